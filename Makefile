@@ -1,0 +1,56 @@
+# Front door. `make demo` and `make test` install what is missing, build, and run.
+BUILD ?= build
+JOBS ?= 2
+CMAKE_FLAGS ?=
+
+.PHONY: all deps build demo test asan memcheck fuzz bench format format-check install clean
+
+all: build
+
+deps:
+	@bash scripts/install-deps.sh core
+
+build: deps
+	@cmake -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=Release $(CMAKE_FLAGS) >/dev/null
+	@cmake --build $(BUILD) -j$(JOBS)
+
+demo: build
+	@bash scripts/demo.sh $(BUILD)/quadkit
+
+test: build
+	@ctest --test-dir $(BUILD) --output-on-failure -j$(JOBS)
+
+# The whole suite under AddressSanitizer + UndefinedBehaviorSanitizer, warnings as errors.
+asan: deps
+	@cmake -S . -B build-asan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DQUADKIT_SANITIZE=ON -DQUADKIT_WERROR=ON >/dev/null
+	@cmake --build build-asan -j$(JOBS)
+	@ctest --test-dir build-asan --output-on-failure -j$(JOBS)
+
+format-check: deps
+	@cmake -S . -B $(BUILD) >/dev/null
+	@cmake --build $(BUILD) --target format-check
+
+format: deps
+	@cmake -S . -B $(BUILD) >/dev/null
+	@cmake --build $(BUILD) --target format
+
+install: build
+	@cmake --install $(BUILD)
+
+clean:
+	rm -rf $(BUILD) build-asan build-bench build-fuzz build-memcheck
+
+# Benchmarks against the baselines (installs them first); see docs/benchmarks.md.
+bench:
+	@bash scripts/install-deps.sh core bench
+	@bash scripts/bench.sh
+
+# valgrind memcheck over a representative subset of the tests.
+memcheck:
+	@bash scripts/install-deps.sh core memcheck
+	@bash scripts/memcheck.sh
+
+# libFuzzer targets, each for FUZZ_SECONDS (default 60).
+fuzz:
+	@bash scripts/install-deps.sh core fuzz
+	@bash scripts/fuzz.sh

@@ -1,0 +1,13 @@
+/**
+ * \file quadkit.h
+ * \brief Umbrella header: includes every quadkit module.
+ */
+#ifndef QUADKIT_QUADKIT_H
+#define QUADKIT_QUADKIT_H
+
+#include "quadkit/common.h"
+#include "quadkit/index.h"
+#include "quadkit/mesh.h"
+#include "quadkit/query.h"
+
+#endif /* QUADKIT_QUADKIT_H */

@@ -1,0 +1,129 @@
+/* qk_tree_check(): verifies every structural invariant of a tree (as p4est_is_valid). */
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+
+#include "index/index_internal.h"
+
+typedef struct checker {
+  const qk_tree_t *t;
+  char *msg;
+  size_t msg_size;
+  size_t points_seen;
+  size_t live_nodes;
+  uint8_t *slot_owned; /* one byte per slot: 1 once a leaf claims it */
+} checker_t;
+
+static qk_status_t fail(checker_t *c, const char *fmt, ...) {
+  if (c->msg && c->msg_size) {
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(c->msg, c->msg_size, fmt, ap);
+    va_end(ap);
+  }
+  return QK_ERR_CORRUPT;
+}
+
+/* Check the subtree of v, whose ancestors' midpoints constrain its points. */
+static qk_status_t check_node(checker_t *c, uint32_t v) {
+  const qk_tree_t *t = c->t;
+  const qk__node_t *n = &t->nodes[v];
+  c->live_nodes++;
+  if (!n->live) return fail(c, "node %u is reachable but not live", v);
+  if (n->depth > t->max_depth) return fail(c, "node %u deeper than the cap", v);
+  if (qk__is_leaf(n)) {
+    if ((uint64_t)n->start + n->room > t->n_slots || n->count > n->room)
+      return fail(c, "leaf %u: slot range [%u,+%u) count %u out of bounds", v, n->start, n->room,
+                  n->count);
+    if (n->count > t->capacity && qk__can_split(t, n))
+      return fail(c, "leaf %u holds %u points > capacity %u but can split", v, n->count,
+                  t->capacity);
+    for (uint32_t i = n->start; i < n->start + n->room; i++) {
+      if (c->slot_owned[i]) return fail(c, "slot %u owned by two leaves", i);
+      c->slot_owned[i] = 1;
+    }
+    for (uint32_t i = n->start; i < n->start + n->count; i++) {
+      qk_id_t id = t->pid[i];
+      if (id >= t->n_ids || t->where[id] != i)
+        return fail(c, "slot %u: id %u not mapped back to it", i, id);
+      /* The point must lie where the tie rules send it at every ancestor. */
+      uint32_t child = v;
+      for (uint32_t a = n->parent; a != QK_NONE; child = a, a = t->nodes[a].parent) {
+        const qk__node_t *an = &t->nodes[a];
+        unsigned q = qk__quadrant_of(an->x0, an->y0, t->side[an->depth + 1], t->px[i], t->py[i]);
+        if (an->child + q != child)
+          return fail(c, "point %u (%.17g, %.17g) is in the wrong quadrant of node %u", id,
+                      t->px[i], t->py[i], a);
+      }
+    }
+    c->points_seen += n->count;
+    return QK_OK;
+  }
+  if (n->child + 4 > t->n_nodes || n->child % 4 != 1)
+    return fail(c, "node %u: child block %u invalid", v, n->child);
+  if (!qk__can_split(t, n)) return fail(c, "node %u is split but cannot be", v);
+  if (!t->refined && n->count <= t->capacity)
+    return fail(c, "node %u holds %u <= capacity points but is not a leaf", v, n->count);
+  uint64_t sum = 0;
+  double half = t->side[n->depth + 1];
+  for (uint32_t q = 0; q < 4; q++) {
+    const qk__node_t *k = &t->nodes[n->child + q];
+    if (k->parent != v || k->quadrant != q || k->depth != n->depth + 1)
+      return fail(c, "node %u: parent/quadrant/depth links of child %u wrong", v, n->child + q);
+    double ex = (q == QK_NE || q == QK_SE) ? n->x0 + half : n->x0;
+    double ey = (q == QK_NE || q == QK_NW) ? n->y0 + half : n->y0;
+    if (k->x0 != ex || k->y0 != ey)
+      return fail(c, "node %u: square is not its quadrant", n->child + q);
+    sum += k->count;
+  }
+  if (sum != n->count)
+    return fail(c, "node %u: count %u != sum of children %llu", v, n->count,
+                (unsigned long long)sum);
+  for (uint32_t q = 0; q < 4; q++) {
+    qk_status_t st = check_node(c, n->child + q);
+    if (st) return st;
+  }
+  return QK_OK;
+}
+
+qk_status_t qk_tree_check(const qk_tree_t *t, char *msg, size_t msg_size) {
+  checker_t c = {t, msg, msg_size, 0, 0, NULL};
+  if (msg && msg_size) msg[0] = '\0';
+  if (!t) return fail(&c, "NULL tree");
+  if (t->n_nodes == 0 || t->n_nodes > t->cap_nodes || (t->n_nodes - 1) % 4 != 0)
+    return fail(&c, "node count %u / capacity %u inconsistent", t->n_nodes, t->cap_nodes);
+  const qk__node_t *r = &t->nodes[0];
+  if (r->parent != QK_NONE || r->depth != 0) return fail(&c, "root links wrong");
+  if (r->count != t->n_points)
+    return fail(&c, "root count %u != points %zu", r->count, t->n_points);
+  if (t->n_slots > t->cap_slots) return fail(&c, "slots used beyond capacity");
+  c.slot_owned = calloc(t->n_slots ? t->n_slots : 1, 1);
+  if (!c.slot_owned) return QK_ERR_NOMEM;
+  qk_status_t st = check_node(&c, 0);
+  if (!st && c.points_seen != t->n_points)
+    st = fail(&c, "leaves hold %zu points, tree says %zu", c.points_seen, t->n_points);
+  if (!st) {
+    size_t owned = 0;
+    for (uint32_t i = 0; i < t->n_slots; i++) owned += c.slot_owned[i];
+    if (owned + t->garbage != t->n_slots)
+      st = fail(&c, "slots: %zu owned + %u garbage != %u used", owned, t->garbage, t->n_slots);
+  }
+  if (!st) {
+    size_t mapped = 0;
+    for (uint32_t id = 0; id < t->n_ids; id++)
+      if (t->where[id] != QK_NONE) {
+        if (t->where[id] >= t->n_slots || t->pid[t->where[id]] != id) {
+          st = fail(&c, "id %u maps to slot %u which holds another point", id, t->where[id]);
+          break;
+        }
+        mapped++;
+      }
+    if (!st && mapped != t->n_points)
+      st = fail(&c, "%zu ids mapped, %zu points", mapped, t->n_points);
+  }
+  if (!st && c.live_nodes + 4 * (size_t)t->n_free_blocks != t->n_nodes)
+    st = fail(&c, "%zu live nodes + %u free blocks != %u slots", c.live_nodes, t->n_free_blocks,
+              t->n_nodes);
+  free(c.slot_owned);
+  return st;
+}

@@ -1,0 +1,96 @@
+/*
+ * Private layout of the quadtree, shared by index/ and, read-only, by the modules built
+ * on it (query/, mesh/). Not API: it may change with any release.
+ */
+#ifndef QUADKIT_INDEX_INTERNAL_H
+#define QUADKIT_INDEX_INTERNAL_H
+
+#include "quadkit/index.h"
+
+#include <stdbool.h>
+
+/*
+ * One node. Its square is (x0, y0) with side tree->side[depth]. `child` is the first of
+ * four consecutive children (NE, NW, SW, SE) or QK_NONE for a leaf. For a leaf, its
+ * points occupy slots [start, start + count) of the point arrays, with `room` slots
+ * reserved there so that inserts usually need no move. `count` is the number of points
+ * in the subtree for every node.
+ */
+typedef struct qk__node {
+  double x0, y0;
+  uint32_t child;
+  uint32_t parent;
+  uint32_t start;
+  uint32_t count;
+  uint32_t room;
+  uint8_t depth;
+  uint8_t quadrant;
+  uint8_t live;
+  uint8_t pad_;
+} qk__node_t;
+
+struct qk_tree {
+  qk_allocator_t alloc;
+  uint32_t capacity;
+  uint32_t max_depth;
+  bool refined; /* split beyond the capacity rule: removals no longer merge */
+  double side[QK_MAX_DEPTH_LIMIT + 2]; /* side length at each depth, exact halvings */
+
+  /* Nodes: node 0 is the root; children come in blocks of four. */
+  qk__node_t *nodes;
+  uint32_t n_nodes;    /* slots used (high-water mark, including free blocks) */
+  uint32_t cap_nodes;  /* slots allocated */
+  uint32_t free_block; /* first free block of four (linked through .parent), or QK_NONE */
+  uint32_t n_free_blocks;
+
+  /* Points in leaf order: slot s holds (px[s], py[s]) with id pid[s]. */
+  double *px, *py;
+  qk_id_t *pid;
+  uint32_t n_slots;   /* slots used (high-water mark) */
+  uint32_t cap_slots; /* slots allocated */
+  uint32_t garbage;   /* slots inside [0, n_slots) owned by no leaf */
+
+  /* Id map: where[id] is the slot of point id, or QK_NONE once removed. */
+  uint32_t *where;
+  uint32_t n_ids; /* ids handed out */
+  uint32_t cap_ids;
+  size_t n_points; /* points stored */
+};
+
+/* Allocation goes through here and only here. */
+void *qk__realloc(const qk_allocator_t *a, void *ptr, size_t osize, size_t nsize);
+void qk__free(const qk_allocator_t *a, void *ptr, size_t size);
+
+static inline bool qk__is_leaf(const qk__node_t *n) { return n->child == QK_NONE; }
+
+/* Side length of a node's square. */
+static inline double qk__node_side(const qk_tree_t *t, const qk__node_t *n) {
+  return t->side[n->depth];
+}
+
+/* Which child of a node of square (x0, y0, side) a location belongs to, by the tie rules:
+ * east when x > xmid, north when y > ymid. */
+static inline unsigned qk__quadrant_of(double x0, double y0, double half, double x, double y) {
+  unsigned east = x > x0 + half;
+  unsigned north = y > y0 + half;
+  /* NE=0 (1,1), NW=1 (0,1), SW=2 (0,0), SE=3 (1,0) */
+  static const unsigned char q[2][2] = {{2, 1}, {3, 0}};
+  return q[east][north];
+}
+
+/* East and north bits of a quadrant. */
+static inline unsigned qk__q_east(unsigned q) { return q == QK_NE || q == QK_SE; }
+static inline unsigned qk__q_north(unsigned q) { return q == QK_NE || q == QK_NW; }
+
+/* Can this node be split (not at the depth cap, and its side still halves exactly into
+ * distinct midpoints)? */
+bool qk__can_split(const qk_tree_t *t, const qk__node_t *n);
+
+/* Split a leaf into four children and distribute its points. Nodes must have been
+ * reserved (qk__reserve_nodes) beforehand; cannot fail then. Returns the first child. */
+uint32_t qk__split(qk_tree_t *t, uint32_t leaf);
+
+/* Make room for at least `extra` more node slots. */
+qk_status_t qk__reserve_nodes(qk_tree_t *t, uint32_t extra);
+
+#endif /* QUADKIT_INDEX_INTERNAL_H */

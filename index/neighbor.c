@@ -1,0 +1,102 @@
+/*
+ * Neighbour finding (lecture notes, section IV): the book's NorthNeighbor, written once
+ * for all four directions by naming, for a direction, the coordinate bit it flips.
+ */
+#include "index/index_internal.h"
+
+/* Is quadrant q on the `dir` side of its parent's square? */
+static int on_side(unsigned q, qk_dir_t dir) {
+  switch (dir) {
+  case QK_NORTH:
+    return qk__q_north(q);
+  case QK_SOUTH:
+    return !qk__q_north(q);
+  case QK_EAST:
+    return qk__q_east(q);
+  default:
+    return !qk__q_east(q);
+  }
+}
+
+/* The quadrant mirrored across the axis perpendicular to dir: for north/south swap
+ * north and south halves (SW <-> NW, SE <-> NE); for east/west swap east and west. */
+static unsigned mirror(unsigned q, qk_dir_t dir) {
+  static const unsigned char ns[4] = {QK_SE, QK_SW, QK_NW, QK_NE};
+  static const unsigned char ew[4] = {QK_NW, QK_NE, QK_SE, QK_SW};
+  return (dir == QK_NORTH || dir == QK_SOUTH) ? ns[q] : ew[q];
+}
+
+/*
+ * NorthNeighbor(v) generalised. If v is not on the `dir` side of its parent, the
+ * neighbour is its mirrored sibling (notes, lines 4-7). Otherwise find the parent's
+ * neighbour u (line 8); if u is nil or a leaf it is the answer (lines 9-10), else the
+ * answer is u's child mirrored from v's quadrant (lines 11-13). Written as a loop: first
+ * climb to the lowest ancestor that is not on the `dir` side, then come back down.
+ */
+qk_node_t qk_tree_neighbor(const qk_tree_t *t, qk_node_t v, qk_dir_t dir) {
+  if (!t || v >= t->n_nodes || !t->nodes[v].live || (unsigned)dir > QK_WEST) return QK_NONE;
+  unsigned char path[QK_MAX_DEPTH_LIMIT + 2];
+  unsigned len = 0;
+  uint32_t a = v;
+  while (a != 0 && on_side(t->nodes[a].quadrant, dir)) {
+    path[len++] = t->nodes[a].quadrant;
+    a = t->nodes[a].parent;
+  }
+  if (a == 0) return QK_NONE; /* the side lies on the root square's boundary */
+  const qk__node_t *pa = &t->nodes[t->nodes[a].parent];
+  uint32_t u = pa->child + mirror(t->nodes[a].quadrant, dir);
+  while (len > 0 && !qk__is_leaf(&t->nodes[u])) u = t->nodes[u].child + mirror(path[--len], dir);
+  return u;
+}
+
+typedef struct adj {
+  qk_node_t *out;
+  size_t cap, n;
+} adj_t;
+
+static void push(adj_t *a, qk_node_t v) {
+  if (a->n < a->cap) a->out[a->n] = v;
+  a->n++;
+}
+
+/* The two children of a node on the side facing `dir`'s opposite, in west-to-east or
+ * south-to-north order. */
+static void facing_children(qk_dir_t dir, unsigned q[2]) {
+  switch (dir) {
+  case QK_NORTH: /* neighbour lies north: its south children face us */
+    q[0] = QK_SW, q[1] = QK_SE;
+    break;
+  case QK_SOUTH:
+    q[0] = QK_NW, q[1] = QK_NE;
+    break;
+  case QK_EAST: /* neighbour lies east: its west children face us */
+    q[0] = QK_SW, q[1] = QK_NW;
+    break;
+  default:
+    q[0] = QK_SE, q[1] = QK_NE;
+    break;
+  }
+}
+
+static void collect(const qk_tree_t *t, uint32_t u, qk_dir_t dir, adj_t *a) {
+  const qk__node_t *n = &t->nodes[u];
+  if (qk__is_leaf(n)) {
+    push(a, u);
+    return;
+  }
+  unsigned q[2];
+  facing_children(dir, q);
+  collect(t, n->child + q[0], dir, a);
+  collect(t, n->child + q[1], dir, a);
+}
+
+qk_status_t qk_tree_adjacent_leaves(const qk_tree_t *t, qk_node_t v, qk_dir_t dir, qk_node_t *out,
+                                    size_t cap, size_t *n_out) {
+  if (!t || !n_out || (cap && !out) || (unsigned)dir > QK_WEST) return QK_ERR_INVALID;
+  if (v >= t->n_nodes || !t->nodes[v].live) return QK_ERR_NOT_FOUND;
+  adj_t a = {out, cap, 0};
+  qk_node_t u = qk_tree_neighbor(t, v, dir);
+  if (u != QK_NONE) collect(t, u, dir, &a);
+  *n_out = a.n;
+  return QK_OK;
+}

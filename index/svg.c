@@ -1,0 +1,43 @@
+/* SVG drawing of a tree: leaf cells as squares, points as dots. */
+#include "index/index_internal.h"
+
+typedef struct svg {
+  FILE *f;
+  double x0, y0, scale, h;
+  int points; /* 0: draw cells; 1: draw points */
+} svg_t;
+
+static qk_visit_t draw(const qk_tree_t *t, qk_node_t v, void *ud) {
+  svg_t *s = ud;
+  const qk__node_t *n = &t->nodes[v];
+  if (!qk__is_leaf(n)) return QK_VISIT_CONTINUE;
+  double side = t->side[n->depth] * s->scale;
+  double x = (n->x0 - s->x0) * s->scale, y = s->h - (n->y0 - s->y0) * s->scale - side;
+  if (!s->points) {
+    fprintf(s->f, "<rect x=\"%.3f\" y=\"%.3f\" width=\"%.3f\" height=\"%.3f\"/>\n", x, y, side,
+            side);
+    return QK_VISIT_CONTINUE;
+  }
+  for (uint32_t i = n->start; i < n->start + n->count; i++)
+    fprintf(s->f, "<circle cx=\"%.3f\" cy=\"%.3f\" r=\"1.6\"/>\n", (t->px[i] - s->x0) * s->scale,
+            s->h - (t->py[i] - s->y0) * s->scale);
+  return QK_VISIT_CONTINUE;
+}
+
+qk_status_t qk_tree_write_svg(const qk_tree_t *t, FILE *f, unsigned width) {
+  if (!t || !f) return QK_ERR_INVALID;
+  if (width == 0) width = 800;
+  svg_t s = {f, t->nodes[0].x0, t->nodes[0].y0, (double)width / t->side[0], (double)width, 0};
+  fprintf(f,
+          "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"%u\" height=\"%u\" "
+          "viewBox=\"-2 -2 %u %u\">\n<rect x=\"-2\" y=\"-2\" width=\"%u\" height=\"%u\" "
+          "fill=\"white\"/>\n<g fill=\"none\" stroke=\"#4a6fa5\" stroke-width=\"0.6\">\n",
+          width + 4, width + 4, width + 4, width + 4, width + 4, width + 4);
+  /* Cells first, then the points on top, in two passes over the leaves. */
+  qk_tree_visit(t, 0, draw, &s);
+  fprintf(f, "</g>\n<g fill=\"#c0392b\">\n");
+  s.points = 1;
+  qk_tree_visit(t, 0, draw, &s);
+  fprintf(f, "</g>\n</svg>\n");
+  return ferror(f) ? QK_ERR_IO : QK_OK;
+}

@@ -1,0 +1,606 @@
+/*
+ * The point-region quadtree: construction, insertion, removal and lookups.
+ *
+ * Storage (see index_internal.h): nodes in one array, children in blocks of four; points
+ * in three parallel arrays (x, y, id) where every leaf owns a contiguous block of slots.
+ * A bulk build lays the blocks out in pre-order with no gaps. An insert into a full block
+ * moves the leaf's points to a larger block at the end of the arrays; the abandoned slots
+ * are counted as garbage and the arrays are compacted when garbage outweighs live points.
+ *
+ * Every mutating call first makes all the allocations it may need, and only then changes
+ * the tree, so that a failed allocation leaves the tree exactly as it was.
+ */
+#include <math.h>
+#include <string.h>
+
+#include "index/index_internal.h"
+
+void qk_tree_options_init(qk_tree_options_t *o) {
+  memset(o, 0, sizeof *o);
+  o->capacity = 1;
+  o->max_depth = QK_DEFAULT_MAX_DEPTH;
+}
+
+/* ---- allocation helpers ---------------------------------------------------------- */
+
+/* Grow an array of `elem`-byte items from *cap to at least `need` items. */
+static qk_status_t grow(const qk_allocator_t *a, void **arr, uint32_t *cap, size_t need,
+                        size_t elem) {
+  if (need <= *cap) return QK_OK;
+  if (need > UINT32_MAX) return QK_ERR_LIMIT;
+  size_t ncap = *cap ? (size_t)*cap : 16;
+  while (ncap < need) ncap *= 2;
+  if (ncap > UINT32_MAX) ncap = UINT32_MAX;
+  if (ncap > SIZE_MAX / elem) return QK_ERR_LIMIT;
+  void *p = qk__realloc(a, *arr, (size_t)*cap * elem, ncap * elem);
+  if (!p) return QK_ERR_NOMEM;
+  *arr = p;
+  *cap = (uint32_t)ncap;
+  return QK_OK;
+}
+
+qk_status_t qk__reserve_nodes(qk_tree_t *t, uint32_t extra) {
+  /* Blocks on the free list can be reused; the rest must fit after n_nodes. */
+  size_t reusable = (size_t)t->n_free_blocks * 4;
+  if (extra <= reusable) return QK_OK;
+  return grow(&t->alloc, (void **)&t->nodes, &t->cap_nodes, (size_t)t->n_nodes + (extra - reusable),
+              sizeof(qk__node_t));
+}
+
+/* Grow the three point arrays together to at least `need` slots. */
+static qk_status_t reserve_slots(qk_tree_t *t, size_t need) {
+  if (need <= t->cap_slots) return QK_OK;
+  if (need > UINT32_MAX) return QK_ERR_LIMIT;
+  size_t ncap = t->cap_slots ? (size_t)t->cap_slots : 16;
+  while (ncap < need) ncap *= 2;
+  if (ncap > UINT32_MAX) ncap = UINT32_MAX;
+  double *nx = qk__realloc(&t->alloc, NULL, 0, ncap * sizeof(double));
+  double *ny = qk__realloc(&t->alloc, NULL, 0, ncap * sizeof(double));
+  qk_id_t *ni = qk__realloc(&t->alloc, NULL, 0, ncap * sizeof(qk_id_t));
+  if (!nx || !ny || !ni) {
+    qk__free(&t->alloc, nx, ncap * sizeof(double));
+    qk__free(&t->alloc, ny, ncap * sizeof(double));
+    qk__free(&t->alloc, ni, ncap * sizeof(qk_id_t));
+    return QK_ERR_NOMEM;
+  }
+  if (t->n_slots) {
+    memcpy(nx, t->px, (size_t)t->n_slots * sizeof(double));
+    memcpy(ny, t->py, (size_t)t->n_slots * sizeof(double));
+    memcpy(ni, t->pid, (size_t)t->n_slots * sizeof(qk_id_t));
+  }
+  qk__free(&t->alloc, t->px, (size_t)t->cap_slots * sizeof(double));
+  qk__free(&t->alloc, t->py, (size_t)t->cap_slots * sizeof(double));
+  qk__free(&t->alloc, t->pid, (size_t)t->cap_slots * sizeof(qk_id_t));
+  t->px = nx;
+  t->py = ny;
+  t->pid = ni;
+  t->cap_slots = (uint32_t)ncap;
+  return QK_OK;
+}
+
+/* Rewrite the point arrays with every leaf's block in pre-order and no gaps, leaving
+ * `headroom` free slots at the end. Allocates fresh arrays; on failure nothing changes. */
+static qk_status_t compact(qk_tree_t *t, size_t headroom) {
+  size_t live = t->n_points, ncap = live + headroom;
+  if (ncap < 16) ncap = 16;
+  if (ncap > UINT32_MAX) return QK_ERR_LIMIT;
+  double *nx = qk__realloc(&t->alloc, NULL, 0, ncap * sizeof(double));
+  double *ny = qk__realloc(&t->alloc, NULL, 0, ncap * sizeof(double));
+  qk_id_t *ni = qk__realloc(&t->alloc, NULL, 0, ncap * sizeof(qk_id_t));
+  if (!nx || !ny || !ni) {
+    qk__free(&t->alloc, nx, ncap * sizeof(double));
+    qk__free(&t->alloc, ny, ncap * sizeof(double));
+    qk__free(&t->alloc, ni, ncap * sizeof(qk_id_t));
+    return QK_ERR_NOMEM;
+  }
+  /* Pre-order walk with an explicit stack: at most 3 pending siblings per level. */
+  uint32_t stack[4 * (QK_MAX_DEPTH_LIMIT + 2)], top = 0, pos = 0;
+  stack[top++] = 0;
+  while (top) {
+    qk__node_t *n = &t->nodes[stack[--top]];
+    if (!qk__is_leaf(n)) {
+      for (int c = 3; c >= 0; c--) stack[top++] = n->child + (uint32_t)c;
+      continue;
+    }
+    memcpy(nx + pos, t->px + n->start, (size_t)n->count * sizeof(double));
+    memcpy(ny + pos, t->py + n->start, (size_t)n->count * sizeof(double));
+    memcpy(ni + pos, t->pid + n->start, (size_t)n->count * sizeof(qk_id_t));
+    for (uint32_t i = 0; i < n->count; i++) t->where[ni[pos + i]] = pos + i;
+    n->start = pos;
+    n->room = n->count;
+    pos += n->count;
+  }
+  qk__free(&t->alloc, t->px, (size_t)t->cap_slots * sizeof(double));
+  qk__free(&t->alloc, t->py, (size_t)t->cap_slots * sizeof(double));
+  qk__free(&t->alloc, t->pid, (size_t)t->cap_slots * sizeof(qk_id_t));
+  t->px = nx;
+  t->py = ny;
+  t->pid = ni;
+  t->cap_slots = (uint32_t)ncap;
+  t->n_slots = pos;
+  t->garbage = 0;
+  return QK_OK;
+}
+
+/* Make sure `extra` slots are free at the end of the point arrays, compacting when more
+ * than half of the used slots are garbage. */
+static qk_status_t reserve_tail(qk_tree_t *t, size_t extra) {
+  if ((size_t)t->n_slots + extra <= t->cap_slots) return QK_OK;
+  if (t->garbage > t->n_slots / 2) return compact(t, t->n_points + extra);
+  return reserve_slots(t, (size_t)t->n_slots + extra);
+}
+
+/* ---- nodes ---------------------------------------------------------------------------- */
+
+/* Take a block of four node slots (reserved beforehand). */
+static uint32_t take_block(qk_tree_t *t) {
+  uint32_t b;
+  if (t->free_block != QK_NONE) {
+    b = t->free_block;
+    t->free_block = t->nodes[b].parent;
+    t->n_free_blocks--;
+  } else {
+    b = t->n_nodes;
+    t->n_nodes += 4;
+  }
+  return b;
+}
+
+static void release_block(qk_tree_t *t, uint32_t b) {
+  for (uint32_t i = 0; i < 4; i++) t->nodes[b + i].live = 0;
+  t->nodes[b].parent = t->free_block;
+  t->free_block = b;
+  t->n_free_blocks++;
+}
+
+bool qk__can_split(const qk_tree_t *t, const qk__node_t *n) {
+  if (n->depth >= t->max_depth) return false;
+  double half = t->side[n->depth + 1];
+  if (!(half > 0)) return false;
+  double xm = n->x0 + half, ym = n->y0 + half;
+  double side = t->side[n->depth];
+  /* The midpoint must fall strictly inside the square, or the halves are not distinct
+   * in double precision. */
+  return xm > n->x0 && xm < n->x0 + side && ym > n->y0 && ym < n->y0 + side;
+}
+
+uint32_t qk__split(qk_tree_t *t, uint32_t leaf) {
+  uint32_t b = take_block(t);
+  qk__node_t *n = &t->nodes[leaf];
+  double half = t->side[n->depth + 1];
+  double x0 = n->x0, y0 = n->y0;
+  uint32_t start = n->start, count = n->count;
+
+  /* Partition the leaf's slots into NE, NW, SW, SE order in place (American flag sort on
+   * the quadrant). */
+  uint32_t cnt[4] = {0, 0, 0, 0};
+  for (uint32_t i = start; i < start + count; i++)
+    cnt[qk__quadrant_of(x0, y0, half, t->px[i], t->py[i])]++;
+  uint32_t first[4], next[4];
+  first[0] = start;
+  for (int q = 1; q < 4; q++) first[q] = first[q - 1] + cnt[q - 1];
+  memcpy(next, first, sizeof next);
+  for (int q = 0; q < 4; q++) {
+    uint32_t end = first[q] + cnt[q];
+    while (next[q] < end) {
+      uint32_t i = next[q];
+      unsigned r = qk__quadrant_of(x0, y0, half, t->px[i], t->py[i]);
+      if ((int)r == q) {
+        next[q]++;
+        continue;
+      }
+      uint32_t j = next[r]++;
+      double tx = t->px[i], ty = t->py[i];
+      qk_id_t ti = t->pid[i];
+      t->px[i] = t->px[j];
+      t->py[i] = t->py[j];
+      t->pid[i] = t->pid[j];
+      t->px[j] = tx;
+      t->py[j] = ty;
+      t->pid[j] = ti;
+    }
+  }
+  for (uint32_t i = start; i < start + count; i++) t->where[t->pid[i]] = i;
+
+  static const double ox[4] = {1, 0, 0, 1}, oy[4] = {1, 1, 0, 0};
+  for (uint32_t q = 0; q < 4; q++) {
+    qk__node_t *c = &t->nodes[b + q];
+    c->x0 = ox[q] ? x0 + half : x0;
+    c->y0 = oy[q] ? y0 + half : y0;
+    c->child = QK_NONE;
+    c->parent = leaf;
+    c->start = first[q];
+    c->count = cnt[q];
+    c->room = cnt[q];
+    c->depth = (uint8_t)(n->depth + 1);
+    c->quadrant = (uint8_t)q;
+    c->live = 1;
+    c->pad_ = 0;
+  }
+  /* The leaf's unused room goes to the last child so that no slot is lost. */
+  t->nodes[b + 3].room += n->room - count;
+  n->child = b;
+  n->start = 0;
+  n->room = 0;
+  return b;
+}
+
+/* Split a leaf and then every child that is still over capacity. Nodes must be reserved
+ * for the whole cascade (4 per level below the leaf). */
+static void split_while_full(qk_tree_t *t, uint32_t leaf) {
+  while (t->nodes[leaf].count > t->capacity && qk__can_split(t, &t->nodes[leaf])) {
+    uint32_t b = qk__split(t, leaf);
+    uint32_t next = QK_NONE;
+    for (uint32_t q = 0; q < 4; q++)
+      if (t->nodes[b + q].count > t->capacity) next = b + q;
+    if (next == QK_NONE) break;
+    leaf = next;
+  }
+}
+
+/* ---- construction ------------------------------------------------------------------ */
+
+static qk_status_t check_options(const qk_tree_options_t *o) {
+  if (o->max_depth > QK_MAX_DEPTH_LIMIT) return QK_ERR_INVALID;
+  if (o->has_root) {
+    const qk_square_t *r = &o->root;
+    if (!isfinite(r->x) || !isfinite(r->y) || !isfinite(r->side)) return QK_ERR_NONFINITE;
+    if (!(r->side > 0) || !isfinite(r->x + r->side) || !isfinite(r->y + r->side))
+      return QK_ERR_INVALID;
+  }
+  return QK_OK;
+}
+
+/* The smallest enclosing square of the points (lower-left at the minima). */
+static qk_square_t enclosing_square(const qk_point_t *p, size_t n) {
+  qk_square_t s = {0, 0, 1};
+  if (n == 0) return s;
+  double xmin = p[0].x, xmax = p[0].x, ymin = p[0].y, ymax = p[0].y;
+  for (size_t i = 1; i < n; i++) {
+    xmin = p[i].x < xmin ? p[i].x : xmin;
+    xmax = p[i].x > xmax ? p[i].x : xmax;
+    ymin = p[i].y < ymin ? p[i].y : ymin;
+    ymax = p[i].y > ymax ? p[i].y : ymax;
+  }
+  s.x = xmin;
+  s.y = ymin;
+  s.side = fmax(xmax - xmin, ymax - ymin);
+  if (!(s.side > 0)) s.side = 1; /* one distinct location: any positive side will do */
+  /* Rounding in the subtraction may leave the maxima a hair outside; widen by ulps. */
+  while (s.x + s.side < xmax || s.y + s.side < ymax) s.side = nextafter(s.side, INFINITY);
+  return s;
+}
+
+static int inside_root(const qk_tree_t *t, double x, double y) {
+  const qk__node_t *r = &t->nodes[0];
+  return x >= r->x0 && x <= r->x0 + t->side[0] && y >= r->y0 && y <= r->y0 + t->side[0];
+}
+
+/* Recursive bulk build of the subtree of `node` over slots [start, start + count). The
+ * recursion depth is bounded by max_depth. */
+static qk_status_t build_rec(qk_tree_t *t, uint32_t node) {
+  qk__node_t *n = &t->nodes[node];
+  if (n->count <= t->capacity || !qk__can_split(t, n)) return QK_OK;
+  qk_status_t st = qk__reserve_nodes(t, 4);
+  if (st) return st;
+  uint32_t b = qk__split(t, node);
+  for (uint32_t q = 0; q < 4; q++)
+    if ((st = build_rec(t, b + q))) return st;
+  return QK_OK;
+}
+
+qk_status_t qk_tree_build(const qk_point_t *points, size_t n, const qk_tree_options_t *options,
+                          qk_tree_t **out) {
+  qk_tree_options_t def;
+  qk_status_t st;
+  if (!out) return QK_ERR_INVALID;
+  *out = NULL;
+  if (!options) {
+    qk_tree_options_init(&def);
+    options = &def;
+  }
+  if (n && !points) return QK_ERR_INVALID;
+  if (n > QK_MAX_POINTS) return QK_ERR_LIMIT;
+  if ((st = check_options(options))) return st;
+  for (size_t i = 0; i < n; i++)
+    if (!isfinite(points[i].x) || !isfinite(points[i].y)) return QK_ERR_NONFINITE;
+
+  qk_allocator_t alloc = {NULL, NULL};
+  if (options->allocator) alloc = *options->allocator;
+  qk_tree_t *t = qk__realloc(&alloc, NULL, 0, sizeof *t);
+  if (!t) return QK_ERR_NOMEM;
+  memset(t, 0, sizeof *t);
+  t->alloc = alloc;
+  t->capacity = options->capacity ? options->capacity : 1;
+  t->max_depth = options->max_depth ? options->max_depth : QK_DEFAULT_MAX_DEPTH;
+  t->free_block = QK_NONE;
+  qk_square_t root = options->has_root ? options->root : enclosing_square(points, n);
+  t->side[0] = root.side;
+  for (int d = 1; d < QK_MAX_DEPTH_LIMIT + 2; d++) t->side[d] = t->side[d - 1] * 0.5;
+
+  if ((st = grow(&t->alloc, (void **)&t->nodes, &t->cap_nodes, 1, sizeof(qk__node_t)))) goto fail;
+  t->n_nodes = 1;
+  qk__node_t *r = &t->nodes[0];
+  memset(r, 0, sizeof *r);
+  r->x0 = root.x;
+  r->y0 = root.y;
+  r->child = QK_NONE;
+  r->parent = QK_NONE;
+  r->live = 1;
+  r->count = (uint32_t)n;
+  r->room = (uint32_t)n;
+  for (size_t i = 0; i < n; i++)
+    if (!inside_root(t, points[i].x, points[i].y)) {
+      st = QK_ERR_OUTSIDE;
+      goto fail;
+    }
+  if ((st = reserve_slots(t, n))) goto fail;
+  if ((st = grow(&t->alloc, (void **)&t->where, &t->cap_ids, n ? n : 1, sizeof(uint32_t))))
+    goto fail;
+  for (size_t i = 0; i < n; i++) {
+    t->px[i] = points[i].x;
+    t->py[i] = points[i].y;
+    t->pid[i] = (qk_id_t)i;
+    t->where[i] = (uint32_t)i;
+  }
+  t->n_slots = (uint32_t)n;
+  t->n_ids = (uint32_t)n;
+  t->n_points = n;
+  if ((st = build_rec(t, 0))) goto fail;
+  *out = t;
+  return QK_OK;
+fail:
+  qk_tree_free(t);
+  return st;
+}
+
+void qk_tree_free(qk_tree_t *t) {
+  if (!t) return;
+  qk_allocator_t a = t->alloc;
+  qk__free(&a, t->nodes, (size_t)t->cap_nodes * sizeof(qk__node_t));
+  qk__free(&a, t->px, (size_t)t->cap_slots * sizeof(double));
+  qk__free(&a, t->py, (size_t)t->cap_slots * sizeof(double));
+  qk__free(&a, t->pid, (size_t)t->cap_slots * sizeof(qk_id_t));
+  qk__free(&a, t->where, (size_t)t->cap_ids * sizeof(uint32_t));
+  qk__free(&a, t, sizeof *t);
+}
+
+/* ---- insert and remove --------------------------------------------------------------- */
+
+/* Descend from the root to the leaf whose square holds (x, y). */
+static uint32_t descend(const qk_tree_t *t, double x, double y) {
+  uint32_t v = 0;
+  const qk__node_t *n = &t->nodes[0];
+  while (!qk__is_leaf(n)) {
+    v = n->child + qk__quadrant_of(n->x0, n->y0, t->side[n->depth + 1], x, y);
+    n = &t->nodes[v];
+  }
+  return v;
+}
+
+qk_status_t qk_tree_insert(qk_tree_t *t, qk_point_t p, qk_id_t *id_out) {
+  qk_status_t st;
+  if (!t) return QK_ERR_INVALID;
+  if (!isfinite(p.x) || !isfinite(p.y)) return QK_ERR_NONFINITE;
+  if (!inside_root(t, p.x, p.y)) return QK_ERR_OUTSIDE;
+  if (t->n_ids >= QK_MAX_POINTS) return QK_ERR_LIMIT;
+
+  /* All allocation first: the id map, nodes for a cascade of splits down to the depth
+   * cap, and a larger block for the leaf if its block is full. */
+  if ((st = grow(&t->alloc, (void **)&t->where, &t->cap_ids, (size_t)t->n_ids + 1,
+                 sizeof(uint32_t))))
+    return st;
+  if ((st = qk__reserve_nodes(t, 4 * (t->max_depth + 1)))) return st;
+  uint32_t leaf = descend(t, p.x, p.y);
+  qk__node_t *n = &t->nodes[leaf];
+  uint32_t newroom = 0;
+  if (n->count == n->room) {
+    newroom = n->count < 2 ? 4 : 2 * n->count;
+    if ((st = reserve_tail(t, newroom))) return st;
+    n = &t->nodes[leaf]; /* compaction does not move nodes, but stay explicit */
+  }
+
+  /* From here on nothing can fail. */
+  if (newroom) {
+    uint32_t to = t->n_slots;
+    memcpy(t->px + to, t->px + n->start, (size_t)n->count * sizeof(double));
+    memcpy(t->py + to, t->py + n->start, (size_t)n->count * sizeof(double));
+    memcpy(t->pid + to, t->pid + n->start, (size_t)n->count * sizeof(qk_id_t));
+    for (uint32_t i = 0; i < n->count; i++) t->where[t->pid[to + i]] = to + i;
+    t->garbage += n->room;
+    n->start = to;
+    n->room = newroom;
+    t->n_slots += newroom;
+  }
+  qk_id_t id = t->n_ids++;
+  uint32_t s = n->start + n->count;
+  t->px[s] = p.x;
+  t->py[s] = p.y;
+  t->pid[s] = id;
+  t->where[id] = s;
+  for (uint32_t v = leaf; v != QK_NONE; v = t->nodes[v].parent) t->nodes[v].count++;
+  t->n_points++;
+  split_while_full(t, leaf);
+  if (id_out) *id_out = id;
+  return QK_OK;
+}
+
+/* Move every point of v's subtree into one block at the end of the point arrays, make v
+ * a leaf over that block, and free the node blocks below it. The tail must have room. */
+static void collapse(qk_tree_t *t, uint32_t v) {
+  uint32_t to = t->n_slots, pos = to;
+  uint32_t stack[4 * (QK_MAX_DEPTH_LIMIT + 2)], top = 0;
+  stack[top++] = t->nodes[v].child;
+  while (top) {
+    uint32_t b = stack[--top];
+    for (uint32_t q = 0; q < 4; q++) {
+      qk__node_t *c = &t->nodes[b + q];
+      if (!qk__is_leaf(c)) {
+        stack[top++] = c->child;
+        continue;
+      }
+      memcpy(t->px + pos, t->px + c->start, (size_t)c->count * sizeof(double));
+      memcpy(t->py + pos, t->py + c->start, (size_t)c->count * sizeof(double));
+      memcpy(t->pid + pos, t->pid + c->start, (size_t)c->count * sizeof(qk_id_t));
+      for (uint32_t i = 0; i < c->count; i++) t->where[t->pid[pos + i]] = pos + i;
+      pos += c->count;
+      t->garbage += c->room;
+    }
+    release_block(t, b);
+  }
+  qk__node_t *n = &t->nodes[v];
+  n->child = QK_NONE;
+  n->start = to;
+  n->room = pos - to;
+  t->n_slots = pos;
+}
+
+qk_status_t qk_tree_remove(qk_tree_t *t, qk_id_t id) {
+  if (!t) return QK_ERR_INVALID;
+  if (id >= t->n_ids || t->where[id] == QK_NONE) return QK_ERR_NOT_FOUND;
+  uint32_t leaf = descend(t, t->px[t->where[id]], t->py[t->where[id]]);
+
+  /* Which ancestor will merge: the highest one left holding at most `capacity` points
+   * (counts only grow upwards, so those ancestors form a chain above the leaf). */
+  uint32_t top = QK_NONE;
+  if (!t->refined)
+    for (uint32_t v = t->nodes[leaf].parent; v != QK_NONE; v = t->nodes[v].parent) {
+      if (t->nodes[v].count - 1 > t->capacity) break;
+      top = v;
+    }
+  if (top != QK_NONE) {
+    qk_status_t st = reserve_tail(t, t->nodes[top].count);
+    if (st) return st;
+  }
+
+  /* Nothing can fail from here on (the reservation may have compacted the arrays, so
+   * the slot is read only now). Fill the hole with the leaf's last point. */
+  uint32_t s = t->where[id];
+  qk__node_t *n = &t->nodes[leaf];
+  uint32_t last = n->start + n->count - 1;
+  if (s != last) {
+    t->px[s] = t->px[last];
+    t->py[s] = t->py[last];
+    t->pid[s] = t->pid[last];
+    t->where[t->pid[s]] = s;
+  }
+  t->where[id] = QK_NONE;
+  for (uint32_t v = leaf; v != QK_NONE; v = t->nodes[v].parent) t->nodes[v].count--;
+  t->n_points--;
+  if (top != QK_NONE) collapse(t, top);
+  return QK_OK;
+}
+
+/* ---- lookups ---------------------------------------------------------------------- */
+
+qk_status_t qk_tree_point(const qk_tree_t *t, qk_id_t id, qk_point_t *p) {
+  if (!t || !p) return QK_ERR_INVALID;
+  if (id >= t->n_ids || t->where[id] == QK_NONE) return QK_ERR_NOT_FOUND;
+  p->x = t->px[t->where[id]];
+  p->y = t->py[t->where[id]];
+  return QK_OK;
+}
+
+qk_status_t qk_tree_leaf_of(const qk_tree_t *t, qk_id_t id, qk_node_t *leaf) {
+  if (!t || !leaf) return QK_ERR_INVALID;
+  if (id >= t->n_ids || t->where[id] == QK_NONE) return QK_ERR_NOT_FOUND;
+  uint32_t s = t->where[id];
+  *leaf = descend(t, t->px[s], t->py[s]);
+  return QK_OK;
+}
+
+qk_status_t qk_tree_find_leaf(const qk_tree_t *t, qk_point_t p, qk_node_t *leaf) {
+  if (!t || !leaf) return QK_ERR_INVALID;
+  if (!isfinite(p.x) || !isfinite(p.y)) return QK_ERR_NONFINITE;
+  if (!inside_root(t, p.x, p.y)) return QK_ERR_OUTSIDE;
+  *leaf = descend(t, p.x, p.y);
+  return QK_OK;
+}
+
+qk_node_t qk_tree_root(const qk_tree_t *t) {
+  (void)t;
+  return 0;
+}
+
+static int is_live(const qk_tree_t *t, qk_node_t v) {
+  return t && v < t->n_nodes && t->nodes[v].live;
+}
+
+int qk_tree_node_is_leaf(const qk_tree_t *t, qk_node_t v) {
+  return is_live(t, v) && qk__is_leaf(&t->nodes[v]);
+}
+
+qk_status_t qk_tree_node_info(const qk_tree_t *t, qk_node_t v, qk_node_info_t *info) {
+  if (!info) return QK_ERR_INVALID;
+  if (!is_live(t, v)) return QK_ERR_NOT_FOUND;
+  const qk__node_t *n = &t->nodes[v];
+  info->square.x = n->x0;
+  info->square.y = n->y0;
+  info->square.side = t->side[n->depth];
+  info->depth = n->depth;
+  info->parent = n->parent;
+  for (uint32_t q = 0; q < 4; q++) info->children[q] = qk__is_leaf(n) ? QK_NONE : n->child + q;
+  info->quadrant = (qk_quadrant_t)n->quadrant;
+  info->is_leaf = qk__is_leaf(n);
+  info->count = n->count;
+  return QK_OK;
+}
+
+qk_status_t qk_tree_leaf_points(const qk_tree_t *t, qk_node_t leaf, const double **x,
+                                const double **y, const qk_id_t **ids, size_t *n) {
+  if (!qk_tree_node_is_leaf(t, leaf)) return QK_ERR_INVALID;
+  const qk__node_t *l = &t->nodes[leaf];
+  if (x) *x = t->px + l->start;
+  if (y) *y = t->py + l->start;
+  if (ids) *ids = t->pid + l->start;
+  if (n) *n = l->count;
+  return QK_OK;
+}
+
+/* ---- refinement beyond the capacity rule ---------------------------------------------- */
+
+qk_status_t qk_tree_split_leaf(qk_tree_t *t, qk_node_t leaf) {
+  if (!qk_tree_node_is_leaf(t, leaf)) return QK_ERR_INVALID;
+  if (!qk__can_split(t, &t->nodes[leaf])) return QK_ERR_LIMIT;
+  qk_status_t st = qk__reserve_nodes(t, 4);
+  if (st) return st;
+  qk__split(t, leaf);
+  t->refined = true;
+  return QK_OK;
+}
+
+qk_status_t qk_tree_refine(qk_tree_t *t, qk_refine_fn fn, void *ud) {
+  if (!t || !fn) return QK_ERR_INVALID;
+  t->refined = true;
+  /* Depth-first over the leaves with an explicit stack; every split pushes its children,
+   * so the stack never holds more than 3 per level plus the initial leaves. */
+  size_t cap = 64, top = 0;
+  qk_status_t st = QK_OK;
+  uint32_t *stack = qk__realloc(&t->alloc, NULL, 0, cap * sizeof *stack);
+  if (!stack) return QK_ERR_NOMEM;
+  stack[top++] = 0;
+  while (top) {
+    uint32_t v = stack[--top];
+    qk__node_t *n = &t->nodes[v];
+    if (!qk__is_leaf(n)) {
+      if (top + 4 > cap) {
+        uint32_t *ns = qk__realloc(&t->alloc, stack, cap * sizeof *stack, 2 * cap * sizeof *stack);
+        if (!ns) {
+          st = QK_ERR_NOMEM;
+          break;
+        }
+        stack = ns;
+        cap *= 2;
+      }
+      for (int q = 3; q >= 0; q--) stack[top++] = n->child + (uint32_t)q;
+      continue;
+    }
+    qk_square_t sq = {n->x0, n->y0, t->side[n->depth]};
+    if (!qk__can_split(t, n) || !fn(t, v, sq, n->depth, ud)) continue;
+    if ((st = qk__reserve_nodes(t, 4))) break;
+    qk__split(t, v);
+    stack[top++] = v; /* revisit: now internal, pushes its children */
+  }
+  qk__free(&t->alloc, stack, cap * sizeof *stack);
+  return st;
+}

@@ -1,0 +1,44 @@
+#!/usr/bin/env bash
+# CLI tests for `quadkit tree`: output, exit codes and error messages naming file and line.
+set -u
+cli=$1
+src=$2
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+fails=0
+expect() { # expect CODE PATTERN -- command...
+  local code=$1 pat=$2
+  shift 3
+  local out rc
+  out=$("$@" 2>&1)
+  rc=$?
+  if [ "$rc" -ne "$code" ] || ! grep -qE -- "$pat" <<<"$out"; then
+    echo "FAIL: $* -> exit $rc (want $code), output: $out (want /$pat/)"
+    fails=$((fails + 1))
+  fi
+}
+printf 'x,y\n0,0\n1,1\n0.25,0.75\n' >"$tmp/ok.csv"
+expect 0 '"points": 3, "nodes": 5, "leaves": 4' -- "$cli" tree "$tmp/ok.csv"
+expect 0 '"leaves": 1' -- "$cli" tree "$tmp/ok.csv" --capacity 3
+expect 0 '"points": 300' -- "$cli" tree "$src/examples/points.csv" --svg "$tmp/t.svg"
+grep -q '</svg>' "$tmp/t.svg" || { echo "FAIL: svg not written"; fails=$((fails + 1)); }
+ls "$tmp"/t.svg.tmp.* >/dev/null 2>&1 && { echo "FAIL: temp file left"; fails=$((fails + 1)); }
+printf 'x,y\n0,0\n1,abc\n' >"$tmp/bad.csv"
+expect 1 "bad.csv:3: field 2 is not a number: 'abc'" -- "$cli" tree "$tmp/bad.csv"
+printf '0,0\n1\n' >"$tmp/short.csv"
+expect 1 'short.csv:2: expected at least 2 numeric fields' -- "$cli" tree "$tmp/short.csv"
+printf '0,0\nnan,1\n' >"$tmp/nan.csv"
+expect 1 'nan.csv:2: field 1 is not finite' -- "$cli" tree "$tmp/nan.csv"
+printf 'x,y\n' >"$tmp/empty.csv"
+expect 1 'empty.csv: no data rows' -- "$cli" tree "$tmp/empty.csv"
+printf '0,0\n\0\0\n' >"$tmp/bin.csv"
+expect 1 'bin.csv:2: binary data' -- "$cli" tree "$tmp/bin.csv"
+expect 1 'cannot open' -- "$cli" tree "$tmp/missing.csv"
+expect 2 'must be a whole number' -- "$cli" tree "$tmp/ok.csv" --capacity 0
+expect 2 'unknown option' -- "$cli" tree "$tmp/ok.csv" --bogus
+expect 2 'usage' -- "$cli" tree
+expect 2 'unknown command' -- "$cli" frobnicate
+expect 0 'usage: quadkit' -- "$cli" --help
+expect 1 'cannot write' -- "$cli" tree "$tmp/ok.csv" --svg "$tmp/no/such/dir/x.svg"
+echo "$((16 - fails)) passed, $fails failed"
+[ "$fails" -eq 0 ]

@@ -1,0 +1,99 @@
+#include "qk_test.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+void qkt_rng_seed(qkt_rng_t *r, uint64_t seed) { r->s = seed ^ 0x9E3779B97F4A7C15ull; }
+
+uint64_t qkt_rng_next(qkt_rng_t *r) {
+  /* splitmix64 */
+  uint64_t z = (r->s += 0x9E3779B97F4A7C15ull);
+  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+  return z ^ (z >> 31);
+}
+
+double qkt_rng_unit(qkt_rng_t *r) { return (double)(qkt_rng_next(r) >> 11) * 0x1.0p-53; }
+
+double qkt_rng_range(qkt_rng_t *r, double a, double b) { return a + (b - a) * qkt_rng_unit(r); }
+
+uint32_t qkt_rng_below(qkt_rng_t *r, uint32_t n) { return (uint32_t)(qkt_rng_unit(r) * n); }
+
+void qkt_points(qkt_rng_t *r, qkt_dist_t d, qk_point_t *out, size_t n) {
+  double cx[8], cy[8];
+  for (int i = 0; i < 8; i++) cx[i] = qkt_rng_unit(r), cy[i] = qkt_rng_unit(r);
+  for (size_t i = 0; i < n; i++) {
+    switch (d) {
+    case QKT_UNIFORM:
+      out[i].x = qkt_rng_unit(r);
+      out[i].y = qkt_rng_unit(r);
+      break;
+    case QKT_CLUSTERED: {
+      int c = (int)qkt_rng_below(r, 8);
+      double s = 0.002 * (1 + c);
+      /* sum of uniforms: a cheap bell shape, clamped into the unit square */
+      double dx = (qkt_rng_unit(r) + qkt_rng_unit(r) + qkt_rng_unit(r) - 1.5) * s;
+      double dy = (qkt_rng_unit(r) + qkt_rng_unit(r) + qkt_rng_unit(r) - 1.5) * s;
+      out[i].x = fmin(fmax(cx[c] + dx, 0), 1);
+      out[i].y = fmin(fmax(cy[c] + dy, 0), 1);
+      break;
+    }
+    case QKT_DUPLICATES: {
+      int c = (int)qkt_rng_below(r, 5);
+      out[i].x = cx[c];
+      out[i].y = cy[c];
+      break;
+    }
+    case QKT_GRID_EDGES:
+      out[i].x = qkt_rng_below(r, 17) / 16.0;
+      out[i].y = qkt_rng_below(r, 17) / 16.0;
+      break;
+    }
+  }
+}
+
+uint64_t qkt_seed(uint64_t def) {
+  const char *s = getenv("QK_SEED");
+  uint64_t seed = s ? strtoull(s, NULL, 0) : def;
+  print_message("seed %llu (set QK_SEED to change)\n", (unsigned long long)seed);
+  return seed;
+}
+
+/* Each block carries its size in a header so that frees can be accounted. */
+typedef struct hdr {
+  size_t size;
+  size_t pad;
+} hdr_t;
+
+static void *qkt_alloc_fn(void *ud, void *ptr, size_t osize, size_t nsize) {
+  qkt_alloc_t *a = ud;
+  hdr_t *h = ptr ? (hdr_t *)ptr - 1 : NULL;
+  if (h && h->size != osize) fail_msg("allocator: osize %zu != recorded %zu", osize, h->size);
+  if (nsize == 0) {
+    if (h) {
+      a->live_bytes -= h->size;
+      a->live_blocks--;
+      free(h);
+    }
+    return NULL;
+  }
+  a->calls++;
+  if (a->fail_at && a->calls == a->fail_at) {
+    a->failed = 1;
+    return NULL;
+  }
+  hdr_t *n = realloc(h, sizeof(hdr_t) + nsize);
+  if (!n) return NULL;
+  if (!h) a->live_blocks++;
+  a->live_bytes = a->live_bytes - (h ? osize : 0) + nsize;
+  n->size = nsize;
+  return n + 1;
+}
+
+qk_allocator_t qkt_alloc_make(qkt_alloc_t *state) {
+  memset(state, 0, sizeof *state);
+  qk_allocator_t a = {qkt_alloc_fn, state};
+  return a;
+}

@@ -1,0 +1,55 @@
+/* Helpers shared by every test: seeded random numbers, point generators and an
+ * allocator that fails on the N-th call and counts what is still allocated. */
+#ifndef QK_TEST_H
+#define QK_TEST_H
+
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <setjmp.h>
+#include <cmocka.h>
+
+#include "quadkit/quadkit.h"
+
+/* splitmix64-seeded xoshiro-style generator; deterministic across platforms. */
+typedef struct qkt_rng {
+  uint64_t s;
+} qkt_rng_t;
+void qkt_rng_seed(qkt_rng_t *r, uint64_t seed);
+uint64_t qkt_rng_next(qkt_rng_t *r);
+double qkt_rng_unit(qkt_rng_t *r);                      /* [0, 1) */
+double qkt_rng_range(qkt_rng_t *r, double a, double b); /* [a, b) */
+uint32_t qkt_rng_below(qkt_rng_t *r, uint32_t n);       /* [0, n) */
+
+/* Point sets used throughout the tests. */
+typedef enum qkt_dist {
+  QKT_UNIFORM,    /* uniform in [0,1)^2 */
+  QKT_CLUSTERED,  /* a few tight Gaussian-ish clusters */
+  QKT_DUPLICATES, /* many exact duplicates of a few locations */
+  QKT_GRID_EDGES  /* points on a dyadic grid: they fall on cell edges and corners */
+} qkt_dist_t;
+void qkt_points(qkt_rng_t *r, qkt_dist_t d, qk_point_t *out, size_t n);
+
+/* The seed for a test: QK_SEED from the environment, else `def`. Printed by the test. */
+uint64_t qkt_seed(uint64_t def);
+
+/* Failing allocator: fails the `fail_at`-th call (1-based; 0 = never) that allocates or
+ * grows; tracks live bytes and live blocks so tests can assert no leak. */
+typedef struct qkt_alloc {
+  size_t calls;
+  size_t fail_at;
+  size_t live_bytes;
+  size_t live_blocks;
+  int failed;
+} qkt_alloc_t;
+qk_allocator_t qkt_alloc_make(qkt_alloc_t *state);
+
+/* Assert qk_tree_check() passes, printing its message otherwise. */
+#define QKT_CHECK_TREE(t)                                                                          \
+  do {                                                                                             \
+    char qkt_msg_[256];                                                                            \
+    qk_status_t qkt_st_ = qk_tree_check((t), qkt_msg_, sizeof qkt_msg_);                           \
+    if (qkt_st_ != QK_OK) fail_msg("qk_tree_check: %s", qkt_msg_);                                 \
+  } while (0)
+
+#endif

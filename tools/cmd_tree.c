@@ -1,0 +1,82 @@
+/* `quadkit tree`: build a tree over a points file and print its statistics as JSON. */
+#include <stdlib.h>
+#include <string.h>
+
+#include "cli.h"
+
+static void usage(FILE *f) {
+  fprintf(f,
+          "usage: quadkit tree POINTS.csv [--capacity C] [--max-depth D] [--svg FILE]\n"
+          "Builds a point-region quadtree and prints its statistics as one JSON object.\n"
+          "  --capacity C   points a leaf holds before it splits (default 1)\n"
+          "  --max-depth D  depth cap for coincident points (default %d, at most %d)\n"
+          "  --svg FILE     also draw the tree\n",
+          QK_DEFAULT_MAX_DEPTH, QK_MAX_DEPTH_LIMIT);
+}
+
+int cmd_tree(int argc, char **argv) {
+  const char *cmd = "tree", *in = NULL, *svg = NULL;
+  unsigned long capacity = 1, depth = QK_DEFAULT_MAX_DEPTH;
+  for (int i = 1; i < argc; i++) {
+    if (!strcmp(argv[i], "--help") || !strcmp(argv[i], "-h")) {
+      usage(stdout);
+      return CLI_OK;
+    } else if (!strcmp(argv[i], "--capacity")) {
+      if (cli_parse_u32(cmd, "--capacity", i + 1 < argc ? argv[++i] : NULL, 1, UINT32_MAX,
+                        &capacity))
+        return CLI_USAGE;
+    } else if (!strcmp(argv[i], "--max-depth")) {
+      if (cli_parse_u32(cmd, "--max-depth", i + 1 < argc ? argv[++i] : NULL, 1, QK_MAX_DEPTH_LIMIT,
+                        &depth))
+        return CLI_USAGE;
+    } else if (!strcmp(argv[i], "--svg")) {
+      if (i + 1 >= argc) {
+        cli_error(cmd, "--svg needs a file name");
+        return CLI_USAGE;
+      }
+      svg = argv[++i];
+    } else if (argv[i][0] == '-' && argv[i][1]) {
+      cli_error(cmd, "unknown option '%s' (see quadkit tree --help)", argv[i]);
+      return CLI_USAGE;
+    } else if (!in) {
+      in = argv[i];
+    } else {
+      cli_error(cmd, "unexpected argument '%s'", argv[i]);
+      return CLI_USAGE;
+    }
+  }
+  if (!in) {
+    usage(stderr);
+    return CLI_USAGE;
+  }
+  qk_point_t *pts;
+  size_t n;
+  int rc = cli_read_points(in, &pts, &n);
+  if (rc) return rc;
+  qk_tree_options_t opt;
+  qk_tree_options_init(&opt);
+  opt.capacity = (uint32_t)capacity;
+  opt.max_depth = (uint32_t)depth;
+  qk_tree_t *tree;
+  rc = cli_status(cmd, in, qk_tree_build(pts, n, &opt, &tree));
+  free(pts);
+  if (rc) return rc;
+  qk_tree_stats_t s;
+  qk_tree_stats(tree, &s);
+  printf("{\"points\": %zu, \"nodes\": %zu, \"leaves\": %zu, \"height\": %u, "
+         "\"max_leaf_points\": %zu, \"capped_leaves\": %zu, \"capacity\": %u, \"max_depth\": %u, "
+         "\"root\": {\"x\": %.17g, \"y\": %.17g, \"side\": %.17g}, \"memory_bytes\": %zu}\n",
+         s.points, s.nodes, s.leaves, s.height, s.max_leaf_points, s.capped_leaves, s.capacity,
+         s.max_depth, s.root.x, s.root.y, s.root.side, s.memory_bytes);
+  if (svg) {
+    cli_out_t o;
+    rc = cli_out_open(cmd, svg, &o);
+    if (!rc) {
+      qk_status_t st = qk_tree_write_svg(tree, o.f, 800);
+      rc = cli_out_close(cmd, &o, st == QK_OK);
+      if (!rc && st) rc = cli_status(cmd, svg, st);
+    }
+  }
+  qk_tree_free(tree);
+  return rc;
+}

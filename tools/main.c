@@ -1,0 +1,49 @@
+/* The `quadkit` command-line tool: dispatches to one subcommand. */
+#include <stdio.h>
+#include <string.h>
+
+#include "cli.h"
+
+typedef struct command {
+  const char *name;
+  int (*run)(int argc, char **argv);
+  const char *synopsis;
+} command_t;
+
+static const command_t commands[] = {
+    {"tree", cmd_tree, "tree POINTS.csv [--capacity C] [--svg FILE]   build a tree, print stats"},
+    {"knn", cmd_knn, "knn POINTS.csv QUERIES.csv -k K               k nearest neighbours"},
+    {"range", cmd_range, "range POINTS.csv BOXES.csv                   points in boxes"},
+    {"radius", cmd_radius, "radius POINTS.csv QUERIES.csv -r R            points within R"},
+    {"locate", cmd_locate, "locate POINTS.csv QUERIES.csv                leaf holding each query"},
+    {"collide", cmd_collide,
+     "collide DISCS.csv                             overlapping disc pairs"},
+    {"raycast", cmd_raycast, "raycast DISCS.csv RAYS.csv                   first disc hit by rays"},
+    {"geo", cmd_geo, "geo knn|radius POINTS.csv QUERIES.csv ...     geodesic queries (WGS84)"},
+    {"mesh", cmd_mesh, "mesh IN.poly -o PREFIX [options]              quadtree mesh generator"},
+};
+
+static void usage(FILE *f) {
+  fprintf(f, "usage: quadkit COMMAND [ARGS]\n\ncommands:\n");
+  for (size_t i = 0; i < sizeof commands / sizeof commands[0]; i++)
+    fprintf(f, "  %s\n", commands[i].synopsis);
+  fprintf(f, "\nEvery command accepts --help. Points CSV: the first two fields of each line are "
+             "x and y;\na first line whose first field is not a number is a header. A point's id "
+             "is its\n0-based data row.\n\nexit status: 0 success, 1 bad input, 2 usage error, "
+             "3 internal error or out of memory\n");
+}
+
+int main(int argc, char **argv) {
+  if (argc < 2) {
+    usage(stderr);
+    return CLI_USAGE;
+  }
+  if (!strcmp(argv[1], "--help") || !strcmp(argv[1], "-h") || !strcmp(argv[1], "help")) {
+    usage(stdout);
+    return CLI_OK;
+  }
+  for (size_t i = 0; i < sizeof commands / sizeof commands[0]; i++)
+    if (!strcmp(argv[1], commands[i].name)) return commands[i].run(argc - 1, argv + 1);
+  fprintf(stderr, "quadkit: unknown command '%s' (see quadkit --help)\n", argv[1]);
+  return CLI_USAGE;
+}
