@@ -1,10 +1,394 @@
 /**
  * \file query.h
- * \brief The query module.
+ * \brief Queries on a quadkit tree: range, radius, k nearest neighbours, point
+ *        location, collision of items with extent, and geodesic queries on WGS84.
+ *
+ * Every query here is exact: it returns what a brute-force loop over all points would,
+ * evaluated with the same double-precision formulas stated in each function's comment.
+ * The searches prune by the squares of the tree's nodes and never allocate per node.
+ *
+ * Thread safety: every function taking a `const` handle only reads it, so any number of
+ * threads may query one tree, collider or geodesic index at the same time, as long as no
+ * thread changes the tree meanwhile (see index.h).
+ *
+ * Result buffers follow one convention: the caller passes a buffer of `cap` entries and
+ * gets back through `n_out` the total number of results; when that exceeds `cap` only
+ * the first `cap` are written (call again with a larger buffer). Callbacks return zero
+ * to go on and nonzero to stop the query early (which still returns QK_OK).
  */
 #ifndef QUADKIT_QUERY_H
 #define QUADKIT_QUERY_H
 
 #include "quadkit/index.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/** A neighbour found by a query: the point's id and its distance from the query. */
+typedef struct qk_neighbor {
+  qk_id_t id;  /**< the point's id */
+  double dist; /**< Euclidean distance (metres for the geodesic queries) */
+} qk_neighbor_t;
+
+/**
+ * Called once per point found.
+ * \param [in] id the point's id.
+ * \param [in] p its coordinates (for geodesic queries: lon, lat in degrees).
+ * \param [in] dist distance from the query (0 for box queries; metres for geodesic).
+ * \param [in] ud the caller's pointer.
+ * \return zero to go on, nonzero to stop the query.
+ */
+typedef int (*qk_found_fn)(qk_id_t id, qk_point_t p, double dist, void *ud);
+
+/* ---------------------------------------------------------------------------------- */
+/* Range and radius                                                                    */
+
+/**
+ * Report every point inside a closed box (xmin <= x <= xmax and ymin <= y <= ymax), in
+ * no particular order. An inverted box (xmin > xmax) holds no point; infinite bounds are
+ * allowed.
+ * \param [in] tree the tree.
+ * \param [in] box the box.
+ * \param [in] fn called for each point with dist 0.
+ * \param [in] ud passed to fn.
+ * \return QK_OK or QK_ERR_NONFINITE (a NaN bound).
+ */
+qk_status_t qk_query_range(const qk_tree_t *tree, qk_box_t box, qk_found_fn fn, void *ud);
+
+/**
+ * The ids of the points inside a closed box, into a buffer, in no particular order.
+ * \param [in] tree the tree.
+ * \param [in] box the box.
+ * \param [out] ids buffer for up to cap ids (may be NULL when cap is 0).
+ * \param [in] cap its size.
+ * \param [out] n_out how many points the box holds (may exceed cap).
+ * \return QK_OK or QK_ERR_NONFINITE.
+ */
+qk_status_t qk_query_range_ids(const qk_tree_t *tree, qk_box_t box, qk_id_t *ids, size_t cap,
+                               size_t *n_out);
+
+/**
+ * Report every point p within distance r of c, that is with
+ * (p.x - c.x)^2 + (p.y - c.y)^2 <= r * r in double precision, in no particular order.
+ * \param [in] tree the tree.
+ * \param [in] c the centre; may lie outside the root square.
+ * \param [in] r the radius, >= 0 (INFINITY reports every point).
+ * \param [in] fn called for each point with its distance.
+ * \param [in] ud passed to fn.
+ * \return QK_OK, QK_ERR_NONFINITE (c not finite, or r NaN) or QK_ERR_INVALID (r < 0).
+ */
+qk_status_t qk_query_radius(const qk_tree_t *tree, qk_point_t c, double r, qk_found_fn fn,
+                            void *ud);
+
+/**
+ * The points within distance r of c, into a buffer, in no particular order.
+ * \param [in] tree the tree.
+ * \param [in] c the centre.
+ * \param [in] r the radius, >= 0.
+ * \param [out] out buffer for up to cap neighbours (may be NULL when cap is 0).
+ * \param [in] cap its size.
+ * \param [out] n_out how many points lie within r (may exceed cap).
+ * \return as qk_query_radius().
+ */
+qk_status_t qk_query_radius_list(const qk_tree_t *tree, qk_point_t c, double r, qk_neighbor_t *out,
+                                 size_t cap, size_t *n_out);
+
+/**
+ * Radius queries for many centres in one call. The results of query i are
+ * out[offsets[i] .. offsets[i+1]) when the total fits in cap.
+ * \param [in] tree the tree.
+ * \param [in] centres nq centres.
+ * \param [in] nq how many.
+ * \param [in] r the radius, >= 0.
+ * \param [out] out buffer for up to cap neighbours (may be NULL when cap is 0).
+ * \param [in] cap its size.
+ * \param [out] offsets nq + 1 entries; offsets[nq] is the total (always filled).
+ * \return QK_OK, QK_ERR_NONFINITE, QK_ERR_INVALID, or QK_ERR_LIMIT when the total
+ *         exceeded cap (offsets then tell the size needed; out holds a prefix).
+ */
+qk_status_t qk_query_radius_batch(const qk_tree_t *tree, const qk_point_t *centres, size_t nq,
+                                  double r, qk_neighbor_t *out, size_t cap, size_t *offsets);
+
+/* ---------------------------------------------------------------------------------- */
+/* k nearest neighbours                                                                */
+
+/**
+ * The k nearest points to q, exact, sorted by distance and ties by smaller id. With a
+ * finite max_dist only points with squared distance <= max_dist^2 count (a capped kNN),
+ * so fewer than k may be returned. Uses no heap memory: out is the search's priority
+ * queue.
+ * \param [in] tree the tree.
+ * \param [in] q the query; may lie outside the root square.
+ * \param [in] k how many neighbours (any k; at most the number of points come back).
+ * \param [in] max_dist the cap, >= 0, or INFINITY.
+ * \param [out] out buffer of k entries (may be NULL when k is 0).
+ * \param [out] n_out how many were written: min(k, points within max_dist).
+ * \return QK_OK, QK_ERR_NONFINITE or QK_ERR_INVALID (max_dist < 0 or NaN).
+ */
+qk_status_t qk_query_knn(const qk_tree_t *tree, qk_point_t q, size_t k, double max_dist,
+                         qk_neighbor_t *out, size_t *n_out);
+
+/**
+ * kNN for many queries in one call. Query i's neighbours are out[i*k .. i*k + counts[i]);
+ * unused slots of its block get id QK_NONE and distance INFINITY.
+ * \param [in] tree the tree.
+ * \param [in] qs nq queries.
+ * \param [in] nq how many.
+ * \param [in] k neighbours per query.
+ * \param [in] max_dist the cap, or INFINITY.
+ * \param [out] out nq * k entries.
+ * \param [out] counts nq counts (may be NULL).
+ * \return QK_OK, QK_ERR_NONFINITE (a query not finite; the others are still answered,
+ *         that one gets count 0) or QK_ERR_INVALID.
+ */
+qk_status_t qk_query_knn_batch(const qk_tree_t *tree, const qk_point_t *qs, size_t nq, size_t k,
+                               double max_dist, qk_neighbor_t *out, size_t *counts);
+
+/* ---------------------------------------------------------------------------------- */
+/* Point location                                                                      */
+
+/** The leaf holding a location, with its square and its points (borrowed). */
+typedef struct qk_location {
+  qk_node_t leaf;     /**< the leaf */
+  qk_square_t square; /**< its square */
+  uint32_t depth;     /**< its depth */
+  size_t count;       /**< points in it */
+  const double *x;    /**< their x coordinates (valid until the tree changes) */
+  const double *y;    /**< their y coordinates */
+  const qk_id_t *ids; /**< their ids */
+} qk_location_t;
+
+/**
+ * Point location: the leaf whose square contains p (squares are half-open on their west
+ * and south sides, the root's outer edges included, as qk_tree_find_leaf()).
+ * \param [in] tree the tree.
+ * \param [in] p the location.
+ * \param [out] loc the leaf and its points.
+ * \return QK_OK, QK_ERR_NONFINITE or QK_ERR_OUTSIDE.
+ */
+qk_status_t qk_query_locate(const qk_tree_t *tree, qk_point_t p, qk_location_t *loc);
+
+/**
+ * Point location for many points.
+ * \param [in] tree the tree.
+ * \param [in] ps n locations.
+ * \param [in] n how many.
+ * \param [out] leaves n leaves; QK_NONE for a location outside the root or not finite.
+ * \return QK_OK.
+ */
+qk_status_t qk_query_locate_batch(const qk_tree_t *tree, const qk_point_t *ps, size_t n,
+                                  qk_node_t *leaves);
+
+/* ---------------------------------------------------------------------------------- */
+/* Collision of items with extent                                                       */
+
+/** A closed disc: centre (x, y) and radius r >= 0. */
+typedef struct qk_disc {
+  double x, y, r;
+} qk_disc_t;
+
+/** A pair of item ids, a < b. */
+typedef struct qk_pair {
+  qk_id_t a, b;
+} qk_pair_t;
+
+/** The first item hit by a ray: its id (QK_NONE for none) and parameter t (INFINITY). */
+typedef struct qk_hit {
+  qk_id_t id; /**< the item, or QK_NONE */
+  double t;   /**< where: origin + t * direction */
+} qk_hit_t;
+
+/**
+ * A set of items with extent (discs and axis-aligned boxes) stored in a quadtree by
+ * their centres. Every node also records the bounding box of the items stored beneath
+ * it, so a query reaches exactly as far beyond a node's square as its largest item.
+ */
+typedef struct qk_collider qk_collider_t;
+
+/**
+ * Build a collider. Discs get ids 0 .. n_discs-1, boxes n_discs .. n_discs+n_boxes-1.
+ * Items overlap when they share at least one point (touching counts): discs when
+ * dx^2 + dy^2 <= (r1 + r2)^2, boxes when their closed intervals meet on both axes, a
+ * disc and a box when the box point nearest the centre is within r.
+ * \param [in] discs n_discs discs (copied; may be NULL when n_discs is 0).
+ * \param [in] n_discs how many.
+ * \param [in] boxes n_boxes closed boxes (copied; may be NULL when n_boxes is 0).
+ * \param [in] n_boxes how many.
+ * \param [in] options tree options for the centres (capacity, allocator, root); NULL
+ *             for defaults (capacity 8).
+ * \param [out] out the collider, freed with qk_collider_free(); NULL on error.
+ * \return QK_OK, QK_ERR_NONFINITE, QK_ERR_GEOMETRY (negative radius or inverted box),
+ *         QK_ERR_OUTSIDE (a centre outside a given root), QK_ERR_LIMIT or QK_ERR_NOMEM.
+ */
+qk_status_t qk_collider_build(const qk_disc_t *discs, size_t n_discs, const qk_box_t *boxes,
+                              size_t n_boxes, const qk_tree_options_t *options,
+                              qk_collider_t **out);
+
+/** Free a collider; NULL does nothing. */
+void qk_collider_free(qk_collider_t *c);
+
+/** The collider's tree of item centres (borrowed; valid while the collider lives). */
+const qk_tree_t *qk_collider_tree(const qk_collider_t *c);
+
+/** Number of items. */
+size_t qk_collider_size(const qk_collider_t *c);
+
+/**
+ * Report the items overlapping a closed box (touching counts), in no particular order.
+ * \param [in] c the collider.
+ * \param [in] box the query box (xmin <= xmax, ymin <= ymax).
+ * \param [in] fn called per item with its centre and dist 0.
+ * \param [in] ud passed to fn.
+ * \return QK_OK, QK_ERR_NONFINITE or QK_ERR_GEOMETRY.
+ */
+qk_status_t qk_collider_query_box(const qk_collider_t *c, qk_box_t box, qk_found_fn fn, void *ud);
+
+/**
+ * Report the items overlapping a closed disc (touching counts), in no particular order.
+ * \param [in] c the collider.
+ * \param [in] disc the query disc (r >= 0).
+ * \param [in] fn called per item with its centre and dist 0.
+ * \param [in] ud passed to fn.
+ * \return QK_OK, QK_ERR_NONFINITE or QK_ERR_GEOMETRY.
+ */
+qk_status_t qk_collider_query_disc(const qk_collider_t *c, qk_disc_t disc, qk_found_fn fn,
+                                   void *ud);
+
+/** Called once per overlapping pair (a < b); return nonzero to stop. */
+typedef int (*qk_pair_fn)(qk_id_t a, qk_id_t b, void *ud);
+
+/**
+ * Broad phase: report every overlapping pair of items once, with a < b, in no particular
+ * order.
+ * \param [in] c the collider.
+ * \param [in] fn the callback.
+ * \param [in] ud passed to fn.
+ * \return QK_OK.
+ */
+qk_status_t qk_collider_pairs(const qk_collider_t *c, qk_pair_fn fn, void *ud);
+
+/**
+ * Every overlapping pair into a buffer, sorted by a then b.
+ * \param [in] c the collider.
+ * \param [out] out buffer for up to cap pairs (may be NULL when cap is 0).
+ * \param [in] cap its size.
+ * \param [out] n_out the number of pairs (may exceed cap).
+ * \return QK_OK.
+ */
+qk_status_t qk_collider_pairs_list(const qk_collider_t *c, qk_pair_t *out, size_t cap,
+                                   size_t *n_out);
+
+/**
+ * First hit along a ray origin + t * dir, 0 <= t <= tmax: the item with the smallest t
+ * at which the ray touches it (ties by smaller id); t = 0 when the origin lies inside an
+ * item. For a segment from a to b pass dir = b - a and tmax = 1.
+ * \param [in] c the collider.
+ * \param [in] origin the ray's origin.
+ * \param [in] dir its direction (any length; not normalised).
+ * \param [in] tmax the largest t considered (INFINITY for a ray).
+ * \param [out] hit the hit, or {QK_NONE, INFINITY}.
+ * \return QK_OK, QK_ERR_NONFINITE or QK_ERR_INVALID (tmax < 0 or NaN).
+ */
+qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t origin, qk_point_t dir,
+                                double tmax, qk_hit_t *hit);
+
+/* ---------------------------------------------------------------------------------- */
+/* Geodesic queries (WGS84)                                                             */
+
+/**
+ * Points given as (lon, lat) in degrees on the WGS84 ellipsoid, indexed for queries by
+ * geodesic distance in metres (GeographicLib's algorithms through PROJ's geodesic.h).
+ * Longitudes are normalised into [-180, 180]; the antimeridian and the poles need no
+ * special care from the caller. Without geodesic support in the build every geodesic
+ * call returns QK_ERR_UNSUPPORTED.
+ */
+typedef struct qk_geo qk_geo_t;
+
+/**
+ * Build a geodesic index. Point i (x = lon, y = lat in degrees) gets id i.
+ * \param [in] lonlat n points (copied).
+ * \param [in] n how many.
+ * \param [in] options tree options (only capacity, max_depth and allocator are used; the
+ *             root is fixed); NULL for defaults (capacity 16).
+ * \param [out] out the index, freed with qk_geo_free(); NULL on error.
+ * \return QK_OK, QK_ERR_NONFINITE, QK_ERR_OUTSIDE (latitude outside [-90, 90]),
+ *         QK_ERR_LIMIT, QK_ERR_NOMEM or QK_ERR_UNSUPPORTED.
+ */
+qk_status_t qk_geo_build(const qk_point_t *lonlat, size_t n, const qk_tree_options_t *options,
+                         qk_geo_t **out);
+
+/** Free a geodesic index; NULL does nothing. */
+void qk_geo_free(qk_geo_t *g);
+
+/** The underlying tree over (normalised lon, lat) (borrowed). */
+const qk_tree_t *qk_geo_tree(const qk_geo_t *g);
+
+/**
+ * Geodesic distance in metres between two (lon, lat) points on WGS84.
+ * \param [in] a,b the points.
+ * \param [out] metres the distance.
+ * \return QK_OK, QK_ERR_NONFINITE, QK_ERR_OUTSIDE (|lat| > 90) or QK_ERR_UNSUPPORTED.
+ */
+qk_status_t qk_geo_distance(qk_point_t a, qk_point_t b, double *metres);
+
+/**
+ * Report every point within `metres` (geodesic, inclusive) of q, in no particular
+ * order, each with its distance.
+ * \param [in] g the index.
+ * \param [in] q the query (lon, lat).
+ * \param [in] metres the radius, >= 0.
+ * \param [in] fn called per point with its (lon, lat) and distance in metres.
+ * \param [in] ud passed to fn.
+ * \return QK_OK, QK_ERR_NONFINITE, QK_ERR_OUTSIDE, QK_ERR_INVALID or QK_ERR_UNSUPPORTED.
+ */
+qk_status_t qk_geo_radius(const qk_geo_t *g, qk_point_t q, double metres, qk_found_fn fn, void *ud);
+
+/**
+ * The points within `metres` of q into a buffer, sorted by distance then id.
+ * \param [in] g the index.
+ * \param [in] q the query (lon, lat).
+ * \param [in] metres the radius, >= 0.
+ * \param [out] out buffer for up to cap neighbours (may be NULL when cap is 0).
+ * \param [in] cap its size.
+ * \param [out] n_out the number of such points (may exceed cap; the buffer then holds
+ *              an unspecified subset).
+ * \return as qk_geo_radius().
+ */
+qk_status_t qk_geo_radius_list(const qk_geo_t *g, qk_point_t q, double metres, qk_neighbor_t *out,
+                               size_t cap, size_t *n_out);
+
+/**
+ * The k nearest points to q by geodesic distance, sorted by distance then id; with a
+ * finite max_metres only points within it count.
+ * \param [in] g the index.
+ * \param [in] q the query (lon, lat).
+ * \param [in] k how many.
+ * \param [in] max_metres the cap, or INFINITY.
+ * \param [out] out k entries (distances in metres).
+ * \param [out] n_out how many were written.
+ * \return QK_OK, QK_ERR_NONFINITE, QK_ERR_OUTSIDE, QK_ERR_INVALID or QK_ERR_UNSUPPORTED.
+ */
+qk_status_t qk_geo_knn(const qk_geo_t *g, qk_point_t q, size_t k, double max_metres,
+                       qk_neighbor_t *out, size_t *n_out);
+
+/**
+ * Geodesic kNN for many queries; layout as qk_query_knn_batch().
+ * \param [in] g the index.
+ * \param [in] qs nq queries (lon, lat).
+ * \param [in] nq how many.
+ * \param [in] k neighbours per query.
+ * \param [in] max_metres the cap, or INFINITY.
+ * \param [out] out nq * k entries.
+ * \param [out] counts nq counts (may be NULL).
+ * \return QK_OK, the first error met (the other queries are still answered),
+ *         or QK_ERR_UNSUPPORTED.
+ */
+qk_status_t qk_geo_knn_batch(const qk_geo_t *g, const qk_point_t *qs, size_t nq, size_t k,
+                             double max_metres, qk_neighbor_t *out, size_t *counts);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* QUADKIT_QUERY_H */

@@ -1,0 +1,151 @@
+/*
+ * k nearest neighbours: a depth-first branch-and-bound search that visits the children
+ * of a node nearest first and prunes every node whose square lies farther than the
+ * current k-th best (the classic search of Friedman, Bentley and Finkel, run on the
+ * quadtree's squares). The k best so far live in a bounded max-heap that is the
+ * caller's output buffer, so a query allocates nothing.
+ */
+#include "query/query_internal.h"
+
+static void sift_down(qk_neighbor_t *h, size_t n, size_t i) {
+  qk_neighbor_t v = h[i];
+  for (;;) {
+    size_t l = 2 * i + 1, m = i;
+    qk_neighbor_t best = v;
+    if (l < n && qk__nb_less(best.dist, best.id, h[l].dist, h[l].id)) m = l, best = h[l];
+    if (l + 1 < n && qk__nb_less(best.dist, best.id, h[l + 1].dist, h[l + 1].id)) m = l + 1;
+    if (m == i) break;
+    h[i] = h[m];
+    i = m;
+  }
+  h[i] = v;
+}
+
+void qk__heap_push(qk_neighbor_t *h, size_t *n, qk_neighbor_t v) {
+  size_t i = (*n)++;
+  while (i > 0) {
+    size_t p = (i - 1) / 2;
+    if (!qk__nb_less(h[p].dist, h[p].id, v.dist, v.id)) break;
+    h[i] = h[p];
+    i = p;
+  }
+  h[i] = v;
+}
+
+void qk__heap_replace_top(qk_neighbor_t *h, size_t n, qk_neighbor_t v) {
+  h[0] = v;
+  sift_down(h, n, 0);
+}
+
+void qk__heap_sort(qk_neighbor_t *h, size_t n) {
+  /* Standard in-place heapsort of a max-heap: move the worst to the end repeatedly. */
+  while (n > 1) {
+    qk_neighbor_t top = h[0];
+    h[0] = h[--n];
+    sift_down(h, n, 0);
+    h[n] = top;
+  }
+}
+
+/*
+ * The search proper, on squared distances. `limit2` is the squared cap; a point enters
+ * when its squared distance is at most limit2 and it beats the heap's worst (or the heap
+ * is not full). A node is pruned when its bound is strictly above the threshold: a node
+ * at exactly the k-th distance may still hold a point with a smaller id.
+ */
+static size_t knn_search(const qk_tree_t *t, double qx, double qy, size_t k, double limit2,
+                         qk_neighbor_t *h) {
+  const double e = qk__margin(t);
+  size_t n = 0;
+  double thr = limit2; /* prune above this: the cap, then the k-th best once full */
+  qk__entry_t stack[QK__STACK_MAX];
+  int sp = 0;
+  stack[sp].node = 0;
+  stack[sp++].bound = qk__cell_d2(t, &t->nodes[0], qx, qy, e);
+  while (sp > 0) {
+    qk__entry_t top = stack[--sp];
+    if (top.bound > thr) continue;
+    const qk__node_t *nd = &t->nodes[top.node];
+    if (qk__is_leaf(nd)) {
+      const double *px = t->px + nd->start, *py = t->py + nd->start;
+      const qk_id_t *pid = t->pid + nd->start;
+      for (uint32_t i = 0; i < nd->count; i++) {
+        double dx = px[i] - qx, dy = py[i] - qy;
+        double d2 = dx * dx + dy * dy;
+        if (d2 > thr) continue;
+        qk_neighbor_t v = {pid[i], d2};
+        if (n < k) {
+          qk__heap_push(h, &n, v);
+          if (n == k && h[0].dist < thr) thr = h[0].dist;
+        } else if (qk__nb_less(d2, pid[i], h[0].dist, h[0].id)) {
+          qk__heap_replace_top(h, n, v);
+          thr = h[0].dist;
+        }
+      }
+      continue;
+    }
+    qk__entry_t kids[4];
+    int m = 0;
+    for (uint32_t c = 0; c < 4; c++) {
+      const qk__node_t *ch = &t->nodes[nd->child + c];
+      if (ch->count == 0) continue;
+      double b = qk__cell_d2(t, ch, qx, qy, e);
+      if (b > thr) continue;
+      kids[m].node = nd->child + c;
+      kids[m++].bound = b;
+    }
+    qk__sort4_desc(kids, m);
+    for (int i = 0; i < m; i++) stack[sp++] = kids[i];
+  }
+  return n;
+}
+
+static qk_status_t check_args(qk_point_t q, double max_dist) {
+  if (!isfinite(q.x) || !isfinite(q.y)) return QK_ERR_NONFINITE;
+  if (isnan(max_dist) || max_dist < 0) return QK_ERR_INVALID;
+  return QK_OK;
+}
+
+/* One query into out (k entries, k >= 1); returns the count. */
+static size_t knn_one(const qk_tree_t *t, qk_point_t q, size_t k, double max_dist,
+                      qk_neighbor_t *out) {
+  if (t->n_points == 0 || k == 0) return 0;
+  if (k > t->n_points) k = t->n_points;
+  double limit2 = max_dist * max_dist;
+  size_t n = knn_search(t, q.x, q.y, k, limit2, out);
+  qk__heap_sort(out, n);
+  for (size_t i = 0; i < n; i++) out[i].dist = sqrt(out[i].dist);
+  return n;
+}
+
+qk_status_t qk_query_knn(const qk_tree_t *tree, qk_point_t q, size_t k, double max_dist,
+                         qk_neighbor_t *out, size_t *n_out) {
+  if (!tree || !n_out || (k > 0 && !out)) return QK_ERR_INVALID;
+  *n_out = 0;
+  qk_status_t st = check_args(q, max_dist);
+  if (st != QK_OK) return st;
+  *n_out = knn_one(tree, q, k, max_dist, out);
+  return QK_OK;
+}
+
+qk_status_t qk_query_knn_batch(const qk_tree_t *tree, const qk_point_t *qs, size_t nq, size_t k,
+                               double max_dist, qk_neighbor_t *out, size_t *counts) {
+  if (!tree || (nq > 0 && !qs) || (nq > 0 && k > 0 && !out)) return QK_ERR_INVALID;
+  if (isnan(max_dist) || max_dist < 0) return QK_ERR_INVALID;
+  qk_status_t first = QK_OK;
+  for (size_t i = 0; i < nq; i++) {
+    qk_neighbor_t *o = out ? out + i * k : NULL;
+    size_t n = 0;
+    qk_status_t st = check_args(qs[i], max_dist);
+    if (st == QK_OK)
+      n = knn_one(tree, qs[i], k, max_dist, o);
+    else if (first == QK_OK)
+      first = st;
+    for (size_t j = n; j < k; j++) {
+      o[j].id = QK_NONE;
+      o[j].dist = INFINITY;
+    }
+    if (counts) counts[i] = n;
+  }
+  return first;
+}

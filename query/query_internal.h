@@ -1,0 +1,79 @@
+/*
+ * Private helpers of the query module: cell bounds with a rounding margin, the explicit
+ * traversal stack and the bounded max-heap used by the kNN searches. Not API.
+ */
+#ifndef QUADKIT_QUERY_INTERNAL_H
+#define QUADKIT_QUERY_INTERNAL_H
+
+#include <math.h>
+
+#include "index/index_internal.h"
+#include "quadkit/query.h"
+
+/*
+ * Deepest possible traversal stack: a depth-first search pops one node and pushes at
+ * most four children, so it never holds more than 3 per level plus 4.
+ */
+#define QK__STACK_MAX (3 * (QK_MAX_DEPTH_LIMIT + 2) + 8)
+
+/* A stacked node with the lower bound that let it in (re-checked when popped, because
+ * the pruning threshold may have shrunk meanwhile). */
+typedef struct qk__entry {
+  uint32_t node;
+  double bound;
+} qk__entry_t;
+
+/*
+ * The margin by which node squares are widened before pruning. A node's square is
+ * (x0, y0, side) as stored, but its points are only guaranteed to satisfy the split
+ * tests of its ancestors, whose midpoints were rounded where they were computed; x0 +
+ * side may differ from them by a few units in the last place of the coordinates. A
+ * margin of 2^-40 of the root's magnitude covers hundreds of such roundings and costs
+ * nothing measurable in pruning, while keeping every bound a true lower bound.
+ */
+static inline double qk__margin(const qk_tree_t *t) {
+  const qk__node_t *r = &t->nodes[0];
+  double s = t->side[0];
+  return (fabs(r->x0) + fabs(r->y0) + 2.0 * s) * 0x1p-40;
+}
+
+/*
+ * Squared distance from (qx, qy) to a node's square widened by e. Floating-point
+ * subtraction is monotone, so the result never exceeds the computed squared distance to
+ * any point stored in the node.
+ */
+static inline double qk__cell_d2(const qk_tree_t *t, const qk__node_t *n, double qx, double qy,
+                                 double e) {
+  double s = t->side[n->depth];
+  double xlo = n->x0 - e, xhi = n->x0 + s + e;
+  double ylo = n->y0 - e, yhi = n->y0 + s + e;
+  double dx = qx < xlo ? xlo - qx : (qx > xhi ? qx - xhi : 0.0);
+  double dy = qy < ylo ? ylo - qy : (qy > yhi ? qy - yhi : 0.0);
+  return dx * dx + dy * dy;
+}
+
+/* (d, id) ordering of neighbours: by distance, ties by smaller id. */
+static inline int qk__nb_less(double da, qk_id_t ia, double db, qk_id_t ib) {
+  return da < db || (da == db && ia < ib);
+}
+
+/* Bounded max-heap of neighbours keyed by (dist, id), the worst at h[0]. */
+void qk__heap_push(qk_neighbor_t *h, size_t *n, qk_neighbor_t v);
+void qk__heap_replace_top(qk_neighbor_t *h, size_t n, qk_neighbor_t v);
+/* Sort the heap's contents ascending by (dist, id) in place. */
+void qk__heap_sort(qk_neighbor_t *h, size_t n);
+
+/* Sort up to four stacked entries by descending bound, so the nearest is popped first. */
+static inline void qk__sort4_desc(qk__entry_t *e, int n) {
+  for (int i = 1; i < n; i++) {
+    qk__entry_t v = e[i];
+    int j = i - 1;
+    while (j >= 0 && e[j].bound < v.bound) {
+      e[j + 1] = e[j];
+      j--;
+    }
+    e[j + 1] = v;
+  }
+}
+
+#endif /* QUADKIT_QUERY_INTERNAL_H */

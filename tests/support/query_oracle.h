@@ -1,0 +1,37 @@
+/* Brute-force oracles for the query module: every answer computed by a plain loop over
+ * all points or items, with the same double-precision formulas the library documents. */
+#ifndef QK_QUERY_ORACLE_H
+#define QK_QUERY_ORACLE_H
+
+#include <stddef.h>
+
+#include "quadkit/quadkit.h"
+
+/* Ids of the points inside a closed box, ascending. Returns the count. */
+size_t qko_range(const qk_point_t *pts, size_t n, qk_box_t box, qk_id_t *out);
+
+/* Points within r of c, ascending by id, with distances. Returns the count. */
+size_t qko_radius(const qk_point_t *pts, size_t n, qk_point_t c, double r, qk_neighbor_t *out);
+
+/* The k nearest (ties by id) within max_dist; `alive` may be NULL (all alive). */
+size_t qko_knn(const qk_point_t *pts, const unsigned char *alive, size_t n, qk_point_t q, size_t k,
+               double max_dist, qk_neighbor_t *out);
+
+/* Collision: all overlapping pairs sorted (a, b); items as qk_collider_build numbers them. */
+size_t qko_pairs(const qk_disc_t *d, size_t nd, const qk_box_t *b, size_t nb, qk_pair_t **out);
+/* Items overlapping a query box or disc (is_disc selects), ascending. */
+size_t qko_overlap(const qk_disc_t *d, size_t nd, const qk_box_t *b, size_t nb, int is_disc,
+                   qk_disc_t qd, qk_box_t qb, qk_id_t *out);
+/* First hit of a ray. */
+qk_hit_t qko_raycast(const qk_disc_t *d, size_t nd, const qk_box_t *b, size_t nb, qk_point_t o,
+                     qk_point_t dir, double tmax);
+
+/* Sort neighbours by (dist, id) / by id. */
+void qko_sort_by_dist(qk_neighbor_t *v, size_t n);
+void qko_sort_by_id(qk_neighbor_t *v, size_t n);
+void qko_sort_ids(qk_id_t *v, size_t n);
+
+/* The lon,lat columns of ../shared/data/cities.csv ($QK_SHARED_DIR/data/cities.csv), or
+ * NULL (with *n = 0) when the file is absent. Caller frees. */
+qk_point_t *qko_load_cities(size_t *n);
+#endif

@@ -1,0 +1,493 @@
+/*
+ * Test plan for query/ (range, radius, kNN, point location, batch forms, threads):
+ *  - range and radius on uniform, clustered, duplicate-heavy and cell-edge point sets at
+ *    capacities 1, 4 and 32, against brute force: boxes and centres inside, straddling
+ *    and outside the root square, empty, inverted and infinite boxes, radius 0;
+ *  - kNN against brute force for k from 1 to n on small sets and a spread of k on large
+ *    ones, with and without a distance cap, ties broken by id (duplicates, grid points);
+ *  - kNN after random inserts and removals (qk_tree_check after each batch);
+ *  - point location: every stored point is located in the leaf that holds it, random
+ *    locations land in a leaf whose half-open square contains them, outside/NaN fail;
+ *  - batch forms equal the single-query answers; buffers that are too small report the
+ *    full count; callbacks stop early when asked;
+ *  - bad arguments; an empty tree;
+ *  - four threads querying one tree at once get the single-threaded answers;
+ *  - the real cities set (lon/lat as planar coordinates) when present.
+ */
+#include <math.h>
+#include <pthread.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "qk_test.h"
+#include "query_oracle.h"
+
+static const qkt_dist_t dists[] = {QKT_UNIFORM, QKT_CLUSTERED, QKT_DUPLICATES, QKT_GRID_EDGES};
+static const uint32_t caps[] = {1, 4, 32};
+static uint64_t g_seed;
+
+static qk_tree_t *build(const qk_point_t *p, size_t n, uint32_t cap) {
+  qk_tree_options_t o;
+  qk_tree_options_init(&o);
+  o.capacity = cap;
+  qk_tree_t *t = NULL;
+  assert_int_equal(qk_tree_build(p, n, &o, &t), QK_OK);
+  QKT_CHECK_TREE(t);
+  return t;
+}
+
+/* A query location: mostly inside the unit square, some on the grid, some outside. */
+static qk_point_t rand_loc(qkt_rng_t *r) {
+  qk_point_t q;
+  switch (qkt_rng_below(r, 4)) {
+  case 0:
+    q.x = qkt_rng_below(r, 17) / 16.0;
+    q.y = qkt_rng_below(r, 17) / 16.0;
+    break;
+  case 1:
+    q.x = qkt_rng_range(r, -1, 2);
+    q.y = qkt_rng_range(r, -1, 2);
+    break;
+  default:
+    q.x = qkt_rng_unit(r);
+    q.y = qkt_rng_unit(r);
+  }
+  return q;
+}
+
+static void assert_nb_equal(const qk_neighbor_t *a, size_t na, const qk_neighbor_t *b, size_t nb,
+                            const char *what, size_t qi) {
+  if (na != nb)
+    fail_msg("%s query %zu: %zu results, oracle %zu (seed %llu)", what, qi, na, nb,
+             (unsigned long long)g_seed);
+  for (size_t i = 0; i < na; i++)
+    if (a[i].id != b[i].id || a[i].dist != b[i].dist)
+      fail_msg("%s query %zu rank %zu: (%u, %.17g) vs oracle (%u, %.17g) (seed %llu)", what, qi, i,
+               a[i].id, a[i].dist, b[i].id, b[i].dist, (unsigned long long)g_seed);
+}
+
+static int count_cb(qk_id_t id, qk_point_t p, double dist, void *ud) {
+  (void)id, (void)p, (void)dist;
+  ++*(size_t *)ud;
+  return 0;
+}
+
+static void test_query_range_radius(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed);
+  const size_t n = 3000;
+  qk_point_t *p = malloc(n * sizeof *p);
+  qk_id_t *got = malloc(n * sizeof *got), *want = malloc(n * sizeof *want);
+  qk_neighbor_t *gn = malloc(n * sizeof *gn), *wn = malloc(n * sizeof *wn);
+  for (size_t d = 0; d < 4; d++)
+    for (size_t c = 0; c < 3; c++) {
+      qkt_points(&r, dists[d], p, n);
+      qk_tree_t *t = build(p, n, caps[c]);
+      for (size_t qi = 0; qi < 300; qi++) {
+        qk_point_t a = rand_loc(&r), b = rand_loc(&r);
+        qk_box_t box = {fmin(a.x, b.x), fmin(a.y, b.y), fmax(a.x, b.x), fmax(a.y, b.y)};
+        if (qi % 50 == 1) box = (qk_box_t){-INFINITY, 0.25, INFINITY, 0.5};
+        if (qi % 50 == 2) box = (qk_box_t){0.5, 0.5, 0.25, 0.75}; /* inverted: empty */
+        if (qi % 50 == 3) box = (qk_box_t){a.x, a.y, a.x, a.y};   /* a single location */
+        size_t ng = 0, nw = qko_range(p, n, box, want);
+        assert_int_equal(qk_query_range_ids(t, box, got, n, &ng), QK_OK);
+        qko_sort_ids(got, ng < n ? ng : n);
+        if (ng != nw || memcmp(got, want, nw * sizeof *got))
+          fail_msg("range query %zu: %zu ids, oracle %zu (seed %llu)", qi, ng, nw,
+                   (unsigned long long)g_seed);
+        size_t ncb = 0;
+        assert_int_equal(qk_query_range(t, box, count_cb, &ncb), QK_OK);
+        assert_int_equal(ncb, nw);
+
+        qk_point_t q = rand_loc(&r);
+        double rad = qi % 10 == 0 ? 0.0 : qkt_rng_range(&r, 0, 0.3);
+        if (qi % 10 == 1 && n > 0) q = p[qkt_rng_below(&r, (uint32_t)n)];
+        nw = qko_radius(p, n, q, rad, wn);
+        assert_int_equal(qk_query_radius_list(t, q, rad, gn, n, &ng), QK_OK);
+        qko_sort_by_id(gn, ng);
+        assert_nb_equal(gn, ng, wn, nw, "radius", qi);
+      }
+      qk_tree_free(t);
+    }
+  free(p), free(got), free(want), free(gn), free(wn);
+}
+
+static void test_query_knn_all_k(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 1);
+  const size_t n = 60;
+  qk_point_t p[60];
+  qk_neighbor_t got[61], want[61];
+  for (size_t d = 0; d < 4; d++)
+    for (size_t c = 0; c < 3; c++) {
+      qkt_points(&r, dists[d], p, n);
+      qk_tree_t *t = build(p, n, caps[c]);
+      for (size_t qi = 0; qi < 20; qi++) {
+        qk_point_t q = rand_loc(&r);
+        for (size_t k = 1; k <= n + 1; k++) {
+          double cap = qi % 3 == 0 ? qkt_rng_range(&r, 0, 0.5) : INFINITY;
+          size_t ng = 99;
+          assert_int_equal(qk_query_knn(t, q, k, cap, got, &ng), QK_OK);
+          size_t nw = qko_knn(p, NULL, n, q, k, cap, want);
+          assert_nb_equal(got, ng, want, nw, "knn", qi * 100 + k);
+        }
+      }
+      qk_tree_free(t);
+    }
+}
+
+static void test_query_knn_large(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 2);
+  const size_t n = 20000;
+  const size_t ks[] = {1, 2, 8, 33, 500};
+  qk_point_t *p = malloc(n * sizeof *p);
+  qk_neighbor_t *got = malloc(500 * sizeof *got), *want = malloc(500 * sizeof *want);
+  for (size_t d = 0; d < 4; d++)
+    for (size_t c = 0; c < 3; c++) {
+      qkt_points(&r, dists[d], p, n);
+      qk_tree_t *t = build(p, n, caps[c]);
+      for (size_t qi = 0; qi < 40; qi++) {
+        qk_point_t q = rand_loc(&r);
+        size_t k = ks[qi % 5];
+        double cap = qi % 4 == 0 ? 0.01 : INFINITY;
+        size_t ng;
+        assert_int_equal(qk_query_knn(t, q, k, cap, got, &ng), QK_OK);
+        size_t nw = qko_knn(p, NULL, n, q, k, cap, want);
+        assert_nb_equal(got, ng, want, nw, "knn-large", qi);
+      }
+      qk_tree_free(t);
+    }
+  free(p), free(got), free(want);
+}
+
+static void test_query_knn_after_mutation(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 3);
+  const size_t n0 = 500, extra = 1500;
+  qk_point_t *p = malloc((n0 + extra) * sizeof *p);
+  unsigned char *alive = calloc(n0 + extra, 1);
+  qkt_points(&r, QKT_CLUSTERED, p, n0 + extra);
+  qk_tree_options_t o;
+  qk_tree_options_init(&o);
+  o.capacity = 4;
+  o.has_root = 1;
+  o.root = (qk_square_t){0, 0, 1};
+  qk_tree_t *t = NULL;
+  assert_int_equal(qk_tree_build(p, n0, &o, &t), QK_OK);
+  memset(alive, 1, n0);
+  size_t next = n0;
+  qk_neighbor_t got[16], want[16];
+  for (int round = 0; round < 30; round++) {
+    for (int j = 0; j < 50 && next < n0 + extra; j++) {
+      qk_id_t id;
+      assert_int_equal(qk_tree_insert(t, p[next], &id), QK_OK);
+      assert_int_equal(id, next);
+      alive[next++] = 1;
+    }
+    for (int j = 0; j < 30; j++) {
+      qk_id_t id = qkt_rng_below(&r, (uint32_t)next);
+      if (alive[id]) {
+        assert_int_equal(qk_tree_remove(t, id), QK_OK);
+        alive[id] = 0;
+      }
+    }
+    QKT_CHECK_TREE(t);
+    for (int qi = 0; qi < 20; qi++) {
+      qk_point_t q = rand_loc(&r);
+      size_t ng, nw = qko_knn(p, alive, next, q, 16, INFINITY, want);
+      assert_int_equal(qk_query_knn(t, q, 16, INFINITY, got, &ng), QK_OK);
+      assert_nb_equal(got, ng, want, nw, "knn-mut", (size_t)round * 100 + (size_t)qi);
+    }
+  }
+  qk_tree_free(t);
+  free(p), free(alive);
+}
+
+/* Half-open containment with the root's closed outer edges. */
+static int square_holds(qk_square_t s, qk_square_t root, qk_point_t p) {
+  int inx = (p.x > s.x || (s.x == root.x && p.x == s.x)) && p.x <= s.x + s.side;
+  int iny = (p.y > s.y || (s.y == root.y && p.y == s.y)) && p.y <= s.y + s.side;
+  return inx && iny;
+}
+
+static void test_query_locate(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 4);
+  const size_t n = 4000;
+  qk_point_t *p = malloc(n * sizeof *p);
+  for (size_t d = 0; d < 4; d++)
+    for (size_t c = 0; c < 3; c++) {
+      qkt_points(&r, dists[d], p, n);
+      qk_tree_t *t = build(p, n, caps[c]);
+      qk_tree_stats_t st;
+      qk_tree_stats(t, &st);
+      for (size_t i = 0; i < n; i += 7) {
+        qk_location_t loc;
+        qk_node_t leaf;
+        assert_int_equal(qk_query_locate(t, p[i], &loc), QK_OK);
+        assert_int_equal(qk_tree_leaf_of(t, (qk_id_t)i, &leaf), QK_OK);
+        assert_int_equal(loc.leaf, leaf);
+        int found = 0;
+        for (size_t j = 0; j < loc.count; j++) found |= loc.ids[j] == i;
+        assert_true(found);
+      }
+      for (size_t qi = 0; qi < 500; qi++) {
+        qk_point_t q = rand_loc(&r);
+        qk_location_t loc;
+        qk_status_t s = qk_query_locate(t, q, &loc);
+        int inside = q.x >= st.root.x && q.x <= st.root.x + st.root.side && q.y >= st.root.y &&
+                     q.y <= st.root.y + st.root.side;
+        if (!inside) {
+          assert_int_equal(s, QK_ERR_OUTSIDE);
+          continue;
+        }
+        assert_int_equal(s, QK_OK);
+        assert_true(qk_tree_node_is_leaf(t, loc.leaf));
+        assert_true(square_holds(loc.square, st.root, q));
+        qk_node_info_t info;
+        assert_int_equal(qk_tree_node_info(t, loc.leaf, &info), QK_OK);
+        assert_int_equal(info.depth, loc.depth);
+        assert_int_equal(info.count, loc.count);
+        const qk_id_t *ids;
+        size_t m;
+        assert_int_equal(qk_tree_leaf_points(t, loc.leaf, NULL, NULL, &ids, &m), QK_OK);
+        assert_int_equal(m, loc.count);
+        assert_ptr_equal(ids, loc.ids);
+        for (size_t j = 0; j < m; j++) {
+          assert_true(loc.x[j] == p[ids[j]].x && loc.y[j] == p[ids[j]].y);
+        }
+      }
+      qk_location_t loc;
+      assert_int_equal(qk_query_locate(t, (qk_point_t){NAN, 0}, &loc), QK_ERR_NONFINITE);
+      qk_tree_free(t);
+    }
+  free(p);
+}
+
+static void test_query_batch(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 5);
+  const size_t n = 5000, nq = 200, k = 5;
+  qk_point_t *p = malloc(n * sizeof *p), *qs = malloc(nq * sizeof *qs);
+  qkt_points(&r, QKT_UNIFORM, p, n);
+  for (size_t i = 0; i < nq; i++) qs[i] = rand_loc(&r);
+  qs[7].x = NAN;
+  qk_tree_t *t = build(p, n, 8);
+  qk_neighbor_t *out = malloc(nq * k * sizeof *out), one[5];
+  size_t counts[200];
+  assert_int_equal(qk_query_knn_batch(t, qs, nq, k, INFINITY, out, counts), QK_ERR_NONFINITE);
+  for (size_t i = 0; i < nq; i++) {
+    size_t m = 0;
+    if (i == 7) {
+      assert_int_equal(counts[i], 0);
+      assert_int_equal(out[i * k].id, QK_NONE);
+      continue;
+    }
+    assert_int_equal(qk_query_knn(t, qs[i], k, INFINITY, one, &m), QK_OK);
+    assert_nb_equal(out + i * k, counts[i], one, m, "knn-batch", i);
+  }
+  qs[7].x = 0.5;
+  /* Radius batch: first size it, then fill it. */
+  size_t *off = malloc((nq + 1) * sizeof *off);
+  assert_int_equal(qk_query_radius_batch(t, qs, nq, 0.05, NULL, 0, off), QK_ERR_LIMIT);
+  size_t total = off[nq];
+  assert_true(total > 0);
+  qk_neighbor_t *rb = malloc(total * sizeof *rb), *want = malloc(n * sizeof *want);
+  assert_int_equal(qk_query_radius_batch(t, qs, nq, 0.05, rb, total, off), QK_OK);
+  for (size_t i = 0; i < nq; i++) {
+    size_t nw = qko_radius(p, n, qs[i], 0.05, want);
+    qko_sort_by_id(rb + off[i], off[i + 1] - off[i]);
+    assert_nb_equal(rb + off[i], off[i + 1] - off[i], want, nw, "radius-batch", i);
+  }
+  /* Locate batch. */
+  qk_node_t *leaves = malloc(nq * sizeof *leaves);
+  qs[3] = (qk_point_t){5, 5};
+  assert_int_equal(qk_query_locate_batch(t, qs, nq, leaves), QK_OK);
+  for (size_t i = 0; i < nq; i++) {
+    qk_node_t l;
+    if (qk_tree_find_leaf(t, qs[i], &l) != QK_OK) l = QK_NONE;
+    assert_int_equal(leaves[i], l);
+  }
+  assert_int_equal(leaves[3], QK_NONE);
+  /* A buffer too small still reports the full count. */
+  size_t ng = 0;
+  qk_id_t few[3];
+  assert_int_equal(qk_query_range_ids(t, (qk_box_t){0, 0, 1, 1}, few, 3, &ng), QK_OK);
+  assert_int_equal(ng, n);
+  qk_tree_free(t);
+  free(p), free(qs), free(out), free(off), free(rb), free(want), free(leaves);
+}
+
+static int stop_after_3(qk_id_t id, qk_point_t p, double dist, void *ud) {
+  (void)id, (void)p, (void)dist;
+  return ++*(int *)ud == 3;
+}
+
+static void test_query_stop_and_bad_args(void **state) {
+  (void)state;
+  qk_point_t p[100];
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 6);
+  qkt_points(&r, QKT_UNIFORM, p, 100);
+  qk_tree_t *t = build(p, 100, 4);
+  int calls = 0;
+  assert_int_equal(qk_query_range(t, (qk_box_t){0, 0, 1, 1}, stop_after_3, &calls), QK_OK);
+  assert_int_equal(calls, 3);
+  calls = 0;
+  assert_int_equal(qk_query_radius(t, (qk_point_t){0.5, 0.5}, 2, stop_after_3, &calls), QK_OK);
+  assert_int_equal(calls, 3);
+  qk_neighbor_t nb[4];
+  size_t m;
+  assert_int_equal(qk_query_radius(t, (qk_point_t){0.5, 0.5}, -1, count_cb, &m), QK_ERR_INVALID);
+  assert_int_equal(qk_query_radius(t, (qk_point_t){NAN, 0.5}, 1, count_cb, &m), QK_ERR_NONFINITE);
+  assert_int_equal(qk_query_radius(t, (qk_point_t){0.5, 0.5}, NAN, count_cb, &m), QK_ERR_NONFINITE);
+  assert_int_equal(qk_query_range(t, (qk_box_t){NAN, 0, 1, 1}, count_cb, &m), QK_ERR_NONFINITE);
+  assert_int_equal(qk_query_knn(t, (qk_point_t){INFINITY, 0}, 4, INFINITY, nb, &m),
+                   QK_ERR_NONFINITE);
+  assert_int_equal(qk_query_knn(t, (qk_point_t){0, 0}, 4, -1, nb, &m), QK_ERR_INVALID);
+  assert_int_equal(qk_query_knn(t, (qk_point_t){0, 0}, 4, NAN, nb, &m), QK_ERR_INVALID);
+  assert_int_equal(qk_query_knn(t, (qk_point_t){0, 0}, 0, INFINITY, NULL, &m), QK_OK);
+  assert_int_equal(m, 0);
+  assert_int_equal(qk_query_knn(NULL, (qk_point_t){0, 0}, 1, INFINITY, nb, &m), QK_ERR_INVALID);
+  assert_int_equal(qk_query_range_ids(t, (qk_box_t){0, 0, 1, 1}, NULL, 5, &m), QK_ERR_INVALID);
+  /* Radius of infinity reaches everything; a zero radius on a stored point finds it. */
+  assert_int_equal(qk_query_radius_list(t, (qk_point_t){-1e300, 1e300}, INFINITY, NULL, 0, &m),
+                   QK_OK);
+  assert_int_equal(m, 100);
+  assert_int_equal(qk_query_radius_list(t, p[17], 0, nb, 4, &m), QK_OK);
+  assert_true(m >= 1);
+  qk_tree_free(t);
+
+  /* An empty tree answers everything with nothing. */
+  assert_int_equal(qk_tree_build(NULL, 0, NULL, &t), QK_OK);
+  assert_int_equal(qk_query_knn(t, (qk_point_t){0, 0}, 4, INFINITY, nb, &m), QK_OK);
+  assert_int_equal(m, 0);
+  assert_int_equal(qk_query_range_ids(t, (qk_box_t){-1, -1, 2, 2}, NULL, 0, &m), QK_OK);
+  assert_int_equal(m, 0);
+  assert_int_equal(qk_query_radius_list(t, (qk_point_t){0, 0}, 5, NULL, 0, &m), QK_OK);
+  assert_int_equal(m, 0);
+  qk_location_t loc;
+  assert_int_equal(qk_query_locate(t, (qk_point_t){0.5, 0.5}, &loc), QK_OK);
+  assert_int_equal(loc.count, 0);
+  qk_tree_free(t);
+}
+
+/* Threads: each runs the same queries and compares with answers computed beforehand. */
+typedef struct thr {
+  const qk_tree_t *t;
+  const qk_point_t *qs;
+  size_t nq, k;
+  const qk_neighbor_t *expect;
+  const size_t *expect_radius;
+  int ok;
+} thr_t;
+
+static void *thread_main(void *arg) {
+  thr_t *a = arg;
+  qk_neighbor_t got[8];
+  a->ok = 1;
+  for (int rep = 0; rep < 5; rep++)
+    for (size_t i = 0; i < a->nq; i++) {
+      size_t m, cnt;
+      if (qk_query_knn(a->t, a->qs[i], a->k, INFINITY, got, &m) != QK_OK || m != a->k) a->ok = 0;
+      for (size_t j = 0; j < m && j < a->k; j++)
+        if (got[j].id != a->expect[i * a->k + j].id) a->ok = 0;
+      if (qk_query_radius_list(a->t, a->qs[i], 0.02, NULL, 0, &cnt) != QK_OK ||
+          cnt != a->expect_radius[i])
+        a->ok = 0;
+      qk_location_t loc;
+      if (qk_query_locate(a->t, a->qs[i], &loc) != QK_OK) a->ok = 0;
+      if (!a->ok) return NULL;
+    }
+  return NULL;
+}
+
+static void test_query_threads(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 7);
+  const size_t n = 20000, nq = 500, k = 8;
+  qk_point_t *p = malloc(n * sizeof *p), *qs = malloc(nq * sizeof *qs);
+  qkt_points(&r, QKT_CLUSTERED, p, n);
+  qkt_points(&r, QKT_UNIFORM, qs, nq);
+  qk_tree_options_t o;
+  qk_tree_options_init(&o);
+  o.capacity = 16;
+  o.has_root = 1;
+  o.root = (qk_square_t){0, 0, 1}; /* so that every query can be located */
+  qk_tree_t *t = NULL;
+  assert_int_equal(qk_tree_build(p, n, &o, &t), QK_OK);
+  qk_neighbor_t *expect = malloc(nq * k * sizeof *expect);
+  size_t *er = malloc(nq * sizeof *er);
+  for (size_t i = 0; i < nq; i++) {
+    qko_knn(p, NULL, n, qs[i], k, INFINITY, expect + i * k);
+  }
+  qk_neighbor_t *tmp = malloc(n * sizeof *tmp);
+  for (size_t i = 0; i < nq; i++) er[i] = qko_radius(p, n, qs[i], 0.02, tmp);
+  free(tmp);
+  pthread_t th[4];
+  thr_t args[4];
+  for (int i = 0; i < 4; i++) {
+    args[i] = (thr_t){t, qs, nq, k, expect, er, 0};
+    assert_int_equal(pthread_create(&th[i], NULL, thread_main, &args[i]), 0);
+  }
+  for (int i = 0; i < 4; i++) pthread_join(th[i], NULL);
+  for (int i = 0; i < 4; i++) {
+    if (!args[i].ok)
+      fail_msg("thread %d got a wrong answer (seed %llu)", i, (unsigned long long)g_seed);
+  }
+  qk_tree_free(t);
+  free(p), free(qs), free(expect), free(er);
+}
+
+static void test_query_cities(void **state) {
+  (void)state;
+  size_t n;
+  qk_point_t *p = qko_load_cities(&n);
+  if (!p) {
+    print_message("cities.csv not found: skipping the real-data test\n");
+    skip();
+  }
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 8);
+  qk_tree_t *t = build(p, n, 32);
+  qk_neighbor_t got[10], want[10];
+  qk_neighbor_t *gr = malloc(n * sizeof *gr), *wr = malloc(n * sizeof *wr);
+  for (size_t qi = 0; qi < 150; qi++) {
+    qk_point_t q = qi % 2 ? p[qkt_rng_below(&r, (uint32_t)n)]
+                          : (qk_point_t){qkt_rng_range(&r, -180, 180), qkt_rng_range(&r, -90, 90)};
+    size_t ng, nw = qko_knn(p, NULL, n, q, 10, INFINITY, want);
+    assert_int_equal(qk_query_knn(t, q, 10, INFINITY, got, &ng), QK_OK);
+    assert_nb_equal(got, ng, want, nw, "cities-knn", qi);
+    nw = qko_radius(p, n, q, 1.0, wr);
+    assert_int_equal(qk_query_radius_list(t, q, 1.0, gr, n, &ng), QK_OK);
+    qko_sort_by_id(gr, ng);
+    assert_nb_equal(gr, ng, wr, nw, "cities-radius", qi);
+  }
+  qk_tree_free(t);
+  free(p), free(gr), free(wr);
+}
+
+int main(void) {
+  g_seed = qkt_seed(20261122);
+  const struct CMUnitTest tests[] = {
+      cmocka_unit_test(test_query_range_radius),
+      cmocka_unit_test(test_query_knn_all_k),
+      cmocka_unit_test(test_query_knn_large),
+      cmocka_unit_test(test_query_knn_after_mutation),
+      cmocka_unit_test(test_query_locate),
+      cmocka_unit_test(test_query_batch),
+      cmocka_unit_test(test_query_stop_and_bad_args),
+      cmocka_unit_test(test_query_threads),
+      cmocka_unit_test(test_query_cities),
+  };
+  return cmocka_run_group_tests(tests, NULL, NULL);
+}
