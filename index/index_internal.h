@@ -90,6 +90,17 @@ bool qk__can_split(const qk_tree_t *t, const qk__node_t *n);
  * reserved (qk__reserve_nodes) beforehand; cannot fail then. Returns the first child. */
 uint32_t qk__split(qk_tree_t *t, uint32_t leaf);
 
+/* Attach four children to a leaf without moving its points (they are already in
+ * quadrant order); the caller sets the children's slot ranges. Nodes must be reserved. */
+uint32_t qk__split_sorted(qk_tree_t *t, uint32_t leaf);
+
+/* Split `node` and its descendants while over capacity (the plain recursive build). */
+qk_status_t qk__build_subtree(qk_tree_t *t, uint32_t node);
+
+/* Bulk build by bucketing into a uniform grid (index/build.c). Sets *done when it built
+ * the tree; leaves it false (and the tree untouched) when the plain build should run. */
+qk_status_t qk__build_bucketed(qk_tree_t *t, const qk_point_t *p, size_t n, bool *done);
+
 /* Make room for at least `extra` more node slots. */
 qk_status_t qk__reserve_nodes(qk_tree_t *t, uint32_t extra);
 

@@ -164,12 +164,36 @@ bool qk__can_split(const qk_tree_t *t, const qk__node_t *n) {
   return xm > n->x0 && xm < n->x0 + side && ym > n->y0 && ym < n->y0 + side;
 }
 
-uint32_t qk__split(qk_tree_t *t, uint32_t leaf) {
+/* Attach a block of four children (reserved beforehand) to a leaf, with their squares
+ * and links but no points: the caller sets each child's slot range. */
+uint32_t qk__split_sorted(qk_tree_t *t, uint32_t leaf) {
   uint32_t b = take_block(t);
   qk__node_t *n = &t->nodes[leaf];
   double half = t->side[n->depth + 1];
+  static const double ox[4] = {1, 0, 0, 1}, oy[4] = {1, 1, 0, 0};
+  for (uint32_t q = 0; q < 4; q++) {
+    qk__node_t *c = &t->nodes[b + q];
+    c->x0 = ox[q] ? n->x0 + half : n->x0;
+    c->y0 = oy[q] ? n->y0 + half : n->y0;
+    c->child = QK_NONE;
+    c->parent = leaf;
+    c->start = n->start;
+    c->count = 0;
+    c->room = 0;
+    c->depth = (uint8_t)(n->depth + 1);
+    c->quadrant = (uint8_t)q;
+    c->live = 1;
+    c->pad_ = 0;
+  }
+  n->child = b;
+  return b;
+}
+
+uint32_t qk__split(qk_tree_t *t, uint32_t leaf) {
+  qk__node_t *n = &t->nodes[leaf];
+  double half = t->side[n->depth + 1];
   double x0 = n->x0, y0 = n->y0;
-  uint32_t start = n->start, count = n->count;
+  uint32_t start = n->start, count = n->count, room = n->room;
 
   /* Partition the leaf's slots into NE, NW, SW, SE order in place (American flag sort on
    * the quadrant). */
@@ -202,24 +226,16 @@ uint32_t qk__split(qk_tree_t *t, uint32_t leaf) {
   }
   for (uint32_t i = start; i < start + count; i++) t->where[t->pid[i]] = i;
 
-  static const double ox[4] = {1, 0, 0, 1}, oy[4] = {1, 1, 0, 0};
+  uint32_t b = qk__split_sorted(t, leaf);
   for (uint32_t q = 0; q < 4; q++) {
     qk__node_t *c = &t->nodes[b + q];
-    c->x0 = ox[q] ? x0 + half : x0;
-    c->y0 = oy[q] ? y0 + half : y0;
-    c->child = QK_NONE;
-    c->parent = leaf;
     c->start = first[q];
     c->count = cnt[q];
     c->room = cnt[q];
-    c->depth = (uint8_t)(n->depth + 1);
-    c->quadrant = (uint8_t)q;
-    c->live = 1;
-    c->pad_ = 0;
   }
   /* The leaf's unused room goes to the last child so that no slot is lost. */
-  t->nodes[b + 3].room += n->room - count;
-  n->child = b;
+  t->nodes[b + 3].room += room - count;
+  n = &t->nodes[leaf];
   n->start = 0;
   n->room = 0;
   return b;
@@ -276,16 +292,16 @@ static int inside_root(const qk_tree_t *t, double x, double y) {
   return x >= r->x0 && x <= r->x0 + t->side[0] && y >= r->y0 && y <= r->y0 + t->side[0];
 }
 
-/* Recursive bulk build of the subtree of `node` over slots [start, start + count). The
- * recursion depth is bounded by max_depth. */
-static qk_status_t build_rec(qk_tree_t *t, uint32_t node) {
+/* Recursive bulk build of the subtree of `node` over its slots, splitting while over
+ * capacity. The recursion depth is bounded by max_depth. */
+qk_status_t qk__build_subtree(qk_tree_t *t, uint32_t node) {
   qk__node_t *n = &t->nodes[node];
   if (n->count <= t->capacity || !qk__can_split(t, n)) return QK_OK;
   qk_status_t st = qk__reserve_nodes(t, 4);
   if (st) return st;
   uint32_t b = qk__split(t, node);
   for (uint32_t q = 0; q < 4; q++)
-    if ((st = build_rec(t, b + q))) return st;
+    if ((st = qk__build_subtree(t, b + q))) return st;
   return QK_OK;
 }
 
@@ -337,16 +353,21 @@ qk_status_t qk_tree_build(const qk_point_t *points, size_t n, const qk_tree_opti
   if ((st = reserve_slots(t, n))) goto fail;
   if ((st = grow(&t->alloc, (void **)&t->where, &t->cap_ids, n ? n : 1, sizeof(uint32_t))))
     goto fail;
-  for (size_t i = 0; i < n; i++) {
-    t->px[i] = points[i].x;
-    t->py[i] = points[i].y;
-    t->pid[i] = (qk_id_t)i;
-    t->where[i] = (uint32_t)i;
-  }
   t->n_slots = (uint32_t)n;
   t->n_ids = (uint32_t)n;
   t->n_points = n;
-  if ((st = build_rec(t, 0))) goto fail;
+  bool done;
+  if ((st = qk__build_bucketed(t, points, n, &done))) goto fail;
+  if (!done) {
+    /* The plain recursive build of the book: copy, then partition top-down. */
+    for (size_t i = 0; i < n; i++) {
+      t->px[i] = points[i].x;
+      t->py[i] = points[i].y;
+      t->pid[i] = (qk_id_t)i;
+      t->where[i] = (uint32_t)i;
+    }
+    if ((st = qk__build_subtree(t, 0))) goto fail;
+  }
   *out = t;
   return QK_OK;
 fail:
