@@ -169,6 +169,44 @@ static void test_index_build_equals_inserts(void **state) {
   free(p);
 }
 
+/* The bucketed bulk build must give the same tree as inserting one by one also when the
+ * coordinates are offset or scaled so that rounding matters, and with points on grid lines. */
+static void test_index_build_conditioning(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, qkt_seed(17));
+  enum { N = 20000 };
+  qk_point_t *p = malloc(N * sizeof *p);
+  const double shift[] = {0, 1e6, -3.7e9, 0.1, 0};
+  const double scale[] = {1, 1, 1e-3, 3.3, 1e-200};
+  for (size_t k = 0; k < sizeof shift / sizeof shift[0]; k++)
+    for (size_t d = 0; d < 4; d++) {
+      qkt_points(&r, dists[d], p, N);
+      for (size_t i = 0; i < N; i++) {
+        p[i].x = shift[k] + p[i].x * scale[k];
+        p[i].y = shift[k] - p[i].y * scale[k];
+      }
+      qk_tree_options_t o;
+      qk_tree_options_init(&o);
+      o.capacity = 4;
+      qk_tree_t *a, *b;
+      assert_int_equal(qk_tree_build(p, N, &o, &a), QK_OK);
+      QKT_CHECK_TREE(a);
+      qk_tree_stats_t s;
+      qk_tree_stats(a, &s);
+      o.has_root = 1;
+      o.root = s.root;
+      assert_int_equal(qk_tree_build(NULL, 0, &o, &b), QK_OK);
+      for (size_t i = 0; i < N; i++) assert_int_equal(qk_tree_insert(b, p[i], NULL), QK_OK);
+      shape_t sa = shape_of(a), sb = shape_of(b);
+      assert_int_equal(sa.nodes, sb.nodes);
+      assert_true(sa.hash == sb.hash);
+      qk_tree_free(a);
+      qk_tree_free(b);
+    }
+  free(p);
+}
+
 static void test_index_height_bound(void **state) {
   (void)state;
   qkt_rng_t r;
@@ -608,6 +646,7 @@ int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_index_build_invariants),
       cmocka_unit_test(test_index_build_equals_inserts),
+      cmocka_unit_test(test_index_build_conditioning),
       cmocka_unit_test(test_index_height_bound),
       cmocka_unit_test(test_index_random_ops),
       cmocka_unit_test(test_index_neighbors),
