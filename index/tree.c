@@ -51,7 +51,8 @@ qk_status_t qk__reserve_nodes(qk_tree_t *t, uint32_t extra) {
 static qk_status_t reserve_slots(qk_tree_t *t, size_t need) {
   if (need <= t->cap_slots) return QK_OK;
   if (need > UINT32_MAX) return QK_ERR_LIMIT;
-  size_t ncap = t->cap_slots ? (size_t)t->cap_slots : 16;
+  /* The first allocation (a bulk build) is exact; growth doubles. */
+  size_t ncap = t->cap_slots ? (size_t)t->cap_slots : need;
   while (ncap < need) ncap *= 2;
   if (ncap > UINT32_MAX) ncap = UINT32_MAX;
   double *nx = qk__realloc(&t->alloc, NULL, 0, ncap * sizeof(double));
@@ -351,8 +352,11 @@ qk_status_t qk_tree_build(const qk_point_t *points, size_t n, const qk_tree_opti
       goto fail;
     }
   if ((st = reserve_slots(t, n))) goto fail;
-  if ((st = grow(&t->alloc, (void **)&t->where, &t->cap_ids, n ? n : 1, sizeof(uint32_t))))
+  if (n && !(t->where = qk__realloc(&t->alloc, NULL, 0, n * sizeof(uint32_t)))) {
+    st = QK_ERR_NOMEM;
     goto fail;
+  }
+  t->cap_ids = (uint32_t)n;
   t->n_slots = (uint32_t)n;
   t->n_ids = (uint32_t)n;
   t->n_points = n;
@@ -367,6 +371,15 @@ qk_status_t qk_tree_build(const qk_point_t *points, size_t n, const qk_tree_opti
       t->where[i] = (uint32_t)i;
     }
     if ((st = qk__build_subtree(t, 0))) goto fail;
+  }
+  /* Give back the node array's growth slack; if the allocator will not shrink, keep it. */
+  if (t->cap_nodes > t->n_nodes + t->n_nodes / 16) {
+    qk__node_t *nn = qk__realloc(&t->alloc, t->nodes, (size_t)t->cap_nodes * sizeof *nn,
+                                 (size_t)t->n_nodes * sizeof *nn);
+    if (nn) {
+      t->nodes = nn;
+      t->cap_nodes = t->n_nodes;
+    }
   }
   *out = t;
   return QK_OK;
