@@ -268,24 +268,35 @@ static qk_status_t check_options(const qk_tree_options_t *o) {
   return QK_OK;
 }
 
-/* The smallest enclosing square of the points (lower-left at the minima). */
-static qk_square_t enclosing_square(const qk_point_t *p, size_t n) {
-  qk_square_t s = {0, 0, 1};
-  if (n == 0) return s;
-  double xmin = p[0].x, xmax = p[0].x, ymin = p[0].y, ymax = p[0].y;
-  for (size_t i = 1; i < n; i++) {
-    xmin = p[i].x < xmin ? p[i].x : xmin;
-    xmax = p[i].x > xmax ? p[i].x : xmax;
-    ymin = p[i].y < ymin ? p[i].y : ymin;
-    ymax = p[i].y > ymax ? p[i].y : ymax;
+/* One pass over the input: the bounding box, and whether every coordinate is finite. */
+static qk_status_t bounding_box(const qk_point_t *p, size_t n, qk_box_t *b) {
+  double xmin = INFINITY, ymin = INFINITY, xmax = -INFINITY, ymax = -INFINITY;
+  int finite = 1;
+  for (size_t i = 0; i < n; i++) {
+    double x = p[i].x, y = p[i].y;
+    finite &= isfinite(x) & isfinite(y);
+    xmin = x < xmin ? x : xmin;
+    xmax = x > xmax ? x : xmax;
+    ymin = y < ymin ? y : ymin;
+    ymax = y > ymax ? y : ymax;
   }
-  s.x = xmin;
-  s.y = ymin;
-  s.side = fmax(xmax - xmin, ymax - ymin);
-  if (!(s.side > 0)) s.side = 1; /* one distinct location: any positive side will do */
+  *b = (qk_box_t){xmin, ymin, xmax, ymax};
+  return finite ? QK_OK : QK_ERR_NONFINITE;
+}
+
+/* The smallest enclosing square of a bounding box (lower-left at the minima). */
+static qk_status_t enclosing_square(qk_box_t b, size_t n, qk_square_t *s) {
+  *s = (qk_square_t){0, 0, 1};
+  if (n == 0) return QK_OK;
+  s->x = b.xmin;
+  s->y = b.ymin;
+  s->side = fmax(b.xmax - b.xmin, b.ymax - b.ymin);
+  if (!(s->side > 0)) s->side = 1; /* one distinct location: any positive side will do */
+  if (!isfinite(s->side)) return QK_ERR_LIMIT; /* the extent overflows a double */
   /* Rounding in the subtraction may leave the maxima a hair outside; widen by ulps. */
-  while (s.x + s.side < xmax || s.y + s.side < ymax) s.side = nextafter(s.side, INFINITY);
-  return s;
+  while (s->x + s->side < b.xmax || s->y + s->side < b.ymax) s->side = nextafter(s->side, INFINITY);
+  if (!isfinite(s->x + s->side) || !isfinite(s->y + s->side)) return QK_ERR_LIMIT;
+  return QK_OK;
 }
 
 static int inside_root(const qk_tree_t *t, double x, double y) {
@@ -319,8 +330,17 @@ qk_status_t qk_tree_build(const qk_point_t *points, size_t n, const qk_tree_opti
   if (n && !points) return QK_ERR_INVALID;
   if (n > QK_MAX_POINTS) return QK_ERR_LIMIT;
   if ((st = check_options(options))) return st;
-  for (size_t i = 0; i < n; i++)
-    if (!isfinite(points[i].x) || !isfinite(points[i].y)) return QK_ERR_NONFINITE;
+  qk_box_t bbox;
+  qk_square_t root;
+  if ((st = bounding_box(points, n, &bbox))) return st;
+  if (options->has_root) {
+    root = options->root;
+    if (n && (bbox.xmin < root.x || bbox.xmax > root.x + root.side || bbox.ymin < root.y ||
+              bbox.ymax > root.y + root.side))
+      return QK_ERR_OUTSIDE;
+  } else if ((st = enclosing_square(bbox, n, &root))) {
+    return st;
+  }
 
   qk_allocator_t alloc = {NULL, NULL};
   if (options->allocator) alloc = *options->allocator;
@@ -331,7 +351,6 @@ qk_status_t qk_tree_build(const qk_point_t *points, size_t n, const qk_tree_opti
   t->capacity = options->capacity ? options->capacity : 1;
   t->max_depth = options->max_depth ? options->max_depth : QK_DEFAULT_MAX_DEPTH;
   t->free_block = QK_NONE;
-  qk_square_t root = options->has_root ? options->root : enclosing_square(points, n);
   t->side[0] = root.side;
   for (int d = 1; d < QK_MAX_DEPTH_LIMIT + 2; d++) t->side[d] = t->side[d - 1] * 0.5;
 
@@ -346,11 +365,6 @@ qk_status_t qk_tree_build(const qk_point_t *points, size_t n, const qk_tree_opti
   r->live = 1;
   r->count = (uint32_t)n;
   r->room = (uint32_t)n;
-  for (size_t i = 0; i < n; i++)
-    if (!inside_root(t, points[i].x, points[i].y)) {
-      st = QK_ERR_OUTSIDE;
-      goto fail;
-    }
   if ((st = reserve_slots(t, n))) goto fail;
   if (n && !(t->where = qk__realloc(&t->alloc, NULL, 0, n * sizeof(uint32_t)))) {
     st = QK_ERR_NOMEM;

@@ -509,6 +509,10 @@ static void test_index_bad_input(void **state) {
   assert_null(t);
   bad[1] = (qk_point_t){0.1, INFINITY};
   assert_int_equal(qk_tree_build(bad, 2, NULL, &t), QK_ERR_NONFINITE);
+  /* An extent that overflows a double cannot have an enclosing square. */
+  qk_point_t huge[2] = {{-1e308, 0}, {1e308, 0}};
+  assert_int_equal(qk_tree_build(huge, 2, NULL, &t), QK_ERR_LIMIT);
+  assert_null(t);
   qk_tree_options_t o = unit_root(1);
   bad[1] = (qk_point_t){1.5, 0.5};
   assert_int_equal(qk_tree_build(bad, 2, &o, &t), QK_ERR_OUTSIDE);
