@@ -47,6 +47,37 @@ qk_status_t qk__reserve_nodes(qk_tree_t *t, uint32_t extra) {
               sizeof(qk__node_t));
 }
 
+/* A set of the three parallel point arrays. */
+typedef struct slots {
+  double *x, *y;
+  qk_id_t *id;
+} slots_t;
+
+static void slots_free(const qk_allocator_t *a, slots_t *s, size_t cap) {
+  qk__free(a, s->x, cap * sizeof(double));
+  qk__free(a, s->y, cap * sizeof(double));
+  qk__free(a, s->id, cap * sizeof(qk_id_t));
+}
+
+static qk_status_t slots_alloc(const qk_allocator_t *a, size_t cap, slots_t *s) {
+  s->x = qk__realloc(a, NULL, 0, cap * sizeof(double));
+  s->y = qk__realloc(a, NULL, 0, cap * sizeof(double));
+  s->id = qk__realloc(a, NULL, 0, cap * sizeof(qk_id_t));
+  if (s->x && s->y && s->id) return QK_OK;
+  slots_free(a, s, cap);
+  return QK_ERR_NOMEM;
+}
+
+/* Replace the tree's point arrays by `s` of `cap` slots, freeing the old ones. */
+static void slots_install(qk_tree_t *t, slots_t s, size_t cap) {
+  slots_t old = {t->px, t->py, t->pid};
+  slots_free(&t->alloc, &old, t->cap_slots);
+  t->px = s.x;
+  t->py = s.y;
+  t->pid = s.id;
+  t->cap_slots = (uint32_t)cap;
+}
+
 /* Grow the three point arrays together to at least `need` slots. */
 static qk_status_t reserve_slots(qk_tree_t *t, size_t need) {
   if (need <= t->cap_slots) return QK_OK;
@@ -55,27 +86,14 @@ static qk_status_t reserve_slots(qk_tree_t *t, size_t need) {
   size_t ncap = t->cap_slots ? (size_t)t->cap_slots : need;
   while (ncap < need) ncap *= 2;
   if (ncap > UINT32_MAX) ncap = UINT32_MAX;
-  double *nx = qk__realloc(&t->alloc, NULL, 0, ncap * sizeof(double));
-  double *ny = qk__realloc(&t->alloc, NULL, 0, ncap * sizeof(double));
-  qk_id_t *ni = qk__realloc(&t->alloc, NULL, 0, ncap * sizeof(qk_id_t));
-  if (!nx || !ny || !ni) {
-    qk__free(&t->alloc, nx, ncap * sizeof(double));
-    qk__free(&t->alloc, ny, ncap * sizeof(double));
-    qk__free(&t->alloc, ni, ncap * sizeof(qk_id_t));
-    return QK_ERR_NOMEM;
-  }
+  slots_t s;
+  if (slots_alloc(&t->alloc, ncap, &s)) return QK_ERR_NOMEM;
   if (t->n_slots) {
-    memcpy(nx, t->px, (size_t)t->n_slots * sizeof(double));
-    memcpy(ny, t->py, (size_t)t->n_slots * sizeof(double));
-    memcpy(ni, t->pid, (size_t)t->n_slots * sizeof(qk_id_t));
+    memcpy(s.x, t->px, (size_t)t->n_slots * sizeof(double));
+    memcpy(s.y, t->py, (size_t)t->n_slots * sizeof(double));
+    memcpy(s.id, t->pid, (size_t)t->n_slots * sizeof(qk_id_t));
   }
-  qk__free(&t->alloc, t->px, (size_t)t->cap_slots * sizeof(double));
-  qk__free(&t->alloc, t->py, (size_t)t->cap_slots * sizeof(double));
-  qk__free(&t->alloc, t->pid, (size_t)t->cap_slots * sizeof(qk_id_t));
-  t->px = nx;
-  t->py = ny;
-  t->pid = ni;
-  t->cap_slots = (uint32_t)ncap;
+  slots_install(t, s, ncap);
   return QK_OK;
 }
 
@@ -85,15 +103,10 @@ static qk_status_t compact(qk_tree_t *t, size_t headroom) {
   size_t live = t->n_points, ncap = live + headroom;
   if (ncap < 16) ncap = 16;
   if (ncap > UINT32_MAX) return QK_ERR_LIMIT;
-  double *nx = qk__realloc(&t->alloc, NULL, 0, ncap * sizeof(double));
-  double *ny = qk__realloc(&t->alloc, NULL, 0, ncap * sizeof(double));
-  qk_id_t *ni = qk__realloc(&t->alloc, NULL, 0, ncap * sizeof(qk_id_t));
-  if (!nx || !ny || !ni) {
-    qk__free(&t->alloc, nx, ncap * sizeof(double));
-    qk__free(&t->alloc, ny, ncap * sizeof(double));
-    qk__free(&t->alloc, ni, ncap * sizeof(qk_id_t));
-    return QK_ERR_NOMEM;
-  }
+  slots_t s;
+  if (slots_alloc(&t->alloc, ncap, &s)) return QK_ERR_NOMEM;
+  double *nx = s.x, *ny = s.y;
+  qk_id_t *ni = s.id;
   /* Pre-order walk with an explicit stack: at most 3 pending siblings per level. */
   uint32_t stack[4 * (QK_MAX_DEPTH_LIMIT + 2)], top = 0, pos = 0;
   stack[top++] = 0;
@@ -111,13 +124,7 @@ static qk_status_t compact(qk_tree_t *t, size_t headroom) {
     n->room = n->count;
     pos += n->count;
   }
-  qk__free(&t->alloc, t->px, (size_t)t->cap_slots * sizeof(double));
-  qk__free(&t->alloc, t->py, (size_t)t->cap_slots * sizeof(double));
-  qk__free(&t->alloc, t->pid, (size_t)t->cap_slots * sizeof(qk_id_t));
-  t->px = nx;
-  t->py = ny;
-  t->pid = ni;
-  t->cap_slots = (uint32_t)ncap;
+  slots_install(t, s, ncap);
   t->n_slots = pos;
   t->garbage = 0;
   return QK_OK;
@@ -406,9 +413,8 @@ void qk_tree_free(qk_tree_t *t) {
   if (!t) return;
   qk_allocator_t a = t->alloc;
   qk__free(&a, t->nodes, (size_t)t->cap_nodes * sizeof(qk__node_t));
-  qk__free(&a, t->px, (size_t)t->cap_slots * sizeof(double));
-  qk__free(&a, t->py, (size_t)t->cap_slots * sizeof(double));
-  qk__free(&a, t->pid, (size_t)t->cap_slots * sizeof(qk_id_t));
+  slots_t pts = {t->px, t->py, t->pid};
+  slots_free(&a, &pts, t->cap_slots);
   qk__free(&a, t->where, (size_t)t->cap_ids * sizeof(uint32_t));
   qk__free(&a, t, sizeof *t);
 }

@@ -141,6 +141,30 @@ static void test_index_build_invariants(void **state) {
   free(p);
 }
 
+/* Build over p both in bulk and by inserting one by one into an empty tree with the
+ * same root, and assert the two trees are identical. */
+static void assert_bulk_equals_inserts(const qk_point_t *p, size_t n, qk_tree_options_t o) {
+  qk_tree_t *a, *b;
+  assert_int_equal(qk_tree_build(p, n, &o, &a), QK_OK);
+  QKT_CHECK_TREE(a);
+  qk_tree_stats_t s;
+  qk_tree_stats(a, &s);
+  o.has_root = 1;
+  o.root = s.root;
+  assert_int_equal(qk_tree_build(NULL, 0, &o, &b), QK_OK);
+  for (size_t i = 0; i < n; i++) {
+    qk_id_t id;
+    assert_int_equal(qk_tree_insert(b, p[i], &id), QK_OK);
+    assert_int_equal(id, i);
+  }
+  QKT_CHECK_TREE(b);
+  shape_t sa = shape_of(a), sb = shape_of(b);
+  assert_int_equal(sa.nodes, sb.nodes);
+  assert_true(sa.hash == sb.hash);
+  qk_tree_free(a);
+  qk_tree_free(b);
+}
+
 static void test_index_build_equals_inserts(void **state) {
   (void)state;
   qkt_rng_t r;
@@ -150,21 +174,7 @@ static void test_index_build_equals_inserts(void **state) {
   for (size_t d = 0; d < 4; d++)
     for (size_t c = 0; c < 3; c++) {
       qkt_points(&r, dists[d], p, N);
-      qk_tree_options_t o = unit_root(caps[c]);
-      qk_tree_t *a, *b;
-      assert_int_equal(qk_tree_build(p, N, &o, &a), QK_OK);
-      assert_int_equal(qk_tree_build(NULL, 0, &o, &b), QK_OK);
-      for (size_t i = 0; i < N; i++) {
-        qk_id_t id;
-        assert_int_equal(qk_tree_insert(b, p[i], &id), QK_OK);
-        assert_int_equal(id, i);
-      }
-      QKT_CHECK_TREE(b);
-      shape_t sa = shape_of(a), sb = shape_of(b);
-      assert_int_equal(sa.nodes, sb.nodes);
-      assert_true(sa.hash == sb.hash);
-      qk_tree_free(a);
-      qk_tree_free(b);
+      assert_bulk_equals_inserts(p, N, unit_root(caps[c]));
     }
   free(p);
 }
@@ -189,20 +199,7 @@ static void test_index_build_conditioning(void **state) {
       qk_tree_options_t o;
       qk_tree_options_init(&o);
       o.capacity = 4;
-      qk_tree_t *a, *b;
-      assert_int_equal(qk_tree_build(p, N, &o, &a), QK_OK);
-      QKT_CHECK_TREE(a);
-      qk_tree_stats_t s;
-      qk_tree_stats(a, &s);
-      o.has_root = 1;
-      o.root = s.root;
-      assert_int_equal(qk_tree_build(NULL, 0, &o, &b), QK_OK);
-      for (size_t i = 0; i < N; i++) assert_int_equal(qk_tree_insert(b, p[i], NULL), QK_OK);
-      shape_t sa = shape_of(a), sb = shape_of(b);
-      assert_int_equal(sa.nodes, sb.nodes);
-      assert_true(sa.hash == sb.hash);
-      qk_tree_free(a);
-      qk_tree_free(b);
+      assert_bulk_equals_inserts(p, N, o);
     }
   free(p);
 }
