@@ -1,0 +1,86 @@
+#!/usr/bin/env bash
+# Builds the libFuzzer targets in fuzz/ with clang (ASan + UBSan) and runs each for
+# FUZZ_SECONDS (default 60), one after another, at low priority.
+#
+#   scripts/fuzz.sh                 build and run every target
+#   scripts/fuzz.sh tree_ops csv    only these targets
+#   FUZZ_SECONDS=600 scripts/fuzz.sh
+#   FUZZ_BUILD_ONLY=1 scripts/fuzz.sh
+#
+# Each target starts from fuzz/corpus/<target>/ and fuzz/regressions/<target>/; what it
+# learns goes to build-fuzz/corpus/<target>/ (not committed). A crash stops the run with
+# exit status 1 and leaves the input in build-fuzz/crashes/<target>/: minimise it with
+# `build-fuzz/fuzz_<target> -minimize_crash=1 -runs=10000 FILE`, then commit it under
+# fuzz/regressions/<target>/ so that tests/test_reliability.c replays it from then on.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+src=$PWD
+out=${FUZZ_BUILD_DIR:-$src/build-fuzz}
+seconds=${FUZZ_SECONDS:-60}
+cc=${FUZZ_CC:-clang}
+jobs_nice=${FUZZ_NICE:-15}
+
+all_targets=(tree_ops csv poly)
+targets=("$@")
+[ ${#targets[@]} -eq 0 ] && targets=("${all_targets[@]}")
+
+if ! command -v "$cc" >/dev/null; then
+  echo "fuzz.sh: $cc not found (make fuzz installs clang)" >&2
+  exit 2
+fi
+
+mkdir -p "$out"
+flags=(-g -O1 -std=c11 -D_POSIX_C_SOURCE=200809L -Wall -Wextra -Wpedantic
+  -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer
+  -I"$src/include" -I"$src")
+lib=("$src"/index/*.c "$src"/query/*.c "$src"/mesh/*.c)
+
+# Per-target sources and options (max_len bounds the work per input).
+sources() {
+  case "$1" in
+    tree_ops) echo "$src/fuzz/fuzz_tree_ops.c" ;;
+    csv) echo "$src/fuzz/fuzz_csv.c" ;;
+    poly) echo "$src/fuzz/fuzz_poly.c" ;;
+    *) echo "fuzz.sh: unknown target '$1' (have: ${all_targets[*]})" >&2; exit 2 ;;
+  esac
+}
+options() {
+  case "$1" in
+    tree_ops) echo "-max_len=2048" ;;
+    csv) echo "-max_len=4096 -close_fd_mask=2 -dict=$src/fuzz/csv.dict" ;;
+    poly) echo "-max_len=4096 -dict=$src/fuzz/poly.dict" ;;
+  esac
+}
+
+for t in "${targets[@]}"; do
+  s=$(sources "$t")
+  echo "== build fuzz_$t" >&2
+  # shellcheck disable=SC2046
+  nice -n "$jobs_nice" "$cc" "${flags[@]}" $s "${lib[@]}" -lm -o "$out/fuzz_$t"
+done
+[ "${FUZZ_BUILD_ONLY:-0}" = 1 ] && exit 0
+
+status=0
+for t in "${targets[@]}"; do
+  work="$out/corpus/$t"
+  crashes="$out/crashes/$t"
+  mkdir -p "$work" "$crashes"
+  seeds=()
+  [ -d "$src/fuzz/corpus/$t" ] && seeds+=("$src/fuzz/corpus/$t")
+  [ -d "$src/fuzz/regressions/$t" ] && seeds+=("$src/fuzz/regressions/$t")
+  echo "== fuzz_$t for ${seconds}s" >&2
+  log="$out/fuzz_$t.log"
+  # shellcheck disable=SC2046
+  if nice -n "$jobs_nice" "$out/fuzz_$t" -max_total_time="$seconds" -timeout=10 -rss_limit_mb=1024 \
+    -print_final_stats=1 -artifact_prefix="$crashes/" $(options "$t") "$work" "${seeds[@]}" \
+    >"$log" 2>&1; then
+    runs=$(grep -m1 -o 'stat::number_of_executed_units: *[0-9]*' "$log" | grep -o '[0-9]*$' || true)
+    cov=$(grep -o 'cov: [0-9]*' "$log" | tail -n 1 || true)
+    echo "   ok: ${runs:-?} runs, ${cov:-cov: ?}, corpus $(find "$work" -type f | wc -l) files" >&2
+  else
+    echo "   FAILED: see $log; input in $crashes/" >&2
+    grep -E 'fuzz oracle|ERROR|runtime error|SUMMARY' "$log" | head -n 5 >&2 || true
+    status=1
+  fi
+done
+exit $status
