@@ -1,0 +1,115 @@
+// quadkit-bench: shared declarations between the driver (main.cpp) and the baselines.
+// Each baseline lives in its own translation unit so that the heavy headers (CGAL above
+// all) are compiled once and a missing library only removes its own file from the build.
+#ifndef QUADKIT_BENCH_H
+#define QUADKIT_BENCH_H
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace qkb {
+
+// Points are two parallel-free arrays of (x, y) doubles, the layout qk_point_t has.
+struct Pt {
+  double x, y;
+};
+
+// The answer to one kNN query: ids and squared distances, nearest first.
+struct KnnOut {
+  std::vector<uint32_t> ids; // nq * k, QK_NONE-like 0xffffffff where missing
+  std::vector<double> d2;    // nq * k
+};
+
+// A point index under test. Every implementation answers in doubles; Embree keeps float
+// bounds in its BVH but the callbacks measure distances on the double coordinates, so
+// its answers are exact too (see base_embree.cpp).
+class PointIndex {
+public:
+  virtual ~PointIndex() = default;
+  virtual const char *name() const = 0;
+  // Build over pts (borrowed: pts outlives the index).
+  virtual void build(const std::vector<Pt> &pts) = 0;
+  // k nearest neighbours of each query, one query per call (batch = false) or through
+  // the library's own many-query entry point when it has one (batch = true).
+  virtual void knn(const std::vector<Pt> &qs, int k, bool batch, int threads, KnnOut &out) = 0;
+  virtual bool has_batch() const { return false; }
+  virtual bool has_threads() const { return false; }
+  // For each query, the number of points within r and the sum of their squared
+  // distances (a checksum), accumulated into count / sum.
+  virtual void radius(const std::vector<Pt> &qs, double r, uint64_t &count, double &sum) = 0;
+  // Points inside each closed box [c - h, c + h]; counts and id checksum.
+  virtual void range(const std::vector<Pt> &qs, double h, uint64_t &count, uint64_t &idsum) = 0;
+  virtual size_t bytes() const = 0;
+};
+
+std::unique_ptr<PointIndex> make_flann();
+std::unique_ptr<PointIndex> make_nanoflann();
+std::unique_ptr<PointIndex> make_embree_points();
+std::unique_ptr<PointIndex> make_cgal_orthtree();
+
+// Boxes for the collision and ray benchmarks.
+struct Box {
+  double xmin, ymin, xmax, ymax;
+};
+struct PairSum {
+  uint64_t pairs = 0;
+  uint64_t hash = 0; // sum over pairs (a < b) of a * 1000003 + b, wrapping
+};
+struct Ray {
+  double ox, oy, dx, dy; // float-representable values, so Embree sees the same rays
+};
+struct HitSum {
+  uint64_t hits = 0;
+  uint64_t idsum = 0;
+  double tsum = 0;
+};
+
+// Embree: all overlapping pairs among boxes (BVH build included in the timing).
+void embree_collide(const std::vector<Box> &boxes, PairSum &out);
+// Embree: first hit of each ray among discs (x, y, r); the BVH is built by
+// embree_discs_build and reused.
+struct EmbreeDiscs;
+EmbreeDiscs *embree_discs_build(const std::vector<double> &xyr);
+void embree_discs_raycast(EmbreeDiscs *s, const std::vector<Ray> &rays, HitSum &out);
+void embree_discs_free(EmbreeDiscs *s);
+
+// Balance: leaves before / after and the time of the balancing step alone. The
+// refinement is described by a callback on (x0, y0, side, depth) of a square of the
+// unit root: split or not.
+struct BalanceResult {
+  size_t leaves_before = 0, leaves_after = 0;
+  double seconds = 0;
+};
+using SplitFn = bool (*)(double x0, double y0, double side, int depth, void *ud);
+bool cgal_grade(const std::vector<Pt> &pts, int max_depth, int bucket, BalanceResult &out);
+bool p4est_balance_run(SplitFn split, void *ud, int max_level, BalanceResult &out);
+size_t cgal_orthtree_build_leaves(const std::vector<Pt> &pts, int max_depth, int bucket);
+
+// Meshing: a domain [0, U]^2 with polygonal components (closed rings of vertices).
+struct MeshResult {
+  size_t triangles = 0;
+  double min_angle_deg = 0;
+  double seconds = 0;
+};
+using Ring = std::vector<Pt>;
+bool cgal_mesh(double U, const std::vector<Ring> &rings, double max_edge, MeshResult &out);
+bool gmsh_mesh(double U, const std::vector<Ring> &rings, double max_edge, MeshResult &out);
+
+// Geodesic kNN (GeographicLib NearestNeighbor over Geodesic::WGS84 distances).
+struct GeoIndex;
+GeoIndex *geo_build(const std::vector<Pt> &lonlat);
+void geo_knn(GeoIndex *g, const std::vector<Pt> &qs, int k, std::vector<double> &dist_out);
+void geo_free(GeoIndex *g);
+
+// Which baselines this binary was built with.
+bool have(const char *what);
+
+double now_seconds();
+double min_angle_of(const std::vector<double> &xy, const std::vector<uint32_t> &tri);
+
+} // namespace qkb
+
+#endif

@@ -1,0 +1,47 @@
+// The quadkit side of every comparison, through the public C API only.
+#ifndef QUADKIT_BENCH_QUADKIT_SIDE_H
+#define QUADKIT_BENCH_QUADKIT_SIDE_H
+
+#include "bench.h"
+
+namespace qkb {
+
+// Leaf capacity used for the point benchmarks (the 16-64 range).
+constexpr unsigned kQuadkitCapacity = 32;
+
+std::unique_ptr<PointIndex> make_quadkit(unsigned capacity = kQuadkitCapacity);
+
+// Collision: build the collider over the boxes and report every overlapping pair.
+bool quadkit_collide(const std::vector<Box> &boxes, PairSum &out);
+
+// Rays: a collider over discs, built once, then first hits.
+struct QuadkitDiscs;
+QuadkitDiscs *quadkit_discs_build(const std::vector<double> &xyr);
+void quadkit_discs_raycast(QuadkitDiscs *s, const std::vector<Ray> &rays, HitSum &out);
+void quadkit_discs_free(QuadkitDiscs *s);
+
+// Balance: a tree over pts in the root [0, 1]^2 with the given capacity and depth cap;
+// times qk_tree_balance() alone. The tree before balancing is kept in *keep (freed with
+// quadkit_tree_free) when keep is not NULL, to drive the other libraries' refinement.
+struct QuadkitTree;
+bool quadkit_balance(const std::vector<Pt> &pts, unsigned capacity, unsigned max_depth,
+                     BalanceResult &out, QuadkitTree **keep);
+bool quadkit_tree_split(double x0, double y0, double side, int depth, void *tree);
+void quadkit_tree_free(QuadkitTree *t);
+
+// Build only, for the build benchmark; returns the leaf count and bytes held.
+size_t quadkit_build_leaves(const std::vector<Pt> &pts, unsigned capacity, unsigned max_depth,
+                            size_t *bytes);
+
+// Meshing through qk_mesh_generate().
+bool quadkit_mesh(unsigned U, const std::vector<Ring> &rings, MeshResult &out, std::string *err);
+
+// Geodesic kNN through qk_geo_knn().
+struct QuadkitGeo;
+QuadkitGeo *quadkit_geo_build(const std::vector<Pt> &lonlat);
+void quadkit_geo_knn(QuadkitGeo *g, const std::vector<Pt> &qs, int k, std::vector<double> &dist);
+void quadkit_geo_free(QuadkitGeo *g);
+
+} // namespace qkb
+
+#endif
