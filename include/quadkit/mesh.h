@@ -1,10 +1,203 @@
 /**
  * \file mesh.h
- * \brief The mesh module.
+ * \brief Quadtree mesh generation (de Berg et al., Computational Geometry, ch. 14).
+ *
+ * Input: disjoint simple polygons ("components") with integer vertices in the domain
+ * [0,U]^2, U a power of two, and edges at 0, 45, 90 or 135 degrees to the x-axis, as read
+ * from Triangle's `.poly` format. Output: a conforming triangulation of the whole domain
+ * that respects every component edge and whose angles all lie in [45, 90] degrees. The
+ * generator follows the book: subdivide the domain square while a square larger than
+ * unit size has a component boundary meeting its closure; balance the quadtree
+ * (BalanceQuadTree); triangulate each leaf (along a component diagonal, along a square
+ * diagonal, or with a Steiner point at the centre).
+ *
+ * Components are the cycles formed by the segments; component k (1-based) is the cycle
+ * holding the k-th smallest of the cycles' smallest segment indices, so the cycle of
+ * segment 0 is component 1. Every triangle carries the innermost component containing
+ * it, or 0 outside all components. Triangles inside a hole region of the input (the
+ * region, bounded by components, that holds a hole point) are dropped.
+ *
+ * All mesh vertices lie on the half-integer lattice, so their double coordinates are
+ * exact.
  */
 #ifndef QUADKIT_MESH_H
 #define QUADKIT_MESH_H
 
+#include <stdio.h>
+
 #include "quadkit/index.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/** Largest accepted domain size (2^30), which keeps all arithmetic exact in 64 bits. */
+#define QK_MESH_MAX_SIZE (1ull << 30)
+
+/** Where and why an input was rejected. */
+typedef struct qk_mesh_error {
+  unsigned long line; /**< 1-based input line, or 0 when the input came from arrays */
+  char message[256];  /**< the reason, naming the offending item and value */
+} qk_mesh_error_t;
+
+/** Opaque planar straight-line input: vertices, segments, hole points. */
+typedef struct qk_poly qk_poly_t;
+
+/**
+ * Read Triangle's `.poly` format: vertices (`#` comments, first index 0 or 1, optional
+ * attributes and boundary markers, which are ignored), segments, an optional holes
+ * section and optional regional attributes (ignored). Only syntax is checked here; the
+ * geometry is checked by qk_mesh_generate().
+ * \param [in] f an open stream, owned by the caller.
+ * \param [in] allocator NULL for libc; copied.
+ * \param [out] out the input, freed with qk_poly_free(); NULL on error.
+ * \param [out] err where and why the input was rejected (may be NULL).
+ * \return QK_OK, QK_ERR_PARSE, QK_ERR_LIMIT (absurd counts), QK_ERR_IO or QK_ERR_NOMEM.
+ */
+qk_status_t qk_poly_read(FILE *f, const qk_allocator_t *allocator, qk_poly_t **out,
+                         qk_mesh_error_t *err);
+
+/**
+ * Make an input from arrays (0-based indices).
+ * \param [in] xy 2*nv vertex coordinates, copied; must be integers.
+ * \param [in] nv number of vertices.
+ * \param [in] seg 2*ns vertex indices, copied.
+ * \param [in] ns number of segments.
+ * \param [in] holes 2*nh hole point coordinates, copied (may be NULL when nh is 0).
+ * \param [in] nh number of hole points.
+ * \param [in] allocator NULL for libc; copied.
+ * \param [out] out the input, freed with qk_poly_free().
+ * \return QK_OK, QK_ERR_INVALID or QK_ERR_NOMEM.
+ */
+qk_status_t qk_poly_from_arrays(const double *xy, size_t nv, const uint32_t *seg, size_t ns,
+                                const double *holes, size_t nh, const qk_allocator_t *allocator,
+                                qk_poly_t **out);
+
+/** Free an input; NULL is a no-op. */
+void qk_poly_free(qk_poly_t *poly);
+
+/** First vertex index used by the input file (0 or 1; 0 for arrays). */
+unsigned qk_poly_first_index(const qk_poly_t *poly);
+
+/** Number of vertices, segments and hole points of an input (any pointer may be NULL). */
+void qk_poly_counts(const qk_poly_t *poly, size_t *nv, size_t *ns, size_t *nh);
+
+/** Options for qk_mesh_generate(); zero-initialise or use qk_mesh_options_init(). */
+typedef struct qk_mesh_options {
+  /** Domain side U, a power of two; 0 means the smallest power of two >= every
+   *  coordinate (and >= 1). */
+  uint64_t size;
+  /** Allocator for the mesh and its tree; NULL means libc. */
+  const qk_allocator_t *allocator;
+} qk_mesh_options_t;
+
+/** Fill options with the defaults. \param [out] options the options. */
+void qk_mesh_options_init(qk_mesh_options_t *options);
+
+/** Opaque mesh handle. */
+typedef struct qk_mesh qk_mesh_t;
+
+/**
+ * Validate the input and generate its mesh.
+ * \param [in] poly the input (borrowed; only read during the call).
+ * \param [in] options NULL for defaults.
+ * \param [out] out the mesh, freed with qk_mesh_free(); NULL on error.
+ * \param [out] err where and why the input was rejected (may be NULL).
+ * \return QK_OK, QK_ERR_INVALID (bad size option), QK_ERR_GEOMETRY (non-integer or
+ *         out-of-domain coordinates, bad angles, open chains, degree != 2,
+ *         intersecting or touching components, hole point on a boundary or outside),
+ *         QK_ERR_LIMIT or QK_ERR_NOMEM.
+ */
+qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *options,
+                             qk_mesh_t **out, qk_mesh_error_t *err);
+
+/** Free a mesh; NULL is a no-op. */
+void qk_mesh_free(qk_mesh_t *mesh);
+
+/**
+ * The mesh vertices as 2*n doubles (x, y), borrowed until qk_mesh_free().
+ * \param [in] mesh the mesh. \param [out] n the number of vertices.
+ * \return the coordinates.
+ */
+const double *qk_mesh_vertices(const qk_mesh_t *mesh, size_t *n);
+
+/**
+ * The triangles as 3*n 0-based vertex indices, counter-clockwise, borrowed.
+ * \param [in] mesh the mesh. \param [out] n the number of triangles.
+ * \return the indices.
+ */
+const uint32_t *qk_mesh_triangles(const qk_mesh_t *mesh, size_t *n);
+
+/** Per triangle, the innermost component containing it (0: outside all). */
+const uint32_t *qk_mesh_triangle_components(const qk_mesh_t *mesh);
+
+/** The balanced quadtree subdivision the mesh was made from (borrowed). */
+const qk_tree_t *qk_mesh_tree(const qk_mesh_t *mesh);
+
+/** Figures about a mesh and its generation. */
+typedef struct qk_mesh_stats {
+  uint64_t size;                /**< the domain side U */
+  size_t components;            /**< number of components */
+  size_t leaves_before_balance; /**< leaves of the subdivision */
+  size_t leaves;                /**< leaves after balancing */
+  size_t triangles;             /**< triangles kept */
+  size_t vertices;              /**< vertices used by them */
+  size_t steiner;               /**< Steiner points (square centres) used */
+  double min_angle_deg;         /**< smallest triangle angle */
+  double max_angle_deg;         /**< largest triangle angle */
+  double uniform_triangles;     /**< 2 U^2, the size of the uniform grid mesh */
+  double seconds_validate;      /**< checking the input */
+  double seconds_subdivide;     /**< step 1 */
+  double seconds_balance;       /**< step 2 */
+  double seconds_triangulate;   /**< step 3, components and holes included */
+} qk_mesh_stats_t;
+
+/** Fill stats for a mesh. \param [in] mesh the mesh. \param [out] stats the figures. */
+void qk_mesh_stats(const qk_mesh_t *mesh, qk_mesh_stats_t *stats);
+
+/**
+ * Write the vertices in Triangle's `.node` format.
+ * \param [in] mesh the mesh. \param [in] f an open stream (caller's).
+ * \param [in] first_index 0 or 1, the first vertex number.
+ * \return QK_OK or QK_ERR_IO.
+ */
+qk_status_t qk_mesh_write_node(const qk_mesh_t *mesh, FILE *f, unsigned first_index);
+
+/**
+ * Write the triangles in Triangle's `.ele` format, counter-clockwise, with the
+ * component id as the one triangle attribute.
+ * \param [in] mesh the mesh. \param [in] f an open stream (caller's).
+ * \param [in] first_index 0 or 1, as for the `.node` file.
+ * \return QK_OK or QK_ERR_IO.
+ */
+qk_status_t qk_mesh_write_ele(const qk_mesh_t *mesh, FILE *f, unsigned first_index);
+
+/**
+ * Write gmsh's `.msh` 4.1 ASCII format: one surface entity and one physical group per
+ * component id present (named "component_K", and "outside" for 0).
+ * \param [in] mesh the mesh. \param [in] f an open stream (caller's).
+ * \return QK_OK or QK_ERR_IO.
+ */
+qk_status_t qk_mesh_write_msh(const qk_mesh_t *mesh, FILE *f);
+
+/**
+ * Write VTK's XML unstructured grid (`.vtu`, ASCII) with the component id as cell data.
+ * \param [in] mesh the mesh. \param [in] f an open stream (caller's).
+ * \return QK_OK or QK_ERR_IO.
+ */
+qk_status_t qk_mesh_write_vtu(const qk_mesh_t *mesh, FILE *f);
+
+/**
+ * Draw the mesh as SVG: triangles shaded by component, the quadtree leaves, and the
+ * component boundaries on top.
+ * \param [in] mesh the mesh. \param [in] f an open stream (caller's).
+ * \param [in] width picture width in pixels (0 means 800).
+ * \return QK_OK or QK_ERR_IO.
+ */
+qk_status_t qk_mesh_write_svg(const qk_mesh_t *mesh, FILE *f, unsigned width);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* QUADKIT_MESH_H */

@@ -1,0 +1,390 @@
+/*
+ * Reading Triangle's `.poly` format (a planar straight-line graph): a vertex section, a
+ * segment section, an optional hole section and optional regional attributes. Only the
+ * syntax is checked here; qk_mesh_generate() checks the geometry, using the line
+ * numbers recorded for every vertex, segment and hole.
+ */
+#include "mesh/mesh_internal.h"
+
+#include <errno.h>
+#include <limits.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* Counts beyond this are rejected as absurd before anything is allocated for them. */
+#define POLY_MAX_COUNT (1ul << 26)
+/* Vertex attributes per line beyond this are rejected as absurd. */
+#define POLY_MAX_ATTRIBUTES 1000ul
+
+qk_status_t qk__mesh_grow(const qk_allocator_t *a, void **p, size_t *cap, size_t elem,
+                          size_t need) {
+  if (need <= *cap) return QK_OK;
+  size_t nc = *cap ? *cap : 16;
+  while (nc < need) {
+    if (nc > SIZE_MAX / 2 / elem) return QK_ERR_NOMEM;
+    nc *= 2;
+  }
+  void *np = qk__realloc(a, *p, *cap * elem, nc * elem);
+  if (!np) return QK_ERR_NOMEM;
+  *p = np;
+  *cap = nc;
+  return QK_OK;
+}
+
+qk_status_t qk__mesh_fail(qk_mesh_error_t *err, qk_status_t st, unsigned long line, const char *fmt,
+                          ...) {
+  if (err) {
+    err->line = line;
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(err->message, sizeof err->message, fmt, ap);
+    va_end(ap);
+  }
+  return st;
+}
+
+/* A line reader that strips `#` comments and splits on blanks, skipping empty lines. */
+typedef struct reader {
+  FILE *f;
+  const qk_allocator_t *a;
+  char *buf;
+  size_t cap;
+  unsigned long line;
+  char *tok[16]; /* the first tokens of the current line */
+  size_t ntok;   /* tokens on the line (may exceed 16; only 16 are kept) */
+  int io_error;
+} reader_t;
+
+/* Read the next line holding a token. Returns 1, 0 at end of input, -1 out of memory. */
+static int next_line(reader_t *r) {
+  for (;;) {
+    size_t n = 0;
+    int c;
+    int any = 0;
+    while ((c = getc(r->f)) != EOF) {
+      any = 1;
+      if (c == '\n') break;
+      if (n + 2 > r->cap) {
+        void *p = r->buf;
+        if (qk__mesh_grow(r->a, &p, &r->cap, 1, n + 2)) return -1;
+        r->buf = p;
+      }
+      r->buf[n++] = (char)c;
+    }
+    if (ferror(r->f)) r->io_error = 1;
+    if (!any) return 0;
+    r->line++;
+    if (!r->buf) continue; /* an empty line before any buffer exists */
+    r->buf[n] = '\0';
+    char *hash = strchr(r->buf, '#');
+    if (hash) *hash = '\0';
+    r->ntok = 0;
+    char *s = r->buf;
+    for (;;) {
+      while (*s == ' ' || *s == '\t' || *s == '\r' || *s == ',') s++;
+      if (!*s) break;
+      if (r->ntok < 16) r->tok[r->ntok] = s;
+      r->ntok++;
+      while (*s && *s != ' ' && *s != '\t' && *s != '\r' && *s != ',') s++;
+      if (*s) *s++ = '\0';
+    }
+    if (r->ntok > 0) return 1;
+  }
+}
+
+/* Parse a whole token as a finite number. */
+static int parse_num(const char *s, double *v) {
+  char *end;
+  errno = 0;
+  double d = strtod(s, &end);
+  if (end == s || *end || !isfinite(d)) return 0;
+  *v = d;
+  return 1;
+}
+
+/* Parse a whole token as a non-negative integer count (digits only). */
+static int parse_count(const char *s, unsigned long *v) {
+  if (!*s) return 0;
+  unsigned long x = 0;
+  for (const char *p = s; *p; p++) {
+    if (*p < '0' || *p > '9') return 0;
+    if (x > (ULONG_MAX - 9) / 10) return 0;
+    x = 10 * x + (unsigned long)(*p - '0');
+  }
+  *v = x;
+  return 1;
+}
+
+/* Parse a whole token as an integer index (a number with no fractional part). */
+static int parse_index(const char *s, long long *v) {
+  double d;
+  if (!parse_num(s, &d) || d != floor(d) || fabs(d) > 9e15) return 0;
+  *v = (long long)d;
+  return 1;
+}
+
+void qk_poly_free(qk_poly_t *p) {
+  if (!p) return;
+  qk_allocator_t a = p->alloc;
+  qk__free(&a, p->vx, p->cap.v * sizeof *p->vx);
+  qk__free(&a, p->vy, p->cap.vy * sizeof *p->vy);
+  qk__free(&a, p->vline, p->cap.vl * sizeof *p->vline);
+  qk__free(&a, p->seg, p->cap.s * 2 * sizeof *p->seg);
+  qk__free(&a, p->sline, p->cap.sl * sizeof *p->sline);
+  qk__free(&a, p->hx, p->cap.h * sizeof *p->hx);
+  qk__free(&a, p->hy, p->cap.hy * sizeof *p->hy);
+  qk__free(&a, p->hline, p->cap.hl * sizeof *p->hline);
+  qk__free(&a, p, sizeof *p);
+}
+
+static qk_poly_t *poly_new(const qk_allocator_t *allocator) {
+  qk_allocator_t a = {NULL, NULL};
+  if (allocator) a = *allocator;
+  qk_poly_t *p = qk__realloc(&a, NULL, 0, sizeof *p);
+  if (!p) return NULL;
+  memset(p, 0, sizeof *p);
+  p->alloc = a;
+  return p;
+}
+
+unsigned qk_poly_first_index(const qk_poly_t *p) { return p ? p->first_index : 0; }
+
+void qk_poly_counts(const qk_poly_t *p, size_t *nv, size_t *ns, size_t *nh) {
+  if (nv) *nv = p ? p->nv : 0;
+  if (ns) *ns = p ? p->ns : 0;
+  if (nh) *nh = p ? p->nh : 0;
+}
+
+static qk_status_t add_vertex(qk_poly_t *p, qk__poly_caps_t *c, double x, double y,
+                              unsigned long line) {
+  const qk_allocator_t *a = &p->alloc;
+  size_t need = p->nv + 1;
+  if (qk__mesh_grow(a, (void **)&p->vx, &c->v, sizeof *p->vx, need) ||
+      qk__mesh_grow(a, (void **)&p->vy, &c->vy, sizeof *p->vy, need) ||
+      qk__mesh_grow(a, (void **)&p->vline, &c->vl, sizeof *p->vline, need))
+    return QK_ERR_NOMEM;
+  p->vx[p->nv] = x;
+  p->vy[p->nv] = y;
+  p->vline[p->nv] = line;
+  p->nv++;
+  return QK_OK;
+}
+
+static qk_status_t add_segment(qk_poly_t *p, qk__poly_caps_t *c, uint32_t u, uint32_t v,
+                               unsigned long line) {
+  const qk_allocator_t *a = &p->alloc;
+  size_t need = p->ns + 1;
+  if (qk__mesh_grow(a, (void **)&p->seg, &c->s, 2 * sizeof *p->seg, need) ||
+      qk__mesh_grow(a, (void **)&p->sline, &c->sl, sizeof *p->sline, need))
+    return QK_ERR_NOMEM;
+  p->seg[2 * p->ns] = u;
+  p->seg[2 * p->ns + 1] = v;
+  p->sline[p->ns] = line;
+  p->ns++;
+  return QK_OK;
+}
+
+static qk_status_t add_hole(qk_poly_t *p, qk__poly_caps_t *c, double x, double y,
+                            unsigned long line) {
+  const qk_allocator_t *a = &p->alloc;
+  size_t need = p->nh + 1;
+  if (qk__mesh_grow(a, (void **)&p->hx, &c->h, sizeof *p->hx, need) ||
+      qk__mesh_grow(a, (void **)&p->hy, &c->hy, sizeof *p->hy, need) ||
+      qk__mesh_grow(a, (void **)&p->hline, &c->hl, sizeof *p->hline, need))
+    return QK_ERR_NOMEM;
+  p->hx[p->nh] = x;
+  p->hy[p->nh] = y;
+  p->hline[p->nh] = line;
+  p->nh++;
+  return QK_OK;
+}
+
+#define FAIL(st, ...)                                                                              \
+  do {                                                                                             \
+    status = qk__mesh_fail(err, (st), r.line, __VA_ARGS__);                                        \
+    goto done;                                                                                     \
+  } while (0)
+
+/* Read a section header's count (first token), rejecting absurd values. */
+#define READ_COUNT(var, what)                                                                      \
+  do {                                                                                             \
+    if (!parse_count(r.tok[0], &(var)))                                                            \
+      FAIL(QK_ERR_PARSE, "expected the number of %s, found '%s'", what, r.tok[0]);                 \
+    if ((var) > POLY_MAX_COUNT)                                                                    \
+      FAIL(QK_ERR_LIMIT, "%lu %s is absurd (at most %lu accepted)", (var), what, POLY_MAX_COUNT);  \
+  } while (0)
+
+/* Advance to the next line, failing on truncation or memory. */
+#define NEED_LINE(...)                                                                             \
+  do {                                                                                             \
+    int got_ = next_line(&r);                                                                      \
+    if (got_ < 0) FAIL(QK_ERR_NOMEM, "out of memory");                                             \
+    if (got_ == 0) {                                                                               \
+      if (r.io_error) FAIL(QK_ERR_IO, "read error");                                               \
+      FAIL(QK_ERR_PARSE, __VA_ARGS__);                                                             \
+    }                                                                                              \
+  } while (0)
+
+qk_status_t qk_poly_read(FILE *f, const qk_allocator_t *allocator, qk_poly_t **out,
+                         qk_mesh_error_t *err) {
+  if (out) *out = NULL;
+  if (err) {
+    err->line = 0;
+    err->message[0] = '\0';
+  }
+  if (!f || !out) return QK_ERR_INVALID;
+  qk_status_t status = QK_OK;
+  qk_poly_t *p = poly_new(allocator);
+  if (!p) return qk__mesh_fail(err, QK_ERR_NOMEM, 0, "out of memory");
+  reader_t r = {f, &p->alloc, NULL, 0, 0, {0}, 0, 0};
+  qk__poly_caps_t *c = &p->cap;
+  unsigned long nv, dim = 2, nattr = 0, nmark = 0;
+
+  /* Vertex section header: <#vertices> <dimension> <#attributes> <#boundary markers>. */
+  NEED_LINE("empty input: expected the vertex section header");
+  READ_COUNT(nv, "vertices");
+  if (r.ntok > 4) FAIL(QK_ERR_PARSE, "vertex section header has %zu fields, expected 4", r.ntok);
+  if (r.ntok > 1 && (!parse_count(r.tok[1], &dim) || dim != 2))
+    FAIL(QK_ERR_PARSE, "dimension must be 2, found '%s'", r.tok[1]);
+  if (r.ntok > 2 && (!parse_count(r.tok[2], &nattr) || nattr > POLY_MAX_ATTRIBUTES))
+    FAIL(QK_ERR_PARSE, "bad number of vertex attributes '%s'", r.tok[2]);
+  if (r.ntok > 3 && (!parse_count(r.tok[3], &nmark) || nmark > 1))
+    FAIL(QK_ERR_PARSE, "number of boundary markers must be 0 or 1, found '%s'", r.tok[3]);
+  if (nv == 0)
+    FAIL(QK_ERR_PARSE, "no vertices (vertices in a separate .node file are not supported)");
+
+  for (unsigned long i = 0; i < nv; i++) {
+    NEED_LINE("truncated input: expected %lu vertices, found %lu", nv, i);
+    long long idx;
+    double x, y;
+    if (!parse_index(r.tok[0], &idx)) FAIL(QK_ERR_PARSE, "bad vertex number '%s'", r.tok[0]);
+    if (i == 0) {
+      if (idx != 0 && idx != 1)
+        FAIL(QK_ERR_PARSE, "first vertex number must be 0 or 1, found %lld", idx);
+      p->first_index = (unsigned)idx;
+    } else if (idx != (long long)(i + p->first_index)) {
+      FAIL(QK_ERR_PARSE, "vertex number %lu expected, found %lld", i + p->first_index, idx);
+    }
+    if (r.ntok < 3) FAIL(QK_ERR_PARSE, "vertex %lld: expected x and y", idx);
+    if (!parse_num(r.tok[1], &x))
+      FAIL(QK_ERR_PARSE, "vertex %lld: bad x coordinate '%s'", idx, r.tok[1]);
+    if (!parse_num(r.tok[2], &y))
+      FAIL(QK_ERR_PARSE, "vertex %lld: bad y coordinate '%s'", idx, r.tok[2]);
+    if (r.ntok > 3 + nattr + nmark)
+      FAIL(QK_ERR_PARSE, "vertex %lld: %zu fields, at most %lu expected", idx, r.ntok,
+           3 + nattr + nmark);
+    for (size_t k = 3; k < r.ntok && k < 16; k++) {
+      double v;
+      if (!parse_num(r.tok[k], &v))
+        FAIL(QK_ERR_PARSE, "vertex %lld: bad field '%s'", idx, r.tok[k]);
+    }
+    if (add_vertex(p, c, x, y, r.line)) FAIL(QK_ERR_NOMEM, "out of memory");
+  }
+
+  /* Segment section: <#segments> <#boundary markers>, then <#> <endpoint> <endpoint>. */
+  unsigned long ns, smark = 0;
+  NEED_LINE("truncated input: expected the segment section header");
+  READ_COUNT(ns, "segments");
+  if (r.ntok > 2) FAIL(QK_ERR_PARSE, "segment section header has %zu fields, expected 2", r.ntok);
+  if (r.ntok > 1 && (!parse_count(r.tok[1], &smark) || smark > 1))
+    FAIL(QK_ERR_PARSE, "number of segment boundary markers must be 0 or 1, found '%s'", r.tok[1]);
+  for (unsigned long i = 0; i < ns; i++) {
+    NEED_LINE("truncated input: expected %lu segments, found %lu", ns, i);
+    long long idx, e[2];
+    if (!parse_index(r.tok[0], &idx)) FAIL(QK_ERR_PARSE, "bad segment number '%s'", r.tok[0]);
+    if (r.ntok < 3) FAIL(QK_ERR_PARSE, "segment %lld: expected two endpoints", idx);
+    if (r.ntok > 3 + smark)
+      FAIL(QK_ERR_PARSE, "segment %lld: %zu fields, at most %lu expected", idx, r.ntok, 3 + smark);
+    for (int k = 0; k < 2; k++) {
+      if (!parse_index(r.tok[1 + k], &e[k]) || e[k] < (long long)p->first_index ||
+          e[k] >= (long long)(nv + p->first_index))
+        FAIL(QK_ERR_PARSE, "segment %lld: endpoint '%s' is not a vertex number (%u..%lu)", idx,
+             r.tok[1 + k], p->first_index, nv - 1 + p->first_index);
+    }
+    if (r.ntok > 3) {
+      double v;
+      if (!parse_num(r.tok[3], &v))
+        FAIL(QK_ERR_PARSE, "segment %lld: bad marker '%s'", idx, r.tok[3]);
+    }
+    if (add_segment(p, c, (uint32_t)(e[0] - p->first_index), (uint32_t)(e[1] - p->first_index),
+                    r.line))
+      FAIL(QK_ERR_NOMEM, "out of memory");
+  }
+
+  /* Optional hole section: <#holes>, then <#> <x> <y>. */
+  int got = next_line(&r);
+  if (got < 0) FAIL(QK_ERR_NOMEM, "out of memory");
+  if (got > 0) {
+    unsigned long nh;
+    READ_COUNT(nh, "holes");
+    if (r.ntok > 1) FAIL(QK_ERR_PARSE, "hole section header has %zu fields, expected 1", r.ntok);
+    for (unsigned long i = 0; i < nh; i++) {
+      NEED_LINE("truncated input: expected %lu holes, found %lu", nh, i);
+      long long idx;
+      double x, y;
+      if (!parse_index(r.tok[0], &idx)) FAIL(QK_ERR_PARSE, "bad hole number '%s'", r.tok[0]);
+      if (r.ntok != 3) FAIL(QK_ERR_PARSE, "hole %lld: expected x and y only", idx);
+      if (!parse_num(r.tok[1], &x) || !parse_num(r.tok[2], &y))
+        FAIL(QK_ERR_PARSE, "hole %lld: bad coordinates '%s' '%s'", idx, r.tok[1], r.tok[2]);
+      if (add_hole(p, c, x, y, r.line)) FAIL(QK_ERR_NOMEM, "out of memory");
+    }
+    /* Optional regional attributes: <#regions>, then <#> <x> <y> <attribute> [<area>].
+     * They are checked for syntax and otherwise ignored: components carry their ids. */
+    got = next_line(&r);
+    if (got < 0) FAIL(QK_ERR_NOMEM, "out of memory");
+    if (got > 0) {
+      unsigned long nr;
+      READ_COUNT(nr, "regional attributes");
+      if (r.ntok > 1)
+        FAIL(QK_ERR_PARSE, "region section header has %zu fields, expected 1", r.ntok);
+      for (unsigned long i = 0; i < nr; i++) {
+        NEED_LINE("truncated input: expected %lu regional attributes, found %lu", nr, i);
+        if (r.ntok < 4 || r.ntok > 5)
+          FAIL(QK_ERR_PARSE, "region: expected 4 or 5 fields, found %zu", r.ntok);
+        for (size_t k = 0; k < r.ntok; k++) {
+          double v;
+          if (!parse_num(r.tok[k], &v)) FAIL(QK_ERR_PARSE, "region: bad field '%s'", r.tok[k]);
+        }
+      }
+      got = next_line(&r);
+      if (got < 0) FAIL(QK_ERR_NOMEM, "out of memory");
+      if (got > 0) FAIL(QK_ERR_PARSE, "unexpected content after the last section: '%s'", r.tok[0]);
+    }
+  }
+  if (r.io_error) FAIL(QK_ERR_IO, "read error");
+
+done:
+  qk__free(&p->alloc, r.buf, r.cap);
+  if (status != QK_OK) {
+    qk_poly_free(p);
+    return status;
+  }
+  *out = p;
+  return QK_OK;
+}
+
+qk_status_t qk_poly_from_arrays(const double *xy, size_t nv, const uint32_t *seg, size_t ns,
+                                const double *holes, size_t nh, const qk_allocator_t *allocator,
+                                qk_poly_t **out) {
+  if (!out) return QK_ERR_INVALID;
+  *out = NULL;
+  if ((nv && !xy) || (ns && !seg) || (nh && !holes)) return QK_ERR_INVALID;
+  if (nv > POLY_MAX_COUNT || ns > POLY_MAX_COUNT || nh > POLY_MAX_COUNT) return QK_ERR_LIMIT;
+  for (size_t i = 0; i < 2 * ns; i++)
+    if (seg[i] >= nv) return QK_ERR_INVALID;
+  qk_poly_t *p = poly_new(allocator);
+  if (!p) return QK_ERR_NOMEM;
+  qk__poly_caps_t *c = &p->cap;
+  for (size_t i = 0; i < nv; i++)
+    if (add_vertex(p, c, xy[2 * i], xy[2 * i + 1], 0)) goto nomem;
+  for (size_t i = 0; i < ns; i++)
+    if (add_segment(p, c, seg[2 * i], seg[2 * i + 1], 0)) goto nomem;
+  for (size_t i = 0; i < nh; i++)
+    if (add_hole(p, c, holes[2 * i], holes[2 * i + 1], 0)) goto nomem;
+  *out = p;
+  return QK_OK;
+nomem:
+  qk_poly_free(p);
+  return QK_ERR_NOMEM;
+}

@@ -1,0 +1,166 @@
+/*
+ * Mesh writers: Triangle's .node/.ele, gmsh .msh 4.1 (ASCII), VTK XML .vtu and SVG.
+ * Coordinates are half-integers, so "%.17g" prints them exactly and briefly.
+ */
+#include "mesh/mesh_internal.h"
+
+#include <string.h>
+
+static qk_status_t io_status(FILE *f) { return ferror(f) ? QK_ERR_IO : QK_OK; }
+
+qk_status_t qk_mesh_write_node(const qk_mesh_t *m, FILE *f, unsigned first) {
+  if (!m || !f || first > 1) return QK_ERR_INVALID;
+  fprintf(f, "%zu 2 0 0\n", m->nv);
+  for (size_t i = 0; i < m->nv; i++)
+    fprintf(f, "%zu %.17g %.17g\n", i + first, m->xy[2 * i], m->xy[2 * i + 1]);
+  return io_status(f);
+}
+
+qk_status_t qk_mesh_write_ele(const qk_mesh_t *m, FILE *f, unsigned first) {
+  if (!m || !f || first > 1) return QK_ERR_INVALID;
+  fprintf(f, "%zu 3 1\n", m->nt);
+  for (size_t i = 0; i < m->nt; i++) {
+    const uint32_t *t = &m->tri[3 * i];
+    fprintf(f, "%zu %lu %lu %lu %lu\n", i + first, (unsigned long)t[0] + first,
+            (unsigned long)t[1] + first, (unsigned long)t[2] + first, (unsigned long)m->comp[i]);
+  }
+  return io_status(f);
+}
+
+/* Which component ids occur, and how many triangles each has. Returns the number of
+ * distinct ids; `count` has room for stats.components + 1 entries. */
+static size_t used_components(const qk_mesh_t *m, size_t *count) {
+  size_t nc = m->stats.components + 1, used = 0;
+  memset(count, 0, nc * sizeof *count);
+  for (size_t i = 0; i < m->nt; i++) count[m->comp[i]]++;
+  for (size_t c = 0; c < nc; c++) used += count[c] != 0;
+  return used;
+}
+
+/*
+ * gmsh 4.1: every component id present becomes a surface entity (tag id + 1) carrying
+ * a physical group of the same tag; all nodes are listed in one block on the first
+ * entity, which gmsh accepts for a mesh without geometry.
+ */
+qk_status_t qk_mesh_write_msh(const qk_mesh_t *m, FILE *f) {
+  if (!m || !f) return QK_ERR_INVALID;
+  size_t nc = m->stats.components + 1;
+  size_t *count = qk__realloc(&m->alloc, NULL, 0, nc * sizeof *count);
+  if (!count) return QK_ERR_NOMEM;
+  size_t used = used_components(m, count);
+  double U = (double)m->size;
+  fprintf(f, "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n");
+  fprintf(f, "$PhysicalNames\n%zu\n", used);
+  for (size_t c = 0; c < nc; c++) {
+    if (!count[c]) continue;
+    if (c == 0)
+      fprintf(f, "2 1 \"outside\"\n");
+    else
+      fprintf(f, "2 %zu \"component_%zu\"\n", c + 1, c);
+  }
+  fprintf(f, "$EndPhysicalNames\n$Entities\n0 0 %zu 0\n", used);
+  size_t first_tag = 0;
+  for (size_t c = 0; c < nc; c++) {
+    if (!count[c]) continue;
+    if (!first_tag) first_tag = c + 1;
+    fprintf(f, "%zu 0 0 0 %.17g %.17g 0 1 %zu 0\n", c + 1, U, U, c + 1);
+  }
+  fprintf(f, "$EndEntities\n$Nodes\n%d %zu %d %zu\n", m->nv ? 1 : 0, m->nv, m->nv ? 1 : 0, m->nv);
+  if (m->nv) {
+    fprintf(f, "2 %zu 0 %zu\n", first_tag, m->nv);
+    for (size_t i = 0; i < m->nv; i++) fprintf(f, "%zu\n", i + 1);
+    for (size_t i = 0; i < m->nv; i++)
+      fprintf(f, "%.17g %.17g 0\n", m->xy[2 * i], m->xy[2 * i + 1]);
+  }
+  fprintf(f, "$EndNodes\n$Elements\n%zu %zu %d %zu\n", used, m->nt, m->nt ? 1 : 0, m->nt);
+  /* Element tags are numbered block by block, so they run 1..nt in block order. */
+  size_t tag = 1;
+  for (size_t c = 0; c < nc; c++) {
+    if (!count[c]) continue;
+    fprintf(f, "2 %zu 2 %zu\n", c + 1, count[c]);
+    for (size_t i = 0; i < m->nt; i++) {
+      if (m->comp[i] != c) continue;
+      const uint32_t *t = &m->tri[3 * i];
+      fprintf(f, "%zu %lu %lu %lu\n", tag++, (unsigned long)t[0] + 1, (unsigned long)t[1] + 1,
+              (unsigned long)t[2] + 1);
+    }
+  }
+  fprintf(f, "$EndElements\n");
+  qk__free(&m->alloc, count, nc * sizeof *count);
+  return io_status(f);
+}
+
+qk_status_t qk_mesh_write_vtu(const qk_mesh_t *m, FILE *f) {
+  if (!m || !f) return QK_ERR_INVALID;
+  fprintf(f,
+          "<?xml version=\"1.0\"?>\n"
+          "<VTKFile type=\"UnstructuredGrid\" version=\"0.1\" byte_order=\"LittleEndian\">\n"
+          "<UnstructuredGrid>\n<Piece NumberOfPoints=\"%zu\" NumberOfCells=\"%zu\">\n",
+          m->nv, m->nt);
+  fprintf(f, "<Points>\n<DataArray type=\"Float64\" NumberOfComponents=\"3\" format=\"ascii\">\n");
+  for (size_t i = 0; i < m->nv; i++) fprintf(f, "%.17g %.17g 0\n", m->xy[2 * i], m->xy[2 * i + 1]);
+  fprintf(f, "</DataArray>\n</Points>\n<Cells>\n"
+             "<DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">\n");
+  for (size_t i = 0; i < m->nt; i++)
+    fprintf(f, "%lu %lu %lu\n", (unsigned long)m->tri[3 * i], (unsigned long)m->tri[3 * i + 1],
+            (unsigned long)m->tri[3 * i + 2]);
+  fprintf(f, "</DataArray>\n<DataArray type=\"Int64\" Name=\"offsets\" format=\"ascii\">\n");
+  for (size_t i = 0; i < m->nt; i++) fprintf(f, "%zu\n", 3 * (i + 1));
+  fprintf(f, "</DataArray>\n<DataArray type=\"UInt8\" Name=\"types\" format=\"ascii\">\n");
+  for (size_t i = 0; i < m->nt; i++) fprintf(f, "5\n"); /* VTK_TRIANGLE */
+  fprintf(f, "</DataArray>\n</Cells>\n<CellData Scalars=\"component\">\n"
+             "<DataArray type=\"Int32\" Name=\"component\" format=\"ascii\">\n");
+  for (size_t i = 0; i < m->nt; i++) fprintf(f, "%lu\n", (unsigned long)m->comp[i]);
+  fprintf(f, "</DataArray>\n</CellData>\n</Piece>\n</UnstructuredGrid>\n</VTKFile>\n");
+  return io_status(f);
+}
+
+typedef struct svg_ctx {
+  FILE *f;
+  double scale, height;
+} svg_ctx_t;
+
+static qk_visit_t draw_leaf(const qk_tree_t *t, qk_node_t v, void *ud) {
+  svg_ctx_t *c = ud;
+  const qk__node_t *n = &t->nodes[v];
+  if (!qk__is_leaf(n)) return QK_VISIT_CONTINUE;
+  double s = t->side[n->depth] * c->scale;
+  fprintf(c->f, "<rect x=\"%.3f\" y=\"%.3f\" width=\"%.3f\" height=\"%.3f\"/>\n", n->x0 * c->scale,
+          c->height - n->y0 * c->scale - s, s, s);
+  return QK_VISIT_CONTINUE;
+}
+
+qk_status_t qk_mesh_write_svg(const qk_mesh_t *m, FILE *f, unsigned width) {
+  if (!m || !f) return QK_ERR_INVALID;
+  if (width == 0) width = 800;
+  double W = width, scale = W / (double)m->size;
+  svg_ctx_t c = {f, scale, W};
+  /* A few pale fills, cycled by component id; the outside stays white. */
+  static const char *fill[] = {"#ffffff", "#c6dbef", "#fdd0a2", "#c7e9c0",
+                               "#dadaeb", "#fcbba1", "#d9d9d9"};
+  fprintf(f,
+          "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"%u\" height=\"%u\" "
+          "viewBox=\"-2 -2 %u %u\">\n<rect x=\"-2\" y=\"-2\" width=\"%u\" height=\"%u\" "
+          "fill=\"white\"/>\n",
+          width + 4, width + 4, width + 4, width + 4, width + 4, width + 4);
+  fprintf(f, "<g stroke=\"#9e9e9e\" stroke-width=\"0.4\" stroke-linejoin=\"round\">\n");
+  for (size_t i = 0; i < m->nt; i++) {
+    const uint32_t *t = &m->tri[3 * i];
+    uint32_t k = m->comp[i];
+    fprintf(f, "<polygon fill=\"%s\" points=\"", fill[k == 0 ? 0 : 1 + (k - 1) % 6]);
+    for (int j = 0; j < 3; j++)
+      fprintf(f, "%s%.3f,%.3f", j ? " " : "", m->xy[2 * t[j]] * scale,
+              W - m->xy[2 * t[j] + 1] * scale);
+    fprintf(f, "\"/>\n");
+  }
+  fprintf(f, "</g>\n<g fill=\"none\" stroke=\"#2b6cb0\" stroke-width=\"1\">\n");
+  qk_tree_visit(m->tree, qk_tree_root(m->tree), draw_leaf, &c);
+  fprintf(f, "</g>\n<g stroke=\"#c53030\" stroke-width=\"2.5\" stroke-linecap=\"round\">\n");
+  for (size_t s = 0; s < m->ncs; s++) {
+    uint32_t a = m->cseg[2 * s], b = m->cseg[2 * s + 1];
+    fprintf(f, "<line x1=\"%.3f\" y1=\"%.3f\" x2=\"%.3f\" y2=\"%.3f\"/>\n", m->cxy[2 * a] * scale,
+            W - m->cxy[2 * a + 1] * scale, m->cxy[2 * b] * scale, W - m->cxy[2 * b + 1] * scale);
+  }
+  fprintf(f, "</g>\n</svg>\n");
+  return io_status(f);
+}
