@@ -1,0 +1,277 @@
+/*
+ * Test plan for the collider (query/collide.c):
+ *  - all overlapping pairs of random discs, boxes and mixed sets (small and large items,
+ *    touching items, zero radii and degenerate boxes, clustered centres) at several
+ *    capacities, against the O(n^2) loop;
+ *  - items overlapping a query box or disc against brute force;
+ *  - first hit of rays and segments against a loop over all items: origins inside
+ *    items (t = 0), outside the whole set, axis-parallel directions, tmax cut-offs;
+ *  - hand-computed cases (tangent discs, a ray grazing a box corner);
+ *  - bad input and allocation failure at every N (clean QK_ERR_NOMEM, no leak).
+ */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "qk_test.h"
+#include "query_oracle.h"
+
+static uint64_t g_seed;
+
+/* Random items: `big` mixes a few large items into many small ones. */
+static void make_items(qkt_rng_t *r, qk_disc_t *d, size_t nd, qk_box_t *b, size_t nb, int clustered,
+                       double scale) {
+  for (size_t i = 0; i < nd; i++) {
+    double cx = qkt_rng_unit(r), cy = qkt_rng_unit(r);
+    if (clustered) cx = 0.3 + 0.1 * cx, cy = 0.6 + 0.1 * cy;
+    double rad =
+        qkt_rng_below(r, 20) == 0 ? qkt_rng_range(r, 0, 10 * scale) : qkt_rng_range(r, 0, scale);
+    if (i % 37 == 5) rad = 0;
+    d[i] = (qk_disc_t){cx, cy, rad};
+  }
+  for (size_t i = 0; i < nb; i++) {
+    double cx = qkt_rng_unit(r), cy = qkt_rng_unit(r);
+    if (clustered) cx = 0.3 + 0.1 * cx, cy = 0.6 + 0.1 * cy;
+    double w =
+        qkt_rng_below(r, 20) == 0 ? qkt_rng_range(r, 0, 10 * scale) : qkt_rng_range(r, 0, scale);
+    double h = qkt_rng_range(r, 0, scale);
+    if (i % 41 == 3) w = 0;
+    b[i] = (qk_box_t){cx - w, cy - h, cx + w, cy + h};
+  }
+  /* A few exactly touching pairs: a disc tangent to the previous one, a box sharing an
+   * edge with the previous one. */
+  for (size_t i = 1; i + 1 < nd; i += 50)
+    d[i] = (qk_disc_t){d[i - 1].x + d[i - 1].r + 0.25, d[i - 1].y, 0.25};
+  for (size_t i = 1; i + 1 < nb; i += 50)
+    b[i] = (qk_box_t){b[i - 1].xmax, b[i - 1].ymin, b[i - 1].xmax + 0.01, b[i - 1].ymax};
+}
+
+static qk_tree_options_t opts(uint32_t cap) {
+  qk_tree_options_t o;
+  qk_tree_options_init(&o);
+  o.capacity = cap;
+  return o;
+}
+
+static void check_pairs(const qk_disc_t *d, size_t nd, const qk_box_t *b, size_t nb, uint32_t cap) {
+  qk_tree_options_t o = opts(cap);
+  qk_collider_t *c = NULL;
+  assert_int_equal(qk_collider_build(d, nd, b, nb, &o, &c), QK_OK);
+  QKT_CHECK_TREE(qk_collider_tree(c));
+  assert_int_equal(qk_collider_size(c), nd + nb);
+  qk_pair_t *want;
+  size_t nw = qko_pairs(d, nd, b, nb, &want), ng = 0;
+  assert_int_equal(qk_collider_pairs_list(c, NULL, 0, &ng), QK_OK);
+  if (ng != nw)
+    fail_msg("pairs: %zu, oracle %zu (nd %zu nb %zu cap %u seed %llu)", ng, nw, nd, nb, cap,
+             (unsigned long long)g_seed);
+  qk_pair_t *got = malloc((ng ? ng : 1) * sizeof *got);
+  assert_int_equal(qk_collider_pairs_list(c, got, ng, &ng), QK_OK);
+  for (size_t i = 0; i < nw; i++)
+    if (got[i].a != want[i].a || got[i].b != want[i].b)
+      fail_msg("pair %zu: (%u,%u) vs oracle (%u,%u) (seed %llu)", i, got[i].a, got[i].b, want[i].a,
+               want[i].b, (unsigned long long)g_seed);
+  free(got);
+  free(want);
+  qk_collider_free(c);
+}
+
+static void test_collide_pairs(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed);
+  const size_t n = 1500;
+  qk_disc_t *d = malloc(n * sizeof *d);
+  qk_box_t *b = malloc(n * sizeof *b);
+  const uint32_t caps[] = {1, 4, 16};
+  for (int cl = 0; cl < 2; cl++)
+    for (int ci = 0; ci < 3; ci++) {
+      make_items(&r, d, n, b, n, cl, cl ? 0.002 : 0.01);
+      check_pairs(d, n, NULL, 0, caps[ci]);
+      check_pairs(NULL, 0, b, n, caps[ci]);
+      check_pairs(d, n / 2, b, n / 2, caps[ci]);
+    }
+  check_pairs(NULL, 0, NULL, 0, 4);
+  free(d), free(b);
+}
+
+typedef struct ids {
+  qk_id_t *v;
+  size_t n;
+} ids_t;
+
+static int add_id(qk_id_t id, qk_point_t p, double dist, void *ud) {
+  ids_t *s = ud;
+  (void)p, (void)dist;
+  s->v[s->n++] = id;
+  return 0;
+}
+
+static void test_collide_query_shapes(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 1);
+  const size_t nd = 800, nb = 800;
+  qk_disc_t *d = malloc(nd * sizeof *d);
+  qk_box_t *b = malloc(nb * sizeof *b);
+  qk_id_t *want = malloc((nd + nb) * sizeof *want);
+  ids_t got = {malloc((nd + nb) * sizeof(qk_id_t)), 0};
+  make_items(&r, d, nd, b, nb, 0, 0.02);
+  qk_tree_options_t o = opts(4);
+  qk_collider_t *c = NULL;
+  assert_int_equal(qk_collider_build(d, nd, b, nb, &o, &c), QK_OK);
+  for (int qi = 0; qi < 400; qi++) {
+    double x = qkt_rng_range(&r, -0.5, 1.5), y = qkt_rng_range(&r, -0.5, 1.5);
+    double s = qkt_rng_range(&r, 0, 0.2);
+    qk_disc_t qd = {x, y, qi % 20 == 0 ? 0 : s};
+    qk_box_t qb = {x - s, y - s * 0.5, x + s, y + s * 0.5};
+    got.n = 0;
+    assert_int_equal(qk_collider_query_disc(c, qd, add_id, &got), QK_OK);
+    qko_sort_ids(got.v, got.n);
+    size_t nw = qko_overlap(d, nd, b, nb, 1, qd, qb, want);
+    if (got.n != nw || memcmp(got.v, want, nw * sizeof *want))
+      fail_msg("disc query %d: %zu vs oracle %zu (seed %llu)", qi, got.n, nw,
+               (unsigned long long)g_seed);
+    got.n = 0;
+    assert_int_equal(qk_collider_query_box(c, qb, add_id, &got), QK_OK);
+    qko_sort_ids(got.v, got.n);
+    nw = qko_overlap(d, nd, b, nb, 0, qd, qb, want);
+    if (got.n != nw || memcmp(got.v, want, nw * sizeof *want))
+      fail_msg("box query %d: %zu vs oracle %zu (seed %llu)", qi, got.n, nw,
+               (unsigned long long)g_seed);
+  }
+  assert_int_equal(qk_collider_query_box(c, (qk_box_t){1, 0, 0, 1}, add_id, &got), QK_ERR_GEOMETRY);
+  assert_int_equal(qk_collider_query_disc(c, (qk_disc_t){0, 0, -1}, add_id, &got), QK_ERR_GEOMETRY);
+  assert_int_equal(qk_collider_query_disc(c, (qk_disc_t){NAN, 0, 1}, add_id, &got),
+                   QK_ERR_NONFINITE);
+  qk_collider_free(c);
+  free(d), free(b), free(want), free(got.v);
+}
+
+static void test_collide_raycast(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 2);
+  const size_t nd = 1000, nb = 1000;
+  qk_disc_t *d = malloc(nd * sizeof *d);
+  qk_box_t *b = malloc(nb * sizeof *b);
+  for (int set = 0; set < 3; set++) {
+    make_items(&r, d, nd, b, nb, set == 2, 0.01);
+    size_t use_d = set == 1 ? 0 : nd, use_b = set == 0 ? 0 : nb;
+    qk_tree_options_t o = opts(set == 2 ? 1 : 8);
+    qk_collider_t *c = NULL;
+    assert_int_equal(qk_collider_build(use_d ? d : NULL, use_d, use_b ? b : NULL, use_b, &o, &c),
+                     QK_OK);
+    for (int qi = 0; qi < 1000; qi++) {
+      qk_point_t org = {qkt_rng_range(&r, -0.5, 1.5), qkt_rng_range(&r, -0.5, 1.5)};
+      double ang = qkt_rng_range(&r, 0, 6.283185307179586);
+      qk_point_t dir = {cos(ang), sin(ang)};
+      if (qi % 10 == 0) dir = (qk_point_t){0, qi % 20 ? 1.0 : -2.0};
+      if (qi % 10 == 1) dir = (qk_point_t){qi % 20 ? 3.0 : -1.0, 0};
+      if (qi % 10 == 2 && use_d) org = (qk_point_t){d[qi % nd].x, d[qi % nd].y};
+      double tmax = qi % 3 == 0 ? qkt_rng_range(&r, 0, 0.5) : INFINITY;
+      qk_hit_t h, w = qko_raycast(use_d ? d : NULL, use_d, use_b ? b : NULL, use_b, org, dir, tmax);
+      assert_int_equal(qk_collider_raycast(c, org, dir, tmax, &h), QK_OK);
+      if (h.id != w.id || !(h.t == w.t))
+        fail_msg("ray %d (set %d): hit (%u, %.17g) vs oracle (%u, %.17g) (seed %llu)", qi, set,
+                 h.id, h.t, w.id, w.t, (unsigned long long)g_seed);
+    }
+    qk_collider_free(c);
+  }
+  free(d), free(b);
+}
+
+static void test_collide_exact_cases(void **state) {
+  (void)state;
+  /* Two tangent discs and a box touching the second at one corner point. */
+  qk_disc_t d[2] = {{0, 0, 1}, {2, 0, 1}};
+  qk_box_t b[1] = {{3, 0, 4, 1}};
+  qk_collider_t *c = NULL;
+  assert_int_equal(qk_collider_build(d, 2, b, 1, NULL, &c), QK_OK);
+  qk_pair_t pairs[4];
+  size_t n;
+  assert_int_equal(qk_collider_pairs_list(c, pairs, 4, &n), QK_OK);
+  assert_int_equal(n, 2);
+  assert_int_equal(pairs[0].a, 0);
+  assert_int_equal(pairs[0].b, 1);
+  assert_int_equal(pairs[1].a, 1);
+  assert_int_equal(pairs[1].b, 2);
+  qk_hit_t h;
+  /* From the left along y = 0: hits disc 0 at x = -1, t = 4 from x = -5. */
+  assert_int_equal(qk_collider_raycast(c, (qk_point_t){-5, 0}, (qk_point_t){1, 0}, INFINITY, &h),
+                   QK_OK);
+  assert_int_equal(h.id, 0);
+  assert_true(h.t == 4.0);
+  /* Origin inside disc 1: t = 0. */
+  assert_int_equal(qk_collider_raycast(c, (qk_point_t){2, 0.5}, (qk_point_t){0, 1}, 1, &h), QK_OK);
+  assert_int_equal(h.id, 1);
+  assert_true(h.t == 0.0);
+  /* A segment that stops short of the box. */
+  assert_int_equal(qk_collider_raycast(c, (qk_point_t){3.5, 5}, (qk_point_t){0, -1}, 3.5, &h),
+                   QK_OK);
+  assert_int_equal(h.id, QK_NONE);
+  assert_true(isinf(h.t));
+  assert_int_equal(qk_collider_raycast(c, (qk_point_t){3.5, 5}, (qk_point_t){0, -1}, 4, &h), QK_OK);
+  assert_int_equal(h.id, 2);
+  assert_true(h.t == 4.0);
+  /* Grazing the box's top-right corner exactly. */
+  assert_int_equal(qk_collider_raycast(c, (qk_point_t){5, 2}, (qk_point_t){-1, -1}, INFINITY, &h),
+                   QK_OK);
+  assert_int_equal(h.id, 2);
+  assert_true(h.t == 1.0);
+  assert_int_equal(qk_collider_raycast(c, (qk_point_t){NAN, 2}, (qk_point_t){1, 0}, 1, &h),
+                   QK_ERR_NONFINITE);
+  assert_int_equal(qk_collider_raycast(c, (qk_point_t){0, 2}, (qk_point_t){1, 0}, -1, &h),
+                   QK_ERR_INVALID);
+  qk_collider_free(c);
+
+  qk_disc_t bad = {0, 0, -1};
+  assert_int_equal(qk_collider_build(&bad, 1, NULL, 0, NULL, &c), QK_ERR_GEOMETRY);
+  assert_null(c);
+  qk_box_t inv = {1, 0, 0, 1};
+  assert_int_equal(qk_collider_build(NULL, 0, &inv, 1, NULL, &c), QK_ERR_GEOMETRY);
+  qk_box_t nanb = {NAN, 0, 0, 1};
+  assert_int_equal(qk_collider_build(NULL, 0, &nanb, 1, NULL, &c), QK_ERR_NONFINITE);
+  qk_collider_free(NULL);
+}
+
+static void test_collide_nomem(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 3);
+  qk_disc_t d[300];
+  qk_box_t b[300];
+  make_items(&r, d, 300, b, 300, 0, 0.05);
+  for (size_t fail_at = 1;; fail_at++) {
+    qkt_alloc_t st;
+    qk_allocator_t a = qkt_alloc_make(&st);
+    st.fail_at = fail_at;
+    qk_tree_options_t o = opts(4);
+    o.allocator = &a;
+    qk_collider_t *c = NULL;
+    qk_status_t s = qk_collider_build(d, 300, b, 300, &o, &c);
+    if (s == QK_OK) {
+      size_t n;
+      assert_int_equal(qk_collider_pairs_list(c, NULL, 0, &n), QK_OK);
+      qk_collider_free(c);
+      assert_int_equal(st.live_blocks, 0);
+      assert_true(fail_at > 4); /* the build allocates at least this often */
+      break;
+    }
+    assert_int_equal(s, QK_ERR_NOMEM);
+    assert_null(c);
+    assert_int_equal(st.live_blocks, 0);
+    assert_true(fail_at < 1000);
+  }
+}
+
+int main(void) {
+  g_seed = qkt_seed(7031);
+  const struct CMUnitTest tests[] = {
+      cmocka_unit_test(test_collide_pairs),   cmocka_unit_test(test_collide_query_shapes),
+      cmocka_unit_test(test_collide_raycast), cmocka_unit_test(test_collide_exact_cases),
+      cmocka_unit_test(test_collide_nomem),
+  };
+  return cmocka_run_group_tests(tests, NULL, NULL);
+}
