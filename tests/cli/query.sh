@@ -1,0 +1,150 @@
+#!/usr/bin/env bash
+# CLI tests for the query commands (knn, range, radius, locate, collide, raycast, geo):
+# exact output on small hand-checked inputs, kNN and radius against a brute-force awk
+# oracle on random data, exit codes, and errors naming file and line.
+set -u
+cli=$1
+src=$2
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+fails=0
+passes=0
+expect() { # expect CODE PATTERN -- command...
+  local code=$1 pat=$2
+  shift 3
+  local out rc
+  out=$("$@" 2>&1)
+  rc=$?
+  if [ "$rc" -ne "$code" ] || ! grep -qE -- "$pat" <<<"$out"; then
+    echo "FAIL: $* -> exit $rc (want $code), output: $out (want /$pat/)"
+    fails=$((fails + 1))
+  else
+    passes=$((passes + 1))
+  fi
+}
+same() { # same NAME FILE_GOT FILE_WANT
+  if cmp -s "$2" "$3"; then
+    passes=$((passes + 1))
+  else
+    echo "FAIL: $1 differs:"
+    diff "$2" "$3" | head -10
+    fails=$((fails + 1))
+  fi
+}
+
+printf 'x,y\n0,0\n1,0\n0,1\n1,1\n0.5,0.5\n' >"$tmp/p.csv"
+printf '0.1,0.1\n0.9,0.8\n' >"$tmp/q.csv"
+
+# knn: exact output.
+"$cli" knn "$tmp/p.csv" "$tmp/q.csv" -k 2 >"$tmp/got" 2>&1
+cat >"$tmp/want" <<'EOF'
+query,rank,point,distance
+0,1,0,0.14142135623730953
+0,2,4,0.56568542494923812
+1,1,3,0.22360679774997891
+1,2,4,0.5
+EOF
+same "knn small" "$tmp/got" "$tmp/want"
+# k larger than n gives n rows; a cap gives fewer.
+expect 0 '^1,5,' -- "$cli" knn "$tmp/p.csv" "$tmp/q.csv" -k 9
+"$cli" knn "$tmp/p.csv" "$tmp/q.csv" -k 5 --max-dist 0.5 >"$tmp/got"
+# (point 4 is 0.5 from query 1 only up to rounding: its squared distance exceeds 0.25.)
+printf 'query,rank,point,distance\n0,1,0,0.14142135623730953\n1,1,3,0.22360679774997891\n' >"$tmp/want"
+same "knn capped" "$tmp/got" "$tmp/want"
+
+# range: sorted by box then point; inclusive edges.
+printf 'xmin,ymin,xmax,ymax\n0,0,0.5,0.5\n0.5,0.5,1,1\n2,2,3,3\n' >"$tmp/b.csv"
+"$cli" range "$tmp/p.csv" "$tmp/b.csv" >"$tmp/got"
+printf 'box,point\n0,0\n0,4\n1,3\n1,4\n' >"$tmp/want"
+same "range" "$tmp/got" "$tmp/want"
+printf '0,0,1,1\n1,0,0,1\n' >"$tmp/inv.csv"
+expect 1 'inv.csv:2: box has xmin > xmax' -- "$cli" range "$tmp/p.csv" "$tmp/inv.csv"
+
+# radius: sorted by query then point.
+"$cli" radius "$tmp/p.csv" "$tmp/q.csv" -r 0.6 >"$tmp/got"
+printf 'query,point,distance\n0,0,0.14142135623730953\n0,4,0.56568542494923812\n1,3,0.22360679774997891\n1,4,0.5\n' >"$tmp/want"
+same "radius" "$tmp/got" "$tmp/want"
+
+# locate: the leaf square of each query; outside the root gets nan.
+printf '0.1,0.1\n0.5,0.5\n7,7\n' >"$tmp/lq.csv"
+"$cli" locate "$tmp/p.csv" "$tmp/lq.csv" --capacity 1 >"$tmp/got"
+printf 'query,xmin,ymin,side,depth,count\n0,0,0,0.25,2,1\n1,0.25,0.25,0.25,2,1\n2,nan,nan,nan,-1,0\n' >"$tmp/want"
+same "locate" "$tmp/got" "$tmp/want"
+
+# collide: tangent discs touch; pairs sorted.
+printf 'x,y,r\n0,0,1\n2,0,1\n5,5,0.5\n5.5,5,0.1\n' >"$tmp/d.csv"
+"$cli" collide "$tmp/d.csv" >"$tmp/got"
+printf 'a,b\n0,1\n2,3\n' >"$tmp/want"
+same "collide" "$tmp/got" "$tmp/want"
+printf '0,0,1,1\n1,1,2,2\n3,3,4,4\n' >"$tmp/boxes.csv"
+"$cli" collide "$tmp/boxes.csv" --boxes >"$tmp/got"
+printf 'a,b\n0,1\n' >"$tmp/want"
+same "collide boxes" "$tmp/got" "$tmp/want"
+printf 'x,y,r\n0,0,1\n\n2,0,-1\n' >"$tmp/negr.csv"
+expect 1 'negr.csv:4: disc radius is negative' -- "$cli" collide "$tmp/negr.csv"
+
+# raycast: first hit, t = 0 inside, segments via tmax, misses.
+printf 'ox,oy,dx,dy,tmax\n-5,0,1,0\n5,5,0,1\n5,3,0,1,1\n5,3,0,1,2\n0,9,1,0\n' >"$tmp/r.csv"
+"$cli" raycast "$tmp/d.csv" "$tmp/r.csv" >"$tmp/got"
+printf 'ray,disc,t\n0,0,4\n1,2,0\n2,-1,inf\n3,2,1.5\n4,-1,inf\n' >"$tmp/want"
+same "raycast" "$tmp/got" "$tmp/want"
+printf '0,0,1,0,-1\n' >"$tmp/negt.csv"
+expect 1 'negt.csv:1: tmax is negative' -- "$cli" raycast "$tmp/d.csv" "$tmp/negt.csv"
+
+# kNN and radius against a brute-force oracle on random points with duplicates.
+awk 'BEGIN { srand(7); print "x,y"; for (i = 0; i < 400; i++) {
+  if (i % 10 == 3) printf "%.17g,%.17g\n", 0.5, 0.25; else printf "%.17g,%.17g\n", rand(), rand() } }' >"$tmp/rp.csv"
+awk 'BEGIN { srand(11); for (i = 0; i < 30; i++) printf "%.17g,%.17g\n", rand() * 1.2 - 0.1, rand() }' >"$tmp/rq.csv"
+awk -F, 'BEGIN { n = 0 } NR == FNR { if (FNR > 1) { px[n] = $1; py[n] = $2; n++ } next }
+  { for (i = 0; i < n; i++) { dx = px[i] - $1; dy = py[i] - $2; printf "%d,%.17g,%d\n", FNR - 1, dx * dx + dy * dy, i } }' \
+  "$tmp/rp.csv" "$tmp/rq.csv" | sort -t, -k1,1n -k2,2g -k3,3n |
+  awk -F, 'BEGIN { print "query,rank,point,distance" }
+    { if ($1 != q) { q = $1; r = 0 } if (++r <= 7) printf "%d,%d,%d,%.17g\n", $1, r, $3, sqrt($2) }' >"$tmp/want"
+"$cli" knn "$tmp/rp.csv" "$tmp/rq.csv" -k 7 --capacity 4 >"$tmp/got"
+same "knn vs brute force" "$tmp/got" "$tmp/want"
+awk -F, 'BEGIN { n = 0 } NR == FNR { if (FNR > 1) { px[n] = $1; py[n] = $2; n++ } next }
+  { for (i = 0; i < n; i++) { dx = px[i] - $1; dy = py[i] - $2; d2 = dx * dx + dy * dy
+      if (d2 <= 0.15 * 0.15) printf "%d,%d,%.17g\n", FNR - 1, i, sqrt(d2) } }' \
+  "$tmp/rp.csv" "$tmp/rq.csv" | sort -t, -k1,1n -k2,2n | sed '1i query,point,distance' >"$tmp/want"
+"$cli" radius "$tmp/rp.csv" "$tmp/rq.csv" -r 0.15 --capacity 2 >"$tmp/got"
+same "radius vs brute force" "$tmp/got" "$tmp/want"
+
+# geo: across the antimeridian, one degree on the equator is a * pi / 180 metres.
+printf 'lon,lat\n179.5,0\n-179.5,0\n0,89.99\n10,0\n' >"$tmp/g.csv"
+printf '180,0\n' >"$tmp/gq.csv"
+"$cli" geo knn "$tmp/g.csv" "$tmp/gq.csv" -k 2 >"$tmp/got" 2>&1
+rc=$?
+if [ "$rc" -eq 3 ] && grep -q 'not supported' "$tmp/got"; then
+  echo "geo: built without geodesic support; checking only the error"
+  passes=$((passes + 1))
+else
+  printf 'query,rank,point,metres\n0,1,0,55659.745396636783\n0,2,1,55659.745396636783\n' >"$tmp/want"
+  same "geo knn" "$tmp/got" "$tmp/want"
+  "$cli" geo radius "$tmp/g.csv" "$tmp/gq.csv" -r 60000 >"$tmp/got"
+  printf 'query,point,metres\n0,0,55659.745396636783\n0,1,55659.745396636783\n' >"$tmp/want"
+  same "geo radius" "$tmp/got" "$tmp/want"
+  printf '0,91\n' >"$tmp/lat.csv"
+  expect 1 'lat.csv:1: latitude 91 is outside' -- "$cli" geo knn "$tmp/g.csv" "$tmp/lat.csv" -k 1
+fi
+expect 2 'unknown geo query' -- "$cli" geo nearest "$tmp/g.csv" "$tmp/gq.csv"
+expect 2 '-r R is required' -- "$cli" geo radius "$tmp/g.csv" "$tmp/gq.csv"
+
+# Usage errors, --help, bad input, output files.
+for c in knn range radius locate collide raycast geo; do
+  expect 0 "usage: quadkit $c" -- "$cli" $c --help
+done
+expect 2 '-k K is required' -- "$cli" knn "$tmp/p.csv" "$tmp/q.csv"
+expect 2 'must be a whole number' -- "$cli" knn "$tmp/p.csv" "$tmp/q.csv" -k 0
+expect 2 'must not be negative' -- "$cli" radius "$tmp/p.csv" "$tmp/q.csv" -r -1
+expect 2 'unknown option' -- "$cli" range "$tmp/p.csv" "$tmp/b.csv" --bogus
+expect 2 'usage' -- "$cli" radius "$tmp/p.csv"
+printf '0,0\n1,oops\n' >"$tmp/bad.csv"
+expect 1 'bad.csv:2: field 2 is not a number' -- "$cli" knn "$tmp/p.csv" "$tmp/bad.csv" -k 1
+expect 1 'cannot open' -- "$cli" locate "$tmp/p.csv" "$tmp/missing.csv"
+expect 0 '' -- "$cli" knn "$tmp/p.csv" "$tmp/q.csv" -k 1 -o "$tmp/out.csv"
+grep -q '^1,1,3,' "$tmp/out.csv" && passes=$((passes + 1)) ||
+  { echo "FAIL: -o file"; fails=$((fails + 1)); }
+expect 1 'cannot write' -- "$cli" knn "$tmp/p.csv" "$tmp/q.csv" -k 1 -o "$tmp/no/dir/x.csv"
+
+echo "$passes passed, $fails failed"
+[ "$fails" -eq 0 ]
