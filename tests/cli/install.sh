@@ -7,6 +7,9 @@ build=$(dirname "$cli")
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
 cmake --install "$build" --prefix "$tmp/prefix" >/dev/null
+# A sanitized library needs its runtime in the consumer too.
+san=""
+if [ "${QK_SANITIZE:-0}" = 1 ]; then san="-fsanitize=address,undefined"; fi
 mkdir -p "$tmp/app"
 cat >"$tmp/app/main.c" <<'C'
 #include <quadkit/quadkit.h>
@@ -29,11 +32,12 @@ find_package(quadkit REQUIRED)
 add_executable(app main.c)
 target_link_libraries(app PRIVATE quadkit::quadkit_static)
 C
-cmake -S "$tmp/app" -B "$tmp/app/build" -DCMAKE_PREFIX_PATH="$tmp/prefix" >/dev/null
+cmake -S "$tmp/app" -B "$tmp/app/build" -DCMAKE_PREFIX_PATH="$tmp/prefix" \
+  -DCMAKE_C_FLAGS="$san" -DCMAKE_EXE_LINKER_FLAGS="$san" >/dev/null
 cmake --build "$tmp/app/build" >/dev/null
 "$tmp/app/build/app"
 libdir=$(find "$tmp/prefix" -name quadkit.pc -printf '%h\n' | head -1)
-PKG_CONFIG_PATH=$libdir cc "$tmp/app/main.c" -o "$tmp/app/app-pc" \
+PKG_CONFIG_PATH=$libdir cc $san "$tmp/app/main.c" -o "$tmp/app/app-pc" \
   $(PKG_CONFIG_PATH=$libdir pkg-config --cflags quadkit) \
   $(PKG_CONFIG_PATH=$libdir pkg-config --libs --static quadkit)
 LD_LIBRARY_PATH=$(dirname "$libdir") "$tmp/app/app-pc"
