@@ -469,10 +469,9 @@ typedef struct tri_state {
   int64_t *vx, *vy; /* doubled coordinates */
   uint8_t *steiner;
   size_t nv, vcap, vycap, scap;
-  uint32_t *tri; /* 3 per triangle */
-  uint32_t *label;
-  uint8_t *con; /* per triangle edge i (from corner i to i+1): a component edge */
-  size_t nt, tcap, lcap, ccap;
+  uint32_t *tri;   /* 3 per triangle */
+  uint32_t *label; /* per triangle: its cell while triangulating, then its component */
+  size_t nt, tcap, lcap;
 } tri_state_t;
 
 static qk_status_t new_vertex(tri_state_t *T, int64_t x, int64_t y, int steiner, uint32_t *id) {
@@ -501,95 +500,155 @@ static qk_status_t corner_vertex(tri_state_t *T, int64_t x, int64_t y, uint32_t 
   return new_vertex(T, x, y, 0, id);
 }
 
-static qk_status_t add_tri(tri_state_t *T, uint32_t a, uint32_t b, uint32_t c, uint32_t label,
-                           uint8_t con0, uint8_t con1, uint8_t con2) {
-  void *p1 = T->tri, *p2 = T->label, *p3 = T->con;
+static qk_status_t add_tri(tri_state_t *T, uint32_t a, uint32_t b, uint32_t c, uint32_t cell) {
+  void *p1 = T->tri, *p2 = T->label;
   if (qk__mesh_grow(T->a, &p1, &T->tcap, 3 * sizeof *T->tri, T->nt + 1)) return QK_ERR_NOMEM;
   T->tri = p1;
   if (qk__mesh_grow(T->a, &p2, &T->lcap, sizeof *T->label, T->nt + 1)) return QK_ERR_NOMEM;
   T->label = p2;
-  if (qk__mesh_grow(T->a, &p3, &T->ccap, 3, T->nt + 1)) return QK_ERR_NOMEM;
-  T->con = p3;
   uint32_t *t = &T->tri[3 * T->nt];
   t[0] = a, t[1] = b, t[2] = c;
-  T->label[T->nt] = label;
-  T->con[3 * T->nt] = con0, T->con[3 * T->nt + 1] = con1, T->con[3 * T->nt + 2] = con2;
+  T->label[T->nt] = cell;
   T->nt++;
   return QK_OK;
-}
-
-/*
- * A triangle edge lying on a component piece seeds the triangle's label when the
- * triangle is on the piece's left as the component runs, i.e. inside that component:
- * `dir` is +1 when the triangle traverses the piece in its positive direction.
- */
-static uint32_t seed(int32_t piece, int dir, uint32_t label) {
-  if (piece == 0) return label;
-  if ((piece > 0) == (dir > 0)) return (uint32_t)(piece > 0 ? piece : -piece);
-  return label;
 }
 
 #define UNKNOWN UINT32_MAX
 
 /*
+ * A triangle edge lying on a component piece seeds the label of the triangle's cell when
+ * the triangle is on the piece's left as the component runs, i.e. inside that component:
+ * `dir` is +1 when the triangle traverses the piece in its positive direction.
+ */
+static void seed(uint32_t *label, int32_t piece, int dir) {
+  if (piece != 0 && (piece > 0) == (dir > 0)) *label = (uint32_t)(piece > 0 ? piece : -piece);
+}
+
+/*
+ * Labelling works on cells: the parts of a leaf that no component edge separates. A leaf
+ * is one cell, except a unit leaf cut by a component diagonal, which is two. cell_side
+ * tells whether cell k of a leaf with diagonal kind `diag` (0 none, 1 SW-NE, 2 SE-NW)
+ * touches side s (south, east, north, west).
+ */
+static int cell_touches(int diag, int k, int s) {
+  static const unsigned char touch[3][2] = {{0xf, 0x0}, {0x3, 0xc}, {0x9, 0x6}};
+  return (touch[diag][k] >> s) & 1;
+}
+
+/*
  * Step 3 for one unit leaf holding component pieces: a component diagonal splits it
  * along that diagonal; otherwise the SW-NE diagonal does (its vertices are only its
- * corners, since no leaf is smaller than unit size).
+ * corners, since no leaf is smaller than unit size). Seeds the labels of its cells.
  */
-static qk_status_t tri_unit(tri_state_t *T, const unit_rec_t *r, const uint32_t c[4]) {
+static qk_status_t tri_unit(tri_state_t *T, const unit_rec_t *r, const uint32_t c[4],
+                            uint32_t cell0, uint32_t *cell_label) {
   /* c: SW, SE, NE, NW. */
   const int32_t *p = r->piece;
   if (p[P_D1]) {
     /* Along SE-NW: (SW, SE, NW) and (SE, NE, NW). */
-    uint32_t l1 = seed(p[P_S], +1, UNKNOWN);
-    l1 = seed(p[P_D1], +1, l1); /* SE -> NW is the positive direction of D1 */
-    l1 = seed(p[P_W], -1, l1);  /* NW -> SW runs southwards */
-    uint32_t l2 = seed(p[P_E], +1, UNKNOWN);
-    l2 = seed(p[P_N], -1, l2);
-    l2 = seed(p[P_D1], -1, l2);
-    qk_status_t st = add_tri(T, c[0], c[1], c[3], l1, p[P_S] != 0, 1, p[P_W] != 0);
+    seed(&cell_label[cell0], p[P_S], +1);
+    seed(&cell_label[cell0], p[P_D1], +1); /* SE -> NW is the positive direction of D1 */
+    seed(&cell_label[cell0], p[P_W], -1);  /* NW -> SW runs southwards */
+    seed(&cell_label[cell0 + 1], p[P_E], +1);
+    seed(&cell_label[cell0 + 1], p[P_N], -1);
+    seed(&cell_label[cell0 + 1], p[P_D1], -1);
+    qk_status_t st = add_tri(T, c[0], c[1], c[3], cell0);
     if (st) return st;
-    return add_tri(T, c[1], c[2], c[3], l2, p[P_E] != 0, p[P_N] != 0, 1);
+    return add_tri(T, c[1], c[2], c[3], cell0 + 1);
   }
-  /* Along SW-NE: (SW, SE, NE) and (SW, NE, NW). */
-  uint32_t l1 = seed(p[P_S], +1, UNKNOWN);
-  l1 = seed(p[P_E], +1, l1);
-  l1 = seed(p[P_D0], -1, l1); /* NE -> SW */
-  uint32_t l2 = seed(p[P_D0], +1, UNKNOWN);
-  l2 = seed(p[P_N], -1, l2);
-  l2 = seed(p[P_W], -1, l2);
-  qk_status_t st = add_tri(T, c[0], c[1], c[2], l1, p[P_S] != 0, p[P_E] != 0, p[P_D0] != 0);
+  /* Along SW-NE: (SW, SE, NE) and (SW, NE, NW); one cell unless SW-NE is a component
+   * edge. */
+  uint32_t cell1 = p[P_D0] ? cell0 + 1 : cell0;
+  seed(&cell_label[cell0], p[P_S], +1);
+  seed(&cell_label[cell0], p[P_E], +1);
+  seed(&cell_label[cell0], p[P_D0], -1); /* NE -> SW */
+  seed(&cell_label[cell1], p[P_D0], +1);
+  seed(&cell_label[cell1], p[P_N], -1);
+  seed(&cell_label[cell1], p[P_W], -1);
+  qk_status_t st = add_tri(T, c[0], c[1], c[2], cell0);
   if (st) return st;
-  return add_tri(T, c[0], c[2], c[3], l2, p[P_D0] != 0, p[P_N] != 0, p[P_W] != 0);
+  return add_tri(T, c[0], c[2], c[3], cell1);
 }
 
-/* Facts the triangulation hands to labelling and hole removal. */
+/* Facts the triangulation hands to hole removal. */
 typedef struct leaf_tris {
   uint32_t *first; /* per node id: first triangle of the leaf, or UNKNOWN */
   size_t cap;
 } leaf_tris_t;
 
+/*
+ * Components: a cell beside a component edge, on its inner (left) side, lies in that
+ * component's face and was seeded with its id. Every other cell takes the label of the
+ * face it shares with the cells across leaf sides that are not component edges (found
+ * with the tree's neighbour finding); a face reached from no seed is the outer face,
+ * label 0.
+ */
+static qk_status_t label_cells(gen_t *g, const qk_node_t *leaves, size_t nleaves,
+                               const uint32_t *leaf_of, const uint32_t *rec_of,
+                               uint32_t *cell_label) {
+  const qk_tree_t *t = g->tree;
+  size_t ncell = 2 * nleaves;
+  uint32_t *queue = qk__realloc(g->a, NULL, 0, (ncell + 1) * sizeof *queue);
+  if (!queue) return QK_ERR_NOMEM;
+  size_t qh = 0, qt = 0;
+  for (size_t c = 0; c < ncell; c++)
+    if (cell_label[c] != UNKNOWN) queue[qt++] = (uint32_t)c;
+  static const qk_dir_t side_dir[4] = {QK_SOUTH, QK_EAST, QK_NORTH, QK_WEST};
+  static const int piece_of_side[4] = {P_S, P_E, P_N, P_W};
+  while (qh < qt) {
+    uint32_t c = queue[qh++], li = c / 2, k = c % 2;
+    uint32_t v = leaves[li];
+    const unit_rec_t *r = rec_of[v] != UNKNOWN ? &g->rec[rec_of[v]] : NULL;
+    int diag = r ? (r->piece[P_D0] ? 1 : r->piece[P_D1] ? 2 : 0) : 0;
+    for (int s = 0; s < 4; s++) {
+      if (!cell_touches(diag, (int)k, s)) continue;
+      if (r && r->piece[piece_of_side[s]]) continue; /* a component edge: a face boundary */
+      qk_node_t nb[8];
+      size_t n = 0;
+      qk_tree_adjacent_leaves(t, v, side_dir[s], nb, 8, &n);
+      for (size_t i = 0; i < n && i < 8; i++) {
+        uint32_t lw = leaf_of[nb[i]];
+        const unit_rec_t *rw = rec_of[nb[i]] != UNKNOWN ? &g->rec[rec_of[nb[i]]] : NULL;
+        int dw = rw ? (rw->piece[P_D0] ? 1 : rw->piece[P_D1] ? 2 : 0) : 0;
+        int opp = (s + 2) % 4;
+        uint32_t cw = 2 * lw + (cell_touches(dw, 0, opp) ? 0 : 1);
+        if (cell_label[cw] == UNKNOWN) cell_label[cw] = cell_label[c], queue[qt++] = cw;
+      }
+    }
+  }
+  for (size_t c = 0; c < ncell; c++)
+    if (cell_label[c] == UNKNOWN) cell_label[c] = 0;
+  qk__free(g->a, queue, (ncell + 1) * sizeof *queue);
+  return QK_OK;
+}
+
 static qk_status_t triangulate(gen_t *g, tri_state_t *T, leaf_tris_t *lt) {
   const qk_tree_t *t = g->tree;
   qk_status_t st = QK_OK;
-  /* Which unit leaves carry component pieces, by node id. */
-  uint32_t *rec_of = qk__realloc(g->a, NULL, 0, (size_t)t->n_nodes * sizeof *rec_of);
-  lt->cap = t->n_nodes;
+  /* Which unit leaves carry component pieces, and each leaf's index, by node id. */
+  size_t nn = t->n_nodes;
+  uint32_t *rec_of = qk__realloc(g->a, NULL, 0, nn * sizeof *rec_of);
+  uint32_t *leaf_of = qk__realloc(g->a, NULL, 0, nn * sizeof *leaf_of);
+  lt->cap = nn;
   lt->first = qk__realloc(g->a, NULL, 0, lt->cap * sizeof *lt->first);
   size_t nleaves = 0;
   qk_tree_leaves(t, NULL, 0, &nleaves);
-  qk_node_t *leaves = qk__realloc(g->a, NULL, 0, (nleaves ? nleaves : 1) * sizeof *leaves);
-  if (!rec_of || !lt->first || !leaves || hmap_init(g->a, &T->vmap, 2 * nleaves + 16) != QK_OK) {
+  qk_node_t *leaves = qk__realloc(g->a, NULL, 0, (nleaves + 1) * sizeof *leaves);
+  uint32_t *cell_label = qk__realloc(g->a, NULL, 0, (2 * nleaves + 1) * sizeof *cell_label);
+  if (!rec_of || !leaf_of || !lt->first || !leaves || !cell_label ||
+      hmap_init(g->a, &T->vmap, 2 * nleaves + 16) != QK_OK) {
     st = QK_ERR_NOMEM;
     goto out;
   }
-  memset(rec_of, 0xff, (size_t)t->n_nodes * sizeof *rec_of);
+  memset(rec_of, 0xff, nn * sizeof *rec_of);
   memset(lt->first, 0xff, lt->cap * sizeof *lt->first);
+  memset(cell_label, 0xff, (2 * nleaves + 1) * sizeof *cell_label);
   for (size_t i = 0; i < g->nrec; i++) rec_of[g->rec[i].node] = (uint32_t)i;
   qk_tree_leaves(t, leaves, nleaves, &nleaves);
+  for (size_t li = 0; li < nleaves; li++) leaf_of[leaves[li]] = (uint32_t)li;
 
   for (size_t li = 0; li < nleaves; li++) {
-    uint32_t v = leaves[li];
+    uint32_t v = leaves[li], cell = (uint32_t)(2 * li);
     const qk__node_t *n = &t->nodes[v];
     int64_t S = 2 * (int64_t)(t->side[n->depth]), X = 2 * (int64_t)n->x0, Y = 2 * (int64_t)n->y0;
     lt->first[v] = (uint32_t)T->nt;
@@ -598,7 +657,7 @@ static qk_status_t triangulate(gen_t *g, tri_state_t *T, leaf_tris_t *lt) {
         (st = corner_vertex(T, X + S, Y + S, &c[2])) || (st = corner_vertex(T, X, Y + S, &c[3])))
       goto out;
     if (rec_of[v] != UNKNOWN) {
-      if ((st = tri_unit(T, &g->rec[rec_of[v]], c))) goto out;
+      if ((st = tri_unit(T, &g->rec[rec_of[v]], c, cell, cell_label))) goto out;
       continue;
     }
     /* A side holds a midpoint vertex exactly when the neighbour across it (found by
@@ -620,8 +679,7 @@ static qk_status_t triangulate(gen_t *g, tri_state_t *T, leaf_tris_t *lt) {
     }
     if (nr == 4) {
       /* Vertices only at its corners: split along a diagonal (angles 45, 45, 90). */
-      if ((st = add_tri(T, c[0], c[1], c[2], UNKNOWN, 0, 0, 0)) ||
-          (st = add_tri(T, c[0], c[2], c[3], UNKNOWN, 0, 0, 0)))
+      if ((st = add_tri(T, c[0], c[1], c[2], cell)) || (st = add_tri(T, c[0], c[2], c[3], cell)))
         goto out;
       continue;
     }
@@ -630,63 +688,16 @@ static qk_status_t triangulate(gen_t *g, tri_state_t *T, leaf_tris_t *lt) {
     uint32_t ctr;
     if ((st = new_vertex(T, X + S / 2, Y + S / 2, 1, &ctr))) goto out;
     for (size_t i = 0; i < nr; i++)
-      if ((st = add_tri(T, ring[i], ring[(i + 1) % nr], ctr, UNKNOWN, 0, 0, 0))) goto out;
+      if ((st = add_tri(T, ring[i], ring[(i + 1) % nr], ctr, cell))) goto out;
   }
+  if ((st = label_cells(g, leaves, nleaves, leaf_of, rec_of, cell_label))) goto out;
+  for (size_t i = 0; i < T->nt; i++) T->label[i] = cell_label[T->label[i]];
 out:
-  qk__free(g->a, rec_of, (size_t)t->n_nodes * sizeof *rec_of);
-  qk__free(g->a, leaves, (nleaves ? nleaves : 1) * sizeof *leaves);
+  qk__free(g->a, rec_of, nn * sizeof *rec_of);
+  qk__free(g->a, leaf_of, nn * sizeof *leaf_of);
+  qk__free(g->a, leaves, (nleaves + 1) * sizeof *leaves);
+  qk__free(g->a, cell_label, (2 * nleaves + 1) * sizeof *cell_label);
   if (st) qk__mesh_fail(g->err, st, 0, "%s while triangulating", qk_strerror(st));
-  return st;
-}
-
-/*
- * Components: a triangle beside a component edge, on its inner (left) side, lies in that
- * component's face and was seeded with its id. Every other triangle takes the label of
- * the face it shares with neighbours across edges that are not component edges; a face
- * reached from no seed is the outer face, label 0. Triangle adjacency comes from a map
- * of edges.
- */
-static qk_status_t label_faces(gen_t *g, tri_state_t *T) {
-  qk_status_t st = QK_OK;
-  size_t m = 3 * T->nt;
-  uint32_t *nb = qk__realloc(g->a, NULL, 0, (m ? m : 1) * sizeof *nb);
-  uint32_t *queue = qk__realloc(g->a, NULL, 0, (T->nt ? T->nt : 1) * sizeof *queue);
-  hmap_t em = {NULL, NULL, 0, 0};
-  if (!nb || !queue || hmap_init(g->a, &em, m / 2 + 16)) {
-    st = QK_ERR_NOMEM;
-    goto out;
-  }
-  memset(nb, 0xff, (m ? m : 1) * sizeof *nb);
-  for (size_t i = 0; i < m; i++) {
-    uint32_t a = T->tri[i], b = T->tri[i % 3 == 2 ? i - 2 : i + 1];
-    uint64_t key = a < b ? ((uint64_t)a << 32 | b) : ((uint64_t)b << 32 | a);
-    uint32_t val = (uint32_t)i;
-    int r = hmap_get_or_put(g->a, &em, key, &val);
-    if (r < 0) {
-      st = QK_ERR_NOMEM;
-      goto out;
-    }
-    if (r == 1) nb[i] = val, nb[val] = (uint32_t)i;
-  }
-  size_t qh = 0, qt = 0;
-  for (size_t t = 0; t < T->nt; t++)
-    if (T->label[t] != UNKNOWN) queue[qt++] = (uint32_t)t;
-  while (qh < qt) {
-    uint32_t t = queue[qh++];
-    for (int i = 0; i < 3; i++) {
-      uint32_t o = nb[3 * t + i];
-      if (o == UNKNOWN || T->con[3 * t + i] || T->con[o]) continue;
-      uint32_t u = o / 3;
-      if (T->label[u] == UNKNOWN) T->label[u] = T->label[t], queue[qt++] = u;
-    }
-  }
-  for (size_t t = 0; t < T->nt; t++)
-    if (T->label[t] == UNKNOWN) T->label[t] = 0;
-out:
-  hmap_free(g->a, &em);
-  qk__free(g->a, nb, (m ? m : 1) * sizeof *nb);
-  qk__free(g->a, queue, (T->nt ? T->nt : 1) * sizeof *queue);
-  if (st) qk__mesh_fail(g->err, st, 0, "out of memory while labelling");
   return st;
 }
 
@@ -759,7 +770,6 @@ static void tri_free(tri_state_t *T) {
   qk__free(T->a, T->steiner, T->scap);
   qk__free(T->a, T->tri, T->tcap * 3 * sizeof *T->tri);
   qk__free(T->a, T->label, T->lcap * sizeof *T->label);
-  qk__free(T->a, T->con, T->ccap * 3);
 }
 
 void qk_mesh_free(qk_mesh_t *m) {
@@ -860,7 +870,6 @@ qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *opt
   /* Step 3: triangulate, label, drop holes, compact. */
   double t3 = now();
   if ((st = triangulate(&g, &T, &lt))) goto fail;
-  if ((st = label_faces(&g, &T))) goto fail;
   drop = qk__realloc(g.a, NULL, 0, g.ncomp + 1);
   newid = qk__realloc(g.a, NULL, 0, (T.nv ? T.nv : 1) * sizeof *newid);
   if (!drop || !newid) {
