@@ -14,6 +14,9 @@
 #include <CGAL/Simple_cartesian.h>
 
 #include <cmath>
+#include <map>
+#include <set>
+#include <tuple>
 
 namespace qkb {
 
@@ -30,6 +33,43 @@ size_t count_leaves(Quadtree &t) {
   }
   return n;
 }
+// An independent 2:1 check of a graded tree: a leaf at depth d violates the rule when a
+// square of depth d + 1 adjacent to it across an edge is an internal node (the
+// neighbour is then subdivided at least two levels finer). Internal nodes are collected
+// as the proper ancestors of the leaves, keyed by (depth, global x, global y).
+size_t count_unbalanced(Quadtree &t) {
+  std::set<std::tuple<int, uint64_t, uint64_t>> internal;
+  std::vector<std::tuple<int, uint64_t, uint64_t>> leaves;
+  for (auto node : t.traverse<CGAL::Orthtrees::Leaves_traversal>()) {
+    int d = node.depth();
+    uint64_t x = node.global_coordinates()[0], y = node.global_coordinates()[1];
+    leaves.emplace_back(d, x, y);
+    for (int a = d - 1; a >= 0; a--) {
+      x >>= 1, y >>= 1;
+      if (!internal.emplace(a, x, y).second) break;
+    }
+  }
+  size_t bad = 0;
+  for (auto &l : leaves) {
+    int d = std::get<0>(l);
+    int64_t x = (int64_t)std::get<1>(l) * 2, y = (int64_t)std::get<2>(l) * 2;
+    int64_t lim = (int64_t)1 << (d + 1);
+    // The two depth-(d+1) squares beyond each edge of the leaf.
+    int64_t cand[4][2][2] = {{{x - 1, y}, {x - 1, y + 1}},
+                             {{x + 2, y}, {x + 2, y + 1}},
+                             {{x, y - 1}, {x + 1, y - 1}},
+                             {{x, y + 2}, {x + 1, y + 2}}};
+    bool v = false;
+    for (auto &side : cand)
+      for (auto &c : side)
+        if (c[0] >= 0 && c[1] >= 0 && c[0] < lim && c[1] < lim &&
+            internal.count({d + 1, (uint64_t)c[0], (uint64_t)c[1]}))
+          v = true;
+    bad += v;
+  }
+  return bad;
+}
+
 } // namespace
 
 size_t cgal_orthtree_build_leaves(const std::vector<Pt> &pts, int max_depth, int bucket) {
@@ -55,6 +95,7 @@ bool cgal_grade(const std::vector<Pt> &pts, int max_depth, int bucket, BalanceRe
   t.grade();
   out.seconds = now_seconds() - t0;
   out.leaves_after = count_leaves(t);
+  out.unbalanced = count_unbalanced(t);
   return true;
 }
 

@@ -248,8 +248,9 @@ void collide_cb(void *user, RTCCollision *c, unsigned n) {
   uint64_t pairs = 0, hash = 0;
   for (unsigned i = 0; i < n; i++) {
     uint32_t a = c[i].primID0, b = c[i].primID1;
-    if (a == b) continue;
-    if (a > b) std::swap(a, b);
+    // A scene collided with itself reports every pair in both orders (and an item
+    // with itself): keep a < b only.
+    if (a >= b) continue;
     const Box &p = bx[a], &q = bx[b];
     if (p.xmin <= q.xmax && q.xmin <= p.xmax && p.ymin <= q.ymax && q.ymin <= p.ymax) {
       pairs++;

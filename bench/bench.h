@@ -82,6 +82,7 @@ void embree_discs_free(EmbreeDiscs *s);
 struct BalanceResult {
   size_t leaves_before = 0, leaves_after = 0;
   double seconds = 0;
+  size_t unbalanced = 0; // leaves violating 2:1 after balancing, by an independent check
 };
 using SplitFn = bool (*)(double x0, double y0, double side, int depth, void *ud);
 bool cgal_grade(const std::vector<Pt> &pts, int max_depth, int bucket, BalanceResult &out);
