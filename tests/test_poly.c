@@ -1,0 +1,214 @@
+/*
+ * Test plan for the mesh input (Triangle's .poly reader and qk_mesh_generate's checks):
+ *  - good files: comments, blank lines, first index 0 and 1, attributes and markers,
+ *    optional holes and regional attributes, all read with the right counts;
+ *  - every kind of bad input gets its status, the line it is on and a message naming
+ *    the problem: malformed numbers, wrong dimension, bad first index, non-consecutive
+ *    vertex numbers, segment endpoints that are not vertices, truncated files, absurd
+ *    counts, trailing garbage; non-integer and out-of-domain coordinates, edges at
+ *    other angles, open chains, vertices of degree 0 or 3, coincident vertices,
+ *    duplicate segments, self-intersecting polygons, touching and crossing components,
+ *    holes outside the domain or on a boundary, a domain size that is not a power of
+ *    two;
+ *  - allocation failure at every N while reading: QK_ERR_NOMEM, no leak.
+ */
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "qk_test.h"
+
+static FILE *from_string(const char *s) {
+  FILE *f = tmpfile();
+  assert_non_null(f);
+  fputs(s, f);
+  rewind(f);
+  return f;
+}
+
+/* Read and mesh `text`; return the status and fill err. */
+static qk_status_t run(const char *text, uint64_t size, qk_mesh_error_t *err) {
+  FILE *f = from_string(text);
+  qk_poly_t *p = NULL;
+  qk_status_t st = qk_poly_read(f, NULL, &p, err);
+  fclose(f);
+  if (st != QK_OK) {
+    assert_null(p);
+    return st;
+  }
+  qk_mesh_options_t o;
+  qk_mesh_options_init(&o);
+  o.size = size;
+  qk_mesh_t *m = NULL;
+  st = qk_mesh_generate(p, &o, &m, err);
+  if (st != QK_OK) assert_null(m);
+  qk_mesh_free(m);
+  qk_poly_free(p);
+  return st;
+}
+
+#define SQUARE_SEGS "4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n"
+
+static void test_poly_good(void **state) {
+  (void)state;
+  const char *text = "# a comment line\n"
+                     "\n"
+                     "4 2 1 1   # vertices with one attribute and a marker\n"
+                     "1 1 1 0.5 1\n"
+                     "2 3 1 0.5 1\n"
+                     "3 3 3 0.5 1\n"
+                     "4 1 3 0.5 1\n"
+                     "4 1\n"
+                     "1 1 2 1\n"
+                     "2 2 3 1\n"
+                     "3 3 4 1\n"
+                     "4 4 1 1\n"
+                     "1\n"
+                     "1 2 2\n"
+                     "1\n"
+                     "1 5 5 7 0.1\n";
+  FILE *f = from_string(text);
+  qk_poly_t *p;
+  qk_mesh_error_t err;
+  assert_int_equal(qk_poly_read(f, NULL, &p, &err), QK_OK);
+  fclose(f);
+  size_t nv, ns, nh;
+  qk_poly_counts(p, &nv, &ns, &nh);
+  assert_int_equal(nv, 4);
+  assert_int_equal(ns, 4);
+  assert_int_equal(nh, 1);
+  assert_int_equal(qk_poly_first_index(p), 1);
+  qk_mesh_t *m;
+  assert_int_equal(qk_mesh_generate(p, NULL, &m, &err), QK_OK);
+  qk_mesh_stats_t s;
+  qk_mesh_stats(m, &s);
+  assert_int_equal(s.size, 4); /* the smallest power of two >= 3 */
+  assert_int_equal(s.components, 1);
+  /* The hole at (2,2) removes the square's inside: what is left has area 16 - 4. */
+  size_t nt;
+  const uint32_t *t = qk_mesh_triangles(m, &nt);
+  const double *v = qk_mesh_vertices(m, NULL);
+  double area = 0;
+  for (size_t i = 0; i < nt; i++) {
+    const double *a = &v[2 * t[3 * i]], *b = &v[2 * t[3 * i + 1]], *c = &v[2 * t[3 * i + 2]];
+    area += ((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])) / 2;
+  }
+  assert_true(area == 12);
+  qk_mesh_free(m);
+  qk_poly_free(p);
+  /* First index 0, no holes section at all. */
+  assert_int_equal(run("4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS, 0, &err), QK_OK);
+}
+
+typedef struct bad_case {
+  const char *text;
+  uint64_t size;
+  qk_status_t status;
+  unsigned long line;
+  const char *words; /* must appear in the message */
+} bad_case_t;
+
+static void test_poly_bad(void **state) {
+  (void)state;
+  static const bad_case_t cases[] = {
+      /* Syntax. */
+      {"", 0, QK_ERR_PARSE, 0, "empty"},
+      {"four 2 0 0\n", 0, QK_ERR_PARSE, 1, "number of vertices"},
+      {"4 3 0 0\n", 0, QK_ERR_PARSE, 1, "dimension"},
+      {"4 2 0 2\n", 0, QK_ERR_PARSE, 1, "boundary markers"},
+      {"0 2 0 0\n", 0, QK_ERR_PARSE, 1, ".node"},
+      {"99999999999 2 0 0\n", 0, QK_ERR_LIMIT, 1, "absurd"},
+      {"4 2 0 0\n2 0 0\n", 0, QK_ERR_PARSE, 2, "first vertex number"},
+      {"4 2 0 0\n0 0 0\n2 2 0\n", 0, QK_ERR_PARSE, 3, "vertex number 1 expected"},
+      {"4 2 0 0\n0 0 0\n1 2 x\n", 0, QK_ERR_PARSE, 3, "bad y"},
+      {"4 2 0 0\n0 0 0\n1 2 0 7\n", 0, QK_ERR_PARSE, 3, "fields"},
+      {"4 2 0 0\n0 0 0\n1 2 0\n", 0, QK_ERR_PARSE, 3, "truncated"},
+      {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n", 0, QK_ERR_PARSE, 5, "segment section"},
+      {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n4 0\n0 0 1\n1 1 9\n", 0, QK_ERR_PARSE, 8,
+       "not a vertex number"},
+      {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n4 0\n0 0 1\n", 0, QK_ERR_PARSE, 7, "truncated"},
+      {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS "1\n", 0, QK_ERR_PARSE, 11, "truncated"},
+      {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS "0\n0\nextra\n", 0, QK_ERR_PARSE, 13,
+       "unexpected"},
+      {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS "1\n0 nan 1\n", 0, QK_ERR_PARSE, 12,
+       "hole"},
+      /* Geometry. */
+      {"4 2 0 0\n0 0 0\n1 2.5 0\n2 2 2\n3 0 2\n" SQUARE_SEGS, 0, QK_ERR_GEOMETRY, 3,
+       "not integers"},
+      {"4 2 0 0\n0 0 0\n1 20 0\n2 20 2\n3 0 2\n" SQUARE_SEGS, 16, QK_ERR_GEOMETRY, 3,
+       "outside the domain"},
+      {"4 2 0 0\n0 0 0\n1 -2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS, 0, QK_ERR_GEOMETRY, 3,
+       "outside the domain"},
+      {"4 2 0 0\n0 0 0\n1 3 0\n2 2 2\n3 0 2\n" SQUARE_SEGS, 0, QK_ERR_GEOMETRY, 8, "degrees"},
+      {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n3 0\n0 0 1\n1 1 2\n2 2 3\n", 0, QK_ERR_GEOMETRY, 2,
+       "open chain"},
+      {"5 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n4 3 3\n" SQUARE_SEGS, 0, QK_ERR_GEOMETRY, 6,
+       "degree 0"},
+      {"5 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n4 4 4\n5 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n4 2 4\n", 0,
+       QK_ERR_GEOMETRY, 12, "degree more than 2"},
+      {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 0\n" SQUARE_SEGS, 0, QK_ERR_GEOMETRY, 5, "coincide"},
+      {"2 2 0 0\n0 0 0\n1 2 2\n2 0\n0 0 1\n1 1 0\n", 0, QK_ERR_GEOMETRY, 6, "coincide"},
+      /* A bow tie: the diagonals cross at (1,1). */
+      {"4 2 0 0\n0 0 0\n1 2 0\n2 0 2\n3 2 2\n" SQUARE_SEGS, 0, QK_ERR_GEOMETRY, 0,
+       "intersects itself"},
+      /* Two squares sharing a corner point. */
+      {"8 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n4 2 2\n5 4 2\n6 4 4\n7 2 4\n8 0\n0 0 1\n1 1 2\n"
+       "2 2 3\n3 3 0\n4 4 5\n5 5 6\n6 6 7\n7 7 4\n",
+       0, QK_ERR_GEOMETRY, 0, "coincide"},
+      /* A corner of one square on the other's edge. */
+      {"8 2 0 0\n0 0 0\n1 4 0\n2 4 4\n3 0 4\n4 4 2\n5 5 1\n6 6 2\n7 5 3\n8 0\n0 0 1\n1 1 2\n"
+       "2 2 3\n3 3 0\n4 4 5\n5 5 6\n6 6 7\n7 7 4\n",
+       0, QK_ERR_GEOMETRY, 0, "touch or cross"},
+      /* Two crossing rectangles. */
+      {"8 2 0 0\n0 1 0\n1 3 0\n2 3 6\n3 1 6\n4 0 2\n5 6 2\n6 6 4\n7 0 4\n8 0\n0 0 1\n1 1 2\n"
+       "2 2 3\n3 3 0\n4 4 5\n5 5 6\n6 6 7\n7 7 4\n",
+       0, QK_ERR_GEOMETRY, 0, "touch or cross"},
+      /* A polygon doubling back along itself. */
+      {"4 2 0 0\n0 0 0\n1 4 0\n2 2 0\n3 2 2\n" SQUARE_SEGS, 0, QK_ERR_GEOMETRY, 0, "itself"},
+      {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS "1\n0 9 1\n", 4, QK_ERR_GEOMETRY, 12,
+       "outside the domain"},
+      {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS "1\n0 1 2\n", 4, QK_ERR_GEOMETRY, 12,
+       "boundary"},
+      {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS, 12, QK_ERR_INVALID, 0, "power of two"},
+  };
+  for (size_t i = 0; i < sizeof cases / sizeof *cases; i++) {
+    qk_mesh_error_t err;
+    qk_status_t st = run(cases[i].text, cases[i].size, &err);
+    if (st != cases[i].status || (cases[i].line && err.line != cases[i].line) ||
+        !strstr(err.message, cases[i].words))
+      fail_msg("case %zu: status %s line %lu '%s'; expected %s line %lu '%s'", i, qk_strerror(st),
+               err.line, err.message, qk_strerror(cases[i].status), cases[i].line, cases[i].words);
+  }
+}
+
+static void test_poly_alloc_failure(void **state) {
+  (void)state;
+  const char *text = "4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS "1\n0 1 1\n";
+  for (size_t fail_at = 1;; fail_at++) {
+    qkt_alloc_t st;
+    qk_allocator_t a = qkt_alloc_make(&st);
+    st.fail_at = fail_at;
+    FILE *f = from_string(text);
+    qk_poly_t *p = NULL;
+    qk_mesh_error_t err;
+    qk_status_t s = qk_poly_read(f, &a, &p, &err);
+    fclose(f);
+    qk_poly_free(p);
+    assert_int_equal(st.live_bytes, 0);
+    if (!st.failed) {
+      assert_int_equal(s, QK_OK);
+      break;
+    }
+    assert_int_equal(s, QK_ERR_NOMEM);
+    assert_true(fail_at < 1000);
+  }
+}
+
+int main(void) {
+  const struct CMUnitTest tests[] = {
+      cmocka_unit_test(test_poly_good),
+      cmocka_unit_test(test_poly_bad),
+      cmocka_unit_test(test_poly_alloc_failure),
+  };
+  return cmocka_run_group_tests(tests, NULL, NULL);
+}
