@@ -1,0 +1,81 @@
+#!/usr/bin/env bash
+# CLI tests for `quadkit mesh`: outputs and their formats, --stats, exit codes, and bad
+# input named by file and line with nothing written.
+set -u
+cli=$1
+src=$2
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+fails=0
+expect() { # expect CODE PATTERN -- command...
+  local code=$1 pat=$2
+  shift 3
+  local out rc
+  out=$("$@" 2>&1)
+  rc=$?
+  if [ "$rc" -ne "$code" ] || ! grep -qE -- "$pat" <<<"$out"; then
+    echo "FAIL: $* -> exit $rc (want $code), output: $out (want /$pat/)"
+    fails=$((fails + 1))
+  fi
+}
+check() { # check DESCRIPTION -- command...: the command must succeed
+  local what=$1
+  shift 2
+  if ! "$@" >/dev/null 2>&1; then
+    echo "FAIL: $what"
+    fails=$((fails + 1))
+  fi
+}
+
+# The notes' example: every output, with the stats the issue lists.
+expect 0 '"U": 16, "components": 1, .*"triangles": [0-9]+, .*"min_angle_deg": 45\.0+, "max_angle_deg": 90\.0+, "uniform_triangles": 512' -- \
+  "$cli" mesh "$src/examples/mesh/notes.poly" --size 16 -o "$tmp/n" --svg "$tmp/n.svg" \
+  --msh "$tmp/n.msh" --vtk "$tmp/n.vtu" --stats
+for f in n.node n.ele n.svg n.msh n.vtu; do
+  [ -s "$tmp/$f" ] || { echo "FAIL: $f not written"; fails=$((fails + 1)); }
+done
+ls "$tmp"/*.tmp.* >/dev/null 2>&1 && { echo "FAIL: temp file left"; fails=$((fails + 1)); }
+# .node: first index 1 as in the input; .ele: counter-clockwise, one attribute.
+check ".node header and first index" -- awk 'NR==1 { n=$1; if ($2 != 2) exit 1 } NR==2 { if ($1 != 1) exit 1 } END { if (NR != n + 1) exit 1 }' "$tmp/n.node"
+check ".ele triangles counter-clockwise with a component attribute" -- awk '
+  FNR==NR { if (FNR > 1) { x[$1]=$2; y[$1]=$3 }; next }
+  FNR==1 { n=$1; if ($2 != 3 || $3 != 1) exit 1; next }
+  { a=$2; b=$3; c=$4; cr=(x[b]-x[a])*(y[c]-y[a])-(y[b]-y[a])*(x[c]-x[a]); if (cr <= 0 || $5 < 0 || $5 > 1) exit 1; k++ }
+  END { if (k != n) exit 1 }' "$tmp/n.node" "$tmp/n.ele"
+check ".msh format" -- grep -q '^4.1 0 8$' "$tmp/n.msh"
+check ".vtu cell data" -- grep -q 'Name="component"' "$tmp/n.vtu"
+check "svg closed" -- grep -q '</svg>' "$tmp/n.svg"
+# Default size: the smallest power of two >= every coordinate.
+expect 0 '"U": 2,' -- "$cli" mesh "$src/examples/mesh/notes.poly" -o "$tmp/d" --stats
+expect 0 '"U": 64, "components": 6' -- "$cli" mesh "$src/examples/mesh/richer.poly" -o "$tmp/r" --stats
+# Input from standard input.
+expect 0 '"components": 1' -- sh -c "\"$cli\" mesh - -o \"$tmp/s\" --stats < \"$src/examples/mesh/notes.poly\""
+
+# Bad input: file:line: reason, exit 1, nothing written.
+printf '4 2 0 0\n0 0 0\n1 3 0\n2 2 2\n3 0 2\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n' >"$tmp/angle.poly"
+expect 1 'angle.poly:8: segment 1 .* is not at 0, 45, 90 or 135 degrees' -- "$cli" mesh "$tmp/angle.poly" -o "$tmp/bad" --svg "$tmp/bad.svg"
+ls "$tmp"/bad* >/dev/null 2>&1 && { echo "FAIL: output written for bad input"; fails=$((fails + 1)); }
+printf '4 2 0 0\n0 0 0\n1 2.5 0\n2 2 2\n3 0 2\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n' >"$tmp/frac.poly"
+expect 1 'frac.poly:3: vertex 1: coordinates .* are not integers' -- "$cli" mesh "$tmp/frac.poly" -o "$tmp/bad"
+printf '4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n4 0\n0 0 1\n' >"$tmp/trunc.poly"
+expect 1 'trunc.poly:7: truncated input' -- "$cli" mesh "$tmp/trunc.poly" -o "$tmp/bad"
+printf '4 2 0 0\n0 0 0\n1 2 0\n2 0 2\n3 2 2\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n' >"$tmp/bowtie.poly"
+expect 1 'bowtie.poly:[0-9]+: component 1 intersects itself' -- "$cli" mesh "$tmp/bowtie.poly" -o "$tmp/bad"
+printf '4 2 0 0\n0 0 0\n1 20 0\n2 20 2\n3 0 2\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n' >"$tmp/out.poly"
+expect 1 'out.poly:3: .*outside the domain \[0,16\]\^2' -- "$cli" mesh "$tmp/out.poly" --size 16 -o "$tmp/bad"
+expect 1 'cannot open' -- "$cli" mesh "$tmp/missing.poly" -o "$tmp/bad"
+ls "$tmp"/bad* >/dev/null 2>&1 && { echo "FAIL: output written for bad input"; fails=$((fails + 1)); }
+
+# Usage errors.
+expect 2 'power of two' -- "$cli" mesh "$src/examples/mesh/notes.poly" -o "$tmp/u" --size 12
+expect 2 'whole number' -- "$cli" mesh "$src/examples/mesh/notes.poly" -o "$tmp/u" --size -4
+expect 2 '-o PREFIX is required' -- "$cli" mesh "$src/examples/mesh/notes.poly"
+expect 2 'unknown option' -- "$cli" mesh "$src/examples/mesh/notes.poly" -o "$tmp/u" --bogus
+expect 2 'no input file' -- "$cli" mesh
+expect 0 'usage: quadkit mesh' -- "$cli" mesh --help
+
+if [ "$fails" -ne 0 ]; then
+  echo "$fails failure(s)"
+  exit 1
+fi
+echo "mesh CLI: all passed"
