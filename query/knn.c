@@ -133,19 +133,23 @@ qk_status_t qk_query_knn_batch(const qk_tree_t *tree, const qk_point_t *qs, size
   if (!tree || (nq > 0 && !qs) || (nq > 0 && k > 0 && !out)) return QK_ERR_INVALID;
   if (isnan(max_dist) || max_dist < 0) return QK_ERR_INVALID;
   qk_status_t first = QK_OK;
-  for (size_t i = 0; i < nq; i++) {
+  uint32_t *order;
+  void *block = qk__morton_order(tree, qs, nq, &order);
+  for (size_t j = 0; j < nq; j++) {
+    size_t i = order ? order[j] : j;
     qk_neighbor_t *o = out ? out + i * k : NULL;
     size_t n = 0;
     qk_status_t st = check_args(qs[i], max_dist);
     if (st == QK_OK)
       n = knn_one(tree, qs[i], k, max_dist, o);
-    else if (first == QK_OK)
+    else
       first = st;
-    for (size_t j = n; j < k; j++) {
-      o[j].id = QK_NONE;
-      o[j].dist = INFINITY;
+    for (size_t m = n; m < k; m++) {
+      o[m].id = QK_NONE;
+      o[m].dist = INFINITY;
     }
     if (counts) counts[i] = n;
   }
+  if (block) qk__morton_free(tree, block, nq);
   return first;
 }

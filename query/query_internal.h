@@ -63,6 +63,15 @@ void qk__heap_replace_top(qk_neighbor_t *h, size_t n, qk_neighbor_t v);
 /* Sort the heap's contents ascending by (dist, id) in place. */
 void qk__heap_sort(qk_neighbor_t *h, size_t n);
 
+/*
+ * Z-order of nq query locations, for the batch calls: returns a block to release with
+ * qk__morton_free() and sets *order to the query indices in Morton order; returns NULL
+ * (order NULL) when the batch is too small to gain or memory is short, in which case
+ * the caller answers the queries in their given order.
+ */
+void *qk__morton_order(const qk_tree_t *t, const qk_point_t *qs, size_t nq, uint32_t **order);
+void qk__morton_free(const qk_tree_t *t, void *block, size_t nq);
+
 /* Sort up to four stacked entries by descending bound, so the nearest is popped first. */
 static inline void qk__sort4_desc(qk__entry_t *e, int n) {
   for (int i = 1; i < n; i++) {

@@ -1,0 +1,63 @@
+/*
+ * Query ordering for the batch calls. Answering queries in Z-order (Morton order) of
+ * their locations makes consecutive searches walk nearly the same nodes and leaves, so
+ * most of what one query brings into the cache the next one reuses; for random queries
+ * over a large tree that is where the time goes. The order comes from a least-
+ * significant-digit radix sort of 32-bit Morton codes (16 bits per axis, relative to the
+ * root square), four passes of eight bits, linear in the number of queries.
+ */
+#include "query/query_internal.h"
+
+/* Spread the low 16 bits of v to the even bit positions. */
+static inline uint32_t spread16(uint32_t v) {
+  v &= 0xFFFFu;
+  v = (v | (v << 8)) & 0x00FF00FFu;
+  v = (v | (v << 4)) & 0x0F0F0F0Fu;
+  v = (v | (v << 2)) & 0x33333333u;
+  v = (v | (v << 1)) & 0x55555555u;
+  return v;
+}
+
+/* A coordinate's 16-bit cell index along one axis of the root, clamped (queries may lie
+ * outside the root, or be NaN, which any cell serves). */
+static inline uint32_t cell16(double v, double lo, double scale) {
+  double c = (v - lo) * scale;
+  if (!(c > 0)) return 0;
+  if (c >= 65535.0) return 65535u;
+  return (uint32_t)c;
+}
+
+void *qk__morton_order(const qk_tree_t *t, const qk_point_t *qs, size_t nq, uint32_t **order) {
+  *order = NULL;
+  if (nq < 64 || nq > UINT32_MAX) return NULL; /* too few to pay, or ids do not fit */
+  const qk_allocator_t *a = &t->alloc;
+  uint64_t *k = qk__realloc(a, NULL, 0, 2 * nq * sizeof *k);
+  if (!k) return NULL;
+  uint64_t *tmp = k + nq;
+  const double x0 = t->nodes[0].x0, y0 = t->nodes[0].y0, scale = 65536.0 / t->side[0];
+  for (size_t i = 0; i < nq; i++) {
+    uint32_t code =
+        spread16(cell16(qs[i].x, x0, scale)) << 1 | spread16(cell16(qs[i].y, y0, scale));
+    k[i] = (uint64_t)code << 32 | (uint64_t)i;
+  }
+  for (int pass = 0; pass < 4; pass++) {
+    size_t count[257] = {0};
+    int shift = 32 + 8 * pass;
+    for (size_t i = 0; i < nq; i++) count[((k[i] >> shift) & 0xFF) + 1]++;
+    for (int b = 0; b < 256; b++) count[b + 1] += count[b];
+    for (size_t i = 0; i < nq; i++) tmp[count[(k[i] >> shift) & 0xFF]++] = k[i];
+    uint64_t *s = k;
+    k = tmp;
+    tmp = s;
+  }
+  /* After an even number of passes the sorted keys are back in the first half; the
+   * second half, now unused, receives the query indices. */
+  uint32_t *o = (uint32_t *)tmp;
+  for (size_t i = 0; i < nq; i++) o[i] = (uint32_t)(k[i] & 0xFFFFFFFFu);
+  *order = o;
+  return k;
+}
+
+void qk__morton_free(const qk_tree_t *t, void *block, size_t nq) {
+  qk__free(&t->alloc, block, 2 * nq * sizeof(uint64_t));
+}
