@@ -168,6 +168,46 @@ static void test_geo_normalise_and_errors(void **state) {
   assert_int_equal(nb[1].id, out[1].id);
   qk_geo_free(g);
   qk_geo_free(NULL);
+  /* An empty index answers with nothing. */
+  assert_int_equal(qk_geo_build(NULL, 0, NULL, &g), QK_OK);
+  assert_int_equal(qk_geo_knn(g, (qk_point_t){0, 0}, 3, INFINITY, nb, &n), QK_OK);
+  assert_int_equal(n, 0);
+  assert_int_equal(qk_geo_radius_list(g, (qk_point_t){0, 0}, 1e7, nb, 3, &n), QK_OK);
+  assert_int_equal(n, 0);
+  qk_geo_free(g);
+}
+
+static void test_geo_nomem(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 2);
+  qk_point_t p[500];
+  for (size_t i = 0; i < 500; i++) p[i] = geo_loc(&r, (int)(i % 4));
+  for (size_t fail_at = 1;; fail_at++) {
+    qkt_alloc_t st;
+    qk_allocator_t a = qkt_alloc_make(&st);
+    st.fail_at = fail_at;
+    qk_tree_options_t o;
+    qk_tree_options_init(&o);
+    o.capacity = 4;
+    o.allocator = &a;
+    qk_geo_t *g = NULL;
+    qk_status_t s = qk_geo_build(p, 500, &o, &g);
+    if (s == QK_OK) {
+      qk_neighbor_t nb[3];
+      size_t n;
+      assert_int_equal(qk_geo_knn(g, p[0], 3, INFINITY, nb, &n), QK_OK);
+      assert_int_equal(n, 3);
+      qk_geo_free(g);
+      assert_int_equal(st.live_blocks, 0);
+      assert_true(fail_at > 3);
+      break;
+    }
+    assert_int_equal(s, QK_ERR_NOMEM);
+    assert_null(g);
+    assert_int_equal(st.live_blocks, 0);
+    assert_true(fail_at < 1000);
+  }
 }
 
 static void test_geo_cities(void **state) {
@@ -217,6 +257,7 @@ int main(void) {
 #if defined(QK_HAVE_GEODESIC)
     cmocka_unit_test(test_geo_knn_radius),
     cmocka_unit_test(test_geo_normalise_and_errors),
+    cmocka_unit_test(test_geo_nomem),
     cmocka_unit_test(test_geo_cities),
 #else
     cmocka_unit_test(test_geo_unsupported),

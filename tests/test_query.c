@@ -326,6 +326,44 @@ static void test_query_batch(void **state) {
   free(p), free(qs), free(out), free(off), free(rb), free(want), free(leaves);
 }
 
+/* Batch kNN borrows memory for its ordering; when none is to be had it must still answer
+ * correctly, in the given order. */
+static void test_query_batch_nomem(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 9);
+  const size_t n = 2000, nq = 300, k = 3;
+  qk_point_t *p = malloc(n * sizeof *p), *qs = malloc(nq * sizeof *qs);
+  qkt_points(&r, QKT_CLUSTERED, p, n);
+  for (size_t i = 0; i < nq; i++) qs[i] = rand_loc(&r);
+  qkt_alloc_t st;
+  qk_allocator_t a = qkt_alloc_make(&st);
+  qk_tree_options_t o;
+  qk_tree_options_init(&o);
+  o.capacity = 8;
+  o.allocator = &a;
+  qk_tree_t *t = NULL;
+  assert_int_equal(qk_tree_build(p, n, &o, &t), QK_OK);
+  qk_neighbor_t *out = malloc(nq * k * sizeof *out), want[3];
+  for (int failing = 0; failing < 2; failing++) {
+    size_t before = st.calls;
+    st.fail_at = failing ? st.calls + 1 : 0;
+    assert_int_equal(qk_query_knn_batch(t, qs, nq, k, INFINITY, out, NULL), QK_OK);
+    if (failing)
+      assert_true(st.failed);
+    else
+      assert_true(st.calls > before); /* the ordering was allocated */
+    for (size_t i = 0; i < nq; i++) {
+      size_t nw = qko_knn(p, NULL, n, qs[i], k, INFINITY, want);
+      assert_nb_equal(out + i * k, nw, want, nw, "knn-batch-nomem", i);
+    }
+  }
+  st.fail_at = 0;
+  qk_tree_free(t);
+  assert_int_equal(st.live_blocks, 0);
+  free(p), free(qs), free(out);
+}
+
 static int stop_after_3(qk_id_t id, qk_point_t p, double dist, void *ud) {
   (void)id, (void)p, (void)dist;
   return ++*(int *)ud == 3;
@@ -479,15 +517,11 @@ static void test_query_cities(void **state) {
 int main(void) {
   g_seed = qkt_seed(20261122);
   const struct CMUnitTest tests[] = {
-      cmocka_unit_test(test_query_range_radius),
-      cmocka_unit_test(test_query_knn_all_k),
-      cmocka_unit_test(test_query_knn_large),
-      cmocka_unit_test(test_query_knn_after_mutation),
-      cmocka_unit_test(test_query_locate),
-      cmocka_unit_test(test_query_batch),
-      cmocka_unit_test(test_query_stop_and_bad_args),
-      cmocka_unit_test(test_query_threads),
-      cmocka_unit_test(test_query_cities),
+      cmocka_unit_test(test_query_range_radius), cmocka_unit_test(test_query_knn_all_k),
+      cmocka_unit_test(test_query_knn_large),    cmocka_unit_test(test_query_knn_after_mutation),
+      cmocka_unit_test(test_query_locate),       cmocka_unit_test(test_query_batch),
+      cmocka_unit_test(test_query_batch_nomem),  cmocka_unit_test(test_query_stop_and_bad_args),
+      cmocka_unit_test(test_query_threads),      cmocka_unit_test(test_query_cities),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -134,7 +134,8 @@ qk_status_t qk_query_knn(const qk_tree_t *tree, qk_point_t q, size_t k, double m
  * unused slots of its block get id QK_NONE and distance INFINITY. The queries are
  * answered in Z-order of their locations, so that consecutive searches reuse the cache;
  * for that a batch of 64 or more borrows 16 bytes per query from the tree's allocator
- * for the duration of the call (when that fails, the given order is used instead).
+ * for the duration of the call (when that fails, the given order is used instead). A
+ * custom allocator must therefore be thread-safe if batches run on several threads.
  * \param [in] tree the tree.
  * \param [in] qs nq queries.
  * \param [in] nq how many.
