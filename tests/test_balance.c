@@ -112,6 +112,7 @@ static qk_tree_t *make_tree(qkt_rng_t *r, int kind, size_t n, qk_point_t *pts,
   o.has_root = 1;
   o.root = (qk_square_t){0, 0, 1};
   o.allocator = a;
+  o.max_depth = 20; /* duplicates stop here; keeps the quadratic brute force quick */
   qk_tree_t *t = NULL;
   if (kind < 4) {
     qkt_points(r, (qkt_dist_t)kind, pts, n);
