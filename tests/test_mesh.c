@@ -46,7 +46,7 @@ static size_t mesh_and_check(const double *xy, size_t nv, const uint32_t *seg, s
   qk_mesh_stats_t s;
   qk_mesh_stats(m, &s);
   assert_int_equal(s.triangles, mm.nt);
-  assert_true(s.min_angle_deg > 44.999 && s.max_angle_deg < 90.001);
+  if (mm.nt) assert_true(s.min_angle_deg > 44.999 && s.max_angle_deg < 90.001);
   size_t nt = mm.nt;
   qk_mesh_free(m);
   qk_poly_free(p);
@@ -115,6 +115,17 @@ static void test_mesh_hand_made(void **state) {
   assert_int_equal(mesh_and_check(NULL, 0, NULL, 0, NULL, 0, 4, "empty"), 2);
 }
 
+/* Exact brute-force oracle for the input rules: do segments i and j (0-based pairs into
+ * xy) meet other than at a shared vertex of consecutive, non-overlapping segments? */
+static int64_t orient3(const int64_t *a, const int64_t *b, const int64_t *c) {
+  int64_t v = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
+  return (v > 0) - (v < 0);
+}
+static int on_seg(const int64_t *a, const int64_t *b, const int64_t *c) {
+  return orient3(a, b, c) == 0 && c[0] >= (a[0] < b[0] ? a[0] : b[0]) &&
+         c[0] <= (a[0] > b[0] ? a[0] : b[0]) && c[1] >= (a[1] < b[1] ? a[1] : b[1]) &&
+         c[1] <= (a[1] > b[1] ? a[1] : b[1]);
+}
 static void test_mesh_random(void **state) {
   (void)state;
   uint64_t seed = qkt_seed(424242);
@@ -127,9 +138,106 @@ static void test_mesh_random(void **state) {
     pg_generate(&r, U, 1 + qkt_rng_below(&r, U >= 256 ? 24 : 8), &in);
     char what[96];
     snprintf(what, sizeof what, "random seed %llu round %d", (unsigned long long)seed, round);
-    mesh_and_check(in.xy, in.nv, in.seg, in.ns, NULL, 0, U, what);
+    /* Every third round, up to two hole points on the half-integer lattice, away from
+     * every segment. */
+    double holes[4];
+    size_t nh = 0;
+    for (int tries = 0; round % 3 == 0 && nh < 2 && tries < 50; tries++) {
+      int64_t h[2] = {qkt_rng_below(&r, (uint32_t)(2 * U + 1)),
+                      qkt_rng_below(&r, (uint32_t)(2 * U + 1))};
+      int on = 0;
+      for (size_t i = 0; i < in.ns && !on; i++) {
+        int64_t a[2] = {2 * (int64_t)in.xy[2 * in.seg[2 * i]],
+                        2 * (int64_t)in.xy[2 * in.seg[2 * i] + 1]};
+        int64_t b[2] = {2 * (int64_t)in.xy[2 * in.seg[2 * i + 1]],
+                        2 * (int64_t)in.xy[2 * in.seg[2 * i + 1] + 1]};
+        on = on_seg(a, b, h);
+      }
+      if (!on) holes[2 * nh] = (double)h[0] / 2, holes[2 * nh + 1] = (double)h[1] / 2, nh++;
+    }
+    mesh_and_check(in.xy, in.nv, in.seg, in.ns, nh ? holes : NULL, nh, U, what);
     pg_free(&in);
   }
+}
+
+/* Do segments i and j break the input rules? */
+static int bad_pair(const int64_t *P, const uint32_t *seg, size_t i, size_t j) {
+  const int64_t *a = &P[2 * seg[2 * i]], *b = &P[2 * seg[2 * i + 1]];
+  const int64_t *c = &P[2 * seg[2 * j]], *d = &P[2 * seg[2 * j + 1]];
+  for (int u = 0; u < 2; u++)
+    for (int v = 0; v < 2; v++)
+      if (seg[2 * i + u] == seg[2 * j + v]) {
+        const int64_t *o = &P[2 * seg[2 * i + u]], *p = &P[2 * seg[2 * i + 1 - u]],
+                      *q = &P[2 * seg[2 * j + 1 - v]];
+        /* Overlap iff the far ends lie on one ray from the shared vertex. */
+        return orient3(o, p, q) == 0 &&
+               (p[0] - o[0]) * (q[0] - o[0]) + (p[1] - o[1]) * (q[1] - o[1]) > 0;
+      }
+  int64_t o1 = orient3(a, b, c), o2 = orient3(a, b, d), o3 = orient3(c, d, a),
+          o4 = orient3(c, d, b);
+  if (o1 * o2 < 0 && o3 * o4 < 0) return 1;
+  return on_seg(a, b, c) || on_seg(a, b, d) || on_seg(c, d, a) || on_seg(c, d, b);
+}
+
+/* Random octagons placed without care: the generator must accept exactly the inputs
+ * the brute-force oracle finds valid, and mesh those correctly. */
+static void test_mesh_random_validity(void **state) {
+  (void)state;
+  uint64_t seed = qkt_seed(99);
+  qkt_rng_t r;
+  qkt_rng_seed(&r, seed);
+  size_t valid = 0, invalid = 0;
+  for (int round = 0; round < 300; round++) {
+    pg_input_t in;
+    memset(&in, 0, sizeof in);
+    int k = 1 + (int)qkt_rng_below(&r, 4);
+    for (int i = 0; i < k; i++) {
+      int64_t x0 = qkt_rng_below(&r, 24), y0 = qkt_rng_below(&r, 24);
+      int64_t w = 1 + qkt_rng_below(&r, 8), h = 1 + qkt_rng_below(&r, 8), mn = w < h ? w : h;
+      int64_t c = qkt_rng_below(&r, (uint32_t)(mn / 2 + 1));
+      int64_t o[16] = {x0 + c, y0,         x0 + w - c, y0,     x0 + w, y0 + c,
+                       x0 + w, y0 + h - c, x0 + w - c, y0 + h, x0 + c, y0 + h,
+                       x0,     y0 + h - c, x0,         y0 + c};
+      pg_add_polygon(&in, o, 8);
+    }
+    int64_t *P = malloc((2 * in.nv + 2) * sizeof *P);
+    assert_non_null(P);
+    for (size_t i = 0; i < 2 * in.nv; i++) P[i] = (int64_t)in.xy[i];
+    int ok = 1;
+    for (size_t i = 0; i < in.ns && ok; i++)
+      for (size_t j = i + 1; j < in.ns && ok; j++) ok = !bad_pair(P, in.seg, i, j);
+    qk_poly_t *p;
+    assert_int_equal(qk_poly_from_arrays(in.xy, in.nv, in.seg, in.ns, NULL, 0, NULL, &p), QK_OK);
+    qk_mesh_options_t o;
+    qk_mesh_options_init(&o);
+    o.size = 32;
+    qk_mesh_t *m = NULL;
+    qk_mesh_error_t err;
+    qk_status_t st = qk_mesh_generate(p, &o, &m, &err);
+    if (ok && st != QK_OK)
+      fail_msg("seed %llu round %d: valid input rejected: %s", (unsigned long long)seed, round,
+               err.message);
+    if (!ok && st != QK_ERR_GEOMETRY)
+      fail_msg("seed %llu round %d: invalid input gave %s", (unsigned long long)seed, round,
+               qk_strerror(st));
+    if (ok) {
+      mc_input_t ci = {in.xy, in.nv, in.seg, in.ns, NULL, 0, 32};
+      mc_mesh_t mm;
+      mm.xy = qk_mesh_vertices(m, &mm.nv);
+      mm.tri = qk_mesh_triangles(m, &mm.nt);
+      mm.comp = qk_mesh_triangle_components(m);
+      char msg[512];
+      if (mc_check(&ci, &mm, msg, sizeof msg))
+        fail_msg("seed %llu round %d: %s", (unsigned long long)seed, round, msg);
+    }
+    valid += ok, invalid += !ok;
+    qk_mesh_free(m);
+    qk_poly_free(p);
+    free(P);
+    pg_free(&in);
+  }
+  print_message("%zu valid, %zu invalid inputs\n", valid, invalid);
+  assert_true(valid > 20 && invalid > 20);
 }
 
 /* Doubling U for a fixed component adds a bounded number of triangles: the mesh grows
@@ -350,10 +458,10 @@ static void test_mesh_checker_rejects(void **state) {
 
 int main(void) {
   const struct CMUnitTest tests[] = {
-      cmocka_unit_test(test_mesh_notes_example),   cmocka_unit_test(test_mesh_hand_made),
-      cmocka_unit_test(test_mesh_random),          cmocka_unit_test(test_mesh_non_uniform),
-      cmocka_unit_test(test_mesh_alloc_failure),   cmocka_unit_test(test_mesh_writers),
-      cmocka_unit_test(test_mesh_checker_rejects),
+      cmocka_unit_test(test_mesh_notes_example), cmocka_unit_test(test_mesh_hand_made),
+      cmocka_unit_test(test_mesh_random),        cmocka_unit_test(test_mesh_random_validity),
+      cmocka_unit_test(test_mesh_non_uniform),   cmocka_unit_test(test_mesh_alloc_failure),
+      cmocka_unit_test(test_mesh_writers),       cmocka_unit_test(test_mesh_checker_rejects),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }

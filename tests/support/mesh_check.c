@@ -280,11 +280,14 @@ int mc_check(const mc_input_t *in, const mc_mesh_t *m, char *msg, size_t msz) {
   /* Input respected: along each segment, the mesh vertices on it are joined by edges. */
   for (size_t s = 0; s < in->ns; s++) {
     int c = comp_of_seg[s];
-    if (hole[c] && hole[cyc[c - 1].parent]) continue; /* no triangle on either side */
     int64_t px = 2 * (int64_t)in->xy[2 * in->seg[2 * s]],
             py = 2 * (int64_t)in->xy[2 * in->seg[2 * s] + 1];
     int64_t qx = 2 * (int64_t)in->xy[2 * in->seg[2 * s + 1]],
             qy = 2 * (int64_t)in->xy[2 * in->seg[2 * s + 1] + 1];
+    /* No triangle on either side: both faces are holes, or the segment lies on the
+     * domain's boundary and its inside is a hole. */
+    int on_domain = (px == qx && (px == 0 || px == U2)) || (py == qy && (py == 0 || py == U2));
+    if (hole[c] && (hole[cyc[c - 1].parent] || on_domain)) continue;
     int64_t sx = (qx > px) - (qx < px), sy = (qy > py) - (qy < py);
     int64_t len = llabs(qx - px) > llabs(qy - py) ? llabs(qx - px) : llabs(qy - py);
     long prev = find_pt(pts, m->nv, px, py);
