@@ -30,7 +30,14 @@ enum { P_S, P_E, P_N, P_W, P_D0, P_D1, P_COUNT };
 typedef struct unit_rec {
   uint32_t node;
   int32_t piece[P_COUNT];
+  uint32_t edge[8]; /* the edges meeting the closed square (at most 8, see unit_leaf) */
+  uint32_t nedge;
 } unit_rec_t;
+
+static int rec_cmp(const void *a, const void *b) {
+  uint32_t x = ((const unit_rec_t *)a)->node, y = ((const unit_rec_t *)b)->node;
+  return (x > y) - (x < y);
+}
 
 /* Generation state; freed in one place. */
 typedef struct gen {
@@ -177,6 +184,8 @@ static qk_status_t unit_leaf(gen_t *g, uint32_t node, int64_t x0, int64_t y0, si
   unit_rec_t *r = &g->rec[g->nrec++];
   memset(r, 0, sizeof *r);
   r->node = node;
+  r->nedge = (uint32_t)k;
+  for (size_t i = 0; i < k; i++) r->edge[i] = L[i];
   for (size_t i = 0; i < k; i++) {
     const edge_t *e = &g->e[L[i]];
     int64_t minx = e->ax < e->bx ? e->ax : e->bx, maxx = e->ax < e->bx ? e->bx : e->ax;
@@ -702,16 +711,53 @@ out:
 }
 
 /*
- * Sign of the turn from a->b to h, exact for mesh edges (directions along axes or
- * diagonals) and any finite h: the products reduce to one subtraction of exact values.
+ * Exact sign of s1 x + s2 y - c for doubles x, y >= 0, signs s1, s2 in {-1, 0, 1} and an
+ * integer c: the lines of a quadtree mesh are axis-parallel or diagonal, so every
+ * orientation test against a hole point has this form. Split x = ix + fx, y = iy + fy
+ * with integer parts and fractions in [0, 1) (both exact); the integer part decides
+ * unless it is within one of zero, and then only exact comparisons of fractions remain.
  */
-static int orient_d(double ax, double ay, double bx, double by, double hx, double hy) {
-  double dx = bx - ax, dy = by - ay, px = hx - ax, py = hy - ay;
-  if (dx == 0) return dy > 0 ? -(px > 0) + (px < 0) : (px > 0) - (px < 0);
-  double sx = dx > 0 ? 1 : -1;
-  if (dy == 0) return sx > 0 ? (py > 0) - (py < 0) : -(py > 0) + (py < 0);
-  double q = (dy * sx > 0) ? py - px : py + px; /* py - (dy/dx) px, dy/dx = +-1 */
-  return sx > 0 ? (q > 0) - (q < 0) : -(q > 0) + (q < 0);
+static int lin_sign(int s1, int s2, double x, double y, int64_t c) {
+  if (s1 == 0 || s2 == 0) {
+    double v = s1 ? x : y;
+    int s = s1 ? s1 : s2;
+    if (s == 0) return (c < 0) - (c > 0);
+    /* sign(s v - c) = s * sign(v - s c) */
+    double t = (double)(s * c);
+    return s * ((v > t) - (v < t));
+  }
+  if (s1 < 0) return -lin_sign(-s1, -s2, x, y, -c);
+  double ix = floor(x), iy = floor(y), fx = x - ix, fy = y - iy;
+  if (s2 > 0) { /* x + y - c = I + (fx + fy), fx + fy in [0, 2) */
+    int64_t I = (int64_t)ix + (int64_t)iy - c;
+    if (I >= 0) return (I > 0 || fx > 0 || fy > 0) ? 1 : 0;
+    if (I <= -2) return -1;
+    /* I = -1: sign(fx + fy - 1). 1 - f is exact for f >= 1/2; if both are below 1/2 the
+     * sum is below 1. */
+    if (fy >= 0.5) return (fx > 1 - fy) - (fx < 1 - fy);
+    if (fx >= 0.5) return (fy > 1 - fx) - (fy < 1 - fx);
+    return -1;
+  }
+  /* x - y - c = I + (fx - fy), fx - fy in (-1, 1). */
+  int64_t I = (int64_t)ix - (int64_t)iy - c;
+  if (I >= 1) return 1;
+  if (I <= -1) return -1;
+  return (fx > fy) - (fx < fy);
+}
+
+/* Exact turn from a->b (integer points, direction axis-parallel or diagonal) to h. */
+static int orient_h(int64_t ax, int64_t ay, int64_t bx, int64_t by, double hx, double hy) {
+  int sx = (bx > ax) - (bx < ax), sy = (by > ay) - (by < ay);
+  /* cross((s), h - a) = sx (hy - ay) - sy (hx - ax) = -sy hx + sx hy - (sx ay - sy ax) */
+  return lin_sign(-sy, sx, hx, hy, sx * ay - sy * ax);
+}
+
+/* Is h on the closed segment a-b? */
+static int on_edge(const edge_t *e, double hx, double hy) {
+  if (orient_h(e->ax, e->ay, e->bx, e->by, hx, hy) != 0) return 0;
+  double x0 = (double)(e->ax < e->bx ? e->ax : e->bx), x1 = (double)(e->ax < e->bx ? e->bx : e->ax);
+  double y0 = (double)(e->ay < e->by ? e->ay : e->by), y1 = (double)(e->ay < e->by ? e->by : e->ay);
+  return hx >= x0 && hx <= x1 && hy >= y0 && hy <= y1;
 }
 
 /* Holes: find the face holding each hole point and mark its label to be dropped. */
@@ -723,19 +769,18 @@ static qk_status_t find_holes(gen_t *g, tri_state_t *T, const leaf_tris_t *lt, u
       return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, P->hline[h],
                            "hole %lu at (%.17g, %.17g) lies outside the domain [0,%llu]^2",
                            snum(P, h), hx, hy, (unsigned long long)g->U);
-    /* On a component edge the face is ambiguous. Edges are horizontal, vertical or
-     * diagonal, so the test is an exact comparison of differences. */
-    for (size_t i = 0; i < g->ne; i++) {
-      const edge_t *e = &g->e[i];
-      double ax = (double)e->ax, ay = (double)e->ay, bx = (double)e->bx, by = (double)e->by;
-      if (orient_d(ax, ay, bx, by, hx, hy) != 0) continue;
-      if (hx >= fmin(ax, bx) && hx <= fmax(ax, bx) && hy >= fmin(ay, by) && hy <= fmax(ay, by))
-        return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, P->hline[h],
-                             "hole %lu at (%.17g, %.17g) lies on the boundary of component %u",
-                             snum(P, h), hx, hy, e->comp);
-    }
     qk_node_t leaf;
     if (qk_tree_find_leaf(g->tree, (qk_point_t){hx, hy}, &leaf) != QK_OK) continue;
+    /* On a component edge the face is ambiguous. Such an edge meets the closure of the
+     * leaf holding the point, so the leaf is a unit square and the edge in its list. */
+    unit_rec_t key;
+    key.node = leaf;
+    const unit_rec_t *r = g->nrec ? bsearch(&key, g->rec, g->nrec, sizeof *g->rec, rec_cmp) : NULL;
+    for (uint32_t i = 0; r && i < r->nedge; i++)
+      if (on_edge(&g->e[r->edge[i]], hx, hy))
+        return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, P->hline[h],
+                             "hole %lu at (%.17g, %.17g) lies on the boundary of component %u",
+                             snum(P, h), hx, hy, g->e[r->edge[i]].comp);
     if (leaf >= lt->cap || lt->first[leaf] == UNKNOWN) continue;
     /* A leaf's triangles are consecutive and at most 8; scan them (a triangle of the next
      * leaf that also holds the point is in the same face, so overrunning is harmless). */
@@ -744,9 +789,7 @@ static qk_status_t find_holes(gen_t *g, tri_state_t *T, const leaf_tris_t *lt, u
       int inside = 1;
       for (int i = 0; i < 3 && inside; i++) {
         uint32_t a = tr[i], b = tr[(i + 1) % 3];
-        if (orient_d((double)T->vx[a], (double)T->vy[a], (double)T->vx[b], (double)T->vy[b], 2 * hx,
-                     2 * hy) < 0)
-          inside = 0;
+        if (orient_h(T->vx[a], T->vy[a], T->vx[b], T->vy[b], 2 * hx, 2 * hy) < 0) inside = 0;
       }
       if (inside) {
         drop[T->label[t]] = 1;
@@ -858,6 +901,8 @@ qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *opt
   }
   if ((st = subdivide(&g, qk_tree_root(g.tree), 0, 0, (int64_t)g.U, 0, g.ne))) goto fail;
   qk_tree_leaves(g.tree, NULL, 0, &m->stats.leaves_before_balance);
+  /* Records sorted by node id, for lookups by hole location. */
+  if (g.nrec) qsort(g.rec, g.nrec, sizeof *g.rec, rec_cmp);
 
   /* Step 2: BalanceQuadTree. */
   double t2 = now();

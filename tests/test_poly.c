@@ -96,6 +96,15 @@ static void test_poly_good(void **state) {
   assert_true(area == 12);
   qk_mesh_free(m);
   qk_poly_free(p);
+  /* Hole points a hair off a boundary are decided exactly: 1 + (1 + 2^-52) rounds to 2
+   * in doubles, yet the point lies strictly inside the diamond x + y > 2. */
+#define DIAMOND "4 2 0 0\n0 2 0\n1 4 2\n2 2 4\n3 0 2\n" SQUARE_SEGS
+  assert_int_equal(run(DIAMOND "1\n0 1 1.0000000000000002\n", 0, &err), QK_OK);
+  assert_int_equal(run(DIAMOND "1\n0 1 1\n", 0, &err), QK_ERR_GEOMETRY);
+  assert_int_equal(run(DIAMOND "1\n0 3 0.9999999999999999\n", 0, &err), QK_OK);
+  assert_int_equal(run(DIAMOND "1\n0 3 1\n", 0, &err), QK_ERR_GEOMETRY);
+  assert_int_equal(run(DIAMOND "1\n0 1e-300 2\n", 0, &err), QK_OK);
+  assert_int_equal(run(DIAMOND "1\n0 2 4\n", 0, &err), QK_ERR_GEOMETRY);
   /* First index 0, no holes section at all. */
   assert_int_equal(run("4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS, 0, &err), QK_OK);
 }
