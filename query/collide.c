@@ -6,19 +6,42 @@
  * when that box meets the query, which widens each node's reach by just as much as its
  * largest item needs, and no more.
  */
+#include <float.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "query/query_internal.h"
 
+/*
+ * The collider's own copy of each node: the bounding box of the items beneath it, in
+ * floats rounded outwards (so still a bounding box), with the links the searches need.
+ * 32 bytes, so the four children of a node fill two adjacent cache lines and a search
+ * reads one place per level instead of the tree's node and a separate box array. An
+ * empty node has a box at +infinity on every side, which every test rejects.
+ */
+typedef struct cnode {
+  float xmin, ymin, xmax, ymax;
+  uint32_t child; /* first of four children, or QK_NONE for a leaf */
+  uint32_t start; /* a leaf's first slot */
+  uint32_t count; /* a leaf's number of items */
+  uint32_t pad_;
+} cnode_t;
+
+/*
+ * Item data is kept in the tree's slot order (parallel to tree->px), not by id, so that
+ * scanning a leaf reads consecutive memory instead of jumping to each item's id: for
+ * large sets that is what the scans cost.
+ */
 struct qk_collider {
   qk_allocator_t alloc;
   qk_tree_t *tree;
   size_t n_discs, n;
-  qk_disc_t *discs;
-  qk_box_t *boxes;
-  qk_box_t *ibox; /* per item id: a box containing everything the item's tests can touch */
-  qk_box_t *nbox; /* per node id: union of ibox over the items beneath */
+  size_t n_slots;
+  qk_box_t *sbox;   /* per slot: the item's box, or a disc's (padded) bounding box */
+  qk_disc_t *sdisc; /* per slot: the disc (when the item is one; NULL without discs) */
+  cnode_t *cn;      /* per node id: see cnode_t */
+  void *cn_block;   /* the allocation holding cn (aligned inside it) */
+  size_t cn_bytes;
   size_t n_nodes;
   double mag; /* largest coordinate magnitude of any item box, for rounding margins */
 };
@@ -47,13 +70,13 @@ typedef struct shape {
   qk_box_t b;
 } shape_t;
 
-static inline shape_t item_shape(const qk_collider_t *c, qk_id_t id) {
+static inline shape_t slot_shape(const qk_collider_t *c, uint32_t slot) {
   shape_t s;
-  s.is_disc = id < c->n_discs;
+  s.is_disc = c->tree->pid[slot] < c->n_discs;
   if (s.is_disc)
-    s.d = c->discs[id];
+    s.d = c->sdisc[slot];
   else
-    s.b = c->boxes[id - c->n_discs];
+    s.b = c->sbox[slot];
   return s;
 }
 
@@ -80,31 +103,63 @@ static inline void box_union(qk_box_t *a, const qk_box_t *b) {
   if (b->ymax > a->ymax) a->ymax = b->ymax;
 }
 
+/* Round outwards to float; out-of-range values go to the largest float or infinity
+ * (converting them directly would be undefined). */
+static float round_down(double v) {
+  if (v > FLT_MAX) return FLT_MAX;
+  if (v < -FLT_MAX) return -INFINITY;
+  float f = (float)v;
+  return (double)f > v ? nextafterf(f, -INFINITY) : f;
+}
+
+static float round_up(double v) {
+  if (v > FLT_MAX) return INFINITY;
+  if (v < -FLT_MAX) return -FLT_MAX;
+  float f = (float)v;
+  return (double)f < v ? nextafterf(f, INFINITY) : f;
+}
+
 /* Post-order: a node's box is the union of its children's (or its items'). Recursion
  * depth is bounded by the tree's depth cap. */
 static qk_box_t fill_node_boxes(qk_collider_t *c, uint32_t node) {
   const qk_tree_t *t = c->tree;
   const qk__node_t *n = &t->nodes[node];
+  cnode_t *cn = &c->cn[node];
   qk_box_t b = {INFINITY, INFINITY, -INFINITY, -INFINITY};
+  cn->child = n->child;
+  cn->start = n->start;
+  cn->count = qk__is_leaf(n) ? n->count : 0;
+  cn->pad_ = 0;
   if (qk__is_leaf(n)) {
-    for (uint32_t i = 0; i < n->count; i++) box_union(&b, &c->ibox[t->pid[n->start + i]]);
+    for (uint32_t i = 0; i < n->count; i++) box_union(&b, &c->sbox[n->start + i]);
   } else {
     for (uint32_t k = 0; k < 4; k++) {
       qk_box_t cb = fill_node_boxes(c, n->child + k);
       box_union(&b, &cb);
     }
   }
-  c->nbox[node] = b;
-  return b;
+  if (n->count == 0) {
+    cn->xmin = cn->ymin = cn->xmax = cn->ymax = INFINITY;
+  } else {
+    cn->xmin = round_down(b.xmin);
+    cn->ymin = round_down(b.ymin);
+    cn->xmax = round_up(b.xmax);
+    cn->ymax = round_up(b.ymax);
+  }
+  return b; /* for an empty node the inverted box, which leaves a union unchanged */
+}
+
+/* Does a node's box meet a closed box? */
+static inline int cbox_box(const cnode_t *n, const qk_box_t *b) {
+  return n->xmin <= b->xmax && b->xmin <= n->xmax && n->ymin <= b->ymax && b->ymin <= n->ymax;
 }
 
 void qk_collider_free(qk_collider_t *c) {
   if (!c) return;
   qk_allocator_t a = c->alloc;
-  qk__free(&a, c->discs, c->n_discs * sizeof *c->discs);
-  qk__free(&a, c->boxes, (c->n - c->n_discs) * sizeof *c->boxes);
-  qk__free(&a, c->ibox, c->n * sizeof *c->ibox);
-  qk__free(&a, c->nbox, c->n_nodes * sizeof *c->nbox);
+  qk__free(&a, c->sbox, c->n_slots * sizeof *c->sbox);
+  qk__free(&a, c->sdisc, c->n_slots * sizeof *c->sdisc);
+  qk__free(&a, c->cn_block, c->cn_bytes);
   qk_tree_free(c->tree);
   qk__free(&a, c, sizeof *c);
 }
@@ -146,16 +201,11 @@ qk_status_t qk_collider_build(const qk_disc_t *discs, size_t n_discs, const qk_b
   c->n = n;
   qk_status_t st = QK_OK;
   qk_point_t *centres = NULL;
-  if (n_discs) c->discs = qk__realloc(&a, NULL, 0, n_discs * sizeof *c->discs);
-  if (n_boxes) c->boxes = qk__realloc(&a, NULL, 0, n_boxes * sizeof *c->boxes);
-  if (n) c->ibox = qk__realloc(&a, NULL, 0, n * sizeof *c->ibox);
   if (n) centres = qk__realloc(&a, NULL, 0, n * sizeof *centres);
-  if ((n_discs && !c->discs) || (n_boxes && !c->boxes) || (n && (!c->ibox || !centres))) {
+  if (n && !centres) {
     st = QK_ERR_NOMEM;
     goto fail;
   }
-  if (n_discs) memcpy(c->discs, discs, n_discs * sizeof *discs);
-  if (n_boxes) memcpy(c->boxes, boxes, n_boxes * sizeof *boxes);
   c->mag = 0;
   for (size_t i = 0; i < n; i++) {
     qk_box_t bb;
@@ -169,20 +219,37 @@ qk_status_t qk_collider_build(const qk_disc_t *discs, size_t n_discs, const qk_b
       centres[i].x = 0.5 * bb.xmin + 0.5 * bb.xmax;
       centres[i].y = 0.5 * bb.ymin + 0.5 * bb.ymax;
     }
-    c->ibox[i] = bb;
     double m = fmax(fmax(fabs(bb.xmin), fabs(bb.xmax)), fmax(fabs(bb.ymin), fabs(bb.ymax)));
     if (m > c->mag) c->mag = m;
   }
   st = qk_tree_build(centres, n, &opt, &c->tree);
-  if (st != QK_OK) goto fail;
   qk__free(&a, centres, n * sizeof *centres);
   centres = NULL;
-  c->n_nodes = c->tree->n_nodes;
-  c->nbox = qk__realloc(&a, NULL, 0, c->n_nodes * sizeof *c->nbox);
-  if (!c->nbox) {
-    c->n_nodes = 0;
+  if (st != QK_OK) goto fail;
+  /* Copy each item into the slot the tree gave its centre. */
+  const qk_tree_t *t = c->tree;
+  /* Sizes of at least one, so that every array exists even for an empty set. */
+  c->n_slots = t->n_slots ? t->n_slots : 1;
+  c->n_nodes = t->n_nodes ? t->n_nodes : 1;
+  c->sbox = qk__realloc(&a, NULL, 0, c->n_slots * sizeof *c->sbox);
+  if (n_discs) c->sdisc = qk__realloc(&a, NULL, 0, c->n_slots * sizeof *c->sdisc);
+  /* Three spare entries in front put each block of four children (which start at ids
+   * 1, 5, 9, ...) on a 128-byte boundary, with 64 bytes of slack for the alignment. */
+  c->cn_bytes = (c->n_nodes + 3) * sizeof(cnode_t) + 64;
+  c->cn_block = qk__realloc(&a, NULL, 0, c->cn_bytes);
+  if (c->cn_block) c->cn = (cnode_t *)(((uintptr_t)c->cn_block + 63) & ~(uintptr_t)63) + 3;
+  if (!c->sbox || (n_discs && !c->sdisc) || !c->cn_block) {
     st = QK_ERR_NOMEM;
     goto fail;
+  }
+  for (qk_id_t id = 0; id < n; id++) {
+    uint32_t slot = t->where[id];
+    if (id < n_discs) {
+      c->sdisc[slot] = discs[id];
+      c->sbox[slot] = disc_bbox(&discs[id]);
+    } else {
+      c->sbox[slot] = boxes[id - n_discs];
+    }
   }
   fill_node_boxes(c, 0);
   *out = c;
@@ -197,30 +264,24 @@ const qk_tree_t *qk_collider_tree(const qk_collider_t *c) { return c ? c->tree :
 
 size_t qk_collider_size(const qk_collider_t *c) { return c ? c->n : 0; }
 
-/*
- * Visit every item whose shape overlaps q (whose bounding box is qb), descending only
- * into nodes whose item box meets qb. Items with id <= skip_upto are not reported (the
- * pair search uses it to report each pair once); pass -1 (as SIZE_MAX) for none.
- */
+/* Visit every item whose shape overlaps q (whose bounding box is qb), descending only
+ * into nodes whose item box meets qb. Returns nonzero when fn asked to stop. */
 typedef int (*item_fn)(qk_id_t id, void *ud);
 
-static int overlap_walk(const qk_collider_t *c, const shape_t *q, const qk_box_t *qb, size_t min_id,
-                        item_fn fn, void *ud) {
+static int overlap_walk(const qk_collider_t *c, const shape_t *q, const qk_box_t *qb, item_fn fn,
+                        void *ud) {
   const qk_tree_t *t = c->tree;
   uint32_t stack[QK__STACK_MAX];
   int sp = 0;
   stack[sp++] = 0;
   while (sp > 0) {
-    uint32_t node = stack[--sp];
-    const qk__node_t *n = &t->nodes[node];
-    if (n->count == 0 || !box_box(&c->nbox[node], qb)) continue;
-    if (qk__is_leaf(n)) {
-      const qk_id_t *pid = t->pid + n->start;
-      for (uint32_t i = 0; i < n->count; i++) {
-        qk_id_t id = pid[i];
-        if (id < min_id || !box_box(&c->ibox[id], qb)) continue;
-        shape_t s = item_shape(c, id);
-        if (shapes_overlap(q, &s) && fn(id, ud)) return 1;
+    const cnode_t *n = &c->cn[stack[--sp]];
+    if (!cbox_box(n, qb)) continue;
+    if (n->child == QK_NONE) {
+      for (uint32_t s = n->start; s < n->start + n->count; s++) {
+        if (!box_box(&c->sbox[s], qb)) continue;
+        shape_t sh = slot_shape(c, s);
+        if (shapes_overlap(q, &sh) && fn(t->pid[s], ud)) return 1;
       }
     } else {
       for (int k = 3; k >= 0; k--) stack[sp++] = n->child + (uint32_t)k;
@@ -249,7 +310,7 @@ qk_status_t qk_collider_query_box(const qk_collider_t *c, qk_box_t box, qk_found
   if (box.xmin > box.xmax || box.ymin > box.ymax) return QK_ERR_GEOMETRY;
   shape_t q = {0, {0, 0, 0}, box};
   found_ctx_t f = {c, fn, ud};
-  overlap_walk(c, &q, &box, 0, found_adapter, &f);
+  overlap_walk(c, &q, &box, found_adapter, &f);
   return QK_OK;
 }
 
@@ -261,40 +322,65 @@ qk_status_t qk_collider_query_disc(const qk_collider_t *c, qk_disc_t disc, qk_fo
   shape_t q = {1, disc, {0, 0, 0, 0}};
   qk_box_t qb = disc_bbox(&disc);
   found_ctx_t f = {c, fn, ud};
-  overlap_walk(c, &q, &qb, 0, found_adapter, &f);
+  overlap_walk(c, &q, &qb, found_adapter, &f);
   return QK_OK;
 }
 
-typedef struct pair_ctx {
-  qk_id_t a;
-  qk_pair_fn fn;
-  void *ud;
-} pair_ctx_t;
-
-static int pair_adapter(qk_id_t id, void *ud) {
-  pair_ctx_t *p = ud;
-  return p->fn(p->a, id, p->ud);
+/*
+ * All pairs between the items of leaf `a` and those of leaf `b`, each pair reported from
+ * the side of its smaller id. Boxes against boxes need no test beyond the bounding
+ * boxes, which are exact for them.
+ */
+static int leaf_pairs(const qk_collider_t *c, const cnode_t *la, const cnode_t *lb, qk_pair_fn fn,
+                      void *ud) {
+  const qk_tree_t *t = c->tree;
+  for (uint32_t si = la->start; si < la->start + la->count; si++) {
+    const qk_box_t *bi = &c->sbox[si];
+    if (!cbox_box(lb, bi)) continue;
+    qk_id_t ia = t->pid[si];
+    int a_disc = ia < c->n_discs;
+    for (uint32_t sj = lb->start; sj < lb->start + lb->count; sj++) {
+      qk_id_t ib = t->pid[sj];
+      if (ib <= ia || !box_box(bi, &c->sbox[sj])) continue;
+      if (a_disc || ib < c->n_discs) {
+        shape_t x = slot_shape(c, si), y = slot_shape(c, sj);
+        if (!shapes_overlap(&x, &y)) continue;
+      }
+      if (fn(ia, ib, ud)) return 1;
+    }
+  }
+  return 0;
 }
 
 qk_status_t qk_collider_pairs(const qk_collider_t *c, qk_pair_fn fn, void *ud) {
   if (!c || !fn) return QK_ERR_INVALID;
-  const qk_tree_t *t = c->tree;
-  /* Take the items leaf by leaf, so that consecutive searches touch the same nodes. */
-  uint32_t stack[QK__STACK_MAX];
-  int sp = 0;
-  stack[sp++] = 0;
-  while (sp > 0) {
-    const qk__node_t *n = &t->nodes[stack[--sp]];
-    if (n->count == 0) continue;
-    if (!qk__is_leaf(n)) {
-      for (int k = 3; k >= 0; k--) stack[sp++] = n->child + (uint32_t)k;
+  /*
+   * Leaf against leaf: for each leaf, one descent finds every leaf whose item box meets
+   * its own, and the items of the two are paired directly. That shares one descent
+   * among all the items of a leaf instead of making one per item.
+   */
+  uint32_t outer[QK__STACK_MAX], inner[QK__STACK_MAX];
+  int so = 0;
+  outer[so++] = 0;
+  while (so > 0) {
+    const cnode_t *la = &c->cn[outer[--so]];
+    if (la->child != QK_NONE) {
+      for (int k = 3; k >= 0; k--) outer[so++] = la->child + (uint32_t)k;
       continue;
     }
-    for (uint32_t i = 0; i < n->count; i++) {
-      qk_id_t a = t->pid[n->start + i];
-      shape_t s = item_shape(c, a);
-      pair_ctx_t p = {a, fn, ud};
-      if (overlap_walk(c, &s, &c->ibox[a], (size_t)a + 1, pair_adapter, &p)) return QK_OK;
+    if (la->count == 0) continue;
+    /* The leaf's box, widened back to doubles, is what the other leaves must meet. */
+    const qk_box_t ba = {la->xmin, la->ymin, la->xmax, la->ymax};
+    int si = 0;
+    inner[si++] = 0;
+    while (si > 0) {
+      const cnode_t *lb = &c->cn[inner[--si]];
+      if (!cbox_box(lb, &ba)) continue;
+      if (lb->child != QK_NONE) {
+        for (int k = 3; k >= 0; k--) inner[si++] = lb->child + (uint32_t)k;
+        continue;
+      }
+      if (leaf_pairs(c, la, lb, fn, ud)) return QK_OK;
     }
   }
   return QK_OK;
@@ -340,11 +426,11 @@ qk_status_t qk_collider_pairs_list(const qk_collider_t *c, qk_pair_t *out, size_
  * [0, tmax] in which the ray is inside the box. Division (not a reciprocal) keeps a
  * zero numerator from turning into NaN for tiny direction components.
  */
-static inline int slab(const qk_box_t *b, double ox, double oy, double dx, double dy, double tmax,
-                       double *lo_out, double *hi_out) {
+static inline int slab(double xmin, double ymin, double xmax, double ymax, double ox, double oy,
+                       double dx, double dy, double tmax, double *lo_out, double *hi_out) {
   double lo = 0.0, hi = tmax;
   if (dx != 0) {
-    double t1 = (b->xmin - ox) / dx, t2 = (b->xmax - ox) / dx;
+    double t1 = (xmin - ox) / dx, t2 = (xmax - ox) / dx;
     if (t1 > t2) {
       double s = t1;
       t1 = t2;
@@ -352,11 +438,11 @@ static inline int slab(const qk_box_t *b, double ox, double oy, double dx, doubl
     }
     if (t1 > lo) lo = t1;
     if (t2 < hi) hi = t2;
-  } else if (ox < b->xmin || ox > b->xmax) {
+  } else if (ox < xmin || ox > xmax) {
     return 0;
   }
   if (dy != 0) {
-    double t1 = (b->ymin - oy) / dy, t2 = (b->ymax - oy) / dy;
+    double t1 = (ymin - oy) / dy, t2 = (ymax - oy) / dy;
     if (t1 > t2) {
       double s = t1;
       t1 = t2;
@@ -364,7 +450,7 @@ static inline int slab(const qk_box_t *b, double ox, double oy, double dx, doubl
     }
     if (t1 > lo) lo = t1;
     if (t2 < hi) hi = t2;
-  } else if (oy < b->ymin || oy > b->ymax) {
+  } else if (oy < ymin || oy > ymax) {
     return 0;
   }
   *lo_out = lo;
@@ -394,7 +480,8 @@ static inline double ray_disc(const qk_disc_t *d, double ox, double oy, double d
 static inline double ray_box(const qk_box_t *b, double ox, double oy, double dx, double dy,
                              double tmax) {
   double lo, hi;
-  if (!slab(b, ox, oy, dx, dy, tmax, &lo, &hi) || lo > hi) return -1.0;
+  if (!slab(b->xmin, b->ymin, b->xmax, b->ymax, ox, oy, dx, dy, tmax, &lo, &hi) || lo > hi)
+    return -1.0;
   return lo;
 }
 
@@ -419,20 +506,27 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
   qk__entry_t stack[QK__STACK_MAX];
   int sp = 0;
   double lo, hi;
-  if (!slab(&c->nbox[0], o.x, o.y, d.x, d.y, tmax, &lo, &hi) || lo > hi + ts) return QK_OK;
+  const int all_discs = c->n_discs == c->n, no_discs = c->n_discs == 0;
+  const cnode_t *root = &c->cn[0];
+  if (!slab(root->xmin, root->ymin, root->xmax, root->ymax, o.x, o.y, d.x, d.y, tmax, &lo, &hi) ||
+      lo > hi + ts)
+    return QK_OK;
   stack[sp].node = 0;
   stack[sp++].bound = lo - ts;
   while (sp > 0) {
     qk__entry_t e = stack[--sp];
     if (e.bound > best) continue;
-    const qk__node_t *n = &t->nodes[e.node];
-    if (qk__is_leaf(n)) {
-      const qk_id_t *pid = t->pid + n->start;
-      for (uint32_t i = 0; i < n->count; i++) {
-        qk_id_t id = pid[i];
-        double th = id < c->n_discs ? ray_disc(&c->discs[id], o.x, o.y, d.x, d.y, tmax)
-                                    : ray_box(&c->boxes[id - c->n_discs], o.x, o.y, d.x, d.y, tmax);
-        if (th >= 0 && (th < best || (th == best && id < best_id))) {
+    const cnode_t *n = &c->cn[e.node];
+    if (n->child == QK_NONE) {
+      /* Ids are read only for hits (and for the kind in mixed sets): the id array is
+       * one more cache miss per leaf otherwise. */
+      for (uint32_t slot = n->start; slot < n->start + n->count; slot++) {
+        int is_disc = all_discs || (!no_discs && t->pid[slot] < c->n_discs);
+        double th = is_disc ? ray_disc(&c->sdisc[slot], o.x, o.y, d.x, d.y, tmax)
+                            : ray_box(&c->sbox[slot], o.x, o.y, d.x, d.y, tmax);
+        if (th < 0 || th > best) continue;
+        qk_id_t id = t->pid[slot];
+        if (th < best || id < best_id) {
           best = th;
           best_id = id;
         }
@@ -443,8 +537,12 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
     int m = 0;
     for (uint32_t k = 0; k < 4; k++) {
       uint32_t ch = n->child + k;
-      if (t->nodes[ch].count == 0) continue;
-      if (!slab(&c->nbox[ch], o.x, o.y, d.x, d.y, tmax, &lo, &hi) || lo > hi + ts) continue;
+      /* Only the children's boxes are read here, not their nodes, which for most of
+       * them would be a cache miss for nothing. */
+      const cnode_t *cb = &c->cn[ch];
+      if (!slab(cb->xmin, cb->ymin, cb->xmax, cb->ymax, o.x, o.y, d.x, d.y, tmax, &lo, &hi) ||
+          lo > hi + ts)
+        continue;
       if (lo - ts > best) continue;
       kids[m].node = ch;
       kids[m++].bound = lo - ts;
