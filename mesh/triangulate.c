@@ -1,0 +1,293 @@
+/*
+ * Step 3 of the book's mesh generation: triangulate every leaf of the balanced
+ * subdivision, then label every triangle with the innermost component containing it.
+ * Coordinates here are doubled, so Steiner points at unit-square centres are integers.
+ */
+#include "mesh/mesh_internal.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+static size_t hslot(uint64_t key, size_t cap) {
+  key ^= key >> 31;
+  key *= 0x9e3779b97f4a7c15ull;
+  key ^= key >> 29;
+  return (size_t)key & (cap - 1);
+}
+
+static void hmap_free(const qk_allocator_t *a, qk__hmap_t *h) {
+  qk__free(a, h->k, h->cap * sizeof *h->k);
+  qk__free(a, h->v, h->cap * sizeof *h->v);
+  h->k = NULL, h->v = NULL, h->cap = h->n = 0;
+}
+
+static qk_status_t hmap_init(const qk_allocator_t *a, qk__hmap_t *h, size_t expect) {
+  size_t cap = 64;
+  while (cap < 2 * expect) cap *= 2;
+  h->k = qk__realloc(a, NULL, 0, cap * sizeof *h->k);
+  h->v = qk__realloc(a, NULL, 0, cap * sizeof *h->v);
+  h->cap = cap, h->n = 0;
+  if (!h->k || !h->v) {
+    hmap_free(a, h);
+    return QK_ERR_NOMEM;
+  }
+  memset(h->k, 0xff, cap * sizeof *h->k);
+  return QK_OK;
+}
+
+/* Find key; if absent insert it with value *v. Returns 1 when found (*v set), 0 when
+ * inserted, -1 out of memory. */
+static int hmap_get_or_put(const qk_allocator_t *a, qk__hmap_t *h, uint64_t key, uint32_t *v) {
+  if (2 * (h->n + 1) > h->cap) {
+    qk__hmap_t nh;
+    if (hmap_init(a, &nh, h->cap)) return -1;
+    for (size_t i = 0; i < h->cap; i++)
+      if (h->k[i] != UINT64_MAX) {
+        size_t j = hslot(h->k[i], nh.cap);
+        while (nh.k[j] != UINT64_MAX) j = (j + 1) & (nh.cap - 1);
+        nh.k[j] = h->k[i], nh.v[j] = h->v[i];
+      }
+    nh.n = h->n;
+    hmap_free(a, h);
+    *h = nh;
+  }
+  size_t j = hslot(key, h->cap);
+  while (h->k[j] != UINT64_MAX) {
+    if (h->k[j] == key) {
+      *v = h->v[j];
+      return 1;
+    }
+    j = (j + 1) & (h->cap - 1);
+  }
+  h->k[j] = key, h->v[j] = *v, h->n++;
+  return 0;
+}
+
+static qk_status_t new_vertex(qk__tri_state_t *T, int64_t x, int64_t y, int steiner, uint32_t *id) {
+  void *p1 = T->vx, *p2 = T->vy, *p3 = T->steiner;
+  if (qk__mesh_grow(T->a, &p1, &T->vcap, sizeof *T->vx, T->nv + 1)) return QK_ERR_NOMEM;
+  T->vx = p1;
+  if (qk__mesh_grow(T->a, &p2, &T->vycap, sizeof *T->vy, T->nv + 1)) return QK_ERR_NOMEM;
+  T->vy = p2;
+  if (qk__mesh_grow(T->a, &p3, &T->scap, 1, T->nv + 1)) return QK_ERR_NOMEM;
+  T->steiner = p3;
+  T->vx[T->nv] = x, T->vy[T->nv] = y, T->steiner[T->nv] = (uint8_t)steiner;
+  *id = (uint32_t)T->nv++;
+  return QK_OK;
+}
+
+/* The vertex at a lattice point, created on first use (corners are shared by leaves). */
+static qk_status_t corner_vertex(qk__tri_state_t *T, int64_t x, int64_t y, uint32_t *id) {
+  uint64_t key = ((uint64_t)x << 32) | (uint64_t)y;
+  uint32_t v = (uint32_t)T->nv;
+  int r = hmap_get_or_put(T->a, &T->vmap, key, &v);
+  if (r < 0) return QK_ERR_NOMEM;
+  if (r == 1) {
+    *id = v;
+    return QK_OK;
+  }
+  return new_vertex(T, x, y, 0, id);
+}
+
+static qk_status_t add_tri(qk__tri_state_t *T, uint32_t a, uint32_t b, uint32_t c, uint32_t cell) {
+  void *p1 = T->tri, *p2 = T->label;
+  if (qk__mesh_grow(T->a, &p1, &T->tcap, 3 * sizeof *T->tri, T->nt + 1)) return QK_ERR_NOMEM;
+  T->tri = p1;
+  if (qk__mesh_grow(T->a, &p2, &T->lcap, sizeof *T->label, T->nt + 1)) return QK_ERR_NOMEM;
+  T->label = p2;
+  uint32_t *t = &T->tri[3 * T->nt];
+  t[0] = a, t[1] = b, t[2] = c;
+  T->label[T->nt] = cell;
+  T->nt++;
+  return QK_OK;
+}
+
+/*
+ * A triangle edge lying on a component piece seeds the label of the triangle's cell when
+ * the triangle is on the piece's left as the component runs, i.e. inside that component:
+ * `dir` is +1 when the triangle traverses the piece in its positive direction.
+ */
+static void seed(uint32_t *label, int32_t piece, int dir) {
+  if (piece != 0 && (piece > 0) == (dir > 0)) *label = (uint32_t)(piece > 0 ? piece : -piece);
+}
+
+/*
+ * Labelling works on cells: the parts of a leaf that no component edge separates. A leaf
+ * is one cell, except a unit leaf cut by a component diagonal, which is two. cell_side
+ * tells whether cell k of a leaf with diagonal kind `diag` (0 none, 1 SW-NE, 2 SE-NW)
+ * touches side s (south, east, north, west).
+ */
+static int cell_touches(int diag, int k, int s) {
+  static const unsigned char touch[3][2] = {{0xf, 0x0}, {0x3, 0xc}, {0x9, 0x6}};
+  return (touch[diag][k] >> s) & 1;
+}
+
+/*
+ * Step 3 for one unit leaf holding component pieces: a component diagonal splits it
+ * along that diagonal; otherwise the SW-NE diagonal does (its vertices are only its
+ * corners, since no leaf is smaller than unit size). Seeds the labels of its cells.
+ */
+static qk_status_t tri_unit(qk__tri_state_t *T, const qk__unit_rec_t *r, const uint32_t c[4],
+                            uint32_t cell0, uint32_t *cell_label) {
+  /* c: SW, SE, NE, NW. */
+  const int32_t *p = r->piece;
+  if (p[QK__P_D1]) {
+    /* Along SE-NW: (SW, SE, NW) and (SE, NE, NW). */
+    seed(&cell_label[cell0], p[QK__P_S], +1);
+    seed(&cell_label[cell0], p[QK__P_D1], +1); /* SE -> NW is the positive direction of D1 */
+    seed(&cell_label[cell0], p[QK__P_W], -1);  /* NW -> SW runs southwards */
+    seed(&cell_label[cell0 + 1], p[QK__P_E], +1);
+    seed(&cell_label[cell0 + 1], p[QK__P_N], -1);
+    seed(&cell_label[cell0 + 1], p[QK__P_D1], -1);
+    qk_status_t st = add_tri(T, c[0], c[1], c[3], cell0);
+    if (st) return st;
+    return add_tri(T, c[1], c[2], c[3], cell0 + 1);
+  }
+  /* Along SW-NE: (SW, SE, NE) and (SW, NE, NW); one cell unless SW-NE is a component
+   * edge. */
+  uint32_t cell1 = p[QK__P_D0] ? cell0 + 1 : cell0;
+  seed(&cell_label[cell0], p[QK__P_S], +1);
+  seed(&cell_label[cell0], p[QK__P_E], +1);
+  seed(&cell_label[cell0], p[QK__P_D0], -1); /* NE -> SW */
+  seed(&cell_label[cell1], p[QK__P_D0], +1);
+  seed(&cell_label[cell1], p[QK__P_N], -1);
+  seed(&cell_label[cell1], p[QK__P_W], -1);
+  qk_status_t st = add_tri(T, c[0], c[1], c[2], cell0);
+  if (st) return st;
+  return add_tri(T, c[0], c[2], c[3], cell1);
+}
+
+/*
+ * Components: a cell beside a component edge, on its inner (left) side, lies in that
+ * component's face and was seeded with its id. Every other cell takes the label of the
+ * face it shares with the cells across leaf sides that are not component edges (found
+ * with the tree's neighbour finding); a face reached from no seed is the outer face,
+ * label 0.
+ */
+static qk_status_t label_cells(qk__gen_t *g, const qk_node_t *leaves, size_t nleaves,
+                               const uint32_t *leaf_of, const uint32_t *rec_of,
+                               uint32_t *cell_label) {
+  const qk_tree_t *t = g->tree;
+  size_t ncell = 2 * nleaves;
+  uint32_t *queue = qk__realloc(g->a, NULL, 0, (ncell + 1) * sizeof *queue);
+  if (!queue) return QK_ERR_NOMEM;
+  size_t qh = 0, qt = 0;
+  for (size_t c = 0; c < ncell; c++)
+    if (cell_label[c] != QK__MESH_UNSET) queue[qt++] = (uint32_t)c;
+  static const qk_dir_t side_dir[4] = {QK_SOUTH, QK_EAST, QK_NORTH, QK_WEST};
+  static const int piece_of_side[4] = {QK__P_S, QK__P_E, QK__P_N, QK__P_W};
+  while (qh < qt) {
+    uint32_t c = queue[qh++], li = c / 2, k = c % 2;
+    uint32_t v = leaves[li];
+    const qk__unit_rec_t *r = rec_of[v] != QK__MESH_UNSET ? &g->rec[rec_of[v]] : NULL;
+    int diag = r ? (r->piece[QK__P_D0] ? 1 : r->piece[QK__P_D1] ? 2 : 0) : 0;
+    for (int s = 0; s < 4; s++) {
+      if (!cell_touches(diag, (int)k, s)) continue;
+      if (r && r->piece[piece_of_side[s]]) continue; /* a component edge: a face boundary */
+      qk_node_t nb[8];
+      size_t n = 0;
+      qk_tree_adjacent_leaves(t, v, side_dir[s], nb, 8, &n);
+      for (size_t i = 0; i < n && i < 8; i++) {
+        uint32_t lw = leaf_of[nb[i]];
+        const qk__unit_rec_t *rw = rec_of[nb[i]] != QK__MESH_UNSET ? &g->rec[rec_of[nb[i]]] : NULL;
+        int dw = rw ? (rw->piece[QK__P_D0] ? 1 : rw->piece[QK__P_D1] ? 2 : 0) : 0;
+        int opp = (s + 2) % 4;
+        uint32_t cw = 2 * lw + (cell_touches(dw, 0, opp) ? 0 : 1);
+        if (cell_label[cw] == QK__MESH_UNSET) cell_label[cw] = cell_label[c], queue[qt++] = cw;
+      }
+    }
+  }
+  for (size_t c = 0; c < ncell; c++)
+    if (cell_label[c] == QK__MESH_UNSET) cell_label[c] = 0;
+  qk__free(g->a, queue, (ncell + 1) * sizeof *queue);
+  return QK_OK;
+}
+
+qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris_t *lt) {
+  const qk_tree_t *t = g->tree;
+  qk_status_t st = QK_OK;
+  /* Which unit leaves carry component pieces, and each leaf's index, by node id. */
+  size_t nn = t->n_nodes;
+  uint32_t *rec_of = qk__realloc(g->a, NULL, 0, nn * sizeof *rec_of);
+  uint32_t *leaf_of = qk__realloc(g->a, NULL, 0, nn * sizeof *leaf_of);
+  lt->cap = nn;
+  lt->first = qk__realloc(g->a, NULL, 0, lt->cap * sizeof *lt->first);
+  size_t nleaves = 0;
+  qk_tree_leaves(t, NULL, 0, &nleaves);
+  qk_node_t *leaves = qk__realloc(g->a, NULL, 0, (nleaves + 1) * sizeof *leaves);
+  uint32_t *cell_label = qk__realloc(g->a, NULL, 0, (2 * nleaves + 1) * sizeof *cell_label);
+  if (!rec_of || !leaf_of || !lt->first || !leaves || !cell_label ||
+      hmap_init(g->a, &T->vmap, 2 * nleaves + 16) != QK_OK) {
+    st = QK_ERR_NOMEM;
+    goto out;
+  }
+  memset(rec_of, 0xff, nn * sizeof *rec_of);
+  memset(lt->first, 0xff, lt->cap * sizeof *lt->first);
+  memset(cell_label, 0xff, (2 * nleaves + 1) * sizeof *cell_label);
+  for (size_t i = 0; i < g->nrec; i++) rec_of[g->rec[i].node] = (uint32_t)i;
+  qk_tree_leaves(t, leaves, nleaves, &nleaves);
+  for (size_t li = 0; li < nleaves; li++) leaf_of[leaves[li]] = (uint32_t)li;
+
+  for (size_t li = 0; li < nleaves; li++) {
+    uint32_t v = leaves[li], cell = (uint32_t)(2 * li);
+    const qk__node_t *n = &t->nodes[v];
+    int64_t S = 2 * (int64_t)(t->side[n->depth]), X = 2 * (int64_t)n->x0, Y = 2 * (int64_t)n->y0;
+    lt->first[v] = (uint32_t)T->nt;
+    uint32_t c[4];
+    if ((st = corner_vertex(T, X, Y, &c[0])) || (st = corner_vertex(T, X + S, Y, &c[1])) ||
+        (st = corner_vertex(T, X + S, Y + S, &c[2])) || (st = corner_vertex(T, X, Y + S, &c[3])))
+      goto out;
+    if (rec_of[v] != QK__MESH_UNSET) {
+      if ((st = tri_unit(T, &g->rec[rec_of[v]], c, cell, cell_label))) goto out;
+      continue;
+    }
+    /* A side holds a midpoint vertex exactly when the neighbour across it (found by
+     * NorthNeighbor, of at most this depth) is internal: then, the tree being balanced,
+     * two leaves of half the size meet this side. Unit leaves have no smaller
+     * neighbours. Sides in CCW order: south, east, north, west. */
+    static const qk_dir_t side_dir[4] = {QK_SOUTH, QK_EAST, QK_NORTH, QK_WEST};
+    int64_t mx[4] = {X + S / 2, X + S, X + S / 2, X}, my[4] = {Y, Y + S / 2, Y + S, Y + S / 2};
+    uint32_t ring[8];
+    size_t nr = 0;
+    for (int s = 0; s < 4; s++) {
+      ring[nr++] = c[s];
+      if (S > 2) {
+        qk_node_t u = qk_tree_neighbor(t, v, side_dir[s]);
+        if (u != QK_NONE && !qk__is_leaf(&t->nodes[u]) &&
+            (st = corner_vertex(T, mx[s], my[s], &ring[nr++])))
+          goto out;
+      }
+    }
+    if (nr == 4) {
+      /* Vertices only at its corners: split along a diagonal (angles 45, 45, 90). */
+      if ((st = add_tri(T, c[0], c[1], c[2], cell)) || (st = add_tri(T, c[0], c[2], c[3], cell)))
+        goto out;
+      continue;
+    }
+    /* A Steiner point at the centre, joined to every boundary vertex: each triangle has
+     * a right angle at the centre (corner-corner) or at the midpoint (corner-midpoint). */
+    uint32_t ctr;
+    if ((st = new_vertex(T, X + S / 2, Y + S / 2, 1, &ctr))) goto out;
+    for (size_t i = 0; i < nr; i++)
+      if ((st = add_tri(T, ring[i], ring[(i + 1) % nr], ctr, cell))) goto out;
+  }
+  if ((st = label_cells(g, leaves, nleaves, leaf_of, rec_of, cell_label))) goto out;
+  for (size_t i = 0; i < T->nt; i++) T->label[i] = cell_label[T->label[i]];
+out:
+  qk__free(g->a, rec_of, nn * sizeof *rec_of);
+  qk__free(g->a, leaf_of, nn * sizeof *leaf_of);
+  qk__free(g->a, leaves, (nleaves + 1) * sizeof *leaves);
+  qk__free(g->a, cell_label, (2 * nleaves + 1) * sizeof *cell_label);
+  if (st) qk__mesh_fail(g->err, st, 0, "%s while triangulating", qk_strerror(st));
+  return st;
+}
+
+void qk__mesh_tri_free(qk__tri_state_t *T) {
+  hmap_free(T->a, &T->vmap);
+  qk__free(T->a, T->vx, T->vcap * sizeof *T->vx);
+  qk__free(T->a, T->vy, T->vycap * sizeof *T->vy);
+  qk__free(T->a, T->steiner, T->scap);
+  qk__free(T->a, T->tri, T->tcap * 3 * sizeof *T->tri);
+  qk__free(T->a, T->label, T->lcap * sizeof *T->label);
+}
