@@ -84,12 +84,14 @@ static size_t knn_search(const qk_tree_t *t, double qx, double qy, size_t k, dou
       }
       continue;
     }
+    /* Bound the children from this node's square (NE, NW, SW, SE), not from their
+     * nodes; a child is read only if it is visited. Empty ones are dropped then. */
+    const double hs = t->side[nd->depth + 1], x0 = nd->x0, y0 = nd->y0;
+    const double cx[4] = {x0 + hs, x0, x0, x0 + hs}, cy[4] = {y0 + hs, y0 + hs, y0, y0};
     qk__entry_t kids[4];
     int m = 0;
     for (uint32_t c = 0; c < 4; c++) {
-      const qk__node_t *ch = &t->nodes[nd->child + c];
-      if (ch->count == 0) continue;
-      double b = qk__cell_d2(t, ch, qx, qy, e);
+      double b = qk__square_d2(cx[c], cy[c], hs, qx, qy, e);
       if (b > thr) continue;
       kids[m].node = nd->child + c;
       kids[m++].bound = b;

@@ -19,10 +19,6 @@ static qk_status_t range_walk(const qk_tree_t *t, qk_box_t b, qk__emit_fn emit, 
   while (sp > 0) {
     const qk__node_t *n = &t->nodes[stack[--sp]];
     if (n->count == 0) continue;
-    double s = t->side[n->depth];
-    if (n->x0 - e > b.xmax || n->x0 + s + e < b.xmin || n->y0 - e > b.ymax ||
-        n->y0 + s + e < b.ymin)
-      continue;
     if (qk__is_leaf(n)) {
       const double *px = t->px + n->start, *py = t->py + n->start;
       const qk_id_t *pid = t->pid + n->start;
@@ -31,8 +27,20 @@ static qk_status_t range_walk(const qk_tree_t *t, qk_box_t b, qk__emit_fn emit, 
         if (x >= b.xmin && x <= b.xmax && y >= b.ymin && y <= b.ymax)
           if (emit(ctx, pid[i], x, y, 0.0)) return QK_OK;
       }
-    } else {
-      for (int c = 3; c >= 0; c--) stack[sp++] = n->child + (uint32_t)c;
+      continue;
+    }
+    /* Test the children's squares, derived from this node's, before pushing them, so
+     * that a pruned child's node is never read. */
+    const double hs = t->side[n->depth + 1];
+    const double xlo[2] = {n->x0 - e, n->x0 + hs - e},
+                 xhi[2] = {n->x0 + hs + e, n->x0 + 2 * hs + e};
+    const double ylo[2] = {n->y0 - e, n->y0 + hs - e},
+                 yhi[2] = {n->y0 + hs + e, n->y0 + 2 * hs + e};
+    for (int c = 3; c >= 0; c--) {
+      unsigned east = qk__q_east((unsigned)c), north = qk__q_north((unsigned)c);
+      if (xlo[east] > b.xmax || xhi[east] < b.xmin || ylo[north] > b.ymax || yhi[north] < b.ymin)
+        continue;
+      stack[sp++] = n->child + (uint32_t)c;
     }
   }
   return QK_OK;
@@ -47,9 +55,10 @@ static qk_status_t radius_walk(const qk_tree_t *t, qk_point_t c, double r, qk__e
   uint32_t stack[QK__STACK_MAX];
   int sp = 0;
   stack[sp++] = 0;
+  if (qk__cell_d2(t, &t->nodes[0], c.x, c.y, e) > r2) return QK_OK;
   while (sp > 0) {
     const qk__node_t *n = &t->nodes[stack[--sp]];
-    if (n->count == 0 || qk__cell_d2(t, n, c.x, c.y, e) > r2) continue;
+    if (n->count == 0) continue;
     if (qk__is_leaf(n)) {
       const double *px = t->px + n->start, *py = t->py + n->start;
       const qk_id_t *pid = t->pid + n->start;
@@ -59,9 +68,13 @@ static qk_status_t radius_walk(const qk_tree_t *t, qk_point_t c, double r, qk__e
         if (d2 <= r2)
           if (emit(ctx, pid[i], px[i], py[i], sqrt(d2))) return QK_OK;
       }
-    } else {
-      for (int k = 3; k >= 0; k--) stack[sp++] = n->child + (uint32_t)k;
+      continue;
     }
+    /* As for boxes: bound the children from this node's square before pushing them. */
+    const double hs = t->side[n->depth + 1], x0 = n->x0, y0 = n->y0;
+    const double cx[4] = {x0 + hs, x0, x0, x0 + hs}, cy[4] = {y0 + hs, y0 + hs, y0, y0};
+    for (int k = 3; k >= 0; k--)
+      if (qk__square_d2(cx[k], cy[k], hs, c.x, c.y, e) <= r2) stack[sp++] = n->child + (uint32_t)k;
   }
   return QK_OK;
 }
