@@ -132,19 +132,19 @@ qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *opt
   /* Step 3: triangulate, label, drop holes, compact. */
   double t3 = now();
   if ((st = qk__mesh_triangulate(&g, &T, &lt))) goto fail;
-  drop = qk__realloc(g.a, NULL, 0, g.ncomp + 1);
+  drop = qk__realloc(g.a, NULL, 0, (size_t)T.nregion + 1);
   newid = qk__realloc(g.a, NULL, 0, (T.nv ? T.nv : 1) * sizeof *newid);
   if (!drop || !newid) {
     st = qk__mesh_fail(err, QK_ERR_NOMEM, 0, "out of memory");
     goto fail;
   }
-  memset(drop, 0, g.ncomp + 1);
+  memset(drop, 0, (size_t)T.nregion + 1);
   if ((st = qk__mesh_find_holes(&g, &T, &lt, drop))) goto fail;
 
   memset(newid, 0xff, (T.nv ? T.nv : 1) * sizeof *newid);
   size_t kt = 0, kv = 0;
   for (size_t t = 0; t < T.nt; t++) {
-    if (drop[T.label[t]]) continue;
+    if (drop[T.region[t]]) continue;
     kt++;
     for (int i = 0; i < 3; i++)
       if (newid[T.tri[3 * t + i]] == QK__MESH_UNSET) newid[T.tri[3 * t + i]] = (uint32_t)kv++;
@@ -169,7 +169,7 @@ qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *opt
     }
   size_t j = 0;
   for (size_t t = 0; t < T.nt; t++) {
-    if (drop[T.label[t]]) continue;
+    if (drop[T.region[t]]) continue;
     const uint32_t *tr = &T.tri[3 * t];
     for (int i = 0; i < 3; i++) {
       m->tri[3 * j + i] = newid[tr[i]];
@@ -197,7 +197,7 @@ qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *opt
   m->stats.seconds_triangulate = t4 - t3;
   st = QK_OK;
 fail:
-  qk__free(g.a, drop, g.ncomp + 1);
+  qk__free(g.a, drop, (size_t)T.nregion + 1);
   qk__free(g.a, newid, (T.nv ? T.nv : 1) * sizeof *newid);
   qk__free(g.a, lt.first, lt.cap * sizeof *lt.first);
   qk__mesh_tri_free(&T);

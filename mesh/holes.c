@@ -58,7 +58,7 @@ static int on_edge(const qk__edge_t *e, double hx, double hy) {
   return hx >= x0 && hx <= x1 && hy >= y0 && hy <= y1;
 }
 
-/* Holes: find the face holding each hole point and mark its label to be dropped. */
+/* Holes: find the region holding each hole point and mark it to be dropped. */
 qk_status_t qk__mesh_find_holes(qk__gen_t *g, qk__tri_state_t *T, const qk__leaf_tris_t *lt,
                                 uint8_t *drop) {
   const qk_poly_t *P = g->poly;
@@ -92,7 +92,7 @@ qk_status_t qk__mesh_find_holes(qk__gen_t *g, qk__tri_state_t *T, const qk__leaf
         if (orient_h(T->vx[a], T->vy[a], T->vx[b], T->vy[b], 2 * hx, 2 * hy) < 0) inside = 0;
       }
       if (inside) {
-        drop[T->label[t]] = 1;
+        drop[T->region[t]] = 1;
         break;
       }
     }

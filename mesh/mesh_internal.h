@@ -109,9 +109,11 @@ typedef struct qk__tri_state {
   int64_t *vx, *vy; /* doubled coordinates */
   uint8_t *steiner;
   size_t nv, vcap, vycap, scap;
-  uint32_t *tri;   /* 3 per triangle */
-  uint32_t *label; /* per triangle: its cell while triangulating, then its component */
-  size_t nt, tcap, lcap;
+  uint32_t *tri;    /* 3 per triangle */
+  uint32_t *label;  /* per triangle: its cell while triangulating, then its component */
+  uint32_t *region; /* per triangle: its region (connected part between boundaries) */
+  size_t nt, tcap, lcap, rcap;
+  uint32_t nregion;
 } qk__tri_state_t;
 
 /* Facts the triangulation hands to hole removal. */
@@ -148,7 +150,7 @@ qk_status_t qk__mesh_subdivide(qk__gen_t *g, uint32_t node, int64_t x0, int64_t 
 qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris_t *lt);
 void qk__mesh_tri_free(qk__tri_state_t *T);
 
-/* Mark the labels of the faces holding hole points in drop[] (mesh/holes.c). */
+/* Mark the regions holding hole points in drop[] (T->nregion entries; mesh/holes.c). */
 qk_status_t qk__mesh_find_holes(qk__gen_t *g, qk__tri_state_t *T, const qk__leaf_tris_t *lt,
                                 uint8_t *drop);
 

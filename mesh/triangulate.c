@@ -159,49 +159,76 @@ static qk_status_t tri_unit(qk__tri_state_t *T, const qk__unit_rec_t *r, const u
 }
 
 /*
- * Components: a cell beside a component edge, on its inner (left) side, lies in that
- * component's face and was seeded with its id. Every other cell takes the label of the
- * face it shares with the cells across leaf sides that are not component edges (found
- * with the tree's neighbour finding); a face reached from no seed is the outer face,
- * label 0.
+ * Regions and components. Regions are the connected parts of the domain minus the
+ * component boundaries: flood the cells across leaf sides that are not component edges
+ * (the neighbours across a side come from the tree's neighbour finding). A cell beside a
+ * component edge, on its inner (left) side, lies in that component's face and was seeded
+ * with its id, which becomes its region's label; a region holding no seed lies outside
+ * every component, label 0. (A face of a component is one region; the outside may be
+ * several when components touching the domain's edge cut it apart.)
  */
-static qk_status_t label_cells(qk__gen_t *g, const qk_node_t *leaves, size_t nleaves,
-                               const uint32_t *leaf_of, const uint32_t *rec_of,
-                               uint32_t *cell_label) {
+static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, const qk_node_t *leaves,
+                               size_t nleaves, const uint32_t *leaf_of, const uint32_t *rec_of,
+                               const uint32_t *cell_label) {
   const qk_tree_t *t = g->tree;
   size_t ncell = 2 * nleaves;
   uint32_t *queue = qk__realloc(g->a, NULL, 0, (ncell + 1) * sizeof *queue);
-  if (!queue) return QK_ERR_NOMEM;
-  size_t qh = 0, qt = 0;
-  for (size_t c = 0; c < ncell; c++)
-    if (cell_label[c] != QK__MESH_UNSET) queue[qt++] = (uint32_t)c;
+  uint32_t *region = qk__realloc(g->a, NULL, 0, (ncell + 1) * sizeof *region);
+  uint32_t *rlabel = qk__realloc(g->a, NULL, 0, (ncell + 1) * sizeof *rlabel);
+  qk_status_t st = QK_OK;
+  void *rp = T->region;
+  if (!queue || !region || !rlabel ||
+      qk__mesh_grow(T->a, &rp, &T->rcap, sizeof *T->region, T->nt + 1)) {
+    st = QK_ERR_NOMEM;
+    goto out;
+  }
+  T->region = rp;
+  memset(region, 0xff, (ncell + 1) * sizeof *region);
   static const qk_dir_t side_dir[4] = {QK_SOUTH, QK_EAST, QK_NORTH, QK_WEST};
   static const int piece_of_side[4] = {QK__P_S, QK__P_E, QK__P_N, QK__P_W};
-  while (qh < qt) {
-    uint32_t c = queue[qh++], li = c / 2, k = c % 2;
-    uint32_t v = leaves[li];
-    const qk__unit_rec_t *r = rec_of[v] != QK__MESH_UNSET ? &g->rec[rec_of[v]] : NULL;
-    int diag = r ? (r->piece[QK__P_D0] ? 1 : r->piece[QK__P_D1] ? 2 : 0) : 0;
-    for (int s = 0; s < 4; s++) {
-      if (!cell_touches(diag, (int)k, s)) continue;
-      if (r && r->piece[piece_of_side[s]]) continue; /* a component edge: a face boundary */
-      qk_node_t nb[8];
-      size_t n = 0;
-      qk_tree_adjacent_leaves(t, v, side_dir[s], nb, 8, &n);
-      for (size_t i = 0; i < n && i < 8; i++) {
-        uint32_t lw = leaf_of[nb[i]];
-        const qk__unit_rec_t *rw = rec_of[nb[i]] != QK__MESH_UNSET ? &g->rec[rec_of[nb[i]]] : NULL;
-        int dw = rw ? (rw->piece[QK__P_D0] ? 1 : rw->piece[QK__P_D1] ? 2 : 0) : 0;
-        int opp = (s + 2) % 4;
-        uint32_t cw = 2 * lw + (cell_touches(dw, 0, opp) ? 0 : 1);
-        if (cell_label[cw] == QK__MESH_UNSET) cell_label[cw] = cell_label[c], queue[qt++] = cw;
+  uint32_t nreg = 0;
+  /* Start a flood from the cell of every triangle not reached yet. */
+  for (size_t tr = 0; tr < T->nt; tr++) {
+    uint32_t c0 = T->label[tr];
+    if (region[c0] != QK__MESH_UNSET) continue;
+    uint32_t rid = nreg++;
+    rlabel[rid] = 0;
+    size_t qh = 0, qt = 0;
+    region[c0] = rid, queue[qt++] = c0;
+    while (qh < qt) {
+      uint32_t c = queue[qh++], li = c / 2, k = c % 2;
+      if (cell_label[c] != QK__MESH_UNSET) rlabel[rid] = cell_label[c];
+      uint32_t v = leaves[li];
+      const qk__unit_rec_t *r = rec_of[v] != QK__MESH_UNSET ? &g->rec[rec_of[v]] : NULL;
+      int diag = r ? (r->piece[QK__P_D0] ? 1 : r->piece[QK__P_D1] ? 2 : 0) : 0;
+      for (int sd = 0; sd < 4; sd++) {
+        if (!cell_touches(diag, (int)k, sd)) continue;
+        if (r && r->piece[piece_of_side[sd]]) continue; /* a component edge: a boundary */
+        qk_node_t nb[8];
+        size_t n = 0;
+        qk_tree_adjacent_leaves(t, v, side_dir[sd], nb, 8, &n);
+        for (size_t i = 0; i < n && i < 8; i++) {
+          uint32_t lw = leaf_of[nb[i]];
+          const qk__unit_rec_t *rw =
+              rec_of[nb[i]] != QK__MESH_UNSET ? &g->rec[rec_of[nb[i]]] : NULL;
+          int dw = rw ? (rw->piece[QK__P_D0] ? 1 : rw->piece[QK__P_D1] ? 2 : 0) : 0;
+          uint32_t cw = 2 * lw + (cell_touches(dw, 0, (sd + 2) % 4) ? 0 : 1);
+          if (region[cw] == QK__MESH_UNSET) region[cw] = rid, queue[qt++] = cw;
+        }
       }
     }
   }
-  for (size_t c = 0; c < ncell; c++)
-    if (cell_label[c] == QK__MESH_UNSET) cell_label[c] = 0;
+  for (size_t tr = 0; tr < T->nt; tr++) {
+    uint32_t rid = region[T->label[tr]];
+    T->region[tr] = rid;
+    T->label[tr] = rlabel[rid];
+  }
+  T->nregion = nreg;
+out:
   qk__free(g->a, queue, (ncell + 1) * sizeof *queue);
-  return QK_OK;
+  qk__free(g->a, region, (ncell + 1) * sizeof *region);
+  qk__free(g->a, rlabel, (ncell + 1) * sizeof *rlabel);
+  return st;
 }
 
 qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris_t *lt) {
@@ -272,8 +299,7 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
     for (size_t i = 0; i < nr; i++)
       if ((st = add_tri(T, ring[i], ring[(i + 1) % nr], ctr, cell))) goto out;
   }
-  if ((st = label_cells(g, leaves, nleaves, leaf_of, rec_of, cell_label))) goto out;
-  for (size_t i = 0; i < T->nt; i++) T->label[i] = cell_label[T->label[i]];
+  if ((st = label_cells(g, T, leaves, nleaves, leaf_of, rec_of, cell_label))) goto out;
 out:
   qk__free(g->a, rec_of, nn * sizeof *rec_of);
   qk__free(g->a, leaf_of, nn * sizeof *leaf_of);
@@ -290,4 +316,5 @@ void qk__mesh_tri_free(qk__tri_state_t *T) {
   qk__free(T->a, T->steiner, T->scap);
   qk__free(T->a, T->tri, T->tcap * 3 * sizeof *T->tri);
   qk__free(T->a, T->label, T->lcap * sizeof *T->label);
+  qk__free(T->a, T->region, T->rcap * sizeof *T->region);
 }

@@ -111,6 +111,15 @@ static void test_mesh_hand_made(void **state) {
   assert_true(with_hole < without);
   double h2[] = {0.5, 0.5, 8, 8};
   mesh_and_check(ring, 8, seg, ns, h2, 2, 16, "outer face and inner holes");
+  /* A band across the domain cuts the outside in two: a hole below it removes only the
+   * lower part. */
+  double band[] = {0, 6, 16, 6, 16, 8, 0, 8};
+  ns = 0;
+  poly_close(seg, &ns, 0, 4);
+  double h3[] = {8, 2};
+  size_t all = mesh_and_check(band, 4, seg, ns, NULL, 0, 16, "band");
+  size_t part = mesh_and_check(band, 4, seg, ns, h3, 1, 16, "band, hole below");
+  assert_true(part < all && part > all / 3);
   /* No components at all: two triangles. */
   assert_int_equal(mesh_and_check(NULL, 0, NULL, 0, NULL, 0, 4, "empty"), 2);
 }

@@ -83,6 +83,108 @@ static int innermost(const cyc_t *c, size_t nc, int64_t px, int64_t py, int64_t 
   return best;
 }
 
+/*
+ * Regions for holes, found on a fine grid independent of the mesh: every unit cell is
+ * cut by both diagonals into four quarters (S, E, N, W), and every segment is a union of
+ * unit cell sides and unit cell diagonals, so the connected parts of the domain minus
+ * the segments are unions of quarters. A flood over quarters finds them.
+ */
+typedef struct regions {
+  uint64_t U;
+  uint8_t *h, *v, *d0, *d1; /* blocked unit edges: horizontal, vertical, two diagonals */
+  uint32_t *id;             /* region of each quarter */
+} regions_t;
+
+static size_t qidx(uint64_t U, int64_t x, int64_t y, int q) {
+  return ((size_t)y * U + (size_t)x) * 4 + (size_t)q;
+}
+
+static int regions_build(regions_t *R, const mc_input_t *in) {
+  uint64_t U = in->U;
+  R->U = U;
+  R->h = calloc((U + 1) * U, 1), R->v = calloc((U + 1) * U, 1);
+  R->d0 = calloc(U * U, 1), R->d1 = calloc(U * U, 1);
+  R->id = malloc(4 * U * U * sizeof *R->id);
+  uint32_t *queue = malloc(4 * U * U * sizeof *queue);
+  if (!R->h || !R->v || !R->d0 || !R->d1 || !R->id || !queue) {
+    free(queue);
+    return 1;
+  }
+  for (size_t s = 0; s < in->ns; s++) {
+    int64_t x = (int64_t)in->xy[2 * in->seg[2 * s]], y = (int64_t)in->xy[2 * in->seg[2 * s] + 1];
+    int64_t qx = (int64_t)in->xy[2 * in->seg[2 * s + 1]],
+            qy = (int64_t)in->xy[2 * in->seg[2 * s + 1] + 1];
+    int64_t sx = (qx > x) - (qx < x), sy = (qy > y) - (qy < y);
+    while (x != qx || y != qy) {
+      int64_t nx = x + sx, ny = y + sy, lx = x < nx ? x : nx, ly = y < ny ? y : ny;
+      if (sy == 0)
+        R->h[(size_t)y * U + (size_t)lx] = 1;
+      else if (sx == 0)
+        R->v[(size_t)x * U + (size_t)ly] = 1;
+      else if (sx == sy)
+        R->d0[(size_t)ly * U + (size_t)lx] = 1;
+      else
+        R->d1[(size_t)ly * U + (size_t)lx] = 1;
+      x = nx, y = ny;
+    }
+  }
+  memset(R->id, 0xff, 4 * U * U * sizeof *R->id);
+  uint32_t next = 0;
+  for (size_t start = 0; start < 4 * U * U; start++) {
+    if (R->id[start] != UINT32_MAX) continue;
+    size_t qh = 0, qt = 0;
+    R->id[start] = next, queue[qt++] = (uint32_t)start;
+    while (qh < qt) {
+      size_t c = queue[qh++];
+      int q = (int)(c % 4);
+      int64_t x = (int64_t)((c / 4) % U), y = (int64_t)((c / 4) / U);
+      size_t nb[3];
+      int n = 0;
+      /* Inside the cell: S-E and N-W meet on diagonal d1, S-W and N-E on d0. */
+      int d0 = R->d0[(size_t)y * U + (size_t)x], d1 = R->d1[(size_t)y * U + (size_t)x];
+      static const int cw[4] = {1, 2, 3, 0}, ccw[4] = {3, 0, 1, 2};
+      /* q and q+1 (S-E, E-N, N-W, W-S) are separated by d1, d0, d1, d0 respectively. */
+      if (!((q % 2 == 0) ? d1 : d0)) nb[n++] = qidx(U, x, y, cw[q]);
+      if (!((q % 2 == 0) ? d0 : d1)) nb[n++] = qidx(U, x, y, ccw[q]);
+      /* Across the cell's side. */
+      if (q == 0 && y > 0 && !R->h[(size_t)y * U + (size_t)x]) nb[n++] = qidx(U, x, y - 1, 2);
+      if (q == 2 && y + 1 < (int64_t)U && !R->h[(size_t)(y + 1) * U + (size_t)x])
+        nb[n++] = qidx(U, x, y + 1, 0);
+      if (q == 1 && x + 1 < (int64_t)U && !R->v[(size_t)(x + 1) * U + (size_t)y])
+        nb[n++] = qidx(U, x + 1, y, 3);
+      if (q == 3 && x > 0 && !R->v[(size_t)x * U + (size_t)y]) nb[n++] = qidx(U, x - 1, y, 1);
+      for (int i = 0; i < n; i++)
+        if (R->id[nb[i]] == UINT32_MAX) R->id[nb[i]] = next, queue[qt++] = (uint32_t)nb[i];
+    }
+    next++;
+  }
+  free(queue);
+  return 0;
+}
+
+static void regions_free(regions_t *R) {
+  free(R->h), free(R->v), free(R->d0), free(R->d1), free(R->id);
+}
+
+/* The region of a point given in coordinates scaled by k (k even or 6 here). */
+static uint32_t region_of(const regions_t *R, int64_t px, int64_t py, int64_t k) {
+  int64_t U = (int64_t)R->U;
+  int64_t x = px / k, y = py / k;
+  if (x >= U) x = U - 1;
+  if (y >= U) y = U - 1;
+  int64_t fx = px - x * k, fy = py - y * k; /* in [0, k] */
+  int q;
+  if (fy <= fx && fy <= k - fx)
+    q = 0; /* S */
+  else if (fy >= fx && fy >= k - fx)
+    q = 2; /* N */
+  else if (fx > fy)
+    q = 1; /* E */
+  else
+    q = 3; /* W */
+  return R->id[qidx(R->U, x, y, q)];
+}
+
 int mc_check(const mc_input_t *in, const mc_mesh_t *m, char *msg, size_t msz) {
   int bad = 0;
   int64_t U2 = 2 * (int64_t)in->U;
@@ -90,9 +192,12 @@ int mc_check(const mc_input_t *in, const mc_mesh_t *m, char *msg, size_t msz) {
   uint64_t *edges = calloc(3 * m->nt + 1, sizeof *edges);
   cyc_t *cyc = calloc(in->ns + 1, sizeof *cyc);
   int *comp_of_seg = calloc(in->ns + 1, sizeof *comp_of_seg);
-  uint8_t *hole = calloc(in->ns + 2, 1);
+  regions_t R;
+  memset(&R, 0, sizeof R);
+  int have_regions = 0;
+  uint8_t *hole_region = NULL;
   size_t nc = 0;
-  if (!pts || !edges || !cyc || !comp_of_seg || !hole) {
+  if (!pts || !edges || !cyc || !comp_of_seg) {
     bad = fail(msg, msz, "checker out of memory");
     goto out;
   }
@@ -170,28 +275,34 @@ int mc_check(const mc_input_t *in, const mc_mesh_t *m, char *msg, size_t msz) {
         best = (int)j + 1;
     cyc[i].parent = best;
   }
-  for (size_t h = 0; h < in->nh; h++) {
-    double hx = 2 * in->holes[2 * h], hy = 2 * in->holes[2 * h + 1];
-    if (hx != floor(hx) || hy != floor(hy)) {
-      bad = fail(msg, msz, "checker: hole %zu is not on the half-integer lattice", h);
+  /* Holes remove whole regions (connected parts between boundaries). */
+  i128 expect = (i128)U2 * U2 * 2;
+  if (in->nh) {
+    if (in->U > 4096) {
+      bad = fail(msg, msz, "checker: holes on a domain larger than 4096 are not supported");
       goto out;
     }
-    hole[innermost(cyc, nc, (int64_t)hx, (int64_t)hy, 1)] = 1;
-  }
-  /* Area of the kept faces, times 8 (twice the area in doubled coordinates). */
-  i128 expect = (i128)U2 * U2 * 2;
-  {
-    i128 face0 = (i128)U2 * U2 * 2;
-    for (size_t i = 0; i < nc; i++)
-      if (!cyc[i].parent) face0 -= cyc[i].area2;
-    if (hole[0]) expect -= face0;
-    for (size_t i = 0; i < nc; i++) {
-      if (!hole[i + 1]) continue;
-      i128 f = cyc[i].area2;
-      for (size_t j = 0; j < nc; j++)
-        if (cyc[j].parent == (int)i + 1) f -= cyc[j].area2;
-      expect -= f;
+    have_regions = 1; /* freed at the end even when building fails half-way */
+    if (regions_build(&R, in)) {
+      bad = fail(msg, msz, "checker out of memory");
+      goto out;
     }
+    hole_region = calloc(4 * in->U * in->U + 1, 1);
+    if (!hole_region) {
+      bad = fail(msg, msz, "checker out of memory");
+      goto out;
+    }
+    for (size_t h = 0; h < in->nh; h++) {
+      double hx = 2 * in->holes[2 * h], hy = 2 * in->holes[2 * h + 1];
+      if (hx != floor(hx) || hy != floor(hy)) {
+        bad = fail(msg, msz, "checker: hole %zu is not on the half-integer lattice", h);
+        goto out;
+      }
+      hole_region[region_of(&R, (int64_t)hx, (int64_t)hy, 2)] = 1;
+    }
+    /* Each quarter has area 1/4: 2 in units of 8 * area. */
+    for (size_t q = 0; q < 4 * in->U * in->U; q++)
+      if (hole_region[R.id[q]]) expect -= 2;
   }
 
   /* Triangles: orientation, angles, labels; collect directed edges. */
@@ -227,8 +338,8 @@ int mc_check(const mc_input_t *in, const mc_mesh_t *m, char *msg, size_t msz) {
     /* The centroid in coordinates scaled by 3 relative to doubled ones. */
     int64_t cx = X[0] + X[1] + X[2], cy = Y[0] + Y[1] + Y[2];
     int want = innermost(cyc, nc, cx, cy, 3);
-    if (hole[want]) {
-      bad = fail(msg, msz, "triangle %zu lies in a hole (face of component %d)", t, want);
+    if (have_regions && hole_region[region_of(&R, cx, cy, 6)]) {
+      bad = fail(msg, msz, "triangle %zu lies in a hole region", t);
       goto out;
     }
     if ((int)m->comp[t] != want) {
@@ -284,10 +395,25 @@ int mc_check(const mc_input_t *in, const mc_mesh_t *m, char *msg, size_t msz) {
             py = 2 * (int64_t)in->xy[2 * in->seg[2 * s] + 1];
     int64_t qx = 2 * (int64_t)in->xy[2 * in->seg[2 * s + 1]],
             qy = 2 * (int64_t)in->xy[2 * in->seg[2 * s + 1] + 1];
-    /* No triangle on either side: both faces are holes, or the segment lies on the
-     * domain's boundary and its inside is a hole. */
-    int on_domain = (px == qx && (px == 0 || px == U2)) || (py == qy && (py == 0 || py == U2));
-    if (hole[c] && (hole[cyc[c - 1].parent] || on_domain)) continue;
+    /* No triangle on either side: the regions beside the segment's first unit step are
+     * holes (or outside the domain). */
+    if (have_regions) {
+      int64_t x = px / 2, y = py / 2, ux = (qx > px) - (qx < px), uy = (qy > py) - (qy < py);
+      int64_t lx = ux < 0 ? x - 1 : x, ly = uy < 0 ? y - 1 : y, Ui = (int64_t)in->U;
+      int all_holes = 1;
+      if (uy == 0) { /* horizontal: the cells above (S quarter) and below (N quarter) */
+        if (y < Ui && !hole_region[R.id[qidx(in->U, lx, y, 0)]]) all_holes = 0;
+        if (y > 0 && !hole_region[R.id[qidx(in->U, lx, y - 1, 2)]]) all_holes = 0;
+      } else if (ux == 0) { /* vertical: right (W quarter) and left (E quarter) */
+        if (x < Ui && !hole_region[R.id[qidx(in->U, x, ly, 3)]]) all_holes = 0;
+        if (x > 0 && !hole_region[R.id[qidx(in->U, x - 1, ly, 1)]]) all_holes = 0;
+      } else if (!hole_region[R.id[qidx(in->U, lx, ly, 0)]] ||
+                 !hole_region[R.id[qidx(in->U, lx, ly, 2)]]) {
+        all_holes = 0; /* a diagonal: its S and N quarters lie on its two sides */
+      }
+      if (all_holes) continue;
+    }
+    (void)c;
     int64_t sx = (qx > px) - (qx < px), sy = (qy > py) - (qy < py);
     int64_t len = llabs(qx - px) > llabs(qy - py) ? llabs(qx - px) : llabs(qy - py);
     long prev = find_pt(pts, m->nv, px, py);
@@ -320,6 +446,7 @@ out:
   free(pts);
   free(edges);
   free(comp_of_seg);
-  free(hole);
+  free(hole_region);
+  if (have_regions) regions_free(&R);
   return bad;
 }
