@@ -56,7 +56,8 @@ typedef struct reader {
   int io_error;
 } reader_t;
 
-/* Read the next line holding a token. Returns 1, 0 at end of input, -1 out of memory. */
+/* Read the next line holding a token. Returns 1, 0 at end of input, -1 out of memory,
+ * -2 for a NUL byte (binary data, which no text format holds). */
 static int next_line(reader_t *r) {
   for (;;) {
     size_t n = 0;
@@ -65,6 +66,10 @@ static int next_line(reader_t *r) {
     while ((c = getc(r->f)) != EOF) {
       any = 1;
       if (c == '\n') break;
+      if (c == '\0') {
+        r->line++;
+        return -2;
+      }
       if (n + 2 > r->cap) {
         void *p = r->buf;
         if (qk__mesh_grow(r->a, &p, &r->cap, 1, n + 2)) return -1;
@@ -219,6 +224,7 @@ static qk_status_t add_hole(qk_poly_t *p, qk__poly_caps_t *c, double x, double y
 #define NEED_LINE(...)                                                                             \
   do {                                                                                             \
     int got_ = next_line(&r);                                                                      \
+    if (got_ == -2) FAIL(QK_ERR_PARSE, "binary data (a NUL byte)");                                \
     if (got_ < 0) FAIL(QK_ERR_NOMEM, "out of memory");                                             \
     if (got_ == 0) {                                                                               \
       if (r.io_error) FAIL(QK_ERR_IO, "read error");                                               \
@@ -314,6 +320,7 @@ qk_status_t qk_poly_read(FILE *f, const qk_allocator_t *allocator, qk_poly_t **o
 
   /* Optional hole section: <#holes>, then <#> <x> <y>. */
   int got = next_line(&r);
+  if (got == -2) FAIL(QK_ERR_PARSE, "binary data (a NUL byte)");
   if (got < 0) FAIL(QK_ERR_NOMEM, "out of memory");
   if (got > 0) {
     unsigned long nh;
@@ -332,6 +339,7 @@ qk_status_t qk_poly_read(FILE *f, const qk_allocator_t *allocator, qk_poly_t **o
     /* Optional regional attributes: <#regions>, then <#> <x> <y> <attribute> [<area>].
      * They are checked for syntax and otherwise ignored: components carry their ids. */
     got = next_line(&r);
+    if (got == -2) FAIL(QK_ERR_PARSE, "binary data (a NUL byte)");
     if (got < 0) FAIL(QK_ERR_NOMEM, "out of memory");
     if (got > 0) {
       unsigned long nr;
@@ -348,6 +356,7 @@ qk_status_t qk_poly_read(FILE *f, const qk_allocator_t *allocator, qk_poly_t **o
         }
       }
       got = next_line(&r);
+      if (got == -2) FAIL(QK_ERR_PARSE, "binary data (a NUL byte)");
       if (got < 0) FAIL(QK_ERR_NOMEM, "out of memory");
       if (got > 0) FAIL(QK_ERR_PARSE, "unexpected content after the last section: '%s'", r.tok[0]);
     }

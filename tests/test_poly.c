@@ -180,6 +180,19 @@ static void test_poly_bad(void **state) {
        "boundary"},
       {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS, 12, QK_ERR_INVALID, 0, "power of two"},
   };
+  /* A NUL byte: binary data, named with its line. */
+  {
+    FILE *f = tmpfile();
+    assert_non_null(f);
+    fwrite("4 2 0 0\n0 0\0 0\n", 1, 16, f);
+    rewind(f);
+    qk_poly_t *p = NULL;
+    qk_mesh_error_t err;
+    assert_int_equal(qk_poly_read(f, NULL, &p, &err), QK_ERR_PARSE);
+    fclose(f);
+    assert_int_equal(err.line, 2);
+    assert_non_null(strstr(err.message, "binary"));
+  }
   for (size_t i = 0; i < sizeof cases / sizeof *cases; i++) {
     qk_mesh_error_t err;
     qk_status_t st = run(cases[i].text, cases[i].size, &err);
