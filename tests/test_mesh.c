@@ -141,7 +141,7 @@ static void test_mesh_random(void **state) {
   qkt_rng_t r;
   qkt_rng_seed(&r, seed);
   static const uint64_t sizes[] = {8, 16, 32, 64, 256, 1024};
-  for (int round = 0; round < 48; round++) {
+  for (int round = 0; round < 96; round++) {
     uint64_t U = sizes[round % 6];
     pg_input_t in;
     pg_generate(&r, U, 1 + qkt_rng_below(&r, U >= 256 ? 24 : 8), &in);
