@@ -7,9 +7,11 @@
  *  - first hit of rays and segments against a loop over all items: origins inside
  *    items (t = 0), outside the whole set, axis-parallel directions, tmax cut-offs;
  *  - hand-computed cases (tangent discs, a ray grazing a box corner);
- *  - bad input and allocation failure at every N (clean QK_ERR_NOMEM, no leak).
+ *  - bad input and allocation failure at every N (clean QK_ERR_NOMEM, no leak);
+ *  - three threads casting rays and finding pairs on one collider at once.
  */
 #include <math.h>
+#include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -266,12 +268,79 @@ static void test_collide_nomem(void **state) {
   }
 }
 
+/* Threads: several raycast and pair searches at once on one collider. */
+typedef struct thr {
+  const qk_collider_t *c;
+  const qk_point_t *org, *dir;
+  const qk_hit_t *expect;
+  size_t nr, pairs;
+  int ok;
+} thr_t;
+
+static int count_pair(qk_id_t a, qk_id_t b, void *ud) {
+  (void)a, (void)b;
+  ++*(size_t *)ud;
+  return 0;
+}
+
+static void *thread_main(void *arg) {
+  thr_t *a = arg;
+  a->ok = 1;
+  for (int rep = 0; rep < 3; rep++) {
+    for (size_t i = 0; i < a->nr; i++) {
+      qk_hit_t h;
+      if (qk_collider_raycast(a->c, a->org[i], a->dir[i], INFINITY, &h) != QK_OK ||
+          h.id != a->expect[i].id || !(h.t == a->expect[i].t))
+        a->ok = 0;
+    }
+    size_t np = 0;
+    qk_collider_pairs(a->c, count_pair, &np);
+    if (np != a->pairs) a->ok = 0;
+  }
+  return NULL;
+}
+
+static void test_collide_threads(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 4);
+  const size_t nd = 2000, nb = 2000, nr = 2000;
+  qk_disc_t *d = malloc(nd * sizeof *d);
+  qk_box_t *b = malloc(nb * sizeof *b);
+  qk_point_t *org = malloc(nr * sizeof *org), *dir = malloc(nr * sizeof *dir);
+  qk_hit_t *expect = malloc(nr * sizeof *expect);
+  make_items(&r, d, nd, b, nb, 0, 0.005);
+  qk_collider_t *c = NULL;
+  assert_int_equal(qk_collider_build(d, nd, b, nb, NULL, &c), QK_OK);
+  for (size_t i = 0; i < nr; i++) {
+    org[i] = (qk_point_t){qkt_rng_unit(&r), qkt_rng_unit(&r)};
+    double ang = qkt_rng_range(&r, 0, 6.283185307179586);
+    dir[i] = (qk_point_t){cos(ang), sin(ang)};
+    expect[i] = qko_raycast(d, nd, b, nb, org[i], dir[i], INFINITY);
+  }
+  qk_pair_t *pairs;
+  size_t np = qko_pairs(d, nd, b, nb, &pairs);
+  free(pairs);
+  pthread_t th[3];
+  thr_t args[3];
+  for (int i = 0; i < 3; i++) {
+    args[i] = (thr_t){c, org, dir, expect, nr, np, 0};
+    assert_int_equal(pthread_create(&th[i], NULL, thread_main, &args[i]), 0);
+  }
+  for (int i = 0; i < 3; i++) pthread_join(th[i], NULL);
+  for (int i = 0; i < 3; i++)
+    if (!args[i].ok)
+      fail_msg("thread %d got a wrong answer (seed %llu)", i, (unsigned long long)g_seed);
+  qk_collider_free(c);
+  free(d), free(b), free(org), free(dir), free(expect);
+}
+
 int main(void) {
   g_seed = qkt_seed(7031);
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_collide_pairs),   cmocka_unit_test(test_collide_query_shapes),
       cmocka_unit_test(test_collide_raycast), cmocka_unit_test(test_collide_exact_cases),
-      cmocka_unit_test(test_collide_nomem),
+      cmocka_unit_test(test_collide_nomem),   cmocka_unit_test(test_collide_threads),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
