@@ -10,6 +10,8 @@
  *    duplicate segments, self-intersecting polygons, touching and crossing components,
  *    holes outside the domain or on a boundary, a domain size that is not a power of
  *    two;
+ *  - hole points a hair off a boundary, decided exactly;
+ *  - 3000 random mutations of a valid file: success or a clean error with a message;
  *  - allocation failure at every N while reading: QK_ERR_NOMEM, no leak.
  */
 #include <stdio.h>
@@ -203,6 +205,55 @@ static void test_poly_bad(void **state) {
   }
 }
 
+/* Random mutations of a valid file: every outcome is success or a clean error with a
+ * message (run under ASan/UBSan in CI, this is a small fuzzer). */
+static void test_poly_mutations(void **state) {
+  (void)state;
+  static const char base[] = "# two squares and a diamond inside one\n"
+                             "12 2 0 0\n0 0 0\n1 6 0\n2 6 6\n3 0 6\n4 8 8\n5 12 8\n"
+                             "6 12 12\n7 8 12\n8 3 1\n9 5 3\n10 3 5\n11 1 3\n"
+                             "12 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n4 4 5\n5 5 6\n6 6 7\n"
+                             "7 7 4\n8 8 9\n9 9 10\n10 10 11\n11 11 8\n1\n0 10 10\n";
+  static const char alphabet[] = "0123456789 -.\n#e+x";
+  uint64_t seed = qkt_seed(31337);
+  qkt_rng_t r;
+  qkt_rng_seed(&r, seed);
+  char buf[sizeof base + 64];
+  size_t ok = 0;
+  for (int round = 0; round < 3000; round++) {
+    size_t n = sizeof base - 1;
+    memcpy(buf, base, n);
+    int edits = 1 + (int)qkt_rng_below(&r, 3);
+    for (int e = 0; e < edits; e++) {
+      size_t at = qkt_rng_below(&r, (uint32_t)n);
+      char c = alphabet[qkt_rng_below(&r, sizeof alphabet - 1)];
+      switch (qkt_rng_below(&r, 3)) {
+      case 0:
+        buf[at] = c;
+        break;
+      case 1:
+        if (n + 1 < sizeof buf) memmove(buf + at + 1, buf + at, n - at), buf[at] = c, n++;
+        break;
+      default:
+        memmove(buf + at, buf + at + 1, n - at - 1), n--;
+        break;
+      }
+    }
+    buf[n] = '\0';
+    qk_mesh_error_t err;
+    /* A fixed small domain, so that a mutated coordinate cannot ask for a huge mesh. */
+    qk_status_t st = run(buf, 64, &err);
+    if (st == QK_OK) {
+      ok++;
+      continue;
+    }
+    if ((st != QK_ERR_PARSE && st != QK_ERR_GEOMETRY && st != QK_ERR_LIMIT) || !err.message[0])
+      fail_msg("seed %llu round %d: status %s, message '%s'", (unsigned long long)seed, round,
+               qk_strerror(st), err.message);
+  }
+  print_message("%zu of 3000 mutated files were valid\n", ok);
+}
+
 static void test_poly_alloc_failure(void **state) {
   (void)state;
   const char *text = "4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS "1\n0 1 1\n";
@@ -230,6 +281,7 @@ int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_poly_good),
       cmocka_unit_test(test_poly_bad),
+      cmocka_unit_test(test_poly_mutations),
       cmocka_unit_test(test_poly_alloc_failure),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
