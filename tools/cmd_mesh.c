@@ -6,6 +6,13 @@
 
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
+
+static double now(void) {
+  struct timespec ts;
+  if (timespec_get(&ts, TIME_UTC) != TIME_UTC) return 0;
+  return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
 
 static const char *usage_text =
     "usage: quadkit mesh IN.poly -o PREFIX [--size U] [--svg FILE] [--msh FILE]\n"
@@ -107,7 +114,9 @@ int cmd_mesh(int argc, char **argv) {
   }
   qk_poly_t *poly = NULL;
   qk_mesh_error_t err;
+  double t_read = now();
   qk_status_t st = qk_poly_read(f, NULL, &poly, &err);
+  t_read = now() - t_read;
   if (f != stdin) fclose(f);
   if (st == QK_OK) {
     qk_mesh_options_t opt;
@@ -121,6 +130,7 @@ int cmd_mesh(int argc, char **argv) {
       size_t plen = strlen(prefix);
       char *node_path = malloc(plen + 6), *ele_path = malloc(plen + 5);
       int rc = CLI_OK;
+      double t_write = now();
       if (!node_path || !ele_path) {
         cli_error(cmd, "out of memory");
         rc = CLI_INTERNAL;
@@ -154,18 +164,19 @@ int cmd_mesh(int argc, char **argv) {
       }
       free(node_path);
       free(ele_path);
+      t_write = now() - t_write;
       if (rc == CLI_OK && stats) {
         qk_mesh_stats_t s;
         qk_mesh_stats(mesh, &s);
         printf("{\"U\": %llu, \"components\": %zu, \"leaves_before_balance\": %zu, "
                "\"leaves\": %zu, \"triangles\": %zu, \"vertices\": %zu, \"steiner\": %zu, "
                "\"min_angle_deg\": %.6f, \"max_angle_deg\": %.6f, \"uniform_triangles\": %.0f, "
-               "\"seconds\": {\"validate\": %.6f, \"subdivide\": %.6f, \"balance\": %.6f, "
-               "\"triangulate\": %.6f}}\n",
+               "\"seconds\": {\"read\": %.6f, \"validate\": %.6f, \"subdivide\": %.6f, "
+               "\"balance\": %.6f, \"triangulate\": %.6f, \"write\": %.6f}}\n",
                (unsigned long long)s.size, s.components, s.leaves_before_balance, s.leaves,
                s.triangles, s.vertices, s.steiner, s.min_angle_deg, s.max_angle_deg,
-               s.uniform_triangles, s.seconds_validate, s.seconds_subdivide, s.seconds_balance,
-               s.seconds_triangulate);
+               s.uniform_triangles, t_read, s.seconds_validate, s.seconds_subdivide,
+               s.seconds_balance, s.seconds_triangulate, t_write);
       }
       qk_mesh_free(mesh);
       qk_poly_free(poly);
