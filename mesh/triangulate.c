@@ -299,6 +299,8 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
     for (size_t i = 0; i < nr; i++)
       if ((st = add_tri(T, ring[i], ring[(i + 1) % nr], ctr, cell))) goto out;
   }
+  /* The vertex map is no longer needed; give its memory back before labelling. */
+  hmap_free(T->a, &T->vmap);
   if ((st = label_cells(g, T, leaves, nleaves, leaf_of, rec_of, cell_label))) goto out;
 out:
   qk__free(g->a, rec_of, nn * sizeof *rec_of);
