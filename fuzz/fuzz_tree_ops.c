@@ -380,6 +380,30 @@ static void to_knn(to_state_t *s) {
 
 /* A collider over (some of) the live points as discs of input-chosen radii: its pairs
  * and box queries against brute force with the documented overlap tests. */
+/* Is (xa - xb)^2 + (ya - yb)^2 <= (ra + rb)^2, evaluated after scaling all six values
+ * by one power of two so that nothing overflows and only negligible terms underflow?
+ * Sets *unsure when the answer is within rounding of the boundary. */
+static int to_scaled_le(double xa, double xb, double ya, double yb, double ra, double rb,
+                        int *unsure) {
+  double m =
+      fmax(fmax(fmax(fabs(xa), fabs(xb)), fmax(fabs(ya), fabs(yb))), fmax(fabs(ra), fabs(rb)));
+  *unsure = 0;
+  if (m == 0) return 1;
+  int e;
+  frexp(m, &e);
+  double dx = ldexp(xa, -e) - ldexp(xb, -e), dy = ldexp(ya, -e) - ldexp(yb, -e);
+  double rs = ldexp(ra, -e) + ldexp(rb, -e);
+  double big = fmax(fmax(fabs(dx), fabs(dy)), rs);
+  if (big == 0) return 1;
+  if (big < 0x1p-400) { /* all differences negligible against the coordinates */
+    *unsure = 1;
+    return 0;
+  }
+  double d2 = dx * dx + dy * dy, r2 = rs * rs, tol = 1e-12 * fmax(d2, r2);
+  *unsure = fabs(d2 - r2) <= tol && !(d2 == 0 && r2 == 0);
+  return d2 <= r2;
+}
+
 static int to_pair_cb(qk_id_t a, qk_id_t b, void *ud) {
   size_t *n = ud;
   (void)a, (void)b;
@@ -407,10 +431,11 @@ static void to_collider(to_state_t *s) {
   if (rc == QK_ERR_OUTSIDE) return; /* a box centre rounded outside the root */
   QKF_ASSERT(rc == QK_OK, "collider_build = %d", rc);
   /* The documented tests, evaluated twice: literally in double (what the collider
-   * promises) and in long double, where squares of tiny or huge differences neither
-   * underflow nor overflow. Where the two disagree, or a pair is within rounding of
-   * touching, either answer is accepted: that is the documented limit of the formulas
-   * (see docs/reliability.md, "Limits"). */
+   * promises) and after scaling every input by the same power of two so that squares of
+   * tiny or huge differences neither underflow nor overflow (plain doubles, no long
+   * double, so that the oracle means the same under valgrind). Where the two disagree,
+   * or a pair is within rounding of touching, either answer is accepted: that is the
+   * documented limit of the formulas (see docs/reliability.md, "Limits"). */
   size_t sure = 0, maybe = 0;
   for (size_t i = 0; i < nd + nb; i++)
     for (size_t j = i + 1; j < nd + nb; j++) {
@@ -420,26 +445,22 @@ static void to_collider(to_state_t *s) {
             p->xmin <= q->xmax && q->xmin <= p->xmax && p->ymin <= q->ymax && q->ymin <= p->ymax;
         continue;
       }
-      long double d2, r2;
-      int lit;
+      int lit, exact, unsure;
       if (j < nd) {
         double dx = d[i].x - d[j].x, dy = d[i].y - d[j].y, rs = d[i].r + d[j].r;
         lit = dx * dx + dy * dy <= rs * rs;
-        long double ex = (long double)d[i].x - d[j].x, ey = (long double)d[i].y - d[j].y;
-        long double er = (long double)d[i].r + d[j].r;
-        d2 = ex * ex + ey * ey, r2 = er * er;
+        exact = to_scaled_le(d[i].x, d[j].x, d[i].y, d[j].y, d[i].r, d[j].r, &unsure);
       } else {
         const qk_box_t *b = &bx[j - nd];
         double x = d[i].x, y = d[i].y;
-        double dx = x < b->xmin ? b->xmin - x : x > b->xmax ? x - b->xmax : 0;
-        double dy = y < b->ymin ? b->ymin - y : y > b->ymax ? y - b->ymax : 0;
+        /* The nearest box point: its differences from the centre are exact. */
+        double nx = x < b->xmin ? b->xmin : x > b->xmax ? b->xmax : x;
+        double ny = y < b->ymin ? b->ymin : y > b->ymax ? b->ymax : y;
+        double dx = nx - x, dy = ny - y;
         lit = dx * dx + dy * dy <= d[i].r * d[i].r;
-        long double ex = dx, ey = dy; /* the clamped differences are exact */
-        d2 = ex * ex + ey * ey, r2 = (long double)d[i].r * d[i].r;
+        exact = to_scaled_le(nx, x, ny, y, d[i].r, 0, &unsure);
       }
-      long double tol = 1e-12L * (d2 > r2 ? d2 : r2);
-      int exact = d2 <= r2;
-      if (exact != lit || (d2 - r2 <= tol && r2 - d2 <= tol && !(d2 == 0 && r2 == 0)))
+      if (unsure || exact != lit)
         maybe++;
       else
         sure += exact;

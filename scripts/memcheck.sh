@@ -1,0 +1,74 @@
+#!/usr/bin/env bash
+# valgrind memcheck over a representative subset of the test suite and the CLI, in its
+# own build directory (no sanitizers: valgrind and ASan do not mix). Any memory error or
+# any leaked block (definite, indirect or possible) fails the run.
+#
+#   scripts/memcheck.sh                   the default subset
+#   MEMCHECK_TESTS="test_index" scripts/memcheck.sh
+#
+# The subset leaves out the tests that are long mostly because of their brute-force
+# oracles (test_query, test_geo, test_balance): they exercise no allocation path that the
+# tests below do not, and under valgrind they would take many minutes.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+src=$PWD
+dir=${MEMCHECK_BUILD_DIR:-build-memcheck}
+jobs=${JOBS:-2}
+tests=${MEMCHECK_TESTS:-"test_index test_collide test_mesh test_reliability test_reliab_threads test_headers_c"}
+
+if ! command -v valgrind >/dev/null; then
+  echo "memcheck.sh: valgrind not found (make memcheck installs it)" >&2
+  exit 2
+fi
+cmake -S . -B "$dir" -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
+nice cmake --build "$dir" -j"$jobs"
+
+vg=(valgrind --tool=memcheck --error-exitcode=99 --leak-check=full
+  --show-leak-kinds=definite,indirect,possible --errors-for-leak-kinds=definite,indirect,possible
+  --num-callers=30 --quiet)
+export QK_SOURCE_DIR="$src" QK_SHARED_DIR="$src/../shared"
+log="$dir/memcheck"
+mkdir -p "$log"
+fails=0
+run() { # run NAME EXPECTED_EXIT command...  (valgrind itself exits 99 on any error)
+  local name=$1 want=$2
+  shift 2
+  local start=$SECONDS rc=0
+  "${vg[@]}" --log-file="$log/$name.log" "$@" >"$log/$name.out" 2>&1 || rc=$?
+  if [ "$rc" -eq "$want" ]; then
+    echo "   ok   $name ($((SECONDS - start))s)" >&2
+  else
+    echo "   FAIL $name (exit $rc, want $want): see $log/$name.log and $log/$name.out" >&2
+    head -n 30 "$log/$name.log" >&2
+    fails=$((fails + 1))
+  fi
+}
+
+echo "== valgrind memcheck" >&2
+ran=0
+for t in $tests; do
+  if [ -x "$dir/tests/$t" ]; then
+    run "$t" 0 "$dir/tests/$t"
+    ran=$((ran + 1))
+  else
+    echo "   skip $t (not built)" >&2
+  fi
+done
+# The CLI, on good and bad input: errors must not leak either.
+cli="$dir/quadkit"
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+run cli_tree 0 "$cli" tree examples/points.csv --svg "$tmp/t.svg"
+printf 'x,y\n0,0\n1,nan\n' >"$tmp/bad.csv"
+run cli_tree_bad_input 1 "$cli" tree "$tmp/bad.csv"
+run cli_tree_bad_output 1 "$cli" tree examples/points.csv --svg "$tmp/no/such/dir/t.svg"
+if "$cli" mesh --help >/dev/null 2>&1; then
+  run cli_mesh 0 "$cli" mesh examples/mesh/notes.poly -o "$tmp/notes" --size 16
+  run cli_mesh_bad_input 1 "$cli" mesh "$tmp/bad.csv" -o "$tmp/bad"
+fi
+[ "$ran" -gt 0 ] || { echo "memcheck.sh: no test binaries found" >&2; exit 1; }
+if [ "$fails" -ne 0 ]; then
+  echo "memcheck: $fails failed" >&2
+  exit 1
+fi
+echo "memcheck: all clean" >&2
