@@ -9,11 +9,16 @@ out=${2:-out/demo}
 root=$(cd "$(dirname "$0")/.." && pwd)
 mkdir -p "$out"
 
+# One line from the --stats JSON: triangles, the uniform grid's count, the angle range.
+summary() {
+  sed -E 's/.*"triangles": ([0-9]+),.*"min_angle_deg": ([0-9.]+), "max_angle_deg": ([0-9.]+), "uniform_triangles": ([0-9]+).*/   \1 triangles (a uniform grid needs \4), angles from \2 to \3 degrees/'
+}
+
 echo "== mesh: the notes' example, examples/mesh/notes.poly on a 16x16 domain"
 "$cli" mesh "$root/examples/mesh/notes.poly" --size 16 -o "$out/mesh-notes" \
-  --svg "$out/mesh-notes.svg" --stats
+  --svg "$out/mesh-notes.svg" --stats | summary
 echo "   picture: $out/mesh-notes.svg"
 echo "== mesh: examples/mesh/richer.poly (64x64, six components, one hole)"
 "$cli" mesh "$root/examples/mesh/richer.poly" -o "$out/mesh-richer" --svg "$out/mesh-richer.svg" \
-  --msh "$out/mesh-richer.msh" --vtk "$out/mesh-richer.vtu" --stats
+  --msh "$out/mesh-richer.msh" --vtk "$out/mesh-richer.vtu" --stats | summary
 echo "   picture: $out/mesh-richer.svg (also .node/.ele, .msh, .vtu)"

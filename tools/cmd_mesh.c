@@ -170,7 +170,7 @@ int cmd_mesh(int argc, char **argv) {
         qk_mesh_stats(mesh, &s);
         printf("{\"U\": %llu, \"components\": %zu, \"leaves_before_balance\": %zu, "
                "\"leaves\": %zu, \"triangles\": %zu, \"vertices\": %zu, \"steiner\": %zu, "
-               "\"min_angle_deg\": %.6f, \"max_angle_deg\": %.6f, \"uniform_triangles\": %.0f, "
+               "\"min_angle_deg\": %.10g, \"max_angle_deg\": %.10g, \"uniform_triangles\": %.0f, "
                "\"seconds\": {\"read\": %.6f, \"validate\": %.6f, \"subdivide\": %.6f, "
                "\"balance\": %.6f, \"triangulate\": %.6f, \"write\": %.6f}}\n",
                (unsigned long long)s.size, s.components, s.leaves_before_balance, s.leaves,
