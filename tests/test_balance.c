@@ -185,6 +185,25 @@ static void test_balance_random(void **state) {
     size_t n3 = 0;
     qk_tree_leaves(t, NULL, 0, &n3);
     assert_int_equal(n3, n1);
+    /* The balanced tree stays a working index: inserts and removes keep it valid, and
+     * every point is found in the leaf that holds its location. */
+    if (kind < 4) {
+      for (int i = 0; i < 20; i++) {
+        qk_id_t id;
+        qk_point_t q = {qkt_rng_unit(&r), qkt_rng_unit(&r)};
+        assert_int_equal(qk_tree_insert(t, q, &id), QK_OK);
+        qk_node_t a, b;
+        assert_int_equal(qk_tree_leaf_of(t, id, &a), QK_OK);
+        assert_int_equal(qk_tree_find_leaf(t, q, &b), QK_OK);
+        assert_int_equal(a, b);
+      }
+      for (qk_id_t id = 0; id < n && id < 10; id++) assert_int_equal(qk_tree_remove(t, id), QK_OK);
+      QKT_CHECK_TREE(t);
+      /* Inserts may unbalance it again; balancing restores the property. */
+      assert_int_equal(qk_tree_balance(t), QK_OK);
+      QKT_CHECK_TREE(t);
+      assert_true(qk_tree_is_balanced(t));
+    }
     free(L);
     free(M);
     qk_tree_free(t);
