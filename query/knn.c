@@ -53,11 +53,55 @@ void qk__heap_sort(qk_neighbor_t *h, size_t n) {
  * is not full). A node is pruned when its bound is strictly above the threshold: a node
  * at exactly the k-th distance may still hold a point with a smaller id.
  */
+/* Offer a leaf's points to the heap h (n entries, at most k), tightening *thr. */
+static inline void scan_leaf(const qk_tree_t *t, const qk__node_t *nd, double qx, double qy,
+                             size_t k, qk_neighbor_t *h, size_t *n_io, double *thr_io) {
+  const double *px = t->px + nd->start, *py = t->py + nd->start;
+  const qk_id_t *pid = t->pid + nd->start;
+  size_t n = *n_io;
+  double thr = *thr_io;
+  for (uint32_t i = 0; i < nd->count; i++) {
+    double dx = px[i] - qx, dy = py[i] - qy;
+    double d2 = dx * dx + dy * dy;
+    if (d2 > thr) continue;
+    qk_neighbor_t v = {pid[i], d2};
+    if (n < k) {
+      qk__heap_push(h, &n, v);
+      if (n == k && h[0].dist < thr) thr = h[0].dist;
+    } else if (qk__nb_less(d2, pid[i], h[0].dist, h[0].id)) {
+      qk__heap_replace_top(h, n, v);
+      thr = h[0].dist;
+    }
+  }
+  *n_io = n;
+  *thr_io = thr;
+}
+
 static size_t knn_search(const qk_tree_t *t, double qx, double qy, size_t k, double limit2,
                          qk_neighbor_t *h) {
   const double e = qk__margin(t);
   size_t n = 0;
   double thr = limit2; /* prune above this: the cap, then the k-th best once full */
+  /*
+   * First go straight down to the leaf whose square holds q (when q is in the root) and
+   * take its points: that usually sets the threshold close to its final value before
+   * the search proper starts, so that the search pushes few nodes it later discards.
+   * The search then skips that leaf.
+   */
+  uint32_t first = QK_NONE;
+  {
+    const qk__node_t *r = &t->nodes[0];
+    double s0 = t->side[0];
+    if (qx >= r->x0 && qx <= r->x0 + s0 && qy >= r->y0 && qy <= r->y0 + s0) {
+      uint32_t v = 0;
+      while (!qk__is_leaf(&t->nodes[v])) {
+        const qk__node_t *nd = &t->nodes[v];
+        v = nd->child + qk__quadrant_of(nd->x0, nd->y0, t->side[nd->depth + 1], qx, qy);
+      }
+      first = v;
+      scan_leaf(t, &t->nodes[v], qx, qy, k, h, &n, &thr);
+    }
+  }
   qk__entry_t stack[QK__STACK_MAX];
   int sp = 0;
   stack[sp].node = 0;
@@ -67,34 +111,23 @@ static size_t knn_search(const qk_tree_t *t, double qx, double qy, size_t k, dou
     if (top.bound > thr) continue;
     const qk__node_t *nd = &t->nodes[top.node];
     if (qk__is_leaf(nd)) {
-      const double *px = t->px + nd->start, *py = t->py + nd->start;
-      const qk_id_t *pid = t->pid + nd->start;
-      for (uint32_t i = 0; i < nd->count; i++) {
-        double dx = px[i] - qx, dy = py[i] - qy;
-        double d2 = dx * dx + dy * dy;
-        if (d2 > thr) continue;
-        qk_neighbor_t v = {pid[i], d2};
-        if (n < k) {
-          qk__heap_push(h, &n, v);
-          if (n == k && h[0].dist < thr) thr = h[0].dist;
-        } else if (qk__nb_less(d2, pid[i], h[0].dist, h[0].id)) {
-          qk__heap_replace_top(h, n, v);
-          thr = h[0].dist;
-        }
-      }
+      if (top.node != first) scan_leaf(t, nd, qx, qy, k, h, &n, &thr);
       continue;
     }
     /* Bound the children from this node's square (NE, NW, SW, SE), not from their
-     * nodes; a child is read only if it is visited. Empty ones are dropped then. */
-    const double hs = t->side[nd->depth + 1], x0 = nd->x0, y0 = nd->y0;
-    const double cx[4] = {x0 + hs, x0, x0, x0 + hs}, cy[4] = {y0 + hs, y0 + hs, y0, y0};
+     * nodes; a child is read only if it is visited (empty ones are dropped then). The
+     * children share their edges, so two distances per axis give all four bounds. */
+    const double hs = t->side[nd->depth + 1], xm = nd->x0 + hs, ym = nd->y0 + hs;
+    const double dxw = qk__gap(qx, nd->x0 - e, xm + e), dxe = qk__gap(qx, xm - e, xm + hs + e);
+    const double dys = qk__gap(qy, nd->y0 - e, ym + e), dyn = qk__gap(qy, ym - e, ym + hs + e);
+    const double xw = dxw * dxw, xe = dxe * dxe, ys = dys * dys, yn = dyn * dyn;
+    const double b[4] = {xe + yn, xw + yn, xw + ys, xe + ys}; /* NE, NW, SW, SE */
     qk__entry_t kids[4];
     int m = 0;
     for (uint32_t c = 0; c < 4; c++) {
-      double b = qk__square_d2(cx[c], cy[c], hs, qx, qy, e);
-      if (b > thr) continue;
+      if (b[c] > thr) continue;
       kids[m].node = nd->child + c;
-      kids[m++].bound = b;
+      kids[m++].bound = b[c];
     }
     qk__sort4_desc(kids, m);
     for (int i = 0; i < m; i++) stack[sp++] = kids[i];

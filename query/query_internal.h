@@ -68,6 +68,11 @@ static inline double qk__square_d2(double x0, double y0, double side, double qx,
   return dx * dx + dy * dy;
 }
 
+/* Distance from v to the interval [lo, hi] (0 inside). */
+static inline double qk__gap(double v, double lo, double hi) {
+  return v < lo ? lo - v : (v > hi ? v - hi : 0.0);
+}
+
 /* (d, id) ordering of neighbours: by distance, ties by smaller id. */
 static inline int qk__nb_less(double da, qk_id_t ia, double db, qk_id_t ib) {
   return da < db || (da == db && ia < ib);
