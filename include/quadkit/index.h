@@ -301,7 +301,9 @@ qk_status_t qk_tree_refine(qk_tree_t *tree, qk_refine_fn fn, void *ud);
 /**
  * BalanceQuadTree: split leaves until any two leaves whose squares share an edge
  * differ by at most a factor 2 in side length; points move into the new leaves.
- * O((d+1) m) time for m nodes and depth d. Marks the tree refined.
+ * O((d+1) m) time for m nodes and depth d. Marks the tree refined. A leaf that cannot
+ * split (depth cap, or too small to halve in double precision) stays as it is; then
+ * qk_tree_is_balanced() may still return 0.
  * \param [in,out] tree the tree.
  * \return QK_OK or QK_ERR_NOMEM (the tree stays valid, possibly partly balanced).
  */
