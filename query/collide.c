@@ -459,6 +459,49 @@ static inline int slab(double xmin, double ymin, double xmax, double ymax, doubl
 }
 
 /*
+ * The slab test for node boxes, with reciprocals of the direction computed once per ray
+ * (a multiplication per plane instead of a division). Its result may differ from
+ * slab()'s by a rounding, which the search's margin on t covers; items themselves are
+ * tested with the exact slab().
+ */
+typedef struct ray_inv {
+  double ix, iy; /* 1/dx, 1/dy, or 0 for a zero component */
+  int zx, zy;    /* nonzero where the component is zero */
+} ray_inv_t;
+
+static inline int slab_inv(const cnode_t *b, double ox, double oy, const ray_inv_t *r, double tmax,
+                           double *lo_out, double *hi_out) {
+  double lo = 0.0, hi = tmax;
+  if (!r->zx) {
+    double t1 = (b->xmin - ox) * r->ix, t2 = (b->xmax - ox) * r->ix;
+    if (t1 > t2) {
+      double sw = t1;
+      t1 = t2;
+      t2 = sw;
+    }
+    if (t1 > lo) lo = t1;
+    if (t2 < hi) hi = t2;
+  } else if (ox < b->xmin || ox > b->xmax) {
+    return 0;
+  }
+  if (!r->zy) {
+    double t1 = (b->ymin - oy) * r->iy, t2 = (b->ymax - oy) * r->iy;
+    if (t1 > t2) {
+      double sw = t1;
+      t1 = t2;
+      t2 = sw;
+    }
+    if (t1 > lo) lo = t1;
+    if (t2 < hi) hi = t2;
+  } else if (oy < b->ymin || oy > b->ymax) {
+    return 0;
+  }
+  *lo_out = lo;
+  *hi_out = hi;
+  return 1;
+}
+
+/*
  * First parameter t in [0, tmax] at which the ray meets a disc, or -1. The discriminant
  * is written as a r^2 - (f x d)^2 (Lagrange's identity) to avoid cancelling two large
  * squares, and the root as c / (-b + sqrt(disc)) to avoid cancelling -b and sqrt(disc).
@@ -507,6 +550,10 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
   int sp = 0;
   double lo, hi;
   const int all_discs = c->n_discs == c->n, no_discs = c->n_discs == 0;
+  /* Reciprocals, unless a component is so small that its reciprocal overflows (then the
+   * dividing slab test is used throughout). */
+  ray_inv_t ri = {d.x != 0 ? 1 / d.x : 0, d.y != 0 ? 1 / d.y : 0, d.x == 0, d.y == 0};
+  const int fast = isfinite(ri.ix) && isfinite(ri.iy);
   const cnode_t *root = &c->cn[0];
   if (!slab(root->xmin, root->ymin, root->xmax, root->ymax, o.x, o.y, d.x, d.y, tmax, &lo, &hi) ||
       lo > hi + ts)
@@ -540,9 +587,10 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
       /* Only the children's boxes are read here, not their nodes, which for most of
        * them would be a cache miss for nothing. */
       const cnode_t *cb = &c->cn[ch];
-      if (!slab(cb->xmin, cb->ymin, cb->xmax, cb->ymax, o.x, o.y, d.x, d.y, tmax, &lo, &hi) ||
-          lo > hi + ts)
-        continue;
+      int in =
+          fast ? slab_inv(cb, o.x, o.y, &ri, tmax, &lo, &hi)
+               : slab(cb->xmin, cb->ymin, cb->xmax, cb->ymax, o.x, o.y, d.x, d.y, tmax, &lo, &hi);
+      if (!in || lo > hi + ts) continue;
       if (lo - ts > best) continue;
       kids[m].node = ch;
       kids[m++].bound = lo - ts;
