@@ -82,6 +82,56 @@ row T25 1 'nan.csv:3' -- "$cli" tree nan.csv --svg out/t.svg
 cmp -s before.svg out/t.svg || { echo "FAIL T25: existing output changed"; fails=$((fails + 1)); }
 rm -f out/t.svg
 
+# ---- queries (quadkit knn, radius, range, locate, collide, raycast, geo) ---------------
+if "$cli" knn --help >/dev/null 2>&1; then
+  printf 'x,y\n0,0\n1,1\n0.5,0.5\n' >p.csv
+  printf '0.1,0.1\n' >q.csv
+  printf '0.1,nan\n' >qnan.csv
+  printf '5,5\n' >qout.csv
+  printf '0.3,0.3\n0.3,0.3\n0.3,0.3\n' >dup3.csv
+  printf '0,0,1,1\n1,1,0,0\n' >inverted.csv
+  printf '0,0\n' >shortbox.csv
+  printf '0,0,0.1\n0.05,0,-1\n' >negdisc.csv
+  printf '1,1,0.5,0.5\n' >invbox.csv
+  printf '0,0,0.1\n0.05,0,0.1\n' >discs.csv
+  printf '1,1,0,0\n0,0,0,0\n' >zeroray.csv
+  printf '0.5,0.5,1,0,-1\n' >negtmax.csv
+  : >none.csv
+  row Q1 2 "-k must be a whole number from 1 to 1000000, not '0'" -- "$cli" knn p.csv q.csv -k 0 -o out/k.csv
+  row Q2 0 '0,3,1,1.27' -- "$cli" knn p.csv q.csv -k 5
+  row Q3 2 "-k must be a whole number from 1 to 1000000, not '1000001'" -- "$cli" knn p.csv q.csv -k 1000001
+  row Q4 2 '-k K is required' -- "$cli" knn p.csv q.csv
+  row Q5 2 "--max-dist must not be negative, not '-1'" -- "$cli" knn p.csv q.csv -k 1 --max-dist -1
+  row Q6 1 "qnan.csv:1: field 2 is not finite: 'nan'" -- "$cli" knn p.csv qnan.csv -k 1 -o out/k.csv
+  row Q7 0 '0,1,1,5.65' -- "$cli" knn p.csv qout.csv -k 1
+  row Q8 0 '^0,3,2,0\.28' -- "$cli" knn dup3.csv q.csv -k 3
+  row Q9 0 '0,nan,nan,nan,-1,0' -- "$cli" locate p.csv qout.csv
+  row Q10 2 "-r must not be negative, not '-1'" -- "$cli" radius p.csv q.csv -r -1 -o out/r.csv
+  row Q11 2 "-r must be a finite number, not 'nan'" -- "$cli" radius p.csv q.csv -r nan
+  row Q12 2 "-r must be a finite number, not 'inf'" -- "$cli" radius p.csv q.csv -r inf
+  row Q13 1 'inverted.csv:2: box has xmin > xmax or ymin > ymax' -- "$cli" range p.csv inverted.csv -o out/b.csv
+  row Q14 1 'shortbox.csv:1: expected at least 4 numeric fields, found 2' -- "$cli" range p.csv shortbox.csv
+  row Q15 0 '^box,point$' -- "$cli" range p.csv none.csv
+  row Q16 1 'negdisc.csv:2: disc radius is negative' -- "$cli" collide negdisc.csv -o out/c.csv
+  row Q17 1 'invbox.csv:1: box has xmin > xmax or ymin > ymax' -- "$cli" collide invbox.csv --boxes
+  row Q18 1 'none.csv: no data rows' -- "$cli" collide none.csv
+  row Q19 0 '^0,-1,inf$' -- "$cli" raycast discs.csv zeroray.csv
+  row Q19b 0 '^1,0,0$' -- "$cli" raycast discs.csv zeroray.csv
+  row Q20 1 'negtmax.csv:1: tmax is negative' -- "$cli" raycast discs.csv negtmax.csv -o out/h.csv
+  if "$cli" geo knn p.csv q.csv -k 1 >/dev/null 2>&1; then
+    printf '2,48\n2,91\n' >lat91.csv
+    printf '2,48\n2,47\n' >ll.csv
+    printf '2,95\n' >lat95.csv
+    row Q21 1 'lat91.csv:2: latitude 91 is outside \[-90, 90\]' -- "$cli" geo knn lat91.csv q.csv -k 1
+    row Q22 1 'lat95.csv:1: latitude 95 is outside \[-90, 90\]' -- "$cli" geo knn ll.csv lat95.csv -k 1 -o out/g.csv
+    row Q23 2 "-r must not be negative, not '-5'" -- "$cli" geo radius ll.csv q.csv -r -5
+  else
+    echo "SKIP Q21..Q23: no geodesic support in this build"
+  fi
+else
+  echo "SKIP Q1..Q23: the query subcommands are not available in this build"
+fi
+
 # ---- .poly input (quadkit mesh) ---------------------------------------------------------
 if "$cli" mesh --help >/dev/null 2>&1; then
   sq='4 2 0 0\n0 0 0\n1 4 0\n2 4 4\n3 0 4\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n'
