@@ -24,6 +24,7 @@
 #include <string.h>
 
 #include "qk_test.h"
+#include "index/index_internal.h"
 
 /* The fuzz targets, compiled in with failures reported through cmocka. */
 static const char *qkr_current = "";
@@ -535,6 +536,19 @@ static void test_reliability_limits(void **state) {
   assert_null(c);
   assert_int_equal(a.calls, 0);
   assert_int_equal(a.live_blocks, 0);
+  /* The id counter at its limit: the next insert is refused and changes nothing. The
+   * private layout is used to get there without 2^32 inserts. */
+  o.allocator = NULL;
+  assert_int_equal(qk_tree_build(&one, 1, &o, &t), QK_OK);
+  uint32_t saved = t->n_ids;
+  t->n_ids = QK_MAX_POINTS;
+  qk_id_t id = 7;
+  assert_int_equal(qk_tree_insert(t, one, &id), QK_ERR_LIMIT);
+  assert_int_equal(id, 7);
+  t->n_ids = saved;
+  QKT_CHECK_TREE(t);
+  qk_tree_free(t);
+  o.allocator = &al;
   /* Bad options are refused, not clamped. */
   o.max_depth = QK_MAX_DEPTH_LIMIT + 1;
   assert_int_equal(qk_tree_build(&one, 1, &o, &t), QK_ERR_INVALID);
