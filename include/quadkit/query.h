@@ -277,7 +277,8 @@ qk_status_t qk_collider_pairs(const qk_collider_t *c, qk_pair_fn fn, void *ud);
  * \param [in] c the collider.
  * \param [out] out buffer for up to cap pairs (may be NULL when cap is 0).
  * \param [in] cap its size.
- * \param [out] n_out the number of pairs (may exceed cap).
+ * \param [out] n_out the number of pairs (may exceed cap; the buffer then holds an
+ *              unspecified subset, unsorted: call again with a buffer of n_out).
  * \return QK_OK.
  */
 qk_status_t qk_collider_pairs_list(const qk_collider_t *c, qk_pair_t *out, size_t cap,
