@@ -354,7 +354,11 @@ qk_status_t qk_geo_knn_batch(const qk_geo_t *g, const qk_point_t *qs, size_t nq,
   if (!g || (nq > 0 && !qs) || (nq > 0 && k > 0 && !out)) return QK_ERR_INVALID;
   if (isnan(max_metres) || max_metres < 0) return QK_ERR_INVALID;
   qk_status_t first = QK_OK;
-  for (size_t i = 0; i < nq; i++) {
+  /* Z-order of the queries' (raw) lon/lat: consecutive searches then share nodes. */
+  uint32_t *order;
+  void *block = qk__morton_order(g->tree, qs, nq, &order);
+  for (size_t j = 0; j < nq; j++) {
+    size_t i = order ? order[j] : j;
     qk_neighbor_t *o = out ? out + i * k : NULL;
     size_t n = 0;
     qk_status_t st = qk_geo_knn(g, qs[i], k, max_metres, o, &n);
@@ -365,6 +369,7 @@ qk_status_t qk_geo_knn_batch(const qk_geo_t *g, const qk_point_t *qs, size_t nq,
     }
     if (counts) counts[i] = n;
   }
+  if (block) qk__morton_free(g->tree, block, nq);
   return first;
 }
 

@@ -25,7 +25,14 @@ qk_status_t qk_query_locate(const qk_tree_t *tree, qk_point_t p, qk_location_t *
 qk_status_t qk_query_locate_batch(const qk_tree_t *tree, const qk_point_t *ps, size_t n,
                                   qk_node_t *leaves) {
   if (!tree || (n > 0 && (!ps || !leaves))) return QK_ERR_INVALID;
-  for (size_t i = 0; i < n; i++)
+  /* In Z-order of the locations when the batch is large, so that consecutive descents
+   * share their path through the cache; in the given order otherwise. */
+  uint32_t *order;
+  void *block = qk__morton_order(tree, ps, n, &order);
+  for (size_t j = 0; j < n; j++) {
+    size_t i = order ? order[j] : j;
     if (qk_tree_find_leaf(tree, ps[i], &leaves[i]) != QK_OK) leaves[i] = QK_NONE;
+  }
+  if (block) qk__morton_free(tree, block, n);
   return QK_OK;
 }

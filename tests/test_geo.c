@@ -177,6 +177,35 @@ static void test_geo_normalise_and_errors(void **state) {
   qk_geo_free(g);
 }
 
+/* The batch form (large enough to be reordered) equals single queries. */
+static void test_geo_batch(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 3);
+  const size_t n = 3000, nq = 150, k = 4;
+  qk_point_t *p = malloc(n * sizeof *p), *qs = malloc(nq * sizeof *qs);
+  for (size_t i = 0; i < n; i++) p[i] = geo_loc(&r, (int)(i % 3));
+  for (size_t i = 0; i < nq; i++) qs[i] = geo_loc(&r, (int)(i % 4));
+  qs[5].x = 400; /* longitudes outside [-180, 180] are normalised */
+  qs[9].y = NAN;
+  qk_geo_t *g = NULL;
+  assert_int_equal(qk_geo_build(p, n, NULL, &g), QK_OK);
+  qk_neighbor_t *out = malloc(nq * k * sizeof *out), one[4];
+  size_t counts[150];
+  assert_int_equal(qk_geo_knn_batch(g, qs, nq, k, INFINITY, out, counts), QK_ERR_NONFINITE);
+  for (size_t i = 0; i < nq; i++) {
+    size_t m = 0;
+    if (i == 9) {
+      assert_int_equal(counts[i], 0);
+      continue;
+    }
+    assert_int_equal(qk_geo_knn(g, qs[i], k, INFINITY, one, &m), QK_OK);
+    assert_same(out + i * k, counts[i], one, m, "geo-batch", i, qs[i]);
+  }
+  qk_geo_free(g);
+  free(p), free(qs), free(out);
+}
+
 static void test_geo_nomem(void **state) {
   (void)state;
   qkt_rng_t r;
@@ -258,6 +287,7 @@ int main(void) {
     cmocka_unit_test(test_geo_knn_radius),
     cmocka_unit_test(test_geo_normalise_and_errors),
     cmocka_unit_test(test_geo_nomem),
+    cmocka_unit_test(test_geo_batch),
     cmocka_unit_test(test_geo_cities),
 #else
     cmocka_unit_test(test_geo_unsupported),

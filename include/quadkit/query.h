@@ -174,7 +174,8 @@ typedef struct qk_location {
 qk_status_t qk_query_locate(const qk_tree_t *tree, qk_point_t p, qk_location_t *loc);
 
 /**
- * Point location for many points.
+ * Point location for many points (answered in Z-order of the locations, with the same
+ * temporary allocation as qk_query_knn_batch()).
  * \param [in] tree the tree.
  * \param [in] ps n locations.
  * \param [in] n how many.
@@ -378,7 +379,7 @@ qk_status_t qk_geo_knn(const qk_geo_t *g, qk_point_t q, size_t k, double max_met
                        qk_neighbor_t *out, size_t *n_out);
 
 /**
- * Geodesic kNN for many queries; layout as qk_query_knn_batch().
+ * Geodesic kNN for many queries; layout and ordering as qk_query_knn_batch().
  * \param [in] g the index.
  * \param [in] qs nq queries (lon, lat).
  * \param [in] nq how many.
