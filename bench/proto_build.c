@@ -21,10 +21,11 @@
 #include <string.h>
 #include <time.h>
 
+/* The sort key is the top 32 bits of the Morton code (16 levels); the full 64-bit code
+ * is recomputed only for the rare runs that share those 32 bits and exceed capacity. */
 typedef struct {
-  uint64_t code;
+  uint32_t key;
   uint32_t id;
-  uint32_t pad;
 } item_t;
 
 typedef struct {
@@ -54,41 +55,40 @@ static uint32_t cell_of(double v, double x0, double scale) {
   return (uint32_t)c;
 }
 
-static void radix16(item_t *a, item_t *tmp, size_t n, int shift) {
-  static uint32_t cnt[65536];
+/* One LSD radix pass on 11 bits of the key: 2048 buckets keep the scatter's write
+ * streams few enough for the caches. */
+static void radix11(const item_t *a, item_t *out, size_t n, int shift) {
+  uint32_t cnt[2048];
   memset(cnt, 0, sizeof cnt);
-  for (size_t i = 0; i < n; i++) cnt[(a[i].code >> shift) & 0xFFFF]++;
+  for (size_t i = 0; i < n; i++) cnt[(a[i].key >> shift) & 0x7FF]++;
   uint32_t sum = 0;
-  for (int d = 0; d < 65536; d++) {
+  for (int d = 0; d < 2048; d++) {
     uint32_t c = cnt[d];
     cnt[d] = sum;
     sum += c;
   }
-  for (size_t i = 0; i < n; i++) tmp[cnt[(a[i].code >> shift) & 0xFFFF]++] = a[i];
+  for (size_t i = 0; i < n; i++) out[cnt[(a[i].key >> shift) & 0x7FF]++] = a[i];
 }
 
-static int cmp_item(const void *x, const void *y) {
-  uint64_t a = ((const item_t *)x)->code, b = ((const item_t *)y)->code;
+typedef struct {
+  uint64_t code;
+  uint32_t id;
+} full_t;
+
+static int cmp_full(const void *x, const void *y) {
+  uint64_t a = ((const full_t *)x)->code, b = ((const full_t *)y)->code;
   return a < b ? -1 : a > b;
-}
-
-/* First index in [lo, hi) whose code is >= key. */
-static size_t lower(const item_t *a, size_t lo, size_t hi, uint64_t key) {
-  while (lo < hi) {
-    size_t m = lo + (hi - lo) / 2;
-    if (a[m].code < key)
-      lo = m + 1;
-    else
-      hi = m;
-  }
-  return lo;
 }
 
 typedef struct {
   pnode_t *nodes;
   size_t n_nodes, cap_nodes;
   size_t leaves;
-  const item_t *a;
+  const item_t *a;  /* sorted by the 32-bit key */
+  uint64_t *code64; /* full codes, filled only inside runs that need them */
+  double *px, *py;  /* coordinates in sorted order */
+  uint32_t *pid;
+  double x0, y0, scale;
   unsigned capacity;
 } builder_t;
 
@@ -102,7 +102,53 @@ static uint32_t new_nodes(builder_t *b, unsigned k) {
   return r;
 }
 
-/* Quadrant digit order in a Morton code with y in the odd bits: 0 SW, 1 SE, 2 NW, 3 NE. */
+/* A run sharing its 32-bit key and holding more than `capacity` points: compute the full
+ * codes and sort the run's coordinates by them (insertion-free: sort an index). */
+static void deepen(builder_t *b, size_t lo, size_t hi) {
+  size_t m = hi - lo;
+  full_t *f = malloc(m * sizeof *f);
+  for (size_t i = 0; i < m; i++) {
+    uint32_t cx = cell_of(b->px[lo + i], b->x0, b->scale);
+    uint32_t cy = cell_of(b->py[lo + i], b->y0, b->scale);
+    f[i].code = spread32(cx) | (spread32(cy) << 1);
+    f[i].id = (uint32_t)i;
+  }
+  qsort(f, m, sizeof *f, cmp_full);
+  double *tx = malloc(m * sizeof *tx), *ty = malloc(m * sizeof *ty);
+  uint32_t *ti = malloc(m * sizeof *ti);
+  for (size_t i = 0; i < m; i++) {
+    tx[i] = b->px[lo + f[i].id];
+    ty[i] = b->py[lo + f[i].id];
+    ti[i] = b->pid[lo + f[i].id];
+    b->code64[lo + i] = f[i].code;
+  }
+  memcpy(b->px + lo, tx, m * sizeof *tx);
+  memcpy(b->py + lo, ty, m * sizeof *ty);
+  memcpy(b->pid + lo, ti, m * sizeof *ti);
+  free(f);
+  free(tx);
+  free(ty);
+  free(ti);
+}
+
+static inline uint64_t code_at(const builder_t *b, size_t i, unsigned depth) {
+  return depth < 16 ? (uint64_t)b->a[i].key << 32 : b->code64[i];
+}
+
+/* First index in [lo, hi) whose code is >= key. */
+static size_t lower(const builder_t *b, size_t lo, size_t hi, uint64_t key, unsigned depth) {
+  while (lo < hi) {
+    size_t m = lo + (hi - lo) / 2;
+    if (code_at(b, m, depth) < key)
+      lo = m + 1;
+    else
+      hi = m;
+  }
+  return lo;
+}
+
+/* Quadrant digit order in a Morton code with y in the odd bits: 0 SW, 1 SE, 2 NW, 3 NE
+ * (the prototype's own order; only the leaf count is compared with the library). */
 static void build_node(builder_t *b, uint32_t v, size_t lo, size_t hi, unsigned depth) {
   b->nodes[v].start = (uint32_t)lo;
   b->nodes[v].count = (uint32_t)(hi - lo);
@@ -112,16 +158,28 @@ static void build_node(builder_t *b, uint32_t v, size_t lo, size_t hi, unsigned 
     b->leaves++;
     return;
   }
+  if (depth == 16) {
+    if (!b->code64) b->code64 = malloc(b->n_nodes ? (size_t)b->nodes[0].count * 8 : 8);
+    deepen(b, lo, hi);
+  }
   uint32_t c = new_nodes(b, 4);
   b->nodes[v].first_child = c;
   unsigned sh = 2 * (31 - depth);
-  uint64_t base = b->a[lo].code & ~((sh + 2 >= 64 ? ~0ull : ((1ull << (sh + 2)) - 1)));
+  uint64_t base = code_at(b, lo, depth) & ~((sh + 2 >= 64 ? ~0ull : ((1ull << (sh + 2)) - 1)));
   size_t cut[5];
   cut[0] = lo;
-  for (unsigned q = 1; q < 4; q++) cut[q] = lower(b->a, cut[q - 1], hi, base | ((uint64_t)q << sh));
+  for (unsigned q = 1; q < 4; q++)
+    cut[q] = lower(b, cut[q - 1], hi, base | ((uint64_t)q << sh), depth);
   cut[4] = hi;
   for (unsigned q = 0; q < 4; q++) build_node(b, c + q, cut[q], cut[q + 1], depth + 1);
 }
+
+static double secs(struct timespec a, struct timespec b) {
+  return (double)(b.tv_sec - a.tv_sec) + 1e-9 * (double)(b.tv_nsec - a.tv_nsec);
+}
+
+/* Phase times of the last build, for the report (codes, sort, gather, tree). */
+double qkb_proto_phase[4];
 
 /*
  * Build over n points (xy interleaved) and free everything again; returns the seconds the
@@ -129,7 +187,7 @@ static void build_node(builder_t *b, uint32_t v, size_t lo, size_t hi, unsigned 
  */
 double qkb_proto_build(const double *xy, size_t n, unsigned capacity, size_t *leaves,
                        size_t *bytes) {
-  struct timespec t0, t1;
+  struct timespec t0, t1, t2, t3, t4;
   clock_gettime(CLOCK_MONOTONIC, &t0);
   if (capacity == 0) capacity = 1;
   /* (1) the root square, exactly as the library's smallest enclosing square. */
@@ -146,43 +204,49 @@ double qkb_proto_build(const double *xy, size_t n, unsigned capacity, size_t *le
   while (xmin + side < xmax || ymin + side < ymax) side = nextafter(side, INFINITY);
   double scale = 4294967296.0 / side;
 
-  /* (2) codes. */
-  item_t *a = malloc((n ? n : 1) * sizeof *a), *tmp = malloc((n ? n : 1) * sizeof *tmp);
+  /* (2) 32-bit keys: the top 16 levels of the Morton code. */
+  size_t nn = n ? n : 1;
+  item_t *a = malloc(nn * sizeof *a), *tmp = malloc(nn * sizeof *tmp);
   for (size_t i = 0; i < n; i++) {
     uint32_t cx = cell_of(xy[2 * i], xmin, scale), cy = cell_of(xy[2 * i + 1], ymin, scale);
-    a[i].code = spread32(cx) | (spread32(cy) << 1);
+    a[i].key = (uint32_t)((spread32(cx >> 16) | (spread32(cy >> 16) << 1)));
     a[i].id = (uint32_t)i;
   }
-  /* (3) radix sort on bits 32..63, then finish long runs on the low bits. */
-  radix16(a, tmp, n, 32);
-  radix16(tmp, a, n, 48);
-  for (size_t i = 0; i < n;) {
-    size_t j = i + 1;
-    while (j < n && (a[j].code >> 32) == (a[i].code >> 32)) j++;
-    if (j - i > capacity) qsort(a + i, j - i, sizeof *a, cmp_item);
-    i = j;
-  }
-  /* (4) the tree. */
-  builder_t b = {NULL, 0, 0, 0, a, capacity};
-  new_nodes(&b, 1);
-  build_node(&b, 0, 0, n, 0);
-  /* (5) coordinates in leaf order. */
-  double *px = malloc((n ? n : 1) * sizeof *px), *py = malloc((n ? n : 1) * sizeof *py);
-  uint32_t *pid = malloc((n ? n : 1) * sizeof *pid);
+  clock_gettime(CLOCK_MONOTONIC, &t1);
+  /* (3) LSD radix sort, three 11-bit passes (33 >= 32 bits). */
+  radix11(a, tmp, n, 0);
+  radix11(tmp, a, n, 11);
+  radix11(a, tmp, n, 22);
+  item_t *sorted = tmp;
+  clock_gettime(CLOCK_MONOTONIC, &t2);
+  /* (4) coordinates in sorted order. */
+  double *px = malloc(nn * sizeof *px), *py = malloc(nn * sizeof *py);
+  uint32_t *pid = malloc(nn * sizeof *pid);
   for (size_t i = 0; i < n; i++) {
-    uint32_t id = a[i].id;
+    uint32_t id = sorted[i].id;
     px[i] = xy[2 * id];
     py[i] = xy[2 * id + 1];
     pid[i] = id;
   }
-  clock_gettime(CLOCK_MONOTONIC, &t1);
+  clock_gettime(CLOCK_MONOTONIC, &t3);
+  /* (5) the tree, splitting while a range holds more than `capacity` points. */
+  builder_t b = {NULL, 0, 0, 0, sorted, NULL, px, py, pid, xmin, ymin, scale, capacity};
+  new_nodes(&b, 1);
+  b.nodes[0].count = (uint32_t)n;
+  build_node(&b, 0, 0, n, 0);
+  clock_gettime(CLOCK_MONOTONIC, &t4);
+  qkb_proto_phase[0] = secs(t0, t1);
+  qkb_proto_phase[1] = secs(t1, t2);
+  qkb_proto_phase[2] = secs(t2, t3);
+  qkb_proto_phase[3] = secs(t3, t4);
   *leaves = b.leaves;
   *bytes = n * (2 * sizeof(double) + sizeof(uint32_t)) + b.n_nodes * sizeof(pnode_t);
   free(a);
   free(tmp);
   free(b.nodes);
+  free(b.code64);
   free(px);
   free(py);
   free(pid);
-  return (double)(t1.tv_sec - t0.tv_sec) + 1e-9 * (double)(t1.tv_nsec - t0.tv_nsec);
+  return secs(t0, t4);
 }
