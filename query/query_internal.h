@@ -93,6 +93,17 @@ void qk__heap_sort(qk_neighbor_t *h, size_t n);
 void *qk__morton_order(const qk_tree_t *t, const qk_point_t *qs, size_t nq, uint32_t **order);
 void qk__morton_free(const qk_tree_t *t, void *block, size_t nq);
 
+/* Queries whose paths are walked in lockstep by the batch calls, and the prefetch hint
+ * (a no-op where the compiler has none). */
+#define QK__LANES 8
+#if defined(__GNUC__)
+#define QK__PREFETCH(p) __builtin_prefetch(p)
+#else
+#define QK__PREFETCH(p) ((void)(p))
+#endif
+void qk__prefetch_paths(const qk_tree_t *t, const qk_point_t *qs, const uint32_t *order, size_t j0,
+                        size_t nq);
+
 /* Sort up to four stacked entries by descending bound, so the nearest is popped first. */
 static inline void qk__sort4_desc(qk__entry_t *e, int n) {
   for (int i = 1; i < n; i++) {
