@@ -10,6 +10,7 @@
  *    leaves, leaf points, stats, qk_tree_check, is_balanced, collider box/disc queries,
  *    pairs and ray casts, geodesic kNN and radius, and the mesh and tree writers into
  *    memory streams;
+ *  - several threads mesh one .poly input at once and get the same mesh;
  *  - scripts/tsan.sh runs this test under ThreadSanitizer, which reports any data race
  *    (a hidden cache, a static buffer) even when the answers happen to come out right.
  */
@@ -138,6 +139,19 @@ static int run_query(size_t i) {
     if (!msh || len != S.msh_len || memcmp(msh, S.msh, len)) return 21;
     free(msh);
     if (!qk_tree_is_balanced(qk_mesh_tree(S.mesh))) return 22;
+    /* Batches of 64 borrow a buffer from the tree's allocator (libc here) and answer
+     * in Z-order: the same answers as one query at a time. */
+    static _Thread_local qk_neighbor_t bn[NQ * KNN];
+    static _Thread_local size_t bc[NQ];
+    static _Thread_local qk_node_t bl[NQ];
+    if (qk_query_knn_batch(S.tree, S.q, NQ, KNN, INFINITY, bn, bc) != QK_OK) return 23;
+    if (qk_query_locate_batch(S.tree, S.q, NQ, bl) != QK_OK) return 24;
+    for (size_t j = 0; j < NQ; j++) {
+      if (bc[j] != KNN || bl[j] != S.leaf[j]) return 25;
+      for (int k = 0; k < KNN; k++)
+        if (bn[j * KNN + k].id != S.knn[j][k].id || bn[j * KNN + k].dist != S.knn[j][k].dist)
+          return 26;
+    }
   }
   return 0;
 }
@@ -281,10 +295,66 @@ static void test_reliab_threads_independent_writers(void **state) {
   }
 }
 
+/* Mesh generation only reads its input: several threads may mesh one qk_poly at once,
+ * and each gets the same mesh. */
+typedef struct gen_job {
+  pthread_t th;
+  const qk_poly_t *poly;
+  size_t nt, nv;
+  const qk_mesh_t *ref;
+  int bad;
+} gen_job_t;
+
+static void *gen_one(void *arg) {
+  gen_job_t *j = arg;
+  qk_mesh_t *m;
+  if (qk_mesh_generate(j->poly, NULL, &m, NULL) != QK_OK) {
+    j->bad = 1;
+    return NULL;
+  }
+  size_t nt, nv, rt, rv;
+  const uint32_t *tri = qk_mesh_triangles(m, &nt), *rtri = qk_mesh_triangles(j->ref, &rt);
+  const double *xy = qk_mesh_vertices(m, &nv), *rxy = qk_mesh_vertices(j->ref, &rv);
+  j->bad = nt != rt || nv != rv || memcmp(tri, rtri, 3 * nt * sizeof *tri) ||
+           memcmp(xy, rxy, 2 * nv * sizeof *xy);
+  qk_mesh_free(m);
+  return NULL;
+}
+
+static void test_reliab_threads_generate_from_one_input(void **state) {
+  (void)state;
+  /* A square ring (with a hole point) and a diagonal strip on [0,32]^2. */
+  const char *text = "12 2 0 0\n0 4 4\n1 20 4\n2 20 20\n3 4 20\n4 8 8\n5 16 8\n6 16 16\n"
+                     "7 8 16\n8 22 2\n9 24 2\n10 30 8\n11 28 8\n12 0\n0 0 1\n1 1 2\n2 2 3\n"
+                     "3 3 0\n4 4 5\n5 5 6\n6 6 7\n7 7 4\n8 8 9\n9 9 10\n10 10 11\n11 11 8\n"
+                     "1\n0 12 12\n";
+  FILE *f = fmemopen((void *)text, strlen(text), "rb");
+  assert_non_null(f);
+  qk_poly_t *poly;
+  assert_int_equal(qk_poly_read(f, NULL, &poly, NULL), QK_OK);
+  fclose(f);
+  qk_mesh_options_t mo;
+  qk_mesh_options_init(&mo);
+  qk_mesh_t *ref;
+  assert_int_equal(qk_mesh_generate(poly, &mo, &ref, NULL), QK_OK);
+  gen_job_t jobs[THREADS];
+  for (unsigned t = 0; t < THREADS; t++) {
+    jobs[t] = (gen_job_t){.poly = poly, .ref = ref};
+    assert_int_equal(pthread_create(&jobs[t].th, NULL, gen_one, &jobs[t]), 0);
+  }
+  for (unsigned t = 0; t < THREADS; t++) {
+    assert_int_equal(pthread_join(jobs[t].th, NULL), 0);
+    assert_int_equal(jobs[t].bad, 0);
+  }
+  qk_mesh_free(ref);
+  qk_poly_free(poly);
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_reliab_threads_concurrent_readers),
       cmocka_unit_test(test_reliab_threads_independent_writers),
+      cmocka_unit_test(test_reliab_threads_generate_from_one_input),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -10,7 +10,8 @@
  *    refine, the collider and the geodesic index, the .poly reader, inputs from arrays
  *    and mesh generation (build, insert and remove are in test_index.c);
  *  - the queries that promise not to allocate (range, radius, kNN, locate, collider
- *    queries and pairs) make no allocation call at all;
+ *    queries and pairs) make no allocation call at all; batches of 64 or more, which
+ *    borrow a buffer, give the same answers when that allocation fails;
  *  - writers report a full disk (/dev/full) as QK_ERR_IO;
  *  - limits: counts beyond QK_MAX_POINTS, domains beyond QK_MESH_MAX_SIZE and absurd
  *    counts in a .poly header give QK_ERR_LIMIT / QK_ERR_INVALID / QK_ERR_GEOMETRY
@@ -312,8 +313,8 @@ static void test_reliability_alloc_geo(void **state) {
   assert_true(failures >= 2);
 }
 
-/* The planar queries allocate nothing: a tree whose allocator fails every call still
- * answers them. */
+/* Single planar queries (and small batches) allocate nothing: a tree whose allocator
+ * fails every call still answers them. */
 static int count_found(qk_id_t id, qk_point_t p, double dist, void *ud) {
   (void)id, (void)p, (void)dist;
   ++*(size_t *)ud;
@@ -351,6 +352,53 @@ static void test_reliability_queries_do_not_allocate(void **state) {
   assert_int_equal(qk_query_radius_batch(t, cs, 2, 0.1, out, N, offsets), QK_OK);
   assert_int_equal(a.calls, 0);
   assert_false(a.failed);
+  a.fail_at = 0;
+  qk_tree_free(t);
+  assert_int_equal(a.live_blocks, 0);
+}
+
+/* Batches of 64 or more queries borrow a buffer to answer in Z-order; when that
+ * allocation fails they answer in the given order instead, with the same results. */
+static void test_reliability_batches_fall_back(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, qkt_seed(67));
+  enum { N = 3000, NQ = 200, K = 5 };
+  static qk_point_t p[N], q[NQ];
+  qkt_points(&r, QKT_CLUSTERED, p, N);
+  qkt_points(&r, QKT_UNIFORM, q, NQ);
+  qkt_alloc_t a;
+  qk_allocator_t al = qkt_alloc_make(&a);
+  qk_tree_options_t o = opts_with(&al, 8);
+  qk_tree_t *t;
+  assert_int_equal(qk_tree_build(p, N, &o, &t), QK_OK);
+  static qk_neighbor_t ref[NQ * K], got[NQ * K];
+  static size_t ref_n[NQ], got_n[NQ];
+  static qk_node_t ref_l[NQ], got_l[NQ];
+  /* Reference: one query at a time (no allocation). */
+  for (size_t i = 0; i < NQ; i++) {
+    assert_int_equal(qk_query_knn(t, q[i], K, INFINITY, ref + i * K, &ref_n[i]), QK_OK);
+    assert_int_equal(qk_tree_find_leaf(t, q[i], &ref_l[i]), QK_OK);
+  }
+  for (size_t fail = 0; fail <= 1; fail++) {
+    a.calls = 0;
+    a.fail_at = fail; /* 0: allocation works; 1: the first allocation fails */
+    a.failed = 0;
+    size_t blocks = a.live_blocks;
+    assert_int_equal(qk_query_knn_batch(t, q, NQ, K, INFINITY, got, got_n), QK_OK);
+    assert_int_equal(qk_query_locate_batch(t, q, NQ, got_l), QK_OK);
+    assert_int_equal(a.live_blocks, blocks); /* whatever was borrowed was given back */
+    for (size_t i = 0; i < NQ; i++) {
+      assert_int_equal(got_n[i], ref_n[i]);
+      for (size_t j = 0; j < got_n[i]; j++) {
+        assert_int_equal(got[i * K + j].id, ref[i * K + j].id);
+        assert_true(got[i * K + j].dist == ref[i * K + j].dist);
+      }
+      assert_int_equal(got_l[i], ref_l[i]);
+    }
+    if (fail) assert_true(a.failed);     /* the fallback path really ran */
+    if (!fail) assert_true(a.calls > 0); /* and the Z-order path borrowed its buffer */
+  }
   a.fail_at = 0;
   qk_tree_free(t);
   assert_int_equal(a.live_blocks, 0);
@@ -608,6 +656,7 @@ int main(void) {
       cmocka_unit_test(test_reliability_alloc_collider),
       cmocka_unit_test(test_reliability_alloc_geo),
       cmocka_unit_test(test_reliability_queries_do_not_allocate),
+      cmocka_unit_test(test_reliability_batches_fall_back),
       cmocka_unit_test(test_reliability_alloc_poly_read),
       cmocka_unit_test(test_reliability_alloc_poly_arrays),
       cmocka_unit_test(test_reliability_alloc_mesh_generate),
