@@ -37,19 +37,24 @@ static uint32_t exact_cell(const qk_tree_t *t, double x, double y, unsigned L) {
   return key;
 }
 
-/* Interleave: bit i of hi goes to bit 2i+1, bit i of lo to bit 2i. */
-static inline uint32_t interleave(uint32_t hi, uint32_t lo) {
-  uint64_t v = ((uint64_t)hi << 32) | lo;
-  uint64_t h = v >> 32, l = v & 0xFFFFFFFFu;
-  h = (h | (h << 8)) & 0x00FF00FFull;
-  h = (h | (h << 4)) & 0x0F0F0F0Full;
-  h = (h | (h << 2)) & 0x33333333ull;
-  h = (h | (h << 1)) & 0x55555555ull;
-  l = (l | (l << 8)) & 0x00FF00FFull;
-  l = (l | (l << 4)) & 0x0F0F0F0Full;
-  l = (l | (l << 2)) & 0x33333333ull;
-  l = (l | (l << 1)) & 0x55555555ull;
-  return (uint32_t)((h << 1) | l);
+/* Spread the low 8 bits of v to the even bit positions. */
+static inline uint32_t spread8(uint32_t v) {
+  v = (v | (v << 4)) & 0x0F0Fu;
+  v = (v | (v << 2)) & 0x3333u;
+  return (v | (v << 1)) & 0x5555u;
+}
+
+/* The cell of a point at (qx, qy) in grid units, by truncation, when the point is at least
+ * `delta` away from every grid line (so truncation agrees with the tree's comparisons);
+ * false otherwise. Truncation is floor here: negative values fail the range test. */
+static inline bool scaled_cell(double qx, double qy, double cells, double delta, uint32_t *k) {
+  if (!(qx >= delta && qy >= delta && qx < cells - delta && qy < cells - delta)) return false;
+  uint32_t ix = (uint32_t)qx, iy = (uint32_t)qy;
+  double fx = qx - ix, fy = qy - iy;
+  if (!(fx >= delta && fx <= 1 - delta && fy >= delta && fy <= 1 - delta)) return false;
+  uint32_t top = (uint32_t)cells - 1;
+  *k = (spread8(~iy & top) << 1) | spread8(ix ^ iy);
+  return true;
 }
 
 /* Make node v over slots [a, b) a leaf or split it along the bucket counts. `cum` holds
@@ -94,55 +99,45 @@ qk_status_t qk__build_bucketed(qk_tree_t *t, const qk_point_t *p, size_t n, bool
   if (!(delta < 0.25)) return QK_OK; /* badly conditioned: use the plain build */
 
   size_t nb = (size_t)1 << (2 * L);
-  /* Sort (cell, index) pairs by cell with a two-pass LSD radix sort on bytes (cells have
-   * at most 16 bits), then gather the points in that order: random reads of one cache line
-   * per point instead of random writes to three arrays. */
-  size_t pairs = n ? n : 1;
+  /* Counting sort of the point indices by cell (cells have at most 16 bits, so the counts
+   * stay in cache), then a gather of the points in that order: random reads of one cache
+   * line per point rather than random writes to three arrays. */
+  size_t m = n ? n : 1;
   uint32_t *cum = qk__realloc(&t->alloc, NULL, 0, (nb + 1) * sizeof *cum);
-  uint64_t *a = qk__realloc(&t->alloc, NULL, 0, pairs * sizeof *a);
-  uint64_t *b = qk__realloc(&t->alloc, NULL, 0, pairs * sizeof *b);
-  if (!cum || !a || !b) {
+  uint16_t *key = qk__realloc(&t->alloc, NULL, 0, m * sizeof *key);
+  uint32_t *order = qk__realloc(&t->alloc, NULL, 0, m * sizeof *order);
+  if (!cum || !key || !order) {
     qk__free(&t->alloc, cum, (nb + 1) * sizeof *cum);
-    qk__free(&t->alloc, a, pairs * sizeof *a);
-    qk__free(&t->alloc, b, pairs * sizeof *b);
+    qk__free(&t->alloc, key, m * sizeof *key);
+    qk__free(&t->alloc, order, m * sizeof *order);
     return QK_ERR_NOMEM;
   }
   memset(cum, 0, (nb + 1) * sizeof *cum);
-  uint32_t lo_count[257] = {0}, hi_count[257] = {0};
-  uint32_t top = (uint32_t)cells - 1;
   for (size_t i = 0; i < n; i++) {
-    double qx = (p[i].x - x0) * scale, qy = (p[i].y - y0) * scale;
-    double fx = floor(qx), fy = floor(qy);
     uint32_t k;
-    if (qx - fx < delta || fx + 1 - qx < delta || qy - fy < delta || fy + 1 - qy < delta ||
-        fx > top || fy > top) {
+    if (!scaled_cell((p[i].x - x0) * scale, (p[i].y - y0) * scale, cells, delta, &k))
       k = exact_cell(t, p[i].x, p[i].y, L); /* near a grid line: the tree's comparisons */
-    } else {
-      uint32_t ix = (uint32_t)fx, iy = (uint32_t)fy;
-      k = interleave(~iy & top, ix ^ iy);
-    }
-    a[i] = ((uint64_t)k << 32) | i;
+    key[i] = (uint16_t)k;
     cum[k + 1]++;
-    lo_count[(k & 0xFF) + 1]++;
-    hi_count[(k >> 8) + 1]++;
   }
-  for (int d = 0; d < 256; d++) lo_count[d + 1] += lo_count[d], hi_count[d + 1] += hi_count[d];
-  for (size_t i = 0; i < n; i++) b[lo_count[(a[i] >> 32) & 0xFF]++] = a[i];
-  for (size_t i = 0; i < n; i++) a[hi_count[(b[i] >> 40) & 0xFF]++] = b[i];
+  for (size_t k = 0; k < nb; k++) cum[k + 1] += cum[k];
+  /* `cum[k]` advances as bucket k fills and ends at the next bucket's start. */
+  for (size_t i = 0; i < n; i++) order[cum[key[i]]++] = (uint32_t)i;
   for (size_t s = 0; s < n; s++) {
-    uint32_t i = (uint32_t)a[s];
+    uint32_t i = order[s];
 #if defined(__GNUC__)
     /* The reads are random: ask for the point a few iterations ahead. */
-    if (s + 16 < n) __builtin_prefetch(&p[(uint32_t)a[s + 16]]);
+    if (s + 16 < n) __builtin_prefetch(&p[order[s + 16]]);
 #endif
     t->px[s] = p[i].x;
     t->py[s] = p[i].y;
     t->pid[s] = i;
     t->where[i] = (uint32_t)s;
   }
-  for (size_t k = 0; k < nb; k++) cum[k + 1] += cum[k];
-  qk__free(&t->alloc, a, pairs * sizeof *a);
-  qk__free(&t->alloc, b, pairs * sizeof *b);
+  memmove(cum + 1, cum, nb * sizeof *cum); /* back to bucket starts */
+  cum[0] = 0;
+  qk__free(&t->alloc, key, m * sizeof *key);
+  qk__free(&t->alloc, order, m * sizeof *order);
   qk_status_t st = from_buckets(t, 0, cum, 0, L);
   qk__free(&t->alloc, cum, (nb + 1) * sizeof *cum);
   *done = st == QK_OK;
