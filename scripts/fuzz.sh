@@ -31,7 +31,7 @@ fi
 
 mkdir -p "$out"
 flags=(-g -O1 -std=c11 -D_POSIX_C_SOURCE=200809L -Wall -Wextra -Wpedantic
-  -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer
+  "-fsanitize=fuzzer,address,undefined" -fno-sanitize-recover=all -fno-omit-frame-pointer
   -I"$src/include" -I"$src")
 lib=("$src"/index/*.c "$src"/query/*.c "$src"/mesh/*.c)
 
@@ -55,8 +55,7 @@ options() {
 for t in "${targets[@]}"; do
   s=$(sources "$t")
   echo "== build fuzz_$t" >&2
-  # shellcheck disable=SC2046
-  nice -n "$jobs_nice" "$cc" "${flags[@]}" $s "${lib[@]}" -lm -o "$out/fuzz_$t"
+  nice -n "$jobs_nice" "$cc" "${flags[@]}" "$s" "${lib[@]}" -lm -o "$out/fuzz_$t"
 done
 [ "${FUZZ_BUILD_ONLY:-0}" = 1 ] && exit 0
 

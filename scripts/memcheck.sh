@@ -24,7 +24,7 @@ cmake -S . -B "$dir" -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
 nice cmake --build "$dir" -j"$jobs"
 
 vg=(valgrind --tool=memcheck --error-exitcode=99 --leak-check=full
-  --show-leak-kinds=definite,indirect,possible --errors-for-leak-kinds=definite,indirect,possible
+  '--show-leak-kinds=definite,indirect,possible' '--errors-for-leak-kinds=definite,indirect,possible'
   --num-callers=30 --quiet)
 export QK_SOURCE_DIR="$src" QK_SHARED_DIR="$src/../shared"
 log="$dir/memcheck"

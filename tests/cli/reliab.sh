@@ -18,18 +18,18 @@ row() {
   shift 4
   rows=$((rows + 1))
   local before after out rc
-  before=$(cd out && ls -A | sort)
+  before=$(find out -mindepth 1 | sort)
   out=$("$@" 2>&1)
   rc=$?
-  after=$(cd out && ls -A | sort)
+  after=$(find out -mindepth 1 | sort)
   if [ "$rc" -ne "$code" ] || ! grep -qE -- "$pat" <<<"$out"; then
     echo "FAIL $id: $* -> exit $rc (want $code), output: $out (want /$pat/)"
     fails=$((fails + 1))
   elif [ "$code" -ne 0 ] && [ "$before" != "$after" ]; then
     echo "FAIL $id: $* failed but left files behind: $(comm -13 <(echo "$before") <(echo "$after"))"
     fails=$((fails + 1))
-  elif ls out | grep -q '\.tmp\.'; then
-    echo "FAIL $id: $* left a temporary file: $(ls out)"
+  elif find out -name '*.tmp.*' | grep -q .; then
+    echo "FAIL $id: $* left a temporary file: $(find out -name '*.tmp.*')"
     fails=$((fails + 1))
   fi
 }
@@ -40,7 +40,7 @@ printf 'x,y\n0,0\nnan,1\n' >nan.csv
 printf '0,0\n1,-inf\n' >inf.csv
 printf '0,0\n1e400,1\n' >over.csv
 printf 'x,y\n-1e308,0\n1e308,1\n' >huge.csv
-for i in $(seq 2000); do echo "0.25,0.75"; done >dup.csv
+yes 0.25,0.75 | head -n 2000 >dup.csv
 printf '0,0\n1,abc\n' >word.csv
 printf '0,0\n1\n' >short.csv
 printf '0,0\n1,2\n3' >trunc.csv
