@@ -16,11 +16,18 @@
 /* The reader itself, so that the target needs no CLI binary (it is not in the library). */
 #include "tools/csv.c"
 
-/* One scratch file per process, rewritten for each input. */
+/* One scratch file per process, rewritten for each input and removed at exit. */
+static char csv_path[64];
+
+static void csv_cleanup(void) { remove(csv_path); }
+
 static const char *csv_scratch(const uint8_t *data, size_t size) {
-  static char path[64];
-  if (!path[0]) {
-    snprintf(path, sizeof path, "/tmp/qkf-csv-%ld.csv", (long)getpid());
+  const char *path = csv_path;
+  if (!csv_path[0]) {
+    const char *dir = getenv("TMPDIR");
+    snprintf(csv_path, sizeof csv_path, "%s/qkf-csv-%ld.csv",
+             dir && strlen(dir) < 32 ? dir : "/tmp", (long)getpid());
+    atexit(csv_cleanup);
   }
   FILE *f = fopen(path, "wb");
   if (!f || (size && fwrite(data, 1, size, f) != size) || fclose(f) != 0) {
