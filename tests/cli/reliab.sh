@@ -82,6 +82,39 @@ row T25 1 'nan.csv:3' -- "$cli" tree nan.csv --svg out/t.svg
 cmp -s before.svg out/t.svg || { echo "FAIL T25: existing output changed"; fails=$((fails + 1)); }
 rm -f out/t.svg
 
+# ---- outputs that are not regular files ------------------------------------------------
+# Writing through a symbolic link or into a FIFO must reach the link's target or the
+# FIFO's reader; a temporary-and-rename there would replace the link or the FIFO by a
+# regular file (and, run as root with --svg /dev/stdout, replace the device's link).
+# KNOWN BUG (tools/csv.c cli_out_open/cli_out_close, reported): these rows are expected to
+# fail until fixed; set QK_STRICT=1 to count them.
+known() { # known ID DESCRIPTION CONDITION-COMMAND...
+  local id=$1 what=$2
+  shift 2
+  rows=$((rows + 1))
+  if "$@"; then
+    echo "NOTE $id: known bug seems fixed ($what): make it a normal row"
+  elif [ "${QK_STRICT:-0}" = 1 ]; then
+    echo "FAIL $id: $what"
+    fails=$((fails + 1))
+  else
+    echo "KNOWN $id: $what"
+  fi
+}
+: >target.svg
+ln -s "$tmp/target.svg" out/link.svg
+"$cli" tree ok.csv --svg out/link.svg >/dev/null 2>&1
+known H1 "--svg through a symbolic link keeps the link and fills its target" \
+  bash -c '[ -L out/link.svg ] && grep -q "</svg>" target.svg'
+rm -f out/link.svg
+mkfifo out/pipe.svg
+(timeout 3 cat out/pipe.svg >fifo.out 2>/dev/null &)
+sleep 0.2
+timeout 10 "$cli" tree ok.csv --svg out/pipe.svg >/dev/null 2>&1
+sleep 0.2
+known H2 "--svg into a FIFO keeps the FIFO and its reader gets the picture" \
+  bash -c '[ -p out/pipe.svg ] && grep -q "</svg>" fifo.out'
+rm -f out/pipe.svg
 # ---- queries (quadkit knn, radius, range, locate, collide, raycast, geo) ---------------
 if "$cli" knn --help >/dev/null 2>&1; then
   printf 'x,y\n0,0\n1,1\n0.5,0.5\n' >p.csv
@@ -190,6 +223,8 @@ if "$cli" mesh --help >/dev/null 2>&1; then
   row M27 2 '--size' -- "$cli" mesh ok.poly -o out/m --size 2147483648
   row M28 1 'missing.poly' -- "$cli" mesh missing.poly -o out/m
   row M29 1 'cannot write' -- "$cli" mesh ok.poly -o out/no/such/dir/m
+  # All or nothing: one unwritable output, and none of the others is left.
+  row M31 1 'cannot write out/no/dir/x.svg' -- "$cli" mesh ok.poly -o out/m --svg out/no/dir/x.svg
   # A failed run leaves earlier outputs of the same name untouched.
   "$cli" mesh ok.poly -o out/keep >/dev/null 2>&1
   cp out/keep.node keep.node
