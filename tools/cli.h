@@ -54,12 +54,15 @@ int cli_parse_double(const char *cmd, const char *opt, const char *s, double *ou
 
 /*
  * Output files are written to "PATH.tmp.PID" and renamed on success so that a failed run
- * leaves no half-written file. cli_out_open returns NULL (after printing why) on error.
+ * leaves no half-written file; a symbolic link is written through (its target replaced),
+ * and a FIFO or device ("-" is stdout) is written directly. cli_out_open returns an exit
+ * code (after printing why) on error.
  */
 typedef struct cli_out {
   FILE *f;
-  char *path;
+  char *path; /* final path (a link's target), NULL when writing directly */
   char *tmp;
+  int direct; /* a FIFO or device: written in place, never renamed over */
 } cli_out_t;
 int cli_out_open(const char *cmd, const char *path, cli_out_t *o);
 /* Close and rename (ok != 0) or close and delete (ok == 0). Returns CLI_OK or an error. */
