@@ -21,6 +21,10 @@
 #include "mesh/mesh_internal.h"
 
 #define PF_MAX_U 64
+/* Large domains (up to 2^28) are meshed when the components are short: the work grows
+ * with the perimeter times log U, not with U. */
+#define PF_BIG_U_LOG 28
+#define PF_BIG_PERIMETER 64.0
 
 static int pf_cmp_u64(const void *a, const void *b) {
   uint64_t x = *(const uint64_t *)a, y = *(const uint64_t *)b;
@@ -39,8 +43,11 @@ static int pf_has(const uint64_t *keys, size_t n, uint64_t k) {
   return lo < n && keys[lo] == k;
 }
 
-/* Angle checks in exact arithmetic: coordinates are half-integers up to 64, so twice
- * them are integers and all products below fit easily in int64. */
+/* Angle checks in exact integer arithmetic on doubled coordinates (at most 2^29 here,
+ * so every product below is at most 2^58 and every sum of two at most 2^59). With the
+ * triangle counter-clockwise, the cross product at each corner is the same positive
+ * twice-area A, and an angle lies in [45, 90] degrees exactly when 0 <= dot <= A
+ * (cos >= 0, and tan >= 1). */
 static void pf_check_angles(int64_t p[3][2], size_t t) {
   int64_t area2 =
       (p[1][0] - p[0][0]) * (p[2][1] - p[0][1]) - (p[1][1] - p[0][1]) * (p[2][0] - p[0][0]);
@@ -49,10 +56,9 @@ static void pf_check_angles(int64_t p[3][2], size_t t) {
   for (int i = 0; i < 3; i++) {
     const int64_t *a = p[i], *b = p[(i + 1) % 3], *c = p[(i + 2) % 3];
     int64_t ux = b[0] - a[0], uy = b[1] - a[1], vx = c[0] - a[0], vy = c[1] - a[1];
-    int64_t dot = ux * vx + uy * vy, uu = ux * ux + uy * uy, vv = vx * vx + vy * vy;
-    /* angle <= 90 <=> dot >= 0; angle >= 45 <=> cos^2 <= 1/2 <=> 2 dot^2 <= uu vv. */
+    int64_t dot = ux * vx + uy * vy;
     QKF_ASSERT(dot >= 0, "triangle %zu has an obtuse angle", t);
-    QKF_ASSERT(2 * dot * dot <= uu * vv, "triangle %zu has an angle below 45 degrees", t);
+    QKF_ASSERT(dot <= area2, "triangle %zu has an angle below 45 degrees", t);
   }
 }
 
@@ -78,7 +84,7 @@ static void pf_check_mesh(const qk_poly_t *poly, const qk_mesh_t *m) {
                y / 2);
     v2[2 * i] = (int64_t)x, v2[2 * i + 1] = (int64_t)y;
   }
-  int64_t area2 = 0; /* in quarter units, times 2 */
+  uint64_t area2 = 0; /* in quarter units, times 2 (at most 2^59) */
   for (size_t t = 0; t < nt; t++) {
     int64_t p[3][2];
     for (int k = 0; k < 3; k++) {
@@ -88,7 +94,8 @@ static void pf_check_mesh(const qk_poly_t *poly, const qk_mesh_t *m) {
       keys[3 * t + k] = (uint64_t)v << 32 | tri[3 * t + (k + 1) % 3];
     }
     pf_check_angles(p, t);
-    area2 += (p[1][0] - p[0][0]) * (p[2][1] - p[0][1]) - (p[1][1] - p[0][1]) * (p[2][0] - p[0][0]);
+    area2 += (uint64_t)((p[1][0] - p[0][0]) * (p[2][1] - p[0][1]) -
+                        (p[1][1] - p[0][1]) * (p[2][0] - p[0][0]));
     QKF_ASSERT(comp[t] <= st.components, "triangle %zu has component %u of %zu", t, comp[t],
                st.components);
   }
@@ -100,8 +107,8 @@ static void pf_check_mesh(const qk_poly_t *poly, const qk_mesh_t *m) {
   size_t nh = 0;
   qk_poly_counts(poly, NULL, NULL, &nh);
   if (nh == 0) {
-    QKF_ASSERT(area2 == 2 * U2 * U2, "triangles cover twice-area %lld, domain %lld",
-               (long long)area2, (long long)(2 * U2 * U2));
+    QKF_ASSERT(area2 == (uint64_t)(2 * U2 * U2), "triangles cover twice-area %llu, domain %lld",
+               (unsigned long long)area2, (long long)(2 * U2 * U2));
     /* Conforming: an edge with no twin lies on the domain boundary. */
     for (size_t i = 0; i < ne; i++) {
       uint32_t a = (uint32_t)(keys[i] >> 32), b = (uint32_t)keys[i];
@@ -198,7 +205,21 @@ int qkf_poly(const uint8_t *data, size_t size) {
   mo.allocator = &al;
   double big = 0;
   for (size_t i = 0; i < nv; i++) big = fmax(big, fmax(fabs(poly->vx[i]), fabs(poly->vy[i])));
-  mo.size = opt & 0x80 && big <= PF_MAX_U ? 0 : 1u << (opt % 7);
+  double perimeter = 0;
+  for (size_t i = 0; i < ns; i++) {
+    uint32_t a = poly->seg[2 * i], b = poly->seg[2 * i + 1];
+    perimeter += fmax(fabs(poly->vx[a] - poly->vx[b]), fabs(poly->vy[a] - poly->vy[b]));
+  }
+  if (opt & 0x40 && perimeter <= PF_BIG_PERIMETER && nh == 0) {
+    /* A large domain, from 2^7 to 2^28; the input is moved far from the origin. */
+    mo.size = 1ull << (7 + opt % (PF_BIG_U_LOG - 6));
+    if (big <= PF_MAX_U && (opt & 0x80)) {
+      double shift = (double)(mo.size - 2 * PF_MAX_U);
+      for (size_t i = 0; i < nv; i++) poly->vx[i] += shift, poly->vy[i] += shift / 2;
+    }
+  } else {
+    mo.size = opt & 0x80 && big <= PF_MAX_U ? 0 : 1u << (opt % 7);
+  }
   qk_mesh_t *mesh = (qk_mesh_t *)&as;
   size_t blocks = as.live_blocks;
   qkf_alloc_arm(&as, gen_fail);

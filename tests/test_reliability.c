@@ -26,6 +26,7 @@
 
 #include "qk_test.h"
 #include "index/index_internal.h"
+#include "mesh_check.h"
 
 /* The fuzz targets, compiled in with failures reported through cmocka. */
 static const char *qkr_current = "";
@@ -633,6 +634,39 @@ static void test_reliability_limits(void **state) {
   assert_true(st == QK_ERR_GEOMETRY || st == QK_ERR_LIMIT);
   assert_null(m);
   qk_poly_free(poly);
+  /* The largest domain, U = 2^30, chosen automatically: a unit square in its far corner
+   * and a diamond near the origin mesh exactly (checked by the independent checker). */
+  {
+    const double T = (double)QK_MESH_MAX_SIZE;
+    double big[16] = {T - 1, T - 1, T, T - 1, T, T, T - 1, T, 4, 2, 6, 4, 4, 6, 2, 4};
+    uint32_t bseg[16] = {0, 1, 1, 2, 2, 3, 3, 0, 4, 5, 5, 6, 6, 7, 7, 4};
+    assert_int_equal(qk_poly_from_arrays(big, 8, bseg, 8, NULL, 0, NULL, &poly), QK_OK);
+    mo.size = 0;
+    qk_mesh_t *bm;
+    assert_int_equal(qk_mesh_generate(poly, &mo, &bm, &err), QK_OK);
+    qk_mesh_stats_t ms;
+    qk_mesh_stats(bm, &ms);
+    assert_true(ms.size == QK_MESH_MAX_SIZE);
+    mc_input_t in = {big, 8, bseg, 8, NULL, 0, ms.size};
+    mc_mesh_t mm;
+    mm.xy = qk_mesh_vertices(bm, &mm.nv);
+    mm.tri = qk_mesh_triangles(bm, &mm.nt);
+    mm.comp = qk_mesh_triangle_components(bm);
+    char msg[256];
+    if (mc_check(&in, &mm, msg, sizeof msg)) fail_msg("mesh at U = 2^30: %s", msg);
+    print_message("U = 2^30: %zu triangles, %zu leaves\n", mm.nt, ms.leaves);
+    qk_mesh_free(bm);
+    qk_poly_free(poly);
+    /* One past it: a clear error naming the vertex, not an overflow. */
+    big[2] = T + 1;
+    assert_int_equal(qk_poly_from_arrays(big, 8, bseg, 8, NULL, 0, NULL, &poly), QK_OK);
+    bm = (qk_mesh_t *)&a;
+    st = qk_mesh_generate(poly, &mo, &bm, &err);
+    assert_true(st == QK_ERR_GEOMETRY || st == QK_ERR_LIMIT);
+    assert_null(bm);
+    assert_non_null(strstr(err.message, "1073741825"));
+    qk_poly_free(poly);
+  }
   /* Absurd counts in a .poly header are refused before anything is allocated for them. */
   a.calls = 0;
   poly = (qk_poly_t *)&a;
