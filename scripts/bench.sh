@@ -14,6 +14,8 @@ RESULTS=${RESULTS:-bench/results}
 name=full
 for a in "$@"; do [ "$a" = "--quick" ] && name=quick; done
 
+# PLOT_ONLY=1 redraws the plots (and the targets table) from an existing JSON lines file.
+if [ "${PLOT_ONLY:-0}" != 1 ]; then
 echo "bench: configuring and building $BUILD_DIR (Release)" >&2
 cmake -S . -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Release -DQUADKIT_BUILD_BENCH=ON \
   -DQUADKIT_BUILD_TESTS=OFF >"$BUILD_DIR.configure.log" 2>&1 ||
@@ -21,9 +23,11 @@ cmake -S . -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Release -DQUADKIT_BUILD_BENCH=ON \
 grep "quadkit-bench baselines" "$BUILD_DIR.configure.log" >&2 || true
 nice -n 5 cmake --build "$BUILD_DIR" --target quadkit_bench -j"$JOBS" >/dev/null
 
+fi
 mkdir -p "$RESULTS"
 jsonl="$RESULTS/$name.jsonl"
 table="$RESULTS/$name.txt"
+if [ "${PLOT_ONLY:-0}" != 1 ]; then
 threads=2
 start=$(date +%s)
 {
@@ -32,6 +36,11 @@ start=$(date +%s)
   "$BUILD_DIR/bench/quadkit-bench" --threads "$threads" "$@" --json-out "$jsonl"
 } | tee "$table"
 echo "bench: suite took $(( $(date +%s) - start )) s; results in $jsonl, table in $table" >&2
+fi
+# The issue's targets against this run.
+if command -v python3 >/dev/null; then
+  python3 bench/summarize.py "$jsonl" | tee "$RESULTS/$name-targets.md"
+fi
 
 # Plots: throughput against n for each operation, one line per implementation (and
 # variant for kNN), log-log, from the JSON lines just written.
@@ -66,7 +75,11 @@ for op in ops:
                     d.write(f"{n} {v}\n")
         xl = "domain side U" if op == "mesh" else "n"
         f.write('set terminal svg size 640,400 dynamic font "sans,11"\n')
-        f.write(f'set title "{op}: throughput against {xl} (one thread)"\n')
+        what = {"knn": "1-NN, random order, uniform points", "build": "uniform points",
+                "radius": "uniform points", "range": "uniform points", "balance": "gauss tree, capacity 8",
+                "mesh": "octagons; triangles/s", "collide": "boxes, build + all pairs",
+                "raycast": "1e6 rays against n discs", "geo-knn": "cities"}.get(op, "")
+        f.write(f'set title "{op}: throughput against {xl} ({what}; one thread)"\n')
         f.write(f'set xlabel "{xl}"\nset ylabel "per second"\nset logscale xy\nset key outside right\nset grid\n')
         plots = [f'"{sys.argv[2]}/{op}.{l.replace(" ", "_")}.dat" using 1:2 with linespoints title "{l}"' for l in labels]
         f.write("plot " + ", ".join(plots) + "\n")
