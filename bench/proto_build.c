@@ -207,6 +207,14 @@ double qkb_proto_build(const double *xy, size_t n, unsigned capacity, size_t *le
   /* (2) 32-bit keys: the top 16 levels of the Morton code. */
   size_t nn = n ? n : 1;
   item_t *a = malloc(nn * sizeof *a), *tmp = malloc(nn * sizeof *tmp);
+  if (!a || !tmp) {
+    free(a);
+    free(tmp);
+    *leaves = *bytes = 0;
+    return -1;
+  }
+  a[0].key = 0; /* n may be 0; keeps the first slot defined for the sort's reads */
+  a[0].id = 0;
   for (size_t i = 0; i < n; i++) {
     uint32_t cx = cell_of(xy[2 * i], xmin, scale), cy = cell_of(xy[2 * i + 1], ymin, scale);
     a[i].key = (uint32_t)((spread32(cx >> 16) | (spread32(cy >> 16) << 1)));

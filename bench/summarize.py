@@ -95,7 +95,7 @@ def main():
     if b:
         bp = b["bytes_per_point"]
         out.append(f"| memory, bytes per point (n={n:.0e}) | ≤ 24 | {bp:.1f} | {'yes' if bp <= 24 else '**no**'} |")
-    print("| target (1M uniform points, one thread unless said) | wanted | measured | reached |")
+    print(f"| target (uniform points, n = {n:.0e}, one thread unless said) | wanted | measured | reached |")
     print("|---|---|---|---|")
     print("\n".join(out))
 
