@@ -489,6 +489,66 @@ static void to_collider(to_state_t *s) {
   qk_collider_free(c);
 }
 
+/* Batches (kNN, locate, radius) against the same queries asked one at a time. Batches
+ * of 64 or more borrow a buffer from the tree's allocator, which may be armed to fail:
+ * the answers must not change, and nothing may stay borrowed. */
+static void to_batch(to_state_t *s) {
+  enum { MAXQ = 130, K = 4 };
+  /* Open bug (regressions/tree_ops/open/empty-tree-knn-batch-null-offset): the batch
+   * kNN's prefetching computes NULL + 0 on a tree that never held a point. */
+  qk_tree_stats_t ts;
+  qk_tree_stats(s->tree, &ts);
+  if (QKF_OPEN_BUGS && ts.points == 0) return;
+  static qk_point_t q[MAXQ];
+  static qk_neighbor_t got[MAXQ * K], one[K];
+  static size_t counts[MAXQ], offsets[MAXQ + 1];
+  static qk_node_t leaves[MAXQ];
+  static qk_neighbor_t rout[MAXQ * 8];
+  size_t nq = 1 + qkf_u8(&s->in) % MAXQ;
+  uint8_t fail = qkf_u8(&s->in);
+  for (size_t i = 0; i < nq; i++) q[i] = to_point(s);
+  double r = s->opt.root.side / 16;
+  size_t blocks = s->alloc_state.live_blocks;
+  qkf_alloc_arm(&s->alloc_state, fail & 1 ? 1 : 0);
+  qk_status_t kb = qk_query_knn_batch(s->tree, q, nq, K, INFINITY, got, counts);
+  qk_status_t lb = qk_query_locate_batch(s->tree, q, nq, leaves);
+  qk_status_t rb = qk_query_radius_batch(s->tree, q, nq, r, rout, MAXQ * 8, offsets);
+  qkf_alloc_arm(&s->alloc_state, 0);
+  QKF_ASSERT(s->alloc_state.live_blocks == blocks, "a batch kept %zu borrowed blocks",
+             s->alloc_state.live_blocks - blocks);
+  QKF_ASSERT(lb == QK_OK, "locate_batch = %d", lb);
+  int any_bad = 0;
+  for (size_t i = 0; i < nq; i++) {
+    size_t n1 = 0;
+    qk_status_t st = qk_query_knn(s->tree, q[i], K, INFINITY, one, &n1);
+    if (st != QK_OK) {
+      any_bad = 1;
+      QKF_ASSERT(counts[i] == 0, "knn_batch answered non-finite query %zu", i);
+      QKF_ASSERT(leaves[i] == QK_NONE, "locate_batch placed non-finite query %zu", i);
+      continue;
+    }
+    QKF_ASSERT(counts[i] == n1, "knn_batch query %zu: %zu neighbours, single query %zu", i,
+               counts[i], n1);
+    for (size_t j = 0; j < n1; j++)
+      QKF_ASSERT(got[i * K + j].id == one[j].id && got[i * K + j].dist == one[j].dist,
+                 "knn_batch query %zu neighbour %zu differs from the single query", i, j);
+    for (size_t j = n1; j < K; j++)
+      QKF_ASSERT(got[i * K + j].id == QK_NONE, "knn_batch: unused slot not QK_NONE");
+    qk_node_t leaf = QK_NONE;
+    qk_status_t fl = qk_tree_find_leaf(s->tree, q[i], &leaf);
+    QKF_ASSERT(leaves[i] == (fl == QK_OK ? leaf : QK_NONE), "locate_batch query %zu", i);
+    if (rb == QK_OK) {
+      size_t nr = 0;
+      qk_query_radius_list(s->tree, q[i], r, NULL, 0, &nr);
+      QKF_ASSERT(offsets[i + 1] - offsets[i] == nr, "radius_batch query %zu: %zu, single %zu", i,
+                 offsets[i + 1] - offsets[i], nr);
+    }
+  }
+  QKF_ASSERT(kb == (any_bad ? QK_ERR_NONFINITE : QK_OK), "knn_batch = %d", kb);
+  QKF_ASSERT(rb == QK_OK || rb == QK_ERR_LIMIT || (any_bad && rb == QK_ERR_NONFINITE),
+             "radius_batch = %d", rb);
+}
+
 /* Refinement predicate: split a leaf that holds a point while above the chosen depth. */
 static int to_refine_cb(const qk_tree_t *t, qk_node_t leaf, qk_square_t sq, uint32_t depth,
                         void *ud) {
@@ -577,7 +637,7 @@ int qkf_tree_ops(const uint8_t *data, size_t size) {
       static const uint8_t changes[] = {0, 3, 4, 12};
       code = changes[qkf_u8(&s.in) % 4];
     }
-    switch (code % 13) {
+    switch (code % 14) {
     case 0:
     case 1:
     case 2:
@@ -609,6 +669,9 @@ int qkf_tree_ops(const uint8_t *data, size_t size) {
       break;
     case 10:
       to_rebuild(&s, qkf_u8(&s.in) % 6);
+      break;
+    case 13:
+      to_batch(&s);
       break;
     case 11: { /* neighbours of a leaf: each adjacent leaf lists the leaf back */
       qk_node_t leaf = to_pick_leaf(&s);
