@@ -17,10 +17,11 @@ for a in "$@"; do [ "$a" = "--quick" ] && name=quick; done
 # PLOT_ONLY=1 redraws the plots (and the targets table) from an existing JSON lines file.
 if [ "${PLOT_ONLY:-0}" != 1 ]; then
 echo "bench: configuring and building $BUILD_DIR (Release)" >&2
+mkdir -p "$BUILD_DIR"
+log="$BUILD_DIR/bench-configure.log"
 cmake -S . -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=Release -DQUADKIT_BUILD_BENCH=ON \
-  -DQUADKIT_BUILD_TESTS=OFF >"$BUILD_DIR.configure.log" 2>&1 ||
-  { cat "$BUILD_DIR.configure.log" >&2; exit 1; }
-grep "quadkit-bench baselines" "$BUILD_DIR.configure.log" >&2 || true
+  -DQUADKIT_BUILD_TESTS=OFF >"$log" 2>&1 || { cat "$log" >&2; exit 1; }
+grep "quadkit-bench baselines" "$log" >&2 || true
 nice -n 5 cmake --build "$BUILD_DIR" --target quadkit_bench -j"$JOBS" >/dev/null
 
 fi

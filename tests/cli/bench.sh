@@ -19,10 +19,10 @@ if [ ${#missing[@]} -gt 0 ]; then
 fi
 bdir="$(cd "$(dirname "$cli")" && pwd)/bench-smoke"
 if ! cmake -S "$src" -B "$bdir" -DCMAKE_BUILD_TYPE=Release -DQUADKIT_BUILD_BENCH=ON \
-  -DQUADKIT_BUILD_TESTS=OFF -DQUADKIT_BUILD_TOOLS=OFF >"$bdir.log" 2>&1 ||
-  ! nice -n 5 cmake --build "$bdir" --target quadkit_bench -j2 >>"$bdir.log" 2>&1; then
-  echo "FAIL: building quadkit-bench (log: $bdir.log)"
-  tail -n 30 "$bdir.log"
+  -DQUADKIT_BUILD_TESTS=OFF -DQUADKIT_BUILD_TOOLS=OFF >"$bdir-build.log" 2>&1 ||
+  ! nice -n 5 cmake --build "$bdir" --target quadkit_bench -j2 >>"$bdir-build.log" 2>&1; then
+  echo "FAIL: building quadkit-bench (log: $bdir-build.log)"
+  tail -n 30 "$bdir-build.log"
   exit 1
 fi
 bench="$bdir/bench/quadkit-bench"
