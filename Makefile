@@ -3,7 +3,7 @@ BUILD ?= build
 JOBS ?= 2
 CMAKE_FLAGS ?=
 
-.PHONY: all deps build demo test asan memcheck fuzz bench format format-check install clean
+.PHONY: all deps build demo test asan tsan memcheck fuzz bench format format-check install clean
 
 all: build
 
@@ -38,12 +38,16 @@ install: build
 	@cmake --install $(BUILD)
 
 clean:
-	rm -rf $(BUILD) build-asan build-bench build-fuzz build-memcheck
+	rm -rf $(BUILD) build-asan build-tsan build-bench build-fuzz build-memcheck
 
 # Benchmarks against the baselines (installs them first); see docs/benchmarks.md.
 bench:
 	@bash scripts/install-deps.sh core bench
 	@bash scripts/bench.sh
+
+# The concurrency test under ThreadSanitizer.
+tsan: deps
+	@bash scripts/tsan.sh
 
 # valgrind memcheck over a representative subset of the tests.
 memcheck:

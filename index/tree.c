@@ -372,7 +372,9 @@ qk_status_t qk_tree_build(const qk_point_t *points, size_t n, const qk_tree_opti
   r->live = 1;
   r->count = (uint32_t)n;
   r->room = (uint32_t)n;
-  if ((st = reserve_slots(t, n))) goto fail;
+  /* At least one slot even for an empty tree, so that a leaf's points are never a NULL
+   * base plus an offset (undefined behaviour even for offset 0). */
+  if ((st = reserve_slots(t, n ? n : 1))) goto fail;
   if (n && !(t->where = qk__realloc(&t->alloc, NULL, 0, n * sizeof(uint32_t)))) {
     st = QK_ERR_NOMEM;
     goto fail;

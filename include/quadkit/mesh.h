@@ -19,6 +19,11 @@
  *
  * All mesh vertices lie on the half-integer lattice, so their double coordinates are
  * exact.
+ *
+ * Thread safety: a mesh and a qk_poly never change once made, so any number of threads
+ * may call the functions taking a const handle (accessors, statistics, writers) on one
+ * mesh at once, and qk_mesh_generate() only reads its input, so several threads may mesh
+ * one qk_poly concurrently (each with its own allocator, or libc's).
  */
 #ifndef QUADKIT_MESH_H
 #define QUADKIT_MESH_H
