@@ -30,7 +30,7 @@ if ! command -v "$cc" >/dev/null; then
 fi
 
 mkdir -p "$out"
-flags=(-g -O1 -std=c11 -D_POSIX_C_SOURCE=200809L -Wall -Wextra -Wpedantic
+flags=(-g -O1 -std=c11 -D_XOPEN_SOURCE=700 -Wall -Wextra -Wpedantic
   "-fsanitize=fuzzer,address,undefined" -fno-sanitize-recover=all -fno-omit-frame-pointer
   -I"$src/include" -I"$src")
 lib=("$src"/index/*.c "$src"/query/*.c "$src"/mesh/*.c)
