@@ -294,7 +294,8 @@ void run_build(const std::string &ds, const std::vector<Pt> &pts) {
       bytes.push_back(NAN);
     } else {
       Rec r;
-      r.op = "build", r.impl = "cgal", r.dataset = ds, r.n = pts.size(), r.matches = 0;
+      r.op = "build", r.impl = "cgal", r.dataset = ds, r.n = pts.size(), r.matches = 0,
+      r.order = "-";
       r.note = "leaf count " + std::to_string(b) + " vs quadkit " + std::to_string(a);
       emit(r);
     }
@@ -313,7 +314,8 @@ void run_build(const std::string &ds, const std::vector<Pt> &pts) {
       bytes.push_back((double)pb / (double)pts.size());
     } else {
       Rec r;
-      r.op = "build", r.impl = "proto-morton", r.dataset = ds, r.n = pts.size(), r.matches = 0;
+      r.op = "build", r.impl = "proto-morton", r.dataset = ds, r.n = pts.size(), r.matches = 0,
+      r.order = "-";
       r.note = "leaf count " + std::to_string(pl) + " vs quadkit " + std::to_string(ql);
       emit(r);
     }
