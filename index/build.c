@@ -132,7 +132,6 @@ qk_status_t qk__build_bucketed(qk_tree_t *t, const qk_point_t *p, size_t n, bool
     t->px[s] = p[i].x;
     t->py[s] = p[i].y;
     t->pid[s] = i;
-    t->where[i] = (uint32_t)s;
   }
   memmove(cum + 1, cum, nb * sizeof *cum); /* back to bucket starts */
   cum[0] = 0;

@@ -12,6 +12,8 @@ typedef struct checker {
   size_t points_seen;
   size_t live_nodes;
   uint8_t *slot_owned; /* one byte per slot: 1 once a leaf claims it */
+  uint8_t *id_seen;    /* one byte per id: 1 once a leaf holds it */
+  const uint32_t *map; /* the id map, when it has been made */
 } checker_t;
 
 static qk_status_t fail(checker_t *c, const char *fmt, ...) {
@@ -44,8 +46,10 @@ static qk_status_t check_node(checker_t *c, uint32_t v) {
     }
     for (uint32_t i = n->start; i < n->start + n->count; i++) {
       qk_id_t id = t->pid[i];
-      if (id >= t->n_ids || t->where[id] != i)
-        return fail(c, "slot %u: id %u not mapped back to it", i, id);
+      if (id >= t->n_ids) return fail(c, "slot %u: id %u was never handed out", i, id);
+      if (c->map && c->map[id] != i) return fail(c, "slot %u: id %u not mapped back to it", i, id);
+      if (c->id_seen[id]) return fail(c, "id %u stored twice", id);
+      c->id_seen[id] = 1;
       /* The point must lie where the tie rules send it at every ancestor. */
       uint32_t child = v;
       for (uint32_t a = n->parent; a != QK_NONE; child = a, a = t->nodes[a].parent) {
@@ -87,7 +91,7 @@ static qk_status_t check_node(checker_t *c, uint32_t v) {
 }
 
 qk_status_t qk_tree_check(const qk_tree_t *t, char *msg, size_t msg_size) {
-  checker_t c = {t, msg, msg_size, 0, 0, NULL};
+  checker_t c = {t, msg, msg_size, 0, 0, NULL, NULL, NULL};
   if (msg && msg_size) msg[0] = '\0';
   if (!t) return fail(&c, "NULL tree");
   if (t->n_nodes == 0 || t->n_nodes > t->cap_nodes || (t->n_nodes - 1) % 4 != 0)
@@ -97,8 +101,14 @@ qk_status_t qk_tree_check(const qk_tree_t *t, char *msg, size_t msg_size) {
   if (r->count != t->n_points)
     return fail(&c, "root count %u != points %zu", r->count, t->n_points);
   if (t->n_slots > t->cap_slots) return fail(&c, "slots used beyond capacity");
+  c.map = qk__id_map_if_made(t);
   c.slot_owned = calloc(t->n_slots ? t->n_slots : 1, 1);
-  if (!c.slot_owned) return QK_ERR_NOMEM;
+  c.id_seen = calloc(t->n_ids ? t->n_ids : 1, 1);
+  if (!c.slot_owned || !c.id_seen) {
+    free(c.slot_owned);
+    free(c.id_seen);
+    return QK_ERR_NOMEM;
+  }
   qk_status_t st = check_node(&c, 0);
   if (!st && c.points_seen != t->n_points)
     st = fail(&c, "leaves hold %zu points, tree says %zu", c.points_seen, t->n_points);
@@ -108,12 +118,12 @@ qk_status_t qk_tree_check(const qk_tree_t *t, char *msg, size_t msg_size) {
     if (owned + t->garbage != t->n_slots)
       st = fail(&c, "slots: %zu owned + %u garbage != %u used", owned, t->garbage, t->n_slots);
   }
-  if (!st) {
+  if (!st && c.map) {
     size_t mapped = 0;
     for (uint32_t id = 0; id < t->n_ids; id++)
-      if (t->where[id] != QK_NONE) {
-        if (t->where[id] >= t->n_slots || t->pid[t->where[id]] != id) {
-          st = fail(&c, "id %u maps to slot %u which holds another point", id, t->where[id]);
+      if (c.map[id] != QK_NONE) {
+        if (c.map[id] >= t->n_slots || t->pid[c.map[id]] != id) {
+          st = fail(&c, "id %u maps to slot %u which holds another point", id, c.map[id]);
           break;
         }
         mapped++;
@@ -125,5 +135,6 @@ qk_status_t qk_tree_check(const qk_tree_t *t, char *msg, size_t msg_size) {
     st = fail(&c, "%zu live nodes + %u free blocks != %u slots", c.live_nodes, t->n_free_blocks,
               t->n_nodes);
   free(c.slot_owned);
+  free(c.id_seen);
   return st;
 }

@@ -7,6 +7,7 @@
 
 #include "quadkit/index.h"
 
+#include <stdatomic.h>
 #include <stdbool.h>
 
 /*
@@ -50,11 +51,16 @@ struct qk_tree {
   uint32_t cap_slots; /* slots allocated */
   uint32_t garbage;   /* slots inside [0, n_slots) owned by no leaf */
 
-  /* Id map: where[id] is the slot of point id, or QK_NONE once removed. */
-  uint32_t *where;
-  uint32_t n_ids; /* ids handed out */
-  uint32_t cap_ids;
-  size_t n_points; /* points stored */
+  /* Id map: where[id] is the slot of point id, or QK_NONE once removed. A bulk build
+   * does not make it (it costs a random write per point and 4 bytes per point): it is
+   * made on first need, by a removal or an id lookup, and kept up to date from then on.
+   * Id lookups are read-only calls that may run in many threads at once, so the pointer
+   * is published atomically (qk__id_map). NULL: not made yet. */
+  uint32_t *_Atomic where;
+  uint32_t n_ids;   /* ids handed out */
+  uint32_t cap_ids; /* entries allocated in where; 0 while the map is not made or was made
+                       lazily, in which case it has max(n_ids, 1) entries */
+  size_t n_points;  /* points stored */
 };
 
 /* Allocation goes through here and only here. */
@@ -100,6 +106,21 @@ qk_status_t qk__build_subtree(qk_tree_t *t, uint32_t node);
 /* Bulk build by bucketing into a uniform grid (index/build.c). Sets *done when it built
  * the tree; leaves it false (and the tree untouched) when the plain build should run. */
 qk_status_t qk__build_bucketed(qk_tree_t *t, const qk_point_t *p, size_t n, bool *done);
+
+/* The id map if it has been made, else NULL. */
+static inline uint32_t *qk__id_map_if_made(const qk_tree_t *t) {
+  return atomic_load_explicit(&((qk_tree_t *)t)->where, memory_order_acquire);
+}
+
+/* Entries allocated in the id map when it has been made (see cap_ids). */
+static inline uint32_t qk__id_map_capacity(const qk_tree_t *t) {
+  if (t->cap_ids) return t->cap_ids;
+  return t->n_ids ? t->n_ids : 1;
+}
+
+/* The id map, made now if it was not. Safe from concurrent readers: each may build a
+ * candidate and the first to publish wins. QK_ERR_NOMEM when it cannot be made. */
+qk_status_t qk__id_map(const qk_tree_t *t, const uint32_t **map);
 
 /* Make room for at least `extra` more node slots. */
 qk_status_t qk__reserve_nodes(qk_tree_t *t, uint32_t extra);

@@ -109,6 +109,7 @@ static qk_status_t compact(qk_tree_t *t, size_t headroom) {
   qk_id_t *ni = s.id;
   /* Pre-order walk with an explicit stack: at most 3 pending siblings per level. */
   uint32_t stack[4 * (QK_MAX_DEPTH_LIMIT + 2)], top = 0, pos = 0;
+  uint32_t *w = qk__id_map_if_made(t);
   stack[top++] = 0;
   while (top) {
     qk__node_t *n = &t->nodes[stack[--top]];
@@ -119,7 +120,8 @@ static qk_status_t compact(qk_tree_t *t, size_t headroom) {
     memcpy(nx + pos, t->px + n->start, (size_t)n->count * sizeof(double));
     memcpy(ny + pos, t->py + n->start, (size_t)n->count * sizeof(double));
     memcpy(ni + pos, t->pid + n->start, (size_t)n->count * sizeof(qk_id_t));
-    for (uint32_t i = 0; i < n->count; i++) t->where[ni[pos + i]] = pos + i;
+    if (w)
+      for (uint32_t i = 0; i < n->count; i++) w[ni[pos + i]] = pos + i;
     n->start = pos;
     n->room = n->count;
     pos += n->count;
@@ -136,6 +138,46 @@ static qk_status_t reserve_tail(qk_tree_t *t, size_t extra) {
   if ((size_t)t->n_slots + extra <= t->cap_slots) return QK_OK;
   if (t->garbage > t->n_slots / 2) return compact(t, t->n_points + extra);
   return reserve_slots(t, (size_t)t->n_slots + extra);
+}
+
+/* ---- the id map ------------------------------------------------------------------- */
+
+qk_status_t qk__id_map(const qk_tree_t *ct, const uint32_t **map) {
+  uint32_t *w = qk__id_map_if_made(ct);
+  if (!w) {
+    qk_tree_t *t = (qk_tree_t *)ct; /* only the atomic pointer is written */
+    size_t cap = qk__id_map_capacity(t);
+    w = qk__realloc(&t->alloc, NULL, 0, cap * sizeof *w);
+    if (!w) return QK_ERR_NOMEM;
+    for (size_t i = 0; i < cap; i++) w[i] = QK_NONE;
+    for (uint32_t v = 0; v < t->n_nodes; v++) {
+      const qk__node_t *n = &t->nodes[v];
+      if (!n->live || !qk__is_leaf(n)) continue;
+      for (uint32_t s = n->start; s < n->start + n->count; s++) w[t->pid[s]] = s;
+    }
+    /* Publish; if another reader got there first, use its map and drop this one. */
+    uint32_t *expected = NULL;
+    if (!atomic_compare_exchange_strong_explicit(&t->where, &expected, w, memory_order_acq_rel,
+                                                 memory_order_acquire)) {
+      qk__free(&t->alloc, w, cap * sizeof *w);
+      w = expected;
+    }
+  }
+  *map = w;
+  return QK_OK;
+}
+
+/* In a call that changes the tree (so no reader runs): the id map, made first when `need`
+ * is set, with its capacity recorded; *out is NULL when it is not made and not needed. */
+static qk_status_t own_map(qk_tree_t *t, bool need, uint32_t **out) {
+  const uint32_t *w = qk__id_map_if_made(t);
+  if (!w && need) {
+    qk_status_t st = qk__id_map(t, &w);
+    if (st) return st;
+  }
+  if (w && !t->cap_ids) t->cap_ids = qk__id_map_capacity(t);
+  *out = (uint32_t *)w;
+  return QK_OK;
 }
 
 /* ---- nodes ---------------------------------------------------------------------------- */
@@ -232,7 +274,9 @@ uint32_t qk__split(qk_tree_t *t, uint32_t leaf) {
       t->pid[j] = ti;
     }
   }
-  for (uint32_t i = start; i < start + count; i++) t->where[t->pid[i]] = i;
+  uint32_t *w = qk__id_map_if_made(t);
+  if (w)
+    for (uint32_t i = start; i < start + count; i++) w[t->pid[i]] = i;
 
   uint32_t b = qk__split_sorted(t, leaf);
   for (uint32_t q = 0; q < 4; q++) {
@@ -375,11 +419,6 @@ qk_status_t qk_tree_build(const qk_point_t *points, size_t n, const qk_tree_opti
   /* At least one slot even for an empty tree, so that a leaf's points are never a NULL
    * base plus an offset (undefined behaviour even for offset 0). */
   if ((st = reserve_slots(t, n ? n : 1))) goto fail;
-  if (n && !(t->where = qk__realloc(&t->alloc, NULL, 0, n * sizeof(uint32_t)))) {
-    st = QK_ERR_NOMEM;
-    goto fail;
-  }
-  t->cap_ids = (uint32_t)n;
   t->n_slots = (uint32_t)n;
   t->n_ids = (uint32_t)n;
   t->n_points = n;
@@ -391,7 +430,6 @@ qk_status_t qk_tree_build(const qk_point_t *points, size_t n, const qk_tree_opti
       t->px[i] = points[i].x;
       t->py[i] = points[i].y;
       t->pid[i] = (qk_id_t)i;
-      t->where[i] = (uint32_t)i;
     }
     if ((st = qk__build_subtree(t, 0))) goto fail;
   }
@@ -417,7 +455,7 @@ void qk_tree_free(qk_tree_t *t) {
   qk__free(&a, t->nodes, (size_t)t->cap_nodes * sizeof(qk__node_t));
   slots_t pts = {t->px, t->py, t->pid};
   slots_free(&a, &pts, t->cap_slots);
-  qk__free(&a, t->where, (size_t)t->cap_ids * sizeof(uint32_t));
+  qk__free(&a, qk__id_map_if_made(t), (size_t)qk__id_map_capacity(t) * sizeof(uint32_t));
   qk__free(&a, t, sizeof *t);
 }
 
@@ -443,9 +481,13 @@ qk_status_t qk_tree_insert(qk_tree_t *t, qk_point_t p, qk_id_t *id_out) {
 
   /* All allocation first: the id map, nodes for a cascade of splits down to the depth
    * cap, and a larger block for the leaf if its block is full. */
-  if ((st = grow(&t->alloc, (void **)&t->where, &t->cap_ids, (size_t)t->n_ids + 1,
-                 sizeof(uint32_t))))
-    return st;
+  uint32_t *w;
+  if ((st = own_map(t, false, &w))) return st;
+  if (w) {
+    if ((st = grow(&t->alloc, (void **)&w, &t->cap_ids, (size_t)t->n_ids + 1, sizeof(uint32_t))))
+      return st;
+    atomic_store_explicit(&t->where, w, memory_order_release);
+  }
   if ((st = qk__reserve_nodes(t, 4 * (t->max_depth + 1)))) return st;
   uint32_t leaf = descend(t, p.x, p.y);
   qk__node_t *n = &t->nodes[leaf];
@@ -462,7 +504,8 @@ qk_status_t qk_tree_insert(qk_tree_t *t, qk_point_t p, qk_id_t *id_out) {
     memcpy(t->px + to, t->px + n->start, (size_t)n->count * sizeof(double));
     memcpy(t->py + to, t->py + n->start, (size_t)n->count * sizeof(double));
     memcpy(t->pid + to, t->pid + n->start, (size_t)n->count * sizeof(qk_id_t));
-    for (uint32_t i = 0; i < n->count; i++) t->where[t->pid[to + i]] = to + i;
+    if (w)
+      for (uint32_t i = 0; i < n->count; i++) w[t->pid[to + i]] = to + i;
     t->garbage += n->room;
     n->start = to;
     n->room = newroom;
@@ -473,7 +516,7 @@ qk_status_t qk_tree_insert(qk_tree_t *t, qk_point_t p, qk_id_t *id_out) {
   t->px[s] = p.x;
   t->py[s] = p.y;
   t->pid[s] = id;
-  t->where[id] = s;
+  if (w) w[id] = s;
   for (uint32_t v = leaf; v != QK_NONE; v = t->nodes[v].parent) t->nodes[v].count++;
   t->n_points++;
   split_while_full(t, leaf);
@@ -485,6 +528,7 @@ qk_status_t qk_tree_insert(qk_tree_t *t, qk_point_t p, qk_id_t *id_out) {
  * a leaf over that block, and free the node blocks below it. The tail must have room. */
 static void collapse(qk_tree_t *t, uint32_t v) {
   uint32_t to = t->n_slots, pos = to;
+  uint32_t *w = qk__id_map_if_made(t);
   uint32_t stack[4 * (QK_MAX_DEPTH_LIMIT + 2)], top = 0;
   stack[top++] = t->nodes[v].child;
   while (top) {
@@ -498,7 +542,8 @@ static void collapse(qk_tree_t *t, uint32_t v) {
       memcpy(t->px + pos, t->px + c->start, (size_t)c->count * sizeof(double));
       memcpy(t->py + pos, t->py + c->start, (size_t)c->count * sizeof(double));
       memcpy(t->pid + pos, t->pid + c->start, (size_t)c->count * sizeof(qk_id_t));
-      for (uint32_t i = 0; i < c->count; i++) t->where[t->pid[pos + i]] = pos + i;
+      if (w)
+        for (uint32_t i = 0; i < c->count; i++) w[t->pid[pos + i]] = pos + i;
       pos += c->count;
       t->garbage += c->room;
     }
@@ -513,8 +558,12 @@ static void collapse(qk_tree_t *t, uint32_t v) {
 
 qk_status_t qk_tree_remove(qk_tree_t *t, qk_id_t id) {
   if (!t) return QK_ERR_INVALID;
-  if (id >= t->n_ids || t->where[id] == QK_NONE) return QK_ERR_NOT_FOUND;
-  uint32_t leaf = descend(t, t->px[t->where[id]], t->py[t->where[id]]);
+  if (id >= t->n_ids) return QK_ERR_NOT_FOUND;
+  uint32_t *w;
+  qk_status_t st = own_map(t, true, &w);
+  if (st) return st;
+  if (w[id] == QK_NONE) return QK_ERR_NOT_FOUND;
+  uint32_t leaf = descend(t, t->px[w[id]], t->py[w[id]]);
 
   /* Which ancestor will merge: the highest one left holding at most `capacity` points
    * (counts only grow upwards, so those ancestors form a chain above the leaf). */
@@ -525,22 +574,21 @@ qk_status_t qk_tree_remove(qk_tree_t *t, qk_id_t id) {
       top = v;
     }
   if (top != QK_NONE) {
-    qk_status_t st = reserve_tail(t, t->nodes[top].count);
-    if (st) return st;
+    if ((st = reserve_tail(t, t->nodes[top].count))) return st;
   }
 
   /* Nothing can fail from here on (the reservation may have compacted the arrays, so
    * the slot is read only now). Fill the hole with the leaf's last point. */
-  uint32_t s = t->where[id];
+  uint32_t s = w[id];
   qk__node_t *n = &t->nodes[leaf];
   uint32_t last = n->start + n->count - 1;
   if (s != last) {
     t->px[s] = t->px[last];
     t->py[s] = t->py[last];
     t->pid[s] = t->pid[last];
-    t->where[t->pid[s]] = s;
+    w[t->pid[s]] = s;
   }
-  t->where[id] = QK_NONE;
+  w[id] = QK_NONE;
   for (uint32_t v = leaf; v != QK_NONE; v = t->nodes[v].parent) t->nodes[v].count--;
   t->n_points--;
   if (top != QK_NONE) collapse(t, top);
@@ -549,18 +597,34 @@ qk_status_t qk_tree_remove(qk_tree_t *t, qk_id_t id) {
 
 /* ---- lookups ---------------------------------------------------------------------- */
 
+/* The slot of a point id, or QK_NONE. Uses (making it if need be) the id map; if the map
+ * cannot be allocated, a scan of the leaves gives the same answer in O(n). */
+static uint32_t slot_of(const qk_tree_t *t, qk_id_t id) {
+  if (id >= t->n_ids) return QK_NONE;
+  const uint32_t *w;
+  if (qk__id_map(t, &w) == QK_OK) return w[id];
+  for (uint32_t v = 0; v < t->n_nodes; v++) {
+    const qk__node_t *n = &t->nodes[v];
+    if (!n->live || !qk__is_leaf(n)) continue;
+    for (uint32_t s = n->start; s < n->start + n->count; s++)
+      if (t->pid[s] == id) return s;
+  }
+  return QK_NONE;
+}
+
 qk_status_t qk_tree_point(const qk_tree_t *t, qk_id_t id, qk_point_t *p) {
   if (!t || !p) return QK_ERR_INVALID;
-  if (id >= t->n_ids || t->where[id] == QK_NONE) return QK_ERR_NOT_FOUND;
-  p->x = t->px[t->where[id]];
-  p->y = t->py[t->where[id]];
+  uint32_t s = slot_of(t, id);
+  if (s == QK_NONE) return QK_ERR_NOT_FOUND;
+  p->x = t->px[s];
+  p->y = t->py[s];
   return QK_OK;
 }
 
 qk_status_t qk_tree_leaf_of(const qk_tree_t *t, qk_id_t id, qk_node_t *leaf) {
   if (!t || !leaf) return QK_ERR_INVALID;
-  if (id >= t->n_ids || t->where[id] == QK_NONE) return QK_ERR_NOT_FOUND;
-  uint32_t s = t->where[id];
+  uint32_t s = slot_of(t, id);
+  if (s == QK_NONE) return QK_ERR_NOT_FOUND;
   *leaf = descend(t, t->px[s], t->py[s]);
   return QK_OK;
 }

@@ -242,8 +242,10 @@ qk_status_t qk_collider_build(const qk_disc_t *discs, size_t n_discs, const qk_b
     st = QK_ERR_NOMEM;
     goto fail;
   }
+  const uint32_t *where;
+  if ((st = qk__id_map(t, &where)) != QK_OK) goto fail;
   for (qk_id_t id = 0; id < n; id++) {
-    uint32_t slot = t->where[id];
+    uint32_t slot = where[id];
     if (id < n_discs) {
       c->sdisc[slot] = discs[id];
       c->sbox[slot] = disc_bbox(&discs[id]);

@@ -15,6 +15,7 @@
  *  - pre-order visiting with skip and stop, and the SVG writer.
  */
 #include <float.h>
+#include <pthread.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -644,6 +645,72 @@ static void test_index_visit_and_svg(void **state) {
   qk_tree_free(t);
 }
 
+/* The id map is made on the first id lookup, possibly by several threads at once. */
+typedef struct lookup_job {
+  const qk_tree_t *t;
+  const qk_point_t *p;
+  size_t n, bad;
+} lookup_job_t;
+
+static void *lookup_all(void *arg) {
+  lookup_job_t *j = arg;
+  for (size_t i = 0; i < j->n; i++) {
+    qk_point_t q;
+    qk_node_t leaf;
+    if (qk_tree_point(j->t, (qk_id_t)i, &q) != QK_OK || q.x != j->p[i].x || q.y != j->p[i].y ||
+        qk_tree_leaf_of(j->t, (qk_id_t)i, &leaf) != QK_OK || !qk_tree_node_is_leaf(j->t, leaf))
+      j->bad++;
+  }
+  return NULL;
+}
+
+static void test_index_lazy_id_map(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, qkt_seed(18));
+  enum { N = 50000, T = 4 };
+  qk_point_t *p = malloc(N * sizeof *p);
+  qkt_points(&r, QKT_CLUSTERED, p, N);
+  for (int round = 0; round < 4; round++) {
+    qk_tree_options_t o;
+    qk_tree_options_init(&o);
+    o.capacity = 16;
+    qk_tree_t *t;
+    assert_int_equal(qk_tree_build(p, N, &o, &t), QK_OK);
+    size_t before = qk_tree_memory(t);
+    pthread_t th[T];
+    lookup_job_t jobs[T];
+    for (int k = 0; k < T; k++) {
+      jobs[k] = (lookup_job_t){t, p, N, 0};
+      assert_int_equal(pthread_create(&th[k], NULL, lookup_all, &jobs[k]), 0);
+    }
+    for (int k = 0; k < T; k++) {
+      pthread_join(th[k], NULL);
+      assert_int_equal(jobs[k].bad, 0);
+    }
+    /* The map now exists and is counted; removal and insertion keep it right. */
+    assert_true(qk_tree_memory(t) >= before + N * sizeof(uint32_t));
+    QKT_CHECK_TREE(t);
+    assert_int_equal(qk_tree_remove(t, 7), QK_OK);
+    assert_int_equal(qk_tree_point(t, 7, &(qk_point_t){0}), QK_ERR_NOT_FOUND);
+    qk_id_t id;
+    assert_int_equal(qk_tree_insert(t, p[7], &id), QK_OK);
+    assert_int_equal(id, N);
+    QKT_CHECK_TREE(t);
+    qk_tree_free(t);
+  }
+  /* An insert into a tree whose map was never made leaves it unmade and still works. */
+  qk_tree_t *t;
+  assert_int_equal(qk_tree_build(p, N, NULL, &t), QK_OK);
+  for (int i = 0; i < 100; i++) assert_int_equal(qk_tree_insert(t, p[i], NULL), QK_OK);
+  QKT_CHECK_TREE(t);
+  qk_point_t q;
+  assert_int_equal(qk_tree_point(t, N + 99, &q), QK_OK);
+  assert_true(q.x == p[99].x && q.y == p[99].y);
+  qk_tree_free(t);
+  free(p);
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_index_build_invariants),
@@ -656,6 +723,7 @@ int main(void) {
       cmocka_unit_test(test_index_bad_input),
       cmocka_unit_test(test_index_depth_cap),
       cmocka_unit_test(test_index_visit_and_svg),
+      cmocka_unit_test(test_index_lazy_id_map),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }

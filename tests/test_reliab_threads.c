@@ -230,6 +230,10 @@ static void test_reliab_threads_concurrent_readers(void **state) {
                                           NULL, 0, &S.geo_n[i]),
                        QK_OK);
   }
+  /* The first id lookup makes the tree's id map (once, see index.h); after it, read-only
+   * calls leave memory and shape unchanged. */
+  qk_node_t first_leaf;
+  assert_int_equal(qk_tree_leaf_of(tree, 0, &first_leaf), QK_OK);
   qk_tree_stats(tree, &S.stats);
   assert_int_equal(qk_collider_pairs(col, count_pairs, &S.pairs), QK_OK);
   S.svg = write_mem(0, &S.svg_len);

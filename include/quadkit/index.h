@@ -118,6 +118,14 @@ qk_status_t qk_tree_insert(qk_tree_t *tree, qk_point_t p, qk_id_t *id_out);
  */
 qk_status_t qk_tree_remove(qk_tree_t *tree, qk_id_t id);
 
+/*
+ * Id lookups (qk_tree_point, qk_tree_leaf_of) use a map from id to storage slot, 4 bytes
+ * per id, which a bulk build does not make: the first lookup or removal makes it, with
+ * the tree's allocator, and it is kept up to date from then on. The first lookups may run
+ * in several threads at once (then the allocator must be thread-safe, as libc's is); if
+ * the map cannot be allocated, a lookup still answers, by a scan of the points.
+ */
+
 /**
  * The coordinates of a stored point.
  * \param [in] tree the tree.
