@@ -4,25 +4,6 @@
  */
 #include "index/index_internal.h"
 
-/* The two children of a node on the side that faces a neighbour lying in direction
- * `dir` of it: for a north neighbour that is its SW and SE children, and so on. */
-static void facing(qk_dir_t dir, unsigned q[2]) {
-  switch (dir) {
-  case QK_NORTH:
-    q[0] = QK_SW, q[1] = QK_SE;
-    break;
-  case QK_SOUTH:
-    q[0] = QK_NW, q[1] = QK_NE;
-    break;
-  case QK_EAST:
-    q[0] = QK_SW, q[1] = QK_NW;
-    break;
-  default:
-    q[0] = QK_SE, q[1] = QK_NE;
-    break;
-  }
-}
-
 /*
  * The notes' first issue (line 4): a leaf must be split exactly when a neighbouring
  * square is less than half its size. Such a neighbour exists towards `dir` iff the
@@ -34,7 +15,7 @@ static bool has_small_neighbor(const qk_tree_t *t, uint32_t leaf) {
     qk_node_t u = qk_tree_neighbor(t, leaf, (qk_dir_t)d);
     if (u == QK_NONE || qk__is_leaf(&t->nodes[u])) continue;
     unsigned q[2];
-    facing((qk_dir_t)d, q);
+    qk__facing_children((qk_dir_t)d, q);
     if (!qk__is_leaf(&t->nodes[t->nodes[u].child + q[0]]) ||
         !qk__is_leaf(&t->nodes[t->nodes[u].child + q[1]]))
       return true;

@@ -88,6 +88,20 @@ static inline unsigned qk__quadrant_of(double x0, double y0, double half, double
 static inline unsigned qk__q_east(unsigned q) { return q == QK_NE || q == QK_SE; }
 static inline unsigned qk__q_north(unsigned q) { return q == QK_NE || q == QK_NW; }
 
+/* The two children of a node on the side that faces a neighbour lying in direction `dir`
+ * of it (for a north neighbour: its SW and SE children), in west-to-east or south-to-north
+ * order. */
+static inline void qk__facing_children(qk_dir_t dir, unsigned q[2]) {
+  static const unsigned char f[4][2] = {
+      {QK_SW, QK_SE}, /* neighbour to the north: its south children */
+      {QK_SW, QK_NW}, /* to the east: its west children */
+      {QK_NW, QK_NE}, /* to the south: its north children */
+      {QK_SE, QK_NE}, /* to the west: its east children */
+  };
+  q[0] = f[dir][0];
+  q[1] = f[dir][1];
+}
+
 /* Can this node be split (not at the depth cap, and its side still halves exactly into
  * distinct midpoints)? */
 bool qk__can_split(const qk_tree_t *t, const qk__node_t *n);

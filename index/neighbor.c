@@ -59,25 +59,6 @@ static void push(adj_t *a, qk_node_t v) {
   a->n++;
 }
 
-/* The two children of a node on the side facing `dir`'s opposite, in west-to-east or
- * south-to-north order. */
-static void facing_children(qk_dir_t dir, unsigned q[2]) {
-  switch (dir) {
-  case QK_NORTH: /* neighbour lies north: its south children face us */
-    q[0] = QK_SW, q[1] = QK_SE;
-    break;
-  case QK_SOUTH:
-    q[0] = QK_NW, q[1] = QK_NE;
-    break;
-  case QK_EAST: /* neighbour lies east: its west children face us */
-    q[0] = QK_SW, q[1] = QK_NW;
-    break;
-  default:
-    q[0] = QK_SE, q[1] = QK_NE;
-    break;
-  }
-}
-
 static void collect(const qk_tree_t *t, uint32_t u, qk_dir_t dir, adj_t *a) {
   const qk__node_t *n = &t->nodes[u];
   if (qk__is_leaf(n)) {
@@ -85,7 +66,7 @@ static void collect(const qk_tree_t *t, uint32_t u, qk_dir_t dir, adj_t *a) {
     return;
   }
   unsigned q[2];
-  facing_children(dir, q);
+  qk__facing_children(dir, q);
   collect(t, n->child + q[0], dir, a);
   collect(t, n->child + q[1], dir, a);
 }
