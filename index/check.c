@@ -1,7 +1,7 @@
 /* qk_tree_check(): verifies every structural invariant of a tree (as p4est_is_valid). */
 #include <stdarg.h>
 #include <stdio.h>
-#include <stdlib.h>
+#include <string.h>
 
 #include "index/index_internal.h"
 
@@ -102,13 +102,17 @@ qk_status_t qk_tree_check(const qk_tree_t *t, char *msg, size_t msg_size) {
     return fail(&c, "root count %u != points %zu", r->count, t->n_points);
   if (t->n_slots > t->cap_slots) return fail(&c, "slots used beyond capacity");
   c.map = qk__id_map_if_made(t);
-  c.slot_owned = calloc(t->n_slots ? t->n_slots : 1, 1);
-  c.id_seen = calloc(t->n_ids ? t->n_ids : 1, 1);
+  /* Scratch through the tree's allocator, like every allocation of the library. */
+  size_t n_slot_bytes = t->n_slots ? t->n_slots : 1, n_id_bytes = t->n_ids ? t->n_ids : 1;
+  c.slot_owned = qk__realloc(&t->alloc, NULL, 0, n_slot_bytes);
+  c.id_seen = qk__realloc(&t->alloc, NULL, 0, n_id_bytes);
   if (!c.slot_owned || !c.id_seen) {
-    free(c.slot_owned);
-    free(c.id_seen);
+    qk__free(&t->alloc, c.slot_owned, n_slot_bytes);
+    qk__free(&t->alloc, c.id_seen, n_id_bytes);
     return QK_ERR_NOMEM;
   }
+  memset(c.slot_owned, 0, n_slot_bytes);
+  memset(c.id_seen, 0, n_id_bytes);
   qk_status_t st = check_node(&c, 0);
   if (!st && c.points_seen != t->n_points)
     st = fail(&c, "leaves hold %zu points, tree says %zu", c.points_seen, t->n_points);
@@ -134,7 +138,7 @@ qk_status_t qk_tree_check(const qk_tree_t *t, char *msg, size_t msg_size) {
   if (!st && c.live_nodes + 4 * (size_t)t->n_free_blocks != t->n_nodes)
     st = fail(&c, "%zu live nodes + %u free blocks != %u slots", c.live_nodes, t->n_free_blocks,
               t->n_nodes);
-  free(c.slot_owned);
-  free(c.id_seen);
+  qk__free(&t->alloc, c.slot_owned, n_slot_bytes);
+  qk__free(&t->alloc, c.id_seen, n_id_bytes);
   return st;
 }

@@ -253,7 +253,8 @@ size_t qk_tree_memory(const qk_tree_t *tree);
  * \param [in] tree the tree.
  * \param [out] msg buffer for a description of the first violation (may be NULL).
  * \param [in] msg_size its size.
- * \return QK_OK or QK_ERR_CORRUPT.
+ * \return QK_OK, QK_ERR_CORRUPT, or QK_ERR_NOMEM when its scratch memory (a byte per
+ *         slot and per id, from the tree's allocator) cannot be had.
  */
 qk_status_t qk_tree_check(const qk_tree_t *tree, char *msg, size_t msg_size);
 

@@ -49,6 +49,8 @@ qk_allocator_t qkt_alloc_make(qkt_alloc_t *state);
   do {                                                                                             \
     char qkt_msg_[256];                                                                            \
     qk_status_t qkt_st_ = qk_tree_check((t), qkt_msg_, sizeof qkt_msg_);                           \
+    /* its scratch allocation may be the one a failing allocator refuses (once) */                 \
+    if (qkt_st_ == QK_ERR_NOMEM) qkt_st_ = qk_tree_check((t), qkt_msg_, sizeof qkt_msg_);          \
     if (qkt_st_ != QK_OK) fail_msg("qk_tree_check: %s", qkt_msg_);                                 \
   } while (0)
 
