@@ -423,6 +423,20 @@ qk_status_t qk_collider_pairs_list(const qk_collider_t *c, qk_pair_t *out, size_
 /* ---------------------------------------------------------------------------------- */
 /* Ray casting                                                                          */
 
+/* One axis of the slab test: narrow [*lo, *hi] to where o + t d lies in [min, max]. */
+static inline int slab_axis(double min, double max, double o, double d, double *lo, double *hi) {
+  if (d == 0) return !(o < min || o > max);
+  double t1 = (min - o) / d, t2 = (max - o) / d;
+  if (t1 > t2) {
+    double s = t1;
+    t1 = t2;
+    t2 = s;
+  }
+  if (t1 > *lo) *lo = t1;
+  if (t2 < *hi) *hi = t2;
+  return 1;
+}
+
 /*
  * Slab test of the ray against a closed box: the parameter interval [lo, hi] within
  * [0, tmax] in which the ray is inside the box. Division (not a reciprocal) keeps a
@@ -431,30 +445,8 @@ qk_status_t qk_collider_pairs_list(const qk_collider_t *c, qk_pair_t *out, size_
 static inline int slab(double xmin, double ymin, double xmax, double ymax, double ox, double oy,
                        double dx, double dy, double tmax, double *lo_out, double *hi_out) {
   double lo = 0.0, hi = tmax;
-  if (dx != 0) {
-    double t1 = (xmin - ox) / dx, t2 = (xmax - ox) / dx;
-    if (t1 > t2) {
-      double s = t1;
-      t1 = t2;
-      t2 = s;
-    }
-    if (t1 > lo) lo = t1;
-    if (t2 < hi) hi = t2;
-  } else if (ox < xmin || ox > xmax) {
+  if (!slab_axis(xmin, xmax, ox, dx, &lo, &hi) || !slab_axis(ymin, ymax, oy, dy, &lo, &hi))
     return 0;
-  }
-  if (dy != 0) {
-    double t1 = (ymin - oy) / dy, t2 = (ymax - oy) / dy;
-    if (t1 > t2) {
-      double s = t1;
-      t1 = t2;
-      t2 = s;
-    }
-    if (t1 > lo) lo = t1;
-    if (t2 < hi) hi = t2;
-  } else if (oy < ymin || oy > ymax) {
-    return 0;
-  }
   *lo_out = lo;
   *hi_out = hi;
   return 1;
