@@ -47,6 +47,11 @@ void cli_error(const char *cmd, const char *fmt, ...)
 /* Map a library status to an exit code, printing what failed. */
 int cli_status(const char *cmd, const char *what, qk_status_t st);
 
+/* qk_tree_build with an error message that names the file (and, for an extent too large
+ * for a double, the values). Returns an exit code. */
+int cli_build_tree(const char *cmd, const char *path, const qk_point_t *pts, size_t n,
+                   const qk_tree_options_t *opt, qk_tree_t **out);
+
 /* Parse option values; print a usage error and return nonzero when malformed. */
 int cli_parse_u32(const char *cmd, const char *opt, const char *s, unsigned long min,
                   unsigned long max, unsigned long *out);

@@ -145,7 +145,7 @@ static int build_tree(const qargs_t *a, const qk_point_t *pts, size_t n, qk_tree
   qk_tree_options_t opt;
   qk_tree_options_init(&opt);
   opt.capacity = (uint32_t)a->capacity;
-  return cli_status(a->cmd, a->files[0], qk_tree_build(pts, n, &opt, t));
+  return cli_build_tree(a->cmd, a->files[0], pts, n, &opt, t);
 }
 
 static int nb_by_id(const void *x, const void *y) {

@@ -58,7 +58,7 @@ int cmd_tree(int argc, char **argv) {
   opt.capacity = (uint32_t)capacity;
   opt.max_depth = (uint32_t)depth;
   qk_tree_t *tree;
-  rc = cli_status(cmd, in, qk_tree_build(pts, n, &opt, &tree));
+  rc = cli_build_tree(cmd, in, pts, n, &opt, &tree);
   free(pts);
   if (rc) return rc;
   qk_tree_stats_t s;

@@ -40,5 +40,7 @@ expect 2 'usage' -- "$cli" tree
 expect 2 'unknown command' -- "$cli" frobnicate
 expect 0 'usage: quadkit' -- "$cli" --help
 expect 1 'cannot write' -- "$cli" tree "$tmp/ok.csv" --svg "$tmp/no/such/dir/x.svg"
-echo "$((16 - fails)) passed, $fails failed"
+printf 'x,y\n-1e308,0\n1e308,0\n' >"$tmp/huge.csv"
+expect 1 'huge.csv: the points span x from -1e\+308 to 1e\+308 and y from 0 to 0, an extent too large' -- "$cli" tree "$tmp/huge.csv"
+echo "$((17 - fails)) passed, $fails failed"
 [ "$fails" -eq 0 ]
