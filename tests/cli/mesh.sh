@@ -1,29 +1,15 @@
 #!/usr/bin/env bash
 # CLI tests for `quadkit mesh`: outputs and their formats, --stats, exit codes, and bad
 # input named by file and line with nothing written.
-set -u
-cli=$1
-src=$2
-tmp=$(mktemp -d)
-trap 'rm -rf "$tmp"' EXIT
-fails=0
-expect() { # expect CODE PATTERN -- command...
-  local code=$1 pat=$2
-  shift 3
-  local out rc
-  out=$("$@" 2>&1)
-  rc=$?
-  if [ "$rc" -ne "$code" ] || ! grep -qE -- "$pat" <<<"$out"; then
-    echo "FAIL: $* -> exit $rc (want $code), output: $out (want /$pat/)"
-    fails=$((fails + 1))
-  fi
-}
+# shellcheck source=lib/common.bash
+source "$(dirname "${BASH_SOURCE[0]}")/lib/common.bash" "$@"
 check() { # check DESCRIPTION -- command...: the command must succeed
   local what=$1
   shift 2
   if ! "$@" >/dev/null 2>&1; then
-    echo "FAIL: $what"
-    fails=$((fails + 1))
+    fail "$what"
+  else
+    passes=$((passes + 1))
   fi
 }
 
@@ -74,8 +60,4 @@ expect 2 'unknown option' -- "$cli" mesh "$src/examples/mesh/notes.poly" -o "$tm
 expect 2 'no input file' -- "$cli" mesh
 expect 0 'usage: quadkit mesh' -- "$cli" mesh --help
 
-if [ "$fails" -ne 0 ]; then
-  echo "$fails failure(s)"
-  exit 1
-fi
-echo "mesh CLI: all passed"
+report

@@ -2,26 +2,8 @@
 # CLI tests for the query commands (knn, range, radius, locate, collide, raycast, geo):
 # exact output on small hand-checked inputs, kNN and radius against a brute-force awk
 # oracle on random data, exit codes, and errors naming file and line.
-set -u
-cli=$1
-src=$2
-tmp=$(mktemp -d)
-trap 'rm -rf "$tmp"' EXIT
-fails=0
-passes=0
-expect() { # expect CODE PATTERN -- command...
-  local code=$1 pat=$2
-  shift 3
-  local out rc
-  out=$("$@" 2>&1)
-  rc=$?
-  if [ "$rc" -ne "$code" ] || ! grep -qE -- "$pat" <<<"$out"; then
-    echo "FAIL: $* -> exit $rc (want $code), output: $out (want /$pat/)"
-    fails=$((fails + 1))
-  else
-    passes=$((passes + 1))
-  fi
-}
+# shellcheck source=lib/common.bash
+source "$(dirname "${BASH_SOURCE[0]}")/lib/common.bash" "$@"
 same() { # same NAME FILE_GOT FILE_WANT
   if cmp -s "$2" "$3"; then
     passes=$((passes + 1))
@@ -146,5 +128,4 @@ grep -q '^1,1,3,' "$tmp/out.csv" && passes=$((passes + 1)) ||
   { echo "FAIL: -o file"; fails=$((fails + 1)); }
 expect 1 'cannot write' -- "$cli" knn "$tmp/p.csv" "$tmp/q.csv" -k 1 -o "$tmp/no/dir/x.csv"
 
-echo "$passes passed, $fails failed"
-[ "$fails" -eq 0 ]
+report

@@ -1,22 +1,7 @@
 #!/usr/bin/env bash
 # CLI tests for `quadkit tree`: output, exit codes and error messages naming file and line.
-set -u
-cli=$1
-src=$2
-tmp=$(mktemp -d)
-trap 'rm -rf "$tmp"' EXIT
-fails=0
-expect() { # expect CODE PATTERN -- command...
-  local code=$1 pat=$2
-  shift 3
-  local out rc
-  out=$("$@" 2>&1)
-  rc=$?
-  if [ "$rc" -ne "$code" ] || ! grep -qE -- "$pat" <<<"$out"; then
-    echo "FAIL: $* -> exit $rc (want $code), output: $out (want /$pat/)"
-    fails=$((fails + 1))
-  fi
-}
+# shellcheck source=lib/common.bash
+source "$(dirname "${BASH_SOURCE[0]}")/lib/common.bash" "$@"
 printf 'x,y\n0,0\n1,1\n0.25,0.75\n' >"$tmp/ok.csv"
 expect 0 '"points": 3, "nodes": 5, "leaves": 4' -- "$cli" tree "$tmp/ok.csv"
 expect 0 '"leaves": 1' -- "$cli" tree "$tmp/ok.csv" --capacity 3
@@ -42,5 +27,4 @@ expect 0 'usage: quadkit' -- "$cli" --help
 expect 1 'cannot write' -- "$cli" tree "$tmp/ok.csv" --svg "$tmp/no/such/dir/x.svg"
 printf 'x,y\n-1e308,0\n1e308,0\n' >"$tmp/huge.csv"
 expect 1 'huge.csv: the points span x from -1e\+308 to 1e\+308 and y from 0 to 0, an extent too large' -- "$cli" tree "$tmp/huge.csv"
-echo "$((17 - fails)) passed, $fails failed"
-[ "$fails" -eq 0 ]
+report

@@ -1,0 +1,33 @@
+# Shared by the CLI test scripts (sourced; not a test itself, so it lives outside the
+# tests/cli/*.sh glob). Usage: source it with the CLI binary and source dir as $1 and $2.
+# Sets cli, src, a temporary directory tmp (removed at exit), and the counters.
+set -u
+cli=$1
+src=$2
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+fails=0
+passes=0
+
+fail() { # fail MESSAGE: count a failure and say what it was
+  echo "FAIL: $*"
+  fails=$((fails + 1))
+}
+
+expect() { # expect CODE PATTERN -- command...: exit status and a line matching PATTERN
+  local code=$1 pat=$2
+  shift 3
+  local out rc
+  out=$("$@" 2>&1)
+  rc=$?
+  if [ "$rc" -ne "$code" ] || ! grep -qE -- "$pat" <<<"$out"; then
+    fail "$* -> exit $rc (want $code), output: $out (want /$pat/)"
+  else
+    passes=$((passes + 1))
+  fi
+}
+
+report() { # the closing line ctest and CI read, and the script's status
+  echo "$passes passed, $fails failed"
+  [ "$fails" -eq 0 ]
+}
