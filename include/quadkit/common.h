@@ -46,6 +46,17 @@ typedef enum qk_status {
 const char *qk_strerror(qk_status_t status);
 
 /**
+ * Where and why an input was rejected: filled by every call that reads a file or a
+ * caller's arrays, next to the status it returns. Zeroes mean "not known / not from text".
+ */
+typedef struct qk_error {
+  unsigned long line;   /**< 1-based input line, or 0 when the input came from arrays */
+  unsigned long column; /**< 1-based column on that line, or 0 when not known */
+  size_t item;       /**< 0-based index of the offending item (point, feature, ...), or SIZE_MAX */
+  char message[256]; /**< the reason, naming the offending item and value; "" on success */
+} qk_error_t;
+
+/**
  * Realloc-style allocation function (as Lua's lua_Alloc): with nsize == 0 it frees
  * ptr and returns NULL; otherwise it returns a block of nsize bytes holding the first
  * min(osize, nsize) bytes of ptr (ptr may be NULL, osize then 0), or NULL on failure,

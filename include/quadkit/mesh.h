@@ -39,11 +39,8 @@ extern "C" {
 /** Largest accepted domain size (2^30), which keeps all arithmetic exact in 64 bits. */
 #define QK_MESH_MAX_SIZE (1ull << 30)
 
-/** Where and why an input was rejected. */
-typedef struct qk_mesh_error {
-  unsigned long line; /**< 1-based input line, or 0 when the input came from arrays */
-  char message[256];  /**< the reason, naming the offending item and value */
-} qk_mesh_error_t;
+/** Where and why a mesh input was rejected (the library-wide error record). */
+typedef qk_error_t qk_mesh_error_t;
 
 /** Opaque planar straight-line input: vertices, segments, hole points. */
 typedef struct qk_poly qk_poly_t;
