@@ -3,7 +3,7 @@ BUILD ?= build
 JOBS ?= 2
 CMAKE_FLAGS ?=
 
-.PHONY: all deps build demo test asan tsan memcheck fuzz bench format format-check install clean
+.PHONY: all deps build demo test asan tsan memcheck fuzz bench format format-check check-layout install clean
 
 all: build
 
@@ -29,6 +29,10 @@ asan: deps
 format-check: deps
 	@cmake -S . -B $(BUILD) >/dev/null
 	@cmake --build $(BUILD) --target format-check
+
+# index/ owns the tree's layout: no node fields or index_internal.h outside it (issue 11).
+check-layout:
+	@bash scripts/check-layout.sh
 
 format: deps
 	@cmake -S . -B $(BUILD) >/dev/null

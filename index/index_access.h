@@ -1,8 +1,8 @@
 /*
  * The narrow interface through which the modules built on index/ (query/, collide/,
  * region/, mesh/) read a tree's structure. Not API, and not the layout: index/ may store
- * its nodes however it likes, and only this file and index/*.c know how. Outside index/,
- * code includes this header, never index_internal.h; CI rejects `->nodes[`, `->side[`,
+ * its nodes however it likes, and only this file and the sources of index/ know how. Outside
+ * index/, code includes this header, never index_internal.h; CI rejects `->nodes[`, `->side[`,
  * `->px`, `->py` and `->pid` outside index/.
  *
  * Nodes are named by qk_node_t (0 is the root). The four children of an internal node are
@@ -83,6 +83,33 @@ static inline void qk__node_prefetch(const qk_tree_t *t, qk_node_t v) {
 static inline qk_square_t qk__child_square(qk_square_t s, unsigned q) {
   double h = s.side * 0.5;
   return (qk_square_t){s.x + (qk__q_east(q) ? h : 0.0), s.y + (qk__q_north(q) ? h : 0.0), h};
+}
+
+/* Is (x, y) inside the closed root square? */
+static inline bool qk__tree_contains(const qk_tree_t *t, double x, double y) {
+  qk_square_t r = qk__tree_root_square(t);
+  return x >= r.x && x <= r.x + r.side && y >= r.y && y <= r.y + r.side;
+}
+
+/* The leaf whose square holds (x, y), which must lie in the root square, by the tie rules
+ * (as qk_tree_find_leaf()); its square and depth go to *sq and *depth when not NULL. The
+ * squares are computed along the path, with the same arithmetic as the tree's own. */
+static inline qk_node_t qk__tree_descend(const qk_tree_t *t, double x, double y, qk_square_t *sq,
+                                         unsigned *depth) {
+  qk_square_t s = qk__tree_root_square(t);
+  unsigned d = 0;
+  qk_node_t v = 0;
+  for (uint32_t c = qk__node_child(t, v); c != QK_NONE; c = qk__node_child(t, v)) {
+    double h = qk__tree_side(t, d + 1);
+    unsigned q = qk__quadrant_of(s.x, s.y, h, x, y);
+    v = c + q;
+    s = qk__child_square(s, q);
+    s.side = h;
+    d++;
+  }
+  if (sq) *sq = s;
+  if (depth) *depth = d;
+  return v;
 }
 
 #endif /* QUADKIT_INDEX_ACCESS_H */

@@ -104,11 +104,11 @@ static double meridian_angle(const gq_t *q, double dl, double p0, double p1) {
 }
 
 /* Lower bound in metres on the geodesic distance from q to any point of a node. */
-static double node_bound(const gq_t *q, const qk_tree_t *t, const qk__node_t *n) {
-  double s = t->side[n->depth];
+static double node_bound(const gq_t *q, const qk_tree_t *t, qk__cell_t c) {
+  double s = qk__tree_side(t, c.depth);
   /* Widen by a hair so that rounded cell edges never exclude a stored point. */
-  double lon0 = n->x0 - 1e-9, lon1 = n->x0 + s + 1e-9;
-  double lat0 = n->y0 - 1e-9, lat1 = n->y0 + s + 1e-9;
+  double lon0 = c.x - 1e-9, lon1 = c.x + s + 1e-9;
+  double lat0 = c.y - 1e-9, lat1 = c.y + s + 1e-9;
   if (lat0 < -90) lat0 = -90;
   if (lat1 > 90) lat1 = 90;
   if (lat0 > lat1) return INFINITY; /* the part of the root square beyond the pole */
@@ -226,26 +226,33 @@ qk_status_t qk_geo_radius(const qk_geo_t *g, qk_point_t qp, double metres, qk_fo
   if (st != QK_OK) return st;
   if (isnan(metres) || metres < 0) return QK_ERR_INVALID;
   const qk_tree_t *t = g->tree;
-  if (t->n_points == 0) return QK_OK;
+  if (qk__tree_count(t) == 0) return QK_OK;
+  const double *xs = qk__tree_xs(t), *ys = qk__tree_ys(t);
+  const qk_id_t *ids = qk__tree_ids(t);
   gq_t q;
   prepare(&q, qp);
-  uint32_t stack[QK__STACK_MAX];
+  qk__cell_t stack[QK__STACK_MAX];
   int sp = 0;
-  stack[sp++] = 0;
+  stack[sp++] = qk__root_cell(t);
   while (sp > 0) {
-    const qk__node_t *n = &t->nodes[stack[--sp]];
-    if (n->count == 0 || node_bound(&q, t, n) > metres) continue;
-    if (!qk__is_leaf(n)) {
-      for (int k = 3; k >= 0; k--) stack[sp++] = n->child + (uint32_t)k;
+    const qk__cell_t c = stack[--sp];
+    const uint32_t count = qk__node_count(t, c.node);
+    if (count == 0 || node_bound(&q, t, c) > metres) continue;
+    const uint32_t child = qk__node_child(t, c.node);
+    if (child != QK_NONE) {
+      qk__cell_t kids[4];
+      qk__cell_children(t, c, child, kids);
+      for (int k = 3; k >= 0; k--) stack[sp++] = kids[k];
       continue;
     }
-    for (uint32_t i = 0; i < n->count; i++) {
-      uint32_t s = n->start + i;
-      qk_id_t id = t->pid[s];
+    const uint32_t start = qk__node_start(t, c.node);
+    for (uint32_t i = 0; i < count; i++) {
+      uint32_t s = start + i;
+      qk_id_t id = ids[s];
       if (point_bound(&q, g->u + 3 * (size_t)id) > metres) continue;
-      double d = geodesic(&g->g, &q, t->px[s], t->py[s]);
+      double d = geodesic(&g->g, &q, xs[s], ys[s]);
       if (d <= metres) {
-        qk_point_t p = {t->px[s], t->py[s]};
+        qk_point_t p = {xs[s], ys[s]};
         if (fn(id, p, d, ud)) return QK_OK;
       }
     }
@@ -289,47 +296,45 @@ qk_status_t qk_geo_radius_list(const qk_geo_t *g, qk_point_t q, double metres, q
 static size_t geo_knn_one(const qk_geo_t *g, const gq_t *q, size_t k, double limit,
                           qk_neighbor_t *h) {
   const qk_tree_t *t = g->tree;
-  if (t->n_points == 0 || k == 0) return 0;
-  if (k > t->n_points) k = t->n_points;
+  const size_t np = qk__tree_count(t);
+  if (np == 0 || k == 0) return 0;
+  if (k > np) k = np;
+  const double *xs = qk__tree_xs(t), *ys = qk__tree_ys(t);
+  const qk_id_t *ids = qk__tree_ids(t);
   size_t n = 0;
   double thr = limit;
-  qk__entry_t stack[QK__STACK_MAX];
+  qk__cell_entry_t stack[QK__STACK_MAX];
   int sp = 0;
-  stack[sp].node = 0;
+  stack[sp].c = qk__root_cell(t);
   stack[sp++].bound = 0;
   while (sp > 0) {
-    qk__entry_t top = stack[--sp];
+    qk__cell_entry_t top = stack[--sp];
     if (top.bound > thr) continue;
-    const qk__node_t *nd = &t->nodes[top.node];
-    if (qk__is_leaf(nd)) {
-      for (uint32_t i = 0; i < nd->count; i++) {
-        uint32_t s = nd->start + i;
-        qk_id_t id = t->pid[s];
+    const uint32_t child = qk__node_child(t, top.c.node);
+    if (child == QK_NONE) {
+      const uint32_t start = qk__node_start(t, top.c.node);
+      const uint32_t count = qk__node_count(t, top.c.node);
+      for (uint32_t i = 0; i < count; i++) {
+        uint32_t s = start + i;
+        qk_id_t id = ids[s];
         if (point_bound(q, g->u + 3 * (size_t)id) > thr) continue;
-        double d = geodesic(&g->g, q, t->px[s], t->py[s]);
-        if (d > thr) continue;
-        qk_neighbor_t v = {id, d};
-        if (n < k) {
-          qk__heap_push(h, &n, v);
-          if (n == k && h[0].dist < thr) thr = h[0].dist;
-        } else if (qk__nb_less(d, id, h[0].dist, h[0].id)) {
-          qk__heap_replace_top(h, n, v);
-          thr = h[0].dist;
-        }
+        double d = geodesic(&g->g, q, xs[s], ys[s]);
+        if (d <= thr) qk__heap_offer(h, &n, k, id, d, &thr);
       }
       continue;
     }
-    qk__entry_t kids[4];
+    qk__cell_t kc[4];
+    qk__cell_children(t, top.c, child, kc);
+    qk__cell_entry_t kids[4];
     int m = 0;
     for (uint32_t c = 0; c < 4; c++) {
-      const qk__node_t *ch = &t->nodes[nd->child + c];
-      if (ch->count == 0) continue;
-      double b = node_bound(q, t, ch);
+      if (qk__node_count(t, kc[c].node) == 0) continue;
+      double b = node_bound(q, t, kc[c]);
       if (b > thr) continue;
-      kids[m].node = nd->child + c;
+      kids[m].c = kc[c];
       kids[m++].bound = b;
     }
-    qk__sort4_desc(kids, m);
+    qk__sort_cells_desc(kids, m);
     for (int i = 0; i < m; i++) stack[sp++] = kids[i];
   }
   qk__heap_sort(h, n);

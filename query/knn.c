@@ -47,36 +47,27 @@ void qk__heap_sort(qk_neighbor_t *h, size_t n) {
   }
 }
 
+/* Offer a leaf's points to the heap h (n entries, at most k), tightening *thr. */
+static inline void scan_leaf(const qk_tree_t *t, qk_node_t leaf, double qx, double qy, size_t k,
+                             qk_neighbor_t *h, size_t *n_io, double *thr_io) {
+  const uint32_t start = qk__node_start(t, leaf), count = qk__node_count(t, leaf);
+  const double *px = qk__tree_xs(t) + start, *py = qk__tree_ys(t) + start;
+  const qk_id_t *pid = qk__tree_ids(t) + start;
+  double thr = *thr_io;
+  for (uint32_t i = 0; i < count; i++) {
+    double dx = px[i] - qx, dy = py[i] - qy;
+    double d2 = dx * dx + dy * dy;
+    if (d2 <= thr) qk__heap_offer(h, n_io, k, pid[i], d2, &thr);
+  }
+  *thr_io = thr;
+}
+
 /*
  * The search proper, on squared distances. `limit2` is the squared cap; a point enters
  * when its squared distance is at most limit2 and it beats the heap's worst (or the heap
  * is not full). A node is pruned when its bound is strictly above the threshold: a node
  * at exactly the k-th distance may still hold a point with a smaller id.
  */
-/* Offer a leaf's points to the heap h (n entries, at most k), tightening *thr. */
-static inline void scan_leaf(const qk_tree_t *t, const qk__node_t *nd, double qx, double qy,
-                             size_t k, qk_neighbor_t *h, size_t *n_io, double *thr_io) {
-  const double *px = t->px + nd->start, *py = t->py + nd->start;
-  const qk_id_t *pid = t->pid + nd->start;
-  size_t n = *n_io;
-  double thr = *thr_io;
-  for (uint32_t i = 0; i < nd->count; i++) {
-    double dx = px[i] - qx, dy = py[i] - qy;
-    double d2 = dx * dx + dy * dy;
-    if (d2 > thr) continue;
-    qk_neighbor_t v = {pid[i], d2};
-    if (n < k) {
-      qk__heap_push(h, &n, v);
-      if (n == k && h[0].dist < thr) thr = h[0].dist;
-    } else if (qk__nb_less(d2, pid[i], h[0].dist, h[0].id)) {
-      qk__heap_replace_top(h, n, v);
-      thr = h[0].dist;
-    }
-  }
-  *n_io = n;
-  *thr_io = thr;
-}
-
 static size_t knn_search(const qk_tree_t *t, double qx, double qy, size_t k, double limit2,
                          qk_neighbor_t *h) {
   const double e = qk__margin(t);
@@ -88,48 +79,43 @@ static size_t knn_search(const qk_tree_t *t, double qx, double qy, size_t k, dou
    * the search proper starts, so that the search pushes few nodes it later discards.
    * The search then skips that leaf.
    */
-  uint32_t first = QK_NONE;
-  {
-    const qk__node_t *r = &t->nodes[0];
-    double s0 = t->side[0];
-    if (qx >= r->x0 && qx <= r->x0 + s0 && qy >= r->y0 && qy <= r->y0 + s0) {
-      uint32_t v = 0;
-      while (!qk__is_leaf(&t->nodes[v])) {
-        const qk__node_t *nd = &t->nodes[v];
-        v = nd->child + qk__quadrant_of(nd->x0, nd->y0, t->side[nd->depth + 1], qx, qy);
-      }
-      first = v;
-      scan_leaf(t, &t->nodes[v], qx, qy, k, h, &n, &thr);
-    }
+  qk_node_t first = QK_NONE;
+  if (qk__tree_contains(t, qx, qy)) {
+    first = qk__tree_descend(t, qx, qy, NULL, NULL);
+    scan_leaf(t, first, qx, qy, k, h, &n, &thr);
   }
-  qk__entry_t stack[QK__STACK_MAX];
+  qk__cell_entry_t stack[QK__STACK_MAX];
   int sp = 0;
-  stack[sp].node = 0;
-  stack[sp++].bound = qk__cell_d2(t, &t->nodes[0], qx, qy, e);
+  const qk_square_t r = qk__tree_root_square(t);
+  stack[sp].c = qk__root_cell(t);
+  stack[sp++].bound = qk__square_d2(r.x, r.y, r.side, qx, qy, e);
   while (sp > 0) {
-    qk__entry_t top = stack[--sp];
+    qk__cell_entry_t top = stack[--sp];
     if (top.bound > thr) continue;
-    const qk__node_t *nd = &t->nodes[top.node];
-    if (qk__is_leaf(nd)) {
-      if (top.node != first) scan_leaf(t, nd, qx, qy, k, h, &n, &thr);
+    const uint32_t child = qk__node_child(t, top.c.node);
+    if (child == QK_NONE) {
+      if (top.c.node != first) scan_leaf(t, top.c.node, qx, qy, k, h, &n, &thr);
       continue;
     }
     /* Bound the children from this node's square (NE, NW, SW, SE), not from their
      * nodes; a child is read only if it is visited (empty ones are dropped then). The
      * children share their edges, so two distances per axis give all four bounds. */
-    const double hs = t->side[nd->depth + 1], xm = nd->x0 + hs, ym = nd->y0 + hs;
-    const double dxw = qk__gap(qx, nd->x0 - e, xm + e), dxe = qk__gap(qx, xm - e, xm + hs + e);
-    const double dys = qk__gap(qy, nd->y0 - e, ym + e), dyn = qk__gap(qy, ym - e, ym + hs + e);
+    qk__cell_t kc[4];
+    qk__cell_children(t, top.c, child, kc);
+    const double hs = qk__tree_side(t, top.c.depth + 1), x0 = top.c.x, y0 = top.c.y;
+    const double xm = x0 + hs, ym = y0 + hs;
+    const double dxw = qk__gap(qx, x0 - e, xm + e), dxe = qk__gap(qx, xm - e, xm + hs + e);
+    const double dys = qk__gap(qy, y0 - e, ym + e), dyn = qk__gap(qy, ym - e, ym + hs + e);
     const double xw = dxw * dxw, xe = dxe * dxe, ys = dys * dys, yn = dyn * dyn;
     const double b[4] = {xe + yn, xw + yn, xw + ys, xe + ys}; /* NE, NW, SW, SE */
-    qk__entry_t kids[4];
+    qk__cell_entry_t kids[4];
     int m = 0;
     for (uint32_t c = 0; c < 4; c++) {
       if (b[c] > thr) continue;
-      kids[m].node = nd->child + c;
+      kids[m].c = kc[c];
       kids[m++].bound = b[c];
     }
-    qk__sort4_desc(kids, m);
+    qk__sort_cells_desc(kids, m);
     for (int i = 0; i < m; i++) stack[sp++] = kids[i];
   }
   return n;
@@ -143,31 +129,45 @@ static size_t knn_search(const qk_tree_t *t, double qx, double qy, size_t k, dou
  */
 void qk__prefetch_paths(const qk_tree_t *t, const qk_point_t *qs, const uint32_t *order, size_t j0,
                         size_t nq) {
-  uint32_t v[QK__LANES];
+  qk_node_t v[QK__LANES];
+  unsigned d[QK__LANES];
   int lanes = 0;
-  const qk__node_t *r = &t->nodes[0];
-  const double s0 = t->side[0];
-  double qx[QK__LANES], qy[QK__LANES];
+  double qx[QK__LANES], qy[QK__LANES], cx[QK__LANES], cy[QK__LANES];
+  const qk_square_t r = qk__tree_root_square(t);
   for (size_t j = j0; j < nq && j < j0 + QK__LANES; j++) {
     qk_point_t q = qs[order ? order[j] : j];
-    if (!(q.x >= r->x0 && q.x <= r->x0 + s0 && q.y >= r->y0 && q.y <= r->y0 + s0)) continue;
+    if (!qk__tree_contains(t, q.x, q.y)) continue;
     qx[lanes] = q.x;
     qy[lanes] = q.y;
+    cx[lanes] = r.x;
+    cy[lanes] = r.y;
+    d[lanes] = 0;
     v[lanes++] = 0;
   }
+  const double *xs = qk__tree_xs(t), *ys = qk__tree_ys(t);
   while (lanes > 0) {
     for (int l = 0; l < lanes;) {
-      const qk__node_t *nd = &t->nodes[v[l]];
-      if (qk__is_leaf(nd)) {
-        QK__PREFETCH(t->px + nd->start);
-        QK__PREFETCH(t->py + nd->start);
-        v[l] = v[--lanes]; /* this lane is done: move the last one here */
+      const uint32_t child = qk__node_child(t, v[l]);
+      if (child == QK_NONE) {
+        uint32_t s = qk__node_start(t, v[l]);
+        QK__PREFETCH(xs + s);
+        QK__PREFETCH(ys + s);
+        lanes--; /* this lane is done: move the last one here */
+        v[l] = v[lanes];
+        d[l] = d[lanes];
         qx[l] = qx[lanes];
         qy[l] = qy[lanes];
+        cx[l] = cx[lanes];
+        cy[l] = cy[lanes];
         continue;
       }
-      v[l] = nd->child + qk__quadrant_of(nd->x0, nd->y0, t->side[nd->depth + 1], qx[l], qy[l]);
-      QK__PREFETCH(&t->nodes[v[l]]);
+      const double h = qk__tree_side(t, d[l] + 1);
+      const unsigned q = qk__quadrant_of(cx[l], cy[l], h, qx[l], qy[l]);
+      if (qk__q_east(q)) cx[l] += h;
+      if (qk__q_north(q)) cy[l] += h;
+      d[l]++;
+      v[l] = child + q;
+      qk__node_prefetch(t, v[l]);
       l++;
     }
   }
@@ -182,8 +182,9 @@ static qk_status_t check_args(qk_point_t q, double max_dist) {
 /* One query into out (k entries, k >= 1); returns the count. */
 static size_t knn_one(const qk_tree_t *t, qk_point_t q, size_t k, double max_dist,
                       qk_neighbor_t *out) {
-  if (t->n_points == 0 || k == 0) return 0;
-  if (k > t->n_points) k = t->n_points;
+  const size_t np = qk__tree_count(t);
+  if (np == 0 || k == 0) return 0;
+  if (k > np) k = np;
   double limit2 = max_dist * max_dist;
   size_t n = knn_search(t, q.x, q.y, k, limit2, out);
   qk__heap_sort(out, n);
@@ -206,6 +207,7 @@ qk_status_t qk_query_knn_batch(const qk_tree_t *tree, const qk_point_t *qs, size
   if (!tree || (nq > 0 && !qs) || (nq > 0 && k > 0 && !out)) return QK_ERR_INVALID;
   if (isnan(max_dist) || max_dist < 0) return QK_ERR_INVALID;
   qk_status_t first = QK_OK;
+  size_t first_i = SIZE_MAX;
   uint32_t *order;
   void *block = qk__morton_order(tree, qs, nq, &order);
   for (size_t j = 0; j < nq; j++) {
@@ -216,8 +218,10 @@ qk_status_t qk_query_knn_batch(const qk_tree_t *tree, const qk_point_t *qs, size
     qk_status_t st = check_args(qs[i], max_dist);
     if (st == QK_OK)
       n = knn_one(tree, qs[i], k, max_dist, o);
-    else
-      first = st;
+    else if (i < first_i) {
+      first = st; /* the error of the lowest-numbered query, whatever the answer order */
+      first_i = i;
+    }
     for (size_t m = n; m < k; m++) {
       o[m].id = QK_NONE;
       o[m].dist = INFINITY;

@@ -30,11 +30,12 @@ static inline uint32_t cell16(double v, double lo, double scale) {
 void *qk__morton_order(const qk_tree_t *t, const qk_point_t *qs, size_t nq, uint32_t **order) {
   *order = NULL;
   if (nq < 64 || nq > UINT32_MAX) return NULL; /* too few to pay, or ids do not fit */
-  const qk_allocator_t *a = &t->alloc;
+  const qk_allocator_t *a = qk__tree_allocator(t);
   uint64_t *k = qk__realloc(a, NULL, 0, 2 * nq * sizeof *k);
   if (!k) return NULL;
   uint64_t *tmp = k + nq;
-  const double x0 = t->nodes[0].x0, y0 = t->nodes[0].y0, scale = 65536.0 / t->side[0];
+  const qk_square_t r = qk__tree_root_square(t);
+  const double x0 = r.x, y0 = r.y, scale = 65536.0 / r.side;
   for (size_t i = 0; i < nq; i++) {
     uint32_t code =
         spread16(cell16(qs[i].x, x0, scale)) << 1 | spread16(cell16(qs[i].y, y0, scale));
@@ -59,5 +60,5 @@ void *qk__morton_order(const qk_tree_t *t, const qk_point_t *qs, size_t nq, uint
 }
 
 void qk__morton_free(const qk_tree_t *t, void *block, size_t nq) {
-  qk__free(&t->alloc, block, 2 * nq * sizeof(uint64_t));
+  qk__free(qk__tree_allocator(t), block, 2 * nq * sizeof(uint64_t));
 }

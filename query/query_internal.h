@@ -1,13 +1,14 @@
 /*
  * Private helpers of the query module: cell bounds with a rounding margin, the explicit
- * traversal stack and the bounded max-heap used by the kNN searches. Not API.
+ * traversal stack and the bounded max-heap used by the kNN searches. Not API. Trees are
+ * read only through index/index_access.h: squares are computed along each descent.
  */
 #ifndef QUADKIT_QUERY_INTERNAL_H
 #define QUADKIT_QUERY_INTERNAL_H
 
 #include <math.h>
 
-#include "index/index_internal.h"
+#include "index/index_access.h"
 #include "quadkit/query.h"
 
 /*
@@ -23,6 +24,37 @@ typedef struct qk__entry {
   double bound;
 } qk__entry_t;
 
+/* A stacked node with its square's corner and depth (the side is qk__tree_side(depth)),
+ * carried down the descent so that no node's square is ever read back from the tree. */
+typedef struct qk__cell {
+  uint32_t node;
+  uint32_t depth;
+  double x, y;
+} qk__cell_t;
+
+/* A stacked node with its square and the lower bound that let it in. */
+typedef struct qk__cell_entry {
+  qk__cell_t c;
+  double bound;
+} qk__cell_entry_t;
+
+/* The four children of a cell (NE, NW, SW, SE), their squares derived from its own. */
+static inline void qk__cell_children(const qk_tree_t *t, qk__cell_t c, uint32_t first,
+                                     qk__cell_t kids[4]) {
+  const double h = qk__tree_side(t, c.depth + 1);
+  const uint32_t d = c.depth + 1;
+  kids[0] = (qk__cell_t){first + QK_NE, d, c.x + h, c.y + h};
+  kids[1] = (qk__cell_t){first + QK_NW, d, c.x, c.y + h};
+  kids[2] = (qk__cell_t){first + QK_SW, d, c.x, c.y};
+  kids[3] = (qk__cell_t){first + QK_SE, d, c.x + h, c.y};
+}
+
+/* The root as a cell. */
+static inline qk__cell_t qk__root_cell(const qk_tree_t *t) {
+  qk_square_t r = qk__tree_root_square(t);
+  return (qk__cell_t){0, 0, r.x, r.y};
+}
+
 /*
  * The margin by which node squares are widened before pruning. A node's square is
  * (x0, y0, side) as stored, but its points are only guaranteed to satisfy the split
@@ -32,32 +64,16 @@ typedef struct qk__entry {
  * nothing measurable in pruning, while keeping every bound a true lower bound.
  */
 static inline double qk__margin(const qk_tree_t *t) {
-  const qk__node_t *r = &t->nodes[0];
-  double s = t->side[0];
-  return (fabs(r->x0) + fabs(r->y0) + 2.0 * s) * 0x1p-40;
+  qk_square_t r = qk__tree_root_square(t);
+  return (fabs(r.x) + fabs(r.y) + 2.0 * r.side) * 0x1p-40;
 }
 
 /*
- * Squared distance from (qx, qy) to a node's square widened by e. Floating-point
+ * Squared distance from (qx, qy) to the square (x0, y0, side) widened by e. Floating-point
  * subtraction is monotone, so the result never exceeds the computed squared distance to
- * any point stored in the node.
- */
-static inline double qk__cell_d2(const qk_tree_t *t, const qk__node_t *n, double qx, double qy,
-                                 double e) {
-  double s = t->side[n->depth];
-  double xlo = n->x0 - e, xhi = n->x0 + s + e;
-  double ylo = n->y0 - e, yhi = n->y0 + s + e;
-  double dx = qx < xlo ? xlo - qx : (qx > xhi ? qx - xhi : 0.0);
-  double dy = qy < ylo ? ylo - qy : (qy > yhi ? qy - yhi : 0.0);
-  return dx * dx + dy * dy;
-}
-
-/*
- * Squared distance from (qx, qy) to the square (x0, y0, side) widened by e: the same
- * bound as qk__cell_d2() for a child whose square is derived from its parent's, which
- * lets a search bound the four children without reading their nodes (a cache miss each
- * for the ones it then prunes). The derived corner differs from the stored one by a
- * rounding at most, far inside the margin.
+ * any point stored in the square's node. Squares are derived along the descent, from the
+ * parent's, which lets a search bound the four children without reading their nodes (a
+ * cache miss each for the ones it then prunes).
  */
 static inline double qk__square_d2(double x0, double y0, double side, double qx, double qy,
                                    double e) {
@@ -85,6 +101,25 @@ void qk__heap_replace_top(qk_neighbor_t *h, size_t n, qk_neighbor_t v);
 void qk__heap_sort(qk_neighbor_t *h, size_t n);
 
 /*
+ * Offer a candidate (id, d) to the bounded heap h of *n entries, at most k, whose
+ * pruning threshold is *thr (anything farther than *thr is out): it enters while the
+ * heap is not full, or when it beats the worst entry by (dist, id); *thr then becomes
+ * the worst entry's distance once the heap is full. The kNN searches, planar (squared
+ * distances) and geodesic (metres), share it.
+ */
+static inline void qk__heap_offer(qk_neighbor_t *h, size_t *n, size_t k, qk_id_t id, double d,
+                                  double *thr) {
+  qk_neighbor_t v = {id, d};
+  if (*n < k) {
+    qk__heap_push(h, n, v);
+    if (*n == k && h[0].dist < *thr) *thr = h[0].dist;
+  } else if (qk__nb_less(d, id, h[0].dist, h[0].id)) {
+    qk__heap_replace_top(h, *n, v);
+    *thr = h[0].dist;
+  }
+}
+
+/*
  * Z-order of nq query locations, for the batch calls: returns a block to release with
  * qk__morton_free() and sets *order to the query indices in Morton order; returns NULL
  * (order NULL) when the batch is too small to gain or memory is short, in which case
@@ -108,6 +143,19 @@ void qk__prefetch_paths(const qk_tree_t *t, const qk_point_t *qs, const uint32_t
 static inline void qk__sort4_desc(qk__entry_t *e, int n) {
   for (int i = 1; i < n; i++) {
     qk__entry_t v = e[i];
+    int j = i - 1;
+    while (j >= 0 && e[j].bound < v.bound) {
+      e[j + 1] = e[j];
+      j--;
+    }
+    e[j + 1] = v;
+  }
+}
+
+/* The same for stacked cells. */
+static inline void qk__sort_cells_desc(qk__cell_entry_t *e, int n) {
+  for (int i = 1; i < n; i++) {
+    qk__cell_entry_t v = e[i];
     int j = i - 1;
     while (j >= 0 && e[j].bound < v.bound) {
       e[j + 1] = e[j];

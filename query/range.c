@@ -11,18 +11,21 @@ typedef int (*qk__emit_fn)(void *ctx, qk_id_t id, double x, double y, double dis
 
 static qk_status_t range_walk(const qk_tree_t *t, qk_box_t b, qk__emit_fn emit, void *ctx) {
   if (isnan(b.xmin) || isnan(b.ymin) || isnan(b.xmax) || isnan(b.ymax)) return QK_ERR_NONFINITE;
-  if (b.xmin > b.xmax || b.ymin > b.ymax || t->n_points == 0) return QK_OK;
+  if (b.xmin > b.xmax || b.ymin > b.ymax || qk__tree_count(t) == 0) return QK_OK;
   const double e = qk__margin(t);
-  uint32_t stack[QK__STACK_MAX];
+  const double *xs = qk__tree_xs(t), *ys = qk__tree_ys(t);
+  const qk_id_t *ids = qk__tree_ids(t);
+  qk__cell_t stack[QK__STACK_MAX];
   int sp = 0;
-  stack[sp++] = 0;
+  stack[sp++] = qk__root_cell(t);
   while (sp > 0) {
-    const qk__node_t *n = &t->nodes[stack[--sp]];
-    if (n->count == 0) continue;
-    if (qk__is_leaf(n)) {
-      const double *px = t->px + n->start, *py = t->py + n->start;
-      const qk_id_t *pid = t->pid + n->start;
-      for (uint32_t i = 0; i < n->count; i++) {
+    const qk__cell_t c = stack[--sp];
+    const uint32_t child = qk__node_child(t, c.node);
+    if (child == QK_NONE) {
+      const uint32_t start = qk__node_start(t, c.node), count = qk__node_count(t, c.node);
+      const double *px = xs + start, *py = ys + start;
+      const qk_id_t *pid = ids + start;
+      for (uint32_t i = 0; i < count; i++) {
         double x = px[i], y = py[i];
         if (x >= b.xmin && x <= b.xmax && y >= b.ymin && y <= b.ymax)
           if (emit(ctx, pid[i], x, y, 0.0)) return QK_OK;
@@ -31,16 +34,14 @@ static qk_status_t range_walk(const qk_tree_t *t, qk_box_t b, qk__emit_fn emit, 
     }
     /* Test the children's squares, derived from this node's, before pushing them, so
      * that a pruned child's node is never read. */
-    const double hs = t->side[n->depth + 1];
-    const double xlo[2] = {n->x0 - e, n->x0 + hs - e},
-                 xhi[2] = {n->x0 + hs + e, n->x0 + 2 * hs + e};
-    const double ylo[2] = {n->y0 - e, n->y0 + hs - e},
-                 yhi[2] = {n->y0 + hs + e, n->y0 + 2 * hs + e};
-    for (int c = 3; c >= 0; c--) {
-      unsigned east = qk__q_east((unsigned)c), north = qk__q_north((unsigned)c);
-      if (xlo[east] > b.xmax || xhi[east] < b.xmin || ylo[north] > b.ymax || yhi[north] < b.ymin)
+    const double hs = qk__tree_side(t, c.depth + 1);
+    qk__cell_t kids[4];
+    qk__cell_children(t, c, child, kids);
+    for (int q = 3; q >= 0; q--) {
+      const qk__cell_t k = kids[q];
+      if (k.x - e > b.xmax || k.x + hs + e < b.xmin || k.y - e > b.ymax || k.y + hs + e < b.ymin)
         continue;
-      stack[sp++] = n->child + (uint32_t)c;
+      stack[sp++] = k;
     }
   }
   return QK_OK;
@@ -50,19 +51,23 @@ static qk_status_t radius_walk(const qk_tree_t *t, qk_point_t c, double r, qk__e
                                void *ctx) {
   if (!isfinite(c.x) || !isfinite(c.y) || isnan(r)) return QK_ERR_NONFINITE;
   if (r < 0) return QK_ERR_INVALID;
-  if (t->n_points == 0) return QK_OK;
+  if (qk__tree_count(t) == 0) return QK_OK;
   const double r2 = r * r, e = qk__margin(t);
-  uint32_t stack[QK__STACK_MAX];
+  const qk_square_t root = qk__tree_root_square(t);
+  if (qk__square_d2(root.x, root.y, root.side, c.x, c.y, e) > r2) return QK_OK;
+  const double *xs = qk__tree_xs(t), *ys = qk__tree_ys(t);
+  const qk_id_t *ids = qk__tree_ids(t);
+  qk__cell_t stack[QK__STACK_MAX];
   int sp = 0;
-  stack[sp++] = 0;
-  if (qk__cell_d2(t, &t->nodes[0], c.x, c.y, e) > r2) return QK_OK;
+  stack[sp++] = qk__root_cell(t);
   while (sp > 0) {
-    const qk__node_t *n = &t->nodes[stack[--sp]];
-    if (n->count == 0) continue;
-    if (qk__is_leaf(n)) {
-      const double *px = t->px + n->start, *py = t->py + n->start;
-      const qk_id_t *pid = t->pid + n->start;
-      for (uint32_t i = 0; i < n->count; i++) {
+    const qk__cell_t n = stack[--sp];
+    const uint32_t child = qk__node_child(t, n.node);
+    if (child == QK_NONE) {
+      const uint32_t start = qk__node_start(t, n.node), count = qk__node_count(t, n.node);
+      const double *px = xs + start, *py = ys + start;
+      const qk_id_t *pid = ids + start;
+      for (uint32_t i = 0; i < count; i++) {
         double dx = px[i] - c.x, dy = py[i] - c.y;
         double d2 = dx * dx + dy * dy;
         if (d2 <= r2)
@@ -71,10 +76,11 @@ static qk_status_t radius_walk(const qk_tree_t *t, qk_point_t c, double r, qk__e
       continue;
     }
     /* As for boxes: bound the children from this node's square before pushing them. */
-    const double hs = t->side[n->depth + 1], x0 = n->x0, y0 = n->y0;
-    const double cx[4] = {x0 + hs, x0, x0, x0 + hs}, cy[4] = {y0 + hs, y0 + hs, y0, y0};
-    for (int k = 3; k >= 0; k--)
-      if (qk__square_d2(cx[k], cy[k], hs, c.x, c.y, e) <= r2) stack[sp++] = n->child + (uint32_t)k;
+    const double hs = qk__tree_side(t, n.depth + 1);
+    qk__cell_t kids[4];
+    qk__cell_children(t, n, child, kids);
+    for (int q = 3; q >= 0; q--)
+      if (qk__square_d2(kids[q].x, kids[q].y, hs, c.x, c.y, e) <= r2) stack[sp++] = kids[q];
   }
   return QK_OK;
 }

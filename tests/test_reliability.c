@@ -25,7 +25,7 @@
 #include <string.h>
 
 #include "qk_test.h"
-#include "index/index_internal.h"
+#include "index/index_access.h" /* and, for the id limit test, the tree struct */
 #include "mesh_check.h"
 
 /* The fuzz targets, compiled in with failures reported through cmocka. */
