@@ -48,21 +48,23 @@ qk_status_t qk_tree_balance(qk_tree_t *t) {
 
   /* Line 1: every leaf goes into the list. */
   for (uint32_t i = 0; i < t->n_nodes && st == QK_OK; i++)
-    if (t->nodes[i].live && qk__is_leaf(&t->nodes[i]) && (st = reserve(t, &s, 1)) == QK_OK)
+    if (qk__live(t, i) && qk__is_leaf(&t->nodes[i]) && (st = reserve(t, &s, 1)) == QK_OK)
       s.v[s.n++] = i;
 
   /* Lines 2-10. A node may sit in the list more than once or have been split since it
    * was pushed; such entries are skipped, which keeps the work O((d+1) m). */
   while (st == QK_OK && s.n > 0) {
     uint32_t v = s.v[--s.n];
-    if (!t->nodes[v].live || !qk__is_leaf(&t->nodes[v])) continue;
-    if (!has_small_neighbor(t, v) || !qk__can_split(t, &t->nodes[v])) continue;
+    if (!qk__live(t, v) || !qk__is_leaf(&t->nodes[v])) continue;
+    if (!has_small_neighbor(t, v)) continue;
+    qk__geom_t g = qk__node_geom(t, v);
+    if (!qk__can_split(t, g)) continue;
     /* Reserve (and grow the list) before splitting so that a failure leaves the tree
      * valid and every leaf that still needs attention is known. */
     if ((st = qk__reserve_nodes(t, 4)) != QK_OK) break;
     if ((st = reserve(t, &s, 8)) != QK_OK) break;
     /* Lines 5-7: qk__split moves the leaf's points into the correct new leaves. */
-    uint32_t b = qk__split(t, v);
+    uint32_t b = qk__split(t, v, g);
     /* Line 8: the new leaves may themselves need splitting. */
     for (uint32_t q = 0; q < 4; q++) s.v[s.n++] = b + q;
     /* Lines 9-10, the notes' second issue: a neighbour of v that is larger than v (found
@@ -70,8 +72,7 @@ qk_status_t qk_tree_balance(qk_tree_t *t) {
      * new leaves beside it and must be split. */
     for (int d = 0; d < 4; d++) {
       qk_node_t u = qk_tree_neighbor(t, v, (qk_dir_t)d);
-      if (u != QK_NONE && qk__is_leaf(&t->nodes[u]) && t->nodes[u].depth < t->nodes[v].depth)
-        s.v[s.n++] = u;
+      if (u != QK_NONE && qk__is_leaf(&t->nodes[u]) && qk__depth(t, u) < g.depth) s.v[s.n++] = u;
     }
   }
   qk__free(&t->alloc, s.v, s.cap * sizeof *s.v);
@@ -84,6 +85,6 @@ int qk_tree_is_balanced(const qk_tree_t *t) {
    * adjacent leaves, since of two leaves differing by two or more levels the larger one
    * sees the smaller. */
   for (uint32_t i = 0; i < t->n_nodes; i++)
-    if (t->nodes[i].live && qk__is_leaf(&t->nodes[i]) && has_small_neighbor(t, i)) return 0;
+    if (qk__live(t, i) && qk__is_leaf(&t->nodes[i]) && has_small_neighbor(t, i)) return 0;
   return 1;
 }

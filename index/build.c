@@ -25,7 +25,7 @@ static inline uint32_t digit(unsigned east, unsigned north) {
 
 /* The exact cell number of (x, y): the tree's own comparisons for L levels. */
 static uint32_t exact_cell(const qk_tree_t *t, double x, double y, unsigned L) {
-  double cx = t->nodes[0].x0, cy = t->nodes[0].y0;
+  double cx = t->root_x, cy = t->root_y;
   uint32_t key = 0;
   for (unsigned d = 0; d < L; d++) {
     double half = t->side[d + 1];
@@ -59,16 +59,15 @@ static inline bool scaled_cell(double qx, double qy, double cells, double delta,
 
 /* Make node v over slots [a, b) a leaf or split it along the bucket counts. `cum` holds
  * the prefix sums of the 4^L buckets; v covers buckets [lo, lo + 4^(L - depth)). */
-static qk_status_t from_buckets(qk_tree_t *t, uint32_t v, const uint32_t *cum, uint32_t lo,
-                                unsigned L) {
-  qk__node_t *n = &t->nodes[v];
-  unsigned depth = n->depth;
-  if (n->count <= t->capacity || !qk__can_split(t, n)) return QK_OK;
-  if (depth == L) return qk__build_subtree(t, v);
+static qk_status_t from_buckets(qk_tree_t *t, uint32_t v, qk__geom_t g, const uint32_t *cum,
+                                uint32_t lo, unsigned L) {
+  unsigned depth = g.depth;
+  if (t->nodes[v].count <= t->capacity || !qk__can_split(t, g)) return QK_OK;
+  if (depth == L) return qk__build_subtree(t, v, g);
   qk_status_t st = qk__reserve_nodes(t, 4);
   if (st) return st;
   /* Splitting moves no point: the children's slot ranges are already in order. */
-  uint32_t b = qk__split_sorted(t, v);
+  uint32_t b = qk__split_sorted(t, v, depth);
   t->nodes[v].start = 0;
   t->nodes[v].room = 0;
   uint32_t span = 1u << (2 * (L - depth - 1));
@@ -80,7 +79,7 @@ static qk_status_t from_buckets(qk_tree_t *t, uint32_t v, const uint32_t *cum, u
     c->room = c->count;
   }
   for (uint32_t q = 0; q < 4; q++)
-    if ((st = from_buckets(t, b + q, cum, lo + q * span, L))) return st;
+    if ((st = from_buckets(t, b + q, qk__child_geom(t, g, q), cum, lo + q * span, L))) return st;
   return QK_OK;
 }
 
@@ -91,7 +90,7 @@ qk_status_t qk__build_bucketed(qk_tree_t *t, const qk_point_t *p, size_t n, bool
   if (L < 2) return QK_OK;
   /* Margin in grid units: rounding of the corner arithmetic (at most one rounding per
    * level) and of the scaling, with a factor of four to spare. */
-  double x0 = t->nodes[0].x0, y0 = t->nodes[0].y0, side = t->side[0];
+  double x0 = t->root_x, y0 = t->root_y, side = t->side[0];
   double M = fmax(fmax(fabs(x0), fabs(x0 + side)), fmax(fabs(y0), fabs(y0 + side)));
   double cells = (double)(1u << L), scale = cells / side;
   double ulpM = nextafter(M, INFINITY) - M;
@@ -137,7 +136,7 @@ qk_status_t qk__build_bucketed(qk_tree_t *t, const qk_point_t *p, size_t n, bool
   cum[0] = 0;
   qk__free(&t->alloc, key, m * sizeof *key);
   qk__free(&t->alloc, order, m * sizeof *order);
-  qk_status_t st = from_buckets(t, 0, cum, 0, L);
+  qk_status_t st = from_buckets(t, 0, (qk__geom_t){x0, y0, 0}, cum, 0, L);
   qk__free(&t->alloc, cum, (nb + 1) * sizeof *cum);
   *done = st == QK_OK;
   return st;

@@ -26,18 +26,33 @@ static qk_status_t fail(checker_t *c, const char *fmt, ...) {
   return QK_ERR_CORRUPT;
 }
 
-/* Check the subtree of v, whose ancestors' midpoints constrain its points. */
-static qk_status_t check_node(checker_t *c, uint32_t v) {
+/* The leaf the tree's own descent reaches for (x, y). */
+static uint32_t leaf_by_descent(const qk_tree_t *t, double x, double y) {
+  uint32_t v = 0;
+  qk__geom_t g = {t->root_x, t->root_y, 0};
+  while (!qk__is_leaf(&t->nodes[v])) {
+    unsigned q = qk__quadrant_of(g.x0, g.y0, t->side[g.depth + 1], x, y);
+    v = t->nodes[v].child + q;
+    g = qk__child_geom(t, g, q);
+  }
+  return v;
+}
+
+/* Check the subtree of v, of geometry g (computed down the path from the root). */
+static qk_status_t check_node(checker_t *c, uint32_t v, qk__geom_t g) {
   const qk_tree_t *t = c->t;
   const qk__node_t *n = &t->nodes[v];
   c->live_nodes++;
-  if (!n->live) return fail(c, "node %u is reachable but not live", v);
-  if (n->depth > t->max_depth) return fail(c, "node %u deeper than the cap", v);
+  if (!qk__live(t, v)) return fail(c, "node %u is reachable but not live", v);
+  if (g.depth > t->max_depth) return fail(c, "node %u deeper than the cap", v);
+  if (qk__depth(t, v) != g.depth)
+    return fail(c, "node %u: recorded depth %u, but %u below the root", v, qk__depth(t, v),
+                g.depth);
   if (qk__is_leaf(n)) {
     if ((uint64_t)n->start + n->room > t->n_slots || n->count > n->room)
       return fail(c, "leaf %u: slot range [%u,+%u) count %u out of bounds", v, n->start, n->room,
                   n->count);
-    if (n->count > t->capacity && qk__can_split(t, n))
+    if (n->count > t->capacity && qk__can_split(t, g))
       return fail(c, "leaf %u holds %u points > capacity %u but can split", v, n->count,
                   t->capacity);
     for (uint32_t i = n->start; i < n->start + n->room; i++) {
@@ -50,43 +65,49 @@ static qk_status_t check_node(checker_t *c, uint32_t v) {
       if (c->map && c->map[id] != i) return fail(c, "slot %u: id %u not mapped back to it", i, id);
       if (c->id_seen[id]) return fail(c, "id %u stored twice", id);
       c->id_seen[id] = 1;
-      /* The point must lie where the tie rules send it at every ancestor. */
-      uint32_t child = v;
-      for (uint32_t a = n->parent; a != QK_NONE; child = a, a = t->nodes[a].parent) {
-        const qk__node_t *an = &t->nodes[a];
-        unsigned q = qk__quadrant_of(an->x0, an->y0, t->side[an->depth + 1], t->px[i], t->py[i]);
-        if (an->child + q != child)
-          return fail(c, "point %u (%.17g, %.17g) is in the wrong quadrant of node %u", id,
-                      t->px[i], t->py[i], a);
-      }
+      /* The point must lie where the tie rules send it at every ancestor: the tree's own
+       * descent from the root must reach this leaf. */
+      if (leaf_by_descent(t, t->px[i], t->py[i]) != v)
+        return fail(c, "point %u (%.17g, %.17g) is not in the quadrants leading to leaf %u", id,
+                    t->px[i], t->py[i], v);
     }
     c->points_seen += n->count;
     return QK_OK;
   }
-  if (n->child + 4 > t->n_nodes || n->child % 4 != 1)
+  if (n->child >= t->n_nodes || t->n_nodes - n->child < 4 || n->child % 4 != 1)
     return fail(c, "node %u: child block %u invalid", v, n->child);
-  if (!qk__can_split(t, n)) return fail(c, "node %u is split but cannot be", v);
+  if (!qk__can_split(t, g)) return fail(c, "node %u is split but cannot be", v);
   if (!t->refined && n->count <= t->capacity)
     return fail(c, "node %u holds %u <= capacity points but is not a leaf", v, n->count);
+  const qk__block_t *k = qk__block_of(t, n->child);
+  if (!k->live || k->parent != v || k->depth != g.depth + 1)
+    return fail(c, "node %u: block record of children %u (parent %u, depth %u, live %u) wrong", v,
+                n->child, k->parent, k->depth, k->live);
   uint64_t sum = 0;
-  double half = t->side[n->depth + 1];
-  for (uint32_t q = 0; q < 4; q++) {
-    const qk__node_t *k = &t->nodes[n->child + q];
-    if (k->parent != v || k->quadrant != q || k->depth != n->depth + 1)
-      return fail(c, "node %u: parent/quadrant/depth links of child %u wrong", v, n->child + q);
-    double ex = (q == QK_NE || q == QK_SE) ? n->x0 + half : n->x0;
-    double ey = (q == QK_NE || q == QK_NW) ? n->y0 + half : n->y0;
-    if (k->x0 != ex || k->y0 != ey)
-      return fail(c, "node %u: square is not its quadrant", n->child + q);
-    sum += k->count;
-  }
+  for (uint32_t q = 0; q < 4; q++) sum += t->nodes[n->child + q].count;
   if (sum != n->count)
     return fail(c, "node %u: count %u != sum of children %llu", v, n->count,
                 (unsigned long long)sum);
   for (uint32_t q = 0; q < 4; q++) {
-    qk_status_t st = check_node(c, n->child + q);
+    qk_status_t st = check_node(c, n->child + q, qk__child_geom(t, g, q));
     if (st) return st;
   }
+  return QK_OK;
+}
+
+/* The free list: n_free_blocks blocks, each in range and marked free. */
+static qk_status_t check_free_list(checker_t *c) {
+  const qk_tree_t *t = c->t;
+  uint32_t seen = 0;
+  for (uint32_t b = t->free_block; b != QK_NONE; b = qk__block_of(t, b)->parent) {
+    if (b >= t->n_nodes || b % 4 != 1 || seen >= t->n_free_blocks)
+      return fail(c, "free list: block %u out of range or list longer than %u", b,
+                  t->n_free_blocks);
+    if (qk__block_of(t, b)->live) return fail(c, "free list: block %u is marked live", b);
+    seen++;
+  }
+  if (seen != t->n_free_blocks)
+    return fail(c, "free list holds %u blocks, tree says %u", seen, t->n_free_blocks);
   return QK_OK;
 }
 
@@ -94,10 +115,11 @@ qk_status_t qk_tree_check(const qk_tree_t *t, char *msg, size_t msg_size) {
   checker_t c = {t, msg, msg_size, 0, 0, NULL, NULL, NULL};
   if (msg && msg_size) msg[0] = '\0';
   if (!t) return fail(&c, "NULL tree");
-  if (t->n_nodes == 0 || t->n_nodes > t->cap_nodes || (t->n_nodes - 1) % 4 != 0)
-    return fail(&c, "node count %u / capacity %u inconsistent", t->n_nodes, t->cap_nodes);
+  if (t->n_nodes == 0 || t->n_nodes > t->cap_nodes || (t->n_nodes - 1) % 4 != 0 ||
+      (t->n_nodes - 1) / 4 > t->cap_blocks)
+    return fail(&c, "node count %u / capacity %u / blocks %u inconsistent", t->n_nodes,
+                t->cap_nodes, t->cap_blocks);
   const qk__node_t *r = &t->nodes[0];
-  if (r->parent != QK_NONE || r->depth != 0) return fail(&c, "root links wrong");
   if (r->count != t->n_points)
     return fail(&c, "root count %u != points %zu", r->count, t->n_points);
   if (t->n_slots > t->cap_slots) return fail(&c, "slots used beyond capacity");
@@ -113,7 +135,8 @@ qk_status_t qk_tree_check(const qk_tree_t *t, char *msg, size_t msg_size) {
   }
   memset(c.slot_owned, 0, n_slot_bytes);
   memset(c.id_seen, 0, n_id_bytes);
-  qk_status_t st = check_node(&c, 0);
+  qk_status_t st = check_free_list(&c);
+  if (!st) st = check_node(&c, 0, (qk__geom_t){t->root_x, t->root_y, 0});
   if (!st && c.points_seen != t->n_points)
     st = fail(&c, "leaves hold %zu points, tree says %zu", c.points_seen, t->n_points);
   if (!st) {

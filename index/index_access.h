@@ -41,7 +41,7 @@ static inline double qk__tree_side(const qk_tree_t *t, unsigned depth) { return 
 
 /* The root's square. */
 static inline qk_square_t qk__tree_root_square(const qk_tree_t *t) {
-  return (qk_square_t){t->nodes[0].x0, t->nodes[0].y0, t->side[0]};
+  return (qk_square_t){t->root_x, t->root_y, t->side[0]};
 }
 
 /* ---- one node ------------------------------------------------------------------- */
@@ -53,12 +53,24 @@ static inline bool qk__node_leaf(const qk_tree_t *t, qk_node_t v) {
   return t->nodes[v].child == QK_NONE;
 }
 
-static inline unsigned qk__node_depth(const qk_tree_t *t, qk_node_t v) { return t->nodes[v].depth; }
+static inline unsigned qk__node_depth(const qk_tree_t *t, qk_node_t v) { return qk__depth(t, v); }
 
-/* A node's square (a cold read: prefer squares computed along the path). */
+/* A node's parent (QK_NONE for the root) and which child of it the node is. */
+static inline qk_node_t qk__node_parent(const qk_tree_t *t, qk_node_t v) {
+  return qk__parent(t, v);
+}
+static inline qk_quadrant_t qk__node_quadrant(qk_node_t v) {
+  return (qk_quadrant_t)qk__quadrant(v);
+}
+
+/* Is v a node in use? */
+static inline bool qk__node_live(const qk_tree_t *t, qk_node_t v) { return qk__live(t, v); }
+
+/* A node's square (a cold read, recomputed down its path in O(depth): prefer squares
+ * computed along the descent). */
 static inline qk_square_t qk__node_square(const qk_tree_t *t, qk_node_t v) {
-  const qk__node_t *n = &t->nodes[v];
-  return (qk_square_t){n->x0, n->y0, t->side[n->depth]};
+  qk__geom_t g = qk__node_geom(t, v);
+  return (qk_square_t){g.x0, g.y0, t->side[g.depth]};
 }
 
 /* First slot of a leaf's points. */

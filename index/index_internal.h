@@ -11,37 +11,49 @@
 #include <stdbool.h>
 
 /*
- * One node. Its square is (x0, y0) with side tree->side[depth]. `child` is the first of
+ * One node: the hot part, 16 bytes, all that a descent reads. `child` is the first of
  * four consecutive children (NE, NW, SW, SE) or QK_NONE for a leaf. For a leaf, its
  * points occupy slots [start, start + count) of the point arrays, with `room` slots
  * reserved there so that inserts usually need no move. `count` is the number of points
- * in the subtree for every node.
+ * in the subtree for every node. A node's square is not stored: descents compute it from
+ * the root's along their path (qk__node_geom() recomputes it, in O(depth), for the cold
+ * callers).
  */
 typedef struct qk__node {
-  double x0, y0;
   uint32_t child;
-  uint32_t parent;
   uint32_t start;
   uint32_t count;
   uint32_t room;
-  uint8_t depth;
-  uint8_t quadrant;
-  uint8_t live;
-  uint8_t pad_;
 } qk__node_t;
+
+/*
+ * The cold part, one record per block of four siblings (nodes 1 + 4b .. 4 + 4b form block
+ * b; the root is in no block): their parent, their depth, and whether the block is in
+ * use. A free block is on a list linked through `parent` (the next free block's first
+ * node, or QK_NONE). A node's quadrant is its place in its block, (v - 1) % 4.
+ */
+typedef struct qk__block {
+  uint32_t parent;
+  uint8_t depth;
+  uint8_t live;
+  uint16_t pad_;
+} qk__block_t;
 
 struct qk_tree {
   qk_allocator_t alloc;
   uint32_t capacity;
   uint32_t max_depth;
-  bool refined; /* split beyond the capacity rule: removals no longer merge */
+  bool refined;          /* split beyond the capacity rule: removals no longer merge */
+  double root_x, root_y; /* the root square's lower-left corner */
   double side[QK_MAX_DEPTH_LIMIT + 2]; /* side length at each depth, exact halvings */
 
   /* Nodes: node 0 is the root; children come in blocks of four. */
   qk__node_t *nodes;
+  qk__block_t *blocks; /* cold records of the blocks, cap_nodes / 4 of them */
   uint32_t n_nodes;    /* slots used (high-water mark, including free blocks) */
-  uint32_t cap_nodes;  /* slots allocated */
-  uint32_t free_block; /* first free block of four (linked through .parent), or QK_NONE */
+  uint32_t cap_nodes;  /* node slots allocated (1 + 4 * cap_blocks once grown) */
+  uint32_t cap_blocks; /* block records allocated */
+  uint32_t free_block; /* first node of the first free block, or QK_NONE */
   uint32_t n_free_blocks;
 
   /* Points in leaf order: slot s holds (px[s], py[s]) with id pid[s]. */
@@ -69,9 +81,23 @@ void qk__free(const qk_allocator_t *a, void *ptr, size_t size);
 
 static inline bool qk__is_leaf(const qk__node_t *n) { return n->child == QK_NONE; }
 
-/* Side length of a node's square. */
-static inline double qk__node_side(const qk_tree_t *t, const qk__node_t *n) {
-  return t->side[n->depth];
+/* The block record of a node other than the root. */
+static inline qk__block_t *qk__block_of(const qk_tree_t *t, uint32_t v) {
+  return &t->blocks[(v - 1) >> 2];
+}
+
+/* A node's depth, parent (QK_NONE for the root) and quadrant (QK_NE for the root). */
+static inline unsigned qk__depth(const qk_tree_t *t, uint32_t v) {
+  return v ? qk__block_of(t, v)->depth : 0u;
+}
+static inline uint32_t qk__parent(const qk_tree_t *t, uint32_t v) {
+  return v ? qk__block_of(t, v)->parent : QK_NONE;
+}
+static inline unsigned qk__quadrant(uint32_t v) { return v ? (v - 1) & 3u : 0u; }
+
+/* Is v a node in use (not beyond the array, not in a free block)? */
+static inline bool qk__live(const qk_tree_t *t, uint32_t v) {
+  return v < t->n_nodes && (v == 0 || qk__block_of(t, v)->live);
 }
 
 /* Which child of a node of square (x0, y0, side) a location belongs to, by the tie rules:
@@ -102,20 +128,40 @@ static inline void qk__facing_children(qk_dir_t dir, unsigned q[2]) {
   q[1] = f[dir][1];
 }
 
-/* Can this node be split (not at the depth cap, and its side still halves exactly into
- * distinct midpoints)? */
-bool qk__can_split(const qk_tree_t *t, const qk__node_t *n);
+/* A node's square and depth: where a descent knows them, it passes them on. */
+typedef struct qk__geom {
+  double x0, y0;
+  unsigned depth;
+} qk__geom_t;
 
-/* Split a leaf into four children and distribute its points. Nodes must have been
- * reserved (qk__reserve_nodes) beforehand; cannot fail then. Returns the first child. */
-uint32_t qk__split(qk_tree_t *t, uint32_t leaf);
+/* The geometry of a child q of a node of geometry g. */
+static inline qk__geom_t qk__child_geom(const qk_tree_t *t, qk__geom_t g, unsigned q) {
+  double h = t->side[g.depth + 1];
+  return (qk__geom_t){g.x0 + (qk__q_east(q) ? h : 0.0), g.y0 + (qk__q_north(q) ? h : 0.0),
+                      g.depth + 1};
+}
 
-/* Attach four children to a leaf without moving its points (they are already in
- * quadrant order); the caller sets the children's slot ranges. Nodes must be reserved. */
-uint32_t qk__split_sorted(qk_tree_t *t, uint32_t leaf);
+/* A node's geometry recomputed from the root down its path (the same arithmetic as every
+ * descent, so the same square): O(depth), for callers that did not descend to it. */
+qk__geom_t qk__node_geom(const qk_tree_t *t, uint32_t v);
 
-/* Split `node` and its descendants while over capacity (the plain recursive build). */
-qk_status_t qk__build_subtree(qk_tree_t *t, uint32_t node);
+/* Can a node of this geometry be split (not at the depth cap, and its side still halves
+ * exactly into distinct midpoints)? */
+bool qk__can_split(const qk_tree_t *t, qk__geom_t g);
+
+/* Split a leaf of geometry g into four children and distribute its points. Nodes must
+ * have been reserved (qk__reserve_nodes) beforehand; cannot fail then. Returns the first
+ * child. */
+uint32_t qk__split(qk_tree_t *t, uint32_t leaf, qk__geom_t g);
+
+/* Attach four children to a leaf of depth `depth` without moving its points (they are
+ * already in quadrant order); the caller sets the children's slot ranges. Nodes must be
+ * reserved. */
+uint32_t qk__split_sorted(qk_tree_t *t, uint32_t leaf, unsigned depth);
+
+/* Split `node` (of geometry g) and its descendants while over capacity (the plain
+ * recursive build). */
+qk_status_t qk__build_subtree(qk_tree_t *t, uint32_t node, qk__geom_t g);
 
 /* Bulk build by bucketing into a uniform grid (index/build.c). Sets *done when it built
  * the tree; leaves it false (and the tree untouched) when the plain build should run. */

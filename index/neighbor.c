@@ -34,17 +34,17 @@ static unsigned mirror(unsigned q, qk_dir_t dir) {
  * climb to the lowest ancestor that is not on the `dir` side, then come back down.
  */
 qk_node_t qk_tree_neighbor(const qk_tree_t *t, qk_node_t v, qk_dir_t dir) {
-  if (!t || v >= t->n_nodes || !t->nodes[v].live || (unsigned)dir > QK_WEST) return QK_NONE;
+  if (!t || !qk__live(t, v) || (unsigned)dir > QK_WEST) return QK_NONE;
   unsigned char path[QK_MAX_DEPTH_LIMIT + 2];
   unsigned len = 0;
   uint32_t a = v;
-  while (a != 0 && on_side(t->nodes[a].quadrant, dir)) {
-    path[len++] = t->nodes[a].quadrant;
-    a = t->nodes[a].parent;
+  while (a != 0 && on_side(qk__quadrant(a), dir)) {
+    path[len++] = (unsigned char)qk__quadrant(a);
+    a = qk__parent(t, a);
   }
   if (a == 0) return QK_NONE; /* the side lies on the root square's boundary */
-  const qk__node_t *pa = &t->nodes[t->nodes[a].parent];
-  uint32_t u = pa->child + mirror(t->nodes[a].quadrant, dir);
+  /* a's sibling across the side: same block, so a - quadrant(a) is the block's first. */
+  uint32_t u = a - qk__quadrant(a) + mirror(qk__quadrant(a), dir);
   while (len > 0 && !qk__is_leaf(&t->nodes[u])) u = t->nodes[u].child + mirror(path[--len], dir);
   return u;
 }
@@ -74,7 +74,7 @@ static void collect(const qk_tree_t *t, uint32_t u, qk_dir_t dir, adj_t *a) {
 qk_status_t qk_tree_adjacent_leaves(const qk_tree_t *t, qk_node_t v, qk_dir_t dir, qk_node_t *out,
                                     size_t cap, size_t *n_out) {
   if (!t || !n_out || (cap && !out) || (unsigned)dir > QK_WEST) return QK_ERR_INVALID;
-  if (v >= t->n_nodes || !t->nodes[v].live) return QK_ERR_NOT_FOUND;
+  if (!qk__live(t, v)) return QK_ERR_NOT_FOUND;
   adj_t a = {out, cap, 0};
   qk_node_t u = qk_tree_neighbor(t, v, dir);
   if (u != QK_NONE) collect(t, u, dir, &a);

@@ -11,8 +11,9 @@ static qk_visit_t draw(const qk_tree_t *t, qk_node_t v, void *ud) {
   svg_t *s = ud;
   const qk__node_t *n = &t->nodes[v];
   if (!qk__is_leaf(n)) return QK_VISIT_CONTINUE;
-  double side = t->side[n->depth] * s->scale;
-  double x = (n->x0 - s->x0) * s->scale, y = s->h - (n->y0 - s->y0) * s->scale - side;
+  qk__geom_t g = qk__node_geom(t, v);
+  double side = t->side[g.depth] * s->scale;
+  double x = (g.x0 - s->x0) * s->scale, y = s->h - (g.y0 - s->y0) * s->scale - side;
   if (!s->points) {
     fprintf(s->f, "<rect x=\"%.3f\" y=\"%.3f\" width=\"%.3f\" height=\"%.3f\"/>\n", x, y, side,
             side);
@@ -27,7 +28,7 @@ static qk_visit_t draw(const qk_tree_t *t, qk_node_t v, void *ud) {
 qk_status_t qk_tree_write_svg(const qk_tree_t *t, FILE *f, unsigned width) {
   if (!t || !f) return QK_ERR_INVALID;
   if (width == 0) width = 800;
-  svg_t s = {f, t->nodes[0].x0, t->nodes[0].y0, (double)width / t->side[0], (double)width, 0};
+  svg_t s = {f, t->root_x, t->root_y, (double)width / t->side[0], (double)width, 0};
   fprintf(f,
           "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"%u\" height=\"%u\" "
           "viewBox=\"-2 -2 %u %u\">\n<rect x=\"-2\" y=\"-2\" width=\"%u\" height=\"%u\" "

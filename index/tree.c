@@ -40,11 +40,15 @@ static qk_status_t grow(const qk_allocator_t *a, void **arr, uint32_t *cap, size
 }
 
 qk_status_t qk__reserve_nodes(qk_tree_t *t, uint32_t extra) {
-  /* Blocks on the free list can be reused; the rest must fit after n_nodes. */
+  /* Blocks on the free list can be reused; the rest must fit after n_nodes. The hot and
+   * the cold arrays grow separately: if the second fails, the first is only larger. */
   size_t reusable = (size_t)t->n_free_blocks * 4;
   if (extra <= reusable) return QK_OK;
-  return grow(&t->alloc, (void **)&t->nodes, &t->cap_nodes, (size_t)t->n_nodes + (extra - reusable),
-              sizeof(qk__node_t));
+  size_t need = (size_t)t->n_nodes + (extra - reusable);
+  qk_status_t st = grow(&t->alloc, (void **)&t->nodes, &t->cap_nodes, need, sizeof(qk__node_t));
+  if (st) return st;
+  return grow(&t->alloc, (void **)&t->blocks, &t->cap_blocks, (need - 1 + 3) / 4,
+              sizeof(qk__block_t));
 }
 
 /* A set of the three parallel point arrays. */
@@ -152,7 +156,7 @@ qk_status_t qk__id_map(const qk_tree_t *ct, const uint32_t **map) {
     for (size_t i = 0; i < cap; i++) w[i] = QK_NONE;
     for (uint32_t v = 0; v < t->n_nodes; v++) {
       const qk__node_t *n = &t->nodes[v];
-      if (!n->live || !qk__is_leaf(n)) continue;
+      if (!qk__live(t, v) || !qk__is_leaf(n)) continue;
       for (uint32_t s = n->start; s < n->start + n->count; s++) w[t->pid[s]] = s;
     }
     /* Publish; if another reader got there first, use its map and drop this one. */
@@ -187,7 +191,7 @@ static uint32_t take_block(qk_tree_t *t) {
   uint32_t b;
   if (t->free_block != QK_NONE) {
     b = t->free_block;
-    t->free_block = t->nodes[b].parent;
+    t->free_block = qk__block_of(t, b)->parent;
     t->n_free_blocks--;
   } else {
     b = t->n_nodes;
@@ -197,52 +201,49 @@ static uint32_t take_block(qk_tree_t *t) {
 }
 
 static void release_block(qk_tree_t *t, uint32_t b) {
-  for (uint32_t i = 0; i < 4; i++) t->nodes[b + i].live = 0;
-  t->nodes[b].parent = t->free_block;
+  qk__block_t *k = qk__block_of(t, b);
+  k->live = 0;
+  k->parent = t->free_block;
   t->free_block = b;
   t->n_free_blocks++;
 }
 
-bool qk__can_split(const qk_tree_t *t, const qk__node_t *n) {
-  if (n->depth >= t->max_depth) return false;
-  double half = t->side[n->depth + 1];
-  if (!(half > 0)) return false;
-  double xm = n->x0 + half, ym = n->y0 + half;
-  double side = t->side[n->depth];
-  /* The midpoint must fall strictly inside the square, or the halves are not distinct
-   * in double precision. */
-  return xm > n->x0 && xm < n->x0 + side && ym > n->y0 && ym < n->y0 + side;
+qk__geom_t qk__node_geom(const qk_tree_t *t, uint32_t v) {
+  unsigned char path[QK_MAX_DEPTH_LIMIT + 2];
+  unsigned len = 0;
+  for (uint32_t a = v; a != 0; a = qk__parent(t, a)) path[len++] = (unsigned char)qk__quadrant(a);
+  qk__geom_t g = {t->root_x, t->root_y, 0};
+  while (len > 0) g = qk__child_geom(t, g, path[--len]);
+  return g;
 }
 
-/* Attach a block of four children (reserved beforehand) to a leaf, with their squares
- * and links but no points: the caller sets each child's slot range. */
-uint32_t qk__split_sorted(qk_tree_t *t, uint32_t leaf) {
+bool qk__can_split(const qk_tree_t *t, qk__geom_t g) {
+  if (g.depth >= t->max_depth) return false;
+  double half = t->side[g.depth + 1];
+  if (!(half > 0)) return false;
+  double xm = g.x0 + half, ym = g.y0 + half;
+  double side = t->side[g.depth];
+  /* The midpoint must fall strictly inside the square, or the halves are not distinct
+   * in double precision. */
+  return xm > g.x0 && xm < g.x0 + side && ym > g.y0 && ym < g.y0 + side;
+}
+
+/* Attach a block of four children (reserved beforehand) to a leaf, with their links but
+ * no points: the caller sets each child's slot range. */
+uint32_t qk__split_sorted(qk_tree_t *t, uint32_t leaf, unsigned depth) {
   uint32_t b = take_block(t);
   qk__node_t *n = &t->nodes[leaf];
-  double half = t->side[n->depth + 1];
-  static const double ox[4] = {1, 0, 0, 1}, oy[4] = {1, 1, 0, 0};
-  for (uint32_t q = 0; q < 4; q++) {
-    qk__node_t *c = &t->nodes[b + q];
-    c->x0 = ox[q] ? n->x0 + half : n->x0;
-    c->y0 = oy[q] ? n->y0 + half : n->y0;
-    c->child = QK_NONE;
-    c->parent = leaf;
-    c->start = n->start;
-    c->count = 0;
-    c->room = 0;
-    c->depth = (uint8_t)(n->depth + 1);
-    c->quadrant = (uint8_t)q;
-    c->live = 1;
-    c->pad_ = 0;
-  }
+  for (uint32_t q = 0; q < 4; q++)
+    t->nodes[b + q] = (qk__node_t){.child = QK_NONE, .start = n->start, .count = 0, .room = 0};
+  *qk__block_of(t, b) = (qk__block_t){.parent = leaf, .depth = (uint8_t)(depth + 1), .live = 1};
   n->child = b;
   return b;
 }
 
-uint32_t qk__split(qk_tree_t *t, uint32_t leaf) {
+uint32_t qk__split(qk_tree_t *t, uint32_t leaf, qk__geom_t g) {
   qk__node_t *n = &t->nodes[leaf];
-  double half = t->side[n->depth + 1];
-  double x0 = n->x0, y0 = n->y0;
+  double half = t->side[g.depth + 1];
+  double x0 = g.x0, y0 = g.y0;
   uint32_t start = n->start, count = n->count, room = n->room;
 
   /* Partition the leaf's slots into NE, NW, SW, SE order in place (American flag sort on
@@ -278,7 +279,7 @@ uint32_t qk__split(qk_tree_t *t, uint32_t leaf) {
   if (w)
     for (uint32_t i = start; i < start + count; i++) w[t->pid[i]] = i;
 
-  uint32_t b = qk__split_sorted(t, leaf);
+  uint32_t b = qk__split_sorted(t, leaf, g.depth);
   for (uint32_t q = 0; q < 4; q++) {
     qk__node_t *c = &t->nodes[b + q];
     c->start = first[q];
@@ -295,14 +296,15 @@ uint32_t qk__split(qk_tree_t *t, uint32_t leaf) {
 
 /* Split a leaf and then every child that is still over capacity. Nodes must be reserved
  * for the whole cascade (4 per level below the leaf). */
-static void split_while_full(qk_tree_t *t, uint32_t leaf) {
-  while (t->nodes[leaf].count > t->capacity && qk__can_split(t, &t->nodes[leaf])) {
-    uint32_t b = qk__split(t, leaf);
+static void split_while_full(qk_tree_t *t, uint32_t leaf, qk__geom_t g) {
+  while (t->nodes[leaf].count > t->capacity && qk__can_split(t, g)) {
+    uint32_t b = qk__split(t, leaf, g);
     uint32_t next = QK_NONE;
     for (uint32_t q = 0; q < 4; q++)
-      if (t->nodes[b + q].count > t->capacity) next = b + q;
+      if (t->nodes[b + q].count > t->capacity) next = q;
     if (next == QK_NONE) break;
-    leaf = next;
+    leaf = b + next;
+    g = qk__child_geom(t, g, next);
   }
 }
 
@@ -351,20 +353,19 @@ static qk_status_t enclosing_square(qk_box_t b, size_t n, qk_square_t *s) {
 }
 
 static int inside_root(const qk_tree_t *t, double x, double y) {
-  const qk__node_t *r = &t->nodes[0];
-  return x >= r->x0 && x <= r->x0 + t->side[0] && y >= r->y0 && y <= r->y0 + t->side[0];
+  return x >= t->root_x && x <= t->root_x + t->side[0] && y >= t->root_y &&
+         y <= t->root_y + t->side[0];
 }
 
 /* Recursive bulk build of the subtree of `node` over its slots, splitting while over
  * capacity. The recursion depth is bounded by max_depth. */
-qk_status_t qk__build_subtree(qk_tree_t *t, uint32_t node) {
-  qk__node_t *n = &t->nodes[node];
-  if (n->count <= t->capacity || !qk__can_split(t, n)) return QK_OK;
+qk_status_t qk__build_subtree(qk_tree_t *t, uint32_t node, qk__geom_t g) {
+  if (t->nodes[node].count <= t->capacity || !qk__can_split(t, g)) return QK_OK;
   qk_status_t st = qk__reserve_nodes(t, 4);
   if (st) return st;
-  uint32_t b = qk__split(t, node);
+  uint32_t b = qk__split(t, node, g);
   for (uint32_t q = 0; q < 4; q++)
-    if ((st = qk__build_subtree(t, b + q))) return st;
+    if ((st = qk__build_subtree(t, b + q, qk__child_geom(t, g, q)))) return st;
   return QK_OK;
 }
 
@@ -405,17 +406,12 @@ qk_status_t qk_tree_build(const qk_point_t *points, size_t n, const qk_tree_opti
   t->side[0] = root.side;
   for (int d = 1; d < QK_MAX_DEPTH_LIMIT + 2; d++) t->side[d] = t->side[d - 1] * 0.5;
 
+  t->root_x = root.x;
+  t->root_y = root.y;
   if ((st = grow(&t->alloc, (void **)&t->nodes, &t->cap_nodes, 1, sizeof(qk__node_t)))) goto fail;
   t->n_nodes = 1;
-  qk__node_t *r = &t->nodes[0];
-  memset(r, 0, sizeof *r);
-  r->x0 = root.x;
-  r->y0 = root.y;
-  r->child = QK_NONE;
-  r->parent = QK_NONE;
-  r->live = 1;
-  r->count = (uint32_t)n;
-  r->room = (uint32_t)n;
+  t->nodes[0] =
+      (qk__node_t){.child = QK_NONE, .start = 0, .count = (uint32_t)n, .room = (uint32_t)n};
   /* At least one slot even for an empty tree, so that a leaf's points are never a NULL
    * base plus an offset (undefined behaviour even for offset 0). */
   if ((st = reserve_slots(t, n ? n : 1))) goto fail;
@@ -431,15 +427,24 @@ qk_status_t qk_tree_build(const qk_point_t *points, size_t n, const qk_tree_opti
       t->py[i] = points[i].y;
       t->pid[i] = (qk_id_t)i;
     }
-    if ((st = qk__build_subtree(t, 0))) goto fail;
+    if ((st = qk__build_subtree(t, 0, (qk__geom_t){root.x, root.y, 0}))) goto fail;
   }
-  /* Give back the node array's growth slack; if the allocator will not shrink, keep it. */
+  /* Give back the node arrays' growth slack; if the allocator will not shrink, keep it. */
   if (t->cap_nodes > t->n_nodes + t->n_nodes / 16) {
     qk__node_t *nn = qk__realloc(&t->alloc, t->nodes, (size_t)t->cap_nodes * sizeof *nn,
                                  (size_t)t->n_nodes * sizeof *nn);
     if (nn) {
       t->nodes = nn;
       t->cap_nodes = t->n_nodes;
+    }
+  }
+  uint32_t nb = (t->n_nodes - 1) / 4;
+  if (t->cap_blocks > nb + nb / 16 && nb > 0) {
+    qk__block_t *nk = qk__realloc(&t->alloc, t->blocks, (size_t)t->cap_blocks * sizeof *nk,
+                                  (size_t)nb * sizeof *nk);
+    if (nk) {
+      t->blocks = nk;
+      t->cap_blocks = nb;
     }
   }
   *out = t;
@@ -453,6 +458,7 @@ void qk_tree_free(qk_tree_t *t) {
   if (!t) return;
   qk_allocator_t a = t->alloc;
   qk__free(&a, t->nodes, (size_t)t->cap_nodes * sizeof(qk__node_t));
+  qk__free(&a, t->blocks, (size_t)t->cap_blocks * sizeof(qk__block_t));
   slots_t pts = {t->px, t->py, t->pid};
   slots_free(&a, &pts, t->cap_slots);
   qk__free(&a, qk__id_map_if_made(t), (size_t)qk__id_map_capacity(t) * sizeof(uint32_t));
@@ -461,14 +467,16 @@ void qk_tree_free(qk_tree_t *t) {
 
 /* ---- insert and remove --------------------------------------------------------------- */
 
-/* Descend from the root to the leaf whose square holds (x, y). */
-static uint32_t descend(const qk_tree_t *t, double x, double y) {
+/* Descend from the root to the leaf whose square holds (x, y); its geometry to *g. */
+static uint32_t descend(const qk_tree_t *t, double x, double y, qk__geom_t *g) {
   uint32_t v = 0;
-  const qk__node_t *n = &t->nodes[0];
-  while (!qk__is_leaf(n)) {
-    v = n->child + qk__quadrant_of(n->x0, n->y0, t->side[n->depth + 1], x, y);
-    n = &t->nodes[v];
+  qk__geom_t c = {t->root_x, t->root_y, 0};
+  while (!qk__is_leaf(&t->nodes[v])) {
+    unsigned q = qk__quadrant_of(c.x0, c.y0, t->side[c.depth + 1], x, y);
+    v = t->nodes[v].child + q;
+    c = qk__child_geom(t, c, q);
   }
+  if (g) *g = c;
   return v;
 }
 
@@ -489,7 +497,8 @@ qk_status_t qk_tree_insert(qk_tree_t *t, qk_point_t p, qk_id_t *id_out) {
     atomic_store_explicit(&t->where, w, memory_order_release);
   }
   if ((st = qk__reserve_nodes(t, 4 * (t->max_depth + 1)))) return st;
-  uint32_t leaf = descend(t, p.x, p.y);
+  qk__geom_t g;
+  uint32_t leaf = descend(t, p.x, p.y, &g);
   qk__node_t *n = &t->nodes[leaf];
   uint32_t newroom = 0;
   if (n->count == n->room) {
@@ -517,9 +526,9 @@ qk_status_t qk_tree_insert(qk_tree_t *t, qk_point_t p, qk_id_t *id_out) {
   t->py[s] = p.y;
   t->pid[s] = id;
   if (w) w[id] = s;
-  for (uint32_t v = leaf; v != QK_NONE; v = t->nodes[v].parent) t->nodes[v].count++;
+  for (uint32_t v = leaf; v != QK_NONE; v = qk__parent(t, v)) t->nodes[v].count++;
   t->n_points++;
-  split_while_full(t, leaf);
+  split_while_full(t, leaf, g);
   if (id_out) *id_out = id;
   return QK_OK;
 }
@@ -563,13 +572,13 @@ qk_status_t qk_tree_remove(qk_tree_t *t, qk_id_t id) {
   qk_status_t st = own_map(t, true, &w);
   if (st) return st;
   if (w[id] == QK_NONE) return QK_ERR_NOT_FOUND;
-  uint32_t leaf = descend(t, t->px[w[id]], t->py[w[id]]);
+  uint32_t leaf = descend(t, t->px[w[id]], t->py[w[id]], NULL);
 
   /* Which ancestor will merge: the highest one left holding at most `capacity` points
    * (counts only grow upwards, so those ancestors form a chain above the leaf). */
   uint32_t top = QK_NONE;
   if (!t->refined)
-    for (uint32_t v = t->nodes[leaf].parent; v != QK_NONE; v = t->nodes[v].parent) {
+    for (uint32_t v = qk__parent(t, leaf); v != QK_NONE; v = qk__parent(t, v)) {
       if (t->nodes[v].count - 1 > t->capacity) break;
       top = v;
     }
@@ -589,7 +598,7 @@ qk_status_t qk_tree_remove(qk_tree_t *t, qk_id_t id) {
     w[t->pid[s]] = s;
   }
   w[id] = QK_NONE;
-  for (uint32_t v = leaf; v != QK_NONE; v = t->nodes[v].parent) t->nodes[v].count--;
+  for (uint32_t v = leaf; v != QK_NONE; v = qk__parent(t, v)) t->nodes[v].count--;
   t->n_points--;
   if (top != QK_NONE) collapse(t, top);
   return QK_OK;
@@ -605,7 +614,7 @@ static uint32_t slot_of(const qk_tree_t *t, qk_id_t id) {
   if (qk__id_map(t, &w) == QK_OK) return w[id];
   for (uint32_t v = 0; v < t->n_nodes; v++) {
     const qk__node_t *n = &t->nodes[v];
-    if (!n->live || !qk__is_leaf(n)) continue;
+    if (!qk__live(t, v) || !qk__is_leaf(n)) continue;
     for (uint32_t s = n->start; s < n->start + n->count; s++)
       if (t->pid[s] == id) return s;
   }
@@ -625,7 +634,7 @@ qk_status_t qk_tree_leaf_of(const qk_tree_t *t, qk_id_t id, qk_node_t *leaf) {
   if (!t || !leaf) return QK_ERR_INVALID;
   uint32_t s = slot_of(t, id);
   if (s == QK_NONE) return QK_ERR_NOT_FOUND;
-  *leaf = descend(t, t->px[s], t->py[s]);
+  *leaf = descend(t, t->px[s], t->py[s], NULL);
   return QK_OK;
 }
 
@@ -633,7 +642,7 @@ qk_status_t qk_tree_find_leaf(const qk_tree_t *t, qk_point_t p, qk_node_t *leaf)
   if (!t || !leaf) return QK_ERR_INVALID;
   if (!isfinite(p.x) || !isfinite(p.y)) return QK_ERR_NONFINITE;
   if (!inside_root(t, p.x, p.y)) return QK_ERR_OUTSIDE;
-  *leaf = descend(t, p.x, p.y);
+  *leaf = descend(t, p.x, p.y, NULL);
   return QK_OK;
 }
 
@@ -642,9 +651,7 @@ qk_node_t qk_tree_root(const qk_tree_t *t) {
   return 0;
 }
 
-static int is_live(const qk_tree_t *t, qk_node_t v) {
-  return t && v < t->n_nodes && t->nodes[v].live;
-}
+static int is_live(const qk_tree_t *t, qk_node_t v) { return t && qk__live(t, v); }
 
 int qk_tree_node_is_leaf(const qk_tree_t *t, qk_node_t v) {
   return is_live(t, v) && qk__is_leaf(&t->nodes[v]);
@@ -654,13 +661,14 @@ qk_status_t qk_tree_node_info(const qk_tree_t *t, qk_node_t v, qk_node_info_t *i
   if (!info) return QK_ERR_INVALID;
   if (!is_live(t, v)) return QK_ERR_NOT_FOUND;
   const qk__node_t *n = &t->nodes[v];
-  info->square.x = n->x0;
-  info->square.y = n->y0;
-  info->square.side = t->side[n->depth];
-  info->depth = n->depth;
-  info->parent = n->parent;
+  qk__geom_t g = qk__node_geom(t, v);
+  info->square.x = g.x0;
+  info->square.y = g.y0;
+  info->square.side = t->side[g.depth];
+  info->depth = g.depth;
+  info->parent = qk__parent(t, v);
   for (uint32_t q = 0; q < 4; q++) info->children[q] = qk__is_leaf(n) ? QK_NONE : n->child + q;
-  info->quadrant = (qk_quadrant_t)n->quadrant;
+  info->quadrant = (qk_quadrant_t)qk__quadrant(v);
   info->is_leaf = qk__is_leaf(n);
   info->count = n->count;
   return QK_OK;
@@ -681,10 +689,11 @@ qk_status_t qk_tree_leaf_points(const qk_tree_t *t, qk_node_t leaf, const double
 
 qk_status_t qk_tree_split_leaf(qk_tree_t *t, qk_node_t leaf) {
   if (!qk_tree_node_is_leaf(t, leaf)) return QK_ERR_INVALID;
-  if (!qk__can_split(t, &t->nodes[leaf])) return QK_ERR_LIMIT;
+  qk__geom_t g = qk__node_geom(t, leaf);
+  if (!qk__can_split(t, g)) return QK_ERR_LIMIT;
   qk_status_t st = qk__reserve_nodes(t, 4);
   if (st) return st;
-  qk__split(t, leaf);
+  qk__split(t, leaf, g);
   t->refined = true;
   return QK_OK;
 }
@@ -715,10 +724,11 @@ qk_status_t qk_tree_refine(qk_tree_t *t, qk_refine_fn fn, void *ud) {
       for (int q = 3; q >= 0; q--) stack[top++] = n->child + (uint32_t)q;
       continue;
     }
-    qk_square_t sq = {n->x0, n->y0, t->side[n->depth]};
-    if (!qk__can_split(t, n) || !fn(t, v, sq, n->depth, ud)) continue;
+    qk__geom_t g = qk__node_geom(t, v);
+    qk_square_t sq = {g.x0, g.y0, t->side[g.depth]};
+    if (!qk__can_split(t, g) || !fn(t, v, sq, g.depth, ud)) continue;
     if ((st = qk__reserve_nodes(t, 4))) break;
-    qk__split(t, v);
+    qk__split(t, v, g);
     stack[top++] = v; /* revisit: now internal, pushes its children */
   }
   qk__free(&t->alloc, stack, cap * sizeof *stack);

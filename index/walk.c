@@ -3,7 +3,7 @@
 
 qk_status_t qk_tree_visit(const qk_tree_t *t, qk_node_t start, qk_visit_fn fn, void *ud) {
   if (!t || !fn) return QK_ERR_INVALID;
-  if (start >= t->n_nodes || !t->nodes[start].live) return QK_ERR_NOT_FOUND;
+  if (!qk__live(t, start)) return QK_ERR_NOT_FOUND;
   /* Pre-order with an explicit stack: each level leaves at most three siblings pending. */
   uint32_t stack[4 * (QK_MAX_DEPTH_LIMIT + 2)], top = 0;
   stack[top++] = start;
@@ -43,6 +43,7 @@ qk_status_t qk_tree_leaves(const qk_tree_t *t, qk_node_t *leaves, size_t cap, si
 size_t qk_tree_memory(const qk_tree_t *t) {
   if (!t) return 0;
   return sizeof *t + (size_t)t->cap_nodes * sizeof(qk__node_t) +
+         (size_t)t->cap_blocks * sizeof(qk__block_t) +
          (size_t)t->cap_slots * (2 * sizeof(double) + sizeof(qk_id_t)) +
          (qk__id_map_if_made(t) ? (size_t)qk__id_map_capacity(t) * sizeof(uint32_t) : 0);
 }
@@ -51,7 +52,7 @@ static qk_visit_t count_node(const qk_tree_t *t, qk_node_t v, void *ud) {
   qk_tree_stats_t *s = ud;
   const qk__node_t *n = &t->nodes[v];
   s->nodes++;
-  if (n->depth > s->height) s->height = n->depth;
+  if (qk__depth(t, v) > s->height) s->height = qk__depth(t, v);
   if (qk__is_leaf(n)) {
     s->leaves++;
     if (n->count > s->max_leaf_points) s->max_leaf_points = n->count;
@@ -69,7 +70,7 @@ void qk_tree_stats(const qk_tree_t *t, qk_tree_stats_t *s) {
   s->memory_bytes = qk_tree_memory(t);
   s->capacity = t->capacity;
   s->max_depth = t->max_depth;
-  s->root.x = t->nodes[0].x0;
-  s->root.y = t->nodes[0].y0;
+  s->root.x = t->root_x;
+  s->root.y = t->root_y;
   s->root.side = t->side[0];
 }
