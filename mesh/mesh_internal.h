@@ -5,7 +5,7 @@
 #define QUADKIT_MESH_INTERNAL_H
 
 #include "quadkit/mesh.h"
-#include "index/index_internal.h"
+#include "index/index_access.h"
 
 #include <stdarg.h>
 #include <stdint.h>
