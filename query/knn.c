@@ -1,124 +1,265 @@
 /*
- * k nearest neighbours: a depth-first branch-and-bound search that visits the children
- * of a node nearest first and prunes every node whose square lies farther than the
- * current k-th best (the classic search of Friedman, Bentley and Finkel, run on the
- * quadtree's squares). The k best so far live in a bounded max-heap that is the
- * caller's output buffer, so a query allocates nothing.
+ * k nearest neighbours: a depth-first branch-and-bound search that goes into the nearest
+ * child of a node at once and stacks the others, nearest on top, pruning every node whose
+ * square lies farther than the current k-th best (the classic search of Friedman, Bentley
+ * and Finkel, run on the quadtree's squares). Squares and their bounds come from the path:
+ * the four children's bounds are two distances per axis from the parent's square, so a
+ * child's node is read only when it is visited. The first descent goes straight to the
+ * leaf nearest the query and leaves its siblings, level by level, on the stack, so the
+ * search never walks that path twice.
+ *
+ * The best so far live in the caller's buffer, so a query allocates nothing: for k = 1 a
+ * single (distance, id) pair in registers; for k up to QK__KNN_SORTED an array kept
+ * sorted by insertion (few candidates enter, and no final sort is needed); beyond that a
+ * bounded max-heap (query/heap.c).
  */
 #include "query/query_internal.h"
 
-static void sift_down(qk_neighbor_t *h, size_t n, size_t i) {
-  qk_neighbor_t v = h[i];
-  for (;;) {
-    size_t l = 2 * i + 1, m = i;
-    qk_neighbor_t best = v;
-    if (l < n && qk__nb_less(best.dist, best.id, h[l].dist, h[l].id)) m = l, best = h[l];
-    if (l + 1 < n && qk__nb_less(best.dist, best.id, h[l + 1].dist, h[l + 1].id)) m = l + 1;
-    if (m == i) break;
-    h[i] = h[m];
-    i = m;
-  }
-  h[i] = v;
-}
+/* Largest k kept as a sorted array rather than a heap. */
+#define QK__KNN_SORTED 32
 
-void qk__heap_push(qk_neighbor_t *h, size_t *n, qk_neighbor_t v) {
-  size_t i = (*n)++;
-  while (i > 0) {
-    size_t p = (i - 1) / 2;
-    if (!qk__nb_less(h[p].dist, h[p].id, v.dist, v.id)) break;
-    h[i] = h[p];
-    i = p;
-  }
-  h[i] = v;
-}
+/* The best-so-far set of one search. */
+typedef struct best {
+  qk_neighbor_t *out; /* sorted array or heap, on squared distances */
+  size_t k, n;
+  double thr;  /* prune strictly above this: the cap until full, then the k-th best */
+  qk_id_t one; /* k = 1: the best id so far (its squared distance is thr), or QK_NONE */
+} best_t;
 
-void qk__heap_replace_top(qk_neighbor_t *h, size_t n, qk_neighbor_t v) {
-  h[0] = v;
-  sift_down(h, n, 0);
-}
-
-void qk__heap_sort(qk_neighbor_t *h, size_t n) {
-  /* Standard in-place heapsort of a max-heap: move the worst to the end repeatedly. */
-  while (n > 1) {
-    qk_neighbor_t top = h[0];
-    h[0] = h[--n];
-    sift_down(h, n, 0);
-    h[n] = top;
-  }
-}
-
-/* Offer a leaf's points to the heap h (n entries, at most k), tightening *thr. */
-static inline void scan_leaf(const qk_tree_t *t, qk_node_t leaf, double qx, double qy, size_t k,
-                             qk_neighbor_t *h, size_t *n_io, double *thr_io) {
+/* Offer a leaf's points to a sorted array of at most k. */
+static inline void scan_sorted(const qk_tree_t *t, qk_node_t leaf, double qx, double qy,
+                               best_t *b) {
   const uint32_t start = qk__node_start(t, leaf), count = qk__node_count(t, leaf);
   const double *px = qk__tree_xs(t) + start, *py = qk__tree_ys(t) + start;
   const qk_id_t *pid = qk__tree_ids(t) + start;
-  double thr = *thr_io;
+  qk_neighbor_t *o = b->out;
+  const size_t k = b->k;
   for (uint32_t i = 0; i < count; i++) {
     double dx = px[i] - qx, dy = py[i] - qy;
     double d2 = dx * dx + dy * dy;
-    if (d2 <= thr) qk__heap_offer(h, n_io, k, pid[i], d2, &thr);
+    if (d2 > b->thr) continue;
+    qk_id_t id = pid[i];
+    size_t pos;
+    if (b->n == k) {
+      if (!qk__nb_less(d2, id, o[k - 1].dist, o[k - 1].id)) continue;
+      pos = k - 1;
+    } else {
+      pos = b->n++;
+    }
+    while (pos > 0 && qk__nb_less(d2, id, o[pos - 1].dist, o[pos - 1].id)) {
+      o[pos] = o[pos - 1];
+      pos--;
+    }
+    o[pos] = (qk_neighbor_t){id, d2};
+    if (b->n == k) b->thr = o[k - 1].dist;
   }
-  *thr_io = thr;
+}
+
+/* Offer a leaf's points to a heap of at most k. */
+static inline void scan_heap(const qk_tree_t *t, qk_node_t leaf, double qx, double qy, best_t *b) {
+  const uint32_t start = qk__node_start(t, leaf), count = qk__node_count(t, leaf);
+  const double *px = qk__tree_xs(t) + start, *py = qk__tree_ys(t) + start;
+  const qk_id_t *pid = qk__tree_ids(t) + start;
+  for (uint32_t i = 0; i < count; i++) {
+    double dx = px[i] - qx, dy = py[i] - qy;
+    double d2 = dx * dx + dy * dy;
+    if (d2 <= b->thr) qk__heap_offer(b->out, &b->n, b->k, pid[i], d2, &b->thr);
+  }
 }
 
 /*
- * The search proper, on squared distances. `limit2` is the squared cap; a point enters
- * when its squared distance is at most limit2 and it beats the heap's worst (or the heap
- * is not full). A node is pruned when its bound is strictly above the threshold: a node
- * at exactly the k-th distance may still hold a point with a smaller id.
+ * Expand an internal cell: of its children with bound <= thr, the nearest becomes *cur
+ * (returns 1) and the others are stacked with the nearest on top; returns 0 when every
+ * child is pruned. The children share their edges, so two distances per axis give the
+ * four bounds, and their order needs no sort: with the nearer and farther distance per
+ * axis (Xn <= Xf, Yn <= Yf), the child on the query's side of both midlines comes first
+ * (Xn + Yn), the diagonal one last (Xf + Yf), and one comparison orders the other two.
  */
-static size_t knn_search(const qk_tree_t *t, double qx, double qy, size_t k, double limit2,
-                         qk_neighbor_t *h) {
-  const double e = qk__margin(t);
-  size_t n = 0;
-  double thr = limit2; /* prune above this: the cap, then the k-th best once full */
-  /*
-   * First go straight down to the leaf whose square holds q (when q is in the root) and
-   * take its points: that usually sets the threshold close to its final value before
-   * the search proper starts, so that the search pushes few nodes it later discards.
-   * The search then skips that leaf.
-   */
-  qk_node_t first = QK_NONE;
-  if (qk__tree_contains(t, qx, qy)) {
-    first = qk__tree_descend(t, qx, qy, NULL, NULL);
-    scan_leaf(t, first, qx, qy, k, h, &n, &thr);
+static inline int expand(const qk_tree_t *t, qk__cell_entry_t *cur, uint32_t child, double qx,
+                         double qy, double e, double thr, qk__cell_entry_t *stack, int *sp) {
+  static const unsigned char quad[2][2] = {{QK_SW, QK_NW}, {QK_SE, QK_NE}}; /* [east][north] */
+  const qk__cell_t c = cur->c;
+  const double hs = qk__tree_side(t, c.depth + 1);
+  const double xm = c.x + hs, ym = c.y + hs;
+  const double dxw = qk__gap(qx, c.x - e, xm + e), dxe = qk__gap(qx, xm - e, xm + hs + e);
+  const double dys = qk__gap(qy, c.y - e, ym + e), dyn = qk__gap(qy, ym - e, ym + hs + e);
+  const unsigned en = dxe < dxw, nn = dyn < dys; /* is the east / north half the nearer? */
+  const double xn = en ? dxe : dxw, xf = en ? dxw : dxe, yn = nn ? dyn : dys, yf = nn ? dys : dyn;
+  const double bnn = xn * xn + yn * yn;
+  if (bnn > thr) return 0;
+  const double bff = xf * xf + yf * yf, bfn = xf * xf + yn * yn, bnf = xn * xn + yf * yf;
+  const uint32_t d = c.depth + 1;
+  const double xs[2] = {c.x, xm}, ys[2] = {c.y, ym};
+#define QK__PUSH(east, north, bound)                                                               \
+  stack[(*sp)++] = (qk__cell_entry_t) {                                                            \
+    {child + quad[east][north], d, xs[east], ys[north]}, (bound)                                   \
   }
+  if (bff <= thr) QK__PUSH(!en, !nn, bff);
+  if (bfn > bnf) {
+    if (bfn <= thr) QK__PUSH(!en, nn, bfn);
+    if (bnf <= thr) QK__PUSH(en, !nn, bnf);
+  } else {
+    if (bnf <= thr) QK__PUSH(en, !nn, bnf);
+    if (bfn <= thr) QK__PUSH(!en, nn, bfn);
+  }
+#undef QK__PUSH
+  *cur = (qk__cell_entry_t){{child + quad[en][nn], d, xs[en], ys[nn]}, bnn};
+  return 1;
+}
+
+/*
+ * Stack the children of the path cell p other than its child `skip` (which the first
+ * descent entered), those with bound <= thr, nearest on top.
+ */
+static inline void push_siblings(const qk_tree_t *t, qk__cell_t p, uint32_t child, unsigned skip,
+                                 double qx, double qy, double e, double thr,
+                                 qk__cell_entry_t *stack, int *sp) {
+  const double hs = qk__tree_side(t, p.depth + 1);
+  const double xm = p.x + hs, ym = p.y + hs;
+  const double dxw = qk__gap(qx, p.x - e, xm + e), dxe = qk__gap(qx, xm - e, xm + hs + e);
+  const double dys = qk__gap(qy, p.y - e, ym + e), dyn = qk__gap(qy, ym - e, ym + hs + e);
+  const double xw = dxw * dxw, xe = dxe * dxe, ys = dys * dys, yn = dyn * dyn;
+  const double b[4] = {xe + yn, xw + yn, xw + ys, xe + ys}; /* NE, NW, SW, SE */
+  qk__cell_t kc[4];
+  qk__cell_children(t, p, child, kc);
+  qk__cell_entry_t kids[3];
+  int m = 0;
+  for (unsigned q = 0; q < 4; q++)
+    if (q != skip && b[q] <= thr) kids[m++] = (qk__cell_entry_t){kc[q], b[q]};
+  qk__sort_cells_desc(kids, m);
+  for (int i = 0; i < m; i++) stack[(*sp)++] = kids[i];
+}
+
+/*
+ * Is every point outside the square (x0, y0, side) farther from q than thr (squared)?
+ * Such a point lies beyond one of the square's edges widened by e, so its computed
+ * distance is at least the gap from q to that widened edge (subtraction and squaring are
+ * monotone in floating point). q lies in the square.
+ */
+static inline bool ball_inside(double qx, double qy, double x0, double y0, double side, double e,
+                               double thr) {
+  double g =
+      fmin(fmin(qx - (x0 + e), (x0 + side - e) - qx), fmin(qy - (y0 + e), (y0 + side - e) - qy));
+  return g > 0 && g * g > thr;
+}
+
+/* Which of the three leaf scans a search runs (a constant in each caller, so that the
+ * compiler makes one specialised search per kind). */
+enum { KIND_ONE, KIND_SORTED, KIND_HEAP };
+
+#if defined(__GNUC__)
+#define QK__ALWAYS_INLINE inline __attribute__((always_inline))
+#else
+#define QK__ALWAYS_INLINE inline
+#endif
+
+/* Scan a leaf into the best-so-far set. For KIND_ONE, the best is (b->thr, b->one). */
+static QK__ALWAYS_INLINE void scan(const qk_tree_t *t, qk_node_t leaf, double qx, double qy,
+                                   best_t *b, int kind) {
+  if (kind == KIND_SORTED) {
+    scan_sorted(t, leaf, qx, qy, b);
+  } else if (kind == KIND_HEAP) {
+    scan_heap(t, leaf, qx, qy, b);
+  } else {
+    const uint32_t start = qk__node_start(t, leaf), end = start + qk__node_count(t, leaf);
+    const double *xs = qk__tree_xs(t), *ys = qk__tree_ys(t);
+    const qk_id_t *ids = qk__tree_ids(t);
+    double best = b->thr;
+    qk_id_t one = b->one;
+    for (uint32_t i = start; i < end; i++) {
+      double dx = xs[i] - qx, dy = ys[i] - qy;
+      double d2 = dx * dx + dy * dy;
+      if (d2 < best || (d2 == best && ids[i] < one)) {
+        best = d2;
+        one = ids[i];
+      }
+    }
+    b->thr = best;
+    b->one = one;
+  }
+}
+
+/* Depth-first search of everything on the stack: pop, descend nearest-first, scan. */
+static QK__ALWAYS_INLINE void drain(const qk_tree_t *t, double qx, double qy, double e, best_t *b,
+                                    qk__cell_entry_t *stack, int *sp, int kind) {
+  while (*sp > 0) {
+    qk__cell_entry_t cur = stack[--*sp];
+    if (cur.bound > b->thr) continue;
+    for (;;) {
+      const uint32_t child = qk__node_child(t, cur.c.node);
+      if (child == QK_NONE) {
+        scan(t, cur.c.node, qx, qy, b, kind);
+        break;
+      }
+      if (!expand(t, &cur, child, qx, qy, e, b->thr, stack, sp)) break;
+    }
+  }
+}
+
+/*
+ * The search. For a query inside the root, first straight down to the leaf that holds it
+ * (by the tie rules, no bounds), which usually sets the threshold near its final value;
+ * then back up that path, each level's other children bounded from the path's square and
+ * searched, nearest first, before the level above. A query outside the root starts with
+ * the root on the stack.
+ */
+static QK__ALWAYS_INLINE void search(const qk_tree_t *t, double qx, double qy, best_t *b,
+                                     int kind) {
+  const double e = qk__margin(t);
   qk__cell_entry_t stack[QK__STACK_MAX];
   int sp = 0;
   const qk_square_t r = qk__tree_root_square(t);
-  stack[sp].c = qk__root_cell(t);
-  stack[sp++].bound = qk__square_d2(r.x, r.y, r.side, qx, qy, e);
-  while (sp > 0) {
-    qk__cell_entry_t top = stack[--sp];
-    if (top.bound > thr) continue;
-    const uint32_t child = qk__node_child(t, top.c.node);
-    if (child == QK_NONE) {
-      if (top.c.node != first) scan_leaf(t, top.c.node, qx, qy, k, h, &n, &thr);
-      continue;
-    }
-    /* Bound the children from this node's square (NE, NW, SW, SE), not from their
-     * nodes; a child is read only if it is visited (empty ones are dropped then). The
-     * children share their edges, so two distances per axis give all four bounds. */
-    qk__cell_t kc[4];
-    qk__cell_children(t, top.c, child, kc);
-    const double hs = qk__tree_side(t, top.c.depth + 1), x0 = top.c.x, y0 = top.c.y;
-    const double xm = x0 + hs, ym = y0 + hs;
-    const double dxw = qk__gap(qx, x0 - e, xm + e), dxe = qk__gap(qx, xm - e, xm + hs + e);
-    const double dys = qk__gap(qy, y0 - e, ym + e), dyn = qk__gap(qy, ym - e, ym + hs + e);
-    const double xw = dxw * dxw, xe = dxe * dxe, ys = dys * dys, yn = dyn * dyn;
-    const double b[4] = {xe + yn, xw + yn, xw + ys, xe + ys}; /* NE, NW, SW, SE */
-    qk__cell_entry_t kids[4];
-    int m = 0;
-    for (uint32_t c = 0; c < 4; c++) {
-      if (b[c] > thr) continue;
-      kids[m].c = kc[c];
-      kids[m++].bound = b[c];
-    }
-    qk__sort_cells_desc(kids, m);
-    for (int i = 0; i < m; i++) stack[sp++] = kids[i];
+  if (!qk__tree_contains(t, qx, qy)) {
+    stack[sp++] = (qk__cell_entry_t){qk__root_cell(t), qk__square_d2(r.x, r.y, r.side, qx, qy, e)};
+    drain(t, qx, qy, e, b, stack, &sp, kind);
+    return;
   }
-  return n;
+  qk__cell_t path[QK_MAX_DEPTH_LIMIT + 1];
+  unsigned char pq[QK_MAX_DEPTH_LIMIT + 1];
+  qk__cell_t c = qk__root_cell(t);
+  unsigned len = 0;
+  for (uint32_t child = qk__node_child(t, c.node); child != QK_NONE;
+       child = qk__node_child(t, c.node)) {
+    const double h = qk__tree_side(t, c.depth + 1);
+    const unsigned q = qk__quadrant_of(c.x, c.y, h, qx, qy);
+    path[len] = c;
+    pq[len++] = (unsigned char)q;
+    c = (qk__cell_t){child + q, c.depth + 1, qk__q_east(q) ? c.x + h : c.x,
+                     qk__q_north(q) ? c.y + h : c.y};
+  }
+  scan(t, c.node, qx, qy, b, kind);
+  while (len > 0) {
+    /* Everything inside c is done. When the threshold's ball lies inside c's square
+     * (narrowed by the margin), nothing outside can come within it: stop climbing. */
+    if (ball_inside(qx, qy, c.x, c.y, qk__tree_side(t, c.depth), e, b->thr)) break;
+    len--;
+    push_siblings(t, path[len], qk__node_child(t, path[len].node), pq[len], qx, qy, e, b->thr,
+                  stack, &sp);
+    drain(t, qx, qy, e, b, stack, &sp, kind);
+    c = path[len];
+  }
+}
+
+/* k = 1: the best pair in registers. Returns 0 or 1. */
+static size_t knn1(const qk_tree_t *t, double qx, double qy, double limit2, qk_neighbor_t *out) {
+  best_t b = {out, 1, 0, limit2, QK_NONE};
+  search(t, qx, qy, &b, KIND_ONE);
+  if (b.one == QK_NONE) return 0;
+  out[0] = (qk_neighbor_t){b.one, b.thr};
+  return 1;
+}
+
+/* Any k: returns how many of out hold neighbours (squared distances), sorted. */
+static size_t knn_search(const qk_tree_t *t, double qx, double qy, size_t k, double limit2,
+                         qk_neighbor_t *out) {
+  best_t b = {out, k, 0, limit2, QK_NONE};
+  if (k <= QK__KNN_SORTED) {
+    search(t, qx, qy, &b, KIND_SORTED);
+  } else {
+    search(t, qx, qy, &b, KIND_HEAP);
+    qk__heap_sort(out, b.n);
+  }
+  return b.n;
 }
 
 /*
@@ -186,8 +327,7 @@ static size_t knn_one(const qk_tree_t *t, qk_point_t q, size_t k, double max_dis
   if (np == 0 || k == 0) return 0;
   if (k > np) k = np;
   double limit2 = max_dist * max_dist;
-  size_t n = knn_search(t, q.x, q.y, k, limit2, out);
-  qk__heap_sort(out, n);
+  size_t n = k == 1 ? knn1(t, q.x, q.y, limit2, out) : knn_search(t, q.x, q.y, k, limit2, out);
   for (size_t i = 0; i < n; i++) out[i].dist = sqrt(out[i].dist);
   return n;
 }
