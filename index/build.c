@@ -83,6 +83,65 @@ static qk_status_t from_buckets(qk_tree_t *t, uint32_t v, qk__geom_t g, const ui
   return QK_OK;
 }
 
+/* What the parallel phases of the bucketed build share. Share w of nw covers the points
+ * [lo, hi) of qk__share_range(n, w, nw) in the first two phases and the slots of the same
+ * range in the gather. */
+typedef struct bucket_job {
+  qk_tree_t *t;
+  const qk_point_t *p;
+  size_t n, nb;
+  double x0, y0, scale, cells, delta;
+  unsigned L;
+  uint16_t *key;
+  uint32_t *order;
+  uint32_t *hist; /* nw rows of nb: counts, then each share's next slot per bucket */
+} bucket_job_t;
+
+/* Phase 1: every point's cell, and this share's count per cell. */
+static void cells_share(void *ctx, unsigned w, unsigned nw) {
+  bucket_job_t *j = ctx;
+  size_t lo, hi;
+  qk__share_range(j->n, w, nw, &lo, &hi);
+  uint32_t *h = j->hist + (size_t)w * j->nb;
+  for (size_t i = lo; i < hi; i++) {
+    uint32_t k;
+    if (!scaled_cell((j->p[i].x - j->x0) * j->scale, (j->p[i].y - j->y0) * j->scale, j->cells,
+                     j->delta, &k))
+      k = exact_cell(j->t, j->p[i].x, j->p[i].y, j->L); /* near a grid line: the tree's tests */
+    j->key[i] = (uint16_t)k;
+    h[k]++;
+  }
+}
+
+/* Phase 2: the counting sort's placement, stable (shares are in point order). */
+static void place_share(void *ctx, unsigned w, unsigned nw) {
+  bucket_job_t *j = ctx;
+  size_t lo, hi;
+  qk__share_range(j->n, w, nw, &lo, &hi);
+  uint32_t *next = j->hist + (size_t)w * j->nb;
+  for (size_t i = lo; i < hi; i++) j->order[next[j->key[i]]++] = (uint32_t)i;
+}
+
+/* Phase 3: the gather of the points in that order: random reads of one cache line per
+ * point rather than random writes to three arrays. */
+static void gather_share(void *ctx, unsigned w, unsigned nw) {
+  bucket_job_t *j = ctx;
+  size_t lo, hi;
+  qk__share_range(j->n, w, nw, &lo, &hi);
+  qk_tree_t *t = j->t;
+  const qk_point_t *p = j->p;
+  for (size_t s = lo; s < hi; s++) {
+    uint32_t i = j->order[s];
+#if defined(__GNUC__)
+    /* The reads are random: ask for the point a few iterations ahead. */
+    if (s + 16 < hi) __builtin_prefetch(&p[j->order[s + 16]]);
+#endif
+    t->px[s] = p[i].x;
+    t->py[s] = p[i].y;
+    t->pid[s] = i;
+  }
+}
+
 qk_status_t qk__build_bucketed(qk_tree_t *t, const qk_point_t *p, size_t n, bool *done) {
   *done = false;
   unsigned L = 0;
@@ -98,42 +157,46 @@ qk_status_t qk__build_bucketed(qk_tree_t *t, const qk_point_t *p, size_t n, bool
   if (!(delta < 0.25)) return QK_OK; /* badly conditioned: use the plain build */
 
   size_t nb = (size_t)1 << (2 * L);
+  /* Threads: a share of fewer than 2^16 points does not pay for its thread and its
+   * histogram (one count per cell). */
+  unsigned nw = qk__threads_resolve(t->threads);
+  if (nw > n / 65536) nw = n / 65536 > 0 ? (unsigned)(n / 65536) : 1;
   /* Counting sort of the point indices by cell (cells have at most 16 bits, so the counts
-   * stay in cache), then a gather of the points in that order: random reads of one cache
-   * line per point rather than random writes to three arrays. */
+   * stay in cache), then a gather of the points in that order. */
   size_t m = n ? n : 1;
   uint32_t *cum = qk__realloc(&t->alloc, NULL, 0, (nb + 1) * sizeof *cum);
   uint16_t *key = qk__realloc(&t->alloc, NULL, 0, m * sizeof *key);
   uint32_t *order = qk__realloc(&t->alloc, NULL, 0, m * sizeof *order);
-  if (!cum || !key || !order) {
+  uint32_t *hist = qk__realloc(&t->alloc, NULL, 0, nw * nb * sizeof *hist);
+  if (!hist && nw > 1) { /* one thread needs one histogram only */
+    nw = 1;
+    hist = qk__realloc(&t->alloc, NULL, 0, nb * sizeof *hist);
+  }
+  if (!cum || !key || !order || !hist) {
     qk__free(&t->alloc, cum, (nb + 1) * sizeof *cum);
     qk__free(&t->alloc, key, m * sizeof *key);
     qk__free(&t->alloc, order, m * sizeof *order);
+    qk__free(&t->alloc, hist, nw * nb * sizeof *hist);
     return QK_ERR_NOMEM;
   }
-  memset(cum, 0, (nb + 1) * sizeof *cum);
-  for (size_t i = 0; i < n; i++) {
-    uint32_t k;
-    if (!scaled_cell((p[i].x - x0) * scale, (p[i].y - y0) * scale, cells, delta, &k))
-      k = exact_cell(t, p[i].x, p[i].y, L); /* near a grid line: the tree's comparisons */
-    key[i] = (uint16_t)k;
-    cum[k + 1]++;
+  memset(hist, 0, nw * nb * sizeof *hist);
+  bucket_job_t j = {t, p, n, nb, x0, y0, scale, cells, delta, L, key, order, hist};
+  qk__parallel(nw, cells_share, &j);
+  /* Bucket starts, and each share's first slot in every bucket: the shares before it
+   * come first, so the order is the one thread's. */
+  uint32_t acc = 0;
+  for (size_t k = 0; k < nb; k++) {
+    cum[k] = acc;
+    for (unsigned w = 0; w < nw; w++) {
+      uint32_t c = hist[(size_t)w * nb + k];
+      hist[(size_t)w * nb + k] = acc;
+      acc += c;
+    }
   }
-  for (size_t k = 0; k < nb; k++) cum[k + 1] += cum[k];
-  /* `cum[k]` advances as bucket k fills and ends at the next bucket's start. */
-  for (size_t i = 0; i < n; i++) order[cum[key[i]]++] = (uint32_t)i;
-  for (size_t s = 0; s < n; s++) {
-    uint32_t i = order[s];
-#if defined(__GNUC__)
-    /* The reads are random: ask for the point a few iterations ahead. */
-    if (s + 16 < n) __builtin_prefetch(&p[order[s + 16]]);
-#endif
-    t->px[s] = p[i].x;
-    t->py[s] = p[i].y;
-    t->pid[s] = i;
-  }
-  memmove(cum + 1, cum, nb * sizeof *cum); /* back to bucket starts */
-  cum[0] = 0;
+  cum[nb] = acc;
+  qk__parallel(nw, place_share, &j);
+  qk__parallel(nw, gather_share, &j);
+  qk__free(&t->alloc, hist, nw * nb * sizeof *hist);
   qk__free(&t->alloc, key, m * sizeof *key);
   qk__free(&t->alloc, order, m * sizeof *order);
   qk_status_t st = from_buckets(t, 0, (qk__geom_t){x0, y0, 0}, cum, 0, L);

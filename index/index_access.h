@@ -22,6 +22,11 @@
 /* The allocator every structure derived from the tree should use. */
 static inline const qk_allocator_t *qk__tree_allocator(const qk_tree_t *t) { return &t->alloc; }
 
+/* Threads the batch queries on this tree use (resolved: at least 1). */
+static inline unsigned qk__tree_threads(const qk_tree_t *t) {
+  return qk__threads_resolve(t->threads);
+}
+
 /* Points stored. */
 static inline size_t qk__tree_count(const qk_tree_t *t) { return t->n_points; }
 

@@ -43,6 +43,7 @@ struct qk_tree {
   qk_allocator_t alloc;
   uint32_t capacity;
   uint32_t max_depth;
+  uint32_t threads;      /* threads for the build and batch queries; 0 = every core */
   bool refined;          /* split beyond the capacity rule: removals no longer merge */
   double root_x, root_y; /* the root square's lower-left corner */
   double side[QK_MAX_DEPTH_LIMIT + 2]; /* side length at each depth, exact halvings */
@@ -181,6 +182,27 @@ static inline uint32_t qk__id_map_capacity(const qk_tree_t *t) {
 /* The id map, made now if it was not. Safe from concurrent readers: each may build a
  * candidate and the first to publish wins. QK_ERR_NOMEM when it cannot be made. */
 qk_status_t qk__id_map(const qk_tree_t *t, const uint32_t **map);
+
+/* ---- threads (index/threads.c) ---- */
+
+/* Most threads a parallel region uses. */
+#define QK__MAX_THREADS 64
+
+/* The number of threads a `threads` option asks for: 0 means every online core. */
+unsigned qk__threads_resolve(uint32_t threads);
+
+/* One share of a parallel region: share w of nw. */
+typedef void (*qk__share_fn)(void *ctx, unsigned w, unsigned nw);
+
+/* Run fn for shares 0 .. nw-1, share 0 on the calling thread, and return when all are
+ * done. Shares must write disjoint memory. */
+void qk__parallel(unsigned nw, qk__share_fn fn, void *ctx);
+
+/* The half-open range of [0, n) that share w of nw covers. */
+static inline void qk__share_range(size_t n, unsigned w, unsigned nw, size_t *lo, size_t *hi) {
+  *lo = n / nw * w + (w < n % nw ? w : n % nw);
+  *hi = *lo + n / nw + (w < n % nw);
+}
 
 /* Make room for at least `extra` more node slots. */
 qk_status_t qk__reserve_nodes(qk_tree_t *t, uint32_t extra);

@@ -11,6 +11,8 @@
  * the tree, so that a failed allocation leaves the tree exactly as it was.
  */
 #include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
 #include <string.h>
 
 #include "index/index_internal.h"
@@ -19,6 +21,24 @@ void qk_tree_options_init(qk_tree_options_t *o) {
   memset(o, 0, sizeof *o);
   o->capacity = 1;
   o->max_depth = QK_DEFAULT_MAX_DEPTH;
+  o->threads = 1;
+}
+
+void qk_tree_set_threads(qk_tree_t *t, uint32_t threads) {
+  if (t) t->threads = threads;
+}
+
+/* Fill an error record (when there is one) and return the status. */
+static qk_status_t say(qk_error_t *err, qk_status_t st, size_t item, const char *fmt, ...) {
+  if (!err) return st;
+  err->line = 0;
+  err->column = 0;
+  err->item = item;
+  va_list ap;
+  va_start(ap, fmt);
+  vsnprintf(err->message, sizeof err->message, fmt, ap);
+  va_end(ap);
+  return st;
 }
 
 /* ---- allocation helpers ---------------------------------------------------------- */
@@ -369,39 +389,75 @@ qk_status_t qk__build_subtree(qk_tree_t *t, uint32_t node, qk__geom_t g) {
   return QK_OK;
 }
 
+/* Check the input and find the root square, saying what is wrong with it. */
+static qk_status_t check_input(const qk_point_t *points, size_t n, const qk_tree_options_t *options,
+                               qk_square_t *root, qk_error_t *err) {
+  qk_status_t st;
+  if (n && !points) return say(err, QK_ERR_INVALID, SIZE_MAX, "no point array for %zu points", n);
+  if (n > QK_MAX_POINTS)
+    return say(err, QK_ERR_LIMIT, SIZE_MAX, "%zu points: at most %u", n, (unsigned)QK_MAX_POINTS);
+  if ((st = check_options(options))) {
+    const qk_square_t *r = &options->root;
+    if (options->max_depth > QK_MAX_DEPTH_LIMIT)
+      return say(err, st, SIZE_MAX, "max_depth %u exceeds %d", options->max_depth,
+                 QK_MAX_DEPTH_LIMIT);
+    return say(err, st, SIZE_MAX, "root square (%g, %g, side %g): %s", r->x, r->y, r->side,
+               st == QK_ERR_NONFINITE ? "not finite"
+                                      : "the side must be positive and the square finite");
+  }
+  qk_box_t bbox;
+  if ((st = bounding_box(points, n, &bbox))) {
+    for (size_t i = 0; i < n; i++)
+      if (!isfinite(points[i].x) || !isfinite(points[i].y))
+        return say(err, st, i, "point %zu (%g, %g) is not finite", i, points[i].x, points[i].y);
+  }
+  if (options->has_root) {
+    *root = options->root;
+    const qk_square_t r = *root;
+    if (n && (bbox.xmin < r.x || bbox.xmax > r.x + r.side || bbox.ymin < r.y ||
+              bbox.ymax > r.y + r.side))
+      for (size_t i = 0; i < n; i++) {
+        double x = points[i].x, y = points[i].y;
+        if (x < r.x || x > r.x + r.side || y < r.y || y > r.y + r.side)
+          return say(err, QK_ERR_OUTSIDE, i,
+                     "point %zu (%.17g, %.17g) lies outside the root square (%.17g, %.17g, side "
+                     "%.17g)",
+                     i, x, y, r.x, r.y, r.side);
+      }
+  } else if ((st = enclosing_square(bbox, n, root))) {
+    return say(err, st, SIZE_MAX, "the points' extent [%g, %g] x [%g, %g] overflows a double",
+               bbox.xmin, bbox.xmax, bbox.ymin, bbox.ymax);
+  }
+  return say(err, QK_OK, SIZE_MAX, "%s", "");
+}
+
 qk_status_t qk_tree_build(const qk_point_t *points, size_t n, const qk_tree_options_t *options,
                           qk_tree_t **out) {
+  return qk_tree_build_ex(points, n, options, out, NULL);
+}
+
+qk_status_t qk_tree_build_ex(const qk_point_t *points, size_t n, const qk_tree_options_t *options,
+                             qk_tree_t **out, qk_error_t *err) {
   qk_tree_options_t def;
   qk_status_t st;
-  if (!out) return QK_ERR_INVALID;
+  if (!out) return say(err, QK_ERR_INVALID, SIZE_MAX, "no place for the tree (out is NULL)");
   *out = NULL;
   if (!options) {
     qk_tree_options_init(&def);
     options = &def;
   }
-  if (n && !points) return QK_ERR_INVALID;
-  if (n > QK_MAX_POINTS) return QK_ERR_LIMIT;
-  if ((st = check_options(options))) return st;
-  qk_box_t bbox;
-  qk_square_t root;
-  if ((st = bounding_box(points, n, &bbox))) return st;
-  if (options->has_root) {
-    root = options->root;
-    if (n && (bbox.xmin < root.x || bbox.xmax > root.x + root.side || bbox.ymin < root.y ||
-              bbox.ymax > root.y + root.side))
-      return QK_ERR_OUTSIDE;
-  } else if ((st = enclosing_square(bbox, n, &root))) {
-    return st;
-  }
+  qk_square_t root = {0, 0, 1};
+  if ((st = check_input(points, n, options, &root, err))) return st;
 
   qk_allocator_t alloc = {NULL, NULL};
   if (options->allocator) alloc = *options->allocator;
   qk_tree_t *t = qk__realloc(&alloc, NULL, 0, sizeof *t);
-  if (!t) return QK_ERR_NOMEM;
+  if (!t) return say(err, QK_ERR_NOMEM, SIZE_MAX, "%s", qk_strerror(QK_ERR_NOMEM));
   memset(t, 0, sizeof *t);
   t->alloc = alloc;
   t->capacity = options->capacity ? options->capacity : 1;
   t->max_depth = options->max_depth ? options->max_depth : QK_DEFAULT_MAX_DEPTH;
+  t->threads = options->threads;
   t->free_block = QK_NONE;
   t->side[0] = root.side;
   for (int d = 1; d < QK_MAX_DEPTH_LIMIT + 2; d++) t->side[d] = t->side[d - 1] * 0.5;
@@ -451,7 +507,7 @@ qk_status_t qk_tree_build(const qk_point_t *points, size_t n, const qk_tree_opti
   return QK_OK;
 fail:
   qk_tree_free(t);
-  return st;
+  return say(err, st, SIZE_MAX, "%s", qk_strerror(st));
 }
 
 void qk_tree_free(qk_tree_t *t) {

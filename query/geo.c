@@ -153,12 +153,12 @@ qk_status_t qk_geo_build(const qk_point_t *lonlat, size_t n, const qk_tree_optio
     if (st != QK_OK) return st;
   }
   qk_tree_options_t opt;
-  qk_tree_options_init(&opt);
-  opt.capacity = 16;
+  qk_tree_options_init(&opt); /* NULL options: the same defaults as everywhere */
   if (options) {
     opt.capacity = options->capacity;
     opt.max_depth = options->max_depth;
     opt.allocator = options->allocator;
+    opt.threads = options->threads;
   }
   /* Longitudes in [-180, 180] and latitudes in [-90, 90] fit one square of side 360. */
   opt.has_root = 1;
@@ -354,27 +354,64 @@ qk_status_t qk_geo_knn(const qk_geo_t *g, qk_point_t qp, size_t k, double max_me
   return QK_OK;
 }
 
+/* One thread's share of a geodesic kNN batch (as the planar one in query/batch.c). */
+typedef struct geo_job {
+  const qk_geo_t *g;
+  const qk_point_t *qs;
+  const uint32_t *order;
+  size_t nq, k;
+  double max_metres;
+  qk_neighbor_t *out;
+  size_t *counts;
+  qk_status_t st[QK__MAX_THREADS];
+  size_t bad[QK__MAX_THREADS];
+} geo_job_t;
+
+static void geo_share(void *ctx, unsigned w, unsigned nw) {
+  geo_job_t *j = ctx;
+  size_t lo, hi;
+  qk__share_range(j->nq, w, nw, &lo, &hi);
+  j->st[w] = QK_OK;
+  j->bad[w] = SIZE_MAX;
+  for (size_t jj = lo; jj < hi; jj++) {
+    size_t i = j->order ? j->order[jj] : jj;
+    qk_neighbor_t *o = j->out ? j->out + i * j->k : NULL;
+    size_t n = 0;
+    qk_status_t st = qk_geo_knn(j->g, j->qs[i], j->k, j->max_metres, o, &n);
+    if (st != QK_OK && i < j->bad[w]) {
+      j->st[w] = st;
+      j->bad[w] = i;
+    }
+    for (size_t m = n; m < j->k; m++) o[m] = (qk_neighbor_t){QK_NONE, INFINITY};
+    if (j->counts) j->counts[i] = n;
+  }
+}
+
 qk_status_t qk_geo_knn_batch(const qk_geo_t *g, const qk_point_t *qs, size_t nq, size_t k,
                              double max_metres, qk_neighbor_t *out, size_t *counts) {
   if (!g || (nq > 0 && !qs) || (nq > 0 && k > 0 && !out)) return QK_ERR_INVALID;
   if (isnan(max_metres) || max_metres < 0) return QK_ERR_INVALID;
-  qk_status_t first = QK_OK;
   /* Z-order of the queries' (raw) lon/lat: consecutive searches then share nodes. */
   uint32_t *order;
   void *block = qk__morton_order(g->tree, qs, nq, &order);
-  for (size_t j = 0; j < nq; j++) {
-    size_t i = order ? order[j] : j;
-    qk_neighbor_t *o = out ? out + i * k : NULL;
-    size_t n = 0;
-    qk_status_t st = qk_geo_knn(g, qs[i], k, max_metres, o, &n);
-    if (st != QK_OK && first == QK_OK) first = st;
-    for (size_t j = n; j < k; j++) {
-      o[j].id = QK_NONE;
-      o[j].dist = INFINITY;
-    }
-    if (counts) counts[i] = n;
-  }
+  unsigned nw = qk__batch_threads(g->tree, nq);
+  geo_job_t j = {.g = g,
+                 .qs = qs,
+                 .order = order,
+                 .nq = nq,
+                 .k = k,
+                 .max_metres = max_metres,
+                 .out = out,
+                 .counts = counts};
+  qk__parallel(nw, geo_share, &j);
   if (block) qk__morton_free(g->tree, block, nq);
+  qk_status_t first = QK_OK;
+  size_t first_i = SIZE_MAX;
+  for (unsigned w = 0; w < nw; w++)
+    if (j.st[w] != QK_OK && j.bad[w] < first_i) {
+      first = j.st[w];
+      first_i = j.bad[w];
+    }
   return first;
 }
 

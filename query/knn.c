@@ -314,15 +314,15 @@ void qk__prefetch_paths(const qk_tree_t *t, const qk_point_t *qs, const uint32_t
   }
 }
 
-static qk_status_t check_args(qk_point_t q, double max_dist) {
+qk_status_t qk__knn_check(qk_point_t q, double max_dist) {
   if (!isfinite(q.x) || !isfinite(q.y)) return QK_ERR_NONFINITE;
   if (isnan(max_dist) || max_dist < 0) return QK_ERR_INVALID;
   return QK_OK;
 }
 
-/* One query into out (k entries, k >= 1); returns the count. */
-static size_t knn_one(const qk_tree_t *t, qk_point_t q, size_t k, double max_dist,
-                      qk_neighbor_t *out) {
+/* One query into out (k entries); returns the count. */
+size_t qk__knn_one(const qk_tree_t *t, qk_point_t q, size_t k, double max_dist,
+                   qk_neighbor_t *out) {
   const size_t np = qk__tree_count(t);
   if (np == 0 || k == 0) return 0;
   if (k > np) k = np;
@@ -336,38 +336,8 @@ qk_status_t qk_query_knn(const qk_tree_t *tree, qk_point_t q, size_t k, double m
                          qk_neighbor_t *out, size_t *n_out) {
   if (!tree || !n_out || (k > 0 && !out)) return QK_ERR_INVALID;
   *n_out = 0;
-  qk_status_t st = check_args(q, max_dist);
+  qk_status_t st = qk__knn_check(q, max_dist);
   if (st != QK_OK) return st;
-  *n_out = knn_one(tree, q, k, max_dist, out);
+  *n_out = qk__knn_one(tree, q, k, max_dist, out);
   return QK_OK;
-}
-
-qk_status_t qk_query_knn_batch(const qk_tree_t *tree, const qk_point_t *qs, size_t nq, size_t k,
-                               double max_dist, qk_neighbor_t *out, size_t *counts) {
-  if (!tree || (nq > 0 && !qs) || (nq > 0 && k > 0 && !out)) return QK_ERR_INVALID;
-  if (isnan(max_dist) || max_dist < 0) return QK_ERR_INVALID;
-  qk_status_t first = QK_OK;
-  size_t first_i = SIZE_MAX;
-  uint32_t *order;
-  void *block = qk__morton_order(tree, qs, nq, &order);
-  for (size_t j = 0; j < nq; j++) {
-    if (j % QK__LANES == 0) qk__prefetch_paths(tree, qs, order, j, nq);
-    size_t i = order ? order[j] : j;
-    qk_neighbor_t *o = out ? out + i * k : NULL;
-    size_t n = 0;
-    qk_status_t st = check_args(qs[i], max_dist);
-    if (st == QK_OK)
-      n = knn_one(tree, qs[i], k, max_dist, o);
-    else if (i < first_i) {
-      first = st; /* the error of the lowest-numbered query, whatever the answer order */
-      first_i = i;
-    }
-    for (size_t m = n; m < k; m++) {
-      o[m].id = QK_NONE;
-      o[m].dist = INFINITY;
-    }
-    if (counts) counts[i] = n;
-  }
-  if (block) qk__morton_free(tree, block, nq);
-  return first;
 }

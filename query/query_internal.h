@@ -139,6 +139,28 @@ void qk__morton_free(const qk_tree_t *t, void *block, size_t nq);
 void qk__prefetch_paths(const qk_tree_t *t, const qk_point_t *qs, const uint32_t *order, size_t j0,
                         size_t nq);
 
+/* One kNN query into out (k entries), arguments checked; returns the count. */
+size_t qk__knn_one(const qk_tree_t *t, qk_point_t q, size_t k, double max_dist, qk_neighbor_t *out);
+/* QK_OK, or why a kNN query cannot be answered. */
+qk_status_t qk__knn_check(qk_point_t q, double max_dist);
+
+/* Radius batches (query/range.c does one share, query/batch.c spreads the shares). */
+qk_status_t qk__radius_range(const qk_tree_t *t, const qk_point_t *centres, size_t lo, size_t hi,
+                             double r, qk_neighbor_t *out, size_t cap, size_t *counts,
+                             size_t *total, size_t *first_bad);
+qk_status_t qk__radius_batch(const qk_tree_t *t, const qk_point_t *centres, size_t nq, double r,
+                             qk_neighbor_t *out, size_t cap, size_t *counts, size_t *n_out);
+
+/* Threads for a batch of nq queries on t: the tree's setting, but no thread for fewer
+ * than QK__BATCH_SHARE queries. */
+#define QK__BATCH_SHARE 64
+static inline unsigned qk__batch_threads(const qk_tree_t *t, size_t nq) {
+  unsigned nw = qk__tree_threads(t);
+  size_t most = nq / QK__BATCH_SHARE;
+  if (most < 1) most = 1;
+  return nw > most ? (unsigned)most : nw;
+}
+
 /* Sort up to four stacked entries by descending bound, so the nearest is popped first. */
 static inline void qk__sort4_desc(qk__entry_t *e, int n) {
   for (int i = 1; i < n; i++) {

@@ -128,8 +128,8 @@ qk_status_t qk_query_range(const qk_tree_t *tree, qk_box_t box, qk_found_fn fn, 
   return range_walk(tree, box, emit_cb, &c);
 }
 
-qk_status_t qk_query_range_ids(const qk_tree_t *tree, qk_box_t box, qk_id_t *ids, size_t cap,
-                               size_t *n_out) {
+qk_status_t qk_query_range_list(const qk_tree_t *tree, qk_box_t box, qk_id_t *ids, size_t cap,
+                                size_t *n_out) {
   if (!tree || !n_out || (cap > 0 && !ids)) return QK_ERR_INVALID;
   buf_ctx_t b = {ids, NULL, cap, 0};
   qk_status_t st = range_walk(tree, box, emit_ids, &b);
@@ -153,23 +153,39 @@ qk_status_t qk_query_radius_list(const qk_tree_t *tree, qk_point_t c, double r, 
   return st;
 }
 
-qk_status_t qk_query_radius_batch(const qk_tree_t *tree, const qk_point_t *centres, size_t nq,
-                                  double r, qk_neighbor_t *out, size_t cap, size_t *offsets) {
-  if (!tree || !offsets || (nq > 0 && !centres) || (cap > 0 && !out)) return QK_ERR_INVALID;
+qk_status_t qk_query_radius_list_batch(const qk_tree_t *tree, const qk_point_t *centres, size_t nq,
+                                       double r, qk_neighbor_t *out, size_t cap, size_t *counts,
+                                       size_t *n_out) {
+  if (!tree || !n_out || (nq > 0 && (!centres || !counts)) || (cap > 0 && !out))
+    return QK_ERR_INVALID;
+  *n_out = 0;
   if (isnan(r)) return QK_ERR_NONFINITE;
   if (r < 0) return QK_ERR_INVALID;
+  return qk__radius_batch(tree, centres, nq, r, out, cap, counts, n_out);
+}
+
+/* One thread's share of a radius batch: queries [lo, hi) into out (cap entries), which is
+ * the caller's buffer for the first share and the share's own otherwise. */
+qk_status_t qk__radius_range(const qk_tree_t *t, const qk_point_t *centres, size_t lo, size_t hi,
+                             double r, qk_neighbor_t *out, size_t cap, size_t *counts,
+                             size_t *total, size_t *first_bad) {
   qk_status_t first = QK_OK;
-  size_t total = 0;
-  for (size_t i = 0; i < nq; i++) {
-    offsets[i] = total;
+  size_t sum = 0;
+  *first_bad = SIZE_MAX;
+  for (size_t i = lo; i < hi; i++) {
     /* Each query writes straight after the previous one, into what is left of out. */
-    buf_ctx_t b = {NULL, out ? out + (total < cap ? total : cap) : NULL,
-                   total < cap ? cap - total : 0, 0};
-    qk_status_t st = radius_walk(tree, centres[i], r, emit_nb, &b);
-    if (st != QK_OK && first == QK_OK) first = st;
-    total += b.n;
+    buf_ctx_t b = {NULL, out ? out + (sum < cap ? sum : cap) : NULL, sum < cap ? cap - sum : 0, 0};
+    qk_status_t st = radius_walk(t, centres[i], r, emit_nb, &b);
+    if (st != QK_OK) {
+      b.n = 0;
+      if (first == QK_OK) {
+        first = st;
+        *first_bad = i;
+      }
+    }
+    counts[i] = b.n;
+    sum += b.n;
   }
-  offsets[nq] = total;
-  if (first == QK_OK && total > cap) first = QK_ERR_LIMIT;
+  *total = sum;
   return first;
 }

@@ -12,6 +12,7 @@
  *  - allocation failure at every N for build, insert and remove: a clean QK_ERR_NOMEM,
  *    no leak, and the tree unchanged;
  *  - bad input (NaN, infinity, outside the root, bad options) and the depth cap;
+ *    qk_tree_build_ex() names the first bad point (index and value) or the bad option;
  *  - pre-order visiting with skip and stop, and the SVG writer;
  *  - compact storage (issue 11): at 1M uniform points and capacity 32 a built tree holds
  *    at most 22 bytes per point (16 of coordinates, 4 of ids, the nodes in the rest).
@@ -501,6 +502,44 @@ static void test_index_alloc_failure(void **state) {
 
 /* ---- errors, depth cap, visiting, drawing ---------------------------------------------- */
 
+/* qk_tree_build_ex(): which point was bad, and why (issue 13). */
+static void test_index_build_ex_names_point(void **state) {
+  (void)state;
+  qk_point_t p[8];
+  for (int i = 0; i < 8; i++) p[i] = (qk_point_t){0.1 * i, 0.05 * i};
+  p[5].y = NAN;
+  p[6].x = INFINITY;
+  qk_tree_t *t = (qk_tree_t *)1;
+  qk_error_t err;
+  assert_int_equal(qk_tree_build_ex(p, 8, NULL, &t, &err), QK_ERR_NONFINITE);
+  assert_null(t);
+  assert_int_equal(err.item, 5);
+  assert_int_equal(err.line, 0);
+  assert_non_null(strstr(err.message, "point 5"));
+  assert_non_null(strstr(err.message, "nan"));
+  p[5].y = 0.25;
+  p[6].x = 0.3;
+  qk_tree_options_t o = unit_root(1);
+  p[3].x = 1.5;
+  p[7].y = -2;
+  assert_int_equal(qk_tree_build_ex(p, 8, &o, &t, &err), QK_ERR_OUTSIDE);
+  assert_int_equal(err.item, 3);
+  assert_non_null(strstr(err.message, "point 3 (1.5,"));
+  o.max_depth = QK_MAX_DEPTH_LIMIT + 1;
+  assert_int_equal(qk_tree_build_ex(p, 8, &o, &t, &err), QK_ERR_INVALID);
+  assert_int_equal(err.item, SIZE_MAX);
+  assert_non_null(strstr(err.message, "max_depth"));
+  p[3].x = 0.9;
+  p[7].y = 0.2;
+  o.max_depth = 0;
+  assert_int_equal(qk_tree_build_ex(p, 8, &o, &t, &err), QK_OK);
+  assert_int_equal(err.item, SIZE_MAX);
+  assert_string_equal(err.message, "");
+  qk_tree_free(t);
+  assert_int_equal(qk_tree_build_ex(p, 8, &o, &t, NULL), QK_OK); /* err may be NULL */
+  qk_tree_free(t);
+}
+
 static void test_index_bad_input(void **state) {
   (void)state;
   qk_tree_t *t = (qk_tree_t *)1;
@@ -742,6 +781,7 @@ int main(void) {
       cmocka_unit_test(test_index_neighbors),
       cmocka_unit_test(test_index_alloc_failure),
       cmocka_unit_test(test_index_bad_input),
+      cmocka_unit_test(test_index_build_ex_names_point),
       cmocka_unit_test(test_index_depth_cap),
       cmocka_unit_test(test_index_visit_and_svg),
       cmocka_unit_test(test_index_lazy_id_map),

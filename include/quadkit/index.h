@@ -70,13 +70,17 @@ typedef struct qk_tree_options {
   /** The root square when has_root is nonzero; its side must be positive. */
   qk_square_t root;
   /** Allocator for everything the tree owns; NULL means libc. The pointed-to struct is
-   *  copied. */
+   *  copied. With more than one thread it must be thread-safe (libc's is). */
   const qk_allocator_t *allocator;
+  /** Threads for the bulk build and, kept by the tree, for its batch queries
+   *  (qk_query_*_batch); 0 means every online core. Default 1. Results do not depend on
+   *  it. */
+  uint32_t threads;
 } qk_tree_options_t;
 
 /**
  * Fill options with the defaults (capacity 1, default depth cap, smallest enclosing
- * square, libc allocator).
+ * square, libc allocator, one thread).
  * \param [out] options the options to initialise.
  */
 void qk_tree_options_init(qk_tree_options_t *options);
@@ -94,6 +98,28 @@ void qk_tree_options_init(qk_tree_options_t *options);
  */
 qk_status_t qk_tree_build(const qk_point_t *points, size_t n, const qk_tree_options_t *options,
                           qk_tree_t **out);
+
+/**
+ * qk_tree_build(), saying what was wrong with the input: on QK_ERR_NONFINITE or
+ * QK_ERR_OUTSIDE, err->item is the index of the first offending point and err->message
+ * names it with its coordinates (and the root, for a point outside it); on QK_ERR_INVALID
+ * or QK_ERR_LIMIT the message names the option or count. On success err->item is SIZE_MAX
+ * and the message empty. err->line and err->column are 0 (the input is an array).
+ * \param [in] points,n,options as qk_tree_build().
+ * \param [out] out the new tree, or NULL on error.
+ * \param [out] err where and why the input was rejected (may be NULL).
+ * \return as qk_tree_build().
+ */
+qk_status_t qk_tree_build_ex(const qk_point_t *points, size_t n, const qk_tree_options_t *options,
+                             qk_tree_t **out, qk_error_t *err);
+
+/**
+ * Set the number of threads the tree's batch queries use (0: every online core). Must
+ * not run concurrently with any other call on the tree.
+ * \param [in,out] tree the tree.
+ * \param [in] threads the count.
+ */
+void qk_tree_set_threads(qk_tree_t *tree, uint32_t threads);
 
 /**
  * Free a tree and everything it owns. qk_tree_free(NULL) does nothing.

@@ -13,8 +13,18 @@
  *
  * Result buffers follow one convention: the caller passes a buffer of `cap` entries and
  * gets back through `n_out` the total number of results; when that exceeds `cap` only
- * the first `cap` are written (call again with a larger buffer). Callbacks return zero
- * to go on and nonzero to stop the query early (which still returns QK_OK).
+ * the first `cap` are written and the call still returns QK_OK (call again with a larger
+ * buffer). Functions that fill such a buffer end in `_list`. Callbacks return zero to go
+ * on and nonzero to stop the query early (which still returns QK_OK).
+ *
+ * Batch calls (`_batch`) answer many queries in one call, in parallel on the tree's
+ * threads (qk_tree_options_t::threads, qk_tree_set_threads()), with the same results as
+ * one thread. They share one layout: `counts[i]` receives the number of results of query
+ * i; kNN results sit at a stride of k per query, other results are packed in query order.
+ * A query that fails gets count 0 and the others are still answered; the call returns
+ * the error of the lowest-numbered failed query.
+ *
+ * NULL options mean the defaults of qk_tree_options_init() everywhere.
  */
 #ifndef QUADKIT_QUERY_H
 #define QUADKIT_QUERY_H
@@ -65,8 +75,14 @@ qk_status_t qk_query_range(const qk_tree_t *tree, qk_box_t box, qk_found_fn fn, 
  * \param [out] n_out how many points the box holds (may exceed cap).
  * \return QK_OK or QK_ERR_NONFINITE.
  */
-qk_status_t qk_query_range_ids(const qk_tree_t *tree, qk_box_t box, qk_id_t *ids, size_t cap,
-                               size_t *n_out);
+qk_status_t qk_query_range_list(const qk_tree_t *tree, qk_box_t box, qk_id_t *ids, size_t cap,
+                                size_t *n_out);
+
+/** \deprecated The former name of qk_query_range_list(). */
+static inline qk_status_t qk_query_range_ids(const qk_tree_t *tree, qk_box_t box, qk_id_t *ids,
+                                             size_t cap, size_t *n_out) {
+  return qk_query_range_list(tree, box, ids, cap, n_out);
+}
 
 /**
  * Report every point p within distance r of c, that is with
@@ -95,20 +111,46 @@ qk_status_t qk_query_radius_list(const qk_tree_t *tree, qk_point_t c, double r, 
                                  size_t cap, size_t *n_out);
 
 /**
- * Radius queries for many centres in one call. The results of query i are
- * out[offsets[i] .. offsets[i+1]) when the total fits in cap.
+ * Radius queries for many centres in one call, into one buffer. The results are packed
+ * in query order: query i's are the counts[i] entries after those of queries 0 .. i-1.
+ * When the total exceeds cap, only the first cap entries are written and the call still
+ * returns QK_OK (the counts and *n_out tell the size needed).
  * \param [in] tree the tree.
  * \param [in] centres nq centres.
  * \param [in] nq how many.
  * \param [in] r the radius, >= 0.
  * \param [out] out buffer for up to cap neighbours (may be NULL when cap is 0).
  * \param [in] cap its size.
- * \param [out] offsets nq + 1 entries; offsets[nq] is the total (always filled).
- * \return QK_OK, QK_ERR_NONFINITE, QK_ERR_INVALID, or QK_ERR_LIMIT when the total
- *         exceeded cap (offsets then tell the size needed; out holds a prefix).
+ * \param [out] counts nq entries: the number of points within r of each centre.
+ * \param [out] n_out the total (may exceed cap).
+ * \return QK_OK, QK_ERR_INVALID (r < 0 or a NULL argument), QK_ERR_NONFINITE (r NaN, or
+ *         the lowest-numbered centre that is not finite; its count is 0).
  */
-qk_status_t qk_query_radius_batch(const qk_tree_t *tree, const qk_point_t *centres, size_t nq,
-                                  double r, qk_neighbor_t *out, size_t cap, size_t *offsets);
+qk_status_t qk_query_radius_list_batch(const qk_tree_t *tree, const qk_point_t *centres, size_t nq,
+                                       double r, qk_neighbor_t *out, size_t cap, size_t *counts,
+                                       size_t *n_out);
+
+/**
+ * \deprecated The former layout of qk_query_radius_list_batch(): query i's results are
+ * out[offsets[i] .. offsets[i+1]) (offsets has nq + 1 entries, offsets[nq] the total).
+ * Returns QK_OK with the full offsets when the total exceeds cap, as every buffer does.
+ */
+static inline qk_status_t qk_query_radius_batch(const qk_tree_t *tree, const qk_point_t *centres,
+                                                size_t nq, double r, qk_neighbor_t *out, size_t cap,
+                                                size_t *offsets) {
+  size_t total = 0;
+  if (!offsets) return QK_ERR_INVALID;
+  qk_status_t st = qk_query_radius_list_batch(tree, centres, nq, r, out, cap, offsets, &total);
+  if (st == QK_ERR_INVALID) return st;
+  size_t acc = 0;
+  for (size_t i = 0; i < nq; i++) {
+    size_t c = offsets[i];
+    offsets[i] = acc;
+    acc += c;
+  }
+  offsets[nq] = acc;
+  return st;
+}
 
 /* ---------------------------------------------------------------------------------- */
 /* k nearest neighbours                                                                */
@@ -143,8 +185,8 @@ qk_status_t qk_query_knn(const qk_tree_t *tree, qk_point_t q, size_t k, double m
  * \param [in] max_dist the cap, or INFINITY.
  * \param [out] out nq * k entries.
  * \param [out] counts nq counts (may be NULL).
- * \return QK_OK, QK_ERR_NONFINITE (a query not finite; the others are still answered,
- *         that one gets count 0) or QK_ERR_INVALID.
+ * \return QK_OK, QK_ERR_NONFINITE (the lowest-numbered query that is not finite; the
+ *         others are still answered, that one gets count 0) or QK_ERR_INVALID.
  */
 qk_status_t qk_query_knn_batch(const qk_tree_t *tree, const qk_point_t *qs, size_t nq, size_t k,
                                double max_dist, qk_neighbor_t *out, size_t *counts);
@@ -315,8 +357,9 @@ typedef struct qk_geo qk_geo_t;
  * Build a geodesic index. Point i (x = lon, y = lat in degrees) gets id i.
  * \param [in] lonlat n points (copied).
  * \param [in] n how many.
- * \param [in] options tree options (only capacity, max_depth and allocator are used; the
- *             root is fixed); NULL for defaults (capacity 16).
+ * \param [in] options tree options (only capacity, max_depth, threads and allocator are
+ *             used; the root is fixed); NULL for the defaults of qk_tree_options_init()
+ *             (capacity 1: a capacity of 16 or so answers faster).
  * \param [out] out the index, freed with qk_geo_free(); NULL on error.
  * \return QK_OK, QK_ERR_NONFINITE, QK_ERR_OUTSIDE (latitude outside [-90, 90]),
  *         QK_ERR_LIMIT, QK_ERR_NOMEM or QK_ERR_UNSUPPORTED.
@@ -387,8 +430,8 @@ qk_status_t qk_geo_knn(const qk_geo_t *g, qk_point_t q, size_t k, double max_met
  * \param [in] max_metres the cap, or INFINITY.
  * \param [out] out nq * k entries.
  * \param [out] counts nq counts (may be NULL).
- * \return QK_OK, the first error met (the other queries are still answered),
- *         or QK_ERR_UNSUPPORTED.
+ * \return QK_OK, the error of the lowest-numbered failed query (the other queries are
+ *         still answered), or QK_ERR_UNSUPPORTED.
  */
 qk_status_t qk_geo_knn_batch(const qk_geo_t *g, const qk_point_t *qs, size_t nq, size_t k,
                              double max_metres, qk_neighbor_t *out, size_t *counts);

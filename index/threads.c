@@ -1,0 +1,66 @@
+/*
+ * Worker threads for the parallel parts of the library (bulk build, batch queries). A
+ * parallel region runs share 0 on the calling thread and the others on POSIX threads
+ * created for it; a share whose thread cannot be created runs on the calling thread
+ * afterwards, so the result never depends on how many threads actually ran.
+ */
+#define _POSIX_C_SOURCE 200809L
+#include <unistd.h>
+
+#include "index/index_internal.h"
+
+#if defined(QK_HAVE_PTHREADS)
+#include <pthread.h>
+#endif
+
+unsigned qk__threads_resolve(uint32_t threads) {
+  if (threads == 0) {
+#if defined(_SC_NPROCESSORS_ONLN)
+    long n = sysconf(_SC_NPROCESSORS_ONLN);
+    threads = n > 0 ? (uint32_t)n : 1u;
+#else
+    threads = 1;
+#endif
+  }
+  return threads > QK__MAX_THREADS ? QK__MAX_THREADS : threads;
+}
+
+typedef struct share {
+  qk__share_fn fn;
+  void *ctx;
+  unsigned w, nw;
+} share_t;
+
+#if defined(QK_HAVE_PTHREADS)
+static void *run_share(void *arg) {
+  share_t *s = arg;
+  s->fn(s->ctx, s->w, s->nw);
+  return NULL;
+}
+#endif
+
+void qk__parallel(unsigned nw, qk__share_fn fn, void *ctx) {
+  if (nw <= 1) {
+    fn(ctx, 0, 1);
+    return;
+  }
+  if (nw > QK__MAX_THREADS) nw = QK__MAX_THREADS;
+#if defined(QK_HAVE_PTHREADS)
+  pthread_t th[QK__MAX_THREADS];
+  share_t sh[QK__MAX_THREADS];
+  bool started[QK__MAX_THREADS] = {false};
+  for (unsigned w = 1; w < nw; w++) {
+    sh[w] = (share_t){fn, ctx, w, nw};
+    started[w] = pthread_create(&th[w], NULL, run_share, &sh[w]) == 0;
+  }
+  fn(ctx, 0, nw);
+  for (unsigned w = 1; w < nw; w++) {
+    if (started[w])
+      pthread_join(th[w], NULL);
+    else
+      fn(ctx, w, nw);
+  }
+#else
+  for (unsigned w = 0; w < nw; w++) fn(ctx, w, nw);
+#endif
+}

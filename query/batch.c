@@ -1,0 +1,179 @@
+/*
+ * Batch queries: many queries in one call, answered in Z-order of their locations (so
+ * that consecutive searches reuse the cache), the descents of the next QK__LANES queries
+ * walked in lockstep first (so that their cache misses overlap), and the queries spread
+ * over the tree's threads in contiguous runs of that order. Every query writes only its
+ * own outputs, so the results are those of one thread; a failed query is reported by the
+ * lowest index, whatever thread met it.
+ */
+#include <string.h>
+
+#include "query/query_internal.h"
+
+/* The lowest-numbered failure of a batch, merged from its shares. */
+typedef struct first_err {
+  qk_status_t st;
+  size_t i;
+} first_err_t;
+
+static void note_err(first_err_t *e, qk_status_t st, size_t i) {
+  if (st != QK_OK && i < e->i) {
+    e->st = st;
+    e->i = i;
+  }
+}
+
+/* ---- kNN ------------------------------------------------------------------------- */
+
+typedef struct knn_job {
+  const qk_tree_t *t;
+  const qk_point_t *qs;
+  const uint32_t *order;
+  size_t nq, k;
+  double max_dist;
+  qk_neighbor_t *out;
+  size_t *counts;
+  first_err_t err[QK__MAX_THREADS];
+} knn_job_t;
+
+static void knn_share(void *ctx, unsigned w, unsigned nw) {
+  knn_job_t *j = ctx;
+  size_t lo, hi;
+  qk__share_range(j->nq, w, nw, &lo, &hi);
+  first_err_t e = {QK_OK, SIZE_MAX};
+  for (size_t jj = lo; jj < hi; jj++) {
+    if ((jj - lo) % QK__LANES == 0) qk__prefetch_paths(j->t, j->qs, j->order, jj, hi);
+    size_t i = j->order ? j->order[jj] : jj;
+    qk_neighbor_t *o = j->out ? j->out + i * j->k : NULL;
+    size_t n = 0;
+    qk_status_t st = qk__knn_check(j->qs[i], j->max_dist);
+    if (st == QK_OK)
+      n = qk__knn_one(j->t, j->qs[i], j->k, j->max_dist, o);
+    else
+      note_err(&e, st, i);
+    for (size_t m = n; m < j->k; m++) o[m] = (qk_neighbor_t){QK_NONE, INFINITY};
+    if (j->counts) j->counts[i] = n;
+  }
+  j->err[w] = e;
+}
+
+qk_status_t qk_query_knn_batch(const qk_tree_t *tree, const qk_point_t *qs, size_t nq, size_t k,
+                               double max_dist, qk_neighbor_t *out, size_t *counts) {
+  if (!tree || (nq > 0 && !qs) || (nq > 0 && k > 0 && !out)) return QK_ERR_INVALID;
+  if (isnan(max_dist) || max_dist < 0) return QK_ERR_INVALID;
+  uint32_t *order;
+  void *block = qk__morton_order(tree, qs, nq, &order);
+  unsigned nw = qk__batch_threads(tree, nq);
+  knn_job_t j = {tree, qs, order, nq, k, max_dist, out, counts, {{QK_OK, 0}}};
+  qk__parallel(nw, knn_share, &j);
+  if (block) qk__morton_free(tree, block, nq);
+  first_err_t e = {QK_OK, SIZE_MAX};
+  for (unsigned w = 0; w < nw; w++) note_err(&e, j.err[w].st, j.err[w].i);
+  return e.st;
+}
+
+/* ---- point location --------------------------------------------------------------- */
+
+typedef struct locate_job {
+  const qk_tree_t *t;
+  const qk_point_t *ps;
+  const uint32_t *order;
+  size_t n;
+  qk_node_t *leaves;
+} locate_job_t;
+
+static void locate_share(void *ctx, unsigned w, unsigned nw) {
+  locate_job_t *j = ctx;
+  size_t lo, hi;
+  qk__share_range(j->n, w, nw, &lo, &hi);
+  for (size_t jj = lo; jj < hi; jj++) {
+    if ((jj - lo) % QK__LANES == 0) qk__prefetch_paths(j->t, j->ps, j->order, jj, hi);
+    size_t i = j->order ? j->order[jj] : jj;
+    qk_point_t p = j->ps[i];
+    int ok = isfinite(p.x) && isfinite(p.y) && qk__tree_contains(j->t, p.x, p.y);
+    j->leaves[i] = ok ? qk__tree_descend(j->t, p.x, p.y, NULL, NULL) : QK_NONE;
+  }
+}
+
+qk_status_t qk_query_locate_batch(const qk_tree_t *tree, const qk_point_t *ps, size_t n,
+                                  qk_node_t *leaves) {
+  if (!tree || (n > 0 && (!ps || !leaves))) return QK_ERR_INVALID;
+  uint32_t *order;
+  void *block = qk__morton_order(tree, ps, n, &order);
+  locate_job_t j = {tree, ps, order, n, leaves};
+  qk__parallel(qk__batch_threads(tree, n), locate_share, &j);
+  if (block) qk__morton_free(tree, block, n);
+  return QK_OK;
+}
+
+/* ---- radius ----------------------------------------------------------------------- */
+
+/*
+ * Radius results are packed, so a share does not know where its results go until the
+ * shares before it are done. Share 0 writes straight into the caller's buffer; every
+ * other share into a buffer of its own (from the tree's allocator), copied into place
+ * after the join. A share whose buffer was too small or could not be had is answered
+ * again after the join, on the calling thread, straight into place.
+ */
+typedef struct radius_job {
+  const qk_tree_t *t;
+  const qk_point_t *centres;
+  size_t nq;
+  double r;
+  qk_neighbor_t *out;
+  size_t cap;
+  size_t *counts;
+  qk_neighbor_t *buf[QK__MAX_THREADS];
+  size_t buf_cap[QK__MAX_THREADS], total[QK__MAX_THREADS];
+  first_err_t err[QK__MAX_THREADS];
+} radius_job_t;
+
+static void radius_share(void *ctx, unsigned w, unsigned nw) {
+  radius_job_t *j = ctx;
+  size_t lo, hi, bad;
+  qk__share_range(j->nq, w, nw, &lo, &hi);
+  qk_neighbor_t *out = w == 0 ? j->out : j->buf[w];
+  size_t cap = w == 0 ? j->cap : j->buf_cap[w];
+  qk_status_t st =
+      qk__radius_range(j->t, j->centres, lo, hi, j->r, out, cap, j->counts, &j->total[w], &bad);
+  j->err[w] = (first_err_t){st, st == QK_OK ? SIZE_MAX : bad};
+}
+
+qk_status_t qk__radius_batch(const qk_tree_t *t, const qk_point_t *centres, size_t nq, double r,
+                             qk_neighbor_t *out, size_t cap, size_t *counts, size_t *n_out) {
+  unsigned nw = qk__batch_threads(t, nq);
+  radius_job_t job = {
+      .t = t, .centres = centres, .nq = nq, .r = r, .out = out, .cap = cap, .counts = counts};
+  radius_job_t *j = &job;
+  /* A guess for the other shares' buffers: as many results per query as share 0 would
+   * need if the caller's buffer were sized for the whole batch. */
+  for (unsigned w = 1; w < nw; w++) {
+    size_t lo, hi;
+    qk__share_range(nq, w, nw, &lo, &hi);
+    size_t want = cap / nq * (hi - lo) + 64;
+    j->buf[w] = qk__realloc(qk__tree_allocator(t), NULL, 0, want * sizeof(qk_neighbor_t));
+    j->buf_cap[w] = j->buf[w] ? want : 0;
+  }
+  qk__parallel(nw, radius_share, j);
+  first_err_t e = {QK_OK, SIZE_MAX};
+  size_t sum = 0;
+  for (unsigned w = 0; w < nw; w++) {
+    size_t lo, hi, bad;
+    qk__share_range(nq, w, nw, &lo, &hi);
+    if (w > 0 && j->total[w] > j->buf_cap[w]) {
+      /* Answer this share again straight into place (what fits in the caller's buffer). */
+      size_t room = sum < cap ? cap - sum : 0;
+      qk_status_t st = qk__radius_range(t, centres, lo, hi, r, out ? out + (cap - room) : NULL,
+                                        room, counts, &j->total[w], &bad);
+      j->err[w] = (first_err_t){st, st == QK_OK ? SIZE_MAX : bad};
+    } else if (w > 0 && sum < cap) {
+      size_t m = j->total[w] < cap - sum ? j->total[w] : cap - sum;
+      if (m) memcpy(out + sum, j->buf[w], m * sizeof *out);
+    }
+    note_err(&e, j->err[w].st, j->err[w].i);
+    sum += j->total[w];
+    if (w > 0) qk__free(qk__tree_allocator(t), j->buf[w], j->buf_cap[w] * sizeof(qk_neighbor_t));
+  }
+  *n_out = sum;
+  return e.st;
+}
