@@ -26,6 +26,8 @@ typedef struct to_state {
   size_t n_ids; /* ids handed out */
   double x[TO_MAX_IDS], y[TO_MAX_IDS];
   unsigned char alive[TO_MAX_IDS];
+  qk_id_t freed[TO_MAX_IDS]; /* removed ids, reused last-in first-out by inserts */
+  size_t n_freed;
 } to_state_t;
 
 static size_t to_live(const to_state_t *s) {
@@ -160,10 +162,11 @@ static void to_insert(to_state_t *s, qk_point_t p, int armed) {
   if (armed && want == QK_OK && s->alloc_state.failed && rc == QK_ERR_NOMEM) want = rc;
   QKF_ASSERT(rc == want, "insert(%.17g, %.17g) = %d, want %d", p.x, p.y, rc, want);
   if (rc == QK_OK) {
-    QKF_ASSERT(id == s->n_ids, "insert gave id %u, want %zu", id, s->n_ids);
-    s->x[s->n_ids] = p.x;
-    s->y[s->n_ids] = p.y;
-    s->alive[s->n_ids++] = 1;
+    size_t want_id = s->n_freed ? s->freed[--s->n_freed] : s->n_ids++;
+    QKF_ASSERT(id == want_id, "insert gave id %u, want %zu", id, want_id);
+    s->x[id] = p.x;
+    s->y[id] = p.y;
+    s->alive[id] = 1;
   } else {
     qk_tree_stats_t after;
     qk_tree_stats(s->tree, &after);
@@ -183,6 +186,7 @@ static void to_remove(to_state_t *s, qk_id_t id, int armed) {
   QKF_ASSERT(rc == want, "remove(%u) = %d, want %d", id, rc, want);
   if (rc == QK_OK) {
     s->alive[id] = 0;
+    s->freed[s->n_freed++] = id;
   } else {
     qk_tree_stats_t after;
     qk_tree_stats(s->tree, &after);

@@ -158,6 +158,16 @@ qk_status_t qk_tree_check(const qk_tree_t *t, char *msg, size_t msg_size) {
     if (!st && mapped != t->n_points)
       st = fail(&c, "%zu ids mapped, %zu points", mapped, t->n_points);
   }
+  if (!st && t->n_free_ids > t->n_ids - t->n_points)
+    st = fail(&c, "%u free ids, but only %zu ids are not in use", t->n_free_ids,
+              (size_t)t->n_ids - t->n_points);
+  for (uint32_t i = 0; !st && i < t->n_free_ids; i++) {
+    qk_id_t id = t->free_ids[i];
+    if (id >= t->n_ids || c.id_seen[id] || (c.map && c.map[id] != QK_NONE))
+      st = fail(&c, "free id %u is out of range, stored or listed twice", id);
+    else
+      c.id_seen[id] = 1; /* catches an id listed twice */
+  }
   if (!st && c.live_nodes + 4 * (size_t)t->n_free_blocks != t->n_nodes)
     st = fail(&c, "%zu live nodes + %u free blocks != %u slots", c.live_nodes, t->n_free_blocks,
               t->n_nodes);

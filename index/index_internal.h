@@ -74,6 +74,10 @@ struct qk_tree {
   uint32_t cap_ids; /* entries allocated in where; 0 while the map is not made or was made
                        lazily, in which case it has max(n_ids, 1) entries */
   size_t n_points;  /* points stored */
+
+  /* Removed ids, handed out again by inserts, the most recently removed first. */
+  qk_id_t *free_ids;
+  uint32_t n_free_ids, cap_free_ids;
 };
 
 /* Allocation goes through here and only here. */

@@ -43,13 +43,15 @@ static qk_status_t say(qk_error_t *err, qk_status_t st, size_t item, const char 
 
 /* ---- allocation helpers ---------------------------------------------------------- */
 
-/* Grow an array of `elem`-byte items from *cap to at least `need` items. */
+/* Grow an array of `elem`-byte items from *cap to at least `need` items. Growth is by an
+ * eighth, not a doubling, so that a tree under churn stays near the size of a fresh build
+ * (issue 10); the copies stay amortised O(1) per item. */
 static qk_status_t grow(const qk_allocator_t *a, void **arr, uint32_t *cap, size_t need,
                         size_t elem) {
   if (need <= *cap) return QK_OK;
   if (need > UINT32_MAX) return QK_ERR_LIMIT;
   size_t ncap = *cap ? (size_t)*cap : 16;
-  while (ncap < need) ncap *= 2;
+  while (ncap < need) ncap += ncap / 8 + 16;
   if (ncap > UINT32_MAX) ncap = UINT32_MAX;
   if (ncap > SIZE_MAX / elem) return QK_ERR_LIMIT;
   void *p = qk__realloc(a, *arr, (size_t)*cap * elem, ncap * elem);
@@ -106,9 +108,9 @@ static void slots_install(qk_tree_t *t, slots_t s, size_t cap) {
 static qk_status_t reserve_slots(qk_tree_t *t, size_t need) {
   if (need <= t->cap_slots) return QK_OK;
   if (need > UINT32_MAX) return QK_ERR_LIMIT;
-  /* The first allocation (a bulk build) is exact; growth doubles. */
+  /* The first allocation (a bulk build) is exact; growth is by an eighth. */
   size_t ncap = t->cap_slots ? (size_t)t->cap_slots : need;
-  while (ncap < need) ncap *= 2;
+  while (ncap < need) ncap += ncap / 8 + 16;
   if (ncap > UINT32_MAX) ncap = UINT32_MAX;
   slots_t s;
   if (slots_alloc(&t->alloc, ncap, &s)) return QK_ERR_NOMEM;
@@ -156,11 +158,14 @@ static qk_status_t compact(qk_tree_t *t, size_t headroom) {
   return QK_OK;
 }
 
-/* Make sure `extra` slots are free at the end of the point arrays, compacting when more
- * than half of the used slots are garbage. */
+/* Make sure `extra` slots are free at the end of the point arrays. When more than a
+ * sixteenth of the used slots hold no point (garbage, or room reserved in leaves), the
+ * arrays are compacted, with a thirty-second of headroom, rather than grown: so the arrays
+ * of a tree under churn stay within about a sixth of its points (issue 10). A compaction
+ * costs O(n) and comes after Omega(n / 16) slots were abandoned, so O(1) amortised each. */
 static qk_status_t reserve_tail(qk_tree_t *t, size_t extra) {
   if ((size_t)t->n_slots + extra <= t->cap_slots) return QK_OK;
-  if (t->garbage > t->n_slots / 2) return compact(t, t->n_points + extra);
+  if (t->n_slots - t->n_points > t->n_points / 16) return compact(t, t->n_points / 32 + extra);
   return reserve_slots(t, (size_t)t->n_slots + extra);
 }
 
@@ -515,6 +520,7 @@ void qk_tree_free(qk_tree_t *t) {
   qk_allocator_t a = t->alloc;
   qk__free(&a, t->nodes, (size_t)t->cap_nodes * sizeof(qk__node_t));
   qk__free(&a, t->blocks, (size_t)t->cap_blocks * sizeof(qk__block_t));
+  qk__free(&a, t->free_ids, (size_t)t->cap_free_ids * sizeof(qk_id_t));
   slots_t pts = {t->px, t->py, t->pid};
   slots_free(&a, &pts, t->cap_slots);
   qk__free(&a, qk__id_map_if_made(t), (size_t)qk__id_map_capacity(t) * sizeof(uint32_t));
@@ -536,36 +542,19 @@ static uint32_t descend(const qk_tree_t *t, double x, double y, qk__geom_t *g) {
   return v;
 }
 
-qk_status_t qk_tree_insert(qk_tree_t *t, qk_point_t p, qk_id_t *id_out) {
-  qk_status_t st;
-  if (!t) return QK_ERR_INVALID;
-  if (!isfinite(p.x) || !isfinite(p.y)) return QK_ERR_NONFINITE;
-  if (!inside_root(t, p.x, p.y)) return QK_ERR_OUTSIDE;
-  if (t->n_ids >= QK_MAX_POINTS) return QK_ERR_LIMIT;
+/* The room a full leaf of `count` points gets when it moves to the tail. */
+static uint32_t grown_room(uint32_t count) { return count + count / 4 + 2; }
 
-  /* All allocation first: the id map, nodes for a cascade of splits down to the depth
-   * cap, and a larger block for the leaf if its block is full. */
-  uint32_t *w;
-  if ((st = own_map(t, false, &w))) return st;
-  if (w) {
-    if ((st = grow(&t->alloc, (void **)&w, &t->cap_ids, (size_t)t->n_ids + 1, sizeof(uint32_t))))
-      return st;
-    atomic_store_explicit(&t->where, w, memory_order_release);
-  }
-  if ((st = qk__reserve_nodes(t, 4 * (t->max_depth + 1)))) return st;
+/* Put point (p, id) into the tree: into the leaf that holds p, moved to the tail first
+ * when its block is full, then split while over capacity. Everything must have been
+ * reserved: nodes for a cascade to the depth cap, the tail for the move, the map entry. */
+static void place(qk_tree_t *t, qk_point_t p, qk_id_t id) {
+  uint32_t *w = qk__id_map_if_made(t);
   qk__geom_t g;
   uint32_t leaf = descend(t, p.x, p.y, &g);
   qk__node_t *n = &t->nodes[leaf];
-  uint32_t newroom = 0;
   if (n->count == n->room) {
-    newroom = n->count < 2 ? 4 : 2 * n->count;
-    if ((st = reserve_tail(t, newroom))) return st;
-    n = &t->nodes[leaf]; /* compaction does not move nodes, but stay explicit */
-  }
-
-  /* From here on nothing can fail. */
-  if (newroom) {
-    uint32_t to = t->n_slots;
+    uint32_t to = t->n_slots, newroom = grown_room(n->count);
     memcpy(t->px + to, t->px + n->start, (size_t)n->count * sizeof(double));
     memcpy(t->py + to, t->py + n->start, (size_t)n->count * sizeof(double));
     memcpy(t->pid + to, t->pid + n->start, (size_t)n->count * sizeof(qk_id_t));
@@ -576,7 +565,6 @@ qk_status_t qk_tree_insert(qk_tree_t *t, qk_point_t p, qk_id_t *id_out) {
     n->room = newroom;
     t->n_slots += newroom;
   }
-  qk_id_t id = t->n_ids++;
   uint32_t s = n->start + n->count;
   t->px[s] = p.x;
   t->py[s] = p.y;
@@ -585,6 +573,39 @@ qk_status_t qk_tree_insert(qk_tree_t *t, qk_point_t p, qk_id_t *id_out) {
   for (uint32_t v = leaf; v != QK_NONE; v = qk__parent(t, v)) t->nodes[v].count++;
   t->n_points++;
   split_while_full(t, leaf, g);
+}
+
+/* Tail slots a place() of p needs, when the leaf that holds p has `count` points in
+ * `room` slots. */
+static size_t place_need(uint32_t count, uint32_t room) {
+  return count == room ? grown_room(count) : 0;
+}
+
+qk_status_t qk_tree_insert(qk_tree_t *t, qk_point_t p, qk_id_t *id_out) {
+  qk_status_t st;
+  if (!t) return QK_ERR_INVALID;
+  if (!isfinite(p.x) || !isfinite(p.y)) return QK_ERR_NONFINITE;
+  if (!inside_root(t, p.x, p.y)) return QK_ERR_OUTSIDE;
+  bool reuse = t->n_free_ids > 0;
+  if (!reuse && t->n_ids >= QK_MAX_POINTS) return QK_ERR_LIMIT;
+
+  /* All allocation first: the id map (for a new id), nodes for a cascade of splits down
+   * to the depth cap, and a larger block for the leaf if its block is full. */
+  uint32_t *w;
+  if ((st = own_map(t, false, &w))) return st;
+  if (w && !reuse) {
+    if ((st = grow(&t->alloc, (void **)&w, &t->cap_ids, (size_t)t->n_ids + 1, sizeof(uint32_t))))
+      return st;
+    atomic_store_explicit(&t->where, w, memory_order_release);
+  }
+  if ((st = qk__reserve_nodes(t, 4 * (t->max_depth + 1)))) return st;
+  const qk__node_t *n = &t->nodes[descend(t, p.x, p.y, NULL)];
+  if ((st = reserve_tail(t, place_need(n->count, n->room)))) return st;
+
+  /* From here on nothing can fail. Removed ids are handed out again, the most recently
+   * removed first; a new id only when none is free. */
+  qk_id_t id = reuse ? t->free_ids[--t->n_free_ids] : t->n_ids++;
+  place(t, p, id);
   if (id_out) *id_out = id;
   return QK_OK;
 }
@@ -621,29 +642,22 @@ static void collapse(qk_tree_t *t, uint32_t v) {
   t->n_slots = pos;
 }
 
-qk_status_t qk_tree_remove(qk_tree_t *t, qk_id_t id) {
-  if (!t) return QK_ERR_INVALID;
-  if (id >= t->n_ids) return QK_ERR_NOT_FOUND;
-  uint32_t *w;
-  qk_status_t st = own_map(t, true, &w);
-  if (st) return st;
-  if (w[id] == QK_NONE) return QK_ERR_NOT_FOUND;
-  uint32_t leaf = descend(t, t->px[w[id]], t->py[w[id]], NULL);
-
-  /* Which ancestor will merge: the highest one left holding at most `capacity` points
-   * (counts only grow upwards, so those ancestors form a chain above the leaf). */
+/* The highest ancestor of `leaf` that a removal from it merges (the highest one left
+ * holding at most `capacity` points: counts only grow upwards, so those ancestors form a
+ * chain above the leaf), or QK_NONE. */
+static uint32_t merge_top(const qk_tree_t *t, uint32_t leaf) {
   uint32_t top = QK_NONE;
   if (!t->refined)
     for (uint32_t v = qk__parent(t, leaf); v != QK_NONE; v = qk__parent(t, v)) {
       if (t->nodes[v].count - 1 > t->capacity) break;
       top = v;
     }
-  if (top != QK_NONE) {
-    if ((st = reserve_tail(t, t->nodes[top].count))) return st;
-  }
+  return top;
+}
 
-  /* Nothing can fail from here on (the reservation may have compacted the arrays, so
-   * the slot is read only now). Fill the hole with the leaf's last point. */
+/* Take the point in slot w[id] out of `leaf` (filling the hole with the leaf's last point)
+ * and merge `top` if it is not QK_NONE; the tail must have room for the merge. */
+static void unplace(qk_tree_t *t, uint32_t *w, qk_id_t id, uint32_t leaf, uint32_t top) {
   uint32_t s = w[id];
   qk__node_t *n = &t->nodes[leaf];
   uint32_t last = n->start + n->count - 1;
@@ -657,6 +671,64 @@ qk_status_t qk_tree_remove(qk_tree_t *t, qk_id_t id) {
   for (uint32_t v = leaf; v != QK_NONE; v = qk__parent(t, v)) t->nodes[v].count--;
   t->n_points--;
   if (top != QK_NONE) collapse(t, top);
+}
+
+qk_status_t qk_tree_remove(qk_tree_t *t, qk_id_t id) {
+  if (!t) return QK_ERR_INVALID;
+  if (id >= t->n_ids) return QK_ERR_NOT_FOUND;
+  uint32_t *w;
+  qk_status_t st = own_map(t, true, &w);
+  if (st) return st;
+  if (w[id] == QK_NONE) return QK_ERR_NOT_FOUND;
+  uint32_t leaf = descend(t, t->px[w[id]], t->py[w[id]], NULL);
+  uint32_t top = merge_top(t, leaf);
+  /* Room to remember the id for reuse, and a tail for the merge. */
+  if ((st = grow(&t->alloc, (void **)&t->free_ids, &t->cap_free_ids, (size_t)t->n_free_ids + 1,
+                 sizeof(qk_id_t))))
+    return st;
+  if (top != QK_NONE && (st = reserve_tail(t, t->nodes[top].count))) return st;
+
+  /* Nothing can fail from here on (the reservation may have compacted the arrays, so
+   * the slot is read only in unplace). */
+  unplace(t, w, id, leaf, top);
+  t->free_ids[t->n_free_ids++] = id;
+  return QK_OK;
+}
+
+qk_status_t qk_tree_move(qk_tree_t *t, qk_id_t id, qk_point_t p) {
+  if (!t) return QK_ERR_INVALID;
+  if (!isfinite(p.x) || !isfinite(p.y)) return QK_ERR_NONFINITE;
+  if (!inside_root(t, p.x, p.y)) return QK_ERR_OUTSIDE;
+  if (id >= t->n_ids) return QK_ERR_NOT_FOUND;
+  uint32_t *w;
+  qk_status_t st = own_map(t, true, &w);
+  if (st) return st;
+  if (w[id] == QK_NONE) return QK_ERR_NOT_FOUND;
+  uint32_t from = descend(t, t->px[w[id]], t->py[w[id]], NULL);
+  uint32_t to = descend(t, p.x, p.y, NULL);
+  if (from == to) {
+    /* The same leaf: only the coordinates change, and with them no count or shape. */
+    t->px[w[id]] = p.x;
+    t->py[w[id]] = p.y;
+    return QK_OK;
+  }
+  /* Another leaf: the removal's merge and the insertion's move and splits, all reserved
+   * first. If the merge swallows the target leaf, the point goes into the merged leaf,
+   * which then is full (its room is its count). */
+  uint32_t top = merge_top(t, from);
+  uint32_t count = t->nodes[to].count;
+  if (top != QK_NONE)
+    for (uint32_t v = to; v != QK_NONE; v = qk__parent(t, v))
+      if (v == top) count = t->nodes[top].count - 1;
+  /* Reserve as if the target leaf were full: the reservation may compact the arrays,
+   * after which every leaf is. */
+  size_t need = (top != QK_NONE ? t->nodes[top].count : 0) + grown_room(count);
+  if ((st = qk__reserve_nodes(t, 4 * (t->max_depth + 1)))) return st;
+  if ((st = reserve_tail(t, need))) return st;
+
+  /* Nothing can fail from here on. */
+  unplace(t, w, id, from, top);
+  place(t, p, id);
   return QK_OK;
 }
 

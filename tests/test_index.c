@@ -14,6 +14,9 @@
  *  - bad input (NaN, infinity, outside the root, bad options) and the depth cap;
  *    qk_tree_build_ex() names the first bad point (index and value) or the bad option;
  *  - pre-order visiting with skip and stop, and the SVG writer;
+ *  - churn (issue 10): 10^5 random moves, removes and inserts keep ids below twice the
+ *    live count and the tree within 1.2x the memory of a fresh build of the same points
+ *    (both with their id map);
  *  - compact storage (issue 11): at 1M uniform points and capacity 32 a built tree holds
  *    at most 22 bytes per point (16 of coordinates, 4 of ids, the nodes in the rest).
  */
@@ -252,8 +255,8 @@ static void test_index_random_ops(void **state) {
     assert_int_equal(qk_tree_build(NULL, 0, &o, &t), QK_OK);
     qk_point_t *model = malloc(OPS * sizeof *model);
     unsigned char *present = calloc(OPS, 1);
-    qk_id_t *live = malloc(OPS * sizeof *live);
-    size_t n_live = 0, n_ids = 0;
+    qk_id_t *live = malloc(OPS * sizeof *live), *free_ids = malloc(OPS * sizeof *free_ids);
+    size_t n_live = 0, n_ids = 0, n_free = 0;
     for (int op = 1; op <= OPS; op++) {
       int do_insert = n_live < 10 || (n_live < MAXN && qkt_rng_below(&r, 100) < 55);
       if (do_insert) {
@@ -261,17 +264,31 @@ static void test_index_random_ops(void **state) {
         qkt_points(&r, (qkt_dist_t)qkt_rng_below(&r, 4), &q, 1);
         qk_id_t id;
         assert_int_equal(qk_tree_insert(t, q, &id), QK_OK);
-        assert_int_equal(id, n_ids);
-        model[n_ids++] = q;
+        /* Removed ids come back, the most recently removed first. */
+        qk_id_t want = n_free ? free_ids[--n_free] : (qk_id_t)n_ids++;
+        assert_int_equal(id, want);
+        model[id] = q;
         present[id] = 1;
         live[n_live++] = id;
+      } else if (qkt_rng_below(&r, 4) == 0) {
+        /* A move keeps the id. */
+        size_t k = qkt_rng_below(&r, (uint32_t)n_live);
+        qk_point_t q;
+        qkt_points(&r, (qkt_dist_t)qkt_rng_below(&r, 4), &q, 1);
+        if (qkt_rng_below(&r, 2)) /* a small move, often within the leaf */
+          q = (qk_point_t){fmin(1, fmax(0, model[live[k]].x + 1e-4 * (q.x - 0.5))),
+                           fmin(1, fmax(0, model[live[k]].y + 1e-4 * (q.y - 0.5)))};
+        assert_int_equal(qk_tree_move(t, live[k], q), QK_OK);
+        model[live[k]] = q;
       } else {
         size_t k = qkt_rng_below(&r, (uint32_t)n_live);
         qk_id_t id = live[k];
         live[k] = live[--n_live];
         assert_int_equal(qk_tree_remove(t, id), QK_OK);
         present[id] = 0;
+        free_ids[n_free++] = id;
         assert_int_equal(qk_tree_remove(t, id), QK_ERR_NOT_FOUND);
+        assert_int_equal(qk_tree_move(t, id, (qk_point_t){0.5, 0.5}), QK_ERR_NOT_FOUND);
       }
       if (op % 5000 == 0) {
         QKT_CHECK_TREE(t);
@@ -320,6 +337,7 @@ static void test_index_random_ops(void **state) {
     free(model);
     free(present);
     free(live);
+    free(free_ids);
     qk_tree_free(t);
   }
 }
@@ -465,12 +483,17 @@ static void test_index_alloc_failure(void **state) {
   }
   assert_true(failures >= 4);
   /* Insert and remove sequences: each failing call leaves the tree as it was. */
-  qk_id_t next = N;
+  qk_id_t next = N, freed[3000];
+  size_t n_freed = 0;
   for (int op = 0; op < 3000; op++) {
     int ins = op < 1500 || qkt_rng_below(&r, 2);
+    int mov = !ins && qkt_rng_below(&r, 2);
     qk_point_t q;
     qkt_points(&r, QKT_CLUSTERED, &q, 1);
     qk_id_t victim = qkt_rng_below(&r, next);
+    qk_point_t was = {0, 0};
+    a.fail_at = 0;
+    int victim_live = !ins && qk_tree_point(t, victim, &was) == QK_OK;
     for (size_t k = 1;; k++) {
       qk_tree_stats_t before, after;
       qk_tree_stats(t, &before);
@@ -479,16 +502,24 @@ static void test_index_alloc_failure(void **state) {
       a.failed = 0;
       qk_status_t st;
       qk_id_t id;
-      st = ins ? qk_tree_insert(t, q, &id) : qk_tree_remove(t, victim);
+      st = ins   ? qk_tree_insert(t, q, &id)
+           : mov ? qk_tree_move(t, victim, q)
+                 : qk_tree_remove(t, victim);
       if (!a.failed) {
-        assert_true(st == QK_OK || (!ins && st == QK_ERR_NOT_FOUND));
-        if (ins) assert_int_equal(id, next++);
+        assert_true(st == QK_OK || (!ins && !victim_live && st == QK_ERR_NOT_FOUND));
+        if (ins) assert_int_equal(id, n_freed ? freed[--n_freed] : next++);
+        if (!ins && !mov && st == QK_OK) freed[n_freed++] = victim;
         break;
       }
       assert_int_equal(st, QK_ERR_NOMEM);
       qk_tree_stats(t, &after);
       assert_int_equal(after.points, before.points);
       assert_int_equal(after.nodes, before.nodes);
+      if (victim_live) { /* a failed move or remove leaves the point where it was */
+        qk_point_t now;
+        assert_int_equal(qk_tree_point(t, victim, &now), QK_OK);
+        assert_true(now.x == was.x && now.y == was.y);
+      }
       QKT_CHECK_TREE(t);
     }
     if (op % 500 == 0) QKT_CHECK_TREE(t);
@@ -736,7 +767,7 @@ static void test_index_lazy_id_map(void **state) {
     assert_int_equal(qk_tree_point(t, 7, &(qk_point_t){0}), QK_ERR_NOT_FOUND);
     qk_id_t id;
     assert_int_equal(qk_tree_insert(t, p[7], &id), QK_OK);
-    assert_int_equal(id, N);
+    assert_int_equal(id, 7); /* the removed id, reused */
     QKT_CHECK_TREE(t);
     qk_tree_free(t);
   }
@@ -750,6 +781,65 @@ static void test_index_lazy_id_map(void **state) {
   assert_true(q.x == p[99].x && q.y == p[99].y);
   qk_tree_free(t);
   free(p);
+}
+
+static void test_index_churn_memory(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, qkt_seed(20));
+  enum { N = 20000, OPS = 100000, CAP_IDS = 2 * N };
+  qk_point_t *model = malloc(CAP_IDS * sizeof *model);
+  qk_id_t *live = malloc(CAP_IDS * sizeof *live);
+  qkt_points(&r, QKT_UNIFORM, model, N);
+  qk_tree_options_t o;
+  qk_tree_options_init(&o);
+  o.capacity = 16;
+  o.has_root = 1;
+  o.root = (qk_square_t){0, 0, 1};
+  qk_tree_t *t;
+  assert_int_equal(qk_tree_build(model, N, &o, &t), QK_OK);
+  size_t n_live = N;
+  qk_id_t max_id = N - 1;
+  for (size_t i = 0; i < N; i++) live[i] = (qk_id_t)i;
+  for (int op = 0; op < OPS; op++) {
+    uint32_t kind = qkt_rng_below(&r, 3);
+    qk_point_t q = {qkt_rng_unit(&r), qkt_rng_unit(&r)};
+    if (kind == 0 || (kind == 1 && n_live < N / 2) || (kind == 2 && n_live > 3 * N / 2)) {
+      size_t k = qkt_rng_below(&r, (uint32_t)n_live);
+      assert_int_equal(qk_tree_move(t, live[k], q), QK_OK);
+      model[live[k]] = q;
+    } else if (kind == 1) {
+      size_t k = qkt_rng_below(&r, (uint32_t)n_live);
+      assert_int_equal(qk_tree_remove(t, live[k]), QK_OK);
+      live[k] = live[--n_live];
+    } else {
+      qk_id_t id;
+      assert_int_equal(qk_tree_insert(t, q, &id), QK_OK);
+      assert_true(id < CAP_IDS);
+      model[id] = q;
+      live[n_live++] = id;
+      if (id > max_id) max_id = id;
+    }
+  }
+  QKT_CHECK_TREE(t);
+  if (max_id >= 2 * n_live) fail_msg("id %u for %zu live points", max_id, n_live);
+  qk_point_t *pts = malloc(n_live * sizeof *pts);
+  for (size_t i = 0; i < n_live; i++) pts[i] = model[live[i]];
+  qk_tree_t *f;
+  assert_int_equal(qk_tree_build(pts, n_live, &o, &f), QK_OK);
+  qk_point_t any;
+  assert_int_equal(qk_tree_point(f, 0, &any), QK_OK); /* makes the fresh tree's id map */
+  double ratio = (double)qk_tree_memory(t) / (double)qk_tree_memory(f);
+  print_message("churned tree: %zu bytes, fresh build: %zu bytes (%.3fx)\n", qk_tree_memory(t),
+                qk_tree_memory(f), ratio);
+  if (ratio > 1.2) fail_msg("churned tree is %.3fx a fresh build", ratio);
+  qk_tree_stats_t a, b;
+  qk_tree_stats(t, &a);
+  qk_tree_stats(f, &b);
+  assert_int_equal(a.nodes, b.nodes); /* the shape depends only on the points */
+  qk_tree_free(t);
+  qk_tree_free(f);
+  free(model), free(live), free(pts);
 }
 
 static void test_index_memory_compact(void **state) {
@@ -785,6 +875,7 @@ int main(void) {
       cmocka_unit_test(test_index_depth_cap),
       cmocka_unit_test(test_index_visit_and_svg),
       cmocka_unit_test(test_index_lazy_id_map),
+      cmocka_unit_test(test_index_churn_memory),
       cmocka_unit_test(test_index_memory_compact),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);

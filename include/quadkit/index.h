@@ -128,7 +128,10 @@ void qk_tree_set_threads(qk_tree_t *tree, uint32_t threads);
 void qk_tree_free(qk_tree_t *tree);
 
 /**
- * Insert a point; it gets the next unused id (ids are never reused).
+ * Insert a point. It gets the most recently removed id that has not been handed out again
+ * (removed ids are kept on a stack and reused last-in first-out), or, when there is none,
+ * the next unused id; so the ids of a tree stay below the largest number of points it has
+ * held.
  * \param [in,out] tree the tree; unchanged on error.
  * \param [in] p the point; must lie in the closed root square.
  * \param [out] id_out the new id (may be NULL).
@@ -137,12 +140,24 @@ void qk_tree_free(qk_tree_t *tree);
 qk_status_t qk_tree_insert(qk_tree_t *tree, qk_point_t p, qk_id_t *id_out);
 
 /**
- * Remove a point by id; sibling leaves that now fit in one merge into their parent.
+ * Remove a point by id; sibling leaves that now fit in one merge into their parent. The id
+ * goes on the stack of ids the next inserts reuse (see qk_tree_insert()).
  * \param [in,out] tree the tree; unchanged on error.
  * \param [in] id the point's id.
  * \return QK_OK, QK_ERR_NOT_FOUND (unknown or already removed id) or QK_ERR_NOMEM.
  */
 qk_status_t qk_tree_remove(qk_tree_t *tree, qk_id_t id);
+
+/**
+ * Move a stored point to a new location, keeping its id: the same tree as removing it and
+ * inserting it there, all or nothing. A move within its leaf only rewrites the
+ * coordinates.
+ * \param [in,out] tree the tree; unchanged on error.
+ * \param [in] id the point's id.
+ * \param [in] p the new location; must lie in the closed root square.
+ * \return QK_OK, QK_ERR_NONFINITE, QK_ERR_OUTSIDE, QK_ERR_NOT_FOUND or QK_ERR_NOMEM.
+ */
+qk_status_t qk_tree_move(qk_tree_t *tree, qk_id_t id, qk_point_t p);
 
 /*
  * Id lookups (qk_tree_point, qk_tree_leaf_of) use a map from id to storage slot, 4 bytes
