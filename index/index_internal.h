@@ -44,6 +44,8 @@ struct qk_tree {
   uint32_t capacity;
   uint32_t max_depth;
   uint32_t threads;      /* threads for the build and batch queries; 0 = every core */
+  bool fixed_root;       /* the root square was given (has_root), not fitted to the points */
+  bool huge_pages;       /* advise huge pages for the point arrays */
   bool refined;          /* split beyond the capacity rule: removals no longer merge */
   double root_x, root_y; /* the root square's lower-left corner */
   double side[QK_MAX_DEPTH_LIMIT + 2]; /* side length at each depth, exact halvings */
@@ -83,6 +85,10 @@ struct qk_tree {
 /* Allocation goes through here and only here. */
 void *qk__realloc(const qk_allocator_t *a, void *ptr, size_t osize, size_t nsize);
 void qk__free(const qk_allocator_t *a, void *ptr, size_t size);
+
+/* Ask for transparent huge pages over a large block from the default allocator (a hint;
+ * index/hugepages.c). */
+void qk__advise_huge(const qk_allocator_t *a, void *p, size_t size);
 
 static inline bool qk__is_leaf(const qk__node_t *n) { return n->child == QK_NONE; }
 

@@ -85,11 +85,19 @@ static void slots_free(const qk_allocator_t *a, slots_t *s, size_t cap) {
   qk__free(a, s->id, cap * sizeof(qk_id_t));
 }
 
-static qk_status_t slots_alloc(const qk_allocator_t *a, size_t cap, slots_t *s) {
+static qk_status_t slots_alloc(const qk_tree_t *t, size_t cap, slots_t *s) {
+  const qk_allocator_t *a = &t->alloc;
   s->x = qk__realloc(a, NULL, 0, cap * sizeof(double));
   s->y = qk__realloc(a, NULL, 0, cap * sizeof(double));
   s->id = qk__realloc(a, NULL, 0, cap * sizeof(qk_id_t));
-  if (s->x && s->y && s->id) return QK_OK;
+  if (s->x && s->y && s->id) {
+    if (t->huge_pages) {
+      qk__advise_huge(a, s->x, cap * sizeof(double));
+      qk__advise_huge(a, s->y, cap * sizeof(double));
+      qk__advise_huge(a, s->id, cap * sizeof(qk_id_t));
+    }
+    return QK_OK;
+  }
   slots_free(a, s, cap);
   return QK_ERR_NOMEM;
 }
@@ -113,7 +121,7 @@ static qk_status_t reserve_slots(qk_tree_t *t, size_t need) {
   while (ncap < need) ncap += ncap / 8 + 16;
   if (ncap > UINT32_MAX) ncap = UINT32_MAX;
   slots_t s;
-  if (slots_alloc(&t->alloc, ncap, &s)) return QK_ERR_NOMEM;
+  if (slots_alloc(t, ncap, &s)) return QK_ERR_NOMEM;
   if (t->n_slots) {
     memcpy(s.x, t->px, (size_t)t->n_slots * sizeof(double));
     memcpy(s.y, t->py, (size_t)t->n_slots * sizeof(double));
@@ -130,7 +138,7 @@ static qk_status_t compact(qk_tree_t *t, size_t headroom) {
   if (ncap < 16) ncap = 16;
   if (ncap > UINT32_MAX) return QK_ERR_LIMIT;
   slots_t s;
-  if (slots_alloc(&t->alloc, ncap, &s)) return QK_ERR_NOMEM;
+  if (slots_alloc(t, ncap, &s)) return QK_ERR_NOMEM;
   double *nx = s.x, *ny = s.y;
   qk_id_t *ni = s.id;
   /* Pre-order walk with an explicit stack: at most 3 pending siblings per level. */
@@ -441,6 +449,56 @@ qk_status_t qk_tree_build(const qk_point_t *points, size_t n, const qk_tree_opti
   return qk_tree_build_ex(points, n, options, out, NULL);
 }
 
+/* Make t the tree of n points over `root`, into its existing arrays (grown as needed):
+ * everything but the allocator, the options and the arrays is reset. On failure the tree
+ * is left valid and empty. */
+static qk_status_t fill(qk_tree_t *t, const qk_point_t *points, size_t n, qk_square_t root) {
+  qk_status_t st;
+  t->root_x = root.x;
+  t->root_y = root.y;
+  t->side[0] = root.side;
+  for (int d = 1; d < QK_MAX_DEPTH_LIMIT + 2; d++) t->side[d] = t->side[d - 1] * 0.5;
+  qk__free(&t->alloc, qk__id_map_if_made(t), (size_t)qk__id_map_capacity(t) * sizeof(uint32_t));
+  atomic_store_explicit(&t->where, NULL, memory_order_release);
+  t->cap_ids = 0;
+  t->n_free_ids = 0;
+  t->free_block = QK_NONE;
+  t->n_free_blocks = 0;
+  t->refined = false;
+  t->garbage = 0;
+  t->n_slots = t->n_ids = 0;
+  t->n_points = 0;
+  t->n_nodes = 0;
+  if ((st = grow(&t->alloc, (void **)&t->nodes, &t->cap_nodes, 1, sizeof(qk__node_t)))) return st;
+  t->n_nodes = 1;
+  t->nodes[0] = (qk__node_t){.child = QK_NONE, .start = 0, .count = 0, .room = 0};
+  /* At least one slot even for an empty tree, so that a leaf's points are never a NULL
+   * base plus an offset (undefined behaviour even for offset 0). */
+  if ((st = reserve_slots(t, n ? n : 1))) return st;
+  t->nodes[0].count = t->nodes[0].room = (uint32_t)n;
+  t->n_slots = (uint32_t)n;
+  t->n_ids = (uint32_t)n;
+  t->n_points = n;
+  bool done;
+  st = qk__build_bucketed(t, points, n, &done);
+  if (!st && !done) {
+    /* The plain recursive build of the book: copy, then partition top-down. */
+    for (size_t i = 0; i < n; i++) {
+      t->px[i] = points[i].x;
+      t->py[i] = points[i].y;
+      t->pid[i] = (qk_id_t)i;
+    }
+    st = qk__build_subtree(t, 0, (qk__geom_t){root.x, root.y, 0});
+  }
+  if (st) { /* back to an empty tree: one leaf, no point */
+    t->n_nodes = 1;
+    t->nodes[0] = (qk__node_t){.child = QK_NONE, .start = 0, .count = 0, .room = 0};
+    t->n_slots = t->n_ids = 0;
+    t->n_points = 0;
+  }
+  return st;
+}
+
 qk_status_t qk_tree_build_ex(const qk_point_t *points, size_t n, const qk_tree_options_t *options,
                              qk_tree_t **out, qk_error_t *err) {
   qk_tree_options_t def;
@@ -463,33 +521,9 @@ qk_status_t qk_tree_build_ex(const qk_point_t *points, size_t n, const qk_tree_o
   t->capacity = options->capacity ? options->capacity : 1;
   t->max_depth = options->max_depth ? options->max_depth : QK_DEFAULT_MAX_DEPTH;
   t->threads = options->threads;
-  t->free_block = QK_NONE;
-  t->side[0] = root.side;
-  for (int d = 1; d < QK_MAX_DEPTH_LIMIT + 2; d++) t->side[d] = t->side[d - 1] * 0.5;
-
-  t->root_x = root.x;
-  t->root_y = root.y;
-  if ((st = grow(&t->alloc, (void **)&t->nodes, &t->cap_nodes, 1, sizeof(qk__node_t)))) goto fail;
-  t->n_nodes = 1;
-  t->nodes[0] =
-      (qk__node_t){.child = QK_NONE, .start = 0, .count = (uint32_t)n, .room = (uint32_t)n};
-  /* At least one slot even for an empty tree, so that a leaf's points are never a NULL
-   * base plus an offset (undefined behaviour even for offset 0). */
-  if ((st = reserve_slots(t, n ? n : 1))) goto fail;
-  t->n_slots = (uint32_t)n;
-  t->n_ids = (uint32_t)n;
-  t->n_points = n;
-  bool done;
-  if ((st = qk__build_bucketed(t, points, n, &done))) goto fail;
-  if (!done) {
-    /* The plain recursive build of the book: copy, then partition top-down. */
-    for (size_t i = 0; i < n; i++) {
-      t->px[i] = points[i].x;
-      t->py[i] = points[i].y;
-      t->pid[i] = (qk_id_t)i;
-    }
-    if ((st = qk__build_subtree(t, 0, (qk__geom_t){root.x, root.y, 0}))) goto fail;
-  }
+  t->fixed_root = options->has_root != 0;
+  t->huge_pages = options->huge_pages != 0;
+  if ((st = fill(t, points, n, root))) goto fail;
   /* Give back the node arrays' growth slack; if the allocator will not shrink, keep it. */
   if (t->cap_nodes > t->n_nodes + t->n_nodes / 16) {
     qk__node_t *nn = qk__realloc(&t->alloc, t->nodes, (size_t)t->cap_nodes * sizeof *nn,
@@ -513,6 +547,30 @@ qk_status_t qk_tree_build_ex(const qk_point_t *points, size_t n, const qk_tree_o
 fail:
   qk_tree_free(t);
   return say(err, st, SIZE_MAX, "%s", qk_strerror(st));
+}
+
+qk_status_t qk_tree_rebuild(qk_tree_t *t, const qk_point_t *points, size_t n, qk_error_t *err) {
+  if (!t) return say(err, QK_ERR_INVALID, SIZE_MAX, "no tree to rebuild");
+  qk_tree_options_t o;
+  qk_tree_options_init(&o);
+  o.capacity = t->capacity;
+  o.max_depth = t->max_depth;
+  o.has_root = t->fixed_root;
+  o.root = (qk_square_t){t->root_x, t->root_y, t->side[0]};
+  qk_square_t root = o.root;
+  qk_status_t st = check_input(points, n, &o, &root, err);
+  if (st) return st;
+  /* Point arrays large enough, allocated before anything changes; their old contents
+   * need no copy. */
+  size_t need = n ? n : 1;
+  if (need > t->cap_slots) {
+    slots_t s;
+    if (need > UINT32_MAX) return say(err, QK_ERR_LIMIT, SIZE_MAX, "%zu points", n);
+    if (slots_alloc(t, need, &s)) return say(err, QK_ERR_NOMEM, SIZE_MAX, "out of memory");
+    slots_install(t, s, need);
+  }
+  if ((st = fill(t, points, n, root))) return say(err, st, SIZE_MAX, "%s", qk_strerror(st));
+  return QK_OK;
 }
 
 void qk_tree_free(qk_tree_t *t) {

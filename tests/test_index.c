@@ -14,6 +14,10 @@
  *  - bad input (NaN, infinity, outside the root, bad options) and the depth cap;
  *    qk_tree_build_ex() names the first bad point (index and value) or the bad option;
  *  - pre-order visiting with skip and stop, and the SVG writer;
+ *  - qk_tree_rebuild (issue 11): the same tree as a fresh build, for a fitted and a given
+ *    root, growing and shrinking, after removals and moves; no allocation once the arrays
+ *    are large enough; a bad point leaves the tree unchanged; allocation failure at every
+ *    N leaves a valid tree and no leak; huge pages asked for change no result;
  *  - churn (issue 10): 10^5 random moves, removes and inserts keep ids below twice the
  *    live count and the tree within 1.2x the memory of a fresh build of the same points
  *    (both with their id map);
@@ -783,6 +787,118 @@ static void test_index_lazy_id_map(void **state) {
   free(p);
 }
 
+/* Two trees hold the same leaves with the same points and ids, in the same order. */
+static void assert_same_shape(const qk_tree_t *a, const qk_tree_t *b) {
+  size_t na, nb;
+  qk_tree_leaves(a, NULL, 0, &na);
+  qk_tree_leaves(b, NULL, 0, &nb);
+  assert_int_equal(na, nb);
+  qk_node_t *la = malloc(na * sizeof *la), *lb = malloc(nb * sizeof *lb);
+  qk_tree_leaves(a, la, na, &na);
+  qk_tree_leaves(b, lb, nb, &nb);
+  for (size_t i = 0; i < na; i++) {
+    qk_node_info_t ia, ib;
+    assert_int_equal(qk_tree_node_info(a, la[i], &ia), QK_OK);
+    assert_int_equal(qk_tree_node_info(b, lb[i], &ib), QK_OK);
+    assert_true(ia.square.x == ib.square.x && ia.square.y == ib.square.y &&
+                ia.square.side == ib.square.side && ia.count == ib.count);
+    const double *xa, *xb;
+    const qk_id_t *da, *db;
+    size_t ca, cb;
+    qk_tree_leaf_points(a, la[i], &xa, NULL, &da, &ca);
+    qk_tree_leaf_points(b, lb[i], &xb, NULL, &db, &cb);
+    assert_int_equal(ca, cb);
+    for (size_t j = 0; j < ca; j++) assert_true(xa[j] == xb[j] && da[j] == db[j]);
+  }
+  free(la);
+  free(lb);
+}
+
+static void test_index_rebuild(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, qkt_seed(21));
+  enum { N = 30000 };
+  qk_point_t *p = malloc(N * sizeof *p);
+  static const size_t sizes[] = {5000, 30000, 100, 0, 20000, 30000};
+  for (int fixed = 0; fixed < 2; fixed++) {
+    qk_tree_options_t o = fixed ? unit_root(8) : (qk_tree_options_t){0};
+    if (!fixed) {
+      qk_tree_options_init(&o);
+      o.capacity = 8;
+      o.huge_pages = 1;
+    }
+    qkt_points(&r, QKT_CLUSTERED, p, 1000);
+    qk_tree_t *t;
+    assert_int_equal(qk_tree_build(p, 1000, &o, &t), QK_OK);
+    assert_int_equal(qk_tree_remove(t, 3), QK_OK); /* an id map and a free id to drop */
+    assert_int_equal(qk_tree_move(t, 5, (qk_point_t){0.5, 0.5}), QK_OK);
+    for (size_t k = 0; k < sizeof sizes / sizeof *sizes; k++) {
+      size_t n = sizes[k];
+      qkt_points(&r, (qkt_dist_t)(k % 4), p, n);
+      size_t before = qk_tree_memory(t);
+      assert_int_equal(qk_tree_rebuild(t, p, n, NULL), QK_OK);
+      QKT_CHECK_TREE(t);
+      if (k == sizeof sizes / sizeof *sizes - 1) /* arrays large enough already */
+        assert_true(qk_tree_memory(t) <= before);
+      qk_tree_t *f;
+      assert_int_equal(qk_tree_build(p, n, &o, &f), QK_OK);
+      assert_same_shape(t, f);
+      qk_tree_stats_t st, sf;
+      qk_tree_stats(t, &st);
+      qk_tree_stats(f, &sf);
+      assert_true(st.root.x == sf.root.x && st.root.y == sf.root.y && st.root.side == sf.root.side);
+      qk_id_t id;
+      assert_int_equal(qk_tree_insert(t, (qk_point_t){0.25, 0.25}, &id), QK_OK);
+      assert_int_equal(id, n); /* no removed id survives a rebuild */
+      assert_int_equal(qk_tree_remove(t, id), QK_OK);
+      qk_tree_free(f);
+    }
+    /* A bad point: rejected, named, and the tree stays as it was. */
+    qk_tree_stats_t s0, s1;
+    qk_tree_stats(t, &s0);
+    qk_point_t keep = p[17];
+    p[17].x = NAN;
+    qk_error_t err;
+    assert_int_equal(qk_tree_rebuild(t, p, 20000, &err), QK_ERR_NONFINITE);
+    assert_int_equal(err.item, 17);
+    qk_tree_stats(t, &s1);
+    assert_int_equal(s0.points, s1.points);
+    assert_int_equal(s0.nodes, s1.nodes);
+    p[17] = keep;
+    qk_tree_free(t);
+  }
+  /* Allocation failure at every N: QK_ERR_NOMEM leaves a valid (empty) tree, no leak. */
+  qkt_alloc_t a = {0};
+  qk_allocator_t al = qkt_alloc_make(&a);
+  qk_tree_options_t o;
+  qk_tree_options_init(&o);
+  o.capacity = 4;
+  o.allocator = &al;
+  qk_tree_t *t;
+  assert_int_equal(qk_tree_build(p, 50, &o, &t), QK_OK);
+  qkt_points(&r, QKT_UNIFORM, p, N);
+  int failures = 0;
+  for (size_t k = 1;; k++) {
+    a.calls = 0;
+    a.fail_at = k;
+    a.failed = 0;
+    qk_status_t st = qk_tree_rebuild(t, p, N, NULL);
+    a.fail_at = 0;
+    QKT_CHECK_TREE(t);
+    if (!a.failed) {
+      assert_int_equal(st, QK_OK);
+      break;
+    }
+    assert_int_equal(st, QK_ERR_NOMEM);
+    failures++;
+  }
+  assert_true(failures >= 2);
+  qk_tree_free(t);
+  assert_int_equal(a.live_blocks, 0);
+  free(p);
+}
+
 static void test_index_churn_memory(void **state) {
   (void)state;
   qkt_rng_t r;
@@ -875,6 +991,7 @@ int main(void) {
       cmocka_unit_test(test_index_depth_cap),
       cmocka_unit_test(test_index_visit_and_svg),
       cmocka_unit_test(test_index_lazy_id_map),
+      cmocka_unit_test(test_index_rebuild),
       cmocka_unit_test(test_index_churn_memory),
       cmocka_unit_test(test_index_memory_compact),
   };

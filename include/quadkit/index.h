@@ -76,6 +76,10 @@ typedef struct qk_tree_options {
    *  (qk_query_*_batch); 0 means every online core. Default 1. Results do not depend on
    *  it. */
   uint32_t threads;
+  /** Nonzero: ask the kernel for transparent huge pages (madvise MADV_HUGEPAGE) over the
+   *  point arrays when they come from the default allocator and exceed 4 MB; a hint, on
+   *  Linux only. Default 0. */
+  int huge_pages;
 } qk_tree_options_t;
 
 /**
@@ -112,6 +116,23 @@ qk_status_t qk_tree_build(const qk_point_t *points, size_t n, const qk_tree_opti
  */
 qk_status_t qk_tree_build_ex(const qk_point_t *points, size_t n, const qk_tree_options_t *options,
                              qk_tree_t **out, qk_error_t *err);
+
+/**
+ * Build the tree again over a new array of points, reusing its memory: the node and point
+ * arrays are kept and grown only when too small, so a tree rebuilt every frame stops
+ * growing once it has reached its largest size (the bulk build's scratch, 6 bytes per
+ * point and the bucket counts, is still borrowed for the call). The options it was built with stay
+ * (capacity, depth cap, threads, allocator; a given root stays, a fitted root is fitted to
+ * the new points). Point i gets id i; the id map and the removed ids are dropped.
+ * \param [in,out] tree the tree; unchanged when the input is rejected, and left valid but
+ *                  empty on QK_ERR_NOMEM.
+ * \param [in] points n points; copied.
+ * \param [in] n how many.
+ * \param [out] err where and why the input was rejected, as qk_tree_build_ex() (may be
+ *              NULL).
+ * \return as qk_tree_build_ex().
+ */
+qk_status_t qk_tree_rebuild(qk_tree_t *tree, const qk_point_t *points, size_t n, qk_error_t *err);
 
 /**
  * Set the number of threads the tree's batch queries use (0: every online core). Must
