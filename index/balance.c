@@ -1,90 +1,294 @@
 /*
  * BalanceQuadTree (lecture notes, section V; de Berg et al., ch. 14.2): split leaves
  * until any two leaves whose squares share an edge differ by at most one in depth.
+ *
+ * Done on a linear representation, as p4est balances its linear octrees: cells are named
+ * by depth and integer position (ix, iy at that depth, so a cell's ancestor at depth j is
+ * (ix, iy) >> (depth - j)), the internal cells are a hash set, and the leaves wait in one
+ * list per depth. A leaf L of depth d needs, across each edge it shares with its parent P's
+ * boundary, the cell N of P's size beside P to exist, that is N's parent (depth d - 2) to
+ * be internal; otherwise a leaf of depth <= d - 2 touches L. If it is not, the leaf that
+ * covers N is split, and its descendants towards N, down to depth d - 1 (the notes' split
+ * of the larger neighbour). New leaves are shallower than L, so taking the lists from the
+ * deepest up meets every leaf after everything that could split it: one pass. Only then
+ * are the node array and the points split, top-down, with every node reserved at once.
  */
+#include <string.h>
+
 #include "index/index_internal.h"
 
-/*
- * The notes' first issue (line 4): a leaf must be split exactly when a neighbouring
- * square is less than half its size. Such a neighbour exists towards `dir` iff the
- * neighbour u found by NorthNeighbor is internal (then of the leaf's own depth) and one
- * of its two children facing the leaf is not a leaf.
- */
-static bool has_small_neighbor(const qk_tree_t *t, uint32_t leaf) {
-  for (int d = 0; d < 4; d++) {
-    qk_node_t u = qk_tree_neighbor(t, leaf, (qk_dir_t)d);
-    if (u == QK_NONE || qk__is_leaf(&t->nodes[u])) continue;
-    unsigned q[2];
-    qk__facing_children((qk_dir_t)d, q);
-    if (!qk__is_leaf(&t->nodes[t->nodes[u].child + q[0]]) ||
-        !qk__is_leaf(&t->nodes[t->nodes[u].child + q[1]]))
-      return true;
-  }
-  return false;
+/* A cell: depth and integer position at that depth. */
+typedef struct cell {
+  uint64_t x, y;
+  uint32_t d;
+  uint32_t used; /* in the hash set: slot taken */
+} cell_t;
+
+/* Open-addressing hash set of cells (the internal ones). */
+typedef struct cset {
+  cell_t *slot;
+  size_t cap, n;
+} cset_t;
+
+static size_t hash_cell(uint64_t x, uint64_t y, uint32_t d, size_t cap) {
+  uint64_t h = x * 0x9E3779B97F4A7C15ull ^ (y + 0x632BE59BD9B4E019ull) * 0xC2B2AE3D27D4EB4Full;
+  h ^= (uint64_t)d * 0x165667B19E3779F9ull;
+  h ^= h >> 29;
+  return (size_t)h & (cap - 1);
 }
 
-/* A growable stack of node ids: the notes' linear list L. */
-typedef struct stack {
-  uint32_t *v;
-  size_t n, cap;
-} stack_t_;
+static bool cset_has(const cset_t *s, uint64_t x, uint64_t y, uint32_t d) {
+  for (size_t i = hash_cell(x, y, d, s->cap);; i = (i + 1) & (s->cap - 1)) {
+    const cell_t *c = &s->slot[i];
+    if (!c->used) return false;
+    if (c->x == x && c->y == y && c->d == d) return true;
+  }
+}
 
-/* Make room for `extra` more entries. */
-static qk_status_t reserve(const qk_tree_t *t, stack_t_ *s, size_t extra) {
-  if (s->cap - s->n >= extra) return QK_OK;
-  size_t nc = 2 * s->cap + extra + 64;
-  uint32_t *nv = qk__realloc(&t->alloc, s->v, s->cap * sizeof *nv, nc * sizeof *nv);
-  if (!nv) return QK_ERR_NOMEM;
-  s->v = nv;
-  s->cap = nc;
+/* Add a cell (room must have been made: load at most one half). */
+static void cset_put(cset_t *s, uint64_t x, uint64_t y, uint32_t d) {
+  size_t i = hash_cell(x, y, d, s->cap);
+  while (s->slot[i].used) {
+    if (s->slot[i].x == x && s->slot[i].y == y && s->slot[i].d == d) return;
+    i = (i + 1) & (s->cap - 1);
+  }
+  s->slot[i] = (cell_t){x, y, d, 1};
+  s->n++;
+}
+
+/* Make room for `extra` more cells at load <= 1/2. */
+static qk_status_t cset_reserve(const qk_tree_t *t, cset_t *s, size_t extra) {
+  if (2 * (s->n + extra) <= s->cap) return QK_OK;
+  size_t cap = s->cap ? s->cap : 64;
+  while (2 * (s->n + extra) > cap) cap *= 2;
+  cell_t *nw = qk__realloc(&t->alloc, NULL, 0, cap * sizeof *nw);
+  if (!nw) return QK_ERR_NOMEM;
+  memset(nw, 0, cap * sizeof *nw);
+  cset_t ns = {nw, cap, 0};
+  for (size_t i = 0; i < s->cap; i++)
+    if (s->slot[i].used) cset_put(&ns, s->slot[i].x, s->slot[i].y, s->slot[i].d);
+  qk__free(&t->alloc, s->slot, s->cap * sizeof *s->slot);
+  *s = ns;
   return QK_OK;
+}
+
+/* A growable list of cells. */
+typedef struct clist {
+  cell_t *v;
+  size_t n, cap;
+} clist_t;
+
+static qk_status_t clist_push(const qk_tree_t *t, clist_t *l, cell_t c) {
+  if (l->n == l->cap) {
+    size_t cap = l->cap ? 2 * l->cap : 64;
+    cell_t *nv = qk__realloc(&t->alloc, l->v, l->cap * sizeof *nv, cap * sizeof *nv);
+    if (!nv) return QK_ERR_NOMEM;
+    l->v = nv;
+    l->cap = cap;
+  }
+  l->v[l->n++] = c;
+  return QK_OK;
+}
+
+/* Everything the balance works with. */
+typedef struct work {
+  qk_tree_t *t;
+  cset_t internal;
+  clist_t leaves[QK_MAX_DEPTH_LIMIT + 1]; /* leaves waiting, by depth */
+} work_t;
+
+static void work_free(work_t *w) {
+  const qk_allocator_t *a = &w->t->alloc;
+  qk__free(a, w->internal.slot, w->internal.cap * sizeof(cell_t));
+  for (int d = 0; d <= QK_MAX_DEPTH_LIMIT; d++)
+    qk__free(a, w->leaves[d].v, w->leaves[d].cap * sizeof(cell_t));
+}
+
+/* The internal cells into the set and, when `lists` is set, the leaves into their lists:
+ * one pre-order walk, positions computed along the path. */
+static qk_status_t collect(work_t *w, bool lists) {
+  const qk_tree_t *t = w->t;
+  typedef struct item {
+    uint32_t v;
+    cell_t c;
+  } item_t;
+  item_t stack[3 * (QK_MAX_DEPTH_LIMIT + 2) + 4];
+  int sp = 0;
+  stack[sp++] = (item_t){0, {0, 0, 0, 0}};
+  qk_status_t st = QK_OK;
+  while (sp > 0 && st == QK_OK) {
+    item_t it = stack[--sp];
+    const qk__node_t *n = &t->nodes[it.v];
+    if (qk__is_leaf(n)) {
+      if (lists) st = clist_push(t, &w->leaves[it.c.d], it.c);
+      continue;
+    }
+    if ((st = cset_reserve(t, &w->internal, 1))) break;
+    cset_put(&w->internal, it.c.x, it.c.y, it.c.d);
+    for (int q = 3; q >= 0; q--)
+      stack[sp++] = (item_t){n->child + (uint32_t)q,
+                             {2 * it.c.x + qk__q_east((unsigned)q),
+                              2 * it.c.y + qk__q_north((unsigned)q), it.c.d + 1, 0}};
+  }
+  return st;
+}
+
+/* The geometry of a cell, by the same arithmetic as a descent. */
+static qk__geom_t cell_geom(const qk_tree_t *t, cell_t c) {
+  qk__geom_t g = {t->root_x, t->root_y, 0};
+  for (uint32_t l = 1; l <= c.d; l++) {
+    unsigned east = (unsigned)(c.x >> (c.d - l)) & 1u, north = (unsigned)(c.y >> (c.d - l)) & 1u;
+    g = qk__child_geom(t, g, east ? (north ? QK_NE : QK_SE) : (north ? QK_NW : QK_SW));
+  }
+  return g;
+}
+
+/* Make the cell (nx, ny) of depth e exist: split the leaf that covers it and its
+ * descendants towards it, as far as they can split. New leaves go to their lists. */
+static qk_status_t make_exist(work_t *w, uint64_t nx, uint64_t ny, uint32_t e) {
+  /* The deepest internal ancestor of the cell (the root at worst, which is internal when
+   * there is a cell of depth >= 2 at all). */
+  uint32_t j = e - 1;
+  while (j > 0 && !cset_has(&w->internal, nx >> (e - j), ny >> (e - j), j)) j--;
+  for (uint32_t k = j + 1; k < e; k++) {
+    /* The leaf of depth k on the way: split it, if it can be. */
+    cell_t c = {nx >> (e - k), ny >> (e - k), k, 0};
+    if (!qk__can_split(w->t, cell_geom(w->t, c))) break;
+    qk_status_t st = cset_reserve(w->t, &w->internal, 1);
+    if (st) return st;
+    cset_put(&w->internal, c.x, c.y, c.d);
+    /* Its four children are leaves now, but the one towards N when it splits next. */
+    for (unsigned q = 0; q < 4; q++) {
+      cell_t ch = {2 * c.x + qk__q_east(q), 2 * c.y + qk__q_north(q), k + 1, 0};
+      if ((st = clist_push(w->t, &w->leaves[k + 1], ch))) return st;
+    }
+  }
+  return QK_OK;
+}
+
+/* Split, top-down, every leaf whose cell the set says is internal. Nodes are reserved. */
+static void apply(qk_tree_t *t, const cset_t *internal) {
+  typedef struct item {
+    uint32_t v;
+    qk__geom_t g;
+    uint64_t x, y;
+  } item_t;
+  item_t stack[3 * (QK_MAX_DEPTH_LIMIT + 2) + 4];
+  int sp = 0;
+  stack[sp++] = (item_t){0, {t->root_x, t->root_y, 0}, 0, 0};
+  while (sp > 0) {
+    item_t it = stack[--sp];
+    if (qk__is_leaf(&t->nodes[it.v])) {
+      if (!cset_has(internal, it.x, it.y, it.g.depth)) continue;
+      qk__split(t, it.v, it.g);
+    }
+    uint32_t child = t->nodes[it.v].child;
+    for (int q = 3; q >= 0; q--)
+      stack[sp++] =
+          (item_t){child + (uint32_t)q, qk__child_geom(t, it.g, (unsigned)q),
+                   2 * it.x + qk__q_east((unsigned)q), 2 * it.y + qk__q_north((unsigned)q)};
+  }
+}
+
+/* The two directions in which a child in quadrant q lies on its parent's boundary, as
+ * (dx, dy) steps. */
+static void outer_steps(unsigned q, int dx[2], int dy[2]) {
+  dx[0] = 0;
+  dy[0] = qk__q_north(q) ? 1 : -1;
+  dx[1] = qk__q_east(q) ? 1 : -1;
+  dy[1] = 0;
+}
+
+/* The cell of depth d - 1 beside leaf c's parent across its outer side i, if inside the
+ * root. */
+static bool beside_parent(cell_t c, int i, uint64_t *nx, uint64_t *ny) {
+  unsigned q = (c.x & 1) ? ((c.y & 1) ? QK_NE : QK_SE) : ((c.y & 1) ? QK_NW : QK_SW);
+  int dx[2], dy[2];
+  outer_steps(q, dx, dy);
+  uint64_t px = c.x >> 1, py = c.y >> 1, lim = (uint64_t)1 << (c.d - 1);
+  if ((dx[i] < 0 && px == 0) || (dy[i] < 0 && py == 0)) return false;
+  *nx = px + (uint64_t)(int64_t)dx[i];
+  *ny = py + (uint64_t)(int64_t)dy[i];
+  return *nx < lim && *ny < lim;
 }
 
 qk_status_t qk_tree_balance(qk_tree_t *t) {
   if (!t) return QK_ERR_INVALID;
-  t->refined = true;
-  stack_t_ s = {NULL, 0, 0};
-  qk_status_t st = QK_OK;
-
-  /* Line 1: every leaf goes into the list. */
-  for (uint32_t i = 0; i < t->n_nodes && st == QK_OK; i++)
-    if (qk__live(t, i) && qk__is_leaf(&t->nodes[i]) && (st = reserve(t, &s, 1)) == QK_OK)
-      s.v[s.n++] = i;
-
-  /* Lines 2-10. A node may sit in the list more than once or have been split since it
-   * was pushed; such entries are skipped, which keeps the work O((d+1) m). */
-  while (st == QK_OK && s.n > 0) {
-    uint32_t v = s.v[--s.n];
-    if (!qk__live(t, v) || !qk__is_leaf(&t->nodes[v])) continue;
-    if (!has_small_neighbor(t, v)) continue;
-    qk__geom_t g = qk__node_geom(t, v);
-    if (!qk__can_split(t, g)) continue;
-    /* Reserve (and grow the list) before splitting so that a failure leaves the tree
-     * valid and every leaf that still needs attention is known. */
-    if ((st = qk__reserve_nodes(t, 4)) != QK_OK) break;
-    if ((st = reserve(t, &s, 8)) != QK_OK) break;
-    /* Lines 5-7: qk__split moves the leaf's points into the correct new leaves. */
-    uint32_t b = qk__split(t, v, g);
-    /* Line 8: the new leaves may themselves need splitting. */
-    for (uint32_t q = 0; q < 4; q++) s.v[s.n++] = b + q;
-    /* Lines 9-10, the notes' second issue: a neighbour of v that is larger than v (found
-     * by NorthNeighbor as a leaf of smaller depth) is now more than twice the size of the
-     * new leaves beside it and must be split. */
-    for (int d = 0; d < 4; d++) {
-      qk_node_t u = qk_tree_neighbor(t, v, (qk_dir_t)d);
-      if (u != QK_NONE && qk__is_leaf(&t->nodes[u]) && qk__depth(t, u) < g.depth) s.v[s.n++] = u;
+  work_t w;
+  memset(&w, 0, sizeof w);
+  w.t = t;
+  size_t before = 0;
+  qk_status_t st = collect(&w, true);
+  before = w.internal.n;
+  /* Deepest lists first: a leaf of depth d can only make leaves of depth < d. */
+  for (uint32_t d = QK_MAX_DEPTH_LIMIT; d >= 2 && st == QK_OK; d--) {
+    for (size_t i = 0; i < w.leaves[d].n && st == QK_OK; i++) {
+      cell_t c = w.leaves[d].v[i];
+      if (cset_has(&w.internal, c.x, c.y, c.d)) continue; /* split since it was listed */
+      for (int k = 0; k < 2 && st == QK_OK; k++) {
+        uint64_t nx, ny;
+        if (!beside_parent(c, k, &nx, &ny)) continue;
+        if (d >= 3 && !cset_has(&w.internal, nx >> 1, ny >> 1, d - 2))
+          st = make_exist(&w, nx, ny, d - 1);
+        /* (d == 2: the cell beside the parent is a child of the root, always there.) */
+      }
     }
   }
-  qk__free(&t->alloc, s.v, s.cap * sizeof *s.v);
+  /* The splits, into the node array at the end: all nodes at once, then nothing fails. */
+  if (st == QK_OK) {
+    size_t splits = w.internal.n - before;
+    if (splits > UINT32_MAX / 4)
+      st = QK_ERR_LIMIT;
+    else if (splits && (st = qk__reserve_nodes(t, (uint32_t)(4 * splits))) == QK_OK)
+      apply(t, &w.internal);
+  }
+  t->refined = true;
+  work_free(&w);
   return st;
+}
+
+/* Without memory for the set: for every leaf, NorthNeighbor in each direction; the leaf
+ * has a neighbour less than half its size iff that neighbour is internal and one of its
+ * two children facing the leaf is internal too. */
+static int is_balanced_slow(const qk_tree_t *t) {
+  for (uint32_t v = 0; v < t->n_nodes; v++) {
+    if (!qk__live(t, v) || !qk__is_leaf(&t->nodes[v])) continue;
+    for (int d = 0; d < 4; d++) {
+      qk_node_t u = qk_tree_neighbor(t, v, (qk_dir_t)d);
+      if (u == QK_NONE || qk__is_leaf(&t->nodes[u])) continue;
+      unsigned q[2];
+      qk__facing_children((qk_dir_t)d, q);
+      if (!qk__is_leaf(&t->nodes[t->nodes[u].child + q[0]]) ||
+          !qk__is_leaf(&t->nodes[t->nodes[u].child + q[1]]))
+        return 0;
+    }
+  }
+  return 1;
 }
 
 int qk_tree_is_balanced(const qk_tree_t *t) {
   if (!t) return 0;
-  /* Checking every leaf for a neighbour less than half its size covers every pair of
-   * adjacent leaves, since of two leaves differing by two or more levels the larger one
-   * sees the smaller. */
-  for (uint32_t i = 0; i < t->n_nodes; i++)
-    if (qk__live(t, i) && qk__is_leaf(&t->nodes[i]) && has_small_neighbor(t, i)) return 0;
-  return 1;
+  /* One pass collects the internal cells, one pass over the leaves checks that, beside
+   * each leaf's parent on the leaf's outer sides, the cell of the parent's size exists
+   * (its parent is internal): else a leaf two or more levels larger touches the leaf.
+   * Checking every leaf this way covers every pair of adjacent leaves. */
+  work_t w;
+  memset(&w, 0, sizeof w);
+  w.t = (qk_tree_t *)t; /* only read */
+  int ok = 1;
+  if (collect(&w, true) != QK_OK) {
+    /* No memory for the set: the slow way, leaf by leaf through the tree. */
+    work_free(&w);
+    return is_balanced_slow(t);
+  }
+  for (uint32_t d = 3; d <= QK_MAX_DEPTH_LIMIT && ok; d++)
+    for (size_t i = 0; i < w.leaves[d].n && ok; i++)
+      for (int k = 0; k < 2 && ok; k++) {
+        uint64_t nx, ny;
+        cell_t c = w.leaves[d].v[i];
+        if (beside_parent(c, k, &nx, &ny) && !cset_has(&w.internal, nx >> 1, ny >> 1, d - 2))
+          ok = 0;
+      }
+  work_free(&w);
+  return ok;
 }
