@@ -139,7 +139,7 @@ int main(int argc, char **argv) {
     double t2 = cpu();
     size_t bad = 0, leaves = 0;
     for (uint32_t v = 0; v < t->n_nodes; v++)
-      if (t->nodes[v].live && t->nodes[v].child == QK_NONE) {
+      if (qk__live(t, v) && t->nodes[v].child == QK_NONE) {
         leaves++;
         bad += (size_t)small_neighbor(t, nb, v);
       }

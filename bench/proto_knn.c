@@ -39,16 +39,25 @@ static double urand(void) {
 
 /* Squared distance from q to a node's square (no margin: the prototype's points are
  * uniform doubles in [0, 1), where the dyadic root makes every square exact). */
+/* Since issue 11 nodes store no square: this prototype, written for the 40-byte nodes,
+ * recomputes each from the path (O(depth)), so its rates no longer mean what they did;
+ * it still checks that the techniques give the library's answers. */
+static inline qk__geom_t geom_of(const qk_tree_t *t, const qk__node_t *n) {
+  return qk__node_geom(t, (uint32_t)(n - t->nodes));
+}
+
 static inline double cell_d2(const qk_tree_t *t, const qk__node_t *n, double qx, double qy) {
-  double s = t->side[n->depth];
-  double dx = qx < n->x0 ? n->x0 - qx : (qx > n->x0 + s ? qx - n->x0 - s : 0.0);
-  double dy = qy < n->y0 ? n->y0 - qy : (qy > n->y0 + s ? qy - n->y0 - s : 0.0);
+  qk__geom_t g = geom_of(t, n);
+  double s = t->side[g.depth];
+  double dx = qx < g.x0 ? g.x0 - qx : (qx > g.x0 + s ? qx - g.x0 - s : 0.0);
+  double dy = qy < g.y0 ? g.y0 - qy : (qy > g.y0 + s ? qy - g.y0 - s : 0.0);
   return dx * dx + dy * dy;
 }
 
 static inline uint32_t child_toward(const qk_tree_t *t, const qk__node_t *n, double qx, double qy) {
-  double half = t->side[n->depth + 1];
-  return n->child + qk__quadrant_of(n->x0, n->y0, half, qx, qy);
+  qk__geom_t g = geom_of(t, n);
+  double half = t->side[g.depth + 1];
+  return n->child + qk__quadrant_of(g.x0, g.y0, half, qx, qy);
 }
 
 static inline void scan_leaf(const qk_tree_t *t, const qk__node_t *n, double qx, double qy,

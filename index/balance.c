@@ -247,48 +247,70 @@ qk_status_t qk_tree_balance(qk_tree_t *t) {
   return st;
 }
 
-/* Without memory for the set: for every leaf, NorthNeighbor in each direction; the leaf
- * has a neighbour less than half its size iff that neighbour is internal and one of its
- * two children facing the leaf is internal too. */
-static int is_balanced_slow(const qk_tree_t *t) {
-  for (uint32_t v = 0; v < t->n_nodes; v++) {
-    if (!qk__live(t, v) || !qk__is_leaf(&t->nodes[v])) continue;
-    for (int d = 0; d < 4; d++) {
-      qk_node_t u = qk_tree_neighbor(t, v, (qk_dir_t)d);
-      if (u == QK_NONE || qk__is_leaf(&t->nodes[u])) continue;
-      unsigned q[2];
-      qk__facing_children((qk_dir_t)d, q);
-      if (!qk__is_leaf(&t->nodes[t->nodes[u].child + q[0]]) ||
-          !qk__is_leaf(&t->nodes[t->nodes[u].child + q[1]]))
-        return 0;
-    }
+/* Is quadrant q on the `dir` side of its parent's square? */
+static bool on_side(unsigned q, unsigned dir) {
+  switch (dir) {
+  case QK_NORTH:
+    return qk__q_north(q);
+  case QK_SOUTH:
+    return !qk__q_north(q);
+  case QK_EAST:
+    return qk__q_east(q);
+  default:
+    return !qk__q_east(q);
   }
-  return 1;
+}
+
+/* The quadrant mirrored across the axis perpendicular to dir. */
+static unsigned mirror(unsigned q, unsigned dir) {
+  static const unsigned char ns[4] = {QK_SE, QK_SW, QK_NW, QK_NE};
+  static const unsigned char ew[4] = {QK_NW, QK_NE, QK_SE, QK_SW};
+  return (dir == QK_NORTH || dir == QK_SOUTH) ? ns[q] : ew[q];
 }
 
 int qk_tree_is_balanced(const qk_tree_t *t) {
   if (!t) return 0;
-  /* One pass collects the internal cells, one pass over the leaves checks that, beside
-   * each leaf's parent on the leaf's outer sides, the cell of the parent's size exists
-   * (its parent is internal): else a leaf two or more levels larger touches the leaf.
-   * Checking every leaf this way covers every pair of adjacent leaves. */
-  work_t w;
-  memset(&w, 0, sizeof w);
-  w.t = (qk_tree_t *)t; /* only read */
-  int ok = 1;
-  if (collect(&w, true) != QK_OK) {
-    /* No memory for the set: the slow way, leaf by leaf through the tree. */
-    work_free(&w);
-    return is_balanced_slow(t);
-  }
-  for (uint32_t d = 3; d <= QK_MAX_DEPTH_LIMIT && ok; d++)
-    for (size_t i = 0; i < w.leaves[d].n && ok; i++)
-      for (int k = 0; k < 2 && ok; k++) {
-        uint64_t nx, ny;
-        cell_t c = w.leaves[d].v[i];
-        if (beside_parent(c, k, &nx, &ny) && !cset_has(&w.internal, nx >> 1, ny >> 1, d - 2))
-          ok = 0;
+  /* One pre-order pass that carries every node's four neighbours (NorthNeighbor's answers:
+   * of its depth, or a larger leaf, or none) down from its parent's: a child's neighbour
+   * across an inner side is its sibling, across an outer side the parent's neighbour's
+   * mirrored child (or that neighbour itself, when it is a leaf). A leaf has a neighbour
+   * less than half its size exactly when its neighbour of equal depth is internal and one
+   * of that neighbour's two children facing it is internal too; checking every leaf so
+   * covers every pair of adjacent leaves. No memory beyond a stack of O(depth). */
+  typedef struct item {
+    uint32_t v;
+    uint32_t nb[4];
+  } item_t;
+  item_t stack[3 * (QK_MAX_DEPTH_LIMIT + 2) + 4];
+  int sp = 0;
+  stack[sp++] = (item_t){0, {QK_NONE, QK_NONE, QK_NONE, QK_NONE}};
+  while (sp > 0) {
+    item_t it = stack[--sp];
+    const qk__node_t *n = &t->nodes[it.v];
+    if (qk__is_leaf(n)) {
+      for (unsigned d = 0; d < 4; d++) {
+        uint32_t u = it.nb[d];
+        if (u == QK_NONE || qk__is_leaf(&t->nodes[u])) continue;
+        unsigned f[2];
+        qk__facing_children((qk_dir_t)d, f);
+        uint32_t c = t->nodes[u].child;
+        if (!qk__is_leaf(&t->nodes[c + f[0]]) || !qk__is_leaf(&t->nodes[c + f[1]])) return 0;
       }
-  work_free(&w);
-  return ok;
+      continue;
+    }
+    for (int q = 3; q >= 0; q--) {
+      item_t ch = {n->child + (uint32_t)q, {0, 0, 0, 0}};
+      for (unsigned d = 0; d < 4; d++) {
+        unsigned m = mirror((unsigned)q, d);
+        if (!on_side((unsigned)q, d)) {
+          ch.nb[d] = n->child + m; /* the sibling across */
+        } else {
+          uint32_t u = it.nb[d];
+          ch.nb[d] = (u == QK_NONE || qk__is_leaf(&t->nodes[u])) ? u : t->nodes[u].child + m;
+        }
+      }
+      stack[sp++] = ch;
+    }
+  }
+  return 1;
 }

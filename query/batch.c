@@ -41,14 +41,16 @@ static void knn_share(void *ctx, unsigned w, unsigned nw) {
   size_t lo, hi;
   qk__share_range(j->nq, w, nw, &lo, &hi);
   first_err_t e = {QK_OK, SIZE_MAX};
+  qk__path_t paths[QK__LANES];
   for (size_t jj = lo; jj < hi; jj++) {
-    if ((jj - lo) % QK__LANES == 0) qk__prefetch_paths(j->t, j->qs, j->order, jj, hi);
+    if ((jj - lo) % QK__LANES == 0) qk__walk_lanes(j->t, j->qs, j->order, jj, hi, paths);
+    const qk__path_t *path = &paths[(jj - lo) % QK__LANES];
     size_t i = j->order ? j->order[jj] : jj;
     qk_neighbor_t *o = j->out ? j->out + i * j->k : NULL;
     size_t n = 0;
     qk_status_t st = qk__knn_check(j->qs[i], j->max_dist);
     if (st == QK_OK)
-      n = qk__knn_one(j->t, j->qs[i], j->k, j->max_dist, o);
+      n = qk__knn_one(j->t, j->qs[i], j->k, j->max_dist, o, path->valid ? path : NULL);
     else
       note_err(&e, st, i);
     for (size_t m = n; m < j->k; m++) o[m] = (qk_neighbor_t){QK_NONE, INFINITY};
@@ -86,12 +88,12 @@ static void locate_share(void *ctx, unsigned w, unsigned nw) {
   locate_job_t *j = ctx;
   size_t lo, hi;
   qk__share_range(j->n, w, nw, &lo, &hi);
+  qk__path_t paths[QK__LANES];
   for (size_t jj = lo; jj < hi; jj++) {
-    if ((jj - lo) % QK__LANES == 0) qk__prefetch_paths(j->t, j->ps, j->order, jj, hi);
+    if ((jj - lo) % QK__LANES == 0) qk__walk_lanes(j->t, j->ps, j->order, jj, hi, paths);
+    const qk__path_t *path = &paths[(jj - lo) % QK__LANES];
     size_t i = j->order ? j->order[jj] : jj;
-    qk_point_t p = j->ps[i];
-    int ok = isfinite(p.x) && isfinite(p.y) && qk__tree_contains(j->t, p.x, p.y);
-    j->leaves[i] = ok ? qk__tree_descend(j->t, p.x, p.y, NULL, NULL) : QK_NONE;
+    j->leaves[i] = path->valid ? path->leaf.node : QK_NONE;
   }
 }
 

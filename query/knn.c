@@ -203,47 +203,61 @@ static QK__ALWAYS_INLINE void drain(const qk_tree_t *t, double qx, double qy, do
  * searched, nearest first, before the level above. A query outside the root starts with
  * the root on the stack.
  */
-static QK__ALWAYS_INLINE void search(const qk_tree_t *t, double qx, double qy, best_t *b,
-                                     int kind) {
+/* Scan the leaf at the end of a path, then climb it: each level's other children are
+ * bounded from the path's square and searched, nearest first, before the level above. */
+static QK__ALWAYS_INLINE void climb(const qk_tree_t *t, double qx, double qy, best_t *b, int kind,
+                                    const qk__path_t *p) {
   const double e = qk__margin(t);
   qk__cell_entry_t stack[QK__STACK_MAX];
   int sp = 0;
-  const qk_square_t r = qk__tree_root_square(t);
-  if (!qk__tree_contains(t, qx, qy)) {
-    stack[sp++] = (qk__cell_entry_t){qk__root_cell(t), qk__square_d2(r.x, r.y, r.side, qx, qy, e)};
-    drain(t, qx, qy, e, b, stack, &sp, kind);
-    return;
-  }
-  qk__cell_t path[QK_MAX_DEPTH_LIMIT + 1];
-  unsigned char pq[QK_MAX_DEPTH_LIMIT + 1];
-  qk__cell_t c = qk__root_cell(t);
-  unsigned len = 0;
-  for (uint32_t child = qk__node_child(t, c.node); child != QK_NONE;
-       child = qk__node_child(t, c.node)) {
-    const double h = qk__tree_side(t, c.depth + 1);
-    const unsigned q = qk__quadrant_of(c.x, c.y, h, qx, qy);
-    path[len] = c;
-    pq[len++] = (unsigned char)q;
-    c = (qk__cell_t){child + q, c.depth + 1, qk__q_east(q) ? c.x + h : c.x,
-                     qk__q_north(q) ? c.y + h : c.y};
-  }
+  qk__cell_t c = p->leaf;
+  unsigned len = p->len;
   scan(t, c.node, qx, qy, b, kind);
   while (len > 0) {
     /* Everything inside c is done. When the threshold's ball lies inside c's square
      * (narrowed by the margin), nothing outside can come within it: stop climbing. */
     if (ball_inside(qx, qy, c.x, c.y, qk__tree_side(t, c.depth), e, b->thr)) break;
     len--;
-    push_siblings(t, path[len], qk__node_child(t, path[len].node), pq[len], qx, qy, e, b->thr,
-                  stack, &sp);
+    push_siblings(t, p->cell[len], qk__node_child(t, p->cell[len].node), p->q[len], qx, qy, e,
+                  b->thr, stack, &sp);
     drain(t, qx, qy, e, b, stack, &sp, kind);
-    c = path[len];
+    c = p->cell[len];
   }
 }
 
+/*
+ * The search. For a query inside the root, first straight down to the leaf that holds it
+ * (by the tie rules, no bounds; or the path a batch walked already), which usually sets
+ * the threshold near its final value; then back up that path. A query outside the root
+ * starts with the root on the stack.
+ */
+static QK__ALWAYS_INLINE void search(const qk_tree_t *t, double qx, double qy, best_t *b, int kind,
+                                     const qk__path_t *given) {
+  if (!qk__tree_contains(t, qx, qy)) {
+    const double e = qk__margin(t);
+    const qk_square_t r = qk__tree_root_square(t);
+    qk__cell_entry_t stack[QK__STACK_MAX];
+    int sp = 0;
+    stack[sp++] = (qk__cell_entry_t){qk__root_cell(t), qk__square_d2(r.x, r.y, r.side, qx, qy, e)};
+    drain(t, qx, qy, e, b, stack, &sp, kind);
+    return;
+  }
+  if (given) {
+    climb(t, qx, qy, b, kind, given);
+    return;
+  }
+  qk__path_t p;
+  qk__path_init(t, &p);
+  while (qk__path_step(t, &p, qx, qy)) {
+  }
+  climb(t, qx, qy, b, kind, &p);
+}
+
 /* k = 1: the best pair in registers. Returns 0 or 1. */
-static size_t knn1(const qk_tree_t *t, double qx, double qy, double limit2, qk_neighbor_t *out) {
+static size_t knn1(const qk_tree_t *t, double qx, double qy, double limit2, qk_neighbor_t *out,
+                   const qk__path_t *path) {
   best_t b = {out, 1, 0, limit2, QK_NONE};
-  search(t, qx, qy, &b, KIND_ONE);
+  search(t, qx, qy, &b, KIND_ONE, path);
   if (b.one == QK_NONE) return 0;
   out[0] = (qk_neighbor_t){b.one, b.thr};
   return 1;
@@ -251,64 +265,49 @@ static size_t knn1(const qk_tree_t *t, double qx, double qy, double limit2, qk_n
 
 /* Any k: returns how many of out hold neighbours (squared distances), sorted. */
 static size_t knn_search(const qk_tree_t *t, double qx, double qy, size_t k, double limit2,
-                         qk_neighbor_t *out) {
+                         qk_neighbor_t *out, const qk__path_t *path) {
   best_t b = {out, k, 0, limit2, QK_NONE};
   if (k <= QK__KNN_SORTED) {
-    search(t, qx, qy, &b, KIND_SORTED);
+    search(t, qx, qy, &b, KIND_SORTED, path);
   } else {
-    search(t, qx, qy, &b, KIND_HEAP);
+    search(t, qx, qy, &b, KIND_HEAP, path);
     qk__heap_sort(out, b.n);
   }
   return b.n;
 }
 
 /*
- * Walk the paths from the root to the leaves holding the next QK__LANES queries in
- * lockstep, one level at a time, prefetching each next node: the lanes' cache misses
- * then overlap instead of following one another, and the searches that come next find
- * their paths in the cache. Only a hint: it changes no result.
+ * Walk the paths from the root to the leaves holding up to QK__LANES queries in lockstep,
+ * one level at a time, prefetching each next node: the lanes' cache misses then overlap
+ * instead of following one another. The paths are kept, so the searches that follow
+ * start from them instead of descending again. A query outside the root (or not finite)
+ * gets no path (`valid` 0).
  */
-void qk__prefetch_paths(const qk_tree_t *t, const qk_point_t *qs, const uint32_t *order, size_t j0,
-                        size_t nq) {
-  qk_node_t v[QK__LANES];
-  unsigned d[QK__LANES];
-  int lanes = 0;
-  double qx[QK__LANES], qy[QK__LANES], cx[QK__LANES], cy[QK__LANES];
-  const qk_square_t r = qk__tree_root_square(t);
-  for (size_t j = j0; j < nq && j < j0 + QK__LANES; j++) {
+void qk__walk_lanes(const qk_tree_t *t, const qk_point_t *qs, const uint32_t *order, size_t j0,
+                    size_t j1, qk__path_t *paths) {
+  unsigned idx[QK__LANES];
+  unsigned lanes = 0;
+  for (size_t j = j0; j < j1 && j < j0 + QK__LANES; j++) {
     qk_point_t q = qs[order ? order[j] : j];
-    if (!qk__tree_contains(t, q.x, q.y)) continue;
-    qx[lanes] = q.x;
-    qy[lanes] = q.y;
-    cx[lanes] = r.x;
-    cy[lanes] = r.y;
-    d[lanes] = 0;
-    v[lanes++] = 0;
+    qk__path_t *p = &paths[j - j0];
+    p->valid = isfinite(q.x) && isfinite(q.y) && qk__tree_contains(t, q.x, q.y);
+    if (!p->valid) continue;
+    qk__path_init(t, p);
+    idx[lanes++] = (unsigned)(j - j0);
   }
   const double *xs = qk__tree_xs(t), *ys = qk__tree_ys(t);
   while (lanes > 0) {
-    for (int l = 0; l < lanes;) {
-      const uint32_t child = qk__node_child(t, v[l]);
-      if (child == QK_NONE) {
-        uint32_t s = qk__node_start(t, v[l]);
+    for (unsigned l = 0; l < lanes;) {
+      qk__path_t *p = &paths[idx[l]];
+      qk_point_t q = qs[order ? order[j0 + idx[l]] : j0 + idx[l]];
+      if (!qk__path_step(t, p, q.x, q.y)) {
+        uint32_t s = qk__node_start(t, p->leaf.node);
         QK__PREFETCH(xs + s);
         QK__PREFETCH(ys + s);
-        lanes--; /* this lane is done: move the last one here */
-        v[l] = v[lanes];
-        d[l] = d[lanes];
-        qx[l] = qx[lanes];
-        qy[l] = qy[lanes];
-        cx[l] = cx[lanes];
-        cy[l] = cy[lanes];
+        idx[l] = idx[--lanes]; /* this lane is done: move the last one here */
         continue;
       }
-      const double h = qk__tree_side(t, d[l] + 1);
-      const unsigned q = qk__quadrant_of(cx[l], cy[l], h, qx[l], qy[l]);
-      if (qk__q_east(q)) cx[l] += h;
-      if (qk__q_north(q)) cy[l] += h;
-      d[l]++;
-      v[l] = child + q;
-      qk__node_prefetch(t, v[l]);
+      qk__node_prefetch(t, p->leaf.node);
       l++;
     }
   }
@@ -321,13 +320,14 @@ qk_status_t qk__knn_check(qk_point_t q, double max_dist) {
 }
 
 /* One query into out (k entries); returns the count. */
-size_t qk__knn_one(const qk_tree_t *t, qk_point_t q, size_t k, double max_dist,
-                   qk_neighbor_t *out) {
+size_t qk__knn_one(const qk_tree_t *t, qk_point_t q, size_t k, double max_dist, qk_neighbor_t *out,
+                   const qk__path_t *path) {
   const size_t np = qk__tree_count(t);
   if (np == 0 || k == 0) return 0;
   if (k > np) k = np;
   double limit2 = max_dist * max_dist;
-  size_t n = k == 1 ? knn1(t, q.x, q.y, limit2, out) : knn_search(t, q.x, q.y, k, limit2, out);
+  size_t n =
+      k == 1 ? knn1(t, q.x, q.y, limit2, out, path) : knn_search(t, q.x, q.y, k, limit2, out, path);
   for (size_t i = 0; i < n; i++) out[i].dist = sqrt(out[i].dist);
   return n;
 }
@@ -338,6 +338,6 @@ qk_status_t qk_query_knn(const qk_tree_t *tree, qk_point_t q, size_t k, double m
   *n_out = 0;
   qk_status_t st = qk__knn_check(q, max_dist);
   if (st != QK_OK) return st;
-  *n_out = qk__knn_one(tree, q, k, max_dist, out);
+  *n_out = qk__knn_one(tree, q, k, max_dist, out, NULL);
   return QK_OK;
 }

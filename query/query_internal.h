@@ -136,11 +136,47 @@ void qk__morton_free(const qk_tree_t *t, void *block, size_t nq);
 #else
 #define QK__PREFETCH(p) ((void)(p))
 #endif
-void qk__prefetch_paths(const qk_tree_t *t, const qk_point_t *qs, const uint32_t *order, size_t j0,
-                        size_t nq);
 
-/* One kNN query into out (k entries), arguments checked; returns the count. */
-size_t qk__knn_one(const qk_tree_t *t, qk_point_t q, size_t k, double max_dist, qk_neighbor_t *out);
+/*
+ * A descent's path by the tie rules: the cells from the root to the leaf's parent, the
+ * quadrant taken at each, and the cell reached (the leaf when the walk is over).
+ */
+typedef struct qk__path {
+  qk__cell_t cell[QK_MAX_DEPTH_LIMIT + 1];
+  unsigned char q[QK_MAX_DEPTH_LIMIT + 1];
+  unsigned len;
+  qk__cell_t leaf;
+  int valid; /* for a batch: the query was finite and inside the root */
+} qk__path_t;
+
+static inline void qk__path_init(const qk_tree_t *t, qk__path_t *p) {
+  p->len = 0;
+  p->leaf = qk__root_cell(t);
+}
+
+/* One level down towards (qx, qy); 0 when the cell reached is a leaf. */
+static inline int qk__path_step(const qk_tree_t *t, qk__path_t *p, double qx, double qy) {
+  const qk__cell_t c = p->leaf;
+  const uint32_t child = qk__node_child(t, c.node);
+  if (child == QK_NONE) return 0;
+  const double h = qk__tree_side(t, c.depth + 1);
+  const unsigned q = qk__quadrant_of(c.x, c.y, h, qx, qy);
+  p->cell[p->len] = c;
+  p->q[p->len++] = (unsigned char)q;
+  p->leaf = (qk__cell_t){child + q, c.depth + 1, qk__q_east(q) ? c.x + h : c.x,
+                         qk__q_north(q) ? c.y + h : c.y};
+  return 1;
+}
+
+/* Walk the paths of the queries order[j0 .. min(j1, j0 + QK__LANES)) in lockstep into
+ * paths[0 ..) (query/knn.c). */
+void qk__walk_lanes(const qk_tree_t *t, const qk_point_t *qs, const uint32_t *order, size_t j0,
+                    size_t j1, qk__path_t *paths);
+
+/* One kNN query into out (k entries), arguments checked; returns the count. `path`, when
+ * not NULL, is the query's path, already walked. */
+size_t qk__knn_one(const qk_tree_t *t, qk_point_t q, size_t k, double max_dist, qk_neighbor_t *out,
+                   const qk__path_t *path);
 /* QK_OK, or why a kNN query cannot be answered. */
 qk_status_t qk__knn_check(qk_point_t q, double max_dist);
 
