@@ -218,7 +218,10 @@ qk_status_t qk_tree_balance(qk_tree_t *t) {
   memset(&w, 0, sizeof w);
   w.t = t;
   size_t before = 0;
-  qk_status_t st = collect(&w, true);
+  /* Room for the internal cells and as many again for the splits, so that the set is
+   * rarely rehashed (a quarter of the nodes are internal). */
+  qk_status_t st = cset_reserve(t, &w.internal, t->n_nodes / 2 + 64);
+  if (st == QK_OK) st = collect(&w, true);
   before = w.internal.n;
   /* Deepest lists first: a leaf of depth d can only make leaves of depth < d. */
   for (uint32_t d = QK_MAX_DEPTH_LIMIT; d >= 2 && st == QK_OK; d--) {
