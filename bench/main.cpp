@@ -25,7 +25,7 @@
 #include <vector>
 
 extern "C" {
-// The Morton radix-sort build prototype (proto_build.c); see docs/benchmarks.md.
+// The Morton radix-sort build prototype (proto/build.c); see docs/benchmarks.md.
 double qkb_proto_build(const double *xy, size_t n, unsigned capacity, size_t *leaves,
                        size_t *bytes);
 }
