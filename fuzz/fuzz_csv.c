@@ -60,8 +60,8 @@ int qkf_csv(const uint8_t *data, size_t size) {
   size_t lines = 1;
   for (size_t i = 0; i < n; i++) lines += body[i] == '\n';
 
-  qkf_alloc_t as;
-  qk_allocator_t al = qkf_alloc_make(&as);
+  qkt_alloc_t as;
+  qk_allocator_t al = qkt_alloc_make(&as);
   double *v = NULL;
   size_t rows = 0;
   qk_error_t err;
@@ -99,7 +99,7 @@ int qkf_csv(const uint8_t *data, size_t size) {
   for (size_t k = 1; k <= 6; k++) {
     double *w = NULL;
     size_t wr = 0;
-    qkf_alloc_arm(&as, k);
+    qkt_alloc_arm(&as, k);
     qk_status_t ws = csv_read(path, &o, cols, req, &al, &w, &wr, &err);
     if (ws == QK_ERR_NOMEM) {
       QKF_ASSERT(w == NULL && wr == 0, "failed read left rows");

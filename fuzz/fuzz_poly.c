@@ -167,8 +167,8 @@ int qkf_poly(const uint8_t *data, size_t size) {
   uint8_t opt = qkf_u8(&in), fail = qkf_u8(&in);
   const uint8_t *text = data + in.at;
   size_t n = size - in.at;
-  qkf_alloc_t as;
-  qk_allocator_t al = qkf_alloc_make(&as);
+  qkt_alloc_t as;
+  qk_allocator_t al = qkt_alloc_make(&as);
   /* fail: 0..199 never; 200..227 in the reader at call 1..28; 228..255 in generation. */
   size_t read_fail = fail >= 200 && fail < 228 ? fail - 199u : 0;
   size_t gen_fail = fail >= 228 ? fail - 227u : 0;
@@ -178,7 +178,7 @@ int qkf_poly(const uint8_t *data, size_t size) {
   if (!f) abort();
   qk_poly_t *poly = (qk_poly_t *)&as;
   qk_mesh_error_t err;
-  qkf_alloc_arm(&as, read_fail);
+  qkt_alloc_arm(&as, read_fail);
   qk_status_t rc = qk_poly_read(f, &al, &poly, &err);
   fclose(f);
   if (getenv("QKF_DEBUG")) fprintf(stderr, "read: %d line %lu %s\n", rc, err.line, err.message);
@@ -222,7 +222,7 @@ int qkf_poly(const uint8_t *data, size_t size) {
   }
   qk_mesh_t *mesh = (qk_mesh_t *)&as;
   size_t blocks = as.live_blocks;
-  qkf_alloc_arm(&as, gen_fail);
+  qkt_alloc_arm(&as, gen_fail);
   rc = qk_mesh_generate(poly, &mo, &mesh, &err);
   if (getenv("QKF_DEBUG"))
     fprintf(stderr, "generate (U option %llu): %d line %lu %s\n", (unsigned long long)mo.size, rc,
