@@ -319,15 +319,15 @@ static int knn_answer(qrun_t *q, size_t i) {
   return CLI_OK;
 }
 
-static const qcmd_t knn_cmd = {"k",
-                               2,
-                               {IN_POINTS, IN_POINTS},
-                               "query,rank,point,distance",
-                               {"query", "point"},
-                               {1, 0},
-                               knn_usage,
-                               knn_prepare,
-                               knn_answer};
+static const qcmd_t knn_cmd = {.allow = "k",
+                               .nfiles = 2,
+                               .kind = {IN_POINTS, IN_POINTS},
+                               .head = "query,rank,point,distance",
+                               .side = {"query", "point"},
+                               .side_file = {1, 0},
+                               .usage = knn_usage,
+                               .prepare = knn_prepare,
+                               .answer = knn_answer};
 
 int cmd_knn(int argc, char **argv) { return run_query(argc, argv, &knn_cmd); }
 
@@ -354,15 +354,15 @@ static int radius_answer(qrun_t *q, size_t i) {
   return CLI_OK;
 }
 
-static const qcmd_t radius_cmd = {"r",
-                                  2,
-                                  {IN_POINTS, IN_POINTS},
-                                  "query,point,distance",
-                                  {"query", "point"},
-                                  {1, 0},
-                                  radius_usage,
-                                  radius_prepare,
-                                  radius_answer};
+static const qcmd_t radius_cmd = {.allow = "r",
+                                  .nfiles = 2,
+                                  .kind = {IN_POINTS, IN_POINTS},
+                                  .head = "query,point,distance",
+                                  .side = {"query", "point"},
+                                  .side_file = {1, 0},
+                                  .usage = radius_usage,
+                                  .prepare = radius_prepare,
+                                  .answer = radius_answer};
 
 int cmd_radius(int argc, char **argv) { return run_query(argc, argv, &radius_cmd); }
 
@@ -395,9 +395,15 @@ static int range_answer(qrun_t *q, size_t i) {
   return CLI_OK;
 }
 
-static const qcmd_t range_cmd = {
-    "",     2,           {IN_POINTS, IN_BOXES}, "box,point", {"box", "point"},
-    {1, 0}, range_usage, range_prepare,         range_answer};
+static const qcmd_t range_cmd = {.allow = "",
+                                 .nfiles = 2,
+                                 .kind = {IN_POINTS, IN_BOXES},
+                                 .head = "box,point",
+                                 .side = {"box", "point"},
+                                 .side_file = {1, 0},
+                                 .usage = range_usage,
+                                 .prepare = range_prepare,
+                                 .answer = range_answer};
 
 int cmd_range(int argc, char **argv) { return run_query(argc, argv, &range_cmd); }
 
@@ -421,15 +427,15 @@ static int locate_answer(qrun_t *q, size_t i) {
   return CLI_OK;
 }
 
-static const qcmd_t locate_cmd = {"",
-                                  2,
-                                  {IN_POINTS, IN_POINTS},
-                                  "query,xmin,ymin,side,depth,count",
-                                  {"query", NULL},
-                                  {1, 0},
-                                  locate_usage,
-                                  build_tree,
-                                  locate_answer};
+static const qcmd_t locate_cmd = {.allow = "",
+                                  .nfiles = 2,
+                                  .kind = {IN_POINTS, IN_POINTS},
+                                  .head = "query,xmin,ymin,side,depth,count",
+                                  .side = {"query", NULL},
+                                  .side_file = {1, 0},
+                                  .usage = locate_usage,
+                                  .prepare = build_tree,
+                                  .answer = locate_answer};
 
 int cmd_locate(int argc, char **argv) { return run_query(argc, argv, &locate_cmd); }
 
@@ -503,9 +509,15 @@ static int collide_answer(qrun_t *q, size_t i) {
   return CLI_OK;
 }
 
-static const qcmd_t collide_cmd = {"b",           1,      {IN_ITEMS, 0}, "a,b",
-                                   {"a", "b"},    {0, 0}, collide_usage, collide_prepare,
-                                   collide_answer};
+static const qcmd_t collide_cmd = {.allow = "b",
+                                   .nfiles = 1,
+                                   .kind = {IN_ITEMS, 0},
+                                   .head = "a,b",
+                                   .side = {"a", "b"},
+                                   .side_file = {0, 0},
+                                   .usage = collide_usage,
+                                   .prepare = collide_prepare,
+                                   .answer = collide_answer};
 
 int cmd_collide(int argc, char **argv) { return run_query(argc, argv, &collide_cmd); }
 
@@ -541,15 +553,15 @@ static int raycast_answer(qrun_t *q, size_t i) {
   return CLI_OK;
 }
 
-static const qcmd_t raycast_cmd = {"b",
-                                   2,
-                                   {IN_ITEMS, IN_RAYS},
-                                   "ray,disc,t",
-                                   {"ray", "disc"},
-                                   {1, 0},
-                                   raycast_usage,
-                                   raycast_prepare,
-                                   raycast_answer};
+static const qcmd_t raycast_cmd = {.allow = "b",
+                                   .nfiles = 2,
+                                   .kind = {IN_ITEMS, IN_RAYS},
+                                   .head = "ray,disc,t",
+                                   .side = {"ray", "disc"},
+                                   .side_file = {1, 0},
+                                   .usage = raycast_usage,
+                                   .prepare = raycast_prepare,
+                                   .answer = raycast_answer};
 
 int cmd_raycast(int argc, char **argv) { return run_query(argc, argv, &raycast_cmd); }
 
@@ -607,24 +619,24 @@ static int geo_radius_answer(qrun_t *q, size_t i) {
   return CLI_OK;
 }
 
-static const qcmd_t geo_knn_cmd = {"k",
-                                   2,
-                                   {IN_POINTS, IN_POINTS},
-                                   "query,rank,point,metres",
-                                   {"query", "point"},
-                                   {1, 0},
-                                   geo_usage,
-                                   geo_prepare,
-                                   geo_knn_answer};
-static const qcmd_t geo_radius_cmd = {"r",
-                                      2,
-                                      {IN_POINTS, IN_POINTS},
-                                      "query,point,metres",
-                                      {"query", "point"},
-                                      {1, 0},
-                                      geo_usage,
-                                      geo_prepare,
-                                      geo_radius_answer};
+static const qcmd_t geo_knn_cmd = {.allow = "k",
+                                   .nfiles = 2,
+                                   .kind = {IN_POINTS, IN_POINTS},
+                                   .head = "query,rank,point,metres",
+                                   .side = {"query", "point"},
+                                   .side_file = {1, 0},
+                                   .usage = geo_usage,
+                                   .prepare = geo_prepare,
+                                   .answer = geo_knn_answer};
+static const qcmd_t geo_radius_cmd = {.allow = "r",
+                                      .nfiles = 2,
+                                      .kind = {IN_POINTS, IN_POINTS},
+                                      .head = "query,point,metres",
+                                      .side = {"query", "point"},
+                                      .side_file = {1, 0},
+                                      .usage = geo_usage,
+                                      .prepare = geo_prepare,
+                                      .answer = geo_radius_answer};
 
 int cmd_geo(int argc, char **argv) {
   if (argc < 2 || !strcmp(argv[1], "--help") || !strcmp(argv[1], "-h")) {
