@@ -17,7 +17,7 @@
  *    counts in a .poly header give QK_ERR_LIMIT / QK_ERR_INVALID / QK_ERR_GEOMETRY
  *    before anything is read or allocated.
  */
-#define _XOPEN_SOURCE 700 /* realpath, used by tools/csv.c */
+#define _XOPEN_SOURCE 700 /* opendir here, getpid in fuzz/fuzz_csv.c */
 #include <dirent.h>
 #include <math.h>
 #include <stdio.h>
