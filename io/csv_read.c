@@ -289,7 +289,10 @@ qk_status_t qk_csv_read_values(FILE *f, const qk_csv_options_t *opt, size_t ncol
                                qk_error_t *err) {
   if (values) *values = NULL;
   if (rows) *rows = 0;
-  if (err) memset(err, 0, sizeof *err), err->item = SIZE_MAX;
+  if (err) {
+    memset(err, 0, sizeof *err);
+    err->item = SIZE_MAX;
+  }
   reader_t r;
   memset(&r, 0, sizeof r);
   r.opt = opt, r.alloc = alloc, r.err = err, r.ncols = ncols, r.nreq = nrequired;

@@ -103,7 +103,8 @@ static int parse_args(int argc, char **argv, const qcmd_t *c, qargs_t *a) {
       i++;
     } else if (!strcmp(s, "--boxes") && strchr(allow, 'b')) {
       a->boxes = 1;
-    } else if ((!strcmp(s, "--xy") || !strcmp(s, "--query-xy")) && points) {
+    } else if ((!strcmp(s, "--xy") && points) ||
+               (!strcmp(s, "--query-xy") && c->kind[1] == IN_POINTS)) {
       if (cli_parse_xy(a->cmd, s, v, s[2] == 'x' ? &a->xy : &a->query_xy)) return CLI_USAGE;
       i++;
     } else if (!strcmp(s, "--keep")) {

@@ -163,5 +163,6 @@ expect 2 "--keep takes query, point or both, not 'box'" -- "$cli" knn "$tmp/c.cs
 expect 2 "--keep takes query, not 'point'" -- "$cli" locate "$tmp/c.csv" "$tmp/cq.csv" --keep point
 expect 1 "c.csv:1: no column named 'x'" -- "$cli" knn "$tmp/c.csv" "$tmp/cq.csv" -k 1 --xy x,y
 expect 2 "unknown option '--xy'" -- "$cli" collide "$tmp/d.csv" --xy 1,2
+expect 2 "unknown option '--query-xy'" -- "$cli" range "$tmp/c.csv" "$tmp/b2.csv" --query-xy 1,2
 
 report
