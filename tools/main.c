@@ -27,13 +27,12 @@ static void usage(FILE *f) {
   fprintf(f, "usage: quadkit COMMAND [ARGS]\n\ncommands:\n");
   for (size_t i = 0; i < sizeof commands / sizeof commands[0]; i++)
     fprintf(f, "  %s\n", commands[i].synopsis);
-  fprintf(
-      f,
-      "\nEvery command accepts --help. Points CSV: x and y are the first two fields of "
-      "each line,\nor the columns named by --xy X,Y (header names or 1-based numbers); a "
-      "first line\nwhose x (or y) field is not a number is a header. A point's id is its 0-based "
-      "data row.\n\nexit status: 0 success, 1 bad input, 2 usage error, 3 internal error "
-      "or out of memory\n");
+  fprintf(f, "\nEvery command accepts --help. Points CSV: x and y are the first two fields of "
+             "each line,\nor the columns named by --xy X,Y (header names or 1-based numbers); a "
+             "first line\nwhose x field is not a number (or any line, with --xy names) is a "
+             "header. A point's id is its 0-based "
+             "data row.\n\nexit status: 0 success, 1 bad input, 2 usage error, 3 internal error "
+             "or out of memory\n");
 }
 
 int main(int argc, char **argv) {
