@@ -5,18 +5,18 @@
 #define QUADKIT_MESH_INTERNAL_H
 
 #include "quadkit/mesh.h"
-#include "index/index_internal.h"
+#include "index/index_access.h"
 
 #include <stdarg.h>
 #include <stdint.h>
 
-/* The parsed input, as read: validation happens in qk_mesh_generate(). Line numbers are
- * 0 for inputs made from arrays. */
 /* Allocated capacities (in elements) of a qk_poly's arrays. */
 typedef struct qk__poly_caps {
   size_t v, vy, vl, s, sl, h, hy, hl;
 } qk__poly_caps_t;
 
+/* The parsed input, as read: validation happens in qk_mesh_generate(). Line numbers are
+ * 0 for inputs made from arrays. */
 struct qk_poly {
   qk_allocator_t alloc;
   qk__poly_caps_t cap;

@@ -122,11 +122,11 @@ typedef struct svg_ctx {
 
 static qk_visit_t draw_leaf(const qk_tree_t *t, qk_node_t v, void *ud) {
   svg_ctx_t *c = ud;
-  const qk__node_t *n = &t->nodes[v];
-  if (!qk__is_leaf(n)) return QK_VISIT_CONTINUE;
-  double s = t->side[n->depth] * c->scale;
-  fprintf(c->f, "<rect x=\"%.3f\" y=\"%.3f\" width=\"%.3f\" height=\"%.3f\"/>\n", n->x0 * c->scale,
-          c->height - n->y0 * c->scale - s, s, s);
+  if (!qk__node_leaf(t, v)) return QK_VISIT_CONTINUE;
+  qk_square_t sq = qk__node_square(t, v);
+  double s = sq.side * c->scale;
+  fprintf(c->f, "<rect x=\"%.3f\" y=\"%.3f\" width=\"%.3f\" height=\"%.3f\"/>\n", sq.x * c->scale,
+          c->height - sq.y * c->scale - s, s, s);
   return QK_VISIT_CONTINUE;
 }
 
