@@ -235,7 +235,7 @@ bool quadkit_mesh(unsigned U, const std::vector<Ring> &rings, MeshResult &out, s
   }
   qk_poly_t *poly = nullptr;
   qk_status_t st = qk_poly_from_arrays(xy.data(), xy.size() / 2, seg.data(), seg.size() / 2,
-                                       nullptr, 0, nullptr, &poly);
+                                       nullptr, 0, nullptr, &poly, nullptr);
   if (st) {
     if (err) *err = std::string("qk_poly_from_arrays: ") + qk_strerror(st);
     return false;

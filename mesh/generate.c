@@ -237,7 +237,10 @@ const uint32_t *qk_mesh_triangles(const qk_mesh_t *m, size_t *n) {
   return m ? m->tri : NULL;
 }
 
-const uint32_t *qk_mesh_triangle_components(const qk_mesh_t *m) { return m ? m->comp : NULL; }
+const uint32_t *qk_mesh_triangle_components(const qk_mesh_t *m, size_t *n) {
+  if (n) *n = m ? m->nt : 0;
+  return m ? m->comp : NULL;
+}
 
 const qk_tree_t *qk_mesh_tree(const qk_mesh_t *m) { return m ? m->tree : NULL; }
 

@@ -415,15 +415,32 @@ qk_status_t qk_poly_read(FILE *f, const qk_allocator_t *allocator, qk_poly_t **o
 
 qk_status_t qk_poly_from_arrays(const double *xy, size_t nv, const uint32_t *seg, size_t ns,
                                 const double *holes, size_t nh, const qk_allocator_t *allocator,
-                                qk_poly_t **out) {
-  if (!out) return QK_ERR_INVALID;
+                                qk_poly_t **out, qk_mesh_error_t *err) {
+  if (err) err->line = 0, err->message[0] = '\0';
+  if (!out) return qk__mesh_fail(err, QK_ERR_INVALID, 0, "no output pointer");
   *out = NULL;
-  if ((nv && !xy) || (ns && !seg) || (nh && !holes)) return QK_ERR_INVALID;
-  if (nv > POLY_MAX_COUNT || ns > POLY_MAX_COUNT || nh > POLY_MAX_COUNT) return QK_ERR_LIMIT;
+  if (nv && !xy) return qk__mesh_fail(err, QK_ERR_INVALID, 0, "%zu vertices but no array", nv);
+  if (ns && !seg) return qk__mesh_fail(err, QK_ERR_INVALID, 0, "%zu segments but no array", ns);
+  if (nh && !holes) return qk__mesh_fail(err, QK_ERR_INVALID, 0, "%zu holes but no array", nh);
+  if (nv > POLY_MAX_COUNT || ns > POLY_MAX_COUNT || nh > POLY_MAX_COUNT)
+    return qk__mesh_fail(err, QK_ERR_LIMIT, 0,
+                         "%zu vertices, %zu segments, %zu holes: at most %lu of each", nv, ns, nh,
+                         POLY_MAX_COUNT);
+  for (size_t i = 0; i < nv; i++)
+    if (!isfinite(xy[2 * i]) || !isfinite(xy[2 * i + 1]))
+      return qk__mesh_fail(err, QK_ERR_INVALID, 0, "vertex %zu: coordinates (%g, %g) not finite", i,
+                           xy[2 * i], xy[2 * i + 1]);
   for (size_t i = 0; i < 2 * ns; i++)
-    if (seg[i] >= nv) return QK_ERR_INVALID;
+    if (seg[i] >= nv)
+      return qk__mesh_fail(err, QK_ERR_INVALID, 0,
+                           "segment %zu: endpoint %lu is not a vertex number (0..%zu)", i / 2,
+                           (unsigned long)seg[i], nv ? nv - 1 : 0);
+  for (size_t i = 0; i < nh; i++)
+    if (!isfinite(holes[2 * i]) || !isfinite(holes[2 * i + 1]))
+      return qk__mesh_fail(err, QK_ERR_INVALID, 0, "hole %zu: coordinates (%g, %g) not finite", i,
+                           holes[2 * i], holes[2 * i + 1]);
   qk_poly_t *p = poly_new(allocator);
-  if (!p) return QK_ERR_NOMEM;
+  if (!p) return qk__mesh_fail(err, QK_ERR_NOMEM, 0, "out of memory");
   qk__poly_caps_t *c = &p->cap;
   for (size_t i = 0; i < nv; i++)
     if (add_vertex(p, c, xy[2 * i], xy[2 * i + 1], 0)) goto nomem;
@@ -435,5 +452,27 @@ qk_status_t qk_poly_from_arrays(const double *xy, size_t nv, const uint32_t *seg
   return QK_OK;
 nomem:
   qk_poly_free(p);
-  return QK_ERR_NOMEM;
+  return qk__mesh_fail(err, QK_ERR_NOMEM, 0, "out of memory");
+}
+
+qk_status_t qk_poly_vertices(const qk_poly_t *p, double *xy, size_t cap, size_t *n_out) {
+  if (!p || !n_out || (cap && !xy)) return QK_ERR_INVALID;
+  *n_out = p->nv;
+  for (size_t i = 0; i < p->nv && i < cap; i++) xy[2 * i] = p->vx[i], xy[2 * i + 1] = p->vy[i];
+  return QK_OK;
+}
+
+qk_status_t qk_poly_segments(const qk_poly_t *p, uint32_t *seg, size_t cap, size_t *n_out) {
+  if (!p || !n_out || (cap && !seg)) return QK_ERR_INVALID;
+  *n_out = p->ns;
+  size_t k = p->ns < cap ? p->ns : cap;
+  if (k) memcpy(seg, p->seg, 2 * k * sizeof *seg);
+  return QK_OK;
+}
+
+qk_status_t qk_poly_holes(const qk_poly_t *p, double *xy, size_t cap, size_t *n_out) {
+  if (!p || !n_out || (cap && !xy)) return QK_ERR_INVALID;
+  *n_out = p->nh;
+  for (size_t i = 0; i < p->nh && i < cap; i++) xy[2 * i] = p->hx[i], xy[2 * i + 1] = p->hy[i];
+  return QK_OK;
 }

@@ -69,11 +69,13 @@ qk_status_t qk_poly_read(FILE *f, const qk_allocator_t *allocator, qk_poly_t **o
  * \param [in] nh number of hole points.
  * \param [in] allocator NULL for libc; copied.
  * \param [out] out the input, freed with qk_poly_free().
- * \return QK_OK, QK_ERR_INVALID or QK_ERR_NOMEM.
+ * \param [out] err which array item was rejected and why (may be NULL); line is 0.
+ * \return QK_OK, QK_ERR_INVALID (a missing array, a coordinate not finite, an endpoint
+ *         that is not a vertex number), QK_ERR_LIMIT (over 2^26 items) or QK_ERR_NOMEM.
  */
 qk_status_t qk_poly_from_arrays(const double *xy, size_t nv, const uint32_t *seg, size_t ns,
                                 const double *holes, size_t nh, const qk_allocator_t *allocator,
-                                qk_poly_t **out);
+                                qk_poly_t **out, qk_mesh_error_t *err);
 
 /** Free an input; NULL is a no-op. */
 void qk_poly_free(qk_poly_t *poly);
@@ -83,6 +85,36 @@ unsigned qk_poly_first_index(const qk_poly_t *poly);
 
 /** Number of vertices, segments and hole points of an input (any pointer may be NULL). */
 void qk_poly_counts(const qk_poly_t *poly, size_t *nv, size_t *ns, size_t *nh);
+
+/**
+ * Copy an input's vertices (x, y pairs, 0-based order) into a caller's buffer.
+ * \param [in] poly the input.
+ * \param [out] xy room for 2*cap doubles (may be NULL when cap is 0).
+ * \param [in] cap vertices the buffer holds; at most this many are written.
+ * \param [out] n_out the number of vertices of the input (all of them, even beyond cap).
+ * \return QK_OK, or QK_ERR_INVALID for a NULL input or n_out.
+ */
+qk_status_t qk_poly_vertices(const qk_poly_t *poly, double *xy, size_t cap, size_t *n_out);
+
+/**
+ * Copy an input's segments (pairs of 0-based vertex indices) into a caller's buffer.
+ * \param [in] poly the input.
+ * \param [out] seg room for 2*cap indices (may be NULL when cap is 0).
+ * \param [in] cap segments the buffer holds; at most this many are written.
+ * \param [out] n_out the number of segments of the input.
+ * \return QK_OK, or QK_ERR_INVALID for a NULL input or n_out.
+ */
+qk_status_t qk_poly_segments(const qk_poly_t *poly, uint32_t *seg, size_t cap, size_t *n_out);
+
+/**
+ * Copy an input's hole points (x, y pairs) into a caller's buffer.
+ * \param [in] poly the input.
+ * \param [out] xy room for 2*cap doubles (may be NULL when cap is 0).
+ * \param [in] cap hole points the buffer holds; at most this many are written.
+ * \param [out] n_out the number of hole points of the input.
+ * \return QK_OK, or QK_ERR_INVALID for a NULL input or n_out.
+ */
+qk_status_t qk_poly_holes(const qk_poly_t *poly, double *xy, size_t cap, size_t *n_out);
 
 /** Options for qk_mesh_generate(); zero-initialise or use qk_mesh_options_init(). */
 typedef struct qk_mesh_options {
@@ -130,8 +162,12 @@ const double *qk_mesh_vertices(const qk_mesh_t *mesh, size_t *n);
  */
 const uint32_t *qk_mesh_triangles(const qk_mesh_t *mesh, size_t *n);
 
-/** Per triangle, the innermost component containing it (0: outside all). */
-const uint32_t *qk_mesh_triangle_components(const qk_mesh_t *mesh);
+/**
+ * Per triangle, the innermost component containing it (0: outside all), borrowed.
+ * \param [in] mesh the mesh. \param [out] n the number of entries (the triangles).
+ * \return the component ids.
+ */
+const uint32_t *qk_mesh_triangle_components(const qk_mesh_t *mesh, size_t *n);
 
 /** The balanced quadtree subdivision the mesh was made from (borrowed). */
 const qk_tree_t *qk_mesh_tree(const qk_mesh_t *mesh);
