@@ -24,6 +24,10 @@ void qk_mesh_options_init(qk_mesh_options_t *o) {
   if (!o) return;
   o->size = 0;
   o->allocator = NULL;
+  o->mode = QK_MESH_AUTO;
+  o->max_size = 0;
+  o->size_fn = NULL;
+  o->size_user = NULL;
 }
 
 static void gen_free(qk__gen_t *g) {
@@ -42,6 +46,9 @@ void qk_mesh_free(qk_mesh_t *m) {
   qk__free(&a, m->comp, (m->nt + 1) * sizeof *m->comp);
   qk__free(&a, m->cxy, (2 * m->ncv + 2) * sizeof *m->cxy);
   qk__free(&a, m->cseg, (2 * m->ncs + 2) * sizeof *m->cseg);
+  qk__free(&a, m->vmark, (m->nv + 1) * sizeof *m->vmark);
+  qk__free(&a, m->oseg, m->noseg_cap * sizeof *m->oseg);
+  qk__free(&a, m->attr, (m->nt + 1) * sizeof *m->attr);
   qk__free(&a, m, sizeof *m);
 }
 
@@ -61,7 +68,27 @@ static qk_status_t read_options(const qk_mesh_options_t *options, qk_mesh_option
     return qk__mesh_fail(err, QK_ERR_INVALID, 0,
                          "domain size %llu is not a power of two between 1 and 2^30",
                          (unsigned long long)opt->size);
+  if (opt->mode != QK_MESH_AUTO && opt->mode != QK_MESH_BOOK && opt->mode != QK_MESH_DYADIC)
+    return qk__mesh_fail(err, QK_ERR_INVALID, 0, "unknown mode %d", (int)opt->mode);
+  if (!(opt->max_size >= 0) || isinf(opt->max_size))
+    return qk__mesh_fail(err, QK_ERR_INVALID, 0, "max_size %g is not a finite length >= 0",
+                         opt->max_size);
+  if (opt->mode == QK_MESH_DYADIC && opt->size)
+    return qk__mesh_fail(err, QK_ERR_INVALID, 0,
+                         "a domain size applies to the book's mode only (the dyadic mode's "
+                         "domain is the input's bounding square)");
   return QK_OK;
+}
+
+/* The book's mode: asked for, or (automatically) for integer inputs with no size bound,
+ * and whenever a domain size is given. */
+static int use_book(const qk_poly_t *P, const qk_mesh_options_t *o) {
+  if (o->mode != QK_MESH_AUTO) return o->mode == QK_MESH_BOOK;
+  if (o->size) return 1;
+  if (o->max_size > 0 || o->size_fn) return 0;
+  for (size_t i = 0; i < P->nv; i++)
+    if (P->vx[i] != floor(P->vx[i]) || P->vy[i] != floor(P->vy[i])) return 0;
+  return 1;
 }
 
 /* Step 1: the subdivision is a quadkit tree over the root square [0,U]^2 with no points,
@@ -124,10 +151,11 @@ static qk_status_t compact(qk__gen_t *g, const qk__tri_state_t *T, const uint8_t
     return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   double amin = 180, amax = 0;
   size_t steiner = 0;
+  /* Back from the (doubled) lattice to input coordinates: exact, see mesh/lattice.c. */
   for (size_t i = 0; i < T->nv; i++)
     if (newid[i] != QK__MESH_UNSET) {
-      m->xy[2 * newid[i]] = (double)T->vx[i] / 2;
-      m->xy[2 * newid[i] + 1] = (double)T->vy[i] / 2;
+      m->xy[2 * newid[i]] = qk__lat_out(&g->lat, T->vx[i], g->lat.x0);
+      m->xy[2 * newid[i] + 1] = qk__lat_out(&g->lat, T->vy[i], g->lat.y0);
       steiner += T->steiner[i];
     }
   size_t j = 0;
@@ -143,7 +171,7 @@ static qk_status_t compact(qk__gen_t *g, const qk__tri_state_t *T, const uint8_t
     m->comp[j++] = T->label[t];
   }
   for (size_t i = 0; i < poly->nv; i++)
-    m->cxy[2 * i] = poly->vx[i], m->cxy[2 * i + 1] = poly->vy[i];
+    m->cxy[2 * i] = g->src->vx[i], m->cxy[2 * i + 1] = g->src->vy[i];
   if (poly->ns) memcpy(m->cseg, poly->seg, 2 * poly->ns * sizeof *m->cseg);
   m->stats.triangles = kt;
   m->stats.vertices = kv;
@@ -151,6 +179,30 @@ static qk_status_t compact(qk__gen_t *g, const qk__tri_state_t *T, const uint8_t
   m->stats.min_angle_deg = kt ? amin : 0;
   m->stats.max_angle_deg = kt ? amax : 0;
   return QK_OK;
+}
+
+/* The regional attribute of every kept triangle (m->attr), when the input has any. */
+static qk_status_t region_attributes(qk__gen_t *g, qk__tri_state_t *T, const qk__leaf_tris_t *lt,
+                                     const uint8_t *drop, qk_mesh_t *m) {
+  const qk_poly_t *S = g->src;
+  if (!S->nr) return QK_OK;
+  uint32_t *at = qk__realloc(g->a, NULL, 0, S->nr * sizeof *at);
+  double *ra = qk__realloc(g->a, NULL, 0, ((size_t)T->nregion + 1) * sizeof *ra);
+  m->attr = qk__realloc(g->a, NULL, 0, (m->nt + 1) * sizeof *m->attr);
+  qk_status_t st = QK_OK;
+  if (!at || !ra || !m->attr) {
+    st = qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  } else if (!(st = qk__mesh_find_regions(g, T, lt, at))) {
+    for (size_t r = 0; r <= T->nregion; r++) ra[r] = 0;
+    for (size_t i = 0; i < S->nr; i++)
+      if (at[i] != QK__MESH_UNSET) ra[at[i]] = S->reg[i].attr;
+    size_t j = 0;
+    for (size_t t = 0; t < T->nt; t++)
+      if (!drop[T->region[t]]) m->attr[j++] = ra[T->region[t]];
+  }
+  qk__free(g->a, at, S->nr * sizeof *at);
+  qk__free(g->a, ra, ((size_t)T->nregion + 1) * sizeof *ra);
+  return st;
 }
 
 /* Step 3: triangulate, label, drop holes, compact. */
@@ -171,7 +223,8 @@ static qk_status_t triangulate(qk__gen_t *g, qk_mesh_t *m) {
   }
   memset(drop, 0, (size_t)T.nregion + 1);
   if ((st = qk__mesh_find_holes(g, &T, &lt, drop))) goto out;
-  st = compact(g, &T, drop, newid, m);
+  if ((st = compact(g, &T, drop, newid, m))) goto out;
+  st = region_attributes(g, &T, &lt, drop, m);
 out:
   qk__free(g->a, drop, (size_t)T.nregion + 1);
   qk__free(g->a, newid, (T.nv ? T.nv : 1) * sizeof *newid);
@@ -197,22 +250,35 @@ qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *opt
   m->alloc = alloc;
   qk__gen_t g;
   memset(&g, 0, sizeof g);
-  g.a = &m->alloc, g.poly = poly, g.err = err;
+  g.a = &m->alloc, g.poly = poly, g.src = poly, g.err = err, g.opt = &opt;
+  int book = use_book(poly, &opt);
+  qk_poly_t *onlat = NULL;
 
   double t0 = now(), t1 = t0, t2 = t0, t3 = t0;
-  if (!(st = qk__mesh_validate(&g, opt.size))) {
+  if (book && opt.max_size > 0 && opt.max_size < 1.4142135623730951)
+    st = qk__mesh_fail(err, QK_ERR_INVALID, 0,
+                       "max_size %.17g is below sqrt(2), the book's unit square diagonal (the "
+                       "dyadic mode refines the lattice instead)",
+                       opt.max_size);
+  else if (!(st = qk__mesh_lattice(poly, &opt, book, &g.lat, err)) && !book &&
+           (st = qk__mesh_lattice_poly(poly, &g.lat, g.a, &onlat)))
+    st = qk__mesh_fail(err, st, 0, "out of memory");
+  if (onlat) g.poly = onlat;
+  m->lat = g.lat;
+  if (!st && !(st = qk__mesh_validate(&g, book ? opt.size : 0))) {
     m->size = g.U;
     m->stats.components = g.ncomp;
     t1 = now();
-    if (!(st = subdivide(&g, m))) {
+    if (!(st = subdivide(&g, m)) && !(st = qk__mesh_refine(&g))) {
       t2 = now();
       if (!(st = balance(&g, m))) {
         t3 = now();
-        st = triangulate(&g, m);
+        if (!(st = triangulate(&g, m))) st = qk__mesh_markers(&g, m);
       }
     }
   }
   gen_free(&g);
+  qk__mesh_lattice_poly_free(onlat);
   if (st != QK_OK) {
     qk_mesh_free(m);
     return st;
@@ -223,6 +289,12 @@ qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *opt
   m->stats.seconds_subdivide = t2 - t1;
   m->stats.seconds_balance = t3 - t2;
   m->stats.seconds_triangulate = now() - t3;
+  m->stats.mode = book ? QK_MESH_BOOK : QK_MESH_DYADIC;
+  m->stats.lattice_exponent = g.lat.f;
+  m->stats.origin_x = g.lat.x0;
+  m->stats.origin_y = g.lat.y0;
+  m->stats.proven_min_angle_deg = 45;
+  m->stats.proven_max_angle_deg = 90;
   *out = m;
   return QK_OK;
 }
@@ -240,6 +312,46 @@ const uint32_t *qk_mesh_triangles(const qk_mesh_t *m, size_t *n) {
 const uint32_t *qk_mesh_triangle_components(const qk_mesh_t *m, size_t *n) {
   if (n) *n = m ? m->nt : 0;
   return m ? m->comp : NULL;
+}
+
+const int32_t *qk_mesh_vertex_markers(const qk_mesh_t *m, size_t *n) {
+  if (n) *n = m ? m->nv : 0;
+  return m ? m->vmark : NULL;
+}
+
+const double *qk_mesh_triangle_attributes(const qk_mesh_t *m, size_t *n) {
+  if (n) *n = m && m->attr ? m->nt : 0;
+  return m ? m->attr : NULL;
+}
+
+qk_status_t qk_mesh_segments(const qk_mesh_t *m, uint32_t *ab, uint32_t *seg, int32_t *marker,
+                             size_t cap, size_t *n_out) {
+  if (!m || !n_out || (cap && !ab)) return QK_ERR_INVALID;
+  *n_out = m->noseg;
+  for (size_t i = 0; i < m->noseg && i < cap; i++) {
+    ab[2 * i] = m->oseg[i].a, ab[2 * i + 1] = m->oseg[i].b;
+    if (seg) seg[i] = m->oseg[i].seg;
+    if (marker) marker[i] = m->oseg[i].mark;
+  }
+  return QK_OK;
+}
+
+qk_status_t qk_mesh_angle_histogram(const qk_mesh_t *m, uint64_t bins[180]) {
+  if (!m || !bins) return QK_ERR_INVALID;
+  memset(bins, 0, 180 * sizeof *bins);
+  for (size_t t = 0; t < m->nt; t++) {
+    const uint32_t *tr = &m->tri[3 * t];
+    for (int i = 0; i < 3; i++) {
+      const double *a = &m->xy[2 * tr[(i + 2) % 3]], *b = &m->xy[2 * tr[i]],
+                   *c = &m->xy[2 * tr[(i + 1) % 3]];
+      double ux = a[0] - b[0], uy = a[1] - b[1], wx = c[0] - b[0], wy = c[1] - b[1];
+      double ang =
+          atan2(fabs(ux * wy - uy * wx), ux * wx + uy * wy) * (180.0 / 3.14159265358979323846);
+      int k = (int)floor(ang);
+      bins[k < 0 ? 0 : k > 179 ? 179 : k]++;
+    }
+  }
+  return QK_OK;
 }
 
 const qk_tree_t *qk_mesh_tree(const qk_mesh_t *m) { return m ? m->tree : NULL; }

@@ -104,6 +104,26 @@ static int parse_index(const char *s, long long *v) {
   return 1;
 }
 
+/* Parse a whole token as a boundary marker (an integer that fits 32 bits). */
+static int parse_marker(const char *s, int32_t *v) {
+  double d;
+  if (!parse_num(s, &d) || d != floor(d) || d < -2147483648.0 || d > 2147483647.0) return 0;
+  *v = (int32_t)d;
+  return 1;
+}
+
+/* Record marker v for item i (of the array *m, capacity *cap), growing it. */
+static qk_status_t put_marker(const qk_allocator_t *a, int32_t **m, size_t *cap, size_t i,
+                              int32_t v) {
+  void *p = *m;
+  size_t old = *cap;
+  if (qk__mesh_grow(a, &p, cap, sizeof **m, i + 1)) return QK_ERR_NOMEM;
+  *m = p;
+  if (*cap > old) memset(*m + old, 0, (*cap - old) * sizeof **m);
+  (*m)[i] = v;
+  return QK_OK;
+}
+
 void qk_poly_free(qk_poly_t *p) {
   if (!p) return;
   qk_allocator_t a = p->alloc;
@@ -115,6 +135,9 @@ void qk_poly_free(qk_poly_t *p) {
   qk__free(&a, p->hx, p->cap.h * sizeof *p->hx);
   qk__free(&a, p->hy, p->cap.hy * sizeof *p->hy);
   qk__free(&a, p->hline, p->cap.hl * sizeof *p->hline);
+  qk__free(&a, p->vmark, p->cap.vm * sizeof *p->vmark);
+  qk__free(&a, p->smark, p->cap.sm * sizeof *p->smark);
+  qk__free(&a, p->reg, p->cap.r * sizeof *p->reg);
   qk__free(&a, p, sizeof *p);
 }
 
@@ -317,13 +340,12 @@ static qk_status_t read_segments(reader_t *r, qk_poly_t *p, qk_mesh_error_t *err
         return rfail(r, err, QK_ERR_PARSE,
                      "segment %lld: endpoint '%s' is not a vertex number (%u..%lu)", idx,
                      r->tok[1 + k], p->first_index, nv - 1 + p->first_index);
-    if (r->ntok > 3) {
-      double v;
-      if (!parse_num(r->tok[3], &v))
-        return rfail(r, err, QK_ERR_PARSE, "segment %lld: bad marker '%s'", idx, r->tok[3]);
-    }
+    int32_t mark = 0;
+    if (r->ntok > 3 && !parse_marker(r->tok[3], &mark))
+      return rfail(r, err, QK_ERR_PARSE, "segment %lld: bad marker '%s'", idx, r->tok[3]);
     if (add_segment(p, &p->cap, (uint32_t)(e[0] - p->first_index),
-                    (uint32_t)(e[1] - p->first_index), r->line))
+                    (uint32_t)(e[1] - p->first_index), r->line) ||
+        (smark && put_marker(&p->alloc, &p->smark, &p->cap.sm, p->ns - 1, mark)))
       return rfail(r, err, QK_ERR_NOMEM, "out of memory");
   }
   return QK_OK;
@@ -352,10 +374,19 @@ static qk_status_t read_holes(reader_t *r, qk_poly_t *p, qk_mesh_error_t *err) {
   return QK_OK;
 }
 
+/* Append a regional attribute. */
+static qk_status_t add_region(qk_poly_t *p, double x, double y, double attr, unsigned long line) {
+  void *q = p->reg;
+  if (qk__mesh_grow(&p->alloc, &q, &p->cap.r, sizeof *p->reg, p->nr + 1)) return QK_ERR_NOMEM;
+  p->reg = q;
+  p->reg[p->nr++] = (qk__region_pt_t){x, y, attr, line};
+  return QK_OK;
+}
+
 /* Regional attributes, the header already read: <#regions>, then <#> <x> <y> <attribute>
- * [<area>]. They are checked for syntax and otherwise ignored: components carry their
- * ids. */
-static qk_status_t read_regions(reader_t *r, qk_mesh_error_t *err) {
+ * [<area>]. The area constraint is checked for syntax and otherwise ignored (size
+ * control is qk_mesh_options_t's max_size and size_fn). */
+static qk_status_t read_regions(reader_t *r, qk_poly_t *p, qk_mesh_error_t *err) {
   unsigned long nr;
   char msg[96];
   qk_status_t st = read_count(r, err, "regional attributes", &nr);
@@ -367,11 +398,12 @@ static qk_status_t read_regions(reader_t *r, qk_mesh_error_t *err) {
       return st;
     if (r->ntok < 4 || r->ntok > 5)
       return rfail(r, err, QK_ERR_PARSE, "region: expected 4 or 5 fields, found %zu", r->ntok);
-    for (size_t k = 0; k < r->ntok; k++) {
-      double v;
-      if (!parse_num(r->tok[k], &v))
+    double v[5];
+    for (size_t k = 0; k < r->ntok; k++)
+      if (!parse_num(r->tok[k], &v[k]))
         return rfail(r, err, QK_ERR_PARSE, "region: bad field '%s'", r->tok[k]);
-    }
+    if (add_region(p, v[1], v[2], v[3], r->line))
+      return rfail(r, err, QK_ERR_NOMEM, "out of memory");
   }
   return QK_OK;
 }
@@ -382,7 +414,7 @@ static qk_status_t read_tail(reader_t *r, qk_poly_t *p, qk_mesh_error_t *err) {
   qk_status_t st = maybe_line(r, err, &got);
   if (st || !got) return st;
   if ((st = read_holes(r, p, err)) || (st = maybe_line(r, err, &got)) || !got) return st;
-  if ((st = read_regions(r, err)) || (st = maybe_line(r, err, &got))) return st;
+  if ((st = read_regions(r, p, err)) || (st = maybe_line(r, err, &got))) return st;
   if (got)
     return rfail(r, err, QK_ERR_PARSE, "unexpected content after the last section: '%s'",
                  r->tok[0]);
@@ -474,5 +506,47 @@ qk_status_t qk_poly_holes(const qk_poly_t *p, double *xy, size_t cap, size_t *n_
   if (!p || !n_out || (cap && !xy)) return QK_ERR_INVALID;
   *n_out = p->nh;
   for (size_t i = 0; i < p->nh && i < cap; i++) xy[2 * i] = p->hx[i], xy[2 * i + 1] = p->hy[i];
+  return QK_OK;
+}
+
+qk_status_t qk_poly_set_markers(qk_poly_t *p, const int32_t *vm, const int32_t *sm,
+                                qk_mesh_error_t *err) {
+  if (err) err->line = 0, err->message[0] = '\0';
+  if (!p) return qk__mesh_fail(err, QK_ERR_INVALID, 0, "no input");
+  int32_t *nv = NULL, *ns = NULL;
+  size_t cv = 0, cs = 0;
+  if (vm && p->nv && put_marker(&p->alloc, &nv, &cv, p->nv - 1, 0)) goto nomem;
+  if (sm && p->ns && put_marker(&p->alloc, &ns, &cs, p->ns - 1, 0)) goto nomem;
+  if (nv) memcpy(nv, vm, p->nv * sizeof *nv);
+  if (ns) memcpy(ns, sm, p->ns * sizeof *ns);
+  qk__free(&p->alloc, p->vmark, p->cap.vm * sizeof *p->vmark);
+  qk__free(&p->alloc, p->smark, p->cap.sm * sizeof *p->smark);
+  p->vmark = nv, p->cap.vm = cv, p->smark = ns, p->cap.sm = cs;
+  return QK_OK;
+nomem:
+  qk__free(&p->alloc, nv, cv * sizeof *nv);
+  return qk__mesh_fail(err, QK_ERR_NOMEM, 0, "out of memory");
+}
+
+qk_status_t qk_poly_set_regions(qk_poly_t *p, const double *xya, size_t nr, qk_mesh_error_t *err) {
+  if (err) err->line = 0, err->message[0] = '\0';
+  if (!p || (nr && !xya)) return qk__mesh_fail(err, QK_ERR_INVALID, 0, "no input or no array");
+  if (nr > POLY_MAX_COUNT)
+    return qk__mesh_fail(err, QK_ERR_LIMIT, 0, "%zu regional attributes: at most %lu", nr,
+                         POLY_MAX_COUNT);
+  for (size_t i = 0; i < 3 * nr; i++)
+    if (!isfinite(xya[i]))
+      return qk__mesh_fail(err, QK_ERR_INVALID, 0, "regional attribute %zu: %g is not finite",
+                           i / 3, xya[i]);
+  qk__region_pt_t *reg = NULL;
+  size_t cap = 0;
+  void *q = NULL;
+  if (nr && qk__mesh_grow(&p->alloc, &q, &cap, sizeof *reg, nr))
+    return qk__mesh_fail(err, QK_ERR_NOMEM, 0, "out of memory");
+  reg = q;
+  for (size_t i = 0; i < nr; i++)
+    reg[i] = (qk__region_pt_t){xya[3 * i], xya[3 * i + 1], xya[3 * i + 2], 0};
+  qk__free(&p->alloc, p->reg, p->cap.r * sizeof *p->reg);
+  p->reg = reg, p->cap.r = cap, p->nr = nr;
   return QK_OK;
 }

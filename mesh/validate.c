@@ -61,9 +61,9 @@ static qk_status_t check_coincident(qk__gen_t *g, vkey_t *keys) {
   for (size_t i = 1; i < P->nv; i++)
     if (keys[i].x == keys[i - 1].x && keys[i].y == keys[i - 1].y)
       return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, P->vline[keys[i].i],
-                           "vertices %lu and %lu coincide at (%lld, %lld)",
+                           "vertices %lu and %lu coincide at (%.17g, %.17g)",
                            qk__mesh_num(P, keys[i - 1].i), qk__mesh_num(P, keys[i].i),
-                           (long long)keys[i].x, (long long)keys[i].y);
+                           g->src->vx[keys[i].i], g->src->vy[keys[i].i]);
   return QK_OK;
 }
 
@@ -79,12 +79,13 @@ static qk_status_t check_segments(qk__gen_t *g, uint32_t *adj, uint8_t *deg) {
       return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, P->sline[s],
                            "segment %lu joins vertex %lu to itself", qk__mesh_num(P, s),
                            qk__mesh_num(P, u));
+    const qk_poly_t *S = g->src; /* the coordinates as given, for the message */
     if (!(dx == 0 || dy == 0 || dx == dy || dx == -dy))
       return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, P->sline[s],
-                           "segment %lu from (%lld, %lld) to (%lld, %lld) is not at 0, 45, 90 or "
-                           "135 degrees",
-                           qk__mesh_num(P, s), (long long)P->vx[u], (long long)P->vy[u],
-                           (long long)P->vx[v], (long long)P->vy[v]);
+                           "segment %lu from (%.17g, %.17g) to (%.17g, %.17g) is not at 0, 45, 90 "
+                           "or 135 degrees%s",
+                           qk__mesh_num(P, s), S->vx[u], S->vy[u], S->vx[v], S->vy[v],
+                           S == P ? "" : " (the dyadic mode keeps the book's edge directions)");
     for (int k = 0; k < 2; k++) {
       uint32_t w = P->seg[2 * s + k];
       if (deg[w] >= 2)

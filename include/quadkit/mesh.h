@@ -116,13 +116,64 @@ qk_status_t qk_poly_segments(const qk_poly_t *poly, uint32_t *seg, size_t cap, s
  */
 qk_status_t qk_poly_holes(const qk_poly_t *poly, double *xy, size_t cap, size_t *n_out);
 
+/**
+ * Attach boundary markers to an input made from arrays (a `.poly` file carries its own).
+ * Call before the input is shared: it is the one call that changes a qk_poly.
+ * \param [in,out] poly the input.
+ * \param [in] vertex_markers one per vertex, copied (NULL: none).
+ * \param [in] segment_markers one per segment, copied (NULL: none).
+ * \param [out] err why the call failed (may be NULL).
+ * \return QK_OK, QK_ERR_INVALID or QK_ERR_NOMEM (the input unchanged).
+ */
+qk_status_t qk_poly_set_markers(qk_poly_t *poly, const int32_t *vertex_markers,
+                                const int32_t *segment_markers, qk_mesh_error_t *err);
+
+/**
+ * Attach regional attributes to an input made from arrays: each (x, y, attribute) triple
+ * gives its attribute to the region (the connected part of the domain between segments)
+ * holding the point. Replaces any attached before; same rule as qk_poly_set_markers().
+ * \param [in,out] poly the input.
+ * \param [in] xya 3*nr doubles, copied.
+ * \param [in] nr number of regional attributes.
+ * \param [out] err which triple was rejected and why (may be NULL).
+ * \return QK_OK, QK_ERR_INVALID (a value not finite) or QK_ERR_NOMEM (input unchanged).
+ */
+qk_status_t qk_poly_set_regions(qk_poly_t *poly, const double *xya, size_t nr,
+                                qk_mesh_error_t *err);
+
+/** Which mesher qk_mesh_generate() runs. */
+typedef enum qk_mesh_mode {
+  /** The book's mode when the input has integer coordinates and no size bound is asked
+   *  for (or a domain size is given), the dyadic-lattice mode otherwise. */
+  QK_MESH_AUTO = 0,
+  /** The book's mode (de Berg et al. ch. 14): integer vertices in [0,U]^2. */
+  QK_MESH_BOOK = 1,
+  /** The same algorithm on the coarsest dyadic lattice (spacing 2^-f, origin at the
+   *  input's lower-left corner) holding every vertex exactly: real coordinates that are
+   *  dyadic rationals, any position, edges still at 0, 45, 90 or 135 degrees. */
+  QK_MESH_DYADIC = 2
+} qk_mesh_mode_t;
+
+/** A size function: the longest edge wanted near (x, y) (input coordinates). */
+typedef double (*qk_mesh_size_fn)(double x, double y, void *user);
+
 /** Options for qk_mesh_generate(); zero-initialise or use qk_mesh_options_init(). */
 typedef struct qk_mesh_options {
   /** Domain side U, a power of two; 0 means the smallest power of two >= every
-   *  coordinate (and >= 1). */
+   *  coordinate (and >= 1). The book's mode only. */
   uint64_t size;
   /** Allocator for the mesh and its tree; NULL means libc. */
   const qk_allocator_t *allocator;
+  /** Which mesher; QK_MESH_AUTO by default. */
+  qk_mesh_mode_t mode;
+  /** Longest triangle edge wanted, in input units (0: no bound). Guaranteed: every edge
+   *  is at most this long (in the book's mode it must be at least sqrt 2). */
+  double max_size;
+  /** Size function (NULL: none), sampled at each leaf's corners and centre: a leaf is
+   *  split while its triangles' longest possible edge exceeds the smallest sample. */
+  qk_mesh_size_fn size_fn;
+  /** Passed to size_fn. */
+  void *size_user;
 } qk_mesh_options_t;
 
 /** Fill options with the defaults. \param [out] options the options. */
@@ -184,6 +235,11 @@ typedef struct qk_mesh_stats {
   double min_angle_deg;         /**< smallest triangle angle */
   double max_angle_deg;         /**< largest triangle angle */
   double uniform_triangles;     /**< 2 U^2, the size of the uniform grid mesh */
+  qk_mesh_mode_t mode;          /**< the mesher that ran: QK_MESH_BOOK or QK_MESH_DYADIC */
+  int lattice_exponent;         /**< f: lattice spacing 2^-f input units (0: the book's) */
+  double origin_x, origin_y;    /**< input coordinates of lattice point (0, 0) */
+  double proven_min_angle_deg;  /**< the proven lower bound on every angle (45) */
+  double proven_max_angle_deg;  /**< the proven upper bound on every angle (90) */
   double seconds_validate;      /**< checking the input */
   double seconds_subdivide;     /**< step 1 */
   double seconds_balance;       /**< step 2 */
@@ -194,7 +250,8 @@ typedef struct qk_mesh_stats {
 void qk_mesh_stats(const qk_mesh_t *mesh, qk_mesh_stats_t *stats);
 
 /**
- * Write the vertices in Triangle's `.node` format.
+ * Write the vertices in Triangle's `.node` format, with a boundary marker column when the
+ * input carried markers.
  * \param [in] mesh the mesh. \param [in] f an open stream (caller's).
  * \param [in] first_index 0 or 1, the first vertex number.
  * \return QK_OK or QK_ERR_IO.
@@ -211,15 +268,28 @@ qk_status_t qk_mesh_write_node(const qk_mesh_t *mesh, FILE *f, unsigned first_in
 qk_status_t qk_mesh_write_ele(const qk_mesh_t *mesh, FILE *f, unsigned first_index);
 
 /**
+ * Write the mesh edges along input segments in Triangle's `.poly` format (no vertices:
+ * they are the `.node` file's; segments with their markers; no holes).
+ * \param [in] mesh the mesh. \param [in] f an open stream (caller's).
+ * \param [in] first_index 0 or 1, as for the `.node` file.
+ * \return QK_OK, QK_ERR_INVALID or QK_ERR_IO.
+ */
+qk_status_t qk_mesh_write_poly(const qk_mesh_t *mesh, FILE *f, unsigned first_index);
+
+/**
  * Write gmsh's `.msh` 4.1 ASCII format: one surface entity and one physical group per
- * component id present (named "component_K", and "outside" for 0).
+ * component id present (named "component_K", and "outside" for 0); when the input has
+ * segments, one curve entity and one physical group of line elements per boundary
+ * marker present (named "marker_M").
  * \param [in] mesh the mesh. \param [in] f an open stream (caller's).
  * \return QK_OK or QK_ERR_IO.
  */
 qk_status_t qk_mesh_write_msh(const qk_mesh_t *mesh, FILE *f);
 
 /**
- * Write VTK's XML unstructured grid (`.vtu`, ASCII) with the component id as cell data.
+ * Write VTK's XML unstructured grid (`.vtu`, ASCII) with the component id ("component"
+ * and "region"), the regional attribute when there are regions, as cell data and the
+ * boundary marker ("marker") as point data.
  * \param [in] mesh the mesh. \param [in] f an open stream (caller's).
  * \return QK_OK or QK_ERR_IO.
  */

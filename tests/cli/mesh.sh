@@ -42,7 +42,7 @@ printf '4 2 0 0\n0 0 0\n1 3 0\n2 2 2\n3 0 2\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n' 
 expect 1 'angle.poly:8: segment 1 .* is not at 0, 45, 90 or 135 degrees' -- "$cli" mesh "$tmp/angle.poly" -o "$tmp/bad" --svg "$tmp/bad.svg"
 ls "$tmp"/bad* >/dev/null 2>&1 && { echo "FAIL: output written for bad input"; fails=$((fails + 1)); }
 printf '4 2 0 0\n0 0 0\n1 2.5 0\n2 2 2\n3 0 2\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n' >"$tmp/frac.poly"
-expect 1 'frac.poly:3: vertex 1: coordinates .* are not integers' -- "$cli" mesh "$tmp/frac.poly" -o "$tmp/bad"
+expect 1 'frac.poly:3: vertex 1: coordinates .* are not integers' -- "$cli" mesh "$tmp/frac.poly" --book -o "$tmp/bad"
 printf '4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n4 0\n0 0 1\n' >"$tmp/trunc.poly"
 expect 1 'trunc.poly:7: truncated input' -- "$cli" mesh "$tmp/trunc.poly" -o "$tmp/bad"
 printf '4 2 0 0\n0 0 0\n1 2 0\n2 0 2\n3 2 2\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n' >"$tmp/bowtie.poly"
