@@ -214,6 +214,47 @@ const double *qk_mesh_vertices(const qk_mesh_t *mesh, size_t *n);
 const uint32_t *qk_mesh_triangles(const qk_mesh_t *mesh, size_t *n);
 
 /**
+ * Per vertex, its boundary marker: the vertex's own marker from the input when it is an
+ * input vertex with a nonzero one, else the marker of an input segment through it (the
+ * first in input order with a nonzero marker), else 0. Borrowed.
+ * \param [in] mesh the mesh. \param [out] n the number of entries (the vertices).
+ * \return the markers.
+ */
+const int32_t *qk_mesh_vertex_markers(const qk_mesh_t *mesh, size_t *n);
+
+/**
+ * Per triangle, the regional attribute of its region (0 where no regional attribute
+ * point lies), or NULL when the input has no regional attributes. Borrowed.
+ * \param [in] mesh the mesh. \param [out] n the number of entries (the triangles).
+ * \return the attributes.
+ */
+const double *qk_mesh_triangle_attributes(const qk_mesh_t *mesh, size_t *n);
+
+/**
+ * The mesh edges that make up the input segments, into a caller's buffer: per edge its
+ * two vertex indices, the input segment it lies on and that segment's marker. Segments
+ * with holes on both sides have no mesh edges.
+ * \param [in] mesh the mesh.
+ * \param [out] ab room for 2*cap vertex indices (may be NULL when cap is 0).
+ * \param [out] seg room for cap segment indices (may be NULL).
+ * \param [out] marker room for cap markers (may be NULL).
+ * \param [in] cap edges the buffers hold.
+ * \param [out] n_out the number of such edges (all of them, even beyond cap).
+ * \return QK_OK, or QK_ERR_INVALID for a NULL mesh or n_out.
+ */
+qk_status_t qk_mesh_segments(const qk_mesh_t *mesh, uint32_t *ab, uint32_t *seg, int32_t *marker,
+                             size_t cap, size_t *n_out);
+
+/**
+ * Histogram of the triangles' angles in 1-degree bins: bins[k] counts the angles in
+ * [k, k + 1) degrees (180 bins, 3 angles per triangle; computed in floating point, so an
+ * angle of exactly 45 may land in bin 44).
+ * \param [in] mesh the mesh. \param [out] bins 180 counters, overwritten.
+ * \return QK_OK, or QK_ERR_INVALID for NULL arguments.
+ */
+qk_status_t qk_mesh_angle_histogram(const qk_mesh_t *mesh, uint64_t bins[180]);
+
+/**
  * Per triangle, the innermost component containing it (0: outside all), borrowed.
  * \param [in] mesh the mesh. \param [out] n the number of entries (the triangles).
  * \return the component ids.
@@ -278,9 +319,9 @@ qk_status_t qk_mesh_write_poly(const qk_mesh_t *mesh, FILE *f, unsigned first_in
 
 /**
  * Write gmsh's `.msh` 4.1 ASCII format: one surface entity and one physical group per
- * component id present (named "component_K", and "outside" for 0); when the input has
- * segments, one curve entity and one physical group of line elements per boundary
- * marker present (named "marker_M").
+ * component id present (named "component_K", and "outside" for 0); when the input carries
+ * boundary markers, one curve entity and one physical group of line elements (the mesh
+ * edges along input segments) per marker present (named "marker_M").
  * \param [in] mesh the mesh. \param [in] f an open stream (caller's).
  * \return QK_OK or QK_ERR_IO.
  */
