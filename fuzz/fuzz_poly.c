@@ -228,6 +228,7 @@ int qkf_poly(const uint8_t *data, size_t size) {
   qk_mesh_options_t mo;
   qk_mesh_options_init(&mo);
   mo.allocator = &al;
+  mo.mode = QK_MESH_BOOK; /* the checks below are the book's (half-integer lattice) */
   double big = 0;
   for (size_t i = 0; i < nv; i++)
     big = fmax(big, fmax(fabs(pin.xy[2 * i]), fabs(pin.xy[2 * i + 1])));

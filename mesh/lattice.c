@@ -64,6 +64,23 @@ qk_status_t qk__mesh_lattice(const qk_poly_t *P, const qk_mesh_options_t *opt, i
                          "for a double at magnitude %.17g (no exact placement exists; see "
                          "docs/mesh.md)",
                          qk__mesh_num(P, finest), P->vx[finest], P->vy[finest], f, big);
+  /* The book's step 1 splits every square along the segments down to unit size, so the
+   * mesh has a few triangles per lattice step of boundary; a size bound gives about
+   * 4 (extent / H)^2. Refuse what could not fit in memory rather than try. */
+  double steps = 0;
+  for (size_t s = 0; s < P->ns; s++) {
+    uint32_t a = P->seg[2 * s], b = P->seg[2 * s + 1];
+    steps += ldexp(fmax(fabs(P->vx[a] - P->vx[b]), fabs(P->vy[a] - P->vy[b])), f);
+  }
+  double by_size = opt->max_size > 0 ? 4 * (range / opt->max_size) * (range / opt->max_size) : 0;
+  if (steps > QK__MESH_MAX_STEPS || by_size > QK__MESH_MAX_STEPS)
+    return qk__mesh_fail(err, QK_ERR_LIMIT, P->vline[finest],
+                         "the dyadic mode would need %.3g lattice steps of 2^-%d along the "
+                         "segments and about %.3g triangles for the size bound (at most %.3g): "
+                         "vertex %lu (%.17g, %.17g) needs the finest spacing; round the input "
+                         "to fewer binary digits (see docs/mesh.md)",
+                         steps, f, by_size, (double)QK__MESH_MAX_STEPS, qk__mesh_num(P, finest),
+                         P->vx[finest], P->vy[finest]);
   L->f = f, L->x0 = minx, L->y0 = miny;
   return QK_OK;
 }

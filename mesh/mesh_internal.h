@@ -194,6 +194,10 @@ qk_status_t qk__mesh_find_holes(qk__gen_t *g, qk__tri_state_t *T, const qk__leaf
 qk_status_t qk__mesh_find_regions(qk__gen_t *g, qk__tri_state_t *T, const qk__leaf_tris_t *lt,
                                   uint32_t *out);
 
+/* Most lattice steps along the segments (and triangles asked for by a size bound) the
+ * dyadic mode accepts: about 2^25 triangles, a few GB at most. */
+#define QK__MESH_MAX_STEPS ((double)(1 << 24))
+
 /* Choose the lattice for an input (mesh/lattice.c): the book's (f = 0, origin 0) when
  * `book`, else the coarsest dyadic lattice holding every vertex exactly and fine enough
  * for opt->max_size. Fails with QK_ERR_GEOMETRY naming the vertex when none fits. */

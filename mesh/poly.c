@@ -306,7 +306,13 @@ static qk_status_t read_vertices(reader_t *r, qk_poly_t *p, qk_mesh_error_t *err
       if (!parse_num(r->tok[k], &v))
         return rfail(r, err, QK_ERR_PARSE, "vertex %lld: bad field '%s'", idx, r->tok[k]);
     }
-    if (add_vertex(p, &p->cap, x, y, r->line)) return rfail(r, err, QK_ERR_NOMEM, "out of memory");
+    int32_t mark = 0;
+    if (nmark && r->ntok == 4 + nattr && !parse_marker(r->tok[3 + nattr], &mark))
+      return rfail(r, err, QK_ERR_PARSE, "vertex %lld: boundary marker '%s' is not an integer", idx,
+                   r->tok[3 + nattr]);
+    if (add_vertex(p, &p->cap, x, y, r->line) ||
+        (nmark && put_marker(&p->alloc, &p->vmark, &p->cap.vm, p->nv - 1, mark)))
+      return rfail(r, err, QK_ERR_NOMEM, "out of memory");
   }
   return QK_OK;
 }
