@@ -138,7 +138,7 @@ static void test_mesh_dyadic_random(void **state) {
   qkt_rng_t r;
   qkt_rng_seed(&r, seed);
   static const double offsets[] = {0, -1234.5625, 1e6, -3.0517578125e-05, 0x1p30 + 0.5};
-  for (int round = 0; round < 40; round++) {
+  for (int round = 0; round < 100; round++) {
     uint64_t U = 8u << (round % 5);
     pg_input_t pg;
     pg_generate(&r, U, 1 + qkt_rng_below(&r, 6), &pg);
@@ -477,13 +477,76 @@ static void test_mesh_dyadic_alloc_failure(void **state) {
     assert_int_equal(as.live_bytes, 0);
   }
   assert_true(fail_at > 10);
+  /* Attaching markers and regions: a failed call leaves the input as it was. */
+  double xy[8] = {0, 0, 1, 0, 1, 1, 0, 1}, reg[3] = {0.5, 0.5, 2};
+  uint32_t seg[8] = {0, 1, 1, 2, 2, 3, 3, 0};
+  int32_t vm[4] = {1, 2, 3, 4}, sm[4] = {5, 6, 7, 8};
+  for (fail_at = 1; fail_at < 8; fail_at++) {
+    qkt_alloc_t as;
+    qk_allocator_t a = qkt_alloc_make(&as);
+    qk_poly_t *p;
+    assert_int_equal(qk_poly_from_arrays(xy, 4, seg, 4, NULL, 0, &a, &p, NULL), QK_OK);
+    as.fail_at = as.calls + fail_at;
+    qk_mesh_error_t err;
+    qk_status_t s1 = qk_poly_set_markers(p, vm, sm, &err);
+    qk_status_t s2 = qk_poly_set_regions(p, reg, 1, &err);
+    assert_true(s1 == QK_OK || s1 == QK_ERR_NOMEM);
+    assert_true(s2 == QK_OK || s2 == QK_ERR_NOMEM);
+    qk_mesh_t *m;
+    assert_int_equal(qk_mesh_generate(p, NULL, &m, &err), QK_OK);
+    size_t n;
+    const int32_t *mk = qk_mesh_vertex_markers(m, &n);
+    int any = 0;
+    for (size_t i = 0; i < n; i++) any |= mk[i] != 0;
+    assert_int_equal(any, s1 == QK_OK); /* all markers attached, or none */
+    assert_true((qk_mesh_triangle_attributes(m, NULL) != NULL) == (s2 == QK_OK));
+    qk_mesh_free(m);
+    qk_poly_free(p);
+    assert_int_equal(as.live_bytes, 0);
+  }
+}
+
+/* The book's mode with a size bound (at least its unit diagonal): still the book's
+ * checker, every edge at most H. */
+static void test_mesh_dyadic_book_size(void **state) {
+  (void)state;
+  double xy[8] = {3, 3, 5, 3, 5, 5, 3, 5};
+  uint32_t seg[8] = {0, 1, 1, 2, 2, 3, 3, 0};
+  qk_poly_t *p;
+  qk_mesh_t *m;
+  qk_mesh_error_t err;
+  assert_int_equal(qk_poly_from_arrays(xy, 4, seg, 4, NULL, 0, NULL, &p, &err), QK_OK);
+  qk_mesh_options_t o;
+  qk_mesh_options_init(&o);
+  o.mode = QK_MESH_BOOK;
+  o.size = 16;
+  o.max_size = 3;
+  assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_OK);
+  mc_input_t in = {xy, 4, seg, 4, NULL, 0, 16};
+  mc_mesh_t mm;
+  mm.xy = qk_mesh_vertices(m, &mm.nv);
+  mm.tri = qk_mesh_triangles(m, &mm.nt);
+  mm.comp = qk_mesh_triangle_components(m, NULL);
+  char msg[512];
+  if (mc_check(&in, &mm, msg, sizeof msg)) fail_msg("book + max_size: %s", msg);
+  for (size_t i = 0; i < mm.nt; i++)
+    for (int j = 0; j < 3; j++) {
+      const double *a = &mm.xy[2 * mm.tri[3 * i + j]], *b = &mm.xy[2 * mm.tri[3 * i + (j + 1) % 3]];
+      assert_true((a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]) <= 9);
+    }
+  qk_mesh_free(m);
+  qk_poly_free(p);
 }
 
 int main(void) {
   const struct CMUnitTest tests[] = {
-      cmocka_unit_test(test_mesh_dyadic_random), cmocka_unit_test(test_mesh_dyadic_scales),
-      cmocka_unit_test(test_mesh_dyadic_size),   cmocka_unit_test(test_mesh_dyadic_markers),
-      cmocka_unit_test(test_mesh_dyadic_auto),   cmocka_unit_test(test_mesh_dyadic_alloc_failure),
+      cmocka_unit_test(test_mesh_dyadic_random),
+      cmocka_unit_test(test_mesh_dyadic_scales),
+      cmocka_unit_test(test_mesh_dyadic_size),
+      cmocka_unit_test(test_mesh_dyadic_markers),
+      cmocka_unit_test(test_mesh_dyadic_auto),
+      cmocka_unit_test(test_mesh_dyadic_alloc_failure),
+      cmocka_unit_test(test_mesh_dyadic_book_size),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
