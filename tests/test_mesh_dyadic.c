@@ -23,6 +23,7 @@
 #include <string.h>
 
 #include "mesh_check.h"
+#include "mesh_check_real.h"
 #include "polygen.h"
 #include "qk_test.h"
 
@@ -114,6 +115,13 @@ static size_t check_dyadic(const arr_t *in, const qk_mesh_t *m, const char *what
         fail_msg("%s: output segments cover %g of input segment %zu's %g lattice steps", what,
                  len[s0], s0, fmax(fabs(A[0] - B[0]), fabs(A[1] - B[1])));
     }
+  /* The rational checker, on the doubles as given (no lattice); its quadratic segment
+   * scan is kept to the smaller meshes so the test stays fast. */
+  if (mcr_available() && in->nh == 0 && nt <= 1500) {
+    mcr_input_t ri = {in->xy, in->nv, in->seg, in->ns};
+    mcr_mesh_t rm = {xy, nv, tri, nt, ab, sg, no};
+    if (mcr_check(&ri, &rm, msg, sizeof msg)) fail_msg("%s: rational checker: %s", what, msg);
+  }
   free(ab), free(sg), free(len), free(lxy), free(lin), free(lh);
   return nt;
 }
@@ -164,6 +172,43 @@ static void test_mesh_dyadic_random(void **state) {
     free(in.xy);
     pg_free(&pg);
   }
+}
+
+/* The rational checker itself: it must see this run (GMP present) or report a skip, and
+ * it must reject a mesh with a vertex moved off its segment by one ulp. */
+static void test_mesh_dyadic_rational_checker(void **state) {
+  (void)state;
+  if (!mcr_available()) skip();
+  double xy[8] = {1e6 + 0.25, 3.5, 1e6 + 2.25, 3.5, 1e6 + 2.25, 5.5, 1e6 + 0.25, 5.5};
+  uint32_t seg[8] = {0, 1, 1, 2, 2, 3, 3, 0};
+  arr_t in = {xy, NULL, seg, 4, 4, 0};
+  qk_mesh_options_t o;
+  qk_mesh_options_init(&o);
+  o.max_size = 0.5;
+  qk_mesh_t *m = generate(&in, &o, "rational");
+  check_dyadic(&in, m, "rational");
+  size_t nv, nt, no;
+  const double *v = qk_mesh_vertices(m, &nv);
+  const uint32_t *t = qk_mesh_triangles(m, &nt);
+  assert_int_equal(qk_mesh_segments(m, NULL, NULL, NULL, 0, &no), QK_OK);
+  uint32_t *ab = malloc(2 * no * sizeof *ab), *sg = malloc(no * sizeof *sg);
+  double *moved = malloc(2 * nv * sizeof *moved);
+  assert_true(ab && sg && moved);
+  assert_int_equal(qk_mesh_segments(m, ab, sg, NULL, no, &no), QK_OK);
+  memcpy(moved, v, 2 * nv * sizeof *moved);
+  /* An output-segment vertex strictly inside segment 0 (y = 3.5), nudged by one ulp. */
+  for (size_t k = 0; k < no; k++)
+    if (sg[k] == 0 && moved[2 * ab[2 * k] + 1] == 3.5 && moved[2 * ab[2 * k]] > xy[0] &&
+        moved[2 * ab[2 * k]] < xy[2]) {
+      moved[2 * ab[2 * k] + 1] = nextafter(3.5, 4);
+      break;
+    }
+  mcr_input_t ri = {xy, 4, seg, 4};
+  mcr_mesh_t rm = {moved, nv, t, nt, ab, sg, no};
+  char msg[256];
+  assert_int_equal(mcr_check(&ri, &rm, msg, sizeof msg), 1);
+  free(ab), free(sg), free(moved);
+  qk_mesh_free(m);
 }
 
 /* Two squares of side 2^-20 a million units from the origin, 2^-16 apart: a lattice of
@@ -541,6 +586,7 @@ static void test_mesh_dyadic_book_size(void **state) {
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_mesh_dyadic_random),
+      cmocka_unit_test(test_mesh_dyadic_rational_checker),
       cmocka_unit_test(test_mesh_dyadic_scales),
       cmocka_unit_test(test_mesh_dyadic_size),
       cmocka_unit_test(test_mesh_dyadic_markers),
