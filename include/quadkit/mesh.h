@@ -20,6 +20,15 @@
  * All mesh vertices lie on the half-integer lattice, so their double coordinates are
  * exact.
  *
+ * The dyadic-lattice mode (QK_MESH_DYADIC, chosen automatically for non-integer input or
+ * a size bound) runs the same algorithm on the coarsest lattice of spacing 2^-f, with its
+ * origin at the input's lower-left corner, that holds every vertex exactly: real
+ * coordinates at any position and scale, edges still at multiples of 45 degrees. Input
+ * vertices come back bit-identical, every mesh vertex on a segment lies on it exactly,
+ * and the [45, 90] degree bound holds (docs/mesh.md has the proofs). Inputs needing more
+ * than 2^30 lattice steps across, or 2^24 along their segments, are refused rather than
+ * rounded. Boundary markers and regional attributes are carried to the outputs.
+ *
  * Thread safety: a mesh and a qk_poly never change once made, so any number of threads
  * may call the functions taking a const handle (accessors, statistics, writers) on one
  * mesh at once, and qk_mesh_generate() only reads its input, so several threads may mesh
