@@ -45,9 +45,15 @@ qk_status_t qk__mesh_lattice(const qk_poly_t *P, const qk_mesh_options_t *opt, i
     miny = fmin(miny, P->vy[i]), maxy = fmax(maxy, P->vy[i]);
   }
   /* A unit square's diagonal, sqrt(2) 2^-f, is its longest possible edge. */
+  int fv = f;
   if (opt->max_size > 0)
     while (f < 1100 && ldexp(1.0, -f) * 1.4142135623730951 > opt->max_size) f++;
   double range = fmax(maxx - minx, maxy - miny);
+  if (f > fv && !(ldexp(range, f) <= (double)QK_MESH_MAX_SIZE))
+    return qk__mesh_fail(err, QK_ERR_LIMIT, 0,
+                         "max_size %.17g needs a lattice of spacing 2^-%d, and the input's extent "
+                         "%.17g would span more than 2^30 such steps",
+                         opt->max_size, f, range);
   if (!(ldexp(range, f) <= (double)QK_MESH_MAX_SIZE))
     return qk__mesh_fail(err, QK_ERR_GEOMETRY, P->vline[finest],
                          "vertex %lu: (%.17g, %.17g) needs a lattice of spacing 2^-%d, and the "
