@@ -63,7 +63,7 @@ static qk_status_t check_coincident(qk__gen_t *g, vkey_t *keys) {
       return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, P->vline[keys[i].i],
                            "vertices %lu and %lu coincide at (%.17g, %.17g)",
                            qk__mesh_num(P, keys[i - 1].i), qk__mesh_num(P, keys[i].i),
-                           g->src->vx[keys[i].i], g->src->vy[keys[i].i]);
+                           g->src->vx[keys[i].i] + 0.0, g->src->vy[keys[i].i] + 0.0);
   return QK_OK;
 }
 
@@ -79,12 +79,15 @@ static qk_status_t check_segments(qk__gen_t *g, uint32_t *adj, uint8_t *deg) {
       return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, P->sline[s],
                            "segment %lu joins vertex %lu to itself", qk__mesh_num(P, s),
                            qk__mesh_num(P, u));
-    const qk_poly_t *S = g->src; /* the coordinates as given, for the message */
+    /* The coordinates as given, for the message ("+ 0.0" prints -0 as 0, as the book's
+     * integer messages did). */
+    const qk_poly_t *S = g->src;
     if (!(dx == 0 || dy == 0 || dx == dy || dx == -dy))
       return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, P->sline[s],
                            "segment %lu from (%.17g, %.17g) to (%.17g, %.17g) is not at 0, 45, 90 "
                            "or 135 degrees%s",
-                           qk__mesh_num(P, s), S->vx[u], S->vy[u], S->vx[v], S->vy[v],
+                           qk__mesh_num(P, s), S->vx[u] + 0.0, S->vy[u] + 0.0, S->vx[v] + 0.0,
+                           S->vy[v] + 0.0,
                            S == P ? "" : " (the dyadic mode keeps the book's edge directions)");
     for (int k = 0; k < 2; k++) {
       uint32_t w = P->seg[2 * s + k];
