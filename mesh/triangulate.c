@@ -235,7 +235,7 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
   const qk_tree_t *t = g->tree;
   qk_status_t st = QK_OK;
   /* Which unit leaves carry component pieces, and each leaf's index, by node id. */
-  size_t nn = t->n_nodes;
+  size_t nn = qk__tree_node_bound(t);
   uint32_t *rec_of = qk__realloc(g->a, NULL, 0, nn * sizeof *rec_of);
   uint32_t *leaf_of = qk__realloc(g->a, NULL, 0, nn * sizeof *leaf_of);
   lt->cap = nn;
@@ -258,8 +258,8 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
 
   for (size_t li = 0; li < nleaves; li++) {
     uint32_t v = leaves[li], cell = (uint32_t)(2 * li);
-    const qk__node_t *n = &t->nodes[v];
-    int64_t S = 2 * (int64_t)(t->side[n->depth]), X = 2 * (int64_t)n->x0, Y = 2 * (int64_t)n->y0;
+    qk_square_t sq = qk__node_square(t, v);
+    int64_t S = 2 * (int64_t)sq.side, X = 2 * (int64_t)sq.x, Y = 2 * (int64_t)sq.y;
     lt->first[v] = (uint32_t)T->nt;
     uint32_t c[4];
     if ((st = corner_vertex(T, X, Y, &c[0])) || (st = corner_vertex(T, X + S, Y, &c[1])) ||
@@ -281,7 +281,7 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
       ring[nr++] = c[s];
       if (S > 2) {
         qk_node_t u = qk_tree_neighbor(t, v, side_dir[s]);
-        if (u != QK_NONE && !qk__is_leaf(&t->nodes[u]) &&
+        if (u != QK_NONE && !qk__node_leaf(t, u) &&
             (st = corner_vertex(T, mx[s], my[s], &ring[nr++])))
           goto out;
       }

@@ -211,7 +211,7 @@ if "$cli" mesh --help >/dev/null 2>&1; then
   row M5 1 'degree.poly:11: vertex 0 has degree more than 2' -- "$cli" mesh degree.poly -o out/m
   row M6 1 'dupseg.poly:11: vertex [01] has degree more than 2' -- "$cli" mesh dupseg.poly -o out/m
   row M7 1 'dupvert.poly:5: vertex number 3 expected, found 2' -- "$cli" mesh dupvert.poly -o out/m
-  row M8 1 'frac.poly:3: vertex 1: coordinates \(1.5, 0\) are not integers' -- "$cli" mesh frac.poly -o out/m
+  row M8 1 'frac.poly:3: vertex 1: coordinates \(1.5, 0\) are not integers' -- "$cli" mesh frac.poly --book -o out/m
   row M9 1 "nan.poly:3: vertex 1: bad x coordinate 'nan'" -- "$cli" mesh nan.poly -o out/m
   row M10 1 "inf.poly:3: vertex 1: bad x coordinate 'inf'" -- "$cli" mesh inf.poly -o out/m
   row M11 1 'neg.poly:3: vertex 1: \(-4, 0\) lies outside the domain' -- "$cli" mesh neg.poly -o out/m
