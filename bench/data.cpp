@@ -98,7 +98,10 @@ std::vector<Pt> degenerate(size_t n, std::mt19937_64 &rng) {
 }
 
 std::vector<Pt> cities(size_t cap, std::string *why) {
-  std::string path = std::string(QKB_DATA_DIR) + "/cities.csv";
+  // QK_SHARED_DIR (as for the tests) overrides the data directory fixed at build time.
+  const char *shared = getenv("QK_SHARED_DIR");
+  std::string path = (shared && *shared ? std::string(shared) + "/data" : std::string(QKB_DATA_DIR)) +
+                     "/cities.csv";
   FILE *f = fopen(path.c_str(), "r");
   std::vector<Pt> p;
   if (!f) {

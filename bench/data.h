@@ -19,7 +19,8 @@ namespace qkb {
 //   polyline    points spread evenly along 16 random 32-vertex polylines;
 //   degenerate  a third exact duplicates (64 locations), a third collinear (on y = x
 //               and y = 1/2), a third on a dyadic integer grid;
-//   cities      ../shared/data/cities.csv as (lon, lat); empty when the file is absent.
+//   cities      ../shared/data/cities.csv ($QK_SHARED_DIR/data/cities.csv when that is
+//               set) as (lon, lat); empty when the file is absent.
 std::vector<Pt> make_dataset(const std::string &name, size_t n, std::string *why_empty);
 
 // Query points drawn near the data: a random data point plus a small uniform offset

@@ -25,7 +25,7 @@
 #include <vector>
 
 extern "C" {
-// The Morton radix-sort build prototype (proto_build.c); see docs/benchmarks.md.
+// The Morton radix-sort build prototype (proto/build.c); see docs/benchmarks.md.
 double qkb_proto_build(const double *xy, size_t n, unsigned capacity, size_t *leaves,
                        size_t *bytes);
 }
@@ -679,6 +679,60 @@ void run_mesh(unsigned U) {
   }
 }
 
+// The dyadic-lattice mode: the octagons scaled by 2^-10 and moved one lattice step in,
+// inside a domain square that every mesher is given as a constraint, all with the same
+// longest-edge bound (CGAL with criteria 0.125, i.e. about 20.7 degrees).
+void run_mesh_dyadic(unsigned U) {
+  progress("mesh dyadic U=%u", U);
+  const double s = std::ldexp(1.0, -10), side = (U + 2) * s, edge = 8 * s;
+  std::vector<Ring> rings = make_octagons(U, U / 64 ? U / 64 : 1, 3 + U);
+  for (Ring &r : rings)
+    for (Pt &p : r) p.x = (p.x + 1) * s, p.y = (p.y + 1) * s;
+  std::vector<Ring> with_square = rings;
+  with_square.insert(with_square.begin(), Ring{{0, 0}, {side, 0}, {side, side}, {0, side}});
+  struct Side {
+    std::string name;
+    std::function<bool(MeshResult &)> run;
+    std::vector<double> t;
+    MeshResult last;
+    bool ok = true;
+  };
+  std::vector<Side> sides;
+  std::string err;
+  sides.push_back(
+      {"quadkit", [&](MeshResult &o) { return quadkit_mesh_dyadic(with_square, edge, o, &err); }});
+  if (have("cgal"))
+    sides.push_back({"cgal", [&](MeshResult &o) { return cgal_mesh(side, rings, edge, o); }});
+  if (have("gmsh") && U <= 512)
+    sides.push_back({"gmsh", [&](MeshResult &o) { return gmsh_mesh(side, rings, edge, o); }});
+  for (auto &sd : sides) sd.ok = sd.run(sd.last) && sd.last.triangles > 0;
+  int reps = std::max(5, opt.reps);
+  for (int r = 0; r < reps; r++)
+    for (size_t j = 0; j < sides.size(); j++) {
+      Side &sd = sides[(j + r) % sides.size()];
+      if (!sd.ok) continue;
+      MeshResult o;
+      sd.run(o);
+      sd.t.push_back(o.seconds);
+    }
+  for (auto &sd : sides) {
+    Rec r;
+    r.op = "mesh", r.impl = sd.name, r.dataset = "octagons-dyadic", r.n = U, r.order = "-";
+    r.matches = sd.ok ? 1 : 0;
+    r.extra["triangles"] = (double)sd.last.triangles;
+    r.extra["min_angle_deg"] = sd.last.min_angle_deg;
+    r.extra["max_edge"] = edge;
+    if (sd.ok) {
+      r.seconds = median(sd.t);
+      r.per_second = sd.last.triangles / r.seconds;
+      r.note = "triangles/s; real coordinates (2^-10 lattice), same longest-edge bound";
+    } else {
+      r.note = sd.name == "quadkit" ? "quadkit failed: " + err : "mesher failed";
+    }
+    emit(r);
+  }
+}
+
 void run_geo(size_t cap) {
   std::string why;
   std::vector<Pt> pts = make_dataset("cities", cap, &why);
@@ -818,8 +872,8 @@ void print_table() {
              r.bytes_per_point, r.dataset.c_str(), r.n);
   for (auto &r : records)
     if (r.op == "mesh" && r.matches == 1)
-      printf("mesh U=%zu %-8s %8.0f triangles, min angle %.1f deg\n", r.n, r.impl.c_str(),
-             r.extra.at("triangles"), r.extra.at("min_angle_deg"));
+      printf("mesh %-15s U=%zu %-8s %8.0f triangles, min angle %.1f deg\n", r.dataset.c_str(), r.n,
+             r.impl.c_str(), r.extra.at("triangles"), r.extra.at("min_angle_deg"));
   for (auto &r : records)
     if (r.matches == 0)
       printf("mismatch (not timed): %s %s %s n=%zu k=%d: %s\n", r.op.c_str(), r.impl.c_str(),
@@ -972,6 +1026,7 @@ int main(int argc, char **argv) {
         opt.quick ? std::vector<unsigned>{256} : std::vector<unsigned>{256, 512};
     if (opt.n) Us = {(unsigned)opt.n};
     for (unsigned U : Us) run_mesh(U);
+    for (unsigned U : Us) run_mesh_dyadic(U);
   }
   if (want_op("geo-knn")) run_geo(opt.n ? opt.n : opt.quick ? 20000 : 10000000);
   if (progress_on) fprintf(stderr, "\r\033[K");

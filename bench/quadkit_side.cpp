@@ -221,7 +221,8 @@ size_t quadkit_build_leaves(const std::vector<Pt> &pts, unsigned capacity, unsig
   return s.leaves;
 }
 
-bool quadkit_mesh(unsigned U, const std::vector<Ring> &rings, MeshResult &out, std::string *err) {
+static bool quadkit_mesh_opts(const std::vector<Ring> &rings, const qk_mesh_options_t &o,
+                              MeshResult &out, std::string *err) {
   std::vector<double> xy;
   std::vector<uint32_t> seg;
   for (const Ring &r : rings) {
@@ -234,17 +235,14 @@ bool quadkit_mesh(unsigned U, const std::vector<Ring> &rings, MeshResult &out, s
     }
   }
   qk_poly_t *poly = nullptr;
+  qk_mesh_error_t e;
   qk_status_t st = qk_poly_from_arrays(xy.data(), xy.size() / 2, seg.data(), seg.size() / 2,
-                                       nullptr, 0, nullptr, &poly);
+                                       nullptr, 0, nullptr, &poly, &e);
   if (st) {
-    if (err) *err = std::string("qk_poly_from_arrays: ") + qk_strerror(st);
+    if (err) *err = std::string("qk_poly_from_arrays: ") + e.message;
     return false;
   }
-  qk_mesh_options_t o;
-  qk_mesh_options_init(&o);
-  o.size = U;
   qk_mesh_t *m = nullptr;
-  qk_mesh_error_t e;
   double t0 = now_seconds();
   st = qk_mesh_generate(poly, &o, &m, &e);
   out.seconds = now_seconds() - t0;
@@ -259,6 +257,22 @@ bool quadkit_mesh(unsigned U, const std::vector<Ring> &rings, MeshResult &out, s
   out.min_angle_deg = s.min_angle_deg;
   qk_mesh_free(m);
   return true;
+}
+
+bool quadkit_mesh(unsigned U, const std::vector<Ring> &rings, MeshResult &out, std::string *err) {
+  qk_mesh_options_t o;
+  qk_mesh_options_init(&o);
+  o.size = U;
+  return quadkit_mesh_opts(rings, o, out, err);
+}
+
+bool quadkit_mesh_dyadic(const std::vector<Ring> &rings, double max_edge, MeshResult &out,
+                         std::string *err) {
+  qk_mesh_options_t o;
+  qk_mesh_options_init(&o);
+  o.mode = QK_MESH_DYADIC;
+  o.max_size = max_edge;
+  return quadkit_mesh_opts(rings, o, out, err);
 }
 
 struct QuadkitGeo {

@@ -35,6 +35,9 @@ size_t quadkit_build_leaves(const std::vector<Pt> &pts, unsigned capacity, unsig
 
 // Meshing through qk_mesh_generate().
 bool quadkit_mesh(unsigned U, const std::vector<Ring> &rings, MeshResult &out, std::string *err);
+// The dyadic-lattice mode (real coordinates) with a longest-edge bound max_edge.
+bool quadkit_mesh_dyadic(const std::vector<Ring> &rings, double max_edge, MeshResult &out,
+                         std::string *err);
 
 // Geodesic kNN through qk_geo_knn().
 struct QuadkitGeo;

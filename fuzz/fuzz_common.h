@@ -1,7 +1,6 @@
 /*
  * Shared plumbing of the fuzz targets: a byte reader that turns the fuzzer's input into
- * choices, an allocator that fails on a chosen call and counts live blocks, and the
- * failure hook.
+ * choices, the failing allocator of the tests, and the failure hook.
  *
  * Every target defines `int qkf_<name>(const uint8_t *data, size_t size)` and, unless
  * QKF_REPLAY is defined, libFuzzer's entry point calling it. tests/test_reliability.c
@@ -30,14 +29,6 @@
     fputc('\n', stderr);                                                                           \
     abort();                                                                                       \
   } while (0)
-#endif
-
-/* Bugs found by fuzzing and reported but not yet fixed, which the targets step around so
- * that fuzzing can go on past them. Each has its input under
- * fuzz/regressions/<target>/open/ (not replayed by the test suite until fixed). Build with
- * -DQKF_OPEN_BUGS=0 to exercise them again. */
-#ifndef QKF_OPEN_BUGS
-#define QKF_OPEN_BUGS 0
 #endif
 
 #define QKF_ASSERT(cond, ...)                                                                      \
@@ -71,55 +62,12 @@ static inline double qkf_raw_double(qkf_bytes_t *b) {
   return d;
 }
 
-/* Allocator that fails its `fail_at`-th allocating call (1-based; 0 = never) and keeps
- * live counts, so a target can check that a failed call leaked nothing. */
-typedef struct qkf_alloc {
-  size_t calls, fail_at, live_blocks, live_bytes;
-  int failed;
-} qkf_alloc_t;
-
-typedef struct qkf_hdr {
-  size_t size, pad;
-} qkf_hdr_t;
-
-static void *qkf_alloc_fn(void *ud, void *ptr, size_t osize, size_t nsize) {
-  qkf_alloc_t *a = ud;
-  qkf_hdr_t *h = ptr ? (qkf_hdr_t *)ptr - 1 : NULL;
-  QKF_ASSERT(!h || h->size == osize, "allocator: osize %zu but block has %zu", osize,
-             h ? h->size : 0);
-  if (nsize == 0) {
-    if (h) {
-      a->live_blocks--;
-      a->live_bytes -= h->size;
-      free(h);
-    }
-    return NULL;
-  }
-  a->calls++;
-  if (a->fail_at && a->calls == a->fail_at) {
-    a->failed = 1;
-    return NULL;
-  }
-  qkf_hdr_t *n = realloc(h, sizeof *n + nsize);
-  if (!n) return NULL;
-  if (!h) a->live_blocks++;
-  a->live_bytes = a->live_bytes - (h ? osize : 0) + nsize;
-  n->size = nsize;
-  return n + 1;
-}
-
-static inline qk_allocator_t qkf_alloc_make(qkf_alloc_t *a) {
-  memset(a, 0, sizeof *a);
-  qk_allocator_t al = {qkf_alloc_fn, a};
-  return al;
-}
-
-/* Arm the allocator to fail the k-th allocation from now (0 = never). */
-static inline void qkf_alloc_arm(qkf_alloc_t *a, size_t k) {
-  a->calls = 0;
-  a->fail_at = k;
-  a->failed = 0;
-}
+/* The failing allocator shared with the tests (tests/support/fail_alloc.h); a wrong
+ * osize from the library is an oracle failure. */
+#ifndef QKT_ALLOC_FAIL
+#define QKT_ALLOC_FAIL(...) QKF_FAIL(__VA_ARGS__)
+#endif
+#include "tests/support/fail_alloc.h"
 
 /* Check a tree's invariants. */
 static inline void qkf_check_tree(const qk_tree_t *t, const char *after) {

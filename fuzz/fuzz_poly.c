@@ -16,9 +16,34 @@
  */
 #include "fuzz/fuzz_common.h"
 
-/* The input's arrays (vertex coordinates, segments) are read directly to bound the
- * work and to check that the mesh respects the segments. */
-#include "mesh/mesh_internal.h"
+/* The input's arrays (vertex coordinates, segments), copied out through the public
+ * accessors, bound the work and check that the mesh respects the segments. */
+typedef struct pf_input {
+  double *xy, *holes;
+  uint32_t *seg;
+  size_t nv, ns, nh;
+} pf_input_t;
+
+static void pf_input_get(const qk_poly_t *poly, pf_input_t *in) {
+  QKF_ASSERT(qk_poly_vertices(poly, NULL, 0, &in->nv) == QK_OK &&
+                 qk_poly_segments(poly, NULL, 0, &in->ns) == QK_OK &&
+                 qk_poly_holes(poly, NULL, 0, &in->nh) == QK_OK,
+             "poly accessors");
+  in->xy = malloc((2 * in->nv + 2) * sizeof *in->xy);
+  in->seg = malloc((2 * in->ns + 2) * sizeof *in->seg);
+  in->holes = malloc((2 * in->nh + 2) * sizeof *in->holes);
+  if (!in->xy || !in->seg || !in->holes) abort();
+  size_t n;
+  QKF_ASSERT(qk_poly_vertices(poly, in->xy, in->nv, &n) == QK_OK && n == in->nv, "vertices");
+  QKF_ASSERT(qk_poly_segments(poly, in->seg, in->ns, &n) == QK_OK && n == in->ns, "segments");
+  QKF_ASSERT(qk_poly_holes(poly, in->holes, in->nh, &n) == QK_OK && n == in->nh, "holes");
+}
+
+static void pf_input_free(pf_input_t *in) {
+  free(in->xy);
+  free(in->seg);
+  free(in->holes);
+}
 
 #define PF_MAX_U 64
 /* Large domains (up to 2^28) are meshed when the components are short: the work grows
@@ -62,14 +87,14 @@ static void pf_check_angles(int64_t p[3][2], size_t t) {
   }
 }
 
-static void pf_check_mesh(const qk_poly_t *poly, const qk_mesh_t *m) {
+static void pf_check_mesh(const pf_input_t *poly, const qk_mesh_t *m) {
   qk_mesh_stats_t st;
   qk_mesh_stats(m, &st);
   const int64_t U2 = 2 * (int64_t)st.size; /* the domain side, in half units */
   size_t nv = 0, nt = 0;
   const double *xy = qk_mesh_vertices(m, &nv);
   const uint32_t *tri = qk_mesh_triangles(m, &nt);
-  const uint32_t *comp = qk_mesh_triangle_components(m);
+  const uint32_t *comp = qk_mesh_triangle_components(m, NULL);
   QKF_ASSERT(st.triangles == nt && st.vertices == nv, "stats disagree with the arrays");
   if (nt > 0)
     QKF_ASSERT(st.min_angle_deg >= 45 - 1e-9 && st.max_angle_deg <= 90 + 1e-9,
@@ -104,9 +129,7 @@ static void pf_check_mesh(const qk_poly_t *poly, const qk_mesh_t *m) {
   for (size_t i = 1; i < ne; i++)
     QKF_ASSERT(keys[i] != keys[i - 1], "edge %llu->%llu used twice in one direction",
                (unsigned long long)(keys[i] >> 32), (unsigned long long)(keys[i] & 0xffffffffu));
-  size_t nh = 0;
-  qk_poly_counts(poly, NULL, NULL, &nh);
-  if (nh == 0) {
+  if (poly->nh == 0) {
     QKF_ASSERT(area2 == (uint64_t)(2 * U2 * U2), "triangles cover twice-area %llu, domain %lld",
                (unsigned long long)area2, (long long)(2 * U2 * U2));
     /* Conforming: an edge with no twin lies on the domain boundary. */
@@ -123,8 +146,8 @@ static void pf_check_mesh(const qk_poly_t *poly, const qk_mesh_t *m) {
     /* Every input segment is a chain of mesh edges. */
     for (size_t s = 0; s < poly->ns; s++) {
       uint32_t i0 = poly->seg[2 * s], i1 = poly->seg[2 * s + 1];
-      int64_t ax = (int64_t)(2 * poly->vx[i0]), ay = (int64_t)(2 * poly->vy[i0]);
-      int64_t bx = (int64_t)(2 * poly->vx[i1]), by = (int64_t)(2 * poly->vy[i1]);
+      int64_t ax = (int64_t)(2 * poly->xy[2 * i0]), ay = (int64_t)(2 * poly->xy[2 * i0 + 1]);
+      int64_t bx = (int64_t)(2 * poly->xy[2 * i1]), by = (int64_t)(2 * poly->xy[2 * i1 + 1]);
       int64_t dx = bx - ax, dy = by - ay, len2 = dx * dx + dy * dy;
       /* Mesh vertices on the segment, by their parameter along it. */
       uint64_t *on = malloc((nv + 1) * sizeof *on);
@@ -167,8 +190,8 @@ int qkf_poly(const uint8_t *data, size_t size) {
   uint8_t opt = qkf_u8(&in), fail = qkf_u8(&in);
   const uint8_t *text = data + in.at;
   size_t n = size - in.at;
-  qkf_alloc_t as;
-  qk_allocator_t al = qkf_alloc_make(&as);
+  qkt_alloc_t as;
+  qk_allocator_t al = qkt_alloc_make(&as);
   /* fail: 0..199 never; 200..227 in the reader at call 1..28; 228..255 in generation. */
   size_t read_fail = fail >= 200 && fail < 228 ? fail - 199u : 0;
   size_t gen_fail = fail >= 228 ? fail - 227u : 0;
@@ -178,7 +201,7 @@ int qkf_poly(const uint8_t *data, size_t size) {
   if (!f) abort();
   qk_poly_t *poly = (qk_poly_t *)&as;
   qk_mesh_error_t err;
-  qkf_alloc_arm(&as, read_fail);
+  qkt_alloc_arm(&as, read_fail);
   qk_status_t rc = qk_poly_read(f, &al, &poly, &err);
   fclose(f);
   if (getenv("QKF_DEBUG")) fprintf(stderr, "read: %d line %lu %s\n", rc, err.line, err.message);
@@ -194,35 +217,47 @@ int qkf_poly(const uint8_t *data, size_t size) {
   QKF_ASSERT(!as.failed, "poly_read succeeded although an allocation failed");
   size_t nv, ns, nh;
   qk_poly_counts(poly, &nv, &ns, &nh);
-  QKF_ASSERT(nv == poly->nv && ns == poly->ns && nh == poly->nh, "qk_poly_counts");
+  pf_input_t pin;
+  pf_input_get(poly, &pin);
+  QKF_ASSERT(nv == pin.nv && ns == pin.ns && nh == pin.nh, "qk_poly_counts");
   for (size_t i = 0; i < ns; i++)
-    QKF_ASSERT(poly->seg[2 * i] < nv && poly->seg[2 * i + 1] < nv,
+    QKF_ASSERT(pin.seg[2 * i] < nv && pin.seg[2 * i + 1] < nv,
                "segment %zu refers to a vertex that does not exist", i);
 
   /* The domain: U = 2^(opt % 7) or automatic when the input is small enough. */
   qk_mesh_options_t mo;
   qk_mesh_options_init(&mo);
   mo.allocator = &al;
+  mo.mode = QK_MESH_BOOK; /* the checks below are the book's (half-integer lattice) */
   double big = 0;
-  for (size_t i = 0; i < nv; i++) big = fmax(big, fmax(fabs(poly->vx[i]), fabs(poly->vy[i])));
+  for (size_t i = 0; i < nv; i++)
+    big = fmax(big, fmax(fabs(pin.xy[2 * i]), fabs(pin.xy[2 * i + 1])));
   double perimeter = 0;
   for (size_t i = 0; i < ns; i++) {
-    uint32_t a = poly->seg[2 * i], b = poly->seg[2 * i + 1];
-    perimeter += fmax(fabs(poly->vx[a] - poly->vx[b]), fabs(poly->vy[a] - poly->vy[b]));
+    uint32_t a = pin.seg[2 * i], b = pin.seg[2 * i + 1];
+    perimeter +=
+        fmax(fabs(pin.xy[2 * a] - pin.xy[2 * b]), fabs(pin.xy[2 * a + 1] - pin.xy[2 * b + 1]));
   }
   if (opt & 0x40 && perimeter <= PF_BIG_PERIMETER && nh == 0) {
     /* A large domain, from 2^7 to 2^28; the input is moved far from the origin. */
     mo.size = 1ull << (7 + opt % (PF_BIG_U_LOG - 6));
     if (big <= PF_MAX_U && (opt & 0x80)) {
       double shift = (double)(mo.size - 2 * PF_MAX_U);
-      for (size_t i = 0; i < nv; i++) poly->vx[i] += shift, poly->vy[i] += shift / 2;
+      for (size_t i = 0; i < nv; i++) pin.xy[2 * i] += shift, pin.xy[2 * i + 1] += shift / 2;
+      /* The shifted input replaces the one read (same allocator, nothing armed yet). */
+      qk_poly_t *moved = NULL;
+      QKF_ASSERT(qk_poly_from_arrays(pin.xy, nv, pin.seg, ns, pin.holes, nh, &al, &moved, NULL) ==
+                     QK_OK,
+                 "qk_poly_from_arrays on a read input");
+      qk_poly_free(poly);
+      poly = moved;
     }
   } else {
     mo.size = opt & 0x80 && big <= PF_MAX_U ? 0 : 1u << (opt % 7);
   }
   qk_mesh_t *mesh = (qk_mesh_t *)&as;
   size_t blocks = as.live_blocks;
-  qkf_alloc_arm(&as, gen_fail);
+  qkt_alloc_arm(&as, gen_fail);
   rc = qk_mesh_generate(poly, &mo, &mesh, &err);
   if (getenv("QKF_DEBUG"))
     fprintf(stderr, "generate (U option %llu): %d line %lu %s\n", (unsigned long long)mo.size, rc,
@@ -236,10 +271,11 @@ int qkf_poly(const uint8_t *data, size_t size) {
     QKF_ASSERT(err.message[0], "mesh_generate failed without a message");
   } else {
     /* (An optional allocation, such as the tree giving back slack, may fail quietly.) */
-    pf_check_mesh(poly, mesh);
+    pf_check_mesh(&pin, mesh);
     qk_mesh_free(mesh);
   }
   qk_poly_free(poly);
+  pf_input_free(&pin);
   QKF_ASSERT(as.live_blocks == 0, "leaked %zu blocks", as.live_blocks);
   return 0;
 }

@@ -17,7 +17,7 @@
 
 typedef struct to_state {
   qkf_bytes_t in;
-  qkf_alloc_t alloc_state;
+  qkt_alloc_t alloc_state;
   qk_allocator_t alloc;
   qk_tree_options_t opt;
   qk_tree_t *tree;
@@ -130,12 +130,6 @@ static void to_find_leaf(to_state_t *s, qk_point_t p) {
     v = info.children[east ? (north ? QK_NE : QK_SE) : (north ? QK_NW : QK_SW)];
   }
   QKF_ASSERT(v == leaf, "find_leaf(%.17g, %.17g) = %u, descent gives %u", p.x, p.y, leaf, v);
-  /* Open bug (regressions/tree_ops/open/empty-tree-locate-null-offset): on a tree that
-   * never held a point the point arrays are NULL, and locate / leaf_points compute
-   * NULL + 0, which UBSan rejects. */
-  qk_tree_stats_t ts;
-  qk_tree_stats(s->tree, &ts);
-  if (QKF_OPEN_BUGS && ts.points == 0) return;
   const double *lx, *ly;
   const qk_id_t *lid;
   size_t ln;
@@ -498,11 +492,6 @@ static void to_collider(to_state_t *s) {
  * the answers must not change, and nothing may stay borrowed. */
 static void to_batch(to_state_t *s) {
   enum { MAXQ = 130, K = 4 };
-  /* Open bug (regressions/tree_ops/open/empty-tree-knn-batch-null-offset): the batch
-   * kNN's prefetching computes NULL + 0 on a tree that never held a point. */
-  qk_tree_stats_t ts;
-  qk_tree_stats(s->tree, &ts);
-  if (QKF_OPEN_BUGS && ts.points == 0) return;
   static qk_point_t q[MAXQ];
   static qk_neighbor_t got[MAXQ * K], one[K];
   static size_t counts[MAXQ], offsets[MAXQ + 1];
@@ -513,11 +502,11 @@ static void to_batch(to_state_t *s) {
   for (size_t i = 0; i < nq; i++) q[i] = to_point(s);
   double r = s->opt.root.side / 16;
   size_t blocks = s->alloc_state.live_blocks;
-  qkf_alloc_arm(&s->alloc_state, fail & 1 ? 1 : 0);
+  qkt_alloc_arm(&s->alloc_state, fail & 1 ? 1 : 0);
   qk_status_t kb = qk_query_knn_batch(s->tree, q, nq, K, INFINITY, got, counts);
   qk_status_t lb = qk_query_locate_batch(s->tree, q, nq, leaves);
   qk_status_t rb = qk_query_radius_batch(s->tree, q, nq, r, rout, MAXQ * 8, offsets);
-  qkf_alloc_arm(&s->alloc_state, 0);
+  qkt_alloc_arm(&s->alloc_state, 0);
   QKF_ASSERT(s->alloc_state.live_blocks == blocks, "a batch kept %zu borrowed blocks",
              s->alloc_state.live_blocks - blocks);
   QKF_ASSERT(lb == QK_OK, "locate_batch = %d", lb);
@@ -570,9 +559,9 @@ static void to_rebuild(to_state_t *s, size_t fail_at) {
   size_t n = 0;
   for (size_t i = 0; i < s->n_ids; i++)
     if (s->alive[i]) pts[n++] = (qk_point_t){s->x[i], s->y[i]};
-  qkf_alloc_t fa;
-  qk_allocator_t al = qkf_alloc_make(&fa);
-  qkf_alloc_arm(&fa, fail_at);
+  qkt_alloc_t fa;
+  qk_allocator_t al = qkt_alloc_make(&fa);
+  qkt_alloc_arm(&fa, fail_at);
   qk_tree_options_t o = s->opt;
   o.allocator = &al;
   qk_tree_t *t = (qk_tree_t *)&fa;
@@ -601,7 +590,7 @@ int qkf_tree_ops(const uint8_t *data, size_t size) {
   static to_state_t s;
   memset(&s, 0, sizeof s);
   s.in = (qkf_bytes_t){data, size, 0};
-  s.alloc = qkf_alloc_make(&s.alloc_state);
+  s.alloc = qkt_alloc_make(&s.alloc_state);
   qk_tree_options_init(&s.opt);
   s.opt.allocator = &s.alloc;
   s.opt.capacity = 1 + qkf_u8(&s.in) % 8;
@@ -636,7 +625,7 @@ int qkf_tree_ops(const uint8_t *data, size_t size) {
     uint8_t code = qkf_u8(&s.in);
     int armed = 0;
     if (code >= 0xf0) { /* fail the k-th allocation of the change that follows */
-      qkf_alloc_arm(&s.alloc_state, 1 + (code & 7));
+      qkt_alloc_arm(&s.alloc_state, 1 + (code & 7));
       armed = 1;
       static const uint8_t changes[] = {0, 3, 4, 12};
       code = changes[qkf_u8(&s.in) % 4];
@@ -711,7 +700,7 @@ int qkf_tree_ops(const uint8_t *data, size_t size) {
     if (armed) {
       /* A failed change may keep arrays it grew (the tree owns them); anything else it
        * allocated would show up as a leak when the tree is freed below. */
-      qkf_alloc_arm(&s.alloc_state, 0);
+      qkt_alloc_arm(&s.alloc_state, 0);
     }
   }
   qk_tree_free(s.tree);

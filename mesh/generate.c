@@ -24,6 +24,10 @@ void qk_mesh_options_init(qk_mesh_options_t *o) {
   if (!o) return;
   o->size = 0;
   o->allocator = NULL;
+  o->mode = QK_MESH_AUTO;
+  o->max_size = 0;
+  o->size_fn = NULL;
+  o->size_user = NULL;
 }
 
 static void gen_free(qk__gen_t *g) {
@@ -42,6 +46,9 @@ void qk_mesh_free(qk_mesh_t *m) {
   qk__free(&a, m->comp, (m->nt + 1) * sizeof *m->comp);
   qk__free(&a, m->cxy, (2 * m->ncv + 2) * sizeof *m->cxy);
   qk__free(&a, m->cseg, (2 * m->ncs + 2) * sizeof *m->cseg);
+  qk__free(&a, m->vmark, (m->nv + 1) * sizeof *m->vmark);
+  qk__free(&a, m->oseg, m->noseg_cap * sizeof *m->oseg);
+  qk__free(&a, m->attr, (m->nt + 1) * sizeof *m->attr);
   qk__free(&a, m, sizeof *m);
 }
 
@@ -52,6 +59,180 @@ static double angle_deg(const int64_t *vx, const int64_t *vy, uint32_t a, uint32
   return atan2(fabs(ux * wy - uy * wx), ux * wx + uy * wy) * (180.0 / 3.14159265358979323846);
 }
 
+/* Check the options and fill *opt with them (defaults for NULL). */
+static qk_status_t read_options(const qk_mesh_options_t *options, qk_mesh_options_t *opt,
+                                qk_mesh_error_t *err) {
+  qk_mesh_options_init(opt);
+  if (options) *opt = *options;
+  if (opt->size && ((opt->size & (opt->size - 1)) || opt->size > QK_MESH_MAX_SIZE))
+    return qk__mesh_fail(err, QK_ERR_INVALID, 0,
+                         "domain size %llu is not a power of two between 1 and 2^30",
+                         (unsigned long long)opt->size);
+  if (opt->mode != QK_MESH_AUTO && opt->mode != QK_MESH_BOOK && opt->mode != QK_MESH_DYADIC)
+    return qk__mesh_fail(err, QK_ERR_INVALID, 0, "unknown mode %d", (int)opt->mode);
+  if (!(opt->max_size >= 0) || isinf(opt->max_size))
+    return qk__mesh_fail(err, QK_ERR_INVALID, 0, "max_size %g is not a finite length >= 0",
+                         opt->max_size);
+  if (opt->mode == QK_MESH_DYADIC && opt->size)
+    return qk__mesh_fail(err, QK_ERR_INVALID, 0,
+                         "a domain size applies to the book's mode only (the dyadic mode's "
+                         "domain is the input's bounding square)");
+  return QK_OK;
+}
+
+/* The book's mode: asked for, or (automatically) for integer inputs with no size bound,
+ * and whenever a domain size is given. */
+static int use_book(const qk_poly_t *P, const qk_mesh_options_t *o) {
+  if (o->mode != QK_MESH_AUTO) return o->mode == QK_MESH_BOOK;
+  if (o->size) return 1;
+  if (o->max_size > 0 || o->size_fn) return 0;
+  for (size_t i = 0; i < P->nv; i++)
+    if (P->vx[i] != floor(P->vx[i]) || P->vy[i] != floor(P->vy[i])) return 0;
+  return 1;
+}
+
+/* Step 1: the subdivision is a quadkit tree over the root square [0,U]^2 with no points,
+ * split by qk__mesh_subdivide() from the list of every edge. */
+static qk_status_t subdivide(qk__gen_t *g, qk_mesh_t *m) {
+  qk_tree_options_t to;
+  qk_tree_options_init(&to);
+  to.has_root = 1;
+  to.root = (qk_square_t){0, 0, (double)g->U};
+  to.capacity = 1;
+  to.allocator = &m->alloc;
+  uint32_t lg = 0;
+  while (((uint64_t)1 << lg) < g->U) lg++;
+  to.max_depth = lg + 1;
+  qk_status_t st = qk_tree_build(NULL, 0, &to, &m->tree);
+  if (st) return qk__mesh_fail(g->err, st, 0, "%s while building the tree", qk_strerror(st));
+  g->tree = m->tree;
+  void *ap = g->arena;
+  if (qk__mesh_grow(g->a, &ap, &g->arena_cap, sizeof *g->arena, g->ne + 1))
+    return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  g->arena = ap;
+  for (size_t i = 0; i < g->ne; i++) g->arena[i] = (uint32_t)i;
+  g->arena_n = g->ne;
+  if ((st = qk__mesh_subdivide(g, qk_tree_root(g->tree), 0, 0, (int64_t)g->U, 0, g->ne))) return st;
+  qk_tree_leaves(g->tree, NULL, 0, &m->stats.leaves_before_balance);
+  /* Records sorted by node id, for lookups by hole location. */
+  if (g->nrec) qsort(g->rec, g->nrec, sizeof *g->rec, qk__mesh_rec_cmp);
+  return QK_OK;
+}
+
+/* Step 2: BalanceQuadTree. */
+static qk_status_t balance(qk__gen_t *g, qk_mesh_t *m) {
+  qk_status_t st = qk_tree_balance(g->tree);
+  if (st) return qk__mesh_fail(g->err, st, 0, "%s while balancing", qk_strerror(st));
+  qk_tree_leaves(g->tree, NULL, 0, &m->stats.leaves);
+  return QK_OK;
+}
+
+/* Copy the triangles of the kept regions (drop[region] == 0) and their vertices into the
+ * mesh, renumbered densely, with the angle extremes and the input for drawing. newid has
+ * T->nv slots. */
+static qk_status_t compact(qk__gen_t *g, const qk__tri_state_t *T, const uint8_t *drop,
+                           uint32_t *newid, qk_mesh_t *m) {
+  const qk_poly_t *poly = g->poly;
+  memset(newid, 0xff, (T->nv ? T->nv : 1) * sizeof *newid);
+  size_t kt = 0, kv = 0;
+  for (size_t t = 0; t < T->nt; t++) {
+    if (drop[T->region[t]]) continue;
+    kt++;
+    for (int i = 0; i < 3; i++)
+      if (newid[T->tri[3 * t + i]] == QK__MESH_UNSET) newid[T->tri[3 * t + i]] = (uint32_t)kv++;
+  }
+  m->nv = kv, m->nt = kt, m->ncv = poly->nv, m->ncs = poly->ns;
+  m->xy = qk__realloc(g->a, NULL, 0, (2 * kv + 2) * sizeof *m->xy);
+  m->tri = qk__realloc(g->a, NULL, 0, (3 * kt + 3) * sizeof *m->tri);
+  m->comp = qk__realloc(g->a, NULL, 0, (kt + 1) * sizeof *m->comp);
+  m->cxy = qk__realloc(g->a, NULL, 0, (2 * poly->nv + 2) * sizeof *m->cxy);
+  m->cseg = qk__realloc(g->a, NULL, 0, (2 * poly->ns + 2) * sizeof *m->cseg);
+  if (!m->xy || !m->tri || !m->comp || !m->cxy || !m->cseg)
+    return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  double amin = 180, amax = 0;
+  size_t steiner = 0;
+  /* Back from the (doubled) lattice to input coordinates: exact, see mesh/lattice.c. */
+  for (size_t i = 0; i < T->nv; i++)
+    if (newid[i] != QK__MESH_UNSET) {
+      m->xy[2 * newid[i]] = qk__lat_out(&g->lat, T->vx[i], g->lat.x0);
+      m->xy[2 * newid[i] + 1] = qk__lat_out(&g->lat, T->vy[i], g->lat.y0);
+      steiner += T->steiner[i];
+    }
+  size_t j = 0;
+  for (size_t t = 0; t < T->nt; t++) {
+    if (drop[T->region[t]]) continue;
+    const uint32_t *tr = &T->tri[3 * t];
+    for (int i = 0; i < 3; i++) {
+      m->tri[3 * j + i] = newid[tr[i]];
+      double ang = angle_deg(T->vx, T->vy, tr[(i + 2) % 3], tr[i], tr[(i + 1) % 3]);
+      if (ang < amin) amin = ang;
+      if (ang > amax) amax = ang;
+    }
+    m->comp[j++] = T->label[t];
+  }
+  for (size_t i = 0; i < poly->nv; i++)
+    m->cxy[2 * i] = g->src->vx[i], m->cxy[2 * i + 1] = g->src->vy[i];
+  if (poly->ns) memcpy(m->cseg, poly->seg, 2 * poly->ns * sizeof *m->cseg);
+  m->stats.triangles = kt;
+  m->stats.vertices = kv;
+  m->stats.steiner = steiner;
+  m->stats.min_angle_deg = kt ? amin : 0;
+  m->stats.max_angle_deg = kt ? amax : 0;
+  return QK_OK;
+}
+
+/* The regional attribute of every kept triangle (m->attr), when the input has any. */
+static qk_status_t region_attributes(qk__gen_t *g, qk__tri_state_t *T, const qk__leaf_tris_t *lt,
+                                     const uint8_t *drop, qk_mesh_t *m) {
+  const qk_poly_t *S = g->src;
+  if (!S->nr) return QK_OK;
+  uint32_t *at = qk__realloc(g->a, NULL, 0, S->nr * sizeof *at);
+  double *ra = qk__realloc(g->a, NULL, 0, ((size_t)T->nregion + 1) * sizeof *ra);
+  m->attr = qk__realloc(g->a, NULL, 0, (m->nt + 1) * sizeof *m->attr);
+  qk_status_t st = QK_OK;
+  if (!at || !ra || !m->attr) {
+    st = qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  } else if (!(st = qk__mesh_find_regions(g, T, lt, at))) {
+    for (size_t r = 0; r <= T->nregion; r++) ra[r] = 0;
+    for (size_t i = 0; i < S->nr; i++)
+      if (at[i] != QK__MESH_UNSET) ra[at[i]] = S->reg[i].attr;
+    size_t j = 0;
+    for (size_t t = 0; t < T->nt; t++)
+      if (!drop[T->region[t]]) m->attr[j++] = ra[T->region[t]];
+  }
+  qk__free(g->a, at, S->nr * sizeof *at);
+  qk__free(g->a, ra, ((size_t)T->nregion + 1) * sizeof *ra);
+  return st;
+}
+
+/* Step 3: triangulate, label, drop holes, compact. */
+static qk_status_t triangulate(qk__gen_t *g, qk_mesh_t *m) {
+  qk__tri_state_t T;
+  memset(&T, 0, sizeof T);
+  T.a = g->a;
+  qk__leaf_tris_t lt = {NULL, 0};
+  uint8_t *drop = NULL;
+  uint32_t *newid = NULL;
+  qk_status_t st = qk__mesh_triangulate(g, &T, &lt);
+  if (st) goto out;
+  drop = qk__realloc(g->a, NULL, 0, (size_t)T.nregion + 1);
+  newid = qk__realloc(g->a, NULL, 0, (T.nv ? T.nv : 1) * sizeof *newid);
+  if (!drop || !newid) {
+    st = qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+    goto out;
+  }
+  memset(drop, 0, (size_t)T.nregion + 1);
+  if ((st = qk__mesh_find_holes(g, &T, &lt, drop))) goto out;
+  if ((st = compact(g, &T, drop, newid, m))) goto out;
+  st = region_attributes(g, &T, &lt, drop, m);
+out:
+  qk__free(g->a, drop, (size_t)T.nregion + 1);
+  qk__free(g->a, newid, (T.nv ? T.nv : 1) * sizeof *newid);
+  qk__free(g->a, lt.first, lt.cap * sizeof *lt.first);
+  qk__mesh_tri_free(&T);
+  return st;
+}
+
 qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *options,
                              qk_mesh_t **out, qk_mesh_error_t *err) {
   if (err) err->line = 0, err->message[0] = '\0';
@@ -59,153 +240,61 @@ qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *opt
   *out = NULL;
   if (!poly) return qk__mesh_fail(err, QK_ERR_INVALID, 0, "no input");
   qk_mesh_options_t opt;
-  qk_mesh_options_init(&opt);
-  if (options) opt = *options;
-  if (opt.size && ((opt.size & (opt.size - 1)) || opt.size > QK_MESH_MAX_SIZE))
-    return qk__mesh_fail(err, QK_ERR_INVALID, 0,
-                         "domain size %llu is not a power of two between 1 and 2^30",
-                         (unsigned long long)opt.size);
+  qk_status_t st = read_options(options, &opt, err);
+  if (st) return st;
   qk_allocator_t alloc = {NULL, NULL};
   if (opt.allocator) alloc = *opt.allocator;
-
   qk_mesh_t *m = qk__realloc(&alloc, NULL, 0, sizeof *m);
   if (!m) return qk__mesh_fail(err, QK_ERR_NOMEM, 0, "out of memory");
   memset(m, 0, sizeof *m);
   m->alloc = alloc;
   qk__gen_t g;
   memset(&g, 0, sizeof g);
-  g.a = &m->alloc, g.poly = poly, g.err = err;
-  qk__tri_state_t T;
-  memset(&T, 0, sizeof T);
-  T.a = &m->alloc;
-  qk__leaf_tris_t lt = {NULL, 0};
-  uint8_t *drop = NULL;
-  uint32_t *newid = NULL;
-  qk_status_t st;
+  g.a = &m->alloc, g.poly = poly, g.src = poly, g.err = err, g.opt = &opt;
+  int book = use_book(poly, &opt);
+  qk_poly_t *onlat = NULL;
 
-  double t0 = now();
-  if ((st = qk__mesh_validate(&g, opt.size))) goto fail;
-  m->size = g.U;
-  m->stats.components = g.ncomp;
-
-  /* The subdivision is a quadkit tree over the root square [0,U]^2 with no points. */
-  double t1 = now();
-  qk_tree_options_t to;
-  qk_tree_options_init(&to);
-  to.has_root = 1;
-  to.root = (qk_square_t){0, 0, (double)g.U};
-  to.capacity = 1;
-  to.allocator = &m->alloc;
-  {
-    uint32_t lg = 0;
-    while (((uint64_t)1 << lg) < g.U) lg++;
-    to.max_depth = lg + 1;
-  }
-  if ((st = qk_tree_build(NULL, 0, &to, &m->tree))) {
-    qk__mesh_fail(err, st, 0, "%s while building the tree", qk_strerror(st));
-    goto fail;
-  }
-  g.tree = m->tree;
-  {
-    void *ap = g.arena;
-    if (qk__mesh_grow(g.a, &ap, &g.arena_cap, sizeof *g.arena, g.ne + 1)) {
-      st = qk__mesh_fail(err, QK_ERR_NOMEM, 0, "out of memory");
-      goto fail;
+  double t0 = now(), t1 = t0, t2 = t0, t3 = t0;
+  if (book && opt.max_size > 0 && opt.max_size < 1.4142135623730951)
+    st = qk__mesh_fail(err, QK_ERR_INVALID, 0,
+                       "max_size %.17g is below sqrt(2), the book's unit square diagonal (the "
+                       "dyadic mode refines the lattice instead)",
+                       opt.max_size);
+  else if (!(st = qk__mesh_lattice(poly, &opt, book, &g.lat, err)) && !book &&
+           (st = qk__mesh_lattice_poly(poly, &g.lat, g.a, &onlat)))
+    st = qk__mesh_fail(err, st, 0, "out of memory");
+  if (onlat) g.poly = onlat;
+  m->lat = g.lat;
+  if (!st && !(st = qk__mesh_validate(&g, book ? opt.size : 0))) {
+    m->size = g.U;
+    m->stats.components = g.ncomp;
+    t1 = now();
+    if (!(st = subdivide(&g, m)) && !(st = qk__mesh_refine(&g))) {
+      t2 = now();
+      if (!(st = balance(&g, m))) {
+        t3 = now();
+        if (!(st = triangulate(&g, m))) st = qk__mesh_markers(&g, m);
+      }
     }
-    g.arena = ap;
-    for (size_t i = 0; i < g.ne; i++) g.arena[i] = (uint32_t)i;
-    g.arena_n = g.ne;
   }
-  if ((st = qk__mesh_subdivide(&g, qk_tree_root(g.tree), 0, 0, (int64_t)g.U, 0, g.ne))) goto fail;
-  qk_tree_leaves(g.tree, NULL, 0, &m->stats.leaves_before_balance);
-  /* Records sorted by node id, for lookups by hole location. */
-  if (g.nrec) qsort(g.rec, g.nrec, sizeof *g.rec, qk__mesh_rec_cmp);
-
-  /* Step 2: BalanceQuadTree. */
-  double t2 = now();
-  if ((st = qk_tree_balance(g.tree))) {
-    qk__mesh_fail(err, st, 0, "%s while balancing", qk_strerror(st));
-    goto fail;
-  }
-  qk_tree_leaves(g.tree, NULL, 0, &m->stats.leaves);
-
-  /* Step 3: triangulate, label, drop holes, compact. */
-  double t3 = now();
-  if ((st = qk__mesh_triangulate(&g, &T, &lt))) goto fail;
-  drop = qk__realloc(g.a, NULL, 0, (size_t)T.nregion + 1);
-  newid = qk__realloc(g.a, NULL, 0, (T.nv ? T.nv : 1) * sizeof *newid);
-  if (!drop || !newid) {
-    st = qk__mesh_fail(err, QK_ERR_NOMEM, 0, "out of memory");
-    goto fail;
-  }
-  memset(drop, 0, (size_t)T.nregion + 1);
-  if ((st = qk__mesh_find_holes(&g, &T, &lt, drop))) goto fail;
-
-  memset(newid, 0xff, (T.nv ? T.nv : 1) * sizeof *newid);
-  size_t kt = 0, kv = 0;
-  for (size_t t = 0; t < T.nt; t++) {
-    if (drop[T.region[t]]) continue;
-    kt++;
-    for (int i = 0; i < 3; i++)
-      if (newid[T.tri[3 * t + i]] == QK__MESH_UNSET) newid[T.tri[3 * t + i]] = (uint32_t)kv++;
-  }
-  m->nv = kv, m->nt = kt, m->ncv = poly->nv, m->ncs = poly->ns;
-  m->xy = qk__realloc(g.a, NULL, 0, (2 * kv + 2) * sizeof *m->xy);
-  m->tri = qk__realloc(g.a, NULL, 0, (3 * kt + 3) * sizeof *m->tri);
-  m->comp = qk__realloc(g.a, NULL, 0, (kt + 1) * sizeof *m->comp);
-  m->cxy = qk__realloc(g.a, NULL, 0, (2 * poly->nv + 2) * sizeof *m->cxy);
-  m->cseg = qk__realloc(g.a, NULL, 0, (2 * poly->ns + 2) * sizeof *m->cseg);
-  if (!m->xy || !m->tri || !m->comp || !m->cxy || !m->cseg) {
-    st = qk__mesh_fail(err, QK_ERR_NOMEM, 0, "out of memory");
-    goto fail;
-  }
-  double amin = 180, amax = 0;
-  size_t steiner = 0;
-  for (size_t i = 0; i < T.nv; i++)
-    if (newid[i] != QK__MESH_UNSET) {
-      m->xy[2 * newid[i]] = (double)T.vx[i] / 2;
-      m->xy[2 * newid[i] + 1] = (double)T.vy[i] / 2;
-      steiner += T.steiner[i];
-    }
-  size_t j = 0;
-  for (size_t t = 0; t < T.nt; t++) {
-    if (drop[T.region[t]]) continue;
-    const uint32_t *tr = &T.tri[3 * t];
-    for (int i = 0; i < 3; i++) {
-      m->tri[3 * j + i] = newid[tr[i]];
-      double ang = angle_deg(T.vx, T.vy, tr[(i + 2) % 3], tr[i], tr[(i + 1) % 3]);
-      if (ang < amin) amin = ang;
-      if (ang > amax) amax = ang;
-    }
-    m->comp[j++] = T.label[t];
-  }
-  for (size_t i = 0; i < poly->nv; i++)
-    m->cxy[2 * i] = poly->vx[i], m->cxy[2 * i + 1] = poly->vy[i];
-  if (poly->ns) memcpy(m->cseg, poly->seg, 2 * poly->ns * sizeof *m->cseg);
-  double t4 = now();
-
-  m->stats.size = g.U;
-  m->stats.triangles = kt;
-  m->stats.vertices = kv;
-  m->stats.steiner = steiner;
-  m->stats.min_angle_deg = kt ? amin : 0;
-  m->stats.max_angle_deg = kt ? amax : 0;
-  m->stats.uniform_triangles = 2.0 * (double)g.U * (double)g.U;
-  m->stats.seconds_validate = t1 - t0;
-  m->stats.seconds_subdivide = t2 - t1;
-  m->stats.seconds_balance = t3 - t2;
-  m->stats.seconds_triangulate = t4 - t3;
-  st = QK_OK;
-fail:
-  qk__free(g.a, drop, (size_t)T.nregion + 1);
-  qk__free(g.a, newid, (T.nv ? T.nv : 1) * sizeof *newid);
-  qk__free(g.a, lt.first, lt.cap * sizeof *lt.first);
-  qk__mesh_tri_free(&T);
   gen_free(&g);
+  qk__mesh_lattice_poly_free(onlat);
   if (st != QK_OK) {
     qk_mesh_free(m);
     return st;
   }
+  m->stats.size = g.U;
+  m->stats.uniform_triangles = 2.0 * (double)g.U * (double)g.U;
+  m->stats.seconds_validate = t1 - t0;
+  m->stats.seconds_subdivide = t2 - t1;
+  m->stats.seconds_balance = t3 - t2;
+  m->stats.seconds_triangulate = now() - t3;
+  m->stats.mode = book ? QK_MESH_BOOK : QK_MESH_DYADIC;
+  m->stats.lattice_exponent = g.lat.f;
+  m->stats.origin_x = g.lat.x0;
+  m->stats.origin_y = g.lat.y0;
+  m->stats.proven_min_angle_deg = 45;
+  m->stats.proven_max_angle_deg = 90;
   *out = m;
   return QK_OK;
 }
@@ -220,7 +309,50 @@ const uint32_t *qk_mesh_triangles(const qk_mesh_t *m, size_t *n) {
   return m ? m->tri : NULL;
 }
 
-const uint32_t *qk_mesh_triangle_components(const qk_mesh_t *m) { return m ? m->comp : NULL; }
+const uint32_t *qk_mesh_triangle_components(const qk_mesh_t *m, size_t *n) {
+  if (n) *n = m ? m->nt : 0;
+  return m ? m->comp : NULL;
+}
+
+const int32_t *qk_mesh_vertex_markers(const qk_mesh_t *m, size_t *n) {
+  if (n) *n = m ? m->nv : 0;
+  return m ? m->vmark : NULL;
+}
+
+const double *qk_mesh_triangle_attributes(const qk_mesh_t *m, size_t *n) {
+  if (n) *n = m && m->attr ? m->nt : 0;
+  return m ? m->attr : NULL;
+}
+
+qk_status_t qk_mesh_segments(const qk_mesh_t *m, uint32_t *ab, uint32_t *seg, int32_t *marker,
+                             size_t cap, size_t *n_out) {
+  if (!m || !n_out || (cap && !ab)) return QK_ERR_INVALID;
+  *n_out = m->noseg;
+  for (size_t i = 0; i < m->noseg && i < cap; i++) {
+    ab[2 * i] = m->oseg[i].a, ab[2 * i + 1] = m->oseg[i].b;
+    if (seg) seg[i] = m->oseg[i].seg;
+    if (marker) marker[i] = m->oseg[i].mark;
+  }
+  return QK_OK;
+}
+
+qk_status_t qk_mesh_angle_histogram(const qk_mesh_t *m, uint64_t bins[180]) {
+  if (!m || !bins) return QK_ERR_INVALID;
+  memset(bins, 0, 180 * sizeof *bins);
+  for (size_t t = 0; t < m->nt; t++) {
+    const uint32_t *tr = &m->tri[3 * t];
+    for (int i = 0; i < 3; i++) {
+      const double *a = &m->xy[2 * tr[(i + 2) % 3]], *b = &m->xy[2 * tr[i]],
+                   *c = &m->xy[2 * tr[(i + 1) % 3]];
+      double ux = a[0] - b[0], uy = a[1] - b[1], wx = c[0] - b[0], wy = c[1] - b[1];
+      double ang =
+          atan2(fabs(ux * wy - uy * wx), ux * wx + uy * wy) * (180.0 / 3.14159265358979323846);
+      int k = (int)floor(ang);
+      bins[k < 0 ? 0 : k > 179 ? 179 : k]++;
+    }
+  }
+  return QK_OK;
+}
 
 const qk_tree_t *qk_mesh_tree(const qk_mesh_t *m) { return m ? m->tree : NULL; }
 

@@ -7,16 +7,23 @@
 #include "quadkit/mesh.h"
 #include "index/index_access.h"
 
+#include <math.h>
 #include <stdarg.h>
 #include <stdint.h>
 
-/* The parsed input, as read: validation happens in qk_mesh_generate(). Line numbers are
- * 0 for inputs made from arrays. */
 /* Allocated capacities (in elements) of a qk_poly's arrays. */
 typedef struct qk__poly_caps {
-  size_t v, vy, vl, s, sl, h, hy, hl;
+  size_t v, vy, vl, s, sl, h, hy, hl, vm, sm, r;
 } qk__poly_caps_t;
 
+/* A regional attribute: a point, the attribute of the region holding it, its line. */
+typedef struct qk__region_pt {
+  double x, y, attr;
+  unsigned long line;
+} qk__region_pt_t;
+
+/* The parsed input, as read: validation happens in qk_mesh_generate(). Line numbers are
+ * 0 for inputs made from arrays. */
 struct qk_poly {
   qk_allocator_t alloc;
   qk__poly_caps_t cap;
@@ -28,7 +35,26 @@ struct qk_poly {
   unsigned long *sline;
   double *hx, *hy;
   unsigned long *hline;
+  int32_t *vmark, *smark; /* boundary markers, NULL when the input has none */
+  qk__region_pt_t *reg;   /* regional attributes */
+  size_t nr;
 };
+
+/*
+ * The lattice the mesher works on: lattice point (X, Y) is the input point
+ * (x0 + X 2^-f, y0 + Y 2^-f). The book's mode uses f = 0 and origin (0, 0).
+ */
+typedef struct qk__lattice {
+  int f;
+  double x0, y0;
+} qk__lattice_t;
+
+/* An output segment: a mesh edge along an input segment, and that segment's marker. */
+typedef struct qk__oseg {
+  uint32_t a, b;
+  int32_t mark;
+  uint32_t seg;
+} qk__oseg_t;
 
 struct qk_mesh {
   qk_allocator_t alloc;
@@ -45,6 +71,12 @@ struct qk_mesh {
   uint32_t *cseg;
   size_t ncs;
   qk_mesh_stats_t stats;
+  qk__lattice_t lat;
+  int32_t *vmark;   /* per vertex: boundary marker (nv + 1) */
+  qk__oseg_t *oseg; /* mesh edges along input segments */
+  size_t noseg, noseg_cap;
+  int has_marks; /* the input carried boundary markers */
+  double *attr;  /* per triangle: regional attribute (nt + 1), NULL without regions */
 };
 
 /* Grow *p (holding *cap elements of size `elem`) to at least `need` elements. */
@@ -81,7 +113,10 @@ typedef struct qk__unit_rec {
 /* Generation state; freed in one place. */
 typedef struct qk__gen {
   const qk_allocator_t *a;
-  const qk_poly_t *poly;
+  const qk_poly_t *poly; /* the input on the lattice */
+  const qk_poly_t *src;  /* the input as given (for messages) */
+  qk__lattice_t lat;
+  const qk_mesh_options_t *opt;
   qk_mesh_error_t *err;
   uint64_t U;
   qk__edge_t *e;
@@ -153,5 +188,38 @@ void qk__mesh_tri_free(qk__tri_state_t *T);
 /* Mark the regions holding hole points in drop[] (T->nregion entries; mesh/holes.c). */
 qk_status_t qk__mesh_find_holes(qk__gen_t *g, qk__tri_state_t *T, const qk__leaf_tris_t *lt,
                                 uint8_t *drop);
+
+/* The region (T->region id) holding each regional-attribute point of the input, or
+ * QK__MESH_UNSET for one the tree does not hold (mesh/holes.c); `out` has P->nr slots. */
+qk_status_t qk__mesh_find_regions(qk__gen_t *g, qk__tri_state_t *T, const qk__leaf_tris_t *lt,
+                                  uint32_t *out);
+
+/* Most lattice steps along the segments (and triangles asked for by a size bound) the
+ * dyadic mode accepts: about 2^25 triangles, a few GB at most. */
+#define QK__MESH_MAX_STEPS ((double)(1 << 24))
+
+/* Choose the lattice for an input (mesh/lattice.c): the book's (f = 0, origin 0) when
+ * `book`, else the coarsest dyadic lattice holding every vertex exactly and fine enough
+ * for opt->max_size. Fails with QK_ERR_GEOMETRY naming the vertex when none fits. */
+qk_status_t qk__mesh_lattice(const qk_poly_t *P, const qk_mesh_options_t *opt, int book,
+                             qk__lattice_t *L, qk_mesh_error_t *err);
+
+/* A copy of P with its coordinates on lattice L (vertices exactly), through allocator a. */
+qk_status_t qk__mesh_lattice_poly(const qk_poly_t *P, const qk__lattice_t *L,
+                                  const qk_allocator_t *a, qk_poly_t **out);
+
+/* Free a copy made by qk__mesh_lattice_poly (NULL is a no-op). */
+void qk__mesh_lattice_poly_free(qk_poly_t *q);
+
+/* Input coordinate of a doubled lattice coordinate (exact, see mesh/lattice.c). */
+static inline double qk__lat_out(const qk__lattice_t *L, int64_t v2, double origin) {
+  return ldexp((double)v2, -(L->f + 1)) + origin;
+}
+
+/* Step 1b: split leaves larger than the size bound asks (mesh/refine.c). */
+qk_status_t qk__mesh_refine(qk__gen_t *g);
+
+/* The output segments and vertex markers of a finished mesh (mesh/markers.c). */
+qk_status_t qk__mesh_markers(qk__gen_t *g, qk_mesh_t *m);
 
 #endif /* QUADKIT_MESH_INTERNAL_H */

@@ -9,6 +9,8 @@
 #include <errno.h>
 #include <limits.h>
 #include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -16,33 +18,6 @@
 #define POLY_MAX_COUNT (1ul << 26)
 /* Vertex attributes per line beyond this are rejected as absurd. */
 #define POLY_MAX_ATTRIBUTES 1000ul
-
-qk_status_t qk__mesh_grow(const qk_allocator_t *a, void **p, size_t *cap, size_t elem,
-                          size_t need) {
-  if (need <= *cap) return QK_OK;
-  size_t nc = *cap ? *cap : 16;
-  while (nc < need) {
-    if (nc > SIZE_MAX / 2 / elem) return QK_ERR_NOMEM;
-    nc *= 2;
-  }
-  void *np = qk__realloc(a, *p, *cap * elem, nc * elem);
-  if (!np) return QK_ERR_NOMEM;
-  *p = np;
-  *cap = nc;
-  return QK_OK;
-}
-
-qk_status_t qk__mesh_fail(qk_mesh_error_t *err, qk_status_t st, unsigned long line, const char *fmt,
-                          ...) {
-  if (err) {
-    err->line = line;
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(err->message, sizeof err->message, fmt, ap);
-    va_end(ap);
-  }
-  return st;
-}
 
 /* A line reader that strips `#` comments and splits on blanks, skipping empty lines. */
 typedef struct reader {
@@ -129,6 +104,26 @@ static int parse_index(const char *s, long long *v) {
   return 1;
 }
 
+/* Parse a whole token as a boundary marker (an integer that fits 32 bits). */
+static int parse_marker(const char *s, int32_t *v) {
+  double d;
+  if (!parse_num(s, &d) || d != floor(d) || d < -2147483648.0 || d > 2147483647.0) return 0;
+  *v = (int32_t)d;
+  return 1;
+}
+
+/* Record marker v for item i (of the array *m, capacity *cap), growing it. */
+static qk_status_t put_marker(const qk_allocator_t *a, int32_t **m, size_t *cap, size_t i,
+                              int32_t v) {
+  void *p = *m;
+  size_t old = *cap;
+  if (qk__mesh_grow(a, &p, cap, sizeof **m, i + 1)) return QK_ERR_NOMEM;
+  *m = p;
+  if (*cap > old) memset(*m + old, 0, (*cap - old) * sizeof **m);
+  (*m)[i] = v;
+  return QK_OK;
+}
+
 void qk_poly_free(qk_poly_t *p) {
   if (!p) return;
   qk_allocator_t a = p->alloc;
@@ -140,6 +135,9 @@ void qk_poly_free(qk_poly_t *p) {
   qk__free(&a, p->hx, p->cap.h * sizeof *p->hx);
   qk__free(&a, p->hy, p->cap.hy * sizeof *p->hy);
   qk__free(&a, p->hline, p->cap.hl * sizeof *p->hline);
+  qk__free(&a, p->vmark, p->cap.vm * sizeof *p->vmark);
+  qk__free(&a, p->smark, p->cap.sm * sizeof *p->smark);
+  qk__free(&a, p->reg, p->cap.r * sizeof *p->reg);
   qk__free(&a, p, sizeof *p);
 }
 
@@ -205,32 +203,229 @@ static qk_status_t add_hole(qk_poly_t *p, qk__poly_caps_t *c, double x, double y
   return QK_OK;
 }
 
-#define FAIL(st, ...)                                                                              \
-  do {                                                                                             \
-    status = qk__mesh_fail(err, (st), r.line, __VA_ARGS__);                                        \
-    goto done;                                                                                     \
-  } while (0)
+/* Fill the error record with the reader's line; returns st. */
+static qk_status_t rfail(const reader_t *r, qk_mesh_error_t *err, qk_status_t st, const char *fmt,
+                         ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 4, 5)))
+#endif
+    ;
+
+static qk_status_t rfail(const reader_t *r, qk_mesh_error_t *err, qk_status_t st, const char *fmt,
+                         ...) {
+  if (err) {
+    err->line = r->line;
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(err->message, sizeof err->message, fmt, ap);
+    va_end(ap);
+  }
+  return st;
+}
+
+/* Read the next line holding a token, if any: *got is 1, or 0 at the end of input. */
+static qk_status_t maybe_line(reader_t *r, qk_mesh_error_t *err, int *got) {
+  int g = next_line(r);
+  if (g == -2) return rfail(r, err, QK_ERR_PARSE, "binary data (a NUL byte)");
+  if (g < 0) return rfail(r, err, QK_ERR_NOMEM, "out of memory");
+  if (g == 0 && r->io_error) return rfail(r, err, QK_ERR_IO, "read error");
+  *got = g;
+  return QK_OK;
+}
+
+/* Read the next line, failing with `what` (the expectation) at the end of input. */
+static qk_status_t need_line(reader_t *r, qk_mesh_error_t *err, const char *what) {
+  int got = 0;
+  qk_status_t st = maybe_line(r, err, &got);
+  if (st) return st;
+  if (!got) return rfail(r, err, QK_ERR_PARSE, "%s", what);
+  return QK_OK;
+}
 
 /* Read a section header's count (first token), rejecting absurd values. */
-#define READ_COUNT(var, what)                                                                      \
-  do {                                                                                             \
-    if (!parse_count(r.tok[0], &(var)))                                                            \
-      FAIL(QK_ERR_PARSE, "expected the number of %s, found '%s'", what, r.tok[0]);                 \
-    if ((var) > POLY_MAX_COUNT)                                                                    \
-      FAIL(QK_ERR_LIMIT, "%lu %s is absurd (at most %lu accepted)", (var), what, POLY_MAX_COUNT);  \
-  } while (0)
+static qk_status_t read_count(reader_t *r, qk_mesh_error_t *err, const char *what,
+                              unsigned long *n) {
+  if (!parse_count(r->tok[0], n))
+    return rfail(r, err, QK_ERR_PARSE, "expected the number of %s, found '%s'", what, r->tok[0]);
+  if (*n > POLY_MAX_COUNT)
+    return rfail(r, err, QK_ERR_LIMIT, "%lu %s is absurd (at most %lu accepted)", *n, what,
+                 POLY_MAX_COUNT);
+  return QK_OK;
+}
 
-/* Advance to the next line, failing on truncation or memory. */
-#define NEED_LINE(...)                                                                             \
-  do {                                                                                             \
-    int got_ = next_line(&r);                                                                      \
-    if (got_ == -2) FAIL(QK_ERR_PARSE, "binary data (a NUL byte)");                                \
-    if (got_ < 0) FAIL(QK_ERR_NOMEM, "out of memory");                                             \
-    if (got_ == 0) {                                                                               \
-      if (r.io_error) FAIL(QK_ERR_IO, "read error");                                               \
-      FAIL(QK_ERR_PARSE, __VA_ARGS__);                                                             \
-    }                                                                                              \
-  } while (0)
+/* Truncation message for the i-th of n items. */
+static const char *truncated(char *buf, size_t cap, unsigned long n, unsigned long i,
+                             const char *what) {
+  snprintf(buf, cap, "truncated input: expected %lu %s, found %lu", n, what, i);
+  return buf;
+}
+
+/* The vertex section: <#vertices> <dimension> <#attributes> <#boundary markers>, then
+ * <#> <x> <y> [attributes] [marker]. */
+static qk_status_t read_vertices(reader_t *r, qk_poly_t *p, qk_mesh_error_t *err) {
+  unsigned long nv, dim = 2, nattr = 0, nmark = 0;
+  char msg[96];
+  qk_status_t st = need_line(r, err, "empty input: expected the vertex section header");
+  if (st || (st = read_count(r, err, "vertices", &nv))) return st;
+  if (r->ntok > 4)
+    return rfail(r, err, QK_ERR_PARSE, "vertex section header has %zu fields, expected 4", r->ntok);
+  if (r->ntok > 1 && (!parse_count(r->tok[1], &dim) || dim != 2))
+    return rfail(r, err, QK_ERR_PARSE, "dimension must be 2, found '%s'", r->tok[1]);
+  if (r->ntok > 2 && (!parse_count(r->tok[2], &nattr) || nattr > POLY_MAX_ATTRIBUTES))
+    return rfail(r, err, QK_ERR_PARSE, "bad number of vertex attributes '%s'", r->tok[2]);
+  if (r->ntok > 3 && (!parse_count(r->tok[3], &nmark) || nmark > 1))
+    return rfail(r, err, QK_ERR_PARSE, "number of boundary markers must be 0 or 1, found '%s'",
+                 r->tok[3]);
+  if (nv == 0)
+    return rfail(r, err, QK_ERR_PARSE,
+                 "no vertices (vertices in a separate .node file are not supported)");
+  for (unsigned long i = 0; i < nv; i++) {
+    if ((st = need_line(r, err, truncated(msg, sizeof msg, nv, i, "vertices")))) return st;
+    long long idx;
+    double x, y;
+    if (!parse_index(r->tok[0], &idx))
+      return rfail(r, err, QK_ERR_PARSE, "bad vertex number '%s'", r->tok[0]);
+    if (i == 0) {
+      if (idx != 0 && idx != 1)
+        return rfail(r, err, QK_ERR_PARSE, "first vertex number must be 0 or 1, found %lld", idx);
+      p->first_index = (unsigned)idx;
+    } else if (idx != (long long)(i + p->first_index)) {
+      return rfail(r, err, QK_ERR_PARSE, "vertex number %lu expected, found %lld",
+                   i + p->first_index, idx);
+    }
+    if (r->ntok < 3) return rfail(r, err, QK_ERR_PARSE, "vertex %lld: expected x and y", idx);
+    if (!parse_num(r->tok[1], &x))
+      return rfail(r, err, QK_ERR_PARSE, "vertex %lld: bad x coordinate '%s'", idx, r->tok[1]);
+    if (!parse_num(r->tok[2], &y))
+      return rfail(r, err, QK_ERR_PARSE, "vertex %lld: bad y coordinate '%s'", idx, r->tok[2]);
+    if (r->ntok > 3 + nattr + nmark)
+      return rfail(r, err, QK_ERR_PARSE, "vertex %lld: %zu fields, at most %lu expected", idx,
+                   r->ntok, 3 + nattr + nmark);
+    for (size_t k = 3; k < r->ntok && k < 16; k++) {
+      double v;
+      if (!parse_num(r->tok[k], &v))
+        return rfail(r, err, QK_ERR_PARSE, "vertex %lld: bad field '%s'", idx, r->tok[k]);
+    }
+    int32_t mark = 0;
+    if (nmark && r->ntok == 4 + nattr && !parse_marker(r->tok[3 + nattr], &mark))
+      return rfail(r, err, QK_ERR_PARSE, "vertex %lld: boundary marker '%s' is not an integer", idx,
+                   r->tok[3 + nattr]);
+    if (add_vertex(p, &p->cap, x, y, r->line) ||
+        (nmark && put_marker(&p->alloc, &p->vmark, &p->cap.vm, p->nv - 1, mark)))
+      return rfail(r, err, QK_ERR_NOMEM, "out of memory");
+  }
+  return QK_OK;
+}
+
+/* The segment section: <#segments> <#boundary markers>, then <#> <endpoint> <endpoint>
+ * [marker]. */
+static qk_status_t read_segments(reader_t *r, qk_poly_t *p, qk_mesh_error_t *err) {
+  unsigned long ns, smark = 0, nv = p->nv;
+  char msg[96];
+  qk_status_t st = need_line(r, err, "truncated input: expected the segment section header");
+  if (st || (st = read_count(r, err, "segments", &ns))) return st;
+  if (r->ntok > 2)
+    return rfail(r, err, QK_ERR_PARSE, "segment section header has %zu fields, expected 2",
+                 r->ntok);
+  if (r->ntok > 1 && (!parse_count(r->tok[1], &smark) || smark > 1))
+    return rfail(r, err, QK_ERR_PARSE,
+                 "number of segment boundary markers must be 0 or 1, found '%s'", r->tok[1]);
+  for (unsigned long i = 0; i < ns; i++) {
+    if ((st = need_line(r, err, truncated(msg, sizeof msg, ns, i, "segments")))) return st;
+    long long idx, e[2];
+    if (!parse_index(r->tok[0], &idx))
+      return rfail(r, err, QK_ERR_PARSE, "bad segment number '%s'", r->tok[0]);
+    if (r->ntok < 3)
+      return rfail(r, err, QK_ERR_PARSE, "segment %lld: expected two endpoints", idx);
+    if (r->ntok > 3 + smark)
+      return rfail(r, err, QK_ERR_PARSE, "segment %lld: %zu fields, at most %lu expected", idx,
+                   r->ntok, 3 + smark);
+    for (int k = 0; k < 2; k++)
+      if (!parse_index(r->tok[1 + k], &e[k]) || e[k] < (long long)p->first_index ||
+          e[k] >= (long long)(nv + p->first_index))
+        return rfail(r, err, QK_ERR_PARSE,
+                     "segment %lld: endpoint '%s' is not a vertex number (%u..%lu)", idx,
+                     r->tok[1 + k], p->first_index, nv - 1 + p->first_index);
+    int32_t mark = 0;
+    if (r->ntok > 3 && !parse_marker(r->tok[3], &mark))
+      return rfail(r, err, QK_ERR_PARSE, "segment %lld: bad marker '%s'", idx, r->tok[3]);
+    if (add_segment(p, &p->cap, (uint32_t)(e[0] - p->first_index),
+                    (uint32_t)(e[1] - p->first_index), r->line) ||
+        (smark && put_marker(&p->alloc, &p->smark, &p->cap.sm, p->ns - 1, mark)))
+      return rfail(r, err, QK_ERR_NOMEM, "out of memory");
+  }
+  return QK_OK;
+}
+
+/* The hole section, its header already read: <#holes>, then <#> <x> <y>. */
+static qk_status_t read_holes(reader_t *r, qk_poly_t *p, qk_mesh_error_t *err) {
+  unsigned long nh;
+  char msg[96];
+  qk_status_t st = read_count(r, err, "holes", &nh);
+  if (st) return st;
+  if (r->ntok > 1)
+    return rfail(r, err, QK_ERR_PARSE, "hole section header has %zu fields, expected 1", r->ntok);
+  for (unsigned long i = 0; i < nh; i++) {
+    if ((st = need_line(r, err, truncated(msg, sizeof msg, nh, i, "holes")))) return st;
+    long long idx;
+    double x, y;
+    if (!parse_index(r->tok[0], &idx))
+      return rfail(r, err, QK_ERR_PARSE, "bad hole number '%s'", r->tok[0]);
+    if (r->ntok != 3) return rfail(r, err, QK_ERR_PARSE, "hole %lld: expected x and y only", idx);
+    if (!parse_num(r->tok[1], &x) || !parse_num(r->tok[2], &y))
+      return rfail(r, err, QK_ERR_PARSE, "hole %lld: bad coordinates '%s' '%s'", idx, r->tok[1],
+                   r->tok[2]);
+    if (add_hole(p, &p->cap, x, y, r->line)) return rfail(r, err, QK_ERR_NOMEM, "out of memory");
+  }
+  return QK_OK;
+}
+
+/* Append a regional attribute. */
+static qk_status_t add_region(qk_poly_t *p, double x, double y, double attr, unsigned long line) {
+  void *q = p->reg;
+  if (qk__mesh_grow(&p->alloc, &q, &p->cap.r, sizeof *p->reg, p->nr + 1)) return QK_ERR_NOMEM;
+  p->reg = q;
+  p->reg[p->nr++] = (qk__region_pt_t){x, y, attr, line};
+  return QK_OK;
+}
+
+/* Regional attributes, the header already read: <#regions>, then <#> <x> <y> <attribute>
+ * [<area>]. The area constraint is checked for syntax and otherwise ignored (size
+ * control is qk_mesh_options_t's max_size and size_fn). */
+static qk_status_t read_regions(reader_t *r, qk_poly_t *p, qk_mesh_error_t *err) {
+  unsigned long nr;
+  char msg[96];
+  qk_status_t st = read_count(r, err, "regional attributes", &nr);
+  if (st) return st;
+  if (r->ntok > 1)
+    return rfail(r, err, QK_ERR_PARSE, "region section header has %zu fields, expected 1", r->ntok);
+  for (unsigned long i = 0; i < nr; i++) {
+    if ((st = need_line(r, err, truncated(msg, sizeof msg, nr, i, "regional attributes"))))
+      return st;
+    if (r->ntok < 4 || r->ntok > 5)
+      return rfail(r, err, QK_ERR_PARSE, "region: expected 4 or 5 fields, found %zu", r->ntok);
+    double v[5];
+    for (size_t k = 0; k < r->ntok; k++)
+      if (!parse_num(r->tok[k], &v[k]))
+        return rfail(r, err, QK_ERR_PARSE, "region: bad field '%s'", r->tok[k]);
+    if (add_region(p, v[1], v[2], v[3], r->line))
+      return rfail(r, err, QK_ERR_NOMEM, "out of memory");
+  }
+  return QK_OK;
+}
+
+/* Everything after the segments: optional holes, optional regions, then nothing. */
+static qk_status_t read_tail(reader_t *r, qk_poly_t *p, qk_mesh_error_t *err) {
+  int got = 0;
+  qk_status_t st = maybe_line(r, err, &got);
+  if (st || !got) return st;
+  if ((st = read_holes(r, p, err)) || (st = maybe_line(r, err, &got)) || !got) return st;
+  if ((st = read_regions(r, p, err)) || (st = maybe_line(r, err, &got))) return st;
+  if (got)
+    return rfail(r, err, QK_ERR_PARSE, "unexpected content after the last section: '%s'",
+                 r->tok[0]);
+  return QK_OK;
+}
 
 qk_status_t qk_poly_read(FILE *f, const qk_allocator_t *allocator, qk_poly_t **out,
                          qk_mesh_error_t *err) {
@@ -240,134 +435,17 @@ qk_status_t qk_poly_read(FILE *f, const qk_allocator_t *allocator, qk_poly_t **o
     err->message[0] = '\0';
   }
   if (!f || !out) return QK_ERR_INVALID;
-  qk_status_t status = QK_OK;
   qk_poly_t *p = poly_new(allocator);
   if (!p) return qk__mesh_fail(err, QK_ERR_NOMEM, 0, "out of memory");
   reader_t r = {f, &p->alloc, NULL, 0, 0, {0}, 0, 0};
-  qk__poly_caps_t *c = &p->cap;
-  unsigned long nv, dim = 2, nattr = 0, nmark = 0;
-
-  /* Vertex section header: <#vertices> <dimension> <#attributes> <#boundary markers>. */
-  NEED_LINE("empty input: expected the vertex section header");
-  READ_COUNT(nv, "vertices");
-  if (r.ntok > 4) FAIL(QK_ERR_PARSE, "vertex section header has %zu fields, expected 4", r.ntok);
-  if (r.ntok > 1 && (!parse_count(r.tok[1], &dim) || dim != 2))
-    FAIL(QK_ERR_PARSE, "dimension must be 2, found '%s'", r.tok[1]);
-  if (r.ntok > 2 && (!parse_count(r.tok[2], &nattr) || nattr > POLY_MAX_ATTRIBUTES))
-    FAIL(QK_ERR_PARSE, "bad number of vertex attributes '%s'", r.tok[2]);
-  if (r.ntok > 3 && (!parse_count(r.tok[3], &nmark) || nmark > 1))
-    FAIL(QK_ERR_PARSE, "number of boundary markers must be 0 or 1, found '%s'", r.tok[3]);
-  if (nv == 0)
-    FAIL(QK_ERR_PARSE, "no vertices (vertices in a separate .node file are not supported)");
-
-  for (unsigned long i = 0; i < nv; i++) {
-    NEED_LINE("truncated input: expected %lu vertices, found %lu", nv, i);
-    long long idx;
-    double x, y;
-    if (!parse_index(r.tok[0], &idx)) FAIL(QK_ERR_PARSE, "bad vertex number '%s'", r.tok[0]);
-    if (i == 0) {
-      if (idx != 0 && idx != 1)
-        FAIL(QK_ERR_PARSE, "first vertex number must be 0 or 1, found %lld", idx);
-      p->first_index = (unsigned)idx;
-    } else if (idx != (long long)(i + p->first_index)) {
-      FAIL(QK_ERR_PARSE, "vertex number %lu expected, found %lld", i + p->first_index, idx);
-    }
-    if (r.ntok < 3) FAIL(QK_ERR_PARSE, "vertex %lld: expected x and y", idx);
-    if (!parse_num(r.tok[1], &x))
-      FAIL(QK_ERR_PARSE, "vertex %lld: bad x coordinate '%s'", idx, r.tok[1]);
-    if (!parse_num(r.tok[2], &y))
-      FAIL(QK_ERR_PARSE, "vertex %lld: bad y coordinate '%s'", idx, r.tok[2]);
-    if (r.ntok > 3 + nattr + nmark)
-      FAIL(QK_ERR_PARSE, "vertex %lld: %zu fields, at most %lu expected", idx, r.ntok,
-           3 + nattr + nmark);
-    for (size_t k = 3; k < r.ntok && k < 16; k++) {
-      double v;
-      if (!parse_num(r.tok[k], &v))
-        FAIL(QK_ERR_PARSE, "vertex %lld: bad field '%s'", idx, r.tok[k]);
-    }
-    if (add_vertex(p, c, x, y, r.line)) FAIL(QK_ERR_NOMEM, "out of memory");
-  }
-
-  /* Segment section: <#segments> <#boundary markers>, then <#> <endpoint> <endpoint>. */
-  unsigned long ns, smark = 0;
-  NEED_LINE("truncated input: expected the segment section header");
-  READ_COUNT(ns, "segments");
-  if (r.ntok > 2) FAIL(QK_ERR_PARSE, "segment section header has %zu fields, expected 2", r.ntok);
-  if (r.ntok > 1 && (!parse_count(r.tok[1], &smark) || smark > 1))
-    FAIL(QK_ERR_PARSE, "number of segment boundary markers must be 0 or 1, found '%s'", r.tok[1]);
-  for (unsigned long i = 0; i < ns; i++) {
-    NEED_LINE("truncated input: expected %lu segments, found %lu", ns, i);
-    long long idx, e[2];
-    if (!parse_index(r.tok[0], &idx)) FAIL(QK_ERR_PARSE, "bad segment number '%s'", r.tok[0]);
-    if (r.ntok < 3) FAIL(QK_ERR_PARSE, "segment %lld: expected two endpoints", idx);
-    if (r.ntok > 3 + smark)
-      FAIL(QK_ERR_PARSE, "segment %lld: %zu fields, at most %lu expected", idx, r.ntok, 3 + smark);
-    for (int k = 0; k < 2; k++) {
-      if (!parse_index(r.tok[1 + k], &e[k]) || e[k] < (long long)p->first_index ||
-          e[k] >= (long long)(nv + p->first_index))
-        FAIL(QK_ERR_PARSE, "segment %lld: endpoint '%s' is not a vertex number (%u..%lu)", idx,
-             r.tok[1 + k], p->first_index, nv - 1 + p->first_index);
-    }
-    if (r.ntok > 3) {
-      double v;
-      if (!parse_num(r.tok[3], &v))
-        FAIL(QK_ERR_PARSE, "segment %lld: bad marker '%s'", idx, r.tok[3]);
-    }
-    if (add_segment(p, c, (uint32_t)(e[0] - p->first_index), (uint32_t)(e[1] - p->first_index),
-                    r.line))
-      FAIL(QK_ERR_NOMEM, "out of memory");
-  }
-
-  /* Optional hole section: <#holes>, then <#> <x> <y>. */
-  int got = next_line(&r);
-  if (got == -2) FAIL(QK_ERR_PARSE, "binary data (a NUL byte)");
-  if (got < 0) FAIL(QK_ERR_NOMEM, "out of memory");
-  if (got > 0) {
-    unsigned long nh;
-    READ_COUNT(nh, "holes");
-    if (r.ntok > 1) FAIL(QK_ERR_PARSE, "hole section header has %zu fields, expected 1", r.ntok);
-    for (unsigned long i = 0; i < nh; i++) {
-      NEED_LINE("truncated input: expected %lu holes, found %lu", nh, i);
-      long long idx;
-      double x, y;
-      if (!parse_index(r.tok[0], &idx)) FAIL(QK_ERR_PARSE, "bad hole number '%s'", r.tok[0]);
-      if (r.ntok != 3) FAIL(QK_ERR_PARSE, "hole %lld: expected x and y only", idx);
-      if (!parse_num(r.tok[1], &x) || !parse_num(r.tok[2], &y))
-        FAIL(QK_ERR_PARSE, "hole %lld: bad coordinates '%s' '%s'", idx, r.tok[1], r.tok[2]);
-      if (add_hole(p, c, x, y, r.line)) FAIL(QK_ERR_NOMEM, "out of memory");
-    }
-    /* Optional regional attributes: <#regions>, then <#> <x> <y> <attribute> [<area>].
-     * They are checked for syntax and otherwise ignored: components carry their ids. */
-    got = next_line(&r);
-    if (got == -2) FAIL(QK_ERR_PARSE, "binary data (a NUL byte)");
-    if (got < 0) FAIL(QK_ERR_NOMEM, "out of memory");
-    if (got > 0) {
-      unsigned long nr;
-      READ_COUNT(nr, "regional attributes");
-      if (r.ntok > 1)
-        FAIL(QK_ERR_PARSE, "region section header has %zu fields, expected 1", r.ntok);
-      for (unsigned long i = 0; i < nr; i++) {
-        NEED_LINE("truncated input: expected %lu regional attributes, found %lu", nr, i);
-        if (r.ntok < 4 || r.ntok > 5)
-          FAIL(QK_ERR_PARSE, "region: expected 4 or 5 fields, found %zu", r.ntok);
-        for (size_t k = 0; k < r.ntok; k++) {
-          double v;
-          if (!parse_num(r.tok[k], &v)) FAIL(QK_ERR_PARSE, "region: bad field '%s'", r.tok[k]);
-        }
-      }
-      got = next_line(&r);
-      if (got == -2) FAIL(QK_ERR_PARSE, "binary data (a NUL byte)");
-      if (got < 0) FAIL(QK_ERR_NOMEM, "out of memory");
-      if (got > 0) FAIL(QK_ERR_PARSE, "unexpected content after the last section: '%s'", r.tok[0]);
-    }
-  }
-  if (r.io_error) FAIL(QK_ERR_IO, "read error");
-
-done:
+  qk_status_t st;
+  if (!(st = read_vertices(&r, p, err)) && !(st = read_segments(&r, p, err)) &&
+      !(st = read_tail(&r, p, err)) && r.io_error)
+    st = rfail(&r, err, QK_ERR_IO, "read error");
   qk__free(&p->alloc, r.buf, r.cap);
-  if (status != QK_OK) {
+  if (st != QK_OK) {
     qk_poly_free(p);
-    return status;
+    return st;
   }
   *out = p;
   return QK_OK;
@@ -375,15 +453,32 @@ done:
 
 qk_status_t qk_poly_from_arrays(const double *xy, size_t nv, const uint32_t *seg, size_t ns,
                                 const double *holes, size_t nh, const qk_allocator_t *allocator,
-                                qk_poly_t **out) {
-  if (!out) return QK_ERR_INVALID;
+                                qk_poly_t **out, qk_mesh_error_t *err) {
+  if (err) err->line = 0, err->message[0] = '\0';
+  if (!out) return qk__mesh_fail(err, QK_ERR_INVALID, 0, "no output pointer");
   *out = NULL;
-  if ((nv && !xy) || (ns && !seg) || (nh && !holes)) return QK_ERR_INVALID;
-  if (nv > POLY_MAX_COUNT || ns > POLY_MAX_COUNT || nh > POLY_MAX_COUNT) return QK_ERR_LIMIT;
+  if (nv && !xy) return qk__mesh_fail(err, QK_ERR_INVALID, 0, "%zu vertices but no array", nv);
+  if (ns && !seg) return qk__mesh_fail(err, QK_ERR_INVALID, 0, "%zu segments but no array", ns);
+  if (nh && !holes) return qk__mesh_fail(err, QK_ERR_INVALID, 0, "%zu holes but no array", nh);
+  if (nv > POLY_MAX_COUNT || ns > POLY_MAX_COUNT || nh > POLY_MAX_COUNT)
+    return qk__mesh_fail(err, QK_ERR_LIMIT, 0,
+                         "%zu vertices, %zu segments, %zu holes: at most %lu of each", nv, ns, nh,
+                         POLY_MAX_COUNT);
+  for (size_t i = 0; i < nv; i++)
+    if (!isfinite(xy[2 * i]) || !isfinite(xy[2 * i + 1]))
+      return qk__mesh_fail(err, QK_ERR_INVALID, 0, "vertex %zu: coordinates (%g, %g) not finite", i,
+                           xy[2 * i], xy[2 * i + 1]);
   for (size_t i = 0; i < 2 * ns; i++)
-    if (seg[i] >= nv) return QK_ERR_INVALID;
+    if (seg[i] >= nv)
+      return qk__mesh_fail(err, QK_ERR_INVALID, 0,
+                           "segment %zu: endpoint %lu is not a vertex number (0..%zu)", i / 2,
+                           (unsigned long)seg[i], nv ? nv - 1 : 0);
+  for (size_t i = 0; i < nh; i++)
+    if (!isfinite(holes[2 * i]) || !isfinite(holes[2 * i + 1]))
+      return qk__mesh_fail(err, QK_ERR_INVALID, 0, "hole %zu: coordinates (%g, %g) not finite", i,
+                           holes[2 * i], holes[2 * i + 1]);
   qk_poly_t *p = poly_new(allocator);
-  if (!p) return QK_ERR_NOMEM;
+  if (!p) return qk__mesh_fail(err, QK_ERR_NOMEM, 0, "out of memory");
   qk__poly_caps_t *c = &p->cap;
   for (size_t i = 0; i < nv; i++)
     if (add_vertex(p, c, xy[2 * i], xy[2 * i + 1], 0)) goto nomem;
@@ -395,5 +490,69 @@ qk_status_t qk_poly_from_arrays(const double *xy, size_t nv, const uint32_t *seg
   return QK_OK;
 nomem:
   qk_poly_free(p);
-  return QK_ERR_NOMEM;
+  return qk__mesh_fail(err, QK_ERR_NOMEM, 0, "out of memory");
+}
+
+qk_status_t qk_poly_vertices(const qk_poly_t *p, double *xy, size_t cap, size_t *n_out) {
+  if (!p || !n_out || (cap && !xy)) return QK_ERR_INVALID;
+  *n_out = p->nv;
+  for (size_t i = 0; i < p->nv && i < cap; i++) xy[2 * i] = p->vx[i], xy[2 * i + 1] = p->vy[i];
+  return QK_OK;
+}
+
+qk_status_t qk_poly_segments(const qk_poly_t *p, uint32_t *seg, size_t cap, size_t *n_out) {
+  if (!p || !n_out || (cap && !seg)) return QK_ERR_INVALID;
+  *n_out = p->ns;
+  size_t k = p->ns < cap ? p->ns : cap;
+  if (k) memcpy(seg, p->seg, 2 * k * sizeof *seg);
+  return QK_OK;
+}
+
+qk_status_t qk_poly_holes(const qk_poly_t *p, double *xy, size_t cap, size_t *n_out) {
+  if (!p || !n_out || (cap && !xy)) return QK_ERR_INVALID;
+  *n_out = p->nh;
+  for (size_t i = 0; i < p->nh && i < cap; i++) xy[2 * i] = p->hx[i], xy[2 * i + 1] = p->hy[i];
+  return QK_OK;
+}
+
+qk_status_t qk_poly_set_markers(qk_poly_t *p, const int32_t *vm, const int32_t *sm,
+                                qk_mesh_error_t *err) {
+  if (err) err->line = 0, err->message[0] = '\0';
+  if (!p) return qk__mesh_fail(err, QK_ERR_INVALID, 0, "no input");
+  int32_t *nv = NULL, *ns = NULL;
+  size_t cv = 0, cs = 0;
+  if (vm && p->nv && put_marker(&p->alloc, &nv, &cv, p->nv - 1, 0)) goto nomem;
+  if (sm && p->ns && put_marker(&p->alloc, &ns, &cs, p->ns - 1, 0)) goto nomem;
+  if (nv) memcpy(nv, vm, p->nv * sizeof *nv);
+  if (ns) memcpy(ns, sm, p->ns * sizeof *ns);
+  qk__free(&p->alloc, p->vmark, p->cap.vm * sizeof *p->vmark);
+  qk__free(&p->alloc, p->smark, p->cap.sm * sizeof *p->smark);
+  p->vmark = nv, p->cap.vm = cv, p->smark = ns, p->cap.sm = cs;
+  return QK_OK;
+nomem:
+  qk__free(&p->alloc, nv, cv * sizeof *nv);
+  return qk__mesh_fail(err, QK_ERR_NOMEM, 0, "out of memory");
+}
+
+qk_status_t qk_poly_set_regions(qk_poly_t *p, const double *xya, size_t nr, qk_mesh_error_t *err) {
+  if (err) err->line = 0, err->message[0] = '\0';
+  if (!p || (nr && !xya)) return qk__mesh_fail(err, QK_ERR_INVALID, 0, "no input or no array");
+  if (nr > POLY_MAX_COUNT)
+    return qk__mesh_fail(err, QK_ERR_LIMIT, 0, "%zu regional attributes: at most %lu", nr,
+                         POLY_MAX_COUNT);
+  for (size_t i = 0; i < 3 * nr; i++)
+    if (!isfinite(xya[i]))
+      return qk__mesh_fail(err, QK_ERR_INVALID, 0, "regional attribute %zu: %g is not finite",
+                           i / 3, xya[i]);
+  qk__region_pt_t *reg = NULL;
+  size_t cap = 0;
+  void *q = NULL;
+  if (nr && qk__mesh_grow(&p->alloc, &q, &cap, sizeof *reg, nr))
+    return qk__mesh_fail(err, QK_ERR_NOMEM, 0, "out of memory");
+  reg = q;
+  for (size_t i = 0; i < nr; i++)
+    reg[i] = (qk__region_pt_t){xya[3 * i], xya[3 * i + 1], xya[3 * i + 2], 0};
+  qk__free(&p->alloc, p->reg, p->cap.r * sizeof *p->reg);
+  p->reg = reg, p->cap.r = cap, p->nr = nr;
+  return QK_OK;
 }

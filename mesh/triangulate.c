@@ -235,7 +235,7 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
   const qk_tree_t *t = g->tree;
   qk_status_t st = QK_OK;
   /* Which unit leaves carry component pieces, and each leaf's index, by node id. */
-  size_t nn = t->n_nodes;
+  size_t nn = qk__tree_node_bound(t);
   uint32_t *rec_of = qk__realloc(g->a, NULL, 0, nn * sizeof *rec_of);
   uint32_t *leaf_of = qk__realloc(g->a, NULL, 0, nn * sizeof *leaf_of);
   lt->cap = nn;
@@ -258,7 +258,7 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
 
   for (size_t li = 0; li < nleaves; li++) {
     uint32_t v = leaves[li], cell = (uint32_t)(2 * li);
-    const qk_square_t sq = qk__node_square(t, v);
+    qk_square_t sq = qk__node_square(t, v);
     int64_t S = 2 * (int64_t)sq.side, X = 2 * (int64_t)sq.x, Y = 2 * (int64_t)sq.y;
     lt->first[v] = (uint32_t)T->nt;
     uint32_t c[4];

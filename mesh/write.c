@@ -1,28 +1,47 @@
 /*
  * Mesh writers: Triangle's .node/.ele, gmsh .msh 4.1 (ASCII), VTK XML .vtu and SVG.
- * Coordinates are half-integers, so "%.17g" prints them exactly and briefly.
+ * Coordinates are half-lattice points, doubles that "%.17g" prints exactly.
  */
 #include "mesh/mesh_internal.h"
 
+#include <math.h>
+#include <stdlib.h>
 #include <string.h>
 
 static qk_status_t io_status(FILE *f) { return ferror(f) ? QK_ERR_IO : QK_OK; }
 
 qk_status_t qk_mesh_write_node(const qk_mesh_t *m, FILE *f, unsigned first) {
   if (!m || !f || first > 1) return QK_ERR_INVALID;
-  fprintf(f, "%zu 2 0 0\n", m->nv);
-  for (size_t i = 0; i < m->nv; i++)
-    fprintf(f, "%zu %.17g %.17g\n", i + first, m->xy[2 * i], m->xy[2 * i + 1]);
+  fprintf(f, "%zu 2 0 %d\n", m->nv, m->has_marks ? 1 : 0);
+  for (size_t i = 0; i < m->nv; i++) {
+    fprintf(f, "%zu %.17g %.17g", i + first, m->xy[2 * i], m->xy[2 * i + 1]);
+    if (m->has_marks) fprintf(f, " %ld", (long)m->vmark[i]);
+    fputc('\n', f);
+  }
+  return io_status(f);
+}
+
+qk_status_t qk_mesh_write_poly(const qk_mesh_t *m, FILE *f, unsigned first) {
+  if (!m || !f || first > 1) return QK_ERR_INVALID;
+  fprintf(f, "# the vertices are those of the .node file\n0 2 0 %d\n%zu 1\n", m->has_marks ? 1 : 0,
+          m->noseg);
+  for (size_t i = 0; i < m->noseg; i++)
+    fprintf(f, "%zu %lu %lu %ld\n", i + first, (unsigned long)m->oseg[i].a + first,
+            (unsigned long)m->oseg[i].b + first, (long)m->oseg[i].mark);
+  fprintf(f, "0\n");
   return io_status(f);
 }
 
 qk_status_t qk_mesh_write_ele(const qk_mesh_t *m, FILE *f, unsigned first) {
   if (!m || !f || first > 1) return QK_ERR_INVALID;
-  fprintf(f, "%zu 3 1\n", m->nt);
+  /* The component id, then the regional attribute when the input has regions. */
+  fprintf(f, "%zu 3 %d\n", m->nt, m->attr ? 2 : 1);
   for (size_t i = 0; i < m->nt; i++) {
     const uint32_t *t = &m->tri[3 * i];
-    fprintf(f, "%zu %lu %lu %lu %lu\n", i + first, (unsigned long)t[0] + first,
+    fprintf(f, "%zu %lu %lu %lu %lu", i + first, (unsigned long)t[0] + first,
             (unsigned long)t[1] + first, (unsigned long)t[2] + first, (unsigned long)m->comp[i]);
+    if (m->attr) fprintf(f, " %.17g", m->attr[i]);
+    fputc('\n', f);
   }
   return io_status(f);
 }
@@ -37,20 +56,26 @@ static size_t used_components(const qk_mesh_t *m, size_t *count) {
   return used;
 }
 
-/*
- * gmsh 4.1: every component id present becomes a surface entity (tag id + 1) carrying
- * a physical group of the same tag; all nodes are listed in one block on the first
- * entity, which gmsh accepts for a mesh without geometry.
- */
-qk_status_t qk_mesh_write_msh(const qk_mesh_t *m, FILE *f) {
-  if (!m || !f) return QK_ERR_INVALID;
-  size_t nc = m->stats.components + 1;
-  size_t *count = qk__realloc(&m->alloc, NULL, 0, nc * sizeof *count);
-  if (!count) return QK_ERR_NOMEM;
-  size_t used = used_components(m, count);
-  double U = (double)m->size;
-  fprintf(f, "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n");
-  fprintf(f, "$PhysicalNames\n%zu\n", used);
+static int i32_cmp(const void *a, const void *b) {
+  int32_t x = *(const int32_t *)a, y = *(const int32_t *)b;
+  return (x > y) - (x < y);
+}
+
+/* The distinct markers of the output segments, sorted, into marks (noseg + 1 slots). */
+static size_t distinct_marks(const qk_mesh_t *m, int32_t *marks) {
+  for (size_t i = 0; i < m->noseg; i++) marks[i] = m->oseg[i].mark;
+  qsort(marks, m->noseg, sizeof *marks, i32_cmp);
+  size_t k = 0;
+  for (size_t i = 0; i < m->noseg; i++)
+    if (k == 0 || marks[k - 1] != marks[i]) marks[k++] = marks[i];
+  return k;
+}
+
+/* The physical names: one per marker (dimension 1), one per component (dimension 2). */
+static void msh_names(const qk_mesh_t *m, FILE *f, const size_t *count, size_t nc, size_t used,
+                      const int32_t *marks, size_t nm) {
+  fprintf(f, "$PhysicalNames\n%zu\n", used + nm);
+  for (size_t k = 0; k < nm; k++) fprintf(f, "1 %zu \"marker_%ld\"\n", k + 1, (long)marks[k]);
   for (size_t c = 0; c < nc; c++) {
     if (!count[c]) continue;
     if (c == 0)
@@ -58,12 +83,41 @@ qk_status_t qk_mesh_write_msh(const qk_mesh_t *m, FILE *f) {
     else
       fprintf(f, "2 %zu \"component_%zu\"\n", c + 1, c);
   }
-  fprintf(f, "$EndPhysicalNames\n$Entities\n0 0 %zu 0\n", used);
+  fprintf(f, "$EndPhysicalNames\n");
+  (void)m;
+}
+
+/*
+ * gmsh 4.1: every component id present becomes a surface entity (tag id + 1) carrying
+ * a physical group of the same tag, and every boundary marker of the output segments a
+ * curve entity (tag k + 1 for the k-th smallest marker) carrying a physical group of
+ * line elements; all nodes are listed in one block on the first surface entity, which
+ * gmsh accepts for a mesh without geometry.
+ */
+qk_status_t qk_mesh_write_msh(const qk_mesh_t *m, FILE *f) {
+  if (!m || !f) return QK_ERR_INVALID;
+  size_t nc = m->stats.components + 1;
+  size_t *count = qk__realloc(&m->alloc, NULL, 0, nc * sizeof *count);
+  int32_t *marks = qk__realloc(&m->alloc, NULL, 0, (m->noseg + 1) * sizeof *marks);
+  if (!count || !marks) {
+    qk__free(&m->alloc, count, nc * sizeof *count);
+    qk__free(&m->alloc, marks, (m->noseg + 1) * sizeof *marks);
+    return QK_ERR_NOMEM;
+  }
+  size_t used = used_components(m, count), nm = m->has_marks ? distinct_marks(m, marks) : 0;
+  size_t nseg = m->has_marks ? m->noseg : 0;
+  double ext = ldexp((double)m->size, -m->lat.f);
+  double x0 = m->lat.x0, y0 = m->lat.y0, x1 = x0 + ext, y1 = y0 + ext;
+  fprintf(f, "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n");
+  msh_names(m, f, count, nc, used, marks, nm);
+  fprintf(f, "$Entities\n0 %zu %zu 0\n", nm, used);
+  for (size_t k = 0; k < nm; k++)
+    fprintf(f, "%zu %.17g %.17g 0 %.17g %.17g 0 1 %zu 0\n", k + 1, x0, y0, x1, y1, k + 1);
   size_t first_tag = 0;
   for (size_t c = 0; c < nc; c++) {
     if (!count[c]) continue;
     if (!first_tag) first_tag = c + 1;
-    fprintf(f, "%zu 0 0 0 %.17g %.17g 0 1 %zu 0\n", c + 1, U, U, c + 1);
+    fprintf(f, "%zu %.17g %.17g 0 %.17g %.17g 0 1 %zu 0\n", c + 1, x0, y0, x1, y1, c + 1);
   }
   fprintf(f, "$EndEntities\n$Nodes\n%d %zu %d %zu\n", m->nv ? 1 : 0, m->nv, m->nv ? 1 : 0, m->nv);
   if (m->nv) {
@@ -72,9 +126,19 @@ qk_status_t qk_mesh_write_msh(const qk_mesh_t *m, FILE *f) {
     for (size_t i = 0; i < m->nv; i++)
       fprintf(f, "%.17g %.17g 0\n", m->xy[2 * i], m->xy[2 * i + 1]);
   }
-  fprintf(f, "$EndNodes\n$Elements\n%zu %zu %d %zu\n", used, m->nt, m->nt ? 1 : 0, m->nt);
-  /* Element tags are numbered block by block, so they run 1..nt in block order. */
+  size_t ne = m->nt + nseg;
+  fprintf(f, "$EndNodes\n$Elements\n%zu %zu %d %zu\n", used + nm, ne, ne ? 1 : 0, ne);
+  /* Element tags are numbered block by block, so they run 1..ne in block order. */
   size_t tag = 1;
+  for (size_t k = 0; k < nm; k++) {
+    size_t n = 0;
+    for (size_t i = 0; i < m->noseg; i++) n += m->oseg[i].mark == marks[k];
+    fprintf(f, "1 %zu 1 %zu\n", k + 1, n);
+    for (size_t i = 0; i < m->noseg; i++)
+      if (m->oseg[i].mark == marks[k])
+        fprintf(f, "%zu %lu %lu\n", tag++, (unsigned long)m->oseg[i].a + 1,
+                (unsigned long)m->oseg[i].b + 1);
+  }
   for (size_t c = 0; c < nc; c++) {
     if (!count[c]) continue;
     fprintf(f, "2 %zu 2 %zu\n", c + 1, count[c]);
@@ -87,6 +151,7 @@ qk_status_t qk_mesh_write_msh(const qk_mesh_t *m, FILE *f) {
   }
   fprintf(f, "$EndElements\n");
   qk__free(&m->alloc, count, nc * sizeof *count);
+  qk__free(&m->alloc, marks, (m->noseg + 1) * sizeof *marks);
   return io_status(f);
 }
 
@@ -108,12 +173,29 @@ qk_status_t qk_mesh_write_vtu(const qk_mesh_t *m, FILE *f) {
   for (size_t i = 0; i < m->nt; i++) fprintf(f, "%zu\n", 3 * (i + 1));
   fprintf(f, "</DataArray>\n<DataArray type=\"UInt8\" Name=\"types\" format=\"ascii\">\n");
   for (size_t i = 0; i < m->nt; i++) fprintf(f, "5\n"); /* VTK_TRIANGLE */
-  fprintf(f, "</DataArray>\n</Cells>\n<CellData Scalars=\"component\">\n"
-             "<DataArray type=\"Int32\" Name=\"component\" format=\"ascii\">\n");
-  for (size_t i = 0; i < m->nt; i++) fprintf(f, "%lu\n", (unsigned long)m->comp[i]);
-  fprintf(f, "</DataArray>\n</CellData>\n</Piece>\n</UnstructuredGrid>\n</VTKFile>\n");
+  fprintf(f, "</DataArray>\n</Cells>\n<PointData Scalars=\"marker\">\n"
+             "<DataArray type=\"Int32\" Name=\"marker\" format=\"ascii\">\n");
+  for (size_t i = 0; i < m->nv; i++) fprintf(f, "%ld\n", (long)m->vmark[i]);
+  fprintf(f, "</DataArray>\n</PointData>\n<CellData Scalars=\"component\">\n");
+  /* "region" repeats the component id under the name FEM tools look for. */
+  static const char *names[2] = {"component", "region"};
+  for (int k = 0; k < 2; k++) {
+    fprintf(f, "<DataArray type=\"Int32\" Name=\"%s\" format=\"ascii\">\n", names[k]);
+    for (size_t i = 0; i < m->nt; i++) fprintf(f, "%lu\n", (unsigned long)m->comp[i]);
+    fprintf(f, "</DataArray>\n");
+  }
+  if (m->attr) {
+    fprintf(f, "<DataArray type=\"Float64\" Name=\"attribute\" format=\"ascii\">\n");
+    for (size_t i = 0; i < m->nt; i++) fprintf(f, "%.17g\n", m->attr[i]);
+    fprintf(f, "</DataArray>\n");
+  }
+  fprintf(f, "</CellData>\n</Piece>\n</UnstructuredGrid>\n</VTKFile>\n");
   return io_status(f);
 }
+
+/* Lattice coordinates of an input coordinate, for drawing (the tree is on the lattice). */
+static double lat_x(const qk_mesh_t *m, double x) { return ldexp(x - m->lat.x0, m->lat.f); }
+static double lat_y(const qk_mesh_t *m, double y) { return ldexp(y - m->lat.y0, m->lat.f); }
 
 typedef struct svg_ctx {
   FILE *f;
@@ -123,7 +205,7 @@ typedef struct svg_ctx {
 static qk_visit_t draw_leaf(const qk_tree_t *t, qk_node_t v, void *ud) {
   svg_ctx_t *c = ud;
   if (!qk__node_leaf(t, v)) return QK_VISIT_CONTINUE;
-  const qk_square_t sq = qk__node_square(t, v);
+  qk_square_t sq = qk__node_square(t, v);
   double s = sq.side * c->scale;
   fprintf(c->f, "<rect x=\"%.3f\" y=\"%.3f\" width=\"%.3f\" height=\"%.3f\"/>\n", sq.x * c->scale,
           c->height - sq.y * c->scale - s, s, s);
@@ -149,8 +231,8 @@ qk_status_t qk_mesh_write_svg(const qk_mesh_t *m, FILE *f, unsigned width) {
     uint32_t k = m->comp[i];
     fprintf(f, "<polygon fill=\"%s\" points=\"", fill[k == 0 ? 0 : 1 + (k - 1) % 6]);
     for (int j = 0; j < 3; j++)
-      fprintf(f, "%s%.3f,%.3f", j ? " " : "", m->xy[2 * t[j]] * scale,
-              W - m->xy[2 * t[j] + 1] * scale);
+      fprintf(f, "%s%.3f,%.3f", j ? " " : "", lat_x(m, m->xy[2 * t[j]]) * scale,
+              W - lat_y(m, m->xy[2 * t[j] + 1]) * scale);
     fprintf(f, "\"/>\n");
   }
   fprintf(f, "</g>\n<g fill=\"none\" stroke=\"#2b6cb0\" stroke-width=\"1\">\n");
@@ -158,8 +240,9 @@ qk_status_t qk_mesh_write_svg(const qk_mesh_t *m, FILE *f, unsigned width) {
   fprintf(f, "</g>\n<g stroke=\"#c53030\" stroke-width=\"2.5\" stroke-linecap=\"round\">\n");
   for (size_t s = 0; s < m->ncs; s++) {
     uint32_t a = m->cseg[2 * s], b = m->cseg[2 * s + 1];
-    fprintf(f, "<line x1=\"%.3f\" y1=\"%.3f\" x2=\"%.3f\" y2=\"%.3f\"/>\n", m->cxy[2 * a] * scale,
-            W - m->cxy[2 * a + 1] * scale, m->cxy[2 * b] * scale, W - m->cxy[2 * b + 1] * scale);
+    fprintf(f, "<line x1=\"%.3f\" y1=\"%.3f\" x2=\"%.3f\" y2=\"%.3f\"/>\n",
+            lat_x(m, m->cxy[2 * a]) * scale, W - lat_y(m, m->cxy[2 * a + 1]) * scale,
+            lat_x(m, m->cxy[2 * b]) * scale, W - lat_y(m, m->cxy[2 * b + 1]) * scale);
   }
   fprintf(f, "</g>\n</svg>\n");
   return io_status(f);

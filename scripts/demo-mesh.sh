@@ -22,3 +22,7 @@ echo "== mesh: examples/mesh/richer.poly (64x64, six components, one hole)"
 "$cli" mesh "$root/examples/mesh/richer.poly" -o "$out/mesh-richer" --svg "$out/mesh-richer.svg" \
   --msh "$out/mesh-richer.msh" --vtk "$out/mesh-richer.vtu" --stats | summary
 echo "   picture: $out/mesh-richer.svg (also .node/.ele, .msh, .vtu)"
+echo "== mesh: examples/mesh/real.poly (real coordinates: the dyadic-lattice mode, markers)"
+"$cli" mesh "$root/examples/mesh/real.poly" -o "$out/mesh-real" --svg "$out/mesh-real.svg" \
+  --msh "$out/mesh-real.msh" --poly "$out/mesh-real.segments.poly" --stats | summary
+echo "   picture: $out/mesh-real.svg (gmsh groups marker_1..marker_4, output segments in .poly)"

@@ -26,17 +26,19 @@ fi
 echo "== geo knn: the ten places nearest to Paris on the WGS84 ellipsoid, in km"
 # The query: Paris's own row (lon,lat are the first two fields).
 awk -F, '$4 == "FR" && $5 == "\"Paris\"" { print $1 "," $2; exit }' "$cities" >"$out/paris.csv"
-if ! "$cli" geo knn "$cities" "$out/paris.csv" -k 11 -o "$out/paris-knn.csv" 2>"$out/geo.err"; then
+if ! "$cli" geo knn "$cities" "$out/paris.csv" -k 11 --keep point -o "$out/paris-knn.csv" \
+  2>"$out/geo.err"; then
   cat "$out/geo.err"
   echo "(geodesic queries unavailable in this build)"
   exit 0
 fi
-# Join ids (0-based data rows) with names; rank 1 is Paris itself.
-awk -F, 'NR == FNR { if (FNR > 1) { name = $0; for (i = 0; i < 4; i++) sub(/^[^,]*,/, "", name)
-                       gsub(/"/, "", name); names[FNR - 2] = name " (" $4 ")" }
-                     next }
-         FNR > 1 && $2 > 1 { printf "  %2d. %-28s %8.1f km\n", $2 - 1, names[$3], $4 / 1000 }' \
-  "$cities" "$out/paris-knn.csv"
+# --keep point appended each place's own row (lon,lat,population,country,name) after
+# query,rank,point,metres: the name is the rest of the line after the eighth comma.
+# Rank 1 is Paris itself.
+awk -F, 'NR > 1 && $2 > 1 { name = $0; for (i = 0; i < 8; i++) sub(/^[^,]*,/, "", name)
+                            gsub(/"/, "", name)
+                            printf "  %2d. %-28s %8.1f km\n", $2 - 1, name " (" $8 ")", $4 / 1000 }' \
+  "$out/paris-knn.csv"
 echo "   (CSV: $out/paris-knn.csv)"
 echo "== geo radius: places within 1000 km of Paris"
 "$cli" geo radius "$cities" "$out/paris.csv" -r 1000000 -o "$out/paris-1000km.csv"

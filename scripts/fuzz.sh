@@ -33,7 +33,7 @@ mkdir -p "$out"
 flags=(-g -O1 -std=c11 -D_XOPEN_SOURCE=700 -Wall -Wextra -Wpedantic
   "-fsanitize=fuzzer,address,undefined" -fno-sanitize-recover=all -fno-omit-frame-pointer
   -I"$src/include" -I"$src")
-lib=("$src"/index/*.c "$src"/query/*.c "$src"/mesh/*.c)
+lib=("$src"/index/*.c "$src"/query/*.c "$src"/mesh/*.c "$src"/io/*.c)
 
 # Per-target sources and options (max_len bounds the work per input).
 sources() {

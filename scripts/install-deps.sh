@@ -3,7 +3,7 @@
 # everything is present. Usage: install-deps.sh [core|bench|fuzz]...
 set -euo pipefail
 
-want=(cmake make gcc g++ pkg-config libcmocka-dev libproj-dev)
+want=(cmake make gcc g++ pkg-config libcmocka-dev libproj-dev libgmp-dev)
 for set in "$@"; do
   case "$set" in
     core) ;;

@@ -14,7 +14,7 @@ cd "$(dirname "$0")/.."
 src=$PWD
 dir=${MEMCHECK_BUILD_DIR:-build-memcheck}
 jobs=${JOBS:-2}
-tests=${MEMCHECK_TESTS:-"test_index test_collide test_poly test_mesh test_reliability test_reliab_threads test_headers_c"}
+tests=${MEMCHECK_TESTS:-"test_index test_collide test_poly test_mesh test_io test_reliability test_reliab_threads test_headers_c"}
 
 if ! command -v valgrind >/dev/null; then
   echo "memcheck.sh: valgrind not found (make memcheck installs it)" >&2
@@ -65,6 +65,7 @@ run cli_tree_bad_output 1 "$cli" tree examples/points.csv --svg "$tmp/no/such/di
 if "$cli" knn --help >/dev/null 2>&1; then
   printf '0.5,0.5,0.1\n0.55,0.5,0.1\n0.9,0.9,-1\n' >"$tmp/discs.csv"
   run cli_knn 0 "$cli" knn examples/points.csv examples/points.csv -k 5 -o "$tmp/knn.csv"
+  run cli_knn_keep 0 "$cli" knn examples/points.csv examples/points.csv -k 3 --keep both -o "$tmp/knn3.csv"
   run cli_knn_bad_input 1 "$cli" knn examples/points.csv "$tmp/bad.csv" -k 5 -o "$tmp/knn2.csv"
   run cli_collide_bad_input 1 "$cli" collide "$tmp/discs.csv"
 fi

@@ -7,7 +7,9 @@
  *  - the result equals the smallest balanced refinement, computed by a brute-force
  *    fixpoint (split any leaf with an adjacent leaf two levels deeper, repeat);
  *  - the number of leaves stays within a constant factor of the input's (Theorem 2);
- *  - qk_tree_is_balanced() agrees with the brute-force check before and after;
+ *  - qk_tree_is_balanced() agrees with the brute-force check before and after; most
+ *    rounds start unbalanced (counted per kind), and balancing a balanced tree again
+ *    leaves the same leaf squares;
  *  - allocation failure at every N: QK_ERR_NOMEM, a valid tree, no leak.
  */
 #include <stdio.h>
@@ -138,6 +140,9 @@ static void test_balance_random(void **state) {
   print_message("seed %llu\n", (unsigned long long)seed);
   qk_point_t pts[400];
   double worst_ratio = 0;
+  /* Rounds whose tree started unbalanced, per kind: a run where every input happened to
+   * be balanced already would test nothing, so each kind must contribute some. */
+  int unbalanced[5] = {0}, rounds[5] = {0};
   for (int round = 0; round < 40; round++) {
     int kind = round % 5;
     size_t n = 1 + qkt_rng_below(&r, 150);
@@ -150,6 +155,8 @@ static void test_balance_random(void **state) {
     size_t n0 = get_leaves(t, &L);
     int was = brute_unbalanced(L, n0) < 0;
     free(L);
+    rounds[kind]++;
+    unbalanced[kind] += !was;
     if (qk_tree_is_balanced(t) != was)
       fail_msg("seed %llu round %d: is_balanced before", (unsigned long long)seed, round);
 
@@ -180,11 +187,20 @@ static void test_balance_random(void **state) {
     /* Theorem 2: O(m) nodes. The constant for leaves is small in practice. */
     if (ratio > 12)
       fail_msg("seed %llu round %d: %zu leaves from %zu", (unsigned long long)seed, round, n1, n0);
-    /* Balancing again changes nothing. */
+    /* Balancing again changes nothing: the same leaf squares at the same depths. */
     assert_int_equal(qk_tree_balance(t), QK_OK);
-    size_t n3 = 0;
-    qk_tree_leaves(t, NULL, 0, &n3);
-    assert_int_equal(n3, n1);
+    QKT_CHECK_TREE(t);
+    leaf_t *K;
+    size_t n3 = get_leaves(t, &K);
+    if (n3 != n1)
+      fail_msg("seed %llu round %d: balancing again gave %zu leaves, not %zu",
+               (unsigned long long)seed, round, n3, n1);
+    qsort(K, n3, sizeof *K, leaf_cmp);
+    for (size_t i = 0; i < n3; i++)
+      if (leaf_cmp(&K[i], &L[i]) || K[i].s != L[i].s)
+        fail_msg("seed %llu round %d: balancing again changed leaf %zu", (unsigned long long)seed,
+                 round, i);
+    free(K);
     /* The balanced tree stays a working index: inserts and removes keep it valid, and
      * every point is found in the leaf that holds its location. */
     if (kind < 4) {
@@ -210,6 +226,13 @@ static void test_balance_random(void **state) {
     qk_tree_free(u);
   }
   print_message("worst leaf ratio %.2f\n", worst_ratio);
+  for (int k = 0; k < 5; k++) {
+    print_message("kind %d: %d of %d rounds started unbalanced\n", k, unbalanced[k], rounds[k]);
+    /* Most of each kind's rounds must exercise the balancing proper (all do today). */
+    if (2 * unbalanced[k] < rounds[k])
+      fail_msg("seed %llu kind %d: only %d of %d rounds started unbalanced",
+               (unsigned long long)seed, k, unbalanced[k], rounds[k]);
+  }
 }
 
 /* A single deep leaf next to a huge one: the cascade the notes describe. */

@@ -25,7 +25,7 @@
 static size_t mesh_and_check(const double *xy, size_t nv, const uint32_t *seg, size_t ns,
                              const double *holes, size_t nh, uint64_t U, const char *what) {
   qk_poly_t *p;
-  assert_int_equal(qk_poly_from_arrays(xy, nv, seg, ns, holes, nh, NULL, &p), QK_OK);
+  assert_int_equal(qk_poly_from_arrays(xy, nv, seg, ns, holes, nh, NULL, &p, NULL), QK_OK);
   qk_mesh_options_t o;
   qk_mesh_options_init(&o);
   o.size = U;
@@ -39,7 +39,7 @@ static size_t mesh_and_check(const double *xy, size_t nv, const uint32_t *seg, s
   mc_mesh_t mm;
   mm.xy = qk_mesh_vertices(m, &mm.nv);
   mm.tri = qk_mesh_triangles(m, &mm.nt);
-  mm.comp = qk_mesh_triangle_components(m);
+  mm.comp = qk_mesh_triangle_components(m, NULL);
   char msg[512];
   if (mc_check(&in, &mm, msg, sizeof msg))
     fail_msg("%s (U=%llu): %s", what, (unsigned long long)U, msg);
@@ -216,7 +216,8 @@ static void test_mesh_random_validity(void **state) {
     for (size_t i = 0; i < in.ns && ok; i++)
       for (size_t j = i + 1; j < in.ns && ok; j++) ok = !bad_pair(P, in.seg, i, j);
     qk_poly_t *p;
-    assert_int_equal(qk_poly_from_arrays(in.xy, in.nv, in.seg, in.ns, NULL, 0, NULL, &p), QK_OK);
+    assert_int_equal(qk_poly_from_arrays(in.xy, in.nv, in.seg, in.ns, NULL, 0, NULL, &p, NULL),
+                     QK_OK);
     qk_mesh_options_t o;
     qk_mesh_options_init(&o);
     o.size = 32;
@@ -234,7 +235,7 @@ static void test_mesh_random_validity(void **state) {
       mc_mesh_t mm;
       mm.xy = qk_mesh_vertices(m, &mm.nv);
       mm.tri = qk_mesh_triangles(m, &mm.nt);
-      mm.comp = qk_mesh_triangle_components(m);
+      mm.comp = qk_mesh_triangle_components(m, NULL);
       char msg[512];
       if (mc_check(&ci, &mm, msg, sizeof msg))
         fail_msg("seed %llu round %d: %s", (unsigned long long)seed, round, msg);
@@ -284,7 +285,7 @@ static void test_mesh_alloc_failure(void **state) {
     st.fail_at = fail_at;
     qk_poly_t *p = NULL;
     qk_mesh_t *m = NULL;
-    qk_status_t s = qk_poly_from_arrays(xy, 8, seg, ns, hole, 1, &a, &p);
+    qk_status_t s = qk_poly_from_arrays(xy, 8, seg, ns, hole, 1, &a, &p, NULL);
     if (s == QK_OK) {
       qk_mesh_options_t o;
       qk_mesh_options_init(&o);
@@ -333,7 +334,7 @@ static void test_mesh_writers(void **state) {
   size_t ns = 0;
   poly_close(seg, &ns, 0, 4);
   qk_poly_t *p;
-  assert_int_equal(qk_poly_from_arrays(xy, 4, seg, ns, NULL, 0, NULL, &p), QK_OK);
+  assert_int_equal(qk_poly_from_arrays(xy, 4, seg, ns, NULL, 0, NULL, &p, NULL), QK_OK);
   qk_mesh_options_t o;
   qk_mesh_options_init(&o);
   o.size = 16;
@@ -342,7 +343,7 @@ static void test_mesh_writers(void **state) {
   size_t nv, nt;
   const double *v = qk_mesh_vertices(m, &nv);
   const uint32_t *t = qk_mesh_triangles(m, &nt);
-  const uint32_t *c = qk_mesh_triangle_components(m);
+  const uint32_t *c = qk_mesh_triangle_components(m, NULL);
 
   /* .node and .ele, first index 1: read back and compare. */
   FILE *f = tmpfile();
@@ -415,7 +416,7 @@ static void test_mesh_checker_rejects(void **state) {
   poly_close(seg, &ns, 0, 4);
   poly_close(seg, &ns, 4, 4);
   qk_poly_t *p;
-  assert_int_equal(qk_poly_from_arrays(xy, 8, seg, ns, NULL, 0, NULL, &p), QK_OK);
+  assert_int_equal(qk_poly_from_arrays(xy, 8, seg, ns, NULL, 0, NULL, &p, NULL), QK_OK);
   qk_mesh_options_t o;
   qk_mesh_options_init(&o);
   o.size = 8;
@@ -424,7 +425,7 @@ static void test_mesh_checker_rejects(void **state) {
   size_t nv, nt;
   const double *v = qk_mesh_vertices(m, &nv);
   const uint32_t *t = qk_mesh_triangles(m, &nt);
-  const uint32_t *c = qk_mesh_triangle_components(m);
+  const uint32_t *c = qk_mesh_triangle_components(m, NULL);
   double *v2 = malloc(2 * nv * sizeof *v2);
   uint32_t *t2 = malloc(3 * nt * sizeof *t2), *c2 = malloc(nt * sizeof *c2);
   assert_non_null(v2);

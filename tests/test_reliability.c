@@ -17,7 +17,7 @@
  *    counts in a .poly header give QK_ERR_LIMIT / QK_ERR_INVALID / QK_ERR_GEOMETRY
  *    before anything is read or allocated.
  */
-#define _XOPEN_SOURCE 700 /* realpath, used by tools/csv.c */
+#define _XOPEN_SOURCE 700 /* opendir here, getpid in fuzz/fuzz_csv.c */
 #include <dirent.h>
 #include <math.h>
 #include <stdio.h>
@@ -470,7 +470,7 @@ static void test_reliability_alloc_poly_arrays(void **state) {
     a.fail_at = k;
     a.failed = 0;
     qk_poly_t *p = (qk_poly_t *)&a;
-    qk_status_t st = qk_poly_from_arrays(xy, 4, seg, 4, holes, 1, &al, &p);
+    qk_status_t st = qk_poly_from_arrays(xy, 4, seg, 4, holes, 1, &al, &p, NULL);
     assert_memory_equal(xy, xy0, sizeof xy);
     assert_memory_equal(seg, seg0, sizeof seg);
     assert_memory_equal(holes, holes0, sizeof holes);
@@ -628,7 +628,7 @@ static void test_reliability_limits(void **state) {
   /* A vertex beyond 2^30 is out of every allowed domain. */
   double xy[8] = {0, 0, 2147483648.0, 0, 2147483648.0, 2147483648.0, 0, 2147483648.0};
   uint32_t seg[8] = {0, 1, 1, 2, 2, 3, 3, 0};
-  assert_int_equal(qk_poly_from_arrays(xy, 4, seg, 4, NULL, 0, NULL, &poly), QK_OK);
+  assert_int_equal(qk_poly_from_arrays(xy, 4, seg, 4, NULL, 0, NULL, &poly, NULL), QK_OK);
   mo.size = 0;
   st = qk_mesh_generate(poly, &mo, &m, &err);
   assert_true(st == QK_ERR_GEOMETRY || st == QK_ERR_LIMIT);
@@ -640,7 +640,7 @@ static void test_reliability_limits(void **state) {
     const double T = (double)QK_MESH_MAX_SIZE;
     double big[16] = {T - 1, T - 1, T, T - 1, T, T, T - 1, T, 4, 2, 6, 4, 4, 6, 2, 4};
     uint32_t bseg[16] = {0, 1, 1, 2, 2, 3, 3, 0, 4, 5, 5, 6, 6, 7, 7, 4};
-    assert_int_equal(qk_poly_from_arrays(big, 8, bseg, 8, NULL, 0, NULL, &poly), QK_OK);
+    assert_int_equal(qk_poly_from_arrays(big, 8, bseg, 8, NULL, 0, NULL, &poly, NULL), QK_OK);
     mo.size = 0;
     qk_mesh_t *bm;
     assert_int_equal(qk_mesh_generate(poly, &mo, &bm, &err), QK_OK);
@@ -651,7 +651,7 @@ static void test_reliability_limits(void **state) {
     mc_mesh_t mm;
     mm.xy = qk_mesh_vertices(bm, &mm.nv);
     mm.tri = qk_mesh_triangles(bm, &mm.nt);
-    mm.comp = qk_mesh_triangle_components(bm);
+    mm.comp = qk_mesh_triangle_components(bm, NULL);
     char msg[256];
     if (mc_check(&in, &mm, msg, sizeof msg)) fail_msg("mesh at U = 2^30: %s", msg);
     print_message("U = 2^30: %zu triangles, %zu leaves\n", mm.nt, ms.leaves);
@@ -659,7 +659,7 @@ static void test_reliability_limits(void **state) {
     qk_poly_free(poly);
     /* One past it: a clear error naming the vertex, not an overflow. */
     big[2] = T + 1;
-    assert_int_equal(qk_poly_from_arrays(big, 8, bseg, 8, NULL, 0, NULL, &poly), QK_OK);
+    assert_int_equal(qk_poly_from_arrays(big, 8, bseg, 8, NULL, 0, NULL, &poly, NULL), QK_OK);
     bm = (qk_mesh_t *)&a;
     st = qk_mesh_generate(poly, &mo, &bm, &err);
     assert_true(st == QK_ERR_GEOMETRY || st == QK_ERR_LIMIT);

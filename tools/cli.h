@@ -1,6 +1,7 @@
 /*
- * Shared plumbing of the `quadkit` command-line tool: exit codes, CSV input, option
- * parsing helpers and the subcommand entry points.
+ * Shared plumbing of the `quadkit` command-line tool: exit codes, CSV input (csv.c),
+ * messages (report.c), option parsing helpers (args.c), the atomic output writer (out.c)
+ * and the subcommand entry points.
  */
 #ifndef QUADKIT_CLI_H
 #define QUADKIT_CLI_H
@@ -13,29 +14,45 @@
 /* Exit codes (documented in the README and in --help). */
 enum { CLI_OK = 0, CLI_BAD_INPUT = 1, CLI_USAGE = 2, CLI_INTERNAL = 3 };
 
-/* A numeric CSV table: rows x cols doubles, row-major. A field a row does not have (an
- * optional column) is NAN; nfields[r] says how many the row had (at most cols). */
+/*
+ * CSV input (tools/csv.c), through the library's reader (include/quadkit/io.h): errors are
+ * printed as "quadkit: FILE:LINE:COLUMN: reason" and give CLI_BAD_INPUT (CLI_INTERNAL when
+ * out of memory). A data row's 0-based index is its id.
+ */
+
+/* The text of every data row of an input, its line number, and its header, for --keep
+ * and for messages about a row. width: the most fields any of them has. */
+typedef struct cli_rows {
+  char **text;           /* per row; NULL when the rows' text is not kept */
+  unsigned long *lineno; /* per row */
+  size_t n, cap;
+  char *header; /* NULL when the input has none */
+  size_t width;
+  int keep_text;
+} cli_rows_t;
+void cli_rows_free(cli_rows_t *r);
+
+/* A numeric table: rows x cols doubles, row-major; a missing optional field is NAN. */
 typedef struct cli_table {
   double *v;
   size_t rows;
   int cols;
-  unsigned char *nfields;
 } cli_table_t;
 
-/*
- * Read a CSV file: per line, the first `max_fields` comma-separated fields; the first
- * `min_fields` must be present and numeric, the optional ones numeric when present;
- * fields past max_fields are ignored (so names and other columns may follow). A first
- * line whose first field is not a number is a header and skipped. Blank lines are
- * skipped; every other line is a data row and its 0-based index is its id. Coordinates
- * must be finite. On error prints "FILE:LINE: reason" to stderr and returns CLI_BAD_INPUT
- * (CLI_INTERNAL when out of memory); on success CLI_OK. Free with cli_table_free().
- */
-int cli_read_csv(const char *path, int min_fields, int max_fields, cli_table_t *out);
+/* Read `cols` columns (the first `required` of them required) from the first columns of
+ * path. rows (may be NULL) receives the line numbers and, when rows->keep_text, the text. */
+int cli_read_table(const char *path, int required, int cols, cli_rows_t *rows, cli_table_t *out);
 void cli_table_free(cli_table_t *t);
 
-/* Read points (first two fields x, y) into a freshly malloc'd array. */
-int cli_read_points(const char *path, qk_point_t **pts, size_t *n);
+/* Read points: columns `xy` ("X,Y" names or numbers; NULL: the first two) into a malloc'd
+ * array; at least one data row. rows as for cli_read_table. */
+int cli_read_points(const char *path, const char *xy, cli_rows_t *rows, qk_point_t **pts,
+                    size_t *n);
+
+/* Write `text` (one row's or the header's fields) then empty fields up to `width`, each
+ * preceded by a comma; with prefix, the header's names prefixed (names 1..width when
+ * text is NULL). */
+void cli_write_fields(FILE *f, const char *text, size_t width, const char *prefix);
 
 /* Print "quadkit CMD: message" to stderr (printf-style). */
 void cli_error(const char *cmd, const char *fmt, ...)
@@ -52,16 +69,18 @@ int cli_status(const char *cmd, const char *what, qk_status_t st);
 int cli_build_tree(const char *cmd, const char *path, const qk_point_t *pts, size_t n,
                    const qk_tree_options_t *opt, qk_tree_t **out);
 
-/* Parse option values; print a usage error and return nonzero when malformed. */
+/* Option values (tools/args.c); print a usage error and return nonzero when malformed. */
 int cli_parse_u32(const char *cmd, const char *opt, const char *s, unsigned long min,
                   unsigned long max, unsigned long *out);
 int cli_parse_double(const char *cmd, const char *opt, const char *s, double *out);
+/* --xy X,Y: two column names or 1-based numbers, comma-separated. */
+int cli_parse_xy(const char *cmd, const char *opt, const char *s, const char **out);
 
 /*
- * Output files are written to "PATH.tmp.PID" and renamed on success so that a failed run
- * leaves no half-written file; a symbolic link is written through (its target replaced),
- * and a FIFO or device ("-" is stdout) is written directly. cli_out_open returns an exit
- * code (after printing why) on error.
+ * The atomic output writer (tools/out.c). Output files are written to "PATH.tmp.PID" and renamed on
+ * success so that a failed run leaves no half-written file; a symbolic link is written through (its
+ * target replaced), and a FIFO or device ("-" is stdout) is written directly. cli_out_open returns
+ * an exit code (after printing why) on error.
  */
 typedef struct cli_out {
   FILE *f;

@@ -1,18 +1,22 @@
 /*
- * Query subcommands: knn, range, radius, locate, collide, raycast and geo. Each reads
- * CSV input, builds one index, answers every query with the library, and writes CSV with
- * a header, sorted as its --help says, distances with %.17g so that they round-trip.
+ * Query subcommands: knn, range, radius, locate, collide, raycast and geo. One driver
+ * (run_query) parses the shared options, reads the inputs, lets the command build its
+ * index, and writes CSV with a header, sorted as each --help says, distances with %.17g
+ * so that they round-trip; --keep appends the input rows' own fields. A command is its
+ * usage text, its inputs, its output columns and two functions: prepare and answer.
  */
 #define _POSIX_C_SOURCE 200809L
-#include <errno.h>
 #include <math.h>
+#include <stdarg.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "cli.h"
 
 /* ---------------------------------------------------------------------------------- */
-/* Shared plumbing                                                                      */
+/* The driver                                                                           */
+
+enum { IN_POINTS = 1, IN_BOXES, IN_ITEMS, IN_RAYS };
 
 typedef struct qargs {
   const char *cmd;
@@ -26,20 +30,54 @@ typedef struct qargs {
   double max_dist;
   const char *out;
   int boxes;
+  const char *xy, *query_xy, *keep;
 } qargs_t;
+
+typedef struct qrun qrun_t;
+
+typedef struct qcmd {
+  const char *allow;   /* the optional options it takes: k (-k, --max-dist), r, b (--boxes) */
+  int nfiles;          /* input files */
+  int kind[2];         /* what each holds (IN_*) */
+  const char *head;    /* the result columns */
+  const char *side[2]; /* the id columns --keep may name (NULL: none) */
+  int side_file[2];    /* the input each id column refers to */
+  void (*usage)(FILE *);
+  int (*prepare)(qrun_t *);
+  int (*answer)(qrun_t *, size_t i); /* the rows for item i of the second input */
+} qcmd_t;
+
+struct qrun {
+  qargs_t a;
+  const qcmd_t *c;
+  int keep[2];
+  cli_rows_t rows[2];
+  qk_point_t *pts[2];
+  size_t n[2];
+  cli_table_t tab[2];
+  qk_tree_t *tree;
+  qk_geo_t *geo;
+  qk_collider_t *col;
+  qk_neighbor_t *nb;
+  qk_id_t *ids;
+  qk_pair_t *pairs;
+  size_t cap;
+  FILE *f;
+};
 
 /* Parse the options every query command shares; -k, -r and --boxes only where `allow`
  * names them. Returns -1 to go on, or an exit code (after --help or a usage error). */
-static int parse_args(int argc, char **argv, const char *allow, int want_files,
-                      void (*usage)(FILE *), qargs_t *a) {
+static int parse_args(int argc, char **argv, const qcmd_t *c, qargs_t *a) {
+  const char *allow = c->allow;
   memset(a, 0, sizeof *a);
   a->cmd = argv[0];
   a->capacity = 16;
   a->max_dist = INFINITY;
+  int points = c->kind[0] == IN_POINTS || c->kind[1] == IN_POINTS;
   for (int i = 1; i < argc; i++) {
     const char *s = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
     if (!strcmp(s, "--help") || !strcmp(s, "-h")) {
-      usage(stdout);
+      c->usage(stdout);
       return CLI_OK;
     } else if (!strcmp(s, "--capacity")) {
       if (cli_parse_u32(a->cmd, s, v, 1, UINT32_MAX, &a->capacity)) return CLI_USAGE;
@@ -65,6 +103,17 @@ static int parse_args(int argc, char **argv, const char *allow, int want_files,
       i++;
     } else if (!strcmp(s, "--boxes") && strchr(allow, 'b')) {
       a->boxes = 1;
+    } else if ((!strcmp(s, "--xy") && points) ||
+               (!strcmp(s, "--query-xy") && c->kind[1] == IN_POINTS)) {
+      if (cli_parse_xy(a->cmd, s, v, s[2] == 'x' ? &a->xy : &a->query_xy)) return CLI_USAGE;
+      i++;
+    } else if (!strcmp(s, "--keep")) {
+      if (!v) {
+        cli_error(a->cmd, "--keep needs a value");
+        return CLI_USAGE;
+      }
+      a->keep = v;
+      i++;
     } else if (!strcmp(s, "-o")) {
       if (!v) {
         cli_error(a->cmd, "-o needs a file name");
@@ -75,15 +124,15 @@ static int parse_args(int argc, char **argv, const char *allow, int want_files,
     } else if (s[0] == '-' && s[1]) {
       cli_error(a->cmd, "unknown option '%s' (see quadkit %s --help)", s, a->cmd);
       return CLI_USAGE;
-    } else if (a->nfiles < want_files) {
+    } else if (a->nfiles < c->nfiles) {
       a->files[a->nfiles++] = s;
     } else {
       cli_error(a->cmd, "unexpected argument '%s'", s);
       return CLI_USAGE;
     }
   }
-  if (a->nfiles < want_files) {
-    usage(stderr);
+  if (a->nfiles < c->nfiles) {
+    c->usage(stderr);
     return CLI_USAGE;
   }
   if (strchr(allow, 'k') && !a->has_k) {
@@ -97,55 +146,131 @@ static int parse_args(int argc, char **argv, const char *allow, int want_files,
   return -1;
 }
 
-/*
- * The line number of a data row, for error messages: the table keeps rows, not lines,
- * so re-read the file with the same rules (blank lines and a leading header skipped).
- */
-static long row_line(const char *path, size_t row) {
-  FILE *f = fopen(path, "rb");
-  if (!f) return 0;
-  char *line = NULL;
-  size_t cap = 0, seen = 0;
-  long lineno = 0, found = 0;
-  int first = 1;
-  while (getline(&line, &cap, f) >= 0) {
-    lineno++;
-    const char *q = line;
-    if (lineno == 1 && (unsigned char)q[0] == 0xEF) q += 3;
-    while (*q == ' ' || *q == '\t') q++;
-    if (!*q || *q == '\n' || *q == '\r') continue;
-    if (first) {
-      first = 0;
-      char *end;
-      const char *s = *q == '"' ? q + 1 : q;
-      strtod(s, &end);
-      if (end == s) continue; /* the header */
-    }
-    if (seen++ == row) {
-      found = lineno;
-      break;
+/* --keep WHICH: the id columns named (comma-separated), or "both". */
+static int parse_keep(qrun_t *q) {
+  const char *s = q->a.keep;
+  if (!s) return CLI_OK;
+  char buf[64];
+  snprintf(buf, sizeof buf, "%s", s);
+  for (char *t = strtok(buf, ","); t; t = strtok(NULL, ",")) {
+    int hit = 0;
+    for (int k = 0; k < 2; k++)
+      if (q->c->side[k] && (!strcmp(t, q->c->side[k]) || !strcmp(t, "both"))) q->keep[k] = hit = 1;
+    if (!hit) {
+      cli_error(q->a.cmd, "--keep takes %s%s%s%s, not '%s'", q->c->side[0],
+                q->c->side[1] ? ", " : "", q->c->side[1] ? q->c->side[1] : "",
+                q->c->side[1] ? " or both" : "", s);
+      return CLI_USAGE;
     }
   }
-  free(line);
-  fclose(f);
-  return found;
+  return CLI_OK;
 }
 
-/* Report bad data in a row as "FILE:LINE: message". */
-static int bad_row(const char *path, size_t row, const char *msg) {
-  fprintf(stderr, "quadkit: %s:%ld: %s\n", path, row_line(path, row), msg);
+/* Read input i as its kind says (rows' text kept when --keep names it). */
+static int read_input(qrun_t *q, int i) {
+  const char *path = q->a.files[i];
+  for (int k = 0; k < 2; k++)
+    if (q->keep[k] && q->c->side_file[k] == i) q->rows[i].keep_text = 1;
+  switch (q->c->kind[i]) {
+  case IN_POINTS: {
+    const char *xy = i == 1 && q->a.query_xy ? q->a.query_xy : q->a.xy;
+    return cli_read_points(path, xy, &q->rows[i], &q->pts[i], &q->n[i]);
+  }
+  case IN_BOXES:
+    return cli_read_table(path, 4, 4, &q->rows[i], &q->tab[i]);
+  case IN_ITEMS:
+    return cli_read_table(path, q->a.boxes ? 4 : 3, q->a.boxes ? 4 : 3, &q->rows[i], &q->tab[i]);
+  default:
+    return cli_read_table(path, 4, 5, &q->rows[i], &q->tab[i]);
+  }
+}
+
+/* Report bad data in row `row` of input i as "FILE:LINE: message". */
+static int bad_row(const qrun_t *q, int i, size_t row, const char *msg) {
+  fprintf(stderr, "quadkit: %s:%lu: %s\n", q->a.files[i], q->rows[i].lineno[row], msg);
   return CLI_BAD_INPUT;
 }
 
-static int open_out(const qargs_t *a, cli_out_t *o) {
-  return cli_out_open(a->cmd, a->out ? a->out : "-", o);
+/* One output row: the result columns, then the kept rows of ids a and b (QK_NONE or
+ * SIZE_MAX: empty fields). */
+static void emit(qrun_t *q, size_t a, size_t b, const char *fmt, ...) {
+  va_list ap;
+  va_start(ap, fmt);
+  vfprintf(q->f, fmt, ap);
+  va_end(ap);
+  for (int k = 0; k < 2; k++) {
+    if (!q->keep[k]) continue;
+    const cli_rows_t *r = &q->rows[q->c->side_file[k]];
+    size_t id = k ? b : a;
+    cli_write_fields(q->f, id < r->n ? r->text[id] : NULL, r->width, NULL);
+  }
+  fputc('\n', q->f);
 }
 
-static int build_tree(const qargs_t *a, const qk_point_t *pts, size_t n, qk_tree_t **t) {
+static void write_head(qrun_t *q) {
+  fputs(q->c->head, q->f);
+  for (int k = 0; k < 2; k++) {
+    if (!q->keep[k]) continue;
+    const cli_rows_t *r = &q->rows[q->c->side_file[k]];
+    char prefix[32];
+    snprintf(prefix, sizeof prefix, "%s_", q->c->side[k]);
+    cli_write_fields(q->f, r->header, r->width, prefix);
+  }
+  fputc('\n', q->f);
+}
+
+static void run_free(qrun_t *q) {
+  for (int i = 0; i < 2; i++) {
+    cli_rows_free(&q->rows[i]);
+    free(q->pts[i]);
+    cli_table_free(&q->tab[i]);
+  }
+  qk_tree_free(q->tree);
+  qk_geo_free(q->geo);
+  qk_collider_free(q->col);
+  free(q->nb);
+  free(q->ids);
+  free(q->pairs);
+}
+
+/* Parse, read, prepare, answer every item of the second input (or once), write. */
+static int run_query(int argc, char **argv, const qcmd_t *c) {
+  qrun_t q;
+  memset(&q, 0, sizeof q);
+  q.c = c;
+  int rc = parse_args(argc, argv, c, &q.a);
+  if (rc >= 0) return rc;
+  if ((rc = parse_keep(&q))) return rc;
+  for (int i = 0; i < c->nfiles && !rc; i++) rc = read_input(&q, i);
+  if (!rc) rc = c->prepare(&q);
+  cli_out_t o;
+  if (!rc && !(rc = cli_out_open(q.a.cmd, q.a.out ? q.a.out : "-", &o))) {
+    q.f = o.f;
+    write_head(&q);
+    size_t items = c->nfiles < 2 ? 1 : c->kind[1] == IN_POINTS ? q.n[1] : q.tab[1].rows;
+    for (size_t i = 0; i < items && !rc; i++) rc = c->answer(&q, i);
+    int rc2 = cli_out_close(q.a.cmd, &o, rc == CLI_OK);
+    if (!rc) rc = rc2;
+  }
+  run_free(&q);
+  return rc;
+}
+
+static int build_tree(qrun_t *q) {
   qk_tree_options_t opt;
   qk_tree_options_init(&opt);
-  opt.capacity = (uint32_t)a->capacity;
-  return cli_build_tree(a->cmd, a->files[0], pts, n, &opt, t);
+  opt.capacity = (uint32_t)q->a.capacity;
+  return cli_build_tree(q->a.cmd, q->a.files[0], q->pts[0], q->n[0], &opt, &q->tree);
+}
+
+/* Scratch for up to `cap` neighbours or ids. */
+static int scratch(qrun_t *q, size_t cap, int ids) {
+  q->cap = cap;
+  if (ids)
+    q->ids = malloc((cap ? cap : 1) * sizeof *q->ids);
+  else
+    q->nb = malloc((cap ? cap : 1) * sizeof *q->nb);
+  return (ids ? !!q->ids : !!q->nb) ? CLI_OK : cli_status(q->a.cmd, "scratch", QK_ERR_NOMEM);
 }
 
 static int nb_by_id(const void *x, const void *y) {
@@ -158,342 +283,288 @@ static int id_cmp(const void *x, const void *y) {
   return (p > q) - (p < q);
 }
 
+#define KEEP_HELP(sides)                                                                           \
+  "  --keep WHICH  append the input rows' own fields (" sides "), each header\n"                   \
+  "                name prefixed with WHICH_\n"
+#define XY_HELP                                                                                    \
+  "  --xy X,Y      the columns holding x and y: header names or 1-based numbers\n"                 \
+  "                (default: the first two)\n"
+#define COMMON_HELP                                                                                \
+  "  --capacity C  points per leaf of the tree (default 16)\n"                                     \
+  "  -o FILE       write to FILE instead of standard output\n"
+
 /* ---------------------------------------------------------------------------------- */
-/* knn                                                                                  */
+/* knn and radius                                                                       */
 
 static void knn_usage(FILE *f) {
-  fprintf(f, "usage: quadkit knn POINTS.csv QUERIES.csv -k K [--max-dist D] [--capacity C] "
-             "[-o FILE]\n"
+  fprintf(f, "usage: quadkit knn POINTS.csv QUERIES.csv -k K [--max-dist D] [options]\n"
              "The K nearest points to each query (Euclidean), exact; ties by smaller id.\n"
              "Output: query,rank,point,distance  (rank 1..K, by query then rank)\n"
              "  -k K          neighbours per query (1 to 1000000)\n"
-             "  --max-dist D  only points within distance D (fewer than K rows then)\n"
-             "  --capacity C  points per leaf of the tree (default 16)\n"
-             "  -o FILE       write to FILE instead of standard output\n");
+             "  --max-dist D  only points within distance D (fewer than K rows then)\n" XY_HELP
+             "  --query-xy X,Y  the same for QUERIES.csv only\n" KEEP_HELP("query, point or both")
+                 COMMON_HELP);
 }
 
-int cmd_knn(int argc, char **argv) {
-  qargs_t a;
-  int rc = parse_args(argc, argv, "k", 2, knn_usage, &a);
-  if (rc >= 0) return rc;
-  qk_point_t *pts = NULL, *qs = NULL;
-  size_t n = 0, nq = 0;
-  qk_tree_t *t = NULL;
-  qk_neighbor_t *nb = NULL;
-  if ((rc = cli_read_points(a.files[0], &pts, &n)) || (rc = cli_read_points(a.files[1], &qs, &nq)))
-    goto done;
-  if ((rc = build_tree(&a, pts, n, &t))) goto done;
-  nb = malloc(a.k * sizeof *nb);
-  if (!nb) {
-    rc = cli_status(a.cmd, "kNN", QK_ERR_NOMEM);
-    goto done;
-  }
-  cli_out_t o;
-  if ((rc = open_out(&a, &o))) goto done;
-  fprintf(o.f, "query,rank,point,distance\n");
-  int ok = 1;
-  for (size_t i = 0; i < nq && ok; i++) {
-    size_t m;
-    qk_status_t st = qk_query_knn(t, qs[i], a.k, a.max_dist, nb, &m);
-    if (st != QK_OK) {
-      rc = cli_status(a.cmd, a.files[1], st);
-      ok = 0;
-      break;
-    }
-    for (size_t j = 0; j < m; j++)
-      fprintf(o.f, "%zu,%zu,%u,%.17g\n", i, j + 1, (unsigned)nb[j].id, nb[j].dist);
-  }
-  int rc2 = cli_out_close(a.cmd, &o, ok);
-  if (!rc) rc = rc2;
-done:
-  free(nb);
-  qk_tree_free(t);
-  free(pts);
-  free(qs);
-  return rc;
+static int knn_prepare(qrun_t *q) {
+  int rc = build_tree(q);
+  return rc ? rc : scratch(q, q->a.k, 0);
 }
 
-/* ---------------------------------------------------------------------------------- */
-/* range                                                                                */
-
-static void range_usage(FILE *f) {
-  fprintf(f, "usage: quadkit range POINTS.csv BOXES.csv [--capacity C] [-o FILE]\n"
-             "The points inside each closed box (xmin <= x <= xmax, ymin <= y <= ymax).\n"
-             "BOXES.csv: xmin,ymin,xmax,ymax per line.\n"
-             "Output: box,point  (by box then point)\n"
-             "  --capacity C  points per leaf of the tree (default 16)\n"
-             "  -o FILE       write to FILE instead of standard output\n");
+static int knn_answer(qrun_t *q, size_t i) {
+  size_t m;
+  qk_status_t st = qk_query_knn(q->tree, q->pts[1][i], q->a.k, q->a.max_dist, q->nb, &m);
+  if (st != QK_OK) return cli_status(q->a.cmd, q->a.files[1], st);
+  for (size_t j = 0; j < m; j++)
+    emit(q, i, q->nb[j].id, "%zu,%zu,%u,%.17g", i, j + 1, (unsigned)q->nb[j].id, q->nb[j].dist);
+  return CLI_OK;
 }
 
-int cmd_range(int argc, char **argv) {
-  qargs_t a;
-  int rc = parse_args(argc, argv, "", 2, range_usage, &a);
-  if (rc >= 0) return rc;
-  qk_point_t *pts = NULL;
-  size_t n = 0;
-  qk_tree_t *t = NULL;
-  qk_id_t *ids = NULL;
-  cli_table_t boxes = {0};
-  if ((rc = cli_read_points(a.files[0], &pts, &n))) goto done;
-  if ((rc = cli_read_csv(a.files[1], 4, 4, &boxes))) goto done;
-  for (size_t i = 0; i < boxes.rows; i++) {
-    const double *b = boxes.v + 4 * i;
-    if (b[0] > b[2] || b[1] > b[3]) {
-      rc = bad_row(a.files[1], i, "box has xmin > xmax or ymin > ymax");
-      goto done;
-    }
-  }
-  if ((rc = build_tree(&a, pts, n, &t))) goto done;
-  ids = malloc(n * sizeof *ids);
-  if (!ids) {
-    rc = cli_status(a.cmd, "range", QK_ERR_NOMEM);
-    goto done;
-  }
-  cli_out_t o;
-  if ((rc = open_out(&a, &o))) goto done;
-  fprintf(o.f, "box,point\n");
-  for (size_t i = 0; i < boxes.rows; i++) {
-    const double *b = boxes.v + 4 * i;
-    qk_box_t box = {b[0], b[1], b[2], b[3]};
-    size_t m;
-    qk_query_range_ids(t, box, ids, n, &m);
-    qsort(ids, m, sizeof *ids, id_cmp);
-    for (size_t j = 0; j < m; j++) fprintf(o.f, "%zu,%u\n", i, (unsigned)ids[j]);
-  }
-  rc = cli_out_close(a.cmd, &o, 1);
-done:
-  free(ids);
-  qk_tree_free(t);
-  free(pts);
-  cli_table_free(&boxes);
-  return rc;
-}
+static const qcmd_t knn_cmd = {.allow = "k",
+                               .nfiles = 2,
+                               .kind = {IN_POINTS, IN_POINTS},
+                               .head = "query,rank,point,distance",
+                               .side = {"query", "point"},
+                               .side_file = {1, 0},
+                               .usage = knn_usage,
+                               .prepare = knn_prepare,
+                               .answer = knn_answer};
 
-/* ---------------------------------------------------------------------------------- */
-/* radius                                                                               */
+int cmd_knn(int argc, char **argv) { return run_query(argc, argv, &knn_cmd); }
 
 static void radius_usage(FILE *f) {
-  fprintf(f, "usage: quadkit radius POINTS.csv QUERIES.csv -r R [--capacity C] [-o FILE]\n"
+  fprintf(f, "usage: quadkit radius POINTS.csv QUERIES.csv -r R [options]\n"
              "The points within distance R of each query (inclusive).\n"
              "Output: query,point,distance  (by query then point)\n"
-             "  -r R          the radius, >= 0\n"
-             "  --capacity C  points per leaf of the tree (default 16)\n"
-             "  -o FILE       write to FILE instead of standard output\n");
+             "  -r R          the radius, >= 0\n" XY_HELP
+             "  --query-xy X,Y  the same for QUERIES.csv only\n" KEEP_HELP("query, point or both")
+                 COMMON_HELP);
 }
 
-int cmd_radius(int argc, char **argv) {
-  qargs_t a;
-  int rc = parse_args(argc, argv, "r", 2, radius_usage, &a);
-  if (rc >= 0) return rc;
-  qk_point_t *pts = NULL, *qs = NULL;
-  size_t n = 0, nq = 0;
-  qk_tree_t *t = NULL;
-  qk_neighbor_t *nb = NULL;
-  if ((rc = cli_read_points(a.files[0], &pts, &n)) || (rc = cli_read_points(a.files[1], &qs, &nq)))
-    goto done;
-  if ((rc = build_tree(&a, pts, n, &t))) goto done;
-  nb = malloc(n * sizeof *nb);
-  if (!nb) {
-    rc = cli_status(a.cmd, "radius", QK_ERR_NOMEM);
-    goto done;
-  }
-  cli_out_t o;
-  if ((rc = open_out(&a, &o))) goto done;
-  fprintf(o.f, "query,point,distance\n");
-  for (size_t i = 0; i < nq; i++) {
-    size_t m;
-    qk_query_radius_list(t, qs[i], a.r, nb, n, &m);
-    qsort(nb, m, sizeof *nb, nb_by_id);
-    for (size_t j = 0; j < m; j++)
-      fprintf(o.f, "%zu,%u,%.17g\n", i, (unsigned)nb[j].id, nb[j].dist);
-  }
-  rc = cli_out_close(a.cmd, &o, 1);
-done:
-  free(nb);
-  qk_tree_free(t);
-  free(pts);
-  free(qs);
-  return rc;
+static int radius_prepare(qrun_t *q) {
+  int rc = build_tree(q);
+  return rc ? rc : scratch(q, q->n[0], 0);
 }
+
+static int radius_answer(qrun_t *q, size_t i) {
+  size_t m;
+  qk_query_radius_list(q->tree, q->pts[1][i], q->a.r, q->nb, q->cap, &m);
+  qsort(q->nb, m, sizeof *q->nb, nb_by_id);
+  for (size_t j = 0; j < m; j++)
+    emit(q, i, q->nb[j].id, "%zu,%u,%.17g", i, (unsigned)q->nb[j].id, q->nb[j].dist);
+  return CLI_OK;
+}
+
+static const qcmd_t radius_cmd = {.allow = "r",
+                                  .nfiles = 2,
+                                  .kind = {IN_POINTS, IN_POINTS},
+                                  .head = "query,point,distance",
+                                  .side = {"query", "point"},
+                                  .side_file = {1, 0},
+                                  .usage = radius_usage,
+                                  .prepare = radius_prepare,
+                                  .answer = radius_answer};
+
+int cmd_radius(int argc, char **argv) { return run_query(argc, argv, &radius_cmd); }
 
 /* ---------------------------------------------------------------------------------- */
-/* locate                                                                               */
+/* range and locate                                                                     */
+
+static void range_usage(FILE *f) {
+  fprintf(f, "usage: quadkit range POINTS.csv BOXES.csv [options]\n"
+             "The points inside each closed box (xmin <= x <= xmax, ymin <= y <= ymax).\n"
+             "BOXES.csv: xmin,ymin,xmax,ymax per line.\n"
+             "Output: box,point  (by box then point)\n" XY_HELP KEEP_HELP("box, point or both")
+                 COMMON_HELP);
+}
+
+static int range_prepare(qrun_t *q) {
+  for (size_t i = 0; i < q->tab[1].rows; i++) {
+    const double *b = q->tab[1].v + 4 * i;
+    if (b[0] > b[2] || b[1] > b[3]) return bad_row(q, 1, i, "box has xmin > xmax or ymin > ymax");
+  }
+  int rc = build_tree(q);
+  return rc ? rc : scratch(q, q->n[0], 1);
+}
+
+static int range_answer(qrun_t *q, size_t i) {
+  const double *b = q->tab[1].v + 4 * i;
+  size_t m;
+  qk_query_range_ids(q->tree, (qk_box_t){b[0], b[1], b[2], b[3]}, q->ids, q->cap, &m);
+  qsort(q->ids, m, sizeof *q->ids, id_cmp);
+  for (size_t j = 0; j < m; j++) emit(q, i, q->ids[j], "%zu,%u", i, (unsigned)q->ids[j]);
+  return CLI_OK;
+}
+
+static const qcmd_t range_cmd = {.allow = "",
+                                 .nfiles = 2,
+                                 .kind = {IN_POINTS, IN_BOXES},
+                                 .head = "box,point",
+                                 .side = {"box", "point"},
+                                 .side_file = {1, 0},
+                                 .usage = range_usage,
+                                 .prepare = range_prepare,
+                                 .answer = range_answer};
+
+int cmd_range(int argc, char **argv) { return run_query(argc, argv, &range_cmd); }
 
 static void locate_usage(FILE *f) {
-  fprintf(f, "usage: quadkit locate POINTS.csv QUERIES.csv [--capacity C] [-o FILE]\n"
+  fprintf(f, "usage: quadkit locate POINTS.csv QUERIES.csv [options]\n"
              "The leaf of the tree over POINTS whose square holds each query location\n"
              "(squares are half-open on their west and south sides, the root's edges "
              "included).\n"
              "Output: query,xmin,ymin,side,depth,count  (one row per query, in order; a query\n"
-             "outside the root square gets nan,nan,nan,-1,0)\n"
-             "  --capacity C  points per leaf of the tree (default 16)\n"
-             "  -o FILE       write to FILE instead of standard output\n");
+             "outside the root square gets nan,nan,nan,-1,0)\n" XY_HELP
+             "  --query-xy X,Y  the same for QUERIES.csv only\n" KEEP_HELP("query") COMMON_HELP);
 }
 
-int cmd_locate(int argc, char **argv) {
-  qargs_t a;
-  int rc = parse_args(argc, argv, "", 2, locate_usage, &a);
-  if (rc >= 0) return rc;
-  qk_point_t *pts = NULL, *qs = NULL;
-  size_t n = 0, nq = 0;
-  qk_tree_t *t = NULL;
-  if ((rc = cli_read_points(a.files[0], &pts, &n)) || (rc = cli_read_points(a.files[1], &qs, &nq)))
-    goto done;
-  if ((rc = build_tree(&a, pts, n, &t))) goto done;
-  cli_out_t o;
-  if ((rc = open_out(&a, &o))) goto done;
-  fprintf(o.f, "query,xmin,ymin,side,depth,count\n");
-  for (size_t i = 0; i < nq; i++) {
-    qk_location_t loc;
-    if (qk_query_locate(t, qs[i], &loc) != QK_OK) {
-      fprintf(o.f, "%zu,nan,nan,nan,-1,0\n", i);
-      continue;
-    }
-    fprintf(o.f, "%zu,%.17g,%.17g,%.17g,%u,%zu\n", i, loc.square.x, loc.square.y, loc.square.side,
-            (unsigned)loc.depth, loc.count);
-  }
-  rc = cli_out_close(a.cmd, &o, 1);
-done:
-  qk_tree_free(t);
-  free(pts);
-  free(qs);
-  return rc;
+static int locate_answer(qrun_t *q, size_t i) {
+  qk_location_t loc;
+  if (qk_query_locate(q->tree, q->pts[1][i], &loc) != QK_OK)
+    emit(q, i, SIZE_MAX, "%zu,nan,nan,nan,-1,0", i);
+  else
+    emit(q, i, SIZE_MAX, "%zu,%.17g,%.17g,%.17g,%u,%zu", i, loc.square.x, loc.square.y,
+         loc.square.side, (unsigned)loc.depth, loc.count);
+  return CLI_OK;
 }
+
+static const qcmd_t locate_cmd = {.allow = "",
+                                  .nfiles = 2,
+                                  .kind = {IN_POINTS, IN_POINTS},
+                                  .head = "query,xmin,ymin,side,depth,count",
+                                  .side = {"query", NULL},
+                                  .side_file = {1, 0},
+                                  .usage = locate_usage,
+                                  .prepare = build_tree,
+                                  .answer = locate_answer};
+
+int cmd_locate(int argc, char **argv) { return run_query(argc, argv, &locate_cmd); }
 
 /* ---------------------------------------------------------------------------------- */
 /* collide and raycast                                                                  */
 
-/* Read discs (x,y,r) or, with --boxes, boxes (xmin,ymin,xmax,ymax) into a collider. */
-static int read_items(const qargs_t *a, qk_collider_t **c) {
-  cli_table_t tb;
-  int cols = a->boxes ? 4 : 3;
-  int rc = cli_read_csv(a->files[0], cols, cols, &tb);
-  if (rc) return rc;
-  if (tb.rows == 0) {
-    fprintf(stderr, "quadkit: %s: no data rows\n", a->files[0]);
-    cli_table_free(&tb);
+/* Check the discs (x,y,r) or boxes (xmin,ymin,xmax,ymax) of input 0; build the collider. */
+static int build_collider(qrun_t *q) {
+  const cli_table_t *tb = &q->tab[0];
+  if (tb->rows == 0) {
+    fprintf(stderr, "quadkit: %s: no data rows\n", q->a.files[0]);
     return CLI_BAD_INPUT;
   }
-  for (size_t i = 0; i < tb.rows; i++) {
-    const double *v = tb.v + (size_t)cols * i;
-    if (!a->boxes && v[2] < 0) {
-      rc = bad_row(a->files[0], i, "disc radius is negative");
-      break;
-    }
-    if (a->boxes && (v[0] > v[2] || v[1] > v[3])) {
-      rc = bad_row(a->files[0], i, "box has xmin > xmax or ymin > ymax");
-      break;
-    }
+  for (size_t i = 0; i < tb->rows; i++) {
+    const double *v = tb->v + (size_t)tb->cols * i;
+    if (!q->a.boxes && v[2] < 0) return bad_row(q, 0, i, "disc radius is negative");
+    if (q->a.boxes && (v[0] > v[2] || v[1] > v[3]))
+      return bad_row(q, 0, i, "box has xmin > xmax or ymin > ymax");
   }
-  if (!rc) {
-    qk_tree_options_t opt;
-    qk_tree_options_init(&opt);
-    opt.capacity = (uint32_t)a->capacity;
-    /* cli_table rows are packed doubles in the field order of qk_disc_t / qk_box_t. */
-    qk_disc_t *d = NULL;
-    qk_box_t *b = NULL;
-    if (a->boxes) {
-      b = malloc(tb.rows * sizeof *b);
-      for (size_t i = 0; b && i < tb.rows; i++)
-        b[i] = (qk_box_t){tb.v[4 * i], tb.v[4 * i + 1], tb.v[4 * i + 2], tb.v[4 * i + 3]};
-    } else {
-      d = malloc(tb.rows * sizeof *d);
-      for (size_t i = 0; d && i < tb.rows; i++)
-        d[i] = (qk_disc_t){tb.v[3 * i], tb.v[3 * i + 1], tb.v[3 * i + 2]};
-    }
-    if (!d && !b)
-      rc = cli_status(a->cmd, a->files[0], QK_ERR_NOMEM);
-    else
-      rc = cli_status(a->cmd, a->files[0],
-                      qk_collider_build(d, d ? tb.rows : 0, b, b ? tb.rows : 0, &opt, c));
-    free(d);
-    free(b);
+  qk_tree_options_t opt;
+  qk_tree_options_init(&opt);
+  opt.capacity = (uint32_t)q->a.capacity;
+  /* The rows are packed doubles in the field order of qk_disc_t / qk_box_t. */
+  qk_disc_t *d = NULL;
+  qk_box_t *b = NULL;
+  if (q->a.boxes) {
+    b = malloc(tb->rows * sizeof *b);
+    for (size_t i = 0; b && i < tb->rows; i++)
+      b[i] = (qk_box_t){tb->v[4 * i], tb->v[4 * i + 1], tb->v[4 * i + 2], tb->v[4 * i + 3]};
+  } else {
+    d = malloc(tb->rows * sizeof *d);
+    for (size_t i = 0; d && i < tb->rows; i++)
+      d[i] = (qk_disc_t){tb->v[3 * i], tb->v[3 * i + 1], tb->v[3 * i + 2]};
   }
-  cli_table_free(&tb);
+  int rc;
+  if (!d && !b)
+    rc = cli_status(q->a.cmd, q->a.files[0], QK_ERR_NOMEM);
+  else
+    rc = cli_status(q->a.cmd, q->a.files[0],
+                    qk_collider_build(d, d ? tb->rows : 0, b, b ? tb->rows : 0, &opt, &q->col));
+  free(d);
+  free(b);
   return rc;
 }
 
 static void collide_usage(FILE *f) {
-  fprintf(f, "usage: quadkit collide DISCS.csv [--boxes] [--capacity C] [-o FILE]\n"
+  fprintf(f, "usage: quadkit collide DISCS.csv [--boxes] [options]\n"
              "Every pair of overlapping discs (x,y,r per line); touching counts. With --boxes\n"
              "the file holds boxes (xmin,ymin,xmax,ymax) instead. Ids are 0-based data rows.\n"
-             "Output: a,b  (a < b, sorted by a then b)\n"
-             "  --capacity C  items per leaf of the tree (default 16)\n"
-             "  -o FILE       write to FILE instead of standard output\n");
+             "Output: a,b  (a < b, sorted by a then b)\n" KEEP_HELP(
+                 "a, b or both") "  --capacity C  items per leaf of the tree (default 16)\n"
+                                 "  -o FILE       write to FILE instead of standard output\n");
 }
 
-int cmd_collide(int argc, char **argv) {
-  qargs_t a;
-  int rc = parse_args(argc, argv, "b", 1, collide_usage, &a);
-  if (rc >= 0) return rc;
-  qk_collider_t *c = NULL;
-  qk_pair_t *pairs = NULL;
-  if ((rc = read_items(&a, &c))) return rc;
+static int collide_prepare(qrun_t *q) {
+  int rc = build_collider(q);
+  if (rc) return rc;
   size_t np = 0;
-  qk_collider_pairs_list(c, NULL, 0, &np);
-  pairs = malloc((np ? np : 1) * sizeof *pairs);
-  if (!pairs) {
-    rc = cli_status(a.cmd, "collide", QK_ERR_NOMEM);
-    goto done;
-  }
-  qk_collider_pairs_list(c, pairs, np, &np);
-  cli_out_t o;
-  if ((rc = open_out(&a, &o))) goto done;
-  fprintf(o.f, "a,b\n");
-  for (size_t i = 0; i < np; i++)
-    fprintf(o.f, "%u,%u\n", (unsigned)pairs[i].a, (unsigned)pairs[i].b);
-  rc = cli_out_close(a.cmd, &o, 1);
-done:
-  free(pairs);
-  qk_collider_free(c);
-  return rc;
+  qk_collider_pairs_list(q->col, NULL, 0, &np);
+  q->pairs = malloc((np ? np : 1) * sizeof *q->pairs);
+  if (!q->pairs) return cli_status(q->a.cmd, "collide", QK_ERR_NOMEM);
+  qk_collider_pairs_list(q->col, q->pairs, np, &q->cap);
+  return CLI_OK;
 }
+
+static int collide_answer(qrun_t *q, size_t i) {
+  (void)i; /* one input: all the pairs at once */
+  for (size_t j = 0; j < q->cap; j++)
+    emit(q, q->pairs[j].a, q->pairs[j].b, "%u,%u", (unsigned)q->pairs[j].a,
+         (unsigned)q->pairs[j].b);
+  return CLI_OK;
+}
+
+static const qcmd_t collide_cmd = {.allow = "b",
+                                   .nfiles = 1,
+                                   .kind = {IN_ITEMS, 0},
+                                   .head = "a,b",
+                                   .side = {"a", "b"},
+                                   .side_file = {0, 0},
+                                   .usage = collide_usage,
+                                   .prepare = collide_prepare,
+                                   .answer = collide_answer};
+
+int cmd_collide(int argc, char **argv) { return run_query(argc, argv, &collide_cmd); }
 
 static void raycast_usage(FILE *f) {
-  fprintf(f, "usage: quadkit raycast DISCS.csv RAYS.csv [--boxes] [--capacity C] [-o FILE]\n"
+  fprintf(f, "usage: quadkit raycast DISCS.csv RAYS.csv [--boxes] [options]\n"
              "The first disc hit by each ray origin + t * direction, t >= 0 (t = 0 when the\n"
              "origin is inside a disc; ties by smaller id). RAYS.csv: ox,oy,dx,dy and an\n"
              "optional tmax (a segment from o to o + d has tmax 1). With --boxes the first\n"
              "file holds boxes (xmin,ymin,xmax,ymax).\n"
-             "Output: ray,disc,t  (one row per ray; ray,-1,inf when nothing is hit)\n"
-             "  --capacity C  items per leaf of the tree (default 16)\n"
-             "  -o FILE       write to FILE instead of standard output\n");
+             "Output: ray,disc,t  (one row per ray; ray,-1,inf when nothing is hit)\n" KEEP_HELP(
+                 "ray, disc or both") "  --capacity C  items per leaf of the tree (default 16)\n"
+                                      "  -o FILE       write to FILE instead of standard "
+                                      "output\n");
 }
 
-int cmd_raycast(int argc, char **argv) {
-  qargs_t a;
-  int rc = parse_args(argc, argv, "b", 2, raycast_usage, &a);
-  if (rc >= 0) return rc;
-  qk_collider_t *c = NULL;
-  cli_table_t rays = {0};
-  if ((rc = cli_read_csv(a.files[1], 4, 5, &rays))) return rc;
-  for (size_t i = 0; i < rays.rows; i++) {
-    double tmax = rays.v[5 * i + 4];
-    if (!isnan(tmax) && tmax < 0) {
-      rc = bad_row(a.files[1], i, "tmax is negative");
-      goto done;
-    }
+static int raycast_prepare(qrun_t *q) {
+  for (size_t i = 0; i < q->tab[1].rows; i++) {
+    double tmax = q->tab[1].v[5 * i + 4];
+    if (!isnan(tmax) && tmax < 0) return bad_row(q, 1, i, "tmax is negative");
   }
-  if ((rc = read_items(&a, &c))) goto done;
-  cli_out_t o;
-  if ((rc = open_out(&a, &o))) goto done;
-  fprintf(o.f, "ray,disc,t\n");
-  for (size_t i = 0; i < rays.rows; i++) {
-    const double *v = rays.v + 5 * i;
-    qk_hit_t h;
-    qk_collider_raycast(c, (qk_point_t){v[0], v[1]}, (qk_point_t){v[2], v[3]},
-                        isnan(v[4]) ? INFINITY : v[4], &h);
-    if (h.id == QK_NONE)
-      fprintf(o.f, "%zu,-1,inf\n", i);
-    else
-      fprintf(o.f, "%zu,%u,%.17g\n", i, (unsigned)h.id, h.t);
-  }
-  rc = cli_out_close(a.cmd, &o, 1);
-done:
-  qk_collider_free(c);
-  cli_table_free(&rays);
-  return rc;
+  return build_collider(q);
 }
+
+static int raycast_answer(qrun_t *q, size_t i) {
+  const double *v = q->tab[1].v + 5 * i;
+  qk_hit_t h;
+  qk_collider_raycast(q->col, (qk_point_t){v[0], v[1]}, (qk_point_t){v[2], v[3]},
+                      isnan(v[4]) ? INFINITY : v[4], &h);
+  if (h.id == QK_NONE)
+    emit(q, i, SIZE_MAX, "%zu,-1,inf", i);
+  else
+    emit(q, i, h.id, "%zu,%u,%.17g", i, (unsigned)h.id, h.t);
+  return CLI_OK;
+}
+
+static const qcmd_t raycast_cmd = {.allow = "b",
+                                   .nfiles = 2,
+                                   .kind = {IN_ITEMS, IN_RAYS},
+                                   .head = "ray,disc,t",
+                                   .side = {"ray", "disc"},
+                                   .side_file = {1, 0},
+                                   .usage = raycast_usage,
+                                   .prepare = raycast_prepare,
+                                   .answer = raycast_answer};
+
+int cmd_raycast(int argc, char **argv) { return run_query(argc, argv, &raycast_cmd); }
 
 /* ---------------------------------------------------------------------------------- */
 /* geo                                                                                  */
@@ -501,25 +572,72 @@ done:
 static void geo_usage(FILE *f) {
   fprintf(f, "usage: quadkit geo knn POINTS.csv QUERIES.csv -k K [--max-dist METRES] [options]\n"
              "       quadkit geo radius POINTS.csv QUERIES.csv -r METRES [options]\n"
-             "Geodesic queries on the WGS84 ellipsoid: the first two fields are lon,lat in\n"
+             "Geodesic queries on the WGS84 ellipsoid: the x and y columns are lon,lat in\n"
              "degrees (latitude within [-90, 90]; any longitude, normalised); distances in\n"
              "metres along the geodesic (GeographicLib's algorithm).\n"
              "Output: knn    query,rank,point,metres  (rank 1..K; ties by smaller id)\n"
-             "        radius query,point,metres       (by query then point)\n"
-             "  --capacity C  points per leaf of the tree (default 16)\n"
-             "  -o FILE       write to FILE instead of standard output\n");
+             "        radius query,point,metres       (by query then point)\n" XY_HELP
+             "  --query-xy X,Y  the same for QUERIES.csv only\n" KEEP_HELP("query, point or both")
+                 COMMON_HELP);
 }
 
 /* Latitudes must lie in [-90, 90]: say which line does not. */
-static int check_lat(const char *path, const qk_point_t *p, size_t n) {
-  for (size_t i = 0; i < n; i++)
-    if (p[i].y < -90 || p[i].y > 90) {
+static int check_lat(const qrun_t *q, int i) {
+  for (size_t j = 0; j < q->n[i]; j++)
+    if (q->pts[i][j].y < -90 || q->pts[i][j].y > 90) {
       char msg[96];
-      snprintf(msg, sizeof msg, "latitude %.17g is outside [-90, 90]", p[i].y);
-      return bad_row(path, i, msg);
+      snprintf(msg, sizeof msg, "latitude %.17g is outside [-90, 90]", q->pts[i][j].y);
+      return bad_row(q, i, j, msg);
     }
   return CLI_OK;
 }
+
+static int geo_prepare(qrun_t *q) {
+  int rc;
+  if ((rc = check_lat(q, 0)) || (rc = check_lat(q, 1))) return rc;
+  qk_tree_options_t opt;
+  qk_tree_options_init(&opt);
+  opt.capacity = (uint32_t)q->a.capacity;
+  if ((rc = cli_status(q->a.cmd, q->a.files[0], qk_geo_build(q->pts[0], q->n[0], &opt, &q->geo))))
+    return rc;
+  return scratch(q, q->a.has_k ? q->a.k : q->n[0], 0);
+}
+
+static int geo_knn_answer(qrun_t *q, size_t i) {
+  size_t m;
+  qk_geo_knn(q->geo, q->pts[1][i], q->a.k, q->a.max_dist, q->nb, &m);
+  for (size_t j = 0; j < m; j++)
+    emit(q, i, q->nb[j].id, "%zu,%zu,%u,%.17g", i, j + 1, (unsigned)q->nb[j].id, q->nb[j].dist);
+  return CLI_OK;
+}
+
+static int geo_radius_answer(qrun_t *q, size_t i) {
+  size_t m;
+  qk_geo_radius_list(q->geo, q->pts[1][i], q->a.r, q->nb, q->cap, &m);
+  qsort(q->nb, m, sizeof *q->nb, nb_by_id);
+  for (size_t j = 0; j < m; j++)
+    emit(q, i, q->nb[j].id, "%zu,%u,%.17g", i, (unsigned)q->nb[j].id, q->nb[j].dist);
+  return CLI_OK;
+}
+
+static const qcmd_t geo_knn_cmd = {.allow = "k",
+                                   .nfiles = 2,
+                                   .kind = {IN_POINTS, IN_POINTS},
+                                   .head = "query,rank,point,metres",
+                                   .side = {"query", "point"},
+                                   .side_file = {1, 0},
+                                   .usage = geo_usage,
+                                   .prepare = geo_prepare,
+                                   .answer = geo_knn_answer};
+static const qcmd_t geo_radius_cmd = {.allow = "r",
+                                      .nfiles = 2,
+                                      .kind = {IN_POINTS, IN_POINTS},
+                                      .head = "query,point,metres",
+                                      .side = {"query", "point"},
+                                      .side_file = {1, 0},
+                                      .usage = geo_usage,
+                                      .prepare = geo_prepare,
+                                      .answer = geo_radius_answer};
 
 int cmd_geo(int argc, char **argv) {
   if (argc < 2 || !strcmp(argv[1], "--help") || !strcmp(argv[1], "-h")) {
@@ -531,48 +649,6 @@ int cmd_geo(int argc, char **argv) {
     cli_error("geo", "unknown geo query '%s' (knn or radius)", argv[1]);
     return CLI_USAGE;
   }
-  qargs_t a;
   argv[1] = "geo";
-  int rc = parse_args(argc - 1, argv + 1, is_knn ? "k" : "r", 2, geo_usage, &a);
-  if (rc >= 0) return rc;
-  qk_point_t *pts = NULL, *qs = NULL;
-  size_t n = 0, nq = 0;
-  qk_geo_t *g = NULL;
-  qk_neighbor_t *nb = NULL;
-  if ((rc = cli_read_points(a.files[0], &pts, &n)) || (rc = cli_read_points(a.files[1], &qs, &nq)))
-    goto done;
-  if ((rc = check_lat(a.files[0], pts, n)) || (rc = check_lat(a.files[1], qs, nq))) goto done;
-  qk_tree_options_t opt;
-  qk_tree_options_init(&opt);
-  opt.capacity = (uint32_t)a.capacity;
-  if ((rc = cli_status(a.cmd, a.files[0], qk_geo_build(pts, n, &opt, &g)))) goto done;
-  size_t cap = is_knn ? a.k : n;
-  nb = malloc(cap * sizeof *nb);
-  if (!nb) {
-    rc = cli_status(a.cmd, "geo", QK_ERR_NOMEM);
-    goto done;
-  }
-  cli_out_t o;
-  if ((rc = open_out(&a, &o))) goto done;
-  fprintf(o.f, is_knn ? "query,rank,point,metres\n" : "query,point,metres\n");
-  for (size_t i = 0; i < nq; i++) {
-    size_t m;
-    if (is_knn) {
-      qk_geo_knn(g, qs[i], a.k, a.max_dist, nb, &m);
-      for (size_t j = 0; j < m; j++)
-        fprintf(o.f, "%zu,%zu,%u,%.17g\n", i, j + 1, (unsigned)nb[j].id, nb[j].dist);
-    } else {
-      qk_geo_radius_list(g, qs[i], a.r, nb, cap, &m);
-      qsort(nb, m, sizeof *nb, nb_by_id);
-      for (size_t j = 0; j < m; j++)
-        fprintf(o.f, "%zu,%u,%.17g\n", i, (unsigned)nb[j].id, nb[j].dist);
-    }
-  }
-  rc = cli_out_close(a.cmd, &o, 1);
-done:
-  free(nb);
-  qk_geo_free(g);
-  free(pts);
-  free(qs);
-  return rc;
+  return run_query(argc - 1, argv + 1, is_knn ? &geo_knn_cmd : &geo_radius_cmd);
 }

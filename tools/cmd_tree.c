@@ -6,16 +6,18 @@
 
 static void usage(FILE *f) {
   fprintf(f,
-          "usage: quadkit tree POINTS.csv [--capacity C] [--max-depth D] [--svg FILE]\n"
+          "usage: quadkit tree POINTS.csv [--xy X,Y] [--capacity C] [--max-depth D] [--svg FILE]\n"
           "Builds a point-region quadtree and prints its statistics as one JSON object.\n"
           "  --capacity C   points a leaf holds before it splits (default 1)\n"
           "  --max-depth D  depth cap for coincident points (default %d, at most %d)\n"
-          "  --svg FILE     also draw the tree\n",
+          "  --svg FILE     also draw the tree\n"
+          "  --xy X,Y       the columns holding x and y: header names or 1-based numbers\n"
+          "                 (default: the first two)\n",
           QK_DEFAULT_MAX_DEPTH, QK_MAX_DEPTH_LIMIT);
 }
 
 int cmd_tree(int argc, char **argv) {
-  const char *cmd = "tree", *in = NULL, *svg = NULL;
+  const char *cmd = "tree", *in = NULL, *svg = NULL, *xy = NULL;
   unsigned long capacity = 1, depth = QK_DEFAULT_MAX_DEPTH;
   for (int i = 1; i < argc; i++) {
     if (!strcmp(argv[i], "--help") || !strcmp(argv[i], "-h")) {
@@ -29,6 +31,8 @@ int cmd_tree(int argc, char **argv) {
       if (cli_parse_u32(cmd, "--max-depth", i + 1 < argc ? argv[++i] : NULL, 1, QK_MAX_DEPTH_LIMIT,
                         &depth))
         return CLI_USAGE;
+    } else if (!strcmp(argv[i], "--xy")) {
+      if (cli_parse_xy(cmd, "--xy", i + 1 < argc ? argv[++i] : NULL, &xy)) return CLI_USAGE;
     } else if (!strcmp(argv[i], "--svg")) {
       if (i + 1 >= argc) {
         cli_error(cmd, "--svg needs a file name");
@@ -51,7 +55,7 @@ int cmd_tree(int argc, char **argv) {
   }
   qk_point_t *pts;
   size_t n;
-  int rc = cli_read_points(in, &pts, &n);
+  int rc = cli_read_points(in, xy, NULL, &pts, &n);
   if (rc) return rc;
   qk_tree_options_t opt;
   qk_tree_options_init(&opt);

@@ -27,10 +27,11 @@ static void usage(FILE *f) {
   fprintf(f, "usage: quadkit COMMAND [ARGS]\n\ncommands:\n");
   for (size_t i = 0; i < sizeof commands / sizeof commands[0]; i++)
     fprintf(f, "  %s\n", commands[i].synopsis);
-  fprintf(f, "\nEvery command accepts --help. Points CSV: the first two fields of each line are "
-             "x and y;\na first line whose first field is not a number is a header. A point's id "
-             "is its\n0-based data row.\n\nexit status: 0 success, 1 bad input, 2 usage error, "
-             "3 internal error or out of memory\n");
+  fprintf(f, "\nEvery command accepts --help. Points CSV: x and y are the first two fields of "
+             "each line,\nor the columns named by --xy X,Y (header names or 1-based numbers). "
+             "The first line is\na header when its x field is not a number or when --xy gives "
+             "names. A point's id\nis its 0-based data row.\n\nexit status: 0 success, 1 bad "
+             "input, 2 usage error, 3 internal error or out of memory\n");
 }
 
 int main(int argc, char **argv) {

@@ -20,6 +20,15 @@
  * All mesh vertices lie on the half-integer lattice, so their double coordinates are
  * exact.
  *
+ * The dyadic-lattice mode (QK_MESH_DYADIC, chosen automatically for non-integer input or
+ * a size bound) runs the same algorithm on the coarsest lattice of spacing 2^-f, with its
+ * origin at the input's lower-left corner, that holds every vertex exactly: real
+ * coordinates at any position and scale, edges still at multiples of 45 degrees. Input
+ * vertices come back bit-identical, every mesh vertex on a segment lies on it exactly,
+ * and the [45, 90] degree bound holds (docs/mesh.md has the proofs). Inputs needing more
+ * than 2^30 lattice steps across, or 2^24 along their segments, are refused rather than
+ * rounded. Boundary markers and regional attributes are carried to the outputs.
+ *
  * Thread safety: a mesh and a qk_poly never change once made, so any number of threads
  * may call the functions taking a const handle (accessors, statistics, writers) on one
  * mesh at once, and qk_mesh_generate() only reads its input, so several threads may mesh
@@ -69,11 +78,13 @@ qk_status_t qk_poly_read(FILE *f, const qk_allocator_t *allocator, qk_poly_t **o
  * \param [in] nh number of hole points.
  * \param [in] allocator NULL for libc; copied.
  * \param [out] out the input, freed with qk_poly_free().
- * \return QK_OK, QK_ERR_INVALID or QK_ERR_NOMEM.
+ * \param [out] err which array item was rejected and why (may be NULL); line is 0.
+ * \return QK_OK, QK_ERR_INVALID (a missing array, a coordinate not finite, an endpoint
+ *         that is not a vertex number), QK_ERR_LIMIT (over 2^26 items) or QK_ERR_NOMEM.
  */
 qk_status_t qk_poly_from_arrays(const double *xy, size_t nv, const uint32_t *seg, size_t ns,
                                 const double *holes, size_t nh, const qk_allocator_t *allocator,
-                                qk_poly_t **out);
+                                qk_poly_t **out, qk_mesh_error_t *err);
 
 /** Free an input; NULL is a no-op. */
 void qk_poly_free(qk_poly_t *poly);
@@ -84,13 +95,94 @@ unsigned qk_poly_first_index(const qk_poly_t *poly);
 /** Number of vertices, segments and hole points of an input (any pointer may be NULL). */
 void qk_poly_counts(const qk_poly_t *poly, size_t *nv, size_t *ns, size_t *nh);
 
+/**
+ * Copy an input's vertices (x, y pairs, 0-based order) into a caller's buffer.
+ * \param [in] poly the input.
+ * \param [out] xy room for 2*cap doubles (may be NULL when cap is 0).
+ * \param [in] cap vertices the buffer holds; at most this many are written.
+ * \param [out] n_out the number of vertices of the input (all of them, even beyond cap).
+ * \return QK_OK, or QK_ERR_INVALID for a NULL input or n_out.
+ */
+qk_status_t qk_poly_vertices(const qk_poly_t *poly, double *xy, size_t cap, size_t *n_out);
+
+/**
+ * Copy an input's segments (pairs of 0-based vertex indices) into a caller's buffer.
+ * \param [in] poly the input.
+ * \param [out] seg room for 2*cap indices (may be NULL when cap is 0).
+ * \param [in] cap segments the buffer holds; at most this many are written.
+ * \param [out] n_out the number of segments of the input.
+ * \return QK_OK, or QK_ERR_INVALID for a NULL input or n_out.
+ */
+qk_status_t qk_poly_segments(const qk_poly_t *poly, uint32_t *seg, size_t cap, size_t *n_out);
+
+/**
+ * Copy an input's hole points (x, y pairs) into a caller's buffer.
+ * \param [in] poly the input.
+ * \param [out] xy room for 2*cap doubles (may be NULL when cap is 0).
+ * \param [in] cap hole points the buffer holds; at most this many are written.
+ * \param [out] n_out the number of hole points of the input.
+ * \return QK_OK, or QK_ERR_INVALID for a NULL input or n_out.
+ */
+qk_status_t qk_poly_holes(const qk_poly_t *poly, double *xy, size_t cap, size_t *n_out);
+
+/**
+ * Attach boundary markers to an input made from arrays (a `.poly` file carries its own).
+ * Call before the input is shared: it is the one call that changes a qk_poly.
+ * \param [in,out] poly the input.
+ * \param [in] vertex_markers one per vertex, copied (NULL: none).
+ * \param [in] segment_markers one per segment, copied (NULL: none).
+ * \param [out] err why the call failed (may be NULL).
+ * \return QK_OK, QK_ERR_INVALID or QK_ERR_NOMEM (the input unchanged).
+ */
+qk_status_t qk_poly_set_markers(qk_poly_t *poly, const int32_t *vertex_markers,
+                                const int32_t *segment_markers, qk_mesh_error_t *err);
+
+/**
+ * Attach regional attributes to an input made from arrays: each (x, y, attribute) triple
+ * gives its attribute to the region (the connected part of the domain between segments)
+ * holding the point. Replaces any attached before; same rule as qk_poly_set_markers().
+ * \param [in,out] poly the input.
+ * \param [in] xya 3*nr doubles, copied.
+ * \param [in] nr number of regional attributes.
+ * \param [out] err which triple was rejected and why (may be NULL).
+ * \return QK_OK, QK_ERR_INVALID (a value not finite) or QK_ERR_NOMEM (input unchanged).
+ */
+qk_status_t qk_poly_set_regions(qk_poly_t *poly, const double *xya, size_t nr,
+                                qk_mesh_error_t *err);
+
+/** Which mesher qk_mesh_generate() runs. */
+typedef enum qk_mesh_mode {
+  /** The book's mode when the input has integer coordinates and no size bound is asked
+   *  for (or a domain size is given), the dyadic-lattice mode otherwise. */
+  QK_MESH_AUTO = 0,
+  /** The book's mode (de Berg et al. ch. 14): integer vertices in [0,U]^2. */
+  QK_MESH_BOOK = 1,
+  /** The same algorithm on the coarsest dyadic lattice (spacing 2^-f, origin at the
+   *  input's lower-left corner) holding every vertex exactly: real coordinates that are
+   *  dyadic rationals, any position, edges still at 0, 45, 90 or 135 degrees. */
+  QK_MESH_DYADIC = 2
+} qk_mesh_mode_t;
+
+/** A size function: the longest edge wanted near (x, y) (input coordinates). */
+typedef double (*qk_mesh_size_fn)(double x, double y, void *user);
+
 /** Options for qk_mesh_generate(); zero-initialise or use qk_mesh_options_init(). */
 typedef struct qk_mesh_options {
   /** Domain side U, a power of two; 0 means the smallest power of two >= every
-   *  coordinate (and >= 1). */
+   *  coordinate (and >= 1). The book's mode only. */
   uint64_t size;
   /** Allocator for the mesh and its tree; NULL means libc. */
   const qk_allocator_t *allocator;
+  /** Which mesher; QK_MESH_AUTO by default. */
+  qk_mesh_mode_t mode;
+  /** Longest triangle edge wanted, in input units (0: no bound). Guaranteed: every edge
+   *  is at most this long (in the book's mode it must be at least sqrt 2). */
+  double max_size;
+  /** Size function (NULL: none), sampled at each leaf's corners and centre: a leaf is
+   *  split while its triangles' longest possible edge exceeds the smallest sample. */
+  qk_mesh_size_fn size_fn;
+  /** Passed to size_fn. */
+  void *size_user;
 } qk_mesh_options_t;
 
 /** Fill options with the defaults. \param [out] options the options. */
@@ -130,8 +222,53 @@ const double *qk_mesh_vertices(const qk_mesh_t *mesh, size_t *n);
  */
 const uint32_t *qk_mesh_triangles(const qk_mesh_t *mesh, size_t *n);
 
-/** Per triangle, the innermost component containing it (0: outside all). */
-const uint32_t *qk_mesh_triangle_components(const qk_mesh_t *mesh);
+/**
+ * Per vertex, its boundary marker: the vertex's own marker from the input when it is an
+ * input vertex with a nonzero one, else the marker of an input segment through it (the
+ * first in input order with a nonzero marker), else 0. Borrowed.
+ * \param [in] mesh the mesh. \param [out] n the number of entries (the vertices).
+ * \return the markers.
+ */
+const int32_t *qk_mesh_vertex_markers(const qk_mesh_t *mesh, size_t *n);
+
+/**
+ * Per triangle, the regional attribute of its region (0 where no regional attribute
+ * point lies), or NULL when the input has no regional attributes. Borrowed.
+ * \param [in] mesh the mesh. \param [out] n the number of entries (the triangles).
+ * \return the attributes.
+ */
+const double *qk_mesh_triangle_attributes(const qk_mesh_t *mesh, size_t *n);
+
+/**
+ * The mesh edges that make up the input segments, into a caller's buffer: per edge its
+ * two vertex indices, the input segment it lies on and that segment's marker. Segments
+ * with holes on both sides have no mesh edges.
+ * \param [in] mesh the mesh.
+ * \param [out] ab room for 2*cap vertex indices (may be NULL when cap is 0).
+ * \param [out] seg room for cap segment indices (may be NULL).
+ * \param [out] marker room for cap markers (may be NULL).
+ * \param [in] cap edges the buffers hold.
+ * \param [out] n_out the number of such edges (all of them, even beyond cap).
+ * \return QK_OK, or QK_ERR_INVALID for a NULL mesh or n_out.
+ */
+qk_status_t qk_mesh_segments(const qk_mesh_t *mesh, uint32_t *ab, uint32_t *seg, int32_t *marker,
+                             size_t cap, size_t *n_out);
+
+/**
+ * Histogram of the triangles' angles in 1-degree bins: bins[k] counts the angles in
+ * [k, k + 1) degrees (180 bins, 3 angles per triangle; computed in floating point, so an
+ * angle of exactly 45 may land in bin 44).
+ * \param [in] mesh the mesh. \param [out] bins 180 counters, overwritten.
+ * \return QK_OK, or QK_ERR_INVALID for NULL arguments.
+ */
+qk_status_t qk_mesh_angle_histogram(const qk_mesh_t *mesh, uint64_t bins[180]);
+
+/**
+ * Per triangle, the innermost component containing it (0: outside all), borrowed.
+ * \param [in] mesh the mesh. \param [out] n the number of entries (the triangles).
+ * \return the component ids.
+ */
+const uint32_t *qk_mesh_triangle_components(const qk_mesh_t *mesh, size_t *n);
 
 /** The balanced quadtree subdivision the mesh was made from (borrowed). */
 const qk_tree_t *qk_mesh_tree(const qk_mesh_t *mesh);
@@ -148,6 +285,11 @@ typedef struct qk_mesh_stats {
   double min_angle_deg;         /**< smallest triangle angle */
   double max_angle_deg;         /**< largest triangle angle */
   double uniform_triangles;     /**< 2 U^2, the size of the uniform grid mesh */
+  qk_mesh_mode_t mode;          /**< the mesher that ran: QK_MESH_BOOK or QK_MESH_DYADIC */
+  int lattice_exponent;         /**< f: lattice spacing 2^-f input units (0: the book's) */
+  double origin_x, origin_y;    /**< input coordinates of lattice point (0, 0) */
+  double proven_min_angle_deg;  /**< the proven lower bound on every angle (45) */
+  double proven_max_angle_deg;  /**< the proven upper bound on every angle (90) */
   double seconds_validate;      /**< checking the input */
   double seconds_subdivide;     /**< step 1 */
   double seconds_balance;       /**< step 2 */
@@ -158,7 +300,8 @@ typedef struct qk_mesh_stats {
 void qk_mesh_stats(const qk_mesh_t *mesh, qk_mesh_stats_t *stats);
 
 /**
- * Write the vertices in Triangle's `.node` format.
+ * Write the vertices in Triangle's `.node` format, with a boundary marker column when the
+ * input carried markers.
  * \param [in] mesh the mesh. \param [in] f an open stream (caller's).
  * \param [in] first_index 0 or 1, the first vertex number.
  * \return QK_OK or QK_ERR_IO.
@@ -175,15 +318,28 @@ qk_status_t qk_mesh_write_node(const qk_mesh_t *mesh, FILE *f, unsigned first_in
 qk_status_t qk_mesh_write_ele(const qk_mesh_t *mesh, FILE *f, unsigned first_index);
 
 /**
+ * Write the mesh edges along input segments in Triangle's `.poly` format (no vertices:
+ * they are the `.node` file's; segments with their markers; no holes).
+ * \param [in] mesh the mesh. \param [in] f an open stream (caller's).
+ * \param [in] first_index 0 or 1, as for the `.node` file.
+ * \return QK_OK, QK_ERR_INVALID or QK_ERR_IO.
+ */
+qk_status_t qk_mesh_write_poly(const qk_mesh_t *mesh, FILE *f, unsigned first_index);
+
+/**
  * Write gmsh's `.msh` 4.1 ASCII format: one surface entity and one physical group per
- * component id present (named "component_K", and "outside" for 0).
+ * component id present (named "component_K", and "outside" for 0); when the input carries
+ * boundary markers, one curve entity and one physical group of line elements (the mesh
+ * edges along input segments) per marker present (named "marker_M").
  * \param [in] mesh the mesh. \param [in] f an open stream (caller's).
  * \return QK_OK or QK_ERR_IO.
  */
 qk_status_t qk_mesh_write_msh(const qk_mesh_t *mesh, FILE *f);
 
 /**
- * Write VTK's XML unstructured grid (`.vtu`, ASCII) with the component id as cell data.
+ * Write VTK's XML unstructured grid (`.vtu`, ASCII) with the component id ("component"
+ * and "region"), the regional attribute when there are regions, as cell data and the
+ * boundary marker ("marker") as point data.
  * \param [in] mesh the mesh. \param [in] f an open stream (caller's).
  * \return QK_OK or QK_ERR_IO.
  */

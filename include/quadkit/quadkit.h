@@ -7,6 +7,7 @@
 
 #include "quadkit/common.h"
 #include "quadkit/index.h"
+#include "quadkit/io.h"
 #include "quadkit/mesh.h"
 #include "quadkit/query.h"
 

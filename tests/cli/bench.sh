@@ -1,56 +1,13 @@
 #!/usr/bin/env bash
 # Smoke test of quadkit-bench: when the baseline libraries are installed, build the
-# benchmark (Release, in <build dir>/bench-smoke, reused by later runs) and run a small
-# --quick slice of every operation; every comparison must agree with quadkit's answers
-# (no "matches":false), the JSON lines must carry the documented fields, and bad
-# arguments must give exit code 2. Without the baselines it prints a skip line and
-# passes: `make test` does not need them (`make bench` installs them).
-set -u
-cli=$1
-src=$2
-missing=()
-for h in flann/flann.hpp nanoflann.hpp embree3/rtcore.h CGAL/Orthtree.h p4est.h gmshc.h \
-  GeographicLib/NearestNeighbor.hpp lz4.h; do
-  [ -e "/usr/include/$h" ] || missing+=("$h")
-done
-if [ ${#missing[@]} -gt 0 ]; then
-  echo "SKIP: quadkit-bench baselines not installed (missing ${missing[*]}); 'make bench' installs them"
-  exit 0
-fi
-bdir="$(cd "$(dirname "$cli")" && pwd)/bench-smoke"
-if ! cmake -S "$src" -B "$bdir" -DCMAKE_BUILD_TYPE=Release -DQUADKIT_BUILD_BENCH=ON \
-  -DQUADKIT_BUILD_TESTS=OFF -DQUADKIT_BUILD_TOOLS=OFF >"$bdir-build.log" 2>&1 ||
-  ! nice -n 5 cmake --build "$bdir" --target quadkit_bench -j2 >>"$bdir-build.log" 2>&1; then
-  echo "FAIL: building quadkit-bench (log: $bdir-build.log)"
-  tail -n 30 "$bdir-build.log"
-  exit 1
-fi
-bench="$bdir/bench/quadkit-bench"
-fails=0
-out=$(mktemp)
-trap 'rm -f "$out"' EXIT
-run() { # run ARGS...: JSON lines into $out, must exit 0
-  if ! "$bench" --quick --json "$@" >"$out" 2>/dev/null; then
-    echo "FAIL: quadkit-bench $* exited non-zero"
-    fails=$((fails + 1))
-    return
-  fi
-  if grep -q '"matches":false' "$out"; then
-    echo "FAIL: quadkit-bench $*: an implementation disagreed with quadkit:"
-    grep '"matches":false' "$out"
-    fails=$((fails + 1))
-  fi
-  for f in op impl dataset n queries k order batch threads seconds per_second bytes_per_point matches; do
-    if ! grep -q "\"$f\":" "$out"; then
-      echo "FAIL: quadkit-bench $*: no field '$f' in the JSON lines"
-      fails=$((fails + 1))
-    fi
-  done
-}
-expect_impl() { # expect_impl IMPL OP: the last run timed IMPL
-  grep -q "\"op\":\"$2\",\"impl\":\"$1\".*\"per_second\":[0-9]" "$out" ||
-    { echo "FAIL: no timing of $1 for $2"; fails=$((fails + 1)); }
-}
+# benchmark and run a small --quick slice of every operation on generated data; every
+# comparison must agree with quadkit's answers (no "matches":false), the JSON lines must
+# carry the documented fields, and bad arguments must give exit code 2. Skipped (exit
+# 77) without the baselines. The geodesic step needs cities.csv: tests/cli/bench_geo.sh.
+# shellcheck source=lib/common.bash
+source "$(dirname "${BASH_SOURCE[0]}")/lib/common.bash" "$@"
+# shellcheck source=lib/bench.bash
+source "$(dirname "${BASH_SOURCE[0]}")/lib/bench.bash"
 run --op build --dataset uniform --n 20000
 for i in quadkit flann nanoflann embree cgal; do expect_impl $i build; done
 run --op knn --dataset gauss --n 20000
@@ -66,10 +23,6 @@ run --op balance --dataset uniform --n 20000
 for i in quadkit cgal p4est; do expect_impl $i balance; done
 run --op mesh --n 128
 for i in quadkit cgal gmsh; do expect_impl $i mesh; done
-run --op geo-knn --n 5000
-"$bench" --op nope >/dev/null 2>&1
-[ $? -eq 2 ] || { echo "FAIL: unknown --op must exit 2"; fails=$((fails + 1)); }
-"$bench" --n -3 >/dev/null 2>&1
-[ $? -eq 2 ] || { echo "FAIL: bad --n must exit 2"; fails=$((fails + 1)); }
-[ $fails -eq 0 ] && echo "bench smoke test: ok"
-exit $((fails > 0))
+expect 2 '' -- "$bench" --op nope
+expect 2 '' -- "$bench" --n -3
+report

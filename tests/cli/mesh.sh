@@ -42,7 +42,7 @@ printf '4 2 0 0\n0 0 0\n1 3 0\n2 2 2\n3 0 2\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n' 
 expect 1 'angle.poly:8: segment 1 .* is not at 0, 45, 90 or 135 degrees' -- "$cli" mesh "$tmp/angle.poly" -o "$tmp/bad" --svg "$tmp/bad.svg"
 ls "$tmp"/bad* >/dev/null 2>&1 && { echo "FAIL: output written for bad input"; fails=$((fails + 1)); }
 printf '4 2 0 0\n0 0 0\n1 2.5 0\n2 2 2\n3 0 2\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n' >"$tmp/frac.poly"
-expect 1 'frac.poly:3: vertex 1: coordinates .* are not integers' -- "$cli" mesh "$tmp/frac.poly" -o "$tmp/bad"
+expect 1 'frac.poly:3: vertex 1: coordinates .* are not integers' -- "$cli" mesh "$tmp/frac.poly" --book -o "$tmp/bad"
 printf '4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n4 0\n0 0 1\n' >"$tmp/trunc.poly"
 expect 1 'trunc.poly:7: truncated input' -- "$cli" mesh "$tmp/trunc.poly" -o "$tmp/bad"
 printf '4 2 0 0\n0 0 0\n1 2 0\n2 0 2\n3 2 2\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n' >"$tmp/bowtie.poly"
@@ -50,6 +50,30 @@ expect 1 'bowtie.poly:[0-9]+: component 1 intersects itself' -- "$cli" mesh "$tm
 printf '4 2 0 0\n0 0 0\n1 20 0\n2 20 2\n3 0 2\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n' >"$tmp/out.poly"
 expect 1 'out.poly:3: .*outside the domain \[0,16\]\^2' -- "$cli" mesh "$tmp/out.poly" --size 16 -o "$tmp/bad"
 expect 1 'cannot open' -- "$cli" mesh "$tmp/missing.poly" -o "$tmp/bad"
+ls "$tmp"/bad* >/dev/null 2>&1 && { echo "FAIL: output written for bad input"; fails=$((fails + 1)); }
+
+# Real (dyadic) coordinates: the dyadic mode, input vertices bit-identical, markers.
+printf '6 2 0 1\n0 -1.25 0.5 1\n1 2.75 0.5 1\n2 2.75 1.5 1\n3 1.75 1.5 2\n4 0.75 2.5 2\n5 -1.25 2.5 2\n6 1\n0 0 1 1\n1 1 2 2\n2 2 3 2\n3 3 4 3\n4 4 5 3\n5 5 0 3\n0\n1\n1 0 1 7\n' >"$tmp/real.poly"
+expect 0 '"mode": "dyadic", "lattice_exponent": 2, .*"proven_min_angle_deg": 45, "proven_max_angle_deg": 90, "angle_histogram": \[0, ' -- \
+  "$cli" mesh "$tmp/real.poly" -o "$tmp/real" --poly "$tmp/real.out.poly" --msh "$tmp/real.msh" --vtk "$tmp/real.vtu" --stats
+check "input vertices bit-identical in the .node" -- awk 'NR > 1 { seen[$2 " " $3] = 1 } END { if (!(seen["-1.25 0.5"] && seen["2.75 1.5"] && seen["0.75 2.5"])) exit 1 }' "$tmp/real.node"
+check ".node has the marker column" -- awk 'NR==1 { if ($4 != 1) exit 1 } NR > 1 && NF != 4 { exit 1 }' "$tmp/real.node"
+check ".ele has the regional attribute" -- awk 'NR==1 { if ($3 != 2) exit 1 } NR > 1 && $6 == 7 { k++ } END { if (!k) exit 1 }' "$tmp/real.ele"
+check ".poly of output segments with markers" -- awk 'NR==3 { n=$1; if ($2 != 1) exit 1 } NR > 3 && NF == 4 { k++; if ($4 < 1 || $4 > 3) exit 1 } END { if (k != n) exit 1 }' "$tmp/real.out.poly"
+check ".msh marker groups" -- grep -q '^1 3 "marker_3"$' "$tmp/real.msh"
+check ".vtu marker data" -- grep -q 'Name="marker"' "$tmp/real.vtu"
+# --book insists; --max-size bounds every edge; --min-angle reports the bound.
+expect 1 'real.poly:2: vertex 0: coordinates .* are not integers' -- "$cli" mesh "$tmp/real.poly" --book -o "$tmp/bad"
+expect 0 '"triangles": 2048,' -- "$cli" mesh "$tmp/real.poly" -o "$tmp/h" --max-size 0.2 --stats
+check "--max-size 0.2: every edge at most 0.2" -- awk '
+  FNR==NR { if (FNR > 1) { x[$1]=$2; y[$1]=$3 }; next }
+  FNR > 1 { for (i = 2; i <= 4; i++) { a=$i; b=$(i == 4 ? 2 : i + 1); d=(x[a]-x[b])^2+(y[a]-y[b])^2; if (d > 0.04 + 1e-12) exit 1 } }' "$tmp/h.node" "$tmp/h.ele"
+expect 0 'dyadic mode: every angle in \[45, 90\] degrees \(proven' -- "$cli" mesh "$tmp/real.poly" -o "$tmp/h" --min-angle 30
+expect 2 'the proven bound is 45 degrees' -- "$cli" mesh "$tmp/real.poly" -o "$tmp/u" --min-angle 50
+expect 2 'exclude each other' -- "$cli" mesh "$tmp/real.poly" -o "$tmp/u" --book --dyadic
+# The issue's coastline-like polygon: refused, naming the segment and the reason.
+printf '3 2 0 0\n0 5 5\n1 30.5 3\n2 5 20\n3 0\n0 0 1\n1 1 2\n2 2 0\n' >"$tmp/coast.poly"
+expect 1 'coast.poly:6: segment 0 from \(5, 5\) to \(30.5, 3\) is not at 0, 45, 90 or 135 degrees \(the dyadic mode keeps' -- "$cli" mesh "$tmp/coast.poly" -o "$tmp/bad"
 ls "$tmp"/bad* >/dev/null 2>&1 && { echo "FAIL: output written for bad input"; fails=$((fails + 1)); }
 
 # Usage errors.

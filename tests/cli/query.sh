@@ -121,11 +121,48 @@ expect 2 'must not be negative' -- "$cli" radius "$tmp/p.csv" "$tmp/q.csv" -r -1
 expect 2 'unknown option' -- "$cli" range "$tmp/p.csv" "$tmp/b.csv" --bogus
 expect 2 'usage' -- "$cli" radius "$tmp/p.csv"
 printf '0,0\n1,oops\n' >"$tmp/bad.csv"
-expect 1 'bad.csv:2: field 2 is not a number' -- "$cli" knn "$tmp/p.csv" "$tmp/bad.csv" -k 1
+expect 1 'bad.csv:2:3: field 2 is not a number' -- "$cli" knn "$tmp/p.csv" "$tmp/bad.csv" -k 1
 expect 1 'cannot open' -- "$cli" locate "$tmp/p.csv" "$tmp/missing.csv"
 expect 0 '' -- "$cli" knn "$tmp/p.csv" "$tmp/q.csv" -k 1 -o "$tmp/out.csv"
 grep -q '^1,1,3,' "$tmp/out.csv" && passes=$((passes + 1)) ||
   { echo "FAIL: -o file"; fails=$((fails + 1)); }
 expect 1 'cannot write' -- "$cli" knn "$tmp/p.csv" "$tmp/q.csv" -k 1 -o "$tmp/no/dir/x.csv"
+
+# --xy by name and number, --query-xy, and --keep joining the input rows.
+printf 'name,lat,lon\nParis,48.85,2.35\n"Rome, Lazio",41.9,12.5\nOslo,59.91,10.75\n' >"$tmp/c.csv"
+printf 'lon,lat,tag\n12,42,a\n3,49,b\n' >"$tmp/cq.csv"
+"$cli" knn "$tmp/c.csv" "$tmp/cq.csv" -k 1 --xy lon,lat --keep both >"$tmp/got"
+cat >"$tmp/want" <<'EOF'
+query,rank,point,distance,query_lon,query_lat,query_tag,point_name,point_lat,point_lon
+0,1,1,0.50990195135927874,12,42,a,"Rome, Lazio",41.9,12.5
+1,1,0,0.66708320320631631,3,49,b,Paris,48.85,2.35
+EOF
+same "knn --xy --keep both" "$tmp/got" "$tmp/want"
+"$cli" knn "$tmp/c.csv" "$tmp/cq.csv" -k 1 --xy 3,2 --query-xy 1,2 --keep point >"$tmp/got"
+printf 'query,rank,point,distance,point_name,point_lat,point_lon\n0,1,1,0.50990195135927874,"Rome, Lazio",41.9,12.5\n1,1,0,0.66708320320631631,Paris,48.85,2.35\n' >"$tmp/want"
+same "knn --xy numbers --query-xy --keep point" "$tmp/got" "$tmp/want"
+# Rows of different widths are padded; files without a header get numbered names.
+printf '0,0,x\n1,1\n' >"$tmp/np.csv"
+printf '0.9,0.9\n' >"$tmp/nq.csv"
+"$cli" radius "$tmp/np.csv" "$tmp/nq.csv" -r 2 --keep both >"$tmp/got"
+printf 'query,point,distance,query_1,query_2,point_1,point_2,point_3\n0,0,1.2727922061357855,0.9,0.9,0,0,x\n0,1,0.14142135623730948,0.9,0.9,1,1,\n' >"$tmp/want"
+same "radius --keep both, no header" "$tmp/got" "$tmp/want"
+printf 'xmin,ymin,xmax,ymax\n0,40,13,45\n' >"$tmp/b2.csv"
+"$cli" range "$tmp/c.csv" "$tmp/b2.csv" --xy lon,lat --keep both >"$tmp/got"
+printf 'box,point,box_xmin,box_ymin,box_xmax,box_ymax,point_name,point_lat,point_lon\n0,1,0,40,13,45,"Rome, Lazio",41.9,12.5\n' >"$tmp/want"
+same "range --keep both" "$tmp/got" "$tmp/want"
+"$cli" locate "$tmp/c.csv" "$tmp/cq.csv" --xy lon,lat --keep query >"$tmp/got"
+if grep -q '^query,xmin,ymin,side,depth,count,query_lon,query_lat,query_tag$' "$tmp/got" &&
+  grep -q ',12,42,a$' "$tmp/got"; then passes=$((passes + 1)); else fail "locate --keep query: $(cat "$tmp/got")"; fi
+"$cli" raycast "$tmp/d.csv" "$tmp/r.csv" --keep ray >"$tmp/got"
+if grep -q '^ray,disc,t,ray_ox,ray_oy,ray_dx,ray_dy,ray_tmax$' "$tmp/got" &&
+  grep -q '^2,-1,inf,5,3,0,1,1$' "$tmp/got"; then passes=$((passes + 1)); else fail "raycast --keep ray: $(cat "$tmp/got")"; fi
+"$cli" collide "$tmp/d.csv" --keep both >"$tmp/got"
+if grep -q '^0,1,0,0,1,2,0,1$' "$tmp/got"; then passes=$((passes + 1)); else fail "collide --keep both: $(cat "$tmp/got")"; fi
+expect 2 "--keep takes query, point or both, not 'box'" -- "$cli" knn "$tmp/c.csv" "$tmp/cq.csv" -k 1 --keep box
+expect 2 "--keep takes query, not 'point'" -- "$cli" locate "$tmp/c.csv" "$tmp/cq.csv" --keep point
+expect 1 "c.csv:1: no column named 'x'" -- "$cli" knn "$tmp/c.csv" "$tmp/cq.csv" -k 1 --xy x,y
+expect 2 "unknown option '--xy'" -- "$cli" collide "$tmp/d.csv" --xy 1,2
+expect 2 "unknown option '--query-xy'" -- "$cli" range "$tmp/c.csv" "$tmp/b2.csv" --query-xy 1,2
 
 report

@@ -49,17 +49,17 @@ head -c 4096 "$cli" >binary.csv
 : >empty.csv
 printf 'x,y\n' >header.csv
 printf '\xef\xbb\xbfx,y\r\n0,0\r\n"1",2,extra\r\n' >bom.csv
-row T1 1 "nan.csv:3: field 1 is not finite: 'nan'" -- "$cli" tree nan.csv --svg out/t.svg
-row T2 1 "inf.csv:2: field 2 is not finite: '-inf'" -- "$cli" tree inf.csv --svg out/t.svg
-row T3 1 "over.csv:2: field 1 is not finite: '1e400'" -- "$cli" tree over.csv
+row T1 1 "nan.csv:3:1: field 1 \\(x\\) is not finite: 'nan'" -- "$cli" tree nan.csv --svg out/t.svg
+row T2 1 "inf.csv:2:3: field 2 is not finite: '-inf'" -- "$cli" tree inf.csv --svg out/t.svg
+row T3 1 "over.csv:2:1: field 1 is not finite: '1e400'" -- "$cli" tree over.csv
 row T4 1 "huge.csv: the points span x from -1e\\+308 to 1e\\+308 and y from 0 to 1, an extent too large for a double" -- "$cli" tree huge.csv --svg out/t.svg
 row T5 0 '"points": 2000, .*"height": 40, .*"capped_leaves": 1' -- "$cli" tree dup.csv
 row T6 0 '"height": 3, "max_leaf_points": 2000, .*"max_depth": 3' -- "$cli" tree dup.csv --max-depth 3
-row T7 1 "word.csv:2: field 2 is not a number: 'abc'" -- "$cli" tree word.csv
-row T8 1 'short.csv:2: expected at least 2 numeric fields, found 1' -- "$cli" tree short.csv
-row T9 1 'trunc.csv:3: expected at least 2 numeric fields, found 1' -- "$cli" tree trunc.csv
-row T10 1 'nul.csv:2: binary data \(NUL byte\) in a text file' -- "$cli" tree nul.csv
-row T11 1 'binary.csv:1: (binary data|field 1 is not a number)' -- "$cli" tree binary.csv
+row T7 1 "word.csv:2:3: field 2 is not a number: 'abc'" -- "$cli" tree word.csv
+row T8 1 'short.csv:2:2: field 2 is missing: the line has 1 field' -- "$cli" tree short.csv
+row T9 1 'trunc.csv:3:2: field 2 is missing: the line has 1 field' -- "$cli" tree trunc.csv
+row T10 1 'nul.csv:2:1: binary data \(NUL byte\) in a text file' -- "$cli" tree nul.csv
+row T11 1 'binary.csv:1:[0-9]+: (binary data|field 1 is not a number)' -- "$cli" tree binary.csv
 row T12 1 'empty.csv: no data rows' -- "$cli" tree empty.csv --svg out/t.svg
 row T13 1 'header.csv: no data rows' -- "$cli" tree header.csv
 row T14 1 'missing.csv: cannot open: No such file' -- "$cli" tree missing.csv
@@ -81,6 +81,20 @@ cp out/t.svg before.svg
 row T25 1 'nan.csv:3' -- "$cli" tree nan.csv --svg out/t.svg
 cmp -s before.svg out/t.svg || { echo "FAIL T25: existing output changed"; fails=$((fails + 1)); }
 rm -f out/t.svg
+# Columns chosen with --xy, and the quoting rules.
+printf 'name,lat,lon\nParis,48.85,2.35\nRome,41.9,12.5\n' >named.csv
+printf '0,0\n"1,2\n' >openquote.csv
+printf '0,0\n"1"x,2\n' >afterquote.csv
+printf 'x,x\n0,0\n' >twice.csv
+row X1 0 '"points": 2,' -- "$cli" tree named.csv --xy lon,lat
+row X2 0 '"points": 2,' -- "$cli" tree named.csv --xy 3,2
+row X3 1 "named.csv:1: no column named 'long' in the header \\(3 fields: 'name,lat,lon'\\)" -- "$cli" tree named.csv --xy long,lat
+row X4 1 "named.csv:2:1: field 1 \\(name\\) is not a number: 'Paris'" -- "$cli" tree named.csv --xy 1,2
+row X5 2 "--xy must be two columns X,Y \\(header names or 1-based numbers\\), not 'lon'" -- "$cli" tree named.csv --xy lon
+row X6 1 'openquote.csv:2:1: field 1: unterminated quoted field' -- "$cli" tree openquote.csv
+row X7 1 'afterquote.csv:2:1: field 1: text after a closing quote' -- "$cli" tree afterquote.csv
+row X8 1 "twice.csv:1:3: column name 'x' appears twice in the header \\(fields 1 and 2\\)" -- "$cli" tree twice.csv --xy x,y
+row X9 2 "--keep takes query, point or both, not 'box'" -- "$cli" knn named.csv named.csv -k 1 --xy lon,lat --keep box
 
 # ---- outputs that are not regular files ------------------------------------------------
 # Writing through a symbolic link or into a FIFO must reach the link's target or the
@@ -131,7 +145,7 @@ if "$cli" knn --help >/dev/null 2>&1; then
   row Q3 2 "-k must be a whole number from 1 to 1000000, not '1000001'" -- "$cli" knn p.csv q.csv -k 1000001
   row Q4 2 '-k K is required' -- "$cli" knn p.csv q.csv
   row Q5 2 "--max-dist must not be negative, not '-1'" -- "$cli" knn p.csv q.csv -k 1 --max-dist -1
-  row Q6 1 "qnan.csv:1: field 2 is not finite: 'nan'" -- "$cli" knn p.csv qnan.csv -k 1 -o out/k.csv
+  row Q6 1 "qnan.csv:1:5: field 2 is not finite: 'nan'" -- "$cli" knn p.csv qnan.csv -k 1 -o out/k.csv
   row Q7 0 '0,1,1,5.65' -- "$cli" knn p.csv qout.csv -k 1
   row Q8 0 '^0,3,2,0\.28' -- "$cli" knn dup3.csv q.csv -k 3
   row Q9 0 '0,nan,nan,nan,-1,0' -- "$cli" locate p.csv qout.csv
@@ -139,7 +153,7 @@ if "$cli" knn --help >/dev/null 2>&1; then
   row Q11 2 "-r must be a finite number, not 'nan'" -- "$cli" radius p.csv q.csv -r nan
   row Q12 2 "-r must be a finite number, not 'inf'" -- "$cli" radius p.csv q.csv -r inf
   row Q13 1 'inverted.csv:2: box has xmin > xmax or ymin > ymax' -- "$cli" range p.csv inverted.csv -o out/b.csv
-  row Q14 1 'shortbox.csv:1: expected at least 4 numeric fields, found 2' -- "$cli" range p.csv shortbox.csv
+  row Q14 1 'shortbox.csv:1:4: field 3 is missing: the line has 2 fields' -- "$cli" range p.csv shortbox.csv
   row Q15 0 '^box,point$' -- "$cli" range p.csv none.csv
   row Q16 1 'negdisc.csv:2: disc radius is negative' -- "$cli" collide negdisc.csv -o out/c.csv
   row Q17 1 'invbox.csv:1: box has xmin > xmax or ymin > ymax' -- "$cli" collide invbox.csv --boxes
@@ -197,7 +211,7 @@ if "$cli" mesh --help >/dev/null 2>&1; then
   row M5 1 'degree.poly:11: vertex 0 has degree more than 2' -- "$cli" mesh degree.poly -o out/m
   row M6 1 'dupseg.poly:11: vertex [01] has degree more than 2' -- "$cli" mesh dupseg.poly -o out/m
   row M7 1 'dupvert.poly:5: vertex number 3 expected, found 2' -- "$cli" mesh dupvert.poly -o out/m
-  row M8 1 'frac.poly:3: vertex 1: coordinates \(1.5, 0\) are not integers' -- "$cli" mesh frac.poly -o out/m
+  row M8 1 'frac.poly:3: vertex 1: coordinates \(1.5, 0\) are not integers' -- "$cli" mesh frac.poly --book -o out/m
   row M9 1 "nan.poly:3: vertex 1: bad x coordinate 'nan'" -- "$cli" mesh nan.poly -o out/m
   row M10 1 "inf.poly:3: vertex 1: bad x coordinate 'inf'" -- "$cli" mesh inf.poly -o out/m
   row M11 1 'neg.poly:3: vertex 1: \(-4, 0\) lies outside the domain' -- "$cli" mesh neg.poly -o out/m

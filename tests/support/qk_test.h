@@ -33,16 +33,10 @@ void qkt_points(qkt_rng_t *r, qkt_dist_t d, qk_point_t *out, size_t n);
 /* The seed for a test: QK_SEED from the environment, else `def`. Printed by the test. */
 uint64_t qkt_seed(uint64_t def);
 
-/* Failing allocator: fails the `fail_at`-th call (1-based; 0 = never) that allocates or
- * grows; tracks live bytes and live blocks so tests can assert no leak. */
-typedef struct qkt_alloc {
-  size_t calls;
-  size_t fail_at;
-  size_t live_bytes;
-  size_t live_blocks;
-  int failed;
-} qkt_alloc_t;
-qk_allocator_t qkt_alloc_make(qkt_alloc_t *state);
+/* The failing allocator (qkt_alloc_t, qkt_alloc_make, qkt_alloc_arm), shared with the
+ * fuzz targets; a wrong osize from the library fails the test. */
+#define QKT_ALLOC_FAIL(...) fail_msg(__VA_ARGS__)
+#include "fail_alloc.h"
 
 /* Assert qk_tree_check() passes, printing its message otherwise. */
 #define QKT_CHECK_TREE(t)                                                                          \

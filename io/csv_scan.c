@@ -1,0 +1,128 @@
+/* The CSV scanner: lines of a stream through the caller's allocator, fields, numbers. */
+#include <errno.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "io/io_internal.h"
+
+enum { CHUNK = 1 << 16 };
+
+void *qk__io_realloc(const qk_allocator_t *a, void *p, size_t osize, size_t nsize) {
+  if (a && a->fn) return a->fn(a->ud, p, osize, nsize);
+  if (nsize == 0) {
+    free(p);
+    return NULL;
+  }
+  return realloc(p, nsize);
+}
+
+void qk__lines_init(qk__lines_t *r, FILE *f, const qk_allocator_t *alloc) {
+  memset(r, 0, sizeof *r);
+  r->f = f;
+  r->alloc = alloc;
+}
+
+void qk__lines_free(qk__lines_t *r) {
+  if (r->chunk) qk__io_realloc(r->alloc, r->chunk, CHUNK, 0);
+  if (r->line) qk__io_realloc(r->alloc, r->line, r->cap, 0);
+  r->chunk = r->line = NULL;
+  r->cap = 0;
+}
+
+/* Room for `need` bytes in the line buffer. */
+static int line_room(qk__lines_t *r, size_t need) {
+  if (need <= r->cap) return 0;
+  size_t nc = r->cap ? r->cap : 256;
+  while (nc < need) nc *= 2;
+  char *p = qk__io_realloc(r->alloc, r->line, r->cap, nc);
+  if (!p) return -1;
+  r->line = p;
+  r->cap = nc;
+  return 0;
+}
+
+int qk__lines_next(qk__lines_t *r, size_t *len) {
+  if (!r->chunk) {
+    r->chunk = qk__io_realloc(r->alloc, NULL, 0, CHUNK);
+    if (!r->chunk) return -1;
+  }
+  size_t n = 0;
+  int got = 0;
+  for (;;) {
+    if (r->cpos == r->clen) {
+      if (r->eof) break;
+      r->clen = fread(r->chunk, 1, CHUNK, r->f);
+      r->cpos = 0;
+      if (r->clen < CHUNK) {
+        r->eof = 1;
+        r->ioerr = ferror(r->f) != 0;
+      }
+      if (r->clen == 0) break;
+    }
+    const char *s = r->chunk + r->cpos;
+    size_t avail = r->clen - r->cpos;
+    const char *nl = memchr(s, '\n', avail);
+    size_t take = nl ? (size_t)(nl - s) + 1 : avail;
+    if (line_room(r, n + take + 1)) return -1;
+    memcpy(r->line + n, s, take);
+    n += take;
+    r->cpos += take;
+    got = 1;
+    if (nl) break;
+  }
+  if (!got) return 0;
+  while (n > 0 && (r->line[n - 1] == '\n' || r->line[n - 1] == '\r')) n--;
+  r->line[n] = '\0';
+  r->lineno++;
+  *len = n;
+  return 1;
+}
+
+static int blank(char c) { return c == ' ' || c == '\t'; }
+
+const char *qk__csv_field(const char *line, size_t len, size_t *pos, qk__span_t *sp) {
+  size_t i = *pos;
+  sp->start = i;
+  sp->quoted = 0;
+  size_t j = i;
+  while (j < len && blank(line[j])) j++;
+  if (j < len && line[j] == '"') {
+    /* A quoted field: "" inside is a quote; only blanks may follow the closing quote. */
+    sp->quoted = 1;
+    sp->b = ++j;
+    for (;;) {
+      if (j >= len) return "unterminated quoted field";
+      if (line[j] == '"' && j + 1 < len && line[j + 1] == '"') {
+        j += 2;
+      } else if (line[j] == '"') {
+        break;
+      } else {
+        j++;
+      }
+    }
+    sp->e = j++;
+    while (j < len && blank(line[j])) j++;
+    if (j < len && line[j] != ',') return "text after a closing quote";
+  } else {
+    sp->b = i;
+    while (j < len && line[j] != ',') j++;
+    sp->e = j;
+  }
+  *pos = j + 1; /* past the comma, or len + 1 after the last field */
+  return NULL;
+}
+
+int qk__csv_number(char *line, const qk__span_t *sp, double *v) {
+  size_t b = sp->b, e = sp->e;
+  while (b < e && blank(line[b])) b++;
+  while (e > b && blank(line[e - 1])) e--;
+  if (b == e) return 0;
+  /* strtod needs a terminated string: end the field in place for the call. */
+  char saved = line[e];
+  line[e] = '\0';
+  char *end;
+  errno = 0;
+  *v = strtod(line + b, &end);
+  line[e] = saved;
+  return end == line + e;
+}

@@ -1,0 +1,130 @@
+/*
+ * The lattice the mesher works on. The book's algorithm needs integer vertices; an input
+ * whose coordinates are dyadic rationals (k / 2^f, as every double is, though f may be
+ * large) lies on the lattice of spacing 2^-f, and the algorithm runs unchanged on the
+ * lattice coordinates X = (x - x0) 2^f. Nothing is rounded anywhere:
+ *  - x - x0 is a multiple of 2^-f below 2^30 2^-f, so it is a double and the subtraction
+ *    exact; multiplying by 2^f is exact;
+ *  - back, a mesh vertex is a multiple of 2^-(f+1) (a half-lattice point) of magnitude
+ *    below 2^52 2^-(f+1) (checked here), so X 2^-f + x0 is a double and the sum exact;
+ *    input vertices come back bit-identical.
+ * When no lattice with at most 2^30 points per side holds every vertex (coordinates such
+ * as 0.1, whose nearest double needs 2^-56 spacing, next to a range of 1), the input is
+ * rejected naming the vertex that needs the finest spacing: there is no exact placement
+ * to offer, and rounding would break the promise that input vertices come back as given.
+ */
+#include "mesh/mesh_internal.h"
+
+#include <math.h>
+#include <string.h>
+
+/* Fractional binary digits of a finite double (0 for integers). */
+static int frac_bits(double c) {
+  if (c == 0) return 0;
+  int e;
+  double m = frexp(c, &e);                   /* c = m 2^e, 0.5 <= |m| < 1 */
+  uint64_t M = (uint64_t)fabs(ldexp(m, 53)); /* c = +-M 2^(e-53), M an integer */
+  int tz = 0;
+  while (!(M & 1)) M >>= 1, tz++;
+  int bits = 53 - e - tz;
+  return bits > 0 ? bits : 0;
+}
+
+qk_status_t qk__mesh_lattice(const qk_poly_t *P, const qk_mesh_options_t *opt, int book,
+                             qk__lattice_t *L, qk_mesh_error_t *err) {
+  memset(L, 0, sizeof *L);
+  if (book) return QK_OK;
+  if (P->nv == 0) return QK_OK;
+  int f = 0;
+  size_t finest = 0;
+  double minx = P->vx[0], miny = P->vy[0], maxx = minx, maxy = miny;
+  for (size_t i = 0; i < P->nv; i++) {
+    int b = frac_bits(P->vx[i]), c = frac_bits(P->vy[i]);
+    if (b > f || c > f) f = b > c ? b : c, finest = i;
+    minx = fmin(minx, P->vx[i]), maxx = fmax(maxx, P->vx[i]);
+    miny = fmin(miny, P->vy[i]), maxy = fmax(maxy, P->vy[i]);
+  }
+  /* A unit square's diagonal, sqrt(2) 2^-f, is its longest possible edge. */
+  int fv = f;
+  if (opt->max_size > 0)
+    while (f < 1100 && ldexp(1.0, -f) * 1.4142135623730951 > opt->max_size) f++;
+  double range = fmax(maxx - minx, maxy - miny);
+  if (f > fv && !(ldexp(range, f) <= (double)QK_MESH_MAX_SIZE))
+    return qk__mesh_fail(err, QK_ERR_LIMIT, 0,
+                         "max_size %.17g needs a lattice of spacing 2^-%d, and the input's extent "
+                         "%.17g would span more than 2^30 such steps",
+                         opt->max_size, f, range);
+  if (!(ldexp(range, f) <= (double)QK_MESH_MAX_SIZE))
+    return qk__mesh_fail(err, QK_ERR_GEOMETRY, P->vline[finest],
+                         "vertex %lu: (%.17g, %.17g) needs a lattice of spacing 2^-%d, and the "
+                         "input's extent %.17g would span more than 2^30 such steps (no exact "
+                         "placement exists; see docs/mesh.md)",
+                         qk__mesh_num(P, finest), P->vx[finest], P->vy[finest], f, range);
+  uint64_t U = 1;
+  while ((double)U < ldexp(range, f)) U *= 2;
+  double ext = ldexp((double)U, -f);
+  double big = fmax(fmax(fabs(minx), fabs(minx + ext)), fmax(fabs(miny), fabs(miny + ext)));
+  if (!(ldexp(big, f + 1) < 0x1p52))
+    return qk__mesh_fail(err, QK_ERR_GEOMETRY, P->vline[finest],
+                         "vertex %lu: (%.17g, %.17g) needs a lattice of spacing 2^-%d, too fine "
+                         "for a double at magnitude %.17g (no exact placement exists; see "
+                         "docs/mesh.md)",
+                         qk__mesh_num(P, finest), P->vx[finest], P->vy[finest], f, big);
+  /* The book's step 1 splits every square along the segments down to unit size, so the
+   * mesh has a few triangles per lattice step of boundary; a size bound gives about
+   * 4 (extent / H)^2. Refuse what could not fit in memory rather than try. */
+  double steps = 0;
+  for (size_t s = 0; s < P->ns; s++) {
+    uint32_t a = P->seg[2 * s], b = P->seg[2 * s + 1];
+    steps += ldexp(fmax(fabs(P->vx[a] - P->vx[b]), fabs(P->vy[a] - P->vy[b])), f);
+  }
+  double by_size = opt->max_size > 0 ? 4 * (range / opt->max_size) * (range / opt->max_size) : 0;
+  if (steps > QK__MESH_MAX_STEPS || by_size > QK__MESH_MAX_STEPS)
+    return qk__mesh_fail(err, QK_ERR_LIMIT, P->vline[finest],
+                         "the dyadic mode would need %.3g lattice steps of 2^-%d along the "
+                         "segments and about %.3g triangles for the size bound (at most %.3g): "
+                         "vertex %lu (%.17g, %.17g) needs the finest spacing; round the input "
+                         "to fewer binary digits (see docs/mesh.md)",
+                         steps, f, by_size, (double)QK__MESH_MAX_STEPS, qk__mesh_num(P, finest),
+                         P->vx[finest], P->vy[finest]);
+  L->f = f, L->x0 = minx, L->y0 = miny;
+  return QK_OK;
+}
+
+qk_status_t qk__mesh_lattice_poly(const qk_poly_t *P, const qk__lattice_t *L,
+                                  const qk_allocator_t *a, qk_poly_t **out) {
+  qk_poly_t *q = qk__realloc(a, NULL, 0, sizeof *q);
+  if (!q) return QK_ERR_NOMEM;
+  memset(q, 0, sizeof *q);
+  q->alloc = *a;
+  q->first_index = P->first_index;
+  size_t nv = P->nv ? P->nv : 1, ns = P->ns ? P->ns : 1, nh = P->nh ? P->nh : 1;
+  q->vx = qk__realloc(a, NULL, 0, nv * sizeof *q->vx), q->cap.v = nv;
+  q->vy = qk__realloc(a, NULL, 0, nv * sizeof *q->vy), q->cap.vy = nv;
+  q->seg = qk__realloc(a, NULL, 0, 2 * ns * sizeof *q->seg), q->cap.s = ns;
+  q->hx = qk__realloc(a, NULL, 0, nh * sizeof *q->hx), q->cap.h = nh;
+  q->hy = qk__realloc(a, NULL, 0, nh * sizeof *q->hy), q->cap.hy = nh;
+  if (!q->vx || !q->vy || !q->seg || !q->hx || !q->hy) {
+    qk__mesh_lattice_poly_free(q);
+    return QK_ERR_NOMEM;
+  }
+  q->nv = P->nv, q->ns = P->ns, q->nh = P->nh;
+  for (size_t i = 0; i < P->nv; i++)
+    q->vx[i] = ldexp(P->vx[i] - L->x0, L->f), q->vy[i] = ldexp(P->vy[i] - L->y0, L->f);
+  /* Hole and region points need no exactness beyond their side of the segments; a point
+   * within rounding distance of a segment may be placed on it (and is then rejected). */
+  for (size_t i = 0; i < P->nh; i++)
+    q->hx[i] = ldexp(P->hx[i] - L->x0, L->f), q->hy[i] = ldexp(P->hy[i] - L->y0, L->f);
+  if (P->ns) memcpy(q->seg, P->seg, 2 * P->ns * sizeof *q->seg);
+  /* Line numbers, markers and regions are read from the original (g->src). */
+  q->vline = P->vline, q->sline = P->sline, q->hline = P->hline;
+  q->cap.vl = q->cap.sl = q->cap.hl = 0;
+  *out = q;
+  return QK_OK;
+}
+
+void qk__mesh_lattice_poly_free(qk_poly_t *q) {
+  if (!q) return;
+  q->vline = q->sline = q->hline = NULL; /* borrowed from the original */
+  qk_poly_free(q);
+}

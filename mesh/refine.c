@@ -1,0 +1,51 @@
+/*
+ * Size control: after the book's subdivision, split every leaf whose triangles could have
+ * an edge longer than asked. The longest edge of a leaf of side s is its diagonal,
+ * s sqrt 2 (the corner-to-corner split; the centre fan's edges are shorter), so a leaf is
+ * split while s sqrt 2 exceeds the bound. Only leaves with no component edge are split
+ * (those are larger than unit size), so the book's step 3 and its proof apply unchanged
+ * to the refined, then balanced, tree; balancing only splits further, which keeps the
+ * bound. The lattice is chosen fine enough (mesh/lattice.c) that unit leaves meet a
+ * constant max_size; a size function is only sampled (corners and centre) and cannot
+ * go below the unit leaf.
+ */
+#include "mesh/mesh_internal.h"
+
+#include <math.h>
+
+/* The longest edge wanted in the leaf square (X, Y, S) (lattice units), input units. */
+static double wanted(const qk__gen_t *g, int64_t X, int64_t Y, int64_t S) {
+  const qk_mesh_options_t *o = g->opt;
+  double h = o->max_size > 0 ? o->max_size : INFINITY;
+  if (o->size_fn) {
+    static const int cx[5] = {0, 2, 0, 2, 1}, cy[5] = {0, 0, 2, 2, 1};
+    for (int k = 0; k < 5; k++) {
+      double x = qk__lat_out(&g->lat, 2 * X + cx[k] * S, g->lat.x0);
+      double y = qk__lat_out(&g->lat, 2 * Y + cy[k] * S, g->lat.y0);
+      double v = o->size_fn(x, y, o->size_user);
+      if (v < h) h = v; /* a NaN sample asks for nothing */
+    }
+  }
+  return h;
+}
+
+static qk_status_t refine(qk__gen_t *g, qk_node_t v, int64_t X, int64_t Y, int64_t S) {
+  if (qk__node_leaf(g->tree, v)) {
+    if (S <= 1 || !(ldexp((double)S, -g->lat.f) * 1.4142135623730951 > wanted(g, X, Y, S)))
+      return QK_OK;
+    qk_status_t st = qk_tree_split_leaf(g->tree, v);
+    if (st) return qk__mesh_fail(g->err, st, 0, "%s while refining to size", qk_strerror(st));
+  }
+  uint32_t c = qk__node_child(g->tree, v);
+  int64_t h = S / 2;
+  for (unsigned q = 0; q < 4; q++) {
+    qk_status_t st = refine(g, c + q, X + (qk__q_east(q) ? h : 0), Y + (qk__q_north(q) ? h : 0), h);
+    if (st) return st;
+  }
+  return QK_OK;
+}
+
+qk_status_t qk__mesh_refine(qk__gen_t *g) {
+  if (!(g->opt->max_size > 0) && !g->opt->size_fn) return QK_OK;
+  return refine(g, qk_tree_root(g->tree), 0, 0, (int64_t)g->U);
+}

@@ -1,0 +1,87 @@
+/* The atomic output writer: a temporary file renamed over the target on success. */
+#define _XOPEN_SOURCE 700
+#include <errno.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "cli.h"
+
+int cli_out_open(const char *cmd, const char *path, cli_out_t *o) {
+  memset(o, 0, sizeof *o);
+  if (!strcmp(path, "-")) {
+    o->f = stdout;
+    return CLI_OK;
+  }
+  /* A symbolic link is written through: the temporary goes beside its target and is
+   * renamed over the target, so the link stays. Something that is not a regular file (a
+   * FIFO, a device such as /dev/stdout) cannot be replaced atomically and must not be
+   * replaced at all: it is written directly. */
+  char *target = NULL;
+  struct stat st;
+  if (lstat(path, &st) == 0 && S_ISLNK(st.st_mode)) target = realpath(path, NULL);
+  const char *final = target ? target : path;
+  if (stat(final, &st) == 0 && !S_ISREG(st.st_mode)) {
+    o->f = fopen(final, "wb");
+    free(target);
+    if (!o->f) {
+      cli_error(cmd, "cannot write %s: %s", path, strerror(errno));
+      return CLI_BAD_INPUT;
+    }
+    o->direct = 1;
+    return CLI_OK;
+  }
+  size_t n = strlen(final) + 32;
+  o->path = strdup(final);
+  o->tmp = malloc(n);
+  free(target);
+  if (!o->path || !o->tmp) {
+    free(o->path);
+    free(o->tmp);
+    cli_error(cmd, "out of memory");
+    return CLI_INTERNAL;
+  }
+  snprintf(o->tmp, n, "%s.tmp.%ld", o->path, (long)getpid());
+  o->f = fopen(o->tmp, "wb");
+  if (!o->f) {
+    cli_error(cmd, "cannot write %s: %s", path, strerror(errno));
+    free(o->path);
+    free(o->tmp);
+    memset(o, 0, sizeof *o);
+    return CLI_BAD_INPUT;
+  }
+  return CLI_OK;
+}
+
+int cli_out_close(const char *cmd, cli_out_t *o, int ok) {
+  int rc = CLI_OK;
+  if (!o->f) return CLI_OK;
+  if (o->f == stdout) {
+    if (fflush(stdout) != 0) rc = CLI_INTERNAL;
+    o->f = NULL;
+    return rc;
+  }
+  if (o->direct) {
+    if (ferror(o->f)) rc = CLI_INTERNAL;
+    if (fclose(o->f) != 0) rc = CLI_INTERNAL;
+    memset(o, 0, sizeof *o);
+    return rc;
+  }
+  if (ferror(o->f)) ok = 0, rc = CLI_INTERNAL;
+  if (fclose(o->f) != 0) ok = 0, rc = CLI_INTERNAL;
+  if (ok && rename(o->tmp, o->path) != 0) {
+    cli_error(cmd, "cannot rename %s to %s: %s", o->tmp, o->path, strerror(errno));
+    ok = 0;
+    rc = CLI_INTERNAL;
+  }
+  if (!ok) {
+    remove(o->tmp);
+    if (rc == CLI_INTERNAL) cli_error(cmd, "failed writing %s", o->path);
+  }
+  free(o->path);
+  free(o->tmp);
+  memset(o, 0, sizeof *o);
+  return rc;
+}
