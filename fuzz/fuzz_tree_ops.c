@@ -190,6 +190,29 @@ static void to_remove(to_state_t *s, qk_id_t id, int armed) {
   to_check(s, "remove");
 }
 
+static void to_move(to_state_t *s, qk_id_t id, qk_point_t p, int armed) {
+  qk_tree_stats_t before;
+  qk_tree_stats(s->tree, &before);
+  qk_status_t rc = qk_tree_move(s->tree, id, p);
+  int known = id < s->n_ids && s->alive[id];
+  qk_status_t want = !to_finite(p)      ? QK_ERR_NONFINITE
+                     : !to_inside(s, p) ? QK_ERR_OUTSIDE
+                     : known            ? QK_OK
+                                        : QK_ERR_NOT_FOUND;
+  if (armed && want == QK_OK && s->alloc_state.failed && rc == QK_ERR_NOMEM) want = rc;
+  QKF_ASSERT(rc == want, "move(%u, %.17g, %.17g) = %d, want %d", id, p.x, p.y, rc, want);
+  if (rc == QK_OK) { /* the id stays */
+    s->x[id] = p.x;
+    s->y[id] = p.y;
+  } else {
+    qk_tree_stats_t after;
+    qk_tree_stats(s->tree, &after);
+    QKF_ASSERT(after.nodes == before.nodes && after.leaves == before.leaves,
+               "failed move changed the tree");
+  }
+  to_check(s, "move");
+}
+
 /* Pick a leaf by the next input byte. */
 static qk_node_t to_pick_leaf(to_state_t *s) {
   qk_node_t leaves[64];
@@ -628,7 +651,9 @@ int qkf_tree_ops(const uint8_t *data, size_t size) {
       qkt_alloc_arm(&s.alloc_state, 1 + (code & 7));
       armed = 1;
       static const uint8_t changes[] = {0, 3, 4, 12};
-      code = changes[qkf_u8(&s.in) % 4];
+      uint8_t pick = qkf_u8(&s.in);
+      code = changes[pick % 4];
+      if (code == 3 && (pick & 0x80)) code = 129; /* a move rather than a removal */
     }
     switch (code % 14) {
     case 0:
@@ -637,7 +662,12 @@ int qkf_tree_ops(const uint8_t *data, size_t size) {
       if (s.n_ids < TO_MAX_IDS) to_insert(&s, to_point(&s), armed);
       break;
     case 3:
-      to_remove(&s, (qk_id_t)(qkf_u8(&s.in) % (s.n_ids + 2)), armed);
+      if (code & 0x80) { /* codes 129, 143, ...: move a point, keeping its id */
+        qk_id_t id = (qk_id_t)(qkf_u8(&s.in) % (s.n_ids + 2));
+        to_move(&s, id, to_point(&s), armed);
+      } else {
+        to_remove(&s, (qk_id_t)(qkf_u8(&s.in) % (s.n_ids + 2)), armed);
+      }
       break;
     case 4:
       if (qkf_u8(&s.in) & 1)
