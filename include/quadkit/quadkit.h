@@ -9,5 +9,6 @@
 #include "quadkit/index.h"
 #include "quadkit/mesh.h"
 #include "quadkit/query.h"
+#include "quadkit/region.h"
 
 #endif /* QUADKIT_QUADKIT_H */

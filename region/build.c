@@ -1,0 +1,393 @@
+/*
+ * Building the index of a layer: the refinement and the per-leaf arrays (the design is
+ * described at the top of region.c).
+ */
+#include <string.h>
+#include <time.h>
+
+#include "region/region_internal.h"
+
+#define MAXD (QK_MAX_DEPTH_LIMIT + 1)
+
+typedef struct bctx {
+  qk_region_t *r;
+  const qk__pieces_t *pc;
+  const qk_region_arrays_t *in;
+  uint32_t C, maxd;
+  uint32_t *e[MAXD + 1]; /* per depth: the pieces meeting the current cell */
+  size_t ne[MAXD + 1], cap_e[MAXD + 1];
+  uint32_t *s[MAXD + 1]; /* per depth: features containing its reference point */
+  size_t ns[MAXD + 1], cap_s[MAXD + 1];
+  uint32_t *odd;
+  size_t cap_odd;
+  uint8_t *bad; /* per ring: self-intersecting */
+  unsigned depth;
+} bctx_t;
+
+/* Conservative: may keep a piece that misses the closed box, never drops one that meets
+ * it (extra pieces cost time, not correctness). */
+static bool meets_box(const qk__seg_t *g, double x0, double y0, double x1, double y1) {
+  if (fmax(g->ax, g->bx) < x0 || fmin(g->ax, g->bx) > x1 || fmax(g->ay, g->by) < y0 ||
+      fmin(g->ay, g->by) > y1)
+    return false;
+  double dx = g->bx - g->ax, dy = g->by - g->ay;
+  const double cx[4] = {x0, x1, x1, x0}, cy[4] = {y0, y0, y1, y1};
+  int pos = 0, neg = 0;
+  for (int i = 0; i < 4; i++) {
+    double l = dx * (cy[i] - g->ay), r = dy * (cx[i] - g->ax);
+    double v = l - r, tol = 1e-14 * (fabs(l) + fabs(r));
+    if (v > tol)
+      pos++;
+    else if (v < -tol)
+      neg++;
+  }
+  return pos != 4 && neg != 4;
+}
+
+/* Do two closed segments meet (exactly)? */
+static bool segs_meet(const qk__seg_t *p, const qk__seg_t *q) {
+  int o1 = qk__orient(p->ax, p->ay, p->bx, p->by, q->ax, q->ay);
+  int o2 = qk__orient(p->ax, p->ay, p->bx, p->by, q->bx, q->by);
+  if (o1 * o2 > 0) return false;
+  int o3 = qk__orient(q->ax, q->ay, q->bx, q->by, p->ax, p->ay);
+  int o4 = qk__orient(q->ax, q->ay, q->bx, q->by, p->bx, p->by);
+  if (o3 * o4 > 0) return false;
+  if (o1 == 0 && o2 == 0)
+    return fmax(fmin(p->ax, p->bx), fmin(q->ax, q->bx)) <=
+               fmin(fmax(p->ax, p->bx), fmax(q->ax, q->bx)) &&
+           fmax(fmin(p->ay, p->by), fmin(q->ay, q->by)) <=
+               fmin(fmax(p->ay, p->by), fmax(q->ay, q->by));
+  return true;
+}
+
+/* Flag the rings of a leaf's pieces that meet themselves away from a shared vertex. */
+static void self_meets(bctx_t *b, const uint32_t *E, size_t n) {
+  const qk__pieces_t *pc = b->pc;
+  for (size_t i = 0; i < n; i++) {
+    uint32_t p = E[i], rp = pc->ring[p];
+    if (pc->vtx[p] == UINT32_MAX || b->bad[rp]) continue;
+    for (size_t j = i + 1; j < n; j++) {
+      uint32_t q = E[j];
+      if (pc->ring[q] != rp || pc->vtx[q] == UINT32_MAX) continue;
+      uint32_t vp = pc->vtx[p], vq = pc->vtx[q];
+      size_t rs = b->in->ring_start[rp], re = b->in->ring_start[rp + 1];
+      uint32_t lo = vp < vq ? vp : vq, hi = vp < vq ? vq : vp;
+      if (hi - lo <= 1 || (lo == rs && hi == re - 2)) continue; /* same or neighbouring edges */
+      if (segs_meet(&pc->seg[p], &pc->seg[q])) {
+        b->bad[rp] = 1;
+        break;
+      }
+    }
+  }
+}
+
+static qk_status_t emit_leaf(bctx_t *b, qk_node_t v, double cx, double cy, unsigned d) {
+  qk_region_t *r = b->r;
+  const qk__pieces_t *pc = b->pc;
+  size_t ne = b->ne[d], ns = b->ns[d];
+  if (r->n_leaves >= QK__LEAF - 1) return QK_ERR_LIMIT;
+  qk_status_t st;
+  if ((st = qk__region_grow(&r->alloc, (void **)&r->leaves, &r->cap_leaves, r->n_leaves + 1,
+                            sizeof(qk__leaf_t))) ||
+      (st = qk__region_grow(&r->alloc, (void **)&r->le, &r->cap_le, r->n_le + ne,
+                            sizeof(qk__seg_t))) ||
+      (st = qk__region_grow(&r->alloc, (void **)&r->le_tag, &r->cap_le_tag, r->n_le + ne,
+                            sizeof(uint32_t))) ||
+      (st = qk__region_grow(&r->alloc, (void **)&r->sets, &r->cap_sets, r->n_sets + ns,
+                            sizeof(uint32_t))))
+    return st;
+  if (r->n_le + ne > UINT32_MAX || r->n_sets + ns > UINT32_MAX) return QK_ERR_LIMIT;
+  r->leaves[r->n_leaves] =
+      (qk__leaf_t){cx, cy, (uint32_t)r->n_le, (uint32_t)ne, (uint32_t)r->n_sets, (uint32_t)ns};
+  for (size_t i = 0; i < ne; i++) {
+    uint32_t p = b->e[d][i];
+    const qk__seg_t *g = &pc->seg[p];
+    int side = qk__side(g->ax, g->ay, g->bx, g->by, cx, cy);
+    r->le[r->n_le + i] = *g;
+    r->le_tag[r->n_le + i] =
+        pc->feat[p] << 2 | (uint32_t)(pc->vtx[p] == UINT32_MAX) << 1 | (uint32_t)(side > 0);
+  }
+  if (ns) memcpy(r->sets + r->n_sets, b->s[d], ns * sizeof(uint32_t));
+  r->n_le += ne;
+  r->n_sets += ns;
+  r->kid[v] = QK__LEAF | (uint32_t)r->n_leaves;
+  r->n_leaves++;
+  if (d > b->depth) b->depth = d;
+  self_meets(b, b->e[d], ne);
+  return QK_OK;
+}
+
+/* The pieces of level d meeting a child's box go to level d + 1, and the child's set is
+ * the parent's with the features crossed an odd number of times on the way from the
+ * parent's reference point (px, py) to the child's (qx, qy) toggled. */
+static qk_status_t child_lists(bctx_t *b, unsigned d, double x0, double y0, double x1, double y1,
+                               double px, double py, double qx, double qy) {
+  const qk__pieces_t *pc = b->pc;
+  const qk_allocator_t *a = &b->r->alloc;
+  qk_status_t st;
+  size_t n = b->ne[d];
+  if ((st = qk__region_grow(a, (void **)&b->e[d + 1], &b->cap_e[d + 1], n ? n : 1,
+                            sizeof(uint32_t))) ||
+      (st = qk__region_grow(a, (void **)&b->odd, &b->cap_odd, n ? n : 1, sizeof(uint32_t))))
+    return st;
+  size_t m = 0, nodd = 0;
+  uint32_t cur = UINT32_MAX;
+  bool par = false;
+  for (size_t i = 0; i < n; i++) {
+    uint32_t p = b->e[d][i];
+    const qk__seg_t *g = &pc->seg[p];
+    if (!meets_box(g, x0, y0, x1, y1)) continue;
+    b->e[d + 1][m++] = p;
+    uint32_t f = pc->feat[p];
+    if (f != cur) {
+      if (par) b->odd[nodd++] = cur;
+      cur = f;
+      par = false;
+    }
+    int sc = qk__side(g->ax, g->ay, g->bx, g->by, px, py);
+    if (qk__crosses(px, py, qx, qy, g->ax, g->ay, g->bx, g->by, sc)) par = !par;
+  }
+  if (par) b->odd[nodd++] = cur;
+  b->ne[d + 1] = m;
+  /* symmetric difference of two sorted lists */
+  size_t ns = b->ns[d];
+  if ((st = qk__region_grow(a, (void **)&b->s[d + 1], &b->cap_s[d + 1], ns + nodd + 1,
+                            sizeof(uint32_t))))
+    return st;
+  const uint32_t *S = b->s[d];
+  uint32_t *T = b->s[d + 1];
+  size_t i = 0, j = 0, k = 0;
+  while (i < ns || j < nodd) {
+    if (j == nodd || (i < ns && S[i] < b->odd[j]))
+      T[k++] = S[i++];
+    else if (i == ns || b->odd[j] < S[i])
+      T[k++] = b->odd[j++];
+    else
+      i++, j++;
+  }
+  b->ns[d + 1] = k;
+  return QK_OK;
+}
+
+static qk_status_t build_node(bctx_t *b, qk_node_t v, double x0, double y0, double x1, double y1,
+                              double side, unsigned d) {
+  qk_region_t *r = b->r;
+  double h = side * 0.5, cx = x0 + h, cy = y0 + h;
+  qk_status_t st;
+  if (b->ne[d] > b->C && d < b->maxd) {
+    st = qk_tree_split_leaf(r->tree, v);
+    if (st == QK_OK) {
+      uint32_t first = qk__node_child(r->tree, v);
+      if ((st = qk__region_grow(&r->alloc, (void **)&r->kid, &r->cap_kid,
+                                qk__tree_node_bound(r->tree), sizeof(uint32_t))))
+        return st;
+      r->kid[v] = first;
+      for (unsigned q = 0; q < 4; q++) {
+        int east = (int)qk__q_east(q), north = (int)qk__q_north(q);
+        double qx0 = east ? cx : x0, qx1 = east ? x1 : cx;
+        double qy0 = north ? cy : y0, qy1 = north ? y1 : cy;
+        double hh = h * 0.5;
+        if ((st = child_lists(b, d, qx0, qy0, qx1, qy1, cx, cy, qx0 + hh, qy0 + hh))) return st;
+        if ((st = build_node(b, first + q, qx0, qy0, qx1, qy1, h, d + 1))) return st;
+      }
+      return QK_OK;
+    }
+    if (st != QK_ERR_LIMIT) return st;
+  }
+  return emit_leaf(b, v, cx, cy, d);
+}
+
+/* The root's set: the half-open ray from its reference point, against every piece. */
+static qk_status_t root_set(bctx_t *b, double cx, double cy) {
+  const qk__pieces_t *pc = b->pc;
+  size_t n = pc->n, k = 0;
+  qk_status_t st =
+      qk__region_grow(&b->r->alloc, (void **)&b->s[0], &b->cap_s[0], n + 1, sizeof(uint32_t));
+  if (st) return st;
+  bool par = false;
+  for (size_t i = 0; i < n; i++) {
+    const qk__seg_t *g = &pc->seg[i];
+    if ((g->ay > cy) != (g->by > cy)) {
+      int s = qk__side(g->ax, g->ay, g->bx, g->by, cx, cy);
+      if ((g->by > g->ay) ? s > 0 : s < 0) par = !par;
+    }
+    if (i + 1 == n || pc->feat[i + 1] != pc->feat[i]) {
+      if (par) b->s[0][k++] = pc->feat[i];
+      par = false;
+    }
+  }
+  b->ns[0] = k;
+  return QK_OK;
+}
+
+static qk_status_t root_square(const qk__pieces_t *pc, qk_region_t *r, qk_error_t *err) {
+  double x0 = INFINITY, y0 = INFINITY, x1 = -INFINITY, y1 = -INFINITY;
+  for (size_t i = 0; i < pc->n; i++) {
+    const qk__seg_t *g = &pc->seg[i];
+    x0 = fmin(x0, fmin(g->ax, g->bx));
+    x1 = fmax(x1, fmax(g->ax, g->bx));
+    y0 = fmin(y0, fmin(g->ay, g->by));
+    y1 = fmax(y1, fmax(g->ay, g->by));
+  }
+  if (!pc->n) {
+    r->stats.box = (qk_box_t){0, 0, 0, 0};
+    r->rx = r->ry = -0.5;
+    r->rside = 1;
+    return QK_OK;
+  }
+  r->stats.box = (qk_box_t){x0, y0, x1, y1};
+  double w = x1 - x0, h = y1 - y0, ext = fmax(w, h);
+  if (ext < 1e-60)
+    return qk__region_fail(err, QK_ERR_GEOMETRY, SIZE_MAX, "layer extent %g is too small", ext);
+  /* The root strictly contains every piece, so a point outside it is outside all. */
+  double side = ext * 1.125;
+  for (;;) {
+    double rx = x0 - (side - w) * 0.5, ry = y0 - (side - h) * 0.5;
+    if (rx < x0 && ry < y0 && rx + side > x1 && ry + side > y1) {
+      r->rx = rx;
+      r->ry = ry;
+      r->rside = side;
+      return QK_OK;
+    }
+    side *= 1.0625;
+  }
+}
+
+static double now(void) {
+  struct timespec ts;
+  if (!timespec_get(&ts, TIME_UTC)) return 0;
+  return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+static size_t layer_bytes(const qk_region_t *r) {
+  return sizeof *r + r->cap_segs * (sizeof(qk__seg_t) + sizeof(uint32_t)) +
+         r->cap_kid * sizeof(uint32_t) + r->cap_leaves * sizeof(qk__leaf_t) +
+         r->cap_le * sizeof(qk__seg_t) + r->cap_le_tag * sizeof(uint32_t) +
+         r->cap_sets * sizeof(uint32_t) + qk_tree_memory(r->tree) + r->props.pool_cap +
+         (r->props.cap_start + r->props.cap_key + r->props.cap_val) * sizeof(size_t);
+}
+
+qk_status_t qk__region_build(const qk_region_arrays_t *in, const qk_region_options_t *options,
+                             qk__props_t *props, size_t skipped, size_t holes, qk_region_t **out,
+                             qk_error_t *err) {
+  qk_region_options_t o;
+  qk_region_options_init(&o);
+  if (options) o = *options;
+  qk_allocator_t alloc = {NULL, NULL};
+  if (o.allocator) alloc = *o.allocator;
+  qk__props_t pr = {0};
+  if (props) {
+    pr = *props;
+    memset(props, 0, sizeof *props);
+  }
+  if (err) {
+    err->line = err->column = 0;
+    err->item = SIZE_MAX;
+    err->message[0] = '\0';
+  }
+  if (out) *out = NULL;
+  qk_status_t st = QK_OK;
+  if (!out) st = qk__region_fail(err, QK_ERR_INVALID, SIZE_MAX, "no output");
+  if (o.leaf_edges == 0) o.leaf_edges = QK_REGION_DEFAULT_LEAF_EDGES;
+  if (o.max_depth == 0) o.max_depth = QK_REGION_DEFAULT_MAX_DEPTH;
+  if (!st && o.max_depth > QK_MAX_DEPTH_LIMIT)
+    st = qk__region_fail(err, QK_ERR_INVALID, SIZE_MAX, "max_depth %u exceeds %d", o.max_depth,
+                         QK_MAX_DEPTH_LIMIT);
+  if (st) {
+    qk__props_free(&alloc, &pr);
+    return st;
+  }
+  double t0 = now();
+  qk__pieces_t pc;
+  if ((st = qk__region_prepare(&alloc, in, o.planar, &pc, err))) {
+    qk__props_free(&alloc, &pr);
+    return st;
+  }
+  bctx_t b;
+  memset(&b, 0, sizeof b);
+  qk_region_t *r = qk__realloc(&alloc, NULL, 0, sizeof *r);
+  if (!r) {
+    qk__pieces_free(&alloc, &pc);
+    qk__props_free(&alloc, &pr);
+    return qk__region_fail(err, QK_ERR_NOMEM, SIZE_MAX, "out of memory");
+  }
+  memset(r, 0, sizeof *r);
+  r->alloc = alloc;
+  r->planar = o.planar;
+  r->n_features = (uint32_t)in->n_features;
+  r->props = pr;
+  b.r = r;
+  b.pc = &pc;
+  b.in = in;
+  b.C = o.leaf_edges;
+  b.maxd = o.max_depth;
+  if ((st = root_square(&pc, r, err))) goto done;
+  qk_tree_options_t to;
+  qk_tree_options_init(&to);
+  to.has_root = 1;
+  to.root = (qk_square_t){r->rx, r->ry, r->rside};
+  to.max_depth = o.max_depth;
+  to.allocator = &r->alloc;
+  if ((st = qk_tree_build(NULL, 0, &to, &r->tree))) goto done;
+  if ((st = qk__region_grow(&alloc, (void **)&r->kid, &r->cap_kid, 1, sizeof(uint32_t)))) goto done;
+  b.bad = qk__realloc(&alloc, NULL, 0, in->n_rings + 1);
+  if (!b.bad) {
+    st = QK_ERR_NOMEM;
+    goto done;
+  }
+  memset(b.bad, 0, in->n_rings + 1);
+  if ((st = qk__region_grow(&alloc, (void **)&b.e[0], &b.cap_e[0], pc.n + 1, sizeof(uint32_t))))
+    goto done;
+  for (size_t i = 0; i < pc.n; i++) b.e[0][i] = (uint32_t)i;
+  b.ne[0] = pc.n;
+  double h = r->rside * 0.5;
+  if ((st = root_set(&b, r->rx + h, r->ry + h))) goto done;
+  st = build_node(&b, 0, r->rx, r->ry, r->rx + r->rside, r->ry + r->rside, r->rside, 0);
+
+done:
+  for (int d = 0; d <= MAXD; d++) {
+    qk__free(&alloc, b.e[d], b.cap_e[d] * sizeof(uint32_t));
+    qk__free(&alloc, b.s[d], b.cap_s[d] * sizeof(uint32_t));
+  }
+  qk__free(&alloc, b.odd, b.cap_odd * sizeof(uint32_t));
+  size_t bad = 0;
+  if (b.bad) {
+    for (size_t i = 0; i < in->n_rings; i++) bad += b.bad[i];
+    qk__free(&alloc, b.bad, in->n_rings + 1);
+  }
+  qk__free(&alloc, pc.ring, pc.cap * sizeof(uint32_t));
+  qk__free(&alloc, pc.vtx, pc.cap * sizeof(uint32_t));
+  r->segs = pc.seg;
+  r->seg_feat = pc.feat;
+  r->n_segs = pc.n;
+  r->cap_segs = pc.cap;
+  if (st) {
+    qk_region_free(r);
+    if (err && !err->message[0])
+      qk__region_fail(err, st, SIZE_MAX, "%s while building the index", qk_strerror(st));
+    return st;
+  }
+  qk_region_stats_t *s = &r->stats;
+  s->features = in->n_features;
+  s->rings = in->n_rings;
+  s->vertices = in->n_rings ? in->ring_start[in->n_rings] : 0;
+  if (holes == SIZE_MAX) {
+    holes = 0;
+    for (size_t f = 0; f < in->n_features; f++) {
+      size_t k = in->feature_start[f + 1] - in->feature_start[f];
+      holes += k ? k - 1 : 0;
+    }
+  }
+  s->holes = holes;
+  s->self_intersecting = bad;
+  s->skipped = skipped;
+  s->edges = pc.n;
+  s->leaves = r->n_leaves;
+  s->leaf_edges = r->n_le;
+  s->depth = b.depth;
+  s->planar = r->planar;
+  s->build_seconds = now() - t0;
+  s->bytes = layer_bytes(r);
+  *out = r;
+  return QK_OK;
+}
