@@ -27,8 +27,8 @@ typedef struct bctx {
 /* Conservative: may keep a piece that misses the closed box, never drops one that meets
  * it (extra pieces cost time, not correctness). */
 static bool meets_box(const qk__seg_t *g, double x0, double y0, double x1, double y1) {
-  if (fmax(g->ax, g->bx) < x0 || fmin(g->ax, g->bx) > x1 || fmax(g->ay, g->by) < y0 ||
-      fmin(g->ay, g->by) > y1)
+  if (qk__max(g->ax, g->bx) < x0 || qk__min(g->ax, g->bx) > x1 || qk__max(g->ay, g->by) < y0 ||
+      qk__min(g->ay, g->by) > y1)
     return false;
   double dx = g->bx - g->ax, dy = g->by - g->ay;
   const double cx[4] = {x0, x1, x1, x0}, cy[4] = {y0, y0, y1, y1};
@@ -53,10 +53,10 @@ static bool segs_meet(const qk__seg_t *p, const qk__seg_t *q) {
   int o4 = qk__orient(q->ax, q->ay, q->bx, q->by, p->bx, p->by);
   if (o3 * o4 > 0) return false;
   if (o1 == 0 && o2 == 0)
-    return fmax(fmin(p->ax, p->bx), fmin(q->ax, q->bx)) <=
-               fmin(fmax(p->ax, p->bx), fmax(q->ax, q->bx)) &&
-           fmax(fmin(p->ay, p->by), fmin(q->ay, q->by)) <=
-               fmin(fmax(p->ay, p->by), fmax(q->ay, q->by));
+    return qk__max(qk__min(p->ax, p->bx), qk__min(q->ax, q->bx)) <=
+               qk__min(qk__max(p->ax, p->bx), qk__max(q->ax, q->bx)) &&
+           qk__max(qk__min(p->ay, p->by), qk__min(q->ay, q->by)) <=
+               qk__min(qk__max(p->ay, p->by), qk__max(q->ay, q->by));
   return true;
 }
 
@@ -169,12 +169,36 @@ static qk_status_t child_lists(bctx_t *b, unsigned d, double x0, double y0, doub
   return QK_OK;
 }
 
+/* Does splitting make progress: does every child meet fewer pieces than the cell? Pieces
+ * that all pass one point (a vertex of high degree) or overlap (shared edges) never
+ * separate, and such cells would otherwise split down to the depth cap along them. */
+static bool progress(const bctx_t *b, unsigned d, double x0, double y0, double x1, double y1,
+                     double cx, double cy) {
+  size_t n = b->ne[d], cnt[4] = {0, 0, 0, 0};
+  for (size_t i = 0; i < n; i++) {
+    const qk__seg_t *g = &b->pc->seg[b->e[d][i]];
+    for (unsigned q = 0; q < 4; q++) {
+      int east = (int)qk__q_east(q), north = (int)qk__q_north(q);
+      if (meets_box(g, east ? cx : x0, north ? cy : y0, east ? x1 : cx, north ? y1 : cy)) cnt[q]++;
+    }
+  }
+  return cnt[0] < n && cnt[1] < n && cnt[2] < n && cnt[3] < n;
+}
+
+/* Splits that make no progress are allowed this many levels in a row (a cluster in one
+ * quadrant separates after a few). */
+#define STALL_BUDGET 2
+
 static qk_status_t build_node(bctx_t *b, qk_node_t v, double x0, double y0, double x1, double y1,
-                              double side, unsigned d) {
+                              double side, unsigned d, unsigned stall) {
   qk_region_t *r = b->r;
   double h = side * 0.5, cx = x0 + h, cy = y0 + h;
   qk_status_t st;
-  if (b->ne[d] > b->C && d < b->maxd) {
+  if (b->ne[d] > b->C && d < b->maxd && !progress(b, d, x0, y0, x1, y1, cx, cy))
+    stall++;
+  else
+    stall = 0;
+  if (b->ne[d] > b->C && d < b->maxd && stall <= STALL_BUDGET) {
     st = qk_tree_split_leaf(r->tree, v);
     if (st == QK_OK) {
       uint32_t first = qk__node_child(r->tree, v);
@@ -188,7 +212,7 @@ static qk_status_t build_node(bctx_t *b, qk_node_t v, double x0, double y0, doub
         double qy0 = north ? cy : y0, qy1 = north ? y1 : cy;
         double hh = h * 0.5;
         if ((st = child_lists(b, d, qx0, qy0, qx1, qy1, cx, cy, qx0 + hh, qy0 + hh))) return st;
-        if ((st = build_node(b, first + q, qx0, qy0, qx1, qy1, h, d + 1))) return st;
+        if ((st = build_node(b, first + q, qx0, qy0, qx1, qy1, h, d + 1, stall))) return st;
       }
       return QK_OK;
     }
@@ -224,10 +248,10 @@ static qk_status_t root_square(const qk__pieces_t *pc, qk_region_t *r, qk_error_
   double x0 = INFINITY, y0 = INFINITY, x1 = -INFINITY, y1 = -INFINITY;
   for (size_t i = 0; i < pc->n; i++) {
     const qk__seg_t *g = &pc->seg[i];
-    x0 = fmin(x0, fmin(g->ax, g->bx));
-    x1 = fmax(x1, fmax(g->ax, g->bx));
-    y0 = fmin(y0, fmin(g->ay, g->by));
-    y1 = fmax(y1, fmax(g->ay, g->by));
+    x0 = qk__min(x0, qk__min(g->ax, g->bx));
+    x1 = qk__max(x1, qk__max(g->ax, g->bx));
+    y0 = qk__min(y0, qk__min(g->ay, g->by));
+    y1 = qk__max(y1, qk__max(g->ay, g->by));
   }
   if (!pc->n) {
     r->stats.box = (qk_box_t){0, 0, 0, 0};
@@ -236,7 +260,7 @@ static qk_status_t root_square(const qk__pieces_t *pc, qk_region_t *r, qk_error_
     return QK_OK;
   }
   r->stats.box = (qk_box_t){x0, y0, x1, y1};
-  double w = x1 - x0, h = y1 - y0, ext = fmax(w, h);
+  double w = x1 - x0, h = y1 - y0, ext = qk__max(w, h);
   if (ext < 1e-60)
     return qk__region_fail(err, QK_ERR_GEOMETRY, SIZE_MAX, "layer extent %g is too small", ext);
   /* The root strictly contains every piece, so a point outside it is outside all. */
@@ -342,7 +366,7 @@ qk_status_t qk__region_build(const qk_region_arrays_t *in, const qk_region_optio
   b.ne[0] = pc.n;
   double h = r->rside * 0.5;
   if ((st = root_set(&b, r->rx + h, r->ry + h))) goto done;
-  st = build_node(&b, 0, r->rx, r->ry, r->rx + r->rside, r->ry + r->rside, r->rside, 0);
+  st = build_node(&b, 0, r->rx, r->ry, r->rx + r->rside, r->ry + r->rside, r->rside, 0, 0);
 
 done:
   for (int d = 0; d <= MAXD; d++) {

@@ -122,8 +122,8 @@ static double cut_lat(double ax, double ay, double bu, double by, double m, int 
   if (b_at_m) return by;
   double t = (m - ax) / (bu - ax);
   double phi = ay + t * (by - ay);
-  double lo = fmin(ay, by), hi = fmax(ay, by);
-  phi = fmin(fmax(phi, lo), hi);
+  double lo = qk__min(ay, by), hi = qk__max(ay, by);
+  phi = qk__min(qk__max(phi, lo), hi);
   if (fabs(phi) < QK_REGION_MIN_COORD) phi = 0.0;
   return phi;
 }

@@ -16,6 +16,10 @@
 /* Sign of the orientation of (a, b, c) computed exactly: +1 left turn, -1 right, 0. */
 int qk__orient_exact(double ax, double ay, double bx, double by, double cx, double cy);
 
+/* fmin / fmax without the NaN rules (the library calls are not inlined). */
+static inline double qk__min(double a, double b) { return a < b ? a : b; }
+static inline double qk__max(double a, double b) { return a > b ? a : b; }
+
 /* Shewchuk's bound for the filter: (3 + 16 eps) eps, eps = 2^-53. */
 #define QK__ORIENT_ERR (3.3306690738754716e-16)
 
@@ -61,7 +65,7 @@ static inline bool qk__crosses(double cx, double cy, double px, double py, doubl
 
 /* Is p on the closed segment a-b (exactly)? */
 static inline bool qk__on_edge(double ax, double ay, double bx, double by, double px, double py) {
-  if (px < fmin(ax, bx) || px > fmax(ax, bx) || py < fmin(ay, by) || py > fmax(ay, by))
+  if (px < qk__min(ax, bx) || px > qk__max(ax, bx) || py < qk__min(ay, by) || py > qk__max(ay, by))
     return false;
   return qk__orient(ax, ay, bx, by, px, py) == 0;
 }
