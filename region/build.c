@@ -15,7 +15,10 @@ typedef struct bctx {
   const qk_region_arrays_t *in;
   uint32_t C, maxd;
   uint32_t *e[MAXD + 1]; /* per depth: the pieces meeting the current cell */
-  size_t ne[MAXD + 1], cap_e[MAXD + 1];
+  size_t ne[MAXD + 1];
+  uint32_t *store[MAXD + 1]; /* per depth: the four children's lists, one after another */
+  size_t cap_store[MAXD + 1];
+  size_t cnt[MAXD + 1][4];
   uint32_t *s[MAXD + 1]; /* per depth: features containing its reference point */
   size_t ns[MAXD + 1], cap_s[MAXD + 1];
   uint32_t *odd;
@@ -26,10 +29,11 @@ typedef struct bctx {
 
 /* Conservative: may keep a piece that misses the closed box, never drops one that meets
  * it (extra pieces cost time, not correctness). */
-static bool meets_box(const qk__seg_t *g, double x0, double y0, double x1, double y1) {
-  if (qk__max(g->ax, g->bx) < x0 || qk__min(g->ax, g->bx) > x1 || qk__max(g->ay, g->by) < y0 ||
-      qk__min(g->ay, g->by) > y1)
-    return false;
+static inline bool meets_box(const qk__seg_t *g, double x0, double y0, double x1, double y1) {
+  double lx = qk__min(g->ax, g->bx), hx = qk__max(g->ax, g->bx);
+  double ly = qk__min(g->ay, g->by), hy = qk__max(g->ay, g->by);
+  if (hx < x0 || lx > x1 || hy < y0 || ly > y1) return false;
+  if (lx >= x0 && hx <= x1 && ly >= y0 && hy <= y1) return true; /* inside */
   double dx = g->bx - g->ax, dy = g->by - g->ay;
   const double cx[4] = {x0, x1, x1, x0}, cy[4] = {y0, y0, y1, y1};
   int pos = 0, neg = 0;
@@ -117,27 +121,54 @@ static qk_status_t emit_leaf(bctx_t *b, qk_node_t v, double cx, double cy, unsig
   return QK_OK;
 }
 
-/* The pieces of level d meeting a child's box go to level d + 1, and the child's set is
- * the parent's with the features crossed an odd number of times on the way from the
- * parent's reference point (px, py) to the child's (qx, qy) toggled. */
-static qk_status_t child_lists(bctx_t *b, unsigned d, double x0, double y0, double x1, double y1,
-                               double px, double py, double qx, double qy) {
+/* Sort the pieces of level d into the four children's lists (a piece may go to several).
+ * Returns whether that makes progress: every child meets fewer pieces than the cell.
+ * Pieces that all pass one point (a vertex of high degree) or overlap (shared edges)
+ * never separate, and such cells would otherwise split down to the depth cap. */
+static qk_status_t split_lists(bctx_t *b, unsigned d, double x0, double y0, double x1, double y1,
+                               double cx, double cy, bool *progress) {
+  size_t n = b->ne[d];
+  qk_status_t st = qk__region_grow(&b->r->alloc, (void **)&b->store[d + 1], &b->cap_store[d + 1],
+                                   4 * n + 1, sizeof(uint32_t));
+  if (st) return st;
+  uint32_t *out = b->store[d + 1];
+  size_t *cnt = b->cnt[d + 1];
+  cnt[0] = cnt[1] = cnt[2] = cnt[3] = 0;
+  for (size_t i = 0; i < n; i++) {
+    uint32_t p = b->e[d][i];
+    const qk__seg_t *g = &b->pc->seg[p];
+    double lx = qk__min(g->ax, g->bx), hx = qk__max(g->ax, g->bx);
+    double ly = qk__min(g->ay, g->by), hy = qk__max(g->ay, g->by);
+    /* NE 0, NW 1, SW 2, SE 3 */
+    if (hx >= cx && hy >= cy && meets_box(g, cx, cy, x1, y1)) out[cnt[0]++] = p;
+    if (lx <= cx && hy >= cy && meets_box(g, x0, cy, cx, y1)) out[n + cnt[1]++] = p;
+    if (lx <= cx && ly <= cy && meets_box(g, x0, y0, cx, cy)) out[2 * n + cnt[2]++] = p;
+    if (hx >= cx && ly <= cy && meets_box(g, cx, y0, x1, cy)) out[3 * n + cnt[3]++] = p;
+  }
+  *progress = cnt[0] < n && cnt[1] < n && cnt[2] < n && cnt[3] < n;
+  return QK_OK;
+}
+
+/* The set of child q (its list already at level d + 1): the parent's set with the
+ * features crossed an odd number of times on the way from the parent's reference point
+ * (px, py) to the child's (qx, qy) toggled. */
+static qk_status_t child_set(bctx_t *b, unsigned d, double px, double py, double qx, double qy) {
   const qk__pieces_t *pc = b->pc;
   const qk_allocator_t *a = &b->r->alloc;
+  size_t n = b->ne[d + 1];
   qk_status_t st;
-  size_t n = b->ne[d];
-  if ((st = qk__region_grow(a, (void **)&b->e[d + 1], &b->cap_e[d + 1], n ? n : 1,
-                            sizeof(uint32_t))) ||
-      (st = qk__region_grow(a, (void **)&b->odd, &b->cap_odd, n ? n : 1, sizeof(uint32_t))))
-    return st;
-  size_t m = 0, nodd = 0;
+  if ((st = qk__region_grow(a, (void **)&b->odd, &b->cap_odd, n + 1, sizeof(uint32_t)))) return st;
+  double lx = qk__min(px, qx), hx = qk__max(px, qx), ly = qk__min(py, qy), hy = qk__max(py, qy);
+  size_t nodd = 0;
   uint32_t cur = UINT32_MAX;
   bool par = false;
   for (size_t i = 0; i < n; i++) {
-    uint32_t p = b->e[d][i];
+    uint32_t p = b->e[d + 1][i];
     const qk__seg_t *g = &pc->seg[p];
-    if (!meets_box(g, x0, y0, x1, y1)) continue;
-    b->e[d + 1][m++] = p;
+    /* only pieces whose box meets the segment's can cross it */
+    if (qk__max(g->ax, g->bx) < lx || qk__min(g->ax, g->bx) > hx || qk__max(g->ay, g->by) < ly ||
+        qk__min(g->ay, g->by) > hy)
+      continue;
     uint32_t f = pc->feat[p];
     if (f != cur) {
       if (par) b->odd[nodd++] = cur;
@@ -148,7 +179,6 @@ static qk_status_t child_lists(bctx_t *b, unsigned d, double x0, double y0, doub
     if (qk__crosses(px, py, qx, qy, g->ax, g->ay, g->bx, g->by, sc)) par = !par;
   }
   if (par) b->odd[nodd++] = cur;
-  b->ne[d + 1] = m;
   /* symmetric difference of two sorted lists */
   size_t ns = b->ns[d];
   if ((st = qk__region_grow(a, (void **)&b->s[d + 1], &b->cap_s[d + 1], ns + nodd + 1,
@@ -169,22 +199,6 @@ static qk_status_t child_lists(bctx_t *b, unsigned d, double x0, double y0, doub
   return QK_OK;
 }
 
-/* Does splitting make progress: does every child meet fewer pieces than the cell? Pieces
- * that all pass one point (a vertex of high degree) or overlap (shared edges) never
- * separate, and such cells would otherwise split down to the depth cap along them. */
-static bool progress(const bctx_t *b, unsigned d, double x0, double y0, double x1, double y1,
-                     double cx, double cy) {
-  size_t n = b->ne[d], cnt[4] = {0, 0, 0, 0};
-  for (size_t i = 0; i < n; i++) {
-    const qk__seg_t *g = &b->pc->seg[b->e[d][i]];
-    for (unsigned q = 0; q < 4; q++) {
-      int east = (int)qk__q_east(q), north = (int)qk__q_north(q);
-      if (meets_box(g, east ? cx : x0, north ? cy : y0, east ? x1 : cx, north ? y1 : cy)) cnt[q]++;
-    }
-  }
-  return cnt[0] < n && cnt[1] < n && cnt[2] < n && cnt[3] < n;
-}
-
 /* Splits that make no progress are allowed this many levels in a row (a cluster in one
  * quadrant separates after a few). */
 #define STALL_BUDGET 2
@@ -194,11 +208,14 @@ static qk_status_t build_node(bctx_t *b, qk_node_t v, double x0, double y0, doub
   qk_region_t *r = b->r;
   double h = side * 0.5, cx = x0 + h, cy = y0 + h;
   qk_status_t st;
-  if (b->ne[d] > b->C && d < b->maxd && !progress(b, d, x0, y0, x1, y1, cx, cy))
-    stall++;
-  else
-    stall = 0;
-  if (b->ne[d] > b->C && d < b->maxd && stall <= STALL_BUDGET) {
+  bool split = false;
+  if (b->ne[d] > b->C && d < b->maxd) {
+    bool prog;
+    if ((st = split_lists(b, d, x0, y0, x1, y1, cx, cy, &prog))) return st;
+    stall = prog ? 0 : stall + 1;
+    split = stall <= STALL_BUDGET;
+  }
+  if (split) {
     st = qk_tree_split_leaf(r->tree, v);
     if (st == QK_OK) {
       uint32_t first = qk__node_child(r->tree, v);
@@ -206,12 +223,15 @@ static qk_status_t build_node(bctx_t *b, qk_node_t v, double x0, double y0, doub
                                 qk__tree_node_bound(r->tree), sizeof(uint32_t))))
         return st;
       r->kid[v] = first;
+      size_t n = b->ne[d];
       for (unsigned q = 0; q < 4; q++) {
         int east = (int)qk__q_east(q), north = (int)qk__q_north(q);
         double qx0 = east ? cx : x0, qx1 = east ? x1 : cx;
         double qy0 = north ? cy : y0, qy1 = north ? y1 : cy;
         double hh = h * 0.5;
-        if ((st = child_lists(b, d, qx0, qy0, qx1, qy1, cx, cy, qx0 + hh, qy0 + hh))) return st;
+        b->e[d + 1] = b->store[d + 1] + q * n;
+        b->ne[d + 1] = b->cnt[d + 1][q];
+        if ((st = child_set(b, d, cx, cy, qx0 + hh, qy0 + hh))) return st;
         if ((st = build_node(b, first + q, qx0, qy0, qx1, qy1, h, d + 1, stall))) return st;
       }
       return QK_OK;
@@ -283,8 +303,30 @@ static double now(void) {
   return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
 
+/* Give back the room the doubling left (a failed shrink keeps the larger block). */
+static void shrink(const qk_allocator_t *a, void **p, size_t *cap, size_t n, size_t elem) {
+  if (!*p || n >= *cap) return;
+  if (n == 0) n = 1;
+  void *q = qk__realloc(a, *p, *cap * elem, n * elem);
+  if (q) {
+    *p = q;
+    *cap = n;
+  }
+}
+
+static void shrink_all(qk_region_t *r) {
+  const qk_allocator_t *a = &r->alloc;
+  shrink(a, (void **)&r->leaves, &r->cap_leaves, r->n_leaves, sizeof(qk__leaf_t));
+  shrink(a, (void **)&r->le, &r->cap_le, r->n_le, sizeof(qk__seg_t));
+  shrink(a, (void **)&r->le_tag, &r->cap_le_tag, r->n_le, sizeof(uint32_t));
+  shrink(a, (void **)&r->sets, &r->cap_sets, r->n_sets, sizeof(uint32_t));
+  shrink(a, (void **)&r->kid, &r->cap_kid, qk__tree_node_bound(r->tree), sizeof(uint32_t));
+  shrink(a, (void **)&r->segs, &r->cap_segs, r->n_segs, sizeof(qk__seg_t));
+  shrink(a, (void **)&r->seg_feat, &r->cap_seg_feat, r->n_segs, sizeof(uint32_t));
+}
+
 static size_t layer_bytes(const qk_region_t *r) {
-  return sizeof *r + r->cap_segs * (sizeof(qk__seg_t) + sizeof(uint32_t)) +
+  return sizeof *r + r->cap_segs * sizeof(qk__seg_t) + r->cap_seg_feat * sizeof(uint32_t) +
          r->cap_kid * sizeof(uint32_t) + r->cap_leaves * sizeof(qk__leaf_t) +
          r->cap_le * sizeof(qk__seg_t) + r->cap_le_tag * sizeof(uint32_t) +
          r->cap_sets * sizeof(uint32_t) + qk_tree_memory(r->tree) + r->props.pool_cap +
@@ -360,8 +402,10 @@ qk_status_t qk__region_build(const qk_region_arrays_t *in, const qk_region_optio
     goto done;
   }
   memset(b.bad, 0, in->n_rings + 1);
-  if ((st = qk__region_grow(&alloc, (void **)&b.e[0], &b.cap_e[0], pc.n + 1, sizeof(uint32_t))))
+  if ((st = qk__region_grow(&alloc, (void **)&b.store[0], &b.cap_store[0], pc.n + 1,
+                            sizeof(uint32_t))))
     goto done;
+  b.e[0] = b.store[0];
   for (size_t i = 0; i < pc.n; i++) b.e[0][i] = (uint32_t)i;
   b.ne[0] = pc.n;
   double h = r->rside * 0.5;
@@ -370,7 +414,7 @@ qk_status_t qk__region_build(const qk_region_arrays_t *in, const qk_region_optio
 
 done:
   for (int d = 0; d <= MAXD; d++) {
-    qk__free(&alloc, b.e[d], b.cap_e[d] * sizeof(uint32_t));
+    qk__free(&alloc, b.store[d], b.cap_store[d] * sizeof(uint32_t));
     qk__free(&alloc, b.s[d], b.cap_s[d] * sizeof(uint32_t));
   }
   qk__free(&alloc, b.odd, b.cap_odd * sizeof(uint32_t));
@@ -384,7 +428,7 @@ done:
   r->segs = pc.seg;
   r->seg_feat = pc.feat;
   r->n_segs = pc.n;
-  r->cap_segs = pc.cap;
+  r->cap_segs = r->cap_seg_feat = pc.cap;
   if (st) {
     qk_region_free(r);
     if (err && !err->message[0])
@@ -410,6 +454,7 @@ done:
   s->leaf_edges = r->n_le;
   s->depth = b.depth;
   s->planar = r->planar;
+  shrink_all(r);
   s->build_seconds = now() - t0;
   s->bytes = layer_bytes(r);
   *out = r;

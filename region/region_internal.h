@@ -112,7 +112,7 @@ struct qk_region {
   /* Every edge piece, grouped by feature (for drawings). */
   qk__seg_t *segs;
   uint32_t *seg_feat;
-  size_t n_segs, cap_segs;
+  size_t n_segs, cap_segs, cap_seg_feat;
 
   /* The index: the tree (cells only), and flat arrays for the descent. */
   qk_tree_t *tree;
