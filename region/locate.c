@@ -61,11 +61,11 @@ static inline bool take(taker_t *t, uint32_t f) {
 
 static void leaf_features(const qk_region_t *r, const qk__leaf_t *L, double x, double y,
                           qk_boundary_t b, taker_t *t) {
-  const uint32_t *S = r->sets + L->s0;
-  uint32_t ns = L->ns, si = 0;
-  const qk__seg_t *E = r->le + L->e0;
-  const uint32_t *tag = r->le_tag + L->e0;
-  uint32_t ne = L->ne, i = 0;
+  /* (the arrays may be NULL when the whole layer has no sets or no edges) */
+  uint32_t ns = L->ns, si = 0, ne = L->ne, i = 0;
+  const uint32_t *S = ns ? r->sets + L->s0 : NULL;
+  const qk__seg_t *E = ne ? r->le + L->e0 : NULL;
+  const uint32_t *tag = ne ? r->le_tag + L->e0 : NULL;
   double cx = L->cx, cy = L->cy;
   bool same = (x == cx && y == cy);
   while (i < ne) {

@@ -27,6 +27,15 @@
 
 #include "qk_test.h"
 
+#ifdef QK_HAVE_JSONC
+/* The GeoJSON fuzz target, compiled in with its failures reported through cmocka; its
+ * seed corpus is replayed below. */
+#define QKF_REPLAY 1
+#define QKF_FAIL(...) fail_msg(__VA_ARGS__)
+#include "fuzz/fuzz_geojson.c"
+#include <dirent.h>
+#endif
+
 /* ---- an integer layer and its oracle ------------------------------------------------ */
 
 typedef struct tl {
@@ -687,6 +696,38 @@ static void test_region_countries(void **state) {
   qk_region_free(r);
 }
 
+static void test_region_fuzz_corpus(void **state) {
+  (void)state;
+#ifdef QK_HAVE_JSONC
+  const char *srcdir = getenv("QK_SOURCE_DIR");
+  char dir[1024];
+  snprintf(dir, sizeof dir, "%s/fuzz/corpus/geojson", srcdir ? srcdir : ".");
+  DIR *d = opendir(dir);
+  if (!d) {
+    print_message("no %s: skipped\n", dir);
+    skip();
+  }
+  size_t n = 0;
+  struct dirent *e;
+  while ((e = readdir(d))) {
+    if (e->d_name[0] == '.') continue;
+    char path[2048];
+    snprintf(path, sizeof path, "%s/%s", dir, e->d_name);
+    FILE *f = fopen(path, "rb");
+    if (!f) continue;
+    static uint8_t buf[1 << 16];
+    size_t len = fread(buf, 1, sizeof buf, f);
+    fclose(f);
+    qkf_geojson(buf, len);
+    n++;
+  }
+  closedir(d);
+  assert_true(n > 0);
+#else
+  skip();
+#endif
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_region_random_vs_oracle),
@@ -699,6 +740,7 @@ int main(void) {
       cmocka_unit_test(test_region_alloc_failure),
       cmocka_unit_test(test_region_geojson),
       cmocka_unit_test(test_region_countries),
+      cmocka_unit_test(test_region_fuzz_corpus),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
