@@ -303,6 +303,59 @@ static double now(void) {
   return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
 
+/* The cells' lower sides at depth G along one axis, as the descent computes them. */
+static void grid_sides(double r0, double side, unsigned G, double *out) {
+  size_t g = (size_t)1 << G;
+  for (size_t i = 0; i < g; i++) {
+    double s = r0, h = side;
+    for (unsigned l = 0; l < G; l++) {
+      h *= 0.5;
+      if (i >> (G - 1 - l) & 1) s = s + h;
+    }
+    out[i] = s;
+  }
+  out[g] = INFINITY;
+}
+
+/* The grid shortcut (see region_internal.h): G grows while 4^G stays below twice the
+ * leaves, up to 8 (256 KiB). */
+static qk_status_t build_grid(qk_region_t *r, unsigned depth) {
+  unsigned G = 0;
+  while (G < 8 && G < depth && ((size_t)1 << (2 * (G + 1))) <= 2 * r->n_leaves) G++;
+  if (G < 2) return QK_OK;
+  size_t g = (size_t)1 << G;
+  const qk_allocator_t *a = &r->alloc;
+  uint32_t *grid = qk__realloc(a, NULL, 0, g * g * sizeof *grid);
+  double *gx = qk__realloc(a, NULL, 0, (g + 1) * sizeof *gx);
+  double *gy = qk__realloc(a, NULL, 0, (g + 1) * sizeof *gy);
+  if (!grid || !gx || !gy) {
+    qk__free(a, grid, g * g * sizeof *grid);
+    qk__free(a, gx, (g + 1) * sizeof *gx);
+    qk__free(a, gy, (g + 1) * sizeof *gy);
+    return QK_ERR_NOMEM;
+  }
+  grid_sides(r->rx, r->rside, G, gx);
+  grid_sides(r->ry, r->rside, G, gy);
+  for (size_t j = 0; j < g; j++)
+    for (size_t i = 0; i < g; i++) {
+      uint32_t k = r->kid[0];
+      for (unsigned l = 0; l < G && !(k & QK__LEAF); l++) {
+        unsigned east = i >> (G - 1 - l) & 1, north = j >> (G - 1 - l) & 1;
+        unsigned q = north ? (east ? 0u : 1u) : (east ? 3u : 2u);
+        k = r->kid[k + q];
+      }
+      grid[j << G | i] = k;
+    }
+  r->grid = grid;
+  r->gx = gx;
+  r->gy = gy;
+  r->grid_level = G;
+  r->grid_scale = (double)g / r->rside;
+  r->grid_side = r->rside;
+  for (unsigned l = 0; l < G; l++) r->grid_side *= 0.5;
+  return QK_OK;
+}
+
 /* Give back the room the doubling left (a failed shrink keeps the larger block). */
 static void shrink(const qk_allocator_t *a, void **p, size_t *cap, size_t n, size_t elem) {
   if (!*p || n >= *cap) return;
@@ -330,6 +383,9 @@ static size_t layer_bytes(const qk_region_t *r) {
          r->cap_kid * sizeof(uint32_t) + r->cap_leaves * sizeof(qk__leaf_t) +
          r->cap_le * sizeof(qk__seg_t) + r->cap_le_tag * sizeof(uint32_t) +
          r->cap_sets * sizeof(uint32_t) + qk_tree_memory(r->tree) + r->props.pool_cap +
+         (r->grid_level ? ((size_t)4 << (2 * r->grid_level)) +
+                              (((size_t)2 << r->grid_level) + 2) * sizeof(double)
+                        : 0) +
          (r->props.cap_start + r->props.cap_key + r->props.cap_val) * sizeof(size_t);
 }
 
@@ -411,6 +467,7 @@ qk_status_t qk__region_build(const qk_region_arrays_t *in, const qk_region_optio
   double h = r->rside * 0.5;
   if ((st = root_set(&b, r->rx + h, r->ry + h))) goto done;
   st = build_node(&b, 0, r->rx, r->ry, r->rx + r->rside, r->ry + r->rside, r->rside, 0, 0);
+  if (!st) st = build_grid(r, b.depth);
 
 done:
   for (int d = 0; d <= MAXD; d++) {

@@ -32,6 +32,22 @@ static inline const qk__leaf_t *descend(const qk_region_t *r, double x, double y
   const uint32_t *kid = r->kid;
   uint32_t k = kid[0];
   double sx = r->rx, sy = r->ry, h = r->rside;
+  if (r->grid_level) {
+    /* Guess the grid cell, then correct it exactly against the cells' sides. */
+    unsigned G = r->grid_level;
+    long last = (1L << G) - 1;
+    long i = (long)((x - r->rx) * r->grid_scale), j = (long)((y - r->ry) * r->grid_scale);
+    i = i < 0 ? 0 : i > last ? last : i;
+    j = j < 0 ? 0 : j > last ? last : j;
+    while (i > 0 && x < r->gx[i]) i--;
+    while (x >= r->gx[i + 1]) i++;
+    while (j > 0 && y < r->gy[j]) j--;
+    while (y >= r->gy[j + 1]) j++;
+    k = r->grid[(size_t)j << G | (size_t)i];
+    sx = r->gx[i];
+    sy = r->gy[j];
+    h = r->grid_side;
+  }
   while (!(k & QK__LEAF)) {
     h *= 0.5;
     double mx = sx + h, my = sy + h;

@@ -126,6 +126,16 @@ struct qk_region {
   size_t n_le, cap_le, cap_le_tag;
   uint32_t *sets;
   size_t n_sets, cap_sets;
+  /* A shortcut for the top of the descent: the 2^G x 2^G cells of depth G; grid[j << G
+   * | i] is the kid[] value of the node the descent reaches at depth G in column i, row
+   * j (or of the leaf it stops at before). gx[i] / gy[j] are the cells' lower sides
+   * exactly as the descent computes them (gx[2^G] = +inf), so the column a point falls
+   * in is found exactly from a rounded guess. G = 0: no grid. */
+  unsigned grid_level;
+  uint32_t *grid;
+  double *gx, *gy;
+  double grid_scale; /* 2^G / rside */
+  double grid_side;  /* rside / 2^G */
 
   qk_region_stats_t stats;
 };
