@@ -89,7 +89,13 @@ static qk_status_t emit_leaf(bctx_t *b, qk_node_t v, double cx, double cy, unsig
   qk_region_t *r = b->r;
   const qk__pieces_t *pc = b->pc;
   size_t ne = b->ne[d], ns = b->ns[d];
-  if (r->n_leaves >= QK__LEAF - 1) return QK_ERR_LIMIT;
+  if (d > b->depth) b->depth = d;
+  if (ne == 0 && ns <= 1) {
+    r->kid[v] = QK__LEAF | QK__DIRECT | (ns ? b->s[d][0] + 1 : 0);
+    r->n_direct++;
+    return QK_OK;
+  }
+  if (r->n_leaves >= QK__DIRECT - 1) return QK_ERR_LIMIT;
   qk_status_t st;
   if ((st = qk__region_grow(&r->alloc, (void **)&r->leaves, &r->cap_leaves, r->n_leaves + 1,
                             sizeof(qk__leaf_t))) ||
@@ -116,7 +122,6 @@ static qk_status_t emit_leaf(bctx_t *b, qk_node_t v, double cx, double cy, unsig
   r->n_sets += ns;
   r->kid[v] = QK__LEAF | (uint32_t)r->n_leaves;
   r->n_leaves++;
-  if (d > b->depth) b->depth = d;
   self_meets(b, b->e[d], ne);
   return QK_OK;
 }
@@ -507,7 +512,7 @@ done:
   s->self_intersecting = bad;
   s->skipped = skipped;
   s->edges = pc.n;
-  s->leaves = r->n_leaves;
+  s->leaves = r->n_leaves + r->n_direct;
   s->leaf_edges = r->n_le;
   s->depth = b.depth;
   s->planar = r->planar;

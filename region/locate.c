@@ -28,7 +28,8 @@ static inline bool normalise(const qk_region_t *r, double *x, double *y) {
   return true;
 }
 
-static inline const qk__leaf_t *descend(const qk_region_t *r, double x, double y) {
+/* The kid[] value of the leaf holding (x, y). */
+static inline uint32_t descend(const qk_region_t *r, double x, double y) {
   const uint32_t *kid = r->kid;
   uint32_t k = kid[0];
   double sx = r->rx, sy = r->ry, h = r->rside;
@@ -58,8 +59,11 @@ static inline const qk__leaf_t *descend(const qk_region_t *r, double x, double y
     sy = north ? my : sy;
     k = kid[k + q];
   }
-  return &r->leaves[k & ~QK__LEAF];
+  return k;
 }
+
+/* The answer of a direct leaf. */
+static inline uint32_t direct(uint32_t k) { return (k & 0x3fffffffu) - 1u; }
 
 /* Decide the features of one leaf in increasing order; call `take` for each feature that
  * holds the point, stop when it returns true. Returns the last feature taken or QK_NONE. */
@@ -111,7 +115,9 @@ static void leaf_features(const qk_region_t *r, const qk__leaf_t *L, double x, d
 
 uint32_t qk__region_locate1(const qk_region_t *r, double x, double y, qk_boundary_t b) {
   if (!normalise(r, &x, &y)) return QK_NONE;
-  const qk__leaf_t *L = descend(r, x, y);
+  uint32_t k = descend(r, x, y);
+  if (k & QK__DIRECT) return direct(k);
+  const qk__leaf_t *L = &r->leaves[k & ~QK__LEAF];
   if (L->ne == 0) return L->ns ? r->sets[L->s0] : QK_NONE;
   uint32_t f = QK_NONE;
   taker_t t = {&f, 1, 0, false};
@@ -142,7 +148,12 @@ qk_status_t qk_region_locate_all(const qk_region_t *r, qk_point_t p, qk_boundary
   double x = p.x, y = p.y;
   if (!normalise(r, &x, &y)) return QK_OK;
   taker_t t = {features, cap, 0, true};
-  leaf_features(r, descend(r, x, y), x, y, b, &t);
+  uint32_t k = descend(r, x, y);
+  if (k & QK__DIRECT) {
+    if (direct(k) != QK_NONE) take(&t, direct(k));
+  } else {
+    leaf_features(r, &r->leaves[k & ~QK__LEAF], x, y, b, &t);
+  }
   *n_out = t.n;
   return QK_OK;
 }

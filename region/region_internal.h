@@ -86,8 +86,11 @@ typedef struct qk__leaf {
   uint32_t s0, ns;
 } qk__leaf_t;
 
-/* Leaf tag in the node array: kid[v] is the first child of v, or QK__LEAF | leaf. */
+/* Leaf tags in the node array: kid[v] is the first child of v, or QK__LEAF | leaf, or,
+ * for a leaf without edges holding at most one feature at its reference point,
+ * QK__LEAF | QK__DIRECT | (feature + 1) (0: none), answered without reading leaves[]. */
 #define QK__LEAF 0x80000000u
+#define QK__DIRECT 0x40000000u
 
 /* Properties collected by a reader: moved into the layer on success. */
 typedef struct qk__props {
@@ -121,6 +124,7 @@ struct qk_region {
   size_t cap_kid;
   qk__leaf_t *leaves;
   size_t n_leaves, cap_leaves;
+  size_t n_direct;  /* leaves stored as QK__DIRECT answers */
   qk__seg_t *le;    /* leaf edges, each leaf's grouped by feature */
   uint32_t *le_tag; /* feature << 1 | (side of the leaf's reference point > 0) */
   size_t n_le, cap_le, cap_le_tag;
