@@ -2,9 +2,8 @@
  * The narrow interface through which the modules built on index/ (query/, collide/,
  * region/, mesh/) read a tree's structure. Not API, and not the layout: index/ may store
  * its nodes however it likes, and only this file and the sources of index/ know how.
- * Outside index/, code includes this header, never index_internal.h; CI rejects `->nodes[`,
- * `->side[`,
- * `->px`, `->py` and `->pid` outside index/.
+ * Outside index/, code includes this header, never index_internal.h; CI rejects
+ * `->nodes[`, `->side[`, `->px`, `->py` and `->pid` outside index/.
  *
  * Nodes are named by qk_node_t (0 is the root). The four children of an internal node are
  * consecutive ids, first + QK_NE .. first + QK_SE. A leaf's points occupy the slots
