@@ -181,8 +181,8 @@ qk_status_t qk_region_locate(const qk_region_t *region, qk_point_t p, qk_boundar
  * \param [in] threads 1 for the calling thread only, 0 for every core, else that many.
  * \param [out] features n answers (QK_NONE for none).
  * \return QK_OK, QK_ERR_NONFINITE (some point not finite: its answer is QK_NONE, the
- *         others are answered), QK_ERR_INVALID or QK_ERR_NOMEM (threads could not start:
- *         nothing answered).
+ *         others are answered) or QK_ERR_INVALID. When a thread cannot be started its
+ *         share is answered on the calling thread.
  */
 qk_status_t qk_region_locate_batch(const qk_region_t *region, const qk_point_t *points, size_t n,
                                    qk_boundary_t boundary, unsigned threads, uint32_t *features);
