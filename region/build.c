@@ -108,7 +108,7 @@ static qk_status_t emit_leaf(bctx_t *b, qk_node_t v, double cx, double cy, unsig
     return st;
   if (r->n_le + ne > UINT32_MAX || r->n_sets + ns > UINT32_MAX) return QK_ERR_LIMIT;
   r->leaves[r->n_leaves] =
-      (qk__leaf_t){cx, cy, (uint32_t)r->n_le, (uint32_t)ne, (uint32_t)r->n_sets, (uint32_t)ns};
+      (qk__leaf_t){(uint32_t)r->n_le, (uint32_t)ne, (uint32_t)r->n_sets, (uint32_t)ns};
   for (size_t i = 0; i < ne; i++) {
     uint32_t p = b->e[d][i];
     const qk__seg_t *g = &pc->seg[p];
@@ -344,11 +344,15 @@ static qk_status_t build_grid(qk_region_t *r, unsigned depth) {
   for (size_t j = 0; j < g; j++)
     for (size_t i = 0; i < g; i++) {
       uint32_t k = r->kid[0];
-      for (unsigned l = 0; l < G && !(k & QK__LEAF); l++) {
+      unsigned l = 0;
+      for (; l < G && !(k & QK__LEAF); l++) {
         unsigned east = i >> (G - 1 - l) & 1, north = j >> (G - 1 - l) & 1;
         unsigned q = north ? (east ? 0u : 1u) : (east ? 3u : 2u);
         k = r->kid[k + q];
       }
+      /* A leaf above depth G with edges needs its own square (for its reference point),
+       * not the grid cell's: such cells descend from the root. */
+      if (l < G && !(k & QK__DIRECT)) k = QK__REDO;
       grid[j << G | i] = k;
     }
   r->grid = grid;

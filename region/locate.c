@@ -28,8 +28,8 @@ static inline bool normalise(const qk_region_t *r, double *x, double *y) {
   return true;
 }
 
-/* The kid[] value of the leaf holding (x, y). */
-static inline uint32_t descend(const qk_region_t *r, double x, double y) {
+/* The kid[] value of the leaf holding (x, y); *cx, *cy: the leaf's reference point. */
+static inline uint32_t descend(const qk_region_t *r, double x, double y, double *cx, double *cy) {
   const uint32_t *kid = r->kid;
   uint32_t k = kid[0];
   double sx = r->rx, sy = r->ry, h = r->rside;
@@ -44,10 +44,13 @@ static inline uint32_t descend(const qk_region_t *r, double x, double y) {
     while (x >= r->gx[i + 1]) i++;
     while (j > 0 && y < r->gy[j]) j--;
     while (y >= r->gy[j + 1]) j++;
-    k = r->grid[(size_t)j << G | (size_t)i];
-    sx = r->gx[i];
-    sy = r->gy[j];
-    h = r->grid_side;
+    uint32_t g = r->grid[(size_t)j << G | (size_t)i];
+    if (g != QK__REDO) {
+      k = g;
+      sx = r->gx[i];
+      sy = r->gy[j];
+      h = r->grid_side;
+    }
   }
   while (!(k & QK__LEAF)) {
     h *= 0.5;
@@ -59,6 +62,8 @@ static inline uint32_t descend(const qk_region_t *r, double x, double y) {
     sy = north ? my : sy;
     k = kid[k + q];
   }
+  *cx = sx + h * 0.5;
+  *cy = sy + h * 0.5;
   return k;
 }
 
@@ -79,14 +84,13 @@ static inline bool take(taker_t *t, uint32_t f) {
   return !t->all;
 }
 
-static void leaf_features(const qk_region_t *r, const qk__leaf_t *L, double x, double y,
-                          qk_boundary_t b, taker_t *t) {
+static void leaf_features(const qk_region_t *r, const qk__leaf_t *L, double cx, double cy, double x,
+                          double y, qk_boundary_t b, taker_t *t) {
   /* (the arrays may be NULL when the whole layer has no sets or no edges) */
   uint32_t ns = L->ns, si = 0, ne = L->ne, i = 0;
   const uint32_t *S = ns ? r->sets + L->s0 : NULL;
   const qk__seg_t *E = ne ? r->le + L->e0 : NULL;
   const uint32_t *tag = ne ? r->le_tag + L->e0 : NULL;
-  double cx = L->cx, cy = L->cy;
   bool same = (x == cx && y == cy);
   while (i < ne) {
     uint32_t f = tag[i] >> 2;
@@ -115,13 +119,14 @@ static void leaf_features(const qk_region_t *r, const qk__leaf_t *L, double x, d
 
 uint32_t qk__region_locate1(const qk_region_t *r, double x, double y, qk_boundary_t b) {
   if (!normalise(r, &x, &y)) return QK_NONE;
-  uint32_t k = descend(r, x, y);
+  double cx, cy;
+  uint32_t k = descend(r, x, y, &cx, &cy);
   if (k & QK__DIRECT) return direct(k);
   const qk__leaf_t *L = &r->leaves[k & ~QK__LEAF];
   if (L->ne == 0) return L->ns ? r->sets[L->s0] : QK_NONE;
   uint32_t f = QK_NONE;
   taker_t t = {&f, 1, 0, false};
-  leaf_features(r, L, x, y, b, &t);
+  leaf_features(r, L, cx, cy, x, y, b, &t);
   return t.n ? f : QK_NONE;
 }
 
@@ -148,11 +153,12 @@ qk_status_t qk_region_locate_all(const qk_region_t *r, qk_point_t p, qk_boundary
   double x = p.x, y = p.y;
   if (!normalise(r, &x, &y)) return QK_OK;
   taker_t t = {features, cap, 0, true};
-  uint32_t k = descend(r, x, y);
+  double cx, cy;
+  uint32_t k = descend(r, x, y, &cx, &cy);
   if (k & QK__DIRECT) {
     if (direct(k) != QK_NONE) take(&t, direct(k));
   } else {
-    leaf_features(r, &r->leaves[k & ~QK__LEAF], x, y, b, &t);
+    leaf_features(r, &r->leaves[k & ~QK__LEAF], cx, cy, x, y, b, &t);
   }
   *n_out = t.n;
   return QK_OK;

@@ -77,11 +77,11 @@ typedef struct qk__seg {
   double ax, ay, bx, by;
 } qk__seg_t;
 
-/* One leaf of the index: its reference point (the centre of its square as the descent
- * computes it), its edges [e0, e0 + ne) and the features containing the reference point
- * [s0, s0 + ns) of the set array, in increasing order. */
+/* One leaf of the index: its edges [e0, e0 + ne) and the features containing its
+ * reference point [s0, s0 + ns) of the set array, in increasing order. The reference
+ * point is the centre of its square, x0 + side / 2, which the descent recomputes from
+ * the square it arrives with (the same operations as the build, so the same doubles). */
 typedef struct qk__leaf {
-  double cx, cy;
   uint32_t e0, ne;
   uint32_t s0, ns;
 } qk__leaf_t;
@@ -91,6 +91,8 @@ typedef struct qk__leaf {
  * QK__LEAF | QK__DIRECT | (feature + 1) (0: none), answered without reading leaves[]. */
 #define QK__LEAF 0x80000000u
 #define QK__DIRECT 0x40000000u
+/* In the grid: descend from the root instead. */
+#define QK__REDO 0xffffffffu
 
 /* Properties collected by a reader: moved into the layer on success. */
 typedef struct qk__props {
