@@ -20,6 +20,7 @@
  *  - real data (skipped when ../shared/data is absent): countries-50m with the
  *    Russia / Finland / Norway cities of issue 9 and famous cities.
  */
+#define _XOPEN_SOURCE 700 /* mkstemp, fdopen */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -696,6 +697,47 @@ static void test_region_countries(void **state) {
   qk_region_free(r);
 }
 
+/* The OGR reader (when built with GDAL) reads the same GeoJSON file to the same layer. */
+static void test_region_ogr(void **state) {
+  (void)state;
+  char path[] = "/tmp/qk_region_ogr_XXXXXX";
+  int fd = mkstemp(path);
+  assert_true(fd >= 0);
+  const char *js =
+      "{\"type\":\"FeatureCollection\",\"features\":["
+      "{\"type\":\"Feature\",\"properties\":{\"name\":\"A\"},\"geometry\":"
+      "{\"type\":\"Polygon\",\"coordinates\":[[[0,0],[4,0],[4,4],[0,4],[0,0]],"
+      "[[1,1],[1,2],[2,2],[2,1],[1,1]]]}},"
+      "{\"type\":\"Feature\",\"properties\":{\"name\":\"B\"},\"geometry\":"
+      "{\"type\":\"MultiPolygon\",\"coordinates\":[[[[4,0],[8,0],[8,4],[4,4],[4,0]]]]}}]}";
+  FILE *f = fdopen(fd, "w");
+  fputs(js, f);
+  fclose(f);
+  qk_region_t *a, *b;
+  qk_error_t e;
+  qk_status_t st = qk_region_read_ogr(path, NULL, &b, &e);
+  if (st == QK_ERR_UNSUPPORTED) {
+    assert_non_null(strstr(e.message, "libgdal-dev"));
+    remove(path);
+    skip();
+  }
+  if (st) fail_msg("ogr: %s", e.message);
+  assert_int_equal(qk_region_read_geojson(path, NULL, &a, &e), QK_OK);
+  remove(path);
+  assert_int_equal(qk_region_feature_count(b), 2);
+  assert_string_equal(qk_region_property(b, 1, "name"), "B");
+  for (double y = -0.5; y <= 4.5; y += 0.25)
+    for (double x = -0.5; x <= 8.5; x += 0.25)
+      for (int rule = 0; rule < 3; rule++)
+        assert_int_equal(at(a, x, y, (qk_boundary_t)rule), at(b, x, y, (qk_boundary_t)rule));
+  qk_region_stats_t s;
+  qk_region_stats(b, &s);
+  assert_int_equal(s.holes, 1);
+  qk_region_free(a);
+  qk_region_free(b);
+  assert_int_equal(qk_region_read_ogr("/nonexistent/none.shp", NULL, &b, &e), QK_ERR_IO);
+}
+
 static void test_region_fuzz_corpus(void **state) {
   (void)state;
 #ifdef QK_HAVE_JSONC
@@ -740,6 +782,7 @@ int main(void) {
       cmocka_unit_test(test_region_alloc_failure),
       cmocka_unit_test(test_region_geojson),
       cmocka_unit_test(test_region_countries),
+      cmocka_unit_test(test_region_ogr),
       cmocka_unit_test(test_region_fuzz_corpus),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
