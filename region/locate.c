@@ -173,15 +173,46 @@ typedef struct job {
   int nonfinite;
 } job_t;
 
+/* A batch runs in blocks: first every point's descent (independent chains of loads the
+ * processor overlaps) with a prefetch of its leaf, then the leaf tests. Each answer is
+ * what qk__region_locate1 gives. */
+#define BLOCK 32
+
 static void run(job_t *j) {
-  for (size_t i = 0; i < j->n; i++) {
-    double x = j->pts[i].x, y = j->pts[i].y;
-    if (!isfinite(x) || !isfinite(y)) {
-      j->out[i] = QK_NONE;
-      j->nonfinite = 1;
-      continue;
+  const qk_region_t *r = j->r;
+  for (size_t i0 = 0; i0 < j->n; i0 += BLOCK) {
+    size_t m = j->n - i0 < BLOCK ? j->n - i0 : BLOCK;
+    uint32_t k[BLOCK];
+    double x[BLOCK], y[BLOCK], cx[BLOCK], cy[BLOCK];
+    for (size_t i = 0; i < m; i++) {
+      x[i] = j->pts[i0 + i].x, y[i] = j->pts[i0 + i].y;
+      k[i] = QK__LEAF | QK__DIRECT; /* none */
+      if (!isfinite(x[i]) || !isfinite(y[i])) {
+        j->nonfinite = 1;
+        continue;
+      }
+      if (!normalise(r, &x[i], &y[i])) continue;
+      k[i] = descend(r, x[i], y[i], &cx[i], &cy[i]);
+#if defined(__GNUC__)
+      if (!(k[i] & QK__DIRECT)) __builtin_prefetch(&r->leaves[k[i] & ~QK__LEAF]);
+#endif
     }
-    j->out[i] = qk__region_locate1(j->r, x, y, j->b);
+    for (size_t i = 0; i < m; i++) {
+      uint32_t f = QK_NONE;
+      if (k[i] & QK__DIRECT) {
+        f = direct(k[i]);
+      } else {
+        const qk__leaf_t *L = &r->leaves[k[i] & ~QK__LEAF];
+        if (L->ne == 0) {
+          f = L->ns ? r->sets[L->s0] : QK_NONE;
+        } else {
+          taker_t t = {&f, 1, 0, false};
+          leaf_features(r, L, cx[i], cy[i], x[i], y[i], j->b, &t);
+          if (!t.n) f = QK_NONE;
+        }
+      }
+      j->out[i0 + i] = f;
+    }
   }
 }
 
