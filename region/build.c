@@ -25,6 +25,7 @@ typedef struct bctx {
   size_t cap_odd;
   uint8_t *bad; /* per ring: self-intersecting */
   unsigned depth;
+  size_t splits_left; /* a budget on splits: see build_node */
 } bctx_t;
 
 /* Conservative: may keep a piece that misses the closed box, never drops one that meets
@@ -64,9 +65,15 @@ static bool segs_meet(const qk__seg_t *p, const qk__seg_t *q) {
   return true;
 }
 
-/* Flag the rings of a leaf's pieces that meet themselves away from a shared vertex. */
+/* Flag the rings of a leaf's pieces that meet themselves away from a shared vertex. A
+ * leaf holds few pieces except where pieces never separate (many through one point);
+ * there the pairs are not checked, so that such input costs no quadratic time: the stat
+ * is then a lower bound (documented). */
+#define SELF_CHECK_MAX 256
+
 static void self_meets(bctx_t *b, const uint32_t *E, size_t n) {
   const qk__pieces_t *pc = b->pc;
+  if (n > SELF_CHECK_MAX) return;
   for (size_t i = 0; i < n; i++) {
     uint32_t p = E[i], rp = pc->ring[p];
     if (pc->vtx[p] == UINT32_MAX || b->bad[rp]) continue;
@@ -214,7 +221,11 @@ static qk_status_t build_node(bctx_t *b, qk_node_t v, double x0, double y0, doub
   double h = side * 0.5, cx = x0 + h, cy = y0 + h;
   qk_status_t st;
   bool split = false;
-  if (b->ne[d] > b->C && d < b->maxd) {
+  /* The budget bounds the work on adversarial input (thousands of long edges fanning out
+   * of one point need a number of cells far beyond the edges to separate them); when it
+   * runs out the remaining cells stay leaves with more pieces. Real layers stay far
+   * below it. */
+  if (b->ne[d] > b->C && d < b->maxd && b->splits_left > 0) {
     bool prog;
     if ((st = split_lists(b, d, x0, y0, x1, y1, cx, cy, &prog))) return st;
     stall = prog ? 0 : stall + 1;
@@ -223,6 +234,7 @@ static qk_status_t build_node(bctx_t *b, qk_node_t v, double x0, double y0, doub
   if (split) {
     st = qk_tree_split_leaf(r->tree, v);
     if (st == QK_OK) {
+      b->splits_left--;
       uint32_t first = qk__node_child(r->tree, v);
       if ((st = qk__region_grow(&r->alloc, (void **)&r->kid, &r->cap_kid,
                                 qk__tree_node_bound(r->tree), sizeof(uint32_t))))
@@ -452,6 +464,7 @@ qk_status_t qk__region_build(const qk_region_arrays_t *in, const qk_region_optio
   b.in = in;
   b.C = o.leaf_edges;
   b.maxd = o.max_depth;
+  b.splits_left = pc.n + 4096;
   if ((st = root_square(&pc, r, err))) goto done;
   qk_tree_options_t to;
   qk_tree_options_init(&to);
