@@ -27,6 +27,8 @@
 #include <string.h>
 
 #include "qk_test.h"
+/* test_region_grid_sides reads the descent's grid (internal) to aim at its cell sides. */
+#include "region/region_internal.h"
 
 #ifdef QK_HAVE_JSONC
 /* The GeoJSON fuzz target, compiled in with its failures reported through cmocka; its
@@ -208,6 +210,55 @@ static void test_region_random_vs_oracle(void **state) {
                   (t2.xy[2 * v + 1] + t2.xy[2 * v + 3]) / 2, seed);
     qk_region_free(r);
     free(t2.xy);
+    tl_free(&t);
+  }
+}
+
+/* Points exactly on, and one ulp either side of, the grid cells' sides and the cell
+ * centres of the top levels, against a brute force over the layer's pieces (the half-open
+ * ray with the library's exact predicate: this checks the descent and the grid, which
+ * must send every point to the leaf the build assigned it to). */
+static uint32_t brute_pieces(const qk_region_t *r, double x, double y) {
+  int par = 0;
+  for (size_t i = 0; i < r->n_segs; i++) {
+    const qk__seg_t *g = &r->segs[i];
+    if ((g->ay > y) != (g->by > y)) {
+      int s = qk__side(g->ax, g->ay, g->bx, g->by, x, y);
+      if ((g->by > g->ay) ? s > 0 : s < 0) par ^= 1;
+    }
+    if (i + 1 == r->n_segs || r->seg_feat[i + 1] != r->seg_feat[i]) {
+      if (par) return r->seg_feat[i];
+      par = 0;
+    }
+  }
+  return QK_NONE;
+}
+
+static void test_region_grid_sides(void **state) {
+  (void)state;
+  uint64_t seed = qkt_seed(31337);
+  qkt_rng_t g;
+  qkt_rng_seed(&g, seed);
+  for (int round = 0; round < 3; round++) {
+    tl_t t;
+    random_layer(&g, &t, 40, 5000);
+    qk_region_t *r = tl_build(&t, round + 1, NULL, NULL);
+    assert_true(r->grid_level >= 2);
+    size_t n = (size_t)1 << r->grid_level;
+    for (size_t k = 0; k < 3000; k++) {
+      size_t i = qkt_rng_below(&g, (uint32_t)n), j = qkt_rng_below(&g, (uint32_t)n);
+      double xs[3] = {r->gx[i], nextafter(r->gx[i], -INFINITY), nextafter(r->gx[i], INFINITY)};
+      double ys[3] = {r->gy[j], nextafter(r->gy[j], -INFINITY), nextafter(r->gy[j], INFINITY)};
+      for (int a = 0; a < 3; a++)
+        for (int b = 0; b < 3; b++) {
+          uint32_t f, want = brute_pieces(r, xs[a], ys[b]);
+          qk_region_locate(r, (qk_point_t){xs[a], ys[b]}, QK_BOUNDARY_SEMI_OPEN, &f);
+          if (f != want)
+            fail_msg("seed %llu: (%.17g, %.17g): locate %d, brute force %d",
+                     (unsigned long long)seed, xs[a], ys[b], (int)f, (int)want);
+        }
+    }
+    qk_region_free(r);
     tl_free(&t);
   }
 }
@@ -773,6 +824,7 @@ static void test_region_fuzz_corpus(void **state) {
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_region_random_vs_oracle),
+      cmocka_unit_test(test_region_grid_sides),
       cmocka_unit_test(test_region_coverage_grid),
       cmocka_unit_test(test_region_coverage_jittered),
       cmocka_unit_test(test_region_rules_and_windings),
