@@ -15,5 +15,5 @@ cmake -S . -B "$dir" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DQUADKIT_WERROR=ON \
   >/dev/null
 nice cmake --build "$dir" -j"$jobs" --target test_reliab_threads test_region
 # halt_on_error: the first race fails the test; second_deadlock_stack for lock reports.
-TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1 ${TSAN_OPTIONS:-}" \
+TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1 suppressions=$PWD/scripts/tsan.supp ${TSAN_OPTIONS:-}" \
   ctest --test-dir "$dir" --output-on-failure -R '^(test_reliab_threads|test_region)$'
