@@ -39,11 +39,25 @@
  * reference point, the sorted set of features containing it, and copies of its pieces
  * grouped by feature, each with the side of the reference point against it (one bit).
  *
- * Query (locate.c): descend the flat child array to the leaf (comparisons against cell
- * centres), then for each feature with pieces in the leaf flip the reference point's
- * membership once per piece crossed by the segment reference -> point. Most pieces are
- * rejected by one filtered orientation (the point on the same side as the reference).
- * Leaves without pieces answer from their set at once.
+ * Splits also stop when they do not separate the pieces (pieces through one point, or
+ * overlapping shared edges) for three levels in a row, and when a budget of (pieces +
+ * 4096) splits is spent, so adversarial input cannot make the index explode.
+ *
+ * Layout for queries (build.c). The tree's structure is copied into a flat array kid[]
+ * (node -> first child, or a tagged leaf). A leaf without pieces whose reference point
+ * lies in at most one feature is stored as its answer in kid[] itself (QK__DIRECT), so
+ * most points away from boundaries never read a leaf record. A 2^G x 2^G grid over the
+ * top G levels (G <= 8) holds the kid[] value reached at depth G; a query guesses its
+ * grid cell by scaling and corrects the guess exactly against the cells' sides, which
+ * are stored as the descent computes them.
+ *
+ * Query (locate.c): grid cell, then the rest of the descent (comparisons against cell
+ * centres computed along the path exactly as the build computed them), then for each
+ * feature with pieces in the leaf flip the reference point's membership once per piece
+ * crossed by the segment reference -> point. Most pieces are rejected by one filtered
+ * orientation (the point on the same side as the reference). Batches run in blocks of 32
+ * points: all descents first (their loads overlap), with a prefetch of each leaf record,
+ * then the leaf tests.
  */
 #include <stdarg.h>
 #include <stdio.h>
