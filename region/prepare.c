@@ -223,12 +223,19 @@ qk_status_t qk__region_prepare(const qk_allocator_t *a, const qk_region_arrays_t
         }
         continue;
       }
-      /* First pass: winding and the area enclosed towards the north pole. */
-      ring_ctx_t probe = {a, NULL, 0, 0, 0};
+      /* The winding first (cheap); for a ring around the globe, the area it encloses
+       * towards the north pole decides which pole it holds. */
       long k = 0;
-      ring_lonlat(&probe, in->xy, s, len, 90, &k);
+      for (size_t i = 0; i + 1 < len; i++) {
+        double d = in->xy[2 * (s + i + 1)] - in->xy[2 * (s + i)];
+        k += d < -180 ? 1 : d > 180 ? -1 : 0;
+      }
       double P = 90;
-      if (k != 0 && fabs(probe.area2) * 0.5 > 0.5 * 360 * 180) P = -90;
+      if (k != 0) {
+        ring_ctx_t probe = {a, NULL, 0, 0, 0};
+        ring_lonlat(&probe, in->xy, s, len, 90, &k);
+        if (fabs(probe.area2) * 0.5 > 0.5 * 360 * 180) P = -90;
+      }
       st = ring_lonlat(&c, in->xy, s, len, P, &k);
     }
   }
