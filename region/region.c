@@ -40,7 +40,7 @@
  * grouped by feature, each with the side of the reference point against it (one bit).
  *
  * Splits also stop when they do not separate the pieces (pieces through one point, or
- * overlapping shared edges) for three levels in a row, and when a budget of (pieces +
+ * overlapping shared edges) two levels in a row, and when a budget of (pieces +
  * 4096) splits is spent, so adversarial input cannot make the index explode.
  *
  * Layout for queries (build.c). The tree's structure is copied into a flat array kid[]
