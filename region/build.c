@@ -51,6 +51,11 @@ static inline bool meets_box(const qk__seg_t *g, double x0, double y0, double x1
 
 /* Do two closed segments meet (exactly)? */
 static bool segs_meet(const qk__seg_t *p, const qk__seg_t *q) {
+  if (qk__max(p->ax, p->bx) < qk__min(q->ax, q->bx) ||
+      qk__max(q->ax, q->bx) < qk__min(p->ax, p->bx) ||
+      qk__max(p->ay, p->by) < qk__min(q->ay, q->by) ||
+      qk__max(q->ay, q->by) < qk__min(p->ay, p->by))
+    return false; /* boxes apart: most pairs */
   int o1 = qk__orient(p->ax, p->ay, p->bx, p->by, q->ax, q->ay);
   int o2 = qk__orient(p->ax, p->ay, p->bx, p->by, q->bx, q->by);
   if (o1 * o2 > 0) return false;
