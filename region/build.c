@@ -112,7 +112,7 @@ static qk_status_t emit_leaf(bctx_t *b, qk_node_t v, double cx, double cy, unsig
   if ((st = qk__region_grow(&r->alloc, (void **)&r->leaves, &r->cap_leaves, r->n_leaves + 1,
                             sizeof(qk__leaf_t))) ||
       (st = qk__region_grow(&r->alloc, (void **)&r->le, &r->cap_le, r->n_le + ne,
-                            sizeof(qk__seg_t))) ||
+                            sizeof(uint32_t))) ||
       (st = qk__region_grow(&r->alloc, (void **)&r->le_tag, &r->cap_le_tag, r->n_le + ne,
                             sizeof(uint32_t))) ||
       (st = qk__region_grow(&r->alloc, (void **)&r->sets, &r->cap_sets, r->n_sets + ns,
@@ -125,7 +125,7 @@ static qk_status_t emit_leaf(bctx_t *b, qk_node_t v, double cx, double cy, unsig
     uint32_t p = b->e[d][i];
     const qk__seg_t *g = &pc->seg[p];
     int side = qk__side(g->ax, g->ay, g->bx, g->by, cx, cy);
-    r->le[r->n_le + i] = *g;
+    r->le[r->n_le + i] = p;
     r->le_tag[r->n_le + i] =
         pc->feat[p] << 2 | (uint32_t)(pc->vtx[p] == UINT32_MAX) << 1 | (uint32_t)(side > 0);
   }
@@ -245,6 +245,7 @@ static qk_status_t build_node(bctx_t *b, qk_node_t v, double x0, double y0, doub
                                 qk__tree_node_bound(r->tree), sizeof(uint32_t))))
         return st;
       r->kid[v] = first;
+      if (first + 4 > r->n_kid) r->n_kid = first + 4;
       size_t n = b->ne[d];
       for (unsigned q = 0; q < 4; q++) {
         int east = (int)qk__q_east(q), north = (int)qk__q_north(q);
@@ -396,10 +397,10 @@ static void shrink(const qk_allocator_t *a, void **p, size_t *cap, size_t n, siz
 static void shrink_all(qk_region_t *r) {
   const qk_allocator_t *a = &r->alloc;
   shrink(a, (void **)&r->leaves, &r->cap_leaves, r->n_leaves, sizeof(qk__leaf_t));
-  shrink(a, (void **)&r->le, &r->cap_le, r->n_le, sizeof(qk__seg_t));
+  shrink(a, (void **)&r->le, &r->cap_le, r->n_le, sizeof(uint32_t));
   shrink(a, (void **)&r->le_tag, &r->cap_le_tag, r->n_le, sizeof(uint32_t));
   shrink(a, (void **)&r->sets, &r->cap_sets, r->n_sets, sizeof(uint32_t));
-  shrink(a, (void **)&r->kid, &r->cap_kid, qk__tree_node_bound(r->tree), sizeof(uint32_t));
+  shrink(a, (void **)&r->kid, &r->cap_kid, r->n_kid, sizeof(uint32_t));
   shrink(a, (void **)&r->segs, &r->cap_segs, r->n_segs, sizeof(qk__seg_t));
   shrink(a, (void **)&r->seg_feat, &r->cap_seg_feat, r->n_segs, sizeof(uint32_t));
 }
@@ -407,7 +408,7 @@ static void shrink_all(qk_region_t *r) {
 static size_t layer_bytes(const qk_region_t *r) {
   return sizeof *r + r->cap_segs * sizeof(qk__seg_t) + r->cap_seg_feat * sizeof(uint32_t) +
          r->cap_kid * sizeof(uint32_t) + r->cap_leaves * sizeof(qk__leaf_t) +
-         r->cap_le * sizeof(qk__seg_t) + r->cap_le_tag * sizeof(uint32_t) +
+         r->cap_le * sizeof(uint32_t) + r->cap_le_tag * sizeof(uint32_t) +
          r->cap_sets * sizeof(uint32_t) + qk_tree_memory(r->tree) + r->props.pool_cap +
          (r->grid_level ? ((size_t)4 << (2 * r->grid_level)) +
                               (((size_t)2 << r->grid_level) + 2) * sizeof(double)
@@ -538,6 +539,10 @@ done:
   s->leaf_edges = r->n_le;
   s->depth = b.depth;
   s->planar = r->planar;
+  if (!o.keep_tree) { /* the query arrays hold everything queries need */
+    qk_tree_free(r->tree);
+    r->tree = NULL;
+  }
   shrink_all(r);
   s->build_seconds = now() - t0;
   s->bytes = layer_bytes(r);

@@ -89,7 +89,7 @@ static void leaf_features(const qk_region_t *r, const qk__leaf_t *L, double cx, 
   /* (the arrays may be NULL when the whole layer has no sets or no edges) */
   uint32_t ns = L->ns, si = 0, ne = L->ne, i = 0;
   const uint32_t *S = ns ? r->sets + L->s0 : NULL;
-  const qk__seg_t *E = ne ? r->le + L->e0 : NULL;
+  const uint32_t *E = ne ? r->le + L->e0 : NULL; /* indices into r->segs */
   const uint32_t *tag = ne ? r->le_tag + L->e0 : NULL;
   bool same = (x == cx && y == cy);
   while (i < ne) {
@@ -100,7 +100,7 @@ static void leaf_features(const qk_region_t *r, const qk__leaf_t *L, double cx, 
     if (par) si++;
     bool on = false;
     for (; i < ne && (tag[i] >> 2) == f; i++) {
-      const qk__seg_t *g = &E[i];
+      const qk__seg_t *g = &r->segs[E[i]];
       if (b != QK_BOUNDARY_SEMI_OPEN && !(tag[i] & 2) &&
           qk__on_edge(g->ax, g->ay, g->bx, g->by, x, y))
         on = true;

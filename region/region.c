@@ -107,7 +107,7 @@ void qk_region_free(qk_region_t *r) {
   qk_tree_free(r->tree);
   qk__free(a, r->kid, r->cap_kid * sizeof(uint32_t));
   qk__free(a, r->leaves, r->cap_leaves * sizeof(qk__leaf_t));
-  qk__free(a, r->le, r->cap_le * sizeof(qk__seg_t));
+  qk__free(a, r->le, r->cap_le * sizeof(uint32_t));
   qk__free(a, r->le_tag, r->cap_le_tag * sizeof(uint32_t));
   qk__free(a, r->sets, r->cap_sets * sizeof(uint32_t));
   if (r->grid_level) {
@@ -124,7 +124,7 @@ void qk_region_stats(const qk_region_t *r, qk_region_stats_t *s) { *s = r->stats
 
 size_t qk_region_feature_count(const qk_region_t *r) { return r ? r->n_features : 0; }
 
-const qk_tree_t *qk_region_tree(const qk_region_t *r) { return r->tree; }
+const qk_tree_t *qk_region_tree(const qk_region_t *r) { return r ? r->tree : NULL; }
 
 const char *qk_region_property(const qk_region_t *r, uint32_t f, const char *name) {
   if (!r || !name || f >= r->n_features || !r->props.start) return NULL;

@@ -123,11 +123,11 @@ struct qk_region {
   qk_tree_t *tree;
   double rx, ry, rside;
   uint32_t *kid;
-  size_t cap_kid;
+  size_t n_kid, cap_kid; /* n_kid: nodes in use */
   qk__leaf_t *leaves;
   size_t n_leaves, cap_leaves;
   size_t n_direct;  /* leaves stored as QK__DIRECT answers */
-  qk__seg_t *le;    /* leaf edges, each leaf's grouped by feature */
+  uint32_t *le;     /* leaf edges (indices into segs), each leaf's grouped by feature */
   uint32_t *le_tag; /* feature << 1 | (side of the leaf's reference point > 0) */
   size_t n_le, cap_le, cap_le_tag;
   uint32_t *sets;

@@ -120,6 +120,7 @@ static qk_region_t *tl_build(const tl_t *t, uint32_t leaf_edges, const qk_alloca
   o.planar = 1;
   o.leaf_edges = leaf_edges;
   o.allocator = alloc;
+  o.keep_tree = 1;
   qk_region_t *r = NULL;
   qk_error_t err;
   qk_status_t st = qk_region_from_arrays(&a, &o, &r, &err);
@@ -704,7 +705,10 @@ static void test_region_countries(void **state) {
   fclose(f);
   qk_region_t *r;
   qk_error_t e;
-  qk_status_t st = qk_region_read_geojson(path, NULL, &r, &e);
+  qk_region_options_t o;
+  qk_region_options_init(&o);
+  o.keep_tree = 1;
+  qk_status_t st = qk_region_read_geojson(path, &o, &r, &e);
   if (st) fail_msg("%s: %s", path, e.message);
   struct {
     const char *city;

@@ -55,6 +55,9 @@ typedef struct qk_region_options {
   uint32_t max_depth;
   /** Allocator for everything the layer owns; NULL means libc. Copied. */
   const qk_allocator_t *allocator;
+  /** Nonzero: keep the quadkit tree the index was refined on (qk_region_tree()); zero
+   *  (default): free it once the query arrays are made, which halves the memory. */
+  int keep_tree;
 } qk_region_options_t;
 
 /** Default split threshold: edge pieces per leaf. */
@@ -243,9 +246,10 @@ size_t qk_region_feature_count(const qk_region_t *region);
 const char *qk_region_property(const qk_region_t *region, uint32_t feature, const char *name);
 
 /**
- * The index's tree (its cells; it stores no points), for walks and drawings.
+ * The index's tree (its cells; it stores no points), for walks and checks; kept only
+ * when the layer was built with options.keep_tree.
  * \param [in] region the layer.
- * \return borrowed; valid while the layer lives.
+ * \return borrowed, valid while the layer lives; NULL when not kept.
  */
 const qk_tree_t *qk_region_tree(const qk_region_t *region);
 
