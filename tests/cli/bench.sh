@@ -67,6 +67,18 @@ for i in quadkit cgal p4est; do expect_impl $i balance; done
 run --op mesh --n 128
 for i in quadkit cgal gmsh; do expect_impl $i mesh; done
 run --op geo-knn --n 5000
+# region: GEOS (planar, contains) must agree with quadkit's planar open rule; S2's
+# geodesic edges may disagree on a few points, which is reported, not a failure.
+if [ -r "$src/../shared/data/countries-50m.geojson" ]; then
+  "$bench" --quick --json --op region --n 5000 >"$out" 2>/dev/null ||
+    { echo "FAIL: quadkit-bench --op region exited non-zero"; fails=$((fails + 1)); }
+  if grep '"impl":"geos"' "$out" | grep -q '"matches":false'; then
+    echo "FAIL: GEOS disagrees with quadkit --planar:"
+    grep '"impl":"geos"' "$out" | grep '"matches":false'
+    fails=$((fails + 1))
+  fi
+  for i in quadkit geos s2; do expect_impl $i region; done
+fi
 "$bench" --op nope >/dev/null 2>&1
 [ $? -eq 2 ] || { echo "FAIL: unknown --op must exit 2"; fails=$((fails + 1)); }
 "$bench" --n -3 >/dev/null 2>&1
