@@ -111,6 +111,24 @@ bool have(const char *what);
 double now_seconds();
 double min_angle_of(const std::vector<double> &xy, const std::vector<uint32_t> &tri);
 
+
+// Polygon layers for `--op region` (base_region.cpp): rings as read from GeoJSON, the
+// first ring of each polygon a shell, the others its holes.
+struct RegionLayer {
+  std::vector<double> xy;
+  std::vector<size_t> ring_start, feature_start;
+  std::vector<bool> ring_is_shell;
+  double box[4];
+};
+bool region_load(const std::string &path, RegionLayer &L, std::string *why);
+struct GeosRegions;
+GeosRegions *geos_regions_build(const RegionLayer &L);
+void geos_regions_locate(GeosRegions *g, const std::vector<Pt> &pts, std::vector<uint32_t> &out);
+void geos_regions_free(GeosRegions *g);
+struct S2Regions;
+S2Regions *s2_regions_build(const RegionLayer &L);
+void s2_regions_locate(S2Regions *s, const std::vector<Pt> &pts, std::vector<uint32_t> &out);
+void s2_regions_free(S2Regions *s);
 } // namespace qkb
 
 #endif

@@ -21,6 +21,9 @@ static const command_t commands[] = {
     {"raycast", cmd_raycast, "raycast DISCS.csv RAYS.csv                   first disc hit by rays"},
     {"geo", cmd_geo, "geo knn|radius POINTS.csv QUERIES.csv ...     geodesic queries (WGS84)"},
     {"mesh", cmd_mesh, "mesh IN.poly -o PREFIX [options]              quadtree mesh generator"},
+    {"join", cmd_join, "join REGIONS POINTS.csv [--field NAME]...     feature holding each point"},
+    {"regions", cmd_regions,
+     "regions REGIONS [--stats] [--svg FILE]       polygon layer statistics"},
 };
 
 static void usage(FILE *f) {

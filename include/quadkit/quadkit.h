@@ -10,5 +10,6 @@
 #include "quadkit/io.h"
 #include "quadkit/mesh.h"
 #include "quadkit/query.h"
+#include "quadkit/region.h"
 
 #endif /* QUADKIT_QUADKIT_H */
