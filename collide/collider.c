@@ -11,6 +11,7 @@
 #include <string.h>
 
 #include "query/query_internal.h"
+#include "quadkit/collide.h"
 
 /*
  * The collider's own copy of each node: the bounding box of the items beneath it, in
