@@ -1,7 +1,7 @@
 /*
  * The narrow interface through which the modules built on index/ (query/, collide/,
  * region/, mesh/) read a tree's structure. Not API, and not the layout: index/ may store
- * its nodes however it likes, and only this file and index/*.c know how. Outside index/,
+ * its nodes however it likes, and only this file and the index/ sources know how. Outside index/,
  * code includes this header, never index_internal.h; CI rejects `->nodes[`, `->side[`,
  * `->px`, `->py` and `->pid` outside index/.
  *
