@@ -37,4 +37,26 @@ static inline void qk__csort4_desc(qk__centry_t *e, int n) {
   }
 }
 
+/* ---- the world's shapes (collide/shape.c, collide/exact.c) ------------------------ */
+
+/* Exact signs: orientation of c relative to a->b; (b-a).(c-a); (r1+r2)^2 - |a-b|^2;
+ * r^2 |q-p|^2 - ((q-p) x (c-p))^2. Inputs must satisfy qk__value_ok. */
+int qk__orient(double ax, double ay, double bx, double by, double cx, double cy);
+int qk__dot_sign(double ax, double ay, double bx, double by, double cx, double cy);
+int qk__within(double ax, double ay, double bx, double by, double r1, double r2);
+int qk__line_within(double px, double py, double qx, double qy, double cx, double cy, double r);
+
+/* Zero, or magnitude in [2^-100, 2^100]: the range in which the predicates are exact. */
+int qk__value_ok(double v);
+/* Check a shape and normalise it (box corners min then max, unused values zeroed). */
+qk_status_t qk__shape_normalize(const qk_shape_t *in, qk_shape_t *out);
+/* Bounding box, rounded outwards (contains the shape exactly). */
+qk_box_t qk__shape_box(const qk_shape_t *s);
+/* Exact closed overlap of two normalised shapes. */
+int qk__shapes_overlap(const qk_shape_t *a, const qk_shape_t *b);
+/* Distance from p to a shape (0 exactly when p is in it). */
+double qk__shape_dist(const qk_shape_t *s, qk_point_t p);
+/* Parameter in [0, 1] of the first contact of the segment o -> to with a shape it meets. */
+double qk__ray_param(const qk_shape_t *s, qk_point_t o, qk_point_t to);
+
 #endif /* QUADKIT_COLLIDE_INTERNAL_H */
