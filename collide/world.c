@@ -6,8 +6,8 @@
  * by default) and is filed by that box in one cell of a grid of squares of side 2^L: the
  * smallest L whose cell holds the fattened box's lower-left corner and reaches two cells
  * up and right past it, so the fat box lies in the cell's "loose" square [cx 2^L,
- * (cx + 2) 2^L] (exact: powers of two and floors). A move that stays inside the fat box
- * changes nothing else, so steady motion re-files only the objects that drifted out. The
+ * (cx + 2) 2^L) (exact: powers of two and floors; the far side open). A move that stays inside the
+ * fat box changes nothing else, so steady motion re-files only the objects that drifted out. The
  * cells of all levels live in one hash table keyed by (level, cx, cy), each with an
  * intrusive list of its objects; the table never holds more cells than objects, so the
  * world's memory is proportional to the live objects whatever the churn.
@@ -15,11 +15,11 @@
  * Levels adapt to the sizes (an object of size e sits at level ~log2 e, from 1e-3 to
  * 1e3 and beyond in one world) and to the coordinates (the cell index is kept below
  * 2^51, so a unit object at 1e9 is filed at level 0 and one at 1e30 at a coarser one).
- * Pairs: every cell meets the 13 cells of its own level at or after it (itself and the
- * loose squares that can reach it) and the few cells of each coarser occupied level whose
- * loose squares meet its own; candidate pairs pass the exact box test, then the exact
- * shape test (collide/shape.c). Pairs are sorted by (slot a, slot b), which makes the
- * order deterministic, the began / ended sets a merge of two sorted lists, and the answer
+ * Pairs: every cell meets the 5 cells of its own level at or after it (itself and the
+ * neighbours whose loose squares reach it: indices differing by at most 1) and the few cells of
+ * each coarser occupied level whose loose squares meet its own; candidate pairs pass the exact box
+ * test, then the exact shape test (collide/shape.c). Pairs are sorted by (slot a, slot b), which
+ * makes the order deterministic, the began / ended sets a merge of two sorted lists, and the answer
  * independent of the number of threads (each thread takes a range of the table).
  *
  * Handles: slot in the low 32 bits, generation in the high 32. A slot's generation is
@@ -173,7 +173,7 @@ static void cell_of(const qk_box_t *f, int *level, int64_t *cx, int64_t *cy) {
   if (l < QK__LMIN) l = QK__LMIN;
   for (;; l++) {
     double x = floor(ldexp(f->xmin, -l)), y = floor(ldexp(f->ymin, -l));
-    if (f->xmax <= ldexp(x + 2, l) && f->ymax <= ldexp(y + 2, l)) {
+    if (f->xmax < ldexp(x + 2, l) && f->ymax < ldexp(y + 2, l)) {
       *level = l;
       *cx = (int64_t)x;
       *cy = (int64_t)y;

@@ -75,21 +75,22 @@ static int cell_pairs(share_t *s, const qk__wcell_t *a) {
   for (uint32_t i = a->head; i != QK_NONE; i = obj[i].next)
     for (uint32_t j = obj[i].next; j != QK_NONE; j = obj[j].next)
       if (!try_pair(s, i, j)) return 0;
-  /* The same level: loose squares [c, c + 2] meet when the indices differ by <= 2; each
+  /* The same level: loose squares [c, c + 2) meet when the indices differ by <= 1; each
    * neighbour pair is taken once, from the cell that comes first in (x, y) order. */
-  for (int dx = 0; dx <= 2; dx++)
-    for (int dy = -2; dy <= 2; dy++) {
+  for (int dx = 0; dx <= 1; dx++)
+    for (int dy = -1; dy <= 1; dy++) {
       if (dx == 0 && dy <= 0) continue;
       const qk__wcell_t *b = qk__world_cell(w, a->level, a->cx + dx, a->cy + dy);
       if (b && !cross_cells(s, a, b)) return 0;
     }
-  /* Coarser levels: the cells whose loose squares meet this one's. */
+  /* Coarser levels: the cells whose loose squares [b 2^lb, (b + 2) 2^lb) meet this one's
+   * [a 2^la, (a + 2) 2^la): b 2^k < a + 2 and (b + 2) 2^k > a, with k = lb - la. */
   for (int li = 0; li < s->n_levels; li++) {
     int lb = s->levels[li];
     if (lb <= a->level) continue;
     int k = lb - a->level;
-    int64_t x0 = shr_ceil(a->cx, k) - 2, x1 = shr_floor(a->cx + 2, k);
-    int64_t y0 = shr_ceil(a->cy, k) - 2, y1 = shr_floor(a->cy + 2, k);
+    int64_t x0 = shr_floor(a->cx, k) - 1, x1 = shr_ceil(a->cx + 2, k) - 1;
+    int64_t y0 = shr_floor(a->cy, k) - 1, y1 = shr_ceil(a->cy + 2, k) - 1;
     for (int64_t x = x0; x <= x1; x++)
       for (int64_t y = y0; y <= y1; y++) {
         const qk__wcell_t *b = qk__world_cell(w, lb, x, y);

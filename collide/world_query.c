@@ -14,10 +14,9 @@ static inline int boxes_meet(const qk_box_t *a, const qk_box_t *b) {
   return a->xmin <= b->xmax && b->xmin <= a->xmax && a->ymin <= b->ymax && b->ymin <= a->ymax;
 }
 
-/* v / 2^l floored or ceiled, clamped far inside the int64 range. */
-static int64_t scaled(double v, int l, int up) {
-  double s = ldexp(v, -l);
-  s = up ? ceil(s) : floor(s);
+/* v / 2^l floored, clamped far inside the int64 range. */
+static int64_t scaled(double v, int l) {
+  double s = floor(ldexp(v, -l));
   if (s > 0x1p60) s = 0x1p60;
   if (s < -0x1p60) s = -0x1p60;
   return (int64_t)s;
@@ -39,9 +38,10 @@ void qk__world_visit(const qk_world_t *w, qk_box_t qb, qk__wvisit_fn fn, void *u
   memset(scan, 0, sizeof scan);
   for (int li = 0; li < n; li++) {
     int l = levels[li];
-    /* An object of cell c lies in [c 2^l, (c + 2) 2^l]. */
-    int64_t x0 = scaled(qb.xmin, l, 1) - 2, x1 = scaled(qb.xmax, l, 0);
-    int64_t y0 = scaled(qb.ymin, l, 1) - 2, y1 = scaled(qb.ymax, l, 0);
+    /* An object of cell c lies in [c 2^l, (c + 2) 2^l): c <= qmax / 2^l and
+     * c > qmin / 2^l - 2. */
+    int64_t x0 = scaled(qb.xmin, l) - 1, x1 = scaled(qb.xmax, l);
+    int64_t y0 = scaled(qb.ymin, l) - 1, y1 = scaled(qb.ymax, l);
     double looks = ((double)x1 - (double)x0 + 1) * ((double)y1 - (double)y0 + 1);
     if (looks > 2.0 * w->level_cells[l - QK__LMIN] + 8) {
       scan[l - QK__LMIN] = 1;
