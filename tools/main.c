@@ -20,6 +20,10 @@ static const command_t commands[] = {
      "collide DISCS.csv                             overlapping disc pairs"},
     {"raycast", cmd_raycast, "raycast DISCS.csv RAYS.csv                   first disc hit by rays"},
     {"geo", cmd_geo, "geo knn|radius POINTS.csv QUERIES.csv ...     geodesic queries (WGS84)"},
+    {"world", cmd_world,
+     "world OBJECTS.csv MOVES.csv [--pairs all|began|ended]  replay moving objects"},
+    {"simulate", cmd_simulate,
+     "simulate [--n N] [--frames F] [--seed S] [--svg FILE]  bouncing objects"},
     {"mesh", cmd_mesh, "mesh IN.poly -o PREFIX [options]              quadtree mesh generator"},
 };
 
