@@ -11,11 +11,14 @@
  *  - churn: 10^5 frames of moves, adds and removes on a small world stay within 1.2x the
  *    memory of a fresh world holding the same objects;
  *  - allocation failure at every N in add and update leaves the world unchanged, no leak;
- *  - two threads give the same pairs and batch ray hits as one.
+ *  - two threads give the same pairs and batch ray hits as one, and three reader threads
+ *    querying one world at once get the single-threaded answers (run under TSan by
+ *    scripts/tsan.sh).
  * The oracle computes overlap in long double from the textbook formulas (distance from a
  * point to a segment, orientation signs), independently of the library's exact code.
  */
 #include <math.h>
+#include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -553,14 +556,75 @@ static void test_world_threads(void **s) {
   qk_world_free(w[0]), qk_world_free(w[1]);
 }
 
+/* Readers: three threads query one world at once (read-only calls). */
+typedef struct reader {
+  const qk_world_t *w;
+  const qk_point_t *a, *b;
+  const qk_world_hit_t *want;
+  int n, ok;
+} reader_t;
+
+static void *reader_main(void *arg) {
+  reader_t *r = arg;
+  r->ok = 1;
+  for (int i = 0; i < r->n; i++) {
+    qk_world_hit_t h, nn[3];
+    size_t n;
+    if (qk_world_raycast(r->w, r->a[i], r->b[i], &h) != QK_OK || h.h != r->want[i].h) r->ok = 0;
+    if (qk_world_knn(r->w, r->a[i], 3, nn, &n) != QK_OK || n != 3) r->ok = 0;
+    qk_shape_t q = {QK_SHAPE_DISC, r->a[i].x, r->a[i].y, 2, 0};
+    if (qk_world_query(r->w, &q, NULL, 0, &n) != QK_OK) r->ok = 0;
+  }
+  size_t np;
+  if (qk_world_pairs_list(r->w, QK_PAIRS_ALL, NULL, 0, &np) != QK_OK) r->ok = 0;
+  return NULL;
+}
+
+static void test_world_concurrent_readers(void **s) {
+  (void)s;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 23);
+  qk_world_t *w;
+  assert_int_equal(qk_world_new(NULL, &w), QK_OK);
+  for (int i = 0; i < 3000; i++) {
+    qk_shape_t sh = rnd_shape(&r, SC_UNIFORM, 1);
+    qk_handle_t h;
+    assert_int_equal(qk_world_add(w, &sh, 0, &h), QK_OK);
+  }
+  assert_int_equal(qk_world_update(w), QK_OK);
+  enum { NQ = 300 };
+  qk_point_t a[NQ], b[NQ];
+  qk_world_hit_t want[NQ];
+  for (int i = 0; i < NQ; i++) {
+    a[i] = (qk_point_t){qkt_rng_unit(&r) * 100, qkt_rng_unit(&r) * 100};
+    b[i] = (qk_point_t){a[i].x + qkt_rng_range(&r, -30, 30), a[i].y + qkt_rng_range(&r, -30, 30)};
+    assert_int_equal(qk_world_raycast(w, a[i], b[i], &want[i]), QK_OK);
+  }
+  pthread_t th[3];
+  reader_t rd[3];
+  for (int t = 0; t < 3; t++) {
+    rd[t] = (reader_t){w, a, b, want, NQ, 0};
+    assert_int_equal(pthread_create(&th[t], NULL, reader_main, &rd[t]), 0);
+  }
+  for (int t = 0; t < 3; t++) pthread_join(th[t], NULL);
+  for (int t = 0; t < 3; t++) assert_true(rd[t].ok);
+  qk_world_free(w);
+}
+
 int main(void) {
   g_seed = qkt_seed(20261130);
   const struct CMUnitTest tests[] = {
-      cmocka_unit_test(test_world_uniform),       cmocka_unit_test(test_world_clustered),
-      cmocka_unit_test(test_world_mixed_sizes),   cmocka_unit_test(test_world_all_kinds),
-      cmocka_unit_test(test_world_huge),          cmocka_unit_test(test_world_touching),
-      cmocka_unit_test(test_world_stale_handles), cmocka_unit_test(test_world_churn_memory),
-      cmocka_unit_test(test_world_nomem),         cmocka_unit_test(test_world_threads),
+      cmocka_unit_test(test_world_uniform),
+      cmocka_unit_test(test_world_clustered),
+      cmocka_unit_test(test_world_mixed_sizes),
+      cmocka_unit_test(test_world_all_kinds),
+      cmocka_unit_test(test_world_huge),
+      cmocka_unit_test(test_world_touching),
+      cmocka_unit_test(test_world_stale_handles),
+      cmocka_unit_test(test_world_churn_memory),
+      cmocka_unit_test(test_world_nomem),
+      cmocka_unit_test(test_world_threads),
+      cmocka_unit_test(test_world_concurrent_readers),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
