@@ -80,6 +80,7 @@ void qk_world_free(qk_world_t *w) {
   pvec_free(&a, &w->cur);
   pvec_free(&a, &w->began);
   pvec_free(&a, &w->ended);
+  qk__free(&a, w->pack, w->cap_pack * sizeof *w->pack);
   qk__free(&a, w, sizeof *w);
 }
 
@@ -88,7 +89,8 @@ size_t qk_world_size(const qk_world_t *w) { return w ? w->n_live : 0; }
 size_t qk_world_bytes(const qk_world_t *w) {
   if (!w) return 0;
   return sizeof *w + (size_t)w->cap_obj * sizeof *w->obj + w->cap_cells * sizeof *w->cells +
-         (w->cur.cap + w->began.cap + w->ended.cap) * sizeof(qk_world_pair_t);
+         (w->cur.cap + w->began.cap + w->ended.cap) * sizeof(qk_world_pair_t) +
+         w->cap_pack * sizeof *w->pack;
 }
 
 /* ---- the cell table -------------------------------------------------------------- */
@@ -169,11 +171,13 @@ static void cell_of(const qk_box_t *f, int *level, int64_t *cx, int64_t *cy) {
   double e = fmax(f->xmax - f->xmin, f->ymax - f->ymin);
   double mag = fmax(fmax(fabs(f->xmin), fabs(f->xmax)), fmax(fabs(f->ymin), fabs(f->ymax)));
   int l = ceil_log2(e);
+  l += l & 1; /* levels a factor of 4 apart: fewer levels to visit, a few more objects per cell */
   if (mag > 0 && ilogb(mag) - 50 > l) l = ilogb(mag) - 50;
   if (l < QK__LMIN) l = QK__LMIN;
   for (;; l++) {
-    double x = floor(ldexp(f->xmin, -l)), y = floor(ldexp(f->ymin, -l));
-    if (f->xmax < ldexp(x + 2, l) && f->ymax < ldexp(y + 2, l)) {
+    double inv = qk__pow2(-l), s = qk__pow2(l);
+    double x = floor(f->xmin * inv), y = floor(f->ymin * inv);
+    if (f->xmax < (x + 2) * s && f->ymax < (y + 2) * s) {
       *level = l;
       *cx = (int64_t)x;
       *cy = (int64_t)y;
@@ -307,8 +311,14 @@ qk_status_t qk_world_move(qk_world_t *w, qk_handle_t h, const qk_shape_t *shape)
     }
   }
   uint32_t i = (uint32_t)h;
-  unfile_obj(w, i);
   set_shape(w, o, &s);
+  /* Out of its fat box, but often still filed in the same cell: then the new fat box is
+   * all that changes. */
+  int level;
+  int64_t cx, cy;
+  cell_of(&o->fat, &level, &cx, &cy);
+  if (level == o->level && cx == o->cx && cy == o->cy) return QK_OK;
+  unfile_obj(w, i);
   file_obj(w, i);
   return QK_OK;
 }

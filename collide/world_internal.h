@@ -29,8 +29,15 @@ typedef struct qk__wcell {
   int32_t level;
   uint32_t head;
   uint32_t count;
-  uint32_t pad_;
+  uint32_t start; /* during an update: the cell's first entry in the packed array */
 } qk__wcell_t;
+
+/* An object as the pair search reads it: its box and slot, packed cell by cell. */
+typedef struct qk__wpack {
+  qk_box_t box;
+  uint32_t slot;
+  uint32_t is_box; /* both boxes: the box test is the whole test */
+} qk__wpack_t;
 
 typedef struct qk__pvec {
   qk_world_pair_t *v;
@@ -49,7 +56,19 @@ struct qk_world {
   uint32_t level_objs[QK__NLEV];
   uint32_t level_cells[QK__NLEV];
   qk__pvec_t cur, began, ended;
+  qk__wpack_t *pack; /* scratch of qk_world_update, kept between frames */
+  size_t cap_pack;
 };
+
+/* 2^e for e in [-1022, 1023], exactly (cheaper than ldexp in the inner loops; scaling
+ * by it is exact for the world's values, which never come near the subnormals). */
+static inline double qk__pow2(int e) {
+  union {
+    uint64_t u;
+    double d;
+  } v = {(uint64_t)(e + 1023) << 52};
+  return v.d;
+}
 
 /* The cell (level, cx, cy), or NULL. */
 const qk__wcell_t *qk__world_cell(const qk_world_t *w, int level, int64_t cx, int64_t cy);

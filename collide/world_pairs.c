@@ -34,15 +34,13 @@ static inline int boxes_meet(const qk_box_t *a, const qk_box_t *b) {
   return a->xmin <= b->xmax && b->xmin <= a->xmax && a->ymin <= b->ymax && b->ymin <= a->ymax;
 }
 
-/* Test objects i and j; record the pair when they overlap. */
-static inline int try_pair(share_t *s, uint32_t i, uint32_t j) {
+/* Test two packed objects; record the pair when they overlap. */
+static inline int try_pair(share_t *s, const qk__wpack_t *p, const qk__wpack_t *q) {
+  if (!boxes_meet(&p->box, &q->box)) return 1;
   const qk_world_t *w = s->w;
-  const qk__wobj_t *a = &w->obj[i], *b = &w->obj[j];
-  if (!boxes_meet(&a->box, &b->box)) return 1;
+  uint32_t i = p->slot, j = q->slot;
   /* Two boxes need nothing beyond their boxes, which are exact for them. */
-  if (!(a->s.kind == QK_SHAPE_BOX && b->s.kind == QK_SHAPE_BOX) &&
-      !qk__shapes_overlap(&a->s, &b->s))
-    return 1;
+  if (!(p->is_box && q->is_box) && !qk__shapes_overlap(&w->obj[i].s, &w->obj[j].s)) return 1;
   if (i > j) {
     uint32_t t = i;
     i = j;
@@ -53,28 +51,37 @@ static inline int try_pair(share_t *s, uint32_t i, uint32_t j) {
 
 /* Every object of cell A against every object of cell B (A != B). */
 static int cross_cells(share_t *s, const qk__wcell_t *a, const qk__wcell_t *b) {
-  const qk__wobj_t *obj = s->w->obj;
-  for (uint32_t i = a->head; i != QK_NONE; i = obj[i].next)
-    for (uint32_t j = b->head; j != QK_NONE; j = obj[j].next)
-      if (!try_pair(s, i, j)) return 0;
+  const qk__wpack_t *pk = s->w->pack;
+  for (uint32_t i = a->start; i < a->start + a->count; i++)
+    for (uint32_t j = b->start; j < b->start + b->count; j++)
+      if (!try_pair(s, &pk[i], &pk[j])) return 0;
   return 1;
 }
 
-/* floor(v / 2^k) and ceil(v / 2^k) for k >= 0, on values below 2^52. */
-static inline int64_t shr_floor(int64_t v, int k) {
-  if (k > 60) return v < 0 ? -1 : 0;
-  int64_t d = (int64_t)1 << k;
-  return v >= 0 ? v / d : -((-v + d - 1) / d);
+/* One object against the cells of level l whose loose squares [c 2^l, (c + 2) 2^l) meet
+ * its box: c from floor(min / 2^l) - 1 to floor(max / 2^l). */
+static int object_vs_level(share_t *s, const qk__wpack_t *p, int l) {
+  const qk_world_t *w = s->w;
+  const double inv = qk__pow2(-l);
+  int64_t x0 = (int64_t)floor(p->box.xmin * inv) - 1, x1 = (int64_t)floor(p->box.xmax * inv);
+  int64_t y0 = (int64_t)floor(p->box.ymin * inv) - 1, y1 = (int64_t)floor(p->box.ymax * inv);
+  for (int64_t x = x0; x <= x1; x++)
+    for (int64_t y = y0; y <= y1; y++) {
+      const qk__wcell_t *b = qk__world_cell(w, l, x, y);
+      if (!b) continue;
+      for (uint32_t j = b->start; j < b->start + b->count; j++)
+        if (!try_pair(s, p, &w->pack[j])) return 0;
+    }
+  return 1;
 }
-static inline int64_t shr_ceil(int64_t v, int k) { return -shr_floor(-v, k); }
 
 static int cell_pairs(share_t *s, const qk__wcell_t *a) {
   const qk_world_t *w = s->w;
-  const qk__wobj_t *obj = w->obj;
+  const qk__wpack_t *pk = w->pack;
   /* Within the cell. */
-  for (uint32_t i = a->head; i != QK_NONE; i = obj[i].next)
-    for (uint32_t j = obj[i].next; j != QK_NONE; j = obj[j].next)
-      if (!try_pair(s, i, j)) return 0;
+  for (uint32_t i = a->start; i < a->start + a->count; i++)
+    for (uint32_t j = i + 1; j < a->start + a->count; j++)
+      if (!try_pair(s, &pk[i], &pk[j])) return 0;
   /* The same level: loose squares [c, c + 2) meet when the indices differ by <= 1; each
    * neighbour pair is taken once, from the cell that comes first in (x, y) order. */
   for (int dx = 0; dx <= 1; dx++)
@@ -83,19 +90,14 @@ static int cell_pairs(share_t *s, const qk__wcell_t *a) {
       const qk__wcell_t *b = qk__world_cell(w, a->level, a->cx + dx, a->cy + dy);
       if (b && !cross_cells(s, a, b)) return 0;
     }
-  /* Coarser levels: the cells whose loose squares [b 2^lb, (b + 2) 2^lb) meet this one's
-   * [a 2^la, (a + 2) 2^la): b 2^k < a + 2 and (b + 2) 2^k > a, with k = lb - la. */
+  /* Coarser levels: each object looks up the cells whose loose squares meet its own box
+   * (about four per level; fewer lookups than from the cell's whole loose square when,
+   * as usual, a cell holds one or two objects). */
   for (int li = 0; li < s->n_levels; li++) {
     int lb = s->levels[li];
     if (lb <= a->level) continue;
-    int k = lb - a->level;
-    int64_t x0 = shr_floor(a->cx, k) - 1, x1 = shr_ceil(a->cx + 2, k) - 1;
-    int64_t y0 = shr_floor(a->cy, k) - 1, y1 = shr_ceil(a->cy + 2, k) - 1;
-    for (int64_t x = x0; x <= x1; x++)
-      for (int64_t y = y0; y <= y1; y++) {
-        const qk__wcell_t *b = qk__world_cell(w, lb, x, y);
-        if (b && !cross_cells(s, a, b)) return 0;
-      }
+    for (uint32_t i = a->start; i < a->start + a->count; i++)
+      if (!object_vs_level(s, &pk[i], lb)) return 0;
   }
   return 1;
 }
@@ -137,8 +139,64 @@ static int pv_reserve(const qk_allocator_t *a, qk__pvec_t *p, size_t n) {
   return 1;
 }
 
+/* Copy every object's box into the packed array, cell by cell, and note each cell's
+ * first entry (the searches then read consecutive memory, not the objects' lists). */
+static qk_status_t pack_cells(qk_world_t *w) {
+  size_t need = w->n_live ? w->n_live : 1;
+  if (w->cap_pack < need || w->cap_pack > 2 * need + 64) {
+    size_t cap = need + need / 4;
+    qk__wpack_t *p = qk__realloc(&w->alloc, NULL, 0, cap * sizeof *p);
+    if (!p) return QK_ERR_NOMEM;
+    qk__free(&w->alloc, w->pack, w->cap_pack * sizeof *w->pack);
+    w->pack = p;
+    w->cap_pack = cap;
+  }
+  uint32_t k = 0;
+  for (size_t c = 0; c < w->cap_cells; c++) {
+    qk__wcell_t *cell = &w->cells[c];
+    if (!cell->count) continue;
+    cell->start = k;
+    for (uint32_t i = cell->head; i != QK_NONE; i = w->obj[i].next)
+      w->pack[k++] = (qk__wpack_t){w->obj[i].box, i, w->obj[i].s.kind == QK_SHAPE_BOX};
+  }
+  return QK_OK;
+}
+
+/* Sort pairs by (slot a, slot b): LSD radix sort on 11-bit digits of b, then of a,
+ * skipping digits that are zero everywhere; tmp holds as many pairs. */
+static void sort_pairs(qk_world_pair_t *v, qk_world_pair_t *tmp, size_t n) {
+  uint32_t hi_a = 0, hi_b = 0;
+  int swaps = 0;
+  for (size_t i = 0; i < n; i++) {
+    hi_a |= (uint32_t)v[i].a;
+    hi_b |= (uint32_t)v[i].b;
+  }
+  for (int pass = 0; pass < 6; pass++) {
+    int shift = (pass % 3) * 11, on_a = pass >= 3;
+    if ((((on_a ? hi_a : hi_b) >> shift) & 0x7ff) == 0) continue;
+    size_t count[2049];
+    memset(count, 0, sizeof count);
+    for (size_t i = 0; i < n; i++) {
+      uint32_t key = (uint32_t)(on_a ? v[i].a : v[i].b);
+      count[((key >> shift) & 0x7ff) + 1]++;
+    }
+    for (size_t d = 1; d <= 2048; d++) count[d] += count[d - 1];
+    for (size_t i = 0; i < n; i++) {
+      uint32_t key = (uint32_t)(on_a ? v[i].a : v[i].b);
+      tmp[count[(key >> shift) & 0x7ff]++] = v[i];
+    }
+    qk_world_pair_t *t = v; /* the sorted run is in tmp now: swap roles */
+    v = tmp;
+    tmp = t;
+    swaps++;
+  }
+  if (swaps & 1) memcpy(tmp, v, n * sizeof *v); /* back into the caller's array */
+}
+
 qk_status_t qk_world_update(qk_world_t *w) {
   if (!w) return QK_ERR_INVALID;
+  qk_status_t pst = pack_cells(w);
+  if (pst != QK_OK) return pst;
   int levels[QK__NLEV];
   int n_levels = qk__world_levels(w, levels);
   unsigned nt = w->opt.threads;
@@ -167,10 +225,11 @@ qk_status_t qk_world_update(qk_world_t *w) {
       k += shares[t].out.n;
     }
     cur.n = total;
-    if (total > 1) qsort(cur.v, total, sizeof *cur.v, pair_cmp);
-    /* began <= cur, ended <= previous. */
+    /* began <= cur, ended <= previous; began is the sort's scratch before it is filled. */
     if (!pv_reserve(&w->alloc, &began, total) || !pv_reserve(&w->alloc, &ended, w->cur.n))
       st = QK_ERR_NOMEM;
+    else if (total > 1)
+      sort_pairs(cur.v, began.v, total);
   }
   for (unsigned t = 0; t < nt; t++)
     qk__free(&w->alloc, shares[t].out.v, shares[t].out.cap * sizeof *shares[t].out.v);
