@@ -27,6 +27,19 @@
 
 static uint64_t g_seed;
 
+/* Under ThreadSanitizer (scripts/tsan.sh, which is here for the threaded tests) the
+ * single-threaded churn and allocation-failure loops run shorter. */
+#if defined(__SANITIZE_THREAD__)
+#define QKT_TSAN 1
+#elif defined(__has_feature)
+#if __has_feature(thread_sanitizer)
+#define QKT_TSAN 1
+#endif
+#endif
+#ifndef QKT_TSAN
+#define QKT_TSAN 0
+#endif
+
 /* ---- oracle --------------------------------------------------------------------------- */
 
 typedef long double ld;
@@ -433,7 +446,7 @@ static void test_world_churn_memory(void **s) {
   mirror_t m = {0};
   for (int i = 0; i < 60; i++) m_add(w, &m, rnd_shape(&r, SC_UNIFORM, 1));
   size_t peak = 0;
-  for (int f = 0; f < 100000; f++) {
+  for (int f = 0; f < (QKT_TSAN ? 10000 : 100000); f++) {
     size_t i = qkt_rng_below(&r, (uint32_t)m.n);
     if (f % 10 == 0) { /* churn: remove one, add one */
       assert_int_equal(qk_world_remove(w, m.h[i]), QK_OK);
@@ -468,7 +481,7 @@ static void test_world_nomem(void **s) {
   (void)s;
   qkt_rng_t r;
   qkt_rng_seed(&r, g_seed + 5);
-  for (size_t fail = 1; fail < 400; fail++) {
+  for (size_t fail = 1; fail < (QKT_TSAN ? 40u : 400u); fail++) {
     qkt_alloc_t st = {0};
     qk_allocator_t al = qkt_alloc_make(&st);
     qk_world_options_t o;

@@ -77,7 +77,14 @@ def d2seg(p, a, b):
     dx, dy = p[0] - (a[0] + t*ux), p[1] - (a[1] + t*uy)
     return dx*dx + dy*dy
 def inbox(p, b): return b[0] <= p[0] <= b[2] and b[1] <= p[1] <= b[3]
+def bbox(s):  # floats are exact here (quarters and halves)
+    k, v = s
+    if k == 'disc': return (float(v[0] - v[2]), float(v[1] - v[2]), float(v[0] + v[2]), float(v[1] + v[2]))
+    if k == 'point': return (float(v[0]), float(v[1]), float(v[0]), float(v[1]))
+    return (float(min(v[0], v[2])), float(min(v[1], v[3])), float(max(v[0], v[2])), float(max(v[1], v[3])))
 def overlap(s, t):
+    a, b = bbox(s), bbox(t)
+    if a[0] > b[2] or b[0] > a[2] or a[1] > b[3] or b[1] > a[3]: return False
     order = ['point', 'disc', 'box', 'segment']
     if order.index(s[0]) > order.index(t[0]): s, t = t, s
     (k, a), (m, b) = s, t
