@@ -28,9 +28,9 @@ typedef struct cnode {
 } cnode_t;
 
 /*
- * Item data is kept in the tree's slot order (parallel to tree->px), not by id, so that
- * scanning a leaf reads consecutive memory instead of jumping to each item's id: for
- * large sets that is what the scans cost.
+ * Item data is kept in the tree's slot order (parallel to the tree's point arrays), not by id, so
+ * that scanning a leaf reads consecutive memory instead of jumping to each item's id: for large
+ * sets that is what the scans cost.
  */
 struct qk_collider {
   qk_allocator_t alloc;

@@ -209,6 +209,25 @@ static int in_list(const qk_world_pair_t *v, size_t n, qk_world_pair_t p) {
   return 0;
 }
 
+typedef struct cbctx {
+  const qk_world_pair_t *want;
+  size_t n, i;
+  int ok;
+} cbctx_t;
+
+static int cb_pair(qk_handle_t a, qk_handle_t b, void *ud) {
+  cbctx_t *c = ud;
+  if (c->i >= c->n || c->want[c->i].a != a || c->want[c->i].b != b) c->ok = 0;
+  c->i++;
+  return 0;
+}
+
+static int cb_stop(qk_handle_t a, qk_handle_t b, void *ud) {
+  (void)a, (void)b;
+  ++*(size_t *)ud;
+  return 1;
+}
+
 static void check_pairs(qk_world_t *w, const qk_world_pair_t *want, size_t nw,
                         const qk_world_pair_t *prev, size_t np, const char *what, int frame) {
   size_t n;
@@ -221,6 +240,13 @@ static void check_pairs(qk_world_t *w, const qk_world_pair_t *want, size_t nw,
     if (got[i].a != want[i].a || got[i].b != want[i].b)
       fail_msg("%s frame %d: pair %zu differs (seed %llu)", what, frame, i,
                (unsigned long long)g_seed);
+  /* the callback form: the same pairs in the same order, and a nonzero return stops */
+  cbctx_t cb = {want, nw, 0, 1};
+  assert_int_equal(qk_world_pairs(w, QK_PAIRS_ALL, cb_pair, &cb), QK_OK);
+  assert_true(cb.ok && cb.i == nw);
+  size_t calls = 0;
+  assert_int_equal(qk_world_pairs(w, QK_PAIRS_ALL, cb_stop, &calls), QK_OK);
+  assert_int_equal(calls, nw ? 1 : 0);
   /* began: in want, not in prev; ended: in prev, not in want */
   size_t nb = 0, ne = 0;
   assert_int_equal(qk_world_pairs_list(w, QK_PAIRS_BEGAN, got, nw + np + 1, &nb), QK_OK);
