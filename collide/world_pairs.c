@@ -221,7 +221,7 @@ qk_status_t qk_world_update(qk_world_t *w) {
   if (st == QK_OK) {
     size_t k = 0;
     for (unsigned t = 0; t < nt; t++) {
-      memcpy(cur.v + k, shares[t].out.v, shares[t].out.n * sizeof *cur.v);
+      if (shares[t].out.n) memcpy(cur.v + k, shares[t].out.v, shares[t].out.n * sizeof *cur.v);
       k += shares[t].out.n;
     }
     cur.n = total;
