@@ -50,7 +50,8 @@ qk_status_t qk_world_new(const qk_world_options_t *options, qk_world_t **out) {
   qk_world_options_t o;
   qk_world_options_init(&o);
   if (options) o = *options;
-  if (!(o.margin >= 0) || !(o.min_margin >= 0) || !isfinite(o.margin) || !isfinite(o.min_margin) ||
+  /* Bounded margins keep every fat box, and so every level, inside the level table. */
+  if (!(o.margin >= 0 && o.margin <= 16) || !(o.min_margin >= 0 && o.min_margin <= 0x1p100) ||
       o.threads == 0 || o.threads > 256)
     return QK_ERR_INVALID;
   qk_allocator_t a = {NULL, NULL};

@@ -460,6 +460,36 @@ static void test_world_stale_handles(void **s) {
   assert_true(got.kind == QK_SHAPE_BOX && got.x == 5 && got.b == 6);
   assert_int_equal(qk_world_size(w), 1);
   qk_world_free(w);
+  /* options out of range */
+  qk_world_options_t o;
+  qk_world_options_init(&o);
+  o.margin = 17;
+  assert_int_equal(qk_world_new(&o, &w), QK_ERR_INVALID);
+  qk_world_options_init(&o);
+  o.min_margin = INFINITY;
+  assert_int_equal(qk_world_new(&o, &w), QK_ERR_INVALID);
+  qk_world_options_init(&o);
+  o.threads = 0;
+  assert_int_equal(qk_world_new(&o, &w), QK_ERR_INVALID);
+  qk_world_free(NULL);
+  /* the extremes of the accepted range: tiny and huge values, and a point at 2^100 */
+  assert_int_equal(qk_world_new(NULL, &w), QK_OK);
+  qk_shape_t lo = {QK_SHAPE_DISC, 0x1p-100, -0x1p-100, 0x1p-100, 0};
+  qk_shape_t hi = {QK_SHAPE_BOX, -0x1p100, -0x1p100, 0x1p100, 0x1p100};
+  qk_shape_t far = {QK_SHAPE_POINT, 0x1p100, 0x1p100, 0, 0};
+  qk_handle_t h1, h2, h3;
+  assert_int_equal(qk_world_add(w, &lo, 0, &h1), QK_OK);
+  assert_int_equal(qk_world_add(w, &hi, 0, &h2), QK_OK);
+  assert_int_equal(qk_world_add(w, &far, 0, &h3), QK_OK);
+  assert_int_equal(qk_world_update(w), QK_OK);
+  size_t np;
+  assert_int_equal(qk_world_pairs_list(w, QK_PAIRS_ALL, NULL, 0, &np), QK_OK);
+  assert_int_equal(np, 2); /* the big box holds both others; the disc is far from the point */
+  qk_world_hit_t nn[3];
+  assert_int_equal(qk_world_knn(w, (qk_point_t){0x1p99, 0x1p99}, 3, nn, &np), QK_OK);
+  assert_int_equal(np, 3);
+  assert_true(nn[0].h == h2 && nn[0].t == 0);
+  qk_world_free(w);
 }
 
 /* 10^5 frames of a small world; memory stays within 1.2x a fresh world of the same. */

@@ -184,8 +184,8 @@ typedef struct qk_world_options {
   const qk_allocator_t *allocator; /**< NULL: libc. Must be thread-safe when threads > 1. */
   unsigned threads;                /**< threads for update and batch queries (1: none) */
   double margin;                   /**< fattening of each object's box, as a fraction of its
-                                        size (default 0.25); larger: fewer re-filings */
-  double min_margin;               /**< absolute fattening added to that (default 0) */
+                                        size, 0..16 (default 0.25); larger: fewer re-filings */
+  double min_margin;               /**< absolute fattening added, 0..2^100 (default 0) */
 } qk_world_options_t;
 
 /** A moving-objects world; see docs/collide.md. */
@@ -198,7 +198,8 @@ void qk_world_options_init(qk_world_options_t *o);
  * Make an empty world.
  * \param [in] options NULL for defaults (copied; the allocator struct is copied too).
  * \param [out] out the world, freed with qk_world_free().
- * \return QK_OK, QK_ERR_INVALID or QK_ERR_NOMEM.
+ * \return QK_OK, QK_ERR_INVALID (threads 0 or above 256, a margin out of range) or
+ *         QK_ERR_NOMEM.
  */
 qk_status_t qk_world_new(const qk_world_options_t *options, qk_world_t **out);
 
