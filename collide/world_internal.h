@@ -79,6 +79,10 @@ int qk__world_levels(const qk_world_t *w, int *levels);
 /* Visit every live object whose box meets qb: fn returns nonzero to stop. */
 typedef int (*qk__wvisit_fn)(const qk_world_t *w, uint32_t slot, void *ud);
 void qk__world_visit(const qk_world_t *w, qk_box_t qb, qk__wvisit_fn fn, void *ud);
+/* The same for the box of a segment seg[0] -> seg[1], visiting only the cells along it
+ * where the box would hold many more. */
+void qk__world_visit_seg(const qk_world_t *w, qk_box_t qb, const qk_point_t *seg, qk__wvisit_fn fn,
+                         void *ud);
 
 static inline qk_handle_t qk__handle(const qk_world_t *w, uint32_t slot) {
   return ((uint64_t)w->obj[slot].gen << 32) | slot;

@@ -29,7 +29,57 @@ static int visit_cell(const qk_world_t *w, const qk__wcell_t *c, qk_box_t qb, qk
   return 0;
 }
 
-void qk__world_visit(const qk_world_t *w, qk_box_t qb, qk__wvisit_fn fn, void *ud) {
+/* A box's cell range at level l: an object of cell c lies in [c 2^l, (c + 2) 2^l), so it
+ * can meet the box only when c <= max / 2^l and c > min / 2^l - 2. */
+typedef struct crange {
+  int64_t x0, x1, y0, y1;
+} crange_t;
+
+static crange_t range_of(qk_box_t b, int l) {
+  return (crange_t){scaled(b.xmin, l) - 1, scaled(b.xmax, l), scaled(b.ymin, l) - 1,
+                    scaled(b.ymax, l)};
+}
+
+static int visit_range(const qk_world_t *w, int l, crange_t r, const crange_t *skip, qk_box_t qb,
+                       qk__wvisit_fn fn, void *ud) {
+  for (int64_t x = r.x0; x <= r.x1; x++)
+    for (int64_t y = r.y0; y <= r.y1; y++) {
+      if (skip && x >= skip->x0 && x <= skip->x1 && y >= skip->y0 && y <= skip->y1) continue;
+      const qk__wcell_t *c = qk__world_cell(w, l, x, y);
+      if (c && visit_cell(w, c, qb, fn, ud)) return 1;
+    }
+  return 0;
+}
+
+/*
+ * A long segment at a fine level: the cells along it, piece by piece, instead of every
+ * cell of its bounding box. Each piece is the box between two consecutive points
+ * computed on the segment, widened by far more than their rounding, so the pieces cover
+ * the true segment. Along a segment the pieces' cell ranges move monotonically, so a
+ * cell in two ranges is in every range between them: skipping the cells of the
+ * previous range visits each cell (and so each object) once.
+ */
+static int visit_along(const qk_world_t *w, int l, const qk_point_t *seg, double pieces,
+                       qk_box_t qb, qk__wvisit_fn fn, void *ud) {
+  qk_point_t a = seg[0], b = seg[1];
+  double e = (fabs(a.x) + fabs(a.y) + fabs(b.x) + fabs(b.y)) * 0x1p-40;
+  crange_t prev = {1, 0, 1, 0}; /* empty */
+  qk_point_t p = a;
+  size_t n = (size_t)pieces;
+  for (size_t k = 1; k <= n; k++) {
+    double t = (double)k / (double)n;
+    qk_point_t q = k == n ? b : (qk_point_t){a.x + t * (b.x - a.x), a.y + t * (b.y - a.y)};
+    qk_box_t pb = {fmin(p.x, q.x) - e, fmin(p.y, q.y) - e, fmax(p.x, q.x) + e, fmax(p.y, q.y) + e};
+    crange_t r = range_of(pb, l);
+    if (visit_range(w, l, r, &prev, qb, fn, ud)) return 1;
+    prev = r;
+    p = q;
+  }
+  return 0;
+}
+
+void qk__world_visit_seg(const qk_world_t *w, qk_box_t qb, const qk_point_t *seg, qk__wvisit_fn fn,
+                         void *ud) {
   if (w->n_live == 0) return;
   int levels[QK__NLEV];
   int n = qk__world_levels(w, levels);
@@ -38,27 +88,36 @@ void qk__world_visit(const qk_world_t *w, qk_box_t qb, qk__wvisit_fn fn, void *u
   memset(scan, 0, sizeof scan);
   for (int li = 0; li < n; li++) {
     int l = levels[li];
-    /* An object of cell c lies in [c 2^l, (c + 2) 2^l): c <= qmax / 2^l and
-     * c > qmin / 2^l - 2. */
-    int64_t x0 = scaled(qb.xmin, l) - 1, x1 = scaled(qb.xmax, l);
-    int64_t y0 = scaled(qb.ymin, l) - 1, y1 = scaled(qb.ymax, l);
-    double looks = ((double)x1 - (double)x0 + 1) * ((double)y1 - (double)y0 + 1);
-    if (looks > 2.0 * w->level_cells[l - QK__LMIN] + 8) {
-      scan[l - QK__LMIN] = 1;
-      any_scan = 1;
+    crange_t r = range_of(qb, l);
+    double looks = ((double)r.x1 - (double)r.x0 + 1) * ((double)r.y1 - (double)r.y0 + 1);
+    double cells = 2.0 * w->level_cells[l - QK__LMIN] + 8;
+    if (looks <= cells) {
+      if (visit_range(w, l, r, NULL, qb, fn, ud)) return;
       continue;
     }
-    for (int64_t x = x0; x <= x1; x++)
-      for (int64_t y = y0; y <= y1; y++) {
-        const qk__wcell_t *c = qk__world_cell(w, l, x, y);
-        if (c && visit_cell(w, c, qb, fn, ud)) return;
+    if (seg) {
+      /* pieces about four cells long on the longer axis; each looks up its range */
+      double s = qk__pow2(l);
+      double major = fmax(qb.xmax - qb.xmin, qb.ymax - qb.ymin);
+      double minor = fmin(qb.xmax - qb.xmin, qb.ymax - qb.ymin);
+      double pieces = ceil(major / (4 * s));
+      if (pieces >= 1 && pieces < 1e7 && pieces * 7 * (minor / pieces / s + 3) <= cells) {
+        if (visit_along(w, l, seg, pieces, qb, fn, ud)) return;
+        continue;
       }
+    }
+    scan[l - QK__LMIN] = 1;
+    any_scan = 1;
   }
   if (!any_scan) return;
   for (size_t i = 0; i < w->cap_cells; i++) {
     const qk__wcell_t *c = &w->cells[i];
     if (c->count && scan[c->level - QK__LMIN] && visit_cell(w, c, qb, fn, ud)) return;
   }
+}
+
+void qk__world_visit(const qk_world_t *w, qk_box_t qb, qk__wvisit_fn fn, void *ud) {
+  qk__world_visit_seg(w, qb, NULL, fn, ud);
 }
 
 /* ---- overlap with a shape --------------------------------------------------------- */
@@ -90,7 +149,8 @@ qk_status_t qk_world_query(const qk_world_t *w, const qk_shape_t *shape, qk_hand
   qk_status_t st = qk__shape_normalize(shape, &q);
   if (st != QK_OK) return st;
   qctx_t c = {&q, out, cap, 0};
-  qk__world_visit(w, qk__shape_box(&q), q_visit, &c);
+  qk_point_t seg[2] = {{q.x, q.y}, {q.a, q.b}};
+  qk__world_visit_seg(w, qk__shape_box(&q), q.kind == QK_SHAPE_SEGMENT ? seg : NULL, q_visit, &c);
   if (c.n <= cap && c.n > 1) qsort(out, c.n, sizeof *out, handle_cmp);
   *n_out = c.n;
   return QK_OK;
@@ -153,7 +213,8 @@ qk_status_t qk_world_raycast_all(const qk_world_t *w, qk_point_t from, qk_point_
   if (st != QK_OK) return st;
   c.out = out;
   c.cap = cap;
-  qk__world_visit(w, qk__shape_box(&c.seg), r_visit_all, &c);
+  qk_point_t seg[2] = {from, to};
+  qk__world_visit_seg(w, qk__shape_box(&c.seg), seg, r_visit_all, &c);
   if (c.n <= cap && c.n > 1) qsort(out, c.n, sizeof *out, hit_cmp);
   *n_out = c.n;
   return QK_OK;
@@ -166,7 +227,8 @@ qk_status_t qk_world_raycast(const qk_world_t *w, qk_point_t from, qk_point_t to
   rctx_t c;
   qk_status_t st = ray_setup(from, to, &c);
   if (st != QK_OK) return st;
-  qk__world_visit(w, qk__shape_box(&c.seg), r_visit_first, &c);
+  qk_point_t seg[2] = {from, to};
+  qk__world_visit_seg(w, qk__shape_box(&c.seg), seg, r_visit_first, &c);
   *hit = c.best;
   return QK_OK;
 }

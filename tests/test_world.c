@@ -266,12 +266,26 @@ static void check_pairs(qk_world_t *w, const qk_world_pair_t *want, size_t nw,
 
 static void check_queries(qkt_rng_t *r, qk_world_t *w, const mirror_t *m, int scene) {
   qk_handle_t *got = malloc((m->n + 1) * sizeof *got);
-  for (int q = 0; q < 4; q++) {
+  for (int qi = 0; qi < 5; qi++) {
+    /* kinds in turn; the fifth a long segment across the whole scene (walked cell by
+     * cell at the fine levels rather than through its bounding box) */
+    int q = qi == 4 ? 2 : qi;
     qk_shape_t qs = rnd_shape(r, scene, 1);
     qs.kind = (qk_shape_kind_t)q;
     if (q == 0) qs.a = qkt_rng_range(r, 0, 10);
     if (q == 1 || q == 2)
       qs.a = qs.x + qkt_rng_range(r, -10, 10), qs.b = qs.y + qkt_rng_range(r, -10, 10);
+    if (qi == 4) {
+      double off = scene == SC_HUGE ? 1e9 : 0;
+      qs.x = off - 20, qs.a = off + 120;
+      qs.y = qkt_rng_range(r, -20, 120) - off, qs.b = qkt_rng_range(r, -20, 120) - off;
+      if (qkt_rng_below(r, 2)) { /* or mostly vertical */
+        double t = qs.x;
+        qs.x = qs.y + 2 * off, qs.y = t - 2 * off;
+        t = qs.a;
+        qs.a = qs.b + 2 * off, qs.b = t - 2 * off;
+      }
+    }
     size_t n, want = 0;
     assert_int_equal(qk_world_query(w, &qs, got, m->n + 1, &n), QK_OK);
     for (size_t i = 0; i < m->n; i++) want += o_overlap(qs, m->s[i]);
