@@ -313,3 +313,36 @@ qk_status_t qk_world_knn(const qk_world_t *w, qk_point_t p, size_t k, qk_world_h
     r *= 2;
   }
 }
+
+typedef struct kbatch {
+  const qk_world_t *w;
+  const qk_point_t *ps;
+  size_t n, k, chunk;
+  qk_world_hit_t *out;
+  size_t *counts;
+  qk_status_t st[64];
+} kbatch_t;
+
+static void kbatch_run(unsigned j, void *ud) {
+  kbatch_t *b = ud;
+  size_t lo = (size_t)j * b->chunk, hi = lo + b->chunk < b->n ? lo + b->chunk : b->n;
+  for (size_t i = lo; i < hi; i++) {
+    qk_status_t st = qk_world_knn(b->w, b->ps[i], b->k, b->out + i * b->k, &b->counts[i]);
+    if (st != QK_OK) b->st[j % 64] = st;
+  }
+}
+
+qk_status_t qk_world_knn_batch(const qk_world_t *w, const qk_point_t *ps, size_t n, size_t k,
+                               qk_world_hit_t *out, size_t *counts) {
+  if (!w || (n && (!ps || !counts || (k && !out)))) return QK_ERR_INVALID;
+  kbatch_t b = {w, ps, n, k, 256, out, counts, {QK_OK}};
+  size_t jobs = (n + b.chunk - 1) / b.chunk;
+  if (jobs > 64) {
+    b.chunk = (n + 63) / 64;
+    jobs = (n + b.chunk - 1) / b.chunk;
+  }
+  qk__parallel(w->opt.threads, (unsigned)jobs, kbatch_run, &b);
+  for (int j = 0; j < 64; j++)
+    if (b.st[j] != QK_OK) return b.st[j];
+  return QK_OK;
+}

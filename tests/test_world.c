@@ -630,6 +630,22 @@ static void test_world_threads(void **s) {
   assert_int_equal(qk_world_raycast_batch(w[0], a, b, NR, h0), QK_OK);
   assert_int_equal(qk_world_raycast_batch(w[1], a, b, NR, h1), QK_OK);
   assert_memory_equal(h0, h1, NR * sizeof *h0);
+  /* batch kNN: identical on one and two threads, and equal to the single calls */
+  enum { NK = 500, K = 4 };
+  qk_world_hit_t *k0 = malloc(NK * K * sizeof *k0), *k1 = malloc(NK * K * sizeof *k1);
+  size_t c0[NK], c1[NK];
+  assert_int_equal(qk_world_knn_batch(w[0], a, NK, K, k0, c0), QK_OK);
+  assert_int_equal(qk_world_knn_batch(w[1], a, NK, K, k1, c1), QK_OK);
+  assert_memory_equal(c0, c1, sizeof c0);
+  assert_memory_equal(k0, k1, NK * K * sizeof *k0);
+  for (int i = 0; i < NK; i += 50) {
+    qk_world_hit_t one[K];
+    size_t n1;
+    assert_int_equal(qk_world_knn(w[0], a[i], K, one, &n1), QK_OK);
+    assert_int_equal(n1, c0[i]);
+    assert_memory_equal(one, k0 + (size_t)i * K, n1 * sizeof *one);
+  }
+  free(k0), free(k1);
   for (int i = 0; i < NR; i += 97) {
     qk_world_hit_t one;
     assert_int_equal(qk_world_raycast(w[0], a[i], b[i], &one), QK_OK);

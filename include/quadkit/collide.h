@@ -308,6 +308,14 @@ qk_status_t qk_world_raycast_batch(const qk_world_t *w, const qk_point_t *from,
 qk_status_t qk_world_knn(const qk_world_t *w, qk_point_t p, size_t k, qk_world_hit_t *out,
                          size_t *n_out);
 
+/**
+ * qk_world_knn() for n points, on the world's threads.
+ * \param [out] out n * k hits, point i's in out[i k ..]. \param [out] counts n counts.
+ * \return QK_OK, QK_ERR_INVALID, or the first error of a point (its count is then 0).
+ */
+qk_status_t qk_world_knn_batch(const qk_world_t *w, const qk_point_t *ps, size_t n, size_t k,
+                               qk_world_hit_t *out, size_t *counts);
+
 #ifdef __cplusplus
 }
 #endif
