@@ -9,6 +9,8 @@
 //             sort exploits coherence), as in many game engines.
 //   box2d     b2DynamicTree (fattened AABBs, MoveProxy), then one Query per proxy.
 //   bullet    btDbvt: update(leaf, volume, margin) per box, then collideTT(root, root).
+//   bullet-bp btDbvtBroadphase: setAabb per proxy, calculateOverlappingPairs, then the
+//             pair cache (pairs of fattened boxes) filtered by the exact box test.
 //   embree    rtcCollide on a scene rebuilt every frame (base_embree.cpp).
 // Coordinates are multiples of 1/64 below 2^17, so floats (Box2D, Bullet, Embree) hold
 // them exactly and every implementation can agree with quadkit's exact doubles.
@@ -25,6 +27,8 @@
 #endif
 #ifdef QKB_HAVE_BULLET
 #include <BulletCollision/BroadphaseCollision/btDbvt.h>
+#include <BulletCollision/BroadphaseCollision/btDbvtBroadphase.h>
+#include <BulletCollision/BroadphaseCollision/btOverlappingPairCache.h>
 #endif
 
 namespace qkb {
@@ -269,6 +273,45 @@ public:
 };
 #endif
 
+#ifdef QKB_HAVE_BULLET
+class BulletBroadphase : public WorldImpl {
+  btDbvtBroadphase *bp = nullptr;
+  std::vector<btBroadphaseProxy *> proxy;
+
+public:
+  ~BulletBroadphase() override { delete bp; }
+  const char *name() const override { return "bullet-bp"; }
+  void init(const std::vector<Box> &boxes) override {
+    delete bp;
+    bp = new btDbvtBroadphase;
+    proxy.resize(boxes.size());
+    for (size_t i = 0; i < boxes.size(); i++) {
+      const Box &b = boxes[i];
+      proxy[i] = bp->createProxy(btVector3((btScalar)b.xmin, (btScalar)b.ymin, 0),
+                                 btVector3((btScalar)b.xmax, (btScalar)b.ymax, 0),
+                                 BOX_SHAPE_PROXYTYPE, (void *)(uintptr_t)i, 1, -1, nullptr);
+    }
+  }
+  void frame(const std::vector<Box> &boxes, PairSum &out) override {
+    for (size_t i = 0; i < boxes.size(); i++) {
+      const Box &b = boxes[i];
+      bp->setAabb(proxy[i], btVector3((btScalar)b.xmin, (btScalar)b.ymin, 0),
+                  btVector3((btScalar)b.xmax, (btScalar)b.ymax, 0), nullptr);
+    }
+    bp->calculateOverlappingPairs(nullptr);
+    btOverlappingPairCache *pc = bp->getOverlappingPairCache();
+    int np = pc->getNumOverlappingPairs();
+    const btBroadphasePair *pairs = pc->getOverlappingPairArrayPtr();
+    for (int k = 0; k < np; k++) {
+      uint32_t i = (uint32_t)(uintptr_t)pairs[k].m_pProxy0->m_clientObject;
+      uint32_t j = (uint32_t)(uintptr_t)pairs[k].m_pProxy1->m_clientObject;
+      if (meet(boxes[i], boxes[j])) add_pair(out, i, j);
+    }
+  }
+  size_t bytes() const override { return 0; }
+};
+#endif
+
 // ---- Embree ----------------------------------------------------------------------------------
 
 class EmbreeRebuild : public WorldImpl {
@@ -354,6 +397,7 @@ std::vector<std::unique_ptr<WorldImpl>> make_world_impls() {
 #endif
 #ifdef QKB_HAVE_BULLET
   v.emplace_back(new BulletDbvt);
+  v.emplace_back(new BulletBroadphase);
 #endif
   if (have("embree")) v.emplace_back(new EmbreeRebuild);
   return v;

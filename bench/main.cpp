@@ -833,8 +833,9 @@ std::string rate(double v) {
 }
 
 void print_table() {
-  const char *bases[] = {"flann", "nanoflann", "embree", "cgal",  "p4est", "gmsh",
-                         "geographiclib", "proto-morton", "grid", "sap", "box2d", "bullet"};
+  const char *bases[] = {"flann", "nanoflann",     "embree",       "cgal", "p4est",
+                         "gmsh",  "geographiclib", "proto-morton", "grid", "sap",
+                         "box2d", "bullet",        "bullet-bp"};
   std::vector<const char *> cols;
   for (const char *b : bases)
     for (auto &r : records)
@@ -969,15 +970,15 @@ int main(int argc, char **argv) {
       return 2;
     }
   }
-  static const char *ops[] = {"build",   "knn",     "radius", "range",  "collide",
+  static const char *ops[] = {"build",   "knn",     "radius", "range",   "collide",
                               "raycast", "balance", "mesh",   "geo-knn", "world"};
   if (!opt.op.empty() && std::find_if(std::begin(ops), std::end(ops),
                                       [](const char *o) { return opt.op == o; }) == std::end(ops)) {
     fprintf(stderr, "quadkit-bench: unknown operation '%s'\n", opt.op.c_str());
     return 2;
   }
-  static const char *sets[] = {"uniform", "gauss", "polyline", "degenerate", "cities",
-                               "clustered", "huge"}; // the last two: --op world scenes
+  static const char *sets[] = {"uniform", "gauss",     "polyline", "degenerate",
+                               "cities",  "clustered", "huge"}; // the last two: --op world scenes
   if (!opt.dataset.empty() && std::find_if(std::begin(sets), std::end(sets), [](const char *s) {
                                 return opt.dataset == s;
                               }) == std::end(sets)) {
