@@ -184,14 +184,14 @@ typedef struct qk_world_options {
   const qk_allocator_t *allocator; /**< NULL: libc. Must be thread-safe when threads > 1. */
   unsigned threads;                /**< threads for update and batch queries (1: none) */
   double margin;                   /**< fattening of each object's box, as a fraction of its
-                                        size, 0..16 (default 0.25); larger: fewer re-filings */
+                                        size, 0..16 (default 0.5); larger: fewer re-filings */
   double min_margin;               /**< absolute fattening added, 0..2^100 (default 0) */
 } qk_world_options_t;
 
 /** A moving-objects world; see docs/collide.md. */
 typedef struct qk_world qk_world_t;
 
-/** Defaults: libc allocator, one thread, margin 0.25, min_margin 0. */
+/** Defaults: libc allocator, one thread, margin 0.5, min_margin 0. */
 void qk_world_options_init(qk_world_options_t *o);
 
 /**
