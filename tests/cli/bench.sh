@@ -67,6 +67,14 @@ for i in quadkit cgal p4est; do expect_impl $i balance; done
 run --op mesh --n 128
 for i in quadkit cgal gmsh; do expect_impl $i mesh; done
 run --op geo-knn --n 5000
+# moving boxes: every baseline agrees frame by frame on each scene (Box2D and Bullet when
+# their headers are installed; they are in the bench list of scripts/install-deps.sh)
+for scene in uniform clustered huge; do
+  run --op world --dataset $scene --n 3000
+  for i in quadkit grid sap embree; do expect_impl $i world; done
+  [ -e /usr/include/box2d/b2_dynamic_tree.h ] && expect_impl box2d world
+  [ -e /usr/include/bullet/btBulletCollisionCommon.h ] && expect_impl bullet world && expect_impl bullet-bp world
+done
 "$bench" --op nope >/dev/null 2>&1
 [ $? -eq 2 ] || { echo "FAIL: unknown --op must exit 2"; fails=$((fails + 1)); }
 "$bench" --n -3 >/dev/null 2>&1
