@@ -47,7 +47,14 @@ int qk__within(double ax, double ay, double bx, double by, double r1, double r2)
 int qk__line_within(double px, double py, double qx, double qy, double cx, double cy, double r);
 
 /* Zero, or magnitude in [2^-100, 2^100]: the range in which the predicates are exact. */
-int qk__value_ok(double v);
+static inline int qk__value_ok(double v) {
+  double a = fabs(v);
+  return v == 0 || (a >= 0x1p-100 && a <= 0x1p100);
+}
+
+/* max and min of values known not to be NaN (cheaper than fmax / fmin calls). */
+static inline double qk__max(double a, double b) { return a > b ? a : b; }
+static inline double qk__min(double a, double b) { return a < b ? a : b; }
 /* Check a shape and normalise it (box corners min then max, unused values zeroed). */
 qk_status_t qk__shape_normalize(const qk_shape_t *in, qk_shape_t *out);
 /* Bounding box, rounded outwards (contains the shape exactly). */

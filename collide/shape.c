@@ -9,11 +9,6 @@
 
 #include "collide/collide_internal.h"
 
-int qk__value_ok(double v) {
-  double a = fabs(v);
-  return v == 0 || (a >= 0x1p-100 && a <= 0x1p100);
-}
-
 qk_status_t qk__shape_normalize(const qk_shape_t *in, qk_shape_t *out) {
   qk_shape_t s = *in;
   if (!isfinite(s.x) || !isfinite(s.y)) return QK_ERR_NONFINITE;
@@ -68,7 +63,8 @@ qk_box_t qk__shape_box(const qk_shape_t *s) {
   case QK_SHAPE_BOX:
     return (qk_box_t){s->x, s->y, s->a, s->b};
   case QK_SHAPE_SEGMENT:
-    return (qk_box_t){fmin(s->x, s->a), fmin(s->y, s->b), fmax(s->x, s->a), fmax(s->y, s->b)};
+    return (qk_box_t){qk__min(s->x, s->a), qk__min(s->y, s->b), qk__max(s->x, s->a),
+                      qk__max(s->y, s->b)};
   default:
     return (qk_box_t){s->x, s->y, s->x, s->y};
   }
@@ -82,7 +78,8 @@ static inline int in_box(double x, double y, double x0, double y0, double x1, do
 
 /* A point on a closed segment. */
 static int point_seg(double x, double y, const qk_shape_t *g) {
-  if (!in_box(x, y, fmin(g->x, g->a), fmin(g->y, g->b), fmax(g->x, g->a), fmax(g->y, g->b)))
+  if (!in_box(x, y, qk__min(g->x, g->a), qk__min(g->y, g->b), qk__max(g->x, g->a),
+              qk__max(g->y, g->b)))
     return 0;
   return qk__orient(g->x, g->y, g->a, g->b, x, y) == 0;
 }
@@ -128,7 +125,7 @@ static int seg_seg(const qk_shape_t *g, const qk_shape_t *h) {
 
 /* The box point nearest (x, y) is (x, y) clamped, exactly. */
 static int disc_box(double cx, double cy, double r, const qk_shape_t *b) {
-  double px = fmin(fmax(cx, b->x), b->a), py = fmin(fmax(cy, b->y), b->b);
+  double px = qk__min(qk__max(cx, b->x), b->a), py = qk__min(qk__max(cy, b->y), b->b);
   return qk__within(cx, cy, px, py, r, 0) >= 0;
 }
 

@@ -175,8 +175,9 @@ static int ceil_log2(double e) {
 
 /* The level and cell of a fat box (see the file comment). */
 static void cell_of(const qk_box_t *f, int *level, int64_t *cx, int64_t *cy) {
-  double e = fmax(f->xmax - f->xmin, f->ymax - f->ymin);
-  double mag = fmax(fmax(fabs(f->xmin), fabs(f->xmax)), fmax(fabs(f->ymin), fabs(f->ymax)));
+  double e = qk__max(f->xmax - f->xmin, f->ymax - f->ymin);
+  double mag =
+      qk__max(qk__max(fabs(f->xmin), fabs(f->xmax)), qk__max(fabs(f->ymin), fabs(f->ymax)));
   int l = ceil_log2(e);
   l += l & 1; /* levels a factor of 4 apart: fewer levels to visit, a few more objects per cell */
   if (mag > 0 && ilogb(mag) - 50 > l) l = ilogb(mag) - 50;
@@ -234,7 +235,7 @@ static void unfile_obj(qk_world_t *w, uint32_t i) {
 static void set_shape(const qk_world_t *w, qk__wobj_t *o, const qk_shape_t *s) {
   o->s = *s;
   o->box = qk__shape_box(s);
-  double e = fmax(o->box.xmax - o->box.xmin, o->box.ymax - o->box.ymin);
+  double e = qk__max(o->box.xmax - o->box.xmin, o->box.ymax - o->box.ymin);
   double m = w->opt.margin * e + w->opt.min_margin;
   if (!isfinite(m)) m = 0;
   o->fat = (qk_box_t){o->box.xmin - m, o->box.ymin - m, o->box.xmax + m, o->box.ymax + m};
@@ -309,8 +310,8 @@ qk_status_t qk_world_move(qk_world_t *w, qk_handle_t h, const qk_shape_t *shape)
   if (box_inside(&nb, &o->fat)) {
     /* Still inside its fat box: only the shape changes (unless it shrank so much that
      * a finer level would serve it better, which re-files it below). */
-    double e = fmax(nb.xmax - nb.xmin, nb.ymax - nb.ymin);
-    double fe = fmax(o->fat.xmax - o->fat.xmin, o->fat.ymax - o->fat.ymin);
+    double e = qk__max(nb.xmax - nb.xmin, nb.ymax - nb.ymin);
+    double fe = qk__max(o->fat.xmax - o->fat.xmin, o->fat.ymax - o->fat.ymin);
     if (!(e * 8 < fe)) {
       o->s = s;
       o->box = nb;
