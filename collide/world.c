@@ -20,11 +20,11 @@
  * filed at level 0 and one at 1e30 at a coarser one).
  *
  * Pairs (collide/world_pairs.c): each update first copies the boxes into a packed array,
- * cell by cell; every cell then meets the 5 cells of its own level at or after it (itself
- * and the neighbours whose loose squares reach it: indices differing by at most 1), and
- * each of its objects the cells of every coarser occupied level whose loose squares meet
- * the object's box (about four). Candidate pairs pass the exact box test, then the exact
- * shape test (collide/shape.c). Pairs are radix-sorted by (slot a, slot b), which makes
+ * cell by cell, each cell headed by the box around its objects; every cell then meets the 5 cells
+ * of its own level at or after it (itself and the neighbours whose loose squares reach it: indices
+ * differing by at most 1), and each of its objects the cells of every coarser occupied level whose
+ * loose squares meet the object's box (about four). Candidate pairs pass the exact box test, then
+ * the exact shape test (collide/shape.c). Pairs are radix-sorted by (slot a, slot b), which makes
  * the order deterministic, the began / ended sets a merge of two sorted lists, and the
  * answer independent of the number of threads (each thread takes a range of the table).
  *

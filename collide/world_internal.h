@@ -29,10 +29,12 @@ typedef struct qk__wcell {
   int32_t level;
   uint32_t head;
   uint32_t count;
-  uint32_t start; /* during an update: the cell's first entry in the packed array */
+  uint32_t start; /* during an update: the cell's header in the packed array (its
+                     objects follow) */
 } qk__wcell_t;
 
-/* An object as the pair search reads it: its box and slot, packed cell by cell. */
+/* An object as the pair search reads it: its box and slot, packed cell by cell; each
+ * cell's run starts with a header (slot QK_NONE) holding the box around its objects. */
 typedef struct qk__wpack {
   qk_box_t box;
   uint32_t slot;

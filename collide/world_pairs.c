@@ -52,9 +52,13 @@ static inline int try_pair(share_t *s, const qk__wpack_t *p, const qk__wpack_t *
 /* Every object of cell A against every object of cell B (A != B). */
 static int cross_cells(share_t *s, const qk__wcell_t *a, const qk__wcell_t *b) {
   const qk__wpack_t *pk = s->w->pack;
-  for (uint32_t i = a->start; i < a->start + a->count; i++)
-    for (uint32_t j = b->start; j < b->start + b->count; j++)
+  const qk_box_t *hb = &pk[b->start].box; /* the box around all of B's objects */
+  if (!boxes_meet(&pk[a->start].box, hb)) return 1;
+  for (uint32_t i = a->start + 1; i <= a->start + a->count; i++) {
+    if (!boxes_meet(&pk[i].box, hb)) continue;
+    for (uint32_t j = b->start + 1; j <= b->start + b->count; j++)
       if (!try_pair(s, &pk[i], &pk[j])) return 0;
+  }
   return 1;
 }
 
@@ -69,7 +73,8 @@ static int object_vs_level(share_t *s, const qk__wpack_t *p, int l) {
     for (int64_t y = y0; y <= y1; y++) {
       const qk__wcell_t *b = qk__world_cell(w, l, x, y);
       if (!b) continue;
-      for (uint32_t j = b->start; j < b->start + b->count; j++)
+      if (!boxes_meet(&p->box, &w->pack[b->start].box)) continue;
+      for (uint32_t j = b->start + 1; j <= b->start + b->count; j++)
         if (!try_pair(s, p, &w->pack[j])) return 0;
     }
   return 1;
@@ -79,8 +84,8 @@ static int cell_pairs(share_t *s, const qk__wcell_t *a) {
   const qk_world_t *w = s->w;
   const qk__wpack_t *pk = w->pack;
   /* Within the cell. */
-  for (uint32_t i = a->start; i < a->start + a->count; i++)
-    for (uint32_t j = i + 1; j < a->start + a->count; j++)
+  for (uint32_t i = a->start + 1; i <= a->start + a->count; i++)
+    for (uint32_t j = i + 1; j <= a->start + a->count; j++)
       if (!try_pair(s, &pk[i], &pk[j])) return 0;
   /* The same level: loose squares [c, c + 2) meet when the indices differ by <= 1; each
    * neighbour pair is taken once, from the cell that comes first in (x, y) order. */
@@ -96,7 +101,7 @@ static int cell_pairs(share_t *s, const qk__wcell_t *a) {
   for (int li = 0; li < s->n_levels; li++) {
     int lb = s->levels[li];
     if (lb <= a->level) continue;
-    for (uint32_t i = a->start; i < a->start + a->count; i++)
+    for (uint32_t i = a->start + 1; i <= a->start + a->count; i++)
       if (!object_vs_level(s, &pk[i], lb)) return 0;
   }
   return 1;
@@ -139,10 +144,13 @@ static int pv_reserve(const qk_allocator_t *a, qk__pvec_t *p, size_t n) {
   return 1;
 }
 
-/* Copy every object's box into the packed array, cell by cell, and note each cell's
- * first entry (the searches then read consecutive memory, not the objects' lists). */
+/* Copy every object's box into the packed array, cell by cell, each cell's objects after
+ * a header holding the box around them, and note where each cell starts. The searches
+ * then read consecutive memory, not the objects' lists, and skip a neighbour cell whole
+ * when its box misses (or, for one object, misses that object). */
 static qk_status_t pack_cells(qk_world_t *w) {
-  size_t need = w->n_live ? w->n_live : 1;
+  /* One header entry per cell (the box around its objects), then its objects. */
+  size_t need = w->n_live + w->n_cells + 1;
   if (w->cap_pack < need || w->cap_pack > 2 * need + 64) {
     size_t cap = need + need / 4;
     qk__wpack_t *p = qk__realloc(&w->alloc, NULL, 0, cap * sizeof *p);
@@ -155,9 +163,16 @@ static qk_status_t pack_cells(qk_world_t *w) {
   for (size_t c = 0; c < w->cap_cells; c++) {
     qk__wcell_t *cell = &w->cells[c];
     if (!cell->count) continue;
-    cell->start = k;
-    for (uint32_t i = cell->head; i != QK_NONE; i = w->obj[i].next)
-      w->pack[k++] = (qk__wpack_t){w->obj[i].box, i, w->obj[i].s.kind == QK_SHAPE_BOX};
+    uint32_t h = k++;
+    qk_box_t hb = {INFINITY, INFINITY, -INFINITY, -INFINITY};
+    for (uint32_t i = cell->head; i != QK_NONE; i = w->obj[i].next) {
+      const qk_box_t *b = &w->obj[i].box;
+      w->pack[k++] = (qk__wpack_t){*b, i, w->obj[i].s.kind == QK_SHAPE_BOX};
+      hb.xmin = qk__min(hb.xmin, b->xmin), hb.ymin = qk__min(hb.ymin, b->ymin);
+      hb.xmax = qk__max(hb.xmax, b->xmax), hb.ymax = qk__max(hb.ymax, b->ymax);
+    }
+    w->pack[h] = (qk__wpack_t){hb, QK_NONE, 0};
+    cell->start = h;
   }
   return QK_OK;
 }
