@@ -62,20 +62,18 @@ static int cross_cells(share_t *s, const qk__wcell_t *a, const qk__wcell_t *b) {
   return 1;
 }
 
-/* One object against the cells of level l whose loose squares [c 2^l, (c + 2) 2^l) meet
- * its box: c from floor(min / 2^l) - 1 to floor(max / 2^l). */
-static int object_vs_level(share_t *s, const qk__wpack_t *p, int l) {
+/* Cell A against the cells of level l whose loose squares [c 2^l, (c + 2) 2^l) meet the
+ * box around A's objects: c from floor(min / 2^l) - 1 to floor(max / 2^l). */
+static int cell_vs_level(share_t *s, const qk__wcell_t *a, int l) {
   const qk_world_t *w = s->w;
+  const qk_box_t *hb = &w->pack[a->start].box;
   const double inv = qk__pow2(-l);
-  int64_t x0 = (int64_t)floor(p->box.xmin * inv) - 1, x1 = (int64_t)floor(p->box.xmax * inv);
-  int64_t y0 = (int64_t)floor(p->box.ymin * inv) - 1, y1 = (int64_t)floor(p->box.ymax * inv);
+  int64_t x0 = (int64_t)floor(hb->xmin * inv) - 1, x1 = (int64_t)floor(hb->xmax * inv);
+  int64_t y0 = (int64_t)floor(hb->ymin * inv) - 1, y1 = (int64_t)floor(hb->ymax * inv);
   for (int64_t x = x0; x <= x1; x++)
     for (int64_t y = y0; y <= y1; y++) {
       const qk__wcell_t *b = qk__world_cell(w, l, x, y);
-      if (!b) continue;
-      if (!boxes_meet(&p->box, &w->pack[b->start].box)) continue;
-      for (uint32_t j = b->start + 1; j <= b->start + b->count; j++)
-        if (!try_pair(s, p, &w->pack[j])) return 0;
+      if (b && !cross_cells(s, a, b)) return 0;
     }
   return 1;
 }
@@ -95,14 +93,12 @@ static int cell_pairs(share_t *s, const qk__wcell_t *a) {
       const qk__wcell_t *b = qk__world_cell(w, a->level, a->cx + dx, a->cy + dy);
       if (b && !cross_cells(s, a, b)) return 0;
     }
-  /* Coarser levels: each object looks up the cells whose loose squares meet its own box
-   * (about four per level; fewer lookups than from the cell's whole loose square when,
-   * as usual, a cell holds one or two objects). */
+  /* Coarser levels: the cells whose loose squares meet the box around this cell's
+   * objects (about four per level: that box is much smaller than the cell's loose
+   * square, and one set of lookups serves all of the cell's objects). */
   for (int li = 0; li < s->n_levels; li++) {
     int lb = s->levels[li];
-    if (lb <= a->level) continue;
-    for (uint32_t i = a->start + 1; i <= a->start + a->count; i++)
-      if (!object_vs_level(s, &pk[i], lb)) return 0;
+    if (lb > a->level && !cell_vs_level(s, a, lb)) return 0;
   }
   return 1;
 }
