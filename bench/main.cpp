@@ -84,6 +84,12 @@ bool have(const char *w) {
 #ifdef QKB_HAVE_S2
   if (s == "s2") return true;
 #endif
+#ifdef QKB_HAVE_BOX2D
+  if (s == "box2d") return true;
+#endif
+#ifdef QKB_HAVE_BULLET
+  if (s == "bullet") return true;
+#endif
   return false;
 }
 
@@ -505,6 +511,76 @@ void run_collide(size_t n) {
   }
 }
 
+// ---- moving boxes (--op world) ----------------------------------------------------------
+
+// Every implementation replays the same frames; the per-frame pair counts and checksums
+// must all equal quadkit's before anything is timed. Timed: the frames only (moving the
+// boxes in each structure and finding all pairs), median over the repetitions of the
+// mean per frame; setup and the scene's own motion are outside the clock.
+void run_world(const std::string &kind, size_t n) {
+  progress("world %s n=%zu", kind.c_str(), n);
+  int frames = opt.quick ? 10 : 30;
+  WorldScene base = make_world_scene(kind, n, 77 + n);
+  auto impls = make_world_impls();
+  std::vector<std::vector<PairSum>> got(impls.size());
+  for (size_t i = 0; i < impls.size(); i++) {
+    WorldScene sc = base;
+    impls[i]->init(sc.boxes);
+    for (int f = 0; f < frames; f++) {
+      world_step(sc);
+      PairSum ps;
+      impls[i]->frame(sc.boxes, ps);
+      got[i].push_back(ps);
+    }
+  }
+  std::vector<bool> ok(impls.size(), true);
+  uint64_t total = 0;
+  for (const PairSum &p : got[0]) total += p.pairs;
+  for (size_t i = 1; i < impls.size(); i++) {
+    for (int f = 0; f < frames; f++)
+      if (got[i][f].pairs != got[0][f].pairs || got[i][f].hash != got[0][f].hash) ok[i] = false;
+    if (!ok[i]) {
+      Rec r;
+      r.op = "world", r.impl = impls[i]->name(), r.dataset = kind, r.n = n, r.order = "-";
+      r.matches = 0;
+      r.note = "pairs differ from quadkit's";
+      emit(r);
+    }
+  }
+  std::vector<std::vector<double>> t(impls.size());
+  size_t m = impls.size();
+  for (int rep = 0; rep < opt.reps; rep++)
+    for (size_t j = 0; j < m; j++) {
+      size_t i = (j + rep) % m;
+      if (!ok[i]) continue;
+      WorldScene sc = base;
+      impls[i]->init(sc.boxes);
+      double sum = 0;
+      for (int f = 0; f < frames; f++) {
+        world_step(sc);
+        PairSum ps;
+        double t0 = now_seconds();
+        impls[i]->frame(sc.boxes, ps);
+        sum += now_seconds() - t0;
+      }
+      t[i].push_back(sum / frames);
+    }
+  for (size_t i = 0; i < m; i++) {
+    if (!ok[i]) continue;
+    Rec r;
+    r.op = "world", r.impl = impls[i]->name(), r.dataset = kind, r.n = n, r.order = "-";
+    r.matches = 1;
+    r.seconds = median(t[i]);
+    r.per_second = n / r.seconds;
+    size_t b = impls[i]->bytes();
+    if (b) r.bytes_per_point = (double)b / n;
+    r.extra["pairs_per_frame"] = (double)total / frames;
+    r.extra["frames"] = frames;
+    r.note = "seconds per frame: move all + all pairs";
+    emit(r);
+  }
+}
+
 void run_raycast(size_t n) {
   progress("raycast n=%zu", n);
   size_t nr = opt.quick ? 100000 : 1000000;
@@ -847,7 +923,8 @@ void run_region() {
         qk_region_free(r);
       }};
       std::vector<std::string> who = {"quadkit"};
-      if (g) fns.push_back([&] { geos_regions_free(geos_regions_build(L)); }), who.push_back("geos");
+      if (g)
+        fns.push_back([&] { geos_regions_free(geos_regions_build(L)); }), who.push_back("geos");
       if (s2) fns.push_back([&] { s2_regions_free(s2_regions_build(L)); }), who.push_back("s2");
       auto med = interleaved(fns);
       qk_region_stats_t st;
@@ -869,7 +946,9 @@ void run_region() {
         z ^= z << 13, z ^= z >> 7, z ^= z << 17;
         return (double)(z >> 11) * (1.0 / 9007199254740992.0);
       };
-      for (auto &p : u) p.x = L.box[0] + (L.box[2] - L.box[0]) * unit(), p.y = L.box[1] + (L.box[3] - L.box[1]) * unit();
+      for (auto &p : u)
+        p.x = L.box[0] + (L.box[2] - L.box[0]) * unit(),
+        p.y = L.box[1] + (L.box[3] - L.box[1]) * unit();
       sets.push_back({"uniform", std::move(u)});
       std::vector<Pt> c = make_dataset("cities", opt.quick ? 100000 : 10000000, nullptr);
       if (!c.empty()) sets.push_back({"cities", std::move(c)});
@@ -903,9 +982,8 @@ void run_region() {
           qk_region_locate(ql, qp_pts[i], QK_BOUNDARY_SEMI_OPEN, &tmp[i]);
       });
       recs.back().matches = 1;
-      add("quadkit-planar", true, 1, [&] {
-        qk_region_locate_batch(qp, qp_pts, pts.size(), QK_BOUNDARY_OPEN, 1, tmp.data());
-      });
+      add("quadkit-planar", true, 1,
+          [&] { qk_region_locate_batch(qp, qp_pts, pts.size(), QK_BOUNDARY_OPEN, 1, tmp.data()); });
       recs.back().matches = 1;
       if (opt.threads > 1) {
         add("quadkit", true, opt.threads, [&] {
@@ -965,9 +1043,9 @@ std::string rate(double v) {
 }
 
 void print_table() {
-  const char *bases[] = {"flann", "nanoflann", "embree",        "cgal",
-                         "p4est", "gmsh",      "geographiclib", "proto-morton",
-                         "geos",  "s2"};
+  const char *bases[] = {"flann", "nanoflann",     "embree",       "cgal",   "p4est",
+                         "gmsh",  "geographiclib", "proto-morton", "geos",   "s2",
+                         "grid",  "sap",           "box2d",        "bullet", "bullet-bp"};
   std::vector<const char *> cols;
   for (const char *b : bases)
     for (auto &r : records)
@@ -1030,9 +1108,9 @@ void print_table() {
   }
   for (auto &r : records)
     if (r.op == "region" && r.extra.count("mismatches"))
-      printf("region: %s disagrees with quadkit on %.0f of %zu points (%s; %s)%s\n",
-             r.impl.c_str(), r.extra.at("mismatches"), r.queries, r.dataset.c_str(),
-             r.note.c_str(), r.matches == 0 ? " [*]" : "");
+      printf("region: %s disagrees with quadkit on %.0f of %zu points (%s; %s)%s\n", r.impl.c_str(),
+             r.extra.at("mismatches"), r.queries, r.dataset.c_str(), r.note.c_str(),
+             r.matches == 0 ? " [*]" : "");
   // Memory and quality columns that a ratio does not show.
   for (auto &r : records)
     if (r.impl == "quadkit" && r.op == "build" && r.n >= 1000000)
@@ -1052,8 +1130,8 @@ void usage(FILE *f) {
   fprintf(f,
           "usage: quadkit-bench [--quick] [--op OP] [--n N] [--dataset D] [--threads T] [--json]\n"
           "                     [--reps R] [--json-out FILE]\n"
-          "  OP: build knn radius range collide raycast balance mesh geo-knn region\n"
-          "  D:  uniform gauss polyline degenerate cities\n"
+          "  OP: build knn radius range collide raycast balance mesh geo-knn region world\n"
+          "  D:  uniform gauss polyline degenerate cities; for world: uniform clustered huge\n"
           "  --quick     sizes up to 1e5, fewer queries (well under a minute)\n"
           "  --json      one JSON object per result line on stdout instead of the table\n"
           "  --json-out  also write the JSON lines to FILE (the table still goes to stdout)\n"
@@ -1115,14 +1193,15 @@ int main(int argc, char **argv) {
       return 2;
     }
   }
-  static const char *ops[] = {"build",   "knn",     "radius", "range",  "collide",
-                              "raycast", "balance", "mesh",   "geo-knn", "region"};
+  static const char *ops[] = {"build",   "knn",  "radius",  "range",  "collide", "raycast",
+                              "balance", "mesh", "geo-knn", "region", "world"};
   if (!opt.op.empty() && std::find_if(std::begin(ops), std::end(ops),
                                       [](const char *o) { return opt.op == o; }) == std::end(ops)) {
     fprintf(stderr, "quadkit-bench: unknown operation '%s'\n", opt.op.c_str());
     return 2;
   }
-  static const char *sets[] = {"uniform", "gauss", "polyline", "degenerate", "cities"};
+  static const char *sets[] = {"uniform", "gauss",     "polyline", "degenerate",
+                               "cities",  "clustered", "huge"}; // the last two: --op world scenes
   if (!opt.dataset.empty() && std::find_if(std::begin(sets), std::end(sets), [](const char *s) {
                                 return opt.dataset == s;
                               }) == std::end(sets)) {
@@ -1141,7 +1220,7 @@ int main(int argc, char **argv) {
   double wall_start = wall_seconds();
   fprintf(stderr, "quadkit-bench: baselines built in:");
   for (const char *b : {"flann", "nanoflann", "embree", "cgal", "p4est", "gmsh", "geographiclib",
-                        "geos", "s2"})
+                        "geos", "s2", "box2d", "bullet"})
     if (have(b)) fprintf(stderr, " %s", b);
   fprintf(stderr, "\nquadkit-bench: coordinates are doubles everywhere; Embree's BVH holds float "
                   "boxes (rounded outwards, answers checked in double)\n");
@@ -1185,6 +1264,10 @@ int main(int argc, char **argv) {
     for (size_t n : sizes) run_collide(n);
   if (want_op("raycast"))
     for (size_t n : sizes) run_raycast(n);
+  if (want_op("world"))
+    for (const char *kind : {"uniform", "clustered", "huge"})
+      if (opt.dataset.empty() || opt.dataset == kind)
+        for (size_t n : sizes) run_world(kind, n);
   if (want_op("balance"))
     for (const auto &ds : opt.dataset.empty() ? std::vector<std::string>{"gauss"} : datasets) {
       if (ds == "cities") continue;

@@ -7,7 +7,7 @@ want=(cmake make gcc g++ pkg-config libcmocka-dev libproj-dev libgmp-dev)
 for set in "$@"; do
   case "$set" in
     core) want+=(libjson-c-dev) ;;
-    bench) want+=(libgeos-dev libs2-dev libgdal-dev libflann-dev libnanoflann-dev libembree-dev libcgal-dev libp4est-dev libgmsh-dev libgeographiclib-dev gnuplot-nox liblz4-dev libhdf5-dev) ;;
+    bench) want+=(libgeos-dev libs2-dev libgdal-dev libbox2d-dev libbullet-dev libflann-dev libnanoflann-dev libembree-dev libcgal-dev libp4est-dev libgmsh-dev libgeographiclib-dev gnuplot-nox liblz4-dev libhdf5-dev) ;;
     fuzz) want+=(clang libclang-rt-14-dev) ;;
     memcheck) want+=(valgrind) ;;
     *) echo "install-deps.sh: unknown set '$set'" >&2; exit 2 ;;

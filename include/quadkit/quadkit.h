@@ -5,6 +5,7 @@
 #ifndef QUADKIT_QUADKIT_H
 #define QUADKIT_QUADKIT_H
 
+#include "quadkit/collide.h"
 #include "quadkit/common.h"
 #include "quadkit/index.h"
 #include "quadkit/io.h"
