@@ -128,9 +128,9 @@ int qkf_geojson(const uint8_t *data, size_t size) {
   uint8_t mode = qkf_u8(&b);
   const char *text = (const char *)data + b.at;
   size_t len = size - b.at;
-  qkf_alloc_t fa;
-  qk_allocator_t al = qkf_alloc_make(&fa);
-  qkf_alloc_arm(&fa, (mode & 0x80) ? (size_t)(mode & 0x1f) + 1 : 0);
+  qkt_alloc_t fa;
+  qk_allocator_t al = qkt_alloc_make(&fa);
+  qkt_alloc_arm(&fa, (mode & 0x80) ? (size_t)(mode & 0x1f) + 1 : 0);
   qk_region_options_t o;
   qk_region_options_init(&o);
   o.planar = mode & 1;
