@@ -8,7 +8,6 @@
 
 #include "quadkit/common.h"
 #include "quadkit/index.h"
-#include "quadkit/query.h"
 
 #ifdef __cplusplus
 extern "C" {

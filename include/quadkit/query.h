@@ -31,16 +31,6 @@ typedef struct qk_neighbor {
   double dist; /**< Euclidean distance (metres for the geodesic queries) */
 } qk_neighbor_t;
 
-/**
- * Called once per point found.
- * \param [in] id the point's id.
- * \param [in] p its coordinates (for geodesic queries: lon, lat in degrees).
- * \param [in] dist distance from the query (0 for box queries; metres for geodesic).
- * \param [in] ud the caller's pointer.
- * \return zero to go on, nonzero to stop the query.
- */
-typedef int (*qk_found_fn)(qk_id_t id, qk_point_t p, double dist, void *ud);
-
 /* ---------------------------------------------------------------------------------- */
 /* Range and radius                                                                    */
 
