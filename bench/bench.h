@@ -105,12 +105,49 @@ GeoIndex *geo_build(const std::vector<Pt> &lonlat);
 void geo_knn(GeoIndex *g, const std::vector<Pt> &qs, int k, std::vector<double> &dist_out);
 void geo_free(GeoIndex *g);
 
+// Moving boxes (--op world): a scene, its motion, and the implementations compared.
+struct WorldScene {
+  std::vector<Box> boxes;
+  std::vector<Pt> vel;
+  double side = 0; // boxes bounce inside [0, side]^2
+};
+WorldScene make_world_scene(const std::string &kind, size_t n, uint64_t seed);
+void world_step(WorldScene &s); // one frame of motion
+class WorldImpl {
+public:
+  virtual ~WorldImpl() = default;
+  virtual const char *name() const = 0;
+  virtual void init(const std::vector<Box> &boxes) = 0;
+  // The boxes' new positions; every overlapping pair of the frame into out.
+  virtual void frame(const std::vector<Box> &boxes, PairSum &out) = 0;
+  virtual size_t bytes() const = 0; // 0 when the library does not say
+};
+std::vector<std::unique_ptr<WorldImpl>> make_world_impls();
+
 // Which baselines this binary was built with.
 bool have(const char *what);
 
 double now_seconds();
 double min_angle_of(const std::vector<double> &xy, const std::vector<uint32_t> &tri);
 
+
+// Polygon layers for `--op region` (base_region.cpp): rings as read from GeoJSON, the
+// first ring of each polygon a shell, the others its holes.
+struct RegionLayer {
+  std::vector<double> xy;
+  std::vector<size_t> ring_start, feature_start;
+  std::vector<bool> ring_is_shell;
+  double box[4];
+};
+bool region_load(const std::string &path, RegionLayer &L, std::string *why);
+struct GeosRegions;
+GeosRegions *geos_regions_build(const RegionLayer &L);
+void geos_regions_locate(GeosRegions *g, const std::vector<Pt> &pts, std::vector<uint32_t> &out);
+void geos_regions_free(GeosRegions *g);
+struct S2Regions;
+S2Regions *s2_regions_build(const RegionLayer &L);
+void s2_regions_locate(S2Regions *s, const std::vector<Pt> &pts, std::vector<uint32_t> &out);
+void s2_regions_free(S2Regions *s);
 } // namespace qkb
 
 #endif

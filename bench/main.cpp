@@ -9,6 +9,8 @@
 #include "data.h"
 #include "quadkit_side.h"
 
+#include "quadkit/region.h"
+
 #include <time.h>
 #include <unistd.h>
 
@@ -75,6 +77,18 @@ bool have(const char *w) {
 #endif
 #ifdef QKB_HAVE_GEOGRAPHICLIB
   if (s == "geographiclib") return true;
+#endif
+#ifdef QKB_HAVE_GEOS
+  if (s == "geos") return true;
+#endif
+#ifdef QKB_HAVE_S2
+  if (s == "s2") return true;
+#endif
+#ifdef QKB_HAVE_BOX2D
+  if (s == "box2d") return true;
+#endif
+#ifdef QKB_HAVE_BULLET
+  if (s == "bullet") return true;
 #endif
   return false;
 }
@@ -497,6 +511,76 @@ void run_collide(size_t n) {
   }
 }
 
+// ---- moving boxes (--op world) ----------------------------------------------------------
+
+// Every implementation replays the same frames; the per-frame pair counts and checksums
+// must all equal quadkit's before anything is timed. Timed: the frames only (moving the
+// boxes in each structure and finding all pairs), median over the repetitions of the
+// mean per frame; setup and the scene's own motion are outside the clock.
+void run_world(const std::string &kind, size_t n) {
+  progress("world %s n=%zu", kind.c_str(), n);
+  int frames = opt.quick ? 10 : 30;
+  WorldScene base = make_world_scene(kind, n, 77 + n);
+  auto impls = make_world_impls();
+  std::vector<std::vector<PairSum>> got(impls.size());
+  for (size_t i = 0; i < impls.size(); i++) {
+    WorldScene sc = base;
+    impls[i]->init(sc.boxes);
+    for (int f = 0; f < frames; f++) {
+      world_step(sc);
+      PairSum ps;
+      impls[i]->frame(sc.boxes, ps);
+      got[i].push_back(ps);
+    }
+  }
+  std::vector<bool> ok(impls.size(), true);
+  uint64_t total = 0;
+  for (const PairSum &p : got[0]) total += p.pairs;
+  for (size_t i = 1; i < impls.size(); i++) {
+    for (int f = 0; f < frames; f++)
+      if (got[i][f].pairs != got[0][f].pairs || got[i][f].hash != got[0][f].hash) ok[i] = false;
+    if (!ok[i]) {
+      Rec r;
+      r.op = "world", r.impl = impls[i]->name(), r.dataset = kind, r.n = n, r.order = "-";
+      r.matches = 0;
+      r.note = "pairs differ from quadkit's";
+      emit(r);
+    }
+  }
+  std::vector<std::vector<double>> t(impls.size());
+  size_t m = impls.size();
+  for (int rep = 0; rep < opt.reps; rep++)
+    for (size_t j = 0; j < m; j++) {
+      size_t i = (j + rep) % m;
+      if (!ok[i]) continue;
+      WorldScene sc = base;
+      impls[i]->init(sc.boxes);
+      double sum = 0;
+      for (int f = 0; f < frames; f++) {
+        world_step(sc);
+        PairSum ps;
+        double t0 = now_seconds();
+        impls[i]->frame(sc.boxes, ps);
+        sum += now_seconds() - t0;
+      }
+      t[i].push_back(sum / frames);
+    }
+  for (size_t i = 0; i < m; i++) {
+    if (!ok[i]) continue;
+    Rec r;
+    r.op = "world", r.impl = impls[i]->name(), r.dataset = kind, r.n = n, r.order = "-";
+    r.matches = 1;
+    r.seconds = median(t[i]);
+    r.per_second = n / r.seconds;
+    size_t b = impls[i]->bytes();
+    if (b) r.bytes_per_point = (double)b / n;
+    r.extra["pairs_per_frame"] = (double)total / frames;
+    r.extra["frames"] = frames;
+    r.note = "seconds per frame: move all + all pairs";
+    emit(r);
+  }
+}
+
 void run_raycast(size_t n) {
   progress("raycast n=%zu", n);
   size_t nr = opt.quick ? 100000 : 1000000;
@@ -794,6 +878,154 @@ void run_geo(size_t cap) {
   if (gg) geo_free(gg);
 }
 
+// ---- polygon point location ----------------------------------------------------------
+
+// quadkit's region layer against GEOS (planar, GEOSPreparedContains) and S2 (geodesic
+// edges) on countries-50m and us-states-10m: uniform points in each layer's box and the
+// cities. Answers are compared first: with GEOS in quadkit's planar mode and open
+// boundary rule (contains), with S2 in quadkit's default lon/lat mode; the differences
+// (boundaries, invalid rings, geodesic versus straight lon/lat edges) are counted and
+// reported, and every implementation is timed anyway.
+size_t count_diff(const std::vector<uint32_t> &a, const std::vector<uint32_t> &b) {
+  size_t d = 0;
+  for (size_t i = 0; i < a.size() && i < b.size(); i++) d += a[i] != b[i];
+  return d;
+}
+
+void run_region() {
+  for (const char *name : {"countries-50m", "us-states-10m"}) {
+    RegionLayer L;
+    std::string why;
+    if (!region_load(std::string(QKB_DATA_DIR) + "/" + name + ".geojson", L, &why)) {
+      fprintf(stderr, "quadkit-bench: region %s skipped: %s\n", name, why.c_str());
+      continue;
+    }
+    qk_region_arrays_t a = {L.xy.data(), L.ring_start.data(), L.ring_start.size() - 1,
+                            L.feature_start.data(), L.feature_start.size() - 1};
+    qk_region_options_t lo, po;
+    qk_region_options_init(&lo);
+    qk_region_options_init(&po);
+    po.planar = 1;
+    qk_region_t *ql = nullptr, *qp = nullptr;
+    qk_error_t err;
+    if (qk_region_from_arrays(&a, &lo, &ql, &err) || qk_region_from_arrays(&a, &po, &qp, &err)) {
+      fprintf(stderr, "quadkit-bench: region %s: %s\n", name, err.message);
+      qk_region_free(ql);
+      continue;
+    }
+    progress("region %s: building", name);
+    GeosRegions *g = have("geos") ? geos_regions_build(L) : nullptr;
+    S2Regions *s2 = have("s2") ? s2_regions_build(L) : nullptr;
+    {
+      std::vector<std::function<void()>> fns = {[&] {
+        qk_region_t *r;
+        qk_region_from_arrays(&a, &lo, &r, &err);
+        qk_region_free(r);
+      }};
+      std::vector<std::string> who = {"quadkit"};
+      if (g)
+        fns.push_back([&] { geos_regions_free(geos_regions_build(L)); }), who.push_back("geos");
+      if (s2) fns.push_back([&] { s2_regions_free(s2_regions_build(L)); }), who.push_back("s2");
+      auto med = interleaved(fns);
+      qk_region_stats_t st;
+      qk_region_stats(ql, &st);
+      for (size_t i = 0; i < fns.size(); i++) {
+        Rec r;
+        r.op = "region-build", r.impl = who[i], r.dataset = name, r.n = st.vertices;
+        r.seconds = med[i], r.per_second = st.vertices / med[i];
+        if (i == 0) r.extra["bytes"] = (double)st.bytes, r.extra["leaves"] = (double)st.leaves;
+        emit(r);
+      }
+    }
+    size_t n = opt.n ? opt.n : opt.quick ? 100000 : 1000000;
+    std::vector<std::pair<std::string, std::vector<Pt>>> sets;
+    {
+      std::vector<Pt> u(n);
+      uint64_t z = 0x9E3779B97F4A7C15ull;
+      auto unit = [&] {
+        z ^= z << 13, z ^= z >> 7, z ^= z << 17;
+        return (double)(z >> 11) * (1.0 / 9007199254740992.0);
+      };
+      for (auto &p : u)
+        p.x = L.box[0] + (L.box[2] - L.box[0]) * unit(),
+        p.y = L.box[1] + (L.box[3] - L.box[1]) * unit();
+      sets.push_back({"uniform", std::move(u)});
+      std::vector<Pt> c = make_dataset("cities", opt.quick ? 100000 : 10000000, nullptr);
+      if (!c.empty()) sets.push_back({"cities", std::move(c)});
+    }
+    for (auto &set : sets) {
+      const std::vector<Pt> &pts = set.second;
+      const qk_point_t *qp_pts = reinterpret_cast<const qk_point_t *>(pts.data());
+      std::string ds = std::string(name) + "/" + set.first;
+      progress("region %s: answers", ds.c_str());
+      std::vector<uint32_t> lon(pts.size()), pla(pts.size()), gg, ss;
+      qk_region_locate_batch(ql, qp_pts, pts.size(), QK_BOUNDARY_SEMI_OPEN, 1, lon.data());
+      qk_region_locate_batch(qp, qp_pts, pts.size(), QK_BOUNDARY_OPEN, 1, pla.data());
+      std::vector<std::function<void()>> fns;
+      std::vector<Rec> recs;
+      std::vector<bool> wall;
+      std::vector<uint32_t> tmp(pts.size());
+      auto add = [&](const char *impl, bool batch, int threads, std::function<void()> f) {
+        Rec r;
+        r.op = "region", r.impl = impl, r.dataset = ds, r.n = L.feature_start.size() - 1;
+        r.queries = pts.size(), r.batch = batch, r.threads = threads;
+        recs.push_back(r);
+        fns.push_back(f);
+        wall.push_back(threads > 1);
+      };
+      add("quadkit", true, 1, [&] {
+        qk_region_locate_batch(ql, qp_pts, pts.size(), QK_BOUNDARY_SEMI_OPEN, 1, tmp.data());
+      });
+      recs.back().matches = 1;
+      add("quadkit", false, 1, [&] {
+        for (size_t i = 0; i < pts.size(); i++)
+          qk_region_locate(ql, qp_pts[i], QK_BOUNDARY_SEMI_OPEN, &tmp[i]);
+      });
+      recs.back().matches = 1;
+      add("quadkit-planar", true, 1,
+          [&] { qk_region_locate_batch(qp, qp_pts, pts.size(), QK_BOUNDARY_OPEN, 1, tmp.data()); });
+      recs.back().matches = 1;
+      if (opt.threads > 1) {
+        add("quadkit", true, opt.threads, [&] {
+          qk_region_locate_batch(ql, qp_pts, pts.size(), QK_BOUNDARY_SEMI_OPEN,
+                                 (unsigned)opt.threads, tmp.data());
+        });
+        recs.back().matches = 1;
+      }
+      if (g) {
+        geos_regions_locate(g, pts, gg);
+        size_t d = count_diff(gg, pla);
+        add("geos", false, 1, [&] {
+          std::vector<uint32_t> o;
+          geos_regions_locate(g, pts, o);
+        });
+        recs.back().matches = d == 0, recs.back().extra["mismatches"] = (double)d;
+        recs.back().note = "compared with quadkit --planar, open boundary";
+      }
+      if (s2) {
+        s2_regions_locate(s2, pts, ss);
+        size_t d = count_diff(ss, lon);
+        add("s2", false, 1, [&] {
+          std::vector<uint32_t> o;
+          s2_regions_locate(s2, pts, o);
+        });
+        recs.back().matches = d == 0, recs.back().extra["mismatches"] = (double)d;
+        recs.back().note = "compared with quadkit lon/lat; S2 edges are geodesics";
+      }
+      progress("region %s: timing", ds.c_str());
+      auto med = interleaved(fns, wall);
+      for (size_t i = 0; i < fns.size(); i++) {
+        recs[i].seconds = med[i], recs[i].per_second = pts.size() / med[i];
+        emit(recs[i]);
+      }
+    }
+    geos_regions_free(g);
+    s2_regions_free(s2);
+    qk_region_free(ql);
+    qk_region_free(qp);
+  }
+}
+
 // ---- the ratio table ----------------------------------------------------------------
 
 std::string rate(double v) {
@@ -811,8 +1043,9 @@ std::string rate(double v) {
 }
 
 void print_table() {
-  const char *bases[] = {"flann", "nanoflann", "embree",        "cgal",
-                         "p4est", "gmsh",      "geographiclib", "proto-morton"};
+  const char *bases[] = {"flann", "nanoflann",     "embree",       "cgal",   "p4est",
+                         "gmsh",  "geographiclib", "proto-morton", "geos",   "s2",
+                         "grid",  "sap",           "box2d",        "bullet", "bullet-bp"};
   std::vector<const char *> cols;
   for (const char *b : bases)
     for (auto &r : records)
@@ -839,6 +1072,9 @@ void print_table() {
       snprintf(var, sizeof var, "k=%d%s%s%s", r.k, r.order == "morton" ? " mort" : "",
                r.batch ? " batch" : "",
                r.threads > 1 ? (" t" + std::to_string(r.threads)).c_str() : "");
+    if (r.op == "region")
+      snprintf(var, sizeof var, "%s%s", r.batch ? "batch" : "single",
+               r.threads > 1 ? (" t" + std::to_string(r.threads)).c_str() : "");
     printf("%-8s %-10s %8zu %-14s %10s", r.op.c_str(), r.dataset.c_str(), r.n, var,
            r.matches == 0 ? "MISMATCH" : rate(r.per_second).c_str());
     for (auto c : cols) {
@@ -853,7 +1089,12 @@ void print_table() {
       }
       std::string cell = "";
       if (b) {
-        if (b->matches == 0)
+        if (b->matches == 0 && r.op == "region" && std::isfinite(b->per_second)) {
+          // Region baselines differ on boundaries by semantics: timed anyway, marked.
+          char t[32];
+          snprintf(t, sizeof t, "%.2fx*", r.per_second / b->per_second);
+          cell = t;
+        } else if (b->matches == 0)
           cell = "mismatch";
         else if (std::isfinite(b->per_second) && std::isfinite(r.per_second)) {
           char t[32];
@@ -865,6 +1106,11 @@ void print_table() {
     }
     printf("\n");
   }
+  for (auto &r : records)
+    if (r.op == "region" && r.extra.count("mismatches"))
+      printf("region: %s disagrees with quadkit on %.0f of %zu points (%s; %s)%s\n", r.impl.c_str(),
+             r.extra.at("mismatches"), r.queries, r.dataset.c_str(), r.note.c_str(),
+             r.matches == 0 ? " [*]" : "");
   // Memory and quality columns that a ratio does not show.
   for (auto &r : records)
     if (r.impl == "quadkit" && r.op == "build" && r.n >= 1000000)
@@ -875,7 +1121,7 @@ void print_table() {
       printf("mesh %-15s U=%zu %-8s %8.0f triangles, min angle %.1f deg\n", r.dataset.c_str(), r.n,
              r.impl.c_str(), r.extra.at("triangles"), r.extra.at("min_angle_deg"));
   for (auto &r : records)
-    if (r.matches == 0)
+    if (r.matches == 0 && r.op != "region")
       printf("mismatch (not timed): %s %s %s n=%zu k=%d: %s\n", r.op.c_str(), r.impl.c_str(),
              r.dataset.c_str(), r.n, r.k, r.note.c_str());
 }
@@ -884,8 +1130,8 @@ void usage(FILE *f) {
   fprintf(f,
           "usage: quadkit-bench [--quick] [--op OP] [--n N] [--dataset D] [--threads T] [--json]\n"
           "                     [--reps R] [--json-out FILE]\n"
-          "  OP: build knn radius range collide raycast balance mesh geo-knn\n"
-          "  D:  uniform gauss polyline degenerate cities\n"
+          "  OP: build knn radius range collide raycast balance mesh geo-knn region world\n"
+          "  D:  uniform gauss polyline degenerate cities; for world: uniform clustered huge\n"
           "  --quick     sizes up to 1e5, fewer queries (well under a minute)\n"
           "  --json      one JSON object per result line on stdout instead of the table\n"
           "  --json-out  also write the JSON lines to FILE (the table still goes to stdout)\n"
@@ -947,14 +1193,15 @@ int main(int argc, char **argv) {
       return 2;
     }
   }
-  static const char *ops[] = {"build",   "knn",     "radius", "range",  "collide",
-                              "raycast", "balance", "mesh",   "geo-knn"};
+  static const char *ops[] = {"build",   "knn",  "radius",  "range",  "collide", "raycast",
+                              "balance", "mesh", "geo-knn", "region", "world"};
   if (!opt.op.empty() && std::find_if(std::begin(ops), std::end(ops),
                                       [](const char *o) { return opt.op == o; }) == std::end(ops)) {
     fprintf(stderr, "quadkit-bench: unknown operation '%s'\n", opt.op.c_str());
     return 2;
   }
-  static const char *sets[] = {"uniform", "gauss", "polyline", "degenerate", "cities"};
+  static const char *sets[] = {"uniform", "gauss",     "polyline", "degenerate",
+                               "cities",  "clustered", "huge"}; // the last two: --op world scenes
   if (!opt.dataset.empty() && std::find_if(std::begin(sets), std::end(sets), [](const char *s) {
                                 return opt.dataset == s;
                               }) == std::end(sets)) {
@@ -972,7 +1219,8 @@ int main(int argc, char **argv) {
   progress_on = isatty(STDERR_FILENO);
   double wall_start = wall_seconds();
   fprintf(stderr, "quadkit-bench: baselines built in:");
-  for (const char *b : {"flann", "nanoflann", "embree", "cgal", "p4est", "gmsh", "geographiclib"})
+  for (const char *b : {"flann", "nanoflann", "embree", "cgal", "p4est", "gmsh", "geographiclib",
+                        "geos", "s2", "box2d", "bullet"})
     if (have(b)) fprintf(stderr, " %s", b);
   fprintf(stderr, "\nquadkit-bench: coordinates are doubles everywhere; Embree's BVH holds float "
                   "boxes (rounded outwards, answers checked in double)\n");
@@ -1016,6 +1264,10 @@ int main(int argc, char **argv) {
     for (size_t n : sizes) run_collide(n);
   if (want_op("raycast"))
     for (size_t n : sizes) run_raycast(n);
+  if (want_op("world"))
+    for (const char *kind : {"uniform", "clustered", "huge"})
+      if (opt.dataset.empty() || opt.dataset == kind)
+        for (size_t n : sizes) run_world(kind, n);
   if (want_op("balance"))
     for (const auto &ds : opt.dataset.empty() ? std::vector<std::string>{"gauss"} : datasets) {
       if (ds == "cities") continue;
@@ -1029,6 +1281,7 @@ int main(int argc, char **argv) {
     for (unsigned U : Us) run_mesh_dyadic(U);
   }
   if (want_op("geo-knn")) run_geo(opt.n ? opt.n : opt.quick ? 20000 : 10000000);
+  if (want_op("region")) run_region();
   if (progress_on) fprintf(stderr, "\r\033[K");
   fprintf(stderr, "quadkit-bench: done in %.1f s (wall)\n", wall_seconds() - wall_start);
   if (!opt.json) print_table();

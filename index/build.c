@@ -181,7 +181,7 @@ qk_status_t qk__build_bucketed(qk_tree_t *t, const qk_point_t *p, size_t n, bool
   }
   memset(hist, 0, nw * nb * sizeof *hist);
   bucket_job_t j = {t, p, n, nb, x0, y0, scale, cells, delta, L, key, order, hist};
-  qk__parallel(nw, cells_share, &j);
+  qk__run_shares(nw, cells_share, &j);
   /* Bucket starts, and each share's first slot in every bucket: the shares before it
    * come first, so the order is the one thread's. */
   uint32_t acc = 0;
@@ -194,8 +194,8 @@ qk_status_t qk__build_bucketed(qk_tree_t *t, const qk_point_t *p, size_t n, bool
     }
   }
   cum[nb] = acc;
-  qk__parallel(nw, place_share, &j);
-  qk__parallel(nw, gather_share, &j);
+  qk__run_shares(nw, place_share, &j);
+  qk__run_shares(nw, gather_share, &j);
   qk__free(&t->alloc, hist, nw * nb * sizeof *hist);
   qk__free(&t->alloc, key, m * sizeof *key);
   qk__free(&t->alloc, order, m * sizeof *order);

@@ -206,7 +206,7 @@ typedef void (*qk__share_fn)(void *ctx, unsigned w, unsigned nw);
 
 /* Run fn for shares 0 .. nw-1, share 0 on the calling thread, and return when all are
  * done. Shares must write disjoint memory. */
-void qk__parallel(unsigned nw, qk__share_fn fn, void *ctx);
+void qk__run_shares(unsigned nw, qk__share_fn fn, void *ctx);
 
 /* The half-open range of [0, n) that share w of nw covers. */
 static inline void qk__share_range(size_t n, unsigned w, unsigned nw, size_t *lo, size_t *hi) {

@@ -39,7 +39,7 @@ static void *run_share(void *arg) {
 }
 #endif
 
-void qk__parallel(unsigned nw, qk__share_fn fn, void *ctx) {
+void qk__run_shares(unsigned nw, qk__share_fn fn, void *ctx) {
   if (nw <= 1) {
     fn(ctx, 0, 1);
     return;

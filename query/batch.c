@@ -67,7 +67,7 @@ qk_status_t qk_query_knn_batch(const qk_tree_t *tree, const qk_point_t *qs, size
   void *block = qk__morton_order(tree, qs, nq, &order);
   unsigned nw = qk__batch_threads(tree, nq);
   knn_job_t j = {tree, qs, order, nq, k, max_dist, out, counts, {{QK_OK, 0}}};
-  qk__parallel(nw, knn_share, &j);
+  qk__run_shares(nw, knn_share, &j);
   if (block) qk__morton_free(tree, block, nq);
   first_err_t e = {QK_OK, SIZE_MAX};
   for (unsigned w = 0; w < nw; w++) note_err(&e, j.err[w].st, j.err[w].i);
@@ -103,7 +103,7 @@ qk_status_t qk_query_locate_batch(const qk_tree_t *tree, const qk_point_t *ps, s
   uint32_t *order;
   void *block = qk__morton_order(tree, ps, n, &order);
   locate_job_t j = {tree, ps, order, n, leaves};
-  qk__parallel(qk__batch_threads(tree, n), locate_share, &j);
+  qk__run_shares(qk__batch_threads(tree, n), locate_share, &j);
   if (block) qk__morton_free(tree, block, n);
   return QK_OK;
 }
@@ -156,7 +156,7 @@ qk_status_t qk__radius_batch(const qk_tree_t *t, const qk_point_t *centres, size
     j->buf[w] = qk__realloc(qk__tree_allocator(t), NULL, 0, want * sizeof(qk_neighbor_t));
     j->buf_cap[w] = j->buf[w] ? want : 0;
   }
-  qk__parallel(nw, radius_share, j);
+  qk__run_shares(nw, radius_share, j);
   first_err_t e = {QK_OK, SIZE_MAX};
   size_t sum = 0;
   for (unsigned w = 0; w < nw; w++) {

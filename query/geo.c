@@ -403,7 +403,7 @@ qk_status_t qk_geo_knn_batch(const qk_geo_t *g, const qk_point_t *qs, size_t nq,
                  .max_metres = max_metres,
                  .out = out,
                  .counts = counts};
-  qk__parallel(nw, geo_share, &j);
+  qk__run_shares(nw, geo_share, &j);
   if (block) qk__morton_free(g->tree, block, nq);
   qk_status_t first = QK_OK;
   size_t first_i = SIZE_MAX;

@@ -20,7 +20,7 @@ seconds=${FUZZ_SECONDS:-60}
 cc=${FUZZ_CC:-clang}
 jobs_nice=${FUZZ_NICE:-15}
 
-all_targets=(tree_ops csv poly)
+all_targets=(tree_ops csv poly geojson)
 targets=("$@")
 [ ${#targets[@]} -eq 0 ] && targets=("${all_targets[@]}")
 
@@ -33,7 +33,10 @@ mkdir -p "$out"
 flags=(-g -O1 -std=c11 -D_XOPEN_SOURCE=700 -Wall -Wextra -Wpedantic
   "-fsanitize=fuzzer,address,undefined" -fno-sanitize-recover=all -fno-omit-frame-pointer
   -I"$src/include" -I"$src")
-lib=("$src"/index/*.c "$src"/query/*.c "$src"/mesh/*.c "$src"/io/*.c)
+lib=("$src"/index/*.c "$src"/query/*.c "$src"/mesh/*.c "$src"/region/*.c "$src"/io/*.c)
+# region/ reads GeoJSON through json-c (and the geojson target parses it again for its oracle).
+flags+=(-DQK_HAVE_JSONC=1 $(pkg-config --cflags json-c))
+libs=($(pkg-config --libs json-c) -lpthread)
 
 # Per-target sources and options (max_len bounds the work per input).
 sources() {
@@ -41,6 +44,7 @@ sources() {
     tree_ops) echo "$src/fuzz/fuzz_tree_ops.c" ;;
     csv) echo "$src/fuzz/fuzz_csv.c" ;;
     poly) echo "$src/fuzz/fuzz_poly.c" ;;
+    geojson) echo "$src/fuzz/fuzz_geojson.c" ;;
     *) echo "fuzz.sh: unknown target '$1' (have: ${all_targets[*]})" >&2; exit 2 ;;
   esac
 }
@@ -49,13 +53,14 @@ options() {
     tree_ops) echo "-max_len=2048" ;;
     csv) echo "-max_len=4096 -close_fd_mask=2 -dict=$src/fuzz/csv.dict" ;;
     poly) echo "-max_len=4096 -dict=$src/fuzz/poly.dict" ;;
+    geojson) echo "-max_len=4096 -dict=$src/fuzz/geojson.dict" ;;
   esac
 }
 
 for t in "${targets[@]}"; do
   s=$(sources "$t")
   echo "== build fuzz_$t" >&2
-  nice -n "$jobs_nice" "$cc" "${flags[@]}" "$s" "${lib[@]}" -lm -o "$out/fuzz_$t"
+  nice -n "$jobs_nice" "$cc" "${flags[@]}" "$s" "${lib[@]}" "${libs[@]}" -lm -o "$out/fuzz_$t"
 done
 [ "${FUZZ_BUILD_ONLY:-0}" = 1 ] && exit 0
 

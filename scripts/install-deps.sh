@@ -6,8 +6,8 @@ set -euo pipefail
 want=(cmake make gcc g++ pkg-config libcmocka-dev libproj-dev libgmp-dev)
 for set in "$@"; do
   case "$set" in
-    core) ;;
-    bench) want+=(libflann-dev libnanoflann-dev libembree-dev libcgal-dev libp4est-dev libgmsh-dev libgeographiclib-dev gnuplot-nox liblz4-dev libhdf5-dev) ;;
+    core) want+=(libjson-c-dev) ;;
+    bench) want+=(libgeos-dev libs2-dev libgdal-dev libbox2d-dev libbullet-dev libflann-dev libnanoflann-dev libembree-dev libcgal-dev libp4est-dev libgmsh-dev libgeographiclib-dev gnuplot-nox liblz4-dev libhdf5-dev) ;;
     fuzz) want+=(clang libclang-rt-14-dev) ;;
     memcheck) want+=(valgrind) ;;
     *) echo "install-deps.sh: unknown set '$set'" >&2; exit 2 ;;

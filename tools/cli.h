@@ -102,5 +102,9 @@ int cmd_collide(int argc, char **argv);
 int cmd_raycast(int argc, char **argv);
 int cmd_geo(int argc, char **argv);
 int cmd_mesh(int argc, char **argv);
+int cmd_join(int argc, char **argv);    /* tools/cmd_region.c */
+int cmd_regions(int argc, char **argv); /* tools/cmd_region.c */
+int cmd_world(int argc, char **argv);
+int cmd_simulate(int argc, char **argv);
 
 #endif /* QUADKIT_CLI_H */

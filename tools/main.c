@@ -20,7 +20,14 @@ static const command_t commands[] = {
      "collide DISCS.csv                             overlapping disc pairs"},
     {"raycast", cmd_raycast, "raycast DISCS.csv RAYS.csv                   first disc hit by rays"},
     {"geo", cmd_geo, "geo knn|radius POINTS.csv QUERIES.csv ...     geodesic queries (WGS84)"},
+    {"world", cmd_world,
+     "world OBJECTS.csv MOVES.csv [--pairs all|began|ended]  replay moving objects"},
+    {"simulate", cmd_simulate,
+     "simulate [--n N] [--frames F] [--seed S] [--svg FILE]  bouncing objects"},
     {"mesh", cmd_mesh, "mesh IN.poly -o PREFIX [options]              quadtree mesh generator"},
+    {"join", cmd_join, "join REGIONS POINTS.csv [--field NAME]...     feature holding each point"},
+    {"regions", cmd_regions,
+     "regions REGIONS [--stats] [--svg FILE]       polygon layer statistics"},
 };
 
 static void usage(FILE *f) {

@@ -91,6 +91,16 @@ typedef uint32_t qk_id_t;
 /** Node identifier inside one tree. */
 typedef uint32_t qk_node_t;
 
+/**
+ * Called once per item found (a point of a tree, an item of a collider).
+ * \param [in] id the point's id.
+ * \param [in] p its coordinates (for geodesic queries: lon, lat in degrees).
+ * \param [in] dist distance from the query (0 for box queries; metres for geodesic).
+ * \param [in] ud the caller's pointer.
+ * \return zero to go on, nonzero to stop the query.
+ */
+typedef int (*qk_found_fn)(qk_id_t id, qk_point_t p, double dist, void *ud);
+
 /** "No node" / "no point". */
 #define QK_NONE UINT32_MAX
 

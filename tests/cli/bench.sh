@@ -23,6 +23,17 @@ run --op balance --dataset uniform --n 20000
 for i in quadkit cgal p4est; do expect_impl $i balance; done
 run --op mesh --n 128
 for i in quadkit cgal gmsh; do expect_impl $i mesh; done
+# moving boxes: every baseline agrees frame by frame on each scene (Box2D and Bullet when
+# their headers are installed; they are in the bench list of scripts/install-deps.sh)
+for scene in uniform clustered huge; do
+  run --op world --dataset $scene --n 3000
+  for i in quadkit grid sap embree; do expect_impl $i world; done
+  if [ -e "$inc/box2d/b2_dynamic_tree.h" ]; then expect_impl box2d world; fi
+  if [ -e "$inc/bullet/btBulletCollisionCommon.h" ]; then
+    expect_impl bullet world
+    expect_impl bullet-bp world
+  fi
+done
 expect 2 '' -- "$bench" --op nope
 expect 2 '' -- "$bench" --n -3
 report

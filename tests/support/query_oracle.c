@@ -119,52 +119,212 @@ size_t qko_overlap(const qk_disc_t *d, size_t nd, const qk_box_t *b, size_t nb, 
   return m;
 }
 
-/* Ray against one item: smallest t in [0, tmax] or -1. The disc formula is the stable
- * one documented in collide.c; the box one is the slab method. */
-static double o_ray_disc(qk_disc_t d, qk_point_t o, qk_point_t v, double tmax) {
-  double fx = o.x - d.x, fy = o.y - d.y;
-  double c = fx * fx + fy * fy - d.r * d.r;
-  if (c <= 0) return 0;
-  double b = fx * v.x + fy * v.y;
-  if (b >= 0) return -1;
-  double a = v.x * v.x + v.y * v.y, cr = fx * v.y - fy * v.x;
-  double disc = a * d.r * d.r - cr * cr;
-  if (disc < 0) return -1;
-  double t = c / (-b + sqrt(disc));
-  return t <= tmax ? t : -1;
+/*
+ * Rays, derived independently of the library's formulas. A disc is first tried in long
+ * double with the textbook root t = (-b - sqrt(b^2 - a c)) / a of |f + t v|^2 = r^2
+ * (the library uses c / (-b + sqrt(...)) in double); the items whose long-double t is
+ * near the best are then decided exactly: with GMP, whether the ray meets the item at
+ * all (the nearest ray point to the centre, a rational, within r) and where it enters
+ * (a box: the exact rational slab entry; a disc: bisection over doubles on the exact
+ * predicate "o + t v lies in the closed disc"), so the oracle's t is the double just at
+ * or after the true entry. Without GMP the long-double answers stand.
+ */
+#ifdef QK_HAVE_GMP
+#include <gmp.h>
+
+/* |o + t v - c|^2 <= r^2, exactly. */
+static int x_in_disc(qk_disc_t d, qk_point_t o, qk_point_t v, double t) {
+  mpq_t q[6];
+  for (int i = 0; i < 6; i++) mpq_init(q[i]);
+  mpq_set_d(q[0], t);
+  /* px - cx */
+  mpq_set_d(q[1], v.x);
+  mpq_mul(q[1], q[1], q[0]);
+  mpq_set_d(q[2], o.x - 0.0);
+  mpq_add(q[1], q[1], q[2]);
+  mpq_set_d(q[2], d.x);
+  mpq_sub(q[1], q[1], q[2]);
+  /* py - cy */
+  mpq_set_d(q[3], v.y);
+  mpq_mul(q[3], q[3], q[0]);
+  mpq_set_d(q[2], o.y);
+  mpq_add(q[3], q[3], q[2]);
+  mpq_set_d(q[2], d.y);
+  mpq_sub(q[3], q[3], q[2]);
+  mpq_mul(q[1], q[1], q[1]);
+  mpq_mul(q[3], q[3], q[3]);
+  mpq_add(q[1], q[1], q[3]);
+  mpq_set_d(q[4], d.r);
+  mpq_mul(q[4], q[4], q[4]);
+  int in = mpq_cmp(q[1], q[4]) <= 0;
+  for (int i = 0; i < 6; i++) mpq_clear(q[i]);
+  return in;
 }
-static double o_ray_box(qk_box_t bx, qk_point_t o, qk_point_t v, double tmax) {
-  double lo = 0, hi = tmax;
+
+/* Exact first contact of a ray with a disc: -1 for none, else the smallest double t in
+ * [0, tmax] with o + t v in the disc. */
+static double x_ray_disc(qk_disc_t d, qk_point_t o, qk_point_t v, double tmax) {
+  if (x_in_disc(d, o, v, 0)) return 0;
+  /* the ray point nearest the centre: t* = (c - o).v / v.v, clamped */
+  mpq_t num, den, t;
+  mpq_inits(num, den, t, NULL);
+  mpq_set_d(num, d.x);
+  mpq_set_d(t, o.x);
+  mpq_sub(num, num, t);
+  mpq_set_d(t, v.x);
+  mpq_mul(num, num, t);
+  mpq_set_d(den, d.y);
+  mpq_set_d(t, o.y);
+  mpq_sub(den, den, t);
+  mpq_set_d(t, v.y);
+  mpq_mul(den, den, t);
+  mpq_add(num, num, den);
+  double vv = 0;
+  mpq_set_d(den, v.x);
+  mpq_mul(den, den, den);
+  mpq_set_d(t, v.y);
+  mpq_mul(t, t, t);
+  mpq_add(den, den, t);
+  vv = mpq_get_d(den);
+  double hi = 0;
+  if (vv > 0 && mpq_sgn(num) > 0) {
+    mpq_div(t, num, den);
+    hi = mpq_get_d(t); /* truncated: at or before t* */
+    if (hi > tmax) hi = tmax;
+  }
+  mpq_clears(num, den, t, NULL);
+  /* the nearest double at or after t* may be the only inside one */
+  if (!x_in_disc(d, o, v, hi)) {
+    double h2 = nextafter(hi, INFINITY);
+    if (h2 <= tmax && x_in_disc(d, o, v, h2))
+      hi = h2;
+    else
+      return -1;
+  }
+  double lo = 0; /* outside */
+  while (nextafter(lo, INFINITY) < hi) {
+    double mid = lo + (hi - lo) / 2;
+    if (mid <= lo || mid >= hi) mid = nextafter(lo, INFINITY);
+    if (x_in_disc(d, o, v, mid))
+      hi = mid;
+    else
+      lo = mid;
+  }
+  return hi;
+}
+
+/* Exact slab entry of a ray with a box, rounded up to a double; -1 for none. */
+static double x_ray_box(qk_box_t bx, qk_point_t o, qk_point_t v, double tmax) {
+  mpq_t lo, hi, t1, t2, w;
+  mpq_inits(lo, hi, t1, t2, w, NULL);
+  mpq_set_ui(lo, 0, 1);
+  int bounded = isfinite(tmax), ok = 1;
+  if (bounded) mpq_set_d(hi, tmax);
   double mins[2] = {bx.xmin, bx.ymin}, maxs[2] = {bx.xmax, bx.ymax}, os[2] = {o.x, o.y},
          vs[2] = {v.x, v.y};
+  for (int a = 0; a < 2 && ok; a++) {
+    if (vs[a] == 0) {
+      ok = !(os[a] < mins[a] || os[a] > maxs[a]);
+      continue;
+    }
+    mpq_set_d(w, vs[a]);
+    mpq_set_d(t1, mins[a]);
+    mpq_set_d(t2, os[a]);
+    mpq_sub(t1, t1, t2);
+    mpq_div(t1, t1, w);
+    mpq_set_d(t2, maxs[a]);
+    mpq_set_d(w, os[a]);
+    mpq_sub(t2, t2, w);
+    mpq_set_d(w, vs[a]);
+    mpq_div(t2, t2, w);
+    if (mpq_cmp(t1, t2) > 0) mpq_swap(t1, t2);
+    if (mpq_cmp(t1, lo) > 0) mpq_set(lo, t1);
+    if (!bounded || mpq_cmp(t2, hi) < 0) mpq_set(hi, t2), bounded = 1;
+  }
+  double r = -1;
+  if (ok && (!bounded || mpq_cmp(lo, hi) <= 0)) {
+    r = mpq_get_d(lo);
+    mpq_set_d(w, r);
+    if (mpq_cmp(w, lo) < 0) r = nextafter(r, INFINITY);
+  }
+  mpq_clears(lo, hi, t1, t2, w, NULL);
+  return r;
+}
+#endif
+
+/* Long-double first contact: -1 for a miss. */
+static long double l_ray_disc(qk_disc_t d, qk_point_t o, qk_point_t v, double tmax) {
+  long double fx = (long double)o.x - d.x, fy = (long double)o.y - d.y;
+  long double a = (long double)v.x * v.x + (long double)v.y * v.y;
+  long double b = fx * v.x + fy * v.y, c = fx * fx + fy * fy - (long double)d.r * d.r;
+  if (c <= 0) return 0;
+  long double disc = b * b - a * c;
+  if (disc < 0 || a == 0) return -1;
+  long double t = (-b - sqrtl(disc)) / a;
+  return t >= 0 && t <= tmax ? t : -1;
+}
+static long double l_ray_box(qk_box_t bx, qk_point_t o, qk_point_t v, double tmax) {
+  long double lo = 0, hi = tmax;
+  long double mins[2] = {bx.xmin, bx.ymin}, maxs[2] = {bx.xmax, bx.ymax}, os[2] = {o.x, o.y},
+              vs[2] = {v.x, v.y};
   for (int a = 0; a < 2; a++) {
     if (vs[a] == 0) {
       if (os[a] < mins[a] || os[a] > maxs[a]) return -1;
       continue;
     }
-    double t1 = (mins[a] - os[a]) / vs[a], t2 = (maxs[a] - os[a]) / vs[a];
-    if (t1 > t2) {
-      double s = t1;
-      t1 = t2;
-      t2 = s;
-    }
-    lo = fmax(lo, t1);
-    hi = fmin(hi, t2);
+    /* entering through the near plane, leaving through the far one */
+    long double tn = ((vs[a] > 0 ? mins[a] : maxs[a]) - os[a]) / vs[a];
+    long double tf = ((vs[a] > 0 ? maxs[a] : mins[a]) - os[a]) / vs[a];
+    lo = fmaxl(lo, tn);
+    hi = fminl(hi, tf);
   }
   return lo <= hi ? lo : -1;
 }
 
 qk_hit_t qko_raycast(const qk_disc_t *d, size_t nd, const qk_box_t *b, size_t nb, qk_point_t o,
                      qk_point_t dir, double tmax) {
+  size_t n = nd + nb;
+  long double *t = malloc((n ? n : 1) * sizeof *t), best = INFINITY;
+  for (size_t i = 0; i < n; i++) {
+    t[i] = i < nd ? l_ray_disc(d[i], o, dir, tmax) : l_ray_box(b[i - nd], o, dir, tmax);
+    if (t[i] >= 0 && t[i] < best) best = t[i];
+  }
   qk_hit_t h = {QK_NONE, INFINITY};
-  for (size_t i = 0; i < nd + nb; i++) {
-    double t = i < nd ? o_ray_disc(d[i], o, dir, tmax) : o_ray_box(b[i - nd], o, dir, tmax);
-    if (t >= 0 && t < h.t) {
-      h.t = t;
+  /* the candidates: near the best in long double, or near-misses (decided exactly) */
+  long double slack = 1e-6L * (1 + (isfinite(best) ? best : 0));
+  for (size_t i = 0; i < n; i++) {
+    double ti;
+#ifdef QK_HAVE_GMP
+    int near = t[i] >= 0 ? t[i] <= best + slack : 0;
+    if (!near && t[i] < 0 && i < nd) {
+      /* a miss in long double that is close to tangent gets the exact test too */
+      long double fx = (long double)o.x - d[i].x, fy = (long double)o.y - d[i].y;
+      long double cr = fx * dir.y - fy * dir.x,
+                  a = (long double)dir.x * dir.x + (long double)dir.y * dir.y;
+      near = fabsl(a * d[i].r * d[i].r - cr * cr) <= 1e-9L * (a * d[i].r * d[i].r + cr * cr);
+    }
+    if (!near) continue;
+    ti = i < nd ? x_ray_disc(d[i], o, dir, tmax) : x_ray_box(b[i - nd], o, dir, tmax);
+#else
+    if (!(t[i] >= 0)) continue;
+    ti = (double)t[i];
+#endif
+    if (ti >= 0 && ti <= tmax && (ti < h.t || (ti == h.t && (qk_id_t)i < h.id))) {
+      h.t = ti;
       h.id = (qk_id_t)i;
     }
   }
+  free(t);
   return h;
+}
+
+double qko_ray_item(const qk_disc_t *d, size_t nd, const qk_box_t *b, size_t i, qk_point_t o,
+                    qk_point_t dir, double tmax) {
+#ifdef QK_HAVE_GMP
+  return i < nd ? x_ray_disc(d[i], o, dir, tmax) : x_ray_box(b[i - nd], o, dir, tmax);
+#else
+  return (double)(i < nd ? l_ray_disc(d[i], o, dir, tmax) : l_ray_box(b[i - nd], o, dir, tmax));
+#endif
 }
 
 qk_point_t *qko_load_cities(size_t *n) {

@@ -1,5 +1,5 @@
-/* Brute-force oracles for the query module: every answer computed by a plain loop over
- * all points or items, with the same double-precision formulas the library documents. */
+/* Brute-force oracles for the query and collide modules: every answer computed by a plain
+ * loop over all points or items (rays: exact rational arithmetic with GMP when built). */
 #ifndef QK_QUERY_ORACLE_H
 #define QK_QUERY_ORACLE_H
 
@@ -22,9 +22,14 @@ size_t qko_pairs(const qk_disc_t *d, size_t nd, const qk_box_t *b, size_t nb, qk
 /* Items overlapping a query box or disc (is_disc selects), ascending. */
 size_t qko_overlap(const qk_disc_t *d, size_t nd, const qk_box_t *b, size_t nb, int is_disc,
                    qk_disc_t qd, qk_box_t qb, qk_id_t *out);
-/* First hit of a ray. */
+/* First hit of a ray, derived independently of the library (see query_oracle.c): with
+ * GMP its t is the double at or just after the exact entry. */
 qk_hit_t qko_raycast(const qk_disc_t *d, size_t nd, const qk_box_t *b, size_t nb, qk_point_t o,
                      qk_point_t dir, double tmax);
+
+/* The oracle's entry parameter of item i (-1 for a miss). */
+double qko_ray_item(const qk_disc_t *d, size_t nd, const qk_box_t *b, size_t i, qk_point_t o,
+                    qk_point_t dir, double tmax);
 
 /* Sort neighbours by (dist, id) / by id. */
 void qko_sort_by_dist(qk_neighbor_t *v, size_t n);

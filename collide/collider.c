@@ -10,7 +10,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "query/query_internal.h"
+#include "collide/collide_internal.h"
 
 /*
  * The collider's own copy of each node: the bounding box of the items beneath it, in
@@ -28,9 +28,9 @@ typedef struct cnode {
 } cnode_t;
 
 /*
- * Item data is kept in the tree's slot order (parallel to tree->px), not by id, so that
- * scanning a leaf reads consecutive memory instead of jumping to each item's id: for
- * large sets that is what the scans cost.
+ * Item data is kept in the tree's slot order (parallel to the tree's point arrays), not by id, so
+ * that scanning a leaf reads consecutive memory instead of jumping to each item's id: for large
+ * sets that is what the scans cost.
  */
 struct qk_collider {
   qk_allocator_t alloc;
@@ -72,7 +72,7 @@ typedef struct shape {
 
 static inline shape_t slot_shape(const qk_collider_t *c, uint32_t slot) {
   shape_t s;
-  s.is_disc = c->tree->pid[slot] < c->n_discs;
+  s.is_disc = qk__tree_ids(c->tree)[slot] < c->n_discs;
   if (s.is_disc)
     s.d = c->sdisc[slot];
   else
@@ -123,22 +123,23 @@ static float round_up(double v) {
  * depth is bounded by the tree's depth cap. */
 static qk_box_t fill_node_boxes(qk_collider_t *c, uint32_t node) {
   const qk_tree_t *t = c->tree;
-  const qk__node_t *n = &t->nodes[node];
   cnode_t *cn = &c->cn[node];
   qk_box_t b = {INFINITY, INFINITY, -INFINITY, -INFINITY};
-  cn->child = n->child;
-  cn->start = n->start;
-  cn->count = qk__is_leaf(n) ? n->count : 0;
+  const int leaf = qk__node_leaf(t, node);
+  const uint32_t start = qk__node_start(t, node), count = qk__node_count(t, node);
+  cn->child = qk__node_child(t, node);
+  cn->start = start;
+  cn->count = leaf ? count : 0;
   cn->pad_ = 0;
-  if (qk__is_leaf(n)) {
-    for (uint32_t i = 0; i < n->count; i++) box_union(&b, &c->sbox[n->start + i]);
+  if (leaf) {
+    for (uint32_t i = 0; i < count; i++) box_union(&b, &c->sbox[start + i]);
   } else {
     for (uint32_t k = 0; k < 4; k++) {
-      qk_box_t cb = fill_node_boxes(c, n->child + k);
+      qk_box_t cb = fill_node_boxes(c, cn->child + k);
       box_union(&b, &cb);
     }
   }
-  if (n->count == 0) {
+  if (count == 0) {
     cn->xmin = cn->ymin = cn->xmax = cn->ymax = INFINITY;
   } else {
     cn->xmin = round_down(b.xmin);
@@ -164,11 +165,9 @@ void qk_collider_free(qk_collider_t *c) {
   qk__free(&a, c, sizeof *c);
 }
 
-qk_status_t qk_collider_build(const qk_disc_t *discs, size_t n_discs, const qk_box_t *boxes,
-                              size_t n_boxes, const qk_tree_options_t *options,
-                              qk_collider_t **out) {
-  if (!out) return QK_ERR_INVALID;
-  *out = NULL;
+/* Phase 1: the inputs are finite, radii non-negative and boxes not inverted. */
+static qk_status_t check_items(const qk_disc_t *discs, size_t n_discs, const qk_box_t *boxes,
+                               size_t n_boxes) {
   if ((n_discs > 0 && !discs) || (n_boxes > 0 && !boxes)) return QK_ERR_INVALID;
   if (n_discs > QK_MAX_POINTS || n_boxes > QK_MAX_POINTS - n_discs) return QK_ERR_LIMIT;
   for (size_t i = 0; i < n_discs; i++) {
@@ -182,30 +181,17 @@ qk_status_t qk_collider_build(const qk_disc_t *discs, size_t n_discs, const qk_b
       return QK_ERR_NONFINITE;
     if (b->xmin > b->xmax || b->ymin > b->ymax) return QK_ERR_GEOMETRY;
   }
-  qk_tree_options_t opt;
-  if (options) {
-    opt = *options;
-  } else {
-    qk_tree_options_init(&opt);
-    opt.capacity = 8;
-  }
-  qk_allocator_t a = {NULL, NULL};
-  if (opt.allocator) a = *opt.allocator;
-  size_t n = n_discs + n_boxes;
+  return QK_OK;
+}
 
-  qk_collider_t *c = qk__realloc(&a, NULL, 0, sizeof *c);
-  if (!c) return QK_ERR_NOMEM;
-  memset(c, 0, sizeof *c);
-  c->alloc = a;
-  c->n_discs = n_discs;
-  c->n = n;
-  qk_status_t st = QK_OK;
+/* Phase 2: the tree of item centres (ids in input order, discs first), and the largest
+ * coordinate magnitude of any item box. */
+static qk_status_t build_centre_tree(qk_collider_t *c, const qk_disc_t *discs,
+                                     const qk_box_t *boxes, const qk_tree_options_t *opt) {
+  size_t n = c->n, n_discs = c->n_discs;
   qk_point_t *centres = NULL;
-  if (n) centres = qk__realloc(&a, NULL, 0, n * sizeof *centres);
-  if (n && !centres) {
-    st = QK_ERR_NOMEM;
-    goto fail;
-  }
+  if (n) centres = qk__realloc(&c->alloc, NULL, 0, n * sizeof *centres);
+  if (n && !centres) return QK_ERR_NOMEM;
   c->mag = 0;
   for (size_t i = 0; i < n; i++) {
     qk_box_t bb;
@@ -222,44 +208,76 @@ qk_status_t qk_collider_build(const qk_disc_t *discs, size_t n_discs, const qk_b
     double m = fmax(fmax(fabs(bb.xmin), fabs(bb.xmax)), fmax(fabs(bb.ymin), fabs(bb.ymax)));
     if (m > c->mag) c->mag = m;
   }
-  st = qk_tree_build(centres, n, &opt, &c->tree);
-  qk__free(&a, centres, n * sizeof *centres);
-  centres = NULL;
-  if (st != QK_OK) goto fail;
-  /* Copy each item into the slot the tree gave its centre. */
-  const qk_tree_t *t = c->tree;
+  qk_status_t st = qk_tree_build(centres, n, opt, &c->tree);
+  qk__free(&c->alloc, centres, n * sizeof *centres);
+  return st;
+}
+
+/* Phase 3: the per-slot item arrays and the node array, sized from the tree. */
+static qk_status_t alloc_arrays(qk_collider_t *c) {
+  const qk_allocator_t *a = &c->alloc;
   /* Sizes of at least one, so that every array exists even for an empty set. */
-  c->n_slots = t->n_slots ? t->n_slots : 1;
-  c->n_nodes = t->n_nodes ? t->n_nodes : 1;
-  c->sbox = qk__realloc(&a, NULL, 0, c->n_slots * sizeof *c->sbox);
-  if (n_discs) c->sdisc = qk__realloc(&a, NULL, 0, c->n_slots * sizeof *c->sdisc);
+  uint32_t slots = qk__tree_slot_bound(c->tree), nodes = qk__tree_node_bound(c->tree);
+  c->n_slots = slots ? slots : 1;
+  c->n_nodes = nodes ? nodes : 1;
+  c->sbox = qk__realloc(a, NULL, 0, c->n_slots * sizeof *c->sbox);
+  if (c->n_discs) c->sdisc = qk__realloc(a, NULL, 0, c->n_slots * sizeof *c->sdisc);
   /* Three spare entries in front put each block of four children (which start at ids
    * 1, 5, 9, ...) on a 128-byte boundary, with 64 bytes of slack for the alignment. */
   c->cn_bytes = (c->n_nodes + 3) * sizeof(cnode_t) + 64;
-  c->cn_block = qk__realloc(&a, NULL, 0, c->cn_bytes);
+  c->cn_block = qk__realloc(a, NULL, 0, c->cn_bytes);
   if (c->cn_block) c->cn = (cnode_t *)(((uintptr_t)c->cn_block + 63) & ~(uintptr_t)63) + 3;
-  if (!c->sbox || (n_discs && !c->sdisc) || !c->cn_block) {
-    st = QK_ERR_NOMEM;
-    goto fail;
-  }
+  if (!c->sbox || (c->n_discs && !c->sdisc) || !c->cn_block) return QK_ERR_NOMEM;
+  return QK_OK;
+}
+
+/* Phase 4: each item into the slot the tree gave its centre, then the node boxes. */
+static qk_status_t fill_slots(qk_collider_t *c, const qk_disc_t *discs, const qk_box_t *boxes) {
   const uint32_t *where;
-  if ((st = qk__id_map(t, &where)) != QK_OK) goto fail;
-  for (qk_id_t id = 0; id < n; id++) {
+  qk_status_t st = qk__id_map(c->tree, &where);
+  if (st != QK_OK) return st;
+  for (qk_id_t id = 0; id < c->n; id++) {
     uint32_t slot = where[id];
-    if (id < n_discs) {
+    if (id < c->n_discs) {
       c->sdisc[slot] = discs[id];
       c->sbox[slot] = disc_bbox(&discs[id]);
     } else {
-      c->sbox[slot] = boxes[id - n_discs];
+      c->sbox[slot] = boxes[id - c->n_discs];
     }
   }
   fill_node_boxes(c, 0);
+  return QK_OK;
+}
+
+qk_status_t qk_collider_build(const qk_disc_t *discs, size_t n_discs, const qk_box_t *boxes,
+                              size_t n_boxes, const qk_tree_options_t *options,
+                              qk_collider_t **out) {
+  if (!out) return QK_ERR_INVALID;
+  *out = NULL;
+  qk_status_t st = check_items(discs, n_discs, boxes, n_boxes);
+  if (st != QK_OK) return st;
+  qk_tree_options_t opt;
+  if (options) {
+    opt = *options;
+  } else {
+    qk_tree_options_init(&opt);
+    opt.capacity = 8;
+  }
+  qk_allocator_t a = {NULL, NULL};
+  if (opt.allocator) a = *opt.allocator;
+  qk_collider_t *c = qk__realloc(&a, NULL, 0, sizeof *c);
+  if (!c) return QK_ERR_NOMEM;
+  memset(c, 0, sizeof *c);
+  c->alloc = a;
+  c->n_discs = n_discs;
+  c->n = n_discs + n_boxes;
+  if ((st = build_centre_tree(c, discs, boxes, &opt)) != QK_OK || (st = alloc_arrays(c)) != QK_OK ||
+      (st = fill_slots(c, discs, boxes)) != QK_OK) {
+    qk_collider_free(c);
+    return st;
+  }
   *out = c;
   return QK_OK;
-fail:
-  qk__free(&a, centres, n * sizeof *centres);
-  qk_collider_free(c);
-  return st;
 }
 
 const qk_tree_t *qk_collider_tree(const qk_collider_t *c) { return c ? c->tree : NULL; }
@@ -272,8 +290,8 @@ typedef int (*item_fn)(qk_id_t id, void *ud);
 
 static int overlap_walk(const qk_collider_t *c, const shape_t *q, const qk_box_t *qb, item_fn fn,
                         void *ud) {
-  const qk_tree_t *t = c->tree;
-  uint32_t stack[QK__STACK_MAX];
+  const qk_id_t *pid = qk__tree_ids(c->tree);
+  uint32_t stack[QK__CSTACK_MAX];
   int sp = 0;
   stack[sp++] = 0;
   while (sp > 0) {
@@ -283,7 +301,7 @@ static int overlap_walk(const qk_collider_t *c, const shape_t *q, const qk_box_t
       for (uint32_t s = n->start; s < n->start + n->count; s++) {
         if (!box_box(&c->sbox[s], qb)) continue;
         shape_t sh = slot_shape(c, s);
-        if (shapes_overlap(q, &sh) && fn(t->pid[s], ud)) return 1;
+        if (shapes_overlap(q, &sh) && fn(pid[s], ud)) return 1;
       }
     } else {
       for (int k = 3; k >= 0; k--) stack[sp++] = n->child + (uint32_t)k;
@@ -335,14 +353,14 @@ qk_status_t qk_collider_query_disc(const qk_collider_t *c, qk_disc_t disc, qk_fo
  */
 static int leaf_pairs(const qk_collider_t *c, const cnode_t *la, const cnode_t *lb, qk_pair_fn fn,
                       void *ud) {
-  const qk_tree_t *t = c->tree;
+  const qk_id_t *pid = qk__tree_ids(c->tree);
   for (uint32_t si = la->start; si < la->start + la->count; si++) {
     const qk_box_t *bi = &c->sbox[si];
     if (!cbox_box(lb, bi)) continue;
-    qk_id_t ia = t->pid[si];
+    qk_id_t ia = pid[si];
     int a_disc = ia < c->n_discs;
     for (uint32_t sj = lb->start; sj < lb->start + lb->count; sj++) {
-      qk_id_t ib = t->pid[sj];
+      qk_id_t ib = pid[sj];
       if (ib <= ia || !box_box(bi, &c->sbox[sj])) continue;
       if (a_disc || ib < c->n_discs) {
         shape_t x = slot_shape(c, si), y = slot_shape(c, sj);
@@ -361,7 +379,7 @@ qk_status_t qk_collider_pairs(const qk_collider_t *c, qk_pair_fn fn, void *ud) {
    * its own, and the items of the two are paired directly. That shares one descent
    * among all the items of a leaf instead of making one per item.
    */
-  uint32_t outer[QK__STACK_MAX], inner[QK__STACK_MAX];
+  uint32_t outer[QK__CSTACK_MAX], inner[QK__CSTACK_MAX];
   int so = 0;
   outer[so++] = 0;
   while (so > 0) {
@@ -423,10 +441,24 @@ qk_status_t qk_collider_pairs_list(const qk_collider_t *c, qk_pair_t *out, size_
 /* ---------------------------------------------------------------------------------- */
 /* Ray casting                                                                          */
 
+/*
+ * The ray, with the reciprocals of its direction when they are finite: node boxes are
+ * tested with a multiplication per plane, items with a division (which keeps a zero
+ * numerator from turning into NaN for tiny direction components). The two may differ by
+ * a rounding, which the search's margin on t covers.
+ */
+typedef struct ray {
+  double ox, oy, dx, dy;
+  double ix, iy; /* 1/dx, 1/dy (0 for a zero component) */
+  int fast;      /* both reciprocals finite: node boxes may use them */
+} ray_t;
+
 /* One axis of the slab test: narrow [*lo, *hi] to where o + t d lies in [min, max]. */
-static inline int slab_axis(double min, double max, double o, double d, double *lo, double *hi) {
+static inline int slab_axis(double min, double max, double o, double d, double inv, int mul,
+                            double *lo, double *hi) {
   if (d == 0) return !(o < min || o > max);
-  double t1 = (min - o) / d, t2 = (max - o) / d;
+  double t1 = mul ? (min - o) * inv : (min - o) / d;
+  double t2 = mul ? (max - o) * inv : (max - o) / d;
   if (t1 > t2) {
     double s = t1;
     t1 = t2;
@@ -438,58 +470,16 @@ static inline int slab_axis(double min, double max, double o, double d, double *
 }
 
 /*
- * Slab test of the ray against a closed box: the parameter interval [lo, hi] within
- * [0, tmax] in which the ray is inside the box. Division (not a reciprocal) keeps a
- * zero numerator from turning into NaN for tiny direction components.
+ * The slab test of the ray against a closed box: the parameter interval [lo, hi] within
+ * [0, tmax] in which the ray is inside the box (empty when lo > hi). `mul` selects the
+ * reciprocals (node boxes) over division (items).
  */
-static inline int slab(double xmin, double ymin, double xmax, double ymax, double ox, double oy,
-                       double dx, double dy, double tmax, double *lo_out, double *hi_out) {
+static inline int slab(double xmin, double ymin, double xmax, double ymax, const ray_t *r, int mul,
+                       double tmax, double *lo_out, double *hi_out) {
   double lo = 0.0, hi = tmax;
-  if (!slab_axis(xmin, xmax, ox, dx, &lo, &hi) || !slab_axis(ymin, ymax, oy, dy, &lo, &hi))
+  if (!slab_axis(xmin, xmax, r->ox, r->dx, r->ix, mul, &lo, &hi) ||
+      !slab_axis(ymin, ymax, r->oy, r->dy, r->iy, mul, &lo, &hi))
     return 0;
-  *lo_out = lo;
-  *hi_out = hi;
-  return 1;
-}
-
-/*
- * The slab test for node boxes, with reciprocals of the direction computed once per ray
- * (a multiplication per plane instead of a division). Its result may differ from
- * slab()'s by a rounding, which the search's margin on t covers; items themselves are
- * tested with the exact slab().
- */
-typedef struct ray_inv {
-  double ix, iy; /* 1/dx, 1/dy, or 0 for a zero component */
-  int zx, zy;    /* nonzero where the component is zero */
-} ray_inv_t;
-
-static inline int slab_inv(const cnode_t *b, double ox, double oy, const ray_inv_t *r, double tmax,
-                           double *lo_out, double *hi_out) {
-  double lo = 0.0, hi = tmax;
-  if (!r->zx) {
-    double t1 = (b->xmin - ox) * r->ix, t2 = (b->xmax - ox) * r->ix;
-    if (t1 > t2) {
-      double sw = t1;
-      t1 = t2;
-      t2 = sw;
-    }
-    if (t1 > lo) lo = t1;
-    if (t2 < hi) hi = t2;
-  } else if (ox < b->xmin || ox > b->xmax) {
-    return 0;
-  }
-  if (!r->zy) {
-    double t1 = (b->ymin - oy) * r->iy, t2 = (b->ymax - oy) * r->iy;
-    if (t1 > t2) {
-      double sw = t1;
-      t1 = t2;
-      t2 = sw;
-    }
-    if (t1 > lo) lo = t1;
-    if (t2 < hi) hi = t2;
-  } else if (oy < b->ymin || oy > b->ymax) {
-    return 0;
-  }
   *lo_out = lo;
   *hi_out = hi;
   return 1;
@@ -514,11 +504,9 @@ static inline double ray_disc(const qk_disc_t *d, double ox, double oy, double d
   return t <= tmax ? t : -1.0;
 }
 
-static inline double ray_box(const qk_box_t *b, double ox, double oy, double dx, double dy,
-                             double tmax) {
+static inline double ray_box(const qk_box_t *b, const ray_t *r, double tmax) {
   double lo, hi;
-  if (!slab(b->xmin, b->ymin, b->xmax, b->ymax, ox, oy, dx, dy, tmax, &lo, &hi) || lo > hi)
-    return -1.0;
+  if (!slab(b->xmin, b->ymin, b->xmax, b->ymax, r, 0, tmax, &lo, &hi) || lo > hi) return -1.0;
   return lo;
 }
 
@@ -530,7 +518,7 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
   if (!isfinite(o.x) || !isfinite(o.y) || !isfinite(d.x) || !isfinite(d.y)) return QK_ERR_NONFINITE;
   if (isnan(tmax) || tmax < 0) return QK_ERR_INVALID;
   if (c->n == 0) return QK_OK;
-  const qk_tree_t *t = c->tree;
+  const qk_id_t *pid = qk__tree_ids(c->tree);
   /*
    * Node boxes bound the items in space, but the parameters computed for a box and for
    * a disc round differently; widen each node's interval by a margin far above those
@@ -540,33 +528,33 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
   double ts = dn > 0 ? (fabs(o.x) + fabs(o.y) + 2 * c->mag) * 0x1p-40 / dn : 0.0;
   double best = INFINITY;
   qk_id_t best_id = QK_NONE;
-  qk__entry_t stack[QK__STACK_MAX];
+  qk__centry_t stack[QK__CSTACK_MAX];
   int sp = 0;
   double lo, hi;
   const int all_discs = c->n_discs == c->n, no_discs = c->n_discs == 0;
   /* Reciprocals, unless a component is so small that its reciprocal overflows (then the
    * dividing slab test is used throughout). */
-  ray_inv_t ri = {d.x != 0 ? 1 / d.x : 0, d.y != 0 ? 1 / d.y : 0, d.x == 0, d.y == 0};
-  const int fast = isfinite(ri.ix) && isfinite(ri.iy);
+  ray_t ray = {o.x, o.y, d.x, d.y, d.x != 0 ? 1 / d.x : 0, d.y != 0 ? 1 / d.y : 0, 0};
+  ray.fast = isfinite(ray.ix) && isfinite(ray.iy);
   const cnode_t *root = &c->cn[0];
-  if (!slab(root->xmin, root->ymin, root->xmax, root->ymax, o.x, o.y, d.x, d.y, tmax, &lo, &hi) ||
+  if (!slab(root->xmin, root->ymin, root->xmax, root->ymax, &ray, 0, tmax, &lo, &hi) ||
       lo > hi + ts)
     return QK_OK;
   stack[sp].node = 0;
   stack[sp++].bound = lo - ts;
   while (sp > 0) {
-    qk__entry_t e = stack[--sp];
+    qk__centry_t e = stack[--sp];
     if (e.bound > best) continue;
     const cnode_t *n = &c->cn[e.node];
     if (n->child == QK_NONE) {
       /* Ids are read only for hits (and for the kind in mixed sets): the id array is
        * one more cache miss per leaf otherwise. */
       for (uint32_t slot = n->start; slot < n->start + n->count; slot++) {
-        int is_disc = all_discs || (!no_discs && t->pid[slot] < c->n_discs);
+        int is_disc = all_discs || (!no_discs && pid[slot] < c->n_discs);
         double th = is_disc ? ray_disc(&c->sdisc[slot], o.x, o.y, d.x, d.y, tmax)
-                            : ray_box(&c->sbox[slot], o.x, o.y, d.x, d.y, tmax);
+                            : ray_box(&c->sbox[slot], &ray, tmax);
         if (th < 0 || th > best) continue;
-        qk_id_t id = t->pid[slot];
+        qk_id_t id = pid[slot];
         if (th < best || id < best_id) {
           best = th;
           best_id = id;
@@ -574,22 +562,20 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
       }
       continue;
     }
-    qk__entry_t kids[4];
+    qk__centry_t kids[4];
     int m = 0;
     for (uint32_t k = 0; k < 4; k++) {
       uint32_t ch = n->child + k;
       /* Only the children's boxes are read here, not their nodes, which for most of
        * them would be a cache miss for nothing. */
       const cnode_t *cb = &c->cn[ch];
-      int in =
-          fast ? slab_inv(cb, o.x, o.y, &ri, tmax, &lo, &hi)
-               : slab(cb->xmin, cb->ymin, cb->xmax, cb->ymax, o.x, o.y, d.x, d.y, tmax, &lo, &hi);
+      int in = slab(cb->xmin, cb->ymin, cb->xmax, cb->ymax, &ray, ray.fast, tmax, &lo, &hi);
       if (!in || lo > hi + ts) continue;
       if (lo - ts > best) continue;
       kids[m].node = ch;
       kids[m++].bound = lo - ts;
     }
-    qk__sort4_desc(kids, m);
+    qk__csort4_desc(kids, m);
     for (int i = 0; i < m; i++) stack[sp++] = kids[i];
   }
   hit->id = best_id;

@@ -1,0 +1,406 @@
+// quadkit-bench --op world: moving boxes, all overlapping pairs every frame.
+//
+// Implementations (each fed the same boxes every frame, each answering with the pair
+// count and a checksum of (a, b), a < b, that the driver compares before timing):
+//   quadkit   qk_world: move every box, qk_world_update, walk the pairs.
+//   grid      a uniform grid as users write one: cell = the largest box, boxes filed by
+//             their lower-left corner with a counting sort every frame, 3x3 cells checked.
+//   sap       sort and sweep on x with the order kept from frame to frame (insertion
+//             sort exploits coherence), as in many game engines.
+//   box2d     b2DynamicTree (fattened AABBs, MoveProxy), then one Query per proxy.
+//   bullet    btDbvt: update(leaf, volume, margin) per box, then collideTT(root, root).
+//   bullet-bp btDbvtBroadphase: setAabb per proxy, calculateOverlappingPairs, then the
+//             pair cache (pairs of fattened boxes) filtered by the exact box test.
+//   embree    rtcCollide on a scene rebuilt every frame (base_embree.cpp).
+// Coordinates are multiples of 1/64 below 2^17, so floats (Box2D, Bullet, Embree) hold
+// them exactly and every implementation can agree with quadkit's exact doubles.
+#include "bench.h"
+
+#include "quadkit/quadkit.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+
+#ifdef QKB_HAVE_BOX2D
+#include <box2d/b2_dynamic_tree.h>
+#endif
+#ifdef QKB_HAVE_BULLET
+#include <BulletCollision/BroadphaseCollision/btDbvt.h>
+#include <BulletCollision/BroadphaseCollision/btDbvtBroadphase.h>
+#include <BulletCollision/BroadphaseCollision/btOverlappingPairCache.h>
+#endif
+
+namespace qkb {
+
+namespace {
+
+inline bool meet(const Box &p, const Box &q) {
+  return p.xmin <= q.xmax && q.xmin <= p.xmax && p.ymin <= q.ymax && q.ymin <= p.ymax;
+}
+
+inline void add_pair(PairSum &s, uint32_t a, uint32_t b) {
+  if (a > b) std::swap(a, b);
+  s.pairs++;
+  s.hash += (uint64_t)a * 1000003u + b;
+}
+
+double q64(double v) { return std::round(v * 64) / 64; }
+
+// ---- quadkit -------------------------------------------------------------------------
+
+class QuadkitWorld : public WorldImpl {
+  qk_world_t *w = nullptr;
+  std::vector<qk_handle_t> h;
+
+public:
+  ~QuadkitWorld() override { qk_world_free(w); }
+  const char *name() const override { return "quadkit"; }
+  void init(const std::vector<Box> &boxes) override {
+    qk_world_free(w);
+    qk_world_new(nullptr, &w);
+    h.resize(boxes.size());
+    for (size_t i = 0; i < boxes.size(); i++) {
+      qk_shape_t s = {QK_SHAPE_BOX, boxes[i].xmin, boxes[i].ymin, boxes[i].xmax, boxes[i].ymax};
+      qk_world_add(w, &s, i, &h[i]);
+    }
+  }
+  void frame(const std::vector<Box> &boxes, PairSum &out) override {
+    for (size_t i = 0; i < boxes.size(); i++) {
+      qk_shape_t s = {QK_SHAPE_BOX, boxes[i].xmin, boxes[i].ymin, boxes[i].xmax, boxes[i].ymax};
+      qk_world_move(w, h[i], &s);
+    }
+    qk_world_update(w);
+    qk_world_pairs(
+        w, QK_PAIRS_ALL,
+        [](qk_handle_t a, qk_handle_t b, void *ud) {
+          add_pair(*(PairSum *)ud, QK_HANDLE_SLOT(a), QK_HANDLE_SLOT(b));
+          return 0;
+        },
+        &out);
+  }
+  size_t bytes() const override { return qk_world_bytes(w); }
+};
+
+// ---- uniform grid ----------------------------------------------------------------------
+
+class Grid : public WorldImpl {
+  double cell = 1, x0 = 0, y0 = 0;
+  uint32_t nx = 1, ny = 1;
+  std::vector<uint32_t> start, items, cx, cy;
+
+public:
+  const char *name() const override { return "grid"; }
+  void init(const std::vector<Box> &boxes) override {
+    double big = 0, xmin = INFINITY, ymin = INFINITY, xmax = -INFINITY, ymax = -INFINITY;
+    for (const Box &b : boxes) {
+      big = std::max({big, b.xmax - b.xmin, b.ymax - b.ymin});
+      xmin = std::min(xmin, b.xmin), ymin = std::min(ymin, b.ymin);
+      xmax = std::max(xmax, b.xmax), ymax = std::max(ymax, b.ymax);
+    }
+    // The world's extent, with room for the motion; at most 4 cells per box.
+    double w = std::max(xmax - xmin, ymax - ymin) * 1.5 + 1;
+    x0 = xmin - w / 6, y0 = ymin - w / 6;
+    cell = std::max(big, w / std::sqrt(4.0 * (double)boxes.size() + 1));
+    nx = ny = (uint32_t)std::ceil(w / cell) + 1;
+    start.assign((size_t)nx * ny + 1, 0);
+    items.resize(boxes.size());
+    cx.resize(boxes.size());
+    cy.resize(boxes.size());
+  }
+  void frame(const std::vector<Box> &boxes, PairSum &out) override {
+    std::fill(start.begin(), start.end(), 0);
+    for (size_t i = 0; i < boxes.size(); i++) {
+      double fx = std::floor((boxes[i].xmin - x0) / cell),
+             fy = std::floor((boxes[i].ymin - y0) / cell);
+      cx[i] = (uint32_t)std::min(std::max(fx, 0.0), (double)nx - 1);
+      cy[i] = (uint32_t)std::min(std::max(fy, 0.0), (double)ny - 1);
+      start[(size_t)cy[i] * nx + cx[i] + 1]++;
+    }
+    for (size_t c = 1; c < start.size(); c++) start[c] += start[c - 1];
+    std::vector<uint32_t> fill(start.begin(), start.end() - 1);
+    for (size_t i = 0; i < boxes.size(); i++)
+      items[fill[(size_t)cy[i] * nx + cx[i]]++] = (uint32_t)i;
+    // Boxes are no larger than a cell, so overlapping ones are filed in adjacent cells
+    // (clamping at the border keeps that true: clamped boxes share the border cells).
+    for (size_t i = 0; i < boxes.size(); i++) {
+      uint32_t x1 = cx[i] + 1 < nx ? cx[i] + 1 : nx - 1, y1 = cy[i] + 1 < ny ? cy[i] + 1 : ny - 1;
+      for (uint32_t y = cy[i] ? cy[i] - 1 : 0; y <= y1; y++)
+        for (uint32_t x = cx[i] ? cx[i] - 1 : 0; x <= x1; x++) {
+          size_t c = (size_t)y * nx + x;
+          for (uint32_t k = start[c]; k < start[c + 1]; k++) {
+            uint32_t j = items[k];
+            if (j > i && meet(boxes[i], boxes[j])) add_pair(out, (uint32_t)i, j);
+          }
+        }
+    }
+  }
+  size_t bytes() const override {
+    return (start.size() + items.size() + cx.size() + cy.size()) * sizeof(uint32_t);
+  }
+};
+
+// ---- sort and sweep ----------------------------------------------------------------------
+
+class Sap : public WorldImpl {
+  std::vector<uint32_t> order;
+
+public:
+  const char *name() const override { return "sap"; }
+  void init(const std::vector<Box> &boxes) override {
+    order.resize(boxes.size());
+    for (size_t i = 0; i < boxes.size(); i++) order[i] = (uint32_t)i;
+    std::sort(order.begin(), order.end(),
+              [&](uint32_t a, uint32_t b) { return boxes[a].xmin < boxes[b].xmin; });
+  }
+  void frame(const std::vector<Box> &boxes, PairSum &out) override {
+    // Insertion sort: nearly sorted already after a frame of small moves.
+    for (size_t i = 1; i < order.size(); i++) {
+      uint32_t v = order[i];
+      double key = boxes[v].xmin;
+      size_t j = i;
+      while (j > 0 && boxes[order[j - 1]].xmin > key) {
+        order[j] = order[j - 1];
+        j--;
+      }
+      order[j] = v;
+    }
+    for (size_t i = 0; i < order.size(); i++) {
+      const Box &a = boxes[order[i]];
+      for (size_t j = i + 1; j < order.size() && boxes[order[j]].xmin <= a.xmax; j++) {
+        const Box &b = boxes[order[j]];
+        if (a.ymin <= b.ymax && b.ymin <= a.ymax) add_pair(out, order[i], order[j]);
+      }
+    }
+  }
+  size_t bytes() const override { return order.size() * sizeof(uint32_t); }
+};
+
+// ---- Box2D ---------------------------------------------------------------------------------
+
+#ifdef QKB_HAVE_BOX2D
+class Box2dTree : public WorldImpl {
+  b2DynamicTree *tree = nullptr;
+  std::vector<int32> proxy;
+  std::vector<Box> last;
+
+  struct Query {
+    const b2DynamicTree *tree;
+    const std::vector<Box> *boxes;
+    uint32_t self;
+    PairSum *out;
+    bool QueryCallback(int32 id) {
+      uint32_t j = (uint32_t)(uintptr_t)tree->GetUserData(id);
+      if (j > self && meet((*boxes)[self], (*boxes)[j])) add_pair(*out, self, j);
+      return true;
+    }
+  };
+  static b2AABB aabb(const Box &b) {
+    b2AABB a;
+    a.lowerBound.Set((float)b.xmin, (float)b.ymin);
+    a.upperBound.Set((float)b.xmax, (float)b.ymax);
+    return a;
+  }
+
+public:
+  ~Box2dTree() override { delete tree; }
+  const char *name() const override { return "box2d"; }
+  void init(const std::vector<Box> &boxes) override {
+    delete tree;
+    tree = new b2DynamicTree;
+    proxy.resize(boxes.size());
+    for (size_t i = 0; i < boxes.size(); i++)
+      proxy[i] = tree->CreateProxy(aabb(boxes[i]), (void *)(uintptr_t)i);
+    last = boxes;
+  }
+  void frame(const std::vector<Box> &boxes, PairSum &out) override {
+    for (size_t i = 0; i < boxes.size(); i++) {
+      b2Vec2 d((float)(boxes[i].xmin - last[i].xmin), (float)(boxes[i].ymin - last[i].ymin));
+      tree->MoveProxy(proxy[i], aabb(boxes[i]), d);
+    }
+    last = boxes;
+    Query q{tree, &boxes, 0, &out};
+    for (size_t i = 0; i < boxes.size(); i++) {
+      q.self = (uint32_t)i;
+      tree->Query(&q, aabb(boxes[i]));
+    }
+  }
+  size_t bytes() const override { return 0; }
+};
+#endif
+
+// ---- Bullet --------------------------------------------------------------------------------
+
+#ifdef QKB_HAVE_BULLET
+class BulletDbvt : public WorldImpl {
+  btDbvt *tree = nullptr;
+  std::vector<btDbvtNode *> leaf;
+
+  struct Pairs : btDbvt::ICollide {
+    const std::vector<Box> *boxes;
+    PairSum *out;
+    void Process(const btDbvtNode *a, const btDbvtNode *b) override {
+      uint32_t i = (uint32_t)(uintptr_t)a->data, j = (uint32_t)(uintptr_t)b->data;
+      if (i != j && meet((*boxes)[i], (*boxes)[j])) add_pair(*out, i, j);
+    }
+  };
+  static btDbvtVolume vol(const Box &b) {
+    return btDbvtVolume::FromMM(btVector3((btScalar)b.xmin, (btScalar)b.ymin, 0),
+                                btVector3((btScalar)b.xmax, (btScalar)b.ymax, 0));
+  }
+
+public:
+  ~BulletDbvt() override { delete tree; }
+  const char *name() const override { return "bullet"; }
+  void init(const std::vector<Box> &boxes) override {
+    delete tree;
+    tree = new btDbvt;
+    leaf.resize(boxes.size());
+    for (size_t i = 0; i < boxes.size(); i++)
+      leaf[i] = tree->insert(vol(boxes[i]), (void *)(uintptr_t)i);
+  }
+  void frame(const std::vector<Box> &boxes, PairSum &out) override {
+    for (size_t i = 0; i < boxes.size(); i++) {
+      btDbvtVolume v = vol(boxes[i]);
+      tree->update(leaf[i], v, (btScalar)0.1); // re-inserted only when it leaves the margin
+    }
+    Pairs p;
+    p.boxes = &boxes;
+    p.out = &out;
+    tree->collideTT(tree->m_root, tree->m_root, p);
+  }
+  size_t bytes() const override { return 0; }
+};
+#endif
+
+#ifdef QKB_HAVE_BULLET
+class BulletBroadphase : public WorldImpl {
+  btDbvtBroadphase *bp = nullptr;
+  std::vector<btBroadphaseProxy *> proxy;
+
+public:
+  ~BulletBroadphase() override { delete bp; }
+  const char *name() const override { return "bullet-bp"; }
+  void init(const std::vector<Box> &boxes) override {
+    delete bp;
+    bp = new btDbvtBroadphase;
+    proxy.resize(boxes.size());
+    for (size_t i = 0; i < boxes.size(); i++) {
+      const Box &b = boxes[i];
+      proxy[i] = bp->createProxy(btVector3((btScalar)b.xmin, (btScalar)b.ymin, 0),
+                                 btVector3((btScalar)b.xmax, (btScalar)b.ymax, 0),
+                                 BOX_SHAPE_PROXYTYPE, (void *)(uintptr_t)i, 1, -1, nullptr);
+    }
+  }
+  void frame(const std::vector<Box> &boxes, PairSum &out) override {
+    for (size_t i = 0; i < boxes.size(); i++) {
+      const Box &b = boxes[i];
+      bp->setAabb(proxy[i], btVector3((btScalar)b.xmin, (btScalar)b.ymin, 0),
+                  btVector3((btScalar)b.xmax, (btScalar)b.ymax, 0), nullptr);
+    }
+    bp->calculateOverlappingPairs(nullptr);
+    btOverlappingPairCache *pc = bp->getOverlappingPairCache();
+    int np = pc->getNumOverlappingPairs();
+    const btBroadphasePair *pairs = pc->getOverlappingPairArrayPtr();
+    for (int k = 0; k < np; k++) {
+      uint32_t i = (uint32_t)(uintptr_t)pairs[k].m_pProxy0->m_clientObject;
+      uint32_t j = (uint32_t)(uintptr_t)pairs[k].m_pProxy1->m_clientObject;
+      if (meet(boxes[i], boxes[j])) add_pair(out, i, j);
+    }
+  }
+  size_t bytes() const override { return 0; }
+};
+#endif
+
+// ---- Embree ----------------------------------------------------------------------------------
+
+class EmbreeRebuild : public WorldImpl {
+public:
+  const char *name() const override { return "embree"; }
+  void init(const std::vector<Box> &) override {}
+  void frame(const std::vector<Box> &boxes, PairSum &out) override { embree_collide(boxes, out); }
+  size_t bytes() const override { return 0; }
+};
+
+} // namespace
+
+// ---- scenes ------------------------------------------------------------------------------------
+
+WorldScene make_world_scene(const std::string &kind, size_t n, uint64_t seed) {
+  WorldScene s;
+  uint64_t st = seed * 0x9E3779B97F4A7C15ull + 1;
+  auto rnd = [&]() {
+    uint64_t z = (st += 0x9E3779B97F4A7C15ull);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+    return (double)((z ^ (z >> 31)) >> 11) * 0x1p-53;
+  };
+  s.boxes.resize(n);
+  s.vel.resize(n);
+  if (kind == "huge") {
+    s.side = 131072 - 64; // sparse: groups of unit boxes over 2^17 x 2^17
+  } else {
+    // ~3 overlaps per box for sides 0.5-2: density 3 / 6.25.
+    s.side = std::min(131000.0, std::sqrt((double)n / 0.48));
+  }
+  size_t nclusters = 8;
+  std::vector<double> cxs(nclusters), cys(nclusters);
+  for (size_t c = 0; c < nclusters; c++) cxs[c] = rnd() * s.side, cys[c] = rnd() * s.side;
+  double gx = 0, gy = 0;
+  for (size_t i = 0; i < n; i++) {
+    double w, h, x, y;
+    if (kind == "clustered") {
+      // sizes over three decades (0.03 .. 30), a few large among many small
+      w = q64(std::max(1.0 / 64, 0.03 * std::pow(1000.0, rnd() * rnd())));
+      h = q64(std::max(1.0 / 64, w * (0.5 + rnd())));
+      size_t c = (size_t)(rnd() * nclusters) % nclusters;
+      double spread = s.side * 0.03;
+      x = cxs[c] + (rnd() + rnd() + rnd() - 1.5) * spread;
+      y = cys[c] + (rnd() + rnd() + rnd() - 1.5) * spread;
+    } else if (kind == "huge") {
+      // small groups of four unit-size boxes scattered over the whole world
+      w = q64(0.5 + 1.5 * rnd());
+      h = q64(0.5 + 1.5 * rnd());
+      if (i % 4 == 0) gx = rnd() * s.side, gy = rnd() * s.side;
+      x = gx + 3 * rnd(), y = gy + 3 * rnd();
+    } else {
+      w = q64(0.5 + 1.5 * rnd());
+      h = q64(0.5 + 1.5 * rnd());
+      x = rnd() * s.side, y = rnd() * s.side;
+    }
+    x = q64(std::min(std::max(x, 0.0), s.side - w));
+    y = q64(std::min(std::max(y, 0.0), s.side - h));
+    s.boxes[i] = Box{x, y, x + w, y + h};
+    double a = rnd() * 6.283185307179586, sp = kind == "clustered" ? 0.25 : 0.5;
+    s.vel[i] = Pt{q64(sp * std::cos(a)), q64(sp * std::sin(a))};
+  }
+  return s;
+}
+
+void world_step(WorldScene &s) {
+  for (size_t i = 0; i < s.boxes.size(); i++) {
+    Box &b = s.boxes[i];
+    Pt &v = s.vel[i];
+    if ((b.xmin + v.x < 0) || (b.xmax + v.x > s.side)) v.x = -v.x;
+    if ((b.ymin + v.y < 0) || (b.ymax + v.y > s.side)) v.y = -v.y;
+    b.xmin += v.x, b.xmax += v.x, b.ymin += v.y, b.ymax += v.y;
+  }
+}
+
+std::vector<std::unique_ptr<WorldImpl>> make_world_impls() {
+  std::vector<std::unique_ptr<WorldImpl>> v;
+  v.emplace_back(new QuadkitWorld);
+  v.emplace_back(new Grid);
+  v.emplace_back(new Sap);
+#ifdef QKB_HAVE_BOX2D
+  v.emplace_back(new Box2dTree);
+#endif
+#ifdef QKB_HAVE_BULLET
+  v.emplace_back(new BulletDbvt);
+  v.emplace_back(new BulletBroadphase);
+#endif
+  if (have("embree")) v.emplace_back(new EmbreeRebuild);
+  return v;
+}
+
+} // namespace qkb

@@ -1,0 +1,69 @@
+/*
+ * Private helpers of the collide module (the static collider and the world): the
+ * traversal stack bound and entries, and the allocation and tree accessors it reads
+ * through index/index_access.h. Not API; collide/ depends on index/ only.
+ */
+#ifndef QUADKIT_COLLIDE_INTERNAL_H
+#define QUADKIT_COLLIDE_INTERNAL_H
+
+#include <math.h>
+
+#include "index/index_access.h"
+#include "quadkit/collide.h"
+
+/*
+ * Deepest possible traversal stack: a depth-first search pops one node and pushes at
+ * most four children, so it never holds more than 3 per level plus 4.
+ */
+#define QK__CSTACK_MAX (3 * (QK_MAX_DEPTH_LIMIT + 2) + 8)
+
+/* A stacked node with the lower bound that let it in (re-checked when popped, because
+ * the pruning threshold may have shrunk meanwhile). */
+typedef struct qk__centry {
+  uint32_t node;
+  double bound;
+} qk__centry_t;
+
+/* Sort up to four stacked entries by descending bound, so the nearest is popped first. */
+static inline void qk__csort4_desc(qk__centry_t *e, int n) {
+  for (int i = 1; i < n; i++) {
+    qk__centry_t v = e[i];
+    int j = i - 1;
+    while (j >= 0 && e[j].bound < v.bound) {
+      e[j + 1] = e[j];
+      j--;
+    }
+    e[j + 1] = v;
+  }
+}
+
+/* ---- the world's shapes (collide/shape.c, collide/exact.c) ------------------------ */
+
+/* Exact signs: orientation of c relative to a->b; (b-a).(c-a); (r1+r2)^2 - |a-b|^2;
+ * r^2 |q-p|^2 - ((q-p) x (c-p))^2. Inputs must satisfy qk__value_ok. */
+int qk__orient(double ax, double ay, double bx, double by, double cx, double cy);
+int qk__dot_sign(double ax, double ay, double bx, double by, double cx, double cy);
+int qk__within(double ax, double ay, double bx, double by, double r1, double r2);
+int qk__line_within(double px, double py, double qx, double qy, double cx, double cy, double r);
+
+/* Zero, or magnitude in [2^-100, 2^100]: the range in which the predicates are exact. */
+static inline int qk__value_ok(double v) {
+  double a = fabs(v);
+  return v == 0 || (a >= 0x1p-100 && a <= 0x1p100);
+}
+
+/* max and min of values known not to be NaN (cheaper than fmax / fmin calls). */
+static inline double qk__max(double a, double b) { return a > b ? a : b; }
+static inline double qk__min(double a, double b) { return a < b ? a : b; }
+/* Check a shape and normalise it (box corners min then max, unused values zeroed). */
+qk_status_t qk__shape_normalize(const qk_shape_t *in, qk_shape_t *out);
+/* Bounding box, rounded outwards (contains the shape exactly). */
+qk_box_t qk__shape_box(const qk_shape_t *s);
+/* Exact closed overlap of two normalised shapes. */
+int qk__shapes_overlap(const qk_shape_t *a, const qk_shape_t *b);
+/* Distance from p to a shape (0 exactly when p is in it). */
+double qk__shape_dist(const qk_shape_t *s, qk_point_t p);
+/* Parameter in [0, 1] of the first contact of the segment o -> to with a shape it meets. */
+double qk__ray_param(const qk_shape_t *s, qk_point_t o, qk_point_t to);
+
+#endif /* QUADKIT_COLLIDE_INTERNAL_H */

@@ -1,0 +1,97 @@
+/*
+ * The world's private layout, shared by collide/world.c (objects, filing, pairs) and
+ * collide/world_query.c (queries). Not API.
+ */
+#ifndef QUADKIT_WORLD_INTERNAL_H
+#define QUADKIT_WORLD_INTERNAL_H
+
+#include "collide/collide_internal.h"
+
+/* Levels: cells of side 2^L for L in [QK__LMIN, QK__LMIN + QK__NLEV). */
+#define QK__LMIN (-200)
+#define QK__NLEV 320
+
+typedef struct qk__wobj {
+  qk_shape_t s; /* normalised */
+  qk_box_t box; /* the shape's box, rounded outwards */
+  qk_box_t fat; /* box plus margin: the object is re-filed when box leaves it */
+  uint64_t tag;
+  int64_t cx, cy; /* cell at its level: fat.min / 2^level, floored */
+  uint32_t gen;   /* generation of the slot (odd: live) */
+  int16_t level;
+  uint16_t live;
+  uint32_t next, prev; /* the cell's list; next also links the free slots */
+} qk__wobj_t;
+
+/* A cell of the loose grid at one level; count == 0 marks an empty table entry. */
+typedef struct qk__wcell {
+  int64_t cx, cy;
+  int32_t level;
+  uint32_t head;
+  uint32_t count;
+  uint32_t start; /* during an update: the cell's header in the packed array (its
+                     objects follow) */
+} qk__wcell_t;
+
+/* An object as the pair search reads it: its box and slot, packed cell by cell; each
+ * cell's run starts with a header (slot QK_NONE) holding the box around its objects. */
+typedef struct qk__wpack {
+  qk_box_t box;
+  uint32_t slot;
+  uint32_t is_box; /* both boxes: the box test is the whole test */
+} qk__wpack_t;
+
+typedef struct qk__pvec {
+  qk_world_pair_t *v;
+  size_t n, cap;
+} qk__pvec_t;
+
+struct qk_world {
+  qk_allocator_t alloc;
+  qk_world_options_t opt;
+  qk__wobj_t *obj;
+  uint32_t n_obj, cap_obj; /* slots used (high-water mark) and allocated */
+  uint32_t free_head;      /* first free slot, or QK_NONE */
+  size_t n_live;
+  qk__wcell_t *cells; /* open addressing, linear probing; cap a power of two */
+  size_t cap_cells, n_cells;
+  uint32_t level_objs[QK__NLEV];
+  uint32_t level_cells[QK__NLEV];
+  qk__pvec_t cur, began, ended;
+  qk__wpack_t *pack; /* scratch of qk_world_update, kept between frames */
+  size_t cap_pack;
+};
+
+/* 2^e for e in [-1022, 1023], exactly (cheaper than ldexp in the inner loops; scaling
+ * by it is exact for the world's values, which never come near the subnormals). */
+static inline double qk__pow2(int e) {
+  union {
+    uint64_t u;
+    double d;
+  } v = {(uint64_t)(e + 1023) << 52};
+  return v.d;
+}
+
+/* The cell (level, cx, cy), or NULL. */
+const qk__wcell_t *qk__world_cell(const qk_world_t *w, int level, int64_t cx, int64_t cy);
+
+/* Occupied levels, ascending; returns how many. */
+int qk__world_levels(const qk_world_t *w, int *levels);
+
+/* Visit every live object whose box meets qb: fn returns nonzero to stop. */
+typedef int (*qk__wvisit_fn)(const qk_world_t *w, uint32_t slot, void *ud);
+void qk__world_visit(const qk_world_t *w, qk_box_t qb, qk__wvisit_fn fn, void *ud);
+/* The same for the box of a segment seg[0] -> seg[1], visiting only the cells along it
+ * where the box would hold many more. */
+void qk__world_visit_seg(const qk_world_t *w, qk_box_t qb, const qk_point_t *seg, qk__wvisit_fn fn,
+                         void *ud);
+
+static inline qk_handle_t qk__handle(const qk_world_t *w, uint32_t slot) {
+  return ((uint64_t)w->obj[slot].gen << 32) | slot;
+}
+
+/* Run fn(i, ud) for i in [0, n) on up to `threads` threads (the caller's included);
+ * returns nonzero when threads could not be started (then everything ran on the caller). */
+int qk__parallel(unsigned threads, unsigned n, void (*fn)(unsigned i, void *ud), void *ud);
+
+#endif /* QUADKIT_WORLD_INTERNAL_H */

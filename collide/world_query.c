@@ -1,0 +1,348 @@
+/*
+ * Queries on the world: objects overlapping a shape, hits along a segment (all, in
+ * order, or the first) and the k nearest objects to a point. Each gathers candidates
+ * from the cells of every occupied level whose loose squares meet the query's box (or
+ * scans a level's cells when there are fewer of them than squares to look up), then
+ * decides each candidate exactly (collide/shape.c).
+ */
+#include <stdlib.h>
+#include <string.h>
+
+#include "collide/world_internal.h"
+
+static inline int boxes_meet(const qk_box_t *a, const qk_box_t *b) {
+  return a->xmin <= b->xmax && b->xmin <= a->xmax && a->ymin <= b->ymax && b->ymin <= a->ymax;
+}
+
+/* v / 2^l floored, clamped far inside the int64 range. */
+static int64_t scaled(double v, int l) {
+  double s = floor(ldexp(v, -l));
+  if (s > 0x1p60) s = 0x1p60;
+  if (s < -0x1p60) s = -0x1p60;
+  return (int64_t)s;
+}
+
+static int visit_cell(const qk_world_t *w, const qk__wcell_t *c, qk_box_t qb, qk__wvisit_fn fn,
+                      void *ud) {
+  for (uint32_t i = c->head; i != QK_NONE; i = w->obj[i].next)
+    if (boxes_meet(&w->obj[i].box, &qb) && fn(w, i, ud)) return 1;
+  return 0;
+}
+
+/* A box's cell range at level l: an object of cell c lies in [c 2^l, (c + 2) 2^l), so it
+ * can meet the box only when c <= max / 2^l and c > min / 2^l - 2. */
+typedef struct crange {
+  int64_t x0, x1, y0, y1;
+} crange_t;
+
+static crange_t range_of(qk_box_t b, int l) {
+  return (crange_t){scaled(b.xmin, l) - 1, scaled(b.xmax, l), scaled(b.ymin, l) - 1,
+                    scaled(b.ymax, l)};
+}
+
+static int visit_range(const qk_world_t *w, int l, crange_t r, const crange_t *skip, qk_box_t qb,
+                       qk__wvisit_fn fn, void *ud) {
+  for (int64_t x = r.x0; x <= r.x1; x++)
+    for (int64_t y = r.y0; y <= r.y1; y++) {
+      if (skip && x >= skip->x0 && x <= skip->x1 && y >= skip->y0 && y <= skip->y1) continue;
+      const qk__wcell_t *c = qk__world_cell(w, l, x, y);
+      if (c && visit_cell(w, c, qb, fn, ud)) return 1;
+    }
+  return 0;
+}
+
+/*
+ * A long segment at a fine level: the cells along it, piece by piece, instead of every
+ * cell of its bounding box. Each piece is the box between two consecutive points
+ * computed on the segment, widened by far more than their rounding, so the pieces cover
+ * the true segment. Along a segment the pieces' cell ranges move monotonically, so a
+ * cell in two ranges is in every range between them: skipping the cells of the
+ * previous range visits each cell (and so each object) once.
+ */
+static int visit_along(const qk_world_t *w, int l, const qk_point_t *seg, double pieces,
+                       qk_box_t qb, qk__wvisit_fn fn, void *ud) {
+  qk_point_t a = seg[0], b = seg[1];
+  double e = (fabs(a.x) + fabs(a.y) + fabs(b.x) + fabs(b.y)) * 0x1p-40;
+  crange_t prev = {1, 0, 1, 0}; /* empty */
+  qk_point_t p = a;
+  size_t n = (size_t)pieces;
+  for (size_t k = 1; k <= n; k++) {
+    double t = (double)k / (double)n;
+    qk_point_t q = k == n ? b : (qk_point_t){a.x + t * (b.x - a.x), a.y + t * (b.y - a.y)};
+    qk_box_t pb = {fmin(p.x, q.x) - e, fmin(p.y, q.y) - e, fmax(p.x, q.x) + e, fmax(p.y, q.y) + e};
+    crange_t r = range_of(pb, l);
+    if (visit_range(w, l, r, &prev, qb, fn, ud)) return 1;
+    prev = r;
+    p = q;
+  }
+  return 0;
+}
+
+void qk__world_visit_seg(const qk_world_t *w, qk_box_t qb, const qk_point_t *seg, qk__wvisit_fn fn,
+                         void *ud) {
+  if (w->n_live == 0) return;
+  int levels[QK__NLEV];
+  int n = qk__world_levels(w, levels);
+  unsigned char scan[QK__NLEV];
+  int any_scan = 0;
+  memset(scan, 0, sizeof scan);
+  for (int li = 0; li < n; li++) {
+    int l = levels[li];
+    crange_t r = range_of(qb, l);
+    double looks = ((double)r.x1 - (double)r.x0 + 1) * ((double)r.y1 - (double)r.y0 + 1);
+    double cells = 2.0 * w->level_cells[l - QK__LMIN] + 8;
+    if (looks <= cells) {
+      if (visit_range(w, l, r, NULL, qb, fn, ud)) return;
+      continue;
+    }
+    if (seg) {
+      /* pieces about four cells long on the longer axis; each looks up its range */
+      double s = qk__pow2(l);
+      double major = fmax(qb.xmax - qb.xmin, qb.ymax - qb.ymin);
+      double minor = fmin(qb.xmax - qb.xmin, qb.ymax - qb.ymin);
+      double pieces = ceil(major / (4 * s));
+      if (pieces >= 1 && pieces < 1e7 && pieces * 7 * (minor / pieces / s + 3) <= cells) {
+        if (visit_along(w, l, seg, pieces, qb, fn, ud)) return;
+        continue;
+      }
+    }
+    scan[l - QK__LMIN] = 1;
+    any_scan = 1;
+  }
+  if (!any_scan) return;
+  for (size_t i = 0; i < w->cap_cells; i++) {
+    const qk__wcell_t *c = &w->cells[i];
+    if (c->count && scan[c->level - QK__LMIN] && visit_cell(w, c, qb, fn, ud)) return;
+  }
+}
+
+void qk__world_visit(const qk_world_t *w, qk_box_t qb, qk__wvisit_fn fn, void *ud) {
+  qk__world_visit_seg(w, qb, NULL, fn, ud);
+}
+
+/* ---- overlap with a shape --------------------------------------------------------- */
+
+typedef struct qctx {
+  const qk_shape_t *q;
+  qk_handle_t *out;
+  size_t cap, n;
+} qctx_t;
+
+static int q_visit(const qk_world_t *w, uint32_t i, void *ud) {
+  qctx_t *c = ud;
+  if (!qk__shapes_overlap(c->q, &w->obj[i].s)) return 0;
+  if (c->n < c->cap) c->out[c->n] = qk__handle(w, i);
+  c->n++;
+  return 0;
+}
+
+static int handle_cmp(const void *x, const void *y) {
+  uint32_t a = (uint32_t) * (const qk_handle_t *)x, b = (uint32_t) * (const qk_handle_t *)y;
+  return (a > b) - (a < b);
+}
+
+qk_status_t qk_world_query(const qk_world_t *w, const qk_shape_t *shape, qk_handle_t *out,
+                           size_t cap, size_t *n_out) {
+  if (!w || !shape || !n_out || (cap && !out)) return QK_ERR_INVALID;
+  *n_out = 0;
+  qk_shape_t q;
+  qk_status_t st = qk__shape_normalize(shape, &q);
+  if (st != QK_OK) return st;
+  qctx_t c = {&q, out, cap, 0};
+  qk_point_t seg[2] = {{q.x, q.y}, {q.a, q.b}};
+  qk__world_visit_seg(w, qk__shape_box(&q), q.kind == QK_SHAPE_SEGMENT ? seg : NULL, q_visit, &c);
+  if (c.n <= cap && c.n > 1) qsort(out, c.n, sizeof *out, handle_cmp);
+  *n_out = c.n;
+  return QK_OK;
+}
+
+/* ---- rays ------------------------------------------------------------------------- */
+
+typedef struct rctx {
+  qk_shape_t seg;
+  qk_point_t from, to;
+  qk_world_hit_t *out;
+  size_t cap, n;
+  qk_world_hit_t best;
+} rctx_t;
+
+static inline int hit_less(double ta, uint32_t sa, double tb, uint32_t sb) {
+  return ta < tb || (ta == tb && sa < sb);
+}
+
+static int r_visit_all(const qk_world_t *w, uint32_t i, void *ud) {
+  rctx_t *c = ud;
+  if (!qk__shapes_overlap(&c->seg, &w->obj[i].s)) return 0;
+  if (c->n < c->cap)
+    c->out[c->n] = (qk_world_hit_t){qk__handle(w, i), qk__ray_param(&w->obj[i].s, c->from, c->to)};
+  c->n++;
+  return 0;
+}
+
+static int r_visit_first(const qk_world_t *w, uint32_t i, void *ud) {
+  rctx_t *c = ud;
+  if (!qk__shapes_overlap(&c->seg, &w->obj[i].s)) return 0;
+  double t = qk__ray_param(&w->obj[i].s, c->from, c->to);
+  if (c->best.h == QK_HANDLE_NONE || hit_less(t, i, c->best.t, (uint32_t)c->best.h))
+    c->best = (qk_world_hit_t){qk__handle(w, i), t};
+  return 0;
+}
+
+static int hit_cmp(const void *x, const void *y) {
+  const qk_world_hit_t *a = x, *b = y;
+  if (a->t != b->t) return a->t < b->t ? -1 : 1;
+  uint32_t sa = (uint32_t)a->h, sb = (uint32_t)b->h;
+  return (sa > sb) - (sa < sb);
+}
+
+static qk_status_t ray_setup(qk_point_t from, qk_point_t to, rctx_t *c) {
+  qk_shape_t s = {QK_SHAPE_SEGMENT, from.x, from.y, to.x, to.y};
+  memset(c, 0, sizeof *c);
+  c->from = from;
+  c->to = to;
+  c->best = (qk_world_hit_t){QK_HANDLE_NONE, INFINITY};
+  return qk__shape_normalize(&s, &c->seg);
+}
+
+qk_status_t qk_world_raycast_all(const qk_world_t *w, qk_point_t from, qk_point_t to,
+                                 qk_world_hit_t *out, size_t cap, size_t *n_out) {
+  if (!w || !n_out || (cap && !out)) return QK_ERR_INVALID;
+  *n_out = 0;
+  rctx_t c;
+  qk_status_t st = ray_setup(from, to, &c);
+  if (st != QK_OK) return st;
+  c.out = out;
+  c.cap = cap;
+  qk_point_t seg[2] = {from, to};
+  qk__world_visit_seg(w, qk__shape_box(&c.seg), seg, r_visit_all, &c);
+  if (c.n <= cap && c.n > 1) qsort(out, c.n, sizeof *out, hit_cmp);
+  *n_out = c.n;
+  return QK_OK;
+}
+
+qk_status_t qk_world_raycast(const qk_world_t *w, qk_point_t from, qk_point_t to,
+                             qk_world_hit_t *hit) {
+  if (!w || !hit) return QK_ERR_INVALID;
+  *hit = (qk_world_hit_t){QK_HANDLE_NONE, INFINITY};
+  rctx_t c;
+  qk_status_t st = ray_setup(from, to, &c);
+  if (st != QK_OK) return st;
+  qk_point_t seg[2] = {from, to};
+  qk__world_visit_seg(w, qk__shape_box(&c.seg), seg, r_visit_first, &c);
+  *hit = c.best;
+  return QK_OK;
+}
+
+typedef struct batch {
+  const qk_world_t *w;
+  const qk_point_t *from, *to;
+  size_t n, chunk;
+  qk_world_hit_t *hits;
+  qk_status_t st[64];
+} batch_t;
+
+static void batch_run(unsigned k, void *ud) {
+  batch_t *b = ud;
+  size_t lo = (size_t)k * b->chunk, hi = lo + b->chunk < b->n ? lo + b->chunk : b->n;
+  for (size_t i = lo; i < hi; i++) {
+    qk_status_t st = qk_world_raycast(b->w, b->from[i], b->to[i], &b->hits[i]);
+    if (st != QK_OK) b->st[k % 64] = st;
+  }
+}
+
+qk_status_t qk_world_raycast_batch(const qk_world_t *w, const qk_point_t *from,
+                                   const qk_point_t *to, size_t n, qk_world_hit_t *hits) {
+  if (!w || (n && (!from || !to || !hits))) return QK_ERR_INVALID;
+  batch_t b = {w, from, to, n, 256, hits, {QK_OK}};
+  size_t jobs = (n + b.chunk - 1) / b.chunk;
+  if (jobs > 64) {
+    b.chunk = (n + 63) / 64;
+    jobs = (n + b.chunk - 1) / b.chunk;
+  }
+  qk__parallel(w->opt.threads, (unsigned)jobs, batch_run, &b);
+  for (int k = 0; k < 64; k++)
+    if (b.st[k] != QK_OK) return b.st[k];
+  return QK_OK;
+}
+
+/* ---- k nearest -------------------------------------------------------------------- */
+
+typedef struct kctx {
+  qk_point_t p;
+  qk_world_hit_t *out; /* sorted ascending by (t, slot), n of k filled */
+  size_t k, n, seen;
+} kctx_t;
+
+static int k_visit(const qk_world_t *w, uint32_t i, void *ud) {
+  kctx_t *c = ud;
+  c->seen++;
+  double d = qk__shape_dist(&w->obj[i].s, c->p);
+  if (c->n == c->k && !hit_less(d, i, c->out[c->n - 1].t, (uint32_t)c->out[c->n - 1].h)) return 0;
+  size_t j = c->n < c->k ? c->n++ : c->n - 1;
+  while (j > 0 && hit_less(d, i, c->out[j - 1].t, (uint32_t)c->out[j - 1].h)) {
+    c->out[j] = c->out[j - 1];
+    j--;
+  }
+  c->out[j] = (qk_world_hit_t){qk__handle(w, i), d};
+  return 0;
+}
+
+qk_status_t qk_world_knn(const qk_world_t *w, qk_point_t p, size_t k, qk_world_hit_t *out,
+                         size_t *n_out) {
+  if (!w || !n_out || (k && !out)) return QK_ERR_INVALID;
+  *n_out = 0;
+  if (!isfinite(p.x) || !isfinite(p.y)) return QK_ERR_NONFINITE;
+  if (!qk__value_ok(p.x) || !qk__value_ok(p.y)) return QK_ERR_LIMIT;
+  if (k == 0 || w->n_live == 0) return QK_OK;
+  int levels[QK__NLEV];
+  qk__world_levels(w, levels);
+  /*
+   * Grow a square around p until it holds k objects no farther than its half side:
+   * every object within distance r meets the square of half side r, so those k are the
+   * nearest. Distances are rounded, so the bound is kept a little inside r.
+   */
+  double r = ldexp(1.0, levels[0]);
+  for (;;) {
+    kctx_t c = {p, out, k, 0, 0};
+    qk_box_t qb = {p.x - r, p.y - r, p.x + r, p.y + r};
+    qk__world_visit(w, qb, k_visit, &c);
+    if (c.seen == w->n_live || (c.n == k && c.out[k - 1].t <= r * (1 - 0x1p-20))) {
+      *n_out = c.n;
+      return QK_OK;
+    }
+    r *= 2;
+  }
+}
+
+typedef struct kbatch {
+  const qk_world_t *w;
+  const qk_point_t *ps;
+  size_t n, k, chunk;
+  qk_world_hit_t *out;
+  size_t *counts;
+  qk_status_t st[64];
+} kbatch_t;
+
+static void kbatch_run(unsigned j, void *ud) {
+  kbatch_t *b = ud;
+  size_t lo = (size_t)j * b->chunk, hi = lo + b->chunk < b->n ? lo + b->chunk : b->n;
+  for (size_t i = lo; i < hi; i++) {
+    qk_status_t st = qk_world_knn(b->w, b->ps[i], b->k, b->out + i * b->k, &b->counts[i]);
+    if (st != QK_OK) b->st[j % 64] = st;
+  }
+}
+
+qk_status_t qk_world_knn_batch(const qk_world_t *w, const qk_point_t *ps, size_t n, size_t k,
+                               qk_world_hit_t *out, size_t *counts) {
+  if (!w || (n && (!ps || !counts || (k && !out)))) return QK_ERR_INVALID;
+  kbatch_t b = {w, ps, n, k, 256, out, counts, {QK_OK}};
+  size_t jobs = (n + b.chunk - 1) / b.chunk;
+  if (jobs > 64) {
+    b.chunk = (n + 63) / 64;
+    jobs = (n + b.chunk - 1) / b.chunk;
+  }
+  qk__parallel(w->opt.threads, (unsigned)jobs, kbatch_run, &b);
+  for (int j = 0; j < 64; j++)
+    if (b.st[j] != QK_OK) return b.st[j];
+  return QK_OK;
+}

@@ -1,0 +1,322 @@
+/**
+ * \file collide.h
+ * \brief Collision of items with extent: the static collider (discs and boxes built once)
+ *        and the moving-objects world.
+ */
+#ifndef QUADKIT_COLLIDE_H
+#define QUADKIT_COLLIDE_H
+
+#include "quadkit/common.h"
+#include "quadkit/index.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* ---------------------------------------------------------------------------------- */
+/* Collision of items with extent                                                       */
+
+/** A closed disc: centre (x, y) and radius r >= 0. */
+typedef struct qk_disc {
+  double x, y, r;
+} qk_disc_t;
+
+/** A pair of item ids, a < b. */
+typedef struct qk_pair {
+  qk_id_t a, b;
+} qk_pair_t;
+
+/** The first item hit by a ray: its id (QK_NONE for none) and parameter t (INFINITY). */
+typedef struct qk_hit {
+  qk_id_t id; /**< the item, or QK_NONE */
+  double t;   /**< where: origin + t * direction */
+} qk_hit_t;
+
+/**
+ * A set of items with extent (discs and axis-aligned boxes) stored in a quadtree by
+ * their centres. Every node also records the bounding box of the items stored beneath
+ * it, so a query reaches exactly as far beyond a node's square as its largest item.
+ */
+typedef struct qk_collider qk_collider_t;
+
+/**
+ * Build a collider. Discs get ids 0 .. n_discs-1, boxes n_discs .. n_discs+n_boxes-1.
+ * Items overlap when they share at least one point (touching counts): discs when
+ * dx^2 + dy^2 <= (r1 + r2)^2, boxes when their closed intervals meet on both axes, a
+ * disc and a box when the box point nearest the centre is within r.
+ * \param [in] discs n_discs discs (copied; may be NULL when n_discs is 0).
+ * \param [in] n_discs how many.
+ * \param [in] boxes n_boxes closed boxes (copied; may be NULL when n_boxes is 0).
+ * \param [in] n_boxes how many.
+ * \param [in] options tree options for the centres (capacity, allocator, root); NULL
+ *             for defaults (capacity 8).
+ * \param [out] out the collider, freed with qk_collider_free(); NULL on error.
+ * \return QK_OK, QK_ERR_NONFINITE, QK_ERR_GEOMETRY (negative radius or inverted box),
+ *         QK_ERR_OUTSIDE (a centre outside a given root), QK_ERR_LIMIT or QK_ERR_NOMEM.
+ */
+qk_status_t qk_collider_build(const qk_disc_t *discs, size_t n_discs, const qk_box_t *boxes,
+                              size_t n_boxes, const qk_tree_options_t *options,
+                              qk_collider_t **out);
+
+/** Free a collider; NULL does nothing. */
+void qk_collider_free(qk_collider_t *c);
+
+/** The collider's tree of item centres (borrowed; valid while the collider lives). */
+const qk_tree_t *qk_collider_tree(const qk_collider_t *c);
+
+/** Number of items. */
+size_t qk_collider_size(const qk_collider_t *c);
+
+/**
+ * Report the items overlapping a closed box (touching counts), in no particular order.
+ * \param [in] c the collider.
+ * \param [in] box the query box (xmin <= xmax, ymin <= ymax).
+ * \param [in] fn called per item with its centre and dist 0.
+ * \param [in] ud passed to fn.
+ * \return QK_OK, QK_ERR_NONFINITE or QK_ERR_GEOMETRY.
+ */
+qk_status_t qk_collider_query_box(const qk_collider_t *c, qk_box_t box, qk_found_fn fn, void *ud);
+
+/**
+ * Report the items overlapping a closed disc (touching counts), in no particular order.
+ * \param [in] c the collider.
+ * \param [in] disc the query disc (r >= 0).
+ * \param [in] fn called per item with its centre and dist 0.
+ * \param [in] ud passed to fn.
+ * \return QK_OK, QK_ERR_NONFINITE or QK_ERR_GEOMETRY.
+ */
+qk_status_t qk_collider_query_disc(const qk_collider_t *c, qk_disc_t disc, qk_found_fn fn,
+                                   void *ud);
+
+/** Called once per overlapping pair (a < b); return nonzero to stop. */
+typedef int (*qk_pair_fn)(qk_id_t a, qk_id_t b, void *ud);
+
+/**
+ * Broad phase: report every overlapping pair of items once, with a < b, in no particular
+ * order.
+ * \param [in] c the collider.
+ * \param [in] fn the callback.
+ * \param [in] ud passed to fn.
+ * \return QK_OK.
+ */
+qk_status_t qk_collider_pairs(const qk_collider_t *c, qk_pair_fn fn, void *ud);
+
+/**
+ * Every overlapping pair into a buffer, sorted by a then b.
+ * \param [in] c the collider.
+ * \param [out] out buffer for up to cap pairs (may be NULL when cap is 0).
+ * \param [in] cap its size.
+ * \param [out] n_out the number of pairs (may exceed cap; the buffer then holds an
+ *              unspecified subset, unsorted: call again with a buffer of n_out).
+ * \return QK_OK.
+ */
+qk_status_t qk_collider_pairs_list(const qk_collider_t *c, qk_pair_t *out, size_t cap,
+                                   size_t *n_out);
+
+/**
+ * First hit along a ray origin + t * dir, 0 <= t <= tmax: the item with the smallest t
+ * at which the ray touches it (ties by smaller id); t = 0 when the origin lies inside an
+ * item. For a segment from a to b pass dir = b - a and tmax = 1.
+ * \param [in] c the collider.
+ * \param [in] origin the ray's origin.
+ * \param [in] dir its direction (any length; not normalised).
+ * \param [in] tmax the largest t considered (INFINITY for a ray).
+ * \param [out] hit the hit, or {QK_NONE, INFINITY}.
+ * \return QK_OK, QK_ERR_NONFINITE or QK_ERR_INVALID (tmax < 0 or NaN).
+ */
+qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t origin, qk_point_t dir,
+                                double tmax, qk_hit_t *hit);
+
+/* ---------------------------------------------------------------------------------- */
+/* The world: moving objects with stable handles                                        */
+
+/** Kind of a world object's shape. */
+typedef enum qk_shape_kind {
+  QK_SHAPE_DISC = 0,    /**< centre (x, y), radius a >= 0 */
+  QK_SHAPE_BOX = 1,     /**< closed box with corners (x, y) and (a, b) */
+  QK_SHAPE_SEGMENT = 2, /**< closed segment from (x, y) to (a, b) */
+  QK_SHAPE_POINT = 3    /**< the point (x, y) */
+} qk_shape_kind_t;
+
+/**
+ * A closed shape. Every value must be zero or of magnitude in [2^-100, 2^100] (about
+ * 7.9e-31 to 1.3e30), which is what lets every overlap test be decided exactly.
+ */
+typedef struct qk_shape {
+  qk_shape_kind_t kind; /**< which shape */
+  double x, y, a, b;    /**< see qk_shape_kind_t; unused values are ignored */
+} qk_shape_t;
+
+/**
+ * A handle to a world object: slot in the low 32 bits, generation in the high 32. A slot
+ * is reused after its object is removed, with the next generation, so a stale handle is
+ * rejected (QK_ERR_NOT_FOUND) rather than naming the new object.
+ */
+typedef uint64_t qk_handle_t;
+
+/** "No object". */
+#define QK_HANDLE_NONE UINT64_MAX
+
+/** The slot of a handle (stable while the object lives; dense, reused after removal). */
+#define QK_HANDLE_SLOT(h) ((uint32_t)((h)&0xffffffffu))
+
+/** A pair of overlapping objects, slot of a below slot of b. */
+typedef struct qk_world_pair {
+  qk_handle_t a, b;
+} qk_world_pair_t;
+
+/** An object found by a ray (t in [0, 1] along the segment) or a kNN query (t = distance). */
+typedef struct qk_world_hit {
+  qk_handle_t h; /**< the object, or QK_HANDLE_NONE */
+  double t;      /**< ray parameter or distance */
+} qk_world_hit_t;
+
+/** Which pairs qk_world_pairs_list() reports. */
+typedef enum qk_pairs_which {
+  QK_PAIRS_ALL = 0,   /**< every pair overlapping at the last update */
+  QK_PAIRS_BEGAN = 1, /**< overlapping at the last update, not at the one before */
+  QK_PAIRS_ENDED = 2  /**< overlapping at the update before, not at the last (or removed) */
+} qk_pairs_which_t;
+
+/** World options; initialise with qk_world_options_init(). */
+typedef struct qk_world_options {
+  const qk_allocator_t *allocator; /**< NULL: libc. Must be thread-safe when threads > 1. */
+  unsigned threads;                /**< threads for update and batch queries (1: none) */
+  double margin;                   /**< fattening of each object's box, as a fraction of its
+                                        size, 0..16 (default 0.5); larger: fewer re-filings */
+  double min_margin;               /**< absolute fattening added, 0..2^100 (default 0) */
+} qk_world_options_t;
+
+/** A moving-objects world; see docs/collide.md. */
+typedef struct qk_world qk_world_t;
+
+/** Defaults: libc allocator, one thread, margin 0.5, min_margin 0. */
+void qk_world_options_init(qk_world_options_t *o);
+
+/**
+ * Make an empty world.
+ * \param [in] options NULL for defaults (copied; the allocator struct is copied too).
+ * \param [out] out the world, freed with qk_world_free().
+ * \return QK_OK, QK_ERR_INVALID (threads 0 or above 256, a margin out of range) or
+ *         QK_ERR_NOMEM.
+ */
+qk_status_t qk_world_new(const qk_world_options_t *options, qk_world_t **out);
+
+/** Free a world; NULL does nothing. */
+void qk_world_free(qk_world_t *w);
+
+/**
+ * Add an object. It takes part in pairs from the next qk_world_update().
+ * \param [in] w the world.
+ * \param [in] shape its shape (copied; a box's corners may come in any order).
+ * \param [in] tag any value, returned by qk_world_get().
+ * \param [out] h its handle.
+ * \return QK_OK, QK_ERR_NONFINITE, QK_ERR_GEOMETRY (negative radius), QK_ERR_LIMIT (a
+ *         value outside the accepted range, or 2^32 - 1 objects), QK_ERR_INVALID or
+ *         QK_ERR_NOMEM (the world unchanged).
+ */
+qk_status_t qk_world_add(qk_world_t *w, const qk_shape_t *shape, uint64_t tag, qk_handle_t *h);
+
+/**
+ * Give an object a new shape (of any kind). It is re-filed only when it leaves its
+ * fattened box. Never allocates.
+ * \return QK_OK, QK_ERR_NOT_FOUND (stale or unknown handle) or a shape error as
+ *         qk_world_add (the object unchanged).
+ */
+qk_status_t qk_world_move(qk_world_t *w, qk_handle_t h, const qk_shape_t *shape);
+
+/**
+ * Remove an object; its slot is reused by a later add with a new generation. Its pairs
+ * are reported as ended at the next update.
+ * \return QK_OK or QK_ERR_NOT_FOUND.
+ */
+qk_status_t qk_world_remove(qk_world_t *w, qk_handle_t h);
+
+/**
+ * An object's shape (normalised: a box's corners as min then max) and tag.
+ * \param [out] shape may be NULL. \param [out] tag may be NULL.
+ * \return QK_OK or QK_ERR_NOT_FOUND.
+ */
+qk_status_t qk_world_get(const qk_world_t *w, qk_handle_t h, qk_shape_t *shape, uint64_t *tag);
+
+/** Number of live objects. */
+size_t qk_world_size(const qk_world_t *w);
+
+/** Bytes the world holds from its allocator. */
+size_t qk_world_bytes(const qk_world_t *w);
+
+/**
+ * End a frame: find every overlapping pair (exactly; touching counts) and the pairs that
+ * began and ended since the last update. Uses the threads option.
+ * \return QK_OK or QK_ERR_NOMEM, in which case the pairs of the previous update are kept
+ *         and the call may be retried.
+ */
+qk_status_t qk_world_update(qk_world_t *w);
+
+/** Called per pair in the order of qk_world_pairs_list(); return nonzero to stop. */
+typedef int (*qk_world_pair_fn)(qk_handle_t a, qk_handle_t b, void *ud);
+
+/**
+ * The pairs of the last update, in order (by slot of a, then slot of b).
+ * \param [in] which all, began or ended.
+ * \return QK_OK or QK_ERR_INVALID.
+ */
+qk_status_t qk_world_pairs(const qk_world_t *w, qk_pairs_which_t which, qk_world_pair_fn fn,
+                           void *ud);
+
+/**
+ * The pairs of the last update into a buffer, in order (by slot of a, then slot of b).
+ * \param [out] out up to cap pairs. \param [out] n_out the full count (may exceed cap).
+ * \return QK_OK or QK_ERR_INVALID.
+ */
+qk_status_t qk_world_pairs_list(const qk_world_t *w, qk_pairs_which_t which, qk_world_pair_t *out,
+                                size_t cap, size_t *n_out);
+
+/**
+ * Objects overlapping a shape (a box, disc, point or segment; touching counts), exactly,
+ * as they are now (moves need no update first), by slot.
+ * \param [out] out up to cap handles. \param [out] n_out the full count.
+ * \return QK_OK, a shape error, or QK_ERR_INVALID.
+ */
+qk_status_t qk_world_query(const qk_world_t *w, const qk_shape_t *shape, qk_handle_t *out,
+                           size_t cap, size_t *n_out);
+
+/**
+ * Every object the segment from -> to touches (decided exactly), in order of the
+ * parameter t in [0, 1] of the first contact (computed in long double; ties by slot).
+ * For a ray, pass a far endpoint.
+ * \param [out] out up to cap hits. \param [out] n_out the full count.
+ */
+qk_status_t qk_world_raycast_all(const qk_world_t *w, qk_point_t from, qk_point_t to,
+                                 qk_world_hit_t *out, size_t cap, size_t *n_out);
+
+/** The first of qk_world_raycast_all()'s hits, or {QK_HANDLE_NONE, INFINITY}. */
+qk_status_t qk_world_raycast(const qk_world_t *w, qk_point_t from, qk_point_t to,
+                             qk_world_hit_t *hit);
+
+/**
+ * First hits of n segments, on the world's threads. \param [out] hits n hits.
+ */
+qk_status_t qk_world_raycast_batch(const qk_world_t *w, const qk_point_t *from,
+                                   const qk_point_t *to, size_t n, qk_world_hit_t *hits);
+
+/**
+ * The k objects nearest to p (distance to the shape: 0 inside), by distance then slot.
+ * \param [out] out k hits (t = distance). \param [out] n_out min(k, size).
+ */
+qk_status_t qk_world_knn(const qk_world_t *w, qk_point_t p, size_t k, qk_world_hit_t *out,
+                         size_t *n_out);
+
+/**
+ * qk_world_knn() for n points, on the world's threads.
+ * \param [out] out n * k hits, point i's in out[i k ..]. \param [out] counts n counts.
+ * \return QK_OK, QK_ERR_INVALID, or the first error of a point (its count is then 0).
+ */
+qk_status_t qk_world_knn_batch(const qk_world_t *w, const qk_point_t *ps, size_t n, size_t k,
+                               qk_world_hit_t *out, size_t *counts);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* QUADKIT_COLLIDE_H */

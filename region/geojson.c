@@ -1,0 +1,389 @@
+/*
+ * The GeoJSON reader (RFC 7946), on json-c. The text is parsed into json-c's tree, then
+ * walked into the array form of a layer (rings, features, properties) and handed to the
+ * builder; on any error nothing is built. A layer's feature i is the file's feature i:
+ * features whose geometry is not a Polygon or MultiPolygon stay as empty features (their
+ * properties kept) and are counted as skipped, so indices match the file.
+ *
+ * json-c allocates with malloc, not through the layer's allocator; the allocation-failure
+ * tests therefore cover the rest of the reader and the builder.
+ */
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "region/region_internal.h"
+
+#ifdef QK_HAVE_JSONC
+#include <json.h>
+
+typedef struct gj {
+  const qk_allocator_t *a;
+  int planar;
+  double *xy;
+  size_t nv, cap_xy;
+  size_t *rs;
+  size_t nr, cap_rs;
+  size_t *fs;
+  size_t nf, cap_fs;
+  qk__props_t props;
+  size_t skipped, holes;
+  qk_error_t *err;
+} gj_t;
+
+static void gj_free(gj_t *g) {
+  qk__free(g->a, g->xy, g->cap_xy * sizeof(double));
+  qk__free(g->a, g->rs, g->cap_rs * sizeof(size_t));
+  qk__free(g->a, g->fs, g->cap_fs * sizeof(size_t));
+  qk__props_free(g->a, &g->props);
+}
+
+static qk_status_t nomem(gj_t *g, qk_status_t st) {
+  return qk__region_fail(g->err, st, SIZE_MAX, "%s while reading", qk_strerror(st));
+}
+
+static const char *type_name(json_object *o) {
+  return o ? json_type_to_name(json_object_get_type(o)) : "null";
+}
+
+/* One ring: positions [lon, lat, ...]. */
+static qk_status_t ring(gj_t *g, json_object *arr, size_t f, size_t poly, size_t k) {
+  if (!json_object_is_type(arr, json_type_array))
+    return qk__region_fail(g->err, QK_ERR_PARSE, f,
+                           "feature %zu, polygon %zu, ring %zu: expected an array of positions, "
+                           "found %s",
+                           f, poly, k, type_name(arr));
+  size_t n = json_object_array_length(arr);
+  if (n < 4)
+    return qk__region_fail(g->err, QK_ERR_GEOMETRY, f,
+                           "feature %zu, polygon %zu, ring %zu: %zu positions (a ring needs at "
+                           "least 4)",
+                           f, poly, k, n);
+  qk_status_t st;
+  if ((st = qk__region_grow(g->a, (void **)&g->xy, &g->cap_xy, 2 * (g->nv + n), sizeof(double))) ||
+      (st = qk__region_grow(g->a, (void **)&g->rs, &g->cap_rs, g->nr + 2, sizeof(size_t))))
+    return nomem(g, st);
+  for (size_t i = 0; i < n; i++) {
+    json_object *p = json_object_array_get_idx(arr, i);
+    json_object *x = NULL, *y = NULL;
+    if (json_object_is_type(p, json_type_array) && json_object_array_length(p) >= 2) {
+      x = json_object_array_get_idx(p, 0);
+      y = json_object_array_get_idx(p, 1);
+    }
+    bool okx =
+        x && (json_object_is_type(x, json_type_double) || json_object_is_type(x, json_type_int));
+    bool oky =
+        y && (json_object_is_type(y, json_type_double) || json_object_is_type(y, json_type_int));
+    if (!okx || !oky)
+      return qk__region_fail(g->err, QK_ERR_PARSE, f,
+                             "feature %zu, polygon %zu, ring %zu, position %zu: expected [x, y] "
+                             "numbers, found %s",
+                             f, poly, k, i, p ? json_object_to_json_string(p) : "null");
+    double vx = json_object_get_double(x), vy = json_object_get_double(y);
+    if ((st = qk__region_check_coord(g->planar, vx, vy, f, g->err))) {
+      size_t len = strlen(g->err->message);
+      snprintf(g->err->message + len, sizeof g->err->message - len,
+               " at polygon %zu, ring %zu, position %zu", poly, k, i);
+      return st;
+    }
+    g->xy[2 * (g->nv + i)] = vx;
+    g->xy[2 * (g->nv + i) + 1] = vy;
+  }
+  const double *s = g->xy + 2 * g->nv, *e = g->xy + 2 * (g->nv + n - 1);
+  if (s[0] != e[0] || s[1] != e[1])
+    return qk__region_fail(g->err, QK_ERR_GEOMETRY, f,
+                           "feature %zu, polygon %zu, ring %zu: not closed (first position "
+                           "[%.17g, %.17g], last [%.17g, %.17g])",
+                           f, poly, k, s[0], s[1], e[0], e[1]);
+  if (g->nr == 0) g->rs[0] = 0;
+  g->nv += n;
+  g->rs[++g->nr] = g->nv;
+  if (k > 0) g->holes++;
+  return QK_OK;
+}
+
+static qk_status_t polygon(gj_t *g, json_object *rings, size_t f, size_t poly) {
+  if (!json_object_is_type(rings, json_type_array))
+    return qk__region_fail(g->err, QK_ERR_PARSE, f,
+                           "feature %zu, polygon %zu: expected an array of rings, found %s", f,
+                           poly, type_name(rings));
+  size_t n = json_object_array_length(rings);
+  for (size_t k = 0; k < n; k++) {
+    qk_status_t st = ring(g, json_object_array_get_idx(rings, k), f, poly, k);
+    if (st) return st;
+  }
+  return QK_OK;
+}
+
+static qk_status_t geometry(gj_t *g, json_object *geom, size_t f) {
+  if (!geom) {
+    g->skipped++;
+    return QK_OK;
+  }
+  json_object *t = NULL, *c = NULL;
+  if (!json_object_is_type(geom, json_type_object) ||
+      !json_object_object_get_ex(geom, "type", &t) || !json_object_is_type(t, json_type_string))
+    return qk__region_fail(g->err, QK_ERR_PARSE, f,
+                           "feature %zu: geometry must be an object with a string \"type\"", f);
+  const char *ty = json_object_get_string(t);
+  bool poly = !strcmp(ty, "Polygon"), multi = !strcmp(ty, "MultiPolygon");
+  if (!poly && !multi) {
+    g->skipped++;
+    return QK_OK;
+  }
+  if (!json_object_object_get_ex(geom, "coordinates", &c) ||
+      !json_object_is_type(c, json_type_array))
+    return qk__region_fail(g->err, QK_ERR_PARSE, f,
+                           "feature %zu: %s without a \"coordinates\" array", f, ty);
+  size_t r0 = g->nr;
+  qk_status_t st = QK_OK;
+  if (poly)
+    st = polygon(g, c, f, 0);
+  else
+    for (size_t i = 0, n = json_object_array_length(c); i < n && !st; i++)
+      st = polygon(g, json_object_array_get_idx(c, i), f, i);
+  if (!st && g->nr == r0) g->skipped++; /* empty */
+  return st;
+}
+
+static qk_status_t properties(gj_t *g, json_object *props, size_t f) {
+  if (props && json_object_is_type(props, json_type_object)) {
+    struct json_object_iterator it = json_object_iter_begin(props);
+    struct json_object_iterator end = json_object_iter_end(props);
+    for (; !json_object_iter_equal(&it, &end); json_object_iter_next(&it)) {
+      const char *k = json_object_iter_peek_name(&it);
+      json_object *v = json_object_iter_peek_value(&it);
+      const char *s = "";
+      size_t len = 0;
+      if (json_object_is_type(v, json_type_string)) {
+        s = json_object_get_string(v);
+        len = (size_t)json_object_get_string_len(v);
+      } else if (v) {
+        s = json_object_to_json_string_ext(v, JSON_C_TO_STRING_PLAIN);
+        len = strlen(s);
+      }
+      qk_status_t st = qk__props_add(g->a, &g->props, k, s, len);
+      if (st) return nomem(g, st);
+    }
+  } else if (props) {
+    return qk__region_fail(g->err, QK_ERR_PARSE, f,
+                           "feature %zu: \"properties\" must be an object or null, found %s", f,
+                           type_name(props));
+  }
+  qk_status_t st = qk__props_end_feature(g->a, &g->props, f);
+  return st ? nomem(g, st) : QK_OK;
+}
+
+static qk_status_t end_feature(gj_t *g, size_t f) {
+  qk_status_t st = qk__region_grow(g->a, (void **)&g->fs, &g->cap_fs, f + 2, sizeof(size_t));
+  if (st) return nomem(g, st);
+  if (f == 0) g->fs[0] = 0;
+  g->fs[f + 1] = g->nr;
+  g->nf = f + 1;
+  return QK_OK;
+}
+
+static qk_status_t feature(gj_t *g, json_object *feat, size_t f) {
+  json_object *t = NULL, *geom = NULL, *props = NULL;
+  if (!json_object_is_type(feat, json_type_object) ||
+      !json_object_object_get_ex(feat, "type", &t) || !json_object_is_type(t, json_type_string) ||
+      strcmp(json_object_get_string(t), "Feature"))
+    return qk__region_fail(g->err, QK_ERR_PARSE, f,
+                           "feature %zu: expected an object with \"type\": \"Feature\"", f);
+  if (!json_object_object_get_ex(feat, "geometry", &geom))
+    return qk__region_fail(g->err, QK_ERR_PARSE, f, "feature %zu: no \"geometry\" member", f);
+  json_object_object_get_ex(feat, "properties", &props);
+  qk_status_t st = geometry(g, geom, f);
+  if (!st) st = properties(g, props, f);
+  if (!st) st = end_feature(g, f);
+  return st;
+}
+
+static qk_status_t document(gj_t *g, json_object *root) {
+  json_object *t = NULL, *feats = NULL;
+  if (!json_object_is_type(root, json_type_object) ||
+      !json_object_object_get_ex(root, "type", &t) || !json_object_is_type(t, json_type_string))
+    return qk__region_fail(g->err, QK_ERR_PARSE, SIZE_MAX,
+                           "expected a GeoJSON object with a string \"type\"");
+  const char *ty = json_object_get_string(t);
+  if (!strcmp(ty, "FeatureCollection")) {
+    if (!json_object_object_get_ex(root, "features", &feats) ||
+        !json_object_is_type(feats, json_type_array))
+      return qk__region_fail(g->err, QK_ERR_PARSE, SIZE_MAX,
+                             "FeatureCollection without a \"features\" array");
+    size_t n = json_object_array_length(feats);
+    for (size_t i = 0; i < n; i++) {
+      qk_status_t st = feature(g, json_object_array_get_idx(feats, i), i);
+      if (st) return st;
+    }
+    return QK_OK;
+  }
+  if (!strcmp(ty, "Feature")) return feature(g, root, 0);
+  qk_status_t st = geometry(g, root, 0);
+  if (!st) st = qk__props_end_feature(g->a, &g->props, 0);
+  if (!st) st = end_feature(g, 0);
+  return st == QK_ERR_NOMEM ? nomem(g, st) : st;
+}
+
+/* Line and column (1-based) of a byte offset. */
+static void where(const char *text, size_t off, qk_error_t *err) {
+  unsigned long line = 1, col = 1;
+  for (size_t i = 0; i < off; i++) {
+    if (text[i] == '\n')
+      line++, col = 1;
+    else
+      col++;
+  }
+  if (err) {
+    err->line = line;
+    err->column = col;
+  }
+}
+
+qk_status_t qk_region_read_geojson_text(const char *text, size_t len,
+                                        const qk_region_options_t *options, qk_region_t **out,
+                                        qk_error_t *err) {
+  if (err) {
+    memset(err, 0, sizeof *err);
+    err->item = SIZE_MAX;
+  }
+  if (!out || (!text && len)) return qk__region_fail(err, QK_ERR_INVALID, SIZE_MAX, "no input");
+  *out = NULL;
+  json_tokener *tok = json_tokener_new();
+  if (!tok) return qk__region_fail(err, QK_ERR_NOMEM, SIZE_MAX, "out of memory");
+  json_object *root = NULL;
+  size_t at = 0;
+  enum json_tokener_error jerr = json_tokener_continue;
+  /* json-c takes an int length: feed large texts in pieces. */
+  do {
+    size_t chunk = len - at > (1u << 30) ? (1u << 30) : len - at;
+    root = json_tokener_parse_ex(tok, text + at, (int)chunk);
+    jerr = json_tokener_get_error(tok);
+    if (jerr != json_tokener_continue || chunk == 0) {
+      at += json_tokener_get_parse_end(tok);
+      break;
+    }
+    at += chunk;
+  } while (at < len);
+  if (!root && jerr == json_tokener_continue) {
+    /* the text ended inside a value */
+    where(text, len, err);
+    json_tokener_free(tok);
+    return qk__region_fail(err, QK_ERR_PARSE, SIZE_MAX,
+                           "line %lu, column %lu: unexpected end of "
+                           "input",
+                           err ? err->line : 0, err ? err->column : 0);
+  }
+  if (!root || jerr != json_tokener_success) {
+    size_t off = at ? at - 1 : 0;
+    where(text, off, err);
+    unsigned long l = err ? err->line : 0, c = err ? err->column : 0;
+    qk_status_t st =
+        qk__region_fail(err, QK_ERR_PARSE, SIZE_MAX, "line %lu, column %lu: malformed JSON: %s", l,
+                        c, json_tokener_error_desc(jerr));
+    json_object_put(root);
+    json_tokener_free(tok);
+    return st;
+  }
+  json_tokener_free(tok);
+  for (size_t i = at; i < len; i++)
+    if (!strchr(" \t\r\n", text[i])) {
+      where(text, i, err);
+      unsigned long l = err ? err->line : 0, c = err ? err->column : 0;
+      json_object_put(root);
+      return qk__region_fail(err, QK_ERR_PARSE, SIZE_MAX,
+                             "line %lu, column %lu: unexpected text after the JSON value", l, c);
+    }
+  qk_region_options_t o;
+  qk_region_options_init(&o);
+  if (options) o = *options;
+  qk_allocator_t alloc = {NULL, NULL};
+  if (o.allocator) alloc = *o.allocator;
+  qk_error_t scratch;
+  gj_t g;
+  memset(&g, 0, sizeof g);
+  g.a = &alloc;
+  g.planar = o.planar;
+  g.err = err ? err : &scratch;
+  qk_status_t st = document(&g, root);
+  json_object_put(root);
+  if (!st) {
+    qk_region_arrays_t arr = {g.xy, g.rs, g.nr, g.fs, g.nf};
+    size_t zero = 0;
+    if (!g.nr) arr.ring_start = &zero;
+    st = qk__region_build(&arr, &o, &g.props, g.skipped, g.holes, out, err);
+  }
+  gj_free(&g);
+  return st;
+}
+
+qk_status_t qk_region_read_geojson(const char *path, const qk_region_options_t *options,
+                                   qk_region_t **out, qk_error_t *err) {
+  if (err) {
+    memset(err, 0, sizeof *err);
+    err->item = SIZE_MAX;
+  }
+  if (!path || !out) return qk__region_fail(err, QK_ERR_INVALID, SIZE_MAX, "no path");
+  *out = NULL;
+  FILE *f = fopen(path, "rb");
+  if (!f) return qk__region_fail(err, QK_ERR_IO, SIZE_MAX, "cannot open %s", path);
+  size_t cap = 1 << 16, len = 0;
+  char *buf = malloc(cap);
+  qk_status_t st = QK_OK;
+  while (buf) {
+    size_t got = fread(buf + len, 1, cap - len, f);
+    len += got;
+    if (len < cap) break;
+    char *nb = realloc(buf, cap * 2);
+    if (!nb) {
+      free(buf);
+      buf = NULL;
+      break;
+    }
+    buf = nb;
+    cap *= 2;
+  }
+  if (!buf)
+    st = qk__region_fail(err, QK_ERR_NOMEM, SIZE_MAX, "out of memory reading %s", path);
+  else if (ferror(f))
+    st = qk__region_fail(err, QK_ERR_IO, SIZE_MAX, "cannot read %s", path);
+  fclose(f);
+  if (!st) st = qk_region_read_geojson_text(buf, len, options, out, err);
+  free(buf);
+  return st;
+}
+
+#else /* no json-c */
+
+qk_status_t qk_region_read_geojson_text(const char *text, size_t len,
+                                        const qk_region_options_t *options, qk_region_t **out,
+                                        qk_error_t *err) {
+  (void)text, (void)len, (void)options;
+  if (out) *out = NULL;
+  if (err) memset(err, 0, sizeof *err);
+  return qk__region_fail(err, QK_ERR_UNSUPPORTED, SIZE_MAX,
+                         "built without json-c: install libjson-c-dev and rebuild");
+}
+
+qk_status_t qk_region_read_geojson(const char *path, const qk_region_options_t *options,
+                                   qk_region_t **out, qk_error_t *err) {
+  (void)path;
+  return qk_region_read_geojson_text(NULL, 0, options, out, err);
+}
+
+#endif
+
+qk_status_t qk_region_from_arrays(const qk_region_arrays_t *in, const qk_region_options_t *options,
+                                  qk_region_t **out, qk_error_t *err) {
+  return qk__region_build(in, options, NULL, 0, SIZE_MAX, out, err);
+}
+
+qk_status_t qk_region_read(const char *path, const qk_region_options_t *options, qk_region_t **out,
+                           qk_error_t *err) {
+  size_t n = path ? strlen(path) : 0;
+  if (n >= 8 && !strcmp(path + n - 8, ".geojson"))
+    return qk_region_read_geojson(path, options, out, err);
+  if (n >= 5 && !strcmp(path + n - 5, ".json"))
+    return qk_region_read_geojson(path, options, out, err);
+  return qk_region_read_ogr(path, options, out, err);
+}

@@ -1,0 +1,250 @@
+/*
+ * From rings to edge pieces: validation of the arrays, then, per ring, the pieces that
+ * bound the feature in the plane of the index.
+ *
+ * Planar mode: every ring edge a->b with a != b is a piece.
+ *
+ * Lon/lat mode (coordinates are longitude in [-180, 180], latitude in [-90, 90]):
+ *  1. An edge whose longitudes differ by at most 180 degrees is a piece as it is.
+ *  2. An edge whose longitudes differ by more than 180 crosses the antimeridian the
+ *     short way. Its crossing latitude phi is interpolated linearly in lon/lat (rounded
+ *     once; both halves use the same value, so it is simply a new vertex) and the edge
+ *     becomes a -> (+-180, phi) and (-+180, phi) -> b. An edge from lon 180 to lon -180
+ *     (or back) runs along the antimeridian; it is cut at its first vertex.
+ *  3. Each cut leaves the two sides of the rectangle open. Both are closed along the
+ *     antimeridian through the pole latitude P of the ring: eastward (lon increasing
+ *     through 180) a cut adds (180, phi) -> (180, P) and (-180, P) -> (-180, phi);
+ *     westward the reverse. For a ring crossing as often eastward as westward these
+ *     closures cancel pairwise on [phi1, phi2] (even-odd), whatever P is.
+ *  4. A ring with k more eastward than westward crossings winds k times around the
+ *     globe; |k| pieces along the pole latitude, (180, P) -> (-180, P) (or the reverse
+ *     for westward winding), close it. P is the pole on the side of the smaller enclosed
+ *     lon/lat area: a ring around Antarctica encloses the south pole, an Arctic ring the
+ *     north pole.
+ * The added pieces (cuts' closures and pole pieces) are marked synthetic: they bound the
+ * feature but are not its boundary on the sphere, so the closed and open rules ignore
+ * them. Ring vertices at longitude 180 and -180 are different points of the rectangle;
+ * queries map longitude 180 to -180.
+ */
+#include <stdlib.h>
+#include <string.h>
+
+#include "region/region_internal.h"
+
+qk_status_t qk__region_check_coord(int planar, double x, double y, size_t f, qk_error_t *err) {
+  if (!isfinite(x) || !isfinite(y))
+    return qk__region_fail(err, QK_ERR_NONFINITE, f,
+                           "feature %zu: coordinate (%g, %g) is not finite", f, x, y);
+  if (!planar && (x < -180 || x > 180 || y < -90 || y > 90))
+    return qk__region_fail(err, QK_ERR_GEOMETRY, f,
+                           "feature %zu: (%.17g, %.17g) is not a longitude/latitude in [-180, 180] "
+                           "x [-90, 90] (projected data needs planar mode)",
+                           f, x, y);
+  double v[2] = {x, y};
+  for (int i = 0; i < 2; i++) {
+    double m = fabs(v[i]);
+    if (m > QK_REGION_MAX_COORD || (m != 0 && m < QK_REGION_MIN_COORD))
+      return qk__region_fail(err, QK_ERR_GEOMETRY, f,
+                             "feature %zu: absurd coordinate %.17g (magnitude must be 0 or within "
+                             "[1e-100, 1e100])",
+                             f, v[i]);
+  }
+  return QK_OK;
+}
+
+void qk__pieces_free(const qk_allocator_t *a, qk__pieces_t *p) {
+  qk__free(a, p->seg, p->cap * sizeof(qk__seg_t));
+  qk__free(a, p->feat, p->cap * sizeof(uint32_t));
+  qk__free(a, p->ring, p->cap * sizeof(uint32_t));
+  qk__free(a, p->vtx, p->cap * sizeof(uint32_t));
+  memset(p, 0, sizeof *p);
+}
+
+static qk_status_t reserve(const qk_allocator_t *a, qk__pieces_t *p, size_t need) {
+  if (need <= p->cap) return QK_OK;
+  size_t nc = p->cap ? p->cap : 64;
+  while (nc < need) nc *= 2;
+  if (nc > UINT32_MAX) return QK_ERR_LIMIT;
+  /* Fresh arrays, copied, then the old ones freed: on failure the old ones stay whole
+   * and share one capacity. */
+  qk__pieces_t n = {0};
+  n.seg = qk__realloc(a, NULL, 0, nc * sizeof *n.seg);
+  n.feat = qk__realloc(a, NULL, 0, nc * sizeof(uint32_t));
+  n.ring = qk__realloc(a, NULL, 0, nc * sizeof(uint32_t));
+  n.vtx = qk__realloc(a, NULL, 0, nc * sizeof(uint32_t));
+  n.cap = nc;
+  if (!n.seg || !n.feat || !n.ring || !n.vtx) {
+    qk__free(a, n.seg, nc * sizeof *n.seg);
+    qk__free(a, n.feat, nc * sizeof(uint32_t));
+    qk__free(a, n.ring, nc * sizeof(uint32_t));
+    qk__free(a, n.vtx, nc * sizeof(uint32_t));
+    return QK_ERR_NOMEM;
+  }
+  if (p->n) {
+    memcpy(n.seg, p->seg, p->n * sizeof *n.seg);
+    memcpy(n.feat, p->feat, p->n * sizeof(uint32_t));
+    memcpy(n.ring, p->ring, p->n * sizeof(uint32_t));
+    memcpy(n.vtx, p->vtx, p->n * sizeof(uint32_t));
+  }
+  n.n = p->n;
+  qk__pieces_free(a, p);
+  *p = n;
+  return QK_OK;
+}
+
+/* The ring being turned into pieces: either counted (out == NULL: winding and area) or
+ * emitted. */
+typedef struct ring_ctx {
+  const qk_allocator_t *a;
+  qk__pieces_t *out;
+  uint32_t f, r;
+  double area2; /* twice the signed area of the emitted pieces */
+} ring_ctx_t;
+
+static qk_status_t piece(ring_ctx_t *c, double ax, double ay, double bx, double by, uint32_t v) {
+  if (ax == bx && ay == by) return QK_OK;
+  c->area2 += ax * by - bx * ay;
+  if (!c->out) return QK_OK;
+  qk__pieces_t *p = c->out;
+  qk_status_t st = reserve(c->a, p, p->n + 1);
+  if (st) return st;
+  p->seg[p->n] = (qk__seg_t){ax, ay, bx, by};
+  p->feat[p->n] = c->f;
+  p->ring[p->n] = c->r;
+  p->vtx[p->n] = v;
+  p->n++;
+  return QK_OK;
+}
+
+/* Latitude where a -> b (longitudes unwrapped so that b's is bu) meets longitude m. */
+static double cut_lat(double ax, double ay, double bu, double by, double m, int b_at_m) {
+  if (ax == m) return ay;
+  if (b_at_m) return by;
+  double t = (m - ax) / (bu - ax);
+  double phi = ay + t * (by - ay);
+  double lo = qk__min(ay, by), hi = qk__max(ay, by);
+  phi = qk__min(qk__max(phi, lo), hi);
+  if (fabs(phi) < QK_REGION_MIN_COORD) phi = 0.0;
+  return phi;
+}
+
+/* Pieces of one ring in lon/lat mode; k_out: net eastward windings. */
+static qk_status_t ring_lonlat(ring_ctx_t *c, const double *xy, size_t start, size_t len, double P,
+                               long *k_out) {
+  long k = 0;
+  qk_status_t st = QK_OK;
+  for (size_t i = 0; i + 1 < len && !st; i++) {
+    uint32_t v = (uint32_t)(start + i);
+    double ax = xy[2 * (start + i)], ay = xy[2 * (start + i) + 1];
+    double bx = xy[2 * (start + i + 1)], by = xy[2 * (start + i + 1) + 1];
+    double d = bx - ax;
+    if (d < -180) { /* eastward through 180 */
+      double phi = cut_lat(ax, ay, bx + 360, by, 180, bx == -180);
+      if (!(st = piece(c, ax, ay, 180, phi, v)) && !(st = piece(c, 180, phi, 180, P, UINT32_MAX)) &&
+          !(st = piece(c, -180, P, -180, phi, UINT32_MAX)))
+        st = piece(c, -180, phi, bx, by, v);
+      k++;
+    } else if (d > 180) { /* westward through -180 */
+      double phi = cut_lat(ax, ay, bx - 360, by, -180, bx == 180);
+      if (!(st = piece(c, ax, ay, -180, phi, v)) &&
+          !(st = piece(c, -180, phi, -180, P, UINT32_MAX)) &&
+          !(st = piece(c, 180, P, 180, phi, UINT32_MAX)))
+        st = piece(c, 180, phi, bx, by, v);
+      k--;
+    } else {
+      st = piece(c, ax, ay, bx, by, v);
+    }
+  }
+  for (long j = 0; j < labs(k) && !st; j++)
+    st = k > 0 ? piece(c, 180, P, -180, P, UINT32_MAX) : piece(c, -180, P, 180, P, UINT32_MAX);
+  *k_out = k;
+  return st;
+}
+
+static qk_status_t check_arrays(const qk_region_arrays_t *in, int planar, qk_error_t *err) {
+  if (!in) return qk__region_fail(err, QK_ERR_INVALID, SIZE_MAX, "no input");
+  if (in->n_features && !in->feature_start)
+    return qk__region_fail(err, QK_ERR_INVALID, SIZE_MAX, "feature_start is NULL");
+  if (in->n_rings && (!in->ring_start || !in->xy))
+    return qk__region_fail(err, QK_ERR_INVALID, SIZE_MAX, "ring_start or xy is NULL");
+  if (in->n_features >= (1u << 29))
+    return qk__region_fail(err, QK_ERR_LIMIT, SIZE_MAX, "too many features (%zu)", in->n_features);
+  size_t nr = in->feature_start ? in->feature_start[in->n_features] : 0;
+  if ((in->feature_start && in->feature_start[0] != 0) || nr != in->n_rings)
+    return qk__region_fail(err, QK_ERR_INVALID, SIZE_MAX,
+                           "feature_start must run from 0 to n_rings (%zu)", in->n_rings);
+  if (in->n_rings && in->ring_start[0] != 0)
+    return qk__region_fail(err, QK_ERR_INVALID, SIZE_MAX, "ring_start[0] must be 0");
+  if (in->n_rings && in->ring_start[in->n_rings] >= UINT32_MAX)
+    return qk__region_fail(err, QK_ERR_LIMIT, SIZE_MAX, "too many vertices");
+  for (size_t f = 0; f < in->n_features; f++) {
+    if (in->feature_start[f + 1] < in->feature_start[f])
+      return qk__region_fail(err, QK_ERR_INVALID, f, "feature %zu: ring offsets decrease", f);
+    for (size_t r = in->feature_start[f]; r < in->feature_start[f + 1]; r++) {
+      size_t s = in->ring_start[r], e = in->ring_start[r + 1];
+      size_t k = r - in->feature_start[f];
+      if (e < s)
+        return qk__region_fail(err, QK_ERR_INVALID, f,
+                               "feature %zu, ring %zu: vertex offsets "
+                               "decrease",
+                               f, k);
+      if (e - s < 4)
+        return qk__region_fail(err, QK_ERR_GEOMETRY, f,
+                               "feature %zu, ring %zu: %zu positions (a ring needs at least 4)", f,
+                               k, e - s);
+      for (size_t v = s; v < e; v++) {
+        qk_status_t st = qk__region_check_coord(planar, in->xy[2 * v], in->xy[2 * v + 1], f, err);
+        if (st) return st;
+      }
+      const double *p = in->xy + 2 * s, *q = in->xy + 2 * (e - 1);
+      if (p[0] != q[0] || p[1] != q[1])
+        return qk__region_fail(err, QK_ERR_GEOMETRY, f,
+                               "feature %zu, ring %zu: not closed (first position (%.17g, %.17g), "
+                               "last (%.17g, %.17g))",
+                               f, k, p[0], p[1], q[0], q[1]);
+    }
+  }
+  return QK_OK;
+}
+
+qk_status_t qk__region_prepare(const qk_allocator_t *a, const qk_region_arrays_t *in, int planar,
+                               qk__pieces_t *out, qk_error_t *err) {
+  memset(out, 0, sizeof *out);
+  qk_status_t st = check_arrays(in, planar, err);
+  if (st) return st;
+  for (size_t f = 0; f < in->n_features && !st; f++) {
+    for (size_t r = in->feature_start[f]; r < in->feature_start[f + 1] && !st; r++) {
+      size_t s = in->ring_start[r], len = in->ring_start[r + 1] - s;
+      ring_ctx_t c = {a, out, (uint32_t)f, (uint32_t)r, 0};
+      if (planar) {
+        for (size_t i = 0; i + 1 < len && !st; i++) {
+          const double *p = in->xy + 2 * (s + i);
+          st = piece(&c, p[0], p[1], p[2], p[3], (uint32_t)(s + i));
+        }
+        continue;
+      }
+      /* The winding first (cheap); for a ring around the globe, the area it encloses
+       * towards the north pole decides which pole it holds. */
+      long k = 0;
+      for (size_t i = 0; i + 1 < len; i++) {
+        double d = in->xy[2 * (s + i + 1)] - in->xy[2 * (s + i)];
+        k += d < -180 ? 1 : d > 180 ? -1 : 0;
+      }
+      double P = 90;
+      if (k != 0) {
+        ring_ctx_t probe = {a, NULL, 0, 0, 0};
+        ring_lonlat(&probe, in->xy, s, len, 90, &k);
+        if (fabs(probe.area2) * 0.5 > 0.5 * 360 * 180) P = -90;
+      }
+      st = ring_lonlat(&c, in->xy, s, len, P, &k);
+    }
+  }
+  if (st) {
+    qk__pieces_free(a, out);
+    if (st == QK_ERR_NOMEM)
+      qk__region_fail(err, st, SIZE_MAX, "out of memory");
+    else
+      qk__region_fail(err, st, SIZE_MAX, "too many edges");
+  }
+  return st;
+}

@@ -1,0 +1,845 @@
+/*
+ * Test plan for region/ (polygon layers, point location). The oracle is a brute-force
+ * crossing-parity test written here independently of the library: layers are built on
+ * integer coordinates, the oracle decides with 128-bit integer orientations, and the
+ * library sees the same geometry translated and scaled by exact powers of two (so its
+ * floating-point filter meets non-trivial values near degeneracy).
+ *  - random layers (self-intersecting rings, several rings per feature, many points on
+ *    edges and vertices): locate, locate_all and the three boundary rules == oracle, with
+ *    leaf capacities 1, 3 and the default;
+ *  - coverages: grid cells and jittered quadrilateral cells sharing edges; points on
+ *    shared edges and vertices belong to exactly one feature under semi-open;
+ *  - closed and open rules on hand-made squares; reversed windings give the same answers;
+ *  - holes and multipolygons; bow-tie rings (and the self-intersection count);
+ *  - lon/lat mode: an antimeridian-crossing square, a ring around the south pole,
+ *    longitudes 180 / -180 / 540, latitudes beyond the poles, planar mode switching it off;
+ *  - batch == single, threaded batch == single;
+ *  - allocation failure at every N (arrays and GeoJSON): QK_ERR_NOMEM, nothing leaked;
+ *  - GeoJSON: Feature, bare geometry, skipped geometries, properties; errors with line
+ *    and column, feature index and reason;
+ *  - real data (skipped when ../shared/data is absent): countries-50m with the
+ *    Russia / Finland / Norway cities of issue 9 and famous cities.
+ */
+#define _XOPEN_SOURCE 700 /* mkstemp, fdopen */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "qk_test.h"
+/* test_region_grid_sides reads the descent's grid (internal) to aim at its cell sides. */
+#include "region/region_internal.h"
+
+#ifdef QK_HAVE_JSONC
+/* The GeoJSON fuzz target, compiled in with its failures reported through cmocka; its
+ * seed corpus is replayed below. */
+#define QKF_REPLAY 1
+#define QKF_FAIL(...) fail_msg(__VA_ARGS__)
+#include "fuzz/fuzz_geojson.c"
+#include <dirent.h>
+#endif
+
+/* ---- an integer layer and its oracle ------------------------------------------------ */
+
+typedef struct tl {
+  long *xy; /* integer coordinates */
+  size_t nv, cap_v;
+  size_t rs[512];
+  size_t nr;
+  size_t fs[256];
+  size_t nf;
+} tl_t;
+
+static void tl_init(tl_t *t) {
+  memset(t, 0, sizeof *t);
+  t->cap_v = 4096;
+  t->xy = malloc(2 * t->cap_v * sizeof(long));
+}
+
+static void tl_free(tl_t *t) { free(t->xy); }
+
+static void tl_vertex(tl_t *t, long x, long y) {
+  if (t->nv == t->cap_v) {
+    t->cap_v *= 2;
+    t->xy = realloc(t->xy, 2 * t->cap_v * sizeof(long));
+  }
+  t->xy[2 * t->nv] = x;
+  t->xy[2 * t->nv + 1] = y;
+  t->nv++;
+}
+
+/* Add a ring from n points (closed here). */
+static void tl_ring(tl_t *t, const long *p, size_t n) {
+  if (t->nr == 0) t->rs[0] = 0;
+  for (size_t i = 0; i < n; i++) tl_vertex(t, p[2 * i], p[2 * i + 1]);
+  tl_vertex(t, p[0], p[1]);
+  t->rs[++t->nr] = t->nv;
+}
+
+static void tl_end_feature(tl_t *t) {
+  if (t->nf == 0) t->fs[0] = 0;
+  t->fs[++t->nf] = t->nr;
+}
+
+/* Exact: the tests' coordinates stay below 2^20, so the products fit in 64 bits. */
+static int orient_i(long ax, long ay, long bx, long by, long cx, long cy) {
+  long long d = (long long)(bx - ax) * (cy - ay) - (long long)(by - ay) * (cx - ax);
+  return (d > 0) - (d < 0);
+}
+
+/* Independent oracle: half-open crossing parity (the point moved by (e, e^2)), plus an
+ * exact on-edge test for the closed and open rules. */
+static int oracle_in(const tl_t *t, size_t f, long px, long py, qk_boundary_t rule) {
+  int par = 0, on = 0;
+  for (size_t r = t->fs[f]; r < t->fs[f + 1]; r++)
+    for (size_t v = t->rs[r]; v + 1 < t->rs[r + 1]; v++) {
+      long ax = t->xy[2 * v], ay = t->xy[2 * v + 1], bx = t->xy[2 * v + 2], by = t->xy[2 * v + 3];
+      if (ax == bx && ay == by) continue;
+      int o = orient_i(ax, ay, bx, by, px, py);
+      if ((ay > py) != (by > py) && ((by > ay) ? o > 0 : o < 0)) par ^= 1;
+      if (o == 0 && px >= (ax < bx ? ax : bx) && px <= (ax < bx ? bx : ax) &&
+          py >= (ay < by ? ay : by) && py <= (ay < by ? by : ay))
+        on = 1;
+    }
+  if (rule == QK_BOUNDARY_SEMI_OPEN) return par;
+  if (rule == QK_BOUNDARY_CLOSED) return par || on;
+  return par && !on;
+}
+
+/* The library's view: x = OFF + ix * SCALE (exact for |ix| < 2^26). */
+#define OFF 1048576.0
+#define SCALE (1.0 / 128)
+
+static qk_region_t *tl_build(const tl_t *t, uint32_t leaf_edges, const qk_allocator_t *alloc,
+                             qk_status_t *st_out) {
+  double *xy = malloc(2 * (t->nv + 1) * sizeof(double));
+  for (size_t i = 0; i < 2 * t->nv; i++) xy[i] = OFF + (double)t->xy[i] * SCALE;
+  qk_region_arrays_t a = {xy, t->rs, t->nr, t->fs, t->nf};
+  qk_region_options_t o;
+  qk_region_options_init(&o);
+  o.planar = 1;
+  o.leaf_edges = leaf_edges;
+  o.allocator = alloc;
+  o.keep_tree = 1;
+  qk_region_t *r = NULL;
+  qk_error_t err;
+  qk_status_t st = qk_region_from_arrays(&a, &o, &r, &err);
+  free(xy);
+  if (st_out)
+    *st_out = st;
+  else if (st)
+    fail_msg("build: %s: %s", qk_strerror(st), err.message);
+  return r;
+}
+
+static qk_point_t tp(long x, long y) {
+  return (qk_point_t){OFF + (double)x * SCALE, OFF + (double)y * SCALE};
+}
+
+/* Compare every query answer with the oracle at integer point (x, y). */
+static void check_point(const qk_region_t *r, const tl_t *t, long x, long y, uint64_t seed) {
+  for (int rule = 0; rule < 3; rule++) {
+    uint32_t want = QK_NONE, got;
+    uint32_t all[256];
+    size_t nwant = 0, n;
+    for (size_t f = 0; f < t->nf; f++)
+      if (oracle_in(t, f, x, y, (qk_boundary_t)rule)) {
+        if (want == QK_NONE) want = (uint32_t)f;
+        all[nwant++] = (uint32_t)f;
+      }
+    assert_int_equal(qk_region_locate(r, tp(x, y), (qk_boundary_t)rule, &got), QK_OK);
+    if (got != want)
+      fail_msg("seed %llu rule %d point (%ld, %ld): locate %d, oracle %d", (unsigned long long)seed,
+               rule, x, y, (int)got, (int)want);
+    uint32_t buf[256];
+    assert_int_equal(qk_region_locate_all(r, tp(x, y), (qk_boundary_t)rule, buf, 256, &n), QK_OK);
+    if (n != nwant)
+      fail_msg("seed %llu rule %d point (%ld, %ld): locate_all %zu features, oracle %zu",
+               (unsigned long long)seed, rule, x, y, n, nwant);
+    for (size_t i = 0; i < n; i++) assert_int_equal(buf[i], all[i]);
+  }
+}
+
+/* ---- random layers ------------------------------------------------------------------- */
+
+static void random_layer(qkt_rng_t *g, tl_t *t, size_t nf, long span) {
+  tl_init(t);
+  for (size_t f = 0; f < nf; f++) {
+    size_t rings = 1 + qkt_rng_below(g, 3);
+    for (size_t k = 0; k < rings; k++) {
+      long p[2 * 12];
+      size_t n = 3 + qkt_rng_below(g, 8);
+      long cx = (long)qkt_rng_below(g, (uint32_t)span), cy = (long)qkt_rng_below(g, (uint32_t)span);
+      long rad = 1 + (long)qkt_rng_below(g, (uint32_t)(span / 3));
+      for (size_t i = 0; i < n; i++) {
+        p[2 * i] = cx - rad + (long)qkt_rng_below(g, (uint32_t)(2 * rad + 1));
+        p[2 * i + 1] = cy - rad + (long)qkt_rng_below(g, (uint32_t)(2 * rad + 1));
+      }
+      tl_ring(t, p, n);
+    }
+    tl_end_feature(t);
+  }
+}
+
+static void test_region_random_vs_oracle(void **state) {
+  (void)state;
+  uint64_t seed = qkt_seed(9001);
+  qkt_rng_t g;
+  qkt_rng_seed(&g, seed);
+  const uint32_t caps[3] = {1, 3, 0};
+  for (int round = 0; round < 12; round++) {
+    tl_t t;
+    long span = round % 2 ? 24 : 200;
+    random_layer(&g, &t, 1 + qkt_rng_below(&g, 12), span);
+    qk_region_t *r = tl_build(&t, caps[round % 3], NULL, NULL);
+    QKT_CHECK_TREE(qk_region_tree(r));
+    /* vertices (exactly on edges), random lattice points, points outside */
+    for (size_t v = 0; v < t.nv; v++) check_point(r, &t, t.xy[2 * v], t.xy[2 * v + 1], seed);
+    for (int i = 0; i < 600; i++) {
+      long x = -3 + (long)qkt_rng_below(&g, (uint32_t)span + 6);
+      long y = -3 + (long)qkt_rng_below(&g, (uint32_t)span + 6);
+      check_point(r, &t, x, y, seed);
+    }
+    /* midpoints of edges: scale the layer by 2 */
+    qk_region_free(r);
+    tl_t t2 = t;
+    t2.xy = malloc(2 * t.nv * sizeof(long));
+    for (size_t i = 0; i < 2 * t.nv; i++) t2.xy[i] = 2 * t.xy[i];
+    r = tl_build(&t2, caps[round % 3], NULL, NULL);
+    for (size_t v = 0; v + 1 < t2.nv; v++)
+      check_point(r, &t2, (t2.xy[2 * v] + t2.xy[2 * v + 2]) / 2,
+                  (t2.xy[2 * v + 1] + t2.xy[2 * v + 3]) / 2, seed);
+    qk_region_free(r);
+    free(t2.xy);
+    tl_free(&t);
+  }
+}
+
+/* Points exactly on, and one ulp either side of, the grid cells' sides and the cell
+ * centres of the top levels, against a brute force over the layer's pieces (the half-open
+ * ray with the library's exact predicate: this checks the descent and the grid, which
+ * must send every point to the leaf the build assigned it to). */
+static uint32_t brute_pieces(const qk_region_t *r, double x, double y) {
+  int par = 0;
+  for (size_t i = 0; i < r->n_segs; i++) {
+    const qk__seg_t *g = &r->segs[i];
+    if ((g->ay > y) != (g->by > y)) {
+      int s = qk__side(g->ax, g->ay, g->bx, g->by, x, y);
+      if ((g->by > g->ay) ? s > 0 : s < 0) par ^= 1;
+    }
+    if (i + 1 == r->n_segs || r->seg_feat[i + 1] != r->seg_feat[i]) {
+      if (par) return r->seg_feat[i];
+      par = 0;
+    }
+  }
+  return QK_NONE;
+}
+
+static void test_region_grid_sides(void **state) {
+  (void)state;
+  uint64_t seed = qkt_seed(31337);
+  qkt_rng_t g;
+  qkt_rng_seed(&g, seed);
+  for (int round = 0; round < 3; round++) {
+    tl_t t;
+    random_layer(&g, &t, 40, 5000);
+    qk_region_t *r = tl_build(&t, round + 1, NULL, NULL);
+    assert_true(r->grid_level >= 2);
+    size_t n = (size_t)1 << r->grid_level;
+    for (size_t k = 0; k < 3000; k++) {
+      size_t i = qkt_rng_below(&g, (uint32_t)n), j = qkt_rng_below(&g, (uint32_t)n);
+      double xs[3] = {r->gx[i], nextafter(r->gx[i], -INFINITY), nextafter(r->gx[i], INFINITY)};
+      double ys[3] = {r->gy[j], nextafter(r->gy[j], -INFINITY), nextafter(r->gy[j], INFINITY)};
+      for (int a = 0; a < 3; a++)
+        for (int b = 0; b < 3; b++) {
+          uint32_t f, want = brute_pieces(r, xs[a], ys[b]);
+          qk_region_locate(r, (qk_point_t){xs[a], ys[b]}, QK_BOUNDARY_SEMI_OPEN, &f);
+          if (f != want)
+            fail_msg("seed %llu: (%.17g, %.17g): locate %d, brute force %d",
+                     (unsigned long long)seed, xs[a], ys[b], (int)f, (int)want);
+        }
+    }
+    qk_region_free(r);
+    tl_free(&t);
+  }
+}
+
+/* ---- coverages ------------------------------------------------------------------------- */
+
+static void exactly_one(const qk_region_t *r, long x, long y, uint64_t seed) {
+  size_t n;
+  assert_int_equal(qk_region_locate_all(r, tp(x, y), QK_BOUNDARY_SEMI_OPEN, NULL, 0, &n), QK_OK);
+  if (n != 1)
+    fail_msg("seed %llu: point (%ld, %ld) in %zu features", (unsigned long long)seed, x, y, n);
+}
+
+static void test_region_coverage_grid(void **state) {
+  (void)state;
+  tl_t t;
+  tl_init(&t);
+  const long n = 8, s = 4;
+  for (long i = 0; i < n; i++)
+    for (long j = 0; j < n; j++) {
+      long p[8] = {i * s, j * s, (i + 1) * s, j * s, (i + 1) * s, (j + 1) * s, i * s, (j + 1) * s};
+      tl_ring(&t, p, 4);
+      tl_end_feature(&t);
+    }
+  for (uint32_t cap = 1; cap <= 8; cap *= 8) {
+    qk_region_t *r = tl_build(&t, cap, NULL, NULL);
+    for (long x = 0; x < n * s; x++)
+      for (long y = 0; y < n * s; y++) {
+        exactly_one(r, x, y, 0);
+        check_point(r, &t, x, y, 0);
+      }
+    /* the outer top and right sides are outside after the perturbation, the others in */
+    uint32_t f;
+    qk_region_locate(r, tp(n * s, 3), QK_BOUNDARY_SEMI_OPEN, &f);
+    assert_int_equal(f, QK_NONE);
+    qk_region_locate(r, tp(n * s, 3), QK_BOUNDARY_CLOSED, &f);
+    assert_int_equal(f, (uint32_t)(n - 1) * n);
+    qk_region_free(r);
+  }
+  tl_free(&t);
+}
+
+static void test_region_coverage_jittered(void **state) {
+  (void)state;
+  uint64_t seed = qkt_seed(77);
+  qkt_rng_t g;
+  qkt_rng_seed(&g, seed);
+  for (int round = 0; round < 4; round++) {
+    enum { N = 7 };
+    long vx[N + 1][N + 1], vy[N + 1][N + 1];
+    for (int i = 0; i <= N; i++)
+      for (int j = 0; j <= N; j++) {
+        int border = i == 0 || j == 0 || i == N || j == N;
+        vx[i][j] = 20 * i + (border ? 0 : (long)qkt_rng_below(&g, 13) - 6);
+        vy[i][j] = 20 * j + (border ? 0 : (long)qkt_rng_below(&g, 13) - 6);
+      }
+    tl_t t;
+    tl_init(&t);
+    for (int i = 0; i < N; i++)
+      for (int j = 0; j < N; j++) {
+        long p[8] = {vx[i][j],         vy[i][j],         vx[i + 1][j], vy[i + 1][j],
+                     vx[i + 1][j + 1], vy[i + 1][j + 1], vx[i][j + 1], vy[i][j + 1]};
+        if (qkt_rng_below(&g, 2)) { /* either winding */
+          long q[8] = {p[6], p[7], p[4], p[5], p[2], p[3], p[0], p[1]};
+          memcpy(p, q, sizeof p);
+        }
+        tl_ring(&t, p, 4);
+        tl_end_feature(&t);
+      }
+    qk_region_t *r = tl_build(&t, round % 2 ? 2 : 0, NULL, NULL);
+    for (int i = 1; i < N; i++)
+      for (int j = 1; j < N; j++) {
+        exactly_one(r, vx[i][j], vy[i][j], seed); /* an inner vertex */
+        check_point(r, &t, vx[i][j], vy[i][j], seed);
+      }
+    /* points on shared edges: lattice points of the segments */
+    for (int i = 1; i < N; i++)
+      for (int j = 0; j < N; j++) {
+        long ax = vx[i][j], ay = vy[i][j], bx = vx[i][j + 1], by = vy[i][j + 1];
+        for (int k = 1; k < 8; k++) {
+          /* only lattice points exactly on the edge */
+          long num_x = ax * (8 - k) + bx * k, num_y = ay * (8 - k) + by * k;
+          if (num_x % 8 || num_y % 8) continue;
+          exactly_one(r, num_x / 8, num_y / 8, seed);
+        }
+      }
+    for (int i = 0; i < 2000; i++) {
+      long x = 1 + (long)qkt_rng_below(&g, 20 * N - 2), y = 1 + (long)qkt_rng_below(&g, 20 * N - 2);
+      exactly_one(r, x, y, seed);
+    }
+    qk_region_free(r);
+    tl_free(&t);
+  }
+}
+
+/* ---- boundary rules, windings, holes, bow-ties ------------------------------------------ */
+
+static void test_region_rules_and_windings(void **state) {
+  (void)state;
+  tl_t t, u;
+  tl_init(&t);
+  tl_init(&u);
+  long sq[8] = {0, 0, 10, 0, 10, 10, 0, 10};
+  long rev[8] = {0, 10, 10, 10, 10, 0, 0, 0};
+  long hole[8] = {3, 3, 7, 3, 7, 7, 3, 7};
+  long holer[8] = {3, 7, 7, 7, 7, 3, 3, 3};
+  long far[8] = {20, 0, 30, 0, 30, 10, 20, 10};
+  tl_ring(&t, sq, 4), tl_ring(&t, hole, 4), tl_ring(&t, far, 4), tl_end_feature(&t);
+  tl_ring(&u, rev, 4), tl_ring(&u, hole, 4), tl_ring(&u, far, 4), tl_end_feature(&u);
+  (void)holer;
+  qk_region_t *a = tl_build(&t, 0, NULL, NULL), *b = tl_build(&u, 0, NULL, NULL);
+  for (long x = -2; x <= 32; x++)
+    for (long y = -2; y <= 12; y++) {
+      check_point(a, &t, x, y, 0);
+      for (int rule = 0; rule < 3; rule++) {
+        uint32_t fa, fb;
+        qk_region_locate(a, tp(x, y), (qk_boundary_t)rule, &fa);
+        qk_region_locate(b, tp(x, y), (qk_boundary_t)rule, &fb);
+        assert_int_equal(fa, fb);
+      }
+    }
+  uint32_t f;
+  /* hole: (5,5) out, (1,1) in, (25,5) in (second part) */
+  qk_region_locate(a, tp(5, 5), QK_BOUNDARY_SEMI_OPEN, &f), assert_int_equal(f, QK_NONE);
+  qk_region_locate(a, tp(1, 1), QK_BOUNDARY_SEMI_OPEN, &f), assert_int_equal(f, 0);
+  qk_region_locate(a, tp(25, 5), QK_BOUNDARY_SEMI_OPEN, &f), assert_int_equal(f, 0);
+  /* boundary: left side (0, 5) in under semi-open, right side (10, 5) out; closed both in,
+   * open both out; a hole's edge (3, 5) is boundary too */
+  qk_region_locate(a, tp(0, 5), QK_BOUNDARY_SEMI_OPEN, &f), assert_int_equal(f, 0);
+  qk_region_locate(a, tp(10, 5), QK_BOUNDARY_SEMI_OPEN, &f), assert_int_equal(f, QK_NONE);
+  qk_region_locate(a, tp(10, 5), QK_BOUNDARY_CLOSED, &f), assert_int_equal(f, 0);
+  qk_region_locate(a, tp(0, 5), QK_BOUNDARY_OPEN, &f), assert_int_equal(f, QK_NONE);
+  qk_region_locate(a, tp(3, 5), QK_BOUNDARY_CLOSED, &f), assert_int_equal(f, 0);
+  qk_region_locate(a, tp(0, 0), QK_BOUNDARY_CLOSED, &f), assert_int_equal(f, 0);
+  qk_region_locate(a, tp(0, 0), QK_BOUNDARY_OPEN, &f), assert_int_equal(f, QK_NONE);
+  qk_region_stats_t s;
+  qk_region_stats(a, &s);
+  assert_int_equal(s.features, 1);
+  assert_int_equal(s.rings, 3);
+  assert_int_equal(s.holes, 2);
+  assert_int_equal(s.self_intersecting, 0);
+  qk_region_free(a);
+  qk_region_free(b);
+  tl_free(&t);
+  tl_free(&u);
+}
+
+static void test_region_bowtie(void **state) {
+  (void)state;
+  tl_t t;
+  tl_init(&t);
+  long bow[8] = {0, 0, 10, 10, 10, 0, 0, 10};
+  tl_ring(&t, bow, 4), tl_end_feature(&t);
+  qk_region_t *r = tl_build(&t, 0, NULL, NULL);
+  for (long x = -1; x <= 11; x++)
+    for (long y = -1; y <= 11; y++) check_point(r, &t, x, y, 0);
+  uint32_t f;
+  qk_region_locate(r, tp(8, 5), QK_BOUNDARY_SEMI_OPEN, &f), assert_int_equal(f, 0);
+  qk_region_locate(r, tp(5, 8), QK_BOUNDARY_SEMI_OPEN, &f), assert_int_equal(f, QK_NONE);
+  qk_region_stats_t s;
+  qk_region_stats(r, &s);
+  assert_int_equal(s.self_intersecting, 1);
+  qk_region_free(r);
+  tl_free(&t);
+}
+
+/* ---- lon/lat mode ------------------------------------------------------------------------ */
+
+static qk_region_t *lonlat(const double *xy, const size_t *rs, size_t nr, const size_t *fs,
+                           size_t nf, int planar) {
+  qk_region_arrays_t a = {xy, rs, nr, fs, nf};
+  qk_region_options_t o;
+  qk_region_options_init(&o);
+  o.planar = planar;
+  qk_region_t *r;
+  qk_error_t e;
+  qk_status_t st = qk_region_from_arrays(&a, &o, &r, &e);
+  if (st) fail_msg("%s", e.message);
+  return r;
+}
+
+static uint32_t at(const qk_region_t *r, double x, double y, qk_boundary_t b) {
+  uint32_t f;
+  qk_region_locate(r, (qk_point_t){x, y}, b, &f);
+  return f;
+}
+
+static void test_region_lonlat(void **state) {
+  (void)state;
+  /* feature 0: a square across the antimeridian; feature 1: a ring around the south pole
+   * (westward, as Natural Earth's); feature 2: an Arctic ring, eastward, cut at +-180
+   * with vertices on both sides */
+  double xy[] = {170, -10, -170, -10, -170, 10, 170, 10, 170, -10, -180, -80, 90,  -80, 0,    -80,
+                 -90, -80, -180, -80, -180, 80, -90, 80, 0,   80,  90,   80,  180, 80,  -180, 80};
+  size_t rs[] = {0, 5, 10, 16}, fs[] = {0, 1, 2, 3};
+  qk_region_t *r = lonlat(xy, rs, 3, fs, 3, 0);
+  assert_int_equal(at(r, 175, 0, 0), 0);
+  assert_int_equal(at(r, -175, 0, 0), 0);
+  assert_int_equal(at(r, 180, 0, 0), 0);
+  assert_int_equal(at(r, -180, 5, 0), 0);
+  assert_int_equal(at(r, 540, 0, 0), 0);  /* = 180 */
+  assert_int_equal(at(r, -545, 0, 0), 0); /* = 175 */
+  assert_int_equal(at(r, 0, 0, 0), QK_NONE);
+  assert_int_equal(at(r, 160, 0, 0), QK_NONE);
+  assert_int_equal(at(r, 0, -85, 0), 1);
+  assert_int_equal(at(r, 123, -90, 0), 1);
+  assert_int_equal(at(r, 123, -90, QK_BOUNDARY_CLOSED), 1);
+  assert_int_equal(at(r, -45, -79, 0), QK_NONE);
+  assert_int_equal(at(r, 0, 85, 0), 2);
+  assert_int_equal(at(r, 179.5, 89, 0), 2);
+  assert_int_equal(at(r, 0, 75, 0), QK_NONE);
+  assert_int_equal(at(r, 0, 91, 0), QK_NONE);
+  assert_int_equal(at(r, 0, -91, 0), QK_NONE);
+  /* the seam inside the square is not a boundary */
+  assert_int_equal(at(r, -180, 0, QK_BOUNDARY_OPEN), 0);
+  uint32_t f;
+  assert_int_equal(qk_region_locate(r, (qk_point_t){NAN, 0}, 0, &f), QK_ERR_NONFINITE);
+  assert_int_equal(f, QK_NONE);
+  qk_region_free(r);
+  /* planar mode: the first square is the band between 170 and -170 */
+  r = lonlat(xy, rs, 1, fs, 1, 1);
+  assert_int_equal(at(r, 0, 0, 0), 0);
+  assert_int_equal(at(r, 175, 0, 0), QK_NONE);
+  qk_region_free(r);
+  /* out-of-range coordinates in lon/lat mode name the mode */
+  double bad[] = {0, 0, 200, 0, 200, 10, 0, 0};
+  size_t brs[] = {0, 4}, bfs[] = {0, 1};
+  qk_region_arrays_t a = {bad, brs, 1, bfs, 1};
+  qk_error_t e;
+  assert_int_equal(qk_region_from_arrays(&a, NULL, &r, &e), QK_ERR_GEOMETRY);
+  assert_null(r);
+  assert_non_null(strstr(e.message, "planar"));
+}
+
+/* ---- batch and threads ------------------------------------------------------------------- */
+
+static void test_region_batch_threads(void **state) {
+  (void)state;
+  uint64_t seed = qkt_seed(4242);
+  qkt_rng_t g;
+  qkt_rng_seed(&g, seed);
+  tl_t t;
+  random_layer(&g, &t, 30, 1000);
+  qk_region_t *r = tl_build(&t, 0, NULL, NULL);
+  size_t n = 50000;
+  qk_point_t *p = malloc(n * sizeof *p);
+  uint32_t *a = malloc(n * sizeof *a), *b = malloc(n * sizeof *b), *c = malloc(n * sizeof *c);
+  for (size_t i = 0; i < n; i++)
+    p[i] = tp(-10 + (long)qkt_rng_below(&g, 1020), -10 + (long)qkt_rng_below(&g, 1020));
+  p[7].x = NAN;
+  for (int rule = 0; rule < 3; rule++) {
+    for (size_t i = 0; i < n; i++) {
+      qk_status_t st = qk_region_locate(r, p[i], (qk_boundary_t)rule, &a[i]);
+      assert_int_equal(st, i == 7 ? QK_ERR_NONFINITE : QK_OK);
+    }
+    assert_int_equal(qk_region_locate_batch(r, p, n, (qk_boundary_t)rule, 1, b), QK_ERR_NONFINITE);
+    assert_int_equal(qk_region_locate_batch(r, p, n, (qk_boundary_t)rule, 3, c), QK_ERR_NONFINITE);
+    assert_memory_equal(a, b, n * sizeof *a);
+    assert_memory_equal(a, c, n * sizeof *a);
+    assert_int_equal(qk_region_locate_batch(r, p, n, (qk_boundary_t)rule, 0, c), QK_ERR_NONFINITE);
+    assert_memory_equal(a, c, n * sizeof *a);
+  }
+  free(p), free(a), free(b), free(c);
+  qk_region_free(r);
+  tl_free(&t);
+}
+
+/* ---- allocation failure -------------------------------------------------------------------- */
+
+static void test_region_alloc_failure(void **state) {
+  (void)state;
+  qkt_rng_t g;
+  qkt_rng_seed(&g, 5);
+  tl_t t;
+  random_layer(&g, &t, 6, 100);
+  for (size_t n = 1;; n++) {
+    qkt_alloc_t as = {0};
+    as.fail_at = n;
+    qk_allocator_t al = qkt_alloc_make(&as);
+    qk_status_t st;
+    qk_region_t *r = tl_build(&t, 2, &al, &st);
+    if (st == QK_OK) {
+      assert_false(as.failed);
+      check_point(r, &t, 50, 50, 5);
+      qk_region_free(r);
+      assert_int_equal(as.live_blocks, 0);
+      break;
+    }
+    assert_int_equal(st, QK_ERR_NOMEM);
+    assert_null(r);
+    assert_int_equal(as.live_blocks, 0);
+    assert_int_equal(as.live_bytes, 0);
+    assert_true(n < 100000);
+  }
+  tl_free(&t);
+  const char *js = "{\"type\":\"FeatureCollection\",\"features\":[{\"type\":\"Feature\","
+                   "\"properties\":{\"name\":\"a\",\"n\":3},\"geometry\":{\"type\":\"Polygon\","
+                   "\"coordinates\":[[[0,0],[1,0],[1,1],[0,0]],[[0.1,0.05],[0.2,0.05],"
+                   "[0.2,0.1],[0.1,0.05]]]}},{\"type\":\"Feature\",\"properties\":null,"
+                   "\"geometry\":{\"type\":\"Point\",\"coordinates\":[0,0]}}]}";
+  for (size_t n = 1;; n++) {
+    qkt_alloc_t as = {0};
+    as.fail_at = n;
+    qk_allocator_t al = qkt_alloc_make(&as);
+    qk_region_options_t o;
+    qk_region_options_init(&o);
+    o.allocator = &al;
+    qk_region_t *r;
+    qk_error_t e;
+    qk_status_t st = qk_region_read_geojson_text(js, strlen(js), &o, &r, &e);
+    if (st == QK_OK) {
+      assert_string_equal(qk_region_property(r, 0, "name"), "a");
+      qk_region_free(r);
+      assert_int_equal(as.live_blocks, 0);
+      break;
+    }
+    assert_int_equal(st, QK_ERR_NOMEM);
+    assert_null(r);
+    assert_int_equal(as.live_blocks, 0);
+    assert_true(n < 100000);
+  }
+}
+
+/* ---- GeoJSON ----------------------------------------------------------------------------------
+ */
+
+static qk_status_t gj(const char *text, qk_region_t **r, qk_error_t *e) {
+  return qk_region_read_geojson_text(text, strlen(text), NULL, r, e);
+}
+
+static void test_region_geojson(void **state) {
+  (void)state;
+  qk_region_t *r;
+  qk_error_t e;
+  const char *fc =
+      "{\"type\":\"FeatureCollection\",\"features\":[\n"
+      "{\"type\":\"Feature\",\"properties\":{\"name\":\"A\",\"pop\":12,\"ok\":true,\"z\":null},"
+      "\"geometry\":{\"type\":\"MultiPolygon\",\"coordinates\":[[[[0,0],[1,0],[1,1],[0,1],[0,0]]],"
+      "[[[5,5],[6,5],[6,6],[5,5]]]]}},\n"
+      "{\"type\":\"Feature\",\"properties\":{\"name\":\"line\"},\"geometry\":{\"type\":"
+      "\"LineString\",\"coordinates\":[[0,0],[1,1]]}},\n"
+      "{\"type\":\"Feature\",\"properties\":{\"name\":\"B\"},\"geometry\":{\"type\":\"Polygon\","
+      "\"coordinates\":[[[0,0],[0,1],[-1,1],[-1,0],[0,0]]]}},\n"
+      "{\"type\":\"Feature\",\"properties\":{},\"geometry\":null}]}";
+  assert_int_equal(gj(fc, &r, &e), QK_OK);
+  qk_region_stats_t s;
+  qk_region_stats(r, &s);
+  assert_int_equal(s.features, 4);
+  assert_int_equal(s.skipped, 2);
+  assert_int_equal(s.rings, 3);
+  assert_int_equal(s.holes, 0);
+  assert_string_equal(qk_region_property(r, 0, "name"), "A");
+  assert_string_equal(qk_region_property(r, 0, "pop"), "12");
+  assert_string_equal(qk_region_property(r, 0, "ok"), "true");
+  assert_string_equal(qk_region_property(r, 0, "z"), "");
+  assert_null(qk_region_property(r, 0, "nope"));
+  assert_string_equal(qk_region_property(r, 2, "name"), "B");
+  assert_int_equal(at(r, 0.5, 0.5, 0), 0);
+  assert_int_equal(at(r, 5.7, 5.2, 0), 0);
+  assert_int_equal(at(r, -0.5, 0.5, 0), 2);
+  assert_int_equal(at(r, 0, 0.5, 0), 0); /* shared edge x = 0: the feature to the right */
+  assert_int_equal(at(r, 0, 0.5, QK_BOUNDARY_CLOSED), 0);
+  size_t n;
+  uint32_t fl[4];
+  qk_region_locate_all(r, (qk_point_t){0, 0.5}, QK_BOUNDARY_CLOSED, fl, 4, &n);
+  assert_int_equal(n, 2);
+  assert_int_equal(fl[1], 2);
+  qk_region_free(r);
+  /* a bare geometry and a single feature */
+  assert_int_equal(gj("{\"type\":\"Polygon\",\"coordinates\":[[[0,0],[2,0],[2,2],[0,0]]]}", &r, &e),
+                   QK_OK);
+  assert_int_equal(at(r, 1.5, 0.5, 0), 0);
+  qk_region_free(r);
+  assert_int_equal(gj("{\"type\":\"Feature\",\"geometry\":{\"type\":\"Polygon\",\"coordinates\":"
+                      "[[[0,0],[2,0],[2,2],[0,0]]]},\"properties\":{\"k\":\"v\"}}",
+                      &r, &e),
+                   QK_OK);
+  assert_string_equal(qk_region_property(r, 0, "k"), "v");
+  qk_region_free(r);
+
+  /* errors */
+  struct {
+    const char *text;
+    qk_status_t st;
+    unsigned long line;
+    const char *msg;
+  } bad[] = {
+      {"{\"type\":\"FeatureCollection\",\n \"features\": [1,, 2]}", QK_ERR_PARSE, 2,
+       "malformed JSON"},
+      {"{\"type\":\"Polygon\",\"coordinates\":[[[0,0],[1,0],[1,1],[0,0]]]", QK_ERR_PARSE, 1,
+       "end of input"},
+      {"{\"type\":\"Polygon\",\"coordinates\":[[[0,0],[1,0],[1,1],[0,0]]]} x", QK_ERR_PARSE, 1,
+       "after the JSON value"},
+      {"[1,2]", QK_ERR_PARSE, 0, "GeoJSON object"},
+      {"{\"type\":\"FeatureCollection\"}", QK_ERR_PARSE, 0, "features"},
+      {"{\"type\":\"FeatureCollection\",\"features\":[{\"type\":\"Feature\",\"geometry\":{\"type\":"
+       "\"Polygon\",\"coordinates\":[[[0,0],[1,0],[0,0]]]}}]}",
+       QK_ERR_GEOMETRY, 0, "feature 0, polygon 0, ring 0: 3 positions"},
+      {"{\"type\":\"FeatureCollection\",\"features\":[{\"type\":\"Feature\",\"geometry\":null},"
+       "{\"type\":\"Feature\",\"geometry\":{\"type\":\"Polygon\",\"coordinates\":[[[0,0],[1,0],"
+       "[1,1],[0,1]]]}}]}",
+       QK_ERR_GEOMETRY, 0, "feature 1, polygon 0, ring 0: not closed"},
+      {"{\"type\":\"Polygon\",\"coordinates\":[[[0,0],[1,\"a\"],[1,1],[0,0]]]}", QK_ERR_PARSE, 0,
+       "position 1: expected"},
+      {"{\"type\":\"Polygon\",\"coordinates\":[[[0,0],[1,0],[1,1e999],[0,0]]]}", QK_ERR_NONFINITE,
+       0, "not finite"},
+      {"{\"type\":\"Polygon\",\"coordinates\":[[[0,0],[1,0],[1,95],[0,0]]]}", QK_ERR_GEOMETRY, 0,
+       "planar"},
+      {"{\"type\":\"Polygon\",\"coordinates\":{}}", QK_ERR_PARSE, 0, "coordinates"},
+      {"{\"type\":\"Feature\",\"geometry\":{\"type\":\"Polygon\",\"coordinates\":[]},"
+       "\"properties\":5}",
+       QK_ERR_PARSE, 0, "properties"},
+  };
+  for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+    r = (qk_region_t *)1;
+    qk_status_t st = gj(bad[i].text, &r, &e);
+    if (st != bad[i].st || !strstr(e.message, bad[i].msg) || (bad[i].line && e.line != bad[i].line))
+      fail_msg("case %zu: status %s line %lu message '%s'", i, qk_strerror(st), e.line, e.message);
+    assert_null(r);
+  }
+  /* absurd planar coordinates */
+  qk_region_options_t o;
+  qk_region_options_init(&o);
+  o.planar = 1;
+  const char *huge = "{\"type\":\"Polygon\",\"coordinates\":[[[0,0],[1e200,0],[1,1],[0,0]]]}";
+  assert_int_equal(qk_region_read_geojson_text(huge, strlen(huge), &o, &r, &e), QK_ERR_GEOMETRY);
+  assert_non_null(strstr(e.message, "absurd"));
+  assert_int_equal(qk_region_read_geojson("/nonexistent/x.geojson", NULL, &r, &e), QK_ERR_IO);
+}
+
+/* ---- real data ----------------------------------------------------------------------------- */
+
+static void test_region_countries(void **state) {
+  (void)state;
+  const char *dir = getenv("QK_SHARED_DIR");
+  char path[1024];
+  snprintf(path, sizeof path, "%s/data/countries-50m.geojson", dir ? dir : "../shared");
+  FILE *f = fopen(path, "rb");
+  if (!f) {
+    print_message("no %s: skipped\n", path);
+    skip();
+  }
+  fclose(f);
+  qk_region_t *r;
+  qk_error_t e;
+  qk_region_options_t o;
+  qk_region_options_init(&o);
+  o.keep_tree = 1;
+  qk_status_t st = qk_region_read_geojson(path, &o, &r, &e);
+  if (st) fail_msg("%s: %s", path, e.message);
+  struct {
+    const char *city;
+    double lon, lat;
+    const char *country; /* NULL: must not be Russia */
+  } c[] = {
+      {"Rovaniemi", 25.7294, 66.5039, "Finland"},
+      {"Tornio", 24.1470, 65.8481, "Finland"},
+      {"Bodo", 14.4049, 67.2804, NULL},
+      {"Kautokeino", 23.0413, 68.9995, "Norway"},
+      {"Murmansk", 33.0856, 68.9585, "Russia"},
+      {"Moscow", 37.6173, 55.7558, "Russia"},
+      {"Chukotka west of 180", -175.0, 67.0, "Russia"},
+      {"Chukotka east of 180", 175.0, 67.0, "Russia"},
+      {"Viti Levu", 178.0, -17.8, "Fiji"},
+      {"Paris", 2.3522, 48.8566, "France"},
+      {"Berlin", 13.4050, 52.5200, "Germany"},
+      {"Madrid", -3.7038, 40.4168, "Spain"},
+      {"Tokyo", 139.6917, 35.6895, "Japan"},
+      {"Cairo", 31.2357, 30.0444, "Egypt"},
+      {"Sao Paulo", -46.6333, -23.5505, "Brazil"},
+      {"Nairobi", 36.8219, -1.2921, "Kenya"},
+      {"Delhi", 77.1025, 28.7041, "India"},
+      {"Denver", -104.9903, 39.7392, "United States of America"},
+      {"Sydney inland", 150.9, -33.8, "Australia"},
+      {"Antarctic plateau", 0.0, -85.0, "Antarctica"},
+      {"Ross ice", -160.0, -84.0, "Antarctica"},
+  };
+  for (size_t i = 0; i < sizeof c / sizeof c[0]; i++) {
+    uint32_t ft = at(r, c[i].lon, c[i].lat, QK_BOUNDARY_SEMI_OPEN);
+    const char *name = ft == QK_NONE ? "(none)" : qk_region_property(r, ft, "name");
+    if (c[i].country ? strcmp(name, c[i].country) != 0 : strcmp(name, "Russia") == 0)
+      fail_msg("%s (%g, %g): %s, want %s", c[i].city, c[i].lon, c[i].lat, name,
+               c[i].country ? c[i].country : "not Russia");
+  }
+  assert_int_equal(at(r, -30, 0, 0), QK_NONE); /* Atlantic */
+  qk_region_stats_t s;
+  qk_region_stats(r, &s);
+  assert_int_equal(s.features, 241);
+  QKT_CHECK_TREE(qk_region_tree(r));
+  qk_region_free(r);
+}
+
+/* The OGR reader (when built with GDAL) reads the same GeoJSON file to the same layer. */
+static void test_region_ogr(void **state) {
+  (void)state;
+  char path[] = "/tmp/qk_region_ogr_XXXXXX";
+  int fd = mkstemp(path);
+  assert_true(fd >= 0);
+  const char *js =
+      "{\"type\":\"FeatureCollection\",\"features\":["
+      "{\"type\":\"Feature\",\"properties\":{\"name\":\"A\"},\"geometry\":"
+      "{\"type\":\"Polygon\",\"coordinates\":[[[0,0],[4,0],[4,4],[0,4],[0,0]],"
+      "[[1,1],[1,2],[2,2],[2,1],[1,1]]]}},"
+      "{\"type\":\"Feature\",\"properties\":{\"name\":\"B\"},\"geometry\":"
+      "{\"type\":\"MultiPolygon\",\"coordinates\":[[[[4,0],[8,0],[8,4],[4,4],[4,0]]]]}}]}";
+  FILE *f = fdopen(fd, "w");
+  fputs(js, f);
+  fclose(f);
+  qk_region_t *a, *b;
+  qk_error_t e;
+  qk_status_t st = qk_region_read_ogr(path, NULL, &b, &e);
+  if (st == QK_ERR_UNSUPPORTED) {
+    assert_non_null(strstr(e.message, "libgdal-dev"));
+    remove(path);
+    skip();
+  }
+  if (st) fail_msg("ogr: %s", e.message);
+  assert_int_equal(qk_region_read_geojson(path, NULL, &a, &e), QK_OK);
+  remove(path);
+  assert_int_equal(qk_region_feature_count(b), 2);
+  assert_string_equal(qk_region_property(b, 1, "name"), "B");
+  for (double y = -0.5; y <= 4.5; y += 0.25)
+    for (double x = -0.5; x <= 8.5; x += 0.25)
+      for (int rule = 0; rule < 3; rule++)
+        assert_int_equal(at(a, x, y, (qk_boundary_t)rule), at(b, x, y, (qk_boundary_t)rule));
+  qk_region_stats_t s;
+  qk_region_stats(b, &s);
+  assert_int_equal(s.holes, 1);
+  qk_region_free(a);
+  qk_region_free(b);
+  assert_int_equal(qk_region_read_ogr("/nonexistent/none.shp", NULL, &b, &e), QK_ERR_IO);
+}
+
+static void test_region_fuzz_corpus(void **state) {
+  (void)state;
+#ifdef QK_HAVE_JSONC
+  const char *srcdir = getenv("QK_SOURCE_DIR");
+  char dir[1024];
+  snprintf(dir, sizeof dir, "%s/fuzz/corpus/geojson", srcdir ? srcdir : ".");
+  DIR *d = opendir(dir);
+  if (!d) {
+    print_message("no %s: skipped\n", dir);
+    skip();
+  }
+  size_t n = 0;
+  struct dirent *e;
+  while ((e = readdir(d))) {
+    if (e->d_name[0] == '.') continue;
+    char path[2048];
+    snprintf(path, sizeof path, "%s/%s", dir, e->d_name);
+    FILE *f = fopen(path, "rb");
+    if (!f) continue;
+    static uint8_t buf[1 << 16];
+    size_t len = fread(buf, 1, sizeof buf, f);
+    fclose(f);
+    qkf_geojson(buf, len);
+    n++;
+  }
+  closedir(d);
+  assert_true(n > 0);
+#else
+  skip();
+#endif
+}
+
+int main(void) {
+  const struct CMUnitTest tests[] = {
+      cmocka_unit_test(test_region_random_vs_oracle),
+      cmocka_unit_test(test_region_grid_sides),
+      cmocka_unit_test(test_region_coverage_grid),
+      cmocka_unit_test(test_region_coverage_jittered),
+      cmocka_unit_test(test_region_rules_and_windings),
+      cmocka_unit_test(test_region_bowtie),
+      cmocka_unit_test(test_region_lonlat),
+      cmocka_unit_test(test_region_batch_threads),
+      cmocka_unit_test(test_region_alloc_failure),
+      cmocka_unit_test(test_region_geojson),
+      cmocka_unit_test(test_region_countries),
+      cmocka_unit_test(test_region_ogr),
+      cmocka_unit_test(test_region_fuzz_corpus),
+  };
+  return cmocka_run_group_tests(tests, NULL, NULL);
+}

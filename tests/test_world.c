@@ -1,0 +1,729 @@
+/*
+ * Test plan for the moving-objects world (collide/world*.c):
+ *  - every frame of seeded random scenes (uniform, clustered, mixed sizes over six
+ *    decades, all four kinds, objects added and removed mid-run) against an O(n^2) loop
+ *    over a mirror of the objects: pairs, began / ended sets, objects overlapping a
+ *    random box / disc / point / segment, all hits of a segment (as a set, in order of t)
+ *    and the first hit, k nearest (distances);
+ *  - a huge world: unit objects at coordinates near 1e9, and sizes 1e-3 .. 1e3 together;
+ *  - hand-made touching cases of every pair of kinds (integers: the oracle is exact);
+ *  - stale handles are rejected after removal and slot reuse;
+ *  - churn: 10^5 frames of moves, adds and removes on a small world stay within 1.2x the
+ *    memory of a fresh world holding the same objects;
+ *  - allocation failure at every N in add and update leaves the world unchanged, no leak;
+ *  - two threads give the same pairs and batch ray hits as one, and three reader threads
+ *    querying one world at once get the single-threaded answers (run under TSan by
+ *    scripts/tsan.sh).
+ * The oracle computes overlap in long double from the textbook formulas (distance from a
+ * point to a segment, orientation signs), independently of the library's exact code.
+ */
+#include <math.h>
+#include <pthread.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "qk_test.h"
+
+static uint64_t g_seed;
+
+/* Under ThreadSanitizer (scripts/tsan.sh, which is here for the threaded tests) the
+ * single-threaded churn and allocation-failure loops run shorter. */
+#if defined(__SANITIZE_THREAD__)
+#define QKT_TSAN 1
+#elif defined(__has_feature)
+#if __has_feature(thread_sanitizer)
+#define QKT_TSAN 1
+#endif
+#endif
+#ifndef QKT_TSAN
+#define QKT_TSAN 0
+#endif
+
+/* ---- oracle --------------------------------------------------------------------------- */
+
+typedef long double ld;
+
+static ld o_seg_d2(ld px, ld py, ld ax, ld ay, ld bx, ld by) {
+  ld ux = bx - ax, uy = by - ay, uu = ux * ux + uy * uy;
+  ld t = uu > 0 ? ((px - ax) * ux + (py - ay) * uy) / uu : 0;
+  t = t < 0 ? 0 : t > 1 ? 1 : t;
+  ld dx = px - (ax + t * ux), dy = py - (ay + t * uy);
+  return dx * dx + dy * dy;
+}
+static int o_orient(ld ax, ld ay, ld bx, ld by, ld cx, ld cy) {
+  ld d = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax);
+  return (d > 0) - (d < 0);
+}
+static int o_onseg(ld px, ld py, const qk_shape_t *s) {
+  return o_orient(s->x, s->y, s->a, s->b, px, py) == 0 && px >= fminl(s->x, s->a) &&
+         px <= fmaxl(s->x, s->a) && py >= fminl(s->y, s->b) && py <= fmaxl(s->y, s->b);
+}
+static int o_segseg(const qk_shape_t *g, const qk_shape_t *h) {
+  int o1 = o_orient(g->x, g->y, g->a, g->b, h->x, h->y),
+      o2 = o_orient(g->x, g->y, g->a, g->b, h->a, h->b);
+  int o3 = o_orient(h->x, h->y, h->a, h->b, g->x, g->y),
+      o4 = o_orient(h->x, h->y, h->a, h->b, g->a, g->b);
+  if (o1 * o2 < 0 && o3 * o4 < 0) return 1;
+  return o_onseg(h->x, h->y, g) || o_onseg(h->a, h->b, g) || o_onseg(g->x, g->y, h) ||
+         o_onseg(g->a, g->b, h);
+}
+/* Squared distance from a point to a shape (0 inside). */
+static ld o_d2(const qk_shape_t *s, ld px, ld py) {
+  switch (s->kind) {
+  case QK_SHAPE_DISC: {
+    ld dx = px - s->x, dy = py - s->y, d = sqrtl(dx * dx + dy * dy) - s->a;
+    return d <= 0 ? 0 : d * d;
+  }
+  case QK_SHAPE_BOX: {
+    ld dx = px < s->x ? s->x - px : px > s->a ? px - s->a : 0;
+    ld dy = py < s->y ? s->y - py : py > s->b ? py - s->b : 0;
+    return dx * dx + dy * dy;
+  }
+  case QK_SHAPE_SEGMENT:
+    return o_seg_d2(px, py, s->x, s->y, s->a, s->b);
+  default:
+    return (px - s->x) * (px - s->x) + (py - s->y) * (py - s->y);
+  }
+}
+static qk_shape_t o_norm(qk_shape_t s) {
+  if (s.kind == QK_SHAPE_BOX) {
+    double x0 = fmin(s.x, s.a), x1 = fmax(s.x, s.a), y0 = fmin(s.y, s.b), y1 = fmax(s.y, s.b);
+    s.x = x0, s.a = x1, s.y = y0, s.b = y1;
+  }
+  return s;
+}
+static int o_overlap(qk_shape_t a, qk_shape_t b) {
+  a = o_norm(a), b = o_norm(b);
+  if (a.kind > b.kind) {
+    qk_shape_t t = a;
+    a = b, b = t;
+  }
+  /* kinds: DISC 0, BOX 1, SEGMENT 2, POINT 3 */
+  if (b.kind == QK_SHAPE_POINT) {
+    if (a.kind == QK_SHAPE_SEGMENT) return o_onseg(b.x, b.y, &a);
+    if (a.kind == QK_SHAPE_DISC) {
+      ld dx = (ld)b.x - a.x, dy = (ld)b.y - a.y;
+      return dx * dx + dy * dy <= (ld)a.a * a.a;
+    }
+    return o_d2(&a, b.x, b.y) == 0;
+  }
+  if (a.kind == QK_SHAPE_DISC && b.kind == QK_SHAPE_DISC) {
+    ld dx = (ld)b.x - a.x, dy = (ld)b.y - a.y, rs = (ld)a.a + b.a;
+    return dx * dx + dy * dy <= rs * rs;
+  }
+  if (a.kind == QK_SHAPE_DISC && b.kind == QK_SHAPE_BOX) {
+    ld px = fminl(fmaxl(a.x, b.x), b.a), py = fminl(fmaxl(a.y, b.y), b.b);
+    return (px - a.x) * (px - a.x) + (py - a.y) * (py - a.y) <= (ld)a.a * a.a;
+  }
+  if (a.kind == QK_SHAPE_DISC) return o_seg_d2(a.x, a.y, b.x, b.y, b.a, b.b) <= (ld)a.a * a.a;
+  if (a.kind == QK_SHAPE_BOX && b.kind == QK_SHAPE_BOX)
+    return a.x <= b.a && b.x <= a.a && a.y <= b.b && b.y <= a.b;
+  if (a.kind == QK_SHAPE_BOX) { /* segment: an endpoint inside, or it crosses an edge */
+    if (o_d2(&a, b.x, b.y) == 0 || o_d2(&a, b.a, b.b) == 0) return 1;
+    qk_shape_t e[4] = {{QK_SHAPE_SEGMENT, a.x, a.y, a.a, a.y},
+                       {QK_SHAPE_SEGMENT, a.a, a.y, a.a, a.b},
+                       {QK_SHAPE_SEGMENT, a.a, a.b, a.x, a.b},
+                       {QK_SHAPE_SEGMENT, a.x, a.b, a.x, a.y}};
+    for (int i = 0; i < 4; i++)
+      if (o_segseg(&e[i], &b)) return 1;
+    return 0;
+  }
+  return o_segseg(&a, &b);
+}
+
+/* ---- scenes ----------------------------------------------------------------------------- */
+
+enum { SC_UNIFORM, SC_CLUSTERED, SC_MIXED, SC_HUGE };
+
+static qk_shape_t rnd_shape(qkt_rng_t *r, int scene, int kinds) {
+  double x = qkt_rng_unit(r) * 100, y = qkt_rng_unit(r) * 100, s = qkt_rng_range(r, 0.5, 3);
+  if (scene == SC_CLUSTERED && qkt_rng_below(r, 4)) x = 40 + x * 0.05, y = 60 + y * 0.05;
+  if (scene == SC_MIXED) s = pow(10, qkt_rng_range(r, -3, 3)) * (qkt_rng_below(r, 3) ? 0.01 : 1);
+  if (scene == SC_HUGE) x = 1e9 + x, y = -1e9 + y;
+  qk_shape_t sh = {QK_SHAPE_DISC, x, y, s / 2, 0};
+  int k = kinds ? (int)qkt_rng_below(r, 4) : 0;
+  if (k == 1)
+    sh = (qk_shape_t){QK_SHAPE_BOX, x, y, x + s * qkt_rng_unit(r), y + s * qkt_rng_unit(r)};
+  if (k == 2) {
+    double a = qkt_rng_range(r, 0, 6.28);
+    sh = (qk_shape_t){QK_SHAPE_SEGMENT, x, y, x + s * cos(a), y + s * sin(a)};
+  }
+  if (k == 3) sh = (qk_shape_t){QK_SHAPE_POINT, x, y, 0, 0};
+  return sh;
+}
+
+static qk_shape_t moved(qkt_rng_t *r, qk_shape_t s) {
+  double dx = qkt_rng_range(r, -0.7, 0.7), dy = qkt_rng_range(r, -0.7, 0.7);
+  s.x += dx, s.y += dy;
+  if (s.kind == QK_SHAPE_BOX || s.kind == QK_SHAPE_SEGMENT) s.a += dx, s.b += dy;
+  return s;
+}
+
+typedef struct mirror {
+  qk_handle_t *h;
+  qk_shape_t *s;
+  size_t n, cap;
+} mirror_t;
+
+static void m_add(qk_world_t *w, mirror_t *m, qk_shape_t s) {
+  if (m->n == m->cap) {
+    m->cap = m->cap ? 2 * m->cap : 64;
+    m->h = realloc(m->h, m->cap * sizeof *m->h);
+    m->s = realloc(m->s, m->cap * sizeof *m->s);
+  }
+  assert_int_equal(qk_world_add(w, &s, m->n, &m->h[m->n]), QK_OK);
+  m->s[m->n++] = o_norm(s);
+}
+
+static int wp_cmp(const void *x, const void *y) {
+  const qk_world_pair_t *p = x, *q = y;
+  uint32_t pa = (uint32_t)p->a, qa = (uint32_t)q->a, pb = (uint32_t)p->b, qb = (uint32_t)q->b;
+  if (pa != qa) return pa < qa ? -1 : 1;
+  return (pb > qb) - (pb < qb);
+}
+
+/* All pairs by brute force, ordered as the library orders them. */
+static size_t o_pairs(const mirror_t *m, qk_world_pair_t **out) {
+  size_t n = 0, cap = 64;
+  qk_world_pair_t *v = malloc(cap * sizeof *v);
+  for (size_t i = 0; i < m->n; i++)
+    for (size_t j = i + 1; j < m->n; j++)
+      if (o_overlap(m->s[i], m->s[j])) {
+        if (n == cap) v = realloc(v, (cap *= 2) * sizeof *v);
+        qk_handle_t a = m->h[i], b = m->h[j];
+        if ((uint32_t)a > (uint32_t)b) {
+          qk_handle_t t = a;
+          a = b, b = t;
+        }
+        v[n].a = a, v[n++].b = b;
+      }
+  if (n > 1) qsort(v, n, sizeof *v, wp_cmp);
+  *out = v;
+  return n;
+}
+
+static int in_list(const qk_world_pair_t *v, size_t n, qk_world_pair_t p) {
+  for (size_t i = 0; i < n; i++)
+    if (v[i].a == p.a && v[i].b == p.b) return 1;
+  return 0;
+}
+
+typedef struct cbctx {
+  const qk_world_pair_t *want;
+  size_t n, i;
+  int ok;
+} cbctx_t;
+
+static int cb_pair(qk_handle_t a, qk_handle_t b, void *ud) {
+  cbctx_t *c = ud;
+  if (c->i >= c->n || c->want[c->i].a != a || c->want[c->i].b != b) c->ok = 0;
+  c->i++;
+  return 0;
+}
+
+static int cb_stop(qk_handle_t a, qk_handle_t b, void *ud) {
+  (void)a, (void)b;
+  ++*(size_t *)ud;
+  return 1;
+}
+
+static void check_pairs(qk_world_t *w, const qk_world_pair_t *want, size_t nw,
+                        const qk_world_pair_t *prev, size_t np, const char *what, int frame) {
+  size_t n;
+  qk_world_pair_t *got = malloc((nw + np + 1) * sizeof *got);
+  assert_int_equal(qk_world_pairs_list(w, QK_PAIRS_ALL, got, nw + np + 1, &n), QK_OK);
+  if (n != nw)
+    fail_msg("%s frame %d: %zu pairs, oracle %zu (seed %llu)", what, frame, n, nw,
+             (unsigned long long)g_seed);
+  for (size_t i = 0; i < n; i++)
+    if (got[i].a != want[i].a || got[i].b != want[i].b)
+      fail_msg("%s frame %d: pair %zu differs (seed %llu)", what, frame, i,
+               (unsigned long long)g_seed);
+  /* the callback form: the same pairs in the same order, and a nonzero return stops */
+  cbctx_t cb = {want, nw, 0, 1};
+  assert_int_equal(qk_world_pairs(w, QK_PAIRS_ALL, cb_pair, &cb), QK_OK);
+  assert_true(cb.ok && cb.i == nw);
+  size_t calls = 0;
+  assert_int_equal(qk_world_pairs(w, QK_PAIRS_ALL, cb_stop, &calls), QK_OK);
+  assert_int_equal(calls, nw ? 1 : 0);
+  /* began: in want, not in prev; ended: in prev, not in want */
+  size_t nb = 0, ne = 0;
+  assert_int_equal(qk_world_pairs_list(w, QK_PAIRS_BEGAN, got, nw + np + 1, &nb), QK_OK);
+  size_t exp_b = 0;
+  for (size_t i = 0; i < nw; i++) exp_b += !in_list(prev, np, want[i]);
+  assert_int_equal(nb, exp_b);
+  for (size_t i = 0; i < nb; i++)
+    assert_true(in_list(want, nw, got[i]) && !in_list(prev, np, got[i]));
+  assert_int_equal(qk_world_pairs_list(w, QK_PAIRS_ENDED, got, nw + np + 1, &ne), QK_OK);
+  size_t exp_e = 0;
+  for (size_t i = 0; i < np; i++) exp_e += !in_list(want, nw, prev[i]);
+  assert_int_equal(ne, exp_e);
+  for (size_t i = 0; i < ne; i++)
+    assert_true(in_list(prev, np, got[i]) && !in_list(want, nw, got[i]));
+  free(got);
+}
+
+static void check_queries(qkt_rng_t *r, qk_world_t *w, const mirror_t *m, int scene) {
+  qk_handle_t *got = malloc((m->n + 1) * sizeof *got);
+  for (int qi = 0; qi < 5; qi++) {
+    /* kinds in turn; the fifth a long segment across the whole scene (walked cell by
+     * cell at the fine levels rather than through its bounding box) */
+    int q = qi == 4 ? 2 : qi;
+    qk_shape_t qs = rnd_shape(r, scene, 1);
+    qs.kind = (qk_shape_kind_t)q;
+    if (q == 0) qs.a = qkt_rng_range(r, 0, 10);
+    if (q == 1 || q == 2)
+      qs.a = qs.x + qkt_rng_range(r, -10, 10), qs.b = qs.y + qkt_rng_range(r, -10, 10);
+    if (qi == 4) {
+      double off = scene == SC_HUGE ? 1e9 : 0;
+      qs.x = off - 20, qs.a = off + 120;
+      qs.y = qkt_rng_range(r, -20, 120) - off, qs.b = qkt_rng_range(r, -20, 120) - off;
+      if (qkt_rng_below(r, 2)) { /* or mostly vertical */
+        double t = qs.x;
+        qs.x = qs.y + 2 * off, qs.y = t - 2 * off;
+        t = qs.a;
+        qs.a = qs.b + 2 * off, qs.b = t - 2 * off;
+      }
+    }
+    size_t n, want = 0;
+    assert_int_equal(qk_world_query(w, &qs, got, m->n + 1, &n), QK_OK);
+    for (size_t i = 0; i < m->n; i++) want += o_overlap(qs, m->s[i]);
+    if (n != want)
+      fail_msg("query kind %d: %zu vs oracle %zu (seed %llu)", q, n, want,
+               (unsigned long long)g_seed);
+    for (size_t i = 0; i < n; i++) {
+      size_t j = 0;
+      while (j < m->n && m->h[j] != got[i]) j++;
+      assert_true(j < m->n && o_overlap(qs, m->s[j]));
+      if (i) assert_true((uint32_t)got[i - 1] < (uint32_t)got[i]);
+    }
+    /* rays: the all-hits set is the segment query's; t nondecreasing; first = all[0] */
+    if (q == 2) {
+      qk_world_hit_t *hits = malloc((n + 1) * sizeof *hits), first;
+      size_t nh;
+      qk_point_t a = {qs.x, qs.y}, b = {qs.a, qs.b};
+      assert_int_equal(qk_world_raycast_all(w, a, b, hits, n + 1, &nh), QK_OK);
+      assert_int_equal(nh, n);
+      for (size_t i = 0; i < nh; i++) {
+        if (i) assert_true(hits[i - 1].t <= hits[i].t);
+        assert_true(hits[i].t >= 0 && hits[i].t <= 1);
+        /* the point at t is (nearly) on the shape */
+        size_t j = 0;
+        while (j < m->n && m->h[j] != hits[i].h) j++;
+        assert_true(j < m->n);
+        ld px = a.x + hits[i].t * ((ld)b.x - a.x), py = a.y + hits[i].t * ((ld)b.y - a.y);
+        ld scale = 1 + fabsl(px) + fabsl(py);
+        assert_true(sqrtl(o_d2(&m->s[j], px, py)) <= 1e-9 * scale);
+      }
+      assert_int_equal(qk_world_raycast(w, a, b, &first), QK_OK);
+      if (nh)
+        assert_true(first.h == hits[0].h && first.t == hits[0].t);
+      else
+        assert_true(first.h == QK_HANDLE_NONE);
+      free(hits);
+    }
+  }
+  /* kNN */
+  qk_world_hit_t nn[8];
+  size_t k = 7, nk;
+  qk_point_t p = {qkt_rng_unit(r) * 100 + (scene == SC_HUGE ? 1e9 : 0),
+                  qkt_rng_unit(r) * 100 - (scene == SC_HUGE ? 1e9 : 0)};
+  assert_int_equal(qk_world_knn(w, p, k, nn, &nk), QK_OK);
+  assert_int_equal(nk, m->n < k ? m->n : k);
+  ld *d = malloc((m->n + 1) * sizeof *d);
+  for (size_t i = 0; i < m->n; i++) d[i] = sqrtl(o_d2(&m->s[i], p.x, p.y));
+  for (size_t i = 0; i < nk; i++) {
+    size_t below = 0;
+    for (size_t j = 0; j < m->n; j++) below += d[j] < nn[i].t - 1e-9 * (1 + nn[i].t + fabs(p.x));
+    if (below > i)
+      fail_msg("knn rank %zu: %zu objects nearer (seed %llu)", i, below,
+               (unsigned long long)g_seed);
+    if (i) assert_true(nn[i - 1].t <= nn[i].t);
+  }
+  free(d);
+  free(got);
+}
+
+static void run_scene(int scene, int kinds, size_t n, int frames, unsigned threads) {
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + (uint64_t)scene * 7 + (uint64_t)kinds);
+  qk_world_options_t o;
+  qk_world_options_init(&o);
+  o.threads = threads;
+  qk_world_t *w;
+  assert_int_equal(qk_world_new(&o, &w), QK_OK);
+  mirror_t m = {0};
+  for (size_t i = 0; i < n; i++) m_add(w, &m, rnd_shape(&r, scene, kinds));
+  qk_world_pair_t *prev = NULL;
+  size_t np = 0;
+  for (int f = 0; f < frames; f++) {
+    for (size_t i = 0; i < m.n; i++) {
+      if (qkt_rng_below(&r, 3)) continue;
+      qk_shape_t s = moved(&r, m.s[i]);
+      assert_int_equal(qk_world_move(w, m.h[i], &s), QK_OK);
+      m.s[i] = o_norm(s);
+    }
+    if (f % 3 == 1) { /* remove a few, add a few */
+      for (int k = 0; k < 5 && m.n > 0; k++) {
+        size_t i = qkt_rng_below(&r, (uint32_t)m.n);
+        assert_int_equal(qk_world_remove(w, m.h[i]), QK_OK);
+        m.h[i] = m.h[m.n - 1], m.s[i] = m.s[m.n - 1], m.n--;
+      }
+      for (int k = 0; k < 4; k++) m_add(w, &m, rnd_shape(&r, scene, kinds));
+    }
+    assert_int_equal(qk_world_update(w), QK_OK);
+    qk_world_pair_t *want;
+    size_t nw = o_pairs(&m, &want);
+    check_pairs(w, want, nw, prev, np, "scene", f);
+    if (f % 4 == 0) check_queries(&r, w, &m, scene);
+    free(prev);
+    prev = want, np = nw;
+  }
+  free(prev);
+  free(m.h), free(m.s);
+  qk_world_free(w);
+}
+
+static void test_world_uniform(void **s) {
+  (void)s;
+  run_scene(SC_UNIFORM, 0, 400, 40, 1);
+}
+static void test_world_clustered(void **s) {
+  (void)s;
+  run_scene(SC_CLUSTERED, 1, 300, 40, 1);
+}
+static void test_world_mixed_sizes(void **s) {
+  (void)s;
+  run_scene(SC_MIXED, 1, 300, 30, 1);
+}
+static void test_world_all_kinds(void **s) {
+  (void)s;
+  run_scene(SC_UNIFORM, 1, 400, 40, 1);
+}
+static void test_world_huge(void **s) {
+  (void)s;
+  run_scene(SC_HUGE, 1, 300, 30, 1);
+}
+
+/* Touching cases on integers (every formula is exact there). */
+static void test_world_touching(void **s) {
+  (void)s;
+  qk_shape_t sh[] = {
+      {QK_SHAPE_DISC, 0, 0, 5, 0},
+      {QK_SHAPE_DISC, 8, 6, 5, 0}, /* centres 10 apart */
+      {QK_SHAPE_BOX, 5, -3, 9, 0},
+      {QK_SHAPE_POINT, 9, 0, 0, 0}, /* box corner */
+      {QK_SHAPE_SEGMENT, 9, 0, 20, 11},
+      {QK_SHAPE_SEGMENT, 20, 11, 30, 0}, /* shared end */
+      {QK_SHAPE_SEGMENT, -5, -8, 5, -8},
+      {QK_SHAPE_DISC, 0, -13, 5, 0}, /* tangent line */
+      {QK_SHAPE_POINT, 14, 5, 0, 0},
+      {QK_SHAPE_SEGMENT, 3, 4, 3, 4}, /* point on seg; degenerate seg on disc */
+  };
+  size_t n = sizeof sh / sizeof *sh;
+  qk_world_t *w;
+  assert_int_equal(qk_world_new(NULL, &w), QK_OK);
+  mirror_t m = {0};
+  for (size_t i = 0; i < n; i++) m_add(w, &m, sh[i]);
+  assert_int_equal(qk_world_update(w), QK_OK);
+  qk_world_pair_t *want;
+  size_t nw = o_pairs(&m, &want);
+  check_pairs(w, want, nw, NULL, 0, "touching", 0);
+  assert_true(nw >= 8);
+  /* just apart: a disc of radius 5 at distance 10 + 2^-40 from another */
+  qk_shape_t apart = {QK_SHAPE_DISC, 8 + 0x1p-40, 6, 5, 0};
+  assert_int_equal(qk_world_move(w, m.h[1], &apart), QK_OK);
+  qk_shape_t q = {QK_SHAPE_DISC, 0, 0, 5, 0};
+  qk_handle_t got[16];
+  size_t ng;
+  assert_int_equal(qk_world_query(w, &q, got, 16, &ng), QK_OK);
+  for (size_t i = 0; i < ng; i++) assert_true(got[i] != m.h[1]);
+  free(want), free(m.h), free(m.s);
+  qk_world_free(w);
+}
+
+static void test_world_stale_handles(void **s) {
+  (void)s;
+  qk_world_t *w;
+  assert_int_equal(qk_world_new(NULL, &w), QK_OK);
+  qk_shape_t a = {QK_SHAPE_DISC, 0, 0, 1, 0}, b = {QK_SHAPE_BOX, 5, 5, 6, 6};
+  qk_handle_t ha, hb, hc;
+  assert_int_equal(qk_world_add(w, &a, 11, &ha), QK_OK);
+  assert_int_equal(qk_world_remove(w, ha), QK_OK);
+  assert_int_equal(qk_world_remove(w, ha), QK_ERR_NOT_FOUND);
+  assert_int_equal(qk_world_add(w, &b, 22, &hb), QK_OK);
+  assert_int_equal(QK_HANDLE_SLOT(hb), QK_HANDLE_SLOT(ha)); /* slot reused */
+  assert_true(hb != ha);
+  uint64_t tag;
+  qk_shape_t got;
+  assert_int_equal(qk_world_get(w, ha, &got, &tag), QK_ERR_NOT_FOUND);
+  assert_int_equal(qk_world_move(w, ha, &a), QK_ERR_NOT_FOUND);
+  assert_int_equal(qk_world_get(w, hb, &got, &tag), QK_OK);
+  assert_int_equal(tag, 22);
+  assert_int_equal(qk_world_get(w, (qk_handle_t)77, &got, &tag), QK_ERR_NOT_FOUND);
+  assert_int_equal(qk_world_get(w, QK_HANDLE_NONE, &got, &tag), QK_ERR_NOT_FOUND);
+  /* bad shapes leave the object as it was */
+  qk_shape_t bad = {QK_SHAPE_DISC, NAN, 0, 1, 0}, neg = {QK_SHAPE_DISC, 0, 0, -1, 0},
+             big = {QK_SHAPE_POINT, 1e31, 0, 0, 0}, kind = {(qk_shape_kind_t)9, 0, 0, 0, 0};
+  assert_int_equal(qk_world_move(w, hb, &bad), QK_ERR_NONFINITE);
+  assert_int_equal(qk_world_move(w, hb, &neg), QK_ERR_GEOMETRY);
+  assert_int_equal(qk_world_add(w, &big, 0, &hc), QK_ERR_LIMIT);
+  assert_int_equal(qk_world_add(w, &kind, 0, &hc), QK_ERR_INVALID);
+  assert_int_equal(qk_world_get(w, hb, &got, NULL), QK_OK);
+  assert_true(got.kind == QK_SHAPE_BOX && got.x == 5 && got.b == 6);
+  assert_int_equal(qk_world_size(w), 1);
+  qk_world_free(w);
+  /* options out of range */
+  qk_world_options_t o;
+  qk_world_options_init(&o);
+  o.margin = 17;
+  assert_int_equal(qk_world_new(&o, &w), QK_ERR_INVALID);
+  qk_world_options_init(&o);
+  o.min_margin = INFINITY;
+  assert_int_equal(qk_world_new(&o, &w), QK_ERR_INVALID);
+  qk_world_options_init(&o);
+  o.threads = 0;
+  assert_int_equal(qk_world_new(&o, &w), QK_ERR_INVALID);
+  qk_world_free(NULL);
+  /* the extremes of the accepted range: tiny and huge values, and a point at 2^100 */
+  assert_int_equal(qk_world_new(NULL, &w), QK_OK);
+  qk_shape_t lo = {QK_SHAPE_DISC, 0x1p-100, -0x1p-100, 0x1p-100, 0};
+  qk_shape_t hi = {QK_SHAPE_BOX, -0x1p100, -0x1p100, 0x1p100, 0x1p100};
+  qk_shape_t far = {QK_SHAPE_POINT, 0x1p100, 0x1p100, 0, 0};
+  qk_handle_t h1, h2, h3;
+  assert_int_equal(qk_world_add(w, &lo, 0, &h1), QK_OK);
+  assert_int_equal(qk_world_add(w, &hi, 0, &h2), QK_OK);
+  assert_int_equal(qk_world_add(w, &far, 0, &h3), QK_OK);
+  assert_int_equal(qk_world_update(w), QK_OK);
+  size_t np;
+  assert_int_equal(qk_world_pairs_list(w, QK_PAIRS_ALL, NULL, 0, &np), QK_OK);
+  assert_int_equal(np, 2); /* the big box holds both others; the disc is far from the point */
+  qk_world_hit_t nn[3];
+  assert_int_equal(qk_world_knn(w, (qk_point_t){0x1p99, 0x1p99}, 3, nn, &np), QK_OK);
+  assert_int_equal(np, 3);
+  assert_true(nn[0].h == h2 && nn[0].t == 0);
+  qk_world_free(w);
+}
+
+/* 10^5 frames of a small world; memory stays within 1.2x a fresh world of the same. */
+static void test_world_churn_memory(void **s) {
+  (void)s;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 99);
+  qk_world_t *w;
+  assert_int_equal(qk_world_new(NULL, &w), QK_OK);
+  mirror_t m = {0};
+  for (int i = 0; i < 60; i++) m_add(w, &m, rnd_shape(&r, SC_UNIFORM, 1));
+  size_t peak = 0;
+  for (int f = 0; f < (QKT_TSAN ? 10000 : 100000); f++) {
+    size_t i = qkt_rng_below(&r, (uint32_t)m.n);
+    if (f % 10 == 0) { /* churn: remove one, add one */
+      assert_int_equal(qk_world_remove(w, m.h[i]), QK_OK);
+      m.h[i] = m.h[m.n - 1], m.s[i] = m.s[m.n - 1], m.n--;
+      m_add(w, &m, rnd_shape(&r, SC_UNIFORM, 1));
+    } else {
+      qk_shape_t sh = moved(&r, m.s[i]);
+      if (sh.x < 0 || sh.x > 100 || sh.y < 0 || sh.y > 100) sh = rnd_shape(&r, SC_UNIFORM, 1);
+      assert_int_equal(qk_world_move(w, m.h[i], &sh), QK_OK);
+      m.s[i] = o_norm(sh);
+    }
+    if (f % 20 == 0) assert_int_equal(qk_world_update(w), QK_OK);
+    if (qk_world_bytes(w) > peak) peak = qk_world_bytes(w);
+  }
+  assert_int_equal(qk_world_update(w), QK_OK);
+  qk_world_t *fresh;
+  assert_int_equal(qk_world_new(NULL, &fresh), QK_OK);
+  for (size_t i = 0; i < m.n; i++) {
+    qk_handle_t h;
+    assert_int_equal(qk_world_add(fresh, &m.s[i], 0, &h), QK_OK);
+  }
+  assert_int_equal(qk_world_update(fresh), QK_OK);
+  size_t used = qk_world_bytes(w), base = qk_world_bytes(fresh);
+  if (used * 10 > base * 12)
+    fail_msg("churned %zu bytes vs fresh %zu (peak %zu)", used, base, peak);
+  free(m.h), free(m.s);
+  qk_world_free(w), qk_world_free(fresh);
+}
+
+/* Allocation failure at every N: a failed add or update changes nothing. */
+static void test_world_nomem(void **s) {
+  (void)s;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 5);
+  for (size_t fail = 1; fail < (QKT_TSAN ? 40u : 400u); fail++) {
+    qkt_alloc_t st = {0};
+    qk_allocator_t al = qkt_alloc_make(&st);
+    qk_world_options_t o;
+    qk_world_options_init(&o);
+    o.allocator = &al;
+    qk_world_t *w = NULL;
+    st.fail_at = fail;
+    if (qk_world_new(&o, &w) != QK_OK) {
+      assert_int_equal(st.live_blocks, 0);
+      continue;
+    }
+    size_t done = 0, before = 0;
+    for (int i = 0; i < 300; i++) {
+      qk_shape_t sh = rnd_shape(&r, SC_UNIFORM, 1);
+      qk_handle_t h;
+      size_t n0 = qk_world_size(w);
+      qk_status_t rc = qk_world_add(w, &sh, 0, &h);
+      if (rc == QK_ERR_NOMEM) {
+        assert_int_equal(qk_world_size(w), n0);
+        assert_true(h == QK_HANDLE_NONE);
+        continue;
+      }
+      assert_int_equal(rc, QK_OK);
+      if (i % 50 == 49) {
+        qk_world_pairs_list(w, QK_PAIRS_ALL, NULL, 0, &before);
+        rc = qk_world_update(w);
+        size_t after;
+        qk_world_pairs_list(w, QK_PAIRS_ALL, NULL, 0, &after);
+        if (rc == QK_ERR_NOMEM)
+          assert_int_equal(after, before);
+        else
+          assert_int_equal(rc, QK_OK), done++;
+      }
+    }
+    qk_world_free(w);
+    assert_int_equal(st.live_blocks, 0);
+    assert_int_equal(st.live_bytes, 0);
+  }
+}
+
+/* Two threads give the same pairs and ray hits as one. */
+static void test_world_threads(void **s) {
+  (void)s;
+  qk_world_t *w[2];
+  for (int t = 0; t < 2; t++) {
+    qk_world_options_t o;
+    qk_world_options_init(&o);
+    o.threads = t ? 2 : 1;
+    assert_int_equal(qk_world_new(&o, &w[t]), QK_OK);
+    qkt_rng_t r;
+    qkt_rng_seed(&r, g_seed + 17);
+    for (int i = 0; i < 6000; i++) {
+      qk_shape_t sh = rnd_shape(&r, SC_MIXED, 1);
+      qk_handle_t h;
+      assert_int_equal(qk_world_add(w[t], &sh, 0, &h), QK_OK);
+    }
+    assert_int_equal(qk_world_update(w[t]), QK_OK);
+  }
+  size_t n0, n1;
+  qk_world_pairs_list(w[0], QK_PAIRS_ALL, NULL, 0, &n0);
+  qk_world_pairs_list(w[1], QK_PAIRS_ALL, NULL, 0, &n1);
+  assert_int_equal(n0, n1);
+  qk_world_pair_t *p0 = malloc((n0 + 1) * sizeof *p0), *p1 = malloc((n0 + 1) * sizeof *p1);
+  qk_world_pairs_list(w[0], QK_PAIRS_ALL, p0, n0, &n0);
+  qk_world_pairs_list(w[1], QK_PAIRS_ALL, p1, n1, &n1);
+  assert_memory_equal(p0, p1, n0 * sizeof *p0);
+  enum { NR = 2000 };
+  qk_point_t *a = malloc(NR * sizeof *a), *b = malloc(NR * sizeof *b);
+  qk_world_hit_t *h0 = malloc(NR * sizeof *h0), *h1 = malloc(NR * sizeof *h1);
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 3);
+  for (int i = 0; i < NR; i++) {
+    a[i] = (qk_point_t){qkt_rng_unit(&r) * 100, qkt_rng_unit(&r) * 100};
+    b[i] = (qk_point_t){a[i].x + qkt_rng_range(&r, -20, 20), a[i].y + qkt_rng_range(&r, -20, 20)};
+  }
+  assert_int_equal(qk_world_raycast_batch(w[0], a, b, NR, h0), QK_OK);
+  assert_int_equal(qk_world_raycast_batch(w[1], a, b, NR, h1), QK_OK);
+  assert_memory_equal(h0, h1, NR * sizeof *h0);
+  /* batch kNN: identical on one and two threads, and equal to the single calls */
+  enum { NK = 500, K = 4 };
+  qk_world_hit_t *k0 = malloc(NK * K * sizeof *k0), *k1 = malloc(NK * K * sizeof *k1);
+  size_t c0[NK], c1[NK];
+  assert_int_equal(qk_world_knn_batch(w[0], a, NK, K, k0, c0), QK_OK);
+  assert_int_equal(qk_world_knn_batch(w[1], a, NK, K, k1, c1), QK_OK);
+  assert_memory_equal(c0, c1, sizeof c0);
+  assert_memory_equal(k0, k1, NK * K * sizeof *k0);
+  for (int i = 0; i < NK; i += 50) {
+    qk_world_hit_t one[K];
+    size_t n1;
+    assert_int_equal(qk_world_knn(w[0], a[i], K, one, &n1), QK_OK);
+    assert_int_equal(n1, c0[i]);
+    assert_memory_equal(one, k0 + (size_t)i * K, n1 * sizeof *one);
+  }
+  free(k0), free(k1);
+  for (int i = 0; i < NR; i += 97) {
+    qk_world_hit_t one;
+    assert_int_equal(qk_world_raycast(w[0], a[i], b[i], &one), QK_OK);
+    assert_true(one.h == h0[i].h && (one.t == h0[i].t || one.h == QK_HANDLE_NONE));
+  }
+  free(a), free(b), free(h0), free(h1), free(p0), free(p1);
+  qk_world_free(w[0]), qk_world_free(w[1]);
+}
+
+/* Readers: three threads query one world at once (read-only calls). */
+typedef struct reader {
+  const qk_world_t *w;
+  const qk_point_t *a, *b;
+  const qk_world_hit_t *want;
+  int n, ok;
+} reader_t;
+
+static void *reader_main(void *arg) {
+  reader_t *r = arg;
+  r->ok = 1;
+  for (int i = 0; i < r->n; i++) {
+    qk_world_hit_t h, nn[3];
+    size_t n;
+    if (qk_world_raycast(r->w, r->a[i], r->b[i], &h) != QK_OK || h.h != r->want[i].h) r->ok = 0;
+    if (qk_world_knn(r->w, r->a[i], 3, nn, &n) != QK_OK || n != 3) r->ok = 0;
+    qk_shape_t q = {QK_SHAPE_DISC, r->a[i].x, r->a[i].y, 2, 0};
+    if (qk_world_query(r->w, &q, NULL, 0, &n) != QK_OK) r->ok = 0;
+  }
+  size_t np;
+  if (qk_world_pairs_list(r->w, QK_PAIRS_ALL, NULL, 0, &np) != QK_OK) r->ok = 0;
+  return NULL;
+}
+
+static void test_world_concurrent_readers(void **s) {
+  (void)s;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 23);
+  qk_world_t *w;
+  assert_int_equal(qk_world_new(NULL, &w), QK_OK);
+  for (int i = 0; i < 3000; i++) {
+    qk_shape_t sh = rnd_shape(&r, SC_UNIFORM, 1);
+    qk_handle_t h;
+    assert_int_equal(qk_world_add(w, &sh, 0, &h), QK_OK);
+  }
+  assert_int_equal(qk_world_update(w), QK_OK);
+  enum { NQ = 300 };
+  qk_point_t a[NQ], b[NQ];
+  qk_world_hit_t want[NQ];
+  for (int i = 0; i < NQ; i++) {
+    a[i] = (qk_point_t){qkt_rng_unit(&r) * 100, qkt_rng_unit(&r) * 100};
+    b[i] = (qk_point_t){a[i].x + qkt_rng_range(&r, -30, 30), a[i].y + qkt_rng_range(&r, -30, 30)};
+    assert_int_equal(qk_world_raycast(w, a[i], b[i], &want[i]), QK_OK);
+  }
+  pthread_t th[3];
+  reader_t rd[3];
+  for (int t = 0; t < 3; t++) {
+    rd[t] = (reader_t){w, a, b, want, NQ, 0};
+    assert_int_equal(pthread_create(&th[t], NULL, reader_main, &rd[t]), 0);
+  }
+  for (int t = 0; t < 3; t++) pthread_join(th[t], NULL);
+  for (int t = 0; t < 3; t++) assert_true(rd[t].ok);
+  qk_world_free(w);
+}
+
+int main(void) {
+  g_seed = qkt_seed(20261130);
+  const struct CMUnitTest tests[] = {
+      cmocka_unit_test(test_world_uniform),
+      cmocka_unit_test(test_world_clustered),
+      cmocka_unit_test(test_world_mixed_sizes),
+      cmocka_unit_test(test_world_all_kinds),
+      cmocka_unit_test(test_world_huge),
+      cmocka_unit_test(test_world_touching),
+      cmocka_unit_test(test_world_stale_handles),
+      cmocka_unit_test(test_world_churn_memory),
+      cmocka_unit_test(test_world_nomem),
+      cmocka_unit_test(test_world_threads),
+      cmocka_unit_test(test_world_concurrent_readers),
+  };
+  return cmocka_run_group_tests(tests, NULL, NULL);
+}

@@ -1,0 +1,482 @@
+/*
+ * `quadkit join` (which feature of a polygon layer holds each point of a CSV file) and
+ * `quadkit regions` (layer and index statistics, SVG). Points stream through in chunks,
+ * so memory holds the layer and one chunk only.
+ */
+#define _XOPEN_SOURCE 700
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "cli.h"
+
+#define CHUNK 65536
+
+/* ---- reading the layer ---------------------------------------------------------------- */
+
+static int read_layer(const char *cmd, const char *path, int planar, qk_region_t **out) {
+  qk_region_options_t o;
+  qk_region_options_init(&o);
+  o.planar = planar;
+  qk_error_t e;
+  qk_status_t st = qk_region_read(path, &o, out, &e);
+  if (st == QK_OK) return CLI_OK;
+  if (e.line)
+    cli_error(cmd, "%s:%lu:%lu: %s", path, e.line, e.column, e.message);
+  else
+    cli_error(cmd, "%s: %s", path, e.message[0] ? e.message : qk_strerror(st));
+  return st == QK_ERR_NOMEM || st == QK_ERR_UNSUPPORTED ? CLI_INTERNAL : CLI_BAD_INPUT;
+}
+
+static int parse_boundary(const char *cmd, const char *s, qk_boundary_t *b) {
+  if (s && !strcmp(s, "semi-open"))
+    *b = QK_BOUNDARY_SEMI_OPEN;
+  else if (s && !strcmp(s, "closed"))
+    *b = QK_BOUNDARY_CLOSED;
+  else if (s && !strcmp(s, "open"))
+    *b = QK_BOUNDARY_OPEN;
+  else {
+    cli_error(cmd, "--boundary must be semi-open, closed or open, not '%s'", s ? s : "");
+    return 1;
+  }
+  return 0;
+}
+
+/* ---- CSV fields --------------------------------------------------------------------------- */
+
+/* Copy field `want` (0-based) of a CSV line into buf (quotes removed); returns 1 when
+ * the line has that field. */
+static int csv_field(const char *line, int want, char *buf, size_t cap) {
+  const char *s = line;
+  for (int i = 0;; i++) {
+    size_t n = 0;
+    if (*s == '"') {
+      s++;
+      for (;;) {
+        if (*s == '"' && s[1] == '"') {
+          if (i == want && n + 1 < cap) buf[n++] = '"';
+          s += 2;
+        } else if (*s == '"' || !*s) {
+          if (*s) s++;
+          break;
+        } else {
+          if (i == want && n + 1 < cap) buf[n++] = *s;
+          s++;
+        }
+      }
+      while (*s && *s != ',') s++;
+    } else {
+      while (*s && *s != ',') {
+        if (i == want && n + 1 < cap) buf[n++] = *s;
+        s++;
+      }
+    }
+    if (i == want) {
+      buf[n] = '\0';
+      return 1;
+    }
+    if (*s != ',') return 0;
+    s++;
+  }
+}
+
+static int number(const char *f, double *v) {
+  char *end;
+  while (*f == ' ' || *f == '\t') f++;
+  if (!*f) return 0;
+  *v = strtod(f, &end);
+  if (end == f) return 0;
+  while (*end == ' ' || *end == '\t') end++;
+  return *end == '\0';
+}
+
+/* --xy X,Y: column names or 1-based numbers; resolved against the header. */
+typedef struct xy_spec {
+  char name[2][128];
+  int col[2]; /* 0-based, -1 until resolved */
+} xy_spec_t;
+
+static int parse_xy(const char *cmd, const char *s, xy_spec_t *xy) {
+  const char *comma = s ? strchr(s, ',') : NULL;
+  if (!comma || comma == s || !comma[1] || strchr(comma + 1, ',')) {
+    cli_error(cmd, "--xy needs two columns X,Y (names or 1-based numbers), not '%s'", s ? s : "");
+    return 1;
+  }
+  size_t la = (size_t)(comma - s);
+  if (la >= sizeof xy->name[0] || strlen(comma + 1) >= sizeof xy->name[1]) {
+    cli_error(cmd, "--xy: column name too long");
+    return 1;
+  }
+  memcpy(xy->name[0], s, la);
+  xy->name[0][la] = '\0';
+  strcpy(xy->name[1], comma + 1);
+  for (int i = 0; i < 2; i++) {
+    char *end;
+    long v = strtol(xy->name[i], &end, 10);
+    xy->col[i] = -1;
+    if (!*end && v >= 1 && v <= 100000)
+      xy->col[i] = (int)v - 1;
+    else if (!*end) {
+      cli_error(cmd, "--xy: column number %s must be at least 1", xy->name[i]);
+      return 1;
+    }
+  }
+  return 0;
+}
+
+/* Resolve names against a header line; returns 0 or prints why not. */
+static int resolve_xy(const char *cmd, const char *path, const char *header, xy_spec_t *xy) {
+  char buf[256];
+  for (int k = 0; k < 2; k++) {
+    if (xy->col[k] >= 0) continue;
+    if (!header) {
+      cli_error(cmd, "%s: --xy names column '%s' but the file has no header line", path,
+                xy->name[k]);
+      return 1;
+    }
+    for (int i = 0; csv_field(header, i, buf, sizeof buf); i++) {
+      char *b = buf;
+      while (*b == ' ') b++;
+      if (!strcmp(b, xy->name[k])) {
+        xy->col[k] = i;
+        break;
+      }
+    }
+    if (xy->col[k] < 0) {
+      cli_error(cmd, "%s:1: no column named '%s' in the header", path, xy->name[k]);
+      return 1;
+    }
+  }
+  return 0;
+}
+
+static void put_csv(FILE *f, const char *s) {
+  if (!strpbrk(s, ",\"\n\r")) {
+    fputs(s, f);
+    return;
+  }
+  fputc('"', f);
+  for (; *s; s++) {
+    if (*s == '"') fputc('"', f);
+    fputc(*s, f);
+  }
+  fputc('"', f);
+}
+
+/* ---- progress --------------------------------------------------------------------------- */
+
+static void progress(int on, long done, long total, size_t rows) {
+  if (!on || total <= 0) return;
+  int pct = (int)(100.0 * (double)done / (double)total);
+  if (pct > 100) pct = 100;
+  char bar[41];
+  int k = pct * 40 / 100;
+  for (int i = 0; i < 40; i++) bar[i] = i < k ? '#' : '.';
+  bar[40] = '\0';
+  fprintf(stderr, "\r[%s] %3d%% %zu points", bar, pct, rows);
+}
+
+/* ---- join ------------------------------------------------------------------------------- */
+
+typedef struct join {
+  const char *pts_path;
+  qk_region_t *r;
+  qk_boundary_t rule;
+  int all;
+  unsigned threads;
+  const char **fields;
+  int n_fields;
+  FILE *out;
+  /* the chunk */
+  char **lines;
+  qk_point_t *p;
+  uint32_t *feat;
+  size_t n;
+} join_t;
+
+static void write_row(join_t *j, const char *line, uint32_t f) {
+  fputs(line, j->out);
+  fprintf(j->out, ",%ld", f == QK_NONE ? -1L : (long)f);
+  for (int k = 0; k < j->n_fields; k++) {
+    fputc(',', j->out);
+    const char *v = f == QK_NONE ? NULL : qk_region_property(j->r, f, j->fields[k]);
+    if (v) put_csv(j->out, v);
+  }
+  fputc('\n', j->out);
+}
+
+static int flush_chunk(join_t *j) {
+  if (!j->n) return CLI_OK;
+  if (!j->all) {
+    qk_status_t st = qk_region_locate_batch(j->r, j->p, j->n, j->rule, j->threads, j->feat);
+    if (st) return cli_status("join", "locate", st);
+    for (size_t i = 0; i < j->n; i++) write_row(j, j->lines[i], j->feat[i]);
+  } else {
+    uint32_t buf[64];
+    for (size_t i = 0; i < j->n; i++) {
+      size_t n;
+      qk_status_t st = qk_region_locate_all(j->r, j->p[i], j->rule, buf, 64, &n);
+      if (st) return cli_status("join", "locate", st);
+      uint32_t *many = buf;
+      if (n > 64) {
+        many = malloc(n * sizeof *many);
+        if (!many) return CLI_INTERNAL;
+        qk_region_locate_all(j->r, j->p[i], j->rule, many, n, &n);
+      }
+      if (n == 0) write_row(j, j->lines[i], QK_NONE);
+      for (size_t k = 0; k < n; k++) write_row(j, j->lines[i], many[k]);
+      if (many != buf) free(many);
+    }
+  }
+  for (size_t i = 0; i < j->n; i++) free(j->lines[i]);
+  j->n = 0;
+  return ferror(j->out) ? CLI_INTERNAL : CLI_OK;
+}
+
+static void join_usage(FILE *f) {
+  fprintf(f, "usage: quadkit join REGIONS POINTS.csv [--field NAME]... [--all]\n"
+             "                    [--boundary semi-open|closed|open] [--planar] [--xy X,Y]\n"
+             "                    [--threads N] [-o FILE]\n\n"
+             "For each point (x, y; longitude, latitude unless --planar) the feature of REGIONS\n"
+             "(GeoJSON, or any OGR format when built with GDAL) that holds it. Writes CSV: the\n"
+             "point's line as read, then `feature` (0-based feature index, -1 for none) and the\n"
+             "requested properties. --all writes one row per containing feature (a point in\n"
+             "none gets one row with -1). --xy picks the coordinate columns by header name or\n"
+             "1-based number (default: the first two). A header line (first field not a\n"
+             "number) is copied with the new column names appended.\n");
+}
+
+static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long total) {
+  char *line = NULL;
+  size_t cap = 0;
+  ssize_t len;
+  long lineno = 0;
+  int seen = 0, rc = CLI_OK;
+  char fx[256], fy[256];
+  while ((len = getline(&line, &cap, in)) >= 0) {
+    lineno++;
+    if ((size_t)len != strlen(line)) {
+      fprintf(stderr, "quadkit join: %s:%ld: binary data (NUL byte) in a text file\n", j->pts_path,
+              lineno);
+      rc = CLI_BAD_INPUT;
+      break;
+    }
+    while (len > 0 && (line[len - 1] == '\n' || line[len - 1] == '\r')) line[--len] = '\0';
+    if (lineno == 1 && (unsigned char)line[0] == 0xEF && (unsigned char)line[1] == 0xBB &&
+        (unsigned char)line[2] == 0xBF)
+      memmove(line, line + 3, (size_t)len - 2);
+    const char *q = line;
+    while (*q == ' ' || *q == '\t') q++;
+    if (!*q) continue;
+    if (!seen) {
+      seen = 1;
+      double v;
+      int named = xy->col[0] < 0 || xy->col[1] < 0;
+      int xc = xy->col[0] >= 0 ? xy->col[0] : 0;
+      int header = named || !csv_field(line, xc, fx, sizeof fx) || !number(fx, &v);
+      if (header) {
+        if (resolve_xy("join", j->pts_path, line, xy)) {
+          rc = CLI_BAD_INPUT;
+          break;
+        }
+        fputs(line, j->out);
+        fputs(",feature", j->out);
+        for (int k = 0; k < j->n_fields; k++) {
+          fputc(',', j->out);
+          put_csv(j->out, j->fields[k]);
+        }
+        fputc('\n', j->out);
+        continue;
+      }
+    }
+    double x, y;
+    int hx = csv_field(line, xy->col[0], fx, sizeof fx),
+        hy = csv_field(line, xy->col[1], fy, sizeof fy);
+    if (!hx || !hy) {
+      fprintf(stderr, "quadkit join: %s:%ld: no field %d (need x in field %d, y in field %d)\n",
+              j->pts_path, lineno, (!hx ? xy->col[0] : xy->col[1]) + 1, xy->col[0] + 1,
+              xy->col[1] + 1);
+      rc = CLI_BAD_INPUT;
+      break;
+    }
+    if (!number(fx, &x) || !number(fy, &y) || !isfinite(x) || !isfinite(y)) {
+      const char *bad = (!number(fx, &x) || !isfinite(x)) ? fx : fy;
+      int col = bad == fx ? xy->col[0] : xy->col[1];
+      fprintf(stderr, "quadkit join: %s:%ld: field %d is not a finite number: '%.40s'\n",
+              j->pts_path, lineno, col + 1, bad);
+      rc = CLI_BAD_INPUT;
+      break;
+    }
+    char *copy = malloc((size_t)len + 1);
+    if (!copy) {
+      rc = CLI_INTERNAL;
+      break;
+    }
+    memcpy(copy, line, (size_t)len + 1);
+    j->lines[j->n] = copy;
+    j->p[j->n] = (qk_point_t){x, y};
+    if (++j->n == CHUNK) {
+      if ((rc = flush_chunk(j))) break;
+      progress(progress_on, ftell(in), total, (size_t)lineno);
+    }
+  }
+  if (!rc && ferror(in)) {
+    fprintf(stderr, "quadkit join: %s: read error\n", j->pts_path);
+    rc = CLI_BAD_INPUT;
+  }
+  if (!rc) rc = flush_chunk(j);
+  for (size_t i = 0; i < j->n; i++) free(j->lines[i]);
+  j->n = 0;
+  free(line);
+  if (progress_on) {
+    progress(progress_on, total, total, (size_t)lineno);
+    fputc('\n', stderr);
+  }
+  return rc;
+}
+
+int cmd_join(int argc, char **argv) {
+  const char *pos[2] = {NULL, NULL}, *outp = "-", *xys = NULL;
+  int npos = 0, planar = 0, all = 0;
+  qk_boundary_t rule = QK_BOUNDARY_SEMI_OPEN;
+  unsigned long threads = 1;
+  const char **fields = calloc((size_t)argc + 1, sizeof *fields);
+  int nf = 0, rc = CLI_OK;
+  if (!fields) return CLI_INTERNAL;
+  for (int i = 1; i < argc && !rc; i++) {
+    const char *a = argv[i];
+    if (!strcmp(a, "--help") || !strcmp(a, "-h")) {
+      join_usage(stdout);
+      free(fields);
+      return CLI_OK;
+    } else if (!strcmp(a, "--field")) {
+      if (i + 1 >= argc)
+        cli_error("join", "--field needs a name"), rc = CLI_USAGE;
+      else
+        fields[nf++] = argv[++i];
+    } else if (!strcmp(a, "--all"))
+      all = 1;
+    else if (!strcmp(a, "--planar"))
+      planar = 1;
+    else if (!strcmp(a, "--boundary")) {
+      if (parse_boundary("join", i + 1 < argc ? argv[++i] : NULL, &rule)) rc = CLI_USAGE;
+    } else if (!strcmp(a, "--xy")) {
+      xys = i + 1 < argc ? argv[++i] : "";
+    } else if (!strcmp(a, "--threads")) {
+      if (cli_parse_u32("join", "--threads", i + 1 < argc ? argv[++i] : NULL, 0, 256, &threads))
+        rc = CLI_USAGE;
+    } else if (!strcmp(a, "-o")) {
+      if (i + 1 >= argc)
+        cli_error("join", "-o needs a file"), rc = CLI_USAGE;
+      else
+        outp = argv[++i];
+    } else if (a[0] == '-' && a[1]) {
+      cli_error("join", "unknown option '%s' (see quadkit join --help)", a);
+      rc = CLI_USAGE;
+    } else if (npos < 2)
+      pos[npos++] = a;
+    else {
+      cli_error("join", "too many arguments ('%s')", a);
+      rc = CLI_USAGE;
+    }
+  }
+  xy_spec_t xy = {{"1", "2"}, {0, 1}};
+  if (!rc && xys && parse_xy("join", xys, &xy)) rc = CLI_USAGE;
+  if (!rc && npos != 2) {
+    cli_error("join", "needs REGIONS and POINTS.csv (see quadkit join --help)");
+    rc = CLI_USAGE;
+  }
+  if (rc) {
+    free(fields);
+    return rc;
+  }
+  FILE *in = fopen(pos[1], "rb");
+  if (!in) {
+    cli_error("join", "%s: cannot open: %s", pos[1], strerror(errno));
+    free(fields);
+    return CLI_BAD_INPUT;
+  }
+  qk_region_t *r = NULL;
+  rc = read_layer("join", pos[0], planar, &r);
+  join_t j = {pos[1], r, rule, all, (unsigned)threads, fields, nf, NULL, NULL, NULL, NULL, 0};
+  cli_out_t o = {0};
+  if (!rc) rc = cli_out_open("join", outp, &o);
+  if (!rc) {
+    j.out = o.f;
+    j.lines = malloc(CHUNK * sizeof *j.lines);
+    j.p = malloc(CHUNK * sizeof *j.p);
+    j.feat = malloc(CHUNK * sizeof *j.feat);
+    if (!j.lines || !j.p || !j.feat) rc = CLI_INTERNAL;
+    struct stat sb;
+    long total = (!fstat(fileno(in), &sb) && S_ISREG(sb.st_mode)) ? (long)sb.st_size : 0;
+    if (!rc) rc = join_stream(&j, in, &xy, isatty(2) && total > 0, total);
+    int rc2 = cli_out_close("join", &o, rc == CLI_OK);
+    if (!rc) rc = rc2;
+  }
+  if (rc == CLI_INTERNAL) cli_error("join", "out of memory or write error");
+  free(j.lines);
+  free(j.p);
+  free(j.feat);
+  fclose(in);
+  qk_region_free(r);
+  free(fields);
+  return rc;
+}
+
+/* ---- regions ------------------------------------------------------------------------------ */
+
+int cmd_regions(int argc, char **argv) {
+  const char *path = NULL, *svg = NULL;
+  int planar = 0, rc = CLI_OK;
+  for (int i = 1; i < argc && !rc; i++) {
+    const char *a = argv[i];
+    if (!strcmp(a, "--help") || !strcmp(a, "-h")) {
+      printf("usage: quadkit regions REGIONS [--stats] [--svg FILE] [--planar]\n\n"
+             "Reads a polygon layer and prints its statistics as JSON (features, rings,\n"
+             "vertices, holes, self-intersecting rings, skipped geometries, index leaves,\n"
+             "depth, bytes, build seconds); --svg draws the features and index cells.\n");
+      return CLI_OK;
+    } else if (!strcmp(a, "--stats")) {
+    } else if (!strcmp(a, "--planar"))
+      planar = 1;
+    else if (!strcmp(a, "--svg")) {
+      if (i + 1 >= argc)
+        cli_error("regions", "--svg needs a file"), rc = CLI_USAGE;
+      else
+        svg = argv[++i];
+    } else if (a[0] == '-' && a[1]) {
+      cli_error("regions", "unknown option '%s' (see quadkit regions --help)", a);
+      rc = CLI_USAGE;
+    } else if (!path)
+      path = a;
+    else
+      cli_error("regions", "too many arguments ('%s')", a), rc = CLI_USAGE;
+  }
+  if (!rc && !path) cli_error("regions", "needs REGIONS"), rc = CLI_USAGE;
+  if (rc) return rc;
+  qk_region_t *r;
+  if ((rc = read_layer("regions", path, planar, &r))) return rc;
+  qk_region_stats_t s;
+  qk_region_stats(r, &s);
+  printf("{\"features\": %zu, \"rings\": %zu, \"vertices\": %zu, \"holes\": %zu, "
+         "\"self_intersecting_rings\": %zu, \"skipped_geometries\": %zu, \"edge_pieces\": %zu, "
+         "\"leaves\": %zu, \"leaf_edges\": %zu, \"depth\": %u, \"bytes\": %zu, "
+         "\"build_seconds\": %.6f, \"mode\": \"%s\", \"bbox\": [%.17g, %.17g, %.17g, %.17g]}\n",
+         s.features, s.rings, s.vertices, s.holes, s.self_intersecting, s.skipped, s.edges,
+         s.leaves, s.leaf_edges, s.depth, s.bytes, s.build_seconds, s.planar ? "planar" : "lonlat",
+         s.box.xmin, s.box.ymin, s.box.xmax, s.box.ymax);
+  if (svg) {
+    cli_out_t o;
+    if (!(rc = cli_out_open("regions", svg, &o))) {
+      qk_status_t st = qk_region_write_svg(r, o.f, 1200);
+      rc = cli_out_close("regions", &o, st == QK_OK);
+      if (st) rc = cli_status("regions", svg, st);
+    }
+  }
+  qk_region_free(r);
+  return rc;
+}
