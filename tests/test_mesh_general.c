@@ -1,0 +1,126 @@
+/*
+ * Tests of the general mesh mode's building blocks (docs/mesh-general.md), checked against
+ * exact rational arithmetic (GMP; without it the tests report themselves skipped):
+ *  - qk__orient2d on random triples over many scales, on triples made collinear in
+ *    floating point and then moved by a few ulps (where the floating-point estimate is
+ *    unreliable), on exactly collinear dyadic triples, and on coincident points.
+ */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+
+#include "mesh/general_internal.h"
+#include "qk_test.h"
+
+#ifdef QK_HAVE_GMP
+#include <gmp.h>
+
+/* The sign of (b - a) x (c - a) with rationals. */
+static int orient_q(const double *a, const double *b, const double *c) {
+  mpq_t t[6];
+  for (int i = 0; i < 6; i++) mpq_init(t[i]);
+  mpq_set_d(t[0], b[0]), mpq_set_d(t[5], a[0]), mpq_sub(t[0], t[0], t[5]);
+  mpq_set_d(t[1], c[1]), mpq_set_d(t[5], a[1]), mpq_sub(t[1], t[1], t[5]);
+  mpq_set_d(t[2], b[1]), mpq_sub(t[2], t[2], t[5]);
+  mpq_set_d(t[3], c[0]), mpq_set_d(t[5], a[0]), mpq_sub(t[3], t[3], t[5]);
+  mpq_mul(t[4], t[0], t[1]), mpq_mul(t[5], t[2], t[3]), mpq_sub(t[4], t[4], t[5]);
+  int s = mpq_sgn(t[4]);
+  for (int i = 0; i < 6; i++) mpq_clear(t[i]);
+  return s;
+}
+
+static void expect(const double *a, const double *b, const double *c, uint64_t seed, int k) {
+  int want = orient_q(a, b, c), got = qk__orient2d(a, b, c);
+  if (want != got)
+    fail_msg("seed %llu case %d: orient((%.17g,%.17g),(%.17g,%.17g),(%.17g,%.17g)) = %d, "
+             "exact %d",
+             (unsigned long long)seed, k, a[0], a[1], b[0], b[1], c[0], c[1], got, want);
+  /* The sign flips with the orientation and survives cyclic shifts. */
+  if (qk__orient2d(b, a, c) != -want || qk__orient2d(b, c, a) != want)
+    fail_msg("seed %llu case %d: orient is not antisymmetric", (unsigned long long)seed, k);
+}
+
+static void test_orient_random_scales(void **state) {
+  (void)state;
+  uint64_t seed = qkt_seed(12001);
+  qkt_rng_t r;
+  qkt_rng_seed(&r, seed);
+  for (int k = 0; k < 20000; k++) {
+    int e = (int)qkt_rng_below(&r, 81) - 40; /* scales 2^-40 .. 2^40 */
+    double off = ldexp(qkt_rng_range(&r, -1, 1), (int)qkt_rng_below(&r, 41));
+    double p[3][2];
+    for (int i = 0; i < 3; i++)
+      for (int j = 0; j < 2; j++) p[i][j] = off + ldexp(qkt_rng_range(&r, -1, 1), e);
+    expect(p[0], p[1], p[2], seed, k);
+  }
+}
+
+static void test_orient_near_collinear(void **state) {
+  (void)state;
+  uint64_t seed = qkt_seed(12002);
+  qkt_rng_t r;
+  qkt_rng_seed(&r, seed);
+  int nonzero = 0, naive_wrong = 0;
+  for (int k = 0; k < 20000; k++) {
+    double scale = ldexp(1, (int)qkt_rng_below(&r, 41) - 20);
+    double a[2] = {qkt_rng_range(&r, -1, 1) * scale, qkt_rng_range(&r, -1, 1) * scale};
+    double b[2] = {qkt_rng_range(&r, -1, 1) * scale * 1e6, qkt_rng_range(&r, -1, 1) * scale};
+    double t = qkt_rng_range(&r, -0.5, 1.5);
+    double c[2] = {a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])};
+    int moves = (int)qkt_rng_below(&r, 7) - 3; /* -3 .. 3 ulps in y */
+    for (int m = 0; m < abs(moves); m++) c[1] = nextafter(c[1], moves > 0 ? INFINITY : -INFINITY);
+    expect(a, b, c, seed, k);
+    int want = orient_q(a, b, c);
+    double naive = (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
+    nonzero += want != 0;
+    naive_wrong += (naive > 0) - (naive < 0) != want;
+  }
+  /* The cases must reach both answers near the line, and many where plain floating
+   * point gets the sign wrong (so the exact path is exercised). */
+  assert_true(nonzero > 1000);
+  assert_true(naive_wrong > 1000);
+}
+
+static void test_orient_exact_collinear(void **state) {
+  (void)state;
+  uint64_t seed = qkt_seed(12003);
+  qkt_rng_t r;
+  qkt_rng_seed(&r, seed);
+  for (int k = 0; k < 5000; k++) {
+    /* Dyadic endpoints and a dyadic parameter: the point is on the segment exactly. */
+    double a[2] = {ldexp((double)qkt_rng_below(&r, 1u << 20), -10) + 1e5,
+                   ldexp((double)qkt_rng_below(&r, 1u << 20), -10)};
+    double b[2] = {ldexp((double)qkt_rng_below(&r, 1u << 20), -10),
+                   ldexp((double)qkt_rng_below(&r, 1u << 20), -10) - 3e5};
+    double tk = (double)qkt_rng_below(&r, 1u << 12), s = ldexp(1, -12);
+    double c[2] = {a[0] + tk * ((b[0] - a[0]) * s), a[1] + tk * ((b[1] - a[1]) * s)};
+    expect(a, b, c, seed, k);
+    assert_int_equal(qk__orient2d(a, b, c), 0);
+    double d[2] = {c[0], nextafter(c[1], INFINITY)};
+    expect(a, b, d, seed, k);
+  }
+  double p[2] = {0.1, 0.3}, q[2] = {0.1, 0.3};
+  assert_int_equal(qk__orient2d(p, q, p), 0);
+  double u[2] = {3, -7}, v[2] = {3, 5}, w[2] = {3, 11};
+  expect(u, v, w, seed, -1);
+}
+#endif
+
+static void skip_without_gmp(void **state) {
+  (void)state;
+  skip();
+}
+
+int main(void) {
+#ifdef QK_HAVE_GMP
+  const struct CMUnitTest tests[] = {
+      cmocka_unit_test(test_orient_random_scales),
+      cmocka_unit_test(test_orient_near_collinear),
+      cmocka_unit_test(test_orient_exact_collinear),
+  };
+  (void)skip_without_gmp;
+#else
+  const struct CMUnitTest tests[] = {cmocka_unit_test(skip_without_gmp)};
+#endif
+  return cmocka_run_group_tests(tests, NULL, NULL);
+}
