@@ -3,7 +3,10 @@
  * exact rational arithmetic (GMP; without it the tests report themselves skipped):
  *  - qk__orient2d on random triples over many scales, on triples made collinear in
  *    floating point and then moved by a few ulps (where the floating-point estimate is
- *    unreliable), on exactly collinear dyadic triples, and on coincident points.
+ *    unreliable), on exactly collinear dyadic triples, and on coincident points;
+ *  - qk__seg_budget and qk__seg_point: every point a + (k/2^m)(b - a) with m within the
+ *    budget is exactly that rational point (dyadic endpoints of many magnitudes, axis-
+ *    parallel segments, full-precision doubles), and requests beyond it are refused.
  */
 #include <math.h>
 #include <stdio.h>
@@ -104,6 +107,75 @@ static void test_orient_exact_collinear(void **state) {
   double u[2] = {3, -7}, v[2] = {3, 5}, w[2] = {3, 11};
   expect(u, v, w, seed, -1);
 }
+
+/* out == a + (k/2^m)(b - a) exactly. */
+static int point_is(const double *a, const double *b, uint64_t k, int m, const double *out) {
+  mpq_t t, d, x;
+  mpq_inits(t, d, x, NULL);
+  mpz_set_ui(mpq_numref(t), 1);
+  mpz_mul_2exp(mpq_denref(t), mpq_numref(t), (mp_bitcnt_t)m);
+  mpz_set_ui(mpq_numref(t), 0);
+  mpz_import(mpq_numref(t), 1, -1, sizeof k, 0, 0, &k);
+  mpq_canonicalize(t);
+  int ok = 1;
+  for (int i = 0; i < 2; i++) {
+    mpq_set_d(d, b[i]), mpq_set_d(x, a[i]), mpq_sub(d, d, x), mpq_mul(d, d, t), mpq_add(d, d, x);
+    mpq_set_d(x, out[i]);
+    ok &= mpq_equal(d, x) != 0;
+  }
+  mpq_clears(t, d, x, NULL);
+  return ok;
+}
+
+static void test_seg_points(void **state) {
+  (void)state;
+  uint64_t seed = qkt_seed(12004);
+  qkt_rng_t r;
+  qkt_rng_seed(&r, seed);
+  int interior = 0;
+  for (int c = 0; c < 20000; c++) {
+    double a[2], b[2];
+    int kind = (int)qkt_rng_below(&r, 3);
+    int f = (int)qkt_rng_below(&r, 60) - 20; /* grid 2^-f */
+    int bits = 1 + (int)qkt_rng_below(&r, 52);
+    for (int i = 0; i < 2; i++) {
+      a[i] = ldexp((double)(qkt_rng_next(&r) >> (64 - bits)) - ldexp(1, bits - 1), -f);
+      b[i] = ldexp((double)(qkt_rng_next(&r) >> (64 - bits)) - ldexp(1, bits - 1), -f);
+      if (kind == 2) a[i] = qkt_rng_range(&r, -1e6, 1e6), b[i] = qkt_rng_range(&r, -1e6, 1e6);
+    }
+    if (kind == 1) { /* axis-parallel */
+      int axis = (int)qkt_rng_below(&r, 2);
+      b[axis] = a[axis];
+    }
+    if (a[0] == b[0] && a[1] == b[1]) continue;
+    int budget = qk__seg_budget(a, b);
+    assert_true(budget <= 52);
+    for (int m = 0; m <= budget && m <= 52; m += 1 + (int)qkt_rng_below(&r, 8)) {
+      uint64_t k = m == 0 ? qkt_rng_below(&r, 2) : qkt_rng_next(&r) >> (64 - m);
+      double out[2];
+      assert_int_equal(qk__seg_point(a, b, k, m, out), 0);
+      if (!point_is(a, b, k, m, out))
+        fail_msg("seed %llu case %d: point %llu/2^%d of (%.17g,%.17g)-(%.17g,%.17g) is not exact",
+                 (unsigned long long)seed, c, (unsigned long long)k, m, a[0], a[1], b[0], b[1]);
+      interior += k != 0 && m > 0 && k != (uint64_t)1 << m;
+    }
+    double out[2] = {0, 0};
+    if (budget >= 0 && budget < 52) {
+      assert_int_equal(qk__seg_point(a, b, 1, budget + 1, out), -1);
+      assert_true(out[0] == 0 && out[1] == 0);
+    }
+    /* The endpoints are always available, bit-identical. */
+    assert_int_equal(qk__seg_point(a, b, 8, 3, out), 0);
+    assert_true(out[0] == b[0] && out[1] == b[1]);
+    assert_int_equal(qk__seg_point(a, b, 0, 40, out), 0);
+    assert_true(out[0] == a[0] && out[1] == a[1]);
+    assert_int_equal(qk__seg_point(a, b, 9, 3, out), -1);
+  }
+  assert_true(interior > 10000);
+  /* Coordinates with 16 fractional bits up to 2^20 leave a budget of 16 (the doc's remark). */
+  double p[2] = {ldexp(1, 20) - ldexp(1, -16), 0.5}, q[2] = {3.25, ldexp(1, 19) + ldexp(3, -16)};
+  assert_int_equal(qk__seg_budget(p, q), 16);
+}
 #endif
 
 static void skip_without_gmp(void **state) {
@@ -117,6 +189,7 @@ int main(void) {
       cmocka_unit_test(test_orient_random_scales),
       cmocka_unit_test(test_orient_near_collinear),
       cmocka_unit_test(test_orient_exact_collinear),
+      cmocka_unit_test(test_seg_points),
   };
   (void)skip_without_gmp;
 #else
