@@ -17,6 +17,14 @@
 int qk__orient2d(const double a[2], const double b[2], const double c[2]);
 
 /*
+ * Whether the closed segment from a to b meets the closed box [lo[0], hi[0]] x [lo[1],
+ * hi[1]] (lo <= hi), exactly (the refinement rules' test: a box against a feature). The
+ * separating-axis test: the bounding boxes overlap and the segment's line does not leave
+ * all four box corners strictly on one side. a == b is a point test.
+ */
+int qk__seg_meets_box(const double a[2], const double b[2], const double lo[2], const double hi[2]);
+
+/*
  * The precision budget of the segment from a to b (docs/mesh-general.md, section 3): the
  * largest m such that qk__seg_point() computes every point a + (k / 2^m)(b - a),
  * 0 <= k <= 2^m, exactly; at most QK__SEG_BUDGET_MAX (a coordinate shared by both

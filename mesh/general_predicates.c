@@ -73,3 +73,19 @@ int qk__orient2d(const double a[2], const double b[2], const double c[2]) {
   if (-det > bound) return -1;
   return sign_exact(a, b, c);
 }
+
+int qk__seg_meets_box(const double a[2], const double b[2], const double lo[2],
+                      const double hi[2]) {
+  for (int i = 0; i < 2; i++) {
+    double smin = a[i] < b[i] ? a[i] : b[i], smax = a[i] < b[i] ? b[i] : a[i];
+    if (smax < lo[i] || smin > hi[i]) return 0;
+  }
+  /* Separating axes of a box and a segment: the two axes (done) and the segment's normal. */
+  const double corner[4][2] = {{lo[0], lo[1]}, {hi[0], lo[1]}, {hi[0], hi[1]}, {lo[0], hi[1]}};
+  int pos = 0, neg = 0;
+  for (int k = 0; k < 4; k++) {
+    int o = qk__orient2d(a, b, corner[k]);
+    pos += o > 0, neg += o < 0;
+  }
+  return pos < 4 && neg < 4;
+}

@@ -4,6 +4,8 @@
  *  - qk__orient2d on random triples over many scales, on triples made collinear in
  *    floating point and then moved by a few ulps (where the floating-point estimate is
  *    unreliable), on exactly collinear dyadic triples, and on coincident points;
+ *  - qk__seg_meets_box against exact rational clipping (Liang-Barsky in mpq) on random
+ *    segments, segments through box corners, along box sides and one ulp off them;
  *  - qk__seg_budget and qk__seg_point: every point a + (k/2^m)(b - a) with m within the
  *    budget is exactly that rational point (dyadic endpoints of many magnitudes, axis-
  *    parallel segments, full-precision doubles), and requests beyond it are refused.
@@ -108,6 +110,69 @@ static void test_orient_exact_collinear(void **state) {
   expect(u, v, w, seed, -1);
 }
 
+/* Whether segment ab meets the closed box, by clipping its parameter range with rationals. */
+static int meets_q(const double *a, const double *b, const double *lo, const double *hi) {
+  mpq_t t0, t1, d, u, v, w;
+  mpq_inits(t0, t1, d, u, v, w, NULL);
+  mpq_set_ui(t0, 0, 1), mpq_set_ui(t1, 1, 1);
+  int ok = 1;
+  for (int i = 0; i < 2 && ok; i++) {
+    mpq_set_d(d, b[i]), mpq_set_d(w, a[i]), mpq_sub(d, d, w);
+    if (mpq_sgn(d) == 0) {
+      ok = a[i] >= lo[i] && a[i] <= hi[i];
+      continue;
+    }
+    mpq_set_d(u, lo[i]), mpq_sub(u, u, w), mpq_div(u, u, d); /* parameter at lo */
+    mpq_set_d(v, hi[i]), mpq_sub(v, v, w), mpq_div(v, v, d); /* parameter at hi */
+    if (mpq_cmp(u, v) > 0) mpq_swap(u, v);
+    if (mpq_cmp(u, t0) > 0) mpq_set(t0, u);
+    if (mpq_cmp(v, t1) < 0) mpq_set(t1, v);
+    ok = mpq_cmp(t0, t1) <= 0;
+  }
+  mpq_clears(t0, t1, d, u, v, w, NULL);
+  return ok;
+}
+
+static void test_seg_meets_box(void **state) {
+  (void)state;
+  uint64_t seed = qkt_seed(12005);
+  qkt_rng_t r;
+  qkt_rng_seed(&r, seed);
+  int hits = 0, misses = 0;
+  for (int c = 0; c < 40000; c++) {
+    double s = ldexp(1, (int)qkt_rng_below(&r, 40) - 20);
+    double lo[2] = {s * (double)qkt_rng_below(&r, 64), s * (double)qkt_rng_below(&r, 64)};
+    double hi[2] = {lo[0] + s, lo[1] + s};
+    double a[2], b[2];
+    int kind = (int)qkt_rng_below(&r, 4);
+    for (int i = 0; i < 2; i++) {
+      a[i] = lo[i] + s * qkt_rng_range(&r, -2, 3);
+      b[i] = lo[i] + s * qkt_rng_range(&r, -2, 3);
+    }
+    if (kind == 1) { /* through a corner: b = 2 corner - a, exactly */
+      double k0 = qkt_rng_below(&r, 2) ? lo[0] : hi[0], k1 = qkt_rng_below(&r, 2) ? lo[1] : hi[1];
+      a[0] = k0 + s * (double)qkt_rng_below(&r, 8) / 8,
+      a[1] = k1 - s * (double)qkt_rng_below(&r, 8) / 8;
+      b[0] = 2 * k0 - a[0], b[1] = 2 * k1 - a[1];
+    } else if (kind == 2) { /* along a side line, possibly beyond the box */
+      a[1] = b[1] = qkt_rng_below(&r, 2) ? lo[1] : hi[1];
+    }
+    if (kind >= 1 && qkt_rng_below(&r, 2)) { /* one ulp off (not from 0: no subnormals) */
+      int i = (int)qkt_rng_below(&r, 2);
+      if (a[i] == 0) a[i] = ldexp(1, -300);
+      a[i] = nextafter(a[i], qkt_rng_below(&r, 2) ? INFINITY : -INFINITY);
+    }
+    int want = meets_q(a, b, lo, hi), got = qk__seg_meets_box(a, b, lo, hi);
+    if (want != got)
+      fail_msg("seed %llu case %d: (%.17g,%.17g)-(%.17g,%.17g) vs box [%.17g,%.17g]x[%.17g,%.17g]: "
+               "%d, exact %d",
+               (unsigned long long)seed, c, a[0], a[1], b[0], b[1], lo[0], hi[0], lo[1], hi[1], got,
+               want);
+    hits += want, misses += !want;
+  }
+  assert_true(hits > 5000 && misses > 5000);
+}
+
 /* out == a + (k/2^m)(b - a) exactly. */
 static int point_is(const double *a, const double *b, uint64_t k, int m, const double *out) {
   mpq_t t, d, x;
@@ -186,10 +251,9 @@ static void skip_without_gmp(void **state) {
 int main(void) {
 #ifdef QK_HAVE_GMP
   const struct CMUnitTest tests[] = {
-      cmocka_unit_test(test_orient_random_scales),
-      cmocka_unit_test(test_orient_near_collinear),
-      cmocka_unit_test(test_orient_exact_collinear),
-      cmocka_unit_test(test_seg_points),
+      cmocka_unit_test(test_orient_random_scales),   cmocka_unit_test(test_orient_near_collinear),
+      cmocka_unit_test(test_orient_exact_collinear), cmocka_unit_test(test_seg_points),
+      cmocka_unit_test(test_seg_meets_box),
   };
   (void)skip_without_gmp;
 #else
