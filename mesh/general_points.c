@@ -1,0 +1,53 @@
+/*
+ * Exact points on input segments for the general mesh mode (docs/mesh-general.md,
+ * section 3). A coordinate pair (a, b), both multiples of 2^e and below 2^E in magnitude,
+ * has b - a a multiple of 2^e below 2^(E+1), a double when E + 1 - e <= 53; scaled by
+ * 2^-m and multiplied by k <= 2^m it stays a multiple of 2^(e-m) below 2^(E+1), a double
+ * when m <= 52 - (E - e); and a plus it lies between a and b, so below 2^E and a multiple
+ * of 2^(e-m): a double too. Every operation's exact result is a double, so each is exact.
+ */
+#include <math.h>
+
+#include "mesh/general_internal.h"
+
+/* Exponent of the lowest set bit of x != 0: x is an odd multiple of 2^lsb. */
+static int lsb_exp(double x) {
+  int q;
+  double f = frexp(fabs(x), &q); /* f in [1/2, 1), x = f 2^q */
+  uint64_t mant = (uint64_t)ldexp(f, 53);
+  int tz = 0;
+  while (!(mant & 1)) mant >>= 1, tz++;
+  return q - 53 + tz;
+}
+
+/* Budget of one coordinate pair. */
+static int pair_budget(double a, double b) {
+  if (a == b) return QK__SEG_BUDGET_MAX;
+  int e = INT32_MAX, big = INT32_MIN, q;
+  double v[2] = {a, b};
+  for (int i = 0; i < 2; i++) {
+    if (v[i] == 0) continue;
+    int l = lsb_exp(v[i]);
+    if (l < e) e = l;
+    frexp(v[i], &q); /* |v| < 2^q */
+    if (q > big) big = q;
+  }
+  int m = 52 - (big - e);
+  /* Keep every intermediate a normal double: multiples of 2^(e-m) with e - m >= -1022. */
+  if (m > e + 1022) m = e + 1022;
+  return m;
+}
+
+int qk__seg_budget(const double a[2], const double b[2]) {
+  int mx = pair_budget(a[0], b[0]), my = pair_budget(a[1], b[1]);
+  return mx < my ? mx : my;
+}
+
+int qk__seg_point(const double a[2], const double b[2], uint64_t k, int m, double out[2]) {
+  if (m < 0 || m > 62 || k > (uint64_t)1 << m) return -1;
+  if (k == 0) return out[0] = a[0], out[1] = a[1], 0;
+  if (k == (uint64_t)1 << m) return out[0] = b[0], out[1] = b[1], 0;
+  if (m > qk__seg_budget(a, b)) return -1;
+  for (int i = 0; i < 2; i++) out[i] = a[i] + (double)k * ldexp(b[i] - a[i], -m);
+  return 0;
+}

@@ -1,0 +1,91 @@
+/*
+ * Exact orientation for the general mesh mode (docs/mesh-general.md, section 5).
+ *
+ * The determinant (bx - ax)(cy - ay) - (by - ay)(cx - ax) is first estimated in doubles;
+ * its rounding error is at most (3u + 16u^2)(|l| + |r|) for the unit roundoff u = 2^-53
+ * and the two products l, r (the standard bound for this expression), so an estimate
+ * larger than 2^-50 (|l| + |r|) in magnitude has the right sign. Otherwise every
+ * difference is split exactly into a rounded value and its error (two-sum), every product
+ * of those parts exactly into a rounded product and its error (fma), and the sixteen
+ * resulting doubles are summed exactly into a nonoverlapping expansion (each term added
+ * by a chain of two-sums, smallest components first); the sign of an expansion is the
+ * sign of its largest nonzero component.
+ */
+#include <math.h>
+
+#include "mesh/general_internal.h"
+
+/* a + b = s + e exactly (Knuth's two-sum, no branch on magnitudes). */
+static void two_sum(double a, double b, double *s, double *e) {
+  double x = a + b, bv = x - a, av = x - bv;
+  *s = x;
+  *e = (a - av) + (b - bv);
+}
+
+/* a * b = p + e exactly, barring underflow. */
+static void two_prod(double a, double b, double *p, double *e) {
+  double x = a * b;
+  *p = x;
+  *e = fma(a, b, -x);
+}
+
+/* Add q to the nonoverlapping expansion h[0..*n) (increasing magnitude), dropping zero
+ * components; the result stays nonoverlapping. h has room for one more component. */
+static void grow(double *h, int *n, double q) {
+  int m = 0;
+  for (int i = 0; i < *n; i++) {
+    double s, e;
+    two_sum(q, h[i], &s, &e);
+    if (e != 0) h[m++] = e;
+    q = s;
+  }
+  if (q != 0) h[m++] = q;
+  *n = m;
+}
+
+static int sign_exact(const double *a, const double *b, const double *c) {
+  double d[4][2]; /* bx - ax, cy - ay, by - ay, cx - ax as (value, error) */
+  two_sum(b[0], -a[0], &d[0][0], &d[0][1]);
+  two_sum(c[1], -a[1], &d[1][0], &d[1][1]);
+  two_sum(b[1], -a[1], &d[2][0], &d[2][1]);
+  two_sum(c[0], -a[0], &d[3][0], &d[3][1]);
+  double h[17];
+  int n = 0;
+  for (int pair = 0; pair < 2; pair++) {
+    const double *u = d[2 * pair], *v = d[2 * pair + 1];
+    double sgn = pair == 0 ? 1.0 : -1.0;
+    for (int i = 0; i < 2; i++)
+      for (int j = 0; j < 2; j++) {
+        double p, e;
+        two_prod(sgn * u[i], v[j], &p, &e);
+        grow(h, &n, e);
+        grow(h, &n, p);
+      }
+  }
+  if (n == 0) return 0;
+  return h[n - 1] > 0 ? 1 : -1;
+}
+
+int qk__orient2d(const double a[2], const double b[2], const double c[2]) {
+  double l = (b[0] - a[0]) * (c[1] - a[1]), r = (b[1] - a[1]) * (c[0] - a[0]);
+  double det = l - r, bound = ldexp(fabs(l) + fabs(r), -50);
+  if (det > bound) return 1;
+  if (-det > bound) return -1;
+  return sign_exact(a, b, c);
+}
+
+int qk__seg_meets_box(const double a[2], const double b[2], const double lo[2],
+                      const double hi[2]) {
+  for (int i = 0; i < 2; i++) {
+    double smin = a[i] < b[i] ? a[i] : b[i], smax = a[i] < b[i] ? b[i] : a[i];
+    if (smax < lo[i] || smin > hi[i]) return 0;
+  }
+  /* Separating axes of a box and a segment: the two axes (done) and the segment's normal. */
+  const double corner[4][2] = {{lo[0], lo[1]}, {hi[0], lo[1]}, {hi[0], hi[1]}, {lo[0], hi[1]}};
+  int pos = 0, neg = 0;
+  for (int k = 0; k < 4; k++) {
+    int o = qk__orient2d(a, b, corner[k]);
+    pos += o > 0, neg += o < 0;
+  }
+  return pos < 4 && neg < 4;
+}
