@@ -12,6 +12,10 @@
 
 #include "collide/collide_internal.h"
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 /*
  * The collider's own copy of each node: the bounding box of the items beneath it, in
  * floats rounded outwards (so still a bounding box), with the links the searches need.
@@ -24,8 +28,17 @@ typedef struct cnode {
   uint32_t child; /* first of four children, or QK_NONE for a leaf */
   uint32_t start; /* a leaf's first slot */
   uint32_t count; /* a leaf's number of items */
-  uint32_t pad_;
+  uint32_t quad;  /* an internal node's entry in quads (its children's boxes) */
 } cnode_t;
+
+/*
+ * The boxes of an internal node's four children side by side (structure of arrays, as a
+ * BVH4 stores them), the same outward-rounded floats as their cnode_t: one 64-byte line
+ * from which the ray cast tests all four children at once.
+ */
+typedef struct cquad {
+  float xmin[4], ymin[4], xmax[4], ymax[4];
+} cquad_t;
 
 /*
  * Item data is kept in the tree's slot order (parallel to the tree's point arrays), not by id, so
@@ -43,7 +56,11 @@ struct qk_collider {
   void *cn_block;   /* the allocation holding cn (aligned inside it) */
   size_t cn_bytes;
   size_t n_nodes;
-  double mag; /* largest coordinate magnitude of any item box, for rounding margins */
+  cquad_t *quads;    /* per internal node (cnode_t::quad), 64-byte aligned */
+  void *quads_block; /* the allocation holding quads */
+  size_t quads_bytes;
+  uint32_t n_quads; /* entries filled */
+  double mag;       /* largest coordinate magnitude of any item box, for rounding margins */
 };
 
 /* Exact overlap predicates (touching counts). */
@@ -130,13 +147,21 @@ static qk_box_t fill_node_boxes(qk_collider_t *c, uint32_t node) {
   cn->child = qk__node_child(t, node);
   cn->start = start;
   cn->count = leaf ? count : 0;
-  cn->pad_ = 0;
+  cn->quad = QK_NONE;
   if (leaf) {
     for (uint32_t i = 0; i < count; i++) box_union(&b, &c->sbox[start + i]);
   } else {
     for (uint32_t k = 0; k < 4; k++) {
       qk_box_t cb = fill_node_boxes(c, cn->child + k);
       box_union(&b, &cb);
+    }
+    cquad_t *q = &c->quads[cn->quad = c->n_quads++];
+    for (uint32_t k = 0; k < 4; k++) {
+      const cnode_t *ch = &c->cn[cn->child + k];
+      q->xmin[k] = ch->xmin;
+      q->ymin[k] = ch->ymin;
+      q->xmax[k] = ch->xmax;
+      q->ymax[k] = ch->ymax;
     }
   }
   if (count == 0) {
@@ -161,6 +186,7 @@ void qk_collider_free(qk_collider_t *c) {
   qk__free(&a, c->sbox, c->n_slots * sizeof *c->sbox);
   qk__free(&a, c->sdisc, c->n_slots * sizeof *c->sdisc);
   qk__free(&a, c->cn_block, c->cn_bytes);
+  qk__free(&a, c->quads_block, c->quads_bytes);
   qk_tree_free(c->tree);
   qk__free(&a, c, sizeof *c);
 }
@@ -227,7 +253,11 @@ static qk_status_t alloc_arrays(qk_collider_t *c) {
   c->cn_bytes = (c->n_nodes + 3) * sizeof(cnode_t) + 64;
   c->cn_block = qk__realloc(a, NULL, 0, c->cn_bytes);
   if (c->cn_block) c->cn = (cnode_t *)(((uintptr_t)c->cn_block + 63) & ~(uintptr_t)63) + 3;
-  if (!c->sbox || (c->n_discs && !c->sdisc) || !c->cn_block) return QK_ERR_NOMEM;
+  /* Every internal node has four children, so there are at most n_nodes / 4 of them. */
+  c->quads_bytes = (c->n_nodes / 4 + 1) * sizeof(cquad_t) + 64;
+  c->quads_block = qk__realloc(a, NULL, 0, c->quads_bytes);
+  if (c->quads_block) c->quads = (cquad_t *)(((uintptr_t)c->quads_block + 63) & ~(uintptr_t)63);
+  if (!c->sbox || (c->n_discs && !c->sdisc) || !c->cn_block || !c->quads_block) return QK_ERR_NOMEM;
   return QK_OK;
 }
 
@@ -510,6 +540,83 @@ static inline double ray_box(const qk_box_t *b, const ray_t *r, double tmax) {
   return lo;
 }
 
+/*
+ * The slab test of the ray against the four boxes of a cquad_t at once: bit k of the
+ * result is set when child k's box meets the ray within [0, tmax] (widened by ts) at a
+ * parameter not beyond best + ts, and lo[k] receives where it enters. The same
+ * arithmetic as slab() per lane: products with the reciprocals when they are finite,
+ * quotients otherwise, and for a zero direction component a test of the origin's
+ * coordinate (whose interval is then everything or nothing). No lane can produce a NaN:
+ * the origin is finite, the boxes' sides finite or infinite, and a zero component never
+ * multiplies or divides.
+ */
+#if defined(__SSE2__)
+/* One axis for two lanes: the entry and exit parameters. */
+static inline void quad_axis(__m128d mn, __m128d mx, double o, double d, double inv, int mul,
+                             __m128d *tn, __m128d *tf) {
+  const __m128d vo = _mm_set1_pd(o);
+  if (d == 0) {
+    __m128d in = _mm_and_pd(_mm_cmple_pd(mn, vo), _mm_cmple_pd(vo, mx));
+    const __m128d inf = _mm_set1_pd(INFINITY), ninf = _mm_set1_pd(-INFINITY);
+    *tn = _mm_or_pd(_mm_and_pd(in, ninf), _mm_andnot_pd(in, inf));
+    *tf = _mm_or_pd(_mm_and_pd(in, inf), _mm_andnot_pd(in, ninf));
+    return;
+  }
+  __m128d t1, t2;
+  if (mul) {
+    const __m128d vi = _mm_set1_pd(inv);
+    t1 = _mm_mul_pd(_mm_sub_pd(mn, vo), vi);
+    t2 = _mm_mul_pd(_mm_sub_pd(mx, vo), vi);
+  } else {
+    const __m128d vd = _mm_set1_pd(d);
+    t1 = _mm_div_pd(_mm_sub_pd(mn, vo), vd);
+    t2 = _mm_div_pd(_mm_sub_pd(mx, vo), vd);
+  }
+  *tn = _mm_min_pd(t1, t2);
+  *tf = _mm_max_pd(t1, t2);
+}
+
+static inline unsigned quad_slab(const cquad_t *q, const ray_t *r, double tmax, double ts,
+                                 double best, double lo[4]) {
+  const __m128 xmin = _mm_load_ps(q->xmin), ymin = _mm_load_ps(q->ymin);
+  const __m128 xmax = _mm_load_ps(q->xmax), ymax = _mm_load_ps(q->ymax);
+  unsigned keep = 0;
+  for (int h = 0; h < 2; h++) {
+    /* Lanes 2h and 2h + 1, widened to doubles (exactly). */
+    __m128d x0 = _mm_cvtps_pd(h ? _mm_movehl_ps(xmin, xmin) : xmin);
+    __m128d x1 = _mm_cvtps_pd(h ? _mm_movehl_ps(xmax, xmax) : xmax);
+    __m128d y0 = _mm_cvtps_pd(h ? _mm_movehl_ps(ymin, ymin) : ymin);
+    __m128d y1 = _mm_cvtps_pd(h ? _mm_movehl_ps(ymax, ymax) : ymax);
+    __m128d txn, txf, tyn, tyf;
+    quad_axis(x0, x1, r->ox, r->dx, r->ix, r->fast, &txn, &txf);
+    quad_axis(y0, y1, r->oy, r->dy, r->iy, r->fast, &tyn, &tyf);
+    __m128d l = _mm_max_pd(_mm_max_pd(txn, tyn), _mm_setzero_pd());
+    __m128d u = _mm_min_pd(_mm_min_pd(txf, tyf), _mm_set1_pd(tmax));
+    const __m128d vts = _mm_set1_pd(ts);
+    __m128d ok = _mm_and_pd(_mm_cmple_pd(l, _mm_add_pd(u, vts)),
+                            _mm_cmple_pd(_mm_sub_pd(l, vts), _mm_set1_pd(best)));
+    _mm_storeu_pd(lo + 2 * h, l);
+    keep |= (unsigned)_mm_movemask_pd(ok) << (2 * h);
+  }
+  return keep;
+}
+#else
+/* Portable fallback: the same test lane by lane. */
+static inline unsigned quad_slab(const cquad_t *q, const ray_t *r, double tmax, double ts,
+                                 double best, double lo[4]) {
+  unsigned keep = 0;
+  for (int k = 0; k < 4; k++) {
+    double l, u;
+    if (slab(q->xmin[k], q->ymin[k], q->xmax[k], q->ymax[k], r, r->fast, tmax, &l, &u) &&
+        l <= u + ts && l - ts <= best) {
+      lo[k] = l;
+      keep |= 1u << k;
+    }
+  }
+  return keep;
+}
+#endif
+
 qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t d, double tmax,
                                 qk_hit_t *hit) {
   if (!c || !hit) return QK_ERR_INVALID;
@@ -562,18 +669,15 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
       }
       continue;
     }
+    /* All four children's boxes from one line, only the kept ones stacked. */
+    double lo4[4];
+    unsigned keep = quad_slab(&c->quads[n->quad], &ray, tmax, ts, best, lo4);
     qk__centry_t kids[4];
     int m = 0;
     for (uint32_t k = 0; k < 4; k++) {
-      uint32_t ch = n->child + k;
-      /* Only the children's boxes are read here, not their nodes, which for most of
-       * them would be a cache miss for nothing. */
-      const cnode_t *cb = &c->cn[ch];
-      int in = slab(cb->xmin, cb->ymin, cb->xmax, cb->ymax, &ray, ray.fast, tmax, &lo, &hi);
-      if (!in || lo > hi + ts) continue;
-      if (lo - ts > best) continue;
-      kids[m].node = ch;
-      kids[m++].bound = lo - ts;
+      if (!(keep >> k & 1)) continue;
+      kids[m].node = n->child + k;
+      kids[m++].bound = lo4[k] - ts;
     }
     qk__csort4_desc(kids, m);
     for (int i = 0; i < m; i++) stack[sp++] = kids[i];
