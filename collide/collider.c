@@ -479,8 +479,10 @@ qk_status_t qk_collider_pairs_list(const qk_collider_t *c, qk_pair_t *out, size_
  */
 typedef struct ray {
   double ox, oy, dx, dy;
-  double ix, iy; /* 1/dx, 1/dy (0 for a zero component) */
-  int fast;      /* both reciprocals finite: node boxes may use them */
+  double ix, iy;  /* 1/dx, 1/dy (0 for a zero component) */
+  int fast;       /* both reciprocals finite: node boxes may use them */
+  int simd;       /* fast, and neither component zero: quad_slab's short path */
+  int negx, negy; /* dx < 0, dy < 0: a box is entered across its max side */
 } ray_t;
 
 /* One axis of the slab test: narrow [*lo, *hi] to where o + t d lies in [min, max]. */
@@ -576,8 +578,45 @@ static inline void quad_axis(__m128d mn, __m128d mx, double o, double d, double 
   *tf = _mm_max_pd(t1, t2);
 }
 
+/*
+ * The short path, for a ray with reciprocals and no zero component: the entry side of
+ * each axis is known from the direction's sign (products with a fixed reciprocal are
+ * monotone, so this picks the same values as a min and max would).
+ */
+static inline unsigned quad_slab_signed(const cquad_t *q, const ray_t *r, double tmax, double ts,
+                                        double best, double lo[4]) {
+  const __m128 xn = _mm_load_ps(r->negx ? q->xmax : q->xmin);
+  const __m128 xf = _mm_load_ps(r->negx ? q->xmin : q->xmax);
+  const __m128 yn = _mm_load_ps(r->negy ? q->ymax : q->ymin);
+  const __m128 yf = _mm_load_ps(r->negy ? q->ymin : q->ymax);
+  const __m128d ox = _mm_set1_pd(r->ox), oy = _mm_set1_pd(r->oy);
+  const __m128d ix = _mm_set1_pd(r->ix), iy = _mm_set1_pd(r->iy);
+  const __m128d vts = _mm_set1_pd(ts), vmax = _mm_set1_pd(tmax), vbest = _mm_set1_pd(best + ts);
+  /* Lanes 0 and 1, then 2 and 3, widened to doubles (exactly). */
+  __m128d txn0 = _mm_mul_pd(_mm_sub_pd(_mm_cvtps_pd(xn), ox), ix);
+  __m128d txn1 = _mm_mul_pd(_mm_sub_pd(_mm_cvtps_pd(_mm_movehl_ps(xn, xn)), ox), ix);
+  __m128d txf0 = _mm_mul_pd(_mm_sub_pd(_mm_cvtps_pd(xf), ox), ix);
+  __m128d txf1 = _mm_mul_pd(_mm_sub_pd(_mm_cvtps_pd(_mm_movehl_ps(xf, xf)), ox), ix);
+  __m128d tyn0 = _mm_mul_pd(_mm_sub_pd(_mm_cvtps_pd(yn), oy), iy);
+  __m128d tyn1 = _mm_mul_pd(_mm_sub_pd(_mm_cvtps_pd(_mm_movehl_ps(yn, yn)), oy), iy);
+  __m128d tyf0 = _mm_mul_pd(_mm_sub_pd(_mm_cvtps_pd(yf), oy), iy);
+  __m128d tyf1 = _mm_mul_pd(_mm_sub_pd(_mm_cvtps_pd(_mm_movehl_ps(yf, yf)), oy), iy);
+  __m128d l0 = _mm_max_pd(_mm_max_pd(txn0, tyn0), _mm_setzero_pd());
+  __m128d l1 = _mm_max_pd(_mm_max_pd(txn1, tyn1), _mm_setzero_pd());
+  __m128d u0 = _mm_add_pd(_mm_min_pd(_mm_min_pd(txf0, tyf0), vmax), vts);
+  __m128d u1 = _mm_add_pd(_mm_min_pd(_mm_min_pd(txf1, tyf1), vmax), vts);
+  /* Kept: l <= u + ts and l - ts <= best, the latter as l <= best + ts (both sides are
+   * rounded the same way for every lane, and ts is far above a rounding of best). */
+  __m128d ok0 = _mm_and_pd(_mm_cmple_pd(l0, u0), _mm_cmple_pd(l0, vbest));
+  __m128d ok1 = _mm_and_pd(_mm_cmple_pd(l1, u1), _mm_cmple_pd(l1, vbest));
+  _mm_storeu_pd(lo, l0);
+  _mm_storeu_pd(lo + 2, l1);
+  return (unsigned)_mm_movemask_pd(ok0) | (unsigned)_mm_movemask_pd(ok1) << 2;
+}
+
 static inline unsigned quad_slab(const cquad_t *q, const ray_t *r, double tmax, double ts,
                                  double best, double lo[4]) {
+  if (r->simd) return quad_slab_signed(q, r, tmax, ts, best, lo);
   const __m128 xmin = _mm_load_ps(q->xmin), ymin = _mm_load_ps(q->ymin);
   const __m128 xmax = _mm_load_ps(q->xmax), ymax = _mm_load_ps(q->ymax);
   unsigned keep = 0;
@@ -641,8 +680,11 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
   const int all_discs = c->n_discs == c->n, no_discs = c->n_discs == 0;
   /* Reciprocals, unless a component is so small that its reciprocal overflows (then the
    * dividing slab test is used throughout). */
-  ray_t ray = {o.x, o.y, d.x, d.y, d.x != 0 ? 1 / d.x : 0, d.y != 0 ? 1 / d.y : 0, 0};
+  ray_t ray = {o.x, o.y, d.x, d.y, d.x != 0 ? 1 / d.x : 0, d.y != 0 ? 1 / d.y : 0, 0, 0, 0, 0};
   ray.fast = isfinite(ray.ix) && isfinite(ray.iy);
+  ray.simd = ray.fast && d.x != 0 && d.y != 0;
+  ray.negx = d.x < 0;
+  ray.negy = d.y < 0;
   const cnode_t *root = &c->cn[0];
   if (!slab(root->xmin, root->ymin, root->xmax, root->ymax, &ray, 0, tmax, &lo, &hi) ||
       lo > hi + ts)
@@ -672,15 +714,14 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
     /* All four children's boxes from one line, only the kept ones stacked. */
     double lo4[4];
     unsigned keep = quad_slab(&c->quads[n->quad], &ray, tmax, ts, best, lo4);
-    qk__centry_t kids[4];
     int m = 0;
     for (uint32_t k = 0; k < 4; k++) {
       if (!(keep >> k & 1)) continue;
-      kids[m].node = n->child + k;
-      kids[m++].bound = lo4[k] - ts;
+      stack[sp + m].node = n->child + k;
+      stack[sp + m++].bound = lo4[k] - ts;
     }
-    qk__csort4_desc(kids, m);
-    for (int i = 0; i < m; i++) stack[sp++] = kids[i];
+    qk__csort4_desc(&stack[sp], m);
+    sp += m;
   }
   hit->id = best_id;
   hit->t = best_id == QK_NONE ? INFINITY : best;
