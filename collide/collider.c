@@ -60,6 +60,7 @@ struct qk_collider {
   void *quads_block; /* the allocation holding quads */
   size_t quads_bytes;
   uint32_t n_quads; /* entries filled */
+  uint32_t threads; /* for the pairs and batch calls (0: every online core) */
   double mag;       /* largest coordinate magnitude of any item box, for rounding margins */
 };
 
@@ -299,6 +300,7 @@ qk_status_t qk_collider_build(const qk_disc_t *discs, size_t n_discs, const qk_b
   if (!c) return QK_ERR_NOMEM;
   memset(c, 0, sizeof *c);
   c->alloc = a;
+  c->threads = 1;
   c->n_discs = n_discs;
   c->n = n_discs + n_boxes;
   if ((st = build_centre_tree(c, discs, boxes, &opt)) != QK_OK || (st = alloc_arrays(c)) != QK_OK ||
@@ -402,39 +404,78 @@ static int leaf_pairs(const qk_collider_t *c, const cnode_t *la, const cnode_t *
   return 0;
 }
 
-qk_status_t qk_collider_pairs(const qk_collider_t *c, qk_pair_fn fn, void *ud) {
-  if (!c || !fn) return QK_ERR_INVALID;
-  /*
-   * Leaf against leaf: for each leaf, one descent finds every leaf whose item box meets
-   * its own, and the items of the two are paired directly. That shares one descent
-   * among all the items of a leaf instead of making one per item.
-   */
-  uint32_t outer[QK__CSTACK_MAX], inner[QK__CSTACK_MAX];
+/*
+ * Leaf against leaf: for each leaf, one descent finds every leaf whose item box meets its
+ * own, and the items of the two are paired directly. That shares one descent among all
+ * the items of a leaf instead of making one per item. This is the part for one leaf.
+ */
+int qk__collider_leaf_pairs(const qk_collider_t *c, uint32_t leaf, qk_pair_fn fn, void *ud) {
+  const cnode_t *la = &c->cn[leaf];
+  /* The leaf's box, widened back to doubles, is what the other leaves must meet. */
+  const qk_box_t ba = {la->xmin, la->ymin, la->xmax, la->ymax};
+  uint32_t inner[QK__CSTACK_MAX];
+  int si = 0;
+  inner[si++] = 0;
+  while (si > 0) {
+    const cnode_t *lb = &c->cn[inner[--si]];
+    if (!cbox_box(lb, &ba)) continue;
+    if (lb->child != QK_NONE) {
+      for (int k = 3; k >= 0; k--) inner[si++] = lb->child + (uint32_t)k;
+      continue;
+    }
+    if (leaf_pairs(c, la, lb, fn, ud)) return 1;
+  }
+  return 0;
+}
+
+int qk__collider_each_leaf(const qk_collider_t *c, int (*fn)(uint32_t leaf, void *ud), void *ud) {
+  uint32_t outer[QK__CSTACK_MAX];
   int so = 0;
   outer[so++] = 0;
   while (so > 0) {
-    const cnode_t *la = &c->cn[outer[--so]];
+    uint32_t v = outer[--so];
+    const cnode_t *la = &c->cn[v];
     if (la->child != QK_NONE) {
       for (int k = 3; k >= 0; k--) outer[so++] = la->child + (uint32_t)k;
       continue;
     }
-    if (la->count == 0) continue;
-    /* The leaf's box, widened back to doubles, is what the other leaves must meet. */
-    const qk_box_t ba = {la->xmin, la->ymin, la->xmax, la->ymax};
-    int si = 0;
-    inner[si++] = 0;
-    while (si > 0) {
-      const cnode_t *lb = &c->cn[inner[--si]];
-      if (!cbox_box(lb, &ba)) continue;
-      if (lb->child != QK_NONE) {
-        for (int k = 3; k >= 0; k--) inner[si++] = lb->child + (uint32_t)k;
-        continue;
-      }
-      if (leaf_pairs(c, la, lb, fn, ud)) return QK_OK;
-    }
+    if (la->count > 0 && fn(v, ud)) return 1;
   }
+  return 0;
+}
+
+typedef struct pairs_ctx {
+  const qk_collider_t *c;
+  qk_pair_fn fn;
+  void *ud;
+} pairs_ctx_t;
+
+static int serial_leaf(uint32_t leaf, void *ud) {
+  pairs_ctx_t *p = ud;
+  return qk__collider_leaf_pairs(p->c, leaf, p->fn, p->ud);
+}
+
+void qk__collider_pairs_serial(const qk_collider_t *c, qk_pair_fn fn, void *ud) {
+  pairs_ctx_t p = {c, fn, ud};
+  qk__collider_each_leaf(c, serial_leaf, &p);
+}
+
+qk_status_t qk_collider_pairs(const qk_collider_t *c, qk_pair_fn fn, void *ud) {
+  if (!c || !fn) return QK_ERR_INVALID;
+  /* On several threads when asked and the memory for it can be had; the same pairs in
+   * the same order either way. */
+  if (c->threads == 1 || qk__collider_pairs_threaded(c, fn, ud) != QK_OK)
+    qk__collider_pairs_serial(c, fn, ud);
   return QK_OK;
 }
+
+void qk_collider_set_threads(qk_collider_t *c, uint32_t threads) {
+  if (c) c->threads = threads;
+}
+
+uint32_t qk__collider_threads(const qk_collider_t *c) { return c->threads; }
+
+const qk_allocator_t *qk__collider_alloc(const qk_collider_t *c) { return &c->alloc; }
 
 typedef struct list_ctx {
   qk_pair_t *out;
