@@ -37,8 +37,10 @@ typedef struct cnode {
  * from which the ray cast tests all four children at once.
  */
 typedef struct cquad {
-  float xmin[4], ymin[4], xmax[4], ymax[4];
+  float v[16]; /* xmin at QX0 + k, ymin at QY0 + k, xmax at QX1 + k, ymax at QY1 + k */
 } cquad_t;
+
+enum { QX0 = 0, QY0 = 4, QX1 = 8, QY1 = 12 };
 
 /*
  * Item data is kept in the tree's slot order (parallel to the tree's point arrays), not by id, so
@@ -159,10 +161,10 @@ static qk_box_t fill_node_boxes(qk_collider_t *c, uint32_t node) {
     cquad_t *q = &c->quads[cn->quad = c->n_quads++];
     for (uint32_t k = 0; k < 4; k++) {
       const cnode_t *ch = &c->cn[cn->child + k];
-      q->xmin[k] = ch->xmin;
-      q->ymin[k] = ch->ymin;
-      q->xmax[k] = ch->xmax;
-      q->ymax[k] = ch->ymax;
+      q->v[QX0 + k] = ch->xmin;
+      q->v[QY0 + k] = ch->ymin;
+      q->v[QX1 + k] = ch->xmax;
+      q->v[QY1 + k] = ch->ymax;
     }
   }
   if (count == 0) {
@@ -520,10 +522,11 @@ qk_status_t qk_collider_pairs_list(const qk_collider_t *c, qk_pair_t *out, size_
  */
 typedef struct ray {
   double ox, oy, dx, dy;
-  double ix, iy;  /* 1/dx, 1/dy (0 for a zero component) */
-  int fast;       /* both reciprocals finite: node boxes may use them */
-  int simd;       /* fast, and neither component zero: quad_slab's short path */
-  int negx, negy; /* dx < 0, dy < 0: a box is entered across its max side */
+  double ix, iy;   /* 1/dx, 1/dy (0 for a zero component) */
+  int fast;        /* both reciprocals finite: node boxes may use them */
+  int simd;        /* fast, and neither component zero: quad_slab's short path */
+  int negx, negy;  /* dx < 0, dy < 0: a box is entered across its max side */
+  unsigned xn, yn; /* where in a cquad_t (in floats) the entry sides' lanes start */
 } ray_t;
 
 /* One axis of the slab test: narrow [*lo, *hi] to where o + t d lies in [min, max]. */
@@ -626,10 +629,9 @@ static inline void quad_axis(__m128d mn, __m128d mx, double o, double d, double 
  */
 static inline unsigned quad_slab_signed(const cquad_t *q, const ray_t *r, double tmax, double ts,
                                         double best, double lo[4]) {
-  const __m128 xn = _mm_load_ps(r->negx ? q->xmax : q->xmin);
-  const __m128 xf = _mm_load_ps(r->negx ? q->xmin : q->xmax);
-  const __m128 yn = _mm_load_ps(r->negy ? q->ymax : q->ymin);
-  const __m128 yf = _mm_load_ps(r->negy ? q->ymin : q->ymax);
+  const float *f = q->v;
+  const __m128 xn = _mm_load_ps(f + r->xn), xf = _mm_load_ps(f + (r->xn ^ 8));
+  const __m128 yn = _mm_load_ps(f + r->yn), yf = _mm_load_ps(f + (r->yn ^ 8));
   const __m128d ox = _mm_set1_pd(r->ox), oy = _mm_set1_pd(r->oy);
   const __m128d ix = _mm_set1_pd(r->ix), iy = _mm_set1_pd(r->iy);
   const __m128d vts = _mm_set1_pd(ts), vmax = _mm_set1_pd(tmax), vbest = _mm_set1_pd(best + ts);
@@ -658,8 +660,8 @@ static inline unsigned quad_slab_signed(const cquad_t *q, const ray_t *r, double
 static inline unsigned quad_slab(const cquad_t *q, const ray_t *r, double tmax, double ts,
                                  double best, double lo[4]) {
   if (r->simd) return quad_slab_signed(q, r, tmax, ts, best, lo);
-  const __m128 xmin = _mm_load_ps(q->xmin), ymin = _mm_load_ps(q->ymin);
-  const __m128 xmax = _mm_load_ps(q->xmax), ymax = _mm_load_ps(q->ymax);
+  const __m128 xmin = _mm_load_ps(q->v + QX0), ymin = _mm_load_ps(q->v + QY0);
+  const __m128 xmax = _mm_load_ps(q->v + QX1), ymax = _mm_load_ps(q->v + QY1);
   unsigned keep = 0;
   for (int h = 0; h < 2; h++) {
     /* Lanes 2h and 2h + 1, widened to doubles (exactly). */
@@ -687,7 +689,8 @@ static inline unsigned quad_slab(const cquad_t *q, const ray_t *r, double tmax, 
   unsigned keep = 0;
   for (int k = 0; k < 4; k++) {
     double l, u;
-    if (slab(q->xmin[k], q->ymin[k], q->xmax[k], q->ymax[k], r, r->fast, tmax, &l, &u) &&
+    if (slab(q->v[QX0 + k], q->v[QY0 + k], q->v[QX1 + k], q->v[QY1 + k], r, r->fast, tmax, &l,
+             &u) &&
         l <= u + ts && l - ts <= best) {
       lo[k] = l;
       keep |= 1u << k;
@@ -723,7 +726,7 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
    * a disc round differently; widen each node's interval by a margin far above those
    * roundings (which scale with the coordinates over the direction's length).
    */
-  double dn = fmax(fabs(d.x), fabs(d.y));
+  double dn = qk__max(fabs(d.x), fabs(d.y));
   double ts = dn > 0 ? (fabs(o.x) + fabs(o.y) + 2 * c->mag) * 0x1p-40 / dn : 0.0;
   double best = INFINITY;
   qk_id_t best_id = QK_NONE;
@@ -733,11 +736,14 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
   const int all_discs = c->n_discs == c->n, no_discs = c->n_discs == 0;
   /* Reciprocals, unless a component is so small that its reciprocal overflows (then the
    * dividing slab test is used throughout). */
-  ray_t ray = {o.x, o.y, d.x, d.y, d.x != 0 ? 1 / d.x : 0, d.y != 0 ? 1 / d.y : 0, 0, 0, 0, 0};
+  ray_t ray = {o.x, o.y, d.x, d.y, d.x != 0 ? 1 / d.x : 0, d.y != 0 ? 1 / d.y : 0, 0, 0,
+               0,   0,   0,   0};
   ray.fast = isfinite(ray.ix) && isfinite(ray.iy);
   ray.simd = ray.fast && d.x != 0 && d.y != 0;
   ray.negx = d.x < 0;
   ray.negy = d.y < 0;
+  ray.xn = ray.negx ? QX1 : QX0; /* the exit side is the other one: ^ 8 */
+  ray.yn = ray.negy ? QY1 : QY0;
   uint32_t order[4];
   quadrant_order(ray.negx, ray.negy, order);
   const cnode_t *root = &c->cn[0];
