@@ -750,13 +750,28 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
   if (!slab(root->xmin, root->ymin, root->xmax, root->ymax, &ray, 0, tmax, &lo, &hi) ||
       lo > hi + ts)
     return QK_OK;
-  stack[sp].node = 0;
-  stack[sp++].bound = lo - ts;
-  while (sp > 0) {
-    qk__centry_t e = stack[--sp];
-    if (e.bound > best) continue;
-    const cnode_t *n = &c->cn[e.node];
-    if (n->child == QK_NONE) {
+  uint32_t cur = 0;
+  for (;;) {
+    const cnode_t *n = &c->cn[cur];
+    if (n->child != QK_NONE) {
+      /* All four children's boxes from one line, only the kept ones stacked. */
+      double lo4[4];
+      unsigned keep = quad_slab(&c->quads[n->quad], &ray, tmax, ts, best, lo4);
+      /* Far quadrant first, so the one the ray enters first is popped first: the
+       * quadrants' order along the direction, which the item boxes mostly follow (the
+       * bound on each entry keeps the pruning exact whatever the order). */
+      for (int i = 0; i < 4; i++) {
+        uint32_t k = order[i];
+        if (!(keep >> k & 1)) continue;
+        stack[sp].node = n->child + k;
+        stack[sp++].bound = lo4[k] - ts;
+      }
+      /* The nearest kept child, just checked against best, is taken straight away. */
+      if (keep) {
+        cur = stack[--sp].node;
+        continue;
+      }
+    } else {
       /* Ids are read only for hits (and for the kind in mixed sets): the id array is
        * one more cache miss per leaf otherwise. */
       for (uint32_t slot = n->start; slot < n->start + n->count; slot++) {
@@ -770,20 +785,12 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
           best_id = id;
         }
       }
-      continue;
     }
-    /* All four children's boxes from one line, only the kept ones stacked. */
-    double lo4[4];
-    unsigned keep = quad_slab(&c->quads[n->quad], &ray, tmax, ts, best, lo4);
-    /* Far quadrant first, so the one the ray enters first is popped first: the
-     * quadrants' order along the direction, which the item boxes mostly follow (the
-     * bound on each entry keeps the pruning exact whatever the order). */
-    for (int i = 0; i < 4; i++) {
-      uint32_t k = order[i];
-      if (!(keep >> k & 1)) continue;
-      stack[sp].node = n->child + k;
-      stack[sp++].bound = lo4[k] - ts;
-    }
+    /* Next, the nearest stacked node that may still hold a hit no farther than best
+     * (the bound it was stacked with, re-checked: best may have come closer since). */
+    while (sp > 0 && stack[sp - 1].bound > best) sp--;
+    if (sp == 0) break;
+    cur = stack[--sp].node;
   }
   hit->id = best_id;
   hit->t = best_id == QK_NONE ? INFINITY : best;
