@@ -6,7 +6,8 @@
  *  - items overlapping a query box or disc against brute force;
  *  - first hit of rays and segments against an oracle derived independently (exact
  *    rational arithmetic with GMP; tests/support/query_oracle.c): origins inside
- *    items (t = 0), outside the whole set, axis-parallel directions, tmax cut-offs;
+ *    items (t = 0), outside the whole set, axis-parallel directions, components so
+ *    small that their reciprocals overflow, tmax cut-offs;
  *  - hand-computed cases (tangent discs, a ray grazing a box corner);
  *  - bad input and allocation failure at every N (clean QK_ERR_NOMEM, no leak);
  *  - three threads casting rays and finding pairs on one collider at once;
@@ -188,6 +189,11 @@ static void test_collide_raycast(void **state) {
       qk_point_t dir = {cos(ang), sin(ang)};
       if (qi % 10 == 0) dir = (qk_point_t){0, qi % 20 ? 1.0 : -2.0};
       if (qi % 10 == 1) dir = (qk_point_t){qi % 20 ? 3.0 : -1.0, 0};
+      /* A component so small that its reciprocal overflows: the dividing node test. */
+      if (qi % 10 == 3)
+        dir = (qk_point_t){qi % 20 < 10 ? -0.7 : 0.7, qi % 40 < 20 ? 1e-310 : -3e-320};
+      if (qi % 10 == 4)
+        dir = (qk_point_t){qi % 20 < 10 ? 1e-309 : -5e-324, qi % 40 < 20 ? 1.0 : -2.0};
       if (qi % 10 == 2 && use_d) org = (qk_point_t){d[qi % nd].x, d[qi % nd].y};
       double tmax = qi % 3 == 0 ? qkt_rng_range(&r, 0, 0.5) : INFINITY;
       qk_hit_t h, w = qko_raycast(use_d ? d : NULL, use_d, use_b ? b : NULL, use_b, org, dir, tmax);
