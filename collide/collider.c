@@ -527,6 +527,9 @@ typedef struct ray {
   int simd;        /* fast, and neither component zero: quad_slab's short path */
   int negx, negy;  /* dx < 0, dy < 0: a box is entered across its max side */
   unsigned xn, yn; /* where in a cquad_t (in floats) the entry sides' lanes start */
+#if defined(__SSE2__)
+  __m128d vox, voy, vix, viy, vts, vmax; /* ox, oy, ix, iy, ts and tmax in both lanes */
+#endif
 } ray_t;
 
 /* One axis of the slab test: narrow [*lo, *hi] to where o + t d lies in [min, max]. */
@@ -632,9 +635,9 @@ static inline unsigned quad_slab_signed(const cquad_t *q, const ray_t *r, double
   const float *f = q->v;
   const __m128 xn = _mm_load_ps(f + r->xn), xf = _mm_load_ps(f + (r->xn ^ 8));
   const __m128 yn = _mm_load_ps(f + r->yn), yf = _mm_load_ps(f + (r->yn ^ 8));
-  const __m128d ox = _mm_set1_pd(r->ox), oy = _mm_set1_pd(r->oy);
-  const __m128d ix = _mm_set1_pd(r->ix), iy = _mm_set1_pd(r->iy);
-  const __m128d vts = _mm_set1_pd(ts), vmax = _mm_set1_pd(tmax), vbest = _mm_set1_pd(best + ts);
+  (void)tmax;
+  const __m128d ox = r->vox, oy = r->voy, ix = r->vix, iy = r->viy;
+  const __m128d vts = r->vts, vmax = r->vmax, vbest = _mm_set1_pd(best + ts);
   /* Lanes 0 and 1, then 2 and 3, widened to doubles (exactly). */
   __m128d txn0 = _mm_mul_pd(_mm_sub_pd(_mm_cvtps_pd(xn), ox), ix);
   __m128d txn1 = _mm_mul_pd(_mm_sub_pd(_mm_cvtps_pd(_mm_movehl_ps(xn, xn)), ox), ix);
@@ -736,14 +739,23 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
   const int all_discs = c->n_discs == c->n, no_discs = c->n_discs == 0;
   /* Reciprocals, unless a component is so small that its reciprocal overflows (then the
    * dividing slab test is used throughout). */
-  ray_t ray = {o.x, o.y, d.x, d.y, d.x != 0 ? 1 / d.x : 0, d.y != 0 ? 1 / d.y : 0, 0, 0,
-               0,   0,   0,   0};
+  ray_t ray = {.ox = o.x,
+               .oy = o.y,
+               .dx = d.x,
+               .dy = d.y,
+               .ix = d.x != 0 ? 1 / d.x : 0,
+               .iy = d.y != 0 ? 1 / d.y : 0};
   ray.fast = isfinite(ray.ix) && isfinite(ray.iy);
   ray.simd = ray.fast && d.x != 0 && d.y != 0;
   ray.negx = d.x < 0;
   ray.negy = d.y < 0;
   ray.xn = ray.negx ? QX1 : QX0; /* the exit side is the other one: ^ 8 */
   ray.yn = ray.negy ? QY1 : QY0;
+#if defined(__SSE2__)
+  ray.vox = _mm_set1_pd(o.x), ray.voy = _mm_set1_pd(o.y);
+  ray.vix = _mm_set1_pd(ray.ix), ray.viy = _mm_set1_pd(ray.iy);
+  ray.vts = _mm_set1_pd(ts), ray.vmax = _mm_set1_pd(tmax);
+#endif
   uint32_t order[4];
   quadrant_order(ray.negx, ray.negy, order);
   const cnode_t *root = &c->cn[0];
