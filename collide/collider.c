@@ -583,6 +583,39 @@ static inline double ray_disc(const qk_disc_t *d, double ox, double oy, double d
   return t <= tmax ? t : -1.0;
 }
 
+#if defined(__SSE2__)
+/*
+ * ray_disc() for the discs d[0] and d[1] at once, each lane the same sequence of IEEE
+ * operations as the scalar code. Bit k of the result is set when disc k is hit at a t in
+ * [0, best] (t into th[k]); the lanes that the scalar code would leave early compute
+ * values (perhaps NaN) that the masks discard.
+ */
+static inline unsigned ray_disc2(const qk_disc_t *d, const ray_t *r, double tmax, double best,
+                                 double th[2]) {
+  const __m128d a0 = _mm_loadu_pd(&d[0].x), a1 = _mm_loadu_pd(&d[1].x); /* x, y */
+  const __m128d x = _mm_unpacklo_pd(a0, a1), y = _mm_unpackhi_pd(a0, a1);
+  const __m128d rr = _mm_set_pd(d[1].r, d[0].r);
+  const __m128d dx = _mm_set1_pd(r->dx), dy = _mm_set1_pd(r->dy);
+  const __m128d fx = _mm_sub_pd(r->vox, x), fy = _mm_sub_pd(r->voy, y);
+  const __m128d cc =
+      _mm_sub_pd(_mm_add_pd(_mm_mul_pd(fx, fx), _mm_mul_pd(fy, fy)), _mm_mul_pd(rr, rr));
+  const __m128d b = _mm_add_pd(_mm_mul_pd(fx, dx), _mm_mul_pd(fy, dy));
+  const __m128d a = _mm_set1_pd(r->dx * r->dx + r->dy * r->dy);
+  const __m128d cr = _mm_sub_pd(_mm_mul_pd(fx, dy), _mm_mul_pd(fy, dx));
+  const __m128d disc = _mm_sub_pd(_mm_mul_pd(_mm_mul_pd(a, rr), rr), _mm_mul_pd(cr, cr));
+  const __m128d zero = _mm_setzero_pd();
+  const __m128d t = _mm_div_pd(cc, _mm_add_pd(_mm_sub_pd(zero, b), _mm_sqrt_pd(disc)));
+  const __m128d inside = _mm_cmple_pd(cc, zero);
+  /* Outside: hit when b < 0, disc >= 0 and t <= tmax (then t > 0). */
+  const __m128d hit = _mm_and_pd(_mm_and_pd(_mm_cmplt_pd(b, zero), _mm_cmpge_pd(disc, zero)),
+                                 _mm_cmple_pd(t, _mm_set1_pd(tmax)));
+  const __m128d tv = _mm_andnot_pd(inside, t); /* 0 inside */
+  const __m128d cand = _mm_and_pd(_mm_or_pd(inside, hit), _mm_cmple_pd(tv, _mm_set1_pd(best)));
+  _mm_storeu_pd(th, tv);
+  return (unsigned)_mm_movemask_pd(cand);
+}
+#endif
+
 static inline double ray_box(const qk_box_t *b, const ray_t *r, double tmax) {
   double lo, hi;
   if (!slab(b->xmin, b->ymin, b->xmax, b->ymax, r, 0, tmax, &lo, &hi) || lo > hi) return -1.0;
@@ -786,7 +819,27 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
     } else {
       /* Ids are read only for hits (and for the kind in mixed sets): the id array is
        * one more cache miss per leaf otherwise. */
-      for (uint32_t slot = n->start; slot < n->start + n->count; slot++) {
+      uint32_t slot = n->start;
+      const uint32_t end = n->start + n->count;
+#if defined(__SSE2__)
+      /* Discs two at a time, with the same operations as ray_disc() lane by lane (so
+       * the same t to the last bit); only lanes that could be a new best go on. */
+      if (all_discs) {
+        for (; slot + 1 < end; slot += 2) {
+          double th[2];
+          unsigned cand = ray_disc2(&c->sdisc[slot], &ray, tmax, best, th);
+          for (unsigned k = 0; k < 2; k++) {
+            if (!(cand >> k & 1) || th[k] > best) continue; /* best may have moved */
+            qk_id_t id = pid[slot + k];
+            if (th[k] < best || id < best_id) {
+              best = th[k];
+              best_id = id;
+            }
+          }
+        }
+      }
+#endif
+      for (; slot < end; slot++) {
         int is_disc = all_discs || (!no_discs && pid[slot] < c->n_discs);
         double th = is_disc ? ray_disc(&c->sdisc[slot], o.x, o.y, d.x, d.y, tmax)
                             : ray_box(&c->sbox[slot], &ray, tmax);
