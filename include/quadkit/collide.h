@@ -93,7 +93,7 @@ typedef int (*qk_pair_fn)(qk_id_t a, qk_id_t b, void *ud);
 
 /**
  * Broad phase: report every overlapping pair of items once, with a < b, in no particular
- * order.
+ * order (but the same order for every threads setting: see qk_collider_set_threads()).
  * \param [in] c the collider.
  * \param [in] fn the callback.
  * \param [in] ud passed to fn.
