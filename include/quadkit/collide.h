@@ -144,7 +144,7 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t origin, qk_po
  * qk_collider_raycast() for n rays in one call, on the collider's threads
  * (qk_collider_set_threads()), with the same hits as n single calls. A ray that fails
  * gets {QK_NONE, INFINITY} and the others are still answered. Batches of more than 4096
- * rays borrow 16 bytes per 256 rays from the collider's allocator for the duration of
+ * rays borrow 12 bytes per 256 rays from the collider's allocator for the duration of
  * the call.
  * \param [in] c the collider.
  * \param [in] origins n origins.
