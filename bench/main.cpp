@@ -482,6 +482,23 @@ void run_collide(size_t n) {
   std::vector<Rec> recs(1);
   recs[0].impl = "quadkit";
   recs[0].matches = 1;
+  if (opt.threads > 1) {
+    // The pairs on --threads threads (the build stays on one): the same pairs in order.
+    const unsigned th = (unsigned)opt.threads;
+    PairSum tq;
+    quadkit_collide(boxes, tq, th);
+    Rec r;
+    r.impl = "quadkit";
+    r.threads = th;
+    r.matches = tq.pairs == q.pairs && tq.hash == q.hash;
+    if (r.matches) {
+      fns.push_back([&, th] {
+        PairSum s;
+        quadkit_collide(boxes, s, th);
+      });
+      recs.push_back(r);
+    }
+  }
   if (have("embree")) {
     embree_collide(boxes, e);
     Rec r;
@@ -499,7 +516,9 @@ void run_collide(size_t n) {
       emit(r);
     }
   }
-  auto med = interleaved(fns);
+  std::vector<bool> wall;
+  for (auto &r : recs) wall.push_back(r.threads > 1);
+  auto med = interleaved(fns, wall);
   for (size_t i = 0; i < fns.size(); i++) {
     Rec &r = recs[i];
     r.op = "collide", r.dataset = "boxes", r.n = n, r.order = "-";
@@ -596,6 +615,23 @@ void run_raycast(size_t n) {
   std::vector<Rec> recs(1);
   recs[0].impl = "quadkit";
   recs[0].matches = 1;
+  // qk_collider_raycast_batch on one and --threads threads: the same hits as single calls.
+  for (unsigned th : {1u, (unsigned)opt.threads}) {
+    if (th == 1 && recs.size() > 1) continue; // --threads 1: one batch row
+    HitSum b;
+    quadkit_discs_raycast_batch(qd, rays, th, b);
+    Rec r;
+    r.impl = "quadkit";
+    r.batch = true;
+    r.threads = th;
+    r.matches = b.hits == q.hits && b.idsum == q.idsum && b.tsum == q.tsum;
+    if (!r.matches) continue;
+    fns.push_back([&, th] {
+      HitSum s;
+      quadkit_discs_raycast_batch(qd, rays, th, s);
+    });
+    recs.push_back(r);
+  }
   EmbreeDiscs *ed = nullptr;
   if (have("embree")) {
     ed = embree_discs_build(discs);
@@ -615,7 +651,9 @@ void run_raycast(size_t n) {
       emit(r);
     }
   }
-  auto med = interleaved(fns);
+  std::vector<bool> wall;
+  for (auto &r : recs) wall.push_back(r.threads > 1);
+  auto med = interleaved(fns, wall);
   for (size_t i = 0; i < fns.size(); i++) {
     Rec &r = recs[i];
     r.op = "raycast", r.dataset = "discs", r.n = n, r.queries = nr;
@@ -1072,9 +1110,10 @@ void print_table() {
       snprintf(var, sizeof var, "k=%d%s%s%s", r.k, r.order == "morton" ? " mort" : "",
                r.batch ? " batch" : "",
                r.threads > 1 ? (" t" + std::to_string(r.threads)).c_str() : "");
-    if (r.op == "region")
+    if (r.op == "region" || r.op == "raycast")
       snprintf(var, sizeof var, "%s%s", r.batch ? "batch" : "single",
                r.threads > 1 ? (" t" + std::to_string(r.threads)).c_str() : "");
+    if (r.op == "collide" && r.threads > 1) snprintf(var, sizeof var, "t%d", r.threads);
     printf("%-8s %-10s %8zu %-14s %10s", r.op.c_str(), r.dataset.c_str(), r.n, var,
            r.matches == 0 ? "MISMATCH" : rate(r.per_second).c_str());
     for (auto c : cols) {

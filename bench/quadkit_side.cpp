@@ -115,11 +115,12 @@ std::unique_ptr<PointIndex> make_quadkit(unsigned capacity) {
   return std::unique_ptr<PointIndex>(new QuadkitPoints(capacity));
 }
 
-bool quadkit_collide(const std::vector<Box> &boxes, PairSum &out) {
+bool quadkit_collide(const std::vector<Box> &boxes, PairSum &out, unsigned threads) {
   qk_collider_t *c = nullptr;
   qk_status_t st = qk_collider_build(nullptr, 0, reinterpret_cast<const qk_box_t *>(boxes.data()),
                                      boxes.size(), nullptr, &c);
   if (st) die("qk_collider_build", st);
+  qk_collider_set_threads(c, threads);
   qk_collider_pairs(c, pair_fn, &out);
   qk_collider_free(c);
   return true;
@@ -146,6 +147,25 @@ void quadkit_discs_raycast(QuadkitDiscs *s, const std::vector<Ray> &rays, HitSum
       out.hits++;
       out.idsum += h.id;
       out.tsum += h.t;
+    }
+  }
+}
+
+void quadkit_discs_raycast_batch(QuadkitDiscs *s, const std::vector<Ray> &rays, unsigned threads,
+                                 HitSum &out) {
+  std::vector<qk_point_t> o(rays.size()), d(rays.size());
+  for (size_t i = 0; i < rays.size(); i++)
+    o[i] = {rays[i].ox, rays[i].oy}, d[i] = {rays[i].dx, rays[i].dy};
+  std::vector<qk_hit_t> h(rays.size());
+  qk_collider_set_threads(s->c, threads);
+  qk_status_t st =
+      qk_collider_raycast_batch(s->c, o.data(), d.data(), rays.size(), INFINITY, h.data());
+  if (st) die("qk_collider_raycast_batch", st);
+  for (const qk_hit_t &x : h) {
+    if (x.id != QK_NONE) {
+      out.hits++;
+      out.idsum += x.id;
+      out.tsum += x.t;
     }
   }
 }

@@ -11,13 +11,17 @@ constexpr unsigned kQuadkitCapacity = 32;
 
 std::unique_ptr<PointIndex> make_quadkit(unsigned capacity = kQuadkitCapacity);
 
-// Collision: build the collider over the boxes and report every overlapping pair.
-bool quadkit_collide(const std::vector<Box> &boxes, PairSum &out);
+// Collision: build the collider over the boxes and report every overlapping pair (the
+// pairs on `threads` threads; the build on one).
+bool quadkit_collide(const std::vector<Box> &boxes, PairSum &out, unsigned threads = 1);
 
 // Rays: a collider over discs, built once, then first hits.
 struct QuadkitDiscs;
 QuadkitDiscs *quadkit_discs_build(const std::vector<double> &xyr);
 void quadkit_discs_raycast(QuadkitDiscs *s, const std::vector<Ray> &rays, HitSum &out);
+// The same rays through qk_collider_raycast_batch on `threads` threads.
+void quadkit_discs_raycast_batch(QuadkitDiscs *s, const std::vector<Ray> &rays, unsigned threads,
+                                 HitSum &out);
 void quadkit_discs_free(QuadkitDiscs *s);
 
 // Balance: a tree over pts in the root [0, 1]^2 with the given capacity and depth cap;

@@ -37,6 +37,29 @@ static inline void qk__csort4_desc(qk__centry_t *e, int n) {
   }
 }
 
+/* Run fn(i, ud) for i in [0, n) on up to `threads` threads (the caller's included);
+ * returns nonzero when threads could not be started (then everything ran on the caller). */
+int qk__parallel(unsigned threads, unsigned n, void (*fn)(unsigned i, void *ud), void *ud);
+
+/* ---- the static collider's parts shared with collide/collider_batch.c --------------- */
+
+/* Pairs of the items of one leaf with those of every leaf whose box meets its own, as
+ * qk_collider_pairs() reports them; nonzero when fn asked to stop. */
+int qk__collider_leaf_pairs(const qk_collider_t *c, uint32_t leaf, qk_pair_fn fn, void *ud);
+/* fn on every non-empty leaf in the order qk_collider_pairs() visits them; nonzero when
+ * fn asked to stop. */
+int qk__collider_each_leaf(const qk_collider_t *c, int (*fn)(uint32_t leaf, void *ud), void *ud);
+/* qk_collider_pairs() on the calling thread. */
+void qk__collider_pairs_serial(const qk_collider_t *c, qk_pair_fn fn, void *ud);
+/* qk_collider_pairs() on the collider's threads: QK_OK, or QK_ERR_NOMEM (nothing
+ * reported yet: the caller then runs the serial search). */
+qk_status_t qk__collider_pairs_threaded(const qk_collider_t *c, qk_pair_fn fn, void *ud);
+/* The threads option as set (0: every online core), and the allocator. */
+uint32_t qk__collider_threads(const qk_collider_t *c);
+const qk_allocator_t *qk__collider_alloc(const qk_collider_t *c);
+/* Online cores for a threads option of 0, capped at 64 (qk__parallel's limit). */
+unsigned qk__threads_online(uint32_t threads);
+
 /* ---- the world's shapes (collide/shape.c, collide/exact.c) ------------------------ */
 
 /* Exact signs: orientation of c relative to a->b; (b-a).(c-a); (r1+r2)^2 - |a-b|^2;

@@ -12,6 +12,10 @@
 
 #include "collide/collide_internal.h"
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 /*
  * The collider's own copy of each node: the bounding box of the items beneath it, in
  * floats rounded outwards (so still a bounding box), with the links the searches need.
@@ -24,8 +28,19 @@ typedef struct cnode {
   uint32_t child; /* first of four children, or QK_NONE for a leaf */
   uint32_t start; /* a leaf's first slot */
   uint32_t count; /* a leaf's number of items */
-  uint32_t pad_;
+  uint32_t quad;  /* an internal node's entry in quads (its children's boxes) */
 } cnode_t;
+
+/*
+ * The boxes of an internal node's four children side by side (structure of arrays, as a
+ * BVH4 stores them), the same outward-rounded floats as their cnode_t: one 64-byte line
+ * from which the ray cast tests all four children at once.
+ */
+typedef struct cquad {
+  float v[16]; /* xmin at QX0 + k, ymin at QY0 + k, xmax at QX1 + k, ymax at QY1 + k */
+} cquad_t;
+
+enum { QX0 = 0, QY0 = 4, QX1 = 8, QY1 = 12 };
 
 /*
  * Item data is kept in the tree's slot order (parallel to the tree's point arrays), not by id, so
@@ -43,7 +58,12 @@ struct qk_collider {
   void *cn_block;   /* the allocation holding cn (aligned inside it) */
   size_t cn_bytes;
   size_t n_nodes;
-  double mag; /* largest coordinate magnitude of any item box, for rounding margins */
+  cquad_t *quads;    /* per internal node (cnode_t::quad), 64-byte aligned */
+  void *quads_block; /* the allocation holding quads */
+  size_t quads_bytes;
+  uint32_t n_quads; /* entries filled */
+  uint32_t threads; /* for the pairs and batch calls (0: every online core) */
+  double mag;       /* largest coordinate magnitude of any item box, for rounding margins */
 };
 
 /* Exact overlap predicates (touching counts). */
@@ -130,13 +150,21 @@ static qk_box_t fill_node_boxes(qk_collider_t *c, uint32_t node) {
   cn->child = qk__node_child(t, node);
   cn->start = start;
   cn->count = leaf ? count : 0;
-  cn->pad_ = 0;
+  cn->quad = QK_NONE;
   if (leaf) {
     for (uint32_t i = 0; i < count; i++) box_union(&b, &c->sbox[start + i]);
   } else {
     for (uint32_t k = 0; k < 4; k++) {
       qk_box_t cb = fill_node_boxes(c, cn->child + k);
       box_union(&b, &cb);
+    }
+    cquad_t *q = &c->quads[cn->quad = c->n_quads++];
+    for (uint32_t k = 0; k < 4; k++) {
+      const cnode_t *ch = &c->cn[cn->child + k];
+      q->v[QX0 + k] = ch->xmin;
+      q->v[QY0 + k] = ch->ymin;
+      q->v[QX1 + k] = ch->xmax;
+      q->v[QY1 + k] = ch->ymax;
     }
   }
   if (count == 0) {
@@ -161,6 +189,7 @@ void qk_collider_free(qk_collider_t *c) {
   qk__free(&a, c->sbox, c->n_slots * sizeof *c->sbox);
   qk__free(&a, c->sdisc, c->n_slots * sizeof *c->sdisc);
   qk__free(&a, c->cn_block, c->cn_bytes);
+  qk__free(&a, c->quads_block, c->quads_bytes);
   qk_tree_free(c->tree);
   qk__free(&a, c, sizeof *c);
 }
@@ -227,7 +256,11 @@ static qk_status_t alloc_arrays(qk_collider_t *c) {
   c->cn_bytes = (c->n_nodes + 3) * sizeof(cnode_t) + 64;
   c->cn_block = qk__realloc(a, NULL, 0, c->cn_bytes);
   if (c->cn_block) c->cn = (cnode_t *)(((uintptr_t)c->cn_block + 63) & ~(uintptr_t)63) + 3;
-  if (!c->sbox || (c->n_discs && !c->sdisc) || !c->cn_block) return QK_ERR_NOMEM;
+  /* Every internal node has four children, so there are at most n_nodes / 4 of them. */
+  c->quads_bytes = (c->n_nodes / 4 + 1) * sizeof(cquad_t) + 64;
+  c->quads_block = qk__realloc(a, NULL, 0, c->quads_bytes);
+  if (c->quads_block) c->quads = (cquad_t *)(((uintptr_t)c->quads_block + 63) & ~(uintptr_t)63);
+  if (!c->sbox || (c->n_discs && !c->sdisc) || !c->cn_block || !c->quads_block) return QK_ERR_NOMEM;
   return QK_OK;
 }
 
@@ -269,6 +302,7 @@ qk_status_t qk_collider_build(const qk_disc_t *discs, size_t n_discs, const qk_b
   if (!c) return QK_ERR_NOMEM;
   memset(c, 0, sizeof *c);
   c->alloc = a;
+  c->threads = 1;
   c->n_discs = n_discs;
   c->n = n_discs + n_boxes;
   if ((st = build_centre_tree(c, discs, boxes, &opt)) != QK_OK || (st = alloc_arrays(c)) != QK_OK ||
@@ -372,39 +406,78 @@ static int leaf_pairs(const qk_collider_t *c, const cnode_t *la, const cnode_t *
   return 0;
 }
 
-qk_status_t qk_collider_pairs(const qk_collider_t *c, qk_pair_fn fn, void *ud) {
-  if (!c || !fn) return QK_ERR_INVALID;
-  /*
-   * Leaf against leaf: for each leaf, one descent finds every leaf whose item box meets
-   * its own, and the items of the two are paired directly. That shares one descent
-   * among all the items of a leaf instead of making one per item.
-   */
-  uint32_t outer[QK__CSTACK_MAX], inner[QK__CSTACK_MAX];
+/*
+ * Leaf against leaf: for each leaf, one descent finds every leaf whose item box meets its
+ * own, and the items of the two are paired directly. That shares one descent among all
+ * the items of a leaf instead of making one per item. This is the part for one leaf.
+ */
+int qk__collider_leaf_pairs(const qk_collider_t *c, uint32_t leaf, qk_pair_fn fn, void *ud) {
+  const cnode_t *la = &c->cn[leaf];
+  /* The leaf's box, widened back to doubles, is what the other leaves must meet. */
+  const qk_box_t ba = {la->xmin, la->ymin, la->xmax, la->ymax};
+  uint32_t inner[QK__CSTACK_MAX];
+  int si = 0;
+  inner[si++] = 0;
+  while (si > 0) {
+    const cnode_t *lb = &c->cn[inner[--si]];
+    if (!cbox_box(lb, &ba)) continue;
+    if (lb->child != QK_NONE) {
+      for (int k = 3; k >= 0; k--) inner[si++] = lb->child + (uint32_t)k;
+      continue;
+    }
+    if (leaf_pairs(c, la, lb, fn, ud)) return 1;
+  }
+  return 0;
+}
+
+int qk__collider_each_leaf(const qk_collider_t *c, int (*fn)(uint32_t leaf, void *ud), void *ud) {
+  uint32_t outer[QK__CSTACK_MAX];
   int so = 0;
   outer[so++] = 0;
   while (so > 0) {
-    const cnode_t *la = &c->cn[outer[--so]];
+    uint32_t v = outer[--so];
+    const cnode_t *la = &c->cn[v];
     if (la->child != QK_NONE) {
       for (int k = 3; k >= 0; k--) outer[so++] = la->child + (uint32_t)k;
       continue;
     }
-    if (la->count == 0) continue;
-    /* The leaf's box, widened back to doubles, is what the other leaves must meet. */
-    const qk_box_t ba = {la->xmin, la->ymin, la->xmax, la->ymax};
-    int si = 0;
-    inner[si++] = 0;
-    while (si > 0) {
-      const cnode_t *lb = &c->cn[inner[--si]];
-      if (!cbox_box(lb, &ba)) continue;
-      if (lb->child != QK_NONE) {
-        for (int k = 3; k >= 0; k--) inner[si++] = lb->child + (uint32_t)k;
-        continue;
-      }
-      if (leaf_pairs(c, la, lb, fn, ud)) return QK_OK;
-    }
+    if (la->count > 0 && fn(v, ud)) return 1;
   }
+  return 0;
+}
+
+typedef struct pairs_ctx {
+  const qk_collider_t *c;
+  qk_pair_fn fn;
+  void *ud;
+} pairs_ctx_t;
+
+static int serial_leaf(uint32_t leaf, void *ud) {
+  pairs_ctx_t *p = ud;
+  return qk__collider_leaf_pairs(p->c, leaf, p->fn, p->ud);
+}
+
+void qk__collider_pairs_serial(const qk_collider_t *c, qk_pair_fn fn, void *ud) {
+  pairs_ctx_t p = {c, fn, ud};
+  qk__collider_each_leaf(c, serial_leaf, &p);
+}
+
+qk_status_t qk_collider_pairs(const qk_collider_t *c, qk_pair_fn fn, void *ud) {
+  if (!c || !fn) return QK_ERR_INVALID;
+  /* On several threads when asked and the memory for it can be had; the same pairs in
+   * the same order either way. */
+  if (c->threads == 1 || qk__collider_pairs_threaded(c, fn, ud) != QK_OK)
+    qk__collider_pairs_serial(c, fn, ud);
   return QK_OK;
 }
+
+void qk_collider_set_threads(qk_collider_t *c, uint32_t threads) {
+  if (c) c->threads = threads;
+}
+
+uint32_t qk__collider_threads(const qk_collider_t *c) { return c->threads; }
+
+const qk_allocator_t *qk__collider_alloc(const qk_collider_t *c) { return &c->alloc; }
 
 typedef struct list_ctx {
   qk_pair_t *out;
@@ -449,8 +522,14 @@ qk_status_t qk_collider_pairs_list(const qk_collider_t *c, qk_pair_t *out, size_
  */
 typedef struct ray {
   double ox, oy, dx, dy;
-  double ix, iy; /* 1/dx, 1/dy (0 for a zero component) */
-  int fast;      /* both reciprocals finite: node boxes may use them */
+  double ix, iy;   /* 1/dx, 1/dy (0 for a zero component) */
+  int fast;        /* both reciprocals finite: node boxes may use them */
+  int simd;        /* fast, and neither component zero: quad_slab's short path */
+  int negx, negy;  /* dx < 0, dy < 0: a box is entered across its max side */
+  unsigned xn, yn; /* where in a cquad_t (in floats) the entry sides' lanes start */
+#if defined(__SSE2__)
+  __m128d vox, voy, vix, viy, vts, vmax; /* ox, oy, ix, iy, ts and tmax in both lanes */
+#endif
 } ray_t;
 
 /* One axis of the slab test: narrow [*lo, *hi] to where o + t d lies in [min, max]. */
@@ -504,10 +583,169 @@ static inline double ray_disc(const qk_disc_t *d, double ox, double oy, double d
   return t <= tmax ? t : -1.0;
 }
 
+#if defined(__SSE2__)
+/*
+ * ray_disc() for the discs d[0] and d[1] at once, each lane the same sequence of IEEE
+ * operations as the scalar code. Bit k of the result is set when disc k is hit at a t in
+ * [0, best] (t into th[k]); the lanes that the scalar code would leave early compute
+ * values (perhaps NaN) that the masks discard.
+ */
+static inline unsigned ray_disc2(const qk_disc_t *d, const ray_t *r, double tmax, double best,
+                                 double th[2]) {
+  const __m128d a0 = _mm_loadu_pd(&d[0].x), a1 = _mm_loadu_pd(&d[1].x); /* x, y */
+  const __m128d x = _mm_unpacklo_pd(a0, a1), y = _mm_unpackhi_pd(a0, a1);
+  const __m128d rr = _mm_set_pd(d[1].r, d[0].r);
+  const __m128d dx = _mm_set1_pd(r->dx), dy = _mm_set1_pd(r->dy);
+  const __m128d fx = _mm_sub_pd(r->vox, x), fy = _mm_sub_pd(r->voy, y);
+  const __m128d cc =
+      _mm_sub_pd(_mm_add_pd(_mm_mul_pd(fx, fx), _mm_mul_pd(fy, fy)), _mm_mul_pd(rr, rr));
+  const __m128d b = _mm_add_pd(_mm_mul_pd(fx, dx), _mm_mul_pd(fy, dy));
+  const __m128d a = _mm_set1_pd(r->dx * r->dx + r->dy * r->dy);
+  const __m128d cr = _mm_sub_pd(_mm_mul_pd(fx, dy), _mm_mul_pd(fy, dx));
+  const __m128d disc = _mm_sub_pd(_mm_mul_pd(_mm_mul_pd(a, rr), rr), _mm_mul_pd(cr, cr));
+  const __m128d zero = _mm_setzero_pd();
+  const __m128d t = _mm_div_pd(cc, _mm_add_pd(_mm_sub_pd(zero, b), _mm_sqrt_pd(disc)));
+  const __m128d inside = _mm_cmple_pd(cc, zero);
+  /* Outside: hit when b < 0, disc >= 0 and t <= tmax (then t > 0). */
+  const __m128d hit = _mm_and_pd(_mm_and_pd(_mm_cmplt_pd(b, zero), _mm_cmpge_pd(disc, zero)),
+                                 _mm_cmple_pd(t, _mm_set1_pd(tmax)));
+  const __m128d tv = _mm_andnot_pd(inside, t); /* 0 inside */
+  const __m128d cand = _mm_and_pd(_mm_or_pd(inside, hit), _mm_cmple_pd(tv, _mm_set1_pd(best)));
+  _mm_storeu_pd(th, tv);
+  return (unsigned)_mm_movemask_pd(cand);
+}
+#endif
+
 static inline double ray_box(const qk_box_t *b, const ray_t *r, double tmax) {
   double lo, hi;
   if (!slab(b->xmin, b->ymin, b->xmax, b->ymax, r, 0, tmax, &lo, &hi) || lo > hi) return -1.0;
   return lo;
+}
+
+/*
+ * The slab test of the ray against the four boxes of a cquad_t at once: bit k of the
+ * result is set when child k's box meets the ray within [0, tmax] (widened by ts) at a
+ * parameter not beyond best + ts, and lo[k] receives where it enters. The same
+ * arithmetic as slab() per lane: products with the reciprocals when they are finite,
+ * quotients otherwise, and for a zero direction component a test of the origin's
+ * coordinate (whose interval is then everything or nothing). No lane can produce a NaN:
+ * the origin is finite, the boxes' sides finite or infinite, and a zero component never
+ * multiplies or divides.
+ */
+#if defined(__SSE2__)
+/* One axis for two lanes: the entry and exit parameters. */
+static inline void quad_axis(__m128d mn, __m128d mx, double o, double d, double inv, int mul,
+                             __m128d *tn, __m128d *tf) {
+  const __m128d vo = _mm_set1_pd(o);
+  if (d == 0) {
+    __m128d in = _mm_and_pd(_mm_cmple_pd(mn, vo), _mm_cmple_pd(vo, mx));
+    const __m128d inf = _mm_set1_pd(INFINITY), ninf = _mm_set1_pd(-INFINITY);
+    *tn = _mm_or_pd(_mm_and_pd(in, ninf), _mm_andnot_pd(in, inf));
+    *tf = _mm_or_pd(_mm_and_pd(in, inf), _mm_andnot_pd(in, ninf));
+    return;
+  }
+  __m128d t1, t2;
+  if (mul) {
+    const __m128d vi = _mm_set1_pd(inv);
+    t1 = _mm_mul_pd(_mm_sub_pd(mn, vo), vi);
+    t2 = _mm_mul_pd(_mm_sub_pd(mx, vo), vi);
+  } else {
+    const __m128d vd = _mm_set1_pd(d);
+    t1 = _mm_div_pd(_mm_sub_pd(mn, vo), vd);
+    t2 = _mm_div_pd(_mm_sub_pd(mx, vo), vd);
+  }
+  *tn = _mm_min_pd(t1, t2);
+  *tf = _mm_max_pd(t1, t2);
+}
+
+/*
+ * The short path, for a ray with reciprocals and no zero component: the entry side of
+ * each axis is known from the direction's sign (products with a fixed reciprocal are
+ * monotone, so this picks the same values as a min and max would).
+ */
+static inline unsigned quad_slab_signed(const cquad_t *q, const ray_t *r, double tmax, double ts,
+                                        double best, double lo[4]) {
+  const float *f = q->v;
+  const __m128 xn = _mm_load_ps(f + r->xn), xf = _mm_load_ps(f + (r->xn ^ 8));
+  const __m128 yn = _mm_load_ps(f + r->yn), yf = _mm_load_ps(f + (r->yn ^ 8));
+  (void)tmax;
+  const __m128d ox = r->vox, oy = r->voy, ix = r->vix, iy = r->viy;
+  const __m128d vts = r->vts, vmax = r->vmax, vbest = _mm_set1_pd(best + ts);
+  /* Lanes 0 and 1, then 2 and 3, widened to doubles (exactly). */
+  __m128d txn0 = _mm_mul_pd(_mm_sub_pd(_mm_cvtps_pd(xn), ox), ix);
+  __m128d txn1 = _mm_mul_pd(_mm_sub_pd(_mm_cvtps_pd(_mm_movehl_ps(xn, xn)), ox), ix);
+  __m128d txf0 = _mm_mul_pd(_mm_sub_pd(_mm_cvtps_pd(xf), ox), ix);
+  __m128d txf1 = _mm_mul_pd(_mm_sub_pd(_mm_cvtps_pd(_mm_movehl_ps(xf, xf)), ox), ix);
+  __m128d tyn0 = _mm_mul_pd(_mm_sub_pd(_mm_cvtps_pd(yn), oy), iy);
+  __m128d tyn1 = _mm_mul_pd(_mm_sub_pd(_mm_cvtps_pd(_mm_movehl_ps(yn, yn)), oy), iy);
+  __m128d tyf0 = _mm_mul_pd(_mm_sub_pd(_mm_cvtps_pd(yf), oy), iy);
+  __m128d tyf1 = _mm_mul_pd(_mm_sub_pd(_mm_cvtps_pd(_mm_movehl_ps(yf, yf)), oy), iy);
+  __m128d l0 = _mm_max_pd(_mm_max_pd(txn0, tyn0), _mm_setzero_pd());
+  __m128d l1 = _mm_max_pd(_mm_max_pd(txn1, tyn1), _mm_setzero_pd());
+  __m128d u0 = _mm_add_pd(_mm_min_pd(_mm_min_pd(txf0, tyf0), vmax), vts);
+  __m128d u1 = _mm_add_pd(_mm_min_pd(_mm_min_pd(txf1, tyf1), vmax), vts);
+  /* Kept: l <= u + ts and l - ts <= best, the latter as l <= best + ts (both sides are
+   * rounded the same way for every lane, and ts is far above a rounding of best). */
+  __m128d ok0 = _mm_and_pd(_mm_cmple_pd(l0, u0), _mm_cmple_pd(l0, vbest));
+  __m128d ok1 = _mm_and_pd(_mm_cmple_pd(l1, u1), _mm_cmple_pd(l1, vbest));
+  _mm_storeu_pd(lo, l0);
+  _mm_storeu_pd(lo + 2, l1);
+  return (unsigned)_mm_movemask_pd(ok0) | (unsigned)_mm_movemask_pd(ok1) << 2;
+}
+
+static inline unsigned quad_slab(const cquad_t *q, const ray_t *r, double tmax, double ts,
+                                 double best, double lo[4]) {
+  if (r->simd) return quad_slab_signed(q, r, tmax, ts, best, lo);
+  const __m128 xmin = _mm_load_ps(q->v + QX0), ymin = _mm_load_ps(q->v + QY0);
+  const __m128 xmax = _mm_load_ps(q->v + QX1), ymax = _mm_load_ps(q->v + QY1);
+  unsigned keep = 0;
+  for (int h = 0; h < 2; h++) {
+    /* Lanes 2h and 2h + 1, widened to doubles (exactly). */
+    __m128d x0 = _mm_cvtps_pd(h ? _mm_movehl_ps(xmin, xmin) : xmin);
+    __m128d x1 = _mm_cvtps_pd(h ? _mm_movehl_ps(xmax, xmax) : xmax);
+    __m128d y0 = _mm_cvtps_pd(h ? _mm_movehl_ps(ymin, ymin) : ymin);
+    __m128d y1 = _mm_cvtps_pd(h ? _mm_movehl_ps(ymax, ymax) : ymax);
+    __m128d txn, txf, tyn, tyf;
+    quad_axis(x0, x1, r->ox, r->dx, r->ix, r->fast, &txn, &txf);
+    quad_axis(y0, y1, r->oy, r->dy, r->iy, r->fast, &tyn, &tyf);
+    __m128d l = _mm_max_pd(_mm_max_pd(txn, tyn), _mm_setzero_pd());
+    __m128d u = _mm_min_pd(_mm_min_pd(txf, tyf), _mm_set1_pd(tmax));
+    const __m128d vts = _mm_set1_pd(ts);
+    __m128d ok = _mm_and_pd(_mm_cmple_pd(l, _mm_add_pd(u, vts)),
+                            _mm_cmple_pd(_mm_sub_pd(l, vts), _mm_set1_pd(best)));
+    _mm_storeu_pd(lo + 2 * h, l);
+    keep |= (unsigned)_mm_movemask_pd(ok) << (2 * h);
+  }
+  return keep;
+}
+#else
+/* Portable fallback: the same test lane by lane. */
+static inline unsigned quad_slab(const cquad_t *q, const ray_t *r, double tmax, double ts,
+                                 double best, double lo[4]) {
+  unsigned keep = 0;
+  for (int k = 0; k < 4; k++) {
+    double l, u;
+    if (slab(q->v[QX0 + k], q->v[QY0 + k], q->v[QX1 + k], q->v[QY1 + k], r, r->fast, tmax, &l,
+             &u) &&
+        l <= u + ts && l - ts <= best) {
+      lo[k] = l;
+      keep |= 1u << k;
+    }
+  }
+  return keep;
+}
+#endif
+
+/* The four quadrants from the farthest to the nearest along a direction whose x and y
+ * components are negative as given (the corner quadrant it enters first last). */
+static inline void quadrant_order(int negx, int negy, uint32_t order[4]) {
+  /* Quadrant of an east / north flag pair: NE 0, NW 1, SW 2, SE 3. */
+  static const uint32_t q[2][2] = {{QK_SW, QK_NW}, {QK_SE, QK_NE}};
+  int e = negx, nn = negy; /* the near quadrant is east when going west, ... */
+  order[0] = q[!e][!nn];
+  order[1] = q[e][!nn];
+  order[2] = q[!e][nn];
+  order[3] = q[e][nn];
 }
 
 qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t d, double tmax,
@@ -524,7 +762,7 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
    * a disc round differently; widen each node's interval by a margin far above those
    * roundings (which scale with the coordinates over the direction's length).
    */
-  double dn = fmax(fabs(d.x), fabs(d.y));
+  double dn = qk__max(fabs(d.x), fabs(d.y));
   double ts = dn > 0 ? (fabs(o.x) + fabs(o.y) + 2 * c->mag) * 0x1p-40 / dn : 0.0;
   double best = INFINITY;
   qk_id_t best_id = QK_NONE;
@@ -534,22 +772,74 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
   const int all_discs = c->n_discs == c->n, no_discs = c->n_discs == 0;
   /* Reciprocals, unless a component is so small that its reciprocal overflows (then the
    * dividing slab test is used throughout). */
-  ray_t ray = {o.x, o.y, d.x, d.y, d.x != 0 ? 1 / d.x : 0, d.y != 0 ? 1 / d.y : 0, 0};
+  ray_t ray = {.ox = o.x,
+               .oy = o.y,
+               .dx = d.x,
+               .dy = d.y,
+               .ix = d.x != 0 ? 1 / d.x : 0,
+               .iy = d.y != 0 ? 1 / d.y : 0};
   ray.fast = isfinite(ray.ix) && isfinite(ray.iy);
+  ray.simd = ray.fast && d.x != 0 && d.y != 0;
+  ray.negx = d.x < 0;
+  ray.negy = d.y < 0;
+  ray.xn = ray.negx ? QX1 : QX0; /* the exit side is the other one: ^ 8 */
+  ray.yn = ray.negy ? QY1 : QY0;
+#if defined(__SSE2__)
+  ray.vox = _mm_set1_pd(o.x), ray.voy = _mm_set1_pd(o.y);
+  ray.vix = _mm_set1_pd(ray.ix), ray.viy = _mm_set1_pd(ray.iy);
+  ray.vts = _mm_set1_pd(ts), ray.vmax = _mm_set1_pd(tmax);
+#endif
+  uint32_t order[4];
+  quadrant_order(ray.negx, ray.negy, order);
   const cnode_t *root = &c->cn[0];
   if (!slab(root->xmin, root->ymin, root->xmax, root->ymax, &ray, 0, tmax, &lo, &hi) ||
       lo > hi + ts)
     return QK_OK;
-  stack[sp].node = 0;
-  stack[sp++].bound = lo - ts;
-  while (sp > 0) {
-    qk__centry_t e = stack[--sp];
-    if (e.bound > best) continue;
-    const cnode_t *n = &c->cn[e.node];
-    if (n->child == QK_NONE) {
+  uint32_t cur = 0;
+  for (;;) {
+    const cnode_t *n = &c->cn[cur];
+    if (n->child != QK_NONE) {
+      /* All four children's boxes from one line, only the kept ones stacked. */
+      double lo4[4];
+      unsigned keep = quad_slab(&c->quads[n->quad], &ray, tmax, ts, best, lo4);
+      /* Far quadrant first, so the one the ray enters first is popped first: the
+       * quadrants' order along the direction, which the item boxes mostly follow (the
+       * bound on each entry keeps the pruning exact whatever the order). */
+      for (int i = 0; i < 4; i++) {
+        uint32_t k = order[i];
+        if (!(keep >> k & 1)) continue;
+        stack[sp].node = n->child + k;
+        stack[sp++].bound = lo4[k] - ts;
+      }
+      /* The nearest kept child, just checked against best, is taken straight away. */
+      if (keep) {
+        cur = stack[--sp].node;
+        continue;
+      }
+    } else {
       /* Ids are read only for hits (and for the kind in mixed sets): the id array is
        * one more cache miss per leaf otherwise. */
-      for (uint32_t slot = n->start; slot < n->start + n->count; slot++) {
+      uint32_t slot = n->start;
+      const uint32_t end = n->start + n->count;
+#if defined(__SSE2__)
+      /* Discs two at a time, with the same operations as ray_disc() lane by lane (so
+       * the same t to the last bit); only lanes that could be a new best go on. */
+      if (all_discs) {
+        for (; slot + 1 < end; slot += 2) {
+          double th[2];
+          unsigned cand = ray_disc2(&c->sdisc[slot], &ray, tmax, best, th);
+          for (unsigned k = 0; k < 2; k++) {
+            if (!(cand >> k & 1) || th[k] > best) continue; /* best may have moved */
+            qk_id_t id = pid[slot + k];
+            if (th[k] < best || id < best_id) {
+              best = th[k];
+              best_id = id;
+            }
+          }
+        }
+      }
+#endif
+      for (; slot < end; slot++) {
         int is_disc = all_discs || (!no_discs && pid[slot] < c->n_discs);
         double th = is_disc ? ray_disc(&c->sdisc[slot], o.x, o.y, d.x, d.y, tmax)
                             : ray_box(&c->sbox[slot], &ray, tmax);
@@ -560,23 +850,12 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
           best_id = id;
         }
       }
-      continue;
     }
-    qk__centry_t kids[4];
-    int m = 0;
-    for (uint32_t k = 0; k < 4; k++) {
-      uint32_t ch = n->child + k;
-      /* Only the children's boxes are read here, not their nodes, which for most of
-       * them would be a cache miss for nothing. */
-      const cnode_t *cb = &c->cn[ch];
-      int in = slab(cb->xmin, cb->ymin, cb->xmax, cb->ymax, &ray, ray.fast, tmax, &lo, &hi);
-      if (!in || lo > hi + ts) continue;
-      if (lo - ts > best) continue;
-      kids[m].node = ch;
-      kids[m++].bound = lo - ts;
-    }
-    qk__csort4_desc(kids, m);
-    for (int i = 0; i < m; i++) stack[sp++] = kids[i];
+    /* Next, the nearest stacked node that may still hold a hit no farther than best
+     * (the bound it was stacked with, re-checked: best may have come closer since). */
+    while (sp > 0 && stack[sp - 1].bound > best) sp--;
+    if (sp == 0) break;
+    cur = stack[--sp].node;
   }
   hit->id = best_id;
   hit->t = best_id == QK_NONE ? INFINITY : best;

@@ -3,7 +3,9 @@
  * running its share. Jobs are handed out statically (job i on thread i mod threads), so
  * which thread did what never changes an answer.
  */
+#define _POSIX_C_SOURCE 200809L
 #include <pthread.h>
+#include <unistd.h>
 
 #include "collide/world_internal.h"
 
@@ -43,4 +45,16 @@ int qk__parallel(unsigned threads, unsigned n, void (*fn)(unsigned i, void *ud),
   }
   for (unsigned t = 1; t <= started; t++) pthread_join(th[t], NULL);
   return started + 1 < threads;
+}
+
+unsigned qk__threads_online(uint32_t threads) {
+  if (threads == 0) {
+#if defined(_SC_NPROCESSORS_ONLN)
+    long n = sysconf(_SC_NPROCESSORS_ONLN);
+    threads = n > 0 ? (uint32_t)n : 1u;
+#else
+    threads = 1;
+#endif
+  }
+  return threads > 64 ? 64 : threads;
 }

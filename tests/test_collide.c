@@ -6,10 +6,14 @@
  *  - items overlapping a query box or disc against brute force;
  *  - first hit of rays and segments against an oracle derived independently (exact
  *    rational arithmetic with GMP; tests/support/query_oracle.c): origins inside
- *    items (t = 0), outside the whole set, axis-parallel directions, tmax cut-offs;
+ *    items (t = 0), outside the whole set, axis-parallel directions, components so
+ *    small that their reciprocals overflow, tmax cut-offs;
  *  - hand-computed cases (tangent discs, a ray grazing a box corner);
  *  - bad input and allocation failure at every N (clean QK_ERR_NOMEM, no leak);
- *  - three threads casting rays and finding pairs on one collider at once.
+ *  - three threads casting rays and finding pairs on one collider at once;
+ *  - the threads option: pairs (in callback order, also stopped early), the pairs list
+ *    and ray batches on 2, 3 and all cores equal to one thread; allocation failure at
+ *    every N on the threaded paths (the same answers, or a clean QK_ERR_NOMEM).
  */
 #include <math.h>
 #include <pthread.h>
@@ -185,6 +189,11 @@ static void test_collide_raycast(void **state) {
       qk_point_t dir = {cos(ang), sin(ang)};
       if (qi % 10 == 0) dir = (qk_point_t){0, qi % 20 ? 1.0 : -2.0};
       if (qi % 10 == 1) dir = (qk_point_t){qi % 20 ? 3.0 : -1.0, 0};
+      /* A component so small that its reciprocal overflows: the dividing node test. */
+      if (qi % 10 == 3)
+        dir = (qk_point_t){qi % 20 < 10 ? -0.7 : 0.7, qi % 40 < 20 ? 1e-310 : -3e-320};
+      if (qi % 10 == 4)
+        dir = (qk_point_t){qi % 20 < 10 ? 1e-309 : -5e-324, qi % 40 < 20 ? 1.0 : -2.0};
       if (qi % 10 == 2 && use_d) org = (qk_point_t){d[qi % nd].x, d[qi % nd].y};
       double tmax = qi % 3 == 0 ? qkt_rng_range(&r, 0, 0.5) : INFINITY;
       qk_hit_t h, w = qko_raycast(use_d ? d : NULL, use_d, use_b ? b : NULL, use_b, org, dir, tmax);
@@ -352,12 +361,175 @@ static void test_collide_threads(void **state) {
   free(d), free(b), free(org), free(dir), free(expect);
 }
 
+/* Every pair in callback order, up to `stop` of them (0: all). */
+typedef struct seq {
+  qk_pair_t *p;
+  size_t n, cap, stop;
+} seq_t;
+
+static int seq_pair(qk_id_t a, qk_id_t b, void *ud) {
+  seq_t *s = ud;
+  if (s->n == s->cap) {
+    s->cap = s->cap ? 2 * s->cap : 1024;
+    s->p = realloc(s->p, s->cap * sizeof *s->p);
+    assert_non_null(s->p);
+  }
+  s->p[s->n].a = a;
+  s->p[s->n++].b = b;
+  return s->stop && s->n == s->stop;
+}
+
+static seq_t pairs_seq(const qk_collider_t *c, size_t stop) {
+  seq_t s = {NULL, 0, 0, stop};
+  assert_int_equal(qk_collider_pairs(c, seq_pair, &s), QK_OK);
+  return s;
+}
+
+static void assert_same_seq(const seq_t *x, const seq_t *y, uint32_t threads) {
+  if (x->n != y->n || (x->n && memcmp(x->p, y->p, x->n * sizeof *x->p)))
+    fail_msg("threads %u: %zu pairs vs %zu on one thread, or another order (seed %llu)", threads,
+             y->n, x->n, (unsigned long long)g_seed);
+}
+
+static void test_collide_threads_option(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 5);
+  const size_t nd = 1500, nb = 1500, nr = 5000; /* more than 4096 rays: the borrowed path */
+  qk_disc_t *d = malloc(nd * sizeof *d);
+  qk_box_t *b = malloc(nb * sizeof *b);
+  qk_point_t *org = malloc(nr * sizeof *org), *dir = malloc(nr * sizeof *dir);
+  qk_hit_t *one = malloc(nr * sizeof *one), *many = malloc(nr * sizeof *many);
+  make_items(&r, d, nd, b, nb, 0, 0.01);
+  for (size_t i = 0; i < nr; i++) {
+    org[i] = (qk_point_t){qkt_rng_range(&r, -0.2, 1.2), qkt_rng_range(&r, -0.2, 1.2)};
+    double ang = qkt_rng_range(&r, 0, 6.283185307179586);
+    dir[i] = i % 97 == 0 ? (qk_point_t){0, 1} : (qk_point_t){cos(ang), sin(ang)};
+  }
+  qk_tree_options_t o = opts(4);
+  qk_collider_t *c = NULL;
+  assert_int_equal(qk_collider_build(d, nd, b, nb, &o, &c), QK_OK);
+  seq_t ref = pairs_seq(c, 0), ref_stop = pairs_seq(c, 777);
+  assert_true(ref.n > 777);
+  size_t nl;
+  assert_int_equal(qk_collider_pairs_list(c, NULL, 0, &nl), QK_OK);
+  qk_pair_t *list1 = malloc(nl * sizeof *list1), *list2 = malloc(nl * sizeof *list2);
+  assert_int_equal(qk_collider_pairs_list(c, list1, nl, &nl), QK_OK);
+  for (size_t i = 0; i < nr; i++)
+    assert_int_equal(qk_collider_raycast(c, org[i], dir[i], 2.0, &one[i]), QK_OK);
+  const uint32_t ts[] = {1, 2, 3, 0};
+  for (size_t k = 0; k < sizeof ts / sizeof *ts; k++) {
+    qk_collider_set_threads(c, ts[k]);
+    seq_t got = pairs_seq(c, 0), got_stop = pairs_seq(c, 777);
+    assert_same_seq(&ref, &got, ts[k]);
+    assert_same_seq(&ref_stop, &got_stop, ts[k]);
+    free(got.p), free(got_stop.p);
+    size_t n2;
+    assert_int_equal(qk_collider_pairs_list(c, list2, nl, &n2), QK_OK);
+    assert_int_equal(n2, nl);
+    assert_memory_equal(list1, list2, nl * sizeof *list1);
+    assert_int_equal(qk_collider_raycast_batch(c, org, dir, nr, 2.0, many), QK_OK);
+    for (size_t i = 0; i < nr; i++)
+      if (many[i].id != one[i].id || !(many[i].t == one[i].t))
+        fail_msg("threads %u ray %zu: %u at %g, one call %u at %g (seed %llu)", ts[k], i,
+                 (unsigned)many[i].id, many[i].t, (unsigned)one[i].id, one[i].t,
+                 (unsigned long long)g_seed);
+    /* Failing rays: the lowest-numbered one's error, the others still answered. */
+    qk_point_t keep0 = org[4500], keep1 = dir[300];
+    org[4500].x = NAN;
+    dir[300].y = INFINITY;
+    assert_int_equal(qk_collider_raycast_batch(c, org, dir, nr, 2.0, many), QK_ERR_NONFINITE);
+    assert_int_equal(many[300].id, QK_NONE);
+    assert_int_equal(many[4500].id, QK_NONE);
+    assert_int_equal(many[301].id, one[301].id);
+    org[4500] = keep0, dir[300] = keep1;
+    assert_int_equal(qk_collider_raycast_batch(c, org, dir, 3, -1.0, many), QK_ERR_INVALID);
+    assert_int_equal(qk_collider_raycast_batch(c, NULL, dir, 3, 1.0, many), QK_ERR_INVALID);
+    assert_int_equal(qk_collider_raycast_batch(c, NULL, NULL, 0, 1.0, NULL), QK_OK);
+  }
+  qk_collider_set_threads(NULL, 2);
+  qk_collider_free(c);
+  free(ref.p), free(ref_stop.p), free(list1), free(list2);
+  free(d), free(b), free(org), free(dir), free(one), free(many);
+}
+
+/* The failing allocator behind a lock, for the worker threads. */
+typedef struct locked {
+  pthread_mutex_t mu;
+  qkt_alloc_t st;
+} locked_t;
+
+static void *locked_fn(void *ud, void *ptr, size_t osize, size_t nsize) {
+  locked_t *l = ud;
+  pthread_mutex_lock(&l->mu);
+  void *p = qkt_alloc_fn(&l->st, ptr, osize, nsize);
+  pthread_mutex_unlock(&l->mu);
+  return p;
+}
+
+static void test_collide_threads_nomem(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 6);
+  enum { ND = 400, NB = 400, NR = 4500 };
+  qk_disc_t d[ND];
+  qk_box_t b[NB];
+  make_items(&r, d, ND, b, NB, 0, 0.03);
+  static qk_point_t org[NR], dir[NR];
+  static qk_hit_t one[NR], many[NR];
+  for (size_t i = 0; i < NR; i++) {
+    org[i] = (qk_point_t){qkt_rng_unit(&r), qkt_rng_unit(&r)};
+    dir[i] = (qk_point_t){qkt_rng_range(&r, -1, 1), qkt_rng_range(&r, -1, 1)};
+  }
+  locked_t l;
+  pthread_mutex_init(&l.mu, NULL);
+  qk_allocator_t a = qkt_alloc_make(&l.st);
+  a.fn = locked_fn;
+  a.ud = &l;
+  qk_tree_options_t o = opts(4);
+  o.allocator = &a;
+  qk_collider_t *c = NULL;
+  assert_int_equal(qk_collider_build(d, ND, b, NB, &o, &c), QK_OK);
+  seq_t ref = pairs_seq(c, 0);
+  for (size_t i = 0; i < NR; i++)
+    assert_int_equal(qk_collider_raycast(c, org[i], dir[i], INFINITY, &one[i]), QK_OK);
+  qk_collider_set_threads(c, 2);
+  size_t live = l.st.live_blocks;
+  /* Pairs: the same sequence whichever allocation fails (the one-thread fallback). */
+  for (size_t fail_at = 1;; fail_at++) {
+    qkt_alloc_arm(&l.st, fail_at);
+    seq_t got = pairs_seq(c, 0);
+    assert_same_seq(&ref, &got, 2);
+    free(got.p);
+    assert_int_equal(l.st.live_blocks, live);
+    if (!l.st.failed) break;
+    assert_true(fail_at < 1000);
+  }
+  for (size_t fail_at = 1;; fail_at++) {
+    qkt_alloc_arm(&l.st, fail_at);
+    qk_status_t s = qk_collider_raycast_batch(c, org, dir, NR, INFINITY, many);
+    assert_int_equal(l.st.live_blocks, live);
+    if (s == QK_OK) {
+      for (size_t i = 0; i < NR; i++) assert_true(many[i].id == one[i].id && many[i].t == one[i].t);
+      break;
+    }
+    assert_int_equal(s, QK_ERR_NOMEM);
+    assert_true(fail_at < 10);
+  }
+  qkt_alloc_arm(&l.st, 0);
+  qk_collider_free(c);
+  assert_int_equal(l.st.live_blocks, 0);
+  free(ref.p);
+  pthread_mutex_destroy(&l.mu);
+}
+
 int main(void) {
   g_seed = qkt_seed(7031);
   const struct CMUnitTest tests[] = {
-      cmocka_unit_test(test_collide_pairs),   cmocka_unit_test(test_collide_query_shapes),
-      cmocka_unit_test(test_collide_raycast), cmocka_unit_test(test_collide_exact_cases),
-      cmocka_unit_test(test_collide_nomem),   cmocka_unit_test(test_collide_threads),
+      cmocka_unit_test(test_collide_pairs),          cmocka_unit_test(test_collide_query_shapes),
+      cmocka_unit_test(test_collide_raycast),        cmocka_unit_test(test_collide_exact_cases),
+      cmocka_unit_test(test_collide_nomem),          cmocka_unit_test(test_collide_threads),
+      cmocka_unit_test(test_collide_threads_option), cmocka_unit_test(test_collide_threads_nomem),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }

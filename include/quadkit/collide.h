@@ -93,13 +93,26 @@ typedef int (*qk_pair_fn)(qk_id_t a, qk_id_t b, void *ud);
 
 /**
  * Broad phase: report every overlapping pair of items once, with a < b, in no particular
- * order.
+ * order (but the same order for every threads setting: see qk_collider_set_threads()).
  * \param [in] c the collider.
  * \param [in] fn the callback.
  * \param [in] ud passed to fn.
  * \return QK_OK.
  */
 qk_status_t qk_collider_pairs(const qk_collider_t *c, qk_pair_fn fn, void *ud);
+
+/**
+ * Set the number of threads qk_collider_pairs(), qk_collider_pairs_list() and
+ * qk_collider_raycast_batch() use: 0 means every online core, the default is 1. The
+ * answers, and the order in which qk_collider_pairs() reports them, do not depend on it;
+ * fn is always called on the calling thread. With more than one thread, the pairs calls
+ * collect the pairs in memory from the collider's allocator (which must then be
+ * thread-safe) before reporting them; when that memory cannot be had they run on the
+ * calling thread instead. Must not run concurrently with any other call on the collider.
+ * \param [in,out] c the collider (NULL does nothing).
+ * \param [in] threads the count.
+ */
+void qk_collider_set_threads(qk_collider_t *c, uint32_t threads);
 
 /**
  * Every overlapping pair into a buffer, sorted by a then b.
@@ -126,6 +139,25 @@ qk_status_t qk_collider_pairs_list(const qk_collider_t *c, qk_pair_t *out, size_
  */
 qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t origin, qk_point_t dir,
                                 double tmax, qk_hit_t *hit);
+
+/**
+ * qk_collider_raycast() for n rays in one call, on the collider's threads
+ * (qk_collider_set_threads()), with the same hits as n single calls. A ray that fails
+ * gets {QK_NONE, INFINITY} and the others are still answered. Batches of more than 4096
+ * rays borrow 12 bytes per 256 rays from the collider's allocator for the duration of
+ * the call.
+ * \param [in] c the collider.
+ * \param [in] origins n origins.
+ * \param [in] dirs n directions.
+ * \param [in] n how many rays.
+ * \param [in] tmax the largest t considered, for every ray (INFINITY for rays).
+ * \param [out] hits n hits, hits[i] for ray i.
+ * \return QK_OK, QK_ERR_INVALID (NULL arrays, or tmax < 0 or NaN), QK_ERR_NOMEM (nothing
+ *         cast), or the error of the lowest-numbered failed ray (QK_ERR_NONFINITE).
+ */
+qk_status_t qk_collider_raycast_batch(const qk_collider_t *c, const qk_point_t *origins,
+                                      const qk_point_t *dirs, size_t n, double tmax,
+                                      qk_hit_t *hits);
 
 /* ---------------------------------------------------------------------------------- */
 /* The world: moving objects with stable handles                                        */

@@ -1,0 +1,162 @@
+/*
+ * The static collider on several threads: all pairs and batches of rays. Work is cut into
+ * more jobs than threads, in a fixed order (leaves in the order the one-thread search
+ * visits them, rays by index), and qk__parallel hands them out statically, so neither the
+ * answers nor their order depend on the number of threads.
+ */
+#include <string.h>
+
+#include "collide/collide_internal.h"
+
+/* ---- all pairs ------------------------------------------------------------------ */
+
+/* One job's pairs, in the order its leaves produced them. */
+typedef struct pjob {
+  qk_pair_t *buf;
+  size_t n, cap;
+  int nomem;
+  const qk_allocator_t *alloc;
+} pjob_t;
+
+typedef struct pctx {
+  const qk_collider_t *c;
+  const uint32_t *leaves;
+  size_t n_leaves;
+  unsigned n_jobs;
+  pjob_t *jobs;
+} pctx_t;
+
+static int keep_pair(qk_id_t a, qk_id_t b, void *ud) {
+  pjob_t *j = ud;
+  if (j->n == j->cap) {
+    size_t cap = j->cap ? 2 * j->cap : 256;
+    qk_pair_t *p = qk__realloc(j->alloc, j->buf, j->cap * sizeof *p, cap * sizeof *p);
+    if (!p) {
+      j->nomem = 1;
+      return 1;
+    }
+    j->buf = p;
+    j->cap = cap;
+  }
+  j->buf[j->n].a = a;
+  j->buf[j->n++].b = b;
+  return 0;
+}
+
+static void pairs_job(unsigned i, void *ud) {
+  pctx_t *p = ud;
+  size_t lo = p->n_leaves * i / p->n_jobs, hi = p->n_leaves * (i + 1) / p->n_jobs;
+  for (size_t k = lo; k < hi; k++)
+    if (qk__collider_leaf_pairs(p->c, p->leaves[k], keep_pair, &p->jobs[i])) return;
+}
+
+typedef struct lctx {
+  uint32_t *out; /* NULL: count only */
+  size_t n;
+} lctx_t;
+
+static int list_leaf(uint32_t leaf, void *ud) {
+  lctx_t *l = ud;
+  if (l->out) l->out[l->n] = leaf;
+  l->n++;
+  return 0;
+}
+
+qk_status_t qk__collider_pairs_threaded(const qk_collider_t *c, qk_pair_fn fn, void *ud) {
+  const qk_allocator_t *a = qk__collider_alloc(c);
+  unsigned threads = qk__threads_online(qk__collider_threads(c));
+  if (threads <= 1) return QK_ERR_NOMEM; /* nothing to share: the serial path */
+  lctx_t l = {NULL, 0};
+  qk__collider_each_leaf(c, list_leaf, &l);
+  if (l.n < 2) return QK_ERR_NOMEM;
+  size_t n_leaves = l.n;
+  /* Eight jobs per thread even out leaves of unequal work. */
+  unsigned n_jobs = n_leaves < 8u * threads ? (unsigned)n_leaves : 8u * threads;
+  uint32_t *leaves = qk__realloc(a, NULL, 0, n_leaves * sizeof *leaves);
+  pjob_t *jobs = qk__realloc(a, NULL, 0, n_jobs * sizeof *jobs);
+  qk_status_t st = QK_ERR_NOMEM;
+  if (leaves && jobs) {
+    l.out = leaves;
+    l.n = 0;
+    qk__collider_each_leaf(c, list_leaf, &l);
+    for (unsigned i = 0; i < n_jobs; i++) jobs[i] = (pjob_t){NULL, 0, 0, 0, a};
+    pctx_t p = {c, leaves, n_leaves, n_jobs, jobs};
+    qk__parallel(threads, n_jobs, pairs_job, &p);
+    st = QK_OK;
+    for (unsigned i = 0; i < n_jobs; i++)
+      if (jobs[i].nomem) st = QK_ERR_NOMEM;
+    /* Only when every job finished are the pairs reported, in job order. */
+    for (unsigned i = 0, stop = 0; st == QK_OK && i < n_jobs && !stop; i++)
+      for (size_t k = 0; k < jobs[i].n && !stop; k++)
+        stop = fn(jobs[i].buf[k].a, jobs[i].buf[k].b, ud);
+    for (unsigned i = 0; i < n_jobs; i++)
+      qk__free(a, jobs[i].buf, jobs[i].cap * sizeof *jobs[i].buf);
+  }
+  qk__free(a, leaves, n_leaves * sizeof *leaves);
+  qk__free(a, jobs, n_jobs * sizeof *jobs);
+  return st;
+}
+
+/* ---- rays ----------------------------------------------------------------------- */
+
+/* Rays per job: enough to amortise a hand-out, few enough to balance the threads. */
+#define RAYS_PER_JOB 256
+
+typedef struct rctx {
+  const qk_collider_t *c;
+  const qk_point_t *origins, *dirs;
+  size_t n;
+  double tmax;
+  qk_hit_t *hits;
+  size_t *first_bad; /* per job: the first ray that failed, or n */
+  qk_status_t *bad_st;
+} rctx_t;
+
+static void rays_job(unsigned i, void *ud) {
+  rctx_t *r = ud;
+  size_t lo = (size_t)i * RAYS_PER_JOB, hi = lo + RAYS_PER_JOB < r->n ? lo + RAYS_PER_JOB : r->n;
+  for (size_t k = lo; k < hi; k++) {
+    qk_status_t st = qk_collider_raycast(r->c, r->origins[k], r->dirs[k], r->tmax, &r->hits[k]);
+    if (st != QK_OK && r->first_bad[i] == r->n) {
+      r->first_bad[i] = k;
+      r->bad_st[i] = st;
+    }
+  }
+}
+
+qk_status_t qk_collider_raycast_batch(const qk_collider_t *c, const qk_point_t *origins,
+                                      const qk_point_t *dirs, size_t n, double tmax,
+                                      qk_hit_t *hits) {
+  if (!c || (n > 0 && (!origins || !dirs || !hits))) return QK_ERR_INVALID;
+  if (n == 0) return QK_OK;
+  size_t n_jobs = (n + RAYS_PER_JOB - 1) / RAYS_PER_JOB;
+  if (n_jobs > UINT32_MAX) return QK_ERR_LIMIT;
+  unsigned threads = qk__threads_online(qk__collider_threads(c));
+  /* The per-job error records live on the stack when few, else are borrowed. */
+  size_t bad_local[16];
+  qk_status_t st_local[16];
+  size_t *first_bad = bad_local;
+  qk_status_t *bad_st = st_local;
+  const qk_allocator_t *a = qk__collider_alloc(c);
+  if (n_jobs > 16) {
+    first_bad = qk__realloc(a, NULL, 0, n_jobs * sizeof *first_bad);
+    bad_st = qk__realloc(a, NULL, 0, n_jobs * sizeof *bad_st);
+    if (!first_bad || !bad_st) {
+      qk__free(a, first_bad, n_jobs * sizeof *first_bad);
+      qk__free(a, bad_st, n_jobs * sizeof *bad_st);
+      return QK_ERR_NOMEM;
+    }
+  }
+  for (size_t i = 0; i < n_jobs; i++) first_bad[i] = n;
+  rctx_t r = {c, origins, dirs, n, tmax, hits, first_bad, bad_st};
+  qk__parallel(threads, (unsigned)n_jobs, rays_job, &r);
+  /* The error of the lowest-numbered failed ray. */
+  qk_status_t st = QK_OK;
+  for (size_t i = 0; i < n_jobs && st == QK_OK; i++)
+    if (first_bad[i] < n) st = bad_st[i];
+  if (n_jobs > 16) {
+    qk__free(a, first_bad, n_jobs * sizeof *first_bad);
+    qk__free(a, bad_st, n_jobs * sizeof *bad_st);
+  }
+  return st;
+}
