@@ -290,19 +290,17 @@ qk_status_t qk_collider_build(const qk_disc_t *discs, size_t n_discs, const qk_b
   qk_status_t st = check_items(discs, n_discs, boxes, n_boxes);
   if (st != QK_OK) return st;
   qk_tree_options_t opt;
-  if (options) {
+  if (options)
     opt = *options;
-  } else {
+  else
     qk_tree_options_init(&opt);
-    opt.capacity = 8;
-  }
   qk_allocator_t a = {NULL, NULL};
   if (opt.allocator) a = *opt.allocator;
   qk_collider_t *c = qk__realloc(&a, NULL, 0, sizeof *c);
   if (!c) return QK_ERR_NOMEM;
   memset(c, 0, sizeof *c);
   c->alloc = a;
-  c->threads = 1;
+  c->threads = opt.threads;
   c->n_discs = n_discs;
   c->n = n_discs + n_boxes;
   if ((st = build_centre_tree(c, discs, boxes, &opt)) != QK_OK || (st = alloc_arrays(c)) != QK_OK ||
