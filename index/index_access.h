@@ -17,6 +17,13 @@
 
 #include "index/index_internal.h"
 
+/* ---- helpers every module shares (implemented in index/) ------------------------- */
+
+/* Grow *p, an array of *cap items of `elem` bytes, to hold at least `need` items: from 16,
+ * doubling. QK_ERR_LIMIT when the size would overflow, QK_ERR_NOMEM when the allocation
+ * fails; either way *p and *cap are unchanged. */
+qk_status_t qk__grow(const qk_allocator_t *a, void **p, size_t *cap, size_t need, size_t elem);
+
 /* ---- the tree as a whole -------------------------------------------------------- */
 
 /* The allocator every structure derived from the tree should use. */

@@ -60,8 +60,8 @@ static qk_status_t ring(gj_t *g, json_object *arr, size_t f, size_t poly, size_t
                            "least 4)",
                            f, poly, k, n);
   qk_status_t st;
-  if ((st = qk__region_grow(g->a, (void **)&g->xy, &g->cap_xy, 2 * (g->nv + n), sizeof(double))) ||
-      (st = qk__region_grow(g->a, (void **)&g->rs, &g->cap_rs, g->nr + 2, sizeof(size_t))))
+  if ((st = qk__grow(g->a, (void **)&g->xy, &g->cap_xy, 2 * (g->nv + n), sizeof(double))) ||
+      (st = qk__grow(g->a, (void **)&g->rs, &g->cap_rs, g->nr + 2, sizeof(size_t))))
     return nomem(g, st);
   for (size_t i = 0; i < n; i++) {
     json_object *p = json_object_array_get_idx(arr, i);
@@ -175,7 +175,7 @@ static qk_status_t properties(gj_t *g, json_object *props, size_t f) {
 }
 
 static qk_status_t end_feature(gj_t *g, size_t f) {
-  qk_status_t st = qk__region_grow(g->a, (void **)&g->fs, &g->cap_fs, f + 2, sizeof(size_t));
+  qk_status_t st = qk__grow(g->a, (void **)&g->fs, &g->cap_fs, f + 2, sizeof(size_t));
   if (st) return nomem(g, st);
   if (f == 0) g->fs[0] = 0;
   g->fs[f + 1] = g->nr;

@@ -28,9 +28,8 @@ typedef struct ob {
 static qk_status_t add_ring(ob_t *b, OGRGeometryH ring, int k) {
   int n = OGR_G_GetPointCount(ring);
   qk_status_t st;
-  if ((st = qk__region_grow(b->a, (void **)&b->xy, &b->cap_xy, 2 * (b->nv + (size_t)n),
-                            sizeof(double))) ||
-      (st = qk__region_grow(b->a, (void **)&b->rs, &b->cap_rs, b->nr + 2, sizeof(size_t))))
+  if ((st = qk__grow(b->a, (void **)&b->xy, &b->cap_xy, 2 * (b->nv + (size_t)n), sizeof(double))) ||
+      (st = qk__grow(b->a, (void **)&b->rs, &b->cap_rs, b->nr + 2, sizeof(size_t))))
     return st;
   for (int j = 0; j < n; j++) {
     b->xy[2 * (b->nv + (size_t)j)] = OGR_G_GetX(ring, j);
@@ -70,7 +69,7 @@ static qk_status_t add_feature(ob_t *b, OGRFeatureH feat) {
     st = qk__props_add(b->a, &b->props, name, v, strlen(v));
   }
   if (!st) st = qk__props_end_feature(b->a, &b->props, b->nf);
-  if (!st) st = qk__region_grow(b->a, (void **)&b->fs, &b->cap_fs, b->nf + 2, sizeof(size_t));
+  if (!st) st = qk__grow(b->a, (void **)&b->fs, &b->cap_fs, b->nf + 2, sizeof(size_t));
   if (st) return st;
   if (b->nf == 0) b->fs[0] = 0;
   b->fs[++b->nf] = b->nr;

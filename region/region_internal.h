@@ -176,10 +176,6 @@ qk_status_t qk__region_fail(qk_error_t *err, qk_status_t st, size_t item, const 
 /* Check one coordinate pair for the mode; returns QK_OK or an error with message. */
 qk_status_t qk__region_check_coord(int planar, double x, double y, size_t feature, qk_error_t *err);
 
-/* Grow a buffer of elem-size items to at least `need` items (doubling). */
-qk_status_t qk__region_grow(const qk_allocator_t *a, void **p, size_t *cap, size_t need,
-                            size_t elem);
-
 /* Properties being collected. */
 void qk__props_free(const qk_allocator_t *a, qk__props_t *p);
 qk_status_t qk__props_add(const qk_allocator_t *a, qk__props_t *p, const char *key, const char *val,
