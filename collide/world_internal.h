@@ -90,8 +90,4 @@ static inline qk_handle_t qk__handle(const qk_world_t *w, uint32_t slot) {
   return ((uint64_t)w->obj[slot].gen << 32) | slot;
 }
 
-/* Run fn(i, ud) for i in [0, n) on up to `threads` threads (the caller's included);
- * returns nonzero when threads could not be started (then everything ran on the caller). */
-int qk__parallel(unsigned threads, unsigned n, void (*fn)(unsigned i, void *ud), void *ud);
-
 #endif /* QUADKIT_WORLD_INTERNAL_H */

@@ -259,7 +259,7 @@ qk_status_t qk_world_raycast_batch(const qk_world_t *w, const qk_point_t *from,
     b.chunk = (n + 63) / 64;
     jobs = (n + b.chunk - 1) / b.chunk;
   }
-  qk__parallel(w->opt.threads, (unsigned)jobs, batch_run, &b);
+  qk__run_jobs(w->opt.threads, (unsigned)jobs, batch_run, &b);
   for (int k = 0; k < 64; k++)
     if (b.st[k] != QK_OK) return b.st[k];
   return QK_OK;
@@ -341,7 +341,7 @@ qk_status_t qk_world_knn_batch(const qk_world_t *w, const qk_point_t *ps, size_t
     b.chunk = (n + 63) / 64;
     jobs = (n + b.chunk - 1) / b.chunk;
   }
-  qk__parallel(w->opt.threads, (unsigned)jobs, kbatch_run, &b);
+  qk__run_jobs(w->opt.threads, (unsigned)jobs, kbatch_run, &b);
   for (int j = 0; j < 64; j++)
     if (b.st[j] != QK_OK) return b.st[j];
   return QK_OK;

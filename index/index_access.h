@@ -24,6 +24,10 @@
  * fails; either way *p and *cap are unchanged. */
 qk_status_t qk__grow(const qk_allocator_t *a, void **p, size_t *cap, size_t need, size_t elem);
 
+/* Threads: qk__run_shares() and qk__share_range() (index_internal.h) split a region into
+ * shares; qk__run_jobs() runs n numbered jobs, job i in share i mod the thread count. */
+void qk__run_jobs(unsigned threads, unsigned n, void (*fn)(unsigned i, void *ud), void *ud);
+
 /* ---- the tree as a whole -------------------------------------------------------- */
 
 /* The allocator every structure derived from the tree should use. */
