@@ -28,6 +28,14 @@ qk_status_t qk__grow(const qk_allocator_t *a, void **p, size_t *cap, size_t need
  * shares; qk__run_jobs() runs n numbered jobs, job i in share i mod the thread count. */
 void qk__run_jobs(unsigned threads, unsigned n, void (*fn)(unsigned i, void *ud), void *ud);
 
+/* The short-buffer rule of the buffer-form calls: count every item in n, write it to out[n]
+ * only while n < cap (value is evaluated only then). */
+#define QK__SINK_PUT(out, cap, n, value)                                                           \
+  do {                                                                                             \
+    if ((n) < (cap)) (out)[(n)] = (value);                                                         \
+    (n)++;                                                                                         \
+  } while (0)
+
 /* ---- the tree as a whole -------------------------------------------------------- */
 
 /* The allocator every structure derived from the tree should use. */
