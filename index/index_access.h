@@ -36,6 +36,16 @@ void qk__run_jobs(unsigned threads, unsigned n, void (*fn)(unsigned i, void *ud)
     (n)++;                                                                                         \
   } while (0)
 
+/* Spread the low 16 bits of v to the even bit positions (one axis of a Morton code). */
+static inline uint32_t qk__spread16(uint32_t v) {
+  v &= 0xFFFFu;
+  v = (v | (v << 8)) & 0x00FF00FFu;
+  v = (v | (v << 4)) & 0x0F0F0F0Fu;
+  v = (v | (v << 2)) & 0x33333333u;
+  v = (v | (v << 1)) & 0x55555555u;
+  return v;
+}
+
 /* ---- the tree as a whole -------------------------------------------------------- */
 
 /* The allocator every structure derived from the tree should use. */
