@@ -46,6 +46,10 @@ static inline uint32_t qk__spread16(uint32_t v) {
   return v;
 }
 
+/* Start an SVG drawing of a width x width square: the <svg> element, with a 2-unit margin
+ * all round, and a white background (index/svg.c; the caller closes it with </svg>). */
+void qk__svg_open(FILE *f, unsigned width);
+
 /* ---- the tree as a whole -------------------------------------------------------- */
 
 /* The allocator every structure derived from the tree should use. */
