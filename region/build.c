@@ -416,10 +416,8 @@ qk_status_t qk__region_build(const qk_region_arrays_t *in, const qk_region_optio
                              qk__props_t *props, size_t skipped, size_t holes, qk_region_t **out,
                              qk_error_t *err) {
   qk_region_options_t o;
-  qk_region_options_init(&o);
-  if (options) o = *options;
-  qk_allocator_t alloc = {NULL, NULL};
-  if (o.allocator) alloc = *o.allocator;
+  qk_allocator_t alloc;
+  qk__region_options(options, &o, &alloc);
   qk__props_t pr = {0};
   if (props) {
     pr = *props;

@@ -273,10 +273,8 @@ qk_status_t qk_region_read_geojson_text(const char *text, size_t len,
                              "line %lu, column %lu: unexpected text after the JSON value", l, c);
     }
   qk_region_options_t o;
-  qk_region_options_init(&o);
-  if (options) o = *options;
-  qk_allocator_t alloc = {NULL, NULL};
-  if (o.allocator) alloc = *o.allocator;
+  qk_allocator_t alloc;
+  qk__region_options(options, &o, &alloc);
   qk_error_t scratch;
   gj_t g;
   memset(&g, 0, sizeof g);

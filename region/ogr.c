@@ -70,10 +70,8 @@ qk_status_t qk_region_read_ogr(const char *path, const qk_region_options_t *opti
   if (!ds)
     return qk__region_fail(err, QK_ERR_IO, SIZE_MAX, "GDAL cannot open %s as vector data", path);
   qk_region_options_t o;
-  qk_region_options_init(&o);
-  if (options) o = *options;
-  qk_allocator_t alloc = {NULL, NULL};
-  if (o.allocator) alloc = *o.allocator;
+  qk_allocator_t alloc;
+  qk__region_options(options, &o, &alloc);
   ob_t b;
   memset(&b, 0, sizeof b);
   b.a = &alloc;

@@ -83,6 +83,14 @@ void qk_region_options_init(qk_region_options_t *o) {
   o->max_depth = QK_REGION_DEFAULT_MAX_DEPTH;
 }
 
+void qk__region_options(const qk_region_options_t *options, qk_region_options_t *o,
+                        qk_allocator_t *alloc) {
+  qk_region_options_init(o);
+  if (options) *o = *options;
+  *alloc = (qk_allocator_t){NULL, NULL};
+  if (o->allocator) *alloc = *o->allocator;
+}
+
 void qk_region_free(qk_region_t *r) {
   if (!r) return;
   const qk_allocator_t *a = &r->alloc;

@@ -176,6 +176,11 @@ void qk__pieces_free(const qk_allocator_t *a, qk__pieces_t *p);
 /* Build a layer from validated-or-not arrays; `props` may be NULL. Takes the props
  * (frees them on error). skipped/holes go to the stats (holes: SIZE_MAX = count rings
  * after each feature's first). */
+/* The options in force (the defaults when options is NULL) and the allocator they name
+ * (region/region.c). */
+void qk__region_options(const qk_region_options_t *options, qk_region_options_t *o,
+                        qk_allocator_t *alloc);
+
 /* Room for a ring of n more points at xy + 2 * nv (region/rings.c). */
 qk_status_t qk__rings_reserve(const qk_allocator_t *a, qk__rings_t *r, size_t n);
 /* The n points written at xy + 2 * nv form the next ring; k > 0 for a hole. */
