@@ -11,6 +11,8 @@
  * tree is next modified. Descents that need many squares should compute them from the
  * path (the root square halved, a corner moved per quadrant, as qk__child_square() does)
  * rather than ask for each node's: the path is in registers, a node's square may not be.
+ * The first section declares the few helpers every module shares (growth, threads, the
+ * short-buffer sink, Morton spreading, the SVG preamble), implemented in index/.
  */
 #ifndef QUADKIT_INDEX_ACCESS_H
 #define QUADKIT_INDEX_ACCESS_H
@@ -25,7 +27,8 @@
 qk_status_t qk__grow(const qk_allocator_t *a, void **p, size_t *cap, size_t need, size_t elem);
 
 /* Threads: qk__run_shares() and qk__share_range() (index_internal.h) split a region into
- * shares; qk__run_jobs() runs n numbered jobs, job i in share i mod the thread count. */
+ * shares; qk__run_jobs() runs fn(i, ud) for i in [0, n) on min(threads, n, QK__MAX_THREADS)
+ * shares, job i in share i mod their number (0 or 1 thread: all on the caller). */
 void qk__run_jobs(unsigned threads, unsigned n, void (*fn)(unsigned i, void *ud), void *ud);
 
 /* The short-buffer rule of the buffer-form calls: count every item in n, write it to out[n]
