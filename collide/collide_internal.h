@@ -37,10 +37,6 @@ static inline void qk__csort4_desc(qk__centry_t *e, int n) {
   }
 }
 
-/* Run fn(i, ud) for i in [0, n) on up to `threads` threads (the caller's included);
- * returns nonzero when threads could not be started (then everything ran on the caller). */
-int qk__parallel(unsigned threads, unsigned n, void (*fn)(unsigned i, void *ud), void *ud);
-
 /* ---- the static collider's parts shared with collide/collider_batch.c --------------- */
 
 /* Pairs of the items of one leaf with those of every leaf whose box meets its own, as
@@ -57,8 +53,6 @@ qk_status_t qk__collider_pairs_threaded(const qk_collider_t *c, qk_pair_fn fn, v
 /* The threads option as set (0: every online core), and the allocator. */
 uint32_t qk__collider_threads(const qk_collider_t *c);
 const qk_allocator_t *qk__collider_alloc(const qk_collider_t *c);
-/* Online cores for a threads option of 0, capped at 64 (qk__parallel's limit). */
-unsigned qk__threads_online(uint32_t threads);
 
 /* ---- the world's shapes (collide/shape.c, collide/exact.c) ------------------------ */
 

@@ -1,8 +1,8 @@
 /*
  * The static collider on several threads: all pairs and batches of rays. Work is cut into
  * more jobs than threads, in a fixed order (leaves in the order the one-thread search
- * visits them, rays by index), and qk__parallel hands them out statically, so neither the
- * answers nor their order depend on the number of threads.
+ * visits them, rays by index), and qk__run_jobs (index/threads.c) hands them out statically, so
+ * neither the answers nor their order depend on the number of threads.
  */
 #include <string.h>
 
@@ -64,7 +64,7 @@ static int list_leaf(uint32_t leaf, void *ud) {
 
 qk_status_t qk__collider_pairs_threaded(const qk_collider_t *c, qk_pair_fn fn, void *ud) {
   const qk_allocator_t *a = qk__collider_alloc(c);
-  unsigned threads = qk__threads_online(qk__collider_threads(c));
+  unsigned threads = qk__threads_resolve(qk__collider_threads(c));
   if (threads <= 1) return QK_ERR_NOMEM; /* nothing to share: the serial path */
   lctx_t l = {NULL, 0};
   qk__collider_each_leaf(c, list_leaf, &l);
@@ -81,7 +81,7 @@ qk_status_t qk__collider_pairs_threaded(const qk_collider_t *c, qk_pair_fn fn, v
     qk__collider_each_leaf(c, list_leaf, &l);
     for (unsigned i = 0; i < n_jobs; i++) jobs[i] = (pjob_t){NULL, 0, 0, 0, a};
     pctx_t p = {c, leaves, n_leaves, n_jobs, jobs};
-    qk__parallel(threads, n_jobs, pairs_job, &p);
+    qk__run_jobs(threads, n_jobs, pairs_job, &p);
     st = QK_OK;
     for (unsigned i = 0; i < n_jobs; i++)
       if (jobs[i].nomem) st = QK_ERR_NOMEM;
@@ -131,7 +131,7 @@ qk_status_t qk_collider_raycast_batch(const qk_collider_t *c, const qk_point_t *
   if (n == 0) return QK_OK;
   size_t n_jobs = (n + RAYS_PER_JOB - 1) / RAYS_PER_JOB;
   if (n_jobs > UINT32_MAX) return QK_ERR_LIMIT;
-  unsigned threads = qk__threads_online(qk__collider_threads(c));
+  unsigned threads = qk__threads_resolve(qk__collider_threads(c));
   /* The per-job error records live on the stack when few, else are borrowed. */
   size_t bad_local[16];
   qk_status_t st_local[16];
@@ -149,7 +149,7 @@ qk_status_t qk_collider_raycast_batch(const qk_collider_t *c, const qk_point_t *
   }
   for (size_t i = 0; i < n_jobs; i++) first_bad[i] = n;
   rctx_t r = {c, origins, dirs, n, tmax, hits, first_bad, bad_st};
-  qk__parallel(threads, (unsigned)n_jobs, rays_job, &r);
+  qk__run_jobs(threads, (unsigned)n_jobs, rays_job, &r);
   /* The error of the lowest-numbered failed ray. */
   qk_status_t st = QK_OK;
   for (size_t i = 0; i < n_jobs && st == QK_OK; i++)

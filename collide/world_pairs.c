@@ -217,7 +217,7 @@ qk_status_t qk_world_update(qk_world_t *w) {
     shares[t] =
         (share_t){w, w->cap_cells * t / nt, w->cap_cells * (t + 1) / nt, {0}, 0, levels, n_levels};
   }
-  qk__parallel(nt, nt, run_share, shares);
+  qk__run_jobs(nt, nt, run_share, shares);
   qk_status_t st = QK_OK;
   size_t total = 0;
   for (unsigned t = 0; t < nt; t++) {

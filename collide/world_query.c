@@ -131,8 +131,7 @@ typedef struct qctx {
 static int q_visit(const qk_world_t *w, uint32_t i, void *ud) {
   qctx_t *c = ud;
   if (!qk__shapes_overlap(c->q, &w->obj[i].s)) return 0;
-  if (c->n < c->cap) c->out[c->n] = qk__handle(w, i);
-  c->n++;
+  QK__SINK_PUT(c->out, c->cap, c->n, qk__handle(w, i));
   return 0;
 }
 
@@ -173,9 +172,8 @@ static inline int hit_less(double ta, uint32_t sa, double tb, uint32_t sb) {
 static int r_visit_all(const qk_world_t *w, uint32_t i, void *ud) {
   rctx_t *c = ud;
   if (!qk__shapes_overlap(&c->seg, &w->obj[i].s)) return 0;
-  if (c->n < c->cap)
-    c->out[c->n] = (qk_world_hit_t){qk__handle(w, i), qk__ray_param(&w->obj[i].s, c->from, c->to)};
-  c->n++;
+  QK__SINK_PUT(c->out, c->cap, c->n,
+               ((qk_world_hit_t){qk__handle(w, i), qk__ray_param(&w->obj[i].s, c->from, c->to)}));
   return 0;
 }
 
@@ -259,7 +257,7 @@ qk_status_t qk_world_raycast_batch(const qk_world_t *w, const qk_point_t *from,
     b.chunk = (n + 63) / 64;
     jobs = (n + b.chunk - 1) / b.chunk;
   }
-  qk__parallel(w->opt.threads, (unsigned)jobs, batch_run, &b);
+  qk__run_jobs(w->opt.threads, (unsigned)jobs, batch_run, &b);
   for (int k = 0; k < 64; k++)
     if (b.st[k] != QK_OK) return b.st[k];
   return QK_OK;
@@ -341,7 +339,7 @@ qk_status_t qk_world_knn_batch(const qk_world_t *w, const qk_point_t *ps, size_t
     b.chunk = (n + 63) / 64;
     jobs = (n + b.chunk - 1) / b.chunk;
   }
-  qk__parallel(w->opt.threads, (unsigned)jobs, kbatch_run, &b);
+  qk__run_jobs(w->opt.threads, (unsigned)jobs, kbatch_run, &b);
   for (int j = 0; j < 64; j++)
     if (b.st[j] != QK_OK) return b.st[j];
   return QK_OK;

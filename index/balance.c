@@ -250,27 +250,6 @@ qk_status_t qk_tree_balance(qk_tree_t *t) {
   return st;
 }
 
-/* Is quadrant q on the `dir` side of its parent's square? */
-static bool on_side(unsigned q, unsigned dir) {
-  switch (dir) {
-  case QK_NORTH:
-    return qk__q_north(q);
-  case QK_SOUTH:
-    return !qk__q_north(q);
-  case QK_EAST:
-    return qk__q_east(q);
-  default:
-    return !qk__q_east(q);
-  }
-}
-
-/* The quadrant mirrored across the axis perpendicular to dir. */
-static unsigned mirror(unsigned q, unsigned dir) {
-  static const unsigned char ns[4] = {QK_SE, QK_SW, QK_NW, QK_NE};
-  static const unsigned char ew[4] = {QK_NW, QK_NE, QK_SE, QK_SW};
-  return (dir == QK_NORTH || dir == QK_SOUTH) ? ns[q] : ew[q];
-}
-
 int qk_tree_is_balanced(const qk_tree_t *t) {
   if (!t) return 0;
   /* One pre-order pass that carries every node's four neighbours (NorthNeighbor's answers:
@@ -304,8 +283,8 @@ int qk_tree_is_balanced(const qk_tree_t *t) {
     for (int q = 3; q >= 0; q--) {
       item_t ch = {n->child + (uint32_t)q, {0, 0, 0, 0}};
       for (unsigned d = 0; d < 4; d++) {
-        unsigned m = mirror((unsigned)q, d);
-        if (!on_side((unsigned)q, d)) {
+        unsigned m = qk__mirror((unsigned)q, d);
+        if (!qk__on_side((unsigned)q, d)) {
           ch.nb[d] = n->child + m; /* the sibling across */
         } else {
           uint32_t u = it.nb[d];

@@ -16,7 +16,7 @@
 #include <math.h>
 #include <string.h>
 
-#include "index/index_internal.h"
+#include "index/index_access.h"
 
 /* Cell digit of one level from the east and north bits: NE=0, NW=1, SW=2, SE=3. */
 static inline uint32_t digit(unsigned east, unsigned north) {
@@ -37,13 +37,6 @@ static uint32_t exact_cell(const qk_tree_t *t, double x, double y, unsigned L) {
   return key;
 }
 
-/* Spread the low 8 bits of v to the even bit positions. */
-static inline uint32_t spread8(uint32_t v) {
-  v = (v | (v << 4)) & 0x0F0Fu;
-  v = (v | (v << 2)) & 0x3333u;
-  return (v | (v << 1)) & 0x5555u;
-}
-
 /* The cell of a point at (qx, qy) in grid units, by truncation, when the point is at least
  * `delta` away from every grid line (so truncation agrees with the tree's comparisons);
  * false otherwise. Truncation is floor here: negative values fail the range test. */
@@ -53,7 +46,7 @@ static inline bool scaled_cell(double qx, double qy, double cells, double delta,
   double fx = qx - ix, fy = qy - iy;
   if (!(fx >= delta && fx <= 1 - delta && fy >= delta && fy <= 1 - delta)) return false;
   uint32_t top = (uint32_t)cells - 1;
-  *k = (spread8(~iy & top) << 1) | spread8(ix ^ iy);
+  *k = (qk__spread16(~iy & top) << 1) | qk__spread16(ix ^ iy); /* L <= 8 */
   return true;
 }
 

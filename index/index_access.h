@@ -11,11 +11,47 @@
  * tree is next modified. Descents that need many squares should compute them from the
  * path (the root square halved, a corner moved per quadrant, as qk__child_square() does)
  * rather than ask for each node's: the path is in registers, a node's square may not be.
+ * The first section declares the few helpers every module shares (growth, threads, the
+ * short-buffer sink, Morton spreading, the SVG preamble), implemented in index/.
  */
 #ifndef QUADKIT_INDEX_ACCESS_H
 #define QUADKIT_INDEX_ACCESS_H
 
 #include "index/index_internal.h"
+
+/* ---- helpers every module shares (implemented in index/) ------------------------- */
+
+/* Grow *p, an array of *cap items of `elem` bytes, to hold at least `need` items: from 16,
+ * doubling. QK_ERR_LIMIT when the size would overflow, QK_ERR_NOMEM when the allocation
+ * fails; either way *p and *cap are unchanged. */
+qk_status_t qk__grow(const qk_allocator_t *a, void **p, size_t *cap, size_t need, size_t elem);
+
+/* Threads: qk__run_shares() and qk__share_range() (index_internal.h) split a region into
+ * shares; qk__run_jobs() runs fn(i, ud) for i in [0, n) on min(threads, n, QK__MAX_THREADS)
+ * shares, job i in share i mod their number (0 or 1 thread: all on the caller). */
+void qk__run_jobs(unsigned threads, unsigned n, void (*fn)(unsigned i, void *ud), void *ud);
+
+/* The short-buffer rule of the buffer-form calls: count every item in n, write it to out[n]
+ * only while n < cap (value is evaluated only then). */
+#define QK__SINK_PUT(out, cap, n, value)                                                           \
+  do {                                                                                             \
+    if ((n) < (cap)) (out)[(n)] = (value);                                                         \
+    (n)++;                                                                                         \
+  } while (0)
+
+/* Spread the low 16 bits of v to the even bit positions (one axis of a Morton code). */
+static inline uint32_t qk__spread16(uint32_t v) {
+  v &= 0xFFFFu;
+  v = (v | (v << 8)) & 0x00FF00FFu;
+  v = (v | (v << 4)) & 0x0F0F0F0Fu;
+  v = (v | (v << 2)) & 0x33333333u;
+  v = (v | (v << 1)) & 0x55555555u;
+  return v;
+}
+
+/* Start an SVG drawing of a width x width square: the <svg> element, with a 2-unit margin
+ * all round, and a white background (index/svg.c; the caller closes it with </svg>). */
+void qk__svg_open(FILE *f, unsigned width);
 
 /* ---- the tree as a whole -------------------------------------------------------- */
 

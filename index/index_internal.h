@@ -125,6 +125,28 @@ static inline unsigned qk__quadrant_of(double x0, double y0, double half, double
 static inline unsigned qk__q_east(unsigned q) { return q == QK_NE || q == QK_SE; }
 static inline unsigned qk__q_north(unsigned q) { return q == QK_NE || q == QK_NW; }
 
+/* Is quadrant q on the `dir` side of its parent's square? */
+static inline bool qk__on_side(unsigned q, unsigned dir) {
+  switch (dir) {
+  case QK_NORTH:
+    return qk__q_north(q);
+  case QK_SOUTH:
+    return !qk__q_north(q);
+  case QK_EAST:
+    return qk__q_east(q);
+  default:
+    return !qk__q_east(q);
+  }
+}
+
+/* The quadrant mirrored across the axis perpendicular to dir: for north/south swap
+ * north and south halves (SW <-> NW, SE <-> NE); for east/west swap east and west. */
+static inline unsigned qk__mirror(unsigned q, unsigned dir) {
+  static const unsigned char ns[4] = {QK_SE, QK_SW, QK_NW, QK_NE};
+  static const unsigned char ew[4] = {QK_NW, QK_NE, QK_SE, QK_SW};
+  return (dir == QK_NORTH || dir == QK_SOUTH) ? ns[q] : ew[q];
+}
+
 /* The two children of a node on the side that faces a neighbour lying in direction `dir`
  * of it (for a north neighbour: its SW and SE children), in west-to-east or south-to-north
  * order. */

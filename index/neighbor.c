@@ -4,28 +4,6 @@
  */
 #include "index/index_internal.h"
 
-/* Is quadrant q on the `dir` side of its parent's square? */
-static int on_side(unsigned q, qk_dir_t dir) {
-  switch (dir) {
-  case QK_NORTH:
-    return qk__q_north(q);
-  case QK_SOUTH:
-    return !qk__q_north(q);
-  case QK_EAST:
-    return qk__q_east(q);
-  default:
-    return !qk__q_east(q);
-  }
-}
-
-/* The quadrant mirrored across the axis perpendicular to dir: for north/south swap
- * north and south halves (SW <-> NW, SE <-> NE); for east/west swap east and west. */
-static unsigned mirror(unsigned q, qk_dir_t dir) {
-  static const unsigned char ns[4] = {QK_SE, QK_SW, QK_NW, QK_NE};
-  static const unsigned char ew[4] = {QK_NW, QK_NE, QK_SE, QK_SW};
-  return (dir == QK_NORTH || dir == QK_SOUTH) ? ns[q] : ew[q];
-}
-
 /*
  * NorthNeighbor(v) generalised. If v is not on the `dir` side of its parent, the
  * neighbour is its mirrored sibling (notes, lines 4-7). Otherwise find the parent's
@@ -38,14 +16,15 @@ qk_node_t qk_tree_neighbor(const qk_tree_t *t, qk_node_t v, qk_dir_t dir) {
   unsigned char path[QK_MAX_DEPTH_LIMIT + 2];
   unsigned len = 0;
   uint32_t a = v;
-  while (a != 0 && on_side(qk__quadrant(a), dir)) {
+  while (a != 0 && qk__on_side(qk__quadrant(a), dir)) {
     path[len++] = (unsigned char)qk__quadrant(a);
     a = qk__parent(t, a);
   }
   if (a == 0) return QK_NONE; /* the side lies on the root square's boundary */
   /* a's sibling across the side: same block, so a - quadrant(a) is the block's first. */
-  uint32_t u = a - qk__quadrant(a) + mirror(qk__quadrant(a), dir);
-  while (len > 0 && !qk__is_leaf(&t->nodes[u])) u = t->nodes[u].child + mirror(path[--len], dir);
+  uint32_t u = a - qk__quadrant(a) + qk__mirror(qk__quadrant(a), dir);
+  while (len > 0 && !qk__is_leaf(&t->nodes[u]))
+    u = t->nodes[u].child + qk__mirror(path[--len], dir);
   return u;
 }
 

@@ -1,7 +1,7 @@
 /* Status messages and the one allocation entry point of the library. */
 #include <stdlib.h>
 
-#include "index/index_internal.h"
+#include "index/index_access.h"
 
 const char *qk_strerror(qk_status_t status) {
   switch (status) {
@@ -25,4 +25,18 @@ void *qk__realloc(const qk_allocator_t *a, void *ptr, size_t osize, size_t nsize
 
 void qk__free(const qk_allocator_t *a, void *ptr, size_t size) {
   if (ptr) qk__realloc(a, ptr, size, 0);
+}
+
+qk_status_t qk__grow(const qk_allocator_t *a, void **p, size_t *cap, size_t need, size_t elem) {
+  if (need <= *cap) return QK_OK;
+  size_t nc = *cap ? *cap : 16;
+  while (nc < need) {
+    if (nc > SIZE_MAX / 2 / elem) return QK_ERR_LIMIT;
+    nc *= 2;
+  }
+  void *q = qk__realloc(a, *p, *cap * elem, nc * elem);
+  if (!q) return QK_ERR_NOMEM;
+  *p = q;
+  *cap = nc;
+  return QK_OK;
 }

@@ -1,5 +1,5 @@
 /* SVG drawing of a tree: leaf cells as squares, points as dots. */
-#include "index/index_internal.h"
+#include "index/index_access.h"
 
 typedef struct svg {
   FILE *f;
@@ -25,15 +25,21 @@ static qk_visit_t draw(const qk_tree_t *t, qk_node_t v, void *ud) {
   return QK_VISIT_CONTINUE;
 }
 
+void qk__svg_open(FILE *f, unsigned width) {
+  unsigned w = width + 4;
+  fprintf(f,
+          "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"%u\" height=\"%u\" "
+          "viewBox=\"-2 -2 %u %u\">\n<rect x=\"-2\" y=\"-2\" width=\"%u\" height=\"%u\" "
+          "fill=\"white\"/>\n",
+          w, w, w, w, w, w);
+}
+
 qk_status_t qk_tree_write_svg(const qk_tree_t *t, FILE *f, unsigned width) {
   if (!t || !f) return QK_ERR_INVALID;
   if (width == 0) width = 800;
   svg_t s = {f, t->root_x, t->root_y, (double)width / t->side[0], (double)width, 0};
-  fprintf(f,
-          "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"%u\" height=\"%u\" "
-          "viewBox=\"-2 -2 %u %u\">\n<rect x=\"-2\" y=\"-2\" width=\"%u\" height=\"%u\" "
-          "fill=\"white\"/>\n<g fill=\"none\" stroke=\"#4a6fa5\" stroke-width=\"0.6\">\n",
-          width + 4, width + 4, width + 4, width + 4, width + 4, width + 4);
+  qk__svg_open(f, width);
+  fprintf(f, "<g fill=\"none\" stroke=\"#4a6fa5\" stroke-width=\"0.6\">\n");
   /* Cells first, then the points on top, in two passes over the leaves. */
   qk_tree_visit(t, 0, draw, &s);
   fprintf(f, "</g>\n<g fill=\"#c0392b\">\n");

@@ -7,7 +7,7 @@
 #define _POSIX_C_SOURCE 200809L
 #include <unistd.h>
 
-#include "index/index_internal.h"
+#include "index/index_access.h"
 
 #if defined(QK_HAVE_PTHREADS)
 #include <pthread.h>
@@ -63,4 +63,20 @@ void qk__run_shares(unsigned nw, qk__share_fn fn, void *ctx) {
 #else
   for (unsigned w = 0; w < nw; w++) fn(ctx, w, nw);
 #endif
+}
+
+typedef struct jobs {
+  unsigned n;
+  void (*fn)(unsigned, void *);
+  void *ud;
+} jobs_t;
+
+static void jobs_share(void *ctx, unsigned w, unsigned nw) {
+  const jobs_t *j = ctx;
+  for (unsigned i = w; i < j->n; i += nw) j->fn(i, j->ud);
+}
+
+void qk__run_jobs(unsigned threads, unsigned n, void (*fn)(unsigned i, void *ud), void *ud) {
+  jobs_t j = {n, fn, ud};
+  qk__run_shares(threads < n ? threads : n, jobs_share, &j);
 }

@@ -107,7 +107,7 @@ static qk_status_t subdivide(qk__gen_t *g, qk_mesh_t *m) {
   if (st) return qk__mesh_fail(g->err, st, 0, "%s while building the tree", qk_strerror(st));
   g->tree = m->tree;
   void *ap = g->arena;
-  if (qk__mesh_grow(g->a, &ap, &g->arena_cap, sizeof *g->arena, g->ne + 1))
+  if (qk__grow(g->a, &ap, &g->arena_cap, g->ne + 1, sizeof *g->arena))
     return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   g->arena = ap;
   for (size_t i = 0; i < g->ne; i++) g->arena[i] = (uint32_t)i;

@@ -37,7 +37,7 @@ static uint32_t find(const vpos_t *v, size_t n, uint64_t key) {
 
 static qk_status_t add_oseg(const qk_allocator_t *a, qk_mesh_t *m, size_t *cap, qk__oseg_t e) {
   void *p = m->oseg;
-  if (qk__mesh_grow(a, &p, cap, sizeof *m->oseg, m->noseg + 2)) return QK_ERR_NOMEM;
+  if (qk__grow(a, &p, cap, m->noseg + 2, sizeof *m->oseg)) return QK_ERR_NOMEM;
   m->oseg = p;
   m->oseg[m->noseg++] = e;
   return QK_OK;
@@ -93,7 +93,7 @@ qk_status_t qk__mesh_markers(qk__gen_t *g, qk_mesh_t *m) {
   for (size_t s = 0; s < P->ns && !st; s++) st = walk_segment(g, m, pos, &cap, s);
   if (!st && !m->oseg) {
     void *p = NULL;
-    if (qk__mesh_grow(g->a, &p, &cap, sizeof *m->oseg, 1)) st = QK_ERR_NOMEM;
+    if (qk__grow(g->a, &p, &cap, 1, sizeof *m->oseg)) st = QK_ERR_NOMEM;
     m->oseg = p;
   }
 out:

@@ -79,9 +79,6 @@ struct qk_mesh {
   double *attr;  /* per triangle: regional attribute (nt + 1), NULL without regions */
 };
 
-/* Grow *p (holding *cap elements of size `elem`) to at least `need` elements. */
-qk_status_t qk__mesh_grow(const qk_allocator_t *a, void **p, size_t *cap, size_t elem, size_t need);
-
 /* Fill an error record (err may be NULL); returns `st` for convenience. */
 qk_status_t qk__mesh_fail(qk_mesh_error_t *err, qk_status_t st, unsigned long line, const char *fmt,
                           ...)

@@ -47,7 +47,7 @@ static int next_line(reader_t *r) {
       }
       if (n + 2 > r->cap) {
         void *p = r->buf;
-        if (qk__mesh_grow(r->a, &p, &r->cap, 1, n + 2)) return -1;
+        if (qk__grow(r->a, &p, &r->cap, n + 2, 1)) return -1;
         r->buf = p;
       }
       r->buf[n++] = (char)c;
@@ -117,7 +117,7 @@ static qk_status_t put_marker(const qk_allocator_t *a, int32_t **m, size_t *cap,
                               int32_t v) {
   void *p = *m;
   size_t old = *cap;
-  if (qk__mesh_grow(a, &p, cap, sizeof **m, i + 1)) return QK_ERR_NOMEM;
+  if (qk__grow(a, &p, cap, i + 1, sizeof **m)) return QK_ERR_NOMEM;
   *m = p;
   if (*cap > old) memset(*m + old, 0, (*cap - old) * sizeof **m);
   (*m)[i] = v;
@@ -163,9 +163,9 @@ static qk_status_t add_vertex(qk_poly_t *p, qk__poly_caps_t *c, double x, double
                               unsigned long line) {
   const qk_allocator_t *a = &p->alloc;
   size_t need = p->nv + 1;
-  if (qk__mesh_grow(a, (void **)&p->vx, &c->v, sizeof *p->vx, need) ||
-      qk__mesh_grow(a, (void **)&p->vy, &c->vy, sizeof *p->vy, need) ||
-      qk__mesh_grow(a, (void **)&p->vline, &c->vl, sizeof *p->vline, need))
+  if (qk__grow(a, (void **)&p->vx, &c->v, need, sizeof *p->vx) ||
+      qk__grow(a, (void **)&p->vy, &c->vy, need, sizeof *p->vy) ||
+      qk__grow(a, (void **)&p->vline, &c->vl, need, sizeof *p->vline))
     return QK_ERR_NOMEM;
   p->vx[p->nv] = x;
   p->vy[p->nv] = y;
@@ -178,8 +178,8 @@ static qk_status_t add_segment(qk_poly_t *p, qk__poly_caps_t *c, uint32_t u, uin
                                unsigned long line) {
   const qk_allocator_t *a = &p->alloc;
   size_t need = p->ns + 1;
-  if (qk__mesh_grow(a, (void **)&p->seg, &c->s, 2 * sizeof *p->seg, need) ||
-      qk__mesh_grow(a, (void **)&p->sline, &c->sl, sizeof *p->sline, need))
+  if (qk__grow(a, (void **)&p->seg, &c->s, need, 2 * sizeof *p->seg) ||
+      qk__grow(a, (void **)&p->sline, &c->sl, need, sizeof *p->sline))
     return QK_ERR_NOMEM;
   p->seg[2 * p->ns] = u;
   p->seg[2 * p->ns + 1] = v;
@@ -192,9 +192,9 @@ static qk_status_t add_hole(qk_poly_t *p, qk__poly_caps_t *c, double x, double y
                             unsigned long line) {
   const qk_allocator_t *a = &p->alloc;
   size_t need = p->nh + 1;
-  if (qk__mesh_grow(a, (void **)&p->hx, &c->h, sizeof *p->hx, need) ||
-      qk__mesh_grow(a, (void **)&p->hy, &c->hy, sizeof *p->hy, need) ||
-      qk__mesh_grow(a, (void **)&p->hline, &c->hl, sizeof *p->hline, need))
+  if (qk__grow(a, (void **)&p->hx, &c->h, need, sizeof *p->hx) ||
+      qk__grow(a, (void **)&p->hy, &c->hy, need, sizeof *p->hy) ||
+      qk__grow(a, (void **)&p->hline, &c->hl, need, sizeof *p->hline))
     return QK_ERR_NOMEM;
   p->hx[p->nh] = x;
   p->hy[p->nh] = y;
@@ -383,7 +383,7 @@ static qk_status_t read_holes(reader_t *r, qk_poly_t *p, qk_mesh_error_t *err) {
 /* Append a regional attribute. */
 static qk_status_t add_region(qk_poly_t *p, double x, double y, double attr, unsigned long line) {
   void *q = p->reg;
-  if (qk__mesh_grow(&p->alloc, &q, &p->cap.r, sizeof *p->reg, p->nr + 1)) return QK_ERR_NOMEM;
+  if (qk__grow(&p->alloc, &q, &p->cap.r, p->nr + 1, sizeof *p->reg)) return QK_ERR_NOMEM;
   p->reg = q;
   p->reg[p->nr++] = (qk__region_pt_t){x, y, attr, line};
   return QK_OK;
@@ -547,7 +547,7 @@ qk_status_t qk_poly_set_regions(qk_poly_t *p, const double *xya, size_t nr, qk_m
   qk__region_pt_t *reg = NULL;
   size_t cap = 0;
   void *q = NULL;
-  if (nr && qk__mesh_grow(&p->alloc, &q, &cap, sizeof *reg, nr))
+  if (nr && qk__grow(&p->alloc, &q, &cap, nr, sizeof *reg))
     return qk__mesh_fail(err, QK_ERR_NOMEM, 0, "out of memory");
   reg = q;
   for (size_t i = 0; i < nr; i++)

@@ -66,11 +66,11 @@ static int hmap_get_or_put(const qk_allocator_t *a, qk__hmap_t *h, uint64_t key,
 
 static qk_status_t new_vertex(qk__tri_state_t *T, int64_t x, int64_t y, int steiner, uint32_t *id) {
   void *p1 = T->vx, *p2 = T->vy, *p3 = T->steiner;
-  if (qk__mesh_grow(T->a, &p1, &T->vcap, sizeof *T->vx, T->nv + 1)) return QK_ERR_NOMEM;
+  if (qk__grow(T->a, &p1, &T->vcap, T->nv + 1, sizeof *T->vx)) return QK_ERR_NOMEM;
   T->vx = p1;
-  if (qk__mesh_grow(T->a, &p2, &T->vycap, sizeof *T->vy, T->nv + 1)) return QK_ERR_NOMEM;
+  if (qk__grow(T->a, &p2, &T->vycap, T->nv + 1, sizeof *T->vy)) return QK_ERR_NOMEM;
   T->vy = p2;
-  if (qk__mesh_grow(T->a, &p3, &T->scap, 1, T->nv + 1)) return QK_ERR_NOMEM;
+  if (qk__grow(T->a, &p3, &T->scap, T->nv + 1, 1)) return QK_ERR_NOMEM;
   T->steiner = p3;
   T->vx[T->nv] = x, T->vy[T->nv] = y, T->steiner[T->nv] = (uint8_t)steiner;
   *id = (uint32_t)T->nv++;
@@ -92,9 +92,9 @@ static qk_status_t corner_vertex(qk__tri_state_t *T, int64_t x, int64_t y, uint3
 
 static qk_status_t add_tri(qk__tri_state_t *T, uint32_t a, uint32_t b, uint32_t c, uint32_t cell) {
   void *p1 = T->tri, *p2 = T->label;
-  if (qk__mesh_grow(T->a, &p1, &T->tcap, 3 * sizeof *T->tri, T->nt + 1)) return QK_ERR_NOMEM;
+  if (qk__grow(T->a, &p1, &T->tcap, T->nt + 1, 3 * sizeof *T->tri)) return QK_ERR_NOMEM;
   T->tri = p1;
-  if (qk__mesh_grow(T->a, &p2, &T->lcap, sizeof *T->label, T->nt + 1)) return QK_ERR_NOMEM;
+  if (qk__grow(T->a, &p2, &T->lcap, T->nt + 1, sizeof *T->label)) return QK_ERR_NOMEM;
   T->label = p2;
   uint32_t *t = &T->tri[3 * T->nt];
   t[0] = a, t[1] = b, t[2] = c;
@@ -177,8 +177,7 @@ static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, const qk_node_t
   uint32_t *rlabel = qk__realloc(g->a, NULL, 0, (ncell + 1) * sizeof *rlabel);
   qk_status_t st = QK_OK;
   void *rp = T->region;
-  if (!queue || !region || !rlabel ||
-      qk__mesh_grow(T->a, &rp, &T->rcap, sizeof *T->region, T->nt + 1)) {
+  if (!queue || !region || !rlabel || qk__grow(T->a, &rp, &T->rcap, T->nt + 1, sizeof *T->region)) {
     st = QK_ERR_NOMEM;
     goto out;
   }

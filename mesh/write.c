@@ -220,11 +220,7 @@ qk_status_t qk_mesh_write_svg(const qk_mesh_t *m, FILE *f, unsigned width) {
   /* A few pale fills, cycled by component id; the outside stays white. */
   static const char *fill[] = {"#ffffff", "#c6dbef", "#fdd0a2", "#c7e9c0",
                                "#dadaeb", "#fcbba1", "#d9d9d9"};
-  fprintf(f,
-          "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"%u\" height=\"%u\" "
-          "viewBox=\"-2 -2 %u %u\">\n<rect x=\"-2\" y=\"-2\" width=\"%u\" height=\"%u\" "
-          "fill=\"white\"/>\n",
-          width + 4, width + 4, width + 4, width + 4, width + 4, width + 4);
+  qk__svg_open(f, width);
   fprintf(f, "<g stroke=\"#9e9e9e\" stroke-width=\"0.4\" stroke-linejoin=\"round\">\n");
   for (size_t i = 0; i < m->nt; i++) {
     const uint32_t *t = &m->tri[3 * i];

@@ -268,11 +268,7 @@ typedef struct nb_buf {
 static int collect(qk_id_t id, qk_point_t p, double dist, void *ud) {
   nb_buf_t *b = ud;
   (void)p;
-  if (b->n < b->cap) {
-    b->out[b->n].id = id;
-    b->out[b->n].dist = dist;
-  }
-  b->n++;
+  QK__SINK_PUT(b->out, b->cap, b->n, ((qk_neighbor_t){id, dist}));
   return 0;
 }
 

@@ -8,16 +8,6 @@
  */
 #include "query/query_internal.h"
 
-/* Spread the low 16 bits of v to the even bit positions. */
-static inline uint32_t spread16(uint32_t v) {
-  v &= 0xFFFFu;
-  v = (v | (v << 8)) & 0x00FF00FFu;
-  v = (v | (v << 4)) & 0x0F0F0F0Fu;
-  v = (v | (v << 2)) & 0x33333333u;
-  v = (v | (v << 1)) & 0x55555555u;
-  return v;
-}
-
 /* A coordinate's 16-bit cell index along one axis of the root, clamped (queries may lie
  * outside the root, or be NaN, which any cell serves). */
 static inline uint32_t cell16(double v, double lo, double scale) {
@@ -38,7 +28,7 @@ void *qk__morton_order(const qk_tree_t *t, const qk_point_t *qs, size_t nq, uint
   const double x0 = r.x, y0 = r.y, scale = 65536.0 / r.side;
   for (size_t i = 0; i < nq; i++) {
     uint32_t code =
-        spread16(cell16(qs[i].x, x0, scale)) << 1 | spread16(cell16(qs[i].y, y0, scale));
+        qk__spread16(cell16(qs[i].x, x0, scale)) << 1 | qk__spread16(cell16(qs[i].y, y0, scale));
     k[i] = (uint64_t)code << 32 | (uint64_t)i;
   }
   for (int pass = 0; pass < 4; pass++) {

@@ -106,19 +106,14 @@ typedef struct buf_ctx {
 static int emit_ids(void *ctx, qk_id_t id, double x, double y, double dist) {
   buf_ctx_t *b = ctx;
   (void)x, (void)y, (void)dist;
-  if (b->n < b->cap) b->ids[b->n] = id;
-  b->n++;
+  QK__SINK_PUT(b->ids, b->cap, b->n, id);
   return 0;
 }
 
 static int emit_nb(void *ctx, qk_id_t id, double x, double y, double dist) {
   buf_ctx_t *b = ctx;
   (void)x, (void)y;
-  if (b->n < b->cap) {
-    b->nb[b->n].id = id;
-    b->nb[b->n].dist = dist;
-  }
-  b->n++;
+  QK__SINK_PUT(b->nb, b->cap, b->n, ((qk_neighbor_t){id, dist}));
   return 0;
 }
 

@@ -109,14 +109,12 @@ static qk_status_t emit_leaf(bctx_t *b, qk_node_t v, double cx, double cy, unsig
   }
   if (r->n_leaves >= QK__DIRECT - 1) return QK_ERR_LIMIT;
   qk_status_t st;
-  if ((st = qk__region_grow(&r->alloc, (void **)&r->leaves, &r->cap_leaves, r->n_leaves + 1,
-                            sizeof(qk__leaf_t))) ||
-      (st = qk__region_grow(&r->alloc, (void **)&r->le, &r->cap_le, r->n_le + ne,
-                            sizeof(uint32_t))) ||
-      (st = qk__region_grow(&r->alloc, (void **)&r->le_tag, &r->cap_le_tag, r->n_le + ne,
-                            sizeof(uint32_t))) ||
-      (st = qk__region_grow(&r->alloc, (void **)&r->sets, &r->cap_sets, r->n_sets + ns,
-                            sizeof(uint32_t))))
+  if ((st = qk__grow(&r->alloc, (void **)&r->leaves, &r->cap_leaves, r->n_leaves + 1,
+                     sizeof(qk__leaf_t))) ||
+      (st = qk__grow(&r->alloc, (void **)&r->le, &r->cap_le, r->n_le + ne, sizeof(uint32_t))) ||
+      (st = qk__grow(&r->alloc, (void **)&r->le_tag, &r->cap_le_tag, r->n_le + ne,
+                     sizeof(uint32_t))) ||
+      (st = qk__grow(&r->alloc, (void **)&r->sets, &r->cap_sets, r->n_sets + ns, sizeof(uint32_t))))
     return st;
   if (r->n_le + ne > UINT32_MAX || r->n_sets + ns > UINT32_MAX) return QK_ERR_LIMIT;
   r->leaves[r->n_leaves] =
@@ -145,8 +143,8 @@ static qk_status_t emit_leaf(bctx_t *b, qk_node_t v, double cx, double cy, unsig
 static qk_status_t split_lists(bctx_t *b, unsigned d, double x0, double y0, double x1, double y1,
                                double cx, double cy, bool *progress) {
   size_t n = b->ne[d];
-  qk_status_t st = qk__region_grow(&b->r->alloc, (void **)&b->store[d + 1], &b->cap_store[d + 1],
-                                   4 * n + 1, sizeof(uint32_t));
+  qk_status_t st = qk__grow(&b->r->alloc, (void **)&b->store[d + 1], &b->cap_store[d + 1],
+                            4 * n + 1, sizeof(uint32_t));
   if (st) return st;
   uint32_t *out = b->store[d + 1];
   size_t *cnt = b->cnt[d + 1];
@@ -174,7 +172,7 @@ static qk_status_t child_set(bctx_t *b, unsigned d, double px, double py, double
   const qk_allocator_t *a = &b->r->alloc;
   size_t n = b->ne[d + 1];
   qk_status_t st;
-  if ((st = qk__region_grow(a, (void **)&b->odd, &b->cap_odd, n + 1, sizeof(uint32_t)))) return st;
+  if ((st = qk__grow(a, (void **)&b->odd, &b->cap_odd, n + 1, sizeof(uint32_t)))) return st;
   double lx = qk__min(px, qx), hx = qk__max(px, qx), ly = qk__min(py, qy), hy = qk__max(py, qy);
   size_t nodd = 0;
   uint32_t cur = UINT32_MAX;
@@ -198,8 +196,7 @@ static qk_status_t child_set(bctx_t *b, unsigned d, double px, double py, double
   if (par) b->odd[nodd++] = cur;
   /* symmetric difference of two sorted lists */
   size_t ns = b->ns[d];
-  if ((st = qk__region_grow(a, (void **)&b->s[d + 1], &b->cap_s[d + 1], ns + nodd + 1,
-                            sizeof(uint32_t))))
+  if ((st = qk__grow(a, (void **)&b->s[d + 1], &b->cap_s[d + 1], ns + nodd + 1, sizeof(uint32_t))))
     return st;
   const uint32_t *S = b->s[d];
   uint32_t *T = b->s[d + 1];
@@ -241,8 +238,8 @@ static qk_status_t build_node(bctx_t *b, qk_node_t v, double x0, double y0, doub
     if (st == QK_OK) {
       b->splits_left--;
       uint32_t first = qk__node_child(r->tree, v);
-      if ((st = qk__region_grow(&r->alloc, (void **)&r->kid, &r->cap_kid,
-                                qk__tree_node_bound(r->tree), sizeof(uint32_t))))
+      if ((st = qk__grow(&r->alloc, (void **)&r->kid, &r->cap_kid, qk__tree_node_bound(r->tree),
+                         sizeof(uint32_t))))
         return st;
       r->kid[v] = first;
       if (first + 4 > r->n_kid) r->n_kid = first + 4;
@@ -268,8 +265,7 @@ static qk_status_t build_node(bctx_t *b, qk_node_t v, double x0, double y0, doub
 static qk_status_t root_set(bctx_t *b, double cx, double cy) {
   const qk__pieces_t *pc = b->pc;
   size_t n = pc->n, k = 0;
-  qk_status_t st =
-      qk__region_grow(&b->r->alloc, (void **)&b->s[0], &b->cap_s[0], n + 1, sizeof(uint32_t));
+  qk_status_t st = qk__grow(&b->r->alloc, (void **)&b->s[0], &b->cap_s[0], n + 1, sizeof(uint32_t));
   if (st) return st;
   bool par = false;
   for (size_t i = 0; i < n; i++) {
@@ -420,10 +416,8 @@ qk_status_t qk__region_build(const qk_region_arrays_t *in, const qk_region_optio
                              qk__props_t *props, size_t skipped, size_t holes, qk_region_t **out,
                              qk_error_t *err) {
   qk_region_options_t o;
-  qk_region_options_init(&o);
-  if (options) o = *options;
-  qk_allocator_t alloc = {NULL, NULL};
-  if (o.allocator) alloc = *o.allocator;
+  qk_allocator_t alloc;
+  qk__region_options(options, &o, &alloc);
   qk__props_t pr = {0};
   if (props) {
     pr = *props;
@@ -479,15 +473,14 @@ qk_status_t qk__region_build(const qk_region_arrays_t *in, const qk_region_optio
   to.max_depth = o.max_depth;
   to.allocator = &r->alloc;
   if ((st = qk_tree_build(NULL, 0, &to, &r->tree))) goto done;
-  if ((st = qk__region_grow(&alloc, (void **)&r->kid, &r->cap_kid, 1, sizeof(uint32_t)))) goto done;
+  if ((st = qk__grow(&alloc, (void **)&r->kid, &r->cap_kid, 1, sizeof(uint32_t)))) goto done;
   b.bad = qk__realloc(&alloc, NULL, 0, in->n_rings + 1);
   if (!b.bad) {
     st = QK_ERR_NOMEM;
     goto done;
   }
   memset(b.bad, 0, in->n_rings + 1);
-  if ((st = qk__region_grow(&alloc, (void **)&b.store[0], &b.cap_store[0], pc.n + 1,
-                            sizeof(uint32_t))))
+  if ((st = qk__grow(&alloc, (void **)&b.store[0], &b.cap_store[0], pc.n + 1, sizeof(uint32_t))))
     goto done;
   b.e[0] = b.store[0];
   for (size_t i = 0; i < pc.n; i++) b.e[0][i] = (uint32_t)i;

@@ -20,23 +20,9 @@
 typedef struct gj {
   const qk_allocator_t *a;
   int planar;
-  double *xy;
-  size_t nv, cap_xy;
-  size_t *rs;
-  size_t nr, cap_rs;
-  size_t *fs;
-  size_t nf, cap_fs;
-  qk__props_t props;
-  size_t skipped, holes;
+  qk__rings_t rg;
   qk_error_t *err;
 } gj_t;
-
-static void gj_free(gj_t *g) {
-  qk__free(g->a, g->xy, g->cap_xy * sizeof(double));
-  qk__free(g->a, g->rs, g->cap_rs * sizeof(size_t));
-  qk__free(g->a, g->fs, g->cap_fs * sizeof(size_t));
-  qk__props_free(g->a, &g->props);
-}
 
 static qk_status_t nomem(gj_t *g, qk_status_t st) {
   return qk__region_fail(g->err, st, SIZE_MAX, "%s while reading", qk_strerror(st));
@@ -60,9 +46,7 @@ static qk_status_t ring(gj_t *g, json_object *arr, size_t f, size_t poly, size_t
                            "least 4)",
                            f, poly, k, n);
   qk_status_t st;
-  if ((st = qk__region_grow(g->a, (void **)&g->xy, &g->cap_xy, 2 * (g->nv + n), sizeof(double))) ||
-      (st = qk__region_grow(g->a, (void **)&g->rs, &g->cap_rs, g->nr + 2, sizeof(size_t))))
-    return nomem(g, st);
+  if ((st = qk__rings_reserve(g->a, &g->rg, n))) return nomem(g, st);
   for (size_t i = 0; i < n; i++) {
     json_object *p = json_object_array_get_idx(arr, i);
     json_object *x = NULL, *y = NULL;
@@ -86,19 +70,16 @@ static qk_status_t ring(gj_t *g, json_object *arr, size_t f, size_t poly, size_t
                " at polygon %zu, ring %zu, position %zu", poly, k, i);
       return st;
     }
-    g->xy[2 * (g->nv + i)] = vx;
-    g->xy[2 * (g->nv + i) + 1] = vy;
+    g->rg.xy[2 * (g->rg.nv + i)] = vx;
+    g->rg.xy[2 * (g->rg.nv + i) + 1] = vy;
   }
-  const double *s = g->xy + 2 * g->nv, *e = g->xy + 2 * (g->nv + n - 1);
+  const double *s = g->rg.xy + 2 * g->rg.nv, *e = g->rg.xy + 2 * (g->rg.nv + n - 1);
   if (s[0] != e[0] || s[1] != e[1])
     return qk__region_fail(g->err, QK_ERR_GEOMETRY, f,
                            "feature %zu, polygon %zu, ring %zu: not closed (first position "
                            "[%.17g, %.17g], last [%.17g, %.17g])",
                            f, poly, k, s[0], s[1], e[0], e[1]);
-  if (g->nr == 0) g->rs[0] = 0;
-  g->nv += n;
-  g->rs[++g->nr] = g->nv;
-  if (k > 0) g->holes++;
+  qk__rings_close(&g->rg, n, k);
   return QK_OK;
 }
 
@@ -117,7 +98,7 @@ static qk_status_t polygon(gj_t *g, json_object *rings, size_t f, size_t poly) {
 
 static qk_status_t geometry(gj_t *g, json_object *geom, size_t f) {
   if (!geom) {
-    g->skipped++;
+    g->rg.skipped++;
     return QK_OK;
   }
   json_object *t = NULL, *c = NULL;
@@ -128,21 +109,21 @@ static qk_status_t geometry(gj_t *g, json_object *geom, size_t f) {
   const char *ty = json_object_get_string(t);
   bool poly = !strcmp(ty, "Polygon"), multi = !strcmp(ty, "MultiPolygon");
   if (!poly && !multi) {
-    g->skipped++;
+    g->rg.skipped++;
     return QK_OK;
   }
   if (!json_object_object_get_ex(geom, "coordinates", &c) ||
       !json_object_is_type(c, json_type_array))
     return qk__region_fail(g->err, QK_ERR_PARSE, f,
                            "feature %zu: %s without a \"coordinates\" array", f, ty);
-  size_t r0 = g->nr;
+  size_t r0 = g->rg.nr;
   qk_status_t st = QK_OK;
   if (poly)
     st = polygon(g, c, f, 0);
   else
     for (size_t i = 0, n = json_object_array_length(c); i < n && !st; i++)
       st = polygon(g, json_object_array_get_idx(c, i), f, i);
-  if (!st && g->nr == r0) g->skipped++; /* empty */
+  if (!st && g->rg.nr == r0) g->rg.skipped++; /* empty */
   return st;
 }
 
@@ -162,7 +143,7 @@ static qk_status_t properties(gj_t *g, json_object *props, size_t f) {
         s = json_object_to_json_string_ext(v, JSON_C_TO_STRING_PLAIN);
         len = strlen(s);
       }
-      qk_status_t st = qk__props_add(g->a, &g->props, k, s, len);
+      qk_status_t st = qk__props_add(g->a, &g->rg.props, k, s, len);
       if (st) return nomem(g, st);
     }
   } else if (props) {
@@ -170,17 +151,14 @@ static qk_status_t properties(gj_t *g, json_object *props, size_t f) {
                            "feature %zu: \"properties\" must be an object or null, found %s", f,
                            type_name(props));
   }
-  qk_status_t st = qk__props_end_feature(g->a, &g->props, f);
+  qk_status_t st = qk__props_end_feature(g->a, &g->rg.props, f);
   return st ? nomem(g, st) : QK_OK;
 }
 
-static qk_status_t end_feature(gj_t *g, size_t f) {
-  qk_status_t st = qk__region_grow(g->a, (void **)&g->fs, &g->cap_fs, f + 2, sizeof(size_t));
-  if (st) return nomem(g, st);
-  if (f == 0) g->fs[0] = 0;
-  g->fs[f + 1] = g->nr;
-  g->nf = f + 1;
-  return QK_OK;
+/* The next feature ends (its properties ended already). */
+static qk_status_t end_feature(gj_t *g) {
+  qk_status_t st = qk__rings_end_feature(g->a, &g->rg);
+  return st ? nomem(g, st) : QK_OK;
 }
 
 static qk_status_t feature(gj_t *g, json_object *feat, size_t f) {
@@ -195,7 +173,7 @@ static qk_status_t feature(gj_t *g, json_object *feat, size_t f) {
   json_object_object_get_ex(feat, "properties", &props);
   qk_status_t st = geometry(g, geom, f);
   if (!st) st = properties(g, props, f);
-  if (!st) st = end_feature(g, f);
+  if (!st) st = end_feature(g);
   return st;
 }
 
@@ -220,8 +198,8 @@ static qk_status_t document(gj_t *g, json_object *root) {
   }
   if (!strcmp(ty, "Feature")) return feature(g, root, 0);
   qk_status_t st = geometry(g, root, 0);
-  if (!st) st = qk__props_end_feature(g->a, &g->props, 0);
-  if (!st) st = end_feature(g, 0);
+  if (!st) st = qk__props_end_feature(g->a, &g->rg.props, 0);
+  if (!st) st = end_feature(g);
   return st == QK_ERR_NOMEM ? nomem(g, st) : st;
 }
 
@@ -295,10 +273,8 @@ qk_status_t qk_region_read_geojson_text(const char *text, size_t len,
                              "line %lu, column %lu: unexpected text after the JSON value", l, c);
     }
   qk_region_options_t o;
-  qk_region_options_init(&o);
-  if (options) o = *options;
-  qk_allocator_t alloc = {NULL, NULL};
-  if (o.allocator) alloc = *o.allocator;
+  qk_allocator_t alloc;
+  qk__region_options(options, &o, &alloc);
   qk_error_t scratch;
   gj_t g;
   memset(&g, 0, sizeof g);
@@ -307,24 +283,15 @@ qk_status_t qk_region_read_geojson_text(const char *text, size_t len,
   g.err = err ? err : &scratch;
   qk_status_t st = document(&g, root);
   json_object_put(root);
-  if (!st) {
-    qk_region_arrays_t arr = {g.xy, g.rs, g.nr, g.fs, g.nf};
-    size_t zero = 0;
-    if (!g.nr) arr.ring_start = &zero;
-    st = qk__region_build(&arr, &o, &g.props, g.skipped, g.holes, out, err);
-  }
-  gj_free(&g);
+  if (!st) st = qk__rings_build(&g.rg, &o, out, err);
+  qk__rings_free(g.a, &g.rg);
   return st;
 }
 
 qk_status_t qk_region_read_geojson(const char *path, const qk_region_options_t *options,
                                    qk_region_t **out, qk_error_t *err) {
-  if (err) {
-    memset(err, 0, sizeof *err);
-    err->item = SIZE_MAX;
-  }
-  if (!path || !out) return qk__region_fail(err, QK_ERR_INVALID, SIZE_MAX, "no path");
-  *out = NULL;
+  qk_status_t st0 = qk__read_begin(path, out, err);
+  if (st0) return st0;
   FILE *f = fopen(path, "rb");
   if (!f) return qk__region_fail(err, QK_ERR_IO, SIZE_MAX, "cannot open %s", path);
   size_t cap = 1 << 16, len = 0;

@@ -4,10 +4,6 @@
  * points over threads; each answer is computed by the same code, so results do not depend
  * on the thread count.
  */
-#define _POSIX_C_SOURCE 200809L
-#include <pthread.h>
-#include <unistd.h>
-
 #include "region/region_internal.h"
 
 /* Map a query to the plane of the index; false when it is in no feature. */
@@ -216,53 +212,29 @@ static void run(job_t *j) {
   }
 }
 
-static void *thread_main(void *arg) {
-  run(arg);
-  return NULL;
+typedef struct batch {
+  job_t all;
+  int nonfinite[QK__MAX_THREADS];
+} batch_t;
+
+static void locate_share(void *ctx, unsigned w, unsigned nw) {
+  batch_t *bt = ctx;
+  size_t lo, hi;
+  qk__share_range(bt->all.n, w, nw, &lo, &hi);
+  job_t j = {bt->all.r, bt->all.pts + lo, hi - lo, bt->all.b, bt->all.out + lo, 0};
+  run(&j);
+  bt->nonfinite[w] = j.nonfinite;
 }
 
 qk_status_t qk_region_locate_batch(const qk_region_t *r, const qk_point_t *pts, size_t n,
                                    qk_boundary_t b, unsigned threads, uint32_t *out) {
   if (!r || bad_rule(b) || (n && (!pts || !out))) return QK_ERR_INVALID;
-  if (threads == 0) {
-    long c = sysconf(_SC_NPROCESSORS_ONLN);
-    threads = c > 0 ? (unsigned)c : 1;
-  }
-  if (threads > 256) threads = 256;
+  threads = qk__threads_resolve(threads);
   size_t min_per = 4096; /* below this a thread costs more than it saves */
   if ((size_t)threads > n / min_per) threads = (unsigned)(n / min_per);
-  if (threads <= 1) {
-    job_t j = {r, pts, n, b, out, 0};
-    run(&j);
-    return j.nonfinite ? QK_ERR_NONFINITE : QK_OK;
-  }
-  job_t jobs[256];
-  pthread_t tid[256];
-  size_t per = n / threads, at = 0;
-  unsigned started = 0;
-  qk_status_t st = QK_OK;
-  for (unsigned t = 0; t < threads; t++) {
-    size_t len = t + 1 == threads ? n - at : per;
-    jobs[t] = (job_t){r, pts + at, len, b, out + at, 0};
-    at += len;
-  }
-  /* Job 0 runs on the calling thread, the others on new ones. */
-  for (unsigned t = 1; t < threads; t++) {
-    if (pthread_create(&tid[t], NULL, thread_main, &jobs[t])) {
-      st = QK_ERR_NOMEM;
-      break;
-    }
-    started = t;
-  }
-  if (!st) run(&jobs[0]);
-  for (unsigned t = 1; t <= started; t++) pthread_join(tid[t], NULL);
-  if (st) {
-    /* Could not start every thread: finish the work here so the answers are complete. */
-    for (unsigned t = 0; t < threads; t++)
-      if (t == 0 || t > started) run(&jobs[t]);
-    st = QK_OK;
-  }
-  for (unsigned t = 0; t < threads; t++)
-    if (jobs[t].nonfinite) return QK_ERR_NONFINITE;
-  return st;
+  batch_t bt = {{r, pts, n, b, out, 0}, {0}};
+  qk__run_shares(threads, locate_share, &bt);
+  for (unsigned w = 0; w < QK__MAX_THREADS; w++)
+    if (bt.nonfinite[w]) return QK_ERR_NONFINITE;
+  return QK_OK;
 }

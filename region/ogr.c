@@ -15,31 +15,18 @@
 
 typedef struct ob {
   const qk_allocator_t *a;
-  double *xy;
-  size_t nv, cap_xy;
-  size_t *rs;
-  size_t nr, cap_rs;
-  size_t *fs;
-  size_t nf, cap_fs;
-  qk__props_t props;
-  size_t skipped, holes;
+  qk__rings_t rg;
 } ob_t;
 
 static qk_status_t add_ring(ob_t *b, OGRGeometryH ring, int k) {
   int n = OGR_G_GetPointCount(ring);
-  qk_status_t st;
-  if ((st = qk__region_grow(b->a, (void **)&b->xy, &b->cap_xy, 2 * (b->nv + (size_t)n),
-                            sizeof(double))) ||
-      (st = qk__region_grow(b->a, (void **)&b->rs, &b->cap_rs, b->nr + 2, sizeof(size_t))))
-    return st;
+  qk_status_t st = qk__rings_reserve(b->a, &b->rg, (size_t)n);
+  if (st) return st;
   for (int j = 0; j < n; j++) {
-    b->xy[2 * (b->nv + (size_t)j)] = OGR_G_GetX(ring, j);
-    b->xy[2 * (b->nv + (size_t)j) + 1] = OGR_G_GetY(ring, j);
+    b->rg.xy[2 * (b->rg.nv + (size_t)j)] = OGR_G_GetX(ring, j);
+    b->rg.xy[2 * (b->rg.nv + (size_t)j) + 1] = OGR_G_GetY(ring, j);
   }
-  if (b->nr == 0) b->rs[0] = 0;
-  b->nv += (size_t)n;
-  b->rs[++b->nr] = b->nv;
-  if (k > 0) b->holes++;
+  qk__rings_close(&b->rg, (size_t)n, (size_t)k);
   return QK_OK;
 }
 
@@ -54,7 +41,7 @@ static qk_status_t add_polygon(ob_t *b, OGRGeometryH poly) {
 
 static qk_status_t add_feature(ob_t *b, OGRFeatureH feat) {
   OGRGeometryH g = OGR_F_GetGeometryRef(feat);
-  size_t r0 = b->nr;
+  size_t r0 = b->rg.nr;
   qk_status_t st = QK_OK;
   OGRwkbGeometryType t = g ? wkbFlatten(OGR_G_GetGeometryType(g)) : wkbUnknown;
   if (t == wkbPolygon)
@@ -63,37 +50,28 @@ static qk_status_t add_feature(ob_t *b, OGRFeatureH feat) {
     for (int i = 0, n = OGR_G_GetGeometryCount(g); i < n && !st; i++)
       st = add_polygon(b, OGR_G_GetGeometryRef(g, i));
   if (st) return st;
-  if (b->nr == r0) b->skipped++;
+  if (b->rg.nr == r0) b->rg.skipped++;
   for (int i = 0, n = OGR_F_GetFieldCount(feat); i < n && !st; i++) {
     const char *name = OGR_Fld_GetNameRef(OGR_F_GetFieldDefnRef(feat, i));
     const char *v = OGR_F_IsFieldSetAndNotNull(feat, i) ? OGR_F_GetFieldAsString(feat, i) : "";
-    st = qk__props_add(b->a, &b->props, name, v, strlen(v));
+    st = qk__props_add(b->a, &b->rg.props, name, v, strlen(v));
   }
-  if (!st) st = qk__props_end_feature(b->a, &b->props, b->nf);
-  if (!st) st = qk__region_grow(b->a, (void **)&b->fs, &b->cap_fs, b->nf + 2, sizeof(size_t));
-  if (st) return st;
-  if (b->nf == 0) b->fs[0] = 0;
-  b->fs[++b->nf] = b->nr;
-  return QK_OK;
+  if (!st) st = qk__props_end_feature(b->a, &b->rg.props, b->rg.nf);
+  if (!st) st = qk__rings_end_feature(b->a, &b->rg);
+  return st;
 }
 
 qk_status_t qk_region_read_ogr(const char *path, const qk_region_options_t *options,
                                qk_region_t **out, qk_error_t *err) {
-  if (err) {
-    memset(err, 0, sizeof *err);
-    err->item = SIZE_MAX;
-  }
-  if (!path || !out) return qk__region_fail(err, QK_ERR_INVALID, SIZE_MAX, "no path");
-  *out = NULL;
+  qk_status_t st0 = qk__read_begin(path, out, err);
+  if (st0) return st0;
   GDALAllRegister();
   GDALDatasetH ds = GDALOpenEx(path, GDAL_OF_VECTOR | GDAL_OF_READONLY, NULL, NULL, NULL);
   if (!ds)
     return qk__region_fail(err, QK_ERR_IO, SIZE_MAX, "GDAL cannot open %s as vector data", path);
   qk_region_options_t o;
-  qk_region_options_init(&o);
-  if (options) o = *options;
-  qk_allocator_t alloc = {NULL, NULL};
-  if (o.allocator) alloc = *o.allocator;
+  qk_allocator_t alloc;
+  qk__region_options(options, &o, &alloc);
   ob_t b;
   memset(&b, 0, sizeof b);
   b.a = &alloc;
@@ -111,14 +89,9 @@ qk_status_t qk_region_read_ogr(const char *path, const qk_region_options_t *opti
   if (st) {
     qk__region_fail(err, st, SIZE_MAX, "%s while reading %s", qk_strerror(st), path);
   } else {
-    size_t zero = 0;
-    qk_region_arrays_t arr = {b.xy, b.nr ? b.rs : &zero, b.nr, b.fs, b.nf};
-    st = qk__region_build(&arr, &o, &b.props, b.skipped, b.holes, out, err);
+    st = qk__rings_build(&b.rg, &o, out, err);
   }
-  qk__free(&alloc, b.xy, b.cap_xy * sizeof(double));
-  qk__free(&alloc, b.rs, b.cap_rs * sizeof(size_t));
-  qk__free(&alloc, b.fs, b.cap_fs * sizeof(size_t));
-  qk__props_free(&alloc, &b.props);
+  qk__rings_free(&alloc, &b.rg);
   return st;
 }
 

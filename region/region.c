@@ -77,25 +77,18 @@ qk_status_t qk__region_fail(qk_error_t *err, qk_status_t st, size_t item, const 
   return st;
 }
 
-qk_status_t qk__region_grow(const qk_allocator_t *a, void **p, size_t *cap, size_t need,
-                            size_t elem) {
-  if (need <= *cap) return QK_OK;
-  size_t nc = *cap ? *cap : 16;
-  while (nc < need) {
-    if (nc > SIZE_MAX / 2 / elem) return QK_ERR_LIMIT;
-    nc *= 2;
-  }
-  void *q = qk__realloc(a, *p, *cap * elem, nc * elem);
-  if (!q) return QK_ERR_NOMEM;
-  *p = q;
-  *cap = nc;
-  return QK_OK;
-}
-
 void qk_region_options_init(qk_region_options_t *o) {
   memset(o, 0, sizeof *o);
   o->leaf_edges = QK_REGION_DEFAULT_LEAF_EDGES;
   o->max_depth = QK_REGION_DEFAULT_MAX_DEPTH;
+}
+
+void qk__region_options(const qk_region_options_t *options, qk_region_options_t *o,
+                        qk_allocator_t *alloc) {
+  qk_region_options_init(o);
+  if (options) *o = *options;
+  *alloc = (qk_allocator_t){NULL, NULL};
+  if (o->allocator) *alloc = *o->allocator;
 }
 
 void qk_region_free(qk_region_t *r) {
@@ -146,7 +139,7 @@ void qk__props_free(const qk_allocator_t *a, qk__props_t *p) {
 
 static qk_status_t pool_add(const qk_allocator_t *a, qk__props_t *p, const char *s, size_t len,
                             size_t *at) {
-  qk_status_t st = qk__region_grow(a, (void **)&p->pool, &p->pool_cap, p->pool_len + len + 1, 1);
+  qk_status_t st = qk__grow(a, (void **)&p->pool, &p->pool_cap, p->pool_len + len + 1, 1);
   if (st) return st;
   *at = p->pool_len;
   memcpy(p->pool + p->pool_len, s, len);
@@ -157,9 +150,9 @@ static qk_status_t pool_add(const qk_allocator_t *a, qk__props_t *p, const char 
 
 qk_status_t qk__props_add(const qk_allocator_t *a, qk__props_t *p, const char *key, const char *val,
                           size_t val_len) {
-  qk_status_t st = qk__region_grow(a, (void **)&p->key, &p->cap_key, p->n + 1, sizeof(size_t));
+  qk_status_t st = qk__grow(a, (void **)&p->key, &p->cap_key, p->n + 1, sizeof(size_t));
   if (st) return st;
-  if ((st = qk__region_grow(a, (void **)&p->val, &p->cap_val, p->n + 1, sizeof(size_t)))) return st;
+  if ((st = qk__grow(a, (void **)&p->val, &p->cap_val, p->n + 1, sizeof(size_t)))) return st;
   size_t k, v;
   if ((st = pool_add(a, p, key, strlen(key), &k))) return st;
   if ((st = pool_add(a, p, val, val_len, &v))) return st;
@@ -171,8 +164,7 @@ qk_status_t qk__props_add(const qk_allocator_t *a, qk__props_t *p, const char *k
 
 qk_status_t qk__props_end_feature(const qk_allocator_t *a, qk__props_t *p, size_t feature) {
   /* start[f] is the first pair of feature f; start[feature + 1] closes it. */
-  qk_status_t st =
-      qk__region_grow(a, (void **)&p->start, &p->cap_start, feature + 2, sizeof(size_t));
+  qk_status_t st = qk__grow(a, (void **)&p->start, &p->cap_start, feature + 2, sizeof(size_t));
   if (st) return st;
   if (feature == 0) p->start[0] = 0;
   p->start[feature + 1] = p->n;

@@ -104,6 +104,20 @@ typedef struct qk__props {
   size_t pool_len, pool_cap;
 } qk__props_t;
 
+/* What a reader (GeoJSON, OGR) gathers before qk__region_build: the rings' points (xy,
+ * nv points), ring starts (rs, nr rings), feature starts in rings (fs, nf features), the
+ * properties, and the counts of skipped features and of holes. */
+typedef struct qk__rings {
+  double *xy;
+  size_t nv, cap_xy;
+  size_t *rs;
+  size_t nr, cap_rs;
+  size_t *fs;
+  size_t nf, cap_fs;
+  qk__props_t props;
+  size_t skipped, holes;
+} qk__rings_t;
+
 struct qk_region {
   qk_allocator_t alloc;
   int planar;
@@ -162,6 +176,25 @@ void qk__pieces_free(const qk_allocator_t *a, qk__pieces_t *p);
 /* Build a layer from validated-or-not arrays; `props` may be NULL. Takes the props
  * (frees them on error). skipped/holes go to the stats (holes: SIZE_MAX = count rings
  * after each feature's first). */
+/* The options in force (the defaults when options is NULL) and the allocator they name
+ * (region/region.c). */
+void qk__region_options(const qk_region_options_t *options, qk_region_options_t *o,
+                        qk_allocator_t *alloc);
+
+/* Room for a ring of n more points at xy + 2 * nv (region/rings.c). */
+qk_status_t qk__rings_reserve(const qk_allocator_t *a, qk__rings_t *r, size_t n);
+/* The n points written at xy + 2 * nv form the next ring; k > 0 for a hole. */
+void qk__rings_close(qk__rings_t *r, size_t n, size_t k);
+/* The rings since the last feature form the next feature (its properties are ended
+ * separately, by qk__props_end_feature). */
+qk_status_t qk__rings_end_feature(const qk_allocator_t *a, qk__rings_t *r);
+/* Build the region from what was gathered (qk__region_build). */
+qk_status_t qk__rings_build(qk__rings_t *r, const qk_region_options_t *o, qk_region_t **out,
+                            qk_error_t *err);
+void qk__rings_free(const qk_allocator_t *a, qk__rings_t *r);
+/* The start of every reader: clear *err, check path and out, set *out to NULL. */
+qk_status_t qk__read_begin(const char *path, qk_region_t **out, qk_error_t *err);
+
 qk_status_t qk__region_build(const qk_region_arrays_t *in, const qk_region_options_t *options,
                              qk__props_t *props, size_t skipped, size_t holes, qk_region_t **out,
                              qk_error_t *err);
@@ -175,10 +208,6 @@ qk_status_t qk__region_fail(qk_error_t *err, qk_status_t st, size_t item, const 
 
 /* Check one coordinate pair for the mode; returns QK_OK or an error with message. */
 qk_status_t qk__region_check_coord(int planar, double x, double y, size_t feature, qk_error_t *err);
-
-/* Grow a buffer of elem-size items to at least `need` items (doubling). */
-qk_status_t qk__region_grow(const qk_allocator_t *a, void **p, size_t *cap, size_t need,
-                            size_t elem);
 
 /* Properties being collected. */
 void qk__props_free(const qk_allocator_t *a, qk__props_t *p);
