@@ -248,15 +248,19 @@ static void batch_run(unsigned k, void *ud) {
   }
 }
 
+/* Jobs of a batch of n: chunks of 256 queries, or larger ones so that there are at most
+ * 64 (the size of the batches' status arrays). Sets *chunk. */
+static size_t batch_jobs(size_t n, size_t *chunk) {
+  *chunk = 256;
+  if ((n + 255) / 256 > 64) *chunk = (n + 63) / 64;
+  return (n + *chunk - 1) / *chunk;
+}
+
 qk_status_t qk_world_raycast_batch(const qk_world_t *w, const qk_point_t *from,
                                    const qk_point_t *to, size_t n, qk_world_hit_t *hits) {
   if (!w || (n && (!from || !to || !hits))) return QK_ERR_INVALID;
   batch_t b = {w, from, to, n, 256, hits, {QK_OK}};
-  size_t jobs = (n + b.chunk - 1) / b.chunk;
-  if (jobs > 64) {
-    b.chunk = (n + 63) / 64;
-    jobs = (n + b.chunk - 1) / b.chunk;
-  }
+  size_t jobs = batch_jobs(n, &b.chunk);
   qk__run_jobs(w->opt.threads, (unsigned)jobs, batch_run, &b);
   for (int k = 0; k < 64; k++)
     if (b.st[k] != QK_OK) return b.st[k];
@@ -334,11 +338,7 @@ qk_status_t qk_world_knn_batch(const qk_world_t *w, const qk_point_t *ps, size_t
                                qk_world_hit_t *out, size_t *counts) {
   if (!w || (n && (!ps || !counts || (k && !out)))) return QK_ERR_INVALID;
   kbatch_t b = {w, ps, n, k, 256, out, counts, {QK_OK}};
-  size_t jobs = (n + b.chunk - 1) / b.chunk;
-  if (jobs > 64) {
-    b.chunk = (n + 63) / 64;
-    jobs = (n + b.chunk - 1) / b.chunk;
-  }
+  size_t jobs = batch_jobs(n, &b.chunk);
   qk__run_jobs(w->opt.threads, (unsigned)jobs, kbatch_run, &b);
   for (int j = 0; j < 64; j++)
     if (b.st[j] != QK_OK) return b.st[j];

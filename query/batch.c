@@ -10,19 +10,6 @@
 
 #include "query/query_internal.h"
 
-/* The lowest-numbered failure of a batch, merged from its shares. */
-typedef struct first_err {
-  qk_status_t st;
-  size_t i;
-} first_err_t;
-
-static void note_err(first_err_t *e, qk_status_t st, size_t i) {
-  if (st != QK_OK && i < e->i) {
-    e->st = st;
-    e->i = i;
-  }
-}
-
 /* ---- kNN ------------------------------------------------------------------------- */
 
 typedef struct knn_job {
@@ -33,14 +20,14 @@ typedef struct knn_job {
   double max_dist;
   qk_neighbor_t *out;
   size_t *counts;
-  first_err_t err[QK__MAX_THREADS];
+  qk__first_err_t err[QK__MAX_THREADS];
 } knn_job_t;
 
 static void knn_share(void *ctx, unsigned w, unsigned nw) {
   knn_job_t *j = ctx;
   size_t lo, hi;
   qk__share_range(j->nq, w, nw, &lo, &hi);
-  first_err_t e = {QK_OK, SIZE_MAX};
+  qk__first_err_t e = {QK_OK, SIZE_MAX};
   qk__path_t paths[QK__LANES];
   for (size_t jj = lo; jj < hi; jj++) {
     if ((jj - lo) % QK__LANES == 0) qk__walk_lanes(j->t, j->qs, j->order, jj, hi, paths);
@@ -52,7 +39,7 @@ static void knn_share(void *ctx, unsigned w, unsigned nw) {
     if (st == QK_OK)
       n = qk__knn_one(j->t, j->qs[i], j->k, j->max_dist, o, path->valid ? path : NULL);
     else
-      note_err(&e, st, i);
+      qk__note_err(&e, st, i);
     for (size_t m = n; m < j->k; m++) o[m] = (qk_neighbor_t){QK_NONE, INFINITY};
     if (j->counts) j->counts[i] = n;
   }
@@ -69,8 +56,8 @@ qk_status_t qk_query_knn_batch(const qk_tree_t *tree, const qk_point_t *qs, size
   knn_job_t j = {tree, qs, order, nq, k, max_dist, out, counts, {{QK_OK, 0}}};
   qk__run_shares(nw, knn_share, &j);
   if (block) qk__morton_free(tree, block, nq);
-  first_err_t e = {QK_OK, SIZE_MAX};
-  for (unsigned w = 0; w < nw; w++) note_err(&e, j.err[w].st, j.err[w].i);
+  qk__first_err_t e = {QK_OK, SIZE_MAX};
+  for (unsigned w = 0; w < nw; w++) qk__note_err(&e, j.err[w].st, j.err[w].i);
   return e.st;
 }
 
@@ -127,7 +114,7 @@ typedef struct radius_job {
   size_t *counts;
   qk_neighbor_t *buf[QK__MAX_THREADS];
   size_t buf_cap[QK__MAX_THREADS], total[QK__MAX_THREADS];
-  first_err_t err[QK__MAX_THREADS];
+  qk__first_err_t err[QK__MAX_THREADS];
 } radius_job_t;
 
 static void radius_share(void *ctx, unsigned w, unsigned nw) {
@@ -138,7 +125,7 @@ static void radius_share(void *ctx, unsigned w, unsigned nw) {
   size_t cap = w == 0 ? j->cap : j->buf_cap[w];
   qk_status_t st =
       qk__radius_range(j->t, j->centres, lo, hi, j->r, out, cap, j->counts, &j->total[w], &bad);
-  j->err[w] = (first_err_t){st, st == QK_OK ? SIZE_MAX : bad};
+  j->err[w] = (qk__first_err_t){st, st == QK_OK ? SIZE_MAX : bad};
 }
 
 qk_status_t qk__radius_batch(const qk_tree_t *t, const qk_point_t *centres, size_t nq, double r,
@@ -157,7 +144,7 @@ qk_status_t qk__radius_batch(const qk_tree_t *t, const qk_point_t *centres, size
     j->buf_cap[w] = j->buf[w] ? want : 0;
   }
   qk__run_shares(nw, radius_share, j);
-  first_err_t e = {QK_OK, SIZE_MAX};
+  qk__first_err_t e = {QK_OK, SIZE_MAX};
   size_t sum = 0;
   for (unsigned w = 0; w < nw; w++) {
     size_t lo, hi, bad;
@@ -167,12 +154,12 @@ qk_status_t qk__radius_batch(const qk_tree_t *t, const qk_point_t *centres, size
       size_t room = sum < cap ? cap - sum : 0;
       qk_status_t st = qk__radius_range(t, centres, lo, hi, r, out ? out + (cap - room) : NULL,
                                         room, counts, &j->total[w], &bad);
-      j->err[w] = (first_err_t){st, st == QK_OK ? SIZE_MAX : bad};
+      j->err[w] = (qk__first_err_t){st, st == QK_OK ? SIZE_MAX : bad};
     } else if (w > 0 && sum < cap) {
       size_t m = j->total[w] < cap - sum ? j->total[w] : cap - sum;
       if (m) memcpy(out + sum, j->buf[w], m * sizeof *out);
     }
-    note_err(&e, j->err[w].st, j->err[w].i);
+    qk__note_err(&e, j->err[w].st, j->err[w].i);
     sum += j->total[w];
     if (w > 0) qk__free(qk__tree_allocator(t), j->buf[w], j->buf_cap[w] * sizeof(qk_neighbor_t));
   }

@@ -359,28 +359,24 @@ typedef struct geo_job {
   double max_metres;
   qk_neighbor_t *out;
   size_t *counts;
-  qk_status_t st[QK__MAX_THREADS];
-  size_t bad[QK__MAX_THREADS];
+  qk__first_err_t err[QK__MAX_THREADS];
 } geo_job_t;
 
 static void geo_share(void *ctx, unsigned w, unsigned nw) {
   geo_job_t *j = ctx;
   size_t lo, hi;
   qk__share_range(j->nq, w, nw, &lo, &hi);
-  j->st[w] = QK_OK;
-  j->bad[w] = SIZE_MAX;
+  qk__first_err_t e = {QK_OK, SIZE_MAX};
   for (size_t jj = lo; jj < hi; jj++) {
     size_t i = j->order ? j->order[jj] : jj;
     qk_neighbor_t *o = j->out ? j->out + i * j->k : NULL;
     size_t n = 0;
     qk_status_t st = qk_geo_knn(j->g, j->qs[i], j->k, j->max_metres, o, &n);
-    if (st != QK_OK && i < j->bad[w]) {
-      j->st[w] = st;
-      j->bad[w] = i;
-    }
+    qk__note_err(&e, st, i);
     for (size_t m = n; m < j->k; m++) o[m] = (qk_neighbor_t){QK_NONE, INFINITY};
     if (j->counts) j->counts[i] = n;
   }
+  j->err[w] = e;
 }
 
 qk_status_t qk_geo_knn_batch(const qk_geo_t *g, const qk_point_t *qs, size_t nq, size_t k,
@@ -401,14 +397,9 @@ qk_status_t qk_geo_knn_batch(const qk_geo_t *g, const qk_point_t *qs, size_t nq,
                  .counts = counts};
   qk__run_shares(nw, geo_share, &j);
   if (block) qk__morton_free(g->tree, block, nq);
-  qk_status_t first = QK_OK;
-  size_t first_i = SIZE_MAX;
-  for (unsigned w = 0; w < nw; w++)
-    if (j.st[w] != QK_OK && j.bad[w] < first_i) {
-      first = j.st[w];
-      first_i = j.bad[w];
-    }
-  return first;
+  qk__first_err_t e = {QK_OK, SIZE_MAX};
+  for (unsigned w = 0; w < nw; w++) qk__note_err(&e, j.err[w].st, j.err[w].i);
+  return e.st;
 }
 
 #else /* !QK_HAVE_GEODESIC */

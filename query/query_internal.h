@@ -223,4 +223,17 @@ static inline void qk__sort_cells_desc(qk__cell_entry_t *e, int n) {
   }
 }
 
+/* The lowest-numbered failure of a batch, merged from its threads' shares. */
+typedef struct qk__first_err {
+  qk_status_t st;
+  size_t i;
+} qk__first_err_t;
+
+static inline void qk__note_err(qk__first_err_t *e, qk_status_t st, size_t i) {
+  if (st != QK_OK && i < e->i) {
+    e->st = st;
+    e->i = i;
+  }
+}
+
 #endif /* QUADKIT_QUERY_INTERNAL_H */
