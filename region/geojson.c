@@ -294,29 +294,26 @@ qk_status_t qk_region_read_geojson(const char *path, const qk_region_options_t *
   if (st0) return st0;
   FILE *f = fopen(path, "rb");
   if (!f) return qk__region_fail(err, QK_ERR_IO, SIZE_MAX, "cannot open %s", path);
-  size_t cap = 1 << 16, len = 0;
-  char *buf = malloc(cap);
+  /* The whole file, through the caller's allocator like every other allocation. */
+  qk_region_options_t o;
+  qk_allocator_t a;
+  qk__region_options(options, &o, &a);
+  char *buf = NULL;
+  size_t cap = 0, len = 0;
   qk_status_t st = QK_OK;
-  while (buf) {
+  for (;;) {
+    if ((st = qk__grow(&a, (void **)&buf, &cap, len + (1 << 16), 1))) break;
     size_t got = fread(buf + len, 1, cap - len, f);
     len += got;
     if (len < cap) break;
-    char *nb = realloc(buf, cap * 2);
-    if (!nb) {
-      free(buf);
-      buf = NULL;
-      break;
-    }
-    buf = nb;
-    cap *= 2;
   }
-  if (!buf)
-    st = qk__region_fail(err, QK_ERR_NOMEM, SIZE_MAX, "out of memory reading %s", path);
+  if (st)
+    st = qk__region_fail(err, st, SIZE_MAX, "out of memory reading %s", path);
   else if (ferror(f))
     st = qk__region_fail(err, QK_ERR_IO, SIZE_MAX, "cannot read %s", path);
   fclose(f);
   if (!st) st = qk_region_read_geojson_text(buf, len, options, out, err);
-  free(buf);
+  qk__free(&a, buf, cap);
   return st;
 }
 
