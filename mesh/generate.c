@@ -28,6 +28,7 @@ void qk_mesh_options_init(qk_mesh_options_t *o) {
   o->max_size = 0;
   o->size_fn = NULL;
   o->size_user = NULL;
+  o->min_angle_deg = 0;
 }
 
 static void gen_free(qk__gen_t *g) {
@@ -73,6 +74,9 @@ static qk_status_t read_options(const qk_mesh_options_t *options, qk_mesh_option
   if (!(opt->max_size >= 0) || isinf(opt->max_size))
     return qk__mesh_fail(err, QK_ERR_INVALID, 0, "max_size %g is not a finite length >= 0",
                          opt->max_size);
+  if (!(opt->min_angle_deg >= 0 && opt->min_angle_deg <= 45))
+    return qk__mesh_fail(err, QK_ERR_INVALID, 0, "min_angle_deg %g is not between 0 and 45",
+                         opt->min_angle_deg);
   if (opt->mode == QK_MESH_DYADIC && opt->size)
     return qk__mesh_fail(err, QK_ERR_INVALID, 0,
                          "a domain size applies to the book's mode only (the dyadic mode's "

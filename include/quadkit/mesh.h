@@ -160,7 +160,12 @@ typedef enum qk_mesh_mode {
   /** The same algorithm on the coarsest dyadic lattice (spacing 2^-f, origin at the
    *  input's lower-left corner) holding every vertex exactly: real coordinates that are
    *  dyadic rationals, any position, edges still at 0, 45, 90 or 135 degrees. */
-  QK_MESH_DYADIC = 2
+  QK_MESH_DYADIC = 2,
+  /** The general mode: planar straight-line graphs with any double coordinates and any
+   *  angles (holes, open chains, internal segments), meshed by quality Delaunay
+   *  refinement seeded from a graded quadtree (docs/mesh.md, "The general mode"): every
+   *  angle at least min_angle_deg except inside input angles below 60 degrees. */
+  QK_MESH_GENERAL = 3
 } qk_mesh_mode_t;
 
 /** A size function: the longest edge wanted near (x, y) (input coordinates). */
@@ -183,6 +188,11 @@ typedef struct qk_mesh_options {
   qk_mesh_size_fn size_fn;
   /** Passed to size_fn. */
   void *size_user;
+  /** The general mode's minimum angle in degrees (0: the default, 20, which is proven;
+   *  larger values up to 34 are tried with no termination proof and refused with
+   *  QK_ERR_LIMIT when the refinement does not settle). Other modes: must be 0 or at most
+   *  45 (their proven bound). */
+  double min_angle_deg;
 } qk_mesh_options_t;
 
 /** Fill options with the defaults. \param [out] options the options. */
@@ -285,11 +295,15 @@ typedef struct qk_mesh_stats {
   double min_angle_deg;         /**< smallest triangle angle */
   double max_angle_deg;         /**< largest triangle angle */
   double uniform_triangles;     /**< 2 U^2, the size of the uniform grid mesh */
-  qk_mesh_mode_t mode;          /**< the mesher that ran: QK_MESH_BOOK or QK_MESH_DYADIC */
+  qk_mesh_mode_t mode;          /**< the mesher that ran: QK_MESH_BOOK, _DYADIC or _GENERAL */
   int lattice_exponent;         /**< f: lattice spacing 2^-f input units (0: the book's) */
   double origin_x, origin_y;    /**< input coordinates of lattice point (0, 0) */
   double proven_min_angle_deg;  /**< the proven lower bound on every angle (45) */
   double proven_max_angle_deg;  /**< the proven upper bound on every angle (90) */
+  size_t exempt_angles;         /**< general mode: angles below the bound, all inside input
+                                     angles below 60 degrees */
+  double smallest_input_angle_deg; /**< general mode: the smallest angle between two input
+                                        segments at a vertex (180 when none) */
   double seconds_validate;      /**< checking the input */
   double seconds_subdivide;     /**< step 1 */
   double seconds_balance;       /**< step 2 */
