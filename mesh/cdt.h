@@ -1,0 +1,108 @@
+/*
+ * A constrained Delaunay triangulation on flat arrays, for the general mesh mode
+ * (mesh/general*.c). Internal to mesh/.
+ *
+ * The triangulation covers a square given at creation (its four corners are vertices 0..3);
+ * every later vertex must lie strictly inside it. Triangles are counter-clockwise vertex
+ * triples; edge i of triangle t is the edge opposite vertex i, from v[(i+1)%3] to v[(i+2)%3],
+ * and nbr[3t+i] is the triangle across it (QK__CDT_NONE on the square's boundary). An edge
+ * may be constrained (a piece of an input segment): it then carries the segment's id in
+ * seg[3t+i] on both sides, and no flip removes it. Triangles are never deleted: insertions
+ * and flips reuse and append slots, so triangle ids stay valid (a flip changes the triangles'
+ * contents, and on_change reports it).
+ *
+ * Exactness: every decision is an exact predicate on the stored doubles (orientation,
+ * in-circle), so the structure stays a valid triangulation for any finite input inside the
+ * square; Delaunay ties (four cocircular points) are broken consistently.
+ */
+#ifndef QK_MESH_CDT_H
+#define QK_MESH_CDT_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "quadkit/common.h"
+
+#define QK__CDT_NONE UINT32_MAX
+
+/* Where a point lies relative to a triangle (qk__cdt_locate). */
+typedef enum qk__cdt_where {
+  QK__CDT_IN = 0,   /* strictly inside triangle *tri */
+  QK__CDT_EDGE = 1, /* in the relative interior of edge *k of *tri */
+  QK__CDT_VERT = 2  /* equal to vertex *k of *tri */
+} qk__cdt_where_t;
+
+/* Called for every triangle that an insertion, split or flip creates or changes (the
+ * refinement's quality queue listens here). May be NULL. */
+typedef void (*qk__cdt_change_fn)(void *user, uint32_t tri);
+
+typedef struct qk__cdt {
+  const qk_allocator_t *alloc; /* NULL: libc */
+  double *xy;                  /* 2 * nv coordinates */
+  uint32_t *vtri;              /* per vertex: one triangle incident to it */
+  size_t nv, cap_v;
+  uint32_t *v;   /* 3 * nt vertex ids, counter-clockwise */
+  uint32_t *nbr; /* 3 * nt: triangle across edge i, or QK__CDT_NONE */
+  uint32_t *seg; /* 3 * nt: input segment id of a constrained edge i, else QK__CDT_NONE */
+  size_t nt, cap_t;
+  uint32_t hint; /* a triangle near the last change: default start of walks */
+  qk__cdt_change_fn on_change;
+  void *user;
+} qk__cdt_t;
+
+/* Start a triangulation of the square [x0, x0 + side] x [y0, y0 + side] (two triangles,
+ * vertices 0..3 its corners counter-clockwise from (x0, y0)), with room reserved for about
+ * nv_hint vertices. QK_OK or QK_ERR_NOMEM (then nothing to free). */
+qk_status_t qk__cdt_init(qk__cdt_t *c, const qk_allocator_t *alloc, double x0, double y0,
+                         double side, size_t nv_hint);
+
+/* Free the arrays; the struct may be reused after qk__cdt_init. */
+void qk__cdt_free(qk__cdt_t *c);
+
+/* Find (x, y) by walking from triangle `start` (QK__CDT_NONE: c->hint). Returns the
+ * triangle in *tri and, for EDGE and VERT, the edge or vertex slot in *k. The point must
+ * lie in the square. */
+qk__cdt_where_t qk__cdt_locate(const qk__cdt_t *c, double x, double y, uint32_t start,
+                               uint32_t *tri, int *k);
+
+/* Insert the point (x, y) and restore the constrained Delaunay property by flips.
+ * *v_out is the new vertex, or the existing vertex at exactly that position (then *existed
+ * is set to 1 and nothing changes). A point in the relative interior of a constrained edge
+ * splits it: both halves keep the segment id (callers put only points that lie exactly on
+ * the segment there; the refinement does, for segment split points). `start` as for
+ * locate. QK_OK or QK_ERR_NOMEM (the triangulation is then unchanged). */
+qk_status_t qk__cdt_insert(qk__cdt_t *c, double x, double y, uint32_t start, uint32_t *v_out,
+                           int *existed);
+
+/* Make the edge from vertex a to vertex b a constrained edge with segment id `seg`,
+ * removing the edges it crosses and restoring the constrained Delaunay property.
+ * Returns QK_OK; QK_ERR_GEOMETRY when a vertex lies in the relative interior of ab
+ * (*block is that vertex) or a constrained edge crosses ab (*block is one of its vertices,
+ * *block_seg its segment id); QK_ERR_NOMEM. On an error the triangulation is a valid
+ * constrained Delaunay triangulation of what was inserted before. */
+qk_status_t qk__cdt_insert_segment(qk__cdt_t *c, uint32_t a, uint32_t b, uint32_t seg,
+                                   uint32_t *block, uint32_t *block_seg);
+
+/* The triangle and edge slot of the edge from vertex a to vertex b (oriented so that the
+ * triangle lies on its left), or QK__CDT_NONE when ab is not an edge. */
+uint32_t qk__cdt_find_edge(const qk__cdt_t *c, uint32_t a, uint32_t b, int *k);
+
+/* Walk the straight segment from vertex w to the point (x, y) in the square, starting
+ * among the triangles around w. Returns 1 when no constrained edge meets the segment
+ * beyond w: *tri, *k and *where then locate (x, y) as qk__cdt_locate does. Returns 0 when
+ * one does (the refinement's visibility test: that constrained edge separates the point
+ * from w): *tri is the triangle on w's side of the first such edge and *k its slot, and
+ * *where is QK__CDT_EDGE; or, when the segment runs into a vertex on a constrained edge or
+ * along a constrained edge, *where is QK__CDT_VERT and *k that vertex's slot in *tri. */
+int qk__cdt_walk(const qk__cdt_t *c, uint32_t w, double x, double y, uint32_t *tri, int *k,
+                 qk__cdt_where_t *where);
+
+/* Exact sign of (a - p) . (b - p): < 0 when p lies strictly inside the circle with diameter
+ * ab, 0 on it, > 0 outside (p encroaches the segment ab when the sign is <= 0). */
+int qk__cdt_encroach(const double a[2], const double b[2], const double p[2]);
+
+/* Exact in-circle test: > 0 when d lies strictly inside the circle through a, b, c (a, b, c
+ * counter-clockwise), < 0 outside, 0 on it. */
+int qk__incircle(const double a[2], const double b[2], const double c[2], const double d[2]);
+
+#endif
