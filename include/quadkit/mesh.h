@@ -285,29 +285,29 @@ const qk_tree_t *qk_mesh_tree(const qk_mesh_t *mesh);
 
 /** Figures about a mesh and its generation. */
 typedef struct qk_mesh_stats {
-  uint64_t size;                /**< the domain side U */
-  size_t components;            /**< number of components */
-  size_t leaves_before_balance; /**< leaves of the subdivision */
-  size_t leaves;                /**< leaves after balancing */
-  size_t triangles;             /**< triangles kept */
-  size_t vertices;              /**< vertices used by them */
-  size_t steiner;               /**< Steiner points (square centres) used */
-  double min_angle_deg;         /**< smallest triangle angle */
-  double max_angle_deg;         /**< largest triangle angle */
-  double uniform_triangles;     /**< 2 U^2, the size of the uniform grid mesh */
-  qk_mesh_mode_t mode;          /**< the mesher that ran: QK_MESH_BOOK, _DYADIC or _GENERAL */
-  int lattice_exponent;         /**< f: lattice spacing 2^-f input units (0: the book's) */
-  double origin_x, origin_y;    /**< input coordinates of lattice point (0, 0) */
-  double proven_min_angle_deg;  /**< the proven lower bound on every angle (45) */
-  double proven_max_angle_deg;  /**< the proven upper bound on every angle (90) */
-  size_t exempt_angles;         /**< general mode: angles below the bound, all inside input
-                                     angles below 60 degrees */
+  uint64_t size;                   /**< the domain side U */
+  size_t components;               /**< number of components */
+  size_t leaves_before_balance;    /**< leaves of the subdivision */
+  size_t leaves;                   /**< leaves after balancing */
+  size_t triangles;                /**< triangles kept */
+  size_t vertices;                 /**< vertices used by them */
+  size_t steiner;                  /**< Steiner points (square centres) used */
+  double min_angle_deg;            /**< smallest triangle angle */
+  double max_angle_deg;            /**< largest triangle angle */
+  double uniform_triangles;        /**< 2 U^2, the size of the uniform grid mesh */
+  qk_mesh_mode_t mode;             /**< the mesher that ran: QK_MESH_BOOK, _DYADIC or _GENERAL */
+  int lattice_exponent;            /**< f: lattice spacing 2^-f input units (0: the book's) */
+  double origin_x, origin_y;       /**< input coordinates of lattice point (0, 0) */
+  double proven_min_angle_deg;     /**< the proven lower bound on every angle (45) */
+  double proven_max_angle_deg;     /**< the proven upper bound on every angle (90) */
+  size_t exempt_angles;            /**< general mode: angles below the bound, all inside input
+                                        angles below 60 degrees */
   double smallest_input_angle_deg; /**< general mode: the smallest angle between two input
                                         segments at a vertex (180 when none) */
-  double seconds_validate;      /**< checking the input */
-  double seconds_subdivide;     /**< step 1 */
-  double seconds_balance;       /**< step 2 */
-  double seconds_triangulate;   /**< step 3, components and holes included */
+  double seconds_validate;         /**< checking the input */
+  double seconds_subdivide;        /**< step 1 */
+  double seconds_balance;          /**< step 2 */
+  double seconds_triangulate;      /**< step 3, components and holes included */
 } qk_mesh_stats_t;
 
 /** Fill stats for a mesh. \param [in] mesh the mesh. \param [out] stats the figures. */
