@@ -185,6 +185,19 @@ static inline uint64_t equal_mask(const double *d2, uint32_t m, double v) {
   return mask;
 }
 
+/* Bit i set when d2[i] <= v, for the m <= 64 values of d2[]. */
+static inline uint64_t le_mask(const double *d2, uint32_t m, double v) {
+  uint64_t mask = 0;
+  uint32_t i = 0;
+#if defined(__SSE2__)
+  const __m128d vv = _mm_set1_pd(v);
+  for (; i + 1 < m; i += 2)
+    mask |= (uint64_t)_mm_movemask_pd(_mm_cmple_pd(_mm_loadu_pd(d2 + i), vv)) << i;
+#endif
+  for (; i < m; i++) mask |= (uint64_t)(d2[i] <= v) << i;
+  return mask;
+}
+
 /*
  * The k = 1 leaf scan, in two steps per chunk: the smallest squared distance (leaf_d2),
  * and only when it can beat or tie the best so far, the smallest id among the points at
@@ -213,8 +226,8 @@ static inline void scan_one(const qk_tree_t *t, qk_node_t leaf, double qx, doubl
 }
 
 /*
- * Offer a leaf's points to a sorted array of at most k: their squared distances first
- * (leaf_d2), then only those within the threshold go through the insertion.
+ * Offer a leaf's points to a sorted array of at most k. The insertion compares distances
+ * alone while they differ (one comparison per entry moved), then ids among equal ones.
  */
 static inline void scan_sorted(const qk_tree_t *t, qk_node_t leaf, double qx, double qy,
                                best_t *b) {
@@ -223,28 +236,22 @@ static inline void scan_sorted(const qk_tree_t *t, qk_node_t leaf, double qx, do
   const qk_id_t *pid = qk__tree_ids(t) + start;
   qk_neighbor_t *o = b->out;
   const size_t k = b->k;
-  double d2s[QK__SCAN_CHUNK];
-  for (uint32_t base = 0; base < count; base += QK__SCAN_CHUNK) {
-    const uint32_t m = count - base < QK__SCAN_CHUNK ? count - base : QK__SCAN_CHUNK;
-    if (leaf_d2(px + base, py + base, m, qx, qy, d2s) > b->thr) continue;
-    for (uint32_t i = 0; i < m; i++) {
-      const double d2 = d2s[i];
-      if (d2 > b->thr) continue;
-      const qk_id_t id = pid[base + i];
-      size_t pos;
-      if (b->n == k) {
-        if (!qk__nb_less(d2, id, o[k - 1].dist, o[k - 1].id)) continue;
-        pos = k - 1;
-      } else {
-        pos = b->n++;
-      }
-      while (pos > 0 && qk__nb_less(d2, id, o[pos - 1].dist, o[pos - 1].id)) {
-        o[pos] = o[pos - 1];
-        pos--;
-      }
-      o[pos] = (qk_neighbor_t){id, d2};
-      if (b->n == k) b->thr = o[k - 1].dist;
+  for (uint32_t i = 0; i < count; i++) {
+    const double dx = px[i] - qx, dy = py[i] - qy;
+    const double d2 = dx * dx + dy * dy;
+    if (d2 > b->thr) continue;
+    const qk_id_t id = pid[i];
+    qk_neighbor_t *at;
+    if (b->n == k) {
+      if (!qk__nb_less(d2, id, o[k - 1].dist, o[k - 1].id)) continue;
+      at = o + k - 1;
+    } else {
+      at = o + b->n++;
     }
+    for (; at > o && at[-1].dist > d2; at--) *at = at[-1];
+    for (; at > o && at[-1].dist == d2 && at[-1].id > id; at--) *at = at[-1];
+    *at = (qk_neighbor_t){id, d2};
+    if (b->n == k) b->thr = o[k - 1].dist;
   }
 }
 
