@@ -290,38 +290,6 @@ static QK__ALWAYS_INLINE void drain(const qk_tree_t *t, double qx, double qy, do
  * searched, nearest first, before the level above. A query outside the root starts with
  * the root on the stack.
  */
-/*
- * For k = 1: ask for the points of the leaf's siblings that lie so close to the query
- * that the search will likely have to scan them after the leaf, so that their cache
- * misses overlap the leaf's own instead of following them. "So close": nearer than about
- * 1.4 times the expected nearest-neighbour distance in the leaf (half its side over the
- * square root of its count), since the best found in the leaf alone is usually farther. The sibling
- * nodes share the leaf's block of four, already read. A hint only: the search is the same whatever
- * it fetches.
- */
-static inline void prefetch_near_siblings(const qk_tree_t *t, const qk__path_t *p, double qx,
-                                          double qy) {
-  const qk__cell_t par = p->cell[p->len - 1];
-  const uint32_t first = qk__node_child(t, par.node);
-  const double h = qk__tree_side(t, par.depth + 1);
-  const double xm = par.x + h, ym = par.y + h;
-  const double gx = qx > xm ? qx - xm : xm - qx, gy = qy > ym ? qy - ym : ym - qy;
-  const double reach2 = 0.5 * h * h / (double)(qk__node_count(t, p->leaf.node) + 1);
-  const unsigned own = p->q[p->len - 1];
-  /* The sibling across the vertical midline, across the horizontal one, and diagonal. */
-  const unsigned across_x = own ^ 1u, across_y = 3u - own, diag = own ^ 2u;
-  const double *xs = qk__tree_xs(t), *ys = qk__tree_ys(t);
-  const unsigned near[3] = {across_x, across_y, diag};
-  const double g2[3] = {gx * gx, gy * gy, gx * gx + gy * gy};
-  for (int i = 0; i < 3; i++) {
-    const qk_node_t v = first + near[i];
-    if (g2[i] >= reach2 || !qk__node_leaf(t, v) || qk__node_count(t, v) == 0) continue;
-    const uint32_t s = qk__node_start(t, v);
-    QK__PREFETCH(xs + s);
-    QK__PREFETCH(ys + s);
-  }
-}
-
 /* Scan the leaf at the end of a path, then climb it: each level's other children are
  * bounded from the path's square and searched, nearest first, before the level above. */
 static QK__ALWAYS_INLINE void climb(const qk_tree_t *t, double qx, double qy, best_t *b, int kind,
@@ -331,7 +299,6 @@ static QK__ALWAYS_INLINE void climb(const qk_tree_t *t, double qx, double qy, be
   int sp = 0;
   qk__cell_t c = p->leaf;
   unsigned len = p->len;
-  if (kind == KIND_ONE && len > 0) prefetch_near_siblings(t, p, qx, qy);
   scan(t, c.node, qx, qy, b, kind);
   while (len > 0) {
     /* Everything inside c is done. When the threshold's ball lies inside c's square
