@@ -399,12 +399,6 @@ void qk__walk_lanes(const qk_tree_t *t, const qk_point_t *qs, const uint32_t *or
   }
 }
 
-qk_status_t qk__knn_check(qk_point_t q, double max_dist) {
-  if (!isfinite(q.x) || !isfinite(q.y)) return QK_ERR_NONFINITE;
-  if (isnan(max_dist) || max_dist < 0) return QK_ERR_INVALID;
-  return QK_OK;
-}
-
 /* One query into out (k entries); returns the count. */
 size_t qk__knn_one(const qk_tree_t *t, qk_point_t q, size_t k, double max_dist, qk_neighbor_t *out,
                    const qk__path_t *path) {
@@ -424,6 +418,13 @@ qk_status_t qk_query_knn(const qk_tree_t *tree, qk_point_t q, size_t k, double m
   *n_out = 0;
   qk_status_t st = qk__knn_check(q, max_dist);
   if (st != QK_OK) return st;
+  if (k == 1 && qk__tree_count(tree) > 0) {
+    /* The common case straight to its search. */
+    const size_t n = knn1(tree, q.x, q.y, max_dist * max_dist, out, NULL);
+    if (n) out[0].dist = sqrt(out[0].dist);
+    *n_out = n;
+    return QK_OK;
+  }
   *n_out = qk__knn_one(tree, q, k, max_dist, out, NULL);
   return QK_OK;
 }

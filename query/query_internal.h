@@ -279,7 +279,11 @@ void qk__walk_lanes(const qk_tree_t *t, const qk_point_t *qs, const uint32_t *or
 size_t qk__knn_one(const qk_tree_t *t, qk_point_t q, size_t k, double max_dist, qk_neighbor_t *out,
                    const qk__path_t *path);
 /* QK_OK, or why a kNN query cannot be answered. */
-qk_status_t qk__knn_check(qk_point_t q, double max_dist);
+static inline qk_status_t qk__knn_check(qk_point_t q, double max_dist) {
+  if (!isfinite(q.x) || !isfinite(q.y)) return QK_ERR_NONFINITE;
+  if (isnan(max_dist) || max_dist < 0) return QK_ERR_INVALID;
+  return QK_OK;
+}
 
 /* Radius batches (query/range.c does one share, query/batch.c spreads the shares). */
 qk_status_t qk__radius_range(const qk_tree_t *t, const qk_point_t *centres, size_t lo, size_t hi,
