@@ -831,21 +831,26 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
       unsigned keep = quad_slab(q, &ray, tmax, ts, best, lo4);
       /* Far quadrant first, so the one the ray enters first is popped first: the
        * quadrants' order along the direction, which the item boxes mostly follow (the
-       * bound on each entry keeps the pruning exact whatever the order). Each stacked
-       * child's memory is asked for now, so that its misses overlap this one's work. */
+       * bound on each entry keeps the pruning exact whatever the order). The nearest
+       * kept child, just checked against best, is not stacked but taken straight away;
+       * each stacked one's memory is asked for now, so that its misses overlap the work
+       * on the nearest. */
+      int take = -1;
       for (int i = 0; i < 4; i++) {
-        uint32_t k = order[i];
+        const uint32_t k = order[i];
         if (!(keep >> k & 1)) continue;
-        const uint32_t nx = q->next[k], st = q->start[k];
-        stack[sp++] = (rentry_t){nx, st, q->count[k], lo4[k] - ts};
-        if (nx != QK_NONE)
-          QK__CPREFETCH(&quads[nx]);
-        else if (all_discs)
-          QK__CPREFETCH(&c->sdisc[st]);
+        if (take >= 0) {
+          const uint32_t nx = q->next[take], st = q->start[take];
+          stack[sp++] = (rentry_t){nx, st, q->count[take], lo4[take] - ts};
+          if (nx != QK_NONE)
+            QK__CPREFETCH(&quads[nx]);
+          else if (all_discs)
+            QK__CPREFETCH(&c->sdisc[st]);
+        }
+        take = (int)k;
       }
-      /* The nearest kept child, just checked against best, is taken straight away. */
-      if (keep) {
-        cur = stack[--sp];
+      if (take >= 0) {
+        cur = (rentry_t){q->next[take], q->start[take], q->count[take], 0.0};
         continue;
       }
     } else {
