@@ -32,12 +32,19 @@ typedef struct cnode {
 } cnode_t;
 
 /*
- * The boxes of an internal node's four children side by side (structure of arrays, as a
- * BVH4 stores them), the same outward-rounded floats as their cnode_t: one 64-byte line
- * from which the ray cast tests all four children at once.
+ * An internal node for the ray cast, as a BVH4 stores it: the boxes of its four children
+ * side by side (structure of arrays; the same outward-rounded floats as their cnode_t)
+ * in one 64-byte line, and in the next line where each child leads: its own entry here
+ * when internal, else its items. A ray then reads two adjacent lines per node and nothing
+ * else until the leaves (the cnode_t array is for the other searches); a node and its
+ * children's links arrive together instead of one after the other.
  */
 typedef struct cquad {
-  float v[16]; /* xmin at QX0 + k, ymin at QY0 + k, xmax at QX1 + k, ymax at QY1 + k */
+  float v[16];       /* xmin at QX0 + k, ymin at QY0 + k, xmax at QX1 + k, ymax at QY1 + k */
+  uint32_t next[4];  /* child k's entry in quads, or QK_NONE for a leaf */
+  uint32_t start[4]; /* a leaf child's first slot */
+  uint32_t count[4]; /* a leaf child's number of items */
+  uint32_t pad_[4];
 } cquad_t;
 
 enum { QX0 = 0, QY0 = 4, QX1 = 8, QY1 = 12 };
@@ -58,7 +65,7 @@ struct qk_collider {
   void *cn_block;   /* the allocation holding cn (aligned inside it) */
   size_t cn_bytes;
   size_t n_nodes;
-  cquad_t *quads;    /* per internal node (cnode_t::quad), 64-byte aligned */
+  cquad_t *quads;    /* per internal node (cnode_t::quad), 128-byte aligned */
   void *quads_block; /* the allocation holding quads */
   size_t quads_bytes;
   uint32_t n_quads; /* entries filled */
@@ -161,6 +168,10 @@ static qk_box_t fill_node_boxes(qk_collider_t *c, uint32_t node) {
     cquad_t *q = &c->quads[cn->quad = c->n_quads++];
     for (uint32_t k = 0; k < 4; k++) {
       const cnode_t *ch = &c->cn[cn->child + k];
+      q->next[k] = ch->quad;
+      q->start[k] = ch->start;
+      q->count[k] = ch->count;
+      q->pad_[k] = 0;
       q->v[QX0 + k] = ch->xmin;
       q->v[QY0 + k] = ch->ymin;
       q->v[QX1 + k] = ch->xmax;
@@ -257,9 +268,11 @@ static qk_status_t alloc_arrays(qk_collider_t *c) {
   c->cn_block = qk__realloc(a, NULL, 0, c->cn_bytes);
   if (c->cn_block) c->cn = (cnode_t *)(((uintptr_t)c->cn_block + 63) & ~(uintptr_t)63) + 3;
   /* Every internal node has four children, so there are at most n_nodes / 4 of them. */
-  c->quads_bytes = (c->n_nodes / 4 + 1) * sizeof(cquad_t) + 64;
+  /* Aligned to 128 bytes: the pair of lines of an entry is the pair that adjacent-line
+   * prefetchers fetch together. */
+  c->quads_bytes = (c->n_nodes / 4 + 1) * sizeof(cquad_t) + 128;
   c->quads_block = qk__realloc(a, NULL, 0, c->quads_bytes);
-  if (c->quads_block) c->quads = (cquad_t *)(((uintptr_t)c->quads_block + 63) & ~(uintptr_t)63);
+  if (c->quads_block) c->quads = (cquad_t *)(((uintptr_t)c->quads_block + 127) & ~(uintptr_t)127);
   if (!c->sbox || (c->n_discs && !c->sdisc) || !c->cn_block || !c->quads_block) return QK_ERR_NOMEM;
   return QK_OK;
 }
@@ -530,6 +543,19 @@ typedef struct ray {
 #endif
 } ray_t;
 
+/* A stacked node of the ray cast: an entry of quads, or (quad QK_NONE) a leaf's slot
+ * range, with the lower bound on t that let it in. */
+typedef struct rentry {
+  uint32_t quad, start, count;
+  double bound;
+} rentry_t;
+
+#if defined(__GNUC__)
+#define QK__CPREFETCH(p) __builtin_prefetch(p)
+#else
+#define QK__CPREFETCH(p) ((void)(p))
+#endif
+
 /* One axis of the slab test: narrow [*lo, *hi] to where o + t d lies in [min, max]. */
 static inline int slab_axis(double min, double max, double o, double d, double inv, int mul,
                             double *lo, double *hi) {
@@ -764,7 +790,7 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
   double ts = dn > 0 ? (fabs(o.x) + fabs(o.y) + 2 * c->mag) * 0x1p-40 / dn : 0.0;
   double best = INFINITY;
   qk_id_t best_id = QK_NONE;
-  qk__centry_t stack[QK__CSTACK_MAX];
+  rentry_t stack[QK__CSTACK_MAX];
   int sp = 0;
   double lo, hi;
   const int all_discs = c->n_discs == c->n, no_discs = c->n_discs == 0;
@@ -793,32 +819,45 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
   if (!slab(root->xmin, root->ymin, root->xmax, root->ymax, &ray, 0, tmax, &lo, &hi) ||
       lo > hi + ts)
     return QK_OK;
-  uint32_t cur = 0;
+  /* The node in hand: an entry of quads, or (quad QK_NONE) a leaf's slot range. */
+  rentry_t cur = {root->quad, root->start, root->count, 0.0};
+  const cquad_t *quads = c->quads;
   for (;;) {
-    const cnode_t *n = &c->cn[cur];
-    if (n->child != QK_NONE) {
-      /* All four children's boxes from one line, only the kept ones stacked. */
+    if (cur.quad != QK_NONE) {
+      /* All four children's boxes from one line, their links from the next; only the
+       * kept ones stacked. */
+      const cquad_t *q = &quads[cur.quad];
       double lo4[4];
-      unsigned keep = quad_slab(&c->quads[n->quad], &ray, tmax, ts, best, lo4);
+      unsigned keep = quad_slab(q, &ray, tmax, ts, best, lo4);
       /* Far quadrant first, so the one the ray enters first is popped first: the
        * quadrants' order along the direction, which the item boxes mostly follow (the
-       * bound on each entry keeps the pruning exact whatever the order). */
+       * bound on each entry keeps the pruning exact whatever the order). The nearest
+       * kept child, just checked against best, is not stacked but taken straight away;
+       * each stacked one's memory is asked for now, so that its misses overlap the work
+       * on the nearest. */
+      int take = -1;
       for (int i = 0; i < 4; i++) {
-        uint32_t k = order[i];
+        const uint32_t k = order[i];
         if (!(keep >> k & 1)) continue;
-        stack[sp].node = n->child + k;
-        stack[sp++].bound = lo4[k] - ts;
+        if (take >= 0) {
+          const uint32_t nx = q->next[take], st = q->start[take];
+          stack[sp++] = (rentry_t){nx, st, q->count[take], lo4[take] - ts};
+          if (nx != QK_NONE)
+            QK__CPREFETCH(&quads[nx]);
+          else if (all_discs)
+            QK__CPREFETCH(&c->sdisc[st]);
+        }
+        take = (int)k;
       }
-      /* The nearest kept child, just checked against best, is taken straight away. */
-      if (keep) {
-        cur = stack[--sp].node;
+      if (take >= 0) {
+        cur = (rentry_t){q->next[take], q->start[take], q->count[take], 0.0};
         continue;
       }
     } else {
       /* Ids are read only for hits (and for the kind in mixed sets): the id array is
        * one more cache miss per leaf otherwise. */
-      uint32_t slot = n->start;
-      const uint32_t end = n->start + n->count;
+      uint32_t slot = cur.start;
+      const uint32_t end = cur.start + cur.count;
 #if defined(__SSE2__)
       /* Discs two at a time, with the same operations as ray_disc() lane by lane (so
        * the same t to the last bit); only lanes that could be a new best go on. */
@@ -853,7 +892,7 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
      * (the bound it was stacked with, re-checked: best may have come closer since). */
     while (sp > 0 && stack[sp - 1].bound > best) sp--;
     if (sp == 0) break;
-    cur = stack[--sp].node;
+    cur = stack[--sp];
   }
   hit->id = best_id;
   hit->t = best_id == QK_NONE ? INFINITY : best;

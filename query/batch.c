@@ -1,7 +1,8 @@
 /*
  * Batch queries: many queries in one call, answered in Z-order of their locations (so
- * that consecutive searches reuse the cache), the descents of the next QK__LANES queries
- * walked in lockstep first (so that their cache misses overlap), and the queries spread
+ * that consecutive searches reuse the cache and most of one another's descent; point
+ * location also walks the descents of the next QK__LANES queries in lockstep, so that
+ * their cache misses overlap), and the queries spread
  * over the tree's threads in contiguous runs of that order. Every query writes only its
  * own outputs, so the results are those of one thread; a failed query is reported by the
  * lowest index, whatever thread met it.
@@ -28,18 +29,23 @@ static void knn_share(void *ctx, unsigned w, unsigned nw) {
   size_t lo, hi;
   qk__share_range(j->nq, w, nw, &lo, &hi);
   qk__first_err_t e = {QK_OK, SIZE_MAX};
-  qk__path_t paths[QK__LANES];
+  /* One path, carried from query to query: in Z-order each shares most of it with the
+   * one before (qk__path_reuse), so only the last levels are descended again. */
+  qk__path_t path;
+  qk__path_init(j->t, &path);
   for (size_t jj = lo; jj < hi; jj++) {
-    if ((jj - lo) % QK__LANES == 0) qk__walk_lanes(j->t, j->qs, j->order, jj, hi, paths);
-    const qk__path_t *path = &paths[(jj - lo) % QK__LANES];
     size_t i = j->order ? j->order[jj] : jj;
+    const qk_point_t q = j->qs[i];
     qk_neighbor_t *o = j->out ? j->out + i * j->k : NULL;
     size_t n = 0;
-    qk_status_t st = qk__knn_check(j->qs[i], j->max_dist);
-    if (st == QK_OK)
-      n = qk__knn_one(j->t, j->qs[i], j->k, j->max_dist, o, path->valid ? path : NULL);
-    else
+    qk_status_t st = qk__knn_check(q, j->max_dist);
+    if (st == QK_OK) {
+      const int inside = qk__tree_contains(j->t, q.x, q.y);
+      if (inside) qk__path_reuse(j->t, &path, q.x, q.y);
+      n = qk__knn_one(j->t, q, j->k, j->max_dist, o, inside ? &path : NULL);
+    } else {
       qk__note_err(&e, st, i);
+    }
     for (size_t m = n; m < j->k; m++) o[m] = (qk_neighbor_t){QK_NONE, INFINITY};
     if (j->counts) j->counts[i] = n;
   }

@@ -15,6 +15,10 @@
  */
 #include "query/query_internal.h"
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 /* Largest k kept as a sorted array rather than a heap. */
 #define QK__KNN_SORTED 32
 
@@ -25,35 +29,6 @@ typedef struct best {
   double thr;  /* prune strictly above this: the cap until full, then the k-th best */
   qk_id_t one; /* k = 1: the best id so far (its squared distance is thr), or QK_NONE */
 } best_t;
-
-/* Offer a leaf's points to a sorted array of at most k. */
-static inline void scan_sorted(const qk_tree_t *t, qk_node_t leaf, double qx, double qy,
-                               best_t *b) {
-  const uint32_t start = qk__node_start(t, leaf), count = qk__node_count(t, leaf);
-  const double *px = qk__tree_xs(t) + start, *py = qk__tree_ys(t) + start;
-  const qk_id_t *pid = qk__tree_ids(t) + start;
-  qk_neighbor_t *o = b->out;
-  const size_t k = b->k;
-  for (uint32_t i = 0; i < count; i++) {
-    double dx = px[i] - qx, dy = py[i] - qy;
-    double d2 = dx * dx + dy * dy;
-    if (d2 > b->thr) continue;
-    qk_id_t id = pid[i];
-    size_t pos;
-    if (b->n == k) {
-      if (!qk__nb_less(d2, id, o[k - 1].dist, o[k - 1].id)) continue;
-      pos = k - 1;
-    } else {
-      pos = b->n++;
-    }
-    while (pos > 0 && qk__nb_less(d2, id, o[pos - 1].dist, o[pos - 1].id)) {
-      o[pos] = o[pos - 1];
-      pos--;
-    }
-    o[pos] = (qk_neighbor_t){id, d2};
-    if (b->n == k) b->thr = o[k - 1].dist;
-  }
-}
 
 /* Offer a leaf's points to a heap of at most k. */
 static inline void scan_heap(const qk_tree_t *t, qk_node_t leaf, double qx, double qy, best_t *b) {
@@ -138,8 +113,8 @@ static inline void push_siblings(const qk_tree_t *t, qk__cell_t p, uint32_t chil
  */
 static inline bool ball_inside(double qx, double qy, double x0, double y0, double side, double e,
                                double thr) {
-  double g =
-      fmin(fmin(qx - (x0 + e), (x0 + side - e) - qx), fmin(qy - (y0 + e), (y0 + side - e) - qy));
+  double g = qk__min_d(qk__min_d(qx - (x0 + e), (x0 + side - e) - qx),
+                       qk__min_d(qy - (y0 + e), (y0 + side - e) - qy));
   return g > 0 && g * g > thr;
 }
 
@@ -153,30 +128,142 @@ enum { KIND_ONE, KIND_SORTED, KIND_HEAP };
 #define QK__ALWAYS_INLINE inline
 #endif
 
+/* Points whose squared distances one pass of the leaf scans computes into a buffer. */
+#define QK__SCAN_CHUNK 64
+
+/*
+ * Squared distances from (qx, qy) to the m points (xs[i], ys[i]) into d2[], two at a
+ * time where SSE2 is there (the same IEEE operations lane by lane as the scalar tail, so
+ * the same values), and the smallest of them. No branch depends on the data, so the loads
+ * of a leaf's lines all go out at once and the loop costs a few instructions per point.
+ */
+static inline double leaf_d2(const double *xs, const double *ys, uint32_t m, double qx, double qy,
+                             double *d2) {
+  uint32_t i = 0;
+  double lo = INFINITY;
+#if defined(__SSE2__)
+  const __m128d vx = _mm_set1_pd(qx), vy = _mm_set1_pd(qy);
+  __m128d vlo = _mm_set1_pd(INFINITY);
+  for (; i + 1 < m; i += 2) {
+    const __m128d dx = _mm_sub_pd(_mm_loadu_pd(xs + i), vx);
+    const __m128d dy = _mm_sub_pd(_mm_loadu_pd(ys + i), vy);
+    const __m128d d = _mm_add_pd(_mm_mul_pd(dx, dx), _mm_mul_pd(dy, dy));
+    _mm_storeu_pd(d2 + i, d);
+    vlo = _mm_min_pd(vlo, d);
+  }
+  lo = qk__min_d(_mm_cvtsd_f64(vlo), _mm_cvtsd_f64(_mm_unpackhi_pd(vlo, vlo)));
+#endif
+  for (; i < m; i++) {
+    const double dx = xs[i] - qx, dy = ys[i] - qy;
+    d2[i] = dx * dx + dy * dy;
+    lo = qk__min_d(lo, d2[i]);
+  }
+  return lo;
+}
+
+/* Index of the lowest set bit of a nonzero v. */
+static inline uint32_t ctz64(uint64_t v) {
+#if defined(__GNUC__)
+  return (uint32_t)__builtin_ctzll(v);
+#else
+  uint32_t i = 0;
+  while (!(v >> i & 1)) i++;
+  return i;
+#endif
+}
+
+/* Bit i set when d2[i] == v, for the m <= 64 values of d2[] (usually one bit). */
+static inline uint64_t equal_mask(const double *d2, uint32_t m, double v) {
+  uint64_t mask = 0;
+  uint32_t i = 0;
+#if defined(__SSE2__)
+  const __m128d vv = _mm_set1_pd(v);
+  for (; i + 1 < m; i += 2)
+    mask |= (uint64_t)_mm_movemask_pd(_mm_cmpeq_pd(_mm_loadu_pd(d2 + i), vv)) << i;
+#endif
+  for (; i < m; i++) mask |= (uint64_t)(d2[i] == v) << i;
+  return mask;
+}
+
+/* Bit i set when d2[i] <= v, for the m <= 64 values of d2[]. */
+static inline uint64_t le_mask(const double *d2, uint32_t m, double v) {
+  uint64_t mask = 0;
+  uint32_t i = 0;
+#if defined(__SSE2__)
+  const __m128d vv = _mm_set1_pd(v);
+  for (; i + 1 < m; i += 2)
+    mask |= (uint64_t)_mm_movemask_pd(_mm_cmple_pd(_mm_loadu_pd(d2 + i), vv)) << i;
+#endif
+  for (; i < m; i++) mask |= (uint64_t)(d2[i] <= v) << i;
+  return mask;
+}
+
+/*
+ * The k = 1 leaf scan, in two steps per chunk: the smallest squared distance (leaf_d2),
+ * and only when it can beat or tie the best so far, the smallest id among the points at
+ * exactly that distance. The result is that of offering every point in turn with the
+ * (distance, id) order, which is what the other scans do.
+ */
+static inline void scan_one(const qk_tree_t *t, qk_node_t leaf, double qx, double qy, best_t *b) {
+  const uint32_t start = qk__node_start(t, leaf), count = qk__node_count(t, leaf);
+  const double *xs = qk__tree_xs(t) + start, *ys = qk__tree_ys(t) + start;
+  const qk_id_t *ids = qk__tree_ids(t) + start;
+  double d2[QK__SCAN_CHUNK];
+  for (uint32_t base = 0; base < count; base += QK__SCAN_CHUNK) {
+    const uint32_t m = count - base < QK__SCAN_CHUNK ? count - base : QK__SCAN_CHUNK;
+    const double lo = leaf_d2(xs + base, ys + base, m, qx, qy, d2);
+    if (lo > b->thr) continue;
+    qk_id_t id = QK_NONE;
+    for (uint64_t at = equal_mask(d2, m, lo); at; at &= at - 1) {
+      const qk_id_t v = ids[base + ctz64(at)];
+      if (v < id) id = v;
+    }
+    if (lo < b->thr || id < b->one) {
+      b->thr = lo;
+      b->one = id;
+    }
+  }
+}
+
+/*
+ * Offer a leaf's points to a sorted array of at most k. The insertion compares distances
+ * alone while they differ (one comparison per entry moved), then ids among equal ones.
+ */
+static inline void scan_sorted(const qk_tree_t *t, qk_node_t leaf, double qx, double qy,
+                               best_t *b) {
+  const uint32_t start = qk__node_start(t, leaf), count = qk__node_count(t, leaf);
+  const double *px = qk__tree_xs(t) + start, *py = qk__tree_ys(t) + start;
+  const qk_id_t *pid = qk__tree_ids(t) + start;
+  qk_neighbor_t *o = b->out;
+  const size_t k = b->k;
+  for (uint32_t i = 0; i < count; i++) {
+    const double dx = px[i] - qx, dy = py[i] - qy;
+    const double d2 = dx * dx + dy * dy;
+    if (d2 > b->thr) continue;
+    const qk_id_t id = pid[i];
+    qk_neighbor_t *at;
+    if (b->n == k) {
+      if (!qk__nb_less(d2, id, o[k - 1].dist, o[k - 1].id)) continue;
+      at = o + k - 1;
+    } else {
+      at = o + b->n++;
+    }
+    for (; at > o && at[-1].dist > d2; at--) *at = at[-1];
+    for (; at > o && at[-1].dist == d2 && at[-1].id > id; at--) *at = at[-1];
+    *at = (qk_neighbor_t){id, d2};
+    if (b->n == k) b->thr = o[k - 1].dist;
+  }
+}
+
 /* Scan a leaf into the best-so-far set. For KIND_ONE, the best is (b->thr, b->one). */
 static QK__ALWAYS_INLINE void scan(const qk_tree_t *t, qk_node_t leaf, double qx, double qy,
                                    best_t *b, int kind) {
-  if (kind == KIND_SORTED) {
+  if (kind == KIND_SORTED)
     scan_sorted(t, leaf, qx, qy, b);
-  } else if (kind == KIND_HEAP) {
+  else if (kind == KIND_HEAP)
     scan_heap(t, leaf, qx, qy, b);
-  } else {
-    const uint32_t start = qk__node_start(t, leaf), end = start + qk__node_count(t, leaf);
-    const double *xs = qk__tree_xs(t), *ys = qk__tree_ys(t);
-    const qk_id_t *ids = qk__tree_ids(t);
-    double best = b->thr;
-    qk_id_t one = b->one;
-    for (uint32_t i = start; i < end; i++) {
-      double dx = xs[i] - qx, dy = ys[i] - qy;
-      double d2 = dx * dx + dy * dy;
-      if (d2 < best || (d2 == best && ids[i] < one)) {
-        best = d2;
-        one = ids[i];
-      }
-    }
-    b->thr = best;
-    b->one = one;
-  }
+  else
+    scan_one(t, leaf, qx, qy, b);
 }
 
 /* Depth-first search of everything on the stack: pop, descend nearest-first, scan. */
@@ -248,8 +335,7 @@ static QK__ALWAYS_INLINE void search(const qk_tree_t *t, double qx, double qy, b
   }
   qk__path_t p;
   qk__path_init(t, &p);
-  while (qk__path_step(t, &p, qx, qy)) {
-  }
+  qk__path_finish(t, &p, qx, qy);
   climb(t, qx, qy, b, kind, &p);
 }
 
@@ -313,12 +399,6 @@ void qk__walk_lanes(const qk_tree_t *t, const qk_point_t *qs, const uint32_t *or
   }
 }
 
-qk_status_t qk__knn_check(qk_point_t q, double max_dist) {
-  if (!isfinite(q.x) || !isfinite(q.y)) return QK_ERR_NONFINITE;
-  if (isnan(max_dist) || max_dist < 0) return QK_ERR_INVALID;
-  return QK_OK;
-}
-
 /* One query into out (k entries); returns the count. */
 size_t qk__knn_one(const qk_tree_t *t, qk_point_t q, size_t k, double max_dist, qk_neighbor_t *out,
                    const qk__path_t *path) {
@@ -338,6 +418,13 @@ qk_status_t qk_query_knn(const qk_tree_t *tree, qk_point_t q, size_t k, double m
   *n_out = 0;
   qk_status_t st = qk__knn_check(q, max_dist);
   if (st != QK_OK) return st;
+  if (k == 1 && qk__tree_count(tree) > 0) {
+    /* The common case straight to its search. */
+    const size_t n = knn1(tree, q.x, q.y, max_dist * max_dist, out, NULL);
+    if (n) out[0].dist = sqrt(out[0].dist);
+    *n_out = n;
+    return QK_OK;
+  }
   *n_out = qk__knn_one(tree, q, k, max_dist, out, NULL);
   return QK_OK;
 }

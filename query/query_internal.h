@@ -8,6 +8,10 @@
 
 #include <math.h>
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 #include "index/index_access.h"
 #include "quadkit/query.h"
 
@@ -89,6 +93,10 @@ static inline double qk__gap(double v, double lo, double hi) {
   return v < lo ? lo - v : (v > hi ? v - hi : 0.0);
 }
 
+/* The smaller of two values known not to be NaN (a single instruction, where fmin() is
+ * a library call). */
+static inline double qk__min_d(double a, double b) { return a < b ? a : b; }
+
 /* (d, id) ordering of neighbours: by distance, ties by smaller id. */
 static inline int qk__nb_less(double da, qk_id_t ia, double db, qk_id_t ib) {
   return da < db || (da == db && ia < ib);
@@ -144,6 +152,10 @@ void qk__morton_free(const qk_tree_t *t, void *block, size_t nq);
 typedef struct qk__path {
   qk__cell_t cell[QK_MAX_DEPTH_LIMIT + 1];
   unsigned char q[QK_MAX_DEPTH_LIMIT + 1];
+#if defined(__SSE2__)
+  __m128d mid[QK_MAX_DEPTH_LIMIT + 1];      /* each level's midlines (x, y), for qk__path_reuse */
+  unsigned char go[QK_MAX_DEPTH_LIMIT + 1]; /* east (bit 0) and north (bit 1) taken there */
+#endif
   unsigned len;
   qk__cell_t leaf;
   int valid; /* for a batch: the query was finite and inside the root */
@@ -168,6 +180,95 @@ static inline int qk__path_step(const qk_tree_t *t, qk__path_t *p, double qx, do
   return 1;
 }
 
+/*
+ * The rest of a descent towards (qx, qy) from p->leaf down to the leaf, in one loop that
+ * keeps the cell in registers: the same decisions and squares as qk__path_step() (east
+ * when qx > x + h, the child's corner moved by h), so the same path.
+ */
+static inline void qk__path_finish(const qk_tree_t *t, qk__path_t *p, double qx, double qy) {
+  uint32_t node = p->leaf.node, depth = p->leaf.depth;
+  unsigned len = p->len;
+#if defined(__SSE2__)
+  /* The corner (x, y) in one register: both midlines, both decisions and both moves at
+   * once; bit 0 of the mask is east, bit 1 north. */
+  static const unsigned char quad[4] = {QK_SW, QK_SE, QK_NW, QK_NE};
+  const __m128d vq = _mm_set_pd(qy, qx);
+  __m128d v = _mm_set_pd(p->leaf.y, p->leaf.x);
+  for (uint32_t child = qk__node_child(t, node); child != QK_NONE;
+       child = qk__node_child(t, node)) {
+    const __m128d vm = _mm_add_pd(v, _mm_set1_pd(qk__tree_side(t, depth + 1)));
+    const __m128d go = _mm_cmplt_pd(vm, vq); /* qx > xm, qy > ym */
+    const int bits = _mm_movemask_pd(go);
+    p->mid[len] = vm;
+    p->go[len] = (unsigned char)bits;
+    const unsigned q = quad[bits];
+    qk__cell_t *c = &p->cell[len];
+    c->node = node;
+    c->depth = depth;
+    _mm_storel_pd(&c->x, v);
+    _mm_storeh_pd(&c->y, v);
+    p->q[len++] = (unsigned char)q;
+    node = child + q;
+    depth++;
+    v = _mm_or_pd(_mm_and_pd(go, vm), _mm_andnot_pd(go, v));
+  }
+  p->leaf.node = node;
+  p->leaf.depth = depth;
+  _mm_storel_pd(&p->leaf.x, v);
+  _mm_storeh_pd(&p->leaf.y, v);
+#else
+  static const unsigned char quad[2][2] = {{QK_SW, QK_NW}, {QK_SE, QK_NE}}; /* [east][north] */
+  double x = p->leaf.x, y = p->leaf.y;
+  for (uint32_t child = qk__node_child(t, node); child != QK_NONE;
+       child = qk__node_child(t, node)) {
+    const double h = qk__tree_side(t, depth + 1);
+    const double xm = x + h, ym = y + h;
+    const unsigned east = qx > xm, north = qy > ym;
+    const unsigned q = quad[east][north];
+    p->cell[len] = (qk__cell_t){node, depth, x, y};
+    p->q[len++] = (unsigned char)q;
+    node = child + q;
+    depth++;
+    x = east ? xm : x;
+    y = north ? ym : y;
+  }
+  p->leaf = (qk__cell_t){node, depth, x, y};
+#endif
+  p->len = len;
+}
+
+/*
+ * Make p, the path of an earlier query in the same unchanged tree, the path of (qx, qy):
+ * keep its levels from the root for as long as the new query takes the same quadrants
+ * (decided with the same arithmetic as a descent), then descend afresh from there. For
+ * queries in Z-order most of the path is shared, and its nodes need not be read again.
+ */
+static inline void qk__path_reuse(const qk_tree_t *t, qk__path_t *p, double qx, double qy) {
+#if defined(__SSE2__)
+  /* The midlines kept by the descent: one comparison of both per level. */
+  const __m128d vq = _mm_set_pd(qy, qx);
+  for (unsigned i = 0; i < p->len; i++) {
+    if (_mm_movemask_pd(_mm_cmplt_pd(p->mid[i], vq)) != p->go[i]) {
+      p->len = i;
+      p->leaf = p->cell[i];
+      break;
+    }
+  }
+#else
+  static const unsigned char quad[2][2] = {{QK_SW, QK_NW}, {QK_SE, QK_NE}};
+  for (unsigned i = 0; i < p->len; i++) {
+    const qk__cell_t c = p->cell[i];
+    const double h = qk__tree_side(t, c.depth + 1);
+    if (quad[qx > c.x + h][qy > c.y + h] != p->q[i]) {
+      p->len = i;
+      p->leaf = c;
+      break;
+    }
+  }
+#endif
+  qk__path_finish(t, p, qx, qy);
+}
+
 /* Walk the paths of the queries order[j0 .. min(j1, j0 + QK__LANES)) in lockstep into
  * paths[0 ..) (query/knn.c). */
 void qk__walk_lanes(const qk_tree_t *t, const qk_point_t *qs, const uint32_t *order, size_t j0,
@@ -178,7 +279,11 @@ void qk__walk_lanes(const qk_tree_t *t, const qk_point_t *qs, const uint32_t *or
 size_t qk__knn_one(const qk_tree_t *t, qk_point_t q, size_t k, double max_dist, qk_neighbor_t *out,
                    const qk__path_t *path);
 /* QK_OK, or why a kNN query cannot be answered. */
-qk_status_t qk__knn_check(qk_point_t q, double max_dist);
+static inline qk_status_t qk__knn_check(qk_point_t q, double max_dist) {
+  if (!isfinite(q.x) || !isfinite(q.y)) return QK_ERR_NONFINITE;
+  if (isnan(max_dist) || max_dist < 0) return QK_ERR_INVALID;
+  return QK_OK;
+}
 
 /* Radius batches (query/range.c does one share, query/batch.c spreads the shares). */
 qk_status_t qk__radius_range(const qk_tree_t *t, const qk_point_t *centres, size_t lo, size_t hi,

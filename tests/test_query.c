@@ -5,6 +5,10 @@
  *    and outside the root square, empty, inverted and infinite boxes, radius 0;
  *  - kNN against brute force for k from 1 to n on small sets and a spread of k on large
  *    ones, with and without a distance cap, ties broken by id (duplicates, grid points);
+ *  - kNN on leaves far over capacity (several scan chunks, many equal distances), k
+ *    around the sorted-array limit, single and batch;
+ *  - batch kNN (Z-order, each query starting from the previous path) on every point set
+ *    and capacity, one and two threads, against brute force;
  *  - kNN after random inserts and removals (qk_tree_check after each batch);
  *  - point location: every stored point is located in the leaf that holds it, random
  *    locations land in a leaf whose half-open square contains them, outside/NaN fail;
@@ -491,6 +495,96 @@ static void test_query_threads(void **state) {
   free(p), free(qs), free(expect), free(er);
 }
 
+/*
+ * Leaves far over capacity (a shallow depth cap over clumps of equal points), so that the
+ * leaf scans work in several chunks and meet many exactly equal distances: kNN for k
+ * around the sorted-array limit (32) and beyond, single and batch, against brute force.
+ */
+static void test_query_knn_big_leaves(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 11);
+  const size_t n = 3000, nq = 300;
+  const size_t ks[] = {1, 2, 7, 31, 32, 33, 100};
+  qk_point_t *p = malloc(n * sizeof *p), *qs = malloc(nq * sizeof *qs);
+  for (size_t i = 0; i < n; i++) {
+    if (i % 3 == 0) {
+      p[i] = (qk_point_t){qkt_rng_unit(&r), qkt_rng_unit(&r)};
+    } else {
+      /* One of 9 clump centres, on the midlines of the first levels. */
+      size_t c = qkt_rng_below(&r, 9);
+      p[i] = (qk_point_t){0.25 * (double)(1 + c % 3), 0.25 * (double)(1 + c / 3)};
+    }
+  }
+  for (size_t i = 0; i < nq; i++) qs[i] = i % 4 == 0 ? p[qkt_rng_below(&r, n)] : rand_loc(&r);
+  qk_tree_options_t o;
+  qk_tree_options_init(&o);
+  o.capacity = 4;
+  o.max_depth = 3;
+  o.has_root = 1;
+  o.root = (qk_square_t){0, 0, 1};
+  qk_tree_t *t = NULL;
+  assert_int_equal(qk_tree_build(p, n, &o, &t), QK_OK);
+  QKT_CHECK_TREE(t);
+  qk_tree_stats_t st;
+  qk_tree_stats(t, &st);
+  assert_true(st.max_leaf_points > 128); /* several chunks of 64 */
+  qk_neighbor_t *got = malloc(nq * 100 * sizeof *got), *want = malloc(100 * sizeof *want);
+  size_t *counts = malloc(nq * sizeof *counts);
+  for (size_t ki = 0; ki < sizeof ks / sizeof ks[0]; ki++) {
+    const size_t k = ks[ki];
+    for (size_t i = 0; i < nq; i++) {
+      size_t ng;
+      double cap = i % 5 == 0 ? 0.1 : INFINITY;
+      assert_int_equal(qk_query_knn(t, qs[i], k, cap, got, &ng), QK_OK);
+      size_t nw = qko_knn(p, NULL, n, qs[i], k, cap, want);
+      assert_nb_equal(got, ng, want, nw, "knn-big-leaves", i * 1000 + k);
+    }
+    assert_int_equal(qk_query_knn_batch(t, qs, nq, k, INFINITY, got, counts), QK_OK);
+    for (size_t i = 0; i < nq; i++) {
+      size_t nw = qko_knn(p, NULL, n, qs[i], k, INFINITY, want);
+      assert_nb_equal(got + i * k, counts[i], want, nw, "knn-big-leaves-batch", i * 1000 + k);
+    }
+  }
+  qk_tree_free(t);
+  free(p), free(qs), free(got), free(want), free(counts);
+}
+
+/*
+ * Batch kNN answers in Z-order, each query starting from the path of the one before: a
+ * large batch over every point set and capacity, with queries on the split lines, outside
+ * the root and repeated, on one and on two threads, against brute force.
+ */
+static void test_query_knn_batch_paths(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 12);
+  const size_t n = 4000, nq = 1000;
+  const size_t ks[] = {1, 8, 32};
+  qk_point_t *p = malloc(n * sizeof *p), *qs = malloc(nq * sizeof *qs);
+  qk_neighbor_t *got = malloc(nq * 32 * sizeof *got), *want = malloc(32 * sizeof *want);
+  size_t *counts = malloc(nq * sizeof *counts);
+  for (size_t d = 0; d < 4; d++)
+    for (size_t c = 0; c < 3; c++) {
+      qkt_points(&r, dists[d], p, n);
+      for (size_t i = 0; i < nq; i++)
+        qs[i] = i % 7 == 0 ? p[qkt_rng_below(&r, n)] : i % 11 == 0 ? qs[i / 2] : rand_loc(&r);
+      qk_tree_t *t = build(p, n, caps[c]);
+      for (unsigned threads = 1; threads <= 2; threads++) {
+        qk_tree_set_threads(t, threads);
+        const size_t k = ks[(d + c + threads) % 3];
+        assert_int_equal(qk_query_knn_batch(t, qs, nq, k, INFINITY, got, counts), QK_OK);
+        for (size_t i = 0; i < nq; i++) {
+          size_t nw = qko_knn(p, NULL, n, qs[i], k, INFINITY, want);
+          assert_nb_equal(got + i * k, counts[i], want, nw, "knn-batch-paths",
+                          d * 100000 + c * 10000 + i);
+        }
+      }
+      qk_tree_free(t);
+    }
+  free(p), free(qs), free(got), free(want), free(counts);
+}
+
 static void test_query_cities(void **state) {
   (void)state;
   size_t n;
@@ -522,11 +616,12 @@ static void test_query_cities(void **state) {
 int main(void) {
   g_seed = qkt_seed(20261122);
   const struct CMUnitTest tests[] = {
-      cmocka_unit_test(test_query_range_radius), cmocka_unit_test(test_query_knn_all_k),
-      cmocka_unit_test(test_query_knn_large),    cmocka_unit_test(test_query_knn_after_mutation),
-      cmocka_unit_test(test_query_locate),       cmocka_unit_test(test_query_batch),
-      cmocka_unit_test(test_query_batch_nomem),  cmocka_unit_test(test_query_stop_and_bad_args),
-      cmocka_unit_test(test_query_threads),      cmocka_unit_test(test_query_cities),
+      cmocka_unit_test(test_query_range_radius),   cmocka_unit_test(test_query_knn_all_k),
+      cmocka_unit_test(test_query_knn_large),      cmocka_unit_test(test_query_knn_after_mutation),
+      cmocka_unit_test(test_query_locate),         cmocka_unit_test(test_query_batch),
+      cmocka_unit_test(test_query_batch_nomem),    cmocka_unit_test(test_query_stop_and_bad_args),
+      cmocka_unit_test(test_query_threads),        cmocka_unit_test(test_query_cities),
+      cmocka_unit_test(test_query_knn_big_leaves), cmocka_unit_test(test_query_knn_batch_paths),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
