@@ -13,7 +13,8 @@
  *  - holes and multipolygons; bow-tie rings (and the self-intersection count);
  *  - lon/lat mode: an antimeridian-crossing square, a ring around the south pole,
  *    longitudes 180 / -180 / 540, latitudes beyond the poles, planar mode switching it off;
- *  - batch == single, threaded batch == single;
+ *  - batch == single, threaded batch == single; batches large enough for the Morton order
+ *    (with vertices, far and non-finite points, failed scratch allocation) == single;
  *  - allocation failure at every N (arrays and GeoJSON): QK_ERR_NOMEM, nothing leaked;
  *  - GeoJSON: Feature, bare geometry, skipped geometries, properties; errors with line
  *    and column, feature index and reason;
@@ -527,6 +528,64 @@ static void test_region_batch_threads(void **state) {
   tl_free(&t);
 }
 
+/* Batches large enough to be answered in Morton order (chunks of 2^18 points, sorted from
+ * 2^15 up): answers in input order equal to single calls, with points on vertices and
+ * edges, outside the layer, non-finite, and all in one cell; with 1 and 2 threads; and
+ * when the sort's scratch cannot be allocated (then the batch runs in input order). */
+static void test_region_batch_morton(void **state) {
+  (void)state;
+  uint64_t seed = qkt_seed(977);
+  qkt_rng_t g;
+  qkt_rng_seed(&g, seed);
+  tl_t t;
+  random_layer(&g, &t, 20, 1000);
+  qkt_alloc_t as;
+  qk_allocator_t al = qkt_alloc_make(&as);
+  qk_region_t *r = tl_build(&t, 0, &al, NULL);
+  size_t n = 300000; /* one full chunk and a sorted remainder of 37856 */
+  qk_point_t *p = malloc(n * sizeof *p);
+  uint32_t *a = malloc(n * sizeof *a), *b = malloc(n * sizeof *b);
+  for (size_t i = 0; i < n; i++) {
+    unsigned kind = (unsigned)qkt_rng_below(&g, 8);
+    if (kind == 0) { /* a vertex of the layer */
+      size_t v = (size_t)qkt_rng_below(&g, t.nv);
+      p[i] = tp(t.xy[2 * v], t.xy[2 * v + 1]);
+    } else if (kind == 1 && i > n / 2) { /* many points in one cell */
+      p[i] = tp(500 + (long)qkt_rng_below(&g, 3), 500 + (long)qkt_rng_below(&g, 3));
+    } else {
+      p[i] = tp(-50 + (long)qkt_rng_below(&g, 1100), -50 + (long)qkt_rng_below(&g, 1100));
+    }
+  }
+  p[3].x = NAN, p[n - 1].y = INFINITY, p[n / 2].x = -INFINITY, p[1000].y = 1e300;
+  for (int rule = 0; rule < 3; rule++) {
+    for (size_t i = 0; i < n; i++) qk_region_locate(r, p[i], (qk_boundary_t)rule, &a[i]);
+    for (unsigned th = 1; th <= 2; th++) {
+      memset(b, 0xab, n * sizeof *b);
+      assert_int_equal(qk_region_locate_batch(r, p, n, (qk_boundary_t)rule, th, b),
+                       QK_ERR_NONFINITE);
+      for (size_t i = 0; i < n; i++)
+        if (a[i] != b[i])
+          fail_msg("seed %llu rule %d threads %u point %zu (%.17g, %.17g): batch %u, single %u",
+                   (unsigned long long)seed, rule, th, i, p[i].x, p[i].y, b[i], a[i]);
+    }
+  }
+  /* The scratch allocation fails: the same answers, in input order, nothing leaked. */
+  size_t live = as.live_blocks;
+  as.calls = 0;
+  as.fail_at = 1;
+  memset(b, 0xab, n * sizeof *b);
+  assert_int_equal(qk_region_locate_batch(r, p, n, QK_BOUNDARY_SEMI_OPEN, 1, b), QK_ERR_NONFINITE);
+  assert_true(as.failed);
+  assert_int_equal(as.live_blocks, live);
+  for (size_t i = 0; i < n; i++) qk_region_locate(r, p[i], QK_BOUNDARY_SEMI_OPEN, &a[i]);
+  assert_memory_equal(a, b, n * sizeof *a);
+  as.fail_at = 0;
+  qk_region_free(r);
+  assert_int_equal(as.live_blocks, 0);
+  free(p), free(a), free(b);
+  tl_free(&t);
+}
+
 /* ---- allocation failure -------------------------------------------------------------------- */
 
 static void test_region_alloc_failure(void **state) {
@@ -835,6 +894,7 @@ int main(void) {
       cmocka_unit_test(test_region_bowtie),
       cmocka_unit_test(test_region_lonlat),
       cmocka_unit_test(test_region_batch_threads),
+      cmocka_unit_test(test_region_batch_morton),
       cmocka_unit_test(test_region_alloc_failure),
       cmocka_unit_test(test_region_geojson),
       cmocka_unit_test(test_region_countries),
