@@ -72,12 +72,13 @@ def plot(rows, path):
     bld = [r for r in rows if r["op"] == "region-build" and r.get("seconds")]
     if not reg:
         sys.exit("plot_region: no region rows in the results")
-    order = ["quadkit batch", "quadkit single", "geos", "s2"]
+    order = ["quadkit batch", "quadkit single", "quadkit batch t", "geos", "s2"]
     rate_groups = []
     for ds in dict.fromkeys(r["dataset"] for r in reg):
         items = []
         rs = [r for r in reg if r["dataset"] == ds and r["impl"] != "quadkit-planar"]
-        rs.sort(key=lambda r: (order.index(label(r)) if label(r) in order else 2, label(r)))
+        rank = lambda lab: order.index("quadkit batch t" if lab.startswith("quadkit batch t") else lab)
+        rs.sort(key=lambda r: (rank(label(r)), label(r)))
         for r in rs:
             items.append((label(r), r["per_second"] / 1e6, r.get("matches") is False))
         rate_groups.append((f"{ds} ({rs[0]['queries']:,} points)", items))
@@ -118,7 +119,7 @@ def main():
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("-o", default=os.path.join(root, "docs", "img", "region-bench.svg"))
     a = ap.parse_args()
-    if a.bench:
+    if a.bench:  # the run's table goes to stdout as usual
         a.results = a.results or os.path.join(root, "bench", "results", "region.jsonl")
         os.makedirs(os.path.dirname(a.results), exist_ok=True)
         subprocess.run([a.bench, "--op", "region", "--n", str(a.n), "--threads", str(a.threads),
