@@ -28,27 +28,6 @@ typedef struct bctx {
   size_t splits_left; /* a budget on splits: see build_node */
 } bctx_t;
 
-/* Conservative: may keep a piece that misses the closed box, never drops one that meets
- * it (extra pieces cost time, not correctness). */
-static inline bool meets_box(const qk__seg_t *g, double x0, double y0, double x1, double y1) {
-  double lx = qk__min(g->ax, g->bx), hx = qk__max(g->ax, g->bx);
-  double ly = qk__min(g->ay, g->by), hy = qk__max(g->ay, g->by);
-  if (hx < x0 || lx > x1 || hy < y0 || ly > y1) return false;
-  if (lx >= x0 && hx <= x1 && ly >= y0 && hy <= y1) return true; /* inside */
-  double dx = g->bx - g->ax, dy = g->by - g->ay;
-  const double cx[4] = {x0, x1, x1, x0}, cy[4] = {y0, y0, y1, y1};
-  int pos = 0, neg = 0;
-  for (int i = 0; i < 4; i++) {
-    double l = dx * (cy[i] - g->ay), r = dy * (cx[i] - g->ax);
-    double v = l - r, tol = 1e-14 * (fabs(l) + fabs(r));
-    if (v > tol)
-      pos++;
-    else if (v < -tol)
-      neg++;
-  }
-  return pos != 4 && neg != 4;
-}
-
 /* Do two closed segments meet (exactly)? */
 static bool segs_meet(const qk__seg_t *p, const qk__seg_t *q) {
   if (qk__max(p->ax, p->bx) < qk__min(q->ax, q->bx) ||
@@ -137,7 +116,14 @@ static qk_status_t emit_leaf(bctx_t *b, qk_node_t v, double cx, double cy, unsig
 }
 
 /* Sort the pieces of level d into the four children's lists (a piece may go to several).
- * Returns whether that makes progress: every child meets fewer pieces than the cell.
+ * A child keeps a piece whose box meets its square and, unless the box lies inside the
+ * square, whose line has corners of the square on both sides or within a tolerance. That
+ * is conservative: it may keep a piece that misses the closed square, never drops one that
+ * meets it (an extra piece costs time, not correctness). The line's value at the children's corners
+ * is its value at the centre plus multiples of dx h and dy h (h = half the side), so one evaluation
+ * serves the four children; the tolerance covers the rounding of that sum and of the
+ * corners themselves (x0 + h is not exactly the middle).
+ * Returns whether the split makes progress: every child meets fewer pieces than the cell.
  * Pieces that all pass one point (a vertex of high degree) or overlap (shared edges)
  * never separate, and such cells would otherwise split down to the depth cap. */
 static qk_status_t split_lists(bctx_t *b, unsigned d, double x0, double y0, double x1, double y1,
@@ -147,20 +133,43 @@ static qk_status_t split_lists(bctx_t *b, unsigned d, double x0, double y0, doub
                             4 * n + 1, sizeof(uint32_t));
   if (st) return st;
   uint32_t *out = b->store[d + 1];
-  size_t *cnt = b->cnt[d + 1];
-  cnt[0] = cnt[1] = cnt[2] = cnt[3] = 0;
+  size_t c0 = 0, c1 = 0, c2 = 0, c3 = 0;
+  const double h = cx - x0;
+  const qk__seg_t *seg = b->pc->seg;
+  const uint32_t *E = b->e[d];
   for (size_t i = 0; i < n; i++) {
-    uint32_t p = b->e[d][i];
-    const qk__seg_t *g = &b->pc->seg[p];
+    uint32_t p = E[i];
+    const qk__seg_t *g = &seg[p];
     double lx = qk__min(g->ax, g->bx), hx = qk__max(g->ax, g->bx);
     double ly = qk__min(g->ay, g->by), hy = qk__max(g->ay, g->by);
-    /* NE 0, NW 1, SW 2, SE 3 */
-    if (hx >= cx && hy >= cy && meets_box(g, cx, cy, x1, y1)) out[cnt[0]++] = p;
-    if (lx <= cx && hy >= cy && meets_box(g, x0, cy, cx, y1)) out[n + cnt[1]++] = p;
-    if (lx <= cx && ly <= cy && meets_box(g, x0, y0, cx, cy)) out[2 * n + cnt[2]++] = p;
-    if (hx >= cx && ly <= cy && meets_box(g, cx, y0, x1, cy)) out[3 * n + cnt[3]++] = p;
+    bool e = hx >= cx, w = lx <= cx, no = hy >= cy, so = ly <= cy;
+    /* Inside one child's square and off the centre lines (most pieces below the top
+     * levels): that child only. NE 0, NW 1, SW 2, SE 3. */
+    if ((lx > cx || hx < cx) && (ly > cy || hy < cy)) {
+      bool east = lx > cx, north = ly > cy;
+      if ((east ? hx <= x1 : lx >= x0) && (north ? hy <= y1 : ly >= y0)) {
+        if (north)
+          east ? (out[c0++] = p) : (out[n + c1++] = p);
+        else
+          east ? (out[3 * n + c3++] = p) : (out[2 * n + c2++] = p);
+        continue;
+      }
+    }
+    double dx = g->bx - g->ax, dy = g->by - g->ay;
+    double l = dx * (cy - g->ay), r = dy * (cx - g->ax);
+    double v = l - r, a = dx * h, q = dy * h;
+    double tol = 1e-12 * (fabs(l) + fabs(r) + fabs(a) + fabs(q) +
+                          (fabs(dx) + fabs(dy)) * (fabs(cx) + fabs(cy)));
+    /* the line's value over each child's corners: v + dx * [0 or +-h] - dy * [0 or +-h] */
+    double ap = qk__max(a, 0), an = qk__min(a, 0), qp = qk__max(q, 0), qn = qk__min(q, 0);
+    if (e && no && v + an - qp <= tol && v + ap - qn >= -tol) out[c0++] = p;
+    if (w && no && v + an + qn <= tol && v + ap + qp >= -tol) out[n + c1++] = p;
+    if (w && so && v - ap + qn <= tol && v - an + qp >= -tol) out[2 * n + c2++] = p;
+    if (e && so && v - ap - qp <= tol && v - an - qn >= -tol) out[3 * n + c3++] = p;
   }
-  *progress = cnt[0] < n && cnt[1] < n && cnt[2] < n && cnt[3] < n;
+  size_t *cnt = b->cnt[d + 1];
+  cnt[0] = c0, cnt[1] = c1, cnt[2] = c2, cnt[3] = c3;
+  *progress = c0 < n && c1 < n && c2 < n && c3 < n;
   return QK_OK;
 }
 
@@ -234,12 +243,20 @@ static qk_status_t build_node(bctx_t *b, qk_node_t v, double x0, double y0, doub
     split = stall <= STALL_BUDGET;
   }
   if (split) {
-    st = qk_tree_split_leaf(r->tree, v);
+    /* With the tree kept, its split names the children; without, they take the next four
+     * slots of kid[] (the same cells, numbered without the tree's bookkeeping). */
+    uint32_t first = 0;
+    if (r->tree) {
+      st = qk_tree_split_leaf(r->tree, v);
+      if (st == QK_OK) first = qk__node_child(r->tree, v);
+    } else {
+      st = r->n_kid + 4 < QK__DIRECT ? QK_OK : QK_ERR_LIMIT;
+      first = (uint32_t)r->n_kid;
+    }
     if (st == QK_OK) {
       b->splits_left--;
-      uint32_t first = qk__node_child(r->tree, v);
-      if ((st = qk__grow(&r->alloc, (void **)&r->kid, &r->cap_kid, qk__tree_node_bound(r->tree),
-                         sizeof(uint32_t))))
+      if ((st = qk__grow(&r->alloc, (void **)&r->kid, &r->cap_kid,
+                         r->tree ? qk__tree_node_bound(r->tree) : r->n_kid + 4, sizeof(uint32_t))))
         return st;
       r->kid[v] = first;
       if (first + 4 > r->n_kid) r->n_kid = first + 4;
@@ -466,14 +483,17 @@ qk_status_t qk__region_build(const qk_region_arrays_t *in, const qk_region_optio
   b.maxd = o.max_depth;
   b.splits_left = pc.n + 4096;
   if ((st = root_square(&pc, r, err))) goto done;
-  qk_tree_options_t to;
-  qk_tree_options_init(&to);
-  to.has_root = 1;
-  to.root = (qk_square_t){r->rx, r->ry, r->rside};
-  to.max_depth = o.max_depth;
-  to.allocator = &r->alloc;
-  if ((st = qk_tree_build(NULL, 0, &to, &r->tree))) goto done;
+  if (o.keep_tree) { /* the refinement is made on a quadkit tree, kept for qk_region_tree */
+    qk_tree_options_t to;
+    qk_tree_options_init(&to);
+    to.has_root = 1;
+    to.root = (qk_square_t){r->rx, r->ry, r->rside};
+    to.max_depth = o.max_depth;
+    to.allocator = &r->alloc;
+    if ((st = qk_tree_build(NULL, 0, &to, &r->tree))) goto done;
+  }
   if ((st = qk__grow(&alloc, (void **)&r->kid, &r->cap_kid, 1, sizeof(uint32_t)))) goto done;
+  r->n_kid = 1;
   b.bad = qk__realloc(&alloc, NULL, 0, in->n_rings + 1);
   if (!b.bad) {
     st = QK_ERR_NOMEM;
@@ -532,10 +552,6 @@ done:
   s->leaf_edges = r->n_le;
   s->depth = b.depth;
   s->planar = r->planar;
-  if (!o.keep_tree) { /* the query arrays hold everything queries need */
-    qk_tree_free(r->tree);
-    r->tree = NULL;
-  }
   shrink_all(r);
   s->build_seconds = now() - t0;
   s->bytes = layer_bytes(r);

@@ -55,8 +55,9 @@ typedef struct qk_region_options {
   uint32_t max_depth;
   /** Allocator for everything the layer owns; NULL means libc. Copied. */
   const qk_allocator_t *allocator;
-  /** Nonzero: keep the quadkit tree the index was refined on (qk_region_tree()); zero
-   *  (default): free it once the query arrays are made, which halves the memory. */
+  /** Nonzero: refine the index on a quadkit tree and keep it (qk_region_tree()); zero
+   *  (default): the same cells go straight into the query arrays, with no tree (a faster
+   *  build and half the memory). The answers are the same either way. */
   int keep_tree;
 } qk_region_options_t;
 
