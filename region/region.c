@@ -60,7 +60,8 @@
  * crossed by the segment reference -> point. Most pieces are rejected by one filtered
  * orientation (the point on the same side as the reference). Batches run in blocks of 32
  * points: all descents first (their loads overlap), with a prefetch of each leaf record,
- * then the leaf tests.
+ * then the leaf tests; large batches are first put in Morton order, chunk by chunk, so
+ * that consecutive points share their descent and leaf (locate.c).
  */
 #include <stdarg.h>
 #include <stdio.h>
