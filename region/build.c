@@ -192,7 +192,6 @@ static qk_status_t split_lists(bctx_t *b, unsigned d, double x0, double y0, doub
     const qk__seg_t *g = &seg[p];
     double lx = qk__min(g->ax, g->bx), hx = qk__max(g->ax, g->bx);
     double ly = qk__min(g->ay, g->by), hy = qk__max(g->ay, g->by);
-    bool e = hx >= cx, w = lx <= cx, no = hy >= cy, so = ly <= cy;
     /* Inside one child's square and off the centre lines (most pieces below the top
      * levels): that child only. NE 0, NW 1, SW 2, SE 3. */
     if ((lx > cx || hx < cx) && (ly > cy || hy < cy)) {
@@ -207,6 +206,7 @@ static qk_status_t split_lists(bctx_t *b, unsigned d, double x0, double y0, doub
         continue;
       }
     }
+    bool e = hx >= cx, w = lx <= cx, no = hy >= cy, so = ly <= cy;
     double dx = g->bx - g->ax, dy = g->by - g->ay;
     double l = dx * (cy - g->ay), r = dy * (cx - g->ax);
     double v = l - r, a = dx * h, q = dy * h;
