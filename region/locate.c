@@ -229,7 +229,8 @@ static void run(job_t *j, const qk_point_t *sorted, const uint32_t *order) {
  * the work changes: every answer is computed alone by the same code and written to its
  * own index, so the results are those of single calls. Measured on countries-50m with
  * 10^6 uniform points (docs/region.md): callgrind counts more instructions (the sort)
- * but the time per point falls by about a quarter.
+ * but the time per point falls by about a quarter (process CPU time on a loaded machine;
+ * the benchmark run on an idle one has the final word).
  * Each thread borrows 22 bytes per chunk point and 4 << (2 SORT_BITS) bytes from the
  * layer's allocator for the call; when that fails the batch runs in input order.
  */
@@ -247,6 +248,10 @@ static const uint16_t spread8[256] = {
 #define R16(v) R4(v), R4(v + 4), R4(v + 8), R4(v + 12)
     R16(0),   R16(16),  R16(32),  R16(48),  R16(64),  R16(80),  R16(96),  R16(112),
     R16(128), R16(144), R16(160), R16(176), R16(192), R16(208), R16(224), R16(240)};
+#undef S1
+#undef S2
+#undef R4
+#undef R16
 
 /* A coordinate's cell along one axis of the root square, clamped (points outside the
  * root, even NaN, go to some cell; they are answered like any other). */
