@@ -12,6 +12,9 @@
 #include "quadkit/region.h"
 
 #include <time.h>
+#if defined(__GLIBC__)
+#include <malloc.h>
+#endif
 #include <unistd.h>
 
 #include <algorithm>
@@ -930,6 +933,16 @@ size_t count_diff(const std::vector<uint32_t> &a, const std::vector<uint32_t> &b
   return d;
 }
 
+// Heap bytes in use (glibc's mallinfo2), to measure what a baseline holds: 0 elsewhere.
+size_t heap_bytes() {
+#if defined(__GLIBC__) && (__GLIBC__ > 2 || __GLIBC_MINOR__ >= 33)
+  struct mallinfo2 m = mallinfo2();
+  return m.uordblks + m.hblkhd;
+#else
+  return 0;
+#endif
+}
+
 void run_region() {
   for (const char *name : {"countries-50m", "us-states-10m"}) {
     RegionLayer L;
@@ -952,8 +965,25 @@ void run_region() {
       continue;
     }
     progress("region %s: building", name);
+    // Memory: quadkit's layer counts its own bytes (qk_region_stats); GEOS's and S2's are
+    // the heap growth over their build and one query pass of 10^5 uniform points (GEOS
+    // builds each prepared geometry's point-in-area index on its first queries).
+    std::vector<Pt> probe(100000);
+    uint64_t pz = 88172645463325252ull;
+    for (auto &p : probe) {
+      pz ^= pz << 13, pz ^= pz >> 7, pz ^= pz << 17;
+      p.x = L.box[0] + (L.box[2] - L.box[0]) * (double)(pz >> 11) / 9007199254740992.0;
+      pz ^= pz << 13, pz ^= pz >> 7, pz ^= pz << 17;
+      p.y = L.box[1] + (L.box[3] - L.box[1]) * (double)(pz >> 11) / 9007199254740992.0;
+    }
+    std::vector<uint32_t> probe_out(probe.size());
+    size_t h0 = heap_bytes();
     GeosRegions *g = have("geos") ? geos_regions_build(L) : nullptr;
+    if (g) geos_regions_locate(g, probe, probe_out);
+    size_t h1 = heap_bytes();
     S2Regions *s2 = have("s2") ? s2_regions_build(L) : nullptr;
+    if (s2) s2_regions_locate(s2, probe, probe_out);
+    size_t h2 = heap_bytes();
     {
       std::vector<std::function<void()>> fns = {[&] {
         qk_region_t *r;
@@ -972,6 +1002,8 @@ void run_region() {
         r.op = "region-build", r.impl = who[i], r.dataset = name, r.n = st.vertices;
         r.seconds = med[i], r.per_second = st.vertices / med[i];
         if (i == 0) r.extra["bytes"] = (double)st.bytes, r.extra["leaves"] = (double)st.leaves;
+        if (who[i] == "geos" && h1 > h0) r.extra["bytes"] = (double)(h1 - h0);
+        if (who[i] == "s2" && h2 > h1) r.extra["bytes"] = (double)(h2 - h1);
         emit(r);
       }
     }
@@ -1150,6 +1182,15 @@ void print_table() {
       printf("region: %s disagrees with quadkit on %.0f of %zu points (%s; %s)%s\n", r.impl.c_str(),
              r.extra.at("mismatches"), r.queries, r.dataset.c_str(), r.note.c_str(),
              r.matches == 0 ? " [*]" : "");
+  for (auto &r : records)
+    if (r.op == "region-build" && r.impl == "quadkit" && r.extra.count("bytes")) {
+      printf("region memory, %s: quadkit %.1f MB", r.dataset.c_str(), r.extra.at("bytes") / 1e6);
+      for (auto &b : records)
+        if (b.op == "region-build" && b.dataset == r.dataset && b.impl != "quadkit" &&
+            b.extra.count("bytes"))
+          printf(", %s %.1f MB", b.impl.c_str(), b.extra.at("bytes") / 1e6);
+      printf(" (quadkit: the layer's count; others: heap growth over build + 1e5 queries)\n");
+    }
   // Memory and quality columns that a ratio does not show.
   for (auto &r : records)
     if (r.impl == "quadkit" && r.op == "build" && r.n >= 1000000)

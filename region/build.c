@@ -21,33 +21,15 @@ typedef struct bctx {
   size_t cnt[MAXD + 1][4];
   uint32_t *s[MAXD + 1]; /* per depth: features containing its reference point */
   size_t ns[MAXD + 1], cap_s[MAXD + 1];
-  uint32_t *odd;
-  size_t cap_odd;
+  /* per depth: the features whose parity flips from the cell's reference point to each
+   * child's, four lists of up to ne[d] + 1 (found while sorting the pieces) */
+  uint32_t *odd[MAXD + 1];
+  size_t cap_odd[MAXD + 1];
+  size_t nodd[MAXD + 1][4];
   uint8_t *bad; /* per ring: self-intersecting */
   unsigned depth;
   size_t splits_left; /* a budget on splits: see build_node */
 } bctx_t;
-
-/* Conservative: may keep a piece that misses the closed box, never drops one that meets
- * it (extra pieces cost time, not correctness). */
-static inline bool meets_box(const qk__seg_t *g, double x0, double y0, double x1, double y1) {
-  double lx = qk__min(g->ax, g->bx), hx = qk__max(g->ax, g->bx);
-  double ly = qk__min(g->ay, g->by), hy = qk__max(g->ay, g->by);
-  if (hx < x0 || lx > x1 || hy < y0 || ly > y1) return false;
-  if (lx >= x0 && hx <= x1 && ly >= y0 && hy <= y1) return true; /* inside */
-  double dx = g->bx - g->ax, dy = g->by - g->ay;
-  const double cx[4] = {x0, x1, x1, x0}, cy[4] = {y0, y0, y1, y1};
-  int pos = 0, neg = 0;
-  for (int i = 0; i < 4; i++) {
-    double l = dx * (cy[i] - g->ay), r = dy * (cx[i] - g->ax);
-    double v = l - r, tol = 1e-14 * (fabs(l) + fabs(r));
-    if (v > tol)
-      pos++;
-    else if (v < -tol)
-      neg++;
-  }
-  return pos != 4 && neg != 4;
-}
 
 /* Do two closed segments meet (exactly)? */
 static bool segs_meet(const qk__seg_t *p, const qk__seg_t *q) {
@@ -137,75 +119,137 @@ static qk_status_t emit_leaf(bctx_t *b, qk_node_t v, double cx, double cy, unsig
 }
 
 /* Sort the pieces of level d into the four children's lists (a piece may go to several).
- * Returns whether that makes progress: every child meets fewer pieces than the cell.
+ * A child keeps a piece whose box meets its square and, unless the box lies inside the
+ * square, whose line has corners of the square on both sides or within a tolerance. That
+ * is conservative: it may keep a piece that misses the closed square, never drops one that
+ * meets it (an extra piece costs time, not correctness). The line's value at the children's corners
+ * is its value at the centre plus multiples of dx h and dy h (h = half the side), so one evaluation
+ * serves the four children; the tolerance covers the rounding of that sum and of the
+ * corners themselves (x0 + h is not exactly the middle).
+ * Returns whether the split makes progress: every child meets fewer pieces than the cell.
  * Pieces that all pass one point (a vertex of high degree) or overlap (shared edges)
  * never separate, and such cells would otherwise split down to the depth cap. */
+/* The parities gathered while sorting a cell's pieces into its children: for child q,
+ * the features crossed an odd number of times by the segment from the cell's reference
+ * point to the child's (which lies in the child's closed square, so only the child's
+ * pieces can cross it). A child's pieces come in feature order, so a feature is done when
+ * the next one starts. */
+typedef struct flips {
+  const uint32_t *feat;
+  uint32_t *odd; /* child q's list at odd + q * stride */
+  size_t stride;
+  double px, py, qx[4], qy[4];
+  uint32_t cur[4];
+  bool par[4];
+  size_t n[4];
+} flips_t;
+
+static inline void flip(flips_t *fl, unsigned q, uint32_t p, const qk__seg_t *g, double lx,
+                        double hx, double ly, double hy) {
+  double qx = fl->qx[q], qy = fl->qy[q];
+  /* only pieces whose box meets the segment's can cross it */
+  if (hx < qk__min(fl->px, qx) || lx > qk__max(fl->px, qx) || hy < qk__min(fl->py, qy) ||
+      ly > qk__max(fl->py, qy))
+    return;
+  uint32_t f = fl->feat[p];
+  if (f != fl->cur[q]) {
+    if (fl->par[q]) fl->odd[q * fl->stride + fl->n[q]++] = fl->cur[q];
+    fl->cur[q] = f;
+    fl->par[q] = false;
+  }
+  int sc = qk__side(g->ax, g->ay, g->bx, g->by, fl->px, fl->py);
+  if (qk__crosses(fl->px, fl->py, qx, qy, g->ax, g->ay, g->bx, g->by, sc)) fl->par[q] = !fl->par[q];
+}
+
 static qk_status_t split_lists(bctx_t *b, unsigned d, double x0, double y0, double x1, double y1,
-                               double cx, double cy, bool *progress) {
+                               double cx, double cy, double half, bool *progress) {
   size_t n = b->ne[d];
   qk_status_t st = qk__grow(&b->r->alloc, (void **)&b->store[d + 1], &b->cap_store[d + 1],
                             4 * n + 1, sizeof(uint32_t));
   if (st) return st;
+  if ((st = qk__grow(&b->r->alloc, (void **)&b->odd[d], &b->cap_odd[d], 4 * (n + 1),
+                     sizeof(uint32_t))))
+    return st;
   uint32_t *out = b->store[d + 1];
-  size_t *cnt = b->cnt[d + 1];
-  cnt[0] = cnt[1] = cnt[2] = cnt[3] = 0;
+  size_t c0 = 0, c1 = 0, c2 = 0, c3 = 0;
+  /* the children's reference points, exactly as build_node computes them */
+  const double hh = half * 0.5;
+  flips_t fl = {b->pc->feat,
+                b->odd[d],
+                n + 1,
+                cx,
+                cy,
+                {cx + hh, x0 + hh, x0 + hh, cx + hh},
+                {cy + hh, cy + hh, y0 + hh, y0 + hh},
+                {UINT32_MAX, UINT32_MAX, UINT32_MAX, UINT32_MAX},
+                {false, false, false, false},
+                {0, 0, 0, 0}};
+  const double h = cx - x0;
+  const qk__seg_t *seg = b->pc->seg;
+  const uint32_t *E = b->e[d];
   for (size_t i = 0; i < n; i++) {
-    uint32_t p = b->e[d][i];
-    const qk__seg_t *g = &b->pc->seg[p];
+    uint32_t p = E[i];
+    const qk__seg_t *g = &seg[p];
     double lx = qk__min(g->ax, g->bx), hx = qk__max(g->ax, g->bx);
     double ly = qk__min(g->ay, g->by), hy = qk__max(g->ay, g->by);
-    /* NE 0, NW 1, SW 2, SE 3 */
-    if (hx >= cx && hy >= cy && meets_box(g, cx, cy, x1, y1)) out[cnt[0]++] = p;
-    if (lx <= cx && hy >= cy && meets_box(g, x0, cy, cx, y1)) out[n + cnt[1]++] = p;
-    if (lx <= cx && ly <= cy && meets_box(g, x0, y0, cx, cy)) out[2 * n + cnt[2]++] = p;
-    if (hx >= cx && ly <= cy && meets_box(g, cx, y0, x1, cy)) out[3 * n + cnt[3]++] = p;
+    /* Inside one child's square and off the centre lines (most pieces below the top
+     * levels): that child only. NE 0, NW 1, SW 2, SE 3. */
+    if ((lx > cx || hx < cx) && (ly > cy || hy < cy)) {
+      bool east = lx > cx, north = ly > cy;
+      if ((east ? hx <= x1 : lx >= x0) && (north ? hy <= y1 : ly >= y0)) {
+        unsigned q = north ? (east ? 0u : 1u) : (east ? 3u : 2u);
+        if (north)
+          east ? (out[c0++] = p) : (out[n + c1++] = p);
+        else
+          east ? (out[3 * n + c3++] = p) : (out[2 * n + c2++] = p);
+        flip(&fl, q, p, g, lx, hx, ly, hy);
+        continue;
+      }
+    }
+    bool e = hx >= cx, w = lx <= cx, no = hy >= cy, so = ly <= cy;
+    double dx = g->bx - g->ax, dy = g->by - g->ay;
+    double l = dx * (cy - g->ay), r = dy * (cx - g->ax);
+    double v = l - r, a = dx * h, q = dy * h;
+    double tol = 1e-12 * (fabs(l) + fabs(r) + fabs(a) + fabs(q) +
+                          (fabs(dx) + fabs(dy)) * (fabs(cx) + fabs(cy)));
+    /* the line's value over each child's corners: v + dx * [0 or +-h] - dy * [0 or +-h] */
+    double ap = qk__max(a, 0), an = qk__min(a, 0), qp = qk__max(q, 0), qn = qk__min(q, 0);
+    if (e && no && v + an - qp <= tol && v + ap - qn >= -tol)
+      out[c0++] = p, flip(&fl, 0, p, g, lx, hx, ly, hy);
+    if (w && no && v + an + qn <= tol && v + ap + qp >= -tol)
+      out[n + c1++] = p, flip(&fl, 1, p, g, lx, hx, ly, hy);
+    if (w && so && v - ap + qn <= tol && v - an + qp >= -tol)
+      out[2 * n + c2++] = p, flip(&fl, 2, p, g, lx, hx, ly, hy);
+    if (e && so && v - ap - qp <= tol && v - an - qn >= -tol)
+      out[3 * n + c3++] = p, flip(&fl, 3, p, g, lx, hx, ly, hy);
   }
-  *progress = cnt[0] < n && cnt[1] < n && cnt[2] < n && cnt[3] < n;
+  for (unsigned q = 0; q < 4; q++) {
+    if (fl.par[q]) fl.odd[q * fl.stride + fl.n[q]++] = fl.cur[q];
+    b->nodd[d][q] = fl.n[q];
+  }
+  size_t *cnt = b->cnt[d + 1];
+  cnt[0] = c0, cnt[1] = c1, cnt[2] = c2, cnt[3] = c3;
+  *progress = c0 < n && c1 < n && c2 < n && c3 < n;
   return QK_OK;
 }
 
-/* The set of child q (its list already at level d + 1): the parent's set with the
- * features crossed an odd number of times on the way from the parent's reference point
- * (px, py) to the child's (qx, qy) toggled. */
-static qk_status_t child_set(bctx_t *b, unsigned d, double px, double py, double qx, double qy) {
-  const qk__pieces_t *pc = b->pc;
+/* The set of child q: the parent's set (level d) with the features of the child's flip
+ * list toggled (a symmetric difference of two sorted lists), at level d + 1. */
+static qk_status_t child_set(bctx_t *b, unsigned d, unsigned q) {
   const qk_allocator_t *a = &b->r->alloc;
-  size_t n = b->ne[d + 1];
+  size_t ns = b->ns[d], nodd = b->nodd[d][q];
+  const uint32_t *odd = b->odd[d] + q * (b->ne[d] + 1);
   qk_status_t st;
-  if ((st = qk__grow(a, (void **)&b->odd, &b->cap_odd, n + 1, sizeof(uint32_t)))) return st;
-  double lx = qk__min(px, qx), hx = qk__max(px, qx), ly = qk__min(py, qy), hy = qk__max(py, qy);
-  size_t nodd = 0;
-  uint32_t cur = UINT32_MAX;
-  bool par = false;
-  for (size_t i = 0; i < n; i++) {
-    uint32_t p = b->e[d + 1][i];
-    const qk__seg_t *g = &pc->seg[p];
-    /* only pieces whose box meets the segment's can cross it */
-    if (qk__max(g->ax, g->bx) < lx || qk__min(g->ax, g->bx) > hx || qk__max(g->ay, g->by) < ly ||
-        qk__min(g->ay, g->by) > hy)
-      continue;
-    uint32_t f = pc->feat[p];
-    if (f != cur) {
-      if (par) b->odd[nodd++] = cur;
-      cur = f;
-      par = false;
-    }
-    int sc = qk__side(g->ax, g->ay, g->bx, g->by, px, py);
-    if (qk__crosses(px, py, qx, qy, g->ax, g->ay, g->bx, g->by, sc)) par = !par;
-  }
-  if (par) b->odd[nodd++] = cur;
-  /* symmetric difference of two sorted lists */
-  size_t ns = b->ns[d];
   if ((st = qk__grow(a, (void **)&b->s[d + 1], &b->cap_s[d + 1], ns + nodd + 1, sizeof(uint32_t))))
     return st;
   const uint32_t *S = b->s[d];
   uint32_t *T = b->s[d + 1];
   size_t i = 0, j = 0, k = 0;
   while (i < ns || j < nodd) {
-    if (j == nodd || (i < ns && S[i] < b->odd[j]))
+    if (j == nodd || (i < ns && S[i] < odd[j]))
       T[k++] = S[i++];
-    else if (i == ns || b->odd[j] < S[i])
-      T[k++] = b->odd[j++];
+    else if (i == ns || odd[j] < S[i])
+      T[k++] = odd[j++];
     else
       i++, j++;
   }
@@ -229,17 +273,25 @@ static qk_status_t build_node(bctx_t *b, qk_node_t v, double x0, double y0, doub
    * below it. */
   if (b->ne[d] > b->C && d < b->maxd && b->splits_left > 0) {
     bool prog;
-    if ((st = split_lists(b, d, x0, y0, x1, y1, cx, cy, &prog))) return st;
+    if ((st = split_lists(b, d, x0, y0, x1, y1, cx, cy, h, &prog))) return st;
     stall = prog ? 0 : stall + 1;
     split = stall <= STALL_BUDGET;
   }
   if (split) {
-    st = qk_tree_split_leaf(r->tree, v);
+    /* With the tree kept, its split names the children; without, they take the next four
+     * slots of kid[] (the same cells, numbered without the tree's bookkeeping). */
+    uint32_t first = 0;
+    if (r->tree) {
+      st = qk_tree_split_leaf(r->tree, v);
+      if (st == QK_OK) first = qk__node_child(r->tree, v);
+    } else {
+      st = r->n_kid + 4 < QK__DIRECT ? QK_OK : QK_ERR_LIMIT;
+      first = (uint32_t)r->n_kid;
+    }
     if (st == QK_OK) {
       b->splits_left--;
-      uint32_t first = qk__node_child(r->tree, v);
-      if ((st = qk__grow(&r->alloc, (void **)&r->kid, &r->cap_kid, qk__tree_node_bound(r->tree),
-                         sizeof(uint32_t))))
+      if ((st = qk__grow(&r->alloc, (void **)&r->kid, &r->cap_kid,
+                         r->tree ? qk__tree_node_bound(r->tree) : r->n_kid + 4, sizeof(uint32_t))))
         return st;
       r->kid[v] = first;
       if (first + 4 > r->n_kid) r->n_kid = first + 4;
@@ -248,10 +300,9 @@ static qk_status_t build_node(bctx_t *b, qk_node_t v, double x0, double y0, doub
         int east = (int)qk__q_east(q), north = (int)qk__q_north(q);
         double qx0 = east ? cx : x0, qx1 = east ? x1 : cx;
         double qy0 = north ? cy : y0, qy1 = north ? y1 : cy;
-        double hh = h * 0.5;
         b->e[d + 1] = b->store[d + 1] + q * n;
         b->ne[d + 1] = b->cnt[d + 1][q];
-        if ((st = child_set(b, d, cx, cy, qx0 + hh, qy0 + hh))) return st;
+        if ((st = child_set(b, d, q))) return st;
         if ((st = build_node(b, first + q, qx0, qy0, qx1, qy1, h, d + 1, stall))) return st;
       }
       return QK_OK;
@@ -466,14 +517,17 @@ qk_status_t qk__region_build(const qk_region_arrays_t *in, const qk_region_optio
   b.maxd = o.max_depth;
   b.splits_left = pc.n + 4096;
   if ((st = root_square(&pc, r, err))) goto done;
-  qk_tree_options_t to;
-  qk_tree_options_init(&to);
-  to.has_root = 1;
-  to.root = (qk_square_t){r->rx, r->ry, r->rside};
-  to.max_depth = o.max_depth;
-  to.allocator = &r->alloc;
-  if ((st = qk_tree_build(NULL, 0, &to, &r->tree))) goto done;
+  if (o.keep_tree) { /* the refinement is made on a quadkit tree, kept for qk_region_tree */
+    qk_tree_options_t to;
+    qk_tree_options_init(&to);
+    to.has_root = 1;
+    to.root = (qk_square_t){r->rx, r->ry, r->rside};
+    to.max_depth = o.max_depth;
+    to.allocator = &r->alloc;
+    if ((st = qk_tree_build(NULL, 0, &to, &r->tree))) goto done;
+  }
   if ((st = qk__grow(&alloc, (void **)&r->kid, &r->cap_kid, 1, sizeof(uint32_t)))) goto done;
+  r->n_kid = 1;
   b.bad = qk__realloc(&alloc, NULL, 0, in->n_rings + 1);
   if (!b.bad) {
     st = QK_ERR_NOMEM;
@@ -494,8 +548,8 @@ done:
   for (int d = 0; d <= MAXD; d++) {
     qk__free(&alloc, b.store[d], b.cap_store[d] * sizeof(uint32_t));
     qk__free(&alloc, b.s[d], b.cap_s[d] * sizeof(uint32_t));
+    qk__free(&alloc, b.odd[d], b.cap_odd[d] * sizeof(uint32_t));
   }
-  qk__free(&alloc, b.odd, b.cap_odd * sizeof(uint32_t));
   size_t bad = 0;
   if (b.bad) {
     for (size_t i = 0; i < in->n_rings; i++) bad += b.bad[i];
@@ -532,10 +586,6 @@ done:
   s->leaf_edges = r->n_le;
   s->depth = b.depth;
   s->planar = r->planar;
-  if (!o.keep_tree) { /* the query arrays hold everything queries need */
-    qk_tree_free(r->tree);
-    r->tree = NULL;
-  }
   shrink_all(r);
   s->build_seconds = now() - t0;
   s->bytes = layer_bytes(r);

@@ -8,6 +8,7 @@
  * json-c allocates with malloc, not through the layer's allocator; the allocation-failure
  * tests therefore cover the rest of the reader and the builder.
  */
+#include <errno.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -141,6 +142,7 @@ static qk_status_t properties(gj_t *g, json_object *props, size_t f) {
         len = (size_t)json_object_get_string_len(v);
       } else if (v) {
         s = json_object_to_json_string_ext(v, JSON_C_TO_STRING_PLAIN);
+        if (!s) return nomem(g, QK_ERR_NOMEM); /* json-c's malloc failed */
         len = strlen(s);
       }
       qk_status_t st = qk__props_add(g->a, &g->rg.props, k, s, len);
@@ -232,6 +234,10 @@ qk_status_t qk_region_read_geojson_text(const char *text, size_t len,
   json_object *root = NULL;
   size_t at = 0;
   enum json_tokener_error jerr = json_tokener_continue;
+  /* json-c allocates with malloc (it has no allocator hook) and, in the versions Debian
+   * ships, reports a failed allocation as a parse error; malloc's ENOMEM tells them
+   * apart. */
+  errno = 0;
   /* json-c takes an int length: feed large texts in pieces. */
   do {
     size_t chunk = len - at > (1u << 30) ? (1u << 30) : len - at;
@@ -243,6 +249,11 @@ qk_status_t qk_region_read_geojson_text(const char *text, size_t len,
     }
     at += chunk;
   } while (at < len);
+  if (errno == ENOMEM) { /* even with a root: json-c may have dropped what it could not add */
+    json_object_put(root);
+    json_tokener_free(tok);
+    return qk__region_fail(err, QK_ERR_NOMEM, SIZE_MAX, "out of memory parsing JSON (json-c)");
+  }
   if (!root && jerr == json_tokener_continue) {
     /* the text ended inside a value */
     where(text, len, err);
@@ -281,7 +292,9 @@ qk_status_t qk_region_read_geojson_text(const char *text, size_t len,
   g.a = &alloc;
   g.planar = o.planar;
   g.err = err ? err : &scratch;
+  errno = 0;
   qk_status_t st = document(&g, root);
+  if (!st && errno == ENOMEM) st = nomem(&g, QK_ERR_NOMEM); /* inside json-c */
   json_object_put(root);
   if (!st) st = qk__rings_build(&g.rg, &o, out, err);
   qk__rings_free(g.a, &g.rg);

@@ -4,6 +4,8 @@
  * points over threads; each answer is computed by the same code, so results do not depend
  * on the thread count.
  */
+#include <string.h>
+
 #include "region/region_internal.h"
 
 /* Map a query to the plane of the index; false when it is in no feature. */
@@ -170,18 +172,20 @@ typedef struct job {
 } job_t;
 
 /* A batch runs in blocks: first every point's descent (independent chains of loads the
- * processor overlaps) with a prefetch of its leaf, then the leaf tests. Each answer is
- * what qk__region_locate1 gives. */
+ * processor overlaps) with a prefetch of its leaf, then the leaf tests. With an order,
+ * the job's points are taken from sorted[] (its points in that order) and the answer of
+ * sorted[i] goes to out[order[i]]. Each answer is what qk__region_locate1 gives. */
 #define BLOCK 32
 
-static void run(job_t *j) {
+static void run(job_t *j, const qk_point_t *sorted, const uint32_t *order) {
   const qk_region_t *r = j->r;
+  const qk_point_t *pts = order ? sorted : j->pts;
   for (size_t i0 = 0; i0 < j->n; i0 += BLOCK) {
     size_t m = j->n - i0 < BLOCK ? j->n - i0 : BLOCK;
     uint32_t k[BLOCK];
     double x[BLOCK], y[BLOCK], cx[BLOCK], cy[BLOCK];
     for (size_t i = 0; i < m; i++) {
-      x[i] = j->pts[i0 + i].x, y[i] = j->pts[i0 + i].y;
+      x[i] = pts[i0 + i].x, y[i] = pts[i0 + i].y;
       k[i] = QK__LEAF | QK__DIRECT; /* none */
       if (!isfinite(x[i]) || !isfinite(y[i])) {
         j->nonfinite = 1;
@@ -207,13 +211,90 @@ static void run(job_t *j) {
           if (!t.n) f = QK_NONE;
         }
       }
-      j->out[i0 + i] = f;
+      j->out[order ? order[i0 + i] : i0 + i] = f;
     }
+  }
+}
+
+/*
+ * Morton buckets. Random points over a layer larger than the processor's caches miss
+ * the cache at nearly every level of their descent and again at their leaf's edges.
+ * Answering the points in Z-order of their cells instead makes consecutive points walk
+ * the same top levels and mostly the same leaves, which then stay in cache. A share is
+ * taken in chunks of up to CHUNK points; each chunk is ordered by one counting pass over
+ * 2^SORT_BITS x 2^SORT_BITS cells of the root square (the cells' Morton codes are the
+ * bucket numbers; within a bucket the input order is kept), copying each point to its
+ * place so that the queries read them in sequence, and the answers, scattered back to
+ * the chunk's own part of out[], stay within a few hundred kilobytes. Only the order of
+ * the work changes: every answer is computed alone by the same code and written to its
+ * own index, so the results are those of single calls. Measured on countries-50m with
+ * 10^6 uniform points (docs/region.md): callgrind counts more instructions (the sort)
+ * but the time per point falls by about a quarter (process CPU time on a loaded machine;
+ * the benchmark run on an idle one has the final word).
+ * Each thread borrows 22 bytes per chunk point and 4 << (2 SORT_BITS) bytes from the
+ * layer's allocator for the call; when that fails the batch runs in input order.
+ */
+#define SORT_BITS 8
+#define SORT_BUCKETS (1u << (2 * SORT_BITS))
+#define CHUNK ((size_t)1 << 18)
+/* Chunks with fewer points are answered in input order (the sort would not pay). */
+#define SORT_MIN ((size_t)1 << 15)
+
+/* Bits 0..7 of v at the even positions 0..14. */
+static const uint16_t spread8[256] = {
+#define S1(v) (((v)&1) | ((v)&2) << 1 | ((v)&4) << 2 | ((v)&8) << 3)
+#define S2(v) (S1(v) | S1((v) >> 4) << 8)
+#define R4(v) S2(v), S2(v + 1), S2(v + 2), S2(v + 3)
+#define R16(v) R4(v), R4(v + 4), R4(v + 8), R4(v + 12)
+    R16(0),   R16(16),  R16(32),  R16(48),  R16(64),  R16(80),  R16(96),  R16(112),
+    R16(128), R16(144), R16(160), R16(176), R16(192), R16(208), R16(224), R16(240)};
+#undef S1
+#undef S2
+#undef R4
+#undef R16
+
+/* A coordinate's cell along one axis of the root square, clamped (points outside the
+ * root, even NaN, go to some cell; they are answered like any other). */
+static inline uint32_t sort_cell(double v, double lo, double scale) {
+  double c = (v - lo) * scale;
+  if (!(c > 0)) return 0;
+  if (c >= (double)((1u << SORT_BITS) - 1)) return (1u << SORT_BITS) - 1;
+  return (uint32_t)c;
+}
+
+/* sorted[] = pts[0..n) by bucket and order[i] = the index of sorted[i] in pts; cnt has
+ * SORT_BUCKETS entries, key n (n <= CHUNK). */
+static void sort_chunk(const qk_region_t *r, const qk_point_t *pts, size_t n, uint32_t *cnt,
+                       uint16_t *key, qk_point_t *sorted, uint32_t *order) {
+  const double scale = (double)(1u << SORT_BITS) / r->rside;
+  memset(cnt, 0, SORT_BUCKETS * sizeof *cnt);
+  for (size_t i = 0; i < n; i++) {
+    uint32_t c = spread8[sort_cell(pts[i].x, r->rx, scale)] |
+                 (uint32_t)spread8[sort_cell(pts[i].y, r->ry, scale)] << 1;
+    key[i] = (uint16_t)c;
+    cnt[c]++;
+  }
+  uint32_t sum = 0;
+  for (uint32_t b = 0; b < SORT_BUCKETS; b++) {
+    uint32_t c = cnt[b];
+    cnt[b] = sum;
+    sum += c;
+  }
+  for (size_t i = 0; i < n; i++) {
+    uint32_t at = cnt[key[i]]++;
+    sorted[at] = pts[i];
+    order[at] = (uint32_t)i;
   }
 }
 
 typedef struct batch {
   job_t all;
+  /* The scratch of the Morton order (cnt NULL: none): per share, SORT_BUCKETS counters
+   * and `chunk` places in each of sorted[], order[] and key[]. */
+  size_t chunk;
+  uint32_t *cnt, *order;
+  qk_point_t *sorted;
+  uint16_t *key;
   int nonfinite[QK__MAX_THREADS];
 } batch_t;
 
@@ -221,9 +302,23 @@ static void locate_share(void *ctx, unsigned w, unsigned nw) {
   batch_t *bt = ctx;
   size_t lo, hi;
   qk__share_range(bt->all.n, w, nw, &lo, &hi);
-  job_t j = {bt->all.r, bt->all.pts + lo, hi - lo, bt->all.b, bt->all.out + lo, 0};
-  run(&j);
-  bt->nonfinite[w] = j.nonfinite;
+  for (size_t c0 = lo; c0 < hi; c0 += CHUNK) {
+    size_t c1 = hi - c0 < CHUNK ? hi : c0 + CHUNK;
+    job_t j = {bt->all.r, bt->all.pts + c0, c1 - c0, bt->all.b, bt->all.out + c0, 0};
+    size_t at = (size_t)w * bt->chunk;
+    bool sort = bt->cnt && j.n >= SORT_MIN;
+    if (sort)
+      sort_chunk(j.r, j.pts, j.n, bt->cnt + (size_t)w * SORT_BUCKETS, bt->key + at, bt->sorted + at,
+                 bt->order + at);
+    run(&j, sort ? bt->sorted + at : NULL, sort ? bt->order + at : NULL);
+    if (j.nonfinite) bt->nonfinite[w] = 1;
+  }
+}
+
+/* The scratch of nw shares of chunks of up to `chunk` points. */
+static size_t scratch_bytes(size_t chunk, unsigned nw) {
+  return (size_t)nw * (chunk * (sizeof(qk_point_t) + sizeof(uint32_t) + sizeof(uint16_t)) +
+                       SORT_BUCKETS * sizeof(uint32_t));
 }
 
 qk_status_t qk_region_locate_batch(const qk_region_t *r, const qk_point_t *pts, size_t n,
@@ -232,8 +327,22 @@ qk_status_t qk_region_locate_batch(const qk_region_t *r, const qk_point_t *pts, 
   threads = qk__threads_resolve(threads);
   size_t min_per = 4096; /* below this a thread costs more than it saves */
   if ((size_t)threads > n / min_per) threads = (unsigned)(n / min_per);
-  batch_t bt = {{r, pts, n, b, out, 0}, {0}};
+  unsigned nw = threads ? threads : 1;
+  if (nw > QK__MAX_THREADS) nw = QK__MAX_THREADS;
+  batch_t bt = {{r, pts, n, b, out, 0}, 0, NULL, NULL, NULL, NULL, {0}};
+  /* Sort only when a share is large enough to pay. */
+  size_t per = (n + nw - 1) / nw;
+  bt.chunk = per < CHUNK ? per : CHUNK;
+  void *scratch = NULL;
+  if (bt.chunk >= SORT_MIN) scratch = qk__realloc(&r->alloc, NULL, 0, scratch_bytes(bt.chunk, nw));
+  if (scratch) {
+    bt.sorted = scratch;
+    bt.cnt = (uint32_t *)(bt.sorted + (size_t)nw * bt.chunk);
+    bt.order = bt.cnt + (size_t)nw * SORT_BUCKETS;
+    bt.key = (uint16_t *)(bt.order + (size_t)nw * bt.chunk);
+  }
   qk__run_shares(threads, locate_share, &bt);
+  if (scratch) qk__free(&r->alloc, scratch, scratch_bytes(bt.chunk, nw));
   for (unsigned w = 0; w < QK__MAX_THREADS; w++)
     if (bt.nonfinite[w]) return QK_ERR_NONFINITE;
   return QK_OK;

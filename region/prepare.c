@@ -62,7 +62,7 @@ void qk__pieces_free(const qk_allocator_t *a, qk__pieces_t *p) {
 
 static qk_status_t reserve(const qk_allocator_t *a, qk__pieces_t *p, size_t need) {
   if (need <= p->cap) return QK_OK;
-  size_t nc = p->cap ? p->cap : 64;
+  size_t nc = p->cap ? p->cap : (need > 64 ? need : 64); /* the first time: the bound asked */
   while (nc < need) nc *= 2;
   if (nc > UINT32_MAX) return QK_ERR_LIMIT;
   /* Fresh arrays, copied, then the old ones freed: on failure the old ones stay whole
@@ -212,6 +212,26 @@ qk_status_t qk__region_prepare(const qk_allocator_t *a, const qk_region_arrays_t
   memset(out, 0, sizeof *out);
   qk_status_t st = check_arrays(in, planar, err);
   if (st) return st;
+  /* Room for every piece at once: a ring edge gives one piece, or four when it crosses the
+   * antimeridian, and a ring winding k times round the globe |k| more. */
+  size_t bound = 0;
+  for (size_t r = 0; r < in->n_rings; r++) {
+    size_t s = in->ring_start[r], len = in->ring_start[r + 1] - s;
+    bound += len - 1;
+    if (planar) continue;
+    long k = 0;
+    size_t cuts = 0;
+    for (size_t i = 0; i + 1 < len; i++) {
+      double d = in->xy[2 * (s + i + 1)] - in->xy[2 * (s + i)];
+      if (d < -180 || d > 180) cuts++, k += d < -180 ? 1 : -1;
+    }
+    bound += 3 * cuts + (size_t)labs(k);
+  }
+  if (bound && (st = reserve(a, out, bound))) {
+    qk__pieces_free(a, out);
+    return qk__region_fail(err, st, SIZE_MAX,
+                           st == QK_ERR_NOMEM ? "out of memory" : "too many edges");
+  }
   for (size_t f = 0; f < in->n_features && !st; f++) {
     for (size_t r = in->feature_start[f]; r < in->feature_start[f + 1] && !st; r++) {
       size_t s = in->ring_start[r], len = in->ring_start[r + 1] - s;

@@ -27,10 +27,13 @@
  * same operations, and antimeridian cut points, which become vertices (both pieces of a
  * cut edge use the same rounded latitude).
  *
- * The index (this file). The pieces are refined into a quadkit tree (index/): a cell
- * splits (qk_tree_split_leaf, so the tree is a plain quadkit tree the SVG writer and
- * walks understand) while more than C = options.leaf_edges pieces meet its closed square,
- * up to a depth cap. Each cell has a reference point, the centre of its square as
+ * The index (build.c). The pieces are refined as a quadtree: a cell splits while more
+ * than C = options.leaf_edges pieces meet its closed square, up to a depth cap. With
+ * options.keep_tree the refinement runs on a quadkit tree (qk_tree_split_leaf, so it is a
+ * plain quadkit tree that walks and checks understand, returned by qk_region_tree);
+ * without it (the default) the same cells are numbered straight into the query array
+ * kid[], which saves the tree's bookkeeping (about 8% of the build's instructions) and
+ * its memory. Each cell has a reference point, the centre of its square as
  * computed by the descent. The root's reference point is classified by brute force (a
  * half-open ray, which is the perturbed crossing test); a child's from its parent's by
  * counting the crossings of the segment parent reference -> child reference (the
@@ -43,8 +46,8 @@
  * overlapping shared edges) two levels in a row, and when a budget of (pieces +
  * 4096) splits is spent, so adversarial input cannot make the index explode.
  *
- * Layout for queries (build.c). The tree's structure is copied into a flat array kid[]
- * (node -> first child, or a tagged leaf). A leaf without pieces whose reference point
+ * Layout for queries (build.c). The cells form a flat array kid[] (node -> first child,
+ * or a tagged leaf). A leaf without pieces whose reference point
  * lies in at most one feature is stored as its answer in kid[] itself (QK__DIRECT), so
  * most points away from boundaries never read a leaf record. A 2^G x 2^G grid over the
  * top G levels (G <= 8) holds the kid[] value reached at depth G; a query guesses its
@@ -57,7 +60,8 @@
  * crossed by the segment reference -> point. Most pieces are rejected by one filtered
  * orientation (the point on the same side as the reference). Batches run in blocks of 32
  * points: all descents first (their loads overlap), with a prefetch of each leaf record,
- * then the leaf tests.
+ * then the leaf tests; large batches are first put in Morton order, chunk by chunk, so
+ * that consecutive points share their descent and leaf (locate.c).
  */
 #include <stdarg.h>
 #include <stdio.h>

@@ -1,12 +1,16 @@
 #!/usr/bin/env bash
 # Installs the Debian packages quadkit needs that are missing. Idempotent and quiet when
-# everything is present. Usage: install-deps.sh [core|bench|fuzz]...
+# everything is present. Usage: install-deps.sh [core|gdal|bench|fuzz|memcheck]...
+# gdal: the optional OGR reader of region/ (every vector format GDAL reads); CMake compiles
+# it in when it finds libgdal-dev, otherwise qk_region_read_ogr returns QK_ERR_UNSUPPORTED.
+# It is large, so `make test` does not install it; CI (.ci/run) does, to build that path.
 set -euo pipefail
 
 want=(cmake make gcc g++ pkg-config libcmocka-dev libproj-dev libgmp-dev)
 for set in "$@"; do
   case "$set" in
     core) want+=(libjson-c-dev) ;;
+    gdal) want+=(libgdal-dev) ;;
     bench) want+=(libgeos-dev libs2-dev libgdal-dev libbox2d-dev libbullet-dev libflann-dev libnanoflann-dev libembree-dev libcgal-dev libp4est-dev libgmsh-dev libgeographiclib-dev gnuplot-nox liblz4-dev libhdf5-dev) ;;
     fuzz) want+=(clang libclang-rt-14-dev) ;;
     memcheck) want+=(valgrind) ;;

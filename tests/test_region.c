@@ -13,8 +13,10 @@
  *  - holes and multipolygons; bow-tie rings (and the self-intersection count);
  *  - lon/lat mode: an antimeridian-crossing square, a ring around the south pole,
  *    longitudes 180 / -180 / 540, latitudes beyond the poles, planar mode switching it off;
- *  - batch == single, threaded batch == single;
+ *  - batch == single, threaded batch == single; batches large enough for the Morton order
+ *    (with vertices, far and non-finite points, failed scratch allocation) == single;
  *  - allocation failure at every N (arrays and GeoJSON): QK_ERR_NOMEM, nothing leaked;
+ *  - without keep_tree: the same index and answers as with the tree, allocation failures;
  *  - GeoJSON: Feature, bare geometry, skipped geometries, properties; errors with line
  *    and column, feature index and reason;
  *  - real data (skipped when ../shared/data is absent): countries-50m with the
@@ -110,6 +112,8 @@ static int oracle_in(const tl_t *t, size_t f, long px, long py, qk_boundary_t ru
 #define OFF 1048576.0
 #define SCALE (1.0 / 128)
 
+static int tl_keep_tree = 1; /* options.keep_tree for tl_build */
+
 static qk_region_t *tl_build(const tl_t *t, uint32_t leaf_edges, const qk_allocator_t *alloc,
                              qk_status_t *st_out) {
   double *xy = malloc(2 * (t->nv + 1) * sizeof(double));
@@ -120,7 +124,7 @@ static qk_region_t *tl_build(const tl_t *t, uint32_t leaf_edges, const qk_alloca
   o.planar = 1;
   o.leaf_edges = leaf_edges;
   o.allocator = alloc;
-  o.keep_tree = 1;
+  o.keep_tree = tl_keep_tree;
   qk_region_t *r = NULL;
   qk_error_t err;
   qk_status_t st = qk_region_from_arrays(&a, &o, &r, &err);
@@ -527,6 +531,126 @@ static void test_region_batch_threads(void **state) {
   tl_free(&t);
 }
 
+/* Batches large enough to be answered in Morton order (chunks of 2^18 points, sorted from
+ * 2^15 up): answers in input order equal to single calls, with points on vertices and
+ * edges, outside the layer, non-finite, and all in one cell; with 1 and 2 threads; and
+ * when the sort's scratch cannot be allocated (then the batch runs in input order). */
+static void test_region_batch_morton(void **state) {
+  (void)state;
+  uint64_t seed = qkt_seed(977);
+  qkt_rng_t g;
+  qkt_rng_seed(&g, seed);
+  tl_t t;
+  random_layer(&g, &t, 20, 1000);
+  qkt_alloc_t as;
+  qk_allocator_t al = qkt_alloc_make(&as);
+  qk_region_t *r = tl_build(&t, 0, &al, NULL);
+  size_t n = 300000; /* one full chunk and a sorted remainder of 37856 */
+  qk_point_t *p = malloc(n * sizeof *p);
+  uint32_t *a = malloc(n * sizeof *a), *b = malloc(n * sizeof *b);
+  for (size_t i = 0; i < n; i++) {
+    unsigned kind = (unsigned)qkt_rng_below(&g, 8);
+    if (kind == 0) { /* a vertex of the layer */
+      size_t v = (size_t)qkt_rng_below(&g, t.nv);
+      p[i] = tp(t.xy[2 * v], t.xy[2 * v + 1]);
+    } else if (kind == 1 && i > n / 2) { /* many points in one cell */
+      p[i] = tp(500 + (long)qkt_rng_below(&g, 3), 500 + (long)qkt_rng_below(&g, 3));
+    } else {
+      p[i] = tp(-50 + (long)qkt_rng_below(&g, 1100), -50 + (long)qkt_rng_below(&g, 1100));
+    }
+  }
+  p[3].x = NAN, p[n - 1].y = INFINITY, p[n / 2].x = -INFINITY, p[1000].y = 1e300;
+  for (int rule = 0; rule < 3; rule++) {
+    for (size_t i = 0; i < n; i++) qk_region_locate(r, p[i], (qk_boundary_t)rule, &a[i]);
+    for (unsigned th = 1; th <= 2; th++) {
+      memset(b, 0xab, n * sizeof *b);
+      assert_int_equal(qk_region_locate_batch(r, p, n, (qk_boundary_t)rule, th, b),
+                       QK_ERR_NONFINITE);
+      for (size_t i = 0; i < n; i++)
+        if (a[i] != b[i])
+          fail_msg("seed %llu rule %d threads %u point %zu (%.17g, %.17g): batch %u, single %u",
+                   (unsigned long long)seed, rule, th, i, p[i].x, p[i].y, b[i], a[i]);
+    }
+  }
+  /* The scratch allocation fails: the same answers, in input order, nothing leaked. */
+  size_t live = as.live_blocks;
+  as.calls = 0;
+  as.fail_at = 1;
+  memset(b, 0xab, n * sizeof *b);
+  assert_int_equal(qk_region_locate_batch(r, p, n, QK_BOUNDARY_SEMI_OPEN, 1, b), QK_ERR_NONFINITE);
+  assert_true(as.failed);
+  assert_int_equal(as.live_blocks, live);
+  for (size_t i = 0; i < n; i++) qk_region_locate(r, p[i], QK_BOUNDARY_SEMI_OPEN, &a[i]);
+  assert_memory_equal(a, b, n * sizeof *a);
+  as.fail_at = 0;
+  qk_region_free(r);
+  assert_int_equal(as.live_blocks, 0);
+  free(p), free(a), free(b);
+  tl_free(&t);
+}
+
+/* Without keep_tree the cells go straight into the query arrays: the same index (stats)
+ * and the same answers as the refinement on a quadkit tree, for leaf capacities 1 and 8;
+ * with every allocation failing in turn, QK_ERR_NOMEM and nothing leaked. */
+static void test_region_without_tree(void **state) {
+  (void)state;
+  uint64_t seed = qkt_seed(31);
+  qkt_rng_t g;
+  qkt_rng_seed(&g, seed);
+  tl_t t;
+  random_layer(&g, &t, 25, 1000);
+  size_t n = 20000;
+  qk_point_t *p = malloc(n * sizeof *p);
+  uint32_t *a = malloc(n * sizeof *a), *b = malloc(n * sizeof *b);
+  for (size_t i = 0; i < n; i++)
+    p[i] = tp(-10 + (long)qkt_rng_below(&g, 1020), -10 + (long)qkt_rng_below(&g, 1020));
+  for (uint32_t cap = 1; cap <= 8; cap += 7) {
+    tl_keep_tree = 1;
+    qk_region_t *r1 = tl_build(&t, cap, NULL, NULL);
+    tl_keep_tree = 0;
+    qk_region_t *r0 = tl_build(&t, cap, NULL, NULL);
+    assert_non_null(qk_region_tree(r1));
+    assert_null(qk_region_tree(r0));
+    qk_region_stats_t s0, s1;
+    qk_region_stats(r0, &s0);
+    qk_region_stats(r1, &s1);
+    assert_int_equal(s0.leaves, s1.leaves);
+    assert_int_equal(s0.leaf_edges, s1.leaf_edges);
+    assert_int_equal(s0.depth, s1.depth);
+    assert_true(s0.bytes < s1.bytes);
+    for (int rule = 0; rule < 3; rule++) {
+      assert_int_equal(qk_region_locate_batch(r1, p, n, (qk_boundary_t)rule, 1, a), QK_OK);
+      assert_int_equal(qk_region_locate_batch(r0, p, n, (qk_boundary_t)rule, 1, b), QK_OK);
+      for (size_t i = 0; i < n; i++)
+        if (a[i] != b[i])
+          fail_msg("seed %llu cap %u rule %d point %zu: without tree %u, with %u",
+                   (unsigned long long)seed, cap, rule, i, b[i], a[i]);
+    }
+    qk_region_free(r0);
+    qk_region_free(r1);
+  }
+  for (size_t k = 1;; k++) {
+    qkt_alloc_t as;
+    qk_allocator_t al = qkt_alloc_make(&as); /* (it clears the counts) */
+    as.fail_at = k;
+    qk_status_t st;
+    qk_region_t *r = tl_build(&t, 2, &al, &st);
+    if (st == QK_OK) { /* all succeeded, or only a shrink failed (it keeps the block) */
+      qk_region_free(r);
+      assert_int_equal(as.live_blocks, 0);
+      if (!as.failed) break;
+      continue;
+    }
+    assert_int_equal(st, QK_ERR_NOMEM);
+    assert_null(r);
+    assert_int_equal(as.live_blocks, 0);
+    assert_true(k < 100000);
+  }
+  tl_keep_tree = 1;
+  free(p), free(a), free(b);
+  tl_free(&t);
+}
+
 /* ---- allocation failure -------------------------------------------------------------------- */
 
 static void test_region_alloc_failure(void **state) {
@@ -536,17 +660,17 @@ static void test_region_alloc_failure(void **state) {
   tl_t t;
   random_layer(&g, &t, 6, 100);
   for (size_t n = 1;; n++) {
-    qkt_alloc_t as = {0};
+    qkt_alloc_t as;
+    qk_allocator_t al = qkt_alloc_make(&as); /* (it clears the counts) */
     as.fail_at = n;
-    qk_allocator_t al = qkt_alloc_make(&as);
     qk_status_t st;
     qk_region_t *r = tl_build(&t, 2, &al, &st);
-    if (st == QK_OK) {
-      assert_false(as.failed);
+    if (st == QK_OK) { /* all succeeded, or only a shrink failed (it keeps the block) */
       check_point(r, &t, 50, 50, 5);
       qk_region_free(r);
       assert_int_equal(as.live_blocks, 0);
-      break;
+      if (!as.failed) break;
+      continue;
     }
     assert_int_equal(st, QK_ERR_NOMEM);
     assert_null(r);
@@ -561,20 +685,21 @@ static void test_region_alloc_failure(void **state) {
                    "[0.2,0.1],[0.1,0.05]]]}},{\"type\":\"Feature\",\"properties\":null,"
                    "\"geometry\":{\"type\":\"Point\",\"coordinates\":[0,0]}}]}";
   for (size_t n = 1;; n++) {
-    qkt_alloc_t as = {0};
+    qkt_alloc_t as;
+    qk_allocator_t al = qkt_alloc_make(&as); /* (it clears the counts) */
     as.fail_at = n;
-    qk_allocator_t al = qkt_alloc_make(&as);
     qk_region_options_t o;
     qk_region_options_init(&o);
     o.allocator = &al;
     qk_region_t *r;
     qk_error_t e;
     qk_status_t st = qk_region_read_geojson_text(js, strlen(js), &o, &r, &e);
-    if (st == QK_OK) {
+    if (st == QK_OK) { /* all succeeded, or only a shrink failed (it keeps the block) */
       assert_string_equal(qk_region_property(r, 0, "name"), "a");
       qk_region_free(r);
       assert_int_equal(as.live_blocks, 0);
-      break;
+      if (!as.failed) break;
+      continue;
     }
     assert_int_equal(st, QK_ERR_NOMEM);
     assert_null(r);
@@ -835,6 +960,8 @@ int main(void) {
       cmocka_unit_test(test_region_bowtie),
       cmocka_unit_test(test_region_lonlat),
       cmocka_unit_test(test_region_batch_threads),
+      cmocka_unit_test(test_region_batch_morton),
+      cmocka_unit_test(test_region_without_tree),
       cmocka_unit_test(test_region_alloc_failure),
       cmocka_unit_test(test_region_geojson),
       cmocka_unit_test(test_region_countries),
