@@ -507,6 +507,68 @@ static void test_cdt_segments(void **state) {
   }
 }
 
+/* Long segments between random vertices of a coarse grid (many cocircular and collinear
+ * vertices in every cavity) and random points: accepted ones are checked as chains,
+ * refused ones must name a real blocker. */
+static void test_cdt_long_segments(void **state) {
+  (void)state;
+  g_seed = qkt_seed(12111);
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed);
+  for (int round = 0; round < 3; round++) {
+    qk__cdt_t c;
+    assert_int_equal(qk__cdt_init(&c, NULL, 0, 0, 64, 0), QK_OK);
+    for (int i = 0; i < 1500; i++) {
+      uint32_t v;
+      int ex;
+      double x = round == 1 ? qkt_rng_range(&r, 1, 63) : 1 + qkt_rng_below(&r, 62);
+      double y = round == 1 ? qkt_rng_range(&r, 1, 63) : 1 + qkt_rng_below(&r, 62);
+      assert_int_equal(qk__cdt_insert(&c, x, y, NONE, &v, &ex), QK_OK);
+    }
+    segrec_t used[200];
+    size_t nu = 0;
+    int refused = 0;
+    for (int q = 0; q < 200; q++) {
+      uint32_t a = 4 + qkt_rng_below(&r, (uint32_t)c.nv - 4),
+               b = 4 + qkt_rng_below(&r, (uint32_t)c.nv - 4);
+      uint32_t blk, bs;
+      qk_status_t st = qk__cdt_insert_segment(&c, a, b, (uint32_t)q, &blk, &bs);
+      if (a == b) {
+        assert_int_equal(st, QK_ERR_GEOMETRY);
+        continue;
+      }
+      if (st == QK_OK) {
+        used[nu++] = (segrec_t){a, b, (uint32_t)q};
+        continue;
+      }
+      assert_int_equal(st, QK_ERR_GEOMETRY);
+      refused++;
+      const double *pa = c.xy + 2 * a, *pb = c.xy + 2 * b;
+      if (bs == NONE) { /* a vertex in the relative interior of ab */
+        assert_int_equal(qk__orient2d(pa, pb, c.xy + 2 * blk), 0);
+        assert_true(qk__cdt_encroach(pa, pb, c.xy + 2 * blk) < 0);
+      } else { /* a constrained edge of segment bs, with blk one of its ends, crosses ab */
+        int found = 0;
+        for (size_t i = 0; i < nu; i++)
+          if (used[i].id == bs &&
+              (used[i].a == blk || used[i].b == blk ||
+               qk__orient2d(c.xy + 2 * used[i].a, c.xy + 2 * used[i].b, c.xy + 2 * blk) == 0)) {
+            const double *u = c.xy + 2 * used[i].a, *w = c.xy + 2 * used[i].b;
+            assert_true(qk__orient2d(pa, pb, u) * qk__orient2d(pa, pb, w) <= 0);
+            assert_true(qk__orient2d(u, w, pa) * qk__orient2d(u, w, pb) <= 0);
+            found = 1;
+          }
+        assert_true(found);
+      }
+      if (q % 20 == 0) check_cdt(&c);
+    }
+    check_cdt(&c);
+    check_segments(&c, used, nu);
+    assert_true(nu > 10 && refused > 10);
+    qk__cdt_free(&c);
+  }
+}
+
 /* Snapshot of a triangulation, to check that a refused call changed nothing. */
 typedef struct snap {
   size_t nv, nt;
@@ -725,14 +787,15 @@ static void skip_without_gmp(void **state) {
 int main(void) {
   const struct CMUnitTest tests[] = {
 #ifdef QK_HAVE_GMP
-      cmocka_unit_test(test_cdt_incircle_gmp), cmocka_unit_test(test_cdt_encroach_gmp),
+      cmocka_unit_test(test_cdt_incircle_gmp),  cmocka_unit_test(test_cdt_encroach_gmp),
 #else
       cmocka_unit_test(skip_without_gmp),
 #endif
-      cmocka_unit_test(test_cdt_uniform),      cmocka_unit_test(test_cdt_grid),
-      cmocka_unit_test(test_cdt_scales),       cmocka_unit_test(test_cdt_near_degenerate),
-      cmocka_unit_test(test_cdt_segments),     cmocka_unit_test(test_cdt_segment_refused),
-      cmocka_unit_test(test_cdt_walk),         cmocka_unit_test(test_cdt_alloc_fail),
+      cmocka_unit_test(test_cdt_uniform),       cmocka_unit_test(test_cdt_grid),
+      cmocka_unit_test(test_cdt_scales),        cmocka_unit_test(test_cdt_near_degenerate),
+      cmocka_unit_test(test_cdt_segments),      cmocka_unit_test(test_cdt_segment_refused),
+      cmocka_unit_test(test_cdt_long_segments), cmocka_unit_test(test_cdt_walk),
+      cmocka_unit_test(test_cdt_alloc_fail),
   };
   (void)skip_without_gmp;
   return cmocka_run_group_tests(tests, NULL, NULL);
