@@ -307,6 +307,8 @@ qk_status_t qk__cdt_insert(qk__cdt_t *c, double x, double y, uint32_t start, uin
   uint32_t t;
   int k;
   *existed = 0;
+  /* corners 0 and 2 are the square's; NaN fails the comparisons too */
+  if (!(x >= c->xy[0] && x <= c->xy[4] && y >= c->xy[1] && y <= c->xy[5])) return QK_ERR_OUTSIDE;
   qk__cdt_where_t w = qk__cdt_locate(c, x, y, start, &t, &k);
   if (w == QK__CDT_VERT) {
     *v_out = c->v[3 * (size_t)t + k];

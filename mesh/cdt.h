@@ -75,7 +75,10 @@ qk__cdt_where_t qk__cdt_locate(const qk__cdt_t *c, double x, double y, uint32_t 
  * is set to 1 and nothing changes). A point in the relative interior of a constrained edge
  * splits it: both halves keep the segment id (callers put only points that lie exactly on
  * the segment there; the refinement does, for segment split points). `start` as for
- * locate. QK_OK or QK_ERR_NOMEM (the triangulation is then unchanged). */
+ * locate. QK_OK or QK_ERR_NOMEM (the triangulation is then unchanged); QK_ERR_OUTSIDE (and
+ * nothing changes) when the point is not in the closed square or is NaN. A point on the
+ * square's boundary is accepted (it splits a boundary edge) but breaks "the four corners
+ * are the only boundary vertices": callers keep points strictly inside. */
 qk_status_t qk__cdt_insert(qk__cdt_t *c, double x, double y, uint32_t start, uint32_t *v_out,
                            int *existed);
 

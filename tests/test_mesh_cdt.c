@@ -507,6 +507,15 @@ static void test_cdt_segments(void **state) {
   }
 }
 
+typedef struct snap {
+  size_t nv, nt;
+  double *xy;
+  uint32_t *v, *nbr, *seg;
+} snap_t;
+static void snap_take(snap_t *s, const qk__cdt_t *c);
+static void snap_expect(const snap_t *s, const qk__cdt_t *c);
+static void snap_free(snap_t *s);
+
 /* Long segments between random vertices of a coarse grid (many cocircular and collinear
  * vertices in every cavity) and random points: accepted ones are checked as chains,
  * refused ones must name a real blocker. */
@@ -532,7 +541,22 @@ static void test_cdt_long_segments(void **state) {
       uint32_t a = 4 + qkt_rng_below(&r, (uint32_t)c.nv - 4),
                b = 4 + qkt_rng_below(&r, (uint32_t)c.nv - 4);
       uint32_t blk, bs;
+      snap_t before;
+      snap_take(&before, &c);
+      uint8_t *seen = calloc(c.nt, 1);
+      c.on_change = count_change, c.user = seen;
       qk_status_t st = qk__cdt_insert_segment(&c, a, b, (uint32_t)q, &blk, &bs);
+      c.on_change = NULL, c.user = NULL;
+      assert_int_equal(c.nt, before.nt);
+      for (size_t t = 0; t < c.nt; t++)
+        if ((memcmp(before.v + 3 * t, c.v + 3 * t, 3 * sizeof *c.v) ||
+             memcmp(before.seg + 3 * t, c.seg + 3 * t, 3 * sizeof *c.v)) &&
+            !seen[t])
+          fail_msg("seed %llu: segment insertion changed triangle %zu unreported",
+                   (unsigned long long)g_seed, t);
+      if (st != QK_OK) snap_expect(&before, &c);
+      snap_free(&before);
+      free(seen);
       if (a == b) {
         assert_int_equal(st, QK_ERR_GEOMETRY);
         continue;
@@ -570,11 +594,6 @@ static void test_cdt_long_segments(void **state) {
 }
 
 /* Snapshot of a triangulation, to check that a refused call changed nothing. */
-typedef struct snap {
-  size_t nv, nt;
-  double *xy;
-  uint32_t *v, *nbr, *seg;
-} snap_t;
 
 static void snap_take(snap_t *s, const qk__cdt_t *c) {
   s->nv = c->nv, s->nt = c->nt;
@@ -619,6 +638,12 @@ static void test_cdt_segment_refused(void **state) {
   assert_int_equal(qk__cdt_insert_segment(&c, v[5], v[1], 10, &blk, &bs), QK_ERR_GEOMETRY);
   assert_int_equal(bs, 8);
   assert_true(blk == v[2] || blk == v[3]);
+  snap_expect(&s, &c);
+  /* points outside the closed square, or NaN, are refused and change nothing */
+  uint32_t w;
+  assert_int_equal(qk__cdt_insert(&c, 17, 5, NONE, &w, &ex), QK_ERR_OUTSIDE);
+  assert_int_equal(qk__cdt_insert(&c, 5, -1e-300, NONE, &w, &ex), QK_ERR_OUTSIDE);
+  assert_int_equal(qk__cdt_insert(&c, NAN, 5, NONE, &w, &ex), QK_ERR_OUTSIDE);
   snap_expect(&s, &c);
   snap_free(&s);
   check_cdt(&c);
