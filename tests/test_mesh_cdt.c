@@ -507,6 +507,53 @@ static void test_cdt_segments(void **state) {
   }
 }
 
+/* Segments along a line whose points were rounded and moved by ulps: every vertex near
+ * the segment is a few ulps off it or exactly on it, so the trace and the cavity's
+ * triangulation decide everything on exact predicates. */
+static void test_cdt_segment_near_collinear(void **state) {
+  (void)state;
+  g_seed = qkt_seed(12112);
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed);
+  for (int round = 0; round < 20; round++) {
+    qk__cdt_t c;
+    assert_int_equal(qk__cdt_init(&c, NULL, 0, 0, 1, 0), QK_OK);
+    double slope = qkt_rng_range(&r, -0.6, 0.6), y0 = qkt_rng_range(&r, 0.3, 0.7);
+    for (int i = 0; i < 300; i++) {
+      double x = qkt_rng_range(&r, 0.05, 0.95), y = y0 + slope * (x - 0.5);
+      int moves = (int)qkt_rng_below(&r, 7) - 3;
+      for (int m = 0; m < abs(moves); m++) y = nextafter(y, moves > 0 ? 1.0 : 0.0);
+      uint32_t v;
+      int ex;
+      if (i % 3 == 0) y = qkt_rng_range(&r, 0.01, 0.99); /* some points off the line */
+      assert_int_equal(qk__cdt_insert(&c, x, y, NONE, &v, &ex), QK_OK);
+    }
+    segrec_t used[40];
+    size_t nu = 0;
+    for (int q = 0; q < 40; q++) {
+      uint32_t a = 4 + qkt_rng_below(&r, (uint32_t)c.nv - 4),
+               b = 4 + qkt_rng_below(&r, (uint32_t)c.nv - 4);
+      uint32_t blk, bs;
+      qk_status_t st = qk__cdt_insert_segment(&c, a, b, (uint32_t)q, &blk, &bs);
+      if (st == QK_OK) {
+        used[nu++] = (segrec_t){a, b, (uint32_t)q};
+      } else if (a != b) {
+        assert_int_equal(st, QK_ERR_GEOMETRY);
+        const double *pa = c.xy + 2 * a, *pb = c.xy + 2 * b;
+        if (bs == NONE) {
+          assert_int_equal(qk__orient2d(pa, pb, c.xy + 2 * blk), 0);
+          assert_true(qk__cdt_encroach(pa, pb, c.xy + 2 * blk) < 0);
+        } else {
+          assert_true(bs < (uint32_t)q);
+        }
+      }
+    }
+    check_cdt(&c);
+    check_segments(&c, used, nu);
+    qk__cdt_free(&c);
+  }
+}
+
 typedef struct snap {
   size_t nv, nt;
   double *xy;
@@ -819,8 +866,8 @@ int main(void) {
       cmocka_unit_test(test_cdt_uniform),       cmocka_unit_test(test_cdt_grid),
       cmocka_unit_test(test_cdt_scales),        cmocka_unit_test(test_cdt_near_degenerate),
       cmocka_unit_test(test_cdt_segments),      cmocka_unit_test(test_cdt_segment_refused),
-      cmocka_unit_test(test_cdt_long_segments), cmocka_unit_test(test_cdt_walk),
-      cmocka_unit_test(test_cdt_alloc_fail),
+      cmocka_unit_test(test_cdt_long_segments), cmocka_unit_test(test_cdt_segment_near_collinear),
+      cmocka_unit_test(test_cdt_walk),          cmocka_unit_test(test_cdt_alloc_fail),
   };
   (void)skip_without_gmp;
   return cmocka_run_group_tests(tests, NULL, NULL);
