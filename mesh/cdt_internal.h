@@ -59,6 +59,10 @@ uint32_t qk__cdt_ring_next(const qk__cdt_t *c, qk__cdt_ring_t *r);
  * must be strictly convex. */
 void qk__cdt_flip(qk__cdt_t *c, uint32_t t, int i, uint32_t n, int j);
 
+/* Tests only: nonzero makes segment insertion take its flip fallback (mesh/cdt_segment.c),
+ * which otherwise runs only when a cavity's triangulation cannot be planned. */
+extern int qk__cdt_test_flips;
+
 /* Room for `need` entries in c->scr. */
 qk_status_t qk__cdt_reserve_scratch(qk__cdt_t *c, size_t need);
 
