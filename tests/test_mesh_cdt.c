@@ -726,7 +726,7 @@ static void test_cdt_walk(void **state) {
   g_seed = qkt_seed(12109);
   qkt_rng_t r;
   qkt_rng_seed(&r, g_seed);
-  int g = 10, blocked = 0, free_ = 0;
+  int g = 10, blocked = 0, free_ = 0, vert_blocked = 0;
   double xy[2 * 100];
   segrec_t sg[300];
   size_t ns = grid_graph(&r, g, xy, sg);
@@ -790,9 +790,18 @@ static void test_cdt_walk(void **state) {
     } else {
       blocked++;
       if (wh == QK__CDT_EDGE) assert_true(c.seg[3 * t + k] != NONE);
+      if (wh == QK__CDT_VERT) { /* a constrained edge's end on the segment, beyond w */
+        vert_blocked++;
+        uint32_t o = c.v[3 * t + k];
+        assert_true(o != w);
+        assert_int_equal(qk__orient2d(c.xy + 2 * w, P, c.xy + 2 * o), 0);
+        int on = 0;
+        for (size_t i = 0; i < nu; i++) on |= used[i].a == o || used[i].b == o;
+        assert_true(on);
+      }
     }
   }
-  assert_true(blocked > 100 && free_ > 100);
+  assert_true(blocked > 100 && free_ > 100 && vert_blocked > 10);
   qk__cdt_free(&c);
 }
 
