@@ -17,6 +17,12 @@
 
 #define NONE QK__CDT_NONE
 
+#if defined(__GNUC__)
+#define ALWAYS_INLINE inline __attribute__((always_inline))
+#else
+#define ALWAYS_INLINE inline
+#endif
+
 /* ---- storage ------------------------------------------------------------------------ */
 
 static size_t vblock_bytes(size_t cap) {
@@ -201,8 +207,7 @@ static inline void flip(qk__cdt_t *c, uint32_t t, int i, uint32_t n, int j) {
 }
 
 /* flip() with i = 0, for the legalisation after a point insertion (always inlined there). */
-static inline __attribute__((always_inline)) void flip0(qk__cdt_t *c, uint32_t t, uint32_t n,
-                                                        int j) {
+static ALWAYS_INLINE void flip0(qk__cdt_t *c, uint32_t t, uint32_t n, int j) {
   const int j1 = j == 2 ? 0 : j + 1, j2 = j == 0 ? 2 : j - 1;
   uint32_t *tv = c->v + 3 * (size_t)t, *tn = c->nbr + 3 * (size_t)t, *ts = c->seg + 3 * (size_t)t;
   uint32_t *nv = c->v + 3 * (size_t)n, *nn = c->nbr + 3 * (size_t)n, *ns = c->seg + 3 * (size_t)n;
