@@ -113,6 +113,18 @@ uint32_t qk__cdt_find_edge(const qk__cdt_t *c, uint32_t a, uint32_t b, int *k);
 int qk__cdt_walk(const qk__cdt_t *c, uint32_t w, double x, double y, uint32_t *tri, int *k,
                  qk__cdt_where_t *where);
 
+/* The triangles around vertex a: counter-clockwise from vtri[a] until back there, or, at
+ * the square's boundary, until the boundary and then clockwise from vtri[a]. Start with
+ * qk__cdt_ring_t r = {a, QK__CDT_NONE, QK__CDT_NONE, 1}; each qk__cdt_ring_next(c, &r)
+ * returns the next triangle, QK__CDT_NONE at the end:
+ *   for (uint32_t t = qk__cdt_ring_next(c, &r); t != QK__CDT_NONE; t = qk__cdt_ring_next(c, &r))
+ * The triangulation must not change during the loop. */
+typedef struct qk__cdt_ring {
+  uint32_t a, first, t;
+  int ccw;
+} qk__cdt_ring_t;
+uint32_t qk__cdt_ring_next(const qk__cdt_t *c, qk__cdt_ring_t *r);
+
 /* Exact sign of (a - p) . (b - p): < 0 when p lies strictly inside the circle with diameter
  * ab, 0 on it, > 0 outside (p encroaches the segment ab when the sign is <= 0). */
 int qk__cdt_encroach(const double a[2], const double b[2], const double p[2]);

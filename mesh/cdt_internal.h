@@ -62,15 +62,6 @@ static inline int qk__cdt_slot(const qk__cdt_t *c, uint32_t t, uint32_t a) {
   return v[0] == a ? 0 : v[1] == a ? 1 : 2;
 }
 
-/* The triangles around vertex a: counter-clockwise from vtri[a] until back there, or, at
- * the square's boundary, until the boundary and then clockwise from vtri[a]. Start with
- * {a, QK__CDT_NONE, QK__CDT_NONE, 1}; qk__cdt_ring_next returns QK__CDT_NONE at the end. */
-typedef struct qk__cdt_ring {
-  uint32_t a, first, t;
-  int ccw;
-} qk__cdt_ring_t;
-uint32_t qk__cdt_ring_next(const qk__cdt_t *c, qk__cdt_ring_t *r);
-
 /* Flip edge i of triangle t, whose other side is slot j of triangle n: with t = (p, q, r)
  * from slot i and s the vertex of n across, t becomes (p, q, s) and n (p, s, r). The quad
  * must be strictly convex. */

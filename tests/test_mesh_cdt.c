@@ -137,6 +137,19 @@ static void check_cdt(const qk__cdt_t *c) {
     if (t >= c->nt || (c->v[3 * t] != i && c->v[3 * t + 1] != i && c->v[3 * t + 2] != i))
       fail_msg("seed %llu: vtri[%zu] = %u does not hold it", s, i, t);
   }
+  /* the ring around every vertex visits exactly the triangles that hold it */
+  uint32_t *deg = calloc(c->nv, sizeof *deg);
+  for (size_t t = 0; t < 3 * c->nt; t++) deg[c->v[t]]++;
+  for (uint32_t i = 0; i < c->nv; i++) {
+    qk__cdt_ring_t r = {i, NONE, NONE, 1};
+    uint32_t n = 0;
+    for (uint32_t t = qk__cdt_ring_next(c, &r); t != NONE && n <= deg[i];
+         t = qk__cdt_ring_next(c, &r), n++)
+      if (c->v[3 * t] != i && c->v[3 * t + 1] != i && c->v[3 * t + 2] != i)
+        fail_msg("seed %llu: ring of %u visits triangle %u", s, i, t);
+    if (n != deg[i]) fail_msg("seed %llu: ring of %u has %u triangles, not %u", s, i, n, deg[i]);
+  }
+  free(deg);
   /* Euler: with the four corners the only boundary vertices, nt = 2 nv - 6, and the
    * boundary has four edges. */
   if (boundary_edges != 4 || c->nt != 2 * c->nv - 6)
