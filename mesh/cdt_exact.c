@@ -11,7 +11,9 @@
  * and products of doubles are made exact by returning their rounding error as a second
  * double (two-sum, two-product); an expansion grows by one double through a chain of
  * two-sums (the result is again nonoverlapping), and is scaled by a double through a chain
- * of two-products and two-sums.
+ * of two-products and two-sums. Points on a shared grid (every difference exact and, scaled
+ * by a power of two, an integer below 2^30) take a shortcut through 128-bit integers where
+ * the compiler has them.
  *
  * Range of exactness: every coordinate is 0 or has magnitude in [2^-200, 2^200]. Then every
  * coordinate is a multiple of 2^-252, every component of a degree-k product of differences
@@ -127,6 +129,46 @@ static int cross2(const double *x1, int n1, const double *y1, int m1, const doub
   return nh;
 }
 
+#ifdef __SIZEOF_INT128__
+__extension__ typedef __int128 qk__i128;
+
+/*
+ * The in-circle sign in integers, for the common hard case of points on a shared grid (the
+ * quadtree's seeds: many exactly cocircular quadruples). The six differences x[0..6) (ax,
+ * ay, bx, by, cx, cy, all exact) are scaled by a power of two so the largest is below 2^30;
+ * when all are then integers, every product of two is below 2^60, each 2x2 determinant and
+ * lift below 2^61, each term below 2^122 and the sum below 2^124: exact in 128 bits.
+ * Returns 0 (and *sign untouched) when they are not integers at that scale.
+ */
+static int incircle_int(const double x[6], int *sign) {
+  double m = 0;
+  for (int i = 0; i < 6; i++) m = fabs(x[i]) > m ? fabs(x[i]) : m;
+  if (m == 0) {
+    *sign = 0;
+    return 1;
+  }
+  int e;
+  (void)frexp(m, &e);     /* m < 2^e */
+  if (e < -900) return 0; /* the scale would overflow: leave it to the expansions */
+  double scale = ldexp(1.0, 30 - e);
+  int64_t q[6];
+  for (int i = 0; i < 6; i++) {
+    double v = x[i] * scale; /* exact: a power of two, no overflow (|v| < 2^30) */
+    q[i] = (int64_t)v;
+    if ((double)q[i] != v) return 0;
+  }
+  qk__i128 det = 0;
+  for (int i = 0; i < 3; i++) {
+    int j = (i + 1) % 3, k = (i + 2) % 3;
+    qk__i128 lift = (qk__i128)(q[2 * i] * q[2 * i] + q[2 * i + 1] * q[2 * i + 1]);
+    qk__i128 d2 = (qk__i128)(q[2 * j] * q[2 * k + 1]) - (qk__i128)(q[2 * j + 1] * q[2 * k]);
+    det += lift * d2;
+  }
+  *sign = det > 0 ? 1 : det < 0 ? -1 : 0;
+  return 1;
+}
+#endif
+
 int qk__incircle_exact(const double a[2], const double b[2], const double c[2], const double d[2]) {
   double dx[3][2], dy[3][2];
   int nx[3], ny[3];
@@ -135,6 +177,16 @@ int qk__incircle_exact(const double a[2], const double b[2], const double c[2], 
     nx[i] = diff(pt[i][0], d[0], dx[i]);
     ny[i] = diff(pt[i][1], d[1], dy[i]);
   }
+#ifdef __SIZEOF_INT128__
+  if (nx[0] < 2 && ny[0] < 2 && nx[1] < 2 && ny[1] < 2 && nx[2] < 2 && ny[2] < 2) {
+    /* every difference is one double (or zero): try the integer path */
+    double x[6];
+    for (int i = 0; i < 3; i++)
+      x[2 * i] = nx[i] ? dx[i][0] : 0, x[2 * i + 1] = ny[i] ? dy[i][0] : 0;
+    int sign;
+    if (incircle_int(x, &sign)) return sign;
+  }
+#endif
   /* det = sum over i of lift_i * (x_j y_k - y_j x_k), (i, j, k) cyclic. */
   double total[1536];
   int ntot = 0;
