@@ -9,7 +9,8 @@
  * of those parts exactly into a rounded product and its error (fma), and the sixteen
  * resulting doubles are summed exactly into a nonoverlapping expansion (each term added
  * by a chain of two-sums, smallest components first); the sign of an expansion is the
- * sign of its largest nonzero component.
+ * sign of its largest nonzero component. Points on a shared grid (exact differences that
+ * are integers once scaled below 2^30) take a shortcut through 64-bit integers.
  */
 #include <math.h>
 
@@ -43,12 +44,43 @@ static void grow(double *h, int *n, double q) {
   *n = m;
 }
 
+/* When the four differences are exact and, scaled by one power of two so that the largest
+ * is below 2^30, integers (points on a shared grid: the common case of a tie), the
+ * determinant is d0 d1 - d2 d3 in 64-bit integers (each product below 2^60). Returns 0 when
+ * that does not apply. */
+static int sign_int(const double d[4][2], int *sign) {
+  double m = 0;
+  for (int i = 0; i < 4; i++) {
+    if (d[i][1] != 0) return 0;
+    m = fabs(d[i][0]) > m ? fabs(d[i][0]) : m;
+  }
+  if (m == 0) {
+    *sign = 0;
+    return 1;
+  }
+  int e;
+  (void)frexp(m, &e); /* m < 2^e */
+  if (e < -900) return 0;
+  double scale = ldexp(1.0, 30 - e);
+  int64_t q[4];
+  for (int i = 0; i < 4; i++) {
+    double v = d[i][0] * scale; /* exact: a power of two, |v| < 2^30 */
+    q[i] = (int64_t)v;
+    if ((double)q[i] != v) return 0;
+  }
+  int64_t det = q[0] * q[1] - q[2] * q[3];
+  *sign = det > 0 ? 1 : det < 0 ? -1 : 0;
+  return 1;
+}
+
 static int sign_exact(const double *a, const double *b, const double *c) {
   double d[4][2]; /* bx - ax, cy - ay, by - ay, cx - ax as (value, error) */
   two_sum(b[0], -a[0], &d[0][0], &d[0][1]);
   two_sum(c[1], -a[1], &d[1][0], &d[1][1]);
   two_sum(b[1], -a[1], &d[2][0], &d[2][1]);
   two_sum(c[0], -a[0], &d[3][0], &d[3][1]);
+  int sign;
+  if (sign_int((const double(*)[2])d, &sign)) return sign;
   double h[17];
   int n = 0;
   for (int pair = 0; pair < 2; pair++) {
