@@ -48,6 +48,11 @@ typedef struct qk__cdt {
   uint32_t hint; /* a triangle near the last change: default start of walks */
   qk__cdt_change_fn on_change;
   void *user;
+  /* Private to mesh/cdt*.c: the flip stack (cap_v + 8 entries, in the vertex block) and the
+   * segment insertion's scratch. */
+  uint32_t *stk;
+  uint32_t *scr;
+  size_t cap_scr;
 } qk__cdt_t;
 
 /* Start a triangulation of the square [x0, x0 + side] x [y0, y0 + side] (two triangles,
@@ -104,5 +109,8 @@ int qk__cdt_encroach(const double a[2], const double b[2], const double p[2]);
 /* Exact in-circle test: > 0 when d lies strictly inside the circle through a, b, c (a, b, c
  * counter-clockwise), < 0 outside, 0 on it. */
 int qk__incircle(const double a[2], const double b[2], const double c[2], const double d[2]);
+
+/* The same, without the floating-point filter (the fallback of callers that filter inline). */
+int qk__incircle_exact(const double a[2], const double b[2], const double c[2], const double d[2]);
 
 #endif
