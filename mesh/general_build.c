@@ -91,8 +91,9 @@ qk_status_t qk__gm_insert(qk__gm_t *g, double x, double y, uint32_t start, uint3
   return QK_OK;
 }
 
-/* Step 2: the root square, a power of two S = 2^e with corners at multiples of S, holding
- * the input's bounding box grown by a quarter of its extent on every side. */
+/* Step 2: the root square, a power of two S = 2^e with corners at multiples of S / 4 (an
+ * aligned square could not straddle zero), holding the input's bounding box grown by a
+ * quarter of its extent on every side. */
 static void root_square(qk__gm_t *g) {
   const qk_poly_t *P = g->P;
   double x0 = P->nv ? P->vx[0] : 0, x1 = x0, y0 = P->nv ? P->vy[0] : 0, y1 = y0;
@@ -107,7 +108,7 @@ static void root_square(qk__gm_t *g) {
   int e;
   frexp(1.5 * w, &e);
   for (;; e++) {
-    double S = ldexp(1.0, e), X0 = floor(lx / S) * S, Y0 = floor(ly / S) * S;
+    double S = ldexp(1.0, e), Q = S / 4, X0 = floor(lx / Q) * Q, Y0 = floor(ly / Q) * Q;
     if ((X0 + S > hx && Y0 + S > hy) || e > 1000) {
       g->S = S, g->e = e, g->X0 = X0, g->Y0 = Y0;
       return;
@@ -149,32 +150,30 @@ static qk_status_t insert_segments(qk__gm_t *g) {
       return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, ls, "segment %lu joins vertex %lu to itself",
                            qk__mesh_num(P, s), qk__mesh_num(P, u));
     int k;
+    char n1[80], n2[80];
     uint32_t t = qk__cdt_find_edge(c, g->cv[u], g->cv[w], &k);
     if (t != QK__CDT_NONE && c->seg[3 * t + k] != QK__CDT_NONE) {
       uint32_t o = c->seg[3 * t + k];
-      return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, ls,
-                           "segments %lu (line %lu) and %lu (line %lu) both join vertices %lu "
-                           "and %lu",
-                           qk__mesh_num(P, o), sline(P, o), qk__mesh_num(P, s), ls,
-                           qk__mesh_num(P, u), qk__mesh_num(P, w));
+      return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, ls, "%s and %s both join vertices %lu and %lu",
+                           qk__gm_name(P, "segments", o, sline(P, o), n1),
+                           qk__gm_name(P, "", s, ls, n2) + 1, qk__mesh_num(P, u),
+                           qk__mesh_num(P, w));
     }
     uint32_t block = QK__CDT_NONE, bseg = QK__CDT_NONE;
     qk_status_t st = qk__cdt_insert_segment(c, g->cv[u], g->cv[w], (uint32_t)s, &block, &bseg);
     if (st == QK_ERR_NOMEM) return qk__mesh_fail(g->err, st, 0, "out of memory");
     if (st && bseg != QK__CDT_NONE)
-      return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, ls,
-                           "segments %lu (line %lu) and %lu (line %lu) cross or overlap",
-                           qk__mesh_num(P, bseg), sline(P, bseg), qk__mesh_num(P, s), ls);
+      return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, ls, "%s and %s cross or overlap",
+                           qk__gm_name(P, "segments", bseg, sline(P, bseg), n1),
+                           qk__gm_name(P, "", s, ls, n2) + 1);
     if (st) {
       uint32_t vi = block < g->vcap ? g->vi[block].in : QK__CDT_NONE;
       if (vi == QK__CDT_NONE)
-        return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, ls, "segment %lu (line %lu) is blocked",
-                             qk__mesh_num(P, s), ls);
-      return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, ls,
-                           "vertex %lu (line %lu) at (%.17g, %.17g) lies on segment %lu (line "
-                           "%lu)",
-                           qk__mesh_num(P, vi), vline(P, vi), P->vx[vi] + 0.0, P->vy[vi] + 0.0,
-                           qk__mesh_num(P, s), ls);
+        return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, ls, "%s is blocked",
+                             qk__gm_name(P, "segment", s, ls, n2));
+      return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, ls, "%s at (%.17g, %.17g) lies on %s",
+                           qk__gm_name(P, "vertex", vi, vline(P, vi), n1), P->vx[vi] + 0.0,
+                           P->vy[vi] + 0.0, qk__gm_name(P, "segment", s, ls, n2));
     }
   }
   return QK_OK;

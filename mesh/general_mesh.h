@@ -9,6 +9,8 @@
 #ifndef QK_MESH_GENERAL_MESH_H
 #define QK_MESH_GENERAL_MESH_H
 
+#include <stdio.h>
+
 #include "mesh/cdt.h"
 #include "mesh/general_internal.h"
 #include "mesh/mesh_internal.h"
@@ -91,6 +93,16 @@ typedef struct qk__gm {
   size_t seeds;
   double smallest_input_angle;
 } qk__gm_t;
+
+/* "segment 3" or, when the input has line numbers, "segment 3 (line 12)", into buf. */
+static inline const char *qk__gm_name(const qk_poly_t *P, const char *what, size_t i,
+                                      unsigned long line, char buf[80]) {
+  if (line)
+    snprintf(buf, 80, "%s %lu (line %lu)", what, qk__mesh_num(P, i), line);
+  else
+    snprintf(buf, 80, "%s %lu", what, qk__mesh_num(P, i));
+  return buf;
+}
 
 /* CDT vertex v's coordinates. */
 static inline const double *qk__gm_vxy(const qk__gm_t *g, uint32_t v) { return &g->cdt.xy[2 * v]; }

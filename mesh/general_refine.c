@@ -54,14 +54,19 @@ qk_status_t qk__gm_split(qk__gm_t *g, uint32_t a, uint32_t b, uint32_t s) {
   uint32_t u = P->seg[2 * s], w = P->seg[2 * s + 1];
   const double A[2] = {P->vx[u], P->vy[u]}, B[2] = {P->vx[w], P->vy[w]};
   if (!qk__gm_split_param(g, s, lo, hi, &k)) {
-    int bud = qk__seg_budget(A, B);
-    return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, P->sline ? P->sline[s] : 0,
-                         "segment %lu (line %lu) from (%.17g, %.17g) to (%.17g, %.17g) must be "
-                         "split between parameters %.17g and %.17g, finer than 2^-%d, the finest "
-                         "step at which points on it are exact doubles; round the input to a "
-                         "coarser binary grid (quadkit mesh --round)",
-                         qk__mesh_num(P, s), P->sline ? P->sline[s] : 0, A[0], A[1], B[0], B[1],
-                         ldexp((double)lo, -62), ldexp((double)hi, -62), bud < 62 ? bud : 62);
+    /* The step the split needs: the piece spans (hi - lo) 2^-62 of the segment. */
+    int need = 62 - (int)floor(log2((double)(hi - lo))) + 1, bud = qk__seg_budget(A, B);
+    unsigned long line = P->sline ? P->sline[s] : 0;
+    char nm[80], has[48];
+    if (bud < 1)
+      snprintf(has, sizeof has, "none inside it");
+    else
+      snprintf(has, sizeof has, "2^-%d", bud < 62 ? bud : 62);
+    return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, line,
+                         "%s from (%.17g, %.17g) to (%.17g, %.17g) needs a split point at steps "
+                         "of 2^-%d of its length; exact ones: %s. Round the input to a grid "
+                         "(--round)",
+                         qk__gm_name(P, "segment", s, line, nm), A[0], A[1], B[0], B[1], need, has);
   }
   int tz = 0;
   while (tz < 62 && !((k >> tz) & 1)) tz++;

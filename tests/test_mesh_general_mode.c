@@ -29,6 +29,13 @@
 
 #include "qk_test.h"
 
+#ifndef M_PI
+#define M_PI 3.14159265358979323846
+#endif
+#ifndef M_SQRT2
+#define M_SQRT2 1.41421356237309504880
+#endif
+
 #ifdef QK_HAVE_GMP
 #include <gmp.h>
 #endif
@@ -651,7 +658,7 @@ static void test_mesh_general_mode_refusals(void **state) {
   assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_ERR_GEOMETRY);
   printf("# %s\n", err.message);
   assert_non_null(strstr(err.message, "segment "));
-  assert_non_null(strstr(err.message, "round the input"));
+  assert_non_null(strstr(err.message, "Round the input to a grid (--round)"));
   assert_null(m);
   qk_poly_free(p);
   /* Two crossing segments. */
@@ -742,10 +749,13 @@ static void test_mesh_general_mode_alloc_failure(void **state) {
     qk_mesh_error_t err;
     qk_status_t st = qk_mesh_generate(p, &o, &m, &err);
     if (st == QK_OK) {
+      /* A refused allocation may be survived (the tree keeps a block it failed to shrink);
+       * the loop ends with the first run in which none was refused. */
       qk_mesh_free(m);
       qk_poly_free(p);
       assert_int_equal(as.live_bytes, 0);
-      break;
+      if (!as.failed) break;
+      continue;
     }
     if (st != QK_ERR_NOMEM) fail_msg("fail_at %zu: %s: %s", fail_at, qk_strerror(st), err.message);
     assert_null(m);
