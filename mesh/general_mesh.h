@@ -51,7 +51,7 @@ typedef struct qk__gm {
   const qk_mesh_options_t *opt;
   qk_mesh_error_t *err;
   /* The root square [X0, X0 + S] x [Y0, Y0 + S], S = 2^e, and the input's bounding box. */
-  double X0, Y0, S;
+  double X0, Y0, S, inv_S; /* inv_S = 2^-e */
   int e;
   double bx0, by0, bx1, by1;
   qk__cdt_t cdt;

@@ -9,11 +9,6 @@
 #include <math.h>
 #include <string.h>
 
-static double angle_deg(const double *a, const double *b, const double *c) {
-  double ux = a[0] - b[0], uy = a[1] - b[1], wx = c[0] - b[0], wy = c[1] - b[1];
-  return atan2(fabs(ux * wy - uy * wx), ux * wx + uy * wy) * (180.0 / 3.14159265358979323846);
-}
-
 static int kept(const qk__gm_t *g, uint32_t t) { return !g->faces[g->face[t]].drop; }
 
 /* The mesh edges along input segments: each constrained edge of a kept triangle once,
@@ -105,17 +100,21 @@ qk_status_t qk__gm_output(qk__gm_t *g, qk_mesh_t *m) {
   for (size_t v = 0; v < c->nv; v++)
     if (newid[v] != QK__CDT_NONE)
       m->xy[2 * newid[v]] = c->xy[2 * v], m->xy[2 * newid[v] + 1] = c->xy[2 * v + 1];
-  double amin = 180, amax = 0;
+  /* Angles through their cosines (one square root each); the extremes back to degrees at
+   * the end. */
+  double cmax = -1, cmin = 1, cb = cos(g->bound_deg * (3.14159265358979323846 / 180));
   size_t j = 0, exempt = 0;
   for (uint32_t t = 0; t < c->nt; t++) {
     if (!kept(g, t)) continue;
     const uint32_t *tv = &c->v[3 * t];
     for (int i = 0; i < 3; i++) {
       m->tri[3 * j + i] = newid[tv[i]];
-      double a =
-          angle_deg(&c->xy[2 * tv[(i + 2) % 3]], &c->xy[2 * tv[i]], &c->xy[2 * tv[(i + 1) % 3]]);
-      amin = fmin(amin, a), amax = fmax(amax, a);
-      exempt += a < g->bound_deg;
+      const double *o = &c->xy[2 * tv[i]], *u = &c->xy[2 * tv[(i + 1) % 3]],
+                   *w = &c->xy[2 * tv[(i + 2) % 3]];
+      double ux = u[0] - o[0], uy = u[1] - o[1], wx = w[0] - o[0], wy = w[1] - o[1];
+      double cs = (ux * wx + uy * wy) / sqrt((ux * ux + uy * uy) * (wx * wx + wy * wy));
+      cmax = fmax(cmax, cs), cmin = fmin(cmin, cs);
+      exempt += cs > cb;
     }
     const qk__gm_face_t *f = &g->faces[g->face[t]];
     m->comp[j] = f->id;
@@ -130,8 +129,9 @@ qk_status_t qk__gm_output(qk__gm_t *g, qk_mesh_t *m) {
   m->stats.triangles = kt;
   m->stats.vertices = kv;
   m->stats.steiner = steiner;
-  m->stats.min_angle_deg = kt ? amin : 0;
-  m->stats.max_angle_deg = kt ? amax : 0;
+  const double deg = 180 / 3.14159265358979323846;
+  m->stats.min_angle_deg = kt ? acos(fmin(cmax, 1)) * deg : 0;
+  m->stats.max_angle_deg = kt ? acos(fmax(cmin, -1)) * deg : 0;
   m->stats.exempt_angles = exempt;
 out:
   qk__free(g->a, newid, (c->nv + 1) * sizeof *newid);
