@@ -56,8 +56,10 @@ typedef struct qk__gm {
   double bx0, by0, bx1, by1;
   qk__cdt_t cdt;
   int cdt_live;
-  /* Per input vertex: its CDT vertex. */
+  /* Per input vertex: its CDT vertex, and whether two of its segments meet at an angle
+   * below 60 degrees there (the concentric shells' apexes). */
   uint32_t *cv;
+  uint8_t *vsmall;
   /* Per CDT vertex. */
   qk__gm_vert_t *vi;
   size_t vcap;

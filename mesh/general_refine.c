@@ -23,10 +23,12 @@ int qk__gm_split_param(const qk__gm_t *g, uint32_t s, uint64_t lo, uint64_t hi, 
   if (bud > 62) bud = 62;
   if (bud < 1 || hi - lo < 2) return 0;
   uint64_t q = (uint64_t)1 << (62 - bud), target = lo + (hi - lo) / 2;
-  if ((lo == 0) != (hi == QK__GM_ONE)) {
-    /* Concentric shells: the split point's distance from the input vertex is the power of
-     * two nearest half the piece's length, so that pieces of segments meeting at that
-     * vertex split at equal radii. */
+  int shell = lo == 0 ? g->vsmall[u] : hi == QK__GM_ONE ? g->vsmall[w] : 0;
+  if ((lo == 0) != (hi == QK__GM_ONE) && shell) {
+    /* Concentric shells at the apex of a small input angle: the split point's distance
+     * from the apex is the power of two nearest half the piece's length, so that pieces of
+     * segments meeting there split at equal radii (Shewchuk 2002). Elsewhere, the exact
+     * midpoint in parameter. */
     double len = hypot(B[0] - A[0], B[1] - A[1]), L = len * ldexp((double)(hi - lo), -62);
     int ex;
     double f = frexp(L / 2, &ex), d = ldexp(1.0, f < 0.70710678118654752 ? ex - 1 : ex);
@@ -356,9 +358,11 @@ qk_status_t qk__gm_refine(qk__gm_t *g) {
       }
       return qk__mesh_fail(g->err, QK_ERR_LIMIT, 0,
                            "the refinement did not settle after %zu insertions (still working "
-                           "near (%.17g, %.17g)); a minimum angle above 20.7 degrees has no "
-                           "termination proof",
-                           g->insertions, x, y);
+                           "near (%.17g, %.17g))%s",
+                           g->insertions, x, y,
+                           g->bound_deg > 20.7
+                               ? "; a minimum angle above 20.7 degrees has no termination proof"
+                               : "");
     }
     if (g->nenc) {
       g->nenc--;

@@ -19,6 +19,7 @@ static void gm_free(qk__gm_t *g) {
   const qk_allocator_t *a = g->a;
   if (g->cdt_live) qk__cdt_free(&g->cdt);
   qk__free(a, g->cv, (g->P->nv + 1) * sizeof *g->cv);
+  qk__free(a, g->vsmall, g->P->nv + 1);
   qk__free(a, g->vi, g->vcap * sizeof *g->vi);
   qk__free(a, g->face, g->fcap * sizeof *g->face);
   qk__free(a, g->faces, g->nface_cap * sizeof *g->faces);
@@ -69,7 +70,10 @@ qk_status_t qk__mesh_general(const qk_poly_t *P, const qk_mesh_options_t *opt, q
     t2 = now();
   }
   if (!st) {
-    g.work_cap = 100 * (g.npts + P->nv + P->ns + 16) + 1000000;
+    /* The work cap: the refinement inserts about as many points as the seeding proposed
+     * (at most 1.2 times in the tests, small input angles and 32 degrees included); ten
+     * times that means it does not settle. */
+    g.work_cap = 10 * (g.npts + P->nv + P->ns) + 100000;
     st = qk__gm_refine(&g);
   }
   if (!st) st = qk__gm_output(&g, m);
