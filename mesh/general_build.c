@@ -50,12 +50,9 @@ static void on_change(void *user, uint32_t t) {
   g->dirty[g->ndirty++] = t;
 }
 
-qk_status_t qk__gm_insert(qk__gm_t *g, double x, double y, uint32_t start, uint32_t seg, uint64_t k,
-                          uint32_t *v_out, int *existed) {
+qk_status_t qk__gm_insert(qk__gm_t *g, double x, double y, uint32_t t0, int k0, qk__cdt_where_t w,
+                          uint32_t seg, uint64_t k, uint32_t *v_out, int *existed) {
   qk__cdt_t *c = &g->cdt;
-  uint32_t t0;
-  int k0;
-  qk__cdt_where_t w = qk__cdt_locate(c, x, y, start, &t0, &k0);
   /* The faces on both sides of where the point goes: one face unless it splits a
    * constrained edge, whose line then tells the sides apart (every triangle the insertion
    * makes has the new vertex as a corner, so its other corners are on one side). */

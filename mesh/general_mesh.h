@@ -115,11 +115,11 @@ qk_status_t qk__gm_build(qk__gm_t *g);
 qk_status_t qk__gm_fit(qk__gm_t *g);
 /* The parameter of CDT vertex v on input segment s (an endpoint or a split point of s). */
 uint64_t qk__gm_param(const qk__gm_t *g, uint32_t v, uint32_t s);
-/* Insert (x, y), which lies in triangle `start` or beside it, label the new triangles'
- * faces and record the vertex as a split point of segment seg at parameter k (seg NONE
- * for a free point). *v_out is the vertex; *existed as qk__cdt_insert. */
-qk_status_t qk__gm_insert(qk__gm_t *g, double x, double y, uint32_t start, uint32_t seg, uint64_t k,
-                          uint32_t *v_out, int *existed);
+/* Insert (x, y), located at (t0, k0, w) as qk__cdt_locate reports it, label the new
+ * triangles' faces and record the vertex as a split point of segment seg at parameter k
+ * (seg NONE for a free point). *v_out is the vertex; *existed as qk__cdt_insert. */
+qk_status_t qk__gm_insert(qk__gm_t *g, double x, double y, uint32_t t0, int k0, qk__cdt_where_t w,
+                          uint32_t seg, uint64_t k, uint32_t *v_out, int *existed);
 /* general_seed.c: the graded quadtree, its seeds and the pre-split points, inserted. */
 qk_status_t qk__gm_seed(qk__gm_t *g, qk_mesh_stats_t *st);
 /* general_refine.c: split the subsegment a-b of segment s at an exact point (concentric

@@ -78,7 +78,7 @@ qk_status_t qk__gm_split(qk__gm_t *g, uint32_t a, uint32_t b, uint32_t s) {
   uint32_t t = qk__cdt_find_edge(&g->cdt, a, b, &kk), v;
   int existed;
   if (t == QK__CDT_NONE) return QK_OK; /* split already */
-  qk_status_t st = qk__gm_insert(g, p[0], p[1], t, s, k, &v, &existed);
+  qk_status_t st = qk__gm_insert(g, p[0], p[1], t, kk, QK__CDT_EDGE, s, k, &v, &existed);
   if (st) return qk__mesh_fail(g->err, st, 0, "out of memory");
   return QK_OK;
 }
@@ -338,7 +338,7 @@ static qk_status_t split_triangle(qk__gm_t *g, uint32_t t) {
   }
   uint32_t v;
   int existed;
-  qk_status_t st = qk__gm_insert(g, p[0], p[1], tri, QK__CDT_NONE, 0, &v, &existed);
+  qk_status_t st = qk__gm_insert(g, p[0], p[1], tri, k, where, QK__CDT_NONE, 0, &v, &existed);
   if (st) return qk__mesh_fail(g->err, st, 0, "out of memory");
   return check_dirty(g);
 }

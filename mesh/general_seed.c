@@ -260,7 +260,8 @@ static qk_status_t sort_points(qk__gm_t *g) {
   qk__gm_pt_t *tmp = qk__realloc(g->a, NULL, 0, (n + 1) * sizeof *tmp), *src = g->pts, *dst = tmp;
   if (!tmp) return QK_ERR_NOMEM;
   size_t cnt[2048];
-  for (int shift = 0; shift < 64; shift += 11) {
+  /* Bits below 20 order points within 2^-22 of the square's side: irrelevant to walks. */
+  for (int shift = 20; shift < 64; shift += 11) {
     memset(cnt, 0, sizeof cnt);
     for (size_t i = 0; i < n; i++) cnt[(src[i].key >> shift) & 2047]++;
     if (cnt[(src[0].key >> shift) & 2047] == n) continue;
@@ -287,17 +288,18 @@ static qk_status_t insert_points(qk__gm_t *g) {
     const qk__gm_pt_t *q = &g->pts[i];
     uint32_t t, v;
     int k, existed;
+    /* Leaves share corners: a repeated seed follows its twin (equal keys stay in order). */
+    if (q->seg == QK__CDT_NONE && i && q->key == q[-1].key && q->x == q[-1].x && q->y == q[-1].y)
+      continue;
+    qk__cdt_where_t w = qk__cdt_locate(c, q->x, q->y, hint, &t, &k);
+    hint = t;
     if (q->seg == QK__CDT_NONE) {
-      /* Leaves share corners: a repeated seed follows its twin (equal keys stay in order). */
-      if (i && q->key == q[-1].key && q->x == q[-1].x && q->y == q[-1].y) continue;
-      qk__cdt_where_t w = qk__cdt_locate(c, q->x, q->y, hint, &t, &k);
-      hint = t;
       if (w == QK__CDT_VERT || g->faces[g->face[t]].drop ||
           (w == QK__CDT_EDGE && c->seg[3 * t + k] != QK__CDT_NONE))
         continue;
       g->seeds++;
     }
-    qk_status_t st = qk__gm_insert(g, q->x, q->y, hint, q->seg, q->k, &v, &existed);
+    qk_status_t st = qk__gm_insert(g, q->x, q->y, t, k, w, q->seg, q->k, &v, &existed);
     if (st) return qk__mesh_fail(g->err, st, 0, "out of memory");
     hint = c->vtri[v];
   }
