@@ -106,24 +106,6 @@ void qk__cdt_free(qk__cdt_t *c) {
 
 /* ---- point location ----------------------------------------------------------------- */
 
-/* Classify p in triangle t, which contains it (closed): the orientations of p against the
- * three edges are >= 0. */
-static qk__cdt_where_t classify(const qk__cdt_t *c, uint32_t t, const double *p, int *k) {
-  const uint32_t *tv = c->v + 3 * (size_t)t;
-  int zero[3], nz = 0;
-  for (int i = 0; i < 3; i++) {
-    const double *a = c->xy + 2 * (size_t)tv[(i + 1) % 3], *b = c->xy + 2 * (size_t)tv[(i + 2) % 3];
-    if (qk__cdt_orient(a, b, p) == 0) zero[nz++] = i;
-  }
-  if (nz == 0) return QK__CDT_IN;
-  if (nz == 1) {
-    *k = zero[0];
-    return QK__CDT_EDGE;
-  }
-  *k = 3 - zero[0] - zero[1];
-  return QK__CDT_VERT;
-}
-
 /*
  * The remembering stochastic walk (Devillers, Pion and Teillaud, "Walking in a
  * triangulation", 2002): from the current triangle, cross an edge that has p strictly on
@@ -137,6 +119,7 @@ qk__cdt_where_t qk__cdt_locate(const qk__cdt_t *c, double x, double y, uint32_t 
   uint32_t t = start != NONE ? start : c->hint;
   if (t >= c->nt) t = 0;
   uint32_t from = NONE, rnd = 0x9E3779B9u ^ t;
+  int o[3];
   for (;;) {
     const uint32_t *tv = c->v + 3 * (size_t)t, *tn = c->nbr + 3 * (size_t)t;
     rnd ^= rnd << 13, rnd ^= rnd >> 17, rnd ^= rnd << 5;
@@ -144,10 +127,14 @@ qk__cdt_where_t qk__cdt_locate(const qk__cdt_t *c, double x, double y, uint32_t 
     uint32_t next = NONE;
     for (int j = 0; j < 3; j++, i = i == 2 ? 0 : i + 1) {
       uint32_t n = tn[i];
-      if (n == from || n == NONE) continue;
+      if (n == from) { /* p is strictly inside this edge's half-plane: we came across it */
+        o[i] = 1;
+        continue;
+      }
       const double *a = c->xy + 2 * (size_t)tv[i == 2 ? 0 : i + 1];
       const double *b = c->xy + 2 * (size_t)tv[i == 0 ? 2 : i - 1];
-      if (qk__cdt_orient(a, b, p) < 0) {
+      o[i] = qk__cdt_orient(a, b, p);
+      if (o[i] < 0 && n != NONE) {
         next = n;
         break;
       }
@@ -155,9 +142,17 @@ qk__cdt_where_t qk__cdt_locate(const qk__cdt_t *c, double x, double y, uint32_t 
     if (next == NONE) break;
     from = t, t = next;
   }
+  /* p is in the closed triangle t (outside the square only if it was asked for there) */
   *tri = t;
   *k = 0;
-  return classify(c, t, p, k);
+  int nz = (o[0] == 0) + (o[1] == 0) + (o[2] == 0);
+  if (nz == 0) return QK__CDT_IN;
+  if (nz == 1) {
+    *k = o[0] == 0 ? 0 : o[1] == 0 ? 1 : 2;
+    return QK__CDT_EDGE;
+  }
+  *k = o[0] != 0 ? 0 : o[1] != 0 ? 1 : 2; /* the vertex between the two zero edges */
+  return QK__CDT_VERT;
 }
 
 /* ---- the changes: split, flip -------------------------------------------------------- */
@@ -187,7 +182,7 @@ static inline void set_tri(qk__cdt_t *c, uint32_t t, uint32_t a, uint32_t b, uin
   s[0] = sa, s[1] = sb, s[2] = sd;
 }
 
-void qk__cdt_flip(qk__cdt_t *c, uint32_t t, int i, uint32_t n, int j) {
+static inline void flip(qk__cdt_t *c, uint32_t t, int i, uint32_t n, int j) {
   const int i1 = i == 2 ? 0 : i + 1, i2 = i == 0 ? 2 : i - 1;
   const int j1 = j == 2 ? 0 : j + 1, j2 = j == 0 ? 2 : j - 1;
   uint32_t *tv = c->v + 3 * (size_t)t, *tn = c->nbr + 3 * (size_t)t, *ts = c->seg + 3 * (size_t)t;
@@ -199,10 +194,32 @@ void qk__cdt_flip(qk__cdt_t *c, uint32_t t, int i, uint32_t n, int j) {
   set_tri(c, n, p, s, r, D, A, t, sD, sA, NONE);
   relink(c, A, t, n);
   relink(c, C, n, t);
-  c->vtri[p] = t, c->vtri[q] = t, c->vtri[r] = n, c->vtri[s] = n;
+  c->vtri[q] = t, c->vtri[r] = n; /* q left n, r left t; p and s are in both */
   changed(c, t);
   changed(c, n);
 }
+
+/* flip() with i = 0, for the legalisation after a point insertion (always inlined there). */
+static inline __attribute__((always_inline)) void flip0(qk__cdt_t *c, uint32_t t, uint32_t n,
+                                                        int j) {
+  const int j1 = j == 2 ? 0 : j + 1, j2 = j == 0 ? 2 : j - 1;
+  uint32_t *tv = c->v + 3 * (size_t)t, *tn = c->nbr + 3 * (size_t)t, *ts = c->seg + 3 * (size_t)t;
+  uint32_t *nv = c->v + 3 * (size_t)n, *nn = c->nbr + 3 * (size_t)n, *ns = c->seg + 3 * (size_t)n;
+  uint32_t p = tv[0], q = tv[1], r = tv[2], s = nv[j];
+  uint32_t A = tn[1], sA = ts[1];
+  uint32_t C = nn[j1], sC = ns[j1], D = nn[j2], sD = ns[j2];
+  tv[2] = s, tn[0] = C, tn[1] = n, ts[0] = sC, ts[1] = NONE; /* t = (p, q, s), B kept */
+  nv[0] = p, nv[1] = s, nv[2] = r;
+  nn[0] = D, nn[1] = A, nn[2] = t;
+  ns[0] = sD, ns[1] = sA, ns[2] = NONE;
+  relink(c, A, t, n);
+  relink(c, C, n, t);
+  c->vtri[q] = t, c->vtri[r] = n;
+  changed(c, t);
+  changed(c, n);
+}
+
+void qk__cdt_flip(qk__cdt_t *c, uint32_t t, int i, uint32_t n, int j) { flip(c, t, i, n, j); }
 
 /* The slot of triangle n that faces triangle t. */
 static inline int facing(const qk__cdt_t *c, uint32_t n, uint32_t t) {
@@ -280,7 +297,7 @@ static void legalize(qk__cdt_t *c, int sp) {
     const double *pp = c->xy + 2 * (size_t)tv[0], *pq = c->xy + 2 * (size_t)tv[1];
     const double *pr = c->xy + 2 * (size_t)tv[2], *ps = c->xy + 2 * (size_t)c->v[3 * (size_t)n + j];
     if (qk__cdt_incircle(pp, pq, pr, ps) <= 0) continue;
-    qk__cdt_flip(c, t, 0, n, j);
+    flip0(c, t, n, j);
     stk[sp++] = t, stk[sp++] = n;
   }
 }
@@ -290,6 +307,8 @@ qk_status_t qk__cdt_insert(qk__cdt_t *c, double x, double y, uint32_t start, uin
   uint32_t t;
   int k;
   *existed = 0;
+  /* corners 0 and 2 are the square's; NaN fails the comparisons too */
+  if (!(x >= c->xy[0] && x <= c->xy[4] && y >= c->xy[1] && y <= c->xy[5])) return QK_ERR_OUTSIDE;
   qk__cdt_where_t w = qk__cdt_locate(c, x, y, start, &t, &k);
   if (w == QK__CDT_VERT) {
     *v_out = c->v[3 * (size_t)t + k];

@@ -507,12 +507,140 @@ static void test_cdt_segments(void **state) {
   }
 }
 
-/* Snapshot of a triangulation, to check that a refused call changed nothing. */
+/* Segments along a line whose points were rounded and moved by ulps: every vertex near
+ * the segment is a few ulps off it or exactly on it, so the trace and the cavity's
+ * triangulation decide everything on exact predicates. */
+static void test_cdt_segment_near_collinear(void **state) {
+  (void)state;
+  g_seed = qkt_seed(12112);
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed);
+  for (int round = 0; round < 20; round++) {
+    qk__cdt_t c;
+    assert_int_equal(qk__cdt_init(&c, NULL, 0, 0, 1, 0), QK_OK);
+    double slope = qkt_rng_range(&r, -0.6, 0.6), y0 = qkt_rng_range(&r, 0.3, 0.7);
+    for (int i = 0; i < 300; i++) {
+      double x = qkt_rng_range(&r, 0.05, 0.95), y = y0 + slope * (x - 0.5);
+      int moves = (int)qkt_rng_below(&r, 7) - 3;
+      for (int m = 0; m < abs(moves); m++) y = nextafter(y, moves > 0 ? 1.0 : 0.0);
+      uint32_t v;
+      int ex;
+      if (i % 3 == 0) y = qkt_rng_range(&r, 0.01, 0.99); /* some points off the line */
+      assert_int_equal(qk__cdt_insert(&c, x, y, NONE, &v, &ex), QK_OK);
+    }
+    segrec_t used[40];
+    size_t nu = 0;
+    for (int q = 0; q < 40; q++) {
+      uint32_t a = 4 + qkt_rng_below(&r, (uint32_t)c.nv - 4),
+               b = 4 + qkt_rng_below(&r, (uint32_t)c.nv - 4);
+      uint32_t blk, bs;
+      qk_status_t st = qk__cdt_insert_segment(&c, a, b, (uint32_t)q, &blk, &bs);
+      if (st == QK_OK) {
+        used[nu++] = (segrec_t){a, b, (uint32_t)q};
+      } else if (a != b) {
+        assert_int_equal(st, QK_ERR_GEOMETRY);
+        const double *pa = c.xy + 2 * a, *pb = c.xy + 2 * b;
+        if (bs == NONE) {
+          assert_int_equal(qk__orient2d(pa, pb, c.xy + 2 * blk), 0);
+          assert_true(qk__cdt_encroach(pa, pb, c.xy + 2 * blk) < 0);
+        } else {
+          assert_true(bs < (uint32_t)q);
+        }
+      }
+    }
+    check_cdt(&c);
+    check_segments(&c, used, nu);
+    qk__cdt_free(&c);
+  }
+}
+
 typedef struct snap {
   size_t nv, nt;
   double *xy;
   uint32_t *v, *nbr, *seg;
 } snap_t;
+static void snap_take(snap_t *s, const qk__cdt_t *c);
+static void snap_expect(const snap_t *s, const qk__cdt_t *c);
+static void snap_free(snap_t *s);
+
+/* Long segments between random vertices of a coarse grid (many cocircular and collinear
+ * vertices in every cavity) and random points: accepted ones are checked as chains,
+ * refused ones must name a real blocker. */
+static void test_cdt_long_segments(void **state) {
+  (void)state;
+  g_seed = qkt_seed(12111);
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed);
+  for (int round = 0; round < 3; round++) {
+    qk__cdt_t c;
+    assert_int_equal(qk__cdt_init(&c, NULL, 0, 0, 64, 0), QK_OK);
+    for (int i = 0; i < 1500; i++) {
+      uint32_t v;
+      int ex;
+      double x = round == 1 ? qkt_rng_range(&r, 1, 63) : 1 + qkt_rng_below(&r, 62);
+      double y = round == 1 ? qkt_rng_range(&r, 1, 63) : 1 + qkt_rng_below(&r, 62);
+      assert_int_equal(qk__cdt_insert(&c, x, y, NONE, &v, &ex), QK_OK);
+    }
+    segrec_t used[200];
+    size_t nu = 0;
+    int refused = 0;
+    for (int q = 0; q < 200; q++) {
+      uint32_t a = 4 + qkt_rng_below(&r, (uint32_t)c.nv - 4),
+               b = 4 + qkt_rng_below(&r, (uint32_t)c.nv - 4);
+      uint32_t blk, bs;
+      snap_t before;
+      snap_take(&before, &c);
+      uint8_t *seen = calloc(c.nt, 1);
+      c.on_change = count_change, c.user = seen;
+      qk_status_t st = qk__cdt_insert_segment(&c, a, b, (uint32_t)q, &blk, &bs);
+      c.on_change = NULL, c.user = NULL;
+      assert_int_equal(c.nt, before.nt);
+      for (size_t t = 0; t < c.nt; t++)
+        if ((memcmp(before.v + 3 * t, c.v + 3 * t, 3 * sizeof *c.v) ||
+             memcmp(before.seg + 3 * t, c.seg + 3 * t, 3 * sizeof *c.v)) &&
+            !seen[t])
+          fail_msg("seed %llu: segment insertion changed triangle %zu unreported",
+                   (unsigned long long)g_seed, t);
+      if (st != QK_OK) snap_expect(&before, &c);
+      snap_free(&before);
+      free(seen);
+      if (a == b) {
+        assert_int_equal(st, QK_ERR_GEOMETRY);
+        continue;
+      }
+      if (st == QK_OK) {
+        used[nu++] = (segrec_t){a, b, (uint32_t)q};
+        continue;
+      }
+      assert_int_equal(st, QK_ERR_GEOMETRY);
+      refused++;
+      const double *pa = c.xy + 2 * a, *pb = c.xy + 2 * b;
+      if (bs == NONE) { /* a vertex in the relative interior of ab */
+        assert_int_equal(qk__orient2d(pa, pb, c.xy + 2 * blk), 0);
+        assert_true(qk__cdt_encroach(pa, pb, c.xy + 2 * blk) < 0);
+      } else { /* a constrained edge of segment bs, with blk one of its ends, crosses ab */
+        int found = 0;
+        for (size_t i = 0; i < nu; i++)
+          if (used[i].id == bs &&
+              (used[i].a == blk || used[i].b == blk ||
+               qk__orient2d(c.xy + 2 * used[i].a, c.xy + 2 * used[i].b, c.xy + 2 * blk) == 0)) {
+            const double *u = c.xy + 2 * used[i].a, *w = c.xy + 2 * used[i].b;
+            assert_true(qk__orient2d(pa, pb, u) * qk__orient2d(pa, pb, w) <= 0);
+            assert_true(qk__orient2d(u, w, pa) * qk__orient2d(u, w, pb) <= 0);
+            found = 1;
+          }
+        assert_true(found);
+      }
+      if (q % 20 == 0) check_cdt(&c);
+    }
+    check_cdt(&c);
+    check_segments(&c, used, nu);
+    assert_true(nu > 10 && refused > 10);
+    qk__cdt_free(&c);
+  }
+}
+
+/* Snapshot of a triangulation, to check that a refused call changed nothing. */
 
 static void snap_take(snap_t *s, const qk__cdt_t *c) {
   s->nv = c->nv, s->nt = c->nt;
@@ -557,6 +685,12 @@ static void test_cdt_segment_refused(void **state) {
   assert_int_equal(qk__cdt_insert_segment(&c, v[5], v[1], 10, &blk, &bs), QK_ERR_GEOMETRY);
   assert_int_equal(bs, 8);
   assert_true(blk == v[2] || blk == v[3]);
+  snap_expect(&s, &c);
+  /* points outside the closed square, or NaN, are refused and change nothing */
+  uint32_t w;
+  assert_int_equal(qk__cdt_insert(&c, 17, 5, NONE, &w, &ex), QK_ERR_OUTSIDE);
+  assert_int_equal(qk__cdt_insert(&c, 5, -1e-300, NONE, &w, &ex), QK_ERR_OUTSIDE);
+  assert_int_equal(qk__cdt_insert(&c, NAN, 5, NONE, &w, &ex), QK_ERR_OUTSIDE);
   snap_expect(&s, &c);
   snap_free(&s);
   check_cdt(&c);
@@ -725,14 +859,15 @@ static void skip_without_gmp(void **state) {
 int main(void) {
   const struct CMUnitTest tests[] = {
 #ifdef QK_HAVE_GMP
-      cmocka_unit_test(test_cdt_incircle_gmp), cmocka_unit_test(test_cdt_encroach_gmp),
+      cmocka_unit_test(test_cdt_incircle_gmp),  cmocka_unit_test(test_cdt_encroach_gmp),
 #else
       cmocka_unit_test(skip_without_gmp),
 #endif
-      cmocka_unit_test(test_cdt_uniform),      cmocka_unit_test(test_cdt_grid),
-      cmocka_unit_test(test_cdt_scales),       cmocka_unit_test(test_cdt_near_degenerate),
-      cmocka_unit_test(test_cdt_segments),     cmocka_unit_test(test_cdt_segment_refused),
-      cmocka_unit_test(test_cdt_walk),         cmocka_unit_test(test_cdt_alloc_fail),
+      cmocka_unit_test(test_cdt_uniform),       cmocka_unit_test(test_cdt_grid),
+      cmocka_unit_test(test_cdt_scales),        cmocka_unit_test(test_cdt_near_degenerate),
+      cmocka_unit_test(test_cdt_segments),      cmocka_unit_test(test_cdt_segment_refused),
+      cmocka_unit_test(test_cdt_long_segments), cmocka_unit_test(test_cdt_segment_near_collinear),
+      cmocka_unit_test(test_cdt_walk),          cmocka_unit_test(test_cdt_alloc_fail),
   };
   (void)skip_without_gmp;
   return cmocka_run_group_tests(tests, NULL, NULL);
