@@ -409,6 +409,23 @@ static void test_mesh_general_mode_small_angle(void **state) {
   qk_mesh_free(m);
   qk_poly_free(p);
   free(s);
+  /* The same L with a 5-degree notch cut into it instead (the domain wraps around the
+   * notch's apex), and a second, separate component: two faces. */
+  s = calloc(1, sizeof *s);
+  double w = grid(3 * tan(2.5 * M_PI / 180), 24); /* mouth of a 5-degree wedge 1.5 deep */
+  double ring[18] = {0, 0, 4, 0, 4, 2, 3, 2, 3 - w / 2, 0.5, 3 - w, 2, 2, 2, 2, 4, 0, 4};
+  sh_ring(s, ring, 9);
+  double far[6] = {10, 0, 12, 0.5, 11, 3};
+  sh_ring(s, far, 3);
+  run(s, &o, 20, "L-shape with a 5-degree notch, and a triangle apart");
+  p = sh_poly(s, NULL);
+  m = mesh_of(p, &o);
+  qk_mesh_stats(m, &st);
+  assert_int_equal(st.components, 2);
+  assert_true(fabs(st.smallest_input_angle_deg - 5) < 0.01);
+  qk_mesh_free(m);
+  qk_poly_free(p);
+  free(s);
 }
 
 /* A random star polygon around (0, 0) on a 2^-16 grid, with spokes from the centre to
@@ -675,6 +692,14 @@ static void test_mesh_general_mode_refusals(void **state) {
   assert_int_equal(qk_poly_from_arrays(x3, 3, s3, 1, NULL, 0, NULL, &p, &err), QK_OK);
   assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_ERR_GEOMETRY);
   assert_non_null(strstr(err.message, "vertex 2"));
+  assert_non_null(strstr(err.message, "segment 0"));
+  qk_poly_free(p);
+  /* A hole point on a segment. */
+  double x5[8] = {0, 0, 3, 0, 3, 3, 0, 3}, h5[2] = {1.5, 0};
+  uint32_t s5[8] = {0, 1, 1, 2, 2, 3, 3, 0};
+  assert_int_equal(qk_poly_from_arrays(x5, 4, s5, 4, h5, 1, NULL, &p, &err), QK_OK);
+  assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_ERR_GEOMETRY);
+  assert_non_null(strstr(err.message, "hole 0"));
   assert_non_null(strstr(err.message, "segment 0"));
   qk_poly_free(p);
   /* Duplicate vertices. */
