@@ -120,6 +120,10 @@ uint64_t qk__gm_param(const qk__gm_t *g, uint32_t v, uint32_t s);
  * (seg NONE for a free point). *v_out is the vertex; *existed as qk__cdt_insert. */
 qk_status_t qk__gm_insert(qk__gm_t *g, double x, double y, uint32_t t0, int k0, qk__cdt_where_t w,
                           uint32_t seg, uint64_t k, uint32_t *v_out, int *existed);
+/* The Morton key of input point (x, y) in the root square, and a stable sort of points
+ * by key (general_seed.c). */
+uint64_t qk__gm_morton(const qk__gm_t *g, double x, double y);
+qk_status_t qk__gm_sort_points(const qk__gm_t *g, qk__gm_pt_t *pts, size_t n);
 /* general_seed.c: the graded quadtree, its seeds and the pre-split points, inserted. */
 qk_status_t qk__gm_seed(qk__gm_t *g, qk_mesh_stats_t *st);
 /* general_refine.c: split the subsegment a-b of segment s at an exact point (concentric

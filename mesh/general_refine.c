@@ -129,7 +129,9 @@ int qk__gm_is_bad(const qk__gm_t *g, uint32_t t) {
       double v = g->opt->size_fn(cx, cy, g->opt->size_user);
       if (v > 0 && v < h) h = v;
     }
-    if (lmax > h * h) return 1;
+    /* A hair below h^2, so that rounding in the squared lengths never passes an edge
+     * longer than h. */
+    if (lmax > h * h * (1 - 0x1p-40)) return 1;
   }
   /* The smallest angle is at vertex i, opposite the shortest edge; below 90 degrees, so
    * comparing squared sines is comparing angles. */

@@ -176,7 +176,7 @@ static uint64_t morton_lat(double X, double Y) {
   return spread32(ix) | spread32(iy) << 1;
 }
 
-static uint64_t morton(const qk__gm_t *g, double x, double y) {
+uint64_t qk__gm_morton(const qk__gm_t *g, double x, double y) {
   return morton_lat((x - g->X0) * g->inv_S, (y - g->Y0) * g->inv_S);
 }
 
@@ -248,16 +248,15 @@ static qk_status_t presplit(qk__gm_t *g, uint32_t s, const double *A, const doub
   double p[2];
   if (qk__seg_point(A, B, k >> tz, 62 - tz, p)) return QK_OK;
   qk_status_t st = presplit(g, s, A, B, len, lo, k);
-  if (!st) st = add_pt(g, morton(g, p[0], p[1]), p[0], p[1], s, k);
+  if (!st) st = add_pt(g, qk__gm_morton(g, p[0], p[1]), p[0], p[1], s, k);
   if (!st) st = presplit(g, s, A, B, len, k, hi);
   return st;
 }
 
 /* Sort the points by Morton key: least significant digit first, 11 bits a pass, passes
  * whose digit is the same for every key skipped; stable. */
-static qk_status_t sort_points(qk__gm_t *g) {
-  size_t n = g->npts;
-  qk__gm_pt_t *tmp = qk__realloc(g->a, NULL, 0, (n + 1) * sizeof *tmp), *src = g->pts, *dst = tmp;
+qk_status_t qk__gm_sort_points(const qk__gm_t *g, qk__gm_pt_t *pts, size_t n) {
+  qk__gm_pt_t *tmp = qk__realloc(g->a, NULL, 0, (n + 1) * sizeof *tmp), *src = pts, *dst = tmp;
   if (!tmp) return QK_ERR_NOMEM;
   size_t cnt[2048];
   /* Bits below 20 order points within 2^-22 of the square's side: irrelevant to walks. */
@@ -274,7 +273,7 @@ static qk_status_t sort_points(qk__gm_t *g) {
     qk__gm_pt_t *t = src;
     src = dst, dst = t;
   }
-  if (src != g->pts) memcpy(g->pts, src, n * sizeof *src);
+  if (src != pts) memcpy(pts, src, n * sizeof *src);
   qk__free(g->a, tmp, (n + 1) * sizeof *tmp);
   return QK_OK;
 }
@@ -338,6 +337,7 @@ qk_status_t qk__gm_seed(qk__gm_t *g, qk_mesh_stats_t *stats) {
     if (presplit(g, (uint32_t)s, A, B, hypot(B[0] - A[0], B[1] - A[1]), 0, QK__GM_ONE))
       return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   }
-  if (g->npts && sort_points(g)) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  if (g->npts && qk__gm_sort_points(g, g->pts, g->npts))
+    return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   return insert_points(g);
 }
