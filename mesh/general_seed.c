@@ -61,8 +61,8 @@ static int separate(const qk__gm_t *g, uint32_t f, uint32_t h, const double lo[2
  * orientation filter inlined (the subdivision's hot test), the exact predicate only when
  * the estimate's error bound (as in qk__orient2d) leaves a corner's side open. */
 static int seg_box(const double a[2], const double b[2], const double lo[2], const double hi[2]) {
-  for (int i = 0; i < 2; i++)
-    if (fmax(a[i], b[i]) < lo[i] || fmin(a[i], b[i]) > hi[i]) return 0;
+  for (int i = 0; i < 2; i++) /* (not fmin/fmax: library calls in this hot loop) */
+    if ((a[i] > b[i] ? a[i] : b[i]) < lo[i] || (a[i] < b[i] ? a[i] : b[i]) > hi[i]) return 0;
   const double c[4][2] = {{lo[0], lo[1]}, {hi[0], lo[1]}, {hi[0], hi[1]}, {lo[0], hi[1]}};
   double dx = b[0] - a[0], dy = b[1] - a[1];
   int pos = 0, neg = 0;
