@@ -113,6 +113,47 @@ int qk__gm_exempt(const qk__gm_t *g, const uint32_t *tv) {
   return 0;
 }
 
+/* a + b = s + e exactly (two-sum); a * b = p + e exactly (fma). */
+static void two_sum(double a, double b, double *s, double *e) {
+  double x = a + b, bv = x - a, av = x - bv;
+  *s = x, *e = (a - av) + (b - bv);
+}
+
+/* Add q to the nonoverlapping expansion h[0..*n) (increasing magnitude). */
+static void grow(double *h, int *n, double q) {
+  int m = 0;
+  for (int i = 0; i < *n; i++) {
+    double s, e;
+    two_sum(q, h[i], &s, &e);
+    if (e != 0) h[m++] = e;
+    q = s;
+  }
+  if (q != 0) h[m++] = q;
+  *n = m;
+}
+
+/* Is |pq|^2 > h^2, exactly? Each difference splits into a rounded part and its error, each
+ * square and the cross term into products and their errors; the sum is an exact expansion
+ * whose sign is its largest component's. */
+static int len2_exceeds(const double *p, const double *q, double h) {
+  double x[16];
+  int n = 0;
+  for (int i = 0; i < 2; i++) {
+    double dh, dl;
+    two_sum(p[i], -q[i], &dh, &dl);
+    const double f[3][2] = {{dh, dh}, {2 * dh, dl}, {dl, dl}};
+    for (int k = 0; k < 3; k++) {
+      double pr = f[k][0] * f[k][1];
+      grow(x, &n, fma(f[k][0], f[k][1], -pr));
+      grow(x, &n, pr);
+    }
+  }
+  double hh = h * h;
+  grow(x, &n, -fma(h, h, -hh));
+  grow(x, &n, -hh);
+  return n > 0 && x[n - 1] > 0;
+}
+
 int qk__gm_is_bad(const qk__gm_t *g, uint32_t t) {
   const qk__cdt_t *c = &g->cdt;
   if (g->faces[g->face[t]].drop) return 0;
@@ -129,9 +170,13 @@ int qk__gm_is_bad(const qk__gm_t *g, uint32_t t) {
       double v = g->opt->size_fn(cx, cy, g->opt->size_user);
       if (v > 0 && v < h) h = v;
     }
-    /* A hair below h^2, so that rounding in the squared lengths never passes an edge
-     * longer than h. */
-    if (lmax > h * h * (1 - 0x1p-40)) return 1;
+    double h2 = h * h;
+    if (lmax > h2 * (1 + 0x1p-48)) return 1;
+    /* Within rounding of h: decide exactly, so that an edge of exactly h (a leaf's side) is
+     * good and one a hair longer is not. */
+    if (lmax >= h2 * (1 - 0x1p-48))
+      for (int j = 0; j < 3; j++)
+        if (len2_exceeds(p[(j + 1) % 3], p[(j + 2) % 3], h)) return 1;
   }
   /* The smallest angle is at vertex i, opposite the shortest edge; below 90 degrees, so
    * comparing squared sines is comparing angles. */
