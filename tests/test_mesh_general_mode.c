@@ -653,6 +653,20 @@ static void test_mesh_general_mode_markers(void **state) {
     if (xy[2 * v] == 4 && xy[2 * v + 1] == 0.5) assert_int_equal(mk[v], 1);
   }
   free(ab), free(sg), free(sm_out);
+  /* Every writer takes a general mesh (negative lattice exponent, the graded tree). */
+  FILE *f = tmpfile();
+  assert_non_null(f);
+  assert_int_equal(qk_mesh_write_node(m, f, 1), QK_OK);
+  assert_int_equal(qk_mesh_write_ele(m, f, 1), QK_OK);
+  assert_int_equal(qk_mesh_write_poly(m, f, 1), QK_OK);
+  assert_int_equal(qk_mesh_write_msh(m, f), QK_OK);
+  assert_int_equal(qk_mesh_write_vtu(m, f), QK_OK);
+  assert_int_equal(qk_mesh_write_svg(m, f, 400), QK_OK);
+  assert_true(ftell(f) > 10000);
+  fclose(f);
+  uint64_t bins[180];
+  assert_int_equal(qk_mesh_angle_histogram(m, bins), QK_OK);
+  for (int k = 0; k < 20; k++) assert_true(bins[k] == 0);
   qk_mesh_free(m);
   qk_poly_free(p);
   free(s);
