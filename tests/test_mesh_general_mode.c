@@ -387,6 +387,8 @@ static void test_mesh_general_mode_square_holes(void **state) {
   assert_true(st.min_angle_deg >= 20 && st.max_angle_deg <= 140);
   assert_int_equal(st.components, 1);
   assert_non_null(qk_mesh_tree(m));
+  /* The input vertices come first, in input order, bit-identical. */
+  assert_memory_equal(qk_mesh_vertices(m, NULL), s->xy, 2 * s->nv * sizeof(double));
   qk_mesh_free(m);
   qk_poly_free(p);
   free(s);
