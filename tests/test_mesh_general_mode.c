@@ -777,11 +777,23 @@ static void test_mesh_general_mode_alloc_failure(void **state) {
   square(pts, 4, 4, 1.2, 0.5, 1);
   sh_ring(s, pts, 4);
   sh_hole(s, 4, 4);
+  /* An internal segment from an outer corner to the nearest corner of the hole. */
+  uint32_t near = 4;
+  for (uint32_t v = 5; v < 8; v++)
+    if (hypot(s->xy[2 * v] - s->xy[4], s->xy[2 * v + 1] - s->xy[5]) <
+        hypot(s->xy[2 * near] - s->xy[4], s->xy[2 * near + 1] - s->xy[5]))
+      near = v;
+  sh_seg(s, 2, near);
   size_t fail_at;
   for (fail_at = 1;; fail_at++) {
     qkt_alloc_t as;
     qk_allocator_t a = qkt_alloc_make(&as);
     qk_poly_t *p = sh_poly(s, &a);
+    /* Markers and a region too, so that every output array is allocated. */
+    int32_t sm[9] = {1, 2, 3, 4, 5, 6, 7, 8, 9};
+    double reg[3] = {8, 8, 7};
+    assert_int_equal(qk_poly_set_markers(p, NULL, sm, NULL), QK_OK);
+    assert_int_equal(qk_poly_set_regions(p, reg, 1, NULL), QK_OK);
     as.fail_at = as.calls + fail_at;
     qk_mesh_options_t o = general_opts();
     o.allocator = &a;
