@@ -595,6 +595,10 @@ static void test_mesh_general_mode_size(void **state) {
   o.min_angle_deg = 40;
   qk_mesh_error_t err;
   assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_ERR_INVALID);
+  o.min_angle_deg = 0;
+  o.size = 16; /* the book's option */
+  assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_ERR_INVALID);
+  assert_non_null(strstr(err.message, "book's mode only"));
   qk_poly_free(p);
   free(s);
 }
