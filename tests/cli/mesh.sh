@@ -69,7 +69,7 @@ check "--max-size 0.2: every edge at most 0.2" -- awk '
   FNR==NR { if (FNR > 1) { x[$1]=$2; y[$1]=$3 }; next }
   FNR > 1 { for (i = 2; i <= 4; i++) { a=$i; b=$(i == 4 ? 2 : i + 1); d=(x[a]-x[b])^2+(y[a]-y[b])^2; if (d > 0.04 + 1e-12) exit 1 } }' "$tmp/h.node" "$tmp/h.ele"
 expect 0 'dyadic mode: every angle in \[45, 90\] degrees \(proven' -- "$cli" mesh "$tmp/real.poly" -o "$tmp/h" --min-angle 30
-expect 2 'the proven bound is 45 degrees' -- "$cli" mesh "$tmp/real.poly" -o "$tmp/u" --min-angle 50
+expect 2 'must be between 0 and 45 degrees' -- "$cli" mesh "$tmp/real.poly" -o "$tmp/u" --min-angle 50
 expect 2 'exclude each other' -- "$cli" mesh "$tmp/real.poly" -o "$tmp/u" --book --dyadic
 # The issue's coastline-like polygon: refused, naming the segment and the reason.
 printf '3 2 0 0\n0 5 5\n1 30.5 3\n2 5 20\n3 0\n0 0 1\n1 1 2\n2 2 0\n' >"$tmp/coast.poly"
