@@ -253,7 +253,7 @@ void pg_pslg(qkt_rng_t *r, unsigned flags, size_t n, pg_pslg_t *g) {
   double ox = snap((unit(r) - 0.5) * ldexp(1, e + (int)qkt_rng_below(r, 4)), grid),
          oy = snap((unit(r) - 0.5) * ldexp(1, e + (int)qkt_rng_below(r, 4)), grid);
   if (full) ox += unit(r) * R, oy += unit(r) * R;
-  g->grid = grid;
+  g->grid = flags & PG_NEAR_COLLINEAR ? grid / 2 : grid; /* midpoints: half a step */
   if (n < 3) n = 3;
   double *pts = malloc((2 * n + 8) * sizeof *pts);
   if (!pts) abort();
