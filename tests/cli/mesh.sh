@@ -71,9 +71,10 @@ check "--max-size 0.2: every edge at most 0.2" -- awk '
 expect 0 'dyadic mode: every angle in \[45, 90\] degrees \(proven' -- "$cli" mesh "$tmp/real.poly" -o "$tmp/h" --min-angle 30
 expect 2 'must be between 0 and 45 degrees' -- "$cli" mesh "$tmp/real.poly" -o "$tmp/u" --min-angle 50
 expect 2 'exclude each other' -- "$cli" mesh "$tmp/real.poly" -o "$tmp/u" --book --dyadic
-# The issue's coastline-like polygon: refused, naming the segment and the reason.
+# The issue's coastline-like polygon in the dyadic mode: refused, naming the segment and
+# the reason (without --dyadic the general mode meshes it: tests/cli/mesh_general.sh).
 printf '3 2 0 0\n0 5 5\n1 30.5 3\n2 5 20\n3 0\n0 0 1\n1 1 2\n2 2 0\n' >"$tmp/coast.poly"
-expect 1 'coast.poly:6: segment 0 from \(5, 5\) to \(30.5, 3\) is not at 0, 45, 90 or 135 degrees \(the dyadic mode keeps' -- "$cli" mesh "$tmp/coast.poly" -o "$tmp/bad"
+expect 1 'coast.poly:6: segment 0 from \(5, 5\) to \(30.5, 3\) is not at 0, 45, 90 or 135 degrees \(the dyadic mode keeps' -- "$cli" mesh "$tmp/coast.poly" --dyadic -o "$tmp/bad"
 ls "$tmp"/bad* >/dev/null 2>&1 && { echo "FAIL: output written for bad input"; fails=$((fails + 1)); }
 
 # Usage errors.
