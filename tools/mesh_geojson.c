@@ -331,28 +331,26 @@ static int hole_points(mg_input_t *in, const char *path, char *msg, size_t n) {
     if (in->ring_sign[q] > 0) continue;
     int found = 0;
     size_t m = in->ring_start[q + 1] - in->ring_start[q];
-    for (size_t e = 0; e < m && !found; e++) {
+    for (size_t e = 0; e < m && !found && !rc; e++) {
       const double *a = &xy[2 * (rs[q] + e)], *b = &xy[2 * (rs[q] + e + 1)];
       double mx = a[0] + (b[0] - a[0]) / 2, my = a[1] + (b[1] - a[1]) / 2;
       double nx = -(b[1] - a[1]), ny = b[0] - a[0];
       static const double step[] = {1e-3, -1e-3, 1e-2, -1e-2, 0.1, -0.1, 0.3, -0.3};
       for (int k = 0; k < 8 && !found; k++) {
         qk_point_t p = {mx + step[k] * nx, my + step[k] * ny};
-        uint32_t f_all = 0, f_ring = 0;
+        uint32_t f_all = 0;
         size_t cnt = 0;
-        uint32_t inside[1];
-        qk_region_locate(l_all, p, QK_BOUNDARY_CLOSED, &f_all);
-        if (f_all != QK_NONE) continue;
-        qk_region_locate_all(l_each, p, QK_BOUNDARY_OPEN, inside, 0, &cnt);
-        (void)f_ring;
-        /* strictly inside its own hole ring (open boundary) */
-        size_t cap = cnt;
-        uint32_t *list = malloc((cap + 1) * sizeof *list);
+        /* outside the domain, boundaries included ... */
+        if (qk_region_locate(l_all, p, QK_BOUNDARY_CLOSED, &f_all) != QK_OK || f_all != QK_NONE)
+          continue;
+        /* ... and strictly inside its own hole ring (open boundary) */
+        qk_region_locate_all(l_each, p, QK_BOUNDARY_OPEN, NULL, 0, &cnt);
+        uint32_t *list = malloc((cnt + 1) * sizeof *list);
         if (!list) {
           rc = mg_fail(msg, n, 3, "out of memory");
           break;
         }
-        qk_region_locate_all(l_each, p, QK_BOUNDARY_OPEN, list, cap, &cnt);
+        qk_region_locate_all(l_each, p, QK_BOUNDARY_OPEN, list, cnt, &cnt);
         for (size_t i = 0; i < cnt; i++) found |= list[i] == q;
         free(list);
         if (found) in->holes[2 * in->nh] = p.x, in->holes[2 * in->nh + 1] = p.y, in->nh++;
