@@ -20,7 +20,7 @@
  *  - general-mode meshes of the five countries, one with a size bound.
  * The general-mode tests report themselves skipped while qk_mesh_generate() does not know
  * QK_MESH_GENERAL; the country tests when the data file is absent (QK_SHARED_DIR).
- * QK_SEED=n replays a seed.
+ * QK_SEED=n replays a seed; QK_DUMP_DIR=dir writes every random input there as a .poly.
  */
 #include <math.h>
 #include <stdio.h>
@@ -217,6 +217,13 @@ static void test_mesh_real_random(void **state) {
     char what[128];
     snprintf(what, sizeof what, "seed %llu case %d (flags 0x%x, max_size %g)",
              (unsigned long long)seed, i, flags, max_size);
+    const char *dump = getenv("QK_DUMP_DIR"); /* write every case as a .poly to debug */
+    if (dump) {
+      char path[1024];
+      snprintf(path, sizeof path, "%s/pslg-%llu-%d.poly", dump, (unsigned long long)seed, i);
+      FILE *f = fopen(path, "w");
+      if (f) pg_pslg_write_poly(&g, f), fclose(f);
+    }
     size_t nt = 0;
     int rc = mesh_check(&in, max_size, (flags & PG_FULL) != 0, what, &nt);
     pg_pslg_free(&g);
