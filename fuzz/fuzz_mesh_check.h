@@ -123,7 +123,7 @@ static inline void qkfm_check(const qkfm_input_t *in, const qk_mesh_t *m, qk_mes
 
 /*
  * The common driver: byte 0 picks the size bound (0: none, else the input's extent /
- * 2^(b % 8)), byte 1 an allocation to fail (0..199: none); the rest is .poly text. Inputs
+ * 2^(b / 2 % 5) for odd b), byte 1 an allocation to fail (0..199: none); the rest is .poly text. Inputs
  * above max_nv vertices, or (max_perimeter > 0) whose perimeter in steps of the finest
  * binary digit of their coordinates exceeds max_perimeter, are only read: that bounds
  * the work per input. Returns 0.
@@ -180,7 +180,7 @@ static inline int qkfm_run(const uint8_t *data, size_t size, qk_mesh_mode_t mode
     mo.allocator = &al;
     mo.mode = mode;
     double ext = fmax(hi[0] - lo[0], hi[1] - lo[1]);
-    if (opt % 2 && pin.nv && isfinite(ext) && ext > 0) mo.max_size = ldexp(ext, -(opt / 2 % 8));
+    if (opt % 2 && pin.nv && isfinite(ext) && ext > 0) mo.max_size = ldexp(ext, -(opt / 2 % 5));
     qk_mesh_t *mesh = NULL;
     size_t blocks = as.live_blocks;
     qkt_alloc_arm(&as, fail >= 200 ? fail - 199u : 0);
