@@ -123,8 +123,8 @@ static inline void qkfm_check(const qkfm_input_t *in, const qk_mesh_t *m, qk_mes
 
 /*
  * The common driver: byte 0 picks the size bound (0: none, else the input's extent /
- * 2^(b / 2 % 5) for odd b), byte 1 an allocation to fail (0..199: none); the rest is .poly text. Inputs
- * above max_nv vertices, or (max_perimeter > 0) whose perimeter in steps of the finest
+ * 2^(b / 2 % 5) for odd b), byte 1 an allocation to fail (0..199: none); the rest is .poly text.
+ * Inputs above max_nv vertices, or (max_perimeter > 0) whose perimeter in steps of the finest
  * binary digit of their coordinates exceeds max_perimeter, are only read: that bounds
  * the work per input. Returns 0.
  */
