@@ -146,7 +146,8 @@ bool cgal_mesh_pslg(const Pslg &in, double max_edge, MeshResult &out) {
   double t0 = now_seconds();
   CDT cdt;
   std::vector<CDT::Vertex_handle> vh(in.xy.size() / 2);
-  for (size_t i = 0; i < vh.size(); i++) vh[i] = cdt.insert(K::Point_2(in.xy[2 * i], in.xy[2 * i + 1]));
+  for (size_t i = 0; i < vh.size(); i++)
+    vh[i] = cdt.insert(K::Point_2(in.xy[2 * i], in.xy[2 * i + 1]));
   for (size_t s = 0; s < in.seg.size() / 2; s++)
     cdt.insert_constraint(vh[in.seg[2 * s]], vh[in.seg[2 * s + 1]]);
   std::vector<K::Point_2> seeds;

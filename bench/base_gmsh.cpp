@@ -76,7 +76,8 @@ bool gmsh_mesh(double U, const std::vector<Ring> &rings, double max_edge, MeshRe
 static bool inside_ring(const Pslg &in, const std::vector<uint32_t> &r, double px, double py) {
   bool c = false;
   for (size_t i = 0, j = r.size() - 1; i < r.size(); j = i++) {
-    double ax = in.xy[2 * r[i]], ay = in.xy[2 * r[i] + 1], bx = in.xy[2 * r[j]], by = in.xy[2 * r[j] + 1];
+    double ax = in.xy[2 * r[i]], ay = in.xy[2 * r[i] + 1], bx = in.xy[2 * r[j]],
+           by = in.xy[2 * r[j] + 1];
     if ((ay > py) != (by > py) && px < ax + (py - ay) / (by - ay) * (bx - ax)) c = !c;
   }
   return c;

@@ -149,7 +149,6 @@ bool have(const char *what);
 double now_seconds();
 double min_angle_of(const std::vector<double> &xy, const std::vector<uint32_t> &tri);
 
-
 // Polygon layers for `--op region` (base_region.cpp): rings as read from GeoJSON, the
 // first ring of each polygon a shell, the others its holes.
 struct RegionLayer {

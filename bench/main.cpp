@@ -864,8 +864,9 @@ void run_mesh_dyadic(unsigned U) {
 // equirectangularly at its mean latitude (metres), rounded to 1/16 m.
 static bool coast_pslg(const std::string &name, Pslg &out, std::string *why) {
   const char *shared = getenv("QK_SHARED_DIR");
-  std::string path = (shared && *shared ? std::string(shared) + "/data" : std::string(QKB_DATA_DIR)) +
-                     "/countries-50m.geojson";
+  std::string path =
+      (shared && *shared ? std::string(shared) + "/data" : std::string(QKB_DATA_DIR)) +
+      "/countries-50m.geojson";
   mg_options_t o = {-1, "name", name.c_str(), 1, 1.0 / 16};
   mg_input_t in;
   char msg[512];
