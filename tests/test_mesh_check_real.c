@@ -214,6 +214,24 @@ static void test_check_angles(void **state) {
   vin.seg = v_seg2;
   expect(&vin, &vm, &o, "at vertex 0 ", NULL);
 
+  /* A triangle spanning a 14-degree input angle, its 17-degree corner at a Steiner vertex
+   * inside the wedge and its other two vertices on the two segments: refused by rule 1
+   * (not at the input vertex), allowed by rule 2 (the wedge rule). */
+  const double s2_xy[] = {0, 0, 16, 0, 16, 4, 1.5, 0.2, 8, 0, 8, 2, 2.5, 1.5};
+  const uint32_t s2_seg[] = {0, 1, 0, 2, 1, 2}, span[] = {3, 4, 5}, off[] = {6, 4, 5};
+  mcr_input_t s2in = {s2_xy, 7 - 4, s2_seg, 3};
+  mcr_mesh_t s2m = {s2_xy, 7, span, 1, NULL, NULL, 0};
+  expect(&s2in, &s2m, &o, "at vertex 3 ", NULL);
+  mcr_opts_t ow = o;
+  ow.exempt_small = 2;
+  assert_int_equal(mcr_check_general(&s2in, &s2m, &ow, &r, msg, sizeof msg), 1);
+  assert_null(strstr(msg, "degrees (below")); /* exempt; it fails later, on conformity */
+  assert_int_equal(r.exempt_wedge, 1);
+  /* The same shape with its corner outside the wedge (above segment 0-2): not exempt. */
+  s2m.tri = off;
+  ow.min_deg = 30;
+  expect(&s2in, &s2m, &ow, "at vertex 6 ", NULL);
+
   /* The upper bound: the square fan has right angles. */
   mcr_mesh_t m = {sq_xy, 5, sq_tri, 4, NULL, NULL, 0};
   mcr_opts_t up = {20, 1, 80, 0, NULL, NULL, NULL, 0};

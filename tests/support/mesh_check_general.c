@@ -139,6 +139,38 @@ static int exempt(gc_t *c, uint32_t a, uint32_t b, uint32_t d) {
   return 0;
 }
 
+/* The wedge rule (exempt_small == 2): the small corner a of triangle (a, b, d) lies, with
+ * the whole triangle, in the closed wedge at an input vertex v between two input segments
+ * meeting there at less than 60 degrees, and b and d lie on those two segments (one on
+ * each): the triangle spans the input angle (Shewchuk's rule leaves such triangles, whose
+ * shortest edge crosses a small input angle, alone). Uses the vertex-to-segment lists. */
+static int exempt_wedge(gc_t *c, uint32_t a, uint32_t b, uint32_t d) {
+  const mcr_input_t *in = c->in;
+  const double *p[3] = {&c->m->xy[2 * a], &c->m->xy[2 * b], &c->m->xy[2 * d]};
+  for (size_t i = c->on0[b]; i < c->on0[b + 1]; i++)
+    for (size_t j = c->on0[d]; j < c->on0[d + 1]; j++) {
+      uint32_t s1 = c->on[i], s2 = c->on[j];
+      if (s1 == s2) continue;
+      for (int e1 = 0; e1 < 2; e1++)
+        for (int e2 = 0; e2 < 2; e2++) {
+          uint32_t v = in->seg[2 * s1 + e1];
+          if (v != in->seg[2 * s2 + e2]) continue;
+          const double *pv = &in->xy[2 * v], *pu = &in->xy[2 * in->seg[2 * s1 + 1 - e1]],
+                       *pw = &in->xy[2 * in->seg[2 * s2 + 1 - e2]];
+          if (!below60(c, pv, pu, pw)) {
+            const double *t = pu;
+            pu = pw, pw = t;
+            if (!below60(c, pv, pu, pw)) continue;
+          }
+          int inside = 1;
+          for (int k = 0; k < 3 && inside; k++)
+            inside = orient(c, pv, pu, p[k]) >= 0 && orient(c, pv, p[k], pw) >= 0;
+          if (inside) return 1;
+        }
+    }
+  return 0;
+}
+
 static int check_triangles(gc_t *c, mcr_report_t *rep) {
   const mcr_mesh_t *m = c->m;
   rep->min_angle_deg = 180, rep->max_angle_deg = 0;
@@ -158,6 +190,10 @@ static int check_triangles(gc_t *c, mcr_report_t *rep) {
       if (isnan(c->cmin) || cot_side(c, c->cmin, pa, pb, pd) >= 0) continue;
       if (c->o->exempt_small && exempt(c, a, b, d)) {
         rep->exempt++, had_exempt = 1;
+        continue;
+      }
+      if (c->o->exempt_small == 2 && exempt_wedge(c, a, b, d)) {
+        rep->exempt_wedge++, had_exempt = 1;
         continue;
       }
       return fail(c,
@@ -345,7 +381,7 @@ static int check_segments(gc_t *c) {
   size_t cap = 4 * in->ns + 16, n_pairs = 0;
   uint64_t *pairs = xmalloc(cap * sizeof *pairs); /* vertex << 32 | segment */
   int r = 0;
-  for (size_t s = 0; !r && s < in->ns; s++) {
+  for (size_t s = 0; s < in->ns; s++) { /* all of them: the lists are used after a failure */
     const double *a = &in->xy[2 * in->seg[2 * s]], *b = &in->xy[2 * in->seg[2 * s + 1]];
     size_t k = vertices_on(c, &g, a, b, buf);
     /* Order along the segment: by x, or by y for a vertical one (insertion sort). */
@@ -357,7 +393,8 @@ static int check_segments(gc_t *c) {
         uint32_t t = buf[j];
         buf[j] = buf[j - 1], buf[j - 1] = t;
       }
-    if (k < 2 || buf[0] != c->in2m[in->seg[2 * s]] || buf[k - 1] != c->in2m[in->seg[2 * s + 1]])
+    if (!r &&
+        (k < 2 || buf[0] != c->in2m[in->seg[2 * s]] || buf[k - 1] != c->in2m[in->seg[2 * s + 1]]))
       r = fail(c, "segment %zu: its endpoints are not the ends of the mesh vertices on it", s);
     for (size_t i = 1; !r && i < k; i++)
       if (!has_edge(c, buf[i - 1], buf[i]))
@@ -536,18 +573,29 @@ int mcr_check_general(const mcr_input_t *in, const mcr_mesh_t *m, const mcr_opts
     rep.smallest_input_angle_deg = smallest_input_angle(&c);
   }
   if (!r) r = check_vertices(&c);
-  if (!r) r = check_triangles(&c, &rep);
+  for (size_t t = 0; !r && t < m->nt; t++)
+    for (int i = 0; !r && i < 3; i++)
+      if (m->tri[3 * t + i] >= m->nv)
+        r = fail(&c, "triangle %zu uses vertex %u of %zu", t, m->tri[3 * t + i], m->nv);
+  /* Angles (check_triangles) come first in what is reported, but the wedge rule needs the
+   * vertex-to-segment lists, so a failed segment check is only reported after them. */
+  int rseg = 0;
+  char segmsg[512] = "";
   if (!r) {
     for (size_t t = 0; t < m->nt; t++)
       for (int i = 0; i < 3; i++)
         c.keys[3 * t + i] = (uint64_t)m->tri[3 * t + i] << 32 | m->tri[3 * t + (i + 1) % 3];
     qsort(c.keys, c.ne, sizeof *c.keys, cmp_u64);
-    for (size_t i = 1; !r && i < c.ne; i++)
-      if (c.keys[i] == c.keys[i - 1])
-        r = fail(&c, "directed edge %u->%u is used twice (overlapping triangles)",
-                 (unsigned)(c.keys[i] >> 32), (unsigned)c.keys[i]);
+    c.msg = segmsg, c.n = sizeof segmsg;
+    rseg = check_segments(&c);
+    c.msg = msg, c.n = n;
   }
-  if (!r) r = check_segments(&c);
+  if (!r) r = check_triangles(&c, &rep);
+  for (size_t i = 1; !r && i < c.ne; i++)
+    if (c.keys[i] == c.keys[i - 1])
+      r = fail(&c, "directed edge %u->%u is used twice (overlapping triangles)",
+               (unsigned)(c.keys[i] >> 32), (unsigned)c.keys[i]);
+  if (!r && rseg) r = 1, snprintf(msg, n, "%s", segmsg);
   if (!r) r = check_edges(&c, &rep);
   if (!r) r = check_output_segments(&c);
   for (int i = 0; i < 8; i++) mpq_clear(c.q[i]);

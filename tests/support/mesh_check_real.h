@@ -68,7 +68,8 @@ typedef struct mcr_opts {
 
 typedef struct mcr_report {
   double min_angle_deg, max_angle_deg; /* over every triangle (floating point) */
-  size_t exempt;                       /* angles below min_deg allowed by the rule */
+  size_t exempt;                       /* angles below min_deg at input vertices (rule 1) */
+  size_t exempt_wedge;                 /* others allowed by the wedge rule (rule 2) */
   double smallest_input_angle_deg;     /* between two input segments at a vertex (180: none) */
   double area;                         /* the kept area (from the boundary edges) */
   size_t boundary_edges;               /* edges without a twin */
@@ -79,9 +80,10 @@ typedef struct mcr_report {
  * vertices coincide; triangles are counter-clockwise; angle bounds as in opts (the
  * exemption: an angle below min_deg at an input vertex v, with both triangle edges at v
  * inside or along the wedge between two input segments meeting at v at less than 60
- * degrees); no directed edge twice and every edge without a twin lies on an input
- * segment; every input segment is the chain of mesh edges joining the mesh vertices
- * exactly on it, in order; every output segment is a mesh edge exactly on its input
+ * degrees, or with exempt_small == 2 the wedge rule: the triangle lies in such a wedge
+ * with two of its vertices on its two segments); no directed edge twice and every edge without a
+ * twin lies on an input segment; every input segment is the chain of mesh edges joining the mesh
+ * vertices exactly on it, in order; every output segment is a mesh edge exactly on its input
  * segment; edge lengths; the kept area against the rings. rep (may be NULL) receives
  * the figures. Returns 0 when the mesh passes, 1 with a description in msg, 2 without
  * GMP.
