@@ -1,7 +1,9 @@
 /*
  * Test plan for the general mesh mode on real-world and random inputs, every mesh passed
  * through the independent exact rational checker (tests/support/mesh_check_general.c):
- * every angle at least the proven bound except inside input angles below 60 degrees,
+ * every angle at least the proven bound except inside input angles below 60 degrees (at
+ * the input vertex, or in a triangle spanning the input angle with a vertex on each of
+ * its two segments: the checker's wedge rule),
  * conforming, every input segment covered exactly by mesh edges on it, input vertices
  * bit-identical, the kept area equal to the rings' (outer minus holes), edge lengths
  * within max_size; and the statistics agree with the checker (smallest angle, smallest
@@ -79,8 +81,14 @@ static int mesh_check(const mr_input_t *in, double max_size, int may_refuse, con
   assert_int_equal(qk_mesh_segments(m, ab, sg, NULL, no, &no), QK_OK);
   mcr_input_t ci = {in->xy, in->nv, in->seg, in->ns};
   mcr_mesh_t cm = {xy, nv, tri, nt, ab, sg, no};
-  mcr_opts_t co = {s.proven_min_angle_deg, 1,     0, max_size, in->ring_v, in->ring_start,
-                   in->ring_sign,          in->nr};
+  /* The wedge rule (2): an angle below the bound is allowed at the input vertex of a small
+   * input angle, or in a triangle spanning that angle with a vertex on each of its two
+   * segments (mesh.h: "except inside input angles below 60 degrees"; Shewchuk's rule). */
+  mcr_opts_t co;
+  memset(&co, 0, sizeof co);
+  co.min_deg = s.proven_min_angle_deg, co.exempt_small = 2, co.max_edge = max_size;
+  co.ring_v = in->ring_v, co.ring_start = in->ring_start, co.ring_sign = in->ring_sign;
+  co.n_rings = in->nr;
   if (s.proven_max_angle_deg > 0 && s.proven_max_angle_deg < 180)
     co.max_deg = s.proven_max_angle_deg;
   mcr_report_t rep;
@@ -94,9 +102,13 @@ static int mesh_check(const mr_input_t *in, double max_size, int may_refuse, con
     if (fabs(rep.smallest_input_angle_deg - s.smallest_input_angle_deg) > 1e-6)
       fail_msg("%s: smallest input angle %.12g by the checker, %.12g in the stats", what,
                rep.smallest_input_angle_deg, s.smallest_input_angle_deg);
-    if (rep.smallest_input_angle_deg >= 60 && (rep.exempt || s.exempt_angles))
-      fail_msg("%s: %zu / %zu exempt angles without an input angle below 60", what, rep.exempt,
-               s.exempt_angles);
+    if (rep.smallest_input_angle_deg >= 60 && (rep.exempt || rep.exempt_wedge || s.exempt_angles))
+      fail_msg("%s: %zu + %zu / %zu exempt angles without an input angle below 60", what,
+               rep.exempt, rep.exempt_wedge, s.exempt_angles);
+    if (getenv("QK_VERBOSE"))
+      print_message("%s: %zu triangles, exempt angles: %zu at input vertices + %zu spanning "
+                    "(checker), %zu (stats)\n",
+                    what, nt, rep.exempt, rep.exempt_wedge, s.exempt_angles);
   }
   free(ab), free(sg);
   qk_mesh_free(m);
