@@ -126,7 +126,8 @@ static inline void qkfm_check(const qkfm_input_t *in, const qk_mesh_t *m, qk_mes
  * 2^(b / 2 % 5) for odd b), byte 1 an allocation to fail (0..199: none); the rest is .poly text.
  * Inputs above max_nv vertices, or (max_perimeter > 0) whose perimeter in steps of the finest
  * binary digit of their coordinates exceeds max_perimeter, are only read: that bounds
- * the work per input. Returns 0.
+ * the work per input, as does max_ratio (> 0): inputs whose extent exceeds max_ratio
+ * times their shortest segment are only read. Returns 0.
  */
 static inline double qkfm_lattice_perimeter(const qkfm_input_t *in, const double *lo) {
   int f = -1100;
@@ -150,7 +151,7 @@ static inline double qkfm_lattice_perimeter(const qkfm_input_t *in, const double
 }
 
 static inline int qkfm_run(const uint8_t *data, size_t size, qk_mesh_mode_t mode, size_t max_nv,
-                           double max_perimeter) {
+                           double max_perimeter, double max_ratio) {
   qkf_bytes_t in = {data, size, 0};
   uint8_t opt = qkf_u8(&in), fail = qkf_u8(&in);
   const uint8_t *text = data + in.at;
@@ -173,7 +174,17 @@ static inline int qkfm_run(const uint8_t *data, size_t size, qk_mesh_mode_t mode
   for (size_t i = 0; i < pin.nv; i++)
     for (int k = 0; k < 2; k++)
       lo[k] = fmin(lo[k], pin.xy[2 * i + k]), hi[k] = fmax(hi[k], pin.xy[2 * i + k]);
-  if (pin.nv <= max_nv &&
+  /* The extent against the shortest segment: a needle 10^9 long and a few units wide
+   * legitimately takes the general mode up to its work cap, longer than a fuzzing run
+   * allows per input (tests/test_mesh_real.c meshes features 2^-20 to 2^20 apart). */
+  double shortest = INFINITY, ext0 = fmax(hi[0] - lo[0], hi[1] - lo[1]);
+  for (size_t s = 0; s < pin.ns; s++) {
+    const double *a = &pin.xy[2 * pin.seg[2 * s]], *b = &pin.xy[2 * pin.seg[2 * s + 1]];
+    double l = fmax(fabs(a[0] - b[0]), fabs(a[1] - b[1]));
+    if (l > 0 && l < shortest) shortest = l;
+  }
+  int too_spread = max_ratio > 0 && pin.ns && !(ext0 <= max_ratio * shortest);
+  if (pin.nv <= max_nv && !too_spread &&
       !(max_perimeter > 0 && !(qkfm_lattice_perimeter(&pin, lo) <= max_perimeter))) {
     qk_mesh_options_t mo;
     qk_mesh_options_init(&mo);

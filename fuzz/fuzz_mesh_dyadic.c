@@ -9,7 +9,7 @@
 #include "fuzz/fuzz_mesh_check.h"
 
 int qkf_mesh_dyadic(const uint8_t *data, size_t size) {
-  return qkfm_run(data, size, QK_MESH_DYADIC, 64, 4096);
+  return qkfm_run(data, size, QK_MESH_DYADIC, 64, 4096, 0);
 }
 
 #ifndef QKF_REPLAY
