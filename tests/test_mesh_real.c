@@ -215,7 +215,8 @@ static void test_mesh_real_random(void **state) {
   qkt_rng_seed(&r, seed);
   size_t meshed = 0, refused = 0, triangles = 0;
   for (int i = 0; i < 60; i++) {
-    unsigned flags = i < 8 ? 1u << i : qkt_rng_below(&r, 256);
+    /* One feature alone for the first eight, then mixtures; every sixth in full precision. */
+    unsigned flags = i < 8 ? 1u << i : qkt_rng_below(&r, 128) | (i % 6 == 5 ? PG_FULL : 0);
     pg_pslg_t g;
     pg_pslg(&r, flags, 6 + qkt_rng_below(&r, 30), &g);
     double max_size = 0;
@@ -247,7 +248,7 @@ static void test_mesh_real_random(void **state) {
   }
   print_message("random PSLGs: %zu meshed (%zu triangles), %zu full-precision inputs refused\n",
                 meshed, triangles, refused);
-  assert_true(meshed >= 40);
+  assert_true(meshed >= 45); /* every input on a grid is meshed; full precision may be refused */
 }
 
 static void test_mesh_real_countries(void **state) {
