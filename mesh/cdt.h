@@ -48,6 +48,11 @@ typedef struct qk__cdt {
   uint32_t hint; /* a triangle near the last change: default start of walks */
   qk__cdt_change_fn on_change;
   void *user;
+  /* Private to mesh/cdt*.c: the flip stack (cap_v + 8 entries, in the vertex block) and the
+   * segment insertion's scratch. */
+  uint32_t *stk;
+  uint32_t *scr;
+  size_t cap_scr;
 } qk__cdt_t;
 
 /* Start a triangulation of the square [x0, x0 + side] x [y0, y0 + side] (two triangles,
@@ -70,16 +75,23 @@ qk__cdt_where_t qk__cdt_locate(const qk__cdt_t *c, double x, double y, uint32_t 
  * is set to 1 and nothing changes). A point in the relative interior of a constrained edge
  * splits it: both halves keep the segment id (callers put only points that lie exactly on
  * the segment there; the refinement does, for segment split points). `start` as for
- * locate. QK_OK or QK_ERR_NOMEM (the triangulation is then unchanged). */
+ * locate. QK_OK or QK_ERR_NOMEM (the triangulation is then unchanged); QK_ERR_OUTSIDE (and
+ * nothing changes) when the point is not in the closed square or is NaN. A point on the
+ * square's boundary is accepted (it splits a boundary edge) but breaks "the four corners
+ * are the only boundary vertices": callers keep points strictly inside. */
 qk_status_t qk__cdt_insert(qk__cdt_t *c, double x, double y, uint32_t start, uint32_t *v_out,
                            int *existed);
 
 /* Make the edge from vertex a to vertex b a constrained edge with segment id `seg`,
  * removing the edges it crosses and restoring the constrained Delaunay property.
  * Returns QK_OK; QK_ERR_GEOMETRY when a vertex lies in the relative interior of ab
- * (*block is that vertex) or a constrained edge crosses ab (*block is one of its vertices,
- * *block_seg its segment id); QK_ERR_NOMEM. On an error the triangulation is a valid
- * constrained Delaunay triangulation of what was inserted before. */
+ * (*block is that vertex, *block_seg QK__CDT_NONE) or a constrained edge crosses ab (*block
+ * is one of its vertices, *block_seg its segment id); QK_ERR_NOMEM. On an error the
+ * triangulation is a valid constrained Delaunay triangulation of what was inserted before
+ * (in fact unchanged: every check and allocation comes before the first change). When ab is
+ * already an edge it is marked (QK_OK); if it is already constrained with another id,
+ * QK_ERR_GEOMETRY with *block = a and *block_seg that id. a == b: QK_ERR_GEOMETRY, *block
+ * = a. Every triangle changed is reported to on_change (also the two sides of ab). */
 qk_status_t qk__cdt_insert_segment(qk__cdt_t *c, uint32_t a, uint32_t b, uint32_t seg,
                                    uint32_t *block, uint32_t *block_seg);
 
@@ -88,12 +100,16 @@ qk_status_t qk__cdt_insert_segment(qk__cdt_t *c, uint32_t a, uint32_t b, uint32_
 uint32_t qk__cdt_find_edge(const qk__cdt_t *c, uint32_t a, uint32_t b, int *k);
 
 /* Walk the straight segment from vertex w to the point (x, y) in the square, starting
- * among the triangles around w. Returns 1 when no constrained edge meets the segment
- * beyond w: *tri, *k and *where then locate (x, y) as qk__cdt_locate does. Returns 0 when
- * one does (the refinement's visibility test: that constrained edge separates the point
- * from w): *tri is the triangle on w's side of the first such edge and *k its slot, and
- * *where is QK__CDT_EDGE; or, when the segment runs into a vertex on a constrained edge or
- * along a constrained edge, *where is QK__CDT_VERT and *k that vertex's slot in *tri. */
+ * among the triangles around w. Returns 1 when no constrained edge meets the closed segment
+ * anywhere but at w: *tri, *k and *where then locate (x, y) as qk__cdt_locate does. Returns
+ * 0 when one does (the refinement's visibility test: that constrained edge separates the
+ * point from w), at the first such place from w on:
+ *  - the segment crosses or ends on the relative interior of a constrained edge, or runs
+ *    along one (overlaps it, from w or from a vertex it passed): *where is QK__CDT_EDGE,
+ *    *tri the triangle on w's side of it (for an overlap, either side) and *k its slot;
+ *  - the segment runs into (or ends at) a vertex other than w that is an end of a
+ *    constrained edge: *where is QK__CDT_VERT and *k that vertex's slot in *tri.
+ * A vertex with no constrained edge on the way is passed through. */
 int qk__cdt_walk(const qk__cdt_t *c, uint32_t w, double x, double y, uint32_t *tri, int *k,
                  qk__cdt_where_t *where);
 
@@ -104,5 +120,8 @@ int qk__cdt_encroach(const double a[2], const double b[2], const double p[2]);
 /* Exact in-circle test: > 0 when d lies strictly inside the circle through a, b, c (a, b, c
  * counter-clockwise), < 0 outside, 0 on it. */
 int qk__incircle(const double a[2], const double b[2], const double c[2], const double d[2]);
+
+/* The same, without the floating-point filter (the fallback of callers that filter inline). */
+int qk__incircle_exact(const double a[2], const double b[2], const double c[2], const double d[2]);
 
 #endif

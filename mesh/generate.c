@@ -69,7 +69,8 @@ static qk_status_t read_options(const qk_mesh_options_t *options, qk_mesh_option
     return qk__mesh_fail(err, QK_ERR_INVALID, 0,
                          "domain size %llu is not a power of two between 1 and 2^30",
                          (unsigned long long)opt->size);
-  if (opt->mode != QK_MESH_AUTO && opt->mode != QK_MESH_BOOK && opt->mode != QK_MESH_DYADIC)
+  if (opt->mode != QK_MESH_AUTO && opt->mode != QK_MESH_BOOK && opt->mode != QK_MESH_DYADIC &&
+      opt->mode != QK_MESH_GENERAL)
     return qk__mesh_fail(err, QK_ERR_INVALID, 0, "unknown mode %d", (int)opt->mode);
   if (!(opt->max_size >= 0) || isinf(opt->max_size))
     return qk__mesh_fail(err, QK_ERR_INVALID, 0, "max_size %g is not a finite length >= 0",
@@ -93,6 +94,44 @@ static int use_book(const qk_poly_t *P, const qk_mesh_options_t *o) {
   for (size_t i = 0; i < P->nv; i++)
     if (P->vx[i] != floor(P->vx[i]) || P->vy[i] != floor(P->vy[i])) return 0;
   return 1;
+}
+
+/*
+ * Whether the book's or the dyadic mode (the one use_book() picks) can mesh the input: its
+ * vertices on a lattice the mode accepts, every segment at 0, 45, 90 or 135 degrees and
+ * every vertex of degree two. QK_MESH_AUTO runs the general mode otherwise. The remaining
+ * conditions (no crossings, hole points inside) are errors in every mode, so the
+ * classic mode reports them. *ok is set; QK_ERR_NOMEM is the only failure.
+ */
+static qk_status_t classic_ok(const qk_poly_t *P, const qk_mesh_options_t *o, int book,
+                              const qk_allocator_t *a, int *ok) {
+  *ok = 0;
+  if (book) {
+    for (size_t i = 0; i < P->nv; i++)
+      if (!(P->vx[i] >= 0 && P->vy[i] >= 0 && P->vx[i] <= (double)QK_MESH_MAX_SIZE &&
+            P->vy[i] <= (double)QK_MESH_MAX_SIZE))
+        return QK_OK;
+  } else {
+    qk__lattice_t L;
+    qk_mesh_error_t e;
+    if (qk__mesh_lattice(P, o, 0, &L, &e)) return QK_OK;
+  }
+  /* On a lattice the mode accepts, coordinate differences are exact. */
+  for (size_t s = 0; s < P->ns; s++) {
+    uint32_t u = P->seg[2 * s], v = P->seg[2 * s + 1];
+    double dx = P->vx[v] - P->vx[u], dy = P->vy[v] - P->vy[u];
+    if (!(dx == 0 || dy == 0 || fabs(dx) == fabs(dy))) return QK_OK;
+  }
+  uint8_t *deg = qk__realloc(a, NULL, 0, P->nv + 1);
+  if (!deg) return QK_ERR_NOMEM;
+  memset(deg, 0, P->nv + 1);
+  for (size_t s = 0; s < 2 * P->ns; s++)
+    if (deg[P->seg[s]] < 3) deg[P->seg[s]]++;
+  int all2 = 1;
+  for (size_t i = 0; i < P->nv; i++) all2 &= deg[i] == 2;
+  qk__free(a, deg, P->nv + 1);
+  *ok = all2;
+  return QK_OK;
 }
 
 /* Step 1: the subdivision is a quadkit tree over the root square [0,U]^2 with no points,
@@ -255,7 +294,21 @@ qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *opt
   qk__gen_t g;
   memset(&g, 0, sizeof g);
   g.a = &m->alloc, g.poly = poly, g.src = poly, g.err = err, g.opt = &opt;
-  int book = use_book(poly, &opt);
+  int book = use_book(poly, &opt), classic = opt.mode == QK_MESH_BOOK || opt.mode == QK_MESH_DYADIC;
+  if (opt.mode == QK_MESH_AUTO && opt.size)
+    classic = 1;
+  else if (opt.mode == QK_MESH_AUTO && (st = classic_ok(poly, &opt, book, &m->alloc, &classic))) {
+    qk_mesh_free(m);
+    return qk__mesh_fail(err, st, 0, "out of memory");
+  }
+  if (!classic) {
+    if ((st = qk__mesh_general(poly, &opt, m, err))) {
+      qk_mesh_free(m);
+      return st;
+    }
+    *out = m;
+    return QK_OK;
+  }
   qk_poly_t *onlat = NULL;
 
   double t0 = now(), t1 = t0, t2 = t0, t3 = t0;

@@ -216,6 +216,12 @@ static inline double qk__lat_out(const qk__lattice_t *L, int64_t v2, double orig
 /* Step 1b: split leaves larger than the size bound asks (mesh/refine.c). */
 qk_status_t qk__mesh_refine(qk__gen_t *g);
 
+/* The general mode (mesh/general_*.c, docs/mesh.md "The general mode"): mesh P into m
+ * (allocated and zeroed, its allocator set); on an error m holds nothing to keep (the
+ * caller frees it). */
+qk_status_t qk__mesh_general(const qk_poly_t *P, const qk_mesh_options_t *opt, qk_mesh_t *m,
+                             qk_mesh_error_t *err);
+
 /* The output segments and vertex markers of a finished mesh (mesh/markers.c). */
 qk_status_t qk__mesh_markers(qk__gen_t *g, qk_mesh_t *m);
 

@@ -29,6 +29,14 @@
  * than 2^30 lattice steps across, or 2^24 along their segments, are refused rather than
  * rounded. Boundary markers and regional attributes are carried to the outputs.
  *
+ * The general mode (QK_MESH_GENERAL, and QK_MESH_AUTO for inputs the two lattice modes
+ * cannot take) meshes planar straight-line graphs with any double coordinates and any
+ * angles (holes, several components, internal segments, open chains) by quality Delaunay
+ * refinement seeded from a graded quadtree: every angle at least 20 degrees (or
+ * min_angle_deg) and at most 140 (180 - 2 x the bound) except inside input angles below
+ * 60 degrees; input vertices bit-identical, every vertex on a segment exactly on it
+ * (docs/mesh.md, "The general mode", has the algorithm and the proof).
+ *
  * Thread safety: a mesh and a qk_poly never change once made, so any number of threads
  * may call the functions taking a const handle (accessors, statistics, writers) on one
  * mesh at once, and qk_mesh_generate() only reads its input, so several threads may mesh
@@ -70,7 +78,7 @@ qk_status_t qk_poly_read(FILE *f, const qk_allocator_t *allocator, qk_poly_t **o
 
 /**
  * Make an input from arrays (0-based indices).
- * \param [in] xy 2*nv vertex coordinates, copied; must be integers.
+ * \param [in] xy 2*nv vertex coordinates, copied; finite (the book's mode needs integers).
  * \param [in] nv number of vertices.
  * \param [in] seg 2*ns vertex indices, copied.
  * \param [in] ns number of segments.
@@ -153,7 +161,9 @@ qk_status_t qk_poly_set_regions(qk_poly_t *poly, const double *xya, size_t nr,
 /** Which mesher qk_mesh_generate() runs. */
 typedef enum qk_mesh_mode {
   /** The book's mode when the input has integer coordinates and no size bound is asked
-   *  for (or a domain size is given), the dyadic-lattice mode otherwise. */
+   *  for (or a domain size is given), the dyadic-lattice mode for other inputs on a dyadic
+   *  lattice it accepts, when the input meets that mode's conditions (segments at 0, 45,
+   *  90 or 135 degrees, every vertex on exactly two segments); the general mode otherwise. */
   QK_MESH_AUTO = 0,
   /** The book's mode (de Berg et al. ch. 14): integer vertices in [0,U]^2. */
   QK_MESH_BOOK = 1,
@@ -184,7 +194,9 @@ typedef struct qk_mesh_options {
    *  is at most this long (in the book's mode it must be at least sqrt 2). */
   double max_size;
   /** Size function (NULL: none), sampled at each leaf's corners and centre: a leaf is
-   *  split while its triangles' longest possible edge exceeds the smallest sample. */
+   *  split while its triangles' longest possible edge exceeds the smallest sample. The
+   *  general mode also samples it at every triangle's centroid and splits a triangle whose
+   *  longest edge exceeds it. */
   qk_mesh_size_fn size_fn;
   /** Passed to size_fn. */
   void *size_user;
@@ -207,10 +219,13 @@ typedef struct qk_mesh qk_mesh_t;
  * \param [in] options NULL for defaults.
  * \param [out] out the mesh, freed with qk_mesh_free(); NULL on error.
  * \param [out] err where and why the input was rejected (may be NULL).
- * \return QK_OK, QK_ERR_INVALID (bad size option), QK_ERR_GEOMETRY (non-integer or
- *         out-of-domain coordinates, bad angles, open chains, degree != 2,
- *         intersecting or touching components, hole point on a boundary or outside),
- *         QK_ERR_LIMIT or QK_ERR_NOMEM.
+ * \return QK_OK, QK_ERR_INVALID (bad option), QK_ERR_GEOMETRY (the lattice modes:
+ *         non-integer or out-of-domain coordinates, bad angles, open chains, degree != 2,
+ *         intersecting or touching components, hole point on a boundary or outside; the
+ *         general mode: duplicate vertices, a vertex on a segment, crossing or overlapping
+ *         segments, a hole or region point on a segment, or a segment that must be split
+ *         where its endpoints allow no exact point), QK_ERR_LIMIT (too large; the general
+ *         mode: a refinement that does not settle, or precision exhausted) or QK_ERR_NOMEM.
  */
 qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *options,
                              qk_mesh_t **out, qk_mesh_error_t *err);
@@ -274,40 +289,48 @@ qk_status_t qk_mesh_segments(const qk_mesh_t *mesh, uint32_t *ab, uint32_t *seg,
 qk_status_t qk_mesh_angle_histogram(const qk_mesh_t *mesh, uint64_t bins[180]);
 
 /**
- * Per triangle, the innermost component containing it (0: outside all), borrowed.
+ * Per triangle, the innermost component containing it (0: outside all), borrowed. The
+ * general mode: the face holding it (1-based over the kept faces, the connected parts of
+ * the domain between segments).
  * \param [in] mesh the mesh. \param [out] n the number of entries (the triangles).
  * \return the component ids.
  */
 const uint32_t *qk_mesh_triangle_components(const qk_mesh_t *mesh, size_t *n);
 
-/** The balanced quadtree subdivision the mesh was made from (borrowed). */
+/** The balanced quadtree subdivision the mesh was made from (borrowed); in the general
+ *  mode the graded tree that placed the seeds, over [0, 1]^2 in lattice coordinates. */
 const qk_tree_t *qk_mesh_tree(const qk_mesh_t *mesh);
 
 /** Figures about a mesh and its generation. */
 typedef struct qk_mesh_stats {
-  uint64_t size;                /**< the domain side U */
-  size_t components;            /**< number of components */
-  size_t leaves_before_balance; /**< leaves of the subdivision */
-  size_t leaves;                /**< leaves after balancing */
-  size_t triangles;             /**< triangles kept */
-  size_t vertices;              /**< vertices used by them */
-  size_t steiner;               /**< Steiner points (square centres) used */
-  double min_angle_deg;         /**< smallest triangle angle */
-  double max_angle_deg;         /**< largest triangle angle */
-  double uniform_triangles;     /**< 2 U^2, the size of the uniform grid mesh */
-  qk_mesh_mode_t mode;          /**< the mesher that ran: QK_MESH_BOOK, _DYADIC or _GENERAL */
-  int lattice_exponent;         /**< f: lattice spacing 2^-f input units (0: the book's) */
-  double origin_x, origin_y;    /**< input coordinates of lattice point (0, 0) */
-  double proven_min_angle_deg;  /**< the proven lower bound on every angle (45) */
-  double proven_max_angle_deg;  /**< the proven upper bound on every angle (90) */
-  size_t exempt_angles;         /**< general mode: angles below the bound, all inside input
-                                     angles below 60 degrees */
+  uint64_t size;                   /**< the domain side U (general mode: 1, in lattice units) */
+  size_t components;               /**< number of components */
+  size_t leaves_before_balance;    /**< leaves of the subdivision */
+  size_t leaves;                   /**< leaves after balancing */
+  size_t triangles;                /**< triangles kept */
+  size_t vertices;                 /**< vertices used by them */
+  size_t steiner;                  /**< Steiner points used (square centres; general mode:
+                                        every vertex not in the input) */
+  double min_angle_deg;            /**< smallest triangle angle */
+  double max_angle_deg;            /**< largest triangle angle */
+  double uniform_triangles;        /**< 2 U^2, the size of the uniform grid mesh */
+  qk_mesh_mode_t mode;             /**< the mesher that ran: QK_MESH_BOOK, _DYADIC or _GENERAL */
+  int lattice_exponent;            /**< f: lattice spacing 2^-f input units (0: the book's;
+                                        general mode: -e for the root square's side 2^e) */
+  double origin_x, origin_y;       /**< input coordinates of lattice point (0, 0) */
+  double proven_min_angle_deg;     /**< the proven lower bound on every angle (45; general
+                                        mode: the bound, 20 by default, outside exempt
+                                        triangles, or 0 when min_angle_deg > 20.7 was asked) */
+  double proven_max_angle_deg;     /**< the proven upper bound on every angle (90; general
+                                        mode: 180 - 2 x the bound, or 180) */
+  size_t exempt_angles;            /**< general mode: angles below the bound, all in triangles
+                                        facing input angles below 60 degrees */
   double smallest_input_angle_deg; /**< general mode: the smallest angle between two input
                                         segments at a vertex (180 when none) */
-  double seconds_validate;      /**< checking the input */
-  double seconds_subdivide;     /**< step 1 */
-  double seconds_balance;       /**< step 2 */
-  double seconds_triangulate;   /**< step 3, components and holes included */
+  double seconds_validate;         /**< checking the input */
+  double seconds_subdivide;        /**< step 1 */
+  double seconds_balance;          /**< step 2 */
+  double seconds_triangulate;      /**< step 3, components and holes included */
 } qk_mesh_stats_t;
 
 /** Fill stats for a mesh. \param [in] mesh the mesh. \param [out] stats the figures. */

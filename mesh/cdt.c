@@ -1,0 +1,359 @@
+/*
+ * The constrained Delaunay triangulation of mesh/cdt.h: storage, point location and point
+ * insertion (Lawson's incremental algorithm: split the triangle 1 -> 3 or the edge 2 -> 4,
+ * then flip the edges opposite the new vertex that fail the in-circle test, never a
+ * constrained one). Segment insertion and the visibility walk are in cdt_segment.c.
+ *
+ * Memory: the per-vertex arrays (xy, vtri and the flip stack) live in one block and the
+ * per-triangle arrays (v, nbr, seg) in another, each grown by allocating a larger block and
+ * copying, so a failed allocation leaves everything as it was. Every operation reserves
+ * what it may need before it changes anything.
+ */
+#include <string.h>
+
+#include "index/index_access.h"
+#include "mesh/cdt_internal.h"
+
+#define NONE QK__CDT_NONE
+
+/* ---- storage ------------------------------------------------------------------------ */
+
+static size_t vblock_bytes(size_t cap) {
+  return cap * (2 * sizeof(double) + sizeof(uint32_t)) + (cap + 8) * sizeof(uint32_t);
+}
+static size_t tblock_bytes(size_t cap) { return cap * 9 * sizeof(uint32_t); }
+
+static qk_status_t grow_vertices(qk__cdt_t *c, size_t need) {
+  if (need <= c->cap_v) return QK_OK;
+  size_t cap = c->cap_v < 16 ? 16 : c->cap_v;
+  while (cap < need) cap *= 2;
+  if (cap > (size_t)UINT32_MAX - 16) cap = (size_t)UINT32_MAX - 16;
+  if (cap < need) return QK_ERR_NOMEM;
+  char *blk = qk__realloc(c->alloc, NULL, 0, vblock_bytes(cap));
+  if (!blk) return QK_ERR_NOMEM;
+  double *xy = (double *)blk;
+  uint32_t *vtri = (uint32_t *)(blk + cap * 2 * sizeof(double));
+  uint32_t *stk = vtri + cap;
+  if (c->nv) {
+    memcpy(xy, c->xy, c->nv * 2 * sizeof *xy);
+    memcpy(vtri, c->vtri, c->nv * sizeof *vtri);
+  }
+  if (c->xy) qk__free(c->alloc, c->xy, vblock_bytes(c->cap_v));
+  c->xy = xy, c->vtri = vtri, c->stk = stk, c->cap_v = cap;
+  return QK_OK;
+}
+
+static qk_status_t grow_triangles(qk__cdt_t *c, size_t need) {
+  if (need <= c->cap_t) return QK_OK;
+  size_t cap = c->cap_t < 16 ? 16 : c->cap_t;
+  while (cap < need) cap *= 2;
+  if (cap > (size_t)UINT32_MAX / 4) cap = (size_t)UINT32_MAX / 4;
+  if (cap < need) return QK_ERR_NOMEM;
+  uint32_t *blk = qk__realloc(c->alloc, NULL, 0, tblock_bytes(cap));
+  if (!blk) return QK_ERR_NOMEM;
+  if (c->nt) {
+    memcpy(blk, c->v, c->nt * 3 * sizeof *blk);
+    memcpy(blk + 3 * cap, c->nbr, c->nt * 3 * sizeof *blk);
+    memcpy(blk + 6 * cap, c->seg, c->nt * 3 * sizeof *blk);
+  }
+  if (c->v) qk__free(c->alloc, c->v, tblock_bytes(c->cap_t));
+  c->v = blk, c->nbr = blk + 3 * cap, c->seg = blk + 6 * cap, c->cap_t = cap;
+  return QK_OK;
+}
+
+qk_status_t qk__cdt_reserve_scratch(qk__cdt_t *c, size_t need) {
+  if (need <= c->cap_scr) return QK_OK;
+  size_t cap = c->cap_scr < 64 ? 64 : c->cap_scr;
+  while (cap < need) cap *= 2;
+  uint32_t *s = qk__realloc(c->alloc, c->scr, c->cap_scr * sizeof *s, cap * sizeof *s);
+  if (!s) return QK_ERR_NOMEM;
+  c->scr = s, c->cap_scr = cap;
+  return QK_OK;
+}
+
+qk_status_t qk__cdt_init(qk__cdt_t *c, const qk_allocator_t *alloc, double x0, double y0,
+                         double side, size_t nv_hint) {
+  memset(c, 0, sizeof *c);
+  c->alloc = alloc;
+  c->hint = 0;
+  size_t nv = nv_hint + 4;
+  if (nv < nv_hint || nv > (size_t)UINT32_MAX / 4) nv = 16;
+  if (grow_vertices(c, nv) != QK_OK) return QK_ERR_NOMEM;
+  if (grow_triangles(c, 2 * nv) != QK_OK) {
+    qk__free(c->alloc, c->xy, vblock_bytes(c->cap_v));
+    memset(c, 0, sizeof *c);
+    return QK_ERR_NOMEM;
+  }
+  const double cx[4] = {x0, x0 + side, x0 + side, x0}, cy[4] = {y0, y0, y0 + side, y0 + side};
+  for (int i = 0; i < 4; i++) c->xy[2 * i] = cx[i], c->xy[2 * i + 1] = cy[i];
+  c->nv = 4;
+  /* t0 = (0, 1, 2), t1 = (0, 2, 3), sharing the diagonal 0-2 */
+  const uint32_t v[6] = {0, 1, 2, 0, 2, 3}, nb[6] = {NONE, 1, NONE, NONE, NONE, 0};
+  for (int i = 0; i < 6; i++) c->v[i] = v[i], c->nbr[i] = nb[i], c->seg[i] = NONE;
+  c->nt = 2;
+  c->vtri[0] = 0, c->vtri[1] = 0, c->vtri[2] = 0, c->vtri[3] = 1;
+  return QK_OK;
+}
+
+void qk__cdt_free(qk__cdt_t *c) {
+  if (c->xy) qk__free(c->alloc, c->xy, vblock_bytes(c->cap_v));
+  if (c->v) qk__free(c->alloc, c->v, tblock_bytes(c->cap_t));
+  if (c->scr) qk__free(c->alloc, c->scr, c->cap_scr * sizeof *c->scr);
+  const qk_allocator_t *a = c->alloc;
+  memset(c, 0, sizeof *c);
+  c->alloc = a;
+}
+
+/* ---- point location ----------------------------------------------------------------- */
+
+/*
+ * The remembering stochastic walk (Devillers, Pion and Teillaud, "Walking in a
+ * triangulation", 2002): from the current triangle, cross an edge that has p strictly on
+ * its far side, testing the edges from a random one on and never the one just crossed.
+ * It ends with probability 1 on any triangulation (a deterministic visibility walk may
+ * cycle on a non-Delaunay one, and a constrained one is not Delaunay).
+ */
+qk__cdt_where_t qk__cdt_locate(const qk__cdt_t *c, double x, double y, uint32_t start,
+                               uint32_t *tri, int *k) {
+  const double p[2] = {x, y};
+  uint32_t t = start != NONE ? start : c->hint;
+  if (t >= c->nt) t = 0;
+  uint32_t from = NONE, rnd = 0x9E3779B9u ^ t;
+  int o[3];
+  for (;;) {
+    const uint32_t *tv = c->v + 3 * (size_t)t, *tn = c->nbr + 3 * (size_t)t;
+    rnd ^= rnd << 13, rnd ^= rnd >> 17, rnd ^= rnd << 5;
+    int i = (int)(((uint64_t)rnd * 3) >> 32);
+    uint32_t next = NONE;
+    for (int j = 0; j < 3; j++, i = i == 2 ? 0 : i + 1) {
+      uint32_t n = tn[i];
+      if (n == from) { /* p is strictly inside this edge's half-plane: we came across it */
+        o[i] = 1;
+        continue;
+      }
+      const double *a = c->xy + 2 * (size_t)tv[i == 2 ? 0 : i + 1];
+      const double *b = c->xy + 2 * (size_t)tv[i == 0 ? 2 : i - 1];
+      o[i] = qk__cdt_orient(a, b, p);
+      if (o[i] < 0 && n != NONE) {
+        next = n;
+        break;
+      }
+    }
+    if (next == NONE) break;
+    from = t, t = next;
+  }
+  /* p is in the closed triangle t (outside the square only if it was asked for there) */
+  *tri = t;
+  *k = 0;
+  int nz = (o[0] == 0) + (o[1] == 0) + (o[2] == 0);
+  if (nz == 0) return QK__CDT_IN;
+  if (nz == 1) {
+    *k = o[0] == 0 ? 0 : o[1] == 0 ? 1 : 2;
+    return QK__CDT_EDGE;
+  }
+  *k = o[0] != 0 ? 0 : o[1] != 0 ? 1 : 2; /* the vertex between the two zero edges */
+  return QK__CDT_VERT;
+}
+
+/* ---- the changes: split, flip -------------------------------------------------------- */
+
+static inline void changed(qk__cdt_t *c, uint32_t t) {
+  if (c->on_change) c->on_change(c->user, t);
+}
+
+/* In triangle x (if any), make the link that pointed to `from` point to `to`. */
+static inline void relink(qk__cdt_t *c, uint32_t x, uint32_t from, uint32_t to) {
+  if (x == NONE) return;
+  uint32_t *n = c->nbr + 3 * (size_t)x;
+  if (n[0] == from)
+    n[0] = to;
+  else if (n[1] == from)
+    n[1] = to;
+  else
+    n[2] = to;
+}
+
+static inline void set_tri(qk__cdt_t *c, uint32_t t, uint32_t a, uint32_t b, uint32_t d,
+                           uint32_t na, uint32_t nb, uint32_t nd, uint32_t sa, uint32_t sb,
+                           uint32_t sd) {
+  uint32_t *v = c->v + 3 * (size_t)t, *n = c->nbr + 3 * (size_t)t, *s = c->seg + 3 * (size_t)t;
+  v[0] = a, v[1] = b, v[2] = d;
+  n[0] = na, n[1] = nb, n[2] = nd;
+  s[0] = sa, s[1] = sb, s[2] = sd;
+}
+
+static inline void flip(qk__cdt_t *c, uint32_t t, int i, uint32_t n, int j) {
+  const int i1 = i == 2 ? 0 : i + 1, i2 = i == 0 ? 2 : i - 1;
+  const int j1 = j == 2 ? 0 : j + 1, j2 = j == 0 ? 2 : j - 1;
+  uint32_t *tv = c->v + 3 * (size_t)t, *tn = c->nbr + 3 * (size_t)t, *ts = c->seg + 3 * (size_t)t;
+  uint32_t *nv = c->v + 3 * (size_t)n, *nn = c->nbr + 3 * (size_t)n, *ns = c->seg + 3 * (size_t)n;
+  uint32_t p = tv[i], q = tv[i1], r = tv[i2], s = nv[j];
+  uint32_t A = tn[i1], sA = ts[i1], B = tn[i2], sB = ts[i2];
+  uint32_t C = nn[j1], sC = ns[j1], D = nn[j2], sD = ns[j2];
+  set_tri(c, t, p, q, s, C, n, B, sC, NONE, sB);
+  set_tri(c, n, p, s, r, D, A, t, sD, sA, NONE);
+  relink(c, A, t, n);
+  relink(c, C, n, t);
+  c->vtri[q] = t, c->vtri[r] = n; /* q left n, r left t; p and s are in both */
+  changed(c, t);
+  changed(c, n);
+}
+
+/* flip() with i = 0, for the legalisation after a point insertion (always inlined there). */
+static inline __attribute__((always_inline)) void flip0(qk__cdt_t *c, uint32_t t, uint32_t n,
+                                                        int j) {
+  const int j1 = j == 2 ? 0 : j + 1, j2 = j == 0 ? 2 : j - 1;
+  uint32_t *tv = c->v + 3 * (size_t)t, *tn = c->nbr + 3 * (size_t)t, *ts = c->seg + 3 * (size_t)t;
+  uint32_t *nv = c->v + 3 * (size_t)n, *nn = c->nbr + 3 * (size_t)n, *ns = c->seg + 3 * (size_t)n;
+  uint32_t p = tv[0], q = tv[1], r = tv[2], s = nv[j];
+  uint32_t A = tn[1], sA = ts[1];
+  uint32_t C = nn[j1], sC = ns[j1], D = nn[j2], sD = ns[j2];
+  tv[2] = s, tn[0] = C, tn[1] = n, ts[0] = sC, ts[1] = NONE; /* t = (p, q, s), B kept */
+  nv[0] = p, nv[1] = s, nv[2] = r;
+  nn[0] = D, nn[1] = A, nn[2] = t;
+  ns[0] = sD, ns[1] = sA, ns[2] = NONE;
+  relink(c, A, t, n);
+  relink(c, C, n, t);
+  c->vtri[q] = t, c->vtri[r] = n;
+  changed(c, t);
+  changed(c, n);
+}
+
+void qk__cdt_flip(qk__cdt_t *c, uint32_t t, int i, uint32_t n, int j) { flip(c, t, i, n, j); }
+
+/* The slot of triangle n that faces triangle t. */
+static inline int facing(const qk__cdt_t *c, uint32_t n, uint32_t t) {
+  const uint32_t *nn = c->nbr + 3 * (size_t)n;
+  return nn[0] == t ? 0 : nn[1] == t ? 1 : 2;
+}
+
+/* Split triangle t by the new vertex p inside it: t = (p, b, c), t1 = (p, c, a),
+ * t2 = (p, a, b). Pushes the three on the flip stack. */
+static int split3(qk__cdt_t *c, uint32_t t, uint32_t p) {
+  uint32_t *tv = c->v + 3 * (size_t)t, *tn = c->nbr + 3 * (size_t)t, *ts = c->seg + 3 * (size_t)t;
+  uint32_t a = tv[0], b = tv[1], d = tv[2];
+  uint32_t na = tn[0], nb = tn[1], nd = tn[2], sa = ts[0], sb = ts[1], sd = ts[2];
+  uint32_t t1 = (uint32_t)c->nt, t2 = t1 + 1;
+  c->nt += 2;
+  set_tri(c, t, p, b, d, na, t1, t2, sa, NONE, NONE);
+  set_tri(c, t1, p, d, a, nb, t2, t, sb, NONE, NONE);
+  set_tri(c, t2, p, a, b, nd, t, t1, sd, NONE, NONE);
+  relink(c, nb, t, t1);
+  relink(c, nd, t, t2);
+  c->vtri[p] = t, c->vtri[a] = t1;
+  changed(c, t), changed(c, t1), changed(c, t2);
+  c->stk[0] = t, c->stk[1] = t1, c->stk[2] = t2;
+  return 3;
+}
+
+/* Split edge k of triangle t (and the triangle n across it, if any) by the new vertex p in
+ * its relative interior. The halves keep the edge's segment id. Pushes the new triangles. */
+static int split_edge(qk__cdt_t *c, uint32_t t, int k, uint32_t p) {
+  const int k1 = k == 2 ? 0 : k + 1, k2 = k == 0 ? 2 : k - 1;
+  uint32_t *tv = c->v + 3 * (size_t)t, *tn = c->nbr + 3 * (size_t)t, *ts = c->seg + 3 * (size_t)t;
+  uint32_t a = tv[k], b = tv[k1], d = tv[k2]; /* the edge is b -> d */
+  uint32_t n = tn[k], s = ts[k];
+  uint32_t ntb = tn[k1], stb = ts[k1], ntd = tn[k2], std_ = ts[k2];
+  uint32_t t1 = (uint32_t)c->nt++;
+  if (n == NONE) {
+    set_tri(c, t, p, d, a, ntb, t1, NONE, stb, NONE, s);
+    set_tri(c, t1, p, a, b, ntd, NONE, t, std_, s, NONE);
+    relink(c, ntd, t, t1);
+    c->vtri[p] = t, c->vtri[b] = t1, c->vtri[d] = t;
+    changed(c, t), changed(c, t1);
+    c->stk[0] = t, c->stk[1] = t1;
+    return 2;
+  }
+  int j = facing(c, n, t);
+  const int j1 = j == 2 ? 0 : j + 1, j2 = j == 0 ? 2 : j - 1;
+  uint32_t *nv = c->v + 3 * (size_t)n, *nn = c->nbr + 3 * (size_t)n, *ns = c->seg + 3 * (size_t)n;
+  uint32_t e = nv[j]; /* n = (e, d, b) */
+  uint32_t nnd = nn[j1], snd = ns[j1], nnb = nn[j2], snb = ns[j2];
+  uint32_t n1 = (uint32_t)c->nt++;
+  set_tri(c, t, p, d, a, ntb, t1, n1, stb, NONE, s);
+  set_tri(c, t1, p, a, b, ntd, n, t, std_, s, NONE);
+  set_tri(c, n, p, b, e, nnd, n1, t1, snd, NONE, s);
+  set_tri(c, n1, p, e, d, nnb, t, n, snb, s, NONE);
+  relink(c, ntd, t, t1);
+  relink(c, nnb, n, n1);
+  c->vtri[p] = t, c->vtri[b] = t1, c->vtri[d] = t, c->vtri[e] = n;
+  changed(c, t), changed(c, t1), changed(c, n), changed(c, n1);
+  c->stk[0] = t, c->stk[1] = t1, c->stk[2] = n, c->stk[3] = n1;
+  return 4;
+}
+
+/* Lawson's flips after inserting p: every stacked triangle has p in slot 0; its edge 0 is
+ * flipped when the vertex across it lies strictly inside its circumcircle (ties keep the
+ * edge, so flips end). Each flip adds one triangle to p's star, so the stack never holds
+ * more than its initial four plus nv entries. */
+static void legalize(qk__cdt_t *c, int sp) {
+  uint32_t *stk = c->stk;
+  while (sp > 0) {
+    uint32_t t = stk[--sp];
+    uint32_t n = c->nbr[3 * (size_t)t];
+    if (n == NONE || c->seg[3 * (size_t)t] != NONE) continue;
+    int j = facing(c, n, t);
+    const uint32_t *tv = c->v + 3 * (size_t)t;
+    const double *pp = c->xy + 2 * (size_t)tv[0], *pq = c->xy + 2 * (size_t)tv[1];
+    const double *pr = c->xy + 2 * (size_t)tv[2], *ps = c->xy + 2 * (size_t)c->v[3 * (size_t)n + j];
+    if (qk__cdt_incircle(pp, pq, pr, ps) <= 0) continue;
+    flip0(c, t, n, j);
+    stk[sp++] = t, stk[sp++] = n;
+  }
+}
+
+qk_status_t qk__cdt_insert(qk__cdt_t *c, double x, double y, uint32_t start, uint32_t *v_out,
+                           int *existed) {
+  uint32_t t;
+  int k;
+  *existed = 0;
+  /* corners 0 and 2 are the square's; NaN fails the comparisons too */
+  if (!(x >= c->xy[0] && x <= c->xy[4] && y >= c->xy[1] && y <= c->xy[5])) return QK_ERR_OUTSIDE;
+  qk__cdt_where_t w = qk__cdt_locate(c, x, y, start, &t, &k);
+  if (w == QK__CDT_VERT) {
+    *v_out = c->v[3 * (size_t)t + k];
+    *existed = 1;
+    return QK_OK;
+  }
+  if (grow_vertices(c, c->nv + 1) != QK_OK || grow_triangles(c, c->nt + 2) != QK_OK)
+    return QK_ERR_NOMEM;
+  uint32_t p = (uint32_t)c->nv++;
+  c->xy[2 * (size_t)p] = x, c->xy[2 * (size_t)p + 1] = y;
+  int sp = w == QK__CDT_IN ? split3(c, t, p) : split_edge(c, t, k, p);
+  legalize(c, sp);
+  c->hint = c->vtri[p];
+  *v_out = p;
+  return QK_OK;
+}
+
+/* ---- around a vertex ---------------------------------------------------------------- */
+
+uint32_t qk__cdt_ring_next(const qk__cdt_t *c, qk__cdt_ring_t *r) {
+  if (r->t == NONE) {
+    r->t = r->first = c->vtri[r->a];
+    r->ccw = 1;
+    return r->t;
+  }
+  if (r->ccw) {
+    uint32_t n = c->nbr[3 * (size_t)r->t + (qk__cdt_slot(c, r->t, r->a) + 1) % 3];
+    if (n == r->first) return NONE;
+    if (n != NONE) return r->t = n;
+    r->ccw = 0;
+    r->t = r->first;
+  }
+  uint32_t n = c->nbr[3 * (size_t)r->t + (qk__cdt_slot(c, r->t, r->a) + 2) % 3];
+  if (n == NONE) return NONE;
+  return r->t = n;
+}
+
+uint32_t qk__cdt_find_edge(const qk__cdt_t *c, uint32_t a, uint32_t b, int *k) {
+  qk__cdt_ring_t r = {a, NONE, NONE, 1};
+  for (uint32_t t = qk__cdt_ring_next(c, &r); t != NONE; t = qk__cdt_ring_next(c, &r)) {
+    int i = qk__cdt_slot(c, t, a);
+    if (c->v[3 * (size_t)t + (i + 1) % 3] == b) {
+      *k = (i + 2) % 3;
+      return t;
+    }
+  }
+  return NONE;
+}

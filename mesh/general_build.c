@@ -1,0 +1,343 @@
+/*
+ * The general mode, steps 2, 3, 7 and 8 (docs/mesh.md, "The general mode"): the root
+ * square, the constrained Delaunay triangulation of the input vertices and segments (which
+ * is also the validation: the CDT's exact predicates find duplicate vertices, vertices on
+ * segments and crossing segments), and the faces: the unbounded one, holes and regions.
+ */
+#include "mesh/general_mesh.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+qk_status_t qk__gm_fit(qk__gm_t *g) {
+  size_t nv = g->cdt.nv, nt = g->cdt.nt;
+  if (nv > g->vcap) {
+    void *p = g->vi;
+    size_t c = g->vcap;
+    if (qk__grow(g->a, &p, &c, nv, sizeof *g->vi)) return QK_ERR_NOMEM;
+    g->vi = p;
+    for (size_t i = g->vcap; i < c; i++) g->vi[i] = (qk__gm_vert_t){QK__CDT_NONE, QK__CDT_NONE, 0};
+    g->vcap = c;
+  }
+  if (nt > g->fcap) {
+    void *p = g->face;
+    size_t c = g->fcap;
+    if (qk__grow(g->a, &p, &c, nt, sizeof *g->face)) return QK_ERR_NOMEM;
+    g->face = p;
+    for (size_t i = g->fcap; i < c; i++) g->face[i] = QK__CDT_NONE;
+    g->fcap = c;
+  }
+  return QK_OK;
+}
+
+uint64_t qk__gm_param(const qk__gm_t *g, uint32_t v, uint32_t s) {
+  if (g->vi[v].seg == s) return g->vi[v].par;
+  return g->vi[v].in == g->P->seg[2 * s] ? 0 : QK__GM_ONE;
+}
+
+/* The CDT's change hook: remember the triangle for labelling and quality checks. */
+static void on_change(void *user, uint32_t t) {
+  qk__gm_t *g = user;
+  if (g->ndirty == g->dirty_cap) {
+    void *p = g->dirty;
+    if (qk__grow(g->a, &p, &g->dirty_cap, g->ndirty + 1, sizeof *g->dirty)) {
+      g->dirty_nomem = 1;
+      return;
+    }
+    g->dirty = p;
+  }
+  g->dirty[g->ndirty++] = t;
+}
+
+qk_status_t qk__gm_insert(qk__gm_t *g, double x, double y, uint32_t t0, int k0, qk__cdt_where_t w,
+                          uint32_t seg, uint64_t k, uint32_t *v_out, int *existed) {
+  qk__cdt_t *c = &g->cdt;
+  /* The faces on both sides of where the point goes: one face unless it splits a
+   * constrained edge, whose line then tells the sides apart (every triangle the insertion
+   * makes has the new vertex as a corner, so its other corners are on one side). */
+  uint32_t f0 = g->face[t0], f1 = f0, ea = 0, eb = 0;
+  if (w == QK__CDT_EDGE && c->seg[3 * t0 + k0] != QK__CDT_NONE) {
+    uint32_t n = c->nbr[3 * t0 + k0];
+    if (n != QK__CDT_NONE) f1 = g->face[n];
+    ea = c->v[3 * t0 + (k0 + 1) % 3], eb = c->v[3 * t0 + (k0 + 2) % 3];
+  }
+  g->ndirty = 0;
+  qk_status_t st = qk__cdt_insert(c, x, y, t0, v_out, existed);
+  if (st) return st;
+  if (g->dirty_nomem || qk__gm_fit(g)) return QK_ERR_NOMEM;
+  if (*existed) return QK_OK;
+  uint32_t v = *v_out;
+  g->vi[v] = (qk__gm_vert_t){QK__CDT_NONE, seg, k};
+  for (size_t i = 0; i < g->ndirty; i++) {
+    uint32_t t = g->dirty[i], f = f0;
+    if (f0 != f1) {
+      for (int j = 0; j < 3; j++) {
+        uint32_t u = c->v[3 * t + j];
+        if (u == v) continue;
+        int o = qk__orient2d(qk__gm_vxy(g, ea), qk__gm_vxy(g, eb), qk__gm_vxy(g, u));
+        if (o) {
+          f = o > 0 ? f0 : f1;
+          break;
+        }
+      }
+    }
+    g->face[t] = f;
+  }
+  g->insertions++;
+  return QK_OK;
+}
+
+/* Step 2: the root square, a power of two S = 2^e with corners at multiples of S / 4 (an
+ * aligned square could not straddle zero), holding the input's bounding box grown by a
+ * quarter of its extent on every side. */
+static void root_square(qk__gm_t *g) {
+  const qk_poly_t *P = g->P;
+  double x0 = P->nv ? P->vx[0] : 0, x1 = x0, y0 = P->nv ? P->vy[0] : 0, y1 = y0;
+  for (size_t i = 1; i < P->nv; i++) {
+    x0 = fmin(x0, P->vx[i]), x1 = fmax(x1, P->vx[i]);
+    y0 = fmin(y0, P->vy[i]), y1 = fmax(y1, P->vy[i]);
+  }
+  g->bx0 = x0, g->bx1 = x1, g->by0 = y0, g->by1 = y1;
+  double w = fmax(x1 - x0, y1 - y0);
+  if (!(w > 0)) w = fmax(fmax(fabs(x0), fabs(y0)), 1.0) * 0x1p-20;
+  double lx = x0 - w / 4, hx = x1 + w / 4, ly = y0 - w / 4, hy = y1 + w / 4;
+  int e;
+  frexp(1.5 * w, &e);
+  for (;; e++) {
+    double S = ldexp(1.0, e), Q = S / 4, X0 = floor(lx / Q) * Q, Y0 = floor(ly / Q) * Q;
+    if ((X0 + S > hx && Y0 + S > hy) || e > 1000) {
+      g->S = S, g->e = e, g->X0 = X0, g->Y0 = Y0;
+      return;
+    }
+  }
+}
+
+static unsigned long sline(const qk_poly_t *P, size_t s) { return P->sline ? P->sline[s] : 0; }
+static unsigned long vline(const qk_poly_t *P, size_t v) { return P->vline ? P->vline[v] : 0; }
+
+/* The input vertices in a biased randomized insertion order (Amenta, Choi and Rote): rounds
+ * of geometrically growing size, drawn by a hash of the index, each in Z-order. In input
+ * (or plain Z-) order, points along a coastline each flip a long fan of nearly cocircular
+ * triangles: work grows like n^1.5 (12k instructions a vertex at 30,000); random rounds
+ * keep the expected flips per insertion constant and Z-order keeps the walks short. */
+static qk_status_t insert_vertices(qk__gm_t *g) {
+  const qk_poly_t *P = g->P;
+  qk__gm_pt_t *o = qk__realloc(g->a, NULL, 0, (P->nv + 1) * sizeof *o);
+  if (!o) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  for (size_t i = 0; i < P->nv; i++) {
+    uint64_t h = ((uint64_t)i + 1) * 0x9E3779B97F4A7C15ull;
+    h ^= h >> 31, h *= 0xBF58476D1CE4E5B9ull, h ^= h >> 29;
+    int r = 0;
+    while (r < 30 && !((h >> r) & 1)) r++; /* round r holds about n / 2^(r+1) points */
+    uint64_t key = (uint64_t)(31 - r) << 59 | qk__gm_morton(g, P->vx[i], P->vy[i]) >> 5;
+    o[i] = (qk__gm_pt_t){key, P->vx[i], P->vy[i], i, 0};
+  }
+  qk_status_t st = P->nv ? qk__gm_sort_points(g, o, P->nv) : QK_OK;
+  for (size_t j = 0; j < P->nv && !st; j++) {
+    size_t i = (size_t)o[j].k;
+    uint32_t v;
+    int existed;
+    double x = P->vx[i], y = P->vy[i];
+    if ((st = qk__cdt_insert(&g->cdt, x, y, QK__CDT_NONE, &v, &existed)) || (st = qk__gm_fit(g))) {
+      st = qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+    } else if (existed) {
+      /* Name the pair in input order. */
+      size_t a = g->vi[v].in < i ? g->vi[v].in : i, b = g->vi[v].in < i ? i : g->vi[v].in;
+      st = qk__mesh_fail(g->err, QK_ERR_GEOMETRY, vline(P, b),
+                         "vertices %lu and %lu coincide at (%.17g, %.17g)", qk__mesh_num(P, a),
+                         qk__mesh_num(P, b), x + 0.0, y + 0.0);
+    } else {
+      g->vi[v].in = (uint32_t)i;
+      g->cv[i] = v;
+    }
+  }
+  qk__free(g->a, o, (P->nv + 1) * sizeof *o);
+  return st;
+}
+
+/* The input segments as constrained edges; a blocking vertex or constrained edge is a
+ * vertex on a segment or two segments crossing (or overlapping). */
+static qk_status_t insert_segments(qk__gm_t *g) {
+  const qk_poly_t *P = g->P;
+  qk__cdt_t *c = &g->cdt;
+  for (size_t s = 0; s < P->ns; s++) {
+    uint32_t u = P->seg[2 * s], w = P->seg[2 * s + 1];
+    unsigned long ls = sline(P, s);
+    if (u == w)
+      return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, ls, "segment %lu joins vertex %lu to itself",
+                           qk__mesh_num(P, s), qk__mesh_num(P, u));
+    int k;
+    char n1[80], n2[80];
+    uint32_t t = qk__cdt_find_edge(c, g->cv[u], g->cv[w], &k);
+    if (t != QK__CDT_NONE && c->seg[3 * t + k] != QK__CDT_NONE) {
+      uint32_t o = c->seg[3 * t + k];
+      return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, ls, "%s and %s both join vertices %lu and %lu",
+                           qk__gm_name(P, "segments", o, sline(P, o), n1),
+                           qk__gm_name(P, "", s, ls, n2) + 1, qk__mesh_num(P, u),
+                           qk__mesh_num(P, w));
+    }
+    uint32_t block = QK__CDT_NONE, bseg = QK__CDT_NONE;
+    qk_status_t st = qk__cdt_insert_segment(c, g->cv[u], g->cv[w], (uint32_t)s, &block, &bseg);
+    if (st == QK_ERR_NOMEM) return qk__mesh_fail(g->err, st, 0, "out of memory");
+    if (st && bseg != QK__CDT_NONE)
+      return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, ls, "%s and %s cross or overlap",
+                           qk__gm_name(P, "segments", bseg, sline(P, bseg), n1),
+                           qk__gm_name(P, "", s, ls, n2) + 1);
+    if (st) {
+      uint32_t vi = block < g->vcap ? g->vi[block].in : QK__CDT_NONE;
+      if (vi == QK__CDT_NONE)
+        return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, ls, "%s is blocked",
+                             qk__gm_name(P, "segment", s, ls, n2));
+      return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, ls, "%s at (%.17g, %.17g) lies on %s",
+                           qk__gm_name(P, "vertex", vi, vline(P, vi), n1), P->vx[vi] + 0.0,
+                           P->vy[vi] + 0.0, qk__gm_name(P, "segment", s, ls, n2));
+    }
+  }
+  return QK_OK;
+}
+
+static qk_status_t new_face(qk__gm_t *g, uint32_t *f) {
+  void *p = g->faces;
+  if (qk__grow(g->a, &p, &g->nface_cap, g->nface + 1, sizeof *g->faces)) return QK_ERR_NOMEM;
+  g->faces = p;
+  *f = g->nface++;
+  g->faces[*f] = (qk__gm_face_t){0, 0, 0};
+  return QK_OK;
+}
+
+/* Step 8: the faces are the parts of the square between constrained edges, found by
+ * flooding over unconstrained edges; face 0, the one holding the square's corners, is the
+ * unbounded face. */
+static qk_status_t label_faces(qk__gm_t *g) {
+  qk__cdt_t *c = &g->cdt;
+  void *p = g->stack;
+  if (qk__grow(g->a, &p, &g->stack_cap, c->nt + 1, sizeof *g->stack)) return QK_ERR_NOMEM;
+  g->stack = p;
+  for (size_t i = 0; i <= c->nt; i++) {
+    uint32_t t0 = i == 0 ? c->vtri[0] : (uint32_t)(i - 1);
+    if (g->face[t0] != QK__CDT_NONE) continue;
+    uint32_t f;
+    if (new_face(g, &f)) return QK_ERR_NOMEM;
+    size_t n = 0;
+    g->stack[n++] = t0;
+    g->face[t0] = f;
+    while (n) {
+      uint32_t t = g->stack[--n];
+      for (int k = 0; k < 3; k++) {
+        uint32_t u = c->nbr[3 * t + k];
+        if (u == QK__CDT_NONE || c->seg[3 * t + k] != QK__CDT_NONE || g->face[u] != QK__CDT_NONE)
+          continue;
+        g->face[u] = f;
+        g->stack[n++] = u;
+      }
+    }
+  }
+  g->faces[0].drop = 1;
+  return QK_OK;
+}
+
+/* The face holding a hole or region point, or NONE outside the square; a point on a
+ * segment or a vertex is refused (its face is ambiguous). */
+static qk_status_t point_face(qk__gm_t *g, double x, double y, const char *what, unsigned long num,
+                              unsigned long line, uint32_t *f) {
+  qk__cdt_t *c = &g->cdt;
+  *f = QK__CDT_NONE;
+  if (!(x > g->X0 && x < g->X0 + g->S && y > g->Y0 && y < g->Y0 + g->S)) return QK_OK;
+  uint32_t t;
+  int k;
+  qk__cdt_where_t w = qk__cdt_locate(c, x, y, QK__CDT_NONE, &t, &k);
+  if (w == QK__CDT_EDGE && c->seg[3 * t + k] != QK__CDT_NONE)
+    return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, line,
+                         "%s %lu at (%.17g, %.17g) lies on segment %lu", what, num, x, y,
+                         qk__mesh_num(g->P, c->seg[3 * t + k]));
+  if (w == QK__CDT_VERT) {
+    uint32_t vi = g->vi[c->v[3 * t + k]].in;
+    return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, line, "%s %lu at (%.17g, %.17g) is vertex %lu",
+                         what, num, x, y, qk__mesh_num(g->P, vi == QK__CDT_NONE ? 0 : vi));
+  }
+  *f = g->face[t];
+  return QK_OK;
+}
+
+static qk_status_t holes_and_regions(qk__gm_t *g) {
+  const qk_poly_t *P = g->P;
+  uint32_t f;
+  for (size_t h = 0; h < P->nh; h++) {
+    unsigned long line = P->hline ? P->hline[h] : 0;
+    qk_status_t st = point_face(g, P->hx[h], P->hy[h], "hole", qk__mesh_num(P, h), line, &f);
+    if (st) return st;
+    if (f != QK__CDT_NONE) g->faces[f].drop = 1;
+  }
+  for (size_t r = 0; r < P->nr; r++) {
+    const qk__region_pt_t *q = &P->reg[r];
+    qk_status_t st =
+        point_face(g, q->x, q->y, "regional attribute", qk__mesh_num(P, r), q->line, &f);
+    if (st) return st;
+    if (f != QK__CDT_NONE) g->faces[f].attr = q->attr;
+  }
+  return QK_OK;
+}
+
+/* Directions of the segments at a vertex, for the smallest input angle. */
+typedef struct vdir {
+  uint32_t v;
+  double a;
+} vdir_t;
+
+static int vdir_cmp(const void *x, const void *y) {
+  const vdir_t *p = x, *q = y;
+  if (p->v != q->v) return p->v < q->v ? -1 : 1;
+  return (p->a > q->a) - (p->a < q->a);
+}
+
+/* The smallest angle between two segments at a vertex, in degrees (180 when none). */
+static qk_status_t input_angles(qk__gm_t *g) {
+  const qk_poly_t *P = g->P;
+  g->smallest_input_angle = 180;
+  g->vsmall = qk__realloc(g->a, NULL, 0, P->nv + 1);
+  if (!g->vsmall) return QK_ERR_NOMEM;
+  memset(g->vsmall, 0, P->nv + 1);
+  if (P->ns < 2) return QK_OK;
+  vdir_t *d = qk__realloc(g->a, NULL, 0, 2 * P->ns * sizeof *d);
+  if (!d) return QK_ERR_NOMEM;
+  for (size_t s = 0; s < P->ns; s++)
+    for (int j = 0; j < 2; j++) {
+      uint32_t u = P->seg[2 * s + j], w = P->seg[2 * s + 1 - j];
+      d[2 * s + j] = (vdir_t){u, atan2(P->vy[w] - P->vy[u], P->vx[w] - P->vx[u])};
+    }
+  qsort(d, 2 * P->ns, sizeof *d, vdir_cmp);
+  const double pi = 3.14159265358979323846;
+  for (size_t i = 0, j; i < 2 * P->ns; i = j) {
+    double amin = 360;
+    for (j = i + 1; j < 2 * P->ns && d[j].v == d[i].v; j++)
+      amin = fmin(amin, (d[j].a - d[j - 1].a) * 180 / pi);
+    if (j - i >= 2) amin = fmin(amin, (d[i].a + 2 * pi - d[j - 1].a) * 180 / pi);
+    g->smallest_input_angle = fmin(g->smallest_input_angle, amin);
+    /* Concentric shells at the apexes of small angles only: elsewhere every split is an
+     * exact midpoint, as in the proof for angles of 60 degrees and more. The estimate
+     * errs by far less than the margin the proof has (a vertex at 59.999 degrees gets
+     * shells, harmlessly). */
+    g->vsmall[d[i].v] = amin < 60.001;
+  }
+  qk__free(g->a, d, 2 * P->ns * sizeof *d);
+  return QK_OK;
+}
+
+qk_status_t qk__gm_build(qk__gm_t *g) {
+  const qk_poly_t *P = g->P;
+  root_square(g);
+  qk_status_t st = qk__cdt_init(&g->cdt, g->a, g->X0, g->Y0, g->S, 8 * P->nv + 16);
+  if (st) return qk__mesh_fail(g->err, st, 0, "out of memory");
+  g->cdt_live = 1;
+  g->cv = qk__realloc(g->a, NULL, 0, (P->nv + 1) * sizeof *g->cv);
+  if (!g->cv || qk__gm_fit(g)) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  if ((st = insert_vertices(g)) || (st = insert_segments(g))) return st;
+  if (qk__gm_fit(g) || label_faces(g) || input_angles(g))
+    return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  if ((st = holes_and_regions(g))) return st;
+  /* From here on every insertion reports the triangles it changes. */
+  g->cdt.on_change = on_change;
+  g->cdt.user = g;
+  return QK_OK;
+}

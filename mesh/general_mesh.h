@@ -1,0 +1,141 @@
+/*
+ * The general mesh mode's state, shared by mesh/general_*.c (docs/mesh.md, "The general
+ * mode"). Not API. The pipeline: general_build.c validates the input while building its
+ * constrained Delaunay triangulation (mesh/cdt.h) and labels the faces; general_seed.c
+ * grades a quadtree on the input's features and inserts its seeds and the segments'
+ * pre-split points; general_refine.c runs the quality refinement; general_out.c fills
+ * struct qk_mesh; general_run.c drives them.
+ */
+#ifndef QK_MESH_GENERAL_MESH_H
+#define QK_MESH_GENERAL_MESH_H
+
+#include <stdio.h>
+
+#include "mesh/cdt.h"
+#include "mesh/general_internal.h"
+#include "mesh/mesh_internal.h"
+
+/* Parameters on a segment are K / 2^62, K in [0, 2^62]. */
+#define QK__GM_ONE ((uint64_t)1 << 62)
+
+/* A point to insert before the refinement: a seed (seg == QK__CDT_NONE) or a segment's
+ * pre-split point (at parameter k on input segment seg). */
+typedef struct qk__gm_pt {
+  uint64_t key; /* Morton key of the point in the root square: the insertion order */
+  double x, y;
+  uint64_t k;
+  uint32_t seg;
+} qk__gm_pt_t;
+
+/* A CDT vertex: its input vertex (or NONE), the segment of a split point (or NONE) and
+ * its parameter there. */
+typedef struct qk__gm_vert {
+  uint32_t in, seg;
+  uint64_t par;
+} qk__gm_vert_t;
+
+/* A face: dropped (the unbounded face, holes) or kept, and its regional attribute. */
+typedef struct qk__gm_face {
+  double attr;
+  uint32_t drop, id;
+} qk__gm_face_t;
+
+/* A queued triangle, with its vertices to recognise a slot the CDT has reused since. */
+typedef struct qk__gm_tq {
+  uint32_t t, a, b, c;
+} qk__gm_tq_t;
+
+typedef struct qk__gm {
+  const qk_allocator_t *a;
+  const qk_poly_t *P;
+  const qk_mesh_options_t *opt;
+  qk_mesh_error_t *err;
+  /* The root square [X0, X0 + S] x [Y0, Y0 + S], S = 2^e, and the input's bounding box. */
+  double X0, Y0, S, inv_S; /* inv_S = 2^-e */
+  int e;
+  double bx0, by0, bx1, by1;
+  qk__cdt_t cdt;
+  int cdt_live;
+  /* Per input vertex: its CDT vertex, and whether two of its segments meet at an angle
+   * below 60 degrees there (the concentric shells' apexes). */
+  uint32_t *cv;
+  uint8_t *vsmall;
+  /* Per CDT vertex. */
+  qk__gm_vert_t *vi;
+  size_t vcap;
+  /* Per triangle slot: its face. Faces: 0 is the unbounded one; fdrop marks dropped faces
+   * (the unbounded one and holes), fattr their regional attribute. */
+  uint32_t *face;
+  size_t fcap;
+  qk__gm_face_t *faces;
+  uint32_t nface;
+  size_t nface_cap;
+  /* Triangles the CDT created or changed since the last insertion (its on_change). */
+  uint32_t *dirty;
+  size_t ndirty, dirty_cap;
+  int dirty_nomem;
+  /* The graded quadtree (lattice coordinates: the root square is [0, 1]^2). */
+  qk_tree_t *tree;
+  uint8_t *free_node; /* per node id: its grown square meets no feature */
+  size_t free_cap;
+  uint32_t *arena; /* feature lists of the subdivision */
+  size_t arena_n, arena_cap;
+  qk__gm_pt_t *pts;
+  size_t npts, pts_cap;
+  /* The refinement. */
+  double bound_deg, sin2_bound;
+  int refining;
+  qk__gm_tq_t *bad;
+  size_t nbad, bad_head, bad_cap;
+  uint32_t *enc; /* encroached subsegments: pairs of vertices, and their segment */
+  size_t nenc, enc_cap;
+  uint32_t *stack;
+  size_t stack_cap;
+  size_t insertions, work_cap;
+  size_t seeds;
+  double smallest_input_angle;
+} qk__gm_t;
+
+/* "segment 3" or, when the input has line numbers, "segment 3 (line 12)", into buf. */
+static inline const char *qk__gm_name(const qk_poly_t *P, const char *what, size_t i,
+                                      unsigned long line, char buf[80]) {
+  if (line)
+    snprintf(buf, 80, "%s %lu (line %lu)", what, qk__mesh_num(P, i), line);
+  else
+    snprintf(buf, 80, "%s %lu", what, qk__mesh_num(P, i));
+  return buf;
+}
+
+/* CDT vertex v's coordinates. */
+static inline const double *qk__gm_vxy(const qk__gm_t *g, uint32_t v) { return &g->cdt.xy[2 * v]; }
+
+/* general_build.c: root square, the CDT of the input (validation), faces, holes, regions. */
+qk_status_t qk__gm_build(qk__gm_t *g);
+/* Grow the per-vertex and per-triangle arrays to the CDT's size. */
+qk_status_t qk__gm_fit(qk__gm_t *g);
+/* The parameter of CDT vertex v on input segment s (an endpoint or a split point of s). */
+uint64_t qk__gm_param(const qk__gm_t *g, uint32_t v, uint32_t s);
+/* Insert (x, y), located at (t0, k0, w) as qk__cdt_locate reports it, label the new
+ * triangles' faces and record the vertex as a split point of segment seg at parameter k
+ * (seg NONE for a free point). *v_out is the vertex; *existed as qk__cdt_insert. */
+qk_status_t qk__gm_insert(qk__gm_t *g, double x, double y, uint32_t t0, int k0, qk__cdt_where_t w,
+                          uint32_t seg, uint64_t k, uint32_t *v_out, int *existed);
+/* The Morton key of input point (x, y) in the root square, and a stable sort of points
+ * by key (general_seed.c). */
+uint64_t qk__gm_morton(const qk__gm_t *g, double x, double y);
+qk_status_t qk__gm_sort_points(const qk__gm_t *g, qk__gm_pt_t *pts, size_t n);
+/* general_seed.c: the graded quadtree, its seeds and the pre-split points, inserted. */
+qk_status_t qk__gm_seed(qk__gm_t *g, qk_mesh_stats_t *st);
+/* general_refine.c: split the subsegment a-b of segment s at an exact point (concentric
+ * shells next to an input vertex); QK_ERR_GEOMETRY naming s when no exact point exists. */
+qk_status_t qk__gm_split(qk__gm_t *g, uint32_t a, uint32_t b, uint32_t s);
+/* Quality refinement until no subsegment is encroached and no triangle is bad. */
+qk_status_t qk__gm_refine(qk__gm_t *g);
+/* Is triangle t bad (to be split)? 0 good or exempt, 1 bad. */
+int qk__gm_is_bad(const qk__gm_t *g, uint32_t t);
+/* Is triangle t's smallest angle below the bound, but exempt (inside a small input angle)? */
+int qk__gm_exempt(const qk__gm_t *g, const uint32_t *tv);
+/* general_out.c: fill the mesh. */
+qk_status_t qk__gm_output(qk__gm_t *g, qk_mesh_t *m);
+
+#endif

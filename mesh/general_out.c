@@ -1,0 +1,139 @@
+/*
+ * The general mode, step 11: the kept triangles (those of faces that are neither the
+ * unbounded face nor a hole) and the vertices they use, renumbered densely in CDT order
+ * (so the input vertices come first, in input order); per triangle its face number and
+ * regional attribute; the mesh edges along input segments with their markers.
+ */
+#include "mesh/general_mesh.h"
+
+#include <math.h>
+#include <string.h>
+
+static int kept(const qk__gm_t *g, uint32_t t) { return !g->faces[g->face[t]].drop; }
+
+/* The mesh edges along input segments: each constrained edge of a kept triangle once,
+ * directed along its segment. */
+static qk_status_t output_segments(qk__gm_t *g, qk_mesh_t *m, const uint32_t *newid) {
+  const qk__cdt_t *c = &g->cdt;
+  const qk_poly_t *P = g->P;
+  size_t n = 0;
+  for (int pass = 0; pass < 2; pass++) {
+    for (uint32_t t = 0; t < c->nt; t++) {
+      if (!kept(g, t)) continue;
+      for (int k = 0; k < 3; k++) {
+        uint32_t s = c->seg[3 * t + k], u = c->nbr[3 * t + k];
+        if (s == QK__CDT_NONE || (u != QK__CDT_NONE && u < t && kept(g, u))) continue;
+        if (pass == 0) {
+          n++;
+          continue;
+        }
+        uint32_t a = c->v[3 * t + (k + 1) % 3], b = c->v[3 * t + (k + 2) % 3];
+        if (qk__gm_param(g, a, s) > qk__gm_param(g, b, s)) {
+          uint32_t x = a;
+          a = b, b = x;
+        }
+        int32_t mark = P->smark ? P->smark[s] : 0;
+        m->oseg[m->noseg++] = (qk__oseg_t){newid[a], newid[b], mark, s};
+      }
+    }
+    if (pass == 0) {
+      m->oseg = qk__realloc(g->a, NULL, 0, (n + 1) * sizeof *m->oseg);
+      if (!m->oseg) return QK_ERR_NOMEM;
+      m->noseg_cap = n + 1;
+    }
+  }
+  return QK_OK;
+}
+
+/* Vertex markers: an input vertex's own nonzero marker, else the first segment (in input
+ * order) through it with a nonzero marker; a split point takes its segment's. */
+static void vertex_markers(qk__gm_t *g, qk_mesh_t *m, const uint32_t *newid) {
+  const qk__cdt_t *c = &g->cdt;
+  const qk_poly_t *P = g->P;
+  memset(m->vmark, 0, (m->nv + 1) * sizeof *m->vmark);
+  for (size_t v = 0; v < c->nv; v++) {
+    uint32_t id = newid[v];
+    if (id == QK__CDT_NONE) continue;
+    if (g->vi[v].in != QK__CDT_NONE && P->vmark) m->vmark[id] = P->vmark[g->vi[v].in];
+    if (g->vi[v].seg != QK__CDT_NONE && P->smark) m->vmark[id] = P->smark[g->vi[v].seg];
+  }
+  for (size_t s = 0; P->smark && s < P->ns; s++)
+    for (int j = 0; j < 2; j++) {
+      uint32_t id = newid[g->cv[P->seg[2 * s + j]]];
+      if (id != QK__CDT_NONE && !m->vmark[id]) m->vmark[id] = P->smark[s];
+    }
+}
+
+qk_status_t qk__gm_output(qk__gm_t *g, qk_mesh_t *m) {
+  const qk__cdt_t *c = &g->cdt;
+  const qk_poly_t *P = g->P;
+  uint32_t *newid = qk__realloc(g->a, NULL, 0, (c->nv + 1) * sizeof *newid);
+  if (!newid) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  memset(newid, 0xff, (c->nv + 1) * sizeof *newid);
+  size_t kt = 0, kv = 0, steiner = 0;
+  uint32_t nf = 0;
+  for (uint32_t f = 0; f < g->nface; f++) g->faces[f].id = g->faces[f].drop ? 0 : ++nf;
+  for (uint32_t t = 0; t < c->nt; t++)
+    if (kept(g, t)) {
+      kt++;
+      for (int i = 0; i < 3; i++) newid[c->v[3 * t + i]] = 0;
+    }
+  for (size_t v = 0; v < c->nv; v++)
+    if (newid[v] == 0) {
+      newid[v] = (uint32_t)kv++;
+      steiner += g->vi[v].in == QK__CDT_NONE;
+    }
+  m->nv = kv, m->nt = kt, m->ncv = P->nv, m->ncs = P->ns;
+  m->xy = qk__realloc(g->a, NULL, 0, (2 * kv + 2) * sizeof *m->xy);
+  m->tri = qk__realloc(g->a, NULL, 0, (3 * kt + 3) * sizeof *m->tri);
+  m->comp = qk__realloc(g->a, NULL, 0, (kt + 1) * sizeof *m->comp);
+  m->cxy = qk__realloc(g->a, NULL, 0, (2 * P->nv + 2) * sizeof *m->cxy);
+  m->cseg = qk__realloc(g->a, NULL, 0, (2 * P->ns + 2) * sizeof *m->cseg);
+  m->vmark = qk__realloc(g->a, NULL, 0, (kv + 1) * sizeof *m->vmark);
+  if (P->nr) m->attr = qk__realloc(g->a, NULL, 0, (kt + 1) * sizeof *m->attr);
+  qk_status_t st = QK_OK;
+  if (!m->xy || !m->tri || !m->comp || !m->cxy || !m->cseg || !m->vmark || (P->nr && !m->attr) ||
+      output_segments(g, m, newid)) {
+    st = qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+    goto out;
+  }
+  for (size_t v = 0; v < c->nv; v++)
+    if (newid[v] != QK__CDT_NONE)
+      m->xy[2 * newid[v]] = c->xy[2 * v], m->xy[2 * newid[v] + 1] = c->xy[2 * v + 1];
+  /* Angles through their cosines (one square root each); the extremes back to degrees at
+   * the end. */
+  double cmax = -1, cmin = 1, cb = cos(g->bound_deg * (3.14159265358979323846 / 180));
+  size_t j = 0, exempt = 0;
+  for (uint32_t t = 0; t < c->nt; t++) {
+    if (!kept(g, t)) continue;
+    const uint32_t *tv = &c->v[3 * t];
+    for (int i = 0; i < 3; i++) {
+      m->tri[3 * j + i] = newid[tv[i]];
+      const double *o = &c->xy[2 * tv[i]], *u = &c->xy[2 * tv[(i + 1) % 3]],
+                   *w = &c->xy[2 * tv[(i + 2) % 3]];
+      double ux = u[0] - o[0], uy = u[1] - o[1], wx = w[0] - o[0], wy = w[1] - o[1];
+      double cs = (ux * wx + uy * wy) / sqrt((ux * ux + uy * uy) * (wx * wx + wy * wy));
+      cmax = fmax(cmax, cs), cmin = fmin(cmin, cs);
+      exempt += cs > cb;
+    }
+    const qk__gm_face_t *f = &g->faces[g->face[t]];
+    m->comp[j] = f->id;
+    if (m->attr) m->attr[j] = f->attr;
+    j++;
+  }
+  for (size_t i = 0; i < P->nv; i++) m->cxy[2 * i] = P->vx[i], m->cxy[2 * i + 1] = P->vy[i];
+  if (P->ns) memcpy(m->cseg, P->seg, 2 * P->ns * sizeof *m->cseg);
+  vertex_markers(g, m, newid);
+  m->has_marks = P->vmark || P->smark;
+  m->stats.components = nf;
+  m->stats.triangles = kt;
+  m->stats.vertices = kv;
+  m->stats.steiner = steiner;
+  const double deg = 180 / 3.14159265358979323846;
+  m->stats.min_angle_deg = kt ? acos(fmin(cmax, 1)) * deg : 0;
+  m->stats.max_angle_deg = kt ? acos(fmax(cmin, -1)) * deg : 0;
+  m->stats.exempt_angles = exempt;
+out:
+  qk__free(g->a, newid, (c->nv + 1) * sizeof *newid);
+  return st;
+}

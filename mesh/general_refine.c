@@ -1,0 +1,429 @@
+/*
+ * The general mode, step 9: Delaunay refinement (Ruppert 1995; Shewchuk 2002) on the CDT
+ * the seeds and split points made. Encroached subsegments are split first, at exact dyadic
+ * points of their input segment (concentric shells next to an input vertex); then a bad
+ * triangle (smallest angle below the bound, or an edge above the size bound) gets its
+ * circumcentre, unless that point is hidden behind a subsegment or would encroach one, in
+ * which case those subsegments are split instead. Skinny triangles whose shortest edge
+ * joins two points at equal distance on two segments meeting at an input angle below 60
+ * degrees are left alone (Shewchuk's rule; counted as exempt). docs/mesh.md has the proof.
+ */
+#include "mesh/general_mesh.h"
+
+#include <math.h>
+#include <string.h>
+
+int qk__gm_split_param(const qk__gm_t *g, uint32_t s, uint64_t lo, uint64_t hi, uint64_t *k);
+
+int qk__gm_split_param(const qk__gm_t *g, uint32_t s, uint64_t lo, uint64_t hi, uint64_t *k) {
+  const qk_poly_t *P = g->P;
+  uint32_t u = P->seg[2 * s], w = P->seg[2 * s + 1];
+  const double A[2] = {P->vx[u], P->vy[u]}, B[2] = {P->vx[w], P->vy[w]};
+  int bud = qk__seg_budget(A, B);
+  if (bud > 62) bud = 62;
+  if (bud < 1 || hi - lo < 2) return 0;
+  uint64_t q = (uint64_t)1 << (62 - bud), target = lo + (hi - lo) / 2;
+  int shell = lo == 0 ? g->vsmall[u] : hi == QK__GM_ONE ? g->vsmall[w] : 0;
+  if ((lo == 0) != (hi == QK__GM_ONE) && shell) {
+    /* Concentric shells at the apex of a small input angle: the split point's distance
+     * from the apex is the power of two nearest half the piece's length, so that pieces of
+     * segments meeting there split at equal radii (Shewchuk 2002). Elsewhere, the exact
+     * midpoint in parameter. */
+    double len = hypot(B[0] - A[0], B[1] - A[1]), L = len * ldexp((double)(hi - lo), -62);
+    int ex;
+    double f = frexp(L / 2, &ex), d = ldexp(1.0, f < 0.70710678118654752 ? ex - 1 : ex);
+    double dk = ldexp(d / len, 62);
+    if (dk > 0 && dk < (double)(hi - lo)) {
+      uint64_t D = (uint64_t)dk;
+      target = lo == 0 ? lo + D : hi - D;
+    }
+  }
+  uint64_t K = (target + q / 2) / q * q;
+  if (K <= lo || K >= hi) K = (lo + (hi - lo) / 2 + q / 2) / q * q;
+  if (K <= lo || K >= hi) K = lo / q * q + q;
+  if (K <= lo || K >= hi) return 0;
+  *k = K;
+  return 1;
+}
+
+qk_status_t qk__gm_split(qk__gm_t *g, uint32_t a, uint32_t b, uint32_t s) {
+  const qk_poly_t *P = g->P;
+  uint64_t lo = qk__gm_param(g, a, s), hi = qk__gm_param(g, b, s), k;
+  if (lo > hi) {
+    uint64_t t = lo;
+    lo = hi, hi = t;
+  }
+  uint32_t u = P->seg[2 * s], w = P->seg[2 * s + 1];
+  const double A[2] = {P->vx[u], P->vy[u]}, B[2] = {P->vx[w], P->vy[w]};
+  if (!qk__gm_split_param(g, s, lo, hi, &k)) {
+    /* The step the split needs: the piece spans (hi - lo) 2^-62 of the segment. */
+    int need = 62 - (int)floor(log2((double)(hi - lo))) + 1, bud = qk__seg_budget(A, B);
+    unsigned long line = P->sline ? P->sline[s] : 0;
+    char nm[80], has[48];
+    if (bud < 1)
+      snprintf(has, sizeof has, "none inside it");
+    else
+      snprintf(has, sizeof has, "2^-%d", bud < 62 ? bud : 62);
+    return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, line,
+                         "%s from (%.17g, %.17g) to (%.17g, %.17g) needs a split point at steps "
+                         "of 2^-%d of its length; exact ones: %s. Round the input to a grid "
+                         "(--round)",
+                         qk__gm_name(P, "segment", s, line, nm), A[0], A[1], B[0], B[1], need, has);
+  }
+  int tz = 0;
+  while (tz < 62 && !((k >> tz) & 1)) tz++;
+  double p[2];
+  if (qk__seg_point(A, B, k >> tz, 62 - tz, p)) return QK_ERR_GEOMETRY;
+  int kk;
+  uint32_t t = qk__cdt_find_edge(&g->cdt, a, b, &kk), v;
+  int existed;
+  if (t == QK__CDT_NONE) return QK_OK; /* split already */
+  qk_status_t st = qk__gm_insert(g, p[0], p[1], t, kk, QK__CDT_EDGE, s, k, &v, &existed);
+  if (st) return qk__mesh_fail(g->err, st, 0, "out of memory");
+  return QK_OK;
+}
+
+static double d2(const double *p, const double *q) {
+  double x = p[0] - q[0], y = p[1] - q[1];
+  return x * x + y * y;
+}
+
+int qk__gm_exempt(const qk__gm_t *g, const uint32_t *tv) {
+  const qk__cdt_t *c = &g->cdt;
+  const qk_poly_t *P = g->P;
+  double l[3];
+  for (int i = 0; i < 3; i++) l[i] = d2(&c->xy[2 * tv[(i + 1) % 3]], &c->xy[2 * tv[(i + 2) % 3]]);
+  int i = l[0] <= l[1] && l[0] <= l[2] ? 0 : l[1] <= l[2] ? 1 : 2;
+  uint32_t p = tv[(i + 1) % 3], q = tv[(i + 2) % 3];
+  uint32_t s1 = g->vi[p].seg, s2 = g->vi[q].seg;
+  if (s1 == QK__CDT_NONE || s2 == QK__CDT_NONE || s1 == s2) return 0;
+  for (int x = 0; x < 2; x++)
+    for (int y = 0; y < 2; y++) {
+      uint32_t apex = P->seg[2 * s1 + x];
+      if (apex != P->seg[2 * s2 + y]) continue;
+      uint32_t o1 = P->seg[2 * s1 + 1 - x], o2 = P->seg[2 * s2 + 1 - y];
+      double ux = P->vx[o1] - P->vx[apex], uy = P->vy[o1] - P->vy[apex];
+      double wx = P->vx[o2] - P->vx[apex], wy = P->vy[o2] - P->vy[apex];
+      double ang = atan2(fabs(ux * wy - uy * wx), ux * wx + uy * wy);
+      if (!(ang < 1.0471975511965976)) return 0; /* 60 degrees */
+      const double ap[2] = {P->vx[apex], P->vy[apex]};
+      double r1 = sqrt(d2(&c->xy[2 * p], ap)), r2 = sqrt(d2(&c->xy[2 * q], ap));
+      return fabs(r1 - r2) <= 1e-3 * fmax(r1, r2);
+    }
+  return 0;
+}
+
+/* a + b = s + e exactly (two-sum); a * b = p + e exactly (fma). */
+static void two_sum(double a, double b, double *s, double *e) {
+  double x = a + b, bv = x - a, av = x - bv;
+  *s = x, *e = (a - av) + (b - bv);
+}
+
+/* Add q to the nonoverlapping expansion h[0..*n) (increasing magnitude). */
+static void grow(double *h, int *n, double q) {
+  int m = 0;
+  for (int i = 0; i < *n; i++) {
+    double s, e;
+    two_sum(q, h[i], &s, &e);
+    if (e != 0) h[m++] = e;
+    q = s;
+  }
+  if (q != 0) h[m++] = q;
+  *n = m;
+}
+
+/* Is |pq|^2 > h^2, exactly? Each difference splits into a rounded part and its error, each
+ * square and the cross term into products and their errors; the sum is an exact expansion
+ * whose sign is its largest component's. */
+static int len2_exceeds(const double *p, const double *q, double h) {
+  double x[16];
+  int n = 0;
+  for (int i = 0; i < 2; i++) {
+    double dh, dl;
+    two_sum(p[i], -q[i], &dh, &dl);
+    const double f[3][2] = {{dh, dh}, {2 * dh, dl}, {dl, dl}};
+    for (int k = 0; k < 3; k++) {
+      double pr = f[k][0] * f[k][1];
+      grow(x, &n, fma(f[k][0], f[k][1], -pr));
+      grow(x, &n, pr);
+    }
+  }
+  double hh = h * h;
+  grow(x, &n, -fma(h, h, -hh));
+  grow(x, &n, -hh);
+  return n > 0 && x[n - 1] > 0;
+}
+
+int qk__gm_is_bad(const qk__gm_t *g, uint32_t t) {
+  const qk__cdt_t *c = &g->cdt;
+  if (g->faces[g->face[t]].drop) return 0;
+  const uint32_t *tv = &c->v[3 * t];
+  const double *p[3] = {&c->xy[2 * tv[0]], &c->xy[2 * tv[1]], &c->xy[2 * tv[2]]};
+  double l[3];
+  for (int i = 0; i < 3; i++) l[i] = d2(p[(i + 1) % 3], p[(i + 2) % 3]);
+  int i = l[0] <= l[1] && l[0] <= l[2] ? 0 : l[1] <= l[2] ? 1 : 2;
+  double lmax = fmax(l[0], fmax(l[1], l[2]));
+  if (g->opt->max_size > 0 || g->opt->size_fn) {
+    double h = g->opt->max_size > 0 ? g->opt->max_size : INFINITY;
+    if (g->opt->size_fn) {
+      double cx = (p[0][0] + p[1][0] + p[2][0]) / 3, cy = (p[0][1] + p[1][1] + p[2][1]) / 3;
+      double v = g->opt->size_fn(cx, cy, g->opt->size_user);
+      if (v > 0 && v < h) h = v;
+    }
+    double h2 = h * h;
+    if (lmax > h2 * (1 + 0x1p-48)) return 1;
+    /* Within rounding of h: decide exactly, so that an edge of exactly h (a leaf's side) is
+     * good and one a hair longer is not. */
+    if (lmax >= h2 * (1 - 0x1p-48))
+      for (int j = 0; j < 3; j++)
+        if (len2_exceeds(p[(j + 1) % 3], p[(j + 2) % 3], h)) return 1;
+  }
+  /* The smallest angle is at vertex i, opposite the shortest edge; below 90 degrees, so
+   * comparing squared sines is comparing angles. */
+  const double *o = p[i], *u = p[(i + 1) % 3], *w = p[(i + 2) % 3];
+  double ux = u[0] - o[0], uy = u[1] - o[1], wx = w[0] - o[0], wy = w[1] - o[1];
+  double cr = ux * wy - uy * wx;
+  if (cr * cr >= g->sin2_bound * l[(i + 2) % 3] * l[(i + 1) % 3]) return 0;
+  return !qk__gm_exempt(g, tv);
+}
+
+static qk_status_t push_bad(qk__gm_t *g, uint32_t t) {
+  if (g->bad_head && g->bad_head == g->nbad) g->bad_head = g->nbad = 0;
+  void *p = g->bad;
+  if (qk__grow(g->a, &p, &g->bad_cap, g->nbad + 1, sizeof *g->bad)) return QK_ERR_NOMEM;
+  g->bad = p;
+  const uint32_t *tv = &g->cdt.v[3 * t];
+  g->bad[g->nbad++] = (qk__gm_tq_t){t, tv[0], tv[1], tv[2]};
+  return QK_OK;
+}
+
+static qk_status_t push_enc(qk__gm_t *g, uint32_t a, uint32_t b, uint32_t s) {
+  void *p = g->enc;
+  if (qk__grow(g->a, &p, &g->enc_cap, 3 * (g->nenc + 1), sizeof *g->enc)) return QK_ERR_NOMEM;
+  g->enc = p;
+  g->enc[3 * g->nenc] = a, g->enc[3 * g->nenc + 1] = b, g->enc[3 * g->nenc + 2] = s;
+  g->nenc++;
+  return QK_OK;
+}
+
+/* Is the constrained edge k of kept triangle t encroached by its apex there? */
+static int apex_encroaches(const qk__gm_t *g, uint32_t t, int k) {
+  const qk__cdt_t *c = &g->cdt;
+  const uint32_t *tv = &c->v[3 * t];
+  return qk__cdt_encroach(&c->xy[2 * tv[(k + 1) % 3]], &c->xy[2 * tv[(k + 2) % 3]],
+                          &c->xy[2 * tv[k]]) < 0;
+}
+
+/* Queue what triangle t (changed or new) asks for: its encroached subsegments (seen from a
+ * kept side) and itself when bad. */
+static qk_status_t check(qk__gm_t *g, uint32_t t) {
+  const qk__cdt_t *c = &g->cdt;
+  if (g->faces[g->face[t]].drop) return QK_OK;
+  for (int k = 0; k < 3; k++)
+    if (c->seg[3 * t + k] != QK__CDT_NONE && apex_encroaches(g, t, k) &&
+        push_enc(g, c->v[3 * t + (k + 1) % 3], c->v[3 * t + (k + 2) % 3], c->seg[3 * t + k]))
+      return QK_ERR_NOMEM;
+  return qk__gm_is_bad(g, t) ? push_bad(g, t) : QK_OK;
+}
+
+static qk_status_t check_dirty(qk__gm_t *g) {
+  for (size_t i = 0; i < g->ndirty; i++)
+    if (check(g, g->dirty[i])) return QK_ERR_NOMEM;
+  g->ndirty = 0;
+  return QK_OK;
+}
+
+/* Is subsegment a-b still an edge, encroached from a kept side? */
+static int still_encroached(const qk__gm_t *g, uint32_t a, uint32_t b) {
+  const qk__cdt_t *c = &g->cdt;
+  int k;
+  uint32_t t = qk__cdt_find_edge(c, a, b, &k);
+  if (t == QK__CDT_NONE) return 0;
+  if (!g->faces[g->face[t]].drop && apex_encroaches(g, t, k)) return 1;
+  uint32_t n = c->nbr[3 * t + k];
+  if (n == QK__CDT_NONE || g->faces[g->face[n]].drop) return 0;
+  for (int j = 0; j < 3; j++)
+    if (c->nbr[3 * n + j] == t) return apex_encroaches(g, n, j);
+  return 0;
+}
+
+static qk_status_t grow_stack(qk__gm_t *g, size_t need) {
+  void *p = g->stack;
+  if (qk__grow(g->a, &p, &g->stack_cap, need, sizeof *g->stack)) return QK_ERR_NOMEM;
+  g->stack = p;
+  return QK_OK;
+}
+
+/* The subsegments on the boundary of the insertion cavity of p (the triangles whose
+ * circumcircles hold p, reached from t0 and t1 without crossing a constrained edge) that p
+ * would encroach: queued (as triples) in g->enc. Returns the number queued, or -1 on NOMEM. */
+static int cavity_encroach(qk__gm_t *g, uint32_t t0, uint32_t t1, const double p[2]) {
+  const qk__cdt_t *c = &g->cdt;
+  size_t n = 0, seen = 0;
+  int found = 0;
+  if (grow_stack(g, 2)) return -1;
+  g->stack[n++] = t0;
+  if (t1 != QK__CDT_NONE) g->stack[n++] = t1;
+  /* g->stack[0..seen) are done, [seen, n) to do; the cavity is small, so membership is a
+   * scan. */
+  while (seen < n) {
+    uint32_t t = g->stack[seen++];
+    for (int k = 0; k < 3; k++) {
+      uint32_t a = c->v[3 * t + (k + 1) % 3], b = c->v[3 * t + (k + 2) % 3];
+      if (c->seg[3 * t + k] != QK__CDT_NONE) {
+        if (qk__cdt_encroach(&c->xy[2 * a], &c->xy[2 * b], p) < 0) {
+          if (push_enc(g, a, b, c->seg[3 * t + k])) return -1;
+          found++;
+        }
+        continue;
+      }
+      uint32_t u = c->nbr[3 * t + k];
+      if (u == QK__CDT_NONE || n > 4096) continue;
+      int dup = 0;
+      for (size_t i = 0; i < n && !dup; i++) dup = g->stack[i] == u;
+      if (dup) continue;
+      const uint32_t *uv = &c->v[3 * u];
+      if (qk__incircle(&c->xy[2 * uv[0]], &c->xy[2 * uv[1]], &c->xy[2 * uv[2]], p) <= 0) continue;
+      if (grow_stack(g, n + 1)) return -1;
+      g->stack[n++] = u;
+    }
+  }
+  return found;
+}
+
+/* A constrained edge at vertex x (found by turning around it from triangle t): the
+ * subsegment to split when a circumcentre's walk runs into x. */
+static int constrained_at(const qk__gm_t *g, uint32_t t, uint32_t x, uint32_t *a, uint32_t *b,
+                          uint32_t *s) {
+  const qk__cdt_t *c = &g->cdt;
+  uint32_t u = t;
+  for (int guard = 0; guard < 1 << 16 && u != QK__CDT_NONE; guard++) {
+    int i = c->v[3 * u] == x ? 0 : c->v[3 * u + 1] == x ? 1 : 2;
+    for (int d = 1; d <= 2; d++) {
+      int k = (i + d) % 3;
+      if (c->seg[3 * u + k] != QK__CDT_NONE) {
+        *a = c->v[3 * u + (k + 1) % 3], *b = c->v[3 * u + (k + 2) % 3], *s = c->seg[3 * u + k];
+        return 1;
+      }
+    }
+    u = c->nbr[3 * u + (i + 1) % 3];
+    if (u == t) break;
+  }
+  return 0;
+}
+
+/* Split a bad triangle: its circumcentre, or the subsegments hiding or encroached by it. */
+static qk_status_t split_triangle(qk__gm_t *g, uint32_t t) {
+  qk__cdt_t *c = &g->cdt;
+  const uint32_t *tv = &c->v[3 * t];
+  const double *A = &c->xy[2 * tv[0]], *B = &c->xy[2 * tv[1]], *C = &c->xy[2 * tv[2]];
+  double bx = B[0] - A[0], by = B[1] - A[1], cx = C[0] - A[0], cy = C[1] - A[1];
+  double D = 2 * (bx * cy - by * cx), b2 = bx * bx + by * by, c2 = cx * cx + cy * cy;
+  double p[2] = {A[0] + (cy * b2 - by * c2) / D, A[1] + (bx * c2 - cx * b2) / D};
+  /* Walk from the vertex opposite the longest edge (the circumcentre lies beyond it when
+   * it lies outside the triangle). */
+  double l[3];
+  for (int i = 0; i < 3; i++) l[i] = d2(&c->xy[2 * tv[(i + 1) % 3]], &c->xy[2 * tv[(i + 2) % 3]]);
+  uint32_t w = tv[l[0] >= l[1] && l[0] >= l[2] ? 0 : l[1] >= l[2] ? 1 : 2];
+  const double *W = &c->xy[2 * w];
+  /* A circumcentre beyond the input's bounding box (grown by an eighth) lies in the
+   * unbounded face: walk towards the box's edge instead, which is as hidden. */
+  double m = fmax(g->bx1 - g->bx0, g->by1 - g->by0) / 8;
+  double lo[2] = {g->bx0 - m, g->by0 - m}, hi[2] = {g->bx1 + m, g->by1 + m};
+  int clamped = 0;
+  if (!isfinite(p[0]) || !isfinite(p[1])) {
+    return qk__mesh_fail(g->err, QK_ERR_LIMIT, 0,
+                         "no circumcentre for the triangle at (%.17g, %.17g): precision "
+                         "exhausted",
+                         W[0], W[1]);
+  }
+  double lam = 1;
+  for (int j = 0; j < 2; j++) {
+    double dj = p[j] - W[j];
+    if (p[j] > hi[j]) lam = fmin(lam, (hi[j] - W[j]) / dj), clamped = 1;
+    if (p[j] < lo[j]) lam = fmin(lam, (lo[j] - W[j]) / dj), clamped = 1;
+  }
+  if (clamped) p[0] = W[0] + lam * (p[0] - W[0]), p[1] = W[1] + lam * (p[1] - W[1]);
+  uint32_t tri;
+  int k;
+  qk__cdt_where_t where;
+  qk__gm_tq_t self = {t, tv[0], tv[1], tv[2]};
+  if (!qk__cdt_walk(c, w, p[0], p[1], &tri, &k, &where)) {
+    uint32_t a, b, s;
+    if (where == QK__CDT_EDGE) {
+      a = c->v[3 * tri + (k + 1) % 3], b = c->v[3 * tri + (k + 2) % 3], s = c->seg[3 * tri + k];
+    } else if (!constrained_at(g, tri, c->v[3 * tri + k], &a, &b, &s)) {
+      return qk__mesh_fail(g->err, QK_ERR_LIMIT, 0, "cannot split the triangle at (%.17g, %.17g)",
+                           W[0], W[1]);
+    }
+    qk_status_t st = qk__gm_split(g, a, b, s);
+    if (!st) st = check_dirty(g);
+    if (!st && push_bad(g, t)) st = QK_ERR_NOMEM;
+    if (!st) g->bad[g->nbad - 1] = self;
+    return st;
+  }
+  if (clamped || where == QK__CDT_VERT)
+    return qk__mesh_fail(g->err, QK_ERR_LIMIT, 0,
+                         "precision exhausted refining the triangle at (%.17g, %.17g)", W[0], W[1]);
+  uint32_t t1 = where == QK__CDT_EDGE ? c->nbr[3 * tri + k] : QK__CDT_NONE;
+  size_t before = g->nenc;
+  int f = cavity_encroach(g, tri, t1, p);
+  if (f < 0) return QK_ERR_NOMEM;
+  if (f > 0) {
+    /* Split those instead (the queue's front part is still empty here: the refinement
+     * handles encroached subsegments before triangles), then retry the triangle. */
+    while (g->nenc > before) {
+      g->nenc--;
+      uint32_t a = g->enc[3 * g->nenc], b = g->enc[3 * g->nenc + 1], s = g->enc[3 * g->nenc + 2];
+      qk_status_t st = qk__gm_split(g, a, b, s);
+      if (!st) st = check_dirty(g);
+      if (st) return st;
+    }
+    if (push_bad(g, t)) return QK_ERR_NOMEM;
+    g->bad[g->nbad - 1] = self;
+    return QK_OK;
+  }
+  uint32_t v;
+  int existed;
+  qk_status_t st = qk__gm_insert(g, p[0], p[1], tri, k, where, QK__CDT_NONE, 0, &v, &existed);
+  if (st) return qk__mesh_fail(g->err, st, 0, "out of memory");
+  return check_dirty(g);
+}
+
+qk_status_t qk__gm_refine(qk__gm_t *g) {
+  qk__cdt_t *c = &g->cdt;
+  g->ndirty = 0;
+  for (uint32_t t = 0; t < c->nt; t++)
+    if (check(g, t)) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  qk_status_t st = QK_OK;
+  for (;;) {
+    if (g->insertions > g->work_cap) {
+      double x = 0, y = 0;
+      if (g->bad_head < g->nbad) {
+        const double *q = &c->xy[2 * g->bad[g->bad_head].a];
+        x = q[0], y = q[1];
+      }
+      return qk__mesh_fail(g->err, QK_ERR_LIMIT, 0,
+                           "the refinement did not settle after %zu insertions (still working "
+                           "near (%.17g, %.17g))%s",
+                           g->insertions, x, y,
+                           g->bound_deg > 20.7
+                               ? "; a minimum angle above 20.7 degrees has no termination proof"
+                               : "");
+    }
+    if (g->nenc) {
+      g->nenc--;
+      uint32_t a = g->enc[3 * g->nenc], b = g->enc[3 * g->nenc + 1], s = g->enc[3 * g->nenc + 2];
+      if (!still_encroached(g, a, b)) continue;
+      if ((st = qk__gm_split(g, a, b, s)) || (st = check_dirty(g))) break;
+      continue;
+    }
+    if (g->bad_head == g->nbad) break;
+    qk__gm_tq_t q = g->bad[g->bad_head++];
+    const uint32_t *tv = &c->v[3 * q.t];
+    if (tv[0] != q.a || tv[1] != q.b || tv[2] != q.c || !qk__gm_is_bad(g, q.t)) continue;
+    if ((st = split_triangle(g, q.t))) break;
+  }
+  if (st == QK_ERR_NOMEM) return qk__mesh_fail(g->err, st, 0, "out of memory");
+  return st;
+}

@@ -1,0 +1,343 @@
+/*
+ * The general mode, steps 4 to 6 (docs/mesh.md, "The general mode"): a quadtree graded
+ * by the input's features, its seeds, and the segments' pre-split points, inserted into
+ * the CDT in Z-order so that every walk starts next to its target.
+ *
+ * The tree lives in lattice coordinates, the root square being [0, 1]^2: input point
+ * (x, y) is (x - X0, y - Y0) 2^-e there. The feature tests convert the squares back to input
+ * coordinates (the same conversion for a square's sides and its corners, so a seed lies in
+ * the closed box it was tested with).
+ */
+#include "mesh/general_mesh.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* Deepest subdivision: beyond it, the refinement alone separates features. */
+#define GM_DEPTH_CAP 50
+/* Most tree nodes the grading may make (a size bound asking for more is refused). */
+#define GM_NODE_CAP ((uint32_t)1 << 27)
+
+/* Lattice to input coordinates; multiplying by S = 2^e is exact (and cheaper than ldexp). */
+static double in_x(const qk__gm_t *g, double X) { return g->X0 + X * g->S; }
+static double in_y(const qk__gm_t *g, double Y) { return g->Y0 + Y * g->S; }
+
+/* The size bound near a point set: max_size, and size_fn at each sample (+inf: none). */
+static double size_at(const qk__gm_t *g, const double *xy, int n) {
+  double h = g->opt->max_size > 0 ? g->opt->max_size : INFINITY;
+  if (g->opt->size_fn)
+    for (int i = 0; i < n; i++) {
+      double v = g->opt->size_fn(xy[2 * i], xy[2 * i + 1], g->opt->size_user);
+      if (v > 0 && v < h) h = v;
+    }
+  return h;
+}
+
+/* Do features f and h (vertex ids below nv, then nv + segment ids) need separating in the
+ * closed box [lo, hi]? Two vertices always do; a vertex and a segment unless the vertex is
+ * an endpoint; two segments unless they share an endpoint that lies in the box (near their
+ * shared vertex the concentric shells of the refinement grade them instead). */
+static int separate(const qk__gm_t *g, uint32_t f, uint32_t h, const double lo[2],
+                    const double hi[2]) {
+  const qk_poly_t *P = g->P;
+  uint32_t nv = (uint32_t)P->nv;
+  if (f < nv && h < nv) return 1;
+  if (f < nv || h < nv) {
+    uint32_t v = f < nv ? f : h, s = (f < nv ? h : f) - nv;
+    return P->seg[2 * s] != v && P->seg[2 * s + 1] != v;
+  }
+  const uint32_t *a = &P->seg[2 * (f - nv)], *b = &P->seg[2 * (h - nv)];
+  for (int i = 0; i < 2; i++)
+    for (int j = 0; j < 2; j++)
+      if (a[i] == b[j]) {
+        double x = P->vx[a[i]], y = P->vy[a[i]];
+        return !(x >= lo[0] && x <= hi[0] && y >= lo[1] && y <= hi[1]);
+      }
+  return 1;
+}
+
+/* Whether the closed segment ab meets the closed box, exactly: qk__seg_meets_box with the
+ * orientation filter inlined (the subdivision's hot test), the exact predicate only when
+ * the estimate's error bound (as in qk__orient2d) leaves a corner's side open. */
+static int seg_box(const double a[2], const double b[2], const double lo[2], const double hi[2]) {
+  for (int i = 0; i < 2; i++) /* (not fmin/fmax: library calls in this hot loop) */
+    if ((a[i] > b[i] ? a[i] : b[i]) < lo[i] || (a[i] < b[i] ? a[i] : b[i]) > hi[i]) return 0;
+  const double c[4][2] = {{lo[0], lo[1]}, {hi[0], lo[1]}, {hi[0], hi[1]}, {lo[0], hi[1]}};
+  double dx = b[0] - a[0], dy = b[1] - a[1];
+  int pos = 0, neg = 0;
+  for (int k = 0; k < 4; k++) {
+    double l = dx * (c[k][1] - a[1]), r = dy * (c[k][0] - a[0]), det = l - r;
+    double bound = (fabs(l) + fabs(r)) * 0x1p-50;
+    int o = det > bound ? 1 : -det > bound ? -1 : qk__orient2d(a, b, c[k]);
+    pos += o > 0, neg += o < 0;
+  }
+  return pos < 4 && neg < 4;
+}
+
+static int meets(const qk__gm_t *g, uint32_t f, const double lo[2], const double hi[2]) {
+  const qk_poly_t *P = g->P;
+  if (f < P->nv) {
+    double x = P->vx[f], y = P->vy[f];
+    return x >= lo[0] && x <= hi[0] && y >= lo[1] && y <= hi[1];
+  }
+  uint32_t s = f - (uint32_t)P->nv, u = P->seg[2 * s], w = P->seg[2 * s + 1];
+  const double a[2] = {P->vx[u], P->vy[u]}, b[2] = {P->vx[w], P->vy[w]};
+  return seg_box(a, b, lo, hi);
+}
+
+static qk_status_t mark_free(qk__gm_t *g, uint32_t node) {
+  if (node >= g->free_cap) {
+    size_t old = g->free_cap;
+    void *p = g->free_node;
+    if (qk__grow(g->a, &p, &g->free_cap, (size_t)node + 1, 1)) return QK_ERR_NOMEM;
+    g->free_node = p;
+    memset(g->free_node + old, 0, g->free_cap - old);
+  }
+  g->free_node[node] = 1;
+  return QK_OK;
+}
+
+/* The grown square, the leaf grown by a quarter of its side all round, in input
+ * coordinates. (Growing by a whole side, as BEG's neighbourhoods do, made three times the
+ * leaves on coastlines and twice the triangles for the same angle bound, and 10% more
+ * instructions per triangle: the refinement places the last points near features more
+ * cheaply than a finer tree.) */
+static void grown_box(const qk__gm_t *g, double X, double Y, double s, double lo[2], double hi[2]) {
+  lo[0] = in_x(g, X - s / 4), lo[1] = in_y(g, Y - s / 4);
+  hi[0] = in_x(g, X + 1.25 * s), hi[1] = in_y(g, Y + 1.25 * s);
+}
+
+/* Step 4: split a leaf while its grown square meets two features that need separating, or
+ * while it is larger than the size bound there (inside the input's bounding box). The k
+ * features at g->arena[off..] meet this node's grown square; children filter them. */
+static qk_status_t subdivide(qk__gm_t *g, uint32_t node, double X, double Y, double s,
+                             unsigned depth, size_t off, size_t k) {
+  double lo[2], hi[2];
+  grown_box(g, X, Y, s, lo, hi);
+  int split = 0;
+  if (depth < GM_DEPTH_CAP) {
+    const uint32_t *L = g->arena + off;
+    if (k > 48) split = 1;
+    for (size_t i = 0; i < k && !split; i++)
+      for (size_t j = i + 1; j < k && !split; j++) split = separate(g, L[i], L[j], lo, hi);
+    if (!split && (g->opt->max_size > 0 || g->opt->size_fn)) {
+      double x0 = in_x(g, X), y0 = in_y(g, Y), x1 = in_x(g, X + s), y1 = in_y(g, Y + s);
+      if (x1 >= g->bx0 && x0 <= g->bx1 && y1 >= g->by0 && y0 <= g->by1) {
+        const double smp[10] = {x0, y0, x1, y0, x1, y1, x0, y1, (x0 + x1) / 2, (y0 + y1) / 2};
+        split = x1 - x0 > size_at(g, smp, 5);
+      }
+    }
+  }
+  if (!split) return k == 0 ? mark_free(g, node) : QK_OK;
+  if (qk__tree_node_bound(g->tree) > GM_NODE_CAP)
+    return qk__mesh_fail(g->err, QK_ERR_LIMIT, 0,
+                         "the size bound asks for more than 2^27 quadtree cells");
+  qk_status_t st = qk_tree_split_leaf(g->tree, node);
+  if (st) return qk__mesh_fail(g->err, st, 0, "%s while grading the quadtree", qk_strerror(st));
+  uint32_t child = qk__node_child(g->tree, node);
+  double h = s / 2;
+  for (unsigned q = 0; q < 4; q++) {
+    double cx = X + (qk__q_east(q) ? h : 0), cy = Y + (qk__q_north(q) ? h : 0);
+    void *ap = g->arena;
+    if (qk__grow(g->a, &ap, &g->arena_cap, g->arena_n + k + 1, sizeof *g->arena))
+      return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+    g->arena = ap;
+    grown_box(g, cx, cy, h, lo, hi);
+    size_t base = g->arena_n, n = 0;
+    for (size_t i = 0; i < k; i++) {
+      uint32_t f = g->arena[off + i];
+      if (meets(g, f, lo, hi)) g->arena[base + n++] = f;
+    }
+    g->arena_n = base + n;
+    st = subdivide(g, child + q, cx, cy, h, depth + 1, base, n);
+    g->arena_n = base;
+    if (st) return st;
+  }
+  return QK_OK;
+}
+
+/* Spread the low 32 bits of v to the even bit positions. */
+static uint64_t spread32(uint64_t v) {
+  v &= 0xFFFFFFFFu;
+  v = (v | (v << 16)) & 0x0000FFFF0000FFFFull;
+  v = (v | (v << 8)) & 0x00FF00FF00FF00FFull;
+  v = (v | (v << 4)) & 0x0F0F0F0F0F0F0F0Full;
+  v = (v | (v << 2)) & 0x3333333333333333ull;
+  v = (v | (v << 1)) & 0x5555555555555555ull;
+  return v;
+}
+
+/* Morton key of lattice point (X, Y) in [0, 1]^2, 32 bits an axis. */
+static uint64_t morton_lat(double X, double Y) {
+  X *= 0x1p32, Y *= 0x1p32;
+  uint64_t ix = X <= 0 ? 0 : X >= 4294967295.0 ? 4294967295u : (uint64_t)X;
+  uint64_t iy = Y <= 0 ? 0 : Y >= 4294967295.0 ? 4294967295u : (uint64_t)Y;
+  return spread32(ix) | spread32(iy) << 1;
+}
+
+uint64_t qk__gm_morton(const qk__gm_t *g, double x, double y) {
+  return morton_lat((x - g->X0) * g->inv_S, (y - g->Y0) * g->inv_S);
+}
+
+static qk_status_t add_pt(qk__gm_t *g, uint64_t key, double x, double y, uint32_t seg, uint64_t k) {
+  void *p = g->pts;
+  if (qk__grow(g->a, &p, &g->pts_cap, g->npts + 1, sizeof *g->pts)) return QK_ERR_NOMEM;
+  g->pts = p;
+  g->pts[g->npts++] = (qk__gm_pt_t){key, x, y, k, seg};
+  return QK_OK;
+}
+
+/* Step 5: the corners and centres of the free leaves (whose grown squares meet no
+ * feature) that meet the input's bounding box, in the tree's order. */
+static qk_status_t seeds(qk__gm_t *g, uint32_t node, double X, double Y, double s, int fr) {
+  fr |= node < g->free_cap && g->free_node[node];
+  uint32_t child = qk__node_child(g->tree, node);
+  if (child == QK_NONE) {
+    if (!fr) return QK_OK;
+    double x0 = in_x(g, X), y0 = in_y(g, Y), x1 = in_x(g, X + s), y1 = in_y(g, Y + s);
+    if (x1 < g->bx0 || x0 > g->bx1 || y1 < g->by0 || y0 > g->by1) return QK_OK;
+    const double c[10] = {x0, y0, x1, y0, x0, y1, x1, y1, in_x(g, X + s / 2), in_y(g, Y + s / 2)};
+    const double L[10] = {X, Y, X + s, Y, X, Y + s, X + s, Y + s, X + s / 2, Y + s / 2};
+    /* The centre moves by a pattern of up to s/256 (any double is a valid seed): a grid's
+     * points are cocircular and collinear everywhere, which sends in-circle and orientation
+     * tests to their exact, slow path, and every Delaunay triangle here has a centre as a
+     * corner. Corners stay put, so that leaves sharing one emit it alike. */
+    for (int i = 0; i < 5; i++) {
+      uint64_t key = morton_lat(L[2 * i], L[2 * i + 1]);
+      double x = c[2 * i], y = c[2 * i + 1];
+      if (i == 4) {
+        uint64_t h = key * 0x9E3779B97F4A7C15ull;
+        double j = (x1 - x0) / 128;
+        x += j * ((double)(h >> 61) / 7 - 0.5), y += j * ((double)((h >> 58) & 7) / 7 - 0.5);
+      }
+      if (add_pt(g, key, x, y, QK__CDT_NONE, 0)) return QK_ERR_NOMEM;
+    }
+    return QK_OK;
+  }
+  double h = s / 2;
+  for (unsigned q = 0; q < 4; q++) {
+    qk_status_t st =
+        seeds(g, child + q, X + (qk__q_east(q) ? h : 0), Y + (qk__q_north(q) ? h : 0), h, fr);
+    if (st) return st;
+  }
+  return QK_OK;
+}
+
+/* Choose an exact split parameter strictly inside (lo, hi) of segment s: concentric shells
+ * next to an input vertex, the midpoint otherwise (general_refine.c). */
+int qk__gm_split_param(const qk__gm_t *g, uint32_t s, uint64_t lo, uint64_t hi, uint64_t *k);
+
+/* Step 6: split segment s's piece (lo, hi) while it is longer than the leaf at its middle
+ * (or the size bound there). A piece with no exact split point is left to the refinement,
+ * which refuses the input only if it must split it. */
+static qk_status_t presplit(qk__gm_t *g, uint32_t s, const double *A, const double *B, double len,
+                            uint64_t lo, uint64_t hi) {
+  double t = (double)(lo / 2 + hi / 2) * 0x1p-62;
+  double mid[2] = {A[0] + t * (B[0] - A[0]), A[1] + t * (B[1] - A[1])};
+  double X = (mid[0] - g->X0) * g->inv_S, Y = (mid[1] - g->Y0) * g->inv_S;
+  X = X < 0 ? 0 : X > 1 ? 1 : X, Y = Y < 0 ? 0 : Y > 1 ? 1 : Y;
+  qk_square_t sq;
+  qk__tree_descend(g->tree, X, Y, &sq, NULL);
+  double want = fmin(sq.side * g->S, size_at(g, mid, 1));
+  if (!(len * ((double)(hi - lo) * 0x1p-62) > want)) return QK_OK;
+  uint64_t k;
+  if (!qk__gm_split_param(g, s, lo, hi, &k)) return QK_OK;
+  int tz = 0;
+  while (tz < 62 && !((k >> tz) & 1)) tz++;
+  double p[2];
+  if (qk__seg_point(A, B, k >> tz, 62 - tz, p)) return QK_OK;
+  qk_status_t st = presplit(g, s, A, B, len, lo, k);
+  if (!st) st = add_pt(g, qk__gm_morton(g, p[0], p[1]), p[0], p[1], s, k);
+  if (!st) st = presplit(g, s, A, B, len, k, hi);
+  return st;
+}
+
+/* Sort the points by Morton key: least significant digit first, 11 bits a pass, passes
+ * whose digit is the same for every key skipped; stable. */
+qk_status_t qk__gm_sort_points(const qk__gm_t *g, qk__gm_pt_t *pts, size_t n) {
+  qk__gm_pt_t *tmp = qk__realloc(g->a, NULL, 0, (n + 1) * sizeof *tmp), *src = pts, *dst = tmp;
+  if (!tmp) return QK_ERR_NOMEM;
+  size_t cnt[2048];
+  /* Bits below 20 order points within 2^-22 of the square's side: irrelevant to walks. */
+  for (int shift = 20; shift < 64; shift += 11) {
+    memset(cnt, 0, sizeof cnt);
+    for (size_t i = 0; i < n; i++) cnt[(src[i].key >> shift) & 2047]++;
+    if (cnt[(src[0].key >> shift) & 2047] == n) continue;
+    size_t sum = 0;
+    for (int d = 0; d < 2048; d++) {
+      size_t c = cnt[d];
+      cnt[d] = sum, sum += c;
+    }
+    for (size_t i = 0; i < n; i++) dst[cnt[(src[i].key >> shift) & 2047]++] = src[i];
+    qk__gm_pt_t *t = src;
+    src = dst, dst = t;
+  }
+  if (src != pts) memcpy(pts, src, n * sizeof *src);
+  qk__free(g->a, tmp, (n + 1) * sizeof *tmp);
+  return QK_OK;
+}
+
+/* Insert the seeds and split points in Z-order, each walk starting at the last vertex.
+ * Seeds in dropped faces (outside, holes) are skipped. */
+static qk_status_t insert_points(qk__gm_t *g) {
+  qk__cdt_t *c = &g->cdt;
+  uint32_t hint = QK__CDT_NONE;
+  for (size_t i = 0; i < g->npts; i++) {
+    const qk__gm_pt_t *q = &g->pts[i];
+    uint32_t t, v;
+    int k, existed;
+    /* Leaves share corners: a repeated seed follows its twin (equal keys stay in order). */
+    if (q->seg == QK__CDT_NONE && i && q->key == q[-1].key && q->x == q[-1].x && q->y == q[-1].y)
+      continue;
+    qk__cdt_where_t w = qk__cdt_locate(c, q->x, q->y, hint, &t, &k);
+    hint = t;
+    if (q->seg == QK__CDT_NONE) {
+      if (w == QK__CDT_VERT || g->faces[g->face[t]].drop ||
+          (w == QK__CDT_EDGE && c->seg[3 * t + k] != QK__CDT_NONE))
+        continue;
+      g->seeds++;
+    }
+    qk_status_t st = qk__gm_insert(g, q->x, q->y, t, k, w, q->seg, q->k, &v, &existed);
+    if (st) return qk__mesh_fail(g->err, st, 0, "out of memory");
+    hint = c->vtri[v];
+  }
+  return QK_OK;
+}
+
+qk_status_t qk__gm_seed(qk__gm_t *g, qk_mesh_stats_t *stats) {
+  const qk_poly_t *P = g->P;
+  g->inv_S = ldexp(1.0, -g->e);
+  qk_tree_options_t to;
+  qk_tree_options_init(&to);
+  to.has_root = 1;
+  to.root = (qk_square_t){0, 0, 1};
+  to.capacity = 1;
+  to.allocator = g->a;
+  to.max_depth = QK_MAX_DEPTH_LIMIT;
+  qk_status_t st = qk_tree_build(NULL, 0, &to, &g->tree);
+  if (st) return qk__mesh_fail(g->err, st, 0, "%s while building the tree", qk_strerror(st));
+  size_t nf = P->nv + P->ns;
+  void *ap = g->arena;
+  if (qk__grow(g->a, &ap, &g->arena_cap, nf + 1, sizeof *g->arena))
+    return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  g->arena = ap;
+  for (size_t i = 0; i < nf; i++) g->arena[i] = (uint32_t)i;
+  g->arena_n = nf;
+  if ((st = subdivide(g, qk_tree_root(g->tree), 0, 0, 1, 0, 0, nf))) return st;
+  qk_tree_leaves(g->tree, NULL, 0, &stats->leaves_before_balance);
+  if ((st = qk_tree_balance(g->tree)))
+    return qk__mesh_fail(g->err, st, 0, "%s while balancing", qk_strerror(st));
+  qk_tree_leaves(g->tree, NULL, 0, &stats->leaves);
+  if (seeds(g, qk_tree_root(g->tree), 0, 0, 1, 0))
+    return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  for (size_t s = 0; s < P->ns; s++) {
+    uint32_t u = P->seg[2 * s], w = P->seg[2 * s + 1];
+    const double A[2] = {P->vx[u], P->vy[u]}, B[2] = {P->vx[w], P->vy[w]};
+    if (presplit(g, (uint32_t)s, A, B, hypot(B[0] - A[0], B[1] - A[1]), 0, QK__GM_ONE))
+      return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  }
+  if (g->npts && qk__gm_sort_points(g, g->pts, g->npts))
+    return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  return insert_points(g);
+}
