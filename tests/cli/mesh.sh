@@ -39,7 +39,7 @@ expect 0 '"components": 1' -- sh -c "\"$cli\" mesh - -o \"$tmp/s\" --stats < \"$
 
 # Bad input: file:line: reason, exit 1, nothing written.
 printf '4 2 0 0\n0 0 0\n1 3 0\n2 2 2\n3 0 2\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n' >"$tmp/angle.poly"
-expect 1 'angle.poly:8: segment 1 .* is not at 0, 45, 90 or 135 degrees' -- "$cli" mesh "$tmp/angle.poly" -o "$tmp/bad" --svg "$tmp/bad.svg"
+expect 1 'angle.poly:8: segment 1 .* is not at 0, 45, 90 or 135 degrees' -- "$cli" mesh "$tmp/angle.poly" --book -o "$tmp/bad" --svg "$tmp/bad.svg"
 ls "$tmp"/bad* >/dev/null 2>&1 && { echo "FAIL: output written for bad input"; fails=$((fails + 1)); }
 printf '4 2 0 0\n0 0 0\n1 2.5 0\n2 2 2\n3 0 2\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n' >"$tmp/frac.poly"
 expect 1 'frac.poly:3: vertex 1: coordinates .* are not integers' -- "$cli" mesh "$tmp/frac.poly" --book -o "$tmp/bad"

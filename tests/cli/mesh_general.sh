@@ -49,7 +49,7 @@ ls "$tmp"/bad* >/dev/null 2>&1 && fail "output written for bad input"
 
 shared=${QK_SHARED_DIR:-$src/../shared}
 if [ -f "$shared/data/countries-50m.geojson" ]; then
-  expect 0 '"mode": "general", .*"input": \{"format": "geojson", "features": 1, "name": "Iceland", "projection": "equirect", "lat0_deg": 6[45]\.[0-9]*, .*"round": 0.0625, "rounded_coordinates": [1-9]' -- \
+  expect 0 '"input": \{"format": "geojson", "features": 1, "name": "Iceland", "projection": "equirect", "lat0_deg": 6[45]\.[0-9]*, .*"round": 0.0625, "rounded_coordinates": [1-9][0-9]*\}, "mode": "general"' -- \
     "$cli" mesh "$shared/data/countries-50m.geojson" --field name=Iceland --project equirect --round 2^-4 -o "$tmp/ice" --svg "$tmp/ice.svg" --stats
 fi
 report
