@@ -136,6 +136,43 @@ bool cgal_mesh(double U, const std::vector<Ring> &rings, double max_edge, MeshRe
   return true;
 }
 
+bool cgal_mesh_pslg(const Pslg &in, double max_edge, MeshResult &out) {
+  using K = CGAL::Exact_predicates_inexact_constructions_kernel;
+  using Vb = CGAL::Triangulation_vertex_base_2<K>;
+  using Fb = CGAL::Delaunay_mesh_face_base_2<K>;
+  using Tds = CGAL::Triangulation_data_structure_2<Vb, Fb>;
+  using CDT = CGAL::Constrained_Delaunay_triangulation_2<K, Tds>;
+  using Criteria = CGAL::Delaunay_mesh_size_criteria_2<CDT>;
+  double t0 = now_seconds();
+  CDT cdt;
+  std::vector<CDT::Vertex_handle> vh(in.xy.size() / 2);
+  for (size_t i = 0; i < vh.size(); i++)
+    vh[i] = cdt.insert(K::Point_2(in.xy[2 * i], in.xy[2 * i + 1]));
+  for (size_t s = 0; s < in.seg.size() / 2; s++)
+    cdt.insert_constraint(vh[in.seg[2 * s]], vh[in.seg[2 * s + 1]]);
+  std::vector<K::Point_2> seeds;
+  for (size_t h = 0; h < in.holes.size() / 2; h++)
+    seeds.emplace_back(in.holes[2 * h], in.holes[2 * h + 1]);
+  // 0.125 bounds (sin of the smallest angle)^2: about 20.7 degrees, CGAL's guarantee.
+  CGAL::refine_Delaunay_mesh_2(cdt, seeds.begin(), seeds.end(), Criteria(0.125, max_edge), false);
+  out.seconds = now_seconds() - t0;
+  std::vector<double> xy;
+  std::vector<uint32_t> tri;
+  std::map<CDT::Vertex_handle, uint32_t> id;
+  for (auto v = cdt.finite_vertices_begin(); v != cdt.finite_vertices_end(); ++v) {
+    id[v] = (uint32_t)(xy.size() / 2);
+    xy.push_back(v->point().x());
+    xy.push_back(v->point().y());
+  }
+  for (auto f = cdt.finite_faces_begin(); f != cdt.finite_faces_end(); ++f) {
+    if (!f->is_in_domain()) continue;
+    for (int i = 0; i < 3; i++) tri.push_back(id[f->vertex(i)]);
+  }
+  out.triangles = tri.size() / 3;
+  out.min_angle_deg = min_angle_of(xy, tri);
+  return true;
+}
+
 } // namespace qkb
 
 #else
@@ -143,5 +180,6 @@ namespace qkb {
 size_t cgal_orthtree_build_leaves(const std::vector<Pt> &, int, int) { return 0; }
 bool cgal_grade(const std::vector<Pt> &, int, int, BalanceResult &) { return false; }
 bool cgal_mesh(double, const std::vector<Ring> &, double, MeshResult &) { return false; }
+bool cgal_mesh_pslg(const Pslg &, double, MeshResult &) { return false; }
 } // namespace qkb
 #endif

@@ -99,6 +99,25 @@ using Ring = std::vector<Pt>;
 bool cgal_mesh(double U, const std::vector<Ring> &rings, double max_edge, MeshResult &out);
 bool gmsh_mesh(double U, const std::vector<Ring> &rings, double max_edge, MeshResult &out);
 
+// The general mode's inputs: a planar straight-line graph (vertices, segments, hole
+// points) whose segments form closed rings (outer rings with sign +1, holes -1), as the
+// coastlines and the random polygons of --op mesh are. The domain is the inside of the
+// outer rings minus the holes.
+struct Pslg {
+  std::vector<double> xy;
+  std::vector<uint32_t> seg;
+  std::vector<double> holes;
+  std::vector<std::vector<uint32_t>> rings;
+  std::vector<int> ring_sign;
+};
+// CGAL Mesh_2: constrained Delaunay triangulation of the segments, refined with
+// Delaunay_mesh_size_criteria_2(0.125, max_edge), the hole points as seeds of the
+// regions left out.
+bool cgal_mesh_pslg(const Pslg &in, double max_edge, MeshResult &out);
+// gmsh: one plane surface per outer ring with its holes, 2D Delaunay (algorithm 5),
+// Mesh.MeshSizeMax = max_edge.
+bool gmsh_mesh_pslg(const Pslg &in, double max_edge, MeshResult &out);
+
 // Geodesic kNN (GeographicLib NearestNeighbor over Geodesic::WGS84 distances).
 struct GeoIndex;
 GeoIndex *geo_build(const std::vector<Pt> &lonlat);
@@ -129,7 +148,6 @@ bool have(const char *what);
 
 double now_seconds();
 double min_angle_of(const std::vector<double> &xy, const std::vector<uint32_t> &tri);
-
 
 // Polygon layers for `--op region` (base_region.cpp): rings as read from GeoJSON, the
 // first ring of each polygon a shell, the others its holes.

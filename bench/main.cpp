@@ -8,6 +8,9 @@
 #include "bench.h"
 #include "data.h"
 #include "quadkit_side.h"
+extern "C" {
+#include "tools/mesh_geojson.h"
+}
 
 #include "quadkit/region.h"
 
@@ -858,6 +861,168 @@ void run_mesh_dyadic(unsigned U) {
   }
 }
 
+// ---- the general mode: coastlines and random polygons ---------------------------------
+
+// A country from countries-50m.geojson as the CLI and tests make it: projected
+// equirectangularly at its mean latitude (metres), rounded to 1/16 m.
+static bool coast_pslg(const std::string &name, Pslg &out, std::string *why) {
+  const char *shared = getenv("QK_SHARED_DIR");
+  std::string path =
+      (shared && *shared ? std::string(shared) + "/data" : std::string(QKB_DATA_DIR)) +
+      "/countries-50m.geojson";
+  mg_options_t o = {-1, "name", name.c_str(), 1, 1.0 / 16};
+  mg_input_t in;
+  char msg[512];
+  if (mg_read(path.c_str(), &o, &in, msg, sizeof msg)) {
+    *why = msg;
+    return false;
+  }
+  out.xy.assign(in.xy, in.xy + 2 * in.nv);
+  out.seg.assign(in.seg, in.seg + 2 * in.ns);
+  out.holes.assign(in.holes, in.holes + 2 * in.nh);
+  for (size_t r = 0; r < in.nr; r++) {
+    out.rings.emplace_back(in.ring_v + in.ring_start[r], in.ring_v + in.ring_start[r + 1]);
+    out.ring_sign.push_back(in.ring_sign[r]);
+  }
+  mg_free(&in);
+  return true;
+}
+
+// A random polygon with holes: a star-shaped outer ring of n jittered corners (radius
+// 0.8 to 1) around the origin and star-shaped holes in the cells of a grid inside the
+// disk of radius 0.7 (disjoint by construction), all on the grid 2^-20.
+static Pslg random_pslg(size_t n, uint64_t seed) {
+  Pslg g;
+  uint64_t s = seed * 0x9E3779B97F4A7C15ull + 1;
+  auto rnd = [&]() {
+    s ^= s << 13, s ^= s >> 7, s ^= s << 17;
+    return (double)(s >> 11) * 0x1p-53;
+  };
+  auto snap = [](double v) { return std::nearbyint(std::ldexp(v, 20)) * 0x1p-20; };
+  const double pi = 3.14159265358979323846;
+  auto star = [&](double cx, double cy, double R, size_t k, int sign) {
+    std::vector<uint32_t> ring;
+    for (size_t i = 0; i < k; i++) {
+      double th = 2 * pi * (i + 0.8 * rnd()) / k, rho = R * (0.8 + 0.2 * rnd());
+      ring.push_back((uint32_t)(g.xy.size() / 2));
+      g.xy.push_back(snap(cx + rho * std::cos(th)));
+      g.xy.push_back(snap(cy + rho * std::sin(th)));
+    }
+    for (size_t i = 0; i < k; i++) g.seg.push_back(ring[i]), g.seg.push_back(ring[(i + 1) % k]);
+    g.rings.push_back(ring), g.ring_sign.push_back(sign);
+  };
+  star(0, 0, 1, n, 1);
+  const int cells = 6;
+  const double w = 1.4 / cells;
+  for (int i = 0; i < cells; i++)
+    for (int j = 0; j < cells; j++) {
+      double cx = -0.7 + (i + 0.5) * w, cy = -0.7 + (j + 0.5) * w;
+      if (cx * cx + cy * cy > 0.6 * 0.6 || rnd() < 0.5) continue;
+      star(cx, cy, 0.3 * w, 5 + (size_t)(8 * rnd()), -1);
+      g.holes.push_back(snap(cx)), g.holes.push_back(snap(cy));
+    }
+  return g;
+}
+
+// One input, one size bound, the three meshers: triangles/s, smallest angle, triangle
+// count, and quadkit's ratios to the others.
+static void mesh_general_case(const std::string &dataset, const Pslg &in, double max_edge,
+                              size_t n) {
+  progress("mesh general %s n=%zu", dataset.c_str(), n);
+  struct Side {
+    std::string name;
+    std::function<bool(MeshResult &)> run;
+    std::vector<double> t;
+    MeshResult last;
+    bool ok = true;
+  };
+  std::string err;
+  size_t exempt = 0;
+  std::vector<Side> sides;
+  sides.push_back({"quadkit", [&](MeshResult &o) {
+                     return quadkit_mesh_general(in, max_edge, o, &err, &exempt);
+                   }});
+  if (have("cgal"))
+    sides.push_back({"cgal", [&](MeshResult &o) { return cgal_mesh_pslg(in, max_edge, o); }});
+  if (have("gmsh"))
+    sides.push_back({"gmsh", [&](MeshResult &o) { return gmsh_mesh_pslg(in, max_edge, o); }});
+  for (auto &sd : sides) {
+    // gmsh meshes at tens of thousands of triangles/s: skip it where CGAL's mesh is big.
+    if (sd.name == "gmsh" && sides.size() > 1 && sides[1].name == "cgal" &&
+        sides[1].last.triangles > 400000) {
+      sd.ok = false;
+      continue;
+    }
+    sd.ok = sd.run(sd.last) && sd.last.triangles > 0;
+  }
+  int reps = opt.quick ? 1 : std::max(3, opt.reps);
+  for (int r = 0; r < reps; r++)
+    for (size_t j = 0; j < sides.size(); j++) {
+      Side &sd = sides[(j + r) % sides.size()];
+      if (!sd.ok) continue;
+      MeshResult o;
+      sd.run(o);
+      sd.t.push_back(o.seconds);
+    }
+  const Side &q = sides[0];
+  for (auto &sd : sides) {
+    Rec r;
+    r.op = "mesh", r.impl = sd.name, r.dataset = dataset, r.n = n, r.order = "-";
+    r.matches = sd.ok ? 1 : 0;
+    r.extra["triangles"] = (double)sd.last.triangles;
+    r.extra["min_angle_deg"] = sd.last.min_angle_deg;
+    r.extra["max_edge"] = max_edge;
+    if (sd.ok) {
+      r.seconds = median(sd.t);
+      r.per_second = sd.last.triangles / r.seconds;
+      r.note = "triangles/s; general mode input, same longest-edge bound";
+      if (sd.name == "quadkit") {
+        r.extra["exempt_angles"] = (double)exempt;
+      } else if (q.ok) {
+        // The ratios the targets are stated in, and a sanity check of the sizes.
+        double ratio_t = (double)q.last.triangles / sd.last.triangles;
+        r.extra["quadkit_speedup"] = (q.last.triangles / median(q.t)) / r.per_second;
+        r.extra["quadkit_triangle_ratio"] = ratio_t;
+        r.extra["quadkit_min_angle_minus_theirs"] = q.last.min_angle_deg - sd.last.min_angle_deg;
+        if (ratio_t < 0.2 || ratio_t > 5)
+          r.note += "; triangle counts differ by more than 5x: check the size bounds";
+      }
+    } else {
+      r.note = sd.name == "quadkit" ? "quadkit failed: " + err
+               : sd.name == "gmsh" && sd.last.triangles == 0 && sides.size() > 1 &&
+                       sides[1].last.triangles > 400000
+                   ? "skipped (too slow at this size)"
+                   : "mesher failed";
+    }
+    emit(r);
+  }
+}
+
+void run_mesh_general() {
+  // The size bound: the domain's extent divided by k, for a few k (--n sets one).
+  std::vector<double> ks = opt.quick ? std::vector<double>{32} : std::vector<double>{64, 256, 1024};
+  if (opt.n) ks = {(double)opt.n};
+  std::vector<std::pair<std::string, Pslg>> inputs;
+  for (const char *c : {"Iceland", "Norway", "South Africa"}) {
+    Pslg p;
+    std::string why;
+    if (coast_pslg(c, p, &why))
+      inputs.emplace_back(std::string("coast-") + c, std::move(p));
+    else
+      fprintf(stderr, "quadkit-bench: mesh coast-%s skipped: %s\n", c, why.c_str());
+  }
+  inputs.emplace_back("random-pslg", random_pslg(opt.quick ? 64 : 512, 7));
+  for (auto &in : inputs) {
+    double lo[2] = {INFINITY, INFINITY}, hi[2] = {-INFINITY, -INFINITY};
+    for (size_t i = 0; i < in.second.xy.size() / 2; i++)
+      for (int k = 0; k < 2; k++)
+        lo[k] = std::min(lo[k], in.second.xy[2 * i + k]),
+        hi[k] = std::max(hi[k], in.second.xy[2 * i + k]);
+    double extent = std::max(hi[0] - lo[0], hi[1] - lo[1]);
+    for (double k : ks) mesh_general_case(in.first, in.second, extent / k, (size_t)k);
+  }
+}
+
 void run_geo(size_t cap) {
   std::string why;
   std::vector<Pt> pts = make_dataset("cities", cap, &why);
@@ -1359,6 +1524,7 @@ int main(int argc, char **argv) {
     if (opt.n) Us = {(unsigned)opt.n};
     for (unsigned U : Us) run_mesh(U);
     for (unsigned U : Us) run_mesh_dyadic(U);
+    run_mesh_general();
   }
   if (want_op("geo-knn")) run_geo(opt.n ? opt.n : opt.quick ? 20000 : 10000000);
   if (want_op("region")) run_region();

@@ -305,6 +305,35 @@ bool quadkit_mesh_dyadic(const std::vector<Ring> &rings, double max_edge, MeshRe
   return quadkit_mesh_opts(rings, o, out, err);
 }
 
+bool quadkit_mesh_general(const Pslg &in, double max_edge, MeshResult &out, std::string *err,
+                          size_t *exempt) {
+  qk_mesh_options_t o;
+  qk_mesh_options_init(&o);
+  o.mode = QK_MESH_GENERAL;
+  o.max_size = max_edge;
+  double t0 = now_seconds();
+  qk_poly_t *poly = nullptr;
+  qk_mesh_error_t e;
+  qk_status_t st =
+      qk_poly_from_arrays(in.xy.data(), in.xy.size() / 2, in.seg.data(), in.seg.size() / 2,
+                          in.holes.data(), in.holes.size() / 2, nullptr, &poly, &e);
+  qk_mesh_t *m = nullptr;
+  if (!st) st = qk_mesh_generate(poly, &o, &m, &e);
+  out.seconds = now_seconds() - t0;
+  qk_poly_free(poly);
+  if (st) {
+    if (err) *err = std::string(qk_strerror(st)) + ": " + e.message;
+    return false;
+  }
+  qk_mesh_stats_t s;
+  qk_mesh_stats(m, &s);
+  out.triangles = s.triangles;
+  out.min_angle_deg = s.min_angle_deg;
+  if (exempt) *exempt = s.exempt_angles;
+  qk_mesh_free(m);
+  return true;
+}
+
 struct QuadkitGeo {
   qk_geo_t *g;
 };

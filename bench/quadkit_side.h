@@ -43,6 +43,12 @@ bool quadkit_mesh(unsigned U, const std::vector<Ring> &rings, MeshResult &out, s
 bool quadkit_mesh_dyadic(const std::vector<Ring> &rings, double max_edge, MeshResult &out,
                          std::string *err);
 
+// The general mode (QK_MESH_GENERAL) with a longest-edge bound (0: none); the time
+// includes making the input from the arrays. The mesh's exempt angles (inside input
+// angles below 60 degrees) are counted in *exempt when not NULL.
+bool quadkit_mesh_general(const Pslg &in, double max_edge, MeshResult &out, std::string *err,
+                          size_t *exempt = nullptr);
+
 // Geodesic kNN through qk_geo_knn().
 struct QuadkitGeo;
 QuadkitGeo *quadkit_geo_build(const std::vector<Pt> &lonlat);

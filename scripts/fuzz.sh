@@ -20,7 +20,7 @@ seconds=${FUZZ_SECONDS:-60}
 cc=${FUZZ_CC:-clang}
 jobs_nice=${FUZZ_NICE:-15}
 
-all_targets=(tree_ops csv poly geojson)
+all_targets=(tree_ops csv poly geojson mesh_dyadic mesh_general)
 targets=("$@")
 [ ${#targets[@]} -eq 0 ] && targets=("${all_targets[@]}")
 
@@ -45,6 +45,8 @@ sources() {
     csv) echo "$src/fuzz/fuzz_csv.c" ;;
     poly) echo "$src/fuzz/fuzz_poly.c" ;;
     geojson) echo "$src/fuzz/fuzz_geojson.c" ;;
+    mesh_dyadic) echo "$src/fuzz/fuzz_mesh_dyadic.c" ;;
+    mesh_general) echo "$src/fuzz/fuzz_mesh_general.c" ;;
     *) echo "fuzz.sh: unknown target '$1' (have: ${all_targets[*]})" >&2; exit 2 ;;
   esac
 }
@@ -54,6 +56,8 @@ options() {
     csv) echo "-max_len=4096 -close_fd_mask=2 -dict=$src/fuzz/csv.dict" ;;
     poly) echo "-max_len=4096 -dict=$src/fuzz/poly.dict" ;;
     geojson) echo "-max_len=4096 -dict=$src/fuzz/geojson.dict" ;;
+    mesh_dyadic) echo "-max_len=2048 -dict=$src/fuzz/poly.dict" ;;
+    mesh_general) echo "-max_len=1024 -dict=$src/fuzz/poly.dict" ;;
   esac
 }
 

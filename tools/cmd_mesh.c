@@ -1,9 +1,13 @@
 /*
- * `quadkit mesh`: read a .poly file, mesh it, write Triangle/gmsh/VTK/SVG files. Only
- * argument handling lives here; parsing, meshing and the writers are the library's.
+ * `quadkit mesh`: read a .poly file or GeoJSON polygons, mesh them, write
+ * Triangle/gmsh/VTK/SVG files. Only argument handling and the input's preparation
+ * (projection, rounding: tools/mesh_geojson.c) live here; parsing, meshing and the
+ * writers are the library's.
  */
 #include "cli.h"
+#include "mesh_geojson.h"
 
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
@@ -15,25 +19,39 @@ static double now(void) {
 }
 
 static const char *usage_text =
-    "usage: quadkit mesh IN.poly -o PREFIX [--book | --dyadic] [--size U] [--max-size H]\n"
-    "                    [--min-angle DEG] [--poly FILE] [--svg FILE] [--msh FILE]\n"
-    "                    [--vtk FILE] [--stats]\n"
+    "usage: quadkit mesh IN.poly|IN.geojson -o PREFIX [--book | --dyadic | --general]\n"
+    "                    [--size U] [--max-size H] [--min-angle DEG] [--round 2^-q|Q]\n"
+    "                    [--project equirect] [--feature N | --field NAME=VALUE]\n"
+    "                    [--poly FILE] [--svg FILE] [--msh FILE] [--vtk FILE] [--stats]\n"
     "\n"
-    "Mesh polygons with edges at 0, 45, 90 or 135 degrees (Triangle's .poly format) with\n"
-    "the quadtree algorithm of de Berg et al., ch. 14: every angle is between 45 and 90\n"
-    "degrees (proven). Integer vertices use the book's mode over [0,U]^2; real (dyadic)\n"
-    "coordinates, or a size bound, use the same algorithm on the coarsest binary lattice\n"
-    "holding every vertex exactly (the dyadic mode). Input vertices come back bit-identical.\n"
+    "Mesh a planar straight-line graph: polygons with holes, internal segments, any angles\n"
+    "and real coordinates. Three modes, chosen automatically unless one is insisted on:\n"
+    "the book's quadtree mode (de Berg et al., ch. 14: integer vertices, edges at 0, 45, 90\n"
+    "or 135 degrees; every angle in [45, 90], proven), the dyadic-lattice mode (the same on\n"
+    "the coarsest binary lattice holding real coordinates), and the general mode (any\n"
+    "angles: quality Delaunay refinement seeded from a graded quadtree; every angle at least\n"
+    "20 degrees, proven, except inside input angles below 60 degrees). Input vertices come\n"
+    "back bit-identical; mesh vertices on input segments lie on them exactly.\n"
     "\n"
     "  -o PREFIX       write PREFIX.node (with boundary markers when the input has them)\n"
     "                  and PREFIX.ele (component id, then the regional attribute if any)\n"
     "  --book          insist on the book's mode (integer vertices in [0,U]^2)\n"
     "  --dyadic        insist on the dyadic-lattice mode\n"
+    "  --general       insist on the general mode\n"
     "  --size U        domain side for the book's mode, a power of two (default: the\n"
     "                  smallest power of two >= every coordinate)\n"
     "  --max-size H    longest triangle edge, in input units (guaranteed)\n"
-    "  --min-angle DEG the smallest angle wanted: accepted up to the proven 45 degrees;\n"
-    "                  prints the bound that applies on stderr\n"
+    "  --min-angle DEG the smallest angle wanted (general mode: 20 is the proven default,\n"
+    "                  up to 34 is tried without proof; other modes: at most 45); prints\n"
+    "                  the bound that applies on stderr\n"
+    "  --round G       round every input coordinate to the nearest multiple of G (2^-q or\n"
+    "                  a number) before anything else; --stats says how many changed\n"
+    "  --project equirect\n"
+    "                  GeoJSON lon/lat in degrees: project equirectangularly at the mean\n"
+    "                  latitude, in metres (use --round after it, e.g. --round 2^-4)\n"
+    "  --feature N     GeoJSON: mesh only polygon feature N (0-based; default: all)\n"
+    "  --field NAME=VALUE\n"
+    "                  GeoJSON: mesh the first feature whose property NAME is VALUE\n"
     "  --poly FILE     the mesh edges along input segments, with markers (.poly)\n"
     "  --svg FILE      picture of the components, quadtree leaves and triangles\n"
     "  --msh FILE      gmsh 4.1 ASCII mesh: a physical group per component and per marker\n"
@@ -41,7 +59,8 @@ static const char *usage_text =
     "                  marker\n"
     "  --stats         print figures as one JSON object on stdout (with the angle\n"
     "                  histogram in 1-degree bins)\n"
-    "  IN.poly may be '-' for standard input.\n"
+    "  IN may be '-' for a .poly on standard input; a name ending in .geojson or .json is\n"
+    "  read as GeoJSON (rings become closed chains, holes get hole points).\n"
     "\n"
     "Exit status: 0 ok, 1 bad input (FILE:LINE: reason on stderr; nothing written),\n"
     "2 usage error, 3 internal error or out of memory.\n";
@@ -79,12 +98,38 @@ static qk_status_t w_svg(const qk_mesh_t *m, FILE *f, unsigned a) {
 
 /* The command line. */
 typedef struct mesh_args {
-  const char *in, *prefix, *svg, *msh, *vtk, *poly;
+  const char *in, *prefix, *svg, *msh, *vtk, *poly, *round_text;
   unsigned long size;
-  double max_size, min_angle;
+  double max_size, min_angle, round;
   qk_mesh_mode_t mode;
-  int stats, help;
+  int stats, help, geojson, project;
+  long feature;
+  const char *field; /* NAME=VALUE (points into argv) */
+  const char *field_value;
 } mesh_args_t;
+
+/* --round G: "2^-q", "2^q" or a positive number. */
+static int parse_round(const char *cmd, const char *v, double *out) {
+  char *end;
+  double g;
+  if (!strncmp(v, "2^", 2)) {
+    long q = strtol(v + 2, &end, 10);
+    if (end == v + 2 || *end || q < -1000 || q > 1000) {
+      cli_error(cmd, "--round %s: expected 2^-q with an integer q, or a positive number", v);
+      return 1;
+    }
+    g = ldexp(1, (int)q);
+  } else {
+    g = strtod(v, &end);
+    if (end == v || *end) g = -1;
+  }
+  if (!(g > 0) || !isfinite(g) || g < 1e-300) {
+    cli_error(cmd, "--round %s: the grid step must be a positive number (e.g. 2^-4 or 0.5)", v);
+    return 1;
+  }
+  *out = g;
+  return 0;
+}
 
 /* Parse one option taking a value; returns CLI_OK or an exit code. */
 static int parse_value(const char *cmd, const char *a, const char *v, mesh_args_t *o) {
@@ -111,11 +156,36 @@ static int parse_value(const char *cmd, const char *a, const char *v, mesh_args_
     if (cli_parse_double(cmd, "--min-angle", v, &o->min_angle)) return CLI_USAGE;
     if (!(o->min_angle >= 0 && o->min_angle <= 45)) {
       cli_error(cmd,
-                "--min-angle %s: the proven bound is 45 degrees (every angle in [45, 90] in "
-                "both modes); nothing above it is promised",
+                "--min-angle %s: must be between 0 and 45 degrees (the book's and dyadic modes "
+                "prove 45; the general mode proves 20 and tries up to 34)",
                 v);
       return CLI_USAGE;
     }
+  }
+  if (!strcmp(a, "--round")) {
+    if (parse_round(cmd, v, &o->round)) return CLI_USAGE;
+    o->round_text = v;
+  }
+  if (!strcmp(a, "--project")) {
+    if (strcmp(v, "equirect")) {
+      cli_error(cmd, "--project %s: the one projection is 'equirect'", v);
+      return CLI_USAGE;
+    }
+    o->project = 1;
+  }
+  if (!strcmp(a, "--feature")) {
+    unsigned long f;
+    if (cli_parse_u32(cmd, "--feature", v, 0, 0xfffffffful, &f)) return CLI_USAGE;
+    o->feature = (long)f;
+  }
+  if (!strcmp(a, "--field")) {
+    const char *eq = strchr(v, '=');
+    if (!eq || eq == v) {
+      cli_error(cmd, "--field %s: expected NAME=VALUE", v);
+      return CLI_USAGE;
+    }
+    o->field = v;
+    o->field_value = eq + 1;
   }
   return CLI_OK;
 }
@@ -123,14 +193,16 @@ static int parse_value(const char *cmd, const char *a, const char *v, mesh_args_
 static int parse_args(const char *cmd, int argc, char **argv, mesh_args_t *o) {
   memset(o, 0, sizeof *o);
   o->min_angle = -1;
+  o->feature = -1;
   for (int i = 1; i < argc; i++) {
     const char *a = argv[i];
     if (!strcmp(a, "--help") || !strcmp(a, "-h")) {
       o->help = 1;
       return CLI_OK;
     }
-    static const char *valued[] = {"-o",     "--svg",  "--msh",      "--vtk",
-                                   "--poly", "--size", "--max-size", "--min-angle"};
+    static const char *valued[] = {"-o",      "--svg",     "--msh",      "--vtk",
+                                   "--poly",  "--size",    "--max-size", "--min-angle",
+                                   "--round", "--project", "--feature",  "--field"};
     int takes = 0;
     for (size_t k = 0; k < sizeof valued / sizeof *valued; k++) takes |= !strcmp(a, valued[k]);
     if (takes) {
@@ -142,9 +214,12 @@ static int parse_args(const char *cmd, int argc, char **argv, mesh_args_t *o) {
       if (rc) return rc;
     } else if (!strcmp(a, "--stats")) {
       o->stats = 1;
-    } else if (!strcmp(a, "--book") || !strcmp(a, "--dyadic")) {
-      qk_mesh_mode_t md = a[2] == 'b' ? QK_MESH_BOOK : QK_MESH_DYADIC;
-      if (o->mode && o->mode != md) return usage(cmd, "--book and --dyadic exclude each other");
+    } else if (!strcmp(a, "--book") || !strcmp(a, "--dyadic") || !strcmp(a, "--general")) {
+      qk_mesh_mode_t md = a[2] == 'b'   ? QK_MESH_BOOK
+                          : a[2] == 'd' ? QK_MESH_DYADIC
+                                        : QK_MESH_GENERAL;
+      if (o->mode && o->mode != md)
+        return usage(cmd, "--book, --dyadic and --general exclude each other");
       o->mode = md;
     } else if (a[0] == '-' && a[1]) {
       cli_error(cmd, "unknown option '%s'", a);
@@ -157,8 +232,14 @@ static int parse_args(const char *cmd, int argc, char **argv, mesh_args_t *o) {
   }
   if (!o->in) return usage(cmd, "no input file");
   if (!o->prefix) return usage(cmd, "-o PREFIX is required");
-  if (o->mode == QK_MESH_DYADIC && o->size)
-    return usage(cmd, "--size is the book's domain; the dyadic mode uses the input's extent");
+  if ((o->mode == QK_MESH_DYADIC || o->mode == QK_MESH_GENERAL) && o->size)
+    return usage(cmd, "--size is the book's domain; the other modes use the input's extent");
+  size_t len = strlen(o->in);
+  o->geojson = (len > 8 && !strcmp(o->in + len - 8, ".geojson")) ||
+               (len > 5 && !strcmp(o->in + len - 5, ".json"));
+  if (!o->geojson && (o->project || o->feature >= 0 || o->field))
+    return usage(cmd, "--project, --feature and --field apply to GeoJSON input");
+  if (o->feature >= 0 && o->field) return usage(cmd, "--feature and --field exclude each other");
   return CLI_OK;
 }
 
@@ -203,7 +284,29 @@ static int write_outputs(const char *cmd, const mesh_args_t *o, const qk_mesh_t 
   return rc;
 }
 
-static void print_stats(const qk_mesh_t *mesh, double t_read, double t_write) {
+/* What the input went through before meshing (for --stats and messages). */
+typedef struct prep {
+  const char *format;
+  size_t rounded, merged, dropped_rings, dup_segments, features;
+  double lat0;
+  char name[128];
+  mg_input_t gj; /* GeoJSON input (for naming segments in messages) */
+} prep_t;
+
+static const char *mode_name(qk_mesh_mode_t m) {
+  return m == QK_MESH_BOOK ? "book" : m == QK_MESH_DYADIC ? "dyadic" : "general";
+}
+
+/* A JSON string body: quotes and backslashes escaped, control characters dropped. */
+static void json_text(const char *s) {
+  for (; *s; s++) {
+    if (*s == '"' || *s == '\\') putchar('\\');
+    if ((unsigned char)*s >= 0x20) putchar(*s);
+  }
+}
+
+static void print_stats(const qk_mesh_t *mesh, const mesh_args_t *o, const prep_t *pp,
+                        double t_read, double t_write) {
   qk_mesh_stats_t s;
   qk_mesh_stats(mesh, &s);
   printf("{\"U\": %llu, \"components\": %zu, \"leaves_before_balance\": %zu, "
@@ -215,36 +318,143 @@ static void print_stats(const qk_mesh_t *mesh, double t_read, double t_write) {
          s.vertices, s.steiner, s.min_angle_deg, s.max_angle_deg, s.uniform_triangles, t_read,
          s.seconds_validate, s.seconds_subdivide, s.seconds_balance, s.seconds_triangulate,
          t_write);
+  printf("\"input\": {\"format\": \"%s\", ", pp->format);
+  if (pp->features) {
+    printf("\"features\": %zu, \"name\": \"", pp->features);
+    json_text(pp->name);
+    printf("\", \"projection\": \"%s\", ", o->project ? "equirect" : "none");
+    if (o->project) printf("\"lat0_deg\": %.10g, ", pp->lat0);
+    printf("\"merged_vertices\": %zu, \"dropped_rings\": %zu, \"duplicate_segments\": %zu, ",
+           pp->merged, pp->dropped_rings, pp->dup_segments);
+  }
+  printf("\"round\": %.17g, \"rounded_coordinates\": %zu}, ", o->round, pp->rounded);
   printf("\"mode\": \"%s\", \"lattice_exponent\": %d, \"origin\": [%.17g, %.17g], "
-         "\"proven_min_angle_deg\": %g, \"proven_max_angle_deg\": %g, \"angle_histogram\": [",
-         s.mode == QK_MESH_BOOK ? "book" : "dyadic", s.lattice_exponent, s.origin_x, s.origin_y,
-         s.proven_min_angle_deg, s.proven_max_angle_deg);
+         "\"proven_min_angle_deg\": %g, \"proven_max_angle_deg\": %g, ",
+         mode_name(s.mode), s.lattice_exponent, s.origin_x, s.origin_y, s.proven_min_angle_deg,
+         s.proven_max_angle_deg);
+  if (s.mode == QK_MESH_GENERAL)
+    printf("\"exempt_angles\": %zu, \"smallest_input_angle_deg\": %.10g, ", s.exempt_angles,
+           s.smallest_input_angle_deg);
+  printf("\"angle_histogram\": [");
   uint64_t bins[180];
   qk_mesh_angle_histogram(mesh, bins);
   for (int k = 0; k < 180; k++) printf("%s%llu", k ? ", " : "", (unsigned long long)bins[k]);
   printf("]}\n");
 }
 
-/* Read and mesh; on failure prints FILE:LINE: reason and returns an exit code. */
-static int make_mesh(const char *cmd, const mesh_args_t *o, qk_poly_t **poly, qk_mesh_t **mesh,
-                     double *t_read) {
+/* Which angle bound applies, on stderr (--min-angle). */
+static void report_bound(const qk_mesh_t *mesh, double asked) {
+  qk_mesh_stats_t s;
+  qk_mesh_stats(mesh, &s);
+  if (s.mode != QK_MESH_GENERAL) {
+    fprintf(stderr,
+            "quadkit mesh: %s mode: every angle in [%g, %g] degrees (proven; --min-angle %g "
+            "met everywhere, small input angles included: the input has none below 45)\n",
+            s.mode == QK_MESH_BOOK ? "book's" : "dyadic", s.proven_min_angle_deg,
+            s.proven_max_angle_deg, asked);
+    return;
+  }
+  if (s.proven_min_angle_deg > 0)
+    fprintf(stderr,
+            "quadkit mesh: general mode: every angle >= %g degrees (proven; --min-angle %g) "
+            "and <= %g degrees, except %zu angles inside input angles below 60 degrees (the "
+            "smallest input angle is %.6g degrees); smallest angle in this mesh %.6g\n",
+            s.proven_min_angle_deg, asked, s.proven_max_angle_deg, s.exempt_angles,
+            s.smallest_input_angle_deg, s.min_angle_deg);
+  else
+    fprintf(stderr,
+            "quadkit mesh: general mode: --min-angle %g is above the proven bound (20 "
+            "degrees): the refinement met it outside input angles below 60 degrees, but no "
+            "bound is proven; %zu exempt angles (smallest input angle %.6g degrees); "
+            "smallest angle in this mesh %.6g\n",
+            asked, s.exempt_angles, s.smallest_input_angle_deg, s.min_angle_deg);
+}
+
+/* Round a .poly input read from a file: rebuilt from its vertices, segments and holes. */
+static qk_status_t round_poly(qk_poly_t **poly, double g, prep_t *pp, qk_mesh_error_t *err) {
+  size_t nv, ns, nh;
+  qk_poly_counts(*poly, &nv, &ns, &nh);
+  double *xy = malloc((2 * nv + 2) * sizeof *xy), *holes = malloc((2 * nh + 2) * sizeof *holes);
+  uint32_t *seg = malloc((2 * ns + 2) * sizeof *seg);
+  qk_status_t st = QK_ERR_NOMEM;
+  if (xy && holes && seg) {
+    size_t n;
+    qk_poly_vertices(*poly, xy, nv, &n);
+    qk_poly_segments(*poly, seg, ns, &n);
+    qk_poly_holes(*poly, holes, nh, &n);
+    for (size_t i = 0; i < 2 * nv; i++) {
+      double v = nearbyint(xy[i] / g) * g;
+      pp->rounded += v != xy[i];
+      xy[i] = v;
+    }
+    qk_poly_t *out = NULL;
+    st = qk_poly_from_arrays(xy, nv, seg, ns, holes, nh, NULL, &out, err);
+    if (st == QK_OK) qk_poly_free(*poly), *poly = out;
+  }
+  free(xy), free(holes), free(seg);
+  return st;
+}
+
+/* Append to a mesher's message what its "segment N" is in the GeoJSON input. */
+static void name_segment(const prep_t *pp, const char *msg, char *buf, size_t n) {
+  const char *at = strstr(msg, "segment ");
+  char where[96] = "";
+  if (at && pp->gj.ns) {
+    char *end;
+    unsigned long s = strtoul(at + 8, &end, 10);
+    if (end != at + 8 && s < pp->gj.ns) mg_describe_segment(&pp->gj, s, where, sizeof where);
+  }
+  if (where[0])
+    snprintf(buf, n, "%s (input segment %s)", msg, where);
+  else
+    snprintf(buf, n, "%s", msg);
+}
+
+/* Read (and prepare) the input; on failure prints why and returns an exit code. */
+static int read_input(const char *cmd, const mesh_args_t *o, qk_poly_t **poly, prep_t *pp) {
+  qk_mesh_error_t err;
+  memset(&err, 0, sizeof err);
+  if (o->geojson) {
+    char name[256] = "", msg[512];
+    mg_options_t mo = {o->feature, NULL, NULL, o->project, o->round};
+    if (o->field) {
+      size_t k = (size_t)(o->field_value - 1 - o->field);
+      snprintf(name, sizeof name, "%.*s", (int)(k < sizeof name ? k : sizeof name - 1), o->field);
+      mo.field_name = name, mo.field_value = o->field_value;
+    }
+    int rc = mg_read(o->in, &mo, &pp->gj, msg, sizeof msg);
+    if (rc) {
+      cli_error(cmd, "%s", msg);
+      return rc == 3 ? CLI_INTERNAL : CLI_BAD_INPUT;
+    }
+    pp->format = "geojson";
+    pp->rounded = pp->gj.rounded, pp->merged = pp->gj.merged;
+    pp->dropped_rings = pp->gj.dropped_rings, pp->dup_segments = pp->gj.dup_segments;
+    pp->features = pp->gj.features, pp->lat0 = pp->gj.lat0;
+    snprintf(pp->name, sizeof pp->name, "%s", pp->gj.name);
+    qk_status_t st = qk_poly_from_arrays(pp->gj.xy, pp->gj.nv, pp->gj.seg, pp->gj.ns, pp->gj.holes,
+                                         pp->gj.nh, NULL, poly, &err);
+    if (st != QK_OK) {
+      cli_error(cmd, "%s: %s", o->in, err.message[0] ? err.message : qk_strerror(st));
+      return st == QK_ERR_NOMEM ? CLI_INTERNAL : CLI_BAD_INPUT;
+    }
+    return CLI_OK;
+  }
+  pp->format = "poly";
   FILE *f = strcmp(o->in, "-") ? fopen(o->in, "rb") : stdin;
   if (!f) {
     cli_error(cmd, "cannot open %s", o->in);
     return CLI_BAD_INPUT;
   }
-  qk_mesh_error_t err;
-  *t_read = now();
   qk_status_t st = qk_poly_read(f, NULL, poly, &err);
-  *t_read = now() - *t_read;
   if (f != stdin) fclose(f);
-  if (st == QK_OK) {
-    qk_mesh_options_t opt;
-    qk_mesh_options_init(&opt);
-    opt.size = o->size;
-    opt.mode = o->mode;
-    opt.max_size = o->max_size;
-    st = qk_mesh_generate(*poly, &opt, mesh, &err);
+  if (st == QK_OK && o->round > 0) {
+    st = round_poly(poly, o->round, pp, &err);
+    fprintf(stderr,
+            "quadkit mesh: --round %s: %zu coordinates of %s moved to the grid; the input is "
+            "rebuilt from its vertices, segments and holes (boundary markers and regional "
+            "attributes of the file are not carried)\n",
+            o->round_text, pp->rounded, o->in);
   }
   if (st == QK_OK) return CLI_OK;
   const char *name = strcmp(o->in, "-") ? o->in : "<stdin>";
@@ -252,6 +462,35 @@ static int make_mesh(const char *cmd, const mesh_args_t *o, qk_poly_t **poly, qk
     cli_error(cmd, "%s:%lu: %s", name, err.line, err.message);
   else
     cli_error(cmd, "%s: %s", name, err.message[0] ? err.message : qk_strerror(st));
+  return (st == QK_ERR_NOMEM || st == QK_ERR_IO) ? CLI_INTERNAL : CLI_BAD_INPUT;
+}
+
+/* Read and mesh; on failure prints FILE:LINE: reason and returns an exit code. */
+static int make_mesh(const char *cmd, const mesh_args_t *o, qk_poly_t **poly, qk_mesh_t **mesh,
+                     prep_t *pp, double *t_read) {
+  *t_read = now();
+  int rc = read_input(cmd, o, poly, pp);
+  *t_read = now() - *t_read;
+  if (rc) return rc;
+  qk_mesh_error_t err;
+  memset(&err, 0, sizeof err);
+  qk_mesh_options_t opt;
+  qk_mesh_options_init(&opt);
+  opt.size = o->size;
+  opt.mode = o->mode;
+  opt.max_size = o->max_size;
+  if (o->min_angle >= 0) opt.min_angle_deg = o->min_angle;
+  qk_status_t st = qk_mesh_generate(*poly, &opt, mesh, &err);
+  if (st == QK_OK) return CLI_OK;
+  const char *name = strcmp(o->in, "-") ? o->in : "<stdin>";
+  char msg[600];
+  name_segment(pp, err.message[0] ? err.message : qk_strerror(st), msg, sizeof msg);
+  if (err.line)
+    cli_error(cmd, "%s:%lu: %s", name, err.line, msg);
+  else if (pp->features == 1 && pp->name[0])
+    cli_error(cmd, "%s: feature %s: %s", name, pp->name, msg);
+  else
+    cli_error(cmd, "%s: %s", name, msg);
   if (st == QK_ERR_INVALID) return CLI_USAGE;
   return (st == QK_ERR_NOMEM || st == QK_ERR_IO) ? CLI_INTERNAL : CLI_BAD_INPUT;
 }
@@ -267,24 +506,19 @@ int cmd_mesh(int argc, char **argv) {
   }
   qk_poly_t *poly = NULL;
   qk_mesh_t *mesh = NULL;
+  prep_t pp;
+  memset(&pp, 0, sizeof pp);
   double t_read = 0;
-  rc = make_mesh(cmd, &o, &poly, &mesh, &t_read);
+  rc = make_mesh(cmd, &o, &poly, &mesh, &pp, &t_read);
   if (rc == CLI_OK) {
     double t_write = now();
     rc = write_outputs(cmd, &o, mesh, qk_poly_first_index(poly));
     t_write = now() - t_write;
-    if (rc == CLI_OK && o.min_angle >= 0) {
-      qk_mesh_stats_t s;
-      qk_mesh_stats(mesh, &s);
-      fprintf(stderr,
-              "quadkit mesh: %s mode: every angle in [%g, %g] degrees (proven; --min-angle %g "
-              "met everywhere, small input angles included: the input has none below 45)\n",
-              s.mode == QK_MESH_BOOK ? "book's" : "dyadic", s.proven_min_angle_deg,
-              s.proven_max_angle_deg, o.min_angle);
-    }
-    if (rc == CLI_OK && o.stats) print_stats(mesh, t_read, t_write);
+    if (rc == CLI_OK && o.min_angle >= 0) report_bound(mesh, o.min_angle);
+    if (rc == CLI_OK && o.stats) print_stats(mesh, &o, &pp, t_read, t_write);
   }
   qk_mesh_free(mesh);
   qk_poly_free(poly);
+  mg_free(&pp.gj);
   return rc;
 }

@@ -1,0 +1,440 @@
+/* GeoJSON polygons as a mesh input; see mesh_geojson.h. */
+#include "mesh_geojson.h"
+
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "quadkit/quadkit.h"
+
+#ifdef QK_HAVE_JSONC
+#include <json-c/json.h>
+#endif
+
+#define MG_PI 3.14159265358979323846
+#define MG_EARTH_M 6371008.8 /* mean Earth radius (IUGG), metres */
+
+static int mg_fail(char *msg, size_t n, int rc, const char *fmt, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 4, 5)))
+#endif
+    ;
+static int mg_fail(char *msg, size_t n, int rc, const char *fmt, ...) {
+  va_list ap;
+  va_start(ap, fmt);
+  vsnprintf(msg, n, fmt, ap);
+  va_end(ap);
+  return rc;
+}
+
+void mg_free(mg_input_t *in) {
+  free(in->xy), free(in->seg), free(in->holes), free(in->ring_v), free(in->ring_start);
+  free(in->ring_sign), free(in->seg_feature), free(in->seg_ring), free(in->seg_point);
+  memset(in, 0, sizeof *in);
+}
+
+void mg_describe_segment(const mg_input_t *in, size_t s, char *buf, size_t n) {
+  if (s >= in->ns || !in->seg_feature) {
+    snprintf(buf, n, "segment %zu", s);
+    return;
+  }
+  snprintf(buf, n, "feature %u ring %u point %u", in->seg_feature[s], in->seg_ring[s],
+           in->seg_point[s]);
+}
+
+#ifndef QK_HAVE_JSONC
+int mg_read(const char *path, const mg_options_t *o, mg_input_t *out, char *msg, size_t n) {
+  (void)o;
+  memset(out, 0, sizeof *out);
+  return mg_fail(msg, n, 1, "%s: GeoJSON input needs json-c (install libjson-c-dev)", path);
+}
+#else
+
+/* A growing array of rings in input coordinates: points, ring starts, the feature and
+ * ring number of each ring, and whether it is a hole. */
+typedef struct rings {
+  double *xy;
+  size_t np, cap_p;
+  size_t *start; /* nr + 1 */
+  uint32_t *feat, *num;
+  int *hole;
+  size_t nr, cap_r;
+} rings_t;
+
+static int grow(void **p, size_t *cap, size_t need, size_t elem) {
+  if (need <= *cap) return 0;
+  size_t nc = *cap ? *cap : 16;
+  while (nc < need) nc *= 2;
+  void *q = realloc(*p, nc * elem);
+  if (!q) return 1;
+  *p = q;
+  *cap = nc;
+  return 0;
+}
+
+/* Append the rings of one GeoJSON polygon (an array of rings) of feature f. */
+static int add_polygon(rings_t *r, json_object *poly, uint32_t f, uint32_t *ring_no) {
+  size_t nring = json_object_array_length(poly);
+  for (size_t k = 0; k < nring; k++) {
+    json_object *ring = json_object_array_get_idx(poly, k);
+    size_t np = json_object_array_length(ring);
+    if (np > 1) np--; /* the closing point (the region reader checked it) */
+    if (grow((void **)&r->xy, &r->cap_p, 2 * (r->np + np), sizeof *r->xy)) return 3;
+    if (r->nr + 2 > r->cap_r) {
+      size_t nc = r->cap_r ? 2 * r->cap_r : 16;
+      void *a = realloc(r->start, nc * sizeof *r->start), *b, *c, *d;
+      if (!a) return 3;
+      r->start = a;
+      if (!(b = realloc(r->feat, nc * sizeof *r->feat))) return 3;
+      r->feat = b;
+      if (!(c = realloc(r->num, nc * sizeof *r->num))) return 3;
+      r->num = c;
+      if (!(d = realloc(r->hole, nc * sizeof *r->hole))) return 3;
+      r->hole = d;
+      if (!r->cap_r) r->start[0] = 0;
+      r->cap_r = nc;
+    }
+    for (size_t i = 0; i < np; i++) {
+      json_object *pt = json_object_array_get_idx(ring, i);
+      r->xy[2 * r->np] = json_object_get_double(json_object_array_get_idx(pt, 0));
+      r->xy[2 * r->np + 1] = json_object_get_double(json_object_array_get_idx(pt, 1));
+      r->np++;
+    }
+    r->feat[r->nr] = f, r->num[r->nr] = (*ring_no)++, r->hole[r->nr] = k > 0;
+    r->start[++r->nr] = r->np;
+  }
+  return 0;
+}
+
+/* The polygon geometry of a Feature (or bare geometry), or NULL. */
+static json_object *polygon_geometry(json_object *obj, int *multi) {
+  json_object *t = NULL, *geom = obj, *c = NULL;
+  if (json_object_object_get_ex(obj, "type", &t) && !strcmp(json_object_get_string(t), "Feature"))
+    if (!json_object_object_get_ex(obj, "geometry", &geom)) return NULL;
+  if (!geom || !json_object_object_get_ex(geom, "type", &t)) return NULL;
+  const char *ty = json_object_get_string(t);
+  *multi = !strcmp(ty, "MultiPolygon");
+  if (!*multi && strcmp(ty, "Polygon")) return NULL;
+  if (!json_object_object_get_ex(geom, "coordinates", &c) || !json_object_array_length(c))
+    return NULL;
+  return c;
+}
+
+/* Gather the rings of the features wanted (want[f] nonzero), numbering features as the
+ * region reader does (polygon features with at least one ring, in input order). */
+static int gather(json_object *root, const unsigned char *want, size_t nf, rings_t *r,
+                  size_t *seen) {
+  json_object *t = NULL, *feats = NULL;
+  size_t n = 1;
+  int collection = json_object_object_get_ex(root, "type", &t) &&
+                   !strcmp(json_object_get_string(t), "FeatureCollection") &&
+                   json_object_object_get_ex(root, "features", &feats);
+  if (collection) n = json_object_array_length(feats);
+  size_t f = 0;
+  for (size_t i = 0; i < n; i++) {
+    json_object *obj = collection ? json_object_array_get_idx(feats, i) : root;
+    int multi = 0;
+    json_object *c = polygon_geometry(obj, &multi);
+    if (!c) continue;
+    if (f < nf && want[f]) {
+      uint32_t ring_no = 0;
+      if (multi) {
+        for (size_t k = 0, m = json_object_array_length(c); k < m; k++)
+          if (add_polygon(r, json_object_array_get_idx(c, k), (uint32_t)f, &ring_no)) return 3;
+      } else if (add_polygon(r, c, (uint32_t)f, &ring_no)) {
+        return 3;
+      }
+    }
+    f++;
+  }
+  *seen = f;
+  return 0;
+}
+
+/* Vertex keys for merging coincident points: the bits of x and y, then the point. */
+typedef struct vkey {
+  double x, y;
+  size_t i;
+} vkey_t;
+
+static int cmp_vkey(const void *pa, const void *pb) {
+  const vkey_t *a = pa, *b = pb;
+  if (a->x != b->x) return a->x < b->x ? -1 : 1;
+  if (a->y != b->y) return a->y < b->y ? -1 : 1;
+  return (a->i > b->i) - (a->i < b->i);
+}
+
+typedef struct skey {
+  uint64_t key;
+  size_t i;
+} skey_t;
+
+static int cmp_skey(const void *pa, const void *pb) {
+  const skey_t *a = pa, *b = pb;
+  if (a->key != b->key) return a->key < b->key ? -1 : 1;
+  return (a->i > b->i) - (a->i < b->i);
+}
+
+/* Project and round in place; counts rounded coordinates. */
+static void transform(rings_t *r, const mg_options_t *o, mg_input_t *out) {
+  if (o->project && r->np) {
+    double lo = r->xy[0], hi = r->xy[0], lat = 0;
+    for (size_t i = 0; i < r->np; i++) {
+      lo = fmin(lo, r->xy[2 * i]), hi = fmax(hi, r->xy[2 * i]);
+      lat += r->xy[2 * i + 1];
+    }
+    out->lat0 = lat / (double)r->np;
+    double k = cos(out->lat0 * MG_PI / 180) * MG_EARTH_M * MG_PI / 180;
+    for (size_t i = 0; i < r->np; i++) {
+      double lon = r->xy[2 * i];
+      if (hi - lo > 180 && lon < 0) lon += 360; /* across the antimeridian: keep it whole */
+      r->xy[2 * i] = lon * k;
+      r->xy[2 * i + 1] = r->xy[2 * i + 1] * MG_EARTH_M * MG_PI / 180;
+    }
+  }
+  if (o->round > 0)
+    for (size_t i = 0; i < 2 * r->np; i++) {
+      double v = nearbyint(r->xy[i] / o->round) * o->round;
+      out->rounded += v != r->xy[i];
+      r->xy[i] = v;
+    }
+}
+
+/* Merge coincident points into vertices, make the segments and the ring records. */
+static int build(const rings_t *r, mg_input_t *out) {
+  vkey_t *k = malloc((r->np + 1) * sizeof *k);
+  size_t *vid = malloc((r->np + 1) * sizeof *vid);
+  out->xy = malloc((2 * r->np + 2) * sizeof *out->xy);
+  out->seg = malloc((2 * r->np + 2) * sizeof *out->seg);
+  out->seg_feature = malloc((r->np + 1) * sizeof *out->seg_feature);
+  out->seg_ring = malloc((r->np + 1) * sizeof *out->seg_ring);
+  out->seg_point = malloc((r->np + 1) * sizeof *out->seg_point);
+  out->ring_v = malloc((r->np + 1) * sizeof *out->ring_v);
+  out->ring_start = malloc((r->nr + 1) * sizeof *out->ring_start);
+  out->ring_sign = malloc((r->nr + 1) * sizeof *out->ring_sign);
+  int rc = 0;
+  if (!k || !vid || !out->xy || !out->seg || !out->seg_feature || !out->seg_ring ||
+      !out->seg_point || !out->ring_v || !out->ring_start || !out->ring_sign)
+    rc = 3;
+  if (!rc) {
+    for (size_t i = 0; i < r->np; i++) k[i] = (vkey_t){r->xy[2 * i], r->xy[2 * i + 1], i};
+    qsort(k, r->np, sizeof *k, cmp_vkey);
+    for (size_t i = 0; i < r->np; i++) {
+      if (i && k[i].x == k[i - 1].x && k[i].y == k[i - 1].y) {
+        vid[k[i].i] = out->nv - 1, out->merged++;
+        continue;
+      }
+      out->xy[2 * out->nv] = k[i].x, out->xy[2 * out->nv + 1] = k[i].y;
+      vid[k[i].i] = out->nv++;
+    }
+    /* Vertex numbers in input order of first appearance make messages easier to follow,
+     * but sorted order is what was built; keep it (the .node output numbers them). */
+    out->ring_start[0] = 0;
+    for (size_t q = 0; q < r->nr; q++) {
+      size_t s0 = r->start[q], s1 = r->start[q + 1], at = out->ring_start[out->nr], m = 0;
+      /* The ring's distinct consecutive vertices. */
+      for (size_t i = s0; i < s1; i++) {
+        uint32_t v = (uint32_t)vid[i];
+        if (m && out->ring_v[at + m - 1] == v) continue;
+        out->ring_v[at + m++] = v;
+      }
+      while (m > 1 && out->ring_v[at] == out->ring_v[at + m - 1]) m--;
+      if (m < 3) {
+        out->dropped_rings++;
+        continue;
+      }
+      for (size_t i = 0; i < m; i++) {
+        uint32_t a = out->ring_v[at + i], b = out->ring_v[at + (i + 1) % m];
+        out->seg[2 * out->ns] = a, out->seg[2 * out->ns + 1] = b;
+        out->seg_feature[out->ns] = r->feat[q], out->seg_ring[out->ns] = r->num[q];
+        out->seg_point[out->ns] = (uint32_t)i;
+        out->ns++;
+      }
+      out->ring_sign[out->nr] = r->hole[q] ? -1 : 1;
+      out->ring_start[++out->nr] = at + m;
+    }
+    /* A segment given twice (rings sharing an edge) is kept once: the first copy. */
+    skey_t *sk = malloc((out->ns + 1) * sizeof *sk);
+    unsigned char *dup = calloc(out->ns + 1, 1);
+    if (!sk || !dup) {
+      free(sk), free(dup);
+      rc = 3;
+    }
+    size_t w = 0;
+    if (!rc) {
+      for (size_t s = 0; s < out->ns; s++) {
+        uint32_t a = out->seg[2 * s], b = out->seg[2 * s + 1];
+        sk[s].key = a < b ? (uint64_t)a << 32 | b : (uint64_t)b << 32 | a, sk[s].i = s;
+      }
+      qsort(sk, out->ns, sizeof *sk, cmp_skey);
+      for (size_t s = 1; s < out->ns; s++)
+        if (sk[s].key == sk[s - 1].key) dup[sk[s].i] = 1;
+      for (size_t s = 0; s < out->ns; s++) {
+        if (dup[s]) {
+          out->dup_segments++;
+          continue;
+        }
+        out->seg[2 * w] = out->seg[2 * s], out->seg[2 * w + 1] = out->seg[2 * s + 1];
+        out->seg_feature[w] = out->seg_feature[s], out->seg_ring[w] = out->seg_ring[s];
+        out->seg_point[w] = out->seg_point[s];
+        w++;
+      }
+      free(sk), free(dup);
+    }
+    if (!rc) out->ns = w;
+  }
+  free(k), free(vid);
+  return rc;
+}
+
+/* A hole point for every hole ring: near the middle of one of its edges, on the inner
+ * side, strictly inside the hole ring and outside the domain (even-odd over every ring,
+ * boundaries included), both decided exactly by planar region layers. */
+static int hole_points(mg_input_t *in, const char *path, char *msg, size_t n) {
+  size_t nh = 0;
+  for (size_t q = 0; q < in->nr; q++) nh += in->ring_sign[q] < 0;
+  if (!nh) return 0;
+  in->holes = malloc(2 * nh * sizeof *in->holes);
+  size_t total = in->ring_start[in->nr] + in->nr;
+  double *xy = malloc(2 * total * sizeof *xy);
+  size_t *rs = malloc((in->nr + 1) * sizeof *rs), fs_all[2] = {0, in->nr};
+  size_t *fs_holes = malloc((in->nr + 1) * sizeof *fs_holes);
+  if (!in->holes || !xy || !rs || !fs_holes) {
+    free(xy), free(rs), free(fs_holes);
+    return mg_fail(msg, n, 3, "out of memory");
+  }
+  /* Every ring closed, as region layers want. */
+  size_t at = 0;
+  for (size_t q = 0; q < in->nr; q++) {
+    rs[q] = at;
+    for (size_t i = in->ring_start[q]; i <= in->ring_start[q + 1]; i++) {
+      uint32_t v = in->ring_v[i < in->ring_start[q + 1] ? i : in->ring_start[q]];
+      xy[2 * at] = in->xy[2 * v], xy[2 * at + 1] = in->xy[2 * v + 1], at++;
+    }
+  }
+  rs[in->nr] = at;
+  qk_region_options_t ro;
+  qk_region_options_init(&ro);
+  ro.planar = 1;
+  qk_region_arrays_t all = {xy, rs, in->nr, fs_all, 1};
+  for (size_t q = 0; q <= in->nr; q++) fs_holes[q] = q; /* one feature per ring */
+  qk_region_arrays_t each = {xy, rs, in->nr, fs_holes, in->nr};
+  qk_region_t *l_all = NULL, *l_each = NULL;
+  qk_error_t err;
+  int rc = 0;
+  if (qk_region_from_arrays(&all, &ro, &l_all, &err) != QK_OK ||
+      qk_region_from_arrays(&each, &ro, &l_each, &err) != QK_OK)
+    rc = mg_fail(msg, n, 1, "%s: the rings do not make a polygon layer: %s", path, err.message);
+  for (size_t q = 0; !rc && q < in->nr; q++) {
+    if (in->ring_sign[q] > 0) continue;
+    int found = 0;
+    size_t m = in->ring_start[q + 1] - in->ring_start[q];
+    for (size_t e = 0; e < m && !found && !rc; e++) {
+      const double *a = &xy[2 * (rs[q] + e)], *b = &xy[2 * (rs[q] + e + 1)];
+      double mx = a[0] + (b[0] - a[0]) / 2, my = a[1] + (b[1] - a[1]) / 2;
+      double nx = -(b[1] - a[1]), ny = b[0] - a[0];
+      static const double step[] = {1e-3, -1e-3, 1e-2, -1e-2, 0.1, -0.1, 0.3, -0.3};
+      for (int k = 0; k < 8 && !found; k++) {
+        qk_point_t p = {mx + step[k] * nx, my + step[k] * ny};
+        uint32_t f_all = 0;
+        size_t cnt = 0;
+        /* outside the domain, boundaries included ... */
+        if (qk_region_locate(l_all, p, QK_BOUNDARY_CLOSED, &f_all) != QK_OK || f_all != QK_NONE)
+          continue;
+        /* ... and strictly inside its own hole ring (open boundary) */
+        qk_region_locate_all(l_each, p, QK_BOUNDARY_OPEN, NULL, 0, &cnt);
+        uint32_t *list = malloc((cnt + 1) * sizeof *list);
+        if (!list) {
+          rc = mg_fail(msg, n, 3, "out of memory");
+          break;
+        }
+        qk_region_locate_all(l_each, p, QK_BOUNDARY_OPEN, list, cnt, &cnt);
+        for (size_t i = 0; i < cnt; i++) found |= list[i] == q;
+        free(list);
+        if (found) in->holes[2 * in->nh] = p.x, in->holes[2 * in->nh + 1] = p.y, in->nh++;
+      }
+    }
+    if (!found && !rc) {
+      size_t v = in->ring_v[in->ring_start[q]];
+      rc = mg_fail(msg, n, 1,
+                   "%s: no point found strictly inside the hole ring through (%.17g, %.17g)", path,
+                   in->xy[2 * v], in->xy[2 * v + 1]);
+    }
+  }
+  qk_region_free(l_all), qk_region_free(l_each);
+  free(xy), free(rs), free(fs_holes);
+  return rc;
+}
+
+int mg_read(const char *path, const mg_options_t *o, mg_input_t *out, char *msg, size_t n) {
+  memset(out, 0, sizeof *out);
+  qk_region_t *layer = NULL;
+  qk_error_t err;
+  qk_region_options_t ro;
+  qk_region_options_init(&ro);
+  ro.planar = !o->project; /* lon/lat is checked as such only when it is projected here */
+  qk_status_t st = qk_region_read_geojson(path, &ro, &layer, &err);
+  if (st != QK_OK) {
+    int rc = st == QK_ERR_NOMEM ? 3 : 1;
+    if (err.line)
+      return mg_fail(msg, n, rc, "%s:%lu:%lu: %s", path, err.line, err.column, err.message);
+    return mg_fail(msg, n, rc, "%s: %s", path, err.message[0] ? err.message : qk_strerror(st));
+  }
+  size_t nf = qk_region_feature_count(layer);
+  unsigned char *want = calloc(nf + 1, 1);
+  int rc = want ? 0 : 3;
+  if (rc) mg_fail(msg, n, 3, "out of memory");
+  long pick = o->feature;
+  if (!rc && o->field_name) {
+    pick = -1;
+    for (size_t f = 0; f < nf && pick < 0; f++) {
+      const char *v = qk_region_property(layer, (uint32_t)f, o->field_name);
+      if (v && !strcmp(v, o->field_value)) pick = (long)f;
+    }
+    if (pick < 0)
+      rc = mg_fail(msg, n, 1, "%s: no feature has %s=%s (of %zu polygon features)", path,
+                   o->field_name, o->field_value, nf);
+  }
+  if (!rc && pick >= (long)nf)
+    rc =
+        mg_fail(msg, n, 1, "%s: feature %ld does not exist (%zu polygon features)", path, pick, nf);
+  if (!rc && nf == 0) rc = mg_fail(msg, n, 1, "%s: no Polygon or MultiPolygon features", path);
+  if (!rc) {
+    for (size_t f = 0; f < nf; f++) want[f] = pick < 0 || (long)f == pick;
+    out->features = pick < 0 ? nf : 1;
+    const char *nm = NULL;
+    if (pick >= 0) {
+      static const char *names[] = {"NAME", "name", "ADMIN", "admin"};
+      for (int i = 0; i < 4 && !nm; i++) nm = qk_region_property(layer, (uint32_t)pick, names[i]);
+    }
+    snprintf(out->name, sizeof out->name, "%s", nm ? nm : "");
+  }
+  qk_region_free(layer);
+  rings_t r;
+  memset(&r, 0, sizeof r);
+  json_object *root = NULL;
+  if (!rc) {
+    root = json_object_from_file(path);
+    if (!root) rc = mg_fail(msg, n, 1, "%s: cannot read the file again", path);
+  }
+  size_t seen = 0;
+  if (!rc && gather(root, want, nf, &r, &seen)) rc = mg_fail(msg, n, 3, "out of memory");
+  if (!rc && seen != nf)
+    rc = mg_fail(msg, n, 3, "%s: %zu polygon features here, %zu for the region reader", path, seen,
+                 nf);
+  json_object_put(root);
+  free(want);
+  if (!rc) {
+    out->points = r.np;
+    transform(&r, o, out);
+    if (build(&r, out)) rc = mg_fail(msg, n, 3, "out of memory");
+  }
+  if (!rc && out->ns == 0) rc = mg_fail(msg, n, 1, "%s: no ring with 3 distinct points", path);
+  if (!rc) rc = hole_points(out, path, msg, n);
+  free(r.xy), free(r.start), free(r.feat), free(r.num), free(r.hole);
+  if (rc) mg_free(out);
+  return rc;
+}
+#endif

@@ -1,0 +1,65 @@
+/*
+ * GeoJSON polygons as a mesh input (tools/mesh_geojson.c), shared by `quadkit mesh`, the
+ * mesh tests and the benchmark. The file is read and checked by the region reader
+ * (include/quadkit/region.h: line and column for malformed JSON, feature numbers, the
+ * properties used to pick a feature); the chosen features' rings become closed chains
+ * of segments for qk_poly_from_arrays(). Coordinates may be projected (equirectangular
+ * at the mean latitude, in metres) and rounded to a grid; vertices that coincide after
+ * that become one vertex, repeated segments one segment, and rings that collapse are
+ * dropped — all counted, never silent. Every hole ring gets a hole point strictly inside
+ * it and outside every other ring, checked exactly with the region layer's point
+ * location.
+ */
+#ifndef QUADKIT_TOOLS_MESH_GEOJSON_H
+#define QUADKIT_TOOLS_MESH_GEOJSON_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+/* What to read. */
+typedef struct mg_options {
+  long feature;           /* the feature number (0-based, polygon features), or -1 */
+  const char *field_name; /* with field_value: the first feature whose property matches */
+  const char *field_value;
+  int project;  /* nonzero: equirectangular projection at the mean latitude, metres */
+  double round; /* grid step to round every coordinate to (0: none) */
+} mg_options_t;
+
+/* The input for qk_poly_from_arrays, and what happened on the way. */
+typedef struct mg_input {
+  double *xy;
+  size_t nv;
+  uint32_t *seg;
+  size_t ns;
+  double *holes;
+  size_t nh;
+  /* Rings as vertex chains (for exact area checks): ring r is ring_v[ring_start[r] ..
+   * ring_start[r+1]), sign +1 for an outer ring, -1 for a hole. */
+  uint32_t *ring_v;
+  size_t *ring_start;
+  int *ring_sign;
+  size_t nr;
+  /* Per segment: the feature, ring (within the feature) and point it starts from. */
+  uint32_t *seg_feature, *seg_ring, *seg_point;
+  size_t features;      /* features read */
+  size_t points;        /* ring points read (closing points not counted) */
+  size_t rounded;       /* coordinates changed by rounding */
+  size_t merged;        /* ring points that became an existing vertex */
+  size_t dropped_rings; /* rings with fewer than 3 distinct points left */
+  size_t dup_segments;  /* segments given twice */
+  double lat0;          /* the projection's latitude (degrees) */
+  char name[128];       /* the feature's name (NAME / name / ADMIN), or "" */
+} mg_input_t;
+
+/*
+ * Read path. Returns 0, or 1 (bad input) / 3 (out of memory, internal) with a message
+ * naming the file, line or feature in msg.
+ */
+int mg_read(const char *path, const mg_options_t *o, mg_input_t *out, char *msg, size_t msg_size);
+
+void mg_free(mg_input_t *in);
+
+/* Describe input segment s (or vertex v) as "feature F ring R point P" into buf. */
+void mg_describe_segment(const mg_input_t *in, size_t s, char *buf, size_t n);
+
+#endif
