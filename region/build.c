@@ -138,7 +138,7 @@ typedef struct flips {
   const uint32_t *feat;
   uint32_t *odd; /* child q's list at odd + q * stride */
   size_t stride;
-  double px, py, qx[4], qy[4];
+  double ox, oy, qx[4], qy[4]; /* the parent centre and the children's */
   uint32_t cur[4];
   bool par[4];
   size_t n[4];
@@ -148,8 +148,8 @@ static inline void flip(flips_t *fl, unsigned q, uint32_t p, const qk__seg_t *g,
                         double hx, double ly, double hy) {
   double qx = fl->qx[q], qy = fl->qy[q];
   /* only pieces whose box meets the segment's can cross it */
-  if (hx < qk__min(fl->px, qx) || lx > qk__max(fl->px, qx) || hy < qk__min(fl->py, qy) ||
-      ly > qk__max(fl->py, qy))
+  if (hx < qk__min(fl->ox, qx) || lx > qk__max(fl->ox, qx) || hy < qk__min(fl->oy, qy) ||
+      ly > qk__max(fl->oy, qy))
     return;
   uint32_t f = fl->feat[p];
   if (f != fl->cur[q]) {
@@ -157,8 +157,8 @@ static inline void flip(flips_t *fl, unsigned q, uint32_t p, const qk__seg_t *g,
     fl->cur[q] = f;
     fl->par[q] = false;
   }
-  int sc = qk__side(g->ax, g->ay, g->bx, g->by, fl->px, fl->py);
-  if (qk__crosses(fl->px, fl->py, qx, qy, g->ax, g->ay, g->bx, g->by, sc)) fl->par[q] = !fl->par[q];
+  int sc = qk__side(g->ax, g->ay, g->bx, g->by, fl->ox, fl->oy);
+  if (qk__crosses(fl->ox, fl->oy, qx, qy, g->ax, g->ay, g->bx, g->by, sc)) fl->par[q] = !fl->par[q];
 }
 
 static qk_status_t split_lists(bctx_t *b, unsigned d, double x0, double y0, double x1, double y1,
