@@ -115,10 +115,12 @@ typedef struct sub_job {
   qk_status_t *st;
 } sub_job_t;
 
-static void sub_build(unsigned i, void *ud) {
-  const sub_job_t *j = ud;
-  const qk_tree_t *t = j->t;
-  qk_tree_t *o = &j->own[i];
+/* Set up the tree of its own for subtree i, with room for about as many nodes as it will
+ * need (four per `capacity` points: more than a uniform or clustered set makes), so that
+ * its arrays come from the calling thread and rarely grow on a worker. A worker's
+ * allocations would come from a per-thread arena of the C library, returned to the
+ * system when freed and faulted in again at the next build. */
+static qk_status_t sub_init(const qk_tree_t *t, const subtree_t *s, qk_tree_t *o) {
   memset(o, 0, sizeof *o);
   o->alloc = t->alloc; /* the default allocator: thread-safe */
   o->capacity = t->capacity;
@@ -131,13 +133,17 @@ static void sub_build(unsigned i, void *ud) {
   o->pid = t->pid;
   atomic_init(&o->where, NULL);
   o->free_block = QK_NONE;
-  qk_status_t st = qk__reserve_nodes(o, 1);
-  if (st == QK_OK) {
-    o->n_nodes = 1;
-    o->nodes[0] = t->nodes[j->list[i].v];
-    st = from_buckets(o, 0, j->list[i].g, j->cum, j->list[i].lo, j->L, 0, NULL, NULL);
-  }
-  j->st[i] = st;
+  uint64_t count = t->nodes[s->v].count, est = 4 * (count / t->capacity) + 64;
+  qk_status_t st = qk__reserve_nodes(o, est < UINT32_MAX / 2 ? (uint32_t)est : UINT32_MAX / 2);
+  if (st) return st;
+  o->n_nodes = 1;
+  o->nodes[0] = t->nodes[s->v];
+  return QK_OK;
+}
+
+static void sub_build(unsigned i, void *ud) {
+  const sub_job_t *j = ud;
+  j->st[i] = from_buckets(&j->own[i], 0, j->list[i].g, j->cum, j->list[i].lo, j->L, 0, NULL, NULL);
 }
 
 /* Append subtree tree o, whose root stands for node v, to t (nodes reserved). */
@@ -187,11 +193,13 @@ static qk_status_t from_grid(qk_tree_t *t, qk__geom_t g, const uint32_t *cum, un
     qk__free(&t->alloc, sts, n * sizeof *sts);
     return QK_ERR_NOMEM;
   }
+  memset(own, 0, n * sizeof *own);
+  for (size_t i = 0; i < n && st == QK_OK; i++) st = sub_init(t, &list[i], &own[i]);
   sub_job_t j = {t, cum, L, list, own, sts};
-  qk__run_jobs(nw, (unsigned)n, sub_build, &j);
+  if (st == QK_OK) qk__run_jobs(nw, (unsigned)n, sub_build, &j);
   size_t extra = 0;
   for (size_t i = 0; i < n; i++) {
-    if (sts[i] && !st) st = sts[i];
+    if (st == QK_OK && sts[i]) st = sts[i];
     extra += own[i].n_nodes ? own[i].n_nodes - 1 : 0;
   }
   if (st == QK_OK && extra > UINT32_MAX) st = QK_ERR_LIMIT;
