@@ -354,7 +354,7 @@ void run_build(const std::string &ds, const std::vector<Pt> &pts) {
     r.seconds = med[i];
     r.per_second = pts.size() / med[i];
     r.bytes_per_point = bytes[i];
-    r.matches = names[i] == "cgal" ? cgal_match : names[i] == "proto-morton" ? 1 : -1;
+    r.matches = names[i] == "cgal" ? cgal_match : names[i] == "proto-morton" || wall[i] ? 1 : -1;
     r.order = "-";
     emit(r);
   }
