@@ -235,6 +235,20 @@ void quadkit_tree_free(QuadkitTree *t) {
   delete t;
 }
 
+size_t quadkit_build_threads(const std::vector<Pt> &pts, unsigned capacity, unsigned threads) {
+  qk_tree_options_t o;
+  qk_tree_options_init(&o);
+  o.capacity = capacity;
+  o.threads = threads;
+  qk_tree_t *t = nullptr;
+  qk_status_t st = qk_tree_build(as_points(pts), pts.size(), &o, &t);
+  if (st) die("qk_tree_build", st);
+  qk_tree_stats_t s;
+  qk_tree_stats(t, &s);
+  qk_tree_free(t);
+  return s.leaves;
+}
+
 size_t quadkit_build_leaves(const std::vector<Pt> &pts, unsigned capacity, unsigned max_depth,
                             size_t *bytes) {
   qk_tree_options_t o;

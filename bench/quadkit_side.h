@@ -34,6 +34,9 @@ bool quadkit_tree_split(double x0, double y0, double side, int depth, void *tree
 void quadkit_tree_free(QuadkitTree *t);
 
 // Build only, for the build benchmark; returns the leaf count and bytes held.
+// Build quadkit's tree of the points with the default options but `threads` threads and
+// free it; returns the leaf count (the threaded build row of --op build).
+size_t quadkit_build_threads(const std::vector<Pt> &pts, unsigned capacity, unsigned threads);
 size_t quadkit_build_leaves(const std::vector<Pt> &pts, unsigned capacity, unsigned max_depth,
                             size_t *bytes);
 

@@ -17,6 +17,10 @@
 
 #include "index/index_internal.h"
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 void qk_tree_options_init(qk_tree_options_t *o) {
   memset(o, 0, sizeof *o);
   o->capacity = 1;
@@ -354,11 +358,52 @@ static qk_status_t check_options(const qk_tree_options_t *o) {
   return QK_OK;
 }
 
-/* One pass over the input: the bounding box, and whether every coordinate is finite. */
-static qk_status_t bounding_box(const qk_point_t *p, size_t n, qk_box_t *b) {
+/* One pass over the input (or over share w of nw of it): the bounding box, and whether
+ * every coordinate is finite. */
+typedef struct bbox_job {
+  const qk_point_t *p;
+  size_t n;
+  qk_box_t box[QK__MAX_THREADS];
+  int finite[QK__MAX_THREADS];
+} bbox_job_t;
+
+static void bbox_share(void *ctx, unsigned w, unsigned nw) {
+  bbox_job_t *j = ctx;
+  size_t lo, hi;
+  qk__share_range(j->n, w, nw, &lo, &hi);
+  const qk_point_t *p = j->p;
+#if defined(__SSE2__)
+  /* Two lanes (x, y) per point, two points per step. v - v is +0 for a finite v and NaN
+   * otherwise, so or-ing its bits flags any infinite or NaN coordinate; min/max ignore a
+   * NaN in their first operand (then the box is not used). */
+  __m128d mn0 = _mm_set1_pd(INFINITY), mn1 = mn0, mx0 = _mm_set1_pd(-INFINITY), mx1 = mx0;
+  __m128d bad = _mm_setzero_pd();
+  size_t i = lo;
+  for (; i + 2 <= hi; i += 2) {
+    __m128d a = _mm_loadu_pd(&p[i].x), b = _mm_loadu_pd(&p[i + 1].x);
+    mn0 = _mm_min_pd(a, mn0);
+    mx0 = _mm_max_pd(a, mx0);
+    mn1 = _mm_min_pd(b, mn1);
+    mx1 = _mm_max_pd(b, mx1);
+    bad = _mm_or_pd(bad, _mm_or_pd(_mm_sub_pd(a, a), _mm_sub_pd(b, b)));
+  }
+  if (i < hi) {
+    __m128d a = _mm_loadu_pd(&p[i].x);
+    mn0 = _mm_min_pd(a, mn0);
+    mx0 = _mm_max_pd(a, mx0);
+    bad = _mm_or_pd(bad, _mm_sub_pd(a, a));
+  }
+  double mn[2], mx[2];
+  uint64_t flags[2];
+  _mm_storeu_pd(mn, _mm_min_pd(mn0, mn1));
+  _mm_storeu_pd(mx, _mm_max_pd(mx0, mx1));
+  _mm_storeu_si128((__m128i *)flags, _mm_castpd_si128(bad));
+  j->box[w] = (qk_box_t){mn[0], mn[1], mx[0], mx[1]};
+  j->finite[w] = !(flags[0] | flags[1]);
+#else
   double xmin = INFINITY, ymin = INFINITY, xmax = -INFINITY, ymax = -INFINITY;
   int finite = 1;
-  for (size_t i = 0; i < n; i++) {
+  for (size_t i = lo; i < hi; i++) {
     double x = p[i].x, y = p[i].y;
     finite &= isfinite(x) & isfinite(y);
     xmin = x < xmin ? x : xmin;
@@ -366,7 +411,29 @@ static qk_status_t bounding_box(const qk_point_t *p, size_t n, qk_box_t *b) {
     ymin = y < ymin ? y : ymin;
     ymax = y > ymax ? y : ymax;
   }
-  *b = (qk_box_t){xmin, ymin, xmax, ymax};
+  j->box[w] = (qk_box_t){xmin, ymin, xmax, ymax};
+  j->finite[w] = finite;
+#endif
+}
+
+/* The bounding box over `threads` shares (a share of fewer than 2^17 points does not pay
+ * for its thread). */
+static qk_status_t bounding_box(const qk_point_t *p, size_t n, uint32_t threads, qk_box_t *b) {
+  bbox_job_t j;
+  j.p = p;
+  j.n = n;
+  unsigned nw = qk__threads_resolve(threads);
+  if (nw > n / 131072) nw = n / 131072 > 0 ? (unsigned)(n / 131072) : 1;
+  qk__run_shares(nw, bbox_share, &j);
+  *b = j.box[0];
+  int finite = j.finite[0];
+  for (unsigned w = 1; w < nw; w++) {
+    b->xmin = j.box[w].xmin < b->xmin ? j.box[w].xmin : b->xmin;
+    b->ymin = j.box[w].ymin < b->ymin ? j.box[w].ymin : b->ymin;
+    b->xmax = j.box[w].xmax > b->xmax ? j.box[w].xmax : b->xmax;
+    b->ymax = j.box[w].ymax > b->ymax ? j.box[w].ymax : b->ymax;
+    finite &= j.finite[w];
+  }
   return finite ? QK_OK : QK_ERR_NONFINITE;
 }
 
@@ -419,7 +486,7 @@ static qk_status_t check_input(const qk_point_t *points, size_t n, const qk_tree
                                       : "the side must be positive and the square finite");
   }
   qk_box_t bbox;
-  if ((st = bounding_box(points, n, &bbox))) {
+  if ((st = bounding_box(points, n, options->threads, &bbox))) {
     for (size_t i = 0; i < n; i++)
       if (!isfinite(points[i].x) || !isfinite(points[i].y))
         return say(err, st, i, "point %zu (%g, %g) is not finite", i, points[i].x, points[i].y);
@@ -555,6 +622,7 @@ qk_status_t qk_tree_rebuild(qk_tree_t *t, const qk_point_t *points, size_t n, qk
   qk_tree_options_init(&o);
   o.capacity = t->capacity;
   o.max_depth = t->max_depth;
+  o.threads = t->threads;
   o.has_root = t->fixed_root;
   o.root = (qk_square_t){t->root_x, t->root_y, t->side[0]};
   qk_square_t root = o.root;

@@ -10,7 +10,14 @@
  *  - qk_tree_is_balanced() agrees with the brute-force check before and after; most
  *    rounds start unbalanced (counted per kind), and balancing a balanced tree again
  *    leaves the same leaf squares;
- *  - allocation failure at every N: QK_ERR_NOMEM, a valid tree, no leak.
+ *  - larger trees (10^3..2x10^4 points; uniform, clustered, duplicates, grid edges, a
+ *    root fitted to offset coordinates, random capacities and depth caps): the result
+ *    equals a second oracle that scales, a fixpoint over qk_tree_adjacent_leaves()
+ *    (NorthNeighbor, independent of the balance code: split every leaf with an adjacent
+ *    leaf two levels deeper, repeat), leaf for leaf; qk_tree_is_balanced() agrees with
+ *    that oracle's check before and after;
+ *  - balancing a balanced tree allocates nothing;
+ *  - allocation failure at every N: QK_ERR_NOMEM, the tree unchanged and valid, no leak.
  */
 #include <stdio.h>
 #include <stdlib.h>
@@ -85,6 +92,48 @@ static void brute_balance(qk_tree_t *t) {
     }
     free(L);
     if (!split) return;
+  }
+}
+
+/* Does some leaf have an adjacent leaf two or more levels deeper? Through the public
+ * neighbour calls; when `split` is set, splits every such leaf and returns how many. */
+static size_t neighbour_violations(qk_tree_t *t, int split) {
+  size_t n = 0, count = 0;
+  qk_tree_leaves(t, NULL, 0, &n);
+  qk_node_t *ids = malloc((n + 1) * sizeof *ids);
+  qk_node_t adj[4096];
+  assert_non_null(ids);
+  qk_tree_leaves(t, ids, n, &n);
+  /* Decide every leaf first, split afterwards: a split renames no other node. */
+  size_t *bad = malloc((n + 1) * sizeof *bad), nbad = 0;
+  assert_non_null(bad);
+  for (size_t i = 0; i < n; i++) {
+    qk_node_info_t a;
+    assert_int_equal(qk_tree_node_info(t, ids[i], &a), QK_OK);
+    int need = 0;
+    for (int d = 0; d < 4 && !need; d++) {
+      size_t m = 0;
+      assert_int_equal(qk_tree_adjacent_leaves(t, ids[i], (qk_dir_t)d, adj, 4096, &m), QK_OK);
+      assert_true(m <= 4096);
+      for (size_t j = 0; j < m && !need; j++) {
+        qk_node_info_t b;
+        assert_int_equal(qk_tree_node_info(t, adj[j], &b), QK_OK);
+        need = b.depth >= a.depth + 2;
+      }
+    }
+    if (need) bad[nbad++] = ids[i];
+  }
+  count = nbad;
+  if (split)
+    for (size_t i = 0; i < nbad; i++) assert_int_equal(qk_tree_split_leaf(t, bad[i]), QK_OK);
+  free(bad);
+  free(ids);
+  return count;
+}
+
+/* The smallest balanced refinement by the neighbour fixpoint. */
+static void neighbour_balance(qk_tree_t *t) {
+  while (neighbour_violations(t, 1)) {
   }
 }
 
@@ -263,6 +312,90 @@ static void test_balance_cascade(void **state) {
   qk_tree_free(t);
 }
 
+/* Larger trees against the neighbour fixpoint, leaf for leaf. */
+static void test_balance_larger_random(void **state) {
+  (void)state;
+  uint64_t seed = qkt_seed(20261130);
+  qkt_rng_t r;
+  qkt_rng_seed(&r, seed);
+  print_message("seed %llu\n", (unsigned long long)seed);
+  size_t cap_pts = 20000;
+  qk_point_t *pts = malloc(cap_pts * sizeof *pts);
+  assert_non_null(pts);
+  int started_unbalanced = 0;
+  for (int round = 0; round < 10; round++) {
+    int kind = round % 5;
+    size_t n = 1000 + qkt_rng_below(&r, (uint32_t)(cap_pts - 1000));
+    qkt_points(&r, (qkt_dist_t)(kind % 4), pts, n);
+    qk_tree_options_t o;
+    qk_tree_options_init(&o);
+    o.capacity = 1 + qkt_rng_below(&r, 8);
+    o.max_depth = 12 + qkt_rng_below(&r, 20);
+    if (kind == 4) /* a root fitted to offset, scaled points: non-dyadic squares */
+      for (size_t i = 0; i < n; i++)
+        pts[i] = (qk_point_t){1234.5 + 0.37 * pts[i].x, -77.25 + 0.37 * pts[i].y};
+    else {
+      o.has_root = 1;
+      o.root = (qk_square_t){0, 0, 1};
+    }
+    qk_tree_t *t = NULL, *u = NULL;
+    assert_int_equal(qk_tree_build(pts, n, &o, &t), QK_OK);
+    assert_int_equal(qk_tree_build(pts, n, &o, &u), QK_OK);
+    int was = neighbour_violations(t, 0) == 0;
+    started_unbalanced += !was;
+    if (qk_tree_is_balanced(t) != was)
+      fail_msg("seed %llu round %d: is_balanced before", (unsigned long long)seed, round);
+    assert_int_equal(qk_tree_balance(t), QK_OK);
+    QKT_CHECK_TREE(t);
+    neighbour_balance(u);
+    if (!qk_tree_is_balanced(t) || neighbour_violations(t, 0))
+      fail_msg("seed %llu round %d: not balanced", (unsigned long long)seed, round);
+    leaf_t *L, *M;
+    size_t n1 = get_leaves(t, &L), n2 = get_leaves(u, &M);
+    if (n1 != n2)
+      fail_msg("seed %llu round %d: %zu leaves, oracle %zu", (unsigned long long)seed, round, n1,
+               n2);
+    qsort(L, n1, sizeof *L, leaf_cmp);
+    qsort(M, n2, sizeof *M, leaf_cmp);
+    for (size_t i = 0; i < n1; i++)
+      if (leaf_cmp(&L[i], &M[i]) || L[i].s != M[i].s)
+        fail_msg("seed %llu round %d: leaf %zu differs", (unsigned long long)seed, round, i);
+    free(L);
+    free(M);
+    qk_tree_free(t);
+    qk_tree_free(u);
+  }
+  free(pts);
+  print_message("%d of 10 rounds started unbalanced\n", started_unbalanced);
+  if (started_unbalanced < 5)
+    fail_msg("seed %llu: only %d rounds started unbalanced", (unsigned long long)seed,
+             started_unbalanced);
+}
+
+/* A balanced tree: qk_tree_balance only checks it, without allocating. */
+static void test_balance_balanced_allocates_nothing(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, 11);
+  qk_point_t pts[3000];
+  qkt_points(&r, QKT_CLUSTERED, pts, 3000);
+  qkt_alloc_t st = {0};
+  qk_allocator_t a = qkt_alloc_make(&st);
+  qk_tree_options_t o;
+  qk_tree_options_init(&o);
+  o.allocator = &a;
+  qk_tree_t *t = NULL;
+  assert_int_equal(qk_tree_build(pts, 3000, &o, &t), QK_OK);
+  assert_int_equal(qk_tree_balance(t), QK_OK);
+  size_t before = st.calls;
+  assert_int_equal(qk_tree_balance(t), QK_OK);
+  assert_int_equal(st.calls, before);
+  assert_true(qk_tree_is_balanced(t));
+  QKT_CHECK_TREE(t);
+  qk_tree_free(t);
+  assert_int_equal(st.live_bytes, 0);
+}
+
 static void test_balance_alloc_failure(void **state) {
   (void)state;
   qkt_rng_t r;
@@ -274,9 +407,13 @@ static void test_balance_alloc_failure(void **state) {
     qkt_rng_t r2 = r;
     qk_tree_t *t = make_tree(&r2, QKT_CLUSTERED, 64, pts, &a);
     assert_non_null(t);
+    size_t leaves_before = 0, leaves_after = 0;
+    qk_tree_leaves(t, NULL, 0, &leaves_before);
     st.fail_at = st.calls + fail_at;
     qk_status_t s = qk_tree_balance(t);
     int failed = st.failed; /* before the check, whose scratch may take the failure */
+    qk_tree_leaves(t, NULL, 0, &leaves_after);
+    if (s != QK_OK) assert_int_equal(leaves_after, leaves_before); /* unchanged */
     QKT_CHECK_TREE(t);
     qk_tree_free(t);
     assert_int_equal(st.live_bytes, 0);
@@ -290,6 +427,8 @@ int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_balance_random),
       cmocka_unit_test(test_balance_cascade),
+      cmocka_unit_test(test_balance_larger_random),
+      cmocka_unit_test(test_balance_balanced_allocates_nothing),
       cmocka_unit_test(test_balance_alloc_failure),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);

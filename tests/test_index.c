@@ -21,6 +21,10 @@
  *  - churn (issue 10): 10^5 random moves, removes and inserts keep ids below twice the
  *    live count and the tree within 1.2x the memory of a fresh build of the same points
  *    (both with their id map);
+ *  - threaded build (issue 11): threads = 2 and 0 build the tree node for node as one
+ *    thread does (same node ids, children, counts, squares, points in the same slots), on
+ *    uniform, clustered and duplicate points at capacities 1, 8 and 32, with the default
+ *    allocator (subtrees on threads) and with a counting one (built one after another);
  *  - compact storage (issue 11): at 1M uniform points and capacity 32 a built tree holds
  *    at most 22 bytes per point (16 of coordinates, 4 of ids, the nodes in the rest).
  */
@@ -977,6 +981,80 @@ static void test_index_memory_compact(void **state) {
   free(p);
 }
 
+/* Every node of two trees alike: ids, children, depth, count, square, and each leaf's
+ * points (ids and coordinates) in the same order. */
+static void assert_same_nodes(const qk_tree_t *a, const qk_tree_t *b) {
+  qk_node_t stack[4 * 64];
+  int sp = 0;
+  stack[sp++] = qk_tree_root(a);
+  assert_int_equal(qk_tree_root(a), qk_tree_root(b));
+  while (sp > 0) {
+    qk_node_t v = stack[--sp];
+    qk_node_info_t ia, ib;
+    assert_int_equal(qk_tree_node_info(a, v, &ia), QK_OK);
+    assert_int_equal(qk_tree_node_info(b, v, &ib), QK_OK);
+    assert_true(ia.is_leaf == ib.is_leaf && ia.count == ib.count && ia.depth == ib.depth &&
+                ia.parent == ib.parent && ia.square.x == ib.square.x &&
+                ia.square.y == ib.square.y && ia.square.side == ib.square.side);
+    assert_memory_equal(ia.children, ib.children, sizeof ia.children);
+    if (!ia.is_leaf) {
+      for (int q = 3; q >= 0; q--) stack[sp++] = ia.children[q];
+      continue;
+    }
+    const double *xa, *ya, *xb, *yb;
+    const qk_id_t *da, *db;
+    size_t ca, cb;
+    qk_tree_leaf_points(a, v, &xa, &ya, &da, &ca);
+    qk_tree_leaf_points(b, v, &xb, &yb, &db, &cb);
+    assert_int_equal(ca, cb);
+    assert_memory_equal(da, db, ca * sizeof *da);
+    assert_memory_equal(xa, xb, ca * sizeof *xa);
+    assert_memory_equal(ya, yb, ca * sizeof *ya);
+  }
+}
+
+static void test_index_build_threads(void **state) {
+  (void)state;
+  uint64_t seed = qkt_seed(1130);
+  qkt_rng_t r;
+  qkt_rng_seed(&r, seed);
+  print_message("seed %llu\n", (unsigned long long)seed);
+  enum { N = 140000 }; /* at least 2^16 points per thread */
+  qk_point_t *p = malloc(N * sizeof *p);
+  assert_non_null(p);
+  const qkt_dist_t kinds[] = {QKT_UNIFORM, QKT_CLUSTERED, QKT_DUPLICATES};
+  const uint32_t capacities[] = {1, 8, 32};
+  for (int k = 0; k < 3; k++) {
+    qkt_points(&r, kinds[k], p, N);
+    qk_tree_options_t o;
+    qk_tree_options_init(&o);
+    o.capacity = capacities[k];
+    qk_tree_t *one = NULL;
+    assert_int_equal(qk_tree_build(p, N, &o, &one), QK_OK);
+    for (uint32_t threads = 0; threads <= 2; threads += 2) {
+      for (int counted = 0; counted < (threads ? 2 : 1); counted++) {
+        qkt_alloc_t st = {0};
+        qk_allocator_t a = qkt_alloc_make(&st);
+        o.threads = threads;
+        o.allocator = counted ? &a : NULL;
+        qk_tree_t *t = NULL;
+        assert_int_equal(qk_tree_build(p, N, &o, &t), QK_OK);
+        QKT_CHECK_TREE(t);
+        assert_same_nodes(one, t);
+        /* Built again into its own arrays, on the same threads: still the same. */
+        assert_int_equal(qk_tree_rebuild(t, p, N, NULL), QK_OK);
+        assert_same_nodes(one, t);
+        qk_tree_free(t);
+        assert_int_equal(st.live_bytes, 0);
+      }
+    }
+    o.threads = 1;
+    o.allocator = NULL;
+    qk_tree_free(one);
+  }
+  free(p);
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_index_build_invariants),
@@ -993,6 +1071,7 @@ int main(void) {
       cmocka_unit_test(test_index_lazy_id_map),
       cmocka_unit_test(test_index_rebuild),
       cmocka_unit_test(test_index_churn_memory),
+      cmocka_unit_test(test_index_build_threads),
       cmocka_unit_test(test_index_memory_compact),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
