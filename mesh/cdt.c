@@ -2,7 +2,8 @@
  * The constrained Delaunay triangulation of mesh/cdt.h: storage, point location and point
  * insertion (Lawson's incremental algorithm: split the triangle 1 -> 3 or the edge 2 -> 4,
  * then flip the edges opposite the new vertex that fail the in-circle test, never a
- * constrained one). Segment insertion and the visibility walk are in cdt_segment.c.
+ * constrained one). Segment insertion is in cdt_segment.c, the visibility walk in
+ * cdt_walk.c, the exact predicates in cdt_exact.c.
  *
  * Memory: the per-vertex arrays (xy, vtri and the flip stack) live in one block and the
  * per-triangle arrays (v, nbr, seg) in another, each grown by allocating a larger block and

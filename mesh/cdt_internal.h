@@ -39,6 +39,23 @@ static inline int qk__cdt_incircle(const double *a, const double *b, const doubl
   return qk__incircle_exact(a, b, c, d);
 }
 
+/* The coordinates of vertex v. */
+static inline const double *qk__cdt_pt(const qk__cdt_t *c, uint32_t v) {
+  return c->xy + 2 * (size_t)v;
+}
+
+/* For p collinear with a and b (a != b): whether p lies on the ray from a through b beyond
+ * a (p != a), and where along it: -1 before b, 0 at b, 1 beyond b. Exact comparisons of
+ * coordinates along an axis on which a and b differ. */
+static inline int qk__cdt_along(const double *a, const double *b, const double *p, int *pos) {
+  int ax = a[0] != b[0] ? 0 : 1;
+  double dir = b[ax] - a[ax];
+  if (p[ax] == a[ax]) return 0;
+  if ((p[ax] > a[ax]) != (dir > 0)) return 0;
+  *pos = p[ax] == b[ax] ? 0 : ((p[ax] < b[ax]) == (dir > 0) ? -1 : 1);
+  return 1;
+}
+
 /* The slot (0..2) of vertex a in triangle t, which holds it. */
 static inline int qk__cdt_slot(const qk__cdt_t *c, uint32_t t, uint32_t a) {
   const uint32_t *v = c->v + 3 * (size_t)t;
@@ -58,6 +75,10 @@ uint32_t qk__cdt_ring_next(const qk__cdt_t *c, qk__cdt_ring_t *r);
  * from slot i and s the vertex of n across, t becomes (p, q, s) and n (p, s, r). The quad
  * must be strictly convex. */
 void qk__cdt_flip(qk__cdt_t *c, uint32_t t, int i, uint32_t n, int j);
+
+/* Tests only: nonzero makes segment insertion take its flip fallback (mesh/cdt_segment.c),
+ * which otherwise runs only when a cavity's triangulation cannot be planned. */
+extern int qk__cdt_test_flips;
 
 /* Room for `need` entries in c->scr. */
 qk_status_t qk__cdt_reserve_scratch(qk__cdt_t *c, size_t need);

@@ -10,27 +10,19 @@
  * changes: Shewchuk and Brown, "Fast segment insertion and incremental construction of
  * constrained Delaunay triangulations", 2015, give the theorem). No flip order to prove
  * terminating, and the work is bounded by the cavity's size squared (linear in practice).
+ *
+ * A cavity's boundary may touch itself: an edge inside the cavity with both ends on one side
+ * of ab (both triangles on it are crossed) appears on the chain twice, once each way (a
+ * slit). Such an edge is kept through the retriangulation (its two sides linked to each
+ * other) and the cavity's edges are then flipped by the in-circle test until all are
+ * locally Delaunay. Should the plan of a cavity fail its checks (an apex not strictly left
+ * of its base; never seen), segment insertion falls back to flips (insert_by_flips).
  */
 #include "mesh/cdt_internal.h"
-#ifdef CDT_DEBUG
-#include <stdio.h>
-#endif
 
 #define NONE QK__CDT_NONE
-
-static inline const double *pt(const qk__cdt_t *c, uint32_t v) { return c->xy + 2 * (size_t)v; }
-
-/* For p collinear with a and b (a != b): whether p lies on the ray from a through b beyond
- * a (p != a), and where along it: -1 before b, 0 at b, 1 beyond b. Exact comparisons of
- * coordinates along an axis on which a and b differ. */
-static int along(const double *a, const double *b, const double *p, int *pos) {
-  int ax = a[0] != b[0] ? 0 : 1;
-  double dir = b[ax] - a[ax];
-  if (p[ax] == a[ax]) return 0;
-  if ((p[ax] > a[ax]) != (dir > 0)) return 0;
-  *pos = p[ax] == b[ax] ? 0 : ((p[ax] < b[ax]) == (dir > 0) ? -1 : 1);
-  return 1;
-}
+#define pt qk__cdt_pt
+#define along qk__cdt_along
 
 /* Set the segment id of edge k of t on both its sides. */
 static void mark(qk__cdt_t *c, uint32_t t, int k, uint32_t seg) {
@@ -51,6 +43,8 @@ static void mark(qk__cdt_t *c, uint32_t t, int k, uint32_t seg) {
  * left by (NONE for T_k). Returns k + 1, or -1 with *st set (NOMEM, or GEOMETRY with
  * *block and *block_seg). Changes nothing but the scratch. */
 #define REC 6
+
+int qk__cdt_test_flips = 0;
 static long trace(qk__cdt_t *c, uint32_t a, uint32_t b, qk_status_t *st, uint32_t *block,
                   uint32_t *block_seg) {
   const double *pa = pt(c, a), *pb = pt(c, b);
@@ -145,45 +139,10 @@ static void sort_ids(uint32_t *x, long n) {
     }
 }
 
-/*
- * The fallback for cavities whose boundary touches itself (an edge inside the cavity with
- * both ends on one side of ab, so a vertex appears twice on a chain): remove the crossing
- * edges by flips (Sloan, "A fast algorithm for generating constrained Delaunay
- * triangulations", 1993: an edge whose quad is strictly convex is flipped, and its
- * replacement queued again while it still crosses ab), mark ab, then flip the cavity's
- * unconstrained edges by the in-circle test until none changes (Lawson). Flips keep the
- * cavity's triangle ids (sorted in sp), so both passes stay inside it.
- */
-static void insert_by_flips(qk__cdt_t *c, uint32_t a, uint32_t b, uint32_t seg, const uint32_t *rec,
-                            long nr, const uint32_t *sp, uint32_t *queue) {
-  const double *pa = pt(c, a), *pb = pt(c, b);
-  long nx = nr - 1, head = 0, count = nx;
-  for (long m = 0; m < nx; m++)
-    queue[2 * m] = rec[REC * m + 4], queue[2 * m + 1] = rec[REC * m + 5];
-  while (count > 0) {
-    uint32_t u = queue[2 * head], w = queue[2 * head + 1];
-    head = head + 1 == nx ? 0 : head + 1;
-    count--;
-    int i;
-    uint32_t e = qk__cdt_find_edge(c, u, w, &i);
-    uint32_t n = c->nbr[3 * (size_t)e + i];
-    const uint32_t *nn = c->nbr + 3 * (size_t)n;
-    int j = nn[0] == e ? 0 : nn[1] == e ? 1 : 2;
-    uint32_t p = c->v[3 * (size_t)e + i], s = c->v[3 * (size_t)n + j];
-    long tail = (head + count) % nx;
-    /* e = (p, u, w), n = (s, w, u): convex when u is right of p -> s and w left */
-    if (qk__cdt_orient(pt(c, p), pt(c, s), pt(c, u)) < 0 &&
-        qk__cdt_orient(pt(c, p), pt(c, s), pt(c, w)) > 0) {
-      qk__cdt_flip(c, e, i, n, j);
-      int op = qk__cdt_orient(pa, pb, pt(c, p)), os = qk__cdt_orient(pa, pb, pt(c, s));
-      if (op * os < 0) queue[2 * tail] = p, queue[2 * tail + 1] = s, count++;
-    } else {
-      queue[2 * tail] = u, queue[2 * tail + 1] = w, count++;
-    }
-  }
-  int k;
-  uint32_t t = qk__cdt_find_edge(c, a, b, &k);
-  mark(c, t, k, seg);
+/* Flip the unconstrained edges between triangles of the cavity (ids sorted in sp[0..nr))
+ * by the in-circle test until none changes (Lawson): flips keep both triangles' ids, so the
+ * pass stays in the cavity. */
+static void lawson_pool(qk__cdt_t *c, const uint32_t *sp, long nr) {
   for (int again = 1; again;) {
     again = 0;
     for (long m = 0; m < nr; m++)
@@ -200,7 +159,71 @@ static void insert_by_flips(qk__cdt_t *c, uint32_t a, uint32_t b, uint32_t seg, 
         again = 1;
       }
   }
+}
+
+/* For the crossing edge u-w: its triangle e (edge slot *i), the one across (n, slot *j), the
+ * two apexes, and whether the quad is strictly convex (then it can be flipped). */
+static int quad(const qk__cdt_t *c, uint32_t u, uint32_t w, uint32_t *e, int *i, uint32_t *n,
+                int *j, uint32_t *p, uint32_t *s) {
+  *e = qk__cdt_find_edge(c, u, w, i);
+  *n = c->nbr[3 * (size_t)*e + *i];
+  const uint32_t *nn = c->nbr + 3 * (size_t)*n;
+  *j = nn[0] == *e ? 0 : nn[1] == *e ? 1 : 2;
+  *p = c->v[3 * (size_t)*e + *i], *s = c->v[3 * (size_t)*n + *j];
+  /* e = (p, u, w), n = (s, w, u): convex when u is right of p -> s and w left */
+  return qk__cdt_orient(pt(c, *p), pt(c, *s), pt(c, u)) < 0 &&
+         qk__cdt_orient(pt(c, *p), pt(c, *s), pt(c, w)) > 0;
+}
+
+/*
+ * The fallback for cavities whose boundary touches itself (an edge inside the cavity with
+ * both ends on one side of ab, so a vertex appears twice on a chain): remove the crossing
+ * edges by flips, each time one whose quad is strictly convex and whose new diagonal does
+ * not cross ab (Hanke, Ottmann and Schuierer, "The edge-flipping distance of
+ * triangulations", 1996: such a flip always exists, so k crossing edges go in exactly k
+ * flips; found by a scan, O(k^2) in all, and this path is rare). Should the scan find none,
+ * any convex one is flipped (Sloan's rule) so that nothing stalls. Then ab is marked and
+ * the cavity's unconstrained edges are flipped by the in-circle test until none changes
+ * (Lawson). Flips keep the cavity's triangle ids (sorted in sp), so both passes stay in it.
+ */
+static qk_status_t insert_by_flips(qk__cdt_t *c, uint32_t a, uint32_t b, uint32_t seg,
+                                   const uint32_t *rec, long nr, const uint32_t *sp,
+                                   uint32_t *queue) {
+  const double *pa = pt(c, a), *pb = pt(c, b);
+  long count = nr - 1;
+  for (long m = 0; m < count; m++)
+    queue[2 * m] = rec[REC * m + 4], queue[2 * m + 1] = rec[REC * m + 5];
+  long rot = 0; /* where the last scan for a convex quad began (Sloan's queue order) */
+  while (count > 0) {
+    long any = -1;
+    int done = 0;
+    for (long m = 0; m < count && !done; m++) {
+      uint32_t e, n, p, s;
+      int i, j;
+      if (!quad(c, queue[2 * m], queue[2 * m + 1], &e, &i, &n, &j, &p, &s)) continue;
+      if (any < 0 || (any < rot && m >= rot)) any = m;
+      if (qk__cdt_orient(pa, pb, pt(c, p)) * qk__cdt_orient(pa, pb, pt(c, s)) >= 0) {
+        qk__cdt_flip(c, e, i, n, j); /* one crossing fewer */
+        count--;
+        queue[2 * m] = queue[2 * count], queue[2 * m + 1] = queue[2 * count + 1];
+        done = 1;
+      }
+    }
+    if (done) continue;
+    if (any < 0) return QK_ERR_CORRUPT; /* no convex quad: not a valid triangulation */
+    rot = any + 1 < count ? any + 1 : 0;
+    uint32_t e, n, p, s;
+    int i, j;
+    quad(c, queue[2 * any], queue[2 * any + 1], &e, &i, &n, &j, &p, &s);
+    qk__cdt_flip(c, e, i, n, j); /* Sloan's rule: the new diagonal still crosses ab */
+    queue[2 * any] = p, queue[2 * any + 1] = s;
+  }
+  int k;
+  uint32_t t = qk__cdt_find_edge(c, a, b, &k);
+  mark(c, t, k, seg);
+  lawson_pool(c, sp, nr);
   c->hint = t;
+  return QK_OK;
 }
 
 /* Point the link of triangle x (outside the cavity) across its edge u-w at t. */
@@ -210,51 +233,91 @@ static void link_outside(qk__cdt_t *c, uint32_t x, uint32_t u, uint32_t w, uint3
   c->nbr[3 * (size_t)x + k] = t;
 }
 
+/* One chain of the cavity's boundary, from a to b or reversed: n vertices p, and for each
+ * edge m (p[m] -> p[m + 1]) the triangle nb outside it, its segment id sg, the cavity
+ * triangle own it belonged to, its partner (the same edge the other way round when it lies
+ * inside the cavity: a slit; NONE otherwise), and the new triangle and slot on it. */
+typedef struct chain {
+  uint32_t n, *p, *nb, *sg, *own, *partner, *newt, *news;
+} chain_t;
+
 /*
- * Triangulate the pseudo-polygon p[0..n) (the polygon lies left of p[0] -> p[n-1]; chain
- * edge m is p[m] -> p[m + 1], with the triangle nb[m] and segment id sg[m] outside it) by
- * its constrained Delaunay triangulation: on the base p[i] -> p[j], the apex is the vertex
- * between them whose circle with the base holds no other (one pass: the circles through
- * two points are nested on one side of them), then the same on p[i] -> p[c] and p[c] ->
- * p[j] (Anglada's algorithm, as in Shewchuk's notes on segment insertion). The triangles
- * reuse the ids in pool; the one on p[0] -> p[n-1] (slot 2) is returned, its link across
- * that edge left NONE. stk has room for 4n words.
+ * Plan the constrained Delaunay triangulation of the pseudo-polygon of chain h (the polygon
+ * lies left of p[0] -> p[n-1]): on the base p[i] -> p[j], the apex is the vertex between
+ * them whose circle with the base holds no other (one pass: the circles through two points
+ * are nested on one side of them), then the same on p[i] -> p[m] and p[m] -> p[j]
+ * (Anglada's algorithm, as in Shewchuk's notes on segment insertion). A vertex that appears
+ * twice on the chain (a slit's end) is never the apex of a base it ends. Triangles go to
+ * out as (i, j, m, parent, slot in parent), parents first; returns their count, or -1 when
+ * a base has no apex or an apex is not strictly left of its base (never for a cavity whose
+ * boundary is simple; then the caller falls back to flips). stk has room for 4n words.
  */
-static uint32_t fill(qk__cdt_t *c, const uint32_t *p, const uint32_t *nb, const uint32_t *sg,
-                     uint32_t n, const uint32_t *pool, uint32_t *used, uint32_t *stk) {
-  uint32_t sp = 0, top = NONE;
-  stk[0] = 0, stk[1] = n - 1, stk[2] = NONE, stk[3] = 0, sp = 1;
+static long plan(const qk__cdt_t *c, const chain_t *h, uint32_t *out, uint32_t *stk) {
+  const uint32_t *p = h->p;
+  long nt = 0;
+  uint32_t sp = 1;
+  stk[0] = 0, stk[1] = h->n - 1, stk[2] = NONE, stk[3] = 0;
   while (sp > 0) {
     sp--;
     uint32_t i = stk[4 * sp], j = stk[4 * sp + 1], par = stk[4 * sp + 2], ps = stk[4 * sp + 3];
-    uint32_t m = i + 1;
-    for (uint32_t q = i + 2; q < j; q++)
-      if (qk__cdt_incircle(pt(c, p[i]), pt(c, p[j]), pt(c, p[m]), pt(c, p[q])) > 0) m = q;
-    uint32_t t = pool[(*used)++];
+    uint32_t m = NONE;
+    for (uint32_t q = i + 1; q < j; q++) {
+      if (p[q] == p[i] || p[q] == p[j]) continue;
+      if (m == NONE || qk__cdt_incircle(pt(c, p[i]), pt(c, p[j]), pt(c, p[m]), pt(c, p[q])) > 0)
+        m = q;
+    }
+    if (m == NONE || qk__cdt_orient(pt(c, p[i]), pt(c, p[j]), pt(c, p[m])) <= 0) return -1;
+    uint32_t *o = out + 5 * nt;
+    o[0] = i, o[1] = j, o[2] = m, o[3] = par, o[4] = ps;
+    if (m > i + 1)
+      stk[4 * sp] = i, stk[4 * sp + 1] = m, stk[4 * sp + 2] = (uint32_t)nt, stk[4 * sp + 3] = 1,
+              sp++;
+    if (j > m + 1)
+      stk[4 * sp] = m, stk[4 * sp + 1] = j, stk[4 * sp + 2] = (uint32_t)nt, stk[4 * sp + 3] = 0,
+              sp++;
+    nt++;
+  }
+  return nt;
+}
+
+/* Give chain edge e of h the new triangle t (slot k): link it to the triangle outside, or,
+ * for a slit, to the new triangle on the other side once both exist. */
+static void chain_link(qk__cdt_t *c, chain_t *h, uint32_t e, uint32_t t, int k) {
+  c->nbr[3 * (size_t)t + k] = NONE, c->seg[3 * (size_t)t + k] = h->sg[e];
+  if (h->partner[e] == NONE) {
+    c->nbr[3 * (size_t)t + k] = h->nb[e];
+    link_outside(c, h->nb[e], h->p[e], h->p[e + 1], t);
+    return;
+  }
+  h->newt[e] = t, h->news[e] = (uint32_t)k;
+  uint32_t f = h->partner[e];
+  if (h->newt[f] != NONE) {
+    c->nbr[3 * (size_t)t + k] = h->newt[f];
+    c->nbr[3 * (size_t)h->newt[f] + h->news[f]] = t;
+  }
+}
+
+/* Write the planned triangles into the ids pool[*used ..]; returns the one on the base
+ * p[0] -> p[n-1] (slot 2, its link across left NONE). */
+static uint32_t write_plan(qk__cdt_t *c, chain_t *h, const uint32_t *plan, long nt,
+                           const uint32_t *pool, uint32_t *used) {
+  const uint32_t *p = h->p, *ids = pool + *used;
+  for (long k = 0; k < nt; k++) {
+    const uint32_t *o = plan + 5 * k;
+    uint32_t i = o[0], j = o[1], m = o[2], t = ids[k];
     uint32_t *tv = c->v + 3 * (size_t)t, *tn = c->nbr + 3 * (size_t)t, *ts = c->seg + 3 * (size_t)t;
     tv[0] = p[i], tv[1] = p[j], tv[2] = p[m];
-    tn[2] = par, ts[2] = NONE;
-    if (par != NONE)
-      c->nbr[3 * (size_t)par + ps] = t;
-    else
-      top = t;
-    if (m == i + 1) { /* edge p[m] -> p[i] is chain edge i */
-      tn[1] = nb[i], ts[1] = sg[i];
-      link_outside(c, nb[i], p[i], p[m], t);
-    } else {
-      tn[1] = NONE, ts[1] = NONE;
-      stk[4 * sp] = i, stk[4 * sp + 1] = m, stk[4 * sp + 2] = t, stk[4 * sp + 3] = 1, sp++;
+    tn[0] = tn[1] = tn[2] = NONE, ts[0] = ts[1] = ts[2] = NONE;
+    if (o[3] != NONE) {
+      uint32_t par = ids[o[3]];
+      tn[2] = par, c->nbr[3 * (size_t)par + o[4]] = t;
     }
-    if (j == m + 1) { /* edge p[j] -> p[m] is chain edge m */
-      tn[0] = nb[m], ts[0] = sg[m];
-      link_outside(c, nb[m], p[m], p[j], t);
-    } else {
-      tn[0] = NONE, ts[0] = NONE;
-      stk[4 * sp] = m, stk[4 * sp + 1] = j, stk[4 * sp + 2] = t, stk[4 * sp + 3] = 0, sp++;
-    }
+    if (m == i + 1) chain_link(c, h, i, t, 1); /* edge p[m] -> p[i] */
+    if (j == m + 1) chain_link(c, h, m, t, 0); /* edge p[j] -> p[m] */
     c->vtri[p[i]] = t, c->vtri[p[j]] = t, c->vtri[p[m]] = t;
   }
-  return top;
+  *used += (uint32_t)nt;
+  return ids[0];
 }
 
 qk_status_t qk__cdt_insert_segment(qk__cdt_t *c, uint32_t a, uint32_t b, uint32_t seg,
@@ -278,193 +341,85 @@ qk_status_t qk__cdt_insert_segment(qk__cdt_t *c, uint32_t a, uint32_t b, uint32_
   qk_status_t st = QK_OK;
   long nr = trace(c, a, b, &st, block, block_seg);
   if (nr < 0) return st;
-  /* Both chains have at most nr + 1 vertices: room for the records, the pool of triangle
-   * ids and its sorted copy, each chain's vertices, outside links and segment ids, and the
+  /* Room for the records, the pool of triangle ids and its sorted copy, both chains (at
+   * most nr + 1 vertices each, eight arrays), the plans (five words a triangle) and the
    * stack (or the fallback's queue). */
-  size_t cap = (REC + 2) * (size_t)nr + 6 * ((size_t)nr + 2) + 4 * ((size_t)nr + 2);
-  if (qk__cdt_reserve_scratch(c, cap) != QK_OK) return QK_ERR_NOMEM;
-  uint32_t *rec = c->scr, *pool = rec + REC * nr, *sp = pool + nr;
-  uint32_t *lv = sp + nr, *lnb = lv + nr + 2, *lsg = lnb + nr + 2;
-  uint32_t *rv = lsg + nr + 2, *rnb = rv + nr + 2, *rsg = rnb + nr + 2, *stk = rsg + nr + 2;
+  size_t w = (size_t)nr + 2;
+  if (qk__cdt_reserve_scratch(c, (REC + 2 + 5) * (size_t)nr + 16 * w + 4 * w) != QK_OK)
+    return QK_ERR_NOMEM;
+  uint32_t *rec = c->scr, *pool = rec + REC * nr, *sp = pool + nr, *q = sp + nr;
+  chain_t ch[2];
+  for (int h = 0; h < 2; h++) {
+    ch[h].n = 0;
+    ch[h].p = q, ch[h].nb = q + w, ch[h].sg = q + 2 * w, ch[h].own = q + 3 * w;
+    ch[h].partner = q + 4 * w, ch[h].newt = q + 5 * w, ch[h].news = q + 6 * w;
+    q += 8 * w;
+  }
+  uint32_t *plans = q, *stk = plans + 5 * nr;
   for (long m = 0; m < nr; m++) pool[m] = sp[m] = rec[REC * m];
   sort_ids(sp, nr);
-  /* The chains from a to b: T_0 = (a, x, y) gives y (left) and x (right). */
-  uint32_t nl = 0, nrr = 0;
+  /* The chains from a to b: T_0 = (a, x, y) gives y (left, chain 0) and x (right, 1). */
   {
     const uint32_t *tv = c->v + 3 * (size_t)rec[0];
     int i = qk__cdt_slot(c, rec[0], a);
-    lv[nl++] = a, lv[nl++] = tv[(i + 2) % 3];
-    rv[nrr++] = a, rv[nrr++] = tv[(i + 1) % 3];
+    ch[0].p[0] = a, ch[0].p[1] = tv[(i + 2) % 3];
+    ch[1].p[0] = a, ch[1].p[1] = tv[(i + 1) % 3];
+    ch[0].n = ch[1].n = 2;
   }
-  uint32_t el = 0, er = 0;
-  int pinched = 0;
+  int slits = 0;
   for (long m = 0; m < nr; m++) {
-    uint32_t tri = rec[REC * m], ls = rec[REC * m + 1], rs = rec[REC * m + 2];
-    uint32_t o = rec[REC * m + 3];
-    if (ls != 3) {
-      if (m > 0) lv[nl++] = o;
-      lnb[el] = c->nbr[3 * (size_t)tri + ls], lsg[el] = c->seg[3 * (size_t)tri + ls];
-      pinched |= lnb[el] != NONE && in_pool(sp, nr, lnb[el]);
-      el++;
+    uint32_t tri = rec[REC * m], o = rec[REC * m + 3];
+    for (int h = 0; h < 2; h++) {
+      uint32_t slot = rec[REC * m + 1 + h];
+      if (slot == 3) continue;
+      chain_t *H = &ch[h];
+      uint32_t e = m > 0 ? H->n - 1 : 0;
+      if (m > 0) H->p[H->n++] = o;
+      H->nb[e] = c->nbr[3 * (size_t)tri + slot], H->sg[e] = c->seg[3 * (size_t)tri + slot];
+      H->own[e] = tri, H->partner[e] = NONE, H->newt[e] = NONE;
+      slits |= H->nb[e] != NONE && in_pool(sp, nr, H->nb[e]);
     }
-    if (rs != 3) {
-      if (m > 0) rv[nrr++] = o;
-      rnb[er] = c->nbr[3 * (size_t)tri + rs], rsg[er] = c->seg[3 * (size_t)tri + rs];
-      pinched |= rnb[er] != NONE && in_pool(sp, nr, rnb[er]);
-      er++;
-    }
-  }
-  if (pinched) {
-#ifdef CDT_DEBUG
-    fprintf(stderr, "pinched cavity %ld\n", nr);
-#endif
-    insert_by_flips(c, a, b, seg, rec, nr, sp, stk);
-    return QK_OK;
   }
   /* The right polygon lies left of b -> a: reverse its chain. */
-  for (uint32_t m = 0; m < nrr / 2; m++) {
-    uint32_t x = rv[m];
-    rv[m] = rv[nrr - 1 - m], rv[nrr - 1 - m] = x;
+  {
+    chain_t *H = &ch[1];
+    uint32_t n = H->n, ne = n - 1;
+    for (uint32_t m = 0; m < n / 2; m++) {
+      uint32_t x = H->p[m];
+      H->p[m] = H->p[n - 1 - m], H->p[n - 1 - m] = x;
+    }
+    for (uint32_t m = 0; m < ne / 2; m++) {
+      uint32_t *arr[3] = {H->nb, H->sg, H->own};
+      for (int z = 0; z < 3; z++) {
+        uint32_t x = arr[z][m];
+        arr[z][m] = arr[z][ne - 1 - m], arr[z][ne - 1 - m] = x;
+      }
+    }
   }
-  for (uint32_t m = 0; m < er / 2; m++) {
-    uint32_t x = rnb[m], y = rsg[m];
-    rnb[m] = rnb[er - 1 - m], rsg[m] = rsg[er - 1 - m];
-    rnb[er - 1 - m] = x, rsg[er - 1 - m] = y;
-  }
+  /* Slits: a chain edge whose outside is a cavity triangle pairs with the same edge the
+   * other way round, owned by that triangle (rare: a linear search). */
+  if (slits)
+    for (int h = 0; h < 2; h++)
+      for (uint32_t e = 0; e + 1 < ch[h].n; e++) {
+        if (ch[h].nb[e] == NONE || !in_pool(sp, nr, ch[h].nb[e])) continue;
+        for (uint32_t f = 0; f + 1 < ch[h].n; f++)
+          if (ch[h].own[f] == ch[h].nb[e] && ch[h].p[f] == ch[h].p[e + 1] &&
+              ch[h].p[f + 1] == ch[h].p[e])
+            ch[h].partner[e] = f;
+        if (ch[h].partner[e] == NONE) return insert_by_flips(c, a, b, seg, rec, nr, sp, stk);
+      }
+  if (qk__cdt_test_flips) return insert_by_flips(c, a, b, seg, rec, nr, sp, stk);
+  long n0 = plan(c, &ch[0], plans, stk);
+  long n1 = n0 < 0 ? -1 : plan(c, &ch[1], plans + 5 * n0, stk);
+  if (n1 < 0 || n0 + n1 != nr) return insert_by_flips(c, a, b, seg, rec, nr, sp, stk);
   uint32_t used = 0;
-  uint32_t tl = fill(c, lv, lnb, lsg, nl, pool, &used, stk);
-  uint32_t tr = fill(c, rv, rnb, rsg, nrr, pool, &used, stk);
+  uint32_t tl = write_plan(c, &ch[0], plans, n0, pool, &used);
+  uint32_t tr = write_plan(c, &ch[1], plans + 5 * n0, n1, pool, &used);
   c->nbr[3 * (size_t)tl + 2] = tr, c->seg[3 * (size_t)tl + 2] = seg;
   c->nbr[3 * (size_t)tr + 2] = tl, c->seg[3 * (size_t)tr + 2] = seg;
+  if (slits) lawson_pool(c, sp, nr); /* the slits were kept as edges: flip them if need be */
   if (c->on_change)
     for (uint32_t m = 0; m < used; m++) c->on_change(c->user, pool[m]);
   c->hint = tl;
   return QK_OK;
-}
-
-/* ---- the straight walk from a vertex -------------------------------------------------- */
-
-/* Whether vertex o is an end of a constrained edge. */
-static int on_constraint(const qk__cdt_t *c, uint32_t o) {
-  qk__cdt_ring_t r = {o, NONE, NONE, 1};
-  for (uint32_t t = qk__cdt_ring_next(c, &r); t != NONE; t = qk__cdt_ring_next(c, &r)) {
-    int i = qk__cdt_slot(c, t, o);
-    if (c->seg[3 * (size_t)t + (i + 1) % 3] != NONE || c->seg[3 * (size_t)t + (i + 2) % 3] != NONE)
-      return 1;
-  }
-  return 0;
-}
-
-/* Stop at vertex slot k of t (the walk's end at a vertex, or a vertex that blocks it). */
-static int at_vertex(const qk__cdt_t *c, uint32_t t, int k, int end, uint32_t *tri, int *kout,
-                     qk__cdt_where_t *where) {
-  *tri = t, *kout = k, *where = QK__CDT_VERT;
-  if (on_constraint(c, c->v[3 * (size_t)t + k])) return 0;
-  return end ? 1 : -1; /* -1: pass through and go on */
-}
-
-int qk__cdt_walk(const qk__cdt_t *c, uint32_t w, double x, double y, uint32_t *tri, int *k,
-                 qk__cdt_where_t *where) {
-  const double P[2] = {x, y}, *pw = pt(c, w);
-  uint32_t u = w; /* the vertex the walk is at */
-  for (;;) {
-    const double *pu = pt(c, u);
-    if (pu[0] == P[0] && pu[1] == P[1]) {
-      uint32_t t = c->vtri[u];
-      *tri = t, *k = qk__cdt_slot(c, t, u), *where = QK__CDT_VERT;
-      if (u != w && on_constraint(c, u)) return 0;
-      return 1;
-    }
-    /* Find the triangle (u, x, y) around u whose closed wedge holds P. */
-    qk__cdt_ring_t r = {u, NONE, NONE, 1};
-    uint32_t t = NONE, next_u = NONE;
-    int i = 0;
-    for (uint32_t s = qk__cdt_ring_next(c, &r); s != NONE; s = qk__cdt_ring_next(c, &r)) {
-      i = qk__cdt_slot(c, s, u);
-      int i1 = (i + 1) % 3, i2 = (i + 2) % 3;
-      uint32_t vx = c->v[3 * (size_t)s + i1], vy = c->v[3 * (size_t)s + i2];
-      int ox = qk__cdt_orient(pu, pt(c, vx), P), oy = qk__cdt_orient(pu, pt(c, vy), P), pos;
-      if (ox == 0 && along(pu, P, pt(c, vx), &pos)) { /* P on the ray u -> vx */
-        if (c->seg[3 * (size_t)s + i2] != NONE) {     /* along a constrained edge */
-          *tri = s, *k = i2, *where = QK__CDT_EDGE;
-          return 0;
-        }
-        if (pos > 0) { /* P before vx: on the edge */
-          *tri = s, *k = i2, *where = QK__CDT_EDGE;
-          return 1;
-        }
-        int res = at_vertex(c, s, i1, pos == 0, tri, k, where);
-        if (res >= 0) return res;
-        next_u = vx;
-        break;
-      }
-      if (oy == 0 && along(pu, P, pt(c, vy), &pos)) { /* P on the ray u -> vy */
-        if (c->seg[3 * (size_t)s + i1] != NONE) {
-          *tri = s, *k = i1, *where = QK__CDT_EDGE;
-          return 0;
-        }
-        if (pos > 0) {
-          *tri = s, *k = i1, *where = QK__CDT_EDGE;
-          return 1;
-        }
-        int res = at_vertex(c, s, i2, pos == 0, tri, k, where);
-        if (res >= 0) return res;
-        next_u = vy;
-        break;
-      }
-      if (ox > 0 && oy < 0) {
-        t = s;
-        break;
-      }
-    }
-    if (next_u != NONE) {
-      u = next_u;
-      continue;
-    }
-    if (t == NONE) { /* P outside the square: stay at u */
-      *tri = c->vtri[u], *k = qk__cdt_slot(c, *tri, u), *where = QK__CDT_VERT;
-      return 1;
-    }
-    /* The segment enters t = (u, x, y) between x (right of w -> P) and y (left). State:
-     * (t, kk) with edge kk of t ahead of the segment, P strictly past the other two. */
-    int kk = i;
-    for (;;) {
-      const uint32_t *tv = c->v + 3 * (size_t)t;
-      int oe = qk__cdt_orient(pt(c, tv[(kk + 1) % 3]), pt(c, tv[(kk + 2) % 3]), P);
-      if (oe > 0) {
-        *tri = t, *k = 0, *where = QK__CDT_IN;
-        return 1;
-      }
-      /* P on the edge ahead (in its relative interior: the line crosses it there), or
-       * beyond it: either way a constrained edge stops the walk */
-      if (oe == 0 || c->seg[3 * (size_t)t + kk] != NONE || c->nbr[3 * (size_t)t + kk] == NONE) {
-        *tri = t, *k = kk, *where = QK__CDT_EDGE;
-        return oe == 0 && c->seg[3 * (size_t)t + kk] == NONE;
-      }
-      uint32_t n = c->nbr[3 * (size_t)t + kk];
-      const uint32_t *nn = c->nbr + 3 * (size_t)n;
-      int j = nn[0] == t ? 0 : nn[1] == t ? 1 : 2;
-      t = n;
-      /* t = (o, l, r) from slot j, entered through l -> r, l left of w -> P, r right */
-      const uint32_t *nv = c->v + 3 * (size_t)t;
-      uint32_t o = nv[j];
-      int so = qk__cdt_orient(pw, P, pt(c, o));
-      if (so != 0) {
-        kk = so > 0 ? (j + 1) % 3 : (j + 2) % 3; /* leave by r - o or by o - l */
-        continue;
-      }
-      /* The line runs into o: P lies inside t before o, at o, or beyond o. */
-      int or_ = qk__cdt_orient(pt(c, nv[(j + 2) % 3]), pt(c, o), P);
-      int ol = qk__cdt_orient(pt(c, o), pt(c, nv[(j + 1) % 3]), P);
-      if (or_ > 0 && ol > 0) {
-        *tri = t, *k = 0, *where = QK__CDT_IN;
-        return 1;
-      }
-      int res = at_vertex(c, t, j, or_ == 0 && ol == 0, tri, k, where);
-      if (res >= 0) return res;
-      next_u = o;
-      break;
-    }
-    u = next_u;
-  }
 }

@@ -1,7 +1,7 @@
 /*
  * The general mode, step 11: the kept triangles (those of faces that are neither the
- * unbounded face nor a hole) and the vertices they use, renumbered densely in CDT order
- * (so the input vertices come first, in input order); per triangle its face number and
+ * unbounded face nor a hole) and the vertices they use, renumbered densely (the input
+ * vertices first, in input order, then the others in CDT order); per triangle its face number and
  * regional attribute; the mesh edges along input segments with their markers.
  */
 #include "mesh/general_mesh.h"
@@ -78,11 +78,11 @@ qk_status_t qk__gm_output(qk__gm_t *g, qk_mesh_t *m) {
       kt++;
       for (int i = 0; i < 3; i++) newid[c->v[3 * t + i]] = 0;
     }
+  /* The input vertices first, in input order, then the others in CDT order. */
+  for (size_t i = 0; i < P->nv; i++)
+    if (newid[g->cv[i]] == 0) newid[g->cv[i]] = (uint32_t)kv++;
   for (size_t v = 0; v < c->nv; v++)
-    if (newid[v] == 0) {
-      newid[v] = (uint32_t)kv++;
-      steiner += g->vi[v].in == QK__CDT_NONE;
-    }
+    if (newid[v] == 0 && g->vi[v].in == QK__CDT_NONE) newid[v] = (uint32_t)kv++, steiner++;
   m->nv = kv, m->nt = kt, m->ncv = P->nv, m->ncs = P->ns;
   m->xy = qk__realloc(g->a, NULL, 0, (2 * kv + 2) * sizeof *m->xy);
   m->tri = qk__realloc(g->a, NULL, 0, (3 * kt + 3) * sizeof *m->tri);

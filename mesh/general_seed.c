@@ -322,7 +322,20 @@ qk_status_t qk__gm_seed(qk__gm_t *g, qk_mesh_stats_t *stats) {
   if (qk__grow(g->a, &ap, &g->arena_cap, nf + 1, sizeof *g->arena))
     return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   g->arena = ap;
-  for (size_t i = 0; i < nf; i++) g->arena[i] = (uint32_t)i;
+  /* Isolated vertices and segments are the features; a vertex on a segment is separated
+   * from others through its segments (two segments that share no vertex, or share one
+   * outside the box), except from the segments at its neighbours, which the refinement's
+   * shells grade. */
+  uint8_t *onseg = qk__realloc(g->a, NULL, 0, P->nv + 1);
+  if (!onseg) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  memset(onseg, 0, P->nv + 1);
+  for (size_t j = 0; j < 2 * P->ns; j++) onseg[P->seg[j]] = 1;
+  size_t k = 0;
+  for (size_t i = 0; i < P->nv; i++)
+    if (!onseg[i]) g->arena[k++] = (uint32_t)i;
+  qk__free(g->a, onseg, P->nv + 1);
+  for (size_t s = 0; s < P->ns; s++) g->arena[k++] = (uint32_t)(P->nv + s);
+  nf = k;
   g->arena_n = nf;
   if ((st = subdivide(g, qk_tree_root(g->tree), 0, 0, 1, 0, 0, nf))) return st;
   qk_tree_leaves(g->tree, NULL, 0, &stats->leaves_before_balance);

@@ -78,6 +78,10 @@ static qk_status_t read_options(const qk_mesh_options_t *options, qk_mesh_option
   if (!(opt->min_angle_deg >= 0 && opt->min_angle_deg <= 45))
     return qk__mesh_fail(err, QK_ERR_INVALID, 0, "min_angle_deg %g is not between 0 and 45",
                          opt->min_angle_deg);
+  if (opt->mode == QK_MESH_GENERAL && opt->size)
+    return qk__mesh_fail(err, QK_ERR_INVALID, 0,
+                         "a domain size applies to the book's mode only (the general mode's "
+                         "domain is the input's bounded faces)");
   if (opt->mode == QK_MESH_DYADIC && opt->size)
     return qk__mesh_fail(err, QK_ERR_INVALID, 0,
                          "a domain size applies to the book's mode only (the dyadic mode's "

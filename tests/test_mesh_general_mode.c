@@ -387,6 +387,8 @@ static void test_mesh_general_mode_square_holes(void **state) {
   assert_true(st.min_angle_deg >= 20 && st.max_angle_deg <= 140);
   assert_int_equal(st.components, 1);
   assert_non_null(qk_mesh_tree(m));
+  /* The input vertices come first, in input order, bit-identical. */
+  assert_memory_equal(qk_mesh_vertices(m, NULL), s->xy, 2 * s->nv * sizeof(double));
   qk_mesh_free(m);
   qk_poly_free(p);
   free(s);
@@ -593,6 +595,10 @@ static void test_mesh_general_mode_size(void **state) {
   o.min_angle_deg = 40;
   qk_mesh_error_t err;
   assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_ERR_INVALID);
+  o.min_angle_deg = 0;
+  o.size = 16; /* the book's option */
+  assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_ERR_INVALID);
+  assert_non_null(strstr(err.message, "book's mode only"));
   qk_poly_free(p);
   free(s);
 }
@@ -653,6 +659,20 @@ static void test_mesh_general_mode_markers(void **state) {
     if (xy[2 * v] == 4 && xy[2 * v + 1] == 0.5) assert_int_equal(mk[v], 1);
   }
   free(ab), free(sg), free(sm_out);
+  /* Every writer takes a general mesh (negative lattice exponent, the graded tree). */
+  FILE *f = tmpfile();
+  assert_non_null(f);
+  assert_int_equal(qk_mesh_write_node(m, f, 1), QK_OK);
+  assert_int_equal(qk_mesh_write_ele(m, f, 1), QK_OK);
+  assert_int_equal(qk_mesh_write_poly(m, f, 1), QK_OK);
+  assert_int_equal(qk_mesh_write_msh(m, f), QK_OK);
+  assert_int_equal(qk_mesh_write_vtu(m, f), QK_OK);
+  assert_int_equal(qk_mesh_write_svg(m, f, 400), QK_OK);
+  assert_true(ftell(f) > 10000);
+  fclose(f);
+  uint64_t bins[180];
+  assert_int_equal(qk_mesh_angle_histogram(m, bins), QK_OK);
+  for (int k = 0; k < 20; k++) assert_true(bins[k] == 0);
   qk_mesh_free(m);
   qk_poly_free(p);
   free(s);
@@ -761,11 +781,23 @@ static void test_mesh_general_mode_alloc_failure(void **state) {
   square(pts, 4, 4, 1.2, 0.5, 1);
   sh_ring(s, pts, 4);
   sh_hole(s, 4, 4);
+  /* An internal segment from an outer corner to the nearest corner of the hole. */
+  uint32_t near = 4;
+  for (uint32_t v = 5; v < 8; v++)
+    if (hypot(s->xy[2 * v] - s->xy[4], s->xy[2 * v + 1] - s->xy[5]) <
+        hypot(s->xy[2 * near] - s->xy[4], s->xy[2 * near + 1] - s->xy[5]))
+      near = v;
+  sh_seg(s, 2, near);
   size_t fail_at;
   for (fail_at = 1;; fail_at++) {
     qkt_alloc_t as;
     qk_allocator_t a = qkt_alloc_make(&as);
     qk_poly_t *p = sh_poly(s, &a);
+    /* Markers and a region too, so that every output array is allocated. */
+    int32_t sm[9] = {1, 2, 3, 4, 5, 6, 7, 8, 9};
+    double reg[3] = {8, 8, 7};
+    assert_int_equal(qk_poly_set_markers(p, NULL, sm, NULL), QK_OK);
+    assert_int_equal(qk_poly_set_regions(p, reg, 1, NULL), QK_OK);
     as.fail_at = as.calls + fail_at;
     qk_mesh_options_t o = general_opts();
     o.allocator = &a;
