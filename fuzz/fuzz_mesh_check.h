@@ -194,9 +194,8 @@ static inline int qkfm_run(const uint8_t *data, size_t size, qk_mesh_mode_t mode
   /* Likewise the extent in steps of the finest binary digit: an isolated vertex 10^-14 from
    * a segment 10^10 long asks for 2^27 cells before the refusal, which takes seconds. */
   int fd = qkfm_finest_digit(&pin, lo);
-  int too_spread = max_ratio > 0 && pin.ns &&
-                   (!(ext0 <= max_ratio * shortest) ||
-                    !(ldexp(ext0, fd < -1000 ? 0 : fd) <= max_ratio * max_ratio));
+  int too_spread = max_ratio > 0 && ((pin.ns && !(ext0 <= max_ratio * shortest)) ||
+                                     !(ldexp(ext0, fd < -1000 ? 0 : fd) <= max_ratio * max_ratio));
   if (pin.nv <= max_nv && !too_spread &&
       !(max_perimeter > 0 && !(qkfm_lattice_perimeter(&pin, lo) <= max_perimeter))) {
     qk_mesh_options_t mo;
