@@ -127,9 +127,12 @@ static inline void qkfm_check(const qkfm_input_t *in, const qk_mesh_t *m, qk_mes
  * Inputs above max_nv vertices, or (max_perimeter > 0) whose perimeter in steps of the finest
  * binary digit of their coordinates exceeds max_perimeter, are only read: that bounds
  * the work per input, as does max_ratio (> 0): inputs whose extent exceeds max_ratio
- * times their shortest segment are only read. Returns 0.
+ * times their shortest segment, or max_ratio^2 steps of their finest binary digit, are
+ * only read. Returns 0.
  */
-static inline double qkfm_lattice_perimeter(const qkfm_input_t *in, const double *lo) {
+/* The exponent f of the finest binary digit of the coordinates relative to lo: every
+ * coordinate is lo + an integer times 2^-f. */
+static inline int qkfm_finest_digit(const qkfm_input_t *in, const double *lo) {
   int f = -1100;
   for (size_t i = 0; i < in->nv; i++)
     for (int k = 0; k < 2; k++) {
@@ -142,6 +145,11 @@ static inline double qkfm_lattice_perimeter(const qkfm_input_t *in, const double
       while (!(M & 1)) M >>= 1, tz++;
       if (53 - e - tz > f) f = 53 - e - tz;
     }
+  return f;
+}
+
+static inline double qkfm_lattice_perimeter(const qkfm_input_t *in, const double *lo) {
+  int f = qkfm_finest_digit(in, lo);
   double p = 0;
   for (size_t s = 0; s < in->ns; s++) {
     const double *a = &in->xy[2 * in->seg[2 * s]], *b = &in->xy[2 * in->seg[2 * s + 1]];
@@ -183,7 +191,11 @@ static inline int qkfm_run(const uint8_t *data, size_t size, qk_mesh_mode_t mode
     double l = fmax(fabs(a[0] - b[0]), fabs(a[1] - b[1]));
     if (l > 0 && l < shortest) shortest = l;
   }
-  int too_spread = max_ratio > 0 && pin.ns && !(ext0 <= max_ratio * shortest);
+  /* Likewise the extent in steps of the finest binary digit: an isolated vertex 10^-14 from
+   * a segment 10^10 long asks for 2^27 cells before the refusal, which takes seconds. */
+  int fd = qkfm_finest_digit(&pin, lo);
+  int too_spread = max_ratio > 0 && ((pin.ns && !(ext0 <= max_ratio * shortest)) ||
+                                     !(ldexp(ext0, fd < -1000 ? 0 : fd) <= max_ratio * max_ratio));
   if (pin.nv <= max_nv && !too_spread &&
       !(max_perimeter > 0 && !(qkfm_lattice_perimeter(&pin, lo) <= max_perimeter))) {
     qk_mesh_options_t mo;
