@@ -12,12 +12,14 @@
 #define QK__NLEV 320
 
 typedef struct qk__wobj {
-  qk_shape_t s; /* normalised */
-  qk_box_t box; /* the shape's box, rounded outwards */
-  qk_box_t fat; /* box plus margin: the object is re-filed when box leaves it */
+  qk_shape_t s;   /* normalised */
+  qk_box_t box;   /* the shape's box, rounded outwards */
+  qk_box_t loose; /* its cell's loose square [cx 2^L, (cx + 2) 2^L) per axis: the object is
+                     re-filed only when box leaves it (the far sides are open) */
   uint64_t tag;
-  int64_t cx, cy; /* cell at its level: fat.min / 2^level, floored */
-  uint32_t gen;   /* generation of the slot (odd: live) */
+  double fe;     /* extent of the fat box it was filed by (re-filed when it shrinks to 1/8) */
+  uint32_t gen;  /* generation of the slot (odd: live) */
+  uint32_t ugen; /* generation at the last update: the handles of the stored pairs */
   int16_t level;
   uint16_t live;
   uint32_t next, prev; /* the cell's list; next also links the free slots */
@@ -46,6 +48,13 @@ typedef struct qk__pvec {
   size_t n, cap;
 } qk__pvec_t;
 
+/* Pairs as 64-bit keys: slot a in the high half, slot b (> a) in the low half, so the
+ * keys' order is the (slot a, slot b) order. */
+typedef struct qk__kvec {
+  uint64_t *v;
+  size_t n, cap;
+} qk__kvec_t;
+
 struct qk_world {
   qk_allocator_t alloc;
   qk_world_options_t opt;
@@ -57,9 +66,15 @@ struct qk_world {
   size_t cap_cells, n_cells;
   uint32_t level_objs[QK__NLEV];
   uint32_t level_cells[QK__NLEV];
-  qk__pvec_t cur, began, ended;
-  qk__wpack_t *pack; /* scratch of qk_world_update, kept between frames */
+  qk__kvec_t cur, began; /* this frame's pairs and those that began (handles: ugen) */
+  qk__pvec_t ended;      /* pairs that ended, as handles (their slots may be reused) */
+  int ident_dirty;       /* an object was added or removed since the last update */
+  /* Scratch of qk_world_update, kept between frames. */
+  qk__wpack_t *pack;
   size_t cap_pack;
+  qk__kvec_t found; /* the search's pairs, unsorted */
+  uint32_t *count;  /* per slot: pairs whose first slot it is (cap_count entries) */
+  size_t cap_count;
 };
 
 /* 2^e for e in [-1022, 1023], exactly (cheaper than ldexp in the inner loops; scaling
@@ -88,6 +103,13 @@ void qk__world_visit_seg(const qk_world_t *w, qk_box_t qb, const qk_point_t *seg
 
 static inline qk_handle_t qk__handle(const qk_world_t *w, uint32_t slot) {
   return ((uint64_t)w->obj[slot].gen << 32) | slot;
+}
+
+/* The handles of a stored pair key (generations as of the last update). */
+static inline qk_world_pair_t qk__key_pair(const qk_world_t *w, uint64_t k) {
+  uint32_t a = (uint32_t)(k >> 32), b = (uint32_t)k;
+  return (qk_world_pair_t){((uint64_t)w->obj[a].ugen << 32) | a,
+                           ((uint64_t)w->obj[b].ugen << 32) | b};
 }
 
 #endif /* QUADKIT_WORLD_INTERNAL_H */
