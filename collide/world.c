@@ -88,6 +88,7 @@ void qk_world_free(qk_world_t *w) {
   qk__free(&a, w->began.v, w->began.cap * sizeof *w->began.v);
   pvec_free(&a, &w->ended);
   qk__free(&a, w->pack, w->cap_pack * sizeof *w->pack);
+  qk__free(&a, w->fgrp, w->cap_fgrp * 16 * sizeof *w->fgrp);
   qk__free(&a, w->found.v, w->found.cap * sizeof *w->found.v);
   qk__free(&a, w->count, w->cap_count * sizeof *w->count);
   qk__free(&a, w, sizeof *w);
@@ -100,7 +101,7 @@ size_t qk_world_bytes(const qk_world_t *w) {
   return sizeof *w + (size_t)w->cap_obj * sizeof *w->obj + w->cap_cells * sizeof *w->cells +
          (w->cur.cap + w->began.cap + w->found.cap) * sizeof(uint64_t) +
          w->ended.cap * sizeof(qk_world_pair_t) + w->cap_pack * sizeof *w->pack +
-         w->cap_count * sizeof *w->count;
+         w->cap_count * sizeof *w->count + w->cap_fgrp * 16 * sizeof *w->fgrp;
 }
 
 /* ---- the cell table -------------------------------------------------------------- */

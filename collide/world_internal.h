@@ -40,7 +40,8 @@ typedef struct qk__wcell {
 typedef struct qk__wpack {
   qk_box_t box;
   uint32_t slot;
-  uint32_t is_box; /* both boxes: the box test is the whole test */
+  uint32_t is_box; /* both boxes: the box test is the whole test (in a header: the cell's
+                      first float group) */
 } qk__wpack_t;
 
 typedef struct qk__pvec {
@@ -72,6 +73,8 @@ struct qk_world {
   /* Scratch of qk_world_update, kept between frames. */
   qk__wpack_t *pack;
   size_t cap_pack;
+  float *fgrp;      /* the boxes as floats rounded outwards, 4 objects to 16 floats */
+  size_t cap_fgrp;  /* in groups */
   qk__kvec_t found; /* the search's pairs, unsorted */
   uint32_t *count;  /* per slot: pairs whose first slot it is (cap_count entries) */
   size_t cap_count;

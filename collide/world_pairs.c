@@ -7,6 +7,10 @@
 
 #include "collide/world_internal.h"
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 /* One thread's share: a range of table entries and the pairs found there. */
 typedef struct share {
   const qk_world_t *w;
@@ -47,15 +51,68 @@ static inline int try_pair(share_t *s, const qk__wpack_t *p, const qk__wpack_t *
   return kv_push(s, i, j);
 }
 
+/*
+ * The box prefilter. Besides the packed doubles, each cell's boxes are copied as floats,
+ * four objects to a group (16 floats: 4 xmin, 4 ymin, 4 xmax, 4 ymax; missing lanes hold
+ * an empty box), so one object is compared with four at once. Rounding to float is
+ * monotone, so u <= v implies (float)u <= (float)v: every comparison of the box test
+ * that holds in doubles holds in floats, and the prefilter never drops a pair whose
+ * boxes meet. What it keeps is decided in doubles by try_pair.
+ */
+
+/* Lanes of group g whose float boxes meet the box (x0, y0, x1, y1): a 4-bit mask. */
+static inline unsigned group_hits(const float *g, const float *me) {
+#if defined(__SSE2__)
+  __m128 m = _mm_and_ps(_mm_cmple_ps(_mm_loadu_ps(g), _mm_set1_ps(me[8])),
+                        _mm_cmple_ps(_mm_set1_ps(me[0]), _mm_loadu_ps(g + 8)));
+  m = _mm_and_ps(m, _mm_and_ps(_mm_cmple_ps(_mm_loadu_ps(g + 4), _mm_set1_ps(me[12])),
+                               _mm_cmple_ps(_mm_set1_ps(me[4]), _mm_loadu_ps(g + 12))));
+  return (unsigned)_mm_movemask_ps(m);
+#else
+  unsigned bits = 0;
+  for (int k = 0; k < 4; k++)
+    bits |=
+        (unsigned)(g[k] <= me[8] && me[0] <= g[8 + k] && g[4 + k] <= me[12] && me[4] <= g[12 + k])
+        << k;
+  return bits;
+#endif
+}
+
+/* Object k of a cell (its lane in the float groups starting at f). */
+static inline const float *lane_of(const float *f, uint32_t k) {
+  return f + (k >> 2) * 16 + (k & 3);
+}
+
+/* Object i of cell A (pack entry pi, float lane me) against the objects of cell B from
+ * its group q0 on, lanes below `from` of that first group excluded. */
+static inline int obj_vs_groups(share_t *s, const qk__wpack_t *pi, const float *me,
+                                const qk__wcell_t *b, uint32_t q0, unsigned from) {
+  const qk_world_t *w = s->w;
+  const qk__wpack_t *pk = w->pack;
+  const float *fb = w->fgrp + (size_t)pk[b->start].is_box * 16;
+  uint32_t ng = (b->count + 3) >> 2;
+  for (uint32_t q = q0; q < ng; q++) {
+    unsigned bits = group_hits(fb + (size_t)q * 16, me);
+    if (q == q0) bits &= ~((1u << from) - 1);
+    while (bits) {
+      unsigned lane = (unsigned)__builtin_ctz(bits);
+      bits &= bits - 1;
+      if (!try_pair(s, pi, &pk[b->start + 1 + q * 4 + lane])) return 0;
+    }
+  }
+  return 1;
+}
+
 /* Every object of cell A against every object of cell B (A != B). */
 static int cross_cells(share_t *s, const qk__wcell_t *a, const qk__wcell_t *b) {
   const qk__wpack_t *pk = s->w->pack;
   const qk_box_t *hb = &pk[b->start].box; /* the box around all of B's objects */
   if (!boxes_meet(&pk[a->start].box, hb)) return 1;
-  for (uint32_t i = a->start + 1; i <= a->start + a->count; i++) {
-    if (!boxes_meet(&pk[i].box, hb)) continue;
-    for (uint32_t j = b->start + 1; j <= b->start + b->count; j++)
-      if (!try_pair(s, &pk[i], &pk[j])) return 0;
+  const float *fa = s->w->fgrp + (size_t)pk[a->start].is_box * 16;
+  for (uint32_t k = 0; k < a->count; k++) {
+    const qk__wpack_t *pi = &pk[a->start + 1 + k];
+    if (!boxes_meet(&pi->box, hb)) continue;
+    if (!obj_vs_groups(s, pi, lane_of(fa, k), b, 0, 0)) return 0;
   }
   return 1;
 }
@@ -79,10 +136,11 @@ static int cell_vs_level(share_t *s, const qk__wcell_t *a, int l) {
 static int cell_pairs(share_t *s, const qk__wcell_t *a) {
   const qk_world_t *w = s->w;
   const qk__wpack_t *pk = w->pack;
-  /* Within the cell. */
-  for (uint32_t i = a->start + 1; i <= a->start + a->count; i++)
-    for (uint32_t j = i + 1; j <= a->start + a->count; j++)
-      if (!try_pair(s, &pk[i], &pk[j])) return 0;
+  /* Within the cell: each object with those after it. */
+  const float *fa = w->fgrp + (size_t)pk[a->start].is_box * 16;
+  for (uint32_t k = 0; k + 1 < a->count; k++)
+    if (!obj_vs_groups(s, &pk[a->start + 1 + k], lane_of(fa, k), a, (k + 1) >> 2, (k + 1) & 3))
+      return 0;
   /* The same level: loose squares [c, c + 2) meet when the indices differ by <= 1; each
    * neighbour pair is taken once, from the cell that comes first in (x, y) order. */
   for (int dx = 0; dx <= 1; dx++)
@@ -117,29 +175,46 @@ static void run_share(unsigned t, void *ud) {
  * then read consecutive memory, not the objects' lists, and skip a neighbour cell whole
  * when its box misses (or, for one object, misses that object). */
 static qk_status_t pack_cells(qk_world_t *w) {
-  /* One header entry per cell (the box around its objects), then its objects. */
-  size_t need = w->n_live + w->n_cells + 1;
-  if (w->cap_pack < need || w->cap_pack > 2 * need + 64) {
-    size_t cap = need + need / 4;
+  /* One header entry per cell (the box around its objects), then its objects; float
+   * groups: a quarter of the objects plus one per cell at most. */
+  size_t need = w->n_live + w->n_cells + 1, gneed = w->n_live / 4 + w->n_cells + 1;
+  if (w->cap_pack < need || w->cap_pack > 2 * need + 64 || w->cap_fgrp < gneed ||
+      w->cap_fgrp > 2 * gneed + 64) {
+    size_t cap = need + need / 4, gcap = gneed + gneed / 4;
     qk__wpack_t *p = qk__realloc(&w->alloc, NULL, 0, cap * sizeof *p);
-    if (!p) return QK_ERR_NOMEM;
+    float *g = p ? qk__realloc(&w->alloc, NULL, 0, gcap * 16 * sizeof *g) : NULL;
+    if (!g) {
+      qk__free(&w->alloc, p, cap * sizeof *p);
+      return QK_ERR_NOMEM;
+    }
     qk__free(&w->alloc, w->pack, w->cap_pack * sizeof *w->pack);
+    qk__free(&w->alloc, w->fgrp, w->cap_fgrp * 16 * sizeof *w->fgrp);
     w->pack = p;
     w->cap_pack = cap;
+    w->fgrp = g;
+    w->cap_fgrp = gcap;
   }
-  uint32_t k = 0;
+  uint32_t k = 0, gk = 0;
   for (size_t c = 0; c < w->cap_cells; c++) {
     qk__wcell_t *cell = &w->cells[c];
     if (!cell->count) continue;
-    uint32_t h = k++;
+    uint32_t h = k++, lane = 0;
+    float *g = w->fgrp + (size_t)gk * 16;
     qk_box_t hb = {INFINITY, INFINITY, -INFINITY, -INFINITY};
     for (uint32_t i = cell->head; i != QK_NONE; i = w->obj[i].next) {
       const qk_box_t *b = &w->obj[i].box;
       w->pack[k++] = (qk__wpack_t){*b, i, w->obj[i].s.kind == QK_SHAPE_BOX};
       hb.xmin = qk__min(hb.xmin, b->xmin), hb.ymin = qk__min(hb.ymin, b->ymin);
       hb.xmax = qk__max(hb.xmax, b->xmax), hb.ymax = qk__max(hb.ymax, b->ymax);
+      g[lane] = (float)b->xmin, g[4 + lane] = (float)b->ymin;
+      g[8 + lane] = (float)b->xmax, g[12 + lane] = (float)b->ymax;
+      if (++lane == 4) lane = 0, g += 16;
     }
-    w->pack[h] = (qk__wpack_t){hb, QK_NONE, 0};
+    for (; lane && lane < 4; lane++) /* empty lanes: a box that meets nothing */
+      g[lane] = g[4 + lane] = INFINITY, g[8 + lane] = g[12 + lane] = -INFINITY;
+    /* the header's is_box holds the cell's first float group */
+    w->pack[h] = (qk__wpack_t){hb, QK_NONE, gk};
+    gk += (cell->count + 3) >> 2;
     cell->start = h;
   }
   return QK_OK;
