@@ -6,10 +6,11 @@
  * by default) and is filed by that box in one cell of a grid of squares of side 2^L: the
  * smallest even L whose cell holds the fattened box's lower-left corner and reaches two
  * cells up and right past it, so the fat box lies in the cell's "loose" square
- * [cx 2^L, (cx + 2) 2^L) (exact: powers of two and floors; the far side open). A move
- * that stays inside the fat box changes nothing else, so steady motion re-files only the
- * objects that drifted out. The cells of all levels live in one hash table keyed by
- * (level, cx, cy), each with an intrusive list of its objects; the table never holds
+ * [cx 2^L, (cx + 2) 2^L) (exact: powers of two and floors; the far side open). The
+ * object keeps that square; a move whose box stays inside it changes nothing else (four
+ * comparisons), so steady motion re-files only the objects that drifted out of their
+ * cell's loose square, having moved at least the margin. The cells of all levels live in one hash
+ * table keyed by (level, cx, cy), each with an intrusive list of its objects; the table never holds
  * more cells than objects, so the world's memory is proportional to the live objects
  * whatever the churn.
  *
@@ -20,11 +21,13 @@
  * filed at level 0 and one at 1e30 at a coarser one).
  *
  * Pairs (collide/world_pairs.c): each update first copies the boxes into a packed array,
- * cell by cell, each cell headed by the box around its objects; every cell then meets the 5 cells
+ * cell by cell, each cell headed by the box around its objects (and as floats, four
+ * objects to a group, for a four-wide prefilter); every cell then meets the 5 cells
  * of its own level at or after it (itself and the neighbours whose loose squares reach it: indices
  * differing by at most 1), and each of its objects the cells of every coarser occupied level whose
  * loose squares meet the object's box (about four). Candidate pairs pass the exact box test, then
- * the exact shape test (collide/shape.c). Pairs are radix-sorted by (slot a, slot b), which makes
+ * the exact shape test (collide/shape.c). Pairs are 64-bit keys counting-sorted by (slot a,
+ * slot b), which makes
  * the order deterministic, the began / ended sets a merge of two sorted lists, and the
  * answer independent of the number of threads (each thread takes a range of the table).
  *

@@ -73,7 +73,7 @@ struct qk_world {
   /* Scratch of qk_world_update, kept between frames. */
   qk__wpack_t *pack;
   size_t cap_pack;
-  float *fgrp;      /* the boxes as floats rounded outwards, 4 objects to 16 floats */
+  float *fgrp;      /* the boxes as floats (a prefilter), 4 objects to 16 floats */
   size_t cap_fgrp;  /* in groups */
   qk__kvec_t found; /* the search's pairs, unsorted */
   uint32_t *count;  /* per slot: pairs whose first slot it is (cap_count entries) */
