@@ -92,6 +92,7 @@ void qk_world_free(qk_world_t *w) {
   pvec_free(&a, &w->ended);
   qk__free(&a, w->pack, w->cap_pack * sizeof *w->pack);
   qk__free(&a, w->fgrp, w->cap_fgrp * 16 * sizeof *w->fgrp);
+  qk__free(&a, w->occ, w->cap_occ * sizeof *w->occ);
   qk__free(&a, w->found.v, w->found.cap * sizeof *w->found.v);
   qk__free(&a, w->count, w->cap_count * sizeof *w->count);
   qk__free(&a, w, sizeof *w);
@@ -104,33 +105,18 @@ size_t qk_world_bytes(const qk_world_t *w) {
   return sizeof *w + (size_t)w->cap_obj * sizeof *w->obj + w->cap_cells * sizeof *w->cells +
          (w->cur.cap + w->began.cap + w->found.cap) * sizeof(uint64_t) +
          w->ended.cap * sizeof(qk_world_pair_t) + w->cap_pack * sizeof *w->pack +
-         w->cap_count * sizeof *w->count + w->cap_fgrp * 16 * sizeof *w->fgrp;
+         w->cap_count * sizeof *w->count + w->cap_fgrp * 16 * sizeof *w->fgrp +
+         w->cap_occ * sizeof *w->occ;
 }
 
 /* ---- the cell table -------------------------------------------------------------- */
 
-static inline size_t cell_hash(int level, int64_t cx, int64_t cy) {
-  uint64_t h = (uint64_t)cx * 0x9E3779B97F4A7C15ull;
-  h ^= (uint64_t)cy * 0xC2B2AE3D27D4EB4Full + ((uint64_t)(uint32_t)level << 7);
-  h ^= h >> 29;
-  h *= 0xBF58476D1CE4E5B9ull;
-  return (size_t)(h ^ (h >> 32));
-}
-
 static size_t cell_find(const qk_world_t *w, int level, int64_t cx, int64_t cy) {
-  size_t mask = w->cap_cells - 1, i = cell_hash(level, cx, cy) & mask;
-  for (;;) {
-    const qk__wcell_t *c = &w->cells[i];
-    if (c->count == 0) return i; /* the empty entry where it would go */
-    if (c->cx == cx && c->cy == cy && c->level == level) return i;
-    i = (i + 1) & mask;
-  }
+  return qk__cell_find(w, level, cx, cy);
 }
 
 const qk__wcell_t *qk__world_cell(const qk_world_t *w, int level, int64_t cx, int64_t cy) {
-  if (w->n_cells == 0) return NULL;
-  const qk__wcell_t *c = &w->cells[cell_find(w, level, cx, cy)];
-  return c->count ? c : NULL;
+  return qk__cell_get(w, level, cx, cy);
 }
 
 /* Remove entry i, shifting later entries of its probe run back (no tombstones). */
@@ -141,7 +127,7 @@ static void cell_delete(qk_world_t *w, size_t i) {
     j = (j + 1) & mask;
     qk__wcell_t *c = &w->cells[j];
     if (c->count == 0) return;
-    size_t home = cell_hash(c->level, c->cx, c->cy) & mask;
+    size_t home = qk__cell_hash(c->level, c->cx, c->cy) & mask;
     /* c may move to i when i lies cyclically in [home, j). */
     int move = i <= j ? (home <= i || home > j) : (home <= i && home > j);
     if (move) {

@@ -73,6 +73,8 @@ struct qk_world {
   /* Scratch of qk_world_update, kept between frames. */
   qk__wpack_t *pack;
   size_t cap_pack;
+  uint32_t *occ; /* the occupied table entries, in table order */
+  size_t cap_occ;
   float *fgrp;      /* the boxes as floats (a prefilter), 4 objects to 16 floats */
   size_t cap_fgrp;  /* in groups */
   qk__kvec_t found; /* the search's pairs, unsorted */
@@ -88,6 +90,33 @@ static inline double qk__pow2(int e) {
     double d;
   } v = {(uint64_t)(e + 1023) << 52};
   return v.d;
+}
+
+static inline size_t qk__cell_hash(int level, int64_t cx, int64_t cy) {
+  uint64_t h = (uint64_t)cx * 0x9E3779B97F4A7C15ull;
+  h ^= (uint64_t)cy * 0xC2B2AE3D27D4EB4Full + ((uint64_t)(uint32_t)level << 7);
+  h ^= h >> 29;
+  h *= 0xBF58476D1CE4E5B9ull;
+  return (size_t)(h ^ (h >> 32));
+}
+
+/* The table entry of cell (level, cx, cy), or the empty entry where it would go. */
+static inline size_t qk__cell_find(const qk_world_t *w, int level, int64_t cx, int64_t cy) {
+  size_t mask = w->cap_cells - 1, i = qk__cell_hash(level, cx, cy) & mask;
+  for (;;) {
+    const qk__wcell_t *c = &w->cells[i];
+    if (c->count == 0) return i;
+    if (c->cx == cx && c->cy == cy && c->level == level) return i;
+    i = (i + 1) & mask;
+  }
+}
+
+/* The cell (level, cx, cy), or NULL (inline, for the pair search). */
+static inline const qk__wcell_t *qk__cell_get(const qk_world_t *w, int level, int64_t cx,
+                                              int64_t cy) {
+  if (w->n_cells == 0) return NULL;
+  const qk__wcell_t *c = &w->cells[qk__cell_find(w, level, cx, cy)];
+  return c->count ? c : NULL;
 }
 
 /* The cell (level, cx, cy), or NULL. */

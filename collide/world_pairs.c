@@ -127,7 +127,7 @@ static int cell_vs_level(share_t *s, const qk__wcell_t *a, int l) {
   int64_t y0 = (int64_t)floor(hb->ymin * inv) - 1, y1 = (int64_t)floor(hb->ymax * inv);
   for (int64_t x = x0; x <= x1; x++)
     for (int64_t y = y0; y <= y1; y++) {
-      const qk__wcell_t *b = qk__world_cell(w, l, x, y);
+      const qk__wcell_t *b = qk__cell_get(w, l, x, y);
       if (b && !cross_cells(s, a, b)) return 0;
     }
   return 1;
@@ -146,7 +146,7 @@ static int cell_pairs(share_t *s, const qk__wcell_t *a) {
   for (int dx = 0; dx <= 1; dx++)
     for (int dy = -1; dy <= 1; dy++) {
       if (dx == 0 && dy <= 0) continue;
-      const qk__wcell_t *b = qk__world_cell(w, a->level, a->cx + dx, a->cy + dy);
+      const qk__wcell_t *b = qk__cell_get(w, a->level, a->cx + dx, a->cy + dy);
       if (b && !cross_cells(s, a, b)) return 0;
     }
   /* Coarser levels: the cells whose loose squares meet the box around this cell's
@@ -162,8 +162,8 @@ static int cell_pairs(share_t *s, const qk__wcell_t *a) {
 static void run_share(unsigned t, void *ud) {
   share_t *s = &((share_t *)ud)[t];
   for (size_t i = s->lo; i < s->hi; i++) {
-    const qk__wcell_t *c = &s->w->cells[i];
-    if (c->count && !cell_pairs(s, c)) {
+    const qk__wcell_t *c = &s->w->cells[s->w->occ[i]];
+    if (!cell_pairs(s, c)) {
       s->nomem = 1;
       return;
     }
@@ -178,26 +178,33 @@ static qk_status_t pack_cells(qk_world_t *w) {
   /* One header entry per cell (the box around its objects), then its objects; float
    * groups: a quarter of the objects plus one per cell at most. */
   size_t need = w->n_live + w->n_cells + 1, gneed = w->n_live / 4 + w->n_cells + 1;
+  size_t oneed = w->n_cells + 1;
   if (w->cap_pack < need || w->cap_pack > 2 * need + 64 || w->cap_fgrp < gneed ||
-      w->cap_fgrp > 2 * gneed + 64) {
-    size_t cap = need + need / 4, gcap = gneed + gneed / 4;
+      w->cap_fgrp > 2 * gneed + 64 || w->cap_occ < oneed || w->cap_occ > 2 * oneed + 64) {
+    size_t cap = need + need / 4, gcap = gneed + gneed / 4, ocap = oneed + oneed / 4;
     qk__wpack_t *p = qk__realloc(&w->alloc, NULL, 0, cap * sizeof *p);
     float *g = p ? qk__realloc(&w->alloc, NULL, 0, gcap * 16 * sizeof *g) : NULL;
-    if (!g) {
+    uint32_t *o = g ? qk__realloc(&w->alloc, NULL, 0, ocap * sizeof *o) : NULL;
+    if (!o) {
       qk__free(&w->alloc, p, cap * sizeof *p);
+      qk__free(&w->alloc, g, gcap * 16 * sizeof *g);
       return QK_ERR_NOMEM;
     }
     qk__free(&w->alloc, w->pack, w->cap_pack * sizeof *w->pack);
     qk__free(&w->alloc, w->fgrp, w->cap_fgrp * 16 * sizeof *w->fgrp);
+    qk__free(&w->alloc, w->occ, w->cap_occ * sizeof *w->occ);
     w->pack = p;
     w->cap_pack = cap;
     w->fgrp = g;
     w->cap_fgrp = gcap;
+    w->occ = o;
+    w->cap_occ = ocap;
   }
-  uint32_t k = 0, gk = 0;
+  uint32_t k = 0, gk = 0, nocc = 0;
   for (size_t c = 0; c < w->cap_cells; c++) {
     qk__wcell_t *cell = &w->cells[c];
     if (!cell->count) continue;
+    w->occ[nocc++] = (uint32_t)c;
     uint32_t h = k++, lane = 0;
     float *g = w->fgrp + (size_t)gk * 16;
     qk_box_t hb = {INFINITY, INFINITY, -INFINITY, -INFINITY};
@@ -320,7 +327,7 @@ qk_status_t qk_world_update(qk_world_t *w) {
   share_t shares[256];
   for (unsigned t = 0; t < nt; t++) {
     shares[t] = (share_t){
-        w, w->cap_cells * t / nt, w->cap_cells * (t + 1) / nt, {0}, &w->alloc, 0, levels, n_levels};
+        w, w->n_cells * t / nt, w->n_cells * (t + 1) / nt, {0}, &w->alloc, 0, levels, n_levels};
   }
   shares[0].out = w->found; /* the first share fills the kept buffer */
   shares[0].out.n = 0;
