@@ -546,6 +546,7 @@ constexpr double kWorldBudget = 5.0;
 void run_world(const std::string &kind, size_t n) {
   progress("world %s n=%zu", kind.c_str(), n);
   int frames = opt.quick ? 10 : 30;
+  if (const char *f = getenv("QKB_WORLD_FRAMES")) frames = std::max(1, atoi(f)); // profiling
   WorldScene base = make_world_scene(kind, n, 77 + n);
   auto impls = make_world_impls();
   std::vector<std::vector<PairSum>> got(impls.size());
