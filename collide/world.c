@@ -36,7 +36,7 @@
  * first reused) with the next odd generation, so stale handles never match.
  *
  * Failure: every allocation an operation needs is made before the world changes; add
- * reserves the object slot and the table room (the table keeps at least twice as many
+ * reserves the object slot and the table room (the table keeps at least 4/3 as many
  * entries as objects, so filing never allocates), move and remove never allocate, and
  * update builds its new pair lists aside and swaps them in only when all succeeded.
  */
@@ -265,14 +265,15 @@ static qk__wobj_t *lookup(const qk_world_t *w, qk_handle_t h) {
 static qk_status_t reserve(qk_world_t *w) {
   if (w->free_head == QK_NONE && w->n_obj == w->cap_obj) {
     if (w->cap_obj >= UINT32_MAX / 2) return QK_ERR_LIMIT;
-    uint32_t cap = w->cap_obj ? w->cap_obj * 2 : 16;
+    uint32_t cap = w->cap_obj ? w->cap_obj + w->cap_obj / 2 : 16; /* 1.5x: less slack */
     qk__wobj_t *no =
         qk__realloc(&w->alloc, w->obj, (size_t)w->cap_obj * sizeof *no, (size_t)cap * sizeof *no);
     if (!no) return QK_ERR_NOMEM;
     w->obj = no;
     w->cap_obj = cap;
   }
-  size_t need = 2 * (w->n_live + 1);
+  /* Filing makes at most one cell an object: a load of at most 3/4 then. */
+  size_t need = (w->n_live + 1) + (w->n_live + 1) / 3 + 1;
   if (w->cap_cells < need) {
     size_t cap = w->cap_cells ? w->cap_cells : 32;
     while (cap < need) cap *= 2;
