@@ -255,36 +255,27 @@ static int kv_size(const qk_allocator_t *a, qk__kvec_t *v, size_t n) {
   return 1;
 }
 
-/* In-place heap sort of keys, for the few long runs. */
-static void heap_sort(uint64_t *v, size_t n) {
-  for (size_t k = n / 2; k-- > 0;) {
-    for (size_t i = k;;) {
-      size_t c = 2 * i + 1;
-      if (c >= n) break;
-      if (c + 1 < n && v[c + 1] > v[c]) c++;
-      if (v[i] >= v[c]) break;
-      uint64_t t = v[i];
-      v[i] = v[c], v[c] = t, i = c;
-    }
+/* Sort a long run of keys sharing their first slot by the second: LSD radix on 8-bit
+ * digits of the second slot (below 2^bits), tmp holding as many keys. */
+static void run_radix(uint64_t *v, uint64_t *tmp, size_t n, int bits) {
+  uint64_t *src = v, *dst = tmp;
+  for (int shift = 0; shift < bits; shift += 8) {
+    size_t count[257] = {0};
+    for (size_t i = 0; i < n; i++) count[((src[i] >> shift) & 0xff) + 1]++;
+    for (int d = 1; d <= 256; d++) count[d] += count[d - 1];
+    for (size_t i = 0; i < n; i++) dst[count[(src[i] >> shift) & 0xff]++] = src[i];
+    uint64_t *t = src;
+    src = dst, dst = t;
   }
-  for (size_t m = n; m-- > 1;) {
-    uint64_t t = v[0];
-    v[0] = v[m], v[m] = t;
-    for (size_t i = 0;;) {
-      size_t c = 2 * i + 1;
-      if (c >= m) break;
-      if (c + 1 < m && v[c + 1] > v[c]) c++;
-      if (v[i] >= v[c]) break;
-      t = v[i];
-      v[i] = v[c], v[c] = t, i = c;
-    }
-  }
+  if (src != v) memcpy(v, src, n * sizeof *v);
 }
 
 /* Sort n keys from src into dst: a counting sort on the first slot (count has n_obj + 1
- * entries), then each slot's run (a few pairs) by insertion on the second. */
-static void sort_keys(const uint64_t *src, uint64_t *dst, size_t n, uint32_t *count,
-                      uint32_t n_obj) {
+ * entries), then each slot's run by the second: insertion for a few pairs, radix for
+ * more (src is then free to serve as scratch). */
+static void sort_keys(uint64_t *src, uint64_t *dst, size_t n, uint32_t *count, uint32_t n_obj) {
+  int bits = 0;
+  while (bits < 32 && (n_obj - 1) >> bits) bits++;
   memset(count, 0, ((size_t)n_obj + 1) * sizeof *count);
   for (size_t i = 0; i < n; i++) count[(src[i] >> 32) + 1]++;
   for (uint32_t a = 1; a <= n_obj; a++) count[a] += count[a - 1];
@@ -293,8 +284,8 @@ static void sort_keys(const uint64_t *src, uint64_t *dst, size_t n, uint32_t *co
   uint32_t lo = 0;
   for (uint32_t a = 0; a < n_obj; a++) {
     uint32_t hi = count[a];
-    if (hi - lo > 32) {
-      heap_sort(dst + lo, hi - lo);
+    if (hi - lo > 48) {
+      run_radix(dst + lo, src + lo, hi - lo, bits);
     } else {
       for (uint32_t i = lo + 1; i < hi; i++) {
         uint64_t x = dst[i];
