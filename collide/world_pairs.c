@@ -255,47 +255,19 @@ static int kv_size(const qk_allocator_t *a, qk__kvec_t *v, size_t n) {
   return 1;
 }
 
-/* Sort a long run of keys sharing their first slot by the second: LSD radix on 8-bit
- * digits of the second slot (below 2^bits), tmp holding as many keys. */
-static void run_radix(uint64_t *v, uint64_t *tmp, size_t n, int bits) {
-  uint64_t *src = v, *dst = tmp;
-  for (int shift = 0; shift < bits; shift += 8) {
-    size_t count[257] = {0};
-    for (size_t i = 0; i < n; i++) count[((src[i] >> shift) & 0xff) + 1]++;
-    for (int d = 1; d <= 256; d++) count[d] += count[d - 1];
-    for (size_t i = 0; i < n; i++) dst[count[(src[i] >> shift) & 0xff]++] = src[i];
-    uint64_t *t = src;
-    src = dst, dst = t;
-  }
-  if (src != v) memcpy(v, src, n * sizeof *v);
-}
-
-/* Sort n keys from src into dst: a counting sort on the first slot (count has n_obj + 1
- * entries), then each slot's run by the second: insertion for a few pairs, radix for
- * more (src is then free to serve as scratch). */
+/* Sort n keys into dst: two stable counting sorts, by the second slot then by the first
+ * (count has n_obj + 1 entries), through src, which ends as scratch. Each pass is a count
+ * and a scatter, whatever the lengths of the runs. */
 static void sort_keys(uint64_t *src, uint64_t *dst, size_t n, uint32_t *count, uint32_t n_obj) {
-  int bits = 0;
-  while (bits < 32 && (n_obj - 1) >> bits) bits++;
   memset(count, 0, ((size_t)n_obj + 1) * sizeof *count);
-  for (size_t i = 0; i < n; i++) count[(src[i] >> 32) + 1]++;
+  for (size_t i = 0; i < n; i++) count[(uint32_t)src[i] + 1]++;
   for (uint32_t a = 1; a <= n_obj; a++) count[a] += count[a - 1];
-  for (size_t i = 0; i < n; i++) dst[count[src[i] >> 32]++] = src[i];
-  /* count[a] is now the end of a's run, which starts at count[a - 1] (0 for a = 0) */
-  uint32_t lo = 0;
-  for (uint32_t a = 0; a < n_obj; a++) {
-    uint32_t hi = count[a];
-    if (hi - lo > 48) {
-      run_radix(dst + lo, src + lo, hi - lo, bits);
-    } else {
-      for (uint32_t i = lo + 1; i < hi; i++) {
-        uint64_t x = dst[i];
-        uint32_t j = i;
-        for (; j > lo && dst[j - 1] > x; j--) dst[j] = dst[j - 1];
-        dst[j] = x;
-      }
-    }
-    lo = hi;
-  }
+  for (size_t i = 0; i < n; i++) dst[count[(uint32_t)src[i]]++] = src[i];
+  memset(count, 0, ((size_t)n_obj + 1) * sizeof *count);
+  for (size_t i = 0; i < n; i++) count[(dst[i] >> 32) + 1]++;
+  for (uint32_t a = 1; a <= n_obj; a++) count[a] += count[a - 1];
+  for (size_t i = 0; i < n; i++) src[count[dst[i] >> 32]++] = dst[i];
+  memcpy(dst, src, n * sizeof *dst);
 }
 
 /* A slot's object is not the one it held at the last update (removed, or a new one). */
