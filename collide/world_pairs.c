@@ -259,6 +259,7 @@ static int kv_size(const qk_allocator_t *a, qk__kvec_t *v, size_t n) {
  * (count has n_obj + 1 entries), through src, which ends as scratch. Each pass is a count
  * and a scatter, whatever the lengths of the runs. */
 static void sort_keys(uint64_t *src, uint64_t *dst, size_t n, uint32_t *count, uint32_t n_obj) {
+  if (n == 0) return; /* src may be NULL then */
   memset(count, 0, ((size_t)n_obj + 1) * sizeof *count);
   for (size_t i = 0; i < n; i++) count[(uint32_t)src[i] + 1]++;
   for (uint32_t a = 1; a <= n_obj; a++) count[a] += count[a - 1];
