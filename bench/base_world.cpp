@@ -20,6 +20,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 
 #ifdef QKB_HAVE_BOX2D
@@ -225,7 +226,11 @@ public:
       tree->Query(&q, aabb(boxes[i]));
     }
   }
-  size_t bytes() const override { return 0; }
+  // The tree's nodes in use (2n - 1 for n proxies) times the node size: the least the
+  // tree can hold (its pool doubles, so it may hold up to twice that).
+  size_t bytes() const override {
+    return proxy.empty() ? 0 : sizeof(b2TreeNode) * (2 * proxy.size() - 1);
+  }
 };
 #endif
 
@@ -269,7 +274,9 @@ public:
     p.out = &out;
     tree->collideTT(tree->m_root, tree->m_root, p);
   }
-  size_t bytes() const override { return 0; }
+  size_t bytes() const override {
+    return leaf.empty() ? 0 : sizeof(btDbvtNode) * (2 * leaf.size() - 1);
+  }
 };
 #endif
 
@@ -400,6 +407,13 @@ std::vector<std::unique_ptr<WorldImpl>> make_world_impls() {
   v.emplace_back(new BulletBroadphase);
 #endif
   if (have("embree")) v.emplace_back(new EmbreeRebuild);
+  // QKB_WORLD_ONLY=NAME (for profiling, e.g. under callgrind): that implementation alone.
+  if (const char *only = std::getenv("QKB_WORLD_ONLY")) {
+    std::vector<std::unique_ptr<WorldImpl>> one;
+    for (auto &p : v)
+      if (std::strcmp(p->name(), only) == 0) one.push_back(std::move(p));
+    return one;
+  }
   return v;
 }
 

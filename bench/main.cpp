@@ -555,19 +555,30 @@ void run_collide(size_t n) {
 // must all equal quadkit's before anything is timed. Timed: the frames only (moving the
 // boxes in each structure and finding all pairs), median over the repetitions of the
 // mean per frame; setup and the scene's own motion are outside the clock.
+// Time budget (slow baselines at 1e5+ objects take seconds a frame): the check stops an
+// implementation after kWorldBudget seconds of its frames (its frames so far are
+// compared), and each timed repetition stops after kWorldBudget / reps seconds; the
+// time per frame is then the mean over the frames done (at least one). The rows say how
+// many frames were checked and timed (frames_checked, frames_timed: the fewest of any
+// repetition), so a budgeted row reads as "per frame over the first k frames".
+constexpr double kWorldBudget = 5.0;
 void run_world(const std::string &kind, size_t n) {
   progress("world %s n=%zu", kind.c_str(), n);
   int frames = opt.quick ? 10 : 30;
+  if (const char *f = getenv("QKB_WORLD_FRAMES")) frames = std::max(1, atoi(f)); // profiling
   WorldScene base = make_world_scene(kind, n, 77 + n);
   auto impls = make_world_impls();
   std::vector<std::vector<PairSum>> got(impls.size());
   for (size_t i = 0; i < impls.size(); i++) {
     WorldScene sc = base;
     impls[i]->init(sc.boxes);
-    for (int f = 0; f < frames; f++) {
+    double spent = 0;
+    for (int f = 0; f < frames && (i == 0 || spent < kWorldBudget); f++) {
       world_step(sc);
       PairSum ps;
+      double t0 = now_seconds();
       impls[i]->frame(sc.boxes, ps);
+      spent += now_seconds() - t0;
       got[i].push_back(ps);
     }
   }
@@ -575,7 +586,7 @@ void run_world(const std::string &kind, size_t n) {
   uint64_t total = 0;
   for (const PairSum &p : got[0]) total += p.pairs;
   for (size_t i = 1; i < impls.size(); i++) {
-    for (int f = 0; f < frames; f++)
+    for (size_t f = 0; f < got[i].size(); f++)
       if (got[i][f].pairs != got[0][f].pairs || got[i][f].hash != got[0][f].hash) ok[i] = false;
     if (!ok[i]) {
       Rec r;
@@ -586,7 +597,9 @@ void run_world(const std::string &kind, size_t n) {
     }
   }
   std::vector<std::vector<double>> t(impls.size());
+  std::vector<int> timed(impls.size(), frames);
   size_t m = impls.size();
+  double rep_budget = kWorldBudget / opt.reps;
   for (int rep = 0; rep < opt.reps; rep++)
     for (size_t j = 0; j < m; j++) {
       size_t i = (j + rep) % m;
@@ -594,14 +607,17 @@ void run_world(const std::string &kind, size_t n) {
       WorldScene sc = base;
       impls[i]->init(sc.boxes);
       double sum = 0;
-      for (int f = 0; f < frames; f++) {
+      int f = 0;
+      while (f < frames && sum < rep_budget) {
         world_step(sc);
         PairSum ps;
         double t0 = now_seconds();
         impls[i]->frame(sc.boxes, ps);
         sum += now_seconds() - t0;
+        f++;
       }
-      t[i].push_back(sum / frames);
+      t[i].push_back(sum / f);
+      timed[i] = std::min(timed[i], f);
     }
   for (size_t i = 0; i < m; i++) {
     if (!ok[i]) continue;
@@ -614,7 +630,10 @@ void run_world(const std::string &kind, size_t n) {
     if (b) r.bytes_per_point = (double)b / n;
     r.extra["pairs_per_frame"] = (double)total / frames;
     r.extra["frames"] = frames;
-    r.note = "seconds per frame: move all + all pairs";
+    r.extra["frames_checked"] = (double)got[i].size();
+    r.extra["frames_timed"] = timed[i];
+    r.note = timed[i] < frames ? "seconds per frame over the first frames_timed frames (budget)"
+                               : "seconds per frame: move all + all pairs";
     emit(r);
   }
 }
@@ -1375,6 +1394,13 @@ void print_table() {
     if (r.impl == "quadkit" && r.op == "build" && r.n >= 1000000)
       printf("memory: quadkit %.1f bytes/point (%s, n=%zu; raw coordinates are 16)\n",
              r.bytes_per_point, r.dataset.c_str(), r.n);
+  for (auto &r : records)
+    if (r.op == "world" && r.matches == 1 && std::isfinite(r.bytes_per_point))
+      printf("memory: world %-9s n=%-8zu %-9s %7.1f bytes/object%s\n", r.dataset.c_str(), r.n,
+             r.impl.c_str(), r.bytes_per_point,
+             r.impl == "box2d"    ? " (b2TreeNode size x 2n-1 nodes)"
+             : r.impl == "bullet" ? " (btDbvtNode size x 2n-1 nodes)"
+                                  : "");
   for (auto &r : records)
     if (r.op == "mesh" && r.matches == 1)
       printf("mesh %-15s U=%zu %-8s %8.0f triangles, min angle %.1f deg\n", r.dataset.c_str(), r.n,

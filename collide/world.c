@@ -6,10 +6,11 @@
  * by default) and is filed by that box in one cell of a grid of squares of side 2^L: the
  * smallest even L whose cell holds the fattened box's lower-left corner and reaches two
  * cells up and right past it, so the fat box lies in the cell's "loose" square
- * [cx 2^L, (cx + 2) 2^L) (exact: powers of two and floors; the far side open). A move
- * that stays inside the fat box changes nothing else, so steady motion re-files only the
- * objects that drifted out. The cells of all levels live in one hash table keyed by
- * (level, cx, cy), each with an intrusive list of its objects; the table never holds
+ * [cx 2^L, (cx + 2) 2^L) (exact: powers of two and floors; the far side open). The
+ * object keeps that square; a move whose box stays inside it changes nothing else (four
+ * comparisons), so steady motion re-files only the objects that drifted out of their
+ * cell's loose square, having moved at least the margin. The cells of all levels live in one hash
+ * table keyed by (level, cx, cy), each with an intrusive list of its objects; the table never holds
  * more cells than objects, so the world's memory is proportional to the live objects
  * whatever the churn.
  *
@@ -20,11 +21,13 @@
  * filed at level 0 and one at 1e30 at a coarser one).
  *
  * Pairs (collide/world_pairs.c): each update first copies the boxes into a packed array,
- * cell by cell, each cell headed by the box around its objects; every cell then meets the 5 cells
+ * cell by cell, each cell headed by the box around its objects (and as floats, four
+ * objects to a group, for a four-wide prefilter); every cell then meets the 5 cells
  * of its own level at or after it (itself and the neighbours whose loose squares reach it: indices
  * differing by at most 1), and each of its objects the cells of every coarser occupied level whose
  * loose squares meet the object's box (about four). Candidate pairs pass the exact box test, then
- * the exact shape test (collide/shape.c). Pairs are radix-sorted by (slot a, slot b), which makes
+ * the exact shape test (collide/shape.c). Pairs are 64-bit keys counting-sorted by (slot a,
+ * slot b), which makes
  * the order deterministic, the began / ended sets a merge of two sorted lists, and the
  * answer independent of the number of threads (each thread takes a range of the table).
  *
@@ -33,7 +36,7 @@
  * first reused) with the next odd generation, so stale handles never match.
  *
  * Failure: every allocation an operation needs is made before the world changes; add
- * reserves the object slot and the table room (the table keeps at least twice as many
+ * reserves the object slot and the table room (the table keeps at least 4/3 as many
  * entries as objects, so filing never allocates), move and remove never allocate, and
  * update builds its new pair lists aside and swaps them in only when all succeeded.
  */
@@ -84,10 +87,14 @@ void qk_world_free(qk_world_t *w) {
   qk_allocator_t a = w->alloc;
   qk__free(&a, w->obj, (size_t)w->cap_obj * sizeof *w->obj);
   qk__free(&a, w->cells, w->cap_cells * sizeof *w->cells);
-  pvec_free(&a, &w->cur);
-  pvec_free(&a, &w->began);
+  qk__free(&a, w->cur.v, w->cur.cap * sizeof *w->cur.v);
+  qk__free(&a, w->began.v, w->began.cap * sizeof *w->began.v);
   pvec_free(&a, &w->ended);
   qk__free(&a, w->pack, w->cap_pack * sizeof *w->pack);
+  qk__free(&a, w->fgrp, w->cap_fgrp * 16 * sizeof *w->fgrp);
+  qk__free(&a, w->occ, w->cap_occ * sizeof *w->occ);
+  qk__free(&a, w->found.v, w->found.cap * sizeof *w->found.v);
+  qk__free(&a, w->count, w->cap_count * sizeof *w->count);
   qk__free(&a, w, sizeof *w);
 }
 
@@ -96,34 +103,20 @@ size_t qk_world_size(const qk_world_t *w) { return w ? w->n_live : 0; }
 size_t qk_world_bytes(const qk_world_t *w) {
   if (!w) return 0;
   return sizeof *w + (size_t)w->cap_obj * sizeof *w->obj + w->cap_cells * sizeof *w->cells +
-         (w->cur.cap + w->began.cap + w->ended.cap) * sizeof(qk_world_pair_t) +
-         w->cap_pack * sizeof *w->pack;
+         (w->cur.cap + w->began.cap + w->found.cap) * sizeof(uint64_t) +
+         w->ended.cap * sizeof(qk_world_pair_t) + w->cap_pack * sizeof *w->pack +
+         w->cap_count * sizeof *w->count + w->cap_fgrp * 16 * sizeof *w->fgrp +
+         w->cap_occ * sizeof *w->occ;
 }
 
 /* ---- the cell table -------------------------------------------------------------- */
 
-static inline size_t cell_hash(int level, int64_t cx, int64_t cy) {
-  uint64_t h = (uint64_t)cx * 0x9E3779B97F4A7C15ull;
-  h ^= (uint64_t)cy * 0xC2B2AE3D27D4EB4Full + ((uint64_t)(uint32_t)level << 7);
-  h ^= h >> 29;
-  h *= 0xBF58476D1CE4E5B9ull;
-  return (size_t)(h ^ (h >> 32));
-}
-
 static size_t cell_find(const qk_world_t *w, int level, int64_t cx, int64_t cy) {
-  size_t mask = w->cap_cells - 1, i = cell_hash(level, cx, cy) & mask;
-  for (;;) {
-    const qk__wcell_t *c = &w->cells[i];
-    if (c->count == 0) return i; /* the empty entry where it would go */
-    if (c->cx == cx && c->cy == cy && c->level == level) return i;
-    i = (i + 1) & mask;
-  }
+  return qk__cell_find(w, level, cx, cy);
 }
 
 const qk__wcell_t *qk__world_cell(const qk_world_t *w, int level, int64_t cx, int64_t cy) {
-  if (w->n_cells == 0) return NULL;
-  const qk__wcell_t *c = &w->cells[cell_find(w, level, cx, cy)];
-  return c->count ? c : NULL;
+  return qk__cell_get(w, level, cx, cy);
 }
 
 /* Remove entry i, shifting later entries of its probe run back (no tombstones). */
@@ -134,7 +127,7 @@ static void cell_delete(qk_world_t *w, size_t i) {
     j = (j + 1) & mask;
     qk__wcell_t *c = &w->cells[j];
     if (c->count == 0) return;
-    size_t home = cell_hash(c->level, c->cx, c->cy) & mask;
+    size_t home = qk__cell_hash(c->level, c->cx, c->cy) & mask;
     /* c may move to i when i lies cyclically in [home, j). */
     int move = i <= j ? (home <= i || home > j) : (home <= i && home > j);
     if (move) {
@@ -194,16 +187,23 @@ static void cell_of(const qk_box_t *f, int *level, int64_t *cx, int64_t *cy) {
   }
 }
 
-/* File object i by its fat box; the table has room (see reserve). */
-static void file_obj(qk_world_t *w, uint32_t i) {
+/* The cell of a filed object: its loose square's corner over the cell side (exact). */
+static inline void obj_cell(const qk__wobj_t *o, int64_t *cx, int64_t *cy) {
+  double inv = qk__pow2(-o->level);
+  *cx = (int64_t)(o->loose.xmin * inv);
+  *cy = (int64_t)(o->loose.ymin * inv);
+}
+
+/* File object i in cell (level, cx, cy); the table has room (see reserve). */
+static void file_obj(qk_world_t *w, uint32_t i, int level, int64_t cx, int64_t cy) {
   qk__wobj_t *o = &w->obj[i];
-  int level;
-  cell_of(&o->fat, &level, &o->cx, &o->cy);
   o->level = (int16_t)level;
-  size_t k = cell_find(w, level, o->cx, o->cy);
+  double s = qk__pow2(level);
+  o->loose = (qk_box_t){(double)cx * s, (double)cy * s, (double)(cx + 2) * s, (double)(cy + 2) * s};
+  size_t k = cell_find(w, level, cx, cy);
   qk__wcell_t *c = &w->cells[k];
   if (c->count == 0) {
-    *c = (qk__wcell_t){o->cx, o->cy, level, QK_NONE, 0, 0};
+    *c = (qk__wcell_t){cx, cy, level, QK_NONE, 0, 0};
     w->n_cells++;
     w->level_cells[level - QK__LMIN]++;
   }
@@ -217,7 +217,9 @@ static void file_obj(qk_world_t *w, uint32_t i) {
 
 static void unfile_obj(qk_world_t *w, uint32_t i) {
   qk__wobj_t *o = &w->obj[i];
-  size_t k = cell_find(w, o->level, o->cx, o->cy);
+  int64_t cx, cy;
+  obj_cell(o, &cx, &cy);
+  size_t k = cell_find(w, o->level, cx, cy);
   qk__wcell_t *c = &w->cells[k];
   if (o->prev != QK_NONE)
     w->obj[o->prev].next = o->next;
@@ -232,17 +234,23 @@ static void unfile_obj(qk_world_t *w, uint32_t i) {
   }
 }
 
-static void set_shape(const qk_world_t *w, qk__wobj_t *o, const qk_shape_t *s) {
+/* Set the shape and compute the cell its fat box (box widened by the margin) files it
+ * in. */
+static void set_shape(const qk_world_t *w, qk__wobj_t *o, const qk_shape_t *s, const qk_box_t *b,
+                      int *level, int64_t *cx, int64_t *cy) {
   o->s = *s;
-  o->box = qk__shape_box(s);
-  double e = qk__max(o->box.xmax - o->box.xmin, o->box.ymax - o->box.ymin);
+  o->box = *b;
+  double e = qk__max(b->xmax - b->xmin, b->ymax - b->ymin);
   double m = w->opt.margin * e + w->opt.min_margin;
   if (!isfinite(m)) m = 0;
-  o->fat = (qk_box_t){o->box.xmin - m, o->box.ymin - m, o->box.xmax + m, o->box.ymax + m};
+  qk_box_t fat = {b->xmin - m, b->ymin - m, b->xmax + m, b->ymax + m};
+  o->fe = qk__max(fat.xmax - fat.xmin, fat.ymax - fat.ymin);
+  cell_of(&fat, level, cx, cy);
 }
 
-static inline int box_inside(const qk_box_t *a, const qk_box_t *b) {
-  return a->xmin >= b->xmin && a->ymin >= b->ymin && a->xmax <= b->xmax && a->ymax <= b->ymax;
+/* a inside the loose square b (its far sides open). */
+static inline int box_in_loose(const qk_box_t *a, const qk_box_t *b) {
+  return a->xmin >= b->xmin && a->ymin >= b->ymin && a->xmax < b->xmax && a->ymax < b->ymax;
 }
 
 /* The live object of a handle, or NULL. */
@@ -257,14 +265,15 @@ static qk__wobj_t *lookup(const qk_world_t *w, qk_handle_t h) {
 static qk_status_t reserve(qk_world_t *w) {
   if (w->free_head == QK_NONE && w->n_obj == w->cap_obj) {
     if (w->cap_obj >= UINT32_MAX / 2) return QK_ERR_LIMIT;
-    uint32_t cap = w->cap_obj ? w->cap_obj * 2 : 16;
+    uint32_t cap = w->cap_obj ? w->cap_obj + w->cap_obj / 2 : 16; /* 1.5x: less slack */
     qk__wobj_t *no =
         qk__realloc(&w->alloc, w->obj, (size_t)w->cap_obj * sizeof *no, (size_t)cap * sizeof *no);
     if (!no) return QK_ERR_NOMEM;
     w->obj = no;
     w->cap_obj = cap;
   }
-  size_t need = 2 * (w->n_live + 1);
+  /* Filing makes at most one cell an object: a load of at most 3/4 then. */
+  size_t need = (w->n_live + 1) + (w->n_live + 1) / 3 + 1;
   if (w->cap_cells < need) {
     size_t cap = w->cap_cells ? w->cap_cells : 32;
     while (cap < need) cap *= 2;
@@ -288,15 +297,26 @@ qk_status_t qk_world_add(qk_world_t *w, const qk_shape_t *shape, uint64_t tag, q
   } else {
     i = w->n_obj++;
     w->obj[i].gen = 1;
+    w->obj[i].ugen = 0;
   }
   qk__wobj_t *o = &w->obj[i];
   o->live = 1;
   o->tag = tag;
-  set_shape(w, o, &s);
-  file_obj(w, i);
+  qk_box_t b = qk__shape_box(&s);
+  int level;
+  int64_t cx, cy;
+  set_shape(w, o, &s, &b, &level, &cx, &cy);
+  file_obj(w, i, level, cx, cy);
   w->n_live++;
+  w->ident_dirty = 1;
   *h = qk__handle(w, i);
   return QK_OK;
+}
+
+/* qk__shape_normalize for a box whose values need no change (the common move). */
+static inline int box_ok(const qk_shape_t *s) {
+  return s->kind == QK_SHAPE_BOX && s->x <= s->a && s->y <= s->b && qk__value_ok(s->x) &&
+         qk__value_ok(s->y) && qk__value_ok(s->a) && qk__value_ok(s->b);
 }
 
 qk_status_t qk_world_move(qk_world_t *w, qk_handle_t h, const qk_shape_t *shape) {
@@ -304,30 +324,33 @@ qk_status_t qk_world_move(qk_world_t *w, qk_handle_t h, const qk_shape_t *shape)
   qk__wobj_t *o = lookup(w, h);
   if (!o) return QK_ERR_NOT_FOUND;
   qk_shape_t s;
-  qk_status_t st = qk__shape_normalize(shape, &s);
-  if (st != QK_OK) return st;
-  qk_box_t nb = qk__shape_box(&s);
-  if (box_inside(&nb, &o->fat)) {
-    /* Still inside its fat box: only the shape changes (unless it shrank so much that
-     * a finer level would serve it better, which re-files it below). */
+  qk_box_t nb;
+  if (box_ok(shape)) { /* value_ok excludes NaN and infinities */
+    s = *shape;
+    nb = (qk_box_t){s.x, s.y, s.a, s.b};
+  } else {
+    qk_status_t st = qk__shape_normalize(shape, &s);
+    if (st != QK_OK) return st;
+    nb = qk__shape_box(&s);
+  }
+  if (box_in_loose(&nb, &o->loose)) {
+    /* Still inside its cell's loose square: only the shape changes (unless it shrank so
+     * much that a finer level would serve it better, which re-files it below). */
     double e = qk__max(nb.xmax - nb.xmin, nb.ymax - nb.ymin);
-    double fe = qk__max(o->fat.xmax - o->fat.xmin, o->fat.ymax - o->fat.ymin);
-    if (!(e * 8 < fe)) {
+    if (!(e * 8 < o->fe)) {
       o->s = s;
       o->box = nb;
       return QK_OK;
     }
   }
   uint32_t i = (uint32_t)h;
-  set_shape(w, o, &s);
-  /* Out of its fat box, but often still filed in the same cell: then the new fat box is
-   * all that changes. */
   int level;
-  int64_t cx, cy;
-  cell_of(&o->fat, &level, &cx, &cy);
-  if (level == o->level && cx == o->cx && cy == o->cy) return QK_OK;
+  int64_t cx, cy, ox, oy;
+  set_shape(w, o, &s, &nb, &level, &cx, &cy);
+  obj_cell(o, &ox, &oy);
+  if (level == o->level && cx == ox && cy == oy) return QK_OK;
   unfile_obj(w, i);
-  file_obj(w, i);
+  file_obj(w, i, level, cx, cy);
   return QK_OK;
 }
 
@@ -342,6 +365,7 @@ qk_status_t qk_world_remove(qk_world_t *w, qk_handle_t h) {
   o->next = w->free_head;
   w->free_head = i;
   w->n_live--;
+  w->ident_dirty = 1;
   /* Give table memory back after mass removal; failure to shrink is harmless. */
   if (w->cap_cells > 64 && w->n_live * 8 < w->cap_cells) (void)cells_resize(w, w->cap_cells / 2);
   return QK_OK;

@@ -12,12 +12,14 @@
 #define QK__NLEV 320
 
 typedef struct qk__wobj {
-  qk_shape_t s; /* normalised */
-  qk_box_t box; /* the shape's box, rounded outwards */
-  qk_box_t fat; /* box plus margin: the object is re-filed when box leaves it */
+  qk_shape_t s;   /* normalised */
+  qk_box_t box;   /* the shape's box, rounded outwards */
+  qk_box_t loose; /* its cell's loose square [cx 2^L, (cx + 2) 2^L) per axis: the object is
+                     re-filed only when box leaves it (the far sides are open) */
   uint64_t tag;
-  int64_t cx, cy; /* cell at its level: fat.min / 2^level, floored */
-  uint32_t gen;   /* generation of the slot (odd: live) */
+  double fe;     /* extent of the fat box it was filed by (re-filed when it shrinks to 1/8) */
+  uint32_t gen;  /* generation of the slot (odd: live) */
+  uint32_t ugen; /* generation at the last update: the handles of the stored pairs */
   int16_t level;
   uint16_t live;
   uint32_t next, prev; /* the cell's list; next also links the free slots */
@@ -38,13 +40,21 @@ typedef struct qk__wcell {
 typedef struct qk__wpack {
   qk_box_t box;
   uint32_t slot;
-  uint32_t is_box; /* both boxes: the box test is the whole test */
+  uint32_t is_box; /* both boxes: the box test is the whole test (in a header: the cell's
+                      first float group) */
 } qk__wpack_t;
 
 typedef struct qk__pvec {
   qk_world_pair_t *v;
   size_t n, cap;
 } qk__pvec_t;
+
+/* Pairs as 64-bit keys: slot a in the high half, slot b (> a) in the low half, so the
+ * keys' order is the (slot a, slot b) order. */
+typedef struct qk__kvec {
+  uint64_t *v;
+  size_t n, cap;
+} qk__kvec_t;
 
 struct qk_world {
   qk_allocator_t alloc;
@@ -57,9 +67,19 @@ struct qk_world {
   size_t cap_cells, n_cells;
   uint32_t level_objs[QK__NLEV];
   uint32_t level_cells[QK__NLEV];
-  qk__pvec_t cur, began, ended;
-  qk__wpack_t *pack; /* scratch of qk_world_update, kept between frames */
+  qk__kvec_t cur, began; /* this frame's pairs and those that began (handles: ugen) */
+  qk__pvec_t ended;      /* pairs that ended, as handles (their slots may be reused) */
+  int ident_dirty;       /* an object was added or removed since the last update */
+  /* Scratch of qk_world_update, kept between frames. */
+  qk__wpack_t *pack;
   size_t cap_pack;
+  uint32_t *occ; /* the occupied table entries, in table order */
+  size_t cap_occ;
+  float *fgrp;      /* the boxes as floats (a prefilter), 4 objects to 16 floats */
+  size_t cap_fgrp;  /* in groups */
+  qk__kvec_t found; /* the search's pairs, unsorted */
+  uint32_t *count;  /* per slot: pairs whose first slot it is (cap_count entries) */
+  size_t cap_count;
 };
 
 /* 2^e for e in [-1022, 1023], exactly (cheaper than ldexp in the inner loops; scaling
@@ -70,6 +90,33 @@ static inline double qk__pow2(int e) {
     double d;
   } v = {(uint64_t)(e + 1023) << 52};
   return v.d;
+}
+
+static inline size_t qk__cell_hash(int level, int64_t cx, int64_t cy) {
+  uint64_t h = (uint64_t)cx * 0x9E3779B97F4A7C15ull;
+  h ^= (uint64_t)cy * 0xC2B2AE3D27D4EB4Full + ((uint64_t)(uint32_t)level << 7);
+  h ^= h >> 29;
+  h *= 0xBF58476D1CE4E5B9ull;
+  return (size_t)(h ^ (h >> 32));
+}
+
+/* The table entry of cell (level, cx, cy), or the empty entry where it would go. */
+static inline size_t qk__cell_find(const qk_world_t *w, int level, int64_t cx, int64_t cy) {
+  size_t mask = w->cap_cells - 1, i = qk__cell_hash(level, cx, cy) & mask;
+  for (;;) {
+    const qk__wcell_t *c = &w->cells[i];
+    if (c->count == 0) return i;
+    if (c->cx == cx && c->cy == cy && c->level == level) return i;
+    i = (i + 1) & mask;
+  }
+}
+
+/* The cell (level, cx, cy), or NULL (inline, for the pair search). */
+static inline const qk__wcell_t *qk__cell_get(const qk_world_t *w, int level, int64_t cx,
+                                              int64_t cy) {
+  if (w->n_cells == 0) return NULL;
+  const qk__wcell_t *c = &w->cells[qk__cell_find(w, level, cx, cy)];
+  return c->count ? c : NULL;
 }
 
 /* The cell (level, cx, cy), or NULL. */
@@ -88,6 +135,13 @@ void qk__world_visit_seg(const qk_world_t *w, qk_box_t qb, const qk_point_t *seg
 
 static inline qk_handle_t qk__handle(const qk_world_t *w, uint32_t slot) {
   return ((uint64_t)w->obj[slot].gen << 32) | slot;
+}
+
+/* The handles of a stored pair key (generations as of the last update). */
+static inline qk_world_pair_t qk__key_pair(const qk_world_t *w, uint64_t k) {
+  uint32_t a = (uint32_t)(k >> 32), b = (uint32_t)k;
+  return (qk_world_pair_t){((uint64_t)w->obj[a].ugen << 32) | a,
+                           ((uint64_t)w->obj[b].ugen << 32) | b};
 }
 
 #endif /* QUADKIT_WORLD_INTERNAL_H */

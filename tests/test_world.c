@@ -406,6 +406,67 @@ static void test_world_huge(void **s) {
   run_scene(SC_HUGE, 1, 300, 30, 1);
 }
 
+/* The float prefilter and the pair sort's long runs: boxes whose edges are doubles no
+ * float can hold, touching exactly or missing by one ulp (the prefilter rounds monotonically,
+ * the exact test decides), in cells of 1 to 9 objects (every lane pattern), plus one
+ * large box in slot 0 meeting a hundred small ones (a run longer than insertion sort
+ * takes), every frame against brute force. */
+static void test_world_prefilter_and_sort(void **s) {
+  (void)s;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 31);
+  qk_world_t *w;
+  assert_int_equal(qk_world_new(NULL, &w), QK_OK);
+  mirror_t m = {0};
+  m_add(w, &m,
+        (qk_shape_t){
+            QK_SHAPE_BOX,
+            0,
+            0,
+            40,
+            40,
+        });
+  const double eps = 0x1p-40;
+  for (int g = 0; g < 60; g++) {
+    double x = 1 + 3 * (g % 10) + eps * (g + 1), y = 1 + 5 * (g / 10) + eps;
+    int k = 1 + g % 9;
+    for (int i = 0; i < k; i++) {
+      double w0 = 0.25 + 0.125 * i;
+      qk_shape_t b = {QK_SHAPE_BOX, x, y, x + w0, y + w0};
+      if (i % 3 == 1) b.x = b.a = x - w0; /* touching the first one's left edge exactly */
+      if (i % 3 == 2) b.x = nextafter(x + 0.25, INFINITY), b.a = b.x + w0; /* one ulp off */
+      if (i % 4 == 3) b = (qk_shape_t){QK_SHAPE_DISC, x + 0.25 + w0, y + 0.25, w0, 0};
+      if (i == 0) b = (qk_shape_t){QK_SHAPE_BOX, x, y, x + 0.25, y + 0.25};
+      m_add(w, &m, b);
+    }
+  }
+  qk_world_pair_t *prev = NULL;
+  size_t np = 0;
+  for (int f = 0; f < 12; f++) {
+    if (f) {
+      for (size_t i = 1; i < m.n; i++) {
+        if (qkt_rng_below(&r, 2)) continue;
+        qk_shape_t sh = m.s[i];
+        double d = (qkt_rng_below(&r, 2) ? 1 : -1) * eps * (double)qkt_rng_below(&r, 3);
+        sh.x += d;
+        if (sh.kind == QK_SHAPE_BOX) sh.a += d;
+        assert_int_equal(qk_world_move(w, m.h[i], &sh), QK_OK);
+        m.s[i] = o_norm(sh);
+      }
+    }
+    assert_int_equal(qk_world_update(w), QK_OK);
+    qk_world_pair_t *want;
+    size_t nw = o_pairs(&m, &want);
+    check_pairs(w, want, nw, prev, np, "prefilter", f);
+    free(prev);
+    prev = want, np = nw;
+  }
+  assert_true(np > 100);
+  free(prev);
+  free(m.h), free(m.s);
+  qk_world_free(w);
+}
+
 /* Touching cases on integers (every formula is exact there). */
 static void test_world_touching(void **s) {
   (void)s;
@@ -713,17 +774,12 @@ static void test_world_concurrent_readers(void **s) {
 int main(void) {
   g_seed = qkt_seed(20261130);
   const struct CMUnitTest tests[] = {
-      cmocka_unit_test(test_world_uniform),
-      cmocka_unit_test(test_world_clustered),
-      cmocka_unit_test(test_world_mixed_sizes),
-      cmocka_unit_test(test_world_all_kinds),
-      cmocka_unit_test(test_world_huge),
-      cmocka_unit_test(test_world_touching),
-      cmocka_unit_test(test_world_stale_handles),
-      cmocka_unit_test(test_world_churn_memory),
-      cmocka_unit_test(test_world_nomem),
-      cmocka_unit_test(test_world_threads),
-      cmocka_unit_test(test_world_concurrent_readers),
+      cmocka_unit_test(test_world_uniform),      cmocka_unit_test(test_world_clustered),
+      cmocka_unit_test(test_world_mixed_sizes),  cmocka_unit_test(test_world_all_kinds),
+      cmocka_unit_test(test_world_huge),         cmocka_unit_test(test_world_prefilter_and_sort),
+      cmocka_unit_test(test_world_touching),     cmocka_unit_test(test_world_stale_handles),
+      cmocka_unit_test(test_world_churn_memory), cmocka_unit_test(test_world_nomem),
+      cmocka_unit_test(test_world_threads),      cmocka_unit_test(test_world_concurrent_readers),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
