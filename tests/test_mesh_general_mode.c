@@ -772,6 +772,47 @@ static void test_mesh_general_mode_auto(void **state) {
   qk_poly_free(p);
 }
 
+/* Fails every allocation of meshing s in turn (with markers and a region when tagged, so
+ * that every output array is allocated): each refusal is QK_ERR_NOMEM with a message naming
+ * the step, leaves nothing behind. Returns the number of allocations of a full run. */
+static size_t alloc_failures(const shape_t *s, int tagged, double max_size) {
+  size_t fail_at;
+  for (fail_at = 1;; fail_at++) {
+    qkt_alloc_t as;
+    qk_allocator_t a = qkt_alloc_make(&as);
+    qk_poly_t *p = sh_poly(s, &a);
+    if (tagged) {
+      int32_t sm[9] = {1, 2, 3, 4, 5, 6, 7, 8, 9};
+      double reg[3] = {8, 8, 7};
+      assert_int_equal(qk_poly_set_markers(p, NULL, sm, NULL), QK_OK);
+      assert_int_equal(qk_poly_set_regions(p, reg, 1, NULL), QK_OK);
+    }
+    as.fail_at = as.calls + fail_at;
+    qk_mesh_options_t o = general_opts();
+    o.allocator = &a;
+    o.max_size = max_size;
+    qk_mesh_t *m = (qk_mesh_t *)&as;
+    qk_mesh_error_t err;
+    qk_status_t st = qk_mesh_generate(p, &o, &m, &err);
+    if (st == QK_OK) {
+      /* A refused allocation may be survived (the tree keeps a block it failed to shrink);
+       * the loop ends with the first run in which none was refused. */
+      qk_mesh_free(m);
+      qk_poly_free(p);
+      assert_int_equal(as.live_bytes, 0);
+      if (!as.failed) break;
+      continue;
+    }
+    if (st != QK_ERR_NOMEM) fail_msg("fail_at %zu: %s: %s", fail_at, qk_strerror(st), err.message);
+    if (strncmp(err.message, "out of memory while ", 20) != 0)
+      fail_msg("fail_at %zu: message \"%s\"", fail_at, err.message);
+    assert_null(m);
+    qk_poly_free(p);
+    assert_int_equal(as.live_bytes, 0);
+  }
+  return fail_at;
+}
+
 static void test_mesh_general_mode_alloc_failure(void **state) {
   (void)state;
   shape_t *s = calloc(1, sizeof *s);
@@ -788,39 +829,19 @@ static void test_mesh_general_mode_alloc_failure(void **state) {
         hypot(s->xy[2 * near] - s->xy[4], s->xy[2 * near + 1] - s->xy[5]))
       near = v;
   sh_seg(s, 2, near);
-  size_t fail_at;
-  for (fail_at = 1;; fail_at++) {
-    qkt_alloc_t as;
-    qk_allocator_t a = qkt_alloc_make(&as);
-    qk_poly_t *p = sh_poly(s, &a);
-    /* Markers and a region too, so that every output array is allocated. */
-    int32_t sm[9] = {1, 2, 3, 4, 5, 6, 7, 8, 9};
-    double reg[3] = {8, 8, 7};
-    assert_int_equal(qk_poly_set_markers(p, NULL, sm, NULL), QK_OK);
-    assert_int_equal(qk_poly_set_regions(p, reg, 1, NULL), QK_OK);
-    as.fail_at = as.calls + fail_at;
-    qk_mesh_options_t o = general_opts();
-    o.allocator = &a;
-    o.max_size = 2;
-    qk_mesh_t *m = (qk_mesh_t *)&as;
-    qk_mesh_error_t err;
-    qk_status_t st = qk_mesh_generate(p, &o, &m, &err);
-    if (st == QK_OK) {
-      /* A refused allocation may be survived (the tree keeps a block it failed to shrink);
-       * the loop ends with the first run in which none was refused. */
-      qk_mesh_free(m);
-      qk_poly_free(p);
-      assert_int_equal(as.live_bytes, 0);
-      if (!as.failed) break;
-      continue;
-    }
-    if (st != QK_ERR_NOMEM) fail_msg("fail_at %zu: %s: %s", fail_at, qk_strerror(st), err.message);
-    assert_null(m);
-    qk_poly_free(p);
-    assert_int_equal(as.live_bytes, 0);
-  }
+  size_t fail_at = alloc_failures(s, 1, 2);
   printf("# %zu allocations\n", fail_at);
   assert_true(fail_at > 10);
+  free(s);
+  /* Three isolated vertices, no segment (fuzz/regressions/mesh_general/nomem-no-message):
+   * the 30th allocation failed without a message. */
+  s = calloc(1, sizeof *s);
+  sh_vertex(s, 0, 0);
+  sh_vertex(s, 8, 0);
+  sh_vertex(s, 8, 1073741824.0);
+  fail_at = alloc_failures(s, 0, 0);
+  printf("# %zu allocations (three isolated vertices)\n", fail_at);
+  assert_true(fail_at > 30);
   free(s);
 }
 
