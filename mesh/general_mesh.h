@@ -94,7 +94,8 @@ typedef struct qk__gm {
   size_t insertions, work_cap;
   size_t seeds;
   double smallest_input_angle;
-  const char *stage; /* the step running, for messages: "grading the quadtree", ... */
+  size_t deep_splits, deep_cap; /* the grading's splits below 2^-36 of the root square */
+  const char *stage;            /* the step running, for messages: "grading the quadtree", ... */
 } qk__gm_t;
 
 /* "segment 3" or, when the input has line numbers, "segment 3 (line 12)", into buf. */
