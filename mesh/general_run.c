@@ -83,10 +83,10 @@ qk_status_t qk__mesh_general(const qk_poly_t *P, const qk_mesh_options_t *opt, q
     t2 = now();
   }
   if (!st) {
-    /* The work cap: the refinement inserts about as many points as the seeding proposed
-     * (at most 1.2 times in the tests, small input angles and 32 degrees included); ten
+    /* The work cap: the refinement inserts fewer points than the seeding would propose
+     * (the pre-split points, and five a free leaf: the seeds it would have placed); ten
      * times that means it does not settle. */
-    g.work_cap = 10 * (g.npts + P->nv + P->ns) + 100000;
+    g.work_cap = 10 * (g.npts + 5 * g.free_leaves + P->nv + P->ns) + 100000;
     g.stage = "refining the triangulation";
     st = qk__gm_refine(&g);
   }
