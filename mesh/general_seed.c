@@ -17,7 +17,7 @@
 /* Deepest subdivision: beyond it, the refinement alone separates features. */
 #define GM_DEPTH_CAP 50
 /* Whether the free leaves' corners and centres are inserted as seeds. They are not: on
- * the coastlines (Iceland, Norway; docs/mesh.md, "Size") the refinement alone, from the
+ * the coastlines (Iceland, Norway; docs/mesh.md, "Mesh size") the refinement alone, from the
  * segments' pre-split points, makes half the triangles (2.6 times fewer with a size bound)
  * in 20-45% fewer instructions in all, though more a triangle. The free leaves are still
  * counted: they size the refinement's work cap. */
