@@ -327,6 +327,16 @@ static qk_status_t input_angles(qk__gm_t *g) {
 qk_status_t qk__gm_build(qk__gm_t *g) {
   const qk_poly_t *P = g->P;
   root_square(g);
+  /* The in-circle test squares squared distances: beyond 2^250 they overflow (its filter
+   * and its exact fallback alike), and a triangulation built on wrong answers can make
+   * the point location walk forever; far below 2^-200 they underflow. */
+  if (!(g->e <= 250 && g->e >= -200))
+    return qk__mesh_fail(g->err, QK_ERR_LIMIT, 0,
+                         "the input's extent %.17g x %.17g is %s: the exact predicates would "
+                         "%s (scale the coordinates)",
+                         g->bx1 - g->bx0, g->by1 - g->by0,
+                         g->e > 250 ? "above 2^250 (about 1.8e75)" : "below 2^-200",
+                         g->e > 250 ? "overflow" : "underflow");
   qk_status_t st = qk__cdt_init(&g->cdt, g->a, g->X0, g->Y0, g->S, 8 * P->nv + 16);
   if (st) return qk__mesh_fail(g->err, st, 0, "out of memory");
   g->cdt_live = 1;

@@ -92,8 +92,10 @@ typedef struct qk__gm {
   uint32_t *stack;
   size_t stack_cap;
   size_t insertions, work_cap;
-  size_t seeds;
+  size_t seeds, free_leaves; /* seeds inserted; free leaves meeting the bounding box */
   double smallest_input_angle;
+  size_t deep_splits, deep_cap; /* the grading's splits below 2^-36 of the root square */
+  const char *stage;            /* the step running, for messages: "grading the quadtree", ... */
 } qk__gm_t;
 
 /* "segment 3" or, when the input has line numbers, "segment 3 (line 12)", into buf. */

@@ -47,6 +47,17 @@ static qk_status_t check_size(const qk__gm_t *g) {
   return QK_OK;
 }
 
+/* Every refusal carries a message: an allocation failure says so with the step that ran
+ * out ("out of memory while refining the triangulation"), whichever helper it came from. */
+static qk_status_t name_failure(const qk__gm_t *g, qk_status_t st) {
+  qk_mesh_error_t *err = g->err;
+  if (!st || !err) return st;
+  if (st == QK_ERR_NOMEM && !strstr(err->message, " while "))
+    return qk__mesh_fail(err, st, 0, "out of memory while %s", g->stage);
+  if (!err->message[0]) return qk__mesh_fail(err, st, 0, "%s while %s", qk_strerror(st), g->stage);
+  return st;
+}
+
 qk_status_t qk__mesh_general(const qk_poly_t *P, const qk_mesh_options_t *opt, qk_mesh_t *m,
                              qk_mesh_error_t *err) {
   if (!(opt->min_angle_deg >= 0 && opt->min_angle_deg <= 34))
@@ -62,21 +73,28 @@ qk_status_t qk__mesh_general(const qk_poly_t *P, const qk_mesh_options_t *opt, q
   double s = sin((g.bound_deg + 1e-7) * (3.14159265358979323846 / 180));
   g.sin2_bound = s * s;
   double t0 = now(), t1 = t0, t2 = t0;
+  g.stage = "checking the input";
   qk_status_t st = qk__gm_build(&g);
   if (!st) st = check_size(&g);
   if (!st) {
     t1 = now();
+    g.stage = "grading the quadtree and placing the seeds";
     st = qk__gm_seed(&g, &m->stats);
     t2 = now();
   }
   if (!st) {
-    /* The work cap: the refinement inserts about as many points as the seeding proposed
-     * (at most 1.2 times in the tests, small input angles and 32 degrees included); ten
+    /* The work cap: the refinement inserts fewer points than the seeding would propose
+     * (the pre-split points, and five a free leaf: the seeds it would have placed); ten
      * times that means it does not settle. */
-    g.work_cap = 10 * (g.npts + P->nv + P->ns) + 100000;
+    g.work_cap = 10 * (g.npts + 5 * g.free_leaves + P->nv + P->ns) + 100000;
+    g.stage = "refining the triangulation";
     st = qk__gm_refine(&g);
   }
-  if (!st) st = qk__gm_output(&g, m);
+  if (!st) {
+    g.stage = "writing the mesh";
+    st = qk__gm_output(&g, m);
+  }
+  st = name_failure(&g, st);
   if (!st) {
     m->tree = g.tree, g.tree = NULL;
     m->size = 1;

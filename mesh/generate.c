@@ -292,7 +292,7 @@ qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *opt
   qk_allocator_t alloc = {NULL, NULL};
   if (opt.allocator) alloc = *opt.allocator;
   qk_mesh_t *m = qk__realloc(&alloc, NULL, 0, sizeof *m);
-  if (!m) return qk__mesh_fail(err, QK_ERR_NOMEM, 0, "out of memory");
+  if (!m) return qk__mesh_fail(err, QK_ERR_NOMEM, 0, "out of memory while allocating the mesh");
   memset(m, 0, sizeof *m);
   m->alloc = alloc;
   qk__gen_t g;
@@ -303,7 +303,7 @@ qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *opt
     classic = 1;
   else if (opt.mode == QK_MESH_AUTO && (st = classic_ok(poly, &opt, book, &m->alloc, &classic))) {
     qk_mesh_free(m);
-    return qk__mesh_fail(err, st, 0, "out of memory");
+    return qk__mesh_fail(err, st, 0, "out of memory while choosing the mode");
   }
   if (!classic) {
     if ((st = qk__mesh_general(poly, &opt, m, err))) {

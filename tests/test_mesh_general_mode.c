@@ -26,6 +26,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 #include "qk_test.h"
 
@@ -730,6 +731,48 @@ static void test_mesh_general_mode_refusals(void **state) {
   qk_poly_free(p);
 }
 
+/* Meshes xy (nv vertices, ns segments) in the general mode, expecting a refusal with st whose
+ * message holds want, quickly: under a quarter of a second of CPU in an optimized build
+ * without sanitizers (these inputs took 13 s and over a minute before). */
+static void refused_quickly(const double *xy, size_t nv, const uint32_t *seg, size_t ns,
+                            qk_status_t st, const char *want) {
+  qk_poly_t *p;
+  qk_mesh_t *m = NULL;
+  qk_mesh_error_t err;
+  assert_int_equal(qk_poly_from_arrays(xy, nv, seg, ns, NULL, 0, NULL, &p, &err), QK_OK);
+  qk_mesh_options_t o = general_opts();
+  clock_t c0 = clock();
+  qk_status_t got = qk_mesh_generate(p, &o, &m, &err);
+  double cpu = (double)(clock() - c0) / CLOCKS_PER_SEC;
+  printf("# %.3f s: %s\n", cpu, err.message);
+  if (got != st) fail_msg("%s, not %s: %s", qk_strerror(got), qk_strerror(st), err.message);
+  if (!strstr(err.message, want)) fail_msg("\"%s\" not in \"%s\"", want, err.message);
+  assert_null(m);
+#ifdef NDEBUG
+  const char *san = getenv("QK_SANITIZE");
+  if (!(san && strcmp(san, "1") == 0) && cpu > 0.25) fail_msg("took %.3f s of CPU", cpu);
+#endif
+  qk_poly_free(p);
+}
+
+/* Hostile inputs get a clear refusal at once (fuzz/regressions/mesh_general/isolated-*). */
+static void test_mesh_general_mode_hostile(void **state) {
+  (void)state;
+  /* Two segments 1e-10 apart along 1.1e10 (an input angle of 1e-18 degrees), with a vertex
+   * 1e-14 from them: the grading once made 2^27 cells before refusing. */
+  double a[8] = {0, 0, 5, 1e-14, 2, 0, 11e9, 1};
+  uint32_t as[4] = {2, 3, 3, 0};
+  refused_quickly(a, 4, as, 2, QK_ERR_LIMIT, "stay within");
+  refused_quickly(a, 4, as, 2, QK_ERR_LIMIT, "segment 0 and segment 1");
+  /* Three isolated vertices 3e144 apart: the in-circle test overflowed and the point
+   * location walked forever. */
+  double b[6] = {0, 0, 8, 3.3333333333333333e144, 10737418248.0, 1};
+  refused_quickly(b, 3, NULL, 0, QK_ERR_LIMIT, "above 2^250");
+  /* And far below: 1e-70 apart. */
+  double c[6] = {0, 0, 1e-70, 0, 0, 1e-70};
+  refused_quickly(c, 3, NULL, 0, QK_ERR_LIMIT, "below 2^-200");
+}
+
 /* The automatic choice: 45-degree integer input stays the book's, real 45-degree input
  * the dyadic mode's, anything else the general mode's; QK_MESH_GENERAL insists. */
 static void test_mesh_general_mode_auto(void **state) {
@@ -772,6 +815,47 @@ static void test_mesh_general_mode_auto(void **state) {
   qk_poly_free(p);
 }
 
+/* Fails every allocation of meshing s in turn (with markers and a region when tagged, so
+ * that every output array is allocated): each refusal is QK_ERR_NOMEM with a message naming
+ * the step, leaves nothing behind. Returns the number of allocations of a full run. */
+static size_t alloc_failures(const shape_t *s, int tagged, double max_size) {
+  size_t fail_at;
+  for (fail_at = 1;; fail_at++) {
+    qkt_alloc_t as;
+    qk_allocator_t a = qkt_alloc_make(&as);
+    qk_poly_t *p = sh_poly(s, &a);
+    if (tagged) {
+      int32_t sm[9] = {1, 2, 3, 4, 5, 6, 7, 8, 9};
+      double reg[3] = {8, 8, 7};
+      assert_int_equal(qk_poly_set_markers(p, NULL, sm, NULL), QK_OK);
+      assert_int_equal(qk_poly_set_regions(p, reg, 1, NULL), QK_OK);
+    }
+    as.fail_at = as.calls + fail_at;
+    qk_mesh_options_t o = general_opts();
+    o.allocator = &a;
+    o.max_size = max_size;
+    qk_mesh_t *m = (qk_mesh_t *)&as;
+    qk_mesh_error_t err;
+    qk_status_t st = qk_mesh_generate(p, &o, &m, &err);
+    if (st == QK_OK) {
+      /* A refused allocation may be survived (the tree keeps a block it failed to shrink);
+       * the loop ends with the first run in which none was refused. */
+      qk_mesh_free(m);
+      qk_poly_free(p);
+      assert_int_equal(as.live_bytes, 0);
+      if (!as.failed) break;
+      continue;
+    }
+    if (st != QK_ERR_NOMEM) fail_msg("fail_at %zu: %s: %s", fail_at, qk_strerror(st), err.message);
+    if (strncmp(err.message, "out of memory while ", 20) != 0)
+      fail_msg("fail_at %zu: message \"%s\"", fail_at, err.message);
+    assert_null(m);
+    qk_poly_free(p);
+    assert_int_equal(as.live_bytes, 0);
+  }
+  return fail_at;
+}
+
 static void test_mesh_general_mode_alloc_failure(void **state) {
   (void)state;
   shape_t *s = calloc(1, sizeof *s);
@@ -788,39 +872,19 @@ static void test_mesh_general_mode_alloc_failure(void **state) {
         hypot(s->xy[2 * near] - s->xy[4], s->xy[2 * near + 1] - s->xy[5]))
       near = v;
   sh_seg(s, 2, near);
-  size_t fail_at;
-  for (fail_at = 1;; fail_at++) {
-    qkt_alloc_t as;
-    qk_allocator_t a = qkt_alloc_make(&as);
-    qk_poly_t *p = sh_poly(s, &a);
-    /* Markers and a region too, so that every output array is allocated. */
-    int32_t sm[9] = {1, 2, 3, 4, 5, 6, 7, 8, 9};
-    double reg[3] = {8, 8, 7};
-    assert_int_equal(qk_poly_set_markers(p, NULL, sm, NULL), QK_OK);
-    assert_int_equal(qk_poly_set_regions(p, reg, 1, NULL), QK_OK);
-    as.fail_at = as.calls + fail_at;
-    qk_mesh_options_t o = general_opts();
-    o.allocator = &a;
-    o.max_size = 2;
-    qk_mesh_t *m = (qk_mesh_t *)&as;
-    qk_mesh_error_t err;
-    qk_status_t st = qk_mesh_generate(p, &o, &m, &err);
-    if (st == QK_OK) {
-      /* A refused allocation may be survived (the tree keeps a block it failed to shrink);
-       * the loop ends with the first run in which none was refused. */
-      qk_mesh_free(m);
-      qk_poly_free(p);
-      assert_int_equal(as.live_bytes, 0);
-      if (!as.failed) break;
-      continue;
-    }
-    if (st != QK_ERR_NOMEM) fail_msg("fail_at %zu: %s: %s", fail_at, qk_strerror(st), err.message);
-    assert_null(m);
-    qk_poly_free(p);
-    assert_int_equal(as.live_bytes, 0);
-  }
+  size_t fail_at = alloc_failures(s, 1, 2);
   printf("# %zu allocations\n", fail_at);
   assert_true(fail_at > 10);
+  free(s);
+  /* Three isolated vertices, no segment (fuzz/regressions/mesh_general/nomem-no-message):
+   * the 30th allocation failed without a message. */
+  s = calloc(1, sizeof *s);
+  sh_vertex(s, 0, 0);
+  sh_vertex(s, 8, 0);
+  sh_vertex(s, 8, 1073741824.0);
+  fail_at = alloc_failures(s, 0, 0);
+  printf("# %zu allocations (three isolated vertices)\n", fail_at);
+  assert_true(fail_at > 30);
   free(s);
 }
 
@@ -835,6 +899,7 @@ int main(void) {
       cmocka_unit_test(test_mesh_general_mode_markers),
       cmocka_unit_test(test_mesh_general_mode_refusals),
       cmocka_unit_test(test_mesh_general_mode_auto),
+      cmocka_unit_test(test_mesh_general_mode_hostile),
       cmocka_unit_test(test_mesh_general_mode_alloc_failure),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
