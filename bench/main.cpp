@@ -1391,7 +1391,8 @@ void print_table() {
     }
   // Memory and quality columns that a ratio does not show.
   for (auto &r : records)
-    if (r.impl == "quadkit" && r.op == "build" && r.n >= 1000000)
+    if (r.impl == "quadkit" && r.op == "build" && r.n >= 1000000 &&
+        std::isfinite(r.bytes_per_point))
       printf("memory: quadkit %.1f bytes/point (%s, n=%zu; raw coordinates are 16)\n",
              r.bytes_per_point, r.dataset.c_str(), r.n);
   for (auto &r : records)

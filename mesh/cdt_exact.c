@@ -25,47 +25,12 @@
 #include <math.h>
 
 #include "mesh/cdt.h"
-
-/* a + b = *s + *e exactly (Knuth's two-sum: six operations, no branch). */
-static inline void two_sum(double a, double b, double *s, double *e) {
-  double x = a + b, bv = x - a, av = x - bv;
-  *s = x;
-  *e = (a - av) + (b - bv);
-}
-
-/* a * b = *p + *e exactly (barring underflow and overflow): with a fused multiply-add when
- * the hardware has one, else by Dekker's splitting into 26-bit halves. */
-static inline void two_prod(double a, double b, double *p, double *e) {
-  double x = a * b;
-  *p = x;
-#ifdef FP_FAST_FMA
-  *e = fma(a, b, -x);
-#else
-  const double split = 134217729.0; /* 2^27 + 1 */
-  double ca = split * a, ah = ca - (ca - a), al = a - ah;
-  double cb = split * b, bh = cb - (cb - b), bl = b - bh;
-  *e = al * bl - (((x - ah * bh) - al * bh) - ah * bl);
-#endif
-}
-
-/* Add q to the expansion h[0..*n): the chain of two-sums from the smallest component up
- * keeps the result nonoverlapping and ordered; zero components are dropped. h must have
- * room for *n + 1 components. */
-static void grow(double *h, int *n, double q) {
-  int m = 0;
-  for (int i = 0; i < *n; i++) {
-    double s, e;
-    two_sum(q, h[i], &s, &e);
-    if (e != 0) h[m++] = e;
-    q = s;
-  }
-  if (q != 0) h[m++] = q;
-  *n = m;
-}
+#include "mesh/cdt_internal.h"
+#include "mesh/expansion.h"
 
 /* h += f (f's components added one by one; h needs room for *nh + nf components). */
 static void add_to(double *h, int *nh, const double *f, int nf) {
-  for (int i = 0; i < nf; i++) grow(h, nh, f[i]);
+  for (int i = 0; i < nf; i++) qk__exp_grow(h, nh, f[i]);
 }
 
 /* h = b * e, for an expansion e of n components: each e[i] * b is split into its rounded
@@ -75,14 +40,14 @@ static int scale(const double *e, int n, double b, double *h) {
   if (n == 0 || b == 0) return 0;
   int m = 0;
   double q, lo;
-  two_prod(e[0], b, &q, &lo);
+  qk__two_prod(e[0], b, &q, &lo);
   if (lo != 0) h[m++] = lo;
   for (int i = 1; i < n; i++) {
     double p, pe, s, se, t, te;
-    two_prod(e[i], b, &p, &pe);
-    two_sum(q, pe, &s, &se);
+    qk__two_prod(e[i], b, &p, &pe);
+    qk__two_sum(q, pe, &s, &se);
     if (se != 0) h[m++] = se;
-    two_sum(p, s, &t, &te);
+    qk__two_sum(p, s, &t, &te);
     if (te != 0) h[m++] = te;
     q = t;
   }
@@ -103,7 +68,7 @@ static int mul(const double *e, int ne, const double *f, int nf, double *h, doub
 /* The exact difference a - b as an expansion of at most two components. */
 static int diff(double a, double b, double *h) {
   double s, e;
-  two_sum(a, -b, &s, &e);
+  qk__two_sum(a, -b, &s, &e);
   int n = 0;
   if (e != 0) h[n++] = e;
   if (s != 0) h[n++] = s;
@@ -210,20 +175,7 @@ int qk__incircle_exact(const double a[2], const double b[2], const double c[2], 
  * (1 - u)^-12: below 12u * permanent < 2^-49 * permanent.
  */
 int qk__incircle(const double a[2], const double b[2], const double c[2], const double d[2]) {
-  double adx = a[0] - d[0], ady = a[1] - d[1];
-  double bdx = b[0] - d[0], bdy = b[1] - d[1];
-  double cdx = c[0] - d[0], cdy = c[1] - d[1];
-  double bc1 = bdx * cdy, bc2 = cdx * bdy;
-  double ca1 = cdx * ady, ca2 = adx * cdy;
-  double ab1 = adx * bdy, ab2 = bdx * ady;
-  double la = adx * adx + ady * ady, lb = bdx * bdx + bdy * bdy, lc = cdx * cdx + cdy * cdy;
-  double det = la * (bc1 - bc2) + lb * (ca1 - ca2) + lc * (ab1 - ab2);
-  double perm =
-      la * (fabs(bc1) + fabs(bc2)) + lb * (fabs(ca1) + fabs(ca2)) + lc * (fabs(ab1) + fabs(ab2));
-  double bound = perm * 0x1p-49;
-  if (det > bound) return 1;
-  if (-det > bound) return -1;
-  return qk__incircle_exact(a, b, c, d);
+  return qk__cdt_incircle(a, b, c, d);
 }
 
 /* The sign of (a - p) . (b - p). The estimate's error is below (3u + 16u^2)(|l| + |r|)

@@ -15,34 +15,7 @@
 #include <math.h>
 
 #include "mesh/general_internal.h"
-
-/* a + b = s + e exactly (Knuth's two-sum, no branch on magnitudes). */
-static void two_sum(double a, double b, double *s, double *e) {
-  double x = a + b, bv = x - a, av = x - bv;
-  *s = x;
-  *e = (a - av) + (b - bv);
-}
-
-/* a * b = p + e exactly, barring underflow. */
-static void two_prod(double a, double b, double *p, double *e) {
-  double x = a * b;
-  *p = x;
-  *e = fma(a, b, -x);
-}
-
-/* Add q to the nonoverlapping expansion h[0..*n) (increasing magnitude), dropping zero
- * components; the result stays nonoverlapping. h has room for one more component. */
-static void grow(double *h, int *n, double q) {
-  int m = 0;
-  for (int i = 0; i < *n; i++) {
-    double s, e;
-    two_sum(q, h[i], &s, &e);
-    if (e != 0) h[m++] = e;
-    q = s;
-  }
-  if (q != 0) h[m++] = q;
-  *n = m;
-}
+#include "mesh/expansion.h"
 
 /* When the four differences are exact and, scaled by one power of two so that the largest
  * is below 2^30, integers (points on a shared grid: the common case of a tie), the
@@ -75,10 +48,10 @@ static int sign_int(const double d[4][2], int *sign) {
 
 static int sign_exact(const double *a, const double *b, const double *c) {
   double d[4][2]; /* bx - ax, cy - ay, by - ay, cx - ax as (value, error) */
-  two_sum(b[0], -a[0], &d[0][0], &d[0][1]);
-  two_sum(c[1], -a[1], &d[1][0], &d[1][1]);
-  two_sum(b[1], -a[1], &d[2][0], &d[2][1]);
-  two_sum(c[0], -a[0], &d[3][0], &d[3][1]);
+  qk__two_sum(b[0], -a[0], &d[0][0], &d[0][1]);
+  qk__two_sum(c[1], -a[1], &d[1][0], &d[1][1]);
+  qk__two_sum(b[1], -a[1], &d[2][0], &d[2][1]);
+  qk__two_sum(c[0], -a[0], &d[3][0], &d[3][1]);
   int sign;
   if (sign_int((const double(*)[2])d, &sign)) return sign;
   double h[17];
@@ -89,9 +62,9 @@ static int sign_exact(const double *a, const double *b, const double *c) {
     for (int i = 0; i < 2; i++)
       for (int j = 0; j < 2; j++) {
         double p, e;
-        two_prod(sgn * u[i], v[j], &p, &e);
-        grow(h, &n, e);
-        grow(h, &n, p);
+        qk__two_prod(sgn * u[i], v[j], &p, &e);
+        qk__exp_grow(h, &n, e);
+        qk__exp_grow(h, &n, p);
       }
   }
   if (n == 0) return 0;

@@ -9,6 +9,7 @@
  * degrees are left alone (Shewchuk's rule; counted as exempt). docs/mesh.md has the proof.
  */
 #include "mesh/general_mesh.h"
+#include "mesh/expansion.h"
 
 #include <math.h>
 #include <string.h>
@@ -113,25 +114,6 @@ int qk__gm_exempt(const qk__gm_t *g, const uint32_t *tv) {
   return 0;
 }
 
-/* a + b = s + e exactly (two-sum); a * b = p + e exactly (fma). */
-static void two_sum(double a, double b, double *s, double *e) {
-  double x = a + b, bv = x - a, av = x - bv;
-  *s = x, *e = (a - av) + (b - bv);
-}
-
-/* Add q to the nonoverlapping expansion h[0..*n) (increasing magnitude). */
-static void grow(double *h, int *n, double q) {
-  int m = 0;
-  for (int i = 0; i < *n; i++) {
-    double s, e;
-    two_sum(q, h[i], &s, &e);
-    if (e != 0) h[m++] = e;
-    q = s;
-  }
-  if (q != 0) h[m++] = q;
-  *n = m;
-}
-
 /* Is |pq|^2 > h^2, exactly? Each difference splits into a rounded part and its error, each
  * square and the cross term into products and their errors; the sum is an exact expansion
  * whose sign is its largest component's. */
@@ -140,17 +122,17 @@ static int len2_exceeds(const double *p, const double *q, double h) {
   int n = 0;
   for (int i = 0; i < 2; i++) {
     double dh, dl;
-    two_sum(p[i], -q[i], &dh, &dl);
+    qk__two_sum(p[i], -q[i], &dh, &dl);
     const double f[3][2] = {{dh, dh}, {2 * dh, dl}, {dl, dl}};
     for (int k = 0; k < 3; k++) {
       double pr = f[k][0] * f[k][1];
-      grow(x, &n, fma(f[k][0], f[k][1], -pr));
-      grow(x, &n, pr);
+      qk__exp_grow(x, &n, fma(f[k][0], f[k][1], -pr));
+      qk__exp_grow(x, &n, pr);
     }
   }
   double hh = h * h;
-  grow(x, &n, -fma(h, h, -hh));
-  grow(x, &n, -hh);
+  qk__exp_grow(x, &n, -fma(h, h, -hh));
+  qk__exp_grow(x, &n, -hh);
   return n > 0 && x[n - 1] > 0;
 }
 
