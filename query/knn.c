@@ -185,19 +185,6 @@ static inline uint64_t equal_mask(const double *d2, uint32_t m, double v) {
   return mask;
 }
 
-/* Bit i set when d2[i] <= v, for the m <= 64 values of d2[]. */
-static inline uint64_t le_mask(const double *d2, uint32_t m, double v) {
-  uint64_t mask = 0;
-  uint32_t i = 0;
-#if defined(__SSE2__)
-  const __m128d vv = _mm_set1_pd(v);
-  for (; i + 1 < m; i += 2)
-    mask |= (uint64_t)_mm_movemask_pd(_mm_cmple_pd(_mm_loadu_pd(d2 + i), vv)) << i;
-#endif
-  for (; i < m; i++) mask |= (uint64_t)(d2[i] <= v) << i;
-  return mask;
-}
-
 /*
  * The k = 1 leaf scan, in two steps per chunk: the smallest squared distance (leaf_d2),
  * and only when it can beat or tie the best so far, the smallest id among the points at
