@@ -99,6 +99,24 @@ bool cgal_grade(const std::vector<Pt> &pts, int max_depth, int bucket, BalanceRe
   return true;
 }
 
+// Count the triangles CGAL's refinement left in the domain and measure their smallest angle.
+template <class CDT> static void read_mesh(const CDT &cdt, MeshResult &out) {
+  std::vector<double> xy;
+  std::vector<uint32_t> tri;
+  std::map<typename CDT::Vertex_handle, uint32_t> id;
+  for (auto v = cdt.finite_vertices_begin(); v != cdt.finite_vertices_end(); ++v) {
+    id[v] = (uint32_t)(xy.size() / 2);
+    xy.push_back(v->point().x());
+    xy.push_back(v->point().y());
+  }
+  for (auto f = cdt.finite_faces_begin(); f != cdt.finite_faces_end(); ++f) {
+    if (!f->is_in_domain()) continue;
+    for (int i = 0; i < 3; i++) tri.push_back(id[f->vertex(i)]);
+  }
+  out.triangles = tri.size() / 3;
+  out.min_angle_deg = min_angle_of(xy, tri);
+}
+
 bool cgal_mesh(double U, const std::vector<Ring> &rings, double max_edge, MeshResult &out) {
   using K = CGAL::Exact_predicates_inexact_constructions_kernel;
   using Vb = CGAL::Triangulation_vertex_base_2<K>;
@@ -119,20 +137,7 @@ bool cgal_mesh(double U, const std::vector<Ring> &rings, double max_edge, MeshRe
   // guarantees termination (about 20.7 degrees).
   CGAL::refine_Delaunay_mesh_2(cdt, Criteria(0.125, max_edge));
   out.seconds = now_seconds() - t0;
-  std::vector<double> xy;
-  std::vector<uint32_t> tri;
-  std::map<CDT::Vertex_handle, uint32_t> id;
-  for (auto v = cdt.finite_vertices_begin(); v != cdt.finite_vertices_end(); ++v) {
-    id[v] = (uint32_t)(xy.size() / 2);
-    xy.push_back(v->point().x());
-    xy.push_back(v->point().y());
-  }
-  for (auto f = cdt.finite_faces_begin(); f != cdt.finite_faces_end(); ++f) {
-    if (!f->is_in_domain()) continue;
-    for (int i = 0; i < 3; i++) tri.push_back(id[f->vertex(i)]);
-  }
-  out.triangles = tri.size() / 3;
-  out.min_angle_deg = min_angle_of(xy, tri);
+  read_mesh(cdt, out);
   return true;
 }
 
@@ -156,20 +161,7 @@ bool cgal_mesh_pslg(const Pslg &in, double max_edge, MeshResult &out) {
   // 0.125 bounds (sin of the smallest angle)^2: about 20.7 degrees, CGAL's guarantee.
   CGAL::refine_Delaunay_mesh_2(cdt, seeds.begin(), seeds.end(), Criteria(0.125, max_edge), false);
   out.seconds = now_seconds() - t0;
-  std::vector<double> xy;
-  std::vector<uint32_t> tri;
-  std::map<CDT::Vertex_handle, uint32_t> id;
-  for (auto v = cdt.finite_vertices_begin(); v != cdt.finite_vertices_end(); ++v) {
-    id[v] = (uint32_t)(xy.size() / 2);
-    xy.push_back(v->point().x());
-    xy.push_back(v->point().y());
-  }
-  for (auto f = cdt.finite_faces_begin(); f != cdt.finite_faces_end(); ++f) {
-    if (!f->is_in_domain()) continue;
-    for (int i = 0; i < 3; i++) tri.push_back(id[f->vertex(i)]);
-  }
-  out.triangles = tri.size() / 3;
-  out.min_angle_deg = min_angle_of(xy, tri);
+  read_mesh(cdt, out);
   return true;
 }
 

@@ -12,6 +12,33 @@ extern "C" {
 
 namespace qkb {
 
+// Count the 2D mesh gmsh just made and measure its smallest angle.
+static void read_triangles(MeshResult &out) {
+  int ierr = 0;
+  size_t *tags = nullptr, ntags = 0, *ptags = nullptr, nptags = 0;
+  double *coord = nullptr, *par = nullptr;
+  size_t ncoord = 0, npar = 0;
+  gmshModelMeshGetNodes(&tags, &ntags, &coord, &ncoord, &par, &npar, -1, -1, 0, 0, &ierr);
+  std::map<size_t, uint32_t> idx;
+  std::vector<double> xy;
+  for (size_t i = 0; i < ntags; i++) {
+    idx[tags[i]] = (uint32_t)i;
+    xy.push_back(coord[3 * i]);
+    xy.push_back(coord[3 * i + 1]);
+  }
+  size_t *etags = nullptr, netags = 0;
+  gmshModelMeshGetElementsByType(2, &etags, &netags, &ptags, &nptags, -1, 0, 1, &ierr);
+  std::vector<uint32_t> tri;
+  for (size_t i = 0; i < nptags; i++) tri.push_back(idx[ptags[i]]);
+  gmshFree(tags);
+  gmshFree(coord);
+  gmshFree(par);
+  gmshFree(etags);
+  gmshFree(ptags);
+  out.triangles = tri.size() / 3;
+  out.min_angle_deg = min_angle_of(xy, tri);
+}
+
 bool gmsh_mesh(double U, const std::vector<Ring> &rings, double max_edge, MeshResult &out) {
   static bool init = false;
   int ierr = 0;
@@ -47,28 +74,7 @@ bool gmsh_mesh(double U, const std::vector<Ring> &rings, double max_edge, MeshRe
   out.seconds = now_seconds() - t0;
   if (ierr) return false;
 
-  size_t *tags = nullptr, ntags = 0, *ptags = nullptr, nptags = 0;
-  double *coord = nullptr, *par = nullptr;
-  size_t ncoord = 0, npar = 0;
-  gmshModelMeshGetNodes(&tags, &ntags, &coord, &ncoord, &par, &npar, -1, -1, 0, 0, &ierr);
-  std::map<size_t, uint32_t> idx;
-  std::vector<double> xy;
-  for (size_t i = 0; i < ntags; i++) {
-    idx[tags[i]] = (uint32_t)i;
-    xy.push_back(coord[3 * i]);
-    xy.push_back(coord[3 * i + 1]);
-  }
-  size_t *etags = nullptr, netags = 0;
-  gmshModelMeshGetElementsByType(2, &etags, &netags, &ptags, &nptags, -1, 0, 1, &ierr);
-  std::vector<uint32_t> tri;
-  for (size_t i = 0; i < nptags; i++) tri.push_back(idx[ptags[i]]);
-  gmshFree(tags);
-  gmshFree(coord);
-  gmshFree(par);
-  gmshFree(etags);
-  gmshFree(ptags);
-  out.triangles = tri.size() / 3;
-  out.min_angle_deg = min_angle_of(xy, tri);
+  read_triangles(out);
   return true;
 }
 
@@ -124,28 +130,7 @@ bool gmsh_mesh_pslg(const Pslg &in, double max_edge, MeshResult &out) {
   gmshModelMeshGenerate(2, &ierr);
   out.seconds = now_seconds() - t0;
   if (ierr) return false;
-  size_t *tags = nullptr, ntags = 0, *ptags = nullptr, nptags = 0;
-  double *coord = nullptr, *par = nullptr;
-  size_t ncoord = 0, npar = 0;
-  gmshModelMeshGetNodes(&tags, &ntags, &coord, &ncoord, &par, &npar, -1, -1, 0, 0, &ierr);
-  std::map<size_t, uint32_t> idx;
-  std::vector<double> xy;
-  for (size_t i = 0; i < ntags; i++) {
-    idx[tags[i]] = (uint32_t)i;
-    xy.push_back(coord[3 * i]);
-    xy.push_back(coord[3 * i + 1]);
-  }
-  size_t *etags = nullptr, netags = 0;
-  gmshModelMeshGetElementsByType(2, &etags, &netags, &ptags, &nptags, -1, 0, 1, &ierr);
-  std::vector<uint32_t> tri;
-  for (size_t i = 0; i < nptags; i++) tri.push_back(idx[ptags[i]]);
-  gmshFree(tags);
-  gmshFree(coord);
-  gmshFree(par);
-  gmshFree(etags);
-  gmshFree(ptags);
-  out.triangles = tri.size() / 3;
-  out.min_angle_deg = min_angle_of(xy, tri);
+  read_triangles(out);
   return true;
 }
 
