@@ -177,6 +177,46 @@ static qk_status_t balance(qk__gen_t *g, qk_mesh_t *m) {
 /* Copy the triangles of the kept regions (drop[region] == 0) and their vertices into the
  * mesh, renumbered densely, with the angle extremes and the input for drawing. newid has
  * T->nv slots. */
+/* Input points with a negative zero coordinate, ordered by value (-0 == 0). */
+typedef struct signed_pt {
+  double x, y;
+} signed_pt_t;
+
+static int signed_pt_cmp(const void *a, const void *b) {
+  const signed_pt_t *p = a, *q = b;
+  if (p->x != q->x) return p->x < q->x ? -1 : 1;
+  return (p->y > q->y) - (p->y < q->y);
+}
+
+/*
+ * The lattice map back (qk__lat_out) is exact in value but adds the origin, so an input
+ * coordinate of -0 comes back as +0. Input vertices come back bit-identical: every mesh
+ * vertex equal in value to an input vertex with a -0 coordinate takes the input's bits.
+ * Rare input, so the common case costs one pass over the input.
+ */
+static qk_status_t restore_signed_zeros(const qk__gen_t *g, qk_mesh_t *m) {
+  const qk_poly_t *S = g->src;
+  size_t k = 0;
+  for (size_t i = 0; i < S->nv; i++)
+    k += signbit(S->vx[i]) && S->vx[i] == 0 ? 1 : signbit(S->vy[i]) && S->vy[i] == 0;
+  if (!k) return QK_OK;
+  signed_pt_t *z = qk__realloc(g->a, NULL, 0, k * sizeof *z);
+  if (!z) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  size_t j = 0;
+  for (size_t i = 0; i < S->nv; i++)
+    if ((signbit(S->vx[i]) && S->vx[i] == 0) || (signbit(S->vy[i]) && S->vy[i] == 0))
+      z[j].x = S->vx[i], z[j].y = S->vy[i], j++;
+  qsort(z, k, sizeof *z, signed_pt_cmp);
+  for (size_t v = 0; v < m->nv; v++) {
+    signed_pt_t key = {m->xy[2 * v], m->xy[2 * v + 1]};
+    if (key.x != 0 && key.y != 0) continue;
+    const signed_pt_t *hit = bsearch(&key, z, k, sizeof *z, signed_pt_cmp);
+    if (hit) m->xy[2 * v] = hit->x, m->xy[2 * v + 1] = hit->y;
+  }
+  qk__free(g->a, z, k * sizeof *z);
+  return QK_OK;
+}
+
 static qk_status_t compact(qk__gen_t *g, const qk__tri_state_t *T, const uint8_t *drop,
                            uint32_t *newid, qk_mesh_t *m) {
   const qk_poly_t *poly = g->poly;
@@ -205,6 +245,8 @@ static qk_status_t compact(qk__gen_t *g, const qk__tri_state_t *T, const uint8_t
       m->xy[2 * newid[i] + 1] = qk__lat_out(&g->lat, T->vy[i], g->lat.y0);
       steiner += T->steiner[i];
     }
+  qk_status_t st = restore_signed_zeros(g, m);
+  if (st) return st;
   size_t j = 0;
   for (size_t t = 0; t < T->nt; t++) {
     if (drop[T->region[t]]) continue;
