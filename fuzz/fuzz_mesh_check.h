@@ -148,6 +148,28 @@ static inline int qkfm_finest_digit(const qkfm_input_t *in, const double *lo) {
   return f;
 }
 
+/* The smallest angle, in radians, between two segments sharing an endpoint (pi if none).
+ * The general mode grades its mesh into such an angle theta: about (1 / theta) triangles per
+ * binary scale between the shortest feature and the extent, which is inherent (the angles
+ * away from the apex stay above the bound), so a hair-thin wedge legitimately gives
+ * 10^5..10^6 triangles, longer than a fuzzing run allows per input. */
+static inline double qkfm_smallest_angle(const qkfm_input_t *in) {
+  double best = 3.141592653589793;
+  for (size_t s = 0; s < in->ns; s++)
+    for (size_t t = s + 1; t < in->ns; t++)
+      for (int i = 0; i < 2; i++)
+        for (int j = 0; j < 2; j++) {
+          uint32_t v = in->seg[2 * s + i];
+          if (v != in->seg[2 * t + j]) continue;
+          const double *o = &in->xy[2 * v], *a = &in->xy[2 * in->seg[2 * s + 1 - i]],
+                       *b = &in->xy[2 * in->seg[2 * t + 1 - j]];
+          double ax = a[0] - o[0], ay = a[1] - o[1], bx = b[0] - o[0], by = b[1] - o[1];
+          double th = atan2(fabs(ax * by - ay * bx), ax * bx + ay * by);
+          if (th < best) best = th;
+        }
+  return best;
+}
+
 static inline double qkfm_lattice_perimeter(const qkfm_input_t *in, const double *lo) {
   int f = qkfm_finest_digit(in, lo);
   double p = 0;
@@ -196,6 +218,11 @@ static inline int qkfm_run(const uint8_t *data, size_t size, qk_mesh_mode_t mode
   int fd = qkfm_finest_digit(&pin, lo);
   int too_spread = max_ratio > 0 && ((pin.ns && !(ext0 <= max_ratio * shortest)) ||
                                      !(ldexp(ext0, fd < -1000 ? 0 : fd) <= max_ratio * max_ratio));
+  /* A hair-thin wedge (see qkfm_smallest_angle): at most ~2^14 triangles per scale. */
+  if (max_ratio > 0 && pin.ns && isfinite(shortest)) {
+    double th = qkfm_smallest_angle(&pin);
+    too_spread |= !(log2(2 + ext0 / shortest) <= 16384 * th);
+  }
   if (pin.nv <= max_nv && !too_spread &&
       !(max_perimeter > 0 && !(qkfm_lattice_perimeter(&pin, lo) <= max_perimeter))) {
     qk_mesh_options_t mo;
