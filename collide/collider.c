@@ -769,18 +769,21 @@ static void ray_init(ray_t *r, const qk_collider_t *c, qk_point_t o, qk_point_t 
   const double ax = fabs(d.x), ay = fabs(d.y), dn = qk__max(ax, ay);
   r->ox = o.x, r->oy = o.y, r->dx = d.x, r->dy = d.y;
   r->w = (fabs(o.x) + fabs(o.y) + 2 * c->mag) * 0x1p-40;
-  r->ts = dn > 0 ? r->w / dn : 0.0;
+  r->ts = 0.0;
   r->xn = d.x < 0 ? QX1 : QX0; /* the exit side is the other one: ^ 8 */
   r->yn = d.y < 0 ? QY1 : QY0;
   r->s = (unsigned)(d.x < 0) | (unsigned)(d.y < 0) << 1;
   r->simd = 0;
 #if defined(__SSE2__)
   r->vox = _mm_set1_pd(o.x), r->voy = _mm_set1_pd(o.y);
-  const double big = 0x1p100, small = 0x1p-100;
-  if (!(c->mag <= big && fabs(o.x) <= big && fabs(o.y) <= big && ax >= small && ax <= big &&
-        ay >= small && ay <= big))
+  const double big = 0x1p100, mo = qk__max(qk__max(fabs(o.x), fabs(o.y)), c->mag);
+  r->simd = mo <= big && qk__min(ax, ay) >= 0x1p-100 && dn <= big;
+#endif
+  if (!r->simd) {
+    r->ts = dn > 0 ? r->w / dn : 0.0;
     return;
-  r->simd = 1;
+  }
+#if defined(__SSE2__)
   /* Pn, Pf: the origin moved by w (towards the exit for the entry side, back for the
    * exit side) and by m more, then converted to float: m exceeds the roundings of the
    * double sums and of the conversion, so Pn >= o + w and Pf <= o - w as fact (2) asks
