@@ -801,17 +801,18 @@ static void ray_init(ray_t *r, const qk_collider_t *c, qk_point_t o, qk_point_t 
 #endif
 }
 
-qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t d, double tmax,
-                                qk_hit_t *hit) {
-  if (!c || !hit) return QK_ERR_INVALID;
-  hit->id = QK_NONE;
-  hit->t = INFINITY;
-  if (!isfinite(o.x) || !isfinite(o.y) || !isfinite(d.x) || !isfinite(d.y)) return QK_ERR_NONFINITE;
-  if (isnan(tmax) || tmax < 0) return QK_ERR_INVALID;
-  if (c->n == 0) return QK_OK;
+/*
+ * The search proper, for a ray set up by ray_init. `simd` is the ray's, passed as a
+ * constant by the caller so that each copy of the loop holds one node test only.
+ */
+#if defined(__GNUC__)
+__attribute__((always_inline))
+#endif
+static inline void
+cast(const qk_collider_t *c, const ray_t *rp, const int simd, double tmax, qk_hit_t *hit) {
+  const ray_t ray = *rp;
+  const qk_point_t o = {ray.ox, ray.oy}, d = {ray.dx, ray.dy};
   const qk_id_t *pid = qk__tree_ids(c->tree);
-  ray_t ray;
-  ray_init(&ray, c, o, d);
   double best = INFINITY;
   qk_id_t best_id = QK_NONE;
   /* T of fact (2): min(tmax, best) rounded up to float; it only shrinks. */
@@ -835,7 +836,7 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
       float lo4[4];
       unsigned keep;
 #if defined(__SSE2__)
-      if (ray.simd)
+      if (simd)
         keep = quad_slab_float(q, &ray, tv, lo4);
       else
 #endif
@@ -911,5 +912,21 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
   }
   hit->id = best_id;
   hit->t = best_id == QK_NONE ? INFINITY : best;
+}
+
+qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t d, double tmax,
+                                qk_hit_t *hit) {
+  if (!c || !hit) return QK_ERR_INVALID;
+  hit->id = QK_NONE;
+  hit->t = INFINITY;
+  if (!isfinite(o.x) || !isfinite(o.y) || !isfinite(d.x) || !isfinite(d.y)) return QK_ERR_NONFINITE;
+  if (isnan(tmax) || tmax < 0) return QK_ERR_INVALID;
+  if (c->n == 0) return QK_OK;
+  ray_t ray;
+  ray_init(&ray, c, o, d);
+  if (ray.simd)
+    cast(c, &ray, 1, tmax, hit);
+  else
+    cast(c, &ray, 0, tmax, hit);
   return QK_OK;
 }
