@@ -811,6 +811,7 @@ __attribute__((always_inline))
 static inline void
 cast(const qk_collider_t *c, const ray_t *rp, const int simd, double tmax, qk_hit_t *hit) {
   const ray_t ray = *rp;
+  (void)simd; /* unused without SSE2 */
   const qk_point_t o = {ray.ox, ray.oy}, d = {ray.dx, ray.dy};
   const qk_id_t *pid = qk__tree_ids(c->tree);
   double best = INFINITY;
