@@ -50,6 +50,13 @@ typedef struct cquad {
 enum { QX0 = 0, QY0 = 4, QX1 = 8, QY1 = 12 };
 
 /*
+ * The children sit in a cquad_t's lanes in Z order, lane = 2 * north + east (SW, SE, NW,
+ * NE), so that the order in which a ray meets the four squares is lane ^ s for a ray with
+ * s = (dx < 0) + 2 (dy < 0): nearest first, as a BVH orders its children per octant.
+ */
+static const uint32_t lane_quadrant[4] = {QK_SW, QK_SE, QK_NW, QK_NE};
+
+/*
  * Item data is kept in the tree's slot order (parallel to the tree's point arrays), not by id, so
  * that scanning a leaf reads consecutive memory instead of jumping to each item's id: for large
  * sets that is what the scans cost.
@@ -130,20 +137,33 @@ static inline void box_union(qk_box_t *a, const qk_box_t *b) {
   if (b->ymax > a->ymax) a->ymax = b->ymax;
 }
 
+/* The next float above / below a finite f (what nextafterf does, without the call: the
+ * ray cast rounds its constants with these once per ray). */
+static inline float float_up(float f) {
+  if (f == 0) return 0x1p-149f;
+  uint32_t b;
+  memcpy(&b, &f, sizeof b);
+  b = f > 0 ? b + 1 : b - 1;
+  memcpy(&f, &b, sizeof f);
+  return f;
+}
+
+static inline float float_down(float f) { return -float_up(-f); }
+
 /* Round outwards to float; out-of-range values go to the largest float or infinity
  * (converting them directly would be undefined). */
-static float round_down(double v) {
+static inline float round_down(double v) {
   if (v > FLT_MAX) return FLT_MAX;
   if (v < -FLT_MAX) return -INFINITY;
   float f = (float)v;
-  return (double)f > v ? nextafterf(f, -INFINITY) : f;
+  return (double)f > v ? float_down(f) : f;
 }
 
-static float round_up(double v) {
+static inline float round_up(double v) {
   if (v > FLT_MAX) return INFINITY;
   if (v < -FLT_MAX) return -FLT_MAX;
   float f = (float)v;
-  return (double)f < v ? nextafterf(f, INFINITY) : f;
+  return (double)f < v ? float_up(f) : f;
 }
 
 /* Post-order: a node's box is the union of its children's (or its items'). Recursion
@@ -167,15 +187,18 @@ static qk_box_t fill_node_boxes(qk_collider_t *c, uint32_t node) {
     }
     cquad_t *q = &c->quads[cn->quad = c->n_quads++];
     for (uint32_t k = 0; k < 4; k++) {
-      const cnode_t *ch = &c->cn[cn->child + k];
+      const cnode_t *ch = &c->cn[cn->child + lane_quadrant[k]];
+      const int empty = ch->xmin == INFINITY;
       q->next[k] = ch->quad;
       q->start[k] = ch->start;
       q->count[k] = ch->count;
       q->pad_[k] = 0;
-      q->v[QX0 + k] = ch->xmin;
-      q->v[QY0 + k] = ch->ymin;
-      q->v[QX1 + k] = ch->xmax;
-      q->v[QY1 + k] = ch->ymax;
+      /* An empty child's box is inverted ([+inf, -inf] on both axes): the ray's float
+       * test then finds an entry at +inf and an exit at -inf, whatever the direction. */
+      q->v[QX0 + k] = empty ? INFINITY : ch->xmin;
+      q->v[QY0 + k] = empty ? INFINITY : ch->ymin;
+      q->v[QX1 + k] = empty ? -INFINITY : ch->xmax;
+      q->v[QY1 + k] = empty ? -INFINITY : ch->ymax;
     }
   }
   if (count == 0) {
@@ -526,28 +549,74 @@ qk_status_t qk_collider_pairs_list(const qk_collider_t *c, qk_pair_t *out, size_
 /* Ray casting                                                                          */
 
 /*
- * The ray, with the reciprocals of its direction when they are finite: node boxes are
- * tested with a multiplication per plane, items with a division (which keeps a zero
- * numerator from turning into NaN for tiny direction components). The two may differ by
- * a rounding, which the search's margin on t covers.
+ * How the ray cast prunes in float and still never loses a hit (docs/collide.md, "The ray
+ * path", has the same argument in prose; tests/test_collide.c checks it against brute
+ * force on grazing, axis-parallel, inside, huge and tiny cases).
+ *
+ * Hits are decided by the items alone, in doubles (ray_disc, ray_box); node boxes only
+ * prune, and a node must be entered whenever it holds an item that the search would
+ * report. Two facts give that.
+ *
+ * (1) The item margin. Let w = (|ox| + |oy| + 2 mag) 2^-40, mag the largest coordinate
+ *     magnitude of any item box. An item hit at a computed th has the exact point
+ *     o + th d within w of its box on each axis: th comes from the same doubles with
+ *     relative errors of a few 2^-53, which move that point by some 2^-50 (|o| + mag),
+ *     and disc boxes carry a pad of 2^-40 of their own magnitude. (This is the margin
+ *     the search has always relied on; w is 2^10 times the roundings it covers, short of
+ *     underflow in the item tests themselves.) So the exact ray meets the node's box
+ *     widened by w, B_w, at t* = th, and 0 <= th <= min(tmax, best) for an item that is
+ *     to be reported (ties included).
+ *
+ * (2) The float test accepts every node whose B_w the exact ray meets at some real t* in
+ *     [0, T], T = round_up(min(tmax, best)), and returns an entry bound L <= fl(t*), fl
+ *     being rounding to the nearest float. Per axis, for dx > 0 (for dx < 0 the sides
+ *     swap and so do the rounding directions below):
+ *       near = fl(fl(xmin - Pn) * In),   far = fl(fl(xmax - Pf) * If),
+ *     with floats Pn >= ox + w, Pf <= ox - w, 0 < In <= 1 / (dx (1 + u)) and
+ *     If >= 1 / (dx (1 - u)), u = 2^-24 the float unit roundoff. From
+ *     xmin - w <= ox + t* dx <= xmax + w: a = xmin - Pn <= t* dx. If a <= 0 then
+ *     fl(a) In <= 0 <= t*; else fl(a) <= a (1 + u) (a float subtraction errs by at most
+ *     u relatively, and not at all when the result is subnormal), so fl(a) In <= a / dx
+ *     <= t*. Likewise b = xmax - Pf >= t* dx >= 0, fl(b) >= b (1 - u) and fl(b) If >= t*.
+ *     Rounding to nearest is monotone, overflow and underflow included, so
+ *     near <= fl(t*) <= far; with the same for y, fl(0) = 0 and fl(t*) <= fl(T) = T:
+ *       L = max(near_x, near_y, 0) <= fl(t*) <= min(far_x, far_y, T) = U,
+ *     and the test L <= U accepts. As th <= best gives fl(th) <= round_up(best), a
+ *     stacked node with bound L is dropped only when L > round_up(best) says it holds
+ *     nothing at t <= best.
+ *     The constants meet the conditions: Pn and Pf are ox + w + m and ox - w - m,
+ *     m = (|ox| + w) 2^-21 + 2^-140, computed in double and converted to float; m is
+ *     above the roundings of the double sums (2^-52 relatively) and of the conversion
+ *     (2^-24 relatively, or 2^-150 below the normal range), so Pn >= ox + w and
+ *     Pf <= ox - w. In and If are 1/dx times 1 - 2^-21 and 1 + 2^-21 in double,
+ *     converted to float: three roundings of at most 2^-24 + 2^-52 relatively in all,
+ *     which the factor's 2^-21 exceeds by more than the u that fact (2) asks. No NaN can
+ *     arise, and no difference can overflow, when |ox|, |oy|, mag <= 2^100 and
+ *     2^-100 <= |dx|, |dy| <= 2^100: every ray constant is then a finite nonzero float,
+ *     box sides are finite below 2^101 or infinite (an empty child's box is inverted,
+ *     [+inf, -inf], which every ray rejects), and no infinity meets a zero or another
+ *     infinity. Other rays (a zero or extreme component, huge coordinates) and builds
+ *     without SSE2 take the general test, in doubles, on the boxes widened by w.
  */
 typedef struct ray {
   double ox, oy, dx, dy;
-  double ix, iy;   /* 1/dx, 1/dy (0 for a zero component) */
-  int fast;        /* both reciprocals finite: node boxes may use them */
-  int simd;        /* fast, and neither component zero: quad_slab's short path */
-  int negx, negy;  /* dx < 0, dy < 0: a box is entered across its max side */
+  double w;        /* the item margin of fact (1) */
+  double ts;       /* w over the direction's largest component: the general test's margin in t */
+  int simd;        /* the float test's ranges hold (fact 2) */
   unsigned xn, yn; /* where in a cquad_t (in floats) the entry sides' lanes start */
+  unsigned s;      /* the lanes in the order the ray meets their squares: i ^ s */
 #if defined(__SSE2__)
-  __m128d vox, voy, vix, viy, vts, vmax; /* ox, oy, ix, iy, ts and tmax in both lanes */
+  __m128d vox, voy;          /* ox, oy in both lanes (the leaf test) */
+  __m128 pnx, pny, pfx, pfy; /* Pn, Pf per axis */
+  __m128 inx, iny, ifx, ify; /* In, If per axis */
 #endif
 } ray_t;
 
 /* A stacked node of the ray cast: an entry of quads, or (quad QK_NONE) a leaf's slot
- * range, with the lower bound on t that let it in. */
+ * range, with a lower bound on the t of anything in it (float, rounded down). */
 typedef struct rentry {
   uint32_t quad, start, count;
-  double bound;
+  float bound;
 } rentry_t;
 
 #if defined(__GNUC__)
@@ -556,12 +625,13 @@ typedef struct rentry {
 #define QK__CPREFETCH(p) ((void)(p))
 #endif
 
-/* One axis of the slab test: narrow [*lo, *hi] to where o + t d lies in [min, max]. */
-static inline int slab_axis(double min, double max, double o, double d, double inv, int mul,
-                            double *lo, double *hi) {
+/*
+ * One axis of the slab test in doubles, by division: narrow [*lo, *hi] to where o + t d
+ * lies in [min, max]; 0 when a zero component leaves the origin's coordinate outside.
+ */
+static inline int slab_axis(double min, double max, double o, double d, double *lo, double *hi) {
   if (d == 0) return !(o < min || o > max);
-  double t1 = mul ? (min - o) * inv : (min - o) / d;
-  double t2 = mul ? (max - o) * inv : (max - o) / d;
+  double t1 = (min - o) / d, t2 = (max - o) / d;
   if (t1 > t2) {
     double s = t1;
     t1 = t2;
@@ -572,16 +642,13 @@ static inline int slab_axis(double min, double max, double o, double d, double i
   return 1;
 }
 
-/*
- * The slab test of the ray against a closed box: the parameter interval [lo, hi] within
- * [0, tmax] in which the ray is inside the box (empty when lo > hi). `mul` selects the
- * reciprocals (node boxes) over division (items).
- */
-static inline int slab(double xmin, double ymin, double xmax, double ymax, const ray_t *r, int mul,
+/* The slab test of the ray against a closed box: the parameter interval [lo, hi] within
+ * [0, tmax] in which the ray is inside the box (empty when lo > hi). */
+static inline int slab(double xmin, double ymin, double xmax, double ymax, const ray_t *r,
                        double tmax, double *lo_out, double *hi_out) {
   double lo = 0.0, hi = tmax;
-  if (!slab_axis(xmin, xmax, r->ox, r->dx, r->ix, mul, &lo, &hi) ||
-      !slab_axis(ymin, ymax, r->oy, r->dy, r->iy, mul, &lo, &hi))
+  if (!slab_axis(xmin, xmax, r->ox, r->dx, &lo, &hi) ||
+      !slab_axis(ymin, ymax, r->oy, r->dy, &lo, &hi))
     return 0;
   *lo_out = lo;
   *hi_out = hi;
@@ -642,215 +709,158 @@ static inline unsigned ray_disc2(const qk_disc_t *d, const ray_t *r, double tmax
 
 static inline double ray_box(const qk_box_t *b, const ray_t *r, double tmax) {
   double lo, hi;
-  if (!slab(b->xmin, b->ymin, b->xmax, b->ymax, r, 0, tmax, &lo, &hi) || lo > hi) return -1.0;
+  if (!slab(b->xmin, b->ymin, b->xmax, b->ymax, r, tmax, &lo, &hi) || lo > hi) return -1.0;
   return lo;
 }
 
 /*
- * The slab test of the ray against the four boxes of a cquad_t at once: bit k of the
- * result is set when child k's box meets the ray within [0, tmax] (widened by ts) at a
- * parameter not beyond best + ts, and lo[k] receives where it enters. The same
- * arithmetic as slab() per lane: products with the reciprocals when they are finite,
- * quotients otherwise, and for a zero direction component a test of the origin's
- * coordinate (whose interval is then everything or nothing). No lane can produce a NaN:
- * the origin is finite, the boxes' sides finite or infinite, and a zero component never
- * multiplies or divides.
+ * The general test of the four boxes of a cquad_t, in doubles: bit k is set when child
+ * k's box, widened by w, meets the ray within [0, tmax + ts] at a parameter not beyond
+ * best + ts, and bound[k] receives that entry parameter less ts, rounded down to float.
+ * For the rays the float test does not take, and without SSE2.
  */
+static unsigned quad_slab_general(const cquad_t *q, const ray_t *r, double tmax, double best,
+                                  float bound[4]) {
+  unsigned keep = 0;
+  const double w = r->w, ts = r->ts;
+  for (int k = 0; k < 4; k++) {
+    double x0 = q->v[QX0 + k], y0 = q->v[QY0 + k], x1 = q->v[QX1 + k], y1 = q->v[QY1 + k];
+    double l, u;
+    if (!(x0 <= x1) || !slab(x0 - w, y0 - w, x1 + w, y1 + w, r, tmax, &l, &u) ||
+        !(l <= u + ts && l - ts <= best))
+      continue;
+    bound[k] = round_down(l - ts);
+    keep |= 1u << k;
+  }
+  return keep;
+}
+
 #if defined(__SSE2__)
-/* One axis for two lanes: the entry and exit parameters. */
-static inline void quad_axis(__m128d mn, __m128d mx, double o, double d, double inv, int mul,
-                             __m128d *tn, __m128d *tf) {
-  const __m128d vo = _mm_set1_pd(o);
-  if (d == 0) {
-    __m128d in = _mm_and_pd(_mm_cmple_pd(mn, vo), _mm_cmple_pd(vo, mx));
-    const __m128d inf = _mm_set1_pd(INFINITY), ninf = _mm_set1_pd(-INFINITY);
-    *tn = _mm_or_pd(_mm_and_pd(in, ninf), _mm_andnot_pd(in, inf));
-    *tf = _mm_or_pd(_mm_and_pd(in, inf), _mm_andnot_pd(in, ninf));
+/*
+ * The float test of fact (2) on the four boxes of a cquad_t at once: bit k is set when
+ * child k is kept, and bound[k] receives L. Four subtractions, four multiplications, two
+ * maxima, two minima and a comparison for the four children together.
+ */
+static inline unsigned quad_slab_float(const cquad_t *q, const ray_t *r, __m128 tv,
+                                       float bound[4]) {
+  const float *f = q->v;
+  const __m128 tnx = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(f + r->xn), r->pnx), r->inx);
+  const __m128 tfx = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(f + (r->xn ^ 8)), r->pfx), r->ifx);
+  const __m128 tny = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(f + r->yn), r->pny), r->iny);
+  const __m128 tfy = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(f + (r->yn ^ 8)), r->pfy), r->ify);
+  const __m128 l = _mm_max_ps(_mm_max_ps(tnx, tny), _mm_setzero_ps());
+  const __m128 u = _mm_min_ps(_mm_min_ps(tfx, tfy), tv);
+  _mm_storeu_ps(bound, l);
+  return (unsigned)_mm_movemask_ps(_mm_cmple_ps(l, u));
+}
+#endif
+
+/* perm[s][m]: bit i set when bit i ^ s of m is, i.e. the kept lanes in the order the ray
+ * meets them (bit 0 nearest); low[m] and high[m]: the lowest and highest set bit of m. */
+static const uint8_t perm[4][16] = {{0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15},
+                                    {0, 2, 1, 3, 8, 10, 9, 11, 4, 6, 5, 7, 12, 14, 13, 15},
+                                    {0, 4, 8, 12, 1, 5, 9, 13, 2, 6, 10, 14, 3, 7, 11, 15},
+                                    {0, 8, 4, 12, 2, 10, 6, 14, 1, 9, 5, 13, 3, 11, 7, 15}};
+static const uint8_t low[16] = {0, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0};
+static const uint8_t high[16] = {0, 0, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3, 3, 3, 3, 3};
+
+/* Sets up the ray; fills the float test's constants when fact (2)'s ranges hold. */
+static void ray_init(ray_t *r, const qk_collider_t *c, qk_point_t o, qk_point_t d) {
+  const double ax = fabs(d.x), ay = fabs(d.y), dn = qk__max(ax, ay);
+  r->ox = o.x, r->oy = o.y, r->dx = d.x, r->dy = d.y;
+  r->w = (fabs(o.x) + fabs(o.y) + 2 * c->mag) * 0x1p-40;
+  r->ts = 0.0;
+  r->xn = d.x < 0 ? QX1 : QX0; /* the exit side is the other one: ^ 8 */
+  r->yn = d.y < 0 ? QY1 : QY0;
+  r->s = (unsigned)(d.x < 0) | (unsigned)(d.y < 0) << 1;
+  r->simd = 0;
+#if defined(__SSE2__)
+  r->vox = _mm_set1_pd(o.x), r->voy = _mm_set1_pd(o.y);
+  const double big = 0x1p100, mo = qk__max(qk__max(fabs(o.x), fabs(o.y)), c->mag);
+  r->simd = mo <= big && qk__min(ax, ay) >= 0x1p-100 && dn <= big;
+#endif
+  if (!r->simd) {
+    r->ts = dn > 0 ? r->w / dn : 0.0;
     return;
   }
-  __m128d t1, t2;
-  if (mul) {
-    const __m128d vi = _mm_set1_pd(inv);
-    t1 = _mm_mul_pd(_mm_sub_pd(mn, vo), vi);
-    t2 = _mm_mul_pd(_mm_sub_pd(mx, vo), vi);
-  } else {
-    const __m128d vd = _mm_set1_pd(d);
-    t1 = _mm_div_pd(_mm_sub_pd(mn, vo), vd);
-    t2 = _mm_div_pd(_mm_sub_pd(mx, vo), vd);
-  }
-  *tn = _mm_min_pd(t1, t2);
-  *tf = _mm_max_pd(t1, t2);
+#if defined(__SSE2__)
+  /* Pn, Pf: the origin moved by w (towards the exit for the entry side, back for the
+   * exit side) and by m more, then converted to float: m exceeds the roundings of the
+   * double sums and of the conversion, so Pn >= o + w and Pf <= o - w as fact (2) asks
+   * (cheaper than rounding in a chosen direction). In, If: 1/d scaled by 1 -+ 2^-21,
+   * then converted (an error of 2^-24 at most in this range). */
+  const double w = r->w;
+  const double mx = (fabs(o.x) + w) * 0x1p-21 + 0x1p-140, my = (fabs(o.y) + w) * 0x1p-21 + 0x1p-140;
+  const float xp = (float)(o.x + w + mx), xm = (float)(o.x - w - mx);
+  const float yp = (float)(o.y + w + my), ym = (float)(o.y - w - my);
+  const double qx = 1 / d.x, qy = 1 / d.y, lo = 1 - 0x1p-21, hi = 1 + 0x1p-21;
+  r->inx = _mm_set1_ps((float)(qx * lo)), r->ifx = _mm_set1_ps((float)(qx * hi));
+  r->iny = _mm_set1_ps((float)(qy * lo)), r->ify = _mm_set1_ps((float)(qy * hi));
+  r->pnx = _mm_set1_ps(d.x > 0 ? xp : xm), r->pfx = _mm_set1_ps(d.x > 0 ? xm : xp);
+  r->pny = _mm_set1_ps(d.y > 0 ? yp : ym), r->pfy = _mm_set1_ps(d.y > 0 ? ym : yp);
+#endif
 }
 
 /*
- * The short path, for a ray with reciprocals and no zero component: the entry side of
- * each axis is known from the direction's sign (products with a fixed reciprocal are
- * monotone, so this picks the same values as a min and max would).
+ * The search proper, for a ray set up by ray_init. `simd` is the ray's, passed as a
+ * constant by the caller so that each copy of the loop holds one node test only.
  */
-static inline unsigned quad_slab_signed(const cquad_t *q, const ray_t *r, double tmax, double ts,
-                                        double best, double lo[4]) {
-  const float *f = q->v;
-  const __m128 xn = _mm_load_ps(f + r->xn), xf = _mm_load_ps(f + (r->xn ^ 8));
-  const __m128 yn = _mm_load_ps(f + r->yn), yf = _mm_load_ps(f + (r->yn ^ 8));
-  (void)tmax;
-  const __m128d ox = r->vox, oy = r->voy, ix = r->vix, iy = r->viy;
-  const __m128d vts = r->vts, vmax = r->vmax, vbest = _mm_set1_pd(best + ts);
-  /* Lanes 0 and 1, then 2 and 3, widened to doubles (exactly). */
-  __m128d txn0 = _mm_mul_pd(_mm_sub_pd(_mm_cvtps_pd(xn), ox), ix);
-  __m128d txn1 = _mm_mul_pd(_mm_sub_pd(_mm_cvtps_pd(_mm_movehl_ps(xn, xn)), ox), ix);
-  __m128d txf0 = _mm_mul_pd(_mm_sub_pd(_mm_cvtps_pd(xf), ox), ix);
-  __m128d txf1 = _mm_mul_pd(_mm_sub_pd(_mm_cvtps_pd(_mm_movehl_ps(xf, xf)), ox), ix);
-  __m128d tyn0 = _mm_mul_pd(_mm_sub_pd(_mm_cvtps_pd(yn), oy), iy);
-  __m128d tyn1 = _mm_mul_pd(_mm_sub_pd(_mm_cvtps_pd(_mm_movehl_ps(yn, yn)), oy), iy);
-  __m128d tyf0 = _mm_mul_pd(_mm_sub_pd(_mm_cvtps_pd(yf), oy), iy);
-  __m128d tyf1 = _mm_mul_pd(_mm_sub_pd(_mm_cvtps_pd(_mm_movehl_ps(yf, yf)), oy), iy);
-  __m128d l0 = _mm_max_pd(_mm_max_pd(txn0, tyn0), _mm_setzero_pd());
-  __m128d l1 = _mm_max_pd(_mm_max_pd(txn1, tyn1), _mm_setzero_pd());
-  __m128d u0 = _mm_add_pd(_mm_min_pd(_mm_min_pd(txf0, tyf0), vmax), vts);
-  __m128d u1 = _mm_add_pd(_mm_min_pd(_mm_min_pd(txf1, tyf1), vmax), vts);
-  /* Kept: l <= u + ts and l - ts <= best, the latter as l <= best + ts (both sides are
-   * rounded the same way for every lane, and ts is far above a rounding of best). */
-  __m128d ok0 = _mm_and_pd(_mm_cmple_pd(l0, u0), _mm_cmple_pd(l0, vbest));
-  __m128d ok1 = _mm_and_pd(_mm_cmple_pd(l1, u1), _mm_cmple_pd(l1, vbest));
-  _mm_storeu_pd(lo, l0);
-  _mm_storeu_pd(lo + 2, l1);
-  return (unsigned)_mm_movemask_pd(ok0) | (unsigned)_mm_movemask_pd(ok1) << 2;
-}
-
-static inline unsigned quad_slab(const cquad_t *q, const ray_t *r, double tmax, double ts,
-                                 double best, double lo[4]) {
-  if (r->simd) return quad_slab_signed(q, r, tmax, ts, best, lo);
-  const __m128 xmin = _mm_load_ps(q->v + QX0), ymin = _mm_load_ps(q->v + QY0);
-  const __m128 xmax = _mm_load_ps(q->v + QX1), ymax = _mm_load_ps(q->v + QY1);
-  unsigned keep = 0;
-  for (int h = 0; h < 2; h++) {
-    /* Lanes 2h and 2h + 1, widened to doubles (exactly). */
-    __m128d x0 = _mm_cvtps_pd(h ? _mm_movehl_ps(xmin, xmin) : xmin);
-    __m128d x1 = _mm_cvtps_pd(h ? _mm_movehl_ps(xmax, xmax) : xmax);
-    __m128d y0 = _mm_cvtps_pd(h ? _mm_movehl_ps(ymin, ymin) : ymin);
-    __m128d y1 = _mm_cvtps_pd(h ? _mm_movehl_ps(ymax, ymax) : ymax);
-    __m128d txn, txf, tyn, tyf;
-    quad_axis(x0, x1, r->ox, r->dx, r->ix, r->fast, &txn, &txf);
-    quad_axis(y0, y1, r->oy, r->dy, r->iy, r->fast, &tyn, &tyf);
-    __m128d l = _mm_max_pd(_mm_max_pd(txn, tyn), _mm_setzero_pd());
-    __m128d u = _mm_min_pd(_mm_min_pd(txf, tyf), _mm_set1_pd(tmax));
-    const __m128d vts = _mm_set1_pd(ts);
-    __m128d ok = _mm_and_pd(_mm_cmple_pd(l, _mm_add_pd(u, vts)),
-                            _mm_cmple_pd(_mm_sub_pd(l, vts), _mm_set1_pd(best)));
-    _mm_storeu_pd(lo + 2 * h, l);
-    keep |= (unsigned)_mm_movemask_pd(ok) << (2 * h);
-  }
-  return keep;
-}
-#else
-/* Portable fallback: the same test lane by lane. */
-static inline unsigned quad_slab(const cquad_t *q, const ray_t *r, double tmax, double ts,
-                                 double best, double lo[4]) {
-  unsigned keep = 0;
-  for (int k = 0; k < 4; k++) {
-    double l, u;
-    if (slab(q->v[QX0 + k], q->v[QY0 + k], q->v[QX1 + k], q->v[QY1 + k], r, r->fast, tmax, &l,
-             &u) &&
-        l <= u + ts && l - ts <= best) {
-      lo[k] = l;
-      keep |= 1u << k;
-    }
-  }
-  return keep;
-}
+#if defined(__GNUC__)
+__attribute__((always_inline))
 #endif
-
-/* The four quadrants from the farthest to the nearest along a direction whose x and y
- * components are negative as given (the corner quadrant it enters first last). */
-static inline void quadrant_order(int negx, int negy, uint32_t order[4]) {
-  /* Quadrant of an east / north flag pair: NE 0, NW 1, SW 2, SE 3. */
-  static const uint32_t q[2][2] = {{QK_SW, QK_NW}, {QK_SE, QK_NE}};
-  int e = negx, nn = negy; /* the near quadrant is east when going west, ... */
-  order[0] = q[!e][!nn];
-  order[1] = q[e][!nn];
-  order[2] = q[!e][nn];
-  order[3] = q[e][nn];
-}
-
-qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t d, double tmax,
-                                qk_hit_t *hit) {
-  if (!c || !hit) return QK_ERR_INVALID;
-  hit->id = QK_NONE;
-  hit->t = INFINITY;
-  if (!isfinite(o.x) || !isfinite(o.y) || !isfinite(d.x) || !isfinite(d.y)) return QK_ERR_NONFINITE;
-  if (isnan(tmax) || tmax < 0) return QK_ERR_INVALID;
-  if (c->n == 0) return QK_OK;
+static inline void
+cast(const qk_collider_t *c, const ray_t *rp, const int simd, double tmax, qk_hit_t *hit) {
+  const ray_t ray = *rp;
+  (void)simd; /* unused without SSE2 */
+  const qk_point_t o = {ray.ox, ray.oy}, d = {ray.dx, ray.dy};
   const qk_id_t *pid = qk__tree_ids(c->tree);
-  /*
-   * Node boxes bound the items in space, but the parameters computed for a box and for
-   * a disc round differently; widen each node's interval by a margin far above those
-   * roundings (which scale with the coordinates over the direction's length).
-   */
-  double dn = qk__max(fabs(d.x), fabs(d.y));
-  double ts = dn > 0 ? (fabs(o.x) + fabs(o.y) + 2 * c->mag) * 0x1p-40 / dn : 0.0;
   double best = INFINITY;
   qk_id_t best_id = QK_NONE;
+  /* T of fact (2): min(tmax, best) rounded up to float; it only shrinks. */
+  float tf = round_up(tmax);
+#if defined(__SSE2__)
+  __m128 tv = _mm_set1_ps(tf);
+#endif
   rentry_t stack[QK__CSTACK_MAX];
   int sp = 0;
-  double lo, hi;
   const int all_discs = c->n_discs == c->n, no_discs = c->n_discs == 0;
-  /* Reciprocals, unless a component is so small that its reciprocal overflows (then the
-   * dividing slab test is used throughout). */
-  ray_t ray = {.ox = o.x,
-               .oy = o.y,
-               .dx = d.x,
-               .dy = d.y,
-               .ix = d.x != 0 ? 1 / d.x : 0,
-               .iy = d.y != 0 ? 1 / d.y : 0};
-  ray.fast = isfinite(ray.ix) && isfinite(ray.iy);
-  ray.simd = ray.fast && d.x != 0 && d.y != 0;
-  ray.negx = d.x < 0;
-  ray.negy = d.y < 0;
-  ray.xn = ray.negx ? QX1 : QX0; /* the exit side is the other one: ^ 8 */
-  ray.yn = ray.negy ? QY1 : QY0;
-#if defined(__SSE2__)
-  ray.vox = _mm_set1_pd(o.x), ray.voy = _mm_set1_pd(o.y);
-  ray.vix = _mm_set1_pd(ray.ix), ray.viy = _mm_set1_pd(ray.iy);
-  ray.vts = _mm_set1_pd(ts), ray.vmax = _mm_set1_pd(tmax);
-#endif
-  uint32_t order[4];
-  quadrant_order(ray.negx, ray.negy, order);
+  const unsigned s = ray.s;
   const cnode_t *root = &c->cn[0];
-  if (!slab(root->xmin, root->ymin, root->xmax, root->ymax, &ray, 0, tmax, &lo, &hi) ||
-      lo > hi + ts)
-    return QK_OK;
-  /* The node in hand: an entry of quads, or (quad QK_NONE) a leaf's slot range. */
-  rentry_t cur = {root->quad, root->start, root->count, 0.0};
+  /* The node in hand: an entry of quads, or (quad QK_NONE) a leaf's slot range. The root
+   * needs no test of its own: its children's boxes are tested. */
+  rentry_t cur = {root->quad, root->start, root->count, 0.0f};
   const cquad_t *quads = c->quads;
   for (;;) {
     if (cur.quad != QK_NONE) {
-      /* All four children's boxes from one line, their links from the next; only the
-       * kept ones stacked. */
+      /* All four children's boxes from one line, their links from the next. */
       const cquad_t *q = &quads[cur.quad];
-      double lo4[4];
-      unsigned keep = quad_slab(q, &ray, tmax, ts, best, lo4);
-      /* Far quadrant first, so the one the ray enters first is popped first: the
-       * quadrants' order along the direction, which the item boxes mostly follow (the
-       * bound on each entry keeps the pruning exact whatever the order). The nearest
-       * kept child, just checked against best, is not stacked but taken straight away;
-       * each stacked one's memory is asked for now, so that its misses overlap the work
-       * on the nearest. */
-      int take = -1;
-      for (int i = 0; i < 4; i++) {
-        const uint32_t k = order[i];
-        if (!(keep >> k & 1)) continue;
-        if (take >= 0) {
-          const uint32_t nx = q->next[take], st = q->start[take];
-          stack[sp++] = (rentry_t){nx, st, q->count[take], lo4[take] - ts};
+      float lo4[4];
+      unsigned keep;
+#if defined(__SSE2__)
+      if (simd)
+        keep = quad_slab_float(q, &ray, tv, lo4);
+      else
+#endif
+        keep = quad_slab_general(q, &ray, tmax, best, lo4);
+      if (keep) {
+        /* The kept children in the order the ray meets their squares (the item boxes
+         * mostly follow it; the bounds keep the pruning exact whatever the order): the
+         * nearest is taken at once, the others stacked far to near, each with its
+         * memory asked for now so that the misses overlap the work on the nearest. */
+        unsigned m = perm[s][keep];
+        const uint32_t k0 = (uint32_t)low[m] ^ s;
+        m &= m - 1;
+        while (m) {
+          const unsigned i = high[m];
+          const uint32_t k = i ^ s, nx = q->next[k], st = q->start[k];
+          m ^= 1u << i;
+          stack[sp++] = (rentry_t){nx, st, q->count[k], lo4[k]};
           if (nx != QK_NONE)
             QK__CPREFETCH(&quads[nx]);
           else if (all_discs)
             QK__CPREFETCH(&c->sdisc[st]);
         }
-        take = (int)k;
-      }
-      if (take >= 0) {
-        cur = (rentry_t){q->next[take], q->start[take], q->count[take], 0.0};
+        cur = (rentry_t){q->next[k0], q->start[k0], q->count[k0], 0.0f};
         continue;
       }
     } else {
@@ -858,6 +868,7 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
        * one more cache miss per leaf otherwise. */
       uint32_t slot = cur.start;
       const uint32_t end = cur.start + cur.count;
+      const double best0 = best;
 #if defined(__SSE2__)
       /* Discs two at a time, with the same operations as ray_disc() lane by lane (so
        * the same t to the last bit); only lanes that could be a new best go on. */
@@ -887,14 +898,36 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
           best_id = id;
         }
       }
+      if (best != best0) {
+        tf = round_up(best); /* best <= tmax: the items test t <= tmax */
+#if defined(__SSE2__)
+        tv = _mm_set1_ps(tf);
+#endif
+      }
     }
     /* Next, the nearest stacked node that may still hold a hit no farther than best
-     * (the bound it was stacked with, re-checked: best may have come closer since). */
-    while (sp > 0 && stack[sp - 1].bound > best) sp--;
+     * (its bound re-checked: best may have come closer since it was stacked). */
+    while (sp > 0 && stack[sp - 1].bound > tf) sp--;
     if (sp == 0) break;
     cur = stack[--sp];
   }
   hit->id = best_id;
   hit->t = best_id == QK_NONE ? INFINITY : best;
+}
+
+qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t d, double tmax,
+                                qk_hit_t *hit) {
+  if (!c || !hit) return QK_ERR_INVALID;
+  hit->id = QK_NONE;
+  hit->t = INFINITY;
+  if (!isfinite(o.x) || !isfinite(o.y) || !isfinite(d.x) || !isfinite(d.y)) return QK_ERR_NONFINITE;
+  if (isnan(tmax) || tmax < 0) return QK_ERR_INVALID;
+  if (c->n == 0) return QK_OK;
+  ray_t ray;
+  ray_init(&ray, c, o, d);
+  if (ray.simd)
+    cast(c, &ray, 1, tmax, hit);
+  else
+    cast(c, &ray, 0, tmax, hit);
   return QK_OK;
 }

@@ -1,0 +1,205 @@
+/*
+ * Test plan for the collider's ray cast at the edges of its float pruning
+ * (collide/collider.c, "How the ray cast prunes in float"):
+ *  - the oracle is brute force over every item with the library's own item tests (the
+ *    same double operations, written out again here), so pruning that lost a node would
+ *    show as a different id or t, and the answers must agree exactly, t to the last bit;
+ *  - scenes of boxes sharing edges at coordinates that are not floats (multiples of 0.1),
+ *    discs tangent to boxes and to each other, discs only and mixed, deep trees
+ *    (capacity 1 and 3);
+ *  - rays along box edges (axis-parallel, the general test, and tilted by 2^-60 and
+ *    2^-101, on either side of the float test's range), through box corners, tangent to
+ *    discs, from inside boxes and discs, axis-parallel from anywhere, and random;
+ *  - the same scenes and rays scaled by 1e-30, 1e25, 1e35 (beyond the float test's
+ *    range: the general test), 1e60, and moved by 1e7 and 1e5 (float boxes far coarser
+ *    than the items), with directions scaled by 1e20 and 1e-20 (parameters that overflow
+ *    and underflow a float) and 1e-35 (the general test), and tmax cut-offs.
+ */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+
+#include "qk_test.h"
+
+static uint64_t g_seed;
+
+/* The library's disc test (collider.c ray_disc): the same operations in the same order. */
+static double bf_ray_disc(qk_disc_t d, qk_point_t o, qk_point_t v, double tmax) {
+  double fx = o.x - d.x, fy = o.y - d.y;
+  double c = fx * fx + fy * fy - d.r * d.r;
+  if (c <= 0) return 0.0;
+  double b = fx * v.x + fy * v.y;
+  if (b >= 0) return -1.0;
+  double a = v.x * v.x + v.y * v.y, cr = fx * v.y - fy * v.x;
+  double disc = a * d.r * d.r - cr * cr;
+  if (disc < 0) return -1.0;
+  double t = c / (-b + sqrt(disc));
+  return t <= tmax ? t : -1.0;
+}
+
+/* The library's box test (collider.c ray_box: the slab test by division). */
+static int bf_axis(double mn, double mx, double o, double d, double *lo, double *hi) {
+  if (d == 0) return !(o < mn || o > mx);
+  double t1 = (mn - o) / d, t2 = (mx - o) / d;
+  if (t1 > t2) {
+    double s = t1;
+    t1 = t2;
+    t2 = s;
+  }
+  if (t1 > *lo) *lo = t1;
+  if (t2 < *hi) *hi = t2;
+  return 1;
+}
+
+static double bf_ray_box(qk_box_t b, qk_point_t o, qk_point_t v, double tmax) {
+  double lo = 0.0, hi = tmax;
+  if (!bf_axis(b.xmin, b.xmax, o.x, v.x, &lo, &hi) || !bf_axis(b.ymin, b.ymax, o.y, v.y, &lo, &hi))
+    return -1.0;
+  return lo > hi ? -1.0 : lo;
+}
+
+/* Smallest t, then smallest id, over all items (discs are ids 0 .. nd - 1). */
+static qk_hit_t brute(const qk_disc_t *d, size_t nd, const qk_box_t *b, size_t nb, qk_point_t o,
+                      qk_point_t v, double tmax) {
+  qk_hit_t h = {QK_NONE, INFINITY};
+  for (size_t i = 0; i < nd + nb; i++) {
+    double t = i < nd ? bf_ray_disc(d[i], o, v, tmax) : bf_ray_box(b[i - nd], o, v, tmax);
+    if (t >= 0 && (t < h.t || (t == h.t && (qk_id_t)i < h.id))) {
+      h.t = t;
+      h.id = (qk_id_t)i;
+    }
+  }
+  return h;
+}
+
+enum { NB_MAX = 200, ND_MAX = 300, N_RAYS = 700 };
+
+/* Boxes on a 0.1 grid sharing edges (some cells left out), discs tangent to boxes'
+ * right sides and to each other, and random discs. */
+static void make_scene(qkt_rng_t *r, qk_disc_t *d, size_t *nd, qk_box_t *b, size_t *nb,
+                       int with_boxes) {
+  *nb = 0;
+  if (with_boxes)
+    for (int i = 0; i < 14 && *nb < NB_MAX; i++)
+      for (int j = 0; j < 14 && *nb < NB_MAX; j++)
+        if (qkt_rng_below(r, 3) != 0)
+          b[(*nb)++] = (qk_box_t){0.1 * i, 0.1 * j, 0.1 * (i + 1), 0.1 * j + 0.1 * (1 + (i & 1))};
+  *nd = 0;
+  for (size_t k = 0; k < (with_boxes ? 60u : 150u) && *nb > 0; k++) {
+    const qk_box_t *bx = &b[qkt_rng_below(r, (uint32_t)*nb)];
+    double rad = qkt_rng_range(r, 0.001, 0.04);
+    d[(*nd)++] = (qk_disc_t){bx->xmax + rad, 0.5 * (bx->ymin + bx->ymax), rad};
+  }
+  while (*nd < ND_MAX - 40) {
+    double rad = qkt_rng_below(r, 10) == 0 ? 0.0 : qkt_rng_range(r, 0, 0.05);
+    d[(*nd)++] = (qk_disc_t){qkt_rng_range(r, 0, 1.4), qkt_rng_range(r, 0, 1.4), rad};
+    if (*nd % 7 == 0) { /* a tangent neighbour */
+      qk_disc_t p = d[*nd - 1];
+      d[(*nd)++] = (qk_disc_t){p.x + p.r + 0.03, p.y, 0.03};
+    }
+  }
+}
+
+/* Ray i of a scene in its own coordinates (before scaling). */
+static void make_ray(qkt_rng_t *r, int i, const qk_disc_t *d, size_t nd, const qk_box_t *b,
+                     size_t nb, qk_point_t *o, qk_point_t *v, double *tmax) {
+  static const double tilt[3] = {0.0, 0x1p-60, 0x1p-101};
+  const double e = tilt[qkt_rng_below(r, 3)] * (qkt_rng_below(r, 2) ? 1 : -1);
+  const double sgn = qkt_rng_below(r, 2) ? 1.0 : -1.0;
+  double ang = qkt_rng_range(r, 0, 6.283185307179586);
+  *o = (qk_point_t){qkt_rng_range(r, -0.2, 1.6), qkt_rng_range(r, -0.2, 1.6)};
+  *v = (qk_point_t){cos(ang), sin(ang)};
+  const qk_box_t *bx = nb ? &b[qkt_rng_below(r, (uint32_t)nb)] : NULL;
+  const qk_disc_t *dc = &d[qkt_rng_below(r, (uint32_t)nd)];
+  switch (i % 8) {
+  case 1: /* along a horizontal edge, from either end */
+    if (!bx) break;
+    *o = (qk_point_t){sgn > 0 ? bx->xmin - 0.3 : bx->xmax + 0.3, i & 8 ? bx->ymax : bx->ymin};
+    *v = (qk_point_t){sgn, e};
+    break;
+  case 2: /* along a vertical edge */
+    if (!bx) break;
+    *o = (qk_point_t){i & 8 ? bx->xmax : bx->xmin, sgn > 0 ? bx->ymin - 0.3 : bx->ymax + 0.3};
+    *v = (qk_point_t){e, sgn};
+    break;
+  case 3: /* diagonally through a corner */
+    if (!bx) break;
+    *o = (qk_point_t){bx->xmax + 0.25 * sgn, bx->ymax + 0.25 * sgn};
+    *v = (qk_point_t){-sgn, -sgn + e};
+    break;
+  case 4: /* from inside a box */
+    if (bx) *o = (qk_point_t){0.5 * (bx->xmin + bx->xmax), 0.5 * (bx->ymin + bx->ymax)};
+    break;
+  case 5: /* from inside a disc */
+    *o = (qk_point_t){dc->x, dc->y};
+    break;
+  case 6: /* tangent to a disc's top or bottom */
+    *o = (qk_point_t){dc->x - 0.5 * sgn, dc->y + (i & 8 ? dc->r : -dc->r)};
+    *v = (qk_point_t){sgn, e};
+    break;
+  case 7: /* axis-parallel from anywhere */
+    *v = i & 8 ? (qk_point_t){sgn, 0} : (qk_point_t){0, sgn};
+    break;
+  default:
+    break;
+  }
+  *tmax = qkt_rng_below(r, 4) == 0 ? qkt_rng_range(r, 0, 1) : INFINITY;
+}
+
+static void test_collide_rays_float_edges(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed);
+  static const struct {
+    double scale, offset;
+  } frames[] = {{1, 0}, {1e-30, 0}, {1e25, 0}, {1e35, 0}, {1e60, 0}, {1, 1e7}, {1e-3, 1e5}};
+  static const double dscale[] = {1, 1e20, 1e-20, 1e-35};
+  qk_disc_t d0[ND_MAX], d[ND_MAX];
+  qk_box_t b0[NB_MAX], b[NB_MAX];
+  long checked = 0;
+  for (int scene = 0; scene < 2; scene++) {
+    size_t nd, nb;
+    make_scene(&r, d0, &nd, b0, &nb, 1);
+    if (scene == 1) nb = 0; /* discs only: the two-at-a-time leaf test */
+    for (size_t f = 0; f < sizeof frames / sizeof frames[0]; f++) {
+      const double s = frames[f].scale, off = frames[f].offset;
+      for (size_t i = 0; i < nd; i++)
+        d[i] = (qk_disc_t){d0[i].x * s + off, d0[i].y * s + off, d0[i].r * s};
+      for (size_t i = 0; i < nb; i++)
+        b[i] = (qk_box_t){b0[i].xmin * s + off, b0[i].ymin * s + off, b0[i].xmax * s + off,
+                          b0[i].ymax * s + off};
+      qk_tree_options_t opt;
+      qk_tree_options_init(&opt);
+      opt.capacity = f % 2 ? 1 : 3;
+      qk_collider_t *c = NULL;
+      assert_int_equal(qk_collider_build(d, nd, nb ? b : NULL, nb, &opt, &c), QK_OK);
+      for (int i = 0; i < N_RAYS; i++) {
+        qk_point_t o, v;
+        double tmax;
+        make_ray(&r, i, d0, nd, b0, nb, &o, &v, &tmax);
+        const double ds = dscale[qkt_rng_below(&r, 4)];
+        o = (qk_point_t){o.x * s + off, o.y * s + off};
+        v = (qk_point_t){v.x * ds, v.y * ds};
+        tmax = tmax * s / ds;
+        qk_hit_t h, w = brute(d, nd, b, nb, o, v, tmax);
+        assert_int_equal(qk_collider_raycast(c, o, v, tmax, &h), QK_OK);
+        if (h.id != w.id || !(h.t == w.t || (isinf(h.t) && isinf(w.t))))
+          fail_msg("scene %d frame %zu ray %d (o %.17g %.17g, d %.17g %.17g, tmax %g): "
+                   "hit (%u, %.17g) vs brute force (%u, %.17g) (seed %llu)",
+                   scene, f, i, o.x, o.y, v.x, v.y, tmax, h.id, h.t, w.id, w.t,
+                   (unsigned long long)g_seed);
+        checked++;
+      }
+      qk_collider_free(c);
+    }
+  }
+  assert_true(checked == 2L * 7 * N_RAYS);
+}
+
+int main(void) {
+  g_seed = qkt_seed(90211);
+  const struct CMUnitTest tests[] = {
+      cmocka_unit_test(test_collide_rays_float_edges),
+  };
+  return cmocka_run_group_tests(tests, NULL, NULL);
+}
