@@ -105,11 +105,21 @@ int qk__gm_exempt(const qk__gm_t *g, const uint32_t *tv) {
       uint32_t o1 = P->seg[2 * s1 + 1 - x], o2 = P->seg[2 * s2 + 1 - y];
       double ux = P->vx[o1] - P->vx[apex], uy = P->vy[o1] - P->vy[apex];
       double wx = P->vx[o2] - P->vx[apex], wy = P->vy[o2] - P->vy[apex];
-      double ang = atan2(fabs(ux * wy - uy * wx), ux * wx + uy * wy);
-      if (!(ang < 1.0471975511965976)) return 0; /* 60 degrees */
+      double C = fabs(ux * wy - uy * wx), D = ux * wx + uy * wy;
+      if (!(atan2(C, D) < 1.0471975511965976)) return 0; /* 60 degrees */
       const double ap[2] = {P->vx[apex], P->vy[apex]};
       double r1 = sqrt(d2(&c->xy[2 * p], ap)), r2 = sqrt(d2(&c->xy[2 * q], ap));
-      return fabs(r1 - r2) <= 1e-3 * fmax(r1, r2);
+      if (!(fabs(r1 - r2) <= 1e-3 * fmax(r1, r2))) return 0;
+      /* The smallest angle, at z opposite the shortest edge, must be at least
+       * g(phi) = arctan(sin phi / (2.02 - cos phi)) (docs/mesh.md, "Small input angles"):
+       * tan = X / Y at z against C / (2.02 N - D), N = |u| |w|, with a relative margin of
+       * 1e-6 for the rounding of both (the tests check the bound exactly). */
+      const double *Z = &c->xy[2 * tv[i]], *Pp = &c->xy[2 * p], *Pq = &c->xy[2 * q];
+      double ax = Pp[0] - Z[0], ay = Pp[1] - Z[1], bx = Pq[0] - Z[0], by = Pq[1] - Z[1];
+      double X = fabs(ax * by - ay * bx), Y = ax * bx + ay * by;
+      if (Y <= 0) return 1;
+      double N = sqrt((ux * ux + uy * uy) * (wx * wx + wy * wy));
+      return X * (2.02 * N - D) >= Y * C * (1 + 1e-6);
     }
   return 0;
 }
