@@ -15,6 +15,7 @@
 #include <string.h>
 
 int qk__gm_split_param(const qk__gm_t *g, uint32_t s, uint64_t lo, uint64_t hi, uint64_t *k);
+static int protected_piece(const qk__gm_t *g, uint32_t s, uint64_t lo, uint64_t hi);
 
 int qk__gm_split_param(const qk__gm_t *g, uint32_t s, uint64_t lo, uint64_t hi, uint64_t *k) {
   const qk_poly_t *P = g->P;
@@ -22,7 +23,7 @@ int qk__gm_split_param(const qk__gm_t *g, uint32_t s, uint64_t lo, uint64_t hi, 
   const double A[2] = {P->vx[u], P->vy[u]}, B[2] = {P->vx[w], P->vy[w]};
   int bud = qk__seg_budget(A, B);
   if (bud > 62) bud = 62;
-  if (bud < 1 || hi - lo < 2) return 0;
+  if (bud < 1 || hi - lo < 2 || protected_piece(g, s, lo, hi)) return 0;
   uint64_t q = (uint64_t)1 << (62 - bud), target = lo + (hi - lo) / 2;
   int shell = lo == 0 ? g->vsmall[u] : hi == QK__GM_ONE ? g->vsmall[w] : 0;
   if ((lo == 0) != (hi == QK__GM_ONE) && shell) {
@@ -47,13 +48,31 @@ int qk__gm_split_param(const qk__gm_t *g, uint32_t s, uint64_t lo, uint64_t hi, 
   return 1;
 }
 
-qk_status_t qk__gm_split(qk__gm_t *g, uint32_t a, uint32_t b, uint32_t s) {
+/* The floor next to a small input angle (docs/mesh.md, "Small input angles: the floor"): a
+ * piece of segment s that touches the apex of an input angle below 60 degrees and spans
+ * less than 2^-35 of s (2^27 parameter steps of 2^-62) is never split, so every vertex on
+ * such a segment stays at least 2^-37 of its length from the apex. This is what makes the
+ * refinement terminate for every input. */
+#define GM_FLOOR_STEPS ((uint64_t)1 << 27)
+
+static int protected_piece(const qk__gm_t *g, uint32_t s, uint64_t lo, uint64_t hi) {
+  const qk_poly_t *P = g->P;
+  int at_u = lo == 0 && g->vsmall[P->seg[2 * s]],
+      at_w = hi == QK__GM_ONE && g->vsmall[P->seg[2 * s + 1]];
+  return (at_u || at_w) && hi - lo < GM_FLOOR_STEPS;
+}
+
+/* qk__gm_split, telling whether it split: *done is 0 when the piece a-b is protected by the
+ * floor (nothing inserted), 1 otherwise. */
+static qk_status_t split_piece(qk__gm_t *g, uint32_t a, uint32_t b, uint32_t s, int *done) {
   const qk_poly_t *P = g->P;
   uint64_t lo = qk__gm_param(g, a, s), hi = qk__gm_param(g, b, s), k;
   if (lo > hi) {
     uint64_t t = lo;
     lo = hi, hi = t;
   }
+  *done = !protected_piece(g, s, lo, hi);
+  if (!*done) return QK_OK;
   uint32_t u = P->seg[2 * s], w = P->seg[2 * s + 1];
   const double A[2] = {P->vx[u], P->vy[u]}, B[2] = {P->vx[w], P->vy[w]};
   if (!qk__gm_split_param(g, s, lo, hi, &k)) {
@@ -84,6 +103,11 @@ qk_status_t qk__gm_split(qk__gm_t *g, uint32_t a, uint32_t b, uint32_t s) {
   return QK_OK;
 }
 
+qk_status_t qk__gm_split(qk__gm_t *g, uint32_t a, uint32_t b, uint32_t s) {
+  int done;
+  return split_piece(g, a, b, s, &done);
+}
+
 static double d2(const double *p, const double *q) {
   double x = p[0] - q[0], y = p[1] - q[1];
   return x * x + y * y;
@@ -110,6 +134,12 @@ int qk__gm_exempt(const qk__gm_t *g, const uint32_t *tv) {
       const double ap[2] = {P->vx[apex], P->vy[apex]};
       double r1 = sqrt(d2(&c->xy[2 * p], ap)), r2 = sqrt(d2(&c->xy[2 * q], ap));
       if (!(fabs(r1 - r2) <= 1e-3 * fmax(r1, r2))) return 0;
+      /* The triangle faces the input angle: its third corner lies in the closed wedge
+       * (exact orientations; p and q lie on its sides). */
+      const double *Z0 = &c->xy[2 * tv[i]], U[2] = {P->vx[o1], P->vy[o1]},
+                   W[2] = {P->vx[o2], P->vy[o2]};
+      int turn = qk__orient2d(ap, U, W);
+      if (qk__orient2d(ap, U, Z0) * turn < 0 || qk__orient2d(ap, Z0, W) * turn < 0) return 0;
       /* The smallest angle, at z opposite the shortest edge, must be at least
        * g(phi) = arctan(sin phi / (2.02 - cos phi)) (docs/mesh.md, "Small input angles"):
        * tan = X / Y at z against C / (2.02 N - D), N = |u| |w|, with a relative margin of
@@ -348,10 +378,13 @@ static qk_status_t split_triangle(qk__gm_t *g, uint32_t t) {
       return qk__mesh_fail(g->err, QK_ERR_LIMIT, 0, "cannot split the triangle at (%.17g, %.17g)",
                            W[0], W[1]);
     }
-    qk_status_t st = qk__gm_split(g, a, b, s);
+    int done;
+    qk_status_t st = split_piece(g, a, b, s, &done);
     if (!st) st = check_dirty(g);
-    if (!st && push_bad(g, t)) st = QK_ERR_NOMEM;
-    if (!st) g->bad[g->nbad - 1] = self;
+    /* Behind a protected piece: the triangle is rejected (left as it is; the final check
+     * refuses the mesh if it is still below the bound). */
+    if (!st && done && push_bad(g, t)) st = QK_ERR_NOMEM;
+    if (!st && done) g->bad[g->nbad - 1] = self;
     return st;
   }
   if (clamped || where == QK__CDT_VERT)
@@ -364,13 +397,18 @@ static qk_status_t split_triangle(qk__gm_t *g, uint32_t t) {
   if (f > 0) {
     /* Split those instead (the queue's front part is still empty here: the refinement
      * handles encroached subsegments before triangles), then retry the triangle. */
+    int any = 0;
     while (g->nenc > before) {
       g->nenc--;
       uint32_t a = g->enc[3 * g->nenc], b = g->enc[3 * g->nenc + 1], s = g->enc[3 * g->nenc + 2];
-      qk_status_t st = qk__gm_split(g, a, b, s);
+      int done;
+      qk_status_t st = split_piece(g, a, b, s, &done);
       if (!st) st = check_dirty(g);
       if (st) return st;
+      any |= done;
     }
+    /* Every encroached piece protected: the triangle is rejected (as above). */
+    if (!any) return QK_OK;
     if (push_bad(g, t)) return QK_ERR_NOMEM;
     g->bad[g->nbad - 1] = self;
     return QK_OK;
@@ -407,7 +445,8 @@ qk_status_t qk__gm_refine(qk__gm_t *g) {
       g->nenc--;
       uint32_t a = g->enc[3 * g->nenc], b = g->enc[3 * g->nenc + 1], s = g->enc[3 * g->nenc + 2];
       if (!still_encroached(g, a, b)) continue;
-      if ((st = qk__gm_split(g, a, b, s)) || (st = check_dirty(g))) break;
+      int done;
+      if ((st = split_piece(g, a, b, s, &done)) || (st = check_dirty(g))) break;
       continue;
     }
     if (g->bad_head == g->nbad) break;
@@ -417,5 +456,17 @@ qk_status_t qk__gm_refine(qk__gm_t *g) {
     if ((st = split_triangle(g, q.t))) break;
   }
   if (st == QK_ERR_NOMEM) return qk__mesh_fail(g->err, st, 0, "out of memory");
-  return st;
+  if (st) return st;
+  /* A triangle rejected at the floor and still bad: refuse rather than return a mesh that
+   * breaks the bound (docs/mesh.md, "Small input angles: the floor"). */
+  for (uint32_t t = 0; t < c->nt; t++) {
+    if (c->v[3 * t] == QK__CDT_NONE || !qk__gm_is_bad(g, t)) continue;
+    const double *q = &c->xy[2 * c->v[3 * t]];
+    return qk__mesh_fail(g->err, QK_ERR_LIMIT, 0,
+                         "the triangle at (%.17g, %.17g) stays below the angle bound: improving "
+                         "it would split a segment closer than 2^-37 of its length to the apex "
+                         "of a small input angle (the floor)",
+                         q[0], q[1]);
+  }
+  return QK_OK;
 }
