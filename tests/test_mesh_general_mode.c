@@ -28,6 +28,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "mesh_check_real.h"
 #include "qk_test.h"
 
 #ifndef M_PI
@@ -210,6 +211,30 @@ static int by_param(const void *x, const void *y) {
   return (a > b) - (a < b);
 }
 
+/* The independent exact checker (tests/support/mesh_check_general.c) on the same mesh:
+ * beyond the checks below, every angle under the bound lies in a triangle facing an input
+ * angle phi < 60 degrees and is at least g(phi) = arctan(sin phi / (2.02 - cos phi)),
+ * exactly (docs/mesh.md, "Small input angles"). */
+static void check_small_angles(const shape_t *s, const qk_mesh_t *m, double bound) {
+  size_t nv, nt, no;
+  const double *xy = qk_mesh_vertices(m, &nv);
+  const uint32_t *tri = qk_mesh_triangles(m, &nt);
+  assert_int_equal(qk_mesh_segments(m, NULL, NULL, NULL, 0, &no), QK_OK);
+  uint32_t *ab = malloc((2 * no + 2) * sizeof *ab), *sg = malloc((no + 1) * sizeof *sg);
+  assert_true(ab && sg);
+  assert_int_equal(qk_mesh_segments(m, ab, sg, NULL, no, &no), QK_OK);
+  mcr_input_t ci = {s->xy, s->nv, s->seg, s->ns};
+  mcr_mesh_t cm = {xy, nv, tri, nt, ab, sg, no};
+  mcr_opts_t co;
+  memset(&co, 0, sizeof co);
+  co.min_deg = bound, co.exempt_small = 2, co.max_deg = 180 - 2 * bound;
+  mcr_report_t rep;
+  char msg[512];
+  if (mcr_check_general(&ci, &cm, &co, &rep, msg, sizeof msg) == 1)
+    fail_msg("the exact checker: %s", msg);
+  free(ab), free(sg);
+}
+
 typedef struct check_out {
   size_t nt, exempt;
   double min_angle;
@@ -275,6 +300,7 @@ static check_out_t check_general(const shape_t *s, const qk_mesh_t *m, double bo
     fail_msg("triangle areas sum to %.17g, the domain's area is %.17g", mpq_get_d(area) / 2,
              mpq_get_d(want) / 2);
   mpq_clears(area, want, NULL);
+  check_small_angles(s, m, bound);
   /* Conforming: no directed edge twice; an edge with one side is an output segment. */
   dedge_t *e = malloc((3 * nt + 1) * sizeof *e);
   assert_non_null(e);
@@ -486,6 +512,64 @@ static void test_mesh_general_mode_random(void **state) {
     qk_poly_free(p);
     free(s);
   }
+}
+
+/* Adversarial small angles (docs/mesh.md, "Small input angles"): every one must mesh without
+ * the work cap or the floor's refusal, every angle under 20 degrees facing an input angle
+ * phi and at least g(phi) (the exact checker):
+ *  - fans: many segments from one vertex, 1 to 5 degrees apart (seeded), inside a square;
+ *  - a 1-degree angle whose one side is a short segment (2^-8 against 6);
+ *  - two small angles (2 and 3 degrees) at apexes 2^-10 apart;
+ *  - a 0.5-degree spike of the boundary next to a short edge. */
+static void test_mesh_general_mode_small_fans(void **state) {
+  (void)state;
+  uint64_t seed = qkt_seed(7);
+  printf("# seed %llu\n", (unsigned long long)seed);
+  qkt_rng_t r;
+  qkt_rng_seed(&r, seed);
+  qk_mesh_options_t o = general_opts();
+  double sq[8] = {-8, -8, 8, -8, 8, 8, -8, 8};
+  for (int k = 0; k < 3; k++) {
+    shape_t *s = calloc(1, sizeof *s);
+    sh_ring(s, sq, 4);
+    uint32_t c = sh_vertex(s, 0, 0);
+    double a = qkt_rng_range(&r, 0, 2 * M_PI);
+    int n = 6 + (int)qkt_rng_below(&r, 8);
+    for (int i = 0; i < n; i++) {
+      double rad = qkt_rng_range(&r, 3, 6);
+      sh_seg(s, c, sh_vertex(s, grid(rad * cos(a), 16), grid(rad * sin(a), 16)));
+      a += qkt_rng_range(&r, 1, 5) * M_PI / 180;
+    }
+    char what[64];
+    snprintf(what, sizeof what, "fan of %d segments 1-5 degrees apart", n);
+    run(s, &o, 20, what);
+    free(s);
+  }
+  /* A 1-degree angle, one side 2^-8 long. */
+  shape_t *s = calloc(1, sizeof *s);
+  sh_ring(s, sq, 4);
+  uint32_t A = sh_vertex(s, 1, 1);
+  double t1 = M_PI / 180;
+  sh_seg(s, A, sh_vertex(s, 7, 1));
+  sh_seg(s, A, sh_vertex(s, grid(1 + 0x1p-8 * cos(t1), 30), grid(1 + 0x1p-8 * sin(t1), 30)));
+  run(s, &o, 20, "1-degree angle next to a 2^-8 segment");
+  free(s);
+  /* Two small angles at apexes 2^-10 apart. */
+  s = calloc(1, sizeof *s);
+  sh_ring(s, sq, 4);
+  uint32_t A1 = sh_vertex(s, 0, 0), A2 = sh_vertex(s, 0, -0x1p-10);
+  sh_seg(s, A1, sh_vertex(s, 6, 0));
+  sh_seg(s, A1, sh_vertex(s, 6, grid(6 * tan(2 * t1), 20)));
+  sh_seg(s, A2, sh_vertex(s, 6, -0.125));
+  sh_seg(s, A2, sh_vertex(s, 6, grid(-0.125 - 6 * tan(3 * t1), 20)));
+  run(s, &o, 20, "2 and 3 degree angles 2^-10 apart");
+  free(s);
+  /* A 0.5-degree spike of the boundary, one side of it a 2^-6 edge. */
+  s = calloc(1, sizeof *s);
+  double ring[10] = {0, 0, 0x1p-6, 0, 6, 0, 6, 1, 3, grid(3 * tan(0.5 * t1), 30)};
+  sh_ring(s, ring, 5);
+  run(s, &o, 20, "0.5-degree spike next to a 2^-6 edge");
+  free(s);
 }
 
 /* Near-coincident and near-collinear vertices: 1 ulp apart, a mesh that passes or a
@@ -893,6 +977,7 @@ int main(void) {
       cmocka_unit_test(test_mesh_general_mode_square_holes),
       cmocka_unit_test(test_mesh_general_mode_small_angle),
       cmocka_unit_test(test_mesh_general_mode_random),
+      cmocka_unit_test(test_mesh_general_mode_small_fans),
       cmocka_unit_test(test_mesh_general_mode_near),
       cmocka_unit_test(test_mesh_general_mode_scales),
       cmocka_unit_test(test_mesh_general_mode_size),
