@@ -236,17 +236,12 @@ static int check_triangles(gc_t *c, mcr_report_t *rep) {
         had_exempt = 1;
         continue;
       }
-      if (e < 0 && getenv("QK_PHI_DEBUG")) {
-        fprintf(stderr, "phi-bound: angle %.9g, phi %.9g, ratio %.6f\n", deg, c->phi_deg,
-                c->phi_ratio);
-        continue;
-      }
       if (e < 0)
         return fail(c,
                     "triangle %zu has an angle of %.9g degrees (below %g) at vertex %u "
                     "(%.17g, %.17g), inside an input angle of %.9g degrees but below the bound "
-                    "arctan(sin phi / (2.02 - cos phi)) there",
-                    t, deg, c->o->min_deg, a, pa[0], pa[1], c->phi_deg);
+                    "arctan(sin phi / (2.02 - cos phi)) there (%.6f of it)",
+                    t, deg, c->o->min_deg, a, pa[0], pa[1], c->phi_deg, c->phi_ratio);
       return fail(c,
                   "triangle %zu has an angle of %.9g degrees (below %g) at vertex %u "
                   "(%.17g, %.17g) that no input angle below 60 degrees exempts",
