@@ -50,10 +50,11 @@ int qk__gm_split_param(const qk__gm_t *g, uint32_t s, uint64_t lo, uint64_t hi, 
 
 /* The floor next to a small input angle (docs/mesh.md, "Small input angles: the floor"): a
  * piece of segment s that touches the apex of an input angle below 60 degrees and spans
- * less than 2^-35 of s (2^27 parameter steps of 2^-62) is never split, so every vertex on
- * such a segment stays at least 2^-37 of its length from the apex. This is what makes the
- * refinement terminate for every input. */
-#define GM_FLOOR_STEPS ((uint64_t)1 << 27)
+ * less than 2^-48 of s (2^14 parameter steps of 2^-62) is never split, so every vertex on
+ * such a segment stays at least 2^-50 of its length from the apex: the descent towards an
+ * apex stops after at most 48 halvings, and the termination proof (docs/mesh.md, "Small
+ * input angles") uses that distance. */
+#define GM_FLOOR_STEPS ((uint64_t)1 << 14)
 
 static int protected_piece(const qk__gm_t *g, uint32_t s, uint64_t lo, uint64_t hi) {
   const qk_poly_t *P = g->P;
@@ -334,8 +335,9 @@ static int constrained_at(const qk__gm_t *g, uint32_t t, uint32_t x, uint32_t *a
   return 0;
 }
 
-/* Split a bad triangle: its circumcentre, or the subsegments hiding or encroached by it. */
-static qk_status_t split_triangle(qk__gm_t *g, uint32_t t) {
+/* Split a bad triangle: its circumcentre, or the subsegments hiding or encroached by it.
+ * *rejected counts the triangles left because only protected pieces stood in the way. */
+static qk_status_t split_triangle(qk__gm_t *g, uint32_t t, size_t *rejected) {
   qk__cdt_t *c = &g->cdt;
   const uint32_t *tv = &c->v[3 * t];
   const double *A = &c->xy[2 * tv[0]], *B = &c->xy[2 * tv[1]], *C = &c->xy[2 * tv[2]];
@@ -385,6 +387,7 @@ static qk_status_t split_triangle(qk__gm_t *g, uint32_t t) {
      * refuses the mesh if it is still below the bound). */
     if (!st && done && push_bad(g, t)) st = QK_ERR_NOMEM;
     if (!st && done) g->bad[g->nbad - 1] = self;
+    if (!done) ++*rejected;
     return st;
   }
   if (clamped || where == QK__CDT_VERT)
@@ -408,7 +411,7 @@ static qk_status_t split_triangle(qk__gm_t *g, uint32_t t) {
       any |= done;
     }
     /* Every encroached piece protected: the triangle is rejected (as above). */
-    if (!any) return QK_OK;
+    if (!any) return ++*rejected, QK_OK;
     if (push_bad(g, t)) return QK_ERR_NOMEM;
     g->bad[g->nbad - 1] = self;
     return QK_OK;
@@ -426,6 +429,7 @@ qk_status_t qk__gm_refine(qk__gm_t *g) {
   for (uint32_t t = 0; t < c->nt; t++)
     if (check(g, t)) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   qk_status_t st = QK_OK;
+  size_t rejected = 0;
   for (;;) {
     if (g->insertions > g->work_cap) {
       double x = 0, y = 0;
@@ -453,18 +457,18 @@ qk_status_t qk__gm_refine(qk__gm_t *g) {
     qk__gm_tq_t q = g->bad[g->bad_head++];
     const uint32_t *tv = &c->v[3 * q.t];
     if (tv[0] != q.a || tv[1] != q.b || tv[2] != q.c || !qk__gm_is_bad(g, q.t)) continue;
-    if ((st = split_triangle(g, q.t))) break;
+    if ((st = split_triangle(g, q.t, &rejected))) break;
   }
   if (st == QK_ERR_NOMEM) return qk__mesh_fail(g->err, st, 0, "out of memory");
   if (st) return st;
   /* A triangle rejected at the floor and still bad: refuse rather than return a mesh that
    * breaks the bound (docs/mesh.md, "Small input angles: the floor"). */
-  for (uint32_t t = 0; t < c->nt; t++) {
-    if (c->v[3 * t] == QK__CDT_NONE || !qk__gm_is_bad(g, t)) continue;
+  for (uint32_t t = 0; rejected && t < c->nt; t++) {
+    if (!qk__gm_is_bad(g, t)) continue;
     const double *q = &c->xy[2 * c->v[3 * t]];
     return qk__mesh_fail(g->err, QK_ERR_LIMIT, 0,
                          "the triangle at (%.17g, %.17g) stays below the angle bound: improving "
-                         "it would split a segment closer than 2^-37 of its length to the apex "
+                         "it would split a segment closer than 2^-50 of its length to the apex "
                          "of a small input angle (the floor)",
                          q[0], q[1]);
   }

@@ -520,7 +520,9 @@ static void test_mesh_general_mode_random(void **state) {
  *  - fans: many segments from one vertex, 1 to 5 degrees apart (seeded), inside a square;
  *  - a 1-degree angle whose one side is a short segment (2^-8 against 6);
  *  - two small angles (2 and 3 degrees) at apexes 2^-10 apart;
- *  - a 0.5-degree spike of the boundary next to a short edge. */
+ *  - a 0.5-degree spike of the boundary next to a short edge;
+ *  - an isolated vertex near one side of a 7-degree angle: 2^-44 from it, a mesh; 2^-56,
+ *    a refusal by the floor (QK_ERR_LIMIT naming the place). */
 static void test_mesh_general_mode_small_fans(void **state) {
   (void)state;
   uint64_t seed = qkt_seed(7);
@@ -570,6 +572,31 @@ static void test_mesh_general_mode_small_fans(void **state) {
   sh_ring(s, ring, 5);
   run(s, &o, 20, "0.5-degree spike next to a 2^-6 edge");
   free(s);
+  /* The floor: an isolated vertex inside a 7.1-degree angle, 2^-44 from one of its
+   * segments, meshes; 2^-56 from it, the mesh would need pieces of that segment shorter
+   * than the floor (2^-48 of it) at the apex, and the input is refused, naming it. */
+  for (int e = 40; e <= 52; e += 12) {
+    s = calloc(1, sizeof *s);
+    double box[8] = {-1, -1, 2, -1, 2, 2, -1, 2};
+    sh_ring(s, box, 4);
+    uint32_t a0 = sh_vertex(s, 0, 0);
+    sh_seg(s, a0, sh_vertex(s, 1, 0));
+    sh_seg(s, a0, sh_vertex(s, 1, 0.125));
+    sh_vertex(s, ldexp(1, -e), ldexp(1, -e - 4));
+    if (e == 40) {
+      run(s, &o, 20, "vertex 2^-44 from a segment of a 7-degree angle");
+    } else {
+      qk_poly_t *p = sh_poly(s, NULL);
+      qk_mesh_t *m = NULL;
+      qk_mesh_error_t err;
+      assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_ERR_LIMIT);
+      assert_null(m);
+      assert_non_null(strstr(err.message, "(the floor)"));
+      printf("# %s\n", err.message);
+      qk_poly_free(p);
+    }
+    free(s);
+  }
 }
 
 /* Near-coincident and near-collinear vertices: 1 ulp apart, a mesh that passes or a
