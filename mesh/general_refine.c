@@ -4,9 +4,13 @@
  * points of their input segment (concentric shells next to an input vertex); then a bad
  * triangle (smallest angle below the bound, or an edge above the size bound) gets its
  * circumcentre, unless that point is hidden behind a subsegment or would encroach one, in
- * which case those subsegments are split instead. Skinny triangles whose shortest edge
- * joins two points at equal distance on two segments meeting at an input angle below 60
- * degrees are left alone (Shewchuk's rule; counted as exempt). docs/mesh.md has the proof.
+ * which case those subsegments are split instead. Next to an input angle phi below 60
+ * degrees (docs/mesh.md, "Small input angles", which has the proofs): a skinny triangle
+ * whose shortest edge joins two points at equal distance on its two segments, lying in
+ * their wedge, is left alone (exempt) when its smallest angle is at least
+ * g(phi) = arctan(sin phi / (2.02 - cos phi)), and split otherwise; a piece touching the
+ * apex is never split below the floor (2^-48 of its segment), a triangle that would need it
+ * is rejected, and a mesh still holding a bad triangle at the end is refused.
  */
 #include "mesh/general_mesh.h"
 #include "mesh/expansion.h"
@@ -48,7 +52,8 @@ int qk__gm_split_param(const qk__gm_t *g, uint32_t s, uint64_t lo, uint64_t hi, 
   return 1;
 }
 
-/* The floor next to a small input angle (docs/mesh.md, "Small input angles: the floor"): a
+/* The floor next to a small input angle (docs/mesh.md, "The refinement" and "Small input
+ * angles"): a
  * piece of segment s that touches the apex of an input angle below 60 degrees and spans
  * less than 2^-48 of s (2^14 parameter steps of 2^-62) is never split, so every vertex on
  * such a segment stays at least 2^-50 of its length from the apex: the descent towards an
@@ -137,15 +142,15 @@ int qk__gm_exempt(const qk__gm_t *g, const uint32_t *tv) {
       if (!(fabs(r1 - r2) <= 1e-3 * fmax(r1, r2))) return 0;
       /* The triangle faces the input angle: its third corner lies in the closed wedge
        * (exact orientations; p and q lie on its sides). */
-      const double *Z0 = &c->xy[2 * tv[i]], U[2] = {P->vx[o1], P->vy[o1]},
+      const double *Z = &c->xy[2 * tv[i]], U[2] = {P->vx[o1], P->vy[o1]},
                    W[2] = {P->vx[o2], P->vy[o2]};
       int turn = qk__orient2d(ap, U, W);
-      if (qk__orient2d(ap, U, Z0) * turn < 0 || qk__orient2d(ap, Z0, W) * turn < 0) return 0;
+      if (qk__orient2d(ap, U, Z) * turn < 0 || qk__orient2d(ap, Z, W) * turn < 0) return 0;
       /* The smallest angle, at z opposite the shortest edge, must be at least
        * g(phi) = arctan(sin phi / (2.02 - cos phi)) (docs/mesh.md, "Small input angles"):
        * tan = X / Y at z against C / (2.02 N - D), N = |u| |w|, with a relative margin of
        * 1e-6 for the rounding of both (the tests check the bound exactly). */
-      const double *Z = &c->xy[2 * tv[i]], *Pp = &c->xy[2 * p], *Pq = &c->xy[2 * q];
+      const double *Pp = &c->xy[2 * p], *Pq = &c->xy[2 * q];
       double ax = Pp[0] - Z[0], ay = Pp[1] - Z[1], bx = Pq[0] - Z[0], by = Pq[1] - Z[1];
       double X = fabs(ax * by - ay * bx), Y = ax * bx + ay * by;
       if (Y <= 0) return 1;
@@ -462,7 +467,7 @@ qk_status_t qk__gm_refine(qk__gm_t *g) {
   if (st == QK_ERR_NOMEM) return qk__mesh_fail(g->err, st, 0, "out of memory");
   if (st) return st;
   /* A triangle rejected at the floor and still bad: refuse rather than return a mesh that
-   * breaks the bound (docs/mesh.md, "Small input angles: the floor"). */
+   * breaks the bound (docs/mesh.md, "The refinement": the floor). */
   for (uint32_t t = 0; rejected && t < c->nt; t++) {
     if (!qk__gm_is_bad(g, t)) continue;
     const double *q = &c->xy[2 * c->v[3 * t]];
