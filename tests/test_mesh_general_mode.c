@@ -8,8 +8,9 @@
  *  - every output segment lies exactly on its input segment, and the output segments of
  *    an input segment chain from one end to the other (covered exactly);
  *  - every angle is at least the bound (exactly, against a rational just below tan of the
- *    bound less 1e-6 degrees) and at most 180 - 2 bound, except in triangles with two
- *    vertices on two input segments that meet at an input angle below 60 degrees;
+ *    bound less 1e-6 degrees) and at most 180 - 2 bound, except in triangles facing an
+ *    input angle phi below 60 degrees, where every angle under the bound is at least
+ *    g(phi) = arctan(sin phi / (2.02 - cos phi)) (the exact checker of tests/support);
  *  - the triangle areas sum exactly to the domain's area (shoelace of its rings, holes
  *    wound clockwise).
  * Inputs: squares with holes (rotated, real coordinates on a 2^-20 grid); an L-shape with
@@ -18,7 +19,9 @@
  * ulp: a mesh that passes, or a refusal naming the place; 2^-24 apart: a mesh); a 2^-20
  * feature next to a 2^20 square; size control (max_size, size_fn); markers, regions and
  * output segments; random doubles beyond the precision budget (refused, the segment named);
- * crossing segments, vertex on a segment and duplicates (refused, both named); the
+ * crossing segments, vertex on a segment and duplicates (refused, both named); adversarial
+ * small angles (fans 1-5 degrees apart, tiny angles beside short segments or each other)
+ * and the floor's refusal; the
  * automatic mode choice; min_angle_deg 30; allocation failure at every N (QK_ERR_NOMEM,
  * nothing leaked).
  */
