@@ -41,7 +41,7 @@ typedef struct gc {
   uint32_t *inc;
   size_t *on0; /* mesh vertex v lies on the segments on[on0[v] .. on0[v+1]) */
   uint32_t *on;
-  double phi_ratio, phi_deg; /* the best angle / f(phi) of a corner below its bound */
+  double phi_ratio, phi_deg; /* the best angle / g(phi) of a corner below its bound */
 } gc_t;
 
 static int fail(gc_t *c, const char *fmt, ...) {
