@@ -4,9 +4,13 @@
  * points of their input segment (concentric shells next to an input vertex); then a bad
  * triangle (smallest angle below the bound, or an edge above the size bound) gets its
  * circumcentre, unless that point is hidden behind a subsegment or would encroach one, in
- * which case those subsegments are split instead. Skinny triangles whose shortest edge
- * joins two points at equal distance on two segments meeting at an input angle below 60
- * degrees are left alone (Shewchuk's rule; counted as exempt). docs/mesh.md has the proof.
+ * which case those subsegments are split instead. Next to an input angle phi below 60
+ * degrees (docs/mesh.md, "Small input angles", which has the proofs): a skinny triangle
+ * whose shortest edge joins two points at equal distance on its two segments, lying in
+ * their wedge, is left alone (exempt) when its smallest angle is at least
+ * g(phi) = arctan(sin phi / (2.02 - cos phi)), and split otherwise; a piece touching the
+ * apex is never split below the floor (2^-48 of its segment), a triangle that would need it
+ * is rejected, and a mesh still holding a bad triangle at the end is refused.
  */
 #include "mesh/general_mesh.h"
 #include "mesh/expansion.h"
@@ -15,6 +19,7 @@
 #include <string.h>
 
 int qk__gm_split_param(const qk__gm_t *g, uint32_t s, uint64_t lo, uint64_t hi, uint64_t *k);
+static int protected_piece(const qk__gm_t *g, uint32_t s, uint64_t lo, uint64_t hi);
 
 int qk__gm_split_param(const qk__gm_t *g, uint32_t s, uint64_t lo, uint64_t hi, uint64_t *k) {
   const qk_poly_t *P = g->P;
@@ -22,7 +27,7 @@ int qk__gm_split_param(const qk__gm_t *g, uint32_t s, uint64_t lo, uint64_t hi, 
   const double A[2] = {P->vx[u], P->vy[u]}, B[2] = {P->vx[w], P->vy[w]};
   int bud = qk__seg_budget(A, B);
   if (bud > 62) bud = 62;
-  if (bud < 1 || hi - lo < 2) return 0;
+  if (bud < 1 || hi - lo < 2 || protected_piece(g, s, lo, hi)) return 0;
   uint64_t q = (uint64_t)1 << (62 - bud), target = lo + (hi - lo) / 2;
   int shell = lo == 0 ? g->vsmall[u] : hi == QK__GM_ONE ? g->vsmall[w] : 0;
   if ((lo == 0) != (hi == QK__GM_ONE) && shell) {
@@ -47,13 +52,33 @@ int qk__gm_split_param(const qk__gm_t *g, uint32_t s, uint64_t lo, uint64_t hi, 
   return 1;
 }
 
-qk_status_t qk__gm_split(qk__gm_t *g, uint32_t a, uint32_t b, uint32_t s) {
+/* The floor next to a small input angle (docs/mesh.md, "The refinement" and "Small input
+ * angles"): a
+ * piece of segment s that touches the apex of an input angle below 60 degrees and spans
+ * less than 2^-48 of s (2^14 parameter steps of 2^-62) is never split, so every vertex on
+ * such a segment stays at least 2^-50 of its length from the apex: the descent towards an
+ * apex stops after at most 48 halvings, and the termination proof (docs/mesh.md, "Small
+ * input angles") uses that distance. */
+#define GM_FLOOR_STEPS ((uint64_t)1 << 14)
+
+static int protected_piece(const qk__gm_t *g, uint32_t s, uint64_t lo, uint64_t hi) {
+  const qk_poly_t *P = g->P;
+  int at_u = lo == 0 && g->vsmall[P->seg[2 * s]],
+      at_w = hi == QK__GM_ONE && g->vsmall[P->seg[2 * s + 1]];
+  return (at_u || at_w) && hi - lo < GM_FLOOR_STEPS;
+}
+
+/* qk__gm_split, telling whether it split: *done is 0 when the piece a-b is protected by the
+ * floor (nothing inserted), 1 otherwise. */
+static qk_status_t split_piece(qk__gm_t *g, uint32_t a, uint32_t b, uint32_t s, int *done) {
   const qk_poly_t *P = g->P;
   uint64_t lo = qk__gm_param(g, a, s), hi = qk__gm_param(g, b, s), k;
   if (lo > hi) {
     uint64_t t = lo;
     lo = hi, hi = t;
   }
+  *done = !protected_piece(g, s, lo, hi);
+  if (!*done) return QK_OK;
   uint32_t u = P->seg[2 * s], w = P->seg[2 * s + 1];
   const double A[2] = {P->vx[u], P->vy[u]}, B[2] = {P->vx[w], P->vy[w]};
   if (!qk__gm_split_param(g, s, lo, hi, &k)) {
@@ -84,6 +109,11 @@ qk_status_t qk__gm_split(qk__gm_t *g, uint32_t a, uint32_t b, uint32_t s) {
   return QK_OK;
 }
 
+qk_status_t qk__gm_split(qk__gm_t *g, uint32_t a, uint32_t b, uint32_t s) {
+  int done;
+  return split_piece(g, a, b, s, &done);
+}
+
 static double d2(const double *p, const double *q) {
   double x = p[0] - q[0], y = p[1] - q[1];
   return x * x + y * y;
@@ -105,11 +135,27 @@ int qk__gm_exempt(const qk__gm_t *g, const uint32_t *tv) {
       uint32_t o1 = P->seg[2 * s1 + 1 - x], o2 = P->seg[2 * s2 + 1 - y];
       double ux = P->vx[o1] - P->vx[apex], uy = P->vy[o1] - P->vy[apex];
       double wx = P->vx[o2] - P->vx[apex], wy = P->vy[o2] - P->vy[apex];
-      double ang = atan2(fabs(ux * wy - uy * wx), ux * wx + uy * wy);
-      if (!(ang < 1.0471975511965976)) return 0; /* 60 degrees */
+      double C = fabs(ux * wy - uy * wx), D = ux * wx + uy * wy;
+      if (!(atan2(C, D) < 1.0471975511965976)) return 0; /* 60 degrees */
       const double ap[2] = {P->vx[apex], P->vy[apex]};
       double r1 = sqrt(d2(&c->xy[2 * p], ap)), r2 = sqrt(d2(&c->xy[2 * q], ap));
-      return fabs(r1 - r2) <= 1e-3 * fmax(r1, r2);
+      if (!(fabs(r1 - r2) <= 1e-3 * fmax(r1, r2))) return 0;
+      /* The triangle faces the input angle: its third corner lies in the closed wedge
+       * (exact orientations; p and q lie on its sides). */
+      const double *Z = &c->xy[2 * tv[i]], U[2] = {P->vx[o1], P->vy[o1]},
+                   W[2] = {P->vx[o2], P->vy[o2]};
+      int turn = qk__orient2d(ap, U, W);
+      if (qk__orient2d(ap, U, Z) * turn < 0 || qk__orient2d(ap, Z, W) * turn < 0) return 0;
+      /* The smallest angle, at z opposite the shortest edge, must be at least
+       * g(phi) = arctan(sin phi / (2.02 - cos phi)) (docs/mesh.md, "Small input angles"):
+       * tan = X / Y at z against C / (2.02 N - D), N = |u| |w|, with a relative margin of
+       * 1e-6 for the rounding of both (the tests check the bound exactly). */
+      const double *Pp = &c->xy[2 * p], *Pq = &c->xy[2 * q];
+      double ax = Pp[0] - Z[0], ay = Pp[1] - Z[1], bx = Pq[0] - Z[0], by = Pq[1] - Z[1];
+      double X = fabs(ax * by - ay * bx), Y = ax * bx + ay * by;
+      if (Y <= 0) return 1;
+      double N = sqrt((ux * ux + uy * uy) * (wx * wx + wy * wy));
+      return X * (2.02 * N - D) >= Y * C * (1 + 1e-6);
     }
   return 0;
 }
@@ -294,8 +340,9 @@ static int constrained_at(const qk__gm_t *g, uint32_t t, uint32_t x, uint32_t *a
   return 0;
 }
 
-/* Split a bad triangle: its circumcentre, or the subsegments hiding or encroached by it. */
-static qk_status_t split_triangle(qk__gm_t *g, uint32_t t) {
+/* Split a bad triangle: its circumcentre, or the subsegments hiding or encroached by it.
+ * *rejected counts the triangles left because only protected pieces stood in the way. */
+static qk_status_t split_triangle(qk__gm_t *g, uint32_t t, size_t *rejected) {
   qk__cdt_t *c = &g->cdt;
   const uint32_t *tv = &c->v[3 * t];
   const double *A = &c->xy[2 * tv[0]], *B = &c->xy[2 * tv[1]], *C = &c->xy[2 * tv[2]];
@@ -338,10 +385,14 @@ static qk_status_t split_triangle(qk__gm_t *g, uint32_t t) {
       return qk__mesh_fail(g->err, QK_ERR_LIMIT, 0, "cannot split the triangle at (%.17g, %.17g)",
                            W[0], W[1]);
     }
-    qk_status_t st = qk__gm_split(g, a, b, s);
+    int done;
+    qk_status_t st = split_piece(g, a, b, s, &done);
     if (!st) st = check_dirty(g);
-    if (!st && push_bad(g, t)) st = QK_ERR_NOMEM;
-    if (!st) g->bad[g->nbad - 1] = self;
+    /* Behind a protected piece: the triangle is rejected (left as it is; the final check
+     * refuses the mesh if it is still below the bound). */
+    if (!st && done && push_bad(g, t)) st = QK_ERR_NOMEM;
+    if (!st && done) g->bad[g->nbad - 1] = self;
+    if (!done) ++*rejected;
     return st;
   }
   if (clamped || where == QK__CDT_VERT)
@@ -354,13 +405,18 @@ static qk_status_t split_triangle(qk__gm_t *g, uint32_t t) {
   if (f > 0) {
     /* Split those instead (the queue's front part is still empty here: the refinement
      * handles encroached subsegments before triangles), then retry the triangle. */
+    int any = 0;
     while (g->nenc > before) {
       g->nenc--;
       uint32_t a = g->enc[3 * g->nenc], b = g->enc[3 * g->nenc + 1], s = g->enc[3 * g->nenc + 2];
-      qk_status_t st = qk__gm_split(g, a, b, s);
+      int done;
+      qk_status_t st = split_piece(g, a, b, s, &done);
       if (!st) st = check_dirty(g);
       if (st) return st;
+      any |= done;
     }
+    /* Every encroached piece protected: the triangle is rejected (as above). */
+    if (!any) return ++*rejected, QK_OK;
     if (push_bad(g, t)) return QK_ERR_NOMEM;
     g->bad[g->nbad - 1] = self;
     return QK_OK;
@@ -378,6 +434,7 @@ qk_status_t qk__gm_refine(qk__gm_t *g) {
   for (uint32_t t = 0; t < c->nt; t++)
     if (check(g, t)) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   qk_status_t st = QK_OK;
+  size_t rejected = 0;
   for (;;) {
     if (g->insertions > g->work_cap) {
       double x = 0, y = 0;
@@ -397,15 +454,28 @@ qk_status_t qk__gm_refine(qk__gm_t *g) {
       g->nenc--;
       uint32_t a = g->enc[3 * g->nenc], b = g->enc[3 * g->nenc + 1], s = g->enc[3 * g->nenc + 2];
       if (!still_encroached(g, a, b)) continue;
-      if ((st = qk__gm_split(g, a, b, s)) || (st = check_dirty(g))) break;
+      int done;
+      if ((st = split_piece(g, a, b, s, &done)) || (st = check_dirty(g))) break;
       continue;
     }
     if (g->bad_head == g->nbad) break;
     qk__gm_tq_t q = g->bad[g->bad_head++];
     const uint32_t *tv = &c->v[3 * q.t];
     if (tv[0] != q.a || tv[1] != q.b || tv[2] != q.c || !qk__gm_is_bad(g, q.t)) continue;
-    if ((st = split_triangle(g, q.t))) break;
+    if ((st = split_triangle(g, q.t, &rejected))) break;
   }
   if (st == QK_ERR_NOMEM) return qk__mesh_fail(g->err, st, 0, "out of memory");
-  return st;
+  if (st) return st;
+  /* A triangle rejected at the floor and still bad: refuse rather than return a mesh that
+   * breaks the bound (docs/mesh.md, "The refinement": the floor). */
+  for (uint32_t t = 0; rejected && t < c->nt; t++) {
+    if (!qk__gm_is_bad(g, t)) continue;
+    const double *q = &c->xy[2 * c->v[3 * t]];
+    return qk__mesh_fail(g->err, QK_ERR_LIMIT, 0,
+                         "the triangle at (%.17g, %.17g) stays below the angle bound: improving "
+                         "it would split a segment closer than 2^-50 of its length to the apex "
+                         "of a small input angle (the floor)",
+                         q[0], q[1]);
+  }
+  return QK_OK;
 }

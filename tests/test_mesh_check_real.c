@@ -202,10 +202,17 @@ static void test_check_angles(void **state) {
   const uint32_t across[] = {0, 4, 5}; /* from -7 to 3.6 degrees: across segment 0-1 */
   mcr_mesh_t vm = {v_xy, 8, across, 1, NULL, NULL, 0};
   expect(&vin, &vm, &o, "at vertex 0 ", NULL);
-  const uint32_t inside[] = {0, 6, 5}; /* 1.8 to 3.6 degrees: inside the wedge, exempt */
+  /* 1.8 to 3.6 degrees: inside the wedge, but 1.8 degrees is below the bound there,
+   * g(7.1) = arctan(sin 7.1 / (2.02 - cos 7.1)) = 6.9 degrees. */
+  const uint32_t inside[] = {0, 6, 5};
   vm.tri = inside;
   char msg[512];
   if (!mcr_available()) skip();
+  assert_int_equal(mcr_check_general(&vin, &vm, &o, &r, msg, sizeof msg), 1);
+  assert_non_null(strstr(msg, "below the bound arctan"));
+  /* 0 to 7.1 degrees (the whole input angle, above the bound): exempt. */
+  const uint32_t whole[] = {0, 1, 2};
+  vm.tri = whole;
   assert_int_equal(mcr_check_general(&vin, &vm, &o, &r, msg, sizeof msg), 1);
   assert_null(strstr(msg, "degrees (below")); /* it fails later, on conformity */
   /* The same corner between segments towards (8,0) and (4,8), 63 degrees apart. */

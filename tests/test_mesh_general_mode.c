@@ -8,8 +8,9 @@
  *  - every output segment lies exactly on its input segment, and the output segments of
  *    an input segment chain from one end to the other (covered exactly);
  *  - every angle is at least the bound (exactly, against a rational just below tan of the
- *    bound less 1e-6 degrees) and at most 180 - 2 bound, except in triangles with two
- *    vertices on two input segments that meet at an input angle below 60 degrees;
+ *    bound less 1e-6 degrees) and at most 180 - 2 bound, except in triangles facing an
+ *    input angle phi below 60 degrees, where every angle under the bound is at least
+ *    g(phi) = arctan(sin phi / (2.02 - cos phi)) (the exact checker of tests/support);
  *  - the triangle areas sum exactly to the domain's area (shoelace of its rings, holes
  *    wound clockwise).
  * Inputs: squares with holes (rotated, real coordinates on a 2^-20 grid); an L-shape with
@@ -18,7 +19,9 @@
  * ulp: a mesh that passes, or a refusal naming the place; 2^-24 apart: a mesh); a 2^-20
  * feature next to a 2^20 square; size control (max_size, size_fn); markers, regions and
  * output segments; random doubles beyond the precision budget (refused, the segment named);
- * crossing segments, vertex on a segment and duplicates (refused, both named); the
+ * crossing segments, vertex on a segment and duplicates (refused, both named); adversarial
+ * small angles (fans 1-5 degrees apart, tiny angles beside short segments or each other)
+ * and the floor's refusal; the
  * automatic mode choice; min_angle_deg 30; allocation failure at every N (QK_ERR_NOMEM,
  * nothing leaked).
  */
@@ -28,6 +31,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "mesh_check_real.h"
 #include "qk_test.h"
 
 #ifndef M_PI
@@ -210,6 +214,30 @@ static int by_param(const void *x, const void *y) {
   return (a > b) - (a < b);
 }
 
+/* The independent exact checker (tests/support/mesh_check_general.c) on the same mesh:
+ * beyond the checks below, every angle under the bound lies in a triangle facing an input
+ * angle phi < 60 degrees and is at least g(phi) = arctan(sin phi / (2.02 - cos phi)),
+ * exactly (docs/mesh.md, "Small input angles"). */
+static void check_small_angles(const shape_t *s, const qk_mesh_t *m, double bound) {
+  size_t nv, nt, no;
+  const double *xy = qk_mesh_vertices(m, &nv);
+  const uint32_t *tri = qk_mesh_triangles(m, &nt);
+  assert_int_equal(qk_mesh_segments(m, NULL, NULL, NULL, 0, &no), QK_OK);
+  uint32_t *ab = malloc((2 * no + 2) * sizeof *ab), *sg = malloc((no + 1) * sizeof *sg);
+  assert_true(ab && sg);
+  assert_int_equal(qk_mesh_segments(m, ab, sg, NULL, no, &no), QK_OK);
+  mcr_input_t ci = {s->xy, s->nv, s->seg, s->ns};
+  mcr_mesh_t cm = {xy, nv, tri, nt, ab, sg, no};
+  mcr_opts_t co;
+  memset(&co, 0, sizeof co);
+  co.min_deg = bound, co.exempt_small = 2, co.max_deg = 180 - 2 * bound;
+  mcr_report_t rep;
+  char msg[512];
+  if (mcr_check_general(&ci, &cm, &co, &rep, msg, sizeof msg) == 1)
+    fail_msg("the exact checker: %s", msg);
+  free(ab), free(sg);
+}
+
 typedef struct check_out {
   size_t nt, exempt;
   double min_angle;
@@ -275,6 +303,7 @@ static check_out_t check_general(const shape_t *s, const qk_mesh_t *m, double bo
     fail_msg("triangle areas sum to %.17g, the domain's area is %.17g", mpq_get_d(area) / 2,
              mpq_get_d(want) / 2);
   mpq_clears(area, want, NULL);
+  check_small_angles(s, m, bound);
   /* Conforming: no directed edge twice; an edge with one side is an output segment. */
   dedge_t *e = malloc((3 * nt + 1) * sizeof *e);
   assert_non_null(e);
@@ -484,6 +513,91 @@ static void test_mesh_general_mode_random(void **state) {
            c.exempt);
     qk_mesh_free(m);
     qk_poly_free(p);
+    free(s);
+  }
+}
+
+/* Adversarial small angles (docs/mesh.md, "Small input angles"): every one must mesh without
+ * the work cap or the floor's refusal, every angle under 20 degrees facing an input angle
+ * phi and at least g(phi) (the exact checker):
+ *  - fans: many segments from one vertex, 1 to 5 degrees apart (seeded), inside a square;
+ *  - a 1-degree angle whose one side is a short segment (2^-8 against 6);
+ *  - two small angles (2 and 3 degrees) at apexes 2^-10 apart;
+ *  - a 0.5-degree spike of the boundary next to a short edge;
+ *  - an isolated vertex near one side of a 7-degree angle: 2^-44 from it, a mesh; 2^-56,
+ *    a refusal by the floor (QK_ERR_LIMIT naming the place). */
+static void test_mesh_general_mode_small_fans(void **state) {
+  (void)state;
+  uint64_t seed = qkt_seed(7);
+  printf("# seed %llu\n", (unsigned long long)seed);
+  qkt_rng_t r;
+  qkt_rng_seed(&r, seed);
+  qk_mesh_options_t o = general_opts();
+  double sq[8] = {-8, -8, 8, -8, 8, 8, -8, 8};
+  for (int k = 0; k < 3; k++) {
+    shape_t *s = calloc(1, sizeof *s);
+    sh_ring(s, sq, 4);
+    uint32_t c = sh_vertex(s, 0, 0);
+    double a = qkt_rng_range(&r, 0, 2 * M_PI);
+    int n = 6 + (int)qkt_rng_below(&r, 8);
+    for (int i = 0; i < n; i++) {
+      double rad = qkt_rng_range(&r, 3, 6);
+      sh_seg(s, c, sh_vertex(s, grid(rad * cos(a), 16), grid(rad * sin(a), 16)));
+      a += qkt_rng_range(&r, 1, 5) * M_PI / 180;
+    }
+    char what[64];
+    snprintf(what, sizeof what, "fan of %d segments 1-5 degrees apart", n);
+    run(s, &o, 20, what);
+    free(s);
+  }
+  /* A 1-degree angle, one side 2^-8 long. */
+  shape_t *s = calloc(1, sizeof *s);
+  sh_ring(s, sq, 4);
+  uint32_t A = sh_vertex(s, 1, 1);
+  double t1 = M_PI / 180;
+  sh_seg(s, A, sh_vertex(s, 7, 1));
+  sh_seg(s, A, sh_vertex(s, grid(1 + 0x1p-8 * cos(t1), 30), grid(1 + 0x1p-8 * sin(t1), 30)));
+  run(s, &o, 20, "1-degree angle next to a 2^-8 segment");
+  free(s);
+  /* Two small angles at apexes 2^-10 apart. */
+  s = calloc(1, sizeof *s);
+  sh_ring(s, sq, 4);
+  uint32_t A1 = sh_vertex(s, 0, 0), A2 = sh_vertex(s, 0, -0x1p-10);
+  sh_seg(s, A1, sh_vertex(s, 6, 0));
+  sh_seg(s, A1, sh_vertex(s, 6, grid(6 * tan(2 * t1), 20)));
+  sh_seg(s, A2, sh_vertex(s, 6, -0.125));
+  sh_seg(s, A2, sh_vertex(s, 6, grid(-0.125 - 6 * tan(3 * t1), 20)));
+  run(s, &o, 20, "2 and 3 degree angles 2^-10 apart");
+  free(s);
+  /* A 0.5-degree spike of the boundary, one side of it a 2^-6 edge. */
+  s = calloc(1, sizeof *s);
+  double ring[10] = {0, 0, 0x1p-6, 0, 6, 0, 6, 1, 3, grid(3 * tan(0.5 * t1), 30)};
+  sh_ring(s, ring, 5);
+  run(s, &o, 20, "0.5-degree spike next to a 2^-6 edge");
+  free(s);
+  /* The floor: an isolated vertex inside a 7.1-degree angle, 2^-44 from one of its
+   * segments, meshes; 2^-56 from it, the mesh would need pieces of that segment shorter
+   * than the floor (2^-48 of it) at the apex, and the input is refused, naming it. */
+  for (int e = 40; e <= 52; e += 12) {
+    s = calloc(1, sizeof *s);
+    double box[8] = {-1, -1, 2, -1, 2, 2, -1, 2};
+    sh_ring(s, box, 4);
+    uint32_t a0 = sh_vertex(s, 0, 0);
+    sh_seg(s, a0, sh_vertex(s, 1, 0));
+    sh_seg(s, a0, sh_vertex(s, 1, 0.125));
+    sh_vertex(s, ldexp(1, -e), ldexp(1, -e - 4));
+    if (e == 40) {
+      run(s, &o, 20, "vertex 2^-44 from a segment of a 7-degree angle");
+    } else {
+      qk_poly_t *p = sh_poly(s, NULL);
+      qk_mesh_t *m = NULL;
+      qk_mesh_error_t err;
+      assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_ERR_LIMIT);
+      assert_null(m);
+      assert_non_null(strstr(err.message, "(the floor)"));
+      printf("# %s\n", err.message);
+      qk_poly_free(p);
+    }
     free(s);
   }
 }
@@ -893,6 +1007,7 @@ int main(void) {
       cmocka_unit_test(test_mesh_general_mode_square_holes),
       cmocka_unit_test(test_mesh_general_mode_small_angle),
       cmocka_unit_test(test_mesh_general_mode_random),
+      cmocka_unit_test(test_mesh_general_mode_small_fans),
       cmocka_unit_test(test_mesh_general_mode_near),
       cmocka_unit_test(test_mesh_general_mode_scales),
       cmocka_unit_test(test_mesh_general_mode_size),

@@ -41,6 +41,7 @@ typedef struct gc {
   uint32_t *inc;
   size_t *on0; /* mesh vertex v lies on the segments on[on0[v] .. on0[v+1]) */
   uint32_t *on;
+  double phi_ratio, phi_deg; /* the best angle / g(phi) of a corner below its bound */
 } gc_t;
 
 static int fail(gc_t *c, const char *fmt, ...) {
@@ -116,59 +117,94 @@ static int below60(gc_t *c, const double *v, const double *pu, const double *pw)
   return mpq_cmp(q[4], q[5]) > 0;
 }
 
-/* The exemption rule for the corner at mesh vertex a of a counter-clockwise triangle
- * (a, b, d): a is an input vertex, and two input segments at a, at less than 60 degrees
- * from one to the other counter-clockwise, hold both triangle edges in their closed
- * wedge. */
-static int exempt(gc_t *c, uint32_t a, uint32_t b, uint32_t d) {
-  uint32_t iv = c->m2in[a];
-  if (iv == UINT32_MAX) return 0;
-  const double *pv = &c->m->xy[2 * a], *pb = &c->m->xy[2 * b], *pd = &c->m->xy[2 * d];
-  for (size_t i = c->inc0[iv]; i < c->inc0[iv + 1]; i++)
-    for (size_t j = c->inc0[iv]; j < c->inc0[iv + 1]; j++) {
-      if (i == j) continue;
-      uint32_t si = c->inc[i], sj = c->inc[j];
-      uint32_t oi = c->in->seg[2 * si] == iv ? c->in->seg[2 * si + 1] : c->in->seg[2 * si];
-      uint32_t oj = c->in->seg[2 * sj] == iv ? c->in->seg[2 * sj + 1] : c->in->seg[2 * sj];
-      const double *pu = &c->in->xy[2 * oi], *pw = &c->in->xy[2 * oj];
-      if (!below60(c, pv, pu, pw)) continue;
-      if (orient(c, pv, pu, pb) >= 0 && orient(c, pv, pb, pw) >= 0 && orient(c, pv, pu, pd) >= 0 &&
-          orient(c, pv, pd, pw) >= 0)
-        return 1;
+/* The bound inside an input angle phi < 60 degrees (docs/mesh.md, "Small input angles"):
+ * is the corner angle alpha at pa, between pb and pd, at least
+ * g(phi) = arctan(sin phi / (2.02 - cos phi)), phi the angle at pv from pu to pw? Exact.
+ * With X = |cross| and Y = dot at the corner, C = |cross| and D = dot of the input angle
+ * and N = |u| |w|: tan g = C / (2.02 N - D) (positive: D <= N), so alpha >= g iff Y <= 0,
+ * or X (2.02 N - D) >= Y C, i.e. 2.02 X N >= Y C + X D: true when the right side is <= 0,
+ * else compare squares, (101/50)^2 X^2 |u|^2 |w|^2 >= (Y C + X D)^2. */
+static int above_phi_bound(gc_t *c, const double *pa, const double *pb, const double *pd,
+                           const double *pv, const double *pu, const double *pw) {
+  mpq_t *q = c->q;
+  mpq_t X, Y, C, D, UW;
+  mpq_inits(X, Y, C, D, UW, NULL);
+  qdiff(q[0], pb[0], pa[0], q[7]), qdiff(q[1], pb[1], pa[1], q[7]);
+  qdiff(q[2], pd[0], pa[0], q[7]), qdiff(q[3], pd[1], pa[1], q[7]);
+  mpq_mul(X, q[0], q[3]), mpq_mul(q[4], q[1], q[2]), mpq_sub(X, X, q[4]), mpq_abs(X, X);
+  mpq_mul(Y, q[0], q[2]), mpq_mul(q[4], q[1], q[3]), mpq_add(Y, Y, q[4]);
+  int ok = 1;
+  if (mpq_sgn(Y) > 0) {
+    qdiff(q[0], pu[0], pv[0], q[7]), qdiff(q[1], pu[1], pv[1], q[7]);
+    qdiff(q[2], pw[0], pv[0], q[7]), qdiff(q[3], pw[1], pv[1], q[7]);
+    mpq_mul(C, q[0], q[3]), mpq_mul(q[4], q[1], q[2]), mpq_sub(C, C, q[4]), mpq_abs(C, C);
+    mpq_mul(D, q[0], q[2]), mpq_mul(q[4], q[1], q[3]), mpq_add(D, D, q[4]);
+    mpq_mul(q[4], q[0], q[0]), mpq_mul(q[5], q[1], q[1]), mpq_add(q[4], q[4], q[5]);
+    mpq_mul(q[5], q[2], q[2]), mpq_mul(q[6], q[3], q[3]), mpq_add(q[5], q[5], q[6]);
+    mpq_mul(UW, q[4], q[5]);
+    mpq_mul(q[4], Y, C), mpq_mul(q[5], X, D), mpq_add(q[4], q[4], q[5]); /* Y C + X D */
+    if (mpq_sgn(q[4]) > 0) {
+      mpq_mul(q[4], q[4], q[4]);
+      mpq_mul(q[5], X, X), mpq_mul(q[5], q[5], UW);
+      mpq_set_ui(q[6], 10201, 2500), mpq_mul(q[5], q[5], q[6]);
+      ok = mpq_cmp(q[5], q[4]) >= 0;
     }
-  return 0;
+  }
+  if (!ok) {
+    double phi = angle_deg(pv, pu, pw), al = angle_deg(pa, pb, pd);
+    double f = atan(sin(phi * PI / 180) / (2.02 - cos(phi * PI / 180))) * 180 / PI;
+    if (al / f > c->phi_ratio) c->phi_ratio = al / f, c->phi_deg = phi;
+  }
+  mpq_clears(X, Y, C, D, UW, NULL);
+  return ok;
 }
 
-/* The wedge rule (exempt_small == 2): the small corner a of triangle (a, b, d) lies, with
- * the whole triangle, in the closed wedge at an input vertex v between two input segments
- * meeting there at less than 60 degrees, and b and d lie on those two segments (one on
- * each): the triangle spans the input angle (Shewchuk's rule leaves such triangles, whose
- * shortest edge crosses a small input angle, alone). Uses the vertex-to-segment lists. */
-static int exempt_wedge(gc_t *c, uint32_t a, uint32_t b, uint32_t d) {
+/* The small-angle rule for the corner at mesh vertex a of the counter-clockwise triangle
+ * (a, b, d) whose angle is below the bound. The triangle faces an input angle when, for
+ * two input segments s1, s2 meeting at an input vertex v at phi < 60 degrees, the whole
+ * triangle lies in their closed wedge and two of its vertices lie one on s1 and one on s2
+ * (v itself lies on both: a triangle with a corner at v faces the angle). Then the corner
+ * must be at least g(phi) (above_phi_bound). Returns 1 when some faced input angle allows
+ * the corner (*at_apex: the corner is v itself), -1 when the triangle faces one but the
+ * corner is below g(phi) for every one it faces, 0 when it faces none. apex_only (rule 1
+ * alone): only corners at v count. Uses the vertex-to-segment lists (on0 / on). */
+static int small_angle_rule(gc_t *c, uint32_t a, uint32_t b, uint32_t d, int apex_only,
+                            int *at_apex) {
   const mcr_input_t *in = c->in;
+  const uint32_t tv[3] = {a, b, d};
   const double *p[3] = {&c->m->xy[2 * a], &c->m->xy[2 * b], &c->m->xy[2 * d]};
-  for (size_t i = c->on0[b]; i < c->on0[b + 1]; i++)
-    for (size_t j = c->on0[d]; j < c->on0[d + 1]; j++) {
-      uint32_t s1 = c->on[i], s2 = c->on[j];
-      if (s1 == s2) continue;
-      for (int e1 = 0; e1 < 2; e1++)
-        for (int e2 = 0; e2 < 2; e2++) {
-          uint32_t v = in->seg[2 * s1 + e1];
-          if (v != in->seg[2 * s2 + e2]) continue;
-          const double *pv = &in->xy[2 * v], *pu = &in->xy[2 * in->seg[2 * s1 + 1 - e1]],
-                       *pw = &in->xy[2 * in->seg[2 * s2 + 1 - e2]];
-          if (!below60(c, pv, pu, pw)) {
-            const double *t = pu;
-            pu = pw, pw = t;
-            if (!below60(c, pv, pu, pw)) continue;
-          }
-          int inside = 1;
-          for (int k = 0; k < 3 && inside; k++)
-            inside = orient(c, pv, pu, p[k]) >= 0 && orient(c, pv, p[k], pw) >= 0;
-          if (inside) return 1;
+  int below = 0;
+  for (int x = 0; x < 3; x++)
+    for (int y = 0; y < 3; y++)
+      for (size_t i = c->on0[tv[x]]; i < c->on0[tv[x] + 1]; i++)
+        for (size_t j = c->on0[tv[y]]; j < c->on0[tv[y] + 1]; j++) {
+          uint32_t s1 = c->on[i], s2 = c->on[j];
+          if (s1 == s2) continue;
+          for (int e1 = 0; e1 < 2; e1++)
+            for (int e2 = 0; e2 < 2; e2++) {
+              uint32_t v = in->seg[2 * s1 + e1];
+              if (v != in->seg[2 * s2 + e2]) continue;
+              int apex = c->in2m[v] == a;
+              if (apex_only && !apex) continue;
+              const double *pv = &in->xy[2 * v], *pu = &in->xy[2 * in->seg[2 * s1 + 1 - e1]],
+                           *pw = &in->xy[2 * in->seg[2 * s2 + 1 - e2]];
+              if (!below60(c, pv, pu, pw)) {
+                const double *t = pu;
+                pu = pw, pw = t;
+                if (!below60(c, pv, pu, pw)) continue;
+              }
+              int inside = 1;
+              for (int k = 0; k < 3 && inside; k++)
+                inside = orient(c, pv, pu, p[k]) >= 0 && orient(c, pv, p[k], pw) >= 0;
+              if (!inside) continue;
+              if (above_phi_bound(c, p[0], p[1], p[2], pv, pu, pw)) {
+                *at_apex = apex;
+                return 1;
+              }
+              below = -1;
+            }
         }
-    }
-  return 0;
+  return below;
 }
 
 static int check_triangles(gc_t *c, mcr_report_t *rep) {
@@ -188,14 +224,24 @@ static int check_triangles(gc_t *c, mcr_report_t *rep) {
       if (deg < rep->min_angle_deg) rep->min_angle_deg = deg;
       if (deg > rep->max_angle_deg) rep->max_angle_deg = deg;
       if (isnan(c->cmin) || cot_side(c, c->cmin, pa, pb, pd) >= 0) continue;
-      if (c->o->exempt_small && exempt(c, a, b, d)) {
-        rep->exempt++, had_exempt = 1;
+      c->phi_ratio = 0, c->phi_deg = 0;
+      int at_apex = 0;
+      int e =
+          c->o->exempt_small ? small_angle_rule(c, a, b, d, c->o->exempt_small == 1, &at_apex) : 0;
+      if (e > 0) {
+        if (at_apex)
+          rep->exempt++;
+        else
+          rep->exempt_wedge++;
+        had_exempt = 1;
         continue;
       }
-      if (c->o->exempt_small == 2 && exempt_wedge(c, a, b, d)) {
-        rep->exempt_wedge++, had_exempt = 1;
-        continue;
-      }
+      if (e < 0)
+        return fail(c,
+                    "triangle %zu has an angle of %.9g degrees (below %g) at vertex %u "
+                    "(%.17g, %.17g), inside an input angle of %.9g degrees but below the bound "
+                    "arctan(sin phi / (2.02 - cos phi)) there (%.6f of it)",
+                    t, deg, c->o->min_deg, a, pa[0], pa[1], c->phi_deg, c->phi_ratio);
       return fail(c,
                   "triangle %zu has an angle of %.9g degrees (below %g) at vertex %u "
                   "(%.17g, %.17g) that no input angle below 60 degrees exempts",

@@ -79,14 +79,14 @@ typedef struct mcr_report {
  * Check, exactly: every input vertex is a mesh vertex with the same bits and no two mesh
  * vertices coincide; triangles are counter-clockwise; angle bounds as in opts (the
  * exemption: an angle below min_deg at an input vertex v, with both triangle edges at v
- * inside or along the wedge between two input segments meeting at v at less than 60
+ * inside or along the wedge between two input segments meeting at v at phi < 60
  * degrees, or with exempt_small == 2 the wedge rule: the triangle lies in such a wedge
- * with two of its vertices on its two segments); no directed edge twice and every edge without a
- * twin lies on an input segment; every input segment is the chain of mesh edges joining the mesh
- * vertices exactly on it, in order; every output segment is a mesh edge exactly on its input
- * segment; edge lengths; the kept area against the rings. rep (may be NULL) receives
- * the figures. Returns 0 when the mesh passes, 1 with a description in msg, 2 without
- * GMP.
+ * with two of its vertices on its two segments; either way the angle must still be at
+ * least g(phi) = arctan(sin phi / (2.02 - cos phi)), exactly); no directed edge twice and every
+ * edge without a twin lies on an input segment; every input segment is the chain of mesh edges
+ * joining the mesh vertices exactly on it, in order; every output segment is a mesh edge exactly on
+ * its input segment; edge lengths; the kept area against the rings. rep (may be NULL) receives the
+ * figures. Returns 0 when the mesh passes, 1 with a description in msg, 2 without GMP.
  */
 int mcr_check_general(const mcr_input_t *in, const mcr_mesh_t *m, const mcr_opts_t *opts,
                       mcr_report_t *rep, char *msg, size_t msg_size);
