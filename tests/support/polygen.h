@@ -36,8 +36,10 @@ void pg_free(pg_input_t *p);
  * (a chain's middle vertex one grid step off the line), near-coincident vertices (one
  * grid step apart), tiny features (2^-20 to 2^-10 wide) in a domain 2^20 wide, and full
  * precision doubles. Every coordinate is a multiple of a power of two (the grid) unless
- * PG_FULL is given, so the general mode's precision budget holds; with PG_FULL it may
- * not, and a refusal (QK_ERR_GEOMETRY) is an acceptable answer. The result is checked
+ * PG_FULL is given, so the general mode's precision budget usually holds; with PG_FULL it
+ * may not, nor with PG_SCALES (tiny features on a 2^-28 grid up to 2^22 from the origin
+ * leave only a few binary digits for split points), and a refusal (QK_ERR_GEOMETRY) is an
+ * acceptable answer there. The result is checked
  * exactly (GMP when available, else a filter that only accepts certain answers): no
  * two vertices coincide, no two segments meet except at a shared endpoint, no vertex lies
  * inside a segment, hole points lie strictly inside their hole, nothing lies in a hole.
