@@ -82,6 +82,12 @@ qk__cdt_where_t qk__cdt_locate(const qk__cdt_t *c, double x, double y, uint32_t 
 qk_status_t qk__cdt_insert(qk__cdt_t *c, double x, double y, uint32_t start, uint32_t *v_out,
                            int *existed);
 
+/* qk__cdt_insert for a point the caller has located already: (t, k, w) as qk__cdt_locate (or
+ * qk__cdt_walk, when it returns 1) reports for (x, y), the triangulation unchanged since.
+ * Saves the second walk and its orientation tests (exact ones for a point on an edge). */
+qk_status_t qk__cdt_insert_at(qk__cdt_t *c, double x, double y, uint32_t t, int k,
+                              qk__cdt_where_t w, uint32_t *v_out, int *existed);
+
 /* Make the edge from vertex a to vertex b a constrained edge with segment id `seg`,
  * removing the edges it crosses and restoring the constrained Delaunay property.
  * Returns QK_OK; QK_ERR_GEOMETRY when a vertex lies in the relative interior of ab

@@ -63,7 +63,7 @@ qk_status_t qk__gm_insert(qk__gm_t *g, double x, double y, uint32_t t0, int k0, 
     ea = c->v[3 * t0 + (k0 + 1) % 3], eb = c->v[3 * t0 + (k0 + 2) % 3];
   }
   g->ndirty = 0;
-  qk_status_t st = qk__cdt_insert(c, x, y, t0, v_out, existed);
+  qk_status_t st = qk__cdt_insert_at(c, x, y, t0, k0, w, v_out, existed);
   if (st) return st;
   if (g->dirty_nomem || qk__gm_fit(g)) return QK_ERR_NOMEM;
   if (*existed) return QK_OK;

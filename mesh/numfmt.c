@@ -73,10 +73,12 @@ static const uint64_t POW5[22] = {1ull,
 
 /* The fixed-notation "%.17g" of finite nonzero x, or 0 when x needs the exponent form. */
 static size_t g17_fixed(double x, char *buf) {
-  int q;
-  double f = frexp(fabs(x), &q); /* |x| = f 2^q, f in [1/2, 1) */
-  uint64_t m = (uint64_t)ldexp(f, 53);
-  int e = q - 53;
+  uint64_t bits;
+  memcpy(&bits, &x, sizeof bits);
+  int be = (int)((bits >> 52) & 0x7FF);
+  if (be == 0) return 0; /* subnormal: far outside the fixed range */
+  uint64_t m = (bits & (((uint64_t)1 << 52) - 1)) | (uint64_t)1 << 52;
+  int q = be - 1022, e = q - 53; /* |x| = m 2^e = f 2^q, f in [1/2, 1) */
   /* 2^(q-1) <= |x|, so 10^X0 <= |x| with X0 below: X is X0 or X0 + 1 (k log10(2) is never
    * within rounding of an integer for k != 0 in range). */
   int X = (int)floor((double)(q - 1) * 0.30102999566398120), tries = 0;
@@ -108,8 +110,13 @@ static size_t g17_fixed(double x, char *buf) {
   }
   if (T == E17) T = E16, X++;
   if (T < E16 || X < -4 || X > 16) return 0;
-  char d[17];
-  for (int i = 16; i >= 0; i--) d[i] = (char)('0' + T % 10), T /= 10;
+  char d[18];
+  for (int i = 15; i >= 1; i -= 2) {
+    unsigned r = (unsigned)(T % 100);
+    T /= 100;
+    d[i] = digit_pairs[2 * r], d[i + 1] = digit_pairs[2 * r + 1];
+  }
+  d[0] = (char)('0' + T);
   int nd = 17;
   while (nd > 1 && d[nd - 1] == '0') nd--;
   size_t n = 0;
