@@ -67,6 +67,35 @@ static qk_status_t grow_triangles(qk__cdt_t *c, size_t need) {
   return QK_OK;
 }
 
+void qk__cdt_shrink(qk__cdt_t *c) {
+  size_t nt = c->nt, cap = nt < 16 ? 16 : nt, old = c->cap_t;
+  if (c->v && cap < old) {
+    uint32_t *blk = c->v;
+    memmove(blk + 3 * cap, blk + 3 * old, nt * 3 * sizeof *blk);
+    memmove(blk + 6 * cap, blk + 6 * old, nt * 3 * sizeof *blk);
+    uint32_t *nb = qk__realloc(c->alloc, blk, tblock_bytes(old), tblock_bytes(cap));
+    if (nb) {
+      c->v = nb, c->nbr = nb + 3 * cap, c->seg = nb + 6 * cap, c->cap_t = cap;
+    } else { /* put the arrays back where they were (seg first: it moves furthest) */
+      memmove(blk + 6 * old, blk + 6 * cap, nt * 3 * sizeof *blk);
+      memmove(blk + 3 * old, blk + 3 * cap, nt * 3 * sizeof *blk);
+    }
+  }
+  size_t nv = c->nv, vcap = nv < 16 ? 16 : nv, vold = c->cap_v;
+  if (c->xy && vcap < vold) {
+    char *blk = (char *)c->xy;
+    memmove(blk + vcap * 2 * sizeof(double), c->vtri, nv * sizeof *c->vtri);
+    char *nb = qk__realloc(c->alloc, blk, vblock_bytes(vold), vblock_bytes(vcap));
+    if (nb) {
+      uint32_t *vtri = (uint32_t *)(nb + vcap * 2 * sizeof(double));
+      c->xy = (double *)nb, c->vtri = vtri, c->stk = vtri + vcap, c->cap_v = vcap;
+    } else {
+      memmove(blk + vold * 2 * sizeof(double), blk + vcap * 2 * sizeof(double),
+              nv * sizeof *c->vtri);
+    }
+  }
+}
+
 qk_status_t qk__cdt_reserve_scratch(qk__cdt_t *c, size_t need) {
   if (need <= c->cap_scr) return QK_OK;
   size_t cap = c->cap_scr < 64 ? 64 : c->cap_scr;

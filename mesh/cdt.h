@@ -61,6 +61,10 @@ typedef struct qk__cdt {
 qk_status_t qk__cdt_init(qk__cdt_t *c, const qk_allocator_t *alloc, double x0, double y0,
                          double side, size_t nv_hint);
 
+/* Give back the arrays' spare room (realloc to the current counts; a failed shrink changes
+ * nothing). Later insertions grow them again. */
+void qk__cdt_shrink(qk__cdt_t *c);
+
 /* Free the arrays; the struct may be reused after qk__cdt_init. */
 void qk__cdt_free(qk__cdt_t *c);
 
