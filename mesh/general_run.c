@@ -109,7 +109,6 @@ qk_status_t qk__mesh_general(const qk_poly_t *P, const qk_mesh_options_t *opt, q
   if (!st) {
     free_refinement(&g);
     qk__cdt_shrink(&g.cdt); /* room for the output's arrays */
-    g.cdt.on_change = NULL; /* nothing changes from here on */
     g.stage = "writing the mesh";
     st = qk__gm_output(&g, m);
   }
