@@ -144,7 +144,8 @@ int qk__gm_is_bad(const qk__gm_t *g, uint32_t t) {
   double l[3];
   for (int i = 0; i < 3; i++) l[i] = d2(p[(i + 1) % 3], p[(i + 2) % 3]);
   int i = l[0] <= l[1] && l[0] <= l[2] ? 0 : l[1] <= l[2] ? 1 : 2;
-  double lmax = fmax(l[0], fmax(l[1], l[2]));
+  double lmax = l[0] > l[1] ? l[0] : l[1];
+  lmax = l[2] > lmax ? l[2] : lmax;
   if (g->opt->max_size > 0 || g->opt->size_fn) {
     double h = g->opt->max_size > 0 ? g->opt->max_size : INFINITY;
     if (g->opt->size_fn) {
@@ -257,8 +258,8 @@ static int cavity_encroach(qk__gm_t *g, uint32_t t0, uint32_t t1, const double p
   while (seen < n) {
     uint32_t t = g->stack[seen++];
     for (int k = 0; k < 3; k++) {
-      uint32_t a = c->v[3 * t + (k + 1) % 3], b = c->v[3 * t + (k + 2) % 3];
       if (c->seg[3 * t + k] != QK__CDT_NONE) {
+        uint32_t a = c->v[3 * t + (k + 1) % 3], b = c->v[3 * t + (k + 2) % 3];
         if (qk__cdt_encroach(&c->xy[2 * a], &c->xy[2 * b], p) < 0) {
           if (push_enc(g, a, b, c->seg[3 * t + k])) return -1;
           found++;
