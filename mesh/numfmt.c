@@ -27,19 +27,19 @@ static const char digit_pairs[201] = "00010203040506070809"
                                      "90919293949596979899";
 
 size_t qk__fmt_u64(uint64_t v, char *buf) {
-  size_t n = 1; /* the digits, then written from the last */
-  for (uint64_t p = 10; n < 20 && v >= p; p *= 10) n++;
-  char *o = buf + n;
+  char t[24];
+  size_t n = sizeof t;
   while (v >= 100) {
     unsigned d = (unsigned)(v % 100);
     v /= 100;
-    *--o = digit_pairs[2 * d + 1], *--o = digit_pairs[2 * d];
+    t[--n] = digit_pairs[2 * d + 1], t[--n] = digit_pairs[2 * d];
   }
   if (v >= 10)
-    *--o = digit_pairs[2 * v + 1], *--o = digit_pairs[2 * v];
+    t[--n] = digit_pairs[2 * v + 1], t[--n] = digit_pairs[2 * v];
   else
-    *--o = (char)('0' + v);
-  return n;
+    t[--n] = (char)('0' + v);
+  memcpy(buf, t + n, sizeof t - n);
+  return sizeof t - n;
 }
 
 #if defined(__SIZEOF_INT128__)
@@ -121,16 +121,16 @@ static size_t g17_fixed(double x, char *buf) {
   while (nd > 1 && d[nd - 1] == '0') nd--;
   size_t n = 0;
   if (x < 0) buf[n++] = '-';
-  if (X >= 0) { /* (short loops: memcpy of a variable length is a library call) */
-    for (int i = 0; i <= X; i++) buf[n++] = d[i];
+  if (X >= 0) {
+    memcpy(buf + n, d, (size_t)X + 1), n += (size_t)X + 1;
     if (nd > X + 1) {
       buf[n++] = '.';
-      for (int i = X + 1; i < nd; i++) buf[n++] = d[i];
+      memcpy(buf + n, d + X + 1, (size_t)(nd - X - 1)), n += (size_t)(nd - X - 1);
     }
   } else {
     buf[n++] = '0', buf[n++] = '.';
     for (int i = -1; i > X; i--) buf[n++] = '0';
-    for (int i = 0; i < nd; i++) buf[n++] = d[i];
+    memcpy(buf + n, d, (size_t)nd), n += (size_t)nd;
   }
   buf[n] = 0;
   return n;
