@@ -123,6 +123,13 @@ uint32_t qk__cdt_find_edge(const qk__cdt_t *c, uint32_t a, uint32_t b, int *k);
 int qk__cdt_walk(const qk__cdt_t *c, uint32_t w, double x, double y, uint32_t *tri, int *k,
                  qk__cdt_where_t *where);
 
+/* qk__cdt_walk starting the turn around w at triangle `start` (which holds w; QK__CDT_NONE:
+ * wherever) instead of an arbitrary one: from a triangle's vertex w towards its
+ * circumcentre, when w is opposite the longest edge, the ray runs inside that triangle's
+ * angle at w, so the turn ends at once. */
+int qk__cdt_walk_from(const qk__cdt_t *c, uint32_t w, uint32_t start, double x, double y,
+                      uint32_t *tri, int *k, qk__cdt_where_t *where);
+
 /* The triangles around vertex a: counter-clockwise from vtri[a] until back there, or, at
  * the square's boundary, until the boundary and then clockwise from vtri[a]. Start with
  * qk__cdt_ring_t r = {a, QK__CDT_NONE, QK__CDT_NONE, 1}; each qk__cdt_ring_next(c, &r)

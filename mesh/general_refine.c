@@ -337,7 +337,7 @@ static qk_status_t split_triangle(qk__gm_t *g, uint32_t t) {
   int k;
   qk__cdt_where_t where;
   qk__gm_tq_t self = {t, tv[0], tv[1], tv[2]};
-  if (!qk__cdt_walk(c, w, p[0], p[1], &tri, &k, &where)) {
+  if (!qk__cdt_walk_from(c, w, t, p[0], p[1], &tri, &k, &where)) {
     uint32_t a, b, s;
     if (where == QK__CDT_EDGE) {
       a = c->v[3 * tri + (k + 1) % 3], b = c->v[3 * tri + (k + 2) % 3], s = c->seg[3 * tri + k];
