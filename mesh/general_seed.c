@@ -362,30 +362,6 @@ static qk_status_t insert_points(qk__gm_t *g) {
   return QK_OK;
 }
 
-/* Without seeds, the points are the pre-split points alone, which presplit() made segment by
- * segment in increasing parameter: insert each on the edge from the last one towards the
- * segment's far end, found around that vertex (a few steps), with no walk and no exact
- * orientation test to find a point that lies on an edge by construction. */
-static qk_status_t insert_split_points(qk__gm_t *g) {
-  const qk_poly_t *P = g->P;
-  qk__cdt_t *c = &g->cdt;
-  uint32_t cur = QK__CDT_NONE, s = QK__CDT_NONE;
-  for (size_t i = 0; i < g->npts; i++) {
-    const qk__gm_pt_t *q = &g->pts[i];
-    if (q->seg != s) s = q->seg, cur = g->cv[P->seg[2 * s]];
-    uint32_t far = g->cv[P->seg[2 * s + 1]], v;
-    int k, existed;
-    uint32_t t = qk__cdt_find_edge(c, cur, far, &k);
-    if (t == QK__CDT_NONE) /* not expected: the segment's last piece runs from cur to far */
-      return qk__mesh_fail(g->err, QK_ERR_CORRUPT, 0, "segment %lu lost its last piece",
-                           qk__mesh_num(P, s));
-    qk_status_t st = qk__gm_insert(g, q->x, q->y, t, k, QK__CDT_EDGE, s, q->k, &v, &existed);
-    if (st) return qk__mesh_fail(g->err, st, 0, "out of memory");
-    cur = v;
-  }
-  return QK_OK;
-}
-
 qk_status_t qk__gm_seed(qk__gm_t *g, qk_mesh_stats_t *stats) {
   const qk_poly_t *P = g->P;
   g->inv_S = ldexp(1.0, -g->e);
@@ -433,7 +409,6 @@ qk_status_t qk__gm_seed(qk__gm_t *g, qk_mesh_stats_t *stats) {
     if (presplit(g, (uint32_t)s, A, B, hypot(B[0] - A[0], B[1] - A[1]), 0, QK__GM_ONE))
       return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   }
-  if (!GM_SEED_LEAVES) return insert_split_points(g);
   if (g->npts && qk__gm_sort_points(g, g->pts, g->npts))
     return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   return insert_points(g);
