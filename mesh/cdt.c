@@ -6,9 +6,10 @@
  * cdt_walk.c, the exact predicates in cdt_exact.c.
  *
  * Memory: the per-vertex arrays (xy, vtri and the flip stack) live in one block and the
- * per-triangle arrays (v, nbr, seg) in another, each grown by allocating a larger block and
- * copying, so a failed allocation leaves everything as it was. Every operation reserves
- * what it may need before it changes anything.
+ * per-triangle arrays (v, nbr, seg) in another, each grown by half again with realloc (a
+ * large block is remapped, not copied next to the old one: no transient peak of old plus
+ * new), then the later arrays moved up to their new offsets. A failed realloc leaves the
+ * block as it was. Every operation reserves what it may need before it changes anything.
  */
 #include <string.h>
 
@@ -30,42 +31,69 @@ static size_t vblock_bytes(size_t cap) {
 }
 static size_t tblock_bytes(size_t cap) { return cap * 9 * sizeof(uint32_t); }
 
+/* The next capacity: half again, at least `need`. */
+static size_t next_cap(size_t cap, size_t need) {
+  cap = cap < 16 ? 16 : cap;
+  while (cap < need) cap += cap / 2;
+  return cap;
+}
+
 static qk_status_t grow_vertices(qk__cdt_t *c, size_t need) {
   if (need <= c->cap_v) return QK_OK;
-  size_t cap = c->cap_v < 16 ? 16 : c->cap_v;
-  while (cap < need) cap *= 2;
+  size_t old = c->cap_v, cap = next_cap(old, need);
   if (cap > (size_t)UINT32_MAX - 16) cap = (size_t)UINT32_MAX - 16;
   if (cap < need) return QK_ERR_NOMEM;
-  char *blk = qk__realloc(c->alloc, NULL, 0, vblock_bytes(cap));
+  char *blk = qk__realloc(c->alloc, c->xy, c->xy ? vblock_bytes(old) : 0, vblock_bytes(cap));
   if (!blk) return QK_ERR_NOMEM;
   double *xy = (double *)blk;
   uint32_t *vtri = (uint32_t *)(blk + cap * 2 * sizeof(double));
-  uint32_t *stk = vtri + cap;
-  if (c->nv) {
-    memcpy(xy, c->xy, c->nv * 2 * sizeof *xy);
-    memcpy(vtri, c->vtri, c->nv * sizeof *vtri);
-  }
-  if (c->xy) qk__free(c->alloc, c->xy, vblock_bytes(c->cap_v));
-  c->xy = xy, c->vtri = vtri, c->stk = stk, c->cap_v = cap;
+  if (c->nv) memmove(vtri, blk + old * 2 * sizeof(double), c->nv * sizeof *vtri);
+  c->xy = xy, c->vtri = vtri, c->stk = vtri + cap, c->cap_v = cap;
   return QK_OK;
 }
 
 static qk_status_t grow_triangles(qk__cdt_t *c, size_t need) {
   if (need <= c->cap_t) return QK_OK;
-  size_t cap = c->cap_t < 16 ? 16 : c->cap_t;
-  while (cap < need) cap *= 2;
+  size_t old = c->cap_t, cap = next_cap(old, need);
   if (cap > (size_t)UINT32_MAX / 4) cap = (size_t)UINT32_MAX / 4;
   if (cap < need) return QK_ERR_NOMEM;
-  uint32_t *blk = qk__realloc(c->alloc, NULL, 0, tblock_bytes(cap));
+  uint32_t *blk = qk__realloc(c->alloc, c->v, c->v ? tblock_bytes(old) : 0, tblock_bytes(cap));
   if (!blk) return QK_ERR_NOMEM;
-  if (c->nt) {
-    memcpy(blk, c->v, c->nt * 3 * sizeof *blk);
-    memcpy(blk + 3 * cap, c->nbr, c->nt * 3 * sizeof *blk);
-    memcpy(blk + 6 * cap, c->seg, c->nt * 3 * sizeof *blk);
+  if (c->nt) { /* seg first: nbr's new place may overlap seg's old one */
+    memmove(blk + 6 * cap, blk + 6 * old, c->nt * 3 * sizeof *blk);
+    memmove(blk + 3 * cap, blk + 3 * old, c->nt * 3 * sizeof *blk);
   }
-  if (c->v) qk__free(c->alloc, c->v, tblock_bytes(c->cap_t));
   c->v = blk, c->nbr = blk + 3 * cap, c->seg = blk + 6 * cap, c->cap_t = cap;
   return QK_OK;
+}
+
+void qk__cdt_shrink(qk__cdt_t *c) {
+  size_t nt = c->nt, cap = nt < 16 ? 16 : nt, old = c->cap_t;
+  if (c->v && cap < old) {
+    uint32_t *blk = c->v;
+    memmove(blk + 3 * cap, blk + 3 * old, nt * 3 * sizeof *blk);
+    memmove(blk + 6 * cap, blk + 6 * old, nt * 3 * sizeof *blk);
+    uint32_t *nb = qk__realloc(c->alloc, blk, tblock_bytes(old), tblock_bytes(cap));
+    if (nb) {
+      c->v = nb, c->nbr = nb + 3 * cap, c->seg = nb + 6 * cap, c->cap_t = cap;
+    } else { /* put the arrays back where they were (seg first: it moves furthest) */
+      memmove(blk + 6 * old, blk + 6 * cap, nt * 3 * sizeof *blk);
+      memmove(blk + 3 * old, blk + 3 * cap, nt * 3 * sizeof *blk);
+    }
+  }
+  size_t nv = c->nv, vcap = nv < 16 ? 16 : nv, vold = c->cap_v;
+  if (c->xy && vcap < vold) {
+    char *blk = (char *)c->xy;
+    memmove(blk + vcap * 2 * sizeof(double), c->vtri, nv * sizeof *c->vtri);
+    char *nb = qk__realloc(c->alloc, blk, vblock_bytes(vold), vblock_bytes(vcap));
+    if (nb) {
+      uint32_t *vtri = (uint32_t *)(nb + vcap * 2 * sizeof(double));
+      c->xy = (double *)nb, c->vtri = vtri, c->stk = vtri + vcap, c->cap_v = vcap;
+    } else {
+      memmove(blk + vold * 2 * sizeof(double), blk + vcap * 2 * sizeof(double),
+              nv * sizeof *c->vtri);
+    }
+  }
 }
 
 qk_status_t qk__cdt_reserve_scratch(qk__cdt_t *c, size_t need) {
@@ -316,6 +344,13 @@ qk_status_t qk__cdt_insert(qk__cdt_t *c, double x, double y, uint32_t start, uin
   /* corners 0 and 2 are the square's; NaN fails the comparisons too */
   if (!(x >= c->xy[0] && x <= c->xy[4] && y >= c->xy[1] && y <= c->xy[5])) return QK_ERR_OUTSIDE;
   qk__cdt_where_t w = qk__cdt_locate(c, x, y, start, &t, &k);
+  return qk__cdt_insert_at(c, x, y, t, k, w, v_out, existed);
+}
+
+qk_status_t qk__cdt_insert_at(qk__cdt_t *c, double x, double y, uint32_t t, int k,
+                              qk__cdt_where_t w, uint32_t *v_out, int *existed) {
+  *existed = 0;
+  if (!(x >= c->xy[0] && x <= c->xy[4] && y >= c->xy[1] && y <= c->xy[5])) return QK_ERR_OUTSIDE;
   if (w == QK__CDT_VERT) {
     *v_out = c->v[3 * (size_t)t + k];
     *existed = 1;

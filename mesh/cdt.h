@@ -61,6 +61,10 @@ typedef struct qk__cdt {
 qk_status_t qk__cdt_init(qk__cdt_t *c, const qk_allocator_t *alloc, double x0, double y0,
                          double side, size_t nv_hint);
 
+/* Give back the arrays' spare room (realloc to the current counts; a failed shrink changes
+ * nothing). Later insertions grow them again. */
+void qk__cdt_shrink(qk__cdt_t *c);
+
 /* Free the arrays; the struct may be reused after qk__cdt_init. */
 void qk__cdt_free(qk__cdt_t *c);
 
@@ -81,6 +85,12 @@ qk__cdt_where_t qk__cdt_locate(const qk__cdt_t *c, double x, double y, uint32_t 
  * are the only boundary vertices": callers keep points strictly inside. */
 qk_status_t qk__cdt_insert(qk__cdt_t *c, double x, double y, uint32_t start, uint32_t *v_out,
                            int *existed);
+
+/* qk__cdt_insert for a point the caller has located already: (t, k, w) as qk__cdt_locate (or
+ * qk__cdt_walk, when it returns 1) reports for (x, y), the triangulation unchanged since.
+ * Saves the second walk and its orientation tests (exact ones for a point on an edge). */
+qk_status_t qk__cdt_insert_at(qk__cdt_t *c, double x, double y, uint32_t t, int k,
+                              qk__cdt_where_t w, uint32_t *v_out, int *existed);
 
 /* Make the edge from vertex a to vertex b a constrained edge with segment id `seg`,
  * removing the edges it crosses and restoring the constrained Delaunay property.
@@ -112,6 +122,13 @@ uint32_t qk__cdt_find_edge(const qk__cdt_t *c, uint32_t a, uint32_t b, int *k);
  * A vertex with no constrained edge on the way is passed through. */
 int qk__cdt_walk(const qk__cdt_t *c, uint32_t w, double x, double y, uint32_t *tri, int *k,
                  qk__cdt_where_t *where);
+
+/* qk__cdt_walk starting the turn around w at triangle `start` (which holds w; QK__CDT_NONE:
+ * wherever) instead of an arbitrary one: from a triangle's vertex w towards its
+ * circumcentre, when w is opposite the longest edge, the ray runs inside that triangle's
+ * angle at w, so the turn ends at once. */
+int qk__cdt_walk_from(const qk__cdt_t *c, uint32_t w, uint32_t start, double x, double y,
+                      uint32_t *tri, int *k, qk__cdt_where_t *where);
 
 /* The triangles around vertex a: counter-clockwise from vtri[a] until back there, or, at
  * the square's boundary, until the boundary and then clockwise from vtri[a]. Start with

@@ -31,6 +31,11 @@ static int at_vertex(const qk__cdt_t *c, uint32_t t, int k, int end, uint32_t *t
 
 int qk__cdt_walk(const qk__cdt_t *c, uint32_t w, double x, double y, uint32_t *tri, int *k,
                  qk__cdt_where_t *where) {
+  return qk__cdt_walk_from(c, w, NONE, x, y, tri, k, where);
+}
+
+int qk__cdt_walk_from(const qk__cdt_t *c, uint32_t w, uint32_t start, double x, double y,
+                      uint32_t *tri, int *k, qk__cdt_where_t *where) {
   const double P[2] = {x, y}, *pw = pt(c, w);
   uint32_t u = w; /* the vertex the walk is at */
   for (;;) {
@@ -43,9 +48,13 @@ int qk__cdt_walk(const qk__cdt_t *c, uint32_t w, double x, double y, uint32_t *t
     }
     /* Find the triangle (u, x, y) around u whose closed wedge holds P. */
     qk__cdt_ring_t r = {u, NONE, NONE, 1};
-    uint32_t t = NONE, next_u = NONE;
+    uint32_t t = NONE, next_u = NONE, s0;
     int i = 0;
-    for (uint32_t s = qk__cdt_ring_next(c, &r); s != NONE; s = qk__cdt_ring_next(c, &r)) {
+    if (u == w && start < c->nt)
+      s0 = r.first = r.t = start; /* the ring from there on, as from vtri[w] */
+    else
+      s0 = qk__cdt_ring_next(c, &r);
+    for (uint32_t s = s0; s != NONE; s = qk__cdt_ring_next(c, &r)) {
       i = qk__cdt_slot(c, s, u);
       int i1 = (i + 1) % 3, i2 = (i + 2) % 3;
       uint32_t vx = c->v[3 * (size_t)s + i1], vy = c->v[3 * (size_t)s + i2];

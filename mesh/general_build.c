@@ -36,18 +36,29 @@ uint64_t qk__gm_param(const qk__gm_t *g, uint32_t v, uint32_t s) {
   return g->vi[v].in == g->P->seg[2 * s] ? 0 : QK__GM_ONE;
 }
 
-/* The CDT's change hook: remember the triangle for labelling and quality checks. */
-static void on_change(void *user, uint32_t t) {
-  qk__gm_t *g = user;
-  if (g->ndirty == g->dirty_cap) {
-    void *p = g->dirty;
-    if (qk__grow(g->a, &p, &g->dirty_cap, g->ndirty + 1, sizeof *g->dirty)) {
-      g->dirty_nomem = 1;
-      return;
+/* The triangles around vertex v into g->dirty: after a point insertion, exactly those it
+ * made or changed (the split makes triangles at v, and every Lawson flip replaces two
+ * triangles at v by two others at v). The CDT's change hook reported the same set with
+ * repeats (a triangle flipped twice came twice: a third more quality checks) and cost a
+ * call a change. */
+static qk_status_t star(qk__gm_t *g, uint32_t v) {
+  const qk__cdt_t *c = &g->cdt;
+  /* v lies strictly inside the square, so its star is a closed ring: counter-clockwise
+   * across the edge after v in each triangle until back at the first. */
+  uint32_t first = c->vtri[v], t = first;
+  g->ndirty = 0;
+  do {
+    if (g->ndirty == g->dirty_cap) {
+      void *p = g->dirty;
+      if (qk__grow(g->a, &p, &g->dirty_cap, g->ndirty + 1, sizeof *g->dirty)) return QK_ERR_NOMEM;
+      g->dirty = p;
     }
-    g->dirty = p;
-  }
-  g->dirty[g->ndirty++] = t;
+    g->dirty[g->ndirty++] = t;
+    const uint32_t *tv = &c->v[3 * (size_t)t];
+    int i = tv[0] == v ? 1 : tv[1] == v ? 2 : 0; /* the slot after v's */
+    t = c->nbr[3 * (size_t)t + i];
+  } while (t != first && t != QK__CDT_NONE);
+  return QK_OK;
 }
 
 qk_status_t qk__gm_insert(qk__gm_t *g, double x, double y, uint32_t t0, int k0, qk__cdt_where_t w,
@@ -63,11 +74,12 @@ qk_status_t qk__gm_insert(qk__gm_t *g, double x, double y, uint32_t t0, int k0, 
     ea = c->v[3 * t0 + (k0 + 1) % 3], eb = c->v[3 * t0 + (k0 + 2) % 3];
   }
   g->ndirty = 0;
-  qk_status_t st = qk__cdt_insert(c, x, y, t0, v_out, existed);
+  qk_status_t st = qk__cdt_insert_at(c, x, y, t0, k0, w, v_out, existed);
   if (st) return st;
-  if (g->dirty_nomem || qk__gm_fit(g)) return QK_ERR_NOMEM;
+  if (qk__gm_fit(g)) return QK_ERR_NOMEM;
   if (*existed) return QK_OK;
   uint32_t v = *v_out;
+  if (star(g, v)) return QK_ERR_NOMEM;
   g->vi[v] = (qk__gm_vert_t){QK__CDT_NONE, seg, k};
   for (size_t i = 0; i < g->ndirty; i++) {
     uint32_t t = g->dirty[i], f = f0;
@@ -346,8 +358,7 @@ qk_status_t qk__gm_build(qk__gm_t *g) {
   if (qk__gm_fit(g) || label_faces(g) || input_angles(g))
     return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   if ((st = holes_and_regions(g))) return st;
-  /* From here on every insertion reports the triangles it changes. */
-  g->cdt.on_change = on_change;
-  g->cdt.user = g;
+  /* From here on every insertion goes through qk__gm_insert, which lists the triangles it
+   * changed (the new vertex's star) for labelling and the quality checks. */
   return QK_OK;
 }

@@ -107,13 +107,20 @@ qk_status_t qk__gm_output(qk__gm_t *g, qk_mesh_t *m) {
   for (uint32_t t = 0; t < c->nt; t++) {
     if (!kept(g, t)) continue;
     const uint32_t *tv = &c->v[3 * t];
+    /* e[i] runs from corner i + 1 to corner i + 2, so the sides at corner i are e[i+2] and
+     * -e[i+1]: the same roundings as differences from the corner (a - b is exactly
+     * -(b - a)), with each squared length computed once. */
+    double e[3][2], l[3];
+    for (int i = 0; i < 3; i++) {
+      const double *a = &c->xy[2 * tv[(i + 1) % 3]], *b = &c->xy[2 * tv[(i + 2) % 3]];
+      e[i][0] = b[0] - a[0], e[i][1] = b[1] - a[1];
+      l[i] = e[i][0] * e[i][0] + e[i][1] * e[i][1];
+    }
     for (int i = 0; i < 3; i++) {
       m->tri[3 * j + i] = newid[tv[i]];
-      const double *o = &c->xy[2 * tv[i]], *u = &c->xy[2 * tv[(i + 1) % 3]],
-                   *w = &c->xy[2 * tv[(i + 2) % 3]];
-      double ux = u[0] - o[0], uy = u[1] - o[1], wx = w[0] - o[0], wy = w[1] - o[1];
-      double cs = (ux * wx + uy * wy) / sqrt((ux * ux + uy * uy) * (wx * wx + wy * wy));
-      cmax = fmax(cmax, cs), cmin = fmin(cmin, cs);
+      const double *u = e[(i + 2) % 3], *w = e[(i + 1) % 3];
+      double cs = -(u[0] * w[0] + u[1] * w[1]) / sqrt(l[(i + 2) % 3] * l[(i + 1) % 3]);
+      cmax = cs > cmax ? cs : cmax, cmin = cs < cmin ? cs : cmin; /* NaN: neither, as fmax */
       exempt += cs > cb;
     }
     const qk__gm_face_t *f = &g->faces[g->face[t]];

@@ -15,8 +15,12 @@ static int lsb_exp(double x) {
   int q;
   double f = frexp(fabs(x), &q); /* f in [1/2, 1), x = f 2^q */
   uint64_t mant = (uint64_t)ldexp(f, 53);
+#if defined(__GNUC__)
+  int tz = __builtin_ctzll(mant); /* mant >= 2^52: nonzero */
+#else
   int tz = 0;
   while (!(mant & 1)) mant >>= 1, tz++;
+#endif
   return q - 53 + tz;
 }
 

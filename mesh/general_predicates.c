@@ -73,7 +73,7 @@ static int sign_exact(const double *a, const double *b, const double *c) {
 
 int qk__orient2d(const double a[2], const double b[2], const double c[2]) {
   double l = (b[0] - a[0]) * (c[1] - a[1]), r = (b[1] - a[1]) * (c[0] - a[0]);
-  double det = l - r, bound = ldexp(fabs(l) + fabs(r), -50);
+  double det = l - r, bound = (fabs(l) + fabs(r)) * 0x1p-50; /* as ldexp(., -50), no call */
   if (det > bound) return 1;
   if (-det > bound) return -1;
   return sign_exact(a, b, c);

@@ -190,7 +190,8 @@ int qk__gm_is_bad(const qk__gm_t *g, uint32_t t) {
   double l[3];
   for (int i = 0; i < 3; i++) l[i] = d2(p[(i + 1) % 3], p[(i + 2) % 3]);
   int i = l[0] <= l[1] && l[0] <= l[2] ? 0 : l[1] <= l[2] ? 1 : 2;
-  double lmax = fmax(l[0], fmax(l[1], l[2]));
+  double lmax = l[0] > l[1] ? l[0] : l[1];
+  lmax = l[2] > lmax ? l[2] : lmax;
   if (g->opt->max_size > 0 || g->opt->size_fn) {
     double h = g->opt->max_size > 0 ? g->opt->max_size : INFINITY;
     if (g->opt->size_fn) {
@@ -217,6 +218,12 @@ int qk__gm_is_bad(const qk__gm_t *g, uint32_t t) {
 
 static qk_status_t push_bad(qk__gm_t *g, uint32_t t) {
   if (g->bad_head && g->bad_head == g->nbad) g->bad_head = g->nbad = 0;
+  /* (meshcdt) Drop the consumed front once it is half the queue: the queue held every
+   * triangle ever queued, a fifth of the peak memory on a million triangles. */
+  if (g->bad_head >= 4096 && 2 * g->bad_head >= g->nbad) {
+    memmove(g->bad, g->bad + g->bad_head, (g->nbad - g->bad_head) * sizeof *g->bad);
+    g->nbad -= g->bad_head, g->bad_head = 0;
+  }
   void *p = g->bad;
   if (qk__grow(g->a, &p, &g->bad_cap, g->nbad + 1, sizeof *g->bad)) return QK_ERR_NOMEM;
   g->bad = p;
@@ -297,8 +304,8 @@ static int cavity_encroach(qk__gm_t *g, uint32_t t0, uint32_t t1, const double p
   while (seen < n) {
     uint32_t t = g->stack[seen++];
     for (int k = 0; k < 3; k++) {
-      uint32_t a = c->v[3 * t + (k + 1) % 3], b = c->v[3 * t + (k + 2) % 3];
       if (c->seg[3 * t + k] != QK__CDT_NONE) {
+        uint32_t a = c->v[3 * t + (k + 1) % 3], b = c->v[3 * t + (k + 2) % 3];
         if (qk__cdt_encroach(&c->xy[2 * a], &c->xy[2 * b], p) < 0) {
           if (push_enc(g, a, b, c->seg[3 * t + k])) return -1;
           found++;
@@ -377,7 +384,7 @@ static qk_status_t split_triangle(qk__gm_t *g, uint32_t t, size_t *rejected) {
   int k;
   qk__cdt_where_t where;
   qk__gm_tq_t self = {t, tv[0], tv[1], tv[2]};
-  if (!qk__cdt_walk(c, w, p[0], p[1], &tri, &k, &where)) {
+  if (!qk__cdt_walk_from(c, w, t, p[0], p[1], &tri, &k, &where)) {
     uint32_t a, b, s;
     if (where == QK__CDT_EDGE) {
       a = c->v[3 * tri + (k + 1) % 3], b = c->v[3 * tri + (k + 2) % 3], s = c->seg[3 * tri + k];

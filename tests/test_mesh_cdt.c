@@ -15,7 +15,8 @@
  *  - segment insertion on the edges of a jittered grid graph (non-crossing, with points
  *    inserted afterwards on the segments and elsewhere), a crossing segment and a segment
  *    through a vertex refused with the right *block / *block_seg and nothing changed;
- *  - qk__cdt_walk against a brute-force visibility oracle (does the closed segment from w to
+ *  - qk__cdt_walk (and qk__cdt_walk_from, its turn around w started anywhere in w's star)
+ *    against a brute-force visibility oracle (does the closed segment from w to
  *    P meet a constrained edge anywhere but at w?) and against qk__cdt_locate;
  *  - allocation failure at every N: QK_ERR_NOMEM leaves the triangulation identical and
  *    valid, and nothing leaks.
@@ -790,6 +791,22 @@ static void test_cdt_walk(void **state) {
                   c.xy[2 * used[i].b], c.xy[2 * used[i].b + 1]);
       fail_msg("seed %llu query %d: walk from %u to (%.17g, %.17g) says %s",
                (unsigned long long)g_seed, q, w, P[0], P[1], got ? "visible" : "blocked");
+    }
+    { /* the same walk, its turn around w started at another triangle of w's star */
+      qk__cdt_ring_t ring = {w, NONE, NONE, 1};
+      uint32_t s = qk__cdt_ring_next(&c, &ring), skip = qkt_rng_below(&r, 8), t3;
+      for (uint32_t z = 0; z < skip; z++) {
+        uint32_t nx = qk__cdt_ring_next(&c, &ring);
+        if (nx == NONE) break;
+        s = nx;
+      }
+      int k3;
+      qk__cdt_where_t wh3;
+      assert_int_equal(qk__cdt_walk_from(&c, w, s, P[0], P[1], &t3, &k3, &wh3), got);
+      assert_int_equal(wh3, wh);
+      if (wh == QK__CDT_IN) assert_int_equal(t3, t);
+      if (wh == QK__CDT_VERT) assert_int_equal(c.v[3 * t3 + k3], c.v[3 * t + k]);
+      if (wh == QK__CDT_EDGE) assert_true(t3 == t || c.nbr[3 * t3 + k3] == t);
     }
     if (got) {
       free_++;
