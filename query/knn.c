@@ -26,8 +26,8 @@
 typedef struct best {
   qk_neighbor_t *out; /* sorted array or heap, on squared distances */
   size_t k, n;
-  double thr;  /* prune strictly above this: the cap until full, then the k-th best */
-  qk_id_t one; /* k = 1: the best id so far (its squared distance is thr), or QK_NONE */
+  double thr;    /* prune strictly above this: the cap until full, then the k-th best */
+  uint32_t slot; /* k = 1: the best point's slot (its squared distance is thr), or QK_NONE */
 } best_t;
 
 /* Offer a leaf's points to a heap of at most k. */
@@ -187,27 +187,33 @@ static inline uint64_t equal_mask(const double *d2, uint32_t m, double v) {
 
 /*
  * The k = 1 leaf scan, in two steps per chunk: the smallest squared distance (leaf_d2),
- * and only when it can beat or tie the best so far, the smallest id among the points at
- * exactly that distance. The result is that of offering every point in turn with the
- * (distance, id) order, which is what the other scans do.
+ * and only when it can beat or tie the best so far, which point has it. The best is kept
+ * as a slot, and ids are read only to break a tie (several points at the same distance),
+ * which is what offering every point in turn with the (distance, id) order gives. The
+ * point's id is read once, at the end (knn1): in a tree larger than the cache an id is a
+ * miss of its own, and reading it here would put that miss between the scan and every
+ * decision after it.
  */
 static inline void scan_one(const qk_tree_t *t, qk_node_t leaf, double qx, double qy, best_t *b) {
   const uint32_t start = qk__node_start(t, leaf), count = qk__node_count(t, leaf);
   const double *xs = qk__tree_xs(t) + start, *ys = qk__tree_ys(t) + start;
-  const qk_id_t *ids = qk__tree_ids(t) + start;
+  const qk_id_t *pid = qk__tree_ids(t);
   double d2[QK__SCAN_CHUNK];
   for (uint32_t base = 0; base < count; base += QK__SCAN_CHUNK) {
     const uint32_t m = count - base < QK__SCAN_CHUNK ? count - base : QK__SCAN_CHUNK;
     const double lo = leaf_d2(xs + base, ys + base, m, qx, qy, d2);
     if (lo > b->thr) continue;
-    qk_id_t id = QK_NONE;
-    for (uint64_t at = equal_mask(d2, m, lo); at; at &= at - 1) {
-      const qk_id_t v = ids[base + ctz64(at)];
-      if (v < id) id = v;
+    const uint64_t at = equal_mask(d2, m, lo);
+    uint32_t s = start + base + ctz64(at);
+    if (at & (at - 1)) { /* several points at that distance: the smallest id wins */
+      for (uint64_t r = at & (at - 1); r; r &= r - 1) {
+        const uint32_t s2 = start + base + ctz64(r);
+        if (pid[s2] < pid[s]) s = s2;
+      }
     }
-    if (lo < b->thr || id < b->one) {
+    if (lo < b->thr || b->slot == QK_NONE || pid[s] < pid[b->slot]) {
       b->thr = lo;
-      b->one = id;
+      b->slot = s;
     }
   }
 }
@@ -242,7 +248,7 @@ static inline void scan_sorted(const qk_tree_t *t, qk_node_t leaf, double qx, do
   }
 }
 
-/* Scan a leaf into the best-so-far set. For KIND_ONE, the best is (b->thr, b->one). */
+/* Scan a leaf into the best-so-far set. For KIND_ONE, the best is (b->thr, b->slot). */
 static QK__ALWAYS_INLINE void scan(const qk_tree_t *t, qk_node_t leaf, double qx, double qy,
                                    best_t *b, int kind) {
   if (kind == KIND_SORTED)
@@ -270,13 +276,6 @@ static QK__ALWAYS_INLINE void drain(const qk_tree_t *t, double qx, double qy, do
   }
 }
 
-/*
- * The search. For a query inside the root, first straight down to the leaf that holds it
- * (by the tie rules, no bounds), which usually sets the threshold near its final value;
- * then back up that path, each level's other children bounded from the path's square and
- * searched, nearest first, before the level above. A query outside the root starts with
- * the root on the stack.
- */
 /* Scan the leaf at the end of a path, then climb it: each level's other children are
  * bounded from the path's square and searched, nearest first, before the level above. */
 static QK__ALWAYS_INLINE void climb(const qk_tree_t *t, double qx, double qy, best_t *b, int kind,
@@ -331,8 +330,8 @@ static size_t knn1(const qk_tree_t *t, double qx, double qy, double limit2, qk_n
                    const qk__path_t *path) {
   best_t b = {out, 1, 0, limit2, QK_NONE};
   search(t, qx, qy, &b, KIND_ONE, path);
-  if (b.one == QK_NONE) return 0;
-  out[0] = (qk_neighbor_t){b.one, b.thr};
+  if (b.slot == QK_NONE) return 0;
+  out[0] = (qk_neighbor_t){qk__tree_ids(t)[b.slot], b.thr};
   return 1;
 }
 
