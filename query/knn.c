@@ -13,6 +13,8 @@
  * sorted by insertion (few candidates enter, and no final sort is needed); beyond that a
  * bounded max-heap (query/heap.c).
  */
+#include <string.h>
+
 #include "query/query_internal.h"
 
 #if defined(__SSE2__)
@@ -229,23 +231,29 @@ static inline void scan_sorted(const qk_tree_t *t, qk_node_t leaf, double qx, do
   const qk_id_t *pid = qk__tree_ids(t) + start;
   qk_neighbor_t *o = b->out;
   const size_t k = b->k;
+  /* In locals: the stores into o could alias them. */
+  size_t n = b->n;
+  double thr = b->thr;
   for (uint32_t i = 0; i < count; i++) {
     const double dx = px[i] - qx, dy = py[i] - qy;
     const double d2 = dx * dx + dy * dy;
-    if (d2 > b->thr) continue;
+    if (d2 > thr) continue;
     const qk_id_t id = pid[i];
     qk_neighbor_t *at;
-    if (b->n == k) {
+    if (n == k) {
       if (!qk__nb_less(d2, id, o[k - 1].dist, o[k - 1].id)) continue;
       at = o + k - 1;
     } else {
-      at = o + b->n++;
+      at = o + n++;
     }
-    for (; at > o && at[-1].dist > d2; at--) *at = at[-1];
-    for (; at > o && at[-1].dist == d2 && at[-1].id > id; at--) *at = at[-1];
+    /* o[-1] is a sentinel at distance -infinity (knn_search), so no bound check. */
+    for (; at[-1].dist > d2; at--) *at = at[-1];
+    for (; at[-1].dist == d2 && at[-1].id > id; at--) *at = at[-1];
     *at = (qk_neighbor_t){id, d2};
-    if (b->n == k) b->thr = o[k - 1].dist;
+    if (n == k) thr = o[k - 1].dist;
   }
+  b->n = n;
+  b->thr = thr;
 }
 
 /* Scan a leaf into the best-so-far set. For KIND_ONE, the best is (b->thr, b->slot). */
@@ -340,7 +348,13 @@ static size_t knn_search(const qk_tree_t *t, double qx, double qy, size_t k, dou
                          qk_neighbor_t *out, const qk__path_t *path) {
   best_t b = {out, k, 0, limit2, QK_NONE};
   if (k <= QK__KNN_SORTED) {
+    /* The sorted array lives here, after a sentinel that ends every insertion's shift
+     * without a bound check; copied out at the end. */
+    qk_neighbor_t sorted[QK__KNN_SORTED + 1];
+    sorted[0] = (qk_neighbor_t){QK_NONE, -INFINITY};
+    b.out = sorted + 1;
     search(t, qx, qy, &b, KIND_SORTED, path);
+    memcpy(out, sorted + 1, b.n * sizeof *out);
   } else {
     search(t, qx, qy, &b, KIND_HEAP, path);
     qk__heap_sort(out, b.n);
