@@ -8,10 +8,10 @@
  * leaf nearest the query and leaves its siblings, level by level, on the stack, so the
  * search never walks that path twice.
  *
- * The best so far live in the caller's buffer, so a query allocates nothing: for k = 1 a
- * single (distance, id) pair in registers; for k up to QK__KNN_SORTED an array kept
- * sorted by insertion (few candidates enter, and no final sort is needed); beyond that a
- * bounded max-heap (query/heap.c).
+ * A query allocates nothing: for k = 1 the best so far is a single (distance, slot) pair
+ * in registers, its id read once at the end; for k up to QK__KNN_SORTED an array on the
+ * stack kept sorted by insertion (few candidates enter, and no final sort is needed);
+ * beyond that a bounded max-heap in the caller's buffer (query/heap.c).
  */
 #include <string.h>
 
