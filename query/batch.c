@@ -11,6 +11,9 @@
 
 #include "query/query_internal.h"
 
+/* How many places ahead in Z-order a kNN batch asks for a query and its answer slots. */
+#define QK__BATCH_AHEAD 8
+
 /* ---- kNN ------------------------------------------------------------------------- */
 
 typedef struct knn_job {
@@ -35,6 +38,19 @@ static void knn_share(void *ctx, unsigned w, unsigned nw) {
   qk__path_init(j->t, &path);
   for (size_t jj = lo; jj < hi; jj++) {
     size_t i = j->order ? j->order[jj] : jj;
+    if (j->order && jj + QK__BATCH_AHEAD < hi) {
+      /* In Z-order the queries and their answers are read and written at random: ask for
+       * those of a query a few places ahead, so that their misses overlap the searches. */
+      const size_t a = j->order[jj + QK__BATCH_AHEAD];
+      QK__PREFETCH(&j->qs[a]);
+      if (j->out && j->k) {
+        const char *row = (const char *)&j->out[a * j->k];
+        const size_t bytes = j->k * sizeof(qk_neighbor_t);
+        for (size_t off = 0; off < bytes && off < 16 * 64; off += 64) QK__PREFETCH_W(row + off);
+        QK__PREFETCH_W(row + bytes - 1);
+      }
+      if (j->counts) QK__PREFETCH_W(&j->counts[a]);
+    }
     const qk_point_t q = j->qs[i];
     qk_neighbor_t *o = j->out ? j->out + i * j->k : NULL;
     size_t n = 0;

@@ -8,11 +8,13 @@
  * leaf nearest the query and leaves its siblings, level by level, on the stack, so the
  * search never walks that path twice.
  *
- * The best so far live in the caller's buffer, so a query allocates nothing: for k = 1 a
- * single (distance, id) pair in registers; for k up to QK__KNN_SORTED an array kept
- * sorted by insertion (few candidates enter, and no final sort is needed); beyond that a
- * bounded max-heap (query/heap.c).
+ * A query allocates nothing: for k = 1 the best so far is a single (distance, slot) pair
+ * in registers, its id read once at the end; for k up to QK__KNN_SORTED an array on the
+ * stack kept sorted by insertion (few candidates enter, and no final sort is needed);
+ * beyond that a bounded max-heap in the caller's buffer (query/heap.c).
  */
+#include <string.h>
+
 #include "query/query_internal.h"
 
 #if defined(__SSE2__)
@@ -26,8 +28,8 @@
 typedef struct best {
   qk_neighbor_t *out; /* sorted array or heap, on squared distances */
   size_t k, n;
-  double thr;  /* prune strictly above this: the cap until full, then the k-th best */
-  qk_id_t one; /* k = 1: the best id so far (its squared distance is thr), or QK_NONE */
+  double thr;    /* prune strictly above this: the cap until full, then the k-th best */
+  uint32_t slot; /* k = 1: the best point's slot (its squared distance is thr), or QK_NONE */
 } best_t;
 
 /* Offer a leaf's points to a heap of at most k. */
@@ -187,27 +189,33 @@ static inline uint64_t equal_mask(const double *d2, uint32_t m, double v) {
 
 /*
  * The k = 1 leaf scan, in two steps per chunk: the smallest squared distance (leaf_d2),
- * and only when it can beat or tie the best so far, the smallest id among the points at
- * exactly that distance. The result is that of offering every point in turn with the
- * (distance, id) order, which is what the other scans do.
+ * and only when it can beat or tie the best so far, which point has it. The best is kept
+ * as a slot, and ids are read only to break a tie (several points at the same distance),
+ * which is what offering every point in turn with the (distance, id) order gives. The
+ * point's id is read once, at the end (knn1): in a tree larger than the cache an id is a
+ * miss of its own, and reading it here would put that miss between the scan and every
+ * decision after it.
  */
 static inline void scan_one(const qk_tree_t *t, qk_node_t leaf, double qx, double qy, best_t *b) {
   const uint32_t start = qk__node_start(t, leaf), count = qk__node_count(t, leaf);
   const double *xs = qk__tree_xs(t) + start, *ys = qk__tree_ys(t) + start;
-  const qk_id_t *ids = qk__tree_ids(t) + start;
+  const qk_id_t *pid = qk__tree_ids(t);
   double d2[QK__SCAN_CHUNK];
   for (uint32_t base = 0; base < count; base += QK__SCAN_CHUNK) {
     const uint32_t m = count - base < QK__SCAN_CHUNK ? count - base : QK__SCAN_CHUNK;
     const double lo = leaf_d2(xs + base, ys + base, m, qx, qy, d2);
     if (lo > b->thr) continue;
-    qk_id_t id = QK_NONE;
-    for (uint64_t at = equal_mask(d2, m, lo); at; at &= at - 1) {
-      const qk_id_t v = ids[base + ctz64(at)];
-      if (v < id) id = v;
+    const uint64_t at = equal_mask(d2, m, lo);
+    uint32_t s = start + base + ctz64(at);
+    if (at & (at - 1)) { /* several points at that distance: the smallest id wins */
+      for (uint64_t r = at & (at - 1); r; r &= r - 1) {
+        const uint32_t s2 = start + base + ctz64(r);
+        if (pid[s2] < pid[s]) s = s2;
+      }
     }
-    if (lo < b->thr || id < b->one) {
+    if (lo < b->thr || b->slot == QK_NONE || pid[s] < pid[b->slot]) {
       b->thr = lo;
-      b->one = id;
+      b->slot = s;
     }
   }
 }
@@ -223,26 +231,77 @@ static inline void scan_sorted(const qk_tree_t *t, qk_node_t leaf, double qx, do
   const qk_id_t *pid = qk__tree_ids(t) + start;
   qk_neighbor_t *o = b->out;
   const size_t k = b->k;
+  /* In locals: the stores into o could alias them. */
+  size_t n = b->n;
+  double thr = b->thr;
   for (uint32_t i = 0; i < count; i++) {
     const double dx = px[i] - qx, dy = py[i] - qy;
     const double d2 = dx * dx + dy * dy;
-    if (d2 > b->thr) continue;
+    if (d2 > thr) continue;
     const qk_id_t id = pid[i];
     qk_neighbor_t *at;
-    if (b->n == k) {
+    if (n == k) {
       if (!qk__nb_less(d2, id, o[k - 1].dist, o[k - 1].id)) continue;
       at = o + k - 1;
     } else {
-      at = o + b->n++;
+      at = o + n++;
     }
-    for (; at > o && at[-1].dist > d2; at--) *at = at[-1];
-    for (; at > o && at[-1].dist == d2 && at[-1].id > id; at--) *at = at[-1];
+    /* o[-1] is a sentinel at distance -infinity (knn_search), so no bound check. */
+    for (; at[-1].dist > d2; at--) *at = at[-1];
+    for (; at[-1].dist == d2 && at[-1].id > id; at--) *at = at[-1];
     *at = (qk_neighbor_t){id, d2};
-    if (b->n == k) b->thr = o[k - 1].dist;
+    if (n == k) thr = o[k - 1].dist;
+  }
+  b->n = n;
+  b->thr = thr;
+}
+
+/* Ask for the x and y lines of a leaf's first points (at most 64). */
+static inline void prefetch_points(const qk_tree_t *t, qk_node_t leaf) {
+  const uint32_t start = qk__node_start(t, leaf), count = qk__node_count(t, leaf);
+  const uint32_t m = count < 64 ? count : 64;
+  if (m == 0) return;
+  const double *xs = qk__tree_xs(t) + start, *ys = qk__tree_ys(t) + start;
+  /* A line every 8 doubles, and the last point's, which the steps miss when the leaf does
+   * not start on a line. */
+  for (uint32_t i = 0; i < m; i += 8) {
+    QK__PREFETCH(xs + i);
+    QK__PREFETCH(ys + i);
+  }
+  QK__PREFETCH(xs + m - 1);
+  QK__PREFETCH(ys + m - 1);
+}
+
+/*
+ * Before a 1-NN search scans the leaf at the end of path p, ask for what its climb most
+ * often reads at a cache miss of its own: the nodes below the leaf's parent's siblings
+ * (the "uncles"), or their points when they are leaves. When the nearest point lies
+ * across the parent's edge, the climb reaches an uncle, and without this it would read
+ * the uncle's children and then their points one miss after the other, each after the
+ * scan that admitted them. The uncles' own nodes share a block with the parent, which the
+ * descent just read, so choosing costs no miss. The leaf's siblings are not asked for:
+ * their points lie next to the leaf's in memory (leaves are stored in Z-order), and in an
+ * A/B at 1M uniform points asking for them cost more than it saved, as did this for
+ * k = 8 and 32, whose searches are bound by their insertions rather than by misses. Only
+ * hints: the search is the same.
+ */
+static inline void prefetch_uncles(const qk_tree_t *t, const qk__path_t *p) {
+  if (p->len < 2) return;
+  const unsigned g = p->len - 2; /* the grandparent's level */
+  const uint32_t first = qk__node_child(t, p->cell[g].node);
+  for (unsigned q = 0; q < 4; q++) {
+    if (q == p->q[g]) continue;
+    const uint32_t c = qk__node_child(t, first + q);
+    if (c == QK_NONE) {
+      prefetch_points(t, first + q);
+    } else {
+      qk__node_prefetch(t, c); /* the block of four children spans one or two lines */
+      qk__node_prefetch(t, c + 3);
+    }
   }
 }
 
-/* Scan a leaf into the best-so-far set. For KIND_ONE, the best is (b->thr, b->one). */
+/* Scan a leaf into the best-so-far set. For KIND_ONE, the best is (b->thr, b->slot). */
 static QK__ALWAYS_INLINE void scan(const qk_tree_t *t, qk_node_t leaf, double qx, double qy,
                                    best_t *b, int kind) {
   if (kind == KIND_SORTED)
@@ -270,13 +329,6 @@ static QK__ALWAYS_INLINE void drain(const qk_tree_t *t, double qx, double qy, do
   }
 }
 
-/*
- * The search. For a query inside the root, first straight down to the leaf that holds it
- * (by the tie rules, no bounds), which usually sets the threshold near its final value;
- * then back up that path, each level's other children bounded from the path's square and
- * searched, nearest first, before the level above. A query outside the root starts with
- * the root on the stack.
- */
 /* Scan the leaf at the end of a path, then climb it: each level's other children are
  * bounded from the path's square and searched, nearest first, before the level above. */
 static QK__ALWAYS_INLINE void climb(const qk_tree_t *t, double qx, double qy, best_t *b, int kind,
@@ -286,6 +338,7 @@ static QK__ALWAYS_INLINE void climb(const qk_tree_t *t, double qx, double qy, be
   int sp = 0;
   qk__cell_t c = p->leaf;
   unsigned len = p->len;
+  if (kind == KIND_ONE) prefetch_uncles(t, p);
   scan(t, c.node, qx, qy, b, kind);
   while (len > 0) {
     /* Everything inside c is done. When the threshold's ball lies inside c's square
@@ -331,8 +384,8 @@ static size_t knn1(const qk_tree_t *t, double qx, double qy, double limit2, qk_n
                    const qk__path_t *path) {
   best_t b = {out, 1, 0, limit2, QK_NONE};
   search(t, qx, qy, &b, KIND_ONE, path);
-  if (b.one == QK_NONE) return 0;
-  out[0] = (qk_neighbor_t){b.one, b.thr};
+  if (b.slot == QK_NONE) return 0;
+  out[0] = (qk_neighbor_t){qk__tree_ids(t)[b.slot], b.thr};
   return 1;
 }
 
@@ -341,7 +394,13 @@ static size_t knn_search(const qk_tree_t *t, double qx, double qy, size_t k, dou
                          qk_neighbor_t *out, const qk__path_t *path) {
   best_t b = {out, k, 0, limit2, QK_NONE};
   if (k <= QK__KNN_SORTED) {
+    /* The sorted array lives here, after a sentinel that ends every insertion's shift
+     * without a bound check; copied out at the end. */
+    qk_neighbor_t sorted[QK__KNN_SORTED + 1];
+    sorted[0] = (qk_neighbor_t){QK_NONE, -INFINITY};
+    b.out = sorted + 1;
     search(t, qx, qy, &b, KIND_SORTED, path);
+    memcpy(out, sorted + 1, b.n * sizeof *out);
   } else {
     search(t, qx, qy, &b, KIND_HEAP, path);
     qk__heap_sort(out, b.n);

@@ -141,8 +141,10 @@ void qk__morton_free(const qk_tree_t *t, void *block, size_t nq);
 #define QK__LANES 8
 #if defined(__GNUC__)
 #define QK__PREFETCH(p) __builtin_prefetch(p)
+#define QK__PREFETCH_W(p) __builtin_prefetch((p), 1)
 #else
 #define QK__PREFETCH(p) ((void)(p))
+#define QK__PREFETCH_W(p) ((void)(p))
 #endif
 
 /*

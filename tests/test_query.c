@@ -7,6 +7,8 @@
  *    ones, with and without a distance cap, ties broken by id (duplicates, grid points);
  *  - kNN on leaves far over capacity (several scan chunks, many equal distances), k
  *    around the sorted-array limit, single and batch;
+ *  - 1-NN ties on a duplicated dyadic grid (within a chunk, across leaves), caps equal to
+ *    a grid distance, queries far outside, k above the point count, single and batch;
  *  - batch kNN (Z-order, each query starting from the previous path) on every point set
  *    and capacity, one and two threads, against brute force;
  *  - kNN after random inserts and removals (qk_tree_check after each batch);
@@ -585,6 +587,75 @@ static void test_query_knn_batch_paths(void **state) {
   free(p), free(qs), free(got), free(want), free(counts);
 }
 
+/*
+ * The k = 1 search keeps its best as a point slot and reads ids only to break ties
+ * (issue 11): points on a dyadic grid, many duplicated, with ids in random order, so that
+ * queries on grid points and cell centres see exact ties within a leaf, within one scan
+ * chunk and across sibling and non-sibling leaves; caps equal to a grid distance (a point
+ * exactly at the cap counts); queries far outside the root; k larger than the tree.
+ * Single and batch calls (the batch is large enough to be answered in Z-order with its
+ * look-ahead) against brute force.
+ */
+static void test_query_knn1_ties(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 13);
+  const size_t n = 1500, nq = 400;
+  qk_point_t *p = malloc(n * sizeof *p), *qs = malloc(nq * sizeof *qs);
+  qk_neighbor_t *got = malloc(nq * 4 * sizeof *got), want[4];
+  size_t *counts = malloc(nq * sizeof *counts);
+  for (size_t i = 0; i < n; i++) /* 17 x 17 grid points, about 5 points at each */
+    p[i] = (qk_point_t){qkt_rng_below(&r, 17) / 16.0, qkt_rng_below(&r, 17) / 16.0};
+  for (size_t i = 0; i < nq; i++) {
+    switch (i % 5) {
+    case 0: /* a grid point (often a stored one) */
+      qs[i] = (qk_point_t){qkt_rng_below(&r, 17) / 16.0, qkt_rng_below(&r, 17) / 16.0};
+      break;
+    case 1: /* a cell centre: four grid points at the same distance */
+      qs[i] = (qk_point_t){(2.0 * qkt_rng_below(&r, 16) + 1) / 32.0,
+                           (2.0 * qkt_rng_below(&r, 16) + 1) / 32.0};
+      break;
+    case 2: /* far outside */
+      qs[i] = (qk_point_t){qkt_rng_range(&r, -1e6, 1e6), i % 2 ? 1e6 : -3.0};
+      break;
+    default:
+      qs[i] = rand_loc(&r);
+    }
+  }
+  const double limits[] = {INFINITY, 1.0 / 16, 1.0 / 32};
+  for (size_t c = 0; c < 3; c++) {
+    qk_tree_t *t = build(p, n, caps[c]);
+    for (size_t li = 0; li < 3; li++) {
+      const double cap = limits[li];
+      for (size_t i = 0; i < nq; i++) {
+        size_t ng;
+        assert_int_equal(qk_query_knn(t, qs[i], 1, cap, got, &ng), QK_OK);
+        size_t nw = qko_knn(p, NULL, n, qs[i], 1, cap, want);
+        assert_nb_equal(got, ng, want, nw, "knn1-ties", c * 10000 + li * 1000 + i);
+      }
+      assert_int_equal(qk_query_knn_batch(t, qs, nq, 1, cap, got, counts), QK_OK);
+      for (size_t i = 0; i < nq; i++) {
+        size_t nw = qko_knn(p, NULL, n, qs[i], 1, cap, want);
+        assert_nb_equal(got + i, counts[i], want, nw, "knn1-ties-batch", c * 10000 + li * 1000 + i);
+      }
+    }
+    qk_tree_free(t);
+  }
+  /* More neighbours asked for than the tree holds: all of them, by (distance, id). */
+  qk_tree_t *t = build(p, 3, 1);
+  for (size_t k = 1; k <= 4; k++) {
+    assert_int_equal(qk_query_knn_batch(t, qs, nq, k, INFINITY, got, counts), QK_OK);
+    for (size_t i = 0; i < nq; i++) {
+      size_t ng, nw = qko_knn(p, NULL, 3, qs[i], k, INFINITY, want);
+      assert_nb_equal(got + i * k, counts[i], want, nw, "knn-k-over-n-batch", k * 1000 + i);
+      assert_int_equal(qk_query_knn(t, qs[i], k, INFINITY, got, &ng), QK_OK);
+      assert_nb_equal(got, ng, want, nw, "knn-k-over-n", k * 1000 + i);
+    }
+  }
+  qk_tree_free(t);
+  free(p), free(qs), free(got), free(counts);
+}
+
 static void test_query_cities(void **state) {
   (void)state;
   size_t n;
@@ -622,6 +693,7 @@ int main(void) {
       cmocka_unit_test(test_query_batch_nomem),    cmocka_unit_test(test_query_stop_and_bad_args),
       cmocka_unit_test(test_query_threads),        cmocka_unit_test(test_query_cities),
       cmocka_unit_test(test_query_knn_big_leaves), cmocka_unit_test(test_query_knn_batch_paths),
+      cmocka_unit_test(test_query_knn1_ties),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
