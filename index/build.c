@@ -1,16 +1,29 @@
 /*
- * Bulk build by bucketing: one pass computes, for every point, the cell of the uniform
- * 2^L x 2^L grid over the root square that the tree's own tie rules send it to; a counting
- * sort by that cell number lays the points out in the tree's pre-order (children NE, NW,
- * SW, SE); the top L levels of the tree are then read off the bucket counts without
- * touching a point, and only buckets still over capacity are split further, by the plain
- * comparison-based partition (qk__split), in cache.
+ * Bulk build by bucketing: every point's cell in the uniform 2^L x 2^L grid over the root
+ * square (the cell the tree's own comparisons send it to), a two-digit MSD radix sort of
+ * the points by cell number in the tree's pre-order (children NE, NW, SW, SE), then the top
+ * L levels of the tree read off the bucket counts without touching a point; only buckets
+ * still over capacity are split further, by the plain partition (qk__split), in cache.
  *
- * The result is the same tree as the plain recursive build: the cell number of a point is
- * computed by scaling its coordinates, which can differ from the tree's comparisons only
- * for a point within rounding distance of a grid line; such points (rare) take the exact
- * route, the same comparisons the tree makes. When the root's coordinates are so badly
- * conditioned that no safe margin exists, the caller falls back to the plain build.
+ * The passes, each split over threads (shares of the input, or jobs taken from a counter):
+ *  1. keys: the cell number of every point (2L bits) and, per share, a histogram of its
+ *     high digit (the cell's top ceil(L/2) levels, at most 256 coarse buckets);
+ *  2. scatter: each point with its id and cell as a 24-byte record into its coarse bucket
+ *     (at most 256 write streams, so the writes stay sequential per stream);
+ *  3. per coarse bucket (a job each, its records now in cache): a histogram of the low
+ *     digit, the fine buckets' slot ranges, and the records' coordinates and ids written
+ *     to the tree's point arrays in cell order;
+ *  4. the tree from the bucket counts (subtrees below depth 3 as jobs).
+ * Both digits are counting sorts that keep input order, so the points of a cell keep
+ * their input order and the result is the same for any number of threads.
+ *
+ * The cell of a point is its truncated scaled coordinate, corrected by one step against
+ * the grid lines as the tree computes them (the corner arithmetic of every descent, one
+ * addition per level), so that it is exactly the cell of the tree's comparisons: the
+ * tree's descent is a binary search over those lines, and the cell is the number of lines
+ * a coordinate lies east (north) of. The correction step suffices when the scaling errs by
+ * less than a cell; when the root's coordinates are so badly conditioned that this is not
+ * certain, the caller falls back to the plain build.
  */
 #include <float.h>
 #include <math.h>
@@ -18,43 +31,61 @@
 
 #include "index/index_access.h"
 
-/* Cell digit of one level from the east and north bits: NE=0, NW=1, SW=2, SE=3. */
-static inline uint32_t digit(unsigned east, unsigned north) {
-  return ((north ^ 1u) << 1) | (east ^ north);
-}
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
-/* The exact cell number of (x, y): the tree's own comparisons for L levels. */
-static uint32_t exact_cell(const qk_tree_t *t, double x, double y, unsigned L) {
-  double cx = t->root_x, cy = t->root_y;
-  uint32_t key = 0;
-  for (unsigned d = 0; d < L; d++) {
-    double half = t->side[d + 1];
-    unsigned e = x > cx + half, n = y > cy + half;
-    if (e) cx += half;
-    if (n) cy += half;
-    key = (key << 2) | digit(e, n);
+/* The grid lines along one axis as the tree computes them: line k (0 < k < 2^L) splits
+ * the node of depth d = L - 1 - ctz(k) whose lower corner is the origin plus the sides of
+ * the levels where k's top d bits are set, added in order from the top; it lies at that
+ * corner plus the side of depth d + 1. g[0] is -inf, g[2^L] and g[2^L + 1] are +inf. False
+ * when the lines are not in order (rounding in a badly conditioned root). */
+static bool grid_lines(const qk_tree_t *t, double origin, unsigned L, double *g) {
+  uint32_t cells = 1u << L;
+  g[0] = -INFINITY;
+  g[cells] = g[cells + 1] = INFINITY;
+  for (uint32_t k = 1; k < cells; k++) {
+    unsigned tz = 0;
+    while (!((k >> tz) & 1u)) tz++;
+    unsigned d = L - 1 - tz;
+    double c = origin;
+    for (unsigned j = 0; j < d; j++)
+      if ((k >> (L - 1 - j)) & 1u) c += t->side[j + 1];
+    g[k] = c + t->side[d + 1];
   }
-  return key;
+  for (uint32_t k = 2; k < cells; k++)
+    if (g[k] < g[k - 1]) return false;
+  return true;
 }
 
-/* qk__spread16 of every byte, as a table: the cell pass computes two spreads per point,
- * and two loads from a 512-byte table cost a tenth of the shifts and masks. */
-#define SPREAD2(n) n, n + 1, n + 4, n + 5
-#define SPREAD4(n) SPREAD2(n), SPREAD2(n + 16), SPREAD2(n + 64), SPREAD2(n + 80)
-#define SPREAD6(n) SPREAD4(n), SPREAD4(n + 256), SPREAD4(n + 1024), SPREAD4(n + 1280)
-static const uint16_t spread8[256] = {SPREAD6(0), SPREAD6(4096), SPREAD6(16384), SPREAD6(20480)};
+/*
+ * One axis's tables for the key pass. A coordinate v scaled to grid units and truncated
+ * gives a first guess c in [0, 2^L], off by at most one cell; the lines on either side of
+ * guess c, line[c] = (g[c], g[c + 1]), settle it: with m the two bits (v > g[c],
+ * v > g[c + 1]), the cell is c - 1 + popcount(m). dig[4c + m] holds that cell's key bits
+ * along this axis: a cell's key is dig_x ^ dig_y, two bits per level, the digit NE=0, NW=1,
+ * SW=2, SE=3 from the east bit e and north bit n as ((n ^ 1) << 1) | (e ^ n).
+ */
+typedef struct axis_tab {
+  double line[257][2];
+  uint16_t dig[257 * 4];
+} axis_tab_t;
 
-/* The cell of a point at (qx, qy) in grid units, by truncation, when the point is at least
- * `delta` away from every grid line (so truncation agrees with the tree's comparisons);
- * false otherwise. Truncation is floor here: negative values fail the range test. */
-static inline bool scaled_cell(double qx, double qy, double cells, double delta, uint32_t *k) {
-  if (!(qx >= delta && qy >= delta && qx < cells - delta && qy < cells - delta)) return false;
-  uint32_t ix = (uint32_t)qx, iy = (uint32_t)qy;
-  double fx = qx - ix, fy = qy - iy;
-  if (!(fx >= delta && fx <= 1 - delta && fy >= delta && fy <= 1 - delta)) return false;
-  uint32_t top = (uint32_t)cells - 1;
-  *k = (uint32_t)(spread8[~iy & top] << 1) | spread8[ix ^ iy]; /* L <= 8 */
-  return true;
+static void axis_tables(const double *g, unsigned L, bool north, axis_tab_t *a) {
+  uint32_t cells = 1u << L, top = cells - 1;
+  uint32_t mask = (uint32_t)qk__spread16(top); /* the even bits of the key */
+  for (uint32_t c = 0; c <= cells; c++) {
+    a->line[c][0] = g[c];
+    a->line[c][1] = g[c + 1];
+    for (uint32_t m = 0; m < 4; m++) {
+      int cell = (int)c - 1 + (int)(m & 1u) + (int)(m >> 1);
+      uint32_t i = cell < 0 ? 0u : cell > (int)top ? top : (uint32_t)cell;
+      uint32_t s = (uint32_t)qk__spread16(i);
+      /* east bits go to the low bit of every digit; north bits to both, the high one
+       * inverted */
+      a->dig[4 * c + m] = (uint16_t)(north ? (((s ^ mask) << 1) ^ s) : s);
+    }
+  }
 }
 
 /* A node of the top levels still over capacity, whose subtree is built on its own: the
@@ -196,7 +227,7 @@ static qk_status_t from_grid(qk_tree_t *t, qk__geom_t g, const uint32_t *cum, un
   memset(own, 0, n * sizeof *own);
   for (size_t i = 0; i < n && st == QK_OK; i++) st = sub_init(t, &list[i], &own[i]);
   sub_job_t j = {t, cum, L, list, own, sts};
-  if (st == QK_OK) qk__run_jobs(nw, (unsigned)n, sub_build, &j);
+  if (st == QK_OK) qk__run_jobs_dynamic(nw, (unsigned)n, sub_build, &j);
   size_t extra = 0;
   for (size_t i = 0; i < n; i++) {
     if (st == QK_OK && sts[i]) st = sts[i];
@@ -213,65 +244,106 @@ static qk_status_t from_grid(qk_tree_t *t, qk__geom_t g, const uint32_t *cum, un
   return st;
 }
 
-/* What the parallel phases of the bucketed build share. Share w of nw covers the points
- * [lo, hi) of qk__share_range(n, w, nw) in the first two phases and the slots of the same
- * range in the gather. */
+/* What the parallel phases of the bucketed build share. Shares of the input (passes 1 and
+ * 2) cover the points qk__share_range(n, w, nw); pass 3 runs one job per coarse bucket. */
+typedef struct rec {
+  double x, y;
+  uint32_t id, key;
+} rec_t;
+
 typedef struct bucket_job {
   qk_tree_t *t;
   const qk_point_t *p;
-  size_t n, nb;
-  double x0, y0, scale, cells, delta;
-  unsigned L;
+  size_t n;
+  double x0, y0, scale;
+  const axis_tab_t *ax, *ay; /* the key tables of the two axes */
+  unsigned L, fbits;         /* levels of the grid; bits of the low digit */
+  size_t nc;                 /* coarse buckets */
   uint16_t *key;
-  uint32_t *order;
-  uint32_t *hist; /* nw rows of nb: counts, then each share's next slot per bucket */
+  rec_t *rec;
+  uint32_t *hist;  /* nw rows of nc: counts, then each share's next record per bucket */
+  uint32_t *cbase; /* nc + 1 coarse bucket starts */
+  uint32_t *cum;   /* 4^L + 1 fine bucket starts */
 } bucket_job_t;
 
-/* Phase 1: every point's cell, and this share's count per cell. The job's fields are
- * copied to locals: the stores to key[] and h[] could otherwise alias them. */
-static void cells_share(void *ctx, unsigned w, unsigned nw) {
+/* Pass 1: every point's cell, and this share's count per coarse bucket. The job's fields
+ * are copied to locals: the stores to key[] and h[] could otherwise alias them. */
+static void keys_share(void *ctx, unsigned w, unsigned nw) {
   const bucket_job_t *j = ctx;
   size_t lo, hi;
   qk__share_range(j->n, w, nw, &lo, &hi);
-  uint32_t *h = j->hist + (size_t)w * j->nb;
+  uint32_t *h = j->hist + (size_t)w * j->nc;
   const qk_point_t *p = j->p;
   uint16_t *key = j->key;
-  const double x0 = j->x0, y0 = j->y0, scale = j->scale, cells = j->cells, delta = j->delta;
+  const axis_tab_t *ax = j->ax, *ay = j->ay;
+  const unsigned fbits = j->fbits;
+#if defined(__SSE2__)
+  /* Both axes at once: scale, truncate, and compare with the two lines of each guess. */
+  const __m128d o = _mm_setr_pd(j->x0, j->y0), sc = _mm_set1_pd(j->scale);
   for (size_t i = lo; i < hi; i++) {
-    uint32_t k;
-    if (!scaled_cell((p[i].x - x0) * scale, (p[i].y - y0) * scale, cells, delta, &k))
-      k = exact_cell(j->t, p[i].x, p[i].y, j->L); /* near a grid line: the tree's tests */
+    __m128d v = _mm_loadu_pd(&p[i].x);
+    __m128i c = _mm_cvttpd_epi32(_mm_mul_pd(_mm_sub_pd(v, o), sc));
+    uint32_t cx = (uint32_t)_mm_cvtsi128_si32(c), cy = (uint32_t)_mm_extract_epi16(c, 2);
+    int mx = _mm_movemask_pd(_mm_cmpgt_pd(_mm_unpacklo_pd(v, v), _mm_loadu_pd(ax->line[cx])));
+    int my = _mm_movemask_pd(_mm_cmpgt_pd(_mm_unpackhi_pd(v, v), _mm_loadu_pd(ay->line[cy])));
+    uint32_t k = (uint32_t)(ax->dig[4 * cx + (uint32_t)mx] ^ ay->dig[4 * cy + (uint32_t)my]);
     key[i] = (uint16_t)k;
-    h[k]++;
+    h[k >> fbits]++;
+  }
+#else
+  const double x0 = j->x0, y0 = j->y0, scale = j->scale;
+  for (size_t i = lo; i < hi; i++) {
+    double x = p[i].x, y = p[i].y;
+    uint32_t cx = (uint32_t)((x - x0) * scale), cy = (uint32_t)((y - y0) * scale);
+    uint32_t mx = (uint32_t)(x > ax->line[cx][0]) | (uint32_t)(x > ax->line[cx][1]) << 1;
+    uint32_t my = (uint32_t)(y > ay->line[cy][0]) | (uint32_t)(y > ay->line[cy][1]) << 1;
+    uint32_t k = (uint32_t)(ax->dig[4 * cx + mx] ^ ay->dig[4 * cy + my]);
+    key[i] = (uint16_t)k;
+    h[k >> fbits]++;
+  }
+#endif
+}
+
+/* Pass 2: the records into their coarse buckets, stable (shares are in point order). */
+static void scatter_share(void *ctx, unsigned w, unsigned nw) {
+  const bucket_job_t *j = ctx;
+  size_t lo, hi;
+  qk__share_range(j->n, w, nw, &lo, &hi);
+  uint32_t *next = j->hist + (size_t)w * j->nc;
+  const qk_point_t *p = j->p;
+  const uint16_t *key = j->key;
+  rec_t *rec = j->rec;
+  const unsigned fbits = j->fbits;
+  for (size_t i = lo; i < hi; i++) {
+    uint32_t k = key[i];
+    rec[next[k >> fbits]++] = (rec_t){p[i].x, p[i].y, (uint32_t)i, k};
   }
 }
 
-/* Phase 2: the counting sort's placement, stable (shares are in point order). */
-static void place_share(void *ctx, unsigned w, unsigned nw) {
-  bucket_job_t *j = ctx;
-  size_t lo, hi;
-  qk__share_range(j->n, w, nw, &lo, &hi);
-  uint32_t *next = j->hist + (size_t)w * j->nb;
-  for (size_t i = lo; i < hi; i++) j->order[next[j->key[i]]++] = (uint32_t)i;
-}
-
-/* Phase 3: the gather of the points in that order: random reads of one cache line per
- * point rather than random writes to three arrays. */
-static void gather_share(void *ctx, unsigned w, unsigned nw) {
-  bucket_job_t *j = ctx;
-  size_t lo, hi;
-  qk__share_range(j->n, w, nw, &lo, &hi);
-  qk_tree_t *t = j->t;
-  const qk_point_t *p = j->p;
-  for (size_t s = lo; s < hi; s++) {
-    uint32_t i = j->order[s];
-#if defined(__GNUC__)
-    /* The reads are random: ask for the point a few iterations ahead. */
-    if (s + 16 < hi) __builtin_prefetch(&p[j->order[s + 16]]);
-#endif
-    t->px[s] = p[i].x;
-    t->py[s] = p[i].y;
-    t->pid[s] = i;
+/* Pass 3: coarse bucket c sorted by its low digit into the point arrays, stable, and its
+ * fine buckets' starts. */
+static void fine_job(unsigned c, void *ud) {
+  const bucket_job_t *j = ud;
+  uint32_t a = j->cbase[c], b = j->cbase[c + 1];
+  const unsigned fbits = j->fbits;
+  const uint32_t nf = 1u << fbits, mask = nf - 1;
+  uint32_t next[256];
+  memset(next, 0, nf * sizeof *next);
+  const rec_t *rec = j->rec;
+  for (uint32_t s = a; s < b; s++) next[rec[s].key & mask]++;
+  uint32_t *cum = j->cum + (size_t)c * nf, acc = a;
+  for (uint32_t f = 0; f < nf; f++) {
+    uint32_t k = next[f];
+    cum[f] = next[f] = acc;
+    acc += k;
+  }
+  double *px = j->t->px, *py = j->t->py;
+  qk_id_t *pid = j->t->pid;
+  for (uint32_t s = a; s < b; s++) {
+    uint32_t d = next[rec[s].key & mask]++;
+    px[d] = rec[s].x;
+    py[d] = rec[s].y;
+    pid[d] = rec[s].id;
   }
 }
 
@@ -281,57 +353,63 @@ qk_status_t qk__build_bucketed(qk_tree_t *t, const qk_point_t *p, size_t n, bool
   while (L < 8 && L < t->max_depth && ((size_t)1 << (2 * (L + 1))) <= n / 4) L++;
   if (L < 2) return QK_OK;
   /* Margin in grid units: rounding of the corner arithmetic (at most one rounding per
-   * level) and of the scaling, with a factor of four to spare. */
+   * level) and of the scaling, with a factor of four to spare. Below a quarter cell, a
+   * truncated coordinate is off by at most one cell, which the key pass corrects. */
   double x0 = t->root_x, y0 = t->root_y, side = t->side[0];
   double M = fmax(fmax(fabs(x0), fabs(x0 + side)), fmax(fabs(y0), fabs(y0 + side)));
   double cells = (double)(1u << L), scale = cells / side;
   double ulpM = nextafter(M, INFINITY) - M;
   double delta = 4 * (((L + 2) * ulpM + 2 * ulpM) * scale + cells * 4 * DBL_EPSILON);
   if (!(delta < 0.25)) return QK_OK; /* badly conditioned: use the plain build */
+  double g[258];
+  axis_tab_t tabs[2];
+  if (!grid_lines(t, x0, L, g)) return QK_OK;
+  axis_tables(g, L, false, &tabs[0]);
+  if (!grid_lines(t, y0, L, g)) return QK_OK;
+  axis_tables(g, L, true, &tabs[1]);
 
-  size_t nb = (size_t)1 << (2 * L);
-  /* Threads: a share of fewer than 2^16 points does not pay for its thread and its
-   * histogram (one count per cell). */
+  /* The high digit: the top ceil(L / 2) levels. */
+  unsigned fbits = 2 * (L / 2);
+  size_t nb = (size_t)1 << (2 * L), nc = nb >> fbits;
+  /* Threads: a share of fewer than 2^16 points does not pay for its thread. */
   unsigned nw = qk__threads_resolve(t->threads);
   if (nw > n / 65536) nw = n / 65536 > 0 ? (unsigned)(n / 65536) : 1;
-  /* Counting sort of the point indices by cell (cells have at most 16 bits, so the counts
-   * stay in cache), then a gather of the points in that order. */
-  size_t m = n ? n : 1;
   uint32_t *cum = qk__realloc(&t->alloc, NULL, 0, (nb + 1) * sizeof *cum);
-  uint16_t *key = qk__realloc(&t->alloc, NULL, 0, m * sizeof *key);
-  uint32_t *order = qk__realloc(&t->alloc, NULL, 0, m * sizeof *order);
-  uint32_t *hist = qk__realloc(&t->alloc, NULL, 0, nw * nb * sizeof *hist);
-  if (!hist && nw > 1) { /* one thread needs one histogram only */
-    nw = 1;
-    hist = qk__realloc(&t->alloc, NULL, 0, nb * sizeof *hist);
-  }
-  if (!cum || !key || !order || !hist) {
+  uint32_t *cbase = qk__realloc(&t->alloc, NULL, 0, (nc + 1) * sizeof *cbase);
+  uint16_t *key = qk__realloc(&t->alloc, NULL, 0, n * sizeof *key);
+  rec_t *rec = qk__realloc(&t->alloc, NULL, 0, n * sizeof *rec);
+  uint32_t *hist = qk__realloc(&t->alloc, NULL, 0, nw * nc * sizeof *hist);
+  if (!cum || !cbase || !key || !rec || !hist) {
     qk__free(&t->alloc, cum, (nb + 1) * sizeof *cum);
-    qk__free(&t->alloc, key, m * sizeof *key);
-    qk__free(&t->alloc, order, m * sizeof *order);
-    qk__free(&t->alloc, hist, nw * nb * sizeof *hist);
+    qk__free(&t->alloc, cbase, (nc + 1) * sizeof *cbase);
+    qk__free(&t->alloc, key, n * sizeof *key);
+    qk__free(&t->alloc, rec, n * sizeof *rec);
+    qk__free(&t->alloc, hist, nw * nc * sizeof *hist);
     return QK_ERR_NOMEM;
   }
-  memset(hist, 0, nw * nb * sizeof *hist);
-  bucket_job_t j = {t, p, n, nb, x0, y0, scale, cells, delta, L, key, order, hist};
-  qk__run_shares(nw, cells_share, &j);
-  /* Bucket starts, and each share's first slot in every bucket: the shares before it
-   * come first, so the order is the one thread's. */
+  memset(hist, 0, nw * nc * sizeof *hist);
+  bucket_job_t j = {t, p,     n,  x0,  y0,  scale, &tabs[0], &tabs[1],
+                    L, fbits, nc, key, rec, hist,  cbase,    cum};
+  qk__run_shares(nw, keys_share, &j);
+  /* Coarse bucket starts, and each share's first record in every bucket: the shares
+   * before it come first, so the order is the one thread's. */
   uint32_t acc = 0;
-  for (size_t k = 0; k < nb; k++) {
-    cum[k] = acc;
+  for (size_t c = 0; c < nc; c++) {
+    cbase[c] = acc;
     for (unsigned w = 0; w < nw; w++) {
-      uint32_t c = hist[(size_t)w * nb + k];
-      hist[(size_t)w * nb + k] = acc;
-      acc += c;
+      uint32_t k = hist[(size_t)w * nc + c];
+      hist[(size_t)w * nc + c] = acc;
+      acc += k;
     }
   }
+  cbase[nc] = acc;
   cum[nb] = acc;
-  qk__run_shares(nw, place_share, &j);
-  qk__run_shares(nw, gather_share, &j);
-  qk__free(&t->alloc, hist, nw * nb * sizeof *hist);
-  qk__free(&t->alloc, key, m * sizeof *key);
-  qk__free(&t->alloc, order, m * sizeof *order);
+  qk__run_shares(nw, scatter_share, &j);
+  qk__free(&t->alloc, key, n * sizeof *key);
+  qk__free(&t->alloc, hist, nw * nc * sizeof *hist);
+  qk__run_jobs_dynamic(nw, (unsigned)nc, fine_job, &j);
+  qk__free(&t->alloc, rec, n * sizeof *rec);
+  qk__free(&t->alloc, cbase, (nc + 1) * sizeof *cbase);
   qk_status_t st = from_grid(t, (qk__geom_t){x0, y0, 0}, cum, L, nw);
   qk__free(&t->alloc, cum, (nb + 1) * sizeof *cum);
   *done = st == QK_OK;

@@ -236,6 +236,11 @@ static inline void qk__share_range(size_t n, unsigned w, unsigned nw, size_t *lo
   *hi = *lo + n / nw + (w < n % nw);
 }
 
+/* Run fn(i, ud) for i in [0, n) on min(threads, n) shares, each share taking the next job
+ * from a shared counter (so which share runs a job varies: jobs must write disjoint
+ * memory and not depend on their share). */
+void qk__run_jobs_dynamic(unsigned threads, unsigned n, void (*fn)(unsigned i, void *ud), void *ud);
+
 /* Make room for at least `extra` more node slots. */
 qk_status_t qk__reserve_nodes(qk_tree_t *t, uint32_t extra);
 
