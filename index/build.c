@@ -112,24 +112,54 @@ static qk_status_t from_buckets(qk_tree_t *t, uint32_t v, qk__geom_t g, const ui
     return QK_OK;
   }
   if (depth == L) return qk__build_subtree(t, v, g);
-  qk_status_t st = qk__reserve_nodes(t, 4);
-  if (st) return st;
-  /* Splitting moves no point: the children's slot ranges are already in order. */
-  uint32_t b = qk__split_sorted(t, v, depth);
-  t->nodes[v].start = 0;
-  t->nodes[v].room = 0;
-  uint32_t span = 1u << (2 * (L - depth - 1));
+  qk_status_t st;
+  /* A fresh build has no free blocks: the children are appended, usually into nodes that
+   * from_grid() reserved. Splitting moves no point: the children's slot ranges are
+   * already in order. */
+  if ((t->n_nodes + 4 > t->cap_nodes || (t->n_nodes + 3) / 4 > t->cap_blocks) &&
+      (st = qk__reserve_nodes(t, 4)))
+    return st;
+  uint32_t b = t->n_nodes, span = 1u << (2 * (L - depth - 1));
+  t->n_nodes += 4;
+  qk__node_t *n = t->nodes;
   for (uint32_t q = 0; q < 4; q++) {
-    uint32_t first = lo + q * span;
-    qk__node_t *c = &t->nodes[b + q];
-    c->start = cum[first];
-    c->count = cum[first + span] - cum[first];
-    c->room = c->count;
+    uint32_t s = cum[lo + q * span], e = cum[lo + (q + 1) * span];
+    n[b + q] = (qk__node_t){.child = QK_NONE, .start = s, .count = e - s, .room = e - s};
   }
+  n[v].child = b;
+  n[v].start = 0;
+  n[v].room = 0;
+  t->blocks[(b - 1) >> 2] = (qk__block_t){.parent = v, .depth = (uint8_t)(depth + 1), .live = 1};
+  /* Most children are leaves already (the call would return at once): only those over
+   * capacity are visited. */
   for (uint32_t q = 0; q < 4; q++)
-    if ((st = from_buckets(t, b + q, qk__child_geom(t, g, q), cum, lo + q * span, L, top, list,
+    if (t->nodes[b + q].count > t->capacity &&
+        (st = from_buckets(t, b + q, qk__child_geom(t, g, q), cum, lo + q * span, L, top, list,
                            n_list)))
       return st;
+  return QK_OK;
+}
+
+/* Room for `extra` more nodes, allocated to size (qk__reserve_nodes() would round the
+ * size up to its growth step, and qk_tree_build_ex() would then copy the nodes to give
+ * the excess back). */
+static qk_status_t reserve_exact(qk_tree_t *t, uint64_t extra) {
+  uint64_t need = t->n_nodes + extra, blocks = (need + 2) / 4;
+  if (need > UINT32_MAX / 2) return qk__reserve_nodes(t, (uint32_t)extra);
+  if (need > t->cap_nodes) {
+    qk__node_t *p = qk__realloc(&t->alloc, t->nodes, (size_t)t->cap_nodes * sizeof *p,
+                                (size_t)need * sizeof *p);
+    if (!p) return QK_ERR_NOMEM;
+    t->nodes = p;
+    t->cap_nodes = (uint32_t)need;
+  }
+  if (blocks > t->cap_blocks) {
+    qk__block_t *p = qk__realloc(&t->alloc, t->blocks, (size_t)t->cap_blocks * sizeof *p,
+                                 (size_t)blocks * sizeof *p);
+    if (!p) return QK_ERR_NOMEM;
+    t->blocks = p;
+    t->cap_blocks = (uint32_t)blocks;
+  }
   return QK_OK;
 }
 
@@ -165,14 +195,15 @@ static qk_status_t sub_init(const qk_tree_t *t, const subtree_t *s, qk_tree_t *o
   atomic_init(&o->where, NULL);
   o->free_block = QK_NONE;
   uint64_t count = t->nodes[s->v].count, est = 4 * (count / t->capacity) + 64;
-  qk_status_t st = qk__reserve_nodes(o, est < UINT32_MAX / 2 ? (uint32_t)est : UINT32_MAX / 2);
+  qk_status_t st = reserve_exact(o, est);
   if (st) return st;
   o->n_nodes = 1;
   o->nodes[0] = t->nodes[s->v];
   return QK_OK;
 }
 
-static void sub_build(unsigned i, void *ud) {
+static void sub_build(unsigned i, unsigned w, void *ud) {
+  (void)w;
   const sub_job_t *j = ud;
   j->st[i] = from_buckets(&j->own[i], 0, j->list[i].g, j->cum, j->list[i].lo, j->L, 0, NULL, NULL);
 }
@@ -210,7 +241,16 @@ static qk_status_t from_grid(qk_tree_t *t, qk__geom_t g, const uint32_t *cum, un
   subtree_t list[1u << (2 * TOP_DEPTH)];
   size_t n = 0;
   unsigned top = L > TOP_DEPTH ? TOP_DEPTH : L;
-  qk_status_t st = from_buckets(t, 0, g, cum, 0, L, top, list, &n);
+  /* Nodes for the grid's levels, reserved at once rather than grown step by step: at most
+   * the complete tree of depth L, and about four per `capacity` points, with a sixteenth
+   * to spare (within the slack that qk_tree_build_ex() leaves unreturned). */
+  uint64_t full = (((uint64_t)1 << (2 * L + 2)) - 1) / 3,
+           est = 4 * (cum[(size_t)1 << (2 * L)] / t->capacity) + 64;
+  uint64_t want = full < est ? full : est;
+  want += want / 16;
+  qk_status_t st = reserve_exact(t, want);
+  if (st) return st;
+  st = from_buckets(t, 0, g, cum, 0, L, top, list, &n);
   if (st) return st;
   if (nw <= 1 || n < 2 || t->alloc.fn) {
     for (size_t i = 0; i < n && st == QK_OK; i++)
@@ -234,7 +274,7 @@ static qk_status_t from_grid(qk_tree_t *t, qk__geom_t g, const uint32_t *cum, un
     extra += own[i].n_nodes ? own[i].n_nodes - 1 : 0;
   }
   if (st == QK_OK && extra > UINT32_MAX) st = QK_ERR_LIMIT;
-  if (st == QK_OK) st = qk__reserve_nodes(t, (uint32_t)extra);
+  if (st == QK_OK) st = reserve_exact(t, extra);
   for (size_t i = 0; i < n; i++) {
     if (st == QK_OK) sub_append(t, &own[i], list[i].v);
     sub_free(t, &own[i]);
@@ -245,11 +285,20 @@ static qk_status_t from_grid(qk_tree_t *t, qk__geom_t g, const uint32_t *cum, un
 }
 
 /* What the parallel phases of the bucketed build share. Shares of the input (passes 1 and
- * 2) cover the points qk__share_range(n, w, nw); pass 3 runs one job per coarse bucket. */
+ * 2) cover the points qk__share_range(n, w, nw); pass 3 runs one job per coarse bucket.
+ * The records of coarse bucket c written by share w form a segment of the record array;
+ * segments go in the order (c, w), each starting at a multiple of WC records. */
 typedef struct rec {
   double x, y;
   uint32_t id, key;
 } rec_t;
+
+/* Records per write-combining buffer: 8 of 24 bytes are three cache lines. */
+#define WC 8u
+/* Most coarse buckets: their write-combining buffers (24 KB) stay in the first-level cache. */
+#define MAX_COARSE_BITS 7u
+/* Most points a share stages in pass 3: 320 KB, within a core's second-level cache. */
+#define STAGE_MAX 16384u
 
 typedef struct bucket_job {
   qk_tree_t *t;
@@ -257,13 +306,19 @@ typedef struct bucket_job {
   size_t n;
   double x0, y0, scale;
   const axis_tab_t *ax, *ay; /* the key tables of the two axes */
-  unsigned L, fbits;         /* levels of the grid; bits of the low digit */
+  unsigned fbits;            /* bits of the low digit */
   size_t nc;                 /* coarse buckets */
+  bool stream;               /* write records and points around the caches */
   uint16_t *key;
-  rec_t *rec;
-  uint32_t *hist;  /* nw rows of nc: counts, then each share's next record per bucket */
-  uint32_t *cbase; /* nc + 1 coarse bucket starts */
-  uint32_t *cum;   /* 4^L + 1 fine bucket starts */
+  rec_t *rec;         /* 64-byte aligned */
+  uint32_t *cnt;      /* nw rows of nc: records of bucket c from share w */
+  uint32_t *seg;      /* nw rows of nc: where those records start */
+  uint32_t *cbase;    /* nc + 1 coarse bucket starts in the point arrays */
+  uint32_t *cum;      /* 4^L + 1 fine bucket starts */
+  unsigned nw;        /* shares of passes 1 and 2 */
+  uint32_t stage_cap; /* points per share in the staging arrays (0: none) */
+  double *sx, *sy;    /* the staging arrays, stage_cap per share */
+  qk_id_t *sid;
 } bucket_job_t;
 
 /* Pass 1: every point's cell, and this share's count per coarse bucket. The job's fields
@@ -272,7 +327,7 @@ static void keys_share(void *ctx, unsigned w, unsigned nw) {
   const bucket_job_t *j = ctx;
   size_t lo, hi;
   qk__share_range(j->n, w, nw, &lo, &hi);
-  uint32_t *h = j->hist + (size_t)w * j->nc;
+  uint32_t *h = j->cnt + (size_t)w * j->nc;
   const qk_point_t *p = j->p;
   uint16_t *key = j->key;
   const axis_tab_t *ax = j->ax, *ay = j->ay;
@@ -304,47 +359,150 @@ static void keys_share(void *ctx, unsigned w, unsigned nw) {
 #endif
 }
 
-/* Pass 2: the records into their coarse buckets, stable (shares are in point order). */
+/* Pass 2: the records into their coarse buckets' segments, stable. With `stream`, each
+ * bucket's records gather in a buffer of WC (three cache lines) that goes to memory whole,
+ * with non-temporal stores: no line of the record array is read before it is written,
+ * and 2^7 buffers, unlike 2^7 scattered write streams, stay in cache. */
 static void scatter_share(void *ctx, unsigned w, unsigned nw) {
   const bucket_job_t *j = ctx;
   size_t lo, hi;
   qk__share_range(j->n, w, nw, &lo, &hi);
-  uint32_t *next = j->hist + (size_t)w * j->nc;
+  const size_t nc = j->nc;
+  uint32_t next[1u << MAX_COARSE_BITS];
+  memcpy(next, j->seg + (size_t)w * nc, nc * sizeof *next);
   const qk_point_t *p = j->p;
   const uint16_t *key = j->key;
   rec_t *rec = j->rec;
   const unsigned fbits = j->fbits;
+#if defined(__SSE2__)
+  if (j->stream) {
+    _Alignas(64) rec_t buf[(1u << MAX_COARSE_BITS) * WC];
+    uint8_t fill[1u << MAX_COARSE_BITS];
+    memset(fill, 0, nc);
+    for (size_t i = lo; i < hi; i++) {
+      uint32_t k = key[i], c = k >> fbits, f = fill[c];
+      rec_t *b = &buf[c * WC];
+      b[f] = (rec_t){p[i].x, p[i].y, (uint32_t)i, k};
+      if (++f == WC) {
+        /* next[c] is a multiple of WC and the array 64-byte aligned: whole lines. */
+        __m128i *d = (__m128i *)(void *)&rec[next[c]];
+        const __m128i *s = (const __m128i *)(const void *)b;
+        for (unsigned q = 0; q < WC * sizeof(rec_t) / 16; q++) _mm_stream_si128(d + q, s[q]);
+        next[c] += WC;
+        f = 0;
+      }
+      fill[c] = (uint8_t)f;
+    }
+    for (size_t c = 0; c < nc; c++) memcpy(&rec[next[c]], &buf[c * WC], fill[c] * sizeof *rec);
+    _mm_sfence(); /* the streamed lines before anything the caller does next */
+    return;
+  }
+#endif
   for (size_t i = lo; i < hi; i++) {
     uint32_t k = key[i];
     rec[next[k >> fbits]++] = (rec_t){p[i].x, p[i].y, (uint32_t)i, k};
   }
 }
 
+/* Copy `bytes` from src to dst, with non-temporal stores where `stream` asks. */
+static void copy_out(void *dst, const void *src, size_t bytes, bool stream) {
+#if defined(__SSE2__)
+  if (stream) {
+    unsigned char *d = dst;
+    const unsigned char *s = src;
+    size_t head = (size_t)(-(uintptr_t)d & 15u);
+    if (head > bytes) head = bytes;
+    memcpy(d, s, head);
+    d += head, s += head, bytes -= head;
+    for (; bytes >= 64; d += 64, s += 64, bytes -= 64) {
+      __m128i a = _mm_loadu_si128((const __m128i *)(const void *)s);
+      __m128i b = _mm_loadu_si128((const __m128i *)(const void *)(s + 16));
+      __m128i c = _mm_loadu_si128((const __m128i *)(const void *)(s + 32));
+      __m128i e = _mm_loadu_si128((const __m128i *)(const void *)(s + 48));
+      _mm_stream_si128((__m128i *)(void *)d, a);
+      _mm_stream_si128((__m128i *)(void *)(d + 16), b);
+      _mm_stream_si128((__m128i *)(void *)(d + 32), c);
+      _mm_stream_si128((__m128i *)(void *)(d + 48), e);
+    }
+    memcpy(d, s, bytes);
+    return;
+  }
+#else
+  (void)stream;
+#endif
+  memcpy(dst, src, bytes);
+}
+
 /* Pass 3: coarse bucket c sorted by its low digit into the point arrays, stable, and its
- * fine buckets' starts. */
-static void fine_job(unsigned c, void *ud) {
+ * fine buckets' starts. The sort writes all over the bucket's slot range; when the range
+ * fits the share's staging arrays, it writes there (in cache, reused from bucket to
+ * bucket) and the range is then copied out in order, so that the point arrays are written
+ * front to back rather than line by line at random. */
+static void fine_job(unsigned c, unsigned w, void *ud) {
   const bucket_job_t *j = ud;
+  const size_t nc = j->nc;
   uint32_t a = j->cbase[c], b = j->cbase[c + 1];
   const unsigned fbits = j->fbits;
   const uint32_t nf = 1u << fbits, mask = nf - 1;
-  uint32_t next[256];
+  uint32_t next[1u << (16 - MAX_COARSE_BITS)];
   memset(next, 0, nf * sizeof *next);
   const rec_t *rec = j->rec;
-  for (uint32_t s = a; s < b; s++) next[rec[s].key & mask]++;
+  for (unsigned v = 0; v < j->nw; v++) {
+    const rec_t *r = rec + j->seg[(size_t)v * nc + c], *e = r + j->cnt[(size_t)v * nc + c];
+    for (; r < e; r++) next[r->key & mask]++;
+  }
   uint32_t *cum = j->cum + (size_t)c * nf, acc = a;
   for (uint32_t f = 0; f < nf; f++) {
     uint32_t k = next[f];
-    cum[f] = next[f] = acc;
+    cum[f] = acc;
     acc += k;
   }
-  double *px = j->t->px, *py = j->t->py;
-  qk_id_t *pid = j->t->pid;
-  for (uint32_t s = a; s < b; s++) {
-    uint32_t d = next[rec[s].key & mask]++;
-    px[d] = rec[s].x;
-    py[d] = rec[s].y;
-    pid[d] = rec[s].id;
+  bool staged = b - a <= j->stage_cap;
+  uint32_t base = staged ? 0 : a;
+  for (uint32_t f = 0; f < nf; f++) next[f] = cum[f] - a + base;
+  double *px = staged ? j->sx + (size_t)w * j->stage_cap : j->t->px;
+  double *py = staged ? j->sy + (size_t)w * j->stage_cap : j->t->py;
+  qk_id_t *pid = staged ? j->sid + (size_t)w * j->stage_cap : j->t->pid;
+  for (unsigned v = 0; v < j->nw; v++) {
+    const rec_t *r = rec + j->seg[(size_t)v * nc + c], *e = r + j->cnt[(size_t)v * nc + c];
+    for (; r < e; r++) {
+      uint32_t d = next[r->key & mask]++;
+      px[d] = r->x;
+      py[d] = r->y;
+      pid[d] = r->id;
+    }
   }
+  if (staged) {
+    copy_out(j->t->px + a, px, (size_t)(b - a) * sizeof *px, j->stream);
+    copy_out(j->t->py + a, py, (size_t)(b - a) * sizeof *py, j->stream);
+    copy_out(j->t->pid + a, pid, (size_t)(b - a) * sizeof *pid, j->stream);
+#if defined(__SSE2__)
+    if (j->stream) _mm_sfence();
+#endif
+  }
+}
+
+/* The temporary arrays of the bucketed build. */
+typedef struct scratch {
+  uint32_t *cum, *cbase, *cnt, *seg;
+  uint16_t *key;
+  void *rec_block; /* rec, before alignment */
+  double *sx, *sy;
+  qk_id_t *sid;
+  size_t nb, nc, n, nw, n_rec, ns;
+} scratch_t;
+
+static void scratch_free(const qk_tree_t *t, scratch_t *s) {
+  qk__free(&t->alloc, s->cum, (s->nb + 1) * sizeof *s->cum);
+  qk__free(&t->alloc, s->cbase, (s->nc + 1) * sizeof *s->cbase);
+  qk__free(&t->alloc, s->cnt, s->nw * s->nc * sizeof *s->cnt);
+  qk__free(&t->alloc, s->seg, s->nw * s->nc * sizeof *s->seg);
+  qk__free(&t->alloc, s->key, s->n * sizeof *s->key);
+  qk__free(&t->alloc, s->rec_block, s->n_rec * sizeof(rec_t) + 64);
+  qk__free(&t->alloc, s->sx, s->ns * sizeof *s->sx);
+  qk__free(&t->alloc, s->sy, s->ns * sizeof *s->sy);
+  qk__free(&t->alloc, s->sid, s->ns * sizeof *s->sid);
+  memset(s, 0, sizeof *s);
 }
 
 qk_status_t qk__build_bucketed(qk_tree_t *t, const qk_point_t *p, size_t n, bool *done) {
@@ -368,48 +526,73 @@ qk_status_t qk__build_bucketed(qk_tree_t *t, const qk_point_t *p, size_t n, bool
   if (!grid_lines(t, y0, L, g)) return QK_OK;
   axis_tables(g, L, true, &tabs[1]);
 
-  /* The high digit: the top ceil(L / 2) levels. */
-  unsigned fbits = 2 * (L / 2);
-  size_t nb = (size_t)1 << (2 * L), nc = nb >> fbits;
+  /* The high digit: half the key's bits, rounded up, and at most MAX_COARSE_BITS. */
+  unsigned kbits = 2 * L, cbits = (kbits + 1) / 2;
+  if (cbits > MAX_COARSE_BITS) cbits = MAX_COARSE_BITS;
+  unsigned fbits = kbits - cbits;
+  size_t nb = (size_t)1 << kbits, nc = (size_t)1 << cbits;
   /* Threads: a share of fewer than 2^16 points does not pay for its thread. */
   unsigned nw = qk__threads_resolve(t->threads);
   if (nw > n / 65536) nw = n / 65536 > 0 ? (unsigned)(n / 65536) : 1;
-  uint32_t *cum = qk__realloc(&t->alloc, NULL, 0, (nb + 1) * sizeof *cum);
-  uint32_t *cbase = qk__realloc(&t->alloc, NULL, 0, (nc + 1) * sizeof *cbase);
-  uint16_t *key = qk__realloc(&t->alloc, NULL, 0, n * sizeof *key);
-  rec_t *rec = qk__realloc(&t->alloc, NULL, 0, n * sizeof *rec);
-  uint32_t *hist = qk__realloc(&t->alloc, NULL, 0, nw * nc * sizeof *hist);
-  if (!cum || !cbase || !key || !rec || !hist) {
-    qk__free(&t->alloc, cum, (nb + 1) * sizeof *cum);
-    qk__free(&t->alloc, cbase, (nc + 1) * sizeof *cbase);
-    qk__free(&t->alloc, key, n * sizeof *key);
-    qk__free(&t->alloc, rec, n * sizeof *rec);
-    qk__free(&t->alloc, hist, nw * nc * sizeof *hist);
+  scratch_t s = {0};
+  s.nb = nb, s.nc = nc, s.n = n, s.nw = nw;
+  s.cum = qk__realloc(&t->alloc, NULL, 0, (nb + 1) * sizeof *s.cum);
+  s.cbase = qk__realloc(&t->alloc, NULL, 0, (nc + 1) * sizeof *s.cbase);
+  s.cnt = qk__realloc(&t->alloc, NULL, 0, nw * nc * sizeof *s.cnt);
+  s.seg = qk__realloc(&t->alloc, NULL, 0, nw * nc * sizeof *s.seg);
+  s.key = qk__realloc(&t->alloc, NULL, 0, n * sizeof *s.key);
+  if (!s.cum || !s.cbase || !s.cnt || !s.seg || !s.key) {
+    scratch_free(t, &s);
     return QK_ERR_NOMEM;
   }
-  memset(hist, 0, nw * nc * sizeof *hist);
-  bucket_job_t j = {t, p,     n,  x0,  y0,  scale, &tabs[0], &tabs[1],
-                    L, fbits, nc, key, rec, hist,  cbase,    cum};
+  memset(s.cnt, 0, nw * nc * sizeof *s.cnt);
+  /* Large inputs go around the caches: their records and points would not stay there. */
+  bool stream = n >= ((size_t)1 << 19);
+  bucket_job_t j = {t,     p,  n,      x0,    y0,   scale, &tabs[0], &tabs[1],
+                    fbits, nc, stream, s.key, NULL, s.cnt, s.seg,    s.cbase,
+                    s.cum, nw, 0,      NULL,  NULL, NULL};
   qk__run_shares(nw, keys_share, &j);
-  /* Coarse bucket starts, and each share's first record in every bucket: the shares
-   * before it come first, so the order is the one thread's. */
-  uint32_t acc = 0;
+  /* Coarse bucket starts, and each share's segment of every bucket: the shares before it
+   * come first, so the order is the one thread's. Segments start at multiples of WC. */
+  uint32_t acc = 0, most = 0;
+  size_t at = 0;
   for (size_t c = 0; c < nc; c++) {
-    cbase[c] = acc;
+    s.cbase[c] = acc;
     for (unsigned w = 0; w < nw; w++) {
-      uint32_t k = hist[(size_t)w * nc + c];
-      hist[(size_t)w * nc + c] = acc;
+      uint32_t k = s.cnt[(size_t)w * nc + c];
+      s.seg[(size_t)w * nc + c] = (uint32_t)at;
+      at += (k + WC - 1) / WC * WC;
       acc += k;
     }
+    if (acc - s.cbase[c] > most) most = acc - s.cbase[c];
   }
-  cbase[nc] = acc;
-  cum[nb] = acc;
+  s.cbase[nc] = acc;
+  s.cum[nb] = acc;
+  s.n_rec = at ? at : 1;
+  s.rec_block = qk__realloc(&t->alloc, NULL, 0, s.n_rec * sizeof(rec_t) + 64);
+  if (!s.rec_block) {
+    scratch_free(t, &s);
+    return QK_ERR_NOMEM;
+  }
+  j.rec = (rec_t *)(void *)((unsigned char *)s.rec_block + (-(uintptr_t)s.rec_block & 63u));
   qk__run_shares(nw, scatter_share, &j);
-  qk__free(&t->alloc, key, n * sizeof *key);
-  qk__free(&t->alloc, hist, nw * nc * sizeof *hist);
+  /* Staging arrays for pass 3, each share's as large as the largest coarse bucket up to
+   * STAGE_MAX points (without them, if they cannot be had, the result is the same). */
+  qk__free(&t->alloc, s.key, n * sizeof *s.key);
+  s.key = NULL;
+  size_t cap = most < STAGE_MAX ? most : STAGE_MAX;
+  s.ns = nw * cap;
+  s.sx = qk__realloc(&t->alloc, NULL, 0, s.ns * sizeof *s.sx);
+  s.sy = s.sx ? qk__realloc(&t->alloc, NULL, 0, s.ns * sizeof *s.sy) : NULL;
+  s.sid = s.sy ? qk__realloc(&t->alloc, NULL, 0, s.ns * sizeof *s.sid) : NULL;
+  if (s.sid) {
+    j.stage_cap = (uint32_t)cap;
+    j.sx = s.sx, j.sy = s.sy, j.sid = s.sid;
+  }
   qk__run_jobs_dynamic(nw, (unsigned)nc, fine_job, &j);
-  qk__free(&t->alloc, rec, n * sizeof *rec);
-  qk__free(&t->alloc, cbase, (nc + 1) * sizeof *cbase);
+  uint32_t *cum = s.cum;
+  s.cum = NULL;
+  scratch_free(t, &s);
   qk_status_t st = from_grid(t, (qk__geom_t){x0, y0, 0}, cum, L, nw);
   qk__free(&t->alloc, cum, (nb + 1) * sizeof *cum);
   *done = st == QK_OK;

@@ -180,7 +180,16 @@ qk__geom_t qk__node_geom(const qk_tree_t *t, uint32_t v);
 
 /* Can a node of this geometry be split (not at the depth cap, and its side still halves
  * exactly into distinct midpoints)? */
-bool qk__can_split(const qk_tree_t *t, qk__geom_t g);
+static inline bool qk__can_split(const qk_tree_t *t, qk__geom_t g) {
+  if (g.depth >= t->max_depth) return false;
+  double half = t->side[g.depth + 1];
+  if (!(half > 0)) return false;
+  double xm = g.x0 + half, ym = g.y0 + half;
+  double side = t->side[g.depth];
+  /* The midpoint must fall strictly inside the square, or the halves are not distinct
+   * in double precision. */
+  return xm > g.x0 && xm < g.x0 + side && ym > g.y0 && ym < g.y0 + side;
+}
 
 /* Split a leaf of geometry g into four children and distribute its points. Nodes must
  * have been reserved (qk__reserve_nodes) beforehand; cannot fail then. Returns the first
@@ -236,10 +245,12 @@ static inline void qk__share_range(size_t n, unsigned w, unsigned nw, size_t *lo
   *hi = *lo + n / nw + (w < n % nw);
 }
 
-/* Run fn(i, ud) for i in [0, n) on min(threads, n) shares, each share taking the next job
- * from a shared counter (so which share runs a job varies: jobs must write disjoint
- * memory and not depend on their share). */
-void qk__run_jobs_dynamic(unsigned threads, unsigned n, void (*fn)(unsigned i, void *ud), void *ud);
+/* Run fn(i, w, ud) for i in [0, n) on min(threads, n) shares, each share taking the next
+ * job from a shared counter; w is the share running the job (for scratch memory of its
+ * own). Which share runs a job varies from run to run: jobs must write disjoint memory
+ * and their results must not depend on w. */
+void qk__run_jobs_dynamic(unsigned threads, unsigned n,
+                          void (*fn)(unsigned i, unsigned w, void *ud), void *ud);
 
 /* Make room for at least `extra` more node slots. */
 qk_status_t qk__reserve_nodes(qk_tree_t *t, uint32_t extra);

@@ -87,23 +87,22 @@ void qk__run_jobs(unsigned threads, unsigned n, void (*fn)(unsigned i, void *ud)
 typedef struct djobs {
   atomic_uint next;
   unsigned n;
-  void (*fn)(unsigned, void *);
+  void (*fn)(unsigned, unsigned, void *);
   void *ud;
 } djobs_t;
 
 static void djobs_share(void *ctx, unsigned w, unsigned nw) {
-  (void)w;
   (void)nw;
   djobs_t *j = ctx;
   for (;;) {
     unsigned i = atomic_fetch_add_explicit(&j->next, 1u, memory_order_relaxed);
     if (i >= j->n) return;
-    j->fn(i, j->ud);
+    j->fn(i, w, j->ud);
   }
 }
 
-void qk__run_jobs_dynamic(unsigned threads, unsigned n, void (*fn)(unsigned i, void *ud),
-                          void *ud) {
+void qk__run_jobs_dynamic(unsigned threads, unsigned n,
+                          void (*fn)(unsigned i, unsigned w, void *ud), void *ud) {
   djobs_t j;
   atomic_init(&j.next, 0u);
   j.n = n;
