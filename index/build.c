@@ -577,18 +577,20 @@ qk_status_t qk__build_bucketed(qk_tree_t *t, const qk_point_t *p, size_t n, bool
   j.rec = (rec_t *)(void *)((unsigned char *)s.rec_block + (-(uintptr_t)s.rec_block & 63u));
   qk__run_shares(nw, scatter_share, &j);
   /* Staging arrays for pass 3, each share's as large as the largest coarse bucket up to
-   * STAGE_MAX points (without them, if they cannot be had, the result is the same). */
+   * STAGE_MAX points. */
   qk__free(&t->alloc, s.key, n * sizeof *s.key);
   s.key = NULL;
   size_t cap = most < STAGE_MAX ? most : STAGE_MAX;
   s.ns = nw * cap;
   s.sx = qk__realloc(&t->alloc, NULL, 0, s.ns * sizeof *s.sx);
-  s.sy = s.sx ? qk__realloc(&t->alloc, NULL, 0, s.ns * sizeof *s.sy) : NULL;
-  s.sid = s.sy ? qk__realloc(&t->alloc, NULL, 0, s.ns * sizeof *s.sid) : NULL;
-  if (s.sid) {
-    j.stage_cap = (uint32_t)cap;
-    j.sx = s.sx, j.sy = s.sy, j.sid = s.sid;
+  s.sy = qk__realloc(&t->alloc, NULL, 0, s.ns * sizeof *s.sy);
+  s.sid = qk__realloc(&t->alloc, NULL, 0, s.ns * sizeof *s.sid);
+  if (!s.sx || !s.sy || !s.sid) {
+    scratch_free(t, &s);
+    return QK_ERR_NOMEM;
   }
+  j.stage_cap = (uint32_t)cap;
+  j.sx = s.sx, j.sy = s.sy, j.sid = s.sid;
   qk__run_jobs_dynamic(nw, (unsigned)nc, fine_job, &j);
   uint32_t *cum = s.cum;
   s.cum = NULL;
