@@ -7,12 +7,13 @@
  *
  * The passes, each split over threads (shares of the input, or jobs taken from a counter):
  *  1. keys: the cell number of every point (2L bits) and, per share, a histogram of its
- *     high digit (the cell's top ceil(L/2) levels, at most 256 coarse buckets);
- *  2. scatter: each point with its id and cell as a 24-byte record into its coarse bucket
- *     (at most 256 write streams, so the writes stay sequential per stream);
- *  3. per coarse bucket (a job each, its records now in cache): a histogram of the low
- *     digit, the fine buckets' slot ranges, and the records' coordinates and ids written
- *     to the tree's point arrays in cell order;
+ *     high digit (at most 7 bits: 128 coarse buckets);
+ *  2. scatter: each point with its id and cell as a 24-byte record into its coarse bucket,
+ *     through a write-combining buffer per bucket (whole cache lines, non-temporal for
+ *     large inputs);
+ *  3. per coarse bucket (a job each): a histogram of the low digit, the fine buckets' slot
+ *     ranges, and the records' coordinates and ids sorted by it into staging arrays in
+ *     cache, then copied out in order to the tree's point arrays;
  *  4. the tree from the bucket counts (subtrees below depth 3 as jobs).
  * Both digits are counting sorts that keep input order, so the points of a cell keep
  * their input order and the result is the same for any number of threads.
@@ -94,6 +95,7 @@ typedef struct subtree {
   uint32_t v;
   qk__geom_t g;
   uint32_t lo;
+  uint32_t base; /* where its nodes go in the tree, once built on a thread */
 } subtree_t;
 
 /* The subtrees hang at this depth (at most 4^3 of them), when the grid is deeper. */
@@ -108,7 +110,7 @@ static qk_status_t from_buckets(qk_tree_t *t, uint32_t v, qk__geom_t g, const ui
   unsigned depth = g.depth;
   if (t->nodes[v].count <= t->capacity || !qk__can_split(t, g)) return QK_OK;
   if (list && depth == top) {
-    list[(*n_list)++] = (subtree_t){v, g, lo};
+    list[(*n_list)++] = (subtree_t){v, g, lo, 0};
     return QK_OK;
   }
   if (depth == L) return qk__build_subtree(t, v, g);
@@ -168,7 +170,7 @@ static qk_status_t reserve_exact(qk_tree_t *t, uint64_t extra) {
  * 0; then appended to the tree in list order, which numbers every node as building them
  * one after another in the tree would. */
 typedef struct sub_job {
-  const qk_tree_t *t;
+  qk_tree_t *t;
   const uint32_t *cum;
   unsigned L;
   const subtree_t *list;
@@ -208,9 +210,10 @@ static void sub_build(unsigned i, unsigned w, void *ud) {
   j->st[i] = from_buckets(&j->own[i], 0, j->list[i].g, j->cum, j->list[i].lo, j->L, 0, NULL, NULL);
 }
 
-/* Append subtree tree o, whose root stands for node v, to t (nodes reserved). */
-static void sub_append(qk_tree_t *t, const qk_tree_t *o, uint32_t v) {
-  uint32_t base = t->n_nodes, extra = o->n_nodes - 1; /* node u >= 1 of o is base + u - 1 */
+/* Append subtree tree o, whose root stands for node v, to t at node `base` (nodes
+ * reserved and counted): node u >= 1 of o becomes base + u - 1. */
+static void sub_append(qk_tree_t *t, const qk_tree_t *o, uint32_t v, uint32_t base) {
+  uint32_t extra = o->n_nodes - 1;
   for (uint32_t u = 1; u < o->n_nodes; u++) {
     qk__node_t n = o->nodes[u];
     if (n.child != QK_NONE) n.child += base - 1;
@@ -224,7 +227,13 @@ static void sub_append(qk_tree_t *t, const qk_tree_t *o, uint32_t v) {
   qk__node_t r = o->nodes[0];
   if (r.child != QK_NONE) r.child += base - 1;
   t->nodes[v] = r;
-  t->n_nodes += extra;
+}
+
+/* The appends write disjoint nodes and blocks: they run as jobs too. */
+static void sub_append_job(unsigned i, unsigned w, void *ud) {
+  (void)w;
+  const sub_job_t *j = ud;
+  sub_append(j->t, &j->own[i], j->list[i].v, j->list[i].base);
 }
 
 static void sub_free(const qk_tree_t *t, qk_tree_t *o) {
@@ -275,10 +284,14 @@ static qk_status_t from_grid(qk_tree_t *t, qk__geom_t g, const uint32_t *cum, un
   }
   if (st == QK_OK && extra > UINT32_MAX) st = QK_ERR_LIMIT;
   if (st == QK_OK) st = reserve_exact(t, extra);
-  for (size_t i = 0; i < n; i++) {
-    if (st == QK_OK) sub_append(t, &own[i], list[i].v);
-    sub_free(t, &own[i]);
+  if (st == QK_OK) {
+    for (size_t i = 0; i < n; i++) {
+      list[i].base = t->n_nodes;
+      t->n_nodes += own[i].n_nodes - 1;
+    }
+    qk__run_jobs_dynamic(nw, (unsigned)n, sub_append_job, &j);
   }
+  for (size_t i = 0; i < n; i++) sub_free(t, &own[i]);
   qk__free(&t->alloc, own, n * sizeof *own);
   qk__free(&t->alloc, sts, n * sizeof *sts);
   return st;
@@ -574,6 +587,8 @@ qk_status_t qk__build_bucketed(qk_tree_t *t, const qk_point_t *p, size_t n, bool
     scratch_free(t, &s);
     return QK_ERR_NOMEM;
   }
+  /* The scatter writes 2^7 streams at once: on huge pages, they need fewer TLB entries. */
+  if (t->huge_pages) qk__advise_huge(&t->alloc, s.rec_block, s.n_rec * sizeof(rec_t) + 64);
   j.rec = (rec_t *)(void *)((unsigned char *)s.rec_block + (-(uintptr_t)s.rec_block & 63u));
   qk__run_shares(nw, scatter_share, &j);
   /* Staging arrays for pass 3, each share's as large as the largest coarse bucket up to
