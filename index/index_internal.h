@@ -180,7 +180,16 @@ qk__geom_t qk__node_geom(const qk_tree_t *t, uint32_t v);
 
 /* Can a node of this geometry be split (not at the depth cap, and its side still halves
  * exactly into distinct midpoints)? */
-bool qk__can_split(const qk_tree_t *t, qk__geom_t g);
+static inline bool qk__can_split(const qk_tree_t *t, qk__geom_t g) {
+  if (g.depth >= t->max_depth) return false;
+  double half = t->side[g.depth + 1];
+  if (!(half > 0)) return false;
+  double xm = g.x0 + half, ym = g.y0 + half;
+  double side = t->side[g.depth];
+  /* The midpoint must fall strictly inside the square, or the halves are not distinct
+   * in double precision. */
+  return xm > g.x0 && xm < g.x0 + side && ym > g.y0 && ym < g.y0 + side;
+}
 
 /* Split a leaf of geometry g into four children and distribute its points. Nodes must
  * have been reserved (qk__reserve_nodes) beforehand; cannot fail then. Returns the first
@@ -195,6 +204,14 @@ uint32_t qk__split_sorted(qk_tree_t *t, uint32_t leaf, unsigned depth);
 /* Split `node` (of geometry g) and its descendants while over capacity (the plain
  * recursive build). */
 qk_status_t qk__build_subtree(qk_tree_t *t, uint32_t node, qk__geom_t g);
+
+/* Sort the n points into the tree's point arrays (already sized) by their cell in the
+ * 2^L x 2^L grid over the root square, in the tree's pre-order, on nw threads (a caller's
+ * allocator is only called from the calling thread). *cum gets the 4^L + 1 bucket starts
+ * (the caller frees them), or NULL, with QK_OK and nothing written, when the root is too
+ * badly conditioned for exact cells by scaling (index/cellsort.c). */
+qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned L, unsigned nw,
+                          uint32_t **cum);
 
 /* Bulk build by bucketing into a uniform grid (index/build.c). Sets *done when it built
  * the tree; leaves it false (and the tree untouched) when the plain build should run. */
@@ -235,6 +252,13 @@ static inline void qk__share_range(size_t n, unsigned w, unsigned nw, size_t *lo
   *lo = n / nw * w + (w < n % nw ? w : n % nw);
   *hi = *lo + n / nw + (w < n % nw);
 }
+
+/* Run fn(i, w, ud) for i in [0, n) on min(threads, n) shares, each share taking the next
+ * job from a shared counter; w is the share running the job (for scratch memory of its
+ * own). Which share runs a job varies from run to run: jobs must write disjoint memory
+ * and their results must not depend on w. */
+void qk__run_jobs_dynamic(unsigned threads, unsigned n,
+                          void (*fn)(unsigned i, unsigned w, void *ud), void *ud);
 
 /* Make room for at least `extra` more node slots. */
 qk_status_t qk__reserve_nodes(qk_tree_t *t, uint32_t extra);

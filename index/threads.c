@@ -5,6 +5,7 @@
  * afterwards, so the result never depends on how many threads actually ran.
  */
 #define _POSIX_C_SOURCE 200809L
+#include <stdatomic.h>
 #include <unistd.h>
 
 #include "index/index_access.h"
@@ -79,4 +80,33 @@ static void jobs_share(void *ctx, unsigned w, unsigned nw) {
 void qk__run_jobs(unsigned threads, unsigned n, void (*fn)(unsigned i, void *ud), void *ud) {
   jobs_t j = {n, fn, ud};
   qk__run_shares(threads < n ? threads : n, jobs_share, &j);
+}
+
+/* Jobs handed out by a shared counter: a share takes the next job when it finishes one,
+ * so shares of uneven jobs end together. */
+typedef struct djobs {
+  atomic_uint next;
+  unsigned n;
+  void (*fn)(unsigned, unsigned, void *);
+  void *ud;
+} djobs_t;
+
+static void djobs_share(void *ctx, unsigned w, unsigned nw) {
+  (void)nw;
+  djobs_t *j = ctx;
+  for (;;) {
+    unsigned i = atomic_fetch_add_explicit(&j->next, 1u, memory_order_relaxed);
+    if (i >= j->n) return;
+    j->fn(i, w, j->ud);
+  }
+}
+
+void qk__run_jobs_dynamic(unsigned threads, unsigned n,
+                          void (*fn)(unsigned i, unsigned w, void *ud), void *ud) {
+  djobs_t j;
+  atomic_init(&j.next, 0u);
+  j.n = n;
+  j.fn = fn;
+  j.ud = ud;
+  qk__run_shares(threads < n ? threads : n, djobs_share, &j);
 }

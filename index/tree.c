@@ -254,17 +254,6 @@ qk__geom_t qk__node_geom(const qk_tree_t *t, uint32_t v) {
   return g;
 }
 
-bool qk__can_split(const qk_tree_t *t, qk__geom_t g) {
-  if (g.depth >= t->max_depth) return false;
-  double half = t->side[g.depth + 1];
-  if (!(half > 0)) return false;
-  double xm = g.x0 + half, ym = g.y0 + half;
-  double side = t->side[g.depth];
-  /* The midpoint must fall strictly inside the square, or the halves are not distinct
-   * in double precision. */
-  return xm > g.x0 && xm < g.x0 + side && ym > g.y0 && ym < g.y0 + side;
-}
-
 /* Attach a block of four children (reserved beforehand) to a leaf, with their links but
  * no points: the caller sets each child's slot range. */
 uint32_t qk__split_sorted(qk_tree_t *t, uint32_t leaf, unsigned depth) {
@@ -373,33 +362,42 @@ static void bbox_share(void *ctx, unsigned w, unsigned nw) {
   qk__share_range(j->n, w, nw, &lo, &hi);
   const qk_point_t *p = j->p;
 #if defined(__SSE2__)
-  /* Two lanes (x, y) per point, two points per step. v - v is +0 for a finite v and NaN
-   * otherwise, so or-ing its bits flags any infinite or NaN coordinate; min/max ignore a
-   * NaN in their first operand (then the box is not used). */
-  __m128d mn0 = _mm_set1_pd(INFINITY), mn1 = mn0, mx0 = _mm_set1_pd(-INFINITY), mx1 = mx0;
-  __m128d bad = _mm_setzero_pd();
+  /* Two lanes (x, y) per point, four points per step, in four pairs of accumulators. An
+   * unordered compare flags a NaN; an infinite coordinate shows in the box itself. The
+   * accumulator is min/max's first operand, so the loop needs no register copies (a NaN
+   * there may be dropped from the box, but the flag has it). */
+  __m128d mn0 = _mm_set1_pd(INFINITY), mn1 = mn0, mn2 = mn0, mn3 = mn0;
+  __m128d mx0 = _mm_set1_pd(-INFINITY), mx1 = mx0, mx2 = mx0, mx3 = mx0;
+  __m128d nan = _mm_setzero_pd();
   size_t i = lo;
-  for (; i + 2 <= hi; i += 2) {
+  for (; i + 4 <= hi; i += 4) {
     __m128d a = _mm_loadu_pd(&p[i].x), b = _mm_loadu_pd(&p[i + 1].x);
-    mn0 = _mm_min_pd(a, mn0);
-    mx0 = _mm_max_pd(a, mx0);
-    mn1 = _mm_min_pd(b, mn1);
-    mx1 = _mm_max_pd(b, mx1);
-    bad = _mm_or_pd(bad, _mm_or_pd(_mm_sub_pd(a, a), _mm_sub_pd(b, b)));
+    __m128d c = _mm_loadu_pd(&p[i + 2].x), d = _mm_loadu_pd(&p[i + 3].x);
+    mn0 = _mm_min_pd(mn0, a);
+    mx0 = _mm_max_pd(mx0, a);
+    mn1 = _mm_min_pd(mn1, b);
+    mx1 = _mm_max_pd(mx1, b);
+    mn2 = _mm_min_pd(mn2, c);
+    mx2 = _mm_max_pd(mx2, c);
+    mn3 = _mm_min_pd(mn3, d);
+    mx3 = _mm_max_pd(mx3, d);
+    nan = _mm_or_pd(nan, _mm_or_pd(_mm_cmpunord_pd(a, b), _mm_cmpunord_pd(c, d)));
   }
-  if (i < hi) {
+  for (; i < hi; i++) {
     __m128d a = _mm_loadu_pd(&p[i].x);
-    mn0 = _mm_min_pd(a, mn0);
-    mx0 = _mm_max_pd(a, mx0);
-    bad = _mm_or_pd(bad, _mm_sub_pd(a, a));
+    mn0 = _mm_min_pd(mn0, a);
+    mx0 = _mm_max_pd(mx0, a);
+    nan = _mm_or_pd(nan, _mm_cmpunord_pd(a, a));
   }
+  mn0 = _mm_min_pd(_mm_min_pd(mn0, mn1), _mm_min_pd(mn2, mn3));
+  mx0 = _mm_max_pd(_mm_max_pd(mx0, mx1), _mm_max_pd(mx2, mx3));
   double mn[2], mx[2];
-  uint64_t flags[2];
-  _mm_storeu_pd(mn, _mm_min_pd(mn0, mn1));
-  _mm_storeu_pd(mx, _mm_max_pd(mx0, mx1));
-  _mm_storeu_si128((__m128i *)flags, _mm_castpd_si128(bad));
+  _mm_storeu_pd(mn, mn0);
+  _mm_storeu_pd(mx, mx0);
   j->box[w] = (qk_box_t){mn[0], mn[1], mx[0], mx[1]};
-  j->finite[w] = !(flags[0] | flags[1]);
+  j->finite[w] = !_mm_movemask_pd(nan) && isfinite(mn[0]) && isfinite(mn[1]) && isfinite(mx[0]) &&
+                 isfinite(mx[1]);
+  if (lo == hi) j->finite[w] = 1; /* an empty share: the box stays empty */
 #else
   double xmin = INFINITY, ymin = INFINITY, xmax = -INFINITY, ymax = -INFINITY;
   int finite = 1;

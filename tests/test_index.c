@@ -25,6 +25,7 @@
  *    thread does (same node ids, children, counts, squares, points in the same slots), on
  *    uniform, clustered and duplicate points at capacities 1, 8 and 32, with the default
  *    allocator (subtrees on threads) and with a counting one (built one after another);
+ *    from 2^19 points (the build's non-temporal stores) likewise, and the tree valid;
  *  - compact storage (issue 11): at 1M uniform points and capacity 32 a built tree holds
  *    at most 22 bytes per point (16 of coordinates, 4 of ids, the nodes in the rest).
  */
@@ -1055,6 +1056,33 @@ static void test_index_build_threads(void **state) {
   free(p);
 }
 
+/* From 2^19 points the build writes its records and the point arrays with non-temporal
+ * stores: the tree is still the same with one and with two threads, and valid (every point
+ * in its leaf's square, leaves within capacity). */
+static void test_index_build_streamed(void **state) {
+  (void)state;
+  uint64_t seed = qkt_seed(1131);
+  qkt_rng_t r;
+  qkt_rng_seed(&r, seed);
+  print_message("seed %llu\n", (unsigned long long)seed);
+  enum { N = (1 << 19) + 4321 };
+  qk_point_t *p = malloc(N * sizeof *p);
+  assert_non_null(p);
+  qkt_points(&r, QKT_CLUSTERED, p, N);
+  qk_tree_options_t o;
+  qk_tree_options_init(&o);
+  o.capacity = 16;
+  qk_tree_t *one = NULL, *two = NULL;
+  assert_int_equal(qk_tree_build(p, N, &o, &one), QK_OK);
+  QKT_CHECK_TREE(one);
+  o.threads = 2;
+  assert_int_equal(qk_tree_build(p, N, &o, &two), QK_OK);
+  assert_same_nodes(one, two);
+  qk_tree_free(one);
+  qk_tree_free(two);
+  free(p);
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_index_build_invariants),
@@ -1072,6 +1100,7 @@ int main(void) {
       cmocka_unit_test(test_index_rebuild),
       cmocka_unit_test(test_index_churn_memory),
       cmocka_unit_test(test_index_build_threads),
+      cmocka_unit_test(test_index_build_streamed),
       cmocka_unit_test(test_index_memory_compact),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);

@@ -1,0 +1,400 @@
+/*
+ * The bulk build's sort of the points by cell (index/build.c makes the tree from it): every
+ * point's cell in the uniform 2^L x 2^L grid over the root square, exactly the cell the
+ * tree's own comparisons send it to, and a two-digit MSD radix sort of the points by cell
+ * number into the tree's point arrays. The cell number's base-4 digits are the quadrants
+ * (NE=0, NW=1, SW=2, SE=3), so cell order is the tree's pre-order.
+ *
+ * The passes, each split over threads (shares of the input, or jobs taken from a counter):
+ *  1. keys: the cell number of every point (2L bits) and, per share, a histogram of its
+ *     high digit (at most 7 bits: 128 coarse buckets);
+ *  2. scatter: each point with its id and cell as a 24-byte record into its coarse bucket,
+ *     through a write-combining buffer per bucket (whole cache lines, non-temporal for
+ *     large inputs);
+ *  3. per coarse bucket (a job each): a histogram of the low digit, the fine buckets' slot
+ *     ranges, and the records' coordinates and ids sorted by it into staging arrays in
+ *     cache, then copied out in order to the tree's point arrays.
+ * Both digits are counting sorts that keep input order, so the points of a cell keep
+ * their input order and the result is the same for any number of threads.
+ *
+ * The cell of a point is its truncated scaled coordinate, corrected by one step against
+ * the grid lines as the tree computes them (the corner arithmetic of every descent, one
+ * addition per level), so that it is exactly the cell of the tree's comparisons: the
+ * tree's descent is a binary search over those lines, and the cell is the number of lines
+ * a coordinate lies east (north) of. The correction step suffices when the scaling errs by
+ * less than a cell; when the root's coordinates are so badly conditioned that this is not
+ * certain, the sort declines and the caller uses the plain build.
+ */
+#include <float.h>
+#include <math.h>
+#include <string.h>
+
+#include "index/index_access.h"
+
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
+/* The grid lines along one axis as the tree computes them: line k (0 < k < 2^L) splits
+ * the node of depth d = L - 1 - ctz(k) whose lower corner is the origin plus the sides of
+ * the levels where k's top d bits are set, added in order from the top; it lies at that
+ * corner plus the side of depth d + 1. g[0] is -inf, g[2^L] and g[2^L + 1] are +inf. False
+ * when the lines are not in order (rounding in a badly conditioned root). */
+static bool grid_lines(const qk_tree_t *t, double origin, unsigned L, double *g) {
+  uint32_t cells = 1u << L;
+  g[0] = -INFINITY;
+  g[cells] = g[cells + 1] = INFINITY;
+  for (uint32_t k = 1; k < cells; k++) {
+    unsigned tz = 0;
+    while (!((k >> tz) & 1u)) tz++;
+    unsigned d = L - 1 - tz;
+    double c = origin;
+    for (unsigned j = 0; j < d; j++)
+      if ((k >> (L - 1 - j)) & 1u) c += t->side[j + 1];
+    g[k] = c + t->side[d + 1];
+  }
+  for (uint32_t k = 2; k < cells; k++)
+    if (g[k] < g[k - 1]) return false;
+  return true;
+}
+
+/*
+ * One axis's tables for the key pass. A coordinate v scaled to grid units and truncated
+ * gives a first guess c in [0, 2^L], off by at most one cell; the lines on either side of
+ * guess c, line[c] = (g[c], g[c + 1]), settle it: with m the two bits (v > g[c],
+ * v > g[c + 1]), the cell is c - 1 + popcount(m). dig[4c + m] holds that cell's key bits
+ * along this axis: a cell's key is dig_x ^ dig_y, two bits per level, the digit NE=0, NW=1,
+ * SW=2, SE=3 from the east bit e and north bit n as ((n ^ 1) << 1) | (e ^ n).
+ */
+typedef struct axis_tab {
+  double line[257][2];
+  uint16_t dig[257 * 4];
+} axis_tab_t;
+
+static void axis_tables(const double *g, unsigned L, bool north, axis_tab_t *a) {
+  uint32_t cells = 1u << L, top = cells - 1;
+  uint32_t mask = (uint32_t)qk__spread16(top); /* the even bits of the key */
+  for (uint32_t c = 0; c <= cells; c++) {
+    a->line[c][0] = g[c];
+    a->line[c][1] = g[c + 1];
+    for (uint32_t m = 0; m < 4; m++) {
+      int cell = (int)c - 1 + (int)(m & 1u) + (int)(m >> 1);
+      uint32_t i = cell < 0 ? 0u : cell > (int)top ? top : (uint32_t)cell;
+      uint32_t s = (uint32_t)qk__spread16(i);
+      /* east bits go to the low bit of every digit; north bits to both, the high one
+       * inverted */
+      a->dig[4 * c + m] = (uint16_t)(north ? (((s ^ mask) << 1) ^ s) : s);
+    }
+  }
+}
+
+/* What the parallel phases of the bucketed build share. Shares of the input (passes 1 and
+ * 2) cover the points qk__share_range(n, w, nw); pass 3 runs one job per coarse bucket.
+ * The records of coarse bucket c written by share w form a segment of the record array;
+ * segments go in the order (c, w), each starting at a multiple of WC records. */
+typedef struct rec {
+  double x, y;
+  uint32_t id, key;
+} rec_t;
+
+/* Records per write-combining buffer: 8 of 24 bytes are three cache lines. */
+#define WC 8u
+/* Most coarse buckets: their write-combining buffers (24 KB) stay in the first-level cache. */
+#define MAX_COARSE_BITS 7u
+/* Most points a share stages in pass 3: 320 KB, within a core's second-level cache. */
+#define STAGE_MAX 16384u
+
+typedef struct bucket_job {
+  qk_tree_t *t;
+  const qk_point_t *p;
+  size_t n;
+  double x0, y0, scale;
+  const axis_tab_t *ax, *ay; /* the key tables of the two axes */
+  unsigned fbits;            /* bits of the low digit */
+  size_t nc;                 /* coarse buckets */
+  bool stream;               /* write records and points around the caches */
+  uint16_t *key;
+  rec_t *rec;         /* 64-byte aligned */
+  uint32_t *cnt;      /* nw rows of nc: records of bucket c from share w */
+  uint32_t *seg;      /* nw rows of nc: where those records start */
+  uint32_t *cbase;    /* nc + 1 coarse bucket starts in the point arrays */
+  uint32_t *cum;      /* 4^L + 1 fine bucket starts */
+  unsigned nw;        /* shares of passes 1 and 2 */
+  uint32_t stage_cap; /* points per share in the staging arrays (0: none) */
+  double *sx, *sy;    /* the staging arrays, stage_cap per share */
+  qk_id_t *sid;
+} bucket_job_t;
+
+/* Pass 1: every point's cell, and this share's count per coarse bucket. The job's fields
+ * are copied to locals: the stores to key[] and h[] could otherwise alias them. */
+static void keys_share(void *ctx, unsigned w, unsigned nw) {
+  const bucket_job_t *j = ctx;
+  size_t lo, hi;
+  qk__share_range(j->n, w, nw, &lo, &hi);
+  uint32_t *h = j->cnt + (size_t)w * j->nc;
+  const qk_point_t *p = j->p;
+  uint16_t *key = j->key;
+  const axis_tab_t *ax = j->ax, *ay = j->ay;
+  const unsigned fbits = j->fbits;
+#if defined(__SSE2__)
+  /* Both axes at once: scale, truncate, and compare with the two lines of each guess. */
+  const __m128d o = _mm_setr_pd(j->x0, j->y0), sc = _mm_set1_pd(j->scale);
+  for (size_t i = lo; i < hi; i++) {
+    __m128d v = _mm_loadu_pd(&p[i].x);
+    __m128i c = _mm_cvttpd_epi32(_mm_mul_pd(_mm_sub_pd(v, o), sc));
+    uint32_t cx = (uint32_t)_mm_cvtsi128_si32(c), cy = (uint32_t)_mm_extract_epi16(c, 2);
+    int mx = _mm_movemask_pd(_mm_cmpgt_pd(_mm_unpacklo_pd(v, v), _mm_loadu_pd(ax->line[cx])));
+    int my = _mm_movemask_pd(_mm_cmpgt_pd(_mm_unpackhi_pd(v, v), _mm_loadu_pd(ay->line[cy])));
+    uint32_t k = (uint32_t)(ax->dig[4 * cx + (uint32_t)mx] ^ ay->dig[4 * cy + (uint32_t)my]);
+    key[i] = (uint16_t)k;
+    h[k >> fbits]++;
+  }
+#else
+  const double x0 = j->x0, y0 = j->y0, scale = j->scale;
+  for (size_t i = lo; i < hi; i++) {
+    double x = p[i].x, y = p[i].y;
+    uint32_t cx = (uint32_t)((x - x0) * scale), cy = (uint32_t)((y - y0) * scale);
+    uint32_t mx = (uint32_t)(x > ax->line[cx][0]) | (uint32_t)(x > ax->line[cx][1]) << 1;
+    uint32_t my = (uint32_t)(y > ay->line[cy][0]) | (uint32_t)(y > ay->line[cy][1]) << 1;
+    uint32_t k = (uint32_t)(ax->dig[4 * cx + mx] ^ ay->dig[4 * cy + my]);
+    key[i] = (uint16_t)k;
+    h[k >> fbits]++;
+  }
+#endif
+}
+
+/* Pass 2: the records into their coarse buckets' segments, stable. With `stream`, each
+ * bucket's records gather in a buffer of WC (three cache lines) that goes to memory whole,
+ * with non-temporal stores: no line of the record array is read before it is written,
+ * and 2^7 buffers, unlike 2^7 scattered write streams, stay in cache. */
+static void scatter_share(void *ctx, unsigned w, unsigned nw) {
+  const bucket_job_t *j = ctx;
+  size_t lo, hi;
+  qk__share_range(j->n, w, nw, &lo, &hi);
+  const size_t nc = j->nc;
+  uint32_t next[1u << MAX_COARSE_BITS];
+  memcpy(next, j->seg + (size_t)w * nc, nc * sizeof *next);
+  const qk_point_t *p = j->p;
+  const uint16_t *key = j->key;
+  rec_t *rec = j->rec;
+  const unsigned fbits = j->fbits;
+#if defined(__SSE2__)
+  if (j->stream) {
+    _Alignas(64) rec_t buf[(1u << MAX_COARSE_BITS) * WC];
+    uint8_t fill[1u << MAX_COARSE_BITS];
+    memset(fill, 0, nc);
+    for (size_t i = lo; i < hi; i++) {
+      uint32_t k = key[i], c = k >> fbits, f = fill[c];
+      rec_t *b = &buf[c * WC];
+      b[f] = (rec_t){p[i].x, p[i].y, (uint32_t)i, k};
+      if (++f == WC) {
+        /* next[c] is a multiple of WC and the array 64-byte aligned: whole lines. */
+        __m128i *d = (__m128i *)(void *)&rec[next[c]];
+        const __m128i *s = (const __m128i *)(const void *)b;
+        for (unsigned q = 0; q < WC * sizeof(rec_t) / 16; q++) _mm_stream_si128(d + q, s[q]);
+        next[c] += WC;
+        f = 0;
+      }
+      fill[c] = (uint8_t)f;
+    }
+    for (size_t c = 0; c < nc; c++) memcpy(&rec[next[c]], &buf[c * WC], fill[c] * sizeof *rec);
+    _mm_sfence(); /* the streamed lines before anything the caller does next */
+    return;
+  }
+#endif
+  for (size_t i = lo; i < hi; i++) {
+    uint32_t k = key[i];
+    rec[next[k >> fbits]++] = (rec_t){p[i].x, p[i].y, (uint32_t)i, k};
+  }
+}
+
+/* Copy `bytes` from src to dst, with non-temporal stores where `stream` asks. */
+static void copy_out(void *dst, const void *src, size_t bytes, bool stream) {
+#if defined(__SSE2__)
+  if (stream) {
+    unsigned char *d = dst;
+    const unsigned char *s = src;
+    size_t head = (size_t)(-(uintptr_t)d & 15u);
+    if (head > bytes) head = bytes;
+    memcpy(d, s, head);
+    d += head, s += head, bytes -= head;
+    for (; bytes >= 64; d += 64, s += 64, bytes -= 64) {
+      __m128i a = _mm_loadu_si128((const __m128i *)(const void *)s);
+      __m128i b = _mm_loadu_si128((const __m128i *)(const void *)(s + 16));
+      __m128i c = _mm_loadu_si128((const __m128i *)(const void *)(s + 32));
+      __m128i e = _mm_loadu_si128((const __m128i *)(const void *)(s + 48));
+      _mm_stream_si128((__m128i *)(void *)d, a);
+      _mm_stream_si128((__m128i *)(void *)(d + 16), b);
+      _mm_stream_si128((__m128i *)(void *)(d + 32), c);
+      _mm_stream_si128((__m128i *)(void *)(d + 48), e);
+    }
+    memcpy(d, s, bytes);
+    return;
+  }
+#else
+  (void)stream;
+#endif
+  memcpy(dst, src, bytes);
+}
+
+/* Pass 3: coarse bucket c sorted by its low digit into the point arrays, stable, and its
+ * fine buckets' starts. The sort writes all over the bucket's slot range; when the range
+ * fits the share's staging arrays, it writes there (in cache, reused from bucket to
+ * bucket) and the range is then copied out in order, so that the point arrays are written
+ * front to back rather than line by line at random. */
+static void fine_job(unsigned c, unsigned w, void *ud) {
+  const bucket_job_t *j = ud;
+  const size_t nc = j->nc;
+  uint32_t a = j->cbase[c], b = j->cbase[c + 1];
+  const unsigned fbits = j->fbits;
+  const uint32_t nf = 1u << fbits, mask = nf - 1;
+  uint32_t next[1u << (16 - MAX_COARSE_BITS)];
+  memset(next, 0, nf * sizeof *next);
+  const rec_t *rec = j->rec;
+  for (unsigned v = 0; v < j->nw; v++) {
+    const rec_t *r = rec + j->seg[(size_t)v * nc + c], *e = r + j->cnt[(size_t)v * nc + c];
+    for (; r < e; r++) next[r->key & mask]++;
+  }
+  uint32_t *cum = j->cum + (size_t)c * nf, acc = a;
+  for (uint32_t f = 0; f < nf; f++) {
+    uint32_t k = next[f];
+    cum[f] = acc;
+    acc += k;
+  }
+  bool staged = b - a <= j->stage_cap;
+  uint32_t base = staged ? 0 : a;
+  for (uint32_t f = 0; f < nf; f++) next[f] = cum[f] - a + base;
+  double *px = staged ? j->sx + (size_t)w * j->stage_cap : j->t->px;
+  double *py = staged ? j->sy + (size_t)w * j->stage_cap : j->t->py;
+  qk_id_t *pid = staged ? j->sid + (size_t)w * j->stage_cap : j->t->pid;
+  for (unsigned v = 0; v < j->nw; v++) {
+    const rec_t *r = rec + j->seg[(size_t)v * nc + c], *e = r + j->cnt[(size_t)v * nc + c];
+    for (; r < e; r++) {
+      uint32_t d = next[r->key & mask]++;
+      px[d] = r->x;
+      py[d] = r->y;
+      pid[d] = r->id;
+    }
+  }
+  if (staged) {
+    copy_out(j->t->px + a, px, (size_t)(b - a) * sizeof *px, j->stream);
+    copy_out(j->t->py + a, py, (size_t)(b - a) * sizeof *py, j->stream);
+    copy_out(j->t->pid + a, pid, (size_t)(b - a) * sizeof *pid, j->stream);
+#if defined(__SSE2__)
+    if (j->stream) _mm_sfence();
+#endif
+  }
+}
+
+/* The temporary arrays of the bucketed build. */
+typedef struct scratch {
+  uint32_t *cum, *cbase, *cnt, *seg;
+  uint16_t *key;
+  void *rec_block; /* rec, before alignment */
+  double *sx, *sy;
+  qk_id_t *sid;
+  size_t nb, nc, n, nw, n_rec, ns;
+} scratch_t;
+
+static void scratch_free(const qk_tree_t *t, scratch_t *s) {
+  qk__free(&t->alloc, s->cum, (s->nb + 1) * sizeof *s->cum);
+  qk__free(&t->alloc, s->cbase, (s->nc + 1) * sizeof *s->cbase);
+  qk__free(&t->alloc, s->cnt, s->nw * s->nc * sizeof *s->cnt);
+  qk__free(&t->alloc, s->seg, s->nw * s->nc * sizeof *s->seg);
+  qk__free(&t->alloc, s->key, s->n * sizeof *s->key);
+  qk__free(&t->alloc, s->rec_block, s->n_rec * sizeof(rec_t) + 64);
+  qk__free(&t->alloc, s->sx, s->ns * sizeof *s->sx);
+  qk__free(&t->alloc, s->sy, s->ns * sizeof *s->sy);
+  qk__free(&t->alloc, s->sid, s->ns * sizeof *s->sid);
+  memset(s, 0, sizeof *s);
+}
+
+qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned L, unsigned nw,
+                          uint32_t **cum) {
+  *cum = NULL;
+  /* Margin in grid units: rounding of the corner arithmetic (at most one rounding per
+   * level) and of the scaling, with a factor of four to spare. Below a quarter cell, a
+   * truncated coordinate is off by at most one cell, which the key pass corrects. */
+  double x0 = t->root_x, y0 = t->root_y, side = t->side[0];
+  double M = fmax(fmax(fabs(x0), fabs(x0 + side)), fmax(fabs(y0), fabs(y0 + side)));
+  double cells = (double)(1u << L), scale = cells / side;
+  double ulpM = nextafter(M, INFINITY) - M;
+  double delta = 4 * (((L + 2) * ulpM + 2 * ulpM) * scale + cells * 4 * DBL_EPSILON);
+  if (!(delta < 0.25)) return QK_OK; /* badly conditioned: the plain build */
+  double g[258];
+  axis_tab_t tabs[2];
+  if (!grid_lines(t, x0, L, g)) return QK_OK;
+  axis_tables(g, L, false, &tabs[0]);
+  if (!grid_lines(t, y0, L, g)) return QK_OK;
+  axis_tables(g, L, true, &tabs[1]);
+
+  /* The high digit: half the key's bits, rounded up, and at most MAX_COARSE_BITS. */
+  unsigned kbits = 2 * L, cbits = (kbits + 1) / 2;
+  if (cbits > MAX_COARSE_BITS) cbits = MAX_COARSE_BITS;
+  unsigned fbits = kbits - cbits;
+  size_t nb = (size_t)1 << kbits, nc = (size_t)1 << cbits;
+  scratch_t s = {0};
+  s.nb = nb, s.nc = nc, s.n = n, s.nw = nw;
+  s.cum = qk__realloc(&t->alloc, NULL, 0, (nb + 1) * sizeof *s.cum);
+  s.cbase = qk__realloc(&t->alloc, NULL, 0, (nc + 1) * sizeof *s.cbase);
+  s.cnt = qk__realloc(&t->alloc, NULL, 0, nw * nc * sizeof *s.cnt);
+  s.seg = qk__realloc(&t->alloc, NULL, 0, nw * nc * sizeof *s.seg);
+  s.key = qk__realloc(&t->alloc, NULL, 0, n * sizeof *s.key);
+  if (!s.cum || !s.cbase || !s.cnt || !s.seg || !s.key) {
+    scratch_free(t, &s);
+    return QK_ERR_NOMEM;
+  }
+  memset(s.cnt, 0, nw * nc * sizeof *s.cnt);
+  /* Large inputs go around the caches: their records and points would not stay there. */
+  bool stream = n >= ((size_t)1 << 19);
+  bucket_job_t j = {t,     p,  n,      x0,    y0,   scale, &tabs[0], &tabs[1],
+                    fbits, nc, stream, s.key, NULL, s.cnt, s.seg,    s.cbase,
+                    s.cum, nw, 0,      NULL,  NULL, NULL};
+  qk__run_shares(nw, keys_share, &j);
+  /* Coarse bucket starts, and each share's segment of every bucket: the shares before it
+   * come first, so the order is the one thread's. Segments start at multiples of WC. */
+  uint32_t acc = 0, most = 0;
+  size_t at = 0;
+  for (size_t c = 0; c < nc; c++) {
+    s.cbase[c] = acc;
+    for (unsigned w = 0; w < nw; w++) {
+      uint32_t k = s.cnt[(size_t)w * nc + c];
+      s.seg[(size_t)w * nc + c] = (uint32_t)at;
+      at += (k + WC - 1) / WC * WC;
+      acc += k;
+    }
+    if (acc - s.cbase[c] > most) most = acc - s.cbase[c];
+  }
+  s.cbase[nc] = acc;
+  s.cum[nb] = acc;
+  s.n_rec = at ? at : 1;
+  s.rec_block = qk__realloc(&t->alloc, NULL, 0, s.n_rec * sizeof(rec_t) + 64);
+  if (!s.rec_block) {
+    scratch_free(t, &s);
+    return QK_ERR_NOMEM;
+  }
+  /* The scatter writes 2^7 streams at once: on huge pages, they need fewer TLB entries. */
+  if (t->huge_pages) qk__advise_huge(&t->alloc, s.rec_block, s.n_rec * sizeof(rec_t) + 64);
+  j.rec = (rec_t *)(void *)((unsigned char *)s.rec_block + (-(uintptr_t)s.rec_block & 63u));
+  qk__run_shares(nw, scatter_share, &j);
+  /* Staging arrays for pass 3, each share's as large as the largest coarse bucket up to
+   * STAGE_MAX points. */
+  qk__free(&t->alloc, s.key, n * sizeof *s.key);
+  s.key = NULL;
+  size_t cap = most < STAGE_MAX ? most : STAGE_MAX;
+  s.ns = nw * cap;
+  s.sx = qk__realloc(&t->alloc, NULL, 0, s.ns * sizeof *s.sx);
+  s.sy = qk__realloc(&t->alloc, NULL, 0, s.ns * sizeof *s.sy);
+  s.sid = qk__realloc(&t->alloc, NULL, 0, s.ns * sizeof *s.sid);
+  if (!s.sx || !s.sy || !s.sid) {
+    scratch_free(t, &s);
+    return QK_ERR_NOMEM;
+  }
+  j.stage_cap = (uint32_t)cap;
+  j.sx = s.sx, j.sy = s.sy, j.sid = s.sid;
+  qk__run_jobs_dynamic(nw, (unsigned)nc, fine_job, &j);
+  *cum = s.cum;
+  s.cum = NULL;
+  scratch_free(t, &s);
+  return QK_OK;
+}
