@@ -11,9 +11,10 @@
 #include <emmintrin.h>
 #endif
 
-/* One thread's share: a range of table entries and the pairs found there. */
+/* One thread's share: a range of cells and the pairs found there. */
 typedef struct share {
   const qk_world_t *w;
+  const qk__wpack_t *pk;
   size_t lo, hi;
   qk__kvec_t out;
   const qk_allocator_t *alloc;
@@ -41,20 +42,25 @@ static inline int boxes_meet(const qk_box_t *a, const qk_box_t *b) {
   return a->xmin <= b->xmax && b->xmin <= a->xmax && a->ymin <= b->ymax && b->ymin <= a->ymax;
 }
 
-/* Test two packed objects; record the pair when they overlap. */
-static inline int try_pair(share_t *s, const qk__wpack_t *p, const qk__wpack_t *q) {
-  if (!boxes_meet(&p->box, &q->box)) return 1;
-  const qk_world_t *w = s->w;
-  uint32_t i = p->slot, j = q->slot;
-  /* Two boxes need nothing beyond their boxes, which are exact for them. */
-  if (!(p->is_box && q->is_box) && !qk__shapes_overlap(&w->obj[i].s, &w->obj[j].s)) return 1;
+/* Test the objects of two slots exactly; record the pair when they overlap. */
+static inline int try_pair(share_t *s, uint32_t i, uint32_t j) {
+  const qk__wobj_t *p = &s->w->obj[i], *q = &s->w->obj[j];
+  if ((p->flags & QK__WKIND) == QK_SHAPE_BOX && (q->flags & QK__WKIND) == QK_SHAPE_BOX) {
+    /* Two boxes need nothing beyond their boxes. */
+    if (!(p->x <= q->a && q->x <= p->a && p->y <= q->b && q->y <= p->b)) return 1;
+  } else {
+    qk_box_t pb = qk__wbox(p), qb = qk__wbox(q);
+    if (!boxes_meet(&pb, &qb)) return 1;
+    qk_shape_t ps = qk__wshape(p), qs = qk__wshape(q);
+    if (!qk__shapes_overlap(&ps, &qs)) return 1;
+  }
   return kv_push(s, i, j);
 }
 
 /*
- * The box prefilter. Besides the packed doubles, each cell's boxes are copied as floats,
- * four objects to a group (16 floats: 4 xmin, 4 ymin, 4 xmax, 4 ymax; missing lanes hold
- * an empty box), so one object is compared with four at once. Rounding to float is
+ * The box prefilter. The boxes are copied as floats in the order, four objects to a
+ * group (16 floats: 4 xmin, 4 ymin, 4 xmax, 4 ymax; lanes past the last object hold an
+ * empty box), so one object is compared with four at once. Rounding to float is
  * monotone, so u <= v implies (float)u <= (float)v: every comparison of the box test
  * that holds in doubles holds in floats, and the prefilter never drops a pair whose
  * boxes meet. What it keeps is decided in doubles by try_pair.
@@ -78,153 +84,101 @@ static inline unsigned group_hits(const float *g, const float *me) {
 #endif
 }
 
-/* Object k of a cell (its lane in the float groups starting at f). */
+/* Object k of the order (its lane in the float groups). */
 static inline const float *lane_of(const float *f, uint32_t k) {
-  return f + (k >> 2) * 16 + (k & 3);
+  return f + (size_t)(k >> 2) * 16 + (k & 3);
 }
 
-/* Object i of cell A (pack entry pi, float lane me) against the objects of cell B from
- * its group q0 on, lanes below `from` of that first group excluded. */
-static inline int obj_vs_groups(share_t *s, const qk__wpack_t *pi, const float *me,
-                                const qk__wcell_t *b, uint32_t q0, unsigned from) {
-  const qk_world_t *w = s->w;
-  const qk__wpack_t *pk = w->pack;
-  const float *fb = w->fgrp + (size_t)pk[b->start].is_box * 16;
-  uint32_t ng = (b->count + 3) >> 2;
-  for (uint32_t q = q0; q < ng; q++) {
-    unsigned bits = group_hits(fb + (size_t)q * 16, me);
-    if (q == q0) bits &= ~((1u << from) - 1);
+/* Object k of the order against the objects at order positions [lo, hi). */
+static inline int obj_vs_range(share_t *s, uint32_t k, uint32_t lo, uint32_t hi) {
+  const float *fg = s->pk->fgrp, *me = lane_of(fg, k);
+  const uint32_t *ord = s->w->order;
+  uint32_t slot = ord[k];
+  for (uint32_t q = lo >> 2, qe = (hi - 1) >> 2; q <= qe; q++) {
+    unsigned bits = group_hits(fg + (size_t)q * 16, me);
+    if (q == lo >> 2) bits &= ~((1u << (lo & 3)) - 1);
+    if (q == qe) bits &= (2u << ((hi - 1) & 3)) - 1;
     while (bits) {
       unsigned lane = (unsigned)__builtin_ctz(bits);
       bits &= bits - 1;
-      if (!try_pair(s, pi, &pk[b->start + 1 + q * 4 + lane])) return 0;
+      if (!try_pair(s, slot, ord[q * 4 + lane])) return 0;
     }
   }
   return 1;
 }
 
-/* Every object of cell A against every object of cell B (A != B). */
-static int cross_cells(share_t *s, const qk__wcell_t *a, const qk__wcell_t *b) {
-  const qk__wpack_t *pk = s->w->pack;
-  const qk_box_t *hb = &pk[b->start].box; /* the box around all of B's objects */
-  if (!boxes_meet(&pk[a->start].box, hb)) return 1;
-  const float *fa = s->w->fgrp + (size_t)pk[a->start].is_box * 16;
-  for (uint32_t k = 0; k < a->count; k++) {
-    const qk__wpack_t *pi = &pk[a->start + 1 + k];
-    if (!boxes_meet(&pi->box, hb)) continue;
-    if (!obj_vs_groups(s, pi, lane_of(fa, k), b, 0, 0)) return 0;
+/* Every object of cell A against every object of cell B (A != B): cell indices. */
+static int cross_cells(share_t *s, uint32_t a, uint32_t b) {
+  const qk_box_t *ha = &s->pk->hb[a], *hb = &s->pk->hb[b];
+  if (!boxes_meet(ha, hb)) return 1;
+  const qk__wcell_t *cl = s->w->cells;
+  const float *fg = s->pk->fgrp;
+  /* B's box as floats, for a one-lane check of each of A's objects first. */
+  float bx0 = (float)hb->xmin, by0 = (float)hb->ymin, bx1 = (float)hb->xmax, by1 = (float)hb->ymax;
+  uint32_t blo = cl[b].start, bhi = cl[b + 1].start;
+  for (uint32_t k = cl[a].start, ke = cl[a + 1].start; k < ke; k++) {
+    const float *me = lane_of(fg, k);
+    if (!(me[0] <= bx1 && bx0 <= me[8] && me[4] <= by1 && by0 <= me[12])) continue;
+    if (!obj_vs_range(s, k, blo, bhi)) return 0;
   }
   return 1;
 }
 
-/* Cell A against the cells of level l whose loose squares [c 2^l, (c + 2) 2^l) meet the
- * box around A's objects: c from floor(min / 2^l) - 1 to floor(max / 2^l). */
-static int cell_vs_level(share_t *s, const qk__wcell_t *a, int l) {
+/* Cell a against the cells of the coarser level l whose loose squares
+ * [c 2^l, (c + 2) 2^l) meet the box around a's objects: c from floor(min / 2^l) - 1 to
+ * floor(max / 2^l), each row found by binary search. */
+static int cell_vs_level(share_t *s, uint32_t a, int l) {
   const qk_world_t *w = s->w;
-  const qk_box_t *hb = &w->pack[a->start].box;
+  const qk_box_t *hb = &s->pk->hb[a];
   const double inv = qk__pow2(-l);
   int64_t x0 = (int64_t)floor(hb->xmin * inv) - 1, x1 = (int64_t)floor(hb->xmax * inv);
   int64_t y0 = (int64_t)floor(hb->ymin * inv) - 1, y1 = (int64_t)floor(hb->ymax * inv);
-  for (int64_t x = x0; x <= x1; x++)
-    for (int64_t y = y0; y <= y1; y++) {
-      const qk__wcell_t *b = qk__cell_get(w, l, x, y);
-      if (b && !cross_cells(s, a, b)) return 0;
-    }
+  uint32_t end = w->lv_first[l - QK__LMIN] + w->lv_n[l - QK__LMIN];
+  for (int64_t y = y0; y <= y1; y++)
+    for (uint32_t k = qk__cell_lower(w, l, y, x0);
+         k < end && w->cells[k].cy == y && w->cells[k].cx <= x1; k++)
+      if (!cross_cells(s, a, k)) return 0;
   return 1;
 }
 
-static int cell_pairs(share_t *s, const qk__wcell_t *a) {
+/* The pairs of cell a: within it, with the cells of its level after it whose loose
+ * squares meet its own (indices differing by at most one: the next cell of its row and
+ * three of the row above, found by *up, a cursor that only moves forward), and with the
+ * cells of every coarser level that its objects can meet. */
+static int cell_pairs(share_t *s, uint32_t a, uint32_t *up) {
   const qk_world_t *w = s->w;
-  const qk__wpack_t *pk = w->pack;
-  /* Within the cell: each object with those after it. */
-  const float *fa = w->fgrp + (size_t)pk[a->start].is_box * 16;
-  for (uint32_t k = 0; k + 1 < a->count; k++)
-    if (!obj_vs_groups(s, &pk[a->start + 1 + k], lane_of(fa, k), a, (k + 1) >> 2, (k + 1) & 3))
-      return 0;
-  /* The same level: loose squares [c, c + 2) meet when the indices differ by <= 1; each
-   * neighbour pair is taken once, from the cell that comes first in (x, y) order. */
-  for (int dx = 0; dx <= 1; dx++)
-    for (int dy = -1; dy <= 1; dy++) {
-      if (dx == 0 && dy <= 0) continue;
-      const qk__wcell_t *b = qk__cell_get(w, a->level, a->cx + dx, a->cy + dy);
-      if (b && !cross_cells(s, a, b)) return 0;
-    }
-  /* Coarser levels: the cells whose loose squares meet the box around this cell's
-   * objects (about four per level: that box is much smaller than the cell's loose
-   * square, and one set of lookups serves all of the cell's objects). */
+  const qk__wcell_t *c = &w->cells[a];
+  uint32_t lo = c->start, hi = c[1].start;
+  for (uint32_t k = lo; k + 1 < hi; k++)
+    if (!obj_vs_range(s, k, k + 1, hi)) return 0;
+  int l = c->level;
+  if (c[1].level == l && c[1].cy == c->cy && c[1].cx == c->cx + 1 && !cross_cells(s, a, a + 1))
+    return 0;
+  uint32_t end = w->lv_first[l - QK__LMIN] + w->lv_n[l - QK__LMIN];
+  uint32_t u = *up > a + 1 ? *up : a + 1;
+  int64_t ty = (int64_t)c->cy + 1, tx = (int64_t)c->cx - 1;
+  while (u < end && (w->cells[u].cy < ty || (w->cells[u].cy == ty && w->cells[u].cx < tx))) u++;
+  *up = u;
+  for (; u < end && w->cells[u].cy == ty && w->cells[u].cx <= tx + 2; u++)
+    if (!cross_cells(s, a, u)) return 0;
+  /* Coarser levels whose objects' box meets this cell's. */
   for (int li = 0; li < s->n_levels; li++) {
     int lb = s->levels[li];
-    if (lb > a->level && !cell_vs_level(s, a, lb)) return 0;
+    if (lb <= l || !boxes_meet(&s->pk->hb[a], &s->pk->lv_box[lb - QK__LMIN])) continue;
+    if (!cell_vs_level(s, a, lb)) return 0;
   }
   return 1;
 }
 
 static void run_share(unsigned t, void *ud) {
   share_t *s = &((share_t *)ud)[t];
+  uint32_t up = 0;
   for (size_t i = s->lo; i < s->hi; i++) {
-    const qk__wcell_t *c = &s->w->cells[s->w->occ[i]];
-    if (!cell_pairs(s, c)) {
+    if (!cell_pairs(s, (uint32_t)i, &up)) {
       s->nomem = 1;
       return;
     }
   }
-}
-
-/* Copy every object's box into the packed array, cell by cell, each cell's objects after
- * a header holding the box around them, and note where each cell starts. The searches
- * then read consecutive memory, not the objects' lists, and skip a neighbour cell whole
- * when its box misses (or, for one object, misses that object). */
-static qk_status_t pack_cells(qk_world_t *w) {
-  /* One header entry per cell (the box around its objects), then its objects; float
-   * groups: a quarter of the objects plus one per cell at most. */
-  size_t need = w->n_live + w->n_cells + 1, gneed = w->n_live / 4 + w->n_cells + 1;
-  size_t oneed = w->n_cells + 1;
-  if (w->cap_pack < need || w->cap_pack > 2 * need + 64 || w->cap_fgrp < gneed ||
-      w->cap_fgrp > 2 * gneed + 64 || w->cap_occ < oneed || w->cap_occ > 2 * oneed + 64) {
-    size_t cap = need + need / 4, gcap = gneed + gneed / 4, ocap = oneed + oneed / 4;
-    qk__wpack_t *p = qk__realloc(&w->alloc, NULL, 0, cap * sizeof *p);
-    float *g = p ? qk__realloc(&w->alloc, NULL, 0, gcap * 16 * sizeof *g) : NULL;
-    uint32_t *o = g ? qk__realloc(&w->alloc, NULL, 0, ocap * sizeof *o) : NULL;
-    if (!o) {
-      qk__free(&w->alloc, p, cap * sizeof *p);
-      qk__free(&w->alloc, g, gcap * 16 * sizeof *g);
-      return QK_ERR_NOMEM;
-    }
-    qk__free(&w->alloc, w->pack, w->cap_pack * sizeof *w->pack);
-    qk__free(&w->alloc, w->fgrp, w->cap_fgrp * 16 * sizeof *w->fgrp);
-    qk__free(&w->alloc, w->occ, w->cap_occ * sizeof *w->occ);
-    w->pack = p;
-    w->cap_pack = cap;
-    w->fgrp = g;
-    w->cap_fgrp = gcap;
-    w->occ = o;
-    w->cap_occ = ocap;
-  }
-  uint32_t k = 0, gk = 0, nocc = 0;
-  for (size_t c = 0; c < w->cap_cells; c++) {
-    qk__wcell_t *cell = &w->cells[c];
-    if (!cell->count) continue;
-    w->occ[nocc++] = (uint32_t)c;
-    uint32_t h = k++, lane = 0;
-    float *g = w->fgrp + (size_t)gk * 16;
-    qk_box_t hb = {INFINITY, INFINITY, -INFINITY, -INFINITY};
-    for (uint32_t i = cell->head; i != QK_NONE; i = w->obj[i].next) {
-      const qk_box_t *b = &w->obj[i].box;
-      w->pack[k++] = (qk__wpack_t){*b, i, w->obj[i].s.kind == QK_SHAPE_BOX};
-      hb.xmin = qk__min(hb.xmin, b->xmin), hb.ymin = qk__min(hb.ymin, b->ymin);
-      hb.xmax = qk__max(hb.xmax, b->xmax), hb.ymax = qk__max(hb.ymax, b->ymax);
-      g[lane] = (float)b->xmin, g[4 + lane] = (float)b->ymin;
-      g[8 + lane] = (float)b->xmax, g[12 + lane] = (float)b->ymax;
-      if (++lane == 4) lane = 0, g += 16;
-    }
-    for (; lane && lane < 4; lane++) /* empty lanes: a box that meets nothing */
-      g[lane] = g[4 + lane] = INFINITY, g[8 + lane] = g[12 + lane] = -INFINITY;
-    /* the header's is_box holds the cell's first float group */
-    w->pack[h] = (qk__wpack_t){hb, QK_NONE, gk};
-    gk += (cell->count + 3) >> 2;
-    cell->start = h;
-  }
-  return QK_OK;
 }
 
 /* Room for n entries of `size` bytes in a list of capacity *cap: NULL when the present
@@ -239,20 +193,6 @@ static void *list_room(const qk_allocator_t *a, size_t cap, size_t n, size_t siz
   if (!p && cap < n) *fail = 1;
   *ncap = want;
   return p;
-}
-
-/* Make v hold at least n keys (contents not kept); 0 when memory is short. */
-static int kv_size(const qk_allocator_t *a, qk__kvec_t *v, size_t n) {
-  size_t ncap;
-  int fail = 0;
-  uint64_t *p = list_room(a, v->cap, n, sizeof *p, 16, &ncap, &fail);
-  if (fail) return 0;
-  if (p) {
-    qk__free(a, v->v, v->cap * sizeof *v->v);
-    v->v = p;
-    v->cap = ncap;
-  }
-  return 1;
 }
 
 /* Sort n keys into dst: two stable counting sorts, by the second slot then by the first
@@ -282,34 +222,49 @@ static inline qk_world_pair_t old_pair(const qk_world_t *w, uint64_t k) {
 
 qk_status_t qk_world_update(qk_world_t *w) {
   if (!w) return QK_ERR_INVALID;
-  qk_status_t pst = pack_cells(w);
-  if (pst != QK_OK) return pst;
+  qk__wpack_t pk;
+  qk_status_t pst = qk__world_reorder(w, &pk);
+  if (pst != QK_OK) {
+    qk__world_pack_free(w, &pk);
+    return pst;
+  }
   int levels[QK__NLEV];
   int n_levels = qk__world_levels(w, levels);
   unsigned nt = w->opt.threads;
   if (w->n_live < 4096) nt = 1; /* not worth a thread */
   share_t shares[256];
   for (unsigned t = 0; t < nt; t++) {
-    shares[t] = (share_t){
-        w, w->n_cells * t / nt, w->n_cells * (t + 1) / nt, {0}, &w->alloc, 0, levels, n_levels};
+    shares[t] = (share_t){w,
+                          &pk,
+                          (size_t)w->n_cells * t / nt,
+                          (size_t)w->n_cells * (t + 1) / nt,
+                          {0},
+                          &w->alloc,
+                          0,
+                          levels,
+                          n_levels};
   }
-  shares[0].out = w->found; /* the first share fills the kept buffer */
-  shares[0].out.n = 0;
+  /* The first share's buffer is sized by the last search (it grows if need be). */
+  qk__kvec_t found = {0};
+  size_t guess = w->last_found + w->last_found / 8 + 64;
+  found.v = qk__realloc(&w->alloc, NULL, 0, guess * sizeof *found.v);
+  if (found.v) found.cap = guess;
+  shares[0].out = found;
   qk__run_jobs(nt, nt, run_share, shares);
-  w->found = shares[0].out;
+  found = shares[0].out;
+  qk__world_pack_free(w, &pk);
   qk_status_t st = QK_OK;
   size_t total = 0;
   for (unsigned t = 0; t < nt; t++) {
     if (shares[t].nomem) st = QK_ERR_NOMEM;
     total += shares[t].out.n;
   }
-  /* Scratch sized before anything changes: all pairs in one list, the sort's target and
-   * its counts. */
-  if (st == QK_OK && total > w->found.cap) {
-    uint64_t *v = qk__realloc(&w->alloc, w->found.v, w->found.cap * sizeof *v, total * sizeof *v);
+  /* All pairs in one list, the sort's target and its counts (scratch, freed below). */
+  if (st == QK_OK && total > found.cap) {
+    uint64_t *v = qk__realloc(&w->alloc, found.v, found.cap * sizeof *v, total * sizeof *v);
     if (v) {
-      w->found.v = v;
-      w->found.cap = total;
+      found.v = v;
+      found.cap = total;
     } else {
       st = QK_ERR_NOMEM;
     }
@@ -317,8 +272,8 @@ qk_status_t qk_world_update(qk_world_t *w) {
   if (st == QK_OK) {
     for (unsigned t = 1; t < nt; t++) {
       if (shares[t].out.n)
-        memcpy(w->found.v + w->found.n, shares[t].out.v, shares[t].out.n * sizeof(uint64_t));
-      w->found.n += shares[t].out.n;
+        memcpy(found.v + found.n, shares[t].out.v, shares[t].out.n * sizeof(uint64_t));
+      found.n += shares[t].out.n;
     }
   }
   for (unsigned t = 1; t < nt; t++)
@@ -327,22 +282,20 @@ qk_status_t qk_world_update(qk_world_t *w) {
   size_t ncap = total + total / 8 + 16;
   uint64_t *nv = NULL;
   if (st == QK_OK && !(nv = qk__realloc(&w->alloc, NULL, 0, ncap * sizeof *nv))) st = QK_ERR_NOMEM;
-  size_t need_count = (size_t)w->n_obj + 1;
-  if (st == QK_OK && (w->cap_count < need_count || w->cap_count > 2 * need_count + 64)) {
-    uint32_t *c = qk__realloc(&w->alloc, NULL, 0, need_count * sizeof *c);
-    if (c) {
-      qk__free(&w->alloc, w->count, w->cap_count * sizeof *w->count);
-      w->count = c;
-      w->cap_count = need_count;
-    } else if (w->cap_count < need_count) {
-      st = QK_ERR_NOMEM;
-    }
+  size_t n_count = (size_t)w->n_obj + 1;
+  uint32_t *count = NULL;
+  if (st == QK_OK && !(count = qk__realloc(&w->alloc, NULL, 0, n_count * sizeof *count)))
+    st = QK_ERR_NOMEM;
+  if (st == QK_OK) {
+    sort_keys(found.v, nv, total, count, w->n_obj);
+    w->last_found = total;
   }
+  qk__free(&w->alloc, count, n_count * sizeof *count);
+  qk__free(&w->alloc, found.v, found.cap * sizeof *found.v);
   if (st != QK_OK) {
     qk__free(&w->alloc, nv, ncap * sizeof *nv);
     return st;
   }
-  sort_keys(w->found.v, nv, total, w->count, w->n_obj);
   /* Began and ended: a merge of this frame's keys with the last frame's, counted first so
    * the lists can be sized before either changes. A pair whose slot now holds another
    * object (or none) has ended, and a pair with such a slot has begun. */
@@ -402,8 +355,6 @@ qk_status_t qk_world_update(qk_world_t *w) {
     for (uint32_t i = 0; i < w->n_obj; i++) w->obj[i].ugen = w->obj[i].gen;
     w->ident_dirty = 0;
   }
-  /* Give back what a peak left in the scratch (failure is harmless). */
-  (void)kv_size(&w->alloc, &w->found, total);
   return QK_OK;
 }
 
