@@ -44,6 +44,10 @@
 
 #include "collide/world_internal.h"
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 void qk_world_options_init(qk_world_options_t *o) {
   if (!o) return;
   memset(o, 0, sizeof *o);
@@ -99,12 +103,20 @@ size_t qk_world_bytes(const qk_world_t *w) {
 
 /* ---- filing ---------------------------------------------------------------------- */
 
-/* Smallest L with 2^L >= e (e >= 0). */
+/* The exponent of a positive normal double (floor(log2 v)), from its bits. */
+static inline int exp_of(double v, uint64_t *mant) {
+  uint64_t u;
+  memcpy(&u, &v, sizeof u);
+  *mant = u & ((UINT64_C(1) << 52) - 1);
+  return (int)((u >> 52) & 0x7ff) - 1023;
+}
+
+/* Smallest L with 2^L >= e (e >= 0; QK__LFLOOR for anything below 2^QK__LFLOOR). */
 static int ceil_log2(double e) {
-  if (e <= 0) return QK__LFLOOR;
-  int ex;
-  double m = frexp(e, &ex); /* e = m 2^ex, m in [0.5, 1) */
-  return m == 0.5 ? ex - 1 : ex;
+  if (!(e > 0x1p-120)) return QK__LFLOOR;
+  uint64_t m;
+  int ex = exp_of(e, &m);
+  return m ? ex + 1 : ex;
 }
 
 void qk__world_cell_of(const qk_box_t *f, int *level, int32_t *cx, int32_t *cy, int *forced) {
@@ -116,7 +128,9 @@ void qk__world_cell_of(const qk_box_t *f, int *level, int32_t *cx, int32_t *cy, 
   if (l < QK__LFLOOR) l = QK__LFLOOR;
   *forced = 0;
   /* |coordinate| < 2^(ilogb + 1) <= 2^(l + 30): cell indices (and cx + 2) fit 32 bits. */
-  if (mag > 0 && ilogb(mag) - 29 > l) l = ilogb(mag) - 29, *forced = 1;
+  uint64_t mant;
+  int lm = mag >= 0x1p-1000 ? exp_of(mag, &mant) - 29 : QK__LFLOOR; /* ilogb(mag) - 29 */
+  if (lm > l) l = lm, *forced = 1;
   for (;; l++) {
     double inv = qk__pow2(-l), s = qk__pow2(l);
     double x = floor(f->xmin * inv), y = floor(f->ymin * inv);
@@ -201,19 +215,22 @@ qk_status_t qk_world_add(qk_world_t *w, const qk_shape_t *shape, uint64_t tag, q
   return QK_OK;
 }
 
-/* Zero, or magnitude in [2^-100, 2^100] (qk__value_ok on the exponent bits: NaN and the
- * infinities fail too). */
-static inline int value_ok_bits(double v) {
-  uint64_t u;
-  memcpy(&u, &v, sizeof u);
-  uint64_t e = (u >> 52) & 0x7ff;
-  return (u << 1) == 0 || e - (1023 - 100) <= 200;
-}
-
-/* qk__shape_normalize for a box whose values need no change (the common move). */
+/* qk__shape_normalize for a box whose values need no change (the common move): corners
+ * in order and every value of magnitude in [2^-100, 2^100] (zeros, NaN and the
+ * infinities take the general path). */
 static inline int box_ok(const qk_shape_t *s) {
-  return s->kind == QK_SHAPE_BOX && s->x <= s->a && s->y <= s->b && value_ok_bits(s->x) &&
-         value_ok_bits(s->y) && value_ok_bits(s->a) && value_ok_bits(s->b);
+  if (s->kind != QK_SHAPE_BOX || !(s->x <= s->a && s->y <= s->b)) return 0;
+#if defined(__SSE2__)
+  const __m128d sign = _mm_set1_pd(-0.0), lo = _mm_set1_pd(0x1p-100), hi = _mm_set1_pd(0x1p100);
+  __m128d p = _mm_andnot_pd(sign, _mm_loadu_pd(&s->x)),
+          q = _mm_andnot_pd(sign, _mm_loadu_pd(&s->a));
+  __m128d ok = _mm_and_pd(_mm_and_pd(_mm_cmpge_pd(p, lo), _mm_cmple_pd(p, hi)),
+                          _mm_and_pd(_mm_cmpge_pd(q, lo), _mm_cmple_pd(q, hi)));
+  return _mm_movemask_pd(ok) == 3;
+#else
+  return qk__value_ok(s->x) && qk__value_ok(s->y) && qk__value_ok(s->a) && qk__value_ok(s->b) &&
+         s->x && s->y && s->a && s->b;
+#endif
 }
 
 qk_status_t qk_world_move(qk_world_t *w, qk_handle_t h, const qk_shape_t *shape) {
@@ -263,14 +280,6 @@ qk_status_t qk_world_get(const qk_world_t *w, qk_handle_t h, qk_shape_t *shape, 
   if (shape) *shape = qk__wshape(o);
   if (tag) *tag = o->tag;
   return QK_OK;
-}
-
-qk_box_t qk__world_fat_box(const qk_world_t *w, const qk__wobj_t *o) {
-  qk_box_t b = qk__wbox(o);
-  double e = qk__max(b.xmax - b.xmin, b.ymax - b.ymin);
-  double m = w->opt.margin * e + w->opt.min_margin;
-  if (!isfinite(m)) m = 0;
-  return (qk_box_t){b.xmin - m, b.ymin - m, b.xmax + m, b.ymax + m};
 }
 
 int qk__world_levels(const qk_world_t *w, int *levels) {

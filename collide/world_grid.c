@@ -26,6 +26,27 @@ static int drec_cmp(const void *p, const void *q) {
   return (a->slot > b->slot) - (a->slot < b->slot);
 }
 
+/* Sort n records by key, stably, through tmp (n entries): an LSD radix sort on the key's
+ * nine bytes, skipping the bytes all records share (most of them: nearby cells). */
+static void drec_sort(drec_t *d, drec_t *tmp, size_t n) {
+  uint64_t ly_or = 0, ly_and = ~(uint64_t)0;
+  uint32_t x_or = 0, x_and = ~0u;
+  for (size_t i = 0; i < n; i++) {
+    ly_or |= d[i].ly, ly_and &= d[i].ly;
+    x_or |= d[i].x, x_and &= d[i].x;
+  }
+  for (int byte = 0; byte < 9; byte++) {
+    int in_x = byte < 4, sh = in_x ? 8 * byte : 8 * (byte - 4);
+    uint64_t differ = in_x ? (uint64_t)(x_or ^ x_and) : (ly_or ^ ly_and);
+    if (!((differ >> sh) & 0xff)) continue;
+    size_t count[257] = {0};
+    for (size_t i = 0; i < n; i++) count[((in_x ? d[i].x : d[i].ly) >> sh & 0xff) + 1]++;
+    for (int k = 1; k < 257; k++) count[k] += count[k - 1];
+    for (size_t i = 0; i < n; i++) tmp[count[(in_x ? d[i].x : d[i].ly) >> sh & 0xff]++] = d[i];
+    memcpy(d, tmp, n * sizeof *d);
+  }
+}
+
 static inline drec_t rec_of(const qk__wobj_t *o, uint32_t slot) {
   return (drec_t){(uint64_t)(uint32_t)(o->level - QK__LMIN) << 32 | bias(o->cy), bias(o->u.cx),
                   slot};
@@ -53,13 +74,14 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
    * sentinel) and the pack. */
   size_t nd = w->n_dirty, n = w->n_live, ncap = (size_t)w->n_cells + nd + 1;
   size_t ocap = n ? n : 1, gcap = (n + 3) / 4 + 1;
-  drec_t *d = nd ? qk__realloc(a, NULL, 0, nd * sizeof *d) : NULL;
+  /* (the dirty records and, for the radix sort, as many again) */
+  drec_t *d = nd ? qk__realloc(a, NULL, 0, 2 * nd * sizeof *d) : NULL;
   uint32_t *ord = (!nd || d) ? qk__realloc(a, NULL, 0, ocap * sizeof *ord) : NULL;
   qk__wcell_t *cells = ord ? qk__realloc(a, NULL, 0, ncap * sizeof *cells) : NULL;
   float *fg = cells ? qk__realloc(a, NULL, 0, gcap * 16 * sizeof *fg) : NULL;
   qk_box_t *hb = fg ? qk__realloc(a, NULL, 0, ncap * sizeof *hb) : NULL;
   if (!hb) {
-    qk__free(a, d, nd * sizeof *d);
+    qk__free(a, d, 2 * nd * sizeof *d);
     qk__free(a, ord, ocap * sizeof *ord);
     qk__free(a, cells, ncap * sizeof *cells);
     qk__free(a, fg, gcap * 16 * sizeof *fg);
@@ -81,7 +103,10 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
     d[m_d] = rec_of(o, i);
     m_d++;
   }
-  if (m_d > 1) qsort(d, m_d, sizeof *d, drec_cmp);
+  if (m_d > 64)
+    drec_sort(d, d + nd, m_d);
+  else if (m_d > 1)
+    qsort(d, m_d, sizeof *d, drec_cmp);
 
   /* Merge: the kept entries of the old order (still sorted: their cells did not change)
    * with the sorted dirty ones, packing each object as it is placed. */
@@ -98,8 +123,13 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
       i++;
     }
     uint32_t s;
-    drec_t r = i < no ? rec_of(&w->obj[old[i]], 0) : (drec_t){0, 0, 0};
-    if (i < no && (j == m_d || drec_cmp(&r, &d[j]) <= 0))
+    if (i < no && j < m_d) {
+      drec_t r = rec_of(&w->obj[old[i]], 0);
+      if (drec_cmp(&r, &d[j]) <= 0)
+        s = old[i++];
+      else
+        s = d[j++].slot;
+    } else if (i < no)
       s = old[i++];
     else if (j < m_d)
       s = d[j++].slot;
@@ -109,6 +139,7 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
     int l = o->level;
     if (!nc || cells[nc - 1].level != l || cells[nc - 1].cy != o->cy ||
         cells[nc - 1].cx != o->u.cx) {
+      if (nc) box_join(&pk->lv_box[cells[nc - 1].level - QK__LMIN], &hb[nc - 1]);
       cells[nc] = (qk__wcell_t){o->u.cx, o->cy, m, l};
       hb[nc] = empty_box;
       if (!w->lv_n[l - QK__LMIN]) w->lv_first[l - QK__LMIN] = nc;
@@ -117,7 +148,6 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
     }
     qk_box_t b = qk__wbox(o);
     box_join(&hb[nc - 1], &b);
-    box_join(&pk->lv_box[l - QK__LMIN], &b);
     float *g = fg + (size_t)(m >> 2) * 16 + (m & 3);
     g[0] = (float)b.xmin, g[4] = (float)b.ymin, g[8] = (float)b.xmax, g[12] = (float)b.ymax;
     ord[m++] = s;
@@ -126,12 +156,13 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
     float *g = fg + (size_t)(k >> 2) * 16 + (k & 3);
     g[0] = g[4] = INFINITY, g[8] = g[12] = -INFINITY;
   }
+  if (nc) box_join(&pk->lv_box[cells[nc - 1].level - QK__LMIN], &hb[nc - 1]);
   cells[nc] = (qk__wcell_t){0, 0, m, INT32_MAX};
   for (uint32_t k = w->dirty_head; k != QK_NONE; k = w->obj[k].dnext)
     w->obj[k].flags &= (uint8_t)~QK__WDIRTY;
   w->dirty_head = QK_NONE;
   w->n_dirty = 0;
-  qk__free(a, d, nd * sizeof *d);
+  qk__free(a, d, 2 * nd * sizeof *d);
   qk__free(a, w->order, (size_t)w->cap_order * sizeof *w->order);
   qk__free(a, w->cells, (size_t)w->cap_cells * sizeof *w->cells);
   w->order = ord, w->n_order = m, w->cap_order = (uint32_t)ocap;

@@ -155,7 +155,13 @@ void qk__world_pack_free(qk_world_t *w, qk__wpack_t *pk);
 void qk__world_cell_of(const qk_box_t *f, int *level, int32_t *cx, int32_t *cy, int *forced);
 
 /* The fat box of object o (its box widened by the margins). */
-qk_box_t qk__world_fat_box(const qk_world_t *w, const qk__wobj_t *o);
+static inline qk_box_t qk__world_fat_box(const qk_world_t *w, const qk__wobj_t *o) {
+  qk_box_t b = qk__wbox(o);
+  double e = qk__max(b.xmax - b.xmin, b.ymax - b.ymin);
+  double m = w->opt.margin * e + w->opt.min_margin;
+  if (!isfinite(m)) m = 0;
+  return (qk_box_t){b.xmin - m, b.ymin - m, b.xmax + m, b.ymax + m};
+}
 
 static inline qk_handle_t qk__handle(const qk_world_t *w, uint32_t slot) {
   return ((uint64_t)w->obj[slot].gen << 32) | slot;

@@ -107,21 +107,26 @@ static inline int obj_vs_range(share_t *s, uint32_t k, uint32_t lo, uint32_t hi)
   return 1;
 }
 
-/* Every object of cell A against every object of cell B (A != B): cell indices. */
-static int cross_cells(share_t *s, uint32_t a, uint32_t b) {
-  const qk_box_t *ha = &s->pk->hb[a], *hb = &s->pk->hb[b];
-  if (!boxes_meet(ha, hb)) return 1;
+/* Every object of cell a against the objects at order positions [blo, bhi) (other
+ * cells' objects), whose boxes lie in ub. */
+static int cross_run(share_t *s, uint32_t a, uint32_t blo, uint32_t bhi, const qk_box_t *ub) {
   const qk__wcell_t *cl = s->w->cells;
   const float *fg = s->pk->fgrp;
-  /* B's box as floats, for a one-lane check of each of A's objects first. */
-  float bx0 = (float)hb->xmin, by0 = (float)hb->ymin, bx1 = (float)hb->xmax, by1 = (float)hb->ymax;
-  uint32_t blo = cl[b].start, bhi = cl[b + 1].start;
+  /* ub as floats, for a one-lane check of each of a's objects first. */
+  float bx0 = (float)ub->xmin, by0 = (float)ub->ymin, bx1 = (float)ub->xmax, by1 = (float)ub->ymax;
   for (uint32_t k = cl[a].start, ke = cl[a + 1].start; k < ke; k++) {
     const float *me = lane_of(fg, k);
     if (!(me[0] <= bx1 && bx0 <= me[8] && me[4] <= by1 && by0 <= me[12])) continue;
     if (!obj_vs_range(s, k, blo, bhi)) return 0;
   }
   return 1;
+}
+
+/* Every object of cell a against every object of cell b (a != b). */
+static inline int cross_cells(share_t *s, uint32_t a, uint32_t b) {
+  const qk_box_t *hb = &s->pk->hb[b];
+  if (!boxes_meet(&s->pk->hb[a], hb)) return 1;
+  return cross_run(s, a, s->w->cells[b].start, s->w->cells[b + 1].start, hb);
 }
 
 /* Cell a against the cells of the coarser level l whose loose squares
@@ -148,19 +153,34 @@ static int cell_vs_level(share_t *s, uint32_t a, int l) {
 static int cell_pairs(share_t *s, uint32_t a, uint32_t *up) {
   const qk_world_t *w = s->w;
   const qk__wcell_t *c = &w->cells[a];
-  uint32_t lo = c->start, hi = c[1].start;
-  for (uint32_t k = lo; k + 1 < hi; k++)
-    if (!obj_vs_range(s, k, k + 1, hi)) return 0;
+  const qk_box_t *hb = s->pk->hb, *ha = &hb[a];
   int l = c->level;
-  if (c[1].level == l && c[1].cy == c->cy && c[1].cx == c->cx + 1 && !cross_cells(s, a, a + 1))
-    return 0;
+  /* Within the cell, and with the next cell of its row when adjacent: its objects follow
+   * in the order, so each object meets one run of the ones after it. */
+  uint32_t lo = c->start, hi = c[1].start, hi2 = hi;
+  if (c[1].level == l && c[1].cy == c->cy && c[1].cx == c->cx + 1 && boxes_meet(ha, &hb[a + 1]))
+    hi2 = c[2].start;
+  for (uint32_t k = lo; k < hi && k + 1 < hi2; k++)
+    if (!obj_vs_range(s, k, k + 1, hi2)) return 0;
+  /* The row above: up to three consecutive cells, so one run too (without the end cells
+   * whose boxes miss this one's). */
   uint32_t end = w->lv_first[l - QK__LMIN] + w->lv_n[l - QK__LMIN];
   uint32_t u = *up > a + 1 ? *up : a + 1;
   int64_t ty = (int64_t)c->cy + 1, tx = (int64_t)c->cx - 1;
   while (u < end && (w->cells[u].cy < ty || (w->cells[u].cy == ty && w->cells[u].cx < tx))) u++;
   *up = u;
-  for (; u < end && w->cells[u].cy == ty && w->cells[u].cx <= tx + 2; u++)
-    if (!cross_cells(s, a, u)) return 0;
+  uint32_t u1 = u;
+  while (u1 < end && w->cells[u1].cy == ty && w->cells[u1].cx <= tx + 2) u1++;
+  while (u < u1 && !boxes_meet(ha, &hb[u])) u++;
+  while (u1 > u && !boxes_meet(ha, &hb[u1 - 1])) u1--;
+  if (u < u1) {
+    qk_box_t ub = hb[u];
+    for (uint32_t k = u + 1; k < u1; k++) {
+      ub.xmin = qk__min(ub.xmin, hb[k].xmin), ub.ymin = qk__min(ub.ymin, hb[k].ymin);
+      ub.xmax = qk__max(ub.xmax, hb[k].xmax), ub.ymax = qk__max(ub.ymax, hb[k].ymax);
+    }
+    if (!cross_run(s, a, w->cells[u].start, w->cells[u1].start, &ub)) return 0;
+  }
   /* Coarser levels whose objects' box meets this cell's. */
   for (int li = 0; li < s->n_levels; li++) {
     int lb = s->levels[li];
