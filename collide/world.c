@@ -89,6 +89,7 @@ void qk_world_free(qk_world_t *w) {
   qk__free(&a, w->cur.v, w->cur.cap * sizeof *w->cur.v);
   qk__free(&a, w->began.v, w->began.cap * sizeof *w->began.v);
   qk__free(&a, w->ended.v, w->ended.cap * sizeof *w->ended.v);
+  qk__free(&a, w->egen, w->n_egen * sizeof *w->egen);
   qk__free(&a, w, sizeof *w);
 }
 

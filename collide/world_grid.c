@@ -29,9 +29,18 @@ static int drec_cmp(const void *p, const void *q) {
 /* Sort n records by key, stably, through tmp (n entries): an LSD radix sort on the key's
  * nine bytes, skipping the bytes all records share (most of them: nearby cells). */
 static void drec_sort(drec_t *d, drec_t *tmp, size_t n) {
+  /* Keys relative to their minima, so that only the low bytes differ (a cell index of -1
+   * and one of 0 differ in every byte once biased). */
+  uint64_t ly_min = d[0].ly;
+  uint32_t x_min = d[0].x;
+  for (size_t i = 1; i < n; i++) {
+    ly_min = d[i].ly < ly_min ? d[i].ly : ly_min;
+    x_min = d[i].x < x_min ? d[i].x : x_min;
+  }
   uint64_t ly_or = 0, ly_and = ~(uint64_t)0;
   uint32_t x_or = 0, x_and = ~0u;
   for (size_t i = 0; i < n; i++) {
+    d[i].ly -= ly_min, d[i].x -= x_min;
     ly_or |= d[i].ly, ly_and &= d[i].ly;
     x_or |= d[i].x, x_and &= d[i].x;
   }
@@ -45,6 +54,7 @@ static void drec_sort(drec_t *d, drec_t *tmp, size_t n) {
     for (size_t i = 0; i < n; i++) tmp[count[(in_x ? d[i].x : d[i].ly) >> sh & 0xff]++] = d[i];
     memcpy(d, tmp, n * sizeof *d);
   }
+  for (size_t i = 0; i < n; i++) d[i].ly += ly_min, d[i].x += x_min;
 }
 
 static inline drec_t rec_of(const qk__wobj_t *o, uint32_t slot) {
@@ -169,6 +179,13 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
   w->cells = cells, w->n_cells = nc, w->cap_cells = (uint32_t)ncap;
   /* Give back the cells' room for the dirty objects that joined existing cells (a
    * failed shrink is harmless). */
+  /* And the object slots' slack after growth (a failed shrink is harmless). */
+  if (w->cap_obj > w->n_obj + w->n_obj / 32 + 16) {
+    uint32_t cap = w->n_obj + w->n_obj / 64 + 16;
+    qk__wobj_t *no =
+        qk__realloc(a, w->obj, (size_t)w->cap_obj * sizeof *no, (size_t)cap * sizeof *no);
+    if (no) w->obj = no, w->cap_obj = cap;
+  }
   if (ncap > (size_t)nc + 1 + 16) {
     qk__wcell_t *c = qk__realloc(a, w->cells, ncap * sizeof *c, ((size_t)nc + 1) * sizeof *c);
     if (c) w->cells = c, w->cap_cells = nc + 1;

@@ -47,11 +47,6 @@ typedef struct qk__wcell {
   int32_t level;
 } qk__wcell_t;
 
-typedef struct qk__pvec {
-  qk_world_pair_t *v;
-  size_t n, cap;
-} qk__pvec_t;
-
 /* Pairs as 64-bit keys: slot a in the high half, slot b (> a) in the low half, so the
  * keys' order is the (slot a, slot b) order. */
 typedef struct qk__kvec {
@@ -76,9 +71,12 @@ struct qk_world {
   uint32_t n_cells, cap_cells;
   uint32_t lv_first[QK__NLEV], lv_n[QK__NLEV]; /* each level's run of cells */
   qk__kvec_t cur, began; /* this frame's pairs and those that began (handles: ugen) */
-  qk__pvec_t ended;      /* pairs that ended, as handles (their slots may be reused) */
-  size_t last_found;     /* pairs of the last search (sizes the next one's buffer) */
-  int ident_dirty;       /* an object was added or removed since the last update */
+  qk__kvec_t ended;      /* pairs that ended (handles: ugen, or egen for changed slots) */
+  uint64_t *egen;        /* slot << 32 | generation before the last update, of the slots
+                            that changed at it (sorted) */
+  size_t n_egen;
+  size_t last_found; /* pairs of the last search (sizes the next one's buffer) */
+  int ident_dirty;   /* an object was added or removed since the last update */
 };
 
 /* 2^e for e in [-1022, 1023], exactly (cheaper than ldexp in the inner loops; scaling

@@ -66,45 +66,68 @@ static inline int try_pair(share_t *s, uint32_t i, uint32_t j) {
  * boxes meet. What it keeps is decided in doubles by try_pair.
  */
 
-/* Lanes of group g whose float boxes meet the box (x0, y0, x1, y1): a 4-bit mask. */
-static inline unsigned group_hits(const float *g, const float *me) {
+/* One object's float box, broadcast for the four-wide test. */
 #if defined(__SSE2__)
-  __m128 m = _mm_and_ps(_mm_cmple_ps(_mm_loadu_ps(g), _mm_set1_ps(me[8])),
-                        _mm_cmple_ps(_mm_set1_ps(me[0]), _mm_loadu_ps(g + 8)));
-  m = _mm_and_ps(m, _mm_and_ps(_mm_cmple_ps(_mm_loadu_ps(g + 4), _mm_set1_ps(me[12])),
-                               _mm_cmple_ps(_mm_set1_ps(me[4]), _mm_loadu_ps(g + 12))));
+typedef struct probe {
+  __m128 x0, y0, x1, y1;
+} probe_t;
+static inline probe_t probe_of(const float *me) {
+  return (probe_t){_mm_set1_ps(me[0]), _mm_set1_ps(me[4]), _mm_set1_ps(me[8]), _mm_set1_ps(me[12])};
+}
+/* Lanes of group g whose float boxes meet the probe's box: a 4-bit mask. */
+static inline unsigned group_hits(const float *g, const probe_t *p) {
+  __m128 m =
+      _mm_and_ps(_mm_cmple_ps(_mm_loadu_ps(g), p->x1), _mm_cmple_ps(p->x0, _mm_loadu_ps(g + 8)));
+  m = _mm_and_ps(m, _mm_and_ps(_mm_cmple_ps(_mm_loadu_ps(g + 4), p->y1),
+                               _mm_cmple_ps(p->y0, _mm_loadu_ps(g + 12))));
   return (unsigned)_mm_movemask_ps(m);
+}
 #else
+typedef struct probe {
+  float x0, y0, x1, y1;
+} probe_t;
+static inline probe_t probe_of(const float *me) { return (probe_t){me[0], me[4], me[8], me[12]}; }
+static inline unsigned group_hits(const float *g, const probe_t *p) {
   unsigned bits = 0;
   for (int k = 0; k < 4; k++)
     bits |=
-        (unsigned)(g[k] <= me[8] && me[0] <= g[8 + k] && g[4 + k] <= me[12] && me[4] <= g[12 + k])
+        (unsigned)(g[k] <= p->x1 && p->x0 <= g[8 + k] && g[4 + k] <= p->y1 && p->y0 <= g[12 + k])
         << k;
   return bits;
-#endif
 }
+#endif
 
 /* Object k of the order (its lane in the float groups). */
 static inline const float *lane_of(const float *f, uint32_t k) {
   return f + (size_t)(k >> 2) * 16 + (k & 3);
 }
 
-/* Object k of the order against the objects at order positions [lo, hi). */
-static inline int obj_vs_range(share_t *s, uint32_t k, uint32_t lo, uint32_t hi) {
-  const float *fg = s->pk->fgrp, *me = lane_of(fg, k);
+/* The pairs of lanes `bits` of group q with slot. */
+static inline int group_pairs(share_t *s, uint32_t slot, uint32_t q, unsigned bits) {
   const uint32_t *ord = s->w->order;
-  uint32_t slot = ord[k];
-  for (uint32_t q = lo >> 2, qe = (hi - 1) >> 2; q <= qe; q++) {
-    unsigned bits = group_hits(fg + (size_t)q * 16, me);
-    if (q == lo >> 2) bits &= ~((1u << (lo & 3)) - 1);
-    if (q == qe) bits &= (2u << ((hi - 1) & 3)) - 1;
-    while (bits) {
-      unsigned lane = (unsigned)__builtin_ctz(bits);
-      bits &= bits - 1;
-      if (!try_pair(s, slot, ord[q * 4 + lane])) return 0;
-    }
+  while (bits) {
+    unsigned lane = (unsigned)__builtin_ctz(bits);
+    bits &= bits - 1;
+    if (!try_pair(s, slot, ord[q * 4 + lane])) return 0;
   }
   return 1;
+}
+
+/* Object k of the order against the objects at order positions [lo, hi) (lo < hi): the
+ * first and last groups masked to the range, the ones between whole. */
+static inline int obj_vs_range(share_t *s, uint32_t k, uint32_t lo, uint32_t hi) {
+  const float *fg = s->pk->fgrp;
+  probe_t p = probe_of(lane_of(fg, k));
+  uint32_t slot = s->w->order[k];
+  uint32_t q = lo >> 2, qe = (hi - 1) >> 2;
+  unsigned first = ~((1u << (lo & 3)) - 1) & 15u, last = (2u << ((hi - 1) & 3)) - 1;
+  if (q == qe) return group_pairs(s, slot, q, group_hits(fg + (size_t)q * 16, &p) & first & last);
+  if (!group_pairs(s, slot, q, group_hits(fg + (size_t)q * 16, &p) & first)) return 0;
+  for (q++; q < qe; q++) {
+    unsigned bits = group_hits(fg + (size_t)q * 16, &p);
+    if (bits && !group_pairs(s, slot, q, bits)) return 0;
+  }
+  return group_pairs(s, slot, qe, group_hits(fg + (size_t)qe * 16, &p) & last);
 }
 
 /* Every object of cell a against the objects at order positions [blo, bhi) (other
@@ -201,20 +224,6 @@ static void run_share(unsigned t, void *ud) {
   }
 }
 
-/* Room for n entries of `size` bytes in a list of capacity *cap: NULL when the present
- * buffer will do (it holds n and is not far too large), else a new buffer (its capacity
- * in *ncap), or NULL with *fail set when memory is short and the present one is too
- * small. A shrink that fails is harmless: the present buffer is kept. */
-static void *list_room(const qk_allocator_t *a, size_t cap, size_t n, size_t size, size_t slack,
-                       size_t *ncap, int *fail) {
-  size_t want = n + n / 4 + slack;
-  if (cap >= n && cap <= 2 * want) return NULL;
-  void *p = qk__realloc(a, NULL, 0, want * size);
-  if (!p && cap < n) *fail = 1;
-  *ncap = want;
-  return p;
-}
-
 /* Sort n keys into dst: two stable counting sorts, by the second slot then by the first
  * (count has n_obj + 1 entries), through src, which ends as scratch. Each pass is a count
  * and a scatter, whatever the lengths of the runs. */
@@ -231,13 +240,21 @@ static void sort_keys(uint64_t *src, uint64_t *dst, size_t n, uint32_t *count, u
   memcpy(dst, src, n * sizeof *dst);
 }
 
+/* Cut a list's room to its length (a failed shrink keeps the larger buffer). */
+static void shrink(const qk_allocator_t *a, qk__kvec_t *v) {
+  if (v->cap == v->n) return;
+  if (v->n == 0) {
+    qk__free(a, v->v, v->cap * sizeof *v->v);
+    *v = (qk__kvec_t){0};
+    return;
+  }
+  uint64_t *p = qk__realloc(a, v->v, v->cap * sizeof *p, v->n * sizeof *p);
+  if (p) v->v = p, v->cap = v->n;
+}
+
 /* A slot's object is not the one it held at the last update (removed, or a new one). */
 static inline int changed(const qk_world_t *w, uint32_t s) {
   return s >= w->n_obj || w->obj[s].gen != w->obj[s].ugen;
-}
-
-static inline qk_world_pair_t old_pair(const qk_world_t *w, uint64_t k) {
-  return qk__key_pair(w, k);
 }
 
 qk_status_t qk_world_update(qk_world_t *w) {
@@ -299,7 +316,7 @@ qk_status_t qk_world_update(qk_world_t *w) {
   for (unsigned t = 1; t < nt; t++)
     qk__free(&w->alloc, shares[t].out.v, shares[t].out.cap * sizeof(uint64_t));
   /* The new list (the old one is freed once merged). */
-  size_t ncap = total + total / 8 + 16;
+  size_t ncap = total ? total : 1;
   uint64_t *nv = NULL;
   if (st == QK_OK && !(nv = qk__realloc(&w->alloc, NULL, 0, ncap * sizeof *nv))) st = QK_ERR_NOMEM;
   size_t n_count = (size_t)w->n_obj + 1;
@@ -316,74 +333,107 @@ qk_status_t qk_world_update(qk_world_t *w) {
     qk__free(&w->alloc, nv, ncap * sizeof *nv);
     return st;
   }
-  /* Began and ended: a merge of this frame's keys with the last frame's, counted first so
-   * the lists can be sized before either changes. A pair whose slot now holds another
-   * object (or none) has ended, and a pair with such a slot has begun. */
+  /* Began and ended: a merge of this frame's keys with the last frame's. A pair whose slot
+   * now holds another object (or none) has ended, and a pair with such a slot has begun.
+   * Their lists are allocated at their largest (all new pairs began, all old ones
+   * ended) and, when objects were added or removed, the slots that changed with their
+   * generations at the last update (the ended pairs' handles), all before anything
+   * changes: a failure keeps the last frame's lists. After the merge the two lists are
+   * cut to size (a failed shrink is harmless). */
   const uint64_t *ov = w->cur.v;
   size_t nn = total, on = w->cur.n;
   int dirty = w->ident_dirty;
-  size_t n_began = 0, n_ended = 0;
-  for (size_t i = 0, j = 0; i < nn || j < on;) {
-    if (j == on || (i < nn && nv[i] < ov[j]))
-      n_began++, i++;
-    else if (i == nn || nv[i] > ov[j])
-      n_ended++, j++;
-    else {
-      if (dirty && (changed(w, (uint32_t)(nv[i] >> 32)) || changed(w, (uint32_t)nv[i])))
-        n_began++, n_ended++;
-      i++, j++;
-    }
-  }
-  /* Both lists' room before either changes: a failure keeps the last frame's lists. */
-  size_t bcap = 0, ecap = 0;
-  int fail = 0;
-  uint64_t *bv = list_room(&w->alloc, w->began.cap, n_began, sizeof *bv, 16, &bcap, &fail);
-  qk_world_pair_t *ev =
-      fail ? NULL : list_room(&w->alloc, w->ended.cap, n_ended, sizeof *ev, 16, &ecap, &fail);
-  if (fail) {
-    qk__free(&w->alloc, bv, bcap * sizeof *bv);
+  size_t n_eg = 0;
+  if (dirty)
+    for (uint32_t i = 0; i < w->n_obj; i++) n_eg += w->obj[i].gen != w->obj[i].ugen;
+  uint64_t *bv = nn ? qk__realloc(&w->alloc, NULL, 0, nn * sizeof *bv) : NULL;
+  uint64_t *ev = on ? qk__realloc(&w->alloc, NULL, 0, on * sizeof *ev) : NULL;
+  uint64_t *eg = n_eg ? qk__realloc(&w->alloc, NULL, 0, n_eg * sizeof *eg) : NULL;
+  if ((nn && !bv) || (on && !ev) || (n_eg && !eg)) {
+    qk__free(&w->alloc, bv, nn * sizeof *bv);
+    qk__free(&w->alloc, ev, on * sizeof *ev);
+    qk__free(&w->alloc, eg, n_eg * sizeof *eg);
     qk__free(&w->alloc, nv, ncap * sizeof *nv);
     return QK_ERR_NOMEM;
   }
-  if (bv) {
-    qk__free(&w->alloc, w->began.v, w->began.cap * sizeof *bv);
-    w->began.v = bv, w->began.cap = bcap;
+  qk__free(&w->alloc, w->began.v, w->began.cap * sizeof *bv);
+  qk__free(&w->alloc, w->ended.v, w->ended.cap * sizeof *ev);
+  qk__free(&w->alloc, w->egen, w->n_egen * sizeof *w->egen);
+  w->began = (qk__kvec_t){bv, 0, nn};
+  w->ended = (qk__kvec_t){ev, 0, on};
+  w->egen = eg, w->n_egen = 0;
+  size_t i = 0, j = 0;
+  if (!dirty) { /* the common frame: the same objects, so equal keys are the same pair */
+    while (i < nn && j < on) {
+      uint64_t x = nv[i], y = ov[j];
+      if (x < y)
+        bv[w->began.n++] = x, i++;
+      else if (x > y)
+        ev[w->ended.n++] = y, j++;
+      else
+        i++, j++;
+    }
   }
-  if (ev) {
-    qk__free(&w->alloc, w->ended.v, w->ended.cap * sizeof *ev);
-    w->ended.v = ev, w->ended.cap = ecap;
-  }
-  w->began.n = w->ended.n = 0;
-  for (size_t i = 0, j = 0; i < nn || j < on;) {
+  for (; i < nn || j < on;) {
     if (j == on || (i < nn && nv[i] < ov[j]))
-      w->began.v[w->began.n++] = nv[i++];
+      bv[w->began.n++] = nv[i++];
     else if (i == nn || nv[i] > ov[j])
-      w->ended.v[w->ended.n++] = old_pair(w, ov[j++]);
+      ev[w->ended.n++] = ov[j++];
     else {
       if (dirty && (changed(w, (uint32_t)(nv[i] >> 32)) || changed(w, (uint32_t)nv[i]))) {
-        w->began.v[w->began.n++] = nv[i];
-        w->ended.v[w->ended.n++] = old_pair(w, ov[j]);
+        bv[w->began.n++] = nv[i];
+        ev[w->ended.n++] = ov[j];
       }
       i++, j++;
     }
   }
+  shrink(&w->alloc, &w->began);
+  shrink(&w->alloc, &w->ended);
   /* This frame's keys become the current list, and the handles they stand for are the
    * present generations. */
   qk__free(&w->alloc, w->cur.v, w->cur.cap * sizeof *w->cur.v);
   w->cur = (qk__kvec_t){nv, total, ncap};
   if (dirty) {
-    for (uint32_t i = 0; i < w->n_obj; i++) w->obj[i].ugen = w->obj[i].gen;
+    for (uint32_t i = 0; i < w->n_obj; i++) {
+      qk__wobj_t *o = &w->obj[i];
+      if (o->gen != o->ugen) w->egen[w->n_egen++] = (uint64_t)i << 32 | o->ugen;
+      o->ugen = o->gen;
+    }
     w->ident_dirty = 0;
   }
   return QK_OK;
+}
+
+/* The handles of an ended pair: the generations its slots had at the update before the
+ * last (those of the slots that changed at the last one are kept aside). */
+static uint32_t ended_gen(const qk_world_t *w, uint32_t s) {
+  size_t lo = 0, hi = w->n_egen;
+  while (lo < hi) {
+    size_t mid = lo + (hi - lo) / 2;
+    uint32_t ms = (uint32_t)(w->egen[mid] >> 32);
+    if (ms == s) return (uint32_t)w->egen[mid];
+    if (ms < s)
+      lo = mid + 1;
+    else
+      hi = mid;
+  }
+  return w->obj[s].ugen;
+}
+
+static inline qk_world_pair_t ended_pair(const qk_world_t *w, uint64_t k) {
+  uint32_t a = (uint32_t)(k >> 32), b = (uint32_t)k;
+  return (qk_world_pair_t){(uint64_t)ended_gen(w, a) << 32 | a,
+                           (uint64_t)ended_gen(w, b) << 32 | b};
 }
 
 qk_status_t qk_world_pairs(const qk_world_t *w, qk_pairs_which_t which, qk_world_pair_fn fn,
                            void *ud) {
   if (!w || !fn) return QK_ERR_INVALID;
   if (which == QK_PAIRS_ENDED) {
-    for (size_t i = 0; i < w->ended.n; i++)
-      if (fn(w->ended.v[i].a, w->ended.v[i].b, ud)) break;
+    for (size_t i = 0; i < w->ended.n; i++) {
+      qk_world_pair_t q = ended_pair(w, w->ended.v[i]);
+      if (fn(q.a, q.b, ud)) break;
+    }
     return QK_OK;
   }
   if (which != QK_PAIRS_ALL && which != QK_PAIRS_BEGAN) return QK_ERR_INVALID;
@@ -400,8 +450,7 @@ qk_status_t qk_world_pairs_list(const qk_world_t *w, qk_pairs_which_t which, qk_
   if (!w || !n_out || (cap && !out)) return QK_ERR_INVALID;
   if (which == QK_PAIRS_ENDED) {
     *n_out = w->ended.n;
-    if (w->ended.n && cap)
-      memcpy(out, w->ended.v, (w->ended.n < cap ? w->ended.n : cap) * sizeof *out);
+    for (size_t i = 0; i < w->ended.n && i < cap; i++) out[i] = ended_pair(w, w->ended.v[i]);
     return QK_OK;
   }
   if (which != QK_PAIRS_ALL && which != QK_PAIRS_BEGAN) return QK_ERR_INVALID;
