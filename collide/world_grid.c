@@ -70,7 +70,7 @@ static inline void box_join(qk_box_t *h, const qk_box_t *b) {
 static const qk_box_t empty_box = {INFINITY, INFINITY, -INFINITY, -INFINITY};
 
 void qk__world_pack_free(qk_world_t *w, qk__wpack_t *pk) {
-  qk__free(&w->alloc, pk->fgrp, pk->cap_fgrp * 16 * sizeof *pk->fgrp);
+  qk__free(&w->alloc, pk->fgrp, pk->cap_fgrp * (16 * sizeof *pk->fgrp + 4));
   qk__free(&w->alloc, pk->hb, pk->cap_hb * sizeof *pk->hb);
   pk->fgrp = NULL, pk->hb = NULL;
   pk->cap_fgrp = pk->cap_hb = 0;
@@ -88,16 +88,17 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
   drec_t *d = nd ? qk__realloc(a, NULL, 0, 2 * nd * sizeof *d) : NULL;
   uint32_t *ord = (!nd || d) ? qk__realloc(a, NULL, 0, ocap * sizeof *ord) : NULL;
   qk__wcell_t *cells = ord ? qk__realloc(a, NULL, 0, ncap * sizeof *cells) : NULL;
-  float *fg = cells ? qk__realloc(a, NULL, 0, gcap * 16 * sizeof *fg) : NULL;
+  float *fg = cells ? qk__realloc(a, NULL, 0, gcap * (16 * sizeof *fg + 4)) : NULL;
   qk_box_t *hb = fg ? qk__realloc(a, NULL, 0, ncap * sizeof *hb) : NULL;
   if (!hb) {
     qk__free(a, d, 2 * nd * sizeof *d);
     qk__free(a, ord, ocap * sizeof *ord);
     qk__free(a, cells, ncap * sizeof *cells);
-    qk__free(a, fg, gcap * 16 * sizeof *fg);
+    qk__free(a, fg, gcap * (16 * sizeof *fg + 4));
     return QK_ERR_NOMEM;
   }
   pk->fgrp = fg, pk->cap_fgrp = gcap, pk->hb = hb, pk->cap_hb = ncap;
+  pk->fexact = (uint8_t *)(fg + gcap * 16);
 
   /* File the live dirty objects in their new cells. */
   size_t m_d = 0;
@@ -160,6 +161,9 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
     box_join(&hb[nc - 1], &b);
     float *g = fg + (size_t)(m >> 2) * 16 + (m & 3);
     g[0] = (float)b.xmin, g[4] = (float)b.ymin, g[8] = (float)b.xmax, g[12] = (float)b.ymax;
+    /* A box whose floats are its doubles: the float box test is then the exact one. */
+    pk->fexact[m] = (o->flags & QK__WKIND) == QK_SHAPE_BOX && g[0] == b.xmin && g[4] == b.ymin &&
+                    g[8] == b.xmax && g[12] == b.ymax;
     ord[m++] = s;
   }
   for (uint32_t k = m; k & 3; k++) { /* empty lanes: a box that meets nothing */

@@ -137,6 +137,8 @@ void qk__world_visit_seg(const qk_world_t *w, qk_box_t qb, const qk_point_t *seg
 typedef struct qk__wpack {
   float *fgrp;
   size_t cap_fgrp; /* in groups */
+  uint8_t *fexact; /* per object (in the order): a box whose float box is exact (in the
+                      same allocation, after the groups) */
   qk_box_t *hb;
   size_t cap_hb;
   qk_box_t lv_box[QK__NLEV]; /* per level: the box around its cells' objects */

@@ -102,13 +102,22 @@ static inline const float *lane_of(const float *f, uint32_t k) {
   return f + (size_t)(k >> 2) * 16 + (k & 3);
 }
 
-/* The pairs of lanes `bits` of group q with slot. */
-static inline int group_pairs(share_t *s, uint32_t slot, uint32_t q, unsigned bits) {
+/* The pairs of lanes `bits` of group q with object k of the order. Two boxes whose
+ * floats are exact have passed the exact box test already (the floats' comparisons are
+ * the doubles'); the others are decided by try_pair. */
+static inline int group_pairs(share_t *s, uint32_t k, uint32_t q, unsigned bits) {
   const uint32_t *ord = s->w->order;
+  const uint8_t *fx = s->pk->fexact;
+  uint32_t slot = ord[k];
   while (bits) {
     unsigned lane = (unsigned)__builtin_ctz(bits);
     bits &= bits - 1;
-    if (!try_pair(s, slot, ord[q * 4 + lane])) return 0;
+    uint32_t j = q * 4 + lane;
+    if (fx[k] & fx[j]) {
+      if (!kv_push(s, slot, ord[j])) return 0;
+    } else if (!try_pair(s, slot, ord[j])) {
+      return 0;
+    }
   }
   return 1;
 }
@@ -118,16 +127,15 @@ static inline int group_pairs(share_t *s, uint32_t slot, uint32_t q, unsigned bi
 static inline int obj_vs_range(share_t *s, uint32_t k, uint32_t lo, uint32_t hi) {
   const float *fg = s->pk->fgrp;
   probe_t p = probe_of(lane_of(fg, k));
-  uint32_t slot = s->w->order[k];
   uint32_t q = lo >> 2, qe = (hi - 1) >> 2;
   unsigned first = ~((1u << (lo & 3)) - 1) & 15u, last = (2u << ((hi - 1) & 3)) - 1;
-  if (q == qe) return group_pairs(s, slot, q, group_hits(fg + (size_t)q * 16, &p) & first & last);
-  if (!group_pairs(s, slot, q, group_hits(fg + (size_t)q * 16, &p) & first)) return 0;
+  if (q == qe) return group_pairs(s, k, q, group_hits(fg + (size_t)q * 16, &p) & first & last);
+  if (!group_pairs(s, k, q, group_hits(fg + (size_t)q * 16, &p) & first)) return 0;
   for (q++; q < qe; q++) {
     unsigned bits = group_hits(fg + (size_t)q * 16, &p);
-    if (bits && !group_pairs(s, slot, q, bits)) return 0;
+    if (bits && !group_pairs(s, k, q, bits)) return 0;
   }
-  return group_pairs(s, slot, qe, group_hits(fg + (size_t)qe * 16, &p) & last);
+  return group_pairs(s, k, qe, group_hits(fg + (size_t)qe * 16, &p) & last);
 }
 
 /* Every object of cell a against the objects at order positions [blo, bhi) (other
