@@ -232,8 +232,8 @@ static void run_share(unsigned t, void *ud) {
   }
 }
 
-/* Sort n keys into dst: two stable counting sorts, by the second slot then by the first
- * (count has n_obj + 1 entries), through src, which ends as scratch. Each pass is a count
+/* Sort n keys in src: two stable counting sorts, by the second slot then by the first
+ * (count has n_obj + 1 entries), through dst, which ends as scratch. Each pass is a count
  * and a scatter, whatever the lengths of the runs. */
 static void sort_keys(uint64_t *src, uint64_t *dst, size_t n, uint32_t *count, uint32_t n_obj) {
   if (n == 0) return; /* src may be NULL then */
@@ -245,7 +245,6 @@ static void sort_keys(uint64_t *src, uint64_t *dst, size_t n, uint32_t *count, u
   for (size_t i = 0; i < n; i++) count[(dst[i] >> 32) + 1]++;
   for (uint32_t a = 1; a <= n_obj; a++) count[a] += count[a - 1];
   for (size_t i = 0; i < n; i++) src[count[dst[i] >> 32]++] = dst[i];
-  memcpy(dst, src, n * sizeof *dst);
 }
 
 /* Cut a list's room to its length (a failed shrink keeps the larger buffer). */
@@ -323,24 +322,28 @@ qk_status_t qk_world_update(qk_world_t *w) {
   }
   for (unsigned t = 1; t < nt; t++)
     qk__free(&w->alloc, shares[t].out.v, shares[t].out.cap * sizeof(uint64_t));
-  /* The new list (the old one is freed once merged). */
-  size_t ncap = total ? total : 1;
-  uint64_t *nv = NULL;
-  if (st == QK_OK && !(nv = qk__realloc(&w->alloc, NULL, 0, ncap * sizeof *nv))) st = QK_ERR_NOMEM;
+  /* The sort's scratch and counts; the sorted search buffer becomes the new list (the
+   * old one is freed once merged). */
+  size_t tcap = total ? total : 1;
+  uint64_t *tmp = NULL;
+  if (st == QK_OK && !(tmp = qk__realloc(&w->alloc, NULL, 0, tcap * sizeof *tmp)))
+    st = QK_ERR_NOMEM;
   size_t n_count = (size_t)w->n_obj + 1;
   uint32_t *count = NULL;
   if (st == QK_OK && !(count = qk__realloc(&w->alloc, NULL, 0, n_count * sizeof *count)))
     st = QK_ERR_NOMEM;
   if (st == QK_OK) {
-    sort_keys(found.v, nv, total, count, w->n_obj);
+    sort_keys(found.v, tmp, total, count, w->n_obj);
     w->last_found = total;
   }
   qk__free(&w->alloc, count, n_count * sizeof *count);
-  qk__free(&w->alloc, found.v, found.cap * sizeof *found.v);
+  qk__free(&w->alloc, tmp, tcap * sizeof *tmp);
   if (st != QK_OK) {
-    qk__free(&w->alloc, nv, ncap * sizeof *nv);
+    qk__free(&w->alloc, found.v, found.cap * sizeof *found.v);
     return st;
   }
+  uint64_t *nv = found.v;
+  size_t ncap = found.cap;
   /* Began and ended: a merge of this frame's keys with the last frame's. A pair whose slot
    * now holds another object (or none) has ended, and a pair with such a slot has begun.
    * Their lists are allocated at their largest (all new pairs began, all old ones
@@ -401,6 +404,7 @@ qk_status_t qk_world_update(qk_world_t *w) {
    * present generations. */
   qk__free(&w->alloc, w->cur.v, w->cur.cap * sizeof *w->cur.v);
   w->cur = (qk__kvec_t){nv, total, ncap};
+  shrink(&w->alloc, &w->cur);
   if (dirty) {
     for (uint32_t i = 0; i < w->n_obj; i++) {
       qk__wobj_t *o = &w->obj[i];
