@@ -161,9 +161,13 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
     box_join(&hb[nc - 1], &b);
     float *g = fg + (size_t)(m >> 2) * 16 + (m & 3);
     g[0] = (float)b.xmin, g[4] = (float)b.ymin, g[8] = (float)b.xmax, g[12] = (float)b.ymax;
-    /* A box whose floats are its doubles: the float box test is then the exact one. */
-    pk->fexact[m] = (o->flags & QK__WKIND) == QK_SHAPE_BOX && g[0] == b.xmin && g[4] == b.ymin &&
-                    g[8] == b.xmax && g[12] == b.ymax;
+    /* A box whose floats are its doubles: the float box test is then the exact one. Its
+     * values are zero or of magnitude in [2^-100, 2^100], inside the floats' normal
+     * range, so they are floats exactly when their last 29 mantissa bits are zero. */
+    uint64_t u[4];
+    memcpy(u, &b, sizeof u);
+    pk->fexact[m] = (o->flags & QK__WKIND) == QK_SHAPE_BOX &&
+                    !((u[0] | u[1] | u[2] | u[3]) & ((UINT64_C(1) << 29) - 1));
     ord[m++] = s;
   }
   for (uint32_t k = m; k & 3; k++) { /* empty lanes: a box that meets nothing */
