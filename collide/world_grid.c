@@ -127,6 +127,9 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
   const uint32_t *old = w->order;
   size_t i = 0, j = 0, no = w->n_order;
   uint32_t m = 0, nc = 0;
+  int dl = 0; /* the cell of d[j] */
+  int32_t dy = 0, dx = 0;
+  if (m_d) dl = w->obj[d[0].slot].level, dy = w->obj[d[0].slot].cy, dx = w->obj[d[0].slot].u.cx;
   for (;;) {
     while (i < no) {
       const qk__wobj_t *o = &w->obj[old[i]];
@@ -135,11 +138,14 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
     }
     uint32_t s;
     if (i < no && j < m_d) {
-      drec_t r = rec_of(&w->obj[old[i]], 0);
-      if (drec_cmp(&r, &d[j]) <= 0)
+      const qk__wobj_t *o = &w->obj[old[i]];
+      if (!qk__key_less(dl, dy, dx, o->level, o->cy, o->u.cx)) {
         s = old[i++];
-      else
+      } else {
         s = d[j++].slot;
+        if (j < m_d)
+          dl = w->obj[d[j].slot].level, dy = w->obj[d[j].slot].cy, dx = w->obj[d[j].slot].u.cx;
+      }
     } else if (i < no)
       s = old[i++];
     else if (j < m_d)

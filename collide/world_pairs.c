@@ -247,6 +247,23 @@ static void sort_keys(uint64_t *src, uint64_t *dst, size_t n, uint32_t *count, u
   for (size_t i = 0; i < n; i++) src[count[dst[i] >> 32]++] = dst[i];
 }
 
+/* The same for few keys (fewer than a quarter of the slots, as in a sparse world): an LSD
+ * radix sort on the keys' bytes that differ, so the passes cost the keys, not the slots
+ * (count has at least 256 entries). */
+static void sort_few_keys(uint64_t *src, uint64_t *dst, size_t n, uint32_t *count) {
+  if (n < 2) return;
+  uint64_t all_or = 0, all_and = ~(uint64_t)0;
+  for (size_t i = 0; i < n; i++) all_or |= src[i], all_and &= src[i];
+  for (int sh = 0; sh < 64; sh += 8) {
+    if (!(((all_or ^ all_and) >> sh) & 0xff)) continue;
+    memset(count, 0, 257 * sizeof *count);
+    for (size_t i = 0; i < n; i++) count[(src[i] >> sh & 0xff) + 1]++;
+    for (int k = 1; k < 257; k++) count[k] += count[k - 1];
+    for (size_t i = 0; i < n; i++) dst[count[src[i] >> sh & 0xff]++] = src[i];
+    memcpy(src, dst, n * sizeof *src); /* the result stays in src */
+  }
+}
+
 /* Cut a list's room to its length (a failed shrink keeps the larger buffer). */
 static void shrink(const qk_allocator_t *a, qk__kvec_t *v) {
   if (v->cap == v->n) return;
@@ -328,12 +345,15 @@ qk_status_t qk_world_update(qk_world_t *w) {
   uint64_t *tmp = NULL;
   if (st == QK_OK && !(tmp = qk__realloc(&w->alloc, NULL, 0, tcap * sizeof *tmp)))
     st = QK_ERR_NOMEM;
-  size_t n_count = (size_t)w->n_obj + 1;
+  size_t n_count = (size_t)w->n_obj + 1 > 257 ? (size_t)w->n_obj + 1 : 257;
   uint32_t *count = NULL;
   if (st == QK_OK && !(count = qk__realloc(&w->alloc, NULL, 0, n_count * sizeof *count)))
     st = QK_ERR_NOMEM;
   if (st == QK_OK) {
-    sort_keys(found.v, tmp, total, count, w->n_obj);
+    if (total * 4 < w->n_obj)
+      sort_few_keys(found.v, tmp, total, count);
+    else
+      sort_keys(found.v, tmp, total, count, w->n_obj);
     w->last_found = total;
   }
   qk__free(&w->alloc, count, n_count * sizeof *count);
