@@ -1,7 +1,7 @@
 /*
  * The world's private layout, shared by collide/world.c (objects), collide/world_grid.c
- * (the sorted loose grid), collide/world_pairs.c (pairs) and collide/world_query.c
- * (queries). Not API.
+ * (the sorted loose grid), collide/world_search.c (the pair search), collide/world_pairs.c
+ * (the frame's pair lists) and collide/world_query.c (queries). Not API.
  */
 #ifndef QUADKIT_WORLD_INTERNAL_H
 #define QUADKIT_WORLD_INTERNAL_H
@@ -149,6 +149,11 @@ typedef struct qk__wpack {
  * qk__world_pack_free either way. */
 qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk);
 void qk__world_pack_free(qk_world_t *w, qk__wpack_t *pk);
+
+/* Every overlapping pair of the packed order (collide/world_search.c), as unsorted keys
+ * in *found (the caller frees it), on the world's threads. QK_ERR_NOMEM (found empty)
+ * when memory ran short. */
+qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kvec_t *found);
 
 /* The cell (level, cx, cy) a fat box is filed in; *forced when the magnitude of its
  * coordinates raised the level. */
