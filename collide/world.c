@@ -18,7 +18,8 @@
  * sorted: their cells did not change), sorts the dirty ones and merges them in, in one
  * pass that also packs the boxes for the pair search. Neighbour cells of the same level
  * are then found by walking the sorted cells (the next cell; the row above by a cursor
- * that only moves forward), cells of coarser levels by binary search. Queries search the
+ * that only moves forward), cells of coarser levels by binary search
+ * (collide/world_search.c). Queries search the
  * cells the same way and check the dirty objects one by one.
  *
  * Levels adapt to the sizes (an object of size e sits at level ~log2 e, from 1e-3 to
@@ -27,7 +28,7 @@
  * at level 0, one at 1e20 at a coarser one).
  *
  * Memory (between updates): 64 bytes an object slot, 4 an entry of the order, 16 a cell,
- * and the pair lists (8 bytes a current pair, 8 a began one, 16 an ended one). The
+ * and the pair lists (8 bytes a pair, current, began or ended). The
  * update's scratch (float boxes, cell boxes, the search's pairs and the sort's counts)
  * is allocated per update and freed before it returns.
  *
