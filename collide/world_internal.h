@@ -1,53 +1,51 @@
 /*
- * The world's private layout, shared by collide/world.c (objects, filing, pairs) and
- * collide/world_query.c (queries). Not API.
+ * The world's private layout, shared by collide/world.c (objects), collide/world_grid.c
+ * (the sorted loose grid), collide/world_search.c (the pair search), collide/world_pairs.c
+ * (the frame's pair lists) and collide/world_query.c (queries). Not API.
  */
 #ifndef QUADKIT_WORLD_INTERNAL_H
 #define QUADKIT_WORLD_INTERNAL_H
 
 #include "collide/collide_internal.h"
 
-/* Levels: cells of side 2^L for L in [QK__LMIN, QK__LMIN + QK__NLEV). */
-#define QK__LMIN (-200)
-#define QK__NLEV 320
+/* Levels: cells of side 2^L for L in [QK__LMIN, QK__LMIN + QK__NLEV); the filing keeps
+ * L in [QK__LFLOOR, 127] so that it fits an int8_t. */
+#define QK__LMIN (-128)
+#define QK__NLEV 256
+#define QK__LFLOOR (-120)
 
+/* Flags of an object: its kind in the low two bits, then: */
+#define QK__WKIND 3u
+#define QK__WDIRTY 4u  /* on the dirty list: not (or no longer) where the order files it */
+#define QK__WFORCED 8u /* its level was raised by its coordinates' magnitude */
+
+/*
+ * An object: 64 bytes. The shape is stored once (x, y, a, b as qk_shape_t, the kind in
+ * flags); the box is derived from it. (cx, cy, level) is the cell it is filed in, as of
+ * the last update: the object lies in that cell's loose square [cx 2^L, (cx + 2) 2^L)
+ * per axis, unless it is DIRTY.
+ */
 typedef struct qk__wobj {
-  qk_shape_t s;   /* normalised */
-  qk_box_t box;   /* the shape's box, rounded outwards */
-  qk_box_t loose; /* its cell's loose square [cx 2^L, (cx + 2) 2^L) per axis: the object is
-                     re-filed only when box leaves it (the far sides are open) */
+  double x, y, a, b;
   uint64_t tag;
-  double fe;     /* extent of the fat box it was filed by (re-filed when it shrinks to 1/8) */
   uint32_t gen;  /* generation of the slot (odd: live) */
   uint32_t ugen; /* generation at the last update: the handles of the stored pairs */
-  int16_t level;
-  uint16_t live;
-  uint32_t next, prev; /* the cell's list; next also links the free slots */
+  union {
+    int32_t cx;
+    uint32_t free_next; /* while the slot is free: the next free slot */
+  } u;
+  int32_t cy;
+  uint32_t dnext; /* the dirty list */
+  int8_t level;
+  uint8_t flags;
 } qk__wobj_t;
 
-/* A cell of the loose grid at one level; count == 0 marks an empty table entry. */
+/* A cell of the sorted loose grid: the objects order[start .. next cell's start). */
 typedef struct qk__wcell {
-  int64_t cx, cy;
+  int32_t cx, cy;
+  uint32_t start;
   int32_t level;
-  uint32_t head;
-  uint32_t count;
-  uint32_t start; /* during an update: the cell's header in the packed array (its
-                     objects follow) */
 } qk__wcell_t;
-
-/* An object as the pair search reads it: its box and slot, packed cell by cell; each
- * cell's run starts with a header (slot QK_NONE) holding the box around its objects. */
-typedef struct qk__wpack {
-  qk_box_t box;
-  uint32_t slot;
-  uint32_t is_box; /* both boxes: the box test is the whole test (in a header: the cell's
-                      first float group) */
-} qk__wpack_t;
-
-typedef struct qk__pvec {
-  qk_world_pair_t *v;
-  size_t n, cap;
-} qk__pvec_t;
 
 /* Pairs as 64-bit keys: slot a in the high half, slot b (> a) in the low half, so the
  * keys' order is the (slot a, slot b) order. */
@@ -63,23 +61,22 @@ struct qk_world {
   uint32_t n_obj, cap_obj; /* slots used (high-water mark) and allocated */
   uint32_t free_head;      /* first free slot, or QK_NONE */
   size_t n_live;
-  qk__wcell_t *cells; /* open addressing, linear probing; cap a power of two */
-  size_t cap_cells, n_cells;
-  uint32_t level_objs[QK__NLEV];
-  uint32_t level_cells[QK__NLEV];
+  uint32_t dirty_head; /* objects added or re-filed since the last update */
+  uint32_t n_dirty;    /* entries of the dirty list (removed ones included) */
+  /* The order: the slots of the last update sorted by cell (level, cy, cx), and its
+   * cells, sorted the same way, with a sentinel (start = n_order). */
+  uint32_t *order;
+  uint32_t n_order, cap_order;
+  qk__wcell_t *cells;
+  uint32_t n_cells, cap_cells;
+  uint32_t lv_first[QK__NLEV], lv_n[QK__NLEV]; /* each level's run of cells */
   qk__kvec_t cur, began; /* this frame's pairs and those that began (handles: ugen) */
-  qk__pvec_t ended;      /* pairs that ended, as handles (their slots may be reused) */
-  int ident_dirty;       /* an object was added or removed since the last update */
-  /* Scratch of qk_world_update, kept between frames. */
-  qk__wpack_t *pack;
-  size_t cap_pack;
-  uint32_t *occ; /* the occupied table entries, in table order */
-  size_t cap_occ;
-  float *fgrp;      /* the boxes as floats (a prefilter), 4 objects to 16 floats */
-  size_t cap_fgrp;  /* in groups */
-  qk__kvec_t found; /* the search's pairs, unsorted */
-  uint32_t *count;  /* per slot: pairs whose first slot it is (cap_count entries) */
-  size_t cap_count;
+  qk__kvec_t ended;      /* pairs that ended (handles: ugen, or egen for changed slots) */
+  uint64_t *egen;        /* slot << 32 | generation before the last update, of the slots
+                            that changed at it (sorted) */
+  size_t n_egen;
+  size_t last_found; /* pairs of the last search (sizes the next one's buffer) */
+  int ident_dirty;   /* an object was added or removed since the last update */
 };
 
 /* 2^e for e in [-1022, 1023], exactly (cheaper than ldexp in the inner loops; scaling
@@ -92,37 +89,39 @@ static inline double qk__pow2(int e) {
   return v.d;
 }
 
-static inline size_t qk__cell_hash(int level, int64_t cx, int64_t cy) {
-  uint64_t h = (uint64_t)cx * 0x9E3779B97F4A7C15ull;
-  h ^= (uint64_t)cy * 0xC2B2AE3D27D4EB4Full + ((uint64_t)(uint32_t)level << 7);
-  h ^= h >> 29;
-  h *= 0xBF58476D1CE4E5B9ull;
-  return (size_t)(h ^ (h >> 32));
+static inline int qk__wlive(const qk__wobj_t *o) { return o->gen & 1; }
+
+static inline qk_shape_t qk__wshape(const qk__wobj_t *o) {
+  return (qk_shape_t){(qk_shape_kind_t)(o->flags & QK__WKIND), o->x, o->y, o->a, o->b};
 }
 
-/* The table entry of cell (level, cx, cy), or the empty entry where it would go. */
-static inline size_t qk__cell_find(const qk_world_t *w, int level, int64_t cx, int64_t cy) {
-  size_t mask = w->cap_cells - 1, i = qk__cell_hash(level, cx, cy) & mask;
-  for (;;) {
-    const qk__wcell_t *c = &w->cells[i];
-    if (c->count == 0) return i;
-    if (c->cx == cx && c->cy == cy && c->level == level) return i;
-    i = (i + 1) & mask;
+/* The object's box (qk__shape_box of its shape). */
+static inline qk_box_t qk__wbox(const qk__wobj_t *o) {
+  if ((o->flags & QK__WKIND) == QK_SHAPE_BOX) return (qk_box_t){o->x, o->y, o->a, o->b};
+  qk_shape_t s = qk__wshape(o);
+  return qk__shape_box(&s);
+}
+
+/* (level, cy, cx) order of cells. */
+static inline int qk__key_less(int l1, int32_t y1, int32_t x1, int l2, int32_t y2, int32_t x2) {
+  return l1 != l2 ? l1 < l2 : y1 != y2 ? y1 < y2 : x1 < x2;
+}
+
+/* The first cell of level l's run at or after (y, x) in (cy, cx) order. */
+static inline uint32_t qk__cell_lower(const qk_world_t *w, int l, int64_t y, int64_t x) {
+  uint32_t lo = w->lv_first[l - QK__LMIN], hi = lo + w->lv_n[l - QK__LMIN];
+  while (lo < hi) {
+    uint32_t mid = lo + (hi - lo) / 2;
+    const qk__wcell_t *c = &w->cells[mid];
+    if (c->cy < y || (c->cy == y && c->cx < x))
+      lo = mid + 1;
+    else
+      hi = mid;
   }
+  return lo;
 }
 
-/* The cell (level, cx, cy), or NULL (inline, for the pair search). */
-static inline const qk__wcell_t *qk__cell_get(const qk_world_t *w, int level, int64_t cx,
-                                              int64_t cy) {
-  if (w->n_cells == 0) return NULL;
-  const qk__wcell_t *c = &w->cells[qk__cell_find(w, level, cx, cy)];
-  return c->count ? c : NULL;
-}
-
-/* The cell (level, cx, cy), or NULL. */
-const qk__wcell_t *qk__world_cell(const qk_world_t *w, int level, int64_t cx, int64_t cy);
-
-/* Occupied levels, ascending; returns how many. */
+/* Occupied levels of the order, ascending; returns how many. */
 int qk__world_levels(const qk_world_t *w, int *levels);
 
 /* Visit every live object whose box meets qb: fn returns nonzero to stop. */
@@ -132,6 +131,42 @@ void qk__world_visit(const qk_world_t *w, qk_box_t qb, qk__wvisit_fn fn, void *u
  * where the box would hold many more. */
 void qk__world_visit_seg(const qk_world_t *w, qk_box_t qb, const qk_point_t *seg, qk__wvisit_fn fn,
                          void *ud);
+
+/* The scratch of one update's search: the objects' boxes as floats in the order, four
+ * to a group of 16 floats, and per cell the box around its objects. */
+typedef struct qk__wpack {
+  float *fgrp;
+  size_t cap_fgrp; /* in groups */
+  uint8_t *fexact; /* per object (in the order): a box whose float box is exact (in the
+                      same allocation, after the groups) */
+  qk_box_t *hb;
+  size_t cap_hb;
+  qk_box_t lv_box[QK__NLEV]; /* per level: the box around its cells' objects */
+} qk__wpack_t;
+
+/* Bring the order up to date (file the dirty objects, drop removed ones) and fill the
+ * pack. QK_ERR_NOMEM leaves the world unchanged; the caller frees the pack with
+ * qk__world_pack_free either way. */
+qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk);
+void qk__world_pack_free(qk_world_t *w, qk__wpack_t *pk);
+
+/* Every overlapping pair of the packed order (collide/world_search.c), as unsorted keys
+ * in *found (the caller frees it), on the world's threads. QK_ERR_NOMEM (found empty)
+ * when memory ran short. */
+qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kvec_t *found);
+
+/* The cell (level, cx, cy) a fat box is filed in; *forced when the magnitude of its
+ * coordinates raised the level. */
+void qk__world_cell_of(const qk_box_t *f, int *level, int32_t *cx, int32_t *cy, int *forced);
+
+/* The fat box of object o (its box widened by the margins). */
+static inline qk_box_t qk__world_fat_box(const qk_world_t *w, const qk__wobj_t *o) {
+  qk_box_t b = qk__wbox(o);
+  double e = qk__max(b.xmax - b.xmin, b.ymax - b.ymin);
+  double m = w->opt.margin * e + w->opt.min_margin;
+  if (!isfinite(m)) m = 0;
+  return (qk_box_t){b.xmin - m, b.ymin - m, b.xmax + m, b.ymax + m};
+}
 
 static inline qk_handle_t qk__handle(const qk_world_t *w, uint32_t slot) {
   return ((uint64_t)w->obj[slot].gen << 32) | slot;

@@ -22,10 +22,16 @@ static int64_t scaled(double v, int l) {
   return (int64_t)s;
 }
 
-static int visit_cell(const qk_world_t *w, const qk__wcell_t *c, qk_box_t qb, qk__wvisit_fn fn,
-                      void *ud) {
-  for (uint32_t i = c->head; i != QK_NONE; i = w->obj[i].next)
-    if (boxes_meet(&w->obj[i].box, &qb) && fn(w, i, ud)) return 1;
+/* The objects of cell c that are where the order files them (live, not dirty) and whose
+ * boxes meet qb. */
+static int visit_cell(const qk_world_t *w, uint32_t c, qk_box_t qb, qk__wvisit_fn fn, void *ud) {
+  for (uint32_t k = w->cells[c].start, e = w->cells[c + 1].start; k < e; k++) {
+    uint32_t i = w->order[k];
+    const qk__wobj_t *o = &w->obj[i];
+    if (!qk__wlive(o) || (o->flags & QK__WDIRTY)) continue;
+    qk_box_t b = qk__wbox(o);
+    if (boxes_meet(&b, &qb) && fn(w, i, ud)) return 1;
+  }
   return 0;
 }
 
@@ -40,14 +46,30 @@ static crange_t range_of(qk_box_t b, int l) {
                     scaled(b.ymax, l)};
 }
 
+static inline int in_range(const crange_t *r, int64_t x, int64_t y) {
+  return x >= r->x0 && x <= r->x1 && y >= r->y0 && y <= r->y1;
+}
+
+/* The cells of level l in range r (row by row, each row found by binary search), but
+ * those in *skip. */
 static int visit_range(const qk_world_t *w, int l, crange_t r, const crange_t *skip, qk_box_t qb,
                        qk__wvisit_fn fn, void *ud) {
-  for (int64_t x = r.x0; x <= r.x1; x++)
-    for (int64_t y = r.y0; y <= r.y1; y++) {
-      if (skip && x >= skip->x0 && x <= skip->x1 && y >= skip->y0 && y <= skip->y1) continue;
-      const qk__wcell_t *c = qk__world_cell(w, l, x, y);
-      if (c && visit_cell(w, c, qb, fn, ud)) return 1;
+  uint32_t end = w->lv_first[l - QK__LMIN] + w->lv_n[l - QK__LMIN];
+  for (int64_t y = r.y0; y <= r.y1; y++)
+    for (uint32_t k = qk__cell_lower(w, l, y, r.x0);
+         k < end && w->cells[k].cy == y && w->cells[k].cx <= r.x1; k++) {
+      if (skip && in_range(skip, w->cells[k].cx, y)) continue;
+      if (visit_cell(w, k, qb, fn, ud)) return 1;
     }
+  return 0;
+}
+
+/* Every cell of level l in range r, by scanning the level's cells. */
+static int scan_level(const qk_world_t *w, int l, crange_t r, qk_box_t qb, qk__wvisit_fn fn,
+                      void *ud) {
+  uint32_t k = w->lv_first[l - QK__LMIN], end = k + w->lv_n[l - QK__LMIN];
+  for (; k < end; k++)
+    if (in_range(&r, w->cells[k].cx, w->cells[k].cy) && visit_cell(w, k, qb, fn, ud)) return 1;
   return 0;
 }
 
@@ -83,36 +105,34 @@ void qk__world_visit_seg(const qk_world_t *w, qk_box_t qb, const qk_point_t *seg
   if (w->n_live == 0) return;
   int levels[QK__NLEV];
   int n = qk__world_levels(w, levels);
-  unsigned char scan[QK__NLEV];
-  int any_scan = 0;
-  memset(scan, 0, sizeof scan);
   for (int li = 0; li < n; li++) {
     int l = levels[li];
     crange_t r = range_of(qb, l);
-    double looks = ((double)r.x1 - (double)r.x0 + 1) * ((double)r.y1 - (double)r.y0 + 1);
-    double cells = 2.0 * w->level_cells[l - QK__LMIN] + 8;
-    if (looks <= cells) {
+    double ncell = w->lv_n[l - QK__LMIN], lg = log2(ncell + 1) + 2;
+    double rows = (double)r.y1 - (double)r.y0 + 1;
+    if (rows * lg <= 2 * ncell + 8) { /* a binary search a row */
       if (visit_range(w, l, r, NULL, qb, fn, ud)) return;
       continue;
     }
     if (seg) {
-      /* pieces about four cells long on the longer axis; each looks up its range */
+      /* pieces about four cells long on the longer axis; each searches its rows */
       double s = qk__pow2(l);
       double major = fmax(qb.xmax - qb.xmin, qb.ymax - qb.ymin);
-      double minor = fmin(qb.xmax - qb.xmin, qb.ymax - qb.ymin);
       double pieces = ceil(major / (4 * s));
-      if (pieces >= 1 && pieces < 1e7 && pieces * 7 * (minor / pieces / s + 3) <= cells) {
+      double prow = (qb.ymax - qb.ymin) / pieces / s + 3;
+      if (pieces >= 1 && pieces < 1e7 && pieces * prow * lg <= 2 * ncell + 8) {
         if (visit_along(w, l, seg, pieces, qb, fn, ud)) return;
         continue;
       }
     }
-    scan[l - QK__LMIN] = 1;
-    any_scan = 1;
+    if (scan_level(w, l, r, qb, fn, ud)) return;
   }
-  if (!any_scan) return;
-  for (size_t i = 0; i < w->cap_cells; i++) {
-    const qk__wcell_t *c = &w->cells[i];
-    if (c->count && scan[c->level - QK__LMIN] && visit_cell(w, c, qb, fn, ud)) return;
+  /* The objects added or re-filed since the last update, one by one. */
+  for (uint32_t i = w->dirty_head; i != QK_NONE; i = w->obj[i].dnext) {
+    const qk__wobj_t *o = &w->obj[i];
+    if (!qk__wlive(o)) continue;
+    qk_box_t b = qk__wbox(o);
+    if (boxes_meet(&b, &qb) && fn(w, i, ud)) return;
   }
 }
 
@@ -130,7 +150,8 @@ typedef struct qctx {
 
 static int q_visit(const qk_world_t *w, uint32_t i, void *ud) {
   qctx_t *c = ud;
-  if (!qk__shapes_overlap(c->q, &w->obj[i].s)) return 0;
+  qk_shape_t sh = qk__wshape(&w->obj[i]);
+  if (!qk__shapes_overlap(c->q, &sh)) return 0;
   QK__SINK_PUT(c->out, c->cap, c->n, qk__handle(w, i));
   return 0;
 }
@@ -171,16 +192,18 @@ static inline int hit_less(double ta, uint32_t sa, double tb, uint32_t sb) {
 
 static int r_visit_all(const qk_world_t *w, uint32_t i, void *ud) {
   rctx_t *c = ud;
-  if (!qk__shapes_overlap(&c->seg, &w->obj[i].s)) return 0;
+  qk_shape_t sh = qk__wshape(&w->obj[i]);
+  if (!qk__shapes_overlap(&c->seg, &sh)) return 0;
   QK__SINK_PUT(c->out, c->cap, c->n,
-               ((qk_world_hit_t){qk__handle(w, i), qk__ray_param(&w->obj[i].s, c->from, c->to)}));
+               ((qk_world_hit_t){qk__handle(w, i), qk__ray_param(&sh, c->from, c->to)}));
   return 0;
 }
 
 static int r_visit_first(const qk_world_t *w, uint32_t i, void *ud) {
   rctx_t *c = ud;
-  if (!qk__shapes_overlap(&c->seg, &w->obj[i].s)) return 0;
-  double t = qk__ray_param(&w->obj[i].s, c->from, c->to);
+  qk_shape_t sh = qk__wshape(&w->obj[i]);
+  if (!qk__shapes_overlap(&c->seg, &sh)) return 0;
+  double t = qk__ray_param(&sh, c->from, c->to);
   if (c->best.h == QK_HANDLE_NONE || hit_less(t, i, c->best.t, (uint32_t)c->best.h))
     c->best = (qk_world_hit_t){qk__handle(w, i), t};
   return 0;
@@ -277,8 +300,9 @@ typedef struct kctx {
 
 static int k_visit(const qk_world_t *w, uint32_t i, void *ud) {
   kctx_t *c = ud;
+  qk_shape_t sh = qk__wshape(&w->obj[i]);
   c->seen++;
-  double d = qk__shape_dist(&w->obj[i].s, c->p);
+  double d = qk__shape_dist(&sh, c->p);
   if (c->n == c->k && !hit_less(d, i, c->out[c->n - 1].t, (uint32_t)c->out[c->n - 1].h)) return 0;
   size_t j = c->n < c->k ? c->n++ : c->n - 1;
   while (j > 0 && hit_less(d, i, c->out[j - 1].t, (uint32_t)c->out[j - 1].h)) {
@@ -297,13 +321,13 @@ qk_status_t qk_world_knn(const qk_world_t *w, qk_point_t p, size_t k, qk_world_h
   if (!qk__value_ok(p.x) || !qk__value_ok(p.y)) return QK_ERR_LIMIT;
   if (k == 0 || w->n_live == 0) return QK_OK;
   int levels[QK__NLEV];
-  qk__world_levels(w, levels);
+  int n_levels = qk__world_levels(w, levels);
   /*
    * Grow a square around p until it holds k objects no farther than its half side:
    * every object within distance r meets the square of half side r, so those k are the
    * nearest. Distances are rounded, so the bound is kept a little inside r.
    */
-  double r = ldexp(1.0, levels[0]);
+  double r = n_levels ? ldexp(1.0, levels[0]) : 1.0;
   for (;;) {
     kctx_t c = {p, out, k, 0, 0};
     qk_box_t qb = {p.x - r, p.y - r, p.x + r, p.y + r};

@@ -4,7 +4,7 @@
  *    decades, all four kinds, objects added and removed mid-run) against an O(n^2) loop
  *    over a mirror of the objects: pairs, began / ended sets, objects overlapping a
  *    random box / disc / point / segment, all hits of a segment (as a set, in order of t)
- *    and the first hit, k nearest (distances);
+ *    and the first hit, k nearest (distances); queries also between moves and the update;
  *  - a huge world: unit objects at coordinates near 1e9, and sizes 1e-3 .. 1e3 together;
  *  - hand-made touching cases of every pair of kinds (integers: the oracle is exact);
  *  - stale handles are rejected after removal and slot reuse;
@@ -372,6 +372,9 @@ static void run_scene(int scene, int kinds, size_t n, int frames, unsigned threa
       }
       for (int k = 0; k < 4; k++) m_add(w, &m, rnd_shape(&r, scene, kinds));
     }
+    /* Queries see moves at once: also between the moves and the update, when the moved-out,
+     * added and removed objects are not yet filed (the dirty list). */
+    if (f % 4 == 1) check_queries(&r, w, &m, scene);
     assert_int_equal(qk_world_update(w), QK_OK);
     qk_world_pair_t *want;
     size_t nw = o_pairs(&m, &want);

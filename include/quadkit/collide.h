@@ -251,8 +251,8 @@ void qk_world_free(qk_world_t *w);
 qk_status_t qk_world_add(qk_world_t *w, const qk_shape_t *shape, uint64_t tag, qk_handle_t *h);
 
 /**
- * Give an object a new shape (of any kind). It is re-filed only when it leaves its
- * fattened box. Never allocates.
+ * Give an object a new shape (of any kind). It is re-filed (at the next update) only
+ * when it leaves its cell's loose square. Never allocates.
  * \return QK_OK, QK_ERR_NOT_FOUND (stale or unknown handle) or a shape error as
  *         qk_world_add (the object unchanged).
  */
@@ -275,7 +275,8 @@ qk_status_t qk_world_get(const qk_world_t *w, qk_handle_t h, qk_shape_t *shape, 
 /** Number of live objects. */
 size_t qk_world_size(const qk_world_t *w);
 
-/** Bytes the world holds from its allocator. */
+/** Bytes the world holds from its allocator (between updates: an update's scratch is
+ * freed before it returns). */
 size_t qk_world_bytes(const qk_world_t *w);
 
 /**

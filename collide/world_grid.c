@@ -1,0 +1,208 @@
+/*
+ * The world's sorted loose grid (see collide/world.c for the design): at each update the
+ * dirty objects are filed in their new cells, sorted by cell and merged into the order of
+ * the last update, from which removed and dirty slots are dropped; the same pass rebuilds
+ * the cell list and packs the boxes for the pair search.
+ */
+#include <stdlib.h>
+#include <string.h>
+
+#include "collide/world_internal.h"
+
+/* A dirty object to merge in: its cell as a sortable key (level, then cy, then cx, each
+ * biased to unsigned), and its slot (ties: by slot, so the order is deterministic). */
+typedef struct drec {
+  uint64_t ly; /* (level - QK__LMIN) << 32 | biased cy */
+  uint32_t x;  /* biased cx */
+  uint32_t slot;
+} drec_t;
+
+static inline uint32_t bias(int32_t v) { return (uint32_t)v ^ 0x80000000u; }
+
+static int drec_cmp(const void *p, const void *q) {
+  const drec_t *a = p, *b = q;
+  if (a->ly != b->ly) return a->ly < b->ly ? -1 : 1;
+  if (a->x != b->x) return a->x < b->x ? -1 : 1;
+  return (a->slot > b->slot) - (a->slot < b->slot);
+}
+
+/* Sort n records by key, stably, through tmp (n entries): an LSD radix sort on the key's
+ * nine bytes, skipping the bytes all records share (most of them: nearby cells). */
+static void drec_sort(drec_t *d, drec_t *tmp, size_t n) {
+  /* Keys relative to their minima, so that only the low bytes differ (a cell index of -1
+   * and one of 0 differ in every byte once biased). */
+  uint64_t ly_min = d[0].ly;
+  uint32_t x_min = d[0].x;
+  for (size_t i = 1; i < n; i++) {
+    ly_min = d[i].ly < ly_min ? d[i].ly : ly_min;
+    x_min = d[i].x < x_min ? d[i].x : x_min;
+  }
+  uint64_t ly_or = 0, ly_and = ~(uint64_t)0;
+  uint32_t x_or = 0, x_and = ~0u;
+  for (size_t i = 0; i < n; i++) {
+    d[i].ly -= ly_min, d[i].x -= x_min;
+    ly_or |= d[i].ly, ly_and &= d[i].ly;
+    x_or |= d[i].x, x_and &= d[i].x;
+  }
+  for (int byte = 0; byte < 9; byte++) {
+    int in_x = byte < 4, sh = in_x ? 8 * byte : 8 * (byte - 4);
+    uint64_t differ = in_x ? (uint64_t)(x_or ^ x_and) : (ly_or ^ ly_and);
+    if (!((differ >> sh) & 0xff)) continue;
+    size_t count[257] = {0};
+    for (size_t i = 0; i < n; i++) count[((in_x ? d[i].x : d[i].ly) >> sh & 0xff) + 1]++;
+    for (int k = 1; k < 257; k++) count[k] += count[k - 1];
+    for (size_t i = 0; i < n; i++) tmp[count[(in_x ? d[i].x : d[i].ly) >> sh & 0xff]++] = d[i];
+    memcpy(d, tmp, n * sizeof *d);
+  }
+  for (size_t i = 0; i < n; i++) d[i].ly += ly_min, d[i].x += x_min;
+}
+
+static inline drec_t rec_of(const qk__wobj_t *o, uint32_t slot) {
+  return (drec_t){(uint64_t)(uint32_t)(o->level - QK__LMIN) << 32 | bias(o->cy), bias(o->u.cx),
+                  slot};
+}
+
+static inline void box_join(qk_box_t *h, const qk_box_t *b) {
+  h->xmin = qk__min(h->xmin, b->xmin), h->ymin = qk__min(h->ymin, b->ymin);
+  h->xmax = qk__max(h->xmax, b->xmax), h->ymax = qk__max(h->ymax, b->ymax);
+}
+
+static const qk_box_t empty_box = {INFINITY, INFINITY, -INFINITY, -INFINITY};
+
+void qk__world_pack_free(qk_world_t *w, qk__wpack_t *pk) {
+  qk__free(&w->alloc, pk->fgrp, pk->cap_fgrp * (16 * sizeof *pk->fgrp + 4));
+  qk__free(&w->alloc, pk->hb, pk->cap_hb * sizeof *pk->hb);
+  pk->fgrp = NULL, pk->hb = NULL;
+  pk->cap_fgrp = pk->cap_hb = 0;
+}
+
+qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
+  const qk_allocator_t *a = &w->alloc;
+  pk->fgrp = NULL, pk->hb = NULL, pk->cap_fgrp = pk->cap_hb = 0;
+  /* Everything the pass needs, before anything changes: the dirty records, the new
+   * order, the new cells (at most the old ones plus one per dirty object, and the
+   * sentinel) and the pack. */
+  size_t nd = w->n_dirty, n = w->n_live, ncap = (size_t)w->n_cells + nd + 1;
+  size_t ocap = n ? n : 1, gcap = (n + 3) / 4 + 1;
+  /* (the dirty records and, for the radix sort, as many again) */
+  drec_t *d = nd ? qk__realloc(a, NULL, 0, 2 * nd * sizeof *d) : NULL;
+  uint32_t *ord = (!nd || d) ? qk__realloc(a, NULL, 0, ocap * sizeof *ord) : NULL;
+  qk__wcell_t *cells = ord ? qk__realloc(a, NULL, 0, ncap * sizeof *cells) : NULL;
+  float *fg = cells ? qk__realloc(a, NULL, 0, gcap * (16 * sizeof *fg + 4)) : NULL;
+  qk_box_t *hb = fg ? qk__realloc(a, NULL, 0, ncap * sizeof *hb) : NULL;
+  if (!hb) {
+    qk__free(a, d, 2 * nd * sizeof *d);
+    qk__free(a, ord, ocap * sizeof *ord);
+    qk__free(a, cells, ncap * sizeof *cells);
+    qk__free(a, fg, gcap * (16 * sizeof *fg + 4));
+    return QK_ERR_NOMEM;
+  }
+  pk->fgrp = fg, pk->cap_fgrp = gcap, pk->hb = hb, pk->cap_hb = ncap;
+  pk->fexact = (uint8_t *)(fg + gcap * 16);
+
+  /* File the live dirty objects in their new cells. */
+  size_t m_d = 0;
+  for (uint32_t i = w->dirty_head; i != QK_NONE; i = w->obj[i].dnext) {
+    qk__wobj_t *o = &w->obj[i];
+    if (!qk__wlive(o)) continue;
+    qk_box_t f = qk__world_fat_box(w, o);
+    int level, forced;
+    int32_t cx, cy;
+    qk__world_cell_of(&f, &level, &cx, &cy, &forced);
+    o->level = (int8_t)level, o->u.cx = cx, o->cy = cy;
+    o->flags = (uint8_t)((o->flags & ~QK__WFORCED) | (forced ? QK__WFORCED : 0));
+    d[m_d] = rec_of(o, i);
+    m_d++;
+  }
+  if (m_d > 64)
+    drec_sort(d, d + nd, m_d);
+  else if (m_d > 1)
+    qsort(d, m_d, sizeof *d, drec_cmp);
+
+  /* Merge: the kept entries of the old order (still sorted: their cells did not change)
+   * with the sorted dirty ones, packing each object as it is placed. */
+  memset(w->lv_first, 0, sizeof w->lv_first);
+  memset(w->lv_n, 0, sizeof w->lv_n);
+  for (int l = 0; l < QK__NLEV; l++) pk->lv_box[l] = empty_box;
+  const uint32_t *old = w->order;
+  size_t i = 0, j = 0, no = w->n_order;
+  uint32_t m = 0, nc = 0;
+  int dl = 0; /* the cell of d[j] */
+  int32_t dy = 0, dx = 0;
+  if (m_d) dl = w->obj[d[0].slot].level, dy = w->obj[d[0].slot].cy, dx = w->obj[d[0].slot].u.cx;
+  for (;;) {
+    while (i < no) {
+      const qk__wobj_t *o = &w->obj[old[i]];
+      if (qk__wlive(o) && !(o->flags & QK__WDIRTY)) break;
+      i++;
+    }
+    uint32_t s;
+    if (i < no && j < m_d) {
+      const qk__wobj_t *o = &w->obj[old[i]];
+      if (!qk__key_less(dl, dy, dx, o->level, o->cy, o->u.cx)) {
+        s = old[i++];
+      } else {
+        s = d[j++].slot;
+        if (j < m_d)
+          dl = w->obj[d[j].slot].level, dy = w->obj[d[j].slot].cy, dx = w->obj[d[j].slot].u.cx;
+      }
+    } else if (i < no)
+      s = old[i++];
+    else if (j < m_d)
+      s = d[j++].slot;
+    else
+      break;
+    const qk__wobj_t *o = &w->obj[s];
+    int l = o->level;
+    if (!nc || cells[nc - 1].level != l || cells[nc - 1].cy != o->cy ||
+        cells[nc - 1].cx != o->u.cx) {
+      if (nc) box_join(&pk->lv_box[cells[nc - 1].level - QK__LMIN], &hb[nc - 1]);
+      cells[nc] = (qk__wcell_t){o->u.cx, o->cy, m, l};
+      hb[nc] = empty_box;
+      if (!w->lv_n[l - QK__LMIN]) w->lv_first[l - QK__LMIN] = nc;
+      w->lv_n[l - QK__LMIN]++;
+      nc++;
+    }
+    qk_box_t b = qk__wbox(o);
+    box_join(&hb[nc - 1], &b);
+    float *g = fg + (size_t)(m >> 2) * 16 + (m & 3);
+    g[0] = (float)b.xmin, g[4] = (float)b.ymin, g[8] = (float)b.xmax, g[12] = (float)b.ymax;
+    /* A box whose floats are its doubles: the float box test is then the exact one. Its
+     * values are zero or of magnitude in [2^-100, 2^100], inside the floats' normal
+     * range, so they are floats exactly when their last 29 mantissa bits are zero. */
+    uint64_t u[4];
+    memcpy(u, &b, sizeof u);
+    pk->fexact[m] = (o->flags & QK__WKIND) == QK_SHAPE_BOX &&
+                    !((u[0] | u[1] | u[2] | u[3]) & ((UINT64_C(1) << 29) - 1));
+    ord[m++] = s;
+  }
+  for (uint32_t k = m; k & 3; k++) { /* empty lanes: a box that meets nothing */
+    float *g = fg + (size_t)(k >> 2) * 16 + (k & 3);
+    g[0] = g[4] = INFINITY, g[8] = g[12] = -INFINITY;
+  }
+  if (nc) box_join(&pk->lv_box[cells[nc - 1].level - QK__LMIN], &hb[nc - 1]);
+  cells[nc] = (qk__wcell_t){0, 0, m, INT32_MAX};
+  for (uint32_t k = w->dirty_head; k != QK_NONE; k = w->obj[k].dnext)
+    w->obj[k].flags &= (uint8_t)~QK__WDIRTY;
+  w->dirty_head = QK_NONE;
+  w->n_dirty = 0;
+  qk__free(a, d, 2 * nd * sizeof *d);
+  qk__free(a, w->order, (size_t)w->cap_order * sizeof *w->order);
+  qk__free(a, w->cells, (size_t)w->cap_cells * sizeof *w->cells);
+  w->order = ord, w->n_order = m, w->cap_order = (uint32_t)ocap;
+  w->cells = cells, w->n_cells = nc, w->cap_cells = (uint32_t)ncap;
+  /* Give back the cells' room for the dirty objects that joined existing cells (a
+   * failed shrink is harmless). */
+  /* And the object slots' slack after growth (a failed shrink is harmless). */
+  if (w->cap_obj > w->n_obj + w->n_obj / 32 + 16) {
+    uint32_t cap = w->n_obj + w->n_obj / 64 + 16;
+    qk__wobj_t *no =
+        qk__realloc(a, w->obj, (size_t)w->cap_obj * sizeof *no, (size_t)cap * sizeof *no);
+    if (no) w->obj = no, w->cap_obj = cap;
+  }
+  if (ncap > (size_t)nc + 1 + 16) {
+    qk__wcell_t *c = qk__realloc(a, w->cells, ncap * sizeof *c, ((size_t)nc + 1) * sizeof *c);
+    if (c) w->cells = c, w->cap_cells = nc + 1;
+  }
+  return QK_OK;
+}
