@@ -305,7 +305,7 @@ static qk_status_t grow_marks(qk__gm_t *g) {
     memset(g->mark + g->mark_cap, 0, (c - g->mark_cap) * sizeof *g->mark);
     g->mark_cap = c;
   }
-  if (g->mark_gen == UINT32_MAX) {
+  if (g->mark_gen >= UINT32_MAX / 2) {
     memset(g->mark, 0, g->mark_cap * sizeof *g->mark);
     g->mark_gen = 0;
   }
@@ -315,15 +315,17 @@ static qk_status_t grow_marks(qk__gm_t *g) {
 /* The subsegments on the boundary of the insertion cavity of p (the triangles whose
  * circumcircles hold p, reached from t0 and t1 without crossing a constrained edge) that p
  * would encroach: queued (as triples) in g->enc. Returns the number queued, or -1 on NOMEM.
- * Membership of the cavity is a per-slot stamp (g->mark[t] == g->mark_gen), not a scan. */
+ * Every slot tested gets a stamp, g->mark[t] = 2 g->mark_gen + (1 inside the circle, 0
+ * not): membership without a scan, and the insertion of p that follows reuses the results
+ * for its flips (qk__cdt_t's known) instead of testing the same circles again. */
 static int cavity_encroach(qk__gm_t *g, uint32_t t0, uint32_t t1, const double p[2]) {
   const qk__cdt_t *c = &g->cdt;
   size_t n = 0, seen = 0;
   int found = 0;
   if (grow_stack(g, 2) || grow_marks(g)) return -1;
   uint32_t gen = ++g->mark_gen, *mark = g->mark;
-  g->stack[n++] = t0, mark[t0] = gen;
-  if (t1 != QK__CDT_NONE) g->stack[n++] = t1, mark[t1] = gen;
+  g->stack[n++] = t0, mark[t0] = 2 * gen + 1;
+  if (t1 != QK__CDT_NONE) g->stack[n++] = t1, mark[t1] = 2 * gen + 1;
   /* g->stack[0..seen) are done, [seen, n) to do. */
   while (seen < n) {
     uint32_t t = g->stack[seen++];
@@ -337,10 +339,11 @@ static int cavity_encroach(qk__gm_t *g, uint32_t t0, uint32_t t1, const double p
         continue;
       }
       uint32_t u = c->nbr[3 * t + k];
-      if (u == QK__CDT_NONE || n > 4096 || mark[u] == gen) continue;
-      mark[u] = gen; /* tested once, in the cavity or not */
+      if (u == QK__CDT_NONE || n > 4096 || mark[u] >> 1 == gen) continue;
       const uint32_t *uv = &c->v[3 * u];
-      if (qk__incircle(&c->xy[2 * uv[0]], &c->xy[2 * uv[1]], &c->xy[2 * uv[2]], p) <= 0) continue;
+      int in = qk__incircle(&c->xy[2 * uv[0]], &c->xy[2 * uv[1]], &c->xy[2 * uv[2]], p) > 0;
+      mark[u] = 2 * gen + (uint32_t)in; /* tested once */
+      if (!in) continue;
       if (grow_stack(g, n + 1)) return -1;
       g->stack[n++] = u;
     }
@@ -452,7 +455,11 @@ static qk_status_t split_triangle(qk__gm_t *g, uint32_t t, size_t *rejected) {
   }
   uint32_t v;
   int existed;
+  /* The cavity's tests stand for this one insertion (slots untested, beyond the search's
+   * cap, are tested by the flips as usual). */
+  c->known = g->mark, c->known_gen = g->mark_gen;
   qk_status_t st = qk__gm_insert(g, p[0], p[1], tri, k, where, QK__CDT_NONE, 0, &v, &existed);
+  c->known = NULL;
   if (st) return qk__mesh_fail(g->err, st, 0, "out of memory");
   return check_dirty(g);
 }
