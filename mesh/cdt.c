@@ -330,7 +330,13 @@ static void legalize(qk__cdt_t *c, int sp) {
     const uint32_t *tv = c->v + 3 * (size_t)t;
     const double *pp = c->xy + 2 * (size_t)tv[0], *pq = c->xy + 2 * (size_t)tv[1];
     const double *pr = c->xy + 2 * (size_t)tv[2], *ps = c->xy + 2 * (size_t)c->v[3 * (size_t)n + j];
-    if (qk__cdt_incircle(pp, pq, pr, ps) <= 0) continue;
+    /* t = (p, q, r) holds the new point p and n = (r, q, s) is an old triangle: s inside
+     * t's circle is p inside n's (an even permutation of the in-circle determinant). */
+    if (c->known && c->known[n] >> 1 == c->known_gen) {
+      if (!(c->known[n] & 1)) continue;
+    } else if (qk__cdt_incircle(pp, pq, pr, ps) <= 0) {
+      continue;
+    }
     flip0(c, t, n, j);
     stk[sp++] = t, stk[sp++] = n;
   }

@@ -48,6 +48,12 @@ typedef struct qk__cdt {
   uint32_t hint; /* a triangle near the last change: default start of walks */
   qk__cdt_change_fn on_change;
   void *user;
+  /* Optional, set by a caller that has tested the next point against triangles already
+   * (the refinement's cavity search) and cleared after that one insertion: known[n] ==
+   * 2 * known_gen + r says the point lies strictly inside slot n's circumcircle (r = 1) or
+   * not (r = 0), and the flips reuse that instead of testing again. NULL: no such record. */
+  const uint32_t *known;
+  uint32_t known_gen;
   /* Private to mesh/cdt*.c: the flip stack (cap_v + 8 entries, in the vertex block) and the
    * segment insertion's scratch. */
   uint32_t *stk;

@@ -91,6 +91,9 @@ typedef struct qk__gm {
   size_t nenc, enc_cap;
   uint32_t *stack;
   size_t stack_cap;
+  uint32_t *mark; /* per triangle slot: the cavity search's stamp (general_refine.c) */
+  size_t mark_cap;
+  uint32_t mark_gen;
   size_t insertions, work_cap;
   size_t seeds, free_leaves; /* seeds inserted; free leaves meeting the bounding box */
   double smallest_input_angle;

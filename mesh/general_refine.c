@@ -224,18 +224,22 @@ static qk_status_t push_bad(qk__gm_t *g, uint32_t t) {
     memmove(g->bad, g->bad + g->bad_head, (g->nbad - g->bad_head) * sizeof *g->bad);
     g->nbad -= g->bad_head, g->bad_head = 0;
   }
-  void *p = g->bad;
-  if (qk__grow(g->a, &p, &g->bad_cap, g->nbad + 1, sizeof *g->bad)) return QK_ERR_NOMEM;
-  g->bad = p;
+  if (g->nbad == g->bad_cap) {
+    void *p = g->bad;
+    if (qk__grow(g->a, &p, &g->bad_cap, g->nbad + 1, sizeof *g->bad)) return QK_ERR_NOMEM;
+    g->bad = p;
+  }
   const uint32_t *tv = &g->cdt.v[3 * t];
   g->bad[g->nbad++] = (qk__gm_tq_t){t, tv[0], tv[1], tv[2]};
   return QK_OK;
 }
 
 static qk_status_t push_enc(qk__gm_t *g, uint32_t a, uint32_t b, uint32_t s) {
-  void *p = g->enc;
-  if (qk__grow(g->a, &p, &g->enc_cap, 3 * (g->nenc + 1), sizeof *g->enc)) return QK_ERR_NOMEM;
-  g->enc = p;
+  if (3 * (g->nenc + 1) > g->enc_cap) {
+    void *p = g->enc;
+    if (qk__grow(g->a, &p, &g->enc_cap, 3 * (g->nenc + 1), sizeof *g->enc)) return QK_ERR_NOMEM;
+    g->enc = p;
+  }
   g->enc[3 * g->nenc] = a, g->enc[3 * g->nenc + 1] = b, g->enc[3 * g->nenc + 2] = s;
   g->nenc++;
   return QK_OK;
@@ -283,24 +287,46 @@ static int still_encroached(const qk__gm_t *g, uint32_t a, uint32_t b) {
 }
 
 static qk_status_t grow_stack(qk__gm_t *g, size_t need) {
+  if (need <= g->stack_cap) return QK_OK;
   void *p = g->stack;
   if (qk__grow(g->a, &p, &g->stack_cap, need, sizeof *g->stack)) return QK_ERR_NOMEM;
   g->stack = p;
   return QK_OK;
 }
 
+/* The cavity stamps cover every triangle slot; new slots and a wrapped generation start
+ * from 0 (no stamp). */
+static qk_status_t grow_marks(qk__gm_t *g) {
+  size_t nt = g->cdt.nt, c = g->mark_cap;
+  if (nt > c) {
+    void *p = g->mark;
+    if (qk__grow(g->a, &p, &c, nt, sizeof *g->mark)) return QK_ERR_NOMEM;
+    g->mark = p;
+    memset(g->mark + g->mark_cap, 0, (c - g->mark_cap) * sizeof *g->mark);
+    g->mark_cap = c;
+  }
+  if (g->mark_gen >= UINT32_MAX / 2) {
+    memset(g->mark, 0, g->mark_cap * sizeof *g->mark);
+    g->mark_gen = 0;
+  }
+  return QK_OK;
+}
+
 /* The subsegments on the boundary of the insertion cavity of p (the triangles whose
  * circumcircles hold p, reached from t0 and t1 without crossing a constrained edge) that p
- * would encroach: queued (as triples) in g->enc. Returns the number queued, or -1 on NOMEM. */
+ * would encroach: queued (as triples) in g->enc. Returns the number queued, or -1 on NOMEM.
+ * Every slot tested gets a stamp, g->mark[t] = 2 g->mark_gen + (1 inside the circle, 0
+ * not): membership without a scan, and the insertion of p that follows reuses the results
+ * for its flips (qk__cdt_t's known) instead of testing the same circles again. */
 static int cavity_encroach(qk__gm_t *g, uint32_t t0, uint32_t t1, const double p[2]) {
   const qk__cdt_t *c = &g->cdt;
   size_t n = 0, seen = 0;
   int found = 0;
-  if (grow_stack(g, 2)) return -1;
-  g->stack[n++] = t0;
-  if (t1 != QK__CDT_NONE) g->stack[n++] = t1;
-  /* g->stack[0..seen) are done, [seen, n) to do; the cavity is small, so membership is a
-   * scan. */
+  if (grow_stack(g, 2) || grow_marks(g)) return -1;
+  uint32_t gen = ++g->mark_gen, *mark = g->mark;
+  g->stack[n++] = t0, mark[t0] = 2 * gen + 1;
+  if (t1 != QK__CDT_NONE) g->stack[n++] = t1, mark[t1] = 2 * gen + 1;
+  /* g->stack[0..seen) are done, [seen, n) to do. */
   while (seen < n) {
     uint32_t t = g->stack[seen++];
     for (int k = 0; k < 3; k++) {
@@ -313,12 +339,11 @@ static int cavity_encroach(qk__gm_t *g, uint32_t t0, uint32_t t1, const double p
         continue;
       }
       uint32_t u = c->nbr[3 * t + k];
-      if (u == QK__CDT_NONE || n > 4096) continue;
-      int dup = 0;
-      for (size_t i = 0; i < n && !dup; i++) dup = g->stack[i] == u;
-      if (dup) continue;
+      if (u == QK__CDT_NONE || n > 4096 || mark[u] >> 1 == gen) continue;
       const uint32_t *uv = &c->v[3 * u];
-      if (qk__incircle(&c->xy[2 * uv[0]], &c->xy[2 * uv[1]], &c->xy[2 * uv[2]], p) <= 0) continue;
+      int in = qk__incircle(&c->xy[2 * uv[0]], &c->xy[2 * uv[1]], &c->xy[2 * uv[2]], p) > 0;
+      mark[u] = 2 * gen + (uint32_t)in; /* tested once */
+      if (!in) continue;
       if (grow_stack(g, n + 1)) return -1;
       g->stack[n++] = u;
     }
@@ -430,7 +455,11 @@ static qk_status_t split_triangle(qk__gm_t *g, uint32_t t, size_t *rejected) {
   }
   uint32_t v;
   int existed;
+  /* The cavity's tests stand for this one insertion (slots untested, beyond the search's
+   * cap, are tested by the flips as usual). */
+  c->known = g->mark, c->known_gen = g->mark_gen;
   qk_status_t st = qk__gm_insert(g, p[0], p[1], tri, k, where, QK__CDT_NONE, 0, &v, &existed);
+  c->known = NULL;
   if (st) return qk__mesh_fail(g->err, st, 0, "out of memory");
   return check_dirty(g);
 }
@@ -466,9 +495,13 @@ qk_status_t qk__gm_refine(qk__gm_t *g) {
       continue;
     }
     if (g->bad_head == g->nbad) break;
+    /* A triangle was queued when found bad; the slot holding the same three vertices in
+     * the same order is the same triangle (its face, and so its quality, unchanged), so it
+     * is still bad and is not tested again. A changed slot is skipped: its new triangle was
+     * checked (and queued if bad) when the CDT changed it. */
     qk__gm_tq_t q = g->bad[g->bad_head++];
     const uint32_t *tv = &c->v[3 * q.t];
-    if (tv[0] != q.a || tv[1] != q.b || tv[2] != q.c || !qk__gm_is_bad(g, q.t)) continue;
+    if (tv[0] != q.a || tv[1] != q.b || tv[2] != q.c) continue;
     if ((st = split_triangle(g, q.t, &rejected))) break;
   }
   if (st == QK_ERR_NOMEM) return qk__mesh_fail(g->err, st, 0, "out of memory");

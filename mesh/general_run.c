@@ -31,6 +31,7 @@ static void gm_free(qk__gm_t *g) {
   qk__free(a, g->bad, g->bad_cap * sizeof *g->bad);
   qk__free(a, g->enc, g->enc_cap * sizeof *g->enc);
   qk__free(a, g->stack, g->stack_cap * sizeof *g->stack);
+  qk__free(a, g->mark, g->mark_cap * sizeof *g->mark);
 }
 
 /* The refinement's queues and scratch, freed before the output is allocated: the queue of
@@ -42,9 +43,11 @@ static void free_refinement(qk__gm_t *g) {
   qk__free(a, g->enc, g->enc_cap * sizeof *g->enc);
   qk__free(a, g->stack, g->stack_cap * sizeof *g->stack);
   qk__free(a, g->dirty, g->dirty_cap * sizeof *g->dirty);
+  qk__free(a, g->mark, g->mark_cap * sizeof *g->mark);
   qk__free(a, g->arena, g->arena_cap * sizeof *g->arena);
   qk__free(a, g->pts, g->pts_cap * sizeof *g->pts);
   g->bad = NULL, g->enc = NULL, g->stack = NULL, g->dirty = NULL, g->arena = NULL, g->pts = NULL;
+  g->mark = NULL, g->mark_cap = 0, g->mark_gen = 0;
   g->bad_cap = g->enc_cap = g->stack_cap = g->dirty_cap = g->arena_cap = g->pts_cap = 0;
   g->nbad = g->bad_head = g->nenc = g->ndirty = g->arena_n = g->npts = 0;
 }
