@@ -367,6 +367,21 @@ static qk_status_t root_square(const qk__pieces_t *pc, qk_region_t *r, qk_error_
   }
 }
 
+/* The query window (region_internal.h): inside the root square, and in lon/lat mode inside
+ * [-180, 180) x [-90, 90], so that normalising such a point changes nothing. The bounds are
+ * doubles a query compares with directly: x < rx + rside is x <= the double below it. */
+static void query_window(qk_region_t *r) {
+  double x0 = r->rx, x1 = nextafter(r->rx + r->rside, -INFINITY);
+  double y0 = r->ry, y1 = nextafter(r->ry + r->rside, -INFINITY);
+  if (!r->planar) {
+    x0 = qk__max(x0, -180.0);
+    x1 = qk__min(x1, nextafter(180.0, 0.0));
+    y0 = qk__max(y0, -90.0);
+    y1 = qk__min(y1, 90.0);
+  }
+  r->qx0 = x0, r->qx1 = x1, r->qy0 = y0, r->qy1 = y1;
+}
+
 static double now(void) {
   struct timespec ts;
   if (!timespec_get(&ts, TIME_UTC)) return 0;
@@ -517,6 +532,7 @@ qk_status_t qk__region_build(const qk_region_arrays_t *in, const qk_region_optio
   b.maxd = o.max_depth;
   b.splits_left = pc.n + 4096;
   if ((st = root_square(&pc, r, err))) goto done;
+  query_window(r);
   if (o.keep_tree) { /* the refinement is made on a quadkit tree, kept for qk_region_tree */
     qk_tree_options_t to;
     qk_tree_options_init(&to);
