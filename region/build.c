@@ -53,6 +53,8 @@ static bool segs_meet(const qk__seg_t *p, const qk__seg_t *q) {
 }
 
 /* Flag the rings of a leaf's pieces that meet themselves away from a shared vertex. A
+ * leaf's pieces come in increasing order (every list keeps the order of the pieces), and
+ * a ring's pieces are consecutive, so the pieces of p's ring follow p. A
  * leaf holds few pieces except where pieces never separate (many through one point);
  * there the pairs are not checked, so that such input costs no quadratic time: the stat
  * is then a lower bound (documented). */
@@ -65,9 +67,9 @@ static void self_meets(bctx_t *b, const uint32_t *E, size_t n) {
     uint32_t p = E[i], rp = pc->ring[p], vp = pc->vtx[p];
     if (vp == UINT32_MAX || b->bad[rp]) continue;
     size_t rs = b->in->ring_start[rp], re = b->in->ring_start[rp + 1];
-    for (size_t j = i + 1; j < n; j++) {
+    for (size_t j = i + 1; j < n && pc->ring[E[j]] == rp; j++) {
       uint32_t q = E[j];
-      if (pc->ring[q] != rp || pc->vtx[q] == UINT32_MAX) continue;
+      if (pc->vtx[q] == UINT32_MAX) continue;
       uint32_t vq = pc->vtx[q];
       uint32_t lo = vp < vq ? vp : vq, hi = vp < vq ? vq : vp;
       if (hi - lo <= 1 || (lo == rs && hi == re - 2)) continue; /* same or neighbouring edges */

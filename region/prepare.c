@@ -98,14 +98,16 @@ typedef struct ring_ctx {
   const qk_allocator_t *a;
   qk__pieces_t *out;
   uint32_t f, r;
-  double area2; /* twice the signed area of the emitted pieces */
+  double area2; /* twice the signed area of the pieces (counted only) */
 } ring_ctx_t;
 
 static qk_status_t piece(ring_ctx_t *c, double ax, double ay, double bx, double by, uint32_t v) {
   if (ax == bx && ay == by) return QK_OK;
-  c->area2 += ax * by - bx * ay;
-  if (!c->out) return QK_OK;
   qk__pieces_t *p = c->out;
+  if (!p) { /* counting: only the area is wanted */
+    c->area2 += ax * by - bx * ay;
+    return QK_OK;
+  }
   qk_status_t st = p->n < p->cap ? QK_OK : reserve(c->a, p, p->n + 1); /* (sized at once) */
   if (st) return st;
   p->seg[p->n] = (qk__seg_t){ax, ay, bx, by};
