@@ -301,19 +301,24 @@ qk_status_t qk_region_locate_all(const qk_region_t *r, qk_point_t p, qk_boundary
  * cache at nearly every level of their descent and again at their leaf's edges. Answered
  * in Z-order of their cells instead, consecutive points walk the same top levels and
  * mostly the same leaves, which then stay in cache, and a point that lies in the leaf box
- * of the point before (leaf_box_t) skips its descent altogether.
+ * of the point before (leaf_box_t) skips its descent altogether (on countries-50m with
+ * 10^6 uniform points, three points in four).
  *
  * The batch is cut into chunks of up to CHUNK points, which the threads take one at a
- * time from an atomic counter (so that a thread whose points are cheaper takes more
- * chunks). A chunk is ordered without moving its points: one pass maps every point (the
- * points in no feature are answered there) and writes for each an item, its cell's
- * 16-bit Morton code (256 x 256 cells of the root square) above its index in the chunk;
- * two passes of a radix sort on the code's two bytes order the items (stable: within a
- * cell the input order stays); the answers are then computed in that order, reading each
- * point and writing each answer at its index. A chunk's items, input and output are some
- * 1.3 MB at most, so a chunk's work stays within the processor's second-level cache.
- * Only the order of the work changes: every answer is computed alone by the same code
- * and written to its own index, so the results are those of single calls.
+ * time from an atomic counter, so that a thread whose points are cheaper (ocean, or
+ * outside the layer) takes more chunks and the threads end together. A chunk is ordered
+ * without moving its points: one pass writes for each point of the query window an item,
+ * its cell's 16-bit Morton code (256 x 256 cells of the root square) above its index in
+ * the chunk (the few other points, outside the window, non-finite or with a tiny
+ * coordinate, are answered by the single-point code after that pass); two passes of a
+ * radix sort on the code's two bytes order the items (stable: within a cell the input
+ * order stays); the answers are then computed in that order, reading each point (with a
+ * prefetch a few items ahead) and writing each answer at its index. A chunk's items
+ * (2 x 256 KiB), input (1 MiB) and output (256 KiB) stay near the processor's
+ * second-level cache, and a thread's scratch is those two item arrays, borrowed once per
+ * call, whatever the batch size. Only the order of the work changes: every answer is
+ * computed alone by the same code and written to its own index, so the results are
+ * those of single calls.
  */
 #define IDX_BITS 16
 #define CHUNK ((size_t)1 << IDX_BITS)
@@ -324,8 +329,8 @@ qk_status_t qk_region_locate_all(const qk_region_t *r, qk_point_t p, qk_boundary
 /* Chunks with fewer points are answered in input order (the sort would not pay). */
 #define SORT_MIN ((size_t)1 << 12)
 /* Batches of fewer points per thread run on fewer threads (a thread costs tens of
- * microseconds to start; this many points take about a millisecond). */
-#define MIN_PER_THREAD ((size_t)1 << 15)
+ * microseconds to start; this many points take about half a millisecond). */
+#define MIN_PER_THREAD ((size_t)1 << 14)
 /* A batch on several threads is cut into at least this many chunks per thread, so that
  * the threads end together. */
 #define CHUNKS_PER_THREAD 4
