@@ -120,9 +120,11 @@ static ALWAYS_INLINE size_t leaf_features(const qk_region_t *r, const qk__leaf_t
   const qk__seg_t *segs = r->segs;
   bool same = (x == cx && y == cy);
   size_t n = 0;
-#define QK__TAKE(f)                                                                                \
+  /* (the value is evaluated whatever the room: it may advance the set) */
+#define QK__TAKE(value)                                                                            \
   do {                                                                                             \
-    if (n < cap) out[n] = (f);                                                                     \
+    uint32_t taken_ = (value);                                                                     \
+    if (n < cap) out[n] = taken_;                                                                  \
     n++;                                                                                           \
     if (!all) return n;                                                                            \
   } while (0)

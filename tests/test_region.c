@@ -161,6 +161,11 @@ static void check_point(const qk_region_t *r, const tl_t *t, long x, long y, uin
       fail_msg("seed %llu rule %d point (%ld, %ld): locate_all %zu features, oracle %zu",
                (unsigned long long)seed, rule, x, y, n, nwant);
     for (size_t i = 0; i < n; i++) assert_int_equal(buf[i], all[i]);
+    /* counting only (no room): the same count */
+    assert_int_equal(qk_region_locate_all(r, tp(x, y), (qk_boundary_t)rule, NULL, 0, &n), QK_OK);
+    if (n != nwant)
+      fail_msg("seed %llu rule %d point (%ld, %ld): locate_all without room %zu, oracle %zu",
+               (unsigned long long)seed, rule, x, y, n, nwant);
   }
 }
 
