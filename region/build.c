@@ -53,6 +53,8 @@ static bool segs_meet(const qk__seg_t *p, const qk__seg_t *q) {
 }
 
 /* Flag the rings of a leaf's pieces that meet themselves away from a shared vertex. A
+ * leaf's pieces come in increasing order (every list keeps the order of the pieces), and
+ * a ring's pieces are consecutive, so the pieces of p's ring follow p. A
  * leaf holds few pieces except where pieces never separate (many through one point);
  * there the pairs are not checked, so that such input costs no quadratic time: the stat
  * is then a lower bound (documented). */
@@ -62,13 +64,13 @@ static void self_meets(bctx_t *b, const uint32_t *E, size_t n) {
   const qk__pieces_t *pc = b->pc;
   if (n > SELF_CHECK_MAX) return;
   for (size_t i = 0; i < n; i++) {
-    uint32_t p = E[i], rp = pc->ring[p];
-    if (pc->vtx[p] == UINT32_MAX || b->bad[rp]) continue;
-    for (size_t j = i + 1; j < n; j++) {
+    uint32_t p = E[i], rp = pc->ring[p], vp = pc->vtx[p];
+    if (vp == UINT32_MAX || b->bad[rp]) continue;
+    size_t rs = b->in->ring_start[rp], re = b->in->ring_start[rp + 1];
+    for (size_t j = i + 1; j < n && pc->ring[E[j]] == rp; j++) {
       uint32_t q = E[j];
-      if (pc->ring[q] != rp || pc->vtx[q] == UINT32_MAX) continue;
-      uint32_t vp = pc->vtx[p], vq = pc->vtx[q];
-      size_t rs = b->in->ring_start[rp], re = b->in->ring_start[rp + 1];
+      if (pc->vtx[q] == UINT32_MAX) continue;
+      uint32_t vq = pc->vtx[q];
       uint32_t lo = vp < vq ? vp : vq, hi = vp < vq ? vq : vp;
       if (hi - lo <= 1 || (lo == rs && hi == re - 2)) continue; /* same or neighbouring edges */
       if (segs_meet(&pc->seg[p], &pc->seg[q])) {
@@ -90,13 +92,18 @@ static qk_status_t emit_leaf(bctx_t *b, qk_node_t v, double cx, double cy, unsig
     return QK_OK;
   }
   if (r->n_leaves >= QK__DIRECT - 1) return QK_ERR_LIMIT;
-  qk_status_t st;
-  if ((st = qk__grow(&r->alloc, (void **)&r->leaves, &r->cap_leaves, r->n_leaves + 1,
-                     sizeof(qk__leaf_t))) ||
-      (st = qk__grow(&r->alloc, (void **)&r->le, &r->cap_le, r->n_le + ne, sizeof(uint32_t))) ||
-      (st = qk__grow(&r->alloc, (void **)&r->le_tag, &r->cap_le_tag, r->n_le + ne,
-                     sizeof(uint32_t))) ||
-      (st = qk__grow(&r->alloc, (void **)&r->sets, &r->cap_sets, r->n_sets + ns, sizeof(uint32_t))))
+  qk_status_t st = QK_OK;
+  /* (qk__grow returns at once when there is room; the tests save the calls) */
+  if ((r->n_leaves + 1 > r->cap_leaves &&
+       (st = qk__grow(&r->alloc, (void **)&r->leaves, &r->cap_leaves, r->n_leaves + 1,
+                      sizeof(qk__leaf_t)))) ||
+      (r->n_le + ne > r->cap_le &&
+       (st = qk__grow(&r->alloc, (void **)&r->le, &r->cap_le, r->n_le + ne, sizeof(uint32_t)))) ||
+      (r->n_le + ne > r->cap_le_tag &&
+       (st = qk__grow(&r->alloc, (void **)&r->le_tag, &r->cap_le_tag, r->n_le + ne,
+                      sizeof(uint32_t)))) ||
+      (r->n_sets + ns > r->cap_sets && (st = qk__grow(&r->alloc, (void **)&r->sets, &r->cap_sets,
+                                                      r->n_sets + ns, sizeof(uint32_t)))))
     return st;
   if (r->n_le + ne > UINT32_MAX || r->n_sets + ns > UINT32_MAX) return QK_ERR_LIMIT;
   r->leaves[r->n_leaves] =
@@ -142,15 +149,14 @@ typedef struct flips {
   uint32_t cur[4];
   bool par[4];
   size_t n[4];
+  double lo_x[4], hi_x[4], lo_y[4], hi_y[4]; /* the box of each segment centre -> child's */
 } flips_t;
 
 static inline void flip(flips_t *fl, unsigned q, uint32_t p, const qk__seg_t *g, double lx,
                         double hx, double ly, double hy) {
-  double qx = fl->qx[q], qy = fl->qy[q];
   /* only pieces whose box meets the segment's can cross it */
-  if (hx < qk__min(fl->ox, qx) || lx > qk__max(fl->ox, qx) || hy < qk__min(fl->oy, qy) ||
-      ly > qk__max(fl->oy, qy))
-    return;
+  if (hx < fl->lo_x[q] || lx > fl->hi_x[q] || hy < fl->lo_y[q] || ly > fl->hi_y[q]) return;
+  double qx = fl->qx[q], qy = fl->qy[q];
   uint32_t f = fl->feat[p];
   if (f != fl->cur[q]) {
     if (fl->par[q]) fl->odd[q * fl->stride + fl->n[q]++] = fl->cur[q];
@@ -183,7 +189,15 @@ static qk_status_t split_lists(bctx_t *b, unsigned d, double x0, double y0, doub
                 {cy + hh, cy + hh, y0 + hh, y0 + hh},
                 {UINT32_MAX, UINT32_MAX, UINT32_MAX, UINT32_MAX},
                 {false, false, false, false},
-                {0, 0, 0, 0}};
+                {0, 0, 0, 0},
+                {0},
+                {0},
+                {0},
+                {0}};
+  for (unsigned q = 0; q < 4; q++) {
+    fl.lo_x[q] = qk__min(cx, fl.qx[q]), fl.hi_x[q] = qk__max(cx, fl.qx[q]);
+    fl.lo_y[q] = qk__min(cy, fl.qy[q]), fl.hi_y[q] = qk__max(cy, fl.qy[q]);
+  }
   const double h = cx - x0;
   const qk__seg_t *seg = b->pc->seg;
   const uint32_t *E = b->e[d];
@@ -367,6 +381,21 @@ static qk_status_t root_square(const qk__pieces_t *pc, qk_region_t *r, qk_error_
   }
 }
 
+/* The query window (region_internal.h): inside the root square, and in lon/lat mode inside
+ * [-180, 180) x [-90, 90], so that normalising such a point changes nothing. The bounds are
+ * doubles a query compares with directly: x < rx + rside is x <= the double below it. */
+static void query_window(qk_region_t *r) {
+  double x0 = r->rx, x1 = nextafter(r->rx + r->rside, -INFINITY);
+  double y0 = r->ry, y1 = nextafter(r->ry + r->rside, -INFINITY);
+  if (!r->planar) {
+    x0 = qk__max(x0, -180.0);
+    x1 = qk__min(x1, nextafter(180.0, 0.0));
+    y0 = qk__max(y0, -90.0);
+    y1 = qk__min(y1, 90.0);
+  }
+  r->qx0 = x0, r->qx1 = x1, r->qy0 = y0, r->qy1 = y1;
+}
+
 static double now(void) {
   struct timespec ts;
   if (!timespec_get(&ts, TIME_UTC)) return 0;
@@ -517,6 +546,7 @@ qk_status_t qk__region_build(const qk_region_arrays_t *in, const qk_region_optio
   b.maxd = o.max_depth;
   b.splits_left = pc.n + 4096;
   if ((st = root_square(&pc, r, err))) goto done;
+  query_window(r);
   if (o.keep_tree) { /* the refinement is made on a quadkit tree, kept for qk_region_tree */
     qk_tree_options_t to;
     qk_tree_options_init(&to);
@@ -526,7 +556,19 @@ qk_status_t qk__region_build(const qk_region_arrays_t *in, const qk_region_optio
     to.allocator = &r->alloc;
     if ((st = qk_tree_build(NULL, 0, &to, &r->tree))) goto done;
   }
-  if ((st = qk__grow(&alloc, (void **)&r->kid, &r->cap_kid, 1, sizeof(uint32_t)))) goto done;
+  /* The arrays at once at about their final size (measured on Natural Earth layers: the
+   * nodes, the leaf pieces about 1.5 per piece, the leaves with pieces a third), so that
+   * they are seldom copied while they grow; shrink_all gives back the rest. */
+  {
+    size_t pn = pc.n + 16;
+    if ((st = qk__grow(&alloc, (void **)&r->kid, &r->cap_kid, pn, sizeof(uint32_t))) ||
+        (st = qk__grow(&alloc, (void **)&r->le, &r->cap_le, pn + pn / 2, sizeof(uint32_t))) ||
+        (st = qk__grow(&alloc, (void **)&r->le_tag, &r->cap_le_tag, pn + pn / 2,
+                       sizeof(uint32_t))) ||
+        (st = qk__grow(&alloc, (void **)&r->leaves, &r->cap_leaves, pn / 2, sizeof(qk__leaf_t))) ||
+        (st = qk__grow(&alloc, (void **)&r->sets, &r->cap_sets, pn / 2, sizeof(uint32_t))))
+      goto done;
+  }
   r->n_kid = 1;
   b.bad = qk__realloc(&alloc, NULL, 0, in->n_rings + 1);
   if (!b.bad) {

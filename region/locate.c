@@ -1,36 +1,68 @@
 /*
  * Queries: descend to the leaf, then decide each candidate feature by the parity of the
- * crossings of the segment leaf reference -> point (see region.c). Batch calls split the
- * points over threads; each answer is computed by the same code, so results do not depend
- * on the thread count.
+ * crossings of the segment leaf reference -> point (see region.c). Batch calls put the
+ * points in Morton order chunk by chunk and split the chunks over threads; each answer is
+ * computed by the same code, so results depend neither on the order nor on the threads.
  */
+#include <stdatomic.h>
 #include <string.h>
 
 #include "region/region_internal.h"
 
-/* Map a query to the plane of the index; false when it is in no feature. */
-static inline bool normalise(const qk_region_t *r, double *x, double *y) {
-  if (!r->planar) {
-    if (!(*y >= -90 && *y <= 90)) return false;
-    if (*x < -180 || *x >= 180) {
-      double t = fmod(*x + 180.0, 360.0);
-      if (t < 0) t += 360.0;
-      *x = t - 180.0;
-      if (*x >= 180) *x -= 360;
+#if defined(__GNUC__)
+#define ALWAYS_INLINE inline __attribute__((always_inline))
+#else
+#define ALWAYS_INLINE inline
+#endif
+
+/* Map a query to the plane of the index; false when it is in no feature. Most points lie
+ * in the query window, where the mapping changes nothing but the tiny coordinates. */
+static ALWAYS_INLINE bool normalise(const qk_region_t *r, double *x, double *y) {
+  if (!(*x >= r->qx0 && *x <= r->qx1 && *y >= r->qy0 && *y <= r->qy1)) {
+    if (!r->planar) {
+      if (!(*y >= -90 && *y <= 90)) return false;
+      if (*x < -180 || *x >= 180) {
+        double t = fmod(*x + 180.0, 360.0);
+        if (t < 0) t += 360.0;
+        *x = t - 180.0;
+        if (*x >= 180) *x -= 360;
+      }
     }
+    if (!(*x >= r->rx && *x < r->rx + r->rside && *y >= r->ry && *y < r->ry + r->rside))
+      return false;
   }
-  if (!(*x >= r->rx && *x < r->rx + r->rside && *y >= r->ry && *y < r->ry + r->rside)) return false;
   /* Coordinates too small for the exact predicates are zero (the layer has none). */
   if (fabs(*x) < QK_REGION_MIN_COORD) *x = 0.0;
   if (fabs(*y) < QK_REGION_MIN_COORD) *y = 0.0;
   return true;
 }
 
-/* The kid[] value of the leaf holding (x, y); *cx, *cy: the leaf's reference point. */
-static inline uint32_t descend(const qk_region_t *r, double x, double y, double *cx, double *cy) {
+/*
+ * The leaf a descent ended in, with the half-open box [lx, ux) x [ly, uy) of the points
+ * that take the same path. lx is the leaf square's lower side: the descent only moves it
+ * up, to a midpoint x0 + h that is never below x0 (rounding is monotone), so it is the
+ * largest lower bound met on the way (the grid cell's side included). ux is the smallest
+ * upper bound met (the grid cell's next side, then each midpoint the point fell below),
+ * kept as a minimum so that no assumption on rounding is needed. A point inside the box
+ * compares the same way as the one that made it at every level, so it reaches the same
+ * leaf with the same reference point (cx, cy): a batch in Morton order asks this box
+ * first and descends only when the point has left it. An empty box (lx = +inf) holds
+ * nothing.
+ */
+typedef struct leaf_box {
+  double lx, ly, ux, uy, cx, cy;
+  uint32_t k; /* the kid[] value of the leaf */
+} leaf_box_t;
+
+static ALWAYS_INLINE bool in_box(const leaf_box_t *c, double x, double y) {
+  return x >= c->lx && x < c->ux && y >= c->ly && y < c->uy;
+}
+
+/* Descend to the leaf holding (x, y), which normalise() accepted. */
+static ALWAYS_INLINE void descend(const qk_region_t *r, double x, double y, leaf_box_t *c) {
   const uint32_t *kid = r->kid;
   uint32_t k = kid[0];
-  double sx = r->rx, sy = r->ry, h = r->rside;
+  double sx = r->rx, sy = r->ry, h = r->rside, ux = INFINITY, uy = INFINITY;
   if (r->grid_level) {
     /* Guess the grid cell, then correct it exactly against the cells' sides. */
     unsigned G = r->grid_level;
@@ -47,6 +79,8 @@ static inline uint32_t descend(const qk_region_t *r, double x, double y, double 
       k = g;
       sx = r->gx[i];
       sy = r->gy[j];
+      ux = r->gx[i + 1];
+      uy = r->gy[j + 1];
       h = r->grid_side;
     }
   }
@@ -58,74 +92,172 @@ static inline uint32_t descend(const qk_region_t *r, double x, double y, double 
     unsigned q = north ? (east ? 0u : 1u) : (east ? 3u : 2u);
     sx = east ? mx : sx;
     sy = north ? my : sy;
+    ux = east ? ux : qk__min(ux, mx);
+    uy = north ? uy : qk__min(uy, my);
     k = kid[k + q];
   }
-  *cx = sx + h * 0.5;
-  *cy = sy + h * 0.5;
-  return k;
+  c->lx = sx, c->ly = sy, c->ux = ux, c->uy = uy;
+  c->cx = sx + h * 0.5;
+  c->cy = sy + h * 0.5;
+  c->k = k;
 }
 
 /* The answer of a direct leaf. */
 static inline uint32_t direct(uint32_t k) { return (k & 0x3fffffffu) - 1u; }
 
-/* Decide the features of one leaf in increasing order; call `take` for each feature that
- * holds the point, stop when it returns true. Returns the last feature taken or QK_NONE. */
-typedef struct taker {
-  uint32_t *out;
-  size_t cap, n;
-  bool all;
-} taker_t;
-
-static inline bool take(taker_t *t, uint32_t f) {
-  if (t->n < t->cap) t->out[t->n] = f;
-  t->n++;
-  return !t->all;
-}
-
-static void leaf_features(const qk_region_t *r, const qk__leaf_t *L, double cx, double cy, double x,
-                          double y, qk_boundary_t b, taker_t *t) {
+/* Decide the features of one leaf in increasing order and hand each one that holds the
+ * point to the sink; with `all` false, stop at the first. Returns how many were found
+ * (and written while below cap). Inlined per rule, so the semi-open rule, which needs no
+ * on-edge test, gets a loop of its own. */
+static ALWAYS_INLINE size_t leaf_features(const qk_region_t *r, const qk__leaf_t *L, double cx,
+                                          double cy, double x, double y, qk_boundary_t b, bool all,
+                                          uint32_t *out, size_t cap) {
   /* (the arrays may be NULL when the whole layer has no sets or no edges) */
   uint32_t ns = L->ns, si = 0, ne = L->ne, i = 0;
   const uint32_t *S = ns ? r->sets + L->s0 : NULL;
   const uint32_t *E = ne ? r->le + L->e0 : NULL; /* indices into r->segs */
   const uint32_t *tag = ne ? r->le_tag + L->e0 : NULL;
+  const qk__seg_t *segs = r->segs;
   bool same = (x == cx && y == cy);
+  size_t n = 0;
+  /* (the value is evaluated whatever the room: it may advance the set) */
+#define QK__TAKE(value)                                                                            \
+  do {                                                                                             \
+    uint32_t taken_ = (value);                                                                     \
+    if (n < cap) out[n] = taken_;                                                                  \
+    n++;                                                                                           \
+    if (!all) return n;                                                                            \
+  } while (0)
   while (i < ne) {
     uint32_t f = tag[i] >> 2;
-    while (si < ns && S[si] < f)
-      if (take(t, S[si++])) return;
+    while (si < ns && S[si] < f) QK__TAKE(S[si++]);
     bool par = si < ns && S[si] == f;
     if (par) si++;
     bool on = false;
     for (; i < ne && (tag[i] >> 2) == f; i++) {
-      const qk__seg_t *g = &r->segs[E[i]];
+      const qk__seg_t *g = &segs[E[i]];
       if (b != QK_BOUNDARY_SEMI_OPEN && !(tag[i] & 2) &&
           qk__on_edge(g->ax, g->ay, g->bx, g->by, x, y))
         on = true;
       if (same) continue;
       int sc = (tag[i] & 1) ? 1 : -1;
-      if (qk__crosses(cx, cy, x, y, g->ax, g->ay, g->bx, g->by, sc)) par = !par;
+      par ^= qk__crosses(cx, cy, x, y, g->ax, g->ay, g->bx, g->by, sc);
     }
     bool in = b == QK_BOUNDARY_SEMI_OPEN ? par
               : b == QK_BOUNDARY_CLOSED  ? (par || on)
                                          : (par && !on);
-    if (in && take(t, f)) return;
+    if (in) QK__TAKE(f);
   }
-  while (si < ns)
-    if (take(t, S[si++])) return;
+  while (si < ns) QK__TAKE(S[si++]);
+#undef QK__TAKE
+  return n;
+}
+
+/* The lowest feature holding the point in leaf record L (QK_NONE for none): the same
+ * walk as leaf_features() stopping at the first feature, written for that case (the
+ * features that hold the reference point and have no pieces here come from the set,
+ * held one ahead in `s`). Inlined per rule. */
+static ALWAYS_INLINE uint32_t leaf_first_exact(const qk_region_t *r, const qk__leaf_t *L, double cx,
+                                               double cy, double x, double y, qk_boundary_t b) {
+  uint32_t ne = L->ne, ns = L->ns, s0 = L->s0;
+  /* features are below 2^29 (prepare.c), so QK_NONE follows every one */
+  uint32_t s = ns ? r->sets[s0] : QK_NONE, si = 0;
+  bool same = (x == cx && y == cy);
+  if (ne == 0 || (same && b == QK_BOUNDARY_SEMI_OPEN)) return s; /* no crossings */
+  const uint32_t *tag = r->le_tag + L->e0, *E = r->le + L->e0;   /* E: indices into segs */
+  const qk__seg_t *segs = r->segs;
+  uint32_t i = 0;
+  do {
+    uint32_t f = tag[i] >> 2;
+    if (s < f) return s;
+    bool par = s == f, on = false;
+    if (par) s = ++si < ns ? r->sets[s0 + si] : QK_NONE;
+    do {
+      uint32_t tg = tag[i];
+      const qk__seg_t *g = &segs[E[i]];
+      if (b != QK_BOUNDARY_SEMI_OPEN) {
+        if (!(tg & 2) && qk__on_edge(g->ax, g->ay, g->bx, g->by, x, y)) on = true;
+        if (same) continue;
+      }
+      par ^= qk__crosses(cx, cy, x, y, g->ax, g->ay, g->bx, g->by, (tg & 1) ? 1 : -1);
+    } while (++i < ne && (tag[i] >> 2) == f);
+    bool in = b == QK_BOUNDARY_SEMI_OPEN ? par
+              : b == QK_BOUNDARY_CLOSED  ? (par || on)
+                                         : (par && !on);
+    if (in) return f;
+  } while (i < ne);
+  return s;
+}
+
+/* Returned by leaf_first_filtered when a filter could not decide. */
+#define UNSURE (QK_NONE - 1u)
+
+/* leaf_first_exact() for the common case where every orientation it needs is decided by
+ * the floating-point filter (qk__orient's, on the same expressions): then no orientation
+ * is zero, so the perturbation never matters and the point is on no edge (the three rules
+ * agree), and the loop makes no call (which would cost the registers holding the points).
+ * Returns UNSURE when some filter cannot decide; the caller then runs the exact walk. */
+static ALWAYS_INLINE uint32_t leaf_first_filtered(const qk_region_t *r, const qk__leaf_t *L,
+                                                  double cx, double cy, double x, double y) {
+  static const double sign[2] = {-1.0, 1.0};
+  uint32_t ne = L->ne, ns = L->ns, s0 = L->s0;
+  uint32_t s = ns ? r->sets[s0] : QK_NONE, si = 0;
+  if (ne == 0) return s;
+  const uint32_t *tag = r->le_tag + L->e0, *E = r->le + L->e0;
+  const qk__seg_t *segs = r->segs;
+  const double px = x - cx, py = y - cy;
+  uint32_t i = 0;
+  do {
+    uint32_t f = tag[i] >> 2;
+    if (s < f) return s;
+    bool par = s == f;
+    if (par) s = ++si < ns ? r->sets[s0 + si] : QK_NONE;
+    do {
+      const qk__seg_t *g = &segs[E[i]];
+      /* orient(a, b, p), signed so that positive is the reference point's side */
+      double l = (g->bx - g->ax) * (y - g->ay), rr = (g->by - g->ay) * (x - g->ax);
+      double d = (l - rr) * sign[tag[i] & 1], bound = QK__ORIENT_ERR * (fabs(l) + fabs(rr));
+      if (d > bound) continue; /* p on the reference point's side: no crossing */
+      if (!(-d > bound)) return UNSURE;
+      /* orient(c, p, a) and orient(c, p, b): does c-p cross the edge? */
+      double la = px * (g->ay - cy), ra = py * (g->ax - cx);
+      double lb = px * (g->by - cy), rb = py * (g->bx - cx);
+      double da = la - ra, db = lb - rb;
+      if (!(fabs(da) > QK__ORIENT_ERR * (fabs(la) + fabs(ra))) ||
+          !(fabs(db) > QK__ORIENT_ERR * (fabs(lb) + fabs(rb))))
+        return UNSURE;
+      par ^= (da > 0) != (db > 0);
+    } while (++i < ne && (tag[i] >> 2) == f);
+    if (par) return f;
+  } while (i < ne);
+  return s;
+}
+
+/* leaf_first_exact() per rule, out of line (a point near an edge's line). */
+#if defined(__GNUC__)
+__attribute__((noinline))
+#endif
+static uint32_t
+leaf_first_slow(const qk_region_t *r, const qk__leaf_t *L, double cx, double cy, double x, double y,
+                qk_boundary_t b) {
+  if (b == QK_BOUNDARY_SEMI_OPEN)
+    return leaf_first_exact(r, L, cx, cy, x, y, QK_BOUNDARY_SEMI_OPEN);
+  return leaf_first_exact(r, L, cx, cy, x, y, b);
+}
+
+/* The lowest feature holding the point in leaf record L (QK_NONE for none). */
+static ALWAYS_INLINE uint32_t leaf_first(const qk_region_t *r, const qk__leaf_t *L, double cx,
+                                         double cy, double x, double y, qk_boundary_t b) {
+  uint32_t f = leaf_first_filtered(r, L, cx, cy, x, y);
+  return f != UNSURE ? f : leaf_first_slow(r, L, cx, cy, x, y, b);
 }
 
 uint32_t qk__region_locate1(const qk_region_t *r, double x, double y, qk_boundary_t b) {
   if (!normalise(r, &x, &y)) return QK_NONE;
-  double cx, cy;
-  uint32_t k = descend(r, x, y, &cx, &cy);
-  if (k & QK__DIRECT) return direct(k);
-  const qk__leaf_t *L = &r->leaves[k & ~QK__LEAF];
-  if (L->ne == 0) return L->ns ? r->sets[L->s0] : QK_NONE;
-  uint32_t f = QK_NONE;
-  taker_t t = {&f, 1, 0, false};
-  leaf_features(r, L, cx, cy, x, y, b, &t);
-  return t.n ? f : QK_NONE;
+  leaf_box_t c;
+  descend(r, x, y, &c);
+  if (c.k & QK__DIRECT) return direct(c.k);
+  return leaf_first(r, &r->leaves[c.k & ~QK__LEAF], c.cx, c.cy, x, y, b);
 }
 
 static bool bad_rule(qk_boundary_t b) {
@@ -150,95 +282,60 @@ qk_status_t qk_region_locate_all(const qk_region_t *r, qk_point_t p, qk_boundary
   if (!isfinite(p.x) || !isfinite(p.y)) return QK_ERR_NONFINITE;
   double x = p.x, y = p.y;
   if (!normalise(r, &x, &y)) return QK_OK;
-  taker_t t = {features, cap, 0, true};
-  double cx, cy;
-  uint32_t k = descend(r, x, y, &cx, &cy);
-  if (k & QK__DIRECT) {
-    if (direct(k) != QK_NONE) take(&t, direct(k));
+  leaf_box_t c;
+  descend(r, x, y, &c);
+  if (c.k & QK__DIRECT) {
+    if (direct(c.k) != QK_NONE) {
+      if (cap) features[0] = direct(c.k);
+      *n_out = 1;
+    }
   } else {
-    leaf_features(r, &r->leaves[k & ~QK__LEAF], cx, cy, x, y, b, &t);
+    *n_out =
+        leaf_features(r, &r->leaves[c.k & ~QK__LEAF], c.cx, c.cy, x, y, b, true, features, cap);
   }
-  *n_out = t.n;
   return QK_OK;
 }
 
-typedef struct job {
-  const qk_region_t *r;
-  const qk_point_t *pts;
-  size_t n;
-  qk_boundary_t b;
-  uint32_t *out;
-  int nonfinite;
-} job_t;
-
-/* A batch runs in blocks: first every point's descent (independent chains of loads the
- * processor overlaps) with a prefetch of its leaf, then the leaf tests. With an order,
- * the job's points are taken from sorted[] (its points in that order) and the answer of
- * sorted[i] goes to out[order[i]]. Each answer is what qk__region_locate1 gives. */
-#define BLOCK 32
-
-static void run(job_t *j, const qk_point_t *sorted, const uint32_t *order) {
-  const qk_region_t *r = j->r;
-  const qk_point_t *pts = order ? sorted : j->pts;
-  for (size_t i0 = 0; i0 < j->n; i0 += BLOCK) {
-    size_t m = j->n - i0 < BLOCK ? j->n - i0 : BLOCK;
-    uint32_t k[BLOCK];
-    double x[BLOCK], y[BLOCK], cx[BLOCK], cy[BLOCK];
-    for (size_t i = 0; i < m; i++) {
-      x[i] = pts[i0 + i].x, y[i] = pts[i0 + i].y;
-      k[i] = QK__LEAF | QK__DIRECT; /* none */
-      if (!isfinite(x[i]) || !isfinite(y[i])) {
-        j->nonfinite = 1;
-        continue;
-      }
-      if (!normalise(r, &x[i], &y[i])) continue;
-      k[i] = descend(r, x[i], y[i], &cx[i], &cy[i]);
-#if defined(__GNUC__)
-      if (!(k[i] & QK__DIRECT)) __builtin_prefetch(&r->leaves[k[i] & ~QK__LEAF]);
-#endif
-    }
-    for (size_t i = 0; i < m; i++) {
-      uint32_t f = QK_NONE;
-      if (k[i] & QK__DIRECT) {
-        f = direct(k[i]);
-      } else {
-        const qk__leaf_t *L = &r->leaves[k[i] & ~QK__LEAF];
-        if (L->ne == 0) {
-          f = L->ns ? r->sets[L->s0] : QK_NONE;
-        } else {
-          taker_t t = {&f, 1, 0, false};
-          leaf_features(r, L, cx[i], cy[i], x[i], y[i], j->b, &t);
-          if (!t.n) f = QK_NONE;
-        }
-      }
-      j->out[order ? order[i0 + i] : i0 + i] = f;
-    }
-  }
-}
+/* ---- batches -------------------------------------------------------------------------- */
 
 /*
- * Morton buckets. Random points over a layer larger than the processor's caches miss
- * the cache at nearly every level of their descent and again at their leaf's edges.
- * Answering the points in Z-order of their cells instead makes consecutive points walk
- * the same top levels and mostly the same leaves, which then stay in cache. A share is
- * taken in chunks of up to CHUNK points; each chunk is ordered by one counting pass over
- * 2^SORT_BITS x 2^SORT_BITS cells of the root square (the cells' Morton codes are the
- * bucket numbers; within a bucket the input order is kept), copying each point to its
- * place so that the queries read them in sequence, and the answers, scattered back to
- * the chunk's own part of out[], stay within a few hundred kilobytes. Only the order of
- * the work changes: every answer is computed alone by the same code and written to its
- * own index, so the results are those of single calls. Measured on countries-50m with
- * 10^6 uniform points (docs/region.md): callgrind counts more instructions (the sort)
- * but the time per point falls by about a quarter (process CPU time on a loaded machine;
- * the benchmark run on an idle one has the final word).
- * Each thread borrows 22 bytes per chunk point and 4 << (2 SORT_BITS) bytes from the
- * layer's allocator for the call; when that fails the batch runs in input order.
+ * Morton order. Random points over a layer larger than the processor's caches miss the
+ * cache at nearly every level of their descent and again at their leaf's edges. Answered
+ * in Z-order of their cells instead, consecutive points walk the same top levels and
+ * mostly the same leaves, which then stay in cache, and a point that lies in the leaf box
+ * of the point before (leaf_box_t) skips its descent altogether (on countries-50m with
+ * 10^6 uniform points, three points in four).
+ *
+ * The batch is cut into chunks of up to CHUNK points, which the threads take one at a
+ * time from an atomic counter, so that a thread whose points are cheaper (ocean, or
+ * outside the layer) takes more chunks and the threads end together. A chunk is ordered
+ * without moving its points: one pass writes for each point of the query window an item,
+ * its cell's 16-bit Morton code (256 x 256 cells of the root square) above its index in
+ * the chunk (the few other points, outside the window, non-finite or with a tiny
+ * coordinate, are answered by the single-point code after that pass); two passes of a
+ * radix sort on the code's two bytes order the items (stable: within a cell the input
+ * order stays); the answers are then computed in that order, reading each point (with a
+ * prefetch a few items ahead) and writing each answer at its index. A chunk's items
+ * (2 x 256 KiB), input (1 MiB) and output (256 KiB) stay near the processor's
+ * second-level cache, and a thread's scratch is those two item arrays, borrowed once per
+ * call, whatever the batch size. Only the order of the work changes: every answer is
+ * computed alone by the same code and written to its own index, so the results are
+ * those of single calls.
  */
-#define SORT_BITS 8
-#define SORT_BUCKETS (1u << (2 * SORT_BITS))
-#define CHUNK ((size_t)1 << 18)
+#define IDX_BITS 16
+#define CHUNK ((size_t)1 << IDX_BITS)
+#define IDX_MASK ((uint32_t)CHUNK - 1u)
+/* How far ahead of the point being answered the next point is prefetched; the item
+ * arrays have room for that many items more than a chunk. */
+#define PREFETCH 8
 /* Chunks with fewer points are answered in input order (the sort would not pay). */
-#define SORT_MIN ((size_t)1 << 15)
+#define SORT_MIN ((size_t)1 << 12)
+/* Batches of fewer points per thread run on fewer threads (a thread costs tens of
+ * microseconds to start; this many points take about half a millisecond). */
+#define MIN_PER_THREAD ((size_t)1 << 14)
+/* A batch on several threads is cut into at least this many chunks per thread, so that
+ * the threads end together. */
+#define CHUNKS_PER_THREAD 4
 
 /* Bits 0..7 of v at the even positions 0..14. */
 static const uint16_t spread8[256] = {
@@ -253,97 +350,162 @@ static const uint16_t spread8[256] = {
 #undef R4
 #undef R16
 
-/* A coordinate's cell along one axis of the root square, clamped (points outside the
- * root, even NaN, go to some cell; they are answered like any other). */
+/* A coordinate's cell of 256 along one axis of the root square, for a coordinate in the
+ * query window (so not below lo). A rounded guess is enough: the order only has to be
+ * good, not exact, and the one value that can come out as 256 wraps to cell 0. */
 static inline uint32_t sort_cell(double v, double lo, double scale) {
-  double c = (v - lo) * scale;
-  if (!(c > 0)) return 0;
-  if (c >= (double)((1u << SORT_BITS) - 1)) return (1u << SORT_BITS) - 1;
-  return (uint32_t)c;
+  return (uint32_t)((v - lo) * scale) & 255u;
 }
 
-/* sorted[] = pts[0..n) by bucket and order[i] = the index of sorted[i] in pts; cnt has
- * SORT_BUCKETS entries, key n (n <= CHUNK). */
-static void sort_chunk(const qk_region_t *r, const qk_point_t *pts, size_t n, uint32_t *cnt,
-                       uint16_t *key, qk_point_t *sorted, uint32_t *order) {
-  const double scale = (double)(1u << SORT_BITS) / r->rside;
-  memset(cnt, 0, SORT_BUCKETS * sizeof *cnt);
-  for (size_t i = 0; i < n; i++) {
-    uint32_t c = spread8[sort_cell(pts[i].x, r->rx, scale)] |
-                 (uint32_t)spread8[sort_cell(pts[i].y, r->ry, scale)] << 1;
-    key[i] = (uint16_t)c;
-    cnt[c]++;
-  }
+/* One pass of the radix sort: the items of `from` to `to` by the byte at `shift`. */
+static void radix_pass(const uint32_t *from, uint32_t *to, size_t m, unsigned shift,
+                       uint32_t *cnt) {
   uint32_t sum = 0;
-  for (uint32_t b = 0; b < SORT_BUCKETS; b++) {
-    uint32_t c = cnt[b];
-    cnt[b] = sum;
+  for (unsigned d = 0; d < 256; d++) {
+    uint32_t c = cnt[d];
+    cnt[d] = sum;
     sum += c;
   }
-  for (size_t i = 0; i < n; i++) {
-    uint32_t at = cnt[key[i]]++;
-    sorted[at] = pts[i];
-    order[at] = (uint32_t)i;
+  for (size_t i = 0; i < m; i++) {
+    uint32_t v = from[i];
+    to[cnt[(v >> shift) & 255u]++] = v;
   }
+}
+
+/* Order the points of a chunk: items[0..m) of the points that lie in the query window
+ * with no tiny coordinate (so that normalising them changes nothing), in Morton order of
+ * their cells; the other points are answered now. `tmp` has room for n items. Returns m. */
+static size_t sort_chunk(const qk_region_t *r, const qk_point_t *pts, size_t n, qk_boundary_t b,
+                         uint32_t *out, uint32_t *items, uint32_t *tmp, int *nonfinite) {
+  const double scale = 256.0 / r->rside, rx = r->rx, ry = r->ry;
+  const double qx0 = r->qx0, qx1 = r->qx1, qy0 = r->qy0, qy1 = r->qy1;
+  uint32_t cnt[2][256];
+  memset(cnt, 0, sizeof cnt);
+  size_t m = 0, k = 0;
+  for (size_t i = 0; i < n; i++) {
+    double x = pts[i].x, y = pts[i].y;
+    if (!(x >= qx0 && x <= qx1 && y >= qy0 && y <= qy1 && fabs(x) >= QK_REGION_MIN_COORD &&
+          fabs(y) >= QK_REGION_MIN_COORD)) {
+      tmp[n - ++k] = (uint32_t)i; /* answered below, out of this loop (which then makes no call) */
+      continue;
+    }
+    uint32_t c = spread8[sort_cell(x, rx, scale)] | (uint32_t)spread8[sort_cell(y, ry, scale)] << 1;
+    items[m++] = c << IDX_BITS | (uint32_t)i;
+    cnt[0][c & 255u]++;
+    cnt[1][c >> 8]++;
+  }
+  for (size_t j = n - k; j < n; j++) { /* (m + k = n: the radix sort writes tmp[0..m) only) */
+    double x = pts[tmp[j]].x, y = pts[tmp[j]].y;
+    if (!isfinite(x) || !isfinite(y)) *nonfinite = 1;
+    out[tmp[j]] = qk__region_locate1(r, x, y, b); /* (NaN included: none) */
+  }
+  radix_pass(items, tmp, m, IDX_BITS, cnt[0]);
+  radix_pass(tmp, items, m, IDX_BITS + 8, cnt[1]);
+  for (unsigned k = 0; k < PREFETCH; k++) items[m + k] = 0; /* for run()'s look-ahead */
+  return m;
+}
+
+/* Answer points of a chunk into out[] (indexed like pts): with items, the m points
+ * items[t] & IDX_MASK, which need no normalising (sort_chunk); without, the m points in
+ * input order. A point in the leaf box of the point before takes its leaf without a
+ * descent. Points that need a leaf's edges are gathered in blocks of BLOCK and decided
+ * together after a prefetch of their leaf records, so that those loads overlap. */
+#define BLOCK 32
+
+static void run(const qk_region_t *r, qk_boundary_t b, const qk_point_t *pts, const uint32_t *items,
+                size_t m, uint32_t *out, int *nonfinite) {
+  leaf_box_t c = {INFINITY, INFINITY, -INFINITY, -INFINITY, 0, 0, 0};
+  uint32_t bi[BLOCK], bk[BLOCK];
+  double bx[BLOCK], by[BLOCK], bcx[BLOCK], bcy[BLOCK];
+  unsigned nb = 0;
+  for (size_t t = 0; t < m; t++) {
+    uint32_t i = items ? items[t] & IDX_MASK : (uint32_t)t;
+    double x = pts[i].x, y = pts[i].y;
+    if (items) {
+#if defined(__GNUC__)
+      /* the points are read out of order: ask for one a few places ahead */
+      __builtin_prefetch(&pts[items[t + PREFETCH] & IDX_MASK]); /* (items are padded) */
+#endif
+    } else {
+      if (!isfinite(x) || !isfinite(y)) *nonfinite = 1;
+      if (!normalise(r, &x, &y)) {
+        out[i] = QK_NONE;
+        continue;
+      }
+    }
+    if (!in_box(&c, x, y)) {
+      descend(r, x, y, &c);
+#if defined(__GNUC__)
+      if (!(c.k & QK__DIRECT)) __builtin_prefetch(&r->leaves[c.k & ~QK__LEAF]);
+#endif
+    }
+    if (c.k & QK__DIRECT) {
+      out[i] = direct(c.k);
+      continue;
+    }
+    bi[nb] = i, bk[nb] = c.k, bx[nb] = x, by[nb] = y, bcx[nb] = c.cx, bcy[nb] = c.cy;
+    if (++nb < BLOCK && t + 1 < m) continue;
+    for (unsigned e = 0; e < nb; e++)
+      out[bi[e]] = leaf_first(r, &r->leaves[bk[e] & ~QK__LEAF], bcx[e], bcy[e], bx[e], by[e], b);
+    nb = 0;
+  }
+  for (unsigned e = 0; e < nb; e++)
+    out[bi[e]] = leaf_first(r, &r->leaves[bk[e] & ~QK__LEAF], bcx[e], bcy[e], bx[e], by[e], b);
 }
 
 typedef struct batch {
-  job_t all;
-  /* The scratch of the Morton order (cnt NULL: none): per share, SORT_BUCKETS counters
-   * and `chunk` places in each of sorted[], order[] and key[]. */
-  size_t chunk;
-  uint32_t *cnt, *order;
-  qk_point_t *sorted;
-  uint16_t *key;
+  const qk_region_t *r;
+  const qk_point_t *pts;
+  size_t n, chunk, n_chunks;
+  qk_boundary_t b;
+  uint32_t *out;
+  /* the scratch (NULL: none): per share, two arrays of `chunk` items */
+  uint32_t *scratch;
+  atomic_size_t next; /* the next chunk to take */
   int nonfinite[QK__MAX_THREADS];
 } batch_t;
 
 static void locate_share(void *ctx, unsigned w, unsigned nw) {
+  (void)nw;
   batch_t *bt = ctx;
-  size_t lo, hi;
-  qk__share_range(bt->all.n, w, nw, &lo, &hi);
-  for (size_t c0 = lo; c0 < hi; c0 += CHUNK) {
-    size_t c1 = hi - c0 < CHUNK ? hi : c0 + CHUNK;
-    job_t j = {bt->all.r, bt->all.pts + c0, c1 - c0, bt->all.b, bt->all.out + c0, 0};
-    size_t at = (size_t)w * bt->chunk;
-    bool sort = bt->cnt && j.n >= SORT_MIN;
-    if (sort)
-      sort_chunk(j.r, j.pts, j.n, bt->cnt + (size_t)w * SORT_BUCKETS, bt->key + at, bt->sorted + at,
-                 bt->order + at);
-    run(&j, sort ? bt->sorted + at : NULL, sort ? bt->order + at : NULL);
-    if (j.nonfinite) bt->nonfinite[w] = 1;
+  size_t room = bt->chunk + PREFETCH;
+  uint32_t *items = bt->scratch ? bt->scratch + (size_t)w * 2 * room : NULL;
+  int nonfinite = 0;
+  for (;;) {
+    size_t c = atomic_fetch_add_explicit(&bt->next, 1, memory_order_relaxed);
+    if (c >= bt->n_chunks) break;
+    size_t c0 = c * bt->chunk, n = bt->n - c0 < bt->chunk ? bt->n - c0 : bt->chunk;
+    const qk_point_t *pts = bt->pts + c0;
+    uint32_t *out = bt->out + c0;
+    if (items && n >= SORT_MIN) {
+      size_t m = sort_chunk(bt->r, pts, n, bt->b, out, items, items + room, &nonfinite);
+      run(bt->r, bt->b, pts, items, m, out, &nonfinite);
+    } else {
+      run(bt->r, bt->b, pts, NULL, n, out, &nonfinite);
+    }
   }
-}
-
-/* The scratch of nw shares of chunks of up to `chunk` points. */
-static size_t scratch_bytes(size_t chunk, unsigned nw) {
-  return (size_t)nw * (chunk * (sizeof(qk_point_t) + sizeof(uint32_t) + sizeof(uint16_t)) +
-                       SORT_BUCKETS * sizeof(uint32_t));
+  if (nonfinite) bt->nonfinite[w] = 1;
 }
 
 qk_status_t qk_region_locate_batch(const qk_region_t *r, const qk_point_t *pts, size_t n,
                                    qk_boundary_t b, unsigned threads, uint32_t *out) {
   if (!r || bad_rule(b) || (n && (!pts || !out))) return QK_ERR_INVALID;
-  threads = qk__threads_resolve(threads);
-  size_t min_per = 4096; /* below this a thread costs more than it saves */
-  if ((size_t)threads > n / min_per) threads = (unsigned)(n / min_per);
-  unsigned nw = threads ? threads : 1;
-  if (nw > QK__MAX_THREADS) nw = QK__MAX_THREADS;
-  batch_t bt = {{r, pts, n, b, out, 0}, 0, NULL, NULL, NULL, NULL, {0}};
-  /* Sort only when a share is large enough to pay. */
-  size_t per = (n + nw - 1) / nw;
-  bt.chunk = per < CHUNK ? per : CHUNK;
-  void *scratch = NULL;
-  if (bt.chunk >= SORT_MIN) scratch = qk__realloc(&r->alloc, NULL, 0, scratch_bytes(bt.chunk, nw));
-  if (scratch) {
-    bt.sorted = scratch;
-    bt.cnt = (uint32_t *)(bt.sorted + (size_t)nw * bt.chunk);
-    bt.order = bt.cnt + (size_t)nw * SORT_BUCKETS;
-    bt.key = (uint16_t *)(bt.order + (size_t)nw * bt.chunk);
-  }
-  qk__run_shares(threads, locate_share, &bt);
-  if (scratch) qk__free(&r->alloc, scratch, scratch_bytes(bt.chunk, nw));
-  for (unsigned w = 0; w < QK__MAX_THREADS; w++)
+  if (n == 0) return QK_OK;
+  unsigned nw = qk__threads_resolve(threads);
+  size_t most = n / MIN_PER_THREAD ? n / MIN_PER_THREAD : 1;
+  if (nw > most) nw = (unsigned)most;
+  /* Chunks of CHUNK points, or smaller ones (multiples of 16, so that no two chunks write
+   * the same cache line of a 64-byte aligned out[]) when the threads would have too few. */
+  size_t chunk = CHUNK, per = CHUNKS_PER_THREAD * (size_t)nw;
+  if (nw > 1 && n < CHUNK * per) chunk = ((n + per - 1) / per + 15) & ~(size_t)15;
+  if (chunk > n) chunk = n;
+  batch_t bt = {r, pts, n, chunk, (n + chunk - 1) / chunk, b, out, NULL, 0, {0}};
+  atomic_init(&bt.next, 0);
+  size_t bytes = (size_t)nw * 2 * (chunk + PREFETCH) * sizeof(uint32_t);
+  if (n >= SORT_MIN) bt.scratch = qk__realloc(&r->alloc, NULL, 0, bytes);
+  qk__run_shares(nw, locate_share, &bt);
+  if (bt.scratch) qk__free(&r->alloc, bt.scratch, bytes);
+  for (unsigned w = 0; w < nw; w++)
     if (bt.nonfinite[w]) return QK_ERR_NONFINITE;
   return QK_OK;
 }

@@ -98,15 +98,17 @@ typedef struct ring_ctx {
   const qk_allocator_t *a;
   qk__pieces_t *out;
   uint32_t f, r;
-  double area2; /* twice the signed area of the emitted pieces */
+  double area2; /* twice the signed area of the pieces (counted only) */
 } ring_ctx_t;
 
 static qk_status_t piece(ring_ctx_t *c, double ax, double ay, double bx, double by, uint32_t v) {
   if (ax == bx && ay == by) return QK_OK;
-  c->area2 += ax * by - bx * ay;
-  if (!c->out) return QK_OK;
   qk__pieces_t *p = c->out;
-  qk_status_t st = reserve(c->a, p, p->n + 1);
+  if (!p) { /* counting: only the area is wanted */
+    c->area2 += ax * by - bx * ay;
+    return QK_OK;
+  }
+  qk_status_t st = p->n < p->cap ? QK_OK : reserve(c->a, p, p->n + 1); /* (sized at once) */
   if (st) return st;
   p->seg[p->n] = (qk__seg_t){ax, ay, bx, by};
   p->feat[p->n] = c->f;
@@ -161,6 +163,14 @@ static qk_status_t ring_lonlat(ring_ctx_t *c, const double *xy, size_t start, si
   return st;
 }
 
+/* Does qk__region_check_coord accept (x, y)? (NaN fails every comparison.) */
+static inline bool coord_ok(int planar, double x, double y) {
+  double ax = fabs(x), ay = fabs(y);
+  bool ok = ax <= QK_REGION_MAX_COORD && ay <= QK_REGION_MAX_COORD &&
+            (ax >= QK_REGION_MIN_COORD || ax == 0) && (ay >= QK_REGION_MIN_COORD || ay == 0);
+  return ok && (planar || (x >= -180 && x <= 180 && y >= -90 && y <= 90));
+}
+
 static qk_status_t check_arrays(const qk_region_arrays_t *in, int planar, qk_error_t *err) {
   if (!in) return qk__region_fail(err, QK_ERR_INVALID, SIZE_MAX, "no input");
   if (in->n_features && !in->feature_start)
@@ -193,7 +203,9 @@ static qk_status_t check_arrays(const qk_region_arrays_t *in, int planar, qk_err
                                "feature %zu, ring %zu: %zu positions (a ring needs at least 4)", f,
                                k, e - s);
       for (size_t v = s; v < e; v++) {
-        qk_status_t st = qk__region_check_coord(planar, in->xy[2 * v], in->xy[2 * v + 1], f, err);
+        double x = in->xy[2 * v], y = in->xy[2 * v + 1];
+        if (coord_ok(planar, x, y)) continue; /* (the common case, without a call) */
+        qk_status_t st = qk__region_check_coord(planar, x, y, f, err);
         if (st) return st;
       }
       const double *p = in->xy + 2 * s, *q = in->xy + 2 * (e - 1);

@@ -58,10 +58,13 @@
  * centres computed along the path exactly as the build computed them), then for each
  * feature with pieces in the leaf flip the reference point's membership once per piece
  * crossed by the segment reference -> point. Most pieces are rejected by one filtered
- * orientation (the point on the same side as the reference). Batches run in blocks of 32
- * points: all descents first (their loads overlap), with a prefetch of each leaf record,
- * then the leaf tests; large batches are first put in Morton order, chunk by chunk, so
- * that consecutive points share their descent and leaf (locate.c).
+ * orientation (the point on the same side as the reference); the leaf walk runs first on
+ * the floating-point filters alone, and again with the exact predicates when a filter
+ * cannot decide. Batches are put in Morton order, chunk by chunk, so that consecutive
+ * points share their descent and leaf: a point inside the previous point's leaf box (the
+ * bounds its descent compared against) takes that leaf without descending; the points
+ * that need a leaf's pieces are decided in blocks of 32, after a prefetch of each leaf
+ * record (locate.c).
  */
 #include <stdarg.h>
 #include <stdio.h>

@@ -156,6 +156,10 @@ struct qk_region {
   double *gx, *gy;
   double grid_scale; /* 2^G / rside */
   double grid_side;  /* rside / 2^G */
+  /* The query window: a point with qx0 <= x <= qx1 and qy0 <= y <= qy1 lies in the root
+   * and needs no longitude wrap (the fast path of the queries' normalisation; empty when
+   * qx0 > qx1). */
+  double qx0, qx1, qy0, qy1;
 
   qk_region_stats_t stats;
 };

@@ -161,6 +161,11 @@ static void check_point(const qk_region_t *r, const tl_t *t, long x, long y, uin
       fail_msg("seed %llu rule %d point (%ld, %ld): locate_all %zu features, oracle %zu",
                (unsigned long long)seed, rule, x, y, n, nwant);
     for (size_t i = 0; i < n; i++) assert_int_equal(buf[i], all[i]);
+    /* counting only (no room): the same count */
+    assert_int_equal(qk_region_locate_all(r, tp(x, y), (qk_boundary_t)rule, NULL, 0, &n), QK_OK);
+    if (n != nwant)
+      fail_msg("seed %llu rule %d point (%ld, %ld): locate_all without room %zu, oracle %zu",
+               (unsigned long long)seed, rule, x, y, n, nwant);
   }
 }
 
@@ -589,6 +594,74 @@ static void test_region_batch_morton(void **state) {
   tl_free(&t);
 }
 
+/* Batches aimed at the cells' sides: points exactly on the sides met along random descents
+ * (every depth, the grid's included) and one double either side, clustered around each
+ * descent's leaf, so that in Morton order most points fall in the leaf box of the point
+ * before (which skips the descent: locate.c) and many lie on its bounds. Batches with 1 and
+ * 2 threads equal single calls under the three rules, and the semi-open answers of a
+ * sample equal brute force over the pieces. */
+static void test_region_batch_cell_sides(void **state) {
+  (void)state;
+  uint64_t seed = qkt_seed(4711);
+  qkt_rng_t g;
+  qkt_rng_seed(&g, seed);
+  tl_t t;
+  random_layer(&g, &t, 40, 5000);
+  qk_region_t *r = tl_build(&t, 1, NULL, NULL);
+  enum { PATHS = 64, MAXS = 3 * 64 };
+  static double xs[PATHS][MAXS], ys[PATHS][MAXS];
+  size_t ns[PATHS];
+  for (int p = 0; p < PATHS; p++) {
+    uint32_t k = r->kid[0];
+    double sx = r->rx, sy = r->ry, h = r->rside;
+    ns[p] = 0;
+    while (!(k & QK__LEAF) && ns[p] + 3 <= MAXS) {
+      h *= 0.5;
+      double mx = sx + h, my = sy + h;
+      double cx[3] = {mx, nextafter(mx, -INFINITY), nextafter(mx, INFINITY)};
+      double cy[3] = {my, nextafter(my, -INFINITY), nextafter(my, INFINITY)};
+      for (int a = 0; a < 3; a++) xs[p][ns[p]] = cx[a], ys[p][ns[p]++] = cy[a];
+      unsigned q = (unsigned)qkt_rng_below(&g, 4); /* NE 0, NW 1, SW 2, SE 3 */
+      if (q == 0 || q == 3) sx = mx;
+      if (q <= 1) sy = my;
+      k = r->kid[k + q];
+    }
+  }
+  size_t n = 150000; /* three chunks of the sort */
+  qk_point_t *pt = malloc(n * sizeof *pt);
+  uint32_t *a = malloc(n * sizeof *a), *b = malloc(n * sizeof *b);
+  for (size_t i = 0; i < n; i++) {
+    size_t p = qkt_rng_below(&g, PATHS);
+    /* mostly the deepest sides of the path, where the leaves are small */
+    size_t lo = ns[p] > 12 ? ns[p] - 12 : 0, span = ns[p] - lo;
+    size_t u = qkt_rng_below(&g, 4) ? lo + qkt_rng_below(&g, (uint32_t)span)
+                                    : qkt_rng_below(&g, (uint32_t)ns[p]);
+    size_t v = qkt_rng_below(&g, 4) ? lo + qkt_rng_below(&g, (uint32_t)span)
+                                    : qkt_rng_below(&g, (uint32_t)ns[p]);
+    pt[i] = (qk_point_t){xs[p][u], ys[p][v]};
+  }
+  for (int rule = 0; rule < 3; rule++) {
+    for (size_t i = 0; i < n; i++) qk_region_locate(r, pt[i], (qk_boundary_t)rule, &a[i]);
+    for (unsigned th = 1; th <= 2; th++) {
+      memset(b, 0xab, n * sizeof *b);
+      assert_int_equal(qk_region_locate_batch(r, pt, n, (qk_boundary_t)rule, th, b), QK_OK);
+      for (size_t i = 0; i < n; i++)
+        if (a[i] != b[i])
+          fail_msg("seed %llu rule %d threads %u point %zu (%.17g, %.17g): batch %u, single %u",
+                   (unsigned long long)seed, rule, th, i, pt[i].x, pt[i].y, b[i], a[i]);
+    }
+    if (rule == QK_BOUNDARY_SEMI_OPEN)
+      for (size_t i = 0; i < n; i += 97)
+        if (a[i] != brute_pieces(r, pt[i].x, pt[i].y))
+          fail_msg("seed %llu point %zu (%.17g, %.17g): %u, brute force %u",
+                   (unsigned long long)seed, i, pt[i].x, pt[i].y, a[i],
+                   brute_pieces(r, pt[i].x, pt[i].y));
+  }
+  free(pt), free(a), free(b);
+  qk_region_free(r);
+  tl_free(&t);
+}
+
 /* Without keep_tree the cells go straight into the query arrays: the same index (stats)
  * and the same answers as the refinement on a quadkit tree, for leaf capacities 1 and 8;
  * with every allocation failing in turn, QK_ERR_NOMEM and nothing leaked. */
@@ -961,6 +1034,7 @@ int main(void) {
       cmocka_unit_test(test_region_lonlat),
       cmocka_unit_test(test_region_batch_threads),
       cmocka_unit_test(test_region_batch_morton),
+      cmocka_unit_test(test_region_batch_cell_sides),
       cmocka_unit_test(test_region_without_tree),
       cmocka_unit_test(test_region_alloc_failure),
       cmocka_unit_test(test_region_geojson),

@@ -177,12 +177,14 @@ qk_status_t qk_region_locate(const qk_region_t *region, qk_point_t p, qk_boundar
 
 /**
  * qk_region_locate() for many points, on several threads when asked. The answers do not
- * depend on the number of threads. Batches of at least 2^15 points per thread are answered
- * in Morton order of the points (same answers, far fewer cache misses); for that each
- * thread borrows 22 bytes per point of a chunk of up to 2^18 points plus 256 KiB (at most
- * about 6 MiB) from the layer's allocator for the duration of the call, so an allocator
- * given to a layer that several threads query in batches at once must be thread-safe.
- * When that memory cannot be had, the points are answered in input order.
+ * depend on the number of threads. Batches of at least 2^12 points are answered in Morton
+ * order of the points, in chunks of up to 2^16 points that the threads share out (same
+ * answers, far fewer cache misses); for that each thread borrows 8 bytes per point of a
+ * chunk (at most 512 KiB) from the layer's allocator for the duration of the call, in one
+ * block for all threads, so an allocator given to a layer that several threads query in
+ * batches at once must be thread-safe. When that memory cannot be had, the points are
+ * answered in input order. Batches of fewer than 2^14 points per thread use fewer
+ * threads.
  * \param [in] region the layer.
  * \param [in] points n points.
  * \param [in] n how many.
