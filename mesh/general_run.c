@@ -15,25 +15,6 @@ static double now(void) {
   return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
 
-static void gm_free(qk__gm_t *g) {
-  const qk_allocator_t *a = g->a;
-  if (g->cdt_live) qk__cdt_free(&g->cdt);
-  qk__free(a, g->cv, (g->P->nv + 1) * sizeof *g->cv);
-  qk__free(a, g->vsmall, g->P->nv + 1);
-  qk__free(a, g->vi, g->vcap * sizeof *g->vi);
-  qk__free(a, g->face, g->fcap * sizeof *g->face);
-  qk__free(a, g->faces, g->nface_cap * sizeof *g->faces);
-  qk__free(a, g->dirty, g->dirty_cap * sizeof *g->dirty);
-  qk_tree_free(g->tree);
-  qk__free(a, g->free_node, g->free_cap);
-  qk__free(a, g->arena, g->arena_cap * sizeof *g->arena);
-  qk__free(a, g->pts, g->pts_cap * sizeof *g->pts);
-  qk__free(a, g->bad, g->bad_cap * sizeof *g->bad);
-  qk__free(a, g->enc, g->enc_cap * sizeof *g->enc);
-  qk__free(a, g->stack, g->stack_cap * sizeof *g->stack);
-  qk__free(a, g->mark, g->mark_cap * sizeof *g->mark);
-}
-
 /* The refinement's queues and scratch, freed before the output is allocated: the queue of
  * bad triangles holds every triangle ever queued (about three a triangle), so keeping it
  * to the end raised the peak memory by a quarter. */
@@ -50,6 +31,19 @@ static void free_refinement(qk__gm_t *g) {
   g->mark = NULL, g->mark_cap = 0, g->mark_gen = 0;
   g->bad_cap = g->enc_cap = g->stack_cap = g->dirty_cap = g->arena_cap = g->pts_cap = 0;
   g->nbad = g->bad_head = g->nenc = g->ndirty = g->arena_n = g->npts = 0;
+}
+
+static void gm_free(qk__gm_t *g) {
+  const qk_allocator_t *a = g->a;
+  if (g->cdt_live) qk__cdt_free(&g->cdt);
+  qk__free(a, g->cv, (g->P->nv + 1) * sizeof *g->cv);
+  qk__free(a, g->vsmall, g->P->nv + 1);
+  qk__free(a, g->vi, g->vcap * sizeof *g->vi);
+  qk__free(a, g->face, g->fcap * sizeof *g->face);
+  qk__free(a, g->faces, g->nface_cap * sizeof *g->faces);
+  qk_tree_free(g->tree);
+  qk__free(a, g->free_node, g->free_cap);
+  free_refinement(g);
 }
 
 /* A size bound asking for more triangles than memory could hold is refused up front. */
