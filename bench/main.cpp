@@ -30,6 +30,7 @@ extern "C" {
 #include <functional>
 #include <map>
 #include <string>
+#include <thread>
 #include <vector>
 
 extern "C" {
@@ -220,6 +221,9 @@ std::vector<double> interleaved(const std::vector<std::function<void()>> &fns,
     for (size_t j = 0; j < m; j++) {
       size_t i = (j + r) % m;
       wall_clock = i < wall.size() && wall[i];
+      // Before a wall-clock (several-thread) row, let the thread pools of the libraries
+      // that just ran (OpenMP, TBB) stop spinning on the other core.
+      if (wall_clock) std::this_thread::sleep_for(std::chrono::milliseconds(50));
       double t0 = now_seconds();
       fns[i]();
       t[i].push_back(now_seconds() - t0);
