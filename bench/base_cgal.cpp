@@ -99,8 +99,18 @@ bool cgal_grade(const std::vector<Pt> &pts, int max_depth, int bucket, BalanceRe
   return true;
 }
 
+// The constrained Delaunay triangulation both mesh baselines refine (Mesh_2).
+namespace {
+using K = CGAL::Exact_predicates_inexact_constructions_kernel;
+using Vb = CGAL::Triangulation_vertex_base_2<K>;
+using Fb = CGAL::Delaunay_mesh_face_base_2<K>;
+using Tds = CGAL::Triangulation_data_structure_2<Vb, Fb>;
+using CDT = CGAL::Constrained_Delaunay_triangulation_2<K, Tds>;
+using Criteria = CGAL::Delaunay_mesh_size_criteria_2<CDT>;
+} // namespace
+
 // Count the triangles CGAL's refinement left in the domain and measure their smallest angle.
-template <class CDT> static void read_mesh(const CDT &cdt, MeshResult &out) {
+static void read_mesh(const CDT &cdt, MeshResult &out) {
   std::vector<double> xy;
   std::vector<uint32_t> tri;
   std::map<typename CDT::Vertex_handle, uint32_t> id;
@@ -118,12 +128,6 @@ template <class CDT> static void read_mesh(const CDT &cdt, MeshResult &out) {
 }
 
 bool cgal_mesh(double U, const std::vector<Ring> &rings, double max_edge, MeshResult &out) {
-  using K = CGAL::Exact_predicates_inexact_constructions_kernel;
-  using Vb = CGAL::Triangulation_vertex_base_2<K>;
-  using Fb = CGAL::Delaunay_mesh_face_base_2<K>;
-  using Tds = CGAL::Triangulation_data_structure_2<Vb, Fb>;
-  using CDT = CGAL::Constrained_Delaunay_triangulation_2<K, Tds>;
-  using Criteria = CGAL::Delaunay_mesh_size_criteria_2<CDT>;
   double t0 = now_seconds();
   CDT cdt;
   std::vector<K::Point_2> square = {{0, 0}, {U, 0}, {U, U}, {0, U}};
@@ -142,12 +146,6 @@ bool cgal_mesh(double U, const std::vector<Ring> &rings, double max_edge, MeshRe
 }
 
 bool cgal_mesh_pslg(const Pslg &in, double max_edge, MeshResult &out) {
-  using K = CGAL::Exact_predicates_inexact_constructions_kernel;
-  using Vb = CGAL::Triangulation_vertex_base_2<K>;
-  using Fb = CGAL::Delaunay_mesh_face_base_2<K>;
-  using Tds = CGAL::Triangulation_data_structure_2<Vb, Fb>;
-  using CDT = CGAL::Constrained_Delaunay_triangulation_2<K, Tds>;
-  using Criteria = CGAL::Delaunay_mesh_size_criteria_2<CDT>;
   double t0 = now_seconds();
   CDT cdt;
   std::vector<CDT::Vertex_handle> vh(in.xy.size() / 2);

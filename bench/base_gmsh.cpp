@@ -39,7 +39,9 @@ static void read_triangles(MeshResult &out) {
   out.min_angle_deg = min_angle_of(xy, tri);
 }
 
-bool gmsh_mesh(double U, const std::vector<Ring> &rings, double max_edge, MeshResult &out) {
+// Initialise gmsh once per process (for both entry points below), then start an empty model
+// meshed by Delaunay with edges up to max_edge. False when gmsh cannot start.
+static bool start_model(double max_edge) {
   static bool init = false;
   int ierr = 0;
   if (!init) {
@@ -54,6 +56,12 @@ bool gmsh_mesh(double U, const std::vector<Ring> &rings, double max_edge, MeshRe
   gmshOptionSetNumber("Mesh.MeshSizeMax", max_edge, &ierr);
   gmshOptionSetNumber("Mesh.MeshSizeMin", 0, &ierr);
   gmshOptionSetNumber("Mesh.Algorithm", 5, &ierr); // Delaunay
+  return true;
+}
+
+bool gmsh_mesh(double U, const std::vector<Ring> &rings, double max_edge, MeshResult &out) {
+  int ierr = 0;
+  if (!start_model(max_edge)) return false;
   double t0 = now_seconds();
   auto loop = [&](const Ring &r) {
     std::vector<int> pts, lines;
@@ -90,20 +98,8 @@ static bool inside_ring(const Pslg &in, const std::vector<uint32_t> &r, double p
 }
 
 bool gmsh_mesh_pslg(const Pslg &in, double max_edge, MeshResult &out) {
-  static bool init = false;
   int ierr = 0;
-  if (!init) {
-    gmshInitialize(0, nullptr, 0, &ierr);
-    if (ierr) return false;
-    gmshOptionSetNumber("General.Terminal", 0, &ierr);
-    gmshOptionSetNumber("General.Verbosity", 0, &ierr);
-    init = true;
-  }
-  gmshClear(&ierr);
-  gmshModelAdd("bench", &ierr);
-  gmshOptionSetNumber("Mesh.MeshSizeMax", max_edge, &ierr);
-  gmshOptionSetNumber("Mesh.MeshSizeMin", 0, &ierr);
-  gmshOptionSetNumber("Mesh.Algorithm", 5, &ierr); // Delaunay
+  if (!start_model(max_edge)) return false;
   double t0 = now_seconds();
   std::vector<int> pt(in.xy.size() / 2);
   for (size_t i = 0; i < pt.size(); i++)

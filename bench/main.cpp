@@ -784,6 +784,42 @@ void run_balance(const std::string &ds, const std::vector<Pt> &pts) {
   quadkit_tree_free(keep);
 }
 
+// One mesher in a mesh comparison: its first result (ok when it gave triangles) and the
+// timings of the interleaved repetitions.
+struct MeshSide {
+  std::string name;
+  std::function<bool(MeshResult &)> run;
+  std::vector<double> t;
+  MeshResult last;
+  bool ok = true;
+};
+
+// Time every mesher that worked, reps times, interleaved in a rotating order.
+static void time_mesh_sides(std::vector<MeshSide> &sides, int reps) {
+  for (int r = 0; r < reps; r++)
+    for (size_t j = 0; j < sides.size(); j++) {
+      MeshSide &sd = sides[(j + r) % sides.size()];
+      if (!sd.ok) continue;
+      MeshResult o;
+      sd.run(o);
+      sd.t.push_back(o.seconds);
+    }
+}
+
+// The record every mesh row shares: counts, smallest angle, and the rate when it worked.
+static Rec mesh_rec(const MeshSide &sd, const std::string &dataset, size_t n) {
+  Rec r;
+  r.op = "mesh", r.impl = sd.name, r.dataset = dataset, r.n = n, r.order = "-";
+  r.matches = sd.ok ? 1 : 0;
+  r.extra["triangles"] = (double)sd.last.triangles;
+  r.extra["min_angle_deg"] = sd.last.min_angle_deg;
+  if (sd.ok) {
+    r.seconds = median(sd.t);
+    r.per_second = sd.last.triangles / r.seconds;
+  }
+  return r;
+}
+
 void run_mesh(unsigned U) {
   progress("mesh U=%u", U);
   std::vector<Ring> rings = make_octagons(U, U / 64 ? U / 64 : 1, 3 + U);
@@ -800,14 +836,7 @@ void run_mesh(unsigned U) {
   // area quadkit's mesh has, so the meshes are of comparable size.
   double area = (double)U * U / std::max<size_t>(q.triangles, 1);
   double edge = std::sqrt(4 * area / std::sqrt(3.0));
-  struct Side {
-    std::string name;
-    std::function<bool(MeshResult &)> run;
-    std::vector<double> t;
-    MeshResult last;
-    bool ok = true;
-  };
-  std::vector<Side> sides;
+  std::vector<MeshSide> sides;
   if (qok)
     sides.push_back({"quadkit", [&](MeshResult &o) { return quadkit_mesh(U, rings, o, nullptr); }});
   if (have("cgal"))
@@ -816,29 +845,11 @@ void run_mesh(unsigned U) {
   if (have("gmsh") && U <= 512)
     sides.push_back({"gmsh", [&](MeshResult &o) { return gmsh_mesh(U, rings, edge, o); }});
   for (auto &s : sides) s.ok = s.run(s.last) && s.last.triangles > 0;
-  int reps = std::max(5, opt.reps);
-  for (int r = 0; r < reps; r++)
-    for (size_t j = 0; j < sides.size(); j++) {
-      Side &s = sides[(j + r) % sides.size()];
-      if (!s.ok) continue;
-      MeshResult o;
-      s.run(o);
-      s.t.push_back(o.seconds);
-    }
+  time_mesh_sides(sides, std::max(5, opt.reps));
   for (auto &s : sides) {
-    Rec r;
-    r.op = "mesh", r.impl = s.name, r.dataset = "octagons", r.n = U, r.order = "-";
-    r.matches = s.ok ? 1 : 0;
-    r.extra["triangles"] = (double)s.last.triangles;
-    r.extra["min_angle_deg"] = s.last.min_angle_deg;
+    Rec r = mesh_rec(s, "octagons", U);
     r.extra["components"] = (double)rings.size();
-    if (s.ok) {
-      r.seconds = median(s.t);
-      r.per_second = s.last.triangles / r.seconds;
-      r.note = "triangles/s; same boundary, each mesher's own quality";
-    } else {
-      r.note = "mesher failed";
-    }
+    r.note = s.ok ? "triangles/s; same boundary, each mesher's own quality" : "mesher failed";
     emit(r);
   }
 }
@@ -854,14 +865,7 @@ void run_mesh_dyadic(unsigned U) {
     for (Pt &p : r) p.x = (p.x + 1) * s, p.y = (p.y + 1) * s;
   std::vector<Ring> with_square = rings;
   with_square.insert(with_square.begin(), Ring{{0, 0}, {side, 0}, {side, side}, {0, side}});
-  struct Side {
-    std::string name;
-    std::function<bool(MeshResult &)> run;
-    std::vector<double> t;
-    MeshResult last;
-    bool ok = true;
-  };
-  std::vector<Side> sides;
+  std::vector<MeshSide> sides;
   std::string err;
   sides.push_back(
       {"quadkit", [&](MeshResult &o) { return quadkit_mesh_dyadic(with_square, edge, o, &err); }});
@@ -870,25 +874,11 @@ void run_mesh_dyadic(unsigned U) {
   if (have("gmsh") && U <= 512)
     sides.push_back({"gmsh", [&](MeshResult &o) { return gmsh_mesh(side, rings, edge, o); }});
   for (auto &sd : sides) sd.ok = sd.run(sd.last) && sd.last.triangles > 0;
-  int reps = std::max(5, opt.reps);
-  for (int r = 0; r < reps; r++)
-    for (size_t j = 0; j < sides.size(); j++) {
-      Side &sd = sides[(j + r) % sides.size()];
-      if (!sd.ok) continue;
-      MeshResult o;
-      sd.run(o);
-      sd.t.push_back(o.seconds);
-    }
+  time_mesh_sides(sides, std::max(5, opt.reps));
   for (auto &sd : sides) {
-    Rec r;
-    r.op = "mesh", r.impl = sd.name, r.dataset = "octagons-dyadic", r.n = U, r.order = "-";
-    r.matches = sd.ok ? 1 : 0;
-    r.extra["triangles"] = (double)sd.last.triangles;
-    r.extra["min_angle_deg"] = sd.last.min_angle_deg;
+    Rec r = mesh_rec(sd, "octagons-dyadic", U);
     r.extra["max_edge"] = edge;
     if (sd.ok) {
-      r.seconds = median(sd.t);
-      r.per_second = sd.last.triangles / r.seconds;
       r.note = "triangles/s; real coordinates (2^-10 lattice), same longest-edge bound";
     } else {
       r.note = sd.name == "quadkit" ? "quadkit failed: " + err : "mesher failed";
@@ -965,16 +955,9 @@ static Pslg random_pslg(size_t n, uint64_t seed) {
 static void mesh_general_case(const std::string &dataset, const Pslg &in, double max_edge,
                               size_t n) {
   progress("mesh general %s n=%zu", dataset.c_str(), n);
-  struct Side {
-    std::string name;
-    std::function<bool(MeshResult &)> run;
-    std::vector<double> t;
-    MeshResult last;
-    bool ok = true;
-  };
   std::string err;
   size_t exempt = 0;
-  std::vector<Side> sides;
+  std::vector<MeshSide> sides;
   sides.push_back({"quadkit", [&](MeshResult &o) {
                      return quadkit_mesh_general(in, max_edge, o, &err, &exempt);
                    }});
@@ -991,26 +974,12 @@ static void mesh_general_case(const std::string &dataset, const Pslg &in, double
     }
     sd.ok = sd.run(sd.last) && sd.last.triangles > 0;
   }
-  int reps = opt.quick ? 1 : std::max(3, opt.reps);
-  for (int r = 0; r < reps; r++)
-    for (size_t j = 0; j < sides.size(); j++) {
-      Side &sd = sides[(j + r) % sides.size()];
-      if (!sd.ok) continue;
-      MeshResult o;
-      sd.run(o);
-      sd.t.push_back(o.seconds);
-    }
-  const Side &q = sides[0];
+  time_mesh_sides(sides, opt.quick ? 1 : std::max(3, opt.reps));
+  const MeshSide &q = sides[0];
   for (auto &sd : sides) {
-    Rec r;
-    r.op = "mesh", r.impl = sd.name, r.dataset = dataset, r.n = n, r.order = "-";
-    r.matches = sd.ok ? 1 : 0;
-    r.extra["triangles"] = (double)sd.last.triangles;
-    r.extra["min_angle_deg"] = sd.last.min_angle_deg;
+    Rec r = mesh_rec(sd, dataset, n);
     r.extra["max_edge"] = max_edge;
     if (sd.ok) {
-      r.seconds = median(sd.t);
-      r.per_second = sd.last.triangles / r.seconds;
       r.note = "triangles/s; general mode input, same longest-edge bound";
       if (sd.name == "quadkit") {
         r.extra["exempt_angles"] = (double)exempt;
