@@ -70,10 +70,10 @@ typedef struct qk__gm {
   qk__gm_face_t *faces;
   uint32_t nface;
   size_t nface_cap;
-  /* Triangles the CDT created or changed since the last insertion (its on_change). */
+  /* Triangles the last insertion created or changed (the triangles around the new vertex,
+   * general_build.c). */
   uint32_t *dirty;
   size_t ndirty, dirty_cap;
-  int dirty_nomem;
   /* The graded quadtree (lattice coordinates: the root square is [0, 1]^2). */
   qk_tree_t *tree;
   uint8_t *free_node; /* per node id: its grown square meets no feature */
