@@ -215,6 +215,8 @@ int qkf_poly(const uint8_t *data, size_t size) {
     return 0;
   }
   QKF_ASSERT(!as.failed, "poly_read succeeded although an allocation failed");
+  /* A failure armed for a call the reader never made must not carry over. */
+  qkt_alloc_arm(&as, 0);
   size_t nv, ns, nh;
   qk_poly_counts(poly, &nv, &ns, &nh);
   pf_input_t pin;
@@ -244,7 +246,7 @@ int qkf_poly(const uint8_t *data, size_t size) {
     if (big <= PF_MAX_U && (opt & 0x80)) {
       double shift = (double)(mo.size - 2 * PF_MAX_U);
       for (size_t i = 0; i < nv; i++) pin.xy[2 * i] += shift, pin.xy[2 * i + 1] += shift / 2;
-      /* The shifted input replaces the one read (same allocator, nothing armed yet). */
+      /* The shifted input replaces the one read (same allocator, disarmed above). */
       qk_poly_t *moved = NULL;
       QKF_ASSERT(qk_poly_from_arrays(pin.xy, nv, pin.seg, ns, pin.holes, nh, &al, &moved, NULL) ==
                      QK_OK,
