@@ -213,10 +213,16 @@ double median(std::vector<double> v) {
 
 // Run every function reps times, interleaved in a rotating order; medians per function.
 // `wall` marks the functions that run more than one thread (timed by the wall clock).
+// `partner[i]`, when given and >= 0, is the one-thread function of the same call as the
+// several-thread function i: each rep then also runs it by the wall clock just before i,
+// and `paired[i]` gets the median of those one-thread / several-thread wall-time ratios
+// (the speedup, with both sides timed by the same clock a moment apart).
 std::vector<double> interleaved(const std::vector<std::function<void()>> &fns,
-                                const std::vector<bool> &wall = {}) {
-  std::vector<std::vector<double>> t(fns.size());
+                                const std::vector<bool> &wall = {},
+                                const std::vector<int> &partner = {},
+                                std::vector<double> *paired = nullptr) {
   size_t m = fns.size();
+  std::vector<std::vector<double>> t(m), ratio(m);
   for (int r = 0; r < opt.reps; r++)
     for (size_t j = 0; j < m; j++) {
       size_t i = (j + r) % m;
@@ -224,13 +230,55 @@ std::vector<double> interleaved(const std::vector<std::function<void()>> &fns,
       // Before a wall-clock (several-thread) row, let the thread pools of the libraries
       // that just ran (OpenMP, TBB) stop spinning on the other core.
       if (wall_clock) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+      int p = wall_clock && i < partner.size() ? partner[i] : -1;
+      double one = NAN;
+      if (p >= 0) {
+        double t0 = now_seconds();
+        fns[(size_t)p]();
+        one = now_seconds() - t0;
+      }
       double t0 = now_seconds();
       fns[i]();
       t[i].push_back(now_seconds() - t0);
+      if (p >= 0) ratio[i].push_back(one / t[i].back());
       wall_clock = false;
     }
   std::vector<double> med;
   for (auto &v : t) med.push_back(median(v));
+  if (paired) {
+    paired->clear();
+    for (auto &v : ratio) paired->push_back(median(v));
+  }
+  return med;
+}
+
+// For each several-thread record, the index of the one-thread record of the same call
+// (same library, batch flag, k and order), or -1.
+std::vector<int> one_thread_partners(const std::vector<Rec> &recs) {
+  std::vector<int> partner(recs.size(), -1);
+  for (size_t i = 0; i < recs.size(); i++) {
+    if (recs[i].threads <= 1) continue;
+    for (size_t j = 0; j < recs.size(); j++)
+      if (recs[j].threads == 1 && recs[j].impl == recs[i].impl && recs[j].batch == recs[i].batch &&
+          recs[j].k == recs[i].k && recs[j].order == recs[i].order &&
+          recs[j].dataset == recs[i].dataset) {
+        partner[i] = (int)j;
+        break;
+      }
+  }
+  return partner;
+}
+
+// The timing of a batch of records, with each several-thread record's paired speedup over
+// its one-thread partner kept as an extra ("speedup_wall").
+std::vector<double> interleaved_recs(const std::vector<std::function<void()>> &fns,
+                                     std::vector<Rec> &recs) {
+  std::vector<bool> wall;
+  for (auto &r : recs) wall.push_back(r.threads > 1);
+  std::vector<double> paired;
+  auto med = interleaved(fns, wall, one_thread_partners(recs), &paired);
+  for (size_t i = 0; i < recs.size(); i++)
+    if (std::isfinite(paired[i])) recs[i].extra["speedup_wall"] = paired[i];
   return med;
 }
 
@@ -346,6 +394,7 @@ void run_build(const std::string &ds, const std::vector<Pt> &pts) {
   }
   // The library's threaded build (wall clock), when asked for: the same tree as one thread.
   std::vector<bool> wall(fns.size(), false);
+  std::vector<int> partner(fns.size(), -1);
   if (opt.threads > 1) {
     unsigned th = (unsigned)opt.threads;
     size_t l1 = quadkit_build_leaves(pts, kQuadkitCapacity, 0, nullptr);
@@ -354,9 +403,11 @@ void run_build(const std::string &ds, const std::vector<Pt> &pts) {
       names.push_back("quadkit");
       bytes.push_back(NAN);
       wall.push_back(true);
+      partner.push_back(0); // the one-thread build is the first function
     }
   }
-  auto med = interleaved(fns, wall);
+  std::vector<double> paired;
+  auto med = interleaved(fns, wall, partner, &paired);
   for (size_t i = 0; i < fns.size(); i++) {
     Rec r;
     r.op = "build", r.impl = names[i], r.dataset = ds, r.n = pts.size();
@@ -365,6 +416,7 @@ void run_build(const std::string &ds, const std::vector<Pt> &pts) {
     r.per_second = pts.size() / med[i];
     r.bytes_per_point = bytes[i];
     r.matches = names[i] == "cgal" ? cgal_match : names[i] == "proto-morton" || wall[i] ? 1 : -1;
+    if (std::isfinite(paired[i])) r.extra["speedup_wall"] = paired[i];
     r.order = "-";
     emit(r);
   }
@@ -424,9 +476,7 @@ void run_knn(const std::string &ds, const std::vector<Pt> &pts, bool variants) {
           }
         }
       }
-      std::vector<bool> wall;
-      for (auto &r : recs) wall.push_back(r.threads > 1);
-      auto med = interleaved(fns, wall);
+      auto med = interleaved_recs(fns, recs);
       for (size_t i = 0; i < fns.size(); i++) {
         recs[i].seconds = med[i];
         recs[i].per_second = nqk / med[i];
@@ -539,9 +589,7 @@ void run_collide(size_t n) {
       emit(r);
     }
   }
-  std::vector<bool> wall;
-  for (auto &r : recs) wall.push_back(r.threads > 1);
-  auto med = interleaved(fns, wall);
+  auto med = interleaved_recs(fns, recs);
   for (size_t i = 0; i < fns.size(); i++) {
     Rec &r = recs[i];
     r.op = "collide", r.dataset = "boxes", r.n = n, r.order = "-";
@@ -693,9 +741,7 @@ void run_raycast(size_t n) {
       emit(r);
     }
   }
-  std::vector<bool> wall;
-  for (auto &r : recs) wall.push_back(r.threads > 1);
-  auto med = interleaved(fns, wall);
+  auto med = interleaved_recs(fns, recs);
   for (size_t i = 0; i < fns.size(); i++) {
     Rec &r = recs[i];
     r.op = "raycast", r.dataset = "discs", r.n = n, r.queries = nr;
@@ -1203,7 +1249,6 @@ void run_region() {
       qk_region_locate_batch(qp, qp_pts, pts.size(), QK_BOUNDARY_OPEN, 1, pla.data());
       std::vector<std::function<void()>> fns;
       std::vector<Rec> recs;
-      std::vector<bool> wall;
       std::vector<uint32_t> tmp(pts.size());
       auto add = [&](const char *impl, bool batch, int threads, std::function<void()> f) {
         Rec r;
@@ -1211,7 +1256,6 @@ void run_region() {
         r.queries = pts.size(), r.batch = batch, r.threads = threads;
         recs.push_back(r);
         fns.push_back(f);
-        wall.push_back(threads > 1);
       };
       add("quadkit", true, 1, [&] {
         qk_region_locate_batch(ql, qp_pts, pts.size(), QK_BOUNDARY_SEMI_OPEN, 1, tmp.data());
@@ -1253,7 +1297,7 @@ void run_region() {
         recs.back().note = "compared with quadkit lon/lat; S2 edges are geodesics";
       }
       progress("region %s: timing", ds.c_str());
-      auto med = interleaved(fns, wall);
+      auto med = interleaved_recs(fns, recs);
       for (size_t i = 0; i < fns.size(); i++) {
         recs[i].seconds = med[i], recs[i].per_second = pts.size() / med[i];
         emit(recs[i]);
@@ -1300,7 +1344,9 @@ void print_table() {
   std::map<std::string, const Rec *> by;
   for (auto &r : records) by[key(r, r.batch) + "|" + r.impl] = &r;
   printf("\nquadkit-bench: ratio = quadkit rate / baseline rate (>1: quadkit faster); medians of "
-         "%d interleaved runs in one process; process CPU time (wall time for t2 rows)\n",
+         "%d interleaved runs in one process; process CPU time (wall time for t2 rows)\n"
+         "t2 rows end with their speedup: each run's one-thread wall time (the same call, run "
+         "just before it) over its own\n",
          opt.reps);
   printf("%-8s %-10s %8s %-14s %10s", "op", "dataset", "n", "variant", "quadkit/s");
   for (auto c : cols) printf(" %13s", c);
@@ -1346,6 +1392,8 @@ void print_table() {
       }
       printf(" %13s", cell.c_str());
     }
+    auto sp = r.extra.find("speedup_wall");
+    if (sp != r.extra.end()) printf("  %.2fx one thread (paired wall clock)", sp->second);
     printf("\n");
   }
   for (auto &r : records)
