@@ -244,7 +244,8 @@ static void join_usage(FILE *f) {
              "For each point (x, y; longitude, latitude unless --planar) the feature of REGIONS\n"
              "(GeoJSON, or any OGR format when built with GDAL) that holds it. Writes CSV: the\n"
              "point's line as read, then `feature` (0-based feature index, -1 for none) and the\n"
-             "requested properties. --all writes one row per containing feature (a point in\n"
+             "requested properties (a name no feature has is an error). --all writes one row per "
+             "containing feature (a point in\n"
              "none gets one row with -1). --xy picks the coordinate columns by header name or\n"
              "1-based number (default: the first two). A header line (first field not a\n"
              "number) is copied with the new column names appended.\n");
@@ -339,6 +340,21 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
   return rc;
 }
 
+/* A --field that no feature has is a typo, not an empty column: refuse it. */
+static int check_fields(const char *path, const qk_region_t *r, const char **fields, int nf) {
+  size_t nfeat = qk_region_feature_count(r);
+  for (int k = 0; k < nf; k++) {
+    size_t f = 0;
+    while (f < nfeat && !qk_region_property(r, (uint32_t)f, fields[k])) f++;
+    if (f == nfeat) {
+      cli_error("join", "%s: --field %s: no feature of the %zu has that property", path, fields[k],
+                nfeat);
+      return CLI_BAD_INPUT;
+    }
+  }
+  return CLI_OK;
+}
+
 int cmd_join(int argc, char **argv) {
   const char *pos[2] = {NULL, NULL}, *outp = "-", *xys = NULL;
   int npos = 0, planar = 0, all = 0;
@@ -402,6 +418,7 @@ int cmd_join(int argc, char **argv) {
   }
   qk_region_t *r = NULL;
   rc = read_layer("join", pos[0], planar, &r);
+  if (!rc) rc = check_fields(pos[0], r, fields, nf);
   join_t j = {pos[1], r, rule, all, (unsigned)threads, fields, nf, NULL, NULL, NULL, NULL, 0};
   cli_out_t o = {0};
   if (!rc) rc = cli_out_open("join", outp, &o);

@@ -53,6 +53,9 @@ expect 1 'bad.csv:3: field 2 is not a finite number' -- "$cli" join "$layer" "$t
 printf '1\n' >"$tmp/short.csv"
 expect 1 'short.csv:1: no field 2' -- "$cli" join "$layer" "$tmp/short.csv"
 expect 1 "no column named 'lng'" -- "$cli" join "$layer" "$pts" --xy lon,lng
+expect 1 'islands.geojson: --field nmae: no feature of the [0-9]+ has that property' -- \
+  "$cli" join "$layer" "$pts" --xy lon,lat --field nmae -o "$tmp/none.csv"
+[ ! -e "$tmp/none.csv" ] && passes=$((passes + 1)) || fail "output written for a bad --field"
 expect 2 'needs REGIONS' -- "$cli" join "$layer"
 expect 2 'boundary must be' -- "$cli" join "$layer" "$pts" --boundary half
 expect 2 'xy needs two columns' -- "$cli" join "$layer" "$pts" --xy lon
