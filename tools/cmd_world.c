@@ -44,20 +44,24 @@ static int num(const char *s, double *v) {
   return end != s && *end == '\0';
 }
 
-static int parse_id(const char *s, uint64_t *id) {
+/* An id (or a frame): a whole number from 0 to 2^64 - 1. NULL, or an error message for
+ * bad() saying what is wrong with it. */
+static const char *parse_id(const char *s, uint64_t *id) {
   char *end;
-  if (!isdigit((unsigned char)*s)) return 0;
+  if (!isdigit((unsigned char)*s)) return "id is not a whole number: '%s'";
   errno = 0;
   unsigned long long v = strtoull(s, &end, 10);
-  if (*end || errno) return 0;
+  if (*end) return "id is not a whole number: '%s'";
+  if (errno == ERANGE) return "id is above 2^64 - 1: '%s'";
   *id = v;
-  return 1;
+  return NULL;
 }
 
 typedef struct obj {
   uint64_t id;
   qk_shape_t s;
   qk_handle_t h;
+  unsigned long line; /* in the objects file */
 } obj_t;
 
 typedef struct move {
@@ -183,7 +187,8 @@ static int each_row(const char *path,
 static int object_row(const char *path, unsigned long ln, row_t *r, scene_t *s) {
   if (r->n < 4) return bad(path, ln, "%s", "expected id,kind,x,y[,a,b]");
   uint64_t id;
-  if (!parse_id(r->f[0], &id)) return bad(path, ln, "id is not a whole number: '%s'", r->f[0]);
+  const char *why = parse_id(r->f[0], &id);
+  if (why) return bad(path, ln, why, r->f[0]);
   qk_shape_kind_t k;
   if (!kind_of(r->f[1], &k))
     return bad(path, ln, "unknown kind '%s' (disc, box, segment or point)", r->f[1]);
@@ -197,18 +202,19 @@ static int object_row(const char *path, unsigned long ln, row_t *r, scene_t *s) 
     s->o = o;
     s->cap = cap;
   }
-  s->o[s->n++] = (obj_t){id, sh, QK_HANDLE_NONE};
+  s->o[s->n++] = (obj_t){id, sh, QK_HANDLE_NONE, ln};
   return CLI_OK;
 }
 
 static int move_row(const char *path, unsigned long ln, row_t *r, scene_t *s) {
   if (r->n < 4) return bad(path, ln, "%s", "expected frame,id,x,y[,a,b]");
   uint64_t frame, id;
-  if (!parse_id(r->f[0], &frame) || frame > 100000000)
+  if (parse_id(r->f[0], &frame) || frame > 100000000)
     return bad(path, ln, "frame is not a whole number from 0 to 1e8: '%s'", r->f[0]);
   if (s->nm && frame < s->m[s->nm - 1].frame)
     return bad(path, ln, "frames out of order: '%s' after a later frame", r->f[0]);
-  if (!parse_id(r->f[1], &id)) return bad(path, ln, "id is not a whole number: '%s'", r->f[1]);
+  const char *why = parse_id(r->f[1], &id);
+  if (why) return bad(path, ln, why, r->f[1]);
   size_t i = find_id(s, id);
   if (i == SIZE_MAX) return bad(path, ln, "unknown id '%s'", r->f[1]);
   qk_shape_t sh;
@@ -310,8 +316,9 @@ int cmd_world(int argc, char **argv) {
   qsort(s.by_id, s.n, sizeof *s.by_id, by_id_cmp);
   for (size_t i = 1; i < s.n; i++)
     if (s.o[s.by_id[i]].id == s.o[s.by_id[i - 1]].id) {
-      fprintf(stderr, "quadkit world: %s: id %llu appears twice\n", files[0],
-              (unsigned long long)s.o[s.by_id[i]].id);
+      unsigned long a = s.o[s.by_id[i - 1]].line, b = s.o[s.by_id[i]].line;
+      fprintf(stderr, "quadkit world: %s:%lu: id %llu appears twice (also on line %lu)\n", files[0],
+              a > b ? a : b, (unsigned long long)s.o[s.by_id[i]].id, a < b ? a : b);
       rc = CLI_BAD_INPUT;
       goto done;
     }
