@@ -45,7 +45,8 @@ typedef struct qk__cdt {
   uint32_t *nbr; /* 3 * nt: triangle across edge i, or QK__CDT_NONE */
   uint32_t *seg; /* 3 * nt: input segment id of a constrained edge i, else QK__CDT_NONE */
   size_t nt, cap_t;
-  uint32_t hint; /* a triangle near the last change: default start of walks */
+  size_t cap_tv, cap_tn, cap_ts; /* private: each array's own room (cap_t is the least) */
+  uint32_t hint;                 /* a triangle near the last change: default start of walks */
   qk__cdt_change_fn on_change;
   void *user;
   /* Optional, set by a caller that has tested the next point against triangles already

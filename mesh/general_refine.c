@@ -12,8 +12,9 @@
  * apex is never split below the floor (2^-48 of its segment), a triangle that would need it
  * is rejected, and a mesh still holding a bad triangle at the end is refused.
  */
-#include "mesh/general_mesh.h"
+#include "mesh/cdt_internal.h"
 #include "mesh/expansion.h"
+#include "mesh/general_mesh.h"
 
 #include <math.h>
 #include <string.h>
@@ -182,9 +183,10 @@ static int len2_exceeds(const double *p, const double *q, double h) {
   return n > 0 && x[n - 1] > 0;
 }
 
-int qk__gm_is_bad(const qk__gm_t *g, uint32_t t) {
+/* qk__gm_is_bad for a triangle of a kept face (inlined in the refinement's checks, which
+ * have looked at the face already). */
+static inline int bad_kept(const qk__gm_t *g, uint32_t t) {
   const qk__cdt_t *c = &g->cdt;
-  if (g->faces[g->face[t]].drop) return 0;
   const uint32_t *tv = &c->v[3 * t];
   const double *p[3] = {&c->xy[2 * tv[0]], &c->xy[2 * tv[1]], &c->xy[2 * tv[2]]};
   double l[3];
@@ -214,6 +216,10 @@ int qk__gm_is_bad(const qk__gm_t *g, uint32_t t) {
   double cr = ux * wy - uy * wx;
   if (cr * cr >= g->sin2_bound * l[(i + 2) % 3] * l[(i + 1) % 3]) return 0;
   return !qk__gm_exempt(g, tv);
+}
+
+int qk__gm_is_bad(const qk__gm_t *g, uint32_t t) {
+  return g->faces[g->face[t]].drop ? 0 : bad_kept(g, t);
 }
 
 static qk_status_t push_bad(qk__gm_t *g, uint32_t t) {
@@ -262,7 +268,7 @@ static qk_status_t check(qk__gm_t *g, uint32_t t) {
     if (c->seg[3 * t + k] != QK__CDT_NONE && apex_encroaches(g, t, k) &&
         push_enc(g, c->v[3 * t + (k + 1) % 3], c->v[3 * t + (k + 2) % 3], c->seg[3 * t + k]))
       return QK_ERR_NOMEM;
-  return qk__gm_is_bad(g, t) ? push_bad(g, t) : QK_OK;
+  return bad_kept(g, t) ? push_bad(g, t) : QK_OK;
 }
 
 static qk_status_t check_dirty(qk__gm_t *g) {
@@ -322,7 +328,8 @@ static int cavity_encroach(qk__gm_t *g, uint32_t t0, uint32_t t1, const double p
   const qk__cdt_t *c = &g->cdt;
   size_t n = 0, seen = 0;
   int found = 0;
-  if (grow_stack(g, 2) || grow_marks(g)) return -1;
+  /* Room for the whole search at once: it stops growing past 4096 triangles. */
+  if (grow_stack(g, 4096 + 8) || grow_marks(g)) return -1;
   uint32_t gen = ++g->mark_gen, *mark = g->mark;
   g->stack[n++] = t0, mark[t0] = 2 * gen + 1;
   if (t1 != QK__CDT_NONE) g->stack[n++] = t1, mark[t1] = 2 * gen + 1;
@@ -341,10 +348,9 @@ static int cavity_encroach(qk__gm_t *g, uint32_t t0, uint32_t t1, const double p
       uint32_t u = c->nbr[3 * t + k];
       if (u == QK__CDT_NONE || n > 4096 || mark[u] >> 1 == gen) continue;
       const uint32_t *uv = &c->v[3 * u];
-      int in = qk__incircle(&c->xy[2 * uv[0]], &c->xy[2 * uv[1]], &c->xy[2 * uv[2]], p) > 0;
+      int in = qk__cdt_incircle(&c->xy[2 * uv[0]], &c->xy[2 * uv[1]], &c->xy[2 * uv[2]], p) > 0;
       mark[u] = 2 * gen + (uint32_t)in; /* tested once */
       if (!in) continue;
-      if (grow_stack(g, n + 1)) return -1;
       g->stack[n++] = u;
     }
   }
