@@ -38,8 +38,9 @@ static size_t next_cap(size_t cap, size_t need) {
   return cap;
 }
 
-static qk_status_t grow_vertices_slow(qk__cdt_t *c, size_t need) {
-  size_t old = c->cap_v, cap = next_cap(old, need);
+/* Room for `need` vertices: half again or more (exact: just `need`). */
+static qk_status_t grow_vertices_slow(qk__cdt_t *c, size_t need, int exact) {
+  size_t old = c->cap_v, cap = exact ? need : next_cap(old, need);
   if (cap > (size_t)UINT32_MAX - 16) cap = (size_t)UINT32_MAX - 16;
   if (cap < need) return QK_ERR_NOMEM;
   char *blk = qk__realloc(c->alloc, c->xy, c->xy ? vblock_bytes(old) : 0, vblock_bytes(cap));
@@ -52,7 +53,7 @@ static qk_status_t grow_vertices_slow(qk__cdt_t *c, size_t need) {
 }
 
 static inline qk_status_t grow_vertices(qk__cdt_t *c, size_t need) {
-  return need <= c->cap_v ? QK_OK : grow_vertices_slow(c, need);
+  return need <= c->cap_v ? QK_OK : grow_vertices_slow(c, need, 0);
 }
 
 /* One per-triangle array (3 entries a triangle) to `cap` triangles; *have its capacity. */
@@ -65,8 +66,8 @@ static int grow_array(qk__cdt_t *c, uint32_t **arr, size_t *have, size_t cap) {
   return 1;
 }
 
-static qk_status_t grow_triangles_slow(qk__cdt_t *c, size_t need) {
-  size_t cap = next_cap(c->cap_t, need);
+static qk_status_t grow_triangles_slow(qk__cdt_t *c, size_t need, int exact) {
+  size_t cap = exact ? need : next_cap(c->cap_t, need);
   if (cap > (size_t)UINT32_MAX / 4) cap = (size_t)UINT32_MAX / 4;
   if (cap < need) return QK_ERR_NOMEM;
   /* Three arrays, each grown on its own (a large block is remapped, not copied); one that
@@ -79,7 +80,13 @@ static qk_status_t grow_triangles_slow(qk__cdt_t *c, size_t need) {
 }
 
 static inline qk_status_t grow_triangles(qk__cdt_t *c, size_t need) {
-  return need <= c->cap_t ? QK_OK : grow_triangles_slow(c, need);
+  return need <= c->cap_t ? QK_OK : grow_triangles_slow(c, need, 0);
+}
+
+qk_status_t qk__cdt_reserve(qk__cdt_t *c, size_t nv, size_t nt) {
+  if (nv > c->cap_v && grow_vertices_slow(c, nv, 1) != QK_OK) return QK_ERR_NOMEM;
+  if (nt > c->cap_t && grow_triangles_slow(c, nt, 1) != QK_OK) return QK_ERR_NOMEM;
+  return QK_OK;
 }
 
 /* Shrink one per-triangle array to `cap` triangles (a failed shrink keeps it as it was). */

@@ -68,6 +68,11 @@ typedef struct qk__cdt {
 qk_status_t qk__cdt_init(qk__cdt_t *c, const qk_allocator_t *alloc, double x0, double y0,
                          double side, size_t nv_hint);
 
+/* Room for nv vertices and nt triangles in all (a caller that can estimate the final size
+ * saves the copies of growing by steps). QK_OK or QK_ERR_NOMEM (then nothing changed but
+ * the room of arrays already grown). */
+qk_status_t qk__cdt_reserve(qk__cdt_t *c, size_t nv, size_t nt);
+
 /* Give back the arrays' spare room (realloc to the current counts; a failed shrink changes
  * nothing). Later insertions grow them again. */
 void qk__cdt_shrink(qk__cdt_t *c);
