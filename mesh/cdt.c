@@ -348,20 +348,24 @@ static int split_edge(qk__cdt_t *c, uint32_t t, int k, uint32_t p) {
  * more than its initial four plus nv entries. */
 static void legalize(qk__cdt_t *c, int sp) {
   uint32_t *stk = c->stk;
+  const uint32_t *known = c->known, gen = c->known_gen;
   while (sp > 0) {
     uint32_t t = stk[--sp];
     uint32_t n = c->nbr[3 * (size_t)t];
     if (n == NONE || c->seg[3 * (size_t)t] != NONE) continue;
-    int j = facing(c, n, t);
-    const uint32_t *tv = c->v + 3 * (size_t)t;
-    const double *pp = c->xy + 2 * (size_t)tv[0], *pq = c->xy + 2 * (size_t)tv[1];
-    const double *pr = c->xy + 2 * (size_t)tv[2], *ps = c->xy + 2 * (size_t)c->v[3 * (size_t)n + j];
-    /* t = (p, q, r) holds the new point p and n = (r, q, s) is an old triangle: s inside
-     * t's circle is p inside n's (an even permutation of the in-circle determinant). */
-    if (c->known && c->known[n] >> 1 == c->known_gen) {
-      if (!(c->known[n] & 1)) continue;
-    } else if (qk__cdt_incircle(pp, pq, pr, ps) <= 0) {
-      continue;
+    int j;
+    if (known && known[n] >> 1 == gen) { /* decided without the slot across */
+      if (!(known[n] & 1)) continue;
+      j = facing(c, n, t);
+    } else {
+      /* t = (p, q, r) holds the new point p and n = (r, q, s) is an old triangle: s inside
+       * t's circle is p inside n's (an even permutation of the in-circle determinant). */
+      j = facing(c, n, t);
+      const uint32_t *tv = c->v + 3 * (size_t)t;
+      const double *pp = c->xy + 2 * (size_t)tv[0], *pq = c->xy + 2 * (size_t)tv[1];
+      const double *pr = c->xy + 2 * (size_t)tv[2];
+      const double *ps = c->xy + 2 * (size_t)c->v[3 * (size_t)n + j];
+      if (qk__cdt_incircle(pp, pq, pr, ps) <= 0) continue;
     }
     flip0(c, t, n, j);
     stk[sp++] = t, stk[sp++] = n;
