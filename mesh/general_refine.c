@@ -222,7 +222,7 @@ int qk__gm_is_bad(const qk__gm_t *g, uint32_t t) {
   return g->faces[g->face[t]].drop ? 0 : bad_kept(g, t);
 }
 
-static qk_status_t push_bad(qk__gm_t *g, uint32_t t) {
+static qk_status_t push_bad_slow(qk__gm_t *g, uint32_t t) {
   if (g->bad_head && g->bad_head == g->nbad) g->bad_head = g->nbad = 0;
   /* (meshcdt) Drop the consumed front once it is half the queue: the queue held every
    * triangle ever queued, a fifth of the peak memory on a million triangles. */
@@ -238,6 +238,17 @@ static qk_status_t push_bad(qk__gm_t *g, uint32_t t) {
   const uint32_t *tv = &g->cdt.v[3 * t];
   g->bad[g->nbad++] = (qk__gm_tq_t){t, tv[0], tv[1], tv[2]};
   return QK_OK;
+}
+
+/* Queue triangle t as bad. The common case inline: room at the end and a short consumed
+ * front (the queue's order is the same either way). */
+static inline qk_status_t push_bad(qk__gm_t *g, uint32_t t) {
+  if (g->nbad < g->bad_cap && g->bad_head < 4096) {
+    const uint32_t *tv = &g->cdt.v[3 * t];
+    g->bad[g->nbad++] = (qk__gm_tq_t){t, tv[0], tv[1], tv[2]};
+    return QK_OK;
+  }
+  return push_bad_slow(g, t);
 }
 
 static qk_status_t push_enc(qk__gm_t *g, uint32_t a, uint32_t b, uint32_t s) {
@@ -264,10 +275,12 @@ static int apex_encroaches(const qk__gm_t *g, uint32_t t, int k) {
 static qk_status_t check(qk__gm_t *g, uint32_t t) {
   const qk__cdt_t *c = &g->cdt;
   if (g->faces[g->face[t]].drop) return QK_OK;
-  for (int k = 0; k < 3; k++)
-    if (c->seg[3 * t + k] != QK__CDT_NONE && apex_encroaches(g, t, k) &&
-        push_enc(g, c->v[3 * t + (k + 1) % 3], c->v[3 * t + (k + 2) % 3], c->seg[3 * t + k]))
-      return QK_ERR_NOMEM;
+  const uint32_t *ts = &c->seg[3 * t];
+  if ((ts[0] & ts[1] & ts[2]) != QK__CDT_NONE) /* some edge constrained (NONE is all ones) */
+    for (int k = 0; k < 3; k++)
+      if (ts[k] != QK__CDT_NONE && apex_encroaches(g, t, k) &&
+          push_enc(g, c->v[3 * t + (k + 1) % 3], c->v[3 * t + (k + 2) % 3], c->seg[3 * t + k]))
+        return QK_ERR_NOMEM;
   return bad_kept(g, t) ? push_bad(g, t) : QK_OK;
 }
 
