@@ -315,8 +315,8 @@ static qk_status_t grow_stack(qk__gm_t *g, size_t need) {
 
 /* The cavity stamps cover every triangle slot; new slots and a wrapped generation start
  * from 0 (no stamp). */
-static qk_status_t grow_marks(qk__gm_t *g) {
-  size_t nt = g->cdt.nt, c = g->mark_cap;
+static qk_status_t grow_marks_to(qk__gm_t *g, size_t nt) {
+  size_t c = g->mark_cap;
   if (nt > c) {
     void *p = g->mark;
     if (qk__grow(g->a, &p, &c, nt, sizeof *g->mark)) return QK_ERR_NOMEM;
@@ -330,6 +330,8 @@ static qk_status_t grow_marks(qk__gm_t *g) {
   }
   return QK_OK;
 }
+
+static qk_status_t grow_marks(qk__gm_t *g) { return grow_marks_to(g, g->cdt.nt); }
 
 /* The subsegments on the boundary of the insertion cavity of p (the triangles whose
  * circumcircles hold p, reached from t0 and t1 without crossing a constrained edge) that p
@@ -485,8 +487,9 @@ static qk_status_t split_triangle(qk__gm_t *g, uint32_t t, size_t *rejected) {
 
 /* With a plain size bound h, the refined mesh holds about 5.1 triangles per h^2 of kept
  * area (5.05 to 5.2 on the coastlines at 1/128 and 1/256 of their extent): room for a bit
- * more is reserved up front, which saves the copies of growing the CDT's arrays by steps
- * (the last growth alone copies two thirds of them). Beyond 2^27 triangles, steps. */
+ * more is reserved up front in the CDT's arrays and the cavity stamps, which saves the
+ * copies of growing them by steps (the last growth alone copies two thirds of them).
+ * Beyond 2^27 triangles, steps. */
 static qk_status_t reserve(qk__gm_t *g) {
   qk__cdt_t *c = &g->cdt;
   double h = g->opt->max_size, area = 0;
@@ -500,7 +503,8 @@ static qk_status_t reserve(qk__gm_t *g) {
   double est = 5.3 * (area / 2) / (h * h);
   if (!(est < (double)((size_t)1 << 27))) return QK_OK;
   size_t nt = c->nt + (size_t)est, nv = c->nv + (size_t)est / 2 + 4;
-  return qk__cdt_reserve(c, nv, nt);
+  if (qk__cdt_reserve(c, nv, nt) || grow_marks_to(g, nt)) return QK_ERR_NOMEM;
+  return QK_OK;
 }
 
 qk_status_t qk__gm_refine(qk__gm_t *g) {
