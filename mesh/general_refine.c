@@ -188,33 +188,42 @@ static int len2_exceeds(const double *p, const double *q, double h) {
 static inline int bad_kept(const qk__gm_t *g, uint32_t t) {
   const qk__cdt_t *c = &g->cdt;
   const uint32_t *tv = &c->v[3 * t];
-  const double *p[3] = {&c->xy[2 * tv[0]], &c->xy[2 * tv[1]], &c->xy[2 * tv[2]]};
-  double l[3];
-  for (int i = 0; i < 3; i++) l[i] = d2(p[(i + 1) % 3], p[(i + 2) % 3]);
-  int i = l[0] <= l[1] && l[0] <= l[2] ? 0 : l[1] <= l[2] ? 1 : 2;
-  double lmax = l[0] > l[1] ? l[0] : l[1];
-  lmax = l[2] > lmax ? l[2] : lmax;
-  if (g->opt->max_size > 0 || g->opt->size_fn) {
-    double h = g->opt->max_size > 0 ? g->opt->max_size : INFINITY;
-    if (g->opt->size_fn) {
-      double cx = (p[0][0] + p[1][0] + p[2][0]) / 3, cy = (p[0][1] + p[1][1] + p[2][1]) / 3;
-      double v = g->opt->size_fn(cx, cy, g->opt->size_user);
+  const double *p0 = &c->xy[2 * tv[0]], *p1 = &c->xy[2 * tv[1]], *p2 = &c->xy[2 * tv[2]];
+  /* l_i: the squared length of the edge opposite vertex i. Written out (no arrays indexed
+   * by i modulo 3) so that it all stays in registers; the arithmetic is the same. */
+  double l0 = d2(p1, p2), l1 = d2(p2, p0), l2 = d2(p0, p1);
+  double lmax = l0 > l1 ? l0 : l1;
+  lmax = l2 > lmax ? l2 : lmax;
+  const qk_mesh_options_t *opt = g->opt;
+  if (opt->max_size > 0 || opt->size_fn) {
+    double h = opt->max_size > 0 ? opt->max_size : INFINITY;
+    if (opt->size_fn) {
+      double cx = (p0[0] + p1[0] + p2[0]) / 3, cy = (p0[1] + p1[1] + p2[1]) / 3;
+      double v = opt->size_fn(cx, cy, opt->size_user);
       if (v > 0 && v < h) h = v;
     }
     double h2 = h * h;
     if (lmax > h2 * (1 + 0x1p-48)) return 1;
     /* Within rounding of h: decide exactly, so that an edge of exactly h (a leaf's side) is
      * good and one a hair longer is not. */
-    if (lmax >= h2 * (1 - 0x1p-48))
-      for (int j = 0; j < 3; j++)
-        if (len2_exceeds(p[(j + 1) % 3], p[(j + 2) % 3], h)) return 1;
+    if (lmax >= h2 * (1 - 0x1p-48) &&
+        (len2_exceeds(p1, p2, h) || len2_exceeds(p2, p0, h) || len2_exceeds(p0, p1, h)))
+      return 1;
   }
-  /* The smallest angle is at vertex i, opposite the shortest edge; below 90 degrees, so
-   * comparing squared sines is comparing angles. */
-  const double *o = p[i], *u = p[(i + 1) % 3], *w = p[(i + 2) % 3];
+  /* The smallest angle is at vertex o opposite the shortest edge (u, w the next two
+   * counter-clockwise, lu and lw the squared lengths of the edges opposite them); below 90
+   * degrees, so comparing squared sines is comparing angles. */
+  const double *o, *u, *w;
+  double lu, lw;
+  if (l0 <= l1 && l0 <= l2)
+    o = p0, u = p1, w = p2, lu = l1, lw = l2;
+  else if (l1 <= l2)
+    o = p1, u = p2, w = p0, lu = l2, lw = l0;
+  else
+    o = p2, u = p0, w = p1, lu = l0, lw = l1;
   double ux = u[0] - o[0], uy = u[1] - o[1], wx = w[0] - o[0], wy = w[1] - o[1];
   double cr = ux * wy - uy * wx;
-  if (cr * cr >= g->sin2_bound * l[(i + 2) % 3] * l[(i + 1) % 3]) return 0;
+  if (cr * cr >= g->sin2_bound * lw * lu) return 0;
   return !qk__gm_exempt(g, tv);
 }
 
