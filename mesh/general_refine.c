@@ -231,30 +231,34 @@ int qk__gm_is_bad(const qk__gm_t *g, uint32_t t) {
   return g->faces[g->face[t]].drop ? 0 : bad_kept(g, t);
 }
 
+/* The bad-triangle queue is a ring: g->bad_head and g->nbad count pops and pushes since the
+ * start, the entry of count i is g->bad[i & (g->bad_cap - 1)], and bad_cap is a power of two
+ * (qk__grow doubles from 16). It holds only the waiting triangles, and a push never moves
+ * them, except when the ring is full and grows. */
+#define BAD_AT(g, i) ((g)->bad[(i) & ((g)->bad_cap - 1)])
+
 static qk_status_t push_bad_slow(qk__gm_t *g, uint32_t t) {
-  if (g->bad_head && g->bad_head == g->nbad) g->bad_head = g->nbad = 0;
-  /* (meshcdt) Drop the consumed front once it is half the queue: the queue held every
-   * triangle ever queued, a fifth of the peak memory on a million triangles. */
-  if (g->bad_head >= 4096 && 2 * g->bad_head >= g->nbad) {
-    memmove(g->bad, g->bad + g->bad_head, (g->nbad - g->bad_head) * sizeof *g->bad);
-    g->nbad -= g->bad_head, g->bad_head = 0;
-  }
-  if (g->nbad == g->bad_cap) {
-    void *p = g->bad;
-    if (qk__grow(g->a, &p, &g->bad_cap, g->nbad + 1, sizeof *g->bad)) return QK_ERR_NOMEM;
-    g->bad = p;
-  }
+  size_t old = g->bad_cap, live = g->nbad - g->bad_head;
+  void *p = g->bad;
+  if (qk__grow(g->a, &p, &g->bad_cap, live + 1, sizeof *g->bad)) return QK_ERR_NOMEM;
+  g->bad = p;
+  /* Unwrap: the entries from the head's slot to the old end stay; those that had wrapped
+   * to the front follow them. */
+  size_t h = old ? g->bad_head & (old - 1) : 0;
+  if (live && h + live > old) memcpy(g->bad + old, g->bad, (h + live - old) * sizeof *g->bad);
+  g->nbad = h + live, g->bad_head = h; /* counts restart at the head's slot */
   const uint32_t *tv = &g->cdt.v[3 * t];
-  g->bad[g->nbad++] = (qk__gm_tq_t){t, tv[0], tv[1], tv[2]};
+  BAD_AT(g, g->nbad) = (qk__gm_tq_t){t, tv[0], tv[1], tv[2]};
+  g->nbad++;
   return QK_OK;
 }
 
-/* Queue triangle t as bad. The common case inline: room at the end and a short consumed
- * front (the queue's order is the same either way). */
+/* Queue triangle t as bad (inline while the ring has room). */
 static inline qk_status_t push_bad(qk__gm_t *g, uint32_t t) {
-  if (g->nbad < g->bad_cap && g->bad_head < 4096) {
+  if (g->nbad - g->bad_head < g->bad_cap) {
     const uint32_t *tv = &g->cdt.v[3 * t];
-    g->bad[g->nbad++] = (qk__gm_tq_t){t, tv[0], tv[1], tv[2]};
+    BAD_AT(g, g->nbad) = (qk__gm_tq_t){t, tv[0], tv[1], tv[2]};
+    g->nbad++;
     return QK_OK;
   }
   return push_bad_slow(g, t);
@@ -453,7 +457,7 @@ static qk_status_t split_triangle(qk__gm_t *g, uint32_t t, size_t *rejected) {
     /* Behind a protected piece: the triangle is rejected (left as it is; the final check
      * refuses the mesh if it is still below the bound). */
     if (!st && done && push_bad(g, t)) st = QK_ERR_NOMEM;
-    if (!st && done) g->bad[g->nbad - 1] = self;
+    if (!st && done) BAD_AT(g, g->nbad - 1) = self;
     if (!done) ++*rejected;
     return st;
   }
@@ -480,7 +484,7 @@ static qk_status_t split_triangle(qk__gm_t *g, uint32_t t, size_t *rejected) {
     /* Every encroached piece protected: the triangle is rejected (as above). */
     if (!any) return ++*rejected, QK_OK;
     if (push_bad(g, t)) return QK_ERR_NOMEM;
-    g->bad[g->nbad - 1] = self;
+    BAD_AT(g, g->nbad - 1) = self;
     return QK_OK;
   }
   uint32_t v;
@@ -528,7 +532,7 @@ qk_status_t qk__gm_refine(qk__gm_t *g) {
     if (g->insertions > g->work_cap) {
       double x = 0, y = 0;
       if (g->bad_head < g->nbad) {
-        const double *q = &c->xy[2 * g->bad[g->bad_head].a];
+        const double *q = &c->xy[2 * BAD_AT(g, g->bad_head).a];
         x = q[0], y = q[1];
       }
       return qk__mesh_fail(g->err, QK_ERR_LIMIT, 0,
@@ -552,7 +556,8 @@ qk_status_t qk__gm_refine(qk__gm_t *g) {
      * the same order is the same triangle (its face, and so its quality, unchanged), so it
      * is still bad and is not tested again. A changed slot is skipped: its new triangle was
      * checked (and queued if bad) when the CDT changed it. */
-    qk__gm_tq_t q = g->bad[g->bad_head++];
+    qk__gm_tq_t q = BAD_AT(g, g->bad_head);
+    g->bad_head++;
     const uint32_t *tv = &c->v[3 * q.t];
     if (tv[0] != q.a || tv[1] != q.b || tv[2] != q.c) continue;
     if ((st = split_triangle(g, q.t, &rejected))) break;
