@@ -5,11 +5,12 @@
  * constrained one). Segment insertion is in cdt_segment.c, the visibility walk in
  * cdt_walk.c, the exact predicates in cdt_exact.c.
  *
- * Memory: the per-vertex arrays (xy, vtri and the flip stack) live in one block and the
- * per-triangle arrays (v, nbr, seg) in another, each grown by half again with realloc (a
- * large block is remapped, not copied next to the old one: no transient peak of old plus
- * new), then the later arrays moved up to their new offsets. A failed realloc leaves the
- * block as it was. Every operation reserves what it may need before it changes anything.
+ * Memory: the per-vertex arrays (xy, vtri and the flip stack) live in one block, grown by
+ * half again with realloc and vtri and the stack then moved up to their new offsets; the
+ * per-triangle arrays (v, nbr, seg) are three blocks, each grown by half again with
+ * realloc (a large block is remapped, not copied next to the old one: no transient peak of
+ * old plus new, and nothing to move). A failed realloc leaves the block as it was. Every
+ * operation reserves what it may need before it changes anything.
  */
 #include <string.h>
 
@@ -29,7 +30,6 @@
 static size_t vblock_bytes(size_t cap) {
   return cap * (2 * sizeof(double) + sizeof(uint32_t)) + (cap + 8) * sizeof(uint32_t);
 }
-static size_t tblock_bytes(size_t cap) { return cap * 9 * sizeof(uint32_t); }
 
 /* The next capacity: half again, at least `need`. */
 static size_t next_cap(size_t cap, size_t need) {
@@ -38,9 +38,9 @@ static size_t next_cap(size_t cap, size_t need) {
   return cap;
 }
 
-static qk_status_t grow_vertices(qk__cdt_t *c, size_t need) {
-  if (need <= c->cap_v) return QK_OK;
-  size_t old = c->cap_v, cap = next_cap(old, need);
+/* Room for `need` vertices: half again or more (exact: just `need`). */
+static qk_status_t grow_vertices_slow(qk__cdt_t *c, size_t need, int exact) {
+  size_t old = c->cap_v, cap = exact ? need : next_cap(old, need);
   if (cap > (size_t)UINT32_MAX - 16) cap = (size_t)UINT32_MAX - 16;
   if (cap < need) return QK_ERR_NOMEM;
   char *blk = qk__realloc(c->alloc, c->xy, c->xy ? vblock_bytes(old) : 0, vblock_bytes(cap));
@@ -52,34 +52,58 @@ static qk_status_t grow_vertices(qk__cdt_t *c, size_t need) {
   return QK_OK;
 }
 
-static qk_status_t grow_triangles(qk__cdt_t *c, size_t need) {
-  if (need <= c->cap_t) return QK_OK;
-  size_t old = c->cap_t, cap = next_cap(old, need);
+static inline qk_status_t grow_vertices(qk__cdt_t *c, size_t need) {
+  return need <= c->cap_v ? QK_OK : grow_vertices_slow(c, need, 0);
+}
+
+/* One per-triangle array (3 entries a triangle) to `cap` triangles; *have its capacity. */
+static int grow_array(qk__cdt_t *c, uint32_t **arr, size_t *have, size_t cap) {
+  if (*have >= cap) return 1;
+  uint32_t *a =
+      qk__realloc(c->alloc, *arr, *arr ? *have * 3 * sizeof **arr : 0, cap * 3 * sizeof **arr);
+  if (!a) return 0;
+  *arr = a, *have = cap;
+  return 1;
+}
+
+static qk_status_t grow_triangles_slow(qk__cdt_t *c, size_t need, int exact) {
+  size_t cap = exact ? need : next_cap(c->cap_t, need);
   if (cap > (size_t)UINT32_MAX / 4) cap = (size_t)UINT32_MAX / 4;
   if (cap < need) return QK_ERR_NOMEM;
-  uint32_t *blk = qk__realloc(c->alloc, c->v, c->v ? tblock_bytes(old) : 0, tblock_bytes(cap));
-  if (!blk) return QK_ERR_NOMEM;
-  if (c->nt) { /* seg first: nbr's new place may overlap seg's old one */
-    memmove(blk + 6 * cap, blk + 6 * old, c->nt * 3 * sizeof *blk);
-    memmove(blk + 3 * cap, blk + 3 * old, c->nt * 3 * sizeof *blk);
-  }
-  c->v = blk, c->nbr = blk + 3 * cap, c->seg = blk + 6 * cap, c->cap_t = cap;
+  /* Three arrays, each grown on its own (a large block is remapped, not copied); one that
+   * grew before a failure keeps its room. */
+  if (!grow_array(c, &c->v, &c->cap_tv, cap) || !grow_array(c, &c->nbr, &c->cap_tn, cap) ||
+      !grow_array(c, &c->seg, &c->cap_ts, cap))
+    return QK_ERR_NOMEM;
+  c->cap_t = cap;
   return QK_OK;
 }
 
+static inline qk_status_t grow_triangles(qk__cdt_t *c, size_t need) {
+  return need <= c->cap_t ? QK_OK : grow_triangles_slow(c, need, 0);
+}
+
+qk_status_t qk__cdt_reserve(qk__cdt_t *c, size_t nv, size_t nt) {
+  if (nv > c->cap_v && grow_vertices_slow(c, nv, 1) != QK_OK) return QK_ERR_NOMEM;
+  if (nt > c->cap_t && grow_triangles_slow(c, nt, 1) != QK_OK) return QK_ERR_NOMEM;
+  return QK_OK;
+}
+
+/* Shrink one per-triangle array to `cap` triangles (a failed shrink keeps it as it was). */
+static void shrink_array(qk__cdt_t *c, uint32_t **arr, size_t *have, size_t cap) {
+  if (!*arr || *have <= cap) return;
+  uint32_t *a = qk__realloc(c->alloc, *arr, *have * 3 * sizeof **arr, cap * 3 * sizeof **arr);
+  if (a) *arr = a, *have = cap;
+}
+
 void qk__cdt_shrink(qk__cdt_t *c) {
-  size_t nt = c->nt, cap = nt < 16 ? 16 : nt, old = c->cap_t;
-  if (c->v && cap < old) {
-    uint32_t *blk = c->v;
-    memmove(blk + 3 * cap, blk + 3 * old, nt * 3 * sizeof *blk);
-    memmove(blk + 6 * cap, blk + 6 * old, nt * 3 * sizeof *blk);
-    uint32_t *nb = qk__realloc(c->alloc, blk, tblock_bytes(old), tblock_bytes(cap));
-    if (nb) {
-      c->v = nb, c->nbr = nb + 3 * cap, c->seg = nb + 6 * cap, c->cap_t = cap;
-    } else { /* put the arrays back where they were (seg first: it moves furthest) */
-      memmove(blk + 6 * old, blk + 6 * cap, nt * 3 * sizeof *blk);
-      memmove(blk + 3 * old, blk + 3 * cap, nt * 3 * sizeof *blk);
-    }
+  size_t nt = c->nt, cap = nt < 16 ? 16 : nt;
+  if (cap < c->cap_t) {
+    shrink_array(c, &c->v, &c->cap_tv, cap);
+    shrink_array(c, &c->nbr, &c->cap_tn, cap);
+    shrink_array(c, &c->seg, &c->cap_ts, cap);
+    size_t m = c->cap_tv < c->cap_tn ? c->cap_tv : c->cap_tn;
+    c->cap_t = m < c->cap_ts ? m : c->cap_ts;
   }
   size_t nv = c->nv, vcap = nv < 16 ? 16 : nv, vold = c->cap_v;
   if (c->xy && vcap < vold) {
@@ -115,7 +139,7 @@ qk_status_t qk__cdt_init(qk__cdt_t *c, const qk_allocator_t *alloc, double x0, d
   if (nv < nv_hint || nv > (size_t)UINT32_MAX / 4) nv = 16;
   if (grow_vertices(c, nv) != QK_OK) return QK_ERR_NOMEM;
   if (grow_triangles(c, 2 * nv) != QK_OK) {
-    qk__free(c->alloc, c->xy, vblock_bytes(c->cap_v));
+    qk__cdt_free(c);
     memset(c, 0, sizeof *c);
     return QK_ERR_NOMEM;
   }
@@ -132,7 +156,9 @@ qk_status_t qk__cdt_init(qk__cdt_t *c, const qk_allocator_t *alloc, double x0, d
 
 void qk__cdt_free(qk__cdt_t *c) {
   if (c->xy) qk__free(c->alloc, c->xy, vblock_bytes(c->cap_v));
-  if (c->v) qk__free(c->alloc, c->v, tblock_bytes(c->cap_t));
+  if (c->v) qk__free(c->alloc, c->v, c->cap_tv * 3 * sizeof *c->v);
+  if (c->nbr) qk__free(c->alloc, c->nbr, c->cap_tn * 3 * sizeof *c->nbr);
+  if (c->seg) qk__free(c->alloc, c->seg, c->cap_ts * 3 * sizeof *c->seg);
   if (c->scr) qk__free(c->alloc, c->scr, c->cap_scr * sizeof *c->scr);
   const qk_allocator_t *a = c->alloc;
   memset(c, 0, sizeof *c);
@@ -322,20 +348,24 @@ static int split_edge(qk__cdt_t *c, uint32_t t, int k, uint32_t p) {
  * more than its initial four plus nv entries. */
 static void legalize(qk__cdt_t *c, int sp) {
   uint32_t *stk = c->stk;
+  const uint32_t *known = c->known, gen = c->known_gen;
   while (sp > 0) {
     uint32_t t = stk[--sp];
     uint32_t n = c->nbr[3 * (size_t)t];
     if (n == NONE || c->seg[3 * (size_t)t] != NONE) continue;
-    int j = facing(c, n, t);
-    const uint32_t *tv = c->v + 3 * (size_t)t;
-    const double *pp = c->xy + 2 * (size_t)tv[0], *pq = c->xy + 2 * (size_t)tv[1];
-    const double *pr = c->xy + 2 * (size_t)tv[2], *ps = c->xy + 2 * (size_t)c->v[3 * (size_t)n + j];
-    /* t = (p, q, r) holds the new point p and n = (r, q, s) is an old triangle: s inside
-     * t's circle is p inside n's (an even permutation of the in-circle determinant). */
-    if (c->known && c->known[n] >> 1 == c->known_gen) {
-      if (!(c->known[n] & 1)) continue;
-    } else if (qk__cdt_incircle(pp, pq, pr, ps) <= 0) {
-      continue;
+    int j;
+    if (known && known[n] >> 1 == gen) { /* decided without the slot across */
+      if (!(known[n] & 1)) continue;
+      j = facing(c, n, t);
+    } else {
+      /* t = (p, q, r) holds the new point p and n = (r, q, s) is an old triangle: s inside
+       * t's circle is p inside n's (an even permutation of the in-circle determinant). */
+      j = facing(c, n, t);
+      const uint32_t *tv = c->v + 3 * (size_t)t;
+      const double *pp = c->xy + 2 * (size_t)tv[0], *pq = c->xy + 2 * (size_t)tv[1];
+      const double *pr = c->xy + 2 * (size_t)tv[2];
+      const double *ps = c->xy + 2 * (size_t)c->v[3 * (size_t)n + j];
+      if (qk__cdt_incircle(pp, pq, pr, ps) <= 0) continue;
     }
     flip0(c, t, n, j);
     stk[sp++] = t, stk[sp++] = n;

@@ -45,7 +45,8 @@ typedef struct qk__cdt {
   uint32_t *nbr; /* 3 * nt: triangle across edge i, or QK__CDT_NONE */
   uint32_t *seg; /* 3 * nt: input segment id of a constrained edge i, else QK__CDT_NONE */
   size_t nt, cap_t;
-  uint32_t hint; /* a triangle near the last change: default start of walks */
+  size_t cap_tv, cap_tn, cap_ts; /* private: each array's own room (cap_t is the least) */
+  uint32_t hint;                 /* a triangle near the last change: default start of walks */
   qk__cdt_change_fn on_change;
   void *user;
   /* Optional, set by a caller that has tested the next point against triangles already
@@ -66,6 +67,11 @@ typedef struct qk__cdt {
  * nv_hint vertices. QK_OK or QK_ERR_NOMEM (then nothing to free). */
 qk_status_t qk__cdt_init(qk__cdt_t *c, const qk_allocator_t *alloc, double x0, double y0,
                          double side, size_t nv_hint);
+
+/* Room for nv vertices and nt triangles in all (a caller that can estimate the final size
+ * saves the copies of growing by steps). QK_OK or QK_ERR_NOMEM (then nothing changed but
+ * the room of arrays already grown). */
+qk_status_t qk__cdt_reserve(qk__cdt_t *c, size_t nv, size_t nt);
 
 /* Give back the arrays' spare room (realloc to the current counts; a failed shrink changes
  * nothing). Later insertions grow them again. */

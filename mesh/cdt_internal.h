@@ -1,6 +1,7 @@
 /*
- * Shared by the sources of the constrained Delaunay triangulation (mesh/cdt*.c) only: the
- * inline predicate filters, the walk around a vertex, the flip.
+ * Shared by the sources of the constrained Delaunay triangulation (mesh/cdt*.c): the
+ * inline predicate filters, the walk around a vertex, the flip. The refinement
+ * (mesh/general_refine.c) uses the inline in-circle filter for its cavity search too.
  */
 #ifndef QK_MESH_CDT_INTERNAL_H
 #define QK_MESH_CDT_INTERNAL_H

@@ -12,8 +12,9 @@
  * apex is never split below the floor (2^-48 of its segment), a triangle that would need it
  * is rejected, and a mesh still holding a bad triangle at the end is refused.
  */
-#include "mesh/general_mesh.h"
+#include "mesh/cdt_internal.h"
 #include "mesh/expansion.h"
+#include "mesh/general_mesh.h"
 
 #include <math.h>
 #include <string.h>
@@ -182,56 +183,85 @@ static int len2_exceeds(const double *p, const double *q, double h) {
   return n > 0 && x[n - 1] > 0;
 }
 
-int qk__gm_is_bad(const qk__gm_t *g, uint32_t t) {
+/* qk__gm_is_bad for a triangle of a kept face (inlined in the refinement's checks, which
+ * have looked at the face already). */
+static inline int bad_kept(const qk__gm_t *g, uint32_t t) {
   const qk__cdt_t *c = &g->cdt;
-  if (g->faces[g->face[t]].drop) return 0;
   const uint32_t *tv = &c->v[3 * t];
-  const double *p[3] = {&c->xy[2 * tv[0]], &c->xy[2 * tv[1]], &c->xy[2 * tv[2]]};
-  double l[3];
-  for (int i = 0; i < 3; i++) l[i] = d2(p[(i + 1) % 3], p[(i + 2) % 3]);
-  int i = l[0] <= l[1] && l[0] <= l[2] ? 0 : l[1] <= l[2] ? 1 : 2;
-  double lmax = l[0] > l[1] ? l[0] : l[1];
-  lmax = l[2] > lmax ? l[2] : lmax;
-  if (g->opt->max_size > 0 || g->opt->size_fn) {
-    double h = g->opt->max_size > 0 ? g->opt->max_size : INFINITY;
-    if (g->opt->size_fn) {
-      double cx = (p[0][0] + p[1][0] + p[2][0]) / 3, cy = (p[0][1] + p[1][1] + p[2][1]) / 3;
-      double v = g->opt->size_fn(cx, cy, g->opt->size_user);
+  const double *p0 = &c->xy[2 * tv[0]], *p1 = &c->xy[2 * tv[1]], *p2 = &c->xy[2 * tv[2]];
+  /* l_i: the squared length of the edge opposite vertex i. Written out (no arrays indexed
+   * by i modulo 3) so that it all stays in registers; the arithmetic is the same. */
+  double l0 = d2(p1, p2), l1 = d2(p2, p0), l2 = d2(p0, p1);
+  double lmax = l0 > l1 ? l0 : l1;
+  lmax = l2 > lmax ? l2 : lmax;
+  const qk_mesh_options_t *opt = g->opt;
+  if (opt->max_size > 0 || opt->size_fn) {
+    double h = opt->max_size > 0 ? opt->max_size : INFINITY;
+    if (opt->size_fn) {
+      double cx = (p0[0] + p1[0] + p2[0]) / 3, cy = (p0[1] + p1[1] + p2[1]) / 3;
+      double v = opt->size_fn(cx, cy, opt->size_user);
       if (v > 0 && v < h) h = v;
     }
     double h2 = h * h;
     if (lmax > h2 * (1 + 0x1p-48)) return 1;
     /* Within rounding of h: decide exactly, so that an edge of exactly h (a leaf's side) is
      * good and one a hair longer is not. */
-    if (lmax >= h2 * (1 - 0x1p-48))
-      for (int j = 0; j < 3; j++)
-        if (len2_exceeds(p[(j + 1) % 3], p[(j + 2) % 3], h)) return 1;
+    if (lmax >= h2 * (1 - 0x1p-48) &&
+        (len2_exceeds(p1, p2, h) || len2_exceeds(p2, p0, h) || len2_exceeds(p0, p1, h)))
+      return 1;
   }
-  /* The smallest angle is at vertex i, opposite the shortest edge; below 90 degrees, so
-   * comparing squared sines is comparing angles. */
-  const double *o = p[i], *u = p[(i + 1) % 3], *w = p[(i + 2) % 3];
+  /* The smallest angle is at vertex o opposite the shortest edge (u, w the next two
+   * counter-clockwise, lu and lw the squared lengths of the edges opposite them); below 90
+   * degrees, so comparing squared sines is comparing angles. */
+  const double *o, *u, *w;
+  double lu, lw;
+  if (l0 <= l1 && l0 <= l2)
+    o = p0, u = p1, w = p2, lu = l1, lw = l2;
+  else if (l1 <= l2)
+    o = p1, u = p2, w = p0, lu = l2, lw = l0;
+  else
+    o = p2, u = p0, w = p1, lu = l0, lw = l1;
   double ux = u[0] - o[0], uy = u[1] - o[1], wx = w[0] - o[0], wy = w[1] - o[1];
   double cr = ux * wy - uy * wx;
-  if (cr * cr >= g->sin2_bound * l[(i + 2) % 3] * l[(i + 1) % 3]) return 0;
+  if (cr * cr >= g->sin2_bound * lw * lu) return 0;
   return !qk__gm_exempt(g, tv);
 }
 
-static qk_status_t push_bad(qk__gm_t *g, uint32_t t) {
-  if (g->bad_head && g->bad_head == g->nbad) g->bad_head = g->nbad = 0;
-  /* (meshcdt) Drop the consumed front once it is half the queue: the queue held every
-   * triangle ever queued, a fifth of the peak memory on a million triangles. */
-  if (g->bad_head >= 4096 && 2 * g->bad_head >= g->nbad) {
-    memmove(g->bad, g->bad + g->bad_head, (g->nbad - g->bad_head) * sizeof *g->bad);
-    g->nbad -= g->bad_head, g->bad_head = 0;
-  }
-  if (g->nbad == g->bad_cap) {
-    void *p = g->bad;
-    if (qk__grow(g->a, &p, &g->bad_cap, g->nbad + 1, sizeof *g->bad)) return QK_ERR_NOMEM;
-    g->bad = p;
-  }
+int qk__gm_is_bad(const qk__gm_t *g, uint32_t t) {
+  return g->faces[g->face[t]].drop ? 0 : bad_kept(g, t);
+}
+
+/* The bad-triangle queue is a ring: g->bad_head and g->nbad count pops and pushes since the
+ * start, the entry of count i is g->bad[i & (g->bad_cap - 1)], and bad_cap is a power of two
+ * (qk__grow doubles from 16). It holds only the waiting triangles, and a push never moves
+ * them, except when the ring is full and grows. */
+#define BAD_AT(g, i) ((g)->bad[(i) & ((g)->bad_cap - 1)])
+
+static qk_status_t push_bad_slow(qk__gm_t *g, uint32_t t) {
+  size_t old = g->bad_cap, live = g->nbad - g->bad_head;
+  void *p = g->bad;
+  if (qk__grow(g->a, &p, &g->bad_cap, live + 1, sizeof *g->bad)) return QK_ERR_NOMEM;
+  g->bad = p;
+  /* Unwrap: the entries from the head's slot to the old end stay; those that had wrapped
+   * to the front follow them. */
+  size_t h = old ? g->bad_head & (old - 1) : 0;
+  if (live && h + live > old) memcpy(g->bad + old, g->bad, (h + live - old) * sizeof *g->bad);
+  g->nbad = h + live, g->bad_head = h; /* counts restart at the head's slot */
   const uint32_t *tv = &g->cdt.v[3 * t];
-  g->bad[g->nbad++] = (qk__gm_tq_t){t, tv[0], tv[1], tv[2]};
+  BAD_AT(g, g->nbad) = (qk__gm_tq_t){t, tv[0], tv[1], tv[2]};
+  g->nbad++;
   return QK_OK;
+}
+
+/* Queue triangle t as bad (inline while the ring has room). */
+static inline qk_status_t push_bad(qk__gm_t *g, uint32_t t) {
+  if (g->nbad - g->bad_head < g->bad_cap) {
+    const uint32_t *tv = &g->cdt.v[3 * t];
+    BAD_AT(g, g->nbad) = (qk__gm_tq_t){t, tv[0], tv[1], tv[2]};
+    g->nbad++;
+    return QK_OK;
+  }
+  return push_bad_slow(g, t);
 }
 
 static qk_status_t push_enc(qk__gm_t *g, uint32_t a, uint32_t b, uint32_t s) {
@@ -258,11 +288,13 @@ static int apex_encroaches(const qk__gm_t *g, uint32_t t, int k) {
 static qk_status_t check(qk__gm_t *g, uint32_t t) {
   const qk__cdt_t *c = &g->cdt;
   if (g->faces[g->face[t]].drop) return QK_OK;
-  for (int k = 0; k < 3; k++)
-    if (c->seg[3 * t + k] != QK__CDT_NONE && apex_encroaches(g, t, k) &&
-        push_enc(g, c->v[3 * t + (k + 1) % 3], c->v[3 * t + (k + 2) % 3], c->seg[3 * t + k]))
-      return QK_ERR_NOMEM;
-  return qk__gm_is_bad(g, t) ? push_bad(g, t) : QK_OK;
+  const uint32_t *ts = &c->seg[3 * t];
+  if ((ts[0] & ts[1] & ts[2]) != QK__CDT_NONE) /* some edge constrained (NONE is all ones) */
+    for (int k = 0; k < 3; k++)
+      if (ts[k] != QK__CDT_NONE && apex_encroaches(g, t, k) &&
+          push_enc(g, c->v[3 * t + (k + 1) % 3], c->v[3 * t + (k + 2) % 3], c->seg[3 * t + k]))
+        return QK_ERR_NOMEM;
+  return bad_kept(g, t) ? push_bad(g, t) : QK_OK;
 }
 
 static qk_status_t check_dirty(qk__gm_t *g) {
@@ -296,8 +328,8 @@ static qk_status_t grow_stack(qk__gm_t *g, size_t need) {
 
 /* The cavity stamps cover every triangle slot; new slots and a wrapped generation start
  * from 0 (no stamp). */
-static qk_status_t grow_marks(qk__gm_t *g) {
-  size_t nt = g->cdt.nt, c = g->mark_cap;
+static qk_status_t grow_marks_to(qk__gm_t *g, size_t nt) {
+  size_t c = g->mark_cap;
   if (nt > c) {
     void *p = g->mark;
     if (qk__grow(g->a, &p, &c, nt, sizeof *g->mark)) return QK_ERR_NOMEM;
@@ -312,6 +344,8 @@ static qk_status_t grow_marks(qk__gm_t *g) {
   return QK_OK;
 }
 
+static qk_status_t grow_marks(qk__gm_t *g) { return grow_marks_to(g, g->cdt.nt); }
+
 /* The subsegments on the boundary of the insertion cavity of p (the triangles whose
  * circumcircles hold p, reached from t0 and t1 without crossing a constrained edge) that p
  * would encroach: queued (as triples) in g->enc. Returns the number queued, or -1 on NOMEM.
@@ -322,7 +356,8 @@ static int cavity_encroach(qk__gm_t *g, uint32_t t0, uint32_t t1, const double p
   const qk__cdt_t *c = &g->cdt;
   size_t n = 0, seen = 0;
   int found = 0;
-  if (grow_stack(g, 2) || grow_marks(g)) return -1;
+  /* Room for the whole search at once: it stops growing past 4096 triangles. */
+  if (grow_stack(g, 4096 + 8) || grow_marks(g)) return -1;
   uint32_t gen = ++g->mark_gen, *mark = g->mark;
   g->stack[n++] = t0, mark[t0] = 2 * gen + 1;
   if (t1 != QK__CDT_NONE) g->stack[n++] = t1, mark[t1] = 2 * gen + 1;
@@ -341,10 +376,9 @@ static int cavity_encroach(qk__gm_t *g, uint32_t t0, uint32_t t1, const double p
       uint32_t u = c->nbr[3 * t + k];
       if (u == QK__CDT_NONE || n > 4096 || mark[u] >> 1 == gen) continue;
       const uint32_t *uv = &c->v[3 * u];
-      int in = qk__incircle(&c->xy[2 * uv[0]], &c->xy[2 * uv[1]], &c->xy[2 * uv[2]], p) > 0;
+      int in = qk__cdt_incircle(&c->xy[2 * uv[0]], &c->xy[2 * uv[1]], &c->xy[2 * uv[2]], p) > 0;
       mark[u] = 2 * gen + (uint32_t)in; /* tested once */
       if (!in) continue;
-      if (grow_stack(g, n + 1)) return -1;
       g->stack[n++] = u;
     }
   }
@@ -423,7 +457,7 @@ static qk_status_t split_triangle(qk__gm_t *g, uint32_t t, size_t *rejected) {
     /* Behind a protected piece: the triangle is rejected (left as it is; the final check
      * refuses the mesh if it is still below the bound). */
     if (!st && done && push_bad(g, t)) st = QK_ERR_NOMEM;
-    if (!st && done) g->bad[g->nbad - 1] = self;
+    if (!st && done) BAD_AT(g, g->nbad - 1) = self;
     if (!done) ++*rejected;
     return st;
   }
@@ -450,7 +484,7 @@ static qk_status_t split_triangle(qk__gm_t *g, uint32_t t, size_t *rejected) {
     /* Every encroached piece protected: the triangle is rejected (as above). */
     if (!any) return ++*rejected, QK_OK;
     if (push_bad(g, t)) return QK_ERR_NOMEM;
-    g->bad[g->nbad - 1] = self;
+    BAD_AT(g, g->nbad - 1) = self;
     return QK_OK;
   }
   uint32_t v;
@@ -464,9 +498,32 @@ static qk_status_t split_triangle(qk__gm_t *g, uint32_t t, size_t *rejected) {
   return check_dirty(g);
 }
 
+/* With a plain size bound h, the refined mesh holds about 5.1 triangles per h^2 of kept
+ * area (5.05 to 5.2 on the coastlines at 1/128 and 1/256 of their extent): room for a bit
+ * more is reserved up front in the CDT's arrays and the cavity stamps, which saves the
+ * copies of growing them by steps (the last growth alone copies two thirds of them).
+ * Beyond 2^27 triangles, steps. */
+static qk_status_t reserve(qk__gm_t *g) {
+  qk__cdt_t *c = &g->cdt;
+  double h = g->opt->max_size, area = 0;
+  if (!(h > 0) || g->opt->size_fn) return QK_OK;
+  for (size_t t = 0; t < c->nt; t++) {
+    if (g->faces[g->face[t]].drop) continue;
+    const uint32_t *tv = &c->v[3 * t];
+    const double *A = &c->xy[2 * tv[0]], *B = &c->xy[2 * tv[1]], *C = &c->xy[2 * tv[2]];
+    area += (B[0] - A[0]) * (C[1] - A[1]) - (B[1] - A[1]) * (C[0] - A[0]);
+  }
+  double est = 5.3 * (area / 2) / (h * h);
+  if (!(est < (double)((size_t)1 << 27))) return QK_OK;
+  size_t nt = c->nt + (size_t)est, nv = c->nv + (size_t)est / 2 + 4;
+  if (qk__cdt_reserve(c, nv, nt) || grow_marks_to(g, nt)) return QK_ERR_NOMEM;
+  return QK_OK;
+}
+
 qk_status_t qk__gm_refine(qk__gm_t *g) {
   qk__cdt_t *c = &g->cdt;
   g->ndirty = 0;
+  if (reserve(g)) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   for (uint32_t t = 0; t < c->nt; t++)
     if (check(g, t)) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   qk_status_t st = QK_OK;
@@ -475,7 +532,7 @@ qk_status_t qk__gm_refine(qk__gm_t *g) {
     if (g->insertions > g->work_cap) {
       double x = 0, y = 0;
       if (g->bad_head < g->nbad) {
-        const double *q = &c->xy[2 * g->bad[g->bad_head].a];
+        const double *q = &c->xy[2 * BAD_AT(g, g->bad_head).a];
         x = q[0], y = q[1];
       }
       return qk__mesh_fail(g->err, QK_ERR_LIMIT, 0,
@@ -499,7 +556,8 @@ qk_status_t qk__gm_refine(qk__gm_t *g) {
      * the same order is the same triangle (its face, and so its quality, unchanged), so it
      * is still bad and is not tested again. A changed slot is skipped: its new triangle was
      * checked (and queued if bad) when the CDT changed it. */
-    qk__gm_tq_t q = g->bad[g->bad_head++];
+    qk__gm_tq_t q = BAD_AT(g, g->bad_head);
+    g->bad_head++;
     const uint32_t *tv = &c->v[3 * q.t];
     if (tv[0] != q.a || tv[1] != q.b || tv[2] != q.c) continue;
     if ((st = split_triangle(g, q.t, &rejected))) break;

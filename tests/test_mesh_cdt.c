@@ -893,6 +893,51 @@ static void test_cdt_alloc_fail(void **state) {
   assert_true(failures > 3);
 }
 
+/* qk__cdt_reserve: with room for the whole triangulation reserved, 100 insertions and the
+ * shrink allocate nothing more (the shrink only gives back); a failure at any allocation of
+ * the reserve leaves the triangulation as it was, usable, and nothing leaked. The triangle
+ * arrays grow one by one, so a failure between them leaves some with more room (the
+ * allocator checks every block's recorded size). */
+static void test_cdt_reserve(void **state) {
+  (void)state;
+  g_seed = qkt_seed(12111);
+  qkt_alloc_t fa;
+  qk_allocator_t al = qkt_alloc_make(&fa);
+  int failures = 0;
+  for (size_t n = 1;; n++) {
+    qkt_rng_t r;
+    qkt_rng_seed(&r, g_seed);
+    qk__cdt_t c;
+    qkt_alloc_arm(&fa, 0);
+    assert_int_equal(qk__cdt_init(&c, &al, 0, 0, 16, 0), QK_OK);
+    qkt_alloc_arm(&fa, n);
+    snap_t s;
+    snap_take(&s, &c);
+    qk_status_t st = qk__cdt_reserve(&c, 4 + 100, 2 * 104);
+    if (st == QK_ERR_NOMEM) snap_expect(&s, &c);
+    snap_free(&s);
+    int done = !fa.failed;
+    failures += fa.failed;
+    qkt_alloc_arm(&fa, 0);
+    if (st != QK_OK) assert_int_equal(qk__cdt_reserve(&c, 4 + 100, 2 * 104), QK_OK);
+    size_t calls = fa.calls;
+    for (int i = 0; i < 100; i++) {
+      uint32_t v;
+      int ex;
+      double x = 0.5 + 15 * qkt_rng_unit(&r), y = 0.5 + 15 * qkt_rng_unit(&r);
+      assert_int_equal(qk__cdt_insert(&c, x, y, NONE, &v, &ex), QK_OK);
+    }
+    assert_int_equal(fa.calls, calls); /* no growth */
+    check_cdt(&c);
+    qk__cdt_shrink(&c);
+    check_cdt(&c);
+    qk__cdt_free(&c);
+    assert_int_equal(fa.live_blocks, 0);
+    if (done) break;
+  }
+  assert_true(failures >= 2);
+}
+
 static void skip_without_gmp(void **state) {
   (void)state;
   skip();
@@ -910,6 +955,7 @@ int main(void) {
       cmocka_unit_test(test_cdt_segments),      cmocka_unit_test(test_cdt_segment_refused),
       cmocka_unit_test(test_cdt_long_segments), cmocka_unit_test(test_cdt_segment_near_collinear),
       cmocka_unit_test(test_cdt_walk),          cmocka_unit_test(test_cdt_alloc_fail),
+      cmocka_unit_test(test_cdt_reserve),
   };
   (void)skip_without_gmp;
   return cmocka_run_group_tests(tests, NULL, NULL);
