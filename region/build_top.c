@@ -61,8 +61,8 @@ typedef struct top {
   uint32_t *cset; /* grid cell c's set: pool[cset[c]] features at pool + cset[c] + 1 */
   uint32_t *pool;
   size_t n_pool, cap_pool;
-  uint32_t *s, *u, *oa, *ob; /* the walk's set, scratch, two crossing lists */
-  size_t cap_s, cap_u, cap_oa, cap_ob;
+  uint32_t *s, *u, *oa, *ob, *oe; /* the walk's set, scratch, crossing lists */
+  size_t cap_s, cap_u, cap_oa, cap_ob, cap_oe;
   uint32_t *gather; /* a leaf above level k: its pieces */
   size_t cap_gather;
 } top_t;
@@ -232,20 +232,6 @@ static qk_status_t toggle(top_t *t, size_t *ns, const uint32_t *odd, size_t n) {
   return QK_OK;
 }
 
-/* The walk's step from o to q through m, o in grid cell c0 and q in c1; *moved: whether
- * the set changed. */
-static qk_status_t step(top_t *t, size_t *ns, size_t c0, size_t c1, double ox, double oy, double mx,
-                        double my, double qx, double qy, bool *moved) {
-  qk_status_t st;
-  size_t na, nb;
-  if ((st = cell_odd(t, c0, ox, oy, mx, my, &t->oa, &t->cap_oa, &na)) ||
-      (st = cell_odd(t, c1, mx, my, qx, qy, &t->ob, &t->cap_ob, &nb)) ||
-      (st = toggle(t, ns, t->oa, na)) || (st = toggle(t, ns, t->ob, nb)))
-    return st;
-  *moved = na || nb;
-  return QK_OK;
-}
-
 /* Record the walk's set as grid cell c's (shared with the previous cell when the same). */
 static qk_status_t keep_set(top_t *t, size_t c, size_t ns, bool same) {
   if (same && c) {
@@ -285,13 +271,50 @@ static qk_status_t ray_set(top_t *t, double cx, double cy, size_t *ns) {
   return QK_OK;
 }
 
-/* Every grid cell's set: column 0 upwards, then each row eastwards. */
+/* The features crossed an odd number of times by the two halves of grid cell c's
+ * horizontal line through its centre, (x0, y) -> (xm, y) into t->oa and (xm, y) -> (x1, y)
+ * into t->ob: one pass over its pieces, of which only those across the line are tested. */
+static qk_status_t row_odds(top_t *t, size_t c, double x0, double xm, double x1, double y,
+                            size_t *na, size_t *nb) {
+  const qk__pieces_t *pc = t->b->pc;
+  const uint32_t *E = t->list + t->cstart[c];
+  size_t n = t->cstart[c + 1] - t->cstart[c], ka = 0, kb = 0;
+  qk_status_t st;
+  if ((st = qk__grow(t->a, (void **)&t->oa, &t->cap_oa, n, sizeof(uint32_t))) ||
+      (st = qk__grow(t->a, (void **)&t->ob, &t->cap_ob, n, sizeof(uint32_t))))
+    return st;
+  uint32_t *oa = t->oa, *ob = t->ob;
+  for (size_t i = 0; i < n; i++) {
+    const qk__seg_t *g = &pc->seg[E[i]];
+    double ly = qk__min(g->ay, g->by), hy = qk__max(g->ay, g->by);
+    if (hy < y || ly > y) continue;
+    double lx = qk__min(g->ax, g->bx), hx = qk__max(g->ax, g->bx);
+    uint32_t f = pc->feat[E[i]];
+    if (qk__ref_crosses(x0, y, xm, y, g, lx, hx, ly, hy)) {
+      if (ka && oa[ka - 1] == f)
+        ka--; /* crossed twice so far: even */
+      else
+        oa[ka++] = f;
+    }
+    if (qk__ref_crosses(xm, y, x1, y, g, lx, hx, ly, hy)) {
+      if (kb && ob[kb - 1] == f)
+        kb--;
+      else
+        ob[kb++] = f;
+    }
+  }
+  *na = ka;
+  *nb = kb;
+  return QK_OK;
+}
+
+/* Every grid cell's set: column 0 upwards, then each row eastwards, from centre to
+ * centre through the midpoint of the side between them. */
 static qk_status_t walk(top_t *t) {
   const unsigned k = t->k;
   const size_t g = t->g;
   const double hk = t->hk;
-  size_t ns;
-  bool moved;
+  size_t ns, na, nb;
   qk_status_t st = ray_set(t, t->gx[0] + hk, t->gy[0] + hk, &ns);
   for (size_t j = 0; j < g && !st; j++) {
     double cy = t->gy[j] + hk, cx = t->gx[0] + hk;
@@ -300,16 +323,37 @@ static qk_status_t walk(top_t *t) {
       ns = prev[0];
       if ((st = qk__grow(t->a, (void **)&t->s, &t->cap_s, ns + 1, sizeof(uint32_t)))) break;
       memcpy(t->s, prev + 1, ns * sizeof(uint32_t));
-      if ((st = step(t, &ns, (j - 1) << k, j << k, cx, t->gy[j - 1] + hk, cx, t->gy[j], cx, cy,
-                     &moved)))
+      if ((st = cell_odd(t, (j - 1) << k, cx, t->gy[j - 1] + hk, cx, t->gy[j], &t->oa, &t->cap_oa,
+                         &na)) ||
+          (st = toggle(t, &ns, t->oa, na)) ||
+          (st = cell_odd(t, j << k, cx, t->gy[j], cx, cy, &t->oa, &t->cap_oa, &na)) ||
+          (st = toggle(t, &ns, t->oa, na)))
         break;
     }
     if ((st = keep_set(t, j << k, ns, false))) break;
-    for (size_t i = 1; i < g && !st; i++) {
+    /* e: the crossings of the east half of the previous cell's line, kept in t->oe */
+    size_t ne = 0;
+    for (size_t i = 0; i < g && !st; i++) {
       size_t c = j << k | i;
-      if (!(st = step(t, &ns, c - 1, c, t->gx[i - 1] + hk, cy, t->gx[i], cy, t->gx[i] + hk, cy,
-                      &moved)))
-        st = keep_set(t, c, ns, !moved);
+      bool moved = ne > 0;
+      if (ne && (st = toggle(t, &ns, t->oe, ne))) break;
+      ne = 0;
+      if (t->cstart[c + 1] > t->cstart[c]) {
+        double xm = t->gx[i] + hk;
+        if ((st = row_odds(t, c, t->gx[i], xm, t->gx[i + 1], cy, &na, &nb))) break;
+        if (i && na) {
+          if ((st = toggle(t, &ns, t->oa, na))) break;
+          moved = true;
+        }
+        if (nb) { /* keep the east half's for the next cell */
+          uint32_t *w = t->oe;
+          size_t cw = t->cap_oe;
+          t->oe = t->ob, t->cap_oe = t->cap_ob;
+          t->ob = w, t->cap_ob = cw;
+          ne = nb;
+        }
+      }
+      if (i) st = keep_set(t, c, ns, !moved);
     }
   }
   return st;
@@ -511,6 +555,7 @@ qk_status_t qk__build_top(qk__bctx_t *b) {
   qk__free(a, t.u, t.cap_u * sizeof(uint32_t));
   qk__free(a, t.oa, t.cap_oa * sizeof(uint32_t));
   qk__free(a, t.ob, t.cap_ob * sizeof(uint32_t));
+  qk__free(a, t.oe, t.cap_oe * sizeof(uint32_t));
   qk__free(a, t.gather, t.cap_gather * sizeof(uint32_t));
   qk__free(a, blk, bytes);
   return st;
