@@ -353,7 +353,11 @@ static qk_status_t walk(top_t *t) {
           ne = nb;
         }
       }
-      if (i) st = keep_set(t, c, ns, !moved);
+      if (!i) continue;
+      if (moved)
+        st = keep_set(t, c, ns, false);
+      else
+        t->cset[c] = t->cset[c - 1]; /* the same set */
     }
   }
   return st;

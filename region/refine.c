@@ -39,14 +39,16 @@ static bool segs_meet(const qk__seg_t *p, const qk__seg_t *q) {
 static void self_meets(qk__bctx_t *b, const uint32_t *E, size_t n) {
   const qk__pieces_t *pc = b->pc;
   if (n > SELF_CHECK_MAX) return;
-  for (size_t i = 0; i < n; i++) {
-    uint32_t p = E[i], rp = pc->ring[p], vp = pc->vtx[p];
-    if (vp == UINT32_MAX || b->bad[rp]) continue;
+  const uint32_t *ring = pc->ring, *vtx = pc->vtx;
+  uint32_t rn = n ? ring[E[0]] : 0;
+  for (size_t i = 0; i + 1 < n; i++) {
+    uint32_t p = E[i], rp = rn, vp = vtx[p];
+    rn = ring[E[i + 1]];
+    if (rn != rp || vp == UINT32_MAX || b->bad[rp]) continue; /* (the next piece's ring) */
     size_t rs = b->in->ring_start[rp], re = b->in->ring_start[rp + 1];
-    for (size_t j = i + 1; j < n && pc->ring[E[j]] == rp; j++) {
-      uint32_t q = E[j];
-      if (pc->vtx[q] == UINT32_MAX) continue;
-      uint32_t vq = pc->vtx[q];
+    for (size_t j = i + 1; j < n && ring[E[j]] == rp; j++) {
+      uint32_t q = E[j], vq = vtx[q];
+      if (vq == UINT32_MAX) continue;
       uint32_t lo = vp < vq ? vp : vq, hi = vp < vq ? vq : vp;
       if (hi - lo <= 1 || (lo == rs && hi == re - 2)) continue; /* same or neighbouring edges */
       if (segs_meet(&pc->seg[p], &pc->seg[q])) {
@@ -133,8 +135,9 @@ static inline void flip(flips_t *fl, unsigned q, uint32_t p, const qk__seg_t *g,
  * progress: every child meets fewer pieces than the cell. Pieces that all pass one point
  * (a vertex of high degree) or overlap (shared edges) never separate, and such cells
  * would otherwise split down to the depth cap. */
-static qk_status_t split_lists(qk__bctx_t *b, unsigned d, double x0, double y0, double x1,
-                               double y1, double cx, double cy, double half, bool *progress) {
+__attribute__((noinline)) static qk_status_t split_lists(qk__bctx_t *b, unsigned d, double x0,
+                                                         double y0, double x1, double y1, double cx,
+                                                         double cy, double half, bool *progress) {
   size_t n = b->ne[d];
   qk_status_t st = qk__grow(&b->r->alloc, (void **)&b->store[d + 1], &b->cap_store[d + 1],
                             4 * n + 1, sizeof(uint32_t));
