@@ -20,7 +20,8 @@
  *    column 0, then along every row, from centre to centre through the midpoint of the
  *    side between them. Each half of a step lies in one cell's closed square, so only
  *    that cell's pieces can cross it, and only those whose box reaches the step's line:
- *    few. The first centre is classified by brute force (a half-open ray). A leaf above
+ *    few. The first centre is classified by a half-open ray to the west, which only its
+ *    cell's pieces can cross. A leaf above
  *    level k has its centre at the corner of a grid cell: its set is that cell's with
  *    the crossings of the half diagonal between them.
  *
@@ -249,23 +250,27 @@ static qk_status_t keep_set(top_t *t, size_t c, size_t ns, bool same) {
   return QK_OK;
 }
 
-/* The features containing (cx, cy), by brute force: the half-open ray to the east. */
-static qk_status_t ray_set(top_t *t, double cx, double cy, size_t *ns) {
+/* The features containing the centre (cx, cy) of grid cell 0, from the half-open ray to
+ * the west: inside the root it runs in cell 0's closed square, and no piece lies outside
+ * the root, so only cell 0's pieces can cross it. (The perturbed point is above a vertex
+ * exactly when the vertex is not above cy; an edge across its line is crossed on the
+ * west side when the point is on the other side than for the ray to the east.) */
+static qk_status_t first_set(top_t *t, double cx, double cy, size_t *ns) {
   const qk__pieces_t *pc = t->b->pc;
-  size_t n = pc->n, k = 0;
+  const uint32_t *E = t->list + t->cstart[0];
+  size_t n = t->cstart[1] - t->cstart[0], k = 0;
   qk_status_t st = qk__grow(t->a, (void **)&t->s, &t->cap_s, n + 1, sizeof(uint32_t));
   if (st) return st;
-  bool par = false;
   for (size_t i = 0; i < n; i++) {
-    const qk__seg_t *g = &pc->seg[i];
-    if ((g->ay > cy) != (g->by > cy)) {
-      int s = qk__side(g->ax, g->ay, g->bx, g->by, cx, cy);
-      if ((g->by > g->ay) ? s > 0 : s < 0) par = !par;
-    }
-    if (i + 1 == n || pc->feat[i + 1] != pc->feat[i]) {
-      if (par) t->s[k++] = pc->feat[i];
-      par = false;
-    }
+    const qk__seg_t *g = &pc->seg[E[i]];
+    if ((g->ay > cy) == (g->by > cy)) continue;
+    int sd = qk__side(g->ax, g->ay, g->bx, g->by, cx, cy);
+    if ((g->by > g->ay) ? sd > 0 : sd < 0) continue; /* crossed to the east */
+    uint32_t f = pc->feat[E[i]];
+    if (k && t->s[k - 1] == f)
+      k--;
+    else
+      t->s[k++] = f;
   }
   *ns = k;
   return QK_OK;
@@ -315,7 +320,7 @@ static qk_status_t walk(top_t *t) {
   const size_t g = t->g;
   const double hk = t->hk;
   size_t ns, na, nb;
-  qk_status_t st = ray_set(t, t->gx[0] + hk, t->gy[0] + hk, &ns);
+  qk_status_t st = first_set(t, t->gx[0] + hk, t->gy[0] + hk, &ns);
   for (size_t j = 0; j < g && !st; j++) {
     double cy = t->gy[j] + hk, cx = t->gx[0] + hk;
     if (j) { /* from row j - 1's first centre, which the pool holds */

@@ -290,12 +290,11 @@ static inline unsigned qk__clip4(const qk__seg_t *g, double lx, double hx, doubl
   return m;
 }
 
-/* Does the segment o -> c between two reference points cross piece g (box lx..hy)? The
- * box test first: only pieces whose box meets the segment's can cross it. */
-static inline bool qk__ref_crosses(double ox, double oy, double qx, double qy, const qk__seg_t *g,
-                                   double lx, double hx, double ly, double hy) {
-  if (hx < qk__min(ox, qx) || lx > qk__max(ox, qx) || hy < qk__min(oy, qy) || ly > qk__max(oy, qy))
-    return false;
+/* Does the segment o -> q between two reference points cross piece g (box lx..hy)? The
+ * box test first (qk__ref_crosses): only pieces whose box meets the segment's can cross
+ * it. */
+static inline bool qk__ref_crosses_line(double ox, double oy, double qx, double qy,
+                                        const qk__seg_t *g) {
   /* Both ends surely on one side of the segment's line (qk__orient's filter, without its
    * exact fallback: undecided cases take the full test): no crossing. Most pieces in the
    * segment's box are decided here, by two products each. */
@@ -307,6 +306,13 @@ static inline bool qk__ref_crosses(double ox, double oy, double qx, double qy, c
   if ((da > ea && db > eb) || (da < -ea && db < -eb)) return false;
   int sc = qk__side(g->ax, g->ay, g->bx, g->by, ox, oy);
   return qk__crosses(ox, oy, qx, qy, g->ax, g->ay, g->bx, g->by, sc);
+}
+
+static inline bool qk__ref_crosses(double ox, double oy, double qx, double qy, const qk__seg_t *g,
+                                   double lx, double hx, double ly, double hy) {
+  if (hx < qk__min(ox, qx) || lx > qk__max(ox, qx) || hy < qk__min(oy, qy) || ly > qk__max(oy, qy))
+    return false;
+  return qk__ref_crosses_line(ox, oy, qx, qy, g);
 }
 
 /* The refinement below a cell whose pieces are b->e[d] and set b->s[d] (refine.c): split
