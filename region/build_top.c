@@ -83,8 +83,8 @@ static qk_status_t push2(const qk_allocator_t *a, uint32_t **v, size_t *n, size_
 
 /* Column i with gx[i] < x <= gx[i + 1] (gx[0] < x <= gx[g]). */
 static inline size_t col_lo(const double *gx, size_t g, double r0, double scale, double x) {
-  double f = (x - r0) * scale;
-  size_t i = f < 1 ? 0 : f >= (double)g ? g - 1 : (size_t)f;
+  size_t i = (size_t)((x - r0) * scale); /* (x > r0) */
+  if (i >= g) i = g - 1;
   while (i > 0 && gx[i] >= x) i--;
   while (i + 1 < g && gx[i + 1] < x) i++;
   return i;
@@ -92,8 +92,8 @@ static inline size_t col_lo(const double *gx, size_t g, double r0, double scale,
 
 /* Column i with gx[i] <= x < gx[i + 1] (gx[0] < x < gx[g]). */
 static inline size_t col_hi(const double *gx, size_t g, double r0, double scale, double x) {
-  double f = (x - r0) * scale;
-  size_t i = f < 1 ? 0 : f >= (double)g ? g - 1 : (size_t)f;
+  size_t i = (size_t)((x - r0) * scale);
+  if (i >= g) i = g - 1;
   while (i > 0 && gx[i] > x) i--;
   while (i + 1 < g && gx[i + 1] <= x) i++;
   return i;

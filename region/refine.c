@@ -135,15 +135,16 @@ static inline void flip(flips_t *fl, unsigned q, uint32_t p, const qk__seg_t *g,
  * progress: every child meets fewer pieces than the cell. Pieces that all pass one point
  * (a vertex of high degree) or overlap (shared edges) never separate, and such cells
  * would otherwise split down to the depth cap. */
-__attribute__((noinline)) static qk_status_t split_lists(qk__bctx_t *b, unsigned d, double x0,
-                                                         double y0, double x1, double y1, double cx,
-                                                         double cy, double half, bool *progress) {
+static qk_status_t split_lists(qk__bctx_t *b, unsigned d, double x0, double y0, double x1,
+                               double y1, double cx, double cy, double half, bool *progress) {
   size_t n = b->ne[d];
-  qk_status_t st = qk__grow(&b->r->alloc, (void **)&b->store[d + 1], &b->cap_store[d + 1],
-                            4 * n + 1, sizeof(uint32_t));
-  if (st) return st;
-  if ((st = qk__grow(&b->r->alloc, (void **)&b->odd[d], &b->cap_odd[d], 4 * (n + 1),
-                     sizeof(uint32_t))))
+  qk_status_t st;
+  if ((4 * n + 1 > b->cap_store[d + 1] &&
+       (st = qk__grow(&b->r->alloc, (void **)&b->store[d + 1], &b->cap_store[d + 1], 4 * n + 1,
+                      sizeof(uint32_t)))) ||
+      (4 * (n + 1) > b->cap_odd[d] &&
+       (st = qk__grow(&b->r->alloc, (void **)&b->odd[d], &b->cap_odd[d], 4 * (n + 1),
+                      sizeof(uint32_t)))))
     return st;
   uint32_t *out = b->store[d + 1];
   size_t c0 = 0, c1 = 0, c2 = 0, c3 = 0;
@@ -186,7 +187,8 @@ qk_status_t qk__child_set(qk__bctx_t *b, unsigned d, const uint32_t *odd, size_t
   const qk_allocator_t *a = &b->r->alloc;
   size_t ns = b->ns[d];
   qk_status_t st;
-  if ((st = qk__grow(a, (void **)&b->s[d + 1], &b->cap_s[d + 1], ns + nodd + 1, sizeof(uint32_t))))
+  if (ns + nodd + 1 > b->cap_s[d + 1] &&
+      (st = qk__grow(a, (void **)&b->s[d + 1], &b->cap_s[d + 1], ns + nodd + 1, sizeof(uint32_t))))
     return st;
   const uint32_t *S = b->s[d];
   uint32_t *T = b->s[d + 1];
