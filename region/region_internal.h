@@ -274,6 +274,14 @@ static inline unsigned qk__clip4(const qk__seg_t *g, double lx, double hx, doubl
       return 1u << (north ? (east ? 0u : 1u) : (east ? 3u : 2u));
   }
   bool e = hx >= cx, w = lx <= cx, no = hy >= cy, so = ly <= cy;
+  /* Inside one half's strip (a piece across the cell's side, or across the centre line
+   * within one half): the children its box reaches. The box meets the cell's square
+   * (every cell keeps only such pieces), so within the strip the piece passes through
+   * each of those children and the test below would keep it. */
+  if (ly > cy && hy <= y1) return (e ? 1u : 0u) | (w ? 2u : 0u);
+  if (hy < cy && ly >= y0) return (w ? 4u : 0u) | (e ? 8u : 0u);
+  if (lx > cx && hx <= x1) return (no ? 1u : 0u) | (so ? 8u : 0u);
+  if (hx < cx && lx >= x0) return (no ? 2u : 0u) | (so ? 4u : 0u);
   const double h = cx - x0;
   double dx = g->bx - g->ax, dy = g->by - g->ay;
   double l = dx * (cy - g->ay), r = dy * (cx - g->ax);
