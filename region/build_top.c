@@ -233,12 +233,8 @@ static qk_status_t toggle(top_t *t, size_t *ns, const uint32_t *odd, size_t n) {
   return QK_OK;
 }
 
-/* Record the walk's set as grid cell c's (shared with the previous cell when the same). */
-static qk_status_t keep_set(top_t *t, size_t c, size_t ns, bool same) {
-  if (same && c) {
-    t->cset[c] = t->cset[c - 1];
-    return QK_OK;
-  }
+/* Record the walk's set as grid cell c's. */
+static qk_status_t keep_set(top_t *t, size_t c, size_t ns) {
   qk_status_t st;
   if ((st = qk__grow(t->a, (void **)&t->pool, &t->cap_pool, t->n_pool + ns + 1, sizeof(uint32_t))))
     return st;
@@ -335,7 +331,7 @@ static qk_status_t walk(top_t *t) {
           (st = toggle(t, &ns, t->oa, na)))
         break;
     }
-    if ((st = keep_set(t, j << k, ns, false))) break;
+    if ((st = keep_set(t, j << k, ns))) break;
     /* e: the crossings of the east half of the previous cell's line, kept in t->oe */
     size_t ne = 0;
     for (size_t i = 0; i < g && !st; i++) {
@@ -360,7 +356,7 @@ static qk_status_t walk(top_t *t) {
       }
       if (!i) continue;
       if (moved)
-        st = keep_set(t, c, ns, false);
+        st = keep_set(t, c, ns);
       else
         t->cset[c] = t->cset[c - 1]; /* the same set */
     }
