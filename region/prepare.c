@@ -153,6 +153,13 @@ static qk_status_t ring_lonlat(ring_ctx_t *c, const double *xy, size_t start, si
           !(st = piece(c, 180, P, 180, phi, UINT32_MAX)))
         st = piece(c, 180, phi, bx, by, v);
       k--;
+    } else if (c->out && c->out->n < c->out->cap && (ax != bx || ay != by)) {
+      qk__pieces_t *p = c->out; /* piece() inline, for the common case */
+      p->seg[p->n] = (qk__seg_t){ax, ay, bx, by};
+      p->feat[p->n] = c->f;
+      p->ring[p->n] = c->r;
+      p->vtx[p->n] = v;
+      p->n++;
     } else {
       st = piece(c, ax, ay, bx, by, v);
     }

@@ -34,13 +34,26 @@
  * without it (the default) the same cells are numbered straight into the query array
  * kid[], which saves the tree's bookkeeping (about 8% of the build's instructions) and
  * its memory. Each cell has a reference point, the centre of its square as
- * computed by the descent. The root's reference point is classified by brute force (a
- * half-open ray, which is the perturbed crossing test); a child's from its parent's by
- * counting the crossings of the segment parent reference -> child reference (the
- * parent's reference is a corner of the child's square, so the segment stays in the
- * child's closed square and only the child's pieces can cross it). A leaf stores its
- * reference point, the sorted set of features containing it, and copies of its pieces
- * grouped by feature, each with the side of the reference point against it (one bit).
+ * computed by the descent. A leaf stores its reference point, the sorted set of
+ * features containing it, and copies of its pieces grouped by feature, each with the
+ * side of the reference point against it (one bit).
+ *
+ * The build runs in two stages that make the same cells. The top k levels (4^k about the
+ * number of pieces; build_top.c) are made in one pass over the pieces: each piece is
+ * located in the 2^k x 2^k grid of level-k cells (its *home*: the deepest cell whose
+ * open square holds its box; the few pieces across grid lines are clipped down from
+ * there with the refinement's own test), the cells' piece counts and the grid cells'
+ * lists (a counting sort) follow, and the split decisions above level k are taken from
+ * the counts. The grid cells' reference points are classified by a walk along column 0
+ * and then along each row, from centre to centre through the midpoint of the side
+ * between them: each half step lies in one cell, so only that cell's pieces whose box
+ * reaches the step's line are tested. Below level k (refine.c) a cell's pieces are sorted
+ * into its children level by level, and a child's reference point is classified from
+ * its parent's by counting the crossings of the segment parent reference -> child
+ * reference (the parent's reference is a corner of the child's square, so only the
+ * child's pieces can cross it). Every crossing count is exact (perturbed crossing
+ * tests), and every list is made by the same conservative test (qk__clip4), so the index
+ * does not depend on where the stages meet.
  *
  * Splits also stop when they do not separate the pieces (pieces through one point, or
  * overlapping shared edges) two levels in a row, and when a budget of (pieces +

@@ -219,6 +219,124 @@ qk_status_t qk__props_add(const qk_allocator_t *a, qk__props_t *p, const char *k
                           size_t val_len);
 qk_status_t qk__props_end_feature(const qk_allocator_t *a, qk__props_t *p, size_t feature);
 
+/* ---- building (build.c, refine.c, build_top.c) ---------------------------------------- */
+
+#define QK__MAXD (QK_MAX_DEPTH_LIMIT + 1)
+
+/* Splits that make no progress are allowed this many levels in a row (a cluster in one
+ * quadrant separates after a few). */
+#define QK__STALL_BUDGET 2
+
+/* The state of one build. Per depth d along the current path: the pieces meeting the
+ * cell (e, ne: increasing piece order) and the features containing its reference point
+ * (s, ns: increasing). */
+typedef struct qk__bctx {
+  qk_region_t *r;
+  const qk__pieces_t *pc;
+  const qk_region_arrays_t *in;
+  uint32_t C, maxd;
+  uint32_t *e[QK__MAXD + 1];
+  size_t ne[QK__MAXD + 1];
+  uint32_t *store[QK__MAXD + 1]; /* per depth: the four children's lists, one after another */
+  size_t cap_store[QK__MAXD + 1];
+  size_t cnt[QK__MAXD + 1][4];
+  uint32_t *s[QK__MAXD + 1];
+  size_t ns[QK__MAXD + 1], cap_s[QK__MAXD + 1];
+  /* per depth: the features whose parity flips from the cell's reference point to each
+   * child's, four lists of up to ne[d] + 1 (found while sorting the pieces) */
+  uint32_t *odd[QK__MAXD + 1];
+  size_t cap_odd[QK__MAXD + 1];
+  size_t nodd[QK__MAXD + 1][4];
+  uint8_t *bad; /* per ring: self-intersecting */
+  unsigned depth;
+  size_t splits_left; /* a budget on splits: see qk__build_node */
+} qk__bctx_t;
+
+/*
+ * Which children of a cell keep a piece (bit q for child q: NE 0, NW 1, SW 2, SE 3). The
+ * cell is [x0, x1] x [y0, y1] with centre (cx, cy); l.. are the piece's box. A child keeps
+ * a piece whose box meets its square and, unless the box lies inside the square, whose
+ * line has corners of the square on both sides or within a tolerance. That is
+ * conservative: it may keep a piece that misses the closed square, never drops one that
+ * meets it (an extra piece costs time, not correctness). The line's value at the
+ * children's corners is its value at the centre plus multiples of dx h and dy h (h = cx -
+ * x0), so one evaluation serves the four children; the tolerance covers the rounding of
+ * that sum and of the corners themselves (x0 + h is not exactly the middle). Every build
+ * path sorts pieces with this one function, so they all make the same cells.
+ */
+static inline unsigned qk__clip4(const qk__seg_t *g, double lx, double hx, double ly, double hy,
+                                 double x0, double y0, double x1, double y1, double cx, double cy) {
+  /* Inside one child's square and off the centre lines (most pieces below the top
+   * levels): that child only. */
+  if ((lx > cx || hx < cx) && (ly > cy || hy < cy)) {
+    bool east = lx > cx, north = ly > cy;
+    if ((east ? hx <= x1 : lx >= x0) && (north ? hy <= y1 : ly >= y0))
+      return 1u << (north ? (east ? 0u : 1u) : (east ? 3u : 2u));
+  }
+  bool e = hx >= cx, w = lx <= cx, no = hy >= cy, so = ly <= cy;
+  /* Inside one half's strip (a piece across the cell's side, or across the centre line
+   * within one half): the children its box reaches. The box meets the cell's square
+   * (every cell keeps only such pieces), so within the strip the piece passes through
+   * each of those children and the test below would keep it. */
+  if (ly > cy && hy <= y1) return (e ? 1u : 0u) | (w ? 2u : 0u);
+  if (hy < cy && ly >= y0) return (w ? 4u : 0u) | (e ? 8u : 0u);
+  if (lx > cx && hx <= x1) return (no ? 1u : 0u) | (so ? 8u : 0u);
+  if (hx < cx && lx >= x0) return (no ? 2u : 0u) | (so ? 4u : 0u);
+  const double h = cx - x0;
+  double dx = g->bx - g->ax, dy = g->by - g->ay;
+  double l = dx * (cy - g->ay), r = dy * (cx - g->ax);
+  double v = l - r, a = dx * h, q = dy * h;
+  double tol = 1e-12 * (fabs(l) + fabs(r) + fabs(a) + fabs(q) +
+                        (fabs(dx) + fabs(dy)) * (fabs(cx) + fabs(cy)));
+  /* the line's value over each child's corners: v + dx * [0 or +-h] - dy * [0 or +-h] */
+  double ap = qk__max(a, 0), an = qk__min(a, 0), qp = qk__max(q, 0), qn = qk__min(q, 0);
+  unsigned m = 0;
+  if (e && no && v + an - qp <= tol && v + ap - qn >= -tol) m |= 1u;
+  if (w && no && v + an + qn <= tol && v + ap + qp >= -tol) m |= 2u;
+  if (w && so && v - ap + qn <= tol && v - an + qp >= -tol) m |= 4u;
+  if (e && so && v - ap - qp <= tol && v - an - qn >= -tol) m |= 8u;
+  return m;
+}
+
+/* Does the segment o -> q between two reference points cross piece g (box lx..hy)? The
+ * box test first (qk__ref_crosses): only pieces whose box meets the segment's can cross
+ * it. */
+static inline bool qk__ref_crosses_line(double ox, double oy, double qx, double qy,
+                                        const qk__seg_t *g) {
+  /* Both ends surely on one side of the segment's line (qk__orient's filter, without its
+   * exact fallback: undecided cases take the full test): no crossing. Most pieces in the
+   * segment's box are decided here, by two products each. */
+  double ux = qx - ox, uy = qy - oy;
+  double la = ux * (g->ay - oy), ra = uy * (g->ax - ox), lb = ux * (g->by - oy),
+         rb = uy * (g->bx - ox);
+  double da = la - ra, db = lb - rb;
+  double ea = QK__ORIENT_ERR * (fabs(la) + fabs(ra)), eb = QK__ORIENT_ERR * (fabs(lb) + fabs(rb));
+  if ((da > ea && db > eb) || (da < -ea && db < -eb)) return false;
+  int sc = qk__side(g->ax, g->ay, g->bx, g->by, ox, oy);
+  return qk__crosses(ox, oy, qx, qy, g->ax, g->ay, g->bx, g->by, sc);
+}
+
+static inline bool qk__ref_crosses(double ox, double oy, double qx, double qy, const qk__seg_t *g,
+                                   double lx, double hx, double ly, double hy) {
+  if (hx < qk__min(ox, qx) || lx > qk__max(ox, qx) || hy < qk__min(oy, qy) || ly > qk__max(oy, qy))
+    return false;
+  return qk__ref_crosses_line(ox, oy, qx, qy, g);
+}
+
+/* The refinement below a cell whose pieces are b->e[d] and set b->s[d] (refine.c): split
+ * while more than C pieces meet the cell, else a leaf. */
+qk_status_t qk__build_node(qk__bctx_t *b, qk_node_t v, double x0, double y0, double x1, double y1,
+                           double side, unsigned d, unsigned stall);
+/* Store cell v (at depth d, reference point (cx, cy)) as a leaf with b->e[d], b->s[d]. */
+qk_status_t qk__emit_leaf(qk__bctx_t *b, qk_node_t v, double cx, double cy, unsigned d);
+/* Give cell v four children, numbered from *first: QK_ERR_LIMIT when the index is full
+ * (v stays a leaf). */
+qk_status_t qk__split_cell(qk__bctx_t *b, qk_node_t v, uint32_t *first);
+/* b->s[d + 1] = b->s[d] with the features of the sorted list odd[0, n) toggled. */
+qk_status_t qk__child_set(qk__bctx_t *b, unsigned d, const uint32_t *odd, size_t n);
+/* The whole refinement from the root, whose set is b->s[0] (build_top.c). */
+qk_status_t qk__build_top(qk__bctx_t *b);
+
 /* Locate in one leaf; used by every query. */
 uint32_t qk__region_locate1(const qk_region_t *r, double x, double y, qk_boundary_t b);
 

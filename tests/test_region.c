@@ -6,7 +6,8 @@
  * floating-point filter meets non-trivial values near degeneracy).
  *  - random layers (self-intersecting rings, several rings per feature, many points on
  *    edges and vertices): locate, locate_all and the three boundary rules == oracle, with
- *    leaf capacities 1, 3 and the default;
+ *    leaf capacities 1, 3 and the default; points on the build's one-pass grid lines and
+ *    at its cells' centres == brute force;
  *  - coverages: grid cells and jittered quadrilateral cells sharing edges; points on
  *    shared edges and vertices belong to exactly one feature under semi-open;
  *  - closed and open rules on hand-made squares; reversed windings give the same answers;
@@ -268,6 +269,52 @@ static void test_region_grid_sides(void **state) {
                      (unsigned long long)seed, xs[a], ys[b], (int)f, (int)want);
         }
     }
+    qk_region_free(r);
+    tl_free(&t);
+  }
+}
+
+/* Points on the lines and at the centres of the build's one-pass grid (the level-k cells,
+ * 4^k about the number of pieces; region/build_top.c), computed here as the refinement
+ * computes cell sides, and just beside them: the answers equal brute force. Leaf
+ * capacities 1 to 3 make cells split far below the grid. */
+static void test_region_build_grid_lines(void **state) {
+  (void)state;
+  uint64_t seed = qkt_seed(4242);
+  qkt_rng_t g;
+  qkt_rng_seed(&g, seed);
+  for (int round = 0; round < 3; round++) {
+    tl_t t;
+    random_layer(&g, &t, 30 + 20 * (size_t)round, 3000);
+    qk_region_t *r = tl_build(&t, (uint32_t)round + 1, NULL, NULL);
+    unsigned k = 0;
+    while (k < 10 && ((size_t)1 << (2 * (k + 1))) <= r->n_segs) k++;
+    assert_true(k >= 3);
+    size_t n = (size_t)1 << k;
+    double hk = r->rside;
+    for (unsigned l = 0; l <= k; l++) hk *= 0.5;
+    for (size_t q = 0; q < 2000; q++) {
+      size_t i = qkt_rng_below(&g, (uint32_t)n), j = qkt_rng_below(&g, (uint32_t)n);
+      double lx = r->rx, ly = r->ry, h = r->rside;
+      for (unsigned l = 0; l < k; l++) {
+        h *= 0.5;
+        if (i >> (k - 1 - l) & 1) lx = lx + h;
+        if (j >> (k - 1 - l) & 1) ly = ly + h;
+      }
+      double xs[4] = {lx, nextafter(lx, -INFINITY), nextafter(lx, INFINITY), lx + hk};
+      double ys[4] = {ly, nextafter(ly, -INFINITY), nextafter(ly, INFINITY), ly + hk};
+      for (int a = 0; a < 4; a++)
+        for (int b = 0; b < 4; b++) {
+          uint32_t f, want = brute_pieces(r, xs[a], ys[b]);
+          qk_region_locate(r, (qk_point_t){xs[a], ys[b]}, QK_BOUNDARY_SEMI_OPEN, &f);
+          if (f != want)
+            fail_msg("seed %llu: (%.17g, %.17g): locate %d, brute force %d",
+                     (unsigned long long)seed, xs[a], ys[b], (int)f, (int)want);
+        }
+    }
+    for (size_t q = 0; q < 300; q++)
+      check_point(r, &t, (long)qkt_rng_below(&g, 3200) - 100, (long)qkt_rng_below(&g, 3200) - 100,
+                  seed);
     qk_region_free(r);
     tl_free(&t);
   }
@@ -1027,6 +1074,7 @@ int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_region_random_vs_oracle),
       cmocka_unit_test(test_region_grid_sides),
+      cmocka_unit_test(test_region_build_grid_lines),
       cmocka_unit_test(test_region_coverage_grid),
       cmocka_unit_test(test_region_coverage_jittered),
       cmocka_unit_test(test_region_rules_and_windings),

@@ -1,0 +1,262 @@
+/*
+ * The refinement below a cell, level by level: sorting a cell's pieces into its children,
+ * the children's sets, and the leaves' records (the design is described at the top of
+ * region.c; the top levels are made in one pass by build_top.c).
+ */
+#include <string.h>
+
+#include "region/region_internal.h"
+
+/* Do two closed segments meet (exactly)? */
+static bool segs_meet(const qk__seg_t *p, const qk__seg_t *q) {
+  if (qk__max(p->ax, p->bx) < qk__min(q->ax, q->bx) ||
+      qk__max(q->ax, q->bx) < qk__min(p->ax, p->bx) ||
+      qk__max(p->ay, p->by) < qk__min(q->ay, q->by) ||
+      qk__max(q->ay, q->by) < qk__min(p->ay, p->by))
+    return false; /* boxes apart: most pairs */
+  int o1 = qk__orient(p->ax, p->ay, p->bx, p->by, q->ax, q->ay);
+  int o2 = qk__orient(p->ax, p->ay, p->bx, p->by, q->bx, q->by);
+  if (o1 * o2 > 0) return false;
+  int o3 = qk__orient(q->ax, q->ay, q->bx, q->by, p->ax, p->ay);
+  int o4 = qk__orient(q->ax, q->ay, q->bx, q->by, p->bx, p->by);
+  if (o3 * o4 > 0) return false;
+  if (o1 == 0 && o2 == 0)
+    return qk__max(qk__min(p->ax, p->bx), qk__min(q->ax, q->bx)) <=
+               qk__min(qk__max(p->ax, p->bx), qk__max(q->ax, q->bx)) &&
+           qk__max(qk__min(p->ay, p->by), qk__min(q->ay, q->by)) <=
+               qk__min(qk__max(p->ay, p->by), qk__max(q->ay, q->by));
+  return true;
+}
+
+/* Flag the rings of a leaf's pieces that meet themselves away from a shared vertex. A
+ * leaf's pieces come in increasing order (every list keeps the order of the pieces), and
+ * a ring's pieces are consecutive, so the pieces of p's ring follow p. A
+ * leaf holds few pieces except where pieces never separate (many through one point);
+ * there the pairs are not checked, so that such input costs no quadratic time: the stat
+ * is then a lower bound (documented). */
+#define SELF_CHECK_MAX 256
+
+static void self_meets(qk__bctx_t *b, const uint32_t *E, size_t n) {
+  const qk__pieces_t *pc = b->pc;
+  if (n > SELF_CHECK_MAX) return;
+  const uint32_t *ring = pc->ring, *vtx = pc->vtx;
+  uint32_t rn = n ? ring[E[0]] : 0;
+  for (size_t i = 0; i + 1 < n; i++) {
+    uint32_t p = E[i], rp = rn, vp = vtx[p];
+    rn = ring[E[i + 1]];
+    if (rn != rp || vp == UINT32_MAX || b->bad[rp]) continue; /* (the next piece's ring) */
+    size_t rs = b->in->ring_start[rp], re = b->in->ring_start[rp + 1];
+    for (size_t j = i + 1; j < n && ring[E[j]] == rp; j++) {
+      uint32_t q = E[j], vq = vtx[q];
+      if (vq == UINT32_MAX) continue;
+      uint32_t lo = vp < vq ? vp : vq, hi = vp < vq ? vq : vp;
+      if (hi - lo <= 1 || (lo == rs && hi == re - 2)) continue; /* same or neighbouring edges */
+      if (segs_meet(&pc->seg[p], &pc->seg[q])) {
+        b->bad[rp] = 1;
+        break;
+      }
+    }
+  }
+}
+
+qk_status_t qk__emit_leaf(qk__bctx_t *b, qk_node_t v, double cx, double cy, unsigned d) {
+  qk_region_t *r = b->r;
+  const qk__pieces_t *pc = b->pc;
+  size_t ne = b->ne[d], ns = b->ns[d];
+  if (d > b->depth) b->depth = d;
+  if (ne == 0 && ns <= 1) {
+    r->kid[v] = QK__LEAF | QK__DIRECT | (ns ? b->s[d][0] + 1 : 0);
+    r->n_direct++;
+    return QK_OK;
+  }
+  if (r->n_leaves >= QK__DIRECT - 1) return QK_ERR_LIMIT;
+  qk_status_t st = QK_OK;
+  /* (qk__grow returns at once when there is room; the tests save the calls) */
+  if ((r->n_leaves + 1 > r->cap_leaves &&
+       (st = qk__grow(&r->alloc, (void **)&r->leaves, &r->cap_leaves, r->n_leaves + 1,
+                      sizeof(qk__leaf_t)))) ||
+      (r->n_le + ne > r->cap_le &&
+       (st = qk__grow(&r->alloc, (void **)&r->le, &r->cap_le, r->n_le + ne, sizeof(uint32_t)))) ||
+      (r->n_le + ne > r->cap_le_tag &&
+       (st = qk__grow(&r->alloc, (void **)&r->le_tag, &r->cap_le_tag, r->n_le + ne,
+                      sizeof(uint32_t)))) ||
+      (r->n_sets + ns > r->cap_sets && (st = qk__grow(&r->alloc, (void **)&r->sets, &r->cap_sets,
+                                                      r->n_sets + ns, sizeof(uint32_t)))))
+    return st;
+  if (r->n_le + ne > UINT32_MAX || r->n_sets + ns > UINT32_MAX) return QK_ERR_LIMIT;
+  r->leaves[r->n_leaves] =
+      (qk__leaf_t){(uint32_t)r->n_le, (uint32_t)ne, (uint32_t)r->n_sets, (uint32_t)ns};
+  for (size_t i = 0; i < ne; i++) {
+    uint32_t p = b->e[d][i];
+    const qk__seg_t *g = &pc->seg[p];
+    int side = qk__side(g->ax, g->ay, g->bx, g->by, cx, cy);
+    r->le[r->n_le + i] = p;
+    r->le_tag[r->n_le + i] =
+        pc->feat[p] << 2 | (uint32_t)(pc->vtx[p] == UINT32_MAX) << 1 | (uint32_t)(side > 0);
+  }
+  if (ns) memcpy(r->sets + r->n_sets, b->s[d], ns * sizeof(uint32_t));
+  r->n_le += ne;
+  r->n_sets += ns;
+  r->kid[v] = QK__LEAF | (uint32_t)r->n_leaves;
+  r->n_leaves++;
+  self_meets(b, b->e[d], ne);
+  return QK_OK;
+}
+
+/* The parities gathered while sorting a cell's pieces into its children: for child q,
+ * the features crossed an odd number of times by the segment from the cell's reference
+ * point to the child's (which lies in the child's closed square, so only the child's
+ * pieces can cross it). A child's pieces come in feature order, so a feature is done when
+ * the next one starts. */
+typedef struct flips {
+  const uint32_t *feat;
+  uint32_t *odd; /* child q's list at odd + q * stride */
+  size_t stride;
+  double ox, oy, qx[4], qy[4]; /* the parent centre and the children's */
+  uint32_t cur[4];
+  bool par[4];
+  size_t n[4];
+} flips_t;
+
+static inline void flip(flips_t *fl, unsigned q, uint32_t p, const qk__seg_t *g, double lx,
+                        double hx, double ly, double hy) {
+  if (!qk__ref_crosses(fl->ox, fl->oy, fl->qx[q], fl->qy[q], g, lx, hx, ly, hy)) return;
+  uint32_t f = fl->feat[p];
+  if (f != fl->cur[q]) {
+    if (fl->par[q]) fl->odd[q * fl->stride + fl->n[q]++] = fl->cur[q];
+    fl->cur[q] = f;
+    fl->par[q] = false;
+  }
+  fl->par[q] = !fl->par[q];
+}
+
+/* Sort the pieces of level d into the four children's lists (a piece may go to several;
+ * qk__clip4 decides) and gather the children's flips. Returns whether the split makes
+ * progress: every child meets fewer pieces than the cell. Pieces that all pass one point
+ * (a vertex of high degree) or overlap (shared edges) never separate, and such cells
+ * would otherwise split down to the depth cap. */
+static qk_status_t split_lists(qk__bctx_t *b, unsigned d, double x0, double y0, double x1,
+                               double y1, double cx, double cy, double half, bool *progress) {
+  size_t n = b->ne[d];
+  qk_status_t st;
+  if ((4 * n + 1 > b->cap_store[d + 1] &&
+       (st = qk__grow(&b->r->alloc, (void **)&b->store[d + 1], &b->cap_store[d + 1], 4 * n + 1,
+                      sizeof(uint32_t)))) ||
+      (4 * (n + 1) > b->cap_odd[d] &&
+       (st = qk__grow(&b->r->alloc, (void **)&b->odd[d], &b->cap_odd[d], 4 * (n + 1),
+                      sizeof(uint32_t)))))
+    return st;
+  uint32_t *out = b->store[d + 1];
+  size_t c0 = 0, c1 = 0, c2 = 0, c3 = 0;
+  /* the children's reference points, exactly as build_node computes them */
+  const double hh = half * 0.5;
+  flips_t fl = {b->pc->feat,
+                b->odd[d],
+                n + 1,
+                cx,
+                cy,
+                {cx + hh, x0 + hh, x0 + hh, cx + hh},
+                {cy + hh, cy + hh, y0 + hh, y0 + hh},
+                {UINT32_MAX, UINT32_MAX, UINT32_MAX, UINT32_MAX},
+                {false, false, false, false},
+                {0, 0, 0, 0}};
+  const qk__seg_t *seg = b->pc->seg;
+  const uint32_t *E = b->e[d];
+  for (size_t i = 0; i < n; i++) {
+    uint32_t p = E[i];
+    const qk__seg_t *g = &seg[p];
+    double lx = qk__min(g->ax, g->bx), hx = qk__max(g->ax, g->bx);
+    double ly = qk__min(g->ay, g->by), hy = qk__max(g->ay, g->by);
+    unsigned m = qk__clip4(g, lx, hx, ly, hy, x0, y0, x1, y1, cx, cy);
+    if (m & 1u) out[c0++] = p, flip(&fl, 0, p, g, lx, hx, ly, hy);
+    if (m & 2u) out[n + c1++] = p, flip(&fl, 1, p, g, lx, hx, ly, hy);
+    if (m & 4u) out[2 * n + c2++] = p, flip(&fl, 2, p, g, lx, hx, ly, hy);
+    if (m & 8u) out[3 * n + c3++] = p, flip(&fl, 3, p, g, lx, hx, ly, hy);
+  }
+  for (unsigned q = 0; q < 4; q++) {
+    if (fl.par[q]) fl.odd[q * fl.stride + fl.n[q]++] = fl.cur[q];
+    b->nodd[d][q] = fl.n[q];
+  }
+  size_t *cnt = b->cnt[d + 1];
+  cnt[0] = c0, cnt[1] = c1, cnt[2] = c2, cnt[3] = c3;
+  *progress = c0 < n && c1 < n && c2 < n && c3 < n;
+  return QK_OK;
+}
+
+qk_status_t qk__child_set(qk__bctx_t *b, unsigned d, const uint32_t *odd, size_t nodd) {
+  const qk_allocator_t *a = &b->r->alloc;
+  size_t ns = b->ns[d];
+  qk_status_t st;
+  if (ns + nodd + 1 > b->cap_s[d + 1] &&
+      (st = qk__grow(a, (void **)&b->s[d + 1], &b->cap_s[d + 1], ns + nodd + 1, sizeof(uint32_t))))
+    return st;
+  const uint32_t *S = b->s[d];
+  uint32_t *T = b->s[d + 1];
+  size_t i = 0, j = 0, k = 0;
+  while (i < ns || j < nodd) {
+    if (j == nodd || (i < ns && S[i] < odd[j]))
+      T[k++] = S[i++];
+    else if (i == ns || odd[j] < S[i])
+      T[k++] = odd[j++];
+    else
+      i++, j++;
+  }
+  b->ns[d + 1] = k;
+  return QK_OK;
+}
+
+qk_status_t qk__split_cell(qk__bctx_t *b, qk_node_t v, uint32_t *first) {
+  qk_region_t *r = b->r;
+  qk_status_t st;
+  /* With the tree kept, its split names the children; without, they take the next four
+   * slots of kid[] (the same cells, numbered without the tree's bookkeeping). */
+  if (r->tree) {
+    if ((st = qk_tree_split_leaf(r->tree, v))) return st;
+    *first = qk__node_child(r->tree, v);
+  } else {
+    if (r->n_kid + 4 >= QK__DIRECT) return QK_ERR_LIMIT;
+    *first = (uint32_t)r->n_kid;
+  }
+  b->splits_left--;
+  if ((st = qk__grow(&r->alloc, (void **)&r->kid, &r->cap_kid,
+                     r->tree ? qk__tree_node_bound(r->tree) : r->n_kid + 4, sizeof(uint32_t))))
+    return st;
+  r->kid[v] = *first;
+  if (*first + 4 > r->n_kid) r->n_kid = *first + 4;
+  return QK_OK;
+}
+
+qk_status_t qk__build_node(qk__bctx_t *b, qk_node_t v, double x0, double y0, double x1, double y1,
+                           double side, unsigned d, unsigned stall) {
+  double h = side * 0.5, cx = x0 + h, cy = y0 + h;
+  qk_status_t st;
+  bool split = false;
+  /* The budget bounds the work on adversarial input (thousands of long edges fanning out
+   * of one point need a number of cells far beyond the edges to separate them); when it
+   * runs out the remaining cells stay leaves with more pieces. Real layers stay far
+   * below it. */
+  if (b->ne[d] > b->C && d < b->maxd && b->splits_left > 0) {
+    bool prog;
+    if ((st = split_lists(b, d, x0, y0, x1, y1, cx, cy, h, &prog))) return st;
+    stall = prog ? 0 : stall + 1;
+    split = stall <= QK__STALL_BUDGET;
+  }
+  if (split) {
+    uint32_t first = 0;
+    if ((st = qk__split_cell(b, v, &first)) == QK_OK) {
+      size_t n = b->ne[d];
+      for (unsigned q = 0; q < 4; q++) {
+        int east = (int)qk__q_east(q), north = (int)qk__q_north(q);
+        double qx0 = east ? cx : x0, qx1 = east ? x1 : cx;
+        double qy0 = north ? cy : y0, qy1 = north ? y1 : cy;
+        b->e[d + 1] = b->store[d + 1] + q * n;
+        b->ne[d + 1] = b->cnt[d + 1][q];
+        if ((st = qk__child_set(b, d, b->odd[d] + q * (n + 1), b->nodd[d][q]))) return st;
+        if ((st = qk__build_node(b, first + q, qx0, qy0, qx1, qy1, h, d + 1, stall))) return st;
+      }
+      return QK_OK;
+    }
+    if (st != QK_ERR_LIMIT) return st;
+  }
+  return qk__emit_leaf(b, v, cx, cy, d);
+}
