@@ -34,6 +34,14 @@
 #if defined(__SSE2__)
 #include <emmintrin.h>
 #endif
+/* The keys four at a time where the compiler can target AVX2 in one function and the
+ * processor has it (checked when the build runs). */
+#if defined(__GNUC__) && defined(__x86_64__) && (defined(__clang__) || __GNUC__ >= 8)
+#define QK__CELL_AVX2 1
+#include <immintrin.h>
+#else
+#define QK__CELL_AVX2 0
+#endif
 
 /* The grid lines along one axis as the tree computes them: line k (0 < k < 2^L) splits
  * the node of depth d = L - 1 - ctz(k) whose lower corner is the origin plus the sides of
@@ -117,6 +125,9 @@ typedef struct bucket_job {
   size_t nc, nb;             /* coarse buckets, cells */
   bool stream;               /* write records and points around the caches */
   uint32_t page;             /* records per page, a multiple of WC */
+  double near;               /* the scaling's error bound, in grid units */
+  uint32_t even;             /* the even bits of a key */
+  bool avx2;                 /* the keys four at a time */
   rec_t *rec;                /* the pages, 64-byte aligned */
   uint32_t *link;            /* per page: the next page of its chain */
   uint32_t *pbase;           /* nw + 1: each share's first page */
@@ -167,10 +178,87 @@ static void flush(const bucket_job_t *j, chains_t *ch, uint32_t *head, uint32_t 
   cnt[c] += m;
 }
 
+/* Points per block of pass 1: their keys (1 KB) stay in the first-level cache between the
+ * loop that computes them and the loop that scatters the points. */
+#define BLOCK 256u
+
+/* The cell of one point by the tables: the truncated scaled coordinate, corrected by the
+ * lines on either side of it. */
+static inline uint32_t key_by_lines(const bucket_job_t *j, double x, double y) {
+  uint32_t cx = (uint32_t)((x - j->x0) * j->scale), cy = (uint32_t)((y - j->y0) * j->scale);
+  const axis_tab_t *ax = j->ax, *ay = j->ay;
+  uint32_t mx = (uint32_t)(x > ax->line[cx][0]) | (uint32_t)(x > ax->line[cx][1]) << 1;
+  uint32_t my = (uint32_t)(y > ay->line[cy][0]) | (uint32_t)(y > ay->line[cy][1]) << 1;
+  return (uint32_t)(ax->dig[4 * cx + mx] ^ ay->dig[4 * cy + my]);
+}
+
+/* The keys of m points, by the tables. */
+static void keys_by_lines(const bucket_job_t *j, const qk_point_t *p, size_t m, uint32_t *key) {
+  const axis_tab_t *ax = j->ax, *ay = j->ay;
+#if defined(__SSE2__)
+  /* Both axes at once: scale, truncate, and compare with the two lines of each guess. */
+  const __m128d o = _mm_setr_pd(j->x0, j->y0), sc = _mm_set1_pd(j->scale);
+  for (size_t i = 0; i < m; i++) {
+    __m128d v = _mm_loadu_pd(&p[i].x);
+    __m128i g = _mm_cvttpd_epi32(_mm_mul_pd(_mm_sub_pd(v, o), sc));
+    uint32_t cx = (uint32_t)_mm_cvtsi128_si32(g), cy = (uint32_t)_mm_extract_epi16(g, 2);
+    int mx = _mm_movemask_pd(_mm_cmpgt_pd(_mm_unpacklo_pd(v, v), _mm_loadu_pd(ax->line[cx])));
+    int my = _mm_movemask_pd(_mm_cmpgt_pd(_mm_unpackhi_pd(v, v), _mm_loadu_pd(ay->line[cy])));
+    key[i] = (uint32_t)(ax->dig[4 * cx + (uint32_t)mx] ^ ay->dig[4 * cy + (uint32_t)my]);
+  }
+#else
+  (void)ax, (void)ay;
+  for (size_t i = 0; i < m; i++) key[i] = key_by_lines(j, p[i].x, p[i].y);
+#endif
+}
+
+#if QK__CELL_AVX2
+/* The keys of m points, four at a time. A scaled coordinate whose fraction lies at least
+ * `near` (the error bound of the scaling and of the grid lines, in grid units) from a
+ * whole number is strictly between the lines of its truncation: its cell is that, and its
+ * key the interleaved bits of the two cells (east bits low, north bits high and inverted:
+ * the same bits as the tables'). The four points of a group with a coordinate nearer
+ * than that to a line go by the tables. */
+__attribute__((target("avx2"))) static void keys_avx2(const bucket_job_t *j, const qk_point_t *p,
+                                                      size_t m, uint32_t *key) {
+  const __m256d o = _mm256_setr_pd(j->x0, j->y0, j->x0, j->y0), sc = _mm256_set1_pd(j->scale);
+  const __m256d lo = _mm256_set1_pd(j->near), hi = _mm256_set1_pd(1.0 - j->near);
+  const __m256i m4 = _mm256_set1_epi32(0x0f0f), m2 = _mm256_set1_epi32(0x3333),
+                m1 = _mm256_set1_epi32(0x5555), even = _mm256_set1_epi32((int)j->even);
+  const __m256i pick = _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7);
+  size_t i = 0;
+  for (; i + 4 <= m; i += 4) {
+    __m256d a = _mm256_loadu_pd(&p[i].x), b = _mm256_loadu_pd(&p[i + 2].x);
+    __m256d ta = _mm256_mul_pd(_mm256_sub_pd(a, o), sc),
+            tb = _mm256_mul_pd(_mm256_sub_pd(b, o), sc);
+    __m128i ia = _mm256_cvttpd_epi32(ta), ib = _mm256_cvttpd_epi32(tb);
+    __m256d fa = _mm256_sub_pd(ta, _mm256_cvtepi32_pd(ia));
+    __m256d fb = _mm256_sub_pd(tb, _mm256_cvtepi32_pd(ib));
+    __m256d bad = _mm256_or_pd(
+        _mm256_or_pd(_mm256_cmp_pd(fa, lo, _CMP_LT_OQ), _mm256_cmp_pd(fa, hi, _CMP_GT_OQ)),
+        _mm256_or_pd(_mm256_cmp_pd(fb, lo, _CMP_LT_OQ), _mm256_cmp_pd(fb, hi, _CMP_GT_OQ)));
+    /* cx0 cy0 cx1 cy1 cx2 cy2 cx3 cy3, each spread to the even bits */
+    __m256i v = _mm256_inserti128_si256(_mm256_castsi128_si256(ia), ib, 1);
+    v = _mm256_and_si256(_mm256_or_si256(v, _mm256_slli_epi32(v, 4)), m4);
+    v = _mm256_and_si256(_mm256_or_si256(v, _mm256_slli_epi32(v, 2)), m2);
+    v = _mm256_and_si256(_mm256_or_si256(v, _mm256_slli_epi32(v, 1)), m1);
+    __m256i n = _mm256_srli_epi64(v, 32); /* each point's north bits under its east bits */
+    __m256i k =
+        _mm256_xor_si256(_mm256_xor_si256(v, n), _mm256_slli_epi32(_mm256_xor_si256(n, even), 1));
+    k = _mm256_permutevar8x32_epi32(k, pick);
+    _mm_storeu_si128((__m128i *)(void *)&key[i], _mm256_castsi256_si128(k));
+    if (_mm256_movemask_pd(bad))
+      for (size_t q = i; q < i + 4; q++) key[q] = key_by_lines(j, p[q].x, p[q].y);
+  }
+  for (; i < m; i++) key[i] = key_by_lines(j, p[i].x, p[i].y);
+}
+#endif
+
 /* Pass 1: every point's cell, counted in the share's histogram, and the point with its id
  * and cell as a record into its coarse bucket's chain, through a write-combining buffer
- * per bucket (2^7 buffers, unlike 2^7 scattered write streams, stay in cache). The job's
- * fields are copied to locals: the stores could otherwise alias them. */
+ * per bucket (2^7 buffers, unlike 2^7 scattered write streams, stay in cache). The keys
+ * come a block at a time, in a loop of their own: one loop with both would run out of
+ * registers. */
 static void scatter_share(void *ctx, unsigned w, unsigned nw) {
   const bucket_job_t *j = ctx;
   size_t lo, hi;
@@ -187,53 +275,36 @@ static void scatter_share(void *ctx, unsigned w, unsigned nw) {
     ch.pos[c] = ch.end[c] = 0;
   }
   _Alignas(64) rec_t buf[(1u << MAX_COARSE_BITS) * WC];
-  uint8_t fill[1u << MAX_COARSE_BITS];
-  memset(fill, 0, nc);
+  uint32_t key[BLOCK];
+  /* fill[c]: where bucket c's next record goes in buf (c * WC up to c * WC + WC - 1) */
+  uint16_t fill[1u << MAX_COARSE_BITS];
+  for (uint32_t c = 0; c < nc; c++) fill[c] = (uint16_t)(c * WC);
   const qk_point_t *p = j->p;
-  const axis_tab_t *ax = j->ax, *ay = j->ay;
   const unsigned fbits = j->fbits;
-#if defined(__SSE2__)
-  /* Both axes at once: scale, truncate, and compare with the two lines of each guess. */
-  const __m128d o = _mm_setr_pd(j->x0, j->y0), sc = _mm_set1_pd(j->scale);
-  for (size_t i = lo; i < hi; i++) {
-    __m128d v = _mm_loadu_pd(&p[i].x);
-    __m128i g = _mm_cvttpd_epi32(_mm_mul_pd(_mm_sub_pd(v, o), sc));
-    uint32_t cx = (uint32_t)_mm_cvtsi128_si32(g), cy = (uint32_t)_mm_extract_epi16(g, 2);
-    int mx = _mm_movemask_pd(_mm_cmpgt_pd(_mm_unpacklo_pd(v, v), _mm_loadu_pd(ax->line[cx])));
-    int my = _mm_movemask_pd(_mm_cmpgt_pd(_mm_unpackhi_pd(v, v), _mm_loadu_pd(ay->line[cy])));
-    uint32_t k = (uint32_t)(ax->dig[4 * cx + (uint32_t)mx] ^ ay->dig[4 * cy + (uint32_t)my]);
-    h[k]++;
-    uint32_t c = k >> fbits, f = fill[c];
-    rec_t *b = &buf[c * WC + f];
-    _mm_storeu_pd(&b->x, v);
-    b->id = (uint32_t)i;
-    b->key = k;
-    if (++f == WC) {
-      flush(j, &ch, head, cnt, c, &buf[c * WC], WC);
-      f = 0;
-    }
-    fill[c] = (uint8_t)f;
-  }
-#else
-  const double x0 = j->x0, y0 = j->y0, scale = j->scale;
-  for (size_t i = lo; i < hi; i++) {
-    double x = p[i].x, y = p[i].y;
-    uint32_t cx = (uint32_t)((x - x0) * scale), cy = (uint32_t)((y - y0) * scale);
-    uint32_t mx = (uint32_t)(x > ax->line[cx][0]) | (uint32_t)(x > ax->line[cx][1]) << 1;
-    uint32_t my = (uint32_t)(y > ay->line[cy][0]) | (uint32_t)(y > ay->line[cy][1]) << 1;
-    uint32_t k = (uint32_t)(ax->dig[4 * cx + mx] ^ ay->dig[4 * cy + my]);
-    h[k]++;
-    uint32_t c = k >> fbits, f = fill[c];
-    buf[c * WC + f] = (rec_t){x, y, (uint32_t)i, k};
-    if (++f == WC) {
-      flush(j, &ch, head, cnt, c, &buf[c * WC], WC);
-      f = 0;
-    }
-    fill[c] = (uint8_t)f;
-  }
+  for (size_t i0 = lo; i0 < hi; i0 += BLOCK) {
+    size_t m = hi - i0 < BLOCK ? hi - i0 : BLOCK;
+#if QK__CELL_AVX2
+    if (j->avx2)
+      keys_avx2(j, p + i0, m, key);
+    else
 #endif
+      keys_by_lines(j, p + i0, m, key);
+    for (size_t q = 0; q < m; q++) {
+      uint32_t k = key[q], c = k >> fbits, f = fill[c];
+      h[k]++;
+      rec_t *b = &buf[f];
+      memcpy(b, &p[i0 + q], 16);
+      b->id = (uint32_t)(i0 + q);
+      b->key = k;
+      if (!(++f & (WC - 1))) {
+        f -= WC;
+        flush(j, &ch, head, cnt, c, &buf[f], WC);
+      }
+      fill[c] = (uint16_t)f;
+    }
+  }
   for (uint32_t c = 0; c < nc; c++)
-    if (fill[c]) flush(j, &ch, head, cnt, c, &buf[c * WC], fill[c]);
+    if (fill[c] != c * WC) flush(j, &ch, head, cnt, c, &buf[c * WC], fill[c] - c * WC);
 #if defined(__SSE2__)
   if (j->stream) _mm_sfence(); /* the streamed lines before anything the caller does next */
 #endif
@@ -408,6 +479,11 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
   j.t = t, j.p = p, j.n = n, j.x0 = x0, j.y0 = y0, j.scale = scale;
   j.ax = &tabs[0], j.ay = &tabs[1], j.fbits = fbits, j.nc = nc, j.nb = nb, j.stream = stream;
   j.page = (uint32_t)page;
+  j.near = delta;
+  j.even = (uint32_t)qk__spread16((1u << L) - 1);
+#if QK__CELL_AVX2
+  j.avx2 = __builtin_cpu_supports("avx2");
+#endif
   j.rec = (rec_t *)(void *)((unsigned char *)s.rec_block + (-(uintptr_t)s.rec_block & 63u));
   j.link = s.link, j.pbase = s.pbase, j.head = s.head, j.cnt = s.cnt, j.hist = s.hist;
   j.cbase = s.cbase, j.cum = s.cum, j.nw = nw;
