@@ -310,8 +310,34 @@ static void scatter_share(void *ctx, unsigned w, unsigned nw) {
 #endif
 }
 
+#if QK__CELL_AVX2
+/* copy_out()'s streaming copy, 32 bytes per store. */
+__attribute__((target("avx2"))) static void stream_avx2(unsigned char *d, const unsigned char *s,
+                                                        size_t bytes) {
+  size_t head = (size_t)(-(uintptr_t)d & 31u);
+  if (head > bytes) head = bytes;
+  memcpy(d, s, head);
+  d += head, s += head, bytes -= head;
+  for (; bytes >= 64; d += 64, s += 64, bytes -= 64) {
+    __m256i a = _mm256_loadu_si256((const __m256i *)(const void *)s);
+    __m256i b = _mm256_loadu_si256((const __m256i *)(const void *)(s + 32));
+    _mm256_stream_si256((__m256i *)(void *)d, a);
+    _mm256_stream_si256((__m256i *)(void *)(d + 32), b);
+  }
+  memcpy(d, s, bytes);
+}
+#endif
+
 /* Copy `bytes` from src to dst, with non-temporal stores where `stream` asks. */
-static void copy_out(void *dst, const void *src, size_t bytes, bool stream) {
+static void copy_out(void *dst, const void *src, size_t bytes, bool stream, bool avx2) {
+#if QK__CELL_AVX2
+  if (stream && avx2) {
+    stream_avx2(dst, src, bytes);
+    return;
+  }
+#else
+  (void)avx2;
+#endif
 #if defined(__SSE2__)
   if (stream) {
     unsigned char *d = dst;
@@ -382,9 +408,9 @@ static void fine_job(unsigned c, unsigned w, void *ud) {
     }
   }
   if (staged) {
-    copy_out(j->t->px + a, px, (size_t)(b - a) * sizeof *px, j->stream);
-    copy_out(j->t->py + a, py, (size_t)(b - a) * sizeof *py, j->stream);
-    copy_out(j->t->pid + a, pid, (size_t)(b - a) * sizeof *pid, j->stream);
+    copy_out(j->t->px + a, px, (size_t)(b - a) * sizeof *px, j->stream, j->avx2);
+    copy_out(j->t->py + a, py, (size_t)(b - a) * sizeof *py, j->stream, j->avx2);
+    copy_out(j->t->pid + a, pid, (size_t)(b - a) * sizeof *pid, j->stream, j->avx2);
 #if defined(__SSE2__)
     if (j->stream) _mm_sfence();
 #endif
