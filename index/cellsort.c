@@ -381,9 +381,10 @@ static void fine_job(unsigned c, unsigned w, void *ud) {
   uint32_t base = staged ? 0 : a;
   uint32_t next[1u << (16 - MAX_COARSE_BITS)];
   uint32_t *cum = j->cum + (size_t)c * nf, acc = a;
+  const uint32_t *h0 = j->hist + (size_t)c * nf;
   for (uint32_t f = 0; f < nf; f++) {
-    uint32_t k = 0;
-    for (unsigned v = 0; v < j->nw; v++) k += j->hist[(size_t)v * nb + (size_t)c * nf + f];
+    uint32_t k = h0[f];
+    for (unsigned v = 1; v < j->nw; v++) k += h0[(size_t)v * nb + f];
     cum[f] = acc;
     next[f] = acc - a + base;
     acc += k;
@@ -397,7 +398,19 @@ static void fine_job(unsigned c, unsigned w, void *ud) {
     while (left) {
       uint32_t m = left < j->page ? left : j->page;
       const rec_t *r = rec + (size_t)pg * j->page, *e = r + m;
-      for (; r < e; r++) {
+      /* Two records a step: the second's slot is taken after the first's, as one at a
+       * time would (they may share a fine bucket). */
+      for (; r + 2 <= e; r += 2) {
+        uint32_t d = next[r[0].key & mask]++;
+        px[d] = r[0].x;
+        py[d] = r[0].y;
+        pid[d] = r[0].id;
+        uint32_t d1 = next[r[1].key & mask]++;
+        px[d1] = r[1].x;
+        py[d1] = r[1].y;
+        pid[d1] = r[1].id;
+      }
+      if (r < e) {
         uint32_t d = next[r->key & mask]++;
         px[d] = r->x;
         py[d] = r->y;
