@@ -34,8 +34,8 @@
 #if defined(__SSE2__)
 #include <emmintrin.h>
 #endif
-/* The keys four at a time where the compiler can target AVX2 in one function and the
- * processor has it (checked when the build runs). */
+/* The keys four at a time, and the streaming copy 32 bytes a store, where the compiler can
+ * target AVX2 in one function and the processor has it (checked when the build runs). */
 #if defined(__GNUC__) && defined(__x86_64__) && (defined(__clang__) || __GNUC__ >= 8)
 #define QK__CELL_AVX2 1
 #include <immintrin.h>
@@ -96,11 +96,10 @@ static void axis_tables(const double *g, unsigned L, bool north, axis_tab_t *a) 
   }
 }
 
-/* What the parallel phases of the bucketed build share. Pass 1 covers the points
- * qk__share_range(n, w, nw) in share w; pass 2 runs one job per coarse bucket. Pass 1
- * writes records in pages of `page` records: share w owns pages [pbase[w], pbase[w + 1]),
- * and the records of coarse bucket c from share w fill a chain of them, head[w][c] first,
- * each page's successor in link[], every page full but the last. */
+/* What the parallel phases of the bucketed build share. Shares of the input (passes 1 and
+ * 2) cover the points qk__share_range(n, w, nw); pass 3 runs one job per coarse bucket.
+ * The records of coarse bucket c written by share w form a segment of the record array;
+ * segments go in the order (c, w), each starting at a multiple of WC records. */
 typedef struct rec {
   double x, y;
   uint32_t id, key;
@@ -110,9 +109,7 @@ typedef struct rec {
 #define WC 8u
 /* Most coarse buckets: their write-combining buffers (24 KB) stay in the first-level cache. */
 #define MAX_COARSE_BITS 7u
-/* Most records per page (6 KB): long enough runs for the prefetcher in pass 2. */
-#define PAGE_MAX 256u
-/* Most points a share stages in pass 2: 320 KB, within a core's second-level cache. */
+/* Most points a share stages in pass 3: 320 KB, within a core's second-level cache. */
 #define STAGE_MAX 16384u
 
 typedef struct bucket_job {
@@ -122,65 +119,22 @@ typedef struct bucket_job {
   double x0, y0, scale;
   const axis_tab_t *ax, *ay; /* the key tables of the two axes */
   unsigned fbits;            /* bits of the low digit */
-  size_t nc, nb;             /* coarse buckets, cells */
+  size_t nc;                 /* coarse buckets */
   bool stream;               /* write records and points around the caches */
-  uint32_t page;             /* records per page, a multiple of WC */
-  double near;               /* the scaling's error bound, in grid units */
-  uint32_t even;             /* the even bits of a key */
-  bool avx2;                 /* the keys four at a time */
-  rec_t *rec;                /* the pages, 64-byte aligned */
-  uint32_t *link;            /* per page: the next page of its chain */
-  uint32_t *pbase;           /* nw + 1: each share's first page */
-  uint32_t *head;            /* nw rows of nc: the first page of bucket c from share w */
-  uint32_t *cnt;             /* nw rows of nc: records of bucket c from share w */
-  uint32_t *hist;            /* nw rows of nb: points of each cell from share w */
-  uint32_t *cbase;           /* nc + 1 coarse bucket starts in the point arrays */
-  uint32_t *cum;             /* 4^L + 1 fine bucket starts */
-  unsigned nw;               /* shares of pass 1 */
-  uint32_t stage_cap;        /* points per share in the staging arrays (0: none) */
-  double *sx, *sy;           /* the staging arrays, stage_cap per share */
+  uint16_t *key;
+  rec_t *rec;         /* 64-byte aligned */
+  uint32_t *cnt;      /* nw rows of nc: records of bucket c from share w */
+  uint32_t *seg;      /* nw rows of nc: where those records start */
+  uint32_t *cbase;    /* nc + 1 coarse bucket starts in the point arrays */
+  uint32_t *cum;      /* 4^L + 1 fine bucket starts */
+  unsigned nw;        /* shares of passes 1 and 2 */
+  uint32_t stage_cap; /* points per share in the staging arrays (0: none) */
+  double *sx, *sy;    /* the staging arrays, stage_cap per share */
   qk_id_t *sid;
+  double near;   /* the scaling's error bound, in grid units */
+  uint32_t even; /* the even bits of a key */
+  bool avx2;     /* keys four at a time, copies 32 bytes a store */
 } bucket_job_t;
-
-/* Where a share's write-combining buffers go: per coarse bucket, the next record's place,
- * the end of its current page, and that page. */
-typedef struct chains {
-  uint32_t pos[1u << MAX_COARSE_BITS], end[1u << MAX_COARSE_BITS], last[1u << MAX_COARSE_BITS];
-  uint32_t next_page;
-} chains_t;
-
-/* Write m records of bucket c from its buffer b to its chain, starting a page when the
- * current one is full (pages hold whole buffers: page is a multiple of WC). Whole buffers
- * go with non-temporal stores where `stream` asks: their place is a multiple of WC records
- * in a 64-byte aligned array, so they are whole cache lines. */
-static void flush(const bucket_job_t *j, chains_t *ch, uint32_t *head, uint32_t *cnt, uint32_t c,
-                  const rec_t *b, uint32_t m) {
-  if (ch->pos[c] == ch->end[c]) {
-    uint32_t pg = ch->next_page++;
-    if (head[c] == QK_NONE)
-      head[c] = pg;
-    else
-      j->link[ch->last[c]] = pg;
-    ch->last[c] = pg;
-    ch->pos[c] = pg * j->page;
-    ch->end[c] = ch->pos[c] + j->page;
-  }
-  rec_t *d = &j->rec[ch->pos[c]];
-#if defined(__SSE2__)
-  if (j->stream && m == WC) {
-    __m128i *dv = (__m128i *)(void *)d;
-    const __m128i *s = (const __m128i *)(const void *)b;
-    for (unsigned q = 0; q < WC * sizeof(rec_t) / 16; q++) _mm_stream_si128(dv + q, s[q]);
-  } else
-#endif
-    memcpy(d, b, m * sizeof *d);
-  ch->pos[c] += m;
-  cnt[c] += m;
-}
-
-/* Points per block of pass 1: their keys (1 KB) stay in the first-level cache between the
- * loop that computes them and the loop that scatters the points. */
-#define BLOCK 256u
 
 /* The cell of one point by the tables: the truncated scaled coordinate, corrected by the
  * lines on either side of it. */
@@ -192,27 +146,11 @@ static inline uint32_t key_by_lines(const bucket_job_t *j, double x, double y) {
   return (uint32_t)(ax->dig[4 * cx + mx] ^ ay->dig[4 * cy + my]);
 }
 
-/* The keys of m points, by the tables. */
-static void keys_by_lines(const bucket_job_t *j, const qk_point_t *p, size_t m, uint32_t *key) {
-  const axis_tab_t *ax = j->ax, *ay = j->ay;
-#if defined(__SSE2__)
-  /* Both axes at once: scale, truncate, and compare with the two lines of each guess. */
-  const __m128d o = _mm_setr_pd(j->x0, j->y0), sc = _mm_set1_pd(j->scale);
-  for (size_t i = 0; i < m; i++) {
-    __m128d v = _mm_loadu_pd(&p[i].x);
-    __m128i g = _mm_cvttpd_epi32(_mm_mul_pd(_mm_sub_pd(v, o), sc));
-    uint32_t cx = (uint32_t)_mm_cvtsi128_si32(g), cy = (uint32_t)_mm_extract_epi16(g, 2);
-    int mx = _mm_movemask_pd(_mm_cmpgt_pd(_mm_unpacklo_pd(v, v), _mm_loadu_pd(ax->line[cx])));
-    int my = _mm_movemask_pd(_mm_cmpgt_pd(_mm_unpackhi_pd(v, v), _mm_loadu_pd(ay->line[cy])));
-    key[i] = (uint32_t)(ax->dig[4 * cx + (uint32_t)mx] ^ ay->dig[4 * cy + (uint32_t)my]);
-  }
-#else
-  (void)ax, (void)ay;
-  for (size_t i = 0; i < m; i++) key[i] = key_by_lines(j, p[i].x, p[i].y);
-#endif
-}
-
 #if QK__CELL_AVX2
+/* Points per block of the AVX2 key pass: their keys stay in the first-level cache between
+ * the loop that computes them and the one that counts them. */
+#define BLOCK 256u
+
 /* The keys of m points, four at a time. A scaled coordinate whose fraction lies at least
  * `near` (the error bound of the scaling and of the grid lines, in grid units) from a
  * whole number is strictly between the lines of its truncation: its cell is that, and its
@@ -220,7 +158,7 @@ static void keys_by_lines(const bucket_job_t *j, const qk_point_t *p, size_t m, 
  * the same bits as the tables'). The four points of a group with a coordinate nearer
  * than that to a line go by the tables. */
 __attribute__((target("avx2"))) static void keys_avx2(const bucket_job_t *j, const qk_point_t *p,
-                                                      size_t m, uint32_t *key) {
+                                                      size_t m, uint16_t *key) {
   const __m256d o = _mm256_setr_pd(j->x0, j->y0, j->x0, j->y0), sc = _mm256_set1_pd(j->scale);
   const __m256d lo = _mm256_set1_pd(j->near), hi = _mm256_set1_pd(1.0 - j->near);
   const __m256i m4 = _mm256_set1_epi32(0x0f0f), m2 = _mm256_set1_epi32(0x3333),
@@ -246,68 +184,106 @@ __attribute__((target("avx2"))) static void keys_avx2(const bucket_job_t *j, con
     __m256i k =
         _mm256_xor_si256(_mm256_xor_si256(v, n), _mm256_slli_epi32(_mm256_xor_si256(n, even), 1));
     k = _mm256_permutevar8x32_epi32(k, pick);
-    _mm_storeu_si128((__m128i *)(void *)&key[i], _mm256_castsi256_si128(k));
+    __m128i k16 = _mm_packus_epi32(_mm256_castsi256_si128(k), _mm256_castsi256_si128(k));
+    _mm_storel_epi64((__m128i *)(void *)&key[i], k16);
     if (_mm256_movemask_pd(bad))
-      for (size_t q = i; q < i + 4; q++) key[q] = key_by_lines(j, p[q].x, p[q].y);
+      for (size_t q = i; q < i + 4; q++) key[q] = (uint16_t)key_by_lines(j, p[q].x, p[q].y);
   }
-  for (; i < m; i++) key[i] = key_by_lines(j, p[i].x, p[i].y);
+  for (; i < m; i++) key[i] = (uint16_t)key_by_lines(j, p[i].x, p[i].y);
 }
 #endif
 
-/* Pass 1: every point's cell, counted in the share's histogram, and the point with its id
- * and cell as a record into its coarse bucket's chain, through a write-combining buffer
- * per bucket (2^7 buffers, unlike 2^7 scattered write streams, stay in cache). The keys
- * come a block at a time, in a loop of their own: one loop with both would run out of
- * registers. */
+/* Pass 1: every point's cell, and this share's count per coarse bucket. The job's fields
+ * are copied to locals: the stores to key[] and h[] could otherwise alias them. */
+static void keys_share(void *ctx, unsigned w, unsigned nw) {
+  const bucket_job_t *j = ctx;
+  size_t lo, hi;
+  qk__share_range(j->n, w, nw, &lo, &hi);
+  uint32_t *h = j->cnt + (size_t)w * j->nc;
+  const qk_point_t *p = j->p;
+  uint16_t *key = j->key;
+  const axis_tab_t *ax = j->ax, *ay = j->ay;
+  const unsigned fbits = j->fbits;
+#if QK__CELL_AVX2
+  if (j->avx2) {
+    for (size_t i0 = lo; i0 < hi; i0 += BLOCK) {
+      size_t m = hi - i0 < BLOCK ? hi - i0 : BLOCK;
+      keys_avx2(j, p + i0, m, key + i0);
+      for (size_t i = i0; i < i0 + m; i++) h[key[i] >> fbits]++;
+    }
+    return;
+  }
+#endif
+#if defined(__SSE2__)
+  /* Both axes at once: scale, truncate, and compare with the two lines of each guess. */
+  const __m128d o = _mm_setr_pd(j->x0, j->y0), sc = _mm_set1_pd(j->scale);
+  for (size_t i = lo; i < hi; i++) {
+    __m128d v = _mm_loadu_pd(&p[i].x);
+    __m128i c = _mm_cvttpd_epi32(_mm_mul_pd(_mm_sub_pd(v, o), sc));
+    uint32_t cx = (uint32_t)_mm_cvtsi128_si32(c), cy = (uint32_t)_mm_extract_epi16(c, 2);
+    int mx = _mm_movemask_pd(_mm_cmpgt_pd(_mm_unpacklo_pd(v, v), _mm_loadu_pd(ax->line[cx])));
+    int my = _mm_movemask_pd(_mm_cmpgt_pd(_mm_unpackhi_pd(v, v), _mm_loadu_pd(ay->line[cy])));
+    uint32_t k = (uint32_t)(ax->dig[4 * cx + (uint32_t)mx] ^ ay->dig[4 * cy + (uint32_t)my]);
+    key[i] = (uint16_t)k;
+    h[k >> fbits]++;
+  }
+#else
+  const double x0 = j->x0, y0 = j->y0, scale = j->scale;
+  for (size_t i = lo; i < hi; i++) {
+    double x = p[i].x, y = p[i].y;
+    uint32_t cx = (uint32_t)((x - x0) * scale), cy = (uint32_t)((y - y0) * scale);
+    uint32_t mx = (uint32_t)(x > ax->line[cx][0]) | (uint32_t)(x > ax->line[cx][1]) << 1;
+    uint32_t my = (uint32_t)(y > ay->line[cy][0]) | (uint32_t)(y > ay->line[cy][1]) << 1;
+    uint32_t k = (uint32_t)(ax->dig[4 * cx + mx] ^ ay->dig[4 * cy + my]);
+    key[i] = (uint16_t)k;
+    h[k >> fbits]++;
+  }
+#endif
+}
+
+/* Pass 2: the records into their coarse buckets' segments, stable. With `stream`, each
+ * bucket's records gather in a buffer of WC (three cache lines) that goes to memory whole,
+ * with non-temporal stores: no line of the record array is read before it is written,
+ * and 2^7 buffers, unlike 2^7 scattered write streams, stay in cache. */
 static void scatter_share(void *ctx, unsigned w, unsigned nw) {
   const bucket_job_t *j = ctx;
   size_t lo, hi;
   qk__share_range(j->n, w, nw, &lo, &hi);
   const size_t nc = j->nc;
-  uint32_t *h = j->hist + (size_t)w * j->nb;
-  uint32_t *head = j->head + (size_t)w * nc, *cnt = j->cnt + (size_t)w * nc;
-  memset(h, 0, j->nb * sizeof *h);
-  memset(cnt, 0, nc * sizeof *cnt);
-  chains_t ch;
-  ch.next_page = j->pbase[w];
-  for (size_t c = 0; c < nc; c++) {
-    head[c] = QK_NONE;
-    ch.pos[c] = ch.end[c] = 0;
-  }
-  _Alignas(64) rec_t buf[(1u << MAX_COARSE_BITS) * WC];
-  uint32_t key[BLOCK];
-  /* fill[c]: where bucket c's next record goes in buf (c * WC up to c * WC + WC - 1) */
-  uint16_t fill[1u << MAX_COARSE_BITS];
-  for (uint32_t c = 0; c < nc; c++) fill[c] = (uint16_t)(c * WC);
+  uint32_t next[1u << MAX_COARSE_BITS];
+  memcpy(next, j->seg + (size_t)w * nc, nc * sizeof *next);
   const qk_point_t *p = j->p;
+  const uint16_t *key = j->key;
+  rec_t *rec = j->rec;
   const unsigned fbits = j->fbits;
-  for (size_t i0 = lo; i0 < hi; i0 += BLOCK) {
-    size_t m = hi - i0 < BLOCK ? hi - i0 : BLOCK;
-#if QK__CELL_AVX2
-    if (j->avx2)
-      keys_avx2(j, p + i0, m, key);
-    else
-#endif
-      keys_by_lines(j, p + i0, m, key);
-    for (size_t q = 0; q < m; q++) {
-      uint32_t k = key[q], c = k >> fbits, f = fill[c];
-      h[k]++;
-      rec_t *b = &buf[f];
-      memcpy(b, &p[i0 + q], 16);
-      b->id = (uint32_t)(i0 + q);
-      b->key = k;
-      if (!(++f & (WC - 1))) {
-        f -= WC;
-        flush(j, &ch, head, cnt, c, &buf[f], WC);
-      }
-      fill[c] = (uint16_t)f;
-    }
-  }
-  for (uint32_t c = 0; c < nc; c++)
-    if (fill[c] != c * WC) flush(j, &ch, head, cnt, c, &buf[c * WC], fill[c] - c * WC);
 #if defined(__SSE2__)
-  if (j->stream) _mm_sfence(); /* the streamed lines before anything the caller does next */
+  if (j->stream) {
+    _Alignas(64) rec_t buf[(1u << MAX_COARSE_BITS) * WC];
+    uint8_t fill[1u << MAX_COARSE_BITS];
+    memset(fill, 0, nc);
+    for (size_t i = lo; i < hi; i++) {
+      uint32_t k = key[i], c = k >> fbits, f = fill[c];
+      rec_t *b = &buf[c * WC];
+      b[f] = (rec_t){p[i].x, p[i].y, (uint32_t)i, k};
+      if (++f == WC) {
+        /* next[c] is a multiple of WC and the array 64-byte aligned: whole lines. */
+        __m128i *d = (__m128i *)(void *)&rec[next[c]];
+        const __m128i *s = (const __m128i *)(const void *)b;
+        for (unsigned q = 0; q < WC * sizeof(rec_t) / 16; q++) _mm_stream_si128(d + q, s[q]);
+        next[c] += WC;
+        f = 0;
+      }
+      fill[c] = (uint8_t)f;
+    }
+    for (size_t c = 0; c < nc; c++) memcpy(&rec[next[c]], &buf[c * WC], fill[c] * sizeof *rec);
+    _mm_sfence(); /* the streamed lines before anything the caller does next */
+    return;
+  }
 #endif
+  for (size_t i = lo; i < hi; i++) {
+    uint32_t k = key[i];
+    rec[next[k >> fbits]++] = (rec_t){p[i].x, p[i].y, (uint32_t)i, k};
+  }
 }
 
 #if QK__CELL_AVX2
@@ -365,59 +341,55 @@ static void copy_out(void *dst, const void *src, size_t bytes, bool stream, bool
   memcpy(dst, src, bytes);
 }
 
-/* Pass 2: coarse bucket c sorted by its low digit into the point arrays, stable, and its
- * fine buckets' starts, from the shares' histograms (no pass over the records to count).
- * The sort writes all over the bucket's slot range; when the range fits the share's
- * staging arrays, it writes there (in cache, reused from bucket to bucket) and the range
- * is then copied out in order, so that the point arrays are written front to back rather
- * than line by line at random. */
+/* Pass 3: coarse bucket c sorted by its low digit into the point arrays, stable, and its
+ * fine buckets' starts. The sort writes all over the bucket's slot range; when the range
+ * fits the share's staging arrays, it writes there (in cache, reused from bucket to
+ * bucket) and the range is then copied out in order, so that the point arrays are written
+ * front to back rather than line by line at random. */
 static void fine_job(unsigned c, unsigned w, void *ud) {
   const bucket_job_t *j = ud;
-  const size_t nc = j->nc, nb = j->nb;
+  const size_t nc = j->nc;
   uint32_t a = j->cbase[c], b = j->cbase[c + 1];
   const unsigned fbits = j->fbits;
   const uint32_t nf = 1u << fbits, mask = nf - 1;
-  bool staged = b - a <= j->stage_cap;
-  uint32_t base = staged ? 0 : a;
   uint32_t next[1u << (16 - MAX_COARSE_BITS)];
+  memset(next, 0, nf * sizeof *next);
+  const rec_t *rec = j->rec;
+  for (unsigned v = 0; v < j->nw; v++) {
+    const rec_t *r = rec + j->seg[(size_t)v * nc + c], *e = r + j->cnt[(size_t)v * nc + c];
+    for (; r < e; r++) next[r->key & mask]++;
+  }
   uint32_t *cum = j->cum + (size_t)c * nf, acc = a;
-  const uint32_t *h0 = j->hist + (size_t)c * nf;
   for (uint32_t f = 0; f < nf; f++) {
-    uint32_t k = h0[f];
-    for (unsigned v = 1; v < j->nw; v++) k += h0[(size_t)v * nb + f];
+    uint32_t k = next[f];
     cum[f] = acc;
-    next[f] = acc - a + base;
     acc += k;
   }
+  bool staged = b - a <= j->stage_cap;
+  uint32_t base = staged ? 0 : a;
+  for (uint32_t f = 0; f < nf; f++) next[f] = cum[f] - a + base;
   double *px = staged ? j->sx + (size_t)w * j->stage_cap : j->t->px;
   double *py = staged ? j->sy + (size_t)w * j->stage_cap : j->t->py;
   qk_id_t *pid = staged ? j->sid + (size_t)w * j->stage_cap : j->t->pid;
-  const rec_t *rec = j->rec;
   for (unsigned v = 0; v < j->nw; v++) {
-    uint32_t left = j->cnt[(size_t)v * nc + c], pg = j->head[(size_t)v * nc + c];
-    while (left) {
-      uint32_t m = left < j->page ? left : j->page;
-      const rec_t *r = rec + (size_t)pg * j->page, *e = r + m;
-      /* Two records a step: the second's slot is taken after the first's, as one at a
-       * time would (they may share a fine bucket). */
-      for (; r + 2 <= e; r += 2) {
-        uint32_t d = next[r[0].key & mask]++;
-        px[d] = r[0].x;
-        py[d] = r[0].y;
-        pid[d] = r[0].id;
-        uint32_t d1 = next[r[1].key & mask]++;
-        px[d1] = r[1].x;
-        py[d1] = r[1].y;
-        pid[d1] = r[1].id;
-      }
-      if (r < e) {
-        uint32_t d = next[r->key & mask]++;
-        px[d] = r->x;
-        py[d] = r->y;
-        pid[d] = r->id;
-      }
-      left -= m;
-      if (left) pg = j->link[pg];
+    const rec_t *r = rec + j->seg[(size_t)v * nc + c], *e = r + j->cnt[(size_t)v * nc + c];
+    /* Two records a step: the second's slot is taken after the first's, as one at a time
+     * would (they may share a fine bucket). */
+    for (; r + 2 <= e; r += 2) {
+      uint32_t d = next[r[0].key & mask]++;
+      px[d] = r[0].x;
+      py[d] = r[0].y;
+      pid[d] = r[0].id;
+      uint32_t d1 = next[r[1].key & mask]++;
+      px[d1] = r[1].x;
+      py[d1] = r[1].y;
+      pid[d1] = r[1].id;
+    }
+    if (r < e) {
+      uint32_t d = next[r->key & mask]++;
+      px[d] = r->x;
+      py[d] = r->y;
+      pid[d] = r->id;
     }
   }
   if (staged) {
@@ -432,22 +404,21 @@ static void fine_job(unsigned c, unsigned w, void *ud) {
 
 /* The temporary arrays of the bucketed build. */
 typedef struct scratch {
-  uint32_t *cum, *cbase, *cnt, *head, *hist, *link, *pbase;
+  uint32_t *cum, *cbase, *cnt, *seg;
+  uint16_t *key;
   void *rec_block; /* rec, before alignment */
   double *sx, *sy;
   qk_id_t *sid;
-  size_t nb, nc, nw, n_pages, page, ns;
+  size_t nb, nc, n, nw, n_rec, ns;
 } scratch_t;
 
 static void scratch_free(const qk_tree_t *t, scratch_t *s) {
   qk__free(&t->alloc, s->cum, (s->nb + 1) * sizeof *s->cum);
   qk__free(&t->alloc, s->cbase, (s->nc + 1) * sizeof *s->cbase);
   qk__free(&t->alloc, s->cnt, s->nw * s->nc * sizeof *s->cnt);
-  qk__free(&t->alloc, s->head, s->nw * s->nc * sizeof *s->head);
-  qk__free(&t->alloc, s->hist, s->nw * s->nb * sizeof *s->hist);
-  qk__free(&t->alloc, s->pbase, (s->nw + 1) * sizeof *s->pbase);
-  qk__free(&t->alloc, s->link, s->n_pages * sizeof *s->link);
-  qk__free(&t->alloc, s->rec_block, s->n_pages * s->page * sizeof(rec_t) + 64);
+  qk__free(&t->alloc, s->seg, s->nw * s->nc * sizeof *s->seg);
+  qk__free(&t->alloc, s->key, s->n * sizeof *s->key);
+  qk__free(&t->alloc, s->rec_block, s->n_rec * sizeof(rec_t) + 64);
   qk__free(&t->alloc, s->sx, s->ns * sizeof *s->sx);
   qk__free(&t->alloc, s->sy, s->ns * sizeof *s->sy);
   qk__free(&t->alloc, s->sid, s->ns * sizeof *s->sid);
@@ -478,66 +449,60 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
   if (cbits > MAX_COARSE_BITS) cbits = MAX_COARSE_BITS;
   unsigned fbits = kbits - cbits;
   size_t nb = (size_t)1 << kbits, nc = (size_t)1 << cbits;
-  /* Pages: about a quarter of a share's expected run per bucket, so that small inputs do
-   * not pay for mostly empty pages; a share needs at most one page per `page` of its
-   * points, plus one partly filled page per bucket. */
-  size_t page = n / (4 * nc * nw) / WC * WC;
-  page = page < WC ? WC : page > PAGE_MAX ? PAGE_MAX : page;
   scratch_t s = {0};
-  s.nb = nb, s.nc = nc, s.nw = nw, s.page = page;
+  s.nb = nb, s.nc = nc, s.n = n, s.nw = nw;
   s.cum = qk__realloc(&t->alloc, NULL, 0, (nb + 1) * sizeof *s.cum);
   s.cbase = qk__realloc(&t->alloc, NULL, 0, (nc + 1) * sizeof *s.cbase);
   s.cnt = qk__realloc(&t->alloc, NULL, 0, nw * nc * sizeof *s.cnt);
-  s.head = qk__realloc(&t->alloc, NULL, 0, nw * nc * sizeof *s.head);
-  s.hist = qk__realloc(&t->alloc, NULL, 0, nw * nb * sizeof *s.hist);
-  s.pbase = qk__realloc(&t->alloc, NULL, 0, (nw + 1) * sizeof *s.pbase);
-  if (!s.cum || !s.cbase || !s.cnt || !s.head || !s.hist || !s.pbase) {
+  s.seg = qk__realloc(&t->alloc, NULL, 0, nw * nc * sizeof *s.seg);
+  s.key = qk__realloc(&t->alloc, NULL, 0, n * sizeof *s.key);
+  if (!s.cum || !s.cbase || !s.cnt || !s.seg || !s.key) {
     scratch_free(t, &s);
     return QK_ERR_NOMEM;
   }
-  size_t pages = 0;
-  for (unsigned w = 0; w < nw; w++) {
-    size_t lo, hi;
-    qk__share_range(n, w, nw, &lo, &hi);
-    s.pbase[w] = (uint32_t)pages;
-    pages += (hi - lo) / page + nc;
-  }
-  s.pbase[nw] = (uint32_t)pages;
-  s.n_pages = pages;
-  s.link = qk__realloc(&t->alloc, NULL, 0, pages * sizeof *s.link);
-  s.rec_block = qk__realloc(&t->alloc, NULL, 0, pages * page * sizeof(rec_t) + 64);
-  if (!s.link || !s.rec_block) {
-    scratch_free(t, &s);
-    return QK_ERR_NOMEM;
-  }
-  /* The scatter writes 2^7 streams at once: on huge pages, they need fewer TLB entries. */
-  if (t->huge_pages) qk__advise_huge(&t->alloc, s.rec_block, pages * page * sizeof(rec_t) + 64);
+  memset(s.cnt, 0, nw * nc * sizeof *s.cnt);
   /* Large inputs go around the caches: their records and points would not stay there. */
   bool stream = n >= ((size_t)1 << 19);
   bucket_job_t j = {0};
   j.t = t, j.p = p, j.n = n, j.x0 = x0, j.y0 = y0, j.scale = scale;
-  j.ax = &tabs[0], j.ay = &tabs[1], j.fbits = fbits, j.nc = nc, j.nb = nb, j.stream = stream;
-  j.page = (uint32_t)page;
+  j.ax = &tabs[0], j.ay = &tabs[1], j.fbits = fbits, j.nc = nc, j.stream = stream;
+  j.key = s.key, j.cnt = s.cnt, j.seg = s.seg, j.cbase = s.cbase, j.cum = s.cum, j.nw = nw;
   j.near = delta;
   j.even = (uint32_t)qk__spread16((1u << L) - 1);
 #if QK__CELL_AVX2
   j.avx2 = __builtin_cpu_supports("avx2");
 #endif
-  j.rec = (rec_t *)(void *)((unsigned char *)s.rec_block + (-(uintptr_t)s.rec_block & 63u));
-  j.link = s.link, j.pbase = s.pbase, j.head = s.head, j.cnt = s.cnt, j.hist = s.hist;
-  j.cbase = s.cbase, j.cum = s.cum, j.nw = nw;
-  qk__run_shares(nw, scatter_share, &j);
-  /* Coarse bucket starts: the shares' counts, in the order of the one thread. */
+  qk__run_shares(nw, keys_share, &j);
+  /* Coarse bucket starts, and each share's segment of every bucket: the shares before it
+   * come first, so the order is the one thread's. Segments start at multiples of WC. */
   uint32_t acc = 0, most = 0;
+  size_t at = 0;
   for (size_t c = 0; c < nc; c++) {
     s.cbase[c] = acc;
-    for (unsigned w = 0; w < nw; w++) acc += s.cnt[(size_t)w * nc + c];
+    for (unsigned w = 0; w < nw; w++) {
+      uint32_t k = s.cnt[(size_t)w * nc + c];
+      s.seg[(size_t)w * nc + c] = (uint32_t)at;
+      at += (k + WC - 1) / WC * WC;
+      acc += k;
+    }
     if (acc - s.cbase[c] > most) most = acc - s.cbase[c];
   }
   s.cbase[nc] = acc;
   s.cum[nb] = acc;
-  /* Staging arrays for pass 2, each share's as large as the largest coarse bucket up to
+  s.n_rec = at ? at : 1;
+  s.rec_block = qk__realloc(&t->alloc, NULL, 0, s.n_rec * sizeof(rec_t) + 64);
+  if (!s.rec_block) {
+    scratch_free(t, &s);
+    return QK_ERR_NOMEM;
+  }
+  /* The scatter writes 2^7 streams at once: on huge pages, they need fewer TLB entries. */
+  if (t->huge_pages) qk__advise_huge(&t->alloc, s.rec_block, s.n_rec * sizeof(rec_t) + 64);
+  j.rec = (rec_t *)(void *)((unsigned char *)s.rec_block + (-(uintptr_t)s.rec_block & 63u));
+  qk__run_shares(nw, scatter_share, &j);
+  /* Staging arrays for pass 3, each share's as large as the largest coarse bucket up to
    * STAGE_MAX points. */
+  qk__free(&t->alloc, s.key, n * sizeof *s.key);
+  s.key = NULL;
   size_t cap = most < STAGE_MAX ? most : STAGE_MAX;
   s.ns = nw * cap;
   s.sx = qk__realloc(&t->alloc, NULL, 0, s.ns * sizeof *s.sx);
