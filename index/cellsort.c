@@ -209,7 +209,14 @@ static void keys_share(void *ctx, unsigned w, unsigned nw) {
     for (size_t i0 = lo; i0 < hi; i0 += BLOCK) {
       size_t m = hi - i0 < BLOCK ? hi - i0 : BLOCK;
       keys_avx2(j, p + i0, m, key + i0);
-      for (size_t i = i0; i < i0 + m; i++) h[key[i] >> fbits]++;
+      size_t i = i0, e = i0 + m;
+      for (; i + 4 <= e; i += 4) {
+        h[key[i] >> fbits]++;
+        h[key[i + 1] >> fbits]++;
+        h[key[i + 2] >> fbits]++;
+        h[key[i + 3] >> fbits]++;
+      }
+      for (; i < e; i++) h[key[i] >> fbits]++;
     }
     return;
   }
