@@ -34,6 +34,14 @@
 #if defined(__SSE2__)
 #include <emmintrin.h>
 #endif
+/* The keys four at a time, and the streaming copy 32 bytes a store, where the compiler can
+ * target AVX2 in one function and the processor has it (checked when the build runs). */
+#if defined(__GNUC__) && defined(__x86_64__) && (defined(__clang__) || __GNUC__ >= 8)
+#define QK__CELL_AVX2 1
+#include <immintrin.h>
+#else
+#define QK__CELL_AVX2 0
+#endif
 
 /* The grid lines along one axis as the tree computes them: line k (0 < k < 2^L) splits
  * the node of depth d = L - 1 - ctz(k) whose lower corner is the origin plus the sides of
@@ -123,7 +131,67 @@ typedef struct bucket_job {
   uint32_t stage_cap; /* points per share in the staging arrays (0: none) */
   double *sx, *sy;    /* the staging arrays, stage_cap per share */
   qk_id_t *sid;
+  double near;   /* the scaling's error bound, in grid units */
+  uint32_t even; /* the even bits of a key */
+  bool avx2;     /* keys four at a time, copies 32 bytes a store */
 } bucket_job_t;
+
+/* The cell of one point by the tables: the truncated scaled coordinate, corrected by the
+ * lines on either side of it. */
+static inline uint32_t key_by_lines(const bucket_job_t *j, double x, double y) {
+  uint32_t cx = (uint32_t)((x - j->x0) * j->scale), cy = (uint32_t)((y - j->y0) * j->scale);
+  const axis_tab_t *ax = j->ax, *ay = j->ay;
+  uint32_t mx = (uint32_t)(x > ax->line[cx][0]) | (uint32_t)(x > ax->line[cx][1]) << 1;
+  uint32_t my = (uint32_t)(y > ay->line[cy][0]) | (uint32_t)(y > ay->line[cy][1]) << 1;
+  return (uint32_t)(ax->dig[4 * cx + mx] ^ ay->dig[4 * cy + my]);
+}
+
+#if QK__CELL_AVX2
+/* Points per block of the AVX2 key pass: their keys stay in the first-level cache between
+ * the loop that computes them and the one that counts them. */
+#define BLOCK 256u
+
+/* The keys of m points, four at a time. A scaled coordinate whose fraction lies at least
+ * `near` (the error bound of the scaling and of the grid lines, in grid units) from a
+ * whole number is strictly between the lines of its truncation: its cell is that, and its
+ * key the interleaved bits of the two cells (east bits low, north bits high and inverted:
+ * the same bits as the tables'). The four points of a group with a coordinate nearer
+ * than that to a line go by the tables. */
+__attribute__((target("avx2"))) static void keys_avx2(const bucket_job_t *j, const qk_point_t *p,
+                                                      size_t m, uint16_t *key) {
+  const __m256d o = _mm256_setr_pd(j->x0, j->y0, j->x0, j->y0), sc = _mm256_set1_pd(j->scale);
+  const __m256d lo = _mm256_set1_pd(j->near), hi = _mm256_set1_pd(1.0 - j->near);
+  const __m256i m4 = _mm256_set1_epi32(0x0f0f), m2 = _mm256_set1_epi32(0x3333),
+                m1 = _mm256_set1_epi32(0x5555), even = _mm256_set1_epi32((int)j->even);
+  const __m256i pick = _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7);
+  size_t i = 0;
+  for (; i + 4 <= m; i += 4) {
+    __m256d a = _mm256_loadu_pd(&p[i].x), b = _mm256_loadu_pd(&p[i + 2].x);
+    __m256d ta = _mm256_mul_pd(_mm256_sub_pd(a, o), sc),
+            tb = _mm256_mul_pd(_mm256_sub_pd(b, o), sc);
+    __m128i ia = _mm256_cvttpd_epi32(ta), ib = _mm256_cvttpd_epi32(tb);
+    __m256d fa = _mm256_sub_pd(ta, _mm256_cvtepi32_pd(ia));
+    __m256d fb = _mm256_sub_pd(tb, _mm256_cvtepi32_pd(ib));
+    __m256d bad = _mm256_or_pd(
+        _mm256_or_pd(_mm256_cmp_pd(fa, lo, _CMP_LT_OQ), _mm256_cmp_pd(fa, hi, _CMP_GT_OQ)),
+        _mm256_or_pd(_mm256_cmp_pd(fb, lo, _CMP_LT_OQ), _mm256_cmp_pd(fb, hi, _CMP_GT_OQ)));
+    /* cx0 cy0 cx1 cy1 cx2 cy2 cx3 cy3, each spread to the even bits */
+    __m256i v = _mm256_inserti128_si256(_mm256_castsi128_si256(ia), ib, 1);
+    v = _mm256_and_si256(_mm256_or_si256(v, _mm256_slli_epi32(v, 4)), m4);
+    v = _mm256_and_si256(_mm256_or_si256(v, _mm256_slli_epi32(v, 2)), m2);
+    v = _mm256_and_si256(_mm256_or_si256(v, _mm256_slli_epi32(v, 1)), m1);
+    __m256i n = _mm256_srli_epi64(v, 32); /* each point's north bits under its east bits */
+    __m256i k =
+        _mm256_xor_si256(_mm256_xor_si256(v, n), _mm256_slli_epi32(_mm256_xor_si256(n, even), 1));
+    k = _mm256_permutevar8x32_epi32(k, pick);
+    __m128i k16 = _mm_packus_epi32(_mm256_castsi256_si128(k), _mm256_castsi256_si128(k));
+    _mm_storel_epi64((__m128i *)(void *)&key[i], k16);
+    if (_mm256_movemask_pd(bad))
+      for (size_t q = i; q < i + 4; q++) key[q] = (uint16_t)key_by_lines(j, p[q].x, p[q].y);
+  }
+  for (; i < m; i++) key[i] = (uint16_t)key_by_lines(j, p[i].x, p[i].y);
+}
+#endif
 
 /* Pass 1: every point's cell, and this share's count per coarse bucket. The job's fields
  * are copied to locals: the stores to key[] and h[] could otherwise alias them. */
@@ -136,6 +204,23 @@ static void keys_share(void *ctx, unsigned w, unsigned nw) {
   uint16_t *key = j->key;
   const axis_tab_t *ax = j->ax, *ay = j->ay;
   const unsigned fbits = j->fbits;
+#if QK__CELL_AVX2
+  if (j->avx2) {
+    for (size_t i0 = lo; i0 < hi; i0 += BLOCK) {
+      size_t m = hi - i0 < BLOCK ? hi - i0 : BLOCK;
+      keys_avx2(j, p + i0, m, key + i0);
+      size_t i = i0, e = i0 + m;
+      for (; i + 4 <= e; i += 4) {
+        h[key[i] >> fbits]++;
+        h[key[i + 1] >> fbits]++;
+        h[key[i + 2] >> fbits]++;
+        h[key[i + 3] >> fbits]++;
+      }
+      for (; i < e; i++) h[key[i] >> fbits]++;
+    }
+    return;
+  }
+#endif
 #if defined(__SSE2__)
   /* Both axes at once: scale, truncate, and compare with the two lines of each guess. */
   const __m128d o = _mm_setr_pd(j->x0, j->y0), sc = _mm_set1_pd(j->scale);
@@ -208,8 +293,34 @@ static void scatter_share(void *ctx, unsigned w, unsigned nw) {
   }
 }
 
+#if QK__CELL_AVX2
+/* copy_out()'s streaming copy, 32 bytes per store. */
+__attribute__((target("avx2"))) static void stream_avx2(unsigned char *d, const unsigned char *s,
+                                                        size_t bytes) {
+  size_t head = (size_t)(-(uintptr_t)d & 31u);
+  if (head > bytes) head = bytes;
+  memcpy(d, s, head);
+  d += head, s += head, bytes -= head;
+  for (; bytes >= 64; d += 64, s += 64, bytes -= 64) {
+    __m256i a = _mm256_loadu_si256((const __m256i *)(const void *)s);
+    __m256i b = _mm256_loadu_si256((const __m256i *)(const void *)(s + 32));
+    _mm256_stream_si256((__m256i *)(void *)d, a);
+    _mm256_stream_si256((__m256i *)(void *)(d + 32), b);
+  }
+  memcpy(d, s, bytes);
+}
+#endif
+
 /* Copy `bytes` from src to dst, with non-temporal stores where `stream` asks. */
-static void copy_out(void *dst, const void *src, size_t bytes, bool stream) {
+static void copy_out(void *dst, const void *src, size_t bytes, bool stream, bool avx2) {
+#if QK__CELL_AVX2
+  if (stream && avx2) {
+    stream_avx2(dst, src, bytes);
+    return;
+  }
+#else
+  (void)avx2;
+#endif
 #if defined(__SSE2__)
   if (stream) {
     unsigned char *d = dst;
@@ -269,7 +380,19 @@ static void fine_job(unsigned c, unsigned w, void *ud) {
   qk_id_t *pid = staged ? j->sid + (size_t)w * j->stage_cap : j->t->pid;
   for (unsigned v = 0; v < j->nw; v++) {
     const rec_t *r = rec + j->seg[(size_t)v * nc + c], *e = r + j->cnt[(size_t)v * nc + c];
-    for (; r < e; r++) {
+    /* Two records a step: the second's slot is taken after the first's, as one at a time
+     * would (they may share a fine bucket). */
+    for (; r + 2 <= e; r += 2) {
+      uint32_t d = next[r[0].key & mask]++;
+      px[d] = r[0].x;
+      py[d] = r[0].y;
+      pid[d] = r[0].id;
+      uint32_t d1 = next[r[1].key & mask]++;
+      px[d1] = r[1].x;
+      py[d1] = r[1].y;
+      pid[d1] = r[1].id;
+    }
+    if (r < e) {
       uint32_t d = next[r->key & mask]++;
       px[d] = r->x;
       py[d] = r->y;
@@ -277,9 +400,9 @@ static void fine_job(unsigned c, unsigned w, void *ud) {
     }
   }
   if (staged) {
-    copy_out(j->t->px + a, px, (size_t)(b - a) * sizeof *px, j->stream);
-    copy_out(j->t->py + a, py, (size_t)(b - a) * sizeof *py, j->stream);
-    copy_out(j->t->pid + a, pid, (size_t)(b - a) * sizeof *pid, j->stream);
+    copy_out(j->t->px + a, px, (size_t)(b - a) * sizeof *px, j->stream, j->avx2);
+    copy_out(j->t->py + a, py, (size_t)(b - a) * sizeof *py, j->stream, j->avx2);
+    copy_out(j->t->pid + a, pid, (size_t)(b - a) * sizeof *pid, j->stream, j->avx2);
 #if defined(__SSE2__)
     if (j->stream) _mm_sfence();
 #endif
@@ -347,9 +470,15 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
   memset(s.cnt, 0, nw * nc * sizeof *s.cnt);
   /* Large inputs go around the caches: their records and points would not stay there. */
   bool stream = n >= ((size_t)1 << 19);
-  bucket_job_t j = {t,     p,  n,      x0,    y0,   scale, &tabs[0], &tabs[1],
-                    fbits, nc, stream, s.key, NULL, s.cnt, s.seg,    s.cbase,
-                    s.cum, nw, 0,      NULL,  NULL, NULL};
+  bucket_job_t j = {0};
+  j.t = t, j.p = p, j.n = n, j.x0 = x0, j.y0 = y0, j.scale = scale;
+  j.ax = &tabs[0], j.ay = &tabs[1], j.fbits = fbits, j.nc = nc, j.stream = stream;
+  j.key = s.key, j.cnt = s.cnt, j.seg = s.seg, j.cbase = s.cbase, j.cum = s.cum, j.nw = nw;
+  j.near = delta;
+  j.even = (uint32_t)qk__spread16((1u << L) - 1);
+#if QK__CELL_AVX2
+  j.avx2 = __builtin_cpu_supports("avx2");
+#endif
   qk__run_shares(nw, keys_share, &j);
   /* Coarse bucket starts, and each share's segment of every bucket: the shares before it
    * come first, so the order is the one thread's. Segments start at multiples of WC. */

@@ -20,6 +20,14 @@
 #if defined(__SSE2__)
 #include <emmintrin.h>
 #endif
+/* The bounding box two points per register where the compiler can target AVX2 in one
+ * function and the processor has it (as index/cellsort.c's keys). */
+#if defined(__GNUC__) && defined(__x86_64__) && (defined(__clang__) || __GNUC__ >= 8)
+#define QK__TREE_AVX2 1
+#include <immintrin.h>
+#else
+#define QK__TREE_AVX2 0
+#endif
 
 void qk_tree_options_init(qk_tree_options_t *o) {
   memset(o, 0, sizeof *o);
@@ -356,11 +364,59 @@ typedef struct bbox_job {
   int finite[QK__MAX_THREADS];
 } bbox_job_t;
 
+#if QK__TREE_AVX2
+/* The same as the SSE2 loop below, two points per register: half the instructions. */
+__attribute__((target("avx2"))) static void bbox_avx2(const qk_point_t *p, size_t lo, size_t hi,
+                                                      qk_box_t *box, int *finite) {
+  __m256d mn0 = _mm256_set1_pd(INFINITY), mn1 = mn0, mx0 = _mm256_set1_pd(-INFINITY), mx1 = mx0;
+  __m256d nan = _mm256_setzero_pd();
+  size_t i = lo;
+  for (; i + 8 <= hi; i += 8) {
+    __m256d a = _mm256_loadu_pd(&p[i].x), b = _mm256_loadu_pd(&p[i + 2].x);
+    __m256d c = _mm256_loadu_pd(&p[i + 4].x), d = _mm256_loadu_pd(&p[i + 6].x);
+    mn0 = _mm256_min_pd(mn0, a);
+    mx0 = _mm256_max_pd(mx0, a);
+    mn1 = _mm256_min_pd(mn1, b);
+    mx1 = _mm256_max_pd(mx1, b);
+    mn0 = _mm256_min_pd(mn0, c);
+    mx0 = _mm256_max_pd(mx0, c);
+    mn1 = _mm256_min_pd(mn1, d);
+    mx1 = _mm256_max_pd(mx1, d);
+    nan = _mm256_or_pd(
+        nan, _mm256_or_pd(_mm256_cmp_pd(a, b, _CMP_UNORD_Q), _mm256_cmp_pd(c, d, _CMP_UNORD_Q)));
+  }
+  mn0 = _mm256_min_pd(mn0, mn1);
+  mx0 = _mm256_max_pd(mx0, mx1);
+  __m128d mn = _mm_min_pd(_mm256_castpd256_pd128(mn0), _mm256_extractf128_pd(mn0, 1));
+  __m128d mx = _mm_max_pd(_mm256_castpd256_pd128(mx0), _mm256_extractf128_pd(mx0, 1));
+  __m128d un = _mm_or_pd(_mm256_castpd256_pd128(nan), _mm256_extractf128_pd(nan, 1));
+  for (; i < hi; i++) {
+    __m128d a = _mm_loadu_pd(&p[i].x);
+    mn = _mm_min_pd(mn, a);
+    mx = _mm_max_pd(mx, a);
+    un = _mm_or_pd(un, _mm_cmpunord_pd(a, a));
+  }
+  double l[2], u[2];
+  _mm_storeu_pd(l, mn);
+  _mm_storeu_pd(u, mx);
+  *box = (qk_box_t){l[0], l[1], u[0], u[1]};
+  *finite =
+      !_mm_movemask_pd(un) && isfinite(l[0]) && isfinite(l[1]) && isfinite(u[0]) && isfinite(u[1]);
+  if (lo == hi) *finite = 1; /* an empty share: the box stays empty */
+}
+#endif
+
 static void bbox_share(void *ctx, unsigned w, unsigned nw) {
   bbox_job_t *j = ctx;
   size_t lo, hi;
   qk__share_range(j->n, w, nw, &lo, &hi);
   const qk_point_t *p = j->p;
+#if QK__TREE_AVX2
+  if (__builtin_cpu_supports("avx2")) {
+    bbox_avx2(p, lo, hi, &j->box[w], &j->finite[w]);
+    return;
+  }
+#endif
 #if defined(__SSE2__)
   /* Two lanes (x, y) per point, four points per step, in four pairs of accumulators. An
    * unordered compare flags a NaN; an infinite coordinate shows in the box itself. The
