@@ -85,6 +85,7 @@ struct qk_collider {
   uint32_t n_quads; /* entries filled */
   uint32_t threads; /* for the pairs and batch calls (0: every online core) */
   double mag;       /* largest coordinate magnitude of any item box, for rounding margins */
+  double reach;     /* farthest any item box reaches from its centre on an axis (the ray cast) */
 };
 
 /* Exact overlap predicates (touching counts). */
@@ -357,6 +358,8 @@ static qk_status_t fill_slots(qk_collider_t *c, const qk_disc_t *discs, const qk
   const uint32_t *where;
   qk_status_t st = qk__id_map(c->tree, &where);
   if (st != QK_OK) return st;
+  const double *xs = qk__tree_xs(c->tree), *ys = qk__tree_ys(c->tree);
+  c->reach = 0;
   for (qk_id_t id = 0; id < c->n; id++) {
     uint32_t slot = where[id];
     if (id < c->n_discs) {
@@ -365,6 +368,10 @@ static qk_status_t fill_slots(qk_collider_t *c, const qk_disc_t *discs, const qk
     } else {
       c->sbox[slot] = boxes[id - c->n_discs];
     }
+    const qk_box_t *b = &c->sbox[slot];
+    const double r = qk__max(qk__max(xs[slot] - b->xmin, b->xmax - xs[slot]),
+                             qk__max(ys[slot] - b->ymin, b->ymax - ys[slot]));
+    if (r > c->reach) c->reach = r;
   }
   fill_node_boxes(c, 0);
   if (c->quads && c->cn[0].child != QK_NONE && c->cn[0].xmin != INFINITY) fill_qnodes(c, 0);
@@ -950,27 +957,32 @@ static inline unsigned qnode_slab_float(const qnode_t *q, const ray_t *r, __m128
   return (unsigned)_mm_movemask_ps(_mm_cmple_ps(l, u));
 }
 
-/* The cast with the float test, walking the qnode_t array. */
-static void cast_float(const qk_collider_t *c, const ray_t *rp, double tmax, qk_hit_t *hit) {
+/*
+ * The search with the float test over the subtree of quads entry `from` (its own box
+ * untested), into *bp; entry `skip` (QK_NONE: none) is passed over with all beneath it.
+ */
+#if defined(__GNUC__)
+__attribute__((always_inline))
+#endif
+static inline void
+walk_float(const qk_collider_t *c, const ray_t *rp, double tmax, uint32_t from, uint32_t skip,
+           best_t *bp) {
   const ray_t ray = *rp;
-  best_t b = {INFINITY, QK_NONE};
+  best_t b = *bp;
   /* T of fact (2): min(tmax, best) rounded up to float; it only shrinks. */
-  float tf = round_up(tmax);
+  float tf = round_up(b.t < tmax ? b.t : tmax);
   __m128 tv = _mm_set1_ps(tf);
   rentry_t stack[QK__CSTACK_MAX];
   int sp = 0;
   const int all_discs = c->n_discs == c->n;
   const unsigned s = ray.s;
-  const cnode_t *root = &c->cn[0];
-  /* The node in hand. The root needs no test of its own: its children's boxes are. */
-  rentry_t cur = root->child != QK_NONE ? (rentry_t){root->quad, QK_NONE, 0.0f}
-                                        : (rentry_t){root->start, root->count, 0.0f};
+  rentry_t cur = {from, QK_NONE, 0.0f};
   const qnode_t *quads = c->quads;
   for (;;) {
     if (cur.count == QK_NONE) {
       const qnode_t *q = &quads[cur.link];
       float lo4[4];
-      const unsigned keep = qnode_slab_float(q, &ray, tv, lo4);
+      const unsigned keep = cur.link == skip ? 0 : qnode_slab_float(q, &ray, tv, lo4);
       if (keep) {
         /* The kept children in the order the ray meets their squares (the item boxes
          * mostly follow it; the bounds keep the pruning exact whatever the order): the
@@ -1005,6 +1017,78 @@ static void cast_float(const qk_collider_t *c, const ray_t *rp, double tmax, qk_
     while (sp > 0 && stack[sp - 1].bound > tf) sp--;
     if (sp == 0) break;
     cur = stack[--sp];
+  }
+  *bp = b;
+}
+
+/* Levels above the origin's deepest internal node at which the local search starts. */
+#define QK__RAY_START_UP 2
+
+/*
+ * The cast with the float test, in two steps. Most rays end near their origin, and a
+ * search from the root spends most of its work testing the boxes on the way down to it.
+ * So the descent to the origin first goes by the origin's quadrant alone (two
+ * comparisons a level, the squares computed along the path as the tree computes them),
+ * and the search proper starts at N, a few levels above the deepest internal node
+ * there, which yields the first hit t1 among N's items (or t1 = tmax). Any other item
+ * that the ray meets at t <= t1 has its centre outside N's square (centres strictly
+ * inside a node's square are all beneath it) and, by fact (1), the point o + t d of the
+ * hit within reach + w of that centre on each axis. So when the segment from o to
+ * o + t1 d stays farther than that from the edges of the square of an ancestor A of N,
+ * every such item lies beneath A: the search then goes on from A with best = t1, passing
+ * over N, which it has done. A is the deepest ancestor (N itself, usually) whose square
+ * holds the segment so; the root holds every item. The margin adds w for the roundings
+ * of reach, of the segment's end and of the comparisons (each below 2^-48 of the
+ * magnitudes involved, which the last term covers). The answer is the smallest (t, id)
+ * over A's items, the same as a search from the root finds.
+ */
+static void cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk_hit_t *hit) {
+  best_t b = {INFINITY, QK_NONE};
+  const cnode_t *root = &c->cn[0];
+  if (root->child == QK_NONE) {
+    scan_leaf(c, ray, root->start, root->start + root->count, tmax, &b);
+  } else {
+    const qk_tree_t *t = c->tree;
+    /* The path: entries in quads and the lower left corners of their squares. */
+    double px[QK_MAX_DEPTH_LIMIT + 1], py[QK_MAX_DEPTH_LIMIT + 1];
+    uint32_t path[QK_MAX_DEPTH_LIMIT + 1];
+    const double ox = ray->ox, oy = ray->oy;
+    const qk_square_t rs = qk__tree_root_square(t);
+    double x0 = rs.x, y0 = rs.y;
+    uint32_t e = root->quad;
+    px[0] = x0, py[0] = y0, path[0] = e;
+    unsigned d = 0;
+    if (ox >= rs.x && ox <= rs.x + rs.side && oy >= rs.y && oy <= rs.y + rs.side) {
+      const qnode_t *quads = c->quads;
+      while (d < QK_MAX_DEPTH_LIMIT) {
+        const double h = qk__tree_side(t, d + 1);
+        const unsigned east = ox > x0 + h, north = oy > y0 + h;
+        const unsigned lane = north << 1 | east;
+        const qnode_t *q = &quads[e];
+        if (q->count[lane] != QK_NONE) break;
+        e = q->link[lane];
+        x0 = east ? x0 + h : x0;
+        y0 = north ? y0 + h : y0;
+        d++;
+        px[d] = x0, py[d] = y0, path[d] = e;
+      }
+    }
+    const unsigned n = d > QK__RAY_START_UP ? d - QK__RAY_START_UP : 0;
+    walk_float(c, ray, tmax, path[n], QK_NONE, &b);
+    unsigned a = 0;
+    const double t1 = b.t < tmax ? b.t : tmax;
+    if (n > 0 && t1 < INFINITY) {
+      const double ex = ox + t1 * ray->dx, ey = oy + t1 * ray->dy;
+      const double m =
+          c->reach + 2 * ray->w + (fabs(ox) + fabs(oy) + fabs(ex) + fabs(ey) + c->reach) * 0x1p-48;
+      const double lx = qk__min(ox, ex) - m, hx = qk__max(ox, ex) + m;
+      const double ly = qk__min(oy, ey) - m, hy = qk__max(oy, ey) + m;
+      for (a = n; a > 0; a--) {
+        const double side = qk__tree_side(t, a);
+        if (lx > px[a] && hx < px[a] + side && ly > py[a] && hy < py[a] + side) break;
+      }
+    }
+    if (a != n) walk_float(c, ray, tmax, path[a], path[n], &b);
   }
   hit->id = b.id;
   hit->t = b.id == QK_NONE ? INFINITY : b.t;
