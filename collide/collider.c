@@ -1027,9 +1027,8 @@ walk_float(const qk_collider_t *c, const ray_t *rp, double tmax, uint32_t from, 
 /*
  * The cast with the float test, in two steps. Most rays end near their origin, and a
  * search from the root spends most of its work testing the boxes on the way down to it.
- * So the descent to the origin first goes by the origin's quadrant alone (two
- * comparisons a level, the squares computed along the path as the tree computes them),
- * and the search proper starts at N, a few levels above the deepest internal node
+ * So the descent to the origin first goes by the bits of the origin's position alone
+ * (no box tests), and the search proper starts at N, a few levels above the deepest internal node
  * there, which yields the first hit t1 among N's items (or t1 = tmax). Any other item
  * that the ray meets at t <= t1 has its centre outside N's square (centres strictly
  * inside a node's square are all beneath it) and, by fact (1), the point o + t d of the
@@ -1039,8 +1038,13 @@ walk_float(const qk_collider_t *c, const ray_t *rp, double tmax, uint32_t from, 
  * over N, which it has done. A is the deepest ancestor (N itself, usually) whose square
  * holds the segment so; the root holds every item. The margin adds w for the roundings
  * of reach, of the segment's end and of the comparisons (each below 2^-48 of the
- * magnitudes involved, which the last term covers). The answer is the smallest (t, id)
- * over A's items, the same as a search from the root finds.
+ * magnitudes involved), and 2^-45 of the root square's for the corners: here they are
+ * the root's corner plus the path's bits times side / 2^32 (two roundings), where the
+ * tree adds halves level by level (one rounding each, 60 levels at most), so the two
+ * differ by less than 2^-46 of it. The descent need not pick, near a midline, the child
+ * the tree would pick for the origin: the nodes on the path are nodes of the tree
+ * whatever the bits, and only the check above decides. The answer is the smallest
+ * (t, id) over A's items, the same as a search from the root finds.
  */
 static void cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk_hit_t *hit) {
   best_t b = {INFINITY, QK_NONE};
@@ -1049,28 +1053,24 @@ static void cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk
     scan_leaf(c, ray, root->start, root->start + root->count, tmax, &b);
   } else {
     const qk_tree_t *t = c->tree;
-    /* The path: entries in quads and the lower left corners of their squares. */
-    double px[QK_MAX_DEPTH_LIMIT + 1], py[QK_MAX_DEPTH_LIMIT + 1];
-    uint32_t path[QK_MAX_DEPTH_LIMIT + 1];
+    /* The path, by the bits of the origin's position in the root square in 32-bit fixed
+     * point (a lane's two bits per level): entries in quads. */
+    uint32_t path[33];
     const double ox = ray->ox, oy = ray->oy;
     const qk_square_t rs = qk__tree_root_square(t);
-    double x0 = rs.x, y0 = rs.y;
-    uint32_t e = root->quad;
-    px[0] = x0, py[0] = y0, path[0] = e;
+    const double f = 0x1p32 / rs.side, ux = (ox - rs.x) * f, uy = (oy - rs.y) * f;
+    uint32_t e = root->quad, ix = 0, iy = 0;
+    path[0] = e;
     unsigned d = 0;
-    if (ox >= rs.x && ox <= rs.x + rs.side && oy >= rs.y && oy <= rs.y + rs.side) {
+    /* (A root square below 2^-900 would make side / 2^32 subnormal: no local start.) */
+    if (rs.side > 0x1p-900 && ux >= 0 && ux < 0x1p32 && uy >= 0 && uy < 0x1p32) {
       const qnode_t *quads = c->quads;
-      while (d < QK_MAX_DEPTH_LIMIT) {
-        const double h = qk__tree_side(t, d + 1);
-        const unsigned east = ox > x0 + h, north = oy > y0 + h;
-        const unsigned lane = north << 1 | east;
+      ix = (uint32_t)ux, iy = (uint32_t)uy;
+      while (d < 32) {
+        const unsigned lane = (iy >> (31 - d) & 1u) << 1 | (ix >> (31 - d) & 1u);
         const qnode_t *q = &quads[e];
         if (q->count[lane] != QK_NONE) break;
-        e = q->link[lane];
-        x0 = east ? x0 + h : x0;
-        y0 = north ? y0 + h : y0;
-        d++;
-        px[d] = x0, py[d] = y0, path[d] = e;
+        path[++d] = e = q->link[lane];
       }
     }
     const unsigned n = d > QK__RAY_START_UP ? d - QK__RAY_START_UP : 0;
@@ -1079,13 +1079,17 @@ static void cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk
     const double t1 = b.t < tmax ? b.t : tmax;
     if (n > 0 && t1 < INFINITY) {
       const double ex = ox + t1 * ray->dx, ey = oy + t1 * ray->dy;
-      const double m =
-          c->reach + 2 * ray->w + (fabs(ox) + fabs(oy) + fabs(ex) + fabs(ey) + c->reach) * 0x1p-48;
+      const double m = c->reach + 2 * ray->w +
+                       (fabs(ox) + fabs(oy) + fabs(ex) + fabs(ey) + c->reach) * 0x1p-48 +
+                       (fabs(rs.x) + fabs(rs.y) + rs.side) * 0x1p-45;
       const double lx = qk__min(ox, ex) - m, hx = qk__max(ox, ex) + m;
       const double ly = qk__min(oy, ey) - m, hy = qk__max(oy, ey) + m;
+      const double unit = rs.side * 0x1p-32;
       for (a = n; a > 0; a--) {
         const double side = qk__tree_side(t, a);
-        if (lx > px[a] && hx < px[a] + side && ly > py[a] && hy < py[a] + side) break;
+        const uint32_t keep = ~(uint32_t)0 << (32 - a); /* the path's first a bits */
+        const double x0 = rs.x + (double)(ix & keep) * unit, y0 = rs.y + (double)(iy & keep) * unit;
+        if (lx > x0 && hx < x0 + side && ly > y0 && hy < y0 + side) break;
       }
     }
     if (a != n) walk_float(c, ray, tmax, path[a], path[n], &b);
