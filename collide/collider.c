@@ -967,7 +967,7 @@ __attribute__((always_inline))
 static inline void
 walk_float(const qk_collider_t *c, const ray_t *rp, double tmax, uint32_t from, uint32_t skip,
            best_t *bp) {
-  const ray_t ray = *rp;
+  const ray_t *const ray = rp;
   best_t b = *bp;
   /* T of fact (2): min(tmax, best) rounded up to float; it only shrinks. */
   float tf = round_up(b.t < tmax ? b.t : tmax);
@@ -975,14 +975,14 @@ walk_float(const qk_collider_t *c, const ray_t *rp, double tmax, uint32_t from, 
   rentry_t stack[QK__CSTACK_MAX];
   int sp = 0;
   const int all_discs = c->n_discs == c->n;
-  const unsigned s = ray.s;
+  const unsigned s = ray->s;
   rentry_t cur = {from, QK_NONE, 0.0f};
   const qnode_t *quads = c->quads;
   for (;;) {
     if (cur.count == QK_NONE) {
       const qnode_t *q = &quads[cur.link];
       float lo4[4];
-      const unsigned keep = cur.link == skip ? 0 : qnode_slab_float(q, &ray, tv, lo4);
+      const unsigned keep = cur.link == skip ? 0 : qnode_slab_float(q, ray, tv, lo4);
       if (keep) {
         /* The kept children in the order the ray meets their squares (the item boxes
          * mostly follow it; the bounds keep the pruning exact whatever the order): the
@@ -1006,7 +1006,7 @@ walk_float(const qk_collider_t *c, const ray_t *rp, double tmax, uint32_t from, 
       }
     } else {
       const double best0 = b.t;
-      scan_leaf(c, &ray, cur.link, cur.link + cur.count, tmax, &b);
+      scan_leaf(c, ray, cur.link, cur.link + cur.count, tmax, &b);
       if (b.t != best0) {
         tf = round_up(b.t); /* b.t <= tmax: the items test t <= tmax */
         tv = _mm_set1_ps(tf);
@@ -1019,6 +1019,16 @@ walk_float(const qk_collider_t *c, const ray_t *rp, double tmax, uint32_t from, 
     cur = stack[--sp];
   }
   *bp = b;
+}
+
+/* The bits of v at the even positions of a 64-bit word (one axis of a Morton code). */
+static inline uint64_t spread32(uint32_t v) {
+  uint64_t x = v;
+  x = (x | x << 16) & 0x0000FFFF0000FFFFull;
+  x = (x | x << 8) & 0x00FF00FF00FF00FFull;
+  x = (x | x << 4) & 0x0F0F0F0F0F0F0F0Full;
+  x = (x | x << 2) & 0x3333333333333333ull;
+  return (x | x << 1) & 0x5555555555555555ull;
 }
 
 /* Levels above the origin's deepest internal node at which the local search starts. */
@@ -1066,11 +1076,13 @@ static void cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk
     if (rs.side > 0x1p-900 && ux >= 0 && ux < 0x1p32 && uy >= 0 && uy < 0x1p32) {
       const qnode_t *quads = c->quads;
       ix = (uint32_t)ux, iy = (uint32_t)uy;
+      uint64_t z = spread32(ix) | spread32(iy) << 1; /* the lanes, root first, from bit 63 */
       while (d < 32) {
-        const unsigned lane = (iy >> (31 - d) & 1u) << 1 | (ix >> (31 - d) & 1u);
+        const unsigned lane = (unsigned)(z >> 62);
         const qnode_t *q = &quads[e];
         if (q->count[lane] != QK_NONE) break;
         path[++d] = e = q->link[lane];
+        z <<= 2;
       }
     }
     const unsigned n = d > QK__RAY_START_UP ? d - QK__RAY_START_UP : 0;
