@@ -84,6 +84,7 @@ struct qk_collider {
   size_t quads_bytes;
   uint32_t n_quads; /* entries filled */
   uint32_t threads; /* for the pairs and batch calls (0: every online core) */
+  int huge_pages;   /* the options' hint, applied to the collider's own arrays too */
   double mag;       /* largest coordinate magnitude of any item box, for rounding margins */
   double reach;     /* farthest any item box reaches from its centre on an axis (the ray cast) */
 };
@@ -350,6 +351,14 @@ static qk_status_t alloc_arrays(qk_collider_t *c) {
   }
   if (!c->sbox || (c->n_discs && !c->sdisc) || !c->cn_block || (c->quads_bytes && !c->quads_block))
     return QK_ERR_NOMEM;
+  /* Before the first touch, so that the pages are huge from the start: the ray cast and
+   * the searches jump across these arrays, one or two lines per page. */
+  if (c->huge_pages) {
+    qk__advise_huge(a, c->sbox, c->n_slots * sizeof *c->sbox);
+    qk__advise_huge(a, c->sdisc, c->n_discs ? c->n_slots * sizeof *c->sdisc : 0);
+    qk__advise_huge(a, c->cn_block, c->cn_bytes);
+    qk__advise_huge(a, c->quads_block, c->quads_bytes);
+  }
   return QK_OK;
 }
 
@@ -397,6 +406,7 @@ qk_status_t qk_collider_build(const qk_disc_t *discs, size_t n_discs, const qk_b
   memset(c, 0, sizeof *c);
   c->alloc = a;
   c->threads = opt.threads;
+  c->huge_pages = opt.huge_pages;
   c->n_discs = n_discs;
   c->n = n_discs + n_boxes;
   if ((st = build_centre_tree(c, discs, boxes, &opt)) != QK_OK || (st = alloc_arrays(c)) != QK_OK ||
