@@ -1090,7 +1090,21 @@ static void cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk
       while (d < 32) {
         const unsigned lane = (unsigned)(z >> 62);
         const qnode_t *q = &quads[e];
-        if (q->count[lane] != QK_NONE) break;
+        if (q->count[lane] != QK_NONE) {
+          /* The origin's leaf, which the search below reaches after a few node tests:
+           * its items and ids asked for now, so that those misses overlap the tests. */
+          const uint32_t st = q->link[lane], cnt = q->count[lane];
+          if (cnt > 0) {
+            if (c->sdisc) {
+              QK__CPREFETCH(&c->sdisc[st]);
+              QK__CPREFETCH(&c->sdisc[st + cnt - 1]);
+            } else {
+              QK__CPREFETCH(&c->sbox[st]);
+            }
+            QK__CPREFETCH(&qk__tree_ids(t)[st]);
+          }
+          break;
+        }
         path[++d] = e = q->link[lane];
         z <<= 2;
       }
