@@ -18,6 +18,9 @@
  *    leaves past the depth cap), boxes of zero width and height on one line, items whose
  *    sides fall exactly on and just off power-of-two grid values, far from the origin and
  *    near it; rays along those sides and through those points;
+ *  - trees deeper than the 32 bits of the ray's descent (pairs of discs 2^-45 apart, depth
+ *    cap 60) and a given root square whose halvings are not exact (corner -0.3, side
+ *    1.7), with rays from inside and outside the root;
  *  - the batch call (which reorders its rays by origin) against single calls.
  */
 #include <math.h>
@@ -258,6 +261,58 @@ static void test_collide_rays_grid_edges(void **state) {
   assert_true(checked == 4L * 2 * 400);
 }
 
+/* Deep trees and an inexact root square: the local start's descent stops at 32 levels,
+ * and its squares differ from the tree's by roundings that the margin must cover. */
+static void test_collide_rays_deep_and_rooted(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 3);
+  enum { ND = 240 };
+  qk_disc_t d[ND];
+  long checked = 0;
+  for (int variant = 0; variant < 2; variant++) {
+    for (int i = 0; i < ND; i += 2) { /* pairs 2^-45 apart, some in a tight cluster */
+      const double x = i < 80 ? 0.4 + qkt_rng_range(&r, 0, 1e-9) : qkt_rng_range(&r, 0, 1.3);
+      const double y = i < 80 ? 0.7 + qkt_rng_range(&r, 0, 1e-9) : qkt_rng_range(&r, 0, 1.3);
+      const double rad =
+          qkt_rng_below(&r, 3) ? qkt_rng_range(&r, 0, 1e-10) : qkt_rng_range(&r, 0, 0.02);
+      d[i] = (qk_disc_t){x, y, rad};
+      d[i + 1] = (qk_disc_t){x + 0x1p-45, y - 0x1p-45, rad};
+    }
+    qk_tree_options_t opt;
+    qk_tree_options_init(&opt);
+    opt.capacity = 1;
+    opt.max_depth = QK_MAX_DEPTH_LIMIT;
+    if (variant == 1) {
+      opt.has_root = 1;
+      opt.root = (qk_square_t){-0.3, -0.3, 1.7};
+    }
+    qk_collider_t *c = NULL;
+    assert_int_equal(qk_collider_build(d, ND, NULL, 0, &opt, &c), QK_OK);
+    for (int i = 0; i < 600; i++) {
+      const qk_disc_t *t = &d[qkt_rng_below(&r, ND)];
+      qk_point_t o = {qkt_rng_range(&r, -0.5, 1.8), qkt_rng_range(&r, -0.5, 1.8)};
+      static const double near[3] = {0.0, 0x1p-47, 1e-9}; /* on, beside, off the pair */
+      const double nr = near[qkt_rng_below(&r, 3)];
+      if (i % 3 == 0) o = (qk_point_t){t->x + nr, t->y - nr};
+      const double ang = qkt_rng_range(&r, 0, 6.283185307179586);
+      qk_point_t v = {cos(ang), sin(ang)};
+      if (i % 3 == 1) v = (qk_point_t){t->x - o.x, t->y - o.y};
+      const double tmax = qkt_rng_below(&r, 4) == 0 ? qkt_rng_range(&r, 0, 0.3) : INFINITY;
+      qk_hit_t h, w = brute(d, ND, NULL, 0, o, v, tmax);
+      assert_int_equal(qk_collider_raycast(c, o, v, tmax, &h), QK_OK);
+      if (h.id != w.id || !(h.t == w.t || (isinf(h.t) && isinf(w.t))))
+        fail_msg("variant %d ray %d (o %.17g %.17g, d %.17g %.17g, tmax %g): hit (%u, %.17g) vs "
+                 "brute force (%u, %.17g) (seed %llu)",
+                 variant, i, o.x, o.y, v.x, v.y, tmax, h.id, h.t, w.id, w.t,
+                 (unsigned long long)g_seed);
+      checked++;
+    }
+    qk_collider_free(c);
+  }
+  assert_true(checked == 2L * 600);
+}
+
 /* The batch call, on one and two threads, answers each ray as a single call does. */
 static void test_collide_rays_batch_matches_single(void **state) {
   (void)state;
@@ -298,6 +353,7 @@ int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_collide_rays_float_edges),
       cmocka_unit_test(test_collide_rays_grid_edges),
+      cmocka_unit_test(test_collide_rays_deep_and_rooted),
       cmocka_unit_test(test_collide_rays_batch_matches_single),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
