@@ -1054,9 +1054,10 @@ static inline uint64_t spread32(uint32_t v) {
  * inside a node's square are all beneath it) and, by fact (1), the point o + t d of the
  * hit within reach + w of that centre on each axis. So when the segment from o to
  * o + t1 d stays farther than that from the edges of the square of an ancestor A of N,
- * every such item lies beneath A: the search then goes on from A with best = t1, passing
- * over N, which it has done. A is the deepest ancestor (N itself, usually) whose square
- * holds the segment so; the root holds every item. The margin adds w for the roundings
+ * every such item lies beneath A. So while the segment is not inside the square of the
+ * node searched last (N first), the search goes on from that node's parent with the best
+ * so far, passing over the node, which it has done; the best only comes closer, and the
+ * root holds every item. Most rays stop at N. The margin adds w for the roundings
  * of reach, of the segment's end and of the comparisons (each below 2^-48 of the
  * magnitudes involved), and 2^-45 of the root square's for the corners: here they are
  * the root's corner plus the path's bits times side / 2^32 (two roundings), where the
@@ -1111,24 +1112,25 @@ static void cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk
     }
     const unsigned n = d > QK__RAY_START_UP ? d - QK__RAY_START_UP : 0;
     walk_float(c, ray, tmax, path[n], QK_NONE, &b);
-    unsigned a = 0;
-    const double t1 = b.t < tmax ? b.t : tmax;
-    if (n > 0 && t1 < INFINITY) {
-      const double ex = ox + t1 * ray->dx, ey = oy + t1 * ray->dy;
-      const double m = c->reach + 2 * ray->w +
-                       (fabs(ox) + fabs(oy) + fabs(ex) + fabs(ey) + c->reach) * 0x1p-48 +
-                       (fabs(rs.x) + fabs(rs.y) + rs.side) * 0x1p-45;
-      const double lx = qk__min(ox, ex) - m, hx = qk__max(ox, ex) + m;
-      const double ly = qk__min(oy, ey) - m, hy = qk__max(oy, ey) + m;
-      const double unit = rs.side * 0x1p-32;
-      for (a = n; a > 0; a--) {
+    /* Up from N one level at a time while the segment to the best hit so far (or to
+     * tmax) is not inside the square of the node searched: each step searches the
+     * parent's other children, which may bring the hit closer. */
+    const double unit = rs.side * 0x1p-32;
+    const double mb = c->reach + 2 * ray->w + (fabs(rs.x) + fabs(rs.y) + rs.side) * 0x1p-45;
+    for (unsigned a = n; a > 0; a--) {
+      const double t1 = b.t < tmax ? b.t : tmax;
+      if (t1 < INFINITY) {
+        const double ex = ox + t1 * ray->dx, ey = oy + t1 * ray->dy;
+        const double m = mb + (fabs(ox) + fabs(oy) + fabs(ex) + fabs(ey) + c->reach) * 0x1p-48;
         const double side = qk__tree_side(t, a);
         const uint32_t keep = ~(uint32_t)0 << (32 - a); /* the path's first a bits */
         const double x0 = rs.x + (double)(ix & keep) * unit, y0 = rs.y + (double)(iy & keep) * unit;
-        if (lx > x0 && hx < x0 + side && ly > y0 && hy < y0 + side) break;
+        if (qk__min(ox, ex) - m > x0 && qk__max(ox, ex) + m < x0 + side &&
+            qk__min(oy, ey) - m > y0 && qk__max(oy, ey) + m < y0 + side)
+          break;
       }
+      walk_float(c, ray, tmax, path[a - 1], path[a], &b);
     }
-    if (a != n) walk_float(c, ray, tmax, path[a], path[n], &b);
   }
   hit->id = b.id;
   hit->t = b.id == QK_NONE ? INFINITY : b.t;
