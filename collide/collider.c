@@ -211,7 +211,12 @@ static qk_box_t fill_node_boxes(qk_collider_t *c, uint32_t node) {
  * lo = floor(pmin / sc) sc has a quotient below 2^23 (see qnode_t). The divisions by sc
  * are exact. */
 static void grid_axis(double pmin, double pmax, float *lo, float *sc) {
-  double s = 0x1p-126, a, b;
+  /* From the power of two just below what either condition needs (no smaller step can
+   * meet both), so that the loop runs once or twice. */
+  const double need = qk__max((pmax - pmin) / 255, qk__max(fabs(pmin), fabs(pmax)) * 0x1p-23);
+  int ex;
+  (void)frexp(need, &ex);
+  double s = qk__max(ldexp(1.0, ex - 1), 0x1p-126), a, b;
   for (;;) {
     a = floor(pmin / s), b = ceil(pmax / s);
     if (b - a <= 255 && fabs(a) <= 0x1p23 && fabs(b) <= 0x1p23) break;
