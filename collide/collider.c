@@ -1047,13 +1047,13 @@ static inline uint64_t spread32(uint32_t v) {
 }
 
 /* Levels above the origin's deepest internal node at which the local search starts. */
-#define QK__RAY_START_UP 2
+#define QK__RAY_START_UP 1
 
 /*
  * The cast with the float test, in two steps. Most rays end near their origin, and a
  * search from the root spends most of its work testing the boxes on the way down to it.
  * So the descent to the origin first goes by the bits of the origin's position alone
- * (no box tests), and the search proper starts at N, a few levels above the deepest internal node
+ * (no box tests), and the search proper starts at N, one level above the deepest internal node
  * there, which yields the first hit t1 among N's items (or t1 = tmax). Any other item
  * that the ray meets at t <= t1 has its centre outside N's square (centres strictly
  * inside a node's square are all beneath it) and, by fact (1), the point o + t d of the
