@@ -28,29 +28,36 @@ typedef struct cnode {
   uint32_t child; /* first of four children, or QK_NONE for a leaf */
   uint32_t start; /* a leaf's first slot */
   uint32_t count; /* a leaf's number of items */
-  uint32_t quad;  /* an internal node's entry in quads (its children's boxes) */
+  uint32_t quad;  /* an internal node's entry in quads (QK_NONE when there are none) */
 } cnode_t;
 
 /*
- * An internal node for the ray cast, as a BVH4 stores it: the boxes of its four children
- * side by side (structure of arrays; the same outward-rounded floats as their cnode_t)
- * in one 64-byte line, and in the next line where each child leads: its own entry here
- * when internal, else its items. A ray then reads two adjacent lines per node and nothing
- * else until the leaves (the cnode_t array is for the other searches); a node and its
- * children's links arrive together instead of one after the other.
+ * An internal node for the ray cast, as a compressed BVH4 stores it: the boxes of its four
+ * children quantised to 8 bits per side against a grid of the node's own box, and where
+ * each child leads, in one 64-byte line. A ray reads one line per node and nothing else
+ * until the leaves (the cnode_t array is for the other searches and for the rays that the
+ * float test does not take).
+ *
+ * The grid of an axis is lo + i * sc, i = 0 .. 255, with sc a power of two and lo a
+ * multiple of sc whose quotient is below 2^23 in magnitude: every grid value is then a
+ * float, and lo + i * sc computed in float is exact (the product scales by a power of two,
+ * the sum is representable), whatever the rounding or contraction of the arithmetic. A
+ * child's box is its cnode_t box rounded outwards to the grid (min down, max up), so it
+ * still holds every item beneath, and the float test of fact (2) below applies to it as
+ * to any float box. An empty child is a leaf of no items whose box is inverted (min at
+ * the grid's top, max at its bottom), which rays all but always reject.
  */
-typedef struct cquad {
-  float v[16];       /* xmin at QX0 + k, ymin at QY0 + k, xmax at QX1 + k, ymax at QY1 + k */
-  uint32_t next[4];  /* child k's entry in quads, or QK_NONE for a leaf */
-  uint32_t start[4]; /* a leaf child's first slot */
-  uint32_t count[4]; /* a leaf child's number of items */
-  uint32_t pad_[4];
-} cquad_t;
+typedef struct qnode {
+  float h[4];    /* lo and sc per axis: lo_x, lo_y, sc_x, sc_y */
+  uint8_t q[16]; /* child k: xmin at QX0 + k, ymin at QY0 + k, xmax at QX1 + k, ymax at QY1 + k */
+  uint32_t link[4];  /* child k: its entry in quads when internal, else its first slot */
+  uint32_t count[4]; /* child k: QK_NONE when internal, else its number of items */
+} qnode_t;
 
 enum { QX0 = 0, QY0 = 4, QX1 = 8, QY1 = 12 };
 
 /*
- * The children sit in a cquad_t's lanes in Z order, lane = 2 * north + east (SW, SE, NW,
+ * The children sit in a qnode_t's lanes in Z order, lane = 2 * north + east (SW, SE, NW,
  * NE), so that the order in which a ray meets the four squares is lane ^ s for a ray with
  * s = (dx < 0) + 2 (dy < 0): nearest first, as a BVH orders its children per octant.
  */
@@ -72,12 +79,14 @@ struct qk_collider {
   void *cn_block;   /* the allocation holding cn (aligned inside it) */
   size_t cn_bytes;
   size_t n_nodes;
-  cquad_t *quads;    /* per internal node (cnode_t::quad), 128-byte aligned */
+  qnode_t *quads;    /* per internal node (cnode_t::quad), 64-byte aligned; NULL past 2^100 */
   void *quads_block; /* the allocation holding quads */
   size_t quads_bytes;
   uint32_t n_quads; /* entries filled */
   uint32_t threads; /* for the pairs and batch calls (0: every online core) */
+  int huge_pages;   /* the options' hint, applied to the collider's own arrays too */
   double mag;       /* largest coordinate magnitude of any item box, for rounding margins */
+  double reach;     /* farthest any item box reaches from its centre on an axis (the ray cast) */
 };
 
 /* Exact overlap predicates (touching counts). */
@@ -185,21 +194,6 @@ static qk_box_t fill_node_boxes(qk_collider_t *c, uint32_t node) {
       qk_box_t cb = fill_node_boxes(c, cn->child + k);
       box_union(&b, &cb);
     }
-    cquad_t *q = &c->quads[cn->quad = c->n_quads++];
-    for (uint32_t k = 0; k < 4; k++) {
-      const cnode_t *ch = &c->cn[cn->child + lane_quadrant[k]];
-      const int empty = ch->xmin == INFINITY;
-      q->next[k] = ch->quad;
-      q->start[k] = ch->start;
-      q->count[k] = ch->count;
-      q->pad_[k] = 0;
-      /* An empty child's box is inverted ([+inf, -inf] on both axes): the ray's float
-       * test then finds an entry at +inf and an exit at -inf, whatever the direction. */
-      q->v[QX0 + k] = empty ? INFINITY : ch->xmin;
-      q->v[QY0 + k] = empty ? INFINITY : ch->ymin;
-      q->v[QX1 + k] = empty ? -INFINITY : ch->xmax;
-      q->v[QY1 + k] = empty ? -INFINITY : ch->ymax;
-    }
   }
   if (count == 0) {
     cn->xmin = cn->ymin = cn->xmax = cn->ymax = INFINITY;
@@ -210,6 +204,68 @@ static qk_box_t fill_node_boxes(qk_collider_t *c, uint32_t node) {
     cn->ymax = round_up(b.ymax);
   }
   return b; /* for an empty node the inverted box, which leaves a union unchanged */
+}
+
+/* The grid of one axis for a node's box [pmin, pmax] (finite floats, below 2^102 in
+ * magnitude): the least power of two sc at which the box spans at most 255 steps and
+ * lo = floor(pmin / sc) sc has a quotient below 2^23 (see qnode_t). The divisions by sc
+ * are exact. */
+static void grid_axis(double pmin, double pmax, float *lo, float *sc) {
+  /* From the power of two just below what either condition needs (no smaller step can
+   * meet both), so that the loop runs once or twice. */
+  const double need = qk__max((pmax - pmin) / 255, qk__max(fabs(pmin), fabs(pmax)) * 0x1p-23);
+  int ex;
+  (void)frexp(need, &ex);
+  double s = qk__max(ldexp(1.0, ex - 1), 0x1p-126), a, b;
+  for (;;) {
+    a = floor(pmin / s), b = ceil(pmax / s);
+    if (b - a <= 255 && fabs(a) <= 0x1p23 && fabs(b) <= 0x1p23) break;
+    s *= 2;
+  }
+  *lo = (float)(a * s);
+  *sc = (float)s;
+}
+
+/* The side v (a float) in grid steps from lo, rounded down or up: exact, as above. */
+static uint8_t grid_step(double v, double lo, double sc, int up) {
+  double i = (up ? ceil(v / sc) : floor(v / sc)) - lo / sc;
+  return (uint8_t)(i < 0 ? 0 : i > 255 ? 255 : i);
+}
+
+/* Pre-order: an internal node's qnode_t, then those of its internal children, so that a
+ * descent mostly moves forward in memory. Returns the node's entry in quads. */
+static uint32_t fill_qnodes(qk_collider_t *c, uint32_t node) {
+  cnode_t *cn = &c->cn[node];
+  const uint32_t idx = c->n_quads++;
+  qnode_t *q = &c->quads[idx];
+  float lo[2], sc[2];
+  grid_axis(cn->xmin, cn->xmax, &lo[0], &sc[0]);
+  grid_axis(cn->ymin, cn->ymax, &lo[1], &sc[1]);
+  q->h[0] = lo[0], q->h[1] = lo[1], q->h[2] = sc[0], q->h[3] = sc[1];
+  cn->quad = idx;
+  for (uint32_t k = 0; k < 4; k++) {
+    const uint32_t child = cn->child + lane_quadrant[k];
+    const cnode_t *ch = &c->cn[child];
+    if (ch->xmin == INFINITY) { /* empty: inverted, no items */
+      q->q[QX0 + k] = q->q[QY0 + k] = 255;
+      q->q[QX1 + k] = q->q[QY1 + k] = 0;
+      q->link[k] = 0;
+      q->count[k] = 0;
+      continue;
+    }
+    q->q[QX0 + k] = grid_step(ch->xmin, lo[0], sc[0], 0);
+    q->q[QY0 + k] = grid_step(ch->ymin, lo[1], sc[1], 0);
+    q->q[QX1 + k] = grid_step(ch->xmax, lo[0], sc[0], 1);
+    q->q[QY1 + k] = grid_step(ch->ymax, lo[1], sc[1], 1);
+    if (ch->child != QK_NONE) {
+      q->count[k] = QK_NONE;
+      q->link[k] = fill_qnodes(c, child); /* q stays valid: quads is never moved */
+    } else {
+      q->link[k] = ch->start;
+      q->count[k] = ch->count;
+    }
+  }
+  return idx;
 }
 
 /* Does a node's box meet a closed box? */
@@ -290,13 +346,24 @@ static qk_status_t alloc_arrays(qk_collider_t *c) {
   c->cn_bytes = (c->n_nodes + 3) * sizeof(cnode_t) + 64;
   c->cn_block = qk__realloc(a, NULL, 0, c->cn_bytes);
   if (c->cn_block) c->cn = (cnode_t *)(((uintptr_t)c->cn_block + 63) & ~(uintptr_t)63) + 3;
-  /* Every internal node has four children, so there are at most n_nodes / 4 of them. */
-  /* Aligned to 128 bytes: the pair of lines of an entry is the pair that adjacent-line
-   * prefetchers fetch together. */
-  c->quads_bytes = (c->n_nodes / 4 + 1) * sizeof(cquad_t) + 128;
-  c->quads_block = qk__realloc(a, NULL, 0, c->quads_bytes);
-  if (c->quads_block) c->quads = (cquad_t *)(((uintptr_t)c->quads_block + 127) & ~(uintptr_t)127);
-  if (!c->sbox || (c->n_discs && !c->sdisc) || !c->cn_block || !c->quads_block) return QK_ERR_NOMEM;
+  /* Every internal node has four children, so there are at most n_nodes / 4 of them; each
+   * entry is one cache line. Items beyond 2^100 take the general test only (fact 2's
+   * range), and their boxes need not fit a float grid: no entries then. */
+  if (c->mag <= 0x1p100) {
+    c->quads_bytes = (c->n_nodes / 4 + 1) * sizeof(qnode_t) + 64;
+    c->quads_block = qk__realloc(a, NULL, 0, c->quads_bytes);
+    if (c->quads_block) c->quads = (qnode_t *)(((uintptr_t)c->quads_block + 63) & ~(uintptr_t)63);
+  }
+  if (!c->sbox || (c->n_discs && !c->sdisc) || !c->cn_block || (c->quads_bytes && !c->quads_block))
+    return QK_ERR_NOMEM;
+  /* Before the first touch, so that the pages are huge from the start: the ray cast and
+   * the searches jump across these arrays, one or two lines per page. */
+  if (c->huge_pages) {
+    qk__advise_huge(a, c->sbox, c->n_slots * sizeof *c->sbox);
+    qk__advise_huge(a, c->sdisc, c->n_discs ? c->n_slots * sizeof *c->sdisc : 0);
+    qk__advise_huge(a, c->cn_block, c->cn_bytes);
+    qk__advise_huge(a, c->quads_block, c->quads_bytes);
+  }
   return QK_OK;
 }
 
@@ -305,6 +372,8 @@ static qk_status_t fill_slots(qk_collider_t *c, const qk_disc_t *discs, const qk
   const uint32_t *where;
   qk_status_t st = qk__id_map(c->tree, &where);
   if (st != QK_OK) return st;
+  const double *xs = qk__tree_xs(c->tree), *ys = qk__tree_ys(c->tree);
+  c->reach = 0;
   for (qk_id_t id = 0; id < c->n; id++) {
     uint32_t slot = where[id];
     if (id < c->n_discs) {
@@ -313,8 +382,13 @@ static qk_status_t fill_slots(qk_collider_t *c, const qk_disc_t *discs, const qk
     } else {
       c->sbox[slot] = boxes[id - c->n_discs];
     }
+    const qk_box_t *b = &c->sbox[slot];
+    const double r = qk__max(qk__max(xs[slot] - b->xmin, b->xmax - xs[slot]),
+                             qk__max(ys[slot] - b->ymin, b->ymax - ys[slot]));
+    if (r > c->reach) c->reach = r;
   }
   fill_node_boxes(c, 0);
+  if (c->quads && c->cn[0].child != QK_NONE && c->cn[0].xmin != INFINITY) fill_qnodes(c, 0);
   return QK_OK;
 }
 
@@ -337,6 +411,7 @@ qk_status_t qk_collider_build(const qk_disc_t *discs, size_t n_discs, const qk_b
   memset(c, 0, sizeof *c);
   c->alloc = a;
   c->threads = opt.threads;
+  c->huge_pages = opt.huge_pages;
   c->n_discs = n_discs;
   c->n = n_discs + n_boxes;
   if ((st = build_centre_tree(c, discs, boxes, &opt)) != QK_OK || (st = alloc_arrays(c)) != QK_OK ||
@@ -593,29 +668,30 @@ qk_status_t qk_collider_pairs_list(const qk_collider_t *c, qk_pair_t *out, size_
  *     which the factor's 2^-21 exceeds by more than the u that fact (2) asks. No NaN can
  *     arise, and no difference can overflow, when |ox|, |oy|, mag <= 2^100 and
  *     2^-100 <= |dx|, |dy| <= 2^100: every ray constant is then a finite nonzero float,
- *     box sides are finite below 2^101 or infinite (an empty child's box is inverted,
- *     [+inf, -inf], which every ray rejects), and no infinity meets a zero or another
- *     infinity. Other rays (a zero or extreme component, huge coordinates) and builds
- *     without SSE2 take the general test, in doubles, on the boxes widened by w.
+ *     box sides (the exact grid values of qnode_t) are finite below 2^103, and no
+ *     infinity meets a zero or another infinity. Other rays (a zero or extreme component,
+ *     huge coordinates) and builds without SSE2 take the general test, in doubles, on the
+ *     cnode_t boxes widened by w.
  */
 typedef struct ray {
   double ox, oy, dx, dy;
-  double w;        /* the item margin of fact (1) */
-  double ts;       /* w over the direction's largest component: the general test's margin in t */
-  int simd;        /* the float test's ranges hold (fact 2) */
-  unsigned xn, yn; /* where in a cquad_t (in floats) the entry sides' lanes start */
-  unsigned s;      /* the lanes in the order the ray meets their squares: i ^ s */
+  double w;   /* the item margin of fact (1) */
+  double ts;  /* w over the direction's largest component: the general test's margin in t */
+  int simd;   /* the float test's ranges hold (fact 2) */
+  unsigned s; /* the lanes in the order the ray meets their squares: i ^ s */
 #if defined(__SSE2__)
-  __m128d vox, voy;          /* ox, oy in both lanes (the leaf test) */
+  __m128d vox, voy; /* ox, oy in both lanes (the leaf test) */
+  __m128i swap;     /* per 32-bit group of qnode_t::q: all ones where entry and exit swap */
   __m128 pnx, pny, pfx, pfy; /* Pn, Pf per axis */
   __m128 inx, iny, ifx, ify; /* In, If per axis */
 #endif
 } ray_t;
 
-/* A stacked node of the ray cast: an entry of quads, or (quad QK_NONE) a leaf's slot
- * range, with a lower bound on the t of anything in it (float, rounded down). */
+/* A stacked node of the ray cast: an entry of quads (count QK_NONE; in the general test a
+ * node id) or a leaf's slot range, with a lower bound on the t of anything in it (float,
+ * rounded down). */
 typedef struct rentry {
-  uint32_t quad, start, count;
+  uint32_t link, count;
   float bound;
 } rentry_t;
 
@@ -713,47 +789,46 @@ static inline double ray_box(const qk_box_t *b, const ray_t *r, double tmax) {
   return lo;
 }
 
-/*
- * The general test of the four boxes of a cquad_t, in doubles: bit k is set when child
- * k's box, widened by w, meets the ray within [0, tmax + ts] at a parameter not beyond
- * best + ts, and bound[k] receives that entry parameter less ts, rounded down to float.
- * For the rays the float test does not take, and without SSE2.
- */
-static unsigned quad_slab_general(const cquad_t *q, const ray_t *r, double tmax, double best,
-                                  float bound[4]) {
-  unsigned keep = 0;
-  const double w = r->w, ts = r->ts;
-  for (int k = 0; k < 4; k++) {
-    double x0 = q->v[QX0 + k], y0 = q->v[QY0 + k], x1 = q->v[QX1 + k], y1 = q->v[QY1 + k];
-    double l, u;
-    if (!(x0 <= x1) || !slab(x0 - w, y0 - w, x1 + w, y1 + w, r, tmax, &l, &u) ||
-        !(l <= u + ts && l - ts <= best))
-      continue;
-    bound[k] = round_down(l - ts);
-    keep |= 1u << k;
-  }
-  return keep;
-}
+/* The best hit so far: smallest t, then smallest id. */
+typedef struct best {
+  double t;
+  qk_id_t id;
+} best_t;
 
-#if defined(__SSE2__)
-/*
- * The float test of fact (2) on the four boxes of a cquad_t at once: bit k is set when
- * child k is kept, and bound[k] receives L. Four subtractions, four multiplications, two
- * maxima, two minima and a comparison for the four children together.
- */
-static inline unsigned quad_slab_float(const cquad_t *q, const ray_t *r, __m128 tv,
-                                       float bound[4]) {
-  const float *f = q->v;
-  const __m128 tnx = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(f + r->xn), r->pnx), r->inx);
-  const __m128 tfx = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(f + (r->xn ^ 8)), r->pfx), r->ifx);
-  const __m128 tny = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(f + r->yn), r->pny), r->iny);
-  const __m128 tfy = _mm_mul_ps(_mm_sub_ps(_mm_load_ps(f + (r->yn ^ 8)), r->pfy), r->ify);
-  const __m128 l = _mm_max_ps(_mm_max_ps(tnx, tny), _mm_setzero_ps());
-  const __m128 u = _mm_min_ps(_mm_min_ps(tfx, tfy), tv);
-  _mm_storeu_ps(bound, l);
-  return (unsigned)_mm_movemask_ps(_mm_cmple_ps(l, u));
-}
+/* The items of slots [slot, end) against the ray, into *b. Ids are read only for hits (and
+ * for the kind in mixed sets): the id array is one more cache miss per leaf otherwise. */
+#if defined(__GNUC__)
+__attribute__((always_inline))
 #endif
+static inline void
+scan_leaf(const qk_collider_t *c, const ray_t *ray, uint32_t slot, uint32_t end, double tmax,
+          best_t *b) {
+  const qk_id_t *pid = qk__tree_ids(c->tree);
+  const int all_discs = c->n_discs == c->n, no_discs = c->n_discs == 0;
+#if defined(__SSE2__)
+  /* Discs two at a time, with the same operations as ray_disc() lane by lane (so the same
+   * t to the last bit); only lanes that could be a new best go on. */
+  if (all_discs) {
+    for (; slot + 1 < end; slot += 2) {
+      double th[2];
+      unsigned cand = ray_disc2(&c->sdisc[slot], ray, tmax, b->t, th);
+      for (unsigned k = 0; k < 2; k++) {
+        if (!(cand >> k & 1) || th[k] > b->t) continue; /* the best may have moved */
+        qk_id_t id = pid[slot + k];
+        if (th[k] < b->t || id < b->id) *b = (best_t){th[k], id};
+      }
+    }
+  }
+#endif
+  for (; slot < end; slot++) {
+    int is_disc = all_discs || (!no_discs && pid[slot] < c->n_discs);
+    double th = is_disc ? ray_disc(&c->sdisc[slot], ray->ox, ray->oy, ray->dx, ray->dy, tmax)
+                        : ray_box(&c->sbox[slot], ray, tmax);
+    if (th < 0 || th > b->t) continue;
+    qk_id_t id = pid[slot];
+    if (th < b->t || id < b->id) *b = (best_t){th, id};
+  }
+}
 
 /* perm[s][m]: bit i set when bit i ^ s of m is, i.e. the kept lanes in the order the ray
  * meets them (bit 0 nearest); low[m] and high[m]: the lowest and highest set bit of m. */
@@ -770,14 +845,12 @@ static void ray_init(ray_t *r, const qk_collider_t *c, qk_point_t o, qk_point_t 
   r->ox = o.x, r->oy = o.y, r->dx = d.x, r->dy = d.y;
   r->w = (fabs(o.x) + fabs(o.y) + 2 * c->mag) * 0x1p-40;
   r->ts = 0.0;
-  r->xn = d.x < 0 ? QX1 : QX0; /* the exit side is the other one: ^ 8 */
-  r->yn = d.y < 0 ? QY1 : QY0;
   r->s = (unsigned)(d.x < 0) | (unsigned)(d.y < 0) << 1;
   r->simd = 0;
 #if defined(__SSE2__)
   r->vox = _mm_set1_pd(o.x), r->voy = _mm_set1_pd(o.y);
   const double big = 0x1p100, mo = qk__max(qk__max(fabs(o.x), fabs(o.y)), c->mag);
-  r->simd = mo <= big && qk__min(ax, ay) >= 0x1p-100 && dn <= big;
+  r->simd = c->quads && mo <= big && qk__min(ax, ay) >= 0x1p-100 && dn <= big;
 #endif
   if (!r->simd) {
     r->ts = dn > 0 ? r->w / dn : 0.0;
@@ -798,50 +871,133 @@ static void ray_init(ray_t *r, const qk_collider_t *c, qk_point_t o, qk_point_t 
   r->iny = _mm_set1_ps((float)(qy * lo)), r->ify = _mm_set1_ps((float)(qy * hi));
   r->pnx = _mm_set1_ps(d.x > 0 ? xp : xm), r->pfx = _mm_set1_ps(d.x > 0 ? xm : xp);
   r->pny = _mm_set1_ps(d.y > 0 ? yp : ym), r->pfy = _mm_set1_ps(d.y > 0 ? ym : yp);
+  /* A negative component enters a box by its max side: swap min and max of that axis. */
+  const int sx = d.x < 0 ? -1 : 0, sy = d.y < 0 ? -1 : 0;
+  r->swap = _mm_set_epi32(sy, sx, sy, sx);
 #endif
 }
 
 /*
- * The search proper, for a ray set up by ray_init. `simd` is the ray's, passed as a
- * constant by the caller so that each copy of the loop holds one node test only.
+ * The general test of a node's four children, in doubles on their cnode_t boxes: bit k is
+ * set when lane k's box, widened by w, meets the ray within [0, tmax + ts] at a parameter
+ * not beyond best + ts, and bound[k] receives that entry parameter less ts, rounded down
+ * to float. For the rays the float test does not take, and without SSE2.
+ */
+static unsigned node_slab_general(const qk_collider_t *c, const cnode_t *n, const ray_t *r,
+                                  double tmax, double best, float bound[4]) {
+  unsigned keep = 0;
+  const double w = r->w, ts = r->ts;
+  for (int k = 0; k < 4; k++) {
+    const cnode_t *ch = &c->cn[n->child + lane_quadrant[k]];
+    double x0 = ch->xmin, y0 = ch->ymin, x1 = ch->xmax, y1 = ch->ymax;
+    double l, u;
+    if (x0 == INFINITY || !slab(x0 - w, y0 - w, x1 + w, y1 + w, r, tmax, &l, &u) ||
+        !(l <= u + ts && l - ts <= best))
+      continue;
+    bound[k] = round_down(l - ts);
+    keep |= 1u << k;
+  }
+  return keep;
+}
+
+/* The cast with the general test, walking the cnode_t array (entries are node ids). */
+static void cast_general(const qk_collider_t *c, const ray_t *ray, double tmax, qk_hit_t *hit) {
+  best_t b = {INFINITY, QK_NONE};
+  float tf = round_up(tmax);
+  rentry_t stack[QK__CSTACK_MAX];
+  int sp = 0;
+  uint32_t cur = 0;
+  for (;;) {
+    const cnode_t *n = &c->cn[cur];
+    if (n->child != QK_NONE) {
+      float lo4[4];
+      unsigned keep = node_slab_general(c, n, ray, tmax, b.t, lo4);
+      if (keep) {
+        unsigned m = perm[ray->s][keep];
+        const uint32_t k0 = (uint32_t)low[m] ^ ray->s;
+        m &= m - 1;
+        while (m) {
+          const unsigned i = high[m];
+          const uint32_t k = i ^ ray->s;
+          m ^= 1u << i;
+          stack[sp++] = (rentry_t){n->child + lane_quadrant[k], 0, lo4[k]};
+        }
+        cur = n->child + lane_quadrant[k0];
+        continue;
+      }
+    } else {
+      const double best0 = b.t;
+      scan_leaf(c, ray, n->start, n->start + n->count, tmax, &b);
+      if (b.t != best0) tf = round_up(b.t); /* b.t <= tmax: the items test t <= tmax */
+    }
+    while (sp > 0 && stack[sp - 1].bound > tf) sp--;
+    if (sp == 0) break;
+    cur = stack[--sp].link;
+  }
+  hit->id = b.id;
+  hit->t = b.id == QK_NONE ? INFINITY : b.t;
+}
+
+#if defined(__SSE2__)
+/*
+ * The float test of fact (2) on the four children of a qnode_t at once: bit k is set when
+ * child k is kept, and bound[k] receives L. The grid steps are put in entry / exit order
+ * per axis (one swap of 32-bit groups), widened to floats and mapped exactly to the grid
+ * values; then four subtractions, four multiplications, two maxima, two minima and a
+ * comparison for the four children together.
+ */
+static inline unsigned qnode_slab_float(const qnode_t *q, const ray_t *r, __m128 tv,
+                                        float bound[4]) {
+  __m128i raw = _mm_load_si128((const __m128i *)(const void *)q->q);
+  const __m128i sw = _mm_shuffle_epi32(raw, _MM_SHUFFLE(1, 0, 3, 2));
+  raw = _mm_xor_si128(raw, _mm_and_si128(_mm_xor_si128(raw, sw), r->swap));
+  const __m128i z = _mm_setzero_si128();
+  const __m128i near16 = _mm_unpacklo_epi8(raw, z), far16 = _mm_unpackhi_epi8(raw, z);
+  const __m128 h = _mm_load_ps(q->h);
+  const __m128 lox = _mm_shuffle_ps(h, h, 0x00), loy = _mm_shuffle_ps(h, h, 0x55);
+  const __m128 scx = _mm_shuffle_ps(h, h, 0xAA), scy = _mm_shuffle_ps(h, h, 0xFF);
+  const __m128 nx =
+      _mm_add_ps(lox, _mm_mul_ps(_mm_cvtepi32_ps(_mm_unpacklo_epi16(near16, z)), scx));
+  const __m128 ny =
+      _mm_add_ps(loy, _mm_mul_ps(_mm_cvtepi32_ps(_mm_unpackhi_epi16(near16, z)), scy));
+  const __m128 fx = _mm_add_ps(lox, _mm_mul_ps(_mm_cvtepi32_ps(_mm_unpacklo_epi16(far16, z)), scx));
+  const __m128 fy = _mm_add_ps(loy, _mm_mul_ps(_mm_cvtepi32_ps(_mm_unpackhi_epi16(far16, z)), scy));
+  const __m128 tnx = _mm_mul_ps(_mm_sub_ps(nx, r->pnx), r->inx);
+  const __m128 tfx = _mm_mul_ps(_mm_sub_ps(fx, r->pfx), r->ifx);
+  const __m128 tny = _mm_mul_ps(_mm_sub_ps(ny, r->pny), r->iny);
+  const __m128 tfy = _mm_mul_ps(_mm_sub_ps(fy, r->pfy), r->ify);
+  const __m128 l = _mm_max_ps(_mm_max_ps(tnx, tny), _mm_setzero_ps());
+  const __m128 u = _mm_min_ps(_mm_min_ps(tfx, tfy), tv);
+  _mm_storeu_ps(bound, l);
+  return (unsigned)_mm_movemask_ps(_mm_cmple_ps(l, u));
+}
+
+/*
+ * The search with the float test over the subtree of quads entry `from` (its own box
+ * untested), into *bp; entry `skip` (QK_NONE: none) is passed over with all beneath it.
  */
 #if defined(__GNUC__)
 __attribute__((always_inline))
 #endif
 static inline void
-cast(const qk_collider_t *c, const ray_t *rp, const int simd, double tmax, qk_hit_t *hit) {
-  const ray_t ray = *rp;
-  (void)simd; /* unused without SSE2 */
-  const qk_point_t o = {ray.ox, ray.oy}, d = {ray.dx, ray.dy};
-  const qk_id_t *pid = qk__tree_ids(c->tree);
-  double best = INFINITY;
-  qk_id_t best_id = QK_NONE;
+walk_float(const qk_collider_t *c, const ray_t *rp, double tmax, uint32_t from, uint32_t skip,
+           best_t *bp) {
+  const ray_t *const ray = rp;
+  best_t b = *bp;
   /* T of fact (2): min(tmax, best) rounded up to float; it only shrinks. */
-  float tf = round_up(tmax);
-#if defined(__SSE2__)
+  float tf = round_up(b.t < tmax ? b.t : tmax);
   __m128 tv = _mm_set1_ps(tf);
-#endif
   rentry_t stack[QK__CSTACK_MAX];
   int sp = 0;
-  const int all_discs = c->n_discs == c->n, no_discs = c->n_discs == 0;
-  const unsigned s = ray.s;
-  const cnode_t *root = &c->cn[0];
-  /* The node in hand: an entry of quads, or (quad QK_NONE) a leaf's slot range. The root
-   * needs no test of its own: its children's boxes are tested. */
-  rentry_t cur = {root->quad, root->start, root->count, 0.0f};
-  const cquad_t *quads = c->quads;
+  const int all_discs = c->n_discs == c->n;
+  const unsigned s = ray->s;
+  rentry_t cur = {from, QK_NONE, 0.0f};
+  const qnode_t *quads = c->quads;
   for (;;) {
-    if (cur.quad != QK_NONE) {
-      /* All four children's boxes from one line, their links from the next. */
-      const cquad_t *q = &quads[cur.quad];
+    if (cur.count == QK_NONE) {
+      const qnode_t *q = &quads[cur.link];
       float lo4[4];
-      unsigned keep;
-#if defined(__SSE2__)
-      if (simd)
-        keep = quad_slab_float(q, &ray, tv, lo4);
-      else
-#endif
-        keep = quad_slab_general(q, &ray, tmax, best, lo4);
+      const unsigned keep = cur.link == skip ? 0 : qnode_slab_float(q, ray, tv, lo4);
       if (keep) {
         /* The kept children in the order the ray meets their squares (the item boxes
          * mostly follow it; the bounds keep the pruning exact whatever the order): the
@@ -852,57 +1008,23 @@ cast(const qk_collider_t *c, const ray_t *rp, const int simd, double tmax, qk_hi
         m &= m - 1;
         while (m) {
           const unsigned i = high[m];
-          const uint32_t k = i ^ s, nx = q->next[k], st = q->start[k];
+          const uint32_t k = i ^ s, nx = q->link[k], cnt = q->count[k];
           m ^= 1u << i;
-          stack[sp++] = (rentry_t){nx, st, q->count[k], lo4[k]};
-          if (nx != QK_NONE)
+          stack[sp++] = (rentry_t){nx, cnt, lo4[k]};
+          if (cnt == QK_NONE)
             QK__CPREFETCH(&quads[nx]);
           else if (all_discs)
-            QK__CPREFETCH(&c->sdisc[st]);
+            QK__CPREFETCH(&c->sdisc[nx]);
         }
-        cur = (rentry_t){q->next[k0], q->start[k0], q->count[k0], 0.0f};
+        cur = (rentry_t){q->link[k0], q->count[k0], 0.0f};
         continue;
       }
     } else {
-      /* Ids are read only for hits (and for the kind in mixed sets): the id array is
-       * one more cache miss per leaf otherwise. */
-      uint32_t slot = cur.start;
-      const uint32_t end = cur.start + cur.count;
-      const double best0 = best;
-#if defined(__SSE2__)
-      /* Discs two at a time, with the same operations as ray_disc() lane by lane (so
-       * the same t to the last bit); only lanes that could be a new best go on. */
-      if (all_discs) {
-        for (; slot + 1 < end; slot += 2) {
-          double th[2];
-          unsigned cand = ray_disc2(&c->sdisc[slot], &ray, tmax, best, th);
-          for (unsigned k = 0; k < 2; k++) {
-            if (!(cand >> k & 1) || th[k] > best) continue; /* best may have moved */
-            qk_id_t id = pid[slot + k];
-            if (th[k] < best || id < best_id) {
-              best = th[k];
-              best_id = id;
-            }
-          }
-        }
-      }
-#endif
-      for (; slot < end; slot++) {
-        int is_disc = all_discs || (!no_discs && pid[slot] < c->n_discs);
-        double th = is_disc ? ray_disc(&c->sdisc[slot], o.x, o.y, d.x, d.y, tmax)
-                            : ray_box(&c->sbox[slot], &ray, tmax);
-        if (th < 0 || th > best) continue;
-        qk_id_t id = pid[slot];
-        if (th < best || id < best_id) {
-          best = th;
-          best_id = id;
-        }
-      }
-      if (best != best0) {
-        tf = round_up(best); /* best <= tmax: the items test t <= tmax */
-#if defined(__SSE2__)
+      const double best0 = b.t;
+      scan_leaf(c, ray, cur.link, cur.link + cur.count, tmax, &b);
+      if (b.t != best0) {
+        tf = round_up(b.t); /* b.t <= tmax: the items test t <= tmax */
         tv = _mm_set1_ps(tf);
-#endif
       }
     }
     /* Next, the nearest stacked node that may still hold a hit no farther than best
@@ -911,9 +1033,114 @@ cast(const qk_collider_t *c, const ray_t *rp, const int simd, double tmax, qk_hi
     if (sp == 0) break;
     cur = stack[--sp];
   }
-  hit->id = best_id;
-  hit->t = best_id == QK_NONE ? INFINITY : best;
+  *bp = b;
 }
+
+/* The bits of v at the even positions of a 64-bit word (one axis of a Morton code). */
+static inline uint64_t spread32(uint32_t v) {
+  uint64_t x = v;
+  x = (x | x << 16) & 0x0000FFFF0000FFFFull;
+  x = (x | x << 8) & 0x00FF00FF00FF00FFull;
+  x = (x | x << 4) & 0x0F0F0F0F0F0F0F0Full;
+  x = (x | x << 2) & 0x3333333333333333ull;
+  return (x | x << 1) & 0x5555555555555555ull;
+}
+
+/* Levels above the origin's deepest internal node at which the local search starts. */
+#define QK__RAY_START_UP 1
+
+/*
+ * The cast with the float test, in two steps. Most rays end near their origin, and a
+ * search from the root spends most of its work testing the boxes on the way down to it.
+ * So the descent to the origin first goes by the bits of the origin's position alone
+ * (no box tests), and the search proper starts at N, one level above the deepest internal node
+ * there, which yields the first hit t1 among N's items (or t1 = tmax). Any other item
+ * that the ray meets at t <= t1 has its centre outside N's square (centres strictly
+ * inside a node's square are all beneath it) and, by fact (1), the point o + t d of the
+ * hit within reach + w of that centre on each axis. So when the segment from o to
+ * o + t1 d stays farther than that from the edges of the square of an ancestor A of N,
+ * every such item lies beneath A. So while the segment is not inside the square of the
+ * node searched last (N first), the search goes on from that node's parent with the best
+ * so far, passing over the node, which it has done; the best only comes closer, and the
+ * root holds every item. Most rays stop at N. The margin adds w for the roundings
+ * of reach, of the segment's end and of the comparisons (each below 2^-48 of the
+ * magnitudes involved), and 2^-45 of the root square's for the corners: here they are
+ * the root's corner plus the path's bits times side / 2^32 (two roundings), where the
+ * tree adds halves level by level (one rounding each, 60 levels at most), so the two
+ * differ by less than 2^-46 of it. The descent need not pick, near a midline, the child
+ * the tree would pick for the origin: the nodes on the path are nodes of the tree
+ * whatever the bits, and only the check above decides. The answer is the smallest
+ * (t, id) over A's items, the same as a search from the root finds.
+ */
+static void cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk_hit_t *hit) {
+  best_t b = {INFINITY, QK_NONE};
+  const cnode_t *root = &c->cn[0];
+  if (root->child == QK_NONE) {
+    scan_leaf(c, ray, root->start, root->start + root->count, tmax, &b);
+  } else {
+    const qk_tree_t *t = c->tree;
+    /* The path, by the bits of the origin's position in the root square in 32-bit fixed
+     * point (a lane's two bits per level): entries in quads. */
+    uint32_t path[33];
+    const double ox = ray->ox, oy = ray->oy;
+    const qk_square_t rs = qk__tree_root_square(t);
+    const double f = 0x1p32 / rs.side, ux = (ox - rs.x) * f, uy = (oy - rs.y) * f;
+    uint32_t e = root->quad, ix = 0, iy = 0;
+    path[0] = e;
+    unsigned d = 0;
+    /* (A root square below 2^-900 would make side / 2^32 subnormal: no local start.) */
+    if (rs.side > 0x1p-900 && ux >= 0 && ux < 0x1p32 && uy >= 0 && uy < 0x1p32) {
+      const qnode_t *quads = c->quads;
+      ix = (uint32_t)ux, iy = (uint32_t)uy;
+      uint64_t z = spread32(ix) | spread32(iy) << 1; /* the lanes, root first, from bit 63 */
+      while (d < 32) {
+        const unsigned lane = (unsigned)(z >> 62);
+        const qnode_t *q = &quads[e];
+        if (q->count[lane] != QK_NONE) {
+          /* The origin's leaf, which the search below reaches after a few node tests:
+           * its items and ids asked for now, so that those misses overlap the tests. */
+          const uint32_t st = q->link[lane], cnt = q->count[lane];
+          if (cnt > 0) {
+            if (c->sdisc) {
+              QK__CPREFETCH(&c->sdisc[st]);
+              QK__CPREFETCH(&c->sdisc[st + cnt - 1]);
+            } else {
+              QK__CPREFETCH(&c->sbox[st]);
+            }
+            QK__CPREFETCH(&qk__tree_ids(t)[st]);
+          }
+          break;
+        }
+        path[++d] = e = q->link[lane];
+        z <<= 2;
+      }
+    }
+    const unsigned n = d > QK__RAY_START_UP ? d - QK__RAY_START_UP : 0;
+    walk_float(c, ray, tmax, path[n], QK_NONE, &b);
+    /* Up from N one level at a time while the segment to the best hit so far (or to
+     * tmax) is not inside the square of the node searched: each step searches the
+     * parent's other children, which may bring the hit closer. */
+    const double unit = rs.side * 0x1p-32;
+    const double mb = c->reach + 2 * ray->w + (fabs(rs.x) + fabs(rs.y) + rs.side) * 0x1p-45;
+    for (unsigned a = n; a > 0; a--) {
+      const double t1 = b.t < tmax ? b.t : tmax;
+      if (t1 < INFINITY) {
+        const double ex = ox + t1 * ray->dx, ey = oy + t1 * ray->dy;
+        const double m = mb + (fabs(ox) + fabs(oy) + fabs(ex) + fabs(ey) + c->reach) * 0x1p-48;
+        const double side = qk__tree_side(t, a);
+        const uint32_t keep = ~(uint32_t)0 << (32 - a); /* the path's first a bits */
+        const double x0 = rs.x + (double)(ix & keep) * unit, y0 = rs.y + (double)(iy & keep) * unit;
+        if (qk__min(ox, ex) - m > x0 && qk__max(ox, ex) + m < x0 + side &&
+            qk__min(oy, ey) - m > y0 && qk__max(oy, ey) + m < y0 + side)
+          break;
+      }
+      walk_float(c, ray, tmax, path[a - 1], path[a], &b);
+    }
+  }
+  hit->id = b.id;
+  hit->t = b.id == QK_NONE ? INFINITY : b.t;
+}
+#endif
 
 qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t d, double tmax,
                                 qk_hit_t *hit) {
@@ -925,9 +1152,12 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
   if (c->n == 0) return QK_OK;
   ray_t ray;
   ray_init(&ray, c, o, d);
-  if (ray.simd)
-    cast(c, &ray, 1, tmax, hit);
-  else
-    cast(c, &ray, 0, tmax, hit);
+#if defined(__SSE2__)
+  if (ray.simd) {
+    cast_float(c, &ray, tmax, hit);
+    return QK_OK;
+  }
+#endif
+  cast_general(c, &ray, tmax, hit);
   return QK_OK;
 }

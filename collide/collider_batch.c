@@ -101,6 +101,8 @@ qk_status_t qk__collider_pairs_threaded(const qk_collider_t *c, qk_pair_fn fn, v
 
 /* Rays per job: enough to amortise a hand-out, few enough to balance the threads. */
 #define RAYS_PER_JOB 256
+/* Batches from this size on are cast in the Z order of their origins. */
+#define RAYS_SORT_MIN 1024
 
 typedef struct rctx {
   const qk_collider_t *c;
@@ -108,7 +110,8 @@ typedef struct rctx {
   size_t n;
   double tmax;
   qk_hit_t *hits;
-  size_t *first_bad; /* per job: the first ray that failed, or n */
+  const uint64_t *order; /* low 32 bits: the k-th ray to cast, or NULL: in input order */
+  size_t *first_bad;     /* per job: its lowest-numbered ray that failed, or n */
   qk_status_t *bad_st;
 } rctx_t;
 
@@ -116,12 +119,49 @@ static void rays_job(unsigned i, void *ud) {
   rctx_t *r = ud;
   size_t lo = (size_t)i * RAYS_PER_JOB, hi = lo + RAYS_PER_JOB < r->n ? lo + RAYS_PER_JOB : r->n;
   for (size_t k = lo; k < hi; k++) {
-    qk_status_t st = qk_collider_raycast(r->c, r->origins[k], r->dirs[k], r->tmax, &r->hits[k]);
-    if (st != QK_OK && r->first_bad[i] == r->n) {
-      r->first_bad[i] = k;
+    const size_t j = r->order ? (size_t)(uint32_t)r->order[k] : k;
+    qk_status_t st = qk_collider_raycast(r->c, r->origins[j], r->dirs[j], r->tmax, &r->hits[j]);
+    if (st != QK_OK && j < r->first_bad[i]) {
+      r->first_bad[i] = j;
       r->bad_st[i] = st;
     }
   }
+}
+
+/*
+ * The rays in the Z (Morton) order of their origins over the tree's root square, so that
+ * consecutive rays, which start near one another, find the nodes and items of their
+ * neighbourhood still in cache: with random origins over a large set each ray otherwise
+ * brings its own path from memory. Origins outside the square (or not finite) go to its
+ * nearest side. An LSD radix sort of (key << 32 | index) in four byte passes, stable, so
+ * the order is a function of the input alone. NULL when the memory cannot be had (the
+ * rays are then cast in input order: the same answers).
+ */
+static uint64_t *ray_order(const qk_collider_t *c, const qk_point_t *origins, size_t n,
+                           size_t *bytes) {
+  const qk_allocator_t *a = qk__collider_alloc(c);
+  *bytes = 2 * n * sizeof(uint64_t);
+  uint64_t *buf = qk__realloc(a, NULL, 0, *bytes);
+  if (!buf) return NULL;
+  uint64_t *key = buf, *tmp = buf + n;
+  const qk_square_t sq = qk__tree_root_square(qk_collider_tree(c));
+  const double scale = sq.side > 0 ? 65536.0 / sq.side : 0.0;
+  for (size_t i = 0; i < n; i++) {
+    double u = (origins[i].x - sq.x) * scale, v = (origins[i].y - sq.y) * scale;
+    uint32_t ux = !(u > 0) ? 0 : u >= 65535 ? 65535 : (uint32_t)u;
+    uint32_t uy = !(v > 0) ? 0 : v >= 65535 ? 65535 : (uint32_t)v;
+    key[i] = (uint64_t)(qk__spread16(ux) | qk__spread16(uy) << 1) << 32 | i;
+  }
+  for (unsigned shift = 32; shift < 64; shift += 8) {
+    size_t count[257] = {0};
+    for (size_t i = 0; i < n; i++) count[(key[i] >> shift & 0xFF) + 1]++;
+    for (unsigned b = 0; b < 256; b++) count[b + 1] += count[b];
+    for (size_t i = 0; i < n; i++) tmp[count[key[i] >> shift & 0xFF]++] = key[i];
+    uint64_t *s = key;
+    key = tmp;
+    tmp = s;
+  }
+  return buf; /* four passes: the sorted keys are back in the first half */
 }
 
 qk_status_t qk_collider_raycast_batch(const qk_collider_t *c, const qk_point_t *origins,
@@ -147,13 +187,18 @@ qk_status_t qk_collider_raycast_batch(const qk_collider_t *c, const qk_point_t *
       return QK_ERR_NOMEM;
     }
   }
+  size_t order_bytes = 0;
+  uint64_t *order = NULL;
+  if (n >= RAYS_SORT_MIN && n <= UINT32_MAX) order = ray_order(c, origins, n, &order_bytes);
   for (size_t i = 0; i < n_jobs; i++) first_bad[i] = n;
-  rctx_t r = {c, origins, dirs, n, tmax, hits, first_bad, bad_st};
+  rctx_t r = {c, origins, dirs, n, tmax, hits, order, first_bad, bad_st};
   qk__run_jobs(threads, (unsigned)n_jobs, rays_job, &r);
   /* The error of the lowest-numbered failed ray. */
   qk_status_t st = QK_OK;
-  for (size_t i = 0; i < n_jobs && st == QK_OK; i++)
-    if (first_bad[i] < n) st = bad_st[i];
+  size_t bad = n;
+  for (size_t i = 0; i < n_jobs; i++)
+    if (first_bad[i] < bad) bad = first_bad[i], st = bad_st[i];
+  if (order) qk__free(a, order, order_bytes);
   if (n_jobs > 16) {
     qk__free(a, first_bad, n_jobs * sizeof *first_bad);
     qk__free(a, bad_st, n_jobs * sizeof *bad_st);

@@ -13,7 +13,15 @@
  *  - the same scenes and rays scaled by 1e-30, 1e25, 1e35 (beyond the float test's
  *    range: the general test), 1e60, and moved by 1e7 and 1e5 (float boxes far coarser
  *    than the items), with directions scaled by 1e20 and 1e-20 (parameters that overflow
- *    and underflow a float) and 1e-35 (the general test), and tmax cut-offs.
+ *    and underflow a float) and 1e-35 (the general test), and tmax cut-offs;
+ *  - the quantised node boxes at their edges: items stacked on one point (zero extent,
+ *    leaves past the depth cap), boxes of zero width and height on one line, items whose
+ *    sides fall exactly on and just off power-of-two grid values, far from the origin and
+ *    near it; rays along those sides and through those points;
+ *  - trees deeper than the 32 bits of the ray's descent (pairs of discs 2^-45 apart, depth
+ *    cap 60) and a given root square whose halvings are not exact (corner -0.3, side
+ *    1.7), with rays from inside and outside the root;
+ *  - the batch call (which reorders its rays by origin) against single calls.
  */
 #include <math.h>
 #include <stdio.h>
@@ -196,10 +204,157 @@ static void test_collide_rays_float_edges(void **state) {
   assert_true(checked == 2L * 7 * N_RAYS);
 }
 
+/* Degenerate scenes for the 8-bit grids of the ray nodes: many items at one point, flat
+ * boxes on a line, sides on grid values (k / 2^j) and next to them. */
+static void test_collide_rays_grid_edges(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 1);
+  static const double offs[] = {0.0, 1e7, -3.0, 0x1p-20};
+  qk_disc_t d[120];
+  qk_box_t b[60];
+  long checked = 0;
+  for (size_t f = 0; f < sizeof offs / sizeof offs[0]; f++) {
+    const double off = offs[f];
+    size_t nd = 0, nb = 0;
+    for (int i = 0; i < 40; i++) /* stacked: one point, radius 0 or tiny */
+      d[nd++] = (qk_disc_t){off + 0.5, off + 0.25, i % 3 ? 0.0 : 0x1p-30};
+    while (nd < 120) {
+      const double x = off + (double)qkt_rng_below(&r, 64) / 64,
+                   y = off + (double)qkt_rng_below(&r, 64) / 64;
+      const double e = qkt_rng_below(&r, 2) ? 0.0 : 0x1p-40 * (qkt_rng_below(&r, 2) ? 1 : -1);
+      d[nd++] = (qk_disc_t){x + e, y - e, (double)qkt_rng_below(&r, 4) / 128};
+    }
+    for (int i = 0; i < 60; i++) { /* flat boxes on y = off + 0.75 and x = off + 0.125 */
+      const double a = off + (double)qkt_rng_below(&r, 64) / 64,
+                   w = (double)qkt_rng_below(&r, 3) / 64;
+      b[nb++] = i % 2 ? (qk_box_t){a, off + 0.75, a + w, off + 0.75}
+                      : (qk_box_t){off + 0.125, a, off + 0.125, a + w};
+    }
+    for (int cap = 1; cap <= 8; cap += 7) {
+      qk_tree_options_t opt;
+      qk_tree_options_init(&opt);
+      opt.capacity = (uint32_t)cap;
+      qk_collider_t *c = NULL;
+      assert_int_equal(qk_collider_build(d, nd, b, nb, &opt, &c), QK_OK);
+      for (int i = 0; i < 400; i++) {
+        qk_point_t o = {off + qkt_rng_range(&r, -0.2, 1.2), off + qkt_rng_range(&r, -0.2, 1.2)}, v;
+        const double ang = qkt_rng_range(&r, 0, 6.283185307179586);
+        v = (qk_point_t){cos(ang), sin(ang)};
+        if (i % 4 == 1)
+          o.y = off + 0.75, v = (qk_point_t){i & 8 ? 1 : -1, i & 16 ? 0x1p-60 : 0x1p-20};
+        if (i % 4 == 2)
+          o.x = off + 0.125, v = (qk_point_t){i & 16 ? -0x1p-60 : 0x1p-20, i & 8 ? 1 : -1};
+        if (i % 4 == 3) v = (qk_point_t){off + 0.5 - o.x, off + 0.25 - o.y}; /* at the stack */
+        qk_hit_t h, w = brute(d, nd, b, nb, o, v, INFINITY);
+        assert_int_equal(qk_collider_raycast(c, o, v, INFINITY, &h), QK_OK);
+        if (h.id != w.id || !(h.t == w.t || (isinf(h.t) && isinf(w.t))))
+          fail_msg("offset %g cap %d ray %d (o %.17g %.17g, d %.17g %.17g): hit (%u, %.17g) vs "
+                   "brute force (%u, %.17g) (seed %llu)",
+                   off, cap, i, o.x, o.y, v.x, v.y, h.id, h.t, w.id, w.t,
+                   (unsigned long long)g_seed);
+        checked++;
+      }
+      qk_collider_free(c);
+    }
+  }
+  assert_true(checked == 4L * 2 * 400);
+}
+
+/* Deep trees and an inexact root square: the local start's descent stops at 32 levels,
+ * and its squares differ from the tree's by roundings that the margin must cover. */
+static void test_collide_rays_deep_and_rooted(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 3);
+  enum { ND = 240 };
+  qk_disc_t d[ND];
+  long checked = 0;
+  for (int variant = 0; variant < 2; variant++) {
+    for (int i = 0; i < ND; i += 2) { /* pairs 2^-45 apart, some in a tight cluster */
+      const double x = i < 80 ? 0.4 + qkt_rng_range(&r, 0, 1e-9) : qkt_rng_range(&r, 0, 1.3);
+      const double y = i < 80 ? 0.7 + qkt_rng_range(&r, 0, 1e-9) : qkt_rng_range(&r, 0, 1.3);
+      const double rad =
+          qkt_rng_below(&r, 3) ? qkt_rng_range(&r, 0, 1e-10) : qkt_rng_range(&r, 0, 0.02);
+      d[i] = (qk_disc_t){x, y, rad};
+      d[i + 1] = (qk_disc_t){x + 0x1p-45, y - 0x1p-45, rad};
+    }
+    qk_tree_options_t opt;
+    qk_tree_options_init(&opt);
+    opt.capacity = 1;
+    opt.max_depth = QK_MAX_DEPTH_LIMIT;
+    if (variant == 1) {
+      opt.has_root = 1;
+      opt.root = (qk_square_t){-0.3, -0.3, 1.7};
+    }
+    qk_collider_t *c = NULL;
+    assert_int_equal(qk_collider_build(d, ND, NULL, 0, &opt, &c), QK_OK);
+    for (int i = 0; i < 600; i++) {
+      const qk_disc_t *t = &d[qkt_rng_below(&r, ND)];
+      qk_point_t o = {qkt_rng_range(&r, -0.5, 1.8), qkt_rng_range(&r, -0.5, 1.8)};
+      static const double near[3] = {0.0, 0x1p-47, 1e-9}; /* on, beside, off the pair */
+      const double nr = near[qkt_rng_below(&r, 3)];
+      if (i % 3 == 0) o = (qk_point_t){t->x + nr, t->y - nr};
+      const double ang = qkt_rng_range(&r, 0, 6.283185307179586);
+      qk_point_t v = {cos(ang), sin(ang)};
+      if (i % 3 == 1) v = (qk_point_t){t->x - o.x, t->y - o.y};
+      const double tmax = qkt_rng_below(&r, 4) == 0 ? qkt_rng_range(&r, 0, 0.3) : INFINITY;
+      qk_hit_t h, w = brute(d, ND, NULL, 0, o, v, tmax);
+      assert_int_equal(qk_collider_raycast(c, o, v, tmax, &h), QK_OK);
+      if (h.id != w.id || !(h.t == w.t || (isinf(h.t) && isinf(w.t))))
+        fail_msg("variant %d ray %d (o %.17g %.17g, d %.17g %.17g, tmax %g): hit (%u, %.17g) vs "
+                 "brute force (%u, %.17g) (seed %llu)",
+                 variant, i, o.x, o.y, v.x, v.y, tmax, h.id, h.t, w.id, w.t,
+                 (unsigned long long)g_seed);
+      checked++;
+    }
+    qk_collider_free(c);
+  }
+  assert_true(checked == 2L * 600);
+}
+
+/* The batch call, on one and two threads, answers each ray as a single call does. */
+static void test_collide_rays_batch_matches_single(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 2);
+  enum { ND = 3000, NR = 5000 };
+  qk_disc_t *d = malloc(ND * sizeof *d);
+  qk_point_t *o = malloc(NR * sizeof *o), *v = malloc(NR * sizeof *v);
+  qk_hit_t *h = malloc(NR * sizeof *h);
+  assert_non_null(d && o && v && h);
+  for (int i = 0; i < ND; i++)
+    d[i] =
+        (qk_disc_t){qkt_rng_range(&r, 0, 1), qkt_rng_range(&r, 0, 1), qkt_rng_range(&r, 0, 0.01)};
+  for (int i = 0; i < NR; i++) {
+    const double ang = qkt_rng_range(&r, 0, 6.283185307179586);
+    o[i] = (qk_point_t){qkt_rng_range(&r, -0.5, 1.5), qkt_rng_range(&r, -0.5, 1.5)};
+    v[i] = (qk_point_t){cos(ang), sin(ang)};
+  }
+  qk_collider_t *c = NULL;
+  assert_int_equal(qk_collider_build(d, ND, NULL, 0, NULL, &c), QK_OK);
+  for (uint32_t th = 1; th <= 2; th++) {
+    qk_collider_set_threads(c, th);
+    assert_int_equal(qk_collider_raycast_batch(c, o, v, NR, 0.5, h), QK_OK);
+    for (int i = 0; i < NR; i++) {
+      qk_hit_t s;
+      assert_int_equal(qk_collider_raycast(c, o[i], v[i], 0.5, &s), QK_OK);
+      if (s.id != h[i].id || !(s.t == h[i].t || (isinf(s.t) && isinf(h[i].t))))
+        fail_msg("threads %u ray %d: batch (%u, %.17g) vs single (%u, %.17g) (seed %llu)", th, i,
+                 h[i].id, h[i].t, s.id, s.t, (unsigned long long)g_seed);
+    }
+  }
+  qk_collider_free(c);
+  free(d), free(o), free(v), free(h);
+}
+
 int main(void) {
   g_seed = qkt_seed(90211);
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_collide_rays_float_edges),
+      cmocka_unit_test(test_collide_rays_grid_edges),
+      cmocka_unit_test(test_collide_rays_deep_and_rooted),
+      cmocka_unit_test(test_collide_rays_batch_matches_single),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
