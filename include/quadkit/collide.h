@@ -279,6 +279,11 @@ size_t qk_world_size(const qk_world_t *w);
  * freed before it returns). */
 size_t qk_world_bytes(const qk_world_t *w);
 
+/** The part of qk_world_bytes() that holds the pair state: the current pairs (4 bytes a
+ * pair and 4 a slot) and the began and ended lists (8 bytes a pair); the rest is the
+ * index (objects, order, cells). */
+size_t qk_world_pair_bytes(const qk_world_t *w);
+
 /**
  * End a frame: find every overlapping pair (exactly; touching counts) and the pairs that
  * began and ended since the last update. Uses the threads option.
