@@ -100,18 +100,25 @@ static inline int changed(const qk_world_t *w, uint32_t s) {
  * Began and ended: row by row, a merge of this frame's rows with the last frame's. A pair
  * whose slot now holds another object (or none) has ended, and a pair with such a slot
  * has begun (dirty: objects were added or removed since the last update). Returns 0 when
- * memory ran short (the lists are then the caller's to free).
+ * memory ran short (the lists are then the caller's to free). Rows come in slot order and
+ * each row in slot order, so both lists are in key order.
  */
 static int diff_rows(const qk_world_t *w, const qk__prows_t *o, const qk__prows_t *nw, int dirty,
                      qk__kvec_t *bv, qk__kvec_t *ev) {
   const qk_allocator_t *al = &w->alloc;
+  const uint32_t *nb = nw->b, *ob = o->b;
   uint32_t rows = o->n_rows > nw->n_rows ? o->n_rows : nw->n_rows;
+  uint32_t both = o->n_rows < nw->n_rows ? o->n_rows : nw->n_rows;
   for (uint32_t a = 0; a < rows; a++) {
-    size_t i = a < nw->n_rows ? nw->off[a] : 0, ie = a < nw->n_rows ? nw->off[a + 1] : 0;
-    size_t j = a < o->n_rows ? o->off[a] : 0, je = a < o->n_rows ? o->off[a + 1] : 0;
-    if (i == ie && j == je) continue;
+    size_t i, ie, j, je;
+    if (a < both) { /* (most rows of a sparse world are empty in both: skipped cheaply) */
+      i = nw->off[a], ie = nw->off[a + 1], j = o->off[a], je = o->off[a + 1];
+      if (i == ie && j == je) continue;
+    } else {
+      i = a < nw->n_rows ? nw->off[a] : 0, ie = a < nw->n_rows ? nw->off[a + 1] : 0;
+      j = a < o->n_rows ? o->off[a] : 0, je = a < o->n_rows ? o->off[a + 1] : 0;
+    }
     uint64_t ka = (uint64_t)a << 32;
-    const uint32_t *nb = nw->b, *ob = o->b;
     if (dirty && changed(w, a)) { /* every old pair ended, every new one began */
       for (; i < ie; i++)
         if (!kv_add(al, bv, ka | nb[i])) return 0;
@@ -119,25 +126,24 @@ static int diff_rows(const qk_world_t *w, const qk__prows_t *o, const qk__prows_
         if (!kv_add(al, ev, ka | ob[j])) return 0;
       continue;
     }
-    if (ie - i == je - j && !memcmp(nb + i, ob + j, (ie - i) * sizeof *nb)) {
-      if (!dirty) continue; /* the common row: the same pairs */
-      for (; i < ie; i++)
-        if (changed(w, nb[i]) && (!kv_add(al, bv, ka | nb[i]) || !kv_add(al, ev, ka | nb[i])))
-          return 0;
-      continue;
-    }
-    while (i < ie || j < je) {
-      if (j == je || (i < ie && nb[i] < ob[j])) {
-        if (!kv_add(al, bv, ka | nb[i++])) return 0;
-      } else if (i == ie || nb[i] > ob[j]) {
-        if (!kv_add(al, ev, ka | ob[j++])) return 0;
-      } else {
-        if (dirty && changed(w, nb[i]) &&
-            (!kv_add(al, bv, ka | nb[i]) || !kv_add(al, ev, ka | ob[j])))
+    while (i < ie && j < je) {
+      uint32_t x = nb[i], y = ob[j];
+      if (x == y) {
+        if (dirty && changed(w, x) && (!kv_add(al, bv, ka | x) || !kv_add(al, ev, ka | x)))
           return 0;
         i++, j++;
+      } else if (x < y) {
+        if (!kv_add(al, bv, ka | x)) return 0;
+        i++;
+      } else {
+        if (!kv_add(al, ev, ka | y)) return 0;
+        j++;
       }
     }
+    for (; i < ie; i++)
+      if (!kv_add(al, bv, ka | nb[i])) return 0;
+    for (; j < je; j++)
+      if (!kv_add(al, ev, ka | ob[j])) return 0;
   }
   return 1;
 }
@@ -189,8 +195,6 @@ qk_status_t qk_world_update(qk_world_t *w) {
     rows_free(al, &nr);
     return QK_ERR_NOMEM;
   }
-  /* The merge ran row by row: the ended pairs of a changed row came before the pairs of
-   * the rows after it, so both lists are in key order already. */
   shrink(al, &bv);
   shrink(al, &ev);
   qk__free(al, w->began.v, w->began.cap * sizeof *w->began.v);
