@@ -107,17 +107,16 @@ static int diff_rows(const qk_world_t *w, const qk__prows_t *o, const qk__prows_
                      qk__kvec_t *bv, qk__kvec_t *ev) {
   const qk_allocator_t *al = &w->alloc;
   const uint32_t *nb = nw->b, *ob = o->b;
+  const uint32_t *noff = nw->off, *ooff = o->off;
   uint32_t rows = o->n_rows > nw->n_rows ? o->n_rows : nw->n_rows;
   uint32_t both = o->n_rows < nw->n_rows ? o->n_rows : nw->n_rows;
-  for (uint32_t a = 0; a < rows; a++) {
-    size_t i, ie, j, je;
-    if (a < both) { /* (most rows of a sparse world are empty in both: skipped cheaply) */
-      i = nw->off[a], ie = nw->off[a + 1], j = o->off[a], je = o->off[a + 1];
-      if (i == ie && j == je) continue;
-    } else {
-      i = a < nw->n_rows ? nw->off[a] : 0, ie = a < nw->n_rows ? nw->off[a + 1] : 0;
-      j = a < o->n_rows ? o->off[a] : 0, je = a < o->n_rows ? o->off[a + 1] : 0;
-    }
+  /* Rows are contiguous: each ends where the next starts, so i and j carry over, and
+   * rows empty in both (most of a sparse world's) are skipped by a tight loop. */
+  size_t i = 0, j = 0;
+  for (uint32_t a = 0;; a++) {
+    while (a < both && noff[a + 1] == i && ooff[a + 1] == j) a++;
+    if (a >= rows) break;
+    size_t ie = a < nw->n_rows ? noff[a + 1] : i, je = a < o->n_rows ? ooff[a + 1] : j;
     uint64_t ka = (uint64_t)a << 32;
     if (dirty && changed(w, a)) { /* every old pair ended, every new one began */
       for (; i < ie; i++)
@@ -186,7 +185,12 @@ qk_status_t qk_world_update(qk_world_t *w) {
   if (dirty)
     for (uint32_t i = 0; i < w->n_obj; i++) n_eg += w->obj[i].gen != w->ugen[i];
   uint64_t *eg = NULL;
-  if (!nr.off || (n_eg && !(eg = qk__realloc(al, NULL, 0, n_eg * sizeof *eg))) ||
+  /* The lists start with room for the last frame's counts and some (frames are alike),
+   * and grow if need be. */
+  size_t bcap = w->began.n + w->began.n / 4 + 64, ecap = w->ended.n + w->ended.n / 4 + 64;
+  if (nr.off && (bv.v = qk__realloc(al, NULL, 0, bcap * sizeof *bv.v))) bv.cap = bcap;
+  if (bv.v && (ev.v = qk__realloc(al, NULL, 0, ecap * sizeof *ev.v))) ev.cap = ecap;
+  if (!ev.v || (n_eg && !(eg = qk__realloc(al, NULL, 0, n_eg * sizeof *eg))) ||
       !diff_rows(w, &w->cur, &nr, dirty, &bv, &ev)) {
     qk__free(al, eg, n_eg * sizeof *eg);
     qk__free(al, bv.v, bv.cap * sizeof *bv.v);
@@ -263,8 +267,9 @@ qk_status_t qk_world_pairs(const qk_world_t *w, qk_pairs_which_t which, qk_world
   }
   if (which != QK_PAIRS_ALL) return QK_ERR_INVALID;
   const qk__prows_t *r = &w->cur;
+  size_t i = 0;
   for (uint32_t a = 0; a < r->n_rows; a++) {
-    size_t i = r->off[a], e = r->off[a + 1];
+    size_t e = r->off[a + 1]; /* (rows are contiguous: row a starts at i) */
     if (i == e) continue;
     qk_handle_t ha = qk__uhandle(w, a);
     for (; i < e; i++)
