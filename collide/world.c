@@ -29,8 +29,8 @@
  *
  * Memory (between updates): 68 bytes an object slot (the object and its generation at
  * the last update), 4 an entry of the order, 16 a cell; and the pair state: the current
- * pairs by rows (4 bytes a pair and 4 a slot) and the began and ended lists (8 bytes a
- * pair). The update's scratch (float boxes, cell boxes, the search's pairs and the
+ * pairs by rows (4 bytes a pair and 8 a slot with pairs) and the began and ended lists
+ * (8 bytes a pair). The update's scratch (float boxes, cell boxes, the search's pairs and the
  * sort's buffers and counts) is allocated per update and freed before it returns.
  *
  * Handles: slot in the low 32 bits, generation in the high 32. A slot's generation is
@@ -90,7 +90,7 @@ void qk_world_free(qk_world_t *w) {
   qk__free(&a, w->cells, (size_t)w->cap_cells * sizeof *w->cells);
   qk__free(&a, w->ugen, (size_t)w->cap_ugen * sizeof *w->ugen);
   qk__free(&a, w->cur.b, w->cur.cap * sizeof *w->cur.b);
-  qk__free(&a, w->cur.off, w->cur.off ? ((size_t)w->cur.n_rows + 1) * sizeof *w->cur.off : 0);
+  qk__free(&a, w->cur.row, w->cur.row ? 2 * (w->cur.n_nz + 1) * sizeof *w->cur.row : 0);
   qk__free(&a, w->began.v, w->began.cap * sizeof *w->began.v);
   qk__free(&a, w->ended.v, w->ended.cap * sizeof *w->ended.v);
   qk__free(&a, w->egen, w->n_egen * sizeof *w->egen);
@@ -102,7 +102,7 @@ size_t qk_world_size(const qk_world_t *w) { return w ? w->n_live : 0; }
 size_t qk_world_pair_bytes(const qk_world_t *w) {
   if (!w) return 0;
   return w->cur.cap * sizeof *w->cur.b +
-         (w->cur.off ? ((size_t)w->cur.n_rows + 1) * sizeof *w->cur.off : 0) +
+         (w->cur.row ? 2 * (w->cur.n_nz + 1) * sizeof *w->cur.row : 0) +
          (w->began.cap + w->ended.cap + w->n_egen) * sizeof(uint64_t);
 }
 

@@ -56,13 +56,16 @@ typedef struct qk__kvec {
   size_t n, cap;
 } qk__kvec_t;
 
-/* The current pairs by rows, 4 bytes a pair and 4 a slot: row a (a < n_rows) holds the
- * slots b > a of a's pairs, ascending, at b[off[a] .. off[a + 1]). */
+/* The current pairs by rows, 4 bytes a pair and 8 a slot that has pairs: the k-th row
+ * with pairs is slot row[k] (ascending), and holds the slots b > row[k] of its pairs,
+ * ascending, at b[start[k] .. start[k + 1]). Rows without pairs take no room, so a
+ * sparse world pays for its pairs only. */
 typedef struct qk__prows {
   uint32_t *b;
   size_t n, cap;   /* pairs, and the room of b */
-  uint32_t *off;   /* n_rows + 1 entries (NULL when n_rows is 0) */
-  uint32_t n_rows; /* the slots at the update that made them */
+  uint32_t *row;   /* n_nz + 1 entries: the rows' slots, then (start) their starts */
+  uint32_t *start; /* n_nz + 1 entries, start[n_nz] = n (in row's allocation) */
+  size_t n_nz;     /* rows with pairs */
 } qk__prows_t;
 
 struct qk_world {

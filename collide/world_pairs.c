@@ -35,22 +35,32 @@ static inline int kv_add(const qk_allocator_t *a, qk__kvec_t *v, uint64_t k) {
 
 static void rows_free(const qk_allocator_t *a, qk__prows_t *r) {
   qk__free(a, r->b, r->cap * sizeof *r->b);
-  qk__free(a, r->off, r->off ? ((size_t)r->n_rows + 1) * sizeof *r->off : 0);
+  qk__free(a, r->row, r->row ? 2 * (r->n_nz + 1) * sizeof *r->row : 0);
   *r = (qk__prows_t){0};
 }
 
+/* Room for n_nz rows (row and start in one block); 0 when memory ran short. */
+static int rows_alloc(const qk_allocator_t *a, qk__prows_t *r, size_t n_nz) {
+  r->row = qk__realloc(a, NULL, 0, 2 * (n_nz + 1) * sizeof *r->row);
+  if (!r->row) return 0;
+  r->start = r->row + n_nz + 1;
+  r->n_nz = n_nz;
+  return 1;
+}
+
 /*
- * The found keys (unsorted, n of them) as rows over n_obj slots, each row ascending.
- * Many keys (at least a quarter of the slots): two stable counting sorts, by slot b into
- * tmp, then by slot a, which writes only b into its row (the counts of a are the rows'
- * offsets); both counts come from one read of the keys. Few keys (a sparse world): an LSD
- * radix sort of the keys on the bytes that differ (cnt: 257 entries), so the passes cost
- * the keys, not the slots, then the rows from the sorted keys.
+ * The found keys (unsorted, n of them) as rows over n_obj slots, each row ascending;
+ * 0 when memory ran short. Many keys (at least a quarter of the slots): two stable
+ * counting sorts, by slot b into tmp, then by slot a, which writes only b into its row;
+ * both counts come from one read of the keys (cnt: 2 (n_obj + 1) entries). Few keys (a
+ * sparse world): an LSD radix sort of the keys on the bytes that differ (cnt: 257
+ * entries), so the passes cost the keys, not the slots, then the rows from the sorted
+ * keys.
  */
-static void make_rows(uint64_t *keys, uint64_t *tmp, size_t n, uint32_t *cnt, uint32_t n_obj,
-                      qk__prows_t *r) {
-  uint32_t *off = r->off, *rb = r->b;
-  memset(off, 0, ((size_t)n_obj + 1) * sizeof *off);
+static int make_rows(const qk_allocator_t *al, uint64_t *keys, uint64_t *tmp, size_t n,
+                     uint32_t *cnt, uint32_t n_obj, qk__prows_t *r) {
+  uint32_t *rb = r->b;
+  r->n = n;
   if (n * 4 < n_obj) {
     uint64_t all_or = 0, all_and = ~(uint64_t)0;
     for (size_t i = 0; i < n; i++) all_or |= keys[i], all_and &= keys[i];
@@ -62,33 +72,42 @@ static void make_rows(uint64_t *keys, uint64_t *tmp, size_t n, uint32_t *cnt, ui
       for (size_t i = 0; i < n; i++) tmp[cnt[keys[i] >> sh & 0xff]++] = keys[i];
       memcpy(keys, tmp, n * sizeof *keys); /* the result stays in keys */
     }
+    size_t nz = 0;
+    for (size_t i = 0; i < n; i++) nz += !i || keys[i] >> 32 != keys[i - 1] >> 32;
+    if (!rows_alloc(al, r, nz)) return 0;
+    nz = 0;
     for (size_t i = 0; i < n; i++) {
-      off[(keys[i] >> 32) + 1]++;
+      if (!i || keys[i] >> 32 != keys[i - 1] >> 32)
+        r->row[nz] = (uint32_t)(keys[i] >> 32), r->start[nz++] = (uint32_t)i;
       rb[i] = (uint32_t)keys[i];
     }
-    for (uint32_t a = 1; a <= n_obj; a++) off[a] += off[a - 1];
-  } else {
-    /* cnt[b + 1] counts slot b; off[a] counts a, then is row a's cursor, then (shifted
-     * by one) its start. */
-    memset(cnt, 0, ((size_t)n_obj + 1) * sizeof *cnt);
-    for (size_t i = 0; i < n; i++) {
-      uint64_t k = keys[i];
-      cnt[(uint32_t)k + 1]++;
-      off[k >> 32]++;
-    }
-    uint32_t sa = 0;
-    for (uint32_t a = 1; a <= n_obj; a++) cnt[a] += cnt[a - 1];
-    for (uint32_t a = 0; a < n_obj; a++) {
-      uint32_t c = off[a];
-      off[a] = sa, sa += c;
-    }
-    for (size_t i = 0; i < n; i++) tmp[cnt[(uint32_t)keys[i]]++] = keys[i];
-    for (size_t i = 0; i < n; i++) rb[off[tmp[i] >> 32]++] = (uint32_t)tmp[i];
-    /* off[a] is now row a's end: shift the ends into starts. */
-    memmove(off + 1, off, (size_t)n_obj * sizeof *off);
-    off[0] = 0;
+    r->start[nz] = (uint32_t)n;
+    return 1;
   }
-  r->n = n;
+  /* cb[b + 1] counts slot b, then is the scatter's cursor; ca[a] counts a, then is row
+   * a's cursor. */
+  uint32_t *cb = cnt, *ca = cnt + n_obj + 1;
+  memset(cnt, 0, 2 * ((size_t)n_obj + 1) * sizeof *cnt);
+  for (size_t i = 0; i < n; i++) {
+    uint64_t k = keys[i];
+    cb[(uint32_t)k + 1]++;
+    ca[k >> 32]++;
+  }
+  for (uint32_t a = 1; a <= n_obj; a++) cb[a] += cb[a - 1];
+  size_t nz = 0;
+  for (uint32_t a = 0; a < n_obj; a++) nz += ca[a] != 0;
+  if (!rows_alloc(al, r, nz)) return 0;
+  uint32_t sa = 0;
+  nz = 0;
+  for (uint32_t a = 0; a < n_obj; a++) {
+    uint32_t c = ca[a];
+    if (c) r->row[nz] = a, r->start[nz++] = sa;
+    ca[a] = sa, sa += c;
+  }
+  r->start[nz] = (uint32_t)n;
+  for (size_t i = 0; i < n; i++) tmp[cb[(uint32_t)keys[i]]++] = keys[i];
+  for (size_t i = 0; i < n; i++) rb[ca[tmp[i] >> 32]++] = (uint32_t)tmp[i];
+  return 1;
 }
 
 /* A slot's object is not the one it held at the last update (removed, or a new one). */
@@ -96,27 +115,68 @@ static inline int changed(const qk_world_t *w, uint32_t s) {
   return s >= w->n_obj || w->obj[s].gen != w->ugen[s];
 }
 
+/* A cursor over rows in key order: pair i of row p. Rows with pairs are not empty, so
+ * the row advances by one when i reaches its end. Slots are below 2^32 - 1, so no key
+ * is END. */
+#define END UINT64_MAX
+typedef struct rcur {
+  const qk__prows_t *r;
+  size_t i, p;
+} rcur_t;
+
+static inline uint64_t rc_first(rcur_t *c) {
+  return c->r->n ? (uint64_t)c->r->row[0] << 32 | c->r->b[0] : END;
+}
+
+static inline uint64_t rc_next(rcur_t *c) {
+  const qk__prows_t *r = c->r;
+  if (++c->i == r->n) return END;
+  if (c->i == r->start[c->p + 1]) c->p++;
+  return (uint64_t)r->row[c->p] << 32 | r->b[c->i];
+}
+
 /*
- * Began and ended: row by row, a merge of this frame's rows with the last frame's. A pair
- * whose slot now holds another object (or none) has ended, and a pair with such a slot
- * has begun (dirty: objects were added or removed since the last update). Returns 0 when
- * memory ran short (the lists are then the caller's to free). Rows come in slot order and
- * each row in slot order, so both lists are in key order.
+ * Began and ended: one merge of this frame's keys with the last frame's. A pair whose
+ * slot now holds another object (or none) has ended, and a pair with such a slot has
+ * begun (dirty: objects were added or removed since the last update). Both lists come
+ * out in key order. Returns 0 when memory ran short (the lists are then the caller's to
+ * free).
  */
+static int diff_keys(const qk_world_t *w, const qk__prows_t *o, const qk__prows_t *nw, int dirty,
+                     qk__kvec_t *bv, qk__kvec_t *ev) {
+  const qk_allocator_t *al = &w->alloc;
+  rcur_t cn = {nw, 0, 0}, co = {o, 0, 0};
+  uint64_t x = rc_first(&cn), y = rc_first(&co);
+  while (x != END || y != END) {
+    if (x < y) {
+      if (!kv_add(al, bv, x)) return 0;
+      x = rc_next(&cn);
+    } else if (x > y) {
+      if (!kv_add(al, ev, y)) return 0;
+      y = rc_next(&co);
+    } else {
+      if (dirty && (changed(w, (uint32_t)(x >> 32)) || changed(w, (uint32_t)x)) &&
+          (!kv_add(al, bv, x) || !kv_add(al, ev, x)))
+        return 0;
+      x = rc_next(&cn), y = rc_next(&co);
+    }
+  }
+  return 1;
+}
+
+/* The same merge row by row, for long rows (a dense world): a row's pairs are compared
+ * as 32-bit slots in a tight loop, and a row's key is made once. */
 static int diff_rows(const qk_world_t *w, const qk__prows_t *o, const qk__prows_t *nw, int dirty,
                      qk__kvec_t *bv, qk__kvec_t *ev) {
   const qk_allocator_t *al = &w->alloc;
   const uint32_t *nb = nw->b, *ob = o->b;
-  const uint32_t *noff = nw->off, *ooff = o->off;
-  uint32_t rows = o->n_rows > nw->n_rows ? o->n_rows : nw->n_rows;
-  uint32_t both = o->n_rows < nw->n_rows ? o->n_rows : nw->n_rows;
-  /* Rows are contiguous: each ends where the next starts, so i and j carry over, and
-   * rows empty in both (most of a sparse world's) are skipped by a tight loop. */
-  size_t i = 0, j = 0;
-  for (uint32_t a = 0;; a++) {
-    while (a < both && noff[a + 1] == i && ooff[a + 1] == j) a++;
-    if (a >= rows) break;
-    size_t ie = a < nw->n_rows ? noff[a + 1] : i, je = a < o->n_rows ? ooff[a + 1] : j;
+  size_t p = 0, q = 0; /* the next row with pairs, new and old */
+  while (p < nw->n_nz || q < o->n_nz) {
+    uint32_t an = p < nw->n_nz ? nw->row[p] : UINT32_MAX, ao = q < o->n_nz ? o->row[q] : UINT32_MAX;
+    uint32_t a = an < ao ? an : ao;
+    size_t i = 0, ie = 0, j = 0, je = 0;
+    if (an == a) i = nw->start[p], ie = nw->start[p + 1], p++;
+    if (ao == a) j = o->start[q], je = o->start[q + 1], q++;
     uint64_t ka = (uint64_t)a << 32;
     if (dirty && changed(w, a)) { /* every old pair ended, every new one began */
       for (; i < ie; i++)
@@ -147,6 +207,14 @@ static int diff_rows(const qk_world_t *w, const qk__prows_t *o, const qk__prows_
   return 1;
 }
 
+/* Began and ended, by whichever merge suits the rows' lengths (measured: the key merge
+ * for rows of a pair or two, the row merge from about four). */
+static int diff(const qk_world_t *w, const qk__prows_t *o, const qk__prows_t *nw, int dirty,
+                qk__kvec_t *bv, qk__kvec_t *ev) {
+  if (nw->n + o->n >= 4 * (nw->n_nz + o->n_nz)) return diff_rows(w, o, nw, dirty, bv, ev);
+  return diff_keys(w, o, nw, dirty, bv, ev);
+}
+
 qk_status_t qk_world_update(qk_world_t *w) {
   if (!w) return QK_ERR_INVALID;
   const qk_allocator_t *al = &w->alloc;
@@ -164,19 +232,14 @@ qk_status_t qk_world_update(qk_world_t *w) {
    * counts, the new rows, and the began and ended lists (sized by the last frame's,
    * grown as needed): a failure keeps the last frame's lists. */
   size_t total = found.n, n_obj = w->n_obj;
-  size_t tcap = total ? total : 1, ccap = n_obj + 1 > 257 ? n_obj + 1 : 257;
+  size_t tcap = total ? total : 1, ccap = total * 4 < n_obj ? 257 : 2 * (n_obj + 1);
   qk__prows_t nr = {0};
-  nr.n_rows = (uint32_t)n_obj;
-  nr.cap = tcap;
   uint64_t *tmp = qk__realloc(al, NULL, 0, tcap * sizeof *tmp);
   uint32_t *cnt = tmp ? qk__realloc(al, NULL, 0, ccap * sizeof *cnt) : NULL;
   nr.b = cnt ? qk__realloc(al, NULL, 0, tcap * sizeof *nr.b) : NULL;
-  nr.off = nr.b ? qk__realloc(al, NULL, 0, (n_obj + 1) * sizeof *nr.off) : NULL;
+  if (nr.b) nr.cap = tcap;
   qk__kvec_t bv = {0}, ev = {0};
-  if (nr.off) {
-    make_rows(found.v, tmp, total, cnt, (uint32_t)n_obj, &nr);
-    w->last_found = total;
-  }
+  if (nr.b && make_rows(al, found.v, tmp, total, cnt, (uint32_t)n_obj, &nr)) w->last_found = total;
   qk__free(al, cnt, ccap * sizeof *cnt);
   qk__free(al, tmp, tcap * sizeof *tmp);
   qk__free(al, found.v, found.cap * sizeof *found.v);
@@ -188,14 +251,13 @@ qk_status_t qk_world_update(qk_world_t *w) {
   /* The lists start with room for the last frame's counts and some (frames are alike),
    * and grow if need be. */
   size_t bcap = w->began.n + w->began.n / 4 + 64, ecap = w->ended.n + w->ended.n / 4 + 64;
-  if (nr.off && (bv.v = qk__realloc(al, NULL, 0, bcap * sizeof *bv.v))) bv.cap = bcap;
+  if (nr.row && (bv.v = qk__realloc(al, NULL, 0, bcap * sizeof *bv.v))) bv.cap = bcap;
   if (bv.v && (ev.v = qk__realloc(al, NULL, 0, ecap * sizeof *ev.v))) ev.cap = ecap;
   if (!ev.v || (n_eg && !(eg = qk__realloc(al, NULL, 0, n_eg * sizeof *eg))) ||
-      !diff_rows(w, &w->cur, &nr, dirty, &bv, &ev)) {
+      !diff(w, &w->cur, &nr, dirty, &bv, &ev)) {
     qk__free(al, eg, n_eg * sizeof *eg);
     qk__free(al, bv.v, bv.cap * sizeof *bv.v);
     qk__free(al, ev.v, ev.cap * sizeof *ev.v);
-    if (!nr.b) nr.cap = 0;
     rows_free(al, &nr);
     return QK_ERR_NOMEM;
   }
@@ -267,12 +329,9 @@ qk_status_t qk_world_pairs(const qk_world_t *w, qk_pairs_which_t which, qk_world
   }
   if (which != QK_PAIRS_ALL) return QK_ERR_INVALID;
   const qk__prows_t *r = &w->cur;
-  size_t i = 0;
-  for (uint32_t a = 0; a < r->n_rows; a++) {
-    size_t e = r->off[a + 1]; /* (rows are contiguous: row a starts at i) */
-    if (i == e) continue;
-    qk_handle_t ha = qk__uhandle(w, a);
-    for (; i < e; i++)
+  for (size_t k = 0; k < r->n_nz; k++) {
+    qk_handle_t ha = qk__uhandle(w, r->row[k]);
+    for (size_t i = r->start[k], e = r->start[k + 1]; i < e; i++)
       if (fn(ha, qk__uhandle(w, r->b[i]), ud)) return QK_OK;
   }
   return QK_OK;
@@ -295,10 +354,10 @@ qk_status_t qk_world_pairs_list(const qk_world_t *w, qk_pairs_which_t which, qk_
   const qk__prows_t *r = &w->cur;
   *n_out = r->n;
   size_t m = r->n < cap ? r->n : cap;
-  for (uint32_t a = 0; a < r->n_rows && r->off[a] < m; a++) {
-    size_t i = r->off[a], e = r->off[a + 1] < m ? r->off[a + 1] : m;
-    qk_handle_t ha = qk__uhandle(w, a);
-    for (; i < e; i++) out[i] = (qk_world_pair_t){ha, qk__uhandle(w, r->b[i])};
+  for (size_t k = 0; k < r->n_nz && r->start[k] < m; k++) {
+    qk_handle_t ha = qk__uhandle(w, r->row[k]);
+    for (size_t i = r->start[k], e = r->start[k + 1] < m ? r->start[k + 1] : m; i < e; i++)
+      out[i] = (qk_world_pair_t){ha, qk__uhandle(w, r->b[i])};
   }
   return QK_OK;
 }
