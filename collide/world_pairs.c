@@ -51,8 +51,9 @@ static int rows_alloc(const qk_allocator_t *a, qk__prows_t *r, size_t n_nz) {
 /*
  * The found keys (unsorted, n of them) as rows over n_obj slots, each row ascending;
  * 0 when memory ran short. Many keys (at least a quarter of the slots): two stable
- * counting sorts, by slot b into tmp, then by slot a, which writes only b into its row;
- * both counts come from one read of the keys (cnt: 2 (n_obj + 1) entries). Few keys (a
+ * counting sorts, by slot b into tmp (as 32-bit slots a), then by slot a, which writes
+ * only b into its row; both counts come from one read of the keys (cnt: 2 (n_obj + 1)
+ * entries). Few keys (a
  * sparse world): an LSD radix sort of the keys on the bytes that differ (cnt: 257
  * entries), so the passes cost the keys, not the slots, then the rows from the sorted
  * keys.
@@ -84,9 +85,10 @@ static int make_rows(const qk_allocator_t *al, uint64_t *keys, uint64_t *tmp, si
     r->start[nz] = (uint32_t)n;
     return 1;
   }
-  /* cb[b + 1] counts slot b, then is the scatter's cursor; ca[a] counts a, then is row
-   * a's cursor. */
-  uint32_t *cb = cnt, *ca = cnt + n_obj + 1;
+  /* cb[b + 1] counts slot b, then cb[b] is the scatter's cursor; ca[a] counts a, then
+   * is row a's cursor. The first scatter writes only slot a (4 bytes), at b's place:
+   * b is known from the place in the second. */
+  uint32_t *cb = cnt, *ca = cnt + n_obj + 1, *t32 = (uint32_t *)tmp;
   memset(cnt, 0, 2 * ((size_t)n_obj + 1) * sizeof *cnt);
   for (size_t i = 0; i < n; i++) {
     uint64_t k = keys[i];
@@ -105,8 +107,11 @@ static int make_rows(const qk_allocator_t *al, uint64_t *keys, uint64_t *tmp, si
     ca[a] = sa, sa += c;
   }
   r->start[nz] = (uint32_t)n;
-  for (size_t i = 0; i < n; i++) tmp[cb[(uint32_t)keys[i]]++] = keys[i];
-  for (size_t i = 0; i < n; i++) rb[ca[tmp[i] >> 32]++] = (uint32_t)tmp[i];
+  for (size_t i = 0; i < n; i++) t32[cb[(uint32_t)keys[i]]++] = (uint32_t)(keys[i] >> 32);
+  /* cb[b] is now the end of b's run, where b + 1's starts. */
+  size_t i = 0;
+  for (uint32_t b = 0; b < n_obj; b++)
+    for (size_t e = cb[b]; i < e; i++) rb[ca[t32[i]]++] = b;
   return 1;
 }
 
@@ -234,14 +239,16 @@ qk_status_t qk_world_update(qk_world_t *w) {
   size_t total = found.n, n_obj = w->n_obj;
   size_t tcap = total ? total : 1, ccap = total * 4 < n_obj ? 257 : 2 * (n_obj + 1);
   qk__prows_t nr = {0};
-  uint64_t *tmp = qk__realloc(al, NULL, 0, tcap * sizeof *tmp);
+  /* (the dense sort's scratch holds 32-bit slots, the sparse one's keys) */
+  size_t tbytes = (total * 4 < n_obj ? sizeof(uint64_t) : sizeof(uint32_t)) * tcap;
+  uint64_t *tmp = qk__realloc(al, NULL, 0, tbytes);
   uint32_t *cnt = tmp ? qk__realloc(al, NULL, 0, ccap * sizeof *cnt) : NULL;
   nr.b = cnt ? qk__realloc(al, NULL, 0, tcap * sizeof *nr.b) : NULL;
   if (nr.b) nr.cap = tcap;
   qk__kvec_t bv = {0}, ev = {0};
   if (nr.b && make_rows(al, found.v, tmp, total, cnt, (uint32_t)n_obj, &nr)) w->last_found = total;
   qk__free(al, cnt, ccap * sizeof *cnt);
-  qk__free(al, tmp, tcap * sizeof *tmp);
+  qk__free(al, tmp, tbytes);
   qk__free(al, found.v, found.cap * sizeof *found.v);
   int dirty = w->ident_dirty;
   size_t n_eg = 0;
