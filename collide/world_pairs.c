@@ -120,24 +120,29 @@ static inline int changed(const qk_world_t *w, uint32_t s) {
   return s >= w->n_obj || w->obj[s].gen != w->ugen[s];
 }
 
-/* A cursor over rows in key order: pair i of row p. Rows with pairs are not empty, so
- * the row advances by one when i reaches its end. Slots are below 2^32 - 1, so no key
- * is END. */
+/* A cursor over rows in key order: pair i, in a row that ends at end and whose key
+ * part is ka. Rows with pairs are not empty, so the next row starts where one ends.
+ * Slots are below 2^32 - 1, so no key is END. */
 #define END UINT64_MAX
 typedef struct rcur {
   const qk__prows_t *r;
-  size_t i, p;
+  size_t i, end, p;
+  uint64_t ka;
 } rcur_t;
 
-static inline uint64_t rc_first(rcur_t *c) {
-  return c->r->n ? (uint64_t)c->r->row[0] << 32 | c->r->b[0] : END;
+static inline uint64_t rc_first(rcur_t *c, const qk__prows_t *r) {
+  *c = (rcur_t){r, 0, r->n ? r->start[1] : 0, 0, r->n ? (uint64_t)r->row[0] << 32 : 0};
+  return r->n ? c->ka | r->b[0] : END;
 }
 
 static inline uint64_t rc_next(rcur_t *c) {
-  const qk__prows_t *r = c->r;
-  if (++c->i == r->n) return END;
-  if (c->i == r->start[c->p + 1]) c->p++;
-  return (uint64_t)r->row[c->p] << 32 | r->b[c->i];
+  if (++c->i == c->end) {
+    if (c->i == c->r->n) return END;
+    c->p++;
+    c->end = c->r->start[c->p + 1];
+    c->ka = (uint64_t)c->r->row[c->p] << 32;
+  }
+  return c->ka | c->r->b[c->i];
 }
 
 /*
@@ -150,8 +155,8 @@ static inline uint64_t rc_next(rcur_t *c) {
 static int diff_keys(const qk_world_t *w, const qk__prows_t *o, const qk__prows_t *nw, int dirty,
                      qk__kvec_t *bv, qk__kvec_t *ev) {
   const qk_allocator_t *al = &w->alloc;
-  rcur_t cn = {nw, 0, 0}, co = {o, 0, 0};
-  uint64_t x = rc_first(&cn), y = rc_first(&co);
+  rcur_t cn, co;
+  uint64_t x = rc_first(&cn, nw), y = rc_first(&co, o);
   while (x != END || y != END) {
     if (x < y) {
       if (!kv_add(al, bv, x)) return 0;
