@@ -1,8 +1,8 @@
 /*
  * The world's frame (see collide/world.c for the design): the order brought up to date
  * (collide/world_grid.c), all overlapping pairs found (collide/world_search.c) and
- * sorted into rows (one per slot), and the began / ended sets by merging the rows with
- * the previous frame's.
+ * sorted into rows (one per slot that has pairs), and the began / ended sets by merging
+ * them with the previous frame's.
  */
 #include <stdlib.h>
 #include <string.h>
@@ -53,10 +53,9 @@ static int rows_alloc(const qk_allocator_t *a, qk__prows_t *r, size_t n_nz) {
  * 0 when memory ran short. Many keys (at least a quarter of the slots): two stable
  * counting sorts, by slot b into tmp (as 32-bit slots a), then by slot a, which writes
  * only b into its row; both counts come from one read of the keys (cnt: 2 (n_obj + 1)
- * entries). Few keys (a
- * sparse world): an LSD radix sort of the keys on the bytes that differ (cnt: 257
- * entries), so the passes cost the keys, not the slots, then the rows from the sorted
- * keys.
+ * entries). Few keys (a sparse world): an LSD radix sort of the keys on the bytes that
+ * differ (cnt: 257 entries), so the passes cost the keys, not the slots, then the rows
+ * from the sorted keys.
  */
 static int make_rows(const qk_allocator_t *al, uint64_t *keys, uint64_t *tmp, size_t n,
                      uint32_t *cnt, uint32_t n_obj, qk__prows_t *r) {
@@ -238,6 +237,10 @@ qk_status_t qk_world_update(qk_world_t *w) {
   qk_status_t st = qk__world_search(w, &pk, &found);
   qk__world_pack_free(w, &pk);
   if (st != QK_OK) return st;
+  if (found.n > UINT32_MAX) { /* (rows and counts hold 32-bit positions) */
+    qk__free(al, found.v, found.cap * sizeof *found.v);
+    return QK_ERR_LIMIT;
+  }
   /* Everything else the update needs, before anything changes: the sort's buffer and
    * counts, the new rows, and the began and ended lists (sized by the last frame's,
    * grown as needed): a failure keeps the last frame's lists. */
