@@ -81,6 +81,7 @@ public:
         &out);
   }
   size_t bytes() const override { return qk_world_bytes(w); }
+  size_t pair_bytes() const override { return qk_world_pair_bytes(w); }
 };
 
 // ---- uniform grid ----------------------------------------------------------------------

@@ -140,6 +140,9 @@ public:
   // The boxes' new positions; every overlapping pair of the frame into out.
   virtual void frame(const std::vector<Box> &boxes, PairSum &out) = 0;
   virtual size_t bytes() const = 0; // 0 when the library does not say
+  // The part of bytes() that is pair state kept between frames (the last frame's pairs,
+  // began / ended), not the index: 0 when there is none or the library does not say.
+  virtual size_t pair_bytes() const { return 0; }
 };
 std::vector<std::unique_ptr<WorldImpl>> make_world_impls();
 

@@ -680,6 +680,14 @@ void run_world(const std::string &kind, size_t n) {
     r.per_second = n / r.seconds;
     size_t b = impls[i]->bytes();
     if (b) r.bytes_per_point = (double)b / n;
+    // The index and the pair state apart (the pairs of the last frame timed, whose
+    // lists bytes() holds), so the index compares like for like with the trees.
+    if (size_t pb = impls[i]->pair_bytes()) {
+      double last = (double)got[0][std::min((size_t)timed[i], got[0].size()) - 1].pairs;
+      r.extra["index_bytes_per_object"] = (double)(b - pb) / n;
+      r.extra["pair_bytes_per_pair"] = last ? pb / last : 0;
+      r.extra["pairs_last_frame"] = last;
+    }
     r.extra["pairs_per_frame"] = (double)total / frames;
     r.extra["frames"] = frames;
     r.extra["frames_checked"] = (double)got[i].size();
@@ -1423,6 +1431,12 @@ void print_table() {
              r.impl == "box2d"    ? " (b2TreeNode size x 2n-1 nodes)"
              : r.impl == "bullet" ? " (btDbvtNode size x 2n-1 nodes)"
                                   : "");
+  for (auto &r : records)
+    if (r.op == "world" && r.matches == 1 && r.extra.count("index_bytes_per_object"))
+      printf("memory: world %-9s n=%-8zu %-9s %7.1f bytes/object index + %.1f bytes/pair pair "
+             "state (%.1f pairs/object)\n",
+             r.dataset.c_str(), r.n, r.impl.c_str(), r.extra.at("index_bytes_per_object"),
+             r.extra.at("pair_bytes_per_pair"), r.extra.at("pairs_last_frame") / r.n);
   for (auto &r : records)
     if (r.op == "mesh" && r.matches == 1)
       printf("mesh %-15s U=%zu %-8s %8.0f triangles, min angle %.1f deg\n", r.dataset.c_str(), r.n,

@@ -27,10 +27,11 @@
  * (cell indices are kept below 2^30 so they fit 32 bits: a unit object at 1e9 is filed
  * at level 0, one at 1e20 at a coarser one).
  *
- * Memory (between updates): 64 bytes an object slot, 4 an entry of the order, 16 a cell,
- * and the pair lists (8 bytes a pair, current, began or ended). The
- * update's scratch (float boxes, cell boxes, the search's pairs and the sort's counts)
- * is allocated per update and freed before it returns.
+ * Memory (between updates): 68 bytes an object slot (the object and its generation at
+ * the last update), 4 an entry of the order, 16 a cell; and the pair state: the current
+ * pairs by rows (4 bytes a pair and 8 a slot with pairs) and the began and ended lists
+ * (8 bytes a pair). The update's scratch (float boxes, cell boxes, the search's pairs and the
+ * sort's buffers and counts) is allocated per update and freed before it returns.
  *
  * Handles: slot in the low 32 bits, generation in the high 32. A slot's generation is
  * odd while it is live and becomes even at removal; a freed slot is reused (last freed,
@@ -87,7 +88,9 @@ void qk_world_free(qk_world_t *w) {
   qk__free(&a, w->obj, (size_t)w->cap_obj * sizeof *w->obj);
   qk__free(&a, w->order, (size_t)w->cap_order * sizeof *w->order);
   qk__free(&a, w->cells, (size_t)w->cap_cells * sizeof *w->cells);
-  qk__free(&a, w->cur.v, w->cur.cap * sizeof *w->cur.v);
+  qk__free(&a, w->ugen, (size_t)w->cap_ugen * sizeof *w->ugen);
+  qk__free(&a, w->cur.b, w->cur.cap * sizeof *w->cur.b);
+  qk__free(&a, w->cur.row, w->cur.row ? 2 * (w->cur.n_nz + 1) * sizeof *w->cur.row : 0);
   qk__free(&a, w->began.v, w->began.cap * sizeof *w->began.v);
   qk__free(&a, w->ended.v, w->ended.cap * sizeof *w->ended.v);
   qk__free(&a, w->egen, w->n_egen * sizeof *w->egen);
@@ -96,11 +99,18 @@ void qk_world_free(qk_world_t *w) {
 
 size_t qk_world_size(const qk_world_t *w) { return w ? w->n_live : 0; }
 
+size_t qk_world_pair_bytes(const qk_world_t *w) {
+  if (!w) return 0;
+  return w->cur.cap * sizeof *w->cur.b +
+         (w->cur.row ? 2 * (w->cur.n_nz + 1) * sizeof *w->cur.row : 0) +
+         (w->began.cap + w->ended.cap + w->n_egen) * sizeof(uint64_t);
+}
+
 size_t qk_world_bytes(const qk_world_t *w) {
   if (!w) return 0;
-  return sizeof *w + (size_t)w->cap_obj * sizeof *w->obj + (size_t)w->cap_order * sizeof *w->order +
-         (size_t)w->cap_cells * sizeof *w->cells + (w->cur.cap + w->began.cap) * sizeof(uint64_t) +
-         w->ended.cap * sizeof(qk_world_pair_t);
+  return sizeof *w + (size_t)w->cap_obj * sizeof *w->obj + (size_t)w->cap_ugen * sizeof *w->ugen +
+         (size_t)w->cap_order * sizeof *w->order + (size_t)w->cap_cells * sizeof *w->cells +
+         qk_world_pair_bytes(w);
 }
 
 /* ---- filing ---------------------------------------------------------------------- */
@@ -190,6 +200,13 @@ qk_status_t qk_world_add(qk_world_t *w, const qk_shape_t *shape, uint64_t tag, q
   if (w->free_head == QK_NONE && w->n_obj == w->cap_obj) {
     if (w->cap_obj >= UINT32_MAX / 2) return QK_ERR_LIMIT;
     uint32_t cap = w->cap_obj ? w->cap_obj + w->cap_obj / 2 : 16; /* 1.5x: less slack */
+    if (w->cap_ugen < cap) { /* (grown first: a failure after it leaves only room) */
+      uint32_t *nu = qk__realloc(&w->alloc, w->ugen, (size_t)w->cap_ugen * sizeof *nu,
+                                 (size_t)cap * sizeof *nu);
+      if (!nu) return QK_ERR_NOMEM;
+      w->ugen = nu;
+      w->cap_ugen = cap;
+    }
     qk__wobj_t *no =
         qk__realloc(&w->alloc, w->obj, (size_t)w->cap_obj * sizeof *no, (size_t)cap * sizeof *no);
     if (!no) return QK_ERR_NOMEM;
@@ -205,6 +222,7 @@ qk_status_t qk_world_add(qk_world_t *w, const qk_shape_t *shape, uint64_t tag, q
     i = w->n_obj++;
     memset(&w->obj[i], 0, sizeof w->obj[i]);
     w->obj[i].gen = 1;
+    w->ugen[i] = 0;
   }
   qk__wobj_t *o = &w->obj[i];
   o->tag = tag;

@@ -200,6 +200,11 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
         qk__realloc(a, w->obj, (size_t)w->cap_obj * sizeof *no, (size_t)cap * sizeof *no);
     if (no) w->obj = no, w->cap_obj = cap;
   }
+  if (w->cap_ugen > w->cap_obj) {
+    uint32_t *nu =
+        qk__realloc(a, w->ugen, (size_t)w->cap_ugen * sizeof *nu, (size_t)w->cap_obj * sizeof *nu);
+    if (nu) w->ugen = nu, w->cap_ugen = w->cap_obj;
+  }
   if (ncap > (size_t)nc + 1 + 16) {
     qk__wcell_t *c = qk__realloc(a, w->cells, ncap * sizeof *c, ((size_t)nc + 1) * sizeof *c);
     if (c) w->cells = c, w->cap_cells = nc + 1;

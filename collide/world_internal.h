@@ -23,13 +23,14 @@
  * An object: 64 bytes. The shape is stored once (x, y, a, b as qk_shape_t, the kind in
  * flags); the box is derived from it. (cx, cy, level) is the cell it is filed in, as of
  * the last update: the object lies in that cell's loose square [cx 2^L, (cx + 2) 2^L)
- * per axis, unless it is DIRTY.
+ * per axis, unless it is DIRTY. The generation at the last update (the handles of the
+ * stored pairs) is kept apart, in the world's ugen array: walking the pairs reads it
+ * for every pair, and 4 bytes a slot stay in cache where 64 do not.
  */
 typedef struct qk__wobj {
   double x, y, a, b;
   uint64_t tag;
-  uint32_t gen;  /* generation of the slot (odd: live) */
-  uint32_t ugen; /* generation at the last update: the handles of the stored pairs */
+  uint32_t gen; /* generation of the slot (odd: live) */
   union {
     int32_t cx;
     uint32_t free_next; /* while the slot is free: the next free slot */
@@ -48,18 +49,33 @@ typedef struct qk__wcell {
 } qk__wcell_t;
 
 /* Pairs as 64-bit keys: slot a in the high half, slot b (> a) in the low half, so the
- * keys' order is the (slot a, slot b) order. */
+ * keys' order is the (slot a, slot b) order. The search finds them so, and the began
+ * and ended lists keep them so; the current pairs are stored by rows (qk__prows_t). */
 typedef struct qk__kvec {
   uint64_t *v;
   size_t n, cap;
 } qk__kvec_t;
+
+/* The current pairs by rows, 4 bytes a pair and 8 a slot that has pairs: the k-th row
+ * with pairs is slot row[k] (ascending), and holds the slots b > row[k] of its pairs,
+ * ascending, at b[start[k] .. start[k + 1]). Rows without pairs take no room, so a
+ * sparse world pays for its pairs only. */
+typedef struct qk__prows {
+  uint32_t *b;
+  size_t n, cap;   /* pairs, and the room of b */
+  uint32_t *row;   /* n_nz + 1 entries: the rows' slots, then (start) their starts */
+  uint32_t *start; /* n_nz + 1 entries, start[n_nz] = n (in row's allocation) */
+  size_t n_nz;     /* rows with pairs */
+} qk__prows_t;
 
 struct qk_world {
   qk_allocator_t alloc;
   qk_world_options_t opt;
   qk__wobj_t *obj;
   uint32_t n_obj, cap_obj; /* slots used (high-water mark) and allocated */
-  uint32_t free_head;      /* first free slot, or QK_NONE */
+  uint32_t *ugen;          /* per slot: its generation at the last update */
+  uint32_t cap_ugen;
+  uint32_t free_head; /* first free slot, or QK_NONE */
   size_t n_live;
   uint32_t dirty_head; /* objects added or re-filed since the last update */
   uint32_t n_dirty;    /* entries of the dirty list (removed ones included) */
@@ -70,10 +86,11 @@ struct qk_world {
   qk__wcell_t *cells;
   uint32_t n_cells, cap_cells;
   uint32_t lv_first[QK__NLEV], lv_n[QK__NLEV]; /* each level's run of cells */
-  qk__kvec_t cur, began; /* this frame's pairs and those that began (handles: ugen) */
-  qk__kvec_t ended;      /* pairs that ended (handles: ugen, or egen for changed slots) */
-  uint64_t *egen;        /* slot << 32 | generation before the last update, of the slots
-                            that changed at it (sorted) */
+  qk__prows_t cur;                             /* this frame's pairs (handles: ugen) */
+  qk__kvec_t began;                            /* pairs that began (handles: ugen) */
+  qk__kvec_t ended; /* pairs that ended (handles: ugen, or egen for changed slots) */
+  uint64_t *egen;   /* slot << 32 | generation before the last update, of the slots
+                       that changed at it (sorted) */
   size_t n_egen;
   size_t last_found; /* pairs of the last search (sizes the next one's buffer) */
   int ident_dirty;   /* an object was added or removed since the last update */
@@ -172,11 +189,14 @@ static inline qk_handle_t qk__handle(const qk_world_t *w, uint32_t slot) {
   return ((uint64_t)w->obj[slot].gen << 32) | slot;
 }
 
+/* The handle of slot s as of the last update (the handles of the stored pairs). */
+static inline qk_handle_t qk__uhandle(const qk_world_t *w, uint32_t s) {
+  return ((uint64_t)w->ugen[s] << 32) | s;
+}
+
 /* The handles of a stored pair key (generations as of the last update). */
 static inline qk_world_pair_t qk__key_pair(const qk_world_t *w, uint64_t k) {
-  uint32_t a = (uint32_t)(k >> 32), b = (uint32_t)k;
-  return (qk_world_pair_t){((uint64_t)w->obj[a].ugen << 32) | a,
-                           ((uint64_t)w->obj[b].ugen << 32) | b};
+  return (qk_world_pair_t){qk__uhandle(w, (uint32_t)(k >> 32)), qk__uhandle(w, (uint32_t)k)};
 }
 
 #endif /* QUADKIT_WORLD_INTERNAL_H */

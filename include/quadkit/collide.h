@@ -279,11 +279,16 @@ size_t qk_world_size(const qk_world_t *w);
  * freed before it returns). */
 size_t qk_world_bytes(const qk_world_t *w);
 
+/** The part of qk_world_bytes() that holds the pair state: the current pairs (4 bytes a
+ * pair and 4 a slot) and the began and ended lists (8 bytes a pair); the rest is the
+ * index (objects, order, cells). */
+size_t qk_world_pair_bytes(const qk_world_t *w);
+
 /**
  * End a frame: find every overlapping pair (exactly; touching counts) and the pairs that
  * began and ended since the last update. Uses the threads option.
  * \return QK_OK or QK_ERR_NOMEM, in which case the pairs of the previous update are kept
- *         and the call may be retried.
+ *         and the call may be retried (QK_ERR_LIMIT, the same, past 2^32 - 1 pairs).
  */
 qk_status_t qk_world_update(qk_world_t *w);
 
