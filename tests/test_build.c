@@ -11,45 +11,6 @@
 
 #include "qk_test.h"
 
-/* A hash of the tree's shape: every node's depth, leaf flag and count in pre-order, and
- * every leaf's ids (sorted: inserts and the bulk build may order a leaf's points apart). */
-typedef struct shape {
-  uint64_t hash;
-  size_t nodes;
-} shape_t;
-
-static int cmp_id(const void *a, const void *b) {
-  qk_id_t x = *(const qk_id_t *)a, y = *(const qk_id_t *)b;
-  return (x > y) - (x < y);
-}
-
-static qk_visit_t shape_visit(const qk_tree_t *t, qk_node_t v, void *ud) {
-  shape_t *s = ud;
-  qk_node_info_t info;
-  assert_int_equal(qk_tree_node_info(t, v, &info), QK_OK);
-  uint64_t h = s->hash * 1000003u ^ (info.depth * 31u + (unsigned)info.is_leaf * 7u + info.count);
-  if (info.is_leaf) {
-    const qk_id_t *ids;
-    size_t n;
-    assert_int_equal(qk_tree_leaf_points(t, v, NULL, NULL, &ids, &n), QK_OK);
-    qk_id_t *c = malloc((n + 1) * sizeof *c);
-    assert_non_null(c);
-    memcpy(c, ids, n * sizeof *c);
-    qsort(c, n, sizeof *c, cmp_id);
-    for (size_t i = 0; i < n; i++) h = h * 1000003u ^ c[i];
-    free(c);
-  }
-  s->hash = h;
-  s->nodes++;
-  return QK_VISIT_CONTINUE;
-}
-
-static shape_t shape_of(const qk_tree_t *t) {
-  shape_t s = {1469598103934665603ull, 0};
-  qk_tree_visit(t, qk_tree_root(t), shape_visit, &s);
-  return s;
-}
-
 /* A coordinate on grid line k of 2^8 over [x0, x0 + side], or one ulp either side of it,
  * or anywhere (a quarter of them). */
 static double near_line(qkt_rng_t *r, double x0, double side) {
@@ -92,14 +53,14 @@ static void test_build_deep_grid_lines(void **state) {
     qk_tree_t *ins = NULL;
     assert_int_equal(qk_tree_build(NULL, 0, &o, &ins), QK_OK);
     for (size_t i = 0; i < N; i++) assert_int_equal(qk_tree_insert(ins, p[i], NULL), QK_OK);
-    shape_t want = shape_of(ins);
+    qkt_shape_t want = qkt_tree_shape(ins);
     qk_tree_free(ins);
     for (uint32_t threads = 1; threads <= 2; threads++) {
       o.threads = threads;
       qk_tree_t *t = NULL;
       assert_int_equal(qk_tree_build(p, N, &o, &t), QK_OK);
       QKT_CHECK_TREE(t);
-      shape_t got = shape_of(t);
+      qkt_shape_t got = qkt_tree_shape(t);
       if (got.nodes != want.nodes || got.hash != want.hash)
         print_error("seed %llu, root %d, %u threads: %zu nodes vs %zu by inserts\n",
                     (unsigned long long)seed, k, threads, got.nodes, want.nodes);

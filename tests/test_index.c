@@ -88,44 +88,6 @@ static void assert_partition(const qk_tree_t *t, size_t n_ids, int exact) {
   free(seen);
 }
 
-/* A canonical description of the tree's shape: pre-order (depth, leaf?, count) and the
- * sorted ids of each leaf. Two trees over the same set of points must produce the same. */
-typedef struct shape {
-  uint64_t hash;
-  size_t nodes;
-} shape_t;
-
-static int cmp_id(const void *a, const void *b) {
-  qk_id_t x = *(const qk_id_t *)a, y = *(const qk_id_t *)b;
-  return (x > y) - (x < y);
-}
-
-static qk_visit_t shape_visit(const qk_tree_t *t, qk_node_t v, void *ud) {
-  shape_t *s = ud;
-  qk_node_info_t info;
-  qk_tree_node_info(t, v, &info);
-  uint64_t h = s->hash * 1000003u ^ (info.depth * 31u + (unsigned)info.is_leaf * 7u + info.count);
-  if (info.is_leaf) {
-    const qk_id_t *ids;
-    size_t n;
-    qk_tree_leaf_points(t, v, NULL, NULL, &ids, &n);
-    qk_id_t *c = malloc((n + 1) * sizeof *c);
-    memcpy(c, ids, n * sizeof *c);
-    qsort(c, n, sizeof *c, cmp_id);
-    for (size_t i = 0; i < n; i++) h = h * 1000003u ^ c[i];
-    free(c);
-  }
-  s->hash = h;
-  s->nodes++;
-  return QK_VISIT_CONTINUE;
-}
-
-static shape_t shape_of(const qk_tree_t *t) {
-  shape_t s = {1469598103934665603ull, 0};
-  qk_tree_visit(t, qk_tree_root(t), shape_visit, &s);
-  return s;
-}
-
 static void test_index_build_invariants(void **state) {
   (void)state;
   qkt_rng_t r;
@@ -174,7 +136,7 @@ static void assert_bulk_equals_inserts(const qk_point_t *p, size_t n, qk_tree_op
     assert_int_equal(id, i);
   }
   QKT_CHECK_TREE(b);
-  shape_t sa = shape_of(a), sb = shape_of(b);
+  qkt_shape_t sa = qkt_tree_shape(a), sb = qkt_tree_shape(b);
   assert_int_equal(sa.nodes, sb.nodes);
   assert_true(sa.hash == sb.hash);
   qk_tree_free(a);

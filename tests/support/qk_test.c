@@ -60,3 +60,35 @@ uint64_t qkt_seed(uint64_t def) {
   print_message("seed %llu (set QK_SEED to change)\n", (unsigned long long)seed);
   return seed;
 }
+
+static int cmp_id(const void *a, const void *b) {
+  qk_id_t x = *(const qk_id_t *)a, y = *(const qk_id_t *)b;
+  return (x > y) - (x < y);
+}
+
+static qk_visit_t shape_visit(const qk_tree_t *t, qk_node_t v, void *ud) {
+  qkt_shape_t *s = ud;
+  qk_node_info_t info;
+  assert_int_equal(qk_tree_node_info(t, v, &info), QK_OK);
+  uint64_t h = s->hash * 1000003u ^ (info.depth * 31u + (unsigned)info.is_leaf * 7u + info.count);
+  if (info.is_leaf) {
+    const qk_id_t *ids;
+    size_t n;
+    assert_int_equal(qk_tree_leaf_points(t, v, NULL, NULL, &ids, &n), QK_OK);
+    qk_id_t *c = malloc((n + 1) * sizeof *c);
+    assert_non_null(c);
+    memcpy(c, ids, n * sizeof *c);
+    qsort(c, n, sizeof *c, cmp_id);
+    for (size_t i = 0; i < n; i++) h = h * 1000003u ^ c[i];
+    free(c);
+  }
+  s->hash = h;
+  s->nodes++;
+  return QK_VISIT_CONTINUE;
+}
+
+qkt_shape_t qkt_tree_shape(const qk_tree_t *t) {
+  qkt_shape_t s = {1469598103934665603ull, 0};
+  qk_tree_visit(t, qk_tree_root(t), shape_visit, &s);
+  return s;
+}

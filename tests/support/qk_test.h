@@ -33,6 +33,15 @@ void qkt_points(qkt_rng_t *r, qkt_dist_t d, qk_point_t *out, size_t n);
 /* The seed for a test: QK_SEED from the environment, else `def`. Printed by the test. */
 uint64_t qkt_seed(uint64_t def);
 
+/* A canonical description of a tree's shape: every node's depth, leaf flag and count in
+ * pre-order, and every leaf's ids sorted (inserts and the bulk build may order a leaf's
+ * points apart), hashed. Two trees over the same points with the same rule agree. */
+typedef struct qkt_shape {
+  uint64_t hash;
+  size_t nodes;
+} qkt_shape_t;
+qkt_shape_t qkt_tree_shape(const qk_tree_t *t);
+
 /* The failing allocator (qkt_alloc_t, qkt_alloc_make, qkt_alloc_arm), shared with the
  * fuzz targets; a wrong osize from the library fails the test. */
 #define QKT_ALLOC_FAIL(...) fail_msg(__VA_ARGS__)
