@@ -62,8 +62,9 @@ static double now(void) {
   return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
 
-/* The cells' lower sides at depth G along one axis, as the descent computes them. */
-static void grid_sides(double r0, double side, unsigned G, double *out) {
+/* The cells' lower sides at depth G along one axis, as the descent computes them (a
+ * cell's upper child starts at its centre s + h / 2): out[0 .. 2^G - 1]. */
+void qk__region_grid_sides(double r0, double side, unsigned G, double *out) {
   size_t g = (size_t)1 << G;
   for (size_t i = 0; i < g; i++) {
     double s = r0, h = side;
@@ -73,7 +74,6 @@ static void grid_sides(double r0, double side, unsigned G, double *out) {
     }
     out[i] = s;
   }
-  out[g] = INFINITY;
 }
 
 /* The grid shortcut (see region_internal.h): G grows while 4^G stays below twice the
@@ -93,8 +93,9 @@ static qk_status_t build_grid(qk_region_t *r, unsigned depth) {
     qk__free(a, gy, (g + 1) * sizeof *gy);
     return QK_ERR_NOMEM;
   }
-  grid_sides(r->rx, r->rside, G, gx);
-  grid_sides(r->ry, r->rside, G, gy);
+  qk__region_grid_sides(r->rx, r->rside, G, gx);
+  qk__region_grid_sides(r->ry, r->rside, G, gy);
+  gx[g] = gy[g] = INFINITY;
   for (size_t j = 0; j < g; j++)
     for (size_t i = 0; i < g; i++) {
       uint32_t k = r->kid[0];

@@ -482,14 +482,7 @@ static qk_status_t top_cell(top_t *t, qk_node_t v, unsigned l, size_t i, size_t 
  * cell without a centre strictly inside (absurd extents: then k = 0). */
 static bool grid_lines(double r0, double r1, double side, unsigned k, double hk, double *out) {
   size_t g = (size_t)1 << k;
-  for (size_t i = 0; i < g; i++) {
-    double s = r0, h = side;
-    for (unsigned l = 0; l < k; l++) {
-      h *= 0.5;
-      if (i >> (k - 1 - l) & 1) s = s + h;
-    }
-    out[i] = s;
-  }
+  qk__region_grid_sides(r0, side, k, out);
   out[g] = r1;
   for (size_t i = 0; i < g; i++)
     if (!(out[i] < out[i] + hk && out[i] + hk < out[i + 1])) return false;

@@ -252,6 +252,10 @@ typedef struct qk__bctx {
   size_t splits_left; /* a budget on splits: see qk__build_node */
 } qk__bctx_t;
 
+/* The lower sides of the 2^G cells at depth G along one axis of the root [r0, r0 + side],
+ * halved the way the descent halves them (build.c). */
+void qk__region_grid_sides(double r0, double side, unsigned G, double *out);
+
 /*
  * Which children of a cell keep a piece (bit q for child q: NE 0, NW 1, SW 2, SE 3). The
  * cell is [x0, x1] x [y0, y1] with centre (cx, cy); l.. are the piece's box. A child keeps
