@@ -291,19 +291,9 @@ static qk_status_t holes_and_regions(qk__gm_t *g) {
   return QK_OK;
 }
 
-/* Directions of the segments at a vertex, for the smallest input angle. */
-typedef struct vdir {
-  uint32_t v;
-  double a;
-} vdir_t;
-
-static int vdir_cmp(const void *x, const void *y) {
-  const vdir_t *p = x, *q = y;
-  if (p->v != q->v) return p->v < q->v ? -1 : 1;
-  return (p->a > q->a) - (p->a < q->a);
-}
-
-/* The smallest angle between two segments at a vertex, in degrees (180 when none). */
+/* The smallest angle between two segments at a vertex, in degrees (180 when none). The
+ * segments' directions are bucketed by vertex (a counting pass, no comparison sort: most
+ * vertices have two) and each vertex's few sorted by insertion once all are in. */
 static qk_status_t input_angles(qk__gm_t *g) {
   const qk_poly_t *P = g->P;
   g->smallest_input_angle = 180;
@@ -311,27 +301,43 @@ static qk_status_t input_angles(qk__gm_t *g) {
   if (!g->vsmall) return QK_ERR_NOMEM;
   memset(g->vsmall, 0, P->nv + 1);
   if (P->ns < 2) return QK_OK;
-  vdir_t *d = qk__realloc(g->a, NULL, 0, 2 * P->ns * sizeof *d);
-  if (!d) return QK_ERR_NOMEM;
+  uint32_t *start = qk__realloc(g->a, NULL, 0, (P->nv + 2) * sizeof *start);
+  double *d = qk__realloc(g->a, NULL, 0, 2 * P->ns * sizeof *d);
+  if (!start || !d) {
+    qk__free(g->a, start, (P->nv + 2) * sizeof *start);
+    qk__free(g->a, d, 2 * P->ns * sizeof *d);
+    return QK_ERR_NOMEM;
+  }
+  memset(start, 0, (P->nv + 2) * sizeof *start);
+  for (size_t j = 0; j < 2 * P->ns; j++) start[P->seg[j] + 2]++;
+  for (size_t v = 0; v < P->nv; v++) start[v + 2] += start[v + 1];
+  /* start[v + 1] is now where vertex v's directions go; filling moves it to their end. */
   for (size_t s = 0; s < P->ns; s++)
     for (int j = 0; j < 2; j++) {
       uint32_t u = P->seg[2 * s + j], w = P->seg[2 * s + 1 - j];
-      d[2 * s + j] = (vdir_t){u, atan2(P->vy[w] - P->vy[u], P->vx[w] - P->vx[u])};
+      d[start[u + 1]++] = atan2(P->vy[w] - P->vy[u], P->vx[w] - P->vx[u]);
     }
-  qsort(d, 2 * P->ns, sizeof *d, vdir_cmp);
   const double pi = 3.14159265358979323846;
-  for (size_t i = 0, j; i < 2 * P->ns; i = j) {
+  for (size_t v = 0; v < P->nv; v++) {
+    size_t i = start[v], e = start[v + 1];
+    if (i == e) continue;
+    for (size_t j = i + 1; j < e; j++) {
+      double a = d[j];
+      size_t k = j;
+      for (; k > i && d[k - 1] > a; k--) d[k] = d[k - 1];
+      d[k] = a;
+    }
     double amin = 360;
-    for (j = i + 1; j < 2 * P->ns && d[j].v == d[i].v; j++)
-      amin = fmin(amin, (d[j].a - d[j - 1].a) * 180 / pi);
-    if (j - i >= 2) amin = fmin(amin, (d[i].a + 2 * pi - d[j - 1].a) * 180 / pi);
+    for (size_t j = i + 1; j < e; j++) amin = fmin(amin, (d[j] - d[j - 1]) * 180 / pi);
+    if (e - i >= 2) amin = fmin(amin, (d[i] + 2 * pi - d[e - 1]) * 180 / pi);
     g->smallest_input_angle = fmin(g->smallest_input_angle, amin);
     /* Concentric shells at the apexes of small angles only: elsewhere every split is an
      * exact midpoint, as in the proof for angles of 60 degrees and more. The estimate
      * errs by far less than the margin the proof has (a vertex at 59.999 degrees gets
      * shells, harmlessly). */
-    g->vsmall[d[i].v] = amin < 60.001;
+    g->vsmall[v] = amin < 60.001;
   }
+  qk__free(g->a, start, (P->nv + 2) * sizeof *start);
   qk__free(g->a, d, 2 * P->ns * sizeof *d);
   return QK_OK;
 }

@@ -78,33 +78,36 @@ static int separate(const qk__gm_t *g, uint32_t f, uint32_t h, const double lo[2
   return 1;
 }
 
-/* Whether the closed segment ab meets the closed box, exactly: qk__seg_meets_box with the
- * orientation filter inlined (the subdivision's hot test), the exact predicate only when
- * the estimate's error bound (as in qk__orient2d) leaves a corner's side open. */
-static int seg_box(const double a[2], const double b[2], const double lo[2], const double hi[2]) {
-  for (int i = 0; i < 2; i++) /* (not fmin/fmax: library calls in this hot loop) */
-    if ((a[i] > b[i] ? a[i] : b[i]) < lo[i] || (a[i] < b[i] ? a[i] : b[i]) > hi[i]) return 0;
-  const double c[4][2] = {{lo[0], lo[1]}, {hi[0], lo[1]}, {hi[0], hi[1]}, {lo[0], hi[1]}};
+/* Whether the closed segment ab meets the closed box, exactly: the bounding boxes overlap
+ * and the segment's line does not leave every box corner strictly on one side. The
+ * orientation det(c) = dx (c_y - a_y) - dy (c_x - a_x) is linear in the corner c, so its
+ * largest and smallest values over the box are at the two corners the exact signs of dx
+ * and dy pick (a rounded difference has the exact sign): two tests, not four. Each is the
+ * floating-point estimate with the error bound of qk__orient2d, the exact predicate only
+ * when the bound leaves its sign open. f holds the feature as {ax, ay, bx, by}. */
+static int seg_box(const double *f, const double lo[2], const double hi[2]) {
+  const double a[2] = {f[0], f[1]}, b[2] = {f[2], f[3]};
   double dx = b[0] - a[0], dy = b[1] - a[1];
-  int pos = 0, neg = 0;
-  for (int k = 0; k < 4; k++) {
+  /* The corner maximising det: largest y when dx > 0, smallest x when dy > 0. */
+  const double cmax[2] = {dy > 0 ? lo[0] : hi[0], dx > 0 ? hi[1] : lo[1]};
+  const double cmin[2] = {dy > 0 ? hi[0] : lo[0], dx > 0 ? lo[1] : hi[1]};
+  const double *c[2] = {cmax, cmin};
+  int o[2];
+  for (int k = 0; k < 2; k++) {
     double l = dx * (c[k][1] - a[1]), r = dy * (c[k][0] - a[0]), det = l - r;
     double bound = (fabs(l) + fabs(r)) * 0x1p-50;
-    int o = det > bound ? 1 : -det > bound ? -1 : qk__orient2d(a, b, c[k]);
-    pos += o > 0, neg += o < 0;
+    o[k] = det > bound ? 1 : -det > bound ? -1 : qk__orient2d(a, b, c[k]);
   }
-  return pos < 4 && neg < 4;
+  return o[0] >= 0 && o[1] <= 0;
 }
 
+/* Does feature f meet the closed box? Its bounding box first, then a segment's line
+ * (g->fbox: per feature {x0, y0, x1, y1} its bounding box, then {ax, ay, bx, by} its ends,
+ * one cache line). */
 static int meets(const qk__gm_t *g, uint32_t f, const double lo[2], const double hi[2]) {
-  const qk_poly_t *P = g->P;
-  if (f < P->nv) {
-    double x = P->vx[f], y = P->vy[f];
-    return x >= lo[0] && x <= hi[0] && y >= lo[1] && y <= hi[1];
-  }
-  uint32_t s = f - (uint32_t)P->nv, u = P->seg[2 * s], w = P->seg[2 * s + 1];
-  const double a[2] = {P->vx[u], P->vy[u]}, b[2] = {P->vx[w], P->vy[w]};
-  return seg_box(a, b, lo, hi);
+  const double *q = &g->fbox[8 * (size_t)f];
+  if (q[2] < lo[0] || q[0] > hi[0] || q[3] < lo[1] || q[1] > hi[1]) return 0;
+  return f < g->P->nv || seg_box(q + 4, lo, hi);
 }
 
 static qk_status_t mark_free(qk__gm_t *g, uint32_t node) {
@@ -281,6 +284,17 @@ static size_t size_cells(const qk__gm_t *g) {
   return n < 0x1p40 ? (size_t)n : (size_t)1 << 40; /* check_size refused more than 2^26 */
 }
 
+/* The trailing zero bits of k (62 for k == 0). */
+static int ctz62(uint64_t k) {
+#if defined(__GNUC__) || defined(__clang__)
+  return k ? __builtin_ctzll(k) < 62 ? __builtin_ctzll(k) : 62 : 62;
+#else
+  int tz = 0;
+  while (tz < 62 && !((k >> tz) & 1)) tz++;
+  return tz;
+#endif
+}
+
 /* Choose an exact split parameter strictly inside (lo, hi) of segment s: concentric shells
  * next to an input vertex, the midpoint otherwise (general_refine.c). */
 int qk__gm_split_param(const qk__gm_t *g, uint32_t s, uint64_t lo, uint64_t hi, uint64_t *k);
@@ -300,8 +314,7 @@ static qk_status_t presplit(qk__gm_t *g, uint32_t s, const double *A, const doub
   if (!(len * ((double)(hi - lo) * 0x1p-62) > want)) return QK_OK;
   uint64_t k;
   if (!qk__gm_split_param(g, s, lo, hi, &k)) return QK_OK;
-  int tz = 0;
-  while (tz < 62 && !((k >> tz) & 1)) tz++;
+  int tz = ctz62(k);
   double p[2];
   if (qk__seg_point(A, B, k >> tz, 62 - tz, p)) return QK_OK;
   qk_status_t st = presplit(g, s, A, B, len, lo, k);
@@ -375,6 +388,22 @@ qk_status_t qk__gm_seed(qk__gm_t *g, qk_mesh_stats_t *stats) {
   qk_status_t st = qk_tree_build(NULL, 0, &to, &g->tree);
   if (st) return qk__mesh_fail(g->err, st, 0, "%s while building the tree", qk_strerror(st));
   size_t nf = P->nv + P->ns;
+  /* Each feature's ends in one flat array: the subdivision tests every feature of a node
+   * against each child's box, and reads them here without going through P->seg. */
+  g->fbox = qk__realloc(g->a, NULL, 0, (nf + 1) * 8 * sizeof *g->fbox);
+  if (!g->fbox) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  for (size_t f = 0; f < nf; f++) {
+    uint32_t u = f < P->nv ? (uint32_t)f : P->seg[2 * (f - P->nv)];
+    uint32_t w = f < P->nv ? (uint32_t)f : P->seg[2 * (f - P->nv) + 1];
+    double ax = P->vx[u], ay = P->vy[u], bx = P->vx[w], by = P->vy[w], *q = &g->fbox[8 * f];
+    q[0] = ax < bx ? ax : bx, q[1] = ay < by ? ay : by;
+    q[2] = ax < bx ? bx : ax, q[3] = ay < by ? by : ay;
+    q[4] = ax, q[5] = ay, q[6] = bx, q[7] = by;
+  }
+  /* The grading makes about ten leaves a feature on coastlines: room for the nodes up
+   * front, rather than the tree's growth by an eighth (53 copies on Iceland). */
+  if (qk__tree_reserve(g->tree, (uint32_t)(nf < 0x8000000 ? 16 * nf + 64 : 0)))
+    return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   void *ap = g->arena;
   if (qk__grow(g->a, &ap, &g->arena_cap, nf + 1, sizeof *g->arena))
     return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
