@@ -81,20 +81,30 @@ qk_status_t qk__gm_insert(qk__gm_t *g, double x, double y, uint32_t t0, int k0, 
   uint32_t v = *v_out;
   if (star(g, v)) return QK_ERR_NOMEM;
   g->vi[v] = (qk__gm_vert_t){QK__CDT_NONE, seg, k};
-  for (size_t i = 0; i < g->ndirty; i++) {
-    uint32_t t = g->dirty[i], f = f0;
-    if (f0 != f1) {
-      for (int j = 0; j < 3; j++) {
-        uint32_t u = c->v[3 * t + j];
-        if (u == v) continue;
-        int o = qk__orient2d(qk__gm_vxy(g, ea), qk__gm_vxy(g, eb), qk__gm_vxy(g, u));
-        if (o) {
-          f = o > 0 ? f0 : f1;
-          break;
-        }
+  if (f0 == f1) {
+    for (size_t i = 0; i < g->ndirty; i++) g->face[g->dirty[i]] = f0;
+  } else {
+    /* The first triangle's side by the segment's line; then around the ring of triangles
+     * at v (star() lists them in order), the side changes exactly where the ring crosses
+     * one of the two halves of the split segment, the only constrained edges at v. */
+    uint32_t t = g->dirty[0], f = f0;
+    for (int j = 0; j < 3; j++) {
+      uint32_t u = c->v[3 * t + j];
+      if (u == v) continue;
+      int o = qk__orient2d(qk__gm_vxy(g, ea), qk__gm_vxy(g, eb), qk__gm_vxy(g, u));
+      if (o) {
+        f = o > 0 ? f0 : f1;
+        break;
       }
     }
     g->face[t] = f;
+    for (size_t i = 1; i < g->ndirty; i++) {
+      const uint32_t *tv = &c->v[3 * (size_t)t];
+      int j = tv[0] == v ? 1 : tv[1] == v ? 2 : 0; /* the edge star() crossed from t */
+      if (c->seg[3 * (size_t)t + j] != QK__CDT_NONE) f = f == f0 ? f1 : f0;
+      t = g->dirty[i];
+      g->face[t] = f;
+    }
   }
   g->insertions++;
   return QK_OK;
