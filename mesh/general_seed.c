@@ -84,9 +84,15 @@ static int separate(const qk__gm_t *g, uint32_t f, uint32_t h, const double lo[2
  * largest and smallest values over the box are at the two corners the exact signs of dx
  * and dy pick (a rounded difference has the exact sign): two tests, not four. Each is the
  * floating-point estimate with the error bound of qk__orient2d, the exact predicate only
- * when the bound leaves its sign open. f holds the feature as {ax, ay, bx, by}. */
+ * when the bound leaves its sign open. f holds the segment as {ax, ay, bx, by}; the
+ * caller has checked the bounding boxes (g->fbox: per feature {x0, y0, x1, y1} its bounding
+ * box, then {ax, ay, bx, by} its ends, one cache line). */
 static int seg_box(const double *f, const double lo[2], const double hi[2]) {
   const double a[2] = {f[0], f[1]}, b[2] = {f[2], f[3]};
+  /* An end in the box settles it (most features of a small box end in it). */
+  if ((a[0] >= lo[0] && a[0] <= hi[0] && a[1] >= lo[1] && a[1] <= hi[1]) ||
+      (b[0] >= lo[0] && b[0] <= hi[0] && b[1] >= lo[1] && b[1] <= hi[1]))
+    return 1;
   double dx = b[0] - a[0], dy = b[1] - a[1];
   /* The corner maximising det: largest y when dx > 0, smallest x when dy > 0. */
   const double cmax[2] = {dy > 0 ? lo[0] : hi[0], dx > 0 ? hi[1] : lo[1]};
@@ -99,15 +105,6 @@ static int seg_box(const double *f, const double lo[2], const double hi[2]) {
     o[k] = det > bound ? 1 : -det > bound ? -1 : qk__orient2d(a, b, c[k]);
   }
   return o[0] >= 0 && o[1] <= 0;
-}
-
-/* Does feature f meet the closed box? Its bounding box first, then a segment's line
- * (g->fbox: per feature {x0, y0, x1, y1} its bounding box, then {ax, ay, bx, by} its ends,
- * one cache line). */
-static int meets(const qk__gm_t *g, uint32_t f, const double lo[2], const double hi[2]) {
-  const double *q = &g->fbox[8 * (size_t)f];
-  if (q[2] < lo[0] || q[0] > hi[0] || q[3] < lo[1] || q[1] > hi[1]) return 0;
-  return f < g->P->nv || seg_box(q + 4, lo, hi);
 }
 
 static qk_status_t mark_free(qk__gm_t *g, uint32_t node) {
@@ -182,25 +179,46 @@ static qk_status_t subdivide(qk__gm_t *g, uint32_t node, double X, double Y, dou
   qk_status_t st = qk_tree_split_leaf(g->tree, node);
   if (st) return qk__mesh_fail(g->err, st, 0, "%s while grading the quadtree", qk_strerror(st));
   uint32_t child = qk__node_child(g->tree, node);
-  double h = s / 2;
+  double h = s / 2, cx[4], cy[4], clo[4][2], chi[4][2];
+  /* The four children's lists at once, child q's at base + q k (in the parent's order):
+   * each feature's box is read once and tested against the children's columns and rows. */
+  void *ap = g->arena;
+  if (qk__grow(g->a, &ap, &g->arena_cap, g->arena_n + 4 * k + 1, sizeof *g->arena))
+    return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  g->arena = ap;
+  unsigned qwest = 0, qeast = 0, qsouth = 0, qnorth = 0;
   for (unsigned q = 0; q < 4; q++) {
-    double cx = X + (qk__q_east(q) ? h : 0), cy = Y + (qk__q_north(q) ? h : 0);
-    void *ap = g->arena;
-    if (qk__grow(g->a, &ap, &g->arena_cap, g->arena_n + k + 1, sizeof *g->arena))
-      return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
-    g->arena = ap;
-    grown_box(g, cx, cy, h, lo, hi);
-    size_t base = g->arena_n, n = 0;
-    for (size_t i = 0; i < k; i++) {
-      uint32_t f = g->arena[off + i];
-      if (meets(g, f, lo, hi)) g->arena[base + n++] = f;
-    }
-    g->arena_n = base + n;
-    st = subdivide(g, child + q, cx, cy, h, depth + 1, base, n);
-    g->arena_n = base;
-    if (st) return st;
+    cx[q] = X + (qk__q_east(q) ? h : 0), cy[q] = Y + (qk__q_north(q) ? h : 0);
+    grown_box(g, cx[q], cy[q], h, clo[q], chi[q]);
+    *(qk__q_east(q) ? &qeast : &qwest) = q;
+    *(qk__q_north(q) ? &qnorth : &qsouth) = q;
   }
-  return QK_OK;
+  const double xw0 = clo[qwest][0], xw1 = chi[qwest][0], xe0 = clo[qeast][0], xe1 = chi[qeast][0];
+  const double ys0 = clo[qsouth][1], ys1 = chi[qsouth][1], yn0 = clo[qnorth][1],
+               yn1 = chi[qnorth][1];
+  size_t base = g->arena_n, n[4] = {0, 0, 0, 0};
+  uint32_t nv = (uint32_t)g->P->nv, *A = g->arena;
+  for (size_t i = 0; i < k; i++) {
+    uint32_t f = A[off + i];
+    const double *b = &g->fbox[8 * (size_t)f];
+    int w = !(b[2] < xw0 || b[0] > xw1), e = !(b[2] < xe0 || b[0] > xe1);
+    int so = !(b[3] < ys0 || b[1] > ys1), no = !(b[3] < yn0 || b[1] > yn1);
+    /* Quadrant by quadrant with constant numbers, so the tests unroll. */
+#define GM_PUT(q, in)                                                                              \
+  if ((in) && (f < nv || seg_box(b + 4, clo[q], chi[q]))) A[base + (q)*k + n[q]++] = f
+    GM_PUT(QK_NE, e && no);
+    GM_PUT(QK_NW, w && no);
+    GM_PUT(QK_SW, w && so);
+    GM_PUT(QK_SE, e && so);
+#undef GM_PUT
+  }
+  g->arena_n = base + 4 * k;
+  for (unsigned q = 0; q < 4; q++) {
+    st = subdivide(g, child + q, cx[q], cy[q], h, depth + 1, base + q * k, n[q]);
+    if (st) break;
+  }
+  g->arena_n = base;
+  return st;
 }
 
 /* Spread the low 32 bits of v to the even bit positions. */
