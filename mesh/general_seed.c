@@ -317,6 +317,21 @@ static int ctz62(uint64_t k) {
  * next to an input vertex, the midpoint otherwise (general_refine.c). */
 int qk__gm_split_param(const qk__gm_t *g, uint32_t s, uint64_t lo, uint64_t hi, uint64_t *k);
 
+/* The side of the leaf holding lattice point (X, Y): qk__tree_descend's walk (a point on
+ * a midline goes west or south) in the root square [0, 1]^2, whose halvings are exact,
+ * without its square geometry a level. */
+static double leaf_side(const qk_tree_t *t, double X, double Y) {
+  double x0 = 0, y0 = 0, side = 1;
+  qk_node_t v = qk_tree_root(t);
+  for (uint32_t c = qk__node_child(t, v); c != QK_NONE; c = qk__node_child(t, v)) {
+    double h = side * 0.5;
+    int e = X > x0 + h, n = Y > y0 + h;
+    v = c + (e ? (n ? QK_NE : QK_SE) : (n ? QK_NW : QK_SW));
+    x0 += e ? h : 0, y0 += n ? h : 0, side = h;
+  }
+  return side;
+}
+
 /* Step 6: split segment s's piece (lo, hi) while it is longer than the leaf at its middle
  * (or the size bound there). A piece with no exact split point is left to the refinement,
  * which refuses the input only if it must split it. */
@@ -326,9 +341,7 @@ static qk_status_t presplit(qk__gm_t *g, uint32_t s, const double *A, const doub
   double mid[2] = {A[0] + t * (B[0] - A[0]), A[1] + t * (B[1] - A[1])};
   double X = (mid[0] - g->X0) * g->inv_S, Y = (mid[1] - g->Y0) * g->inv_S;
   X = X < 0 ? 0 : X > 1 ? 1 : X, Y = Y < 0 ? 0 : Y > 1 ? 1 : Y;
-  qk_square_t sq;
-  qk__tree_descend(g->tree, X, Y, &sq, NULL);
-  double want = fmin(sq.side * g->S, size_at(g, mid, 1));
+  double want = fmin(leaf_side(g->tree, X, Y) * g->S, size_at(g, mid, 1));
   if (!(len * ((double)(hi - lo) * 0x1p-62) > want)) return QK_OK;
   uint64_t k;
   if (!qk__gm_split_param(g, s, lo, hi, &k)) return QK_OK;
@@ -443,10 +456,12 @@ qk_status_t qk__gm_seed(qk__gm_t *g, qk_mesh_stats_t *stats) {
   g->arena_n = nf;
   g->deep_cap = GM_DEEP_BUDGET + 256 * nf;
   if ((st = subdivide(g, qk_tree_root(g->tree), 0, 0, 1, 0, 0, nf))) return st;
-  qk_tree_leaves(g->tree, NULL, 0, &stats->leaves_before_balance);
+  /* The tree grew from its root by splits alone (four nodes each, three more leaves), so
+   * its node count gives its leaves without a walk. */
+  stats->leaves_before_balance = 1 + 3 * ((size_t)qk__tree_node_bound(g->tree) - 1) / 4;
   if ((st = qk_tree_balance(g->tree)))
     return qk__mesh_fail(g->err, st, 0, "%s while balancing", qk_strerror(st));
-  qk_tree_leaves(g->tree, NULL, 0, &stats->leaves);
+  stats->leaves = 1 + 3 * ((size_t)qk__tree_node_bound(g->tree) - 1) / 4;
   if (seeds(g, qk_tree_root(g->tree), 0, 0, 1, 0))
     return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   g->free_leaves += size_cells(g);
