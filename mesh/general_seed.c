@@ -354,23 +354,27 @@ static qk_status_t presplit(qk__gm_t *g, uint32_t s, const double *A, const doub
   return st;
 }
 
-/* Sort the points by Morton key: least significant digit first, 11 bits a pass, passes
+/* Sort the points by Morton key: least significant digit first, 8 or 11 bits a pass, passes
  * whose digit is the same for every key skipped; stable. */
 qk_status_t qk__gm_sort_points(const qk__gm_t *g, qk__gm_pt_t *pts, size_t n) {
   qk__gm_pt_t *tmp = qk__realloc(g->a, NULL, 0, (n + 1) * sizeof *tmp), *src = pts, *dst = tmp;
   if (!tmp) return QK_ERR_NOMEM;
   size_t cnt[2048];
+  /* Digits of 8 bits for a few thousand points, where clearing and summing 2048 counters
+   * a pass would cost more than the points; 11 bits above. The same stable order. */
+  const int bits = n < 8192 ? 8 : 11;
+  const uint64_t mask = ((uint64_t)1 << bits) - 1;
   /* Bits below 20 order points within 2^-22 of the square's side: irrelevant to walks. */
-  for (int shift = 20; shift < 64; shift += 11) {
-    memset(cnt, 0, sizeof cnt);
-    for (size_t i = 0; i < n; i++) cnt[(src[i].key >> shift) & 2047]++;
-    if (cnt[(src[0].key >> shift) & 2047] == n) continue;
+  for (int shift = 20; shift < 64; shift += bits) {
+    memset(cnt, 0, (mask + 1) * sizeof *cnt);
+    for (size_t i = 0; i < n; i++) cnt[(src[i].key >> shift) & mask]++;
+    if (cnt[(src[0].key >> shift) & mask] == n) continue;
     size_t sum = 0;
-    for (int d = 0; d < 2048; d++) {
+    for (size_t d = 0; d <= mask; d++) {
       size_t c = cnt[d];
       cnt[d] = sum, sum += c;
     }
-    for (size_t i = 0; i < n; i++) dst[cnt[(src[i].key >> shift) & 2047]++] = src[i];
+    for (size_t i = 0; i < n; i++) dst[cnt[(src[i].key >> shift) & mask]++] = src[i];
     qk__gm_pt_t *t = src;
     src = dst, dst = t;
   }
