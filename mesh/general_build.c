@@ -90,7 +90,7 @@ qk_status_t qk__gm_insert(qk__gm_t *g, double x, double y, uint32_t t0, int k0, 
     uint32_t t = g->dirty[0], f = f0;
     for (int j = 0; j < 3; j++) {
       uint32_t u = c->v[3 * t + j];
-      if (u == v) continue;
+      if (u == v || u == ea || u == eb) continue; /* on the line: no side (and a slow zero) */
       int o = qk__orient2d(qk__gm_vxy(g, ea), qk__gm_vxy(g, eb), qk__gm_vxy(g, u));
       if (o) {
         f = o > 0 ? f0 : f1;
