@@ -165,4 +165,10 @@ static inline qk_node_t qk__tree_descend(const qk_tree_t *t, double x, double y,
   return v;
 }
 
+/* Room for `extra` more nodes before the tree next grows its node arrays (a caller that
+ * knows roughly how many splits it will make saves the growth's copies). */
+static inline qk_status_t qk__tree_reserve(qk_tree_t *t, uint32_t extra) {
+  return qk__reserve_nodes(t, extra);
+}
+
 #endif /* QUADKIT_INDEX_ACCESS_H */

@@ -81,20 +81,30 @@ qk_status_t qk__gm_insert(qk__gm_t *g, double x, double y, uint32_t t0, int k0, 
   uint32_t v = *v_out;
   if (star(g, v)) return QK_ERR_NOMEM;
   g->vi[v] = (qk__gm_vert_t){QK__CDT_NONE, seg, k};
-  for (size_t i = 0; i < g->ndirty; i++) {
-    uint32_t t = g->dirty[i], f = f0;
-    if (f0 != f1) {
-      for (int j = 0; j < 3; j++) {
-        uint32_t u = c->v[3 * t + j];
-        if (u == v) continue;
-        int o = qk__orient2d(qk__gm_vxy(g, ea), qk__gm_vxy(g, eb), qk__gm_vxy(g, u));
-        if (o) {
-          f = o > 0 ? f0 : f1;
-          break;
-        }
+  if (f0 == f1) {
+    for (size_t i = 0; i < g->ndirty; i++) g->face[g->dirty[i]] = f0;
+  } else {
+    /* The first triangle's side by the segment's line; then around the ring of triangles
+     * at v (star() lists them in order), the side changes exactly where the ring crosses
+     * one of the two halves of the split segment, the only constrained edges at v. */
+    uint32_t t = g->dirty[0], f = f0;
+    for (int j = 0; j < 3; j++) {
+      uint32_t u = c->v[3 * t + j];
+      if (u == v || u == ea || u == eb) continue; /* on the line: no side (and a slow zero) */
+      int o = qk__orient2d(qk__gm_vxy(g, ea), qk__gm_vxy(g, eb), qk__gm_vxy(g, u));
+      if (o) {
+        f = o > 0 ? f0 : f1;
+        break;
       }
     }
     g->face[t] = f;
+    for (size_t i = 1; i < g->ndirty; i++) {
+      const uint32_t *tv = &c->v[3 * (size_t)t];
+      int j = tv[0] == v ? 1 : tv[1] == v ? 2 : 0; /* the edge star() crossed from t */
+      if (c->seg[3 * (size_t)t + j] != QK__CDT_NONE) f = f == f0 ? f1 : f0;
+      t = g->dirty[i];
+      g->face[t] = f;
+    }
   }
   g->insertions++;
   return QK_OK;
@@ -291,19 +301,9 @@ static qk_status_t holes_and_regions(qk__gm_t *g) {
   return QK_OK;
 }
 
-/* Directions of the segments at a vertex, for the smallest input angle. */
-typedef struct vdir {
-  uint32_t v;
-  double a;
-} vdir_t;
-
-static int vdir_cmp(const void *x, const void *y) {
-  const vdir_t *p = x, *q = y;
-  if (p->v != q->v) return p->v < q->v ? -1 : 1;
-  return (p->a > q->a) - (p->a < q->a);
-}
-
-/* The smallest angle between two segments at a vertex, in degrees (180 when none). */
+/* The smallest angle between two segments at a vertex, in degrees (180 when none). The
+ * segments' directions are bucketed by vertex (a counting pass, no comparison sort: most
+ * vertices have two) and each vertex's few sorted by insertion once all are in. */
 static qk_status_t input_angles(qk__gm_t *g) {
   const qk_poly_t *P = g->P;
   g->smallest_input_angle = 180;
@@ -311,27 +311,43 @@ static qk_status_t input_angles(qk__gm_t *g) {
   if (!g->vsmall) return QK_ERR_NOMEM;
   memset(g->vsmall, 0, P->nv + 1);
   if (P->ns < 2) return QK_OK;
-  vdir_t *d = qk__realloc(g->a, NULL, 0, 2 * P->ns * sizeof *d);
-  if (!d) return QK_ERR_NOMEM;
+  uint32_t *start = qk__realloc(g->a, NULL, 0, (P->nv + 2) * sizeof *start);
+  double *d = qk__realloc(g->a, NULL, 0, 2 * P->ns * sizeof *d);
+  if (!start || !d) {
+    qk__free(g->a, start, (P->nv + 2) * sizeof *start);
+    qk__free(g->a, d, 2 * P->ns * sizeof *d);
+    return QK_ERR_NOMEM;
+  }
+  memset(start, 0, (P->nv + 2) * sizeof *start);
+  for (size_t j = 0; j < 2 * P->ns; j++) start[P->seg[j] + 2]++;
+  for (size_t v = 0; v < P->nv; v++) start[v + 2] += start[v + 1];
+  /* start[v + 1] is now where vertex v's directions go; filling moves it to their end. */
   for (size_t s = 0; s < P->ns; s++)
     for (int j = 0; j < 2; j++) {
       uint32_t u = P->seg[2 * s + j], w = P->seg[2 * s + 1 - j];
-      d[2 * s + j] = (vdir_t){u, atan2(P->vy[w] - P->vy[u], P->vx[w] - P->vx[u])};
+      d[start[u + 1]++] = atan2(P->vy[w] - P->vy[u], P->vx[w] - P->vx[u]);
     }
-  qsort(d, 2 * P->ns, sizeof *d, vdir_cmp);
   const double pi = 3.14159265358979323846;
-  for (size_t i = 0, j; i < 2 * P->ns; i = j) {
+  for (size_t v = 0; v < P->nv; v++) {
+    size_t i = start[v], e = start[v + 1];
+    if (i == e) continue;
+    for (size_t j = i + 1; j < e; j++) {
+      double a = d[j];
+      size_t k = j;
+      for (; k > i && d[k - 1] > a; k--) d[k] = d[k - 1];
+      d[k] = a;
+    }
     double amin = 360;
-    for (j = i + 1; j < 2 * P->ns && d[j].v == d[i].v; j++)
-      amin = fmin(amin, (d[j].a - d[j - 1].a) * 180 / pi);
-    if (j - i >= 2) amin = fmin(amin, (d[i].a + 2 * pi - d[j - 1].a) * 180 / pi);
+    for (size_t j = i + 1; j < e; j++) amin = fmin(amin, (d[j] - d[j - 1]) * 180 / pi);
+    if (e - i >= 2) amin = fmin(amin, (d[i] + 2 * pi - d[e - 1]) * 180 / pi);
     g->smallest_input_angle = fmin(g->smallest_input_angle, amin);
     /* Concentric shells at the apexes of small angles only: elsewhere every split is an
      * exact midpoint, as in the proof for angles of 60 degrees and more. The estimate
      * errs by far less than the margin the proof has (a vertex at 59.999 degrees gets
      * shells, harmlessly). */
-    g->vsmall[d[i].v] = amin < 60.001;
+    g->vsmall[v] = amin < 60.001;
   }
+  qk__free(g->a, start, (P->nv + 2) * sizeof *start);
   qk__free(g->a, d, 2 * P->ns * sizeof *d);
   return QK_OK;
 }

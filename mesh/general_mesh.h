@@ -79,6 +79,7 @@ typedef struct qk__gm {
   uint8_t *free_node; /* per node id: its grown square meets no feature */
   size_t free_cap;
   uint32_t *arena; /* feature lists of the subdivision */
+  double *fbox;    /* per feature (vertices, then segments): its box, then its ends */
   size_t arena_n, arena_cap;
   qk__gm_pt_t *pts;
   size_t npts, pts_cap;

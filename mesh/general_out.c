@@ -2,7 +2,8 @@
  * The general mode, step 11: the kept triangles (those of faces that are neither the
  * unbounded face nor a hole) and the vertices they use, renumbered densely (the input
  * vertices first, in input order, then the others in CDT order); per triangle its face number and
- * regional attribute; the mesh edges along input segments with their markers.
+ * regional attribute; the mesh edges along input segments with their markers. One pass
+ * over the triangles counts, the next writes every array in its final form.
  */
 #include "mesh/general_mesh.h"
 
@@ -11,38 +12,25 @@
 
 static int kept(const qk__gm_t *g, uint32_t t) { return !g->faces[g->face[t]].drop; }
 
-/* The mesh edges along input segments: each constrained edge of a kept triangle once,
- * directed along its segment. */
-static qk_status_t output_segments(qk__gm_t *g, qk_mesh_t *m, const uint32_t *newid) {
+/* Is the edge of kept triangle t opposite corner k a mesh edge along an input segment
+ * that t reports (each such edge once: by the kept triangle of smaller number)? Its
+ * segment, or NONE. */
+static uint32_t own_seg(const qk__gm_t *g, uint32_t t, int k) {
   const qk__cdt_t *c = &g->cdt;
-  const qk_poly_t *P = g->P;
-  size_t n = 0;
-  for (int pass = 0; pass < 2; pass++) {
-    for (uint32_t t = 0; t < c->nt; t++) {
-      if (!kept(g, t)) continue;
-      for (int k = 0; k < 3; k++) {
-        uint32_t s = c->seg[3 * t + k], u = c->nbr[3 * t + k];
-        if (s == QK__CDT_NONE || (u != QK__CDT_NONE && u < t && kept(g, u))) continue;
-        if (pass == 0) {
-          n++;
-          continue;
-        }
-        uint32_t a = c->v[3 * t + (k + 1) % 3], b = c->v[3 * t + (k + 2) % 3];
-        if (qk__gm_param(g, a, s) > qk__gm_param(g, b, s)) {
-          uint32_t x = a;
-          a = b, b = x;
-        }
-        int32_t mark = P->smark ? P->smark[s] : 0;
-        m->oseg[m->noseg++] = (qk__oseg_t){newid[a], newid[b], mark, s};
-      }
-    }
-    if (pass == 0) {
-      m->oseg = qk__realloc(g->a, NULL, 0, (n + 1) * sizeof *m->oseg);
-      if (!m->oseg) return QK_ERR_NOMEM;
-      m->noseg_cap = n + 1;
-    }
+  uint32_t s = c->seg[3 * t + k], u = c->nbr[3 * t + k];
+  if (s == QK__CDT_NONE || (u != QK__CDT_NONE && u < t && kept(g, u))) return QK__CDT_NONE;
+  return s;
+}
+
+/* The output segment of the edge of t opposite corner k, on segment s: directed along s. */
+static qk__oseg_t out_seg(const qk__gm_t *g, uint32_t t, int k, uint32_t s, const uint32_t *newid) {
+  const qk__cdt_t *c = &g->cdt;
+  uint32_t a = c->v[3 * t + (k + 1) % 3], b = c->v[3 * t + (k + 2) % 3];
+  if (qk__gm_param(g, a, s) > qk__gm_param(g, b, s)) {
+    uint32_t x = a;
+    a = b, b = x;
   }
-  return QK_OK;
+  return (qk__oseg_t){newid[a], newid[b], g->P->smark ? g->P->smark[s] : 0, s};
 }
 
 /* Vertex markers: an input vertex's own nonzero marker, else the first segment (in input
@@ -73,10 +61,14 @@ qk_status_t qk__gm_output(qk__gm_t *g, qk_mesh_t *m) {
   size_t kt = 0, kv = 0, steiner = 0;
   uint32_t nf = 0;
   for (uint32_t f = 0; f < g->nface; f++) g->faces[f].id = g->faces[f].drop ? 0 : ++nf;
+  size_t ns = 0;
   for (uint32_t t = 0; t < c->nt; t++)
     if (kept(g, t)) {
       kt++;
+      const uint32_t *ts = &c->seg[3 * t];
       for (int i = 0; i < 3; i++) newid[c->v[3 * t + i]] = 0;
+      if ((ts[0] & ts[1] & ts[2]) != QK__CDT_NONE)
+        for (int i = 0; i < 3; i++) ns += own_seg(g, t, i) != QK__CDT_NONE;
     }
   /* The input vertices first, in input order, then the others in CDT order. */
   for (size_t i = 0; i < P->nv; i++)
@@ -91,9 +83,11 @@ qk_status_t qk__gm_output(qk__gm_t *g, qk_mesh_t *m) {
   m->cseg = qk__realloc(g->a, NULL, 0, (2 * P->ns + 2) * sizeof *m->cseg);
   m->vmark = qk__realloc(g->a, NULL, 0, (kv + 1) * sizeof *m->vmark);
   if (P->nr) m->attr = qk__realloc(g->a, NULL, 0, (kt + 1) * sizeof *m->attr);
+  m->oseg = qk__realloc(g->a, NULL, 0, (ns + 1) * sizeof *m->oseg);
+  if (m->oseg) m->noseg_cap = ns + 1;
   qk_status_t st = QK_OK;
   if (!m->xy || !m->tri || !m->comp || !m->cxy || !m->cseg || !m->vmark || (P->nr && !m->attr) ||
-      output_segments(g, m, newid)) {
+      !m->oseg) {
     st = qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
     goto out;
   }
@@ -123,6 +117,14 @@ qk_status_t qk__gm_output(qk__gm_t *g, qk_mesh_t *m) {
       cmax = cs > cmax ? cs : cmax, cmin = cs < cmin ? cs : cmin; /* NaN: neither, as fmax */
       exempt += cs > cb;
     }
+    /* NONE has every bit set: the AND of the three is NONE only when no side is on a
+     * segment, as in most triangles. */
+    const uint32_t *ts = &c->seg[3 * t];
+    if ((ts[0] & ts[1] & ts[2]) != QK__CDT_NONE)
+      for (int i = 0; i < 3; i++) {
+        uint32_t sg = own_seg(g, t, i);
+        if (sg != QK__CDT_NONE) m->oseg[m->noseg++] = out_seg(g, t, i, sg, newid);
+      }
     const qk__gm_face_t *f = &g->faces[g->face[t]];
     m->comp[j] = f->id;
     if (m->attr) m->attr[j] = f->attr;

@@ -27,6 +27,8 @@ static void free_refinement(qk__gm_t *g) {
   qk__free(a, g->mark, g->mark_cap * sizeof *g->mark);
   qk__free(a, g->arena, g->arena_cap * sizeof *g->arena);
   qk__free(a, g->pts, g->pts_cap * sizeof *g->pts);
+  qk__free(a, g->fbox, (g->P->nv + g->P->ns + 1) * 8 * sizeof *g->fbox);
+  g->fbox = NULL;
   g->bad = NULL, g->enc = NULL, g->stack = NULL, g->dirty = NULL, g->arena = NULL, g->pts = NULL;
   g->mark = NULL, g->mark_cap = 0, g->mark_gen = 0;
   g->bad_cap = g->enc_cap = g->stack_cap = g->dirty_cap = g->arena_cap = g->pts_cap = 0;

@@ -78,33 +78,33 @@ static int separate(const qk__gm_t *g, uint32_t f, uint32_t h, const double lo[2
   return 1;
 }
 
-/* Whether the closed segment ab meets the closed box, exactly: qk__seg_meets_box with the
- * orientation filter inlined (the subdivision's hot test), the exact predicate only when
- * the estimate's error bound (as in qk__orient2d) leaves a corner's side open. */
-static int seg_box(const double a[2], const double b[2], const double lo[2], const double hi[2]) {
-  for (int i = 0; i < 2; i++) /* (not fmin/fmax: library calls in this hot loop) */
-    if ((a[i] > b[i] ? a[i] : b[i]) < lo[i] || (a[i] < b[i] ? a[i] : b[i]) > hi[i]) return 0;
-  const double c[4][2] = {{lo[0], lo[1]}, {hi[0], lo[1]}, {hi[0], hi[1]}, {lo[0], hi[1]}};
+/* Whether the closed segment ab meets the closed box, exactly: the bounding boxes overlap
+ * and the segment's line does not leave every box corner strictly on one side. The
+ * orientation det(c) = dx (c_y - a_y) - dy (c_x - a_x) is linear in the corner c, so its
+ * largest and smallest values over the box are at the two corners the exact signs of dx
+ * and dy pick (a rounded difference has the exact sign): two tests, not four. Each is the
+ * floating-point estimate with the error bound of qk__orient2d, the exact predicate only
+ * when the bound leaves its sign open. f holds the segment as {ax, ay, bx, by}; the
+ * caller has checked the bounding boxes (g->fbox: per feature {x0, y0, x1, y1} its bounding
+ * box, then {ax, ay, bx, by} its ends, one cache line). */
+static int seg_box(const double *f, const double lo[2], const double hi[2]) {
+  const double a[2] = {f[0], f[1]}, b[2] = {f[2], f[3]};
+  /* An end in the box settles it (most features of a small box end in it). */
+  if ((a[0] >= lo[0] && a[0] <= hi[0] && a[1] >= lo[1] && a[1] <= hi[1]) ||
+      (b[0] >= lo[0] && b[0] <= hi[0] && b[1] >= lo[1] && b[1] <= hi[1]))
+    return 1;
   double dx = b[0] - a[0], dy = b[1] - a[1];
-  int pos = 0, neg = 0;
-  for (int k = 0; k < 4; k++) {
+  /* The corner maximising det: largest y when dx > 0, smallest x when dy > 0. */
+  const double cmax[2] = {dy > 0 ? lo[0] : hi[0], dx > 0 ? hi[1] : lo[1]};
+  const double cmin[2] = {dy > 0 ? hi[0] : lo[0], dx > 0 ? lo[1] : hi[1]};
+  const double *c[2] = {cmax, cmin};
+  int o[2];
+  for (int k = 0; k < 2; k++) {
     double l = dx * (c[k][1] - a[1]), r = dy * (c[k][0] - a[0]), det = l - r;
     double bound = (fabs(l) + fabs(r)) * 0x1p-50;
-    int o = det > bound ? 1 : -det > bound ? -1 : qk__orient2d(a, b, c[k]);
-    pos += o > 0, neg += o < 0;
+    o[k] = det > bound ? 1 : -det > bound ? -1 : qk__orient2d(a, b, c[k]);
   }
-  return pos < 4 && neg < 4;
-}
-
-static int meets(const qk__gm_t *g, uint32_t f, const double lo[2], const double hi[2]) {
-  const qk_poly_t *P = g->P;
-  if (f < P->nv) {
-    double x = P->vx[f], y = P->vy[f];
-    return x >= lo[0] && x <= hi[0] && y >= lo[1] && y <= hi[1];
-  }
-  uint32_t s = f - (uint32_t)P->nv, u = P->seg[2 * s], w = P->seg[2 * s + 1];
-  const double a[2] = {P->vx[u], P->vy[u]}, b[2] = {P->vx[w], P->vy[w]};
-  return seg_box(a, b, lo, hi);
+  return o[0] >= 0 && o[1] <= 0;
 }
 
 static qk_status_t mark_free(qk__gm_t *g, uint32_t node) {
@@ -179,25 +179,46 @@ static qk_status_t subdivide(qk__gm_t *g, uint32_t node, double X, double Y, dou
   qk_status_t st = qk_tree_split_leaf(g->tree, node);
   if (st) return qk__mesh_fail(g->err, st, 0, "%s while grading the quadtree", qk_strerror(st));
   uint32_t child = qk__node_child(g->tree, node);
-  double h = s / 2;
+  double h = s / 2, cx[4], cy[4], clo[4][2], chi[4][2];
+  /* The four children's lists at once, child q's at base + q k (in the parent's order):
+   * each feature's box is read once and tested against the children's columns and rows. */
+  void *ap = g->arena;
+  if (qk__grow(g->a, &ap, &g->arena_cap, g->arena_n + 4 * k + 1, sizeof *g->arena))
+    return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  g->arena = ap;
+  unsigned qwest = 0, qeast = 0, qsouth = 0, qnorth = 0;
   for (unsigned q = 0; q < 4; q++) {
-    double cx = X + (qk__q_east(q) ? h : 0), cy = Y + (qk__q_north(q) ? h : 0);
-    void *ap = g->arena;
-    if (qk__grow(g->a, &ap, &g->arena_cap, g->arena_n + k + 1, sizeof *g->arena))
-      return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
-    g->arena = ap;
-    grown_box(g, cx, cy, h, lo, hi);
-    size_t base = g->arena_n, n = 0;
-    for (size_t i = 0; i < k; i++) {
-      uint32_t f = g->arena[off + i];
-      if (meets(g, f, lo, hi)) g->arena[base + n++] = f;
-    }
-    g->arena_n = base + n;
-    st = subdivide(g, child + q, cx, cy, h, depth + 1, base, n);
-    g->arena_n = base;
-    if (st) return st;
+    cx[q] = X + (qk__q_east(q) ? h : 0), cy[q] = Y + (qk__q_north(q) ? h : 0);
+    grown_box(g, cx[q], cy[q], h, clo[q], chi[q]);
+    *(qk__q_east(q) ? &qeast : &qwest) = q;
+    *(qk__q_north(q) ? &qnorth : &qsouth) = q;
   }
-  return QK_OK;
+  const double xw0 = clo[qwest][0], xw1 = chi[qwest][0], xe0 = clo[qeast][0], xe1 = chi[qeast][0];
+  const double ys0 = clo[qsouth][1], ys1 = chi[qsouth][1], yn0 = clo[qnorth][1],
+               yn1 = chi[qnorth][1];
+  size_t base = g->arena_n, n[4] = {0, 0, 0, 0};
+  uint32_t nv = (uint32_t)g->P->nv, *A = g->arena;
+  for (size_t i = 0; i < k; i++) {
+    uint32_t f = A[off + i];
+    const double *b = &g->fbox[8 * (size_t)f];
+    int w = !(b[2] < xw0 || b[0] > xw1), e = !(b[2] < xe0 || b[0] > xe1);
+    int so = !(b[3] < ys0 || b[1] > ys1), no = !(b[3] < yn0 || b[1] > yn1);
+    /* Quadrant by quadrant with constant numbers, so the tests unroll. */
+#define GM_PUT(q, in)                                                                              \
+  if ((in) && (f < nv || seg_box(b + 4, clo[q], chi[q]))) A[base + (q)*k + n[q]++] = f
+    GM_PUT(QK_NE, e && no);
+    GM_PUT(QK_NW, w && no);
+    GM_PUT(QK_SW, w && so);
+    GM_PUT(QK_SE, e && so);
+#undef GM_PUT
+  }
+  g->arena_n = base + 4 * k;
+  for (unsigned q = 0; q < 4; q++) {
+    st = subdivide(g, child + q, cx[q], cy[q], h, depth + 1, base + q * k, n[q]);
+    if (st) break;
+  }
+  g->arena_n = base;
+  return st;
 }
 
 /* Spread the low 32 bits of v to the even bit positions. */
@@ -281,9 +302,35 @@ static size_t size_cells(const qk__gm_t *g) {
   return n < 0x1p40 ? (size_t)n : (size_t)1 << 40; /* check_size refused more than 2^26 */
 }
 
+/* The trailing zero bits of k (62 for k == 0). */
+static int ctz62(uint64_t k) {
+#if defined(__GNUC__) || defined(__clang__)
+  return k ? __builtin_ctzll(k) < 62 ? __builtin_ctzll(k) : 62 : 62;
+#else
+  int tz = 0;
+  while (tz < 62 && !((k >> tz) & 1)) tz++;
+  return tz;
+#endif
+}
+
 /* Choose an exact split parameter strictly inside (lo, hi) of segment s: concentric shells
  * next to an input vertex, the midpoint otherwise (general_refine.c). */
 int qk__gm_split_param(const qk__gm_t *g, uint32_t s, uint64_t lo, uint64_t hi, uint64_t *k);
+
+/* The side of the leaf holding lattice point (X, Y): qk__tree_descend's walk (a point on
+ * a midline goes west or south) in the root square [0, 1]^2, whose halvings are exact,
+ * without its square geometry a level. */
+static double leaf_side(const qk_tree_t *t, double X, double Y) {
+  double x0 = 0, y0 = 0, side = 1;
+  qk_node_t v = qk_tree_root(t);
+  for (uint32_t c = qk__node_child(t, v); c != QK_NONE; c = qk__node_child(t, v)) {
+    double h = side * 0.5;
+    int e = X > x0 + h, n = Y > y0 + h;
+    v = c + (e ? (n ? QK_NE : QK_SE) : (n ? QK_NW : QK_SW));
+    x0 += e ? h : 0, y0 += n ? h : 0, side = h;
+  }
+  return side;
+}
 
 /* Step 6: split segment s's piece (lo, hi) while it is longer than the leaf at its middle
  * (or the size bound there). A piece with no exact split point is left to the refinement,
@@ -294,14 +341,11 @@ static qk_status_t presplit(qk__gm_t *g, uint32_t s, const double *A, const doub
   double mid[2] = {A[0] + t * (B[0] - A[0]), A[1] + t * (B[1] - A[1])};
   double X = (mid[0] - g->X0) * g->inv_S, Y = (mid[1] - g->Y0) * g->inv_S;
   X = X < 0 ? 0 : X > 1 ? 1 : X, Y = Y < 0 ? 0 : Y > 1 ? 1 : Y;
-  qk_square_t sq;
-  qk__tree_descend(g->tree, X, Y, &sq, NULL);
-  double want = fmin(sq.side * g->S, size_at(g, mid, 1));
+  double want = fmin(leaf_side(g->tree, X, Y) * g->S, size_at(g, mid, 1));
   if (!(len * ((double)(hi - lo) * 0x1p-62) > want)) return QK_OK;
   uint64_t k;
   if (!qk__gm_split_param(g, s, lo, hi, &k)) return QK_OK;
-  int tz = 0;
-  while (tz < 62 && !((k >> tz) & 1)) tz++;
+  int tz = ctz62(k);
   double p[2];
   if (qk__seg_point(A, B, k >> tz, 62 - tz, p)) return QK_OK;
   qk_status_t st = presplit(g, s, A, B, len, lo, k);
@@ -310,23 +354,27 @@ static qk_status_t presplit(qk__gm_t *g, uint32_t s, const double *A, const doub
   return st;
 }
 
-/* Sort the points by Morton key: least significant digit first, 11 bits a pass, passes
+/* Sort the points by Morton key: least significant digit first, 8 or 11 bits a pass, passes
  * whose digit is the same for every key skipped; stable. */
 qk_status_t qk__gm_sort_points(const qk__gm_t *g, qk__gm_pt_t *pts, size_t n) {
   qk__gm_pt_t *tmp = qk__realloc(g->a, NULL, 0, (n + 1) * sizeof *tmp), *src = pts, *dst = tmp;
   if (!tmp) return QK_ERR_NOMEM;
   size_t cnt[2048];
+  /* Digits of 8 bits for a few thousand points, where clearing and summing 2048 counters
+   * a pass would cost more than the points; 11 bits above. The same stable order. */
+  const int bits = n < 8192 ? 8 : 11;
+  const uint64_t mask = ((uint64_t)1 << bits) - 1;
   /* Bits below 20 order points within 2^-22 of the square's side: irrelevant to walks. */
-  for (int shift = 20; shift < 64; shift += 11) {
-    memset(cnt, 0, sizeof cnt);
-    for (size_t i = 0; i < n; i++) cnt[(src[i].key >> shift) & 2047]++;
-    if (cnt[(src[0].key >> shift) & 2047] == n) continue;
+  for (int shift = 20; shift < 64; shift += bits) {
+    memset(cnt, 0, (mask + 1) * sizeof *cnt);
+    for (size_t i = 0; i < n; i++) cnt[(src[i].key >> shift) & mask]++;
+    if (cnt[(src[0].key >> shift) & mask] == n) continue;
     size_t sum = 0;
-    for (int d = 0; d < 2048; d++) {
+    for (size_t d = 0; d <= mask; d++) {
       size_t c = cnt[d];
       cnt[d] = sum, sum += c;
     }
-    for (size_t i = 0; i < n; i++) dst[cnt[(src[i].key >> shift) & 2047]++] = src[i];
+    for (size_t i = 0; i < n; i++) dst[cnt[(src[i].key >> shift) & mask]++] = src[i];
     qk__gm_pt_t *t = src;
     src = dst, dst = t;
   }
@@ -375,6 +423,22 @@ qk_status_t qk__gm_seed(qk__gm_t *g, qk_mesh_stats_t *stats) {
   qk_status_t st = qk_tree_build(NULL, 0, &to, &g->tree);
   if (st) return qk__mesh_fail(g->err, st, 0, "%s while building the tree", qk_strerror(st));
   size_t nf = P->nv + P->ns;
+  /* Each feature's ends in one flat array: the subdivision tests every feature of a node
+   * against each child's box, and reads them here without going through P->seg. */
+  g->fbox = qk__realloc(g->a, NULL, 0, (nf + 1) * 8 * sizeof *g->fbox);
+  if (!g->fbox) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  for (size_t f = 0; f < nf; f++) {
+    uint32_t u = f < P->nv ? (uint32_t)f : P->seg[2 * (f - P->nv)];
+    uint32_t w = f < P->nv ? (uint32_t)f : P->seg[2 * (f - P->nv) + 1];
+    double ax = P->vx[u], ay = P->vy[u], bx = P->vx[w], by = P->vy[w], *q = &g->fbox[8 * f];
+    q[0] = ax < bx ? ax : bx, q[1] = ay < by ? ay : by;
+    q[2] = ax < bx ? bx : ax, q[3] = ay < by ? by : ay;
+    q[4] = ax, q[5] = ay, q[6] = bx, q[7] = by;
+  }
+  /* The grading makes about ten leaves a feature on coastlines: room for the nodes up
+   * front, rather than the tree's growth by an eighth (53 copies on Iceland). */
+  if (qk__tree_reserve(g->tree, (uint32_t)(nf < 0x8000000 ? 16 * nf + 64 : 0)))
+    return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   void *ap = g->arena;
   if (qk__grow(g->a, &ap, &g->arena_cap, nf + 1, sizeof *g->arena))
     return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
@@ -396,10 +460,12 @@ qk_status_t qk__gm_seed(qk__gm_t *g, qk_mesh_stats_t *stats) {
   g->arena_n = nf;
   g->deep_cap = GM_DEEP_BUDGET + 256 * nf;
   if ((st = subdivide(g, qk_tree_root(g->tree), 0, 0, 1, 0, 0, nf))) return st;
-  qk_tree_leaves(g->tree, NULL, 0, &stats->leaves_before_balance);
+  /* The tree grew from its root by splits alone (four nodes each, three more leaves), so
+   * its node count gives its leaves without a walk. */
+  stats->leaves_before_balance = 1 + 3 * ((size_t)qk__tree_node_bound(g->tree) - 1) / 4;
   if ((st = qk_tree_balance(g->tree)))
     return qk__mesh_fail(g->err, st, 0, "%s while balancing", qk_strerror(st));
-  qk_tree_leaves(g->tree, NULL, 0, &stats->leaves);
+  stats->leaves = 1 + 3 * ((size_t)qk__tree_node_bound(g->tree) - 1) / 4;
   if (seeds(g, qk_tree_root(g->tree), 0, 0, 1, 0))
     return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   g->free_leaves += size_cells(g);
