@@ -7,21 +7,30 @@
  * of 2^(e-m): a double too. Every operation's exact result is a double, so each is exact.
  */
 #include <math.h>
+#include <string.h>
 
 #include "mesh/general_internal.h"
 
-/* Exponent of the lowest set bit of x != 0: x is an odd multiple of 2^lsb. */
-static int lsb_exp(double x) {
-  int q;
-  double f = frexp(fabs(x), &q); /* f in [1/2, 1), x = f 2^q */
-  uint64_t mant = (uint64_t)ldexp(f, 53);
+/* For finite x != 0: the exponent of its lowest set bit (x is an odd multiple of 2^*lsb)
+ * and the q with 2^(q-1) <= |x| < 2^q, read off the bits (frexp's q, without the call). */
+static void bit_exps(double x, int *lsb, int *q) {
+  uint64_t u;
+  memcpy(&u, &x, sizeof u);
+  int be = (int)(u >> 52 & 0x7ff);
+  uint64_t mant = u & (((uint64_t)1 << 52) - 1);
+  int e0 = -1074; /* x = mant 2^e0 */
+  if (be) mant |= (uint64_t)1 << 52, e0 = be - 1075;
+  int tz = 0, top = 0;
 #if defined(__GNUC__)
-  int tz = __builtin_ctzll(mant); /* mant >= 2^52: nonzero */
+  tz = __builtin_ctzll(mant); /* mant != 0 */
+  top = 63 - __builtin_clzll(mant);
 #else
-  int tz = 0;
-  while (!(mant & 1)) mant >>= 1, tz++;
+  while (!(mant >> tz & 1)) tz++;
+  top = 63;
+  while (!(mant >> top & 1)) top--;
 #endif
-  return q - 53 + tz;
+  *lsb = e0 + tz;
+  *q = e0 + top + 1;
 }
 
 /* Budget of one coordinate pair. */
@@ -31,9 +40,9 @@ static int pair_budget(double a, double b) {
   double v[2] = {a, b};
   for (int i = 0; i < 2; i++) {
     if (v[i] == 0) continue;
-    int l = lsb_exp(v[i]);
+    int l;
+    bit_exps(v[i], &l, &q); /* |v| < 2^q */
     if (l < e) e = l;
-    frexp(v[i], &q); /* |v| < 2^q */
     if (q > big) big = q;
   }
   int m = 52 - (big - e);
