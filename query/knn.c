@@ -132,29 +132,40 @@ enum { KIND_ONE, KIND_SORTED, KIND_HEAP };
 /* Points whose squared distances one pass of the leaf scans computes into a buffer. */
 #define QK__SCAN_CHUNK 64
 
+#if defined(__SSE2__)
+/* Squared distances to the points i and i + 1, into d2[i] and d2[i + 1]. */
+static inline __m128d pair_d2(const double *xs, const double *ys, uint32_t i, __m128d vx,
+                              __m128d vy, double *d2) {
+  const __m128d dx = _mm_sub_pd(_mm_loadu_pd(xs + i), vx);
+  const __m128d dy = _mm_sub_pd(_mm_loadu_pd(ys + i), vy);
+  const __m128d d = _mm_add_pd(_mm_mul_pd(dx, dx), _mm_mul_pd(dy, dy));
+  _mm_storeu_pd(d2 + i, d);
+  return d;
+}
+#endif
+
 /*
  * Squared distances from (qx, qy) to the m points (xs[i], ys[i]) into d2[], two at a
- * time where SSE2 is there (the same IEEE operations lane by lane as the scalar tail, so
+ * time where SSE2 is there (the same IEEE operations lane by lane as the scalar code, so
  * the same values), and the smallest of them. No branch depends on the data, so the loads
  * of a leaf's lines all go out at once and the loop costs a few instructions per point.
+ * The last pair is done first, at m - 2, and the loop stops before it: for an odd count
+ * the two overlap at m - 2, whose value is written twice, the same. That is a fixed step
+ * instead of a scalar tail whose "one more?" branch goes either way from leaf to leaf
+ * (the same in equal_mask and within).
  */
 static inline double leaf_d2(const double *xs, const double *ys, uint32_t m, double qx, double qy,
                              double *d2) {
-  uint32_t i = 0;
-  double lo = INFINITY;
 #if defined(__SSE2__)
-  const __m128d vx = _mm_set1_pd(qx), vy = _mm_set1_pd(qy);
-  __m128d vlo = _mm_set1_pd(INFINITY);
-  for (; i + 1 < m; i += 2) {
-    const __m128d dx = _mm_sub_pd(_mm_loadu_pd(xs + i), vx);
-    const __m128d dy = _mm_sub_pd(_mm_loadu_pd(ys + i), vy);
-    const __m128d d = _mm_add_pd(_mm_mul_pd(dx, dx), _mm_mul_pd(dy, dy));
-    _mm_storeu_pd(d2 + i, d);
-    vlo = _mm_min_pd(vlo, d);
+  if (m >= 2) {
+    const __m128d vx = _mm_set1_pd(qx), vy = _mm_set1_pd(qy);
+    __m128d vlo = pair_d2(xs, ys, m - 2, vx, vy, d2); /* the last pair, first */
+    for (uint32_t i = 0; i + 2 < m; i += 2) vlo = _mm_min_pd(vlo, pair_d2(xs, ys, i, vx, vy, d2));
+    return qk__min_d(_mm_cvtsd_f64(vlo), _mm_cvtsd_f64(_mm_unpackhi_pd(vlo, vlo)));
   }
-  lo = qk__min_d(_mm_cvtsd_f64(vlo), _mm_cvtsd_f64(_mm_unpackhi_pd(vlo, vlo)));
 #endif
-  for (; i < m; i++) {
+  double lo = INFINITY;
+  for (uint32_t i = 0; i < m; i++) {
     const double dx = xs[i] - qx, dy = ys[i] - qy;
     d2[i] = dx * dx + dy * dy;
     lo = qk__min_d(lo, d2[i]);
@@ -176,13 +187,16 @@ static inline uint32_t ctz64(uint64_t v) {
 /* Bit i set when d2[i] == v, for the m <= 64 values of d2[] (usually one bit). */
 static inline uint64_t equal_mask(const double *d2, uint32_t m, double v) {
   uint64_t mask = 0;
-  uint32_t i = 0;
 #if defined(__SSE2__)
-  const __m128d vv = _mm_set1_pd(v);
-  for (; i + 1 < m; i += 2)
-    mask |= (uint64_t)_mm_movemask_pd(_mm_cmpeq_pd(_mm_loadu_pd(d2 + i), vv)) << i;
+  if (m >= 2) {
+    const __m128d vv = _mm_set1_pd(v);
+    mask = (uint64_t)_mm_movemask_pd(_mm_cmpeq_pd(_mm_loadu_pd(d2 + m - 2), vv)) << (m - 2);
+    for (uint32_t i = 0; i + 2 < m; i += 2)
+      mask |= (uint64_t)_mm_movemask_pd(_mm_cmpeq_pd(_mm_loadu_pd(d2 + i), vv)) << i;
+    return mask;
+  }
 #endif
-  for (; i < m; i++) mask |= (uint64_t)(d2[i] == v) << i;
+  for (uint32_t i = 0; i < m; i++) mask |= (uint64_t)(d2[i] == v) << i;
   return mask;
 }
 
@@ -220,6 +234,34 @@ static inline void scan_one(const qk_tree_t *t, qk_node_t leaf, double qx, doubl
 }
 
 /*
+ * Squared distances from (qx, qy) to the m <= 64 points (xs[i], ys[i]) into d2[], and a
+ * mask of those within thr (bit i: d2[i] <= thr), in one pass, two points at a time where
+ * SSE2 is there (the same IEEE operations as the scalar tail, so the same values). The
+ * points' side of the threshold is then data, not a branch per point, which mispredicts
+ * about as often as a point passes.
+ */
+static inline uint64_t within(const double *xs, const double *ys, uint32_t m, double qx, double qy,
+                              double thr, double *d2) {
+  uint64_t mask = 0;
+#if defined(__SSE2__)
+  if (m >= 2) {
+    const __m128d vx = _mm_set1_pd(qx), vy = _mm_set1_pd(qy), vt = _mm_set1_pd(thr);
+    mask = (uint64_t)_mm_movemask_pd(_mm_cmple_pd(pair_d2(xs, ys, m - 2, vx, vy, d2), vt))
+           << (m - 2);
+    for (uint32_t i = 0; i + 2 < m; i += 2)
+      mask |= (uint64_t)_mm_movemask_pd(_mm_cmple_pd(pair_d2(xs, ys, i, vx, vy, d2), vt)) << i;
+    return mask;
+  }
+#endif
+  for (uint32_t i = 0; i < m; i++) {
+    const double dx = xs[i] - qx, dy = ys[i] - qy;
+    d2[i] = dx * dx + dy * dy;
+    mask |= (uint64_t)(d2[i] <= thr) << i;
+  }
+  return mask;
+}
+
+/*
  * Offer a leaf's points to a sorted array of at most k (squared distance, slot) pairs.
  * The array keeps slots, not ids, as the k = 1 search does: an id is read
  * only when two distances tie (the (distance, id) order), and the k ids at the end, all
@@ -237,28 +279,31 @@ static inline void scan_sorted(const qk_tree_t *t, qk_node_t leaf, double qx, do
   /* In locals: the stores into o could alias them. */
   size_t n = b->n;
   double thr = b->thr;
-  for (uint32_t i = 0; i < count; i++) {
-    const double dx = xs[i] - qx, dy = ys[i] - qy;
-    const double v = dx * dx + dy * dy;
-    if (v > thr) continue;
-    const uint32_t s = start + i;
-    qk_neighbor_t *at;
-    if (n == k) {
-      const qk_neighbor_t w = o[k - 1];
-      if (!(v < w.dist || (v == w.dist && pid[s] < pid[w.id]))) continue;
-      at = o + k - 1;
-    } else {
-      at = o + n++;
+  double d2[QK__SCAN_CHUNK];
+  for (uint32_t base = 0; base < count; base += QK__SCAN_CHUNK) {
+    const uint32_t m = count - base < QK__SCAN_CHUNK ? count - base : QK__SCAN_CHUNK;
+    for (uint64_t r = within(xs + base, ys + base, m, qx, qy, thr, d2); r; r &= r - 1) {
+      const uint32_t i = ctz64(r), s = start + base + i;
+      const double v = d2[i];
+      qk_neighbor_t *at;
+      if (n == k) {
+        /* The threshold is the last entry's distance, which may have shrunk since. */
+        const qk_neighbor_t w = o[k - 1];
+        if (!(v < w.dist || (v == w.dist && pid[s] < pid[w.id]))) continue;
+        at = o + k - 1;
+      } else {
+        at = o + n++;
+      }
+      /* o[-1] is a sentinel at distance -infinity (knn_search), so no bound check, and
+       * the tie loop never reads its slot. */
+      for (; at[-1].dist > v; at--) *at = at[-1];
+      if (at[-1].dist == v) {
+        const qk_id_t id = pid[s];
+        for (; at[-1].dist == v && pid[at[-1].id] > id; at--) *at = at[-1];
+      }
+      *at = (qk_neighbor_t){s, v};
+      if (n == k) thr = o[k - 1].dist;
     }
-    /* o[-1] is a sentinel at distance -infinity (knn_search), so no bound check, and
-     * the tie loop never reads its slot. */
-    for (; at[-1].dist > v; at--) *at = at[-1];
-    if (at[-1].dist == v) {
-      const qk_id_t id = pid[s];
-      for (; at[-1].dist == v && pid[at[-1].id] > id; at--) *at = at[-1];
-    }
-    *at = (qk_neighbor_t){s, v};
-    if (n == k) thr = o[k - 1].dist;
   }
   b->n = n;
   b->thr = thr;
@@ -420,16 +465,20 @@ size_t qk__knn_guess_runs, qk__knn_guess_misses;
 
 /*
  * A first limit for a search of k > 1 (squared): the radius of the disc that holds about
- * 2k + 8 points at the density of the smallest cell on the query's path that holds at
- * least 4k (its count over its area), or infinity when no cell does. A search within it
- * that finds k points has found the k nearest: every point beyond it ranks after the k it
- * found. Until the best-so-far set is full, the searches prune nothing and every point
- * they meet enters it, to be pushed out again by nearer ones; for k = 32 at 1M uniform
- * points, about 110 insertions for the 32 answers. With this limit a point enters only
- * when it lies within the disc, and whole subtrees beyond it are skipped from the start.
- * For uniform points the disc misses k in fewer than one query in 10^4 (the count is
- * Poisson with mean 2k + 8); the search then runs again with the caller's limit, which
- * bounds the cost of a poor guess (clustered points) by one cheap extra search.
+ * k + 2 sqrt(k) + 4 points at the density of the smallest cell on the query's path that
+ * holds at least 4k (its count over its area), or infinity when no cell does. A search
+ * within it that finds k points has found the k nearest: every point beyond it ranks after
+ * the k it found. Without it, until the best-so-far set is full, a search prunes nothing
+ * and every point it meets enters the set, most to be pushed out again by nearer ones;
+ * with it a point enters only when it lies within the disc. For uniform points the count
+ * in the disc is about Poisson: at 1M uniform points the disc holds fewer than k in 0.1%
+ * of the searches for k = 8 and 0.6% for k = 32, and those run again with the caller's
+ * limit (the cost of a poor guess, as for clustered points, is one cheap extra search).
+ * The size was chosen with callgrind at 1M uniform points (k = 8 and 32, instructions and
+ * simulated mispredictions per query, the extra searches included): 2k + 8 points gave
+ * 2479 and 7208 instructions, k + 2 sqrt(k) + 4 gave 2396 and 6558, k + 1.5 sqrt(k) + 4
+ * 2374 and 6466 with twice the extra searches (1.4% for k = 32), which clustered points
+ * would make dearer.
  */
 static double guess_limit(const qk_tree_t *t, const qk__path_t *p, size_t k) {
   const size_t want = 4 * k;
@@ -441,7 +490,7 @@ static double guess_limit(const qk_tree_t *t, const qk__path_t *p, size_t k) {
   }
   if (cnt < want) return INFINITY;
   const double side = qk__tree_side(t, c.depth);
-  return (double)(2 * k + 8) * side * side / (3.14159 * (double)cnt);
+  return ((double)k + 2.0 * sqrt((double)k) + 4.0) * side * side / (3.14159 * (double)cnt);
 }
 
 /* Any k > 1 with a limit (squared): how many of out hold neighbours (squared distances
