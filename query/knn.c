@@ -98,10 +98,13 @@ static inline void push_siblings(const qk_tree_t *t, qk__cell_t p, uint32_t chil
   const double b[4] = {xe + yn, xw + yn, xw + ys, xe + ys}; /* NE, NW, SW, SE */
   qk__cell_t kc[4];
   qk__cell_children(t, p, child, kc);
-  qk__cell_entry_t kids[3];
+  /* Each child written, and kept (m advanced) when it passes: no branch on the bounds. */
+  qk__cell_entry_t kids[4];
   int m = 0;
-  for (unsigned q = 0; q < 4; q++)
-    if (q != skip && b[q] <= thr) kids[m++] = (qk__cell_entry_t){kc[q], b[q]};
+  for (unsigned q = 0; q < 4; q++) {
+    kids[m] = (qk__cell_entry_t){kc[q], b[q]};
+    m += (q != skip) & (b[q] <= thr);
+  }
   qk__sort_cells_desc(kids, m);
   for (int i = 0; i < m; i++) stack[(*sp)++] = kids[i];
 }
@@ -161,7 +164,7 @@ static inline double leaf_d2(const double *xs, const double *ys, uint32_t m, dou
     const __m128d vx = _mm_set1_pd(qx), vy = _mm_set1_pd(qy);
     __m128d vlo = pair_d2(xs, ys, m - 2, vx, vy, d2); /* the last pair, first */
     for (uint32_t i = 0; i + 2 < m; i += 2) vlo = _mm_min_pd(vlo, pair_d2(xs, ys, i, vx, vy, d2));
-    return qk__min_d(_mm_cvtsd_f64(vlo), _mm_cvtsd_f64(_mm_unpackhi_pd(vlo, vlo)));
+    return _mm_cvtsd_f64(_mm_min_sd(vlo, _mm_unpackhi_pd(vlo, vlo)));
   }
 #endif
   double lo = INFINITY;
@@ -326,19 +329,20 @@ static inline void prefetch_points(const qk_tree_t *t, qk_node_t leaf) {
 }
 
 /*
- * Ask for the ids of a leaf's points (at most 48). The k = 1 and sorted searches read ids
- * only at the end, and the answer lies most often in the leaf that holds the query: asked
- * for with that leaf's coordinates, the line is there by then instead of being a miss of
- * its own after the whole search.
+ * Ask for the ids of a leaf's points (those of its first 32). The k = 1 and sorted searches
+ * read ids only at the end, and the answer lies most often in the leaf that holds the
+ * query: asked for with that leaf's coordinates, the line is there by then instead of
+ * being a miss of its own after the whole search. The first, middle and last of up to 32
+ * ids (128 bytes) touch every line they span, with no test on the count.
  */
 static inline void prefetch_ids(const qk_tree_t *t, qk_node_t leaf) {
   const uint32_t start = qk__node_start(t, leaf), count = qk__node_count(t, leaf);
   if (count == 0) return;
+  const uint32_t m = count < 32 ? count : 32;
   const qk_id_t *pid = qk__tree_ids(t) + start;
   QK__PREFETCH(pid);
-  if (count > 16) QK__PREFETCH(pid + 16);
-  if (count > 32) QK__PREFETCH(pid + 32);
-  QK__PREFETCH(pid + (count < 48 ? count : 48) - 1);
+  QK__PREFETCH(pid + (m - 1) / 2);
+  QK__PREFETCH(pid + m - 1);
 }
 
 /*
@@ -358,8 +362,9 @@ static inline void prefetch_uncles(const qk_tree_t *t, const qk__path_t *p) {
   if (p->len < 2) return;
   const unsigned g = p->len - 2; /* the grandparent's level */
   const uint32_t first = qk__node_child(t, p->cell[g].node);
+  /* All four, the parent too (its children are in cache, asked for again at no cost): a
+   * test to skip it would go either way from query to query. */
   for (unsigned q = 0; q < 4; q++) {
-    if (q == p->q[g]) continue;
     const uint32_t c = qk__node_child(t, first + q);
     if (c == QK_NONE) {
       prefetch_points(t, first + q);

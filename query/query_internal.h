@@ -88,14 +88,24 @@ static inline double qk__square_d2(double x0, double y0, double side, double qx,
   return dx * dx + dy * dy;
 }
 
-/* Distance from v to the interval [lo, hi] (0 inside). */
-static inline double qk__gap(double v, double lo, double hi) {
-  return v < lo ? lo - v : (v > hi ? v - hi : 0.0);
-}
-
-/* The smaller of two values known not to be NaN (a single instruction, where fmin() is
- * a library call). */
+/* The smaller and the larger of two values known not to be NaN (a single instruction,
+ * where fmin() is a library call). */
 static inline double qk__min_d(double a, double b) { return a < b ? a : b; }
+static inline double qk__max_d(double a, double b) { return a > b ? a : b; }
+
+/* Distance from v to the interval [lo, hi] (0 inside), lo <= hi: at most one of the two
+ * terms is nonzero, and adding +0 changes nothing, so the value is that of the test "below,
+ * above or inside", without its branches, which the searches' bounds take at random. */
+static inline double qk__gap(double v, double lo, double hi) {
+#if defined(__SSE2__)
+  /* maxsd spelled out: compilers keep the branch of the ternary for doubles. */
+  const __m128d z = _mm_setzero_pd();
+  return _mm_cvtsd_f64(
+      _mm_add_sd(_mm_max_sd(_mm_set_sd(lo - v), z), _mm_max_sd(_mm_set_sd(v - hi), z)));
+#else
+  return qk__max_d(lo - v, 0.0) + qk__max_d(v - hi, 0.0);
+#endif
+}
 
 /* (d, id) ordering of neighbours: by distance, ties by smaller id. */
 static inline int qk__nb_less(double da, qk_id_t ia, double db, qk_id_t ib) {
