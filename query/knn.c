@@ -60,7 +60,9 @@ static inline int expand(const qk_tree_t *t, qk__cell_entry_t *cur, uint32_t chi
   const double dxw = qk__gap(qx, c.x - e, xm + e), dxe = qk__gap(qx, xm - e, xm + hs + e);
   const double dys = qk__gap(qy, c.y - e, ym + e), dyn = qk__gap(qy, ym - e, ym + hs + e);
   const unsigned en = dxe < dxw, nn = dyn < dys; /* is the east / north half the nearer? */
-  const double xn = en ? dxe : dxw, xf = en ? dxw : dxe, yn = nn ? dyn : dys, yf = nn ? dys : dyn;
+  /* The nearer and farther per axis: the same values as choosing by en and nn. */
+  const double xn = qk__min_d(dxe, dxw), xf = qk__max_d(dxe, dxw);
+  const double yn = qk__min_d(dyn, dys), yf = qk__max_d(dyn, dys);
   const double bnn = xn * xn + yn * yn;
   if (bnn > thr) return 0;
   const double bff = xf * xf + yf * yf, bfn = xf * xf + yn * yn, bnf = xn * xn + yf * yf;
@@ -305,7 +307,7 @@ static inline void scan_sorted(const qk_tree_t *t, qk_node_t leaf, double qx, do
         for (; at[-1].dist == v && pid[at[-1].id] > id; at--) *at = at[-1];
       }
       *at = (qk_neighbor_t){s, v};
-      if (n == k) thr = o[k - 1].dist;
+      thr = o[k - 1].dist; /* the caller's limit until the array is full (knn_limited) */
     }
   }
   b->n = n;
@@ -508,6 +510,9 @@ static size_t knn_limited(const qk_tree_t *t, double qx, double qy, size_t k, do
      * without a bound check. */
     qk_neighbor_t sorted[QK__KNN_SORTED + 1];
     sorted[0] = (qk_neighbor_t){QK_NONE, -INFINITY};
+    /* The last entry holds the limit until an insertion reaches it, so that the
+     * threshold is always the last entry's distance (no test on the count). */
+    sorted[k] = (qk_neighbor_t){QK_NONE, limit2};
     b.out = sorted + 1;
     search(t, qx, qy, &b, KIND_SORTED, path);
     /* The entries hold slots: their ids now, whose reads do not wait for one another. */
