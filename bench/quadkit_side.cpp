@@ -60,6 +60,9 @@ public:
     qk_tree_options_t o;
     qk_tree_options_init(&o);
     o.capacity = capacity;
+    // QKB_HUGE_PAGES=1: the point arrays on transparent huge pages (an A/B of the TLB's
+    // share of the query rates; see docs/benchmarks.md).
+    if (const char *h = std::getenv("QKB_HUGE_PAGES")) o.huge_pages = std::atoi(h) != 0;
     qk_status_t st = qk_tree_build(as_points(pts), pts.size(), &o, &tree);
     if (st) die("qk_tree_build", st);
   }

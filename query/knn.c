@@ -9,12 +9,11 @@
  * search never walks that path twice.
  *
  * A query allocates nothing: for k = 1 the best so far is a single (distance, slot) pair
- * in registers, its id read once at the end; for k up to QK__KNN_SORTED an array on the
- * stack kept sorted by insertion (few candidates enter, and no final sort is needed);
+ * in registers, its id read once at the end; for k up to QK__KNN_SORTED an array of
+ * (distance, slot) on the stack kept sorted by insertion (few candidates enter, and no
+ * final sort is needed), its ids read at the end;
  * beyond that a bounded max-heap in the caller's buffer (query/heap.c).
  */
-#include <string.h>
-
 #include "query/query_internal.h"
 
 #if defined(__SSE2__)
@@ -61,7 +60,9 @@ static inline int expand(const qk_tree_t *t, qk__cell_entry_t *cur, uint32_t chi
   const double dxw = qk__gap(qx, c.x - e, xm + e), dxe = qk__gap(qx, xm - e, xm + hs + e);
   const double dys = qk__gap(qy, c.y - e, ym + e), dyn = qk__gap(qy, ym - e, ym + hs + e);
   const unsigned en = dxe < dxw, nn = dyn < dys; /* is the east / north half the nearer? */
-  const double xn = en ? dxe : dxw, xf = en ? dxw : dxe, yn = nn ? dyn : dys, yf = nn ? dys : dyn;
+  /* The nearer and farther per axis: the same values as choosing by en and nn. */
+  const double xn = qk__min_d(dxe, dxw), xf = qk__max_d(dxe, dxw);
+  const double yn = qk__min_d(dyn, dys), yf = qk__max_d(dyn, dys);
   const double bnn = xn * xn + yn * yn;
   if (bnn > thr) return 0;
   const double bff = xf * xf + yf * yf, bfn = xf * xf + yn * yn, bnf = xn * xn + yf * yf;
@@ -99,10 +100,13 @@ static inline void push_siblings(const qk_tree_t *t, qk__cell_t p, uint32_t chil
   const double b[4] = {xe + yn, xw + yn, xw + ys, xe + ys}; /* NE, NW, SW, SE */
   qk__cell_t kc[4];
   qk__cell_children(t, p, child, kc);
-  qk__cell_entry_t kids[3];
+  /* Each child written, and kept (m advanced) when it passes: no branch on the bounds. */
+  qk__cell_entry_t kids[4];
   int m = 0;
-  for (unsigned q = 0; q < 4; q++)
-    if (q != skip && b[q] <= thr) kids[m++] = (qk__cell_entry_t){kc[q], b[q]};
+  for (unsigned q = 0; q < 4; q++) {
+    kids[m] = (qk__cell_entry_t){kc[q], b[q]};
+    m += (q != skip) & (b[q] <= thr);
+  }
   qk__sort_cells_desc(kids, m);
   for (int i = 0; i < m; i++) stack[(*sp)++] = kids[i];
 }
@@ -133,29 +137,40 @@ enum { KIND_ONE, KIND_SORTED, KIND_HEAP };
 /* Points whose squared distances one pass of the leaf scans computes into a buffer. */
 #define QK__SCAN_CHUNK 64
 
+#if defined(__SSE2__)
+/* Squared distances to the points i and i + 1, into d2[i] and d2[i + 1]. */
+static inline __m128d pair_d2(const double *xs, const double *ys, uint32_t i, __m128d vx,
+                              __m128d vy, double *d2) {
+  const __m128d dx = _mm_sub_pd(_mm_loadu_pd(xs + i), vx);
+  const __m128d dy = _mm_sub_pd(_mm_loadu_pd(ys + i), vy);
+  const __m128d d = _mm_add_pd(_mm_mul_pd(dx, dx), _mm_mul_pd(dy, dy));
+  _mm_storeu_pd(d2 + i, d);
+  return d;
+}
+#endif
+
 /*
  * Squared distances from (qx, qy) to the m points (xs[i], ys[i]) into d2[], two at a
- * time where SSE2 is there (the same IEEE operations lane by lane as the scalar tail, so
+ * time where SSE2 is there (the same IEEE operations lane by lane as the scalar code, so
  * the same values), and the smallest of them. No branch depends on the data, so the loads
  * of a leaf's lines all go out at once and the loop costs a few instructions per point.
+ * The last pair is done first, at m - 2, and the loop stops before it: for an odd count
+ * the two overlap at m - 2, whose value is written twice, the same. That is a fixed step
+ * instead of a scalar tail whose "one more?" branch goes either way from leaf to leaf
+ * (the same in equal_mask and within).
  */
 static inline double leaf_d2(const double *xs, const double *ys, uint32_t m, double qx, double qy,
                              double *d2) {
-  uint32_t i = 0;
-  double lo = INFINITY;
 #if defined(__SSE2__)
-  const __m128d vx = _mm_set1_pd(qx), vy = _mm_set1_pd(qy);
-  __m128d vlo = _mm_set1_pd(INFINITY);
-  for (; i + 1 < m; i += 2) {
-    const __m128d dx = _mm_sub_pd(_mm_loadu_pd(xs + i), vx);
-    const __m128d dy = _mm_sub_pd(_mm_loadu_pd(ys + i), vy);
-    const __m128d d = _mm_add_pd(_mm_mul_pd(dx, dx), _mm_mul_pd(dy, dy));
-    _mm_storeu_pd(d2 + i, d);
-    vlo = _mm_min_pd(vlo, d);
+  if (m >= 2) {
+    const __m128d vx = _mm_set1_pd(qx), vy = _mm_set1_pd(qy);
+    __m128d vlo = pair_d2(xs, ys, m - 2, vx, vy, d2); /* the last pair, first */
+    for (uint32_t i = 0; i + 2 < m; i += 2) vlo = _mm_min_pd(vlo, pair_d2(xs, ys, i, vx, vy, d2));
+    return _mm_cvtsd_f64(_mm_min_sd(vlo, _mm_unpackhi_pd(vlo, vlo)));
   }
-  lo = qk__min_d(_mm_cvtsd_f64(vlo), _mm_cvtsd_f64(_mm_unpackhi_pd(vlo, vlo)));
 #endif
-  for (; i < m; i++) {
+  double lo = INFINITY;
+  for (uint32_t i = 0; i < m; i++) {
     const double dx = xs[i] - qx, dy = ys[i] - qy;
     d2[i] = dx * dx + dy * dy;
     lo = qk__min_d(lo, d2[i]);
@@ -177,13 +192,16 @@ static inline uint32_t ctz64(uint64_t v) {
 /* Bit i set when d2[i] == v, for the m <= 64 values of d2[] (usually one bit). */
 static inline uint64_t equal_mask(const double *d2, uint32_t m, double v) {
   uint64_t mask = 0;
-  uint32_t i = 0;
 #if defined(__SSE2__)
-  const __m128d vv = _mm_set1_pd(v);
-  for (; i + 1 < m; i += 2)
-    mask |= (uint64_t)_mm_movemask_pd(_mm_cmpeq_pd(_mm_loadu_pd(d2 + i), vv)) << i;
+  if (m >= 2) {
+    const __m128d vv = _mm_set1_pd(v);
+    mask = (uint64_t)_mm_movemask_pd(_mm_cmpeq_pd(_mm_loadu_pd(d2 + m - 2), vv)) << (m - 2);
+    for (uint32_t i = 0; i + 2 < m; i += 2)
+      mask |= (uint64_t)_mm_movemask_pd(_mm_cmpeq_pd(_mm_loadu_pd(d2 + i), vv)) << i;
+    return mask;
+  }
 #endif
-  for (; i < m; i++) mask |= (uint64_t)(d2[i] == v) << i;
+  for (uint32_t i = 0; i < m; i++) mask |= (uint64_t)(d2[i] == v) << i;
   return mask;
 }
 
@@ -221,36 +239,76 @@ static inline void scan_one(const qk_tree_t *t, qk_node_t leaf, double qx, doubl
 }
 
 /*
- * Offer a leaf's points to a sorted array of at most k. The insertion compares distances
- * alone while they differ (one comparison per entry moved), then ids among equal ones.
+ * Squared distances from (qx, qy) to the m <= 64 points (xs[i], ys[i]) into d2[], and a
+ * mask of those within thr (bit i: d2[i] <= thr), in one pass, two points at a time where
+ * SSE2 is there (the same IEEE operations as the scalar tail, so the same values). The
+ * points' side of the threshold is then data, not a branch per point, which mispredicts
+ * about as often as a point passes.
+ */
+static inline uint64_t within(const double *xs, const double *ys, uint32_t m, double qx, double qy,
+                              double thr, double *d2) {
+  uint64_t mask = 0;
+#if defined(__SSE2__)
+  if (m >= 2) {
+    const __m128d vx = _mm_set1_pd(qx), vy = _mm_set1_pd(qy), vt = _mm_set1_pd(thr);
+    mask = (uint64_t)_mm_movemask_pd(_mm_cmple_pd(pair_d2(xs, ys, m - 2, vx, vy, d2), vt))
+           << (m - 2);
+    for (uint32_t i = 0; i + 2 < m; i += 2)
+      mask |= (uint64_t)_mm_movemask_pd(_mm_cmple_pd(pair_d2(xs, ys, i, vx, vy, d2), vt)) << i;
+    return mask;
+  }
+#endif
+  for (uint32_t i = 0; i < m; i++) {
+    const double dx = xs[i] - qx, dy = ys[i] - qy;
+    d2[i] = dx * dx + dy * dy;
+    mask |= (uint64_t)(d2[i] <= thr) << i;
+  }
+  return mask;
+}
+
+/*
+ * Offer a leaf's points to a sorted array of at most k (squared distance, slot) pairs.
+ * The array keeps slots, not ids, as the k = 1 search does: an id is read
+ * only when two distances tie (the (distance, id) order), and the k ids at the end, all
+ * at once (knn_search). In a tree larger than the cache the ids are lines of their own,
+ * and most candidates are pushed out again before the end. The insertion compares
+ * distances alone while they differ (one comparison per entry moved).
  */
 static inline void scan_sorted(const qk_tree_t *t, qk_node_t leaf, double qx, double qy,
                                best_t *b) {
   const uint32_t start = qk__node_start(t, leaf), count = qk__node_count(t, leaf);
-  const double *px = qk__tree_xs(t) + start, *py = qk__tree_ys(t) + start;
-  const qk_id_t *pid = qk__tree_ids(t) + start;
+  const double *xs = qk__tree_xs(t) + start, *ys = qk__tree_ys(t) + start;
+  const qk_id_t *pid = qk__tree_ids(t);
   qk_neighbor_t *o = b->out;
   const size_t k = b->k;
   /* In locals: the stores into o could alias them. */
   size_t n = b->n;
   double thr = b->thr;
-  for (uint32_t i = 0; i < count; i++) {
-    const double dx = px[i] - qx, dy = py[i] - qy;
-    const double d2 = dx * dx + dy * dy;
-    if (d2 > thr) continue;
-    const qk_id_t id = pid[i];
-    qk_neighbor_t *at;
-    if (n == k) {
-      if (!qk__nb_less(d2, id, o[k - 1].dist, o[k - 1].id)) continue;
-      at = o + k - 1;
-    } else {
-      at = o + n++;
+  double d2[QK__SCAN_CHUNK];
+  for (uint32_t base = 0; base < count; base += QK__SCAN_CHUNK) {
+    const uint32_t m = count - base < QK__SCAN_CHUNK ? count - base : QK__SCAN_CHUNK;
+    for (uint64_t r = within(xs + base, ys + base, m, qx, qy, thr, d2); r; r &= r - 1) {
+      const uint32_t i = ctz64(r), s = start + base + i;
+      const double v = d2[i];
+      qk_neighbor_t *at;
+      if (n == k) {
+        /* The threshold is the last entry's distance, which may have shrunk since. */
+        const qk_neighbor_t w = o[k - 1];
+        if (!(v < w.dist || (v == w.dist && pid[s] < pid[w.id]))) continue;
+        at = o + k - 1;
+      } else {
+        at = o + n++;
+      }
+      /* o[-1] is a sentinel at distance -infinity (knn_search), so no bound check, and
+       * the tie loop never reads its slot. */
+      for (; at[-1].dist > v; at--) *at = at[-1];
+      if (at[-1].dist == v) {
+        const qk_id_t id = pid[s];
+        for (; at[-1].dist == v && pid[at[-1].id] > id; at--) *at = at[-1];
+      }
+      *at = (qk_neighbor_t){s, v};
+      thr = o[k - 1].dist; /* the caller's limit until the array is full (knn_limited) */
     }
-    /* o[-1] is a sentinel at distance -infinity (knn_search), so no bound check. */
-    for (; at[-1].dist > d2; at--) *at = at[-1];
-    for (; at[-1].dist == d2 && at[-1].id > id; at--) *at = at[-1];
-    *at = (qk_neighbor_t){id, d2};
-    if (n == k) thr = o[k - 1].dist;
   }
   b->n = n;
   b->thr = thr;
@@ -273,6 +331,23 @@ static inline void prefetch_points(const qk_tree_t *t, qk_node_t leaf) {
 }
 
 /*
+ * Ask for the ids of a leaf's points (those of its first 32). The k = 1 and sorted searches
+ * read ids only at the end, and the answer lies most often in the leaf that holds the
+ * query: asked for with that leaf's coordinates, the line is there by then instead of
+ * being a miss of its own after the whole search. The first, middle and last of up to 32
+ * ids (128 bytes) touch every line they span, with no test on the count.
+ */
+static inline void prefetch_ids(const qk_tree_t *t, qk_node_t leaf) {
+  const uint32_t start = qk__node_start(t, leaf), count = qk__node_count(t, leaf);
+  if (count == 0) return;
+  const uint32_t m = count < 32 ? count : 32;
+  const qk_id_t *pid = qk__tree_ids(t) + start;
+  QK__PREFETCH(pid);
+  QK__PREFETCH(pid + (m - 1) / 2);
+  QK__PREFETCH(pid + m - 1);
+}
+
+/*
  * Before a 1-NN search scans the leaf at the end of path p, ask for what its climb most
  * often reads at a cache miss of its own: the nodes below the leaf's parent's siblings
  * (the "uncles"), or their points when they are leaves. When the nearest point lies
@@ -289,8 +364,9 @@ static inline void prefetch_uncles(const qk_tree_t *t, const qk__path_t *p) {
   if (p->len < 2) return;
   const unsigned g = p->len - 2; /* the grandparent's level */
   const uint32_t first = qk__node_child(t, p->cell[g].node);
+  /* All four, the parent too (its children are in cache, asked for again at no cost): a
+   * test to skip it would go either way from query to query. */
   for (unsigned q = 0; q < 4; q++) {
-    if (q == p->q[g]) continue;
     const uint32_t c = qk__node_child(t, first + q);
     if (c == QK_NONE) {
       prefetch_points(t, first + q);
@@ -339,6 +415,7 @@ static QK__ALWAYS_INLINE void climb(const qk_tree_t *t, double qx, double qy, be
   qk__cell_t c = p->leaf;
   unsigned len = p->len;
   if (kind == KIND_ONE) prefetch_uncles(t, p);
+  if (kind != KIND_HEAP) prefetch_ids(t, c.node);
   scan(t, c.node, qx, qy, b, kind);
   while (len > 0) {
     /* Everything inside c is done. When the threshold's ball lies inside c's square
@@ -389,23 +466,89 @@ static size_t knn1(const qk_tree_t *t, double qx, double qy, double limit2, qk_n
   return 1;
 }
 
-/* Any k: returns how many of out hold neighbours (squared distances), sorted. */
-static size_t knn_search(const qk_tree_t *t, double qx, double qy, size_t k, double limit2,
-                         qk_neighbor_t *out, const qk__path_t *path) {
+#ifdef QK_KNN_STATS
+size_t qk__knn_guess_runs, qk__knn_guess_misses;
+#endif
+
+/*
+ * A first limit for a search of k > 1 (squared): the radius of the disc that holds about
+ * k + 2 sqrt(k) + 4 points at the density of the smallest cell on the query's path that
+ * holds at least 4k (its count over its area), or infinity when no cell does. A search
+ * within it that finds k points has found the k nearest: every point beyond it ranks after
+ * the k it found. Without it, until the best-so-far set is full, a search prunes nothing
+ * and every point it meets enters the set, most to be pushed out again by nearer ones;
+ * with it a point enters only when it lies within the disc. For uniform points the count
+ * in the disc is about Poisson: at 1M uniform points the disc holds fewer than k in 0.1%
+ * of the searches for k = 8 and 0.6% for k = 32, and those run again with the caller's
+ * limit (the cost of a poor guess, as for clustered points, is one cheap extra search).
+ * The size was chosen with callgrind at 1M uniform points (k = 8 and 32, instructions and
+ * simulated mispredictions per query, the extra searches included): 2k + 8 points gave
+ * 2479 and 7208 instructions, k + 2 sqrt(k) + 4 gave 2396 and 6558, k + 1.5 sqrt(k) + 4
+ * 2374 and 6466 with twice the extra searches (1.4% for k = 32), which clustered points
+ * would make dearer.
+ */
+static double guess_limit(const qk_tree_t *t, const qk__path_t *p, size_t k) {
+  const size_t want = 4 * k;
+  qk__cell_t c = p->leaf;
+  size_t cnt = qk__node_count(t, c.node);
+  for (unsigned i = p->len; cnt < want && i > 0;) {
+    c = p->cell[--i];
+    cnt = qk__node_count(t, c.node);
+  }
+  if (cnt < want) return INFINITY;
+  const double side = qk__tree_side(t, c.depth);
+  return ((double)k + 2.0 * sqrt((double)k) + 4.0) * side * side / (3.14159 * (double)cnt);
+}
+
+/* Any k > 1 with a limit (squared): how many of out hold neighbours (squared distances
+ * in b->out), sorted, into out; the ids of a sorted search's slots are read at the end. */
+static size_t knn_limited(const qk_tree_t *t, double qx, double qy, size_t k, double limit2,
+                          qk_neighbor_t *out, const qk__path_t *path) {
   best_t b = {out, k, 0, limit2, QK_NONE};
   if (k <= QK__KNN_SORTED) {
     /* The sorted array lives here, after a sentinel that ends every insertion's shift
-     * without a bound check; copied out at the end. */
+     * without a bound check. */
     qk_neighbor_t sorted[QK__KNN_SORTED + 1];
     sorted[0] = (qk_neighbor_t){QK_NONE, -INFINITY};
+    /* The last entry holds the limit until an insertion reaches it, so that the
+     * threshold is always the last entry's distance (no test on the count). */
+    sorted[k] = (qk_neighbor_t){QK_NONE, limit2};
     b.out = sorted + 1;
     search(t, qx, qy, &b, KIND_SORTED, path);
-    memcpy(out, sorted + 1, b.n * sizeof *out);
+    /* The entries hold slots: their ids now, whose reads do not wait for one another. */
+    const qk_id_t *pid = qk__tree_ids(t);
+    for (size_t i = 0; i < b.n; i++)
+      out[i] = (qk_neighbor_t){pid[sorted[i + 1].id], sqrt(sorted[i + 1].dist)};
   } else {
     search(t, qx, qy, &b, KIND_HEAP, path);
     qk__heap_sort(out, b.n);
+    for (size_t i = 0; i < b.n; i++) out[i].dist = sqrt(out[i].dist);
   }
   return b.n;
+}
+
+/* Any k > 1: returns how many of out hold neighbours (distances), sorted. A query inside
+ * the root is searched first within the guessed limit (guess_limit), from its path. */
+static size_t knn_search(const qk_tree_t *t, double qx, double qy, size_t k, double limit2,
+                         qk_neighbor_t *out, const qk__path_t *path) {
+  if (!qk__tree_contains(t, qx, qy)) return knn_limited(t, qx, qy, k, limit2, out, NULL);
+  qk__path_t own;
+  if (!path) {
+    qk__path_init(t, &own);
+    qk__path_finish(t, &own, qx, qy);
+    path = &own;
+  }
+  const double guess2 = guess_limit(t, path, k);
+  if (guess2 < limit2) {
+#ifdef QK_KNN_STATS
+    qk__knn_guess_runs++;
+#endif
+    if (knn_limited(t, qx, qy, k, guess2, out, path) == k) return k;
+#ifdef QK_KNN_STATS
+    qk__knn_guess_misses++;
+#endif
+  }
+  return knn_limited(t, qx, qy, k, limit2, out, path);
 }
 
 /*
@@ -452,9 +595,9 @@ size_t qk__knn_one(const qk_tree_t *t, qk_point_t q, size_t k, double max_dist, 
   if (np == 0 || k == 0) return 0;
   if (k > np) k = np;
   double limit2 = max_dist * max_dist;
-  size_t n =
-      k == 1 ? knn1(t, q.x, q.y, limit2, out, path) : knn_search(t, q.x, q.y, k, limit2, out, path);
-  for (size_t i = 0; i < n; i++) out[i].dist = sqrt(out[i].dist);
+  if (k > 1) return knn_search(t, q.x, q.y, k, limit2, out, path);
+  const size_t n = knn1(t, q.x, q.y, limit2, out, path);
+  if (n) out[0].dist = sqrt(out[0].dist);
   return n;
 }
 

@@ -88,14 +88,30 @@ static inline double qk__square_d2(double x0, double y0, double side, double qx,
   return dx * dx + dy * dy;
 }
 
-/* Distance from v to the interval [lo, hi] (0 inside). */
-static inline double qk__gap(double v, double lo, double hi) {
-  return v < lo ? lo - v : (v > hi ? v - hi : 0.0);
+/* The smaller and the larger of two values known not to be NaN: one instruction (minsd,
+ * maxsd, whose rule is exactly a < b ? a : b) where fmin() is a library call and compilers
+ * may keep the ternary's branch, which the searches' bounds would take at random. */
+static inline double qk__min_d(double a, double b) {
+#if defined(__SSE2__)
+  return _mm_cvtsd_f64(_mm_min_sd(_mm_set_sd(a), _mm_set_sd(b)));
+#else
+  return a < b ? a : b;
+#endif
+}
+static inline double qk__max_d(double a, double b) {
+#if defined(__SSE2__)
+  return _mm_cvtsd_f64(_mm_max_sd(_mm_set_sd(a), _mm_set_sd(b)));
+#else
+  return a > b ? a : b;
+#endif
 }
 
-/* The smaller of two values known not to be NaN (a single instruction, where fmin() is
- * a library call). */
-static inline double qk__min_d(double a, double b) { return a < b ? a : b; }
+/* Distance from v to the interval [lo, hi] (0 inside), lo <= hi: at most one of the two
+ * terms is nonzero, and adding +0 changes nothing, so the value is that of the test "below,
+ * above or inside", without its branches, which the searches' bounds take at random. */
+static inline double qk__gap(double v, double lo, double hi) {
+  return qk__max_d(lo - v, 0.0) + qk__max_d(v - hi, 0.0);
+}
 
 /* (d, id) ordering of neighbours: by distance, ties by smaller id. */
 static inline int qk__nb_less(double da, qk_id_t ia, double db, qk_id_t ib) {

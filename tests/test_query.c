@@ -9,6 +9,8 @@
  *    around the sorted-array limit, single and batch;
  *  - 1-NN ties on a duplicated dyadic grid (within a chunk, across leaves), caps equal to
  *    a grid distance, queries far outside, k above the point count, single and batch;
+ *  - k > 1 ties on that grid (the id order decides which equal distances make the k), and
+ *    queries beside a dense cluster, where the search's guessed first limit falls short;
  *  - batch kNN (Z-order, each query starting from the previous path) on every point set
  *    and capacity, one and two threads, against brute force;
  *  - kNN after random inserts and removals (qk_tree_check after each batch);
@@ -656,6 +658,62 @@ static void test_query_knn1_ties(void **state) {
   free(p), free(qs), free(got), free(counts);
 }
 
+/*
+ * k > 1 on a duplicated dyadic grid (many equal distances, so the (distance, id) order
+ * decides which of them make the k), with caps equal to grid distances, single and batch;
+ * and on a dense cluster beside sparse points, where the first limit a search guesses
+ * from the density of a cell on its path (query/knn.c) holds fewer than k points and the
+ * search has to run again with the caller's limit.
+ */
+static void test_query_knn_ties_k(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 14);
+  const size_t n = 1500, nq = 60;
+  const size_t ks[] = {2, 5, 8, 32, 33};
+  qk_point_t *p = malloc(n * sizeof *p), *qs = malloc(nq * sizeof *qs);
+  qk_neighbor_t *got = malloc(nq * 33 * sizeof *got), one[33], want[33];
+  size_t *counts = malloc(nq * sizeof *counts);
+  for (int set = 0; set < 2; set++) {
+    for (size_t i = 0; i < n; i++) {
+      if (set == 0) /* 17 x 17 grid points, about 5 at each */
+        p[i] = (qk_point_t){qkt_rng_below(&r, 17) / 16.0, qkt_rng_below(&r, 17) / 16.0};
+      else if (i % 50 == 0) /* sparse, over the unit square */
+        p[i] = (qk_point_t){qkt_rng_unit(&r), qkt_rng_unit(&r)};
+      else /* a cluster of side 2^-12 */
+        p[i] = (qk_point_t){0.25 + qkt_rng_unit(&r) * 0x1p-12, 0.25 + qkt_rng_unit(&r) * 0x1p-12};
+    }
+    for (size_t i = 0; i < nq; i++) {
+      if (set == 0 && i % 3 == 0) /* a cell centre: four grid points at the same distance */
+        qs[i] = (qk_point_t){(2.0 * qkt_rng_below(&r, 16) + 1) / 32.0,
+                             (2.0 * qkt_rng_below(&r, 16) + 1) / 32.0};
+      else if (set == 1 && i % 2 == 0) /* next to the cluster */
+        qs[i] = (qk_point_t){0.25 + qkt_rng_range(&r, -0.01, 0.01),
+                             0.25 + qkt_rng_range(&r, -0.01, 0.01)};
+      else
+        qs[i] = rand_loc(&r);
+    }
+    const double limits[] = {INFINITY, 1.0 / 16, 1.0 / 32};
+    for (size_t c = 0; c < 3; c++) {
+      qk_tree_t *t = build(p, n, caps[c]);
+      for (size_t ki = 0; ki < sizeof ks / sizeof *ks; ki++) {
+        const size_t k = ks[ki];
+        const double cap = limits[(ki + c) % 3];
+        assert_int_equal(qk_query_knn_batch(t, qs, nq, k, cap, got, counts), QK_OK);
+        for (size_t i = 0; i < nq; i++) {
+          const size_t tag = (size_t)set * 100000 + c * 10000 + k * 100 + i;
+          size_t ng, nw = qko_knn(p, NULL, n, qs[i], k, cap, want);
+          assert_int_equal(qk_query_knn(t, qs[i], k, cap, one, &ng), QK_OK);
+          assert_nb_equal(one, ng, want, nw, "knn-ties-k", tag);
+          assert_nb_equal(got + i * k, counts[i], want, nw, "knn-ties-k-batch", tag);
+        }
+      }
+      qk_tree_free(t);
+    }
+  }
+  free(p), free(qs), free(got), free(counts);
+}
+
 static void test_query_cities(void **state) {
   (void)state;
   size_t n;
@@ -693,7 +751,7 @@ int main(void) {
       cmocka_unit_test(test_query_batch_nomem),    cmocka_unit_test(test_query_stop_and_bad_args),
       cmocka_unit_test(test_query_threads),        cmocka_unit_test(test_query_cities),
       cmocka_unit_test(test_query_knn_big_leaves), cmocka_unit_test(test_query_knn_batch_paths),
-      cmocka_unit_test(test_query_knn1_ties),
+      cmocka_unit_test(test_query_knn1_ties),      cmocka_unit_test(test_query_knn_ties_k),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
