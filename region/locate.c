@@ -195,6 +195,14 @@ static ALWAYS_INLINE uint32_t leaf_first_exact(const qk_region_t *r, const qk__l
 /* Returned by leaf_first_filtered when a filter could not decide. */
 #define UNSURE (QK_NONE - 1u)
 
+/* Does edge g lie strictly beside the box [lox, hix] x [loy, hiy]? (Then it crosses no
+ * segment in the box, whatever the perturbation, which is infinitesimal.) */
+static ALWAYS_INLINE bool beside(const qk__seg_t *g, double lox, double hix, double loy,
+                                 double hiy) {
+  return qk__max(g->ax, g->bx) < lox || qk__min(g->ax, g->bx) > hix ||
+         qk__max(g->ay, g->by) < loy || qk__min(g->ay, g->by) > hiy;
+}
+
 /* leaf_first_exact() for the common case where every orientation it needs is decided by
  * the floating-point filter (qk__orient's, on the same expressions): then no orientation
  * is zero, so the perturbation never matters and the point is on no edge (the three rules
@@ -212,7 +220,12 @@ static ALWAYS_INLINE uint32_t leaf_first_filtered(const qk_region_t *r, const qk
   /* the box of the segment c-p: an edge strictly beside it cannot cross it */
   const double lox = qk__min(cx, x), hix = qk__max(cx, x);
   const double loy = qk__min(cy, y), hiy = qk__max(cy, y);
+  /* Most often every edge is beside that box: then nothing crosses, the point is in the
+   * features of the reference point, and a tight scan (no feature bookkeeping) says so. */
   uint32_t i = 0;
+  while (i < ne && beside(&segs[E[i]], lox, hix, loy, hiy)) i++;
+  if (i == ne) return s;
+  i = 0;
   do {
     uint32_t f = tag[i] >> 2;
     if (s < f) return s;
@@ -220,8 +233,7 @@ static ALWAYS_INLINE uint32_t leaf_first_filtered(const qk_region_t *r, const qk
     if (par) s = ++si < ns ? r->sets[s0 + si] : QK_NONE;
     do {
       const qk__seg_t *g = &segs[E[i]];
-      if (qk__max(g->ax, g->bx) < lox || qk__min(g->ax, g->bx) > hix) continue;
-      if (qk__max(g->ay, g->by) < loy || qk__min(g->ay, g->by) > hiy) continue;
+      if (beside(g, lox, hix, loy, hiy)) continue;
       /* orient(a, b, p), signed so that positive is the reference point's side */
       double l = (g->bx - g->ax) * (y - g->ay), rr = (g->by - g->ay) * (x - g->ax);
       double d = (l - rr) * sign[tag[i] & 1], bound = QK__ORIENT_ERR * (fabs(l) + fabs(rr));
