@@ -6,6 +6,9 @@
  */
 #include <stdatomic.h>
 #include <string.h>
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 #include "region/region_internal.h"
 
@@ -192,6 +195,14 @@ static ALWAYS_INLINE uint32_t leaf_first_exact(const qk_region_t *r, const qk__l
 /* Returned by leaf_first_filtered when a filter could not decide. */
 #define UNSURE (QK_NONE - 1u)
 
+/* Does edge g lie strictly beside the box [lox, hix] x [loy, hiy]? (Then it crosses no
+ * segment in the box, whatever the perturbation, which is infinitesimal.) */
+static ALWAYS_INLINE bool beside(const qk__seg_t *g, double lox, double hix, double loy,
+                                 double hiy) {
+  return qk__max(g->ax, g->bx) < lox || qk__min(g->ax, g->bx) > hix ||
+         qk__max(g->ay, g->by) < loy || qk__min(g->ay, g->by) > hiy;
+}
+
 /* leaf_first_exact() for the common case where every orientation it needs is decided by
  * the floating-point filter (qk__orient's, on the same expressions): then no orientation
  * is zero, so the perturbation never matters and the point is on no edge (the three rules
@@ -206,7 +217,15 @@ static ALWAYS_INLINE uint32_t leaf_first_filtered(const qk_region_t *r, const qk
   const uint32_t *tag = r->le_tag + L->e0, *E = r->le + L->e0;
   const qk__seg_t *segs = r->segs;
   const double px = x - cx, py = y - cy;
+  /* the box of the segment c-p: an edge strictly beside it cannot cross it */
+  const double lox = qk__min(cx, x), hix = qk__max(cx, x);
+  const double loy = qk__min(cy, y), hiy = qk__max(cy, y);
+  /* Most often every edge is beside that box: then nothing crosses, the point is in the
+   * features of the reference point, and a tight scan (no feature bookkeeping) says so. */
   uint32_t i = 0;
+  while (i < ne && beside(&segs[E[i]], lox, hix, loy, hiy)) i++;
+  if (i == ne) return s;
+  i = 0;
   do {
     uint32_t f = tag[i] >> 2;
     if (s < f) return s;
@@ -214,6 +233,7 @@ static ALWAYS_INLINE uint32_t leaf_first_filtered(const qk_region_t *r, const qk
     if (par) s = ++si < ns ? r->sets[s0 + si] : QK_NONE;
     do {
       const qk__seg_t *g = &segs[E[i]];
+      if (beside(g, lox, hix, loy, hiy)) continue;
       /* orient(a, b, p), signed so that positive is the reference point's side */
       double l = (g->bx - g->ax) * (y - g->ay), rr = (g->by - g->ay) * (x - g->ax);
       double d = (l - rr) * sign[tag[i] & 1], bound = QK__ORIENT_ERR * (fabs(l) + fabs(rr));
@@ -382,7 +402,28 @@ static size_t sort_chunk(const qk_region_t *r, const qk_point_t *pts, size_t n, 
   uint32_t cnt[2][256];
   memset(cnt, 0, sizeof cnt);
   size_t m = 0, k = 0;
+#if defined(__SSE2__)
+  /* The same tests and cells, on x and y at once (a third of this loop's instructions). */
+  const __m128d lo = _mm_set_pd(qy0, qx0), hi = _mm_set_pd(qy1, qx1);
+  const __m128d tiny = _mm_set1_pd(QK_REGION_MIN_COORD), org = _mm_set_pd(ry, rx);
+  const __m128d sc = _mm_set1_pd(scale), abs_mask = _mm_castsi128_pd(_mm_set1_epi64x(INT64_MAX));
+  (void)sort_cell;
+#endif
   for (size_t i = 0; i < n; i++) {
+#if defined(__SSE2__)
+    __m128d p = _mm_loadu_pd(&pts[i].x);
+    __m128d ok = _mm_and_pd(_mm_and_pd(_mm_cmpge_pd(p, lo), _mm_cmple_pd(p, hi)),
+                            _mm_cmpge_pd(_mm_and_pd(p, abs_mask), tiny));
+    if (_mm_movemask_pd(ok) != 3) {
+      tmp[n - ++k] = (uint32_t)i; /* answered below, out of this loop (which then makes no call) */
+      continue;
+    }
+    /* (v - lo) * scale is in [0, 256]: its 32-bit truncation is sort_cell's */
+    __m128i cell = _mm_cvttpd_epi32(_mm_mul_pd(_mm_sub_pd(p, org), sc));
+    uint32_t c = spread8[(uint32_t)_mm_cvtsi128_si32(cell) & 255u] |
+                 (uint32_t)spread8[(uint32_t)_mm_cvtsi128_si32(_mm_srli_si128(cell, 4)) & 255u]
+                     << 1;
+#else
     double x = pts[i].x, y = pts[i].y;
     if (!(x >= qx0 && x <= qx1 && y >= qy0 && y <= qy1 && fabs(x) >= QK_REGION_MIN_COORD &&
           fabs(y) >= QK_REGION_MIN_COORD)) {
@@ -390,6 +431,7 @@ static size_t sort_chunk(const qk_region_t *r, const qk_point_t *pts, size_t n, 
       continue;
     }
     uint32_t c = spread8[sort_cell(x, rx, scale)] | (uint32_t)spread8[sort_cell(y, ry, scale)] << 1;
+#endif
     items[m++] = c << IDX_BITS | (uint32_t)i;
     cnt[0][c & 255u]++;
     cnt[1][c >> 8]++;
