@@ -44,16 +44,16 @@ typedef struct top {
   qk__bctx_t *b;
   const qk_allocator_t *a;
   unsigned k;
-  size_t g;        /* 2^k */
-  double *gx, *gy; /* g + 1 grid lines each: the cells' sides */
-  double scale;    /* g / root side */
-  double side[TOP_MAX + 1];
-  double hk;               /* half a grid cell's side: a centre is gx[i] + hk */
-  size_t off[TOP_MAX + 2]; /* cell (l, i, j) is number off[l] + (j << l | i) */
-  uint32_t *home;          /* per cell: pieces at home in it, then summed over its subtree */
-  uint32_t *reach;         /* per cell: clipped pieces reaching it from above */
-  uint32_t *pcell;         /* per piece: its home's grid cell, or CLIPPED */
-  uint32_t *pair;          /* (grid cell, piece) of clipped pieces, in piece order */
+  size_t g;                  /* 2^k */
+  double *gx, *gy;           /* g + 1 grid lines each: the cells' sides */
+  double scale;              /* g / root side */
+  double lside[TOP_MAX + 1]; /* a cell's side at each level */
+  double hk;                 /* half a grid cell's side: a centre is gx[i] + hk */
+  size_t off[TOP_MAX + 2];   /* cell (l, i, j) is number off[l] + (j << l | i) */
+  uint32_t *home;            /* per cell: pieces at home in it, then summed over its subtree */
+  uint32_t *reach;           /* per cell: clipped pieces reaching it from above */
+  uint32_t *pcell;           /* per piece: its home's grid cell, or CLIPPED */
+  uint32_t *pair;            /* (grid cell, piece) of clipped pieces, in piece order */
   size_t n_pair, cap_pair;
   uint32_t *stub; /* (cell number, piece): clipped pieces that reach no child */
   size_t n_stub, cap_stub;
@@ -106,7 +106,7 @@ static qk_status_t clip(top_t *t, uint32_t p, const qk__seg_t *g, double lx, dou
   unsigned sh = t->k - l;
   double x0 = t->gx[i << sh], x1 = t->gx[(i + 1) << sh];
   double y0 = t->gy[j << sh], y1 = t->gy[(j + 1) << sh];
-  double h = t->side[l] * 0.5, cx = x0 + h, cy = y0 + h;
+  double h = t->lside[l] * 0.5, cx = x0 + h, cy = y0 + h;
   unsigned m = qk__clip4(g, lx, hx, ly, hy, x0, y0, x1, y1, cx, cy);
   if (!m)
     return push2(t->a, &t->stub, &t->n_stub, &t->cap_stub, (uint32_t)(t->off[l] + (j << l | i)), p);
@@ -443,10 +443,10 @@ static qk_status_t top_cell(top_t *t, qk_node_t v, unsigned l, size_t i, size_t 
     b->e[l] = t->list + t->cstart[c];
     b->ne[l] = t->cstart[c + 1] - t->cstart[c];
     if ((st = set_from_cell(t, l, c, NAN, NAN))) return st;
-    return qk__build_node(b, v, x0, y0, x1, y1, t->side[l], l, stall);
+    return qk__build_node(b, v, x0, y0, x1, y1, t->lside[l], l, stall);
   }
   size_t ne = count(t, l, i, j);
-  double h = t->side[l] * 0.5, cx = x0 + h, cy = y0 + h;
+  double h = t->lside[l] * 0.5, cx = x0 + h, cy = y0 + h;
   bool split = false;
   if (ne > b->C && l < b->maxd && b->splits_left > 0) {
     bool prog = true;
@@ -510,9 +510,9 @@ qk_status_t qk__build_top(qk__bctx_t *b) {
     t.g = (size_t)1 << k;
     t.off[0] = 0;
     for (unsigned l = 0; l <= k; l++) t.off[l + 1] = t.off[l] + ((size_t)1 << (2 * l));
-    t.side[0] = r->rside;
-    for (unsigned l = 0; l < k; l++) t.side[l + 1] = t.side[l] * 0.5;
-    t.hk = t.side[k] * 0.5;
+    t.lside[0] = r->rside;
+    for (unsigned l = 0; l < k; l++) t.lside[l + 1] = t.lside[l] * 0.5;
+    t.hk = t.lside[k] * 0.5;
     nw = t.off[k + 1];
     nc = t.g * t.g;
     bytes = 2 * (t.g + 1) * sizeof(double) + (2 * nw + 2 * nc + n + 2) * sizeof(uint32_t);
