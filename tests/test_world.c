@@ -518,6 +518,40 @@ static void test_world_touching(void **s) {
   qk_world_free(w);
 }
 
+/* qk_world_pair_bytes: at least what the pairs of the last update need (4 bytes a current
+ * pair, 8 a began or ended pair), never more than qk_world_bytes. */
+static void test_world_pair_bytes(void **s) {
+  (void)s;
+  qk_world_t *w;
+  assert_int_equal(qk_world_new(NULL, &w), QK_OK);
+  assert_true(qk_world_pair_bytes(w) <= qk_world_bytes(w));
+  enum { N = 200 };
+  qk_handle_t h[N];
+  for (int i = 0; i < N; i++) { /* a chain: each disc meets its two neighbours */
+    qk_shape_t d = {QK_SHAPE_DISC, 1.5 * i, 0, 1, 0};
+    assert_int_equal(qk_world_add(w, &d, (uint64_t)i, &h[i]), QK_OK);
+  }
+  for (int frame = 0; frame < 3; frame++) {
+    if (frame == 2) /* every other disc leaves: all pairs end */
+      for (int i = 0; i < N; i += 2) {
+        qk_shape_t far = {QK_SHAPE_DISC, 1.5 * i, 1000, 1, 0};
+        assert_int_equal(qk_world_move(w, h[i], &far), QK_OK);
+      }
+    assert_int_equal(qk_world_update(w), QK_OK);
+    size_t all, began, ended;
+    assert_int_equal(qk_world_pairs_list(w, QK_PAIRS_ALL, NULL, 0, &all), QK_OK);
+    assert_int_equal(qk_world_pairs_list(w, QK_PAIRS_BEGAN, NULL, 0, &began), QK_OK);
+    assert_int_equal(qk_world_pairs_list(w, QK_PAIRS_ENDED, NULL, 0, &ended), QK_OK);
+    assert_int_equal(all, frame < 2 ? N - 1 : 0);
+    assert_int_equal(began, frame == 0 ? N - 1 : 0);
+    assert_int_equal(ended, frame == 2 ? N - 1 : 0);
+    size_t pb = qk_world_pair_bytes(w);
+    assert_true(pb >= 4 * all + 8 * (began + ended));
+    assert_true(pb <= qk_world_bytes(w));
+  }
+  qk_world_free(w);
+}
+
 static void test_world_stale_handles(void **s) {
   (void)s;
   qk_world_t *w;
@@ -788,12 +822,19 @@ static void test_world_concurrent_readers(void **s) {
 int main(void) {
   g_seed = qkt_seed(20261130);
   const struct CMUnitTest tests[] = {
-      cmocka_unit_test(test_world_uniform),      cmocka_unit_test(test_world_clustered),
-      cmocka_unit_test(test_world_mixed_sizes),  cmocka_unit_test(test_world_all_kinds),
-      cmocka_unit_test(test_world_huge),         cmocka_unit_test(test_world_prefilter_and_sort),
-      cmocka_unit_test(test_world_touching),     cmocka_unit_test(test_world_stale_handles),
-      cmocka_unit_test(test_world_churn_memory), cmocka_unit_test(test_world_nomem),
-      cmocka_unit_test(test_world_threads),      cmocka_unit_test(test_world_concurrent_readers),
+      cmocka_unit_test(test_world_uniform),
+      cmocka_unit_test(test_world_clustered),
+      cmocka_unit_test(test_world_mixed_sizes),
+      cmocka_unit_test(test_world_all_kinds),
+      cmocka_unit_test(test_world_huge),
+      cmocka_unit_test(test_world_prefilter_and_sort),
+      cmocka_unit_test(test_world_touching),
+      cmocka_unit_test(test_world_stale_handles),
+      cmocka_unit_test(test_world_pair_bytes),
+      cmocka_unit_test(test_world_churn_memory),
+      cmocka_unit_test(test_world_nomem),
+      cmocka_unit_test(test_world_threads),
+      cmocka_unit_test(test_world_concurrent_readers),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
