@@ -219,15 +219,8 @@ static int by_param(const void *x, const void *y) {
  * angle phi < 60 degrees and is at least g(phi) = arctan(sin phi / (2.02 - cos phi)),
  * exactly (docs/mesh.md, "Small input angles"). */
 static void check_small_angles(const shape_t *s, const qk_mesh_t *m, double bound) {
-  size_t nv, nt, no;
-  const double *xy = qk_mesh_vertices(m, &nv);
-  const uint32_t *tri = qk_mesh_triangles(m, &nt);
-  assert_int_equal(qk_mesh_segments(m, NULL, NULL, NULL, 0, &no), QK_OK);
-  uint32_t *ab = malloc((2 * no + 2) * sizeof *ab), *sg = malloc((no + 1) * sizeof *sg);
-  assert_true(ab && sg);
-  assert_int_equal(qk_mesh_segments(m, ab, sg, NULL, no, &no), QK_OK);
   mcr_input_t ci = {s->xy, s->nv, s->seg, s->ns};
-  mcr_mesh_t cm = {xy, nv, tri, nt, ab, sg, no};
+  mcr_mesh_t cm = qkt_mesh_view(m);
   mcr_opts_t co;
   memset(&co, 0, sizeof co);
   co.min_deg = bound, co.exempt_small = 2, co.max_deg = 180 - 2 * bound;
@@ -235,7 +228,7 @@ static void check_small_angles(const shape_t *s, const qk_mesh_t *m, double boun
   char msg[512];
   if (mcr_check_general(&ci, &cm, &co, &rep, msg, sizeof msg) == 1)
     fail_msg("the exact checker: %s", msg);
-  free(ab), free(sg);
+  qkt_mesh_view_free(&cm);
 }
 
 typedef struct check_out {

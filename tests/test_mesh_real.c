@@ -72,15 +72,9 @@ static int mesh_check(const mr_input_t *in, double max_size, int may_refuse, con
   qk_mesh_stats_t s;
   qk_mesh_stats(m, &s);
   assert_int_equal(s.mode, QK_MESH_GENERAL);
-  size_t nv, nt, no;
-  const double *xy = qk_mesh_vertices(m, &nv);
-  const uint32_t *tri = qk_mesh_triangles(m, &nt);
-  assert_int_equal(qk_mesh_segments(m, NULL, NULL, NULL, 0, &no), QK_OK);
-  uint32_t *ab = malloc((2 * no + 2) * sizeof *ab), *sg = malloc((no + 1) * sizeof *sg);
-  assert_true(ab && sg);
-  assert_int_equal(qk_mesh_segments(m, ab, sg, NULL, no, &no), QK_OK);
   mcr_input_t ci = {in->xy, in->nv, in->seg, in->ns};
-  mcr_mesh_t cm = {xy, nv, tri, nt, ab, sg, no};
+  mcr_mesh_t cm = qkt_mesh_view(m);
+  size_t nt = cm.nt;
   /* The wedge rule (2): an angle below the bound is allowed at the input vertex of a small
    * input angle, or in a triangle spanning that angle with a vertex on each of its two
    * segments (mesh.h: "except inside input angles below 60 degrees"; Shewchuk's rule). */
@@ -110,7 +104,7 @@ static int mesh_check(const mr_input_t *in, double max_size, int may_refuse, con
                     "(checker), %zu (stats)\n",
                     what, nt, rep.exempt, rep.exempt_wedge, s.exempt_angles);
   }
-  free(ab), free(sg);
+  qkt_mesh_view_free(&cm);
   qk_mesh_free(m);
   if (nt_out) *nt_out = nt;
   return MR_OK;

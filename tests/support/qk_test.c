@@ -92,3 +92,21 @@ qkt_shape_t qkt_tree_shape(const qk_tree_t *t) {
   qk_tree_visit(t, qk_tree_root(t), shape_visit, &s);
   return s;
 }
+
+mcr_mesh_t qkt_mesh_view(const qk_mesh_t *m) {
+  mcr_mesh_t v = {0};
+  v.xy = qk_mesh_vertices(m, &v.nv);
+  v.tri = qk_mesh_triangles(m, &v.nt);
+  assert_int_equal(qk_mesh_segments(m, NULL, NULL, NULL, 0, &v.no), QK_OK);
+  uint32_t *ab = malloc((2 * v.no + 2) * sizeof *ab), *sg = malloc((v.no + 1) * sizeof *sg);
+  assert_true(ab && sg);
+  assert_int_equal(qk_mesh_segments(m, ab, sg, NULL, v.no, &v.no), QK_OK);
+  v.oseg = ab, v.oseg_of = sg;
+  return v;
+}
+
+void qkt_mesh_view_free(mcr_mesh_t *v) {
+  free((void *)v->oseg);
+  free((void *)v->oseg_of);
+  v->oseg = v->oseg_of = NULL;
+}

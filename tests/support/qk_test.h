@@ -10,6 +10,7 @@
 #include <cmocka.h>
 
 #include "quadkit/quadkit.h"
+#include "mesh_check_real.h"
 
 /* splitmix64-seeded xoshiro-style generator; deterministic across platforms. */
 typedef struct qkt_rng {
@@ -41,6 +42,11 @@ typedef struct qkt_shape {
   size_t nodes;
 } qkt_shape_t;
 qkt_shape_t qkt_tree_shape(const qk_tree_t *t);
+
+/* A mesh as the exact checker reads it (mesh_check_real.h): vertices and triangles
+ * borrowed from the mesh, its output segments copied out; free with qkt_mesh_view_free. */
+mcr_mesh_t qkt_mesh_view(const qk_mesh_t *m);
+void qkt_mesh_view_free(mcr_mesh_t *v);
 
 /* The failing allocator (qkt_alloc_t, qkt_alloc_make, qkt_alloc_arm), shared with the
  * fuzz targets; a wrong osize from the library fails the test. */
