@@ -53,13 +53,18 @@ double q64(double v) { return std::round(v * 64) / 64; }
 class QuadkitWorld : public WorldImpl {
   qk_world_t *w = nullptr;
   std::vector<qk_handle_t> h;
+  unsigned threads;
 
 public:
+  explicit QuadkitWorld(unsigned th = 1) : threads(th) {}
   ~QuadkitWorld() override { qk_world_free(w); }
   const char *name() const override { return "quadkit"; }
   void init(const std::vector<Box> &boxes) override {
     qk_world_free(w);
-    qk_world_new(nullptr, &w);
+    qk_world_options_t o;
+    qk_world_options_init(&o);
+    o.threads = threads;
+    qk_world_new(&o, &w);
     h.resize(boxes.size());
     for (size_t i = 0; i < boxes.size(); i++) {
       qk_shape_t s = {QK_SHAPE_BOX, boxes[i].xmin, boxes[i].ymin, boxes[i].xmax, boxes[i].ymax};
@@ -393,6 +398,10 @@ void world_step(WorldScene &s) {
     if ((b.ymin + v.y < 0) || (b.ymax + v.y > s.side)) v.y = -v.y;
     b.xmin += v.x, b.xmax += v.x, b.ymin += v.y, b.ymax += v.y;
   }
+}
+
+std::unique_ptr<WorldImpl> make_world_quadkit(unsigned threads) {
+  return std::unique_ptr<WorldImpl>(new QuadkitWorld(threads));
 }
 
 std::vector<std::unique_ptr<WorldImpl>> make_world_impls() {

@@ -145,6 +145,7 @@ public:
   virtual size_t pair_bytes() const { return 0; }
 };
 std::vector<std::unique_ptr<WorldImpl>> make_world_impls();
+std::unique_ptr<WorldImpl> make_world_quadkit(unsigned threads); // qk_world on that many threads
 
 // Which baselines this binary was built with.
 bool have(const char *what);

@@ -620,6 +620,11 @@ void run_world(const std::string &kind, size_t n) {
   if (const char *f = getenv("QKB_WORLD_FRAMES")) frames = std::max(1, atoi(f)); // profiling
   WorldScene base = make_world_scene(kind, n, 77 + n);
   auto impls = make_world_impls();
+  // --threads T: quadkit's world on T threads too (checked like the others), timed by the
+  // wall clock right after its one-thread partner (the first impl) in each repetition.
+  std::vector<int> nth(impls.size(), 1);
+  if (opt.threads > 1 && !impls.empty() && std::string(impls[0]->name()) == "quadkit")
+    impls.push_back(make_world_quadkit((unsigned)opt.threads)), nth.push_back(opt.threads);
   std::vector<std::vector<PairSum>> got(impls.size());
   for (size_t i = 0; i < impls.size(); i++) {
     WorldScene sc = base;
@@ -648,27 +653,40 @@ void run_world(const std::string &kind, size_t n) {
       emit(r);
     }
   }
-  std::vector<std::vector<double>> t(impls.size());
+  std::vector<std::vector<double>> t(impls.size()), ratio(impls.size());
   std::vector<int> timed(impls.size(), frames);
   size_t m = impls.size();
   double rep_budget = kWorldBudget / opt.reps;
+  auto run = [&](size_t i, int &f) { // the mean seconds per frame of impl i
+    WorldScene sc = base;
+    impls[i]->init(sc.boxes);
+    double sum = 0;
+    f = 0;
+    while (f < frames && sum < rep_budget) {
+      world_step(sc);
+      PairSum ps;
+      double t0 = now_seconds();
+      impls[i]->frame(sc.boxes, ps);
+      sum += now_seconds() - t0;
+      f++;
+    }
+    return sum / f;
+  };
   for (int rep = 0; rep < opt.reps; rep++)
     for (size_t j = 0; j < m; j++) {
       size_t i = (j + rep) % m;
       if (!ok[i]) continue;
-      WorldScene sc = base;
-      impls[i]->init(sc.boxes);
-      double sum = 0;
       int f = 0;
-      while (f < frames && sum < rep_budget) {
-        world_step(sc);
-        PairSum ps;
-        double t0 = now_seconds();
-        impls[i]->frame(sc.boxes, ps);
-        sum += now_seconds() - t0;
-        f++;
+      if (nth[i] > 1) { // paired wall clock: the one-thread world just before
+        std::this_thread::sleep_for(std::chrono::milliseconds(50));
+        wall_clock = true;
+        double one = run(0, f);
+        t[i].push_back(run(i, f));
+        ratio[i].push_back(one / t[i].back());
+        wall_clock = false;
+      } else {
+        t[i].push_back(run(i, f));
       }
-      t[i].push_back(sum / f);
       timed[i] = std::min(timed[i], f);
     }
   for (size_t i = 0; i < m; i++) {
@@ -676,6 +694,8 @@ void run_world(const std::string &kind, size_t n) {
     Rec r;
     r.op = "world", r.impl = impls[i]->name(), r.dataset = kind, r.n = n, r.order = "-";
     r.matches = 1;
+    r.threads = nth[i];
+    if (!ratio[i].empty()) r.extra["speedup_wall"] = median(ratio[i]);
     r.seconds = median(t[i]);
     r.per_second = n / r.seconds;
     size_t b = impls[i]->bytes();

@@ -41,6 +41,7 @@
  * allocate; update allocates the new order and its scratch before anything changes, and
  * builds its new pair lists aside, swapping them in only when all succeeded.
  */
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -253,10 +254,11 @@ static inline int box_ok(const qk_shape_t *s) {
 #endif
 }
 
-qk_status_t qk_world_move(qk_world_t *w, qk_handle_t h, const qk_shape_t *shape) {
-  if (!w || !shape) return QK_ERR_INVALID;
-  qk__wobj_t *o = lookup(w, h);
-  if (!o) return QK_ERR_NOT_FOUND;
+/* The move of a live object o (slot i) to a shape: the common case (a box needing no
+ * normalisation, staying in its loose square) is inline and branch-light, as the batch
+ * call runs it once per object. */
+static inline qk_status_t move_obj(qk_world_t *w, qk__wobj_t *o, uint32_t i,
+                                   const qk_shape_t *shape) {
   qk_shape_t s;
   qk_box_t nb;
   if (box_ok(shape)) {
@@ -274,7 +276,40 @@ qk_status_t qk_world_move(qk_world_t *w, qk_handle_t h, const qk_shape_t *shape)
   if (in_loose(o, &nb) &&
       ((o->flags & QK__WFORCED) || !(fat_extent(w, &nb) * 16 <= qk__pow2(o->level))))
     return QK_OK;
-  make_dirty(w, (uint32_t)h);
+  make_dirty(w, i);
+  return QK_OK;
+}
+
+qk_status_t qk_world_move(qk_world_t *w, qk_handle_t h, const qk_shape_t *shape) {
+  if (!w || !shape) return QK_ERR_INVALID;
+  qk__wobj_t *o = lookup(w, h);
+  if (!o) return QK_ERR_NOT_FOUND;
+  return move_obj(w, o, (uint32_t)h, shape);
+}
+
+qk_status_t qk_world_move_batch(qk_world_t *w, const qk_handle_t *h, const qk_shape_t *shapes,
+                                size_t n, qk_error_t *err) {
+  if (!w || (n && (!h || !shapes))) return QK_ERR_INVALID;
+  const uint32_t n_obj = w->n_obj;
+  for (size_t k = 0; k < n; k++) {
+    /* The handle check: a live slot's generation is odd and a removed one's even, so an
+     * odd generation equal to the slot's names its live object. */
+    uint32_t slot = (uint32_t)h[k], gen = (uint32_t)(h[k] >> 32);
+    qk_status_t st = QK_ERR_NOT_FOUND;
+    if (slot < n_obj) {
+      qk__wobj_t *o = &w->obj[slot];
+      if (o->gen == gen && (gen & 1)) st = move_obj(w, o, slot, &shapes[k]);
+    }
+    if (st != QK_OK) {
+      if (!err) return st;
+      err->line = err->column = 0;
+      err->item = k;
+      snprintf(err->message, sizeof err->message, "move %zu (handle 0x%016llx): %s", k,
+               (unsigned long long)h[k],
+               st == QK_ERR_NOT_FOUND ? "no live object has this handle" : qk_strerror(st));
+      return st;
+    }
+  }
   return QK_OK;
 }
 

@@ -69,6 +69,83 @@ static inline void box_join(qk_box_t *h, const qk_box_t *b) {
 
 static const qk_box_t empty_box = {INFINITY, INFINITY, -INFINITY, -INFINITY};
 
+/* The boxes of cells [c0, c1) of a new order: per cell the box around its objects, per
+ * object its float box and whether that is exact. */
+static void pack_cells(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
+                       const qk__wcell_t *cells, uint32_t c0, uint32_t c1) {
+  float *fg = pk->fgrp;
+  uint8_t *fx = pk->fexact;
+  for (uint32_t c = c0; c < c1; c++) {
+    qk_box_t h = empty_box;
+    for (uint32_t m = cells[c].start, me = cells[c + 1].start; m < me; m++) {
+      const qk__wobj_t *o = &w->obj[ord[m]];
+      qk_box_t b =
+          (o->flags & QK__WKIND) == QK_SHAPE_BOX ? (qk_box_t){o->x, o->y, o->a, o->b} : qk__wbox(o);
+      box_join(&h, &b);
+      float *g = fg + (size_t)(m >> 2) * 16 + (m & 3);
+      g[0] = (float)b.xmin, g[4] = (float)b.ymin, g[8] = (float)b.xmax, g[12] = (float)b.ymax;
+      /* A box whose floats are its doubles: the float box test is then the exact one. Its
+       * values are zero or of magnitude in [2^-100, 2^100], inside the floats' normal
+       * range, so they are floats exactly when their last 29 mantissa bits are zero. */
+      uint64_t u[4];
+      memcpy(u, &b, sizeof u);
+      fx[m] = (o->flags & QK__WKIND) == QK_SHAPE_BOX &&
+              !((u[0] | u[1] | u[2] | u[3]) & ((UINT64_C(1) << 29) - 1));
+    }
+    pk->hb[c] = h;
+  }
+}
+
+/* One thread's share of the packing: a range of cells of about equal objects. */
+typedef struct pack_job {
+  const qk_world_t *w;
+  qk__wpack_t *pk;
+  const uint32_t *ord;
+  const qk__wcell_t *cells;
+  uint32_t nc;
+  unsigned n_jobs;
+} pack_job_t;
+
+/* The first cell at or after order position m (m <= the sentinel's start). */
+static uint32_t cell_at(const qk__wcell_t *cells, uint32_t nc, uint32_t m) {
+  uint32_t lo = 0, hi = nc;
+  while (lo < hi) {
+    uint32_t mid = lo + (hi - lo) / 2;
+    if (cells[mid].start < m)
+      lo = mid + 1;
+    else
+      hi = mid;
+  }
+  return lo;
+}
+
+static void pack_run(unsigned t, void *ud) {
+  pack_job_t *p = ud;
+  uint32_t n = p->cells[p->nc].start;
+  uint32_t c0 = cell_at(p->cells, p->nc, (uint32_t)((uint64_t)n * t / p->n_jobs));
+  uint32_t c1 = cell_at(p->cells, p->nc, (uint32_t)((uint64_t)n * (t + 1) / p->n_jobs));
+  pack_cells(p->w, p->pk, p->ord, p->cells, c0, c1);
+}
+
+void qk__world_pack(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
+                    const qk__wcell_t *cells, uint32_t nc) {
+  uint32_t n = cells[nc].start;
+  unsigned nt = w->opt.threads;
+  if (n < 4096) nt = 1; /* not worth a thread */
+  if (nt > 1) {
+    pack_job_t p = {w, pk, ord, cells, nc, nt};
+    qk__run_jobs(nt, nt, pack_run, &p);
+  } else {
+    pack_cells(w, pk, ord, cells, 0, nc);
+  }
+  for (uint32_t k = n; k & 3; k++) { /* empty lanes: a box that meets nothing */
+    float *g = pk->fgrp + (size_t)(k >> 2) * 16 + (k & 3);
+    g[0] = g[4] = INFINITY, g[8] = g[12] = -INFINITY;
+  }
+  for (int l = 0; l < QK__NLEV; l++) pk->lv_box[l] = empty_box;
+  for (uint32_t c = 0; c < nc; c++) box_join(&pk->lv_box[cells[c].level - QK__LMIN], &pk->hb[c]);
+}
+
 void qk__world_pack_free(qk_world_t *w, qk__wpack_t *pk) {
   qk__free(&w->alloc, pk->fgrp, pk->cap_fgrp * (16 * sizeof *pk->fgrp + 4));
   qk__free(&w->alloc, pk->hb, pk->cap_hb * sizeof *pk->hb);
@@ -119,69 +196,49 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
   else if (m_d > 1)
     qsort(d, m_d, sizeof *d, drec_cmp);
 
-  /* Merge: the kept entries of the old order (still sorted: their cells did not change)
-   * with the sorted dirty ones, packing each object as it is placed. */
+  /* Merge, cell by cell: the old cells in order (their kept entries stay sorted: their
+   * cells did not change), each preceded by the dirty cells that sort before it and
+   * followed by the dirty entries of the same cell. The keys are compared once a cell,
+   * not once an object. */
   memset(w->lv_first, 0, sizeof w->lv_first);
   memset(w->lv_n, 0, sizeof w->lv_n);
-  for (int l = 0; l < QK__NLEV; l++) pk->lv_box[l] = empty_box;
   const uint32_t *old = w->order;
-  size_t i = 0, j = 0, no = w->n_order;
-  uint32_t m = 0, nc = 0;
-  int dl = 0; /* the cell of d[j] */
-  int32_t dy = 0, dx = 0;
-  if (m_d) dl = w->obj[d[0].slot].level, dy = w->obj[d[0].slot].cy, dx = w->obj[d[0].slot].u.cx;
-  for (;;) {
-    while (i < no) {
-      const qk__wobj_t *o = &w->obj[old[i]];
-      if (qk__wlive(o) && !(o->flags & QK__WDIRTY)) break;
-      i++;
-    }
-    uint32_t s;
-    if (i < no && j < m_d) {
-      const qk__wobj_t *o = &w->obj[old[i]];
-      if (!qk__key_less(dl, dy, dx, o->level, o->cy, o->u.cx)) {
-        s = old[i++];
-      } else {
-        s = d[j++].slot;
-        if (j < m_d)
-          dl = w->obj[d[j].slot].level, dy = w->obj[d[j].slot].cy, dx = w->obj[d[j].slot].u.cx;
-      }
-    } else if (i < no)
-      s = old[i++];
-    else if (j < m_d)
-      s = d[j++].slot;
-    else
-      break;
-    const qk__wobj_t *o = &w->obj[s];
-    int l = o->level;
-    if (!nc || cells[nc - 1].level != l || cells[nc - 1].cy != o->cy ||
-        cells[nc - 1].cx != o->u.cx) {
-      if (nc) box_join(&pk->lv_box[cells[nc - 1].level - QK__LMIN], &hb[nc - 1]);
-      cells[nc] = (qk__wcell_t){o->u.cx, o->cy, m, l};
-      hb[nc] = empty_box;
-      if (!w->lv_n[l - QK__LMIN]) w->lv_first[l - QK__LMIN] = nc;
-      w->lv_n[l - QK__LMIN]++;
+  const qk__wcell_t *oc = w->cells;
+  uint32_t m = 0, nc = 0, n_oc = w->order ? w->n_cells : 0;
+  size_t j = 0;
+  for (uint32_t c = 0;; c++) {
+    uint64_t cly = 0;
+    uint32_t cxk = 0;
+    if (c < n_oc)
+      cly = (uint64_t)(uint32_t)(oc[c].level - QK__LMIN) << 32 | bias(oc[c].cy),
+      cxk = bias(oc[c].cx);
+    /* The dirty cells before old cell c (all that are left after the last one). */
+    while (j < m_d && (c == n_oc || d[j].ly < cly || (d[j].ly == cly && d[j].x < cxk))) {
+      const qk__wobj_t *o = &w->obj[d[j].slot];
+      cells[nc] = (qk__wcell_t){o->u.cx, o->cy, m, o->level};
+      uint64_t ly = d[j].ly;
+      uint32_t x = d[j].x;
+      do ord[m++] = d[j++].slot;
+      while (j < m_d && d[j].ly == ly && d[j].x == x);
       nc++;
     }
-    qk_box_t b = qk__wbox(o);
-    box_join(&hb[nc - 1], &b);
-    float *g = fg + (size_t)(m >> 2) * 16 + (m & 3);
-    g[0] = (float)b.xmin, g[4] = (float)b.ymin, g[8] = (float)b.xmax, g[12] = (float)b.ymax;
-    /* A box whose floats are its doubles: the float box test is then the exact one. Its
-     * values are zero or of magnitude in [2^-100, 2^100], inside the floats' normal
-     * range, so they are floats exactly when their last 29 mantissa bits are zero. */
-    uint64_t u[4];
-    memcpy(u, &b, sizeof u);
-    pk->fexact[m] = (o->flags & QK__WKIND) == QK_SHAPE_BOX &&
-                    !((u[0] | u[1] | u[2] | u[3]) & ((UINT64_C(1) << 29) - 1));
-    ord[m++] = s;
+    if (c == n_oc) break;
+    cells[nc] = oc[c];
+    cells[nc].start = m;
+    for (uint32_t k = oc[c].start, ke = oc[c + 1].start; k < ke; k++) {
+      const qk__wobj_t *o = &w->obj[old[k]];
+      if (qk__wlive(o) && !(o->flags & QK__WDIRTY)) ord[m++] = old[k];
+    }
+    while (j < m_d && d[j].ly == cly && d[j].x == cxk) ord[m++] = d[j++].slot;
+    nc += m > cells[nc].start; /* (a cell left empty is dropped) */
   }
-  for (uint32_t k = m; k & 3; k++) { /* empty lanes: a box that meets nothing */
-    float *g = fg + (size_t)(k >> 2) * 16 + (k & 3);
-    g[0] = g[4] = INFINITY, g[8] = g[12] = -INFINITY;
-  }
-  if (nc) box_join(&pk->lv_box[cells[nc - 1].level - QK__LMIN], &hb[nc - 1]);
   cells[nc] = (qk__wcell_t){0, 0, m, INT32_MAX};
+  for (uint32_t c = 0; c < nc; c++) {
+    int l = cells[c].level - QK__LMIN;
+    if (!w->lv_n[l]) w->lv_first[l] = c;
+    w->lv_n[l]++;
+  }
+  qk__world_pack(w, pk, ord, cells, nc);
   for (uint32_t k = w->dirty_head; k != QK_NONE; k = w->obj[k].dnext)
     w->obj[k].flags &= (uint8_t)~QK__WDIRTY;
   w->dirty_head = QK_NONE;

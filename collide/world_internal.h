@@ -166,6 +166,10 @@ typedef struct qk__wpack {
  * qk__world_pack_free either way. */
 qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk);
 void qk__world_pack_free(qk_world_t *w, qk__wpack_t *pk);
+/* Fill the pack (sized for the order) for the order ord and its nc cells (with the
+ * sentinel), on the world's threads. */
+void qk__world_pack(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
+                    const qk__wcell_t *cells, uint32_t nc);
 
 /* Every overlapping pair of the packed order (collide/world_search.c), as unsorted keys
  * in *found (the caller frees it), on the world's threads. QK_ERR_NOMEM (found empty)

@@ -368,13 +368,25 @@ static void run_scene(int scene, int kinds, size_t n, int frames, unsigned threa
   for (size_t i = 0; i < n; i++) m_add(w, &m, rnd_shape(&r, scene, kinds));
   qk_world_pair_t *prev = NULL;
   size_t np = 0;
+  qk_handle_t *bh = malloc((n + 1) * sizeof *bh);
+  qk_shape_t *bs = malloc((n + 1) * sizeof *bs);
   for (int f = 0; f < frames; f++) {
+    /* odd frames move by one qk_world_move_batch call, even ones object by object */
+    size_t nb = 0;
     for (size_t i = 0; i < m.n; i++) {
       if (qkt_rng_below(&r, 3)) continue;
       qk_shape_t s = moved(&r, m.s[i]);
-      assert_int_equal(qk_world_move(w, m.h[i], &s), QK_OK);
+      if (f & 1) {
+        if (nb < n)
+          bh[nb] = m.h[i], bs[nb++] = s;
+        else
+          continue;
+      } else {
+        assert_int_equal(qk_world_move(w, m.h[i], &s), QK_OK);
+      }
       m.s[i] = o_norm(s);
     }
+    assert_int_equal(qk_world_move_batch(w, bh, bs, nb, NULL), QK_OK);
     if (f % 3 == 1) { /* remove a few, add a few */
       for (int k = 0; k < 5 && m.n > 0; k++) {
         size_t i = qkt_rng_below(&r, (uint32_t)m.n);
@@ -395,6 +407,7 @@ static void run_scene(int scene, int kinds, size_t n, int frames, unsigned threa
     prev = want, np = nw;
   }
   free(prev);
+  free(bh), free(bs);
   free(m.h), free(m.s);
   qk_world_free(w);
 }
@@ -418,6 +431,109 @@ static void test_world_all_kinds(void **s) {
 static void test_world_huge(void **s) {
   (void)s;
   run_scene(SC_HUGE, 1, 300, 30, 1);
+}
+/* Enough objects that the update packs the boxes on both threads: frames of moves (by
+ * the batch call), adds and removes give the same pairs, began and ended on two threads
+ * as on one (checked against brute force by the scene tests). */
+static void test_world_threads_frames(void **s) {
+  (void)s;
+  enum { N = 4500 };
+  qk_world_t *w[2];
+  qk_handle_t *h[2];
+  qk_shape_t *sh = malloc(N * sizeof *sh);
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 29);
+  for (int i = 0; i < N; i++) sh[i] = rnd_shape(&r, SC_MIXED, 1);
+  for (int t = 0; t < 2; t++) {
+    qk_world_options_t o;
+    qk_world_options_init(&o);
+    o.threads = t ? 2 : 1;
+    assert_int_equal(qk_world_new(&o, &w[t]), QK_OK);
+    h[t] = malloc(N * sizeof *h[t]);
+    for (int i = 0; i < N; i++) assert_int_equal(qk_world_add(w[t], &sh[i], 0, &h[t][i]), QK_OK);
+  }
+  for (int f = 0; f < 6; f++) {
+    for (int i = 0; i < N; i++) sh[i] = moved(&r, sh[i]);
+    int gone = (int)qkt_rng_below(&r, N);
+    for (int t = 0; t < 2; t++) {
+      assert_int_equal(qk_world_move_batch(w[t], h[t], sh, N, NULL), QK_OK);
+      assert_int_equal(qk_world_remove(w[t], h[t][gone]), QK_OK);
+      assert_int_equal(qk_world_add(w[t], &sh[gone], 0, &h[t][gone]), QK_OK);
+      assert_int_equal(qk_world_update(w[t]), QK_OK);
+    }
+    for (int which = 0; which < 3; which++) {
+      size_t n0, n1;
+      qk_world_pairs_list(w[0], (qk_pairs_which_t)which, NULL, 0, &n0);
+      qk_world_pairs_list(w[1], (qk_pairs_which_t)which, NULL, 0, &n1);
+      assert_int_equal(n0, n1);
+      qk_world_pair_t *p0 = malloc((n0 + 1) * sizeof *p0), *p1 = malloc((n0 + 1) * sizeof *p1);
+      qk_world_pairs_list(w[0], (qk_pairs_which_t)which, p0, n0, &n0);
+      qk_world_pairs_list(w[1], (qk_pairs_which_t)which, p1, n1, &n1);
+      assert_memory_equal(p0, p1, n0 * sizeof *p0);
+      free(p0), free(p1);
+    }
+  }
+  for (int t = 0; t < 2; t++) qk_world_free(w[t]), free(h[t]);
+  free(sh);
+}
+
+/* qk_world_move_batch: the moves before a failing one are done, it and the later ones
+ * are not; err names the failing move. */
+static void test_world_move_batch_errors(void **s) {
+  (void)s;
+  qk_world_t *w;
+  assert_int_equal(qk_world_new(NULL, &w), QK_OK);
+  qk_handle_t h[4];
+  for (int i = 0; i < 4; i++) {
+    qk_shape_t sh = {QK_SHAPE_BOX, 10.0 * i, 0, 10.0 * i + 1, 1};
+    assert_int_equal(qk_world_add(w, &sh, (uint64_t)i, &h[i]), QK_OK);
+  }
+  assert_int_equal(qk_world_update(w), QK_OK);
+  qk_handle_t gone = h[2];
+  assert_int_equal(qk_world_remove(w, gone), QK_OK);
+  qk_handle_t bh[4] = {h[0], h[1], gone, h[3]};
+  qk_shape_t bs[4];
+  for (int i = 0; i < 4; i++) bs[i] = (qk_shape_t){QK_SHAPE_DISC, 100.0 + i, 5, 0.5, 0};
+  qk_error_t err;
+  assert_int_equal(qk_world_move_batch(w, bh, bs, 4, &err), QK_ERR_NOT_FOUND);
+  assert_int_equal(err.item, 2);
+  assert_non_null(strstr(err.message, "move 2"));
+  qk_shape_t got;
+  assert_int_equal(qk_world_get(w, h[0], &got, NULL), QK_OK);
+  assert_true(got.kind == QK_SHAPE_DISC && got.x == 100);
+  assert_int_equal(qk_world_get(w, h[1], &got, NULL), QK_OK);
+  assert_true(got.kind == QK_SHAPE_DISC && got.x == 101);
+  assert_int_equal(qk_world_get(w, h[3], &got, NULL), QK_OK);
+  assert_true(got.kind == QK_SHAPE_BOX && got.x == 30); /* not moved */
+  /* a bad shape: its status, the same partial rule; no err is fine */
+  bh[2] = h[3];
+  bs[0] = (qk_shape_t){QK_SHAPE_BOX, 0, 0, 1, 1};
+  bs[1] = (qk_shape_t){QK_SHAPE_BOX, 0, 0, INFINITY, 1};
+  assert_int_equal(qk_world_move_batch(w, bh, bs, 3, &err), QK_ERR_NONFINITE);
+  assert_int_equal(err.item, 1);
+  assert_int_equal(qk_world_move_batch(w, bh, bs, 3, NULL), QK_ERR_NONFINITE);
+  assert_int_equal(qk_world_get(w, h[0], &got, NULL), QK_OK);
+  assert_true(got.kind == QK_SHAPE_BOX && got.x == 0 && got.a == 1);
+  assert_int_equal(qk_world_get(w, h[1], &got, NULL), QK_OK);
+  assert_true(got.kind == QK_SHAPE_DISC && got.x == 101);
+  /* unknown slots, nothing to do, bad arguments */
+  qk_handle_t odd[1] = {(qk_handle_t)1 << 32 | 999};
+  assert_int_equal(qk_world_move_batch(w, odd, bs, 1, NULL), QK_ERR_NOT_FOUND);
+  odd[0] = QK_HANDLE_NONE;
+  assert_int_equal(qk_world_move_batch(w, odd, bs, 1, NULL), QK_ERR_NOT_FOUND);
+  assert_int_equal(qk_world_move_batch(w, NULL, NULL, 0, NULL), QK_OK);
+  assert_int_equal(qk_world_move_batch(w, NULL, bs, 1, NULL), QK_ERR_INVALID);
+  assert_int_equal(qk_world_move_batch(NULL, bh, bs, 1, NULL), QK_ERR_INVALID);
+  /* the moved objects' pairs at the next update: 0 and 3 overlap now */
+  bs[0] = (qk_shape_t){QK_SHAPE_BOX, 30.5, 0.5, 31.5, 1.5};
+  assert_int_equal(qk_world_move_batch(w, h, bs, 1, NULL), QK_OK);
+  assert_int_equal(qk_world_update(w), QK_OK);
+  qk_world_pair_t p[2];
+  size_t np;
+  assert_int_equal(qk_world_pairs_list(w, QK_PAIRS_ALL, p, 2, &np), QK_OK);
+  assert_int_equal(np, 1);
+  assert_true(p[0].a == h[0] && p[0].b == h[3]);
+  qk_world_free(w);
 }
 
 /* The float prefilter and the pair sort's long runs: boxes whose edges are doubles no
@@ -830,6 +946,8 @@ int main(void) {
       cmocka_unit_test(test_world_prefilter_and_sort),
       cmocka_unit_test(test_world_touching),
       cmocka_unit_test(test_world_stale_handles),
+      cmocka_unit_test(test_world_threads_frames),
+      cmocka_unit_test(test_world_move_batch_errors),
       cmocka_unit_test(test_world_pair_bytes),
       cmocka_unit_test(test_world_churn_memory),
       cmocka_unit_test(test_world_nomem),

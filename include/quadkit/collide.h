@@ -259,6 +259,23 @@ qk_status_t qk_world_add(qk_world_t *w, const qk_shape_t *shape, uint64_t tag, q
 qk_status_t qk_world_move(qk_world_t *w, qk_handle_t h, const qk_shape_t *shape);
 
 /**
+ * qk_world_move() for n objects: object h[i] gets shapes[i], in order. Cheaper per object
+ * than n calls (one loop, the handle check and the loose-square test inline). Never
+ * allocates.
+ * \param [in] w the world.
+ * \param [in] h n handles (a handle may repeat: its last shape wins).
+ * \param [in] shapes n shapes (copied).
+ * \param [in] n how many.
+ * \param [out] err may be NULL; on failure, item is the index of the offending move and
+ *        message names it, its handle and the reason.
+ * \return QK_OK, QK_ERR_INVALID, or the first failing move's status as qk_world_move()
+ *         (QK_ERR_NOT_FOUND for a stale or unknown handle, or a shape error): the moves
+ *         before it are done, it and the ones after it are not.
+ */
+qk_status_t qk_world_move_batch(qk_world_t *w, const qk_handle_t *h, const qk_shape_t *shapes,
+                                size_t n, qk_error_t *err);
+
+/**
  * Remove an object; its slot is reused by a later add with a new generation. Its pairs
  * are reported as ended at the next update.
  * \return QK_OK or QK_ERR_NOT_FOUND.
