@@ -1389,7 +1389,7 @@ void print_table() {
     if (r.op == "region" || r.op == "raycast")
       snprintf(var, sizeof var, "%s%s", r.batch ? "batch" : "single",
                r.threads > 1 ? (" t" + std::to_string(r.threads)).c_str() : "");
-    if ((r.op == "collide" || r.op == "build") && r.threads > 1)
+    if ((r.op == "collide" || r.op == "build" || r.op == "world") && r.threads > 1)
       snprintf(var, sizeof var, "t%d", r.threads);
     printf("%-8s %-10s %8zu %-14s %10s", r.op.c_str(), r.dataset.c_str(), r.n, var,
            r.matches == 0 ? "MISMATCH" : rate(r.per_second).c_str());
@@ -1445,14 +1445,15 @@ void print_table() {
       printf("memory: quadkit %.1f bytes/point (%s, n=%zu; raw coordinates are 16)\n",
              r.bytes_per_point, r.dataset.c_str(), r.n);
   for (auto &r : records)
-    if (r.op == "world" && r.matches == 1 && std::isfinite(r.bytes_per_point))
+    if (r.op == "world" && r.matches == 1 && r.threads == 1 && std::isfinite(r.bytes_per_point))
       printf("memory: world %-9s n=%-8zu %-9s %7.1f bytes/object%s\n", r.dataset.c_str(), r.n,
              r.impl.c_str(), r.bytes_per_point,
              r.impl == "box2d"    ? " (b2TreeNode size x 2n-1 nodes)"
              : r.impl == "bullet" ? " (btDbvtNode size x 2n-1 nodes)"
                                   : "");
   for (auto &r : records)
-    if (r.op == "world" && r.matches == 1 && r.extra.count("index_bytes_per_object"))
+    if (r.op == "world" && r.matches == 1 && r.threads == 1 &&
+        r.extra.count("index_bytes_per_object"))
       printf("memory: world %-9s n=%-8zu %-9s %7.1f bytes/object index + %.1f bytes/pair pair "
              "state (%.1f pairs/object)\n",
              r.dataset.c_str(), r.n, r.impl.c_str(), r.extra.at("index_bytes_per_object"),
