@@ -51,6 +51,14 @@
 #include <emmintrin.h>
 #endif
 
+#if defined(__GNUC__)
+#define QK__NOINLINE __attribute__((noinline))
+#define QK__ALIGN16 __attribute__((aligned(16)))
+#else
+#define QK__NOINLINE
+#define QK__ALIGN16
+#endif
+
 void qk_world_options_init(qk_world_options_t *o) {
   if (!o) return;
   memset(o, 0, sizeof *o);
@@ -242,7 +250,9 @@ qk_status_t qk_world_add(qk_world_t *w, const qk_shape_t *shape, uint64_t tag, q
 static inline int box_ok(const qk_shape_t *s) {
   if (s->kind != QK_SHAPE_BOX || !(s->x <= s->a && s->y <= s->b)) return 0;
 #if defined(__SSE2__)
-  const __m128d sign = _mm_set1_pd(-0.0), lo = _mm_set1_pd(0x1p-100), hi = _mm_set1_pd(0x1p100);
+  /* (constants from memory: building them in registers costs more than the test) */
+  static const double k[6] QK__ALIGN16 = {-0.0, -0.0, 0x1p-100, 0x1p-100, 0x1p100, 0x1p100};
+  const __m128d sign = _mm_load_pd(k), lo = _mm_load_pd(k + 2), hi = _mm_load_pd(k + 4);
   __m128d p = _mm_andnot_pd(sign, _mm_loadu_pd(&s->x)),
           q = _mm_andnot_pd(sign, _mm_loadu_pd(&s->a));
   __m128d ok = _mm_and_pd(_mm_and_pd(_mm_cmpge_pd(p, lo), _mm_cmple_pd(p, hi)),
@@ -257,26 +267,40 @@ static inline int box_ok(const qk_shape_t *s) {
 /* The move of a live object o (slot i) to a shape: the common case (a box needing no
  * normalisation, staying in its loose square) is inline and branch-light, as the batch
  * call runs it once per object. */
+/* Re-filed when it leaves its cell's loose square, or when it shrank so much that a level
+ * two steps finer would hold its fat box (unless its coordinates set the level). */
+static inline void refile_check(qk_world_t *w, qk__wobj_t *o, uint32_t i, const qk_box_t *nb) {
+  if (o->flags & QK__WDIRTY) return; /* filed at the next update anyway */
+  if (in_loose(o, nb) &&
+      ((o->flags & QK__WFORCED) || !(fat_extent(w, nb) * 16 <= qk__pow2(o->level))))
+    return;
+  make_dirty(w, i);
+}
+
+/* The general move (any kind, any values): kept out of line so that the common one below
+ * needs no stack frame. */
+static QK__NOINLINE qk_status_t move_general(qk_world_t *w, qk__wobj_t *o, uint32_t i,
+                                             const qk_shape_t *shape) {
+  qk_shape_t s;
+  qk_status_t st = qk__shape_normalize(shape, &s);
+  if (st != QK_OK) return st;
+  qk_box_t nb = qk__shape_box(&s);
+  set_shape(o, &s);
+  refile_check(w, o, i, &nb);
+  return QK_OK;
+}
+
+/* The move of a live object o (slot i) to a shape: the common case (a box needing no
+ * normalisation, staying in its loose square) inline and branch-light, as the batch
+ * call runs it once per object. */
 static inline qk_status_t move_obj(qk_world_t *w, qk__wobj_t *o, uint32_t i,
                                    const qk_shape_t *shape) {
-  qk_shape_t s;
-  qk_box_t nb;
-  if (box_ok(shape)) {
-    s = *shape;
-    nb = (qk_box_t){s.x, s.y, s.a, s.b};
-  } else {
-    qk_status_t st = qk__shape_normalize(shape, &s);
-    if (st != QK_OK) return st;
-    nb = qk__shape_box(&s);
-  }
-  set_shape(o, &s);
-  if (o->flags & QK__WDIRTY) return QK_OK; /* filed at the next update anyway */
-  /* Re-filed when it leaves its cell's loose square, or when it shrank so much that a
-   * level two steps finer would hold its fat box (unless its coordinates set the level). */
-  if (in_loose(o, &nb) &&
-      ((o->flags & QK__WFORCED) || !(fat_extent(w, &nb) * 16 <= qk__pow2(o->level))))
-    return QK_OK;
-  make_dirty(w, i);
+  if (!box_ok(shape)) return move_general(w, o, i, shape);
+  /* (stored as given: no copy through a normalised shape) */
+  qk_box_t nb = {shape->x, shape->y, shape->a, shape->b};
+  o->x = nb.xmin, o->y = nb.ymin, o->a = nb.xmax, o->b = nb.ymax;
+  o->flags = (uint8_t)((o->flags & ~QK__WKIND) | QK_SHAPE_BOX);
+  refile_check(w, o, i, &nb);
   return QK_OK;
 }
 
