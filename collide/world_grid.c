@@ -69,6 +69,13 @@ static inline void box_join(qk_box_t *h, const qk_box_t *b) {
 
 static const qk_box_t empty_box = {INFINITY, INFINITY, -INFINITY, -INFINITY};
 
+/* Cell c of the new cells is complete: count it in its level's run. */
+static inline void count_cell(qk_world_t *w, const qk__wcell_t *cells, uint32_t c) {
+  int l = cells[c].level - QK__LMIN;
+  if (!w->lv_n[l]) w->lv_first[l] = c;
+  w->lv_n[l]++;
+}
+
 /* The boxes of cells [c0, c1) of a new order: per cell the box around its objects, per
  * object its float box and whether that is exact. */
 static void pack_cells(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
@@ -142,8 +149,12 @@ void qk__world_pack(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
     float *g = pk->fgrp + (size_t)(k >> 2) * 16 + (k & 3);
     g[0] = g[4] = INFINITY, g[8] = g[12] = -INFINITY;
   }
-  for (int l = 0; l < QK__NLEV; l++) pk->lv_box[l] = empty_box;
-  for (uint32_t c = 0; c < nc; c++) box_join(&pk->lv_box[cells[c].level - QK__LMIN], &pk->hb[c]);
+  /* Each level's box: its cells are one run (joined in registers). */
+  for (int l = 0; l < QK__NLEV; l++) {
+    qk_box_t b = empty_box;
+    for (uint32_t c = w->lv_first[l], ce = c + w->lv_n[l]; c < ce; c++) box_join(&b, &pk->hb[c]);
+    pk->lv_box[l] = b;
+  }
 }
 
 void qk__world_pack_free(qk_world_t *w, qk__wpack_t *pk) {
@@ -220,7 +231,7 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
       uint32_t x = d[j].x;
       do ord[m++] = d[j++].slot;
       while (j < m_d && d[j].ly == ly && d[j].x == x);
-      nc++;
+      count_cell(w, cells, nc++);
     }
     if (c == n_oc) break;
     cells[nc] = oc[c];
@@ -230,14 +241,9 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
       if (qk__wlive(o) && !(o->flags & QK__WDIRTY)) ord[m++] = old[k];
     }
     while (j < m_d && d[j].ly == cly && d[j].x == cxk) ord[m++] = d[j++].slot;
-    nc += m > cells[nc].start; /* (a cell left empty is dropped) */
+    if (m > cells[nc].start) count_cell(w, cells, nc++); /* (one left empty is dropped) */
   }
   cells[nc] = (qk__wcell_t){0, 0, m, INT32_MAX};
-  for (uint32_t c = 0; c < nc; c++) {
-    int l = cells[c].level - QK__LMIN;
-    if (!w->lv_n[l]) w->lv_first[l] = c;
-    w->lv_n[l]++;
-  }
   qk__world_pack(w, pk, ord, cells, nc);
   for (uint32_t k = w->dirty_head; k != QK_NONE; k = w->obj[k].dnext)
     w->obj[k].flags &= (uint8_t)~QK__WDIRTY;
