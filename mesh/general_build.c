@@ -10,22 +10,25 @@
 #include <stdlib.h>
 #include <string.h>
 
-qk_status_t qk__gm_fit(qk__gm_t *g) {
-  size_t nv = g->cdt.nv, nt = g->cdt.nt;
+/* The next room for `need` entries from `cap`: double, or just `need` when that is more
+ * (a reservation for the final size: no slack). */
+static size_t fit_cap(size_t cap, size_t need) { return need > 2 * cap ? need : 2 * cap; }
+
+qk_status_t qk__gm_fit_to(qk__gm_t *g, size_t nv, size_t nt) {
   if (nv > g->vcap) {
-    void *p = g->vi;
-    size_t c = g->vcap;
-    if (qk__grow(g->a, &p, &c, nv, sizeof *g->vi)) return QK_ERR_NOMEM;
+    size_t c = fit_cap(g->vcap, nv);
+    qk__gm_vert_t *p = qk__realloc(g->a, g->vi, g->vcap * sizeof *p, c * sizeof *p);
+    if (!p) return QK_ERR_NOMEM;
     g->vi = p;
     for (size_t i = g->vcap; i < c; i++) g->vi[i] = (qk__gm_vert_t){QK__CDT_NONE, QK__CDT_NONE, 0};
     g->vcap = c;
   }
   if (nt > g->fcap) {
-    void *p = g->face;
-    size_t c = g->fcap;
-    if (qk__grow(g->a, &p, &c, nt, sizeof *g->face)) return QK_ERR_NOMEM;
+    size_t c = fit_cap(g->fcap, nt);
+    uint32_t *p = qk__realloc(g->a, g->face, g->fcap * sizeof *p, c * sizeof *p);
+    if (!p) return QK_ERR_NOMEM;
     g->face = p;
-    for (size_t i = g->fcap; i < c; i++) g->face[i] = QK__CDT_NONE;
+    memset(g->face + g->fcap, 0xff, (c - g->fcap) * sizeof *g->face); /* QK__CDT_NONE */
     g->fcap = c;
   }
   return QK_OK;
@@ -369,7 +372,8 @@ qk_status_t qk__gm_build(qk__gm_t *g) {
   if (st) return qk__mesh_fail(g->err, st, 0, "out of memory");
   g->cdt_live = 1;
   g->cv = qk__realloc(g->a, NULL, 0, (P->nv + 1) * sizeof *g->cv);
-  if (!g->cv || qk__gm_fit(g)) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  if (!g->cv || qk__gm_fit_to(g, g->cdt.cap_v, g->cdt.cap_t))
+    return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   if ((st = insert_vertices(g)) || (st = insert_segments(g))) return st;
   if (qk__gm_fit(g) || label_faces(g) || input_angles(g))
     return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");

@@ -60,6 +60,8 @@ typedef struct qk__gm {
    * below 60 degrees there (the concentric shells' apexes). */
   uint32_t *cv;
   uint8_t *vsmall;
+  /* Per input segment: its precision budget (qk__seg_budget, at most 62), computed once. */
+  int8_t *sbud;
   /* Per CDT vertex. */
   qk__gm_vert_t *vi;
   size_t vcap;
@@ -117,8 +119,13 @@ static inline const double *qk__gm_vxy(const qk__gm_t *g, uint32_t v) { return &
 
 /* general_build.c: root square, the CDT of the input (validation), faces, holes, regions. */
 qk_status_t qk__gm_build(qk__gm_t *g);
-/* Grow the per-vertex and per-triangle arrays to the CDT's size. */
-qk_status_t qk__gm_fit(qk__gm_t *g);
+/* Grow the per-vertex and per-triangle arrays to nv vertices and nt triangles (doubling). */
+qk_status_t qk__gm_fit_to(qk__gm_t *g, size_t nv, size_t nt);
+/* Grow them to the CDT's size (inline: a compare and a branch while there is room). */
+static inline qk_status_t qk__gm_fit(qk__gm_t *g) {
+  if (g->cdt.nv <= g->vcap && g->cdt.nt <= g->fcap) return QK_OK;
+  return qk__gm_fit_to(g, g->cdt.nv, g->cdt.nt);
+}
 /* The parameter of CDT vertex v on input segment s (an endpoint or a split point of s). */
 uint64_t qk__gm_param(const qk__gm_t *g, uint32_t v, uint32_t s);
 /* Insert (x, y), located at (t0, k0, w) as qk__cdt_locate reports it, label the new

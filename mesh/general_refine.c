@@ -26,8 +26,7 @@ int qk__gm_split_param(const qk__gm_t *g, uint32_t s, uint64_t lo, uint64_t hi, 
   const qk_poly_t *P = g->P;
   uint32_t u = P->seg[2 * s], w = P->seg[2 * s + 1];
   const double A[2] = {P->vx[u], P->vy[u]}, B[2] = {P->vx[w], P->vy[w]};
-  int bud = qk__seg_budget(A, B);
-  if (bud > 62) bud = 62;
+  int bud = g->sbud[s];
   if (bud < 1 || hi - lo < 2 || protected_piece(g, s, lo, hi)) return 0;
   uint64_t q = (uint64_t)1 << (62 - bud), target = lo + (hi - lo) / 2;
   int shell = lo == 0 ? g->vsmall[u] : hi == QK__GM_ONE ? g->vsmall[w] : 0;
@@ -100,7 +99,7 @@ static qk_status_t split_piece(qk__gm_t *g, uint32_t a, uint32_t b, uint32_t s, 
   int tz = 0;
   while (tz < 62 && !((k >> tz) & 1)) tz++;
   double p[2];
-  if (qk__seg_point(A, B, k >> tz, 62 - tz, p)) return QK_ERR_GEOMETRY;
+  qk__seg_point_in(A, B, k >> tz, 62 - tz, p); /* 0 < k < 2^62 on the budget's grid */
   int kk;
   uint32_t t = qk__cdt_find_edge(&g->cdt, a, b, &kk), v;
   int existed;
@@ -516,7 +515,8 @@ static qk_status_t reserve(qk__gm_t *g) {
   double est = 5.3 * (area / 2) / (h * h);
   if (!(est < (double)((size_t)1 << 27))) return QK_OK;
   size_t nt = c->nt + (size_t)est, nv = c->nv + (size_t)est / 2 + 4;
-  if (qk__cdt_reserve(c, nv, nt) || grow_marks_to(g, nt)) return QK_ERR_NOMEM;
+  if (qk__cdt_reserve(c, nv, nt) || grow_marks_to(g, nt) || qk__gm_fit_to(g, nv, nt))
+    return QK_ERR_NOMEM;
   return QK_OK;
 }
 

@@ -347,7 +347,7 @@ static qk_status_t presplit(qk__gm_t *g, uint32_t s, const double *A, const doub
   if (!qk__gm_split_param(g, s, lo, hi, &k)) return QK_OK;
   int tz = ctz62(k);
   double p[2];
-  if (qk__seg_point(A, B, k >> tz, 62 - tz, p)) return QK_OK;
+  qk__seg_point_in(A, B, k >> tz, 62 - tz, p); /* 0 < k < 2^62 on the budget's grid */
   qk_status_t st = presplit(g, s, A, B, len, lo, k);
   if (!st) st = add_pt(g, qk__gm_morton(g, p[0], p[1]), p[0], p[1], s, k);
   if (!st) st = presplit(g, s, A, B, len, k, hi);
@@ -413,6 +413,15 @@ static qk_status_t insert_points(qk__gm_t *g) {
 qk_status_t qk__gm_seed(qk__gm_t *g, qk_mesh_stats_t *stats) {
   const qk_poly_t *P = g->P;
   g->inv_S = ldexp(1.0, -g->e);
+  /* Each segment's precision budget once (every split point asks for it). */
+  g->sbud = qk__realloc(g->a, NULL, 0, P->ns + 1);
+  if (!g->sbud) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  for (size_t s = 0; s < P->ns; s++) {
+    uint32_t u = P->seg[2 * s], w = P->seg[2 * s + 1];
+    const double A[2] = {P->vx[u], P->vy[u]}, B[2] = {P->vx[w], P->vy[w]};
+    int b = qk__seg_budget(A, B);
+    g->sbud[s] = (int8_t)(b > 62 ? 62 : b < -1 ? -1 : b);
+  }
   qk_tree_options_t to;
   qk_tree_options_init(&to);
   to.has_root = 1;
