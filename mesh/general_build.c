@@ -156,7 +156,7 @@ static qk_status_t insert_vertices(qk__gm_t *g) {
     int r = 0;
     while (r < 30 && !((h >> r) & 1)) r++; /* round r holds about n / 2^(r+1) points */
     uint64_t key = (uint64_t)(31 - r) << 59 | qk__gm_morton(g, P->vx[i], P->vy[i]) >> 5;
-    o[i] = (qk__gm_pt_t){key, P->vx[i], P->vy[i], i, 0};
+    o[i] = (qk__gm_pt_t){key, P->vx[i], P->vy[i], i, 0, 0};
   }
   qk_status_t st = P->nv ? qk__gm_sort_points(g, o, P->nv) : QK_OK;
   for (size_t j = 0; j < P->nv && !st; j++) {

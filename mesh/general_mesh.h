@@ -25,6 +25,7 @@ typedef struct qk__gm_pt {
   double x, y;
   uint64_t k;
   uint32_t seg;
+  uint32_t rank; /* a split point's place among all split points, by segment then parameter */
 } qk__gm_pt_t;
 
 /* A CDT vertex: its input vertex (or NONE), the segment of a split point (or NONE) and

@@ -248,7 +248,8 @@ static qk_status_t add_pt(qk__gm_t *g, uint64_t key, double x, double y, uint32_
   void *p = g->pts;
   if (qk__grow(g->a, &p, &g->pts_cap, g->npts + 1, sizeof *g->pts)) return QK_ERR_NOMEM;
   g->pts = p;
-  g->pts[g->npts++] = (qk__gm_pt_t){key, x, y, k, seg};
+  g->pts[g->npts] = (qk__gm_pt_t){key, x, y, k, seg, (uint32_t)g->npts};
+  g->npts++;
   return QK_OK;
 }
 
@@ -383,31 +384,63 @@ qk_status_t qk__gm_sort_points(const qk__gm_t *g, qk__gm_pt_t *pts, size_t n) {
   return QK_OK;
 }
 
-/* Insert the seeds and split points in Z-order, each walk starting at the last vertex.
- * Seeds in dropped faces (outside, holes) are skipped. */
-static qk_status_t insert_points(qk__gm_t *g) {
+/* The edge holding split point q (rank r among all split points, first[s] .. first[s + 1]
+ * those of its segment s, in parameter order): between the nearest split points of s
+ * inserted already on either side (rv: their CDT vertices, NONE while not inserted), or the
+ * segment's ends. No point lies on that piece between them, so it is one constrained edge:
+ * found by turning around one end, without a walk and without the orientation tests of a
+ * walk's last step, which are exact ones for a point on its own segment's line. */
+static uint32_t seg_edge(const qk__gm_t *g, const qk__gm_pt_t *q, const uint32_t *first,
+                         const uint32_t *rv, int *k) {
+  const qk_poly_t *P = g->P;
+  uint32_t s = q->seg, r = q->rank, a = QK__CDT_NONE, b = QK__CDT_NONE;
+  for (uint32_t i = r; i > first[s] && a == QK__CDT_NONE;) a = rv[--i];
+  for (uint32_t i = r + 1; i < first[s + 1] && b == QK__CDT_NONE; i++) b = rv[i];
+  if (a == QK__CDT_NONE) a = g->cv[P->seg[2 * s]];
+  if (b == QK__CDT_NONE) b = g->cv[P->seg[2 * s + 1]];
+  return qk__cdt_find_edge(&g->cdt, a, b, k);
+}
+
+/* Insert the seeds and split points in Z-order: a seed's walk starts at the last vertex, a
+ * split point goes straight onto its edge (seg_edge). Seeds in dropped faces (outside,
+ * holes) are skipped. first[s] is where segment s's split points start in rank order. */
+static qk_status_t insert_points(qk__gm_t *g, const uint32_t *first) {
   qk__cdt_t *c = &g->cdt;
   uint32_t hint = QK__CDT_NONE;
-  for (size_t i = 0; i < g->npts; i++) {
+  uint32_t *rv = qk__realloc(g->a, NULL, 0, (g->npts + 1) * sizeof *rv);
+  if (!rv) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  memset(rv, 0xff, (g->npts + 1) * sizeof *rv); /* QK__CDT_NONE */
+  qk_status_t st = QK_OK;
+  for (size_t i = 0; i < g->npts && !st; i++) {
     const qk__gm_pt_t *q = &g->pts[i];
     uint32_t t, v;
     int k, existed;
-    /* Leaves share corners: a repeated seed follows its twin (equal keys stay in order). */
-    if (q->seg == QK__CDT_NONE && i && q->key == q[-1].key && q->x == q[-1].x && q->y == q[-1].y)
-      continue;
-    qk__cdt_where_t w = qk__cdt_locate(c, q->x, q->y, hint, &t, &k);
-    hint = t;
+    qk__cdt_where_t w;
     if (q->seg == QK__CDT_NONE) {
+      /* Leaves share corners: a repeated seed follows its twin (equal keys stay in order). */
+      if (i && q->key == q[-1].key && q->x == q[-1].x && q->y == q[-1].y) continue;
+      w = qk__cdt_locate(c, q->x, q->y, hint, &t, &k);
+      hint = t;
       if (w == QK__CDT_VERT || g->faces[g->face[t]].drop ||
           (w == QK__CDT_EDGE && c->seg[3 * t + k] != QK__CDT_NONE))
         continue;
       g->seeds++;
+    } else {
+      t = seg_edge(g, q, first, rv, &k);
+      w = QK__CDT_EDGE;
+      if (t == QK__CDT_NONE) /* cannot happen: the piece is an edge */
+        w = qk__cdt_locate(c, q->x, q->y, hint, &t, &k);
     }
-    qk_status_t st = qk__gm_insert(g, q->x, q->y, t, k, w, q->seg, q->k, &v, &existed);
-    if (st) return qk__mesh_fail(g->err, st, 0, "out of memory");
-    hint = c->vtri[v];
+    st = qk__gm_insert(g, q->x, q->y, t, k, w, q->seg, q->k, &v, &existed);
+    if (st) {
+      st = qk__mesh_fail(g->err, st, 0, "out of memory");
+    } else {
+      if (q->seg != QK__CDT_NONE) rv[q->rank] = v;
+      hint = c->vtri[v];
+    }
   }
-  return QK_OK;
+  qk__free(g->a, rv, (g->npts + 1) * sizeof *rv);
+  return st;
 }
 
 qk_status_t qk__gm_seed(qk__gm_t *g, qk_mesh_stats_t *stats) {
@@ -478,13 +511,22 @@ qk_status_t qk__gm_seed(qk__gm_t *g, qk_mesh_stats_t *stats) {
   if (seeds(g, qk_tree_root(g->tree), 0, 0, 1, 0))
     return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   g->free_leaves += size_cells(g);
-  for (size_t s = 0; s < P->ns; s++) {
+  /* The split points of segment s get ranks first[s] .. first[s + 1] - 1 in parameter
+   * order (presplit makes them in order; seeds, when enabled, come before them all). */
+  uint32_t *first = qk__realloc(g->a, NULL, 0, (P->ns + 1) * sizeof *first);
+  if (!first) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  for (size_t s = 0; s < P->ns && !st; s++) {
     uint32_t u = P->seg[2 * s], w = P->seg[2 * s + 1];
     const double A[2] = {P->vx[u], P->vy[u]}, B[2] = {P->vx[w], P->vy[w]};
-    if (presplit(g, (uint32_t)s, A, B, hypot(B[0] - A[0], B[1] - A[1]), 0, QK__GM_ONE))
-      return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+    first[s] = (uint32_t)g->npts;
+    st = presplit(g, (uint32_t)s, A, B, hypot(B[0] - A[0], B[1] - A[1]), 0, QK__GM_ONE);
   }
-  if (g->npts && qk__gm_sort_points(g, g->pts, g->npts))
-    return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
-  return insert_points(g);
+  if (!st) first[P->ns] = (uint32_t)g->npts;
+  if (!st && g->npts) st = qk__gm_sort_points(g, g->pts, g->npts);
+  if (st)
+    st = qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  else
+    st = insert_points(g, first);
+  qk__free(g->a, first, (P->ns + 1) * sizeof *first);
+  return st;
 }
