@@ -44,19 +44,21 @@ uint64_t qk__gm_param(const qk__gm_t *g, uint32_t v, uint32_t s) {
  * triangles at v by two others at v). The CDT's change hook reported the same set with
  * repeats (a triangle flipped twice came twice: a third more quality checks) and cost a
  * call a change. */
-static qk_status_t star(qk__gm_t *g, uint32_t v) {
+static qk_status_t star(qk__gm_t *g, uint32_t v, uint32_t f) {
   const qk__cdt_t *c = &g->cdt;
   /* v lies strictly inside the square, so its star is a closed ring: counter-clockwise
-   * across the edge after v in each triangle until back at the first. */
+   * across the edge after v in each triangle until back at the first. With f != NONE (one
+   * face all round) each triangle is labelled on the way. */
   uint32_t first = c->vtri[v], t = first;
   g->ndirty = 0;
   do {
     if (g->ndirty == g->dirty_cap) {
       void *p = g->dirty;
-      if (qk__grow(g->a, &p, &g->dirty_cap, g->ndirty + 1, sizeof *g->dirty)) return QK_ERR_NOMEM;
+      if (qk__grow(g->a, &p, &g->dirty_cap, g->ndirty + 16, sizeof *g->dirty)) return QK_ERR_NOMEM;
       g->dirty = p;
     }
     g->dirty[g->ndirty++] = t;
+    if (f != QK__CDT_NONE) g->face[t] = f;
     const uint32_t *tv = &c->v[3 * (size_t)t];
     int i = tv[0] == v ? 1 : tv[1] == v ? 2 : 0; /* the slot after v's */
     t = c->nbr[3 * (size_t)t + i];
@@ -82,11 +84,10 @@ qk_status_t qk__gm_insert(qk__gm_t *g, double x, double y, uint32_t t0, int k0, 
   if (qk__gm_fit(g)) return QK_ERR_NOMEM;
   if (*existed) return QK_OK;
   uint32_t v = *v_out;
-  if (star(g, v)) return QK_ERR_NOMEM;
+  if (star(g, v, f0 == f1 ? f0 : QK__CDT_NONE)) return QK_ERR_NOMEM;
   g->vi[v] = (qk__gm_vert_t){QK__CDT_NONE, seg, k};
-  if (f0 == f1) {
-    for (size_t i = 0; i < g->ndirty; i++) g->face[g->dirty[i]] = f0;
-  } else {
+  g->dirty_face = f0 == f1 ? f0 : QK__CDT_NONE;
+  if (f0 != f1) {
     /* The first triangle's side by the segment's line; then around the ring of triangles
      * at v (star() lists them in order), the side changes exactly where the ring crosses
      * one of the two halves of the split segment, the only constrained edges at v. */

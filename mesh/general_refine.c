@@ -282,11 +282,10 @@ static int apex_encroaches(const qk__gm_t *g, uint32_t t, int k) {
                           &c->xy[2 * tv[k]]) < 0;
 }
 
-/* Queue what triangle t (changed or new) asks for: its encroached subsegments (seen from a
- * kept side) and itself when bad. */
-static qk_status_t check(qk__gm_t *g, uint32_t t) {
+/* Queue what triangle t (changed or new), in a kept face, asks for: its encroached
+ * subsegments (seen from a kept side) and itself when bad. */
+static inline qk_status_t check_kept(qk__gm_t *g, uint32_t t) {
   const qk__cdt_t *c = &g->cdt;
-  if (g->faces[g->face[t]].drop) return QK_OK;
   const uint32_t *ts = &c->seg[3 * t];
   if ((ts[0] & ts[1] & ts[2]) != QK__CDT_NONE) /* some edge constrained (NONE is all ones) */
     for (int k = 0; k < 3; k++)
@@ -296,10 +295,25 @@ static qk_status_t check(qk__gm_t *g, uint32_t t) {
   return bad_kept(g, t) ? push_bad(g, t) : QK_OK;
 }
 
+/* check_kept for any triangle. */
+static qk_status_t check(qk__gm_t *g, uint32_t t) {
+  if (g->faces[g->face[t]].drop) return QK_OK;
+  return check_kept(g, t);
+}
+
+/* Check the triangles the last insertion made (its star): when they share one face, its
+ * label is looked at once. */
 static qk_status_t check_dirty(qk__gm_t *g) {
-  for (size_t i = 0; i < g->ndirty; i++)
-    if (check(g, g->dirty[i])) return QK_ERR_NOMEM;
+  size_t n = g->ndirty;
   g->ndirty = 0;
+  if (g->dirty_face != QK__CDT_NONE) {
+    if (g->faces[g->dirty_face].drop) return QK_OK;
+    for (size_t i = 0; i < n; i++)
+      if (check_kept(g, g->dirty[i])) return QK_ERR_NOMEM;
+    return QK_OK;
+  }
+  for (size_t i = 0; i < n; i++)
+    if (check(g, g->dirty[i])) return QK_ERR_NOMEM;
   return QK_OK;
 }
 
