@@ -142,6 +142,29 @@ static void root_square(qk__gm_t *g) {
 static unsigned long sline(const qk_poly_t *P, size_t s) { return P->sline ? P->sline[s] : 0; }
 static unsigned long vline(const qk_poly_t *P, size_t v) { return P->vline ? P->vline[v] : 0; }
 
+/* Where the walk to input vertex i starts: at the last insertion (the CDT's hint), or at
+ * input vertex i - 1 or i + 1 when one is inserted and nearer. Rings list their vertices
+ * in order, so an index neighbour is usually a segment away, where the last insertion of
+ * a round in Z-order may be a jump away (long walks across the thin triangles between
+ * coastline vertices: 2,200 instructions a vertex on Norway). */
+static uint32_t walk_start(const qk__gm_t *g, size_t i) {
+  const qk_poly_t *P = g->P;
+  const qk__cdt_t *c = &g->cdt;
+  double x = P->vx[i], y = P->vy[i];
+  uint32_t best = c->hint < c->nt ? c->hint : 0;
+  const double *h = &c->xy[2 * c->v[3 * (size_t)best]];
+  double bd = (h[0] - x) * (h[0] - x) + (h[1] - y) * (h[1] - y);
+  for (int d = -1; d <= 1; d += 2) {
+    if ((d < 0 && i == 0) || (d > 0 && i + 1 >= P->nv)) continue;
+    uint32_t u = g->cv[(size_t)((ptrdiff_t)i + d)];
+    if (u == QK__CDT_NONE) continue;
+    const double *q = &c->xy[2 * (size_t)u];
+    double dd = (q[0] - x) * (q[0] - x) + (q[1] - y) * (q[1] - y);
+    if (dd < bd) bd = dd, best = c->vtri[u];
+  }
+  return best;
+}
+
 /* The input vertices in a biased randomized insertion order (Amenta, Choi and Rote): rounds
  * of geometrically growing size, drawn by a hash of the index, each in Z-order. In input
  * (or plain Z-) order, points along a coastline each flip a long fan of nearly cocircular
@@ -165,7 +188,8 @@ static qk_status_t insert_vertices(qk__gm_t *g) {
     uint32_t v;
     int existed;
     double x = P->vx[i], y = P->vy[i];
-    if ((st = qk__cdt_insert(&g->cdt, x, y, QK__CDT_NONE, &v, &existed)) || (st = qk__gm_fit(g))) {
+    if ((st = qk__cdt_insert(&g->cdt, x, y, walk_start(g, i), &v, &existed)) ||
+        (st = qk__gm_fit(g))) {
       st = qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
     } else if (existed) {
       /* Name the pair in input order. */
@@ -375,6 +399,7 @@ qk_status_t qk__gm_build(qk__gm_t *g) {
   g->cv = qk__realloc(g->a, NULL, 0, (P->nv + 1) * sizeof *g->cv);
   if (!g->cv || qk__gm_fit_to(g, g->cdt.cap_v, g->cdt.cap_t))
     return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  memset(g->cv, 0xff, (P->nv + 1) * sizeof *g->cv); /* QK__CDT_NONE: not inserted yet */
   if ((st = insert_vertices(g)) || (st = insert_segments(g))) return st;
   if (qk__gm_fit(g) || label_faces(g) || input_angles(g))
     return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");

@@ -318,40 +318,70 @@ static int ctz62(uint64_t k) {
  * next to an input vertex, the midpoint otherwise (general_refine.c). */
 int qk__gm_split_param(const qk__gm_t *g, uint32_t s, uint64_t lo, uint64_t hi, uint64_t *k);
 
+/* The path from the root to the leaf of the last lookup (leaf_side): node, lower-left
+ * corner and side per level. Lookups along a segment are close to each other, so most of
+ * the path is shared. */
+typedef struct leaf_path {
+  int depth; /* levels below the root on the path; -1: empty */
+  qk_node_t node[QK_MAX_DEPTH_LIMIT + 2];
+  double x0[QK_MAX_DEPTH_LIMIT + 2], y0[QK_MAX_DEPTH_LIMIT + 2], side[QK_MAX_DEPTH_LIMIT + 2];
+} leaf_path_t;
+
+/* Whether lattice point (X, Y) in [0, 1]^2 goes to the node with lower-left corner (x0, y0)
+ * and side s under the descent's rule (a point on a midline goes west or south): the node
+ * holds (x0, x0 + s] x (y0, y0 + s], and the closed sides at 0. */
+static int in_node(double X, double Y, double x0, double y0, double s) {
+  return (X > x0 || x0 == 0) && X <= x0 + s && (Y > y0 || y0 == 0) && Y <= y0 + s;
+}
+
 /* The side of the leaf holding lattice point (X, Y): qk__tree_descend's walk (a point on
  * a midline goes west or south) in the root square [0, 1]^2, whose halvings are exact,
- * without its square geometry a level. */
-static double leaf_side(const qk_tree_t *t, double X, double Y) {
-  double x0 = 0, y0 = 0, side = 1;
-  qk_node_t v = qk_tree_root(t);
+ * without its square geometry a level; it resumes from the deepest node of the last
+ * lookup's path that holds the point (the same leaf as a walk from the root). */
+static double leaf_side(const qk_tree_t *t, leaf_path_t *lp, double X, double Y) {
+  int d = lp->depth;
+  while (d > 0 && !in_node(X, Y, lp->x0[d], lp->y0[d], lp->side[d])) d--;
+  if (d < 0) {
+    d = 0;
+    lp->node[0] = qk_tree_root(t), lp->x0[0] = 0, lp->y0[0] = 0, lp->side[0] = 1;
+  }
+  qk_node_t v = lp->node[d];
+  double x0 = lp->x0[d], y0 = lp->y0[d], side = lp->side[d];
   for (uint32_t c = qk__node_child(t, v); c != QK_NONE; c = qk__node_child(t, v)) {
     double h = side * 0.5;
     int e = X > x0 + h, n = Y > y0 + h;
     v = c + (e ? (n ? QK_NE : QK_SE) : (n ? QK_NW : QK_SW));
     x0 += e ? h : 0, y0 += n ? h : 0, side = h;
+    if (d < QK_MAX_DEPTH_LIMIT + 1) {
+      d++;
+      lp->node[d] = v, lp->x0[d] = x0, lp->y0[d] = y0, lp->side[d] = side;
+    } else {
+      d = -1; /* deeper than the path holds (cannot happen): the next lookup starts over */
+    }
   }
+  lp->depth = d;
   return side;
 }
 
 /* Step 6: split segment s's piece (lo, hi) while it is longer than the leaf at its middle
  * (or the size bound there). A piece with no exact split point is left to the refinement,
  * which refuses the input only if it must split it. */
-static qk_status_t presplit(qk__gm_t *g, uint32_t s, const double *A, const double *B, double len,
-                            uint64_t lo, uint64_t hi) {
+static qk_status_t presplit(qk__gm_t *g, leaf_path_t *lp, uint32_t s, const double *A,
+                            const double *B, double len, uint64_t lo, uint64_t hi) {
   double t = (double)(lo / 2 + hi / 2) * 0x1p-62;
   double mid[2] = {A[0] + t * (B[0] - A[0]), A[1] + t * (B[1] - A[1])};
   double X = (mid[0] - g->X0) * g->inv_S, Y = (mid[1] - g->Y0) * g->inv_S;
   X = X < 0 ? 0 : X > 1 ? 1 : X, Y = Y < 0 ? 0 : Y > 1 ? 1 : Y;
-  double want = fmin(leaf_side(g->tree, X, Y) * g->S, size_at(g, mid, 1));
+  double want = fmin(leaf_side(g->tree, lp, X, Y) * g->S, size_at(g, mid, 1));
   if (!(len * ((double)(hi - lo) * 0x1p-62) > want)) return QK_OK;
   uint64_t k;
   if (!qk__gm_split_param(g, s, lo, hi, &k)) return QK_OK;
   int tz = ctz62(k);
   double p[2];
   qk__seg_point_in(A, B, k >> tz, 62 - tz, p); /* 0 < k < 2^62 on the budget's grid */
-  qk_status_t st = presplit(g, s, A, B, len, lo, k);
+  qk_status_t st = presplit(g, lp, s, A, B, len, lo, k);
   if (!st) st = add_pt(g, qk__gm_morton(g, p[0], p[1]), p[0], p[1], s, k);
-  if (!st) st = presplit(g, s, A, B, len, k, hi);
+  if (!st) st = presplit(g, lp, s, A, B, len, k, hi);
   return st;
 }
 
@@ -514,13 +544,20 @@ qk_status_t qk__gm_seed(qk__gm_t *g, qk_mesh_stats_t *stats) {
   /* The split points of segment s get ranks first[s] .. first[s + 1] - 1 in parameter
    * order (presplit makes them in order; seeds, when enabled, come before them all). */
   uint32_t *first = qk__realloc(g->a, NULL, 0, (P->ns + 1) * sizeof *first);
-  if (!first) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  leaf_path_t *lp = qk__realloc(g->a, NULL, 0, sizeof *lp);
+  if (!first || !lp) {
+    qk__free(g->a, first, (P->ns + 1) * sizeof *first);
+    qk__free(g->a, lp, sizeof *lp);
+    return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  }
+  lp->depth = -1;
   for (size_t s = 0; s < P->ns && !st; s++) {
     uint32_t u = P->seg[2 * s], w = P->seg[2 * s + 1];
     const double A[2] = {P->vx[u], P->vy[u]}, B[2] = {P->vx[w], P->vy[w]};
     first[s] = (uint32_t)g->npts;
-    st = presplit(g, (uint32_t)s, A, B, hypot(B[0] - A[0], B[1] - A[1]), 0, QK__GM_ONE);
+    st = presplit(g, lp, (uint32_t)s, A, B, hypot(B[0] - A[0], B[1] - A[1]), 0, QK__GM_ONE);
   }
+  qk__free(g->a, lp, sizeof *lp);
   if (!st) first[P->ns] = (uint32_t)g->npts;
   if (!st && g->npts) st = qk__gm_sort_points(g, g->pts, g->npts);
   if (st)
