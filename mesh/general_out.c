@@ -52,14 +52,6 @@ static void vertex_markers(qk__gm_t *g, qk_mesh_t *m, const uint32_t *newid) {
     }
 }
 
-/* The cosine of the angle at corner i of a triangle with edge vectors e (e[i] from corner
- * i + 1 to corner i + 2) and squared lengths l: the sides at corner i are e[i+2] and
- * -e[i+1] (the same roundings as differences from the corner: a - b is exactly -(b - a)). */
-static inline double corner_cos(double e[3][2], const double l[3], int i) {
-  const double *u = e[(i + 2) % 3], *w = e[(i + 1) % 3];
-  return -(u[0] * w[0] + u[1] * w[1]) / sqrt(l[(i + 2) % 3] * l[(i + 1) % 3]);
-}
-
 qk_status_t qk__gm_output(qk__gm_t *g, qk_mesh_t *m) {
   const qk__cdt_t *c = &g->cdt;
   const qk_poly_t *P = g->P;
@@ -118,22 +110,12 @@ qk_status_t qk__gm_output(qk__gm_t *g, qk_mesh_t *m) {
       e[i][0] = b[0] - a[0], e[i][1] = b[1] - a[1];
       l[i] = e[i][0] * e[i][0] + e[i][1] * e[i][1];
     }
-    for (int i = 0; i < 3; i++) m->tri[3 * j + i] = newid[tv[i]];
-    /* The smallest angle is at the corner opposite the shortest edge (i0), the largest
-     * opposite the longest (i2); only their cosines reach cmax and cmin. The middle one
-     * matters when it ties with either within 10^-9 (then rounding could order them either
-     * way) or when the smallest is below the bound (both may be exempt): then it is
-     * computed too, so the extremes and the count are those of all three corners. */
-    int i0 = l[0] <= l[1] && l[0] <= l[2] ? 0 : l[1] <= l[2] ? 1 : 2;
-    int i2 = l[0] > l[1] && l[0] > l[2] ? 0 : l[1] > l[2] ? 1 : 2, i1 = 3 - i0 - i2;
-    double c0 = corner_cos(e, l, i0), c2 = corner_cos(e, l, i2);
-    cmax = c0 > cmax ? c0 : cmax, cmin = c0 < cmin ? c0 : cmin; /* NaN: neither, as fmax */
-    cmax = c2 > cmax ? c2 : cmax, cmin = c2 < cmin ? c2 : cmin;
-    exempt += (c0 > cb) + (c2 > cb);
-    if (!(l[i1] > l[i0] * (1 + 1e-9) && l[i1] < l[i2] * (1 - 1e-9) && c0 <= cb - 1e-9)) {
-      double c1 = corner_cos(e, l, i1);
-      cmax = c1 > cmax ? c1 : cmax, cmin = c1 < cmin ? c1 : cmin;
-      exempt += c1 > cb;
+    for (int i = 0; i < 3; i++) {
+      m->tri[3 * j + i] = newid[tv[i]];
+      const double *u = e[(i + 2) % 3], *w = e[(i + 1) % 3];
+      double cs = -(u[0] * w[0] + u[1] * w[1]) / sqrt(l[(i + 2) % 3] * l[(i + 1) % 3]);
+      cmax = cs > cmax ? cs : cmax, cmin = cs < cmin ? cs : cmin; /* NaN: neither, as fmax */
+      exempt += cs > cb;
     }
     /* NONE has every bit set: the AND of the three is NONE only when no side is on a
      * segment, as in most triangles. */
