@@ -148,13 +148,13 @@ static qk_status_t too_close(const qk__gm_t *g, uint32_t f, uint32_t h, double s
                        nm[0], nm[1], gap, ext, ext / gap, g->deep_cap, GM_DEEP);
 }
 
-/* Step 4: split a leaf while its grown square meets two features that need separating, or
- * while it is larger than the size bound there (inside the input's bounding box). The k
- * features at g->arena[off..] meet this node's grown square; children filter them. */
+/* Step 4: split a leaf while its grown square ([lo, hi], from its parent) meets two features
+ * that need separating, or while it is larger than the size bound there (inside the input's
+ * bounding box). The k features at g->arena[off..] meet this node's grown square; children
+ * filter them. */
 static qk_status_t subdivide(qk__gm_t *g, uint32_t node, double X, double Y, double s,
-                             unsigned depth, size_t off, size_t k) {
-  double lo[2], hi[2];
-  grown_box(g, X, Y, s, lo, hi);
+                             const double lo[2], const double hi[2], unsigned depth, size_t off,
+                             size_t k) {
   int split = 0;
   if (depth < GM_DEPTH_CAP) {
     const uint32_t *L = g->arena + off;
@@ -214,7 +214,7 @@ static qk_status_t subdivide(qk__gm_t *g, uint32_t node, double X, double Y, dou
   }
   g->arena_n = base + 4 * k;
   for (unsigned q = 0; q < 4; q++) {
-    st = subdivide(g, child + q, cx[q], cy[q], h, depth + 1, base + q * k, n[q]);
+    st = subdivide(g, child + q, cx[q], cy[q], h, clo[q], chi[q], depth + 1, base + q * k, n[q]);
     if (st) break;
   }
   g->arena_n = base;
@@ -531,7 +531,9 @@ qk_status_t qk__gm_seed(qk__gm_t *g, qk_mesh_stats_t *stats) {
   nf = k;
   g->arena_n = nf;
   g->deep_cap = GM_DEEP_BUDGET + 256 * nf;
-  if ((st = subdivide(g, qk_tree_root(g->tree), 0, 0, 1, 0, 0, nf))) return st;
+  double rlo[2], rhi[2];
+  grown_box(g, 0, 0, 1, rlo, rhi);
+  if ((st = subdivide(g, qk_tree_root(g->tree), 0, 0, 1, rlo, rhi, 0, 0, nf))) return st;
   /* The tree grew from its root by splits alone (four nodes each, three more leaves), so
    * its node count gives its leaves without a walk. */
   stats->leaves_before_balance = 1 + 3 * ((size_t)qk__tree_node_bound(g->tree) - 1) / 4;
