@@ -10,13 +10,15 @@
 #include <stdlib.h>
 #include <string.h>
 
-/* The next room for `need` entries from `cap`: double, or just `need` when that is more
- * (a reservation for the final size: no slack). */
-static size_t fit_cap(size_t cap, size_t need) { return need > 2 * cap ? need : 2 * cap; }
+/* The next room for `need` entries from `cap`: just `need` for a reservation (no slack),
+ * else double, or `need` when that is more. */
+static size_t fit_cap(size_t cap, size_t need, int exact) {
+  return exact || need > 2 * cap ? need : 2 * cap;
+}
 
-qk_status_t qk__gm_fit_to(qk__gm_t *g, size_t nv, size_t nt) {
+qk_status_t qk__gm_fit_to(qk__gm_t *g, size_t nv, size_t nt, int exact) {
   if (nv > g->vcap) {
-    size_t c = fit_cap(g->vcap, nv);
+    size_t c = fit_cap(g->vcap, nv, exact);
     qk__gm_vert_t *p = qk__realloc(g->a, g->vi, g->vcap * sizeof *p, c * sizeof *p);
     if (!p) return QK_ERR_NOMEM;
     g->vi = p;
@@ -24,7 +26,7 @@ qk_status_t qk__gm_fit_to(qk__gm_t *g, size_t nv, size_t nt) {
     g->vcap = c;
   }
   if (nt > g->fcap) {
-    size_t c = fit_cap(g->fcap, nt);
+    size_t c = fit_cap(g->fcap, nt, exact);
     uint32_t *p = qk__realloc(g->a, g->face, g->fcap * sizeof *p, c * sizeof *p);
     if (!p) return QK_ERR_NOMEM;
     g->face = p;
@@ -397,7 +399,7 @@ qk_status_t qk__gm_build(qk__gm_t *g) {
   if (st) return qk__mesh_fail(g->err, st, 0, "out of memory");
   g->cdt_live = 1;
   g->cv = qk__realloc(g->a, NULL, 0, (P->nv + 1) * sizeof *g->cv);
-  if (!g->cv || qk__gm_fit_to(g, g->cdt.cap_v, g->cdt.cap_t))
+  if (!g->cv || qk__gm_fit_to(g, g->cdt.cap_v, g->cdt.cap_t, 1))
     return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   memset(g->cv, 0xff, (P->nv + 1) * sizeof *g->cv); /* QK__CDT_NONE: not inserted yet */
   if ((st = insert_vertices(g)) || (st = insert_segments(g))) return st;

@@ -121,12 +121,13 @@ static inline const double *qk__gm_vxy(const qk__gm_t *g, uint32_t v) { return &
 
 /* general_build.c: root square, the CDT of the input (validation), faces, holes, regions. */
 qk_status_t qk__gm_build(qk__gm_t *g);
-/* Grow the per-vertex and per-triangle arrays to nv vertices and nt triangles (doubling). */
-qk_status_t qk__gm_fit_to(qk__gm_t *g, size_t nv, size_t nt);
+/* Grow the per-vertex and per-triangle arrays to nv vertices and nt triangles: exactly
+ * (a reservation for the final size) or by doubling. */
+qk_status_t qk__gm_fit_to(qk__gm_t *g, size_t nv, size_t nt, int exact);
 /* Grow them to the CDT's size (inline: a compare and a branch while there is room). */
 static inline qk_status_t qk__gm_fit(qk__gm_t *g) {
   if (g->cdt.nv <= g->vcap && g->cdt.nt <= g->fcap) return QK_OK;
-  return qk__gm_fit_to(g, g->cdt.nv, g->cdt.nt);
+  return qk__gm_fit_to(g, g->cdt.nv, g->cdt.nt, 0);
 }
 /* The parameter of CDT vertex v on input segment s (an endpoint or a split point of s). */
 uint64_t qk__gm_param(const qk__gm_t *g, uint32_t v, uint32_t s);

@@ -529,7 +529,7 @@ static qk_status_t reserve(qk__gm_t *g) {
   double est = 5.3 * (area / 2) / (h * h);
   if (!(est < (double)((size_t)1 << 27))) return QK_OK;
   size_t nt = c->nt + (size_t)est, nv = c->nv + (size_t)est / 2 + 4;
-  if (qk__cdt_reserve(c, nv, nt) || grow_marks_to(g, nt) || qk__gm_fit_to(g, nv, nt))
+  if (qk__cdt_reserve(c, nv, nt) || grow_marks_to(g, nt) || qk__gm_fit_to(g, nv, nt, 1))
     return QK_ERR_NOMEM;
   return QK_OK;
 }
