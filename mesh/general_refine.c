@@ -119,12 +119,20 @@ static double d2(const double *p, const double *q) {
   return x * x + y * y;
 }
 
+static int exempt_at(const qk__gm_t *g, const uint32_t *tv, int i);
+
 int qk__gm_exempt(const qk__gm_t *g, const uint32_t *tv) {
   const qk__cdt_t *c = &g->cdt;
-  const qk_poly_t *P = g->P;
   double l[3];
   for (int i = 0; i < 3; i++) l[i] = d2(&c->xy[2 * tv[(i + 1) % 3]], &c->xy[2 * tv[(i + 2) % 3]]);
-  int i = l[0] <= l[1] && l[0] <= l[2] ? 0 : l[1] <= l[2] ? 1 : 2;
+  return exempt_at(g, tv, l[0] <= l[1] && l[0] <= l[2] ? 0 : l[1] <= l[2] ? 1 : 2);
+}
+
+/* qk__gm_exempt with i, the slot opposite the triangle's shortest edge (the first of the
+ * shortest), known. */
+static int exempt_at(const qk__gm_t *g, const uint32_t *tv, int i) {
+  const qk__cdt_t *c = &g->cdt;
+  const qk_poly_t *P = g->P;
   uint32_t p = tv[(i + 1) % 3], q = tv[(i + 2) % 3];
   uint32_t s1 = g->vi[p].seg, s2 = g->vi[q].seg;
   if (s1 == QK__CDT_NONE || s2 == QK__CDT_NONE || s1 == s2) return 0;
@@ -214,16 +222,20 @@ static inline int bad_kept(const qk__gm_t *g, uint32_t t) {
    * degrees, so comparing squared sines is comparing angles. */
   const double *o, *u, *w;
   double lu, lw;
+  int io;
   if (l0 <= l1 && l0 <= l2)
-    o = p0, u = p1, w = p2, lu = l1, lw = l2;
+    o = p0, u = p1, w = p2, lu = l1, lw = l2, io = 0;
   else if (l1 <= l2)
-    o = p1, u = p2, w = p0, lu = l2, lw = l0;
+    o = p1, u = p2, w = p0, lu = l2, lw = l0, io = 1;
   else
-    o = p2, u = p0, w = p1, lu = l0, lw = l1;
+    o = p2, u = p0, w = p1, lu = l0, lw = l1, io = 2;
   double ux = u[0] - o[0], uy = u[1] - o[1], wx = w[0] - o[0], wy = w[1] - o[1];
   double cr = ux * wy - uy * wx;
   if (cr * cr >= g->sin2_bound * lw * lu) return 0;
-  return !qk__gm_exempt(g, tv);
+  /* Exemption needs two segments meeting below 60 degrees (the smallest input angle, from
+   * atan2 of directions, is far more exact than this 1-degree margin). */
+  if (g->smallest_input_angle > 61) return 1;
+  return !exempt_at(g, tv, io);
 }
 
 int qk__gm_is_bad(const qk__gm_t *g, uint32_t t) {
