@@ -347,6 +347,7 @@ static double leaf_side(const qk_tree_t *t, leaf_path_t *lp, double X, double Y)
   }
   qk_node_t v = lp->node[d];
   double x0 = lp->x0[d], y0 = lp->y0[d], side = lp->side[d];
+  int full = 0;
   for (uint32_t c = qk__node_child(t, v); c != QK_NONE; c = qk__node_child(t, v)) {
     double h = side * 0.5;
     int e = X > x0 + h, n = Y > y0 + h;
@@ -356,10 +357,10 @@ static double leaf_side(const qk_tree_t *t, leaf_path_t *lp, double X, double Y)
       d++;
       lp->node[d] = v, lp->x0[d] = x0, lp->y0[d] = y0, lp->side[d] = side;
     } else {
-      d = -1; /* deeper than the path holds (cannot happen): the next lookup starts over */
+      full = 1; /* deeper than the path holds (cannot happen): the next lookup starts over */
     }
   }
-  lp->depth = d;
+  lp->depth = full ? -1 : d;
   return side;
 }
 
