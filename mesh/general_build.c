@@ -10,22 +10,27 @@
 #include <stdlib.h>
 #include <string.h>
 
-qk_status_t qk__gm_fit(qk__gm_t *g) {
-  size_t nv = g->cdt.nv, nt = g->cdt.nt;
+/* The next room for `need` entries from `cap`: just `need` for a reservation (no slack),
+ * else double, or `need` when that is more. */
+static size_t fit_cap(size_t cap, size_t need, int exact) {
+  return exact || need > 2 * cap ? need : 2 * cap;
+}
+
+qk_status_t qk__gm_fit_to(qk__gm_t *g, size_t nv, size_t nt, int exact) {
   if (nv > g->vcap) {
-    void *p = g->vi;
-    size_t c = g->vcap;
-    if (qk__grow(g->a, &p, &c, nv, sizeof *g->vi)) return QK_ERR_NOMEM;
+    size_t c = fit_cap(g->vcap, nv, exact);
+    qk__gm_vert_t *p = qk__realloc(g->a, g->vi, g->vcap * sizeof *p, c * sizeof *p);
+    if (!p) return QK_ERR_NOMEM;
     g->vi = p;
     for (size_t i = g->vcap; i < c; i++) g->vi[i] = (qk__gm_vert_t){QK__CDT_NONE, QK__CDT_NONE, 0};
     g->vcap = c;
   }
   if (nt > g->fcap) {
-    void *p = g->face;
-    size_t c = g->fcap;
-    if (qk__grow(g->a, &p, &c, nt, sizeof *g->face)) return QK_ERR_NOMEM;
+    size_t c = fit_cap(g->fcap, nt, exact);
+    uint32_t *p = qk__realloc(g->a, g->face, g->fcap * sizeof *p, c * sizeof *p);
+    if (!p) return QK_ERR_NOMEM;
     g->face = p;
-    for (size_t i = g->fcap; i < c; i++) g->face[i] = QK__CDT_NONE;
+    memset(g->face + g->fcap, 0xff, (c - g->fcap) * sizeof *g->face); /* QK__CDT_NONE */
     g->fcap = c;
   }
   return QK_OK;
@@ -41,19 +46,21 @@ uint64_t qk__gm_param(const qk__gm_t *g, uint32_t v, uint32_t s) {
  * triangles at v by two others at v). The CDT's change hook reported the same set with
  * repeats (a triangle flipped twice came twice: a third more quality checks) and cost a
  * call a change. */
-static qk_status_t star(qk__gm_t *g, uint32_t v) {
+static qk_status_t star(qk__gm_t *g, uint32_t v, uint32_t f) {
   const qk__cdt_t *c = &g->cdt;
   /* v lies strictly inside the square, so its star is a closed ring: counter-clockwise
-   * across the edge after v in each triangle until back at the first. */
+   * across the edge after v in each triangle until back at the first. With f != NONE (one
+   * face all round) each triangle is labelled on the way. */
   uint32_t first = c->vtri[v], t = first;
   g->ndirty = 0;
   do {
     if (g->ndirty == g->dirty_cap) {
       void *p = g->dirty;
-      if (qk__grow(g->a, &p, &g->dirty_cap, g->ndirty + 1, sizeof *g->dirty)) return QK_ERR_NOMEM;
+      if (qk__grow(g->a, &p, &g->dirty_cap, g->ndirty + 16, sizeof *g->dirty)) return QK_ERR_NOMEM;
       g->dirty = p;
     }
     g->dirty[g->ndirty++] = t;
+    if (f != QK__CDT_NONE) g->face[t] = f;
     const uint32_t *tv = &c->v[3 * (size_t)t];
     int i = tv[0] == v ? 1 : tv[1] == v ? 2 : 0; /* the slot after v's */
     t = c->nbr[3 * (size_t)t + i];
@@ -79,11 +86,10 @@ qk_status_t qk__gm_insert(qk__gm_t *g, double x, double y, uint32_t t0, int k0, 
   if (qk__gm_fit(g)) return QK_ERR_NOMEM;
   if (*existed) return QK_OK;
   uint32_t v = *v_out;
-  if (star(g, v)) return QK_ERR_NOMEM;
+  if (star(g, v, f0 == f1 ? f0 : QK__CDT_NONE)) return QK_ERR_NOMEM;
   g->vi[v] = (qk__gm_vert_t){QK__CDT_NONE, seg, k};
-  if (f0 == f1) {
-    for (size_t i = 0; i < g->ndirty; i++) g->face[g->dirty[i]] = f0;
-  } else {
+  g->dirty_face = f0 == f1 ? f0 : QK__CDT_NONE;
+  if (f0 != f1) {
     /* The first triangle's side by the segment's line; then around the ring of triangles
      * at v (star() lists them in order), the side changes exactly where the ring crosses
      * one of the two halves of the split segment, the only constrained edges at v. */
@@ -138,6 +144,29 @@ static void root_square(qk__gm_t *g) {
 static unsigned long sline(const qk_poly_t *P, size_t s) { return P->sline ? P->sline[s] : 0; }
 static unsigned long vline(const qk_poly_t *P, size_t v) { return P->vline ? P->vline[v] : 0; }
 
+/* Where the walk to input vertex i starts: at the last insertion (the CDT's hint), or at
+ * input vertex i - 1 or i + 1 when one is inserted and nearer. Rings list their vertices
+ * in order, so an index neighbour is usually a segment away, where the last insertion of
+ * a round in Z-order may be a jump away (long walks across the thin triangles between
+ * coastline vertices: 2,200 instructions a vertex on Norway). */
+static uint32_t walk_start(const qk__gm_t *g, size_t i) {
+  const qk_poly_t *P = g->P;
+  const qk__cdt_t *c = &g->cdt;
+  double x = P->vx[i], y = P->vy[i];
+  uint32_t best = c->hint < c->nt ? c->hint : 0;
+  const double *h = &c->xy[2 * c->v[3 * (size_t)best]];
+  double bd = (h[0] - x) * (h[0] - x) + (h[1] - y) * (h[1] - y);
+  for (int d = -1; d <= 1; d += 2) {
+    if ((d < 0 && i == 0) || (d > 0 && i + 1 >= P->nv)) continue;
+    uint32_t u = g->cv[(size_t)((ptrdiff_t)i + d)];
+    if (u == QK__CDT_NONE) continue;
+    const double *q = &c->xy[2 * (size_t)u];
+    double dd = (q[0] - x) * (q[0] - x) + (q[1] - y) * (q[1] - y);
+    if (dd < bd) bd = dd, best = c->vtri[u];
+  }
+  return best;
+}
+
 /* The input vertices in a biased randomized insertion order (Amenta, Choi and Rote): rounds
  * of geometrically growing size, drawn by a hash of the index, each in Z-order. In input
  * (or plain Z-) order, points along a coastline each flip a long fan of nearly cocircular
@@ -153,7 +182,7 @@ static qk_status_t insert_vertices(qk__gm_t *g) {
     int r = 0;
     while (r < 30 && !((h >> r) & 1)) r++; /* round r holds about n / 2^(r+1) points */
     uint64_t key = (uint64_t)(31 - r) << 59 | qk__gm_morton(g, P->vx[i], P->vy[i]) >> 5;
-    o[i] = (qk__gm_pt_t){key, P->vx[i], P->vy[i], i, 0};
+    o[i] = (qk__gm_pt_t){key, P->vx[i], P->vy[i], i, 0, 0};
   }
   qk_status_t st = P->nv ? qk__gm_sort_points(g, o, P->nv) : QK_OK;
   for (size_t j = 0; j < P->nv && !st; j++) {
@@ -161,7 +190,8 @@ static qk_status_t insert_vertices(qk__gm_t *g) {
     uint32_t v;
     int existed;
     double x = P->vx[i], y = P->vy[i];
-    if ((st = qk__cdt_insert(&g->cdt, x, y, QK__CDT_NONE, &v, &existed)) || (st = qk__gm_fit(g))) {
+    if ((st = qk__cdt_insert(&g->cdt, x, y, walk_start(g, i), &v, &existed)) ||
+        (st = qk__gm_fit(g))) {
       st = qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
     } else if (existed) {
       /* Name the pair in input order. */
@@ -369,7 +399,9 @@ qk_status_t qk__gm_build(qk__gm_t *g) {
   if (st) return qk__mesh_fail(g->err, st, 0, "out of memory");
   g->cdt_live = 1;
   g->cv = qk__realloc(g->a, NULL, 0, (P->nv + 1) * sizeof *g->cv);
-  if (!g->cv || qk__gm_fit(g)) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  if (!g->cv || qk__gm_fit_to(g, g->cdt.cap_v, g->cdt.cap_t, 1))
+    return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  memset(g->cv, 0xff, (P->nv + 1) * sizeof *g->cv); /* QK__CDT_NONE: not inserted yet */
   if ((st = insert_vertices(g)) || (st = insert_segments(g))) return st;
   if (qk__gm_fit(g) || label_faces(g) || input_angles(g))
     return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");

@@ -41,4 +41,20 @@ int qk__seg_budget(const double a[2], const double b[2]);
  */
 int qk__seg_point(const double a[2], const double b[2], uint64_t k, int m, double out[2]);
 
+/*
+ * qk__seg_point for a caller that has checked 0 < k < 2^m and m <= qk__seg_budget(a, b)
+ * (the mesher caches each segment's budget): no checks, no call. The budget keeps every
+ * intermediate a normal double, so scaling by 2^-m is an exact multiplication (what ldexp
+ * computes, without the library call).
+ */
+static inline void qk__seg_point_in(const double a[2], const double b[2], uint64_t k, int m,
+                                    double out[2]) {
+  union {
+    uint64_t u;
+    double d;
+  } sc = {(uint64_t)(1023 - m) << 52}; /* 2^-m, m in [0, 62] */
+  out[0] = a[0] + (double)k * ((b[0] - a[0]) * sc.d);
+  out[1] = a[1] + (double)k * ((b[1] - a[1]) * sc.d);
+}
+
 #endif

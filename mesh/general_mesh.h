@@ -25,6 +25,7 @@ typedef struct qk__gm_pt {
   double x, y;
   uint64_t k;
   uint32_t seg;
+  uint32_t rank; /* a split point's place among all split points, by segment then parameter */
 } qk__gm_pt_t;
 
 /* A CDT vertex: its input vertex (or NONE), the segment of a split point (or NONE) and
@@ -60,6 +61,8 @@ typedef struct qk__gm {
    * below 60 degrees there (the concentric shells' apexes). */
   uint32_t *cv;
   uint8_t *vsmall;
+  /* Per input segment: its precision budget (qk__seg_budget, at most 62), computed once. */
+  int8_t *sbud;
   /* Per CDT vertex. */
   qk__gm_vert_t *vi;
   size_t vcap;
@@ -74,6 +77,7 @@ typedef struct qk__gm {
    * general_build.c). */
   uint32_t *dirty;
   size_t ndirty, dirty_cap;
+  uint32_t dirty_face; /* their face when they all have one (NONE: a split segment's two) */
   /* The graded quadtree (lattice coordinates: the root square is [0, 1]^2). */
   qk_tree_t *tree;
   uint8_t *free_node; /* per node id: its grown square meets no feature */
@@ -117,8 +121,14 @@ static inline const double *qk__gm_vxy(const qk__gm_t *g, uint32_t v) { return &
 
 /* general_build.c: root square, the CDT of the input (validation), faces, holes, regions. */
 qk_status_t qk__gm_build(qk__gm_t *g);
-/* Grow the per-vertex and per-triangle arrays to the CDT's size. */
-qk_status_t qk__gm_fit(qk__gm_t *g);
+/* Grow the per-vertex and per-triangle arrays to nv vertices and nt triangles: exactly
+ * (a reservation for the final size) or by doubling. */
+qk_status_t qk__gm_fit_to(qk__gm_t *g, size_t nv, size_t nt, int exact);
+/* Grow them to the CDT's size (inline: a compare and a branch while there is room). */
+static inline qk_status_t qk__gm_fit(qk__gm_t *g) {
+  if (g->cdt.nv <= g->vcap && g->cdt.nt <= g->fcap) return QK_OK;
+  return qk__gm_fit_to(g, g->cdt.nv, g->cdt.nt, 0);
+}
 /* The parameter of CDT vertex v on input segment s (an endpoint or a split point of s). */
 uint64_t qk__gm_param(const qk__gm_t *g, uint32_t v, uint32_t s);
 /* Insert (x, y), located at (t0, k0, w) as qk__cdt_locate reports it, label the new

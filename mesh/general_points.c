@@ -61,6 +61,6 @@ int qk__seg_point(const double a[2], const double b[2], uint64_t k, int m, doubl
   if (k == 0) return out[0] = a[0], out[1] = a[1], 0;
   if (k == (uint64_t)1 << m) return out[0] = b[0], out[1] = b[1], 0;
   if (m > qk__seg_budget(a, b)) return -1;
-  for (int i = 0; i < 2; i++) out[i] = a[i] + (double)k * ldexp(b[i] - a[i], -m);
+  qk__seg_point_in(a, b, k, m, out);
   return 0;
 }

@@ -26,8 +26,7 @@ int qk__gm_split_param(const qk__gm_t *g, uint32_t s, uint64_t lo, uint64_t hi, 
   const qk_poly_t *P = g->P;
   uint32_t u = P->seg[2 * s], w = P->seg[2 * s + 1];
   const double A[2] = {P->vx[u], P->vy[u]}, B[2] = {P->vx[w], P->vy[w]};
-  int bud = qk__seg_budget(A, B);
-  if (bud > 62) bud = 62;
+  int bud = g->sbud[s];
   if (bud < 1 || hi - lo < 2 || protected_piece(g, s, lo, hi)) return 0;
   uint64_t q = (uint64_t)1 << (62 - bud), target = lo + (hi - lo) / 2;
   int shell = lo == 0 ? g->vsmall[u] : hi == QK__GM_ONE ? g->vsmall[w] : 0;
@@ -100,7 +99,7 @@ static qk_status_t split_piece(qk__gm_t *g, uint32_t a, uint32_t b, uint32_t s, 
   int tz = 0;
   while (tz < 62 && !((k >> tz) & 1)) tz++;
   double p[2];
-  if (qk__seg_point(A, B, k >> tz, 62 - tz, p)) return QK_ERR_GEOMETRY;
+  qk__seg_point_in(A, B, k >> tz, 62 - tz, p); /* 0 < k < 2^62 on the budget's grid */
   int kk;
   uint32_t t = qk__cdt_find_edge(&g->cdt, a, b, &kk), v;
   int existed;
@@ -120,12 +119,20 @@ static double d2(const double *p, const double *q) {
   return x * x + y * y;
 }
 
+static int exempt_at(const qk__gm_t *g, const uint32_t *tv, int i);
+
 int qk__gm_exempt(const qk__gm_t *g, const uint32_t *tv) {
   const qk__cdt_t *c = &g->cdt;
-  const qk_poly_t *P = g->P;
   double l[3];
   for (int i = 0; i < 3; i++) l[i] = d2(&c->xy[2 * tv[(i + 1) % 3]], &c->xy[2 * tv[(i + 2) % 3]]);
-  int i = l[0] <= l[1] && l[0] <= l[2] ? 0 : l[1] <= l[2] ? 1 : 2;
+  return exempt_at(g, tv, l[0] <= l[1] && l[0] <= l[2] ? 0 : l[1] <= l[2] ? 1 : 2);
+}
+
+/* qk__gm_exempt with i, the slot opposite the triangle's shortest edge (the first of the
+ * shortest), known. */
+static int exempt_at(const qk__gm_t *g, const uint32_t *tv, int i) {
+  const qk__cdt_t *c = &g->cdt;
+  const qk_poly_t *P = g->P;
   uint32_t p = tv[(i + 1) % 3], q = tv[(i + 2) % 3];
   uint32_t s1 = g->vi[p].seg, s2 = g->vi[q].seg;
   if (s1 == QK__CDT_NONE || s2 == QK__CDT_NONE || s1 == s2) return 0;
@@ -215,16 +222,20 @@ static inline int bad_kept(const qk__gm_t *g, uint32_t t) {
    * degrees, so comparing squared sines is comparing angles. */
   const double *o, *u, *w;
   double lu, lw;
+  int io;
   if (l0 <= l1 && l0 <= l2)
-    o = p0, u = p1, w = p2, lu = l1, lw = l2;
+    o = p0, u = p1, w = p2, lu = l1, lw = l2, io = 0;
   else if (l1 <= l2)
-    o = p1, u = p2, w = p0, lu = l2, lw = l0;
+    o = p1, u = p2, w = p0, lu = l2, lw = l0, io = 1;
   else
-    o = p2, u = p0, w = p1, lu = l0, lw = l1;
+    o = p2, u = p0, w = p1, lu = l0, lw = l1, io = 2;
   double ux = u[0] - o[0], uy = u[1] - o[1], wx = w[0] - o[0], wy = w[1] - o[1];
   double cr = ux * wy - uy * wx;
   if (cr * cr >= g->sin2_bound * lw * lu) return 0;
-  return !qk__gm_exempt(g, tv);
+  /* Exemption needs two segments meeting below 60 degrees (the smallest input angle, from
+   * atan2 of directions, is far more exact than this 1-degree margin). */
+  if (g->smallest_input_angle > 61) return 1;
+  return !exempt_at(g, tv, io);
 }
 
 int qk__gm_is_bad(const qk__gm_t *g, uint32_t t) {
@@ -283,11 +294,10 @@ static int apex_encroaches(const qk__gm_t *g, uint32_t t, int k) {
                           &c->xy[2 * tv[k]]) < 0;
 }
 
-/* Queue what triangle t (changed or new) asks for: its encroached subsegments (seen from a
- * kept side) and itself when bad. */
-static qk_status_t check(qk__gm_t *g, uint32_t t) {
+/* Queue what triangle t (changed or new), in a kept face, asks for: its encroached
+ * subsegments (seen from a kept side) and itself when bad. */
+static inline qk_status_t check_kept(qk__gm_t *g, uint32_t t) {
   const qk__cdt_t *c = &g->cdt;
-  if (g->faces[g->face[t]].drop) return QK_OK;
   const uint32_t *ts = &c->seg[3 * t];
   if ((ts[0] & ts[1] & ts[2]) != QK__CDT_NONE) /* some edge constrained (NONE is all ones) */
     for (int k = 0; k < 3; k++)
@@ -297,10 +307,25 @@ static qk_status_t check(qk__gm_t *g, uint32_t t) {
   return bad_kept(g, t) ? push_bad(g, t) : QK_OK;
 }
 
+/* check_kept for any triangle. */
+static qk_status_t check(qk__gm_t *g, uint32_t t) {
+  if (g->faces[g->face[t]].drop) return QK_OK;
+  return check_kept(g, t);
+}
+
+/* Check the triangles the last insertion made (its star): when they share one face, its
+ * label is looked at once. */
 static qk_status_t check_dirty(qk__gm_t *g) {
-  for (size_t i = 0; i < g->ndirty; i++)
-    if (check(g, g->dirty[i])) return QK_ERR_NOMEM;
+  size_t n = g->ndirty;
   g->ndirty = 0;
+  if (g->dirty_face != QK__CDT_NONE) {
+    if (g->faces[g->dirty_face].drop) return QK_OK;
+    for (size_t i = 0; i < n; i++)
+      if (check_kept(g, g->dirty[i])) return QK_ERR_NOMEM;
+    return QK_OK;
+  }
+  for (size_t i = 0; i < n; i++)
+    if (check(g, g->dirty[i])) return QK_ERR_NOMEM;
   return QK_OK;
 }
 
@@ -516,7 +541,8 @@ static qk_status_t reserve(qk__gm_t *g) {
   double est = 5.3 * (area / 2) / (h * h);
   if (!(est < (double)((size_t)1 << 27))) return QK_OK;
   size_t nt = c->nt + (size_t)est, nv = c->nv + (size_t)est / 2 + 4;
-  if (qk__cdt_reserve(c, nv, nt) || grow_marks_to(g, nt)) return QK_ERR_NOMEM;
+  if (qk__cdt_reserve(c, nv, nt) || grow_marks_to(g, nt) || qk__gm_fit_to(g, nv, nt, 1))
+    return QK_ERR_NOMEM;
   return QK_OK;
 }
 

@@ -40,6 +40,7 @@ static void gm_free(qk__gm_t *g) {
   if (g->cdt_live) qk__cdt_free(&g->cdt);
   qk__free(a, g->cv, (g->P->nv + 1) * sizeof *g->cv);
   qk__free(a, g->vsmall, g->P->nv + 1);
+  qk__free(a, g->sbud, g->P->ns + 1);
   qk__free(a, g->vi, g->vcap * sizeof *g->vi);
   qk__free(a, g->face, g->fcap * sizeof *g->face);
   qk__free(a, g->faces, g->nface_cap * sizeof *g->faces);

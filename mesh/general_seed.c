@@ -148,13 +148,13 @@ static qk_status_t too_close(const qk__gm_t *g, uint32_t f, uint32_t h, double s
                        nm[0], nm[1], gap, ext, ext / gap, g->deep_cap, GM_DEEP);
 }
 
-/* Step 4: split a leaf while its grown square meets two features that need separating, or
- * while it is larger than the size bound there (inside the input's bounding box). The k
- * features at g->arena[off..] meet this node's grown square; children filter them. */
+/* Step 4: split a leaf while its grown square ([lo, hi], from its parent) meets two features
+ * that need separating, or while it is larger than the size bound there (inside the input's
+ * bounding box). The k features at g->arena[off..] meet this node's grown square; children
+ * filter them. */
 static qk_status_t subdivide(qk__gm_t *g, uint32_t node, double X, double Y, double s,
-                             unsigned depth, size_t off, size_t k) {
-  double lo[2], hi[2];
-  grown_box(g, X, Y, s, lo, hi);
+                             const double lo[2], const double hi[2], unsigned depth, size_t off,
+                             size_t k) {
   int split = 0;
   if (depth < GM_DEPTH_CAP) {
     const uint32_t *L = g->arena + off;
@@ -214,7 +214,7 @@ static qk_status_t subdivide(qk__gm_t *g, uint32_t node, double X, double Y, dou
   }
   g->arena_n = base + 4 * k;
   for (unsigned q = 0; q < 4; q++) {
-    st = subdivide(g, child + q, cx[q], cy[q], h, depth + 1, base + q * k, n[q]);
+    st = subdivide(g, child + q, cx[q], cy[q], h, clo[q], chi[q], depth + 1, base + q * k, n[q]);
     if (st) break;
   }
   g->arena_n = base;
@@ -248,7 +248,8 @@ static qk_status_t add_pt(qk__gm_t *g, uint64_t key, double x, double y, uint32_
   void *p = g->pts;
   if (qk__grow(g->a, &p, &g->pts_cap, g->npts + 1, sizeof *g->pts)) return QK_ERR_NOMEM;
   g->pts = p;
-  g->pts[g->npts++] = (qk__gm_pt_t){key, x, y, k, seg};
+  g->pts[g->npts] = (qk__gm_pt_t){key, x, y, k, seg, (uint32_t)g->npts};
+  g->npts++;
   return QK_OK;
 }
 
@@ -317,40 +318,71 @@ static int ctz62(uint64_t k) {
  * next to an input vertex, the midpoint otherwise (general_refine.c). */
 int qk__gm_split_param(const qk__gm_t *g, uint32_t s, uint64_t lo, uint64_t hi, uint64_t *k);
 
+/* The path from the root to the leaf of the last lookup (leaf_side): node, lower-left
+ * corner and side per level. Lookups along a segment are close to each other, so most of
+ * the path is shared. */
+typedef struct leaf_path {
+  int depth; /* levels below the root on the path; -1: empty */
+  qk_node_t node[QK_MAX_DEPTH_LIMIT + 2];
+  double x0[QK_MAX_DEPTH_LIMIT + 2], y0[QK_MAX_DEPTH_LIMIT + 2], side[QK_MAX_DEPTH_LIMIT + 2];
+} leaf_path_t;
+
+/* Whether lattice point (X, Y) in [0, 1]^2 goes to the node with lower-left corner (x0, y0)
+ * and side s under the descent's rule (a point on a midline goes west or south): the node
+ * holds (x0, x0 + s] x (y0, y0 + s], and the closed sides at 0. */
+static int in_node(double X, double Y, double x0, double y0, double s) {
+  return (X > x0 || x0 == 0) && X <= x0 + s && (Y > y0 || y0 == 0) && Y <= y0 + s;
+}
+
 /* The side of the leaf holding lattice point (X, Y): qk__tree_descend's walk (a point on
  * a midline goes west or south) in the root square [0, 1]^2, whose halvings are exact,
- * without its square geometry a level. */
-static double leaf_side(const qk_tree_t *t, double X, double Y) {
-  double x0 = 0, y0 = 0, side = 1;
-  qk_node_t v = qk_tree_root(t);
+ * without its square geometry a level; it resumes from the deepest node of the last
+ * lookup's path that holds the point (the same leaf as a walk from the root). */
+static double leaf_side(const qk_tree_t *t, leaf_path_t *lp, double X, double Y) {
+  int d = lp->depth;
+  while (d > 0 && !in_node(X, Y, lp->x0[d], lp->y0[d], lp->side[d])) d--;
+  if (d < 0) {
+    d = 0;
+    lp->node[0] = qk_tree_root(t), lp->x0[0] = 0, lp->y0[0] = 0, lp->side[0] = 1;
+  }
+  qk_node_t v = lp->node[d];
+  double x0 = lp->x0[d], y0 = lp->y0[d], side = lp->side[d];
+  int full = 0;
   for (uint32_t c = qk__node_child(t, v); c != QK_NONE; c = qk__node_child(t, v)) {
     double h = side * 0.5;
     int e = X > x0 + h, n = Y > y0 + h;
     v = c + (e ? (n ? QK_NE : QK_SE) : (n ? QK_NW : QK_SW));
     x0 += e ? h : 0, y0 += n ? h : 0, side = h;
+    if (d < QK_MAX_DEPTH_LIMIT + 1) {
+      d++;
+      lp->node[d] = v, lp->x0[d] = x0, lp->y0[d] = y0, lp->side[d] = side;
+    } else {
+      full = 1; /* deeper than the path holds (cannot happen): the next lookup starts over */
+    }
   }
+  lp->depth = full ? -1 : d;
   return side;
 }
 
 /* Step 6: split segment s's piece (lo, hi) while it is longer than the leaf at its middle
  * (or the size bound there). A piece with no exact split point is left to the refinement,
  * which refuses the input only if it must split it. */
-static qk_status_t presplit(qk__gm_t *g, uint32_t s, const double *A, const double *B, double len,
-                            uint64_t lo, uint64_t hi) {
+static qk_status_t presplit(qk__gm_t *g, leaf_path_t *lp, uint32_t s, const double *A,
+                            const double *B, double len, uint64_t lo, uint64_t hi) {
   double t = (double)(lo / 2 + hi / 2) * 0x1p-62;
   double mid[2] = {A[0] + t * (B[0] - A[0]), A[1] + t * (B[1] - A[1])};
   double X = (mid[0] - g->X0) * g->inv_S, Y = (mid[1] - g->Y0) * g->inv_S;
   X = X < 0 ? 0 : X > 1 ? 1 : X, Y = Y < 0 ? 0 : Y > 1 ? 1 : Y;
-  double want = fmin(leaf_side(g->tree, X, Y) * g->S, size_at(g, mid, 1));
+  double want = fmin(leaf_side(g->tree, lp, X, Y) * g->S, size_at(g, mid, 1));
   if (!(len * ((double)(hi - lo) * 0x1p-62) > want)) return QK_OK;
   uint64_t k;
   if (!qk__gm_split_param(g, s, lo, hi, &k)) return QK_OK;
   int tz = ctz62(k);
   double p[2];
-  if (qk__seg_point(A, B, k >> tz, 62 - tz, p)) return QK_OK;
-  qk_status_t st = presplit(g, s, A, B, len, lo, k);
+  qk__seg_point_in(A, B, k >> tz, 62 - tz, p); /* 0 < k < 2^62 on the budget's grid */
+  qk_status_t st = presplit(g, lp, s, A, B, len, lo, k);
   if (!st) st = add_pt(g, qk__gm_morton(g, p[0], p[1]), p[0], p[1], s, k);
-  if (!st) st = presplit(g, s, A, B, len, k, hi);
+  if (!st) st = presplit(g, lp, s, A, B, len, k, hi);
   return st;
 }
 
@@ -383,36 +415,77 @@ qk_status_t qk__gm_sort_points(const qk__gm_t *g, qk__gm_pt_t *pts, size_t n) {
   return QK_OK;
 }
 
-/* Insert the seeds and split points in Z-order, each walk starting at the last vertex.
- * Seeds in dropped faces (outside, holes) are skipped. */
-static qk_status_t insert_points(qk__gm_t *g) {
+/* The edge holding split point q (rank r among all split points, first[s] .. first[s + 1]
+ * those of its segment s, in parameter order): between the nearest split points of s
+ * inserted already on either side (rv: their CDT vertices, NONE while not inserted), or the
+ * segment's ends. No point lies on that piece between them, so it is one constrained edge:
+ * found by turning around one end, without a walk and without the orientation tests of a
+ * walk's last step, which are exact ones for a point on its own segment's line. */
+static uint32_t seg_edge(const qk__gm_t *g, const qk__gm_pt_t *q, const uint32_t *first,
+                         const uint32_t *rv, int *k) {
+  const qk_poly_t *P = g->P;
+  uint32_t s = q->seg, r = q->rank, a = QK__CDT_NONE, b = QK__CDT_NONE;
+  for (uint32_t i = r; i > first[s] && a == QK__CDT_NONE;) a = rv[--i];
+  for (uint32_t i = r + 1; i < first[s + 1] && b == QK__CDT_NONE; i++) b = rv[i];
+  if (a == QK__CDT_NONE) a = g->cv[P->seg[2 * s]];
+  if (b == QK__CDT_NONE) b = g->cv[P->seg[2 * s + 1]];
+  return qk__cdt_find_edge(&g->cdt, a, b, k);
+}
+
+/* Insert the seeds and split points in Z-order: a seed's walk starts at the last vertex, a
+ * split point goes straight onto its edge (seg_edge). Seeds in dropped faces (outside,
+ * holes) are skipped. first[s] is where segment s's split points start in rank order. */
+static qk_status_t insert_points(qk__gm_t *g, const uint32_t *first) {
   qk__cdt_t *c = &g->cdt;
   uint32_t hint = QK__CDT_NONE;
-  for (size_t i = 0; i < g->npts; i++) {
+  uint32_t *rv = qk__realloc(g->a, NULL, 0, (g->npts + 1) * sizeof *rv);
+  if (!rv) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  memset(rv, 0xff, (g->npts + 1) * sizeof *rv); /* QK__CDT_NONE */
+  qk_status_t st = QK_OK;
+  for (size_t i = 0; i < g->npts && !st; i++) {
     const qk__gm_pt_t *q = &g->pts[i];
     uint32_t t, v;
     int k, existed;
-    /* Leaves share corners: a repeated seed follows its twin (equal keys stay in order). */
-    if (q->seg == QK__CDT_NONE && i && q->key == q[-1].key && q->x == q[-1].x && q->y == q[-1].y)
-      continue;
-    qk__cdt_where_t w = qk__cdt_locate(c, q->x, q->y, hint, &t, &k);
-    hint = t;
+    qk__cdt_where_t w;
     if (q->seg == QK__CDT_NONE) {
+      /* Leaves share corners: a repeated seed follows its twin (equal keys stay in order). */
+      if (i && q->key == q[-1].key && q->x == q[-1].x && q->y == q[-1].y) continue;
+      w = qk__cdt_locate(c, q->x, q->y, hint, &t, &k);
+      hint = t;
       if (w == QK__CDT_VERT || g->faces[g->face[t]].drop ||
           (w == QK__CDT_EDGE && c->seg[3 * t + k] != QK__CDT_NONE))
         continue;
       g->seeds++;
+    } else {
+      t = seg_edge(g, q, first, rv, &k);
+      w = QK__CDT_EDGE;
+      if (t == QK__CDT_NONE) /* cannot happen: the piece is an edge */
+        w = qk__cdt_locate(c, q->x, q->y, hint, &t, &k);
     }
-    qk_status_t st = qk__gm_insert(g, q->x, q->y, t, k, w, q->seg, q->k, &v, &existed);
-    if (st) return qk__mesh_fail(g->err, st, 0, "out of memory");
-    hint = c->vtri[v];
+    st = qk__gm_insert(g, q->x, q->y, t, k, w, q->seg, q->k, &v, &existed);
+    if (st) {
+      st = qk__mesh_fail(g->err, st, 0, "out of memory");
+    } else {
+      if (q->seg != QK__CDT_NONE) rv[q->rank] = v;
+      hint = c->vtri[v];
+    }
   }
-  return QK_OK;
+  qk__free(g->a, rv, (g->npts + 1) * sizeof *rv);
+  return st;
 }
 
 qk_status_t qk__gm_seed(qk__gm_t *g, qk_mesh_stats_t *stats) {
   const qk_poly_t *P = g->P;
   g->inv_S = ldexp(1.0, -g->e);
+  /* Each segment's precision budget once (every split point asks for it). */
+  g->sbud = qk__realloc(g->a, NULL, 0, P->ns + 1);
+  if (!g->sbud) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  for (size_t s = 0; s < P->ns; s++) {
+    uint32_t u = P->seg[2 * s], w = P->seg[2 * s + 1];
+    const double A[2] = {P->vx[u], P->vy[u]}, B[2] = {P->vx[w], P->vy[w]};
+    int b = qk__seg_budget(A, B);
+    g->sbud[s] = (int8_t)(b > 62 ? 62 : b < -1 ? -1 : b);
+  }
   qk_tree_options_t to;
   qk_tree_options_init(&to);
   to.has_root = 1;
@@ -459,7 +532,9 @@ qk_status_t qk__gm_seed(qk__gm_t *g, qk_mesh_stats_t *stats) {
   nf = k;
   g->arena_n = nf;
   g->deep_cap = GM_DEEP_BUDGET + 256 * nf;
-  if ((st = subdivide(g, qk_tree_root(g->tree), 0, 0, 1, 0, 0, nf))) return st;
+  double rlo[2], rhi[2];
+  grown_box(g, 0, 0, 1, rlo, rhi);
+  if ((st = subdivide(g, qk_tree_root(g->tree), 0, 0, 1, rlo, rhi, 0, 0, nf))) return st;
   /* The tree grew from its root by splits alone (four nodes each, three more leaves), so
    * its node count gives its leaves without a walk. */
   stats->leaves_before_balance = 1 + 3 * ((size_t)qk__tree_node_bound(g->tree) - 1) / 4;
@@ -469,13 +544,29 @@ qk_status_t qk__gm_seed(qk__gm_t *g, qk_mesh_stats_t *stats) {
   if (seeds(g, qk_tree_root(g->tree), 0, 0, 1, 0))
     return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   g->free_leaves += size_cells(g);
-  for (size_t s = 0; s < P->ns; s++) {
+  /* The split points of segment s get ranks first[s] .. first[s + 1] - 1 in parameter
+   * order (presplit makes them in order; seeds, when enabled, come before them all). */
+  uint32_t *first = qk__realloc(g->a, NULL, 0, (P->ns + 1) * sizeof *first);
+  leaf_path_t *lp = qk__realloc(g->a, NULL, 0, sizeof *lp);
+  if (!first || !lp) {
+    qk__free(g->a, first, (P->ns + 1) * sizeof *first);
+    qk__free(g->a, lp, sizeof *lp);
+    return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  }
+  lp->depth = -1;
+  for (size_t s = 0; s < P->ns && !st; s++) {
     uint32_t u = P->seg[2 * s], w = P->seg[2 * s + 1];
     const double A[2] = {P->vx[u], P->vy[u]}, B[2] = {P->vx[w], P->vy[w]};
-    if (presplit(g, (uint32_t)s, A, B, hypot(B[0] - A[0], B[1] - A[1]), 0, QK__GM_ONE))
-      return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+    first[s] = (uint32_t)g->npts;
+    st = presplit(g, lp, (uint32_t)s, A, B, hypot(B[0] - A[0], B[1] - A[1]), 0, QK__GM_ONE);
   }
-  if (g->npts && qk__gm_sort_points(g, g->pts, g->npts))
-    return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
-  return insert_points(g);
+  qk__free(g->a, lp, sizeof *lp);
+  if (!st) first[P->ns] = (uint32_t)g->npts;
+  if (!st && g->npts) st = qk__gm_sort_points(g, g->pts, g->npts);
+  if (st)
+    st = qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  else
+    st = insert_points(g, first);
+  qk__free(g->a, first, (P->ns + 1) * sizeof *first);
+  return st;
 }
