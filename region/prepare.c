@@ -178,7 +178,11 @@ static inline bool coord_ok(int planar, double x, double y) {
   return ok && (planar || (x >= -180 && x <= 180 && y >= -90 && y <= 90));
 }
 
-static qk_status_t check_arrays(const qk_region_arrays_t *in, int planar, qk_error_t *err) {
+/* Check the arrays; *bound: the pieces they make at most (see qk__region_prepare), counted
+ * in the same pass over the coordinates. */
+static qk_status_t check_arrays(const qk_region_arrays_t *in, int planar, size_t *bound,
+                                qk_error_t *err) {
+  *bound = 0;
   if (!in) return qk__region_fail(err, QK_ERR_INVALID, SIZE_MAX, "no input");
   if (in->n_features && !in->feature_start)
     return qk__region_fail(err, QK_ERR_INVALID, SIZE_MAX, "feature_start is NULL");
@@ -209,12 +213,21 @@ static qk_status_t check_arrays(const qk_region_arrays_t *in, int planar, qk_err
         return qk__region_fail(err, QK_ERR_GEOMETRY, f,
                                "feature %zu, ring %zu: %zu positions (a ring needs at least 4)", f,
                                k, e - s);
+      /* a ring edge gives one piece, or four when it crosses the antimeridian, and a ring
+       * winding w times round the globe |w| more */
+      long w = 0;
+      size_t cuts = 0;
+      double px = in->xy[2 * s];
       for (size_t v = s; v < e; v++) {
-        double x = in->xy[2 * v], y = in->xy[2 * v + 1];
+        double x = in->xy[2 * v], y = in->xy[2 * v + 1], d = x - px;
+        px = x;
+        if (d < -180 || d > 180) cuts++, w += d < -180 ? 1 : -1;
         if (coord_ok(planar, x, y)) continue; /* (the common case, without a call) */
         qk_status_t st = qk__region_check_coord(planar, x, y, f, err);
         if (st) return st;
       }
+      *bound += e - s - 1;
+      if (!planar) *bound += 3 * cuts + (size_t)labs(w);
       const double *p = in->xy + 2 * s, *q = in->xy + 2 * (e - 1);
       if (p[0] != q[0] || p[1] != q[1])
         return qk__region_fail(err, QK_ERR_GEOMETRY, f,
@@ -229,23 +242,10 @@ static qk_status_t check_arrays(const qk_region_arrays_t *in, int planar, qk_err
 qk_status_t qk__region_prepare(const qk_allocator_t *a, const qk_region_arrays_t *in, int planar,
                                qk__pieces_t *out, qk_error_t *err) {
   memset(out, 0, sizeof *out);
-  qk_status_t st = check_arrays(in, planar, err);
+  size_t bound;
+  qk_status_t st = check_arrays(in, planar, &bound, err);
   if (st) return st;
-  /* Room for every piece at once: a ring edge gives one piece, or four when it crosses the
-   * antimeridian, and a ring winding k times round the globe |k| more. */
-  size_t bound = 0;
-  for (size_t r = 0; r < in->n_rings; r++) {
-    size_t s = in->ring_start[r], len = in->ring_start[r + 1] - s;
-    bound += len - 1;
-    if (planar) continue;
-    long k = 0;
-    size_t cuts = 0;
-    for (size_t i = 0; i + 1 < len; i++) {
-      double d = in->xy[2 * (s + i + 1)] - in->xy[2 * (s + i)];
-      if (d < -180 || d > 180) cuts++, k += d < -180 ? 1 : -1;
-    }
-    bound += 3 * cuts + (size_t)labs(k);
-  }
+  /* Room for every piece at once. */
   if (bound && (st = reserve(a, out, bound))) {
     qk__pieces_free(a, out);
     return qk__region_fail(err, st, SIZE_MAX,
@@ -262,20 +262,18 @@ qk_status_t qk__region_prepare(const qk_allocator_t *a, const qk_region_arrays_t
         }
         continue;
       }
-      /* The winding first (cheap); for a ring around the globe, the area it encloses
-       * towards the north pole decides which pole it holds. */
+      /* Made as if the ring held the north pole; a ring around the globe holds the pole
+       * towards which it encloses the smaller area, and one around the south pole is made
+       * again (rare: each layer has a few such rings at most). */
       long k = 0;
-      for (size_t i = 0; i + 1 < len; i++) {
-        double d = in->xy[2 * (s + i + 1)] - in->xy[2 * (s + i)];
-        k += d < -180 ? 1 : d > 180 ? -1 : 0;
+      size_t first = out->n;
+      if ((st = ring_lonlat(&c, in->xy, s, len, 90, &k)) || k == 0) continue;
+      ring_ctx_t probe = {a, NULL, 0, 0, 0};
+      ring_lonlat(&probe, in->xy, s, len, 90, &k);
+      if (fabs(probe.area2) * 0.5 > 0.5 * 360 * 180) {
+        out->n = first;
+        st = ring_lonlat(&c, in->xy, s, len, -90, &k);
       }
-      double P = 90;
-      if (k != 0) {
-        ring_ctx_t probe = {a, NULL, 0, 0, 0};
-        ring_lonlat(&probe, in->xy, s, len, 90, &k);
-        if (fabs(probe.area2) * 0.5 > 0.5 * 360 * 180) P = -90;
-      }
-      st = ring_lonlat(&c, in->xy, s, len, P, &k);
     }
   }
   if (st) {
