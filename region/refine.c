@@ -40,20 +40,34 @@ static void self_meets(qk__bctx_t *b, const uint32_t *E, size_t n) {
   const qk__pieces_t *pc = b->pc;
   if (n > SELF_CHECK_MAX) return;
   const uint32_t *ring = pc->ring, *vtx = pc->vtx;
-  uint32_t rn = n ? ring[E[0]] : 0;
-  for (size_t i = 0; i + 1 < n; i++) {
-    uint32_t p = E[i], rp = rn, vp = vtx[p];
-    rn = ring[E[i + 1]];
-    if (rn != rp || vp == UINT32_MAX || b->bad[rp]) continue; /* (the next piece's ring) */
-    size_t rs = b->in->ring_start[rp], re = b->in->ring_start[rp + 1];
-    for (size_t j = i + 1; j < n && ring[E[j]] == rp; j++) {
-      uint32_t q = E[j], vq = vtx[q];
-      if (vq == UINT32_MAX) continue;
-      uint32_t lo = vp < vq ? vp : vq, hi = vp < vq ? vq : vp;
-      if (hi - lo <= 1 || (lo == rs && hi == re - 2)) continue; /* same or neighbouring edges */
-      if (segs_meet(&pc->seg[p], &pc->seg[q])) {
-        b->bad[rp] = 1;
-        break;
+  const qk__seg_t *seg = pc->seg;
+  size_t ge;
+  for (size_t i = 0; i + 1 < n; i = ge) {
+    uint32_t rp = ring[E[i]];
+    for (ge = i + 1; ge < n && ring[E[ge]] == rp;) ge++;
+    if (ge - i < 2 || b->bad[rp]) continue;
+    /* One ring's pieces, in the order of its vertices (vq >= vp below); its first and
+     * last edges are neighbours too. */
+    uint32_t rs = (uint32_t)b->in->ring_start[rp], last = (uint32_t)b->in->ring_start[rp + 1] - 2;
+    bool hit = false;
+    for (size_t a = i; a + 1 < ge && !hit; a++) {
+      uint32_t p = E[a], vp = vtx[p];
+      if (vp == UINT32_MAX) continue; /* the added pieces: not the ring's */
+      const qk__seg_t *g = &seg[p];
+      double lx = qk__min(g->ax, g->bx), hx = qk__max(g->ax, g->bx);
+      double ly = qk__min(g->ay, g->by), hy = qk__max(g->ay, g->by);
+      for (size_t c = a + 1; c < ge; c++) {
+        uint32_t q = E[c], vq = vtx[q];
+        if (vq == UINT32_MAX || vq - vp <= 1 || (vp == rs && vq == last)) continue;
+        const qk__seg_t *h = &seg[q];
+        if (qk__max(h->ax, h->bx) < lx || qk__min(h->ax, h->bx) > hx ||
+            qk__max(h->ay, h->by) < ly || qk__min(h->ay, h->by) > hy)
+          continue; /* boxes apart: most pairs */
+        if (segs_meet(g, h)) {
+          b->bad[rp] = 1;
+          hit = true;
+          break;
+        }
       }
     }
   }
