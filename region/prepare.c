@@ -135,33 +135,54 @@ static qk_status_t ring_lonlat(ring_ctx_t *c, const double *xy, size_t start, si
                                long *k_out) {
   long k = 0;
   qk_status_t st = QK_OK;
-  for (size_t i = 0; i + 1 < len && !st; i++) {
+  qk__pieces_t *out = c->out;
+  const double *q = xy + 2 * start;
+  for (size_t i = 0; i + 1 < len && !st; i++, q += 2) {
     uint32_t v = (uint32_t)(start + i);
-    double ax = xy[2 * (start + i)], ay = xy[2 * (start + i) + 1];
-    double bx = xy[2 * (start + i + 1)], by = xy[2 * (start + i + 1) + 1];
+    double ax = q[0], ay = q[1], bx = q[2], by = q[3];
     double d = bx - ax;
-    if (d < -180) { /* eastward through 180 */
+    if (d >= -180 && d <= 180) { /* the common case: the edge as it is */
+      if (out && out->n < out->cap) {
+        /* piece() inline, for the run of such edges (in locals: the stores cannot move
+         * them) */
+        qk__seg_t *seg = out->seg;
+        uint32_t *feat = out->feat, *ring = out->ring, *vx = out->vtx, f = c->f, r = c->r;
+        size_t n = out->n, cap = out->cap;
+        bool full = false;
+        for (;;) {
+          if (ax != bx || ay != by) {
+            if (n == cap) {
+              full = true;
+              break;
+            }
+            seg[n] = (qk__seg_t){ax, ay, bx, by};
+            feat[n] = f, ring[n] = r, vx[n] = v;
+            n++;
+          }
+          if (i + 2 >= len) break;
+          double nx = q[4], ny = q[5];
+          if (!(nx - bx >= -180 && nx - bx <= 180)) break;
+          i++, q += 2, v++;
+          ax = bx, ay = by, bx = nx, by = ny;
+        }
+        out->n = n;
+        if (full) st = piece(c, ax, ay, bx, by, v); /* (sized at once: never) */
+      } else if (ax != bx || ay != by) {
+        st = piece(c, ax, ay, bx, by, v);
+      }
+    } else if (d < -180) { /* eastward through 180 */
       double phi = cut_lat(ax, ay, bx + 360, by, 180, bx == -180);
       if (!(st = piece(c, ax, ay, 180, phi, v)) && !(st = piece(c, 180, phi, 180, P, UINT32_MAX)) &&
           !(st = piece(c, -180, P, -180, phi, UINT32_MAX)))
         st = piece(c, -180, phi, bx, by, v);
       k++;
-    } else if (d > 180) { /* westward through -180 */
+    } else { /* westward through -180 (or NaN, which validation rejects first) */
       double phi = cut_lat(ax, ay, bx - 360, by, -180, bx == 180);
       if (!(st = piece(c, ax, ay, -180, phi, v)) &&
           !(st = piece(c, -180, phi, -180, P, UINT32_MAX)) &&
           !(st = piece(c, 180, P, 180, phi, UINT32_MAX)))
         st = piece(c, 180, phi, bx, by, v);
       k--;
-    } else if (c->out && c->out->n < c->out->cap && (ax != bx || ay != by)) {
-      qk__pieces_t *p = c->out; /* piece() inline, for the common case */
-      p->seg[p->n] = (qk__seg_t){ax, ay, bx, by};
-      p->feat[p->n] = c->f;
-      p->ring[p->n] = c->r;
-      p->vtx[p->n] = v;
-      p->n++;
-    } else {
-      st = piece(c, ax, ay, bx, by, v);
     }
   }
   for (long j = 0; j < labs(k) && !st; j++)
@@ -173,9 +194,10 @@ static qk_status_t ring_lonlat(ring_ctx_t *c, const double *xy, size_t start, si
 /* Does qk__region_check_coord accept (x, y)? (NaN fails every comparison.) */
 static inline bool coord_ok(int planar, double x, double y) {
   double ax = fabs(x), ay = fabs(y);
-  bool ok = ax <= QK_REGION_MAX_COORD && ay <= QK_REGION_MAX_COORD &&
-            (ax >= QK_REGION_MIN_COORD || ax == 0) && (ay >= QK_REGION_MIN_COORD || ay == 0);
-  return ok && (planar || (x >= -180 && x <= 180 && y >= -90 && y <= 90));
+  bool tiny_ok = (ax >= QK_REGION_MIN_COORD || ax == 0) && (ay >= QK_REGION_MIN_COORD || ay == 0);
+  if (!planar) /* (within [-180, 180] x [-90, 90], far below the largest magnitude) */
+    return ax <= 180 && ay <= 90 && tiny_ok;
+  return ax <= QK_REGION_MAX_COORD && ay <= QK_REGION_MAX_COORD && tiny_ok;
 }
 
 /* Check the arrays; *bound: the pieces they make at most (see qk__region_prepare), counted
