@@ -100,13 +100,15 @@ qk_status_t qk__emit_leaf(qk__bctx_t *b, qk_node_t v, double cx, double cy, unsi
   if (r->n_le + ne > UINT32_MAX || r->n_sets + ns > UINT32_MAX) return QK_ERR_LIMIT;
   r->leaves[r->n_leaves] =
       (qk__leaf_t){(uint32_t)r->n_le, (uint32_t)ne, (uint32_t)r->n_sets, (uint32_t)ns};
+  const uint32_t *E = b->e[d], *feat = pc->feat, *vtx = pc->vtx;
+  const qk__seg_t *seg = pc->seg;
+  uint32_t *le = r->le + r->n_le, *tag = r->le_tag + r->n_le;
   for (size_t i = 0; i < ne; i++) {
-    uint32_t p = b->e[d][i];
-    const qk__seg_t *g = &pc->seg[p];
+    uint32_t p = E[i];
+    const qk__seg_t *g = &seg[p];
     int side = qk__side(g->ax, g->ay, g->bx, g->by, cx, cy);
-    r->le[r->n_le + i] = p;
-    r->le_tag[r->n_le + i] =
-        pc->feat[p] << 2 | (uint32_t)(pc->vtx[p] == UINT32_MAX) << 1 | (uint32_t)(side > 0);
+    le[i] = p;
+    tag[i] = feat[p] << 2 | (uint32_t)(vtx[p] == UINT32_MAX) << 1 | (uint32_t)(side > 0);
   }
   if (ns) memcpy(r->sets + r->n_sets, b->s[d], ns * sizeof(uint32_t));
   r->n_le += ne;
