@@ -79,7 +79,7 @@ qk_status_t qk__emit_leaf(qk__bctx_t *b, qk_node_t v, double cx, double cy, unsi
   size_t ne = b->ne[d], ns = b->ns[d];
   if (d > b->depth) b->depth = d;
   if (ne == 0 && ns <= 1) {
-    r->kid[v] = QK__LEAF | QK__DIRECT | (ns ? b->s[d][0] + 1 : 0);
+    r->kid[v] = QK__LEAF | QK__DIRECT | (ns ? b->set[d][0] + 1 : 0);
     r->n_direct++;
     return QK_OK;
   }
@@ -110,7 +110,7 @@ qk_status_t qk__emit_leaf(qk__bctx_t *b, qk_node_t v, double cx, double cy, unsi
     le[i] = p;
     tag[i] = feat[p] << 2 | (uint32_t)(vtx[p] == UINT32_MAX) << 1 | (uint32_t)(side > 0);
   }
-  if (ns) memcpy(r->sets + r->n_sets, b->s[d], ns * sizeof(uint32_t));
+  if (ns) memcpy(r->sets + r->n_sets, b->set[d], ns * sizeof(uint32_t));
   r->n_le += ne;
   r->n_sets += ns;
   r->kid[v] = QK__LEAF | (uint32_t)r->n_leaves;
@@ -202,12 +202,18 @@ static qk_status_t split_lists(qk__bctx_t *b, unsigned d, double x0, double y0, 
 qk_status_t qk__child_set(qk__bctx_t *b, unsigned d, const uint32_t *odd, size_t nodd) {
   const qk_allocator_t *a = &b->r->alloc;
   size_t ns = b->ns[d];
+  if (nodd == 0) { /* the parent's list, not copied (a depth's list stays while below it) */
+    b->set[d + 1] = b->set[d];
+    b->ns[d + 1] = ns;
+    return QK_OK;
+  }
   qk_status_t st;
   if (ns + nodd + 1 > b->cap_s[d + 1] &&
       (st = qk__grow(a, (void **)&b->s[d + 1], &b->cap_s[d + 1], ns + nodd + 1, sizeof(uint32_t))))
     return st;
-  const uint32_t *S = b->s[d];
+  const uint32_t *S = b->set[d];
   uint32_t *T = b->s[d + 1];
+  b->set[d + 1] = T;
   size_t i = 0, j = 0, k = 0;
   while (i < ns || j < nodd) {
     if (j == nodd || (i < ns && S[i] < odd[j]))
