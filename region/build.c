@@ -76,6 +76,23 @@ void qk__region_grid_sides(double r0, double side, unsigned G, double *out) {
   }
 }
 
+/* The grid cells under the node whose kid[] value is k, at depth l, column i, row j: the
+ * value the descent reaches at depth G in each, or the leaf it stops at before. A leaf
+ * above depth G with edges needs its own square (for its reference point), not the grid
+ * cell's: such cells descend from the root. */
+static void fill_grid(const qk_region_t *r, uint32_t *grid, unsigned G, uint32_t k, unsigned l,
+                      size_t i, size_t j) {
+  if (l < G && !(k & QK__LEAF)) {
+    for (unsigned q = 0; q < 4; q++)
+      fill_grid(r, grid, G, r->kid[k + q], l + 1, 2 * i + qk__q_east(q), 2 * j + qk__q_north(q));
+    return;
+  }
+  if (l < G && !(k & QK__DIRECT)) k = QK__REDO;
+  size_t w = (size_t)1 << (G - l);
+  for (size_t jj = j * w; jj < (j + 1) * w; jj++)
+    for (size_t ii = i * w; ii < (i + 1) * w; ii++) grid[jj << G | ii] = k;
+}
+
 /* The grid shortcut (see region_internal.h): G grows while 4^G stays below twice the
  * leaves, up to 8 (256 KiB). */
 static qk_status_t build_grid(qk_region_t *r, unsigned depth) {
@@ -96,20 +113,7 @@ static qk_status_t build_grid(qk_region_t *r, unsigned depth) {
   qk__region_grid_sides(r->rx, r->rside, G, gx);
   qk__region_grid_sides(r->ry, r->rside, G, gy);
   gx[g] = gy[g] = INFINITY;
-  for (size_t j = 0; j < g; j++)
-    for (size_t i = 0; i < g; i++) {
-      uint32_t k = r->kid[0];
-      unsigned l = 0;
-      for (; l < G && !(k & QK__LEAF); l++) {
-        unsigned east = i >> (G - 1 - l) & 1, north = j >> (G - 1 - l) & 1;
-        unsigned q = north ? (east ? 0u : 1u) : (east ? 3u : 2u);
-        k = r->kid[k + q];
-      }
-      /* A leaf above depth G with edges needs its own square (for its reference point),
-       * not the grid cell's: such cells descend from the root. */
-      if (l < G && !(k & QK__DIRECT)) k = QK__REDO;
-      grid[j << G | i] = k;
-    }
+  fill_grid(r, grid, G, r->kid[0], 0, 0, 0);
   r->grid = grid;
   r->gx = gx;
   r->gy = gy;

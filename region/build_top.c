@@ -409,24 +409,28 @@ static qk_status_t gather_cell(top_t *t, unsigned l, size_t i, size_t j, size_t 
   return QK_OK;
 }
 
-/* b->s[d] = the set of grid cell c, with the features toggled that cross the segment
- * from (ox, oy) to its centre (none when ox is NAN). */
+/* b->set[d] = the set of grid cell c, with the features toggled that cross the segment
+ * from (ox, oy) to its centre (none when ox is NAN: then the pool's list itself, which
+ * stays until the end of the build). */
 static qk_status_t set_from_cell(top_t *t, unsigned d, size_t c, double ox, double oy) {
   qk__bctx_t *b = t->b;
   const uint32_t *cs = t->pool + t->cset[c];
   size_t ns = cs[0];
+  if (ox != ox) {
+    b->set[d] = cs + 1;
+    b->ns[d] = ns;
+    return QK_OK;
+  }
   qk_status_t st;
   if ((st = qk__grow(t->a, (void **)&t->s, &t->cap_s, ns + 1, sizeof(uint32_t)))) return st;
   memcpy(t->s, cs + 1, ns * sizeof(uint32_t));
-  if (ox == ox) {
-    size_t k = t->k, i = c & (t->g - 1), j = c >> k, na;
-    if ((st =
-             cell_odd(t, c, ox, oy, t->gx[i] + t->hk, t->gy[j] + t->hk, &t->oa, &t->cap_oa, &na)) ||
-        (st = toggle(t, &ns, t->oa, na)))
-      return st;
-  }
+  size_t k = t->k, i = c & (t->g - 1), j = c >> k, na;
+  if ((st = cell_odd(t, c, ox, oy, t->gx[i] + t->hk, t->gy[j] + t->hk, &t->oa, &t->cap_oa, &na)) ||
+      (st = toggle(t, &ns, t->oa, na)))
+    return st;
   if ((st = qk__grow(t->a, (void **)&b->s[d], &b->cap_s[d], ns + 1, sizeof(uint32_t)))) return st;
   memcpy(b->s[d], t->s, ns * sizeof(uint32_t));
+  b->set[d] = b->s[d];
   b->ns[d] = ns;
   return QK_OK;
 }

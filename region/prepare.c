@@ -135,33 +135,54 @@ static qk_status_t ring_lonlat(ring_ctx_t *c, const double *xy, size_t start, si
                                long *k_out) {
   long k = 0;
   qk_status_t st = QK_OK;
-  for (size_t i = 0; i + 1 < len && !st; i++) {
+  qk__pieces_t *out = c->out;
+  const double *q = xy + 2 * start;
+  for (size_t i = 0; i + 1 < len && !st; i++, q += 2) {
     uint32_t v = (uint32_t)(start + i);
-    double ax = xy[2 * (start + i)], ay = xy[2 * (start + i) + 1];
-    double bx = xy[2 * (start + i + 1)], by = xy[2 * (start + i + 1) + 1];
+    double ax = q[0], ay = q[1], bx = q[2], by = q[3];
     double d = bx - ax;
-    if (d < -180) { /* eastward through 180 */
+    if (d >= -180 && d <= 180) { /* the common case: the edge as it is */
+      if (out && out->n < out->cap) {
+        /* piece() inline, for the run of such edges (in locals: the stores cannot move
+         * them) */
+        qk__seg_t *seg = out->seg;
+        uint32_t *feat = out->feat, *ring = out->ring, *vx = out->vtx, f = c->f, r = c->r;
+        size_t n = out->n, cap = out->cap;
+        bool full = false;
+        for (;;) {
+          if (ax != bx || ay != by) {
+            if (n == cap) {
+              full = true;
+              break;
+            }
+            seg[n] = (qk__seg_t){ax, ay, bx, by};
+            feat[n] = f, ring[n] = r, vx[n] = v;
+            n++;
+          }
+          if (i + 2 >= len) break;
+          double nx = q[4], ny = q[5];
+          if (!(nx - bx >= -180 && nx - bx <= 180)) break;
+          i++, q += 2, v++;
+          ax = bx, ay = by, bx = nx, by = ny;
+        }
+        out->n = n;
+        if (full) st = piece(c, ax, ay, bx, by, v); /* (sized at once: never) */
+      } else if (ax != bx || ay != by) {
+        st = piece(c, ax, ay, bx, by, v);
+      }
+    } else if (d < -180) { /* eastward through 180 */
       double phi = cut_lat(ax, ay, bx + 360, by, 180, bx == -180);
       if (!(st = piece(c, ax, ay, 180, phi, v)) && !(st = piece(c, 180, phi, 180, P, UINT32_MAX)) &&
           !(st = piece(c, -180, P, -180, phi, UINT32_MAX)))
         st = piece(c, -180, phi, bx, by, v);
       k++;
-    } else if (d > 180) { /* westward through -180 */
+    } else { /* westward through -180 (or NaN, which validation rejects first) */
       double phi = cut_lat(ax, ay, bx - 360, by, -180, bx == 180);
       if (!(st = piece(c, ax, ay, -180, phi, v)) &&
           !(st = piece(c, -180, phi, -180, P, UINT32_MAX)) &&
           !(st = piece(c, 180, P, 180, phi, UINT32_MAX)))
         st = piece(c, 180, phi, bx, by, v);
       k--;
-    } else if (c->out && c->out->n < c->out->cap && (ax != bx || ay != by)) {
-      qk__pieces_t *p = c->out; /* piece() inline, for the common case */
-      p->seg[p->n] = (qk__seg_t){ax, ay, bx, by};
-      p->feat[p->n] = c->f;
-      p->ring[p->n] = c->r;
-      p->vtx[p->n] = v;
-      p->n++;
-    } else {
-      st = piece(c, ax, ay, bx, by, v);
     }
   }
   for (long j = 0; j < labs(k) && !st; j++)
@@ -173,12 +194,17 @@ static qk_status_t ring_lonlat(ring_ctx_t *c, const double *xy, size_t start, si
 /* Does qk__region_check_coord accept (x, y)? (NaN fails every comparison.) */
 static inline bool coord_ok(int planar, double x, double y) {
   double ax = fabs(x), ay = fabs(y);
-  bool ok = ax <= QK_REGION_MAX_COORD && ay <= QK_REGION_MAX_COORD &&
-            (ax >= QK_REGION_MIN_COORD || ax == 0) && (ay >= QK_REGION_MIN_COORD || ay == 0);
-  return ok && (planar || (x >= -180 && x <= 180 && y >= -90 && y <= 90));
+  bool tiny_ok = (ax >= QK_REGION_MIN_COORD || ax == 0) && (ay >= QK_REGION_MIN_COORD || ay == 0);
+  if (!planar) /* (within [-180, 180] x [-90, 90], far below the largest magnitude) */
+    return ax <= 180 && ay <= 90 && tiny_ok;
+  return ax <= QK_REGION_MAX_COORD && ay <= QK_REGION_MAX_COORD && tiny_ok;
 }
 
-static qk_status_t check_arrays(const qk_region_arrays_t *in, int planar, qk_error_t *err) {
+/* Check the arrays; *bound: the pieces they make at most (see qk__region_prepare), counted
+ * in the same pass over the coordinates. */
+static qk_status_t check_arrays(const qk_region_arrays_t *in, int planar, size_t *bound,
+                                qk_error_t *err) {
+  *bound = 0;
   if (!in) return qk__region_fail(err, QK_ERR_INVALID, SIZE_MAX, "no input");
   if (in->n_features && !in->feature_start)
     return qk__region_fail(err, QK_ERR_INVALID, SIZE_MAX, "feature_start is NULL");
@@ -209,12 +235,21 @@ static qk_status_t check_arrays(const qk_region_arrays_t *in, int planar, qk_err
         return qk__region_fail(err, QK_ERR_GEOMETRY, f,
                                "feature %zu, ring %zu: %zu positions (a ring needs at least 4)", f,
                                k, e - s);
+      /* a ring edge gives one piece, or four when it crosses the antimeridian, and a ring
+       * winding w times round the globe |w| more */
+      long w = 0;
+      size_t cuts = 0;
+      double px = in->xy[2 * s];
       for (size_t v = s; v < e; v++) {
-        double x = in->xy[2 * v], y = in->xy[2 * v + 1];
+        double x = in->xy[2 * v], y = in->xy[2 * v + 1], d = x - px;
+        px = x;
+        if (d < -180 || d > 180) cuts++, w += d < -180 ? 1 : -1;
         if (coord_ok(planar, x, y)) continue; /* (the common case, without a call) */
         qk_status_t st = qk__region_check_coord(planar, x, y, f, err);
         if (st) return st;
       }
+      *bound += e - s - 1;
+      if (!planar) *bound += 3 * cuts + (size_t)labs(w);
       const double *p = in->xy + 2 * s, *q = in->xy + 2 * (e - 1);
       if (p[0] != q[0] || p[1] != q[1])
         return qk__region_fail(err, QK_ERR_GEOMETRY, f,
@@ -229,23 +264,10 @@ static qk_status_t check_arrays(const qk_region_arrays_t *in, int planar, qk_err
 qk_status_t qk__region_prepare(const qk_allocator_t *a, const qk_region_arrays_t *in, int planar,
                                qk__pieces_t *out, qk_error_t *err) {
   memset(out, 0, sizeof *out);
-  qk_status_t st = check_arrays(in, planar, err);
+  size_t bound;
+  qk_status_t st = check_arrays(in, planar, &bound, err);
   if (st) return st;
-  /* Room for every piece at once: a ring edge gives one piece, or four when it crosses the
-   * antimeridian, and a ring winding k times round the globe |k| more. */
-  size_t bound = 0;
-  for (size_t r = 0; r < in->n_rings; r++) {
-    size_t s = in->ring_start[r], len = in->ring_start[r + 1] - s;
-    bound += len - 1;
-    if (planar) continue;
-    long k = 0;
-    size_t cuts = 0;
-    for (size_t i = 0; i + 1 < len; i++) {
-      double d = in->xy[2 * (s + i + 1)] - in->xy[2 * (s + i)];
-      if (d < -180 || d > 180) cuts++, k += d < -180 ? 1 : -1;
-    }
-    bound += 3 * cuts + (size_t)labs(k);
-  }
+  /* Room for every piece at once. */
   if (bound && (st = reserve(a, out, bound))) {
     qk__pieces_free(a, out);
     return qk__region_fail(err, st, SIZE_MAX,
@@ -262,20 +284,18 @@ qk_status_t qk__region_prepare(const qk_allocator_t *a, const qk_region_arrays_t
         }
         continue;
       }
-      /* The winding first (cheap); for a ring around the globe, the area it encloses
-       * towards the north pole decides which pole it holds. */
+      /* Made as if the ring held the north pole; a ring around the globe holds the pole
+       * towards which it encloses the smaller area, and one around the south pole is made
+       * again (rare: each layer has a few such rings at most). */
       long k = 0;
-      for (size_t i = 0; i + 1 < len; i++) {
-        double d = in->xy[2 * (s + i + 1)] - in->xy[2 * (s + i)];
-        k += d < -180 ? 1 : d > 180 ? -1 : 0;
+      size_t first = out->n;
+      if ((st = ring_lonlat(&c, in->xy, s, len, 90, &k)) || k == 0) continue;
+      ring_ctx_t probe = {a, NULL, 0, 0, 0};
+      ring_lonlat(&probe, in->xy, s, len, 90, &k);
+      if (fabs(probe.area2) * 0.5 > 0.5 * 360 * 180) {
+        out->n = first;
+        st = ring_lonlat(&c, in->xy, s, len, -90, &k);
       }
-      double P = 90;
-      if (k != 0) {
-        ring_ctx_t probe = {a, NULL, 0, 0, 0};
-        ring_lonlat(&probe, in->xy, s, len, 90, &k);
-        if (fabs(probe.area2) * 0.5 > 0.5 * 360 * 180) P = -90;
-      }
-      st = ring_lonlat(&c, in->xy, s, len, P, &k);
     }
   }
   if (st) {

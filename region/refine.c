@@ -40,20 +40,34 @@ static void self_meets(qk__bctx_t *b, const uint32_t *E, size_t n) {
   const qk__pieces_t *pc = b->pc;
   if (n > SELF_CHECK_MAX) return;
   const uint32_t *ring = pc->ring, *vtx = pc->vtx;
-  uint32_t rn = n ? ring[E[0]] : 0;
-  for (size_t i = 0; i + 1 < n; i++) {
-    uint32_t p = E[i], rp = rn, vp = vtx[p];
-    rn = ring[E[i + 1]];
-    if (rn != rp || vp == UINT32_MAX || b->bad[rp]) continue; /* (the next piece's ring) */
-    size_t rs = b->in->ring_start[rp], re = b->in->ring_start[rp + 1];
-    for (size_t j = i + 1; j < n && ring[E[j]] == rp; j++) {
-      uint32_t q = E[j], vq = vtx[q];
-      if (vq == UINT32_MAX) continue;
-      uint32_t lo = vp < vq ? vp : vq, hi = vp < vq ? vq : vp;
-      if (hi - lo <= 1 || (lo == rs && hi == re - 2)) continue; /* same or neighbouring edges */
-      if (segs_meet(&pc->seg[p], &pc->seg[q])) {
-        b->bad[rp] = 1;
-        break;
+  const qk__seg_t *seg = pc->seg;
+  size_t ge;
+  for (size_t i = 0; i + 1 < n; i = ge) {
+    uint32_t rp = ring[E[i]];
+    for (ge = i + 1; ge < n && ring[E[ge]] == rp;) ge++;
+    if (ge - i < 2 || b->bad[rp]) continue;
+    /* One ring's pieces, in the order of its vertices (vq >= vp below); its first and
+     * last edges are neighbours too. */
+    uint32_t rs = (uint32_t)b->in->ring_start[rp], last = (uint32_t)b->in->ring_start[rp + 1] - 2;
+    bool hit = false;
+    for (size_t a = i; a + 1 < ge && !hit; a++) {
+      uint32_t p = E[a], vp = vtx[p];
+      if (vp == UINT32_MAX) continue; /* the added pieces: not the ring's */
+      const qk__seg_t *g = &seg[p];
+      double lx = qk__min(g->ax, g->bx), hx = qk__max(g->ax, g->bx);
+      double ly = qk__min(g->ay, g->by), hy = qk__max(g->ay, g->by);
+      for (size_t c = a + 1; c < ge; c++) {
+        uint32_t q = E[c], vq = vtx[q];
+        if (vq == UINT32_MAX || vq - vp <= 1 || (vp == rs && vq == last)) continue;
+        const qk__seg_t *h = &seg[q];
+        if (qk__max(h->ax, h->bx) < lx || qk__min(h->ax, h->bx) > hx ||
+            qk__max(h->ay, h->by) < ly || qk__min(h->ay, h->by) > hy)
+          continue; /* boxes apart: most pairs */
+        if (segs_meet(g, h)) {
+          b->bad[rp] = 1;
+          hit = true;
+          break;
+        }
       }
     }
   }
@@ -65,7 +79,7 @@ qk_status_t qk__emit_leaf(qk__bctx_t *b, qk_node_t v, double cx, double cy, unsi
   size_t ne = b->ne[d], ns = b->ns[d];
   if (d > b->depth) b->depth = d;
   if (ne == 0 && ns <= 1) {
-    r->kid[v] = QK__LEAF | QK__DIRECT | (ns ? b->s[d][0] + 1 : 0);
+    r->kid[v] = QK__LEAF | QK__DIRECT | (ns ? b->set[d][0] + 1 : 0);
     r->n_direct++;
     return QK_OK;
   }
@@ -86,15 +100,17 @@ qk_status_t qk__emit_leaf(qk__bctx_t *b, qk_node_t v, double cx, double cy, unsi
   if (r->n_le + ne > UINT32_MAX || r->n_sets + ns > UINT32_MAX) return QK_ERR_LIMIT;
   r->leaves[r->n_leaves] =
       (qk__leaf_t){(uint32_t)r->n_le, (uint32_t)ne, (uint32_t)r->n_sets, (uint32_t)ns};
+  const uint32_t *E = b->e[d], *feat = pc->feat, *vtx = pc->vtx;
+  const qk__seg_t *seg = pc->seg;
+  uint32_t *le = r->le + r->n_le, *tag = r->le_tag + r->n_le;
   for (size_t i = 0; i < ne; i++) {
-    uint32_t p = b->e[d][i];
-    const qk__seg_t *g = &pc->seg[p];
+    uint32_t p = E[i];
+    const qk__seg_t *g = &seg[p];
     int side = qk__side(g->ax, g->ay, g->bx, g->by, cx, cy);
-    r->le[r->n_le + i] = p;
-    r->le_tag[r->n_le + i] =
-        pc->feat[p] << 2 | (uint32_t)(pc->vtx[p] == UINT32_MAX) << 1 | (uint32_t)(side > 0);
+    le[i] = p;
+    tag[i] = feat[p] << 2 | (uint32_t)(vtx[p] == UINT32_MAX) << 1 | (uint32_t)(side > 0);
   }
-  if (ns) memcpy(r->sets + r->n_sets, b->s[d], ns * sizeof(uint32_t));
+  if (ns) memcpy(r->sets + r->n_sets, b->set[d], ns * sizeof(uint32_t));
   r->n_le += ne;
   r->n_sets += ns;
   r->kid[v] = QK__LEAF | (uint32_t)r->n_leaves;
@@ -186,12 +202,18 @@ static qk_status_t split_lists(qk__bctx_t *b, unsigned d, double x0, double y0, 
 qk_status_t qk__child_set(qk__bctx_t *b, unsigned d, const uint32_t *odd, size_t nodd) {
   const qk_allocator_t *a = &b->r->alloc;
   size_t ns = b->ns[d];
+  if (nodd == 0) { /* the parent's list, not copied (a depth's list stays while below it) */
+    b->set[d + 1] = b->set[d];
+    b->ns[d + 1] = ns;
+    return QK_OK;
+  }
   qk_status_t st;
   if (ns + nodd + 1 > b->cap_s[d + 1] &&
       (st = qk__grow(a, (void **)&b->s[d + 1], &b->cap_s[d + 1], ns + nodd + 1, sizeof(uint32_t))))
     return st;
-  const uint32_t *S = b->s[d];
+  const uint32_t *S = b->set[d];
   uint32_t *T = b->s[d + 1];
+  b->set[d + 1] = T;
   size_t i = 0, j = 0, k = 0;
   while (i < ns || j < nodd) {
     if (j == nodd || (i < ns && S[i] < odd[j]))

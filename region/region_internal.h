@@ -229,7 +229,7 @@ qk_status_t qk__props_end_feature(const qk_allocator_t *a, qk__props_t *p, size_
 
 /* The state of one build. Per depth d along the current path: the pieces meeting the
  * cell (e, ne: increasing piece order) and the features containing its reference point
- * (s, ns: increasing). */
+ * (set, ns: increasing). */
 typedef struct qk__bctx {
   qk_region_t *r;
   const qk__pieces_t *pc;
@@ -240,6 +240,8 @@ typedef struct qk__bctx {
   uint32_t *store[QK__MAXD + 1]; /* per depth: the four children's lists, one after another */
   size_t cap_store[QK__MAXD + 1];
   size_t cnt[QK__MAXD + 1][4];
+  const uint32_t *set[QK__MAXD + 1]; /* depth d's set: s[d], or the same list as a parent's
+                                        or a grid cell's when no feature flips */
   uint32_t *s[QK__MAXD + 1];
   size_t ns[QK__MAXD + 1], cap_s[QK__MAXD + 1];
   /* per depth: the features whose parity flips from the cell's reference point to each
@@ -327,18 +329,18 @@ static inline bool qk__ref_crosses(double ox, double oy, double qx, double qy, c
   return qk__ref_crosses_line(ox, oy, qx, qy, g);
 }
 
-/* The refinement below a cell whose pieces are b->e[d] and set b->s[d] (refine.c): split
+/* The refinement below a cell whose pieces are b->e[d] and set b->set[d] (refine.c): split
  * while more than C pieces meet the cell, else a leaf. */
 qk_status_t qk__build_node(qk__bctx_t *b, qk_node_t v, double x0, double y0, double x1, double y1,
                            double side, unsigned d, unsigned stall);
-/* Store cell v (at depth d, reference point (cx, cy)) as a leaf with b->e[d], b->s[d]. */
+/* Store cell v (at depth d, reference point (cx, cy)) as a leaf with b->e[d], b->set[d]. */
 qk_status_t qk__emit_leaf(qk__bctx_t *b, qk_node_t v, double cx, double cy, unsigned d);
 /* Give cell v four children, numbered from *first: QK_ERR_LIMIT when the index is full
  * (v stays a leaf). */
 qk_status_t qk__split_cell(qk__bctx_t *b, qk_node_t v, uint32_t *first);
-/* b->s[d + 1] = b->s[d] with the features of the sorted list odd[0, n) toggled. */
+/* b->set[d + 1] = b->set[d] with the features of the sorted list odd[0, n) toggled. */
 qk_status_t qk__child_set(qk__bctx_t *b, unsigned d, const uint32_t *odd, size_t n);
-/* The whole refinement from the root, whose set is b->s[0] (build_top.c). */
+/* The whole refinement from the root (build_top.c). */
 qk_status_t qk__build_top(qk__bctx_t *b);
 
 /* Locate in one leaf; used by every query. */

@@ -11,7 +11,8 @@
  *  - coverages: grid cells and jittered quadrilateral cells sharing edges; points on
  *    shared edges and vertices belong to exactly one feature under semi-open;
  *  - closed and open rules on hand-made squares; reversed windings give the same answers;
- *  - holes and multipolygons; bow-tie rings (and the self-intersection count);
+ *  - holes and multipolygons; bow-tie rings (and the self-intersection count); the count
+ *    on random layers == a brute force over each ring's pairs of edges;
  *  - lon/lat mode: an antimeridian-crossing square, a ring around the south pole,
  *    longitudes 180 / -180 / 540, latitudes beyond the poles, planar mode switching it off;
  *  - batch == single, threaded batch == single; batches large enough for the Morton order
@@ -480,6 +481,64 @@ static void test_region_bowtie(void **state) {
   assert_int_equal(s.self_intersecting, 1);
   qk_region_free(r);
   tl_free(&t);
+}
+
+/* Do the closed segments a-b and c-d meet (exactly)? */
+static int meet_i(const long *a, const long *b, const long *c, const long *d) {
+  int o1 = orient_i(a[0], a[1], b[0], b[1], c[0], c[1]);
+  int o2 = orient_i(a[0], a[1], b[0], b[1], d[0], d[1]);
+  int o3 = orient_i(c[0], c[1], d[0], d[1], a[0], a[1]);
+  int o4 = orient_i(c[0], c[1], d[0], d[1], b[0], b[1]);
+  if (o1 * o2 > 0 || o3 * o4 > 0) return 0;
+  if (o1 || o2 || o3 || o4) return 1;
+  for (int k = 0; k < 2; k++) { /* collinear: do the extents overlap on both axes? */
+    long lo1 = a[k] < b[k] ? a[k] : b[k], hi1 = a[k] < b[k] ? b[k] : a[k];
+    long lo2 = c[k] < d[k] ? c[k] : d[k], hi2 = c[k] < d[k] ? d[k] : c[k];
+    if ((lo1 > lo2 ? lo1 : lo2) > (hi1 < hi2 ? hi1 : hi2)) return 0;
+  }
+  return 1;
+}
+
+/* The self-intersection count by brute force: a ring is counted when two of its edges
+ * (zero-length edges dropped) meet that are not the same or neighbours by vertex number
+ * (its first and last edges are neighbours), the rule of the build's leaf scan. */
+static size_t oracle_self_intersecting(const tl_t *t) {
+  size_t bad = 0;
+  for (size_t r = 0; r < t->nr; r++) {
+    size_t rs = t->rs[r], re = t->rs[r + 1];
+    int hit = 0;
+    for (size_t i = rs; i + 1 < re && !hit; i++)
+      for (size_t j = i + 2; j + 1 < re && !hit; j++) {
+        const long *a = t->xy + 2 * i, *c = t->xy + 2 * j;
+        if ((a[0] == a[2] && a[1] == a[3]) || (c[0] == c[2] && c[1] == c[3])) continue;
+        if (i == rs && j == re - 2) continue;
+        hit = meet_i(a, a + 2, c, c + 2);
+      }
+    bad += (size_t)hit;
+  }
+  return bad;
+}
+
+static void test_region_self_intersecting_oracle(void **state) {
+  (void)state;
+  uint64_t seed = qkt_seed(9107);
+  qkt_rng_t g;
+  qkt_rng_seed(&g, seed);
+  const uint32_t caps[3] = {1, 3, 0};
+  for (int round = 0; round < 24; round++) {
+    tl_t t;
+    long span = round % 2 ? 16 : 300;
+    random_layer(&g, &t, 1 + qkt_rng_below(&g, 12), span);
+    qk_region_t *r = tl_build(&t, caps[round % 3], NULL, NULL);
+    qk_region_stats_t s;
+    qk_region_stats(r, &s);
+    size_t want = oracle_self_intersecting(&t);
+    if (s.self_intersecting != want)
+      fail_msg("seed %llu round %d: %zu self-intersecting rings, oracle %zu",
+               (unsigned long long)seed, round, s.self_intersecting, want);
+    qk_region_free(r);
+    tl_free(&t);
+  }
 }
 
 /* ---- lon/lat mode ------------------------------------------------------------------------ */
@@ -1079,6 +1138,7 @@ int main(void) {
       cmocka_unit_test(test_region_coverage_jittered),
       cmocka_unit_test(test_region_rules_and_windings),
       cmocka_unit_test(test_region_bowtie),
+      cmocka_unit_test(test_region_self_intersecting_oracle),
       cmocka_unit_test(test_region_lonlat),
       cmocka_unit_test(test_region_batch_threads),
       cmocka_unit_test(test_region_batch_morton),
