@@ -82,7 +82,11 @@ struct qk_collider {
   qnode_t *quads;    /* per internal node (cnode_t::quad), 64-byte aligned; NULL past 2^100 */
   void *quads_block; /* the allocation holding quads */
   size_t quads_bytes;
-  uint32_t n_quads; /* entries filled */
+  uint32_t n_quads;  /* entries filled */
+  uint32_t *ztab;    /* the ray cast's start table (see fill_ztab); NULL: descend from the root */
+  uint32_t *qparent; /* per quads entry: its parent's entry (with ztab: the climb's links) */
+  size_t ztab_bytes;
+  unsigned zdepth;  /* its depth: 4^zdepth cells */
   uint32_t threads; /* for the pairs and batch calls (0: every online core) */
   int huge_pages;   /* the options' hint, applied to the collider's own arrays too */
   double mag;       /* largest coordinate magnitude of any item box, for rounding margins */
@@ -177,7 +181,7 @@ static inline float round_up(double v) {
 
 /* Post-order: a node's box is the union of its children's (or its items'). Recursion
  * depth is bounded by the tree's depth cap. */
-static qk_box_t fill_node_boxes(qk_collider_t *c, uint32_t node) {
+static qk_box_t fill_node_boxes(qk_collider_t *c, uint32_t node, uint32_t *n_int) {
   const qk_tree_t *t = c->tree;
   cnode_t *cn = &c->cn[node];
   qk_box_t b = {INFINITY, INFINITY, -INFINITY, -INFINITY};
@@ -191,10 +195,11 @@ static qk_box_t fill_node_boxes(qk_collider_t *c, uint32_t node) {
     for (uint32_t i = 0; i < count; i++) box_union(&b, &c->sbox[start + i]);
   } else {
     for (uint32_t k = 0; k < 4; k++) {
-      qk_box_t cb = fill_node_boxes(c, cn->child + k);
+      qk_box_t cb = fill_node_boxes(c, cn->child + k, n_int);
       box_union(&b, &cb);
     }
   }
+  if (!leaf && count > 0) (*n_int)++; /* one qnode_t each (fill_qnodes) */
   if (count == 0) {
     cn->xmin = cn->ymin = cn->xmax = cn->ymax = INFINITY;
   } else {
@@ -234,9 +239,22 @@ static uint8_t grid_step(double v, double lo, double sc, int up) {
 
 /* Pre-order: an internal node's qnode_t, then those of its internal children, so that a
  * descent mostly moves forward in memory. Returns the node's entry in quads. */
-static uint32_t fill_qnodes(qk_collider_t *c, uint32_t node) {
+/* The subtrees that a threaded build fills in parallel (see fill_boxes_and_quads). */
+#define SPLIT_DEPTH 3
+#define SPLIT_MAX 64 /* 4^SPLIT_DEPTH */
+typedef struct split {
+  uint32_t node[SPLIT_MAX];  /* roots: the nodes at SPLIT_DEPTH and shallower leaves */
+  uint32_t n_int[SPLIT_MAX]; /* their internal non-empty nodes (qnode_t entries) */
+  uint32_t base[SPLIT_MAX];  /* their first entry in quads */
+  qk_box_t box[SPLIT_MAX];   /* their item boxes, unrounded */
+  unsigned n, iter;
+  qk_collider_t *c;
+} split_t;
+
+static uint32_t fill_qnodes(qk_collider_t *c, uint32_t node, uint32_t *next, split_t *sp,
+                            unsigned depth) {
   cnode_t *cn = &c->cn[node];
-  const uint32_t idx = c->n_quads++;
+  const uint32_t idx = (*next)++;
   qnode_t *q = &c->quads[idx];
   float lo[2], sc[2];
   grid_axis(cn->xmin, cn->xmax, &lo[0], &sc[0]);
@@ -259,13 +277,153 @@ static uint32_t fill_qnodes(qk_collider_t *c, uint32_t node) {
     q->q[QY1 + k] = grid_step(ch->ymax, lo[1], sc[1], 1);
     if (ch->child != QK_NONE) {
       q->count[k] = QK_NONE;
-      q->link[k] = fill_qnodes(c, child); /* q stays valid: quads is never moved */
+      if (sp && depth + 1 == SPLIT_DEPTH) { /* a subtree filled later, on its own thread */
+        unsigned i = 0;
+        while (sp->node[i] != child) i++;
+        sp->base[i] = *next;
+        *next += sp->n_int[i];
+        q->link[k] = sp->base[i];
+      } else { /* q stays valid: quads is never moved */
+        q->link[k] = fill_qnodes(c, child, next, sp, depth + 1);
+      }
     } else {
       q->link[k] = ch->start;
       q->count[k] = ch->count;
     }
   }
   return idx;
+}
+
+/* The roots of the parallel subtrees, in the order of the children (post-order top). */
+static void split_roots(qk_collider_t *c, uint32_t node, unsigned depth, split_t *sp) {
+  const qk_tree_t *t = c->tree;
+  if (depth == SPLIT_DEPTH || qk__node_leaf(t, node)) {
+    sp->node[sp->n] = node;
+    sp->n_int[sp->n] = 0;
+    sp->n++;
+    return;
+  }
+  for (uint32_t k = 0; k < 4; k++) split_roots(c, qk__node_child(t, node) + k, depth + 1, sp);
+}
+
+/* fill_node_boxes above the roots, whose boxes are in sp (visited in split_roots' order). */
+static qk_box_t fill_top_boxes(qk_collider_t *c, uint32_t node, unsigned depth, split_t *sp) {
+  const qk_tree_t *t = c->tree;
+  if (depth == SPLIT_DEPTH || qk__node_leaf(t, node)) return sp->box[sp->iter++];
+  cnode_t *cn = &c->cn[node];
+  qk_box_t b = {INFINITY, INFINITY, -INFINITY, -INFINITY};
+  const uint32_t count = qk__node_count(t, node);
+  cn->child = qk__node_child(t, node);
+  cn->start = qk__node_start(t, node);
+  cn->count = 0;
+  cn->quad = QK_NONE;
+  for (uint32_t k = 0; k < 4; k++) {
+    qk_box_t cb = fill_top_boxes(c, cn->child + k, depth + 1, sp);
+    box_union(&b, &cb);
+  }
+  if (count == 0) {
+    cn->xmin = cn->ymin = cn->xmax = cn->ymax = INFINITY;
+  } else {
+    cn->xmin = round_down(b.xmin);
+    cn->ymin = round_down(b.ymin);
+    cn->xmax = round_up(b.xmax);
+    cn->ymax = round_up(b.ymax);
+  }
+  return b;
+}
+
+static void boxes_job(unsigned i, void *ud) {
+  split_t *sp = ud;
+  sp->box[i] = fill_node_boxes(sp->c, sp->node[i], &sp->n_int[i]);
+}
+
+static void quads_job(unsigned i, void *ud) {
+  split_t *sp = ud;
+  const cnode_t *cn = &sp->c->cn[sp->node[i]];
+  if (cn->child == QK_NONE || cn->xmin == INFINITY) return; /* no entries (nor a base) */
+  uint32_t next = sp->base[i];
+  fill_qnodes(sp->c, sp->node[i], &next, NULL, SPLIT_DEPTH);
+}
+
+/*
+ * The node boxes and the ray cast's nodes, on the build's threads: the subtrees below
+ * SPLIT_DEPTH are independent (each writes its own nodes' entries), so they are filled in
+ * parallel, the levels above them by the calling thread. The quads entries are numbered
+ * as the one-thread pre-order numbers them (each subtree's count is known from its boxes'
+ * pass), so the arrays are the same whatever the threads.
+ */
+static void fill_boxes_and_quads(qk_collider_t *c, unsigned threads) {
+  split_t *sp = NULL;
+  if (threads > 1) sp = qk__realloc(&c->alloc, NULL, 0, sizeof *sp);
+  if (!sp) { /* one thread (or no memory for the plan: the same arrays, serially) */
+    uint32_t n_int = 0;
+    fill_node_boxes(c, 0, &n_int);
+    if (c->quads && c->cn[0].child != QK_NONE && c->cn[0].xmin != INFINITY)
+      fill_qnodes(c, 0, &c->n_quads, NULL, 0);
+    return;
+  }
+  sp->n = sp->iter = 0;
+  sp->c = c;
+  split_roots(c, 0, 0, sp);
+  qk__run_jobs(threads, sp->n, boxes_job, sp);
+  fill_top_boxes(c, 0, 0, sp);
+  if (c->quads && c->cn[0].child != QK_NONE && c->cn[0].xmin != INFINITY) {
+    if (sp->n == 1) { /* the root is the only subtree */
+      fill_qnodes(c, 0, &c->n_quads, NULL, 0);
+    } else {
+      fill_qnodes(c, 0, &c->n_quads, sp, 0);
+      qk__run_jobs(threads, sp->n, quads_job, sp);
+    }
+  }
+  qk__free(&c->alloc, sp, sizeof *sp);
+}
+
+/*
+ * The ray cast's start table. A ray first descends from the root to the deepest internal
+ * node on its origin's path, by the bits of the origin's position alone (cast_float); the
+ * first zdepth levels of that descent depend only on the top 2 zdepth bits of the
+ * origin's Morton code, so they are done once here for each of the 4^zdepth codes. Cell z
+ * holds the descent's node after at most zdepth levels: the quads entry, times 64, plus
+ * its depth. A ray then starts at most a couple of levels above its leaf with one load
+ * from a small table instead of zdepth dependent loads of nodes.
+ */
+#define ZTAB_DEPTH_MAX 9
+#define ZTAB_DEPTH_BITS 6
+
+static void fill_ztab(qk_collider_t *c, uint32_t q, unsigned depth, uint32_t prefix) {
+  const unsigned zd = c->zdepth;
+  const qnode_t *qn = &c->quads[q];
+  for (uint32_t k = 0; k < 4; k++) {
+    const uint32_t p = prefix << 2 | k; /* the lane is the Morton digit (2 north + east) */
+    if (qn->count[k] == QK_NONE) {
+      c->qparent[qn->link[k]] = q;
+      if (depth + 1 < zd)
+        fill_ztab(c, qn->link[k], depth + 1, p);
+      else /* depth + 1 == zd: the child is the cell's node (deeper entries: no parents) */
+        c->ztab[p] = qn->link[k] << ZTAB_DEPTH_BITS | (depth + 1);
+    } else { /* a leaf or an empty child: the descent stops at q in all cells below p */
+      const unsigned sh = 2 * (zd - depth - 1);
+      for (uint32_t z = p << sh; z < (p + 1) << sh; z++) c->ztab[z] = q << ZTAB_DEPTH_BITS | depth;
+    }
+  }
+}
+
+/* The table's size: about one cell per internal node (4^zdepth <= n_quads), so that it
+ * costs a sixteenth of the quads' memory or less; none for small trees (the descent is
+ * short) or when the entries would not fit the packing. The parents of the entries down to
+ * the table's depth (those the search may climb to) come with it. */
+static qk_status_t build_ztab(qk_collider_t *c) {
+  unsigned zd = 0;
+  while (zd < ZTAB_DEPTH_MAX && (1ull << 2 * (zd + 1)) <= c->n_quads) zd++;
+  if (zd < 2 || c->n_quads >= 1u << (32 - ZTAB_DEPTH_BITS)) return QK_OK;
+  c->ztab_bytes = ((size_t)1 << 2 * zd) * sizeof *c->ztab;
+  c->ztab = qk__realloc(&c->alloc, NULL, 0, c->ztab_bytes);
+  c->qparent = qk__realloc(&c->alloc, NULL, 0, c->n_quads * sizeof *c->qparent);
+  if (!c->ztab || !c->qparent) return QK_ERR_NOMEM; /* qk_collider_free releases them */
+  c->zdepth = zd;
+  c->qparent[c->cn[0].quad] = QK_NONE;
+  fill_ztab(c, c->cn[0].quad, 0, 0);
+  return QK_OK;
 }
 
 /* Does a node's box meet a closed box? */
@@ -280,6 +438,8 @@ void qk_collider_free(qk_collider_t *c) {
   qk__free(&a, c->sdisc, c->n_slots * sizeof *c->sdisc);
   qk__free(&a, c->cn_block, c->cn_bytes);
   qk__free(&a, c->quads_block, c->quads_bytes);
+  qk__free(&a, c->ztab, c->ztab_bytes);
+  qk__free(&a, c->qparent, c->n_quads * sizeof *c->qparent);
   qk_tree_free(c->tree);
   qk__free(&a, c, sizeof *c);
 }
@@ -387,9 +547,8 @@ static qk_status_t fill_slots(qk_collider_t *c, const qk_disc_t *discs, const qk
                              qk__max(ys[slot] - b->ymin, b->ymax - ys[slot]));
     if (r > c->reach) c->reach = r;
   }
-  fill_node_boxes(c, 0);
-  if (c->quads && c->cn[0].child != QK_NONE && c->cn[0].xmin != INFINITY) fill_qnodes(c, 0);
-  return QK_OK;
+  fill_boxes_and_quads(c, qk__threads_resolve(c->threads));
+  return c->n_quads ? build_ztab(c) : QK_OK;
 }
 
 qk_status_t qk_collider_build(const qk_disc_t *discs, size_t n_discs, const qk_box_t *boxes,
@@ -1087,12 +1246,18 @@ static void cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk
     const double f = 0x1p32 / rs.side, ux = (ox - rs.x) * f, uy = (oy - rs.y) * f;
     uint32_t e = root->quad, ix = 0, iy = 0;
     path[0] = e;
-    unsigned d = 0;
+    unsigned d = 0, known = 0; /* path[known .. d] are filled */
     /* (A root square below 2^-900 would make side / 2^32 subnormal: no local start.) */
     if (rs.side > 0x1p-900 && ux >= 0 && ux < 0x1p32 && uy >= 0 && uy < 0x1p32) {
       const qnode_t *quads = c->quads;
       ix = (uint32_t)ux, iy = (uint32_t)uy;
       uint64_t z = spread32(ix) | spread32(iy) << 1; /* the lanes, root first, from bit 63 */
+      if (c->ztab) { /* the first levels from the start table (fill_ztab) */
+        const uint32_t cell = c->ztab[z >> (64 - 2 * c->zdepth)];
+        known = d = cell & ((1u << ZTAB_DEPTH_BITS) - 1);
+        path[d] = e = cell >> ZTAB_DEPTH_BITS;
+        z <<= 2 * d;
+      }
       while (d < 32) {
         const unsigned lane = (unsigned)(z >> 62);
         const qnode_t *q = &quads[e];
@@ -1116,6 +1281,7 @@ static void cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk
       }
     }
     const unsigned n = d > QK__RAY_START_UP ? d - QK__RAY_START_UP : 0;
+    for (; known > n; known--) path[known - 1] = c->qparent[path[known]];
     walk_float(c, ray, tmax, path[n], QK_NONE, &b);
     /* Up from N one level at a time while the segment to the best hit so far (or to
      * tmax) is not inside the square of the node searched: each step searches the
@@ -1134,6 +1300,7 @@ static void cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk
             qk__min(oy, ey) - m > y0 && qk__max(oy, ey) + m < y0 + side)
           break;
       }
+      if (a - 1 < known) path[--known] = c->qparent[path[a]];
       walk_float(c, ray, tmax, path[a - 1], path[a], &b);
     }
   }
