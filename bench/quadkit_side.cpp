@@ -128,11 +128,11 @@ static qk_tree_options_t collider_options() {
 
 bool quadkit_collide(const std::vector<Box> &boxes, PairSum &out, unsigned threads) {
   qk_collider_t *c = nullptr;
-  const qk_tree_options_t o = collider_options();
+  qk_tree_options_t o = collider_options();
+  o.threads = threads; // the build's phases and the pairs on the same threads
   qk_status_t st = qk_collider_build(nullptr, 0, reinterpret_cast<const qk_box_t *>(boxes.data()),
                                      boxes.size(), &o, &c);
   if (st) die("qk_collider_build", st);
-  qk_collider_set_threads(c, threads);
   qk_collider_pairs(c, pair_fn, &out);
   qk_collider_free(c);
   return true;

@@ -527,27 +527,60 @@ static qk_status_t alloc_arrays(qk_collider_t *c) {
   return QK_OK;
 }
 
-/* Phase 4: each item into the slot the tree gave its centre, then the node boxes. */
-static qk_status_t fill_slots(qk_collider_t *c, const qk_disc_t *discs, const qk_box_t *boxes) {
+/* Jobs per thread of the slot fill (static shares of the ids: a few per thread even out
+ * their pages' first touches), and the smallest set worth threads. */
+#define SLOT_JOBS_PER_THREAD 4
+#define SLOT_PAR_MIN 8192
+
+typedef struct slot_ctx {
+  qk_collider_t *c;
+  const qk_disc_t *discs;
+  const qk_box_t *boxes;
   const uint32_t *where;
-  qk_status_t st = qk__id_map(c->tree, &where);
-  if (st != QK_OK) return st;
+  size_t n_jobs;
+  double reach[QK__MAX_THREADS * SLOT_JOBS_PER_THREAD];
+} slot_ctx_t;
+
+/* The items of ids [n i / n_jobs, n (i + 1) / n_jobs) into their slots; the job's reach. */
+static void slot_job(unsigned i, void *ud) {
+  slot_ctx_t *x = ud;
+  qk_collider_t *c = x->c;
   const double *xs = qk__tree_xs(c->tree), *ys = qk__tree_ys(c->tree);
-  c->reach = 0;
-  for (qk_id_t id = 0; id < c->n; id++) {
-    uint32_t slot = where[id];
+  const size_t lo = c->n * i / x->n_jobs, hi = c->n * (i + 1) / x->n_jobs;
+  double reach = 0;
+  for (size_t id = lo; id < hi; id++) {
+    uint32_t slot = x->where[id];
     if (id < c->n_discs) {
-      c->sdisc[slot] = discs[id];
-      c->sbox[slot] = disc_bbox(&discs[id]);
+      c->sdisc[slot] = x->discs[id];
+      c->sbox[slot] = disc_bbox(&x->discs[id]);
     } else {
-      c->sbox[slot] = boxes[id - c->n_discs];
+      c->sbox[slot] = x->boxes[id - c->n_discs];
     }
     const qk_box_t *b = &c->sbox[slot];
     const double r = qk__max(qk__max(xs[slot] - b->xmin, b->xmax - xs[slot]),
                              qk__max(ys[slot] - b->ymin, b->ymax - ys[slot]));
-    if (r > c->reach) c->reach = r;
+    if (r > reach) reach = r;
   }
-  fill_boxes_and_quads(c, qk__threads_resolve(c->threads));
+  x->reach[i] = reach;
+}
+
+/* Phase 4: each item into the slot the tree gave its centre, then the node boxes; on the
+ * build's threads (each job writes its own items' slots, and the reach is a maximum: the
+ * same arrays whatever the threads). */
+static qk_status_t fill_slots(qk_collider_t *c, const qk_disc_t *discs, const qk_box_t *boxes) {
+  slot_ctx_t x;
+  qk_status_t st = qk__id_map(c->tree, &x.where);
+  if (st != QK_OK) return st;
+  unsigned threads = qk__threads_resolve(c->threads);
+  if (threads > QK__MAX_THREADS) threads = QK__MAX_THREADS;
+  if (c->n < SLOT_PAR_MIN) threads = 1;
+  x.c = c, x.discs = discs, x.boxes = boxes;
+  x.n_jobs = threads > 1 ? (size_t)threads * SLOT_JOBS_PER_THREAD : 1;
+  qk__run_jobs(threads, (unsigned)x.n_jobs, slot_job, &x);
+  c->reach = 0;
+  for (size_t i = 0; i < x.n_jobs; i++)
+    if (x.reach[i] > c->reach) c->reach = x.reach[i];
+  fill_boxes_and_quads(c, threads);
   return c->n_quads ? build_ztab(c) : QK_OK;
 }
 
