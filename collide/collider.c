@@ -463,30 +463,77 @@ static qk_status_t check_items(const qk_disc_t *discs, size_t n_discs, const qk_
   return QK_OK;
 }
 
+/* Jobs per thread of the build's linear passes (static shares: a few per thread even out
+ * their pages' first touches), and the smallest set worth threads. */
+#define RANGE_JOBS_PER_THREAD 4
+#define RANGE_PAR_MIN 8192
+
+/* A linear pass of the build over [0, n) in n_jobs ranges; each returns a maximum. */
+typedef struct range_ctx {
+  qk_collider_t *c;
+  const qk_disc_t *discs;
+  const qk_box_t *boxes;
+  qk_point_t *centres;   /* build_centre_tree's output */
+  const uint32_t *where; /* fill_slots' id map (ids_range) */
+  size_t n, n_jobs;
+  double (*fn)(struct range_ctx *x, size_t lo, size_t hi);
+  double max[QK__MAX_THREADS * RANGE_JOBS_PER_THREAD];
+} range_ctx_t;
+
+static void range_job(unsigned i, void *ud) {
+  range_ctx_t *x = ud;
+  x->max[i] = x->fn(x, x->n * i / x->n_jobs, x->n * (i + 1) / x->n_jobs);
+}
+
+/* fn over [0, n) on the collider's threads; the largest of its results (or 0). Each range
+ * writes only its own entries, so the arrays are those of one thread. */
+static double run_ranges(range_ctx_t *x, size_t n, double (*fn)(range_ctx_t *, size_t, size_t)) {
+  unsigned threads = qk__threads_resolve(x->c->threads);
+  if (threads > QK__MAX_THREADS) threads = QK__MAX_THREADS;
+  if (n < RANGE_PAR_MIN) threads = 1;
+  x->n = n;
+  x->fn = fn;
+  x->n_jobs = threads > 1 ? (size_t)threads * RANGE_JOBS_PER_THREAD : 1;
+  qk__run_jobs(threads, (unsigned)x->n_jobs, range_job, x);
+  double m = 0;
+  for (size_t i = 0; i < x->n_jobs; i++) m = qk__max(m, x->max[i]);
+  return m;
+}
+
+/* Items [lo, hi): their centres; the largest coordinate magnitude of their boxes. */
+static double centres_range(range_ctx_t *x, size_t lo, size_t hi) {
+  const size_t n_discs = x->c->n_discs;
+  double mag = 0;
+  for (size_t i = lo; i < hi; i++) {
+    qk_box_t bb;
+    if (i < n_discs) {
+      bb = disc_bbox(&x->discs[i]);
+      x->centres[i].x = x->discs[i].x;
+      x->centres[i].y = x->discs[i].y;
+    } else {
+      bb = x->boxes[i - n_discs];
+      /* Halves first, so that the sum cannot overflow. */
+      x->centres[i].x = 0.5 * bb.xmin + 0.5 * bb.xmax;
+      x->centres[i].y = 0.5 * bb.ymin + 0.5 * bb.ymax;
+    }
+    const double m =
+        qk__max(qk__max(fabs(bb.xmin), fabs(bb.xmax)), qk__max(fabs(bb.ymin), fabs(bb.ymax)));
+    mag = qk__max(mag, m);
+  }
+  return mag;
+}
+
 /* Phase 2: the tree of item centres (ids in input order, discs first), and the largest
  * coordinate magnitude of any item box. */
 static qk_status_t build_centre_tree(qk_collider_t *c, const qk_disc_t *discs,
                                      const qk_box_t *boxes, const qk_tree_options_t *opt) {
-  size_t n = c->n, n_discs = c->n_discs;
+  size_t n = c->n;
   qk_point_t *centres = NULL;
   if (n) centres = qk__realloc(&c->alloc, NULL, 0, n * sizeof *centres);
   if (n && !centres) return QK_ERR_NOMEM;
-  c->mag = 0;
-  for (size_t i = 0; i < n; i++) {
-    qk_box_t bb;
-    if (i < n_discs) {
-      bb = disc_bbox(&discs[i]);
-      centres[i].x = discs[i].x;
-      centres[i].y = discs[i].y;
-    } else {
-      bb = boxes[i - n_discs];
-      /* Halves first, so that the sum cannot overflow. */
-      centres[i].x = 0.5 * bb.xmin + 0.5 * bb.xmax;
-      centres[i].y = 0.5 * bb.ymin + 0.5 * bb.ymax;
-    }
-    double m = fmax(fmax(fabs(bb.xmin), fabs(bb.xmax)), fmax(fabs(bb.ymin), fabs(bb.ymax)));
-    if (m > c->mag) c->mag = m;
-  }
+  range_ctx_t x;
+  x.c = c, x.discs = discs, x.boxes = boxes, x.centres = centres, x.where = NULL;
+  c->mag = run_ranges(&x, n, centres_range);
   qk_status_t st = qk_tree_build(centres, n, opt, &c->tree);
   qk__free(&c->alloc, centres, n * sizeof *centres);
   return st;
@@ -527,60 +574,57 @@ static qk_status_t alloc_arrays(qk_collider_t *c) {
   return QK_OK;
 }
 
-/* Jobs per thread of the slot fill (static shares of the ids: a few per thread even out
- * their pages' first touches), and the smallest set worth threads. */
-#define SLOT_JOBS_PER_THREAD 4
-#define SLOT_PAR_MIN 8192
+/* The item of `id` into `slot`; how far its box reaches from the centre there. */
+static inline double put_item(qk_collider_t *c, const range_ctx_t *x, size_t id, uint32_t slot,
+                              const double *xs, const double *ys) {
+  if (id < c->n_discs) {
+    c->sdisc[slot] = x->discs[id];
+    c->sbox[slot] = disc_bbox(&x->discs[id]);
+  } else {
+    c->sbox[slot] = x->boxes[id - c->n_discs];
+  }
+  const qk_box_t *b = &c->sbox[slot];
+  return qk__max(qk__max(xs[slot] - b->xmin, b->xmax - xs[slot]),
+                 qk__max(ys[slot] - b->ymin, b->ymax - ys[slot]));
+}
 
-typedef struct slot_ctx {
-  qk_collider_t *c;
-  const qk_disc_t *discs;
-  const qk_box_t *boxes;
-  const uint32_t *where;
-  size_t n_jobs;
-  double reach[QK__MAX_THREADS * SLOT_JOBS_PER_THREAD];
-} slot_ctx_t;
-
-/* The items of ids [n i / n_jobs, n (i + 1) / n_jobs) into their slots; the job's reach. */
-static void slot_job(unsigned i, void *ud) {
-  slot_ctx_t *x = ud;
+/* Slots [lo, hi) of a tree whose slots are all in use (each holds the item of its id). */
+static double slots_range(range_ctx_t *x, size_t lo, size_t hi) {
   qk_collider_t *c = x->c;
   const double *xs = qk__tree_xs(c->tree), *ys = qk__tree_ys(c->tree);
-  const size_t lo = c->n * i / x->n_jobs, hi = c->n * (i + 1) / x->n_jobs;
+  const qk_id_t *pid = qk__tree_ids(c->tree);
   double reach = 0;
-  for (size_t id = lo; id < hi; id++) {
-    uint32_t slot = x->where[id];
-    if (id < c->n_discs) {
-      c->sdisc[slot] = x->discs[id];
-      c->sbox[slot] = disc_bbox(&x->discs[id]);
-    } else {
-      c->sbox[slot] = x->boxes[id - c->n_discs];
-    }
-    const qk_box_t *b = &c->sbox[slot];
-    const double r = qk__max(qk__max(xs[slot] - b->xmin, b->xmax - xs[slot]),
-                             qk__max(ys[slot] - b->ymin, b->ymax - ys[slot]));
-    if (r > reach) reach = r;
-  }
-  x->reach[i] = reach;
+  for (size_t slot = lo; slot < hi; slot++)
+    reach = qk__max(reach, put_item(c, x, pid[slot], (uint32_t)slot, xs, ys));
+  return reach;
+}
+
+/* Ids [lo, hi), each into the slot the tree's id map gives it. */
+static double ids_range(range_ctx_t *x, size_t lo, size_t hi) {
+  qk_collider_t *c = x->c;
+  const double *xs = qk__tree_xs(c->tree), *ys = qk__tree_ys(c->tree);
+  double reach = 0;
+  for (size_t id = lo; id < hi; id++)
+    reach = qk__max(reach, put_item(c, x, id, x->where[id], xs, ys));
+  return reach;
 }
 
 /* Phase 4: each item into the slot the tree gave its centre, then the node boxes; on the
- * build's threads (each job writes its own items' slots, and the reach is a maximum: the
- * same arrays whatever the threads). */
+ * build's threads. When the tree uses exactly n slots (a bulk build), every slot holds
+ * one item and the pass goes slot by slot (reading the items at random, writing in
+ * order); otherwise id by id through the tree's id map. */
 static qk_status_t fill_slots(qk_collider_t *c, const qk_disc_t *discs, const qk_box_t *boxes) {
-  slot_ctx_t x;
-  qk_status_t st = qk__id_map(c->tree, &x.where);
-  if (st != QK_OK) return st;
+  range_ctx_t x;
+  x.c = c, x.discs = discs, x.boxes = boxes, x.centres = NULL, x.where = NULL;
+  if (qk__tree_slot_bound(c->tree) == c->n) {
+    c->reach = run_ranges(&x, c->n, slots_range);
+  } else {
+    qk_status_t st = qk__id_map(c->tree, &x.where);
+    if (st != QK_OK) return st;
+    c->reach = run_ranges(&x, c->n, ids_range);
+  }
   unsigned threads = qk__threads_resolve(c->threads);
-  if (threads > QK__MAX_THREADS) threads = QK__MAX_THREADS;
-  if (c->n < SLOT_PAR_MIN) threads = 1;
-  x.c = c, x.discs = discs, x.boxes = boxes;
-  x.n_jobs = threads > 1 ? (size_t)threads * SLOT_JOBS_PER_THREAD : 1;
-  qk__run_jobs(threads, (unsigned)x.n_jobs, slot_job, &x);
-  c->reach = 0;
-  for (size_t i = 0; i < x.n_jobs; i++)
-    if (x.reach[i] > c->reach) c->reach = x.reach[i];
-  fill_boxes_and_quads(c, threads);
+  fill_boxes_and_quads(c, c->n < RANGE_PAR_MIN ? 1 : threads);
   return c->n_quads ? build_ztab(c) : QK_OK;
 }
 
