@@ -64,6 +64,17 @@ enum { QX0 = 0, QY0 = 4, QX1 = 8, QY1 = 12 };
 static const uint32_t lane_quadrant[4] = {QK_SW, QK_SE, QK_NW, QK_NE};
 
 /*
+ * A disc as the collider keeps it: with its id beside it, 32 bytes, two to a cache line, so
+ * that a leaf's scan reads its discs' lines and nothing else (the tree's id array would
+ * be one more miss per leaf).
+ */
+typedef struct sdisc {
+  qk_disc_t d;
+  qk_id_t id;
+  uint32_t pad;
+} sdisc_t;
+
+/*
  * Item data is kept in the tree's slot order (parallel to the tree's point arrays), not by id, so
  * that scanning a leaf reads consecutive memory instead of jumping to each item's id: for large
  * sets that is what the scans cost.
@@ -73,10 +84,12 @@ struct qk_collider {
   qk_tree_t *tree;
   size_t n_discs, n;
   size_t n_slots;
-  qk_box_t *sbox;   /* per slot: the item's box, or a disc's (padded) bounding box */
-  qk_disc_t *sdisc; /* per slot: the disc (when the item is one; NULL without discs) */
-  cnode_t *cn;      /* per node id: see cnode_t */
-  void *cn_block;   /* the allocation holding cn (aligned inside it) */
+  qk_box_t *sbox;    /* per slot: the item's box, or a disc's (padded) bounding box */
+  sdisc_t *sdisc;    /* per slot: the disc and its id (NULL without discs), 64-byte aligned */
+  void *sdisc_block; /* the allocation holding sdisc */
+  size_t sdisc_bytes;
+  cnode_t *cn;    /* per node id: see cnode_t */
+  void *cn_block; /* the allocation holding cn (aligned inside it) */
   size_t cn_bytes;
   size_t n_nodes;
   qnode_t *quads;    /* per internal node (cnode_t::quad), 64-byte aligned; NULL past 2^100 */
@@ -121,7 +134,7 @@ static inline shape_t slot_shape(const qk_collider_t *c, uint32_t slot) {
   shape_t s;
   s.is_disc = qk__tree_ids(c->tree)[slot] < c->n_discs;
   if (s.is_disc)
-    s.d = c->sdisc[slot];
+    s.d = c->sdisc[slot].d;
   else
     s.b = c->sbox[slot];
   return s;
@@ -177,6 +190,20 @@ static inline float round_up(double v) {
   if (v < -FLT_MAX) return -FLT_MAX;
   float f = (float)v;
   return (double)f < v ? float_up(f) : f;
+}
+
+/* round_up for a parameter t >= 0 (or +infinity), without the branches for negative
+ * values: the next float above is the next bit pattern. */
+static inline float round_up_t(double t) {
+  if (!(t <= FLT_MAX)) return INFINITY;
+  float f = (float)t;
+  if ((double)f < t) {
+    uint32_t b;
+    memcpy(&b, &f, sizeof b);
+    b++;
+    memcpy(&f, &b, sizeof f);
+  }
+  return f;
 }
 
 /* Post-order: a node's box is the union of its children's (or its items'). Recursion
@@ -435,7 +462,7 @@ void qk_collider_free(qk_collider_t *c) {
   if (!c) return;
   qk_allocator_t a = c->alloc;
   qk__free(&a, c->sbox, c->n_slots * sizeof *c->sbox);
-  qk__free(&a, c->sdisc, c->n_slots * sizeof *c->sdisc);
+  qk__free(&a, c->sdisc_block, c->sdisc_bytes);
   qk__free(&a, c->cn_block, c->cn_bytes);
   qk__free(&a, c->quads_block, c->quads_bytes);
   qk__free(&a, c->ztab, c->ztab_bytes);
@@ -547,7 +574,11 @@ static qk_status_t alloc_arrays(qk_collider_t *c) {
   c->n_slots = slots ? slots : 1;
   c->n_nodes = nodes ? nodes : 1;
   c->sbox = qk__realloc(a, NULL, 0, c->n_slots * sizeof *c->sbox);
-  if (c->n_discs) c->sdisc = qk__realloc(a, NULL, 0, c->n_slots * sizeof *c->sdisc);
+  if (c->n_discs) {
+    c->sdisc_bytes = c->n_slots * sizeof(sdisc_t) + 64;
+    c->sdisc_block = qk__realloc(a, NULL, 0, c->sdisc_bytes);
+    if (c->sdisc_block) c->sdisc = (sdisc_t *)(((uintptr_t)c->sdisc_block + 63) & ~(uintptr_t)63);
+  }
   /* Three spare entries in front put each block of four children (which start at ids
    * 1, 5, 9, ...) on a 128-byte boundary, with 64 bytes of slack for the alignment. */
   c->cn_bytes = (c->n_nodes + 3) * sizeof(cnode_t) + 64;
@@ -567,7 +598,7 @@ static qk_status_t alloc_arrays(qk_collider_t *c) {
    * the searches jump across these arrays, one or two lines per page. */
   if (c->huge_pages) {
     qk__advise_huge(a, c->sbox, c->n_slots * sizeof *c->sbox);
-    qk__advise_huge(a, c->sdisc, c->n_discs ? c->n_slots * sizeof *c->sdisc : 0);
+    qk__advise_huge(a, c->sdisc_block, c->sdisc_bytes);
     qk__advise_huge(a, c->cn_block, c->cn_bytes);
     qk__advise_huge(a, c->quads_block, c->quads_bytes);
   }
@@ -578,7 +609,7 @@ static qk_status_t alloc_arrays(qk_collider_t *c) {
 static inline double put_item(qk_collider_t *c, const range_ctx_t *x, size_t id, uint32_t slot,
                               const double *xs, const double *ys) {
   if (id < c->n_discs) {
-    c->sdisc[slot] = x->discs[id];
+    c->sdisc[slot] = (sdisc_t){x->discs[id], (qk_id_t)id, 0};
     c->sbox[slot] = disc_bbox(&x->discs[id]);
   } else {
     c->sbox[slot] = x->boxes[id - c->n_discs];
@@ -993,11 +1024,11 @@ static inline double ray_disc(const qk_disc_t *d, double ox, double oy, double d
  * [0, best] (t into th[k]); the lanes that the scalar code would leave early compute
  * values (perhaps NaN) that the masks discard.
  */
-static inline unsigned ray_disc2(const qk_disc_t *d, const ray_t *r, double tmax, double best,
+static inline unsigned ray_disc2(const sdisc_t *d, const ray_t *r, double tmax, double best,
                                  double th[2]) {
-  const __m128d a0 = _mm_loadu_pd(&d[0].x), a1 = _mm_loadu_pd(&d[1].x); /* x, y */
+  const __m128d a0 = _mm_load_pd(&d[0].d.x), a1 = _mm_load_pd(&d[1].d.x); /* x, y */
   const __m128d x = _mm_unpacklo_pd(a0, a1), y = _mm_unpackhi_pd(a0, a1);
-  const __m128d rr = _mm_set_pd(d[1].r, d[0].r);
+  const __m128d rr = _mm_set_pd(d[1].d.r, d[0].d.r);
   const __m128d dx = _mm_set1_pd(r->dx), dy = _mm_set1_pd(r->dy);
   const __m128d fx = _mm_sub_pd(r->vox, x), fy = _mm_sub_pd(r->voy, y);
   const __m128d cc =
@@ -1031,8 +1062,8 @@ typedef struct best {
   qk_id_t id;
 } best_t;
 
-/* The items of slots [slot, end) against the ray, into *b. Ids are read only for hits (and
- * for the kind in mixed sets): the id array is one more cache miss per leaf otherwise. */
+/* The items of slots [slot, end) against the ray, into *b. Discs carry their ids; the
+ * tree's id array is read only for hits on boxes and for the kind in mixed sets. */
 #if defined(__GNUC__)
 __attribute__((always_inline))
 #endif
@@ -1050,7 +1081,7 @@ scan_leaf(const qk_collider_t *c, const ray_t *ray, uint32_t slot, uint32_t end,
       unsigned cand = ray_disc2(&c->sdisc[slot], ray, tmax, b->t, th);
       for (unsigned k = 0; k < 2; k++) {
         if (!(cand >> k & 1) || th[k] > b->t) continue; /* the best may have moved */
-        qk_id_t id = pid[slot + k];
+        qk_id_t id = c->sdisc[slot + k].id;
         if (th[k] < b->t || id < b->id) *b = (best_t){th[k], id};
       }
     }
@@ -1058,10 +1089,10 @@ scan_leaf(const qk_collider_t *c, const ray_t *ray, uint32_t slot, uint32_t end,
 #endif
   for (; slot < end; slot++) {
     int is_disc = all_discs || (!no_discs && pid[slot] < c->n_discs);
-    double th = is_disc ? ray_disc(&c->sdisc[slot], ray->ox, ray->oy, ray->dx, ray->dy, tmax)
+    double th = is_disc ? ray_disc(&c->sdisc[slot].d, ray->ox, ray->oy, ray->dx, ray->dy, tmax)
                         : ray_box(&c->sbox[slot], ray, tmax);
     if (th < 0 || th > b->t) continue;
-    qk_id_t id = pid[slot];
+    qk_id_t id = all_discs ? c->sdisc[slot].id : pid[slot];
     if (th < b->t || id < b->id) *b = (best_t){th, id};
   }
 }
@@ -1221,7 +1252,7 @@ walk_float(const qk_collider_t *c, const ray_t *rp, double tmax, uint32_t from, 
   const ray_t *const ray = rp;
   best_t b = *bp;
   /* T of fact (2): min(tmax, best) rounded up to float; it only shrinks. */
-  float tf = round_up(b.t < tmax ? b.t : tmax);
+  float tf = round_up_t(b.t < tmax ? b.t : tmax);
   __m128 tv = _mm_set1_ps(tf);
   rentry_t stack[QK__CSTACK_MAX];
   int sp = 0;
@@ -1259,7 +1290,7 @@ walk_float(const qk_collider_t *c, const ray_t *rp, double tmax, uint32_t from, 
       const double best0 = b.t;
       scan_leaf(c, ray, cur.link, cur.link + cur.count, tmax, &b);
       if (b.t != best0) {
-        tf = round_up(b.t); /* b.t <= tmax: the items test t <= tmax */
+        tf = round_up_t(b.t); /* b.t <= tmax: the items test t <= tmax */
         tv = _mm_set1_ps(tf);
       }
     }
@@ -1343,13 +1374,12 @@ static void cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk
            * its items and ids asked for now, so that those misses overlap the tests. */
           const uint32_t st = q->link[lane], cnt = q->count[lane];
           if (cnt > 0) {
-            if (c->sdisc) {
-              QK__CPREFETCH(&c->sdisc[st]);
-              QK__CPREFETCH(&c->sdisc[st + cnt - 1]);
+            if (c->n_discs == c->n) { /* the leaf's lines (ids included), two discs each */
+              for (uint32_t k = st & ~1u; k < st + cnt; k += 2) QK__CPREFETCH(&c->sdisc[k]);
             } else {
-              QK__CPREFETCH(&c->sbox[st]);
+              QK__CPREFETCH(c->sdisc ? (const void *)&c->sdisc[st] : (const void *)&c->sbox[st]);
+              QK__CPREFETCH(&qk__tree_ids(t)[st]);
             }
-            QK__CPREFETCH(&qk__tree_ids(t)[st]);
           }
           break;
         }
