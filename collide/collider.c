@@ -1097,14 +1097,22 @@ scan_leaf(const qk_collider_t *c, const ray_t *ray, uint32_t slot, uint32_t end,
   }
 }
 
-/* perm[s][m]: bit i set when bit i ^ s of m is, i.e. the kept lanes in the order the ray
- * meets them (bit 0 nearest); low[m] and high[m]: the lowest and highest set bit of m. */
-static const uint8_t perm[4][16] = {{0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15},
-                                    {0, 2, 1, 3, 8, 10, 9, 11, 4, 6, 5, 7, 12, 14, 13, 15},
-                                    {0, 4, 8, 12, 1, 5, 9, 13, 2, 6, 10, 14, 3, 7, 11, 15},
-                                    {0, 8, 4, 12, 2, 10, 6, 14, 1, 9, 5, 13, 3, 11, 7, 15}};
-static const uint8_t low[16] = {0, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0};
-static const uint8_t high[16] = {0, 0, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3, 3, 3, 3, 3};
+/*
+ * visit[s][keep]: the kept lanes of a node in the order a ray of signs s meets their
+ * squares (lane ^ s), packed: bits 0-1 the nearest (taken at once), bits 2-3 how many
+ * others, then the others two bits each, farthest first (the order they are stacked, so
+ * that the nearest of them is popped first).
+ */
+static const uint16_t visit[4][16] = {
+    {0x000, 0x000, 0x001, 0x014, 0x002, 0x024, 0x025, 0x068, 0x003, 0x034, 0x035, 0x078, 0x036,
+     0x0b8, 0x0b9, 0x1bc},
+    {0x000, 0x000, 0x001, 0x005, 0x002, 0x024, 0x025, 0x029, 0x003, 0x034, 0x035, 0x039, 0x027,
+     0x0e8, 0x0e9, 0x0ed},
+    {0x000, 0x000, 0x001, 0x014, 0x002, 0x006, 0x016, 0x01a, 0x003, 0x007, 0x017, 0x01b, 0x036,
+     0x0ca, 0x0da, 0x31e},
+    {0x000, 0x000, 0x001, 0x005, 0x002, 0x006, 0x016, 0x04a, 0x003, 0x007, 0x017, 0x04b, 0x027,
+     0x08b, 0x09b, 0x24f},
+};
 
 /* Sets up the ray; fills the float test's constants when fact (2)'s ranges hold. */
 static void ray_init(ray_t *r, const qk_collider_t *c, qk_point_t o, qk_point_t d) {
@@ -1180,16 +1188,10 @@ static void cast_general(const qk_collider_t *c, const ray_t *ray, double tmax, 
       float lo4[4];
       unsigned keep = node_slab_general(c, n, ray, tmax, b.t, lo4);
       if (keep) {
-        unsigned m = perm[ray->s][keep];
-        const uint32_t k0 = (uint32_t)low[m] ^ ray->s;
-        m &= m - 1;
-        while (m) {
-          const unsigned i = high[m];
-          const uint32_t k = i ^ ray->s;
-          m ^= 1u << i;
-          stack[sp++] = (rentry_t){n->child + lane_quadrant[k], 0, lo4[k]};
-        }
-        cur = n->child + lane_quadrant[k0];
+        const unsigned v = visit[ray->s][keep];
+        for (unsigned j = v >> 2 & 3, o = v >> 4; j > 0; j--, o >>= 2)
+          stack[sp++] = (rentry_t){n->child + lane_quadrant[o & 3], 0, lo4[o & 3]};
+        cur = n->child + lane_quadrant[v & 3];
         continue;
       }
     } else {
@@ -1270,13 +1272,10 @@ walk_float(const qk_collider_t *c, const ray_t *rp, double tmax, uint32_t from, 
          * mostly follow it; the bounds keep the pruning exact whatever the order): the
          * nearest is taken at once, the others stacked far to near, each with its
          * memory asked for now so that the misses overlap the work on the nearest. */
-        unsigned m = perm[s][keep];
-        const uint32_t k0 = (uint32_t)low[m] ^ s;
-        m &= m - 1;
-        while (m) {
-          const unsigned i = high[m];
-          const uint32_t k = i ^ s, nx = q->link[k], cnt = q->count[k];
-          m ^= 1u << i;
+        const unsigned v = visit[s][keep], k0 = v & 3;
+        for (unsigned j = v >> 2 & 3, o = v >> 4; j > 0; j--, o >>= 2) {
+          const unsigned k = o & 3;
+          const uint32_t nx = q->link[k], cnt = q->count[k];
           stack[sp++] = (rentry_t){nx, cnt, lo4[k]};
           if (cnt == QK_NONE)
             QK__CPREFETCH(&quads[nx]);
@@ -1375,7 +1374,12 @@ static void cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk
           const uint32_t st = q->link[lane], cnt = q->count[lane];
           if (cnt > 0) {
             if (c->n_discs == c->n) { /* the leaf's lines (ids included), two discs each */
-              for (uint32_t k = st & ~1u; k < st + cnt; k += 2) QK__CPREFETCH(&c->sdisc[k]);
+              const uint32_t last = st + cnt - 1; /* up to 8 discs: four or five lines */
+              QK__CPREFETCH(&c->sdisc[st]);
+              QK__CPREFETCH(&c->sdisc[st + 2 < last ? st + 2 : last]);
+              QK__CPREFETCH(&c->sdisc[st + 4 < last ? st + 4 : last]);
+              QK__CPREFETCH(&c->sdisc[st + 6 < last ? st + 6 : last]);
+              QK__CPREFETCH(&c->sdisc[last]);
             } else {
               QK__CPREFETCH(c->sdisc ? (const void *)&c->sdisc[st] : (const void *)&c->sbox[st]);
               QK__CPREFETCH(&qk__tree_ids(t)[st]);
@@ -1421,7 +1425,8 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
   if (!c || !hit) return QK_ERR_INVALID;
   hit->id = QK_NONE;
   hit->t = INFINITY;
-  if (!isfinite(o.x) || !isfinite(o.y) || !isfinite(d.x) || !isfinite(d.y)) return QK_ERR_NONFINITE;
+  /* v - v is 0 for a finite v and NaN otherwise: one test for the four. */
+  if ((o.x - o.x) + (o.y - o.y) + (d.x - d.x) + (d.y - d.y) != 0) return QK_ERR_NONFINITE;
   if (isnan(tmax) || tmax < 0) return QK_ERR_INVALID;
   if (c->n == 0) return QK_OK;
   ray_t ray;
