@@ -531,7 +531,7 @@ static void test_collide_threaded_build(void **state) {
   (void)state;
   qkt_rng_t r;
   qkt_rng_seed(&r, g_seed + 7);
-  enum { ND = 6000, NB = 4000, NR = 3000 };
+  enum { ND = 6000, NB = 4000, NR = 1000 };
   qk_disc_t *d = malloc(ND * sizeof *d);
   qk_box_t *b = malloc(NB * sizeof *b);
   qk_point_t *org = malloc(NR * sizeof *org), *dir = malloc(NR * sizeof *dir);
