@@ -472,21 +472,54 @@ void qk_collider_free(qk_collider_t *c) {
 }
 
 /* Phase 1: the inputs are finite, radii non-negative and boxes not inverted. */
+/* The check of one item: discs [0, n_discs), then boxes. */
+static inline qk_status_t item_status(const qk_disc_t *discs, size_t n_discs, const qk_box_t *boxes,
+                                      size_t i) {
+  if (i < n_discs) {
+    const qk_disc_t *d = &discs[i];
+    if (!isfinite(d->x) || !isfinite(d->y) || !isfinite(d->r)) return QK_ERR_NONFINITE;
+    return d->r < 0 ? QK_ERR_GEOMETRY : QK_OK;
+  }
+  const qk_box_t *b = &boxes[i - n_discs];
+  if (!isfinite(b->xmin) || !isfinite(b->ymin) || !isfinite(b->xmax) || !isfinite(b->ymax))
+    return QK_ERR_NONFINITE;
+  return b->xmin > b->xmax || b->ymin > b->ymax ? QK_ERR_GEOMETRY : QK_OK;
+}
+
+#define CHECK_JOBS_PER_THREAD 4
+#define CHECK_PAR_MIN 8192
+
+typedef struct check_ctx {
+  const qk_disc_t *discs;
+  const qk_box_t *boxes;
+  size_t n_discs, n, n_jobs;
+  qk_status_t st[QK__MAX_THREADS * CHECK_JOBS_PER_THREAD]; /* per job: its first item's */
+} check_ctx_t;
+
+static void check_job(unsigned j, void *ud) {
+  check_ctx_t *x = ud;
+  const size_t lo = x->n * j / x->n_jobs, hi = x->n * (j + 1) / x->n_jobs;
+  x->st[j] = QK_OK;
+  for (size_t i = lo; i < hi && x->st[j] == QK_OK; i++)
+    x->st[j] = item_status(x->discs, x->n_discs, x->boxes, i);
+}
+
+/* Phase 1: the inputs are finite, radii non-negative and boxes not inverted; the first
+ * failing item's status, on `threads` threads for large sets (ranges in item order, so
+ * the lowest failing range holds the first failing item). */
 static qk_status_t check_items(const qk_disc_t *discs, size_t n_discs, const qk_box_t *boxes,
-                               size_t n_boxes) {
+                               size_t n_boxes, uint32_t threads_opt) {
   if ((n_discs > 0 && !discs) || (n_boxes > 0 && !boxes)) return QK_ERR_INVALID;
   if (n_discs > QK_MAX_POINTS || n_boxes > QK_MAX_POINTS - n_discs) return QK_ERR_LIMIT;
-  for (size_t i = 0; i < n_discs; i++) {
-    if (!isfinite(discs[i].x) || !isfinite(discs[i].y) || !isfinite(discs[i].r))
-      return QK_ERR_NONFINITE;
-    if (discs[i].r < 0) return QK_ERR_GEOMETRY;
-  }
-  for (size_t i = 0; i < n_boxes; i++) {
-    const qk_box_t *b = &boxes[i];
-    if (!isfinite(b->xmin) || !isfinite(b->ymin) || !isfinite(b->xmax) || !isfinite(b->ymax))
-      return QK_ERR_NONFINITE;
-    if (b->xmin > b->xmax || b->ymin > b->ymax) return QK_ERR_GEOMETRY;
-  }
+  check_ctx_t x;
+  x.discs = discs, x.boxes = boxes, x.n_discs = n_discs, x.n = n_discs + n_boxes;
+  unsigned threads = qk__threads_resolve(threads_opt);
+  if (threads > QK__MAX_THREADS) threads = QK__MAX_THREADS;
+  if (x.n < CHECK_PAR_MIN) threads = 1;
+  x.n_jobs = threads > 1 ? (size_t)threads * CHECK_JOBS_PER_THREAD : 1;
+  qk__run_jobs(threads, (unsigned)x.n_jobs, check_job, &x);
+  for (size_t j = 0; j < x.n_jobs; j++)
+    if (x.st[j] != QK_OK) return x.st[j];
   return QK_OK;
 }
 
@@ -664,13 +697,13 @@ qk_status_t qk_collider_build(const qk_disc_t *discs, size_t n_discs, const qk_b
                               qk_collider_t **out) {
   if (!out) return QK_ERR_INVALID;
   *out = NULL;
-  qk_status_t st = check_items(discs, n_discs, boxes, n_boxes);
-  if (st != QK_OK) return st;
   qk_tree_options_t opt;
   if (options)
     opt = *options;
   else
     qk_tree_options_init(&opt);
+  qk_status_t st = check_items(discs, n_discs, boxes, n_boxes, opt.threads);
+  if (st != QK_OK) return st;
   qk_allocator_t a = {NULL, NULL};
   if (opt.allocator) a = *opt.allocator;
   qk_collider_t *c = qk__realloc(&a, NULL, 0, sizeof *c);

@@ -581,6 +581,26 @@ static void test_collide_threaded_build(void **state) {
     assert_true(ref.n > 0);
     free(ref.p);
   }
+  /* Bad items checked on the threads: the first bad item's status (discs come first). */
+  {
+    qk_tree_options_t o = opts(8);
+    o.threads = 2;
+    qk_collider_t *c = NULL;
+    const qk_box_t keep_b = b[NB - 10];
+    const qk_disc_t keep_d = d[ND / 2];
+    b[NB - 10] = (qk_box_t){1, 0, 0, 1}; /* inverted, in the last range */
+    assert_int_equal(qk_collider_build(d, ND, b, NB, &o, &c), QK_ERR_GEOMETRY);
+    assert_null(c);
+    d[ND / 2].y = NAN; /* earlier in item order */
+    assert_int_equal(qk_collider_build(d, ND, b, NB, &o, &c), QK_ERR_NONFINITE);
+    d[ND / 2] = keep_d;
+    d[ND - 1].r = -1;
+    assert_int_equal(qk_collider_build(d, ND, b, NB, &o, &c), QK_ERR_GEOMETRY);
+    d[ND - 1].r = 0;
+    b[NB - 10].xmax = INFINITY;
+    assert_int_equal(qk_collider_build(d, ND, b, NB, &o, &c), QK_ERR_NONFINITE);
+    b[NB - 10] = keep_b;
+  }
   /* Allocation failures of the threaded build: NOMEM and nothing held, until it succeeds. */
   locked_t l;
   pthread_mutex_init(&l.mu, NULL);
