@@ -487,7 +487,7 @@ static inline qk_status_t item_status(const qk_disc_t *discs, size_t n_discs, co
 }
 
 #define CHECK_JOBS_PER_THREAD 4
-#define CHECK_PAR_MIN 8192
+#define CHECK_PAR_MIN 4096
 
 typedef struct check_ctx {
   const qk_disc_t *discs;
@@ -526,7 +526,7 @@ static qk_status_t check_items(const qk_disc_t *discs, size_t n_discs, const qk_
 /* Jobs per thread of the build's linear passes (static shares: a few per thread even out
  * their pages' first touches), and the smallest set worth threads. */
 #define RANGE_JOBS_PER_THREAD 4
-#define RANGE_PAR_MIN 8192
+#define RANGE_PAR_MIN 4096
 
 /* A linear pass of the build over [0, n) in n_jobs ranges; each returns a maximum. */
 typedef struct range_ctx {

@@ -524,14 +524,14 @@ static void test_collide_threads_nomem(void **state) {
 }
 
 /* The build on several threads (the slot fill, the node boxes and the ray cast's nodes by
- * subtrees: from 8192 items on) gives the collider one thread gives: the same pairs in
+ * subtrees: from 4096 items on) gives the collider one thread gives: the same pairs in
  * the same order, the same hits to the last bit, which agree with the oracle; and every
  * failed allocation of such a build leaves nothing behind. */
 static void test_collide_threaded_build(void **state) {
   (void)state;
   qkt_rng_t r;
   qkt_rng_seed(&r, g_seed + 7);
-  enum { ND = 6000, NB = 4000, NR = 1000 };
+  enum { ND = 3000, NB = 2500, NR = 1000 };
   qk_disc_t *d = malloc(ND * sizeof *d);
   qk_box_t *b = malloc(NB * sizeof *b);
   qk_point_t *org = malloc(NR * sizeof *org), *dir = malloc(NR * sizeof *dir);
