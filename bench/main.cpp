@@ -556,7 +556,7 @@ void run_collide(size_t n) {
   recs[0].impl = "quadkit";
   recs[0].matches = 1;
   if (opt.threads > 1) {
-    // The pairs on --threads threads (the build stays on one): the same pairs in order.
+    // The build and the pairs on --threads threads: the same pairs in order.
     const unsigned th = (unsigned)opt.threads;
     PairSum tq;
     quadkit_collide(boxes, tq, th);

@@ -64,6 +64,17 @@ enum { QX0 = 0, QY0 = 4, QX1 = 8, QY1 = 12 };
 static const uint32_t lane_quadrant[4] = {QK_SW, QK_SE, QK_NW, QK_NE};
 
 /*
+ * A disc as the collider keeps it: with its id beside it, 32 bytes, two to a cache line, so
+ * that a leaf's scan reads its discs' lines and nothing else (the tree's id array would
+ * be one more miss per leaf).
+ */
+typedef struct sdisc {
+  qk_disc_t d;
+  qk_id_t id;
+  uint32_t pad;
+} sdisc_t;
+
+/*
  * Item data is kept in the tree's slot order (parallel to the tree's point arrays), not by id, so
  * that scanning a leaf reads consecutive memory instead of jumping to each item's id: for large
  * sets that is what the scans cost.
@@ -73,16 +84,22 @@ struct qk_collider {
   qk_tree_t *tree;
   size_t n_discs, n;
   size_t n_slots;
-  qk_box_t *sbox;   /* per slot: the item's box, or a disc's (padded) bounding box */
-  qk_disc_t *sdisc; /* per slot: the disc (when the item is one; NULL without discs) */
-  cnode_t *cn;      /* per node id: see cnode_t */
-  void *cn_block;   /* the allocation holding cn (aligned inside it) */
+  qk_box_t *sbox;    /* per slot: the item's box, or a disc's (padded) bounding box */
+  sdisc_t *sdisc;    /* per slot: the disc and its id (NULL without discs), 64-byte aligned */
+  void *sdisc_block; /* the allocation holding sdisc */
+  size_t sdisc_bytes;
+  cnode_t *cn;    /* per node id: see cnode_t */
+  void *cn_block; /* the allocation holding cn (aligned inside it) */
   size_t cn_bytes;
   size_t n_nodes;
   qnode_t *quads;    /* per internal node (cnode_t::quad), 64-byte aligned; NULL past 2^100 */
   void *quads_block; /* the allocation holding quads */
   size_t quads_bytes;
-  uint32_t n_quads; /* entries filled */
+  uint32_t n_quads;  /* entries filled */
+  uint32_t *ztab;    /* the ray cast's start table (see fill_ztab); NULL: descend from the root */
+  uint32_t *qparent; /* per quads entry: its parent's entry (with ztab: the climb's links) */
+  size_t ztab_bytes;
+  unsigned zdepth;  /* its depth: 4^zdepth cells */
   uint32_t threads; /* for the pairs and batch calls (0: every online core) */
   int huge_pages;   /* the options' hint, applied to the collider's own arrays too */
   double mag;       /* largest coordinate magnitude of any item box, for rounding margins */
@@ -117,7 +134,7 @@ static inline shape_t slot_shape(const qk_collider_t *c, uint32_t slot) {
   shape_t s;
   s.is_disc = qk__tree_ids(c->tree)[slot] < c->n_discs;
   if (s.is_disc)
-    s.d = c->sdisc[slot];
+    s.d = c->sdisc[slot].d;
   else
     s.b = c->sbox[slot];
   return s;
@@ -175,9 +192,23 @@ static inline float round_up(double v) {
   return (double)f < v ? float_up(f) : f;
 }
 
+/* round_up for a parameter t >= 0 (or +infinity), without the branches for negative
+ * values: the next float above is the next bit pattern. */
+static inline float round_up_t(double t) {
+  if (!(t <= FLT_MAX)) return INFINITY;
+  float f = (float)t;
+  if ((double)f < t) {
+    uint32_t b;
+    memcpy(&b, &f, sizeof b);
+    b++;
+    memcpy(&f, &b, sizeof f);
+  }
+  return f;
+}
+
 /* Post-order: a node's box is the union of its children's (or its items'). Recursion
  * depth is bounded by the tree's depth cap. */
-static qk_box_t fill_node_boxes(qk_collider_t *c, uint32_t node) {
+static qk_box_t fill_node_boxes(qk_collider_t *c, uint32_t node, uint32_t *n_int) {
   const qk_tree_t *t = c->tree;
   cnode_t *cn = &c->cn[node];
   qk_box_t b = {INFINITY, INFINITY, -INFINITY, -INFINITY};
@@ -191,10 +222,11 @@ static qk_box_t fill_node_boxes(qk_collider_t *c, uint32_t node) {
     for (uint32_t i = 0; i < count; i++) box_union(&b, &c->sbox[start + i]);
   } else {
     for (uint32_t k = 0; k < 4; k++) {
-      qk_box_t cb = fill_node_boxes(c, cn->child + k);
+      qk_box_t cb = fill_node_boxes(c, cn->child + k, n_int);
       box_union(&b, &cb);
     }
   }
+  if (!leaf && count > 0) (*n_int)++; /* one qnode_t each (fill_qnodes) */
   if (count == 0) {
     cn->xmin = cn->ymin = cn->xmax = cn->ymax = INFINITY;
   } else {
@@ -234,9 +266,22 @@ static uint8_t grid_step(double v, double lo, double sc, int up) {
 
 /* Pre-order: an internal node's qnode_t, then those of its internal children, so that a
  * descent mostly moves forward in memory. Returns the node's entry in quads. */
-static uint32_t fill_qnodes(qk_collider_t *c, uint32_t node) {
+/* The subtrees that a threaded build fills in parallel (see fill_boxes_and_quads). */
+#define SPLIT_DEPTH 3
+#define SPLIT_MAX 64 /* 4^SPLIT_DEPTH */
+typedef struct split {
+  uint32_t node[SPLIT_MAX];  /* roots: the nodes at SPLIT_DEPTH and shallower leaves */
+  uint32_t n_int[SPLIT_MAX]; /* their internal non-empty nodes (qnode_t entries) */
+  uint32_t base[SPLIT_MAX];  /* their first entry in quads */
+  qk_box_t box[SPLIT_MAX];   /* their item boxes, unrounded */
+  unsigned n, iter;
+  qk_collider_t *c;
+} split_t;
+
+static uint32_t fill_qnodes(qk_collider_t *c, uint32_t node, uint32_t *next, split_t *sp,
+                            unsigned depth) {
   cnode_t *cn = &c->cn[node];
-  const uint32_t idx = c->n_quads++;
+  const uint32_t idx = (*next)++;
   qnode_t *q = &c->quads[idx];
   float lo[2], sc[2];
   grid_axis(cn->xmin, cn->xmax, &lo[0], &sc[0]);
@@ -259,13 +304,153 @@ static uint32_t fill_qnodes(qk_collider_t *c, uint32_t node) {
     q->q[QY1 + k] = grid_step(ch->ymax, lo[1], sc[1], 1);
     if (ch->child != QK_NONE) {
       q->count[k] = QK_NONE;
-      q->link[k] = fill_qnodes(c, child); /* q stays valid: quads is never moved */
+      if (sp && depth + 1 == SPLIT_DEPTH) { /* a subtree filled later, on its own thread */
+        unsigned i = 0;
+        while (sp->node[i] != child) i++;
+        sp->base[i] = *next;
+        *next += sp->n_int[i];
+        q->link[k] = sp->base[i];
+      } else { /* q stays valid: quads is never moved */
+        q->link[k] = fill_qnodes(c, child, next, sp, depth + 1);
+      }
     } else {
       q->link[k] = ch->start;
       q->count[k] = ch->count;
     }
   }
   return idx;
+}
+
+/* The roots of the parallel subtrees, in the order of the children (post-order top). */
+static void split_roots(qk_collider_t *c, uint32_t node, unsigned depth, split_t *sp) {
+  const qk_tree_t *t = c->tree;
+  if (depth == SPLIT_DEPTH || qk__node_leaf(t, node)) {
+    sp->node[sp->n] = node;
+    sp->n_int[sp->n] = 0;
+    sp->n++;
+    return;
+  }
+  for (uint32_t k = 0; k < 4; k++) split_roots(c, qk__node_child(t, node) + k, depth + 1, sp);
+}
+
+/* fill_node_boxes above the roots, whose boxes are in sp (visited in split_roots' order). */
+static qk_box_t fill_top_boxes(qk_collider_t *c, uint32_t node, unsigned depth, split_t *sp) {
+  const qk_tree_t *t = c->tree;
+  if (depth == SPLIT_DEPTH || qk__node_leaf(t, node)) return sp->box[sp->iter++];
+  cnode_t *cn = &c->cn[node];
+  qk_box_t b = {INFINITY, INFINITY, -INFINITY, -INFINITY};
+  const uint32_t count = qk__node_count(t, node);
+  cn->child = qk__node_child(t, node);
+  cn->start = qk__node_start(t, node);
+  cn->count = 0;
+  cn->quad = QK_NONE;
+  for (uint32_t k = 0; k < 4; k++) {
+    qk_box_t cb = fill_top_boxes(c, cn->child + k, depth + 1, sp);
+    box_union(&b, &cb);
+  }
+  if (count == 0) {
+    cn->xmin = cn->ymin = cn->xmax = cn->ymax = INFINITY;
+  } else {
+    cn->xmin = round_down(b.xmin);
+    cn->ymin = round_down(b.ymin);
+    cn->xmax = round_up(b.xmax);
+    cn->ymax = round_up(b.ymax);
+  }
+  return b;
+}
+
+static void boxes_job(unsigned i, void *ud) {
+  split_t *sp = ud;
+  sp->box[i] = fill_node_boxes(sp->c, sp->node[i], &sp->n_int[i]);
+}
+
+static void quads_job(unsigned i, void *ud) {
+  split_t *sp = ud;
+  const cnode_t *cn = &sp->c->cn[sp->node[i]];
+  if (cn->child == QK_NONE || cn->xmin == INFINITY) return; /* no entries (nor a base) */
+  uint32_t next = sp->base[i];
+  fill_qnodes(sp->c, sp->node[i], &next, NULL, SPLIT_DEPTH);
+}
+
+/*
+ * The node boxes and the ray cast's nodes, on the build's threads: the subtrees below
+ * SPLIT_DEPTH are independent (each writes its own nodes' entries), so they are filled in
+ * parallel, the levels above them by the calling thread. The quads entries are numbered
+ * as the one-thread pre-order numbers them (each subtree's count is known from its boxes'
+ * pass), so the arrays are the same whatever the threads.
+ */
+static void fill_boxes_and_quads(qk_collider_t *c, unsigned threads) {
+  split_t *sp = NULL;
+  if (threads > 1) sp = qk__realloc(&c->alloc, NULL, 0, sizeof *sp);
+  if (!sp) { /* one thread (or no memory for the plan: the same arrays, serially) */
+    uint32_t n_int = 0;
+    fill_node_boxes(c, 0, &n_int);
+    if (c->quads && c->cn[0].child != QK_NONE && c->cn[0].xmin != INFINITY)
+      fill_qnodes(c, 0, &c->n_quads, NULL, 0);
+    return;
+  }
+  sp->n = sp->iter = 0;
+  sp->c = c;
+  split_roots(c, 0, 0, sp);
+  qk__run_jobs(threads, sp->n, boxes_job, sp);
+  fill_top_boxes(c, 0, 0, sp);
+  if (c->quads && c->cn[0].child != QK_NONE && c->cn[0].xmin != INFINITY) {
+    if (sp->n == 1) { /* the root is the only subtree */
+      fill_qnodes(c, 0, &c->n_quads, NULL, 0);
+    } else {
+      fill_qnodes(c, 0, &c->n_quads, sp, 0);
+      qk__run_jobs(threads, sp->n, quads_job, sp);
+    }
+  }
+  qk__free(&c->alloc, sp, sizeof *sp);
+}
+
+/*
+ * The ray cast's start table. A ray first descends from the root to the deepest internal
+ * node on its origin's path, by the bits of the origin's position alone (cast_float); the
+ * first zdepth levels of that descent depend only on the top 2 zdepth bits of the
+ * origin's Morton code, so they are done once here for each of the 4^zdepth codes. Cell z
+ * holds the descent's node after at most zdepth levels: the quads entry, times 64, plus
+ * its depth. A ray then starts at most a couple of levels above its leaf with one load
+ * from a small table instead of zdepth dependent loads of nodes.
+ */
+#define ZTAB_DEPTH_MAX 9
+#define ZTAB_DEPTH_BITS 6
+
+static void fill_ztab(qk_collider_t *c, uint32_t q, unsigned depth, uint32_t prefix) {
+  const unsigned zd = c->zdepth;
+  const qnode_t *qn = &c->quads[q];
+  for (uint32_t k = 0; k < 4; k++) {
+    const uint32_t p = prefix << 2 | k; /* the lane is the Morton digit (2 north + east) */
+    if (qn->count[k] == QK_NONE) {
+      c->qparent[qn->link[k]] = q;
+      if (depth + 1 < zd)
+        fill_ztab(c, qn->link[k], depth + 1, p);
+      else /* depth + 1 == zd: the child is the cell's node (deeper entries: no parents) */
+        c->ztab[p] = qn->link[k] << ZTAB_DEPTH_BITS | (depth + 1);
+    } else { /* a leaf or an empty child: the descent stops at q in all cells below p */
+      const unsigned sh = 2 * (zd - depth - 1);
+      for (uint32_t z = p << sh; z < (p + 1) << sh; z++) c->ztab[z] = q << ZTAB_DEPTH_BITS | depth;
+    }
+  }
+}
+
+/* The table's size: about one cell per internal node (4^zdepth <= n_quads), so that it
+ * costs a sixteenth of the quads' memory or less; none for small trees (the descent is
+ * short) or when the entries would not fit the packing. The parents of the entries down to
+ * the table's depth (those the search may climb to) come with it. */
+static qk_status_t build_ztab(qk_collider_t *c) {
+  unsigned zd = 0;
+  while (zd < ZTAB_DEPTH_MAX && (1ull << 2 * (zd + 1)) <= c->n_quads) zd++;
+  if (zd < 2 || c->n_quads >= 1u << (32 - ZTAB_DEPTH_BITS)) return QK_OK;
+  c->ztab_bytes = ((size_t)1 << 2 * zd) * sizeof *c->ztab;
+  c->ztab = qk__realloc(&c->alloc, NULL, 0, c->ztab_bytes);
+  c->qparent = qk__realloc(&c->alloc, NULL, 0, c->n_quads * sizeof *c->qparent);
+  if (!c->ztab || !c->qparent) return QK_ERR_NOMEM; /* qk_collider_free releases them */
+  c->zdepth = zd;
+  c->qparent[c->cn[0].quad] = QK_NONE;
+  fill_ztab(c, c->cn[0].quad, 0, 0);
+  return QK_OK;
 }
 
 /* Does a node's box meet a closed box? */
@@ -277,56 +462,138 @@ void qk_collider_free(qk_collider_t *c) {
   if (!c) return;
   qk_allocator_t a = c->alloc;
   qk__free(&a, c->sbox, c->n_slots * sizeof *c->sbox);
-  qk__free(&a, c->sdisc, c->n_slots * sizeof *c->sdisc);
+  qk__free(&a, c->sdisc_block, c->sdisc_bytes);
   qk__free(&a, c->cn_block, c->cn_bytes);
   qk__free(&a, c->quads_block, c->quads_bytes);
+  qk__free(&a, c->ztab, c->ztab_bytes);
+  qk__free(&a, c->qparent, c->n_quads * sizeof *c->qparent);
   qk_tree_free(c->tree);
   qk__free(&a, c, sizeof *c);
 }
 
 /* Phase 1: the inputs are finite, radii non-negative and boxes not inverted. */
+/* The check of one item: discs [0, n_discs), then boxes. */
+static inline qk_status_t item_status(const qk_disc_t *discs, size_t n_discs, const qk_box_t *boxes,
+                                      size_t i) {
+  if (i < n_discs) {
+    const qk_disc_t *d = &discs[i];
+    if (!isfinite(d->x) || !isfinite(d->y) || !isfinite(d->r)) return QK_ERR_NONFINITE;
+    return d->r < 0 ? QK_ERR_GEOMETRY : QK_OK;
+  }
+  const qk_box_t *b = &boxes[i - n_discs];
+  if (!isfinite(b->xmin) || !isfinite(b->ymin) || !isfinite(b->xmax) || !isfinite(b->ymax))
+    return QK_ERR_NONFINITE;
+  return b->xmin > b->xmax || b->ymin > b->ymax ? QK_ERR_GEOMETRY : QK_OK;
+}
+
+#define CHECK_JOBS_PER_THREAD 4
+#define CHECK_PAR_MIN 4096
+
+typedef struct check_ctx {
+  const qk_disc_t *discs;
+  const qk_box_t *boxes;
+  size_t n_discs, n, n_jobs;
+  qk_status_t st[QK__MAX_THREADS * CHECK_JOBS_PER_THREAD]; /* per job: its first item's */
+} check_ctx_t;
+
+static void check_job(unsigned j, void *ud) {
+  check_ctx_t *x = ud;
+  const size_t lo = x->n * j / x->n_jobs, hi = x->n * (j + 1) / x->n_jobs;
+  x->st[j] = QK_OK;
+  for (size_t i = lo; i < hi && x->st[j] == QK_OK; i++)
+    x->st[j] = item_status(x->discs, x->n_discs, x->boxes, i);
+}
+
+/* Phase 1: the inputs are finite, radii non-negative and boxes not inverted; the first
+ * failing item's status, on `threads` threads for large sets (ranges in item order, so
+ * the lowest failing range holds the first failing item). */
 static qk_status_t check_items(const qk_disc_t *discs, size_t n_discs, const qk_box_t *boxes,
-                               size_t n_boxes) {
+                               size_t n_boxes, uint32_t threads_opt) {
   if ((n_discs > 0 && !discs) || (n_boxes > 0 && !boxes)) return QK_ERR_INVALID;
   if (n_discs > QK_MAX_POINTS || n_boxes > QK_MAX_POINTS - n_discs) return QK_ERR_LIMIT;
-  for (size_t i = 0; i < n_discs; i++) {
-    if (!isfinite(discs[i].x) || !isfinite(discs[i].y) || !isfinite(discs[i].r))
-      return QK_ERR_NONFINITE;
-    if (discs[i].r < 0) return QK_ERR_GEOMETRY;
-  }
-  for (size_t i = 0; i < n_boxes; i++) {
-    const qk_box_t *b = &boxes[i];
-    if (!isfinite(b->xmin) || !isfinite(b->ymin) || !isfinite(b->xmax) || !isfinite(b->ymax))
-      return QK_ERR_NONFINITE;
-    if (b->xmin > b->xmax || b->ymin > b->ymax) return QK_ERR_GEOMETRY;
-  }
+  check_ctx_t x;
+  x.discs = discs, x.boxes = boxes, x.n_discs = n_discs, x.n = n_discs + n_boxes;
+  unsigned threads = qk__threads_resolve(threads_opt);
+  if (threads > QK__MAX_THREADS) threads = QK__MAX_THREADS;
+  if (x.n < CHECK_PAR_MIN) threads = 1;
+  x.n_jobs = threads > 1 ? (size_t)threads * CHECK_JOBS_PER_THREAD : 1;
+  qk__run_jobs(threads, (unsigned)x.n_jobs, check_job, &x);
+  for (size_t j = 0; j < x.n_jobs; j++)
+    if (x.st[j] != QK_OK) return x.st[j];
   return QK_OK;
+}
+
+/* Jobs per thread of the build's linear passes (static shares: a few per thread even out
+ * their pages' first touches), and the smallest set worth threads. */
+#define RANGE_JOBS_PER_THREAD 4
+#define RANGE_PAR_MIN 4096
+
+/* A linear pass of the build over [0, n) in n_jobs ranges; each returns a maximum. */
+typedef struct range_ctx {
+  qk_collider_t *c;
+  const qk_disc_t *discs;
+  const qk_box_t *boxes;
+  qk_point_t *centres;   /* build_centre_tree's output */
+  const uint32_t *where; /* fill_slots' id map (ids_range) */
+  size_t n, n_jobs;
+  double (*fn)(struct range_ctx *x, size_t lo, size_t hi);
+  double max[QK__MAX_THREADS * RANGE_JOBS_PER_THREAD];
+} range_ctx_t;
+
+static void range_job(unsigned i, void *ud) {
+  range_ctx_t *x = ud;
+  x->max[i] = x->fn(x, x->n * i / x->n_jobs, x->n * (i + 1) / x->n_jobs);
+}
+
+/* fn over [0, n) on the collider's threads; the largest of its results (or 0). Each range
+ * writes only its own entries, so the arrays are those of one thread. */
+static double run_ranges(range_ctx_t *x, size_t n, double (*fn)(range_ctx_t *, size_t, size_t)) {
+  unsigned threads = qk__threads_resolve(x->c->threads);
+  if (threads > QK__MAX_THREADS) threads = QK__MAX_THREADS;
+  if (n < RANGE_PAR_MIN) threads = 1;
+  x->n = n;
+  x->fn = fn;
+  x->n_jobs = threads > 1 ? (size_t)threads * RANGE_JOBS_PER_THREAD : 1;
+  qk__run_jobs(threads, (unsigned)x->n_jobs, range_job, x);
+  double m = 0;
+  for (size_t i = 0; i < x->n_jobs; i++) m = qk__max(m, x->max[i]);
+  return m;
+}
+
+/* Items [lo, hi): their centres; the largest coordinate magnitude of their boxes. */
+static double centres_range(range_ctx_t *x, size_t lo, size_t hi) {
+  const size_t n_discs = x->c->n_discs;
+  double mag = 0;
+  for (size_t i = lo; i < hi; i++) {
+    qk_box_t bb;
+    if (i < n_discs) {
+      bb = disc_bbox(&x->discs[i]);
+      x->centres[i].x = x->discs[i].x;
+      x->centres[i].y = x->discs[i].y;
+    } else {
+      bb = x->boxes[i - n_discs];
+      /* Halves first, so that the sum cannot overflow. */
+      x->centres[i].x = 0.5 * bb.xmin + 0.5 * bb.xmax;
+      x->centres[i].y = 0.5 * bb.ymin + 0.5 * bb.ymax;
+    }
+    const double m =
+        qk__max(qk__max(fabs(bb.xmin), fabs(bb.xmax)), qk__max(fabs(bb.ymin), fabs(bb.ymax)));
+    mag = qk__max(mag, m);
+  }
+  return mag;
 }
 
 /* Phase 2: the tree of item centres (ids in input order, discs first), and the largest
  * coordinate magnitude of any item box. */
 static qk_status_t build_centre_tree(qk_collider_t *c, const qk_disc_t *discs,
                                      const qk_box_t *boxes, const qk_tree_options_t *opt) {
-  size_t n = c->n, n_discs = c->n_discs;
+  size_t n = c->n;
   qk_point_t *centres = NULL;
   if (n) centres = qk__realloc(&c->alloc, NULL, 0, n * sizeof *centres);
   if (n && !centres) return QK_ERR_NOMEM;
-  c->mag = 0;
-  for (size_t i = 0; i < n; i++) {
-    qk_box_t bb;
-    if (i < n_discs) {
-      bb = disc_bbox(&discs[i]);
-      centres[i].x = discs[i].x;
-      centres[i].y = discs[i].y;
-    } else {
-      bb = boxes[i - n_discs];
-      /* Halves first, so that the sum cannot overflow. */
-      centres[i].x = 0.5 * bb.xmin + 0.5 * bb.xmax;
-      centres[i].y = 0.5 * bb.ymin + 0.5 * bb.ymax;
-    }
-    double m = fmax(fmax(fabs(bb.xmin), fabs(bb.xmax)), fmax(fabs(bb.ymin), fabs(bb.ymax)));
-    if (m > c->mag) c->mag = m;
-  }
+  range_ctx_t x;
+  x.c = c, x.discs = discs, x.boxes = boxes, x.centres = centres, x.where = NULL;
+  c->mag = run_ranges(&x, n, centres_range);
   qk_status_t st = qk_tree_build(centres, n, opt, &c->tree);
   qk__free(&c->alloc, centres, n * sizeof *centres);
   return st;
@@ -340,7 +607,11 @@ static qk_status_t alloc_arrays(qk_collider_t *c) {
   c->n_slots = slots ? slots : 1;
   c->n_nodes = nodes ? nodes : 1;
   c->sbox = qk__realloc(a, NULL, 0, c->n_slots * sizeof *c->sbox);
-  if (c->n_discs) c->sdisc = qk__realloc(a, NULL, 0, c->n_slots * sizeof *c->sdisc);
+  if (c->n_discs) {
+    c->sdisc_bytes = c->n_slots * sizeof(sdisc_t) + 64;
+    c->sdisc_block = qk__realloc(a, NULL, 0, c->sdisc_bytes);
+    if (c->sdisc_block) c->sdisc = (sdisc_t *)(((uintptr_t)c->sdisc_block + 63) & ~(uintptr_t)63);
+  }
   /* Three spare entries in front put each block of four children (which start at ids
    * 1, 5, 9, ...) on a 128-byte boundary, with 64 bytes of slack for the alignment. */
   c->cn_bytes = (c->n_nodes + 3) * sizeof(cnode_t) + 64;
@@ -360,36 +631,65 @@ static qk_status_t alloc_arrays(qk_collider_t *c) {
    * the searches jump across these arrays, one or two lines per page. */
   if (c->huge_pages) {
     qk__advise_huge(a, c->sbox, c->n_slots * sizeof *c->sbox);
-    qk__advise_huge(a, c->sdisc, c->n_discs ? c->n_slots * sizeof *c->sdisc : 0);
+    qk__advise_huge(a, c->sdisc_block, c->sdisc_bytes);
     qk__advise_huge(a, c->cn_block, c->cn_bytes);
     qk__advise_huge(a, c->quads_block, c->quads_bytes);
   }
   return QK_OK;
 }
 
-/* Phase 4: each item into the slot the tree gave its centre, then the node boxes. */
-static qk_status_t fill_slots(qk_collider_t *c, const qk_disc_t *discs, const qk_box_t *boxes) {
-  const uint32_t *where;
-  qk_status_t st = qk__id_map(c->tree, &where);
-  if (st != QK_OK) return st;
-  const double *xs = qk__tree_xs(c->tree), *ys = qk__tree_ys(c->tree);
-  c->reach = 0;
-  for (qk_id_t id = 0; id < c->n; id++) {
-    uint32_t slot = where[id];
-    if (id < c->n_discs) {
-      c->sdisc[slot] = discs[id];
-      c->sbox[slot] = disc_bbox(&discs[id]);
-    } else {
-      c->sbox[slot] = boxes[id - c->n_discs];
-    }
-    const qk_box_t *b = &c->sbox[slot];
-    const double r = qk__max(qk__max(xs[slot] - b->xmin, b->xmax - xs[slot]),
-                             qk__max(ys[slot] - b->ymin, b->ymax - ys[slot]));
-    if (r > c->reach) c->reach = r;
+/* The item of `id` into `slot`; how far its box reaches from the centre there. */
+static inline double put_item(qk_collider_t *c, const range_ctx_t *x, size_t id, uint32_t slot,
+                              const double *xs, const double *ys) {
+  if (id < c->n_discs) {
+    c->sdisc[slot] = (sdisc_t){x->discs[id], (qk_id_t)id, 0};
+    c->sbox[slot] = disc_bbox(&x->discs[id]);
+  } else {
+    c->sbox[slot] = x->boxes[id - c->n_discs];
   }
-  fill_node_boxes(c, 0);
-  if (c->quads && c->cn[0].child != QK_NONE && c->cn[0].xmin != INFINITY) fill_qnodes(c, 0);
-  return QK_OK;
+  const qk_box_t *b = &c->sbox[slot];
+  return qk__max(qk__max(xs[slot] - b->xmin, b->xmax - xs[slot]),
+                 qk__max(ys[slot] - b->ymin, b->ymax - ys[slot]));
+}
+
+/* Slots [lo, hi) of a tree whose slots are all in use (each holds the item of its id). */
+static double slots_range(range_ctx_t *x, size_t lo, size_t hi) {
+  qk_collider_t *c = x->c;
+  const double *xs = qk__tree_xs(c->tree), *ys = qk__tree_ys(c->tree);
+  const qk_id_t *pid = qk__tree_ids(c->tree);
+  double reach = 0;
+  for (size_t slot = lo; slot < hi; slot++)
+    reach = qk__max(reach, put_item(c, x, pid[slot], (uint32_t)slot, xs, ys));
+  return reach;
+}
+
+/* Ids [lo, hi), each into the slot the tree's id map gives it. */
+static double ids_range(range_ctx_t *x, size_t lo, size_t hi) {
+  qk_collider_t *c = x->c;
+  const double *xs = qk__tree_xs(c->tree), *ys = qk__tree_ys(c->tree);
+  double reach = 0;
+  for (size_t id = lo; id < hi; id++)
+    reach = qk__max(reach, put_item(c, x, id, x->where[id], xs, ys));
+  return reach;
+}
+
+/* Phase 4: each item into the slot the tree gave its centre, then the node boxes; on the
+ * build's threads. When the tree uses exactly n slots (a bulk build), every slot holds
+ * one item and the pass goes slot by slot (reading the items at random, writing in
+ * order); otherwise id by id through the tree's id map. */
+static qk_status_t fill_slots(qk_collider_t *c, const qk_disc_t *discs, const qk_box_t *boxes) {
+  range_ctx_t x;
+  x.c = c, x.discs = discs, x.boxes = boxes, x.centres = NULL, x.where = NULL;
+  if (qk__tree_slot_bound(c->tree) == c->n) {
+    c->reach = run_ranges(&x, c->n, slots_range);
+  } else {
+    qk_status_t st = qk__id_map(c->tree, &x.where);
+    if (st != QK_OK) return st;
+    c->reach = run_ranges(&x, c->n, ids_range);
+  }
+  unsigned threads = qk__threads_resolve(c->threads);
+  fill_boxes_and_quads(c, c->n < RANGE_PAR_MIN ? 1 : threads);
+  return c->n_quads ? build_ztab(c) : QK_OK;
 }
 
 qk_status_t qk_collider_build(const qk_disc_t *discs, size_t n_discs, const qk_box_t *boxes,
@@ -397,13 +697,13 @@ qk_status_t qk_collider_build(const qk_disc_t *discs, size_t n_discs, const qk_b
                               qk_collider_t **out) {
   if (!out) return QK_ERR_INVALID;
   *out = NULL;
-  qk_status_t st = check_items(discs, n_discs, boxes, n_boxes);
-  if (st != QK_OK) return st;
   qk_tree_options_t opt;
   if (options)
     opt = *options;
   else
     qk_tree_options_init(&opt);
+  qk_status_t st = check_items(discs, n_discs, boxes, n_boxes, opt.threads);
+  if (st != QK_OK) return st;
   qk_allocator_t a = {NULL, NULL};
   if (opt.allocator) a = *opt.allocator;
   qk_collider_t *c = qk__realloc(&a, NULL, 0, sizeof *c);
@@ -757,11 +1057,11 @@ static inline double ray_disc(const qk_disc_t *d, double ox, double oy, double d
  * [0, best] (t into th[k]); the lanes that the scalar code would leave early compute
  * values (perhaps NaN) that the masks discard.
  */
-static inline unsigned ray_disc2(const qk_disc_t *d, const ray_t *r, double tmax, double best,
+static inline unsigned ray_disc2(const sdisc_t *d, const ray_t *r, double tmax, double best,
                                  double th[2]) {
-  const __m128d a0 = _mm_loadu_pd(&d[0].x), a1 = _mm_loadu_pd(&d[1].x); /* x, y */
+  const __m128d a0 = _mm_load_pd(&d[0].d.x), a1 = _mm_load_pd(&d[1].d.x); /* x, y */
   const __m128d x = _mm_unpacklo_pd(a0, a1), y = _mm_unpackhi_pd(a0, a1);
-  const __m128d rr = _mm_set_pd(d[1].r, d[0].r);
+  const __m128d rr = _mm_set_pd(d[1].d.r, d[0].d.r);
   const __m128d dx = _mm_set1_pd(r->dx), dy = _mm_set1_pd(r->dy);
   const __m128d fx = _mm_sub_pd(r->vox, x), fy = _mm_sub_pd(r->voy, y);
   const __m128d cc =
@@ -795,8 +1095,8 @@ typedef struct best {
   qk_id_t id;
 } best_t;
 
-/* The items of slots [slot, end) against the ray, into *b. Ids are read only for hits (and
- * for the kind in mixed sets): the id array is one more cache miss per leaf otherwise. */
+/* The items of slots [slot, end) against the ray, into *b. Discs carry their ids; the
+ * tree's id array is read only for hits on boxes and for the kind in mixed sets. */
 #if defined(__GNUC__)
 __attribute__((always_inline))
 #endif
@@ -814,7 +1114,7 @@ scan_leaf(const qk_collider_t *c, const ray_t *ray, uint32_t slot, uint32_t end,
       unsigned cand = ray_disc2(&c->sdisc[slot], ray, tmax, b->t, th);
       for (unsigned k = 0; k < 2; k++) {
         if (!(cand >> k & 1) || th[k] > b->t) continue; /* the best may have moved */
-        qk_id_t id = pid[slot + k];
+        qk_id_t id = c->sdisc[slot + k].id;
         if (th[k] < b->t || id < b->id) *b = (best_t){th[k], id};
       }
     }
@@ -822,22 +1122,30 @@ scan_leaf(const qk_collider_t *c, const ray_t *ray, uint32_t slot, uint32_t end,
 #endif
   for (; slot < end; slot++) {
     int is_disc = all_discs || (!no_discs && pid[slot] < c->n_discs);
-    double th = is_disc ? ray_disc(&c->sdisc[slot], ray->ox, ray->oy, ray->dx, ray->dy, tmax)
+    double th = is_disc ? ray_disc(&c->sdisc[slot].d, ray->ox, ray->oy, ray->dx, ray->dy, tmax)
                         : ray_box(&c->sbox[slot], ray, tmax);
     if (th < 0 || th > b->t) continue;
-    qk_id_t id = pid[slot];
+    qk_id_t id = all_discs ? c->sdisc[slot].id : pid[slot];
     if (th < b->t || id < b->id) *b = (best_t){th, id};
   }
 }
 
-/* perm[s][m]: bit i set when bit i ^ s of m is, i.e. the kept lanes in the order the ray
- * meets them (bit 0 nearest); low[m] and high[m]: the lowest and highest set bit of m. */
-static const uint8_t perm[4][16] = {{0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15},
-                                    {0, 2, 1, 3, 8, 10, 9, 11, 4, 6, 5, 7, 12, 14, 13, 15},
-                                    {0, 4, 8, 12, 1, 5, 9, 13, 2, 6, 10, 14, 3, 7, 11, 15},
-                                    {0, 8, 4, 12, 2, 10, 6, 14, 1, 9, 5, 13, 3, 11, 7, 15}};
-static const uint8_t low[16] = {0, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0};
-static const uint8_t high[16] = {0, 0, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3, 3, 3, 3, 3};
+/*
+ * visit[s][keep]: the kept lanes of a node in the order a ray of signs s meets their
+ * squares (lane ^ s), packed: bits 0-1 the nearest (taken at once), bits 2-3 how many
+ * others, then the others two bits each, farthest first (the order they are stacked, so
+ * that the nearest of them is popped first).
+ */
+static const uint16_t visit[4][16] = {
+    {0x000, 0x000, 0x001, 0x014, 0x002, 0x024, 0x025, 0x068, 0x003, 0x034, 0x035, 0x078, 0x036,
+     0x0b8, 0x0b9, 0x1bc},
+    {0x000, 0x000, 0x001, 0x005, 0x002, 0x024, 0x025, 0x029, 0x003, 0x034, 0x035, 0x039, 0x027,
+     0x0e8, 0x0e9, 0x0ed},
+    {0x000, 0x000, 0x001, 0x014, 0x002, 0x006, 0x016, 0x01a, 0x003, 0x007, 0x017, 0x01b, 0x036,
+     0x0ca, 0x0da, 0x31e},
+    {0x000, 0x000, 0x001, 0x005, 0x002, 0x006, 0x016, 0x04a, 0x003, 0x007, 0x017, 0x04b, 0x027,
+     0x08b, 0x09b, 0x24f},
+};
 
 /* Sets up the ray; fills the float test's constants when fact (2)'s ranges hold. */
 static void ray_init(ray_t *r, const qk_collider_t *c, qk_point_t o, qk_point_t d) {
@@ -913,16 +1221,10 @@ static void cast_general(const qk_collider_t *c, const ray_t *ray, double tmax, 
       float lo4[4];
       unsigned keep = node_slab_general(c, n, ray, tmax, b.t, lo4);
       if (keep) {
-        unsigned m = perm[ray->s][keep];
-        const uint32_t k0 = (uint32_t)low[m] ^ ray->s;
-        m &= m - 1;
-        while (m) {
-          const unsigned i = high[m];
-          const uint32_t k = i ^ ray->s;
-          m ^= 1u << i;
-          stack[sp++] = (rentry_t){n->child + lane_quadrant[k], 0, lo4[k]};
-        }
-        cur = n->child + lane_quadrant[k0];
+        const unsigned v = visit[ray->s][keep];
+        for (unsigned j = v >> 2 & 3, o = v >> 4; j > 0; j--, o >>= 2)
+          stack[sp++] = (rentry_t){n->child + lane_quadrant[o & 3], 0, lo4[o & 3]};
+        cur = n->child + lane_quadrant[v & 3];
         continue;
       }
     } else {
@@ -985,7 +1287,7 @@ walk_float(const qk_collider_t *c, const ray_t *rp, double tmax, uint32_t from, 
   const ray_t *const ray = rp;
   best_t b = *bp;
   /* T of fact (2): min(tmax, best) rounded up to float; it only shrinks. */
-  float tf = round_up(b.t < tmax ? b.t : tmax);
+  float tf = round_up_t(b.t < tmax ? b.t : tmax);
   __m128 tv = _mm_set1_ps(tf);
   rentry_t stack[QK__CSTACK_MAX];
   int sp = 0;
@@ -1003,13 +1305,10 @@ walk_float(const qk_collider_t *c, const ray_t *rp, double tmax, uint32_t from, 
          * mostly follow it; the bounds keep the pruning exact whatever the order): the
          * nearest is taken at once, the others stacked far to near, each with its
          * memory asked for now so that the misses overlap the work on the nearest. */
-        unsigned m = perm[s][keep];
-        const uint32_t k0 = (uint32_t)low[m] ^ s;
-        m &= m - 1;
-        while (m) {
-          const unsigned i = high[m];
-          const uint32_t k = i ^ s, nx = q->link[k], cnt = q->count[k];
-          m ^= 1u << i;
+        const unsigned v = visit[s][keep], k0 = v & 3;
+        for (unsigned j = v >> 2 & 3, o = v >> 4; j > 0; j--, o >>= 2) {
+          const unsigned k = o & 3;
+          const uint32_t nx = q->link[k], cnt = q->count[k];
           stack[sp++] = (rentry_t){nx, cnt, lo4[k]};
           if (cnt == QK_NONE)
             QK__CPREFETCH(&quads[nx]);
@@ -1023,7 +1322,7 @@ walk_float(const qk_collider_t *c, const ray_t *rp, double tmax, uint32_t from, 
       const double best0 = b.t;
       scan_leaf(c, ray, cur.link, cur.link + cur.count, tmax, &b);
       if (b.t != best0) {
-        tf = round_up(b.t); /* b.t <= tmax: the items test t <= tmax */
+        tf = round_up_t(b.t); /* b.t <= tmax: the items test t <= tmax */
         tv = _mm_set1_ps(tf);
       }
     }
@@ -1087,12 +1386,18 @@ static void cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk
     const double f = 0x1p32 / rs.side, ux = (ox - rs.x) * f, uy = (oy - rs.y) * f;
     uint32_t e = root->quad, ix = 0, iy = 0;
     path[0] = e;
-    unsigned d = 0;
+    unsigned d = 0, known = 0; /* path[known .. d] are filled */
     /* (A root square below 2^-900 would make side / 2^32 subnormal: no local start.) */
     if (rs.side > 0x1p-900 && ux >= 0 && ux < 0x1p32 && uy >= 0 && uy < 0x1p32) {
       const qnode_t *quads = c->quads;
       ix = (uint32_t)ux, iy = (uint32_t)uy;
       uint64_t z = spread32(ix) | spread32(iy) << 1; /* the lanes, root first, from bit 63 */
+      if (c->ztab) { /* the first levels from the start table (fill_ztab) */
+        const uint32_t cell = c->ztab[z >> (64 - 2 * c->zdepth)];
+        known = d = cell & ((1u << ZTAB_DEPTH_BITS) - 1);
+        path[d] = e = cell >> ZTAB_DEPTH_BITS;
+        z <<= 2 * d;
+      }
       while (d < 32) {
         const unsigned lane = (unsigned)(z >> 62);
         const qnode_t *q = &quads[e];
@@ -1101,13 +1406,17 @@ static void cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk
            * its items and ids asked for now, so that those misses overlap the tests. */
           const uint32_t st = q->link[lane], cnt = q->count[lane];
           if (cnt > 0) {
-            if (c->sdisc) {
+            if (c->n_discs == c->n) { /* the leaf's lines (ids included), two discs each */
+              const uint32_t last = st + cnt - 1; /* up to 8 discs: four or five lines */
               QK__CPREFETCH(&c->sdisc[st]);
-              QK__CPREFETCH(&c->sdisc[st + cnt - 1]);
+              QK__CPREFETCH(&c->sdisc[st + 2 < last ? st + 2 : last]);
+              QK__CPREFETCH(&c->sdisc[st + 4 < last ? st + 4 : last]);
+              QK__CPREFETCH(&c->sdisc[st + 6 < last ? st + 6 : last]);
+              QK__CPREFETCH(&c->sdisc[last]);
             } else {
-              QK__CPREFETCH(&c->sbox[st]);
+              QK__CPREFETCH(c->sdisc ? (const void *)&c->sdisc[st] : (const void *)&c->sbox[st]);
+              QK__CPREFETCH(&qk__tree_ids(t)[st]);
             }
-            QK__CPREFETCH(&qk__tree_ids(t)[st]);
           }
           break;
         }
@@ -1116,6 +1425,7 @@ static void cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk
       }
     }
     const unsigned n = d > QK__RAY_START_UP ? d - QK__RAY_START_UP : 0;
+    for (; known > n; known--) path[known - 1] = c->qparent[path[known]];
     walk_float(c, ray, tmax, path[n], QK_NONE, &b);
     /* Up from N one level at a time while the segment to the best hit so far (or to
      * tmax) is not inside the square of the node searched: each step searches the
@@ -1134,6 +1444,7 @@ static void cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk
             qk__min(oy, ey) - m > y0 && qk__max(oy, ey) + m < y0 + side)
           break;
       }
+      if (a - 1 < known) path[--known] = c->qparent[path[a]];
       walk_float(c, ray, tmax, path[a - 1], path[a], &b);
     }
   }
@@ -1147,7 +1458,8 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
   if (!c || !hit) return QK_ERR_INVALID;
   hit->id = QK_NONE;
   hit->t = INFINITY;
-  if (!isfinite(o.x) || !isfinite(o.y) || !isfinite(d.x) || !isfinite(d.y)) return QK_ERR_NONFINITE;
+  /* v - v is 0 for a finite v and NaN otherwise: one test for the four. */
+  if ((o.x - o.x) + (o.y - o.y) + (d.x - d.x) + (d.y - d.y) != 0) return QK_ERR_NONFINITE;
   if (isnan(tmax) || tmax < 0) return QK_ERR_INVALID;
   if (c->n == 0) return QK_OK;
   ray_t ray;

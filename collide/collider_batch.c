@@ -51,14 +51,16 @@ static void pairs_job(unsigned i, void *ud) {
 }
 
 typedef struct lctx {
-  uint32_t *out; /* NULL: count only */
-  size_t n;
+  const qk_allocator_t *alloc;
+  uint32_t *out;
+  size_t n, cap;
 } lctx_t;
 
 static int list_leaf(uint32_t leaf, void *ud) {
   lctx_t *l = ud;
-  if (l->out) l->out[l->n] = leaf;
-  l->n++;
+  if (l->n == l->cap && qk__grow(l->alloc, (void **)&l->out, &l->cap, l->n + 1, sizeof *l->out))
+    return 1; /* no memory: stop (the caller sees l->n below the leaves' count) */
+  l->out[l->n++] = leaf;
   return 0;
 }
 
@@ -66,19 +68,19 @@ qk_status_t qk__collider_pairs_threaded(const qk_collider_t *c, qk_pair_fn fn, v
   const qk_allocator_t *a = qk__collider_alloc(c);
   unsigned threads = qk__threads_resolve(qk__collider_threads(c));
   if (threads <= 1) return QK_ERR_NOMEM; /* nothing to share: the serial path */
-  lctx_t l = {NULL, 0};
-  qk__collider_each_leaf(c, list_leaf, &l);
-  if (l.n < 2) return QK_ERR_NOMEM;
-  size_t n_leaves = l.n;
+  /* The leaves in one pass, into a growing list. */
+  lctx_t l = {a, NULL, 0, 0};
+  if (qk__collider_each_leaf(c, list_leaf, &l) || l.n < 2) {
+    qk__free(a, l.out, l.cap * sizeof *l.out);
+    return QK_ERR_NOMEM;
+  }
+  const size_t n_leaves = l.n;
+  const uint32_t *leaves = l.out;
   /* Eight jobs per thread even out leaves of unequal work. */
   unsigned n_jobs = n_leaves < 8u * threads ? (unsigned)n_leaves : 8u * threads;
-  uint32_t *leaves = qk__realloc(a, NULL, 0, n_leaves * sizeof *leaves);
   pjob_t *jobs = qk__realloc(a, NULL, 0, n_jobs * sizeof *jobs);
   qk_status_t st = QK_ERR_NOMEM;
-  if (leaves && jobs) {
-    l.out = leaves;
-    l.n = 0;
-    qk__collider_each_leaf(c, list_leaf, &l);
+  if (jobs) {
     for (unsigned i = 0; i < n_jobs; i++) jobs[i] = (pjob_t){NULL, 0, 0, 0, a};
     pctx_t p = {c, leaves, n_leaves, n_jobs, jobs};
     qk__run_jobs(threads, n_jobs, pairs_job, &p);
@@ -92,7 +94,7 @@ qk_status_t qk__collider_pairs_threaded(const qk_collider_t *c, qk_pair_fn fn, v
     for (unsigned i = 0; i < n_jobs; i++)
       qk__free(a, jobs[i].buf, jobs[i].cap * sizeof *jobs[i].buf);
   }
-  qk__free(a, leaves, n_leaves * sizeof *leaves);
+  qk__free(a, l.out, l.cap * sizeof *l.out);
   qk__free(a, jobs, n_jobs * sizeof *jobs);
   return st;
 }
@@ -128,39 +130,101 @@ static void rays_job(unsigned i, void *ud) {
   }
 }
 
+/* Batches from this size on are sorted on the collider's threads. */
+#define RAYS_SORT_PAR_MIN 65536
+
+/*
+ * The sort's parallel plan: the keys are cut into one contiguous range per share; in each
+ * pass every share counts its range's digits, the offsets follow from the counts in
+ * (digit, share) order, and every share moves its range to them. That is the serial
+ * LSD pass exactly (stable, the same order), with its three loops shared.
+ */
+typedef struct sort_ctx {
+  const qk_point_t *origins;
+  uint64_t *key, *tmp;
+  size_t n;
+  unsigned nw, shift;
+  double sx, sy, scale;
+  size_t count[QK__MAX_THREADS][256];
+} sort_ctx_t;
+
+static void share_range(const sort_ctx_t *s, unsigned w, size_t *lo, size_t *hi) {
+  *lo = s->n * w / s->nw;
+  *hi = s->n * (w + 1) / s->nw;
+}
+
+/* Keys of rays [lo, hi): the origin's 16-bit Morton code over the root square (origins
+ * outside it, or not finite, at its nearest side), then the ray's index. */
+static void keys_job(unsigned w, void *ud) {
+  sort_ctx_t *s = ud;
+  size_t lo, hi;
+  share_range(s, w, &lo, &hi);
+  for (size_t i = lo; i < hi; i++) {
+    double u = (s->origins[i].x - s->sx) * s->scale, v = (s->origins[i].y - s->sy) * s->scale;
+    uint32_t ux = !(u > 0) ? 0 : u >= 65535 ? 65535 : (uint32_t)u;
+    uint32_t uy = !(v > 0) ? 0 : v >= 65535 ? 65535 : (uint32_t)v;
+    s->key[i] = (uint64_t)(qk__spread16(ux) | qk__spread16(uy) << 1) << 32 | i;
+  }
+}
+
+static void count_job(unsigned w, void *ud) {
+  sort_ctx_t *s = ud;
+  size_t lo, hi, *count = s->count[w];
+  share_range(s, w, &lo, &hi);
+  memset(count, 0, 256 * sizeof *count);
+  for (size_t i = lo; i < hi; i++) count[s->key[i] >> s->shift & 0xFF]++;
+}
+
+static void move_job(unsigned w, void *ud) {
+  sort_ctx_t *s = ud;
+  size_t lo, hi, *at = s->count[w]; /* by now: where this share's digits go */
+  share_range(s, w, &lo, &hi);
+  for (size_t i = lo; i < hi; i++) s->tmp[at[s->key[i] >> s->shift & 0xFF]++] = s->key[i];
+}
+
 /*
  * The rays in the Z (Morton) order of their origins over the tree's root square, so that
  * consecutive rays, which start near one another, find the nodes and items of their
  * neighbourhood still in cache: with random origins over a large set each ray otherwise
- * brings its own path from memory. Origins outside the square (or not finite) go to its
- * nearest side. An LSD radix sort of (key << 32 | index) in four byte passes, stable, so
- * the order is a function of the input alone. NULL when the memory cannot be had (the
- * rays are then cast in input order: the same answers).
+ * brings its own path from memory. An LSD radix sort of (key << 32 | index) in four byte
+ * passes, stable, so the order is a function of the input alone, on the collider's
+ * threads for large batches (the same order: see sort_ctx_t). NULL when the memory cannot
+ * be had (the rays are then cast in input order: the same answers).
  */
 static uint64_t *ray_order(const qk_collider_t *c, const qk_point_t *origins, size_t n,
-                           size_t *bytes) {
+                           unsigned threads, size_t *bytes) {
   const qk_allocator_t *a = qk__collider_alloc(c);
   *bytes = 2 * n * sizeof(uint64_t);
   uint64_t *buf = qk__realloc(a, NULL, 0, *bytes);
-  if (!buf) return NULL;
-  uint64_t *key = buf, *tmp = buf + n;
+  sort_ctx_t *s = qk__realloc(a, NULL, 0, sizeof *s);
+  if (!buf || !s) {
+    qk__free(a, buf, *bytes);
+    qk__free(a, s, sizeof *s);
+    return NULL;
+  }
   const qk_square_t sq = qk__tree_root_square(qk_collider_tree(c));
-  const double scale = sq.side > 0 ? 65536.0 / sq.side : 0.0;
-  for (size_t i = 0; i < n; i++) {
-    double u = (origins[i].x - sq.x) * scale, v = (origins[i].y - sq.y) * scale;
-    uint32_t ux = !(u > 0) ? 0 : u >= 65535 ? 65535 : (uint32_t)u;
-    uint32_t uy = !(v > 0) ? 0 : v >= 65535 ? 65535 : (uint32_t)v;
-    key[i] = (uint64_t)(qk__spread16(ux) | qk__spread16(uy) << 1) << 32 | i;
+  s->origins = origins;
+  s->key = buf, s->tmp = buf + n;
+  s->n = n;
+  s->nw = n < RAYS_SORT_PAR_MIN ? 1 : threads < QK__MAX_THREADS ? threads : QK__MAX_THREADS;
+  s->sx = sq.x, s->sy = sq.y;
+  s->scale = sq.side > 0 ? 65536.0 / sq.side : 0.0;
+  qk__run_jobs(s->nw, s->nw, keys_job, s);
+  for (s->shift = 32; s->shift < 64; s->shift += 8) {
+    qk__run_jobs(s->nw, s->nw, count_job, s);
+    size_t sum = 0;
+    for (unsigned b = 0; b < 256; b++)
+      for (unsigned w = 0; w < s->nw; w++) {
+        const size_t k = s->count[w][b];
+        s->count[w][b] = sum;
+        sum += k;
+      }
+    qk__run_jobs(s->nw, s->nw, move_job, s);
+    uint64_t *t = s->key;
+    s->key = s->tmp;
+    s->tmp = t;
   }
-  for (unsigned shift = 32; shift < 64; shift += 8) {
-    size_t count[257] = {0};
-    for (size_t i = 0; i < n; i++) count[(key[i] >> shift & 0xFF) + 1]++;
-    for (unsigned b = 0; b < 256; b++) count[b + 1] += count[b];
-    for (size_t i = 0; i < n; i++) tmp[count[key[i] >> shift & 0xFF]++] = key[i];
-    uint64_t *s = key;
-    key = tmp;
-    tmp = s;
-  }
+  qk__free(a, s, sizeof *s);
   return buf; /* four passes: the sorted keys are back in the first half */
 }
 
@@ -189,7 +253,8 @@ qk_status_t qk_collider_raycast_batch(const qk_collider_t *c, const qk_point_t *
   }
   size_t order_bytes = 0;
   uint64_t *order = NULL;
-  if (n >= RAYS_SORT_MIN && n <= UINT32_MAX) order = ray_order(c, origins, n, &order_bytes);
+  if (n >= RAYS_SORT_MIN && n <= UINT32_MAX)
+    order = ray_order(c, origins, n, threads, &order_bytes);
   for (size_t i = 0; i < n_jobs; i++) first_bad[i] = n;
   rctx_t r = {c, origins, dirs, n, tmax, hits, order, first_bad, bad_st};
   qk__run_jobs(threads, (unsigned)n_jobs, rays_job, &r);

@@ -14,6 +14,113 @@
 /* How many places ahead in Z-order a kNN batch asks for a query and its answer slots. */
 #define QK__BATCH_AHEAD 8
 
+/* ---- the Z-order on the batch's threads ------------------------------------------- */
+
+/* Batches from this size on are ordered on their threads. */
+#define QK__ORDER_PAR_MIN 65536
+/* As query/order.c: 11 bits per axis, two LSD passes of 11 bits. */
+#define QK__OBITS 11
+#define QK__OCELLS (1u << QK__OBITS)
+
+/*
+ * qk__morton_order()'s sort with its loops shared: the keys cut into one contiguous range
+ * per share; per pass every share counts its range's digits, the offsets follow from the
+ * counts in (digit, share) order, and every share moves its range to them. That is the
+ * serial stable pass exactly, so the order (and the block, released with
+ * qk__morton_free) is the same as qk__morton_order's.
+ */
+typedef struct order_job {
+  const qk_point_t *qs;
+  uint64_t *key, *tmp;
+  size_t nq;
+  unsigned nw, shift;
+  double x0, y0, scale;
+  uint32_t *count; /* nw rows of QK__OCELLS */
+} order_job_t;
+
+static inline uint32_t ocell(double v, double lo, double scale) {
+  double c = (v - lo) * scale;
+  if (!(c > 0)) return 0;
+  if (c >= QK__OCELLS - 1) return QK__OCELLS - 1;
+  return (uint32_t)c;
+}
+
+static void order_keys(void *ctx, unsigned w, unsigned nw) {
+  order_job_t *j = ctx;
+  size_t lo, hi;
+  qk__share_range(j->nq, w, nw, &lo, &hi);
+  for (size_t i = lo; i < hi; i++) {
+    const uint32_t code = qk__spread16(ocell(j->qs[i].x, j->x0, j->scale)) << 1 |
+                          qk__spread16(ocell(j->qs[i].y, j->y0, j->scale));
+    j->key[i] = (uint64_t)code << 32 | (uint64_t)i;
+  }
+}
+
+static void order_count(void *ctx, unsigned w, unsigned nw) {
+  order_job_t *j = ctx;
+  size_t lo, hi;
+  qk__share_range(j->nq, w, nw, &lo, &hi);
+  uint32_t *count = j->count + (size_t)w * QK__OCELLS;
+  memset(count, 0, QK__OCELLS * sizeof *count);
+  for (size_t i = lo; i < hi; i++) count[j->key[i] >> j->shift & (QK__OCELLS - 1)]++;
+}
+
+static void order_move(void *ctx, unsigned w, unsigned nw) {
+  order_job_t *j = ctx;
+  size_t lo, hi;
+  qk__share_range(j->nq, w, nw, &lo, &hi);
+  uint32_t *at = j->count + (size_t)w * QK__OCELLS; /* by now: where the digits go */
+  for (size_t i = lo; i < hi; i++)
+    j->tmp[at[j->key[i] >> j->shift & (QK__OCELLS - 1)]++] = j->key[i];
+}
+
+static void order_index(void *ctx, unsigned w, unsigned nw) {
+  order_job_t *j = ctx;
+  size_t lo, hi;
+  qk__share_range(j->nq, w, nw, &lo, &hi);
+  uint32_t *o = (uint32_t *)j->tmp;
+  for (size_t i = lo; i < hi; i++) o[i] = (uint32_t)(j->key[i] & 0xFFFFFFFFu);
+}
+
+/* The Z-order of the queries, as qk__morton_order() gives it, on nw threads. */
+static void *morton_order_par(const qk_tree_t *t, const qk_point_t *qs, size_t nq, unsigned nw,
+                              uint32_t **order) {
+  if (nw <= 1 || nq < QK__ORDER_PAR_MIN || nq > UINT32_MAX)
+    return qk__morton_order(t, qs, nq, order);
+  *order = NULL;
+  const qk_allocator_t *a = qk__tree_allocator(t);
+  uint64_t *k = qk__realloc(a, NULL, 0, 2 * nq * sizeof *k);
+  uint32_t *count = qk__realloc(a, NULL, 0, (size_t)nw * QK__OCELLS * sizeof *count);
+  if (!k || !count) {
+    qk__free(a, count, (size_t)nw * QK__OCELLS * sizeof *count);
+    if (k) qk__morton_free(t, k, nq);
+    return NULL;
+  }
+  const qk_square_t r = qk__tree_root_square(t);
+  order_job_t j = {qs, k, k + nq, nq, nw, 0, r.x, r.y, (double)QK__OCELLS / r.side, count};
+  qk__run_shares(nw, order_keys, &j);
+  for (int pass = 0; pass < 2; pass++) {
+    j.shift = 32 + QK__OBITS * (unsigned)pass;
+    qk__run_shares(nw, order_count, &j);
+    uint32_t sum = 0;
+    for (uint32_t b = 0; b < QK__OCELLS; b++)
+      for (unsigned w = 0; w < nw; w++) {
+        const uint32_t c = count[(size_t)w * QK__OCELLS + b];
+        count[(size_t)w * QK__OCELLS + b] = sum;
+        sum += c;
+      }
+    qk__run_shares(nw, order_move, &j);
+    uint64_t *s = j.key;
+    j.key = j.tmp;
+    j.tmp = s;
+  }
+  /* Two passes: the keys are back in the first half; the indices go to the second. */
+  qk__run_shares(nw, order_index, &j);
+  qk__free(a, count, (size_t)nw * QK__OCELLS * sizeof *count);
+  *order = (uint32_t *)j.tmp;
+  return k;
+}
+
 /* ---- kNN ------------------------------------------------------------------------- */
 
 typedef struct knn_job {
@@ -73,8 +180,8 @@ qk_status_t qk_query_knn_batch(const qk_tree_t *tree, const qk_point_t *qs, size
   if (!tree || (nq > 0 && !qs) || (nq > 0 && k > 0 && !out)) return QK_ERR_INVALID;
   if (isnan(max_dist) || max_dist < 0) return QK_ERR_INVALID;
   uint32_t *order;
-  void *block = qk__morton_order(tree, qs, nq, &order);
   unsigned nw = qk__batch_threads(tree, nq);
+  void *block = morton_order_par(tree, qs, nq, nw, &order);
   knn_job_t j = {tree, qs, order, nq, k, max_dist, out, counts, {{QK_OK, 0}}};
   qk__run_shares(nw, knn_share, &j);
   if (block) qk__morton_free(tree, block, nq);
@@ -110,9 +217,10 @@ qk_status_t qk_query_locate_batch(const qk_tree_t *tree, const qk_point_t *ps, s
                                   qk_node_t *leaves) {
   if (!tree || (n > 0 && (!ps || !leaves))) return QK_ERR_INVALID;
   uint32_t *order;
-  void *block = qk__morton_order(tree, ps, n, &order);
+  const unsigned nw = qk__batch_threads(tree, n);
+  void *block = morton_order_par(tree, ps, n, nw, &order);
   locate_job_t j = {tree, ps, order, n, leaves};
-  qk__run_shares(qk__batch_threads(tree, n), locate_share, &j);
+  qk__run_shares(nw, locate_share, &j);
   if (block) qk__morton_free(tree, block, n);
   return QK_OK;
 }

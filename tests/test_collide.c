@@ -523,6 +523,114 @@ static void test_collide_threads_nomem(void **state) {
   pthread_mutex_destroy(&l.mu);
 }
 
+/* The build on several threads (the slot fill, the node boxes and the ray cast's nodes by
+ * subtrees: from 4096 items on) gives the collider one thread gives: the same pairs in
+ * the same order, the same hits to the last bit, which agree with the oracle; and every
+ * failed allocation of such a build leaves nothing behind. */
+static void test_collide_threaded_build(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 7);
+  enum { ND = 3000, NB = 2500, NR = 1000 };
+  qk_disc_t *d = malloc(ND * sizeof *d);
+  qk_box_t *b = malloc(NB * sizeof *b);
+  qk_point_t *org = malloc(NR * sizeof *org), *dir = malloc(NR * sizeof *dir);
+  qk_hit_t *one = malloc(NR * sizeof *one);
+  assert_non_null(d && b && org && dir && one);
+  for (int set = 0; set < 2; set++) {
+    make_items(&r, d, ND, b, NB, set, set ? 0.001 : 0.005);
+    for (size_t i = 0; i < NR; i++) {
+      org[i] = (qk_point_t){qkt_rng_range(&r, -0.1, 1.1), qkt_rng_range(&r, -0.1, 1.1)};
+      double ang = qkt_rng_range(&r, 0, 6.283185307179586);
+      dir[i] = (qk_point_t){cos(ang), sin(ang)};
+    }
+    seq_t ref = {NULL, 0, 0, 0};
+    const uint32_t ts[] = {1, 2, 3};
+    for (size_t k = 0; k < sizeof ts / sizeof *ts; k++) {
+      qk_tree_options_t o = opts(set ? 2 : 8);
+      o.threads = ts[k];
+      qk_collider_t *c = NULL;
+      assert_int_equal(qk_collider_build(d, ND, b, NB, &o, &c), QK_OK);
+      qk_collider_set_threads(c, 1);
+      seq_t got = pairs_seq(c, 0);
+      for (size_t i = 0; i < NR; i++) {
+        qk_hit_t h;
+        assert_int_equal(qk_collider_raycast(c, org[i], dir[i], INFINITY, &h), QK_OK);
+        if (k == 0) {
+          one[i] = h;
+          if (i % 10 == 0) {
+            qk_hit_t w = qko_raycast(d, ND, b, NB, org[i], dir[i], INFINITY);
+            if (!ray_agrees(h, w, d, ND, b, org[i], dir[i], INFINITY))
+              fail_msg("set %d ray %zu: hit (%u, %.17g) vs oracle (%u, %.17g) (seed %llu)", set, i,
+                       h.id, h.t, w.id, w.t, (unsigned long long)g_seed);
+          }
+        } else if (h.id != one[i].id || !(h.t == one[i].t || (isinf(h.t) && isinf(one[i].t)))) {
+          fail_msg("set %d, built on %u threads, ray %zu: (%u, %.17g) vs one thread (%u, %.17g) "
+                   "(seed %llu)",
+                   set, ts[k], i, h.id, h.t, one[i].id, one[i].t, (unsigned long long)g_seed);
+        }
+      }
+      if (k == 0)
+        ref = got;
+      else {
+        assert_same_seq(&ref, &got, ts[k]);
+        free(got.p);
+      }
+      qk_collider_free(c);
+    }
+    assert_true(ref.n > 0);
+    free(ref.p);
+  }
+  /* Bad items checked on the threads: the first bad item's status (discs come first). */
+  {
+    qk_tree_options_t o = opts(8);
+    o.threads = 2;
+    qk_collider_t *c = NULL;
+    const qk_box_t keep_b = b[NB - 10];
+    const qk_disc_t keep_d = d[ND / 2];
+    b[NB - 10] = (qk_box_t){1, 0, 0, 1}; /* inverted, in the last range */
+    assert_int_equal(qk_collider_build(d, ND, b, NB, &o, &c), QK_ERR_GEOMETRY);
+    assert_null(c);
+    d[ND / 2].y = NAN; /* earlier in item order */
+    assert_int_equal(qk_collider_build(d, ND, b, NB, &o, &c), QK_ERR_NONFINITE);
+    d[ND / 2] = keep_d;
+    d[ND - 1].r = -1;
+    assert_int_equal(qk_collider_build(d, ND, b, NB, &o, &c), QK_ERR_GEOMETRY);
+    d[ND - 1].r = 0;
+    b[NB - 10].xmax = INFINITY;
+    assert_int_equal(qk_collider_build(d, ND, b, NB, &o, &c), QK_ERR_NONFINITE);
+    b[NB - 10] = keep_b;
+  }
+  /* Allocation failures of the threaded build: NOMEM and nothing held, until it succeeds. */
+  locked_t l;
+  pthread_mutex_init(&l.mu, NULL);
+  qk_allocator_t a = qkt_alloc_make(&l.st);
+  a.fn = locked_fn;
+  a.ud = &l;
+  for (size_t fail_at = 1;; fail_at++) {
+    qkt_alloc_arm(&l.st, fail_at);
+    qk_tree_options_t o = opts(8);
+    o.threads = 2;
+    o.allocator = &a;
+    qk_collider_t *c = NULL;
+    qk_status_t s = qk_collider_build(d, ND, b, NB, &o, &c);
+    if (s == QK_OK) {
+      qkt_alloc_arm(&l.st, 0);
+      qk_hit_t h;
+      assert_int_equal(qk_collider_raycast(c, org[0], dir[0], INFINITY, &h), QK_OK);
+      qk_collider_free(c);
+      assert_int_equal(l.st.live_blocks, 0);
+      break;
+    }
+    assert_int_equal(s, QK_ERR_NOMEM);
+    assert_null(c);
+    assert_int_equal(l.st.live_blocks, 0);
+    assert_true(fail_at < 1000);
+  }
+  pthread_mutex_destroy(&l.mu);
+  free(d), free(b), free(org), free(dir), free(one);
+}
+
 int main(void) {
   g_seed = qkt_seed(7031);
   const struct CMUnitTest tests[] = {
@@ -530,6 +638,7 @@ int main(void) {
       cmocka_unit_test(test_collide_raycast),        cmocka_unit_test(test_collide_exact_cases),
       cmocka_unit_test(test_collide_nomem),          cmocka_unit_test(test_collide_threads),
       cmocka_unit_test(test_collide_threads_option), cmocka_unit_test(test_collide_threads_nomem),
+      cmocka_unit_test(test_collide_threaded_build),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }

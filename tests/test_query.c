@@ -742,16 +742,76 @@ static void test_query_cities(void **state) {
   free(p), free(gr), free(wr);
 }
 
+/* Large batches (from 65536 queries) put their queries in Z-order on the batch's threads:
+ * on one, two and three threads, and with either of that sort's allocations failing, every
+ * kNN and located leaf is the single call's, and nothing is left allocated. */
+static void test_query_batch_threaded_order(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 11);
+  const size_t n = 4000, nq = 70000, k = 2;
+  qk_point_t *p = malloc(n * sizeof *p), *qs = malloc(nq * sizeof *qs);
+  qk_neighbor_t *want = malloc(nq * k * sizeof *want), *out = malloc(nq * k * sizeof *out);
+  qk_node_t *wleaf = malloc(nq * sizeof *wleaf), *leaves = malloc(nq * sizeof *leaves);
+  assert_non_null(p && qs && want && out && wleaf && leaves);
+  qkt_points(&r, QKT_CLUSTERED, p, n);
+  for (size_t i = 0; i < nq; i++) qs[i] = rand_loc(&r);
+  qkt_alloc_t st;
+  qk_allocator_t a = qkt_alloc_make(&st);
+  qk_tree_options_t o;
+  qk_tree_options_init(&o);
+  o.capacity = 4;
+  o.allocator = &a;
+  qk_tree_t *t = NULL;
+  assert_int_equal(qk_tree_build(p, n, &o, &t), QK_OK);
+  for (size_t i = 0; i < nq; i++) {
+    size_t m = 0;
+    assert_int_equal(qk_query_knn(t, qs[i], k, INFINITY, want + i * k, &m), QK_OK);
+    assert_int_equal(m, k);
+    if (qk_tree_find_leaf(t, qs[i], &wleaf[i]) != QK_OK) wleaf[i] = QK_NONE;
+  }
+  const size_t live = st.live_blocks;
+  for (unsigned threads = 1; threads <= 3; threads++) {
+    qk_tree_set_threads(t, threads);
+    for (size_t fail_at = 0; fail_at <= 2; fail_at++) { /* 0: no failure; 1, 2: the sort's */
+      qkt_alloc_arm(&st, fail_at);
+      assert_int_equal(qk_query_knn_batch(t, qs, nq, k, INFINITY, out, NULL), QK_OK);
+      assert_int_equal(st.live_blocks, live);
+      for (size_t i = 0; i < nq * k; i++)
+        if (out[i].id != want[i].id || out[i].dist != want[i].dist)
+          fail_msg("threads %u fail_at %zu: knn %zu (%u, %.17g) vs single (%u, %.17g) (seed %llu)",
+                   threads, fail_at, i, out[i].id, out[i].dist, want[i].id, want[i].dist,
+                   (unsigned long long)g_seed);
+      qkt_alloc_arm(&st, fail_at);
+      assert_int_equal(qk_query_locate_batch(t, qs, nq, leaves), QK_OK);
+      assert_int_equal(st.live_blocks, live);
+      assert_memory_equal(leaves, wleaf, nq * sizeof *leaves);
+    }
+  }
+  qkt_alloc_arm(&st, 0);
+  qk_tree_free(t);
+  assert_int_equal(st.live_blocks, 0);
+  free(p), free(qs), free(want), free(out), free(wleaf), free(leaves);
+}
+
 int main(void) {
   g_seed = qkt_seed(20261122);
   const struct CMUnitTest tests[] = {
-      cmocka_unit_test(test_query_range_radius),   cmocka_unit_test(test_query_knn_all_k),
-      cmocka_unit_test(test_query_knn_large),      cmocka_unit_test(test_query_knn_after_mutation),
-      cmocka_unit_test(test_query_locate),         cmocka_unit_test(test_query_batch),
-      cmocka_unit_test(test_query_batch_nomem),    cmocka_unit_test(test_query_stop_and_bad_args),
-      cmocka_unit_test(test_query_threads),        cmocka_unit_test(test_query_cities),
-      cmocka_unit_test(test_query_knn_big_leaves), cmocka_unit_test(test_query_knn_batch_paths),
-      cmocka_unit_test(test_query_knn1_ties),      cmocka_unit_test(test_query_knn_ties_k),
+      cmocka_unit_test(test_query_range_radius),
+      cmocka_unit_test(test_query_knn_all_k),
+      cmocka_unit_test(test_query_knn_large),
+      cmocka_unit_test(test_query_knn_after_mutation),
+      cmocka_unit_test(test_query_locate),
+      cmocka_unit_test(test_query_batch),
+      cmocka_unit_test(test_query_batch_nomem),
+      cmocka_unit_test(test_query_stop_and_bad_args),
+      cmocka_unit_test(test_query_threads),
+      cmocka_unit_test(test_query_batch_threaded_order),
+      cmocka_unit_test(test_query_cities),
+      cmocka_unit_test(test_query_knn_big_leaves),
+      cmocka_unit_test(test_query_knn_batch_paths),
+      cmocka_unit_test(test_query_knn1_ties),
+      cmocka_unit_test(test_query_knn_ties_k),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
