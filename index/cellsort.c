@@ -96,10 +96,11 @@ static void axis_tables(const double *g, unsigned L, bool north, axis_tab_t *a) 
   }
 }
 
-/* What the parallel phases of the bucketed build share. Shares of the input (passes 1 and
- * 2) cover the points qk__share_range(n, w, nw); pass 3 runs one job per coarse bucket.
- * The records of coarse bucket c written by share w form a segment of the record array;
- * segments go in the order (c, w), each starting at a multiple of WC records. */
+/* What the parallel phases of the bucketed build share. Pass 1 runs on shares of the
+ * input, qk__share_range(n, w, nw); pass 2 runs one job per coarse bucket. Share w writes
+ * its records of coarse bucket c into a list of chunks of CH records each, taken in order
+ * from a region of the record array of its own, so that no count is needed before the
+ * scatter; the chunks of (w, c) are linked through next[]. */
 typedef struct rec {
   double x, y;
   uint32_t id, key;
@@ -109,8 +110,11 @@ typedef struct rec {
 #define WC 8u
 /* Most coarse buckets: their write-combining buffers (24 KB) stay in the first-level cache. */
 #define MAX_COARSE_BITS 7u
-/* Most points a share stages in pass 3: 320 KB, within a core's second-level cache. */
+/* Most points a share stages in pass 2: 320 KB, within a core's second-level cache. */
 #define STAGE_MAX 16384u
+/* Points per block of the key computation: their keys stay in the first-level cache
+ * between the loop that computes them and the one that scatters them. */
+#define BLOCK 256u
 
 typedef struct bucket_job {
   qk_tree_t *t;
@@ -121,15 +125,17 @@ typedef struct bucket_job {
   unsigned fbits;            /* bits of the low digit */
   size_t nc;                 /* coarse buckets */
   bool stream;               /* write records and points around the caches */
-  uint16_t *key;
-  rec_t *rec;         /* 64-byte aligned */
-  uint32_t *cnt;      /* nw rows of nc: records of bucket c from share w */
-  uint32_t *seg;      /* nw rows of nc: where those records start */
-  uint32_t *cbase;    /* nc + 1 coarse bucket starts in the point arrays */
-  uint32_t *cum;      /* 4^L + 1 fine bucket starts */
-  unsigned nw;        /* shares of passes 1 and 2 */
-  uint32_t stage_cap; /* points per share in the staging arrays (0: none) */
-  double *sx, *sy;    /* the staging arrays, stage_cap per share */
+  rec_t *rec;                /* 64-byte aligned, chunks of ch records */
+  uint32_t ch;               /* records per chunk, a multiple of WC */
+  uint32_t *first;           /* nw + 1: each share's first chunk */
+  uint32_t *next;            /* per chunk, the next chunk of its list */
+  uint32_t *head;            /* nw rows of nc: the first chunk of (w, c) */
+  uint32_t *cnt;             /* nw rows of nc: records of bucket c from share w */
+  uint32_t *cbase;           /* nc + 1 coarse bucket starts in the point arrays */
+  uint32_t *cum;             /* 4^L + 1 fine bucket starts */
+  unsigned nw;               /* shares of pass 1 */
+  uint32_t stage_cap;        /* points per share in the staging arrays (0: none) */
+  double *sx, *sy;           /* the staging arrays, stage_cap per share */
   qk_id_t *sid;
   double near;   /* the scaling's error bound, in grid units */
   uint32_t even; /* the even bits of a key */
@@ -147,10 +153,6 @@ static inline uint32_t key_by_lines(const bucket_job_t *j, double x, double y) {
 }
 
 #if QK__CELL_AVX2
-/* Points per block of the AVX2 key pass: their keys stay in the first-level cache between
- * the loop that computes them and the one that counts them. */
-#define BLOCK 256u
-
 /* The keys of m points, four at a time. A scaled coordinate whose fraction lies at least
  * `near` (the error bound of the scaling and of the grid lines, in grid units) from a
  * whole number is strictly between the lines of its truncation: its cell is that, and its
@@ -193,104 +195,123 @@ __attribute__((target("avx2"))) static void keys_avx2(const bucket_job_t *j, con
 }
 #endif
 
-/* Pass 1: every point's cell, and this share's count per coarse bucket. The job's fields
- * are copied to locals: the stores to key[] and h[] could otherwise alias them. */
-static void keys_share(void *ctx, unsigned w, unsigned nw) {
-  const bucket_job_t *j = ctx;
-  size_t lo, hi;
-  qk__share_range(j->n, w, nw, &lo, &hi);
-  uint32_t *h = j->cnt + (size_t)w * j->nc;
-  const qk_point_t *p = j->p;
-  uint16_t *key = j->key;
-  const axis_tab_t *ax = j->ax, *ay = j->ay;
-  const unsigned fbits = j->fbits;
+/* The keys of m points (m <= BLOCK). */
+static void keys_block(const bucket_job_t *j, const qk_point_t *p, size_t m, uint16_t *key) {
 #if QK__CELL_AVX2
   if (j->avx2) {
-    for (size_t i0 = lo; i0 < hi; i0 += BLOCK) {
-      size_t m = hi - i0 < BLOCK ? hi - i0 : BLOCK;
-      keys_avx2(j, p + i0, m, key + i0);
-      size_t i = i0, e = i0 + m;
-      for (; i + 4 <= e; i += 4) {
-        h[key[i] >> fbits]++;
-        h[key[i + 1] >> fbits]++;
-        h[key[i + 2] >> fbits]++;
-        h[key[i + 3] >> fbits]++;
-      }
-      for (; i < e; i++) h[key[i] >> fbits]++;
-    }
+    keys_avx2(j, p, m, key);
     return;
   }
 #endif
 #if defined(__SSE2__)
   /* Both axes at once: scale, truncate, and compare with the two lines of each guess. */
   const __m128d o = _mm_setr_pd(j->x0, j->y0), sc = _mm_set1_pd(j->scale);
-  for (size_t i = lo; i < hi; i++) {
+  const axis_tab_t *ax = j->ax, *ay = j->ay;
+  for (size_t i = 0; i < m; i++) {
     __m128d v = _mm_loadu_pd(&p[i].x);
     __m128i c = _mm_cvttpd_epi32(_mm_mul_pd(_mm_sub_pd(v, o), sc));
     uint32_t cx = (uint32_t)_mm_cvtsi128_si32(c), cy = (uint32_t)_mm_extract_epi16(c, 2);
     int mx = _mm_movemask_pd(_mm_cmpgt_pd(_mm_unpacklo_pd(v, v), _mm_loadu_pd(ax->line[cx])));
     int my = _mm_movemask_pd(_mm_cmpgt_pd(_mm_unpackhi_pd(v, v), _mm_loadu_pd(ay->line[cy])));
-    uint32_t k = (uint32_t)(ax->dig[4 * cx + (uint32_t)mx] ^ ay->dig[4 * cy + (uint32_t)my]);
-    key[i] = (uint16_t)k;
-    h[k >> fbits]++;
+    key[i] = (uint16_t)(ax->dig[4 * cx + (uint32_t)mx] ^ ay->dig[4 * cy + (uint32_t)my]);
   }
 #else
-  const double x0 = j->x0, y0 = j->y0, scale = j->scale;
-  for (size_t i = lo; i < hi; i++) {
-    double x = p[i].x, y = p[i].y;
-    uint32_t cx = (uint32_t)((x - x0) * scale), cy = (uint32_t)((y - y0) * scale);
-    uint32_t mx = (uint32_t)(x > ax->line[cx][0]) | (uint32_t)(x > ax->line[cx][1]) << 1;
-    uint32_t my = (uint32_t)(y > ay->line[cy][0]) | (uint32_t)(y > ay->line[cy][1]) << 1;
-    uint32_t k = (uint32_t)(ax->dig[4 * cx + mx] ^ ay->dig[4 * cy + my]);
-    key[i] = (uint16_t)k;
-    h[k >> fbits]++;
-  }
+  for (size_t i = 0; i < m; i++) key[i] = (uint16_t)key_by_lines(j, p[i].x, p[i].y);
 #endif
 }
 
-/* Pass 2: the records into their coarse buckets' segments, stable. With `stream`, each
- * bucket's records gather in a buffer of WC (three cache lines) that goes to memory whole,
- * with non-temporal stores: no line of the record array is read before it is written,
- * and 2^7 buffers, unlike 2^7 scattered write streams, stay in cache. */
+/* Write one write-combining buffer's worth (WC records, whole cache lines at a 64-byte
+ * aligned place) around the caches, or through them. */
+static void flush_wc(rec_t *d, const rec_t *s, bool stream) {
+#if defined(__SSE2__)
+  if (stream) {
+    __m128i *o = (__m128i *)(void *)d;
+    const __m128i *i = (const __m128i *)(const void *)s;
+    for (unsigned q = 0; q < WC * sizeof(rec_t) / 16; q++) _mm_stream_si128(o + q, i[q]);
+    return;
+  }
+#else
+  (void)stream;
+#endif
+  memcpy(d, s, WC * sizeof *d);
+}
+
+/* Pass 1: every point's cell, and the point with its id and cell as a 24-byte record into
+ * its coarse bucket's chunk list, stable. Each bucket's records gather in a buffer of WC
+ * (three cache lines) that goes to the chunk whole, with non-temporal stores for large
+ * inputs: no line of the record array is read before it is written, and 2^7 buffers,
+ * unlike 2^7 scattered write streams, stay in cache. The chunks of a share come from its
+ * region in order: a list needs a new one only when its last is full. */
 static void scatter_share(void *ctx, unsigned w, unsigned nw) {
   const bucket_job_t *j = ctx;
   size_t lo, hi;
   qk__share_range(j->n, w, nw, &lo, &hi);
   const size_t nc = j->nc;
-  uint32_t next[1u << MAX_COARSE_BITS];
-  memcpy(next, j->seg + (size_t)w * nc, nc * sizeof *next);
+  const uint32_t ch = j->ch;
   const qk_point_t *p = j->p;
-  const uint16_t *key = j->key;
   rec_t *rec = j->rec;
+  uint32_t *next = j->next, *head = j->head + (size_t)w * nc;
   const unsigned fbits = j->fbits;
-#if defined(__SSE2__)
-  if (j->stream) {
-    _Alignas(64) rec_t buf[(1u << MAX_COARSE_BITS) * WC];
-    uint8_t fill[1u << MAX_COARSE_BITS];
-    memset(fill, 0, nc);
-    for (size_t i = lo; i < hi; i++) {
-      uint32_t k = key[i], c = k >> fbits, f = fill[c];
-      rec_t *b = &buf[c * WC];
-      b[f] = (rec_t){p[i].x, p[i].y, (uint32_t)i, k};
+  const bool stream = j->stream;
+  uint32_t take = j->first[w];
+  uint32_t cur[1u << MAX_COARSE_BITS]; /* the last chunk of every list, QK_NONE: none */
+  uint32_t pos[1u << MAX_COARSE_BITS]; /* records in it */
+  uint32_t total[1u << MAX_COARSE_BITS];
+  uint8_t fill[1u << MAX_COARSE_BITS];
+  _Alignas(64) rec_t buf[(1u << MAX_COARSE_BITS) * WC];
+  _Alignas(16) uint16_t key[BLOCK];
+  for (size_t c = 0; c < nc; c++) {
+    head[c] = QK_NONE;
+    cur[c] = QK_NONE;
+    pos[c] = ch;
+    total[c] = 0;
+    fill[c] = 0;
+  }
+  for (size_t i0 = lo; i0 < hi; i0 += BLOCK) {
+    size_t m = hi - i0 < BLOCK ? hi - i0 : BLOCK;
+    keys_block(j, p + i0, m, key);
+    for (size_t q = 0; q < m; q++) {
+      uint32_t k = key[q], c = k >> fbits, f = fill[c];
+      rec_t *b = &buf[c * WC + f];
+      b->x = p[i0 + q].x;
+      b->y = p[i0 + q].y;
+      b->id = (uint32_t)(i0 + q);
+      b->key = k;
       if (++f == WC) {
-        /* next[c] is a multiple of WC and the array 64-byte aligned: whole lines. */
-        __m128i *d = (__m128i *)(void *)&rec[next[c]];
-        const __m128i *s = (const __m128i *)(const void *)b;
-        for (unsigned q = 0; q < WC * sizeof(rec_t) / 16; q++) _mm_stream_si128(d + q, s[q]);
-        next[c] += WC;
+        if (pos[c] == ch) {
+          if (cur[c] == QK_NONE)
+            head[c] = take;
+          else
+            next[cur[c]] = take;
+          cur[c] = take++;
+          pos[c] = 0;
+        }
+        flush_wc(&rec[(size_t)cur[c] * ch + pos[c]], &buf[c * WC], stream);
+        pos[c] += WC;
+        total[c] += WC;
         f = 0;
       }
       fill[c] = (uint8_t)f;
     }
-    for (size_t c = 0; c < nc; c++) memcpy(&rec[next[c]], &buf[c * WC], fill[c] * sizeof *rec);
-    _mm_sfence(); /* the streamed lines before anything the caller does next */
-    return;
   }
+  /* The partial buffers, through the caches; a full last chunk needs a new one. */
+  for (size_t c = 0; c < nc; c++) {
+    if (fill[c]) {
+      if (pos[c] == ch) {
+        if (cur[c] == QK_NONE)
+          head[c] = take;
+        else
+          next[cur[c]] = take;
+        cur[c] = take++;
+        pos[c] = 0;
+      }
+      memcpy(&rec[(size_t)cur[c] * ch + pos[c]], &buf[c * WC], fill[c] * sizeof *rec);
+    }
+    j->cnt[(size_t)w * nc + c] = total[c] + fill[c];
+  }
+#if defined(__SSE2__)
+  if (stream) _mm_sfence(); /* the streamed lines before anything the caller does next */
 #endif
-  for (size_t i = lo; i < hi; i++) {
-    uint32_t k = key[i];
-    rec[next[k >> fbits]++] = (rec_t){p[i].x, p[i].y, (uint32_t)i, k};
-  }
 }
 
 #if QK__CELL_AVX2
@@ -348,7 +369,7 @@ static void copy_out(void *dst, const void *src, size_t bytes, bool stream, bool
   memcpy(dst, src, bytes);
 }
 
-/* Pass 3: coarse bucket c sorted by its low digit into the point arrays, stable, and its
+/* Pass 2: coarse bucket c sorted by its low digit into the point arrays, stable, and its
  * fine buckets' starts. The sort writes all over the bucket's slot range; when the range
  * fits the share's staging arrays, it writes there (in cache, reused from bucket to
  * bucket) and the range is then copied out in order, so that the point arrays are written
@@ -362,9 +383,15 @@ static void fine_job(unsigned c, unsigned w, void *ud) {
   uint32_t next[1u << (16 - MAX_COARSE_BITS)];
   memset(next, 0, nf * sizeof *next);
   const rec_t *rec = j->rec;
+  const uint32_t ch = j->ch;
+  /* The bucket's chunks, share by share, each list in order. */
   for (unsigned v = 0; v < j->nw; v++) {
-    const rec_t *r = rec + j->seg[(size_t)v * nc + c], *e = r + j->cnt[(size_t)v * nc + c];
-    for (; r < e; r++) next[r->key & mask]++;
+    uint32_t left = j->cnt[(size_t)v * nc + c];
+    for (uint32_t k = j->head[(size_t)v * nc + c]; left; k = j->next[k]) {
+      uint32_t m = left < ch ? left : ch;
+      left -= m;
+      for (const rec_t *r = rec + (size_t)k * ch, *e = r + m; r < e; r++) next[r->key & mask]++;
+    }
   }
   uint32_t *cum = j->cum + (size_t)c * nf, acc = a;
   for (uint32_t f = 0; f < nf; f++) {
@@ -379,24 +406,29 @@ static void fine_job(unsigned c, unsigned w, void *ud) {
   double *py = staged ? j->sy + (size_t)w * j->stage_cap : j->t->py;
   qk_id_t *pid = staged ? j->sid + (size_t)w * j->stage_cap : j->t->pid;
   for (unsigned v = 0; v < j->nw; v++) {
-    const rec_t *r = rec + j->seg[(size_t)v * nc + c], *e = r + j->cnt[(size_t)v * nc + c];
-    /* Two records a step: the second's slot is taken after the first's, as one at a time
-     * would (they may share a fine bucket). */
-    for (; r + 2 <= e; r += 2) {
-      uint32_t d = next[r[0].key & mask]++;
-      px[d] = r[0].x;
-      py[d] = r[0].y;
-      pid[d] = r[0].id;
-      uint32_t d1 = next[r[1].key & mask]++;
-      px[d1] = r[1].x;
-      py[d1] = r[1].y;
-      pid[d1] = r[1].id;
-    }
-    if (r < e) {
-      uint32_t d = next[r->key & mask]++;
-      px[d] = r->x;
-      py[d] = r->y;
-      pid[d] = r->id;
+    uint32_t left = j->cnt[(size_t)v * nc + c];
+    for (uint32_t k = j->head[(size_t)v * nc + c]; left; k = j->next[k]) {
+      uint32_t m = left < ch ? left : ch;
+      left -= m;
+      const rec_t *r = rec + (size_t)k * ch, *e = r + m;
+      /* Two records a step: the second's slot is taken after the first's, as one at a
+       * time would (they may share a fine bucket). */
+      for (; r + 2 <= e; r += 2) {
+        uint32_t d = next[r[0].key & mask]++;
+        px[d] = r[0].x;
+        py[d] = r[0].y;
+        pid[d] = r[0].id;
+        uint32_t d1 = next[r[1].key & mask]++;
+        px[d1] = r[1].x;
+        py[d1] = r[1].y;
+        pid[d1] = r[1].id;
+      }
+      if (r < e) {
+        uint32_t d = next[r->key & mask]++;
+        px[d] = r->x;
+        py[d] = r->y;
+        pid[d] = r->id;
+      }
     }
   }
   if (staged) {
@@ -411,20 +443,20 @@ static void fine_job(unsigned c, unsigned w, void *ud) {
 
 /* The temporary arrays of the bucketed build. */
 typedef struct scratch {
-  uint32_t *cum, *cbase, *cnt, *seg;
-  uint16_t *key;
+  uint32_t *cum, *cbase, *cnt, *head, *first, *next;
   void *rec_block; /* rec, before alignment */
   double *sx, *sy;
   qk_id_t *sid;
-  size_t nb, nc, n, nw, n_rec, ns;
+  size_t nb, nc, nw, n_chunks, n_rec, ns;
 } scratch_t;
 
 static void scratch_free(const qk_tree_t *t, scratch_t *s) {
   qk__free(&t->alloc, s->cum, (s->nb + 1) * sizeof *s->cum);
   qk__free(&t->alloc, s->cbase, (s->nc + 1) * sizeof *s->cbase);
   qk__free(&t->alloc, s->cnt, s->nw * s->nc * sizeof *s->cnt);
-  qk__free(&t->alloc, s->seg, s->nw * s->nc * sizeof *s->seg);
-  qk__free(&t->alloc, s->key, s->n * sizeof *s->key);
+  qk__free(&t->alloc, s->head, s->nw * s->nc * sizeof *s->head);
+  qk__free(&t->alloc, s->first, (s->nw + 1) * sizeof *s->first);
+  qk__free(&t->alloc, s->next, s->n_chunks * sizeof *s->next);
   qk__free(&t->alloc, s->rec_block, s->n_rec * sizeof(rec_t) + 64);
   qk__free(&t->alloc, s->sx, s->ns * sizeof *s->sx);
   qk__free(&t->alloc, s->sy, s->ns * sizeof *s->sy);
@@ -456,60 +488,68 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
   if (cbits > MAX_COARSE_BITS) cbits = MAX_COARSE_BITS;
   unsigned fbits = kbits - cbits;
   size_t nb = (size_t)1 << kbits, nc = (size_t)1 << cbits;
+  /* Chunks of about an eighth of a share's bucket, whole write-combining buffers: a list's
+   * last chunk is partly empty, an eighth of the records at most on uniform input. A
+   * share of m points fills at most m / ch + nc chunks. */
+  size_t ch = n / ((size_t)nw * nc * 8);
+  ch = (ch + WC - 1) / WC * WC;
+  if (ch < WC) ch = WC;
+  if (ch > 1024) ch = 1024;
   scratch_t s = {0};
-  s.nb = nb, s.nc = nc, s.n = n, s.nw = nw;
+  s.nb = nb, s.nc = nc, s.nw = nw;
   s.cum = qk__realloc(&t->alloc, NULL, 0, (nb + 1) * sizeof *s.cum);
   s.cbase = qk__realloc(&t->alloc, NULL, 0, (nc + 1) * sizeof *s.cbase);
   s.cnt = qk__realloc(&t->alloc, NULL, 0, nw * nc * sizeof *s.cnt);
-  s.seg = qk__realloc(&t->alloc, NULL, 0, nw * nc * sizeof *s.seg);
-  s.key = qk__realloc(&t->alloc, NULL, 0, n * sizeof *s.key);
-  if (!s.cum || !s.cbase || !s.cnt || !s.seg || !s.key) {
+  s.head = qk__realloc(&t->alloc, NULL, 0, nw * nc * sizeof *s.head);
+  s.first = qk__realloc(&t->alloc, NULL, 0, (nw + 1) * sizeof *s.first);
+  if (!s.cum || !s.cbase || !s.cnt || !s.head || !s.first) {
     scratch_free(t, &s);
     return QK_ERR_NOMEM;
   }
-  memset(s.cnt, 0, nw * nc * sizeof *s.cnt);
-  /* Large inputs go around the caches: their records and points would not stay there. */
-  bool stream = n >= ((size_t)1 << 19);
-  bucket_job_t j = {0};
-  j.t = t, j.p = p, j.n = n, j.x0 = x0, j.y0 = y0, j.scale = scale;
-  j.ax = &tabs[0], j.ay = &tabs[1], j.fbits = fbits, j.nc = nc, j.stream = stream;
-  j.key = s.key, j.cnt = s.cnt, j.seg = s.seg, j.cbase = s.cbase, j.cum = s.cum, j.nw = nw;
-  j.near = delta;
-  j.even = (uint32_t)qk__spread16((1u << L) - 1);
-#if QK__CELL_AVX2
-  j.avx2 = __builtin_cpu_supports("avx2");
-#endif
-  qk__run_shares(nw, keys_share, &j);
-  /* Coarse bucket starts, and each share's segment of every bucket: the shares before it
-   * come first, so the order is the one thread's. Segments start at multiples of WC. */
-  uint32_t acc = 0, most = 0;
-  size_t at = 0;
-  for (size_t c = 0; c < nc; c++) {
-    s.cbase[c] = acc;
-    for (unsigned w = 0; w < nw; w++) {
-      uint32_t k = s.cnt[(size_t)w * nc + c];
-      s.seg[(size_t)w * nc + c] = (uint32_t)at;
-      at += (k + WC - 1) / WC * WC;
-      acc += k;
-    }
-    if (acc - s.cbase[c] > most) most = acc - s.cbase[c];
+  size_t chunks = 0;
+  for (unsigned w = 0; w < nw; w++) {
+    size_t lo, hi;
+    qk__share_range(n, w, nw, &lo, &hi);
+    s.first[w] = (uint32_t)chunks;
+    chunks += (hi - lo) / ch + nc + 1;
   }
-  s.cbase[nc] = acc;
-  s.cum[nb] = acc;
-  s.n_rec = at ? at : 1;
+  s.first[nw] = (uint32_t)chunks;
+  s.n_chunks = chunks;
+  s.n_rec = chunks * ch;
+  s.next = qk__realloc(&t->alloc, NULL, 0, chunks * sizeof *s.next);
   s.rec_block = qk__realloc(&t->alloc, NULL, 0, s.n_rec * sizeof(rec_t) + 64);
-  if (!s.rec_block) {
+  if (!s.next || !s.rec_block) {
     scratch_free(t, &s);
     return QK_ERR_NOMEM;
   }
   /* The scatter writes 2^7 streams at once: on huge pages, they need fewer TLB entries. */
   if (t->huge_pages) qk__advise_huge(&t->alloc, s.rec_block, s.n_rec * sizeof(rec_t) + 64);
+  /* Large inputs go around the caches: their records and points would not stay there. */
+  bool stream = n >= ((size_t)1 << 19);
+  bucket_job_t j = {0};
+  j.t = t, j.p = p, j.n = n, j.x0 = x0, j.y0 = y0, j.scale = scale;
+  j.ax = &tabs[0], j.ay = &tabs[1], j.fbits = fbits, j.nc = nc, j.stream = stream;
+  j.ch = (uint32_t)ch, j.first = s.first, j.next = s.next, j.head = s.head;
+  j.cnt = s.cnt, j.cbase = s.cbase, j.cum = s.cum, j.nw = nw;
   j.rec = (rec_t *)(void *)((unsigned char *)s.rec_block + (-(uintptr_t)s.rec_block & 63u));
+  j.near = delta;
+  j.even = (uint32_t)qk__spread16((1u << L) - 1);
+#if QK__CELL_AVX2
+  j.avx2 = __builtin_cpu_supports("avx2");
+#endif
   qk__run_shares(nw, scatter_share, &j);
-  /* Staging arrays for pass 3, each share's as large as the largest coarse bucket up to
+  /* Coarse bucket starts: the shares' records of a bucket follow one another in share
+   * order, so the order is the one thread's. */
+  uint32_t acc = 0, most = 0;
+  for (size_t c = 0; c < nc; c++) {
+    s.cbase[c] = acc;
+    for (unsigned w = 0; w < nw; w++) acc += s.cnt[(size_t)w * nc + c];
+    if (acc - s.cbase[c] > most) most = acc - s.cbase[c];
+  }
+  s.cbase[nc] = acc;
+  s.cum[nb] = acc;
+  /* Staging arrays for pass 2, each share's as large as the largest coarse bucket up to
    * STAGE_MAX points. */
-  qk__free(&t->alloc, s.key, n * sizeof *s.key);
-  s.key = NULL;
   size_t cap = most < STAGE_MAX ? most : STAGE_MAX;
   s.ns = nw * cap;
   s.sx = qk__realloc(&t->alloc, NULL, 0, s.ns * sizeof *s.sx);
