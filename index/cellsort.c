@@ -131,6 +131,8 @@ typedef struct bucket_job {
   uint32_t *next;            /* per chunk, the next chunk of its list */
   uint32_t *head;            /* nw rows of nc: the first chunk of (w, c) */
   uint32_t *cnt;             /* nw rows of nc: records of bucket c from share w */
+  uint32_t *hist;            /* nw rows of 4^L: the points of every cell by share */
+  size_t nb;                 /* cells, 4^L */
   uint32_t *cbase;           /* nc + 1 coarse bucket starts in the point arrays */
   uint32_t *cum;             /* 4^L + 1 fine bucket starts */
   unsigned nw;               /* shares of pass 1 */
@@ -236,7 +238,7 @@ static void flush_wc(rec_t *d, const rec_t *s, bool stream) {
   memcpy(d, s, WC * sizeof *d);
 }
 
-/* Pass 1: every point's cell, and the point with its id and cell as a 24-byte record into
+/* Pass 1: every point's cell, counted, and the point with its id and cell as a 24-byte record into
  * its coarse bucket's chunk list, stable. Each bucket's records gather in a buffer of WC
  * (three cache lines) that goes to the chunk whole, with non-temporal stores for large
  * inputs: no line of the record array is read before it is written, and 2^7 buffers,
@@ -251,6 +253,7 @@ static void scatter_share(void *ctx, unsigned w, unsigned nw) {
   const qk_point_t *p = j->p;
   rec_t *rec = j->rec;
   uint32_t *next = j->next, *head = j->head + (size_t)w * nc;
+  uint32_t *h = j->hist + (size_t)w * j->nb;
   const unsigned fbits = j->fbits;
   const bool stream = j->stream;
   uint32_t take = j->first[w];
@@ -260,6 +263,7 @@ static void scatter_share(void *ctx, unsigned w, unsigned nw) {
   uint8_t fill[1u << MAX_COARSE_BITS];
   _Alignas(64) rec_t buf[(1u << MAX_COARSE_BITS) * WC];
   _Alignas(16) uint16_t key[BLOCK];
+  memset(h, 0, j->nb * sizeof *h);
   for (size_t c = 0; c < nc; c++) {
     head[c] = QK_NONE;
     cur[c] = QK_NONE;
@@ -272,6 +276,7 @@ static void scatter_share(void *ctx, unsigned w, unsigned nw) {
     keys_block(j, p + i0, m, key);
     for (size_t q = 0; q < m; q++) {
       uint32_t k = key[q], c = k >> fbits, f = fill[c];
+      h[k]++;
       rec_t *b = &buf[c * WC + f];
       b->x = p[i0 + q].x;
       b->y = p[i0 + q].y;
@@ -370,10 +375,10 @@ static void copy_out(void *dst, const void *src, size_t bytes, bool stream, bool
 }
 
 /* Pass 2: coarse bucket c sorted by its low digit into the point arrays, stable, and its
- * fine buckets' starts. The sort writes all over the bucket's slot range; when the range
- * fits the share's staging arrays, it writes there (in cache, reused from bucket to
- * bucket) and the range is then copied out in order, so that the point arrays are written
- * front to back rather than line by line at random. */
+ * fine buckets' starts from the shares' counts of pass 1. The sort writes all over the bucket's
+ * slot range; when the range fits the share's staging arrays, it writes there (in cache, reused
+ * from bucket to bucket) and the range is then copied out in order, so that the point arrays are
+ * written front to back rather than line by line at random. */
 static void fine_job(unsigned c, unsigned w, void *ud) {
   const bucket_job_t *j = ud;
   const size_t nc = j->nc;
@@ -381,18 +386,13 @@ static void fine_job(unsigned c, unsigned w, void *ud) {
   const unsigned fbits = j->fbits;
   const uint32_t nf = 1u << fbits, mask = nf - 1;
   uint32_t next[1u << (16 - MAX_COARSE_BITS)];
-  memset(next, 0, nf * sizeof *next);
+  memcpy(next, j->hist + (size_t)c * nf, nf * sizeof *next);
+  for (unsigned v = 1; v < j->nw; v++) {
+    const uint32_t *h = j->hist + (size_t)v * j->nb + (size_t)c * nf;
+    for (uint32_t f = 0; f < nf; f++) next[f] += h[f];
+  }
   const rec_t *rec = j->rec;
   const uint32_t ch = j->ch;
-  /* The bucket's chunks, share by share, each list in order. */
-  for (unsigned v = 0; v < j->nw; v++) {
-    uint32_t left = j->cnt[(size_t)v * nc + c];
-    for (uint32_t k = j->head[(size_t)v * nc + c]; left; k = j->next[k]) {
-      uint32_t m = left < ch ? left : ch;
-      left -= m;
-      for (const rec_t *r = rec + (size_t)k * ch, *e = r + m; r < e; r++) next[r->key & mask]++;
-    }
-  }
   uint32_t *cum = j->cum + (size_t)c * nf, acc = a;
   for (uint32_t f = 0; f < nf; f++) {
     uint32_t k = next[f];
@@ -443,7 +443,7 @@ static void fine_job(unsigned c, unsigned w, void *ud) {
 
 /* The temporary arrays of the bucketed build. */
 typedef struct scratch {
-  uint32_t *cum, *cbase, *cnt, *head, *first, *next;
+  uint32_t *cum, *cbase, *cnt, *hist, *head, *first, *next;
   void *rec_block; /* rec, before alignment */
   double *sx, *sy;
   qk_id_t *sid;
@@ -455,6 +455,7 @@ static void scratch_free(const qk_tree_t *t, scratch_t *s) {
   qk__free(&t->alloc, s->cbase, (s->nc + 1) * sizeof *s->cbase);
   qk__free(&t->alloc, s->cnt, s->nw * s->nc * sizeof *s->cnt);
   qk__free(&t->alloc, s->head, s->nw * s->nc * sizeof *s->head);
+  qk__free(&t->alloc, s->hist, s->nw * s->nb * sizeof *s->hist);
   qk__free(&t->alloc, s->first, (s->nw + 1) * sizeof *s->first);
   qk__free(&t->alloc, s->next, s->n_chunks * sizeof *s->next);
   qk__free(&t->alloc, s->rec_block, s->n_rec * sizeof(rec_t) + 64);
@@ -502,7 +503,8 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
   s.cnt = qk__realloc(&t->alloc, NULL, 0, nw * nc * sizeof *s.cnt);
   s.head = qk__realloc(&t->alloc, NULL, 0, nw * nc * sizeof *s.head);
   s.first = qk__realloc(&t->alloc, NULL, 0, (nw + 1) * sizeof *s.first);
-  if (!s.cum || !s.cbase || !s.cnt || !s.head || !s.first) {
+  s.hist = qk__realloc(&t->alloc, NULL, 0, nw * nb * sizeof *s.hist);
+  if (!s.cum || !s.cbase || !s.cnt || !s.head || !s.first || !s.hist) {
     scratch_free(t, &s);
     return QK_ERR_NOMEM;
   }
@@ -530,6 +532,7 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
   j.t = t, j.p = p, j.n = n, j.x0 = x0, j.y0 = y0, j.scale = scale;
   j.ax = &tabs[0], j.ay = &tabs[1], j.fbits = fbits, j.nc = nc, j.stream = stream;
   j.ch = (uint32_t)ch, j.first = s.first, j.next = s.next, j.head = s.head;
+  j.hist = s.hist, j.nb = nb;
   j.cnt = s.cnt, j.cbase = s.cbase, j.cum = s.cum, j.nw = nw;
   j.rec = (rec_t *)(void *)((unsigned char *)s.rec_block + (-(uintptr_t)s.rec_block & 63u));
   j.near = delta;
