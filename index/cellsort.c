@@ -5,14 +5,15 @@
  * number into the tree's point arrays. The cell number's base-4 digits are the quadrants
  * (NE=0, NW=1, SW=2, SE=3), so cell order is the tree's pre-order.
  *
- * The passes, each split over threads (shares of the input, or jobs taken from a counter):
- *  1. keys: the cell number of every point (2L bits) and, per share, a histogram of its
- *     high digit (at most 7 bits: 128 coarse buckets);
- *  2. scatter: each point with its id and cell as a 24-byte record into its coarse bucket,
- *     through a write-combining buffer per bucket (whole cache lines, non-temporal for
- *     large inputs);
- *  3. per coarse bucket (a job each): a histogram of the low digit, the fine buckets' slot
- *     ranges, and the records' coordinates and ids sorted by it into staging arrays in
+ * Two passes over the points, each split over threads (shares of the input, or jobs taken
+ * from a counter):
+ *  1. keys and scatter, one read of the input: the cell number of every point (2L bits),
+ *     counted per cell and share, and the point with its place and low digit as a 20-byte
+ *     record into its coarse bucket (high digit, at most 7 bits: 128 buckets), through a
+ *     write-combining buffer per bucket (whole cache lines, non-temporal for large
+ *     inputs) into chunk lists, which need no count beforehand;
+ *  2. per coarse bucket (a job each): the fine buckets' slot ranges from the counts, and
+ *     the records' coordinates and ids sorted by the low digit into staging arrays in
  *     cache, then copied out in order to the tree's point arrays.
  * Both digits are counting sorts that keep input order, so the points of a cell keep
  * their input order and the result is the same for any number of threads.
@@ -97,18 +98,22 @@ static void axis_tables(const double *g, unsigned L, bool north, axis_tab_t *a) 
 }
 
 /* What the parallel phases of the bucketed build share. Pass 1 runs on shares of the
- * input, qk__share_range(n, w, nw); pass 2 runs one job per coarse bucket. Share w writes
- * its records of coarse bucket c into a list of chunks of CH records each, taken in order
+ * input, qk__share_range(n, w, ns); pass 2 runs one job per coarse bucket. Share w writes
+ * its records of coarse bucket c into a list of chunks of ch records each, taken in order
  * from a region of the record array of its own, so that no count is needed before the
- * scatter; the chunks of (w, c) are linked through next[]. */
+ * scatter; the chunks of (w, c) are linked through next[].
+ *
+ * A record is 20 bytes: the point's coordinates, and a tag with its low digit in the low
+ * fbits bits and its place in the share above them (shares hold at most 2^(32 - fbits)
+ * points, so it fits). Byte arrays, read and written with memcpy (one move each). */
 typedef struct rec {
-  double x, y;
-  uint32_t id, key;
+  unsigned char b[20];
 } rec_t;
+_Static_assert(sizeof(rec_t) == 20, "records of 20 bytes");
 
-/* Records per write-combining buffer: 8 of 24 bytes are three cache lines. */
-#define WC 8u
-/* Most coarse buckets: their write-combining buffers (24 KB) stay in the first-level cache. */
+/* Records per write-combining buffer: 16 of 20 bytes are five cache lines. */
+#define WC 16u
+/* Most coarse buckets: their write-combining buffers take 40 KB. */
 #define MAX_COARSE_BITS 7u
 /* Most points a share stages in pass 2: 320 KB, within a core's second-level cache. */
 #define STAGE_MAX 16384u
@@ -127,17 +132,18 @@ typedef struct bucket_job {
   bool stream;               /* write records and points around the caches */
   rec_t *rec;                /* 64-byte aligned, chunks of ch records */
   uint32_t ch;               /* records per chunk, a multiple of WC */
-  uint32_t *first;           /* nw + 1: each share's first chunk */
+  uint32_t *first;           /* ns + 1: each share's first chunk */
   uint32_t *next;            /* per chunk, the next chunk of its list */
-  uint32_t *head;            /* nw rows of nc: the first chunk of (w, c) */
-  uint32_t *cnt;             /* nw rows of nc: records of bucket c from share w */
-  uint32_t *hist;            /* nw rows of 4^L: the points of every cell by share */
+  uint32_t *head;            /* ns rows of nc: the first chunk of (w, c) */
+  uint32_t *cnt;             /* ns rows of nc: records of bucket c from share w */
+  uint32_t *hist;            /* ns rows of 4^L: the points of every cell by share */
   size_t nb;                 /* cells, 4^L */
   uint32_t *cbase;           /* nc + 1 coarse bucket starts in the point arrays */
   uint32_t *cum;             /* 4^L + 1 fine bucket starts */
-  unsigned nw;               /* shares of pass 1 */
-  uint32_t stage_cap;        /* points per share in the staging arrays (0: none) */
-  double *sx, *sy;           /* the staging arrays, stage_cap per share */
+  unsigned nw;               /* threads */
+  unsigned ns;               /* shares of pass 1, at least nw */
+  uint32_t stage_cap;        /* points per thread in the staging arrays (0: none) */
+  double *sx, *sy;           /* the staging arrays, stage_cap per thread */
   qk_id_t *sid;
   double near;   /* the scaling's error bound, in grid units */
   uint32_t even; /* the even bits of a key */
@@ -229,7 +235,14 @@ static void flush_wc(rec_t *d, const rec_t *s, bool stream) {
   if (stream) {
     __m128i *o = (__m128i *)(void *)d;
     const __m128i *i = (const __m128i *)(const void *)s;
-    for (unsigned q = 0; q < WC * sizeof(rec_t) / 16; q++) _mm_stream_si128(o + q, i[q]);
+    /* five lines of four stores each, unrolled by hand (compilers keep a loop of 20) */
+    for (unsigned q = 0; q < WC * sizeof(rec_t) / 16; q += 4) {
+      __m128i a = i[q], b = i[q + 1], c = i[q + 2], e = i[q + 3];
+      _mm_stream_si128(o + q, a);
+      _mm_stream_si128(o + q + 1, b);
+      _mm_stream_si128(o + q + 2, c);
+      _mm_stream_si128(o + q + 3, e);
+    }
     return;
   }
 #else
@@ -238,16 +251,17 @@ static void flush_wc(rec_t *d, const rec_t *s, bool stream) {
   memcpy(d, s, WC * sizeof *d);
 }
 
-/* Pass 1: every point's cell, counted, and the point with its id and cell as a 24-byte record into
- * its coarse bucket's chunk list, stable. Each bucket's records gather in a buffer of WC
- * (three cache lines) that goes to the chunk whole, with non-temporal stores for large
+/* Pass 1 for share w: every point's cell, counted, and the point as a record into its
+ * coarse bucket's chunk list, stable. Each bucket's records gather in a buffer of WC
+ * (five cache lines) that goes to the chunk whole, with non-temporal stores for large
  * inputs: no line of the record array is read before it is written, and 2^7 buffers,
  * unlike 2^7 scattered write streams, stay in cache. The chunks of a share come from its
  * region in order: a list needs a new one only when its last is full. */
-static void scatter_share(void *ctx, unsigned w, unsigned nw) {
+static void scatter_job(unsigned w, unsigned thread, void *ctx) {
+  (void)thread;
   const bucket_job_t *j = ctx;
   size_t lo, hi;
-  qk__share_range(j->n, w, nw, &lo, &hi);
+  qk__share_range(j->n, w, j->ns, &lo, &hi);
   const size_t nc = j->nc;
   const uint32_t ch = j->ch;
   const qk_point_t *p = j->p;
@@ -255,6 +269,7 @@ static void scatter_share(void *ctx, unsigned w, unsigned nw) {
   uint32_t *next = j->next, *head = j->head + (size_t)w * nc;
   uint32_t *h = j->hist + (size_t)w * j->nb;
   const unsigned fbits = j->fbits;
+  const uint32_t mask = (1u << fbits) - 1;
   const bool stream = j->stream;
   uint32_t take = j->first[w];
   uint32_t cur[1u << MAX_COARSE_BITS]; /* the last chunk of every list, QK_NONE: none */
@@ -263,6 +278,8 @@ static void scatter_share(void *ctx, unsigned w, unsigned nw) {
   uint8_t fill[1u << MAX_COARSE_BITS];
   _Alignas(64) rec_t buf[(1u << MAX_COARSE_BITS) * WC];
   _Alignas(16) uint16_t key[BLOCK];
+  _Alignas(16) uint32_t tag[BLOCK];
+  _Alignas(16) uint8_t cb[BLOCK];
   memset(h, 0, j->nb * sizeof *h);
   for (size_t c = 0; c < nc; c++) {
     head[c] = QK_NONE;
@@ -274,14 +291,27 @@ static void scatter_share(void *ctx, unsigned w, unsigned nw) {
   for (size_t i0 = lo; i0 < hi; i0 += BLOCK) {
     size_t m = hi - i0 < BLOCK ? hi - i0 : BLOCK;
     keys_block(j, p + i0, m, key);
+    /* The block's buckets and tags in a loop of their own (the compiler vectorises it),
+     * its counts in another, so that the scatter loop does little more than copy. */
+    uint32_t tq = (uint32_t)(i0 - lo) << fbits;
+    const uint32_t step = 1u << fbits;
+    for (size_t q = 0; q < m; q++, tq += step) {
+      cb[q] = (uint8_t)(key[q] >> fbits);
+      tag[q] = tq | (key[q] & mask);
+    }
+    size_t q4 = 0;
+    for (; q4 + 4 <= m; q4 += 4) {
+      h[key[q4]]++;
+      h[key[q4 + 1]]++;
+      h[key[q4 + 2]]++;
+      h[key[q4 + 3]]++;
+    }
+    for (; q4 < m; q4++) h[key[q4]]++;
     for (size_t q = 0; q < m; q++) {
-      uint32_t k = key[q], c = k >> fbits, f = fill[c];
-      h[k]++;
-      rec_t *b = &buf[c * WC + f];
-      b->x = p[i0 + q].x;
-      b->y = p[i0 + q].y;
-      b->id = (uint32_t)(i0 + q);
-      b->key = k;
+      uint32_t c = cb[q], f = fill[c];
+      unsigned char *b = buf[c * WC + f].b;
+      memcpy(b, &p[i0 + q], 16);
+      memcpy(b + 16, &tag[q], 4);
       if (++f == WC) {
         if (pos[c] == ch) {
           if (cur[c] == QK_NONE)
@@ -317,6 +347,11 @@ static void scatter_share(void *ctx, unsigned w, unsigned nw) {
 #if defined(__SSE2__)
   if (stream) _mm_sfence(); /* the streamed lines before anything the caller does next */
 #endif
+}
+
+static void scatter_share(void *ctx, unsigned w, unsigned nw) {
+  (void)nw;
+  scatter_job(w, w, ctx);
 }
 
 #if QK__CELL_AVX2
@@ -387,7 +422,7 @@ static void fine_job(unsigned c, unsigned w, void *ud) {
   const uint32_t nf = 1u << fbits, mask = nf - 1;
   uint32_t next[1u << (16 - MAX_COARSE_BITS)];
   memcpy(next, j->hist + (size_t)c * nf, nf * sizeof *next);
-  for (unsigned v = 1; v < j->nw; v++) {
+  for (unsigned v = 1; v < j->ns; v++) {
     const uint32_t *h = j->hist + (size_t)v * j->nb + (size_t)c * nf;
     for (uint32_t f = 0; f < nf; f++) next[f] += h[f];
   }
@@ -405,8 +440,11 @@ static void fine_job(unsigned c, unsigned w, void *ud) {
   double *px = staged ? j->sx + (size_t)w * j->stage_cap : j->t->px;
   double *py = staged ? j->sy + (size_t)w * j->stage_cap : j->t->py;
   qk_id_t *pid = staged ? j->sid + (size_t)w * j->stage_cap : j->t->pid;
-  for (unsigned v = 0; v < j->nw; v++) {
+  for (unsigned v = 0; v < j->ns; v++) {
     uint32_t left = j->cnt[(size_t)v * nc + c];
+    size_t lo, hi;
+    qk__share_range(j->n, v, j->ns, &lo, &hi);
+    const uint32_t id0 = (uint32_t)lo;
     for (uint32_t k = j->head[(size_t)v * nc + c]; left; k = j->next[k]) {
       uint32_t m = left < ch ? left : ch;
       left -= m;
@@ -414,20 +452,25 @@ static void fine_job(unsigned c, unsigned w, void *ud) {
       /* Two records a step: the second's slot is taken after the first's, as one at a
        * time would (they may share a fine bucket). */
       for (; r + 2 <= e; r += 2) {
-        uint32_t d = next[r[0].key & mask]++;
-        px[d] = r[0].x;
-        py[d] = r[0].y;
-        pid[d] = r[0].id;
-        uint32_t d1 = next[r[1].key & mask]++;
-        px[d1] = r[1].x;
-        py[d1] = r[1].y;
-        pid[d1] = r[1].id;
+        uint32_t g0, g1;
+        memcpy(&g0, r[0].b + 16, 4);
+        memcpy(&g1, r[1].b + 16, 4);
+        uint32_t d = next[g0 & mask]++;
+        memcpy(&px[d], r[0].b, 8);
+        memcpy(&py[d], r[0].b + 8, 8);
+        pid[d] = id0 + (g0 >> fbits);
+        uint32_t d1 = next[g1 & mask]++;
+        memcpy(&px[d1], r[1].b, 8);
+        memcpy(&py[d1], r[1].b + 8, 8);
+        pid[d1] = id0 + (g1 >> fbits);
       }
       if (r < e) {
-        uint32_t d = next[r->key & mask]++;
-        px[d] = r->x;
-        py[d] = r->y;
-        pid[d] = r->id;
+        uint32_t g;
+        memcpy(&g, r->b + 16, 4);
+        uint32_t d = next[g & mask]++;
+        memcpy(&px[d], r->b, 8);
+        memcpy(&py[d], r->b + 8, 8);
+        pid[d] = id0 + (g >> fbits);
       }
     }
   }
@@ -447,21 +490,21 @@ typedef struct scratch {
   void *rec_block; /* rec, before alignment */
   double *sx, *sy;
   qk_id_t *sid;
-  size_t nb, nc, nw, n_chunks, n_rec, ns;
+  size_t nb, nc, nw, n_chunks, n_rec, ns, n_stage;
 } scratch_t;
 
 static void scratch_free(const qk_tree_t *t, scratch_t *s) {
   qk__free(&t->alloc, s->cum, (s->nb + 1) * sizeof *s->cum);
   qk__free(&t->alloc, s->cbase, (s->nc + 1) * sizeof *s->cbase);
-  qk__free(&t->alloc, s->cnt, s->nw * s->nc * sizeof *s->cnt);
-  qk__free(&t->alloc, s->head, s->nw * s->nc * sizeof *s->head);
-  qk__free(&t->alloc, s->hist, s->nw * s->nb * sizeof *s->hist);
-  qk__free(&t->alloc, s->first, (s->nw + 1) * sizeof *s->first);
+  qk__free(&t->alloc, s->cnt, s->ns * s->nc * sizeof *s->cnt);
+  qk__free(&t->alloc, s->head, s->ns * s->nc * sizeof *s->head);
+  qk__free(&t->alloc, s->hist, s->ns * s->nb * sizeof *s->hist);
+  qk__free(&t->alloc, s->first, (s->ns + 1) * sizeof *s->first);
   qk__free(&t->alloc, s->next, s->n_chunks * sizeof *s->next);
   qk__free(&t->alloc, s->rec_block, s->n_rec * sizeof(rec_t) + 64);
-  qk__free(&t->alloc, s->sx, s->ns * sizeof *s->sx);
-  qk__free(&t->alloc, s->sy, s->ns * sizeof *s->sy);
-  qk__free(&t->alloc, s->sid, s->ns * sizeof *s->sid);
+  qk__free(&t->alloc, s->sx, s->n_stage * sizeof *s->sx);
+  qk__free(&t->alloc, s->sy, s->n_stage * sizeof *s->sy);
+  qk__free(&t->alloc, s->sid, s->n_stage * sizeof *s->sid);
   memset(s, 0, sizeof *s);
 }
 
@@ -492,30 +535,35 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
   /* Chunks of about an eighth of a share's bucket, whole write-combining buffers: a list's
    * last chunk is partly empty, an eighth of the records at most on uniform input. A
    * share of m points fills at most m / ch + nc chunks. */
-  size_t ch = n / ((size_t)nw * nc * 8);
+  /* Shares: one per thread, and more where a share would have more than 2^19 points. A tag
+   * numbers 2^(32 - fbits) >= 2^23 points; the lower bound also has every input of more than
+   * 2^19 points (the tests' too) sorted in several shares, on any number of threads. */
+  size_t per = (size_t)1 << 19, ns = (n + per - 1) / per;
+  if (ns < nw) ns = nw;
+  size_t ch = n / (ns * nc * 8);
   ch = (ch + WC - 1) / WC * WC;
   if (ch < WC) ch = WC;
   if (ch > 1024) ch = 1024;
   scratch_t s = {0};
-  s.nb = nb, s.nc = nc, s.nw = nw;
+  s.nb = nb, s.nc = nc, s.nw = nw, s.ns = ns;
   s.cum = qk__realloc(&t->alloc, NULL, 0, (nb + 1) * sizeof *s.cum);
   s.cbase = qk__realloc(&t->alloc, NULL, 0, (nc + 1) * sizeof *s.cbase);
-  s.cnt = qk__realloc(&t->alloc, NULL, 0, nw * nc * sizeof *s.cnt);
-  s.head = qk__realloc(&t->alloc, NULL, 0, nw * nc * sizeof *s.head);
-  s.first = qk__realloc(&t->alloc, NULL, 0, (nw + 1) * sizeof *s.first);
-  s.hist = qk__realloc(&t->alloc, NULL, 0, nw * nb * sizeof *s.hist);
+  s.cnt = qk__realloc(&t->alloc, NULL, 0, ns * nc * sizeof *s.cnt);
+  s.head = qk__realloc(&t->alloc, NULL, 0, ns * nc * sizeof *s.head);
+  s.first = qk__realloc(&t->alloc, NULL, 0, (ns + 1) * sizeof *s.first);
+  s.hist = qk__realloc(&t->alloc, NULL, 0, ns * nb * sizeof *s.hist);
   if (!s.cum || !s.cbase || !s.cnt || !s.head || !s.first || !s.hist) {
     scratch_free(t, &s);
     return QK_ERR_NOMEM;
   }
   size_t chunks = 0;
-  for (unsigned w = 0; w < nw; w++) {
+  for (unsigned w = 0; w < ns; w++) {
     size_t lo, hi;
-    qk__share_range(n, w, nw, &lo, &hi);
+    qk__share_range(n, w, (unsigned)ns, &lo, &hi);
     s.first[w] = (uint32_t)chunks;
     chunks += (hi - lo) / ch + nc + 1;
   }
-  s.first[nw] = (uint32_t)chunks;
+  s.first[ns] = (uint32_t)chunks;
   s.n_chunks = chunks;
   s.n_rec = chunks * ch;
   s.next = qk__realloc(&t->alloc, NULL, 0, chunks * sizeof *s.next);
@@ -533,20 +581,23 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
   j.ax = &tabs[0], j.ay = &tabs[1], j.fbits = fbits, j.nc = nc, j.stream = stream;
   j.ch = (uint32_t)ch, j.first = s.first, j.next = s.next, j.head = s.head;
   j.hist = s.hist, j.nb = nb;
-  j.cnt = s.cnt, j.cbase = s.cbase, j.cum = s.cum, j.nw = nw;
+  j.cnt = s.cnt, j.cbase = s.cbase, j.cum = s.cum, j.nw = nw, j.ns = (unsigned)ns;
   j.rec = (rec_t *)(void *)((unsigned char *)s.rec_block + (-(uintptr_t)s.rec_block & 63u));
   j.near = delta;
   j.even = (uint32_t)qk__spread16((1u << L) - 1);
 #if QK__CELL_AVX2
   j.avx2 = __builtin_cpu_supports("avx2");
 #endif
-  qk__run_shares(nw, scatter_share, &j);
+  if (ns == nw) /* share w on thread w, not two on one that started first */
+    qk__run_shares(nw, scatter_share, &j);
+  else
+    qk__run_jobs_dynamic(nw, (unsigned)ns, scatter_job, &j);
   /* Coarse bucket starts: the shares' records of a bucket follow one another in share
    * order, so the order is the one thread's. */
   uint32_t acc = 0, most = 0;
   for (size_t c = 0; c < nc; c++) {
     s.cbase[c] = acc;
-    for (unsigned w = 0; w < nw; w++) acc += s.cnt[(size_t)w * nc + c];
+    for (unsigned w = 0; w < ns; w++) acc += s.cnt[(size_t)w * nc + c];
     if (acc - s.cbase[c] > most) most = acc - s.cbase[c];
   }
   s.cbase[nc] = acc;
@@ -554,10 +605,10 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
   /* Staging arrays for pass 2, each share's as large as the largest coarse bucket up to
    * STAGE_MAX points. */
   size_t cap = most < STAGE_MAX ? most : STAGE_MAX;
-  s.ns = nw * cap;
-  s.sx = qk__realloc(&t->alloc, NULL, 0, s.ns * sizeof *s.sx);
-  s.sy = qk__realloc(&t->alloc, NULL, 0, s.ns * sizeof *s.sy);
-  s.sid = qk__realloc(&t->alloc, NULL, 0, s.ns * sizeof *s.sid);
+  s.n_stage = nw * cap;
+  s.sx = qk__realloc(&t->alloc, NULL, 0, s.n_stage * sizeof *s.sx);
+  s.sy = qk__realloc(&t->alloc, NULL, 0, s.n_stage * sizeof *s.sy);
+  s.sid = qk__realloc(&t->alloc, NULL, 0, s.n_stage * sizeof *s.sid);
   if (!s.sx || !s.sy || !s.sid) {
     scratch_free(t, &s);
     return QK_ERR_NOMEM;
