@@ -275,7 +275,8 @@ static void scatter_job(unsigned w, unsigned thread, void *ctx) {
   uint32_t cur[1u << MAX_COARSE_BITS]; /* the last chunk of every list, QK_NONE: none */
   uint32_t pos[1u << MAX_COARSE_BITS]; /* records in it */
   uint32_t total[1u << MAX_COARSE_BITS];
-  uint8_t fill[1u << MAX_COARSE_BITS];
+  /* where bucket c's next record goes in buf, in bytes, and where its buffer ends */
+  uint16_t off[1u << MAX_COARSE_BITS], end[1u << MAX_COARSE_BITS];
   _Alignas(64) rec_t buf[(1u << MAX_COARSE_BITS) * WC];
   _Alignas(16) uint16_t key[BLOCK];
   _Alignas(16) uint32_t tag[BLOCK];
@@ -286,7 +287,8 @@ static void scatter_job(unsigned w, unsigned thread, void *ctx) {
     cur[c] = QK_NONE;
     pos[c] = ch;
     total[c] = 0;
-    fill[c] = 0;
+    off[c] = (uint16_t)(c * WC * sizeof(rec_t));
+    end[c] = (uint16_t)((c + 1) * WC * sizeof(rec_t));
   }
   for (size_t i0 = lo; i0 < hi; i0 += BLOCK) {
     size_t m = hi - i0 < BLOCK ? hi - i0 : BLOCK;
@@ -307,12 +309,13 @@ static void scatter_job(unsigned w, unsigned thread, void *ctx) {
       h[key[q4 + 3]]++;
     }
     for (; q4 < m; q4++) h[key[q4]]++;
+    unsigned char *bytes = buf[0].b;
     for (size_t q = 0; q < m; q++) {
-      uint32_t c = cb[q], f = fill[c];
-      unsigned char *b = buf[c * WC + f].b;
-      memcpy(b, &p[i0 + q], 16);
-      memcpy(b + 16, &tag[q], 4);
-      if (++f == WC) {
+      uint32_t c = cb[q], o = off[c];
+      memcpy(bytes + o, &p[i0 + q], 16);
+      memcpy(bytes + o + 16, &tag[q], 4);
+      o += (uint32_t)sizeof(rec_t);
+      if (o == end[c]) {
         if (pos[c] == ch) {
           if (cur[c] == QK_NONE)
             head[c] = take;
@@ -321,17 +324,19 @@ static void scatter_job(unsigned w, unsigned thread, void *ctx) {
           cur[c] = take++;
           pos[c] = 0;
         }
-        flush_wc(&rec[(size_t)cur[c] * ch + pos[c]], &buf[c * WC], stream);
+        o -= WC * (uint32_t)sizeof(rec_t);
+        flush_wc(&rec[(size_t)cur[c] * ch + pos[c]], (const rec_t *)(const void *)(bytes + o),
+                 stream);
         pos[c] += WC;
         total[c] += WC;
-        f = 0;
       }
-      fill[c] = (uint8_t)f;
+      off[c] = (uint16_t)o;
     }
   }
   /* The partial buffers, through the caches; a full last chunk needs a new one. */
   for (size_t c = 0; c < nc; c++) {
-    if (fill[c]) {
+    uint32_t fill = (uint32_t)(off[c] - c * WC * sizeof(rec_t)) / (uint32_t)sizeof(rec_t);
+    if (fill) {
       if (pos[c] == ch) {
         if (cur[c] == QK_NONE)
           head[c] = take;
@@ -340,9 +345,9 @@ static void scatter_job(unsigned w, unsigned thread, void *ctx) {
         cur[c] = take++;
         pos[c] = 0;
       }
-      memcpy(&rec[(size_t)cur[c] * ch + pos[c]], &buf[c * WC], fill[c] * sizeof *rec);
+      memcpy(&rec[(size_t)cur[c] * ch + pos[c]], &buf[c * WC], fill * sizeof *rec);
     }
-    j->cnt[(size_t)w * nc + c] = total[c] + fill[c];
+    j->cnt[(size_t)w * nc + c] = total[c] + fill;
   }
 #if defined(__SSE2__)
   if (stream) _mm_sfence(); /* the streamed lines before anything the caller does next */
