@@ -97,11 +97,11 @@ static void axis_tables(const double *g, unsigned L, bool north, axis_tab_t *a) 
   }
 }
 
-/* What the parallel phases of the bucketed build share. Pass 1 runs on shares of the
- * input, qk__share_range(n, w, ns); pass 2 runs one job per coarse bucket. Share w writes
- * its records of coarse bucket c into a list of chunks of ch records each, taken in order
- * from a region of the record array of its own, so that no count is needed before the
- * scatter; the chunks of (w, c) are linked through next[].
+/* What the parallel phases of the bucketed build share. Passes 1 and 2 run on shares of
+ * the input, qk__share_range(n, w, ns); pass 3 runs one job per coarse bucket. The records
+ * of coarse bucket c written by share w form a segment of the record array; segments go in
+ * the order (c, w), each starting at a multiple of WC records, so that a bucket's records
+ * are one run of memory that the fine pass reads front to back.
  *
  * A record is 20 bytes: the point's coordinates, and a tag with its low digit in the low
  * fbits bits and its place in the share above them (shares hold at most 2^(32 - fbits)
@@ -115,7 +115,7 @@ _Static_assert(sizeof(rec_t) == 20, "records of 20 bytes");
 #define WC 16u
 /* Most coarse buckets: their write-combining buffers take 40 KB. */
 #define MAX_COARSE_BITS 7u
-/* Most points a share stages in pass 2: 320 KB, within a core's second-level cache. */
+/* Most points a thread stages in pass 3: 320 KB, within a core's second-level cache. */
 #define STAGE_MAX 16384u
 /* Points per block of the key computation: their keys stay in the first-level cache
  * between the loop that computes them and the one that scatters them. */
@@ -130,11 +130,9 @@ typedef struct bucket_job {
   unsigned fbits;            /* bits of the low digit */
   size_t nc;                 /* coarse buckets */
   bool stream;               /* write records and points around the caches */
-  rec_t *rec;                /* 64-byte aligned, chunks of ch records */
-  uint32_t ch;               /* records per chunk, a multiple of WC */
-  uint32_t *first;           /* ns + 1: each share's first chunk */
-  uint32_t *next;            /* per chunk, the next chunk of its list */
-  uint32_t *head;            /* ns rows of nc: the first chunk of (w, c) */
+  uint16_t *key;             /* every point's cell */
+  rec_t *rec;                /* 64-byte aligned */
+  uint32_t *seg;             /* ns rows of nc: where the records of (w, c) start */
   uint32_t *cnt;             /* ns rows of nc: records of bucket c from share w */
   uint32_t *hist;            /* ns rows of 4^L: the points of every cell by share */
   size_t nb;                 /* cells, 4^L */
@@ -251,112 +249,118 @@ static void flush_wc(rec_t *d, const rec_t *s, bool stream) {
   memcpy(d, s, WC * sizeof *d);
 }
 
-/* Pass 1 for share w: every point's cell, counted, and the point as a record into its
- * coarse bucket's chunk list, stable. Each bucket's records gather in a buffer of WC
- * (five cache lines) that goes to the chunk whole, with non-temporal stores for large
- * inputs: no line of the record array is read before it is written, and 2^7 buffers,
- * unlike 2^7 scattered write streams, stay in cache. The chunks of a share come from its
- * region in order: a list needs a new one only when its last is full. */
+/* Pass 1 for share w: every point's cell, and the share's count of every cell and of
+ * every coarse bucket. */
+static void keys_job(unsigned w, unsigned thread, void *ctx) {
+  (void)thread;
+  const bucket_job_t *j = ctx;
+  size_t lo, hi;
+  qk__share_range(j->n, w, j->ns, &lo, &hi);
+  uint32_t *h = j->hist + (size_t)w * j->nb;
+  const qk_point_t *p = j->p;
+  uint16_t *key = j->key;
+  memset(h, 0, j->nb * sizeof *h);
+  for (size_t i0 = lo; i0 < hi; i0 += BLOCK) {
+    size_t m = hi - i0 < BLOCK ? hi - i0 : BLOCK;
+    const uint16_t *k = key + i0;
+    keys_block(j, p + i0, m, key + i0);
+    size_t q = 0;
+    for (; q + 4 <= m; q += 4) {
+      h[k[q]]++;
+      h[k[q + 1]]++;
+      h[k[q + 2]]++;
+      h[k[q + 3]]++;
+    }
+    for (; q < m; q++) h[k[q]]++;
+  }
+  const size_t nc = j->nc, nf = (size_t)1 << j->fbits;
+  for (size_t c = 0; c < nc; c++) {
+    uint32_t k = 0;
+    for (size_t f = 0; f < nf; f++) k += h[c * nf + f];
+    j->cnt[(size_t)w * nc + c] = k;
+  }
+}
+
+/* Pass 2 for share w: the points as records into their coarse buckets' segments, stable.
+ * Each bucket's records gather in a buffer of WC (five cache lines) that goes to memory
+ * whole, with non-temporal stores for large inputs: no line of the record array is read
+ * before it is written, and 2^7 buffers, unlike 2^7 scattered write streams, stay in
+ * cache. */
 static void scatter_job(unsigned w, unsigned thread, void *ctx) {
   (void)thread;
   const bucket_job_t *j = ctx;
   size_t lo, hi;
   qk__share_range(j->n, w, j->ns, &lo, &hi);
   const size_t nc = j->nc;
-  const uint32_t ch = j->ch;
   const qk_point_t *p = j->p;
+  const uint16_t *key = j->key;
   rec_t *rec = j->rec;
-  uint32_t *next = j->next, *head = j->head + (size_t)w * nc;
-  uint32_t *h = j->hist + (size_t)w * j->nb;
   const unsigned fbits = j->fbits;
   const uint32_t mask = (1u << fbits) - 1;
   const bool stream = j->stream;
-  uint32_t take = j->first[w];
-  uint32_t cur[1u << MAX_COARSE_BITS]; /* the last chunk of every list, QK_NONE: none */
-  uint32_t pos[1u << MAX_COARSE_BITS]; /* records in it */
-  uint32_t total[1u << MAX_COARSE_BITS];
+  uint32_t next[1u << MAX_COARSE_BITS]; /* where bucket c's next buffer goes */
   /* where bucket c's next record goes in buf, in bytes, and where its buffer ends */
   uint16_t off[1u << MAX_COARSE_BITS], end[1u << MAX_COARSE_BITS];
   _Alignas(64) rec_t buf[(1u << MAX_COARSE_BITS) * WC];
-  _Alignas(16) uint16_t key[BLOCK];
   _Alignas(16) uint32_t tag[BLOCK];
   _Alignas(16) uint8_t cb[BLOCK];
-  memset(h, 0, j->nb * sizeof *h);
   for (size_t c = 0; c < nc; c++) {
-    head[c] = QK_NONE;
-    cur[c] = QK_NONE;
-    pos[c] = ch;
-    total[c] = 0;
+    next[c] = j->seg[(size_t)w * nc + c];
     off[c] = (uint16_t)(c * WC * sizeof(rec_t));
     end[c] = (uint16_t)((c + 1) * WC * sizeof(rec_t));
   }
+  unsigned char *bytes = buf[0].b;
   for (size_t i0 = lo; i0 < hi; i0 += BLOCK) {
     size_t m = hi - i0 < BLOCK ? hi - i0 : BLOCK;
-    keys_block(j, p + i0, m, key);
+    const uint16_t *k = key + i0;
     /* The block's buckets and tags in a loop of their own (the compiler vectorises it),
-     * its counts in another, so that the scatter loop does little more than copy. */
+     * so that the scatter loop does little more than copy. */
     uint32_t tq = (uint32_t)(i0 - lo) << fbits;
     const uint32_t step = 1u << fbits;
     for (size_t q = 0; q < m; q++, tq += step) {
-      cb[q] = (uint8_t)(key[q] >> fbits);
-      tag[q] = tq | (key[q] & mask);
+      cb[q] = (uint8_t)(k[q] >> fbits);
+      tag[q] = tq | (k[q] & mask);
     }
-    size_t q4 = 0;
-    for (; q4 + 4 <= m; q4 += 4) {
-      h[key[q4]]++;
-      h[key[q4 + 1]]++;
-      h[key[q4 + 2]]++;
-      h[key[q4 + 3]]++;
-    }
-    for (; q4 < m; q4++) h[key[q4]]++;
-    unsigned char *bytes = buf[0].b;
     for (size_t q = 0; q < m; q++) {
       uint32_t c = cb[q], o = off[c];
       memcpy(bytes + o, &p[i0 + q], 16);
       memcpy(bytes + o + 16, &tag[q], 4);
       o += (uint32_t)sizeof(rec_t);
       if (o == end[c]) {
-        if (pos[c] == ch) {
-          if (cur[c] == QK_NONE)
-            head[c] = take;
-          else
-            next[cur[c]] = take;
-          cur[c] = take++;
-          pos[c] = 0;
-        }
+        /* next[c] is a multiple of WC and the array 64-byte aligned: whole lines */
         o -= WC * (uint32_t)sizeof(rec_t);
-        flush_wc(&rec[(size_t)cur[c] * ch + pos[c]], (const rec_t *)(const void *)(bytes + o),
-                 stream);
-        pos[c] += WC;
-        total[c] += WC;
+        flush_wc(&rec[next[c]], (const rec_t *)(const void *)(bytes + o), stream);
+        next[c] += WC;
       }
       off[c] = (uint16_t)o;
     }
   }
-  /* The partial buffers, through the caches; a full last chunk needs a new one. */
   for (size_t c = 0; c < nc; c++) {
     uint32_t fill = (uint32_t)(off[c] - c * WC * sizeof(rec_t)) / (uint32_t)sizeof(rec_t);
-    if (fill) {
-      if (pos[c] == ch) {
-        if (cur[c] == QK_NONE)
-          head[c] = take;
-        else
-          next[cur[c]] = take;
-        cur[c] = take++;
-        pos[c] = 0;
-      }
-      memcpy(&rec[(size_t)cur[c] * ch + pos[c]], &buf[c * WC], fill * sizeof *rec);
-    }
-    j->cnt[(size_t)w * nc + c] = total[c] + fill;
+    memcpy(&rec[next[c]], &buf[c * WC], fill * sizeof *rec);
   }
 #if defined(__SSE2__)
   if (stream) _mm_sfence(); /* the streamed lines before anything the caller does next */
 #endif
 }
 
+static void keys_share(void *ctx, unsigned w, unsigned nw) {
+  (void)nw;
+  keys_job(w, w, ctx);
+}
+
 static void scatter_share(void *ctx, unsigned w, unsigned nw) {
   (void)nw;
   scatter_job(w, w, ctx);
+}
+
+/* Run a pass over the shares: share w on thread w when there are as many, else as jobs. */
+static void run_pass(const bucket_job_t *j, qk__share_fn share,
+                     void (*job)(unsigned, unsigned, void *)) {
+  if (j->ns == j->nw) /* not two shares on a thread that happened to start first */
+    qk__run_shares(j->nw, share, (void *)j);
+  else
+    qk__run_jobs_dynamic(j->nw, j->ns, job, (void *)j);
 }
 
 #if QK__CELL_AVX2
@@ -414,7 +418,7 @@ static void copy_out(void *dst, const void *src, size_t bytes, bool stream, bool
   memcpy(dst, src, bytes);
 }
 
-/* Pass 2: coarse bucket c sorted by its low digit into the point arrays, stable, and its
+/* Pass 3: coarse bucket c sorted by its low digit into the point arrays, stable, and its
  * fine buckets' starts from the shares' counts of pass 1. The sort writes all over the bucket's
  * slot range; when the range fits the share's staging arrays, it writes there (in cache, reused
  * from bucket to bucket) and the range is then copied out in order, so that the point arrays are
@@ -432,7 +436,6 @@ static void fine_job(unsigned c, unsigned w, void *ud) {
     for (uint32_t f = 0; f < nf; f++) next[f] += h[f];
   }
   const rec_t *rec = j->rec;
-  const uint32_t ch = j->ch;
   uint32_t *cum = j->cum + (size_t)c * nf, acc = a;
   for (uint32_t f = 0; f < nf; f++) {
     uint32_t k = next[f];
@@ -446,37 +449,32 @@ static void fine_job(unsigned c, unsigned w, void *ud) {
   double *py = staged ? j->sy + (size_t)w * j->stage_cap : j->t->py;
   qk_id_t *pid = staged ? j->sid + (size_t)w * j->stage_cap : j->t->pid;
   for (unsigned v = 0; v < j->ns; v++) {
-    uint32_t left = j->cnt[(size_t)v * nc + c];
     size_t lo, hi;
     qk__share_range(j->n, v, j->ns, &lo, &hi);
     const uint32_t id0 = (uint32_t)lo;
-    for (uint32_t k = j->head[(size_t)v * nc + c]; left; k = j->next[k]) {
-      uint32_t m = left < ch ? left : ch;
-      left -= m;
-      const rec_t *r = rec + (size_t)k * ch, *e = r + m;
-      /* Two records a step: the second's slot is taken after the first's, as one at a
-       * time would (they may share a fine bucket). */
-      for (; r + 2 <= e; r += 2) {
-        uint32_t g0, g1;
-        memcpy(&g0, r[0].b + 16, 4);
-        memcpy(&g1, r[1].b + 16, 4);
-        uint32_t d = next[g0 & mask]++;
-        memcpy(&px[d], r[0].b, 8);
-        memcpy(&py[d], r[0].b + 8, 8);
-        pid[d] = id0 + (g0 >> fbits);
-        uint32_t d1 = next[g1 & mask]++;
-        memcpy(&px[d1], r[1].b, 8);
-        memcpy(&py[d1], r[1].b + 8, 8);
-        pid[d1] = id0 + (g1 >> fbits);
-      }
-      if (r < e) {
-        uint32_t g;
-        memcpy(&g, r->b + 16, 4);
-        uint32_t d = next[g & mask]++;
-        memcpy(&px[d], r->b, 8);
-        memcpy(&py[d], r->b + 8, 8);
-        pid[d] = id0 + (g >> fbits);
-      }
+    const rec_t *r = rec + j->seg[(size_t)v * nc + c], *e = r + j->cnt[(size_t)v * nc + c];
+    /* Two records a step: the second's slot is taken after the first's, as one at a time
+     * would (they may share a fine bucket). */
+    for (; r + 2 <= e; r += 2) {
+      uint32_t g0, g1;
+      memcpy(&g0, r[0].b + 16, 4);
+      memcpy(&g1, r[1].b + 16, 4);
+      uint32_t d = next[g0 & mask]++;
+      memcpy(&px[d], r[0].b, 8);
+      memcpy(&py[d], r[0].b + 8, 8);
+      pid[d] = id0 + (g0 >> fbits);
+      uint32_t d1 = next[g1 & mask]++;
+      memcpy(&px[d1], r[1].b, 8);
+      memcpy(&py[d1], r[1].b + 8, 8);
+      pid[d1] = id0 + (g1 >> fbits);
+    }
+    if (r < e) {
+      uint32_t g;
+      memcpy(&g, r->b + 16, 4);
+      uint32_t d = next[g & mask]++;
+      memcpy(&px[d], r->b, 8);
+      memcpy(&py[d], r->b + 8, 8);
+      pid[d] = id0 + (g >> fbits);
     }
   }
   if (staged) {
@@ -491,21 +489,21 @@ static void fine_job(unsigned c, unsigned w, void *ud) {
 
 /* The temporary arrays of the bucketed build. */
 typedef struct scratch {
-  uint32_t *cum, *cbase, *cnt, *hist, *head, *first, *next;
+  uint32_t *cum, *cbase, *cnt, *seg, *hist;
+  uint16_t *key;
   void *rec_block; /* rec, before alignment */
   double *sx, *sy;
   qk_id_t *sid;
-  size_t nb, nc, nw, n_chunks, n_rec, ns, n_stage;
+  size_t nb, nc, n, ns, n_rec, n_stage;
 } scratch_t;
 
 static void scratch_free(const qk_tree_t *t, scratch_t *s) {
   qk__free(&t->alloc, s->cum, (s->nb + 1) * sizeof *s->cum);
   qk__free(&t->alloc, s->cbase, (s->nc + 1) * sizeof *s->cbase);
   qk__free(&t->alloc, s->cnt, s->ns * s->nc * sizeof *s->cnt);
-  qk__free(&t->alloc, s->head, s->ns * s->nc * sizeof *s->head);
+  qk__free(&t->alloc, s->seg, s->ns * s->nc * sizeof *s->seg);
   qk__free(&t->alloc, s->hist, s->ns * s->nb * sizeof *s->hist);
-  qk__free(&t->alloc, s->first, (s->ns + 1) * sizeof *s->first);
-  qk__free(&t->alloc, s->next, s->n_chunks * sizeof *s->next);
+  qk__free(&t->alloc, s->key, s->n * sizeof *s->key);
   qk__free(&t->alloc, s->rec_block, s->n_rec * sizeof(rec_t) + 64);
   qk__free(&t->alloc, s->sx, s->n_stage * sizeof *s->sx);
   qk__free(&t->alloc, s->sy, s->n_stage * sizeof *s->sy);
@@ -537,77 +535,65 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
   if (cbits > MAX_COARSE_BITS) cbits = MAX_COARSE_BITS;
   unsigned fbits = kbits - cbits;
   size_t nb = (size_t)1 << kbits, nc = (size_t)1 << cbits;
-  /* Chunks of about an eighth of a share's bucket, whole write-combining buffers: a list's
-   * last chunk is partly empty, an eighth of the records at most on uniform input. A
-   * share of m points fills at most m / ch + nc chunks. */
   /* Shares: one per thread, and more where a share would have more than 2^19 points. A tag
    * numbers 2^(32 - fbits) >= 2^23 points; the lower bound also has every input of more than
    * 2^19 points (the tests' too) sorted in several shares, on any number of threads. */
   size_t per = (size_t)1 << 19, ns = (n + per - 1) / per;
   if (ns < nw) ns = nw;
-  size_t ch = n / (ns * nc * 8);
-  ch = (ch + WC - 1) / WC * WC;
-  if (ch < WC) ch = WC;
-  if (ch > 1024) ch = 1024;
   scratch_t s = {0};
-  s.nb = nb, s.nc = nc, s.nw = nw, s.ns = ns;
+  s.nb = nb, s.nc = nc, s.n = n, s.ns = ns;
   s.cum = qk__realloc(&t->alloc, NULL, 0, (nb + 1) * sizeof *s.cum);
   s.cbase = qk__realloc(&t->alloc, NULL, 0, (nc + 1) * sizeof *s.cbase);
   s.cnt = qk__realloc(&t->alloc, NULL, 0, ns * nc * sizeof *s.cnt);
-  s.head = qk__realloc(&t->alloc, NULL, 0, ns * nc * sizeof *s.head);
-  s.first = qk__realloc(&t->alloc, NULL, 0, (ns + 1) * sizeof *s.first);
+  s.seg = qk__realloc(&t->alloc, NULL, 0, ns * nc * sizeof *s.seg);
   s.hist = qk__realloc(&t->alloc, NULL, 0, ns * nb * sizeof *s.hist);
-  if (!s.cum || !s.cbase || !s.cnt || !s.head || !s.first || !s.hist) {
+  s.key = qk__realloc(&t->alloc, NULL, 0, n * sizeof *s.key);
+  if (!s.cum || !s.cbase || !s.cnt || !s.seg || !s.hist || !s.key) {
     scratch_free(t, &s);
     return QK_ERR_NOMEM;
   }
-  size_t chunks = 0;
-  for (unsigned w = 0; w < ns; w++) {
-    size_t lo, hi;
-    qk__share_range(n, w, (unsigned)ns, &lo, &hi);
-    s.first[w] = (uint32_t)chunks;
-    chunks += (hi - lo) / ch + nc + 1;
-  }
-  s.first[ns] = (uint32_t)chunks;
-  s.n_chunks = chunks;
-  s.n_rec = chunks * ch;
-  s.next = qk__realloc(&t->alloc, NULL, 0, chunks * sizeof *s.next);
-  s.rec_block = qk__realloc(&t->alloc, NULL, 0, s.n_rec * sizeof(rec_t) + 64);
-  if (!s.next || !s.rec_block) {
-    scratch_free(t, &s);
-    return QK_ERR_NOMEM;
-  }
-  /* The scatter writes 2^7 streams at once: on huge pages, they need fewer TLB entries. */
-  if (t->huge_pages) qk__advise_huge(&t->alloc, s.rec_block, s.n_rec * sizeof(rec_t) + 64);
   /* Large inputs go around the caches: their records and points would not stay there. */
   bool stream = n >= ((size_t)1 << 19);
   bucket_job_t j = {0};
   j.t = t, j.p = p, j.n = n, j.x0 = x0, j.y0 = y0, j.scale = scale;
   j.ax = &tabs[0], j.ay = &tabs[1], j.fbits = fbits, j.nc = nc, j.stream = stream;
-  j.ch = (uint32_t)ch, j.first = s.first, j.next = s.next, j.head = s.head;
-  j.hist = s.hist, j.nb = nb;
+  j.key = s.key, j.hist = s.hist, j.nb = nb, j.seg = s.seg;
   j.cnt = s.cnt, j.cbase = s.cbase, j.cum = s.cum, j.nw = nw, j.ns = (unsigned)ns;
-  j.rec = (rec_t *)(void *)((unsigned char *)s.rec_block + (-(uintptr_t)s.rec_block & 63u));
   j.near = delta;
   j.even = (uint32_t)qk__spread16((1u << L) - 1);
 #if QK__CELL_AVX2
   j.avx2 = __builtin_cpu_supports("avx2");
 #endif
-  if (ns == nw) /* share w on thread w, not two on one that started first */
-    qk__run_shares(nw, scatter_share, &j);
-  else
-    qk__run_jobs_dynamic(nw, (unsigned)ns, scatter_job, &j);
-  /* Coarse bucket starts: the shares' records of a bucket follow one another in share
-   * order, so the order is the one thread's. */
+  run_pass(&j, keys_share, keys_job);
+  /* The buckets' starts, and each share's segment of every bucket: the shares before it
+   * come first, so the order is the one thread's. Segments start at multiples of WC. */
   uint32_t acc = 0, most = 0;
+  size_t at = 0;
   for (size_t c = 0; c < nc; c++) {
     s.cbase[c] = acc;
-    for (unsigned w = 0; w < ns; w++) acc += s.cnt[(size_t)w * nc + c];
+    for (size_t w = 0; w < ns; w++) {
+      uint32_t k = s.cnt[w * nc + c];
+      s.seg[w * nc + c] = (uint32_t)at;
+      at += (k + WC - 1) / WC * WC;
+      acc += k;
+    }
     if (acc - s.cbase[c] > most) most = acc - s.cbase[c];
   }
   s.cbase[nc] = acc;
   s.cum[nb] = acc;
-  /* Staging arrays for pass 2, each share's as large as the largest coarse bucket up to
+  s.n_rec = at ? at : 1;
+  s.rec_block = qk__realloc(&t->alloc, NULL, 0, s.n_rec * sizeof(rec_t) + 64);
+  if (!s.rec_block) {
+    scratch_free(t, &s);
+    return QK_ERR_NOMEM;
+  }
+  /* The scatter writes 2^7 streams at once: on huge pages, they need fewer TLB entries. */
+  if (t->huge_pages) qk__advise_huge(&t->alloc, s.rec_block, s.n_rec * sizeof(rec_t) + 64);
+  j.rec = (rec_t *)(void *)((unsigned char *)s.rec_block + (-(uintptr_t)s.rec_block & 63u));
+  run_pass(&j, scatter_share, scatter_job);
+  qk__free(&t->alloc, s.key, n * sizeof *s.key);
+  s.key = NULL;
+  /* Staging arrays for pass 3, each thread's as large as the largest coarse bucket up to
    * STAGE_MAX points. */
   size_t cap = most < STAGE_MAX ? most : STAGE_MAX;
   s.n_stage = nw * cap;
