@@ -494,7 +494,7 @@ typedef struct scratch {
   void *rec_block; /* rec, before alignment */
   double *sx, *sy;
   qk_id_t *sid;
-  size_t nb, nc, n, ns, n_rec, n_stage;
+  size_t nb, nc, n, ns, n_rec, rec_bytes, n_stage;
 } scratch_t;
 
 static void scratch_free(const qk_tree_t *t, scratch_t *s) {
@@ -504,7 +504,7 @@ static void scratch_free(const qk_tree_t *t, scratch_t *s) {
   qk__free(&t->alloc, s->seg, s->ns * s->nc * sizeof *s->seg);
   qk__free(&t->alloc, s->hist, s->ns * s->nb * sizeof *s->hist);
   qk__free(&t->alloc, s->key, s->n * sizeof *s->key);
-  qk__free(&t->alloc, s->rec_block, s->n_rec * sizeof(rec_t) + 64);
+  qk__free(&t->alloc, s->rec_block, s->rec_bytes);
   qk__free(&t->alloc, s->sx, s->n_stage * sizeof *s->sx);
   qk__free(&t->alloc, s->sy, s->n_stage * sizeof *s->sy);
   qk__free(&t->alloc, s->sid, s->n_stage * sizeof *s->sid);
@@ -582,7 +582,20 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
   s.cbase[nc] = acc;
   s.cum[nb] = acc;
   s.n_rec = at ? at : 1;
-  s.rec_block = qk__realloc(&t->alloc, NULL, 0, s.n_rec * sizeof(rec_t) + 64);
+  /* From the default allocator, the record block is asked for at least as large as the
+   * rest of what a build holds (the tree's point arrays and nodes by estimate, the keys,
+   * the counts) and a megabyte. glibc's malloc gives the top of its heap back to the
+   * system when a free leaves more there than twice the largest block it recently had to
+   * map: freeing a tree after a build whose largest block were less than half of it all
+   * would hand back every page, and the next build would fault them all in again (10,000
+   * faults for 1M points). The excess is never touched: address space, not memory. */
+  s.rec_bytes = s.n_rec * sizeof(rec_t) + 64;
+  if (!t->alloc.fn) {
+    size_t rest = n * (2 * sizeof(double) + sizeof(qk_id_t) + sizeof *s.key) + ns * nb * 4 +
+                  (4 * (n / t->capacity) + 64) * sizeof(qk__node_t) + ((size_t)1 << 20);
+    if (s.rec_bytes < rest) s.rec_bytes = rest;
+  }
+  s.rec_block = qk__realloc(&t->alloc, NULL, 0, s.rec_bytes);
   if (!s.rec_block) {
     scratch_free(t, &s);
     return QK_ERR_NOMEM;
