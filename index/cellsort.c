@@ -588,12 +588,13 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
    * system when a free leaves more there than twice the largest block it recently had to
    * map: freeing a tree after a build whose largest block were less than half of it all
    * would hand back every page, and the next build would fault them all in again (10,000
-   * faults for 1M points). The excess is never touched: address space, not memory. */
+   * faults for 1M points). The excess is never touched: address space, not memory. Blocks
+   * over 32 MB are mapped afresh whatever their size (glibc's largest mapping threshold). */
   s.rec_bytes = s.n_rec * sizeof(rec_t) + 64;
   if (!t->alloc.fn) {
     size_t rest = n * (2 * sizeof(double) + sizeof(qk_id_t) + sizeof *s.key) + ns * nb * 4 +
                   (4 * (n / t->capacity) + 64) * sizeof(qk__node_t) + ((size_t)1 << 20);
-    if (s.rec_bytes < rest) s.rec_bytes = rest;
+    if (s.rec_bytes < rest && rest <= ((size_t)32 << 20)) s.rec_bytes = rest;
   }
   s.rec_block = qk__realloc(&t->alloc, NULL, 0, s.rec_bytes);
   if (!s.rec_block) {
