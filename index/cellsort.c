@@ -173,6 +173,48 @@ __attribute__((target("avx2"))) static void keys_avx2(const bucket_job_t *j, con
                 m1 = _mm256_set1_epi32(0x5555), even = _mm256_set1_epi32((int)j->even);
   const __m256i pick = _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7);
   size_t i = 0;
+  /* Eight points a step: their 16 cell numbers packed to 16 bits in one register are spread
+   * at once; each 32-bit lane then holds a point's east bits (low half) and north bits
+   * (high half). */
+  const __m256i w4 = _mm256_set1_epi16(0x0f0f), w2 = _mm256_set1_epi16(0x3333),
+                w1 = _mm256_set1_epi16(0x5555), low = _mm256_set1_epi32(0xffff);
+  const __m256i order = _mm256_setr_epi32(0, 1, 4, 5, 2, 3, 6, 7);
+  for (; i + 8 <= m; i += 8) {
+    __m256d t0 = _mm256_mul_pd(_mm256_sub_pd(_mm256_loadu_pd(&p[i].x), o), sc);
+    __m256d t1 = _mm256_mul_pd(_mm256_sub_pd(_mm256_loadu_pd(&p[i + 2].x), o), sc);
+    __m256d t2 = _mm256_mul_pd(_mm256_sub_pd(_mm256_loadu_pd(&p[i + 4].x), o), sc);
+    __m256d t3 = _mm256_mul_pd(_mm256_sub_pd(_mm256_loadu_pd(&p[i + 6].x), o), sc);
+    __m128i i0 = _mm256_cvttpd_epi32(t0), i1 = _mm256_cvttpd_epi32(t1);
+    __m128i i2 = _mm256_cvttpd_epi32(t2), i3 = _mm256_cvttpd_epi32(t3);
+    __m256d f0 = _mm256_sub_pd(t0, _mm256_cvtepi32_pd(i0));
+    __m256d f1 = _mm256_sub_pd(t1, _mm256_cvtepi32_pd(i1));
+    __m256d f2 = _mm256_sub_pd(t2, _mm256_cvtepi32_pd(i2));
+    __m256d f3 = _mm256_sub_pd(t3, _mm256_cvtepi32_pd(i3));
+    __m256d bad = _mm256_or_pd(
+        _mm256_or_pd(
+            _mm256_or_pd(_mm256_cmp_pd(f0, lo, _CMP_LT_OQ), _mm256_cmp_pd(f0, hi, _CMP_GT_OQ)),
+            _mm256_or_pd(_mm256_cmp_pd(f1, lo, _CMP_LT_OQ), _mm256_cmp_pd(f1, hi, _CMP_GT_OQ))),
+        _mm256_or_pd(
+            _mm256_or_pd(_mm256_cmp_pd(f2, lo, _CMP_LT_OQ), _mm256_cmp_pd(f2, hi, _CMP_GT_OQ)),
+            _mm256_or_pd(_mm256_cmp_pd(f3, lo, _CMP_LT_OQ), _mm256_cmp_pd(f3, hi, _CMP_GT_OQ))));
+    /* 32-bit lanes: points 0 1 2 3 (x, y each) and 4 5 6 7; packed to 16 bits: points
+     * 0 1 4 5 in the low 128 bits, 2 3 6 7 in the high */
+    __m256i a = _mm256_inserti128_si256(_mm256_castsi128_si256(i0), i1, 1);
+    __m256i c = _mm256_inserti128_si256(_mm256_castsi128_si256(i2), i3, 1);
+    __m256i v = _mm256_packus_epi32(a, c);
+    v = _mm256_and_si256(_mm256_or_si256(v, _mm256_slli_epi16(v, 4)), w4);
+    v = _mm256_and_si256(_mm256_or_si256(v, _mm256_slli_epi16(v, 2)), w2);
+    v = _mm256_and_si256(_mm256_or_si256(v, _mm256_slli_epi16(v, 1)), w1);
+    __m256i n = _mm256_srli_epi32(v, 16);
+    __m256i k = _mm256_and_si256(
+        _mm256_xor_si256(_mm256_xor_si256(v, n), _mm256_slli_epi32(_mm256_xor_si256(n, even), 1)),
+        low);
+    k = _mm256_permutevar8x32_epi32(k, order);
+    __m128i k16 = _mm_packus_epi32(_mm256_castsi256_si128(k), _mm256_extracti128_si256(k, 1));
+    _mm_storeu_si128((__m128i *)(void *)&key[i], k16);
+    if (_mm256_movemask_pd(bad))
+      for (size_t q = i; q < i + 8; q++) key[q] = (uint16_t)key_by_lines(j, p[q].x, p[q].y);
+  }
   for (; i + 4 <= m; i += 4) {
     __m256d a = _mm256_loadu_pd(&p[i].x), b = _mm256_loadu_pd(&p[i + 2].x);
     __m256d ta = _mm256_mul_pd(_mm256_sub_pd(a, o), sc),
