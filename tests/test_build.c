@@ -148,7 +148,7 @@ static void test_build_threads_adversarial(void **state) {
     qk_tree_options_t o;
     qk_tree_options_init(&o);
     o.capacity = capacity[k];
-    o.max_depth = 24;
+    o.max_depth = 12;
     o.threads = 1;
     qk_tree_t *one = NULL;
     assert_int_equal(qk_tree_build(p, n, &o, &one), QK_OK);
