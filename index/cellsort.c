@@ -5,14 +5,15 @@
  * number into the tree's point arrays. The cell number's base-4 digits are the quadrants
  * (NE=0, NW=1, SW=2, SE=3), so cell order is the tree's pre-order.
  *
- * The passes, each split over threads (shares of the input, or jobs taken from a counter):
- *  1. keys: the cell number of every point (2L bits) and, per share, a histogram of its
- *     high digit (at most 7 bits: 128 coarse buckets);
- *  2. scatter: each point with its id and cell as a 24-byte record into its coarse bucket,
- *     through a write-combining buffer per bucket (whole cache lines, non-temporal for
- *     large inputs);
- *  3. per coarse bucket (a job each): a histogram of the low digit, the fine buckets' slot
- *     ranges, and the records' coordinates and ids sorted by it into staging arrays in
+ * Two passes over the points, each split over threads (shares of the input, or jobs taken
+ * from a counter):
+ *  1. keys and scatter, one read of the input: the cell number of every point (2L bits),
+ *     counted per cell and share, and the point with its place and low digit as a 20-byte
+ *     record into its coarse bucket (high digit, at most 7 bits: 128 buckets), through a
+ *     write-combining buffer per bucket (whole cache lines, non-temporal for large
+ *     inputs) into chunk lists, which need no count beforehand;
+ *  2. per coarse bucket (a job each): the fine buckets' slot ranges from the counts, and
+ *     the records' coordinates and ids sorted by the low digit into staging arrays in
  *     cache, then copied out in order to the tree's point arrays.
  * Both digits are counting sorts that keep input order, so the points of a cell keep
  * their input order and the result is the same for any number of threads.
@@ -96,21 +97,29 @@ static void axis_tables(const double *g, unsigned L, bool north, axis_tab_t *a) 
   }
 }
 
-/* What the parallel phases of the bucketed build share. Shares of the input (passes 1 and
- * 2) cover the points qk__share_range(n, w, nw); pass 3 runs one job per coarse bucket.
- * The records of coarse bucket c written by share w form a segment of the record array;
- * segments go in the order (c, w), each starting at a multiple of WC records. */
+/* What the parallel phases of the bucketed build share. Passes 1 and 2 run on shares of
+ * the input, qk__share_range(n, w, ns); pass 3 runs one job per coarse bucket. The records
+ * of coarse bucket c written by share w form a segment of the record array; segments go in
+ * the order (c, w), each starting at a multiple of WC records, so that a bucket's records
+ * are one run of memory that the fine pass reads front to back.
+ *
+ * A record is 20 bytes: the point's coordinates, and a tag with its low digit in the low
+ * fbits bits and its place in the share above them (shares hold at most 2^(32 - fbits)
+ * points, so it fits). Byte arrays, read and written with memcpy (one move each). */
 typedef struct rec {
-  double x, y;
-  uint32_t id, key;
+  unsigned char b[20];
 } rec_t;
+_Static_assert(sizeof(rec_t) == 20, "records of 20 bytes");
 
-/* Records per write-combining buffer: 8 of 24 bytes are three cache lines. */
-#define WC 8u
-/* Most coarse buckets: their write-combining buffers (24 KB) stay in the first-level cache. */
+/* Records per write-combining buffer: 16 of 20 bytes are five cache lines. */
+#define WC 16u
+/* Most coarse buckets: their write-combining buffers take 40 KB. */
 #define MAX_COARSE_BITS 7u
-/* Most points a share stages in pass 3: 320 KB, within a core's second-level cache. */
+/* Most points a thread stages in pass 3: 320 KB, within a core's second-level cache. */
 #define STAGE_MAX 16384u
+/* Points per block of the key computation: their keys stay in the first-level cache
+ * between the loop that computes them and the one that scatters them. */
+#define BLOCK 256u
 
 typedef struct bucket_job {
   qk_tree_t *t;
@@ -121,15 +130,18 @@ typedef struct bucket_job {
   unsigned fbits;            /* bits of the low digit */
   size_t nc;                 /* coarse buckets */
   bool stream;               /* write records and points around the caches */
-  uint16_t *key;
-  rec_t *rec;         /* 64-byte aligned */
-  uint32_t *cnt;      /* nw rows of nc: records of bucket c from share w */
-  uint32_t *seg;      /* nw rows of nc: where those records start */
-  uint32_t *cbase;    /* nc + 1 coarse bucket starts in the point arrays */
-  uint32_t *cum;      /* 4^L + 1 fine bucket starts */
-  unsigned nw;        /* shares of passes 1 and 2 */
-  uint32_t stage_cap; /* points per share in the staging arrays (0: none) */
-  double *sx, *sy;    /* the staging arrays, stage_cap per share */
+  uint16_t *key;             /* every point's cell */
+  rec_t *rec;                /* 64-byte aligned */
+  uint32_t *seg;             /* ns rows of nc: where the records of (w, c) start */
+  uint32_t *cnt;             /* ns rows of nc: records of bucket c from share w */
+  uint32_t *hist;            /* ns rows of 4^L: the points of every cell by share */
+  size_t nb;                 /* cells, 4^L */
+  uint32_t *cbase;           /* nc + 1 coarse bucket starts in the point arrays */
+  uint32_t *cum;             /* 4^L + 1 fine bucket starts */
+  unsigned nw;               /* threads */
+  unsigned ns;               /* shares of pass 1, at least nw */
+  uint32_t stage_cap;        /* points per thread in the staging arrays (0: none) */
+  double *sx, *sy;           /* the staging arrays, stage_cap per thread */
   qk_id_t *sid;
   double near;   /* the scaling's error bound, in grid units */
   uint32_t even; /* the even bits of a key */
@@ -147,10 +159,6 @@ static inline uint32_t key_by_lines(const bucket_job_t *j, double x, double y) {
 }
 
 #if QK__CELL_AVX2
-/* Points per block of the AVX2 key pass: their keys stay in the first-level cache between
- * the loop that computes them and the one that counts them. */
-#define BLOCK 256u
-
 /* The keys of m points, four at a time. A scaled coordinate whose fraction lies at least
  * `near` (the error bound of the scaling and of the grid lines, in grid units) from a
  * whole number is strictly between the lines of its truncation: its cell is that, and its
@@ -165,6 +173,48 @@ __attribute__((target("avx2"))) static void keys_avx2(const bucket_job_t *j, con
                 m1 = _mm256_set1_epi32(0x5555), even = _mm256_set1_epi32((int)j->even);
   const __m256i pick = _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7);
   size_t i = 0;
+  /* Eight points a step: their 16 cell numbers packed to 16 bits in one register are spread
+   * at once; each 32-bit lane then holds a point's east bits (low half) and north bits
+   * (high half). */
+  const __m256i w4 = _mm256_set1_epi16(0x0f0f), w2 = _mm256_set1_epi16(0x3333),
+                w1 = _mm256_set1_epi16(0x5555), low = _mm256_set1_epi32(0xffff);
+  const __m256i order = _mm256_setr_epi32(0, 1, 4, 5, 2, 3, 6, 7);
+  for (; i + 8 <= m; i += 8) {
+    __m256d t0 = _mm256_mul_pd(_mm256_sub_pd(_mm256_loadu_pd(&p[i].x), o), sc);
+    __m256d t1 = _mm256_mul_pd(_mm256_sub_pd(_mm256_loadu_pd(&p[i + 2].x), o), sc);
+    __m256d t2 = _mm256_mul_pd(_mm256_sub_pd(_mm256_loadu_pd(&p[i + 4].x), o), sc);
+    __m256d t3 = _mm256_mul_pd(_mm256_sub_pd(_mm256_loadu_pd(&p[i + 6].x), o), sc);
+    __m128i i0 = _mm256_cvttpd_epi32(t0), i1 = _mm256_cvttpd_epi32(t1);
+    __m128i i2 = _mm256_cvttpd_epi32(t2), i3 = _mm256_cvttpd_epi32(t3);
+    __m256d f0 = _mm256_sub_pd(t0, _mm256_cvtepi32_pd(i0));
+    __m256d f1 = _mm256_sub_pd(t1, _mm256_cvtepi32_pd(i1));
+    __m256d f2 = _mm256_sub_pd(t2, _mm256_cvtepi32_pd(i2));
+    __m256d f3 = _mm256_sub_pd(t3, _mm256_cvtepi32_pd(i3));
+    __m256d bad = _mm256_or_pd(
+        _mm256_or_pd(
+            _mm256_or_pd(_mm256_cmp_pd(f0, lo, _CMP_LT_OQ), _mm256_cmp_pd(f0, hi, _CMP_GT_OQ)),
+            _mm256_or_pd(_mm256_cmp_pd(f1, lo, _CMP_LT_OQ), _mm256_cmp_pd(f1, hi, _CMP_GT_OQ))),
+        _mm256_or_pd(
+            _mm256_or_pd(_mm256_cmp_pd(f2, lo, _CMP_LT_OQ), _mm256_cmp_pd(f2, hi, _CMP_GT_OQ)),
+            _mm256_or_pd(_mm256_cmp_pd(f3, lo, _CMP_LT_OQ), _mm256_cmp_pd(f3, hi, _CMP_GT_OQ))));
+    /* 32-bit lanes: points 0 1 2 3 (x, y each) and 4 5 6 7; packed to 16 bits: points
+     * 0 1 4 5 in the low 128 bits, 2 3 6 7 in the high */
+    __m256i a = _mm256_inserti128_si256(_mm256_castsi128_si256(i0), i1, 1);
+    __m256i c = _mm256_inserti128_si256(_mm256_castsi128_si256(i2), i3, 1);
+    __m256i v = _mm256_packus_epi32(a, c);
+    v = _mm256_and_si256(_mm256_or_si256(v, _mm256_slli_epi16(v, 4)), w4);
+    v = _mm256_and_si256(_mm256_or_si256(v, _mm256_slli_epi16(v, 2)), w2);
+    v = _mm256_and_si256(_mm256_or_si256(v, _mm256_slli_epi16(v, 1)), w1);
+    __m256i n = _mm256_srli_epi32(v, 16);
+    __m256i k = _mm256_and_si256(
+        _mm256_xor_si256(_mm256_xor_si256(v, n), _mm256_slli_epi32(_mm256_xor_si256(n, even), 1)),
+        low);
+    k = _mm256_permutevar8x32_epi32(k, order);
+    __m128i k16 = _mm_packus_epi32(_mm256_castsi256_si128(k), _mm256_extracti128_si256(k, 1));
+    _mm_storeu_si128((__m128i *)(void *)&key[i], k16);
+    if (_mm256_movemask_pd(bad))
+      for (size_t q = i; q < i + 8; q++) key[q] = (uint16_t)key_by_lines(j, p[q].x, p[q].y);
+  }
   for (; i + 4 <= m; i += 4) {
     __m256d a = _mm256_loadu_pd(&p[i].x), b = _mm256_loadu_pd(&p[i + 2].x);
     __m256d ta = _mm256_mul_pd(_mm256_sub_pd(a, o), sc),
@@ -193,104 +243,166 @@ __attribute__((target("avx2"))) static void keys_avx2(const bucket_job_t *j, con
 }
 #endif
 
-/* Pass 1: every point's cell, and this share's count per coarse bucket. The job's fields
- * are copied to locals: the stores to key[] and h[] could otherwise alias them. */
-static void keys_share(void *ctx, unsigned w, unsigned nw) {
-  const bucket_job_t *j = ctx;
-  size_t lo, hi;
-  qk__share_range(j->n, w, nw, &lo, &hi);
-  uint32_t *h = j->cnt + (size_t)w * j->nc;
-  const qk_point_t *p = j->p;
-  uint16_t *key = j->key;
-  const axis_tab_t *ax = j->ax, *ay = j->ay;
-  const unsigned fbits = j->fbits;
+/* The keys of m points (m <= BLOCK). */
+static void keys_block(const bucket_job_t *j, const qk_point_t *p, size_t m, uint16_t *key) {
 #if QK__CELL_AVX2
   if (j->avx2) {
-    for (size_t i0 = lo; i0 < hi; i0 += BLOCK) {
-      size_t m = hi - i0 < BLOCK ? hi - i0 : BLOCK;
-      keys_avx2(j, p + i0, m, key + i0);
-      size_t i = i0, e = i0 + m;
-      for (; i + 4 <= e; i += 4) {
-        h[key[i] >> fbits]++;
-        h[key[i + 1] >> fbits]++;
-        h[key[i + 2] >> fbits]++;
-        h[key[i + 3] >> fbits]++;
-      }
-      for (; i < e; i++) h[key[i] >> fbits]++;
-    }
+    keys_avx2(j, p, m, key);
     return;
   }
 #endif
 #if defined(__SSE2__)
   /* Both axes at once: scale, truncate, and compare with the two lines of each guess. */
   const __m128d o = _mm_setr_pd(j->x0, j->y0), sc = _mm_set1_pd(j->scale);
-  for (size_t i = lo; i < hi; i++) {
+  const axis_tab_t *ax = j->ax, *ay = j->ay;
+  for (size_t i = 0; i < m; i++) {
     __m128d v = _mm_loadu_pd(&p[i].x);
     __m128i c = _mm_cvttpd_epi32(_mm_mul_pd(_mm_sub_pd(v, o), sc));
     uint32_t cx = (uint32_t)_mm_cvtsi128_si32(c), cy = (uint32_t)_mm_extract_epi16(c, 2);
     int mx = _mm_movemask_pd(_mm_cmpgt_pd(_mm_unpacklo_pd(v, v), _mm_loadu_pd(ax->line[cx])));
     int my = _mm_movemask_pd(_mm_cmpgt_pd(_mm_unpackhi_pd(v, v), _mm_loadu_pd(ay->line[cy])));
-    uint32_t k = (uint32_t)(ax->dig[4 * cx + (uint32_t)mx] ^ ay->dig[4 * cy + (uint32_t)my]);
-    key[i] = (uint16_t)k;
-    h[k >> fbits]++;
+    key[i] = (uint16_t)(ax->dig[4 * cx + (uint32_t)mx] ^ ay->dig[4 * cy + (uint32_t)my]);
   }
 #else
-  const double x0 = j->x0, y0 = j->y0, scale = j->scale;
-  for (size_t i = lo; i < hi; i++) {
-    double x = p[i].x, y = p[i].y;
-    uint32_t cx = (uint32_t)((x - x0) * scale), cy = (uint32_t)((y - y0) * scale);
-    uint32_t mx = (uint32_t)(x > ax->line[cx][0]) | (uint32_t)(x > ax->line[cx][1]) << 1;
-    uint32_t my = (uint32_t)(y > ay->line[cy][0]) | (uint32_t)(y > ay->line[cy][1]) << 1;
-    uint32_t k = (uint32_t)(ax->dig[4 * cx + mx] ^ ay->dig[4 * cy + my]);
-    key[i] = (uint16_t)k;
-    h[k >> fbits]++;
-  }
+  for (size_t i = 0; i < m; i++) key[i] = (uint16_t)key_by_lines(j, p[i].x, p[i].y);
 #endif
 }
 
-/* Pass 2: the records into their coarse buckets' segments, stable. With `stream`, each
- * bucket's records gather in a buffer of WC (three cache lines) that goes to memory whole,
- * with non-temporal stores: no line of the record array is read before it is written,
- * and 2^7 buffers, unlike 2^7 scattered write streams, stay in cache. */
-static void scatter_share(void *ctx, unsigned w, unsigned nw) {
+/* Write one write-combining buffer's worth (WC records, whole cache lines at a 64-byte
+ * aligned place) around the caches, or through them. */
+static void flush_wc(rec_t *d, const rec_t *s, bool stream) {
+#if defined(__SSE2__)
+  if (stream) {
+    __m128i *o = (__m128i *)(void *)d;
+    const __m128i *i = (const __m128i *)(const void *)s;
+    /* five lines of four stores each, unrolled by hand (compilers keep a loop of 20) */
+    for (unsigned q = 0; q < WC * sizeof(rec_t) / 16; q += 4) {
+      __m128i a = i[q], b = i[q + 1], c = i[q + 2], e = i[q + 3];
+      _mm_stream_si128(o + q, a);
+      _mm_stream_si128(o + q + 1, b);
+      _mm_stream_si128(o + q + 2, c);
+      _mm_stream_si128(o + q + 3, e);
+    }
+    return;
+  }
+#else
+  (void)stream;
+#endif
+  memcpy(d, s, WC * sizeof *d);
+}
+
+/* Pass 1 for share w: every point's cell, and the share's count of every cell and of
+ * every coarse bucket. */
+static void keys_job(unsigned w, unsigned thread, void *ctx) {
+  (void)thread;
   const bucket_job_t *j = ctx;
   size_t lo, hi;
-  qk__share_range(j->n, w, nw, &lo, &hi);
+  qk__share_range(j->n, w, j->ns, &lo, &hi);
+  uint32_t *h = j->hist + (size_t)w * j->nb;
+  const qk_point_t *p = j->p;
+  uint16_t *key = j->key;
+  memset(h, 0, j->nb * sizeof *h);
+  for (size_t i0 = lo; i0 < hi; i0 += BLOCK) {
+    size_t m = hi - i0 < BLOCK ? hi - i0 : BLOCK;
+    const uint16_t *k = key + i0;
+    keys_block(j, p + i0, m, key + i0);
+    size_t q = 0;
+    for (; q + 4 <= m; q += 4) {
+      h[k[q]]++;
+      h[k[q + 1]]++;
+      h[k[q + 2]]++;
+      h[k[q + 3]]++;
+    }
+    for (; q < m; q++) h[k[q]]++;
+  }
+  const size_t nc = j->nc, nf = (size_t)1 << j->fbits;
+  for (size_t c = 0; c < nc; c++) {
+    uint32_t k = 0;
+    for (size_t f = 0; f < nf; f++) k += h[c * nf + f];
+    j->cnt[(size_t)w * nc + c] = k;
+  }
+}
+
+/* Pass 2 for share w: the points as records into their coarse buckets' segments, stable.
+ * Each bucket's records gather in a buffer of WC (five cache lines) that goes to memory
+ * whole, with non-temporal stores for large inputs: no line of the record array is read
+ * before it is written, and 2^7 buffers, unlike 2^7 scattered write streams, stay in
+ * cache. */
+static void scatter_job(unsigned w, unsigned thread, void *ctx) {
+  (void)thread;
+  const bucket_job_t *j = ctx;
+  size_t lo, hi;
+  qk__share_range(j->n, w, j->ns, &lo, &hi);
   const size_t nc = j->nc;
-  uint32_t next[1u << MAX_COARSE_BITS];
-  memcpy(next, j->seg + (size_t)w * nc, nc * sizeof *next);
   const qk_point_t *p = j->p;
   const uint16_t *key = j->key;
   rec_t *rec = j->rec;
   const unsigned fbits = j->fbits;
-#if defined(__SSE2__)
-  if (j->stream) {
-    _Alignas(64) rec_t buf[(1u << MAX_COARSE_BITS) * WC];
-    uint8_t fill[1u << MAX_COARSE_BITS];
-    memset(fill, 0, nc);
-    for (size_t i = lo; i < hi; i++) {
-      uint32_t k = key[i], c = k >> fbits, f = fill[c];
-      rec_t *b = &buf[c * WC];
-      b[f] = (rec_t){p[i].x, p[i].y, (uint32_t)i, k};
-      if (++f == WC) {
-        /* next[c] is a multiple of WC and the array 64-byte aligned: whole lines. */
-        __m128i *d = (__m128i *)(void *)&rec[next[c]];
-        const __m128i *s = (const __m128i *)(const void *)b;
-        for (unsigned q = 0; q < WC * sizeof(rec_t) / 16; q++) _mm_stream_si128(d + q, s[q]);
-        next[c] += WC;
-        f = 0;
-      }
-      fill[c] = (uint8_t)f;
+  const uint32_t mask = (1u << fbits) - 1;
+  const bool stream = j->stream;
+  uint32_t next[1u << MAX_COARSE_BITS]; /* where bucket c's next buffer goes */
+  /* where bucket c's next record goes in buf, in bytes, and where its buffer ends */
+  uint16_t off[1u << MAX_COARSE_BITS], end[1u << MAX_COARSE_BITS];
+  _Alignas(64) rec_t buf[(1u << MAX_COARSE_BITS) * WC];
+  _Alignas(16) uint32_t tag[BLOCK];
+  _Alignas(16) uint8_t cb[BLOCK];
+  for (size_t c = 0; c < nc; c++) {
+    next[c] = j->seg[(size_t)w * nc + c];
+    off[c] = (uint16_t)(c * WC * sizeof(rec_t));
+    end[c] = (uint16_t)((c + 1) * WC * sizeof(rec_t));
+  }
+  unsigned char *bytes = buf[0].b;
+  for (size_t i0 = lo; i0 < hi; i0 += BLOCK) {
+    size_t m = hi - i0 < BLOCK ? hi - i0 : BLOCK;
+    const uint16_t *k = key + i0;
+    /* The block's buckets and tags in a loop of their own (the compiler vectorises it),
+     * so that the scatter loop does little more than copy. */
+    uint32_t tq = (uint32_t)(i0 - lo) << fbits;
+    const uint32_t step = 1u << fbits;
+    for (size_t q = 0; q < m; q++, tq += step) {
+      cb[q] = (uint8_t)(k[q] >> fbits);
+      tag[q] = tq | (k[q] & mask);
     }
-    for (size_t c = 0; c < nc; c++) memcpy(&rec[next[c]], &buf[c * WC], fill[c] * sizeof *rec);
-    _mm_sfence(); /* the streamed lines before anything the caller does next */
-    return;
+    for (size_t q = 0; q < m; q++) {
+      uint32_t c = cb[q], o = off[c];
+      memcpy(bytes + o, &p[i0 + q], 16);
+      memcpy(bytes + o + 16, &tag[q], 4);
+      o += (uint32_t)sizeof(rec_t);
+      if (o == end[c]) {
+        /* next[c] is a multiple of WC and the array 64-byte aligned: whole lines */
+        o -= WC * (uint32_t)sizeof(rec_t);
+        flush_wc(&rec[next[c]], (const rec_t *)(const void *)(bytes + o), stream);
+        next[c] += WC;
+      }
+      off[c] = (uint16_t)o;
+    }
   }
+  for (size_t c = 0; c < nc; c++) {
+    uint32_t fill = (uint32_t)(off[c] - c * WC * sizeof(rec_t)) / (uint32_t)sizeof(rec_t);
+    memcpy(&rec[next[c]], &buf[c * WC], fill * sizeof *rec);
+  }
+#if defined(__SSE2__)
+  if (stream) _mm_sfence(); /* the streamed lines before anything the caller does next */
 #endif
-  for (size_t i = lo; i < hi; i++) {
-    uint32_t k = key[i];
-    rec[next[k >> fbits]++] = (rec_t){p[i].x, p[i].y, (uint32_t)i, k};
-  }
+}
+
+static void keys_share(void *ctx, unsigned w, unsigned nw) {
+  (void)nw;
+  keys_job(w, w, ctx);
+}
+
+static void scatter_share(void *ctx, unsigned w, unsigned nw) {
+  (void)nw;
+  scatter_job(w, w, ctx);
+}
+
+/* Run a pass over the shares: share w on thread w when there are as many, else as jobs. */
+static void run_pass(const bucket_job_t *j, qk__share_fn share,
+                     void (*job)(unsigned, unsigned, void *)) {
+  if (j->ns == j->nw) /* not two shares on a thread that happened to start first */
+    qk__run_shares(j->nw, share, (void *)j);
+  else
+    qk__run_jobs_dynamic(j->nw, j->ns, job, (void *)j);
 }
 
 #if QK__CELL_AVX2
@@ -349,10 +461,10 @@ static void copy_out(void *dst, const void *src, size_t bytes, bool stream, bool
 }
 
 /* Pass 3: coarse bucket c sorted by its low digit into the point arrays, stable, and its
- * fine buckets' starts. The sort writes all over the bucket's slot range; when the range
- * fits the share's staging arrays, it writes there (in cache, reused from bucket to
- * bucket) and the range is then copied out in order, so that the point arrays are written
- * front to back rather than line by line at random. */
+ * fine buckets' starts from the shares' counts of pass 1. The sort writes all over the bucket's
+ * slot range; when the range fits the share's staging arrays, it writes there (in cache, reused
+ * from bucket to bucket) and the range is then copied out in order, so that the point arrays are
+ * written front to back rather than line by line at random. */
 static void fine_job(unsigned c, unsigned w, void *ud) {
   const bucket_job_t *j = ud;
   const size_t nc = j->nc;
@@ -360,12 +472,12 @@ static void fine_job(unsigned c, unsigned w, void *ud) {
   const unsigned fbits = j->fbits;
   const uint32_t nf = 1u << fbits, mask = nf - 1;
   uint32_t next[1u << (16 - MAX_COARSE_BITS)];
-  memset(next, 0, nf * sizeof *next);
-  const rec_t *rec = j->rec;
-  for (unsigned v = 0; v < j->nw; v++) {
-    const rec_t *r = rec + j->seg[(size_t)v * nc + c], *e = r + j->cnt[(size_t)v * nc + c];
-    for (; r < e; r++) next[r->key & mask]++;
+  memcpy(next, j->hist + (size_t)c * nf, nf * sizeof *next);
+  for (unsigned v = 1; v < j->ns; v++) {
+    const uint32_t *h = j->hist + (size_t)v * j->nb + (size_t)c * nf;
+    for (uint32_t f = 0; f < nf; f++) next[f] += h[f];
   }
+  const rec_t *rec = j->rec;
   uint32_t *cum = j->cum + (size_t)c * nf, acc = a;
   for (uint32_t f = 0; f < nf; f++) {
     uint32_t k = next[f];
@@ -378,25 +490,33 @@ static void fine_job(unsigned c, unsigned w, void *ud) {
   double *px = staged ? j->sx + (size_t)w * j->stage_cap : j->t->px;
   double *py = staged ? j->sy + (size_t)w * j->stage_cap : j->t->py;
   qk_id_t *pid = staged ? j->sid + (size_t)w * j->stage_cap : j->t->pid;
-  for (unsigned v = 0; v < j->nw; v++) {
+  for (unsigned v = 0; v < j->ns; v++) {
+    size_t lo, hi;
+    qk__share_range(j->n, v, j->ns, &lo, &hi);
+    const uint32_t id0 = (uint32_t)lo;
     const rec_t *r = rec + j->seg[(size_t)v * nc + c], *e = r + j->cnt[(size_t)v * nc + c];
     /* Two records a step: the second's slot is taken after the first's, as one at a time
      * would (they may share a fine bucket). */
     for (; r + 2 <= e; r += 2) {
-      uint32_t d = next[r[0].key & mask]++;
-      px[d] = r[0].x;
-      py[d] = r[0].y;
-      pid[d] = r[0].id;
-      uint32_t d1 = next[r[1].key & mask]++;
-      px[d1] = r[1].x;
-      py[d1] = r[1].y;
-      pid[d1] = r[1].id;
+      uint32_t g0, g1;
+      memcpy(&g0, r[0].b + 16, 4);
+      memcpy(&g1, r[1].b + 16, 4);
+      uint32_t d = next[g0 & mask]++;
+      memcpy(&px[d], r[0].b, 8);
+      memcpy(&py[d], r[0].b + 8, 8);
+      pid[d] = id0 + (g0 >> fbits);
+      uint32_t d1 = next[g1 & mask]++;
+      memcpy(&px[d1], r[1].b, 8);
+      memcpy(&py[d1], r[1].b + 8, 8);
+      pid[d1] = id0 + (g1 >> fbits);
     }
     if (r < e) {
-      uint32_t d = next[r->key & mask]++;
-      px[d] = r->x;
-      py[d] = r->y;
-      pid[d] = r->id;
+      uint32_t g;
+      memcpy(&g, r->b + 16, 4);
+      uint32_t d = next[g & mask]++;
+      memcpy(&px[d], r->b, 8);
+      memcpy(&py[d], r->b + 8, 8);
+      pid[d] = id0 + (g >> fbits);
     }
   }
   if (staged) {
@@ -411,24 +531,25 @@ static void fine_job(unsigned c, unsigned w, void *ud) {
 
 /* The temporary arrays of the bucketed build. */
 typedef struct scratch {
-  uint32_t *cum, *cbase, *cnt, *seg;
+  uint32_t *cum, *cbase, *cnt, *seg, *hist;
   uint16_t *key;
   void *rec_block; /* rec, before alignment */
   double *sx, *sy;
   qk_id_t *sid;
-  size_t nb, nc, n, nw, n_rec, ns;
+  size_t nb, nc, n, ns, n_rec, rec_bytes, n_stage;
 } scratch_t;
 
 static void scratch_free(const qk_tree_t *t, scratch_t *s) {
   qk__free(&t->alloc, s->cum, (s->nb + 1) * sizeof *s->cum);
   qk__free(&t->alloc, s->cbase, (s->nc + 1) * sizeof *s->cbase);
-  qk__free(&t->alloc, s->cnt, s->nw * s->nc * sizeof *s->cnt);
-  qk__free(&t->alloc, s->seg, s->nw * s->nc * sizeof *s->seg);
+  qk__free(&t->alloc, s->cnt, s->ns * s->nc * sizeof *s->cnt);
+  qk__free(&t->alloc, s->seg, s->ns * s->nc * sizeof *s->seg);
+  qk__free(&t->alloc, s->hist, s->ns * s->nb * sizeof *s->hist);
   qk__free(&t->alloc, s->key, s->n * sizeof *s->key);
-  qk__free(&t->alloc, s->rec_block, s->n_rec * sizeof(rec_t) + 64);
-  qk__free(&t->alloc, s->sx, s->ns * sizeof *s->sx);
-  qk__free(&t->alloc, s->sy, s->ns * sizeof *s->sy);
-  qk__free(&t->alloc, s->sid, s->ns * sizeof *s->sid);
+  qk__free(&t->alloc, s->rec_block, s->rec_bytes);
+  qk__free(&t->alloc, s->sx, s->n_stage * sizeof *s->sx);
+  qk__free(&t->alloc, s->sy, s->n_stage * sizeof *s->sy);
+  qk__free(&t->alloc, s->sid, s->n_stage * sizeof *s->sid);
   memset(s, 0, sizeof *s);
 }
 
@@ -456,39 +577,45 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
   if (cbits > MAX_COARSE_BITS) cbits = MAX_COARSE_BITS;
   unsigned fbits = kbits - cbits;
   size_t nb = (size_t)1 << kbits, nc = (size_t)1 << cbits;
+  /* Shares: one per thread, and more where a share would have more than 2^19 points. A tag
+   * numbers 2^(32 - fbits) >= 2^23 points; the lower bound also has every input of more than
+   * 2^19 points (the tests' too) sorted in several shares, on any number of threads. */
+  size_t per = (size_t)1 << 19, ns = (n + per - 1) / per;
+  if (ns < nw) ns = nw;
   scratch_t s = {0};
-  s.nb = nb, s.nc = nc, s.n = n, s.nw = nw;
+  s.nb = nb, s.nc = nc, s.n = n, s.ns = ns;
   s.cum = qk__realloc(&t->alloc, NULL, 0, (nb + 1) * sizeof *s.cum);
   s.cbase = qk__realloc(&t->alloc, NULL, 0, (nc + 1) * sizeof *s.cbase);
-  s.cnt = qk__realloc(&t->alloc, NULL, 0, nw * nc * sizeof *s.cnt);
-  s.seg = qk__realloc(&t->alloc, NULL, 0, nw * nc * sizeof *s.seg);
+  s.cnt = qk__realloc(&t->alloc, NULL, 0, ns * nc * sizeof *s.cnt);
+  s.seg = qk__realloc(&t->alloc, NULL, 0, ns * nc * sizeof *s.seg);
+  s.hist = qk__realloc(&t->alloc, NULL, 0, ns * nb * sizeof *s.hist);
   s.key = qk__realloc(&t->alloc, NULL, 0, n * sizeof *s.key);
-  if (!s.cum || !s.cbase || !s.cnt || !s.seg || !s.key) {
+  if (!s.cum || !s.cbase || !s.cnt || !s.seg || !s.hist || !s.key) {
     scratch_free(t, &s);
     return QK_ERR_NOMEM;
   }
-  memset(s.cnt, 0, nw * nc * sizeof *s.cnt);
   /* Large inputs go around the caches: their records and points would not stay there. */
   bool stream = n >= ((size_t)1 << 19);
   bucket_job_t j = {0};
   j.t = t, j.p = p, j.n = n, j.x0 = x0, j.y0 = y0, j.scale = scale;
   j.ax = &tabs[0], j.ay = &tabs[1], j.fbits = fbits, j.nc = nc, j.stream = stream;
-  j.key = s.key, j.cnt = s.cnt, j.seg = s.seg, j.cbase = s.cbase, j.cum = s.cum, j.nw = nw;
+  j.key = s.key, j.hist = s.hist, j.nb = nb, j.seg = s.seg;
+  j.cnt = s.cnt, j.cbase = s.cbase, j.cum = s.cum, j.nw = nw, j.ns = (unsigned)ns;
   j.near = delta;
   j.even = (uint32_t)qk__spread16((1u << L) - 1);
 #if QK__CELL_AVX2
   j.avx2 = __builtin_cpu_supports("avx2");
 #endif
-  qk__run_shares(nw, keys_share, &j);
-  /* Coarse bucket starts, and each share's segment of every bucket: the shares before it
+  run_pass(&j, keys_share, keys_job);
+  /* The buckets' starts, and each share's segment of every bucket: the shares before it
    * come first, so the order is the one thread's. Segments start at multiples of WC. */
   uint32_t acc = 0, most = 0;
   size_t at = 0;
   for (size_t c = 0; c < nc; c++) {
     s.cbase[c] = acc;
-    for (unsigned w = 0; w < nw; w++) {
-      uint32_t k = s.cnt[(size_t)w * nc + c];
-      s.seg[(size_t)w * nc + c] = (uint32_t)at;
+    for (size_t w = 0; w < ns; w++) {
+      uint32_t k = s.cnt[w * nc + c];
+      s.seg[w * nc + c] = (uint32_t)at;
       at += (k + WC - 1) / WC * WC;
       acc += k;
     }
@@ -497,7 +624,21 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
   s.cbase[nc] = acc;
   s.cum[nb] = acc;
   s.n_rec = at ? at : 1;
-  s.rec_block = qk__realloc(&t->alloc, NULL, 0, s.n_rec * sizeof(rec_t) + 64);
+  /* From the default allocator, the record block is asked for at least as large as the
+   * rest of what a build holds (the tree's point arrays and nodes by estimate, the keys,
+   * the counts) and a megabyte. glibc's malloc gives the top of its heap back to the
+   * system when a free leaves more there than twice the largest block it recently had to
+   * map: freeing a tree after a build whose largest block were less than half of it all
+   * would hand back every page, and the next build would fault them all in again (10,000
+   * faults for 1M points). The excess is never touched: address space, not memory. Blocks
+   * over 32 MB are mapped afresh whatever their size (glibc's largest mapping threshold). */
+  s.rec_bytes = s.n_rec * sizeof(rec_t) + 64;
+  if (!t->alloc.fn) {
+    size_t rest = n * (2 * sizeof(double) + sizeof(qk_id_t) + sizeof *s.key) + ns * nb * 4 +
+                  (4 * (n / t->capacity) + 64) * sizeof(qk__node_t) + ((size_t)1 << 20);
+    if (s.rec_bytes < rest && rest <= ((size_t)32 << 20)) s.rec_bytes = rest;
+  }
+  s.rec_block = qk__realloc(&t->alloc, NULL, 0, s.rec_bytes);
   if (!s.rec_block) {
     scratch_free(t, &s);
     return QK_ERR_NOMEM;
@@ -505,16 +646,16 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
   /* The scatter writes 2^7 streams at once: on huge pages, they need fewer TLB entries. */
   if (t->huge_pages) qk__advise_huge(&t->alloc, s.rec_block, s.n_rec * sizeof(rec_t) + 64);
   j.rec = (rec_t *)(void *)((unsigned char *)s.rec_block + (-(uintptr_t)s.rec_block & 63u));
-  qk__run_shares(nw, scatter_share, &j);
-  /* Staging arrays for pass 3, each share's as large as the largest coarse bucket up to
-   * STAGE_MAX points. */
+  run_pass(&j, scatter_share, scatter_job);
   qk__free(&t->alloc, s.key, n * sizeof *s.key);
   s.key = NULL;
+  /* Staging arrays for pass 3, each thread's as large as the largest coarse bucket up to
+   * STAGE_MAX points. */
   size_t cap = most < STAGE_MAX ? most : STAGE_MAX;
-  s.ns = nw * cap;
-  s.sx = qk__realloc(&t->alloc, NULL, 0, s.ns * sizeof *s.sx);
-  s.sy = qk__realloc(&t->alloc, NULL, 0, s.ns * sizeof *s.sy);
-  s.sid = qk__realloc(&t->alloc, NULL, 0, s.ns * sizeof *s.sid);
+  s.n_stage = nw * cap;
+  s.sx = qk__realloc(&t->alloc, NULL, 0, s.n_stage * sizeof *s.sx);
+  s.sy = qk__realloc(&t->alloc, NULL, 0, s.n_stage * sizeof *s.sy);
+  s.sid = qk__realloc(&t->alloc, NULL, 0, s.n_stage * sizeof *s.sid);
   if (!s.sx || !s.sy || !s.sid) {
     scratch_free(t, &s);
     return QK_ERR_NOMEM;

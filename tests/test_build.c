@@ -4,6 +4,11 @@
  * and one ulp after every grid line, mixed with uniform ones, in a unit root and in an
  * offset, scaled one, must give the same tree as inserting them one by one (the book's
  * definition), on one thread and on two.
+ *
+ * The threaded build on inputs that load its buckets unevenly (all points equal, a few
+ * duplicated locations, points on dyadic grid lines, half of them in one spot, capacity
+ * 1): on two and on three threads the same tree node for node, with the same point order
+ * in every leaf, as on one.
  */
 #include <math.h>
 #include <stdlib.h>
@@ -72,9 +77,99 @@ static void test_build_deep_grid_lines(void **state) {
   free(p);
 }
 
+/* a and b are the same tree: the same nodes under the same numbers, and the same points in
+ * the same order in every leaf. */
+static void assert_identical(const qk_tree_t *a, const qk_tree_t *b) {
+  qk_tree_stats_t sa, sb;
+  qk_tree_stats(a, &sa);
+  qk_tree_stats(b, &sb);
+  assert_int_equal(sa.nodes, sb.nodes);
+  assert_int_equal(sa.leaves, sb.leaves);
+  qk_node_t stack[4 * 64];
+  int sp = 0;
+  stack[sp++] = qk_tree_root(a);
+  assert_int_equal(qk_tree_root(a), qk_tree_root(b));
+  while (sp > 0) {
+    qk_node_t v = stack[--sp];
+    qk_node_info_t ia, ib;
+    assert_int_equal(qk_tree_node_info(a, v, &ia), QK_OK);
+    assert_int_equal(qk_tree_node_info(b, v, &ib), QK_OK);
+    assert_true(ia.is_leaf == ib.is_leaf && ia.count == ib.count && ia.depth == ib.depth);
+    assert_memory_equal(ia.children, ib.children, sizeof ia.children);
+    if (!ia.is_leaf) {
+      for (int q = 3; q >= 0; q--) stack[sp++] = ia.children[q];
+      continue;
+    }
+    const double *xa, *ya, *xb, *yb;
+    const qk_id_t *da, *db;
+    size_t ca, cb;
+    qk_tree_leaf_points(a, v, &xa, &ya, &da, &ca);
+    qk_tree_leaf_points(b, v, &xb, &yb, &db, &cb);
+    assert_int_equal(ca, cb);
+    if (ca) {
+      assert_memory_equal(da, db, ca * sizeof *da);
+      assert_memory_equal(xa, xb, ca * sizeof *xa);
+      assert_memory_equal(ya, yb, ca * sizeof *ya);
+    }
+  }
+}
+
+static void test_build_threads_adversarial(void **state) {
+  (void)state;
+  uint64_t seed = qkt_seed(1202);
+  qkt_rng_t r;
+  qkt_rng_seed(&r, seed);
+  print_message("seed %llu\n", (unsigned long long)seed);
+  enum { N = 200000 }; /* three shares of 2^16 points */
+  qk_point_t *p = malloc(N * sizeof *p);
+  assert_non_null(p);
+  const uint32_t capacity[] = {1, 1, 2, 4, 1, 1, 1};
+  const size_t count[] = {N, N, N, N, N, 1, 70};
+  for (int k = 0; k < 7; k++) {
+    size_t n = count[k];
+    switch (k) {
+    case 0: /* all equal */
+      for (size_t i = 0; i < n; i++) p[i] = (qk_point_t){0.25, 0.75};
+      break;
+    case 1:
+      qkt_points(&r, QKT_DUPLICATES, p, n);
+      break;
+    case 2:
+      qkt_points(&r, QKT_GRID_EDGES, p, n);
+      break;
+    case 3: /* half in one spot, after the first share */
+      qkt_points(&r, QKT_UNIFORM, p, n);
+      for (size_t i = n / 3; i < n / 3 + n / 2; i++) p[i] = (qk_point_t){0.5, 0.5};
+      break;
+    default:
+      qkt_points(&r, QKT_UNIFORM, p, n);
+      break;
+    }
+    qk_tree_options_t o;
+    qk_tree_options_init(&o);
+    o.capacity = capacity[k];
+    o.max_depth = 12;
+    o.threads = 1;
+    qk_tree_t *one = NULL;
+    assert_int_equal(qk_tree_build(p, n, &o, &one), QK_OK);
+    QKT_CHECK_TREE(one);
+    for (uint32_t threads = 2; threads <= 3; threads++) {
+      o.threads = threads;
+      qk_tree_t *t = NULL;
+      assert_int_equal(qk_tree_build(p, n, &o, &t), QK_OK);
+      print_message("input %d, %u threads\n", k, threads);
+      assert_identical(one, t);
+      qk_tree_free(t);
+    }
+    qk_tree_free(one);
+  }
+  free(p);
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_build_deep_grid_lines),
+      cmocka_unit_test(test_build_threads_adversarial),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
