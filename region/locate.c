@@ -4,6 +4,7 @@
  * points in Morton order chunk by chunk and split the chunks over threads; each answer is
  * computed by the same code, so results depend neither on the order nor on the threads.
  */
+#include <float.h>
 #include <stdatomic.h>
 #include <string.h>
 #if defined(__SSE2__)
@@ -108,6 +109,13 @@ static ALWAYS_INLINE void descend(const qk_region_t *r, double x, double y, leaf
 /* The answer of a direct leaf. */
 static inline uint32_t direct(uint32_t k) { return (k & 0x3fffffffu) - 1u; }
 
+/* Does the box of leaf L's edges lie strictly beside the box [lox, hix] x [loy, hiy]?
+ * Then every edge does (beside()), and none is touched or crossed by a segment in it. */
+static ALWAYS_INLINE bool box_beside(const qk__leaf_t *L, double lox, double hix, double loy,
+                                     double hiy) {
+  return hix < L->ex0 || lox > L->ex1 || hiy < L->ey0 || loy > L->ey1;
+}
+
 /* Decide the features of one leaf in increasing order and hand each one that holds the
  * point to the sink; with `all` false, stop at the first. Returns how many were found
  * (and written while below cap). Inlined per rule, so the semi-open rule, which needs no
@@ -123,7 +131,9 @@ static ALWAYS_INLINE size_t leaf_features(const qk_region_t *r, const qk__leaf_t
   const qk__seg_t *segs = r->segs;
   bool same = (x == cx && y == cy);
   size_t n = 0;
-  /* (the value is evaluated whatever the room: it may advance the set) */
+  /* every edge beside the segment c-p's box: the point is on none and crosses none */
+  if (box_beside(L, qk__min(cx, x), qk__max(cx, x), qk__min(cy, y), qk__max(cy, y))) ne = 0;
+    /* (the value is evaluated whatever the room: it may advance the set) */
 #define QK__TAKE(value)                                                                            \
   do {                                                                                             \
     uint32_t taken_ = (value);                                                                     \
@@ -213,13 +223,15 @@ static ALWAYS_INLINE uint32_t leaf_first_filtered(const qk_region_t *r, const qk
   static const double sign[2] = {-1.0, 1.0};
   uint32_t ne = L->ne, ns = L->ns, s0 = L->s0;
   uint32_t s = ns ? r->sets[s0] : QK_NONE, si = 0;
-  if (ne == 0) return s;
-  const uint32_t *tag = r->le_tag + L->e0, *E = r->le + L->e0;
-  const qk__seg_t *segs = r->segs;
-  const double px = x - cx, py = y - cy;
   /* the box of the segment c-p: an edge strictly beside it cannot cross it */
   const double lox = qk__min(cx, x), hix = qk__max(cx, x);
   const double loy = qk__min(cy, y), hiy = qk__max(cy, y);
+  /* All of them beside it (often, in a leaf whose edges are a small cluster): no edge is
+   * read. (Also when ne = 0: the box is empty.) */
+  if (box_beside(L, lox, hix, loy, hiy)) return s;
+  const uint32_t *tag = r->le_tag + L->e0, *E = r->le + L->e0;
+  const qk__seg_t *segs = r->segs;
+  const double px = x - cx, py = y - cy;
   /* Most often every edge is beside that box: then nothing crosses, the point is in the
    * features of the reference point, and a tight scan (no feature bookkeeping) says so. */
   uint32_t i = 0;
@@ -278,6 +290,35 @@ uint32_t qk__region_locate1(const qk_region_t *r, double x, double y, qk_boundar
   descend(r, x, y, &c);
   if (c.k & QK__DIRECT) return direct(c.k);
   return leaf_first(r, &r->leaves[c.k & ~QK__LEAF], c.cx, c.cy, x, y, b);
+}
+
+/* A float at most v (lo) or at least v (!lo): v rounded outwards. */
+static float outward(double v, bool lo) {
+  if (v > FLT_MAX) return lo ? FLT_MAX : INFINITY;
+  if (v < -FLT_MAX) return lo ? -INFINITY : -FLT_MAX;
+  float f = (float)v;
+  if (lo && (double)f > v) return nextafterf(f, -INFINITY);
+  if (!lo && (double)f < v) return nextafterf(f, INFINITY);
+  return f;
+}
+
+void qk__region_leaf_boxes(qk_region_t *r) {
+  for (size_t l = 0; l < r->n_leaves; l++) {
+    qk__leaf_t *L = &r->leaves[l];
+    double x0 = INFINITY, y0 = INFINITY, x1 = -INFINITY, y1 = -INFINITY;
+    for (uint32_t i = 0; i < L->ne; i++) {
+      const qk__seg_t *g = &r->segs[r->le[L->e0 + i]];
+      x0 = qk__min(x0, qk__min(g->ax, g->bx)), x1 = qk__max(x1, qk__max(g->ax, g->bx));
+      y0 = qk__min(y0, qk__min(g->ay, g->by)), y1 = qk__max(y1, qk__max(g->ay, g->by));
+    }
+    if (L->ne == 0) { /* an empty box: beside everything */
+      L->ex0 = L->ey0 = INFINITY;
+      L->ex1 = L->ey1 = -INFINITY;
+    } else {
+      L->ex0 = outward(x0, true), L->ey0 = outward(y0, true);
+      L->ex1 = outward(x1, false), L->ey1 = outward(y1, false);
+    }
+  }
 }
 
 static bool bad_rule(qk_boundary_t b) {

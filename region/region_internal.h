@@ -84,6 +84,10 @@ typedef struct qk__seg {
 typedef struct qk__leaf {
   uint32_t e0, ne;
   uint32_t s0, ns;
+  /* The box of the leaf's edges, rounded outwards to floats (qk__region_leaf_boxes, after
+   * the build): a query whose segment reference point -> point lies strictly beside it
+   * crosses and touches none of them, and reads none (region/locate.c). */
+  float ex0, ey0, ex1, ey1;
 } qk__leaf_t;
 
 /* Leaf tags in the node array: kid[v] is the first child of v, or QK__LEAF | leaf, or,
@@ -340,6 +344,10 @@ qk_status_t qk__split_cell(qk__bctx_t *b, qk_node_t v, uint32_t *first);
 qk_status_t qk__child_set(qk__bctx_t *b, unsigned d, const uint32_t *odd, size_t n);
 /* The whole refinement from the root, whose set is b->s[0] (build_top.c). */
 qk_status_t qk__build_top(qk__bctx_t *b);
+
+/* Fill every leaf record's edge box (ex0 .. ey1) from its edges; after the build, once
+ * r->segs is set (region/locate.c: the query side's layout, kept there). */
+void qk__region_leaf_boxes(qk_region_t *r);
 
 /* Locate in one leaf; used by every query. */
 uint32_t qk__region_locate1(const qk_region_t *r, double x, double y, qk_boundary_t b);
