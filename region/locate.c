@@ -297,8 +297,17 @@ static float outward(double v, bool lo) {
   if (v > FLT_MAX) return lo ? FLT_MAX : INFINITY;
   if (v < -FLT_MAX) return lo ? -INFINITY : -FLT_MAX;
   float f = (float)v;
-  if (lo && (double)f > v) return nextafterf(f, -INFINITY);
-  if (!lo && (double)f < v) return nextafterf(f, INFINITY);
+  if (lo ? !((double)f > v) : !((double)f < v)) return f;
+  /* one float down (lo) or up, by its bits (nextafterf is a call, and most conversions
+   * need it on one side) */
+  if (f == 0) return lo ? -FLT_TRUE_MIN : FLT_TRUE_MIN;
+  uint32_t u;
+  memcpy(&u, &f, sizeof u);
+  if ((f > 0) == lo)
+    u--; /* towards zero */
+  else
+    u++; /* away from zero */
+  memcpy(&f, &u, sizeof f);
   return f;
 }
 
