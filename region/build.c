@@ -154,7 +154,8 @@ static size_t layer_bytes(const qk_region_t *r) {
          (r->grid_level ? ((size_t)4 << (2 * r->grid_level)) +
                               (((size_t)2 << r->grid_level) + 2) * sizeof(double)
                         : 0) +
-         (r->props.cap_start + r->props.cap_key + r->props.cap_val) * sizeof(size_t);
+         (r->props.cap_start + r->props.cap_key + r->props.cap_val) * sizeof(size_t) +
+         qk__region_pure_bytes(r);
 }
 
 qk_status_t qk__region_build(const qk_region_arrays_t *in, const qk_region_options_t *options,
@@ -243,6 +244,7 @@ qk_status_t qk__region_build(const qk_region_arrays_t *in, const qk_region_optio
   memset(b.bad, 0, in->n_rings + 1);
   st = qk__build_top(&b);
   if (!st) st = build_grid(r, b.depth);
+  if (!st) st = qk__region_pure_build(r);
 
 done:
   for (int d = 0; d <= QK__MAXD; d++) {
@@ -261,6 +263,7 @@ done:
   r->seg_feat = pc.feat;
   r->n_segs = pc.n;
   r->cap_segs = r->cap_seg_feat = pc.cap;
+  if (!st) qk__region_leaf_boxes(r);
   if (st) {
     qk_region_free(r);
     if (err && !err->message[0])

@@ -4,6 +4,7 @@
  * points in Morton order chunk by chunk and split the chunks over threads; each answer is
  * computed by the same code, so results depend neither on the order nor on the threads.
  */
+#include <float.h>
 #include <stdatomic.h>
 #include <string.h>
 #if defined(__SSE2__)
@@ -91,8 +92,8 @@ static ALWAYS_INLINE void descend(const qk_region_t *r, double x, double y, leaf
     h *= 0.5;
     double mx = sx + h, my = sy + h;
     unsigned east = x >= mx, north = y >= my;
-    /* NE 0, NW 1, SW 2, SE 3 */
-    unsigned q = north ? (east ? 0u : 1u) : (east ? 3u : 2u);
+    /* NE 0, NW 1, SW 2, SE 3, without a branch */
+    unsigned q = (north ^ 1u) << 1 | (north ^ east);
     sx = east ? mx : sx;
     sy = north ? my : sy;
     ux = east ? ux : qk__min(ux, mx);
@@ -107,6 +108,13 @@ static ALWAYS_INLINE void descend(const qk_region_t *r, double x, double y, leaf
 
 /* The answer of a direct leaf. */
 static inline uint32_t direct(uint32_t k) { return (k & 0x3fffffffu) - 1u; }
+
+/* Does the box of leaf L's edges lie strictly beside the box [lox, hix] x [loy, hiy]?
+ * Then every edge does (beside()), and none is touched or crossed by a segment in it. */
+static ALWAYS_INLINE bool box_beside(const qk__leaf_t *L, double lox, double hix, double loy,
+                                     double hiy) {
+  return hix < L->ex0 || lox > L->ex1 || hiy < L->ey0 || loy > L->ey1;
+}
 
 /* Decide the features of one leaf in increasing order and hand each one that holds the
  * point to the sink; with `all` false, stop at the first. Returns how many were found
@@ -123,7 +131,9 @@ static ALWAYS_INLINE size_t leaf_features(const qk_region_t *r, const qk__leaf_t
   const qk__seg_t *segs = r->segs;
   bool same = (x == cx && y == cy);
   size_t n = 0;
-  /* (the value is evaluated whatever the room: it may advance the set) */
+  /* every edge beside the segment c-p's box: the point is on none and crosses none */
+  if (box_beside(L, qk__min(cx, x), qk__max(cx, x), qk__min(cy, y), qk__max(cy, y))) ne = 0;
+    /* (the value is evaluated whatever the room: it may advance the set) */
 #define QK__TAKE(value)                                                                            \
   do {                                                                                             \
     uint32_t taken_ = (value);                                                                     \
@@ -213,13 +223,15 @@ static ALWAYS_INLINE uint32_t leaf_first_filtered(const qk_region_t *r, const qk
   static const double sign[2] = {-1.0, 1.0};
   uint32_t ne = L->ne, ns = L->ns, s0 = L->s0;
   uint32_t s = ns ? r->sets[s0] : QK_NONE, si = 0;
-  if (ne == 0) return s;
-  const uint32_t *tag = r->le_tag + L->e0, *E = r->le + L->e0;
-  const qk__seg_t *segs = r->segs;
-  const double px = x - cx, py = y - cy;
   /* the box of the segment c-p: an edge strictly beside it cannot cross it */
   const double lox = qk__min(cx, x), hix = qk__max(cx, x);
   const double loy = qk__min(cy, y), hiy = qk__max(cy, y);
+  /* All of them beside it (often, in a leaf whose edges are a small cluster): no edge is
+   * read. (Also when ne = 0: the box is empty.) */
+  if (box_beside(L, lox, hix, loy, hiy)) return s;
+  const uint32_t *tag = r->le_tag + L->e0, *E = r->le + L->e0;
+  const qk__seg_t *segs = r->segs;
+  const double px = x - cx, py = y - cy;
   /* Most often every edge is beside that box: then nothing crosses, the point is in the
    * features of the reference point, and a tight scan (no feature bookkeeping) says so. */
   uint32_t i = 0;
@@ -278,6 +290,133 @@ uint32_t qk__region_locate1(const qk_region_t *r, double x, double y, qk_boundar
   descend(r, x, y, &c);
   if (c.k & QK__DIRECT) return direct(c.k);
   return leaf_first(r, &r->leaves[c.k & ~QK__LEAF], c.cx, c.cy, x, y, b);
+}
+
+/* A float at most v (lo) or at least v (!lo): v rounded outwards. */
+static float outward(double v, bool lo) {
+  if (v > FLT_MAX) return lo ? FLT_MAX : INFINITY;
+  if (v < -FLT_MAX) return lo ? -INFINITY : -FLT_MAX;
+  float f = (float)v;
+  if (lo ? !((double)f > v) : !((double)f < v)) return f;
+  /* one float down (lo) or up, by its bits (nextafterf is a call, and most conversions
+   * need it on one side) */
+  if (f == 0) return lo ? -FLT_TRUE_MIN : FLT_TRUE_MIN;
+  uint32_t u;
+  memcpy(&u, &f, sizeof u);
+  if ((f > 0) == lo)
+    u--; /* towards zero */
+  else
+    u++; /* away from zero */
+  memcpy(&f, &u, sizeof f);
+  return f;
+}
+
+void qk__region_leaf_boxes(qk_region_t *r) {
+  for (size_t l = 0; l < r->n_leaves; l++) {
+    qk__leaf_t *L = &r->leaves[l];
+    double x0 = INFINITY, y0 = INFINITY, x1 = -INFINITY, y1 = -INFINITY;
+    for (uint32_t i = 0; i < L->ne; i++) {
+      const qk__seg_t *g = &r->segs[r->le[L->e0 + i]];
+      x0 = qk__min(x0, qk__min(g->ax, g->bx)), x1 = qk__max(x1, qk__max(g->ax, g->bx));
+      y0 = qk__min(y0, qk__min(g->ay, g->by)), y1 = qk__max(y1, qk__max(g->ay, g->by));
+    }
+    if (L->ne == 0) { /* an empty box: beside everything */
+      L->ex0 = L->ey0 = INFINITY;
+      L->ex1 = L->ey1 = -INFINITY;
+    } else {
+      L->ex0 = outward(x0, true), L->ey0 = outward(y0, true);
+      L->ex1 = outward(x1, false), L->ey1 = outward(y1, false);
+    }
+  }
+}
+
+/* ---- pure cells ----------------------------------------------------------------------- */
+
+/* A cell answer meaning "not one direct answer" (features are below 2^29, QK_NONE above). */
+#define MIXED (QK_NONE - 1u)
+
+/* The one answer of every leaf under node value k, or MIXED. */
+static uint32_t subtree_answer(const qk_region_t *r, uint32_t k) {
+  if (k & QK__LEAF) return (k & QK__DIRECT) ? direct(k) : MIXED;
+  uint32_t a = subtree_answer(r, r->kid[k]);
+  for (unsigned q = 1; q < 4 && a != MIXED; q++)
+    if (subtree_answer(r, r->kid[k + q]) != a) a = MIXED;
+  return a;
+}
+
+/* Fill the answers of the cells under node value k, the cell (i, j) of depth d. */
+static void cell_answers(const qk_region_t *r, uint32_t k, unsigned d, size_t i, size_t j,
+                         unsigned P, uint32_t *ans) {
+  if (d == P || (k & QK__LEAF)) {
+    uint32_t a = subtree_answer(r, k);
+    size_t w = (size_t)1 << (P - d); /* a leaf above depth P covers w x w cells */
+    for (size_t jj = j * w; jj < (j + 1) * w; jj++)
+      for (size_t ii = i * w; ii < (i + 1) * w; ii++) ans[jj << P | ii] = a;
+    return;
+  }
+  /* NE 0, NW 1, SW 2, SE 3 */
+  cell_answers(r, r->kid[k + 0], d + 1, 2 * i + 1, 2 * j + 1, P, ans);
+  cell_answers(r, r->kid[k + 1], d + 1, 2 * i, 2 * j + 1, P, ans);
+  cell_answers(r, r->kid[k + 2], d + 1, 2 * i, 2 * j, P, ans);
+  cell_answers(r, r->kid[k + 3], d + 1, 2 * i + 1, 2 * j, P, ans);
+}
+
+/*
+ * The level: 2^8 cells a side (the batch's sort cells, 64 KiB) for a layer of at least a
+ * megabyte, else one level finer than the grid (at most 2 bytes a leaf), so that the table
+ * stays a small part of the layer. A cell is pure when it lies in direct leaves of one
+ * answer: a point in it, whose descent passes through the cell's node (the cells' sides
+ * are the descent's), ends in one of those leaves, and gets that answer whatever the
+ * boundary rule (a direct leaf has no edges). `pure_eps` bounds the rounding of a point's
+ * cell coordinate (x - rx) * 2^8 / rside against the cells' sides, as computed by the
+ * descent: a point whose coordinate is farther than that from an integer is in the cell
+ * its truncation names.
+ */
+qk_status_t qk__region_pure_build(qk_region_t *r) {
+  unsigned P = r->grid_level + 1;
+  if (r->n_le * sizeof(uint32_t) * 2 + r->n_segs * sizeof(qk__seg_t) >= ((size_t)1 << 20)) P = 8;
+  if (P > 8) P = 8;
+  if (P < 3 || r->n_kid == 0) return QK_OK;
+  size_t g = (size_t)1 << P;
+  const qk_allocator_t *a = &r->alloc;
+  uint32_t *ans = qk__realloc(a, NULL, 0, g * g * sizeof *ans);
+  uint8_t *pure = qk__realloc(a, NULL, 0, g * g);
+  if (!ans || !pure) {
+    qk__free(a, ans, g * g * sizeof *ans);
+    qk__free(a, pure, g * g);
+    return QK_ERR_NOMEM;
+  }
+  cell_answers(r, r->kid[0], 0, 0, 0, P, ans);
+  unsigned n_ans = 0;
+  for (size_t j = 0; j < g; j++)
+    for (size_t i = 0; i < g; i++) {
+      uint32_t v = ans[j << P | i];
+      unsigned t = 0;
+      if (v != MIXED) {
+        while (t < n_ans && r->pure_ans[t] != v) t++;
+        if (t == n_ans && n_ans < 255) r->pure_ans[n_ans++] = v;
+        t = t < n_ans ? t + 1 : 0; /* (no room left for another answer: not pure) */
+      }
+      pure[j << P | i] = (uint8_t)t;
+    }
+  qk__free(a, ans, g * g * sizeof *ans);
+  r->pure = pure;
+  r->pure_level = P;
+  /* The sides: 8 halvings and additions from rx (each off by half an ulp of at most |rx|
+   * + rside); the coordinate: a subtraction and a product (relative errors of 2^-53).
+   * 2^-40 of the magnitudes involved, in cells, is far above their sum. */
+  r->pure_eps = (fabs(r->rx) + fabs(r->ry) + 2 * r->rside) * (256.0 / r->rside) * 0x1p-40;
+  return QK_OK;
+}
+
+size_t qk__region_pure_bytes(const qk_region_t *r) {
+  return r->pure_level ? (size_t)1 << (2 * r->pure_level) : 0;
+}
+
+void qk__region_pure_free(qk_region_t *r) {
+  if (r->pure_level) qk__free(&r->alloc, r->pure, qk__region_pure_bytes(r));
+  r->pure = NULL;
+  r->pure_level = 0;
 }
 
 static bool bad_rule(qk_boundary_t b) {
@@ -370,13 +509,6 @@ static const uint16_t spread8[256] = {
 #undef R4
 #undef R16
 
-/* A coordinate's cell of 256 along one axis of the root square, for a coordinate in the
- * query window (so not below lo). A rounded guess is enough: the order only has to be
- * good, not exact, and the one value that can come out as 256 wraps to cell 0. */
-static inline uint32_t sort_cell(double v, double lo, double scale) {
-  return (uint32_t)((v - lo) * scale) & 255u;
-}
-
 /* One pass of the radix sort: the items of `from` to `to` by the byte at `shift`. */
 static void radix_pass(const uint32_t *from, uint32_t *to, size_t m, unsigned shift,
                        uint32_t *cnt) {
@@ -399,6 +531,10 @@ static size_t sort_chunk(const qk_region_t *r, const qk_point_t *pts, size_t n, 
                          uint32_t *out, uint32_t *items, uint32_t *tmp, int *nonfinite) {
   const double scale = 256.0 / r->rside, rx = r->rx, ry = r->ry;
   const double qx0 = r->qx0, qx1 = r->qx1, qy0 = r->qy0, qy1 = r->qy1;
+  /* a point in a pure cell is answered at once (P <= 8: the pure cells are sort cells or
+   * groups of them) */
+  const uint8_t *pure = r->pure;
+  const unsigned P = r->pure_level, pshift = 8 - P;
   uint32_t cnt[2][256];
   memset(cnt, 0, sizeof cnt);
   size_t m = 0, k = 0;
@@ -407,7 +543,7 @@ static size_t sort_chunk(const qk_region_t *r, const qk_point_t *pts, size_t n, 
   const __m128d lo = _mm_set_pd(qy0, qx0), hi = _mm_set_pd(qy1, qx1);
   const __m128d tiny = _mm_set1_pd(QK_REGION_MIN_COORD), org = _mm_set_pd(ry, rx);
   const __m128d sc = _mm_set1_pd(scale), abs_mask = _mm_castsi128_pd(_mm_set1_epi64x(INT64_MAX));
-  (void)sort_cell;
+  const __m128d eps = _mm_set1_pd(r->pure_eps), eps1 = _mm_set1_pd(1.0 - r->pure_eps);
 #endif
   for (size_t i = 0; i < n; i++) {
 #if defined(__SSE2__)
@@ -418,11 +554,26 @@ static size_t sort_chunk(const qk_region_t *r, const qk_point_t *pts, size_t n, 
       tmp[n - ++k] = (uint32_t)i; /* answered below, out of this loop (which then makes no call) */
       continue;
     }
-    /* (v - lo) * scale is in [0, 256]: its 32-bit truncation is sort_cell's */
-    __m128i cell = _mm_cvttpd_epi32(_mm_mul_pd(_mm_sub_pd(p, org), sc));
-    uint32_t c = spread8[(uint32_t)_mm_cvtsi128_si32(cell) & 255u] |
-                 (uint32_t)spread8[(uint32_t)_mm_cvtsi128_si32(_mm_srli_si128(cell, 4)) & 255u]
-                     << 1;
+    /* A coordinate's cell of 256 along one axis of the root square: the point is in the
+     * query window, so (v - lo) * scale is in [0, 256]. A rounded guess is enough: the
+     * order only has to be good, not exact (the one value that can come out as 256 wraps
+     * to cell 0), and the pure cells allow for one cell of error (256 is cell 255). */
+    __m128d t = _mm_mul_pd(_mm_sub_pd(p, org), sc);
+    __m128i cell = _mm_cvttpd_epi32(t);
+    uint32_t ux = (uint32_t)_mm_cvtsi128_si32(cell);
+    uint32_t uy = (uint32_t)_mm_cvtsi128_si32(_mm_srli_si128(cell, 4));
+    if (pure) {
+      /* the fractional parts of both coordinates, farther than eps from 0 and 1 */
+      __m128d f = _mm_sub_pd(t, _mm_cvtepi32_pd(cell));
+      if (_mm_movemask_pd(_mm_and_pd(_mm_cmpgt_pd(f, eps), _mm_cmplt_pd(f, eps1))) == 3) {
+        uint8_t v = pure[(uy > 255 ? 255 : uy) >> pshift << P | (ux > 255 ? 255 : ux) >> pshift];
+        if (v) {
+          out[i] = r->pure_ans[v - 1];
+          continue;
+        }
+      }
+    }
+    uint32_t c = spread8[ux & 255u] | (uint32_t)spread8[uy & 255u] << 1;
 #else
     double x = pts[i].x, y = pts[i].y;
     if (!(x >= qx0 && x <= qx1 && y >= qy0 && y <= qy1 && fabs(x) >= QK_REGION_MIN_COORD &&
@@ -430,7 +581,20 @@ static size_t sort_chunk(const qk_region_t *r, const qk_point_t *pts, size_t n, 
       tmp[n - ++k] = (uint32_t)i; /* answered below, out of this loop (which then makes no call) */
       continue;
     }
-    uint32_t c = spread8[sort_cell(x, rx, scale)] | (uint32_t)spread8[sort_cell(y, ry, scale)] << 1;
+    double tx = (x - rx) * scale, ty = (y - ry) * scale;
+    uint32_t ux = (uint32_t)tx, uy = (uint32_t)ty;
+    if (pure) {
+      /* the fractional parts of both coordinates, farther than eps from 0 and 1 */
+      double fx = tx - ux, fy = ty - uy, eps = r->pure_eps;
+      if (fx > eps && fx < 1 - eps && fy > eps && fy < 1 - eps) {
+        uint8_t v = pure[(uy > 255 ? 255 : uy) >> pshift << P | (ux > 255 ? 255 : ux) >> pshift];
+        if (v) {
+          out[i] = r->pure_ans[v - 1];
+          continue;
+        }
+      }
+    }
+    uint32_t c = spread8[ux & 255u] | (uint32_t)spread8[uy & 255u] << 1;
 #endif
     items[m++] = c << IDX_BITS | (uint32_t)i;
     cnt[0][c & 255u]++;
@@ -454,16 +618,17 @@ static size_t sort_chunk(const qk_region_t *r, const qk_point_t *pts, size_t n, 
  * together after a prefetch of their leaf records, so that those loads overlap. */
 #define BLOCK 32
 
-static void run(const qk_region_t *r, qk_boundary_t b, const qk_point_t *pts, const uint32_t *items,
-                size_t m, uint32_t *out, int *nonfinite) {
+static ALWAYS_INLINE void run_impl(const qk_region_t *r, qk_boundary_t b, const qk_point_t *pts,
+                                   const uint32_t *items, size_t m, uint32_t *out, int *nonfinite,
+                                   bool sorted) {
   leaf_box_t c = {INFINITY, INFINITY, -INFINITY, -INFINITY, 0, 0, 0};
   uint32_t bi[BLOCK], bk[BLOCK];
   double bx[BLOCK], by[BLOCK], bcx[BLOCK], bcy[BLOCK];
   unsigned nb = 0;
   for (size_t t = 0; t < m; t++) {
-    uint32_t i = items ? items[t] & IDX_MASK : (uint32_t)t;
+    uint32_t i = sorted ? items[t] & IDX_MASK : (uint32_t)t;
     double x = pts[i].x, y = pts[i].y;
-    if (items) {
+    if (sorted) {
 #if defined(__GNUC__)
       /* the points are read out of order: ask for one a few places ahead */
       __builtin_prefetch(&pts[items[t + PREFETCH] & IDX_MASK]); /* (items are padded) */
@@ -495,6 +660,18 @@ static void run(const qk_region_t *r, qk_boundary_t b, const qk_point_t *pts, co
     out[bi[e]] = leaf_first(r, &r->leaves[bk[e] & ~QK__LEAF], bcx[e], bcy[e], bx[e], by[e], b);
 }
 
+/* run_impl for sorted items (the loop then tests nothing about the order per point). */
+static void run_sorted(const qk_region_t *r, qk_boundary_t b, const qk_point_t *pts,
+                       const uint32_t *items, size_t m, uint32_t *out) {
+  run_impl(r, b, pts, items, m, out, NULL, true);
+}
+
+/* run_impl in input order, normalising each point. */
+static void run_plain(const qk_region_t *r, qk_boundary_t b, const qk_point_t *pts, size_t m,
+                      uint32_t *out, int *nonfinite) {
+  run_impl(r, b, pts, NULL, m, out, nonfinite, false);
+}
+
 typedef struct batch {
   const qk_region_t *r;
   const qk_point_t *pts;
@@ -521,9 +698,9 @@ static void locate_share(void *ctx, unsigned w, unsigned nw) {
     uint32_t *out = bt->out + c0;
     if (items && n >= SORT_MIN) {
       size_t m = sort_chunk(bt->r, pts, n, bt->b, out, items, items + room, &nonfinite);
-      run(bt->r, bt->b, pts, items, m, out, &nonfinite);
+      run_sorted(bt->r, bt->b, pts, items, m, out);
     } else {
-      run(bt->r, bt->b, pts, NULL, n, out, &nonfinite);
+      run_plain(bt->r, bt->b, pts, n, out, &nonfinite);
     }
   }
   if (nonfinite) bt->nonfinite[w] = 1;

@@ -98,8 +98,8 @@ qk_status_t qk__emit_leaf(qk__bctx_t *b, qk_node_t v, double cx, double cy, unsi
                                                       r->n_sets + ns, sizeof(uint32_t)))))
     return st;
   if (r->n_le + ne > UINT32_MAX || r->n_sets + ns > UINT32_MAX) return QK_ERR_LIMIT;
-  r->leaves[r->n_leaves] =
-      (qk__leaf_t){(uint32_t)r->n_le, (uint32_t)ne, (uint32_t)r->n_sets, (uint32_t)ns};
+  r->leaves[r->n_leaves] = (qk__leaf_t){
+      .e0 = (uint32_t)r->n_le, .ne = (uint32_t)ne, .s0 = (uint32_t)r->n_sets, .ns = (uint32_t)ns};
   const uint32_t *E = b->e[d], *feat = pc->feat, *vtx = pc->vtx;
   const qk__seg_t *seg = pc->seg;
   uint32_t *le = r->le + r->n_le, *tag = r->le_tag + r->n_le;

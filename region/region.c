@@ -123,6 +123,7 @@ void qk_region_free(qk_region_t *r) {
   qk__free(a, r->le, r->cap_le * sizeof(uint32_t));
   qk__free(a, r->le_tag, r->cap_le_tag * sizeof(uint32_t));
   qk__free(a, r->sets, r->cap_sets * sizeof(uint32_t));
+  qk__region_pure_free(r);
   if (r->grid_level) {
     size_t g = (size_t)1 << r->grid_level;
     qk__free(a, r->grid, g * g * sizeof(uint32_t));

@@ -84,6 +84,10 @@ typedef struct qk__seg {
 typedef struct qk__leaf {
   uint32_t e0, ne;
   uint32_t s0, ns;
+  /* The box of the leaf's edges, rounded outwards to floats (qk__region_leaf_boxes, after
+   * the build): a query whose segment reference point -> point lies strictly beside it
+   * crosses and touches none of them, and reads none (region/locate.c). */
+  float ex0, ey0, ex1, ey1;
 } qk__leaf_t;
 
 /* Leaf tags in the node array: kid[v] is the first child of v, or QK__LEAF | leaf, or,
@@ -156,6 +160,15 @@ struct qk_region {
   double *gx, *gy;
   double grid_scale; /* 2^G / rside */
   double grid_side;  /* rside / 2^G */
+  /* Pure cells, for batches (qk__region_pure_build, region/locate.c): the root square
+   * cut in 2^P x 2^P cells (P = pure_level, 0: no table); pure[j << P | i] is 0, or v > 0
+   * when the cell (i, j) lies in direct leaves that all answer pure_ans[v - 1]. A batch
+   * point whose cell is pure, surely (its cell coordinates farther than pure_eps from an
+   * integer), takes that answer without a descent. */
+  unsigned pure_level;
+  uint8_t *pure;
+  double pure_eps;
+  uint32_t pure_ans[255];
   /* The query window: a point with qx0 <= x <= qx1 and qy0 <= y <= qy1 lies in the root
    * and needs no longitude wrap (the fast path of the queries' normalisation; empty when
    * qx0 > qx1). */
@@ -342,6 +355,16 @@ qk_status_t qk__split_cell(qk__bctx_t *b, qk_node_t v, uint32_t *first);
 qk_status_t qk__child_set(qk__bctx_t *b, unsigned d, const uint32_t *odd, size_t n);
 /* The whole refinement from the root (build_top.c). */
 qk_status_t qk__build_top(qk__bctx_t *b);
+
+/* Fill every leaf record's edge box (ex0 .. ey1) from its edges; after the build, once
+ * r->segs is set (region/locate.c: the query side's layout, kept there). */
+void qk__region_leaf_boxes(qk_region_t *r);
+
+/* Build the pure cells (after the grid; QK_ERR_NOMEM fails the build), their
+ * bytes, and their release (region/locate.c). */
+qk_status_t qk__region_pure_build(qk_region_t *r);
+size_t qk__region_pure_bytes(const qk_region_t *r);
+void qk__region_pure_free(qk_region_t *r);
 
 /* Locate in one leaf; used by every query. */
 uint32_t qk__region_locate1(const qk_region_t *r, double x, double y, qk_boundary_t b);

@@ -768,6 +768,92 @@ static void test_region_batch_cell_sides(void **state) {
   tl_free(&t);
 }
 
+/* The pure cells (locate.c): a batch point surely inside a cell that lies in direct leaves
+ * of one answer takes it while its chunk is sorted. Points exactly on the pure cells' sides
+ * (as the descent computes them), one and a few doubles either side, and random points in
+ * the cells: batches with 1 and 2 threads equal single calls under the three rules, a
+ * sample equals brute force, and every pure cell's answer is the single call's at its
+ * centre. The leaf records' edge boxes (a point beside them reads no edge) are checked on
+ * the same points. */
+static void test_region_batch_pure_cells(void **state) {
+  (void)state;
+  uint64_t seed = qkt_seed(2718);
+  qkt_rng_t g;
+  qkt_rng_seed(&g, seed);
+  tl_t t;
+  random_layer(&g, &t, 12, 5000);
+  /* coordinates that make the root square's side and its cells' sides not dyadic, so that
+   * a point's cell coordinate is rounded */
+  double *xy = malloc(2 * t.nv * sizeof *xy);
+  for (size_t i = 0; i < 2 * t.nv; i++) xy[i] = -3.7 + (double)t.xy[i] * 0.0371;
+  qk_region_arrays_t in = {xy, t.rs, t.nr, t.fs, t.nf};
+  qk_region_options_t o;
+  qk_region_options_init(&o);
+  o.planar = 1;
+  qk_region_t *r;
+  qk_error_t err;
+  assert_int_equal(qk_region_from_arrays(&in, &o, &r, &err), QK_OK);
+  free(xy);
+  unsigned P = r->pure_level;
+  assert_true(P >= 3 && P <= 8);
+  size_t cells = (size_t)1 << P, n_pure = 0;
+  double *sx = malloc((cells + 1) * sizeof *sx), *sy = malloc((cells + 1) * sizeof *sy);
+  qk__region_grid_sides(r->rx, r->rside, P, sx);
+  qk__region_grid_sides(r->ry, r->rside, P, sy);
+  sx[cells] = r->rx + r->rside, sy[cells] = r->ry + r->rside;
+  for (size_t j = 0; j < cells; j++)
+    for (size_t i = 0; i < cells; i++) {
+      uint8_t v = r->pure[j << P | i];
+      if (!v) continue;
+      n_pure++;
+      uint32_t want;
+      qk_point_t c = {0.5 * (sx[i] + sx[i + 1]), 0.5 * (sy[j] + sy[j + 1])};
+      assert_int_equal(qk_region_locate(r, c, QK_BOUNDARY_CLOSED, &want), QK_OK);
+      if (want != r->pure_ans[v - 1])
+        fail_msg("seed %llu pure cell (%zu, %zu): %u, single call %u", (unsigned long long)seed, i,
+                 j, r->pure_ans[v - 1], want);
+    }
+  if (n_pure < cells * cells / 16)
+    fail_msg("seed %llu: %zu pure cells of %zu", (unsigned long long)seed, n_pure, cells * cells);
+  size_t n = 150000; /* three chunks of the sort */
+  qk_point_t *pt = malloc(n * sizeof *pt);
+  uint32_t *a = malloc(n * sizeof *a), *b = malloc(n * sizeof *b);
+  for (size_t k = 0; k < n; k++) {
+    size_t i = qkt_rng_below(&g, (uint32_t)cells), j = qkt_rng_below(&g, (uint32_t)cells);
+    double x = sx[i], y = sy[j];
+    int steps = (int)qkt_rng_below(&g, 9) - 4; /* on the side, or up to 4 doubles off */
+    for (; steps < 0; steps++) x = nextafter(x, -INFINITY);
+    for (; steps > 0; steps--) x = nextafter(x, INFINITY);
+    steps = (int)qkt_rng_below(&g, 9) - 4;
+    for (; steps < 0; steps++) y = nextafter(y, -INFINITY);
+    for (; steps > 0; steps--) y = nextafter(y, INFINITY);
+    if (qkt_rng_below(&g, 3) == 0) /* anywhere in the cell */
+      x = sx[i] + (sx[i + 1] - sx[i]) * qkt_rng_unit(&g),
+      y = sy[j] + (sy[j + 1] - sy[j]) * qkt_rng_unit(&g);
+    pt[k] = (qk_point_t){x, y};
+  }
+  for (int rule = 0; rule < 3; rule++) {
+    for (size_t k = 0; k < n; k++) qk_region_locate(r, pt[k], (qk_boundary_t)rule, &a[k]);
+    for (unsigned th = 1; th <= 2; th++) {
+      memset(b, 0xab, n * sizeof *b);
+      assert_int_equal(qk_region_locate_batch(r, pt, n, (qk_boundary_t)rule, th, b), QK_OK);
+      for (size_t k = 0; k < n; k++)
+        if (a[k] != b[k])
+          fail_msg("seed %llu rule %d threads %u point %zu (%.17g, %.17g): batch %u, single %u",
+                   (unsigned long long)seed, rule, th, k, pt[k].x, pt[k].y, b[k], a[k]);
+    }
+    if (rule == QK_BOUNDARY_SEMI_OPEN)
+      for (size_t k = 0; k < n; k += 61)
+        if (a[k] != brute_pieces(r, pt[k].x, pt[k].y))
+          fail_msg("seed %llu point %zu (%.17g, %.17g): %u, brute force %u",
+                   (unsigned long long)seed, k, pt[k].x, pt[k].y, a[k],
+                   brute_pieces(r, pt[k].x, pt[k].y));
+  }
+  free(pt), free(a), free(b), free(sx), free(sy);
+  qk_region_free(r);
+  tl_free(&t);
+}
+
 /* Without keep_tree the cells go straight into the query arrays: the same index (stats)
  * and the same answers as the refinement on a quadkit tree, for leaf capacities 1 and 8;
  * with every allocation failing in turn, QK_ERR_NOMEM and nothing leaked. */
@@ -1143,6 +1229,7 @@ int main(void) {
       cmocka_unit_test(test_region_batch_threads),
       cmocka_unit_test(test_region_batch_morton),
       cmocka_unit_test(test_region_batch_cell_sides),
+      cmocka_unit_test(test_region_batch_pure_cells),
       cmocka_unit_test(test_region_without_tree),
       cmocka_unit_test(test_region_alloc_failure),
       cmocka_unit_test(test_region_geojson),
