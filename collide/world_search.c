@@ -287,21 +287,22 @@ typedef struct span {
   int64_t xa, xb, ya, yb, ix0, ix1, iy0, iy1;
 } span_t;
 
-/* The cells [c, hi) of row y from the first one with cx >= xa: those up to xb tested or
- * recorded whole; returns the first cell after them. */
-static inline uint32_t do_row(share_t *s, const me_t *m, const span_t *sp, uint32_t c, uint32_t hi,
-                              int64_t y, int *ok) {
+/* The cells [c, hi) of row y (hi: the row's end) from the first one with cx >= xa: those
+ * up to xb tested, or recorded whole when inside; returns the first cell after them. A
+ * row of a few objects is tested in one run (finding its inside cells would cost more). */
+static inline __attribute__((always_inline)) uint32_t
+do_row(share_t *s, const me_t *m, const span_t *sp, uint32_t c, uint32_t hi, int64_t y, int *ok) {
   const qk__wcell_t *cl = s->w->cells;
-  uint32_t ca = c, cb = c, c1 = c; /* [c, ca) tested, [ca, cb) inside, [cb, c1) tested */
-  if (y >= sp->iy0 && y <= sp->iy1) {
-    while (ca < hi && cl[ca].cy == y && cl[ca].cx < sp->ix0) ca++;
-    cb = ca;
-    while (cb < hi && cl[cb].cy == y && cl[cb].cx <= sp->ix1) cb++;
-    c1 = cb;
-  } else {
-    ca = cb = c;
+  uint32_t c1 = c;
+  while (c1 < hi && cl[c1].cx <= sp->xb) c1++;
+  if (c1 == c) return c;
+  if (cl[c1].start - cl[c].start <= 8 || y < sp->iy0 || y > sp->iy1) {
+    if (!test_run(s, m, cl[c].start, cl[c1].start)) *ok = 0;
+    return c1;
   }
-  while (c1 < hi && cl[c1].cy == y && cl[c1].cx <= sp->xb) c1++;
+  uint32_t ca = c, cb; /* [c, ca) tested, [ca, cb) inside, [cb, c1) tested */
+  while (ca < c1 && cl[ca].cx < sp->ix0) ca++;
+  for (cb = ca; cb < c1 && cl[cb].cx <= sp->ix1;) cb++;
   if (ca == cb) ca = cb = c1; /* nothing inside: one run to test */
   if ((c < ca && !test_run(s, m, cl[c].start, cl[ca].start)) ||
       (ca < cb && !emit_run(s, m, cl[ca].start, cl[cb].start)) ||
@@ -361,8 +362,10 @@ static int descend(share_t *s, const me_t *m, const qk_box_t *b, int whole, cons
       c = gallop(lv, cl, c, y, sp.xa);
     else if (cl[c].cx > sp.xb)
       c = gallop(lv, cl, c, y + 1, sp.xa);
-    else
-      c = gallop(lv, cl, do_row(s, m, &sp, c, lv->end, y, &ok), y + 1, sp.xa);
+    else {
+      uint32_t row_end = gallop(lv, cl, c, y, INT64_MAX);
+      c = gallop(lv, cl, do_row(s, m, &sp, c, row_end, y, &ok), y + 1, sp.xa);
+    }
   }
   return ok;
 }
