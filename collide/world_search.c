@@ -496,6 +496,12 @@ static int level_info(const qk_world_t *w, const qk__wpack_t *pk, lvinfo_t *lv, 
   return 1;
 }
 
+/* The work of cell a's objects, as a weight (see qk__world_search). */
+static inline double cell_work(const qk_world_t *w, uint32_t a, int finest) {
+  int d = w->cells[a].level - finest;
+  return (double)(w->cells[a + 1].start - w->cells[a].start) * qk__pow2(d < 60 ? d : 60);
+}
+
 qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kvec_t *out) {
   *out = (qk__kvec_t){0};
   lvinfo_t lv[QK__NLEV];
@@ -505,8 +511,10 @@ qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kve
   if (!level_info(w, pk, lv, &n_levels, &rf, &n_rf)) return QK_ERR_NOMEM;
   unsigned nt = w->opt.threads;
   if (w->n_live < 4096) nt = 1; /* not worth a thread */
-  /* Chunks of cells, taken in turn by the workers: many more than the workers, as a
-   * coarse cell's objects do far more work than a fine one's. */
+  /* Chunks of cells of about equal work, taken in turn by the workers (many more than
+   * the workers). An object's work grows with its size (the finer cells its box covers):
+   * it is taken as 2^(l - finest level), so the few coarse cells at the end of the order
+   * (which find most of the pairs of a mixed-size scene) are spread over many chunks. */
   enum { PER_THREAD = 32 };
   uint32_t chunk_one[2] = {0, w->n_cells}, *chunk = chunk_one;
   unsigned n_chunks = 1;
@@ -517,8 +525,15 @@ qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kve
       qk__free(&w->alloc, rf, n_rf * sizeof *rf);
       return QK_ERR_NOMEM;
     }
-    for (unsigned i = 0; i <= n_chunks; i++)
-      chunk[i] = (uint32_t)((uint64_t)w->n_cells * i / n_chunks);
+    double total = 0, acc = 0;
+    for (uint32_t a = 0; a < w->n_cells; a++) total += cell_work(w, a, lv[0].l);
+    unsigned i = 0;
+    chunk[i++] = 0;
+    for (uint32_t a = 0; a < w->n_cells && i < n_chunks; a++) {
+      acc += cell_work(w, a, lv[0].l);
+      if (acc >= total * i / n_chunks) chunk[i++] = a + 1;
+    }
+    while (i <= n_chunks) chunk[i++] = w->n_cells;
   }
   atomic_uint next;
   atomic_init(&next, 0u);
