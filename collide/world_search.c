@@ -403,16 +403,15 @@ static int cell_vs_level(share_t *s, uint32_t a, const lvinfo_t *lv) {
   return 1;
 }
 
-/* The pairs of cell a: with its own level; of each of its objects with the objects of
- * the finer levels it descends to; and with the cells of the coarser levels that look
- * up (look_up), in each case only where the levels' boxes meet a's. */
-static int cell_pairs(share_t *s, uint32_t a, uint32_t *up) {
+/* The pairs of cell a (of level s->lv[me]): with its own level; of each of its objects with the
+ * objects of the finer levels it descends to; and with the cells of the coarser levels that look up
+ * (look_up), in each case only where the levels' boxes meet a's. */
+static int cell_pairs(share_t *s, uint32_t a, uint32_t *up, int me) {
   if (!same_level(s, a, up)) return 0;
+  if (s->n_levels == 1) return 1;
   const qk_world_t *w = s->w;
   const qk__wcell_t *c = &w->cells[a];
   const qk_box_t *ha = &s->pk->hb[a];
-  int me = 0;
-  while (s->lv[me].l < c->level) me++;
   for (int li = 0; li < s->n_levels; li++) {
     const lvinfo_t *lv = &s->lv[li];
     if (li == me || !boxes_meet(ha, &lv->box)) continue;
@@ -438,8 +437,10 @@ static void run_share(unsigned t, void *ud) {
     unsigned i = atomic_fetch_add_explicit(s->next, 1u, memory_order_relaxed);
     if (i >= s->n_chunks) return;
     uint32_t up = 0;
+    int me = 0; /* the level of cell a */
     for (uint32_t a = s->chunk[i]; a < s->chunk[i + 1]; a++) {
-      if (!cell_pairs(s, a, &up)) {
+      while (s->lv[me].end <= a) me++;
+      if (!cell_pairs(s, a, &up, me)) {
         s->nomem = 1;
         return;
       }
