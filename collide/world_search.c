@@ -30,6 +30,7 @@ typedef struct lvinfo {
   int32_t cy0, cy1;
   const uint32_t *rf;
   qk_box_t box;
+  int other; /* its cells find pairs with other levels (descend or look up) */
 } lvinfo_t;
 
 /* One worker: the pairs it found. Workers take chunks of cells in turn (next). */
@@ -408,7 +409,7 @@ static int cell_vs_level(share_t *s, uint32_t a, const lvinfo_t *lv) {
  * (look_up), in each case only where the levels' boxes meet a's. */
 static int cell_pairs(share_t *s, uint32_t a, uint32_t *up, int me) {
   if (!same_level(s, a, up)) return 0;
-  if (s->n_levels == 1) return 1;
+  if (!s->lv[me].other) return 1;
   const qk_world_t *w = s->w;
   const qk__wcell_t *c = &w->cells[a];
   const qk_box_t *ha = &s->pk->hb[a];
@@ -477,6 +478,10 @@ static int level_info(const qk_world_t *w, const qk__wpack_t *pk, lvinfo_t *lv, 
                          pk->lv_box[i]};
   }
   *n_lv = n;
+  for (int i = 0; i < n; i++)
+    for (int j = 0; j < n; j++)
+      if ((j < i && !look_up(&lv[i], &lv[j])) || (j > i && look_up(&lv[j], &lv[i])))
+        lv[i].other = 1;
   size_t need = 0;
   for (int i = 0; i < n; i++)
     if (wants_index(lv, n, i)) need += (size_t)((int64_t)lv[i].cy1 - lv[i].cy0 + 2);
