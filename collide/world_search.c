@@ -475,7 +475,8 @@ static int level_info(const qk_world_t *w, const qk__wpack_t *pk, lvinfo_t *lv, 
                          w->cells[f].cy,
                          w->cells[e - 1].cy,
                          NULL,
-                         pk->lv_box[i]};
+                         pk->lv_box[i],
+                         0};
   }
   *n_lv = n;
   for (int i = 0; i < n; i++)
