@@ -9,6 +9,10 @@
 
 #include "collide/world_internal.h"
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 /* Cut a list's room to its length when it holds much more (a failed shrink keeps the
  * larger buffer). */
 static void shrink(const qk_allocator_t *a, qk__kvec_t *v) {
@@ -195,6 +199,16 @@ static int diff_rows(const qk_world_t *w, const qk__prows_t *o, const qk__prows_
       continue;
     }
     while (i < ie && j < je) {
+#if defined(__SSE2__)
+      /* Runs of pairs that stayed (most of them), four at a time. */
+      if (!dirty)
+        while (i + 4 <= ie && j + 4 <= je &&
+               _mm_movemask_epi8(_mm_cmpeq_epi32(_mm_loadu_si128((const __m128i *)(nb + i)),
+                                                 _mm_loadu_si128((const __m128i *)(ob + j)))) ==
+                   0xFFFF)
+          i += 4, j += 4;
+      if (i == ie || j == je) break;
+#endif
       uint32_t x = nb[i], y = ob[j];
       if (x == y) {
         if (dirty && changed(w, x) && (!kv_add(al, bv, ka | x) || !kv_add(al, ev, ka | x)))

@@ -1,7 +1,17 @@
 /*
  * The world's pair search (see collide/world.c for the design): every overlapping pair of
- * the order packed by the update, cell by cell, as unsorted 64-bit keys.
+ * the order packed by the update, as unsorted 64-bit keys.
+ *
+ * Each cell's objects meet (1) the objects of their own level in the same and the
+ * neighbouring cells, found by walking the sorted cells, and (2) the objects of every
+ * finer level, found from the coarser object's side: its box is walked over the finer
+ * level's sorted cells row by row (a row index gives each row's cells at once), so the
+ * candidates are the finer objects near the box, not the coarse cell's whole loose square;
+ * and the finer cells whose loose squares lie inside a box object are recorded whole,
+ * without a test (most of the pairs of a large object with small ones). The rest are
+ * tested four at a time on float boxes, and decided exactly when the floats cannot.
  */
+#include <stdatomic.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -11,30 +21,42 @@
 #include <emmintrin.h>
 #endif
 
-/* One thread's share: a range of cells and the pairs found there. */
+/* An occupied level: its cells [first, end), rows cy0 .. cy1, the box around its objects,
+ * and (when its rows are not too many for its cells) a row index: rf[y - cy0] is the first
+ * cell of a row at or after y, for y in [cy0, cy1 + 1]. */
+typedef struct lvinfo {
+  int l;
+  uint32_t first, end, n_obj;
+  int32_t cy0, cy1;
+  const uint32_t *rf;
+  qk_box_t box;
+  int other; /* its cells find pairs with other levels (descend or look up) */
+} lvinfo_t;
+
+/* One worker: the pairs it found. Workers take chunks of cells in turn (next). */
 typedef struct share {
   const qk_world_t *w;
   const qk__wpack_t *pk;
-  size_t lo, hi;
   qk__kvec_t out;
   const qk_allocator_t *alloc;
   int nomem;
-  const int *levels;
+  const lvinfo_t *lv; /* the occupied levels, ascending */
   int n_levels;
+  const uint32_t *chunk; /* chunk i: cells [chunk[i], chunk[i + 1]) */
+  unsigned n_chunks;
+  atomic_uint *next;
 } share_t;
 
-static int kv_grow(const qk_allocator_t *a, qk__kvec_t *p) {
+/* Room for `more` keys after the found ones; 0 when memory ran short. */
+static int kv_reserve(share_t *s, size_t more) {
+  qk__kvec_t *p = &s->out;
+  if (p->cap - p->n >= more) return 1;
   size_t cap = p->cap ? p->cap * 2 : 256;
-  uint64_t *v = qk__realloc(a, p->v, p->cap * sizeof *v, cap * sizeof *v);
+  if (cap < p->n + more) cap = p->n + more;
+  uint64_t *v = qk__realloc(s->alloc, p->v, p->cap * sizeof *v, cap * sizeof *v);
   if (!v) return 0;
   p->v = v;
   p->cap = cap;
-  return 1;
-}
-
-static inline int kv_push(share_t *s, uint32_t i, uint32_t j) {
-  if (s->out.n == s->out.cap && !kv_grow(s->alloc, &s->out)) return 0;
-  s->out.v[s->out.n++] = i < j ? (uint64_t)i << 32 | j : (uint64_t)j << 32 | i;
   return 1;
 }
 
@@ -42,19 +64,21 @@ static inline int boxes_meet(const qk_box_t *a, const qk_box_t *b) {
   return a->xmin <= b->xmax && b->xmin <= a->xmax && a->ymin <= b->ymax && b->ymin <= a->ymax;
 }
 
-/* Test the objects of two slots exactly; record the pair when they overlap. */
-static inline int try_pair(share_t *s, uint32_t i, uint32_t j) {
-  const qk__wobj_t *p = &s->w->obj[i], *q = &s->w->obj[j];
-  if ((p->flags & QK__WKIND) == QK_SHAPE_BOX && (q->flags & QK__WKIND) == QK_SHAPE_BOX) {
-    /* Two boxes need nothing beyond their boxes. */
-    if (!(p->x <= q->a && q->x <= p->a && p->y <= q->b && q->y <= p->b)) return 1;
-  } else {
-    qk_box_t pb = qk__wbox(p), qb = qk__wbox(q);
-    if (!boxes_meet(&pb, &qb)) return 1;
-    qk_shape_t ps = qk__wshape(p), qs = qk__wshape(q);
-    if (!qk__shapes_overlap(&ps, &qs)) return 1;
-  }
-  return kv_push(s, i, j);
+/* The objects of slots i and j overlap, exactly. (Not inlined: the rare path, and inlined
+ * it takes the registers of the four-wide loop that calls it.) */
+__attribute__((noinline)) static int objects_meet(const qk_world_t *w, uint32_t i, uint32_t j) {
+  const qk__wobj_t *p = &w->obj[i], *q = &w->obj[j];
+  if ((p->flags & QK__WKIND) == QK_SHAPE_BOX && (q->flags & QK__WKIND) == QK_SHAPE_BOX)
+    return p->x <= q->a && q->x <= p->a && p->y <= q->b && q->y <= p->b;
+  qk_box_t pb = qk__wbox(p), qb = qk__wbox(q);
+  if (!boxes_meet(&pb, &qb)) return 0;
+  qk_shape_t ps = qk__wshape(p), qs = qk__wshape(q);
+  return qk__shapes_overlap(&ps, &qs);
+}
+
+/* The key of the pair of slot a (whose key half is ha = a << 32) and slot b. */
+static inline uint64_t pair_key(uint32_t a, uint64_t ha, uint32_t b) {
+  return b > a ? ha | b : (uint64_t)b << 32 | a;
 }
 
 /*
@@ -63,10 +87,9 @@ static inline int try_pair(share_t *s, uint32_t i, uint32_t j) {
  * empty box), so one object is compared with four at once. Rounding to float is
  * monotone, so u <= v implies (float)u <= (float)v: every comparison of the box test
  * that holds in doubles holds in floats, and the prefilter never drops a pair whose
- * boxes meet. What it keeps is decided in doubles by try_pair.
+ * boxes meet. What it keeps is decided exactly (objects_meet), unless both boxes are
+ * boxes whose floats are their doubles (fexact): the float test is then the exact one.
  */
-
-/* One object's float box, broadcast for the four-wide test. */
 #if defined(__SSE2__)
 typedef struct probe {
   __m128 x0, y0, x1, y1;
@@ -102,41 +125,68 @@ static inline const float *lane_of(const float *f, uint32_t k) {
   return f + (size_t)(k >> 2) * 16 + (k & 3);
 }
 
-/* The pairs of lanes `bits` of group q with object k of the order. Two boxes whose
- * floats are exact have passed the exact box test already (the floats' comparisons are
- * the doubles'); the others are decided by try_pair. */
-static inline int group_pairs(share_t *s, uint32_t k, uint32_t q, unsigned bits) {
+/* One object as the searches use it: its slot, its key half, its float box broadcast,
+ * and whether its float box is exact. */
+typedef struct me {
+  probe_t p;
+  uint64_t hs;
+  uint32_t slot;
+  uint8_t exact;
+} me_t;
+
+static inline me_t me_of(const share_t *s, uint32_t k) {
+  uint32_t slot = s->w->order[k];
+  return (me_t){probe_of(lane_of(s->pk->fgrp, k)), (uint64_t)slot << 32, slot, s->pk->fexact[k]};
+}
+
+/* The pairs of object m with the objects at order positions [lo, hi) (lo < hi): the
+ * first and last groups masked to the range. The keys are written at once, and kept
+ * when the pair is decided (the room for them all is reserved first). */
+static inline __attribute__((always_inline)) int test_run(share_t *s, const me_t *m, uint32_t lo,
+                                                          uint32_t hi) {
+  if (!kv_reserve(s, hi - lo)) return 0;
+  const float *fg = s->pk->fgrp;
   const uint32_t *ord = s->w->order;
   const uint8_t *fx = s->pk->fexact;
-  uint32_t slot = ord[k];
-  while (bits) {
-    unsigned lane = (unsigned)__builtin_ctz(bits);
-    bits &= bits - 1;
-    uint32_t j = q * 4 + lane;
-    if (fx[k] & fx[j]) {
-      if (!kv_push(s, slot, ord[j])) return 0;
-    } else if (!try_pair(s, slot, ord[j])) {
-      return 0;
+  const uint32_t slot = m->slot;
+  const uint64_t hs = m->hs;
+  const unsigned ek = m->exact;
+  const probe_t p = m->p; /* (in registers: the keys' stores could alias m) */
+  uint64_t *v = s->out.v + s->out.n;
+  uint32_t q = lo >> 2, qe = (hi - 1) >> 2;
+  unsigned bits = group_hits(fg + (size_t)q * 16, &p) & ~((1u << (lo & 3)) - 1) & 15u;
+  const unsigned last = (2u << ((hi - 1) & 3)) - 1;
+  for (;;) {
+    if (q == qe) bits &= last;
+    while (bits) {
+      uint32_t j = q * 4 + (uint32_t)__builtin_ctz(bits);
+      bits &= bits - 1;
+      uint32_t sj = ord[j];
+      *v = pair_key(slot, hs, sj);
+      v += (ek & fx[j]) ? 1 : objects_meet(s->w, slot, sj);
     }
+    if (q == qe) break;
+    q++;
+    bits = group_hits(fg + (size_t)q * 16, &p);
   }
+  s->out.n = (size_t)(v - s->out.v);
   return 1;
 }
 
-/* Object k of the order against the objects at order positions [lo, hi) (lo < hi): the
- * first and last groups masked to the range, the ones between whole. */
-static inline int obj_vs_range(share_t *s, uint32_t k, uint32_t lo, uint32_t hi) {
-  const float *fg = s->pk->fgrp;
-  probe_t p = probe_of(lane_of(fg, k));
-  uint32_t q = lo >> 2, qe = (hi - 1) >> 2;
-  unsigned first = ~((1u << (lo & 3)) - 1) & 15u, last = (2u << ((hi - 1) & 3)) - 1;
-  if (q == qe) return group_pairs(s, k, q, group_hits(fg + (size_t)q * 16, &p) & first & last);
-  if (!group_pairs(s, k, q, group_hits(fg + (size_t)q * 16, &p) & first)) return 0;
-  for (q++; q < qe; q++) {
-    unsigned bits = group_hits(fg + (size_t)q * 16, &p);
-    if (bits && !group_pairs(s, k, q, bits)) return 0;
-  }
-  return group_pairs(s, k, qe, group_hits(fg + (size_t)qe * 16, &p) & last);
+/* Record the pairs of object m with the objects at order positions [lo, hi), all known
+ * to overlap it. */
+static int emit_run(share_t *s, const me_t *m, uint32_t lo, uint32_t hi) {
+  if (!kv_reserve(s, hi - lo)) return 0;
+  const uint32_t *ord = s->w->order;
+  const uint32_t slot = m->slot;
+  const uint64_t hs = m->hs;
+  uint64_t *v = s->out.v + s->out.n;
+  for (uint32_t k = lo; k < hi; k++) *v++ = pair_key(slot, hs, ord[k]);
+  s->out.n += hi - lo;
+  return 1;
 }
+
+/* ---- the same level ---------------------------------------------------------------- */
 
 /* Every object of cell a against the objects at order positions [blo, bhi) (other
  * cells' objects), whose boxes lie in ub. */
@@ -146,53 +196,31 @@ static int cross_run(share_t *s, uint32_t a, uint32_t blo, uint32_t bhi, const q
   /* ub as floats, for a one-lane check of each of a's objects first. */
   float bx0 = (float)ub->xmin, by0 = (float)ub->ymin, bx1 = (float)ub->xmax, by1 = (float)ub->ymax;
   for (uint32_t k = cl[a].start, ke = cl[a + 1].start; k < ke; k++) {
-    const float *me = lane_of(fg, k);
-    if (!(me[0] <= bx1 && bx0 <= me[8] && me[4] <= by1 && by0 <= me[12])) continue;
-    if (!obj_vs_range(s, k, blo, bhi)) return 0;
+    const float *f = lane_of(fg, k);
+    if (!(f[0] <= bx1 && bx0 <= f[8] && f[4] <= by1 && by0 <= f[12])) continue;
+    me_t m = me_of(s, k);
+    if (!test_run(s, &m, blo, bhi)) return 0;
   }
   return 1;
 }
 
-/* Every object of cell a against every object of cell b (a != b). */
-static inline int cross_cells(share_t *s, uint32_t a, uint32_t b) {
-  const qk_box_t *hb = &s->pk->hb[b];
-  if (!boxes_meet(&s->pk->hb[a], hb)) return 1;
-  return cross_run(s, a, s->w->cells[b].start, s->w->cells[b + 1].start, hb);
-}
-
-/* Cell a against the cells of the coarser level l whose loose squares
- * [c 2^l, (c + 2) 2^l) meet the box around a's objects: c from floor(min / 2^l) - 1 to
- * floor(max / 2^l), each row found by binary search. */
-static int cell_vs_level(share_t *s, uint32_t a, int l) {
-  const qk_world_t *w = s->w;
-  const qk_box_t *hb = &s->pk->hb[a];
-  const double inv = qk__pow2(-l);
-  int64_t x0 = (int64_t)floor(hb->xmin * inv) - 1, x1 = (int64_t)floor(hb->xmax * inv);
-  int64_t y0 = (int64_t)floor(hb->ymin * inv) - 1, y1 = (int64_t)floor(hb->ymax * inv);
-  uint32_t end = w->lv_first[l - QK__LMIN] + w->lv_n[l - QK__LMIN];
-  for (int64_t y = y0; y <= y1; y++)
-    for (uint32_t k = qk__cell_lower(w, l, y, x0);
-         k < end && w->cells[k].cy == y && w->cells[k].cx <= x1; k++)
-      if (!cross_cells(s, a, k)) return 0;
-  return 1;
-}
-
-/* The pairs of cell a: within it, with the cells of its level after it whose loose
- * squares meet its own (indices differing by at most one: the next cell of its row and
- * three of the row above, found by *up, a cursor that only moves forward), and with the
- * cells of every coarser level that its objects can meet. */
-static int cell_pairs(share_t *s, uint32_t a, uint32_t *up) {
+/* The pairs of cell a with its own level: within it, with the next cell of its row when
+ * adjacent, and with the cells of the row above whose loose squares meet its own (three
+ * consecutive ones at most, found by *up, a cursor that only moves forward). */
+static int same_level(share_t *s, uint32_t a, uint32_t *up) {
   const qk_world_t *w = s->w;
   const qk__wcell_t *c = &w->cells[a];
   const qk_box_t *hb = s->pk->hb, *ha = &hb[a];
   int l = c->level;
-  /* Within the cell, and with the next cell of its row when adjacent: its objects follow
-   * in the order, so each object meets one run of the ones after it. */
+  /* Its objects and the next cell's follow in the order, so each object meets one run of
+   * the ones after it. */
   uint32_t lo = c->start, hi = c[1].start, hi2 = hi;
   if (c[1].level == l && c[1].cy == c->cy && c[1].cx == c->cx + 1 && boxes_meet(ha, &hb[a + 1]))
     hi2 = c[2].start;
-  for (uint32_t k = lo; k < hi && k + 1 < hi2; k++)
-    if (!obj_vs_range(s, k, k + 1, hi2)) return 0;
+  for (uint32_t k = lo; k < hi && k + 1 < hi2; k++) {
+    me_t m = me_of(s, k);
+    if (!test_run(s, &m, k + 1, hi2)) return 0;
+  }
   /* The row above: up to three consecutive cells, so one run too (without the end cells
    * whose boxes miss this one's). */
   uint32_t end = w->lv_first[l - QK__LMIN] + w->lv_n[l - QK__LMIN];
@@ -212,43 +240,314 @@ static int cell_pairs(share_t *s, uint32_t a, uint32_t *up) {
     }
     if (!cross_run(s, a, w->cells[u].start, w->cells[u1].start, &ub)) return 0;
   }
-  /* Coarser levels whose objects' box meets this cell's. */
+  return 1;
+}
+
+/* ---- finer levels: the coarser object's box walked over their sorted cells ---------- */
+
+/* (cy, cx) of cell c before (y, x). */
+static inline int cell_before(const qk__wcell_t *c, int64_t y, int64_t x) {
+  return c->cy < y || (c->cy == y && c->cx < x);
+}
+
+/* The first cell in [lo, hi) not before (y, x), or hi (the cells before lo are before it). */
+static inline uint32_t bisect(const qk__wcell_t *cl, uint32_t lo, uint32_t hi, int64_t y,
+                              int64_t x) {
+  while (lo < hi) {
+    uint32_t mid = lo + (hi - lo) / 2;
+    if (cell_before(&cl[mid], y, x))
+      lo = mid + 1;
+    else
+      hi = mid;
+  }
+  return lo;
+}
+
+/* The first cell of level lv at or after `from` not before (y, x), by a galloping search
+ * from `from` (the cells before it are before (y, x)). */
+static uint32_t gallop(const lvinfo_t *lv, const qk__wcell_t *cl, uint32_t from, int64_t y,
+                       int64_t x) {
+  if (from >= lv->end || !cell_before(&cl[from], y, x)) return from;
+  uint32_t lo = from, step = 1; /* cl[lo] is before (y, x) */
+  while (lo + step < lv->end && cell_before(&cl[lo + step], y, x)) lo += step, step *= 2;
+  return bisect(cl, lo + 1, lo + step < lv->end ? lo + step : lv->end, y, x);
+}
+
+/* Cell indices from a scaled coordinate, clamped to a little beyond the 32-bit range of
+ * cell indices (a box far from a fine level's cells gives values beyond it). */
+static inline int64_t cell_index(double v) {
+  if (v < -0x1p31 - 4) return INT32_MIN - INT64_C(4);
+  if (v > 0x1p31 + 4) return INT32_MAX + INT64_C(4);
+  return (int64_t)v;
+}
+
+/* A box in a finer level's cells: the cells that can hold objects meeting it, x in
+ * [xa, xb] and y in [ya, yb], and those whose loose squares lie inside it, x in
+ * [ix0, ix1] and y in [iy0, iy1] (none when the box is not a box object). */
+typedef struct span {
+  int64_t xa, xb, ya, yb, ix0, ix1, iy0, iy1;
+} span_t;
+
+/* The cells [c, hi) of row y (hi: the row's end) from the first one with cx >= xa: those
+ * up to xb tested, or recorded whole when inside; returns the first cell after them. A
+ * row of a few objects is tested in one run (finding its inside cells would cost more). */
+static inline __attribute__((always_inline)) uint32_t
+do_row(share_t *s, const me_t *m, const span_t *sp, uint32_t c, uint32_t hi, int64_t y, int *ok) {
+  const qk__wcell_t *cl = s->w->cells;
+  uint32_t c1 = c;
+  while (c1 < hi && cl[c1].cx <= sp->xb) c1++;
+  if (c1 == c) return c;
+  if (cl[c1].start - cl[c].start <= 8 || y < sp->iy0 || y > sp->iy1) {
+    if (!test_run(s, m, cl[c].start, cl[c1].start)) *ok = 0;
+    return c1;
+  }
+  uint32_t ca = c, cb; /* [c, ca) tested, [ca, cb) inside, [cb, c1) tested */
+  while (ca < c1 && cl[ca].cx < sp->ix0) ca++;
+  for (cb = ca; cb < c1 && cl[cb].cx <= sp->ix1;) cb++;
+  if (ca == cb) ca = cb = c1; /* nothing inside: one run to test */
+  if ((c < ca && !test_run(s, m, cl[c].start, cl[ca].start)) ||
+      (ca < cb && !emit_run(s, m, cl[ca].start, cl[cb].start)) ||
+      (cb < c1 && !test_run(s, m, cl[cb].start, cl[c1].start)))
+    *ok = 0;
+  return c1;
+}
+
+/* The first cell of [lo, hi) (one row's) with cx >= x, or hi: a few steps, then bisection. */
+static inline uint32_t row_seek(const qk__wcell_t *cl, uint32_t lo, uint32_t hi, int64_t x) {
+  for (int i = 0; i < 4 && lo < hi; i++, lo++)
+    if (cl[lo].cx >= x) return lo;
+  while (lo < hi) {
+    uint32_t mid = lo + (hi - lo) / 2;
+    if (cl[mid].cx < x)
+      lo = mid + 1;
+    else
+      hi = mid;
+  }
+  return lo;
+}
+
+/*
+ * Object m (box b) against the objects of the finer level lv. An object of lv's cell c
+ * lies in c's loose square [c 2^l, (c + 2) 2^l) per axis, so those that can meet b are in
+ * the cells from floor(min / 2^l) - 1 to floor(max / 2^l), a run of consecutive cells in
+ * each row; and when m is a box, every object of a cell whose loose square lies inside b
+ * (c from ceil(min / 2^l) to floor(max / 2^l) - 2) meets it, whatever its shape. With the
+ * row index each row costs a lookup (and a bisection of the row when it has cells in
+ * range); without, a galloping search skips the rows without such cells.
+ */
+static int descend(share_t *s, const me_t *m, const qk_box_t *b, int whole, const lvinfo_t *lv) {
+  const qk__wcell_t *cl = s->w->cells;
+  const double inv = qk__pow2(-lv->l);
+  double x0 = b->xmin * inv, x1 = b->xmax * inv, y0 = b->ymin * inv, y1 = b->ymax * inv;
+  span_t sp;
+  sp.xa = cell_index(floor(x0)) - 1, sp.xb = cell_index(floor(x1));
+  sp.ya = cell_index(floor(y0)) - 1, sp.yb = cell_index(floor(y1));
+  sp.ix0 = cell_index(ceil(x0)), sp.ix1 = sp.xb - 2;
+  sp.iy0 = whole ? cell_index(ceil(y0)) : INT64_MAX, sp.iy1 = sp.yb - 2;
+  int64_t ya = sp.ya > lv->cy0 ? sp.ya : lv->cy0, yb = sp.yb < lv->cy1 ? sp.yb : lv->cy1;
+  int ok = 1;
+  if (lv->rf) {
+    for (int64_t y = ya; y <= yb && ok; y++) {
+      uint32_t lo = lv->rf[y - lv->cy0], hi = lv->rf[y - lv->cy0 + 1];
+      if (lo == hi || cl[hi - 1].cx < sp.xa || cl[lo].cx > sp.xb) continue;
+      if (cl[lo].cx < sp.xa) lo = row_seek(cl, lo + 1, hi, sp.xa);
+      do_row(s, m, &sp, lo, hi, y, &ok);
+    }
+    return ok;
+  }
+  if (ya > yb) return 1;
+  uint32_t c = gallop(lv, cl, lv->first, ya, sp.xa);
+  while (ok && c < lv->end && cl[c].cy <= yb) {
+    int64_t y = cl[c].cy;
+    if (cl[c].cx < sp.xa)
+      c = gallop(lv, cl, c, y, sp.xa);
+    else if (cl[c].cx > sp.xb)
+      c = gallop(lv, cl, c, y + 1, sp.xa);
+    else {
+      uint32_t row_end = gallop(lv, cl, c, y, INT64_MAX);
+      c = gallop(lv, cl, do_row(s, m, &sp, c, row_end, y, &ok), y + 1, sp.xa);
+    }
+  }
+  return ok;
+}
+
+/* ---- coarser levels: a fine cell looking up the coarse cells near it ----------------- */
+
+/*
+ * Which side finds the pairs of a coarse level with a finer one. Walking each coarse
+ * object's box over the finer cells (descend) costs a few rows a coarse object, and
+ * tests only finer objects near the box; looking up, from each finer cell, the coarse
+ * cells whose loose squares meet it (two rows, bisected) costs a few searches a finer
+ * cell and tests the coarse objects of those cells, which are few when the coarse level
+ * is sparse but many when it is not. So: looking up when the coarse level has many more
+ * objects than the finer one has cells (sizes mostly of one level, a few smaller ones:
+ * the uniform scenes), descending otherwise (sizes spread over many levels).
+ */
+static inline int look_up(const lvinfo_t *coarse, const lvinfo_t *fine) {
+  return coarse->n_obj > 16 * (size_t)(fine->end - fine->first);
+}
+
+/* Cell a against the cells of the coarser level lv whose loose squares
+ * [c 2^l, (c + 2) 2^l) meet the box around a's objects: c from floor(min / 2^l) - 1 to
+ * floor(max / 2^l), each row's found by bisection. */
+static int cell_vs_level(share_t *s, uint32_t a, const lvinfo_t *lv) {
+  const qk__wcell_t *cl = s->w->cells;
+  const qk_box_t *hb = s->pk->hb, *ha = &hb[a];
+  const double inv = qk__pow2(-lv->l);
+  int64_t x0 = cell_index(floor(ha->xmin * inv)) - 1, x1 = cell_index(floor(ha->xmax * inv));
+  int64_t y0 = cell_index(floor(ha->ymin * inv)) - 1, y1 = cell_index(floor(ha->ymax * inv));
+  for (int64_t y = y0 > lv->cy0 ? y0 : lv->cy0; y <= y1 && y <= lv->cy1; y++)
+    for (uint32_t k = bisect(cl, lv->first, lv->end, y, x0);
+         k < lv->end && cl[k].cy == y && cl[k].cx <= x1; k++)
+      if (boxes_meet(ha, &hb[k]) && !cross_run(s, a, cl[k].start, cl[k + 1].start, &hb[k]))
+        return 0;
+  return 1;
+}
+
+/* The pairs of cell a (of level s->lv[me]): with its own level; of each of its objects with the
+ * objects of the finer levels it descends to; and with the cells of the coarser levels that look up
+ * (look_up), in each case only where the levels' boxes meet a's. */
+static int cell_pairs(share_t *s, uint32_t a, uint32_t *up, int me) {
+  if (!same_level(s, a, up)) return 0;
+  if (!s->lv[me].other) return 1;
+  const qk_world_t *w = s->w;
+  const qk__wcell_t *c = &w->cells[a];
+  const qk_box_t *ha = &s->pk->hb[a];
   for (int li = 0; li < s->n_levels; li++) {
-    int lb = s->levels[li];
-    if (lb <= l || !boxes_meet(&s->pk->hb[a], &s->pk->lv_box[lb - QK__LMIN])) continue;
-    if (!cell_vs_level(s, a, lb)) return 0;
+    const lvinfo_t *lv = &s->lv[li];
+    if (li == me || !boxes_meet(ha, &lv->box)) continue;
+    if (li > me) {
+      if (look_up(lv, &s->lv[me]) && !cell_vs_level(s, a, lv)) return 0;
+      continue;
+    }
+    if (look_up(&s->lv[me], lv)) continue;
+    for (uint32_t k = c->start; k < c[1].start; k++) {
+      const qk__wobj_t *o = &w->obj[w->order[k]];
+      qk_box_t b = qk__wbox(o);
+      if (!boxes_meet(&b, &lv->box)) continue;
+      me_t m = me_of(s, k);
+      if (!descend(s, &m, &b, (o->flags & QK__WKIND) == QK_SHAPE_BOX, lv)) return 0;
+    }
   }
   return 1;
 }
 
 static void run_share(unsigned t, void *ud) {
   share_t *s = &((share_t *)ud)[t];
-  uint32_t up = 0;
-  for (size_t i = s->lo; i < s->hi; i++) {
-    if (!cell_pairs(s, (uint32_t)i, &up)) {
-      s->nomem = 1;
-      return;
+  for (;;) {
+    unsigned i = atomic_fetch_add_explicit(s->next, 1u, memory_order_relaxed);
+    if (i >= s->n_chunks) return;
+    uint32_t up = 0;
+    int me = 0; /* the level of cell a */
+    for (uint32_t a = s->chunk[i]; a < s->chunk[i + 1]; a++) {
+      while (s->lv[me].end <= a) me++;
+      if (!cell_pairs(s, a, &up, me)) {
+        s->nomem = 1;
+        return;
+      }
     }
   }
 }
 
+/* Level i of lv gets a row index when coarser levels descend to it (look_up) with
+ * enough objects to pay for it (a few rows each), and its rows do not far outnumber its
+ * cells (an index costs a word a row). */
+static int wants_index(const lvinfo_t *lv, int n, int i) {
+  size_t rows = (size_t)((int64_t)lv[i].cy1 - lv[i].cy0 + 1), visits = 0;
+  if (rows > 4 * (size_t)(lv[i].end - lv[i].first) + 1024) return 0;
+  for (int j = i + 1; j < n; j++)
+    if (!look_up(&lv[j], &lv[i])) visits += 16 * (size_t)lv[j].n_obj;
+  return visits >= rows;
+}
+
+/* The occupied levels and their row indices (in one block, *rf, of *n_rf entries, NULL
+ * when none is needed). 0 when memory ran short. */
+static int level_info(const qk_world_t *w, const qk__wpack_t *pk, lvinfo_t *lv, int *n_lv,
+                      uint32_t **rf, size_t *n_rf) {
+  int n = 0;
+  for (int i = 0; i < QK__NLEV; i++) {
+    if (!w->lv_n[i]) continue;
+    uint32_t f = w->lv_first[i], e = f + w->lv_n[i];
+    lv[n++] = (lvinfo_t){i + QK__LMIN,
+                         f,
+                         e,
+                         w->cells[e].start - w->cells[f].start,
+                         w->cells[f].cy,
+                         w->cells[e - 1].cy,
+                         NULL,
+                         pk->lv_box[i],
+                         0};
+  }
+  *n_lv = n;
+  for (int i = 0; i < n; i++)
+    for (int j = 0; j < n; j++)
+      if ((j < i && !look_up(&lv[i], &lv[j])) || (j > i && look_up(&lv[j], &lv[i])))
+        lv[i].other = 1;
+  size_t need = 0;
+  for (int i = 0; i < n; i++)
+    if (wants_index(lv, n, i)) need += (size_t)((int64_t)lv[i].cy1 - lv[i].cy0 + 2);
+  *rf = NULL, *n_rf = need;
+  if (!need) return 1;
+  uint32_t *r = qk__realloc(&w->alloc, NULL, 0, need * sizeof *r);
+  if (!r) return 0;
+  *rf = r;
+  for (int i = 0; i < n; i++) {
+    if (!wants_index(lv, n, i)) continue;
+    size_t rows = (size_t)((int64_t)lv[i].cy1 - lv[i].cy0 + 1), y = 0;
+    lv[i].rf = r;
+    for (uint32_t c = lv[i].first; c < lv[i].end; c++)
+      for (size_t cy = (size_t)((int64_t)w->cells[c].cy - lv[i].cy0); y <= cy; y++) r[y] = c;
+    r[rows] = lv[i].end;
+    r += rows + 1;
+  }
+  return 1;
+}
+
+/* The work of cell a's objects, as a weight (see qk__world_search). */
+static inline double cell_work(const qk_world_t *w, uint32_t a, int finest) {
+  int d = w->cells[a].level - finest;
+  return (double)(w->cells[a + 1].start - w->cells[a].start) * qk__pow2(d < 60 ? d : 60);
+}
+
 qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kvec_t *out) {
-  int levels[QK__NLEV];
-  int n_levels = qk__world_levels(w, levels);
+  *out = (qk__kvec_t){0};
+  lvinfo_t lv[QK__NLEV];
+  int n_levels;
+  uint32_t *rf;
+  size_t n_rf;
+  if (!level_info(w, pk, lv, &n_levels, &rf, &n_rf)) return QK_ERR_NOMEM;
   unsigned nt = w->opt.threads;
   if (w->n_live < 4096) nt = 1; /* not worth a thread */
+  /* Chunks of cells of about equal work, taken in turn by the workers (many more than
+   * the workers). An object's work grows with its size (the finer cells its box covers):
+   * it is taken as 2^(l - finest level), so the few coarse cells at the end of the order
+   * (which find most of the pairs of a mixed-size scene) are spread over many chunks. */
+  enum { PER_THREAD = 32 };
+  uint32_t chunk_one[2] = {0, w->n_cells}, *chunk = chunk_one;
+  unsigned n_chunks = 1;
+  if (nt > 1) {
+    n_chunks = nt * PER_THREAD;
+    chunk = qk__realloc(&w->alloc, NULL, 0, (n_chunks + 1) * sizeof *chunk);
+    if (!chunk) {
+      qk__free(&w->alloc, rf, n_rf * sizeof *rf);
+      return QK_ERR_NOMEM;
+    }
+    double total = 0, acc = 0;
+    for (uint32_t a = 0; a < w->n_cells; a++) total += cell_work(w, a, lv[0].l);
+    unsigned i = 0;
+    chunk[i++] = 0;
+    for (uint32_t a = 0; a < w->n_cells && i < n_chunks; a++) {
+      acc += cell_work(w, a, lv[0].l);
+      if (acc >= total * i / n_chunks) chunk[i++] = a + 1;
+    }
+    while (i <= n_chunks) chunk[i++] = w->n_cells;
+  }
+  atomic_uint next;
+  atomic_init(&next, 0u);
   share_t shares[256];
   for (unsigned t = 0; t < nt; t++)
-    shares[t] = (share_t){w,
-                          pk,
-                          (size_t)w->n_cells * t / nt,
-                          (size_t)w->n_cells * (t + 1) / nt,
-                          {0},
-                          &w->alloc,
-                          0,
-                          levels,
-                          n_levels};
-  /* The first share's buffer is sized by the last search (it grows if need be). */
+    shares[t] = (share_t){w, pk, {0}, &w->alloc, 0, lv, n_levels, chunk, n_chunks, &next};
+  /* The first worker's buffer is sized by the last search (it grows if need be). */
   qk__kvec_t found = {0};
   size_t guess = w->last_found + w->last_found / 8 + 64;
   found.v = qk__realloc(&w->alloc, NULL, 0, guess * sizeof *found.v);
@@ -256,6 +555,8 @@ qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kve
   shares[0].out = found;
   qk__run_jobs(nt, nt, run_share, shares);
   found = shares[0].out;
+  if (chunk != chunk_one) qk__free(&w->alloc, chunk, (n_chunks + 1) * sizeof *chunk);
+  qk__free(&w->alloc, rf, n_rf * sizeof *rf);
   qk_status_t st = QK_OK;
   size_t total = 0;
   for (unsigned t = 0; t < nt; t++) {

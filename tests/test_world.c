@@ -7,6 +7,9 @@
  *    random box / disc / point / segment, all hits of a segment (as a set, in order of t)
  *    and the first hit, k nearest (distances); queries also between moves and the update;
  *  - a huge world: unit objects at coordinates near 1e9, and sizes 1e-3 .. 1e3 together;
+ *  - the bench's clustered mixed-size scene, small (boxes of 0.03 .. 30 on a 1/64 grid in
+ *    eight clusters, moving; also with discs, segments and points): large objects over
+ *    many finer levels' cells, inside them and on their borders;
  *  - hand-made touching cases of every pair of kinds (integers: the oracle is exact);
  *  - stale handles are rejected after removal and slot reuse;
  *  - churn: 10^5 frames of moves, adds and removes on a small world stay within 1.2x the
@@ -597,6 +600,99 @@ static void test_world_prefilter_and_sort(void **s) {
   qk_world_free(w);
 }
 
+/* The bench's clustered mixed-size scene, small: boxes in eight clusters with sizes over
+ * three decades (0.03 .. 30, most small), on a grid of 1/64 so that edges touch exactly
+ * and often, moving with constant velocities (bouncing off the scene's edges), a few
+ * removed and added every third frame. Large boxes meet small objects several levels
+ * finer, whose cells lie inside them (recorded without a test) or on their border
+ * (tested); with kinds, a quarter of the objects are discs, segments and points (a large
+ * disc or segment has no inside run: every finer object is tested). Every frame against
+ * brute force. */
+static double q64(double v) { return round(v * 64) / 64; }
+
+static qk_shape_t cm_shape(qkt_rng_t *r, const double *cx, const double *cy, int kinds) {
+  double w = q64(fmax(1.0 / 64, 0.03 * pow(1000.0, qkt_rng_unit(r) * qkt_rng_unit(r))));
+  double h = q64(fmax(1.0 / 64, w * qkt_rng_range(r, 0.5, 1.5)));
+  int c = (int)qkt_rng_below(r, 8);
+  double spread = 2.5;
+  double x = q64(cx[c] + (qkt_rng_unit(r) + qkt_rng_unit(r) + qkt_rng_unit(r) - 1.5) * spread);
+  double y = q64(cy[c] + (qkt_rng_unit(r) + qkt_rng_unit(r) + qkt_rng_unit(r) - 1.5) * spread);
+  qk_shape_t sh = {QK_SHAPE_BOX, x, y, x + w, y + h};
+  switch (kinds ? qkt_rng_below(r, 8) : 7) {
+  case 0:
+    sh = (qk_shape_t){QK_SHAPE_DISC, x, y, w / 2, 0};
+    break;
+  case 1:
+    sh = (qk_shape_t){QK_SHAPE_SEGMENT, x, y, x + w, y - h};
+    break;
+  case 2:
+    sh = (qk_shape_t){QK_SHAPE_POINT, x, y, 0, 0};
+    break;
+  default:
+    break;
+  }
+  return sh;
+}
+
+static void run_clustered_mixed(int kinds, size_t n, int frames) {
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 101 + (uint64_t)kinds);
+  double cx[8], cy[8];
+  for (int c = 0; c < 8; c++)
+    cx[c] = q64(qkt_rng_range(&r, 5, 45)), cy[c] = q64(qkt_rng_range(&r, 5, 45));
+  qk_world_t *w;
+  assert_int_equal(qk_world_new(NULL, &w), QK_OK);
+  mirror_t m = {0};
+  double *vx = NULL, *vy = NULL;
+  size_t vcap = 0;
+  qk_world_pair_t *prev = NULL;
+  size_t np = 0;
+  for (int f = 0; f < frames; f++) {
+    if (f == 0 || f % 3 == 1) { /* the scene, then a few removed and added */
+      for (int k = 0; f && k < 6 && m.n > 0; k++) {
+        size_t i = qkt_rng_below(&r, (uint32_t)m.n);
+        assert_int_equal(qk_world_remove(w, m.h[i]), QK_OK);
+        m.h[i] = m.h[m.n - 1], m.s[i] = m.s[m.n - 1], m.n--;
+        vx[i] = vx[m.n], vy[i] = vy[m.n];
+      }
+      for (size_t k = 0, add = f ? 5 : n; k < add; k++) {
+        m_add(w, &m, cm_shape(&r, cx, cy, kinds));
+        if (m.n > vcap) {
+          vcap = m.cap;
+          vx = realloc(vx, vcap * sizeof *vx), vy = realloc(vy, vcap * sizeof *vy);
+        }
+        double a = qkt_rng_range(&r, 0, 6.283185307179586);
+        vx[m.n - 1] = q64(0.25 * cos(a)), vy[m.n - 1] = q64(0.25 * sin(a));
+      }
+    }
+    for (size_t i = 0; f && i < m.n; i++) {
+      qk_shape_t sh = m.s[i];
+      if (sh.x + vx[i] < 0 || sh.x + vx[i] > 50) vx[i] = -vx[i];
+      if (sh.y + vy[i] < 0 || sh.y + vy[i] > 50) vy[i] = -vy[i];
+      sh.x += vx[i], sh.y += vy[i];
+      if (sh.kind == QK_SHAPE_BOX || sh.kind == QK_SHAPE_SEGMENT) sh.a += vx[i], sh.b += vy[i];
+      assert_int_equal(qk_world_move(w, m.h[i], &sh), QK_OK);
+      m.s[i] = o_norm(sh);
+    }
+    assert_int_equal(qk_world_update(w), QK_OK);
+    qk_world_pair_t *want;
+    size_t nw = o_pairs(&m, &want);
+    check_pairs(w, want, nw, prev, np, "clustered mixed", f);
+    free(prev);
+    prev = want, np = nw;
+  }
+  assert_true(np > 3 * n); /* dense: large objects over many small ones */
+  free(prev), free(vx), free(vy);
+  free(m.h), free(m.s);
+  qk_world_free(w);
+}
+
+static void test_world_clustered_mixed_sizes(void **s) {
+  (void)s;
+  run_clustered_mixed(0, 1200, 12);
+  run_clustered_mixed(1, 1200, 12);
+}
+
 /* Touching cases on integers (every formula is exact there). */
 static void test_world_touching(void **s) {
   (void)s;
@@ -943,6 +1039,7 @@ int main(void) {
       cmocka_unit_test(test_world_mixed_sizes),
       cmocka_unit_test(test_world_all_kinds),
       cmocka_unit_test(test_world_huge),
+      cmocka_unit_test(test_world_clustered_mixed_sizes),
       cmocka_unit_test(test_world_prefilter_and_sort),
       cmocka_unit_test(test_world_touching),
       cmocka_unit_test(test_world_stale_handles),
