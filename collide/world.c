@@ -18,9 +18,9 @@
  * sorted: their cells did not change), sorts the dirty ones and merges them in, in one
  * pass that also packs the boxes for the pair search. Neighbour cells of the same level
  * are then found by walking the sorted cells (the next cell; the row above by a cursor
- * that only moves forward), cells of coarser levels by binary search
- * (collide/world_search.c). Queries search the
- * cells the same way and check the dirty objects one by one.
+ * that only moves forward); across levels, each coarser object walks its box over the
+ * finer level's sorted cells row by row (collide/world_search.c). Queries search the
+ * cells by binary search per row and check the dirty objects one by one.
  *
  * Levels adapt to the sizes (an object of size e sits at level ~log2 e, from 1e-3 to
  * 1e3 and beyond in one world; levels are a factor of 4 apart) and to the coordinates
