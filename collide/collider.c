@@ -206,6 +206,18 @@ static inline float round_up_t(double t) {
   return f;
 }
 
+/* A node's float box: b rounded outwards, or an inverted box for an empty node. */
+static void set_float_box(cnode_t *cn, uint32_t count, const qk_box_t *b) {
+  if (count == 0) {
+    cn->xmin = cn->ymin = cn->xmax = cn->ymax = INFINITY;
+  } else {
+    cn->xmin = round_down(b->xmin);
+    cn->ymin = round_down(b->ymin);
+    cn->xmax = round_up(b->xmax);
+    cn->ymax = round_up(b->ymax);
+  }
+}
+
 /* Post-order: a node's box is the union of its children's (or its items'). Recursion
  * depth is bounded by the tree's depth cap. */
 static qk_box_t fill_node_boxes(qk_collider_t *c, uint32_t node, uint32_t *n_int) {
@@ -227,14 +239,7 @@ static qk_box_t fill_node_boxes(qk_collider_t *c, uint32_t node, uint32_t *n_int
     }
   }
   if (!leaf && count > 0) (*n_int)++; /* one qnode_t each (fill_qnodes) */
-  if (count == 0) {
-    cn->xmin = cn->ymin = cn->xmax = cn->ymax = INFINITY;
-  } else {
-    cn->xmin = round_down(b.xmin);
-    cn->ymin = round_down(b.ymin);
-    cn->xmax = round_up(b.xmax);
-    cn->ymax = round_up(b.ymax);
-  }
+  set_float_box(cn, count, &b);
   return b; /* for an empty node the inverted box, which leaves a union unchanged */
 }
 
@@ -348,14 +353,7 @@ static qk_box_t fill_top_boxes(qk_collider_t *c, uint32_t node, unsigned depth, 
     qk_box_t cb = fill_top_boxes(c, cn->child + k, depth + 1, sp);
     box_union(&b, &cb);
   }
-  if (count == 0) {
-    cn->xmin = cn->ymin = cn->xmax = cn->ymax = INFINITY;
-  } else {
-    cn->xmin = round_down(b.xmin);
-    cn->ymin = round_down(b.ymin);
-    cn->xmax = round_up(b.xmax);
-    cn->ymax = round_up(b.ymax);
-  }
+  set_float_box(cn, count, &b);
   return b;
 }
 
