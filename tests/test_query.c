@@ -35,14 +35,20 @@ static const qkt_dist_t dists[] = {QKT_UNIFORM, QKT_CLUSTERED, QKT_DUPLICATES, Q
 static const uint32_t caps[] = {1, 4, 32};
 static uint64_t g_seed;
 
-static qk_tree_t *build(const qk_point_t *p, size_t n, uint32_t cap) {
+/* A checked tree of capacity cap, its memory from a (NULL: libc). */
+static qk_tree_t *build_with(const qk_point_t *p, size_t n, uint32_t cap, const qk_allocator_t *a) {
   qk_tree_options_t o;
   qk_tree_options_init(&o);
   o.capacity = cap;
+  o.allocator = a;
   qk_tree_t *t = NULL;
   assert_int_equal(qk_tree_build(p, n, &o, &t), QK_OK);
   QKT_CHECK_TREE(t);
   return t;
+}
+
+static qk_tree_t *build(const qk_point_t *p, size_t n, uint32_t cap) {
+  return build_with(p, n, cap, NULL);
 }
 
 /* A query location: mostly inside the unit square, some on the grid, some outside. */
@@ -351,12 +357,7 @@ static void test_query_batch_nomem(void **state) {
   for (size_t i = 0; i < nq; i++) qs[i] = rand_loc(&r);
   qkt_alloc_t st;
   qk_allocator_t a = qkt_alloc_make(&st);
-  qk_tree_options_t o;
-  qk_tree_options_init(&o);
-  o.capacity = 8;
-  o.allocator = &a;
-  qk_tree_t *t = NULL;
-  assert_int_equal(qk_tree_build(p, n, &o, &t), QK_OK);
+  qk_tree_t *t = build_with(p, n, 8, &a);
   qk_neighbor_t *out = malloc(nq * k * sizeof *out), want[3];
   for (int failing = 0; failing < 2; failing++) {
     size_t before = st.calls;
@@ -758,12 +759,7 @@ static void test_query_batch_threaded_order(void **state) {
   for (size_t i = 0; i < nq; i++) qs[i] = rand_loc(&r);
   qkt_alloc_t st;
   qk_allocator_t a = qkt_alloc_make(&st);
-  qk_tree_options_t o;
-  qk_tree_options_init(&o);
-  o.capacity = 4;
-  o.allocator = &a;
-  qk_tree_t *t = NULL;
-  assert_int_equal(qk_tree_build(p, n, &o, &t), QK_OK);
+  qk_tree_t *t = build_with(p, n, 4, &a);
   for (size_t i = 0; i < nq; i++) {
     size_t m = 0;
     assert_int_equal(qk_query_knn(t, qs[i], k, INFINITY, want + i * k, &m), QK_OK);
