@@ -141,10 +141,13 @@ static int resolve_xy(const char *cmd, const char *path, const char *header, xy_
     for (int i = 0; csv_field(header, i, buf, sizeof buf); i++) {
       char *b = buf;
       while (*b == ' ') b++;
-      if (!strcmp(b, xy->name[k])) {
-        xy->col[k] = i;
-        break;
+      if (strcmp(b, xy->name[k])) continue;
+      if (xy->col[k] >= 0) { /* as the library's reader: a name twice is ambiguous */
+        cli_error(cmd, "%s:1: column name '%s' appears twice in the header (fields %d and %d)",
+                  path, xy->name[k], xy->col[k] + 1, i + 1);
+        return 1;
       }
+      xy->col[k] = i;
     }
     if (xy->col[k] < 0) {
       cli_error(cmd, "%s:1: no column named '%s' in the header", path, xy->name[k]);
@@ -225,7 +228,11 @@ static int flush_chunk(join_t *j) {
       if (n > 64) {
         many = malloc(n * sizeof *many);
         if (!many) return CLI_INTERNAL;
-        qk_region_locate_all(j->r, j->p[i], j->rule, many, n, &n);
+        st = qk_region_locate_all(j->r, j->p[i], j->rule, many, n, &n);
+        if (st) {
+          free(many);
+          return cli_status("join", "locate", st);
+        }
       }
       if (n == 0) write_row(j, j->lines[i], QK_NONE);
       for (size_t k = 0; k < n; k++) write_row(j, j->lines[i], many[k]);

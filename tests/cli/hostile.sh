@@ -61,6 +61,11 @@ same "join: BOM, CRLF, quoted commas, --xy by name" \
 same "join: --xy by number" "$("$cli" join "$tmp/sq.geojson" "$tmp/q.csv" --xy 2,3 | awk -F, '{ print $NF }' | tr '\n' ' ')" \
   "feature 0 -1 "
 
+printf 'x,x,y\n5,0.5,0.5\n' >"$tmp/twice.csv"
+expect 1 "twice.csv:1: column name 'x' appears twice in the header \\(fields 1 and 2\\)" -- \
+  "$cli" join "$tmp/sq.geojson" "$tmp/twice.csv" --xy x,y -o "$tmp/keep.csv"
+unchanged "$tmp/keep.csv"
+
 # ---- GeoJSON: BOM accepted; unknown types refused; the position given once -------------
 printf '%s' "$bom" >"$tmp/bom.geojson"
 cat "$tmp/sq.geojson" >>"$tmp/bom.geojson"
