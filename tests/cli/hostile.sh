@@ -83,6 +83,15 @@ unchanged "$tmp/keep.csv"
 printf '{"type":"FeatureCollection","features":[{"type":"Feature","properties":{},"geometry":{"type":"Point","coordinates":[0,0]}}]}\n' >"$tmp/point.geojson"
 expect 0 '"skipped_geometries": 1' -- "$cli" regions "$tmp/point.geojson"
 
+# An island cut at the antimeridian whose cut points differ (Natural Earth's Fiji): kept
+# whole by --project equirect, the parts meet in T-junctions along the cut; they used to be
+# refused ("vertex ... lies on segment ..."), now the cut edge is split there.
+printf '{"type":"MultiPolygon","coordinates":[[[[179,-1],[180,-1],[180,1],[179,1],[179,-1]]],[[[-180,-0.5],[-179,-0.5],[-179,0.5],[-180,0.5],[-180,-0.5]]]]}\n' >"$tmp/cut.geojson"
+expect 0 '"duplicate_segments": 1, "split_points": 2, ' -- "$cli" mesh "$tmp/cut.geojson" --project equirect --round 2^-4 -o "$tmp/cut" --stats
+# ... and the same in planar data: a square with a smaller one against its side.
+printf '{"type":"MultiPolygon","coordinates":[[[[0,0],[4,0],[4,4],[0,4],[0,0]]],[[[4,1],[6,1],[6,3],[4,3],[4,1]]]]}\n' >"$tmp/t.geojson"
+expect 0 '"triangles": [1-9].*"split_points": 2, ' -- "$cli" mesh "$tmp/t.geojson" -o "$tmp/t" --stats
+
 # ---- .poly: BOM accepted; bad geometry refused naming the line, nothing written ------
 printf '%s4 2 0 0\n0 0 0\n1 1 0\n2 1 1\n3 0 1\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n0\n' "$bom" >"$tmp/bom.poly"
 expect 0 '"triangles": [1-9]' -- "$cli" mesh "$tmp/bom.poly" -o "$tmp/b" --stats
@@ -92,5 +101,10 @@ printf '4 2 0 0\n0 0 0\n1 1 0\n2 1 1\n3 0 1\n4 0\n0 0 2\n1 1 3\n2 0 1\n3 2 3\n0\
 expect 1 'cross.poly:[0-9]+: .*segments 0 \(line 7\) and 1 \(line 8\) meet' -- "$cli" mesh "$tmp/cross.poly" -o "$tmp/d"
 printf '4 2 0 0\n0 0 0\n1 1 0\n2 1 1\n3 0 1\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n1\n0 5 5\n' >"$tmp/hole.poly"
 expect 1 'hole.poly:12: hole 0 at \(5, 5\) lies outside the domain' -- "$cli" mesh "$tmp/hole.poly" -o "$tmp/d"
+# Two outputs naming one file: a usage error before any work, the file untouched.
+echo keep >"$tmp/same.node"
+expect 2 'both write' -- "$cli" mesh "$tmp/bom.poly" -o "$tmp/same" --svg "$tmp/same.node"
+unchanged "$tmp/same.node"
+expect 2 '--msh and --vtk both write' -- "$cli" mesh "$tmp/bom.poly" -o "$tmp/d" --msh "$tmp/x.msh" --vtk "$tmp/x.msh"
 for f in d.node d.ele; do [ -e "$tmp/$f" ] && fail "$f written after an error"; done
 report
