@@ -514,6 +514,11 @@ static int make_mesh(const char *cmd, const mesh_args_t *o, qk_poly_t **poly, qk
   qk_mesh_options_init(&opt);
   opt.size = o->size;
   opt.mode = o->mode;
+  /* GeoJSON is real-world data: an axis-parallel ring in metres (a graticule cell, a
+   * rectangular county) meets the book's or the dyadic conditions, and those modes
+   * refine every boundary down to the lattice step (a 111 km square at 1/16 m: tens of
+   * millions of triangles). The general mode unless a mode is insisted on. */
+  if (o->geojson && !o->mode) opt.mode = QK_MESH_GENERAL;
   opt.max_size = o->max_size;
   if (o->min_angle >= 0) opt.min_angle_deg = o->min_angle;
   qk_status_t st = qk_mesh_generate(*poly, &opt, mesh, &err);

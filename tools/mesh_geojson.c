@@ -385,6 +385,26 @@ static int build(const rings_t *r, mg_input_t *out) {
       free(sk), free(dup);
     }
     if (!rc) out->ns = w;
+    /* The points of dropped rings would stay behind as isolated vertices, which the
+     * mesher keeps as input (refining round them inside the domain): keep only the
+     * vertices some segment uses. */
+    uint32_t *renum = rc ? NULL : malloc((out->nv + 1) * sizeof *renum);
+    if (!rc && !renum) rc = 3;
+    if (!rc && out->dropped_rings) {
+      for (size_t v = 0; v < out->nv; v++) renum[v] = UINT32_MAX;
+      for (size_t i = 0; i < 2 * out->ns; i++) renum[out->seg[i]] = 0;
+      size_t nv = 0;
+      for (size_t v = 0; v < out->nv; v++)
+        if (renum[v] == 0) {
+          out->xy[2 * nv] = out->xy[2 * v], out->xy[2 * nv + 1] = out->xy[2 * v + 1];
+          renum[v] = (uint32_t)nv++;
+        }
+      for (size_t i = 0; i < 2 * out->ns; i++) out->seg[i] = renum[out->seg[i]];
+      for (size_t i = 0; i < out->ring_start[out->nr]; i++) out->ring_v[i] = renum[out->ring_v[i]];
+      out->unused_points = out->nv - nv;
+      out->nv = nv;
+    }
+    free(renum);
   }
   free(k), free(vid);
   return rc;

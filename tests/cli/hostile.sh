@@ -92,6 +92,20 @@ expect 0 '"duplicate_segments": 1, "split_points": 2, ' -- "$cli" mesh "$tmp/cut
 printf '{"type":"MultiPolygon","coordinates":[[[[0,0],[4,0],[4,4],[0,4],[0,0]]],[[[4,1],[6,1],[6,3],[4,3],[4,1]]]]}\n' >"$tmp/t.geojson"
 expect 0 '"triangles": [1-9].*"split_points": 2, ' -- "$cli" mesh "$tmp/t.geojson" -o "$tmp/t" --stats
 
+# A projected lon/lat square meets the book's conditions after rounding; it took the
+# book's or dyadic mode and millions of triangles (minutes). GeoJSON means the general mode.
+printf '{"type":"Polygon","coordinates":[[[0,0],[1,0],[1,1],[0,1],[0,0]]]}\n' >"$tmp/cell.geojson"
+expect 0 '"triangles": 2, .*"mode": "general"' -- "$cli" mesh "$tmp/cell.geojson" --project equirect --round 2^-4 -o "$tmp/cell" --stats
+# A degenerate ring (A, B, A) inside the domain is dropped, and so are its points: they
+# stayed as isolated input vertices inside the mesh.
+printf '{"type":"MultiPolygon","coordinates":[[[[0,0],[8,0],[8,8],[0,8],[0,0]]],[[[2.5,2.5],[3.75,2.25],[2.5,2.5],[2.5,2.5]]]]}\n' >"$tmp/deg.geojson"
+expect 0 '"dropped_rings": 1' -- "$cli" mesh "$tmp/deg.geojson" -o "$tmp/deg" --stats
+if awk 'NR > 1 && (($2 == 2.5 && $3 == 2.5) || ($2 == 3.75 && $3 == 2.25)) { found = 1 } END { exit !found }' "$tmp/deg.node"; then
+  fail "the points of a dropped ring are in the mesh"
+else
+  passes=$((passes + 1))
+fi
+
 # ---- .poly: BOM accepted; bad geometry refused naming the line, nothing written ------
 printf '%s4 2 0 0\n0 0 0\n1 1 0\n2 1 1\n3 0 1\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n0\n' "$bom" >"$tmp/bom.poly"
 expect 0 '"triangles": [1-9]' -- "$cli" mesh "$tmp/bom.poly" -o "$tmp/b" --stats
