@@ -432,14 +432,29 @@ static qk_status_t round_poly(qk_poly_t **poly, double g, prep_t *pp, qk_mesh_er
 
 /* Append to a mesher's message what its "segment N" is in the GeoJSON input. */
 static void name_segment(const prep_t *pp, const char *msg, char *buf, size_t n) {
+  /* "segment N ...", or "segments N and M ..." (crossing segments: both named) */
   const char *at = strstr(msg, "segment ");
-  char where[96] = "";
+  size_t skip = 8;
+  if (!at && (at = strstr(msg, "segments "))) skip = 9;
+  char where[96] = "", where2[96] = "";
   if (at && pp->gj.ns) {
     char *end;
-    unsigned long s = strtoul(at + 8, &end, 10);
-    if (end != at + 8 && s < pp->gj.ns) mg_describe_segment(&pp->gj, s, where, sizeof where);
+    unsigned long s = strtoul(at + skip, &end, 10);
+    if (end == at + skip || s >= pp->gj.ns) {
+      snprintf(buf, n, "%s", msg);
+      return;
+    }
+    mg_describe_segment(&pp->gj, s, where, sizeof where);
+    if (skip == 9 && !strncmp(end, " and ", 5)) {
+      char *end2;
+      unsigned long s2 = strtoul(end + 5, &end2, 10);
+      if (end2 != end + 5 && s2 < pp->gj.ns)
+        mg_describe_segment(&pp->gj, s2, where2, sizeof where2);
+    }
   }
-  if (where[0])
+  if (where[0] && where2[0])
+    snprintf(buf, n, "%s (input segments %s and %s)", msg, where, where2);
+  else if (where[0])
     snprintf(buf, n, "%s (input segment %s)", msg, where);
   else
     snprintf(buf, n, "%s", msg);

@@ -106,6 +106,11 @@ else
   passes=$((passes + 1))
 fi
 
+# Crossing rings in GeoJSON: both segments named by feature, ring and point.
+printf '{"type":"MultiPolygon","coordinates":[[[[0,0],[4,0],[4,4],[0,4],[0,0]]],[[[2,2],[6,2.5],[6,3],[2,2]]]]}\n' >"$tmp/crossing.geojson"
+expect 1 'segments 1 and 4 cross or overlap \(input segments feature 0 ring 0 point 1 and feature 0 ring 1 point 0\)' -- \
+  "$cli" mesh "$tmp/crossing.geojson" -o "$tmp/crossing"
+
 # ---- .poly: BOM accepted; bad geometry refused naming the line, nothing written ------
 printf '%s4 2 0 0\n0 0 0\n1 1 0\n2 1 1\n3 0 1\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n0\n' "$bom" >"$tmp/bom.poly"
 expect 0 '"triangles": [1-9]' -- "$cli" mesh "$tmp/bom.poly" -o "$tmp/b" --stats
