@@ -61,6 +61,8 @@ static int next_line(reader_t *r) {
     if (hash) *hash = '\0';
     r->ntok = 0;
     char *s = r->buf;
+    /* A UTF-8 byte order mark opening the file (Windows editors write one) is not text. */
+    if (r->line == 1 && !strncmp(s, "\xEF\xBB\xBF", 3)) s += 3;
     for (;;) {
       while (*s == ' ' || *s == '\t' || *s == '\r' || *s == ',') s++;
       if (!*s) break;

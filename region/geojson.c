@@ -103,6 +103,17 @@ static qk_status_t polygon(gj_t *g, json_object *rings, size_t f, size_t poly) {
   return QK_OK;
 }
 
+/* RFC 7946's geometry types other than Polygon and MultiPolygon: skipped and counted.
+ * Any other "type" (a typo such as "polygon" or "Polgon") is an error, not a silent
+ * skip. */
+static bool other_geometry(const char *ty) {
+  static const char *const names[] = {"Point", "MultiPoint", "LineString", "MultiLineString",
+                                      "GeometryCollection"};
+  for (size_t i = 0; i < sizeof names / sizeof *names; i++)
+    if (!strcmp(ty, names[i])) return true;
+  return false;
+}
+
 static qk_status_t geometry(gj_t *g, json_object *geom, size_t f) {
   if (!geom) {
     g->rg.skipped++;
@@ -116,6 +127,11 @@ static qk_status_t geometry(gj_t *g, json_object *geom, size_t f) {
   const char *ty = json_object_get_string(t);
   bool poly = !strcmp(ty, "Polygon"), multi = !strcmp(ty, "MultiPolygon");
   if (!poly && !multi) {
+    if (!other_geometry(ty))
+      return qk__region_fail(g->err, QK_ERR_PARSE, f,
+                             "feature %zu: unknown geometry type \"%.60s\" (RFC 7946: Polygon, "
+                             "MultiPolygon, Point, ...; names are case-sensitive)",
+                             f, ty);
     g->rg.skipped++;
     return QK_OK;
   }
@@ -205,6 +221,11 @@ static qk_status_t document(gj_t *g, json_object *root) {
     return QK_OK;
   }
   if (!strcmp(ty, "Feature")) return feature(g, root, 0);
+  if (strcmp(ty, "Polygon") && strcmp(ty, "MultiPolygon") && !other_geometry(ty))
+    return qk__region_fail(g->err, QK_ERR_PARSE, SIZE_MAX,
+                           "unknown GeoJSON type \"%.60s\" (expected FeatureCollection, Feature "
+                           "or a geometry; names are case-sensitive)",
+                           ty);
   qk_status_t st = geometry(g, root, 0);
   if (!st) st = qk__props_end_feature(g->a, &g->rg.props, 0);
   if (!st) st = end_feature(g);
@@ -235,6 +256,8 @@ qk_status_t qk_region_read_geojson_text(const char *text, size_t len,
   }
   if (!out || (!text && len)) return qk__region_fail(err, QK_ERR_INVALID, SIZE_MAX, "no input");
   *out = NULL;
+  /* RFC 8259 lets a parser ignore a UTF-8 byte order mark; Windows editors write one. */
+  if (len >= 3 && !memcmp(text, "\xEF\xBB\xBF", 3)) text += 3, len -= 3;
   json_tokener *tok = json_tokener_new();
   if (!tok) return qk__region_fail(err, QK_ERR_NOMEM, SIZE_MAX, "out of memory");
   json_object *root = NULL;
@@ -267,18 +290,13 @@ qk_status_t qk_region_read_geojson_text(const char *text, size_t len,
     /* the text ended inside a value */
     where(text, len, err);
     json_tokener_free(tok);
-    return qk__region_fail(err, QK_ERR_PARSE, SIZE_MAX,
-                           "line %lu, column %lu: unexpected end of "
-                           "input",
-                           err ? err->line : 0, err ? err->column : 0);
+    return qk__region_fail(err, QK_ERR_PARSE, SIZE_MAX, "unexpected end of input");
   }
   if (!root || jerr != json_tokener_success) {
     size_t off = at ? at - 1 : 0;
     where(text, off, err);
-    unsigned long l = err ? err->line : 0, c = err ? err->column : 0;
-    qk_status_t st =
-        qk__region_fail(err, QK_ERR_PARSE, SIZE_MAX, "line %lu, column %lu: malformed JSON: %s", l,
-                        c, json_tokener_error_desc(jerr));
+    qk_status_t st = qk__region_fail(err, QK_ERR_PARSE, SIZE_MAX, "malformed JSON: %s",
+                                     json_tokener_error_desc(jerr));
     json_object_put(root);
     json_tokener_free(tok);
     return st;
@@ -287,10 +305,8 @@ qk_status_t qk_region_read_geojson_text(const char *text, size_t len,
   for (size_t i = at; i < len; i++)
     if (!strchr(" \t\r\n", text[i])) {
       where(text, i, err);
-      unsigned long l = err ? err->line : 0, c = err ? err->column : 0;
       json_object_put(root);
-      return qk__region_fail(err, QK_ERR_PARSE, SIZE_MAX,
-                             "line %lu, column %lu: unexpected text after the JSON value", l, c);
+      return qk__region_fail(err, QK_ERR_PARSE, SIZE_MAX, "unexpected text after the JSON value");
     }
   qk_region_options_t o;
   qk_allocator_t alloc;

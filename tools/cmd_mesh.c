@@ -4,12 +4,14 @@
  * (projection, rounding: tools/mesh_geojson.c) live here; parsing, meshing and the
  * writers are the library's.
  */
+#define _POSIX_C_SOURCE 200809L
 #include "cli.h"
 #include "mesh_geojson.h"
 
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <time.h>
 
 static double now(void) {
@@ -190,6 +192,38 @@ static int parse_value(const char *cmd, const char *a, const char *v, mesh_args_
   return CLI_OK;
 }
 
+/* Two outputs naming one file would overwrite each other (the file ending up with
+ * whichever was renamed last, or half of each): a usage error, found before any work. */
+static int same_file(const char *a, const char *b) {
+  struct stat sa, sb;
+  if (!strcmp(a, b)) return 1;
+  return !stat(a, &sa) && !stat(b, &sb) && sa.st_dev == sb.st_dev && sa.st_ino == sb.st_ino;
+}
+
+static int distinct_outputs(const char *cmd, const mesh_args_t *o) {
+  size_t plen = strlen(o->prefix);
+  char *node = malloc(plen + 6), *ele = malloc(plen + 5);
+  if (!node || !ele) {
+    free(node), free(ele);
+    cli_error(cmd, "out of memory");
+    return CLI_INTERNAL;
+  }
+  memcpy(node, o->prefix, plen), memcpy(node + plen, ".node", 6);
+  memcpy(ele, o->prefix, plen), memcpy(ele + plen, ".ele", 5);
+  const char *path[6] = {node, ele, o->svg, o->msh, o->vtk, o->poly};
+  static const char *const what[6] = {
+      "-o PREFIX (.node)", "-o PREFIX (.ele)", "--svg", "--msh", "--vtk", "--poly"};
+  int rc = CLI_OK;
+  for (int i = 0; i < 6 && !rc; i++)
+    for (int k = i + 1; k < 6 && !rc && path[i]; k++)
+      if (path[k] && same_file(path[i], path[k])) {
+        cli_error(cmd, "%s and %s both write %s", what[i], what[k], path[k]);
+        rc = CLI_USAGE;
+      }
+  free(node), free(ele);
+  return rc;
+}
+
 static int parse_args(const char *cmd, int argc, char **argv, mesh_args_t *o) {
   memset(o, 0, sizeof *o);
   o->min_angle = -1;
@@ -240,7 +274,7 @@ static int parse_args(const char *cmd, int argc, char **argv, mesh_args_t *o) {
   if (!o->geojson && (o->project || o->feature >= 0 || o->field))
     return usage(cmd, "--project, --feature and --field apply to GeoJSON input");
   if (o->feature >= 0 && o->field) return usage(cmd, "--feature and --field exclude each other");
-  return CLI_OK;
+  return distinct_outputs(cmd, o);
 }
 
 /* Write every output through temporary files, renamed only when all were written, so a
@@ -287,7 +321,7 @@ static int write_outputs(const char *cmd, const mesh_args_t *o, const qk_mesh_t 
 /* What the input went through before meshing (for --stats and messages). */
 typedef struct prep {
   const char *format;
-  size_t rounded, merged, dropped_rings, dup_segments, features;
+  size_t rounded, merged, dropped_rings, dup_segments, split_points, features;
   double lat0;
   char name[128];
   mg_input_t gj; /* GeoJSON input (for naming segments in messages) */
@@ -324,8 +358,9 @@ static void print_stats(const qk_mesh_t *mesh, const mesh_args_t *o, const prep_
     json_text(pp->name);
     printf("\", \"projection\": \"%s\", ", o->project ? "equirect" : "none");
     if (o->project) printf("\"lat0_deg\": %.10g, ", pp->lat0);
-    printf("\"merged_vertices\": %zu, \"dropped_rings\": %zu, \"duplicate_segments\": %zu, ",
-           pp->merged, pp->dropped_rings, pp->dup_segments);
+    printf("\"merged_vertices\": %zu, \"dropped_rings\": %zu, \"duplicate_segments\": %zu, "
+           "\"split_points\": %zu, ",
+           pp->merged, pp->dropped_rings, pp->dup_segments, pp->split_points);
   }
   printf("\"round\": %.17g, \"rounded_coordinates\": %zu}, ", o->round, pp->rounded);
   printf("\"mode\": \"%s\", \"lattice_exponent\": %d, \"origin\": [%.17g, %.17g], "
@@ -397,14 +432,29 @@ static qk_status_t round_poly(qk_poly_t **poly, double g, prep_t *pp, qk_mesh_er
 
 /* Append to a mesher's message what its "segment N" is in the GeoJSON input. */
 static void name_segment(const prep_t *pp, const char *msg, char *buf, size_t n) {
+  /* "segment N ...", or "segments N and M ..." (crossing segments: both named) */
   const char *at = strstr(msg, "segment ");
-  char where[96] = "";
+  size_t skip = 8;
+  if (!at && (at = strstr(msg, "segments "))) skip = 9;
+  char where[96] = "", where2[96] = "";
   if (at && pp->gj.ns) {
     char *end;
-    unsigned long s = strtoul(at + 8, &end, 10);
-    if (end != at + 8 && s < pp->gj.ns) mg_describe_segment(&pp->gj, s, where, sizeof where);
+    unsigned long s = strtoul(at + skip, &end, 10);
+    if (end == at + skip || s >= pp->gj.ns) {
+      snprintf(buf, n, "%s", msg);
+      return;
+    }
+    mg_describe_segment(&pp->gj, s, where, sizeof where);
+    if (skip == 9 && !strncmp(end, " and ", 5)) {
+      char *end2;
+      unsigned long s2 = strtoul(end + 5, &end2, 10);
+      if (end2 != end + 5 && s2 < pp->gj.ns)
+        mg_describe_segment(&pp->gj, s2, where2, sizeof where2);
+    }
   }
-  if (where[0])
+  if (where[0] && where2[0])
+    snprintf(buf, n, "%s (input segments %s and %s)", msg, where, where2);
+  else if (where[0])
     snprintf(buf, n, "%s (input segment %s)", msg, where);
   else
     snprintf(buf, n, "%s", msg);
@@ -430,6 +480,7 @@ static int read_input(const char *cmd, const mesh_args_t *o, qk_poly_t **poly, p
     pp->format = "geojson";
     pp->rounded = pp->gj.rounded, pp->merged = pp->gj.merged;
     pp->dropped_rings = pp->gj.dropped_rings, pp->dup_segments = pp->gj.dup_segments;
+    pp->split_points = pp->gj.split_points;
     pp->features = pp->gj.features, pp->lat0 = pp->gj.lat0;
     snprintf(pp->name, sizeof pp->name, "%s", pp->gj.name);
     qk_status_t st = qk_poly_from_arrays(pp->gj.xy, pp->gj.nv, pp->gj.seg, pp->gj.ns, pp->gj.holes,
@@ -478,6 +529,11 @@ static int make_mesh(const char *cmd, const mesh_args_t *o, qk_poly_t **poly, qk
   qk_mesh_options_init(&opt);
   opt.size = o->size;
   opt.mode = o->mode;
+  /* GeoJSON is real-world data: an axis-parallel ring in metres (a graticule cell, a
+   * rectangular county) meets the book's or the dyadic conditions, and those modes
+   * refine every boundary down to the lattice step (a 111 km square at 1/16 m: tens of
+   * millions of triangles). The general mode unless a mode is insisted on. */
+  if (o->geojson && !o->mode) opt.mode = QK_MESH_GENERAL;
   opt.max_size = o->max_size;
   if (o->min_angle >= 0) opt.min_angle_deg = o->min_angle;
   qk_status_t st = qk_mesh_generate(*poly, &opt, mesh, &err);

@@ -141,10 +141,13 @@ static int resolve_xy(const char *cmd, const char *path, const char *header, xy_
     for (int i = 0; csv_field(header, i, buf, sizeof buf); i++) {
       char *b = buf;
       while (*b == ' ') b++;
-      if (!strcmp(b, xy->name[k])) {
-        xy->col[k] = i;
-        break;
+      if (strcmp(b, xy->name[k])) continue;
+      if (xy->col[k] >= 0) { /* as the library's reader: a name twice is ambiguous */
+        cli_error(cmd, "%s:1: column name '%s' appears twice in the header (fields %d and %d)",
+                  path, xy->name[k], xy->col[k] + 1, i + 1);
+        return 1;
       }
+      xy->col[k] = i;
     }
     if (xy->col[k] < 0) {
       cli_error(cmd, "%s:1: no column named '%s' in the header", path, xy->name[k]);
@@ -225,7 +228,11 @@ static int flush_chunk(join_t *j) {
       if (n > 64) {
         many = malloc(n * sizeof *many);
         if (!many) return CLI_INTERNAL;
-        qk_region_locate_all(j->r, j->p[i], j->rule, many, n, &n);
+        st = qk_region_locate_all(j->r, j->p[i], j->rule, many, n, &n);
+        if (st) {
+          free(many);
+          return cli_status("join", "locate", st);
+        }
       }
       if (n == 0) write_row(j, j->lines[i], QK_NONE);
       for (size_t k = 0; k < n; k++) write_row(j, j->lines[i], many[k]);
@@ -257,9 +264,22 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
   ssize_t len;
   long lineno = 0;
   int seen = 0, rc = CLI_OK;
-  char fx[256], fy[256];
+  /* The x and y fields, as long as the line (a field cut short could turn
+   * '0.5   <300 spaces>junk' into a number). */
+  char *fx = NULL, *fy = NULL;
+  size_t fcap = 0;
   while ((len = getline(&line, &cap, in)) >= 0) {
     lineno++;
+    if ((size_t)len + 1 > fcap) {
+      char *nx = realloc(fx, (size_t)len + 1), *ny = nx ? realloc(fy, (size_t)len + 1) : NULL;
+      if (nx) fx = nx;
+      if (ny) fy = ny;
+      if (!nx || !ny) {
+        rc = CLI_INTERNAL;
+        break;
+      }
+      fcap = (size_t)len + 1;
+    }
     if ((size_t)len != strlen(line)) {
       fprintf(stderr, "quadkit join: %s:%ld: binary data (NUL byte) in a text file\n", j->pts_path,
               lineno);
@@ -278,7 +298,7 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
       double v;
       int named = xy->col[0] < 0 || xy->col[1] < 0;
       int xc = xy->col[0] >= 0 ? xy->col[0] : 0;
-      int header = named || !csv_field(line, xc, fx, sizeof fx) || !number(fx, &v);
+      int header = named || !csv_field(line, xc, fx, fcap) || !number(fx, &v);
       if (header) {
         if (resolve_xy("join", j->pts_path, line, xy)) {
           rc = CLI_BAD_INPUT;
@@ -295,8 +315,7 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
       }
     }
     double x, y;
-    int hx = csv_field(line, xy->col[0], fx, sizeof fx),
-        hy = csv_field(line, xy->col[1], fy, sizeof fy);
+    int hx = csv_field(line, xy->col[0], fx, fcap), hy = csv_field(line, xy->col[1], fy, fcap);
     if (!hx || !hy) {
       fprintf(stderr, "quadkit join: %s:%ld: no field %d (need x in field %d, y in field %d)\n",
               j->pts_path, lineno, (!hx ? xy->col[0] : xy->col[1]) + 1, xy->col[0] + 1,
@@ -333,6 +352,8 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
   for (size_t i = 0; i < j->n; i++) free(j->lines[i]);
   j->n = 0;
   free(line);
+  free(fx);
+  free(fy);
   if (progress_on) {
     progress(progress_on, total, total, (size_t)lineno);
     fputc('\n', stderr);

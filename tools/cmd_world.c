@@ -163,6 +163,9 @@ static int each_row(const char *path,
     }
     line[strcspn(line, "\r\n")] = '\0';
     char *p = line;
+    /* A UTF-8 byte order mark (editors on Windows write one) is not part of the first
+     * field: left there, it would make a first data row look like a header. */
+    if (ln == 1 && !strncmp(p, "\xEF\xBB\xBF", 3)) p += 3;
     while (isspace((unsigned char)*p)) p++;
     if (!*p) continue;
     row_t r;

@@ -202,6 +202,71 @@ static void transform(rings_t *r, const mg_options_t *o, mg_input_t *out) {
     }
 }
 
+/* Vertices lying exactly inside an axis-parallel ring edge (a T-junction: parts of a
+ * feature cut along a meridian and kept whole across the antimeridian, Fiji's islands,
+ * meet there with their cut points at different latitudes). Such an edge is split at
+ * them, so that the cut edges become shared segments. Exact: equal coordinates only.
+ * by_x: vertex numbers sorted by (x, y) (the merged vertices are in that order already);
+ * by_y: sorted by (y, x). */
+typedef struct tj {
+  const double *xy;
+  size_t nv;
+  const uint32_t *by_y;
+} tj_t;
+
+/* First position in [0, n) whose key (c0 major, c1 minor) is >= (u, w); in by_x order
+ * (idx NULL: vertex i itself) or by_y order. */
+static size_t tj_lower(const tj_t *t, const uint32_t *idx, int c0, double u, double w) {
+  size_t lo = 0, hi = t->nv;
+  while (lo < hi) {
+    size_t mid = lo + (hi - lo) / 2;
+    const double *p = &t->xy[2 * (idx ? idx[mid] : mid)];
+    if (p[c0] < u || (p[c0] == u && p[1 - c0] < w))
+      lo = mid + 1;
+    else
+      hi = mid;
+  }
+  return lo;
+}
+
+/* The vertices strictly inside edge a-b when it is axis-parallel, in order from a to b,
+ * into list (NULL: count only); returns how many. */
+static size_t tj_inside(const tj_t *t, uint32_t a, uint32_t b, uint32_t *list) {
+  const double *pa = &t->xy[2 * a], *pb = &t->xy[2 * b];
+  int c0; /* the coordinate the edge keeps */
+  if (pa[0] == pb[0])
+    c0 = 0;
+  else if (pa[1] == pb[1])
+    c0 = 1;
+  else
+    return 0;
+  const uint32_t *idx = c0 == 0 ? NULL : t->by_y;
+  double lo = fmin(pa[1 - c0], pb[1 - c0]), hi = fmax(pa[1 - c0], pb[1 - c0]);
+  size_t i0 = tj_lower(t, idx, c0, pa[c0], lo) + 1; /* past the endpoint at lo */
+  size_t n = 0;
+  for (size_t i = i0; i < t->nv; i++) {
+    uint32_t v = idx ? idx[i] : (uint32_t)i;
+    const double *p = &t->xy[2 * v];
+    if (p[c0] != pa[c0] || p[1 - c0] >= hi) break;
+    n++;
+  }
+  if (list) {
+    int up = pa[1 - c0] < pb[1 - c0];
+    for (size_t j = 0; j < n; j++) {
+      size_t i = up ? i0 + j : i0 + n - 1 - j;
+      list[j] = idx ? idx[i] : (uint32_t)i;
+    }
+  }
+  return n;
+}
+
+static const double *g_cmp_xy; /* for qsort by (y, x) */
+static int cmp_yx(const void *pa, const void *pb) {
+  const double *a = &g_cmp_xy[2 * *(const uint32_t *)pa], *b = &g_cmp_xy[2 * *(const uint32_t *)pb];
+  if (a[1] != b[1]) return a[1] < b[1] ? -1 : 1;
+  return (a[0] > b[0]) - (a[0] < b[0]);
+}
+
 /* Merge coincident points into vertices, make the segments and the ring records. */
 static int build(const rings_t *r, mg_input_t *out) {
   vkey_t *k = malloc((r->np + 1) * sizeof *k);
@@ -232,13 +297,44 @@ static int build(const rings_t *r, mg_input_t *out) {
     /* Vertex numbers in input order of first appearance make messages easier to follow,
      * but sorted order is what was built; keep it (the .node output numbers them). */
     out->ring_start[0] = 0;
-    for (size_t q = 0; q < r->nr; q++) {
+    /* T-junctions: count the vertices to insert, and make room for them. */
+    uint32_t *by_y = malloc((out->nv + 1) * sizeof *by_y);
+    if (!by_y) rc = 3;
+    tj_t tj = {out->xy, out->nv, by_y};
+    size_t extra = 0;
+    if (!rc) {
+      for (size_t i = 0; i < out->nv; i++) by_y[i] = (uint32_t)i;
+      g_cmp_xy = out->xy;
+      qsort(by_y, out->nv, sizeof *by_y, cmp_yx);
+      for (size_t q = 0; q < r->nr; q++)
+        for (size_t i = r->start[q]; i < r->start[q + 1]; i++) {
+          size_t j = i + 1 < r->start[q + 1] ? i + 1 : r->start[q];
+          if (vid[i] != vid[j]) extra += tj_inside(&tj, (uint32_t)vid[i], (uint32_t)vid[j], NULL);
+        }
+    }
+    if (!rc && extra) {
+      size_t n = r->np + extra + 1;
+      uint32_t *rv = realloc(out->ring_v, n * sizeof *rv);
+      if (rv) out->ring_v = rv;
+      uint32_t *sg = realloc(out->seg, 2 * n * sizeof *sg);
+      if (sg) out->seg = sg;
+      uint32_t *sf = realloc(out->seg_feature, n * sizeof *sf);
+      if (sf) out->seg_feature = sf;
+      uint32_t *sr = realloc(out->seg_ring, n * sizeof *sr);
+      if (sr) out->seg_ring = sr;
+      uint32_t *sp = realloc(out->seg_point, n * sizeof *sp);
+      if (sp) out->seg_point = sp;
+      if (!rv || !sg || !sf || !sr || !sp) rc = 3;
+    }
+    out->split_points = extra;
+    for (size_t q = 0; !rc && q < r->nr; q++) {
       size_t s0 = r->start[q], s1 = r->start[q + 1], at = out->ring_start[out->nr], m = 0;
-      /* The ring's distinct consecutive vertices. */
+      /* The ring's distinct consecutive vertices, with T-junction vertices inserted. */
       for (size_t i = s0; i < s1; i++) {
         uint32_t v = (uint32_t)vid[i];
-        if (m && out->ring_v[at + m - 1] == v) continue;
-        out->ring_v[at + m++] = v;
+        if (!(m && out->ring_v[at + m - 1] == v)) out->ring_v[at + m++] = v;
+        uint32_t w = (uint32_t)vid[i + 1 < s1 ? i + 1 : s0];
+        if (extra && v != w) m += tj_inside(&tj, v, w, out->ring_v + at + m);
       }
       while (m > 1 && out->ring_v[at] == out->ring_v[at + m - 1]) m--;
       if (m < 3) {
@@ -255,12 +351,17 @@ static int build(const rings_t *r, mg_input_t *out) {
       out->ring_sign[out->nr] = r->hole[q] ? -1 : 1;
       out->ring_start[++out->nr] = at + m;
     }
+    free(by_y);
     /* A segment given twice (rings sharing an edge) is kept once: the first copy. */
-    skey_t *sk = malloc((out->ns + 1) * sizeof *sk);
-    unsigned char *dup = calloc(out->ns + 1, 1);
-    if (!sk || !dup) {
-      free(sk), free(dup);
-      rc = 3;
+    skey_t *sk = NULL;
+    unsigned char *dup = NULL;
+    if (!rc) {
+      sk = malloc((out->ns + 1) * sizeof *sk);
+      dup = calloc(out->ns + 1, 1);
+      if (!sk || !dup) {
+        free(sk), free(dup);
+        rc = 3;
+      }
     }
     size_t w = 0;
     if (!rc) {
@@ -284,6 +385,26 @@ static int build(const rings_t *r, mg_input_t *out) {
       free(sk), free(dup);
     }
     if (!rc) out->ns = w;
+    /* The points of dropped rings would stay behind as isolated vertices, which the
+     * mesher keeps as input (refining round them inside the domain): keep only the
+     * vertices some segment uses. */
+    uint32_t *renum = rc ? NULL : malloc((out->nv + 1) * sizeof *renum);
+    if (!rc && !renum) rc = 3;
+    if (!rc && out->dropped_rings) {
+      for (size_t v = 0; v < out->nv; v++) renum[v] = UINT32_MAX;
+      for (size_t i = 0; i < 2 * out->ns; i++) renum[out->seg[i]] = 0;
+      size_t nv = 0;
+      for (size_t v = 0; v < out->nv; v++)
+        if (renum[v] == 0) {
+          out->xy[2 * nv] = out->xy[2 * v], out->xy[2 * nv + 1] = out->xy[2 * v + 1];
+          renum[v] = (uint32_t)nv++;
+        }
+      for (size_t i = 0; i < 2 * out->ns; i++) out->seg[i] = renum[out->seg[i]];
+      for (size_t i = 0; i < out->ring_start[out->nr]; i++) out->ring_v[i] = renum[out->ring_v[i]];
+      out->unused_points = out->nv - nv;
+      out->nv = nv;
+    }
+    free(renum);
   }
   free(k), free(vid);
   return rc;

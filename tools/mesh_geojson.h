@@ -46,7 +46,9 @@ typedef struct mg_input {
   size_t rounded;       /* coordinates changed by rounding */
   size_t merged;        /* ring points that became an existing vertex */
   size_t dropped_rings; /* rings with fewer than 3 distinct points left */
+  size_t unused_points; /* vertices left only by dropped rings (removed) */
   size_t dup_segments;  /* segments given twice */
+  size_t split_points;  /* vertices inserted into axis-parallel ring edges they lay on */
   double lat0;          /* the projection's latitude (degrees) */
   char name[128];       /* the feature's name (NAME / name / ADMIN), or "" */
 } mg_input_t;

@@ -43,7 +43,9 @@ int cli_out_open(const char *cmd, const char *path, cli_out_t *o) {
     cli_error(cmd, "out of memory");
     return CLI_INTERNAL;
   }
-  snprintf(o->tmp, n, "%s.tmp.%ld", o->path, (long)getpid());
+  /* One temporary per output of this process, even when two names reach one file. */
+  static unsigned serial;
+  snprintf(o->tmp, n, "%s.tmp.%ld.%u", o->path, (long)getpid(), serial++);
   o->f = fopen(o->tmp, "wb");
   if (!o->f) {
     cli_error(cmd, "cannot write %s: %s", path, strerror(errno));

@@ -1,0 +1,116 @@
+/*
+ * The GeoJSON reader on unusual input found by a review with hostile files:
+ *  - a UTF-8 byte order mark before the text is ignored (RFC 8259 allows it; it was a
+ *    "malformed JSON" error);
+ *  - a "type" that is not one of RFC 7946's (a typo: "FeatureColection", "polygon") is
+ *    an error naming the feature, not a silently skipped, empty layer;
+ *  - RFC 7946's other geometry types are still skipped and counted;
+ *  - malformed JSON gives its line and column in qk_error_t, not repeated in the
+ *    message (the CLI printed "f.geojson:1:61: line 1, column 61: ...").
+ */
+#include "support/qk_test.h"
+
+#include <string.h>
+
+#ifdef QK_HAVE_JSONC
+static qk_status_t read_text(const char *text, qk_region_t **r, qk_error_t *err) {
+  qk_region_options_t o;
+  qk_region_options_init(&o);
+  o.planar = 1;
+  return qk_region_read_geojson_text(text, strlen(text), &o, r, err);
+}
+
+#define SQUARE "{\"type\":\"Polygon\",\"coordinates\":[[[0,0],[1,0],[1,1],[0,1],[0,0]]]}"
+#endif
+
+static void test_geojson_bom(void **state) {
+  (void)state;
+#ifndef QK_HAVE_JSONC
+  skip();
+#else
+  qk_region_t *r = NULL;
+  qk_error_t err;
+  assert_int_equal(read_text("\xEF\xBB\xBF" SQUARE, &r, &err), QK_OK);
+  uint32_t f = QK_NONE;
+  assert_int_equal(qk_region_locate(r, (qk_point_t){0.5, 0.5}, QK_BOUNDARY_SEMI_OPEN, &f), QK_OK);
+  assert_int_equal(f, 0);
+  qk_region_free(r);
+  /* A BOM alone is an empty document; a BOM in the middle is still an error. */
+  assert_int_equal(read_text("\xEF\xBB\xBF", &r, &err), QK_ERR_PARSE);
+  assert_null(r);
+  assert_int_equal(read_text(" \xEF\xBB\xBF" SQUARE, &r, &err), QK_ERR_PARSE);
+  assert_null(r);
+#endif
+}
+
+static void test_geojson_unknown_types(void **state) {
+  (void)state;
+#ifndef QK_HAVE_JSONC
+  skip();
+#else
+  qk_region_t *r = NULL;
+  qk_error_t err;
+  assert_int_equal(read_text("{\"type\":\"FeatureColection\",\"features\":[]}", &r, &err),
+                   QK_ERR_PARSE);
+  assert_null(r);
+  assert_non_null(strstr(err.message, "unknown GeoJSON type \"FeatureColection\""));
+  const char *lower = "{\"type\":\"FeatureCollection\",\"features\":[{\"type\":\"Feature\","
+                      "\"properties\":{},\"geometry\":" SQUARE "},{\"type\":\"Feature\","
+                      "\"properties\":{},\"geometry\":{\"type\":\"polygon\","
+                      "\"coordinates\":[]}}]}";
+  assert_int_equal(read_text(lower, &r, &err), QK_ERR_PARSE);
+  assert_null(r);
+  assert_int_equal(err.item, 1);
+  assert_non_null(strstr(err.message, "feature 1: unknown geometry type \"polygon\""));
+  /* RFC 7946's other types: skipped and counted, indices kept. */
+  const char *mixed = "{\"type\":\"FeatureCollection\",\"features\":["
+                      "{\"type\":\"Feature\",\"properties\":{},\"geometry\":{\"type\":\"Point\","
+                      "\"coordinates\":[0,0]}},"
+                      "{\"type\":\"Feature\",\"properties\":{},\"geometry\":{\"type\":"
+                      "\"GeometryCollection\",\"geometries\":[]}},"
+                      "{\"type\":\"Feature\",\"properties\":{},\"geometry\":" SQUARE "}]}";
+  assert_int_equal(read_text(mixed, &r, &err), QK_OK);
+  qk_region_stats_t s;
+  qk_region_stats(r, &s);
+  assert_int_equal(s.skipped, 2);
+  uint32_t f = QK_NONE;
+  assert_int_equal(qk_region_locate(r, (qk_point_t){0.5, 0.5}, QK_BOUNDARY_SEMI_OPEN, &f), QK_OK);
+  assert_int_equal(f, 2);
+  qk_region_free(r);
+  assert_int_equal(read_text("{\"type\":\"LineString\",\"coordinates\":[[0,0],[1,1]]}", &r, &err),
+                   QK_OK);
+  qk_region_free(r);
+#endif
+}
+
+static void test_geojson_error_position(void **state) {
+  (void)state;
+#ifndef QK_HAVE_JSONC
+  skip();
+#else
+  qk_region_t *r = NULL;
+  qk_error_t err;
+  assert_int_equal(read_text("{\n  \"type\": \"Polygon\",\n  \"coordinates\": [[[0,0],", &r, &err),
+                   QK_ERR_PARSE);
+  assert_int_equal(err.line, 3);
+  assert_true(err.column > 1);
+  assert_string_equal(err.message, "unexpected end of input");
+  assert_int_equal(read_text("{\"type\": @}", &r, &err), QK_ERR_PARSE);
+  assert_int_equal(err.line, 1);
+  assert_non_null(strstr(err.message, "malformed JSON"));
+  assert_null(strstr(err.message, "line"));
+  assert_int_equal(read_text(SQUARE "\n x", &r, &err), QK_ERR_PARSE);
+  assert_int_equal(err.line, 2);
+  assert_int_equal(err.column, 2);
+  assert_string_equal(err.message, "unexpected text after the JSON value");
+#endif
+}
+
+int main(void) {
+  const struct CMUnitTest tests[] = {
+      cmocka_unit_test(test_geojson_bom),
+      cmocka_unit_test(test_geojson_unknown_types),
+      cmocka_unit_test(test_geojson_error_position),
+  };
+  return cmocka_run_group_tests(tests, NULL, NULL);
+}
