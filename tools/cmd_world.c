@@ -15,9 +15,9 @@
 
 /* ---- reading the scene ------------------------------------------------------------- */
 
-/* One parsed row: up to 6 fields as text. */
+/* One parsed row: up to 6 fields as text; n is 7 when there were more. */
 typedef struct row {
-  char *f[6];
+  char *f[7];
   int n;
 } row_t;
 
@@ -26,7 +26,7 @@ static int split(char *line, row_t *r) {
   char *s = line;
   for (;;) {
     while (*s == ' ' || *s == '\t') s++;
-    if (r->n < 6) r->f[r->n++] = s;
+    if (r->n < 7) r->f[r->n++] = s;
     char *c = strchr(s, ',');
     char *end = c ? c : s + strlen(s);
     while (end > s && isspace((unsigned char)end[-1])) end--;
@@ -112,6 +112,14 @@ static int shape_values(const char *path, unsigned long ln, qk_shape_kind_t k, c
     if (!num(f[i], &v[i])) return bad(path, ln, "not a number: '%s'", f[i]);
     if (!isfinite(v[i])) return bad(path, ln, "coordinate is not finite: '%s'", f[i]);
   }
+  /* Fields a kind does not use may be empty or hold a number (files that write all six
+   * columns for every kind), but nothing else. */
+  for (int i = need; i < nf; i++) {
+    double unused;
+    if (f[i][0] && !num(f[i], &unused))
+      return bad(path, ln,
+                 "field '%s' is not used by this kind of shape: leave it empty or a number", f[i]);
+  }
   *s = (qk_shape_t){k, v[0], v[1], v[2], v[3]};
   if (k == QK_SHAPE_DISC && v[2] < 0) return bad(path, ln, "disc radius is negative: '%s'", f[2]);
   for (int i = 0; i < need; i++) {
@@ -188,7 +196,7 @@ static int each_row(const char *path,
 }
 
 static int object_row(const char *path, unsigned long ln, row_t *r, scene_t *s) {
-  if (r->n < 4) return bad(path, ln, "%s", "expected id,kind,x,y[,a,b]");
+  if (r->n < 4 || r->n > 6) return bad(path, ln, "%s", "expected id,kind,x,y[,a,b]");
   uint64_t id;
   const char *why = parse_id(r->f[0], &id);
   if (why) return bad(path, ln, why, r->f[0]);
@@ -210,7 +218,7 @@ static int object_row(const char *path, unsigned long ln, row_t *r, scene_t *s) 
 }
 
 static int move_row(const char *path, unsigned long ln, row_t *r, scene_t *s) {
-  if (r->n < 4) return bad(path, ln, "%s", "expected frame,id,x,y[,a,b]");
+  if (r->n < 4 || r->n > 6) return bad(path, ln, "%s", "expected frame,id,x,y[,a,b]");
   uint64_t frame, id;
   if (parse_id(r->f[0], &frame) || frame > 100000000)
     return bad(path, ln, "frame is not a whole number from 0 to 1e8: '%s'", r->f[0]);
