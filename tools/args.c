@@ -50,6 +50,15 @@ int cli_parse_xy(const char *cmd, const char *opt, const char *s, const char **o
               s);
     return 1;
   }
+  /* A number names a column from 1 (as in join's --xy): 0 is a usage error here, not a
+   * reading error later. */
+  const char *part[2] = {s, comma + 1};
+  size_t len[2] = {(size_t)(comma - s), strlen(comma + 1)};
+  for (int i = 0; i < 2; i++)
+    if (strspn(part[i], "0123456789") == len[i] && strspn(part[i], "0") == len[i]) {
+      cli_error(cmd, "%s: column numbers start at 1, not '%.*s'", opt, (int)len[i], part[i]);
+      return 1;
+    }
   *out = s;
   return 0;
 }

@@ -33,4 +33,5 @@ expect 0 '"points": 3, "nodes": 5, "leaves": 4, .*"root": \{"x": 0, "y": 0, "sid
 expect 0 '"points": 3, "nodes": 5, "leaves": 4' -- "$cli" tree "$tmp/named.csv" --xy 3,2
 expect 1 "named.csv:1: no column named 'x'" -- "$cli" tree "$tmp/named.csv" --xy x,lat
 expect 2 'must be two columns' -- "$cli" tree "$tmp/named.csv" --xy 3
+expect 2 'column numbers start at 1' -- "$cli" tree "$tmp/named.csv" --xy 0,2
 report
