@@ -537,8 +537,17 @@ static int make_mesh(const char *cmd, const mesh_args_t *o, qk_poly_t **poly, qk
   opt.max_size = o->max_size;
   if (o->min_angle >= 0) opt.min_angle_deg = o->min_angle;
   qk_status_t st = qk_mesh_generate(*poly, &opt, mesh, &err);
-  if (st == QK_OK) return CLI_OK;
   const char *name = strcmp(o->in, "-") ? o->in : "<stdin>";
+  if (st == QK_OK) {
+    /* No triangle at all: nothing encloses an area outside the holes (an open chain, a
+     * lone segment, a ring whose face is a hole). An empty file would drop the input
+     * without a word, so say it and write nothing. */
+    qk_mesh_stats_t s;
+    qk_mesh_stats(*mesh, &s);
+    if (s.triangles > 0) return CLI_OK;
+    cli_error(cmd, "%s: nothing to mesh: no closed ring encloses an area outside the holes", name);
+    return CLI_BAD_INPUT;
+  }
   char msg[600];
   name_segment(pp, err.message[0] ? err.message : qk_strerror(st), msg, sizeof msg);
   if (err.line)

@@ -46,6 +46,10 @@ expect 0 '"mode": "general"' -- "$cli" mesh "$tmp/coast.poly" --general --max-si
 printf '4 2 0 0\n0 0 0\n1 4 4\n2 4 0\n3 0 4\n2 0\n0 0 1\n1 2 3\n0\n' >"$tmp/cross.poly"
 expect 1 'cross.poly' -- "$cli" mesh "$tmp/cross.poly" --general -o "$tmp/bad"
 ls "$tmp"/bad* >/dev/null 2>&1 && fail "output written for bad input"
+# An open chain encloses nothing: an error saying so, not an empty mesh.
+printf '3 2 0 0\n0 0 0\n1 4 1\n2 8 0\n2 0\n0 0 1\n1 1 2\n0\n' >"$tmp/open.poly"
+expect 1 'open.poly: nothing to mesh' -- "$cli" mesh "$tmp/open.poly" -o "$tmp/empty"
+ls "$tmp"/empty* >/dev/null 2>&1 && fail "output written for an input without area"
 
 shared=${QK_SHARED_DIR:-$src/../shared}
 if [ -f "$shared/data/countries-50m.geojson" ]; then
