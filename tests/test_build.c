@@ -178,7 +178,7 @@ static void test_build_direct_equals_records(void **state) {
   qkt_rng_t r;
   qkt_rng_seed(&r, seed);
   print_message("seed %llu\n", (unsigned long long)seed);
-  enum { N = 150000 };
+  enum { N = 100000 }; /* a 2^7 x 2^7 grid, both digits of 7 bits */
   qk_point_t *p = malloc(N * sizeof *p);
   assert_non_null(p);
   const size_t saved = qk__cell_direct_max;
