@@ -81,43 +81,6 @@ static void test_build_deep_grid_lines(void **state) {
   free(p);
 }
 
-/* a and b are the same tree: the same nodes under the same numbers, and the same points in
- * the same order in every leaf. */
-static void assert_identical(const qk_tree_t *a, const qk_tree_t *b) {
-  qk_tree_stats_t sa, sb;
-  qk_tree_stats(a, &sa);
-  qk_tree_stats(b, &sb);
-  assert_int_equal(sa.nodes, sb.nodes);
-  assert_int_equal(sa.leaves, sb.leaves);
-  qk_node_t stack[4 * 64];
-  int sp = 0;
-  stack[sp++] = qk_tree_root(a);
-  assert_int_equal(qk_tree_root(a), qk_tree_root(b));
-  while (sp > 0) {
-    qk_node_t v = stack[--sp];
-    qk_node_info_t ia, ib;
-    assert_int_equal(qk_tree_node_info(a, v, &ia), QK_OK);
-    assert_int_equal(qk_tree_node_info(b, v, &ib), QK_OK);
-    assert_true(ia.is_leaf == ib.is_leaf && ia.count == ib.count && ia.depth == ib.depth);
-    assert_memory_equal(ia.children, ib.children, sizeof ia.children);
-    if (!ia.is_leaf) {
-      for (int q = 3; q >= 0; q--) stack[sp++] = ia.children[q];
-      continue;
-    }
-    const double *xa, *ya, *xb, *yb;
-    const qk_id_t *da, *db;
-    size_t ca, cb;
-    qk_tree_leaf_points(a, v, &xa, &ya, &da, &ca);
-    qk_tree_leaf_points(b, v, &xb, &yb, &db, &cb);
-    assert_int_equal(ca, cb);
-    if (ca) {
-      assert_memory_equal(da, db, ca * sizeof *da);
-      assert_memory_equal(xa, xb, ca * sizeof *xa);
-      assert_memory_equal(ya, yb, ca * sizeof *ya);
-    }
-  }
-}
-
 static void test_build_threads_adversarial(void **state) {
   (void)state;
   uint64_t seed = qkt_seed(1202);
@@ -162,7 +125,7 @@ static void test_build_threads_adversarial(void **state) {
       qk_tree_t *t = NULL;
       assert_int_equal(qk_tree_build(p, n, &o, &t), QK_OK);
       print_message("input %d, %u threads\n", k, threads);
-      assert_identical(one, t);
+      qkt_assert_same_tree(one, t);
       qk_tree_free(t);
     }
     qk_tree_free(one);
@@ -201,7 +164,7 @@ static void test_build_direct_equals_records(void **state) {
       assert_int_equal(st, QK_OK);
       QKT_CHECK_TREE(direct);
       print_message("input %d, %u threads\n", k, threads);
-      assert_identical(direct, rec);
+      qkt_assert_same_tree(direct, rec);
       qk_tree_free(direct);
       qk_tree_free(rec);
     }

@@ -944,38 +944,6 @@ static void test_index_memory_compact(void **state) {
   free(p);
 }
 
-/* Every node of two trees alike: ids, children, depth, count, square, and each leaf's
- * points (ids and coordinates) in the same order. */
-static void assert_same_nodes(const qk_tree_t *a, const qk_tree_t *b) {
-  qk_node_t stack[4 * 64];
-  int sp = 0;
-  stack[sp++] = qk_tree_root(a);
-  assert_int_equal(qk_tree_root(a), qk_tree_root(b));
-  while (sp > 0) {
-    qk_node_t v = stack[--sp];
-    qk_node_info_t ia, ib;
-    assert_int_equal(qk_tree_node_info(a, v, &ia), QK_OK);
-    assert_int_equal(qk_tree_node_info(b, v, &ib), QK_OK);
-    assert_true(ia.is_leaf == ib.is_leaf && ia.count == ib.count && ia.depth == ib.depth &&
-                ia.parent == ib.parent && ia.square.x == ib.square.x &&
-                ia.square.y == ib.square.y && ia.square.side == ib.square.side);
-    assert_memory_equal(ia.children, ib.children, sizeof ia.children);
-    if (!ia.is_leaf) {
-      for (int q = 3; q >= 0; q--) stack[sp++] = ia.children[q];
-      continue;
-    }
-    const double *xa, *ya, *xb, *yb;
-    const qk_id_t *da, *db;
-    size_t ca, cb;
-    qk_tree_leaf_points(a, v, &xa, &ya, &da, &ca);
-    qk_tree_leaf_points(b, v, &xb, &yb, &db, &cb);
-    assert_int_equal(ca, cb);
-    assert_memory_equal(da, db, ca * sizeof *da);
-    assert_memory_equal(xa, xb, ca * sizeof *xa);
-    assert_memory_equal(ya, yb, ca * sizeof *ya);
-  }
-}
-
 static void test_index_build_threads(void **state) {
   (void)state;
   uint64_t seed = qkt_seed(1130);
@@ -1003,10 +971,10 @@ static void test_index_build_threads(void **state) {
         qk_tree_t *t = NULL;
         assert_int_equal(qk_tree_build(p, N, &o, &t), QK_OK);
         QKT_CHECK_TREE(t);
-        assert_same_nodes(one, t);
+        qkt_assert_same_tree(one, t);
         /* Built again into its own arrays, on the same threads: still the same. */
         assert_int_equal(qk_tree_rebuild(t, p, N, NULL), QK_OK);
-        assert_same_nodes(one, t);
+        qkt_assert_same_tree(one, t);
         qk_tree_free(t);
         assert_int_equal(st.live_bytes, 0);
       }
@@ -1039,7 +1007,7 @@ static void test_index_build_streamed(void **state) {
   QKT_CHECK_TREE(one);
   o.threads = 2;
   assert_int_equal(qk_tree_build(p, N, &o, &two), QK_OK);
-  assert_same_nodes(one, two);
+  qkt_assert_same_tree(one, two);
   qk_tree_free(one);
   qk_tree_free(two);
   free(p);

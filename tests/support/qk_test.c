@@ -93,6 +93,43 @@ qkt_shape_t qkt_tree_shape(const qk_tree_t *t) {
   return s;
 }
 
+void qkt_assert_same_tree(const qk_tree_t *a, const qk_tree_t *b) {
+  qk_tree_stats_t sa, sb;
+  qk_tree_stats(a, &sa);
+  qk_tree_stats(b, &sb);
+  assert_int_equal(sa.nodes, sb.nodes);
+  assert_int_equal(sa.leaves, sb.leaves);
+  qk_node_t stack[4 * 64];
+  int sp = 0;
+  stack[sp++] = qk_tree_root(a);
+  assert_int_equal(qk_tree_root(a), qk_tree_root(b));
+  while (sp > 0) {
+    qk_node_t v = stack[--sp];
+    qk_node_info_t ia, ib;
+    assert_int_equal(qk_tree_node_info(a, v, &ia), QK_OK);
+    assert_int_equal(qk_tree_node_info(b, v, &ib), QK_OK);
+    assert_true(ia.is_leaf == ib.is_leaf && ia.count == ib.count && ia.depth == ib.depth &&
+                ia.parent == ib.parent && ia.square.x == ib.square.x &&
+                ia.square.y == ib.square.y && ia.square.side == ib.square.side);
+    assert_memory_equal(ia.children, ib.children, sizeof ia.children);
+    if (!ia.is_leaf) {
+      for (int q = 3; q >= 0; q--) stack[sp++] = ia.children[q];
+      continue;
+    }
+    const double *xa, *ya, *xb, *yb;
+    const qk_id_t *da, *db;
+    size_t ca, cb;
+    qk_tree_leaf_points(a, v, &xa, &ya, &da, &ca);
+    qk_tree_leaf_points(b, v, &xb, &yb, &db, &cb);
+    assert_int_equal(ca, cb);
+    if (ca) {
+      assert_memory_equal(da, db, ca * sizeof *da);
+      assert_memory_equal(xa, xb, ca * sizeof *xa);
+      assert_memory_equal(ya, yb, ca * sizeof *ya);
+    }
+  }
+}
+
 mcr_mesh_t qkt_mesh_view(const qk_mesh_t *m) {
   mcr_mesh_t v = {0};
   v.xy = qk_mesh_vertices(m, &v.nv);

@@ -43,6 +43,11 @@ typedef struct qkt_shape {
 } qkt_shape_t;
 qkt_shape_t qkt_tree_shape(const qk_tree_t *t);
 
+/* Asserts that a and b are the same tree: the same node numbers, children, parents,
+ * depths, counts and squares, and the same points (ids and coordinates) in the same order
+ * in every leaf (what a threaded or differently-sorted build must reproduce exactly). */
+void qkt_assert_same_tree(const qk_tree_t *a, const qk_tree_t *b);
+
 /* A mesh as the exact checker reads it (mesh_check_real.h): vertices and triangles
  * borrowed from the mesh, its output segments copied out; free with qkt_mesh_view_free. */
 mcr_mesh_t qkt_mesh_view(const qk_mesh_t *m);
