@@ -4,7 +4,8 @@
 # ThreadSanitizer in build-tsan/ and runs it: many threads querying one tree, collider,
 # geodesic index and mesh at once, and threads changing trees of their own; and
 # tests/test_region.c and tests/test_collide.c, whose threaded batches must equal the
-# single calls. Any data race
+# single calls; tests/test_build.c, whose threaded bulk build must equal one thread's.
+# Any data race
 # TSan sees fails the run. Usage: scripts/tsan.sh [build-dir]
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -15,7 +16,7 @@ cmake -S . -B "$dir" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DQUADKIT_WERROR=ON \
   -DCMAKE_C_FLAGS="$flags" -DCMAKE_CXX_FLAGS="$flags" \
   -DCMAKE_EXE_LINKER_FLAGS="-fsanitize=thread" -DCMAKE_SHARED_LINKER_FLAGS="-fsanitize=thread" \
   >/dev/null
-nice cmake --build "$dir" -j"$jobs" --target test_reliab_threads test_region test_world test_collide
+nice cmake --build "$dir" -j"$jobs" --target test_reliab_threads test_region test_world test_collide test_build
 # halt_on_error: the first race fails the test; second_deadlock_stack for lock reports.
 TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1 suppressions=$PWD/scripts/tsan.supp ${TSAN_OPTIONS:-}" \
-  ctest --test-dir "$dir" --output-on-failure -R '^(test_reliab_threads|test_region|test_world|test_collide)$'
+  ctest --test-dir "$dir" --output-on-failure -R '^(test_reliab_threads|test_region|test_world|test_collide|test_build)$'
