@@ -3,6 +3,8 @@
  * the children's sets, and the leaves' records (the design is described at the top of
  * region.c; the top levels are made in one pass by build_top.c).
  */
+#include <float.h>
+#include <math.h>
 #include <string.h>
 
 #include "region/region_internal.h"
@@ -73,6 +75,25 @@ static void self_meets(qk__bctx_t *b, const uint32_t *E, size_t n) {
   }
 }
 
+/* A float at most v (lo) or at least v (!lo): v rounded outwards. */
+static float outward(double v, bool lo) {
+  if (v > FLT_MAX) return lo ? FLT_MAX : INFINITY;
+  if (v < -FLT_MAX) return lo ? -INFINITY : -FLT_MAX;
+  float f = (float)v;
+  if (lo ? !((double)f > v) : !((double)f < v)) return f;
+  /* one float down (lo) or up, by its bits (nextafterf is a call, and most conversions
+   * need it on one side) */
+  if (f == 0) return lo ? -FLT_TRUE_MIN : FLT_TRUE_MIN;
+  uint32_t u;
+  memcpy(&u, &f, sizeof u);
+  if ((f > 0) == lo)
+    u--; /* towards zero */
+  else
+    u++; /* away from zero */
+  memcpy(&f, &u, sizeof f);
+  return f;
+}
+
 qk_status_t qk__emit_leaf(qk__bctx_t *b, qk_node_t v, double cx, double cy, unsigned d) {
   qk_region_t *r = b->r;
   const qk__pieces_t *pc = b->pc;
@@ -103,12 +124,25 @@ qk_status_t qk__emit_leaf(qk__bctx_t *b, qk_node_t v, double cx, double cy, unsi
   const uint32_t *E = b->e[d], *feat = pc->feat, *vtx = pc->vtx;
   const qk__seg_t *seg = pc->seg;
   uint32_t *le = r->le + r->n_le, *tag = r->le_tag + r->n_le;
+  /* the box of the leaf's edges, rounded outwards to floats (see qk__leaf_t; ne > 0 here,
+   * as a leaf without edges is direct unless several features hold its reference point) */
+  double x0 = INFINITY, y0 = INFINITY, x1 = -INFINITY, y1 = -INFINITY;
   for (size_t i = 0; i < ne; i++) {
     uint32_t p = E[i];
     const qk__seg_t *g = &seg[p];
+    x0 = qk__min(x0, qk__min(g->ax, g->bx)), x1 = qk__max(x1, qk__max(g->ax, g->bx));
+    y0 = qk__min(y0, qk__min(g->ay, g->by)), y1 = qk__max(y1, qk__max(g->ay, g->by));
     int side = qk__side(g->ax, g->ay, g->bx, g->by, cx, cy);
     le[i] = p;
     tag[i] = feat[p] << 2 | (uint32_t)(vtx[p] == UINT32_MAX) << 1 | (uint32_t)(side > 0);
+  }
+  qk__leaf_t *L = &r->leaves[r->n_leaves];
+  if (ne == 0) { /* an empty box: beside everything */
+    L->ex0 = L->ey0 = INFINITY;
+    L->ex1 = L->ey1 = -INFINITY;
+  } else {
+    L->ex0 = outward(x0, true), L->ey0 = outward(y0, true);
+    L->ex1 = outward(x1, false), L->ey1 = outward(y1, false);
   }
   if (ns) memcpy(r->sets + r->n_sets, b->set[d], ns * sizeof(uint32_t));
   r->n_le += ne;
