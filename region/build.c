@@ -263,7 +263,6 @@ done:
   r->seg_feat = pc.feat;
   r->n_segs = pc.n;
   r->cap_segs = r->cap_seg_feat = pc.cap;
-  if (!st) qk__region_leaf_boxes(r);
   if (st) {
     qk_region_free(r);
     if (err && !err->message[0])

@@ -83,7 +83,9 @@ static qk_status_t push2(const qk_allocator_t *a, uint32_t **v, size_t *n, size_
 
 /* Column i with gx[i] < x <= gx[i + 1] (gx[0] < x <= gx[g]). */
 static inline size_t col_lo(const double *gx, size_t g, double r0, double scale, double x) {
-  size_t i = (size_t)((x - r0) * scale); /* (x > r0) */
+  /* (x > r0 and x < the root's end: 0 <= guess <= g, converted through int64_t, one
+   * instruction, where a size_t conversion takes a branch and several) */
+  size_t i = (size_t)(int64_t)((x - r0) * scale);
   if (i >= g) i = g - 1;
   while (i > 0 && gx[i] >= x) i--;
   while (i + 1 < g && gx[i + 1] < x) i++;
@@ -92,7 +94,7 @@ static inline size_t col_lo(const double *gx, size_t g, double r0, double scale,
 
 /* Column i with gx[i] <= x < gx[i + 1] (gx[0] < x < gx[g]). */
 static inline size_t col_hi(const double *gx, size_t g, double r0, double scale, double x) {
-  size_t i = (size_t)((x - r0) * scale);
+  size_t i = (size_t)(int64_t)((x - r0) * scale); /* (as col_lo) */
   if (i >= g) i = g - 1;
   while (i > 0 && gx[i] > x) i--;
   while (i + 1 < g && gx[i + 1] <= x) i++;

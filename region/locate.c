@@ -292,44 +292,6 @@ uint32_t qk__region_locate1(const qk_region_t *r, double x, double y, qk_boundar
   return leaf_first(r, &r->leaves[c.k & ~QK__LEAF], c.cx, c.cy, x, y, b);
 }
 
-/* A float at most v (lo) or at least v (!lo): v rounded outwards. */
-static float outward(double v, bool lo) {
-  if (v > FLT_MAX) return lo ? FLT_MAX : INFINITY;
-  if (v < -FLT_MAX) return lo ? -INFINITY : -FLT_MAX;
-  float f = (float)v;
-  if (lo ? !((double)f > v) : !((double)f < v)) return f;
-  /* one float down (lo) or up, by its bits (nextafterf is a call, and most conversions
-   * need it on one side) */
-  if (f == 0) return lo ? -FLT_TRUE_MIN : FLT_TRUE_MIN;
-  uint32_t u;
-  memcpy(&u, &f, sizeof u);
-  if ((f > 0) == lo)
-    u--; /* towards zero */
-  else
-    u++; /* away from zero */
-  memcpy(&f, &u, sizeof f);
-  return f;
-}
-
-void qk__region_leaf_boxes(qk_region_t *r) {
-  for (size_t l = 0; l < r->n_leaves; l++) {
-    qk__leaf_t *L = &r->leaves[l];
-    double x0 = INFINITY, y0 = INFINITY, x1 = -INFINITY, y1 = -INFINITY;
-    for (uint32_t i = 0; i < L->ne; i++) {
-      const qk__seg_t *g = &r->segs[r->le[L->e0 + i]];
-      x0 = qk__min(x0, qk__min(g->ax, g->bx)), x1 = qk__max(x1, qk__max(g->ax, g->bx));
-      y0 = qk__min(y0, qk__min(g->ay, g->by)), y1 = qk__max(y1, qk__max(g->ay, g->by));
-    }
-    if (L->ne == 0) { /* an empty box: beside everything */
-      L->ex0 = L->ey0 = INFINITY;
-      L->ex1 = L->ey1 = -INFINITY;
-    } else {
-      L->ex0 = outward(x0, true), L->ey0 = outward(y0, true);
-      L->ex1 = outward(x1, false), L->ey1 = outward(y1, false);
-    }
-  }
-}
-
 /* ---- pure cells ----------------------------------------------------------------------- */
 
 /* A cell answer meaning "not one direct answer" (features are below 2^29, QK_NONE above). */
@@ -387,18 +349,23 @@ qk_status_t qk__region_pure_build(qk_region_t *r) {
     return QK_ERR_NOMEM;
   }
   cell_answers(r, r->kid[0], 0, 0, 0, P, ans);
-  unsigned n_ans = 0;
-  for (size_t j = 0; j < g; j++)
-    for (size_t i = 0; i < g; i++) {
-      uint32_t v = ans[j << P | i];
+  /* the answers numbered in the order they first appear, row by row; runs of one answer
+   * are common (oceans, large countries), so the last cell's number is tried first */
+  unsigned n_ans = 0, last_t = 0;
+  uint32_t last_v = MIXED;
+  for (size_t c = 0; c < g * g; c++) {
+    uint32_t v = ans[c];
+    if (v != last_v) {
       unsigned t = 0;
       if (v != MIXED) {
         while (t < n_ans && r->pure_ans[t] != v) t++;
         if (t == n_ans && n_ans < 255) r->pure_ans[n_ans++] = v;
         t = t < n_ans ? t + 1 : 0; /* (no room left for another answer: not pure) */
       }
-      pure[j << P | i] = (uint8_t)t;
+      last_v = v, last_t = t;
     }
+    pure[c] = (uint8_t)last_t;
+  }
   qk__free(a, ans, g * g * sizeof *ans);
   r->pure = pure;
   r->pure_level = P;

@@ -3,7 +3,12 @@
  * the children's sets, and the leaves' records (the design is described at the top of
  * region.c; the top levels are made in one pass by build_top.c).
  */
+#include <float.h>
+#include <math.h>
 #include <string.h>
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 #include "region/region_internal.h"
 
@@ -73,6 +78,52 @@ static void self_meets(qk__bctx_t *b, const uint32_t *E, size_t n) {
   }
 }
 
+#if defined(__SSE2__)
+/* The leaf box (lo = (x0, y0), hi = (x1, y1)) rounded outwards to floats, four at once:
+ * each converted to the nearest float, and those on the wrong side of their double moved
+ * one float outwards by their bits (towards zero or away from it by the float's sign; a
+ * zero becomes the smallest subnormal of the outward sign). This gives what a directed
+ * rounding would, overflow included (a float beyond FLT_MAX: FLT_MAX, or an infinity). */
+static void set_box(qk__leaf_t *L, __m128d lo, __m128d hi) {
+  __m128 f = _mm_movelh_ps(_mm_cvtpd_ps(lo), _mm_cvtpd_ps(hi)); /* fx0 fy0 fx1 fy1 */
+  __m128d mlo = _mm_cmpgt_pd(_mm_cvtps_pd(f), lo);
+  __m128d mhi = _mm_cmplt_pd(_mm_cvtps_pd(_mm_movehl_ps(f, f)), hi);
+  __m128i m = _mm_castps_si128(
+      _mm_shuffle_ps(_mm_castpd_ps(mlo), _mm_castpd_ps(mhi), _MM_SHUFFLE(2, 0, 2, 0)));
+  __m128i u = _mm_castps_si128(f);
+  __m128i d = _mm_set_epi32(1, 1, -1, -1); /* the outward step of a positive float */
+  __m128i sign = _mm_srai_epi32(u, 31);
+  __m128i step = _mm_sub_epi32(_mm_xor_si128(d, sign), sign); /* negated for a negative */
+  __m128i moved = _mm_add_epi32(u, _mm_and_si128(step, m));
+  __m128i zero = _mm_and_si128(
+      m, _mm_cmpeq_epi32(_mm_and_si128(u, _mm_set1_epi32(0x7fffffff)), _mm_setzero_si128()));
+  __m128i tiny = _mm_set_epi32(1, 1, (int)0x80000001u, (int)0x80000001u);
+  moved = _mm_or_si128(_mm_andnot_si128(zero, moved), _mm_and_si128(zero, tiny));
+  float out[4];
+  _mm_storeu_ps(out, _mm_castsi128_ps(moved));
+  L->ex0 = out[0], L->ey0 = out[1], L->ex1 = out[2], L->ey1 = out[3];
+}
+#else
+/* A float at most v (lo) or at least v (!lo): v rounded outwards. */
+static float outward(double v, bool lo) {
+  if (v > FLT_MAX) return lo ? FLT_MAX : INFINITY;
+  if (v < -FLT_MAX) return lo ? -INFINITY : -FLT_MAX;
+  float f = (float)v;
+  if (lo ? !((double)f > v) : !((double)f < v)) return f;
+  /* one float down (lo) or up, by its bits (nextafterf is a call, and most conversions
+   * need it on one side) */
+  if (f == 0) return lo ? -FLT_TRUE_MIN : FLT_TRUE_MIN;
+  uint32_t u;
+  memcpy(&u, &f, sizeof u);
+  if ((f > 0) == lo)
+    u--; /* towards zero */
+  else
+    u++; /* away from zero */
+  memcpy(&f, &u, sizeof f);
+  return f;
+}
+#endif
+
 qk_status_t qk__emit_leaf(qk__bctx_t *b, qk_node_t v, double cx, double cy, unsigned d) {
   qk_region_t *r = b->r;
   const qk__pieces_t *pc = b->pc;
@@ -103,12 +154,39 @@ qk_status_t qk__emit_leaf(qk__bctx_t *b, qk_node_t v, double cx, double cy, unsi
   const uint32_t *E = b->e[d], *feat = pc->feat, *vtx = pc->vtx;
   const qk__seg_t *seg = pc->seg;
   uint32_t *le = r->le + r->n_le, *tag = r->le_tag + r->n_le;
+  /* the box of the leaf's edges, rounded outwards to floats (see qk__leaf_t; ne > 0 here,
+   * as a leaf without edges is direct unless several features hold its reference point) */
+#if defined(__SSE2__) /* (min_pd and max_pd are qk__min and qk__max on two lanes) */
+  __m128d lo = _mm_set1_pd(INFINITY), hi = _mm_set1_pd(-INFINITY);
+#else
+  double x0 = INFINITY, y0 = INFINITY, x1 = -INFINITY, y1 = -INFINITY;
+#endif
   for (size_t i = 0; i < ne; i++) {
     uint32_t p = E[i];
     const qk__seg_t *g = &seg[p];
+#if defined(__SSE2__)
+    __m128d ga = _mm_loadu_pd(&g->ax), gb = _mm_loadu_pd(&g->bx);
+    lo = _mm_min_pd(lo, _mm_min_pd(ga, gb));
+    hi = _mm_max_pd(hi, _mm_max_pd(ga, gb));
+#else
+    x0 = qk__min(x0, qk__min(g->ax, g->bx)), x1 = qk__max(x1, qk__max(g->ax, g->bx));
+    y0 = qk__min(y0, qk__min(g->ay, g->by)), y1 = qk__max(y1, qk__max(g->ay, g->by));
+#endif
     int side = qk__side(g->ax, g->ay, g->bx, g->by, cx, cy);
     le[i] = p;
     tag[i] = feat[p] << 2 | (uint32_t)(vtx[p] == UINT32_MAX) << 1 | (uint32_t)(side > 0);
+  }
+  qk__leaf_t *L = &r->leaves[r->n_leaves];
+  if (ne == 0) { /* an empty box: beside everything */
+    L->ex0 = L->ey0 = INFINITY;
+    L->ex1 = L->ey1 = -INFINITY;
+  } else {
+#if defined(__SSE2__)
+    set_box(L, lo, hi);
+#else
+    L->ex0 = outward(x0, true), L->ey0 = outward(y0, true);
+    L->ex1 = outward(x1, false), L->ey1 = outward(y1, false);
+#endif
   }
   if (ns) memcpy(r->sets + r->n_sets, b->set[d], ns * sizeof(uint32_t));
   r->n_le += ne;

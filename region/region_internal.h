@@ -84,8 +84,8 @@ typedef struct qk__seg {
 typedef struct qk__leaf {
   uint32_t e0, ne;
   uint32_t s0, ns;
-  /* The box of the leaf's edges, rounded outwards to floats (qk__region_leaf_boxes, after
-   * the build): a query whose segment reference point -> point lies strictly beside it
+  /* The box of the leaf's edges, rounded outwards to floats (qk__emit_leaf, as the
+   * leaf is made): a query whose segment reference point -> point lies strictly beside it
    * crosses and touches none of them, and reads none (region/locate.c). */
   float ex0, ey0, ex1, ey1;
 } qk__leaf_t;
@@ -355,10 +355,6 @@ qk_status_t qk__split_cell(qk__bctx_t *b, qk_node_t v, uint32_t *first);
 qk_status_t qk__child_set(qk__bctx_t *b, unsigned d, const uint32_t *odd, size_t n);
 /* The whole refinement from the root (build_top.c). */
 qk_status_t qk__build_top(qk__bctx_t *b);
-
-/* Fill every leaf record's edge box (ex0 .. ey1) from its edges; after the build, once
- * r->segs is set (region/locate.c: the query side's layout, kept there). */
-void qk__region_leaf_boxes(qk_region_t *r);
 
 /* Build the pure cells (after the grid; QK_ERR_NOMEM fails the build), their
  * bytes, and their release (region/locate.c). */
