@@ -261,9 +261,10 @@ typedef struct rjob {
   uint32_t n_obj;
   unsigned nt;
   int dirty, phase, nomem[QK__RMAX];
-  uint32_t *cnt;                         /* nt (n_obj + 1): per chunk, counts then cursors */
-  uint32_t *st;                          /* n_obj + 1: row a's pairs at rb[st[a] .. st[a + 1]) */
-  uint8_t *mark;                         /* nt n_obj, zero */
+  uint32_t *cnt;  /* nt (n_obj + 1): per chunk, counts then cursors */
+  uint32_t *st;   /* n_obj + 1: row a's pairs at rb[st[a] .. st[a + 1]) */
+  uint32_t *mark; /* nt n_obj stamps, zero at first */
+  uint32_t stamp[QK__RMAX];
   uint32_t *scr;                         /* per thread 2 maxlen slots */
   size_t rs[QK__RMAX + 1];               /* pairs per slot range, then their prefix */
   uint32_t pr[QK__RMAX + 1];             /* the threads' row ranges */
@@ -291,43 +292,75 @@ static void sort_small(uint32_t *g, size_t n) {
 }
 
 /* Build row a (n new slots at nb, unsorted; the old row ob of m slots, sorted) in place,
- * adding its began and ended pairs; 0 when memory ran short. */
+ * adding its began and ended pairs; 0 when memory ran short. The old row's slots are
+ * stamped v (a stamp used once), those found in the new row then v + 1 (stayed); the
+ * others of the new row began, and the old ones still at v ended. */
 static int row_build(rjob_t *J, unsigned t, uint32_t a, uint32_t *nb, size_t n, const uint32_t *ob,
                      size_t m) {
   const qk_world_t *w = J->w;
   const qk_allocator_t *al = &w->alloc;
-  uint8_t *mk = J->mark + (size_t)t * J->n_obj;
+  uint32_t *mk = J->mark + (size_t)t * J->n_obj;
   uint32_t *S = J->scr + J->scr_off[t], *G = S + J->mx[t];
   qk__kvec_t *bv = &J->bv[t], *ev = &J->ev[t];
   uint64_t ka = (uint64_t)a << 32;
   int dirty = J->dirty, ch_a = dirty && changed(w, a);
-  for (size_t i = 0; i < n; i++) mk[nb[i]] = 1;
-  size_t ns = 0, ng = 0;
-  for (size_t j = 0; j < m; j++) {
-    uint32_t y = ob[j];
-    if (mk[y]) {
-      S[ns++] = y;
-      if (dirty && (ch_a || changed(w, y)) && !kv_add(al, ev, ka | y)) return 0;
-    } else if (!kv_add(al, ev, ka | y)) {
-      return 0;
-    }
-    mk[y] = 0;
+  if (J->stamp[t] >= UINT32_MAX - 2) { /* (the stamps wrapped: start again) */
+    memset(mk, 0, (size_t)J->n_obj * sizeof *mk);
+    J->stamp[t] = 0;
   }
+  uint32_t v = J->stamp[t] + 1, v1 = v + 1;
+  J->stamp[t] = v1;
+  for (size_t j = 0; j < m; j++) mk[ob[j]] = v;
+  size_t ns = 0, ng = 0;
   for (size_t i = 0; i < n; i++) {
     uint32_t x = nb[i];
-    if (mk[x]) G[ng++] = x, mk[x] = 0;
+    if (mk[x] == v)
+      mk[x] = v1, ns++;
+    else
+      G[ng++] = x;
   }
-  if (!ng && !dirty) { /* the row stayed as it was */
-    memcpy(nb, S, ns * sizeof *nb);
-    return 1;
+  const uint32_t *base = ob;
+  if (ns != m || dirty) { /* some ended: the stayed ones, in order */
+    ns = 0;
+    for (size_t j = 0; j < m; j++) {
+      uint32_t y = ob[j];
+      if (mk[y] == v1) {
+        S[ns++] = y;
+        if (dirty && (ch_a || changed(w, y)) && !kv_add(al, ev, ka | y)) return 0;
+      } else if (!kv_add(al, ev, ka | y)) {
+        return 0;
+      }
+    }
+    base = S;
   }
   sort_small(G, ng);
+  if (!dirty) {
+    /* The began slots go in between runs of the stayed ones, found by bisection. */
+    size_t i = 0, k = 0;
+    for (size_t j = 0; j < ng; j++) {
+      uint32_t x = G[j];
+      size_t lo = i, hi = ns;
+      while (lo < hi) {
+        size_t mid = lo + (hi - lo) / 2;
+        if (base[mid] < x)
+          lo = mid + 1;
+        else
+          hi = mid;
+      }
+      memcpy(nb + k, base + i, (lo - i) * sizeof *nb);
+      k += lo - i, i = lo;
+      nb[k++] = x;
+      if (!kv_add(al, bv, ka | x)) return 0;
+    }
+    memcpy(nb + k, base + i, (ns - i) * sizeof *nb);
+    return 1;
+  }
   size_t i = 0, j = 0, k = 0;
   while (i < ns || j < ng) {
     if (j == ng || (i < ns && S[i] < G[j])) {
       uint32_t y = S[i++];
       nb[k++] = y;
-      if (dirty && (ch_a || changed(w, y)) && !kv_add(al, bv, ka | y)) return 0;
+      if ((ch_a || changed(w, y)) && !kv_add(al, bv, ka | y)) return 0;
     } else {
       uint32_t x = G[j++];
       nb[k++] = x;
@@ -348,7 +381,7 @@ static void rjob_run(unsigned t, void *ud) {
   switch (J->phase) {
   case 0: /* count the chunk's keys by slot a */
     memset(c, 0, stride * sizeof *c);
-    for (size_t i = k0; i < k1; i++) c[J->keys[i] >> 32]++;
+    for (const uint64_t *k = J->keys + k0, *e = J->keys + k1; k < e; k++) c[*k >> 32]++;
     break;
   case 1: { /* the slot range's pairs */
     size_t s = 0;
@@ -369,11 +402,12 @@ static void rjob_run(unsigned t, void *ud) {
     break;
   }
   case 3: /* scatter the chunk's b into the rows */
-    for (size_t i = k0; i < k1; i++) {
-      uint64_t k = J->keys[i];
-      J->r->b[c[k >> 32]++] = (uint32_t)k;
-    }
+  {
+    uint32_t *rb = J->r->b;
+    for (const uint64_t *k = J->keys + k0, *e = J->keys + k1; k < e; k++)
+      rb[c[*k >> 32]++] = (uint32_t)*k;
     break;
+  }
   case 4: { /* the row range's rows with pairs, and its longest */
     size_t nz = 0, mx = 0;
     for (uint32_t a = J->pr[t]; a < J->pr[t + 1]; a++) {
@@ -431,7 +465,7 @@ static int rows_frame(const qk_world_t *w, const uint64_t *keys, size_t n, qk__p
   J->w = w, J->o = &w->cur, J->r = r, J->keys = keys, J->n = n, J->n_obj = n_obj, J->nt = nt;
   J->dirty = dirty;
   size_t stride = (size_t)n_obj + 1, cbytes = nt * stride * sizeof *J->cnt;
-  size_t mbytes = (size_t)nt * n_obj, sbytes = stride * sizeof *J->st, scn = 0;
+  size_t mbytes = (size_t)nt * n_obj * sizeof *J->mark, sbytes = stride * sizeof *J->st, scn = 0;
   int ok = 0;
   J->cnt = qk__realloc(al, NULL, 0, cbytes);
   J->st = J->cnt ? qk__realloc(al, NULL, 0, sbytes) : NULL;
@@ -540,16 +574,21 @@ qk_status_t qk_world_update(qk_world_t *w) {
   qk__prows_t nr = {0};
   qk__kvec_t bv = {0}, ev = {0};
   if ((nr.b = qk__realloc(al, NULL, 0, tcap * sizeof *nr.b))) nr.cap = tcap;
-  if (nr.b && total * 4 >= n_obj) {
-    /* dense: rows and began / ended in one go, on the world's threads */
+  unsigned nt = w->n_live < 4096 ? 1 : w->opt.threads;
+  if (nr.b && total * 4 >= n_obj && nt > 1) {
+    /* dense, on threads: rows and began / ended in one go */
     ok = rows_frame(w, found.v, total, &nr, dirty, &bv, &ev);
   } else if (nr.b) {
-    /* sparse: a sort of the keys (counts: 257), then a merge with the last frame's */
-    uint64_t *tmp = qk__realloc(al, NULL, 0, tcap * sizeof *tmp);
-    uint32_t *cnt = tmp ? qk__realloc(al, NULL, 0, 257 * sizeof *cnt) : NULL;
+    /* one thread, or sparse: the keys sorted into rows, then merged with the last
+     * frame's */
+    size_t ccap = total * 4 < n_obj ? 257 : 2 * (n_obj + 1);
+    /* (the dense sort's scratch holds 32-bit slots, the sparse one's keys) */
+    size_t tbytes = (total * 4 < n_obj ? sizeof(uint64_t) : sizeof(uint32_t)) * tcap;
+    uint64_t *tmp = qk__realloc(al, NULL, 0, tbytes);
+    uint32_t *cnt = tmp ? qk__realloc(al, NULL, 0, ccap * sizeof *cnt) : NULL;
     ok = cnt && make_rows(al, found.v, tmp, total, cnt, (uint32_t)n_obj, &nr);
-    qk__free(al, cnt, 257 * sizeof *cnt);
-    qk__free(al, tmp, tcap * sizeof *tmp);
+    qk__free(al, cnt, ccap * sizeof *cnt);
+    qk__free(al, tmp, tbytes);
     /* The lists start with room for the last frame's counts and some (frames are
      * alike), and grow if need be. */
     size_t bcap = w->began.n + w->began.n / 4 + 64, ecap = w->ended.n + w->ended.n / 4 + 64;
