@@ -239,17 +239,17 @@ static int diff(const qk_world_t *w, const qk__prows_t *o, const qk__prows_t *nw
 }
 
 /*
- * The dense frame (many pairs), on the world's threads: the rows and began / ended in
+ * The dense frame (many pairs) on the world's threads: the rows and began / ended in
  * one go. The keys are split into nt chunks, each counted by slot a (cnt: a count array
  * per chunk), the counts made into each chunk's cursors per row (by slot ranges), and
  * the chunks scattered (only b) into their rows, unsorted. Then each thread takes a
  * range of rows (about n / nt pairs) and builds every row from the last frame's, which
- * is sorted: the new row's slots are marked (mark: a byte per slot), the old row walked
- * (marked: stayed, in order; unmarked: ended), the new slots still marked are the ones
- * that began (few: a small sort), and the stayed and began slots are merged into the
- * row. Each thread's began and ended lists are in key order and the ranges ascend, so
- * the lists are joined in range order: the result is the same on any number of
- * threads.
+ * is sorted (row_build: stamps per slot, the new slots that began sorted and put in by
+ * bisection). Each thread's began and ended lists are in key order and the ranges
+ * ascend, so the lists are joined in range order: the result is the same on any number
+ * of threads, and the same as the one-thread path's (make_rows and diff). On one thread
+ * that path is used: measured, it costs fewer instructions (the SSE row merge makes the
+ * pairs that stayed cheap there), so this one pays only when split.
  */
 #define QK__RMAX 64 /* = QK__MAX_THREADS */
 typedef struct rjob {
@@ -401,14 +401,11 @@ static void rjob_run(unsigned t, void *ud) {
     }
     break;
   }
-  case 3: /* scatter the chunk's b into the rows */
-  {
+  case 3: { /* scatter the chunk's b into the rows; then the row range's rows with
+             * pairs, and its longest */
     uint32_t *rb = J->r->b;
     for (const uint64_t *k = J->keys + k0, *e = J->keys + k1; k < e; k++)
       rb[c[*k >> 32]++] = (uint32_t)*k;
-    break;
-  }
-  case 4: { /* the row range's rows with pairs, and its longest */
     size_t nz = 0, mx = 0;
     for (uint32_t a = J->pr[t]; a < J->pr[t + 1]; a++) {
       size_t l = J->st[a + 1] - J->st[a];
@@ -481,7 +478,6 @@ static int rows_frame(const qk_world_t *w, const uint64_t *keys, size_t n, qk__p
   }
   rjob_phase(J, 2);
   J->st[n_obj] = (uint32_t)n;
-  rjob_phase(J, 3);
   /* Row ranges of about n / nt pairs each. */
   J->pr[0] = 0, J->pr[nt] = n_obj;
   for (unsigned t = 1; t < nt; t++) {
@@ -496,7 +492,7 @@ static int rows_frame(const qk_world_t *w, const uint64_t *keys, size_t n, qk__p
     }
     J->pr[t] = lo;
   }
-  rjob_phase(J, 4);
+  rjob_phase(J, 3);
   size_t nz = 0;
   for (unsigned t = 0; t < nt; t++) {
     size_t c = J->nz[t];
@@ -514,7 +510,7 @@ static int rows_frame(const qk_world_t *w, const uint64_t *keys, size_t n, qk__p
     if (!(J->ev[t].v = qk__realloc(al, NULL, 0, ec * sizeof(uint64_t)))) goto out;
     J->ev[t].cap = ec;
   }
-  rjob_phase(J, 5);
+  rjob_phase(J, 4);
   for (unsigned t = 0; t < nt; t++)
     if (J->nomem[t]) goto out;
   /* Thread 0's lists take the others'. */
