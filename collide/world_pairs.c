@@ -379,7 +379,8 @@ static void rjob_run(unsigned t, void *ud) {
   unsigned nt = J->nt;
   size_t stride = (size_t)n_obj + 1;
   switch (J->phase) {
-  case 0: /* count the chunk's keys by slot a */
+  case 0: /* count the chunk's keys by slot a (and clear the thread's stamps) */
+    memset(J->mark + (size_t)t * n_obj, 0, (size_t)n_obj * sizeof *J->mark);
     memset(c, 0, stride * sizeof *c);
     for (const uint64_t *k = J->keys + k0, *e = J->keys + k1; k < e; k++) c[*k >> 32]++;
     break;
@@ -468,7 +469,6 @@ static int rows_frame(const qk_world_t *w, const uint64_t *keys, size_t n, qk__p
   J->st = J->cnt ? qk__realloc(al, NULL, 0, sbytes) : NULL;
   J->mark = J->st ? qk__realloc(al, NULL, 0, mbytes ? mbytes : 1) : NULL;
   if (!J->mark) goto out;
-  memset(J->mark, 0, mbytes);
   rjob_phase(J, 0);
   rjob_phase(J, 1);
   size_t acc = 0;
