@@ -319,8 +319,8 @@ static int row_build(rjob_t *J, unsigned t, uint32_t a, uint32_t *nb, size_t n, 
     else
       G[ng++] = x;
   }
-  const uint32_t *base = ob;
-  if (ns != m || dirty) { /* some ended: the stayed ones, in order */
+  const uint32_t *base = m ? ob : S; /* (S: never NULL) */
+  if (ns != m || dirty) {            /* some ended: the stayed ones, in order */
     ns = 0;
     for (size_t j = 0; j < m; j++) {
       uint32_t y = ob[j];
