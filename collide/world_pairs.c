@@ -238,6 +238,313 @@ static int diff(const qk_world_t *w, const qk__prows_t *o, const qk__prows_t *nw
   return diff_keys(w, o, nw, dirty, bv, ev);
 }
 
+/*
+ * The dense frame (many pairs) on the world's threads: the rows and began / ended in
+ * one go. The keys are split into nt chunks, each counted by slot a (cnt: a count array
+ * per chunk), the counts made into each chunk's cursors per row (by slot ranges), and
+ * the chunks scattered (only b) into their rows, unsorted. Then each thread takes a
+ * range of rows (about n / nt pairs) and builds every row from the last frame's, which
+ * is sorted (row_build: stamps per slot, the new slots that began sorted and put in by
+ * bisection). Each thread's began and ended lists are in key order and the ranges
+ * ascend, so the lists are joined in range order: the result is the same on any number
+ * of threads, and the same as the one-thread path's (make_rows and diff). On one thread
+ * that path is used: measured, it costs fewer instructions (the SSE row merge makes the
+ * pairs that stayed cheap there), so this one pays only when split.
+ */
+#define QK__RMAX 64 /* = QK__MAX_THREADS */
+typedef struct rjob {
+  const qk_world_t *w;
+  const qk__prows_t *o; /* the last frame's rows */
+  qk__prows_t *r;       /* the new rows (b filled by the scatter) */
+  const uint64_t *keys;
+  size_t n;
+  uint32_t n_obj;
+  unsigned nt;
+  int dirty, phase, nomem[QK__RMAX];
+  uint32_t *cnt;  /* nt (n_obj + 1): per chunk, counts then cursors */
+  uint32_t *st;   /* n_obj + 1: row a's pairs at rb[st[a] .. st[a + 1]) */
+  uint32_t *mark; /* nt n_obj stamps, zero at first */
+  uint32_t stamp[QK__RMAX];
+  uint32_t *scr;                         /* per thread 2 maxlen slots */
+  size_t rs[QK__RMAX + 1];               /* pairs per slot range, then their prefix */
+  uint32_t pr[QK__RMAX + 1];             /* the threads' row ranges */
+  size_t nz[QK__RMAX + 1], mx[QK__RMAX]; /* rows with pairs (then prefix), longest */
+  size_t scr_off[QK__RMAX + 1];
+  qk__kvec_t bv[QK__RMAX], ev[QK__RMAX];
+} rjob_t;
+
+static int cmp_u32(const void *x, const void *y) {
+  uint32_t a = *(const uint32_t *)x, b = *(const uint32_t *)y;
+  return (a > b) - (a < b);
+}
+
+static void sort_small(uint32_t *g, size_t n) {
+  if (n > 24) {
+    qsort(g, n, sizeof *g, cmp_u32);
+    return;
+  }
+  for (size_t i = 1; i < n; i++) {
+    uint32_t v = g[i];
+    size_t j = i;
+    for (; j > 0 && g[j - 1] > v; j--) g[j] = g[j - 1];
+    g[j] = v;
+  }
+}
+
+/* Build row a (n new slots at nb, unsorted; the old row ob of m slots, sorted) in place,
+ * adding its began and ended pairs; 0 when memory ran short. The old row's slots are
+ * stamped v (a stamp used once), those found in the new row then v + 1 (stayed); the
+ * others of the new row began, and the old ones still at v ended. */
+static int row_build(rjob_t *J, unsigned t, uint32_t a, uint32_t *nb, size_t n, const uint32_t *ob,
+                     size_t m) {
+  const qk_world_t *w = J->w;
+  const qk_allocator_t *al = &w->alloc;
+  uint32_t *mk = J->mark + (size_t)t * J->n_obj;
+  uint32_t *S = J->scr + J->scr_off[t], *G = S + J->mx[t];
+  qk__kvec_t *bv = &J->bv[t], *ev = &J->ev[t];
+  uint64_t ka = (uint64_t)a << 32;
+  int dirty = J->dirty, ch_a = dirty && changed(w, a);
+  if (J->stamp[t] >= UINT32_MAX - 2) { /* (the stamps wrapped: start again) */
+    memset(mk, 0, (size_t)J->n_obj * sizeof *mk);
+    J->stamp[t] = 0;
+  }
+  uint32_t v = J->stamp[t] + 1, v1 = v + 1;
+  J->stamp[t] = v1;
+  for (size_t j = 0; j < m; j++) mk[ob[j]] = v;
+  size_t ns = 0, ng = 0;
+  for (size_t i = 0; i < n; i++) {
+    uint32_t x = nb[i];
+    if (mk[x] == v)
+      mk[x] = v1, ns++;
+    else
+      G[ng++] = x;
+  }
+  const uint32_t *base = m ? ob : S; /* (S: never NULL) */
+  if (ns != m || dirty) {            /* some ended: the stayed ones, in order */
+    ns = 0;
+    for (size_t j = 0; j < m; j++) {
+      uint32_t y = ob[j];
+      if (mk[y] == v1) {
+        S[ns++] = y;
+        if (dirty && (ch_a || changed(w, y)) && !kv_add(al, ev, ka | y)) return 0;
+      } else if (!kv_add(al, ev, ka | y)) {
+        return 0;
+      }
+    }
+    base = S;
+  }
+  sort_small(G, ng);
+  if (!dirty) {
+    /* The began slots go in between runs of the stayed ones, found by bisection. */
+    size_t i = 0, k = 0;
+    for (size_t j = 0; j < ng; j++) {
+      uint32_t x = G[j];
+      size_t lo = i, hi = ns;
+      while (lo < hi) {
+        size_t mid = lo + (hi - lo) / 2;
+        if (base[mid] < x)
+          lo = mid + 1;
+        else
+          hi = mid;
+      }
+      memcpy(nb + k, base + i, (lo - i) * sizeof *nb);
+      k += lo - i, i = lo;
+      nb[k++] = x;
+      if (!kv_add(al, bv, ka | x)) return 0;
+    }
+    memcpy(nb + k, base + i, (ns - i) * sizeof *nb);
+    return 1;
+  }
+  size_t i = 0, j = 0, k = 0;
+  while (i < ns || j < ng) {
+    if (j == ng || (i < ns && S[i] < G[j])) {
+      uint32_t y = S[i++];
+      nb[k++] = y;
+      if ((ch_a || changed(w, y)) && !kv_add(al, bv, ka | y)) return 0;
+    } else {
+      uint32_t x = G[j++];
+      nb[k++] = x;
+      if (!kv_add(al, bv, ka | x)) return 0;
+    }
+  }
+  return 1;
+}
+
+static void rjob_run(unsigned t, void *ud) {
+  rjob_t *J = ud;
+  uint32_t n_obj = J->n_obj, *c = J->cnt + (size_t)t * (n_obj + 1);
+  size_t k0 = J->n * t / J->nt, k1 = J->n * (t + 1) / J->nt;
+  uint32_t s0 = (uint32_t)((uint64_t)n_obj * t / J->nt);
+  uint32_t s1 = (uint32_t)((uint64_t)n_obj * (t + 1) / J->nt);
+  unsigned nt = J->nt;
+  size_t stride = (size_t)n_obj + 1;
+  switch (J->phase) {
+  case 0: /* count the chunk's keys by slot a (and clear the thread's stamps) */
+    memset(J->mark + (size_t)t * n_obj, 0, (size_t)n_obj * sizeof *J->mark);
+    memset(c, 0, stride * sizeof *c);
+    for (const uint64_t *k = J->keys + k0, *e = J->keys + k1; k < e; k++) c[*k >> 32]++;
+    break;
+  case 1: { /* the slot range's pairs */
+    size_t s = 0;
+    for (unsigned u = 0; u < nt; u++)
+      for (uint32_t a = s0; a < s1; a++) s += J->cnt[u * stride + a];
+    J->rs[t] = s;
+    break;
+  }
+  case 2: { /* row starts and the chunks' cursors */
+    uint32_t base = (uint32_t)J->rs[t];
+    for (uint32_t a = s0; a < s1; a++) {
+      J->st[a] = base;
+      for (unsigned u = 0; u < nt; u++) {
+        uint32_t *p = &J->cnt[u * stride + a], q = *p;
+        *p = base, base += q;
+      }
+    }
+    break;
+  }
+  case 3: { /* scatter the chunk's b into the rows; then the row range's rows with
+             * pairs, and its longest */
+    uint32_t *rb = J->r->b;
+    for (const uint64_t *k = J->keys + k0, *e = J->keys + k1; k < e; k++)
+      rb[c[*k >> 32]++] = (uint32_t)*k;
+    size_t nz = 0, mx = 0;
+    for (uint32_t a = J->pr[t]; a < J->pr[t + 1]; a++) {
+      size_t l = J->st[a + 1] - J->st[a];
+      nz += l != 0, mx = l > mx ? l : mx;
+    }
+    J->nz[t] = nz;
+    J->mx[t] = mx;
+    break;
+  }
+  default: { /* build the rows */
+    const qk__prows_t *o = J->o;
+    qk__prows_t *r = J->r;
+    size_t q = 0, hi = o->n_nz, z = J->nz[t];
+    while (q < hi) { /* the first old row at or after the range */
+      size_t mid = q + (hi - q) / 2;
+      if (o->row[mid] < J->pr[t])
+        q = mid + 1;
+      else
+        hi = mid;
+    }
+    for (uint32_t a = J->pr[t]; a < J->pr[t + 1]; a++) {
+      size_t n = J->st[a + 1] - J->st[a], m = 0;
+      const uint32_t *ob = NULL;
+      if (q < o->n_nz && o->row[q] == a)
+        ob = o->b + o->start[q], m = o->start[q + 1] - o->start[q], q++;
+      if (!n && !m) continue;
+      if (n) r->row[z] = a, r->start[z++] = J->st[a];
+      if (!row_build(J, t, a, r->b + J->st[a], n, ob, m)) {
+        J->nomem[t] = 1;
+        return;
+      }
+    }
+  }
+  }
+}
+
+static void rjob_phase(rjob_t *J, int ph) {
+  J->phase = ph;
+  qk__run_jobs(J->nt, J->nt, rjob_run, J);
+}
+
+/* Rows, began and ended for the dense case; QK_ERR_NOMEM leaves nothing allocated in
+ * *r, *bv, *ev. */
+static int rows_frame(const qk_world_t *w, const uint64_t *keys, size_t n, qk__prows_t *r,
+                      int dirty, qk__kvec_t *bvo, qk__kvec_t *evo) {
+  const qk_allocator_t *al = &w->alloc;
+  uint32_t n_obj = w->n_obj;
+  unsigned nt = w->opt.threads;
+  if (nt < 1 || w->n_live < 4096) nt = 1;
+  if (nt > QK__RMAX) nt = QK__RMAX;
+  rjob_t *J = qk__realloc(al, NULL, 0, sizeof *J);
+  if (!J) return 0;
+  memset(J, 0, sizeof *J);
+  J->w = w, J->o = &w->cur, J->r = r, J->keys = keys, J->n = n, J->n_obj = n_obj, J->nt = nt;
+  J->dirty = dirty;
+  size_t stride = (size_t)n_obj + 1, cbytes = nt * stride * sizeof *J->cnt;
+  size_t mbytes = (size_t)nt * n_obj * sizeof *J->mark, sbytes = stride * sizeof *J->st, scn = 0;
+  int ok = 0;
+  J->cnt = qk__realloc(al, NULL, 0, cbytes);
+  J->st = J->cnt ? qk__realloc(al, NULL, 0, sbytes) : NULL;
+  J->mark = J->st ? qk__realloc(al, NULL, 0, mbytes ? mbytes : 1) : NULL;
+  if (!J->mark) goto out;
+  rjob_phase(J, 0);
+  rjob_phase(J, 1);
+  size_t acc = 0;
+  for (unsigned t = 0; t < nt; t++) {
+    size_t s = J->rs[t];
+    J->rs[t] = acc, acc += s;
+  }
+  rjob_phase(J, 2);
+  J->st[n_obj] = (uint32_t)n;
+  /* Row ranges of about n / nt pairs each. */
+  J->pr[0] = 0, J->pr[nt] = n_obj;
+  for (unsigned t = 1; t < nt; t++) {
+    size_t want = n * t / nt;
+    uint32_t lo = J->pr[t - 1], hi = n_obj;
+    while (lo < hi) {
+      uint32_t mid = lo + (hi - lo) / 2;
+      if (J->st[mid] < want)
+        lo = mid + 1;
+      else
+        hi = mid;
+    }
+    J->pr[t] = lo;
+  }
+  rjob_phase(J, 3);
+  size_t nz = 0;
+  for (unsigned t = 0; t < nt; t++) {
+    size_t c = J->nz[t];
+    J->nz[t] = nz, nz += c;
+    J->scr_off[t] = scn, scn += 2 * J->mx[t];
+  }
+  J->scr = qk__realloc(al, NULL, 0, (scn ? scn : 1) * sizeof *J->scr);
+  if (!J->scr || !rows_alloc(al, r, nz)) goto out;
+  r->n = n;
+  r->start[nz] = (uint32_t)n;
+  for (unsigned t = 0; t < nt; t++) {
+    size_t bc = w->began.n / nt + 64, ec = w->ended.n / nt + 64;
+    if (!(J->bv[t].v = qk__realloc(al, NULL, 0, bc * sizeof(uint64_t)))) goto out;
+    J->bv[t].cap = bc;
+    if (!(J->ev[t].v = qk__realloc(al, NULL, 0, ec * sizeof(uint64_t)))) goto out;
+    J->ev[t].cap = ec;
+  }
+  rjob_phase(J, 4);
+  for (unsigned t = 0; t < nt; t++)
+    if (J->nomem[t]) goto out;
+  /* Thread 0's lists take the others'. */
+  for (int which = 0; which < 2; which++) {
+    qk__kvec_t *v = which ? J->ev : J->bv;
+    size_t tot = 0;
+    for (unsigned t = 0; t < nt; t++) tot += v[t].n;
+    if (tot > v[0].cap) {
+      uint64_t *p = qk__realloc(al, v[0].v, v[0].cap * sizeof *p, tot * sizeof *p);
+      if (!p) goto out;
+      v[0].v = p, v[0].cap = tot;
+    }
+    for (unsigned t = 1; t < nt; t++) {
+      if (v[t].n) memcpy(v[0].v + v[0].n, v[t].v, v[t].n * sizeof *v[t].v);
+      v[0].n += v[t].n;
+    }
+  }
+  *bvo = J->bv[0], *evo = J->ev[0];
+  J->bv[0] = J->ev[0] = (qk__kvec_t){0};
+  ok = 1;
+out:
+  for (unsigned t = 0; t < nt; t++) {
+    qk__free(al, J->bv[t].v, J->bv[t].cap * sizeof(uint64_t));
+    qk__free(al, J->ev[t].v, J->ev[t].cap * sizeof(uint64_t));
+  }
+  if (!ok && r->row) qk__free(al, r->row, 2 * (r->n_nz + 1) * sizeof *r->row), r->row = NULL;
+  qk__free(al, J->scr, (scn ? scn : 1) * sizeof *J->scr);
+  qk__free(al, J->mark, mbytes ? mbytes : 1);
+  qk__free(al, J->st, sbytes);
+  qk__free(al, J->cnt, cbytes);
+  qk__free(al, J, sizeof *J);
+  return ok;
+}
+
 qk_status_t qk_world_update(qk_world_t *w) {
   if (!w) return QK_ERR_INVALID;
   const qk_allocator_t *al = &w->alloc;
@@ -255,36 +562,43 @@ qk_status_t qk_world_update(qk_world_t *w) {
     qk__free(al, found.v, found.cap * sizeof *found.v);
     return QK_ERR_LIMIT;
   }
-  /* Everything else the update needs, before anything changes: the sort's buffer and
-   * counts, the new rows, and the began and ended lists (sized by the last frame's,
-   * grown as needed): a failure keeps the last frame's lists. */
-  size_t total = found.n, n_obj = w->n_obj;
-  size_t tcap = total ? total : 1, ccap = total * 4 < n_obj ? 257 : 2 * (n_obj + 1);
+  /* Everything else the update needs, before anything changes: the new rows and the
+   * began and ended lists (sized by the last frame's, grown as needed): a failure keeps
+   * the last frame's lists. */
+  size_t total = found.n, n_obj = w->n_obj, tcap = total ? total : 1;
+  int dirty = w->ident_dirty, ok = 0;
   qk__prows_t nr = {0};
-  /* (the dense sort's scratch holds 32-bit slots, the sparse one's keys) */
-  size_t tbytes = (total * 4 < n_obj ? sizeof(uint64_t) : sizeof(uint32_t)) * tcap;
-  uint64_t *tmp = qk__realloc(al, NULL, 0, tbytes);
-  uint32_t *cnt = tmp ? qk__realloc(al, NULL, 0, ccap * sizeof *cnt) : NULL;
-  nr.b = cnt ? qk__realloc(al, NULL, 0, tcap * sizeof *nr.b) : NULL;
-  if (nr.b) nr.cap = tcap;
   qk__kvec_t bv = {0}, ev = {0};
-  if (nr.b && make_rows(al, found.v, tmp, total, cnt, (uint32_t)n_obj, &nr)) w->last_found = total;
-  qk__free(al, cnt, ccap * sizeof *cnt);
-  qk__free(al, tmp, tbytes);
+  if ((nr.b = qk__realloc(al, NULL, 0, tcap * sizeof *nr.b))) nr.cap = tcap;
+  unsigned nt = w->n_live < 4096 ? 1 : w->opt.threads;
+  if (nr.b && total * 4 >= n_obj && nt > 1) {
+    /* dense, on threads: rows and began / ended in one go */
+    ok = rows_frame(w, found.v, total, &nr, dirty, &bv, &ev);
+  } else if (nr.b) {
+    /* one thread, or sparse: the keys sorted into rows, then merged with the last
+     * frame's */
+    size_t ccap = total * 4 < n_obj ? 257 : 2 * (n_obj + 1);
+    /* (the dense sort's scratch holds 32-bit slots, the sparse one's keys) */
+    size_t tbytes = (total * 4 < n_obj ? sizeof(uint64_t) : sizeof(uint32_t)) * tcap;
+    uint64_t *tmp = qk__realloc(al, NULL, 0, tbytes);
+    uint32_t *cnt = tmp ? qk__realloc(al, NULL, 0, ccap * sizeof *cnt) : NULL;
+    ok = cnt && make_rows(al, found.v, tmp, total, cnt, (uint32_t)n_obj, &nr);
+    qk__free(al, cnt, ccap * sizeof *cnt);
+    qk__free(al, tmp, tbytes);
+    /* The lists start with room for the last frame's counts and some (frames are
+     * alike), and grow if need be. */
+    size_t bcap = w->began.n + w->began.n / 4 + 64, ecap = w->ended.n + w->ended.n / 4 + 64;
+    if (ok && (bv.v = qk__realloc(al, NULL, 0, bcap * sizeof *bv.v))) bv.cap = bcap;
+    if (bv.v && (ev.v = qk__realloc(al, NULL, 0, ecap * sizeof *ev.v))) ev.cap = ecap;
+    ok = ev.v && diff(w, &w->cur, &nr, dirty, &bv, &ev);
+  }
+  if (ok) w->last_found = total;
   qk__free(al, found.v, found.cap * sizeof *found.v);
-  int dirty = w->ident_dirty;
   size_t n_eg = 0;
   if (dirty)
     for (uint32_t i = 0; i < w->n_obj; i++) n_eg += w->obj[i].gen != w->ugen[i];
   uint64_t *eg = NULL;
-  /* The lists start with room for the last frame's counts and some (frames are alike),
-   * and grow if need be. */
-  size_t bcap = w->began.n + w->began.n / 4 + 64, ecap = w->ended.n + w->ended.n / 4 + 64;
-  if (nr.row && (bv.v = qk__realloc(al, NULL, 0, bcap * sizeof *bv.v))) bv.cap = bcap;
-  if (bv.v && (ev.v = qk__realloc(al, NULL, 0, ecap * sizeof *ev.v))) ev.cap = ecap;
-  if (!ev.v || (n_eg && !(eg = qk__realloc(al, NULL, 0, n_eg * sizeof *eg))) ||
-      !diff(w, &w->cur, &nr, dirty, &bv, &ev)) {
-    qk__free(al, eg, n_eg * sizeof *eg);
+  if (!ok || (n_eg && !(eg = qk__realloc(al, NULL, 0, n_eg * sizeof *eg)))) {
     qk__free(al, bv.v, bv.cap * sizeof *bv.v);
     qk__free(al, ev.v, ev.cap * sizeof *ev.v);
     rows_free(al, &nr);

@@ -1031,6 +1031,80 @@ static void test_world_concurrent_readers(void **s) {
   qk_world_free(w);
 }
 
+/* Allocation failure at every allocating call of a threaded update (the rows and the
+ * began / ended lists built on the world's threads): each failure leaves the pairs as
+ * they were, and an update that succeeds agrees with a one-thread world. */
+static qk_world_t *nomem_world(qk_allocator_t *al, unsigned threads, const qk_shape_t *sh,
+                               const qk_shape_t *sh2, int n) {
+  qk_world_options_t o;
+  qk_world_options_init(&o);
+  o.threads = threads;
+  o.allocator = al;
+  qk_world_t *w;
+  qk_handle_t *h = malloc(n * sizeof *h);
+  assert_int_equal(qk_world_new(&o, &w), QK_OK);
+  for (int i = 0; i < n; i++) assert_int_equal(qk_world_add(w, &sh[i], 0, &h[i]), QK_OK);
+  assert_int_equal(qk_world_update(w), QK_OK);
+  assert_int_equal(qk_world_move_batch(w, h, sh2, n, NULL), QK_OK);
+  free(h);
+  return w;
+}
+
+/* The counting allocator behind a lock: a threaded world allocates from its threads.
+ * (Which call fails then varies with the threads' timing; every one must be handled.) */
+static pthread_mutex_t g_alloc_mu = PTHREAD_MUTEX_INITIALIZER;
+static void *locked_alloc(void *ud, void *p, size_t osize, size_t nsize) {
+  pthread_mutex_lock(&g_alloc_mu);
+  void *r = qkt_alloc_fn(ud, p, osize, nsize);
+  pthread_mutex_unlock(&g_alloc_mu);
+  return r;
+}
+
+static void test_world_nomem_threads(void **s) {
+  (void)s;
+  enum { N = 4400 };
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 41);
+  qk_shape_t *sh = malloc(2 * N * sizeof *sh);
+  for (int i = 0; i < N; i++) sh[i] = rnd_shape(&r, SC_UNIFORM, 1), sh[N + i] = moved(&r, sh[i]);
+  qk_world_t *w0 = nomem_world(NULL, 1, sh, sh + N, N);
+  assert_int_equal(qk_world_update(w0), QK_OK);
+  size_t calls = 0;
+  for (size_t fail = 1; fail <= calls + 1; fail++) {
+    qkt_alloc_t st = {0};
+    qk_allocator_t al = qkt_alloc_make(&st);
+    al = (qk_allocator_t){locked_alloc, &st};
+    qk_world_t *w = nomem_world(&al, 2, sh, sh + N, N);
+    size_t before[3];
+    for (int which = 0; which < 3; which++)
+      qk_world_pairs_list(w, (qk_pairs_which_t)which, NULL, 0, &before[which]);
+    st.calls = 0, st.fail_at = calls ? fail : 0, st.failed = 0;
+    qk_status_t rc = qk_world_update(w);
+    if (!calls) calls = st.calls, fail = 0; /* the first round counts the calls */
+    for (int which = 0; which < 3; which++) {
+      size_t n0, n1;
+      qk_world_pairs_list(w0, (qk_pairs_which_t)which, NULL, 0, &n0);
+      qk_world_pairs_list(w, (qk_pairs_which_t)which, NULL, 0, &n1);
+      if (rc == QK_ERR_NOMEM) {
+        assert_int_equal(n1, before[which]);
+        continue;
+      }
+      assert_int_equal(rc, QK_OK);
+      assert_int_equal(n0, n1);
+      qk_world_pair_t *p0 = malloc((n0 + 1) * sizeof *p0), *p1 = malloc((n1 + 1) * sizeof *p1);
+      qk_world_pairs_list(w0, (qk_pairs_which_t)which, p0, n0, &n0);
+      qk_world_pairs_list(w, (qk_pairs_which_t)which, p1, n1, &n1);
+      assert_memory_equal(p0, p1, n0 * sizeof *p0);
+      free(p0), free(p1);
+    }
+    qk_world_free(w);
+    assert_int_equal(st.live_blocks, 0);
+  }
+  assert_true(calls >= 12); /* (the threaded rows allocate a dozen blocks and more) */
+  qk_world_free(w0);
+  free(sh);
+}
+
 int main(void) {
   g_seed = qkt_seed(20261130);
   const struct CMUnitTest tests[] = {
@@ -1048,6 +1122,7 @@ int main(void) {
       cmocka_unit_test(test_world_pair_bytes),
       cmocka_unit_test(test_world_churn_memory),
       cmocka_unit_test(test_world_nomem),
+      cmocka_unit_test(test_world_nomem_threads),
       cmocka_unit_test(test_world_threads),
       cmocka_unit_test(test_world_concurrent_readers),
   };
