@@ -18,13 +18,6 @@
  * Both digits are counting sorts that keep input order, so the points of a cell keep
  * their input order and the result is the same for any number of threads.
  *
- * Up to qk__cell_direct_max points (1.5M: their 20 bytes a point of output fit the
- * last-level cache), pass 1 is followed instead by one direct counting sort of all 4^L
- * cells: each share's starts in every cell from the counts of pass 1, and each point
- * written straight to its final slot (random writes, but into memory that stays cached).
- * No records, no fine pass: about 36 instead of 61 instructions a point, and about 60
- * instead of 115 bytes a point to or from memory. Same order, so the same tree.
- *
  * The cell of a point is its truncated scaled coordinate, corrected by one step against
  * the grid lines as the tree computes them (the corner arithmetic of every descent, one
  * addition per level), so that it is exactly the cell of the tree's comparisons: the
@@ -127,10 +120,6 @@ _Static_assert(sizeof(rec_t) == 20, "records of 20 bytes");
 /* Points per block of the key computation: their keys stay in the first-level cache
  * between the loop that computes them and the one that scatters them. */
 #define BLOCK 256u
-/* Most points sorted by the direct scatter, straight to their final slots: 20 bytes a
- * point of output, 30 MB, within the last-level cache. A variable so that the tests can
- * send small inputs through the record path (index_internal.h). */
-size_t qk__cell_direct_max = (size_t)3 << 19;
 
 typedef struct bucket_job {
   qk_tree_t *t;
@@ -397,62 +386,6 @@ static void scatter_job(unsigned w, unsigned thread, void *ctx) {
 #endif
 }
 
-/* The direct scatter for share w: every point straight to its final slot, the next slot
- * of its cell for this share (hist's row w, turned into starts by direct_starts()). The
- * points of a cell keep their input order. */
-static void direct_job(unsigned w, unsigned thread, void *ctx) {
-  (void)thread;
-  const bucket_job_t *j = ctx;
-  size_t lo, hi;
-  qk__share_range(j->n, w, j->ns, &lo, &hi);
-  uint32_t *next = j->hist + (size_t)w * j->nb;
-  const qk_point_t *p = j->p;
-  const uint16_t *key = j->key;
-  double *px = j->t->px, *py = j->t->py;
-  qk_id_t *pid = j->t->pid;
-  size_t i = lo;
-#if defined(__SSE2__)
-  /* A point in one load, its halves stored apart; four points a step (each one's slot
-   * taken after the one before, as they may share a cell). */
-  for (; i + 4 <= hi; i += 4) {
-    for (size_t q = i; q < i + 4; q++) {
-      uint32_t d = next[key[q]]++;
-      __m128d v = _mm_loadu_pd(&p[q].x);
-      _mm_storel_pd(&px[d], v);
-      _mm_storeh_pd(&py[d], v);
-      pid[d] = (qk_id_t)q;
-    }
-  }
-#endif
-  for (; i < hi; i++) {
-    uint32_t d = next[key[i]]++;
-    px[d] = p[i].x;
-    py[d] = p[i].y;
-    pid[d] = (qk_id_t)i;
-  }
-}
-
-static void direct_share(void *ctx, unsigned w, unsigned nw) {
-  (void)nw;
-  direct_job(w, w, ctx);
-}
-
-/* The cells' starts into cum (4^L + 1), and every share's row of counts in hist turned
- * into the starts of its points in every cell: the shares before it first, so that the
- * order is one thread's. */
-static void direct_starts(uint32_t *hist, size_t ns, size_t nb, uint32_t *cum) {
-  uint32_t acc = 0;
-  for (size_t c = 0; c < nb; c++) {
-    cum[c] = acc;
-    for (size_t w = 0; w < ns; w++) {
-      uint32_t k = hist[w * nb + c];
-      hist[w * nb + c] = acc;
-      acc += k;
-    }
-  }
-  cum[nb] = acc;
-}
-
 static void keys_share(void *ctx, unsigned w, unsigned nw) {
   (void)nw;
   keys_job(w, w, ctx);
@@ -649,10 +582,6 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
    * 2^19 points (the tests' too) sorted in several shares, on any number of threads. */
   size_t per = (size_t)1 << 19, ns = (n + per - 1) / per;
   if (ns < nw) ns = nw;
-  /* The direct scatter has no tags: one share per thread (fewer cell counts to zero, sum
-   * and keep in cache). */
-  bool direct = n <= qk__cell_direct_max;
-  if (direct) ns = nw;
   scratch_t s = {0};
   s.nb = nb, s.nc = nc, s.n = n, s.ns = ns;
   s.cum = qk__realloc(&t->alloc, NULL, 0, (nb + 1) * sizeof *s.cum);
@@ -678,28 +607,6 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
   j.avx2 = __builtin_cpu_supports("avx2");
 #endif
   run_pass(&j, keys_share, keys_job);
-  if (direct) {
-    /* The output fits the last-level cache: no records, no fine pass. */
-    direct_starts(s.hist, ns, nb, s.cum);
-    /* glibc's malloc gives the top of its heap back to the system when a free leaves more
-     * there than twice the largest block it recently had to map (see the record block
-     * below): without a block as large as the rest of the build, freeing a tree would
-     * hand back its pages and every later build fault them in again (5,500 faults for 1M
-     * points). A block of that size, never touched (address space, not memory), is
-     * mapped and freed once, which raises those thresholds as the record block did. */
-    if (!t->alloc.fn) {
-      size_t rest = n * (2 * sizeof(double) + sizeof(qk_id_t) + sizeof *s.key) + ns * nb * 4 +
-                    (4 * (n / t->capacity) + 64) * sizeof(qk__node_t) + ((size_t)1 << 20);
-      if (rest > ((size_t)32 << 20)) rest = (size_t)32 << 20;
-      void *hold = qk__realloc(&t->alloc, NULL, 0, rest);
-      qk__free(&t->alloc, hold, rest);
-    }
-    run_pass(&j, direct_share, direct_job);
-    *cum = s.cum;
-    s.cum = NULL;
-    scratch_free(t, &s);
-    return QK_OK;
-  }
   /* The buckets' starts, and each share's segment of every bucket: the shares before it
    * come first, so the order is the one thread's. Segments start at multiples of WC. */
   uint32_t acc = 0, most = 0;

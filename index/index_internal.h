@@ -213,12 +213,6 @@ qk_status_t qk__build_subtree(qk_tree_t *t, uint32_t node, qk__geom_t g);
 qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned L, unsigned nw,
                           uint32_t **cum);
 
-/* Inputs of up to this many points are sorted by cell in one direct scatter to their
- * final slots, larger ones through 20-byte records and a fine pass (index/cellsort.c;
- * both give the same order). Only the tests change it, to run both paths on small
- * inputs. */
-extern size_t qk__cell_direct_max;
-
 /* Bulk build by bucketing into a uniform grid (index/build.c). Sets *done when it built
  * the tree; leaves it false (and the tree untouched) when the plain build should run. */
 qk_status_t qk__build_bucketed(qk_tree_t *t, const qk_point_t *p, size_t n, bool *done);

@@ -9,16 +9,12 @@
  * duplicated locations, points on dyadic grid lines, half of them in one spot, capacity
  * 1): on two and on three threads the same tree node for node, with the same point order
  * in every leaf, as on one.
- *
- * The direct scatter of inputs that fit the cache and the record path of larger ones give
- * the same tree and point order (the record path forced on a small input).
  */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "qk_test.h"
-#include "index/index_internal.h" /* qk__cell_direct_max */
 
 /* A coordinate on grid line k of 2^8 over [x0, x0 + side], or one ulp either side of it,
  * or anywhere (a quarter of them). */
@@ -133,50 +129,10 @@ static void test_build_threads_adversarial(void **state) {
   free(p);
 }
 
-/* The direct scatter (inputs up to qk__cell_direct_max points) and the record path give
- * the same tree node for node and the same point order, on one thread and on two. */
-static void test_build_direct_equals_records(void **state) {
-  (void)state;
-  uint64_t seed = qkt_seed(1203);
-  qkt_rng_t r;
-  qkt_rng_seed(&r, seed);
-  print_message("seed %llu\n", (unsigned long long)seed);
-  enum { N = 100000 }; /* a 2^7 x 2^7 grid, both digits of 7 bits */
-  qk_point_t *p = malloc(N * sizeof *p);
-  assert_non_null(p);
-  const size_t saved = qk__cell_direct_max;
-  for (int k = 0; k < 3; k++) {
-    if (k == 0) qkt_points(&r, QKT_UNIFORM, p, N);
-    if (k == 1) qkt_points(&r, QKT_DUPLICATES, p, N);
-    if (k == 2) qkt_points(&r, QKT_GRID_EDGES, p, N);
-    qk_tree_options_t o;
-    qk_tree_options_init(&o);
-    o.capacity = k == 0 ? 32 : 2;
-    o.max_depth = 12;
-    for (uint32_t threads = 1; threads <= 2; threads++) {
-      o.threads = threads;
-      qk_tree_t *direct = NULL, *rec = NULL;
-      qk__cell_direct_max = (size_t)-1;
-      assert_int_equal(qk_tree_build(p, N, &o, &direct), QK_OK);
-      qk__cell_direct_max = 0;
-      qk_status_t st = qk_tree_build(p, N, &o, &rec);
-      qk__cell_direct_max = saved;
-      assert_int_equal(st, QK_OK);
-      QKT_CHECK_TREE(direct);
-      print_message("input %d, %u threads\n", k, threads);
-      qkt_assert_same_tree(direct, rec);
-      qk_tree_free(direct);
-      qk_tree_free(rec);
-    }
-  }
-  free(p);
-}
-
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_build_deep_grid_lines),
       cmocka_unit_test(test_build_threads_adversarial),
-      cmocka_unit_test(test_build_direct_equals_records),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
