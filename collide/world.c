@@ -65,6 +65,7 @@ void qk_world_options_init(qk_world_options_t *o) {
   o->threads = 1;
   o->margin = 0.5;
   o->min_margin = 0;
+  o->thread_min = 32768;
 }
 
 qk_status_t qk_world_new(const qk_world_options_t *options, qk_world_t **out) {

@@ -137,7 +137,7 @@ static void pack_run(unsigned t, void *ud) {
 void qk__world_pack(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
                     const qk__wcell_t *cells, uint32_t nc) {
   uint32_t n = cells[nc].start;
-  unsigned nt = w->opt.threads;
+  unsigned nt = qk__world_update_threads(w);
   if (n < 4096) nt = 1; /* not worth a thread */
   if (nt > 1) {
     pack_job_t p = {w, pk, ord, cells, nc, nt};

@@ -108,6 +108,11 @@ static inline double qk__pow2(int e) {
 
 static inline int qk__wlive(const qk__wobj_t *o) { return o->gen & 1; }
 
+/* The threads an update may use: one below the options' thread_min live objects. */
+static inline unsigned qk__world_update_threads(const qk_world_t *w) {
+  return w->n_live < w->opt.thread_min ? 1 : w->opt.threads;
+}
+
 static inline qk_shape_t qk__wshape(const qk__wobj_t *o) {
   return (qk_shape_t){(qk_shape_kind_t)(o->flags & QK__WKIND), o->x, o->y, o->a, o->b};
 }

@@ -454,7 +454,7 @@ static int rows_frame(const qk_world_t *w, const uint64_t *keys, size_t n, qk__p
                       int dirty, qk__kvec_t *bvo, qk__kvec_t *evo) {
   const qk_allocator_t *al = &w->alloc;
   uint32_t n_obj = w->n_obj;
-  unsigned nt = w->opt.threads;
+  unsigned nt = qk__world_update_threads(w);
   if (nt < 1 || w->n_live < 4096) nt = 1;
   if (nt > QK__RMAX) nt = QK__RMAX;
   rjob_t *J = qk__realloc(al, NULL, 0, sizeof *J);
@@ -570,7 +570,7 @@ qk_status_t qk_world_update(qk_world_t *w) {
   qk__prows_t nr = {0};
   qk__kvec_t bv = {0}, ev = {0};
   if ((nr.b = qk__realloc(al, NULL, 0, tcap * sizeof *nr.b))) nr.cap = tcap;
-  unsigned nt = w->n_live < 4096 ? 1 : w->opt.threads;
+  unsigned nt = w->n_live < 4096 ? 1 : qk__world_update_threads(w);
   if (nr.b && total * 4 >= n_obj && nt > 1) {
     /* dense, on threads: rows and began / ended in one go */
     ok = rows_frame(w, found.v, total, &nr, dirty, &bv, &ev);

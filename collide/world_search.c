@@ -516,7 +516,7 @@ qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kve
   uint32_t *rf;
   size_t n_rf;
   if (!level_info(w, pk, lv, &n_levels, &rf, &n_rf)) return QK_ERR_NOMEM;
-  unsigned nt = w->opt.threads;
+  unsigned nt = qk__world_update_threads(w);
   if (w->n_live < 4096) nt = 1; /* not worth a thread */
   /* Chunks of cells of about equal work, taken in turn by the workers (many more than
    * the workers). An object's work grows with its size (the finer cells its box covers):

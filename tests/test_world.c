@@ -365,6 +365,7 @@ static void run_scene(int scene, int kinds, size_t n, int frames, unsigned threa
   qk_world_options_t o;
   qk_world_options_init(&o);
   o.threads = threads;
+  o.thread_min = 0; /* the threaded paths from the smallest scenes on */
   qk_world_t *w;
   assert_int_equal(qk_world_new(&o, &w), QK_OK);
   mirror_t m = {0};
@@ -451,6 +452,7 @@ static void test_world_threads_frames(void **s) {
     qk_world_options_t o;
     qk_world_options_init(&o);
     o.threads = t ? 2 : 1;
+    o.thread_min = 0; /* the threaded paths at this size too */
     assert_int_equal(qk_world_new(&o, &w[t]), QK_OK);
     h[t] = malloc(N * sizeof *h[t]);
     for (int i = 0; i < N; i++) assert_int_equal(qk_world_add(w[t], &sh[i], 0, &h[t][i]), QK_OK);
@@ -921,6 +923,7 @@ static void test_world_threads(void **s) {
     qk_world_options_t o;
     qk_world_options_init(&o);
     o.threads = t ? 2 : 1;
+    o.thread_min = 0; /* the threaded paths at this size too */
     assert_int_equal(qk_world_new(&o, &w[t]), QK_OK);
     qkt_rng_t r;
     qkt_rng_seed(&r, g_seed + 17);
@@ -1039,6 +1042,7 @@ static qk_world_t *nomem_world(qk_allocator_t *al, unsigned threads, const qk_sh
   qk_world_options_t o;
   qk_world_options_init(&o);
   o.threads = threads;
+  o.thread_min = 0; /* the threaded paths at this size too */
   o.allocator = al;
   qk_world_t *w;
   qk_handle_t *h = malloc(n * sizeof *h);

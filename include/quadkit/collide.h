@@ -218,12 +218,15 @@ typedef struct qk_world_options {
   double margin;                   /**< fattening of each object's box, as a fraction of its
                                         size, 0..16 (default 0.5); larger: fewer re-filings */
   double min_margin;               /**< absolute fattening added, 0..2^100 (default 0) */
+  size_t thread_min;               /**< an update uses the threads only from this many live
+                                        objects (default 32768: below it, starting threads
+                                        costs more than they save) */
 } qk_world_options_t;
 
 /** A moving-objects world; see docs/collide.md. */
 typedef struct qk_world qk_world_t;
 
-/** Defaults: libc allocator, one thread, margin 0.5, min_margin 0. */
+/** Defaults: libc allocator, one thread, margin 0.5, min_margin 0, thread_min 32768. */
 void qk_world_options_init(qk_world_options_t *o);
 
 /**
