@@ -461,7 +461,7 @@ qk_status_t qk_region_locate_all(const qk_region_t *r, qk_point_t p, qk_boundary
 #define MIN_PER_THREAD ((size_t)1 << 14)
 /* A batch on several threads is cut into at least this many chunks per thread, so that
  * the threads end together. */
-#define CHUNKS_PER_THREAD 4
+#define CHUNKS_PER_THREAD 16
 
 /* Bits 0..7 of v at the even positions 0..14. */
 static const uint16_t spread8[256] = {
