@@ -700,6 +700,30 @@ static void test_region_batch_morton(void **state) {
   tl_free(&t);
 }
 
+/* Under every boundary rule: batch calls on one and two threads give the single calls'
+ * answers a (b is scratch for n answers), and every stride-th point the brute force's under
+ * the default rule. */
+static void check_batch_single_brute(const qk_region_t *r, const qk_point_t *pt, size_t n,
+                                     uint32_t *a, uint32_t *b, uint64_t seed, size_t stride) {
+  for (int rule = 0; rule < 3; rule++) {
+    for (size_t i = 0; i < n; i++) qk_region_locate(r, pt[i], (qk_boundary_t)rule, &a[i]);
+    for (unsigned th = 1; th <= 2; th++) {
+      memset(b, 0xab, n * sizeof *b);
+      assert_int_equal(qk_region_locate_batch(r, pt, n, (qk_boundary_t)rule, th, b), QK_OK);
+      for (size_t i = 0; i < n; i++)
+        if (a[i] != b[i])
+          fail_msg("seed %llu rule %d threads %u point %zu (%.17g, %.17g): batch %u, single %u",
+                   (unsigned long long)seed, rule, th, i, pt[i].x, pt[i].y, b[i], a[i]);
+    }
+    if (rule == QK_BOUNDARY_SEMI_OPEN)
+      for (size_t i = 0; i < n; i += stride)
+        if (a[i] != brute_pieces(r, pt[i].x, pt[i].y))
+          fail_msg("seed %llu point %zu (%.17g, %.17g): %u, brute force %u",
+                   (unsigned long long)seed, i, pt[i].x, pt[i].y, a[i],
+                   brute_pieces(r, pt[i].x, pt[i].y));
+  }
+}
+
 /* Batches aimed at the cells' sides: points exactly on the sides met along random descents
  * (every depth, the grid's included) and one double either side, clustered around each
  * descent's leaf, so that in Morton order most points fall in the leaf box of the point
@@ -746,23 +770,7 @@ static void test_region_batch_cell_sides(void **state) {
                                     : qkt_rng_below(&g, (uint32_t)ns[p]);
     pt[i] = (qk_point_t){xs[p][u], ys[p][v]};
   }
-  for (int rule = 0; rule < 3; rule++) {
-    for (size_t i = 0; i < n; i++) qk_region_locate(r, pt[i], (qk_boundary_t)rule, &a[i]);
-    for (unsigned th = 1; th <= 2; th++) {
-      memset(b, 0xab, n * sizeof *b);
-      assert_int_equal(qk_region_locate_batch(r, pt, n, (qk_boundary_t)rule, th, b), QK_OK);
-      for (size_t i = 0; i < n; i++)
-        if (a[i] != b[i])
-          fail_msg("seed %llu rule %d threads %u point %zu (%.17g, %.17g): batch %u, single %u",
-                   (unsigned long long)seed, rule, th, i, pt[i].x, pt[i].y, b[i], a[i]);
-    }
-    if (rule == QK_BOUNDARY_SEMI_OPEN)
-      for (size_t i = 0; i < n; i += 97)
-        if (a[i] != brute_pieces(r, pt[i].x, pt[i].y))
-          fail_msg("seed %llu point %zu (%.17g, %.17g): %u, brute force %u",
-                   (unsigned long long)seed, i, pt[i].x, pt[i].y, a[i],
-                   brute_pieces(r, pt[i].x, pt[i].y));
-  }
+  check_batch_single_brute(r, pt, n, a, b, seed, 97);
   free(pt), free(a), free(b);
   qk_region_free(r);
   tl_free(&t);
@@ -832,23 +840,7 @@ static void test_region_batch_pure_cells(void **state) {
       y = sy[j] + (sy[j + 1] - sy[j]) * qkt_rng_unit(&g);
     pt[k] = (qk_point_t){x, y};
   }
-  for (int rule = 0; rule < 3; rule++) {
-    for (size_t k = 0; k < n; k++) qk_region_locate(r, pt[k], (qk_boundary_t)rule, &a[k]);
-    for (unsigned th = 1; th <= 2; th++) {
-      memset(b, 0xab, n * sizeof *b);
-      assert_int_equal(qk_region_locate_batch(r, pt, n, (qk_boundary_t)rule, th, b), QK_OK);
-      for (size_t k = 0; k < n; k++)
-        if (a[k] != b[k])
-          fail_msg("seed %llu rule %d threads %u point %zu (%.17g, %.17g): batch %u, single %u",
-                   (unsigned long long)seed, rule, th, k, pt[k].x, pt[k].y, b[k], a[k]);
-    }
-    if (rule == QK_BOUNDARY_SEMI_OPEN)
-      for (size_t k = 0; k < n; k += 61)
-        if (a[k] != brute_pieces(r, pt[k].x, pt[k].y))
-          fail_msg("seed %llu point %zu (%.17g, %.17g): %u, brute force %u",
-                   (unsigned long long)seed, k, pt[k].x, pt[k].y, a[k],
-                   brute_pieces(r, pt[k].x, pt[k].y));
-  }
+  check_batch_single_brute(r, pt, n, a, b, seed, 61);
   free(pt), free(a), free(b), free(sx), free(sy);
   qk_region_free(r);
   tl_free(&t);
