@@ -87,8 +87,10 @@ static inline size_t col_lo(const double *gx, size_t g, double r0, double scale,
    * instruction, where a size_t conversion takes a branch and several) */
   size_t i = (size_t)(int64_t)((x - r0) * scale);
   if (i >= g) i = g - 1;
-  while (i > 0 && gx[i] >= x) i--;
-  while (i + 1 < g && gx[i + 1] < x) i++;
+  /* (no bounds needed: gx[0] < x stops the first loop at 0, x <= gx[g] the second at
+   * g - 1) */
+  while (gx[i] >= x) i--;
+  while (gx[i + 1] < x) i++;
   return i;
 }
 
@@ -96,8 +98,8 @@ static inline size_t col_lo(const double *gx, size_t g, double r0, double scale,
 static inline size_t col_hi(const double *gx, size_t g, double r0, double scale, double x) {
   size_t i = (size_t)(int64_t)((x - r0) * scale); /* (as col_lo) */
   if (i >= g) i = g - 1;
-  while (i > 0 && gx[i] > x) i--;
-  while (i + 1 < g && gx[i + 1] <= x) i++;
+  while (gx[i] > x) i--; /* (no bounds needed: gx[0] < x < gx[g]) */
+  while (gx[i + 1] <= x) i++;
   return i;
 }
 
@@ -449,7 +451,10 @@ static qk_status_t top_cell(top_t *t, qk_node_t v, unsigned l, size_t i, size_t 
     b->e[l] = t->list + t->cstart[c];
     b->ne[l] = t->cstart[c + 1] - t->cstart[c];
     if ((st = set_from_cell(t, l, c, NAN, NAN))) return st;
-    return qk__build_node(b, v, x0, y0, x1, y1, t->lside[l], l, stall);
+    double s = t->lside[l];
+    if (!(b->ne[l] > b->C && l < b->maxd && b->splits_left > 0)) /* a leaf: as build_node */
+      return qk__emit_leaf(b, v, x0 + s * 0.5, y0 + s * 0.5, l);
+    return qk__build_node(b, v, x0, y0, x1, y1, s, l, stall);
   }
   size_t ne = count(t, l, i, j);
   double h = t->lside[l] * 0.5, cx = x0 + h, cy = y0 + h;

@@ -206,7 +206,8 @@ typedef struct flips {
   const uint32_t *feat;
   uint32_t *odd; /* child q's list at odd + q * stride */
   size_t stride;
-  double ox, oy, qx[4], qy[4]; /* the parent centre and the children's */
+  double ox, oy, qx[4], qy[4];       /* the parent centre and the children's */
+  double lx[4], hx[4], ly[4], hy[4]; /* the box of each segment parent centre -> child's */
   uint32_t cur[4];
   bool par[4];
   size_t n[4];
@@ -214,7 +215,9 @@ typedef struct flips {
 
 static inline void flip(flips_t *fl, unsigned q, uint32_t p, const qk__seg_t *g, double lx,
                         double hx, double ly, double hy) {
-  if (!qk__ref_crosses(fl->ox, fl->oy, fl->qx[q], fl->qy[q], g, lx, hx, ly, hy)) return;
+  /* (qk__ref_crosses, with the segment's box made once per cell) */
+  if (hx < fl->lx[q] || lx > fl->hx[q] || hy < fl->ly[q] || ly > fl->hy[q]) return;
+  if (!qk__ref_crosses_line(fl->ox, fl->oy, fl->qx[q], fl->qy[q], g)) return;
   uint32_t f = fl->feat[p];
   if (f != fl->cur[q]) {
     if (fl->par[q]) fl->odd[q * fl->stride + fl->n[q]++] = fl->cur[q];
@@ -251,9 +254,17 @@ static qk_status_t split_lists(qk__bctx_t *b, unsigned d, double x0, double y0, 
                 cy,
                 {cx + hh, x0 + hh, x0 + hh, cx + hh},
                 {cy + hh, cy + hh, y0 + hh, y0 + hh},
+                {0, 0, 0, 0},
+                {0, 0, 0, 0},
+                {0, 0, 0, 0},
+                {0, 0, 0, 0},
                 {UINT32_MAX, UINT32_MAX, UINT32_MAX, UINT32_MAX},
                 {false, false, false, false},
                 {0, 0, 0, 0}};
+  for (unsigned q = 0; q < 4; q++) {
+    fl.lx[q] = qk__min(cx, fl.qx[q]), fl.hx[q] = qk__max(cx, fl.qx[q]);
+    fl.ly[q] = qk__min(cy, fl.qy[q]), fl.hy[q] = qk__max(cy, fl.qy[q]);
+  }
   const qk__seg_t *seg = b->pc->seg;
   const uint32_t *E = b->e[d];
   for (size_t i = 0; i < n; i++) {
@@ -349,10 +360,24 @@ qk_status_t qk__build_node(qk__bctx_t *b, qk_node_t v, double x0, double y0, dou
         int east = (int)qk__q_east(q), north = (int)qk__q_north(q);
         double qx0 = east ? cx : x0, qx1 = east ? x1 : cx;
         double qy0 = north ? cy : y0, qy1 = north ? y1 : cy;
+        size_t cn = b->cnt[d + 1][q];
         b->e[d + 1] = b->store[d + 1] + q * n;
-        b->ne[d + 1] = b->cnt[d + 1][q];
-        if ((st = qk__child_set(b, d, b->odd[d] + q * (n + 1), b->nodd[d][q]))) return st;
-        if ((st = qk__build_node(b, first + q, qx0, qy0, qx1, qy1, h, d + 1, stall))) return st;
+        b->ne[d + 1] = cn;
+        if (b->nodd[d][q] == 0) { /* (qk__child_set's first case, without the call) */
+          b->set[d + 1] = b->set[d];
+          b->ns[d + 1] = b->ns[d];
+        } else if ((st = qk__child_set(b, d, b->odd[d] + q * (n + 1), b->nodd[d][q]))) {
+          return st;
+        }
+        /* A child that will not split is a leaf at once (qk__build_node's test and
+         * reference point, without the call). */
+        if (!(cn > b->C && d + 1 < b->maxd && b->splits_left > 0)) {
+          double hq = h * 0.5;
+          st = qk__emit_leaf(b, first + q, qx0 + hq, qy0 + hq, d + 1);
+        } else {
+          st = qk__build_node(b, first + q, qx0, qy0, qx1, qy1, h, d + 1, stall);
+        }
+        if (st) return st;
       }
       return QK_OK;
     }
