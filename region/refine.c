@@ -51,6 +51,10 @@ static void self_meets(qk__bctx_t *b, const uint32_t *E, size_t n) {
     uint32_t rp = ring[E[i]];
     for (ge = i + 1; ge < n && ring[E[ge]] == rp;) ge++;
     if (ge - i < 2 || b->bad[rp]) continue;
+    if (ge - i == 2) { /* two pieces (often one vertex's): the one pair, skipped as below */
+      uint32_t v0 = vtx[E[i]], v1 = vtx[E[i + 1]];
+      if (v0 == UINT32_MAX || v1 == UINT32_MAX || v1 - v0 <= 1) continue;
+    }
     /* One ring's pieces, in the order of its vertices (vq >= vp below); its first and
      * last edges are neighbours too. */
     uint32_t rs = (uint32_t)b->in->ring_start[rp], last = (uint32_t)b->in->ring_start[rp + 1] - 2;
