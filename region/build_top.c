@@ -87,10 +87,8 @@ static inline size_t col_lo(const double *gx, size_t g, double r0, double scale,
    * instruction, where a size_t conversion takes a branch and several) */
   size_t i = (size_t)(int64_t)((x - r0) * scale);
   if (i >= g) i = g - 1;
-  /* (no bounds needed: gx[0] < x stops the first loop at 0, x <= gx[g] the second at
-   * g - 1) */
-  while (gx[i] >= x) i--;
-  while (gx[i + 1] < x) i++;
+  while (i > 0 && gx[i] >= x) i--;
+  while (i + 1 < g && gx[i + 1] < x) i++;
   return i;
 }
 
@@ -98,8 +96,8 @@ static inline size_t col_lo(const double *gx, size_t g, double r0, double scale,
 static inline size_t col_hi(const double *gx, size_t g, double r0, double scale, double x) {
   size_t i = (size_t)(int64_t)((x - r0) * scale); /* (as col_lo) */
   if (i >= g) i = g - 1;
-  while (gx[i] > x) i--; /* (no bounds needed: gx[0] < x < gx[g]) */
-  while (gx[i + 1] <= x) i++;
+  while (i > 0 && gx[i] > x) i--;
+  while (i + 1 < g && gx[i + 1] <= x) i++;
   return i;
 }
 
