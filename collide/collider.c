@@ -1436,17 +1436,21 @@ static void cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk
      * parent's other children, which may bring the hit closer. */
     const double unit = rs.side * 0x1p-32;
     const double mb = c->reach + 2 * ray->w + (fabs(rs.x) + fabs(rs.y) + rs.side) * 0x1p-45;
+    double t1_seen = -1.0, lx = 0, hx = 0, ly = 0, hy = 0; /* the widened segment's box */
     for (unsigned a = n; a > 0; a--) {
       const double t1 = b.t < tmax ? b.t : tmax;
       if (t1 < INFINITY) {
-        const double ex = ox + t1 * ray->dx, ey = oy + t1 * ray->dy;
-        const double m = mb + (fabs(ox) + fabs(oy) + fabs(ex) + fabs(ey) + c->reach) * 0x1p-48;
+        if (t1 != t1_seen) { /* the box anew only when the best has moved */
+          const double ex = ox + t1 * ray->dx, ey = oy + t1 * ray->dy;
+          const double m = mb + (fabs(ox) + fabs(oy) + fabs(ex) + fabs(ey) + c->reach) * 0x1p-48;
+          lx = qk__min(ox, ex) - m, hx = qk__max(ox, ex) + m;
+          ly = qk__min(oy, ey) - m, hy = qk__max(oy, ey) + m;
+          t1_seen = t1;
+        }
         const double side = qk__tree_side(t, a);
         const uint32_t keep = ~(uint32_t)0 << (32 - a); /* the path's first a bits */
         const double x0 = rs.x + (double)(ix & keep) * unit, y0 = rs.y + (double)(iy & keep) * unit;
-        if (qk__min(ox, ex) - m > x0 && qk__max(ox, ex) + m < x0 + side &&
-            qk__min(oy, ey) - m > y0 && qk__max(oy, ey) + m < y0 + side)
-          break;
+        if (lx > x0 && hx < x0 + side && ly > y0 && hy < y0 + side) break;
       }
       if (a - 1 < known) path[--known] = c->qparent[path[a]];
       walk_float(c, ray, tmax, path[a - 1], path[a], &b);
