@@ -978,9 +978,9 @@ typedef struct ray {
   int simd;   /* the float test's ranges hold (fact 2) */
   unsigned s; /* the lanes in the order the ray meets their squares: i ^ s */
 #if defined(__SSE2__)
-  __m128d vox, voy; /* ox, oy in both lanes (the leaf test) */
+  __m128d vox, voy;     /* ox, oy in both lanes (the leaf test) */
   __m128d vdx, vdy, va; /* dx, dy and dx dx + dy dy in both lanes (the leaf test) */
-  __m128i swap;     /* per 32-bit group of qnode_t::q: all ones where entry and exit swap */
+  __m128i swap;         /* per 32-bit group of qnode_t::q: all ones where entry and exit swap */
   __m128 pnx, pny, pfx, pfy; /* Pn, Pf per axis */
   __m128 inx, iny, ifx, ify; /* In, If per axis */
 #endif
@@ -1053,8 +1053,8 @@ static inline double ray_disc(const qk_disc_t *d, double ox, double oy, double d
 /*
  * ray_disc() for the discs d[0] and d[1] at once, each lane the same sequence of IEEE
  * operations as the scalar code. Bit k of the result is set when disc k is hit at a t in
- * [0, best] (t into th[k]); the lanes that the scalar code would leave early compute
- * values (perhaps NaN) that the masks discard.
+ * [0, best] (t into th[k], written only when some bit is set); the lanes that the scalar
+ * code would leave early compute values (perhaps NaN) that the masks discard.
  */
 static inline unsigned ray_disc2(const sdisc_t *d, const ray_t *r, double tmax, double best,
                                  double th[2]) {
