@@ -978,8 +978,9 @@ typedef struct ray {
   int simd;   /* the float test's ranges hold (fact 2) */
   unsigned s; /* the lanes in the order the ray meets their squares: i ^ s */
 #if defined(__SSE2__)
-  __m128d vox, voy; /* ox, oy in both lanes (the leaf test) */
-  __m128i swap;     /* per 32-bit group of qnode_t::q: all ones where entry and exit swap */
+  __m128d vox, voy;     /* ox, oy in both lanes (the leaf test) */
+  __m128d vdx, vdy, va; /* dx, dy and dx dx + dy dy in both lanes (the leaf test) */
+  __m128i swap;         /* per 32-bit group of qnode_t::q: all ones where entry and exit swap */
   __m128 pnx, pny, pfx, pfy; /* Pn, Pf per axis */
   __m128 inx, iny, ifx, ify; /* In, If per axis */
 #endif
@@ -1052,28 +1053,30 @@ static inline double ray_disc(const qk_disc_t *d, double ox, double oy, double d
 /*
  * ray_disc() for the discs d[0] and d[1] at once, each lane the same sequence of IEEE
  * operations as the scalar code. Bit k of the result is set when disc k is hit at a t in
- * [0, best] (t into th[k]); the lanes that the scalar code would leave early compute
- * values (perhaps NaN) that the masks discard.
+ * [0, best] (t into th[k], written only when some bit is set); the lanes that the scalar
+ * code would leave early compute values (perhaps NaN) that the masks discard.
  */
 static inline unsigned ray_disc2(const sdisc_t *d, const ray_t *r, double tmax, double best,
                                  double th[2]) {
   const __m128d a0 = _mm_load_pd(&d[0].d.x), a1 = _mm_load_pd(&d[1].d.x); /* x, y */
   const __m128d x = _mm_unpacklo_pd(a0, a1), y = _mm_unpackhi_pd(a0, a1);
   const __m128d rr = _mm_set_pd(d[1].d.r, d[0].d.r);
-  const __m128d dx = _mm_set1_pd(r->dx), dy = _mm_set1_pd(r->dy);
+  const __m128d dx = r->vdx, dy = r->vdy;
   const __m128d fx = _mm_sub_pd(r->vox, x), fy = _mm_sub_pd(r->voy, y);
   const __m128d cc =
       _mm_sub_pd(_mm_add_pd(_mm_mul_pd(fx, fx), _mm_mul_pd(fy, fy)), _mm_mul_pd(rr, rr));
   const __m128d b = _mm_add_pd(_mm_mul_pd(fx, dx), _mm_mul_pd(fy, dy));
-  const __m128d a = _mm_set1_pd(r->dx * r->dx + r->dy * r->dy);
+  const __m128d a = r->va;
   const __m128d cr = _mm_sub_pd(_mm_mul_pd(fx, dy), _mm_mul_pd(fy, dx));
   const __m128d disc = _mm_sub_pd(_mm_mul_pd(_mm_mul_pd(a, rr), rr), _mm_mul_pd(cr, cr));
   const __m128d zero = _mm_setzero_pd();
-  const __m128d t = _mm_div_pd(cc, _mm_add_pd(_mm_sub_pd(zero, b), _mm_sqrt_pd(disc)));
   const __m128d inside = _mm_cmple_pd(cc, zero);
-  /* Outside: hit when b < 0, disc >= 0 and t <= tmax (then t > 0). */
-  const __m128d hit = _mm_and_pd(_mm_and_pd(_mm_cmplt_pd(b, zero), _mm_cmpge_pd(disc, zero)),
-                                 _mm_cmple_pd(t, _mm_set1_pd(tmax)));
+  /* Outside: hit when b < 0, disc >= 0 and t <= tmax (then t > 0). Most pairs miss on
+   * both lanes before t is needed: they skip the square root and the division. */
+  const __m128d may = _mm_and_pd(_mm_cmplt_pd(b, zero), _mm_cmpge_pd(disc, zero));
+  if (!_mm_movemask_pd(_mm_or_pd(inside, may))) return 0;
+  const __m128d t = _mm_div_pd(cc, _mm_add_pd(_mm_sub_pd(zero, b), _mm_sqrt_pd(disc)));
+  const __m128d hit = _mm_and_pd(may, _mm_cmple_pd(t, _mm_set1_pd(tmax)));
   const __m128d tv = _mm_andnot_pd(inside, t); /* 0 inside */
   const __m128d cand = _mm_and_pd(_mm_or_pd(inside, hit), _mm_cmple_pd(tv, _mm_set1_pd(best)));
   _mm_storeu_pd(th, tv);
@@ -1110,6 +1113,7 @@ scan_leaf(const qk_collider_t *c, const ray_t *ray, uint32_t slot, uint32_t end,
     for (; slot + 1 < end; slot += 2) {
       double th[2];
       unsigned cand = ray_disc2(&c->sdisc[slot], ray, tmax, b->t, th);
+      if (!cand) continue; /* the common case: neither disc can be a new best */
       for (unsigned k = 0; k < 2; k++) {
         if (!(cand >> k & 1) || th[k] > b->t) continue; /* the best may have moved */
         qk_id_t id = c->sdisc[slot + k].id;
@@ -1155,6 +1159,8 @@ static void ray_init(ray_t *r, const qk_collider_t *c, qk_point_t o, qk_point_t 
   r->simd = 0;
 #if defined(__SSE2__)
   r->vox = _mm_set1_pd(o.x), r->voy = _mm_set1_pd(o.y);
+  r->vdx = _mm_set1_pd(d.x), r->vdy = _mm_set1_pd(d.y);
+  r->va = _mm_set1_pd(d.x * d.x + d.y * d.y); /* the same operations as ray_disc()'s a */
   const double big = 0x1p100, mo = qk__max(qk__max(fabs(o.x), fabs(o.y)), c->mag);
   r->simd = c->quads && mo <= big && qk__min(ax, ay) >= 0x1p-100 && dn <= big;
 #endif
@@ -1430,17 +1436,21 @@ static void cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk
      * parent's other children, which may bring the hit closer. */
     const double unit = rs.side * 0x1p-32;
     const double mb = c->reach + 2 * ray->w + (fabs(rs.x) + fabs(rs.y) + rs.side) * 0x1p-45;
+    double t1_seen = -1.0, lx = 0, hx = 0, ly = 0, hy = 0; /* the widened segment's box */
     for (unsigned a = n; a > 0; a--) {
       const double t1 = b.t < tmax ? b.t : tmax;
       if (t1 < INFINITY) {
-        const double ex = ox + t1 * ray->dx, ey = oy + t1 * ray->dy;
-        const double m = mb + (fabs(ox) + fabs(oy) + fabs(ex) + fabs(ey) + c->reach) * 0x1p-48;
+        if (t1 != t1_seen) { /* the box anew only when the best has moved */
+          const double ex = ox + t1 * ray->dx, ey = oy + t1 * ray->dy;
+          const double m = mb + (fabs(ox) + fabs(oy) + fabs(ex) + fabs(ey) + c->reach) * 0x1p-48;
+          lx = qk__min(ox, ex) - m, hx = qk__max(ox, ex) + m;
+          ly = qk__min(oy, ey) - m, hy = qk__max(oy, ey) + m;
+          t1_seen = t1;
+        }
         const double side = qk__tree_side(t, a);
         const uint32_t keep = ~(uint32_t)0 << (32 - a); /* the path's first a bits */
         const double x0 = rs.x + (double)(ix & keep) * unit, y0 = rs.y + (double)(iy & keep) * unit;
-        if (qk__min(ox, ex) - m > x0 && qk__max(ox, ex) + m < x0 + side &&
-            qk__min(oy, ey) - m > y0 && qk__max(oy, ey) + m < y0 + side)
-          break;
+        if (lx > x0 && hx < x0 + side && ly > y0 && hy < y0 + side) break;
       }
       if (a - 1 < known) path[--known] = c->qparent[path[a]];
       walk_float(c, ray, tmax, path[a - 1], path[a], &b);
