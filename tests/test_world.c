@@ -278,6 +278,18 @@ static void check_pairs(qk_world_t *w, const qk_world_pair_t *want, size_t nw,
   free(got);
 }
 
+/* A frame's end: the update, then its pairs against the brute force over m and its began
+ * and ended against *prev (check_pairs); *prev becomes this frame's pairs. */
+static void update_and_check(qk_world_t *w, const mirror_t *m, qk_world_pair_t **prev, size_t *np,
+                             const char *what, int frame) {
+  assert_int_equal(qk_world_update(w), QK_OK);
+  qk_world_pair_t *want;
+  size_t nw = o_pairs(m, &want);
+  check_pairs(w, want, nw, *prev, *np, what, frame);
+  free(*prev);
+  *prev = want, *np = nw;
+}
+
 static void check_queries(qkt_rng_t *r, qk_world_t *w, const mirror_t *m, int scene) {
   qk_handle_t *got = malloc((m->n + 1) * sizeof *got);
   for (int qi = 0; qi < 5; qi++) {
@@ -402,13 +414,8 @@ static void run_scene(int scene, int kinds, size_t n, int frames, unsigned threa
     /* Queries see moves at once: also between the moves and the update, when the moved-out,
      * added and removed objects are not yet filed (the dirty list). */
     if (f % 4 == 1) check_queries(&r, w, &m, scene);
-    assert_int_equal(qk_world_update(w), QK_OK);
-    qk_world_pair_t *want;
-    size_t nw = o_pairs(&m, &want);
-    check_pairs(w, want, nw, prev, np, "scene", f);
+    update_and_check(w, &m, &prev, &np, "scene", f);
     if (f % 4 == 0) check_queries(&r, w, &m, scene);
-    free(prev);
-    prev = want, np = nw;
   }
   free(prev);
   free(bh), free(bs);
@@ -589,12 +596,7 @@ static void test_world_prefilter_and_sort(void **s) {
         m.s[i] = o_norm(sh);
       }
     }
-    assert_int_equal(qk_world_update(w), QK_OK);
-    qk_world_pair_t *want;
-    size_t nw = o_pairs(&m, &want);
-    check_pairs(w, want, nw, prev, np, "prefilter", f);
-    free(prev);
-    prev = want, np = nw;
+    update_and_check(w, &m, &prev, &np, "prefilter", f);
   }
   assert_true(np > 100);
   free(prev);
@@ -676,12 +678,7 @@ static void run_clustered_mixed(int kinds, size_t n, int frames) {
       assert_int_equal(qk_world_move(w, m.h[i], &sh), QK_OK);
       m.s[i] = o_norm(sh);
     }
-    assert_int_equal(qk_world_update(w), QK_OK);
-    qk_world_pair_t *want;
-    size_t nw = o_pairs(&m, &want);
-    check_pairs(w, want, nw, prev, np, "clustered mixed", f);
-    free(prev);
-    prev = want, np = nw;
+    update_and_check(w, &m, &prev, &np, "clustered mixed", f);
   }
   assert_true(np > 3 * n); /* dense: large objects over many small ones */
   free(prev), free(vx), free(vy);
