@@ -9,6 +9,7 @@
  * tests therefore cover the rest of the reader and the builder.
  */
 #include <errno.h>
+#include <limits.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -103,50 +104,60 @@ static qk_status_t polygon(gj_t *g, json_object *rings, size_t f, size_t poly) {
   return QK_OK;
 }
 
-/* RFC 7946's geometry types other than Polygon and MultiPolygon: skipped and counted.
- * Any other "type" (a typo such as "polygon" or "Polgon") is an error, not a silent
- * skip. */
+/* RFC 7946's geometry types without area: skipped and counted. Any other "type" (a typo
+ * such as "polygon" or "Polgon") is an error, not a silent skip. */
 static bool other_geometry(const char *ty) {
-  static const char *const names[] = {"Point", "MultiPoint", "LineString", "MultiLineString",
-                                      "GeometryCollection"};
+  static const char *const names[] = {"Point", "MultiPoint", "LineString", "MultiLineString"};
   for (size_t i = 0; i < sizeof names / sizeof *names; i++)
     if (!strcmp(ty, names[i])) return true;
   return false;
 }
 
-static qk_status_t geometry(gj_t *g, json_object *geom, size_t f) {
-  if (!geom) {
-    g->rg.skipped++;
-    return QK_OK;
-  }
+/* The rings of one geometry into g->rg; *poly numbers its polygons within the feature.
+ * A GeometryCollection gives the polygons of its members, in order (members without
+ * area add nothing). */
+static qk_status_t geometry_rings(gj_t *g, json_object *geom, size_t f, size_t *poly) {
   json_object *t = NULL, *c = NULL;
   if (!json_object_is_type(geom, json_type_object) ||
       !json_object_object_get_ex(geom, "type", &t) || !json_object_is_type(t, json_type_string))
     return qk__region_fail(g->err, QK_ERR_PARSE, f,
                            "feature %zu: geometry must be an object with a string \"type\"", f);
   const char *ty = json_object_get_string(t);
-  bool poly = !strcmp(ty, "Polygon"), multi = !strcmp(ty, "MultiPolygon");
-  if (!poly && !multi) {
+  if (!strcmp(ty, "GeometryCollection")) {
+    if (!json_object_object_get_ex(geom, "geometries", &c) ||
+        !json_object_is_type(c, json_type_array))
+      return qk__region_fail(g->err, QK_ERR_PARSE, f,
+                             "feature %zu: GeometryCollection without a \"geometries\" array", f);
+    qk_status_t st = QK_OK;
+    for (size_t i = 0, n = json_object_array_length(c); i < n && !st; i++)
+      st = geometry_rings(g, json_object_array_get_idx(c, i), f, poly);
+    return st;
+  }
+  bool one = !strcmp(ty, "Polygon"), multi = !strcmp(ty, "MultiPolygon");
+  if (!one && !multi) {
     if (!other_geometry(ty))
       return qk__region_fail(g->err, QK_ERR_PARSE, f,
                              "feature %zu: unknown geometry type \"%.60s\" (RFC 7946: Polygon, "
                              "MultiPolygon, Point, ...; names are case-sensitive)",
                              f, ty);
-    g->rg.skipped++;
     return QK_OK;
   }
   if (!json_object_object_get_ex(geom, "coordinates", &c) ||
       !json_object_is_type(c, json_type_array))
     return qk__region_fail(g->err, QK_ERR_PARSE, f,
                            "feature %zu: %s without a \"coordinates\" array", f, ty);
-  size_t r0 = g->rg.nr;
+  if (one) return polygon(g, c, f, (*poly)++);
   qk_status_t st = QK_OK;
-  if (poly)
-    st = polygon(g, c, f, 0);
-  else
-    for (size_t i = 0, n = json_object_array_length(c); i < n && !st; i++)
-      st = polygon(g, json_object_array_get_idx(c, i), f, i);
-  if (!st && g->rg.nr == r0) g->rg.skipped++; /* empty */
+  for (size_t i = 0, n = json_object_array_length(c); i < n && !st; i++)
+    st = polygon(g, json_object_array_get_idx(c, i), f, (*poly)++);
+  return st;
+}
+
+/* A feature's geometry (NULL: none); a feature left without rings counts as skipped. */
+static qk_status_t geometry(gj_t *g, json_object *geom, size_t f) {
+  size_t r0 = g->rg.nr, poly = 0;
+  qk_status_t st = geom ? geometry_rings(g, geom, f, &poly) : QK_OK;
+  if (!st && g->rg.nr == r0) g->rg.skipped++; /* no area: a Point, null, empty, ... */
   return st;
 }
 
@@ -221,7 +232,8 @@ static qk_status_t document(gj_t *g, json_object *root) {
     return QK_OK;
   }
   if (!strcmp(ty, "Feature")) return feature(g, root, 0);
-  if (strcmp(ty, "Polygon") && strcmp(ty, "MultiPolygon") && !other_geometry(ty))
+  if (strcmp(ty, "Polygon") && strcmp(ty, "MultiPolygon") && strcmp(ty, "GeometryCollection") &&
+      !other_geometry(ty))
     return qk__region_fail(g->err, QK_ERR_PARSE, SIZE_MAX,
                            "unknown GeoJSON type \"%.60s\" (expected FeatureCollection, Feature "
                            "or a geometry; names are case-sensitive)",
@@ -247,6 +259,21 @@ static void where(const char *text, size_t off, qk_error_t *err) {
   }
 }
 
+/* Where a whole JSON value (json-c's lenient syntax) ends in text[0, n), or SIZE_MAX when
+ * those bytes do not hold one: tells text after a value from a malformed value. */
+static size_t value_end(const char *text, size_t n) {
+  if (n > (size_t)INT_MAX) return SIZE_MAX;
+  json_tokener *tok = json_tokener_new();
+  if (!tok) return SIZE_MAX;
+  json_object *v = json_tokener_parse_ex(tok, text, (int)n);
+  size_t end = v && json_tokener_get_error(tok) == json_tokener_success
+                   ? json_tokener_get_parse_end(tok)
+                   : SIZE_MAX;
+  json_object_put(v);
+  json_tokener_free(tok);
+  return end;
+}
+
 qk_status_t qk_region_read_geojson_text(const char *text, size_t len,
                                         const qk_region_options_t *options, qk_region_t **out,
                                         qk_error_t *err) {
@@ -258,8 +285,17 @@ qk_status_t qk_region_read_geojson_text(const char *text, size_t len,
   *out = NULL;
   /* RFC 8259 lets a parser ignore a UTF-8 byte order mark; Windows editors write one. */
   if (len >= 3 && !memcmp(text, "\xEF\xBB\xBF", 3)) text += 3, len -= 3;
+  /* A NUL byte is not JSON (json-c would stop there, or take it for a blank after the
+   * value): binary data is refused where it is. */
+  const char *nul = len ? memchr(text, '\0', len) : NULL;
+  if (nul) {
+    where(text, (size_t)(nul - text), err);
+    return qk__region_fail(err, QK_ERR_PARSE, SIZE_MAX, "binary data (NUL byte) in a text file");
+  }
   json_tokener *tok = json_tokener_new();
   if (!tok) return qk__region_fail(err, QK_ERR_NOMEM, SIZE_MAX, "out of memory");
+  /* RFC 8259 JSON: no trailing commas, no single quotes (json-c accepts both otherwise). */
+  json_tokener_set_flags(tok, JSON_TOKENER_STRICT);
   json_object *root = NULL;
   size_t at = 0;
   enum json_tokener_error jerr = json_tokener_continue;
@@ -292,6 +328,14 @@ qk_status_t qk_region_read_geojson_text(const char *text, size_t len,
     json_tokener_free(tok);
     return qk__region_fail(err, QK_ERR_PARSE, SIZE_MAX, "unexpected end of input");
   }
+  size_t end = !root && jerr != json_tokener_continue ? value_end(text, at) : SIZE_MAX;
+  if (end != SIZE_MAX) {
+    /* strict mode stopped after a whole value: text follows it */
+    while (end < len && strchr(" \t\r\n", text[end])) end++;
+    where(text, end, err);
+    json_tokener_free(tok);
+    return qk__region_fail(err, QK_ERR_PARSE, SIZE_MAX, "unexpected text after the JSON value");
+  }
   if (!root || jerr != json_tokener_success) {
     size_t off = at ? at - 1 : 0;
     where(text, off, err);
@@ -303,7 +347,7 @@ qk_status_t qk_region_read_geojson_text(const char *text, size_t len,
   }
   json_tokener_free(tok);
   for (size_t i = at; i < len; i++)
-    if (!strchr(" \t\r\n", text[i])) {
+    if (!text[i] || !strchr(" \t\r\n", text[i])) {
       where(text, i, err);
       json_object_put(root);
       return qk__region_fail(err, QK_ERR_PARSE, SIZE_MAX, "unexpected text after the JSON value");
@@ -329,7 +373,8 @@ qk_status_t qk_region_read_geojson(const char *path, const qk_region_options_t *
   qk_status_t st0 = qk__read_begin(path, out, err);
   if (st0) return st0;
   FILE *f = fopen(path, "rb");
-  if (!f) return qk__region_fail(err, QK_ERR_IO, SIZE_MAX, "cannot open %s", path);
+  if (!f)
+    return qk__region_fail(err, QK_ERR_IO, SIZE_MAX, "cannot open %s: %s", path, strerror(errno));
   /* The whole file, through the caller's allocator like every other allocation. */
   qk_region_options_t o;
   qk_allocator_t a;
@@ -346,7 +391,7 @@ qk_status_t qk_region_read_geojson(const char *path, const qk_region_options_t *
   if (st)
     st = qk__region_fail(err, st, SIZE_MAX, "out of memory reading %s", path);
   else if (ferror(f))
-    st = qk__region_fail(err, QK_ERR_IO, SIZE_MAX, "cannot read %s", path);
+    st = qk__region_fail(err, QK_ERR_IO, SIZE_MAX, "cannot read %s: %s", path, strerror(errno));
   fclose(f);
   if (!st) st = qk_region_read_geojson_text(buf, len, options, out, err);
   qk__free(&a, buf, cap);

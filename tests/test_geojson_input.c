@@ -6,7 +6,11 @@
  *    an error naming the feature, not a silently skipped, empty layer;
  *  - RFC 7946's other geometry types are still skipped and counted;
  *  - malformed JSON gives its line and column in qk_error_t, not repeated in the
- *    message (the CLI printed "f.geojson:1:61: line 1, column 61: ...").
+ *    message (the CLI printed "f.geojson:1:61: line 1, column 61: ...");
+ *  - a GeometryCollection's polygons (nested ones too) are the feature's (they were
+ *    skipped as if it had no area);
+ *  - a NUL byte, anywhere, and trailing commas are errors with their position (json-c
+ *    took a NUL after the value for a blank and accepted "[0,0],]").
  */
 #include "support/qk_test.h"
 
@@ -106,11 +110,66 @@ static void test_geojson_error_position(void **state) {
 #endif
 }
 
+static void test_geojson_collection_and_strict(void **state) {
+  (void)state;
+#ifndef QK_HAVE_JSONC
+  skip();
+#else
+  qk_region_t *r = NULL;
+  qk_error_t err;
+  const char *gc = "{\"type\":\"GeometryCollection\",\"geometries\":[{\"type\":\"Point\","
+                   "\"coordinates\":[5,5]}," SQUARE ",{\"type\":\"GeometryCollection\","
+                   "\"geometries\":[{\"type\":\"MultiPolygon\",\"coordinates\":[[[[2,0],[3,0],"
+                   "[3,1],[2,1],[2,0]]]]}]}]}";
+  assert_int_equal(read_text(gc, &r, &err), QK_OK);
+  const qk_point_t p[3] = {{0.5, 0.5}, {2.5, 0.5}, {1.5, 0.5}};
+  const uint32_t want[3] = {0, 0, QK_NONE};
+  for (int i = 0; i < 3; i++) {
+    uint32_t f = 7;
+    assert_int_equal(qk_region_locate(r, p[i], QK_BOUNDARY_SEMI_OPEN, &f), QK_OK);
+    assert_int_equal(f, want[i]);
+  }
+  qk_region_stats_t st;
+  qk_region_stats(r, &st);
+  assert_int_equal(st.skipped, 0);
+  qk_region_free(r);
+  /* A collection without area is skipped and counted, like a Point. */
+  assert_int_equal(read_text("{\"type\":\"GeometryCollection\",\"geometries\":[]}", &r, &err),
+                   QK_OK);
+  qk_region_stats(r, &st);
+  assert_int_equal(st.skipped, 1);
+  qk_region_free(r);
+  assert_int_equal(read_text("{\"type\":\"GeometryCollection\"}", &r, &err), QK_ERR_PARSE);
+  assert_non_null(strstr(err.message, "\"geometries\""));
+  /* NUL bytes: after the value, and inside it. */
+  static const char nul_after[] = SQUARE "\0\n";
+  assert_int_equal(qk_region_read_geojson_text(nul_after, sizeof nul_after - 1, NULL, &r, &err),
+                   QK_ERR_PARSE);
+  assert_null(r);
+  assert_int_equal(err.line, 1);
+  assert_int_equal(err.column, sizeof SQUARE);
+  assert_string_equal(err.message, "binary data (NUL byte) in a text file");
+  static const char nul_in[] = "{\"type\":\n\"Poly\0gon\"}";
+  assert_int_equal(qk_region_read_geojson_text(nul_in, sizeof nul_in - 1, NULL, &r, &err),
+                   QK_ERR_PARSE);
+  assert_int_equal(err.line, 2);
+  assert_int_equal(err.column, 6);
+  /* Trailing commas. */
+  assert_int_equal(
+      read_text("{\"type\":\"Polygon\",\"coordinates\":[[[0,0],[1,0],[1,1],[0,0],]]}", &r, &err),
+      QK_ERR_PARSE);
+  assert_null(r);
+  assert_non_null(strstr(err.message, "malformed JSON"));
+  assert_int_equal(read_text("{\"type\":\"Polygon\",\"coordinates\":[],}", &r, &err), QK_ERR_PARSE);
+#endif
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_geojson_bom),
       cmocka_unit_test(test_geojson_unknown_types),
       cmocka_unit_test(test_geojson_error_position),
+      cmocka_unit_test(test_geojson_collection_and_strict),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -51,7 +51,7 @@ static const char *usage_text =
     "  --project equirect\n"
     "                  GeoJSON lon/lat in degrees: project equirectangularly at the mean\n"
     "                  latitude, in metres (use --round after it, e.g. --round 2^-4)\n"
-    "  --feature N     GeoJSON: mesh only polygon feature N (0-based; default: all)\n"
+    "  --feature N     GeoJSON: mesh only feature N (0-based, in file order; default: all)\n"
     "  --field NAME=VALUE\n"
     "                  GeoJSON: mesh the first feature whose property NAME is VALUE\n"
     "  --poly FILE     the mesh edges along input segments, with markers (.poly)\n"

@@ -1,6 +1,7 @@
 /* GeoJSON polygons as a mesh input; see mesh_geojson.h. */
 #include "mesh_geojson.h"
 
+#include <errno.h>
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -108,22 +109,31 @@ static int add_polygon(rings_t *r, json_object *poly, uint32_t f, uint32_t *ring
   return 0;
 }
 
-/* The polygon geometry of a Feature (or bare geometry), or NULL. */
-static json_object *polygon_geometry(json_object *obj, int *multi) {
-  json_object *t = NULL, *geom = obj, *c = NULL;
-  if (json_object_object_get_ex(obj, "type", &t) && !strcmp(json_object_get_string(t), "Feature"))
-    if (!json_object_object_get_ex(obj, "geometry", &geom)) return NULL;
-  if (!geom || !json_object_object_get_ex(geom, "type", &t)) return NULL;
+/* The rings of one geometry (Polygon, MultiPolygon, or the polygons of a
+ * GeometryCollection, as the region reader takes them) of feature f; anything else adds
+ * nothing. */
+static int add_geometry(rings_t *r, json_object *geom, uint32_t f, uint32_t *ring_no) {
+  json_object *t = NULL, *c = NULL;
+  if (!geom || !json_object_object_get_ex(geom, "type", &t)) return 0;
   const char *ty = json_object_get_string(t);
-  *multi = !strcmp(ty, "MultiPolygon");
-  if (!*multi && strcmp(ty, "Polygon")) return NULL;
-  if (!json_object_object_get_ex(geom, "coordinates", &c) || !json_object_array_length(c))
-    return NULL;
-  return c;
+  if (!strcmp(ty, "GeometryCollection")) {
+    if (!json_object_object_get_ex(geom, "geometries", &c)) return 0;
+    for (size_t k = 0, m = json_object_array_length(c); k < m; k++)
+      if (add_geometry(r, json_object_array_get_idx(c, k), f, ring_no)) return 3;
+    return 0;
+  }
+  int multi = !strcmp(ty, "MultiPolygon");
+  if ((!multi && strcmp(ty, "Polygon")) || !json_object_object_get_ex(geom, "coordinates", &c))
+    return 0;
+  if (!multi) return add_polygon(r, c, f, ring_no);
+  for (size_t k = 0, m = json_object_array_length(c); k < m; k++)
+    if (add_polygon(r, json_object_array_get_idx(c, k), f, ring_no)) return 3;
+  return 0;
 }
 
 /* Gather the rings of the features wanted (want[f] nonzero), numbering features as the
- * region reader does (polygon features with at least one ring, in input order). */
+ * region reader does: feature f is the file's feature f, whatever its geometry (a bare
+ * geometry is feature 0). */
 static int gather(json_object *root, const unsigned char *want, size_t nf, rings_t *r,
                   size_t *seen) {
   json_object *t = NULL, *feats = NULL;
@@ -132,24 +142,14 @@ static int gather(json_object *root, const unsigned char *want, size_t nf, rings
                    !strcmp(json_object_get_string(t), "FeatureCollection") &&
                    json_object_object_get_ex(root, "features", &feats);
   if (collection) n = json_object_array_length(feats);
-  size_t f = 0;
-  for (size_t i = 0; i < n; i++) {
-    json_object *obj = collection ? json_object_array_get_idx(feats, i) : root;
-    int multi = 0;
-    json_object *c = polygon_geometry(obj, &multi);
-    if (!c) continue;
-    if (f < nf && want[f]) {
-      uint32_t ring_no = 0;
-      if (multi) {
-        for (size_t k = 0, m = json_object_array_length(c); k < m; k++)
-          if (add_polygon(r, json_object_array_get_idx(c, k), (uint32_t)f, &ring_no)) return 3;
-      } else if (add_polygon(r, c, (uint32_t)f, &ring_no)) {
-        return 3;
-      }
-    }
-    f++;
+  for (size_t f = 0; f < n; f++) {
+    json_object *obj = collection ? json_object_array_get_idx(feats, f) : root, *geom = obj;
+    if (json_object_object_get_ex(obj, "type", &t) && !strcmp(json_object_get_string(t), "Feature"))
+      if (!json_object_object_get_ex(obj, "geometry", &geom)) geom = NULL;
+    uint32_t ring_no = 0;
+    if (f < nf && want[f] && add_geometry(r, geom, (uint32_t)f, &ring_no)) return 3;
   }
-  *seen = f;
+  *seen = n;
   return 0;
 }
 
@@ -489,6 +489,59 @@ static int hole_points(mg_input_t *in, const char *path, char *msg, size_t n) {
   return rc;
 }
 
+/* The whole file into a malloc'd buffer (NUL-terminated); 0, or an exit code with msg. */
+static int slurp(const char *path, char **text, size_t *len, char *msg, size_t n) {
+  *text = NULL, *len = 0;
+  FILE *f = fopen(path, "rb");
+  if (!f) return mg_fail(msg, n, 1, "%s: cannot open: %s", path, strerror(errno));
+  size_t cap = 0;
+  int rc = 0;
+  for (;;) {
+    if (*len + 1 >= cap) {
+      size_t nc = cap ? 2 * cap : 1 << 16;
+      char *p = realloc(*text, nc);
+      if (!p) {
+        rc = mg_fail(msg, n, 3, "%s: out of memory reading it", path);
+        break;
+      }
+      *text = p, cap = nc;
+    }
+    size_t got = fread(*text + *len, 1, cap - 1 - *len, f);
+    *len += got;
+    if (got == 0) break;
+  }
+  if (!rc && ferror(f)) rc = mg_fail(msg, n, 1, "%s: cannot read: %s", path, strerror(errno));
+  fclose(f);
+  if (rc) {
+    free(*text);
+    *text = NULL;
+    return rc;
+  }
+  (*text)[*len] = '\0';
+  return 0;
+}
+
+/* The JSON tree of a text the region reader accepted (a byte order mark skipped). */
+static json_object *parse_again(const char *text, size_t len) {
+  if (len >= 3 && !memcmp(text, "\xEF\xBB\xBF", 3)) text += 3, len -= 3;
+  json_tokener *tok = json_tokener_new();
+  if (!tok) return NULL;
+  json_object *root = NULL;
+  size_t at = 0;
+  do { /* json-c takes an int length: large texts in pieces */
+    size_t chunk = len - at > (1u << 30) ? (1u << 30) : len - at;
+    root = json_tokener_parse_ex(tok, text + at, (int)chunk);
+    if (json_tokener_get_error(tok) != json_tokener_continue) break;
+    at += chunk;
+  } while (at < len);
+  if (json_tokener_get_error(tok) != json_tokener_success) {
+    json_object_put(root);
+    root = NULL;
+  }
+  json_tokener_free(tok);
+  return root;
+}
+
 int mg_read(const char *path, const mg_options_t *o, mg_input_t *out, char *msg, size_t n) {
   memset(out, 0, sizeof *out);
   qk_region_t *layer = NULL;
@@ -496,8 +549,15 @@ int mg_read(const char *path, const mg_options_t *o, mg_input_t *out, char *msg,
   qk_region_options_t ro;
   qk_region_options_init(&ro);
   ro.planar = !o->project; /* lon/lat is checked as such only when it is projected here */
-  qk_status_t st = qk_region_read_geojson(path, &ro, &layer, &err);
+  /* One read of the file: the region reader checks the text, then the same text is
+   * walked for the rings. */
+  char *text = NULL;
+  size_t len = 0;
+  int rc0 = slurp(path, &text, &len, msg, n);
+  if (rc0) return rc0;
+  qk_status_t st = qk_region_read_geojson_text(text, len, &ro, &layer, &err);
   if (st != QK_OK) {
+    free(text);
     int rc = st == QK_ERR_NOMEM ? 3 : 1;
     if (err.line)
       return mg_fail(msg, n, rc, "%s:%lu:%lu: %s", path, err.line, err.column, err.message);
@@ -515,16 +575,13 @@ int mg_read(const char *path, const mg_options_t *o, mg_input_t *out, char *msg,
       if (v && !strcmp(v, o->field_value)) pick = (long)f;
     }
     if (pick < 0)
-      rc = mg_fail(msg, n, 1, "%s: no feature has %s=%s (of %zu polygon features)", path,
-                   o->field_name, o->field_value, nf);
+      rc = mg_fail(msg, n, 1, "%s: no feature has %s=%s (of %zu features)", path, o->field_name,
+                   o->field_value, nf);
   }
   if (!rc && pick >= (long)nf)
-    rc =
-        mg_fail(msg, n, 1, "%s: feature %ld does not exist (%zu polygon features)", path, pick, nf);
-  if (!rc && nf == 0) rc = mg_fail(msg, n, 1, "%s: no Polygon or MultiPolygon features", path);
+    rc = mg_fail(msg, n, 1, "%s: feature %ld does not exist (%zu features)", path, pick, nf);
   if (!rc) {
     for (size_t f = 0; f < nf; f++) want[f] = pick < 0 || (long)f == pick;
-    out->features = pick < 0 ? nf : 1;
     const char *nm = NULL;
     if (pick >= 0) {
       static const char *names[] = {"NAME", "name", "ADMIN", "admin"};
@@ -537,14 +594,25 @@ int mg_read(const char *path, const mg_options_t *o, mg_input_t *out, char *msg,
   memset(&r, 0, sizeof r);
   json_object *root = NULL;
   if (!rc) {
-    root = json_object_from_file(path);
-    if (!root) rc = mg_fail(msg, n, 1, "%s: cannot read the file again", path);
+    root = parse_again(text, len);
+    if (!root) rc = mg_fail(msg, n, 3, "%s: out of memory parsing it again", path);
   }
+  free(text);
   size_t seen = 0;
   if (!rc && gather(root, want, nf, &r, &seen)) rc = mg_fail(msg, n, 3, "out of memory");
   if (!rc && seen != nf)
-    rc = mg_fail(msg, n, 3, "%s: %zu polygon features here, %zu for the region reader", path, seen,
-                 nf);
+    rc = mg_fail(msg, n, 3, "%s: %zu features here, %zu for the region reader", path, seen, nf);
+  if (!rc) { /* the features that gave rings */
+    out->features = 0;
+    for (size_t q = 0; q < r.nr; q++) out->features += q == 0 || r.feat[q] != r.feat[q - 1];
+  }
+  if (!rc && r.nr == 0) {
+    if (pick >= 0)
+      rc =
+          mg_fail(msg, n, 1, "%s: feature %ld has no Polygon or MultiPolygon geometry", path, pick);
+    else
+      rc = mg_fail(msg, n, 1, "%s: no Polygon or MultiPolygon features", path);
+  }
   json_object_put(root);
   free(want);
   if (!rc) {

@@ -18,7 +18,7 @@
 
 /* What to read. */
 typedef struct mg_options {
-  long feature;           /* the feature number (0-based, polygon features), or -1 */
+  long feature;           /* the feature number (0-based, in file order), or -1 */
   const char *field_name; /* with field_value: the first feature whose property matches */
   const char *field_value;
   int project;  /* nonzero: equirectangular projection at the mean latitude, metres */
@@ -41,7 +41,7 @@ typedef struct mg_input {
   size_t nr;
   /* Per segment: the feature, ring (within the feature) and point it starts from. */
   uint32_t *seg_feature, *seg_ring, *seg_point;
-  size_t features;      /* features read */
+  size_t features;      /* features that gave rings */
   size_t points;        /* ring points read (closing points not counted) */
   size_t rounded;       /* coordinates changed by rounding */
   size_t merged;        /* ring points that became an existing vertex */

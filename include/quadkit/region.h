@@ -104,9 +104,11 @@ qk_status_t qk_region_from_arrays(const qk_region_arrays_t *in, const qk_region_
 
 /**
  * Read a GeoJSON file (RFC 7946): a FeatureCollection, a Feature or a bare geometry.
- * Polygon and MultiPolygon geometries become features (in input order); other geometries
- * (and features without geometry) are skipped and counted in the stats. Properties are
- * kept (qk_region_property()).
+ * Feature i is the file's feature i. Polygon and MultiPolygon geometries (and the polygons
+ * of a GeometryCollection) give its rings; a feature left without rings (a Point, null or
+ * empty geometry) stays empty and is counted as skipped in the stats. Properties are kept
+ * (qk_region_property()). The syntax is strict RFC 8259 (no trailing commas; a NUL byte is
+ * an error).
  * \param [in] path the file.
  * \param [in] options NULL for defaults (lon/lat).
  * \param [out] out the new layer, freed with qk_region_free(); NULL on error.

@@ -29,8 +29,8 @@ else
 fi
 expect 0 '"features": 1, "name": "diamond"' -- "$cli" mesh "$tmp/two.geojson" --feature 1 -o "$tmp/d" --stats
 expect 0 '"features": 2, ' -- "$cli" mesh "$tmp/two.geojson" -o "$tmp/both" --stats
-expect 1 'no feature has name=lake \(of 2 polygon features\)' -- "$cli" mesh "$tmp/two.geojson" --field name=lake -o "$tmp/bad"
-expect 1 'feature 7 does not exist \(2 polygon features\)' -- "$cli" mesh "$tmp/two.geojson" --feature 7 -o "$tmp/bad"
+expect 1 'no feature has name=lake \(of 2 features\)' -- "$cli" mesh "$tmp/two.geojson" --field name=lake -o "$tmp/bad"
+expect 1 'feature 7 does not exist \(2 features\)' -- "$cli" mesh "$tmp/two.geojson" --feature 7 -o "$tmp/bad"
 printf '{"type": "FeatureCollection", "features": [\n  {"type": "Feature", \n  "geometry": oops}]}\n' >"$tmp/broken.geojson"
 expect 1 'broken.geojson:3:[0-9]+: ' -- "$cli" mesh "$tmp/broken.geojson" -o "$tmp/bad"
 ls "$tmp"/bad* >/dev/null 2>&1 && fail "output written for bad input"
