@@ -495,11 +495,13 @@ static int collide_prepare(qrun_t *q) {
   int rc = build_collider(q);
   if (rc) return rc;
   size_t np = 0;
-  qk_collider_pairs_list(q->col, NULL, 0, &np);
+  qk_status_t st = qk_collider_pairs_list(q->col, NULL, 0, &np);
+  if (st != QK_OK) return cli_status(q->a.cmd, "collide", st);
   q->pairs = malloc((np ? np : 1) * sizeof *q->pairs);
   if (!q->pairs) return cli_status(q->a.cmd, "collide", QK_ERR_NOMEM);
-  qk_collider_pairs_list(q->col, q->pairs, np, &q->cap);
-  return CLI_OK;
+  st = qk_collider_pairs_list(q->col, q->pairs, np, &q->cap);
+  if (st == QK_OK && q->cap != np) st = QK_ERR_CORRUPT;
+  return st == QK_OK ? CLI_OK : cli_status(q->a.cmd, "collide", st);
 }
 
 static int collide_answer(qrun_t *q, size_t i) {
@@ -526,8 +528,10 @@ static void raycast_usage(FILE *f) {
   fprintf(f, "usage: quadkit raycast DISCS.csv RAYS.csv [--boxes] [options]\n"
              "The first disc hit by each ray origin + t * direction, t >= 0 (t = 0 when the\n"
              "origin is inside a disc; ties by smaller id). RAYS.csv: ox,oy,dx,dy and an\n"
-             "optional tmax (a segment from o to o + d has tmax 1). With --boxes the first\n"
-             "file holds boxes (xmin,ymin,xmax,ymax).\n"
+             "optional tmax (a segment from o to o + d has tmax 1). A direction of 0,0 is\n"
+             "the point at the origin: it hits the lowest-numbered disc that contains or\n"
+             "touches it (t = 0), else nothing. With --boxes the first file holds boxes\n"
+             "(xmin,ymin,xmax,ymax).\n"
              "Output: ray,disc,t  (one row per ray; ray,-1,inf when nothing is hit)\n" KEEP_HELP(
                  "ray, disc or both") "  --capacity C  items per leaf of the tree (default 16)\n"
                                       "  -o FILE       write to FILE instead of standard "
@@ -545,8 +549,13 @@ static int raycast_prepare(qrun_t *q) {
 static int raycast_answer(qrun_t *q, size_t i) {
   const double *v = q->tab[1].v + 5 * i;
   qk_hit_t h;
-  qk_collider_raycast(q->col, (qk_point_t){v[0], v[1]}, (qk_point_t){v[2], v[3]},
-                      isnan(v[4]) ? INFINITY : v[4], &h);
+  qk_status_t st = qk_collider_raycast(q->col, (qk_point_t){v[0], v[1]}, (qk_point_t){v[2], v[3]},
+                                       isnan(v[4]) ? INFINITY : v[4], &h);
+  if (st != QK_OK) { /* the reader let only finite values and tmax >= 0 through */
+    char msg[128];
+    snprintf(msg, sizeof msg, "ray %zu: %s", i, qk_strerror(st));
+    return bad_row(q, 1, i, msg);
+  }
   if (h.id == QK_NONE)
     emit(q, i, SIZE_MAX, "%zu,-1,inf", i);
   else

@@ -1,4 +1,5 @@
 /* The `quadkit` command-line tool: dispatches to one subcommand. */
+#include <errno.h>
 #include <stdio.h>
 #include <string.h>
 
@@ -41,6 +42,17 @@ static void usage(FILE *f) {
              "input, 2 usage error, 3 internal error or out of memory\n");
 }
 
+/* Output that could not be written (a full disk, /dev/full, a closed pipe) is an error,
+ * whichever command printed it. */
+static int finish(int rc) {
+  if (fflush(stdout) != 0 || ferror(stdout)) {
+    if (rc == CLI_OK)
+      fprintf(stderr, "quadkit: cannot write standard output: %s\n", strerror(errno));
+    return rc == CLI_OK ? CLI_INTERNAL : rc;
+  }
+  return rc;
+}
+
 int main(int argc, char **argv) {
   if (argc < 2) {
     usage(stderr);
@@ -48,10 +60,10 @@ int main(int argc, char **argv) {
   }
   if (!strcmp(argv[1], "--help") || !strcmp(argv[1], "-h") || !strcmp(argv[1], "help")) {
     usage(stdout);
-    return CLI_OK;
+    return finish(CLI_OK);
   }
   for (size_t i = 0; i < sizeof commands / sizeof commands[0]; i++)
-    if (!strcmp(argv[1], commands[i].name)) return commands[i].run(argc - 1, argv + 1);
+    if (!strcmp(argv[1], commands[i].name)) return finish(commands[i].run(argc - 1, argv + 1));
   fprintf(stderr, "quadkit: unknown command '%s' (see quadkit --help)\n", argv[1]);
   return CLI_USAGE;
 }

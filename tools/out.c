@@ -61,7 +61,10 @@ int cli_out_close(const char *cmd, cli_out_t *o, int ok) {
   int rc = CLI_OK;
   if (!o->f) return CLI_OK;
   if (o->f == stdout) {
-    if (fflush(stdout) != 0) rc = CLI_INTERNAL;
+    if (fflush(stdout) != 0 || ferror(stdout)) {
+      cli_error(cmd, "cannot write standard output: %s", strerror(errno));
+      rc = CLI_INTERNAL;
+    }
     o->f = NULL;
     return rc;
   }

@@ -74,4 +74,46 @@ mkdir "$tmp/dir.geojson"
 expect 1 'dir.geojson.*Is a directory' -- "$cli" regions "$tmp/dir.geojson"
 expect 1 'dir.geojson.*Is a directory' -- "$cli" mesh "$tmp/dir.geojson" -o "$tmp/d"
 nothing "$tmp/d"
+# ---- raycast: a zero direction is the point at the origin (documented, brute-forced) --
+expect 0 'A direction of 0,0 is' -- "$cli" raycast --help
+if command -v python3 >/dev/null; then
+  python3 - "$tmp" <<'PY'
+import random, sys
+tmp = sys.argv[1]
+rnd = random.Random(11)
+discs = [(rnd.randrange(0, 20), rnd.randrange(0, 20), rnd.randrange(0, 5)) for _ in range(60)]
+boxes = []
+for _ in range(60):
+    x, y = rnd.randrange(0, 20), rnd.randrange(0, 20)
+    boxes.append((x, y, x + rnd.randrange(0, 5), y + rnd.randrange(0, 5)))
+rays = [(rnd.randrange(-2, 22), rnd.randrange(-2, 22)) for _ in range(400)]
+open(f'{tmp}/zd.csv', 'w').write(''.join(f'{x},{y},{r}\n' for x, y, r in discs))
+open(f'{tmp}/zb.csv', 'w').write(''.join(f'{a},{b},{c},{d}\n' for a, b, c, d in boxes))
+open(f'{tmp}/zr.csv', 'w').write(''.join(f'{x},{y},0,0\n' for x, y in rays))
+def first(hit):
+    return next((i for i in range(60) if hit(i)), -1)
+with open(f'{tmp}/zd.want', 'w') as f, open(f'{tmp}/zb.want', 'w') as g:
+    f.write('ray,disc,t\n'); g.write('ray,disc,t\n')
+    for k, (x, y) in enumerate(rays):
+        d = first(lambda i: (x - discs[i][0])**2 + (y - discs[i][1])**2 <= discs[i][2]**2)
+        b = first(lambda i: boxes[i][0] <= x <= boxes[i][2] and boxes[i][1] <= y <= boxes[i][3])
+        f.write(f'{k},{d},0\n' if d >= 0 else f'{k},-1,inf\n')
+        g.write(f'{k},{b},0\n' if b >= 0 else f'{k},-1,inf\n')
+PY
+  "$cli" raycast "$tmp/zd.csv" "$tmp/zr.csv" >"$tmp/zd.got" && cmp -s "$tmp/zd.got" "$tmp/zd.want" &&
+    passes=$((passes + 1)) || fail "raycast: zero-direction rays differ from the brute force (discs)"
+  "$cli" raycast "$tmp/zb.csv" "$tmp/zr.csv" --boxes >"$tmp/zb.got" && cmp -s "$tmp/zb.got" "$tmp/zb.want" &&
+    passes=$((passes + 1)) || fail "raycast: zero-direction rays differ from the brute force (boxes)"
+  [ "$(grep -c ',-1,inf' "$tmp/zd.want")" -gt 20 ] && [ "$(grep -vc ',-1,inf' "$tmp/zd.want")" -gt 20 ] &&
+    passes=$((passes + 1)) || fail "raycast: the zero-direction scene tests too little"
+fi
+
+# ---- output that cannot be written is an error (it exited 0 for tree and --help) -------
+if [ -w /dev/full ]; then
+  printf '0,0\n1,1\n' >"$tmp/two.csv"
+  expect 3 'cannot write standard output' -- sh -c "\"$cli\" tree \"$tmp/two.csv\" >/dev/full"
+  expect 3 'cannot write standard output' -- sh -c "\"$cli\" --help >/dev/full"
+  expect 3 'cannot write standard output' -- sh -c "\"$cli\" knn \"$tmp/two.csv\" \"$tmp/two.csv\" -k 1 >/dev/full"
+  expect 3 'cannot write standard output' -- sh -c "\"$cli\" regions \"$tmp/gc.geojson\" --planar >/dev/full"
+fi
 report
