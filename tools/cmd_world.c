@@ -21,20 +21,39 @@ typedef struct row {
   int n;
 } row_t;
 
-static int split(char *line, row_t *r) {
+/* Split a line into fields in place: blanks around a field dropped; a field in double
+ * quotes ("" inside for a quote) unquoted, as the other CSV inputs take them. NULL, or
+ * what is malformed. */
+static const char *split(char *line, row_t *r) {
   r->n = 0;
   char *s = line;
   for (;;) {
     while (*s == ' ' || *s == '\t') s++;
-    if (r->n < 7) r->f[r->n++] = s;
-    char *c = strchr(s, ',');
-    char *end = c ? c : s + strlen(s);
-    while (end > s && isspace((unsigned char)end[-1])) end--;
-    *end = '\0';
+    char *field = s, *c;
+    if (*s == '"') {
+      char *w = s; /* the unquoted text is written over the field */
+      for (s++;; s++) {
+        if (!*s) return "unterminated quoted field";
+        if (*s == '"' && s[1] != '"') break;
+        if (*s == '"') s++; /* "" is one quote */
+        *w++ = *s;
+      }
+      *w = '\0';
+      s++;
+      while (*s == ' ' || *s == '\t') s++;
+      if (*s && *s != ',') return "text after a closing quote";
+      c = *s ? s : NULL;
+    } else {
+      c = strchr(s, ',');
+      char *end = c ? c : s + strlen(s);
+      while (end > s && isspace((unsigned char)end[-1])) end--;
+      *end = '\0';
+    }
+    if (r->n < 7) r->f[r->n++] = field;
     if (!c) break;
     s = c + 1;
   }
-  return r->n;
+  return NULL;
 }
 
 static int num(const char *s, double *v) {
@@ -148,8 +167,8 @@ static size_t find_id(const scene_t *s, uint64_t id) {
   return lo < s->n && s->o[s->by_id[lo]].id == id ? s->by_id[lo] : SIZE_MAX;
 }
 
-/* Read lines of a CSV file, skipping blank lines and a header (a first line whose first
- * field is not a number); fn gets each data row. */
+/* Read lines of a CSV file, skipping blank lines and a header (a first line none of whose
+ * fields is a number); fn gets each data row. */
 static int each_row(const char *path,
                     int (*fn)(const char *path, unsigned long ln, row_t *r, scene_t *s),
                     scene_t *s) {
@@ -177,9 +196,18 @@ static int each_row(const char *path,
     while (isspace((unsigned char)*p)) p++;
     if (!*p) continue;
     row_t r;
-    split(p, &r);
+    const char *why = split(p, &r);
+    if (why) {
+      rc = bad(path, ln, "%s", why);
+      break;
+    }
+    /* A header names its columns: no field of it is a number. A first row with a
+     * malformed id but numbers after it is data, and its error is reported (it was
+     * taken for a header and the object dropped without a word). */
+    int numbers = 0;
     double v;
-    if (first && !num(r.f[0], &v)) {
+    for (int i = 0; i < r.n && i < 6; i++) numbers += num(r.f[i], &v);
+    if (first && numbers == 0) {
       first = 0;
       continue;
     }
@@ -248,7 +276,8 @@ static void world_usage(FILE *f) {
              "OBJECTS.csv rows: id,kind,x,y,a,b  (kind disc: centre x,y radius a; box: corners\n"
              "  x,y and a,b; segment: from x,y to a,b; point: x,y). Ids are whole numbers.\n"
              "MOVES.csv rows: frame,id,x,y,a,b  (the object's new shape from that frame on;\n"
-             "  frames from 0, in order; the kind stays the object's).\n"
+             "  frames from 0, in order; the kind stays the object's). Either file may\n"
+             "  start with a header line (no field a number); fields may be quoted.\n"
              "Shapes are closed: touching counts as overlapping; decided exactly.\n"
              "Output: frame,a,b  (a < b, sorted) for every overlapping pair of every frame, or\n"
              "  with --pairs began / ended the pairs that began / ended at that frame.\n"

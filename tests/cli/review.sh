@@ -108,6 +108,22 @@ PY
     passes=$((passes + 1)) || fail "raycast: the zero-direction scene tests too little"
 fi
 
+# ---- world: quoted fields (a quoted first row was taken for a header and dropped), and a
+# first row with a bad id is an error, not a header -------------------------------------
+printf '"1","disc",0,0,1\n"2",disc , 0.5 ,0,"1"\n3,"point",1,0,"",""\n' >"$tmp/wq.csv"
+: >"$tmp/none.csv"
+same "world: quoted fields" "$("$cli" world "$tmp/wq.csv" "$tmp/none.csv" | tr '\n' ' ')" "frame,a,b 0,1,2 0,1,3 0,2,3 "
+printf '"id","kind","x","y","a","b"\n1,point,0,0\n2,point,0,0\n' >"$tmp/wqh.csv"
+same "world: quoted header" "$("$cli" world "$tmp/wqh.csv" "$tmp/none.csv" | tr '\n' ' ')" "frame,a,b 0,1,2 "
+printf '1,"disc,0,0,1\n' >"$tmp/wq2.csv"
+expect 1 'wq2.csv:1: unterminated quoted field' -- "$cli" world "$tmp/wq2.csv" "$tmp/none.csv"
+printf '1,"disc"x,0,0,1\n' >"$tmp/wq3.csv"
+expect 1 'wq3.csv:1: text after a closing quote' -- "$cli" world "$tmp/wq3.csv" "$tmp/none.csv"
+printf 'x1,disc,0,0,1\n2,disc,0,0,1\n' >"$tmp/wx1.csv"
+expect 1 "wx1.csv:1: id is not a whole number: 'x1'" -- "$cli" world "$tmp/wx1.csv" "$tmp/none.csv"
+printf 'f0,1,0,0,1\n' >"$tmp/mf0.csv"
+expect 1 "mf0.csv:1: frame is not a whole number" -- "$cli" world "$tmp/wq.csv" "$tmp/mf0.csv"
+
 # ---- output that cannot be written is an error (it exited 0 for tree and --help) -------
 if [ -w /dev/full ]; then
   printf '0,0\n1,1\n' >"$tmp/two.csv"
