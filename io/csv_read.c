@@ -241,13 +241,19 @@ static int header_line(reader_t *r, char *line, size_t len) {
   if (h == QK_CSV_HEADER_NO) return 0;
   for (size_t c = 0; c < r->ncols; c++)
     if (r->col[c] == 0) return 1; /* names need a header */
+  /* A header names the columns: none of the selected fields is a number. A line with a
+   * number among them is data, so that a malformed first row is reported, not skipped
+   * as a header ("x1,2" was dropped without a word). */
   size_t nf = 0;
   qk_error_t *keep = r->err;
   r->err = NULL; /* a malformed line is judged as data, with its own message */
-  qk_status_t st = split(r, line, len, r->col[0], &nf, 0, 0);
+  qk_status_t st = split(r, line, len, r->maxcol, &nf, 0, 0);
   r->err = keep;
+  if (st != QK_OK) return 0;
   double v;
-  return st == QK_OK && nf >= r->col[0] && !qk__csv_number(line, &r->spans[r->col[0] - 1], &v);
+  for (size_t c = 0; c < r->ncols; c++)
+    if (nf >= r->col[c] && qk__csv_number(line, &r->spans[r->col[c] - 1], &v)) return 0;
+  return 1;
 }
 
 static qk_status_t read_lines(reader_t *r, qk__lines_t *in) {

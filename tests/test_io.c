@@ -184,6 +184,11 @@ static void test_io_errors(void **state) {
   const qk_csv_header_t A = QK_CSV_HEADER_AUTO;
   expect_error("x,y\n0,0\n1,abc\n", -1, NULL, A, QK_ERR_PARSE, 3, 3, 1,
                "field 2 (y) is not a number: 'abc'");
+  /* A first line with a number among its selected fields is data: a malformed first row
+   * is an error, not a header dropped without a word (review). */
+  expect_error("x1,2\n3,4\n", -1, NULL, A, QK_ERR_PARSE, 1, 1, 0, "field 1 is not a number: 'x1'");
+  expect_error("name,lon,lat\nRome,1e,2\n0,1,2\n", -1, "2,3", A, QK_ERR_PARSE, 2, 6, 0,
+               "field 2 (lon) is not a number: '1e'");
   expect_error("0,0\n1\n", -1, NULL, A, QK_ERR_PARSE, 2, 2, 1,
                "field 2 is missing: the line has 1 field");
   expect_error("0,0\n  nan ,1\n", -1, NULL, A, QK_ERR_NONFINITE, 2, 1, 1,

@@ -254,8 +254,8 @@ static void join_usage(FILE *f) {
              "requested properties (a name no feature has is an error). --all writes one row per "
              "containing feature (a point in\n"
              "none gets one row with -1). --xy picks the coordinate columns by header name or\n"
-             "1-based number (default: the first two). A header line (first field not a\n"
-             "number) is copied with the new column names appended.\n");
+             "1-based number (default: the first two). A header line (x and y fields not\n"
+             "numbers) is copied with the new column names appended.\n");
 }
 
 static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long total) {
@@ -297,8 +297,10 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
       seen = 1;
       double v;
       int named = xy->col[0] < 0 || xy->col[1] < 0;
-      int xc = xy->col[0] >= 0 ? xy->col[0] : 0;
-      int header = named || !csv_field(line, xc, fx, fcap) || !number(fx, &v);
+      int xc = xy->col[0] >= 0 ? xy->col[0] : 0, yc = xy->col[1] >= 0 ? xy->col[1] : 1;
+      /* a header: neither x nor y is a number (as the library's reader decides) */
+      int header = named || ((!csv_field(line, xc, fx, fcap) || !number(fx, &v)) &&
+                             (!csv_field(line, yc, fy, fcap) || !number(fy, &v)));
       if (header) {
         if (resolve_xy("join", j->pts_path, line, xy)) {
           rc = CLI_BAD_INPUT;

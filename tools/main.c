@@ -37,8 +37,9 @@ static void usage(FILE *f) {
     fprintf(f, "  %s\n", commands[i].synopsis);
   fprintf(f, "\nEvery command accepts --help. Points CSV: x and y are the first two fields of "
              "each line,\nor the columns named by --xy X,Y (header names or 1-based numbers). "
-             "The first line is\na header when its x field is not a number or when --xy gives "
-             "names. A point's id\nis its 0-based data row.\n\nexit status: 0 success, 1 bad "
+             "The first line is\na header when neither its x nor its y field is a number, or "
+             "when --xy gives\nnames. A point's id is its 0-based data row.\n\nexit status: 0 "
+             "success, 1 bad "
              "input, 2 usage error, 3 internal error or out of memory\n");
 }
 

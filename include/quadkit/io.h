@@ -7,7 +7,8 @@
  * is skipped); fields separated by commas, a field may be quoted with double quotes
  * (`""` inside for a quote; no line breaks inside); lines holding only blanks are
  * skipped. The first non-blank line is a header when options say so, or (by default)
- * when its first selected field is not a number; columns may then be selected by name.
+ * when none of its selected fields is a number (a first line "x1,2" is data, and an
+ * error); columns may then be selected by name.
  * Every other line is a data row: its selected fields must be numbers (strtod's syntax,
  * blanks around allowed) and finite; the other fields may hold anything. A row's 0-based
  * index among the data rows is its id. Data rows are limited to 2^32 - 2 (the ids a tree
@@ -26,7 +27,7 @@ extern "C" {
 
 /** Whether the first non-blank line is a header. */
 typedef enum qk_csv_header {
-  QK_CSV_HEADER_AUTO = 0, /**< a header when its first selected field is not a number, or
+  QK_CSV_HEADER_AUTO = 0, /**< a header when none of its selected fields is a number, or
                                when columns are selected by name */
   QK_CSV_HEADER_YES = 1,  /**< always a header */
   QK_CSV_HEADER_NO = 2    /**< never: every non-blank line is data */

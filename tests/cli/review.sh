@@ -124,6 +124,13 @@ expect 1 "wx1.csv:1: id is not a whole number: 'x1'" -- "$cli" world "$tmp/wx1.c
 printf 'f0,1,0,0,1\n' >"$tmp/mf0.csv"
 expect 1 "mf0.csv:1: frame is not a whole number" -- "$cli" world "$tmp/wq.csv" "$tmp/mf0.csv"
 
+# ---- points CSV: a first line with a number in it is data (x1,2 was a header, dropped) --
+printf 'x1,2\n3,4\n' >"$tmp/h1.csv"
+expect 1 "h1.csv:1:1: field 1 is not a number: 'x1'" -- "$cli" tree "$tmp/h1.csv"
+expect 1 "h1.csv:1: field 1 is not a finite number: 'x1'" -- "$cli" join "$tmp/gc.geojson" "$tmp/h1.csv" --planar
+printf 'x,y\n3,4\n' >"$tmp/h2.csv"
+same "join: a header still is one" "$("$cli" join "$tmp/gc.geojson" "$tmp/h2.csv" --planar | tr '\n' ' ')" "x,y,feature 3,4,-1 "
+
 # ---- output that cannot be written is an error (it exited 0 for tree and --help) -------
 if [ -w /dev/full ]; then
   printf '0,0\n1,1\n' >"$tmp/two.csv"
