@@ -92,6 +92,12 @@ int cli_out_open(const char *cmd, const char *path, cli_out_t *o);
 /* Close and rename (ok != 0) or close and delete (ok == 0). Returns CLI_OK or an error. */
 int cli_out_close(const char *cmd, cli_out_t *o, int ok);
 
+/* Open an input file for reading ("rb"). NULL after printing "quadkit CMD: PATH: cannot
+ * open: why" (cmd NULL: "quadkit: PATH: ...")
+ * (cannot open: the system's reason; a directory: "is a directory", which fopen lets
+ * through and the first read then fails on with a vague "read error"). */
+FILE *cli_open_input(const char *cmd, const char *path);
+
 /* Subcommands: argv[0] is the subcommand's name. */
 int cmd_tree(int argc, char **argv);
 int cmd_knn(int argc, char **argv);

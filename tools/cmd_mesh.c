@@ -492,11 +492,8 @@ static int read_input(const char *cmd, const mesh_args_t *o, qk_poly_t **poly, p
     return CLI_OK;
   }
   pp->format = "poly";
-  FILE *f = strcmp(o->in, "-") ? fopen(o->in, "rb") : stdin;
-  if (!f) {
-    cli_error(cmd, "cannot open %s", o->in);
-    return CLI_BAD_INPUT;
-  }
+  FILE *f = strcmp(o->in, "-") ? cli_open_input(cmd, o->in) : stdin;
+  if (!f) return CLI_BAD_INPUT;
   qk_status_t st = qk_poly_read(f, NULL, poly, &err);
   if (f != stdin) fclose(f);
   if (st == QK_OK && o->round > 0) {

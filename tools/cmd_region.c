@@ -433,9 +433,8 @@ int cmd_join(int argc, char **argv) {
     free(fields);
     return rc;
   }
-  FILE *in = fopen(pos[1], "rb");
+  FILE *in = cli_open_input("join", pos[1]);
   if (!in) {
-    cli_error("join", "%s: cannot open: %s", pos[1], strerror(errno));
     free(fields);
     return CLI_BAD_INPUT;
   }

@@ -172,11 +172,8 @@ static size_t find_id(const scene_t *s, uint64_t id) {
 static int each_row(const char *path,
                     int (*fn)(const char *path, unsigned long ln, row_t *r, scene_t *s),
                     scene_t *s) {
-  FILE *f = fopen(path, "rb");
-  if (!f) {
-    fprintf(stderr, "quadkit world: %s: %s\n", path, strerror(errno));
-    return CLI_BAD_INPUT;
-  }
+  FILE *f = cli_open_input("world", path);
+  if (!f) return CLI_BAD_INPUT;
   char *line = NULL;
   size_t cap = 0;
   unsigned long ln = 0;

@@ -85,11 +85,8 @@ static int read_values(const char *path, const char *columns, int required, int 
   opt.on_row = on_row;
   opt.ud = rows;
   qk_error_t err;
-  FILE *f = fopen(path, "rb");
-  if (!f) {
-    fprintf(stderr, "quadkit: %s: cannot open: %s\n", path, strerror(errno));
-    return CLI_BAD_INPUT;
-  }
+  FILE *f = cli_open_input(NULL, path);
+  if (!f) return CLI_BAD_INPUT;
   qk_status_t st = qk_csv_read_values(f, &opt, (size_t)cols, (size_t)required, NULL, v, n, &err);
   fclose(f);
   int rc = st == QK_OK ? CLI_OK : read_error(path, st, &err);

@@ -9,6 +9,20 @@
 
 #include "cli.h"
 
+FILE *cli_open_input(const char *cmd, const char *path) {
+  FILE *f = fopen(path, "rb");
+  const char *why = f ? NULL : strerror(errno), *what = "cannot open";
+  struct stat st;
+  if (f && fstat(fileno(f), &st) == 0 && S_ISDIR(st.st_mode)) {
+    why = "it is a directory", what = "cannot read";
+    fclose(f);
+    f = NULL;
+  }
+  if (!f)
+    fprintf(stderr, "quadkit%s%s: %s: %s: %s\n", cmd ? " " : "", cmd ? cmd : "", path, what, why);
+  return f;
+}
+
 int cli_out_open(const char *cmd, const char *path, cli_out_t *o) {
   memset(o, 0, sizeof *o);
   if (!strcmp(path, "-")) {

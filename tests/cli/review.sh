@@ -131,9 +131,19 @@ expect 1 "h1.csv:1: field 1 is not a finite number: 'x1'" -- "$cli" join "$tmp/g
 printf 'x,y\n3,4\n' >"$tmp/h2.csv"
 same "join: a header still is one" "$("$cli" join "$tmp/gc.geojson" "$tmp/h2.csv" --planar | tr '\n' ' ')" "x,y,feature 3,4,-1 "
 
+printf '0,0\n1,1\n' >"$tmp/two.csv"
+# ---- a directory as input: a clear error, exit 1 (was "read error", exit 3 for mesh) ---
+mkdir "$tmp/adir" "$tmp/dir.poly"
+expect 1 'adir: cannot read: it is a directory' -- "$cli" tree "$tmp/adir"
+expect 1 'adir: cannot read: it is a directory' -- "$cli" knn "$tmp/two.csv" "$tmp/adir" -k 1
+expect 1 'adir: cannot read: it is a directory' -- "$cli" world "$tmp/adir" "$tmp/none.csv"
+expect 1 'adir: cannot read: it is a directory' -- "$cli" world "$tmp/wq.csv" "$tmp/adir"
+expect 1 'adir: cannot read: it is a directory' -- "$cli" join "$tmp/gc.geojson" "$tmp/adir" --planar
+expect 1 'dir.poly: cannot read: it is a directory' -- "$cli" mesh "$tmp/dir.poly" -o "$tmp/dp"
+nothing "$tmp/dp"
+
 # ---- output that cannot be written is an error (it exited 0 for tree and --help) -------
 if [ -w /dev/full ]; then
-  printf '0,0\n1,1\n' >"$tmp/two.csv"
   expect 3 'cannot write standard output' -- sh -c "\"$cli\" tree \"$tmp/two.csv\" >/dev/full"
   expect 3 'cannot write standard output' -- sh -c "\"$cli\" --help >/dev/full"
   expect 3 'cannot write standard output' -- sh -c "\"$cli\" knn \"$tmp/two.csv\" \"$tmp/two.csv\" -k 1 >/dev/full"
