@@ -265,6 +265,11 @@ static qk_status_t read_lines(reader_t *r, qk__lines_t *in) {
     if (memchr(line, '\0', len))
       return fail(r, QK_ERR_PARSE, lineno, (size_t)((char *)memchr(line, '\0', len) - line) + 1,
                   SIZE_MAX, "binary data (NUL byte) in a text file");
+    const char *cr = memchr(line, '\r', len);
+    if (cr)
+      return fail(r, QK_ERR_PARSE, lineno, (size_t)(cr - line) + 1, SIZE_MAX,
+                  "a carriage return inside the line (line ends must be LF or CRLF, not CR "
+                  "alone)");
     if (lineno == 1 && len >= 3 && !memcmp(line, "\xEF\xBB\xBF", 3)) {
       memmove(line, line + 3, len - 2); /* the byte order mark, and the NUL */
       len -= 3;

@@ -186,6 +186,12 @@ static void test_io_errors(void **state) {
                "field 2 (y) is not a number: 'abc'");
   /* A first line with a number among its selected fields is data: a malformed first row
    * is an error, not a header dropped without a word (review). */
+  /* Old Mac line ends (CR alone): the whole file was one line, and the error named a
+   * value with a raw CR in it. */
+  expect_error("x,y\r0,0\r1,2\r", -1, NULL, A, QK_ERR_PARSE, 1, 4, SIZE_MAX,
+               "a carriage return inside the line (line ends must be LF or CRLF, not CR alone)");
+  expect_error("0,0\n1,2\r\n3,4\r5,6\n", -1, NULL, A, QK_ERR_PARSE, 3, 4, SIZE_MAX,
+               "a carriage return inside the line (line ends must be LF or CRLF, not CR alone)");
   expect_error("x1,2\n3,4\n", -1, NULL, A, QK_ERR_PARSE, 1, 1, 0, "field 1 is not a number: 'x1'");
   expect_error("name,lon,lat\nRome,1e,2\n0,1,2\n", -1, "2,3", A, QK_ERR_PARSE, 2, 6, 0,
                "field 2 (lon) is not a number: '1e'");

@@ -287,6 +287,14 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
       break;
     }
     while (len > 0 && (line[len - 1] == '\n' || line[len - 1] == '\r')) line[--len] = '\0';
+    if (memchr(line, '\r', (size_t)len)) {
+      fprintf(stderr,
+              "quadkit join: %s:%ld: a carriage return inside the line (line ends must be LF or "
+              "CRLF, not CR alone)\n",
+              j->pts_path, lineno);
+      rc = CLI_BAD_INPUT;
+      break;
+    }
     if (lineno == 1 && (unsigned char)line[0] == 0xEF && (unsigned char)line[1] == 0xBB &&
         (unsigned char)line[2] == 0xBF)
       memmove(line, line + 3, (size_t)len - 2);

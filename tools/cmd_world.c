@@ -185,7 +185,13 @@ static int each_row(const char *path,
       rc = bad(path, ln, "%s", "line contains a NUL byte");
       break;
     }
-    line[strcspn(line, "\r\n")] = '\0';
+    size_t n = (size_t)len;
+    while (n > 0 && (line[n - 1] == '\n' || line[n - 1] == '\r')) line[--n] = '\0';
+    if (memchr(line, '\r', n)) { /* the rest of the file would be dropped as this line's */
+      rc = bad(path, ln, "%s",
+               "a carriage return inside the line (line ends must be LF or CRLF, not CR alone)");
+      break;
+    }
     char *p = line;
     /* A UTF-8 byte order mark (editors on Windows write one) is not part of the first
      * field: left there, it would make a first data row look like a header. */

@@ -142,6 +142,16 @@ expect 1 'adir: cannot read: it is a directory' -- "$cli" join "$tmp/gc.geojson"
 expect 1 'dir.poly: cannot read: it is a directory' -- "$cli" mesh "$tmp/dir.poly" -o "$tmp/dp"
 nothing "$tmp/dp"
 
+# ---- CR-only line ends: an error naming the line (world and join read one line, the
+# rest dropped without a word) ------------------------------------------------------------
+printf '1,disc,0,0,1\r2,disc,0.5,0,1\r' >"$tmp/wcr.csv"
+expect 1 'wcr.csv:1: a carriage return inside the line' -- "$cli" world "$tmp/wcr.csv" "$tmp/none.csv"
+printf 'x,y\r0.5,0.5\r' >"$tmp/jcr.csv"
+expect 1 'jcr.csv:1: a carriage return inside the line' -- "$cli" join "$tmp/gc.geojson" "$tmp/jcr.csv" --planar
+expect 1 'jcr.csv:1:4: a carriage return inside the line' -- "$cli" tree "$tmp/jcr.csv"
+printf '1,disc,0,0,1\r\n2,disc,0.5,0,1\r\n' >"$tmp/wcrlf.csv"
+same "world: CRLF still fine" "$("$cli" world "$tmp/wcrlf.csv" "$tmp/none.csv" | tr '\n' ' ')" "frame,a,b 0,1,2 "
+
 # ---- output that cannot be written is an error (it exited 0 for tree and --help) -------
 if [ -w /dev/full ]; then
   expect 3 'cannot write standard output' -- sh -c "\"$cli\" tree \"$tmp/two.csv\" >/dev/full"
