@@ -6,9 +6,9 @@
  * The rules: one record per line (LF or CRLF; a UTF-8 byte order mark on the first line
  * is skipped); fields separated by commas, a field may be quoted with double quotes
  * (`""` inside for a quote; no line breaks inside; a CR alone inside a line is an error);
- * lines holding only blanks are skipped. The first non-blank line is a header when options say so,
- * or (by default) when none of its selected fields is a number (a first line "x1,2" is data, and an
- * error); columns may then be selected by name.
+ * lines holding only blanks are skipped. The first non-blank line is a header when
+ * options say so, or (by default) when none of its selected fields is a number (a first
+ * line "x1,2" is data, and an error); columns may then be selected by name.
  * Every other line is a data row: its selected fields must be numbers (strtod's syntax,
  * blanks around allowed) and finite; the other fields may hold anything. A row's 0-based
  * index among the data rows is its id. Data rows are limited to 2^32 - 2 (the ids a tree
