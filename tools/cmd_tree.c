@@ -65,6 +65,13 @@ int cmd_tree(int argc, char **argv) {
   rc = cli_build_tree(cmd, in, pts, n, &opt, &tree);
   free(pts);
   if (rc) return rc;
+  /* The picture's file is opened first: a path that cannot be written is an error
+   * before anything is printed (the statistics came out, then the error). */
+  cli_out_t o;
+  if (svg && (rc = cli_out_open(cmd, svg, &o))) {
+    qk_tree_free(tree);
+    return rc;
+  }
   qk_tree_stats_t s;
   qk_tree_stats(tree, &s);
   printf("{\"points\": %zu, \"nodes\": %zu, \"leaves\": %zu, \"height\": %u, "
@@ -73,13 +80,9 @@ int cmd_tree(int argc, char **argv) {
          s.points, s.nodes, s.leaves, s.height, s.max_leaf_points, s.capped_leaves, s.capacity,
          s.max_depth, s.root.x, s.root.y, s.root.side, s.memory_bytes);
   if (svg) {
-    cli_out_t o;
-    rc = cli_out_open(cmd, svg, &o);
-    if (!rc) {
-      qk_status_t st = qk_tree_write_svg(tree, o.f, 800);
-      rc = cli_out_close(cmd, &o, st == QK_OK);
-      if (!rc && st) rc = cli_status(cmd, svg, st);
-    }
+    qk_status_t st = qk_tree_write_svg(tree, o.f, 800);
+    rc = cli_out_close(cmd, &o, st == QK_OK);
+    if (!rc && st) rc = cli_status(cmd, svg, st);
   }
   qk_tree_free(tree);
   return rc;

@@ -460,11 +460,10 @@ static void translate(qk_shape_t *s, double dx, double dy) {
   }
 }
 
-static int write_svg(const char *path, const body_t *b, size_t n, const unsigned char *hit,
+/* Draw into an opened output; returns nonzero when writing failed. */
+static int write_svg(cli_out_t *so, const body_t *b, size_t n, const unsigned char *hit,
                      double side) {
-  cli_out_t o;
-  int rc = cli_out_open("simulate", path, &o);
-  if (rc) return rc;
+  cli_out_t o = *so;
   double k = 800 / side;
   fprintf(o.f, "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"800\" height=\"800\" "
                "viewBox=\"0 0 800 800\">\n<rect width=\"800\" height=\"800\" fill=\"white\" "
@@ -495,7 +494,7 @@ static int write_svg(const char *path, const body_t *b, size_t n, const unsigned
     }
   }
   fprintf(o.f, "</svg>\n");
-  return cli_out_close("simulate", &o, 1);
+  return ferror(o.f) != 0;
 }
 
 static int mark_pair(qk_handle_t a, qk_handle_t b, void *ud) {
@@ -534,6 +533,13 @@ int cmd_simulate(int argc, char **argv) {
       return CLI_USAGE;
     }
   }
+  /* Both outputs are opened (as temporaries) before the work: a path that cannot be
+   * written is an error at once, not after the whole simulation and its JSON. */
+  cli_out_t o, so;
+  memset(&so, 0, sizeof so);
+  int orc = cli_out_open(cmd, out, &o);
+  if (!orc && svg && (orc = cli_out_open(cmd, svg, &so))) cli_out_close(cmd, &o, 0);
+  if (orc) return orc;
   /* About three overlaps per object: objects of mean area ~1 at density ~0.4. */
   double side = sqrt((double)n * 2.5);
   uint64_t rs = seed;
@@ -596,8 +602,6 @@ int cmd_simulate(int argc, char **argv) {
     rc = cli_status(cmd, "simulating", st);
     goto done;
   }
-  cli_out_t o;
-  if ((rc = cli_out_open(cmd, out, &o))) goto done;
   const char *names[3] = {"pairs", "began", "ended"};
   fprintf(o.f, "{\"n\": %lu, \"frames\": %lu, \"seed\": %lu, \"side\": %.6g,\n", n, frames, seed,
           side);
@@ -611,12 +615,20 @@ int cmd_simulate(int argc, char **argv) {
           " \"ms_per_frame\": {\"mean\": %.4f, \"min\": %.4f, \"max\": %.4f},\n"
           " \"bytes\": %zu}\n",
           total / (double)frames, tmin, tmax, qk_world_bytes(w));
-  if ((rc = cli_out_close(cmd, &o, 1))) goto done;
   if (svg) {
     qk_world_pairs(w, QK_PAIRS_ALL, mark_pair, hit);
-    rc = write_svg(svg, b, n, hit, side);
+    if (write_svg(&so, b, n, hit, side)) rc = CLI_INTERNAL;
   }
 done:
+  /* The picture first: when it fails, the JSON file is not left behind either. */
+  if (svg) {
+    int rc2 = cli_out_close(cmd, &so, rc == CLI_OK);
+    if (!rc) rc = rc2;
+  }
+  {
+    int rc2 = cli_out_close(cmd, &o, rc == CLI_OK);
+    if (!rc) rc = rc2;
+  }
   qk_world_free(w);
   free(b);
   free(counts);

@@ -152,6 +152,17 @@ expect 1 'jcr.csv:1:4: a carriage return inside the line' -- "$cli" tree "$tmp/j
 printf '1,disc,0,0,1\r\n2,disc,0.5,0,1\r\n' >"$tmp/wcrlf.csv"
 same "world: CRLF still fine" "$("$cli" world "$tmp/wcrlf.csv" "$tmp/none.csv" | tr '\n' ' ')" "frame,a,b 0,1,2 "
 
+# ---- an output path that cannot be written fails before any work or output (tree
+# printed its statistics, simulate its JSON, then failed) -------------------------------
+expect 1 'cannot write .*adir' -- "$cli" tree "$tmp/two.csv" --svg "$tmp/adir"
+same "tree: nothing on stdout when --svg fails" "$("$cli" tree "$tmp/two.csv" --svg "$tmp/adir" 2>/dev/null)" ""
+same "simulate: nothing on stdout when --svg fails" "$("$cli" simulate --n 20 --frames 2 --svg "$tmp/adir" 2>/dev/null)" ""
+"$cli" simulate --n 20 --frames 2 -o "$tmp/sim.json" --svg "$tmp/nodir/s.svg" 2>/dev/null
+[ $? -eq 1 ] && [ ! -e "$tmp/sim.json" ] && passes=$((passes + 1)) || fail "simulate: -o written although --svg failed"
+"$cli" simulate --n 20 --frames 2 -o "$tmp/sim.json" --svg "$tmp/sim.svg" &&
+  grep -q '"pairs": \[' "$tmp/sim.json" && grep -q '</svg>' "$tmp/sim.svg" &&
+  passes=$((passes + 1)) || fail "simulate -o and --svg"
+
 # ---- output that cannot be written is an error (it exited 0 for tree and --help) -------
 if [ -w /dev/full ]; then
   expect 3 'cannot write standard output' -- sh -c "\"$cli\" tree \"$tmp/two.csv\" >/dev/full"
