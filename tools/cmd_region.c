@@ -507,6 +507,12 @@ int cmd_regions(int argc, char **argv) {
   if (rc) return rc;
   qk_region_t *r;
   if ((rc = read_layer("regions", path, planar, &r))) return rc;
+  /* The picture's file first: one that cannot be written fails before the statistics. */
+  cli_out_t o;
+  if (svg && (rc = cli_out_open("regions", svg, &o))) {
+    qk_region_free(r);
+    return rc;
+  }
   qk_region_stats_t s;
   qk_region_stats(r, &s);
   printf("{\"features\": %zu, \"rings\": %zu, \"vertices\": %zu, \"holes\": %zu, "
@@ -517,12 +523,9 @@ int cmd_regions(int argc, char **argv) {
          s.leaves, s.leaf_edges, s.depth, s.bytes, s.build_seconds, s.planar ? "planar" : "lonlat",
          s.box.xmin, s.box.ymin, s.box.xmax, s.box.ymax);
   if (svg) {
-    cli_out_t o;
-    if (!(rc = cli_out_open("regions", svg, &o))) {
-      qk_status_t st = qk_region_write_svg(r, o.f, 1200);
-      rc = cli_out_close("regions", &o, st == QK_OK);
-      if (st) rc = cli_status("regions", svg, st);
-    }
+    qk_status_t st = qk_region_write_svg(r, o.f, 1200);
+    rc = cli_out_close("regions", &o, st == QK_OK);
+    if (st) rc = cli_status("regions", svg, st);
   }
   qk_region_free(r);
   return rc;

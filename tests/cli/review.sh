@@ -156,6 +156,7 @@ same "world: CRLF still fine" "$("$cli" world "$tmp/wcrlf.csv" "$tmp/none.csv" |
 # printed its statistics, simulate its JSON, then failed) -------------------------------
 expect 1 'cannot write .*adir' -- "$cli" tree "$tmp/two.csv" --svg "$tmp/adir"
 same "tree: nothing on stdout when --svg fails" "$("$cli" tree "$tmp/two.csv" --svg "$tmp/adir" 2>/dev/null)" ""
+same "regions: nothing on stdout when --svg fails" "$("$cli" regions "$tmp/gc.geojson" --planar --svg "$tmp/adir" 2>/dev/null)" ""
 same "simulate: nothing on stdout when --svg fails" "$("$cli" simulate --n 20 --frames 2 --svg "$tmp/adir" 2>/dev/null)" ""
 "$cli" simulate --n 20 --frames 2 -o "$tmp/sim.json" --svg "$tmp/nodir/s.svg" 2>/dev/null
 [ $? -eq 1 ] && [ ! -e "$tmp/sim.json" ] && passes=$((passes + 1)) || fail "simulate: -o written although --svg failed"
