@@ -103,6 +103,7 @@ typedef struct qk__gm {
   size_t seeds, free_leaves; /* seeds inserted; free leaves meeting the bounding box */
   double smallest_input_angle;
   size_t deep_splits, deep_cap; /* the grading's splits below 2^-36 of the root square */
+  size_t sep_splits, sep_cap;   /* the grading's splits that separate features, at any depth */
   const char *stage;            /* the step running, for messages: "grading the quadtree", ... */
 } qk__gm_t;
 

@@ -862,6 +862,52 @@ static void refused_quickly(const double *xy, size_t nv, const uint32_t *seg, si
   qk_poly_free(p);
 }
 
+/* An allocator that records the most bytes live at once: a refusal's peak memory
+ * measures the work done before it, deterministically (no clock). */
+typedef struct peak_alloc {
+  size_t live, peak;
+} peak_alloc_t;
+
+static void *peak_fn(void *ud, void *ptr, size_t osize, size_t nsize) {
+  peak_alloc_t *a = ud;
+  if (nsize == 0) {
+    if (ptr) a->live -= osize;
+    free(ptr);
+    return NULL;
+  }
+  void *q = realloc(ptr, nsize);
+  if (!q) return NULL;
+  a->live = a->live - (ptr ? osize : 0) + nsize;
+  if (a->live > a->peak) a->peak = a->live;
+  return q;
+}
+
+/* Meshes xy in `mode` expecting a refusal with st whose message holds every string of
+ * want (NULL-terminated), having had at most max_mb megabytes live at any time. */
+static void refused_small(const double *xy, size_t nv, const uint32_t *seg, size_t ns,
+                          qk_mesh_mode_t mode, qk_status_t st, const char *const *want,
+                          double max_mb) {
+  qk_poly_t *p;
+  qk_mesh_t *m = NULL;
+  qk_mesh_error_t err;
+  assert_int_equal(qk_poly_from_arrays(xy, nv, seg, ns, NULL, 0, NULL, &p, &err), QK_OK);
+  peak_alloc_t pa = {0, 0};
+  qk_allocator_t a = {peak_fn, &pa};
+  qk_mesh_options_t o;
+  qk_mesh_options_init(&o);
+  o.mode = mode, o.allocator = &a;
+  qk_status_t got = qk_mesh_generate(p, &o, &m, &err);
+  printf("# peak %.1f MB: %s\n", (double)pa.peak / 1048576, err.message);
+  if (got != st) fail_msg("%s, not %s: %s", qk_strerror(got), qk_strerror(st), err.message);
+  for (size_t i = 0; want[i]; i++)
+    if (!strstr(err.message, want[i])) fail_msg("\"%s\" not in \"%s\"", want[i], err.message);
+  assert_null(m);
+  assert_int_equal(pa.live, 0);
+  if ((double)pa.peak > max_mb * 1048576)
+    fail_msg("%.1f MB live before the refusal", (double)pa.peak / 1048576);
+  qk_poly_free(p);
+}
+
 /* Hostile inputs get a clear refusal at once (fuzz/regressions/mesh_general/isolated-*). */
 static void test_mesh_general_mode_hostile(void **state) {
   (void)state;
@@ -878,6 +924,32 @@ static void test_mesh_general_mode_hostile(void **state) {
   /* And far below: 1e-70 apart. */
   double c[6] = {0, 0, 1e-70, 0, 0, 1e-70};
   refused_quickly(c, 3, NULL, 0, QK_ERR_LIMIT, "below 2^-200");
+}
+
+/* Two features close along a stretch far longer than their gap, above the 2^-36 of the
+ * extent that the deep-split budget watches: a 2^31 by 1 rectangle (once 2^27 cells, 18 s
+ * and 2.5 GB before "the size bound asks for more than 2^27 quadtree cells", with no size
+ * bound), and 400 segments 1e-9 apart across a unit square (the same). Refused by the
+ * grading's separation budget, naming two features, after a few MB. */
+static void test_mesh_general_mode_long_gap(void **state) {
+  (void)state;
+  double r[8] = {0, 0, 2147483648.0, 0, 2147483648.0, 1, 0, 1};
+  uint32_t rs[8] = {0, 1, 1, 2, 2, 3, 3, 0};
+  const char *w1[] = {"segment 0 and segment 2 stay within", "cell splits", NULL};
+  refused_small(r, 4, rs, 4, QK_MESH_GENERAL, QK_ERR_LIMIT, w1, 64);
+  refused_small(r, 4, rs, 4, QK_MESH_AUTO, QK_ERR_LIMIT, w1, 64);
+  double st[2 * 408];
+  uint32_t ss[2 * 404];
+  double sq[8] = {0, 0, 1, 0, 1, 1, 0, 1};
+  memcpy(st, sq, sizeof sq);
+  for (uint32_t i = 0; i < 4; i++) ss[2 * i] = i, ss[2 * i + 1] = (i + 1) % 4;
+  for (uint32_t i = 0; i < 200; i++) {
+    double y = 0.1 + i * 1e-9;
+    st[8 + 4 * i] = 0.1, st[9 + 4 * i] = y, st[10 + 4 * i] = 0.9, st[11 + 4 * i] = y + 1e-12;
+    ss[8 + 2 * i] = 4 + 2 * i, ss[9 + 2 * i] = 5 + 2 * i;
+  }
+  const char *w2[] = {"stay within", "cell splits", NULL};
+  refused_small(st, 404, ss, 204, QK_MESH_GENERAL, QK_ERR_LIMIT, w2, 64);
 }
 
 /* The automatic choice: 45-degree integer input stays the book's, real 45-degree input
@@ -1008,6 +1080,7 @@ int main(void) {
       cmocka_unit_test(test_mesh_general_mode_refusals),
       cmocka_unit_test(test_mesh_general_mode_auto),
       cmocka_unit_test(test_mesh_general_mode_hostile),
+      cmocka_unit_test(test_mesh_general_mode_long_gap),
       cmocka_unit_test(test_mesh_general_mode_alloc_failure),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
