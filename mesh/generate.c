@@ -111,10 +111,18 @@ static qk_status_t classic_ok(const qk_poly_t *P, const qk_mesh_options_t *o, in
                               const qk_allocator_t *a, int *ok) {
   *ok = 0;
   if (book) {
-    for (size_t i = 0; i < P->nv; i++)
+    double most = 1;
+    for (size_t i = 0; i < P->nv; i++) {
       if (!(P->vx[i] >= 0 && P->vy[i] >= 0 && P->vx[i] <= (double)QK_MESH_MAX_SIZE &&
             P->vy[i] <= (double)QK_MESH_MAX_SIZE))
         return QK_OK;
+      most = fmax(most, fmax(P->vx[i], P->vy[i]));
+    }
+    /* What the book's mode would refuse as too large goes to the general mode (as the
+     * dyadic mode's refusals do, through qk__mesh_lattice below). */
+    uint64_t U = 1;
+    while ((double)U < most) U *= 2;
+    if (qk__mesh_book_limit(P, o, U, NULL)) return QK_OK;
   } else {
     qk__lattice_t L;
     qk_mesh_error_t e;
@@ -368,7 +376,8 @@ qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *opt
     st = qk__mesh_fail(err, st, 0, "out of memory");
   if (onlat) g.poly = onlat;
   m->lat = g.lat;
-  if (!st && !(st = qk__mesh_validate(&g, book ? opt.size : 0))) {
+  if (!st && !(st = qk__mesh_validate(&g, book ? opt.size : 0)) &&
+      !(book && (st = qk__mesh_book_limit(poly, &opt, g.U, err)))) {
     m->size = g.U;
     m->stats.components = g.ncomp;
     t1 = now();

@@ -195,6 +195,17 @@ qk_status_t qk__mesh_find_regions(qk__gen_t *g, qk__tri_state_t *T, const qk__le
  * dyadic mode accepts: about 2^25 triangles, a few GB at most. */
 #define QK__MESH_MAX_STEPS ((double)(1 << 24))
 
+/* Lattice steps (of 2^-f) along the segments: the sum over segments of the larger of
+ * |dx| and |dy| times 2^f; *longest (may be NULL) gets the segment with the most. */
+double qk__mesh_lattice_steps(const qk_poly_t *P, int f, size_t *longest);
+
+/* The book's mode on domain side U: QK_ERR_LIMIT (a message in err, naming the longest
+ * segment, when err is not NULL) when it would take more than QK__MESH_MAX_STEPS unit
+ * steps along the segments or about that many triangles for the size bound, as the
+ * dyadic mode refuses (mesh/lattice.c). */
+qk_status_t qk__mesh_book_limit(const qk_poly_t *P, const qk_mesh_options_t *opt, uint64_t U,
+                                qk_mesh_error_t *err);
+
 /* Choose the lattice for an input (mesh/lattice.c): the book's (f = 0, origin 0) when
  * `book`, else the coarsest dyadic lattice holding every vertex exactly and fine enough
  * for opt->max_size. Fails with QK_ERR_GEOMETRY naming the vertex when none fits. */

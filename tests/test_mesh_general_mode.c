@@ -952,6 +952,45 @@ static void test_mesh_general_mode_long_gap(void **state) {
   refused_small(st, 404, ss, 204, QK_MESH_GENERAL, QK_ERR_LIMIT, w2, 64);
 }
 
+/* Integer, axis-parallel input of a huge extent: the book's mode would split every cell
+ * along the segments down to unit size (a square of side 2^30: 2^32 unit steps; it ran out
+ * of time and memory). QK_MESH_AUTO hands it to the general mode, as it does with what the
+ * dyadic mode refuses, and QK_MESH_BOOK refuses at once naming the longest segment and the
+ * way out; so does a size bound asking the book's mode for 2^60 triangles. */
+static void test_mesh_general_mode_book_extent(void **state) {
+  (void)state;
+  double U = 1073741824.0, sq[16] = {0, 0, U, 0, U, U, 0, U, 5, 5, 6, 5, 6, 6, 5, 6};
+  uint32_t seg[16] = {0, 1, 1, 2, 2, 3, 3, 0, 4, 5, 5, 6, 6, 7, 7, 4};
+  shape_t *s = calloc(1, sizeof *s);
+  assert_non_null(s);
+  const double outer[8] = {0, 0, U, 0, U, U, 0, U};
+  sh_ring(s, outer, 4);
+  qk_poly_t *p = sh_poly(s, NULL);
+  qk_mesh_t *m = mesh_of(p, NULL);
+  check_out_t c = check_general(s, m, 20);
+  assert_int_equal(c.nt, 2);
+  qk_mesh_free(m);
+  qk_poly_free(p);
+  free(s);
+  const char *w1[] = {"unit steps along the segments", "segment 0 from (0, 0) to (1073741824, 0)",
+                      "--general", NULL};
+  refused_small(sq, 8, seg, 8, QK_MESH_BOOK, QK_ERR_LIMIT, w1, 8);
+  /* A unit square alone in a domain of side 2^30 is small (the domain's boundary is not
+   * refined), but not with a size bound of 2. */
+  assert_int_equal(qk_poly_from_arrays(sq + 8, 4, seg, 4, NULL, 0, NULL, &p, NULL), QK_OK);
+  qk_mesh_options_t o;
+  qk_mesh_options_init(&o);
+  o.mode = QK_MESH_BOOK, o.size = 1u << 30;
+  m = mesh_of(p, &o);
+  qk_mesh_free(m);
+  o.max_size = 2;
+  qk_mesh_error_t err;
+  assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_ERR_LIMIT);
+  assert_non_null(strstr(err.message, "max_size 2 asks the book's mode for about"));
+  assert_null(m);
+  qk_poly_free(p);
+}
+
 /* The automatic choice: 45-degree integer input stays the book's, real 45-degree input
  * the dyadic mode's, anything else the general mode's; QK_MESH_GENERAL insists. */
 static void test_mesh_general_mode_auto(void **state) {
@@ -1081,6 +1120,7 @@ int main(void) {
       cmocka_unit_test(test_mesh_general_mode_auto),
       cmocka_unit_test(test_mesh_general_mode_hostile),
       cmocka_unit_test(test_mesh_general_mode_long_gap),
+      cmocka_unit_test(test_mesh_general_mode_book_extent),
       cmocka_unit_test(test_mesh_general_mode_alloc_failure),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
