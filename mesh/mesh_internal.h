@@ -233,6 +233,19 @@ qk_status_t qk__mesh_refine(qk__gen_t *g);
 qk_status_t qk__mesh_general(const qk_poly_t *P, const qk_mesh_options_t *opt, qk_mesh_t *m,
                              qk_mesh_error_t *err);
 
+/* The general mode's check of the input alone (mesh/general_run.c): the CDT of P's
+ * vertices and segments, refusing duplicate vertices, vertices on segments and crossing
+ * or overlapping segments with QK_ERR_GEOMETRY (naming both), in expected O(n log n);
+ * QK_ERR_LIMIT for an extent its predicates cannot take. Nothing is kept. */
+qk_status_t qk__mesh_general_check(const qk_poly_t *P, const qk_mesh_options_t *opt,
+                                   qk_allocator_t *a, qk_mesh_error_t *err);
+
+/* Lattice steps along the segments above which the lattice modes check the input for
+ * crossings with qk__mesh_general_check before subdividing: their own check happens during
+ * the subdivision, whose work grows with the steps (2^24 steps: minutes and gigabytes
+ * before a crossing was reported). */
+#define QK__MESH_PRECHECK_STEPS ((double)(1 << 16))
+
 /* The output segments and vertex markers of a finished mesh (mesh/markers.c). */
 qk_status_t qk__mesh_markers(qk__gen_t *g, qk_mesh_t *m);
 

@@ -989,6 +989,13 @@ static void test_mesh_general_mode_book_extent(void **state) {
   assert_non_null(strstr(err.message, "max_size 2 asks the book's mode for about"));
   assert_null(m);
   qk_poly_free(p);
+  /* A square of side 2^20 (2^22 unit steps) crossed by a small one: the book's own check
+   * finds crossings during the subdivision, 5 s and 0.7 GB later. Inputs of more than 2^16
+   * steps get the general mode's CDT check first (O(n log n)): refused at once. */
+  double V = 1048576.0, cr[16] = {0, 0, V, 0, V, V, 0, V, V - 1, 5, V + 1, 5, V + 1, 7, V - 1, 7};
+  const char *w2[] = {"segments 1 and 4 cross or overlap", NULL};
+  refused_small(cr, 8, seg, 8, QK_MESH_BOOK, QK_ERR_GEOMETRY, w2, 8);
+  refused_small(cr, 8, seg, 8, QK_MESH_AUTO, QK_ERR_GEOMETRY, w2, 8);
 }
 
 /* The automatic choice: 45-degree integer input stays the book's, real 45-degree input
