@@ -111,18 +111,13 @@ static qk_status_t classic_ok(const qk_poly_t *P, const qk_mesh_options_t *o, in
                               const qk_allocator_t *a, int *ok) {
   *ok = 0;
   if (book) {
-    double most = 1;
-    for (size_t i = 0; i < P->nv; i++) {
+    for (size_t i = 0; i < P->nv; i++)
       if (!(P->vx[i] >= 0 && P->vy[i] >= 0 && P->vx[i] <= (double)QK_MESH_MAX_SIZE &&
             P->vy[i] <= (double)QK_MESH_MAX_SIZE))
         return QK_OK;
-      most = fmax(most, fmax(P->vx[i], P->vy[i]));
-    }
     /* What the book's mode would refuse as too large goes to the general mode (as the
      * dyadic mode's refusals do, through qk__mesh_lattice below). */
-    uint64_t U = 1;
-    while ((double)U < most) U *= 2;
-    if (qk__mesh_book_limit(P, o, U, NULL)) return QK_OK;
+    if (qk__mesh_book_limit(P, o, 0, NULL)) return QK_OK;
   } else {
     qk__lattice_t L;
     qk_mesh_error_t e;
@@ -330,23 +325,6 @@ out:
   return st;
 }
 
-/* A large input is checked for crossings, vertices on segments and duplicates exactly
- * and in O(n log n) (the general mode's CDT of the input) before the subdivision, which
- * would find them only after work proportional to the lattice steps. Only its geometric
- * refusals count: an input the CDT's predicates cannot take (an extent below 2^-200, on
- * a fine dyadic lattice) is left to the subdivision, as before. Smaller inputs are not
- * checked twice, so their messages are the subdivision's, unchanged. */
-static qk_status_t precheck(qk__gen_t *g, qk_allocator_t *a) {
-  if (!(qk__mesh_lattice_steps(g->poly, 0, NULL) > QK__MESH_PRECHECK_STEPS)) return QK_OK;
-  qk_mesh_error_t e;
-  qk_status_t st = qk__mesh_general_check(g->src, g->opt, a, &e);
-  if (st == QK_ERR_GEOMETRY || st == QK_ERR_NOMEM) {
-    if (g->err) *g->err = e;
-    return st;
-  }
-  return QK_OK;
-}
-
 qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *options,
                              qk_mesh_t **out, qk_mesh_error_t *err) {
   if (err) err->line = 0, err->message[0] = '\0';
@@ -394,8 +372,7 @@ qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *opt
   if (onlat) g.poly = onlat;
   m->lat = g.lat;
   if (!st && !(st = qk__mesh_validate(&g, book ? opt.size : 0)) &&
-      !(book && (st = qk__mesh_book_limit(poly, &opt, g.U, err))) &&
-      !(st = precheck(&g, &m->alloc))) {
+      !(st = qk__mesh_precheck(g.poly, g.src, &opt, book ? g.U : 0, &m->alloc, err))) {
     m->size = g.U;
     m->stats.components = g.ncomp;
     t1 = now();

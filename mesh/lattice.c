@@ -43,6 +43,11 @@ double qk__mesh_lattice_steps(const qk_poly_t *P, int f, size_t *longest) {
 
 qk_status_t qk__mesh_book_limit(const qk_poly_t *P, const qk_mesh_options_t *opt, uint64_t U,
                                 qk_mesh_error_t *err) {
+  if (!U) { /* the default domain: the smallest power of two >= every coordinate */
+    double most = 1;
+    for (size_t i = 0; i < P->nv; i++) most = fmax(most, fmax(P->vx[i], P->vy[i]));
+    for (U = 1; (double)U < most;) U *= 2;
+  }
   size_t k = 0;
   double steps = qk__mesh_lattice_steps(P, 0, &k), u = (double)U;
   double by_size = opt->max_size > 0 ? 4 * (u / opt->max_size) * (u / opt->max_size) : 0;
@@ -158,4 +163,25 @@ void qk__mesh_lattice_poly_free(qk_poly_t *q) {
   if (!q) return;
   q->vline = q->sline = q->hline = NULL; /* borrowed from the original */
   qk_poly_free(q);
+}
+
+/* A large input is checked for crossings, vertices on segments and duplicates exactly
+ * and in O(n log n) (the general mode's CDT of the input) before the subdivision, which
+ * would find them only after work proportional to the lattice steps. Only its geometric
+ * refusals count: an input the CDT's predicates cannot take (an extent below 2^-200, on
+ * a fine dyadic lattice) is left to the subdivision, as before. Smaller inputs are not
+ * checked twice, so their messages are the subdivision's, unchanged. */
+qk_status_t qk__mesh_precheck(const qk_poly_t *lat, const qk_poly_t *src,
+                              const qk_mesh_options_t *opt, uint64_t book_U, qk_allocator_t *a,
+                              qk_mesh_error_t *err) {
+  qk_status_t st;
+  if (book_U && (st = qk__mesh_book_limit(src, opt, book_U, err))) return st;
+  if (!(qk__mesh_lattice_steps(lat, 0, NULL) > QK__MESH_PRECHECK_STEPS)) return QK_OK;
+  qk_mesh_error_t e;
+  st = qk__mesh_general_check(src, opt, a, &e);
+  if (st == QK_ERR_GEOMETRY || st == QK_ERR_NOMEM) {
+    if (err) *err = e;
+    return st;
+  }
+  return QK_OK;
 }
