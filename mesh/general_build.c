@@ -382,7 +382,7 @@ static qk_status_t input_angles(qk__gm_t *g) {
   return QK_OK;
 }
 
-qk_status_t qk__gm_build(qk__gm_t *g) {
+qk_status_t qk__gm_check_input(qk__gm_t *g) {
   const qk_poly_t *P = g->P;
   root_square(g);
   /* The in-circle test squares squared distances: beyond 2^250 they overflow (its filter
@@ -402,7 +402,13 @@ qk_status_t qk__gm_build(qk__gm_t *g) {
   if (!g->cv || qk__gm_fit_to(g, g->cdt.cap_v, g->cdt.cap_t, 1))
     return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   memset(g->cv, 0xff, (P->nv + 1) * sizeof *g->cv); /* QK__CDT_NONE: not inserted yet */
-  if ((st = insert_vertices(g)) || (st = insert_segments(g))) return st;
+  if ((st = insert_vertices(g))) return st;
+  return insert_segments(g);
+}
+
+qk_status_t qk__gm_build(qk__gm_t *g) {
+  qk_status_t st = qk__gm_check_input(g);
+  if (st) return st;
   if (qk__gm_fit(g) || label_faces(g) || input_angles(g))
     return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   if ((st = holes_and_regions(g))) return st;

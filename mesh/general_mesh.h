@@ -103,6 +103,7 @@ typedef struct qk__gm {
   size_t seeds, free_leaves; /* seeds inserted; free leaves meeting the bounding box */
   double smallest_input_angle;
   size_t deep_splits, deep_cap; /* the grading's splits below 2^-36 of the root square */
+  size_t sep_splits, sep_cap;   /* the grading's splits that separate features, at any depth */
   const char *stage;            /* the step running, for messages: "grading the quadtree", ... */
 } qk__gm_t;
 
@@ -121,6 +122,9 @@ static inline const double *qk__gm_vxy(const qk__gm_t *g, uint32_t v) { return &
 
 /* general_build.c: root square, the CDT of the input (validation), faces, holes, regions. */
 qk_status_t qk__gm_build(qk__gm_t *g);
+/* Its first part: the root square and the CDT of the input's vertices and segments, which
+ * refuses duplicates, vertices on segments and crossings (expected O(n log n)). */
+qk_status_t qk__gm_check_input(qk__gm_t *g);
 /* Grow the per-vertex and per-triangle arrays to nv vertices and nt triangles: exactly
  * (a reservation for the final size) or by doubling. */
 qk_status_t qk__gm_fit_to(qk__gm_t *g, size_t nv, size_t nt, int exact);

@@ -74,6 +74,17 @@ static qk_status_t name_failure(const qk__gm_t *g, qk_status_t st) {
   return st;
 }
 
+qk_status_t qk__mesh_general_check(const qk_poly_t *P, const qk_mesh_options_t *opt,
+                                   qk_allocator_t *a, qk_mesh_error_t *err) {
+  qk__gm_t g;
+  memset(&g, 0, sizeof g);
+  g.a = a, g.P = P, g.opt = opt, g.err = err;
+  g.stage = "checking the input";
+  qk_status_t st = name_failure(&g, qk__gm_check_input(&g));
+  gm_free(&g);
+  return st;
+}
+
 qk_status_t qk__mesh_general(const qk_poly_t *P, const qk_mesh_options_t *opt, qk_mesh_t *m,
                              qk_mesh_error_t *err) {
   if (!(opt->min_angle_deg >= 0 && opt->min_angle_deg <= 34))

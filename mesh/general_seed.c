@@ -39,6 +39,12 @@
  * is refused, before seconds of work. */
 #define GM_DEEP 36
 #define GM_DEEP_BUDGET 4096
+/* Splits separating features at any depth: the coastlines take one or two a feature
+ * (Norway: 1,953 segments, 4,596 splits), so more than GM_SEP_BUDGET plus 256 per
+ * feature means two features close along a stretch far longer than their gap, above the
+ * 2^-36 that GM_DEEP watches (a 2^31 by 1 rectangle: 2^31 cells; before this cap it ran
+ * into GM_NODE_CAP after 18 s and 2.5 GB). Refused at about 2^20 nodes instead. */
+#define GM_SEP_BUDGET ((size_t)1 << 18)
 
 /* Lattice to input coordinates; multiplying by S = 2^e is exact (and cheaper than ldexp). */
 static double in_x(const qk__gm_t *g, double X) { return g->X0 + X * g->S; }
@@ -130,7 +136,7 @@ static void grown_box(const qk__gm_t *g, double X, double Y, double s, double lo
 }
 
 /* The refusal of a grading that would go on too finely along two features. */
-static qk_status_t too_close(const qk__gm_t *g, uint32_t f, uint32_t h, double s) {
+static qk_status_t too_close(const qk__gm_t *g, uint32_t f, uint32_t h, double s, int deep) {
   const qk_poly_t *P = g->P;
   uint32_t nv = (uint32_t)P->nv, id[2] = {f, h};
   char nm[2][96];
@@ -141,6 +147,13 @@ static qk_status_t too_close(const qk__gm_t *g, uint32_t f, uint32_t h, double s
     qk__gm_name(P, v ? "vertex" : "segment", j, line, nm[i]);
   }
   double gap = 1.5 * s * g->S, ext = fmax(g->bx1 - g->bx0, g->by1 - g->by0);
+  if (!deep)
+    return qk__mesh_fail(g->err, QK_ERR_LIMIT, 0,
+                         "%s and %s stay within %.3g of each other along a stretch of the "
+                         "input (extent %.17g, ratio %.3g): grading the quadtree to their gap "
+                         "along it would take more than %zu cell splits (2^18 + 256 per "
+                         "feature; the mesh would be as large)",
+                         nm[0], nm[1], gap, ext, ext / gap, g->sep_cap);
   return qk__mesh_fail(g->err, QK_ERR_LIMIT, 0,
                        "%s and %s stay within %.3g of each other along a stretch of the input "
                        "(extent %.17g, ratio %.3g): grading the quadtree to their gap along it "
@@ -161,9 +174,11 @@ static qk_status_t subdivide(qk__gm_t *g, uint32_t node, double X, double Y, dou
     if (k > 48) split = 1;
     for (size_t i = 0; i < k && !split; i++)
       for (size_t j = i + 1; j < k && !split; j++)
-        if ((split = separate(g, L[i], L[j], lo, hi)) && depth >= GM_DEEP &&
-            ++g->deep_splits > g->deep_cap)
-          return too_close(g, L[i], L[j], s);
+        if ((split = separate(g, L[i], L[j], lo, hi))) {
+          if (depth >= GM_DEEP && ++g->deep_splits > g->deep_cap)
+            return too_close(g, L[i], L[j], s, 1);
+          if (++g->sep_splits > g->sep_cap) return too_close(g, L[i], L[j], s, 0);
+        }
     if (!split && GM_SIZE_SPLITS(g) && (g->opt->max_size > 0 || g->opt->size_fn)) {
       double x0 = in_x(g, X), y0 = in_y(g, Y), x1 = in_x(g, X + s), y1 = in_y(g, Y + s);
       if (x1 >= g->bx0 && x0 <= g->bx1 && y1 >= g->by0 && y0 <= g->by1) {
@@ -532,6 +547,7 @@ qk_status_t qk__gm_seed(qk__gm_t *g, qk_mesh_stats_t *stats) {
   nf = k;
   g->arena_n = nf;
   g->deep_cap = GM_DEEP_BUDGET + 256 * nf;
+  g->sep_cap = GM_SEP_BUDGET + 256 * nf;
   double rlo[2], rhi[2];
   grown_box(g, 0, 0, 1, rlo, rhi);
   if ((st = subdivide(g, qk_tree_root(g->tree), 0, 0, 1, rlo, rhi, 0, 0, nf))) return st;

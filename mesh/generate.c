@@ -115,6 +115,9 @@ static qk_status_t classic_ok(const qk_poly_t *P, const qk_mesh_options_t *o, in
       if (!(P->vx[i] >= 0 && P->vy[i] >= 0 && P->vx[i] <= (double)QK_MESH_MAX_SIZE &&
             P->vy[i] <= (double)QK_MESH_MAX_SIZE))
         return QK_OK;
+    /* What the book's mode would refuse as too large goes to the general mode (as the
+     * dyadic mode's refusals do, through qk__mesh_lattice below). */
+    if (qk__mesh_book_limit(P, o, 0, NULL)) return QK_OK;
   } else {
     qk__lattice_t L;
     qk_mesh_error_t e;
@@ -368,7 +371,8 @@ qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *opt
     st = qk__mesh_fail(err, st, 0, "out of memory");
   if (onlat) g.poly = onlat;
   m->lat = g.lat;
-  if (!st && !(st = qk__mesh_validate(&g, book ? opt.size : 0))) {
+  if (!st && !(st = qk__mesh_validate(&g, book ? opt.size : 0)) &&
+      !(st = qk__mesh_precheck(g.poly, g.src, &opt, book ? g.U : 0, &m->alloc, err))) {
     m->size = g.U;
     m->stats.components = g.ncomp;
     t1 = now();

@@ -30,6 +30,46 @@ static int frac_bits(double c) {
   return bits > 0 ? bits : 0;
 }
 
+double qk__mesh_lattice_steps(const qk_poly_t *P, int f, size_t *longest) {
+  double steps = 0, most = -1;
+  for (size_t s = 0; s < P->ns; s++) {
+    uint32_t a = P->seg[2 * s], b = P->seg[2 * s + 1];
+    double n = ldexp(fmax(fabs(P->vx[a] - P->vx[b]), fabs(P->vy[a] - P->vy[b])), f);
+    steps += n;
+    if (longest && n > most) most = n, *longest = s;
+  }
+  return steps;
+}
+
+qk_status_t qk__mesh_book_limit(const qk_poly_t *P, const qk_mesh_options_t *opt, uint64_t U,
+                                qk_mesh_error_t *err) {
+  if (!U) { /* the default domain: the smallest power of two >= every coordinate */
+    double most = 1;
+    for (size_t i = 0; i < P->nv; i++) most = fmax(most, fmax(P->vx[i], P->vy[i]));
+    for (U = 1; (double)U < most;) U *= 2;
+  }
+  size_t k = 0;
+  double steps = qk__mesh_lattice_steps(P, 0, &k), u = (double)U;
+  double by_size = opt->max_size > 0 ? 4 * (u / opt->max_size) * (u / opt->max_size) : 0;
+  if (!(steps > QK__MESH_MAX_STEPS || by_size > QK__MESH_MAX_STEPS)) return QK_OK;
+  if (!(steps > QK__MESH_MAX_STEPS) || !P->ns)
+    return qk__mesh_fail(err, QK_ERR_LIMIT, 0,
+                         "max_size %.17g asks the book's mode for about %.3g triangles in the "
+                         "domain of side %llu (at most %.3g): use a larger size bound or the "
+                         "general mode (--general, QK_MESH_GENERAL)",
+                         opt->max_size, by_size, (unsigned long long)U, (double)QK__MESH_MAX_STEPS);
+  uint32_t a = P->seg[2 * k], b = P->seg[2 * k + 1];
+  return qk__mesh_fail(err, QK_ERR_LIMIT, P->sline ? P->sline[k] : 0,
+                       "the book's mode would need %.3g unit steps along the segments (at most "
+                       "%.3g; segment %lu from (%.17g, %.17g) to (%.17g, %.17g) alone has "
+                       "%.17g): it splits every cell along a segment down to unit size. Use the "
+                       "general mode (--general, QK_MESH_GENERAL), which grades the cells to the "
+                       "input's features, or scale the input down",
+                       steps, (double)QK__MESH_MAX_STEPS, qk__mesh_num(P, k), P->vx[a], P->vy[a],
+                       P->vx[b], P->vy[b],
+                       fmax(fabs(P->vx[a] - P->vx[b]), fabs(P->vy[a] - P->vy[b])));
+}
+
 qk_status_t qk__mesh_lattice(const qk_poly_t *P, const qk_mesh_options_t *opt, int book,
                              qk__lattice_t *L, qk_mesh_error_t *err) {
   memset(L, 0, sizeof *L);
@@ -73,11 +113,7 @@ qk_status_t qk__mesh_lattice(const qk_poly_t *P, const qk_mesh_options_t *opt, i
   /* The book's step 1 splits every square along the segments down to unit size, so the
    * mesh has a few triangles per lattice step of boundary; a size bound gives about
    * 4 (extent / H)^2. Refuse what could not fit in memory rather than try. */
-  double steps = 0;
-  for (size_t s = 0; s < P->ns; s++) {
-    uint32_t a = P->seg[2 * s], b = P->seg[2 * s + 1];
-    steps += ldexp(fmax(fabs(P->vx[a] - P->vx[b]), fabs(P->vy[a] - P->vy[b])), f);
-  }
+  double steps = qk__mesh_lattice_steps(P, f, NULL);
   double by_size = opt->max_size > 0 ? 4 * (range / opt->max_size) * (range / opt->max_size) : 0;
   if (steps > QK__MESH_MAX_STEPS || by_size > QK__MESH_MAX_STEPS)
     return qk__mesh_fail(err, QK_ERR_LIMIT, P->vline[finest],
@@ -127,4 +163,25 @@ void qk__mesh_lattice_poly_free(qk_poly_t *q) {
   if (!q) return;
   q->vline = q->sline = q->hline = NULL; /* borrowed from the original */
   qk_poly_free(q);
+}
+
+/* A large input is checked for crossings, vertices on segments and duplicates exactly
+ * and in O(n log n) (the general mode's CDT of the input) before the subdivision, which
+ * would find them only after work proportional to the lattice steps. Only its geometric
+ * refusals count: an input the CDT's predicates cannot take (an extent below 2^-200, on
+ * a fine dyadic lattice) is left to the subdivision, as before. Smaller inputs are not
+ * checked twice, so their messages are the subdivision's, unchanged. */
+qk_status_t qk__mesh_precheck(const qk_poly_t *lat, const qk_poly_t *src,
+                              const qk_mesh_options_t *opt, uint64_t book_U, qk_allocator_t *a,
+                              qk_mesh_error_t *err) {
+  qk_status_t st;
+  if (book_U && (st = qk__mesh_book_limit(src, opt, book_U, err))) return st;
+  if (!(qk__mesh_lattice_steps(lat, 0, NULL) > QK__MESH_PRECHECK_STEPS)) return QK_OK;
+  qk_mesh_error_t e;
+  st = qk__mesh_general_check(src, opt, a, &e);
+  if (st == QK_ERR_GEOMETRY || st == QK_ERR_NOMEM) {
+    if (err) *err = e;
+    return st;
+  }
+  return QK_OK;
 }

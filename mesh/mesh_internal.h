@@ -195,6 +195,17 @@ qk_status_t qk__mesh_find_regions(qk__gen_t *g, qk__tri_state_t *T, const qk__le
  * dyadic mode accepts: about 2^25 triangles, a few GB at most. */
 #define QK__MESH_MAX_STEPS ((double)(1 << 24))
 
+/* Lattice steps (of 2^-f) along the segments: the sum over segments of the larger of
+ * |dx| and |dy| times 2^f; *longest (may be NULL) gets the segment with the most. */
+double qk__mesh_lattice_steps(const qk_poly_t *P, int f, size_t *longest);
+
+/* The book's mode on domain side U (0: the default, from the coordinates): QK_ERR_LIMIT (a message
+ * in err, naming the longest segment, when err is not NULL) when it would take more than
+ * QK__MESH_MAX_STEPS unit steps along the segments or about that many triangles for the size bound,
+ * as the dyadic mode refuses (mesh/lattice.c). */
+qk_status_t qk__mesh_book_limit(const qk_poly_t *P, const qk_mesh_options_t *opt, uint64_t U,
+                                qk_mesh_error_t *err);
+
 /* Choose the lattice for an input (mesh/lattice.c): the book's (f = 0, origin 0) when
  * `book`, else the coarsest dyadic lattice holding every vertex exactly and fine enough
  * for opt->max_size. Fails with QK_ERR_GEOMETRY naming the vertex when none fits. */
@@ -221,6 +232,28 @@ qk_status_t qk__mesh_refine(qk__gen_t *g);
  * caller frees it). */
 qk_status_t qk__mesh_general(const qk_poly_t *P, const qk_mesh_options_t *opt, qk_mesh_t *m,
                              qk_mesh_error_t *err);
+
+/* The general mode's check of the input alone (mesh/general_run.c): the CDT of P's
+ * vertices and segments, refusing duplicate vertices, vertices on segments and crossing
+ * or overlapping segments with QK_ERR_GEOMETRY (naming both), in expected O(n log n);
+ * QK_ERR_LIMIT for an extent its predicates cannot take. Nothing is kept. */
+qk_status_t qk__mesh_general_check(const qk_poly_t *P, const qk_mesh_options_t *opt,
+                                   qk_allocator_t *a, qk_mesh_error_t *err);
+
+/* Lattice steps along the segments above which the lattice modes check the input for
+ * crossings with qk__mesh_general_check before subdividing: their own check happens during
+ * the subdivision, whose work grows with the steps (2^24 steps: minutes and gigabytes
+ * before a crossing was reported). */
+#define QK__MESH_PRECHECK_STEPS ((double)(1 << 16))
+
+/* After a lattice mode's validation: the book's limit (qk__mesh_book_limit, when book_U,
+ * the book's domain side, is not 0), then that check for an input (lat: on its lattice,
+ * src: as given) of more than QK__MESH_PRECHECK_STEPS steps; its QK_ERR_GEOMETRY and
+ * QK_ERR_NOMEM are returned (with err filled), anything else is left to the lattice
+ * mode's own checks (mesh/lattice.c). */
+qk_status_t qk__mesh_precheck(const qk_poly_t *lat, const qk_poly_t *src,
+                              const qk_mesh_options_t *opt, uint64_t book_U, qk_allocator_t *a,
+                              qk_mesh_error_t *err);
 
 /* The output segments and vertex markers of a finished mesh (mesh/markers.c). */
 qk_status_t qk__mesh_markers(qk__gen_t *g, qk_mesh_t *m);

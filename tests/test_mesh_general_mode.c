@@ -862,6 +862,52 @@ static void refused_quickly(const double *xy, size_t nv, const uint32_t *seg, si
   qk_poly_free(p);
 }
 
+/* An allocator that records the most bytes live at once: a refusal's peak memory
+ * measures the work done before it, deterministically (no clock). */
+typedef struct peak_alloc {
+  size_t live, peak;
+} peak_alloc_t;
+
+static void *peak_fn(void *ud, void *ptr, size_t osize, size_t nsize) {
+  peak_alloc_t *a = ud;
+  if (nsize == 0) {
+    if (ptr) a->live -= osize;
+    free(ptr);
+    return NULL;
+  }
+  void *q = realloc(ptr, nsize);
+  if (!q) return NULL;
+  a->live = a->live - (ptr ? osize : 0) + nsize;
+  if (a->live > a->peak) a->peak = a->live;
+  return q;
+}
+
+/* Meshes xy in `mode` expecting a refusal with st whose message holds every string of
+ * want (NULL-terminated), having had at most max_mb megabytes live at any time. */
+static void refused_small(const double *xy, size_t nv, const uint32_t *seg, size_t ns,
+                          qk_mesh_mode_t mode, qk_status_t st, const char *const *want,
+                          double max_mb) {
+  qk_poly_t *p;
+  qk_mesh_t *m = NULL;
+  qk_mesh_error_t err;
+  assert_int_equal(qk_poly_from_arrays(xy, nv, seg, ns, NULL, 0, NULL, &p, &err), QK_OK);
+  peak_alloc_t pa = {0, 0};
+  qk_allocator_t a = {peak_fn, &pa};
+  qk_mesh_options_t o;
+  qk_mesh_options_init(&o);
+  o.mode = mode, o.allocator = &a;
+  qk_status_t got = qk_mesh_generate(p, &o, &m, &err);
+  printf("# peak %.1f MB: %s\n", (double)pa.peak / 1048576, err.message);
+  if (got != st) fail_msg("%s, not %s: %s", qk_strerror(got), qk_strerror(st), err.message);
+  for (size_t i = 0; want[i]; i++)
+    if (!strstr(err.message, want[i])) fail_msg("\"%s\" not in \"%s\"", want[i], err.message);
+  assert_null(m);
+  assert_int_equal(pa.live, 0);
+  if ((double)pa.peak > max_mb * 1048576)
+    fail_msg("%.1f MB live before the refusal", (double)pa.peak / 1048576);
+  qk_poly_free(p);
+}
+
 /* Hostile inputs get a clear refusal at once (fuzz/regressions/mesh_general/isolated-*). */
 static void test_mesh_general_mode_hostile(void **state) {
   (void)state;
@@ -878,6 +924,78 @@ static void test_mesh_general_mode_hostile(void **state) {
   /* And far below: 1e-70 apart. */
   double c[6] = {0, 0, 1e-70, 0, 0, 1e-70};
   refused_quickly(c, 3, NULL, 0, QK_ERR_LIMIT, "below 2^-200");
+}
+
+/* Two features close along a stretch far longer than their gap, above the 2^-36 of the
+ * extent that the deep-split budget watches: a 2^31 by 1 rectangle (once 2^27 cells, 18 s
+ * and 2.5 GB before "the size bound asks for more than 2^27 quadtree cells", with no size
+ * bound), and 400 segments 1e-9 apart across a unit square (the same). Refused by the
+ * grading's separation budget, naming two features, after a few MB. */
+static void test_mesh_general_mode_long_gap(void **state) {
+  (void)state;
+  double r[8] = {0, 0, 2147483648.0, 0, 2147483648.0, 1, 0, 1};
+  uint32_t rs[8] = {0, 1, 1, 2, 2, 3, 3, 0};
+  const char *w1[] = {"segment 0 and segment 2 stay within", "cell splits", NULL};
+  refused_small(r, 4, rs, 4, QK_MESH_GENERAL, QK_ERR_LIMIT, w1, 64);
+  refused_small(r, 4, rs, 4, QK_MESH_AUTO, QK_ERR_LIMIT, w1, 64);
+  double st[2 * 408];
+  uint32_t ss[2 * 404];
+  double sq[8] = {0, 0, 1, 0, 1, 1, 0, 1};
+  memcpy(st, sq, sizeof sq);
+  for (uint32_t i = 0; i < 4; i++) ss[2 * i] = i, ss[2 * i + 1] = (i + 1) % 4;
+  for (uint32_t i = 0; i < 200; i++) {
+    double y = 0.1 + i * 1e-9;
+    st[8 + 4 * i] = 0.1, st[9 + 4 * i] = y, st[10 + 4 * i] = 0.9, st[11 + 4 * i] = y + 1e-12;
+    ss[8 + 2 * i] = 4 + 2 * i, ss[9 + 2 * i] = 5 + 2 * i;
+  }
+  const char *w2[] = {"stay within", "cell splits", NULL};
+  refused_small(st, 404, ss, 204, QK_MESH_GENERAL, QK_ERR_LIMIT, w2, 64);
+}
+
+/* Integer, axis-parallel input of a huge extent: the book's mode would split every cell
+ * along the segments down to unit size (a square of side 2^30: 2^32 unit steps; it ran out
+ * of time and memory). QK_MESH_AUTO hands it to the general mode, as it does with what the
+ * dyadic mode refuses, and QK_MESH_BOOK refuses at once naming the longest segment and the
+ * way out; so does a size bound asking the book's mode for 2^60 triangles. */
+static void test_mesh_general_mode_book_extent(void **state) {
+  (void)state;
+  double U = 1073741824.0, sq[16] = {0, 0, U, 0, U, U, 0, U, 5, 5, 6, 5, 6, 6, 5, 6};
+  uint32_t seg[16] = {0, 1, 1, 2, 2, 3, 3, 0, 4, 5, 5, 6, 6, 7, 7, 4};
+  shape_t *s = calloc(1, sizeof *s);
+  assert_non_null(s);
+  const double outer[8] = {0, 0, U, 0, U, U, 0, U};
+  sh_ring(s, outer, 4);
+  qk_poly_t *p = sh_poly(s, NULL);
+  qk_mesh_t *m = mesh_of(p, NULL);
+  check_out_t c = check_general(s, m, 20);
+  assert_int_equal(c.nt, 2);
+  qk_mesh_free(m);
+  qk_poly_free(p);
+  free(s);
+  const char *w1[] = {"unit steps along the segments", "segment 0 from (0, 0) to (1073741824, 0)",
+                      "--general", NULL};
+  refused_small(sq, 8, seg, 8, QK_MESH_BOOK, QK_ERR_LIMIT, w1, 8);
+  /* A unit square alone in a domain of side 2^30 is small (the domain's boundary is not
+   * refined), but not with a size bound of 2. */
+  assert_int_equal(qk_poly_from_arrays(sq + 8, 4, seg, 4, NULL, 0, NULL, &p, NULL), QK_OK);
+  qk_mesh_options_t o;
+  qk_mesh_options_init(&o);
+  o.mode = QK_MESH_BOOK, o.size = 1u << 30;
+  m = mesh_of(p, &o);
+  qk_mesh_free(m);
+  o.max_size = 2;
+  qk_mesh_error_t err;
+  assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_ERR_LIMIT);
+  assert_non_null(strstr(err.message, "max_size 2 asks the book's mode for about"));
+  assert_null(m);
+  qk_poly_free(p);
+  /* A square of side 2^20 (2^22 unit steps) crossed by a small one: the book's own check
+   * finds crossings during the subdivision, 5 s and 0.7 GB later. Inputs of more than 2^16
+   * steps get the general mode's CDT check first (O(n log n)): refused at once. */
+  double V = 1048576.0, cr[16] = {0, 0, V, 0, V, V, 0, V, V - 1, 5, V + 1, 5, V + 1, 7, V - 1, 7};
+  const char *w2[] = {"segments 1 and 4 cross or overlap", NULL};
+  refused_small(cr, 8, seg, 8, QK_MESH_BOOK, QK_ERR_GEOMETRY, w2, 8);
+  refused_small(cr, 8, seg, 8, QK_MESH_AUTO, QK_ERR_GEOMETRY, w2, 8);
 }
 
 /* The automatic choice: 45-degree integer input stays the book's, real 45-degree input
@@ -1008,6 +1126,8 @@ int main(void) {
       cmocka_unit_test(test_mesh_general_mode_refusals),
       cmocka_unit_test(test_mesh_general_mode_auto),
       cmocka_unit_test(test_mesh_general_mode_hostile),
+      cmocka_unit_test(test_mesh_general_mode_long_gap),
+      cmocka_unit_test(test_mesh_general_mode_book_extent),
       cmocka_unit_test(test_mesh_general_mode_alloc_failure),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);

@@ -120,6 +120,17 @@ printf '4 2 0 0\n0 0 0\n1 1 0\n2 1 1\n3 0 1\n4 0\n0 0 2\n1 1 3\n2 0 1\n3 2 3\n0\
 expect 1 'cross.poly:[0-9]+: .*segments 0 \(line 7\) and 1 \(line 8\) meet' -- "$cli" mesh "$tmp/cross.poly" -o "$tmp/d"
 printf '4 2 0 0\n0 0 0\n1 1 0\n2 1 1\n3 0 1\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n1\n0 5 5\n' >"$tmp/hole.poly"
 expect 1 'hole.poly:12: hole 0 at \(5, 5\) lies outside the domain' -- "$cli" mesh "$tmp/hole.poly" -o "$tmp/d"
+# Integer, axis-parallel, huge: a square of side 2^30 ran out of time and memory in the
+# book's mode (unit cells all along its sides). Automatically the general mode meshes it;
+# --book refuses at once, naming the longest segment and the way out.
+printf '4 2 0 0\n0 0 0\n1 1073741824 0\n2 1073741824 1073741824\n3 0 1073741824\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n0\n' >"$tmp/huge.poly"
+expect 0 '"mode": "general"' -- "$cli" mesh "$tmp/huge.poly" -o "$tmp/h" --stats
+expect 1 "huge.poly:7: the book's mode would need 4.29e\\+09 unit steps .*segment 0 from \\(0, 0\\) to \\(1073741824, 0\\).*--general" -- \
+  "$cli" mesh "$tmp/huge.poly" -o "$tmp/d" --book
+# A 2^31 by 1 rectangle: the general mode would need 2^31 cells along it; refused naming both
+# long sides (once 18 s and 2.5 GB).
+printf '4 2 0 0\n0 0 0\n1 2147483648 0\n2 2147483648 1\n3 0 1\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n0\n' >"$tmp/sliver.poly"
+expect 1 'sliver.poly: segment 0 \(line 7\) and segment 2 \(line 9\) stay within' -- "$cli" mesh "$tmp/sliver.poly" -o "$tmp/d"
 # Two outputs naming one file: a usage error before any work, the file untouched.
 echo keep >"$tmp/same.node"
 expect 2 'both write' -- "$cli" mesh "$tmp/bom.poly" -o "$tmp/same" --svg "$tmp/same.node"
