@@ -14,6 +14,8 @@
  * final sort is needed), its ids read at the end;
  * beyond that a bounded max-heap in the caller's buffer (query/heap.c).
  */
+#include <string.h>
+
 #include "query/query_internal.h"
 
 #if defined(__SSE2__)
@@ -266,6 +268,18 @@ static inline uint64_t within(const double *xs, const double *ys, uint32_t m, do
   return mask;
 }
 
+/* 1 when a > b, else 0, for a and b each either >= +0 or -infinity (squared distances and
+ * the sorted array's sentinel), as data: the bits of such doubles, read as signed
+ * integers, are in the same order (every negative one below every non-negative one), and
+ * an integer comparison becomes a flag, where compilers turn the double one into a branch
+ * that goes either way at random. */
+static inline size_t gt_bit(double a, double b) {
+  int64_t ia, ib;
+  memcpy(&ia, &a, sizeof ia);
+  memcpy(&ib, &b, sizeof ib);
+  return ia > ib;
+}
+
 /*
  * Offer a leaf's points to a sorted array of at most k (squared distance, slot) pairs.
  * The array keeps slots, not ids, as the k = 1 search does: an id is read
@@ -299,9 +313,19 @@ static inline void scan_sorted(const qk_tree_t *t, qk_node_t leaf, double qx, do
       } else {
         at = o + n++;
       }
-      /* o[-1] is a sentinel at distance -infinity (knn_search), so no bound check, and
-       * the tie loop never reads its slot. */
-      for (; at[-1].dist > v; at--) *at = at[-1];
+      /* o[-2] and o[-1] are sentinels at distance -infinity (knn_limited), so no bound
+       * check, and the tie loop never reads their slots. Two entries a step while both
+       * move (the array is sorted: at[-2] above v means at[-1] too), then the last one
+       * without a branch: it is copied up in any case, and overwritten by the new entry
+       * when it was not above v. */
+      while (at[-2].dist > v) {
+        at[0] = at[-1];
+        at[-1] = at[-2];
+        at -= 2;
+      }
+      const qk_neighbor_t last = at[-1];
+      at[0] = last;
+      at -= gt_bit(last.dist, v);
       if (at[-1].dist == v) {
         const qk_id_t id = pid[s];
         for (; at[-1].dist == v && pid[at[-1].id] > id; at--) *at = at[-1];
@@ -500,25 +524,44 @@ static double guess_limit(const qk_tree_t *t, const qk__path_t *p, size_t k) {
   return ((double)k + 2.0 * sqrt((double)k) + 4.0) * side * side / (3.14159 * (double)cnt);
 }
 
+/*
+ * The sorted array's n entries (slot, squared distance) as (id, distance) into out: two
+ * square roots in one instruction where SSE2 is there (sqrtpd, the correctly rounded root
+ * in each lane, as sqrt() gives; the squared distances are >= 0, so the library call's
+ * domain check, which compilers keep beside the instruction, has nothing to catch).
+ */
+static inline void finish_sorted(const qk_id_t *pid, const qk_neighbor_t *e, size_t n,
+                                 qk_neighbor_t *out) {
+  size_t i = 0;
+#if defined(__SSE2__)
+  for (; i + 2 <= n; i += 2) {
+    const __m128d r = _mm_sqrt_pd(_mm_loadh_pd(_mm_load_sd(&e[i].dist), &e[i + 1].dist));
+    out[i].id = pid[e[i].id];
+    out[i + 1].id = pid[e[i + 1].id];
+    _mm_store_sd(&out[i].dist, r);
+    _mm_storeh_pd(&out[i + 1].dist, r);
+  }
+#endif
+  for (; i < n; i++) out[i] = (qk_neighbor_t){pid[e[i].id], sqrt(e[i].dist)};
+}
+
 /* Any k > 1 with a limit (squared): how many of out hold neighbours (squared distances
  * in b->out), sorted, into out; the ids of a sorted search's slots are read at the end. */
 static size_t knn_limited(const qk_tree_t *t, double qx, double qy, size_t k, double limit2,
                           qk_neighbor_t *out, const qk__path_t *path) {
   best_t b = {out, k, 0, limit2, QK_NONE};
   if (k <= QK__KNN_SORTED) {
-    /* The sorted array lives here, after a sentinel that ends every insertion's shift
+    /* The sorted array lives here, after two sentinels that end every insertion's shift
      * without a bound check. */
-    qk_neighbor_t sorted[QK__KNN_SORTED + 1];
-    sorted[0] = (qk_neighbor_t){QK_NONE, -INFINITY};
+    qk_neighbor_t sorted[QK__KNN_SORTED + 2];
+    sorted[0] = sorted[1] = (qk_neighbor_t){QK_NONE, -INFINITY};
     /* The last entry holds the limit until an insertion reaches it, so that the
      * threshold is always the last entry's distance (no test on the count). */
-    sorted[k] = (qk_neighbor_t){QK_NONE, limit2};
-    b.out = sorted + 1;
+    sorted[k + 1] = (qk_neighbor_t){QK_NONE, limit2};
+    b.out = sorted + 2;
     search(t, qx, qy, &b, KIND_SORTED, path);
     /* The entries hold slots: their ids now, whose reads do not wait for one another. */
-    const qk_id_t *pid = qk__tree_ids(t);
-    for (size_t i = 0; i < b.n; i++)
-      out[i] = (qk_neighbor_t){pid[sorted[i + 1].id], sqrt(sorted[i + 1].dist)};
+    finish_sorted(qk__tree_ids(t), b.out, b.n, out);
   } else {
     search(t, qx, qy, &b, KIND_HEAP, path);
     qk__heap_sort(out, b.n);
