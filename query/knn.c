@@ -281,12 +281,39 @@ static inline size_t gt_bit(double a, double b) {
 }
 
 /*
+ * Insert (s, v) at `at` or below in a sorted array of (squared distance, slot) pairs, by
+ * (distance, id): the larger entries move up by one. at[-2] and at[-1] down to the
+ * array's start hold entries or the sentinels at distance -infinity below it (so no bound
+ * check, and the tie loop never reads a sentinel's slot). Two entries a step while both
+ * move (the array is sorted: at[-2] above v means at[-1] too), then the last one without
+ * a branch: it is copied up in any case, and overwritten by the new entry when it was not
+ * above v. Compares distances alone while they differ; ids are read only on a tie.
+ */
+static inline void insert_sorted(qk_neighbor_t *at, const qk_id_t *pid, uint32_t s, double v) {
+  while (at[-2].dist > v) {
+    at[0] = at[-1];
+    at[-1] = at[-2];
+    at -= 2;
+  }
+  const qk_neighbor_t last = at[-1];
+  at[0] = last;
+  at -= gt_bit(last.dist, v);
+  if (at[-1].dist == v) {
+    const qk_id_t id = pid[s];
+    for (; at[-1].dist == v && pid[at[-1].id] > id; at--) *at = at[-1];
+  }
+  *at = (qk_neighbor_t){s, v};
+}
+
+/*
  * Offer a leaf's points to a sorted array of at most k (squared distance, slot) pairs.
  * The array keeps slots, not ids, as the k = 1 search does: an id is read
  * only when two distances tie (the (distance, id) order), and the k ids at the end, all
  * at once (knn_search). In a tree larger than the cache the ids are lines of their own,
- * and most candidates are pushed out again before the end. The insertion compares
- * distances alone while they differ (one comparison per entry moved).
+ * and most candidates are pushed out again before the end. A chunk's points within the
+ * threshold go in two loops: into free entries while the array fills, then over the last
+ * entry when they beat it; the count is tested once per point either way, but the test
+ * ends the first loop only once per search, where a test inside one loop went either way.
  */
 static inline void scan_sorted(const qk_tree_t *t, qk_node_t leaf, double qx, double qy,
                                best_t *b) {
@@ -297,45 +324,26 @@ static inline void scan_sorted(const qk_tree_t *t, qk_node_t leaf, double qx, do
   const size_t k = b->k;
   /* In locals: the stores into o could alias them. */
   size_t n = b->n;
-  double thr = b->thr;
   double d2[QK__SCAN_CHUNK];
   for (uint32_t base = 0; base < count; base += QK__SCAN_CHUNK) {
     const uint32_t m = count - base < QK__SCAN_CHUNK ? count - base : QK__SCAN_CHUNK;
-    for (uint64_t r = within(xs + base, ys + base, m, qx, qy, thr, d2); r; r &= r - 1) {
+    /* The threshold is the last entry's distance: the caller's limit until the array is
+     * full (knn_limited), then the k-th best. */
+    uint64_t r = within(xs + base, ys + base, m, qx, qy, o[k - 1].dist, d2);
+    for (; r && n < k; r &= r - 1) {
+      const uint32_t i = ctz64(r);
+      insert_sorted(o + n++, pid, start + base + i, d2[i]);
+    }
+    for (; r; r &= r - 1) {
       const uint32_t i = ctz64(r), s = start + base + i;
       const double v = d2[i];
-      qk_neighbor_t *at;
-      if (n == k) {
-        /* The threshold is the last entry's distance, which may have shrunk since. */
-        const qk_neighbor_t w = o[k - 1];
-        if (!(v < w.dist || (v == w.dist && pid[s] < pid[w.id]))) continue;
-        at = o + k - 1;
-      } else {
-        at = o + n++;
-      }
-      /* o[-2] and o[-1] are sentinels at distance -infinity (knn_limited), so no bound
-       * check, and the tie loop never reads their slots. Two entries a step while both
-       * move (the array is sorted: at[-2] above v means at[-1] too), then the last one
-       * without a branch: it is copied up in any case, and overwritten by the new entry
-       * when it was not above v. */
-      while (at[-2].dist > v) {
-        at[0] = at[-1];
-        at[-1] = at[-2];
-        at -= 2;
-      }
-      const qk_neighbor_t last = at[-1];
-      at[0] = last;
-      at -= gt_bit(last.dist, v);
-      if (at[-1].dist == v) {
-        const qk_id_t id = pid[s];
-        for (; at[-1].dist == v && pid[at[-1].id] > id; at--) *at = at[-1];
-      }
-      *at = (qk_neighbor_t){s, v};
-      thr = o[k - 1].dist; /* the caller's limit until the array is full (knn_limited) */
+      /* The last entry may have shrunk since the mask was taken. */
+      const qk_neighbor_t w = o[k - 1];
+      if (v < w.dist || (v == w.dist && pid[s] < pid[w.id])) insert_sorted(o + k - 1, pid, s, v);
     }
   }
   b->n = n;
-  b->thr = thr;
+  b->thr = o[k - 1].dist;
 }
 
 /* Ask for the x and y lines of a leaf's first points (at most 64). */
