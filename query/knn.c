@@ -110,7 +110,10 @@ static inline void push_siblings(const qk_tree_t *t, qk__cell_t p, uint32_t chil
     m += (q != skip) & (b[q] <= thr);
   }
   qk__sort_cells_desc(kids, m);
-  for (int i = 0; i < m; i++) stack[(*sp)++] = kids[i];
+  /* At most three pass (one child is skipped): all three places written, m of them kept,
+   * with no loop on m (the stack has room for three beyond its deepest fill). */
+  for (int i = 0; i < 3; i++) stack[*sp + i] = kids[i];
+  *sp += m;
 }
 
 /*
