@@ -14,8 +14,6 @@
  * final sort is needed), its ids read at the end;
  * beyond that a bounded max-heap in the caller's buffer (query/heap.c).
  */
-#include <string.h>
-
 #include "query/query_internal.h"
 
 #if defined(__SSE2__)
@@ -271,16 +269,15 @@ static inline uint64_t within(const double *xs, const double *ys, uint32_t m, do
   return mask;
 }
 
-/* 1 when a > b, else 0, for a and b each either >= +0 or -infinity (squared distances and
- * the sorted array's sentinel), as data: the bits of such doubles, read as signed
- * integers, are in the same order (every negative one below every non-negative one), and
- * an integer comparison becomes a flag, where compilers turn the double one into a branch
- * that goes either way at random. */
+/* 1 when a > b, else 0, as data: a comparison whose result is an integer (comisd, then
+ * a flag into a register), where compilers turn `p -= a > b` into a branch that goes
+ * either way at random where it is used. */
 static inline size_t gt_bit(double a, double b) {
-  int64_t ia, ib;
-  memcpy(&ia, &a, sizeof ia);
-  memcpy(&ib, &b, sizeof ib);
-  return ia > ib;
+#if defined(__SSE2__)
+  return (size_t)_mm_comigt_sd(_mm_set_sd(a), _mm_set_sd(b));
+#else
+  return a > b;
+#endif
 }
 
 /*
