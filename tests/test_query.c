@@ -11,6 +11,8 @@
  *    a grid distance, queries far outside, k above the point count, single and batch;
  *  - k > 1 ties on that grid (the id order decides which equal distances make the k), and
  *    queries beside a dense cluster, where the search's guessed first limit falls short;
+ *  - the k-th bound for k = 8, 32 and 100 on clustered and duplicate-heavy points, caps
+ *    exactly at the k-th and (k/2)-th distance and just below, single and batch;
  *  - batch kNN (Z-order, each query starting from the previous path) on every point set
  *    and capacity, one and two threads, against brute force;
  *  - kNN after random inserts and removals (qk_tree_check after each batch);
@@ -715,6 +717,61 @@ static void test_query_knn_ties_k(void **state) {
   free(p), free(qs), free(got), free(counts);
 }
 
+/*
+ * The k-th bound and the tie order for k = 8, 32 (the sorted array's limit) and 100 (more
+ * than a leaf holds) on clustered points, on a few heavily duplicated locations and on
+ * clustered points with every third one a copy of an earlier one: queries on stored
+ * points (runs of distance 0), between two stored points (equal distances) and at random;
+ * caps equal to the oracle's k-th and (k/2)-th distances (a point exactly at the cap
+ * counts, so a search that prunes or rejects at the bound with < instead of <= loses it)
+ * and just below the k-th. Single calls and batches at capacities 4 and 32, against
+ * brute force.
+ */
+static void test_query_knn_kth_bound(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 15);
+  const size_t n = 6000, nq = 120;
+  const size_t ks[] = {8, 32, 100};
+  const uint32_t bcaps[] = {4, 32};
+  qk_point_t *p = malloc(n * sizeof *p), *qs = malloc(nq * sizeof *qs);
+  qk_neighbor_t *got = malloc(nq * 100 * sizeof *got), one[100], want[100], full[100];
+  size_t *counts = malloc(nq * sizeof *counts);
+  for (int set = 0; set < 3; set++) {
+    qkt_points(&r, set == 1 ? QKT_DUPLICATES : QKT_CLUSTERED, p, n);
+    if (set == 2)
+      for (size_t i = 3; i < n; i += 3) p[i] = p[qkt_rng_below(&r, (uint32_t)i)];
+    for (size_t i = 0; i < nq; i++) {
+      const qk_point_t a = p[qkt_rng_below(&r, (uint32_t)n)], b = p[qkt_rng_below(&r, (uint32_t)n)];
+      qs[i] = i % 3 == 0   ? a
+              : i % 3 == 1 ? (qk_point_t){0.5 * (a.x + b.x), 0.5 * (a.y + b.y)}
+                           : rand_loc(&r);
+    }
+    for (size_t c = 0; c < 2; c++) {
+      qk_tree_t *t = build(p, n, bcaps[c]);
+      for (size_t ki = 0; ki < 3; ki++) {
+        const size_t k = ks[ki];
+        assert_int_equal(qk_query_knn_batch(t, qs, nq, k, INFINITY, got, counts), QK_OK);
+        for (size_t i = 0; i < nq; i++) {
+          const size_t tag = (size_t)set * 100000 + c * 10000 + k * 100 + i;
+          size_t ng, nf = qko_knn(p, NULL, n, qs[i], k, INFINITY, full);
+          assert_int_equal(nf, k);
+          assert_nb_equal(got + i * k, counts[i], full, nf, "knn-kth-batch", tag);
+          const double caps_k[] = {INFINITY, full[k - 1].dist, full[k / 2 - 1].dist,
+                                   nextafter(full[k - 1].dist, 0)};
+          for (size_t j = 0; j < 4; j++) {
+            size_t nw = qko_knn(p, NULL, n, qs[i], k, caps_k[j], want);
+            assert_int_equal(qk_query_knn(t, qs[i], k, caps_k[j], one, &ng), QK_OK);
+            assert_nb_equal(one, ng, want, nw, "knn-kth", tag * 10 + j);
+          }
+        }
+      }
+      qk_tree_free(t);
+    }
+  }
+  free(p), free(qs), free(got), free(counts);
+}
+
 static void test_query_cities(void **state) {
   (void)state;
   size_t n;
@@ -808,6 +865,7 @@ int main(void) {
       cmocka_unit_test(test_query_knn_batch_paths),
       cmocka_unit_test(test_query_knn1_ties),
       cmocka_unit_test(test_query_knn_ties_k),
+      cmocka_unit_test(test_query_knn_kth_bound),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
