@@ -96,7 +96,7 @@ struct qk_collider {
   void *quads_block; /* the allocation holding quads */
   size_t quads_bytes;
   uint32_t n_quads;  /* entries filled */
-  uint32_t *ztab;    /* the ray cast's start table (see fill_ztab); NULL: descend from the root */
+  uint32_t *ztab;    /* the ray cast's start table, two words a cell (see fill_ztab); NULL: none */
   uint32_t *qparent; /* per quads entry: its parent's entry (with ztab: the climb's links) */
   size_t ztab_bytes;
   unsigned zdepth;  /* its depth: 4^zdepth cells */
@@ -408,9 +408,12 @@ static void fill_boxes_and_quads(qk_collider_t *c, unsigned threads) {
  * node on its origin's path, by the bits of the origin's position alone (cast_float); the
  * first zdepth levels of that descent depend only on the top 2 zdepth bits of the
  * origin's Morton code, so they are done once here for each of the 4^zdepth codes. Cell z
- * holds the descent's node after at most zdepth levels: the quads entry, times 64, plus
- * its depth. A ray then starts at most a couple of levels above its leaf with one load
- * from a small table instead of zdepth dependent loads of nodes.
+ * holds the descent's node after at most zdepth levels (word 2 z: the quads entry, times
+ * 64, plus its depth) and that node's parent (word 2 z + 1; QK_NONE for the root). A ray
+ * then starts at most a couple of levels above its leaf with one load from a small table
+ * instead of zdepth dependent loads of nodes; as the search starts one level above the
+ * deepest internal node and the descent ends at or below the cell's node, the parent in
+ * the same line is the highest node the start needs (no load from qparent).
  */
 #define ZTAB_DEPTH_MAX 9
 #define ZTAB_DEPTH_BITS 6
@@ -422,13 +425,19 @@ static void fill_ztab(qk_collider_t *c, uint32_t q, unsigned depth, uint32_t pre
     const uint32_t p = prefix << 2 | k; /* the lane is the Morton digit (2 north + east) */
     if (qn->count[k] == QK_NONE) {
       c->qparent[qn->link[k]] = q;
-      if (depth + 1 < zd)
+      if (depth + 1 < zd) {
         fill_ztab(c, qn->link[k], depth + 1, p);
-      else /* depth + 1 == zd: the child is the cell's node (deeper entries: no parents) */
-        c->ztab[p] = qn->link[k] << ZTAB_DEPTH_BITS | (depth + 1);
+      } else { /* depth + 1 == zd: the child is the cell's node (deeper entries: no parents) */
+        c->ztab[2 * p] = qn->link[k] << ZTAB_DEPTH_BITS | (depth + 1);
+        c->ztab[2 * p + 1] = q;
+      }
     } else { /* a leaf or an empty child: the descent stops at q in all cells below p */
       const unsigned sh = 2 * (zd - depth - 1);
-      for (uint32_t z = p << sh; z < (p + 1) << sh; z++) c->ztab[z] = q << ZTAB_DEPTH_BITS | depth;
+      const uint32_t up = c->qparent[q];
+      for (uint32_t z = p << sh; z < (p + 1) << sh; z++) {
+        c->ztab[2 * z] = q << ZTAB_DEPTH_BITS | depth;
+        c->ztab[2 * z + 1] = up;
+      }
     }
   }
 }
@@ -441,7 +450,7 @@ static qk_status_t build_ztab(qk_collider_t *c) {
   unsigned zd = 0;
   while (zd < ZTAB_DEPTH_MAX && (1ull << 2 * (zd + 1)) <= c->n_quads) zd++;
   if (zd < 2 || c->n_quads >= 1u << (32 - ZTAB_DEPTH_BITS)) return QK_OK;
-  c->ztab_bytes = ((size_t)1 << 2 * zd) * sizeof *c->ztab;
+  c->ztab_bytes = ((size_t)2 << 2 * zd) * sizeof *c->ztab;
   c->ztab = qk__realloc(&c->alloc, NULL, 0, c->ztab_bytes);
   c->qparent = qk__realloc(&c->alloc, NULL, 0, c->n_quads * sizeof *c->qparent);
   if (!c->ztab || !c->qparent) return QK_ERR_NOMEM; /* qk_collider_free releases them */
@@ -1397,9 +1406,10 @@ static void cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk
       ix = (uint32_t)ux, iy = (uint32_t)uy;
       uint64_t z = spread32(ix) | spread32(iy) << 1; /* the lanes, root first, from bit 63 */
       if (c->ztab) { /* the first levels from the start table (fill_ztab) */
-        const uint32_t cell = c->ztab[z >> (64 - 2 * c->zdepth)];
-        known = d = cell & ((1u << ZTAB_DEPTH_BITS) - 1);
-        path[d] = e = cell >> ZTAB_DEPTH_BITS;
+        const uint32_t *cell = &c->ztab[2 * (z >> (64 - 2 * c->zdepth))];
+        known = d = cell[0] & ((1u << ZTAB_DEPTH_BITS) - 1);
+        path[d] = e = cell[0] >> ZTAB_DEPTH_BITS;
+        if (d > 0) path[--known] = cell[1]; /* the start is at depth d - 1 or below */
         z <<= 2 * d;
       }
       while (d < 32) {
