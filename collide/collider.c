@@ -1168,8 +1168,13 @@ static void ray_init(ray_t *r, const qk_collider_t *c, qk_point_t o, qk_point_t 
   r->ox = o.x, r->oy = o.y, r->dx = d.x, r->dy = d.y;
   r->w = (fabs(o.x) + fabs(o.y) + 2 * c->mag) * 0x1p-40;
   r->ts = 0.0;
-  r->s = (unsigned)(d.x < 0) | (unsigned)(d.y < 0) << 1;
   r->simd = 0;
+#if defined(__SSE2__)
+  const __m128d d2 = _mm_set_pd(d.y, d.x), dneg = _mm_cmplt_pd(d2, _mm_setzero_pd());
+  r->s = (unsigned)_mm_movemask_pd(dneg); /* (dx < 0) + 2 (dy < 0) */
+#else
+  r->s = (unsigned)(d.x < 0) | (unsigned)(d.y < 0) << 1;
+#endif
 #if defined(__SSE2__)
   r->vox = _mm_set1_pd(o.x), r->voy = _mm_set1_pd(o.y);
   r->vdx = _mm_set1_pd(d.x), r->vdy = _mm_set1_pd(d.y);
@@ -1187,18 +1192,29 @@ static void ray_init(ray_t *r, const qk_collider_t *c, qk_point_t o, qk_point_t 
    * double sums and of the conversion, so Pn >= o + w and Pf <= o - w as fact (2) asks
    * (cheaper than rounding in a chosen direction). In, If: 1/d scaled by 1 -+ 2^-21,
    * then converted (an error of 2^-24 at most in this range). */
-  const double w = r->w;
-  const double mx = (fabs(o.x) + w) * 0x1p-21 + 0x1p-140, my = (fabs(o.y) + w) * 0x1p-21 + 0x1p-140;
-  const float xp = (float)(o.x + w + mx), xm = (float)(o.x - w - mx);
-  const float yp = (float)(o.y + w + my), ym = (float)(o.y - w - my);
-  const double qx = 1 / d.x, qy = 1 / d.y, lo = 1 - 0x1p-21, hi = 1 + 0x1p-21;
-  r->inx = _mm_set1_ps((float)(qx * lo)), r->ifx = _mm_set1_ps((float)(qx * hi));
-  r->iny = _mm_set1_ps((float)(qy * lo)), r->ify = _mm_set1_ps((float)(qy * hi));
-  r->pnx = _mm_set1_ps(d.x > 0 ? xp : xm), r->pfx = _mm_set1_ps(d.x > 0 ? xm : xp);
-  r->pny = _mm_set1_ps(d.y > 0 ? yp : ym), r->pfy = _mm_set1_ps(d.y > 0 ? ym : yp);
-  /* A negative component enters a box by its max side: swap min and max of that axis. */
-  const int sx = d.x < 0 ? -1 : 0, sy = d.y < 0 ? -1 : 0;
-  r->swap = _mm_set_epi32(sy, sx, sy, sx);
+  /* Both axes at once (lane 0 x, lane 1 y), each lane the same IEEE operations as
+   * mx = (|ox| + w) 2^-21 + 2^-140, xp = fl(ox + w + mx), xm = fl(ox - w - mx) and
+   * fl(1/dx (1 -+ 2^-21)) written out per axis, so the same floats. */
+  const __m128d o2 = _mm_set_pd(o.y, o.x), w2 = _mm_set1_pd(r->w);
+  const __m128d m2 = _mm_add_pd(
+      _mm_mul_pd(_mm_add_pd(_mm_andnot_pd(_mm_set1_pd(-0.0), o2), w2), _mm_set1_pd(0x1p-21)),
+      _mm_set1_pd(0x1p-140));
+  const __m128 p = _mm_cvtpd_ps(_mm_add_pd(_mm_add_pd(o2, w2), m2)); /* xp, yp */
+  const __m128 m = _mm_cvtpd_ps(_mm_sub_pd(_mm_sub_pd(o2, w2), m2)); /* xm, ym */
+  const __m128d q2 = _mm_div_pd(_mm_set1_pd(1.0), d2);
+  const __m128 in = _mm_cvtpd_ps(_mm_mul_pd(q2, _mm_set1_pd(1 - 0x1p-21)));
+  const __m128 fi = _mm_cvtpd_ps(_mm_mul_pd(q2, _mm_set1_pd(1 + 0x1p-21)));
+  /* A negative component enters a box by its max side: swap min and max of that axis
+   * (neg: all ones in 32-bit group 0 for dx < 0, group 1 for dy < 0, and again in 2, 3). */
+  const __m128i neg = _mm_shuffle_epi32(_mm_castpd_si128(dneg), _MM_SHUFFLE(2, 0, 2, 0));
+  const __m128 ng = _mm_castsi128_ps(neg);
+  const __m128 pn = _mm_or_ps(_mm_and_ps(ng, m), _mm_andnot_ps(ng, p));
+  const __m128 pf = _mm_or_ps(_mm_and_ps(ng, p), _mm_andnot_ps(ng, m));
+  r->inx = _mm_shuffle_ps(in, in, 0x00), r->iny = _mm_shuffle_ps(in, in, 0x55);
+  r->ifx = _mm_shuffle_ps(fi, fi, 0x00), r->ify = _mm_shuffle_ps(fi, fi, 0x55);
+  r->pnx = _mm_shuffle_ps(pn, pn, 0x00), r->pny = _mm_shuffle_ps(pn, pn, 0x55);
+  r->pfx = _mm_shuffle_ps(pf, pf, 0x00), r->pfy = _mm_shuffle_ps(pf, pf, 0x55);
+  r->swap = neg;
 #endif
 }
 
