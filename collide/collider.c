@@ -1368,14 +1368,29 @@ walk_float(const qk_collider_t *c, const ray_t *rp, double tmax, uint32_t from, 
   *bp = b;
 }
 
-/* The bits of v at the even positions of a 64-bit word (one axis of a Morton code). */
-static inline uint64_t spread32(uint32_t v) {
-  uint64_t x = v;
-  x = (x | x << 16) & 0x0000FFFF0000FFFFull;
-  x = (x | x << 8) & 0x00FF00FF00FF00FFull;
-  x = (x | x << 4) & 0x0F0F0F0F0F0F0F0Full;
-  x = (x | x << 2) & 0x3333333333333333ull;
-  return (x | x << 1) & 0x5555555555555555ull;
+/* The Morton code of (x, y): the bits of x at the even positions of a 64-bit word, those
+ * of y at the odd ones; both axes spread at once in the two 64-bit lanes. */
+static inline uint64_t morton32(uint32_t x, uint32_t y) {
+#if !defined(__x86_64__) && !defined(_M_X64) /* no 64-bit move out of a vector register */
+  uint64_t v[2] = {x, y};
+  for (int k = 0; k < 2; k++) {
+    v[k] = (v[k] | v[k] << 16) & 0x0000FFFF0000FFFFull;
+    v[k] = (v[k] | v[k] << 8) & 0x00FF00FF00FF00FFull;
+    v[k] = (v[k] | v[k] << 4) & 0x0F0F0F0F0F0F0F0Full;
+    v[k] = (v[k] | v[k] << 2) & 0x3333333333333333ull;
+    v[k] = (v[k] | v[k] << 1) & 0x5555555555555555ull;
+  }
+  return v[0] | v[1] << 1;
+#else
+  __m128i v = _mm_set_epi64x((long long)y, (long long)x);
+  v = _mm_and_si128(_mm_or_si128(v, _mm_slli_epi64(v, 16)), _mm_set1_epi64x(0x0000FFFF0000FFFFll));
+  v = _mm_and_si128(_mm_or_si128(v, _mm_slli_epi64(v, 8)), _mm_set1_epi64x(0x00FF00FF00FF00FFll));
+  v = _mm_and_si128(_mm_or_si128(v, _mm_slli_epi64(v, 4)), _mm_set1_epi64x(0x0F0F0F0F0F0F0F0Fll));
+  v = _mm_and_si128(_mm_or_si128(v, _mm_slli_epi64(v, 2)), _mm_set1_epi64x(0x3333333333333333ll));
+  v = _mm_and_si128(_mm_or_si128(v, _mm_slli_epi64(v, 1)), _mm_set1_epi64x(0x5555555555555555ll));
+  v = _mm_or_si128(v, _mm_slli_epi64(_mm_unpackhi_epi64(v, v), 1));
+  return (uint64_t)_mm_cvtsi128_si64(v);
+#endif
 }
 
 /* Levels above the origin's deepest internal node at which the local search starts. */
@@ -1424,8 +1439,8 @@ static void cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk
     if (rs.side > 0x1p-900 && ux >= 0 && ux < 0x1p32 && uy >= 0 && uy < 0x1p32) {
       const qnode_t *quads = c->quads;
       ix = (uint32_t)ux, iy = (uint32_t)uy;
-      uint64_t z = spread32(ix) | spread32(iy) << 1; /* the lanes, root first, from bit 63 */
-      if (c->ztab) { /* the first levels from the start table (fill_ztab) */
+      uint64_t z = morton32(ix, iy); /* the lanes, root first, from bit 63 */
+      if (c->ztab) {                 /* the first levels from the start table (fill_ztab) */
         const uint32_t *cell = &c->ztab[2 * (z >> (64 - 2 * c->zdepth))];
         known = d = cell[0] & ((1u << ZTAB_DEPTH_BITS) - 1);
         path[d] = e = cell[0] >> ZTAB_DEPTH_BITS;
