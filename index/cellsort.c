@@ -145,6 +145,7 @@ typedef struct bucket_job {
   size_t nb;                 /* cells, 4^L */
   uint32_t *cbase;           /* nc + 1 coarse bucket starts in the point arrays */
   uint32_t *cum;             /* 4^L + 1 fine bucket starts */
+  uint32_t *deep;            /* nc: points of bucket c in cells over the capacity */
   unsigned nw;               /* threads */
   unsigned ns;               /* shares of pass 1, at least nw */
   uint32_t stage_cap;        /* points per thread in the staging arrays (0: none) */
@@ -566,12 +567,14 @@ static void fine_job(unsigned c, unsigned w, void *ud) {
     const uint32_t *h = j->hist + (size_t)v * j->nb + (size_t)c * nf;
     for (uint32_t f = 0; f < nf; f++) next[f] += h[f];
   }
-  uint32_t *cum = j->cum + (size_t)c * nf, acc = a;
+  uint32_t *cum = j->cum + (size_t)c * nf, acc = a, deep = 0, cap = j->t->capacity;
   for (uint32_t f = 0; f < nf; f++) {
     uint32_t k = next[f];
     cum[f] = acc;
     acc += k;
+    deep += k > cap ? k : 0;
   }
+  j->deep[c] = deep;
   if (b - a <= j->stage_cap) {
     /* Staged: coordinates as pairs (one line written a point, not two) and ids. */
     for (uint32_t f = 0; f < nf; f++) next[f] = cum[f] - a;
@@ -591,7 +594,7 @@ static void fine_job(unsigned c, unsigned w, void *ud) {
 
 /* The temporary arrays of the bucketed build. */
 typedef struct scratch {
-  uint32_t *cum, *cbase, *cnt, *seg, *hist;
+  uint32_t *cum, *cbase, *cnt, *seg, *hist, *deep;
   uint16_t *key;
   void *rec_block; /* rec, before alignment */
   double *sxy;
@@ -602,6 +605,7 @@ typedef struct scratch {
 static void scratch_free(const qk_tree_t *t, scratch_t *s) {
   qk__free(&t->alloc, s->cum, (s->nb + 1) * sizeof *s->cum);
   qk__free(&t->alloc, s->cbase, (s->nc + 1) * sizeof *s->cbase);
+  qk__free(&t->alloc, s->deep, s->nc * sizeof *s->deep);
   qk__free(&t->alloc, s->cnt, s->ns * s->nc * sizeof *s->cnt);
   qk__free(&t->alloc, s->seg, s->ns * s->nc * sizeof *s->seg);
   qk__free(&t->alloc, s->hist, s->ns * s->nb * sizeof *s->hist);
@@ -613,8 +617,9 @@ static void scratch_free(const qk_tree_t *t, scratch_t *s) {
 }
 
 qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned L, unsigned nw,
-                          uint32_t **cum) {
+                          uint32_t **cum, size_t *deep) {
   *cum = NULL;
+  *deep = 0;
   /* Margin in grid units: rounding of the corner arithmetic (at most one rounding per
    * level) and of the scaling, with a factor of four to spare. Below a quarter cell, a
    * truncated coordinate is off by at most one cell, which the key pass corrects. */
@@ -645,11 +650,12 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
   s.nb = nb, s.nc = nc, s.n = n, s.ns = ns;
   s.cum = qk__realloc(&t->alloc, NULL, 0, (nb + 1) * sizeof *s.cum);
   s.cbase = qk__realloc(&t->alloc, NULL, 0, (nc + 1) * sizeof *s.cbase);
+  s.deep = qk__realloc(&t->alloc, NULL, 0, nc * sizeof *s.deep);
   s.cnt = qk__realloc(&t->alloc, NULL, 0, ns * nc * sizeof *s.cnt);
   s.seg = qk__realloc(&t->alloc, NULL, 0, ns * nc * sizeof *s.seg);
   s.hist = qk__realloc(&t->alloc, NULL, 0, ns * nb * sizeof *s.hist);
   s.key = qk__realloc(&t->alloc, NULL, 0, n * sizeof *s.key);
-  if (!s.cum || !s.cbase || !s.cnt || !s.seg || !s.hist || !s.key) {
+  if (!s.cum || !s.cbase || !s.deep || !s.cnt || !s.seg || !s.hist || !s.key) {
     scratch_free(t, &s);
     return QK_ERR_NOMEM;
   }
@@ -659,7 +665,7 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
   j.t = t, j.p = p, j.n = n, j.x0 = x0, j.y0 = y0, j.scale = scale;
   j.ax = &tabs[0], j.ay = &tabs[1], j.fbits = fbits, j.nc = nc, j.stream = stream;
   j.key = s.key, j.hist = s.hist, j.nb = nb, j.seg = s.seg;
-  j.cnt = s.cnt, j.cbase = s.cbase, j.cum = s.cum, j.nw = nw, j.ns = (unsigned)ns;
+  j.cnt = s.cnt, j.cbase = s.cbase, j.cum = s.cum, j.deep = s.deep, j.nw = nw, j.ns = (unsigned)ns;
   j.near = delta;
   j.even = (uint32_t)qk__spread16((1u << L) - 1);
 #if QK__CELL_AVX2
@@ -721,6 +727,7 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
   j.stage_cap = (uint32_t)cap;
   j.sxy = s.sxy, j.sid = s.sid;
   qk__run_jobs_dynamic(nw, (unsigned)nc, fine_job, &j);
+  for (size_t c = 0; c < nc; c++) *deep += s.deep[c];
   *cum = s.cum;
   s.cum = NULL;
   scratch_free(t, &s);
