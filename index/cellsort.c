@@ -44,6 +44,15 @@
 #define QK__CELL_AVX2 0
 #endif
 
+/* Reading ahead, where the compiler offers it. */
+#if defined(__GNUC__)
+#define QK__PREFETCH(p) __builtin_prefetch(p)
+#else
+#define QK__PREFETCH(p) ((void)0)
+#endif
+/* How far ahead the fine pass reads its records. */
+#define PREFETCH_RECS 96
+
 /* fine_records() is made twice, for pairs and for separate arrays. */
 #if defined(__GNUC__)
 #define QK__ALWAYS_INLINE inline __attribute__((always_inline))
@@ -482,8 +491,11 @@ static QK__ALWAYS_INLINE void fine_records(const bucket_job_t *j, unsigned c, ui
     const uint32_t id0 = (uint32_t)lo;
     const rec_t *r = j->rec + j->seg[(size_t)v * nc + c], *e = r + j->cnt[(size_t)v * nc + c];
     /* Two records a step: the second's slot is taken after the first's, as one at a time
-     * would (they may share a fine bucket). */
+     * would (they may share a fine bucket). The records come from memory (written around
+     * the caches) and are read ahead by hand, about 2 KB: the hardware's prefetch alone
+     * left the pass a fifth slower on one thread (4.4-4.6 against 3.5-3.7 ms at 1M). */
     for (; r + 2 <= e; r += 2) {
+      QK__PREFETCH((const void *)((uintptr_t)r + PREFETCH_RECS * sizeof *r));
       uint32_t g0, g1;
       memcpy(&g0, r[0].b + 16, 4);
       memcpy(&g1, r[1].b + 16, 4);
