@@ -209,9 +209,11 @@ qk_status_t qk__build_subtree(qk_tree_t *t, uint32_t node, qk__geom_t g);
  * 2^L x 2^L grid over the root square, in the tree's pre-order, on nw threads (a caller's
  * allocator is only called from the calling thread). *cum gets the 4^L + 1 bucket starts
  * (the caller frees them), or NULL, with QK_OK and nothing written, when the root is too
- * badly conditioned for exact cells by scaling (index/cellsort.c). */
+ * badly conditioned for exact cells by scaling (index/cellsort.c). *deep gets the number
+ * of points in cells holding more than the capacity (those the tree splits point by
+ * point below the grid). */
 qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned L, unsigned nw,
-                          uint32_t **cum);
+                          uint32_t **cum, size_t *deep);
 
 /* Bulk build by bucketing into a uniform grid (index/build.c). Sets *done when it built
  * the tree; leaves it false (and the tree untouched) when the plain build should run. */

@@ -8,7 +8,8 @@
  * The threaded build on inputs that load its buckets unevenly (all points equal, a few
  * duplicated locations, points on dyadic grid lines, half of them in one spot, capacity
  * 1): on two and on three threads the same tree node for node, with the same point order
- * in every leaf, as on one.
+ * in every leaf, as on one; and a uniform input whose tree is made on one thread after
+ * the threaded sort.
  */
 #include <math.h>
 #include <stdlib.h>
@@ -86,9 +87,11 @@ static void test_build_threads_adversarial(void **state) {
   enum { N = 200000 }; /* three shares of 2^16 points */
   qk_point_t *p = malloc(N * sizeof *p);
   assert_non_null(p);
-  const uint32_t capacity[] = {1, 1, 2, 4, 1, 1, 1};
-  const size_t count[] = {N, N, N, N, N, 1, 70};
-  for (int k = 0; k < 7; k++) {
+  /* The last input's cells hold fewer points than its capacity: its subtrees are built on
+   * the calling thread after the threaded sort (the others': on threads). */
+  const uint32_t capacity[] = {1, 1, 2, 4, 1, 1, 1, 64};
+  const size_t count[] = {N, N, N, N, N, 1, 70, N};
+  for (int k = 0; k < 8; k++) {
     size_t n = count[k];
     switch (k) {
     case 0: /* all equal */
