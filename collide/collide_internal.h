@@ -42,10 +42,9 @@ static inline void qk__csort4_desc(qk__centry_t *e, int n) {
 /* Pairs of the items of one leaf with those of every leaf whose box meets its own, as
  * qk_collider_pairs() reports them; nonzero when fn asked to stop. */
 int qk__collider_leaf_pairs(const qk_collider_t *c, uint32_t leaf, qk_pair_fn fn, void *ud);
-/* fn on every non-empty leaf of the subtree of `root` (0: the whole tree) in the order
- * qk_collider_pairs() visits them; nonzero when fn asked to stop. */
-int qk__collider_each_leaf(const qk_collider_t *c, uint32_t root,
-                           int (*fn)(uint32_t leaf, void *ud), void *ud);
+/* fn on every non-empty leaf in the order qk_collider_pairs() visits them; nonzero when
+ * fn asked to stop. */
+int qk__collider_each_leaf(const qk_collider_t *c, int (*fn)(uint32_t leaf, void *ud), void *ud);
 /* qk_collider_pairs() on the calling thread. */
 void qk__collider_pairs_serial(const qk_collider_t *c, qk_pair_fn fn, void *ud);
 /* qk_collider_pairs() on the collider's threads: QK_OK, or QK_ERR_NOMEM (nothing

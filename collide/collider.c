@@ -837,11 +837,10 @@ int qk__collider_leaf_pairs(const qk_collider_t *c, uint32_t leaf, qk_pair_fn fn
   return 0;
 }
 
-int qk__collider_each_leaf(const qk_collider_t *c, uint32_t root,
-                           int (*fn)(uint32_t leaf, void *ud), void *ud) {
+int qk__collider_each_leaf(const qk_collider_t *c, int (*fn)(uint32_t leaf, void *ud), void *ud) {
   uint32_t outer[QK__CSTACK_MAX];
   int so = 0;
-  outer[so++] = root;
+  outer[so++] = 0;
   while (so > 0) {
     uint32_t v = outer[--so];
     const cnode_t *la = &c->cn[v];
@@ -867,7 +866,7 @@ static int serial_leaf(uint32_t leaf, void *ud) {
 
 void qk__collider_pairs_serial(const qk_collider_t *c, qk_pair_fn fn, void *ud) {
   pairs_ctx_t p = {c, fn, ud};
-  qk__collider_each_leaf(c, 0, serial_leaf, &p);
+  qk__collider_each_leaf(c, serial_leaf, &p);
 }
 
 qk_status_t qk_collider_pairs(const qk_collider_t *c, qk_pair_fn fn, void *ud) {

@@ -1,60 +1,40 @@
 /*
  * The static collider on several threads: all pairs and batches of rays. Work is cut into
- * more jobs than threads, in a fixed order (subtrees in the order the one-thread search
- * visits their leaves, rays by index); rays are handed out statically (qk__run_jobs,
- * index/threads.c), subtrees from a shared counter, and the answers are gathered by job
- * number, so neither the answers nor their order depend on the number of threads.
+ * more jobs than threads, in a fixed order (leaves in the order the one-thread search
+ * visits them, rays by index), and qk__run_jobs (index/threads.c) hands them out statically, so
+ * neither the answers nor their order depend on the number of threads.
  */
-#include <stdatomic.h>
 #include <string.h>
 
 #include "collide/collide_internal.h"
 
 /* ---- all pairs ------------------------------------------------------------------ */
 
-/*
- * The pairs are found subtree by subtree: the tree is cut, in the order the one-thread
- * search visits its leaves, into subtrees of at most max_items items (or single leaves),
- * many per thread, and the threads take them from a shared counter, so that uneven
- * subtrees and a thread that runs slower still end together. A job's pairs go to its own
- * buffer; the calling thread, between its own jobs, reports every finished job in job
- * order, and runs a job that is next in that order with the caller's callback directly
- * (no buffer). The reports thus overlap the other threads' searches, and the pairs come
- * in exactly the one-thread order. A job whose buffer cannot grow is run again by the
- * calling thread when its turn comes, reporting straight away: the same pairs.
- */
-
-/* Jobs per thread (of about equal item counts), and the smallest job worth a hand-out. */
-#define PAIRS_JOBS_PER_THREAD 64
-#define PAIRS_JOB_MIN 256
-
-enum { JOB_PENDING, JOB_DONE, JOB_NOMEM };
-
+/* One job's pairs, in the order its leaves produced them. */
 typedef struct pjob {
-  uint32_t root, items; /* the subtree and its item count */
-  qk_pair_t *buf;       /* its pairs in the order its leaves produced them */
+  qk_pair_t *buf;
   size_t n, cap;
+  int nomem;
   const qk_allocator_t *alloc;
-  atomic_int state; /* JOB_*: set (release) by the thread that ran the job */
 } pjob_t;
 
 typedef struct pctx {
   const qk_collider_t *c;
+  const uint32_t *leaves;
+  size_t n_leaves;
+  unsigned n_jobs;
   pjob_t *jobs;
-  size_t n_jobs;
-  atomic_size_t next; /* the next job to hand out */
-  atomic_int stop;    /* the callback asked to stop: no more jobs are started */
-  size_t reported;    /* jobs reported so far (the calling thread's) */
-  qk_pair_fn fn;
-  void *ud;
 } pctx_t;
 
 static int keep_pair(qk_id_t a, qk_id_t b, void *ud) {
   pjob_t *j = ud;
   if (j->n == j->cap) {
-    size_t cap = j->cap ? 2 * j->cap : (size_t)j->items + 64;
+    size_t cap = j->cap ? 2 * j->cap : 256;
     qk_pair_t *p = qk__realloc(j->alloc, j->buf, j->cap * sizeof *p, cap * sizeof *p);
-    if (!p) return 1; /* no memory: stop (the job is marked and run again) */
+    if (!p) {
+      j->nomem = 1;
+      return 1;
+    }
     j->buf = p;
     j->cap = cap;
   }
@@ -63,115 +43,60 @@ static int keep_pair(qk_id_t a, qk_id_t b, void *ud) {
   return 0;
 }
 
-typedef struct lrun {
-  const qk_collider_t *c;
-  qk_pair_fn fn;
-  void *ud;
-} lrun_t;
-
-static int run_leaf(uint32_t leaf, void *ud) {
-  const lrun_t *r = ud;
-  return qk__collider_leaf_pairs(r->c, leaf, r->fn, r->ud);
+static void pairs_job(unsigned i, void *ud) {
+  pctx_t *p = ud;
+  size_t lo = p->n_leaves * i / p->n_jobs, hi = p->n_leaves * (i + 1) / p->n_jobs;
+  for (size_t k = lo; k < hi; k++)
+    if (qk__collider_leaf_pairs(p->c, p->leaves[k], keep_pair, &p->jobs[i])) return;
 }
 
-/* Job i's pairs to the caller's callback, straight from the search. */
-static void report_direct(pctx_t *p, size_t i) {
-  lrun_t r = {p->c, p->fn, p->ud};
-  if (qk__collider_each_leaf(p->c, p->jobs[i].root, run_leaf, &r))
-    atomic_store_explicit(&p->stop, 1, memory_order_relaxed);
-}
+typedef struct lctx {
+  const qk_allocator_t *alloc;
+  uint32_t *out;
+  size_t n, cap;
+} lctx_t;
 
-/* On the calling thread: report the finished jobs that are next in order. */
-static void flush(pctx_t *p) {
-  while (p->reported < p->n_jobs && !atomic_load_explicit(&p->stop, memory_order_relaxed)) {
-    pjob_t *j = &p->jobs[p->reported];
-    const int st = atomic_load_explicit(&j->state, memory_order_acquire);
-    if (st == JOB_PENDING) return;
-    if (st == JOB_NOMEM) {
-      report_direct(p, p->reported);
-    } else {
-      for (size_t k = 0; k < j->n; k++)
-        if (p->fn(j->buf[k].a, j->buf[k].b, p->ud)) {
-          atomic_store_explicit(&p->stop, 1, memory_order_relaxed);
-          break;
-        }
-    }
-    qk__free(j->alloc, j->buf, j->cap * sizeof *j->buf);
-    j->buf = NULL, j->n = j->cap = 0;
-    p->reported++;
-  }
-}
-
-static void pairs_share(void *ctx, unsigned w, unsigned nw) {
-  (void)nw;
-  pctx_t *p = ctx;
-  for (;;) {
-    if (w == 0) flush(p);
-    if (atomic_load_explicit(&p->stop, memory_order_relaxed)) return;
-    const size_t i = atomic_fetch_add_explicit(&p->next, 1, memory_order_relaxed);
-    if (i >= p->n_jobs) return;
-    pjob_t *j = &p->jobs[i];
-    if (w == 0 && i == p->reported) { /* every job before it is reported: no buffer */
-      report_direct(p, i);
-      p->reported++;
-      continue;
-    }
-    lrun_t r = {p->c, keep_pair, j};
-    const int nomem = qk__collider_each_leaf(p->c, j->root, run_leaf, &r);
-    atomic_store_explicit(&j->state, nomem ? JOB_NOMEM : JOB_DONE, memory_order_release);
-  }
-}
-
-/* The jobs' subtrees in the one-thread search's order: a node with at most max_items
- * items (or a leaf) is a job, a larger one is cut into its children; empty subtrees,
- * which hold no pairs, are left out. */
-static qk_status_t list_jobs(const qk_collider_t *c, uint32_t max_items, pjob_t **jobs,
-                             size_t *n_jobs, size_t *cap) {
-  const qk_tree_t *t = qk_collider_tree(c);
-  const qk_allocator_t *a = qk__collider_alloc(c);
-  uint32_t stack[QK__CSTACK_MAX];
-  int sp = 0;
-  stack[sp++] = 0;
-  while (sp > 0) {
-    const uint32_t v = stack[--sp], items = qk__node_count(t, v);
-    if (items == 0) continue;
-    if (items > max_items && !qk__node_leaf(t, v)) {
-      for (int k = 3; k >= 0; k--) stack[sp++] = qk__node_child(t, v) + (uint32_t)k;
-      continue;
-    }
-    if (*n_jobs == *cap && qk__grow(a, (void **)jobs, cap, *n_jobs + 1, sizeof **jobs))
-      return QK_ERR_NOMEM;
-    pjob_t *j = &(*jobs)[(*n_jobs)++];
-    j->root = v, j->items = items;
-    j->buf = NULL, j->n = j->cap = 0;
-    j->alloc = a;
-    atomic_init(&j->state, JOB_PENDING);
-  }
-  return QK_OK;
+static int list_leaf(uint32_t leaf, void *ud) {
+  lctx_t *l = ud;
+  if (l->n == l->cap && qk__grow(l->alloc, (void **)&l->out, &l->cap, l->n + 1, sizeof *l->out))
+    return 1; /* no memory: stop (the caller sees l->n below the leaves' count) */
+  l->out[l->n++] = leaf;
+  return 0;
 }
 
 qk_status_t qk__collider_pairs_threaded(const qk_collider_t *c, qk_pair_fn fn, void *ud) {
   const qk_allocator_t *a = qk__collider_alloc(c);
   unsigned threads = qk__threads_resolve(qk__collider_threads(c));
   if (threads <= 1) return QK_ERR_NOMEM; /* nothing to share: the serial path */
-  const size_t n = qk_collider_size(c), per = n / ((size_t)threads * PAIRS_JOBS_PER_THREAD);
-  const uint32_t max_items = per < PAIRS_JOB_MIN ? PAIRS_JOB_MIN : (uint32_t)per;
-  pjob_t *jobs = NULL;
-  size_t n_jobs = 0, cap = 0;
-  if (list_jobs(c, max_items, &jobs, &n_jobs, &cap) != QK_OK || n_jobs < 2) {
-    qk__free(a, jobs, cap * sizeof *jobs);
-    return QK_ERR_NOMEM; /* nothing reported yet: the serial path */
+  /* The leaves in one pass, into a growing list. */
+  lctx_t l = {a, NULL, 0, 0};
+  if (qk__collider_each_leaf(c, list_leaf, &l) || l.n < 2) {
+    qk__free(a, l.out, l.cap * sizeof *l.out);
+    return QK_ERR_NOMEM;
   }
-  pctx_t p;
-  p.c = c, p.jobs = jobs, p.n_jobs = n_jobs, p.reported = 0, p.fn = fn, p.ud = ud;
-  atomic_init(&p.next, 0);
-  atomic_init(&p.stop, 0);
-  qk__run_shares(threads < n_jobs ? threads : (unsigned)n_jobs, pairs_share, &p);
-  flush(&p);                          /* the jobs that ended after the calling thread's last look */
-  for (size_t i = 0; i < n_jobs; i++) /* after a stop, the buffers never reported */
-    qk__free(a, jobs[i].buf, jobs[i].cap * sizeof *jobs[i].buf);
-  qk__free(a, jobs, cap * sizeof *jobs);
-  return QK_OK;
+  const size_t n_leaves = l.n;
+  const uint32_t *leaves = l.out;
+  /* Eight jobs per thread even out leaves of unequal work. */
+  unsigned n_jobs = n_leaves < 8u * threads ? (unsigned)n_leaves : 8u * threads;
+  pjob_t *jobs = qk__realloc(a, NULL, 0, n_jobs * sizeof *jobs);
+  qk_status_t st = QK_ERR_NOMEM;
+  if (jobs) {
+    for (unsigned i = 0; i < n_jobs; i++) jobs[i] = (pjob_t){NULL, 0, 0, 0, a};
+    pctx_t p = {c, leaves, n_leaves, n_jobs, jobs};
+    qk__run_jobs(threads, n_jobs, pairs_job, &p);
+    st = QK_OK;
+    for (unsigned i = 0; i < n_jobs; i++)
+      if (jobs[i].nomem) st = QK_ERR_NOMEM;
+    /* Only when every job finished are the pairs reported, in job order. */
+    for (unsigned i = 0, stop = 0; st == QK_OK && i < n_jobs && !stop; i++)
+      for (size_t k = 0; k < jobs[i].n && !stop; k++)
+        stop = fn(jobs[i].buf[k].a, jobs[i].buf[k].b, ud);
+    for (unsigned i = 0; i < n_jobs; i++)
+      qk__free(a, jobs[i].buf, jobs[i].cap * sizeof *jobs[i].buf);
+  }
+  qk__free(a, l.out, l.cap * sizeof *l.out);
+  qk__free(a, jobs, n_jobs * sizeof *jobs);
+  return st;
 }
 
 /* ---- rays ----------------------------------------------------------------------- */
