@@ -550,9 +550,9 @@ static void *offmain_fn(void *ud, void *ptr, size_t osize, size_t nsize) {
   return p;
 }
 
-/* Pairs on threads whose every buffer allocation fails: the calling thread runs their jobs
- * again when their turn comes, so the pairs are still those of one thread, in order (also
- * when stopped early), and nothing leaks. */
+/* Pairs on threads whose every buffer allocation fails: whatever the threaded pass does
+ * about it, the pairs are still those of one thread, in order (also when stopped early),
+ * and nothing leaks. */
 static void test_collide_threads_worker_nomem(void **state) {
   (void)state;
   qkt_rng_t r;
