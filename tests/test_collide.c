@@ -13,7 +13,8 @@
  *  - three threads casting rays and finding pairs on one collider at once;
  *  - the threads option: pairs (in callback order, also stopped early), the pairs list
  *    and ray batches on 2, 3 and all cores equal to one thread; allocation failure at
- *    every N on the threaded paths (the same answers, or a clean QK_ERR_NOMEM).
+ *    every N on the threaded paths (the same answers, or a clean QK_ERR_NOMEM), and
+ *    every allocation of the worker threads failing (the same pairs, in order).
  */
 #include <math.h>
 #include <pthread.h>
@@ -523,6 +524,71 @@ static void test_collide_threads_nomem(void **state) {
   pthread_mutex_destroy(&l.mu);
 }
 
+/* An allocator that refuses every allocation made off the main thread: every job a
+ * worker thread takes then fails to keep its pairs. */
+typedef struct offmain {
+  pthread_mutex_t mu;
+  pthread_t main;
+  size_t live, refused;
+} offmain_t;
+
+static void *offmain_fn(void *ud, void *ptr, size_t osize, size_t nsize) {
+  (void)osize;
+  offmain_t *m = ud;
+  pthread_mutex_lock(&m->mu);
+  void *p = NULL;
+  if (nsize == 0) {
+    if (ptr) m->live--;
+    free(ptr);
+  } else if (!pthread_equal(pthread_self(), m->main)) {
+    m->refused++; /* ptr stays the caller's */
+  } else {
+    p = realloc(ptr, nsize);
+    if (p && !ptr) m->live++;
+  }
+  pthread_mutex_unlock(&m->mu);
+  return p;
+}
+
+/* Pairs on threads whose every buffer allocation fails: whatever the threaded pass does
+ * about it, the pairs are still those of one thread, in order (also when stopped early),
+ * and nothing leaks. */
+static void test_collide_threads_worker_nomem(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 8);
+  enum { ND = 3000, NB = 3000 };
+  qk_disc_t *d = malloc(ND * sizeof *d);
+  qk_box_t *b = malloc(NB * sizeof *b);
+  make_items(&r, d, ND, b, NB, 0, 0.01);
+  offmain_t m;
+  pthread_mutex_init(&m.mu, NULL);
+  m.main = pthread_self();
+  m.live = m.refused = 0;
+  qk_allocator_t a = {offmain_fn, &m};
+  qk_tree_options_t o = opts(4);
+  o.allocator = &a;
+  qk_collider_t *c = NULL;
+  assert_int_equal(qk_collider_build(d, ND, b, NB, &o, &c), QK_OK);
+  seq_t ref = pairs_seq(c, 0), ref_stop = pairs_seq(c, 501);
+  assert_true(ref.n > 501);
+  const size_t live = m.live;
+  const uint32_t ts[] = {2, 3};
+  for (int rep = 0; rep < 10; rep++)
+    for (size_t k = 0; k < sizeof ts / sizeof *ts; k++) {
+      qk_collider_set_threads(c, ts[k]);
+      seq_t got = pairs_seq(c, 0), got_stop = pairs_seq(c, 501);
+      assert_same_seq(&ref, &got, ts[k]);
+      assert_same_seq(&ref_stop, &got_stop, ts[k]);
+      free(got.p), free(got_stop.p);
+      assert_int_equal(m.live, live);
+    }
+  qk_collider_free(c);
+  assert_int_equal(m.live, 0);
+  free(ref.p), free(ref_stop.p), free(d), free(b);
+  pthread_mutex_destroy(&m.mu);
+}
+
 /* The build on several threads (the slot fill, the node boxes and the ray cast's nodes by
  * subtrees: from 4096 items on) gives the collider one thread gives: the same pairs in
  * the same order, the same hits to the last bit, which agree with the oracle; and every
@@ -634,11 +700,16 @@ static void test_collide_threaded_build(void **state) {
 int main(void) {
   g_seed = qkt_seed(7031);
   const struct CMUnitTest tests[] = {
-      cmocka_unit_test(test_collide_pairs),          cmocka_unit_test(test_collide_query_shapes),
-      cmocka_unit_test(test_collide_raycast),        cmocka_unit_test(test_collide_exact_cases),
-      cmocka_unit_test(test_collide_nomem),          cmocka_unit_test(test_collide_threads),
-      cmocka_unit_test(test_collide_threads_option), cmocka_unit_test(test_collide_threads_nomem),
+      cmocka_unit_test(test_collide_pairs),
+      cmocka_unit_test(test_collide_query_shapes),
+      cmocka_unit_test(test_collide_raycast),
+      cmocka_unit_test(test_collide_exact_cases),
+      cmocka_unit_test(test_collide_nomem),
+      cmocka_unit_test(test_collide_threads),
+      cmocka_unit_test(test_collide_threads_option),
+      cmocka_unit_test(test_collide_threads_nomem),
       cmocka_unit_test(test_collide_threaded_build),
+      cmocka_unit_test(test_collide_threads_worker_nomem),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
