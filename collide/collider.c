@@ -1515,14 +1515,27 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
   if ((o.x - o.x) + (o.y - o.y) + (d.x - d.x) + (d.y - d.y) != 0) return QK_ERR_NONFINITE;
   if (isnan(tmax) || tmax < 0) return QK_ERR_INVALID;
   if (c->n == 0) return QK_OK;
+  /* The cast's arithmetic squares and multiplies the direction's components: one beyond
+   * 2^500 would overflow and a largest one below 2^-500 underflow. Such a direction is
+   * scaled by a power of two to a largest component in [1/2, 1), which is exact (but for
+   * a component 2^1000 times smaller than the other, which then underflows: the ray's
+   * direction moves by less than 2^-1000 of a radian), and t is scaled back. */
+  const double m = fmax(fabs(d.x), fabs(d.y));
+  int e = 0;
+  if (m > 0x1p500 || (m < 0x1p-500 && m > 0)) {
+    (void)frexp(m, &e);
+    d.x = ldexp(d.x, -e);
+    d.y = ldexp(d.y, -e);
+    tmax = ldexp(tmax, e); /* t along d / 2^e is t along d times 2^e */
+  }
   ray_t ray;
   ray_init(&ray, c, o, d);
 #if defined(__SSE2__)
-  if (ray.simd) {
+  if (ray.simd)
     cast_float(c, &ray, tmax, hit);
-    return QK_OK;
-  }
+  else
 #endif
-  cast_general(c, &ray, tmax, hit);
+    cast_general(c, &ray, tmax, hit);
+  if (e != 0 && hit->id != QK_NONE) hit->t = ldexp(hit->t, -e);
   return QK_OK;
 }

@@ -348,6 +348,54 @@ static void test_collide_rays_batch_matches_single(void **state) {
   free(d), free(o), free(v), free(h);
 }
 
+/*
+ * Directions far beyond the arithmetic's range (components of 2^600 and more, or all
+ * below 2^-600): the same ray with its direction multiplied by 2^k hits the same item at
+ * t times 2^-k, exactly, since the cast scales such a direction back by a power of two.
+ * The reference directions have their largest component in [1/2, 1), so that scaling
+ * gives them back bit for bit; a cast that squared the raw components would overflow
+ * (every ray "hits" at t = 0) or underflow.
+ */
+static void test_collide_rays_extreme_directions(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 3);
+  enum { ND = 2000, NR = 2000 };
+  qk_disc_t *d = malloc(ND * sizeof *d);
+  assert_non_null(d);
+  for (int i = 0; i < ND; i++)
+    d[i] =
+        (qk_disc_t){qkt_rng_range(&r, 0, 1), qkt_rng_range(&r, 0, 1), qkt_rng_range(&r, 0, 0.01)};
+  qk_collider_t *c = NULL;
+  assert_int_equal(qk_collider_build(d, ND, NULL, 0, NULL, &c), QK_OK);
+  const int ks[] = {600, -600, 1000, -1000, 1023, -1060};
+  long hits = 0;
+  for (int i = 0; i < NR; i++) {
+    const double ang = qkt_rng_range(&r, 0, 6.283185307179586);
+    const qk_point_t o = {qkt_rng_range(&r, -0.5, 1.5), qkt_rng_range(&r, -0.5, 1.5)};
+    qk_point_t v = {cos(ang), sin(ang)};
+    const double m = fmax(fabs(v.x), fabs(v.y)); /* in [0.707, 1]: 1 only on an axis */
+    if (m == 1) continue;
+    qk_hit_t ref;
+    assert_int_equal(qk_collider_raycast(c, o, v, INFINITY, &ref), QK_OK);
+    hits += ref.id != QK_NONE;
+    for (size_t j = 0; j < sizeof ks / sizeof ks[0]; j++) {
+      const int k = ks[j];
+      const qk_point_t vk = {ldexp(v.x, k), ldexp(v.y, k)};
+      if (ldexp(vk.x, -k) != v.x || ldexp(vk.y, -k) != v.y) continue; /* underflowed */
+      qk_hit_t h;
+      assert_int_equal(qk_collider_raycast(c, o, vk, INFINITY, &h), QK_OK);
+      const double want = ref.id == QK_NONE ? INFINITY : ldexp(ref.t, -k);
+      if (h.id != ref.id || !(h.t == want || (isinf(h.t) && isinf(want))))
+        fail_msg("ray %d, direction times 2^%d: (%u, %.17g), want (%u, %.17g) (seed %llu)", i, k,
+                 h.id, h.t, ref.id, want, (unsigned long long)g_seed);
+    }
+  }
+  assert_true(hits > NR / 4); /* the rays do hit things */
+  qk_collider_free(c);
+  free(d);
+}
+
 int main(void) {
   g_seed = qkt_seed(90211);
   const struct CMUnitTest tests[] = {
@@ -355,6 +403,7 @@ int main(void) {
       cmocka_unit_test(test_collide_rays_grid_edges),
       cmocka_unit_test(test_collide_rays_deep_and_rooted),
       cmocka_unit_test(test_collide_rays_batch_matches_single),
+      cmocka_unit_test(test_collide_rays_extreme_directions),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
