@@ -104,6 +104,8 @@ void qk_world_free(qk_world_t *w) {
   qk__free(&a, w->began.v, w->began.cap * sizeof *w->began.v);
   qk__free(&a, w->ended.v, w->ended.cap * sizeof *w->ended.v);
   qk__free(&a, w->egen, w->n_egen * sizeof *w->egen);
+  qk__free(&a, w->scr_keys.v, w->scr_keys.cap * sizeof *w->scr_keys.v);
+  qk__free(&a, w->spare_b, w->cap_spare_b * sizeof *w->spare_b);
   qk__free(&a, w, sizeof *w);
 }
 
@@ -113,7 +115,8 @@ size_t qk_world_pair_bytes(const qk_world_t *w) {
   if (!w) return 0;
   return w->cur.cap * sizeof *w->cur.b +
          (w->cur.row ? 2 * (w->cur.n_nz + 1) * sizeof *w->cur.row : 0) +
-         (w->began.cap + w->ended.cap + w->n_egen) * sizeof(uint64_t);
+         (w->began.cap + w->ended.cap + w->n_egen + w->scr_keys.cap) * sizeof(uint64_t) +
+         w->cap_spare_b * sizeof *w->spare_b;
 }
 
 size_t qk_world_bytes(const qk_world_t *w) {

@@ -93,7 +93,14 @@ struct qk_world {
                        that changed at it (sorted) */
   size_t n_egen;
   size_t last_found; /* pairs of the last search (sizes the next one's buffer) */
-  int ident_dirty;   /* an object was added or removed since the last update */
+  /* Scratch kept from one update to the next, so that a dense frame's buffers (tens of
+   * megabytes at 10^5 objects) are not fresh pages every frame: the search's keys (with
+   * room for the row sort's 32-bit scratch after them), and the rows' buffer of the
+   * frame before last (the next rows are built in it). Cut when much larger than used. */
+  qk__kvec_t scr_keys; /* (n unused) */
+  uint32_t *spare_b;
+  size_t cap_spare_b;
+  int ident_dirty; /* an object was added or removed since the last update */
 };
 
 /* 2^e for e in [-1022, 1023], exactly (cheaper than ldexp in the inner loops; scaling
@@ -177,8 +184,9 @@ void qk__world_pack(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
                     const qk__wcell_t *cells, uint32_t nc);
 
 /* Every overlapping pair of the packed order (collide/world_search.c), as unsorted keys
- * in *found (the caller frees it), on the world's threads. QK_ERR_NOMEM (found empty)
- * when memory ran short. */
+ * in *found (the caller frees it), on the world's threads. *found comes in empty or with
+ * a buffer to start with (its room in cap, n = 0), which the search then owns.
+ * QK_ERR_NOMEM (found empty) when memory ran short. */
 qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kvec_t *found);
 
 /* The cell (level, cx, cy) a fat box is filed in; *forced when the magnitude of its

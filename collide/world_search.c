@@ -510,12 +510,17 @@ static inline double cell_work(const qk_world_t *w, uint32_t a, int finest) {
 }
 
 qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kvec_t *out) {
+  qk__kvec_t found = *out;
+  found.n = 0;
   *out = (qk__kvec_t){0};
   lvinfo_t lv[QK__NLEV];
   int n_levels;
   uint32_t *rf;
   size_t n_rf;
-  if (!level_info(w, pk, lv, &n_levels, &rf, &n_rf)) return QK_ERR_NOMEM;
+  if (!level_info(w, pk, lv, &n_levels, &rf, &n_rf)) {
+    qk__free(&w->alloc, found.v, found.cap * sizeof *found.v);
+    return QK_ERR_NOMEM;
+  }
   unsigned nt = qk__world_update_threads(w);
   if (w->n_live < 4096) nt = 1; /* not worth a thread */
   /* Chunks of cells of about equal work, taken in turn by the workers (many more than
@@ -530,6 +535,7 @@ qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kve
     chunk = qk__realloc(&w->alloc, NULL, 0, (n_chunks + 1) * sizeof *chunk);
     if (!chunk) {
       qk__free(&w->alloc, rf, n_rf * sizeof *rf);
+      qk__free(&w->alloc, found.v, found.cap * sizeof *found.v);
       return QK_ERR_NOMEM;
     }
     double total = 0, acc = 0;
@@ -547,11 +553,15 @@ qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kve
   share_t shares[256];
   for (unsigned t = 0; t < nt; t++)
     shares[t] = (share_t){w, pk, {0}, &w->alloc, 0, lv, n_levels, chunk, n_chunks, &next};
-  /* The first worker's buffer is sized by the last search (it grows if need be). */
-  qk__kvec_t found = {0};
+  /* The first worker's buffer is the one given, or one sized by the last search (it
+   * grows if need be). */
   size_t guess = w->last_found + w->last_found / 8 + 64;
-  found.v = qk__realloc(&w->alloc, NULL, 0, guess * sizeof *found.v);
-  if (found.v) found.cap = guess;
+  if (found.cap < guess) {
+    qk__free(&w->alloc, found.v, found.cap * sizeof *found.v);
+    found = (qk__kvec_t){0};
+    found.v = qk__realloc(&w->alloc, NULL, 0, guess * sizeof *found.v);
+    if (found.v) found.cap = guess;
+  }
   shares[0].out = found;
   qk__run_jobs(nt, nt, run_share, shares);
   found = shares[0].out;
