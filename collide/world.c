@@ -106,17 +106,26 @@ void qk_world_free(qk_world_t *w) {
   qk__free(&a, w->egen, w->n_egen * sizeof *w->egen);
   qk__free(&a, w->scr_keys.v, w->scr_keys.cap * sizeof *w->scr_keys.v);
   qk__free(&a, w->spare_b, w->cap_spare_b * sizeof *w->spare_b);
+  for (unsigned t = 0; t < QK__KEEP_THREADS; t++)
+    qk__free(&a, w->scr_tkeys[t].v, w->scr_tkeys[t].cap * sizeof *w->scr_tkeys[t].v);
   qk__free(&a, w, sizeof *w);
 }
 
 size_t qk_world_size(const qk_world_t *w) { return w ? w->n_live : 0; }
+
+/* The other search threads' kept key buffers, in bytes. */
+static size_t kept_tkeys(const qk_world_t *w) {
+  size_t b = 0;
+  for (unsigned t = 0; t < QK__KEEP_THREADS; t++) b += w->scr_tkeys[t].cap * sizeof(uint64_t);
+  return b;
+}
 
 size_t qk_world_pair_bytes(const qk_world_t *w) {
   if (!w) return 0;
   return w->cur.cap * sizeof *w->cur.b +
          (w->cur.row ? 2 * (w->cur.n_nz + 1) * sizeof *w->cur.row : 0) +
          (w->began.cap + w->ended.cap + w->n_egen + w->scr_keys.cap) * sizeof(uint64_t) +
-         w->cap_spare_b * sizeof *w->spare_b;
+         w->cap_spare_b * sizeof *w->spare_b + kept_tkeys(w);
 }
 
 size_t qk_world_bytes(const qk_world_t *w) {

@@ -597,10 +597,19 @@ qk_status_t qk_world_update(qk_world_t *w) {
     return pst;
   }
   /* The search starts in the kept keys buffer (the world holds none while it runs). */
-  qk__kvec_t found = w->scr_keys;
+  qk__kvec_t found = w->scr_keys, tk[QK__KEEP_THREADS];
   w->scr_keys = (qk__kvec_t){0};
-  qk_status_t st = qk__world_search(w, &pk, &found);
+  memcpy(tk, w->scr_tkeys, sizeof tk);
+  memset(w->scr_tkeys, 0, sizeof w->scr_tkeys);
+  qk_status_t st = qk__world_search(w, &pk, &found, tk);
   qk__world_pack_free(w, &pk);
+  /* The other threads' buffers are kept when large (as the first's: see keep_keys). */
+  for (unsigned t = 0; t < QK__KEEP_THREADS; t++) {
+    if (tk[t].cap * sizeof *tk[t].v >= QK__KEEP_BYTES && tk[t].cap <= 2 * tk[t].n + 64)
+      w->scr_tkeys[t] = tk[t], w->scr_tkeys[t].n = 0;
+    else
+      qk__free(al, tk[t].v, tk[t].cap * sizeof *tk[t].v);
+  }
   if (st != QK_OK) return st;
   if (found.n > UINT32_MAX) { /* (rows and counts hold 32-bit positions) */
     qk__free(al, found.v, found.cap * sizeof *found.v);
