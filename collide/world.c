@@ -31,7 +31,8 @@
  * the last update), 4 an entry of the order, 16 a cell; and the pair state: the current
  * pairs by rows (4 bytes a pair and 8 a slot with pairs) and the began and ended lists
  * (8 bytes a pair). The update's scratch (float boxes, cell boxes, the search's pairs and the
- * sort's buffers and counts) is allocated per update and freed before it returns.
+ * sort's buffers and counts) is allocated per update and freed before it returns, but for
+ * the buffers of 8 MB and more, kept for the next update (collide/world_pairs.c).
  *
  * Handles: slot in the low 32 bits, generation in the high 32. A slot's generation is
  * odd while it is live and becomes even at removal; a freed slot is reused (last freed,
