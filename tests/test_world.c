@@ -10,6 +10,8 @@
  *  - the bench's clustered mixed-size scene, small (boxes of 0.03 .. 30 on a 1/64 grid in
  *    eight clusters, moving; also with discs, segments and points): large objects over
  *    many finer levels' cells, inside them and on their borders;
+ *  - a dense world (about 2.4 M pairs) whose update keeps its large buffers for the next
+ *    one: pairs, began and ended every frame, on one thread and two;
  *  - hand-made touching cases of every pair of kinds (integers: the oracle is exact);
  *  - stale handles are rejected after removal and slot reuse;
  *  - churn: 10^5 frames of moves, adds and removes on a small world stay within 1.2x the
