@@ -31,7 +31,8 @@
  * the last update), 4 an entry of the order, 16 a cell; and the pair state: the current
  * pairs by rows (4 bytes a pair and 8 a slot with pairs) and the began and ended lists
  * (8 bytes a pair). The update's scratch (float boxes, cell boxes, the search's pairs and the
- * sort's buffers and counts) is allocated per update and freed before it returns.
+ * sort's buffers and counts) is allocated per update and freed before it returns, but for
+ * the buffers of 8 MB and more, kept for the next update (collide/world_pairs.c).
  *
  * Handles: slot in the low 32 bits, generation in the high 32. A slot's generation is
  * odd while it is live and becomes even at removal; a freed slot is reused (last freed,
@@ -104,16 +105,28 @@ void qk_world_free(qk_world_t *w) {
   qk__free(&a, w->began.v, w->began.cap * sizeof *w->began.v);
   qk__free(&a, w->ended.v, w->ended.cap * sizeof *w->ended.v);
   qk__free(&a, w->egen, w->n_egen * sizeof *w->egen);
+  qk__free(&a, w->scr_keys.v, w->scr_keys.cap * sizeof *w->scr_keys.v);
+  qk__free(&a, w->spare_b, w->cap_spare_b * sizeof *w->spare_b);
+  for (unsigned t = 0; t < QK__KEEP_THREADS; t++)
+    qk__free(&a, w->scr_tkeys[t].v, w->scr_tkeys[t].cap * sizeof *w->scr_tkeys[t].v);
   qk__free(&a, w, sizeof *w);
 }
 
 size_t qk_world_size(const qk_world_t *w) { return w ? w->n_live : 0; }
 
+/* The other search threads' kept key buffers, in bytes. */
+static size_t kept_tkeys(const qk_world_t *w) {
+  size_t b = 0;
+  for (unsigned t = 0; t < QK__KEEP_THREADS; t++) b += w->scr_tkeys[t].cap * sizeof(uint64_t);
+  return b;
+}
+
 size_t qk_world_pair_bytes(const qk_world_t *w) {
   if (!w) return 0;
   return w->cur.cap * sizeof *w->cur.b +
          (w->cur.row ? 2 * (w->cur.n_nz + 1) * sizeof *w->cur.row : 0) +
-         (w->began.cap + w->ended.cap + w->n_egen) * sizeof(uint64_t);
+         (w->began.cap + w->ended.cap + w->n_egen + w->scr_keys.cap) * sizeof(uint64_t) +
+         w->cap_spare_b * sizeof *w->spare_b + kept_tkeys(w);
 }
 
 size_t qk_world_bytes(const qk_world_t *w) {

@@ -68,6 +68,9 @@ typedef struct qk__prows {
   size_t n_nz;     /* rows with pairs */
 } qk__prows_t;
 
+/* The search threads whose key buffers an update keeps (beyond the first). */
+#define QK__KEEP_THREADS 7
+
 struct qk_world {
   qk_allocator_t alloc;
   qk_world_options_t opt;
@@ -93,7 +96,15 @@ struct qk_world {
                        that changed at it (sorted) */
   size_t n_egen;
   size_t last_found; /* pairs of the last search (sizes the next one's buffer) */
-  int ident_dirty;   /* an object was added or removed since the last update */
+  /* Scratch kept from one update to the next, so that a dense frame's buffers (tens of
+   * megabytes at 10^5 objects) are not fresh pages every frame: the search's keys (with
+   * room for the row sort's 32-bit scratch after them), and the rows' buffer of the
+   * frame before last (the next rows are built in it). Cut when much larger than used. */
+  qk__kvec_t scr_keys;                    /* (n unused) */
+  qk__kvec_t scr_tkeys[QK__KEEP_THREADS]; /* the other threads' keys (threads 1, 2, ...) */
+  uint32_t *spare_b;
+  size_t cap_spare_b;
+  int ident_dirty; /* an object was added or removed since the last update */
 };
 
 /* 2^e for e in [-1022, 1023], exactly (cheaper than ldexp in the inner loops; scaling
@@ -177,9 +188,13 @@ void qk__world_pack(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
                     const qk__wcell_t *cells, uint32_t nc);
 
 /* Every overlapping pair of the packed order (collide/world_search.c), as unsorted keys
- * in *found (the caller frees it), on the world's threads. QK_ERR_NOMEM (found empty)
- * when memory ran short. */
-qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kvec_t *found);
+ * in *found (the caller frees it), on the world's threads. *found comes in empty or with
+ * a buffer to start with (its room in cap, n = 0), which the search then owns; so do
+ * tk[0 .. QK__KEEP_THREADS), buffers for threads 1, 2, ..., which come back (n: the
+ * keys they held) for the caller to keep or free. QK_ERR_NOMEM (found empty) when memory ran short.
+ */
+qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kvec_t *found,
+                             qk__kvec_t *tk);
 
 /* The cell (level, cx, cy) a fat box is filed in; *forced when the magnitude of its
  * coordinates raised the level. */

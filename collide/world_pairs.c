@@ -545,6 +545,48 @@ out:
   return ok;
 }
 
+/*
+ * Scratch kept between updates. A dense frame's buffers are large (the search's keys, 8
+ * bytes a pair, the sort's scratch, 4, the new rows, 4: 150 MB a frame for the 9.5 M
+ * pairs of 10^5 clustered boxes), and an allocator hands out buffers that large as fresh
+ * pages from the system (glibc: from 32 MB always), each page faulted in and zeroed every
+ * frame: measured, a quarter of such a frame's time went to the kernel. So buffers from
+ * QK__KEEP_BYTES on are kept for the next update: the keys' buffer (grown to hold the
+ * sort's scratch after the keys), and the rows' buffer of the last frame once the new
+ * rows replace it (the next rows are built in it). Smaller ones are freed, as the
+ * allocator recycles them cheaply. A kept buffer more than twice what its frame used is
+ * freed (the next frame allocates afresh).
+ */
+#define QK__KEEP_BYTES ((size_t)8 << 20)
+
+static void keep_keys(qk_world_t *w, qk__kvec_t *found, size_t total) {
+  const qk_allocator_t *al = &w->alloc;
+  size_t want = total + total / 2 + total / 8 + 64; /* keys, the sort's scratch, some room */
+  if (want * sizeof *found->v >= QK__KEEP_BYTES && found->cap <= 2 * want) {
+    if (found->cap < want) { /* (its keys are no longer needed: no copy) */
+      qk__free(al, found->v, found->cap * sizeof *found->v);
+      found->v = qk__realloc(al, NULL, 0, want * sizeof *found->v);
+      found->cap = found->v ? want : 0;
+    }
+    w->scr_keys = (qk__kvec_t){found->v, 0, found->cap};
+  } else {
+    qk__free(al, found->v, found->cap * sizeof *found->v);
+  }
+  *found = (qk__kvec_t){0};
+}
+
+/* The current rows are replaced: their pair buffer is kept as the next rows' when large. */
+static void keep_rows(qk_world_t *w) {
+  const qk_allocator_t *al = &w->alloc;
+  qk__free(al, w->spare_b, w->cap_spare_b * sizeof *w->spare_b);
+  w->spare_b = NULL, w->cap_spare_b = 0;
+  if (w->cur.cap * sizeof *w->cur.b >= QK__KEEP_BYTES) {
+    w->spare_b = w->cur.b, w->cap_spare_b = w->cur.cap;
+    w->cur.b = NULL, w->cur.cap = 0;
+  }
+  rows_free(al, &w->cur);
+}
+
 qk_status_t qk_world_update(qk_world_t *w) {
   if (!w) return QK_ERR_INVALID;
   const qk_allocator_t *al = &w->alloc;
@@ -554,9 +596,20 @@ qk_status_t qk_world_update(qk_world_t *w) {
     qk__world_pack_free(w, &pk);
     return pst;
   }
-  qk__kvec_t found;
-  qk_status_t st = qk__world_search(w, &pk, &found);
+  /* The search starts in the kept keys buffer (the world holds none while it runs). */
+  qk__kvec_t found = w->scr_keys, tk[QK__KEEP_THREADS];
+  w->scr_keys = (qk__kvec_t){0};
+  memcpy(tk, w->scr_tkeys, sizeof tk);
+  memset(w->scr_tkeys, 0, sizeof w->scr_tkeys);
+  qk_status_t st = qk__world_search(w, &pk, &found, tk);
   qk__world_pack_free(w, &pk);
+  /* The other threads' buffers are kept when large (as the first's: see keep_keys). */
+  for (unsigned t = 0; t < QK__KEEP_THREADS; t++) {
+    if (tk[t].cap * sizeof *tk[t].v >= QK__KEEP_BYTES && tk[t].cap <= 2 * tk[t].n + 64)
+      w->scr_tkeys[t] = tk[t], w->scr_tkeys[t].n = 0;
+    else
+      qk__free(al, tk[t].v, tk[t].cap * sizeof *tk[t].v);
+  }
   if (st != QK_OK) return st;
   if (found.n > UINT32_MAX) { /* (rows and counts hold 32-bit positions) */
     qk__free(al, found.v, found.cap * sizeof *found.v);
@@ -569,7 +622,15 @@ qk_status_t qk_world_update(qk_world_t *w) {
   int dirty = w->ident_dirty, ok = 0;
   qk__prows_t nr = {0};
   qk__kvec_t bv = {0}, ev = {0};
-  if ((nr.b = qk__realloc(al, NULL, 0, tcap * sizeof *nr.b))) nr.cap = tcap;
+  /* The new rows go in the buffer of the frame before last when it is large enough
+   * (and not much larger), else in a new one with some room (frames are alike). */
+  if (w->spare_b && w->cap_spare_b >= tcap && w->cap_spare_b <= 2 * tcap) {
+    nr.b = w->spare_b, nr.cap = w->cap_spare_b;
+    w->spare_b = NULL, w->cap_spare_b = 0;
+  } else {
+    size_t c = tcap * sizeof *nr.b >= QK__KEEP_BYTES ? tcap + tcap / 8 + 64 : tcap;
+    if ((nr.b = qk__realloc(al, NULL, 0, c * sizeof *nr.b))) nr.cap = c;
+  }
   unsigned nt = w->n_live < 4096 ? 1 : qk__world_update_threads(w);
   if (nr.b && total * 4 >= n_obj && nt > 1) {
     /* dense, on threads: rows and began / ended in one go */
@@ -580,11 +641,14 @@ qk_status_t qk_world_update(qk_world_t *w) {
     size_t ccap = total * 4 < n_obj ? 257 : 2 * (n_obj + 1);
     /* (the dense sort's scratch holds 32-bit slots, the sparse one's keys) */
     size_t tbytes = (total * 4 < n_obj ? sizeof(uint64_t) : sizeof(uint32_t)) * tcap;
-    uint64_t *tmp = qk__realloc(al, NULL, 0, tbytes);
+    /* The dense sort's scratch goes after the keys when their buffer has the room (it is
+     * given the room when it is kept: see keep_keys). */
+    int in_keys = total * 4 >= n_obj && (found.cap - total) * sizeof *found.v >= tbytes;
+    uint64_t *tmp = in_keys ? found.v + total : qk__realloc(al, NULL, 0, tbytes);
     uint32_t *cnt = tmp ? qk__realloc(al, NULL, 0, ccap * sizeof *cnt) : NULL;
     ok = cnt && make_rows(al, found.v, tmp, total, cnt, (uint32_t)n_obj, &nr);
     qk__free(al, cnt, ccap * sizeof *cnt);
-    qk__free(al, tmp, tbytes);
+    if (!in_keys) qk__free(al, tmp, tbytes);
     /* The lists start with room for the last frame's counts and some (frames are
      * alike), and grow if need be. */
     size_t bcap = w->began.n + w->began.n / 4 + 64, ecap = w->ended.n + w->ended.n / 4 + 64;
@@ -593,7 +657,7 @@ qk_status_t qk_world_update(qk_world_t *w) {
     ok = ev.v && diff(w, &w->cur, &nr, dirty, &bv, &ev);
   }
   if (ok) w->last_found = total;
-  qk__free(al, found.v, found.cap * sizeof *found.v);
+  keep_keys(w, &found, total);
   size_t n_eg = 0;
   if (dirty)
     for (uint32_t i = 0; i < w->n_obj; i++) n_eg += w->obj[i].gen != w->ugen[i];
@@ -614,7 +678,7 @@ qk_status_t qk_world_update(qk_world_t *w) {
   /* This frame's rows become the current pairs (their room cut to size when it is much
    * larger: a failed shrink is harmless), and the handles they stand for are the present
    * generations. */
-  rows_free(al, &w->cur);
+  keep_rows(w);
   if (nr.cap > nr.n + nr.n / 4 + 64) {
     size_t c = nr.n ? nr.n : 1;
     uint32_t *p = qk__realloc(al, nr.b, nr.cap * sizeof *p, c * sizeof *p);

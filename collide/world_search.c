@@ -509,13 +509,26 @@ static inline double cell_work(const qk_world_t *w, uint32_t a, int finest) {
   return (double)(w->cells[a + 1].start - w->cells[a].start) * qk__pow2(d < 60 ? d : 60);
 }
 
-qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kvec_t *out) {
+/* Free the given buffers (a failure before the search ran). */
+static qk_status_t search_nomem(const qk_world_t *w, qk__kvec_t *found, qk__kvec_t *tk) {
+  qk__free(&w->alloc, found->v, found->cap * sizeof *found->v);
+  for (unsigned t = 0; t < QK__KEEP_THREADS; t++) {
+    qk__free(&w->alloc, tk[t].v, tk[t].cap * sizeof *tk[t].v);
+    tk[t] = (qk__kvec_t){0};
+  }
+  return QK_ERR_NOMEM;
+}
+
+qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kvec_t *out,
+                             qk__kvec_t *tk) {
+  qk__kvec_t found = *out;
+  found.n = 0;
   *out = (qk__kvec_t){0};
   lvinfo_t lv[QK__NLEV];
   int n_levels;
   uint32_t *rf;
   size_t n_rf;
-  if (!level_info(w, pk, lv, &n_levels, &rf, &n_rf)) return QK_ERR_NOMEM;
+  if (!level_info(w, pk, lv, &n_levels, &rf, &n_rf)) return search_nomem(w, &found, tk);
   unsigned nt = qk__world_update_threads(w);
   if (w->n_live < 4096) nt = 1; /* not worth a thread */
   /* Chunks of cells of about equal work, taken in turn by the workers (many more than
@@ -530,7 +543,7 @@ qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kve
     chunk = qk__realloc(&w->alloc, NULL, 0, (n_chunks + 1) * sizeof *chunk);
     if (!chunk) {
       qk__free(&w->alloc, rf, n_rf * sizeof *rf);
-      return QK_ERR_NOMEM;
+      return search_nomem(w, &found, tk);
     }
     double total = 0, acc = 0;
     for (uint32_t a = 0; a < w->n_cells; a++) total += cell_work(w, a, lv[0].l);
@@ -547,11 +560,23 @@ qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kve
   share_t shares[256];
   for (unsigned t = 0; t < nt; t++)
     shares[t] = (share_t){w, pk, {0}, &w->alloc, 0, lv, n_levels, chunk, n_chunks, &next};
-  /* The first worker's buffer is sized by the last search (it grows if need be). */
-  qk__kvec_t found = {0};
+  /* The other workers start in the buffers given (those of the last update). */
+  for (unsigned t = 1; t <= QK__KEEP_THREADS; t++) {
+    if (t < nt)
+      shares[t].out = tk[t - 1], shares[t].out.n = 0;
+    else
+      qk__free(&w->alloc, tk[t - 1].v, tk[t - 1].cap * sizeof *tk[t - 1].v);
+    tk[t - 1] = (qk__kvec_t){0};
+  }
+  /* The first worker's buffer is the one given, or one sized by the last search (it
+   * grows if need be). */
   size_t guess = w->last_found + w->last_found / 8 + 64;
-  found.v = qk__realloc(&w->alloc, NULL, 0, guess * sizeof *found.v);
-  if (found.v) found.cap = guess;
+  if (found.cap < guess) {
+    qk__free(&w->alloc, found.v, found.cap * sizeof *found.v);
+    found = (qk__kvec_t){0};
+    found.v = qk__realloc(&w->alloc, NULL, 0, guess * sizeof *found.v);
+    if (found.v) found.cap = guess;
+  }
   shares[0].out = found;
   qk__run_jobs(nt, nt, run_share, shares);
   found = shares[0].out;
@@ -580,8 +605,13 @@ qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kve
       found.n += shares[t].out.n;
     }
   }
-  for (unsigned t = 1; t < nt; t++)
+  for (unsigned t = 1; t < nt; t++) {
+    if (t <= QK__KEEP_THREADS) { /* given back, for the caller to keep or free */
+      tk[t - 1] = shares[t].out;
+      continue;
+    }
     qk__free(&w->alloc, shares[t].out.v, shares[t].out.cap * sizeof(uint64_t));
+  }
   if (st != QK_OK) {
     qk__free(&w->alloc, found.v, found.cap * sizeof *found.v);
     found = (qk__kvec_t){0};

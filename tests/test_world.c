@@ -10,6 +10,8 @@
  *  - the bench's clustered mixed-size scene, small (boxes of 0.03 .. 30 on a 1/64 grid in
  *    eight clusters, moving; also with discs, segments and points): large objects over
  *    many finer levels' cells, inside them and on their borders;
+ *  - a dense world (about 2.4 M pairs) whose update keeps its large buffers for the next
+ *    one: pairs, began and ended every frame, on one thread and two;
  *  - hand-made touching cases of every pair of kinds (integers: the oracle is exact);
  *  - stale handles are rejected after removal and slot reuse;
  *  - churn: 10^5 frames of moves, adds and removes on a small world stay within 1.2x the
@@ -443,6 +445,90 @@ static void test_world_huge(void **s) {
   (void)s;
   run_scene(SC_HUGE, 1, 300, 30, 1);
 }
+/* The library's list `which` equals v[0 .. n). */
+static void list_equals(qk_world_t *w, qk_pairs_which_t which, const qk_world_pair_t *v, size_t n,
+                        int frame) {
+  size_t got;
+  assert_int_equal(qk_world_pairs_list(w, which, NULL, 0, &got), QK_OK);
+  if (got != n) fail_msg("dense frame %d list %d: %zu pairs, oracle %zu", frame, which, got, n);
+  qk_world_pair_t *g = malloc((n ? n : 1) * sizeof *g);
+  assert_int_equal(qk_world_pairs_list(w, which, g, n, &got), QK_OK);
+  for (size_t i = 0; i < n; i++)
+    if (g[i].a != v[i].a || g[i].b != v[i].b)
+      fail_msg("dense frame %d list %d: pair %zu differs (seed %llu)", frame, which, i,
+               (unsigned long long)g_seed);
+  free(g);
+}
+
+/* update_and_check for many pairs: the pairs against brute force, began and ended
+ * against a merge of the sorted last and new lists (a pair whose slots stay but whose
+ * handles changed ended and began). */
+static void dense_check(qk_world_t *w, const mirror_t *m, qk_world_pair_t **prev, size_t *np,
+                        int frame) {
+  assert_int_equal(qk_world_update(w), QK_OK);
+  qk_world_pair_t *want;
+  size_t nw = o_pairs(m, &want), i = 0, j = 0, nb = 0, ne = 0;
+  list_equals(w, QK_PAIRS_ALL, want, nw, frame);
+  qk_world_pair_t *b = malloc((nw + 1) * sizeof *b), *e = malloc((*np + 1) * sizeof *e);
+  while (i < nw || j < *np) {
+    int c = i == nw ? 1 : j == *np ? -1 : wp_cmp(&want[i], &(*prev)[j]);
+    if (c == 0 && (want[i].a != (*prev)[j].a || want[i].b != (*prev)[j].b))
+      b[nb++] = want[i++], e[ne++] = (*prev)[j++];
+    else if (c == 0)
+      i++, j++;
+    else if (c < 0)
+      b[nb++] = want[i++];
+    else
+      e[ne++] = (*prev)[j++];
+  }
+  list_equals(w, QK_PAIRS_BEGAN, b, nb, frame);
+  list_equals(w, QK_PAIRS_ENDED, e, ne, frame);
+  free(b), free(e), free(*prev);
+  *prev = want, *np = nw;
+}
+
+/* A dense world (2200 boxes of side 10 over an 11 x 11 square: about 2.4 M pairs) whose
+ * buffers are large enough that the update keeps them for the next one (the keys with
+ * the sort's scratch, the rows of the frame before last, the other threads' keys): frames
+ * of moves, a remove and an add against brute force, on one thread and on two. */
+static void test_world_dense_kept_scratch(void **s) {
+  (void)s;
+  for (unsigned th = 1; th <= 2; th++) {
+    qkt_rng_t r;
+    qkt_rng_seed(&r, g_seed + 31 + th);
+    qk_world_options_t o;
+    qk_world_options_init(&o);
+    o.threads = th;
+    o.thread_min = 0;
+    qk_world_t *w;
+    assert_int_equal(qk_world_new(&o, &w), QK_OK);
+    mirror_t m = {0};
+    for (int i = 0; i < 2200; i++) {
+      double x = qkt_rng_range(&r, 0, 11), y = qkt_rng_range(&r, 0, 11);
+      m_add(w, &m, (qk_shape_t){QK_SHAPE_BOX, x, y, x + 10, y + 10});
+    }
+    qk_world_pair_t *prev = NULL;
+    size_t np = 0;
+    for (int f = 0; f < 4; f++) {
+      for (size_t i = 0; i < m.n; i++) {
+        qk_shape_t sh = moved(&r, m.s[i]);
+        assert_int_equal(qk_world_move(w, m.h[i], &sh), QK_OK);
+        m.s[i] = o_norm(sh);
+      }
+      if (f == 2) { /* one removed, one added (its slot reused) */
+        size_t i = qkt_rng_below(&r, (uint32_t)m.n);
+        assert_int_equal(qk_world_remove(w, m.h[i]), QK_OK);
+        m.h[i] = m.h[m.n - 1], m.s[i] = m.s[m.n - 1], m.n--;
+        m_add(w, &m, (qk_shape_t){QK_SHAPE_BOX, 3, 3, 13, 13});
+      }
+      dense_check(w, &m, &prev, &np, f);
+      assert_true(np > 2000000);
+    }
+    free(prev), free(m.h), free(m.s);
+    qk_world_free(w);
+  }
+}
+
 /* Enough objects that the update packs the boxes on both threads: frames of moves (by
  * the batch call), adds and removes give the same pairs, began and ended on two threads
  * as on one (checked against brute force by the scene tests). */
@@ -1111,6 +1197,7 @@ int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_world_uniform),
       cmocka_unit_test(test_world_clustered),
+      cmocka_unit_test(test_world_dense_kept_scratch),
       cmocka_unit_test(test_world_mixed_sizes),
       cmocka_unit_test(test_world_all_kinds),
       cmocka_unit_test(test_world_huge),
