@@ -161,7 +161,7 @@ static void knn_share(void *ctx, unsigned w, unsigned nw) {
     const qk_point_t q = j->qs[i];
     qk_neighbor_t *o = j->out ? j->out + i * j->k : NULL;
     size_t n = 0;
-    qk_status_t st = qk__knn_check(q, j->max_dist);
+    qk_status_t st = qk__knn_check(j->t, q, j->max_dist);
     if (st == QK_OK) {
       const int inside = qk__tree_contains(j->t, q.x, q.y);
       if (inside) qk__path_reuse(j->t, &path, q.x, q.y);

@@ -656,7 +656,7 @@ qk_status_t qk_query_knn(const qk_tree_t *tree, qk_point_t q, size_t k, double m
                          qk_neighbor_t *out, size_t *n_out) {
   if (!tree || !n_out || (k > 0 && !out)) return QK_ERR_INVALID;
   *n_out = 0;
-  qk_status_t st = qk__knn_check(q, max_dist);
+  qk_status_t st = qk__knn_check(tree, q, max_dist);
   if (st != QK_OK) return st;
   if (k == 1 && qk__tree_count(tree) > 0) {
     /* The common case straight to its search. */

@@ -296,10 +296,27 @@ void qk__walk_lanes(const qk_tree_t *t, const qk_point_t *qs, const uint32_t *or
  * not NULL, is the query's path, already walked. */
 size_t qk__knn_one(const qk_tree_t *t, qk_point_t q, size_t k, double max_dist, qk_neighbor_t *out,
                    const qk__path_t *path);
+/*
+ * Distances are compared by their squares in double, (dx)^2 + (dy)^2: beyond 2^510 a
+ * coordinate's difference could square past DBL_MAX, and every distance would read
+ * infinite. kNN queries therefore need the query and the root square within
+ * [-2^510, 2^510] on both axes (QK_ERR_LIMIT otherwise); one test per query. (The
+ * radius query is defined by that double formula itself, overflow included.)
+ */
+#define QK__DIST_RANGE 0x1p510
+static inline bool qk__dist_in_range(const qk_tree_t *t, qk_point_t q) {
+  const qk_square_t r = qk__tree_root_square(t);
+  const double m =
+      fmax(fmax(fabs(q.x), fabs(q.y)),
+           fmax(fmax(fabs(r.x), fabs(r.y)), fmax(fabs(r.x + r.side), fabs(r.y + r.side))));
+  return m <= QK__DIST_RANGE;
+}
+
 /* QK_OK, or why a kNN query cannot be answered. */
-static inline qk_status_t qk__knn_check(qk_point_t q, double max_dist) {
+static inline qk_status_t qk__knn_check(const qk_tree_t *t, qk_point_t q, double max_dist) {
   if (!isfinite(q.x) || !isfinite(q.y)) return QK_ERR_NONFINITE;
   if (isnan(max_dist) || max_dist < 0) return QK_ERR_INVALID;
+  if (!qk__dist_in_range(t, q)) return QK_ERR_LIMIT;
   return QK_OK;
 }
 

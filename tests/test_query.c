@@ -385,6 +385,49 @@ static int stop_after_3(qk_id_t id, qk_point_t p, double dist, void *ud) {
   return ++*(int *)ud == 3;
 }
 
+/*
+ * kNN where squared distances leave the double range: points 2e154 and 3e154 from the
+ * query square to infinity alike, so a plain search would rank point 0 first at distance
+ * inf; the query is refused (QK_ERR_LIMIT) instead, single and batch. Just inside the
+ * range (2^509) the answer is the brute-force one.
+ */
+static void test_query_knn_distance_range(void **state) {
+  (void)state;
+  const double scales[] = {1e154, 0x1p509 / 4};
+  for (int s = 0; s < 2; s++) {
+    const qk_point_t p[2] = {{3 * scales[s], 0}, {2 * scales[s], 0}};
+    qk_tree_t *t = NULL;
+    assert_int_equal(qk_tree_build(p, 2, NULL, &t), QK_OK);
+    qk_neighbor_t nb[2];
+    size_t m = 9, counts[2];
+    const qk_point_t qs[2] = {{0, 0}, {0, 0}};
+    qk_status_t st = qk_query_knn(t, qs[0], 1, INFINITY, nb, &m);
+    qk_status_t bt = qk_query_knn_batch(t, qs, 2, 1, INFINITY, nb, counts);
+    if (s == 0) {
+      assert_int_equal(st, QK_ERR_LIMIT);
+      assert_int_equal(m, 0);
+      assert_int_equal(bt, QK_ERR_LIMIT);
+      assert_int_equal(counts[0], 0);
+    } else {
+      assert_int_equal(st, QK_OK);
+      assert_int_equal(m, 1);
+      assert_int_equal(bt, QK_OK);
+      assert_int_equal(nb[0].id, 1);
+      assert_true(nb[0].dist == 2 * scales[s]);
+    }
+    /* A query beyond the range is refused even on a small tree. */
+    if (s == 1) {
+      qk_tree_free(t);
+      const qk_point_t u[1] = {{0.5, 0.5}};
+      assert_int_equal(qk_tree_build(u, 1, NULL, &t), QK_OK);
+      assert_int_equal(qk_query_knn(t, (qk_point_t){1e300, 0}, 1, INFINITY, nb, &m), QK_ERR_LIMIT);
+      assert_int_equal(qk_query_knn(t, (qk_point_t){-1e150, 1e150}, 1, INFINITY, nb, &m), QK_OK);
+      assert_int_equal(m, 1);
+    }
+    qk_tree_free(t);
+  }
+}
+
 static void test_query_stop_and_bad_args(void **state) {
   (void)state;
   qk_point_t p[100];
@@ -858,6 +901,7 @@ int main(void) {
       cmocka_unit_test(test_query_batch),
       cmocka_unit_test(test_query_batch_nomem),
       cmocka_unit_test(test_query_stop_and_bad_args),
+      cmocka_unit_test(test_query_knn_distance_range),
       cmocka_unit_test(test_query_threads),
       cmocka_unit_test(test_query_batch_threaded_order),
       cmocka_unit_test(test_query_cities),

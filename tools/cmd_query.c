@@ -314,6 +314,14 @@ static int knn_prepare(qrun_t *q) {
 static int knn_answer(qrun_t *q, size_t i) {
   size_t m;
   qk_status_t st = qk_query_knn(q->tree, q->pts[1][i], q->a.k, q->a.max_dist, q->nb, &m);
+  if (st == QK_ERR_LIMIT) {
+    cli_error(q->a.cmd,
+              "%s: query %zu (%.17g, %.17g): the query or the points reach beyond 2^510 "
+              "(about 3.4e153) on an axis, where squared distances overflow; scale the data by "
+              "a power of two",
+              q->a.files[1], i, q->pts[1][i].x, q->pts[1][i].y);
+    return CLI_BAD_INPUT;
+  }
   if (st != QK_OK) return cli_status(q->a.cmd, q->a.files[1], st);
   for (size_t j = 0; j < m; j++)
     emit(q, i, q->nb[j].id, "%zu,%zu,%u,%.17g", i, j + 1, (unsigned)q->nb[j].id, q->nb[j].dist);

@@ -77,6 +77,9 @@ static inline qk_status_t qk_query_range_ids(const qk_tree_t *tree, qk_box_t box
 /**
  * Report every point p within distance r of c, that is with
  * (p.x - c.x)^2 + (p.y - c.y)^2 <= r * r in double precision, in no particular order.
+ * That formula is the definition, overflow included: with coordinates beyond about
+ * 1e154 apart squares become infinite (and r * r too, for r beyond that), so compare
+ * such data after scaling it by a power of two.
  * \param [in] tree the tree.
  * \param [in] c the centre; may lie outside the root square.
  * \param [in] r the radius, >= 0 (INFINITY reports every point).
@@ -156,7 +159,10 @@ static inline qk_status_t qk_query_radius_batch(const qk_tree_t *tree, const qk_
  * \param [in] max_dist the cap, >= 0, or INFINITY.
  * \param [out] out buffer of k entries (may be NULL when k is 0).
  * \param [out] n_out how many were written: min(k, points within max_dist).
- * \return QK_OK, QK_ERR_NONFINITE or QK_ERR_INVALID (max_dist < 0 or NaN).
+ * \return QK_OK, QK_ERR_NONFINITE, QK_ERR_INVALID (max_dist < 0 or NaN) or QK_ERR_LIMIT
+ *         (q or the root square reaches beyond 2^510 ~ 3.4e153 on an axis, where squared
+ *         distances could overflow). Distances are ranked by their squares in double:
+ *         points nearer to q than about 1e-162 (2^-537) all rank at distance 0.
  */
 qk_status_t qk_query_knn(const qk_tree_t *tree, qk_point_t q, size_t k, double max_dist,
                          qk_neighbor_t *out, size_t *n_out);
@@ -175,8 +181,9 @@ qk_status_t qk_query_knn(const qk_tree_t *tree, qk_point_t q, size_t k, double m
  * \param [in] max_dist the cap, or INFINITY.
  * \param [out] out nq * k entries.
  * \param [out] counts nq counts (may be NULL).
- * \return QK_OK, QK_ERR_NONFINITE (the lowest-numbered query that is not finite; the
- *         others are still answered, that one gets count 0) or QK_ERR_INVALID.
+ * \return QK_OK, QK_ERR_NONFINITE or QK_ERR_LIMIT (as qk_query_knn(), for the
+ *         lowest-numbered query that failed; the others are still answered, that one gets
+ *         count 0) or QK_ERR_INVALID.
  */
 qk_status_t qk_query_knn_batch(const qk_tree_t *tree, const qk_point_t *qs, size_t nq, size_t k,
                                double max_dist, qk_neighbor_t *out, size_t *counts);
