@@ -108,10 +108,7 @@ static inline void push_siblings(const qk_tree_t *t, qk__cell_t p, uint32_t chil
     m += (q != skip) & (b[q] <= thr);
   }
   qk__sort_cells_desc(kids, m);
-  /* At most three pass (one child is skipped): all three places written, m of them kept,
-   * with no loop on m (the stack has room for three beyond its deepest fill). */
-  for (int i = 0; i < 3; i++) stack[*sp + i] = kids[i];
-  *sp += m;
+  for (int i = 0; i < m; i++) stack[(*sp)++] = kids[i];
 }
 
 /*
@@ -269,51 +266,13 @@ static inline uint64_t within(const double *xs, const double *ys, uint32_t m, do
   return mask;
 }
 
-/* 1 when a > b, else 0, as data: a comparison whose result is an integer (comisd, then
- * a flag into a register), where compilers turn `p -= a > b` into a branch that goes
- * either way at random where it is used. */
-static inline size_t gt_bit(double a, double b) {
-#if defined(__SSE2__)
-  return (size_t)_mm_comigt_sd(_mm_set_sd(a), _mm_set_sd(b));
-#else
-  return a > b;
-#endif
-}
-
-/*
- * Insert (s, v) at `at` or below in a sorted array of (squared distance, slot) pairs, by
- * (distance, id): the larger entries move up by one. at[-2] and at[-1] down to the
- * array's start hold entries or the sentinels at distance -infinity below it (so no bound
- * check, and the tie loop never reads a sentinel's slot). Two entries a step while both
- * move (the array is sorted: at[-2] above v means at[-1] too), then the last one without
- * a branch: it is copied up in any case, and overwritten by the new entry when it was not
- * above v. Compares distances alone while they differ; ids are read only on a tie.
- */
-static inline void insert_sorted(qk_neighbor_t *at, const qk_id_t *pid, uint32_t s, double v) {
-  while (at[-2].dist > v) {
-    at[0] = at[-1];
-    at[-1] = at[-2];
-    at -= 2;
-  }
-  const qk_neighbor_t last = at[-1];
-  at[0] = last;
-  at -= gt_bit(last.dist, v);
-  if (at[-1].dist == v) {
-    const qk_id_t id = pid[s];
-    for (; at[-1].dist == v && pid[at[-1].id] > id; at--) *at = at[-1];
-  }
-  *at = (qk_neighbor_t){s, v};
-}
-
 /*
  * Offer a leaf's points to a sorted array of at most k (squared distance, slot) pairs.
  * The array keeps slots, not ids, as the k = 1 search does: an id is read
  * only when two distances tie (the (distance, id) order), and the k ids at the end, all
  * at once (knn_search). In a tree larger than the cache the ids are lines of their own,
- * and most candidates are pushed out again before the end. A chunk's points within the
- * threshold go in two loops: into free entries while the array fills, then over the last
- * entry when they beat it; the count is tested once per point either way, but the test
- * ends the first loop only once per search, where a test inside one loop went either way.
+ * and most candidates are pushed out again before the end. The insertion compares
+ * distances alone while they differ (one comparison per entry moved).
  */
 static inline void scan_sorted(const qk_tree_t *t, qk_node_t leaf, double qx, double qy,
                                best_t *b) {
@@ -324,26 +283,35 @@ static inline void scan_sorted(const qk_tree_t *t, qk_node_t leaf, double qx, do
   const size_t k = b->k;
   /* In locals: the stores into o could alias them. */
   size_t n = b->n;
+  double thr = b->thr;
   double d2[QK__SCAN_CHUNK];
   for (uint32_t base = 0; base < count; base += QK__SCAN_CHUNK) {
     const uint32_t m = count - base < QK__SCAN_CHUNK ? count - base : QK__SCAN_CHUNK;
-    /* The threshold is the last entry's distance: the caller's limit until the array is
-     * full (knn_limited), then the k-th best. */
-    uint64_t r = within(xs + base, ys + base, m, qx, qy, o[k - 1].dist, d2);
-    for (; r && n < k; r &= r - 1) {
-      const uint32_t i = ctz64(r);
-      insert_sorted(o + n++, pid, start + base + i, d2[i]);
-    }
-    for (; r; r &= r - 1) {
+    for (uint64_t r = within(xs + base, ys + base, m, qx, qy, thr, d2); r; r &= r - 1) {
       const uint32_t i = ctz64(r), s = start + base + i;
       const double v = d2[i];
-      /* The last entry may have shrunk since the mask was taken. */
-      const qk_neighbor_t w = o[k - 1];
-      if (v < w.dist || (v == w.dist && pid[s] < pid[w.id])) insert_sorted(o + k - 1, pid, s, v);
+      qk_neighbor_t *at;
+      if (n == k) {
+        /* The threshold is the last entry's distance, which may have shrunk since. */
+        const qk_neighbor_t w = o[k - 1];
+        if (!(v < w.dist || (v == w.dist && pid[s] < pid[w.id]))) continue;
+        at = o + k - 1;
+      } else {
+        at = o + n++;
+      }
+      /* o[-1] is a sentinel at distance -infinity (knn_search), so no bound check, and
+       * the tie loop never reads its slot. */
+      for (; at[-1].dist > v; at--) *at = at[-1];
+      if (at[-1].dist == v) {
+        const qk_id_t id = pid[s];
+        for (; at[-1].dist == v && pid[at[-1].id] > id; at--) *at = at[-1];
+      }
+      *at = (qk_neighbor_t){s, v};
+      thr = o[k - 1].dist; /* the caller's limit until the array is full (knn_limited) */
     }
   }
   b->n = n;
-  b->thr = o[k - 1].dist;
+  b->thr = thr;
 }
 
 /* Ask for the x and y lines of a leaf's first points (at most 64). */
@@ -532,44 +500,25 @@ static double guess_limit(const qk_tree_t *t, const qk__path_t *p, size_t k) {
   return ((double)k + 2.0 * sqrt((double)k) + 4.0) * side * side / (3.14159 * (double)cnt);
 }
 
-/*
- * The sorted array's n entries (slot, squared distance) as (id, distance) into out: two
- * square roots in one instruction where SSE2 is there (sqrtpd, the correctly rounded root
- * in each lane, as sqrt() gives; the squared distances are >= 0, so the library call's
- * domain check, which compilers keep beside the instruction, has nothing to catch).
- */
-static inline void finish_sorted(const qk_id_t *pid, const qk_neighbor_t *e, size_t n,
-                                 qk_neighbor_t *out) {
-  size_t i = 0;
-#if defined(__SSE2__)
-  for (; i + 2 <= n; i += 2) {
-    const __m128d r = _mm_sqrt_pd(_mm_loadh_pd(_mm_load_sd(&e[i].dist), &e[i + 1].dist));
-    out[i].id = pid[e[i].id];
-    out[i + 1].id = pid[e[i + 1].id];
-    _mm_store_sd(&out[i].dist, r);
-    _mm_storeh_pd(&out[i + 1].dist, r);
-  }
-#endif
-  for (; i < n; i++) out[i] = (qk_neighbor_t){pid[e[i].id], sqrt(e[i].dist)};
-}
-
 /* Any k > 1 with a limit (squared): how many of out hold neighbours (squared distances
  * in b->out), sorted, into out; the ids of a sorted search's slots are read at the end. */
 static size_t knn_limited(const qk_tree_t *t, double qx, double qy, size_t k, double limit2,
                           qk_neighbor_t *out, const qk__path_t *path) {
   best_t b = {out, k, 0, limit2, QK_NONE};
   if (k <= QK__KNN_SORTED) {
-    /* The sorted array lives here, after two sentinels that end every insertion's shift
+    /* The sorted array lives here, after a sentinel that ends every insertion's shift
      * without a bound check. */
-    qk_neighbor_t sorted[QK__KNN_SORTED + 2];
-    sorted[0] = sorted[1] = (qk_neighbor_t){QK_NONE, -INFINITY};
+    qk_neighbor_t sorted[QK__KNN_SORTED + 1];
+    sorted[0] = (qk_neighbor_t){QK_NONE, -INFINITY};
     /* The last entry holds the limit until an insertion reaches it, so that the
      * threshold is always the last entry's distance (no test on the count). */
-    sorted[k + 1] = (qk_neighbor_t){QK_NONE, limit2};
-    b.out = sorted + 2;
+    sorted[k] = (qk_neighbor_t){QK_NONE, limit2};
+    b.out = sorted + 1;
     search(t, qx, qy, &b, KIND_SORTED, path);
     /* The entries hold slots: their ids now, whose reads do not wait for one another. */
-    finish_sorted(qk__tree_ids(t), b.out, b.n, out);
+    const qk_id_t *pid = qk__tree_ids(t);
+    for (size_t i = 0; i < b.n; i++)
+      out[i] = (qk_neighbor_t){pid[sorted[i + 1].id], sqrt(sorted[i + 1].dist)};
   } else {
     search(t, qx, qy, &b, KIND_HEAP, path);
     qk__heap_sort(out, b.n);
