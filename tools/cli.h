@@ -48,6 +48,10 @@ void cli_table_free(cli_table_t *t);
  * array; at least one data row. rows as for cli_read_table. */
 int cli_read_points(const char *path, const char *xy, cli_rows_t *rows, qk_point_t **pts,
                     size_t *n);
+/* The same for a file of queries, which may have no data rows (*n = 0, *pts NULL): a
+ * query command answers an empty batch with its header line alone. */
+int cli_read_queries(const char *path, const char *xy, cli_rows_t *rows, qk_point_t **pts,
+                     size_t *n);
 
 /* Write `text` (one row's or the header's fields) then empty fields up to `width`, each
  * preceded by a comma; with prefix, the header's names prefixed (names 1..width when

@@ -174,7 +174,8 @@ static int read_input(qrun_t *q, int i) {
   switch (q->c->kind[i]) {
   case IN_POINTS: {
     const char *xy = i == 1 && q->a.query_xy ? q->a.query_xy : q->a.xy;
-    return cli_read_points(path, xy, &q->rows[i], &q->pts[i], &q->n[i]);
+    return (i == 0 ? cli_read_points : cli_read_queries)(path, xy, &q->rows[i], &q->pts[i],
+                                                         &q->n[i]);
   }
   case IN_BOXES:
     return cli_read_table(path, 4, 4, &q->rows[i], &q->tab[i]);

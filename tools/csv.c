@@ -105,20 +105,30 @@ void cli_table_free(cli_table_t *t) {
   memset(t, 0, sizeof *t);
 }
 
-int cli_read_points(const char *path, const char *xy, cli_rows_t *rows, qk_point_t **pts,
-                    size_t *n) {
+static int read_points(const char *path, const char *xy, cli_rows_t *rows, qk_point_t **pts,
+                       size_t *n, int need_rows) {
   double *v = NULL;
   *pts = NULL;
   *n = 0;
   int rc = read_values(path, xy, 2, 2, rows, &v, n);
   if (rc) return rc;
-  if (*n == 0) {
+  if (*n == 0 && need_rows) {
     fprintf(stderr, "quadkit: %s: no data rows\n", path);
     cli_rows_free(rows);
     return CLI_BAD_INPUT;
   }
   *pts = (qk_point_t *)(void *)v; /* rows of two doubles: the points' layout */
   return CLI_OK;
+}
+
+int cli_read_points(const char *path, const char *xy, cli_rows_t *rows, qk_point_t **pts,
+                    size_t *n) {
+  return read_points(path, xy, rows, pts, n, 1);
+}
+
+int cli_read_queries(const char *path, const char *xy, cli_rows_t *rows, qk_point_t **pts,
+                     size_t *n) {
+  return read_points(path, xy, rows, pts, n, 0);
 }
 
 void cli_write_fields(FILE *f, const char *text, size_t width, const char *prefix) {

@@ -173,4 +173,22 @@ expect 1 "bigq.csv: query 0 \\(0, 0\\): the query or the points reach beyond 2\\
 printf '3e150,0\n2e150,0\n' >"$tmp/bigp.csv"
 expect 0 '^0,1,1,2e\+150$' -- "$cli" knn "$tmp/bigp.csv" "$tmp/bigq.csv" -k 1
 
+# An empty or header-only file of queries is an empty batch for every query command: the
+# header line alone, exit 0. An empty file of points is an error.
+: >"$tmp/noq.csv"
+printf 'x,y\n' >"$tmp/hdrq.csv"
+for f in noq hdrq; do
+  for opts in "knn -k 1" "radius -r 1" "locate"; do
+    read -r -a args <<<"$opts"
+    "$cli" "${args[0]}" "$tmp/p.csv" "$tmp/$f.csv" "${args[@]:1}" >"$tmp/got" 2>&1
+    rc=$?
+    if [ "$rc" -ne 0 ] || [ "$(wc -l <"$tmp/got")" -ne 1 ]; then
+      fail "$opts on $f.csv: exit $rc, output $(cat "$tmp/got") (want the header alone)"
+    else
+      passes=$((passes + 1))
+    fi
+  done
+done
+expect 1 'noq.csv: no data rows' -- "$cli" knn "$tmp/noq.csv" "$tmp/q.csv" -k 1
+
 report
