@@ -32,7 +32,8 @@ typedef struct reader {
 } reader_t;
 
 /* Read the next line holding a token. Returns 1, 0 at end of input, -1 out of memory,
- * -2 for a NUL byte (binary data, which no text format holds). */
+ * -2 for a NUL byte (binary data, which no text format holds), -3 for a carriage return
+ * not followed by a line feed (CR-only line ends would read as one long line). */
 static int next_line(reader_t *r) {
   for (;;) {
     size_t n = 0;
@@ -44,6 +45,14 @@ static int next_line(reader_t *r) {
       if (c == '\0') {
         r->line++;
         return -2;
+      }
+      if (c == '\r') {
+        int d = getc(r->f);
+        if (d != '\n' && d != EOF) {
+          r->line++;
+          return -3;
+        }
+        if (d == '\n') ungetc(d, r->f);
       }
       if (n + 2 > r->cap) {
         void *p = r->buf;
@@ -229,6 +238,9 @@ static qk_status_t rfail(const reader_t *r, qk_mesh_error_t *err, qk_status_t st
 static qk_status_t maybe_line(reader_t *r, qk_mesh_error_t *err, int *got) {
   int g = next_line(r);
   if (g == -2) return rfail(r, err, QK_ERR_PARSE, "binary data (a NUL byte)");
+  if (g == -3)
+    return rfail(r, err, QK_ERR_PARSE,
+                 "a carriage return inside the line (line ends must be LF or CRLF, not CR alone)");
   if (g < 0) return rfail(r, err, QK_ERR_NOMEM, "out of memory");
   if (g == 0 && r->io_error) return rfail(r, err, QK_ERR_IO, "read error");
   *got = g;

@@ -204,6 +204,8 @@ if "$cli" mesh --help >/dev/null 2>&1; then
   printf '99999999999 2 0 0\n' >absurd.poly
   printf '4 2 0 0\n0 0 0\n1 4 0\n2 4 4\n3 0 4\n99999999999 0\n' >absurdseg.poly
   printf '4 3 0 0\n' >dim.poly
+  printf '4 2 0 0\r0 0 0\r1 4 0\r2 4 4\r3 0 4\r' >cr.poly
+  printf '4 2 0 0\r\n0 0 0\r\n1 4 0\r\n2 4 4\r\n3 0 4\r\n4 0\r\n0 0 1\r\n1 1 2\r\n2 2 3\r\n3 3 0\r\n0\r\n' >crlf.poly
   row M1 0 '' -- "$cli" mesh ok.poly -o out/ok
   [ -s out/ok.node ] && [ -s out/ok.ele ] || { echo "FAIL M1: outputs missing"; fails=$((fails + 1)); }
   rm -f out/ok.node out/ok.ele
@@ -231,6 +233,8 @@ if "$cli" mesh --help >/dev/null 2>&1; then
   row M23 1 'absurd.poly:1: 99999999999 vertices is absurd' -- "$cli" mesh absurd.poly -o out/m
   row M24 1 'absurdseg.poly:6: 99999999999 segments is absurd' -- "$cli" mesh absurdseg.poly -o out/m
   row M25 1 "dim.poly:1: dimension must be 2, found '3'" -- "$cli" mesh dim.poly -o out/m
+  row M25b 1 'cr.poly:1: a carriage return inside the line \(line ends must be LF or CRLF' -- "$cli" mesh cr.poly -o out/m
+  row M25c 0 '' -- "$cli" mesh crlf.poly -o out/crlf
   row M26 2 '--size must be a power of two, not 3' -- "$cli" mesh ok.poly -o out/m --size 3
   row M27 2 '--size' -- "$cli" mesh ok.poly -o out/m --size 2147483648
   row M28 1 'missing.poly' -- "$cli" mesh missing.poly -o out/m
