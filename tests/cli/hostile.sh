@@ -7,14 +7,6 @@
 # shellcheck source=lib/common.bash
 source "$(dirname "${BASH_SOURCE[0]}")/lib/common.bash" "$@"
 
-same() { # same NAME GOT WANT: compare two strings
-  if [ "$2" = "$3" ]; then
-    passes=$((passes + 1))
-  else
-    fail "$1: got '$2', want '$3'"
-  fi
-}
-
 unchanged() { # unchanged FILE: the -o target still holds "keep"
   if [ "$(cat "$1")" = keep ]; then
     passes=$((passes + 1))
@@ -27,14 +19,14 @@ unchanged() { # unchanged FILE: the -o target still holds "keep"
 bom=$'\xef\xbb\xbf'
 printf '%s1,disc,0,0,1\n2,disc,0.5,0,1\n' "$bom" >"$tmp/obj.csv"
 : >"$tmp/none.csv"
-same "world: BOM before the first object" "$("$cli" world "$tmp/obj.csv" "$tmp/none.csv" | tr '\n' ' ')" \
+same_text "world: BOM before the first object" "$("$cli" world "$tmp/obj.csv" "$tmp/none.csv" | tr '\n' ' ')" \
   "frame,a,b 0,1,2 "
 printf '1,disc,0,0,1\n2,disc,0.5,0,1\n' >"$tmp/obj2.csv"
 printf '%s0,1,9,9,1\n' "$bom" >"$tmp/mv.csv"
-same "world: BOM before the first move" "$("$cli" world "$tmp/obj2.csv" "$tmp/mv.csv" | tr '\n' ' ')" \
+same_text "world: BOM before the first move" "$("$cli" world "$tmp/obj2.csv" "$tmp/mv.csv" | tr '\n' ' ')" \
   "frame,a,b "
 printf '1,disc,0,0,1\r\n2,disc,0.5,0,1\r\n' >"$tmp/crlf.csv"
-same "world: CRLF" "$("$cli" world "$tmp/crlf.csv" "$tmp/none.csv" | tr '\n' ' ')" "frame,a,b 0,1,2 "
+same_text "world: CRLF" "$("$cli" world "$tmp/crlf.csv" "$tmp/none.csv" | tr '\n' ' ')" "frame,a,b 0,1,2 "
 echo keep >"$tmp/keep.csv"
 printf '1,1,5,5,1\n0,1,5,5,1\n' >"$tmp/order.csv"
 expect 1 'order.csv:2: frames out of order' -- "$cli" world "$tmp/obj2.csv" "$tmp/order.csv" -o "$tmp/keep.csv"
@@ -52,13 +44,13 @@ expect 1 'junk.csv:2: field 2 is not a finite number' -- "$cli" join "$tmp/sq.ge
 unchanged "$tmp/keep.csv"
 zeros=$(printf '%0300d' 0)
 printf 'x,y\n0.5,%s0.5\n0.5,0.%s1\n' "$zeros" "$zeros" >"$tmp/long.csv"
-same "join: 300-digit numbers" "$("$cli" join "$tmp/sq.geojson" "$tmp/long.csv" | cut -d, -f3 | tr '\n' ' ')" \
+same_text "join: 300-digit numbers" "$("$cli" join "$tmp/sq.geojson" "$tmp/long.csv" | cut -d, -f3 | tr '\n' ' ')" \
   "feature 0 0 "
 printf '%sname,x,y\r\n"Rome, Lazio",0.5,0.5\r\n"a ""b""",2,2\r\n' "$bom" >"$tmp/q.csv"
-same "join: BOM, CRLF, quoted commas, --xy by name" \
+same_text "join: BOM, CRLF, quoted commas, --xy by name" \
   "$("$cli" join "$tmp/sq.geojson" "$tmp/q.csv" --xy x,y --field name | tr '\n' ' ')" \
   'name,x,y,feature,name "Rome, Lazio",0.5,0.5,0,sq "a ""b""",2,2,-1, '
-same "join: --xy by number" "$("$cli" join "$tmp/sq.geojson" "$tmp/q.csv" --xy 2,3 | awk -F, '{ print $NF }' | tr '\n' ' ')" \
+same_text "join: --xy by number" "$("$cli" join "$tmp/sq.geojson" "$tmp/q.csv" --xy 2,3 | awk -F, '{ print $NF }' | tr '\n' ' ')" \
   "feature 0 -1 "
 
 printf 'x,x,y\n5,0.5,0.5\n' >"$tmp/twice.csv"
@@ -70,7 +62,7 @@ unchanged "$tmp/keep.csv"
 printf '%s' "$bom" >"$tmp/bom.geojson"
 cat "$tmp/sq.geojson" >>"$tmp/bom.geojson"
 printf 'x,y\n0.5,0.5\n' >"$tmp/p.csv"
-same "GeoJSON with a BOM" "$("$cli" join "$tmp/bom.geojson" "$tmp/p.csv" | tail -1)" "0.5,0.5,0"
+same_text "GeoJSON with a BOM" "$("$cli" join "$tmp/bom.geojson" "$tmp/p.csv" | tail -1)" "0.5,0.5,0"
 printf '{"type":"FeatureColection","features":[]}\n' >"$tmp/typo.geojson"
 expect 1 'typo.geojson: unknown GeoJSON type "FeatureColection"' -- "$cli" join "$tmp/typo.geojson" "$tmp/p.csv" -o "$tmp/keep.csv"
 unchanged "$tmp/keep.csv"

@@ -7,14 +7,6 @@
 # shellcheck source=lib/common.bash
 source "$(dirname "${BASH_SOURCE[0]}")/lib/common.bash" "$@"
 
-same() { # same NAME GOT WANT: compare two strings
-  if [ "$2" = "$3" ]; then
-    passes=$((passes + 1))
-  else
-    fail "$1: got '$2', want '$3'"
-  fi
-}
-
 nothing() { # nothing PREFIX: no file PREFIX.* was written
   if compgen -G "$1.*" >/dev/null; then
     fail "files written after an error: $(echo "$1".*)"
@@ -34,7 +26,7 @@ printf '{"type":"FeatureCollection","features":[
 {"type":"Feature","properties":{"name":"P"},"geometry":{"type":"Point","coordinates":[50,50]}}]}\n' \
   "$(sq 20 0 30 10 | cut -c2- | rev | cut -c2- | rev)" "$(sq 4 4 6 6)" >"$tmp/fc.geojson"
 printf 'x,y\n1,1\n5,5\n3,3\n25,5\n50,50\n' >"$tmp/p.csv"
-same "join: mixed features" "$("$cli" join "$tmp/fc.geojson" "$tmp/p.csv" --planar --field name | tr '\n' ' ')" \
+same_text "join: mixed features" "$("$cli" join "$tmp/fc.geojson" "$tmp/p.csv" --planar --field name | tr '\n' ' ')" \
   "x,y,feature,name 1,1,0,A 5,5,1, 3,3,-1, 25,5,0,A 50,50,-1, "
 expect 0 '"components": 3, .*"features": 2, ' -- "$cli" mesh "$tmp/fc.geojson" -o "$tmp/fc" --stats
 expect 0 '"components": 1, .*"features": 1, ' -- "$cli" mesh "$tmp/fc.geojson" -o "$tmp/f1" --feature 1 --stats
@@ -49,7 +41,7 @@ nothing "$tmp/pt"
 printf '{"type":"Feature","properties":{"name":"gc"},"geometry":{"type":"GeometryCollection","geometries":[{"type":"Point","coordinates":[5,5]},{"type":"Polygon","coordinates":%s},{"type":"GeometryCollection","geometries":[{"type":"MultiPolygon","coordinates":[%s]}]}]}}\n' \
   "$(sq 0 0 1 1)" "$(sq 2 0 3 1)" >"$tmp/gc.geojson"
 printf 'x,y\n0.5,0.5\n2.5,0.5\n1.5,0.5\n' >"$tmp/g.csv"
-same "join: GeometryCollection" "$("$cli" join "$tmp/gc.geojson" "$tmp/g.csv" --planar --field name | tr '\n' ' ')" \
+same_text "join: GeometryCollection" "$("$cli" join "$tmp/gc.geojson" "$tmp/g.csv" --planar --field name | tr '\n' ' ')" \
   "x,y,feature,name 0.5,0.5,0,gc 2.5,0.5,0,gc 1.5,0.5,-1, "
 expect 0 '"components": 2, .*"triangles": [1-9]' -- "$cli" mesh "$tmp/gc.geojson" -o "$tmp/gc" --stats
 printf '{"type":"GeometryCollection","geometries":{}}\n' >"$tmp/gcbad.geojson"
@@ -112,9 +104,9 @@ fi
 # first row with a bad id is an error, not a header -------------------------------------
 printf '"1","disc",0,0,1\n"2",disc , 0.5 ,0,"1"\n3,"point",1,0,"",""\n' >"$tmp/wq.csv"
 : >"$tmp/none.csv"
-same "world: quoted fields" "$("$cli" world "$tmp/wq.csv" "$tmp/none.csv" | tr '\n' ' ')" "frame,a,b 0,1,2 0,1,3 0,2,3 "
+same_text "world: quoted fields" "$("$cli" world "$tmp/wq.csv" "$tmp/none.csv" | tr '\n' ' ')" "frame,a,b 0,1,2 0,1,3 0,2,3 "
 printf '"id","kind","x","y","a","b"\n1,point,0,0\n2,point,0,0\n' >"$tmp/wqh.csv"
-same "world: quoted header" "$("$cli" world "$tmp/wqh.csv" "$tmp/none.csv" | tr '\n' ' ')" "frame,a,b 0,1,2 "
+same_text "world: quoted header" "$("$cli" world "$tmp/wqh.csv" "$tmp/none.csv" | tr '\n' ' ')" "frame,a,b 0,1,2 "
 printf '1,"disc,0,0,1\n' >"$tmp/wq2.csv"
 expect 1 'wq2.csv:1: unterminated quoted field' -- "$cli" world "$tmp/wq2.csv" "$tmp/none.csv"
 printf '1,"disc"x,0,0,1\n' >"$tmp/wq3.csv"
@@ -129,7 +121,7 @@ printf 'x1,2\n3,4\n' >"$tmp/h1.csv"
 expect 1 "h1.csv:1:1: field 1 is not a number: 'x1'" -- "$cli" tree "$tmp/h1.csv"
 expect 1 "h1.csv:1: field 1 is not a finite number: 'x1'" -- "$cli" join "$tmp/gc.geojson" "$tmp/h1.csv" --planar
 printf 'x,y\n3,4\n' >"$tmp/h2.csv"
-same "join: a header still is one" "$("$cli" join "$tmp/gc.geojson" "$tmp/h2.csv" --planar | tr '\n' ' ')" "x,y,feature 3,4,-1 "
+same_text "join: a header still is one" "$("$cli" join "$tmp/gc.geojson" "$tmp/h2.csv" --planar | tr '\n' ' ')" "x,y,feature 3,4,-1 "
 
 printf '0,0\n1,1\n' >"$tmp/two.csv"
 # ---- a directory as input: a clear error, exit 1 (was "read error", exit 3 for mesh) ---
@@ -150,14 +142,14 @@ printf 'x,y\r0.5,0.5\r' >"$tmp/jcr.csv"
 expect 1 'jcr.csv:1: a carriage return inside the line' -- "$cli" join "$tmp/gc.geojson" "$tmp/jcr.csv" --planar
 expect 1 'jcr.csv:1:4: a carriage return inside the line' -- "$cli" tree "$tmp/jcr.csv"
 printf '1,disc,0,0,1\r\n2,disc,0.5,0,1\r\n' >"$tmp/wcrlf.csv"
-same "world: CRLF still fine" "$("$cli" world "$tmp/wcrlf.csv" "$tmp/none.csv" | tr '\n' ' ')" "frame,a,b 0,1,2 "
+same_text "world: CRLF still fine" "$("$cli" world "$tmp/wcrlf.csv" "$tmp/none.csv" | tr '\n' ' ')" "frame,a,b 0,1,2 "
 
 # ---- an output path that cannot be written fails before any work or output (tree
 # printed its statistics, simulate its JSON, then failed) -------------------------------
 expect 1 'cannot write .*adir' -- "$cli" tree "$tmp/two.csv" --svg "$tmp/adir"
-same "tree: nothing on stdout when --svg fails" "$("$cli" tree "$tmp/two.csv" --svg "$tmp/adir" 2>/dev/null)" ""
-same "regions: nothing on stdout when --svg fails" "$("$cli" regions "$tmp/gc.geojson" --planar --svg "$tmp/adir" 2>/dev/null)" ""
-same "simulate: nothing on stdout when --svg fails" "$("$cli" simulate --n 20 --frames 2 --svg "$tmp/adir" 2>/dev/null)" ""
+same_text "tree: nothing on stdout when --svg fails" "$("$cli" tree "$tmp/two.csv" --svg "$tmp/adir" 2>/dev/null)" ""
+same_text "regions: nothing on stdout when --svg fails" "$("$cli" regions "$tmp/gc.geojson" --planar --svg "$tmp/adir" 2>/dev/null)" ""
+same_text "simulate: nothing on stdout when --svg fails" "$("$cli" simulate --n 20 --frames 2 --svg "$tmp/adir" 2>/dev/null)" ""
 "$cli" simulate --n 20 --frames 2 -o "$tmp/sim.json" --svg "$tmp/nodir/s.svg" 2>/dev/null
 [ $? -eq 1 ] && [ ! -e "$tmp/sim.json" ] && passes=$((passes + 1)) || fail "simulate: -o written although --svg failed"
 "$cli" simulate --n 20 --frames 2 -o "$tmp/sim.json" --svg "$tmp/sim.svg" &&

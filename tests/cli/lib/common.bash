@@ -27,6 +27,14 @@ expect() { # expect CODE PATTERN -- command...: exit status and a line matching 
   fi
 }
 
+same_text() { # same_text NAME GOT WANT: two strings are equal
+  if [ "$2" = "$3" ]; then
+    passes=$((passes + 1))
+  else
+    fail "$1: got '$2', want '$3'"
+  fi
+}
+
 report() { # the closing line ctest and CI read, and the script's status
   echo "$passes passed, $fails failed"
   [ "$fails" -eq 0 ]
