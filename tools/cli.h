@@ -48,6 +48,13 @@ void cli_table_free(cli_table_t *t);
  * array; at least one data row. rows as for cli_read_table. */
 int cli_read_points(const char *path, const char *xy, cli_rows_t *rows, qk_point_t **pts,
                     size_t *n);
+/* What a carriage return left inside a line once its end is cut means to the user. */
+#define CLI_LONE_CR "a carriage return inside the line (line ends must be LF or CRLF, not CR alone)"
+/* Cut a line's end (LF, CRLF) in place, *len its length before and after; nonzero when a
+ * carriage return is left inside it: CR-only line ends, where the rest of the file would
+ * read as this one line. */
+int cli_cut_line_end(char *line, size_t *len);
+
 /* The same for a file of queries, which may have no data rows (*n = 0, *pts NULL): a
  * query command answers an empty batch with its header line alone. */
 int cli_read_queries(const char *path, const char *xy, cli_rows_t *rows, qk_point_t **pts,

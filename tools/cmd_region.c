@@ -286,12 +286,11 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
       rc = CLI_BAD_INPUT;
       break;
     }
-    while (len > 0 && (line[len - 1] == '\n' || line[len - 1] == '\r')) line[--len] = '\0';
-    if (memchr(line, '\r', (size_t)len)) {
-      fprintf(stderr,
-              "quadkit join: %s:%ld: a carriage return inside the line (line ends must be LF or "
-              "CRLF, not CR alone)\n",
-              j->pts_path, lineno);
+    size_t cut = (size_t)len;
+    int lone_cr = cli_cut_line_end(line, &cut);
+    len = (ssize_t)cut;
+    if (lone_cr) {
+      fprintf(stderr, "quadkit join: %s:%ld: " CLI_LONE_CR "\n", j->pts_path, lineno);
       rc = CLI_BAD_INPUT;
       break;
     }

@@ -186,10 +186,8 @@ static int each_row(const char *path,
       break;
     }
     size_t n = (size_t)len;
-    while (n > 0 && (line[n - 1] == '\n' || line[n - 1] == '\r')) line[--n] = '\0';
-    if (memchr(line, '\r', n)) { /* the rest of the file would be dropped as this line's */
-      rc = bad(path, ln, "%s",
-               "a carriage return inside the line (line ends must be LF or CRLF, not CR alone)");
+    if (cli_cut_line_end(line, &n)) {
+      rc = bad(path, ln, "%s", CLI_LONE_CR);
       break;
     }
     char *p = line;

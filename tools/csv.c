@@ -165,3 +165,10 @@ void cli_write_fields(FILE *f, const char *text, size_t width, const char *prefi
       fputc(',', f);
   }
 }
+
+int cli_cut_line_end(char *line, size_t *len) {
+  size_t n = *len;
+  while (n > 0 && (line[n - 1] == '\n' || line[n - 1] == '\r')) line[--n] = '\0';
+  *len = n;
+  return memchr(line, '\r', n) != NULL;
+}
