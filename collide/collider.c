@@ -64,12 +64,20 @@ enum { QX0 = 0, QY0 = 4, QX1 = 8, QY1 = 12 };
 static const uint32_t lane_quadrant[4] = {QK_SW, QK_SE, QK_NW, QK_NE};
 
 /*
+ * A disc as the collider keeps it: with its id beside it, 32 bytes, two to a cache line, so
+ * that a leaf's scan reads its discs' lines and nothing else (the tree's id array would
+ * be one more miss per leaf).
+ */
+typedef struct sdisc {
+  qk_disc_t d;
+  qk_id_t id;
+  uint32_t pad;
+} sdisc_t;
+
+/*
  * Item data is kept in the tree's slot order (parallel to the tree's point arrays), not by id, so
  * that scanning a leaf reads consecutive memory instead of jumping to each item's id: for large
- * sets that is what the scans cost. Discs are bare 24-byte records (no id beside them: 8 of
- * them fill three lines, against four with a 32-byte record holding the id), since the ray
- * cast reads an id only for a disc that becomes the best hit so far, from the tree's id
- * array.
+ * sets that is what the scans cost.
  */
 struct qk_collider {
   qk_allocator_t alloc;
@@ -77,7 +85,7 @@ struct qk_collider {
   size_t n_discs, n;
   size_t n_slots;
   qk_box_t *sbox;    /* per slot: the item's box, or a disc's (padded) bounding box */
-  qk_disc_t *sdisc;  /* per slot: the disc (NULL without discs), 64-byte aligned; see below */
+  sdisc_t *sdisc;    /* per slot: the disc and its id (NULL without discs), 64-byte aligned */
   void *sdisc_block; /* the allocation holding sdisc */
   size_t sdisc_bytes;
   cnode_t *cn;    /* per node id: see cnode_t */
@@ -126,7 +134,7 @@ static inline shape_t slot_shape(const qk_collider_t *c, uint32_t slot) {
   shape_t s;
   s.is_disc = qk__tree_ids(c->tree)[slot] < c->n_discs;
   if (s.is_disc)
-    s.d = c->sdisc[slot];
+    s.d = c->sdisc[slot].d;
   else
     s.b = c->sbox[slot];
   return s;
@@ -611,9 +619,9 @@ static qk_status_t alloc_arrays(qk_collider_t *c) {
   c->n_nodes = nodes ? nodes : 1;
   c->sbox = qk__realloc(a, NULL, 0, c->n_slots * sizeof *c->sbox);
   if (c->n_discs) {
-    c->sdisc_bytes = c->n_slots * sizeof(qk_disc_t) + 64;
+    c->sdisc_bytes = c->n_slots * sizeof(sdisc_t) + 64;
     c->sdisc_block = qk__realloc(a, NULL, 0, c->sdisc_bytes);
-    if (c->sdisc_block) c->sdisc = (qk_disc_t *)(((uintptr_t)c->sdisc_block + 63) & ~(uintptr_t)63);
+    if (c->sdisc_block) c->sdisc = (sdisc_t *)(((uintptr_t)c->sdisc_block + 63) & ~(uintptr_t)63);
   }
   /* Three spare entries in front put each block of four children (which start at ids
    * 1, 5, 9, ...) on a 128-byte boundary, with 64 bytes of slack for the alignment. */
@@ -645,7 +653,7 @@ static qk_status_t alloc_arrays(qk_collider_t *c) {
 static inline double put_item(qk_collider_t *c, const range_ctx_t *x, size_t id, uint32_t slot,
                               const double *xs, const double *ys) {
   if (id < c->n_discs) {
-    c->sdisc[slot] = x->discs[id];
+    c->sdisc[slot] = (sdisc_t){x->discs[id], (qk_id_t)id, 0};
     c->sbox[slot] = disc_bbox(&x->discs[id]);
   } else {
     c->sbox[slot] = x->boxes[id - c->n_discs];
@@ -1061,11 +1069,11 @@ static inline double ray_disc(const qk_disc_t *d, double ox, double oy, double d
  * [0, best] (t into th[k], written only when some bit is set); the lanes that the scalar
  * code would leave early compute values (perhaps NaN) that the masks discard.
  */
-static inline unsigned ray_disc2(const qk_disc_t *d, const ray_t *r, double tmax, double best,
+static inline unsigned ray_disc2(const sdisc_t *d, const ray_t *r, double tmax, double best,
                                  double th[2]) {
-  const __m128d a0 = _mm_loadu_pd(&d[0].x), a1 = _mm_loadu_pd(&d[1].x); /* x, y */
+  const __m128d a0 = _mm_load_pd(&d[0].d.x), a1 = _mm_load_pd(&d[1].d.x); /* x, y */
   const __m128d x = _mm_unpacklo_pd(a0, a1), y = _mm_unpackhi_pd(a0, a1);
-  const __m128d rr = _mm_set_pd(d[1].r, d[0].r);
+  const __m128d rr = _mm_set_pd(d[1].d.r, d[0].d.r);
   const __m128d dx = r->vdx, dy = r->vdy;
   const __m128d fx = _mm_sub_pd(r->vox, x), fy = _mm_sub_pd(r->voy, y);
   const __m128d cc =
@@ -1101,9 +1109,8 @@ typedef struct best {
   qk_id_t id;
 } best_t;
 
-/* The items of slots [slot, end) against the ray, into *b. The tree's id array is read for
- * the items that may become the best hit (their t no farther than the best so far) and,
- * in mixed sets, for the kind. */
+/* The items of slots [slot, end) against the ray, into *b. Discs carry their ids; the
+ * tree's id array is read only for hits on boxes and for the kind in mixed sets. */
 #if defined(__GNUC__)
 __attribute__((always_inline))
 #endif
@@ -1122,7 +1129,7 @@ scan_leaf(const qk_collider_t *c, const ray_t *ray, uint32_t slot, uint32_t end,
       if (!cand) continue; /* the common case: neither disc can be a new best */
       for (unsigned k = 0; k < 2; k++) {
         if (!(cand >> k & 1) || th[k] > b->t) continue; /* the best may have moved */
-        const qk_id_t id = pid[slot + k];
+        qk_id_t id = c->sdisc[slot + k].id;
         if (th[k] < b->t || id < b->id) *b = (best_t){th[k], id};
       }
     }
@@ -1130,10 +1137,10 @@ scan_leaf(const qk_collider_t *c, const ray_t *ray, uint32_t slot, uint32_t end,
 #endif
   for (; slot < end; slot++) {
     int is_disc = all_discs || (!no_discs && pid[slot] < c->n_discs);
-    double th = is_disc ? ray_disc(&c->sdisc[slot], ray->ox, ray->oy, ray->dx, ray->dy, tmax)
+    double th = is_disc ? ray_disc(&c->sdisc[slot].d, ray->ox, ray->oy, ray->dx, ray->dy, tmax)
                         : ray_box(&c->sbox[slot], ray, tmax);
     if (th < 0 || th > b->t) continue;
-    const qk_id_t id = pid[slot];
+    qk_id_t id = all_discs ? c->sdisc[slot].id : pid[slot];
     if (th < b->t || id < b->id) *b = (best_t){th, id};
   }
 }
@@ -1448,13 +1455,13 @@ static void cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk
            * its items and ids asked for now, so that those misses overlap the tests. */
           const uint32_t st = q->link[lane], cnt = q->count[lane];
           if (cnt > 0) {
-            if (c->n_discs == c->n) { /* the leaf's lines: up to 8 discs, at most four */
-              const char *p0 = (const char *)&c->sdisc[st];
-              const char *p1 = (const char *)&c->sdisc[st + cnt] - 1;
-              QK__CPREFETCH(p0);
-              QK__CPREFETCH(p0 + 64 < p1 ? p0 + 64 : p1);
-              QK__CPREFETCH(p0 + 128 < p1 ? p0 + 128 : p1);
-              QK__CPREFETCH(p1);
+            if (c->n_discs == c->n) { /* the leaf's lines (ids included), two discs each */
+              const uint32_t last = st + cnt - 1; /* up to 8 discs: four or five lines */
+              QK__CPREFETCH(&c->sdisc[st]);
+              QK__CPREFETCH(&c->sdisc[st + 2 < last ? st + 2 : last]);
+              QK__CPREFETCH(&c->sdisc[st + 4 < last ? st + 4 : last]);
+              QK__CPREFETCH(&c->sdisc[st + 6 < last ? st + 6 : last]);
+              QK__CPREFETCH(&c->sdisc[last]);
             } else {
               QK__CPREFETCH(c->sdisc ? (const void *)&c->sdisc[st] : (const void *)&c->sbox[st]);
               QK__CPREFETCH(&qk__tree_ids(t)[st]);
