@@ -1527,7 +1527,7 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
    * scaled by a power of two to a largest component in [1/2, 1), which is exact (but for
    * a component 2^1000 times smaller than the other, which then underflows: the ray's
    * direction moves by less than 2^-1000 of a radian), and t is scaled back. */
-  const double m = fmax(fabs(d.x), fabs(d.y));
+  const double m = qk__max(fabs(d.x), fabs(d.y)); /* finite: no call to fmax, no spills */
   int e = 0;
   if (m > 0x1p500 || (m < 0x1p-500 && m > 0)) {
     (void)frexp(m, &e);
