@@ -1103,6 +1103,18 @@ static inline double ray_box(const qk_box_t *b, const ray_t *r, double tmax) {
   return lo;
 }
 
+/* Asks for the lines of the discs of slots [st, st + cnt), cnt > 0, in a collider of discs
+ * only: two records a line, so up to five lines for a leaf of eight (the records of larger
+ * leaves past the first eight are left to the hardware). */
+static inline void prefetch_discs(const qk_collider_t *c, uint32_t st, uint32_t cnt) {
+  const uint32_t last = st + cnt - 1;
+  QK__CPREFETCH(&c->sdisc[st]);
+  QK__CPREFETCH(&c->sdisc[st + 2 < last ? st + 2 : last]);
+  QK__CPREFETCH(&c->sdisc[st + 4 < last ? st + 4 : last]);
+  QK__CPREFETCH(&c->sdisc[st + 6 < last ? st + 6 : last]);
+  QK__CPREFETCH(&c->sdisc[last]);
+}
+
 /* The best hit so far: smallest t, then smallest id. */
 typedef struct best {
   double t;
@@ -1455,13 +1467,8 @@ static void cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk
            * its items and ids asked for now, so that those misses overlap the tests. */
           const uint32_t st = q->link[lane], cnt = q->count[lane];
           if (cnt > 0) {
-            if (c->n_discs == c->n) { /* the leaf's lines (ids included), two discs each */
-              const uint32_t last = st + cnt - 1; /* up to 8 discs: four or five lines */
-              QK__CPREFETCH(&c->sdisc[st]);
-              QK__CPREFETCH(&c->sdisc[st + 2 < last ? st + 2 : last]);
-              QK__CPREFETCH(&c->sdisc[st + 4 < last ? st + 4 : last]);
-              QK__CPREFETCH(&c->sdisc[st + 6 < last ? st + 6 : last]);
-              QK__CPREFETCH(&c->sdisc[last]);
+            if (c->n_discs == c->n) {
+              prefetch_discs(c, st, cnt); /* the leaf's lines, ids included */
             } else {
               QK__CPREFETCH(c->sdisc ? (const void *)&c->sdisc[st] : (const void *)&c->sbox[st]);
               QK__CPREFETCH(&qk__tree_ids(t)[st]);
@@ -1520,7 +1527,7 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
    * scaled by a power of two to a largest component in [1/2, 1), which is exact (but for
    * a component 2^1000 times smaller than the other, which then underflows: the ray's
    * direction moves by less than 2^-1000 of a radian), and t is scaled back. */
-  const double m = fmax(fabs(d.x), fabs(d.y));
+  const double m = qk__max(fabs(d.x), fabs(d.y)); /* finite: no call to fmax, no spills */
   int e = 0;
   if (m > 0x1p500 || (m < 0x1p-500 && m > 0)) {
     (void)frexp(m, &e);

@@ -21,7 +21,9 @@
  *  - trees deeper than the 32 bits of the ray's descent (pairs of discs 2^-45 apart, depth
  *    cap 60) and a given root square whose halvings are not exact (corner -0.3, side
  *    1.7), with rays from inside and outside the root;
- *  - the batch call (which reorders its rays by origin) against single calls.
+ *  - the batch call (which reorders its rays by origin) against single calls;
+ *  - ties: every disc three times at shuffled ids, so that each hit is decided by the
+ *    smallest id among equal t.
  */
 #include <math.h>
 #include <stdio.h>
@@ -349,6 +351,57 @@ static void test_collide_rays_batch_matches_single(void **state) {
 }
 
 /*
+ * Ties between discs: every disc three times, the copies at shuffled ids, so that the
+ * slots of equal discs are adjacent in the tree while their ids are not in slot order, and
+ * every hit is a tie of three (t equal to the last bit) that only the smallest id decides.
+ * The cast reads ids from the tree's id array only for the discs that may be the best hit,
+ * two at a time or one at a time; both must pick the smallest id of a tie.
+ */
+static void test_collide_rays_tied_discs(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 3);
+  enum { NU = 1500, COPIES = 3, ND = NU * COPIES, NR = 3000 };
+  qk_disc_t *u = malloc(NU * sizeof *u), *d = malloc(ND * sizeof *d);
+  uint32_t *perm = malloc(ND * sizeof *perm);
+  assert_non_null(u && d && perm);
+  for (int i = 0; i < NU; i++)
+    u[i] =
+        (qk_disc_t){qkt_rng_range(&r, 0, 1), qkt_rng_range(&r, 0, 1), qkt_rng_range(&r, 0, 0.03)};
+  for (uint32_t i = 0; i < ND; i++) perm[i] = i;
+  for (uint32_t i = ND - 1; i > 0; i--) { /* Fisher-Yates */
+    uint32_t j = qkt_rng_below(&r, i + 1), t = perm[i];
+    perm[i] = perm[j], perm[j] = t;
+  }
+  for (uint32_t i = 0; i < ND; i++) d[perm[i]] = u[i % NU];
+  long ties = 0;
+  for (uint32_t cap = 1; cap <= 8; cap += 7) {
+    qk_tree_options_t opt;
+    qk_tree_options_init(&opt);
+    opt.capacity = cap;
+    qk_collider_t *c = NULL;
+    assert_int_equal(qk_collider_build(d, ND, NULL, 0, &opt, &c), QK_OK);
+    for (int i = 0; i < NR; i++) {
+      const double ang = qkt_rng_range(&r, 0, 6.283185307179586);
+      const qk_disc_t *dc = &u[qkt_rng_below(&r, NU)];
+      const qk_point_t o =
+          i % 3 == 0 ? (qk_point_t){dc->x, dc->y} /* inside: t = 0 */
+                     : (qk_point_t){qkt_rng_range(&r, -0.2, 1.2), qkt_rng_range(&r, -0.2, 1.2)};
+      const qk_point_t v = {cos(ang), sin(ang)};
+      qk_hit_t h, w = brute(d, ND, NULL, 0, o, v, INFINITY);
+      assert_int_equal(qk_collider_raycast(c, o, v, INFINITY, &h), QK_OK);
+      if (h.id != w.id || !(h.t == w.t || (isinf(h.t) && isinf(w.t))))
+        fail_msg("capacity %u ray %d: hit (%u, %.17g) vs brute force (%u, %.17g) (seed %llu)", cap,
+                 i, h.id, h.t, w.id, w.t, (unsigned long long)g_seed);
+      ties += w.id != QK_NONE;
+    }
+    qk_collider_free(c);
+  }
+  assert_true(ties > NR); /* most rays hit (and every hit is a tie of three) */
+  free(u), free(d), free(perm);
+}
+
+/*
  * Directions far beyond the arithmetic's range (components of 2^600 and more, or all
  * below 2^-600): the same ray with its direction multiplied by 2^k hits the same item at
  * t times 2^-k, exactly, since the cast scales such a direction back by a power of two.
@@ -403,6 +456,7 @@ int main(void) {
       cmocka_unit_test(test_collide_rays_grid_edges),
       cmocka_unit_test(test_collide_rays_deep_and_rooted),
       cmocka_unit_test(test_collide_rays_batch_matches_single),
+      cmocka_unit_test(test_collide_rays_tied_discs),
       cmocka_unit_test(test_collide_rays_extreme_directions),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
