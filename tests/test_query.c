@@ -13,6 +13,8 @@
  *    queries beside a dense cluster, where the search's guessed first limit falls short;
  *  - the k-th bound for k = 8, 32 and 100 on clustered and duplicate-heavy points, caps
  *    exactly at the k-th and (k/2)-th distance and just below, single and batch;
+ *  - squared distances a few units in the last place apart and exact ties among them
+ *    (the sorted search's first sort keys drop the low bits), k from 2 to 33;
  *  - batch kNN (Z-order, each query starting from the previous path) on every point set
  *    and capacity, one and two threads, against brute force;
  *  - kNN after random inserts and removals (qk_tree_check after each batch);
@@ -815,6 +817,60 @@ static void test_query_knn_kth_bound(void **state) {
   free(p), free(qs), free(got), free(counts);
 }
 
+/*
+ * Distances that differ only in the last bits of their squares: the sorted search sorts
+ * its first k candidates by keys that drop the six low bits of the squared distance
+ * (query/knn.c, fill_sort), so the order of such points, and of exactly equal ones (by
+ * id), must come from the exact comparison. Points at x = 1/4 + j 2^-54 on the four
+ * half-axes from the query (squares about 2 units in the last place apart; the four
+ * directions tie exactly), ids in a random order, with random points around; k from 2 to
+ * 32 and 33, with and without caps at those distances, single and batch, at capacities 1,
+ * 4 and 32, against brute force.
+ */
+static void test_query_knn_near_ties(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 16);
+  const size_t nj = 24, n = 4 * nj + 200, nq = 6;
+  qk_point_t *p = malloc(n * sizeof *p);
+  qk_neighbor_t *got = malloc(nq * 33 * sizeof *got), one[33], want[33];
+  size_t *counts = malloc(nq * sizeof *counts);
+  for (size_t j = 0; j < nj; j++) {
+    const double x = 0.25 + (double)j * 0x1p-54;
+    p[4 * j] = (qk_point_t){x, 0};
+    p[4 * j + 1] = (qk_point_t){0, x};
+    p[4 * j + 2] = (qk_point_t){-x, 0};
+    p[4 * j + 3] = (qk_point_t){0, -x};
+  }
+  for (size_t i = 4 * nj; i < n; i++)
+    p[i] = (qk_point_t){qkt_rng_range(&r, -1, 1), qkt_rng_range(&r, -1, 1)};
+  for (size_t i = n - 1; i > 0; i--) { /* ids in a random order */
+    const size_t j = qkt_rng_below(&r, (uint32_t)(i + 1));
+    const qk_point_t v = p[i];
+    p[i] = p[j], p[j] = v;
+  }
+  /* The origin (the near ties), tiny offsets of it, and the ends of two rays. */
+  const qk_point_t qs[] = {{0, 0},    {0x1p-60, 0},        {0, -0x1p-58}, {0x1p-70, 0x1p-70},
+                           {0.25, 0}, {-0.25 - 0x1p-53, 0}};
+  for (size_t c = 0; c < 3; c++) {
+    qk_tree_t *t = build(p, n, caps[c]);
+    for (size_t k = 2; k <= 33; k++) {
+      const double limits[] = {INFINITY, 0.25 + 5 * 0x1p-54, 0.25 + 0x1p-54};
+      const double cap = limits[k % 3];
+      assert_int_equal(qk_query_knn_batch(t, qs, nq, k, cap, got, counts), QK_OK);
+      for (size_t i = 0; i < nq; i++) {
+        const size_t tag = c * 10000 + k * 100 + i;
+        size_t ng, nw = qko_knn(p, NULL, n, qs[i], k, cap, want);
+        assert_int_equal(qk_query_knn(t, qs[i], k, cap, one, &ng), QK_OK);
+        assert_nb_equal(one, ng, want, nw, "knn-near-ties", tag);
+        assert_nb_equal(got + i * k, counts[i], want, nw, "knn-near-ties-batch", tag);
+      }
+    }
+    qk_tree_free(t);
+  }
+  free(p), free(got), free(counts);
+}
+
 static void test_query_cities(void **state) {
   (void)state;
   size_t n;
@@ -910,6 +966,7 @@ int main(void) {
       cmocka_unit_test(test_query_knn1_ties),
       cmocka_unit_test(test_query_knn_ties_k),
       cmocka_unit_test(test_query_knn_kth_bound),
+      cmocka_unit_test(test_query_knn_near_ties),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
