@@ -279,13 +279,16 @@ static inline uint64_t within(const double *xs, const double *ys, uint32_t m, do
  * arrival, a shift of an entry each, and of one mispredicted branch per insertion, where
  * the shift stopped (about a third of the instructions and half of the mispredictions of
  * a k = 32 search). The sort is a network of minima and maxima with no branch on the data:
- * each candidate gets a key, its squared distance with the six low bits of the mantissa
- * replaced by its place in the fill order, a positive double whose order is that of the
- * distances wherever those differ above the low bits; keys are distinct, so the network
- * sorts them without ties, and the candidates follow their keys. Two keys whose distances
- * agree above the low bits (equal distances, which the (distance, id) order breaks by id,
- * or nearly equal ones) are found in one pass over neighbours, and only then are the
- * candidates sorted again by comparisons, exactly.
+ * each candidate gets a key, the bits of its squared distance (a nonnegative double, whose
+ * bits as an integer have the same order) shifted right by one, with the six low bits
+ * replaced by its place in the fill order, and one binade added: a positive, normal double
+ * (never subnormal, which a processor set to treat subnormal inputs as zero, as programs
+ * linked with -ffast-math are, would read as 0, losing the place) whose order is that of
+ * the distances wherever those differ above their seven low bits. Keys are distinct, so
+ * the network sorts them without ties, and the candidates follow their keys. Two keys
+ * whose distances agree above the low bits (equal distances, which the (distance, id)
+ * order breaks by id, or nearly equal ones) are found in one pass over neighbours, and
+ * only then are the candidates sorted again by comparisons, exactly.
  */
 #define QK__FILL_LOW 63u /* the low bits of a key that hold the candidate's place */
 
@@ -305,7 +308,7 @@ static inline uint64_t key_bits(double v) {
 }
 
 static inline double make_key(double d2, uint32_t place) {
-  const uint64_t b = (key_bits(d2) & ~(uint64_t)QK__FILL_LOW) | place;
+  const uint64_t b = ((key_bits(d2) >> 1 & ~(uint64_t)QK__FILL_LOW) | place) + ((uint64_t)1 << 52);
   double v;
   memcpy(&v, &b, sizeof v);
   return v;
