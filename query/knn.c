@@ -10,11 +10,13 @@
  *
  * A query allocates nothing: for k = 1 the best so far is a single (distance, slot) pair
  * in registers, its id read once at the end; for k up to QK__KNN_SORTED an array of
- * (distance, slot) on the stack kept sorted by insertion (few candidates enter, and no
- * final sort is needed), its ids read at the end;
+ * (distance, slot) on the stack, its first k sorted at once by a sorting network and kept
+ * sorted by insertion after that (few candidates enter then), its ids read at the end;
  * beyond that a bounded max-heap in the caller's buffer (query/heap.c).
  */
 #include "query/query_internal.h"
+
+#include <string.h>
 
 #if defined(__SSE2__)
 #include <emmintrin.h>
@@ -29,6 +31,9 @@ typedef struct best {
   size_t k, n;
   double thr;    /* prune strictly above this: the cap until full, then the k-th best */
   uint32_t slot; /* k = 1: the best point's slot (its squared distance is thr), or QK_NONE */
+  /* The sorted search's first k candidates, in the order they came (fill_sort). */
+  qk_neighbor_t *fill; /* (slot, squared distance) */
+  double *keys;        /* their sort keys, 16-byte aligned, room for a power of two >= k */
 } best_t;
 
 /* Offer a leaf's points to a heap of at most k. */
@@ -267,6 +272,191 @@ static inline uint64_t within(const double *xs, const double *ys, uint32_t m, do
 }
 
 /*
+ * The sorted search's first k candidates are not inserted one by one: they are appended
+ * as they come (the threshold is the caller's limit until k are there, so nothing else
+ * depends on their order), and sorted once, when the k-th arrives or the search ends.
+ * Inserting them kept the array sorted at the cost of the inversions in their order of
+ * arrival, a shift of an entry each, and of one mispredicted branch per insertion, where
+ * the shift stopped (about a third of the instructions and half of the mispredictions of
+ * a k = 32 search). The sort is a network of minima and maxima with no branch on the data:
+ * each candidate gets a key, the bits of its squared distance (a nonnegative double, whose
+ * bits as an integer have the same order) shifted right by one, with the six low bits
+ * replaced by its place in the fill order, and one binade added: a positive, normal double
+ * (never subnormal, which a processor set to treat subnormal inputs as zero, as programs
+ * linked with -ffast-math are, would read as 0, losing the place) whose order is that of
+ * the distances wherever those differ above their seven low bits. Keys are distinct, so
+ * the network sorts them without ties, and the candidates follow their keys. Two keys
+ * whose distances agree above the low bits (equal distances, which the (distance, id)
+ * order breaks by id, or nearly equal ones) are found in one pass over neighbours, and
+ * only then are the candidates sorted again by comparisons, exactly.
+ */
+#define QK__FILL_LOW 63u /* the low bits of a key that hold the candidate's place */
+
+/* Unroll the loop that follows (the sorting network's, whose bounds are constants). */
+#if defined(__GNUC__) && !defined(__clang__)
+#define QK__UNROLL _Pragma("GCC unroll 32")
+#elif defined(__clang__)
+#define QK__UNROLL _Pragma("unroll")
+#else
+#define QK__UNROLL
+#endif
+
+static inline uint64_t key_bits(double v) {
+  uint64_t b;
+  memcpy(&b, &v, sizeof b);
+  return b;
+}
+
+static inline double make_key(double d2, uint32_t place) {
+  const uint64_t b = ((key_bits(d2) >> 1 & ~(uint64_t)QK__FILL_LOW) | place) + ((uint64_t)1 << 52);
+  double v;
+  memcpy(&v, &b, sizeof v);
+  return v;
+}
+
+#if defined(__SSE2__)
+/* Compare-exchange of the pairs (i, i + 1) and (i + 2, i + 3). */
+static inline void cx_adjacent(double *a, unsigned i) {
+  const __m128d x = _mm_load_pd(a + i), y = _mm_load_pd(a + i + 2);
+  const __m128d lo = _mm_unpacklo_pd(x, y), hi = _mm_unpackhi_pd(x, y);
+  const __m128d mn = _mm_min_pd(lo, hi), mx = _mm_max_pd(lo, hi);
+  _mm_store_pd(a + i, _mm_unpacklo_pd(mn, mx));
+  _mm_store_pd(a + i + 2, _mm_unpackhi_pd(mn, mx));
+}
+
+/* The m keys' pairs (i, i + 1), i even, smaller first. */
+static QK__ALWAYS_INLINE void cx_pairs(double *a, unsigned m) {
+  QK__UNROLL
+  for (unsigned i = 0; i < m; i += 4) cx_adjacent(a, i);
+}
+
+/* In each block of sz, entry t against entry sz - 1 - t, smaller first. */
+static QK__ALWAYS_INLINE void cx_mirror(double *a, unsigned m, unsigned sz) {
+  QK__UNROLL
+  for (unsigned i = 0; i < m / 2; i += 2) {
+    const unsigned b = i / (sz / 2) * sz, t = i % (sz / 2);
+    const __m128d x = _mm_load_pd(a + b + t), z = _mm_load_pd(a + b + sz - 2 - t);
+    const __m128d y = _mm_shuffle_pd(z, z, 1), mx = _mm_max_pd(x, y);
+    _mm_store_pd(a + b + t, _mm_min_pd(x, y));
+    _mm_store_pd(a + b + sz - 2 - t, _mm_shuffle_pd(mx, mx, 1));
+  }
+}
+
+/* Entry i against entry i + j (j >= 2) where i & j is 0, smaller first. */
+static QK__ALWAYS_INLINE void cx_apart(double *a, unsigned m, unsigned j) {
+  QK__UNROLL
+  for (unsigned h = 0; h < m / 2; h += 2) {
+    const unsigned i = h / j * 2 * j + h % j;
+    const __m128d x = _mm_load_pd(a + i), y = _mm_load_pd(a + i + j);
+    _mm_store_pd(a + i, _mm_min_pd(x, y));
+    _mm_store_pd(a + i + j, _mm_max_pd(x, y));
+  }
+}
+
+/*
+ * Sort the m (a power of two, 4 to 32) keys a[] ascending: Batcher's bitonic sorter in
+ * the form whose comparators all put the smaller first (each merge of two sorted halves
+ * of a block compares them mirror-wise, then cleans each half). Two comparators per
+ * instruction, no branch.
+ */
+static QK__ALWAYS_INLINE void bitonic(double *a, unsigned m) {
+  cx_pairs(a, m);
+  cx_mirror(a, m, 4);
+  cx_pairs(a, m);
+  if (m == 4) return;
+  cx_mirror(a, m, 8);
+  cx_apart(a, m, 2);
+  cx_pairs(a, m);
+  if (m == 8) return;
+  cx_mirror(a, m, 16);
+  cx_apart(a, m, 4);
+  cx_apart(a, m, 2);
+  cx_pairs(a, m);
+  if (m == 16) return;
+  cx_mirror(a, m, 32);
+  cx_apart(a, m, 8);
+  cx_apart(a, m, 4);
+  cx_apart(a, m, 2);
+  cx_pairs(a, m);
+}
+#endif
+
+/* Sort the n <= 32 keys a[], padded with +infinity up to a power of two (room for it). */
+static inline void sort_keys(double *a, unsigned n) {
+  unsigned m = 2;
+  while (m < n) m <<= 1;
+  for (unsigned i = n; i < m; i++) a[i] = INFINITY;
+#if defined(__SSE2__)
+  /* One specialised network per width, which the compiler unrolls. */
+  switch (m) {
+  case 2:
+    break;
+  case 4:
+    bitonic(a, 4);
+    return;
+  case 8:
+    bitonic(a, 8);
+    return;
+  case 16:
+    bitonic(a, 16);
+    return;
+  default:
+    bitonic(a, 32);
+    return;
+  }
+#endif
+  /* Insertion sort (no SSE2, or two keys). */
+  for (unsigned i = 1; i < m; i++) {
+    const double v = a[i];
+    unsigned j = i;
+    for (; j > 0 && a[j - 1] > v; j--) a[j] = a[j - 1];
+    a[j] = v;
+  }
+}
+
+/*
+ * The n first candidates fill[] of a sorted search, sorted by (distance, id) into o[],
+ * through their keys[] (fill_sort's comment above).
+ */
+static void fill_sort(const qk_tree_t *t, const qk_neighbor_t *fill, double *keys, size_t n,
+                      qk_neighbor_t *o) {
+  sort_keys(keys, (unsigned)n);
+  /* In key order the distances are ordered unless two agree above the low bits. */
+  uint64_t clash = 0;
+#if defined(__SSE2__)
+  if (n >= 3) {
+    /* Two neighbour pairs per step, the last step at n - 3 (overlapping the one before
+     * when n is even). A clash compares the keys without their low bits. */
+    const __m128d hi = _mm_castsi128_pd(_mm_set1_epi64x(~(long long)QK__FILL_LOW));
+    int c = 0;
+    for (size_t i = 0;; i += 2) {
+      if (i + 3 > n) i = n - 3;
+      const __m128d x = _mm_and_pd(_mm_loadu_pd(keys + i), hi);
+      const __m128d y = _mm_and_pd(_mm_loadu_pd(keys + i + 1), hi);
+      c |= _mm_movemask_pd(_mm_cmple_pd(y, x));
+      if (i + 3 == n) break;
+    }
+    clash = (uint64_t)c;
+  } else
+#endif
+    for (size_t i = 0; i + 1 < n; i++)
+      clash |= (key_bits(keys[i + 1]) >> 6) <= (key_bits(keys[i]) >> 6);
+  if (!clash) {
+    for (size_t i = 0; i < n; i++) o[i] = fill[key_bits(keys[i]) & QK__FILL_LOW];
+    return;
+  }
+  /* Equal (or nearly equal) distances: by comparisons, ties by id. */
+  const qk_id_t *pid = qk__tree_ids(t);
+  for (size_t i = 0; i < n; i++) {
+    const qk_neighbor_t v = fill[i];
+    size_t j = i;
+    for (; j > 0 && qk__nb_less(v.dist, pid[v.id], o[j - 1].dist, pid[o[j - 1].id]); j--)
+      o[j] = o[j - 1];
+    o[j] = v;
+  }
+}
+
+/*
  * Offer a leaf's points to a sorted array of at most k (squared distance, slot) pairs.
  * The array keeps slots, not ids, as the k = 1 search does: an id is read
  * only when two distances tie (the (distance, id) order), and the k ids at the end, all
@@ -291,13 +481,22 @@ static inline void scan_sorted(const qk_tree_t *t, qk_node_t leaf, double qx, do
       const uint32_t i = ctz64(r), s = start + base + i;
       const double v = d2[i];
       qk_neighbor_t *at;
-      if (n == k) {
+      if (n < k) {
+        /* Appended; sorted once the k-th is there (fill_sort), the threshold then its
+         * distance. */
+        b->fill[n] = (qk_neighbor_t){s, v};
+        b->keys[n] = make_key(v, (uint32_t)n);
+        if (++n == k) {
+          fill_sort(t, b->fill, b->keys, k, o);
+          thr = o[k - 1].dist;
+        }
+        continue;
+      }
+      {
         /* The threshold is the last entry's distance, which may have shrunk since. */
         const qk_neighbor_t w = o[k - 1];
         if (!(v < w.dist || (v == w.dist && pid[s] < pid[w.id]))) continue;
         at = o + k - 1;
-      } else {
-        at = o + n++;
       }
       /* o[-1] is a sentinel at distance -infinity (knn_search), so no bound check, and
        * the tie loop never reads its slot. */
@@ -307,7 +506,7 @@ static inline void scan_sorted(const qk_tree_t *t, qk_node_t leaf, double qx, do
         for (; at[-1].dist == v && pid[at[-1].id] > id; at--) *at = at[-1];
       }
       *at = (qk_neighbor_t){s, v};
-      thr = o[k - 1].dist; /* the caller's limit until the array is full (knn_limited) */
+      thr = o[k - 1].dist;
     }
   }
   b->n = n;
@@ -459,7 +658,7 @@ static QK__ALWAYS_INLINE void search(const qk_tree_t *t, double qx, double qy, b
 /* k = 1: the best pair in registers. Returns 0 or 1. */
 static size_t knn1(const qk_tree_t *t, double qx, double qy, double limit2, qk_neighbor_t *out,
                    const qk__path_t *path) {
-  best_t b = {out, 1, 0, limit2, QK_NONE};
+  best_t b = {out, 1, 0, limit2, QK_NONE, NULL, NULL};
   search(t, qx, qy, &b, KIND_ONE, path);
   if (b.slot == QK_NONE) return 0;
   out[0] = (qk_neighbor_t){qk__tree_ids(t)[b.slot], b.thr};
@@ -504,17 +703,18 @@ static double guess_limit(const qk_tree_t *t, const qk__path_t *p, size_t k) {
  * in b->out), sorted, into out; the ids of a sorted search's slots are read at the end. */
 static size_t knn_limited(const qk_tree_t *t, double qx, double qy, size_t k, double limit2,
                           qk_neighbor_t *out, const qk__path_t *path) {
-  best_t b = {out, k, 0, limit2, QK_NONE};
+  best_t b = {out, k, 0, limit2, QK_NONE, NULL, NULL};
   if (k <= QK__KNN_SORTED) {
     /* The sorted array lives here, after a sentinel that ends every insertion's shift
      * without a bound check. */
-    qk_neighbor_t sorted[QK__KNN_SORTED + 1];
+    qk_neighbor_t sorted[QK__KNN_SORTED + 1], fill[QK__KNN_SORTED];
+    _Alignas(16) double keys[QK__KNN_SORTED];
     sorted[0] = (qk_neighbor_t){QK_NONE, -INFINITY};
-    /* The last entry holds the limit until an insertion reaches it, so that the
-     * threshold is always the last entry's distance (no test on the count). */
-    sorted[k] = (qk_neighbor_t){QK_NONE, limit2};
     b.out = sorted + 1;
+    b.fill = fill;
+    b.keys = keys;
     search(t, qx, qy, &b, KIND_SORTED, path);
+    if (b.n < k) fill_sort(t, fill, keys, b.n, b.out); /* fewer than k within the limit */
     /* The entries hold slots: their ids now, whose reads do not wait for one another. */
     const qk_id_t *pid = qk__tree_ids(t);
     for (size_t i = 0; i < b.n; i++)

@@ -13,6 +13,9 @@
  *    queries beside a dense cluster, where the search's guessed first limit falls short;
  *  - the k-th bound for k = 8, 32 and 100 on clustered and duplicate-heavy points, caps
  *    exactly at the k-th and (k/2)-th distance and just below, single and batch;
+ *  - squared distances a few units in the last place apart and exact ties among them
+ *    (the sorted search's first sort keys drop the low bits), k from 2 to 33; kNN with
+ *    subnormals flushed (the processor mode of -ffast-math programs) on stored points;
  *  - batch kNN (Z-order, each query starting from the previous path) on every point set
  *    and capacity, one and two threads, against brute force;
  *  - kNN after random inserts and removals (qk_tree_check after each batch);
@@ -29,6 +32,10 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+
+#if defined(__SSE2__)
+#include <xmmintrin.h>
+#endif
 
 #include "qk_test.h"
 #include "query_oracle.h"
@@ -815,6 +822,115 @@ static void test_query_knn_kth_bound(void **state) {
   free(p), free(qs), free(got), free(counts);
 }
 
+/*
+ * Distances that differ only in the last bits of their squares: the sorted search sorts
+ * its first k candidates by keys that drop the six low bits of the squared distance
+ * (query/knn.c, fill_sort), so the order of such points, and of exactly equal ones (by
+ * id), must come from the exact comparison. Points at x = 1/4 + j 2^-54 on the four
+ * half-axes from the query (squares about 2 units in the last place apart; the four
+ * directions tie exactly), ids in a random order, with random points around; k from 2 to
+ * 32 and 33, with and without caps at those distances, single and batch, at capacities 1,
+ * 4 and 32, against brute force.
+ */
+static void test_query_knn_near_ties(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 16);
+  const size_t nj = 24, n = 4 * nj + 200, nq = 6;
+  qk_point_t *p = malloc(n * sizeof *p);
+  qk_neighbor_t *got = malloc(nq * 33 * sizeof *got), one[33], want[33];
+  size_t *counts = malloc(nq * sizeof *counts);
+  for (size_t j = 0; j < nj; j++) {
+    const double x = 0.25 + (double)j * 0x1p-54;
+    p[4 * j] = (qk_point_t){x, 0};
+    p[4 * j + 1] = (qk_point_t){0, x};
+    p[4 * j + 2] = (qk_point_t){-x, 0};
+    p[4 * j + 3] = (qk_point_t){0, -x};
+  }
+  for (size_t i = 4 * nj; i < n; i++)
+    p[i] = (qk_point_t){qkt_rng_range(&r, -1, 1), qkt_rng_range(&r, -1, 1)};
+  for (size_t i = n - 1; i > 0; i--) { /* ids in a random order */
+    const size_t j = qkt_rng_below(&r, (uint32_t)(i + 1));
+    const qk_point_t v = p[i];
+    p[i] = p[j], p[j] = v;
+  }
+  /* The origin (the near ties), tiny offsets of it, and the ends of two rays. */
+  const qk_point_t qs[] = {{0, 0},    {0x1p-60, 0},        {0, -0x1p-58}, {0x1p-70, 0x1p-70},
+                           {0.25, 0}, {-0.25 - 0x1p-53, 0}};
+  for (size_t c = 0; c < 3; c++) {
+    qk_tree_t *t = build(p, n, caps[c]);
+    for (size_t k = 2; k <= 33; k++) {
+      const double limits[] = {INFINITY, 0.25 + 5 * 0x1p-54, 0.25 + 0x1p-54};
+      const double cap = limits[k % 3];
+      assert_int_equal(qk_query_knn_batch(t, qs, nq, k, cap, got, counts), QK_OK);
+      for (size_t i = 0; i < nq; i++) {
+        const size_t tag = c * 10000 + k * 100 + i;
+        size_t ng, nw = qko_knn(p, NULL, n, qs[i], k, cap, want);
+        assert_int_equal(qk_query_knn(t, qs[i], k, cap, one, &ng), QK_OK);
+        assert_nb_equal(one, ng, want, nw, "knn-near-ties", tag);
+        assert_nb_equal(got + i * k, counts[i], want, nw, "knn-near-ties-batch", tag);
+      }
+    }
+    qk_tree_free(t);
+  }
+  free(p), free(got), free(counts);
+}
+
+#if defined(__SSE2__)
+/*
+ * kNN with the processor set to flush subnormal numbers (DAZ and FTZ in MXCSR, as a
+ * program linked with -ffast-math runs): the sorted search sorts by keys that are
+ * doubles, and a subnormal key would read as 0. Queries on stored points (distance 0,
+ * alone or, where a point repeats, with its copy) and between two, k = 2, 8, 32, single
+ * and batch, against brute force computed before the mode is set.
+ */
+static void test_query_knn_flush_subnormals(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 17);
+  const size_t n = 3000, nq = 90;
+  const size_t ks[] = {2, 8, 32};
+  qk_point_t *p = malloc(n * sizeof *p), *qs = malloc(nq * sizeof *qs);
+  qk_neighbor_t *want = malloc(3 * nq * 32 * sizeof *want), *got = malloc(nq * 32 * sizeof *got);
+  qk_neighbor_t one[32];
+  size_t *nw = malloc(3 * nq * sizeof *nw), *counts = malloc(nq * sizeof *counts);
+  /* Distinct points, most at random; a few repeated. */
+  qkt_points(&r, QKT_UNIFORM, p, n);
+  for (size_t i = 7; i < n; i += 97) p[i] = p[i - 7];
+  for (size_t i = 0; i < nq; i++) {
+    const qk_point_t a = p[qkt_rng_below(&r, (uint32_t)n)], b = p[qkt_rng_below(&r, (uint32_t)n)];
+    qs[i] = i % 3 ? a : (qk_point_t){0.5 * (a.x + b.x), 0.5 * (a.y + b.y)};
+  }
+  for (size_t ki = 0; ki < 3; ki++)
+    for (size_t i = 0; i < nq; i++)
+      nw[ki * nq + i] = qko_knn(p, NULL, n, qs[i], ks[ki], INFINITY, want + (ki * nq + i) * 32);
+  qk_tree_t *t = build(p, n, 4);
+  const unsigned csr = _mm_getcsr();
+  _mm_setcsr(csr | 0x8040); /* FTZ | DAZ */
+  int ok = 1;
+  for (size_t ki = 0; ki < 3 && ok; ki++) {
+    const size_t k = ks[ki];
+    ok &= qk_query_knn_batch(t, qs, nq, k, INFINITY, got, counts) == QK_OK;
+    for (size_t i = 0; i < nq && ok; i++) {
+      const qk_neighbor_t *w = want + (ki * nq + i) * 32;
+      size_t ng;
+      ok &= qk_query_knn(t, qs[i], k, INFINITY, one, &ng) == QK_OK && ng == nw[ki * nq + i] &&
+            counts[i] == ng;
+      for (size_t j = 0; j < ng && ok; j++)
+        ok &= one[j].id == w[j].id && one[j].dist == w[j].dist && got[i * k + j].id == w[j].id &&
+              got[i * k + j].dist == w[j].dist;
+      if (!ok)
+        fprintf(stderr, "knn-flush: k %zu query %zu (seed %llu)\n", k, i,
+                (unsigned long long)g_seed);
+    }
+  }
+  _mm_setcsr(csr);
+  assert_true(ok);
+  qk_tree_free(t);
+  free(p), free(qs), free(want), free(got), free(nw), free(counts);
+}
+#endif
+
 static void test_query_cities(void **state) {
   (void)state;
   size_t n;
@@ -893,23 +1009,27 @@ static void test_query_batch_threaded_order(void **state) {
 int main(void) {
   g_seed = qkt_seed(20261122);
   const struct CMUnitTest tests[] = {
-      cmocka_unit_test(test_query_range_radius),
-      cmocka_unit_test(test_query_knn_all_k),
-      cmocka_unit_test(test_query_knn_large),
-      cmocka_unit_test(test_query_knn_after_mutation),
-      cmocka_unit_test(test_query_locate),
-      cmocka_unit_test(test_query_batch),
-      cmocka_unit_test(test_query_batch_nomem),
-      cmocka_unit_test(test_query_stop_and_bad_args),
-      cmocka_unit_test(test_query_knn_distance_range),
-      cmocka_unit_test(test_query_threads),
-      cmocka_unit_test(test_query_batch_threaded_order),
-      cmocka_unit_test(test_query_cities),
-      cmocka_unit_test(test_query_knn_big_leaves),
-      cmocka_unit_test(test_query_knn_batch_paths),
-      cmocka_unit_test(test_query_knn1_ties),
-      cmocka_unit_test(test_query_knn_ties_k),
-      cmocka_unit_test(test_query_knn_kth_bound),
+    cmocka_unit_test(test_query_range_radius),
+    cmocka_unit_test(test_query_knn_all_k),
+    cmocka_unit_test(test_query_knn_large),
+    cmocka_unit_test(test_query_knn_after_mutation),
+    cmocka_unit_test(test_query_locate),
+    cmocka_unit_test(test_query_batch),
+    cmocka_unit_test(test_query_batch_nomem),
+    cmocka_unit_test(test_query_stop_and_bad_args),
+    cmocka_unit_test(test_query_knn_distance_range),
+    cmocka_unit_test(test_query_threads),
+    cmocka_unit_test(test_query_batch_threaded_order),
+    cmocka_unit_test(test_query_cities),
+    cmocka_unit_test(test_query_knn_big_leaves),
+    cmocka_unit_test(test_query_knn_batch_paths),
+    cmocka_unit_test(test_query_knn1_ties),
+    cmocka_unit_test(test_query_knn_ties_k),
+    cmocka_unit_test(test_query_knn_kth_bound),
+    cmocka_unit_test(test_query_knn_near_ties),
+#if defined(__SSE2__)
+    cmocka_unit_test(test_query_knn_flush_subnormals),
+#endif
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
