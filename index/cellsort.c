@@ -52,6 +52,15 @@
 #endif
 /* How far ahead the fine pass reads its records. */
 #define PREFETCH_RECS 96
+/* Read ahead of point p by PREFETCH_PTS points (an address past the array's end is only
+ * a hint to the processor, computed outside C's pointer arithmetic). */
+#define QK__PREFETCH_PTS(p)                                                                        \
+  QK__PREFETCH((const void *)((uintptr_t)(p) + PREFETCH_PTS * sizeof(qk_point_t)))
+/* How far ahead the key pass and the scatter read the input by hand, in points (4 KB,
+ * a block of the key pass). The hardware's prefetch alone left the key pass reading the
+ * input at half the rate of the bounding box: 3.2 against 1.8-1.9 ms at 1M points on one
+ * thread, and the scatter 4.0 against 3.2-3.6 ms. */
+#define PREFETCH_PTS 256
 
 /* fine_records() is made twice, for pairs and for separate arrays. */
 #if defined(__GNUC__)
@@ -197,6 +206,8 @@ __attribute__((target("avx2"))) static void keys_avx2(const bucket_job_t *j, con
                 w1 = _mm256_set1_epi16(0x5555), low = _mm256_set1_epi32(0xffff);
   const __m256i order = _mm256_setr_epi32(0, 1, 4, 5, 2, 3, 6, 7);
   for (; i + 8 <= m; i += 8) {
+    QK__PREFETCH_PTS(&p[i]); /* two lines a step */
+    QK__PREFETCH_PTS(&p[i + 4]);
     __m256d t0 = _mm256_mul_pd(_mm256_sub_pd(_mm256_loadu_pd(&p[i].x), o), sc);
     __m256d t1 = _mm256_mul_pd(_mm256_sub_pd(_mm256_loadu_pd(&p[i + 2].x), o), sc);
     __m256d t2 = _mm256_mul_pd(_mm256_sub_pd(_mm256_loadu_pd(&p[i + 4].x), o), sc);
@@ -273,6 +284,7 @@ static void keys_block(const bucket_job_t *j, const qk_point_t *p, size_t m, uin
   const __m128d o = _mm_setr_pd(j->x0, j->y0), sc = _mm_set1_pd(j->scale);
   const axis_tab_t *ax = j->ax, *ay = j->ay;
   for (size_t i = 0; i < m; i++) {
+    QK__PREFETCH_PTS(&p[i]);
     __m128d v = _mm_loadu_pd(&p[i].x);
     __m128i c = _mm_cvttpd_epi32(_mm_mul_pd(_mm_sub_pd(v, o), sc));
     uint32_t cx = (uint32_t)_mm_cvtsi128_si32(c), cy = (uint32_t)_mm_extract_epi16(c, 2);
@@ -381,6 +393,7 @@ static void scatter_job(unsigned w, unsigned thread, void *ctx) {
       tag[q] = tq | (k[q] & mask);
     }
     for (size_t q = 0; q < m; q++) {
+      QK__PREFETCH_PTS(&p[i0 + q]);
       uint32_t c = cb[q], o = off[c];
       memcpy(bytes + o, &p[i0 + q], 16);
       memcpy(bytes + o + 16, &tag[q], 4);
