@@ -46,6 +46,18 @@ uint64_t qk__gm_param(const qk__gm_t *g, uint32_t v, uint32_t s) {
  * triangles at v by two others at v). The CDT's change hook reported the same set with
  * repeats (a triangle flipped twice came twice: a third more quality checks) and cost a
  * call a change. */
+/* Room for one more triangle in g->dirty (out of line: rarely taken). */
+#if defined(__GNUC__)
+__attribute__((noinline, cold))
+#endif
+static qk_status_t
+grow_dirty(qk__gm_t *g) {
+  void *p = g->dirty;
+  if (qk__grow(g->a, &p, &g->dirty_cap, g->ndirty + 16, sizeof *g->dirty)) return QK_ERR_NOMEM;
+  g->dirty = p;
+  return QK_OK;
+}
+
 static qk_status_t star(qk__gm_t *g, uint32_t v, uint32_t f) {
   const qk__cdt_t *c = &g->cdt;
   /* v lies strictly inside the square, so its star is a closed ring: counter-clockwise
@@ -54,11 +66,7 @@ static qk_status_t star(qk__gm_t *g, uint32_t v, uint32_t f) {
   uint32_t first = c->vtri[v], t = first;
   g->ndirty = 0;
   do {
-    if (g->ndirty == g->dirty_cap) {
-      void *p = g->dirty;
-      if (qk__grow(g->a, &p, &g->dirty_cap, g->ndirty + 16, sizeof *g->dirty)) return QK_ERR_NOMEM;
-      g->dirty = p;
-    }
+    if (g->ndirty == g->dirty_cap && grow_dirty(g)) return QK_ERR_NOMEM;
     g->dirty[g->ndirty++] = t;
     if (f != QK__CDT_NONE) g->face[t] = f;
     const uint32_t *tv = &c->v[3 * (size_t)t];

@@ -89,6 +89,10 @@ typedef struct qk__gm {
   size_t npts, pts_cap;
   /* The refinement. */
   double bound_deg, sin2_bound;
+  /* A plain size bound h (max_size, no size function): h and h^2 (1 +- 2^-48), the
+   * quality test's thresholds, computed once. */
+  int size_plain;
+  double h_plain, h2_hi, h2_lo;
   int refining;
   qk__gm_tq_t *bad;
   size_t nbad, bad_head, bad_cap;

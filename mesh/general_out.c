@@ -97,6 +97,13 @@ qk_status_t qk__gm_output(qk__gm_t *g, qk_mesh_t *m) {
   /* Angles through their cosines (one square root each); the extremes back to degrees at
    * the end. */
   double cmax = -1, cmin = 1, cb = cos(g->bound_deg * (3.14159265358979323846 / 180));
+  /* Most corners change none of the three (cmax, cmin, the count above cb): a corner whose
+   * cosine lies strictly between cmin and min(cmax, cb) with a margin of 1e-9, far above
+   * the roundings of a few operations, is passed over on squares (no division, no square
+   * root). thr_hi (for positive cosines) and thr_lo (negative ones) are those squared
+   * limits, with the margin; 0 (never a pass) until cmax > 0 > cmin. Any doubt (zero, NaN) takes
+   * the full computation, so the results are those of computing every corner. */
+  double thr_hi = 0, thr_lo = 0;
   size_t j = 0, exempt = 0;
   for (uint32_t t = 0; t < c->nt; t++) {
     if (!kept(g, t)) continue;
@@ -113,8 +120,14 @@ qk_status_t qk__gm_output(qk__gm_t *g, qk_mesh_t *m) {
     for (int i = 0; i < 3; i++) {
       m->tri[3 * j + i] = newid[tv[i]];
       const double *u = e[(i + 2) % 3], *w = e[(i + 1) % 3];
-      double cs = -(u[0] * w[0] + u[1] * w[1]) / sqrt(l[(i + 2) % 3] * l[(i + 1) % 3]);
-      cmax = cs > cmax ? cs : cmax, cmin = cs < cmin ? cs : cmin; /* NaN: neither, as fmax */
+      double dot = u[0] * w[0] + u[1] * w[1], ll = l[(i + 2) % 3] * l[(i + 1) % 3];
+      if (dot * dot < (dot < 0 ? thr_hi : thr_lo) * ll) continue; /* cosine -dot / sqrt(ll) */
+      double cs = -dot / sqrt(ll);
+      if (cs > cmax || cs < cmin) {
+        cmax = cs > cmax ? cs : cmax, cmin = cs < cmin ? cs : cmin; /* NaN: neither, as fmax */
+        double hi = (cmax < cb ? cmax : cb) * (1 - 1e-9), lo = cmin * (1 - 1e-9);
+        thr_hi = hi > 0 && cmin < 0 ? hi * hi : 0, thr_lo = lo < 0 && cmax > 0 ? lo * lo : 0;
+      }
       exempt += cs > cb;
     }
     /* NONE has every bit set: the AND of the three is NONE only when no side is on a

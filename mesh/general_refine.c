@@ -202,7 +202,12 @@ static inline int bad_kept(const qk__gm_t *g, uint32_t t) {
   double lmax = l0 > l1 ? l0 : l1;
   lmax = l2 > lmax ? l2 : lmax;
   const qk_mesh_options_t *opt = g->opt;
-  if (opt->max_size > 0 || opt->size_fn) {
+  if (g->size_plain) { /* the same tests as below, on the bound's squares kept in g */
+    if (lmax > g->h2_hi) return 1;
+    if (lmax >= g->h2_lo && (len2_exceeds(p1, p2, g->h_plain) || len2_exceeds(p2, p0, g->h_plain) ||
+                             len2_exceeds(p0, p1, g->h_plain)))
+      return 1;
+  } else if (opt->max_size > 0 || opt->size_fn) {
     double h = opt->max_size > 0 ? opt->max_size : INFINITY;
     if (opt->size_fn) {
       double cx = (p0[0] + p1[0] + p2[0]) / 3, cy = (p0[1] + p1[1] + p2[1]) / 3;
@@ -549,6 +554,11 @@ static qk_status_t reserve(qk__gm_t *g) {
 qk_status_t qk__gm_refine(qk__gm_t *g) {
   qk__cdt_t *c = &g->cdt;
   g->ndirty = 0;
+  g->size_plain = g->opt->max_size > 0 && !g->opt->size_fn;
+  if (g->size_plain) {
+    double h = g->opt->max_size, h2 = h * h;
+    g->h_plain = h, g->h2_hi = h2 * (1 + 0x1p-48), g->h2_lo = h2 * (1 - 0x1p-48);
+  }
   if (reserve(g)) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   for (uint32_t t = 0; t < c->nt; t++)
     if (check(g, t)) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
