@@ -53,11 +53,39 @@ void qk_mesh_free(qk_mesh_t *m) {
   qk__free(&a, m, sizeof *m);
 }
 
+/*
+ * The angles of a quadtree mesh come from few (cross, dot) pairs: a triangle's shape is one
+ * of a handful of right isosceles ones, at one size per tree level. A small direct-mapped
+ * table keyed on the bits of both arguments of atan2 returns the same degrees as the call
+ * (same arguments, same result) for a fraction of its cost.
+ */
+#define ANGLE_MEMO 64
+typedef struct angle_memo {
+  uint64_t y[ANGLE_MEMO], x[ANGLE_MEMO];
+  double deg[ANGLE_MEMO];
+} angle_memo_t;
+
+static void angle_memo_init(angle_memo_t *am) {
+  /* A NaN's bits: never the bits of a product of two finite coordinates' differences. */
+  memset(am->y, 0xff, sizeof am->y);
+  memset(am->x, 0xff, sizeof am->x);
+}
+
 /* Angle at b of triangle a-b-c, in degrees. */
-static double angle_deg(const int64_t *vx, const int64_t *vy, uint32_t a, uint32_t b, uint32_t c) {
+static double angle_deg(angle_memo_t *am, const int64_t *vx, const int64_t *vy, uint32_t a,
+                        uint32_t b, uint32_t c) {
   double ux = (double)(vx[a] - vx[b]), uy = (double)(vy[a] - vy[b]);
   double wx = (double)(vx[c] - vx[b]), wy = (double)(vy[c] - vy[b]);
-  return atan2(fabs(ux * wy - uy * wx), ux * wx + uy * wy) * (180.0 / 3.14159265358979323846);
+  double y = fabs(ux * wy - uy * wx), x = ux * wx + uy * wy;
+  uint64_t by, bx;
+  memcpy(&by, &y, sizeof by), memcpy(&bx, &x, sizeof bx);
+  uint64_t h = (by * 0x9e3779b97f4a7c15ull) ^ (bx * 0xc2b2ae3d27d4eb4full);
+  size_t j = (size_t)(h >> 58) & (ANGLE_MEMO - 1);
+  if (am->y[j] != by || am->x[j] != bx) {
+    am->y[j] = by, am->x[j] = bx;
+    am->deg[j] = atan2(y, x) * (180.0 / 3.14159265358979323846);
+  }
+  return am->deg[j];
 }
 
 /* Check the options and fill *opt with them (defaults for NULL). */
@@ -241,22 +269,27 @@ static qk_status_t compact(qk__gen_t *g, const qk__tri_state_t *T, const uint8_t
     return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   double amin = 180, amax = 0;
   size_t steiner = 0;
-  /* Back from the (doubled) lattice to input coordinates: exact, see mesh/lattice.c. */
+  /* Back from the (doubled) lattice to input coordinates: exact, see mesh/lattice.c
+   * (qk__lat_out, with the power of two computed once). */
+  int k = -(g->lat.f + 1);
+  double sc = qk__pow2(k);
   for (size_t i = 0; i < T->nv; i++)
     if (newid[i] != QK__MESH_UNSET) {
-      m->xy[2 * newid[i]] = qk__lat_out(&g->lat, T->vx[i], g->lat.x0);
-      m->xy[2 * newid[i] + 1] = qk__lat_out(&g->lat, T->vy[i], g->lat.y0);
+      m->xy[2 * newid[i]] = qk__ldexp_by((double)T->vx[i], sc, k) + g->lat.x0;
+      m->xy[2 * newid[i] + 1] = qk__ldexp_by((double)T->vy[i], sc, k) + g->lat.y0;
       steiner += T->steiner[i];
     }
   qk_status_t st = restore_signed_zeros(g, m);
   if (st) return st;
   size_t j = 0;
+  angle_memo_t am;
+  angle_memo_init(&am);
   for (size_t t = 0; t < T->nt; t++) {
     if (drop[T->region[t]]) continue;
     const uint32_t *tr = &T->tri[3 * t];
     for (int i = 0; i < 3; i++) {
       m->tri[3 * j + i] = newid[tr[i]];
-      double ang = angle_deg(T->vx, T->vy, tr[(i + 2) % 3], tr[i], tr[(i + 1) % 3]);
+      double ang = angle_deg(&am, T->vx, T->vy, tr[(i + 2) % 3], tr[i], tr[(i + 1) % 3]);
       if (ang < amin) amin = ang;
       if (ang > amax) amax = ang;
     }

@@ -65,6 +65,11 @@ static int hmap_get_or_put(const qk_allocator_t *a, qk__hmap_t *h, uint64_t key,
 }
 
 static qk_status_t new_vertex(qk__tri_state_t *T, int64_t x, int64_t y, int steiner, uint32_t *id) {
+  if (T->nv < T->vcap && T->nv < T->vycap && T->nv < T->scap) { /* room: no calls */
+    T->vx[T->nv] = x, T->vy[T->nv] = y, T->steiner[T->nv] = (uint8_t)steiner;
+    *id = (uint32_t)T->nv++;
+    return QK_OK;
+  }
   void *p1 = T->vx, *p2 = T->vy, *p3 = T->steiner;
   if (qk__grow(T->a, &p1, &T->vcap, T->nv + 1, sizeof *T->vx)) return QK_ERR_NOMEM;
   T->vx = p1;
@@ -91,11 +96,13 @@ static qk_status_t corner_vertex(qk__tri_state_t *T, int64_t x, int64_t y, uint3
 }
 
 static qk_status_t add_tri(qk__tri_state_t *T, uint32_t a, uint32_t b, uint32_t c, uint32_t cell) {
-  void *p1 = T->tri, *p2 = T->label;
-  if (qk__grow(T->a, &p1, &T->tcap, T->nt + 1, 3 * sizeof *T->tri)) return QK_ERR_NOMEM;
-  T->tri = p1;
-  if (qk__grow(T->a, &p2, &T->lcap, T->nt + 1, sizeof *T->label)) return QK_ERR_NOMEM;
-  T->label = p2;
+  if (T->nt >= T->tcap || T->nt >= T->lcap) {
+    void *p1 = T->tri, *p2 = T->label;
+    if (qk__grow(T->a, &p1, &T->tcap, T->nt + 1, 3 * sizeof *T->tri)) return QK_ERR_NOMEM;
+    T->tri = p1;
+    if (qk__grow(T->a, &p2, &T->lcap, T->nt + 1, sizeof *T->label)) return QK_ERR_NOMEM;
+    T->label = p2;
+  }
   uint32_t *t = &T->tri[3 * T->nt];
   t[0] = a, t[1] = b, t[2] = c;
   T->label[T->nt] = cell;
