@@ -36,6 +36,19 @@ static qk_status_t hmap_init(const qk_allocator_t *a, qk__hmap_t *h, size_t expe
   return QK_OK;
 }
 
+/* The value of key into *v: 1 when present, 0 when not. */
+static int hmap_get(const qk__hmap_t *h, uint64_t key, uint32_t *v) {
+  size_t j = hslot(key, h->cap);
+  while (h->k[j] != UINT64_MAX) {
+    if (h->k[j] == key) {
+      *v = h->v[j];
+      return 1;
+    }
+    j = (j + 1) & (h->cap - 1);
+  }
+  return 0;
+}
+
 /* Find key; if absent insert it with value *v. Returns 1 when found (*v set), 0 when
  * inserted, -1 out of memory. */
 static int hmap_get_or_put(const qk_allocator_t *a, qk__hmap_t *h, uint64_t key, uint32_t *v) {
@@ -135,7 +148,7 @@ static int cell_touches(int diag, int k, int s) {
  * along that diagonal; otherwise the SW-NE diagonal does (its vertices are only its
  * corners, since no leaf is smaller than unit size). Seeds the labels of its cells.
  */
-static qk_status_t tri_unit(qk__tri_state_t *T, const qk__unit_rec_t *r, const uint32_t c[4],
+static qk_status_t tri_unit(qk__tri_state_t *T, const qk__unit_rec_t *r, const uint32_t *c,
                             uint32_t cell0, uint32_t *cell_label) {
   /* c: SW, SE, NE, NW. */
   const int32_t *p = r->piece;
@@ -237,6 +250,27 @@ out:
   return st;
 }
 
+/* The square of every node reachable from the root, by node id, computed top-down in one
+ * pass (qk__node_square recomputes a node's whole path at each call); `sq` has room for
+ * the tree's node bound. Squares are dyadic and halving is exact, so these are the
+ * tree's own squares. */
+static void node_squares(const qk_tree_t *t, qk_square_t *sq) {
+  qk_node_t stack[3 * (QK_MAX_DEPTH_LIMIT + 2) + 4]; /* 3 siblings a level wait */
+  size_t n = 0;
+  qk_node_t root = qk_tree_root(t);
+  sq[root] = qk__tree_root_square(t);
+  stack[n++] = root;
+  while (n) {
+    qk_node_t v = stack[--n];
+    uint32_t c = qk__node_child(t, v);
+    if (c == QK_NONE) continue;
+    for (unsigned q = 0; q < 4; q++) {
+      sq[c + q] = qk__child_square(sq[v], q);
+      stack[n++] = c + q;
+    }
+  }
+}
+
 qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris_t *lt) {
   const qk_tree_t *t = g->tree;
   qk_status_t st = QK_OK;
@@ -262,49 +296,78 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
   qk_tree_leaves(t, leaves, nleaves, &nleaves);
   for (size_t li = 0; li < nleaves; li++) leaf_of[leaves[li]] = (uint32_t)li;
 
+  /* Room for the usual counts (about 3 triangles and 1.5 vertices a leaf), so that the
+   * arrays seldom grow while filled. */
+  {
+    void *p1 = T->tri, *p2 = T->label, *p3 = T->vx, *p4 = T->vy, *p5 = T->steiner;
+    size_t nt = 3 * nleaves + 16, nv = nleaves + nleaves / 2 + 16;
+    if (qk__grow(T->a, &p1, &T->tcap, nt, 3 * sizeof *T->tri) ||
+        (T->tri = p1, qk__grow(T->a, &p2, &T->lcap, nt, sizeof *T->label)) ||
+        (T->label = p2, qk__grow(T->a, &p3, &T->vcap, nv, sizeof *T->vx)) ||
+        (T->vx = p3, qk__grow(T->a, &p4, &T->vycap, nv, sizeof *T->vy)) ||
+        (T->vy = p4, qk__grow(T->a, &p5, &T->scap, nv, 1))) {
+      st = QK_ERR_NOMEM;
+      goto out;
+    }
+    T->steiner = p5;
+  }
+  /* First every leaf's corners, so that the vertex map holds every lattice point a leaf
+   * has as a corner. */
+  uint32_t *corner = qk__realloc(g->a, NULL, 0, (4 * nleaves + 4) * sizeof *corner);
+  qk_square_t *nsq = qk__realloc(g->a, NULL, 0, (nn + 1) * sizeof *nsq);
+  if (!corner || !nsq) {
+    qk__free(g->a, corner, (4 * nleaves + 4) * sizeof *corner);
+    qk__free(g->a, nsq, (nn + 1) * sizeof *nsq);
+    st = QK_ERR_NOMEM;
+    goto out;
+  }
+  node_squares(t, nsq);
   for (size_t li = 0; li < nleaves; li++) {
-    uint32_t v = leaves[li], cell = (uint32_t)(2 * li);
-    qk_square_t sq = qk__node_square(t, v);
+    qk_square_t sq = nsq[leaves[li]];
     int64_t S = 2 * (int64_t)sq.side, X = 2 * (int64_t)sq.x, Y = 2 * (int64_t)sq.y;
-    lt->first[v] = (uint32_t)T->nt;
-    uint32_t c[4];
+    uint32_t *c = &corner[4 * li];
     if ((st = corner_vertex(T, X, Y, &c[0])) || (st = corner_vertex(T, X + S, Y, &c[1])) ||
         (st = corner_vertex(T, X + S, Y + S, &c[2])) || (st = corner_vertex(T, X, Y + S, &c[3])))
-      goto out;
+      break;
+  }
+  for (size_t li = 0; li < nleaves && !st; li++) {
+    uint32_t v = leaves[li], cell = (uint32_t)(2 * li);
+    qk_square_t sq = nsq[v];
+    int64_t S = 2 * (int64_t)sq.side, X = 2 * (int64_t)sq.x, Y = 2 * (int64_t)sq.y;
+    lt->first[v] = (uint32_t)T->nt;
+    const uint32_t *c = &corner[4 * li];
     if (rec_of[v] != QK__MESH_UNSET) {
-      if ((st = tri_unit(T, &g->rec[rec_of[v]], c, cell, cell_label))) goto out;
+      st = tri_unit(T, &g->rec[rec_of[v]], c, cell, cell_label);
       continue;
     }
-    /* A side holds a midpoint vertex exactly when the neighbour across it (found by
-     * NorthNeighbor, of at most this depth) is internal: then, the tree being balanced,
-     * two leaves of half the size meet this side. Unit leaves have no smaller
-     * neighbours. Sides in CCW order: south, east, north, west. */
-    static const qk_dir_t side_dir[4] = {QK_SOUTH, QK_EAST, QK_NORTH, QK_WEST};
+    /* A side holds a midpoint vertex exactly when the neighbour across it (of at most
+     * this depth) is internal: then, the tree being balanced, two leaves of half the size
+     * meet this side, and share a corner at its midpoint. Otherwise no leaf has a corner
+     * there (a leaf across the side is as large as this one or larger, with corners on a
+     * coarser grid), so the vertex map, holding every leaf corner, answers without
+     * neighbour finding. Unit leaves have no smaller neighbours. Sides in CCW order:
+     * south, east, north, west. */
     int64_t mx[4] = {X + S / 2, X + S, X + S / 2, X}, my[4] = {Y, Y + S / 2, Y + S, Y + S / 2};
     uint32_t ring[8];
     size_t nr = 0;
     for (int s = 0; s < 4; s++) {
       ring[nr++] = c[s];
-      if (S > 2) {
-        qk_node_t u = qk_tree_neighbor(t, v, side_dir[s]);
-        if (u != QK_NONE && !qk__node_leaf(t, u) &&
-            (st = corner_vertex(T, mx[s], my[s], &ring[nr++])))
-          goto out;
-      }
+      if (S > 2 && hmap_get(&T->vmap, ((uint64_t)mx[s] << 32) | (uint64_t)my[s], &ring[nr])) nr++;
     }
     if (nr == 4) {
       /* Vertices only at its corners: split along a diagonal (angles 45, 45, 90). */
-      if ((st = add_tri(T, c[0], c[1], c[2], cell)) || (st = add_tri(T, c[0], c[2], c[3], cell)))
-        goto out;
+      if (!(st = add_tri(T, c[0], c[1], c[2], cell))) st = add_tri(T, c[0], c[2], c[3], cell);
       continue;
     }
     /* A Steiner point at the centre, joined to every boundary vertex: each triangle has
      * a right angle at the centre (corner-corner) or at the midpoint (corner-midpoint). */
     uint32_t ctr;
-    if ((st = new_vertex(T, X + S / 2, Y + S / 2, 1, &ctr))) goto out;
-    for (size_t i = 0; i < nr; i++)
-      if ((st = add_tri(T, ring[i], ring[(i + 1) % nr], ctr, cell))) goto out;
+    if ((st = new_vertex(T, X + S / 2, Y + S / 2, 1, &ctr))) break;
+    for (size_t i = 0; i < nr && !st; i++) st = add_tri(T, ring[i], ring[(i + 1) % nr], ctr, cell);
   }
+  qk__free(g->a, corner, (4 * nleaves + 4) * sizeof *corner);
+  qk__free(g->a, nsq, (nn + 1) * sizeof *nsq);
+  if (st) goto out;
   /* The vertex map is no longer needed; give its memory back before labelling. */
   hmap_free(T->a, &T->vmap);
   if ((st = label_cells(g, T, leaves, nleaves, leaf_of, rec_of, cell_label))) goto out;
