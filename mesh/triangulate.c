@@ -187,9 +187,67 @@ static qk_status_t tri_unit(qk__tri_state_t *T, const qk__unit_rec_t *r, const u
  * every component, label 0. (A face of a component is one region; the outside may be
  * several when components touching the domain's edge cut it apart.)
  */
+/* Leaves by lower-left corner (a leaf's is its own: leaves do not overlap), with every
+ * node's square: the neighbours across a side by lookups. */
+typedef struct leaf_map {
+  qk__hmap_t at;         /* corner key -> leaf node */
+  const qk_square_t *sq; /* by node id */
+  int64_t U;             /* the root square's side */
+} leaf_map_t;
+
+static uint64_t corner_key(int64_t x, int64_t y) { return ((uint64_t)x << 32) | (uint64_t)y; }
+
+/* The leaf with lower-left corner (x, y) and side s, or QK_NONE. */
+static qk_node_t leaf_at(const leaf_map_t *L, int64_t x, int64_t y, int64_t s) {
+  uint32_t v;
+  if (!hmap_get(&L->at, corner_key(x, y), &v) || (int64_t)L->sq[v].side != s) return QK_NONE;
+  return v;
+}
+
+/*
+ * The leaves across side sd (south, east, north, west) of leaf v, as
+ * qk_tree_adjacent_leaves gives them, same order, into nb (room for 8): in a balanced
+ * tree one leaf of the same size, two of half the size (the one lower along the side
+ * first, as the tree lists them), or one of twice the size; the tree's own search
+ * otherwise (never, for a balanced tree, but it costs nothing to be sure).
+ */
+static size_t side_leaves(const qk_tree_t *t, const leaf_map_t *L, qk_node_t v, int sd,
+                          qk_node_t *nb) {
+  qk_square_t q = L->sq[v];
+  int64_t X = (int64_t)q.x, Y = (int64_t)q.y, S = (int64_t)q.side, h = S / 2, D = 2 * S;
+  if ((sd == 0 && Y == 0) || (sd == 3 && X == 0) || (sd == 2 && Y + S == L->U) ||
+      (sd == 1 && X + S == L->U))
+    return 0; /* the root square's boundary */
+  /* Lower-left corners of the same-size, the two half-size and the double-size
+   * candidates. */
+  int64_t sx, sy, ax, ay, bx, by, dx, dy;
+  switch (sd) {
+  case 0:
+    sx = X, sy = Y - S, ax = X, ay = Y - h, bx = X + h, by = Y - h, dx = X & ~(D - 1), dy = Y - D;
+    break;
+  case 1:
+    sx = X + S, sy = Y, ax = X + S, ay = Y, bx = X + S, by = Y + h, dx = X + S, dy = Y & ~(D - 1);
+    break;
+  case 2:
+    sx = X, sy = Y + S, ax = X, ay = Y + S, bx = X + h, by = Y + S, dx = X & ~(D - 1), dy = Y + S;
+    break;
+  default:
+    sx = X - S, sy = Y, ax = X - h, ay = Y, bx = X - h, by = Y + h, dx = X - D, dy = Y & ~(D - 1);
+    break;
+  }
+  if ((nb[0] = leaf_at(L, sx, sy, S)) != QK_NONE) return 1;
+  if (h && (nb[0] = leaf_at(L, ax, ay, h)) != QK_NONE && (nb[1] = leaf_at(L, bx, by, h)) != QK_NONE)
+    return 2;
+  if ((nb[0] = leaf_at(L, dx, dy, D)) != QK_NONE) return 1;
+  static const qk_dir_t side_dir[4] = {QK_SOUTH, QK_EAST, QK_NORTH, QK_WEST};
+  size_t n = 0;
+  qk_tree_adjacent_leaves(t, v, side_dir[sd], nb, 8, &n);
+  return n < 8 ? n : 8;
+}
+
 static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, const qk_node_t *leaves,
                                size_t nleaves, const uint32_t *leaf_of, const uint32_t *rec_of,
-                               const uint32_t *cell_label) {
+                               const uint32_t *cell_label, const leaf_map_t *L) {
   const qk_tree_t *t = g->tree;
   size_t ncell = 2 * nleaves;
   uint32_t *queue = qk__realloc(g->a, NULL, 0, (ncell + 1) * sizeof *queue);
@@ -203,7 +261,6 @@ static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, const qk_node_t
   }
   T->region = rp;
   memset(region, 0xff, (ncell + 1) * sizeof *region);
-  static const qk_dir_t side_dir[4] = {QK_SOUTH, QK_EAST, QK_NORTH, QK_WEST};
   static const int piece_of_side[4] = {QK__P_S, QK__P_E, QK__P_N, QK__P_W};
   uint32_t nreg = 0;
   /* Start a flood from the cell of every triangle not reached yet. */
@@ -224,9 +281,8 @@ static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, const qk_node_t
         if (!cell_touches(diag, (int)k, sd)) continue;
         if (r && r->piece[piece_of_side[sd]]) continue; /* a component edge: a boundary */
         qk_node_t nb[8];
-        size_t n = 0;
-        qk_tree_adjacent_leaves(t, v, side_dir[sd], nb, 8, &n);
-        for (size_t i = 0; i < n && i < 8; i++) {
+        size_t n = side_leaves(t, L, v, sd, nb);
+        for (size_t i = 0; i < n; i++) {
           uint32_t lw = leaf_of[nb[i]];
           const qk__unit_rec_t *rw =
               rec_of[nb[i]] != QK__MESH_UNSET ? &g->rec[rec_of[nb[i]]] : NULL;
@@ -366,11 +422,19 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
     for (size_t i = 0; i < nr && !st; i++) st = add_tri(T, ring[i], ring[(i + 1) % nr], ctr, cell);
   }
   qk__free(g->a, corner, (4 * nleaves + 4) * sizeof *corner);
-  qk__free(g->a, nsq, (nn + 1) * sizeof *nsq);
-  if (st) goto out;
   /* The vertex map is no longer needed; give its memory back before labelling. */
   hmap_free(T->a, &T->vmap);
-  if ((st = label_cells(g, T, leaves, nleaves, leaf_of, rec_of, cell_label))) goto out;
+  leaf_map_t L = {{NULL, NULL, 0, 0}, nsq, (int64_t)qk__tree_root_square(t).side};
+  if (!st && hmap_init(g->a, &L.at, nleaves + 16)) st = QK_ERR_NOMEM;
+  for (size_t li = 0; li < nleaves && !st; li++) {
+    uint32_t v = leaves[li];
+    if (hmap_get_or_put(g->a, &L.at, corner_key((int64_t)nsq[v].x, (int64_t)nsq[v].y), &v) < 0)
+      st = QK_ERR_NOMEM;
+  }
+  if (!st) st = label_cells(g, T, leaves, nleaves, leaf_of, rec_of, cell_label, &L);
+  hmap_free(g->a, &L.at);
+  qk__free(g->a, nsq, (nn + 1) * sizeof *nsq);
+  if (st) goto out;
 out:
   qk__free(g->a, rec_of, nn * sizeof *rec_of);
   qk__free(g->a, leaf_of, nn * sizeof *leaf_of);
