@@ -60,6 +60,46 @@ static double angle_deg(const int64_t *vx, const int64_t *vy, uint32_t a, uint32
   return atan2(fabs(ux * wy - uy * wx), ux * wx + uy * wy) * (180.0 / 3.14159265358979323846);
 }
 
+/*
+ * A quadtree mesh has few triangle shapes: right isosceles ones in a few orientations, at
+ * one size per tree level. Its three angles are a function of the triangle's two edge
+ * vectors from its first vertex (every difference angle_deg takes is an exact integer
+ * combination of them), so a small direct-mapped table keyed on those vectors gives the
+ * smallest and largest angle as the three atan2 calls would, at a fraction of their cost.
+ */
+#define SHAPE_MEMO 256
+typedef struct shape_memo {
+  int64_t key[SHAPE_MEMO][4];
+  double lo[SHAPE_MEMO], hi[SHAPE_MEMO];
+} shape_memo_t;
+
+static void shape_memo_init(shape_memo_t *sm) {
+  /* Differences of lattice coordinates are far from INT64_MIN: no triangle has this key. */
+  for (size_t j = 0; j < SHAPE_MEMO; j++)
+    for (int i = 0; i < 4; i++) sm->key[j][i] = INT64_MIN;
+}
+
+/* The smallest and largest angle of triangle tr (degrees) into *lo and *hi. */
+static void shape_angles(shape_memo_t *sm, const int64_t *vx, const int64_t *vy, const uint32_t *tr,
+                         double *lo, double *hi) {
+  int64_t k[4] = {vx[tr[1]] - vx[tr[0]], vy[tr[1]] - vy[tr[0]], vx[tr[2]] - vx[tr[0]],
+                  vy[tr[2]] - vy[tr[0]]};
+  uint64_t h = (uint64_t)k[0] * 0x9e3779b97f4a7c15ull ^ (uint64_t)k[1] * 0xc2b2ae3d27d4eb4full ^
+               (uint64_t)k[2] * 0x165667b19e3779f9ull ^ (uint64_t)k[3] * 0x27d4eb2f165667c5ull;
+  size_t j = (size_t)(h >> 56) & (SHAPE_MEMO - 1);
+  int64_t *e = sm->key[j];
+  if (e[0] != k[0] || e[1] != k[1] || e[2] != k[2] || e[3] != k[3]) {
+    double amin = 180, amax = 0;
+    for (int i = 0; i < 3; i++) {
+      double ang = angle_deg(vx, vy, tr[(i + 2) % 3], tr[i], tr[(i + 1) % 3]);
+      if (ang < amin) amin = ang;
+      if (ang > amax) amax = ang;
+    }
+    memcpy(e, k, sizeof k), sm->lo[j] = amin, sm->hi[j] = amax;
+  }
+  *lo = sm->lo[j], *hi = sm->hi[j];
+}
+
 /* Check the options and fill *opt with them (defaults for NULL). */
 static qk_status_t read_options(const qk_mesh_options_t *options, qk_mesh_options_t *opt,
                                 qk_mesh_error_t *err) {
@@ -241,27 +281,33 @@ static qk_status_t compact(qk__gen_t *g, const qk__tri_state_t *T, const uint8_t
     return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   double amin = 180, amax = 0;
   size_t steiner = 0;
-  /* Back from the (doubled) lattice to input coordinates: exact, see mesh/lattice.c. */
+  /* Back from the (doubled) lattice to input coordinates: exact, see mesh/lattice.c
+   * (qk__lat_out, with the power of two computed once). */
+  int k = -(g->lat.f + 1);
+  double sc = qk__pow2(k);
   for (size_t i = 0; i < T->nv; i++)
     if (newid[i] != QK__MESH_UNSET) {
-      m->xy[2 * newid[i]] = qk__lat_out(&g->lat, T->vx[i], g->lat.x0);
-      m->xy[2 * newid[i] + 1] = qk__lat_out(&g->lat, T->vy[i], g->lat.y0);
+      m->xy[2 * newid[i]] = qk__ldexp_by((double)T->vx[i], sc, k) + g->lat.x0;
+      m->xy[2 * newid[i] + 1] = qk__ldexp_by((double)T->vy[i], sc, k) + g->lat.y0;
       steiner += T->steiner[i];
     }
   qk_status_t st = restore_signed_zeros(g, m);
   if (st) return st;
   size_t j = 0;
+  shape_memo_t *sm = qk__realloc(g->a, NULL, 0, sizeof *sm);
+  if (!sm) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  shape_memo_init(sm);
   for (size_t t = 0; t < T->nt; t++) {
     if (drop[T->region[t]]) continue;
     const uint32_t *tr = &T->tri[3 * t];
-    for (int i = 0; i < 3; i++) {
-      m->tri[3 * j + i] = newid[tr[i]];
-      double ang = angle_deg(T->vx, T->vy, tr[(i + 2) % 3], tr[i], tr[(i + 1) % 3]);
-      if (ang < amin) amin = ang;
-      if (ang > amax) amax = ang;
-    }
+    for (int i = 0; i < 3; i++) m->tri[3 * j + i] = newid[tr[i]];
+    double lo, hi;
+    shape_angles(sm, T->vx, T->vy, tr, &lo, &hi);
+    if (lo < amin) amin = lo;
+    if (hi > amax) amax = hi;
     m->comp[j++] = T->label[t];
   }
+  qk__free(g->a, sm, sizeof *sm);
   for (size_t i = 0; i < poly->nv; i++)
     m->cxy[2 * i] = g->src->vx[i], m->cxy[2 * i + 1] = g->src->vy[i];
   if (poly->ns) memcpy(m->cseg, poly->seg, 2 * poly->ns * sizeof *m->cseg);

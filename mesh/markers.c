@@ -10,29 +10,42 @@
 #include <stdlib.h>
 #include <string.h>
 
-/* Sorted (doubled lattice position, vertex id) pairs. */
+/*
+ * Vertex ids by doubled lattice position: an open-addressing table of at least twice the
+ * vertices (a power of two), id QK__MESH_UNSET marking an empty slot. Positions are
+ * distinct; were one repeated, the lowest id keeps it, as a stable sort would.
+ */
 typedef struct vpos {
-  uint64_t key;
-  uint32_t id;
+  uint64_t *key;
+  uint32_t *id;
+  size_t mask;
 } vpos_t;
-
-static int vpos_cmp(const void *a, const void *b) {
-  uint64_t x = ((const vpos_t *)a)->key, y = ((const vpos_t *)b)->key;
-  return (x > y) - (x < y);
-}
 
 static uint64_t pos_key(int64_t X2, int64_t Y2) { return (uint64_t)X2 << 32 | (uint64_t)Y2; }
 
-static uint32_t find(const vpos_t *v, size_t n, uint64_t key) {
-  size_t lo = 0, hi = n;
-  while (lo < hi) {
-    size_t mid = lo + (hi - lo) / 2;
-    if (v[mid].key < key)
-      lo = mid + 1;
-    else
-      hi = mid;
+static size_t pos_slot(uint64_t key, size_t mask) {
+  key ^= key >> 31;
+  key *= 0x9e3779b97f4a7c15ull;
+  key ^= key >> 29;
+  return (size_t)key & mask;
+}
+
+static void pos_put(vpos_t *v, uint64_t key, uint32_t id) {
+  size_t j = pos_slot(key, v->mask);
+  while (v->id[j] != QK__MESH_UNSET) {
+    if (v->key[j] == key) return;
+    j = (j + 1) & v->mask;
   }
-  return lo < n && v[lo].key == key ? v[lo].id : QK__MESH_UNSET;
+  v->key[j] = key, v->id[j] = id;
+}
+
+static uint32_t find(const vpos_t *v, uint64_t key) {
+  size_t j = pos_slot(key, v->mask);
+  while (v->id[j] != QK__MESH_UNSET) {
+    if (v->key[j] == key) return v->id[j];
+    j = (j + 1) & v->mask;
+  }
+  return QK__MESH_UNSET;
 }
 
 static qk_status_t add_oseg(const qk_allocator_t *a, qk_mesh_t *m, size_t *cap, qk__oseg_t e) {
@@ -56,7 +69,7 @@ static qk_status_t walk_segment(qk__gen_t *g, qk_mesh_t *m, const vpos_t *pos, s
   int64_t sx = dx / n, sy = dy / n;
   uint32_t prev = QK__MESH_UNSET;
   for (int64_t k = 0; k <= n; k++) {
-    uint32_t id = find(pos, m->nv, pos_key(2 * (ax + k * sx), 2 * (ay + k * sy)));
+    uint32_t id = find(pos, pos_key(2 * (ax + k * sx), 2 * (ay + k * sy)));
     /* A vertex is missing only where holes dropped both sides of the segment. */
     if (id != QK__MESH_UNSET && mark && !m->vmark[id]) m->vmark[id] = mark;
     if (id != QK__MESH_UNSET && prev != QK__MESH_UNSET &&
@@ -72,25 +85,30 @@ qk_status_t qk__mesh_markers(qk__gen_t *g, qk_mesh_t *m) {
   qk_status_t st = QK_OK;
   m->has_marks = S->vmark || S->smark;
   m->vmark = qk__realloc(g->a, NULL, 0, (m->nv + 1) * sizeof *m->vmark);
-  vpos_t *pos = qk__realloc(g->a, NULL, 0, (m->nv + 1) * sizeof *pos);
+  size_t pcap = 16;
+  while (pcap < 2 * m->nv) pcap *= 2;
+  vpos_t pos = {qk__realloc(g->a, NULL, 0, pcap * sizeof *pos.key),
+                qk__realloc(g->a, NULL, 0, pcap * sizeof *pos.id), pcap - 1};
   size_t cap = 0;
-  if (!m->vmark || !pos) {
+  if (!m->vmark || !pos.key || !pos.id) {
     st = QK_ERR_NOMEM;
     goto out;
   }
   memset(m->vmark, 0, (m->nv + 1) * sizeof *m->vmark);
+  memset(pos.id, 0xff, pcap * sizeof *pos.id);
+  int k = g->lat.f + 1;
+  double sc = qk__pow2(k);
   for (size_t i = 0; i < m->nv; i++) {
-    int64_t X2 = (int64_t)ldexp(m->xy[2 * i] - g->lat.x0, g->lat.f + 1);
-    int64_t Y2 = (int64_t)ldexp(m->xy[2 * i + 1] - g->lat.y0, g->lat.f + 1);
-    pos[i] = (vpos_t){pos_key(X2, Y2), (uint32_t)i};
+    int64_t X2 = (int64_t)qk__ldexp_by(m->xy[2 * i] - g->lat.x0, sc, k);
+    int64_t Y2 = (int64_t)qk__ldexp_by(m->xy[2 * i + 1] - g->lat.y0, sc, k);
+    pos_put(&pos, pos_key(X2, Y2), (uint32_t)i);
   }
-  qsort(pos, m->nv, sizeof *pos, vpos_cmp);
   /* Input vertices' own markers first: they win over their segments'. */
   for (size_t i = 0; S->vmark && i < P->nv; i++) {
-    uint32_t id = find(pos, m->nv, pos_key(2 * (int64_t)P->vx[i], 2 * (int64_t)P->vy[i]));
+    uint32_t id = find(&pos, pos_key(2 * (int64_t)P->vx[i], 2 * (int64_t)P->vy[i]));
     if (id != QK__MESH_UNSET) m->vmark[id] = S->vmark[i];
   }
-  for (size_t s = 0; s < P->ns && !st; s++) st = walk_segment(g, m, pos, &cap, s);
+  for (size_t s = 0; s < P->ns && !st; s++) st = walk_segment(g, m, &pos, &cap, s);
   if (!st && !m->oseg) {
     void *p = NULL;
     if (qk__grow(g->a, &p, &cap, 1, sizeof *m->oseg)) st = QK_ERR_NOMEM;
@@ -98,7 +116,8 @@ qk_status_t qk__mesh_markers(qk__gen_t *g, qk_mesh_t *m) {
   }
 out:
   m->noseg_cap = cap;
-  qk__free(g->a, pos, (m->nv + 1) * sizeof *pos);
+  qk__free(g->a, pos.key, pcap * sizeof *pos.key);
+  qk__free(g->a, pos.id, pcap * sizeof *pos.id);
   if (st) return qk__mesh_fail(g->err, st, 0, "out of memory");
   return QK_OK;
 }

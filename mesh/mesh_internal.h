@@ -224,6 +224,16 @@ static inline double qk__lat_out(const qk__lattice_t *L, int64_t v2, double orig
   return ldexp((double)v2, -(L->f + 1)) + origin;
 }
 
+/* 2^k when it is a double (-1074 <= k <= 1023), else 0. Then x * qk__pow2(k) is exactly
+ * ldexp(x, k): both are the correctly rounded x 2^k. The long loops multiply instead of
+ * calling ldexp (about 50 instructions a call). */
+static inline double qk__pow2(int k) { return k >= -1074 && k <= 1023 ? ldexp(1.0, k) : 0; }
+
+/* ldexp(x, k) given s = qk__pow2(k). */
+static inline double qk__ldexp_by(double x, double s, int k) {
+  return s != 0 ? x * s : ldexp(x, k);
+}
+
 /* Step 1b: split leaves larger than the size bound asks (mesh/refine.c). */
 qk_status_t qk__mesh_refine(qk__gen_t *g);
 

@@ -26,20 +26,103 @@ static const char digit_pairs[201] = "00010203040506070809"
                                      "80818283848586878889"
                                      "90919293949596979899";
 
+/* Two digits of d < 100 at p. */
+static inline void put2(char *p, unsigned d) { memcpy(p, digit_pairs + 2 * d, 2); }
+
+static const uint64_t P10[20] = {1ull,
+                                 10ull,
+                                 100ull,
+                                 1000ull,
+                                 10000ull,
+                                 100000ull,
+                                 1000000ull,
+                                 10000000ull,
+                                 100000000ull,
+                                 1000000000ull,
+                                 10000000000ull,
+                                 100000000000ull,
+                                 1000000000000ull,
+                                 10000000000000ull,
+                                 100000000000000ull,
+                                 1000000000000000ull,
+                                 10000000000000000ull,
+                                 100000000000000000ull,
+                                 1000000000000000000ull,
+                                 10000000000000000000ull};
+
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
+#define QK__SWAR8 1
+/*
+ * The 8 decimal digits of v < 10^8 as the bytes of a word, first digit lowest (its memory
+ * order on a little-endian machine), '0' not added: split into two 4-digit halves, each
+ * into 2-digit and then 1-digit lanes with multiply-shift divisions (x / 100 is
+ * x 10486 >> 20 for x < 10^4, x / 10 is x 103 >> 10 for x < 100), every lane at once.
+ */
+static inline uint64_t digits8(uint32_t v) {
+  uint64_t y = (uint64_t)(v / 10000) | (uint64_t)(v % 10000) << 32;
+  uint64_t z = ((y * 10486) >> 20) & 0x0000007F0000007Full;
+  y = z | (y - 100 * z) << 16;
+  z = ((y * 103) >> 10) & 0x000F000F000F000Full;
+  return z | (y - 10 * z) << 8;
+}
+#endif
+
+/* The 8 digits of v < 10^8 at p. */
+static inline void put8(char *p, uint32_t v) {
+#if defined(QK__SWAR8)
+  uint64_t y = digits8(v) + 0x3030303030303030ull;
+  memcpy(p, &y, 8);
+#else
+  uint32_t a = v / 10000, b = v % 10000;
+  put2(p, a / 100), put2(p + 2, a % 100), put2(p + 4, b / 100), put2(p + 6, b % 100);
+#endif
+}
+
+/* Decimal digits of v (1 for 0). */
+static inline size_t n_digits(uint64_t v) {
+#if defined(__GNUC__)
+  /* floor(bits log10(2)) is the count or one less (1233 / 4096 is just above log10(2)). */
+  size_t n = (size_t)((64 - __builtin_clzll(v | 1)) * 1233) >> 12;
+  return n + ((v | 1) >= P10[n]);
+#else
+  size_t n = 1;
+  while (n < 20 && v >= P10[n]) n++;
+  return n;
+#endif
+}
+
+/* The digits are written from the end, two at a time, straight into buf; values that fit
+ * 32 bits (vertex and triangle numbers) divide in 32 bits. */
 size_t qk__fmt_u64(uint64_t v, char *buf) {
-  char t[24];
-  size_t n = sizeof t;
-  while (v >= 100) {
+#if defined(QK__SWAR8) && defined(__GNUC__)
+  if (v < 100000000u) {
+    /* The leading zero digits are the word's low zero bytes; the last n of the 8 digits
+     * move to the word's first bytes. */
+    uint64_t y = digits8((uint32_t)v);
+    size_t n = y ? 8 - (size_t)__builtin_ctzll(y) / 8 : 1;
+    y = (y + 0x3030303030303030ull) >> (8 * (8 - n));
+    memcpy(buf, &y, 8);
+    return n;
+  }
+#endif
+  size_t n = n_digits(v);
+  char *p = buf + n;
+  while (v > UINT32_MAX) {
     unsigned d = (unsigned)(v % 100);
     v /= 100;
-    t[--n] = digit_pairs[2 * d + 1], t[--n] = digit_pairs[2 * d];
+    put2(p -= 2, d);
   }
-  if (v >= 10)
-    t[--n] = digit_pairs[2 * v + 1], t[--n] = digit_pairs[2 * v];
+  uint32_t w = (uint32_t)v;
+  while (w >= 100) {
+    unsigned d = w % 100;
+    w /= 100;
+    put2(p -= 2, d);
+  }
+  if (w >= 10)
+    put2(p - 2, w);
   else
-    t[--n] = (char)('0' + v);
-  memcpy(buf, t + n, sizeof t - n);
-  return sizeof t - n;
+    p[-1] = (char)('0' + w);
+  return n;
 }
 
 #if defined(__SIZEOF_INT128__)
@@ -79,9 +162,13 @@ static size_t g17_fixed(double x, char *buf) {
   if (be == 0) return 0; /* subnormal: far outside the fixed range */
   uint64_t m = (bits & (((uint64_t)1 << 52) - 1)) | (uint64_t)1 << 52;
   int q = be - 1022, e = q - 53; /* |x| = m 2^e = f 2^q, f in [1/2, 1) */
-  /* 2^(q-1) <= |x|, so 10^X0 <= |x| with X0 below: X is X0 or X0 + 1 (k log10(2) is never
-   * within rounding of an integer for k != 0 in range). */
-  int X = (int)floor((double)(q - 1) * 0.30102999566398120), tries = 0;
+  /* 2^(q-1) <= |x|, so 10^X0 <= |x| with X0 = floor((q - 1) log10(2)), here as
+   * floor((q - 1) 78913 / 2^18) (exact for |q - 1| < 1650; 78913 / 2^18 is just below
+   * log10(2); offset by 16 so that the shifted value is not negative):
+   * X is X0 or X0 + 1 (k log10(2) is never within rounding of an integer for k != 0 in
+   * range). Only the fixed range matters; beyond it the estimate is not used. */
+  if (q < -30 || q > 70) return 0;
+  int X = (int)(((uint32_t)((q - 1) * 78913 + (16 << 18))) >> 18) - 16, tries = 0;
   uint64_t T;
   for (;;) {
     if (X < -5 || X > 16 || ++tries > 2) return 0;
@@ -90,6 +177,18 @@ static size_t g17_fixed(double x, char *buf) {
     if (sh >= 0) {
       if (sh >= 64 || (p << sh) >> 64) return 0;
       T = (uint64_t)(p << sh);
+    } else if (sh > -64) {
+      /* The common case: the quotient and remainder of a shift by r < 64, in 64 bits. */
+      int r = -sh;
+      uint64_t lo = (uint64_t)p, hi = (uint64_t)(p >> 64);
+      if (hi >> r) return 0;
+      T = (lo >> r) | (r ? hi << (64 - r) : 0);
+      uint64_t rem = lo & (((uint64_t)1 << r) - 1), half = (uint64_t)1 << (r - 1);
+      if (T >= E17) { /* X was one too small */
+        X++;
+        continue;
+      }
+      T += rem > half || (rem == half && (T & 1));
     } else {
       int r = -sh;
       if (r >= 127) return 0;
@@ -110,27 +209,32 @@ static size_t g17_fixed(double x, char *buf) {
   }
   if (T == E17) T = E16, X++;
   if (T < E16 || X < -4 || X > 16) return 0;
-  char d[18];
-  for (int i = 15; i >= 1; i -= 2) {
-    unsigned r = (unsigned)(T % 100);
-    T /= 100;
-    d[i] = digit_pairs[2 * r], d[i + 1] = digit_pairs[2 * r + 1];
-  }
-  d[0] = (char)('0' + T);
+  /* The 17 digits: T = d0 10^16 + hi 10^8 + lo. */
+  char d[33]; /* 17 digits, then zeros for the fixed-size copy below */
+  memset(d + 17, '0', 16);
+  uint64_t top = T / 100000000u;
+  uint32_t lo = (uint32_t)(T - top * 100000000u);
+  d[0] = (char)('0' + top / 100000000u);
+  put8(d + 1, (uint32_t)(top % 100000000u)), put8(d + 9, lo);
   int nd = 17;
   while (nd > 1 && d[nd - 1] == '0') nd--;
   size_t n = 0;
   if (x < 0) buf[n++] = '-';
+  /* Fixed-size copies (a few moves each); buf has QK__NUMFMT_MAX bytes, and at most
+   * 1 + 2 + 4 + 17 or 1 + 17 + 1 + 16 of them are touched. */
   if (X >= 0) {
-    memcpy(buf + n, d, (size_t)X + 1), n += (size_t)X + 1;
+    memcpy(buf + n, d, 17);
     if (nd > X + 1) {
-      buf[n++] = '.';
-      memcpy(buf + n, d + X + 1, (size_t)(nd - X - 1)), n += (size_t)(nd - X - 1);
+      memcpy(buf + n + X + 2, d + X + 1, 16);
+      buf[n + (size_t)X + 1] = '.';
+      n += (size_t)nd + 1;
+    } else {
+      n += (size_t)X + 1;
     }
   } else {
-    buf[n++] = '0', buf[n++] = '.';
-    for (int i = -1; i > X; i--) buf[n++] = '0';
-    memcpy(buf + n, d, (size_t)nd), n += (size_t)nd;
+    memcpy(buf + n, "0.0000", 6);
+    memcpy(buf + n + 1 - X, d, 17);
+    n += (size_t)(1 - X) + (size_t)nd;
   }
   buf[n] = 0;
   return n;

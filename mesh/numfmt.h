@@ -21,7 +21,8 @@
  * snprintf itself. */
 size_t qk__fmt_g17(double x, char *buf);
 
-/* Write v in decimal into buf (at least 21 bytes), not terminated; returns the length. */
+/* Write v in decimal into buf (at least 21 bytes, which bytes past the digits may be
+ * scribbled over), not terminated; returns the length. */
 size_t qk__fmt_u64(uint64_t v, char *buf);
 
 /* A line buffer for the writers: text is appended, then written with one fwrite a few
@@ -59,5 +60,32 @@ static inline void qk__wbuf_s(qk__wbuf_t *w, const char *s) {
   memcpy(qk__wbuf_room(w, n), s, n), w->n += n;
 }
 static inline void qk__wbuf_c(qk__wbuf_t *w, char c) { *qk__wbuf_room(w, 1) = c, w->n++; }
+
+/* A line number kept in decimal: the writers number their lines 0, 1, 2... (or from 1),
+ * and adding one to the digits costs less than formatting the number anew. */
+typedef struct qk__dcount {
+  char d[24]; /* the digits, then zeros: copied 24 bytes at a time */
+  size_t n;
+} qk__dcount_t;
+
+/* Start a counter at v. */
+static inline void qk__dcount_init(qk__dcount_t *c, uint64_t v) {
+  memset(c->d, '0', sizeof c->d);
+  c->n = qk__fmt_u64(v, c->d);
+  memset(c->d + c->n, '0', sizeof c->d - c->n);
+}
+
+/* Write the counter's digits at p (24 bytes of room), return how many; then add one. */
+static inline size_t qk__dcount_put(qk__dcount_t *c, char *p) {
+  size_t n = c->n, i = n;
+  memcpy(p, c->d, sizeof c->d);
+  while (i > 0 && c->d[i - 1] == '9') c->d[--i] = '0';
+  if (i > 0) {
+    c->d[i - 1]++;
+  } else { /* 99...9 + 1: a one, then n zeros */
+    c->d[0] = '1', c->d[n] = '0', c->n = n + 1;
+  }
+  return n;
+}
 
 #endif

@@ -36,6 +36,19 @@ static qk_status_t hmap_init(const qk_allocator_t *a, qk__hmap_t *h, size_t expe
   return QK_OK;
 }
 
+/* The value of key into *v: 1 when present, 0 when not. */
+static int hmap_get(const qk__hmap_t *h, uint64_t key, uint32_t *v) {
+  size_t j = hslot(key, h->cap);
+  while (h->k[j] != UINT64_MAX) {
+    if (h->k[j] == key) {
+      *v = h->v[j];
+      return 1;
+    }
+    j = (j + 1) & (h->cap - 1);
+  }
+  return 0;
+}
+
 /* Find key; if absent insert it with value *v. Returns 1 when found (*v set), 0 when
  * inserted, -1 out of memory. */
 static int hmap_get_or_put(const qk_allocator_t *a, qk__hmap_t *h, uint64_t key, uint32_t *v) {
@@ -65,6 +78,11 @@ static int hmap_get_or_put(const qk_allocator_t *a, qk__hmap_t *h, uint64_t key,
 }
 
 static qk_status_t new_vertex(qk__tri_state_t *T, int64_t x, int64_t y, int steiner, uint32_t *id) {
+  if (T->nv < T->vcap && T->nv < T->vycap && T->nv < T->scap) { /* room: no calls */
+    T->vx[T->nv] = x, T->vy[T->nv] = y, T->steiner[T->nv] = (uint8_t)steiner;
+    *id = (uint32_t)T->nv++;
+    return QK_OK;
+  }
   void *p1 = T->vx, *p2 = T->vy, *p3 = T->steiner;
   if (qk__grow(T->a, &p1, &T->vcap, T->nv + 1, sizeof *T->vx)) return QK_ERR_NOMEM;
   T->vx = p1;
@@ -91,11 +109,13 @@ static qk_status_t corner_vertex(qk__tri_state_t *T, int64_t x, int64_t y, uint3
 }
 
 static qk_status_t add_tri(qk__tri_state_t *T, uint32_t a, uint32_t b, uint32_t c, uint32_t cell) {
-  void *p1 = T->tri, *p2 = T->label;
-  if (qk__grow(T->a, &p1, &T->tcap, T->nt + 1, 3 * sizeof *T->tri)) return QK_ERR_NOMEM;
-  T->tri = p1;
-  if (qk__grow(T->a, &p2, &T->lcap, T->nt + 1, sizeof *T->label)) return QK_ERR_NOMEM;
-  T->label = p2;
+  if (T->nt >= T->tcap || T->nt >= T->lcap) {
+    void *p1 = T->tri, *p2 = T->label;
+    if (qk__grow(T->a, &p1, &T->tcap, T->nt + 1, 3 * sizeof *T->tri)) return QK_ERR_NOMEM;
+    T->tri = p1;
+    if (qk__grow(T->a, &p2, &T->lcap, T->nt + 1, sizeof *T->label)) return QK_ERR_NOMEM;
+    T->label = p2;
+  }
   uint32_t *t = &T->tri[3 * T->nt];
   t[0] = a, t[1] = b, t[2] = c;
   T->label[T->nt] = cell;
@@ -128,7 +148,7 @@ static int cell_touches(int diag, int k, int s) {
  * along that diagonal; otherwise the SW-NE diagonal does (its vertices are only its
  * corners, since no leaf is smaller than unit size). Seeds the labels of its cells.
  */
-static qk_status_t tri_unit(qk__tri_state_t *T, const qk__unit_rec_t *r, const uint32_t c[4],
+static qk_status_t tri_unit(qk__tri_state_t *T, const qk__unit_rec_t *r, const uint32_t *c,
                             uint32_t cell0, uint32_t *cell_label) {
   /* c: SW, SE, NE, NW. */
   const int32_t *p = r->piece;
@@ -167,9 +187,67 @@ static qk_status_t tri_unit(qk__tri_state_t *T, const qk__unit_rec_t *r, const u
  * every component, label 0. (A face of a component is one region; the outside may be
  * several when components touching the domain's edge cut it apart.)
  */
+/* Leaves by lower-left corner (a leaf's is its own: leaves do not overlap), with every
+ * node's square: the neighbours across a side by lookups. */
+typedef struct leaf_map {
+  qk__hmap_t at;         /* corner key -> leaf node */
+  const qk_square_t *sq; /* by node id */
+  int64_t U;             /* the root square's side */
+} leaf_map_t;
+
+static uint64_t corner_key(int64_t x, int64_t y) { return ((uint64_t)x << 32) | (uint64_t)y; }
+
+/* The leaf with lower-left corner (x, y) and side s, or QK_NONE. */
+static qk_node_t leaf_at(const leaf_map_t *L, int64_t x, int64_t y, int64_t s) {
+  uint32_t v;
+  if (!hmap_get(&L->at, corner_key(x, y), &v) || (int64_t)L->sq[v].side != s) return QK_NONE;
+  return v;
+}
+
+/*
+ * The leaves across side sd (south, east, north, west) of leaf v, as
+ * qk_tree_adjacent_leaves gives them, same order, into nb (room for 8): in a balanced
+ * tree one leaf of the same size, two of half the size (the one lower along the side
+ * first, as the tree lists them), or one of twice the size; the tree's own search
+ * otherwise (never, for a balanced tree, but it costs nothing to be sure).
+ */
+static size_t side_leaves(const qk_tree_t *t, const leaf_map_t *L, qk_node_t v, int sd,
+                          qk_node_t *nb) {
+  qk_square_t q = L->sq[v];
+  int64_t X = (int64_t)q.x, Y = (int64_t)q.y, S = (int64_t)q.side, h = S / 2, D = 2 * S;
+  if ((sd == 0 && Y == 0) || (sd == 3 && X == 0) || (sd == 2 && Y + S == L->U) ||
+      (sd == 1 && X + S == L->U))
+    return 0; /* the root square's boundary */
+  /* Lower-left corners of the same-size, the two half-size and the double-size
+   * candidates. */
+  int64_t sx, sy, ax, ay, bx, by, dx, dy;
+  switch (sd) {
+  case 0:
+    sx = X, sy = Y - S, ax = X, ay = Y - h, bx = X + h, by = Y - h, dx = X & ~(D - 1), dy = Y - D;
+    break;
+  case 1:
+    sx = X + S, sy = Y, ax = X + S, ay = Y, bx = X + S, by = Y + h, dx = X + S, dy = Y & ~(D - 1);
+    break;
+  case 2:
+    sx = X, sy = Y + S, ax = X, ay = Y + S, bx = X + h, by = Y + S, dx = X & ~(D - 1), dy = Y + S;
+    break;
+  default:
+    sx = X - S, sy = Y, ax = X - h, ay = Y, bx = X - h, by = Y + h, dx = X - D, dy = Y & ~(D - 1);
+    break;
+  }
+  if ((nb[0] = leaf_at(L, sx, sy, S)) != QK_NONE) return 1;
+  if (h && (nb[0] = leaf_at(L, ax, ay, h)) != QK_NONE && (nb[1] = leaf_at(L, bx, by, h)) != QK_NONE)
+    return 2;
+  if ((nb[0] = leaf_at(L, dx, dy, D)) != QK_NONE) return 1;
+  static const qk_dir_t side_dir[4] = {QK_SOUTH, QK_EAST, QK_NORTH, QK_WEST};
+  size_t n = 0;
+  qk_tree_adjacent_leaves(t, v, side_dir[sd], nb, 8, &n);
+  return n < 8 ? n : 8;
+}
+
 static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, const qk_node_t *leaves,
                                size_t nleaves, const uint32_t *leaf_of, const uint32_t *rec_of,
-                               const uint32_t *cell_label) {
+                               const uint32_t *cell_label, const leaf_map_t *L) {
   const qk_tree_t *t = g->tree;
   size_t ncell = 2 * nleaves;
   uint32_t *queue = qk__realloc(g->a, NULL, 0, (ncell + 1) * sizeof *queue);
@@ -183,7 +261,6 @@ static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, const qk_node_t
   }
   T->region = rp;
   memset(region, 0xff, (ncell + 1) * sizeof *region);
-  static const qk_dir_t side_dir[4] = {QK_SOUTH, QK_EAST, QK_NORTH, QK_WEST};
   static const int piece_of_side[4] = {QK__P_S, QK__P_E, QK__P_N, QK__P_W};
   uint32_t nreg = 0;
   /* Start a flood from the cell of every triangle not reached yet. */
@@ -204,9 +281,8 @@ static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, const qk_node_t
         if (!cell_touches(diag, (int)k, sd)) continue;
         if (r && r->piece[piece_of_side[sd]]) continue; /* a component edge: a boundary */
         qk_node_t nb[8];
-        size_t n = 0;
-        qk_tree_adjacent_leaves(t, v, side_dir[sd], nb, 8, &n);
-        for (size_t i = 0; i < n && i < 8; i++) {
+        size_t n = side_leaves(t, L, v, sd, nb);
+        for (size_t i = 0; i < n; i++) {
           uint32_t lw = leaf_of[nb[i]];
           const qk__unit_rec_t *rw =
               rec_of[nb[i]] != QK__MESH_UNSET ? &g->rec[rec_of[nb[i]]] : NULL;
@@ -228,6 +304,27 @@ out:
   qk__free(g->a, region, (ncell + 1) * sizeof *region);
   qk__free(g->a, rlabel, (ncell + 1) * sizeof *rlabel);
   return st;
+}
+
+/* The square of every node reachable from the root, by node id, computed top-down in one
+ * pass (qk__node_square recomputes a node's whole path at each call); `sq` has room for
+ * the tree's node bound. Squares are dyadic and halving is exact, so these are the
+ * tree's own squares. */
+static void node_squares(const qk_tree_t *t, qk_square_t *sq) {
+  qk_node_t stack[3 * (QK_MAX_DEPTH_LIMIT + 2) + 4]; /* 3 siblings a level wait */
+  size_t n = 0;
+  qk_node_t root = qk_tree_root(t);
+  sq[root] = qk__tree_root_square(t);
+  stack[n++] = root;
+  while (n) {
+    qk_node_t v = stack[--n];
+    uint32_t c = qk__node_child(t, v);
+    if (c == QK_NONE) continue;
+    for (unsigned q = 0; q < 4; q++) {
+      sq[c + q] = qk__child_square(sq[v], q);
+      stack[n++] = c + q;
+    }
+  }
 }
 
 qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris_t *lt) {
@@ -255,52 +352,89 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
   qk_tree_leaves(t, leaves, nleaves, &nleaves);
   for (size_t li = 0; li < nleaves; li++) leaf_of[leaves[li]] = (uint32_t)li;
 
+  /* Room for the usual counts (about 3 triangles and 1.5 vertices a leaf), so that the
+   * arrays seldom grow while filled. */
+  {
+    void *p1 = T->tri, *p2 = T->label, *p3 = T->vx, *p4 = T->vy, *p5 = T->steiner;
+    size_t nt = 3 * nleaves + 16, nv = nleaves + nleaves / 2 + 16;
+    if (qk__grow(T->a, &p1, &T->tcap, nt, 3 * sizeof *T->tri) ||
+        (T->tri = p1, qk__grow(T->a, &p2, &T->lcap, nt, sizeof *T->label)) ||
+        (T->label = p2, qk__grow(T->a, &p3, &T->vcap, nv, sizeof *T->vx)) ||
+        (T->vx = p3, qk__grow(T->a, &p4, &T->vycap, nv, sizeof *T->vy)) ||
+        (T->vy = p4, qk__grow(T->a, &p5, &T->scap, nv, 1))) {
+      st = QK_ERR_NOMEM;
+      goto out;
+    }
+    T->steiner = p5;
+  }
+  /* First every leaf's corners, so that the vertex map holds every lattice point a leaf
+   * has as a corner. */
+  uint32_t *corner = qk__realloc(g->a, NULL, 0, (4 * nleaves + 4) * sizeof *corner);
+  qk_square_t *nsq = qk__realloc(g->a, NULL, 0, (nn + 1) * sizeof *nsq);
+  if (!corner || !nsq) {
+    qk__free(g->a, corner, (4 * nleaves + 4) * sizeof *corner);
+    qk__free(g->a, nsq, (nn + 1) * sizeof *nsq);
+    st = QK_ERR_NOMEM;
+    goto out;
+  }
+  node_squares(t, nsq);
   for (size_t li = 0; li < nleaves; li++) {
-    uint32_t v = leaves[li], cell = (uint32_t)(2 * li);
-    qk_square_t sq = qk__node_square(t, v);
+    qk_square_t sq = nsq[leaves[li]];
     int64_t S = 2 * (int64_t)sq.side, X = 2 * (int64_t)sq.x, Y = 2 * (int64_t)sq.y;
-    lt->first[v] = (uint32_t)T->nt;
-    uint32_t c[4];
+    uint32_t *c = &corner[4 * li];
     if ((st = corner_vertex(T, X, Y, &c[0])) || (st = corner_vertex(T, X + S, Y, &c[1])) ||
         (st = corner_vertex(T, X + S, Y + S, &c[2])) || (st = corner_vertex(T, X, Y + S, &c[3])))
-      goto out;
+      break;
+  }
+  for (size_t li = 0; li < nleaves && !st; li++) {
+    uint32_t v = leaves[li], cell = (uint32_t)(2 * li);
+    qk_square_t sq = nsq[v];
+    int64_t S = 2 * (int64_t)sq.side, X = 2 * (int64_t)sq.x, Y = 2 * (int64_t)sq.y;
+    lt->first[v] = (uint32_t)T->nt;
+    const uint32_t *c = &corner[4 * li];
     if (rec_of[v] != QK__MESH_UNSET) {
-      if ((st = tri_unit(T, &g->rec[rec_of[v]], c, cell, cell_label))) goto out;
+      st = tri_unit(T, &g->rec[rec_of[v]], c, cell, cell_label);
       continue;
     }
-    /* A side holds a midpoint vertex exactly when the neighbour across it (found by
-     * NorthNeighbor, of at most this depth) is internal: then, the tree being balanced,
-     * two leaves of half the size meet this side. Unit leaves have no smaller
-     * neighbours. Sides in CCW order: south, east, north, west. */
-    static const qk_dir_t side_dir[4] = {QK_SOUTH, QK_EAST, QK_NORTH, QK_WEST};
+    /* A side holds a midpoint vertex exactly when the neighbour across it (of at most
+     * this depth) is internal: then, the tree being balanced, two leaves of half the size
+     * meet this side, and share a corner at its midpoint. Otherwise no leaf has a corner
+     * there (a leaf across the side is as large as this one or larger, with corners on a
+     * coarser grid), so the vertex map, holding every leaf corner, answers without
+     * neighbour finding. Unit leaves have no smaller neighbours. Sides in CCW order:
+     * south, east, north, west. */
     int64_t mx[4] = {X + S / 2, X + S, X + S / 2, X}, my[4] = {Y, Y + S / 2, Y + S, Y + S / 2};
     uint32_t ring[8];
     size_t nr = 0;
     for (int s = 0; s < 4; s++) {
       ring[nr++] = c[s];
-      if (S > 2) {
-        qk_node_t u = qk_tree_neighbor(t, v, side_dir[s]);
-        if (u != QK_NONE && !qk__node_leaf(t, u) &&
-            (st = corner_vertex(T, mx[s], my[s], &ring[nr++])))
-          goto out;
-      }
+      if (S > 2 && hmap_get(&T->vmap, ((uint64_t)mx[s] << 32) | (uint64_t)my[s], &ring[nr])) nr++;
     }
     if (nr == 4) {
       /* Vertices only at its corners: split along a diagonal (angles 45, 45, 90). */
-      if ((st = add_tri(T, c[0], c[1], c[2], cell)) || (st = add_tri(T, c[0], c[2], c[3], cell)))
-        goto out;
+      if (!(st = add_tri(T, c[0], c[1], c[2], cell))) st = add_tri(T, c[0], c[2], c[3], cell);
       continue;
     }
     /* A Steiner point at the centre, joined to every boundary vertex: each triangle has
      * a right angle at the centre (corner-corner) or at the midpoint (corner-midpoint). */
     uint32_t ctr;
-    if ((st = new_vertex(T, X + S / 2, Y + S / 2, 1, &ctr))) goto out;
-    for (size_t i = 0; i < nr; i++)
-      if ((st = add_tri(T, ring[i], ring[(i + 1) % nr], ctr, cell))) goto out;
+    if ((st = new_vertex(T, X + S / 2, Y + S / 2, 1, &ctr))) break;
+    for (size_t i = 0; i < nr && !st; i++) st = add_tri(T, ring[i], ring[(i + 1) % nr], ctr, cell);
   }
+  qk__free(g->a, corner, (4 * nleaves + 4) * sizeof *corner);
   /* The vertex map is no longer needed; give its memory back before labelling. */
   hmap_free(T->a, &T->vmap);
-  if ((st = label_cells(g, T, leaves, nleaves, leaf_of, rec_of, cell_label))) goto out;
+  leaf_map_t L = {{NULL, NULL, 0, 0}, nsq, (int64_t)qk__tree_root_square(t).side};
+  if (!st && hmap_init(g->a, &L.at, nleaves + 16)) st = QK_ERR_NOMEM;
+  for (size_t li = 0; li < nleaves && !st; li++) {
+    uint32_t v = leaves[li];
+    if (hmap_get_or_put(g->a, &L.at, corner_key((int64_t)nsq[v].x, (int64_t)nsq[v].y), &v) < 0)
+      st = QK_ERR_NOMEM;
+  }
+  if (!st) st = label_cells(g, T, leaves, nleaves, leaf_of, rec_of, cell_label, &L);
+  hmap_free(g->a, &L.at);
+  qk__free(g->a, nsq, (nn + 1) * sizeof *nsq);
+  if (st) goto out;
 out:
   qk__free(g->a, rec_of, nn * sizeof *rec_of);
   qk__free(g->a, leaf_of, nn * sizeof *leaf_of);

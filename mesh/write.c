@@ -18,12 +18,22 @@ qk_status_t qk_mesh_write_node(const qk_mesh_t *m, FILE *f, unsigned first) {
   fprintf(f, "%zu 2 0 %d\n", m->nv, m->has_marks ? 1 : 0);
   qk__wbuf_t w;
   w.f = f, w.n = 0;
+  qk__dcount_t num;
+  qk__dcount_init(&num, first);
   for (size_t i = 0; i < m->nv; i++) {
-    qk__wbuf_u(&w, i + first), qk__wbuf_c(&w, ' ');
-    qk__wbuf_g17(&w, m->xy[2 * i]), qk__wbuf_c(&w, ' ');
-    qk__wbuf_g17(&w, m->xy[2 * i + 1]);
-    if (m->has_marks) qk__wbuf_c(&w, ' '), qk__wbuf_i(&w, (long)m->vmark[i]);
-    qk__wbuf_c(&w, '\n');
+    /* One line formatted in place: 24 + 2 * 41 + 23 + 1 bytes at most. */
+    char *p = qk__wbuf_room(&w, 192), *p0 = p;
+    p += qk__dcount_put(&num, p), *p++ = ' ';
+    p += qk__fmt_g17(m->xy[2 * i], p), *p++ = ' ';
+    p += qk__fmt_g17(m->xy[2 * i + 1], p);
+    if (m->has_marks) {
+      int32_t k = m->vmark[i];
+      *p++ = ' ';
+      if (k < 0) *p++ = '-';
+      p += qk__fmt_u64(k < 0 ? 0 - (uint64_t)k : (uint64_t)k, p);
+    }
+    *p++ = '\n';
+    w.n += (size_t)(p - p0);
   }
   qk__wbuf_flush(&w);
   return io_status(f);
@@ -52,13 +62,18 @@ qk_status_t qk_mesh_write_ele(const qk_mesh_t *m, FILE *f, unsigned first) {
   fprintf(f, "%zu 3 %d\n", m->nt, m->attr ? 2 : 1);
   qk__wbuf_t w;
   w.f = f, w.n = 0;
+  qk__dcount_t num;
+  qk__dcount_init(&num, first);
   for (size_t i = 0; i < m->nt; i++) {
     const uint32_t *t = &m->tri[3 * i];
-    qk__wbuf_u(&w, i + first);
-    for (int j = 0; j < 3; j++) qk__wbuf_c(&w, ' '), qk__wbuf_u(&w, (uint64_t)t[j] + first);
-    qk__wbuf_c(&w, ' '), qk__wbuf_u(&w, m->comp[i]);
-    if (m->attr) qk__wbuf_c(&w, ' '), qk__wbuf_g17(&w, m->attr[i]);
-    qk__wbuf_c(&w, '\n');
+    /* One line formatted in place: 24 + 4 * 22 + 41 + 1 bytes at most. */
+    char *p = qk__wbuf_room(&w, 192), *p0 = p;
+    p += qk__dcount_put(&num, p);
+    for (int j = 0; j < 3; j++) *p++ = ' ', p += qk__fmt_u64((uint64_t)t[j] + first, p);
+    *p++ = ' ', p += qk__fmt_u64(m->comp[i], p);
+    if (m->attr) *p++ = ' ', p += qk__fmt_g17(m->attr[i], p);
+    *p++ = '\n';
+    w.n += (size_t)(p - p0);
   }
   qk__wbuf_flush(&w);
   return io_status(f);

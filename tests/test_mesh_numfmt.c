@@ -8,7 +8,8 @@
  *    bits (exact decimal expansions, so rounding ties to even happen), on powers of ten and
  *    their neighbours, on integers and half-integers up to 1e18, and on the signed zeros;
  *  - qk__fmt_u64 gives snprintf("%llu") on powers of ten, their neighbours and random values;
- *  - the buffered writer keeps what it is given across flushes.
+ *  - the buffered writer keeps what it is given across flushes;
+ *  - the writers' decimal line counter counts as snprintf prints, across powers of ten.
  * Seeds come from QK_SEED (qkt_seed) and are printed on failure.
  */
 #include <float.h>
@@ -104,11 +105,44 @@ static void test_numfmt_buffer(void **state) {
   fclose(f);
 }
 
+/* The writers' line counter against snprintf: from 0, from 1, across every power of ten
+ * (9 -> 10, 99 -> 100, ...) and from random starts. It copies 24 bytes; only the length it
+ * returns counts. */
+static void check_dcount(uint64_t start, int steps) {
+  qk__dcount_t c;
+  qk__dcount_init(&c, start);
+  for (int i = 0; i < steps; i++) {
+    char a[32], b[32];
+    memset(a, 'x', sizeof a);
+    size_t n = qk__dcount_put(&c, a);
+    a[n] = 0;
+    snprintf(b, sizeof b, "%llu", (unsigned long long)(start + (uint64_t)i));
+    if (strcmp(a, b))
+      fail_msg("seed %llu: counter from %llu at step %d says '%s', printf '%s'",
+               (unsigned long long)g_seed, (unsigned long long)start, i, a, b);
+  }
+}
+
+static void test_numfmt_counter(void **state) {
+  (void)state;
+  g_seed = qkt_seed(12403);
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed);
+  check_dcount(0, 120000), check_dcount(1, 1200);
+  for (int k = 1; k <= 19; k++) {
+    uint64_t p = 1;
+    for (int j = 0; j < k; j++) p *= 10;
+    check_dcount(p - 3, 6);
+  }
+  for (int i = 0; i < 200; i++) check_dcount(qkt_rng_next(&r) >> qkt_rng_below(&r, 64) >> 1, 50);
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_numfmt_g17),
       cmocka_unit_test(test_numfmt_u64),
       cmocka_unit_test(test_numfmt_buffer),
+      cmocka_unit_test(test_numfmt_counter),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
