@@ -559,10 +559,16 @@ out:
  */
 #define QK__KEEP_BYTES ((size_t)8 << 20)
 
+/* The rule for every kept buffer: cap elements of elem bytes are kept for a frame that
+ * uses `used` of them when they are at least QK__KEEP_BYTES and at most twice that. */
+static inline int keep_buf(size_t cap, size_t used, size_t elem) {
+  return cap * elem >= QK__KEEP_BYTES && cap <= 2 * used;
+}
+
 static void keep_keys(qk_world_t *w, qk__kvec_t *found, size_t total) {
   const qk_allocator_t *al = &w->alloc;
   size_t want = total + total / 2 + total / 8 + 64; /* keys, the sort's scratch, some room */
-  if (want * sizeof *found->v >= QK__KEEP_BYTES && found->cap <= 2 * want) {
+  if (keep_buf(found->cap > want ? found->cap : want, want, sizeof *found->v)) {
     if (found->cap < want) { /* (its keys are no longer needed: no copy) */
       qk__free(al, found->v, found->cap * sizeof *found->v);
       found->v = qk__realloc(al, NULL, 0, want * sizeof *found->v);
@@ -580,7 +586,7 @@ static void keep_rows(qk_world_t *w) {
   const qk_allocator_t *al = &w->alloc;
   qk__free(al, w->spare_b, w->cap_spare_b * sizeof *w->spare_b);
   w->spare_b = NULL, w->cap_spare_b = 0;
-  if (w->cur.cap * sizeof *w->cur.b >= QK__KEEP_BYTES) {
+  if (keep_buf(w->cur.cap, w->cur.n, sizeof *w->cur.b)) {
     w->spare_b = w->cur.b, w->cap_spare_b = w->cur.cap;
     w->cur.b = NULL, w->cur.cap = 0;
   }
@@ -605,7 +611,7 @@ qk_status_t qk_world_update(qk_world_t *w) {
   qk__world_pack_free(w, &pk);
   /* The other threads' buffers are kept when large (as the first's: see keep_keys). */
   for (unsigned t = 0; t < QK__KEEP_THREADS; t++) {
-    if (tk[t].cap * sizeof *tk[t].v >= QK__KEEP_BYTES && tk[t].cap <= 2 * tk[t].n + 64)
+    if (keep_buf(tk[t].cap, tk[t].n + 32, sizeof *tk[t].v))
       w->scr_tkeys[t] = tk[t], w->scr_tkeys[t].n = 0;
     else
       qk__free(al, tk[t].v, tk[t].cap * sizeof *tk[t].v);
@@ -624,7 +630,7 @@ qk_status_t qk_world_update(qk_world_t *w) {
   qk__kvec_t bv = {0}, ev = {0};
   /* The new rows go in the buffer of the frame before last when it is large enough
    * (and not much larger), else in a new one with some room (frames are alike). */
-  if (w->spare_b && w->cap_spare_b >= tcap && w->cap_spare_b <= 2 * tcap) {
+  if (w->spare_b && w->cap_spare_b >= tcap && keep_buf(w->cap_spare_b, tcap, sizeof *nr.b)) {
     nr.b = w->spare_b, nr.cap = w->cap_spare_b;
     w->spare_b = NULL, w->cap_spare_b = 0;
   } else {
