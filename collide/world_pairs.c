@@ -53,6 +53,113 @@ static int rows_alloc(const qk_allocator_t *a, qk__prows_t *r, size_t n_nz) {
 }
 
 /*
+ * Many keys over many slots (from QK__BUCKET_MIN keys): the two counting sorts below
+ * would each scatter through n_obj cursors over an array far larger than the caches.
+ * Instead the keys are first put in buckets of 2^abits consecutive slots a (a few
+ * hundred buckets: as many cursors as fit in cache), each key as 32 bits,
+ * (a mod 2^abits) << bbits | b, in place in the rows' buffer: the buckets are ranges of
+ * rows, so each lands where its rows will be. Each bucket (about 2^15 keys) is then
+ * sorted alone, in cache, by an LSD radix sort of two digits on those 32 bits, into
+ * the scratch and back, keeping only b. Used when abits + bbits fit 28 bits.
+ */
+#define QK__BUCKET_MIN ((size_t)1 << 20)
+
+static int bucket_plan(size_t n, uint32_t n_obj, unsigned *abits, unsigned *bbits) {
+  if (n < QK__BUCKET_MIN) return 0;
+  unsigned bb = 1, ab = 0;
+  while (bb < 32 && ((uint64_t)1 << bb) < n_obj) bb++;
+  /* buckets of about 2^15 keys: 2^ab slots hold n 2^ab / n_obj keys */
+  while (ab < 31 && ((uint64_t)n << (ab + 1)) <= ((uint64_t)n_obj << 15)) ab++;
+  /* (the high digit, (ab + bb) / 2 bits, must hold a mod 2^ab whole) */
+  if (ab < 4 || (ab + bb) / 2 < ab || ab + bb > 28) return 0;
+  *abits = ab, *bbits = bb;
+  return 1;
+}
+
+/* cnt: n_obj + 1 entries for the rows' counts, then the buckets' cursors and the two
+ * digits' counts (see rows_cnt). */
+static size_t rows_cnt(uint32_t n_obj, size_t n) {
+  unsigned ab, bb;
+  size_t c = 2 * ((size_t)n_obj + 1);
+  if (!bucket_plan(n, n_obj, &ab, &bb)) return c;
+  size_t more = ((size_t)n_obj >> ab) + 2 + ((size_t)2 << ((ab + bb + 1) / 2));
+  return c > n_obj + 1 + more ? c : n_obj + 1 + more;
+}
+
+/* (Not inlined: inlined, its loops share the update's registers and spill.) */
+__attribute__((noinline)) static int rows_buckets(const qk_allocator_t *al, const uint64_t *keys,
+                                                  uint32_t *t32, size_t n, uint32_t *cnt,
+                                                  uint32_t n_obj, unsigned ab, unsigned bb,
+                                                  qk__prows_t *r) {
+  const uint32_t W = (uint32_t)1 << ab, nbk = (uint32_t)(((uint64_t)n_obj + W - 1) >> ab);
+  const unsigned d0 = (ab + bb + 1) / 2, d1 = ab + bb - d0; /* the two digits' bits */
+  const uint32_t m0 = ((uint32_t)1 << d0) - 1, bmask = ((uint32_t)1 << bb) - 1;
+  /* ca: the rows' counts (filled bucket by bucket); bc: the buckets' starts, then their
+   * cursors; c0, c1: the digits' counts. */
+  uint32_t *ca = cnt, *bc = ca + n_obj + 1, *c0 = bc + nbk + 1, *c1 = c0 + m0 + 1;
+  uint32_t *rb = r->b;
+  memset(bc, 0, ((size_t)nbk + 1) * sizeof *bc);
+  for (size_t i = 0; i < n; i++) bc[(uint32_t)(keys[i] >> 32) >> ab]++;
+  for (uint32_t k = 0, s = 0; k <= nbk; k++) {
+    uint32_t c = bc[k];
+    bc[k] = s, s += c;
+  }
+  /* The buckets, in place: bucket k's keys at rb[bc[k] ..), cursors in bc. */
+  const uint32_t bmul = bmask + 1; /* (a mod W) << bb as a product: one shift by ab left */
+  for (size_t i = 0; i < n; i++) {
+    uint64_t k = keys[i];
+    uint32_t a = (uint32_t)(k >> 32);
+    rb[bc[a >> ab]++] = (a & (W - 1)) * bmul | (uint32_t)k;
+  }
+  /* bc[k] is now bucket k's end, where k + 1's starts. Each bucket sorted by its low
+   * digit into t32, then by its high digit, (a mod W) and the top of b, back into rb.
+   * The high digit's counts give the rows' lengths: slot a's are those of its
+   * 2^(d1 - ab) digits. */
+  const unsigned sh = d1 - ab;
+  for (uint32_t k = 0, lo = 0; k < nbk; lo = bc[k], k++) {
+    uint32_t m = bc[k] - lo, *src = rb + lo, a0 = k << ab;
+    uint32_t na = n_obj - a0 < W ? n_obj - a0 : W;
+    memset(c0, 0, (((size_t)1 << d0) + ((size_t)1 << d1)) * sizeof *c0);
+    for (uint32_t i = 0; i < m; i++) {
+      uint32_t v = src[i];
+      c0[v & m0]++, c1[v >> d0]++;
+    }
+    for (uint32_t s0 = 0, j = 0; j <= m0; j++) {
+      uint32_t x = c0[j];
+      c0[j] = s0, s0 += x;
+    }
+    for (uint32_t s1 = 0, j = 0, a = 0; a < na; a++) {
+      uint32_t from = s1;
+      for (uint32_t je = (a + 1) << sh; j < je; j++) {
+        uint32_t x = c1[j];
+        c1[j] = s1, s1 += x;
+      }
+      ca[a0 + a] = s1 - from;
+    }
+    for (uint32_t i = 0; i < m; i++) {
+      uint32_t v = src[i];
+      t32[c0[v & m0]++] = v;
+    }
+    for (uint32_t i = 0; i < m; i++) {
+      uint32_t v = t32[i];
+      src[c1[v >> d0]++] = v & bmask;
+    }
+  }
+  size_t nz = 0;
+  for (uint32_t a = 0; a < n_obj; a++) nz += ca[a] != 0;
+  if (!rows_alloc(al, r, nz)) return 0;
+  uint32_t sa = 0;
+  nz = 0;
+  for (uint32_t a = 0; a < n_obj; a++) {
+    uint32_t c = ca[a];
+    if (c) r->row[nz] = a, r->start[nz++] = sa;
+    sa += c;
+  }
+  r->start[nz] = (uint32_t)n;
+  return 1;
+}
+
+/*
  * The found keys (unsorted, n of them) as rows over n_obj slots, each row ascending;
  * 0 when memory ran short. Many keys (at least a quarter of the slots): two stable
  * counting sorts, by slot b into tmp (as 32-bit slots a), then by slot a, which writes
@@ -88,10 +195,15 @@ static int make_rows(const qk_allocator_t *al, uint64_t *keys, uint64_t *tmp, si
     r->start[nz] = (uint32_t)n;
     return 1;
   }
+  uint32_t *t32 = (uint32_t *)tmp;
+  unsigned abits, bbits;
+  if (bucket_plan(n, n_obj, &abits, &bbits)) {
+    return rows_buckets(al, keys, t32, n, cnt, n_obj, abits, bbits, r);
+  }
   /* cb[b + 1] counts slot b, then cb[b] is the scatter's cursor; ca[a] counts a, then
    * is row a's cursor. The first scatter writes only slot a (4 bytes), at b's place:
    * b is known from the place in the second. */
-  uint32_t *cb = cnt, *ca = cnt + n_obj + 1, *t32 = (uint32_t *)tmp;
+  uint32_t *cb = cnt, *ca = cnt + n_obj + 1;
   memset(cnt, 0, 2 * ((size_t)n_obj + 1) * sizeof *cnt);
   for (size_t i = 0; i < n; i++) {
     uint64_t k = keys[i];
@@ -559,10 +671,16 @@ out:
  */
 #define QK__KEEP_BYTES ((size_t)8 << 20)
 
+/* The rule for every kept buffer: cap elements of elem bytes are kept for a frame that
+ * uses `used` of them when they are at least QK__KEEP_BYTES and at most twice that. */
+static inline int keep_buf(size_t cap, size_t used, size_t elem) {
+  return cap * elem >= QK__KEEP_BYTES && cap <= 2 * used;
+}
+
 static void keep_keys(qk_world_t *w, qk__kvec_t *found, size_t total) {
   const qk_allocator_t *al = &w->alloc;
   size_t want = total + total / 2 + total / 8 + 64; /* keys, the sort's scratch, some room */
-  if (want * sizeof *found->v >= QK__KEEP_BYTES && found->cap <= 2 * want) {
+  if (keep_buf(found->cap > want ? found->cap : want, want, sizeof *found->v)) {
     if (found->cap < want) { /* (its keys are no longer needed: no copy) */
       qk__free(al, found->v, found->cap * sizeof *found->v);
       found->v = qk__realloc(al, NULL, 0, want * sizeof *found->v);
@@ -580,7 +698,7 @@ static void keep_rows(qk_world_t *w) {
   const qk_allocator_t *al = &w->alloc;
   qk__free(al, w->spare_b, w->cap_spare_b * sizeof *w->spare_b);
   w->spare_b = NULL, w->cap_spare_b = 0;
-  if (w->cur.cap * sizeof *w->cur.b >= QK__KEEP_BYTES) {
+  if (keep_buf(w->cur.cap, w->cur.n, sizeof *w->cur.b)) {
     w->spare_b = w->cur.b, w->cap_spare_b = w->cur.cap;
     w->cur.b = NULL, w->cur.cap = 0;
   }
@@ -605,7 +723,7 @@ qk_status_t qk_world_update(qk_world_t *w) {
   qk__world_pack_free(w, &pk);
   /* The other threads' buffers are kept when large (as the first's: see keep_keys). */
   for (unsigned t = 0; t < QK__KEEP_THREADS; t++) {
-    if (tk[t].cap * sizeof *tk[t].v >= QK__KEEP_BYTES && tk[t].cap <= 2 * tk[t].n + 64)
+    if (keep_buf(tk[t].cap, tk[t].n + 32, sizeof *tk[t].v))
       w->scr_tkeys[t] = tk[t], w->scr_tkeys[t].n = 0;
     else
       qk__free(al, tk[t].v, tk[t].cap * sizeof *tk[t].v);
@@ -624,7 +742,7 @@ qk_status_t qk_world_update(qk_world_t *w) {
   qk__kvec_t bv = {0}, ev = {0};
   /* The new rows go in the buffer of the frame before last when it is large enough
    * (and not much larger), else in a new one with some room (frames are alike). */
-  if (w->spare_b && w->cap_spare_b >= tcap && w->cap_spare_b <= 2 * tcap) {
+  if (w->spare_b && w->cap_spare_b >= tcap && keep_buf(w->cap_spare_b, tcap, sizeof *nr.b)) {
     nr.b = w->spare_b, nr.cap = w->cap_spare_b;
     w->spare_b = NULL, w->cap_spare_b = 0;
   } else {
@@ -638,7 +756,7 @@ qk_status_t qk_world_update(qk_world_t *w) {
   } else if (nr.b) {
     /* one thread, or sparse: the keys sorted into rows, then merged with the last
      * frame's */
-    size_t ccap = total * 4 < n_obj ? 257 : 2 * (n_obj + 1);
+    size_t ccap = total * 4 < n_obj ? 257 : rows_cnt((uint32_t)n_obj, total);
     /* (the dense sort's scratch holds 32-bit slots, the sparse one's keys) */
     size_t tbytes = (total * 4 < n_obj ? sizeof(uint64_t) : sizeof(uint32_t)) * tcap;
     /* The dense sort's scratch goes after the keys when their buffer has the room (it is

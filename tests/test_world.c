@@ -529,6 +529,42 @@ static void test_world_dense_kept_scratch(void **s) {
   }
 }
 
+/* Over 2^20 pairs among 6000 boxes (of side 10 over a 60 x 60 square: about 1.5 M
+ * pairs): the one-thread update sorts them into rows through buckets of slots (2^7 slots
+ * a bucket here, the last one partial), each sorted alone; the frames (moves, then a
+ * remove and an add reusing its slot) against brute force, in order. */
+static void test_world_dense_buckets(void **s) {
+  (void)s;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 57);
+  qk_world_t *w;
+  assert_int_equal(qk_world_new(NULL, &w), QK_OK);
+  mirror_t m = {0};
+  for (int i = 0; i < 6000; i++) {
+    double x = qkt_rng_range(&r, 0, 50), y = qkt_rng_range(&r, 0, 50);
+    m_add(w, &m, (qk_shape_t){QK_SHAPE_BOX, x, y, x + 10, y + 10});
+  }
+  qk_world_pair_t *prev = NULL;
+  size_t np = 0;
+  for (int f = 0; f < 3; f++) {
+    for (size_t i = 0; i < m.n; i++) {
+      qk_shape_t sh = moved(&r, m.s[i]);
+      assert_int_equal(qk_world_move(w, m.h[i], &sh), QK_OK);
+      m.s[i] = o_norm(sh);
+    }
+    if (f == 2) {
+      size_t i = qkt_rng_below(&r, (uint32_t)m.n);
+      assert_int_equal(qk_world_remove(w, m.h[i]), QK_OK);
+      m.h[i] = m.h[m.n - 1], m.s[i] = m.s[m.n - 1], m.n--;
+      m_add(w, &m, (qk_shape_t){QK_SHAPE_BOX, 20, 20, 30, 30});
+    }
+    dense_check(w, &m, &prev, &np, f);
+    assert_true(np > ((size_t)1 << 20));
+  }
+  free(prev), free(m.h), free(m.s);
+  qk_world_free(w);
+}
+
 /* Enough objects that the update packs the boxes on both threads: frames of moves (by
  * the batch call), adds and removes give the same pairs, began and ended on two threads
  * as on one (checked against brute force by the scene tests). */
@@ -1198,6 +1234,7 @@ int main(void) {
       cmocka_unit_test(test_world_uniform),
       cmocka_unit_test(test_world_clustered),
       cmocka_unit_test(test_world_dense_kept_scratch),
+      cmocka_unit_test(test_world_dense_buckets),
       cmocka_unit_test(test_world_mixed_sizes),
       cmocka_unit_test(test_world_all_kinds),
       cmocka_unit_test(test_world_huge),
