@@ -52,6 +52,26 @@ static int rows_alloc(const qk_allocator_t *a, qk__prows_t *r, size_t n_nz) {
   return 1;
 }
 
+/* The rows over n_obj slots from their lengths ca (n keys in all): row and start of
+ * every slot that has pairs; with cursors, ca[a] becomes row a's first place. 0 when
+ * memory ran short. */
+static int rows_index(const qk_allocator_t *al, qk__prows_t *r, uint32_t *ca, uint32_t n_obj,
+                      size_t n, int cursors) {
+  size_t nz = 0;
+  for (uint32_t a = 0; a < n_obj; a++) nz += ca[a] != 0;
+  if (!rows_alloc(al, r, nz)) return 0;
+  uint32_t sa = 0;
+  nz = 0;
+  for (uint32_t a = 0; a < n_obj; a++) {
+    uint32_t c = ca[a];
+    if (c) r->row[nz] = a, r->start[nz++] = sa;
+    if (cursors) ca[a] = sa;
+    sa += c;
+  }
+  r->start[nz] = (uint32_t)n;
+  return 1;
+}
+
 /*
  * Many keys over many slots (from QK__BUCKET_MIN keys): the two counting sorts below
  * would each scatter through n_obj cursors over an array far larger than the caches.
@@ -145,18 +165,7 @@ __attribute__((noinline)) static int rows_buckets(const qk_allocator_t *al, cons
       src[c1[v >> d0]++] = v & bmask;
     }
   }
-  size_t nz = 0;
-  for (uint32_t a = 0; a < n_obj; a++) nz += ca[a] != 0;
-  if (!rows_alloc(al, r, nz)) return 0;
-  uint32_t sa = 0;
-  nz = 0;
-  for (uint32_t a = 0; a < n_obj; a++) {
-    uint32_t c = ca[a];
-    if (c) r->row[nz] = a, r->start[nz++] = sa;
-    sa += c;
-  }
-  r->start[nz] = (uint32_t)n;
-  return 1;
+  return rows_index(al, r, ca, n_obj, n, 0);
 }
 
 /*
@@ -211,17 +220,7 @@ static int make_rows(const qk_allocator_t *al, uint64_t *keys, uint64_t *tmp, si
     ca[k >> 32]++;
   }
   for (uint32_t a = 1; a <= n_obj; a++) cb[a] += cb[a - 1];
-  size_t nz = 0;
-  for (uint32_t a = 0; a < n_obj; a++) nz += ca[a] != 0;
-  if (!rows_alloc(al, r, nz)) return 0;
-  uint32_t sa = 0;
-  nz = 0;
-  for (uint32_t a = 0; a < n_obj; a++) {
-    uint32_t c = ca[a];
-    if (c) r->row[nz] = a, r->start[nz++] = sa;
-    ca[a] = sa, sa += c;
-  }
-  r->start[nz] = (uint32_t)n;
+  if (!rows_index(al, r, ca, n_obj, n, 1)) return 0;
   for (size_t i = 0; i < n; i++) t32[cb[(uint32_t)keys[i]]++] = (uint32_t)(keys[i] >> 32);
   /* cb[b] is now the end of b's run, where b + 1's starts. */
   size_t i = 0;

@@ -460,6 +460,21 @@ static void list_equals(qk_world_t *w, qk_pairs_which_t which, const qk_world_pa
   free(g);
 }
 
+/* A frame's moves of every object of m; with churn, then one object removed and `add`
+ * added (reusing its slot). */
+static void dense_moves(qkt_rng_t *r, qk_world_t *w, mirror_t *m, int churn, qk_shape_t add) {
+  for (size_t i = 0; i < m->n; i++) {
+    qk_shape_t sh = moved(r, m->s[i]);
+    assert_int_equal(qk_world_move(w, m->h[i], &sh), QK_OK);
+    m->s[i] = o_norm(sh);
+  }
+  if (!churn) return;
+  size_t i = qkt_rng_below(r, (uint32_t)m->n);
+  assert_int_equal(qk_world_remove(w, m->h[i]), QK_OK);
+  m->h[i] = m->h[m->n - 1], m->s[i] = m->s[m->n - 1], m->n--;
+  m_add(w, m, add);
+}
+
 /* update_and_check for many pairs: the pairs against brute force, began and ended
  * against a merge of the sorted last and new lists (a pair whose slots stay but whose
  * handles changed ended and began). */
@@ -510,17 +525,7 @@ static void test_world_dense_kept_scratch(void **s) {
     qk_world_pair_t *prev = NULL;
     size_t np = 0;
     for (int f = 0; f < 4; f++) {
-      for (size_t i = 0; i < m.n; i++) {
-        qk_shape_t sh = moved(&r, m.s[i]);
-        assert_int_equal(qk_world_move(w, m.h[i], &sh), QK_OK);
-        m.s[i] = o_norm(sh);
-      }
-      if (f == 2) { /* one removed, one added (its slot reused) */
-        size_t i = qkt_rng_below(&r, (uint32_t)m.n);
-        assert_int_equal(qk_world_remove(w, m.h[i]), QK_OK);
-        m.h[i] = m.h[m.n - 1], m.s[i] = m.s[m.n - 1], m.n--;
-        m_add(w, &m, (qk_shape_t){QK_SHAPE_BOX, 3, 3, 13, 13});
-      }
+      dense_moves(&r, w, &m, f == 2, (qk_shape_t){QK_SHAPE_BOX, 3, 3, 13, 13});
       dense_check(w, &m, &prev, &np, f);
       assert_true(np > 2000000);
     }
@@ -547,17 +552,7 @@ static void test_world_dense_buckets(void **s) {
   qk_world_pair_t *prev = NULL;
   size_t np = 0;
   for (int f = 0; f < 3; f++) {
-    for (size_t i = 0; i < m.n; i++) {
-      qk_shape_t sh = moved(&r, m.s[i]);
-      assert_int_equal(qk_world_move(w, m.h[i], &sh), QK_OK);
-      m.s[i] = o_norm(sh);
-    }
-    if (f == 2) {
-      size_t i = qkt_rng_below(&r, (uint32_t)m.n);
-      assert_int_equal(qk_world_remove(w, m.h[i]), QK_OK);
-      m.h[i] = m.h[m.n - 1], m.s[i] = m.s[m.n - 1], m.n--;
-      m_add(w, &m, (qk_shape_t){QK_SHAPE_BOX, 20, 20, 30, 30});
-    }
+    dense_moves(&r, w, &m, f == 2, (qk_shape_t){QK_SHAPE_BOX, 20, 20, 30, 30});
     dense_check(w, &m, &prev, &np, f);
     assert_true(np > ((size_t)1 << 20));
   }
