@@ -284,8 +284,73 @@ static ALWAYS_INLINE uint32_t leaf_first(const qk_region_t *r, const qk__leaf_t 
   return f != UNSURE ? f : leaf_first_slow(r, L, cx, cy, x, y, b);
 }
 
+/*
+ * Lon/lat mode, the closed and open rules, a point on the antimeridian: queries map
+ * longitude 180 to -180, but a ring edge at longitude 180 (a feature east of the
+ * antimeridian, ending on it) is in the leaves of the map's east side, so the point
+ * (-180, y) never meets it and a feature touching the antimeridian from the east would
+ * not hold the point under `closed` (nor lose it under `open`). The point is both (-180,
+ * y) and (180, y): its parity comes from the leaf at -180 as usual, and "on a ring" from
+ * the given (not added) edges of both leaves. The features of the reference point's set
+ * and of the two leaves' edges are merged in increasing order. Rare (a query exactly on
+ * the antimeridian), so written for clarity. Hands features to out[] while below cap and
+ * returns how many hold the point (the first only unless `all`).
+ */
+static size_t antimeridian_features(const qk_region_t *r, double y, qk_boundary_t b, bool all,
+                                    uint32_t *out, size_t cap) {
+  leaf_box_t w, e;
+  descend(r, -180.0, y, &w);
+  descend(r, 180.0, y, &e);
+  const qk__leaf_t *LW = (w.k & QK__DIRECT) ? NULL : &r->leaves[w.k & ~QK__LEAF];
+  const qk__leaf_t *LE = (e.k & QK__DIRECT) ? NULL : &r->leaves[e.k & ~QK__LEAF];
+  uint32_t dw = (w.k & QK__DIRECT) ? direct(w.k) : QK_NONE;
+  const uint32_t *S = LW && LW->ns ? r->sets + LW->s0 : (dw != QK_NONE ? &dw : NULL);
+  uint32_t ns = LW ? LW->ns : (dw != QK_NONE), nw = LW ? LW->ne : 0, ne = LE ? LE->ne : 0;
+  const uint32_t *EW = nw ? r->le + LW->e0 : NULL, *TW = nw ? r->le_tag + LW->e0 : NULL;
+  const uint32_t *EE = ne ? r->le + LE->e0 : NULL, *TE = ne ? r->le_tag + LE->e0 : NULL;
+  bool same = (-180.0 == w.cx && y == w.cy);
+  uint32_t si = 0, iw = 0, ie = 0;
+  size_t n = 0;
+  for (;;) {
+    uint32_t f = QK_NONE;
+    if (si < ns) f = S[si];
+    if (iw < nw && (TW[iw] >> 2) < f) f = TW[iw] >> 2;
+    if (ie < ne && (TE[ie] >> 2) < f) f = TE[ie] >> 2;
+    if (f == QK_NONE) return n;
+    bool par = si < ns && S[si] == f, on = false;
+    if (par) si++;
+    for (; iw < nw && (TW[iw] >> 2) == f; iw++) {
+      const qk__seg_t *g = &r->segs[EW[iw]];
+      if (!(TW[iw] & 2) && qk__on_edge(g->ax, g->ay, g->bx, g->by, -180.0, y)) on = true;
+      if (!same)
+        par ^=
+            qk__crosses(w.cx, w.cy, -180.0, y, g->ax, g->ay, g->bx, g->by, (TW[iw] & 1) ? 1 : -1);
+    }
+    for (; ie < ne && (TE[ie] >> 2) == f; ie++) {
+      const qk__seg_t *g = &r->segs[EE[ie]];
+      if (!(TE[ie] & 2) && qk__on_edge(g->ax, g->ay, g->bx, g->by, 180.0, y)) on = true;
+    }
+    if (b == QK_BOUNDARY_CLOSED ? (par || on) : (par && !on)) {
+      if (n < cap) out[n] = f;
+      n++;
+      if (!all) return n;
+    }
+  }
+}
+
+/* Is (x, y), normalised, a point on the antimeridian under a rule that needs
+ * antimeridian_features()? */
+static inline bool on_antimeridian(const qk_region_t *r, double x, qk_boundary_t b) {
+  return x == -180.0 && !r->planar && b != QK_BOUNDARY_SEMI_OPEN;
+}
+
 uint32_t qk__region_locate1(const qk_region_t *r, double x, double y, qk_boundary_t b) {
   if (!normalise(r, &x, &y)) return QK_NONE;
+  if (on_antimeridian(r, x, b)) {
+    uint32_t f = QK_NONE;
+    antimeridian_features(r, y, b, false, &f, 1);
+    return f;
+  }
   leaf_box_t c;
   descend(r, x, y, &c);
   if (c.k & QK__DIRECT) return direct(c.k);
@@ -408,6 +473,10 @@ qk_status_t qk_region_locate_all(const qk_region_t *r, qk_point_t p, qk_boundary
   if (!isfinite(p.x) || !isfinite(p.y)) return QK_ERR_NONFINITE;
   double x = p.x, y = p.y;
   if (!normalise(r, &x, &y)) return QK_OK;
+  if (on_antimeridian(r, x, b)) {
+    *n_out = antimeridian_features(r, y, b, true, features, cap);
+    return QK_OK;
+  }
   leaf_box_t c;
   descend(r, x, y, &c);
   if (c.k & QK__DIRECT) {
@@ -604,6 +673,10 @@ static ALWAYS_INLINE void run_impl(const qk_region_t *r, qk_boundary_t b, const 
       if (!isfinite(x) || !isfinite(y)) *nonfinite = 1;
       if (!normalise(r, &x, &y)) {
         out[i] = QK_NONE;
+        continue;
+      }
+      if (on_antimeridian(r, x, b)) { /* (sorted items never are: see build.c's window) */
+        out[i] = qk__region_locate1(r, x, y, b);
         continue;
       }
     }

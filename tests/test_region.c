@@ -609,6 +609,65 @@ static void test_region_lonlat(void **state) {
   assert_non_null(strstr(e.message, "planar"));
 }
 
+/* A point on the antimeridian is on the ring of a feature that ends at longitude 180
+ * (east side) as well as of one that starts at -180 (west side): under `closed` both hold
+ * it, under `open` neither (the sphere's answer); `semi-open` gives the west one alone.
+ * Queries map 180 to -180, and the east feature's edges at 180 are in other leaves: before
+ * the fix `closed` gave only the west feature. Checked for single, all and batch calls
+ * (a batch of 5000 takes the sorted path). */
+static void test_region_antimeridian_boundary(void **state) {
+  (void)state;
+  /* feature 0: [170, 180] x [0, 10]; feature 1: [-180, -170] x [0, 10]; feature 2:
+   * [175, 180] x [20, 30], which only touches the antimeridian */
+  double xy[] = {170, 0,    180, 0,    180, 10,  170, 10,  170, 0,   -180, 0,   -170, 0,   -170,
+                 10,  -180, 10,  -180, 0,   175, 20,  180, 20,  180, 30,   175, 30,   175, 20};
+  size_t rs[] = {0, 5, 10, 15}, fs[] = {0, 1, 2, 3};
+  qk_region_t *r = lonlat(xy, rs, 3, fs, 3, 0);
+  /* {x, y, semi-open, closed, open}, first feature */
+  const double cases[][5] = {{180, 5, 1, 0, -1},   {-180, 5, 1, 0, -1},   {540, 5, 1, 0, -1},
+                             {180, 0, 1, 0, -1},   {180, 10, -1, 0, -1},  {175, 5, 0, 0, 0},
+                             {-175, 5, 1, 1, 1},   {180, 25, -1, 2, -1},  {-180, 25, -1, 2, -1},
+                             {180, 30, -1, 2, -1}, {180, 31, -1, -1, -1}, {180, 15, -1, -1, -1}};
+  size_t nc = sizeof cases / sizeof cases[0];
+  for (size_t i = 0; i < nc; i++)
+    for (int rule = 0; rule < 3; rule++) {
+      uint32_t want = cases[i][2 + rule] < 0 ? QK_NONE : (uint32_t)cases[i][2 + rule];
+      if (at(r, cases[i][0], cases[i][1], (qk_boundary_t)rule) != want)
+        fail_msg("(%g, %g) rule %d: got %u, want %u", cases[i][0], cases[i][1], rule,
+                 (unsigned)at(r, cases[i][0], cases[i][1], (qk_boundary_t)rule), (unsigned)want);
+    }
+  uint32_t all[4];
+  size_t n;
+  assert_int_equal(qk_region_locate_all(r, (qk_point_t){180, 5}, QK_BOUNDARY_CLOSED, all, 4, &n),
+                   QK_OK);
+  assert_int_equal(n, 2);
+  assert_int_equal(all[0], 0);
+  assert_int_equal(all[1], 1);
+  assert_int_equal(qk_region_locate_all(r, (qk_point_t){-180, 0}, QK_BOUNDARY_OPEN, all, 4, &n),
+                   QK_OK);
+  assert_int_equal(n, 0);
+  assert_int_equal(qk_region_locate_all(r, (qk_point_t){180, 5}, QK_BOUNDARY_SEMI_OPEN, all, 4, &n),
+                   QK_OK);
+  assert_int_equal(n, 1);
+  assert_int_equal(all[0], 1);
+  /* batches: the same answers as single calls, in both batch paths */
+  size_t m = 5000;
+  qk_point_t *p = malloc(m * sizeof *p);
+  uint32_t *a = malloc(m * sizeof *a), *b = malloc(m * sizeof *b);
+  for (size_t i = 0; i < m; i++)
+    p[i] = (qk_point_t){i % 3 ? 180.0 : 170.0 + (double)(i % 7), (double)(i % 35)};
+  for (int rule = 0; rule < 3; rule++) {
+    for (size_t i = 0; i < m; i++) a[i] = at(r, p[i].x, p[i].y, (qk_boundary_t)rule);
+    assert_int_equal(qk_region_locate_batch(r, p, m, (qk_boundary_t)rule, 1, b), QK_OK);
+    assert_memory_equal(a, b, m * sizeof *a);
+    assert_int_equal(qk_region_locate_batch(r, p, 100, (qk_boundary_t)rule, 1, b), QK_OK);
+    assert_memory_equal(a, b, 100 * sizeof *a);
+  }
+  assert_int_equal(a[0], QK_NONE); /* (170, 0), the last rule open: a corner, in none */
+  free(p), free(a), free(b);
+  qk_region_free(r);
+}
+
 /* ---- batch and threads ------------------------------------------------------------------- */
 
 static void test_region_batch_threads(void **state) {
@@ -1218,6 +1277,7 @@ int main(void) {
       cmocka_unit_test(test_region_bowtie),
       cmocka_unit_test(test_region_self_intersecting_oracle),
       cmocka_unit_test(test_region_lonlat),
+      cmocka_unit_test(test_region_antimeridian_boundary),
       cmocka_unit_test(test_region_batch_threads),
       cmocka_unit_test(test_region_batch_morton),
       cmocka_unit_test(test_region_batch_cell_sides),
