@@ -199,6 +199,7 @@ typedef struct join {
   qk_point_t *p;
   uint32_t *feat;
   size_t n;
+  int dry; /* a checking pass: read and parse every line, write nothing */
 } join_t;
 
 static void write_row(join_t *j, const char *line, uint32_t f) {
@@ -245,17 +246,20 @@ static int flush_chunk(join_t *j) {
 }
 
 static void join_usage(FILE *f) {
-  fprintf(f, "usage: quadkit join REGIONS POINTS.csv [--field NAME]... [--all]\n"
-             "                    [--boundary semi-open|closed|open] [--planar] [--xy X,Y]\n"
-             "                    [--threads N] [-o FILE]\n\n"
-             "For each point (x, y; longitude, latitude unless --planar) the feature of REGIONS\n"
-             "(GeoJSON, or any OGR format when built with GDAL) that holds it. Writes CSV: the\n"
-             "point's line as read, then `feature` (0-based feature index, -1 for none) and the\n"
-             "requested properties (a name no feature has is an error). --all writes one row per "
-             "containing feature (a point in\n"
-             "none gets one row with -1). --xy picks the coordinate columns by header name or\n"
-             "1-based number (default: the first two). A header line (x and y fields not\n"
-             "numbers) is copied with the new column names appended.\n");
+  fprintf(f,
+          "usage: quadkit join REGIONS POINTS.csv [--field NAME]... [--all]\n"
+          "                    [--boundary semi-open|closed|open] [--planar] [--xy X,Y]\n"
+          "                    [--threads N] [-o FILE]\n\n"
+          "For each point (x, y; longitude, latitude unless --planar) the feature of REGIONS\n"
+          "(GeoJSON, or any OGR format when built with GDAL) that holds it. Writes CSV: the\n"
+          "point's line as read, then `feature` (0-based feature index, -1 for none) and the\n"
+          "requested properties (a name no feature has is an error). --all writes one row per "
+          "containing feature (a point in\n"
+          "none gets one row with -1). --xy picks the coordinate columns by header name or\n"
+          "1-based number (default: the first two). A header line (x and y fields not\n"
+          "numbers) is copied with the new column names appended. A bad line is an error\n"
+          "before any row is written (-o FILE is replaced only on success; on standard output\n"
+          "a POINTS file is checked whole first, while points from a pipe are written as read).\n");
 }
 
 static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long total) {
@@ -313,6 +317,7 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
           rc = CLI_BAD_INPUT;
           break;
         }
+        if (j->dry) continue;
         fputs(line, j->out);
         fputs(",feature", j->out);
         for (int k = 0; k < j->n_fields; k++) {
@@ -340,6 +345,7 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
       rc = CLI_BAD_INPUT;
       break;
     }
+    if (j->dry) continue;
     char *copy = malloc((size_t)len + 1);
     if (!copy) {
       rc = CLI_INTERNAL;
@@ -363,7 +369,7 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
   free(line);
   free(fx);
   free(fy);
-  if (progress_on) {
+  if (progress_on && !j->dry) {
     progress(progress_on, total, total, (size_t)lineno);
     fputc('\n', stderr);
   }
@@ -448,7 +454,7 @@ int cmd_join(int argc, char **argv) {
   qk_region_t *r = NULL;
   rc = read_layer("join", pos[0], planar, &r);
   if (!rc) rc = check_fields(pos[0], r, fields, nf);
-  join_t j = {pos[1], r, rule, all, (unsigned)threads, fields, nf, NULL, NULL, NULL, NULL, 0};
+  join_t j = {pos[1], r, rule, all, (unsigned)threads, fields, nf, NULL, NULL, NULL, NULL, 0, 0};
   cli_out_t o = {0};
   if (!rc) rc = cli_out_open("join", outp, &o);
   if (!rc) {
@@ -458,7 +464,22 @@ int cmd_join(int argc, char **argv) {
     j.feat = malloc(CHUNK * sizeof *j.feat);
     if (!j.lines || !j.p || !j.feat) rc = CLI_INTERNAL;
     struct stat sb;
-    long total = (!fstat(fileno(in), &sb) && S_ISREG(sb.st_mode)) ? (long)sb.st_size : 0;
+    int regular = !fstat(fileno(in), &sb) && S_ISREG(sb.st_mode);
+    long total = regular ? (long)sb.st_size : 0;
+    /* Standard output cannot be taken back: a regular file of points is read once
+     * without writing, so that a bad line stops the command before its first row. (-o
+     * FILE is written to a temporary and renamed only on success; from a pipe the rows
+     * are written as they come.) */
+    if (!rc && o.f == stdout && regular) {
+      xy_spec_t xy_check = xy;
+      j.dry = 1;
+      rc = join_stream(&j, in, &xy_check, 0, total);
+      j.dry = 0;
+      if (!rc && fseek(in, 0, SEEK_SET) != 0) {
+        cli_error("join", "%s: cannot read it again: %s", pos[1], strerror(errno));
+        rc = CLI_BAD_INPUT;
+      }
+    }
     if (!rc) rc = join_stream(&j, in, &xy, isatty(2) && total > 0, total);
     int rc2 = cli_out_close("join", &o, rc == CLI_OK);
     if (!rc) rc = rc2;
