@@ -460,21 +460,6 @@ static void list_equals(qk_world_t *w, qk_pairs_which_t which, const qk_world_pa
   free(g);
 }
 
-/* A frame's moves of every object of m; with churn, then one object removed and `add`
- * added (reusing its slot). */
-static void dense_moves(qkt_rng_t *r, qk_world_t *w, mirror_t *m, int churn, qk_shape_t add) {
-  for (size_t i = 0; i < m->n; i++) {
-    qk_shape_t sh = moved(r, m->s[i]);
-    assert_int_equal(qk_world_move(w, m->h[i], &sh), QK_OK);
-    m->s[i] = o_norm(sh);
-  }
-  if (!churn) return;
-  size_t i = qkt_rng_below(r, (uint32_t)m->n);
-  assert_int_equal(qk_world_remove(w, m->h[i]), QK_OK);
-  m->h[i] = m->h[m->n - 1], m->s[i] = m->s[m->n - 1], m->n--;
-  m_add(w, m, add);
-}
-
 /* update_and_check for many pairs: the pairs against brute force, began and ended
  * against a merge of the sorted last and new lists (a pair whose slots stay but whose
  * handles changed ended and began). */
@@ -502,6 +487,36 @@ static void dense_check(qk_world_t *w, const mirror_t *m, qk_world_pair_t **prev
   *prev = want, *np = nw;
 }
 
+/* A dense scene on w: n boxes of side 10 at corners uniform over [0, span]^2, then
+ * `frames` frames of moves (frame 2 also removes one box and adds `add`, which reuses its
+ * slot), each checked by dense_check and with more than min_pairs pairs. */
+static void dense_scene(qk_world_t *w, qkt_rng_t *r, int n, double span, int frames, qk_shape_t add,
+                        size_t min_pairs) {
+  mirror_t m = {0};
+  for (int i = 0; i < n; i++) {
+    double x = qkt_rng_range(r, 0, span), y = qkt_rng_range(r, 0, span);
+    m_add(w, &m, (qk_shape_t){QK_SHAPE_BOX, x, y, x + 10, y + 10});
+  }
+  qk_world_pair_t *prev = NULL;
+  size_t np = 0;
+  for (int f = 0; f < frames; f++) {
+    for (size_t i = 0; i < m.n; i++) {
+      qk_shape_t sh = moved(r, m.s[i]);
+      assert_int_equal(qk_world_move(w, m.h[i], &sh), QK_OK);
+      m.s[i] = o_norm(sh);
+    }
+    if (f == 2) {
+      size_t i = qkt_rng_below(r, (uint32_t)m.n);
+      assert_int_equal(qk_world_remove(w, m.h[i]), QK_OK);
+      m.h[i] = m.h[m.n - 1], m.s[i] = m.s[m.n - 1], m.n--;
+      m_add(w, &m, add);
+    }
+    dense_check(w, &m, &prev, &np, f);
+    assert_true(np > min_pairs);
+  }
+  free(prev), free(m.h), free(m.s);
+}
+
 /* A dense world (2200 boxes of side 10 over an 11 x 11 square: about 2.4 M pairs) whose
  * buffers are large enough that the update keeps them for the next one (the keys with
  * the sort's scratch, the rows of the frame before last, the other threads' keys): frames
@@ -517,19 +532,7 @@ static void test_world_dense_kept_scratch(void **s) {
     o.thread_min = 0;
     qk_world_t *w;
     assert_int_equal(qk_world_new(&o, &w), QK_OK);
-    mirror_t m = {0};
-    for (int i = 0; i < 2200; i++) {
-      double x = qkt_rng_range(&r, 0, 11), y = qkt_rng_range(&r, 0, 11);
-      m_add(w, &m, (qk_shape_t){QK_SHAPE_BOX, x, y, x + 10, y + 10});
-    }
-    qk_world_pair_t *prev = NULL;
-    size_t np = 0;
-    for (int f = 0; f < 4; f++) {
-      dense_moves(&r, w, &m, f == 2, (qk_shape_t){QK_SHAPE_BOX, 3, 3, 13, 13});
-      dense_check(w, &m, &prev, &np, f);
-      assert_true(np > 2000000);
-    }
-    free(prev), free(m.h), free(m.s);
+    dense_scene(w, &r, 2200, 11, 4, (qk_shape_t){QK_SHAPE_BOX, 3, 3, 13, 13}, 2000000);
     qk_world_free(w);
   }
 }
@@ -544,19 +547,7 @@ static void test_world_dense_buckets(void **s) {
   qkt_rng_seed(&r, g_seed + 57);
   qk_world_t *w;
   assert_int_equal(qk_world_new(NULL, &w), QK_OK);
-  mirror_t m = {0};
-  for (int i = 0; i < 6000; i++) {
-    double x = qkt_rng_range(&r, 0, 50), y = qkt_rng_range(&r, 0, 50);
-    m_add(w, &m, (qk_shape_t){QK_SHAPE_BOX, x, y, x + 10, y + 10});
-  }
-  qk_world_pair_t *prev = NULL;
-  size_t np = 0;
-  for (int f = 0; f < 3; f++) {
-    dense_moves(&r, w, &m, f == 2, (qk_shape_t){QK_SHAPE_BOX, 20, 20, 30, 30});
-    dense_check(w, &m, &prev, &np, f);
-    assert_true(np > ((size_t)1 << 20));
-  }
-  free(prev), free(m.h), free(m.s);
+  dense_scene(w, &r, 6000, 50, 3, (qk_shape_t){QK_SHAPE_BOX, 20, 20, 30, 30}, (size_t)1 << 20);
   qk_world_free(w);
 }
 
