@@ -14,13 +14,20 @@
  *  - the threads option: pairs (in callback order, also stopped early), the pairs list
  *    and ray batches on 2, 3 and all cores equal to one thread; allocation failure at
  *    every N on the threaded paths (the same answers, or a clean QK_ERR_NOMEM), and
- *    every allocation of the worker threads failing (the same pairs, in order).
+ *    every allocation of the worker threads failing (the same pairs, in order);
+ *  - on Linux, the ray arrays advised for huge pages by default (huge_pages left 0): a
+ *    region flagged "hg" in /proc/self/smaps appears with the build, and the answers are
+ *    those of the same collider from an allocator that is never advised.
  */
+#define _DEFAULT_SOURCE /* madvise and MADV_HUGEPAGE in <sys/mman.h> */
 #include <math.h>
 #include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#if defined(__linux__)
+#include <sys/mman.h>
+#endif
 
 #include "qk_test.h"
 #include "query_oracle.h"
@@ -697,6 +704,82 @@ static void test_collide_threaded_build(void **state) {
   free(d), free(b), free(org), free(dir), free(one);
 }
 
+#if defined(__linux__) && defined(MADV_HUGEPAGE)
+/* Mappings of this process flagged for huge pages (VmFlags "hg"), or -1 when
+ * /proc/self/smaps cannot be read. */
+static long count_hg_regions(void) {
+  FILE *f = fopen("/proc/self/smaps", "r");
+  if (!f) return -1;
+  char line[512];
+  long n = 0;
+  while (fgets(line, sizeof line, f))
+    if (strncmp(line, "VmFlags:", 8) == 0 && strstr(line, " hg")) n++;
+  fclose(f);
+  return n;
+}
+
+static void *plain_alloc(void *ud, void *ptr, size_t osize, size_t nsize) {
+  (void)ud, (void)osize;
+  if (nsize == 0) {
+    free(ptr);
+    return NULL;
+  }
+  return realloc(ptr, nsize);
+}
+#endif
+
+/* The collider advises its ray arrays (disc records, ray entries) for huge pages whatever
+ * the options' hint; a custom allocator is never advised. Same answers either way. */
+static void test_collide_ray_arrays_huge(void **state) {
+  (void)state;
+#if defined(__linux__) && defined(MADV_HUGEPAGE)
+  /* Skip where the kernel has no transparent huge pages (madvise fails) or no smaps. */
+  const size_t probe_bytes = (size_t)8 << 20;
+  void *probe = mmap(NULL, probe_bytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+  assert_true(probe != MAP_FAILED);
+  const int thp = madvise(probe, probe_bytes, MADV_HUGEPAGE) == 0;
+  munmap(probe, probe_bytes);
+  const long before = count_hg_regions();
+  if (!thp || before < 0) {
+    print_message("skipped: no transparent huge pages or no /proc/self/smaps\n");
+    return;
+  }
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed ^ 0x4855u);
+  const size_t n = 200000; /* 6.4 MB of disc records: above qk__advise_huge's 4 MB */
+  qk_disc_t *d = malloc(n * sizeof *d);
+  assert_non_null(d);
+  for (size_t i = 0; i < n; i++)
+    d[i] = (qk_disc_t){qkt_rng_unit(&r), qkt_rng_unit(&r), qkt_rng_range(&r, 0, 1e-3)};
+  qk_tree_options_t o;
+  qk_tree_options_init(&o);
+  o.capacity = 8;
+  assert_int_equal(o.huge_pages, 0);
+  qk_collider_t *c = NULL, *p = NULL;
+  qk_allocator_t plain = {plain_alloc, NULL};
+  qk_tree_options_t op = o;
+  op.allocator = &plain;
+  assert_int_equal(qk_collider_build(d, n, NULL, 0, &op, &p), QK_OK);
+  assert_int_equal(count_hg_regions(), before); /* a custom allocator: not advised */
+  assert_int_equal(qk_collider_build(d, n, NULL, 0, &o, &c), QK_OK);
+  if (count_hg_regions() <= before)
+    fail_msg("no region advised for huge pages after the build (seed %llu)",
+             (unsigned long long)g_seed);
+  for (int i = 0; i < 2000; i++) {
+    const double a = 6.283185307179586 * qkt_rng_unit(&r);
+    const qk_point_t org = {qkt_rng_unit(&r), qkt_rng_unit(&r)}, dir = {cos(a), sin(a)};
+    qk_hit_t h1, h2;
+    assert_int_equal(qk_collider_raycast(c, org, dir, INFINITY, &h1), QK_OK);
+    assert_int_equal(qk_collider_raycast(p, org, dir, INFINITY, &h2), QK_OK);
+    assert_int_equal(h1.id, h2.id);
+    assert_true(h1.t == h2.t || (isinf(h1.t) && isinf(h2.t)));
+  }
+  qk_collider_free(c);
+  qk_collider_free(p);
+  free(d);
+#endif
+}
+
 int main(void) {
   g_seed = qkt_seed(7031);
   const struct CMUnitTest tests[] = {
@@ -710,6 +793,7 @@ int main(void) {
       cmocka_unit_test(test_collide_threads_nomem),
       cmocka_unit_test(test_collide_threaded_build),
       cmocka_unit_test(test_collide_threads_worker_nomem),
+      cmocka_unit_test(test_collide_ray_arrays_huge),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
