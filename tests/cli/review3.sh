@@ -1,0 +1,40 @@
+#!/usr/bin/env bash
+# CLI regressions from a third review (one block per finding; each failed before its fix):
+# lon/lat rings with an edge across the whole map (whole world, a polar cap, a band)
+# enclosed nothing.
+# shellcheck source=lib/common.bash
+source "$(dirname "${BASH_SOURCE[0]}")/lib/common.bash" "$@"
+
+# ---- edges from -180 to 180 along one latitude: across the map, or a step (Fiji) -------
+# The oracle: each feature is a latitude range (minus a hole), so the answer follows from
+# a point's latitude alone.
+printf '{"type":"FeatureCollection","features":[
+{"type":"Feature","properties":{"n":"cap60"},"geometry":{"type":"Polygon","coordinates":[[[-180,60],[180,60],[180,90],[-180,90],[-180,60]]]}},
+{"type":"Feature","properties":{"n":"world"},"geometry":{"type":"Polygon","coordinates":[[[-180,-90],[180,-90],[180,90],[-180,90],[-180,-90]],[[0,30],[10,30],[10,40],[0,40],[0,30]]]}},
+{"type":"Feature","properties":{"n":"band"},"geometry":{"type":"Polygon","coordinates":[[[-180,-10],[180,-10],[180,0],[180,10],[-180,10],[-180,10],[-180,-10]]]}},
+{"type":"Feature","properties":{"n":"circle"},"geometry":{"type":"Polygon","coordinates":[[[-180,-60],[-90,-60],[0,-60],[90,-60],[180,-60],[-180,-60]]]}},
+{"type":"Feature","properties":{"n":"fiji"},"geometry":{"type":"Polygon","coordinates":[[[179,-17],[180,-17],[-180,-17],[-179,-17],[-179,-16],[-180,-16],[180,-16],[179,-16],[179,-17]]]}},
+{"type":"Feature","properties":{"n":"ant10m"},"geometry":{"type":"Polygon","coordinates":[[[-180,-80],[-90,-75],[0,-70],[90,-75],[180,-80],[180,-90],[-180,-90],[-180,-80]]]}}]}\n' >"$tmp/wide.geojson"
+printf 'lon,lat\n0,70\n-179.5,89\n179.5,61\n5,35\n5,45\n100,5\n-100,-5\n0,-65\n179.5,-16.5\n-179.5,-16.5\n0,-16.5\n0,-85\n' >"$tmp/wide.csv"
+same_text "lon/lat edges across the whole map" \
+  "$("$cli" join "$tmp/wide.geojson" "$tmp/wide.csv" --all --field n | tr '\n' ' ')" \
+  "lon,lat,feature,n 0,70,0,cap60 0,70,1,world -179.5,89,0,cap60 -179.5,89,1,world 179.5,61,0,cap60 179.5,61,1,world 5,35,-1, 5,45,1,world 100,5,1,world 100,5,2,band -100,-5,1,world -100,-5,2,band 0,-65,1,world 0,-65,3,circle 179.5,-16.5,1,world 179.5,-16.5,4,fiji -179.5,-16.5,1,world -179.5,-16.5,4,fiji 0,-16.5,1,world 0,-85,1,world 0,-85,3,circle 0,-85,5,ant10m "
+# a point on the band's edge along latitude 10 is on its ring: in under closed, out under open
+printf 'lon,lat\n50,10\n' >"$tmp/edge.csv"
+same_text "band edge closed" "$("$cli" join "$tmp/wide.geojson" "$tmp/edge.csv" --all --boundary closed | tail -n +2 | tr '\n' ' ')" \
+  "50,10,1 50,10,2 "
+same_text "band edge open" "$("$cli" join "$tmp/wide.geojson" "$tmp/edge.csv" --all --boundary open | tail -n +2 | tr '\n' ' ')" \
+  "50,10,1 "
+
+# Natural Earth (no such edge): points known to be in Antarctica, in Russia east of 180
+# and in Fiji on both sides of it; the coarse 1:50m coast puts Uelen in the sea (checked
+# with an even-odd count over the rings unwrapped across the antimeridian).
+data=${QK_SHARED_DIR:-$src/../shared}/data/countries-50m.geojson
+if [ -f "$data" ]; then
+  printf 'lon,lat\n106.84,-78.46\n0,-85\n-173.2,64.42\n-169.8,66.16\n179.3,-16.5\n-179.95,-16.45\n' >"$tmp/known.csv"
+  same_text "countries-50m across the antimeridian" \
+    "$("$cli" join "$data" "$tmp/known.csv" --field name | tr '\n' ' ')" \
+    "lon,lat,feature,name 106.84,-78.46,239,Antarctica 0,-85,239,Antarctica -173.2,64.42,75,Russia -169.8,66.16,-1, 179.3,-16.5,170,Fiji -179.95,-16.45,170,Fiji "
+fi
+
+report
