@@ -432,8 +432,8 @@ static int locate_answer(qrun_t *q, size_t i) {
   if (qk_query_locate(q->tree, q->pts[1][i], &loc) != QK_OK)
     emit(q, i, SIZE_MAX, "%zu,nan,nan,nan,-1,0", i);
   else
-    emit(q, i, SIZE_MAX, "%zu,%.17g,%.17g,%.17g,%u,%zu", i, loc.square.x, loc.square.y,
-         loc.square.side, (unsigned)loc.depth, loc.count);
+    emit(q, i, SIZE_MAX, "%zu,%.17g,%.17g,%.17g,%u,%zu", i, loc.square.x + 0.0, loc.square.y + 0.0,
+         loc.square.side, (unsigned)loc.depth, loc.count); /* (-0 as 0) */
   return CLI_OK;
 }
 

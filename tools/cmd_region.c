@@ -541,7 +541,7 @@ int cmd_regions(int argc, char **argv) {
          "\"build_seconds\": %.6f, \"mode\": \"%s\", \"bbox\": [%.17g, %.17g, %.17g, %.17g]}\n",
          s.features, s.rings, s.vertices, s.holes, s.self_intersecting, s.skipped, s.edges,
          s.leaves, s.leaf_edges, s.depth, s.bytes, s.build_seconds, s.planar ? "planar" : "lonlat",
-         s.box.xmin, s.box.ymin, s.box.xmax, s.box.ymax);
+         s.box.xmin + 0.0, s.box.ymin + 0.0, s.box.xmax + 0.0, s.box.ymax + 0.0); /* (-0 as 0) */
   if (svg) {
     qk_status_t st = qk_region_write_svg(r, o.f, 1200);
     rc = cli_out_close("regions", &o, st == QK_OK);

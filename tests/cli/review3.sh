@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # CLI regressions from a third review (one block per finding; each failed before its fix):
 # lon/lat rings with an edge across the whole map (whole world, a polar cap, a band)
-# enclosed nothing.
+# enclosed nothing; locate, tree and regions printed a root corner of -0.
 # shellcheck source=lib/common.bash
 source "$(dirname "${BASH_SOURCE[0]}")/lib/common.bash" "$@"
 
@@ -36,5 +36,13 @@ if [ -f "$data" ]; then
     "$("$cli" join "$data" "$tmp/known.csv" --field name | tr '\n' ' ')" \
     "lon,lat,feature,name 106.84,-78.46,239,Antarctica 0,-85,239,Antarctica -173.2,64.42,75,Russia -169.8,66.16,-1, 179.3,-16.5,170,Fiji -179.95,-16.45,170,Fiji "
 fi
+
+# ---- a root at -0 is printed as 0 ------------------------------------------------------
+printf 'x,y\n-0.0,-0\n1,1\n' >"$tmp/negz.csv"
+same_text "locate: no -0" "$("$cli" locate "$tmp/negz.csv" "$tmp/negz.csv" | tr '\n' ' ')" \
+  "query,xmin,ymin,side,depth,count 0,0,0,1,0,2 1,0,0,1,0,2 "
+expect 0 '"root": \{"x": 0, "y": 0, "side": 1\}' -- "$cli" tree "$tmp/negz.csv"
+printf '{"type":"Polygon","coordinates":[[[-0.0,-0.0],[1,0],[1,1],[0,1],[-0.0,-0.0]]]}\n' >"$tmp/negz.geojson"
+expect 0 '"bbox": \[0, 0, 1, 1\]' -- "$cli" regions "$tmp/negz.geojson" --planar --stats
 
 report
