@@ -84,14 +84,12 @@ static int csv_field(const char *line, int want, char *buf, size_t cap) {
   }
 }
 
-static int number(const char *f, double *v) {
-  char *end;
+/* A field as a number, blanks around allowed (cli_number: 1, 0, or -1 for hexadecimal). */
+static int number(char *f, double *v) {
   while (*f == ' ' || *f == '\t') f++;
-  if (!*f) return 0;
-  *v = strtod(f, &end);
-  if (end == f) return 0;
-  while (*end == ' ' || *end == '\t') end++;
-  return *end == '\0';
+  size_t n = strlen(f);
+  while (n > 0 && (f[n - 1] == ' ' || f[n - 1] == '\t')) f[--n] = '\0'; /* (our copy) */
+  return n ? cli_number(f, v) : 0;
 }
 
 /* --xy X,Y: column names or 1-based numbers; resolved against the header. */
@@ -337,8 +335,8 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
       rc = CLI_BAD_INPUT;
       break;
     }
-    if (!number(fx, &x) || !number(fy, &y) || !isfinite(x) || !isfinite(y)) {
-      const char *bad = (!number(fx, &x) || !isfinite(x)) ? fx : fy;
+    if (number(fx, &x) != 1 || number(fy, &y) != 1 || !isfinite(x) || !isfinite(y)) {
+      const char *bad = (number(fx, &x) != 1 || !isfinite(x)) ? fx : fy;
       int col = bad == fx ? xy->col[0] : xy->col[1];
       fprintf(stderr, "quadkit join: %s:%ld: field %d is not a finite number: '%.40s'\n",
               j->pts_path, lineno, col + 1, bad);

@@ -45,4 +45,26 @@ expect 0 '"root": \{"x": 0, "y": 0, "side": 1\}' -- "$cli" tree "$tmp/negz.csv"
 printf '{"type":"Polygon","coordinates":[[[-0.0,-0.0],[1,0],[1,1],[0,1],[-0.0,-0.0]]]}\n' >"$tmp/negz.geojson"
 expect 0 '"bbox": \[0, 0, 1, 1\]' -- "$cli" regions "$tmp/negz.geojson" --planar --stats
 
+# ---- numbers are decimal: strtod's hexadecimal is refused, naming line and value ---------
+printf 'x,y\n0x10,1\n2,3\n' >"$tmp/hex.csv"
+expect 1 "hex.csv:2:1: field 1 \\(x\\) is not a decimal number: '0x10'" -- "$cli" tree "$tmp/hex.csv"
+expect 1 "hex.csv:2:1: field 1 \\(x\\) is not a decimal number: '0x10'" -- "$cli" knn "$tmp/negz.csv" "$tmp/hex.csv" -k 1
+printf 'x,y\n1,-0X1p-3\n' >"$tmp/hexf.csv"
+expect 1 "hexf.csv:2:3: field 2 \\(y\\) is not a decimal number: '-0X1p-3'" -- "$cli" tree "$tmp/hexf.csv"
+# a first line of hexadecimal numbers is data (an error), not a header dropped in silence
+printf '0x1,0x2\n0.5,0.5\n' >"$tmp/hexh.csv"
+expect 1 "hexh.csv:1:1: field 1 is not a decimal number: '0x1'" -- "$cli" tree "$tmp/hexh.csv"
+expect 1 "hexh.csv:1: field 1 is not a finite number: '0x1'" -- "$cli" join "$tmp/negz.geojson" "$tmp/hexh.csv" --planar
+expect 1 "hex.csv:2: field 1 is not a finite number: '0x10'" -- "$cli" join "$tmp/negz.geojson" "$tmp/hex.csv" --planar
+printf 'id,kind,x,y,a,b\n1,disc,0x1,0,1,\n' >"$tmp/hexo.csv"
+printf 'frame,id,x,y\n' >"$tmp/nomoves.csv"
+expect 1 "hexo.csv:2: not a decimal number: '0x1'" -- "$cli" world "$tmp/hexo.csv" "$tmp/nomoves.csv"
+printf 'id,kind,x,y,a,b\n1,disc,1,0,1,0x3\n' >"$tmp/hexu.csv"
+expect 1 "hexu.csv:2: field '0x3' is not used" -- "$cli" world "$tmp/hexu.csv" "$tmp/nomoves.csv"
+expect 2 "-r must be a finite number, not '0x1'" -- "$cli" radius "$tmp/negz.csv" "$tmp/negz.csv" -r 0x1
+# decimal forms strtod and CSV tools share still read: .5, 5., +1, exponents
+printf 'x,y\n.5,5.\n+1,2e-1\n' >"$tmp/dec.csv"
+same_text "decimal forms" "$("$cli" knn "$tmp/dec.csv" "$tmp/dec.csv" -k 1 | tr '\n' ' ')" \
+  "query,rank,point,distance 0,1,0,0 1,1,1,0 "
+
 report
