@@ -67,4 +67,26 @@ printf 'x,y\n.5,5.\n+1,2e-1\n' >"$tmp/dec.csv"
 same_text "decimal forms" "$("$cli" knn "$tmp/dec.csv" "$tmp/dec.csv" -k 1 | tr '\n' ' ')" \
   "query,rank,point,distance 0,1,0,0 1,1,1,0 "
 
+# ---- GeoJSON: what json-c's strict mode lets through but RFC 8259 does not -------------
+# A name twice in one object: json-c (like GDAL and Python) keeps the last, so the first
+# polygon was dropped without a word; NaN, Infinity and "1." are not JSON numbers.
+printf 'x,y\n0.5,0.5\n5.5,5.5\n' >"$tmp/two.csv"
+printf '{"type":"Polygon","coordinates":[[[0,0],[1,0],[1,1],[0,1],[0,0]]],\n "coordinates":[[[5,5],[6,5],[6,6],[5,6],[5,5]]]}\n' >"$tmp/dupc.geojson"
+expect 1 'dupc.geojson:2:2: duplicate name "coordinates" in one object \(first at line 1, column 19' -- "$cli" join "$tmp/dupc.geojson" "$tmp/two.csv" --planar
+printf '{"type":"Feature","properties":{"s":"a \\"s\\": \\\\","s":1},"geometry":null}\n' >"$tmp/dupp.geojson"
+expect 1 'dupp.geojson:1:51: duplicate name "s" in one object \(first at line 1, column 33' -- "$cli" join "$tmp/dupp.geojson" "$tmp/two.csv" --planar
+expect 1 'dupc.geojson:2:2: duplicate name "coordinates"' -- "$cli" mesh "$tmp/dupc.geojson" -o "$tmp/m"
+# the same name in different objects, and names inside strings, are fine
+printf '{"type":"Feature","properties":{"a":{"a":1,"b":{"a":2}},"c":[{"a":1},{"a":1}],"t":"\\"a\\": 1, \\"a\\": 2"},"geometry":{"type":"Polygon","coordinates":[[[0,0],[1,0],[1,1],[0,1],[0,0]]]}}\n' >"$tmp/nodup.geojson"
+same_text "same names in different objects" "$("$cli" join "$tmp/nodup.geojson" "$tmp/two.csv" --planar | tr '\n' ' ')" \
+  "x,y,feature 0.5,0.5,0 5.5,5.5,-1 "
+for v in NaN -Infinity Infinity; do
+  printf '{"type":"Polygon","coordinates":[[[0,0],[%s,0],[1,1],[0,1],[0,0]]]}\n' "$v" >"$tmp/nan.geojson"
+  expect 1 "nan.geojson:1:4[23]: malformed JSON: ${v#-} is not a JSON number" -- "$cli" join "$tmp/nan.geojson" "$tmp/two.csv" --planar
+done
+printf '{"type":"Feature","properties":{"v":NaN},"geometry":null}\n' >"$tmp/nanp.geojson"
+expect 1 'nanp.geojson:1:37: malformed JSON: NaN is not a JSON number' -- "$cli" join "$tmp/nanp.geojson" "$tmp/two.csv" --planar
+printf '{"type":"Polygon","coordinates":[[[0,0],[1.,0],[1,1],[0,1],[0,0]]]}\n' >"$tmp/dot.geojson"
+expect 1 'dot.geojson:1:43: malformed JSON: a decimal point must be followed by digits' -- "$cli" join "$tmp/dot.geojson" "$tmp/two.csv" --planar
+
 report
