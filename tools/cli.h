@@ -100,7 +100,7 @@ int cli_parse_xy(const char *cmd, const char *opt, const char *s, const char **o
  */
 typedef struct cli_out {
   FILE *f;
-  char *path; /* final path (a link's target), NULL when writing directly */
+  char *path; /* final path (a link's target); the path given when writing directly */
   char *tmp;
   int direct; /* a FIFO or device: written in place, never renamed over */
 } cli_out_t;

@@ -454,6 +454,7 @@ int cmd_join(int argc, char **argv) {
   if (!rc) rc = check_fields(pos[0], r, fields, nf);
   join_t j = {pos[1], r, rule, all, (unsigned)threads, fields, nf, NULL, NULL, NULL, NULL, 0, 0};
   cli_out_t o = {0};
+  int wfail = 0; /* the output failed (cli_out_close said so) */
   if (!rc) rc = cli_out_open("join", outp, &o);
   if (!rc) {
     j.out = o.f;
@@ -479,10 +480,12 @@ int cmd_join(int argc, char **argv) {
       }
     }
     if (!rc) rc = join_stream(&j, in, &xy, isatty(2) && total > 0, total);
-    int rc2 = cli_out_close("join", &o, rc == CLI_OK);
+    wfail = o.f && ferror(o.f);
+    int rc2 = cli_out_close("join", &o, rc == CLI_OK); /* (says why a write failed) */
+    if (rc2) wfail = 1;
     if (!rc) rc = rc2;
   }
-  if (rc == CLI_INTERNAL) cli_error("join", "out of memory or write error");
+  if (rc == CLI_INTERNAL && !wfail) cli_error("join", "out of memory");
   free(j.lines);
   free(j.p);
   free(j.feat);

@@ -89,4 +89,15 @@ expect 1 'nanp.geojson:1:37: malformed JSON: NaN is not a JSON number' -- "$cli"
 printf '{"type":"Polygon","coordinates":[[[0,0],[1.,0],[1,1],[0,1],[0,0]]]}\n' >"$tmp/dot.geojson"
 expect 1 'dot.geojson:1:43: malformed JSON: a decimal point must be followed by digits' -- "$cli" join "$tmp/dot.geojson" "$tmp/two.csv" --planar
 
+# ---- a device output that fails says so (it exited 3 without a word) ---------------------
+if [ -w /dev/full ]; then
+  expect 3 'quadkit knn: cannot write /dev/full: No space left on device' -- "$cli" knn "$tmp/two.csv" "$tmp/two.csv" -k 1 -o /dev/full
+  expect 3 'quadkit tree: cannot write /dev/full' -- "$cli" tree "$tmp/two.csv" --svg /dev/full
+  expect 3 'quadkit regions: cannot write /dev/full' -- "$cli" regions "$tmp/negz.geojson" --planar --svg /dev/full
+  expect 3 'quadkit join: cannot write /dev/full' -- "$cli" join "$tmp/negz.geojson" "$tmp/two.csv" --planar -o /dev/full
+  # join said "out of memory or write error" after the real reason
+  out=$("$cli" join "$tmp/negz.geojson" "$tmp/two.csv" --planar 2>&1 >/dev/full)
+  same_text "join to a full stdout: one message" "$out" "quadkit join: cannot write standard output: No space left on device"
+fi
+
 report
