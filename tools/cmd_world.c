@@ -23,7 +23,10 @@ typedef struct row {
 
 /* Split a line into fields in place: blanks around a field dropped; a field in double
  * quotes ("" inside for a quote) unquoted, as the other CSV inputs take them. NULL, or
- * what is malformed. */
+ * what is malformed. (Not io/csv_read.c: the library's reader returns numbers only, and a
+ * scene row holds a kind name and 64-bit ids, which doubles cannot hold exactly; the
+ * field scanner it uses is private to io/. Same quoting rules and messages:
+ * tests/cli/world.sh, review3.) */
 static const char *split(char *line, row_t *r) {
   r->n = 0;
   char *s = line;

@@ -100,4 +100,13 @@ if [ -w /dev/full ]; then
   same_text "join to a full stdout: one message" "$out" "quadkit join: cannot write standard output: No space left on device"
 fi
 
+# ---- world keeps its own field splitter (ids are 64-bit, kinds are text): same quoting ---
+printf 'id,kind,x,y,a,b\n"1", "disc" ,"0",0,"1",""\n2,disc,1.5,0,1,\n' >"$tmp/qo.csv"
+printf 'frame,id,x,y,a\n' >"$tmp/mv0.csv"
+same_text "world: quoted fields" "$("$cli" world "$tmp/qo.csv" "$tmp/mv0.csv" | tr '\n' ' ')" "frame,a,b 0,1,2 "
+printf 'id,kind,x,y,a,b\n"1,disc,0,0,1,\n' >"$tmp/qo2.csv"
+expect 1 'qo2.csv:2: unterminated quoted field' -- "$cli" world "$tmp/qo2.csv" "$tmp/mv0.csv"
+printf 'id,kind,x,y,a,b\n"1"x,disc,0,0,1,\n' >"$tmp/qo3.csv"
+expect 1 'qo3.csv:2: text after a closing quote' -- "$cli" world "$tmp/qo3.csv" "$tmp/mv0.csv"
+
 report
