@@ -62,6 +62,8 @@ expect 1 "hexo.csv:2: not a decimal number: '0x1'" -- "$cli" world "$tmp/hexo.cs
 printf 'id,kind,x,y,a,b\n1,disc,1,0,1,0x3\n' >"$tmp/hexu.csv"
 expect 1 "hexu.csv:2: field '0x3' is not used" -- "$cli" world "$tmp/hexu.csv" "$tmp/nomoves.csv"
 expect 2 "-r must be a finite number, not '0x1'" -- "$cli" radius "$tmp/negz.csv" "$tmp/negz.csv" -r 0x1
+printf '4 2 0 0\n0 0 0\n1 4 0\n2 4 4\n3 0 4\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n0\n' >"$tmp/sq.poly"
+expect 2 "--round 0x1p-4: the grid step must be a positive number" -- "$cli" mesh "$tmp/sq.poly" -o "$tmp/r" --round 0x1p-4
 # decimal forms strtod and CSV tools share still read: .5, 5., +1, exponents
 printf 'x,y\n.5,5.\n+1,2e-1\n' >"$tmp/dec.csv"
 same_text "decimal forms" "$("$cli" knn "$tmp/dec.csv" "$tmp/dec.csv" -k 1 | tr '\n' ' ')" \
