@@ -244,20 +244,21 @@ static int flush_chunk(join_t *j) {
 }
 
 static void join_usage(FILE *f) {
-  fprintf(f,
-          "usage: quadkit join REGIONS POINTS.csv [--field NAME]... [--all]\n"
-          "                    [--boundary semi-open|closed|open] [--planar] [--xy X,Y]\n"
-          "                    [--threads N] [-o FILE]\n\n"
-          "For each point (x, y; longitude, latitude unless --planar) the feature of REGIONS\n"
-          "(GeoJSON, or any OGR format when built with GDAL) that holds it. Writes CSV: the\n"
-          "point's line as read, then `feature` (0-based feature index, -1 for none) and the\n"
-          "requested properties (a name no feature has is an error). --all writes one row per "
-          "containing feature (a point in\n"
-          "none gets one row with -1). --xy picks the coordinate columns by header name or\n"
-          "1-based number (default: the first two). A header line (x and y fields not\n"
-          "numbers) is copied with the new column names appended. A bad line is an error\n"
-          "before any row is written (-o FILE is replaced only on success; on standard output\n"
-          "a POINTS file is checked whole first, while points from a pipe are written as read).\n");
+  fprintf(f, "usage: quadkit join REGIONS POINTS.csv [--field NAME]... [--all]\n"
+             "                    [--boundary semi-open|closed|open] [--planar] [--xy X,Y]\n"
+             "                    [--threads N] [-o FILE]\n"
+             "\n"
+             "For each point (x, y; longitude, latitude unless --planar) the feature of REGIONS\n"
+             "(GeoJSON, or any OGR format when built with GDAL) that holds it. Writes CSV: the\n"
+             "point's line as read, then `feature` (0-based feature index, -1 for none) and the\n"
+             "requested properties (a name no feature has is an error). --all writes one row per\n"
+             "containing feature (a point in none gets one row with -1). --xy picks the\n"
+             "coordinate columns by header name or 1-based number (default: the first two).\n"
+             "A header line (x and y fields not numbers) is copied with the new column names\n"
+             "appended. A bad line is an error before any row is written (-o FILE is replaced\n"
+             "only on success; on standard output a POINTS file is checked whole first, while\n"
+             "points from a pipe are written as read). --threads N answers on N threads\n"
+             "(default 1; 0: one per core; at most 256).\n");
 }
 
 static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long total) {

@@ -111,4 +111,8 @@ expect 1 'qo2.csv:2: unterminated quoted field' -- "$cli" world "$tmp/qo2.csv" "
 printf 'id,kind,x,y,a,b\n"1"x,disc,0,0,1,\n' >"$tmp/qo3.csv"
 expect 1 'qo3.csv:2: text after a closing quote' -- "$cli" world "$tmp/qo3.csv" "$tmp/mv0.csv"
 
+# ---- join --help says what --threads 0 means (it was accepted, undocumented) -------------
+expect 0 '--threads N answers on N threads' -- "$cli" join --help
+expect 0 '0: one per core' -- "$cli" join --help
+
 report
