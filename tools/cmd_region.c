@@ -119,7 +119,7 @@ static int parse_xy(const char *cmd, const char *s, xy_spec_t *xy) {
     if (!*end && v >= 1 && v <= 100000)
       xy->col[i] = (int)v - 1;
     else if (!*end) {
-      cli_error(cmd, "--xy: column number %s must be at least 1", xy->name[i]);
+      cli_error(cmd, "--xy: column number %s must be from 1 to 100000", xy->name[i]);
       return 1;
     }
   }

@@ -126,4 +126,8 @@ printf 'x,y\n3e153,0\n' >"$tmp/near.csv"
 same_text "knn just inside 2^510" "$("$cli" knn "$tmp/near.csv" "$tmp/near.csv" -k 1 | tr '\n' ' ')" \
   "query,rank,point,distance 0,1,0,0 "
 
+# ---- join --xy with a huge column number said it "must be at least 1" --------------------
+expect 2 '--xy: column number 99999999999999999999 must be from 1 to 100000' -- "$cli" join "$tmp/negz.geojson" "$tmp/sm.csv" --planar --xy 99999999999999999999,1
+expect 2 '--xy: column number 0 must be from 1 to 100000' -- "$cli" join "$tmp/negz.geojson" "$tmp/sm.csv" --planar --xy 0,1
+
 report
