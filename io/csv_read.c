@@ -216,9 +216,10 @@ static qk_status_t read_row(reader_t *r, char *line, size_t len, unsigned long l
       continue;
     }
     double v;
-    if (!qk__csv_number(line, sp, &v))
+    int num = qk__csv_number(line, sp, &v);
+    if (num <= 0)
       return fail(r, QK_ERR_PARSE, lineno, sp->start + 1, row,
-                  "field %zu%s is not a number: '%.*s'", f, named,
+                  "field %zu%s is not a %snumber: '%.*s'", f, named, num < 0 ? "decimal " : "",
                   (int)(sp->e - sp->b < 40 ? sp->e - sp->b : 40), line + sp->b);
     if (!isfinite(v))
       return fail(r, QK_ERR_NONFINITE, lineno, sp->start + 1, row,

@@ -112,11 +112,41 @@ const char *qk__csv_field(const char *line, size_t len, size_t *pos, qk__span_t 
   return NULL;
 }
 
+int qk__decimal_syntax(const char *s, size_t n) {
+  size_t i = 0;
+  if (i < n && (s[i] == '+' || s[i] == '-')) i++;
+  static const char *const words[] = {"infinity", "inf", "nan"};
+  for (int w = 0; w < 3; w++) { /* (strtod's words; the caller rejects them as not finite) */
+    size_t k = strlen(words[w]), j = 0;
+    while (j < k && i + j < n && (s[i + j] | 0x20) == words[w][j]) j++;
+    if (j == k && i + k == n) return 1;
+  }
+  size_t d = 0;
+  while (i < n && s[i] >= '0' && s[i] <= '9') i++, d++;
+  if (i < n && s[i] == '.') {
+    i++;
+    while (i < n && s[i] >= '0' && s[i] <= '9') i++, d++;
+  }
+  if (d == 0) return 0;
+  if (i < n && (s[i] == 'e' || s[i] == 'E')) {
+    i++;
+    if (i < n && (s[i] == '+' || s[i] == '-')) i++;
+    size_t x = 0;
+    while (i < n && s[i] >= '0' && s[i] <= '9') i++, x++;
+    if (x == 0) return 0;
+  }
+  return i == n;
+}
+
 int qk__csv_number(char *line, const qk__span_t *sp, double *v) {
   size_t b = sp->b, e = sp->e;
   while (b < e && blank(line[b])) b++;
   while (e > b && blank(line[e - 1])) e--;
   if (b == e) return 0;
+  if (!qk__decimal_syntax(line + b, e - b)) { /* hexadecimal, "1e", "1.2.3", ... */
+    size_t h = b + (line[b] == '+' || line[b] == '-');
+    return e - h > 1 && line[h] == '0' && (line[h + 1] | 0x20) == 'x' ? -1 : 0;
+  }
   /* strtod needs a terminated string: end the field in place for the call. */
   char saved = line[e];
   line[e] = '\0';

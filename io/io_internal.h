@@ -42,7 +42,13 @@ typedef struct qk__span {
  * (to len + 1 after the last field). Returns 0, or an error message. */
 const char *qk__csv_field(const char *line, size_t len, size_t *pos, qk__span_t *sp);
 
-/* Is the field a number (strtod syntax, blanks around allowed)? Sets *v. */
+/* Is s[0, n) a decimal number: an optional sign, digits with an optional decimal point
+ * (at least one digit), an optional exponent (e or E, optional sign, digits); or one of
+ * strtod's words inf, infinity, nan (any case, optional sign)? 1 or 0. */
+int qk__decimal_syntax(const char *s, size_t n);
+
+/* Is the field a number (qk__decimal_syntax, blanks around allowed)? 1 and *v set; 0 when
+ * not; -1 when it is hexadecimal (0x...), which strtod would take but CSV does not. */
 int qk__csv_number(char *line, const qk__span_t *sp, double *v);
 
 #endif /* QUADKIT_IO_INTERNAL_H */

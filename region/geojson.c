@@ -274,6 +274,105 @@ static size_t value_end(const char *text, size_t n) {
   return end;
 }
 
+/* One object member's name: its text[off, off + len) inside the quotes, and a hash. */
+typedef struct jkey {
+  uint64_t h;
+  size_t off, len;
+} jkey_t;
+
+static int jkey_cmp(const void *x, const void *y) {
+  const jkey_t *a = x, *b = y;
+  if (a->h != b->h) return a->h < b->h ? -1 : 1;
+  if (a->len != b->len) return a->len < b->len ? -1 : 1;
+  return (a->off > b->off) - (a->off < b->off);
+}
+
+/* The object whose names are k[0, n) closed: the offset of the later of the first pair of
+ * equal names (as written, escapes not decoded), or SIZE_MAX; *first: the earlier one. */
+static size_t duplicate(const char *text, jkey_t *k, size_t n, size_t *first) {
+  size_t dup = SIZE_MAX;
+  if (n < 2) return dup;
+  qsort(k, n, sizeof *k, jkey_cmp);
+  for (size_t i = 0; i < n; i++)
+    for (size_t j = i + 1; j < n && k[j].h == k[i].h && k[j].len == k[i].len; j++)
+      if (!memcmp(text + k[i].off, text + k[j].off, k[i].len)) {
+        if (k[j].off < dup) dup = k[j].off, *first = k[i].off;
+        break; /* (sorted by offset: later equal names come after k[j]) */
+      }
+  return dup;
+}
+
+/* What json-c's strict mode lets through but RFC 8259 does not, in a text it parsed: the
+ * words NaN and Infinity, a decimal point without digits after it ("1."), and a name
+ * twice in one object (RFC 8259 leaves the meaning to the parser; json-c, like GDAL and
+ * Python, keeps the last, so a second "coordinates" silently replaced the first).
+ * QK_OK, or a parse error at the offending byte. */
+static qk_status_t json_check(const qk_allocator_t *a, const char *text, size_t len,
+                              qk_error_t *err) {
+  enum { MAX_DEPTH = 512 }; /* (json-c parses 32 levels at most by default) */
+  size_t base[MAX_DEPTH];   /* per open object its first name in keys; SIZE_MAX: an array */
+  size_t depth = 0, n = 0, cap = 0;
+  jkey_t *keys = NULL;
+  qk_status_t st = QK_OK;
+  /* the bytes that matter (the rest, mostly digits, commas and blanks, are skipped) */
+  static const unsigned char special[256] = {
+      ['"'] = 1, ['{'] = 1, ['['] = 1, ['}'] = 1, [']'] = 1, ['N'] = 1, ['I'] = 1, ['.'] = 1};
+  for (size_t i = 0; i < len && !st; i++) {
+    while (i < len && !special[(unsigned char)text[i]]) i++;
+    if (i == len) break;
+    char c = text[i];
+    if (c == '"') {
+      size_t b = ++i;
+      for (;;) { /* the closing quote: one not escaped by an odd run of backslashes */
+        const char *q = memchr(text + i, '"', len - i);
+        i = q ? (size_t)(q - text) : len;
+        size_t bs = 0;
+        while (bs < i - b && text[i - 1 - bs] == '\\') bs++;
+        if (!q || bs % 2 == 0) break;
+        i++;
+      }
+      size_t e = i, j = i + 1;
+      while (j < len && (text[j] == ' ' || text[j] == '\n' || text[j] == '\r' || text[j] == '\t'))
+        j++;
+      if (j < len && text[j] == ':' && depth && base[depth - 1] != SIZE_MAX) {
+        uint64_t h = 1469598103934665603u; /* (FNV-1a) */
+        for (size_t k = b; k < e; k++) h = (h ^ (unsigned char)text[k]) * 1099511628211u;
+        if (n == cap && (st = qk__grow(a, (void **)&keys, &cap, n + 1, sizeof *keys))) break;
+        keys[n++] = (jkey_t){h, b, e - b};
+      }
+    } else if (c == '{' || c == '[') {
+      if (depth == MAX_DEPTH) break; /* (deeper than json-c parses: not checked) */
+      base[depth++] = c == '{' ? n : SIZE_MAX;
+    } else if ((c == '}' || c == ']') && depth) {
+      size_t b = base[--depth], first = 0, dup;
+      if (b == SIZE_MAX) continue;
+      if ((dup = duplicate(text, keys + b, n - b, &first)) != SIZE_MAX) {
+        qk_error_t at;
+        where(text, first - 1, &at);
+        where(text, dup - 1, err);
+        size_t nl = 0; /* (the name as written, its first 60 bytes) */
+        while (dup + nl < len && text[dup + nl] != '"' && nl < 60) nl++;
+        st = qk__region_fail(err, QK_ERR_PARSE, SIZE_MAX,
+                             "duplicate name \"%.*s\" in one object (first at line %lu, column "
+                             "%lu; JSON names must be unique here)",
+                             (int)nl, text + dup, at.line, at.column);
+      }
+      n = b;
+    } else if (c == 'N' || c == 'I') {
+      where(text, i, err);
+      st = qk__region_fail(err, QK_ERR_PARSE, SIZE_MAX,
+                           "malformed JSON: %s is not a JSON number (RFC 8259)",
+                           c == 'N' ? "NaN" : "Infinity");
+    } else if (c == '.' && (i + 1 >= len || text[i + 1] < '0' || text[i + 1] > '9')) {
+      where(text, i, err);
+      st = qk__region_fail(err, QK_ERR_PARSE, SIZE_MAX,
+                           "malformed JSON: a decimal point must be followed by digits");
+    }
+  }
+  qk__free(a, keys, cap * sizeof *keys);
+  return st == QK_ERR_NOMEM ? qk__region_fail(err, st, SIZE_MAX, "out of memory") : st;
+}
+
 qk_status_t qk_region_read_geojson_text(const char *text, size_t len,
                                         const qk_region_options_t *options, qk_region_t **out,
                                         qk_error_t *err) {
@@ -355,13 +454,18 @@ qk_status_t qk_region_read_geojson_text(const char *text, size_t len,
   qk_region_options_t o;
   qk_allocator_t alloc;
   qk__region_options(options, &o, &alloc);
+  qk_status_t st = json_check(&alloc, text, len, err);
+  if (st) {
+    json_object_put(root);
+    return st;
+  }
   qk_error_t scratch;
   gj_t g;
   memset(&g, 0, sizeof g);
   g.a = &alloc;
   g.planar = o.planar;
   g.err = err ? err : &scratch;
-  qk_status_t st = document(&g, root); /* json-c's allocations there are checked for NULL */
+  st = document(&g, root); /* json-c's allocations there are checked for NULL */
   json_object_put(root);
   if (!st) st = qk__rings_build(&g.rg, &o, out, err);
   qk__rings_free(g.a, &g.rg);

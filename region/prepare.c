@@ -10,7 +10,12 @@
  *     short way. Its crossing latitude phi is interpolated linearly in lon/lat (rounded
  *     once; both halves use the same value, so it is simply a new vertex) and the edge
  *     becomes a -> (+-180, phi) and (-+180, phi) -> b. An edge from lon 180 to lon -180
- *     (or back) runs along the antimeridian; it is cut at its first vertex.
+ *     (or back) runs along the antimeridian; it is cut at its first vertex. Except an
+ *     edge from (-+180, y) to (+-180, y) that runs across the whole map along latitude y
+ *     (across_map): at the poles (y = +-90, the map's top and bottom lines), and where
+ *     read as a zero-length step the ring would double back on the antimeridian (its
+ *     neighbouring edges both run along it on one side of y: the whole-map rectangle
+ *     [-180, 60] .. [180, 90], the whole world). Such an edge is a piece as it is.
  *  3. Each cut leaves the two sides of the rectangle open. Both are closed along the
  *     antimeridian through the pole latitude P of the ring: eastward (lon increasing
  *     through 180) a cut adds (180, phi) -> (180, P) and (-180, P) -> (-180, phi);
@@ -130,6 +135,36 @@ static double cut_lat(double ax, double ay, double bu, double by, double m, int 
   return phi;
 }
 
+/* The ring's nearest edge of non-zero length before (dir -1) or after (dir +1) edge i of
+ * a closed ring of len positions: its far end (the end away from edge i) in *x, *y. */
+static void neighbour_end(const double *q, size_t len, size_t i, int dir, double *x, double *y) {
+  size_t m = len - 1; /* edges 0 .. m-1; edge j runs from position j to j + 1 */
+  size_t j = i;
+  for (size_t step = 1; step < m; step++) {
+    j = dir < 0 ? (j + m - 1) % m : (j + 1) % m;
+    const double *a = q + 2 * j, *b = a + 2;
+    if (a[0] == b[0] && a[1] == b[1]) continue;
+    *x = dir < 0 ? a[0] : b[0];
+    *y = dir < 0 ? a[1] : b[1];
+    return;
+  }
+  *x = q[2 * i], *y = q[2 * i + 1]; /* (no other edge: the edge's own end) */
+}
+
+/* Does edge i of the ring, from (ax, y) to (bx, y) with {ax, bx} = {-180, 180}, run across
+ * the whole map along latitude y (rather than being a zero-length step on the
+ * antimeridian)? It does at the poles (the map's top and bottom lines), and where, read
+ * as a step, the ring would double back on the antimeridian: its neighbouring edges both
+ * run along the antimeridian on one side of y, as the sides of a band or of the whole-map
+ * rectangle [-180, 60] .. [180, 90] do. */
+static bool across_map(const double *q, size_t len, size_t i, double y) {
+  if (y == 90 || y == -90) return true;
+  double px, py, nx, ny;
+  neighbour_end(q, len, i, -1, &px, &py);
+  neighbour_end(q, len, i, +1, &nx, &ny);
+  return fabs(px) == 180 && fabs(nx) == 180 && ((py > y && ny > y) || (py < y && ny < y));
+}
+
 /* Pieces of one ring in lon/lat mode; k_out: net eastward windings. */
 static qk_status_t ring_lonlat(ring_ctx_t *c, const double *xy, size_t start, size_t len, double P,
                                long *k_out) {
@@ -170,7 +205,9 @@ static qk_status_t ring_lonlat(ring_ctx_t *c, const double *xy, size_t start, si
       } else if (ax != bx || ay != by) {
         st = piece(c, ax, ay, bx, by, v);
       }
-    } else if (d < -180) { /* eastward through 180 */
+    } else if (ay == by && fabs(d) == 360 && across_map(xy + 2 * start, len, i, ay)) {
+      st = piece(c, ax, ay, bx, by, v); /* along latitude ay from one side to the other */
+    } else if (d < -180) {              /* eastward through 180 */
       double phi = cut_lat(ax, ay, bx + 360, by, 180, bx == -180);
       if (!(st = piece(c, ax, ay, 180, phi, v)) && !(st = piece(c, 180, phi, 180, P, UINT32_MAX)) &&
           !(st = piece(c, -180, P, -180, phi, UINT32_MAX)))

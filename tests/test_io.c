@@ -86,6 +86,9 @@ static void test_io_good_files(void **state) {
   expect_points("5,5\n0,0\n1,2\n", NULL, QK_CSV_HEADER_YES, a, 2);
   const double b[] = {5, 5, 0, 0, 1, 2};
   expect_points("5,5\n0,0\n1,2\n", NULL, QK_CSV_HEADER_NO, b, 3);
+  /* decimal forms: a point without digits on one side, signs, exponents, -0 */
+  const double c[] = {0.5, 5, 1, -0.2, 150, 0};
+  expect_points(".5,5.\n+1,-2E-1\n1.5e+2, -0 \n", NULL, QK_CSV_HEADER_AUTO, c, 3);
 }
 
 static void test_io_columns(void **state) {
@@ -201,6 +204,17 @@ static void test_io_errors(void **state) {
                "field 1 is not finite: '  nan '");
   expect_error("0,0\n1,1e400\n", -1, NULL, A, QK_ERR_NONFINITE, 2, 3, 1,
                "field 2 is not finite: '1e400'");
+  /* Numbers are decimal: strtod's hexadecimal was read silently (third review). */
+  expect_error("x,y\n0x10,1\n", -1, NULL, A, QK_ERR_PARSE, 2, 1, 0,
+               "field 1 (x) is not a decimal number: '0x10'");
+  expect_error("0,0\n1, -0X1p-3 \n", -1, NULL, A, QK_ERR_PARSE, 2, 3, 1,
+               "field 2 is not a decimal number: ' -0X1p-3 '");
+  expect_error("0x1,0x2\n0,0\n", -1, NULL, A, QK_ERR_PARSE, 1, 1, 0,
+               "field 1 is not a decimal number: '0x1'"); /* data, not a header */
+  expect_error("0,0\n1.5.1,0\n", -1, NULL, A, QK_ERR_PARSE, 2, 1, 1,
+               "field 1 is not a number: '1.5.1'");
+  expect_error("0,0\n-INFINITY,0\n", -1, NULL, A, QK_ERR_NONFINITE, 2, 1, 1,
+               "field 1 is not finite: '-INFINITY'");
   expect_error("0,0\n1,\0\n", 8, NULL, A, QK_ERR_PARSE, 2, 3, SIZE_MAX,
                "binary data (NUL byte) in a text file");
   expect_error("0,0\n\"1,2\n", -1, NULL, A, QK_ERR_PARSE, 2, 1, 1,

@@ -609,6 +609,55 @@ static void test_region_lonlat(void **state) {
   assert_non_null(strstr(e.message, "planar"));
 }
 
+/* Rings with an edge from (-180, y) to (180, y): across the whole map (at the poles, or
+ * where a step would double back on the antimeridian) or a zero-length step (Fiji).
+ * Each feature is a latitude range (the island also a longitude range, Antarctica below
+ * its coast's straight lon/lat edges), so the oracle is a comparison; random points lie
+ * on no edge. Before the rule the whole world, the cap and the band held nothing. */
+static void test_region_across_map(void **state) {
+  (void)state;
+  double xy[] = {
+      /* 0: the whole world, a hole [0, 10] x [30, 40] */
+      -180, -90, 180, -90, 180, 90, -180, 90, -180, -90, 0, 30, 10, 30, 10, 40, 0, 40, 0, 30,
+      /* 1: north of 60 */
+      -180, 60, 180, 60, 180, 90, -180, 90, -180, 60,
+      /* 2: a band between -10 and 10, one side with a vertex in the middle */
+      -180, -10, 180, -10, 180, 0, 180, 10, -180, 10, -180, -10,
+      /* 3: south of -60: a ring along -60 closed by a step */
+      -180, -60, -90, -60, 0, -60, 90, -60, 180, -60, -180, -60,
+      /* 4: an island across the antimeridian with two steps */
+      179, -17, 180, -17, -180, -17, -179, -17, -179, -16, -180, -16, 180, -16, 179, -16, 179, -17,
+      /* 5: Antarctica as Natural Earth 10m draws it, along -90 from 180 to -180 */
+      -180, -80, -90, -75, 0, -70, 90, -75, 180, -80, 180, -90, -180, -90, -180, -80};
+  size_t rs[] = {0, 5, 10, 15, 21, 27, 36, 44}, fs[] = {0, 2, 3, 4, 5, 6, 7};
+  qk_region_t *r = lonlat(xy, rs, 7, fs, 6, 0);
+  uint64_t seed = 12345;
+  for (int i = 0; i < 20000; i++) {
+    seed = seed * 6364136223846793005u + 1442695040888963407u;
+    double x = -180 + 360 * (double)(seed >> 11) * 0x1p-53;
+    seed = seed * 6364136223846793005u + 1442695040888963407u;
+    double y = -90 + 180 * (double)(seed >> 11) * 0x1p-53;
+    if (i < 8) x = i % 2 ? 179.5 : -179.5, y = -16.5 + (i / 2) * 0.01; /* the island */
+    double coast = x < -90  ? -80 + (x + 180) / 90 * 5
+                   : x < 0  ? -75 + (x + 90) / 90 * 5
+                   : x < 90 ? -70 - x / 90 * 5
+                            : -75 - (x - 90) / 90 * 5;
+    bool want[6] = {
+        !(x > 0 && x < 10 && y > 30 && y < 40),      y > 60,   y > -10 && y < 10, y < -60,
+        (x > 179 || x < -179) && y > -17 && y < -16, y < coast};
+    uint32_t all[8];
+    size_t n;
+    assert_int_equal(qk_region_locate_all(r, (qk_point_t){x, y}, QK_BOUNDARY_SEMI_OPEN, all, 8, &n),
+                     QK_OK);
+    bool got[6] = {0};
+    for (size_t k = 0; k < n; k++) got[all[k]] = 1;
+    for (int f = 0; f < 6; f++)
+      if (got[f] != want[f])
+        fail_msg("(%.17g, %.17g) feature %d: got %d, want %d", x, y, f, got[f], want[f]);
+  }
+  qk_region_free(r);
+}
+
 /* A point on the antimeridian is on the ring of a feature that ends at longitude 180
  * (east side) as well as of one that starts at -180 (west side): under `closed` both hold
  * it, under `open` neither (the sphere's answer); `semi-open` gives the west one alone.
@@ -1278,6 +1327,7 @@ int main(void) {
       cmocka_unit_test(test_region_self_intersecting_oracle),
       cmocka_unit_test(test_region_lonlat),
       cmocka_unit_test(test_region_antimeridian_boundary),
+      cmocka_unit_test(test_region_across_map),
       cmocka_unit_test(test_region_batch_threads),
       cmocka_unit_test(test_region_batch_morton),
       cmocka_unit_test(test_region_batch_cell_sides),

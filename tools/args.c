@@ -23,15 +23,42 @@ int cli_parse_u32(const char *cmd, const char *opt, const char *s, unsigned long
   return 0;
 }
 
+int cli_number(const char *s, double *v) {
+  size_t i = 0, d = 0;
+  if (s[i] == '+' || s[i] == '-') i++;
+  static const char *const words[] = {"infinity", "inf", "nan"};
+  int word = 0;
+  for (int w = 0; w < 3 && !word; w++) { /* (strtod's words: numbers, not finite) */
+    size_t k = strlen(words[w]), j = 0;
+    while (j < k && s[i + j] && (s[i + j] | 0x20) == words[w][j]) j++;
+    word = j == k && !s[i + k];
+  }
+  if (!word) {
+    while (s[i] >= '0' && s[i] <= '9') i++, d++;
+    if (s[i] == '.')
+      for (i++; s[i] >= '0' && s[i] <= '9'; i++) d++;
+    if (d && (s[i] == 'e' || s[i] == 'E')) {
+      size_t x = 0;
+      i += s[i + 1] == '+' || s[i + 1] == '-' ? 2 : 1;
+      while (s[i] >= '0' && s[i] <= '9') i++, x++;
+      if (!x) d = 0;
+    }
+    if (!d || s[i]) {
+      size_t h = s[0] == '+' || s[0] == '-';
+      return s[h] == '0' && (s[h + 1] | 0x20) == 'x' ? -1 : 0;
+    }
+  }
+  *v = strtod(s, NULL);
+  return 1;
+}
+
 int cli_parse_double(const char *cmd, const char *opt, const char *s, double *out) {
-  char *end;
   if (!s) {
     cli_error(cmd, "%s needs a value", opt);
     return 1;
   }
-  errno = 0;
-  double v = strtod(s, &end);
-  if (end == s || *end || !isfinite(v)) {
+  double v;
+  if (cli_number(s, &v) != 1 || !isfinite(v)) {
     cli_error(cmd, "%s must be a finite number, not '%s'", opt, s);
     return 1;
   }

@@ -84,6 +84,11 @@ int cli_build_tree(const char *cmd, const char *path, const qk_point_t *pts, siz
 int cli_parse_u32(const char *cmd, const char *opt, const char *s, unsigned long min,
                   unsigned long max, unsigned long *out);
 int cli_parse_double(const char *cmd, const char *opt, const char *s, double *out);
+/* A whole string as a decimal number (optional sign, digits with an optional point, an
+ * optional exponent; or strtod's inf, infinity, nan in any case, which set a non-finite
+ * *v): 1 and *v set; 0 when it is not one; -1 when it is hexadecimal (0x...), which
+ * strtod would take but the tool's inputs do not. No blanks around. */
+int cli_number(const char *s, double *v);
 /* --xy X,Y: two column names or 1-based numbers, comma-separated. */
 int cli_parse_xy(const char *cmd, const char *opt, const char *s, const char **out);
 
@@ -95,7 +100,7 @@ int cli_parse_xy(const char *cmd, const char *opt, const char *s, const char **o
  */
 typedef struct cli_out {
   FILE *f;
-  char *path; /* final path (a link's target), NULL when writing directly */
+  char *path; /* final path (a link's target); the path given when writing directly */
   char *tmp;
   int direct; /* a FIFO or device: written in place, never renamed over */
 } cli_out_t;

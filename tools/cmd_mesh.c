@@ -122,8 +122,7 @@ static int parse_round(const char *cmd, const char *v, double *out) {
     }
     g = ldexp(1, (int)q);
   } else {
-    g = strtod(v, &end);
-    if (end == v || *end) g = -1;
+    if (cli_number(v, &g) != 1) g = -1; /* (decimal only, as every number the tool reads) */
   }
   if (!(g > 0) || !isfinite(g) || g < 1e-300) {
     cli_error(cmd, "--round %s: the grid step must be a positive number (e.g. 2^-4 or 0.5)", v);

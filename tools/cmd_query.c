@@ -307,22 +307,34 @@ static void knn_usage(FILE *f) {
                  COMMON_HELP);
 }
 
+static int knn_beyond(qrun_t *q, size_t i) {
+  cli_error(q->a.cmd,
+            "%s: query %zu (%.17g, %.17g): the query or the points reach beyond 2^510 "
+            "(about 3.4e153) on an axis, where squared distances overflow; scale the data by "
+            "a power of two",
+            q->a.files[1], i, q->pts[1][i].x, q->pts[1][i].y);
+  return CLI_BAD_INPUT;
+}
+
 static int knn_prepare(qrun_t *q) {
   int rc = build_tree(q);
-  return rc ? rc : scratch(q, q->a.k, 0);
+  if (rc) return rc;
+  /* qk_query_knn's QK_ERR_LIMIT (the query or the root square beyond 2^510 on an axis),
+   * found before the header: standard output cannot be taken back. */
+  qk_tree_stats_t s;
+  qk_tree_stats(q->tree, &s);
+  double m = fmax(fmax(fabs(s.root.x), fabs(s.root.y)),
+                  fmax(fabs(s.root.x + s.root.side), fabs(s.root.y + s.root.side)));
+  for (size_t i = 0; i < q->n[1]; i++)
+    if (fmax(m, fmax(fabs(q->pts[1][i].x), fabs(q->pts[1][i].y))) > 0x1p510)
+      return knn_beyond(q, i);
+  return scratch(q, q->a.k, 0);
 }
 
 static int knn_answer(qrun_t *q, size_t i) {
   size_t m;
   qk_status_t st = qk_query_knn(q->tree, q->pts[1][i], q->a.k, q->a.max_dist, q->nb, &m);
-  if (st == QK_ERR_LIMIT) {
-    cli_error(q->a.cmd,
-              "%s: query %zu (%.17g, %.17g): the query or the points reach beyond 2^510 "
-              "(about 3.4e153) on an axis, where squared distances overflow; scale the data by "
-              "a power of two",
-              q->a.files[1], i, q->pts[1][i].x, q->pts[1][i].y);
-    return CLI_BAD_INPUT;
-  }
+  if (st == QK_ERR_LIMIT) return knn_beyond(q, i);
   if (st != QK_OK) return cli_status(q->a.cmd, q->a.files[1], st);
   for (size_t j = 0; j < m; j++)
     emit(q, i, q->nb[j].id, "%zu,%zu,%u,%.17g", i, j + 1, (unsigned)q->nb[j].id, q->nb[j].dist);
@@ -432,8 +444,8 @@ static int locate_answer(qrun_t *q, size_t i) {
   if (qk_query_locate(q->tree, q->pts[1][i], &loc) != QK_OK)
     emit(q, i, SIZE_MAX, "%zu,nan,nan,nan,-1,0", i);
   else
-    emit(q, i, SIZE_MAX, "%zu,%.17g,%.17g,%.17g,%u,%zu", i, loc.square.x, loc.square.y,
-         loc.square.side, (unsigned)loc.depth, loc.count);
+    emit(q, i, SIZE_MAX, "%zu,%.17g,%.17g,%.17g,%u,%zu", i, loc.square.x + 0.0, loc.square.y + 0.0,
+         loc.square.side, (unsigned)loc.depth, loc.count); /* (-0 as 0) */
   return CLI_OK;
 }
 

@@ -84,14 +84,12 @@ static int csv_field(const char *line, int want, char *buf, size_t cap) {
   }
 }
 
-static int number(const char *f, double *v) {
-  char *end;
+/* A field as a number, blanks around allowed (cli_number: 1, 0, or -1 for hexadecimal). */
+static int number(char *f, double *v) {
   while (*f == ' ' || *f == '\t') f++;
-  if (!*f) return 0;
-  *v = strtod(f, &end);
-  if (end == f) return 0;
-  while (*end == ' ' || *end == '\t') end++;
-  return *end == '\0';
+  size_t n = strlen(f);
+  while (n > 0 && (f[n - 1] == ' ' || f[n - 1] == '\t')) f[--n] = '\0'; /* (our copy) */
+  return n ? cli_number(f, v) : 0;
 }
 
 /* --xy X,Y: column names or 1-based numbers; resolved against the header. */
@@ -121,7 +119,7 @@ static int parse_xy(const char *cmd, const char *s, xy_spec_t *xy) {
     if (!*end && v >= 1 && v <= 100000)
       xy->col[i] = (int)v - 1;
     else if (!*end) {
-      cli_error(cmd, "--xy: column number %s must be at least 1", xy->name[i]);
+      cli_error(cmd, "--xy: column number %s must be from 1 to 100000", xy->name[i]);
       return 1;
     }
   }
@@ -246,20 +244,21 @@ static int flush_chunk(join_t *j) {
 }
 
 static void join_usage(FILE *f) {
-  fprintf(f,
-          "usage: quadkit join REGIONS POINTS.csv [--field NAME]... [--all]\n"
-          "                    [--boundary semi-open|closed|open] [--planar] [--xy X,Y]\n"
-          "                    [--threads N] [-o FILE]\n\n"
-          "For each point (x, y; longitude, latitude unless --planar) the feature of REGIONS\n"
-          "(GeoJSON, or any OGR format when built with GDAL) that holds it. Writes CSV: the\n"
-          "point's line as read, then `feature` (0-based feature index, -1 for none) and the\n"
-          "requested properties (a name no feature has is an error). --all writes one row per "
-          "containing feature (a point in\n"
-          "none gets one row with -1). --xy picks the coordinate columns by header name or\n"
-          "1-based number (default: the first two). A header line (x and y fields not\n"
-          "numbers) is copied with the new column names appended. A bad line is an error\n"
-          "before any row is written (-o FILE is replaced only on success; on standard output\n"
-          "a POINTS file is checked whole first, while points from a pipe are written as read).\n");
+  fprintf(f, "usage: quadkit join REGIONS POINTS.csv [--field NAME]... [--all]\n"
+             "                    [--boundary semi-open|closed|open] [--planar] [--xy X,Y]\n"
+             "                    [--threads N] [-o FILE]\n"
+             "\n"
+             "For each point (x, y; longitude, latitude unless --planar) the feature of REGIONS\n"
+             "(GeoJSON, or any OGR format when built with GDAL) that holds it. Writes CSV: the\n"
+             "point's line as read, then `feature` (0-based feature index, -1 for none) and the\n"
+             "requested properties (a name no feature has is an error). --all writes one row per\n"
+             "containing feature (a point in none gets one row with -1). --xy picks the\n"
+             "coordinate columns by header name or 1-based number (default: the first two).\n"
+             "A header line (x and y fields not numbers) is copied with the new column names\n"
+             "appended. A bad line is an error before any row is written (-o FILE is replaced\n"
+             "only on success; on standard output a POINTS file is checked whole first, while\n"
+             "points from a pipe are written as read). --threads N answers on N threads\n"
+             "(default 1; 0: one per core; at most 256).\n");
 }
 
 static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long total) {
@@ -337,8 +336,8 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
       rc = CLI_BAD_INPUT;
       break;
     }
-    if (!number(fx, &x) || !number(fy, &y) || !isfinite(x) || !isfinite(y)) {
-      const char *bad = (!number(fx, &x) || !isfinite(x)) ? fx : fy;
+    if (number(fx, &x) != 1 || number(fy, &y) != 1 || !isfinite(x) || !isfinite(y)) {
+      const char *bad = (number(fx, &x) != 1 || !isfinite(x)) ? fx : fy;
       int col = bad == fx ? xy->col[0] : xy->col[1];
       fprintf(stderr, "quadkit join: %s:%ld: field %d is not a finite number: '%.40s'\n",
               j->pts_path, lineno, col + 1, bad);
@@ -456,6 +455,7 @@ int cmd_join(int argc, char **argv) {
   if (!rc) rc = check_fields(pos[0], r, fields, nf);
   join_t j = {pos[1], r, rule, all, (unsigned)threads, fields, nf, NULL, NULL, NULL, NULL, 0, 0};
   cli_out_t o = {0};
+  int wfail = 0; /* the output failed (cli_out_close said so) */
   if (!rc) rc = cli_out_open("join", outp, &o);
   if (!rc) {
     j.out = o.f;
@@ -481,10 +481,12 @@ int cmd_join(int argc, char **argv) {
       }
     }
     if (!rc) rc = join_stream(&j, in, &xy, isatty(2) && total > 0, total);
-    int rc2 = cli_out_close("join", &o, rc == CLI_OK);
+    wfail = o.f && ferror(o.f);
+    int rc2 = cli_out_close("join", &o, rc == CLI_OK); /* (says why a write failed) */
+    if (rc2) wfail = 1;
     if (!rc) rc = rc2;
   }
-  if (rc == CLI_INTERNAL) cli_error("join", "out of memory or write error");
+  if (rc == CLI_INTERNAL && !wfail) cli_error("join", "out of memory");
   free(j.lines);
   free(j.p);
   free(j.feat);
@@ -541,7 +543,7 @@ int cmd_regions(int argc, char **argv) {
          "\"build_seconds\": %.6f, \"mode\": \"%s\", \"bbox\": [%.17g, %.17g, %.17g, %.17g]}\n",
          s.features, s.rings, s.vertices, s.holes, s.self_intersecting, s.skipped, s.edges,
          s.leaves, s.leaf_edges, s.depth, s.bytes, s.build_seconds, s.planar ? "planar" : "lonlat",
-         s.box.xmin, s.box.ymin, s.box.xmax, s.box.ymax);
+         s.box.xmin + 0.0, s.box.ymin + 0.0, s.box.xmax + 0.0, s.box.ymax + 0.0); /* (-0 as 0) */
   if (svg) {
     qk_status_t st = qk_region_write_svg(r, o.f, 1200);
     rc = cli_out_close("regions", &o, st == QK_OK);

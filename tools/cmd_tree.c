@@ -78,7 +78,7 @@ int cmd_tree(int argc, char **argv) {
          "\"max_leaf_points\": %zu, \"capped_leaves\": %zu, \"capacity\": %u, \"max_depth\": %u, "
          "\"root\": {\"x\": %.17g, \"y\": %.17g, \"side\": %.17g}, \"memory_bytes\": %zu}\n",
          s.points, s.nodes, s.leaves, s.height, s.max_leaf_points, s.capped_leaves, s.capacity,
-         s.max_depth, s.root.x, s.root.y, s.root.side, s.memory_bytes);
+         s.max_depth, s.root.x + 0.0, s.root.y + 0.0, s.root.side /* (-0 as 0) */, s.memory_bytes);
   if (svg) {
     qk_status_t st = qk_tree_write_svg(tree, o.f, 800);
     rc = cli_out_close(cmd, &o, st == QK_OK);

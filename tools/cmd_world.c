@@ -23,7 +23,10 @@ typedef struct row {
 
 /* Split a line into fields in place: blanks around a field dropped; a field in double
  * quotes ("" inside for a quote) unquoted, as the other CSV inputs take them. NULL, or
- * what is malformed. */
+ * what is malformed. (Not io/csv_read.c: the library's reader returns numbers only, and a
+ * scene row holds a kind name and 64-bit ids, which doubles cannot hold exactly; the
+ * field scanner it uses is private to io/. Same quoting rules and messages:
+ * tests/cli/world.sh, review3.) */
 static const char *split(char *line, row_t *r) {
   r->n = 0;
   char *s = line;
@@ -56,12 +59,9 @@ static const char *split(char *line, row_t *r) {
   return NULL;
 }
 
-static int num(const char *s, double *v) {
-  char *end;
-  errno = 0;
-  *v = strtod(s, &end);
-  return end != s && *end == '\0';
-}
+/* A field as a number: cli_number's 1, 0, or -1 (hexadecimal, which looks like a number
+ * to the header test but is refused as a value). */
+static int num(const char *s, double *v) { return cli_number(s, v); }
 
 /* An id (or a frame): a whole number from 0 to 2^64 - 1. NULL, or an error message for
  * bad() saying what is wrong with it. */
@@ -128,14 +128,14 @@ static int shape_values(const char *path, unsigned long ln, qk_shape_kind_t k, c
   double v[4] = {0, 0, 0, 0};
   if (nf < need) return bad(path, ln, "%s", "too few fields for this kind of shape");
   for (int i = 0; i < need; i++) {
-    if (!num(f[i], &v[i])) return bad(path, ln, "not a number: '%s'", f[i]);
+    if (num(f[i], &v[i]) != 1) return bad(path, ln, "not a decimal number: '%s'", f[i]);
     if (!isfinite(v[i])) return bad(path, ln, "coordinate is not finite: '%s'", f[i]);
   }
   /* Fields a kind does not use may be empty or hold a number (files that write all six
    * columns for every kind), but nothing else. */
   for (int i = need; i < nf; i++) {
     double unused;
-    if (f[i][0] && !num(f[i], &unused))
+    if (f[i][0] && num(f[i], &unused) != 1)
       return bad(path, ln,
                  "field '%s' is not used by this kind of shape: leave it empty or a number", f[i]);
   }
@@ -207,7 +207,7 @@ static int each_row(const char *path,
      * taken for a header and the object dropped without a word). */
     int numbers = 0;
     double v;
-    for (int i = 0; i < r.n && i < 6; i++) numbers += num(r.f[i], &v);
+    for (int i = 0; i < r.n && i < 6; i++) numbers += num(r.f[i], &v) != 0;
     if (first && numbers == 0) {
       first = 0;
       continue;

@@ -45,6 +45,7 @@ int cli_out_open(const char *cmd, const char *path, cli_out_t *o) {
       return CLI_BAD_INPUT;
     }
     o->direct = 1;
+    o->path = strdup(path); /* (for the message when a write fails) */
     return CLI_OK;
   }
   size_t n = strlen(final) + 32;
@@ -82,9 +83,14 @@ int cli_out_close(const char *cmd, cli_out_t *o, int ok) {
     o->f = NULL;
     return rc;
   }
-  if (o->direct) {
+  if (o->direct) { /* a device or FIFO: nothing to take back, but say that it failed */
     if (ferror(o->f)) rc = CLI_INTERNAL;
-    if (fclose(o->f) != 0) rc = CLI_INTERNAL;
+    int e = rc ? errno : 0; /* (what the failed write left) */
+    if (fclose(o->f) != 0) rc = CLI_INTERNAL, e = errno;
+    if (rc)
+      cli_error(cmd, "cannot write %s: %s", o->path ? o->path : "the output",
+                e ? strerror(e) : "write error");
+    free(o->path);
     memset(o, 0, sizeof *o);
     return rc;
   }

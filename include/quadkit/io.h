@@ -9,10 +9,12 @@
  * lines holding only blanks are skipped. The first non-blank line is a header when
  * options say so, or (by default) when none of its selected fields is a number (a first
  * line "x1,2" is data, and an error); columns may then be selected by name.
- * Every other line is a data row: its selected fields must be numbers (strtod's syntax,
- * blanks around allowed) and finite; the other fields may hold anything. A row's 0-based
- * index among the data rows is its id. Data rows are limited to 2^32 - 2 (the ids a tree
- * holds). The library never prints: a rejected input fills a qk_error_t.
+ * Every other line is a data row: its selected fields must be decimal numbers (an optional
+ * sign, digits with an optional decimal point, an optional exponent: `-1.5e3`, `.5`, `5.`;
+ * blanks around allowed; strtod's hexadecimal `0x10` is refused) and finite; the other
+ * fields may hold anything. A row's 0-based index among the data rows is its id. Data
+ * rows are limited to 2^32 - 2 (the ids a tree holds). The library never prints: a
+ * rejected input fills a qk_error_t.
  */
 #ifndef QUADKIT_IO_H
 #define QUADKIT_IO_H
