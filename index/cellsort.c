@@ -27,6 +27,7 @@
  * certain, the sort declines and the caller uses the plain build.
  */
 #include <float.h>
+#include <stdatomic.h>
 #include <math.h>
 #include <string.h>
 
@@ -352,6 +353,26 @@ static void keys_job(unsigned w, unsigned thread, void *ctx) {
   }
 }
 
+/* Coarse bucket c's fine buckets' starts from the shares' counts of pass 1, and the points
+ * of its cells over the capacity. */
+static void bucket_starts(const bucket_job_t *j, size_t c) {
+  const uint32_t nf = 1u << j->fbits;
+  uint32_t next[1u << (16 - MAX_COARSE_BITS)];
+  memcpy(next, j->hist + c * nf, nf * sizeof *next);
+  for (unsigned v = 1; v < j->ns; v++) {
+    const uint32_t *h = j->hist + (size_t)v * j->nb + c * nf;
+    for (uint32_t f = 0; f < nf; f++) next[f] += h[f];
+  }
+  uint32_t *cum = j->cum + c * nf, acc = j->cbase[c], deep = 0, cap = j->t->capacity;
+  for (uint32_t f = 0; f < nf; f++) {
+    uint32_t k = next[f];
+    cum[f] = acc;
+    acc += k;
+    deep += k > cap ? k : 0;
+  }
+  j->deep[c] = deep;
+}
+
 /* Pass 2 for share w: the points as records into their coarse buckets' segments, stable.
  * Each bucket's records gather in a buffer of WC (five cache lines) that goes to memory
  * whole, with non-temporal stores for large inputs: no line of the record array is read
@@ -414,6 +435,9 @@ static void scatter_job(unsigned w, unsigned thread, void *ctx) {
 #if defined(__SSE2__)
   if (stream) _mm_sfence(); /* the streamed lines before anything the caller does next */
 #endif
+  /* The bucket starts, a share of the buckets each, so that the whole tree can be read off
+   * them before (or while) the fine pass runs. */
+  for (size_t c = w; c < nc; c += j->ns) bucket_starts(j, c);
 }
 
 static void keys_share(void *ctx, unsigned w, unsigned nw) {
@@ -587,19 +611,7 @@ static void fine_job(unsigned c, unsigned w, void *ud) {
   uint32_t a = j->cbase[c], b = j->cbase[c + 1];
   const uint32_t nf = 1u << j->fbits;
   uint32_t next[1u << (16 - MAX_COARSE_BITS)];
-  memcpy(next, j->hist + (size_t)c * nf, nf * sizeof *next);
-  for (unsigned v = 1; v < j->ns; v++) {
-    const uint32_t *h = j->hist + (size_t)v * j->nb + (size_t)c * nf;
-    for (uint32_t f = 0; f < nf; f++) next[f] += h[f];
-  }
-  uint32_t *cum = j->cum + (size_t)c * nf, acc = a, deep = 0, cap = j->t->capacity;
-  for (uint32_t f = 0; f < nf; f++) {
-    uint32_t k = next[f];
-    cum[f] = acc;
-    acc += k;
-    deep += k > cap ? k : 0;
-  }
-  j->deep[c] = deep;
+  const uint32_t *cum = j->cum + (size_t)c * nf;
   if (b - a <= j->stage_cap) {
     /* Staged: coordinates as pairs (one line written a point, not two) and ids. */
     for (uint32_t f = 0; f < nf; f++) next[f] = cum[f] - a;
@@ -614,6 +626,61 @@ static void fine_job(unsigned c, unsigned w, void *ud) {
   } else {
     for (uint32_t f = 0; f < nf; f++) next[f] = cum[f];
     fine_records(j, c, next, j->t->px, j->t->py, 1, j->t->pid);
+  }
+}
+
+/* The fine pass beside a hook (qk__cell_hook_t): share 0 runs the hook first, then every
+ * share takes buckets in order from a counter. A bucket is claimed once (0 free, 1
+ * claimed, 2 sorted); the hook, waiting for a cell, sorts the cell's bucket itself when no
+ * share has claimed it, so it never waits for a share that has not started (a thread that
+ * could not be created runs its share after share 0), and sorts other buckets while a
+ * running share sorts the one it waits for. */
+struct qk__cell_wait {
+  const bucket_job_t *j;
+  qk__cell_hook_t *hook;
+  atomic_uint next;
+  atomic_uchar state[1u << MAX_COARSE_BITS];
+};
+
+static bool claim(qk__cell_wait_t *s, unsigned c) {
+  unsigned char free = 0;
+  return atomic_compare_exchange_strong_explicit(&s->state[c], &free, 1, memory_order_relaxed,
+                                                 memory_order_relaxed);
+}
+
+static void sort_claimed(qk__cell_wait_t *s, unsigned c, unsigned w) {
+  fine_job(c, w, (void *)s->j);
+  atomic_store_explicit(&s->state[c], 2, memory_order_release);
+}
+
+void qk__cell_wait(qk__cell_wait_t *s, uint32_t cell) {
+  unsigned c = cell >> s->j->fbits;
+  if (atomic_load_explicit(&s->state[c], memory_order_acquire) == 2) return;
+  if (claim(s, c)) {
+    sort_claimed(s, c, 0); /* the hook runs in share 0 */
+    return;
+  }
+  /* Claimed by a running share: meanwhile sort the buckets no share has taken yet, then,
+   * when none is left, wait for the rest of that one (a bucket's sort: tens of
+   * microseconds). */
+  for (unsigned spins = 0; atomic_load_explicit(&s->state[c], memory_order_acquire) != 2;) {
+    if (atomic_load_explicit(&s->next, memory_order_relaxed) < s->j->nc) {
+      unsigned k = atomic_fetch_add_explicit(&s->next, 1u, memory_order_relaxed);
+      if (k < s->j->nc && claim(s, k)) sort_claimed(s, k, 0);
+    } else if (++spins >= 64) {
+      qk__thread_yield();
+    }
+  }
+}
+
+static void hook_share(void *ctx, unsigned w, unsigned nw) {
+  (void)nw;
+  qk__cell_wait_t *s = ctx;
+  if (w == 0) s->hook->st = s->hook->fn(s->hook->ctx, s->j->cum, s);
+  for (;;) {
+    unsigned c = atomic_fetch_add_explicit(&s->next, 1u, memory_order_relaxed);
+    if (c >= s->j->nc) return;
+    if (claim(s, c)) sort_claimed(s, c, w);
   }
 }
 
@@ -642,7 +709,7 @@ static void scratch_free(const qk_tree_t *t, scratch_t *s) {
 }
 
 qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned L, unsigned nw,
-                          uint32_t **cum, size_t *deep) {
+                          qk__cell_hook_t *hook, uint32_t **cum, size_t *deep) {
   *cum = NULL;
   *deep = 0;
   /* Margin in grid units: rounding of the corner arithmetic (at most one rounding per
@@ -751,8 +818,20 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
   }
   j.stage_cap = (uint32_t)cap;
   j.sxy = s.sxy, j.sid = s.sid;
-  qk__run_jobs_dynamic(nw, (unsigned)nc, fine_job, &j);
   for (size_t c = 0; c < nc; c++) *deep += s.deep[c];
+  if (hook && nw > 1 && nc > 1 && !t->alloc.fn && *deep < hook->deep_below) {
+    /* The hook on the calling thread beside the sort (the other threads' allocations would
+     * come from arenas of their own). */
+    qk__cell_wait_t wt;
+    wt.j = &j;
+    wt.hook = hook;
+    atomic_init(&wt.next, 0u);
+    for (size_t c = 0; c < nc; c++) atomic_init(&wt.state[c], 0);
+    hook->ran = true;
+    qk__run_shares(nw < nc ? nw : (unsigned)nc, hook_share, &wt);
+  } else {
+    qk__run_jobs_dynamic(nw, (unsigned)nc, fine_job, &j);
+  }
   *cum = s.cum;
   s.cum = NULL;
   scratch_free(t, &s);

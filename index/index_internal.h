@@ -205,6 +205,24 @@ uint32_t qk__split_sorted(qk_tree_t *t, uint32_t leaf, unsigned depth);
  * recursive build). */
 qk_status_t qk__build_subtree(qk_tree_t *t, uint32_t node, qk__geom_t g);
 
+/* Work that qk__cell_sort() runs on the calling thread beside its last pass (the points
+ * sorted bucket by bucket on the other threads), when it runs on several threads with the
+ * default allocator and fewer than deep_below points lie in cells over the capacity: fn
+ * gets the 4^L + 1 bucket starts, and must call qk__cell_wait() before it reads or moves
+ * the points of a cell. `ran` and `st` say whether it ran and what it returned. */
+typedef struct qk__cell_wait qk__cell_wait_t;
+typedef struct qk__cell_hook {
+  size_t deep_below;
+  qk_status_t (*fn)(void *ctx, const uint32_t *cum, qk__cell_wait_t *wait);
+  void *ctx;
+  bool ran;
+  qk_status_t st;
+} qk__cell_hook_t;
+
+/* Return once the points of grid cell `cell` are in their sorted places (sorting them on
+ * the calling thread when no thread has started to). */
+void qk__cell_wait(qk__cell_wait_t *w, uint32_t cell);
+
 /* Sort the n points into the tree's point arrays (already sized) by their cell in the
  * 2^L x 2^L grid over the root square, in the tree's pre-order, on nw threads (a caller's
  * allocator is only called from the calling thread). *cum gets the 4^L + 1 bucket starts
@@ -213,7 +231,7 @@ qk_status_t qk__build_subtree(qk_tree_t *t, uint32_t node, qk__geom_t g);
  * of points in cells holding more than the capacity (those the tree splits point by
  * point below the grid). */
 qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned L, unsigned nw,
-                          uint32_t **cum, size_t *deep);
+                          qk__cell_hook_t *hook, uint32_t **cum, size_t *deep);
 
 /* Bulk build by bucketing into a uniform grid (index/build.c). Sets *done when it built
  * the tree; leaves it false (and the tree untouched) when the plain build should run. */
@@ -241,6 +259,9 @@ qk_status_t qk__id_map(const qk_tree_t *t, const uint32_t **map);
 
 /* The number of threads a `threads` option asks for: 0 means every online core. */
 unsigned qk__threads_resolve(uint32_t threads);
+
+/* Let another thread run (a waiting loop's step). */
+void qk__thread_yield(void);
 
 /* One share of a parallel region: share w of nw. */
 typedef void (*qk__share_fn)(void *ctx, unsigned w, unsigned nw);

@@ -12,6 +12,7 @@
 
 #if defined(QK_HAVE_PTHREADS)
 #include <pthread.h>
+#include <sched.h>
 #endif
 
 unsigned qk__threads_resolve(uint32_t threads) {
@@ -24,6 +25,12 @@ unsigned qk__threads_resolve(uint32_t threads) {
 #endif
   }
   return threads > QK__MAX_THREADS ? QK__MAX_THREADS : threads;
+}
+
+void qk__thread_yield(void) {
+#if defined(QK_HAVE_PTHREADS)
+  sched_yield();
+#endif
 }
 
 typedef struct share {

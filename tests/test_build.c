@@ -10,6 +10,10 @@
  * 1): on two and on three threads the same tree node for node, with the same point order
  * in every leaf, as on one; and a uniform input whose tree is made on one thread after
  * the threaded sort.
+ *
+ * The tree made from the counts beside the threaded sort's last pass (fewer than 2^16 points
+ * in cells over the capacity), waiting for the buckets of the cells it splits: the same
+ * tree on 2, 3 and 4 threads as on one, and the shape of inserting the points one by one.
  */
 #include <math.h>
 #include <stdlib.h>
@@ -132,10 +136,64 @@ static void test_build_threads_adversarial(void **state) {
   free(p);
 }
 
+/* Between 1 and 2^16 points in cells over the capacity: on several threads the tree is made
+ * from the counts on the calling thread while the other threads sort the buckets, and it
+ * waits for (or sorts itself) each bucket holding a cell it splits point by point. Uniform
+ * points at capacity 8 (about 29,000 of them in cells over 8) and 24 spots of 200 equal
+ * points, in buckets spread over the grid, split to depth 14: the same tree, node for node
+ * and point for point, on 2, 3 and 4 threads as on one, and the same shape as inserting the
+ * points one by one. */
+static void test_build_tree_beside_sort(void **state) {
+  (void)state;
+  uint64_t seed = qkt_seed(1203);
+  qkt_rng_t r;
+  qkt_rng_seed(&r, seed);
+  print_message("seed %llu\n", (unsigned long long)seed);
+  enum { N = 300000, SPOTS = 24, PER = 200 };
+  qk_point_t *p = malloc(N * sizeof *p);
+  assert_non_null(p);
+  qkt_points(&r, QKT_UNIFORM, p, N);
+  for (size_t s = 0; s < SPOTS; s++) {
+    qk_point_t c = {(double)qkt_rng_below(&r, 1u << 20) / (double)(1u << 20),
+                    (double)qkt_rng_below(&r, 1u << 20) / (double)(1u << 20)};
+    for (size_t i = 0; i < PER; i++) p[(s * 12007 + i * 61) % N] = c;
+  }
+  qk_tree_options_t o;
+  qk_tree_options_init(&o);
+  o.capacity = 8;
+  o.max_depth = 14;
+  o.has_root = 1; /* the inserts' root: a fitted one would differ */
+  o.root = (qk_square_t){0, 0, 1};
+  qk_tree_t *ins = NULL;
+  assert_int_equal(qk_tree_build(NULL, 0, &o, &ins), QK_OK);
+  for (size_t i = 0; i < N; i++) assert_int_equal(qk_tree_insert(ins, p[i], NULL), QK_OK);
+  qkt_shape_t want = qkt_tree_shape(ins);
+  qk_tree_free(ins);
+  o.threads = 1;
+  qk_tree_t *one = NULL;
+  assert_int_equal(qk_tree_build(p, N, &o, &one), QK_OK);
+  QKT_CHECK_TREE(one);
+  qkt_shape_t got = qkt_tree_shape(one);
+  assert_int_equal(got.nodes, want.nodes);
+  assert_true(got.hash == want.hash);
+  for (uint32_t threads = 2; threads <= 4; threads++) {
+    o.threads = threads;
+    qk_tree_t *t = NULL;
+    assert_int_equal(qk_tree_build(p, N, &o, &t), QK_OK);
+    print_message("%u threads\n", threads);
+    QKT_CHECK_TREE(t);
+    qkt_assert_same_tree(one, t);
+    qk_tree_free(t);
+  }
+  qk_tree_free(one);
+  free(p);
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_build_deep_grid_lines),
       cmocka_unit_test(test_build_threads_adversarial),
+      cmocka_unit_test(test_build_tree_beside_sort),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
