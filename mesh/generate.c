@@ -181,6 +181,17 @@ static qk_status_t classic_ok(const qk_poly_t *P, const qk_mesh_options_t *o, in
   return QK_OK;
 }
 
+/* Are the unit-leaf records in increasing node order? They are as made: a unit leaf is a
+ * child of a square of side 2, whose four children get consecutive new ids when it is
+ * split, and the depth-first subdivision splits those squares, and records their
+ * children, in the order it meets them. Checked, so that the sort stays as the fallback
+ * (node ids are the tree's business). */
+static int recs_sorted(const qk__gen_t *g) {
+  for (size_t i = 1; i < g->nrec; i++)
+    if (g->rec[i - 1].node >= g->rec[i].node) return 0;
+  return 1;
+}
+
 /* Step 1: the subdivision is a quadkit tree over the root square [0,U]^2 with no points,
  * split by qk__mesh_subdivide() from the list of every edge. */
 static qk_status_t subdivide(qk__gen_t *g, qk_mesh_t *m) {
@@ -205,15 +216,14 @@ static qk_status_t subdivide(qk__gen_t *g, qk_mesh_t *m) {
   if ((st = qk__mesh_subdivide(g, qk_tree_root(g->tree), 0, 0, (int64_t)g->U, 0, g->ne))) return st;
   qk_tree_leaves(g->tree, NULL, 0, &m->stats.leaves_before_balance);
   /* Records sorted by node id, for lookups by hole location. */
-  if (g->nrec) qsort(g->rec, g->nrec, sizeof *g->rec, qk__mesh_rec_cmp);
+  if (g->nrec && !recs_sorted(g)) qsort(g->rec, g->nrec, sizeof *g->rec, qk__mesh_rec_cmp);
   return QK_OK;
 }
 
-/* Step 2: BalanceQuadTree. */
-static qk_status_t balance(qk__gen_t *g, qk_mesh_t *m) {
+/* Step 2: BalanceQuadTree. The leaves it leaves are counted by the triangulation. */
+static qk_status_t balance(qk__gen_t *g) {
   qk_status_t st = qk_tree_balance(g->tree);
   if (st) return qk__mesh_fail(g->err, st, 0, "%s while balancing", qk_strerror(st));
-  qk_tree_leaves(g->tree, NULL, 0, &m->stats.leaves);
   return QK_OK;
 }
 
@@ -348,11 +358,12 @@ static qk_status_t triangulate(qk__gen_t *g, qk_mesh_t *m) {
   qk__tri_state_t T;
   memset(&T, 0, sizeof T);
   T.a = g->a;
-  qk__leaf_tris_t lt = {NULL, 0};
+  qk__leaf_tris_t lt = {NULL, 0, 0};
   uint8_t *drop = NULL;
   uint32_t *newid = NULL;
   qk_status_t st = qk__mesh_triangulate(g, &T, &lt);
   if (st) goto out;
+  m->stats.leaves = lt.nleaves; /* counted by the triangulation's walk */
   drop = qk__realloc(g->a, NULL, 0, (size_t)T.nregion + 1);
   newid = qk__realloc(g->a, NULL, 0, (T.nv ? T.nv : 1) * sizeof *newid);
   if (!drop || !newid) {
@@ -424,7 +435,7 @@ qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *opt
     t1 = now();
     if (!(st = subdivide(&g, m)) && !(st = qk__mesh_refine(&g))) {
       t2 = now();
-      if (!(st = balance(&g, m))) {
+      if (!(st = balance(&g))) {
         t3 = now();
         if (!(st = triangulate(&g, m))) st = qk__mesh_markers(&g, m);
       }

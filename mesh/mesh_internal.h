@@ -152,6 +152,7 @@ typedef struct qk__tri_state {
 typedef struct qk__leaf_tris {
   uint32_t *first; /* per node id: first triangle of the leaf, or QK__MESH_UNSET */
   size_t cap;
+  size_t nleaves; /* leaves of the balanced tree */
 } qk__leaf_tris_t;
 
 /* "Not set" for node, record, cell and label slots. */

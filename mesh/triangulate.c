@@ -309,22 +309,26 @@ out:
 /* The square of every node reachable from the root, by node id, computed top-down in one
  * pass (qk__node_square recomputes a node's whole path at each call); `sq` has room for
  * the tree's node bound. Squares are dyadic and halving is exact, so these are the
- * tree's own squares. */
-static void node_squares(const qk_tree_t *t, qk_square_t *sq) {
+ * tree's own squares. The same pass lists the leaves into `leaves` (room for the node
+ * bound) in qk_tree_leaves' order, pre-order with the children first to last, and
+ * returns their number: one walk instead of a count, a list and the squares. */
+static size_t node_squares(const qk_tree_t *t, qk_square_t *sq, qk_node_t *leaves) {
   qk_node_t stack[3 * (QK_MAX_DEPTH_LIMIT + 2) + 4]; /* 3 siblings a level wait */
-  size_t n = 0;
+  size_t n = 0, nl = 0;
   qk_node_t root = qk_tree_root(t);
   sq[root] = qk__tree_root_square(t);
   stack[n++] = root;
   while (n) {
     qk_node_t v = stack[--n];
     uint32_t c = qk__node_child(t, v);
-    if (c == QK_NONE) continue;
-    for (unsigned q = 0; q < 4; q++) {
-      sq[c + q] = qk__child_square(sq[v], q);
-      stack[n++] = c + q;
+    if (c == QK_NONE) {
+      leaves[nl++] = v;
+      continue;
     }
+    for (unsigned q = 0; q < 4; q++) sq[c + q] = qk__child_square(sq[v], q);
+    for (unsigned q = 4; q-- > 0;) stack[n++] = c + q;
   }
+  return nl;
 }
 
 qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris_t *lt) {
@@ -336,11 +340,17 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
   uint32_t *leaf_of = qk__realloc(g->a, NULL, 0, nn * sizeof *leaf_of);
   lt->cap = nn;
   lt->first = qk__realloc(g->a, NULL, 0, lt->cap * sizeof *lt->first);
+  /* The leaves and every node's square in one walk; a tree has fewer leaves than nodes. */
   size_t nleaves = 0;
-  qk_tree_leaves(t, NULL, 0, &nleaves);
-  qk_node_t *leaves = qk__realloc(g->a, NULL, 0, (nleaves + 1) * sizeof *leaves);
-  uint32_t *cell_label = qk__realloc(g->a, NULL, 0, (2 * nleaves + 1) * sizeof *cell_label);
-  if (!rec_of || !leaf_of || !lt->first || !leaves || !cell_label ||
+  qk_node_t *leaves = qk__realloc(g->a, NULL, 0, (nn + 1) * sizeof *leaves);
+  qk_square_t *nsq = qk__realloc(g->a, NULL, 0, (nn + 1) * sizeof *nsq);
+  uint32_t *cell_label = NULL;
+  if (leaves && nsq) {
+    nleaves = node_squares(t, nsq, leaves);
+    cell_label = qk__realloc(g->a, NULL, 0, (2 * nleaves + 1) * sizeof *cell_label);
+  }
+  lt->nleaves = nleaves;
+  if (!rec_of || !leaf_of || !lt->first || !leaves || !nsq || !cell_label ||
       hmap_init(g->a, &T->vmap, 2 * nleaves + 16) != QK_OK) {
     st = QK_ERR_NOMEM;
     goto out;
@@ -349,7 +359,6 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
   memset(lt->first, 0xff, lt->cap * sizeof *lt->first);
   memset(cell_label, 0xff, (2 * nleaves + 1) * sizeof *cell_label);
   for (size_t i = 0; i < g->nrec; i++) rec_of[g->rec[i].node] = (uint32_t)i;
-  qk_tree_leaves(t, leaves, nleaves, &nleaves);
   for (size_t li = 0; li < nleaves; li++) leaf_of[leaves[li]] = (uint32_t)li;
 
   /* Room for the usual counts (about 3 triangles and 1.5 vertices a leaf), so that the
@@ -370,14 +379,10 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
   /* First every leaf's corners, so that the vertex map holds every lattice point a leaf
    * has as a corner. */
   uint32_t *corner = qk__realloc(g->a, NULL, 0, (4 * nleaves + 4) * sizeof *corner);
-  qk_square_t *nsq = qk__realloc(g->a, NULL, 0, (nn + 1) * sizeof *nsq);
-  if (!corner || !nsq) {
-    qk__free(g->a, corner, (4 * nleaves + 4) * sizeof *corner);
-    qk__free(g->a, nsq, (nn + 1) * sizeof *nsq);
+  if (!corner) {
     st = QK_ERR_NOMEM;
     goto out;
   }
-  node_squares(t, nsq);
   for (size_t li = 0; li < nleaves; li++) {
     qk_square_t sq = nsq[leaves[li]];
     int64_t S = 2 * (int64_t)sq.side, X = 2 * (int64_t)sq.x, Y = 2 * (int64_t)sq.y;
@@ -433,12 +438,11 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
   }
   if (!st) st = label_cells(g, T, leaves, nleaves, leaf_of, rec_of, cell_label, &L);
   hmap_free(g->a, &L.at);
-  qk__free(g->a, nsq, (nn + 1) * sizeof *nsq);
-  if (st) goto out;
 out:
+  qk__free(g->a, nsq, (nn + 1) * sizeof *nsq);
   qk__free(g->a, rec_of, nn * sizeof *rec_of);
   qk__free(g->a, leaf_of, nn * sizeof *leaf_of);
-  qk__free(g->a, leaves, (nleaves + 1) * sizeof *leaves);
+  qk__free(g->a, leaves, (nn + 1) * sizeof *leaves);
   qk__free(g->a, cell_label, (2 * nleaves + 1) * sizeof *cell_label);
   if (st) qk__mesh_fail(g->err, st, 0, "%s while triangulating", qk_strerror(st));
   return st;

@@ -21,6 +21,48 @@
 #include "polygen.h"
 #include "qk_test.h"
 
+/*
+ * The leaves the statistics report are the tree's (qk_tree_leaves), and, when every
+ * triangle is kept (`all_kept`: no holes), the triangles come leaf by leaf in
+ * qk_tree_leaves' order: the leaf holding each triangle's centroid (found by point
+ * location, apart from the generator's own walk) never goes back in that order.
+ */
+static void check_leaf_order(const qk_mesh_t *m, const qk_mesh_stats_t *s, int all_kept,
+                             const char *what) {
+  const qk_tree_t *t = qk_mesh_tree(m);
+  size_t nl = 0;
+  assert_int_equal(qk_tree_leaves(t, NULL, 0, &nl), QK_OK);
+  if (s->leaves != nl) fail_msg("%s: stats say %zu leaves, the tree has %zu", what, s->leaves, nl);
+  if (!all_kept) return;
+  qk_node_t *leaves = malloc((nl + 1) * sizeof *leaves);
+  assert_non_null(leaves);
+  assert_int_equal(qk_tree_leaves(t, leaves, nl, &nl), QK_OK);
+  qk_node_t top = 0;
+  for (size_t i = 0; i < nl; i++)
+    if (leaves[i] > top) top = leaves[i];
+  size_t *pos = malloc(((size_t)top + 1) * sizeof *pos);
+  assert_non_null(pos);
+  for (size_t i = 0; i < nl; i++) pos[leaves[i]] = i;
+  size_t nv, nt;
+  const double *xy = qk_mesh_vertices(m, &nv);
+  const uint32_t *tri = qk_mesh_triangles(m, &nt);
+  size_t last = 0;
+  for (size_t k = 0; k < nt; k++) {
+    const uint32_t *v = &tri[3 * k];
+    qk_point_t c = {(xy[2 * v[0]] + xy[2 * v[1]] + xy[2 * v[2]]) / 3,
+                    (xy[2 * v[0] + 1] + xy[2 * v[1] + 1] + xy[2 * v[2] + 1]) / 3};
+    qk_node_t leaf;
+    assert_int_equal(qk_tree_find_leaf(t, c, &leaf), QK_OK);
+    assert_true(leaf <= top);
+    if (pos[leaf] < last)
+      fail_msg("%s: triangle %zu lies in leaf %zu of the tree's order, after leaf %zu", what, k,
+               pos[leaf], last);
+    last = pos[leaf];
+  }
+  free(pos);
+  free(leaves);
+}
+
 /* Mesh an input given as arrays and run the checker; returns the triangle count. */
 static size_t mesh_and_check(const double *xy, size_t nv, const uint32_t *seg, size_t ns,
                              const double *holes, size_t nh, uint64_t U, const char *what) {
@@ -47,6 +89,7 @@ static size_t mesh_and_check(const double *xy, size_t nv, const uint32_t *seg, s
   qk_mesh_stats(m, &s);
   assert_int_equal(s.triangles, mm.nt);
   if (mm.nt) assert_true(s.min_angle_deg > 44.999 && s.max_angle_deg < 90.001);
+  check_leaf_order(m, &s, nh == 0, what);
   size_t nt = mm.nt;
   qk_mesh_free(m);
   qk_poly_free(p);
