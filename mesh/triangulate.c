@@ -95,16 +95,23 @@ static qk_status_t new_vertex(qk__tri_state_t *T, int64_t x, int64_t y, int stei
   return QK_OK;
 }
 
-/* The vertex at a lattice point, created on first use (corners are shared by leaves). */
-static qk_status_t corner_vertex(qk__tri_state_t *T, int64_t x, int64_t y, uint32_t *id) {
+/* The vertex at a lattice point, created on first use (corners are shared by leaves).
+ * Four calls a leaf: the probe is inlined, and a new key is stored in the slot the probe
+ * ended at while the map has room (hmap_get_or_put, which grows it, otherwise). */
+static inline qk_status_t corner_vertex(qk__tri_state_t *T, int64_t x, int64_t y, uint32_t *id) {
   uint64_t key = ((uint64_t)x << 32) | (uint64_t)y;
+  qk__hmap_t *h = &T->vmap;
+  size_t mask = h->cap - 1, j = hslot(key, h->cap);
+  for (uint64_t k; (k = h->k[j]) != UINT64_MAX; j = (j + 1) & mask)
+    if (k == key) {
+      *id = h->v[j];
+      return QK_OK;
+    }
   uint32_t v = (uint32_t)T->nv;
-  int r = hmap_get_or_put(T->a, &T->vmap, key, &v);
-  if (r < 0) return QK_ERR_NOMEM;
-  if (r == 1) {
-    *id = v;
-    return QK_OK;
-  }
+  if (2 * (h->n + 1) <= h->cap)
+    h->k[j] = key, h->v[j] = v, h->n++;
+  else if (hmap_get_or_put(T->a, h, key, &v) < 0)
+    return QK_ERR_NOMEM;
   return new_vertex(T, x, y, 0, id);
 }
 
