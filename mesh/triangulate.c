@@ -77,12 +77,10 @@ static int hmap_get_or_put(const qk_allocator_t *a, qk__hmap_t *h, uint64_t key,
   return 0;
 }
 
-static qk_status_t new_vertex(qk__tri_state_t *T, int64_t x, int64_t y, int steiner, uint32_t *id) {
-  if (T->nv < T->vcap && T->nv < T->vycap && T->nv < T->scap) { /* room: no calls */
-    T->vx[T->nv] = x, T->vy[T->nv] = y, T->steiner[T->nv] = (uint8_t)steiner;
-    *id = (uint32_t)T->nv++;
-    return QK_OK;
-  }
+/* new_vertex when an array must grow (kept out of line: the arrays are sized for the
+ * usual counts before the leaves are triangulated, so this is seldom called). */
+static qk_status_t new_vertex_grow(qk__tri_state_t *T, int64_t x, int64_t y, int steiner,
+                                   uint32_t *id) {
   void *p1 = T->vx, *p2 = T->vy, *p3 = T->steiner;
   if (qk__grow(T->a, &p1, &T->vcap, T->nv + 1, sizeof *T->vx)) return QK_ERR_NOMEM;
   T->vx = p1;
@@ -93,6 +91,16 @@ static qk_status_t new_vertex(qk__tri_state_t *T, int64_t x, int64_t y, int stei
   T->vx[T->nv] = x, T->vy[T->nv] = y, T->steiner[T->nv] = (uint8_t)steiner;
   *id = (uint32_t)T->nv++;
   return QK_OK;
+}
+
+static inline qk_status_t new_vertex(qk__tri_state_t *T, int64_t x, int64_t y, int steiner,
+                                     uint32_t *id) {
+  if (T->nv < T->vcap && T->nv < T->vycap && T->nv < T->scap) { /* room: no calls */
+    T->vx[T->nv] = x, T->vy[T->nv] = y, T->steiner[T->nv] = (uint8_t)steiner;
+    *id = (uint32_t)T->nv++;
+    return QK_OK;
+  }
+  return new_vertex_grow(T, x, y, steiner, id);
 }
 
 /* The vertex at a lattice point, created on first use (corners are shared by leaves).
@@ -115,14 +123,24 @@ static inline qk_status_t corner_vertex(qk__tri_state_t *T, int64_t x, int64_t y
   return new_vertex(T, x, y, 0, id);
 }
 
-static qk_status_t add_tri(qk__tri_state_t *T, uint32_t a, uint32_t b, uint32_t c, uint32_t cell) {
-  if (T->nt >= T->tcap || T->nt >= T->lcap) {
-    void *p1 = T->tri, *p2 = T->label;
-    if (qk__grow(T->a, &p1, &T->tcap, T->nt + 1, 3 * sizeof *T->tri)) return QK_ERR_NOMEM;
-    T->tri = p1;
-    if (qk__grow(T->a, &p2, &T->lcap, T->nt + 1, sizeof *T->label)) return QK_ERR_NOMEM;
-    T->label = p2;
-  }
+/* add_tri when the arrays must grow (seldom: they are sized for the usual counts). */
+static qk_status_t add_tri_grow(qk__tri_state_t *T, uint32_t a, uint32_t b, uint32_t c,
+                                uint32_t cell) {
+  void *p1 = T->tri, *p2 = T->label;
+  if (qk__grow(T->a, &p1, &T->tcap, T->nt + 1, 3 * sizeof *T->tri)) return QK_ERR_NOMEM;
+  T->tri = p1;
+  if (qk__grow(T->a, &p2, &T->lcap, T->nt + 1, sizeof *T->label)) return QK_ERR_NOMEM;
+  T->label = p2;
+  uint32_t *t = &T->tri[3 * T->nt];
+  t[0] = a, t[1] = b, t[2] = c;
+  T->label[T->nt] = cell;
+  T->nt++;
+  return QK_OK;
+}
+
+static inline qk_status_t add_tri(qk__tri_state_t *T, uint32_t a, uint32_t b, uint32_t c,
+                                  uint32_t cell) {
+  if (T->nt >= T->tcap || T->nt >= T->lcap) return add_tri_grow(T, a, b, c, cell);
   uint32_t *t = &T->tri[3 * T->nt];
   t[0] = a, t[1] = b, t[2] = c;
   T->label[T->nt] = cell;
@@ -438,10 +456,14 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
   hmap_free(T->a, &T->vmap);
   leaf_map_t L = {{NULL, NULL, 0, 0}, nsq, (int64_t)qk__tree_root_square(t).side};
   if (!st && hmap_init(g->a, &L.at, nleaves + 16)) st = QK_ERR_NOMEM;
+  /* Sized for twice the leaves, so it never grows: each leaf goes into the first empty
+   * slot of its probe (leaves do not overlap, so their corners are distinct keys). */
   for (size_t li = 0; li < nleaves && !st; li++) {
     uint32_t v = leaves[li];
-    if (hmap_get_or_put(g->a, &L.at, corner_key((int64_t)nsq[v].x, (int64_t)nsq[v].y), &v) < 0)
-      st = QK_ERR_NOMEM;
+    uint64_t key = corner_key((int64_t)nsq[v].x, (int64_t)nsq[v].y);
+    size_t j = hslot(key, L.at.cap);
+    while (L.at.k[j] != UINT64_MAX && L.at.k[j] != key) j = (j + 1) & (L.at.cap - 1);
+    if (L.at.k[j] == UINT64_MAX) L.at.k[j] = key, L.at.v[j] = v, L.at.n++;
   }
   if (!st) st = label_cells(g, T, leaves, nleaves, leaf_of, rec_of, cell_label, &L);
   hmap_free(g->a, &L.at);
