@@ -212,67 +212,74 @@ static qk_status_t tri_unit(qk__tri_state_t *T, const qk__unit_rec_t *r, const u
  * every component, label 0. (A face of a component is one region; the outside may be
  * several when components touching the domain's edge cut it apart.)
  */
-/* Leaves by lower-left corner (a leaf's is its own: leaves do not overlap), with every
- * node's square: the neighbours across a side by lookups. */
+/*
+ * The leaves by their corners: by[k][c] is the leaf (index in the leaf list) whose corner
+ * k (SW, SE, NE, NW) is corner vertex c, or QK__MESH_UNSET. Leaves do not overlap, so a
+ * vertex is corner k of at most one leaf. Every neighbour across a side of a leaf in a
+ * balanced tree has a corner at one of that side's ends, so the neighbours come from two
+ * array reads with the leaf's own corner vertices, no coordinates and no hashing.
+ */
 typedef struct leaf_map {
-  qk__hmap_t at;         /* corner key -> leaf node */
-  const qk_square_t *sq; /* by node id */
-  int64_t U;             /* the root square's side */
+  uint32_t *by[4];        /* by corner kind, indexed by corner vertex id */
+  const uint32_t *corner; /* 4 per leaf: SW, SE, NE, NW vertex ids */
+  const qk_node_t *leaves;
+  const uint32_t *leaf_of; /* by node id */
+  const qk_square_t *sq;   /* by node id */
+  int64_t U;               /* the root square's side */
 } leaf_map_t;
 
-static uint64_t corner_key(int64_t x, int64_t y) { return ((uint64_t)x << 32) | (uint64_t)y; }
-
-/* The leaf with lower-left corner (x, y) and side s, or QK_NONE. */
-static qk_node_t leaf_at(const leaf_map_t *L, int64_t x, int64_t y, int64_t s) {
-  uint32_t v;
-  if (!hmap_get(&L->at, corner_key(x, y), &v) || (int64_t)L->sq[v].side != s) return QK_NONE;
-  return v;
-}
-
 /*
- * The leaves across side sd (south, east, north, west) of leaf v, as
- * qk_tree_adjacent_leaves gives them, same order, into nb (room for 8): in a balanced
- * tree one leaf of the same size, two of half the size (the one lower along the side
- * first, as the tree lists them), or one of twice the size; the tree's own search
- * otherwise (never, for a balanced tree, but it costs nothing to be sure).
+ * The leaves across side sd (south, east, north, west) of leaf li, as
+ * qk_tree_adjacent_leaves gives them, same order, into nb (room for 8) as leaf indices: in
+ * a balanced tree one leaf of the same size, two of half the size (the one lower along the
+ * side first, as the tree lists them), or one of twice the size; the tree's own search
+ * otherwise (never, for a balanced tree, but it costs nothing to be sure). Side sd runs
+ * from corner vertex p to q; the same-size neighbour, the first half-size one and the
+ * double-size one when aligned with p have their corner kp at p, the second half-size one
+ * and the double-size one otherwise their corner kq at q.
  */
-static size_t side_leaves(const qk_tree_t *t, const leaf_map_t *L, qk_node_t v, int sd,
-                          qk_node_t *nb) {
-  qk_square_t q = L->sq[v];
-  int64_t X = (int64_t)q.x, Y = (int64_t)q.y, S = (int64_t)q.side, h = S / 2, D = 2 * S;
+static size_t side_leaves(const qk_tree_t *t, const leaf_map_t *L, uint32_t li, int sd,
+                          uint32_t *nb) {
+  static const unsigned char pk[4][4] = {/* p's corner index, kp, q's index, kq */
+                                         {0, 3, 1, 2},
+                                         {1, 0, 2, 3},
+                                         {3, 0, 2, 1},
+                                         {0, 1, 3, 2}};
+  qk_node_t v = L->leaves[li];
+  qk_square_t sq = L->sq[v];
+  int64_t X = (int64_t)sq.x, Y = (int64_t)sq.y, S = (int64_t)sq.side;
   if ((sd == 0 && Y == 0) || (sd == 3 && X == 0) || (sd == 2 && Y + S == L->U) ||
       (sd == 1 && X + S == L->U))
     return 0; /* the root square's boundary */
-  /* Lower-left corners of the same-size, the two half-size and the double-size
-   * candidates. */
-  int64_t sx, sy, ax, ay, bx, by, dx, dy;
-  switch (sd) {
-  case 0:
-    sx = X, sy = Y - S, ax = X, ay = Y - h, bx = X + h, by = Y - h, dx = X & ~(D - 1), dy = Y - D;
-    break;
-  case 1:
-    sx = X + S, sy = Y, ax = X + S, ay = Y, bx = X + S, by = Y + h, dx = X + S, dy = Y & ~(D - 1);
-    break;
-  case 2:
-    sx = X, sy = Y + S, ax = X, ay = Y + S, bx = X + h, by = Y + S, dx = X & ~(D - 1), dy = Y + S;
-    break;
-  default:
-    sx = X - S, sy = Y, ax = X - h, ay = Y, bx = X - h, by = Y + h, dx = X - D, dy = Y & ~(D - 1);
-    break;
+  const uint32_t *c = &L->corner[4 * li];
+  const unsigned char *e = pk[sd];
+  uint32_t a = L->by[e[1]][c[e[0]]], b = L->by[e[3]][c[e[2]]];
+  int64_t sa = a != QK__MESH_UNSET ? (int64_t)L->sq[L->leaves[a]].side : 0;
+  int64_t sb = b != QK__MESH_UNSET ? (int64_t)L->sq[L->leaves[b]].side : 0;
+  if (sa == S || (sa == 2 * S)) {
+    nb[0] = a;
+    return 1;
   }
-  if ((nb[0] = leaf_at(L, sx, sy, S)) != QK_NONE) return 1;
-  if (h && (nb[0] = leaf_at(L, ax, ay, h)) != QK_NONE && (nb[1] = leaf_at(L, bx, by, h)) != QK_NONE)
+  if (sa && 2 * sa == S && 2 * sb == S) {
+    nb[0] = a, nb[1] = b;
     return 2;
-  if ((nb[0] = leaf_at(L, dx, dy, D)) != QK_NONE) return 1;
+  }
+  if (sb == 2 * S) {
+    nb[0] = b;
+    return 1;
+  }
   static const qk_dir_t side_dir[4] = {QK_SOUTH, QK_EAST, QK_NORTH, QK_WEST};
+  qk_node_t nn[8];
   size_t n = 0;
-  qk_tree_adjacent_leaves(t, v, side_dir[sd], nb, 8, &n);
-  return n < 8 ? n : 8;
+  qk_tree_adjacent_leaves(t, v, side_dir[sd], nn, 8, &n);
+  if (n > 8) n = 8;
+  for (size_t i = 0; i < n; i++) nb[i] = L->leaf_of[nn[i]];
+  return n;
 }
 
 static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, const qk_node_t *leaves,
-                               size_t nleaves, const uint32_t *leaf_of, const uint32_t *rec_of,
-                               const uint32_t *cell_label, const leaf_map_t *L) {
+                               size_t nleaves, const uint32_t *rec_of, const uint32_t *cell_label,
+                               const leaf_map_t *L) {
   const qk_tree_t *t = g->tree;
   size_t ncell = 2 * nleaves;
   uint32_t *queue = qk__realloc(g->a, NULL, 0, (ncell + 1) * sizeof *queue);
@@ -305,12 +312,11 @@ static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, const qk_node_t
       for (int sd = 0; sd < 4; sd++) {
         if (!cell_touches(diag, (int)k, sd)) continue;
         if (r && r->piece[piece_of_side[sd]]) continue; /* a component edge: a boundary */
-        qk_node_t nb[8];
-        size_t n = side_leaves(t, L, v, sd, nb);
+        uint32_t nb[8];
+        size_t n = side_leaves(t, L, li, sd, nb);
         for (size_t i = 0; i < n; i++) {
-          uint32_t lw = leaf_of[nb[i]];
-          const qk__unit_rec_t *rw =
-              rec_of[nb[i]] != QK__MESH_UNSET ? &g->rec[rec_of[nb[i]]] : NULL;
+          uint32_t lw = nb[i], vw = leaves[lw];
+          const qk__unit_rec_t *rw = rec_of[vw] != QK__MESH_UNSET ? &g->rec[rec_of[vw]] : NULL;
           int dw = rw ? (rw->piece[QK__P_D0] ? 1 : rw->piece[QK__P_D1] ? 2 : 0) : 0;
           uint32_t cw = 2 * lw + (cell_touches(dw, 0, (sd + 2) % 4) ? 0 : 1);
           if (region[cw] == QK__MESH_UNSET) region[cw] = rid, queue[qt++] = cw;
@@ -416,6 +422,7 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
         (st = corner_vertex(T, X + S, Y + S, &c[2])) || (st = corner_vertex(T, X, Y + S, &c[3])))
       break;
   }
+  size_t ncorner = T->nv; /* the corner vertices are the first ids */
   for (size_t li = 0; li < nleaves && !st; li++) {
     uint32_t v = leaves[li], cell = (uint32_t)(2 * li);
     qk_square_t sq = nsq[v];
@@ -451,22 +458,26 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
     if ((st = new_vertex(T, X + S / 2, Y + S / 2, 1, &ctr))) break;
     for (size_t i = 0; i < nr && !st; i++) st = add_tri(T, ring[i], ring[(i + 1) % nr], ctr, cell);
   }
-  qk__free(g->a, corner, (4 * nleaves + 4) * sizeof *corner);
   /* The vertex map is no longer needed; give its memory back before labelling. */
   hmap_free(T->a, &T->vmap);
-  leaf_map_t L = {{NULL, NULL, 0, 0}, nsq, (int64_t)qk__tree_root_square(t).side};
-  if (!st && hmap_init(g->a, &L.at, nleaves + 16)) st = QK_ERR_NOMEM;
-  /* Sized for twice the leaves, so it never grows: each leaf goes into the first empty
-   * slot of its probe (leaves do not overlap, so their corners are distinct keys). */
-  for (size_t li = 0; li < nleaves && !st; li++) {
-    uint32_t v = leaves[li];
-    uint64_t key = corner_key((int64_t)nsq[v].x, (int64_t)nsq[v].y);
-    size_t j = hslot(key, L.at.cap);
-    while (L.at.k[j] != UINT64_MAX && L.at.k[j] != key) j = (j + 1) & (L.at.cap - 1);
-    if (L.at.k[j] == UINT64_MAX) L.at.k[j] = key, L.at.v[j] = v, L.at.n++;
+  leaf_map_t L = {{NULL, NULL, NULL, NULL},
+                  corner,
+                  leaves,
+                  leaf_of,
+                  nsq,
+                  (int64_t)qk__tree_root_square(t).side};
+  for (int k = 0; k < 4 && !st; k++) {
+    L.by[k] = qk__realloc(g->a, NULL, 0, (ncorner + 1) * sizeof *L.by[k]);
+    if (!L.by[k])
+      st = QK_ERR_NOMEM;
+    else
+      memset(L.by[k], 0xff, (ncorner + 1) * sizeof *L.by[k]);
   }
-  if (!st) st = label_cells(g, T, leaves, nleaves, leaf_of, rec_of, cell_label, &L);
-  hmap_free(g->a, &L.at);
+  for (size_t li = 0; li < nleaves && !st; li++)
+    for (int k = 0; k < 4; k++) L.by[k][corner[4 * li + k]] = (uint32_t)li;
+  if (!st) st = label_cells(g, T, leaves, nleaves, rec_of, cell_label, &L);
+  for (int k = 0; k < 4; k++) qk__free(g->a, L.by[k], (ncorner + 1) * sizeof *L.by[k]);
+  qk__free(g->a, corner, (4 * nleaves + 4) * sizeof *corner);
 out:
   qk__free(g->a, nsq, (nn + 1) * sizeof *nsq);
   qk__free(g->a, rec_of, nn * sizeof *rec_of);
