@@ -274,22 +274,51 @@ static qk_status_t compact(qk__gen_t *g, const qk__tri_state_t *T, const uint8_t
                            uint32_t *newid, qk_mesh_t *m) {
   const qk_poly_t *poly = g->poly;
   memset(newid, 0xff, (T->nv ? T->nv : 1) * sizeof *newid);
-  size_t kt = 0, kv = 0;
-  for (size_t t = 0; t < T->nt; t++) {
-    if (drop[T->region[t]]) continue;
-    kt++;
-    for (int i = 0; i < 3; i++)
-      if (newid[T->tri[3 * t + i]] == QK__MESH_UNSET) newid[T->tri[3 * t + i]] = (uint32_t)kv++;
+  /* Vertices are numbered in order of first use by a kept triangle. With regions dropped,
+   * a first pass counts and numbers; without (the usual case), every triangle is kept and
+   * the one pass below numbers them as it copies the triangles. */
+  int dropped = 0;
+  for (size_t r = 0; r < T->nregion; r++) dropped |= drop[r];
+  size_t kt = T->nt, kv = 0;
+  if (dropped) {
+    kt = 0;
+    for (size_t t = 0; t < T->nt; t++) {
+      if (drop[T->region[t]]) continue;
+      kt++;
+      for (int i = 0; i < 3; i++)
+        if (newid[T->tri[3 * t + i]] == QK__MESH_UNSET) newid[T->tri[3 * t + i]] = (uint32_t)kv++;
+    }
   }
-  m->nv = kv, m->nt = kt, m->ncv = poly->nv, m->ncs = poly->ns;
-  m->xy = qk__realloc(g->a, NULL, 0, (2 * kv + 2) * sizeof *m->xy);
+  m->nt = kt, m->ncv = poly->nv, m->ncs = poly->ns;
   m->tri = qk__realloc(g->a, NULL, 0, (3 * kt + 3) * sizeof *m->tri);
   m->comp = qk__realloc(g->a, NULL, 0, (kt + 1) * sizeof *m->comp);
   m->cxy = qk__realloc(g->a, NULL, 0, (2 * poly->nv + 2) * sizeof *m->cxy);
   m->cseg = qk__realloc(g->a, NULL, 0, (2 * poly->ns + 2) * sizeof *m->cseg);
-  if (!m->xy || !m->tri || !m->comp || !m->cxy || !m->cseg)
+  if (!m->tri || !m->comp || !m->cxy || !m->cseg)
     return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   double amin = 180, amax = 0;
+  size_t j = 0;
+  shape_memo_t *sm = qk__realloc(g->a, NULL, 0, sizeof *sm);
+  if (!sm) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  shape_memo_init(sm);
+  for (size_t t = 0; t < T->nt; t++) {
+    if (dropped && drop[T->region[t]]) continue;
+    const uint32_t *tr = &T->tri[3 * t];
+    for (int i = 0; i < 3; i++) {
+      uint32_t *id = &newid[tr[i]];
+      if (*id == QK__MESH_UNSET) *id = (uint32_t)kv++;
+      m->tri[3 * j + i] = *id;
+    }
+    double lo, hi;
+    shape_angles(sm, T->vx, T->vy, tr, &lo, &hi);
+    if (lo < amin) amin = lo;
+    if (hi > amax) amax = hi;
+    m->comp[j++] = T->label[t];
+  }
+  qk__free(g->a, sm, sizeof *sm);
+  m->nv = kv;
+  m->xy = qk__realloc(g->a, NULL, 0, (2 * kv + 2) * sizeof *m->xy);
+  if (!m->xy) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   size_t steiner = 0;
   /* Back from the (doubled) lattice to input coordinates: exact, see mesh/lattice.c
    * (qk__lat_out, with the power of two computed once). */
@@ -303,21 +332,6 @@ static qk_status_t compact(qk__gen_t *g, const qk__tri_state_t *T, const uint8_t
     }
   qk_status_t st = restore_signed_zeros(g, m);
   if (st) return st;
-  size_t j = 0;
-  shape_memo_t *sm = qk__realloc(g->a, NULL, 0, sizeof *sm);
-  if (!sm) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
-  shape_memo_init(sm);
-  for (size_t t = 0; t < T->nt; t++) {
-    if (drop[T->region[t]]) continue;
-    const uint32_t *tr = &T->tri[3 * t];
-    for (int i = 0; i < 3; i++) m->tri[3 * j + i] = newid[tr[i]];
-    double lo, hi;
-    shape_angles(sm, T->vx, T->vy, tr, &lo, &hi);
-    if (lo < amin) amin = lo;
-    if (hi > amax) amax = hi;
-    m->comp[j++] = T->label[t];
-  }
-  qk__free(g->a, sm, sizeof *sm);
   for (size_t i = 0; i < poly->nv; i++)
     m->cxy[2 * i] = g->src->vx[i], m->cxy[2 * i + 1] = g->src->vy[i];
   if (poly->ns) memcpy(m->cseg, poly->seg, 2 * poly->ns * sizeof *m->cseg);
