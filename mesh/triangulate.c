@@ -224,7 +224,7 @@ typedef struct leaf_map {
   const uint32_t *corner; /* 4 per leaf: SW, SE, NE, NW vertex ids */
   const qk_node_t *leaves;
   const uint32_t *leaf_of; /* by node id */
-  const qk_square_t *sq;   /* by node id */
+  const qk_square_t *sq;   /* by leaf index */
   int64_t U;               /* the root square's side */
 } leaf_map_t;
 
@@ -246,7 +246,7 @@ static size_t side_leaves(const qk_tree_t *t, const leaf_map_t *L, uint32_t li, 
                                          {3, 0, 2, 1},
                                          {0, 1, 3, 2}};
   qk_node_t v = L->leaves[li];
-  qk_square_t sq = L->sq[v];
+  qk_square_t sq = L->sq[li];
   int64_t X = (int64_t)sq.x, Y = (int64_t)sq.y, S = (int64_t)sq.side;
   if ((sd == 0 && Y == 0) || (sd == 3 && X == 0) || (sd == 2 && Y + S == L->U) ||
       (sd == 1 && X + S == L->U))
@@ -254,8 +254,8 @@ static size_t side_leaves(const qk_tree_t *t, const leaf_map_t *L, uint32_t li, 
   const uint32_t *c = &L->corner[4 * li];
   const unsigned char *e = pk[sd];
   uint32_t a = L->by[e[1]][c[e[0]]], b = L->by[e[3]][c[e[2]]];
-  int64_t sa = a != QK__MESH_UNSET ? (int64_t)L->sq[L->leaves[a]].side : 0;
-  int64_t sb = b != QK__MESH_UNSET ? (int64_t)L->sq[L->leaves[b]].side : 0;
+  int64_t sa = a != QK__MESH_UNSET ? (int64_t)L->sq[a].side : 0;
+  int64_t sb = b != QK__MESH_UNSET ? (int64_t)L->sq[b].side : 0;
   if (sa == S || (sa == 2 * S)) {
     nb[0] = a;
     return 1;
@@ -341,9 +341,11 @@ out:
  * pass (qk__node_square recomputes a node's whole path at each call); `sq` has room for
  * the tree's node bound. Squares are dyadic and halving is exact, so these are the
  * tree's own squares. The same pass lists the leaves into `leaves` (room for the node
- * bound) in qk_tree_leaves' order, pre-order with the children first to last, and
- * returns their number: one walk instead of a count, a list and the squares. */
-static size_t node_squares(const qk_tree_t *t, qk_square_t *sq, qk_node_t *leaves) {
+ * bound) in qk_tree_leaves' order, pre-order with the children first to last, with their
+ * squares by leaf index into `leaf_sq` (same room), and returns their number: one walk
+ * instead of a count, a list and the squares. */
+static size_t node_squares(const qk_tree_t *t, qk_square_t *sq, qk_node_t *leaves,
+                           qk_square_t *leaf_sq) {
   qk_node_t stack[3 * (QK_MAX_DEPTH_LIMIT + 2) + 4]; /* 3 siblings a level wait */
   size_t n = 0, nl = 0;
   qk_node_t root = qk_tree_root(t);
@@ -353,6 +355,7 @@ static size_t node_squares(const qk_tree_t *t, qk_square_t *sq, qk_node_t *leave
     qk_node_t v = stack[--n];
     uint32_t c = qk__node_child(t, v);
     if (c == QK_NONE) {
+      leaf_sq[nl] = sq[v];
       leaves[nl++] = v;
       continue;
     }
@@ -375,13 +378,16 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
   size_t nleaves = 0;
   qk_node_t *leaves = qk__realloc(g->a, NULL, 0, (nn + 1) * sizeof *leaves);
   qk_square_t *nsq = qk__realloc(g->a, NULL, 0, (nn + 1) * sizeof *nsq);
+  qk_square_t *lsq = qk__realloc(g->a, NULL, 0, (nn + 1) * sizeof *lsq);
   uint32_t *cell_label = NULL;
-  if (leaves && nsq) {
-    nleaves = node_squares(t, nsq, leaves);
+  if (leaves && nsq && lsq) {
+    nleaves = node_squares(t, nsq, leaves, lsq);
+    qk__free(g->a, nsq, (nn + 1) * sizeof *nsq); /* the leaves' squares are all we need */
+    nsq = NULL;
     cell_label = qk__realloc(g->a, NULL, 0, (2 * nleaves + 1) * sizeof *cell_label);
   }
   lt->nleaves = nleaves;
-  if (!rec_of || !leaf_of || !lt->first || !leaves || !nsq || !cell_label ||
+  if (!rec_of || !leaf_of || !lt->first || !leaves || !lsq || !cell_label ||
       hmap_init(g->a, &T->vmap, 2 * nleaves + 16) != QK_OK) {
     st = QK_ERR_NOMEM;
     goto out;
@@ -415,17 +421,18 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
     goto out;
   }
   for (size_t li = 0; li < nleaves; li++) {
-    qk_square_t sq = nsq[leaves[li]];
+    qk_square_t sq = lsq[li];
     int64_t S = 2 * (int64_t)sq.side, X = 2 * (int64_t)sq.x, Y = 2 * (int64_t)sq.y;
     uint32_t *c = &corner[4 * li];
-    if ((st = corner_vertex(T, X, Y, &c[0])) || (st = corner_vertex(T, X + S, Y, &c[1])) ||
-        (st = corner_vertex(T, X + S, Y + S, &c[2])) || (st = corner_vertex(T, X, Y + S, &c[3])))
-      break;
+    /* One call site, so that the probe is inlined. */
+    const int64_t cx[4] = {X, X + S, X + S, X}, cy[4] = {Y, Y, Y + S, Y + S};
+    for (int q = 0; q < 4 && !st; q++) st = corner_vertex(T, cx[q], cy[q], &c[q]);
+    if (st) break;
   }
   size_t ncorner = T->nv; /* the corner vertices are the first ids */
   for (size_t li = 0; li < nleaves && !st; li++) {
     uint32_t v = leaves[li], cell = (uint32_t)(2 * li);
-    qk_square_t sq = nsq[v];
+    qk_square_t sq = lsq[li];
     int64_t S = 2 * (int64_t)sq.side, X = 2 * (int64_t)sq.x, Y = 2 * (int64_t)sq.y;
     lt->first[v] = (uint32_t)T->nt;
     const uint32_t *c = &corner[4 * li];
@@ -464,7 +471,7 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
                   corner,
                   leaves,
                   leaf_of,
-                  nsq,
+                  lsq,
                   (int64_t)qk__tree_root_square(t).side};
   for (int k = 0; k < 4 && !st; k++) {
     L.by[k] = qk__realloc(g->a, NULL, 0, (ncorner + 1) * sizeof *L.by[k]);
@@ -480,6 +487,7 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
   qk__free(g->a, corner, (4 * nleaves + 4) * sizeof *corner);
 out:
   qk__free(g->a, nsq, (nn + 1) * sizeof *nsq);
+  qk__free(g->a, lsq, (nn + 1) * sizeof *lsq);
   qk__free(g->a, rec_of, nn * sizeof *rec_of);
   qk__free(g->a, leaf_of, nn * sizeof *leaf_of);
   qk__free(g->a, leaves, (nn + 1) * sizeof *leaves);
