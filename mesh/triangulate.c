@@ -285,15 +285,31 @@ static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, const qk_node_t
   uint32_t *queue = qk__realloc(g->a, NULL, 0, (ncell + 1) * sizeof *queue);
   uint32_t *region = qk__realloc(g->a, NULL, 0, (ncell + 1) * sizeof *region);
   uint32_t *rlabel = qk__realloc(g->a, NULL, 0, (ncell + 1) * sizeof *rlabel);
+  uint8_t *kind = qk__realloc(g->a, NULL, 0, nleaves + 1);
   qk_status_t st = QK_OK;
   void *rp = T->region;
-  if (!queue || !region || !rlabel || qk__grow(T->a, &rp, &T->rcap, T->nt + 1, sizeof *T->region)) {
+  if (!queue || !region || !rlabel || !kind ||
+      qk__grow(T->a, &rp, &T->rcap, T->nt + 1, sizeof *T->region)) {
     st = QK_ERR_NOMEM;
     goto out;
   }
   T->region = rp;
   memset(region, 0xff, (ncell + 1) * sizeof *region);
+  /* Per leaf, what the flood asks of its unit record: its diagonal kind (bits 0-1: 0 none,
+   * 1 SW-NE, 2 SE-NW) and which sides are component edges (bit 2 + side, sides south, east,
+   * north, west), read from one byte instead of through the node's record. */
   static const int piece_of_side[4] = {QK__P_S, QK__P_E, QK__P_N, QK__P_W};
+  for (size_t li = 0; li < nleaves; li++) {
+    uint32_t v = leaves[li];
+    const qk__unit_rec_t *r = rec_of[v] != QK__MESH_UNSET ? &g->rec[rec_of[v]] : NULL;
+    uint8_t f = 0;
+    if (r) {
+      f = r->piece[QK__P_D0] ? 1 : r->piece[QK__P_D1] ? 2 : 0;
+      for (int sd = 0; sd < 4; sd++)
+        if (r->piece[piece_of_side[sd]]) f |= (uint8_t)(4 << sd);
+    }
+    kind[li] = f;
+  }
   uint32_t nreg = 0;
   /* Start a flood from the cell of every triangle not reached yet. */
   for (size_t tr = 0; tr < T->nt; tr++) {
@@ -306,19 +322,15 @@ static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, const qk_node_t
     while (qh < qt) {
       uint32_t c = queue[qh++], li = c / 2, k = c % 2;
       if (cell_label[c] != QK__MESH_UNSET) rlabel[rid] = cell_label[c];
-      uint32_t v = leaves[li];
-      const qk__unit_rec_t *r = rec_of[v] != QK__MESH_UNSET ? &g->rec[rec_of[v]] : NULL;
-      int diag = r ? (r->piece[QK__P_D0] ? 1 : r->piece[QK__P_D1] ? 2 : 0) : 0;
+      int diag = kind[li] & 3;
       for (int sd = 0; sd < 4; sd++) {
         if (!cell_touches(diag, (int)k, sd)) continue;
-        if (r && r->piece[piece_of_side[sd]]) continue; /* a component edge: a boundary */
+        if (kind[li] & (4 << sd)) continue; /* a component edge: a boundary */
         uint32_t nb[8];
         size_t n = side_leaves(t, L, li, sd, nb);
         for (size_t i = 0; i < n; i++) {
-          uint32_t lw = nb[i], vw = leaves[lw];
-          const qk__unit_rec_t *rw = rec_of[vw] != QK__MESH_UNSET ? &g->rec[rec_of[vw]] : NULL;
-          int dw = rw ? (rw->piece[QK__P_D0] ? 1 : rw->piece[QK__P_D1] ? 2 : 0) : 0;
-          uint32_t cw = 2 * lw + (cell_touches(dw, 0, (sd + 2) % 4) ? 0 : 1);
+          uint32_t lw = nb[i];
+          uint32_t cw = 2 * lw + (cell_touches(kind[lw] & 3, 0, (sd + 2) % 4) ? 0 : 1);
           if (region[cw] == QK__MESH_UNSET) region[cw] = rid, queue[qt++] = cw;
         }
       }
@@ -334,6 +346,7 @@ out:
   qk__free(g->a, queue, (ncell + 1) * sizeof *queue);
   qk__free(g->a, region, (ncell + 1) * sizeof *region);
   qk__free(g->a, rlabel, (ncell + 1) * sizeof *rlabel);
+  qk__free(g->a, kind, nleaves + 1);
   return st;
 }
 
