@@ -214,7 +214,8 @@ static qk_status_t subdivide(qk__gen_t *g, qk_mesh_t *m) {
   for (size_t i = 0; i < g->ne; i++) g->arena[i] = (uint32_t)i;
   g->arena_n = g->ne;
   if ((st = qk__mesh_subdivide(g, qk_tree_root(g->tree), 0, 0, (int64_t)g->U, 0, g->ne))) return st;
-  qk_tree_leaves(g->tree, NULL, 0, &m->stats.leaves_before_balance);
+  /* The tree starts as one leaf and every split turns a leaf into four. */
+  m->stats.leaves_before_balance = 1 + 3 * g->nsplit;
   /* Records sorted by node id, for lookups by hole location. */
   if (g->nrec && !recs_sorted(g)) qsort(g->rec, g->nrec, sizeof *g->rec, qk__mesh_rec_cmp);
   return QK_OK;

@@ -124,6 +124,7 @@ typedef struct qk__gen {
   size_t arena_n, arena_cap;
   qk__unit_rec_t *rec;
   size_t nrec, rec_cap;
+  size_t nsplit; /* leaves split by the subdivision (each makes three more leaves) */
   qk_tree_t *tree;
 } qk__gen_t;
 
