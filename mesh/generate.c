@@ -181,6 +181,17 @@ static qk_status_t classic_ok(const qk_poly_t *P, const qk_mesh_options_t *o, in
   return QK_OK;
 }
 
+/* Are the unit-leaf records in increasing node order? They are as made: a unit leaf is a
+ * child of a square of side 2, whose four children get consecutive new ids when it is
+ * split, and the depth-first subdivision splits those squares, and records their
+ * children, in the order it meets them. Checked, so that the sort stays as the fallback
+ * (node ids are the tree's business). */
+static int recs_sorted(const qk__gen_t *g) {
+  for (size_t i = 1; i < g->nrec; i++)
+    if (g->rec[i - 1].node >= g->rec[i].node) return 0;
+  return 1;
+}
+
 /* Step 1: the subdivision is a quadkit tree over the root square [0,U]^2 with no points,
  * split by qk__mesh_subdivide() from the list of every edge. */
 static qk_status_t subdivide(qk__gen_t *g, qk_mesh_t *m) {
@@ -203,17 +214,17 @@ static qk_status_t subdivide(qk__gen_t *g, qk_mesh_t *m) {
   for (size_t i = 0; i < g->ne; i++) g->arena[i] = (uint32_t)i;
   g->arena_n = g->ne;
   if ((st = qk__mesh_subdivide(g, qk_tree_root(g->tree), 0, 0, (int64_t)g->U, 0, g->ne))) return st;
-  qk_tree_leaves(g->tree, NULL, 0, &m->stats.leaves_before_balance);
+  /* The tree starts as one leaf and every split turns a leaf into four. */
+  m->stats.leaves_before_balance = 1 + 3 * g->nsplit;
   /* Records sorted by node id, for lookups by hole location. */
-  if (g->nrec) qsort(g->rec, g->nrec, sizeof *g->rec, qk__mesh_rec_cmp);
+  if (g->nrec && !recs_sorted(g)) qsort(g->rec, g->nrec, sizeof *g->rec, qk__mesh_rec_cmp);
   return QK_OK;
 }
 
-/* Step 2: BalanceQuadTree. */
-static qk_status_t balance(qk__gen_t *g, qk_mesh_t *m) {
+/* Step 2: BalanceQuadTree. The leaves it leaves are counted by the triangulation. */
+static qk_status_t balance(qk__gen_t *g) {
   qk_status_t st = qk_tree_balance(g->tree);
   if (st) return qk__mesh_fail(g->err, st, 0, "%s while balancing", qk_strerror(st));
-  qk_tree_leaves(g->tree, NULL, 0, &m->stats.leaves);
   return QK_OK;
 }
 
@@ -264,22 +275,51 @@ static qk_status_t compact(qk__gen_t *g, const qk__tri_state_t *T, const uint8_t
                            uint32_t *newid, qk_mesh_t *m) {
   const qk_poly_t *poly = g->poly;
   memset(newid, 0xff, (T->nv ? T->nv : 1) * sizeof *newid);
-  size_t kt = 0, kv = 0;
-  for (size_t t = 0; t < T->nt; t++) {
-    if (drop[T->region[t]]) continue;
-    kt++;
-    for (int i = 0; i < 3; i++)
-      if (newid[T->tri[3 * t + i]] == QK__MESH_UNSET) newid[T->tri[3 * t + i]] = (uint32_t)kv++;
+  /* Vertices are numbered in order of first use by a kept triangle. With regions dropped,
+   * a first pass counts and numbers; without (the usual case), every triangle is kept and
+   * the one pass below numbers them as it copies the triangles. */
+  int dropped = 0;
+  for (size_t r = 0; r < T->nregion; r++) dropped |= drop[r];
+  size_t kt = T->nt, kv = 0;
+  if (dropped) {
+    kt = 0;
+    for (size_t t = 0; t < T->nt; t++) {
+      if (drop[T->region[t]]) continue;
+      kt++;
+      for (int i = 0; i < 3; i++)
+        if (newid[T->tri[3 * t + i]] == QK__MESH_UNSET) newid[T->tri[3 * t + i]] = (uint32_t)kv++;
+    }
   }
-  m->nv = kv, m->nt = kt, m->ncv = poly->nv, m->ncs = poly->ns;
-  m->xy = qk__realloc(g->a, NULL, 0, (2 * kv + 2) * sizeof *m->xy);
+  m->nt = kt, m->ncv = poly->nv, m->ncs = poly->ns;
   m->tri = qk__realloc(g->a, NULL, 0, (3 * kt + 3) * sizeof *m->tri);
   m->comp = qk__realloc(g->a, NULL, 0, (kt + 1) * sizeof *m->comp);
   m->cxy = qk__realloc(g->a, NULL, 0, (2 * poly->nv + 2) * sizeof *m->cxy);
   m->cseg = qk__realloc(g->a, NULL, 0, (2 * poly->ns + 2) * sizeof *m->cseg);
-  if (!m->xy || !m->tri || !m->comp || !m->cxy || !m->cseg)
+  if (!m->tri || !m->comp || !m->cxy || !m->cseg)
     return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   double amin = 180, amax = 0;
+  size_t j = 0;
+  shape_memo_t *sm = qk__realloc(g->a, NULL, 0, sizeof *sm);
+  if (!sm) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  shape_memo_init(sm);
+  for (size_t t = 0; t < T->nt; t++) {
+    if (dropped && drop[T->region[t]]) continue;
+    const uint32_t *tr = &T->tri[3 * t];
+    for (int i = 0; i < 3; i++) {
+      uint32_t *id = &newid[tr[i]];
+      if (*id == QK__MESH_UNSET) *id = (uint32_t)kv++;
+      m->tri[3 * j + i] = *id;
+    }
+    double lo, hi;
+    shape_angles(sm, T->vx, T->vy, tr, &lo, &hi);
+    if (lo < amin) amin = lo;
+    if (hi > amax) amax = hi;
+    m->comp[j++] = T->label[t];
+  }
+  qk__free(g->a, sm, sizeof *sm);
+  m->nv = kv;
+  m->xy = qk__realloc(g->a, NULL, 0, (2 * kv + 2) * sizeof *m->xy);
+  if (!m->xy) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   size_t steiner = 0;
   /* Back from the (doubled) lattice to input coordinates: exact, see mesh/lattice.c
    * (qk__lat_out, with the power of two computed once). */
@@ -293,21 +333,6 @@ static qk_status_t compact(qk__gen_t *g, const qk__tri_state_t *T, const uint8_t
     }
   qk_status_t st = restore_signed_zeros(g, m);
   if (st) return st;
-  size_t j = 0;
-  shape_memo_t *sm = qk__realloc(g->a, NULL, 0, sizeof *sm);
-  if (!sm) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
-  shape_memo_init(sm);
-  for (size_t t = 0; t < T->nt; t++) {
-    if (drop[T->region[t]]) continue;
-    const uint32_t *tr = &T->tri[3 * t];
-    for (int i = 0; i < 3; i++) m->tri[3 * j + i] = newid[tr[i]];
-    double lo, hi;
-    shape_angles(sm, T->vx, T->vy, tr, &lo, &hi);
-    if (lo < amin) amin = lo;
-    if (hi > amax) amax = hi;
-    m->comp[j++] = T->label[t];
-  }
-  qk__free(g->a, sm, sizeof *sm);
   for (size_t i = 0; i < poly->nv; i++)
     m->cxy[2 * i] = g->src->vx[i], m->cxy[2 * i + 1] = g->src->vy[i];
   if (poly->ns) memcpy(m->cseg, poly->seg, 2 * poly->ns * sizeof *m->cseg);
@@ -348,11 +373,12 @@ static qk_status_t triangulate(qk__gen_t *g, qk_mesh_t *m) {
   qk__tri_state_t T;
   memset(&T, 0, sizeof T);
   T.a = g->a;
-  qk__leaf_tris_t lt = {NULL, 0};
+  qk__leaf_tris_t lt = {NULL, 0, 0};
   uint8_t *drop = NULL;
   uint32_t *newid = NULL;
   qk_status_t st = qk__mesh_triangulate(g, &T, &lt);
   if (st) goto out;
+  m->stats.leaves = lt.nleaves; /* counted by the triangulation's walk */
   drop = qk__realloc(g->a, NULL, 0, (size_t)T.nregion + 1);
   newid = qk__realloc(g->a, NULL, 0, (T.nv ? T.nv : 1) * sizeof *newid);
   if (!drop || !newid) {
@@ -424,7 +450,7 @@ qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *opt
     t1 = now();
     if (!(st = subdivide(&g, m)) && !(st = qk__mesh_refine(&g))) {
       t2 = now();
-      if (!(st = balance(&g, m))) {
+      if (!(st = balance(&g))) {
         t3 = now();
         if (!(st = triangulate(&g, m))) st = qk__mesh_markers(&g, m);
       }

@@ -124,6 +124,7 @@ typedef struct qk__gen {
   size_t arena_n, arena_cap;
   qk__unit_rec_t *rec;
   size_t nrec, rec_cap;
+  size_t nsplit; /* leaves split by the subdivision (each makes three more leaves) */
   qk_tree_t *tree;
 } qk__gen_t;
 
@@ -152,6 +153,7 @@ typedef struct qk__tri_state {
 typedef struct qk__leaf_tris {
   uint32_t *first; /* per node id: first triangle of the leaf, or QK__MESH_UNSET */
   size_t cap;
+  size_t nleaves; /* leaves of the balanced tree */
 } qk__leaf_tris_t;
 
 /* "Not set" for node, record, cell and label slots. */

@@ -29,9 +29,12 @@ static double wanted(const qk__gen_t *g, int64_t X, int64_t Y, int64_t S) {
   return h;
 }
 
-static qk_status_t refine(qk__gen_t *g, qk_node_t v, int64_t X, int64_t Y, int64_t S) {
+/* sc is qk__pow2(-f): a leaf's side in input units is S sc, exactly ldexp(S, -f), without
+ * a call a leaf. */
+static qk_status_t refine(qk__gen_t *g, double sc, qk_node_t v, int64_t X, int64_t Y, int64_t S) {
   if (qk__node_leaf(g->tree, v)) {
-    if (S <= 1 || !(ldexp((double)S, -g->lat.f) * 1.4142135623730951 > wanted(g, X, Y, S)))
+    if (S <= 1 ||
+        !(qk__ldexp_by((double)S, sc, -g->lat.f) * 1.4142135623730951 > wanted(g, X, Y, S)))
       return QK_OK;
     qk_status_t st = qk_tree_split_leaf(g->tree, v);
     if (st) return qk__mesh_fail(g->err, st, 0, "%s while refining to size", qk_strerror(st));
@@ -39,7 +42,8 @@ static qk_status_t refine(qk__gen_t *g, qk_node_t v, int64_t X, int64_t Y, int64
   uint32_t c = qk__node_child(g->tree, v);
   int64_t h = S / 2;
   for (unsigned q = 0; q < 4; q++) {
-    qk_status_t st = refine(g, c + q, X + (qk__q_east(q) ? h : 0), Y + (qk__q_north(q) ? h : 0), h);
+    qk_status_t st =
+        refine(g, sc, c + q, X + (qk__q_east(q) ? h : 0), Y + (qk__q_north(q) ? h : 0), h);
     if (st) return st;
   }
   return QK_OK;
@@ -47,5 +51,5 @@ static qk_status_t refine(qk__gen_t *g, qk_node_t v, int64_t X, int64_t Y, int64
 
 qk_status_t qk__mesh_refine(qk__gen_t *g) {
   if (!(g->opt->max_size > 0) && !g->opt->size_fn) return QK_OK;
-  return refine(g, qk_tree_root(g->tree), 0, 0, (int64_t)g->U);
+  return refine(g, qk__pow2(-g->lat.f), qk_tree_root(g->tree), 0, 0, (int64_t)g->U);
 }

@@ -158,6 +158,7 @@ qk_status_t qk__mesh_subdivide(qk__gen_t *g, uint32_t node, int64_t x0, int64_t 
   if (s == 1) return unit_leaf(g, node, x0, y0, off, k);
   qk_status_t st = qk_tree_split_leaf(g->tree, node);
   if (st != QK_OK) return qk__mesh_fail(g->err, st, 0, "%s while subdividing", qk_strerror(st));
+  g->nsplit++;
   uint32_t child = qk__node_child(g->tree, node);
   int64_t h = s / 2;
   for (unsigned q = 0; q < 4; q++) {

@@ -77,12 +77,10 @@ static int hmap_get_or_put(const qk_allocator_t *a, qk__hmap_t *h, uint64_t key,
   return 0;
 }
 
-static qk_status_t new_vertex(qk__tri_state_t *T, int64_t x, int64_t y, int steiner, uint32_t *id) {
-  if (T->nv < T->vcap && T->nv < T->vycap && T->nv < T->scap) { /* room: no calls */
-    T->vx[T->nv] = x, T->vy[T->nv] = y, T->steiner[T->nv] = (uint8_t)steiner;
-    *id = (uint32_t)T->nv++;
-    return QK_OK;
-  }
+/* new_vertex when an array must grow (kept out of line: the arrays are sized for the
+ * usual counts before the leaves are triangulated, so this is seldom called). */
+static qk_status_t new_vertex_grow(qk__tri_state_t *T, int64_t x, int64_t y, int steiner,
+                                   uint32_t *id) {
   void *p1 = T->vx, *p2 = T->vy, *p3 = T->steiner;
   if (qk__grow(T->a, &p1, &T->vcap, T->nv + 1, sizeof *T->vx)) return QK_ERR_NOMEM;
   T->vx = p1;
@@ -95,27 +93,54 @@ static qk_status_t new_vertex(qk__tri_state_t *T, int64_t x, int64_t y, int stei
   return QK_OK;
 }
 
-/* The vertex at a lattice point, created on first use (corners are shared by leaves). */
-static qk_status_t corner_vertex(qk__tri_state_t *T, int64_t x, int64_t y, uint32_t *id) {
-  uint64_t key = ((uint64_t)x << 32) | (uint64_t)y;
-  uint32_t v = (uint32_t)T->nv;
-  int r = hmap_get_or_put(T->a, &T->vmap, key, &v);
-  if (r < 0) return QK_ERR_NOMEM;
-  if (r == 1) {
-    *id = v;
+static inline qk_status_t new_vertex(qk__tri_state_t *T, int64_t x, int64_t y, int steiner,
+                                     uint32_t *id) {
+  if (T->nv < T->vcap && T->nv < T->vycap && T->nv < T->scap) { /* room: no calls */
+    T->vx[T->nv] = x, T->vy[T->nv] = y, T->steiner[T->nv] = (uint8_t)steiner;
+    *id = (uint32_t)T->nv++;
     return QK_OK;
   }
+  return new_vertex_grow(T, x, y, steiner, id);
+}
+
+/* The vertex at a lattice point, created on first use (corners are shared by leaves).
+ * Four calls a leaf: the probe is inlined, and a new key is stored in the slot the probe
+ * ended at while the map has room (hmap_get_or_put, which grows it, otherwise). */
+static inline qk_status_t corner_vertex(qk__tri_state_t *T, int64_t x, int64_t y, uint32_t *id) {
+  uint64_t key = ((uint64_t)x << 32) | (uint64_t)y;
+  qk__hmap_t *h = &T->vmap;
+  size_t mask = h->cap - 1, j = hslot(key, h->cap);
+  for (uint64_t k; (k = h->k[j]) != UINT64_MAX; j = (j + 1) & mask)
+    if (k == key) {
+      *id = h->v[j];
+      return QK_OK;
+    }
+  uint32_t v = (uint32_t)T->nv;
+  if (2 * (h->n + 1) <= h->cap)
+    h->k[j] = key, h->v[j] = v, h->n++;
+  else if (hmap_get_or_put(T->a, h, key, &v) < 0)
+    return QK_ERR_NOMEM;
   return new_vertex(T, x, y, 0, id);
 }
 
-static qk_status_t add_tri(qk__tri_state_t *T, uint32_t a, uint32_t b, uint32_t c, uint32_t cell) {
-  if (T->nt >= T->tcap || T->nt >= T->lcap) {
-    void *p1 = T->tri, *p2 = T->label;
-    if (qk__grow(T->a, &p1, &T->tcap, T->nt + 1, 3 * sizeof *T->tri)) return QK_ERR_NOMEM;
-    T->tri = p1;
-    if (qk__grow(T->a, &p2, &T->lcap, T->nt + 1, sizeof *T->label)) return QK_ERR_NOMEM;
-    T->label = p2;
-  }
+/* add_tri when the arrays must grow (seldom: they are sized for the usual counts). */
+static qk_status_t add_tri_grow(qk__tri_state_t *T, uint32_t a, uint32_t b, uint32_t c,
+                                uint32_t cell) {
+  void *p1 = T->tri, *p2 = T->label;
+  if (qk__grow(T->a, &p1, &T->tcap, T->nt + 1, 3 * sizeof *T->tri)) return QK_ERR_NOMEM;
+  T->tri = p1;
+  if (qk__grow(T->a, &p2, &T->lcap, T->nt + 1, sizeof *T->label)) return QK_ERR_NOMEM;
+  T->label = p2;
+  uint32_t *t = &T->tri[3 * T->nt];
+  t[0] = a, t[1] = b, t[2] = c;
+  T->label[T->nt] = cell;
+  T->nt++;
+  return QK_OK;
+}
+
+static inline qk_status_t add_tri(qk__tri_state_t *T, uint32_t a, uint32_t b, uint32_t c,
+                                  uint32_t cell) {
+  if (T->nt >= T->tcap || T->nt >= T->lcap) return add_tri_grow(T, a, b, c, cell);
   uint32_t *t = &T->tri[3 * T->nt];
   t[0] = a, t[1] = b, t[2] = c;
   T->label[T->nt] = cell;
@@ -187,81 +212,104 @@ static qk_status_t tri_unit(qk__tri_state_t *T, const qk__unit_rec_t *r, const u
  * every component, label 0. (A face of a component is one region; the outside may be
  * several when components touching the domain's edge cut it apart.)
  */
-/* Leaves by lower-left corner (a leaf's is its own: leaves do not overlap), with every
- * node's square: the neighbours across a side by lookups. */
+/*
+ * The leaves by their corners: by[k][c] is the leaf (index in the leaf list) whose corner
+ * k (SW, SE, NE, NW) is corner vertex c, or QK__MESH_UNSET. Leaves do not overlap, so a
+ * vertex is corner k of at most one leaf. Every neighbour across a side of a leaf in a
+ * balanced tree has a corner at one of that side's ends, so the neighbours come from two
+ * array reads with the leaf's own corner vertices, no coordinates and no hashing.
+ */
 typedef struct leaf_map {
-  qk__hmap_t at;         /* corner key -> leaf node */
-  const qk_square_t *sq; /* by node id */
-  int64_t U;             /* the root square's side */
+  uint32_t *by[4];        /* by corner kind, indexed by corner vertex id */
+  const uint32_t *corner; /* 4 per leaf: SW, SE, NE, NW vertex ids */
+  const qk_node_t *leaves;
+  const uint32_t *leaf_of; /* by node id */
+  const qk_square_t *sq;   /* by leaf index */
+  int64_t U;               /* the root square's side */
 } leaf_map_t;
 
-static uint64_t corner_key(int64_t x, int64_t y) { return ((uint64_t)x << 32) | (uint64_t)y; }
-
-/* The leaf with lower-left corner (x, y) and side s, or QK_NONE. */
-static qk_node_t leaf_at(const leaf_map_t *L, int64_t x, int64_t y, int64_t s) {
-  uint32_t v;
-  if (!hmap_get(&L->at, corner_key(x, y), &v) || (int64_t)L->sq[v].side != s) return QK_NONE;
-  return v;
-}
-
 /*
- * The leaves across side sd (south, east, north, west) of leaf v, as
- * qk_tree_adjacent_leaves gives them, same order, into nb (room for 8): in a balanced
- * tree one leaf of the same size, two of half the size (the one lower along the side
- * first, as the tree lists them), or one of twice the size; the tree's own search
- * otherwise (never, for a balanced tree, but it costs nothing to be sure).
+ * The leaves across side sd (south, east, north, west) of leaf li, as
+ * qk_tree_adjacent_leaves gives them, same order, into nb (room for 8) as leaf indices: in
+ * a balanced tree one leaf of the same size, two of half the size (the one lower along the
+ * side first, as the tree lists them), or one of twice the size; the tree's own search
+ * otherwise (never, for a balanced tree, but it costs nothing to be sure). Side sd runs
+ * from corner vertex p to q; the same-size neighbour, the first half-size one and the
+ * double-size one when aligned with p have their corner kp at p, the second half-size one
+ * and the double-size one otherwise their corner kq at q.
  */
-static size_t side_leaves(const qk_tree_t *t, const leaf_map_t *L, qk_node_t v, int sd,
-                          qk_node_t *nb) {
-  qk_square_t q = L->sq[v];
-  int64_t X = (int64_t)q.x, Y = (int64_t)q.y, S = (int64_t)q.side, h = S / 2, D = 2 * S;
+static size_t side_leaves(const qk_tree_t *t, const leaf_map_t *L, uint32_t li, int sd,
+                          uint32_t *nb) {
+  static const unsigned char pk[4][4] = {/* p's corner index, kp, q's index, kq */
+                                         {0, 3, 1, 2},
+                                         {1, 0, 2, 3},
+                                         {3, 0, 2, 1},
+                                         {0, 1, 3, 2}};
+  qk_node_t v = L->leaves[li];
+  qk_square_t sq = L->sq[li];
+  int64_t X = (int64_t)sq.x, Y = (int64_t)sq.y, S = (int64_t)sq.side;
   if ((sd == 0 && Y == 0) || (sd == 3 && X == 0) || (sd == 2 && Y + S == L->U) ||
       (sd == 1 && X + S == L->U))
     return 0; /* the root square's boundary */
-  /* Lower-left corners of the same-size, the two half-size and the double-size
-   * candidates. */
-  int64_t sx, sy, ax, ay, bx, by, dx, dy;
-  switch (sd) {
-  case 0:
-    sx = X, sy = Y - S, ax = X, ay = Y - h, bx = X + h, by = Y - h, dx = X & ~(D - 1), dy = Y - D;
-    break;
-  case 1:
-    sx = X + S, sy = Y, ax = X + S, ay = Y, bx = X + S, by = Y + h, dx = X + S, dy = Y & ~(D - 1);
-    break;
-  case 2:
-    sx = X, sy = Y + S, ax = X, ay = Y + S, bx = X + h, by = Y + S, dx = X & ~(D - 1), dy = Y + S;
-    break;
-  default:
-    sx = X - S, sy = Y, ax = X - h, ay = Y, bx = X - h, by = Y + h, dx = X - D, dy = Y & ~(D - 1);
-    break;
+  const uint32_t *c = &L->corner[4 * li];
+  const unsigned char *e = pk[sd];
+  uint32_t a = L->by[e[1]][c[e[0]]], b = L->by[e[3]][c[e[2]]];
+  int64_t sa = a != QK__MESH_UNSET ? (int64_t)L->sq[a].side : 0;
+  int64_t sb = b != QK__MESH_UNSET ? (int64_t)L->sq[b].side : 0;
+  if (sa == S || (sa == 2 * S)) {
+    nb[0] = a;
+    return 1;
   }
-  if ((nb[0] = leaf_at(L, sx, sy, S)) != QK_NONE) return 1;
-  if (h && (nb[0] = leaf_at(L, ax, ay, h)) != QK_NONE && (nb[1] = leaf_at(L, bx, by, h)) != QK_NONE)
+  if (sa && 2 * sa == S && 2 * sb == S) {
+    nb[0] = a, nb[1] = b;
     return 2;
-  if ((nb[0] = leaf_at(L, dx, dy, D)) != QK_NONE) return 1;
+  }
+  if (sb == 2 * S) {
+    nb[0] = b;
+    return 1;
+  }
   static const qk_dir_t side_dir[4] = {QK_SOUTH, QK_EAST, QK_NORTH, QK_WEST};
+  qk_node_t nn[8];
   size_t n = 0;
-  qk_tree_adjacent_leaves(t, v, side_dir[sd], nb, 8, &n);
-  return n < 8 ? n : 8;
+  qk_tree_adjacent_leaves(t, v, side_dir[sd], nn, 8, &n);
+  if (n > 8) n = 8;
+  for (size_t i = 0; i < n; i++) nb[i] = L->leaf_of[nn[i]];
+  return n;
 }
 
 static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, const qk_node_t *leaves,
-                               size_t nleaves, const uint32_t *leaf_of, const uint32_t *rec_of,
-                               const uint32_t *cell_label, const leaf_map_t *L) {
+                               size_t nleaves, const uint32_t *rec_of, const uint32_t *cell_label,
+                               const leaf_map_t *L) {
   const qk_tree_t *t = g->tree;
   size_t ncell = 2 * nleaves;
   uint32_t *queue = qk__realloc(g->a, NULL, 0, (ncell + 1) * sizeof *queue);
   uint32_t *region = qk__realloc(g->a, NULL, 0, (ncell + 1) * sizeof *region);
   uint32_t *rlabel = qk__realloc(g->a, NULL, 0, (ncell + 1) * sizeof *rlabel);
+  uint8_t *kind = qk__realloc(g->a, NULL, 0, nleaves + 1);
   qk_status_t st = QK_OK;
   void *rp = T->region;
-  if (!queue || !region || !rlabel || qk__grow(T->a, &rp, &T->rcap, T->nt + 1, sizeof *T->region)) {
+  if (!queue || !region || !rlabel || !kind ||
+      qk__grow(T->a, &rp, &T->rcap, T->nt + 1, sizeof *T->region)) {
     st = QK_ERR_NOMEM;
     goto out;
   }
   T->region = rp;
   memset(region, 0xff, (ncell + 1) * sizeof *region);
+  /* Per leaf, what the flood asks of its unit record: its diagonal kind (bits 0-1: 0 none,
+   * 1 SW-NE, 2 SE-NW) and which sides are component edges (bit 2 + side, sides south, east,
+   * north, west), read from one byte instead of through the node's record. */
   static const int piece_of_side[4] = {QK__P_S, QK__P_E, QK__P_N, QK__P_W};
+  for (size_t li = 0; li < nleaves; li++) {
+    uint32_t v = leaves[li];
+    const qk__unit_rec_t *r = rec_of[v] != QK__MESH_UNSET ? &g->rec[rec_of[v]] : NULL;
+    uint8_t f = 0;
+    if (r) {
+      f = r->piece[QK__P_D0] ? 1 : r->piece[QK__P_D1] ? 2 : 0;
+      for (int sd = 0; sd < 4; sd++)
+        if (r->piece[piece_of_side[sd]]) f |= (uint8_t)(4 << sd);
+    }
+    kind[li] = f;
+  }
   uint32_t nreg = 0;
   /* Start a flood from the cell of every triangle not reached yet. */
   for (size_t tr = 0; tr < T->nt; tr++) {
@@ -274,20 +322,15 @@ static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, const qk_node_t
     while (qh < qt) {
       uint32_t c = queue[qh++], li = c / 2, k = c % 2;
       if (cell_label[c] != QK__MESH_UNSET) rlabel[rid] = cell_label[c];
-      uint32_t v = leaves[li];
-      const qk__unit_rec_t *r = rec_of[v] != QK__MESH_UNSET ? &g->rec[rec_of[v]] : NULL;
-      int diag = r ? (r->piece[QK__P_D0] ? 1 : r->piece[QK__P_D1] ? 2 : 0) : 0;
+      int diag = kind[li] & 3;
       for (int sd = 0; sd < 4; sd++) {
         if (!cell_touches(diag, (int)k, sd)) continue;
-        if (r && r->piece[piece_of_side[sd]]) continue; /* a component edge: a boundary */
-        qk_node_t nb[8];
-        size_t n = side_leaves(t, L, v, sd, nb);
+        if (kind[li] & (4 << sd)) continue; /* a component edge: a boundary */
+        uint32_t nb[8];
+        size_t n = side_leaves(t, L, li, sd, nb);
         for (size_t i = 0; i < n; i++) {
-          uint32_t lw = leaf_of[nb[i]];
-          const qk__unit_rec_t *rw =
-              rec_of[nb[i]] != QK__MESH_UNSET ? &g->rec[rec_of[nb[i]]] : NULL;
-          int dw = rw ? (rw->piece[QK__P_D0] ? 1 : rw->piece[QK__P_D1] ? 2 : 0) : 0;
-          uint32_t cw = 2 * lw + (cell_touches(dw, 0, (sd + 2) % 4) ? 0 : 1);
+          uint32_t lw = nb[i];
+          uint32_t cw = 2 * lw + (cell_touches(kind[lw] & 3, 0, (sd + 2) % 4) ? 0 : 1);
           if (region[cw] == QK__MESH_UNSET) region[cw] = rid, queue[qt++] = cw;
         }
       }
@@ -303,28 +346,36 @@ out:
   qk__free(g->a, queue, (ncell + 1) * sizeof *queue);
   qk__free(g->a, region, (ncell + 1) * sizeof *region);
   qk__free(g->a, rlabel, (ncell + 1) * sizeof *rlabel);
+  qk__free(g->a, kind, nleaves + 1);
   return st;
 }
 
 /* The square of every node reachable from the root, by node id, computed top-down in one
  * pass (qk__node_square recomputes a node's whole path at each call); `sq` has room for
  * the tree's node bound. Squares are dyadic and halving is exact, so these are the
- * tree's own squares. */
-static void node_squares(const qk_tree_t *t, qk_square_t *sq) {
+ * tree's own squares. The same pass lists the leaves into `leaves` (room for the node
+ * bound) in qk_tree_leaves' order, pre-order with the children first to last, with their
+ * squares by leaf index into `leaf_sq` (same room), and returns their number: one walk
+ * instead of a count, a list and the squares. */
+static size_t node_squares(const qk_tree_t *t, qk_square_t *sq, qk_node_t *leaves,
+                           qk_square_t *leaf_sq) {
   qk_node_t stack[3 * (QK_MAX_DEPTH_LIMIT + 2) + 4]; /* 3 siblings a level wait */
-  size_t n = 0;
+  size_t n = 0, nl = 0;
   qk_node_t root = qk_tree_root(t);
   sq[root] = qk__tree_root_square(t);
   stack[n++] = root;
   while (n) {
     qk_node_t v = stack[--n];
     uint32_t c = qk__node_child(t, v);
-    if (c == QK_NONE) continue;
-    for (unsigned q = 0; q < 4; q++) {
-      sq[c + q] = qk__child_square(sq[v], q);
-      stack[n++] = c + q;
+    if (c == QK_NONE) {
+      leaf_sq[nl] = sq[v];
+      leaves[nl++] = v;
+      continue;
     }
+    for (unsigned q = 0; q < 4; q++) sq[c + q] = qk__child_square(sq[v], q);
+    for (unsigned q = 4; q-- > 0;) stack[n++] = c + q;
   }
+  return nl;
 }
 
 qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris_t *lt) {
@@ -336,11 +387,20 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
   uint32_t *leaf_of = qk__realloc(g->a, NULL, 0, nn * sizeof *leaf_of);
   lt->cap = nn;
   lt->first = qk__realloc(g->a, NULL, 0, lt->cap * sizeof *lt->first);
+  /* The leaves and every node's square in one walk; a tree has fewer leaves than nodes. */
   size_t nleaves = 0;
-  qk_tree_leaves(t, NULL, 0, &nleaves);
-  qk_node_t *leaves = qk__realloc(g->a, NULL, 0, (nleaves + 1) * sizeof *leaves);
-  uint32_t *cell_label = qk__realloc(g->a, NULL, 0, (2 * nleaves + 1) * sizeof *cell_label);
-  if (!rec_of || !leaf_of || !lt->first || !leaves || !cell_label ||
+  qk_node_t *leaves = qk__realloc(g->a, NULL, 0, (nn + 1) * sizeof *leaves);
+  qk_square_t *nsq = qk__realloc(g->a, NULL, 0, (nn + 1) * sizeof *nsq);
+  qk_square_t *lsq = qk__realloc(g->a, NULL, 0, (nn + 1) * sizeof *lsq);
+  uint32_t *cell_label = NULL;
+  if (leaves && nsq && lsq) {
+    nleaves = node_squares(t, nsq, leaves, lsq);
+    qk__free(g->a, nsq, (nn + 1) * sizeof *nsq); /* the leaves' squares are all we need */
+    nsq = NULL;
+    cell_label = qk__realloc(g->a, NULL, 0, (2 * nleaves + 1) * sizeof *cell_label);
+  }
+  lt->nleaves = nleaves;
+  if (!rec_of || !leaf_of || !lt->first || !leaves || !lsq || !cell_label ||
       hmap_init(g->a, &T->vmap, 2 * nleaves + 16) != QK_OK) {
     st = QK_ERR_NOMEM;
     goto out;
@@ -349,7 +409,6 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
   memset(lt->first, 0xff, lt->cap * sizeof *lt->first);
   memset(cell_label, 0xff, (2 * nleaves + 1) * sizeof *cell_label);
   for (size_t i = 0; i < g->nrec; i++) rec_of[g->rec[i].node] = (uint32_t)i;
-  qk_tree_leaves(t, leaves, nleaves, &nleaves);
   for (size_t li = 0; li < nleaves; li++) leaf_of[leaves[li]] = (uint32_t)li;
 
   /* Room for the usual counts (about 3 triangles and 1.5 vertices a leaf), so that the
@@ -370,25 +429,23 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
   /* First every leaf's corners, so that the vertex map holds every lattice point a leaf
    * has as a corner. */
   uint32_t *corner = qk__realloc(g->a, NULL, 0, (4 * nleaves + 4) * sizeof *corner);
-  qk_square_t *nsq = qk__realloc(g->a, NULL, 0, (nn + 1) * sizeof *nsq);
-  if (!corner || !nsq) {
-    qk__free(g->a, corner, (4 * nleaves + 4) * sizeof *corner);
-    qk__free(g->a, nsq, (nn + 1) * sizeof *nsq);
+  if (!corner) {
     st = QK_ERR_NOMEM;
     goto out;
   }
-  node_squares(t, nsq);
   for (size_t li = 0; li < nleaves; li++) {
-    qk_square_t sq = nsq[leaves[li]];
+    qk_square_t sq = lsq[li];
     int64_t S = 2 * (int64_t)sq.side, X = 2 * (int64_t)sq.x, Y = 2 * (int64_t)sq.y;
     uint32_t *c = &corner[4 * li];
-    if ((st = corner_vertex(T, X, Y, &c[0])) || (st = corner_vertex(T, X + S, Y, &c[1])) ||
-        (st = corner_vertex(T, X + S, Y + S, &c[2])) || (st = corner_vertex(T, X, Y + S, &c[3])))
-      break;
+    /* One call site, so that the probe is inlined. */
+    const int64_t cx[4] = {X, X + S, X + S, X}, cy[4] = {Y, Y, Y + S, Y + S};
+    for (int q = 0; q < 4 && !st; q++) st = corner_vertex(T, cx[q], cy[q], &c[q]);
+    if (st) break;
   }
+  size_t ncorner = T->nv; /* the corner vertices are the first ids */
   for (size_t li = 0; li < nleaves && !st; li++) {
     uint32_t v = leaves[li], cell = (uint32_t)(2 * li);
-    qk_square_t sq = nsq[v];
+    qk_square_t sq = lsq[li];
     int64_t S = 2 * (int64_t)sq.side, X = 2 * (int64_t)sq.x, Y = 2 * (int64_t)sq.y;
     lt->first[v] = (uint32_t)T->nt;
     const uint32_t *c = &corner[4 * li];
@@ -421,24 +478,32 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
     if ((st = new_vertex(T, X + S / 2, Y + S / 2, 1, &ctr))) break;
     for (size_t i = 0; i < nr && !st; i++) st = add_tri(T, ring[i], ring[(i + 1) % nr], ctr, cell);
   }
-  qk__free(g->a, corner, (4 * nleaves + 4) * sizeof *corner);
   /* The vertex map is no longer needed; give its memory back before labelling. */
   hmap_free(T->a, &T->vmap);
-  leaf_map_t L = {{NULL, NULL, 0, 0}, nsq, (int64_t)qk__tree_root_square(t).side};
-  if (!st && hmap_init(g->a, &L.at, nleaves + 16)) st = QK_ERR_NOMEM;
-  for (size_t li = 0; li < nleaves && !st; li++) {
-    uint32_t v = leaves[li];
-    if (hmap_get_or_put(g->a, &L.at, corner_key((int64_t)nsq[v].x, (int64_t)nsq[v].y), &v) < 0)
+  leaf_map_t L = {{NULL, NULL, NULL, NULL},
+                  corner,
+                  leaves,
+                  leaf_of,
+                  lsq,
+                  (int64_t)qk__tree_root_square(t).side};
+  for (int k = 0; k < 4 && !st; k++) {
+    L.by[k] = qk__realloc(g->a, NULL, 0, (ncorner + 1) * sizeof *L.by[k]);
+    if (!L.by[k])
       st = QK_ERR_NOMEM;
+    else
+      memset(L.by[k], 0xff, (ncorner + 1) * sizeof *L.by[k]);
   }
-  if (!st) st = label_cells(g, T, leaves, nleaves, leaf_of, rec_of, cell_label, &L);
-  hmap_free(g->a, &L.at);
-  qk__free(g->a, nsq, (nn + 1) * sizeof *nsq);
-  if (st) goto out;
+  for (size_t li = 0; li < nleaves && !st; li++)
+    for (int k = 0; k < 4; k++) L.by[k][corner[4 * li + k]] = (uint32_t)li;
+  if (!st) st = label_cells(g, T, leaves, nleaves, rec_of, cell_label, &L);
+  for (int k = 0; k < 4; k++) qk__free(g->a, L.by[k], (ncorner + 1) * sizeof *L.by[k]);
+  qk__free(g->a, corner, (4 * nleaves + 4) * sizeof *corner);
 out:
+  qk__free(g->a, nsq, (nn + 1) * sizeof *nsq);
+  qk__free(g->a, lsq, (nn + 1) * sizeof *lsq);
   qk__free(g->a, rec_of, nn * sizeof *rec_of);
   qk__free(g->a, leaf_of, nn * sizeof *leaf_of);
-  qk__free(g->a, leaves, (nleaves + 1) * sizeof *leaves);
+  qk__free(g->a, leaves, (nn + 1) * sizeof *leaves);
   qk__free(g->a, cell_label, (2 * nleaves + 1) * sizeof *cell_label);
   if (st) qk__mesh_fail(g->err, st, 0, "%s while triangulating", qk_strerror(st));
   return st;

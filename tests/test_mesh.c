@@ -21,6 +21,74 @@
 #include "polygen.h"
 #include "qk_test.h"
 
+/*
+ * The leaves the statistics report are the tree's (qk_tree_leaves), and, when every
+ * triangle is kept (`all_kept`: no holes), the triangles come leaf by leaf in
+ * qk_tree_leaves' order: the leaf holding each triangle's centroid (found by point
+ * location, apart from the generator's own walk) never goes back in that order.
+ */
+static void check_leaf_order(const qk_mesh_t *m, const qk_mesh_stats_t *s, int all_kept,
+                             const char *what) {
+  const qk_tree_t *t = qk_mesh_tree(m);
+  size_t nl = 0;
+  assert_int_equal(qk_tree_leaves(t, NULL, 0, &nl), QK_OK);
+  if (s->leaves != nl) fail_msg("%s: stats say %zu leaves, the tree has %zu", what, s->leaves, nl);
+  if (!all_kept) return;
+  qk_node_t *leaves = malloc((nl + 1) * sizeof *leaves);
+  assert_non_null(leaves);
+  assert_int_equal(qk_tree_leaves(t, leaves, nl, &nl), QK_OK);
+  qk_node_t top = 0;
+  for (size_t i = 0; i < nl; i++)
+    if (leaves[i] > top) top = leaves[i];
+  size_t *pos = malloc(((size_t)top + 1) * sizeof *pos);
+  assert_non_null(pos);
+  for (size_t i = 0; i < nl; i++) pos[leaves[i]] = i;
+  size_t nv, nt;
+  const double *xy = qk_mesh_vertices(m, &nv);
+  const uint32_t *tri = qk_mesh_triangles(m, &nt);
+  size_t last = 0;
+  for (size_t k = 0; k < nt; k++) {
+    const uint32_t *v = &tri[3 * k];
+    qk_point_t c = {(xy[2 * v[0]] + xy[2 * v[1]] + xy[2 * v[2]]) / 3,
+                    (xy[2 * v[0] + 1] + xy[2 * v[1] + 1] + xy[2 * v[2] + 1]) / 3};
+    qk_node_t leaf;
+    assert_int_equal(qk_tree_find_leaf(t, c, &leaf), QK_OK);
+    assert_true(leaf <= top);
+    if (pos[leaf] < last)
+      fail_msg("%s: triangle %zu lies in leaf %zu of the tree's order, after leaf %zu", what, k,
+               pos[leaf], last);
+    last = pos[leaf];
+  }
+  free(pos);
+  free(leaves);
+}
+
+/* Does some lattice point of a segment (integer endpoints, at 0, 45, 90 or 135 degrees)
+ * lie in the closed square [x0, x0 + s]^2? Such a segment meets the square exactly then:
+ * between two consecutive lattice points it runs along a unit side or inside a unit cell. */
+static int seg_meets_square(const double *a, const double *b, int64_t x0, int64_t y0, int64_t s) {
+  int64_t ax = (int64_t)a[0], ay = (int64_t)a[1], dx = (int64_t)b[0] - ax, dy = (int64_t)b[1] - ay;
+  int64_t n = llabs(dx) > llabs(dy) ? llabs(dx) : llabs(dy);
+  for (int64_t k = 0; k <= n; k++) {
+    int64_t x = ax + (n ? k * dx / n : 0), y = ay + (n ? k * dy / n : 0);
+    if (x >= x0 && x <= x0 + s && y >= y0 && y <= y0 + s) return 1;
+  }
+  return 0;
+}
+
+/* Leaves of the book's subdivision before balancing, by brute force: a square is split
+ * while larger than unit size and some segment meets its closure. */
+static size_t book_leaves(const double *xy, const uint32_t *seg, size_t ns, int64_t x0, int64_t y0,
+                          int64_t s) {
+  int meets = 0;
+  for (size_t i = 0; i < ns && !meets && s > 1; i++)
+    meets = seg_meets_square(&xy[2 * seg[2 * i]], &xy[2 * seg[2 * i + 1]], x0, y0, s);
+  if (!meets) return 1;
+  int64_t h = s / 2;
+  return book_leaves(xy, seg, ns, x0, y0, h) + book_leaves(xy, seg, ns, x0 + h, y0, h) +
+         book_leaves(xy, seg, ns, x0, y0 + h, h) + book_leaves(xy, seg, ns, x0 + h, y0 + h, h);
+}
+
 /* Mesh an input given as arrays and run the checker; returns the triangle count. */
 static size_t mesh_and_check(const double *xy, size_t nv, const uint32_t *seg, size_t ns,
                              const double *holes, size_t nh, uint64_t U, const char *what) {
@@ -47,6 +115,13 @@ static size_t mesh_and_check(const double *xy, size_t nv, const uint32_t *seg, s
   qk_mesh_stats(m, &s);
   assert_int_equal(s.triangles, mm.nt);
   if (mm.nt) assert_true(s.min_angle_deg > 44.999 && s.max_angle_deg < 90.001);
+  check_leaf_order(m, &s, nh == 0, what);
+  if (U <= 256 && ns <= 64) {
+    size_t want = book_leaves(xy, seg, ns, 0, 0, (int64_t)U);
+    if (s.leaves_before_balance != want)
+      fail_msg("%s: %zu leaves before balancing, brute force says %zu", what,
+               s.leaves_before_balance, want);
+  }
   size_t nt = mm.nt;
   qk_mesh_free(m);
   qk_poly_free(p);
