@@ -248,7 +248,7 @@ size_t qk__fmt_g17(double x, char *buf) {
     if (n) return n;
   }
 #endif
-  int n = snprintf(buf, QK__NUMFMT_MAX, "%.17g", x);
+  int n = snprintf(buf, QK__NUMFMT_MAX, "%.17g", x + 0.0); /* (-0 + 0 is +0) */
   return n < 0 ? 0 : (size_t)n;
 }
 

@@ -16,9 +16,10 @@
 #define QK__NUMFMT_MAX 40
 
 /* Write x as printf("%.17g", x) does into buf (QK__NUMFMT_MAX bytes), NUL-terminated;
- * returns the length. Correctly rounded (ties to even on the exact binary value, as glibc
- * does), so the digits read back as x; exponent forms and non-finite values go through
- * snprintf itself. */
+ * returns the length; except that -0 is written "0", as the CLI prints it everywhere
+ * (an input "-0" is the same point as "0"). Correctly rounded (ties to even on the exact
+ * binary value, as glibc does), so the digits read back as x; exponent forms and
+ * non-finite values go through snprintf itself. */
 size_t qk__fmt_g17(double x, char *buf);
 
 /* Write v in decimal into buf (at least 21 bytes, which bytes past the digits may be

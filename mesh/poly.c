@@ -84,9 +84,12 @@ static int next_line(reader_t *r) {
   }
 }
 
-/* Parse a whole token as a finite number. */
+/* Parse a whole token as a finite decimal number (strtod's hexadecimal forms, 0x10 or
+ * 0x1p-3, are refused as the CSV readers refuse them). */
 static int parse_num(const char *s, double *v) {
   char *end;
+  const char *digits = s + (*s == '+' || *s == '-');
+  if (digits[0] == '0' && (digits[1] | 0x20) == 'x') return 0;
   errno = 0;
   double d = strtod(s, &end);
   if (end == s || *end || !isfinite(d)) return 0;

@@ -140,7 +140,7 @@ qk_status_t qk_mesh_write_msh(const qk_mesh_t *m, FILE *f) {
   size_t used = used_components(m, count), nm = m->has_marks ? distinct_marks(m, marks) : 0;
   size_t nseg = m->has_marks ? m->noseg : 0;
   double ext = ldexp((double)m->size, -m->lat.f);
-  double x0 = m->lat.x0, y0 = m->lat.y0, x1 = x0 + ext, y1 = y0 + ext;
+  double x0 = m->lat.x0 + 0.0, y0 = m->lat.y0 + 0.0, x1 = x0 + ext, y1 = y0 + ext;
   fprintf(f, "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n");
   msh_names(m, f, count, nc, used, marks, nm);
   fprintf(f, "$Entities\n0 %zu %zu 0\n", nm, used);

@@ -6,7 +6,8 @@
  *    NaN and infinities included), on random doubles of moderate magnitude (the fixed
  *    notation range and just beyond it, both signs), on dyadic values with few significant
  *    bits (exact decimal expansions, so rounding ties to even happen), on powers of ten and
- *    their neighbours, on integers and half-integers up to 1e18, and on the signed zeros;
+ *    their neighbours, on integers and half-integers up to 1e18, and on the signed zeros
+ *    (-0 is written "0");
  *  - qk__fmt_u64 gives snprintf("%llu") on powers of ten, their neighbours and random values;
  *  - the buffered writer keeps what it is given across flushes;
  *  - the writers' decimal line counter counts as snprintf prints, across powers of ten.
@@ -25,7 +26,7 @@ static uint64_t g_seed;
 static void check_g17(double x) {
   char a[QK__NUMFMT_MAX + 8], b[64];
   size_t n = qk__fmt_g17(x, a);
-  snprintf(b, sizeof b, "%.17g", x);
+  snprintf(b, sizeof b, "%.17g", x == 0 ? 0.0 : x); /* -0 is written "0" */
   if (n != strlen(b) || strcmp(a, b))
     fail_msg("seed %llu: %a formats as '%s', printf says '%s'", (unsigned long long)g_seed, x, a,
              b);

@@ -130,4 +130,13 @@ same_text "knn just inside 2^510" "$("$cli" knn "$tmp/near.csv" "$tmp/near.csv" 
 expect 2 '--xy: column number 99999999999999999999 must be from 1 to 100000' -- "$cli" join "$tmp/negz.geojson" "$tmp/sm.csv" --planar --xy 99999999999999999999,1
 expect 2 '--xy: column number 0 must be from 1 to 100000' -- "$cli" join "$tmp/negz.geojson" "$tmp/sm.csv" --planar --xy 0,1
 
+# ---- .poly numbers are decimal too; a mesh vertex at -0 is written 0 -----------------------
+printf '4 2 0 0\n0 0 0\n1 0x4 0\n2 4 4\n3 0 4\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n0\n' >"$tmp/hx.poly"
+expect 1 "hx.poly:3: vertex 1: bad x coordinate '0x4'" -- "$cli" mesh "$tmp/hx.poly" -o "$tmp/hxm"
+[ ! -e "$tmp/hxm.node" ] || fail "hx.poly: a .node file was written"
+printf '4 2 0 0\n0 -0 -0\n1 4 0\n2 4 4\n3 0 4\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n0\n' >"$tmp/nz.poly"
+expect 0 '' -- "$cli" mesh "$tmp/nz.poly" -o "$tmp/nzm"
+same_text "mesh: no -0 in .node" "$(grep -c -- '-0\b' "$tmp/nzm.node")" "0"
+same_text "mesh: the corner at 0 0" "$(awk 'NR > 1 && $2 == "0" && $3 == "0"' "$tmp/nzm.node" | wc -l)" "1"
+
 report
