@@ -52,11 +52,11 @@ static int rows_alloc(const qk_allocator_t *a, qk__prows_t *r, size_t n_nz) {
   return 1;
 }
 
-/* The rows over n_obj slots from their lengths ca (n keys in all): row and start of
- * every slot that has pairs; with cursors, ca[a] becomes row a's first place. 0 when
- * memory ran short. */
-static int rows_index(const qk_allocator_t *al, qk__prows_t *r, uint32_t *ca, uint32_t n_obj,
-                      size_t n, int cursors) {
+/* The rows over n_obj slots from a0 on from their lengths ca (ca[a] for slot a0 + a; n
+ * keys in all): row and start of every slot that has pairs; with cursors, ca[a] becomes
+ * its row's first place. 0 when memory ran short. */
+static int rows_index(const qk_allocator_t *al, qk__prows_t *r, uint32_t *ca, uint32_t a0,
+                      uint32_t n_obj, size_t n, int cursors) {
   size_t nz = 0;
   for (uint32_t a = 0; a < n_obj; a++) nz += ca[a] != 0;
   if (!rows_alloc(al, r, nz)) return 0;
@@ -64,7 +64,7 @@ static int rows_index(const qk_allocator_t *al, qk__prows_t *r, uint32_t *ca, ui
   nz = 0;
   for (uint32_t a = 0; a < n_obj; a++) {
     uint32_t c = ca[a];
-    if (c) r->row[nz] = a, r->start[nz++] = sa;
+    if (c) r->row[nz] = a0 + a, r->start[nz++] = sa;
     if (cursors) ca[a] = sa;
     sa += c;
   }
@@ -106,17 +106,66 @@ static size_t rows_cnt(uint32_t n_obj, size_t n) {
   return c > n_obj + 1 + more ? c : n_obj + 1 + more;
 }
 
+/* The bucket plan's digits: d0 and d1 bits, the low digit's mask, b's mask. */
+typedef struct bdig {
+  unsigned ab, bb, d0, d1, sh;
+  uint32_t m0, bmask;
+} bdig_t;
+
+static bdig_t bucket_digits(unsigned ab, unsigned bb) {
+  bdig_t g;
+  g.ab = ab, g.bb = bb;
+  g.d0 = (ab + bb + 1) / 2, g.d1 = ab + bb - g.d0;
+  g.m0 = ((uint32_t)1 << g.d0) - 1, g.bmask = ((uint32_t)1 << bb) - 1;
+  g.sh = g.d1 - ab;
+  return g;
+}
+
+/* One bucket (m keys at src, as (a mod W) << bb | b, for na slots from a0) sorted by its
+ * low digit into t32, then by its high digit, (a mod W) and the top of b, back into src
+ * keeping only b. The high digit's counts give the rows' lengths: slot a's are those of
+ * its 2^(d1 - ab) digits, into ca[a - a0]. c0, c1: the digits' counts. */
+static void bucket_sort(const bdig_t *g, uint32_t *src, uint32_t m, uint32_t na, uint32_t *t32,
+                        uint32_t *c0, uint32_t *c1, uint32_t *ca) {
+  const unsigned d0 = g->d0, sh = g->sh;
+  const uint32_t m0 = g->m0, bmask = g->bmask;
+  memset(c0, 0, (((size_t)1 << d0) + ((size_t)1 << g->d1)) * sizeof *c0);
+  for (uint32_t i = 0; i < m; i++) {
+    uint32_t v = src[i];
+    c0[v & m0]++, c1[v >> d0]++;
+  }
+  for (uint32_t s0 = 0, j = 0; j <= m0; j++) {
+    uint32_t x = c0[j];
+    c0[j] = s0, s0 += x;
+  }
+  for (uint32_t s1 = 0, j = 0, a = 0; a < na; a++) {
+    uint32_t from = s1;
+    for (uint32_t je = (a + 1) << sh; j < je; j++) {
+      uint32_t x = c1[j];
+      c1[j] = s1, s1 += x;
+    }
+    ca[a] = s1 - from;
+  }
+  for (uint32_t i = 0; i < m; i++) {
+    uint32_t v = src[i];
+    t32[c0[v & m0]++] = v;
+  }
+  for (uint32_t i = 0; i < m; i++) {
+    uint32_t v = t32[i];
+    src[c1[v >> d0]++] = v & bmask;
+  }
+}
+
 /* (Not inlined: inlined, its loops share the update's registers and spill.) */
 __attribute__((noinline)) static int rows_buckets(const qk_allocator_t *al, const uint64_t *keys,
                                                   uint32_t *t32, size_t n, uint32_t *cnt,
                                                   uint32_t n_obj, unsigned ab, unsigned bb,
                                                   qk__prows_t *r) {
+  const bdig_t g = bucket_digits(ab, bb);
   const uint32_t W = (uint32_t)1 << ab, nbk = (uint32_t)(((uint64_t)n_obj + W - 1) >> ab);
-  const unsigned d0 = (ab + bb + 1) / 2, d1 = ab + bb - d0; /* the two digits' bits */
-  const uint32_t m0 = ((uint32_t)1 << d0) - 1, bmask = ((uint32_t)1 << bb) - 1;
   /* ca: the rows' counts (filled bucket by bucket); bc: the buckets' starts, then their
    * cursors; c0, c1: the digits' counts. */
-  uint32_t *ca = cnt, *bc = ca + n_obj + 1, *c0 = bc + nbk + 1, *c1 = c0 + m0 + 1;
+  uint32_t *ca = cnt, *bc = ca + n_obj + 1, *c0 = bc + nbk + 1, *c1 = c0 + g.m0 + 1;
   uint32_t *rb = r->b;
   memset(bc, 0, ((size_t)nbk + 1) * sizeof *bc);
   for (size_t i = 0; i < n; i++) bc[(uint32_t)(keys[i] >> 32) >> ab]++;
@@ -125,63 +174,36 @@ __attribute__((noinline)) static int rows_buckets(const qk_allocator_t *al, cons
     bc[k] = s, s += c;
   }
   /* The buckets, in place: bucket k's keys at rb[bc[k] ..), cursors in bc. */
-  const uint32_t bmul = bmask + 1; /* (a mod W) << bb as a product: one shift by ab left */
+  const uint32_t bmul = g.bmask + 1; /* (a mod W) << bb as a product: one shift by ab left */
   for (size_t i = 0; i < n; i++) {
     uint64_t k = keys[i];
     uint32_t a = (uint32_t)(k >> 32);
     rb[bc[a >> ab]++] = (a & (W - 1)) * bmul | (uint32_t)k;
   }
-  /* bc[k] is now bucket k's end, where k + 1's starts. Each bucket sorted by its low
-   * digit into t32, then by its high digit, (a mod W) and the top of b, back into rb.
-   * The high digit's counts give the rows' lengths: slot a's are those of its
-   * 2^(d1 - ab) digits. */
-  const unsigned sh = d1 - ab;
+  /* bc[k] is now bucket k's end, where k + 1's starts. */
   for (uint32_t k = 0, lo = 0; k < nbk; lo = bc[k], k++) {
-    uint32_t m = bc[k] - lo, *src = rb + lo, a0 = k << ab;
-    uint32_t na = n_obj - a0 < W ? n_obj - a0 : W;
-    memset(c0, 0, (((size_t)1 << d0) + ((size_t)1 << d1)) * sizeof *c0);
-    for (uint32_t i = 0; i < m; i++) {
-      uint32_t v = src[i];
-      c0[v & m0]++, c1[v >> d0]++;
-    }
-    for (uint32_t s0 = 0, j = 0; j <= m0; j++) {
-      uint32_t x = c0[j];
-      c0[j] = s0, s0 += x;
-    }
-    for (uint32_t s1 = 0, j = 0, a = 0; a < na; a++) {
-      uint32_t from = s1;
-      for (uint32_t je = (a + 1) << sh; j < je; j++) {
-        uint32_t x = c1[j];
-        c1[j] = s1, s1 += x;
-      }
-      ca[a0 + a] = s1 - from;
-    }
-    for (uint32_t i = 0; i < m; i++) {
-      uint32_t v = src[i];
-      t32[c0[v & m0]++] = v;
-    }
-    for (uint32_t i = 0; i < m; i++) {
-      uint32_t v = t32[i];
-      src[c1[v >> d0]++] = v & bmask;
-    }
+    uint32_t a0 = k << ab, na = n_obj - a0 < W ? n_obj - a0 : W;
+    bucket_sort(&g, rb + lo, bc[k] - lo, na, t32, c0, c1, ca + a0);
   }
-  return rows_index(al, r, ca, n_obj, n, 0);
+  return rows_index(al, r, ca, 0, n_obj, n, 0);
 }
 
 /*
- * The found keys (unsorted, n of them) as rows over n_obj slots, each row ascending;
- * 0 when memory ran short. Many keys (at least a quarter of the slots): two stable
- * counting sorts, by slot b into tmp (as 32-bit slots a), then by slot a, which writes
- * only b into its row; both counts come from one read of the keys (cnt: 2 (n_obj + 1)
- * entries). Few keys (a sparse world): an LSD radix sort of the keys on the bytes that
- * differ (cnt: 257 entries), so the passes cost the keys, not the slots, then the rows
+ * The found keys (unsorted, n of them) as rows, each row ascending; 0 when memory ran
+ * short. Slots a are in [a0, a0 + n_a), slots b below n_b; bucket: a0 = 0, n_a = n_b,
+ * and cnt holds rows_cnt(n_b, n) entries, so that many keys may take rows_buckets. Many keys (at
+ * least a quarter of the slots): two stable counting sorts, by slot b into tmp (as 32-bit slots a),
+ * then by slot a, which writes only b into its row; both counts come from one read of the keys
+ * (cnt: n_a + n_b + 2 entries). Few keys (a sparse world): an LSD radix sort of the keys on the
+ * bytes that differ (cnt: 257 entries), so the passes cost the keys, not the slots, then the rows
  * from the sorted keys.
  */
 static int make_rows(const qk_allocator_t *al, uint64_t *keys, uint64_t *tmp, size_t n,
-                     uint32_t *cnt, uint32_t n_obj, qk__prows_t *r) {
+                     uint32_t *cnt, uint32_t a0, uint32_t n_a, uint32_t n_b, int bucket,
+                     qk__prows_t *r) {
   uint32_t *rb = r->b;
   r->n = n;
-  if (n * 4 < n_obj) {
+  if (n * 4 < n_b) {
     uint64_t all_or = 0, all_and = ~(uint64_t)0;
     for (size_t i = 0; i < n; i++) all_or |= keys[i], all_and &= keys[i];
     for (int sh = 0; n > 1 && sh < 64; sh += 8) {
@@ -206,25 +228,24 @@ static int make_rows(const qk_allocator_t *al, uint64_t *keys, uint64_t *tmp, si
   }
   uint32_t *t32 = (uint32_t *)tmp;
   unsigned abits, bbits;
-  if (bucket_plan(n, n_obj, &abits, &bbits)) {
-    return rows_buckets(al, keys, t32, n, cnt, n_obj, abits, bbits, r);
-  }
+  if (bucket && bucket_plan(n, n_b, &abits, &bbits))
+    return rows_buckets(al, keys, t32, n, cnt, n_b, abits, bbits, r);
   /* cb[b + 1] counts slot b, then cb[b] is the scatter's cursor; ca[a] counts a, then
    * is row a's cursor. The first scatter writes only slot a (4 bytes), at b's place:
    * b is known from the place in the second. */
-  uint32_t *cb = cnt, *ca = cnt + n_obj + 1;
-  memset(cnt, 0, 2 * ((size_t)n_obj + 1) * sizeof *cnt);
+  uint32_t *cb = cnt, *ca = cnt + n_b + 1;
+  memset(cnt, 0, ((size_t)n_a + n_b + 2) * sizeof *cnt);
   for (size_t i = 0; i < n; i++) {
     uint64_t k = keys[i];
     cb[(uint32_t)k + 1]++;
-    ca[k >> 32]++;
+    ca[(k >> 32) - a0]++;
   }
-  for (uint32_t a = 1; a <= n_obj; a++) cb[a] += cb[a - 1];
-  if (!rows_index(al, r, ca, n_obj, n, 1)) return 0;
-  for (size_t i = 0; i < n; i++) t32[cb[(uint32_t)keys[i]]++] = (uint32_t)(keys[i] >> 32);
+  for (uint32_t b = 1; b <= n_b; b++) cb[b] += cb[b - 1];
+  if (!rows_index(al, r, ca, a0, n_a, n, 1)) return 0;
+  for (size_t i = 0; i < n; i++) t32[cb[(uint32_t)keys[i]]++] = (uint32_t)(keys[i] >> 32) - a0;
   /* cb[b] is now the end of b's run, where b + 1's starts. */
   size_t i = 0;
-  for (uint32_t b = 0; b < n_obj; b++)
+  for (uint32_t b = 0; b < n_b; b++)
     for (size_t e = cb[b]; i < e; i++) rb[ca[t32[i]]++] = b;
   return 1;
 }
@@ -245,14 +266,15 @@ typedef struct rcur {
 } rcur_t;
 
 static inline uint64_t rc_first(rcur_t *c, const qk__prows_t *r) {
-  *c = (rcur_t){r, 0, r->n ? r->start[1] : 0, 0, r->n ? (uint64_t)r->row[0] << 32 : 0};
-  return r->n ? c->ka | r->b[0] : END;
+  *c = (rcur_t){r, 0, 0, 0, 0};
+  if (!r->n_nz) return END;
+  *c = (rcur_t){r, r->start[0], r->start[1], 0, (uint64_t)r->row[0] << 32};
+  return c->ka | r->b[c->i];
 }
 
 static inline uint64_t rc_next(rcur_t *c) {
   if (++c->i == c->end) {
-    if (c->i == c->r->n) return END;
-    c->p++;
+    if (++c->p == c->r->n_nz) return END;
     c->end = c->r->start[c->p + 1];
     c->ka = (uint64_t)c->r->row[c->p] << 32;
   }
@@ -350,291 +372,220 @@ static int diff(const qk_world_t *w, const qk__prows_t *o, const qk__prows_t *nw
 }
 
 /*
- * The dense frame (many pairs) on the world's threads: the rows and began / ended in
- * one go. The keys are split into nt chunks, each counted by slot a (cnt: a count array
- * per chunk), the counts made into each chunk's cursors per row (by slot ranges), and
- * the chunks scattered (only b) into their rows, unsorted. Then each thread takes a
- * range of rows (about n / nt pairs) and builds every row from the last frame's, which
- * is sorted (row_build: stamps per slot, the new slots that began sorted and put in by
- * bisection). Each thread's began and ended lists are in key order and the ranges
- * ascend, so the lists are joined in range order: the result is the same on any number
- * of threads, and the same as the one-thread path's (make_rows and diff). On one thread
- * that path is used: measured, it costs fewer instructions (the SSE row merge makes the
- * pairs that stayed cheap there), so this one pays only when split.
+ * Rows, began and ended on the world's threads, by ranges of slots a. The keys are split
+ * into nt chunks; each chunk is counted by partition (consecutive slots a: the buckets
+ * of the bucketed sort, or 2^pb slots), the partitions are given to the threads in
+ * ranges of about n / nt keys, and each chunk is scattered into its partitions (the
+ * bucketed sort's 32-bit form straight into the rows' buffer, else the keys into
+ * `part`). Each thread then sorts its range's keys into its rows (the bucket sort, or
+ * make_rows over its slots: the one-thread path's sorts) and merges them with the last
+ * frame's rows of its range (diff). A range's keys land where its rows go (rows ascend
+ * by slot a), the rows are unique and sorted, and each range's began and ended lists
+ * are in key order, joined in range order: the result is the one-thread path's, on any
+ * number of threads. The found keys' buffer is the sort's scratch once scattered.
  */
 #define QK__RMAX 64 /* = QK__MAX_THREADS */
-typedef struct rjob {
+typedef struct pjob {
   const qk_world_t *w;
   const qk__prows_t *o; /* the last frame's rows */
-  qk__prows_t *r;       /* the new rows (b filled by the scatter) */
-  const uint64_t *keys;
+  qk__prows_t *r;       /* the new rows */
+  uint64_t *keys;       /* the found keys; scratch after the scatter */
+  uint64_t *part;       /* the keys by partition (not bucketed) */
   size_t n;
-  uint32_t n_obj;
-  unsigned nt;
-  int dirty, phase, nomem[QK__RMAX];
-  uint32_t *cnt;  /* nt (n_obj + 1): per chunk, counts then cursors */
-  uint32_t *st;   /* n_obj + 1: row a's pairs at rb[st[a] .. st[a + 1]) */
-  uint32_t *mark; /* nt n_obj stamps, zero at first */
-  uint32_t stamp[QK__RMAX];
-  uint32_t *scr;                         /* per thread 2 maxlen slots */
-  size_t rs[QK__RMAX + 1];               /* pairs per slot range, then their prefix */
-  uint32_t pr[QK__RMAX + 1];             /* the threads' row ranges */
-  size_t nz[QK__RMAX + 1], mx[QK__RMAX]; /* rows with pairs (then prefix), longest */
-  size_t scr_off[QK__RMAX + 1];
+  uint32_t n_obj, np; /* slots, partitions */
+  unsigned nt, pb;    /* threads, slots per partition (2^pb) */
+  int dirty, phase, bucketed;
+  bdig_t g;
+  uint32_t *pc;              /* nt (np + 1): per chunk, counts by partition, then cursors */
+  uint32_t *pst;             /* np + 1: the partitions' starts */
+  uint32_t *ca;              /* bucketed: the rows' counts, n_obj + 1 */
+  uint32_t rp[QK__RMAX + 1]; /* the threads' partition ranges */
+  qk__prows_t lr[QK__RMAX];  /* each range's rows (starts from the range's first key) */
+  size_t nzo[QK__RMAX + 1];  /* the ranges' first rows in the result */
   qk__kvec_t bv[QK__RMAX], ev[QK__RMAX];
-} rjob_t;
+  int nomem[QK__RMAX];
+} pjob_t;
 
-static int cmp_u32(const void *x, const void *y) {
-  uint32_t a = *(const uint32_t *)x, b = *(const uint32_t *)y;
-  return (a > b) - (a < b);
-}
-
-static void sort_small(uint32_t *g, size_t n) {
-  if (n > 24) {
-    qsort(g, n, sizeof *g, cmp_u32);
-    return;
-  }
-  for (size_t i = 1; i < n; i++) {
-    uint32_t v = g[i];
-    size_t j = i;
-    for (; j > 0 && g[j - 1] > v; j--) g[j] = g[j - 1];
-    g[j] = v;
-  }
-}
-
-/* Build row a (n new slots at nb, unsorted; the old row ob of m slots, sorted) in place,
- * adding its began and ended pairs; 0 when memory ran short. The old row's slots are
- * stamped v (a stamp used once), those found in the new row then v + 1 (stayed); the
- * others of the new row began, and the old ones still at v ended. */
-static int row_build(rjob_t *J, unsigned t, uint32_t a, uint32_t *nb, size_t n, const uint32_t *ob,
-                     size_t m) {
-  const qk_world_t *w = J->w;
-  const qk_allocator_t *al = &w->alloc;
-  uint32_t *mk = J->mark + (size_t)t * J->n_obj;
-  uint32_t *S = J->scr + J->scr_off[t], *G = S + J->mx[t];
-  qk__kvec_t *bv = &J->bv[t], *ev = &J->ev[t];
-  uint64_t ka = (uint64_t)a << 32;
-  int dirty = J->dirty, ch_a = dirty && changed(w, a);
-  if (J->stamp[t] >= UINT32_MAX - 2) { /* (the stamps wrapped: start again) */
-    memset(mk, 0, (size_t)J->n_obj * sizeof *mk);
-    J->stamp[t] = 0;
-  }
-  uint32_t v = J->stamp[t] + 1, v1 = v + 1;
-  J->stamp[t] = v1;
-  for (size_t j = 0; j < m; j++) mk[ob[j]] = v;
-  size_t ns = 0, ng = 0;
-  for (size_t i = 0; i < n; i++) {
-    uint32_t x = nb[i];
-    if (mk[x] == v)
-      mk[x] = v1, ns++;
+/* The rows of o whose slot is in [s0, s1), as rows (sharing o's arrays). */
+static qk__prows_t rows_view(const qk__prows_t *o, uint32_t s0, uint32_t s1) {
+  qk__prows_t v = {0};
+  if (!o->n_nz) return v;
+  size_t lo = 0, hi = o->n_nz;
+  while (lo < hi) {
+    size_t mid = lo + (hi - lo) / 2;
+    if (o->row[mid] < s0)
+      lo = mid + 1;
     else
-      G[ng++] = x;
+      hi = mid;
   }
-  const uint32_t *base = m ? ob : S; /* (S: never NULL) */
-  if (ns != m || dirty) {            /* some ended: the stayed ones, in order */
-    ns = 0;
-    for (size_t j = 0; j < m; j++) {
-      uint32_t y = ob[j];
-      if (mk[y] == v1) {
-        S[ns++] = y;
-        if (dirty && (ch_a || changed(w, y)) && !kv_add(al, ev, ka | y)) return 0;
-      } else if (!kv_add(al, ev, ka | y)) {
-        return 0;
-      }
-    }
-    base = S;
+  size_t q0 = lo;
+  hi = o->n_nz;
+  while (lo < hi) {
+    size_t mid = lo + (hi - lo) / 2;
+    if (o->row[mid] < s1)
+      lo = mid + 1;
+    else
+      hi = mid;
   }
-  sort_small(G, ng);
-  if (!dirty) {
-    /* The began slots go in between runs of the stayed ones, found by bisection. */
-    size_t i = 0, k = 0;
-    for (size_t j = 0; j < ng; j++) {
-      uint32_t x = G[j];
-      size_t lo = i, hi = ns;
-      while (lo < hi) {
-        size_t mid = lo + (hi - lo) / 2;
-        if (base[mid] < x)
-          lo = mid + 1;
-        else
-          hi = mid;
-      }
-      memcpy(nb + k, base + i, (lo - i) * sizeof *nb);
-      k += lo - i, i = lo;
-      nb[k++] = x;
-      if (!kv_add(al, bv, ka | x)) return 0;
-    }
-    memcpy(nb + k, base + i, (ns - i) * sizeof *nb);
-    return 1;
-  }
-  size_t i = 0, j = 0, k = 0;
-  while (i < ns || j < ng) {
-    if (j == ng || (i < ns && S[i] < G[j])) {
-      uint32_t y = S[i++];
-      nb[k++] = y;
-      if ((ch_a || changed(w, y)) && !kv_add(al, bv, ka | y)) return 0;
-    } else {
-      uint32_t x = G[j++];
-      nb[k++] = x;
-      if (!kv_add(al, bv, ka | x)) return 0;
-    }
-  }
-  return 1;
+  v.b = o->b, v.row = o->row + q0, v.start = o->start + q0, v.n_nz = lo - q0;
+  v.n = o->start[lo] - o->start[q0];
+  return v;
 }
 
-static void rjob_run(unsigned t, void *ud) {
-  rjob_t *J = ud;
-  uint32_t n_obj = J->n_obj, *c = J->cnt + (size_t)t * (n_obj + 1);
+/* Range t's rows: sorted, indexed (in J->lr[t]) and merged with the last frame's. */
+static int range_rows(pjob_t *J, unsigned t) {
+  const qk_allocator_t *al = &J->w->alloc;
+  uint32_t p0 = J->rp[t], p1 = J->rp[t + 1];
+  uint32_t s0 = (uint32_t)((uint64_t)p0 << J->pb), s1 = (uint32_t)((uint64_t)p1 << J->pb);
+  if (s1 > J->n_obj) s1 = J->n_obj;
+  if (s0 > s1) s0 = s1;
+  size_t k0 = J->pst[p0], m = J->pst[p1] - k0;
+  qk__prows_t *lr = &J->lr[t];
+  lr->b = J->r->b + k0;
+  uint64_t *scr = J->keys + k0; /* 8 m bytes of scratch */
+  if (J->bucketed) {
+    const uint32_t W = (uint32_t)1 << J->g.ab;
+    size_t cn = ((size_t)1 << J->g.d0) + ((size_t)1 << J->g.d1);
+    uint32_t *c0 = qk__realloc(al, NULL, 0, cn * sizeof *c0);
+    if (!c0) return 0;
+    for (uint32_t k = p0; k < p1; k++) {
+      uint32_t a0 = k << J->g.ab, na = J->n_obj - a0 < W ? J->n_obj - a0 : W;
+      bucket_sort(&J->g, J->r->b + J->pst[k], J->pst[k + 1] - J->pst[k], na, (uint32_t *)scr, c0,
+                  c0 + J->g.m0 + 1, J->ca + a0);
+    }
+    qk__free(al, c0, cn * sizeof *c0);
+    lr->n = m;
+    if (!rows_index(al, lr, J->ca + s0, s0, s1 - s0, m, 0)) return 0;
+  } else {
+    size_t cn = m * 4 < J->n_obj ? 257 : (size_t)(s1 - s0) + J->n_obj + 2;
+    uint32_t *cnt = qk__realloc(al, NULL, 0, cn * sizeof *cnt);
+    if (!cnt) return 0;
+    int ok = make_rows(al, J->part + k0, scr, m, cnt, s0, s1 - s0, J->n_obj, 0, lr);
+    qk__free(al, cnt, cn * sizeof *cnt);
+    if (!ok) return 0;
+  }
+  size_t bc = J->w->began.n / J->nt + 64, ec = J->w->ended.n / J->nt + 64;
+  if (!(J->bv[t].v = qk__realloc(al, NULL, 0, bc * sizeof(uint64_t)))) return 0;
+  J->bv[t].cap = bc;
+  if (!(J->ev[t].v = qk__realloc(al, NULL, 0, ec * sizeof(uint64_t)))) return 0;
+  J->ev[t].cap = ec;
+  /* (the last range takes the old rows of slots past n_obj too) */
+  qk__prows_t ov = rows_view(J->o, t ? s0 : 0, t + 1 < J->nt ? s1 : UINT32_MAX);
+  return diff(J->w, &ov, lr, J->dirty, &J->bv[t], &J->ev[t]);
+}
+
+static void pjob_run(unsigned t, void *ud) {
+  pjob_t *J = ud;
   size_t k0 = J->n * t / J->nt, k1 = J->n * (t + 1) / J->nt;
-  uint32_t s0 = (uint32_t)((uint64_t)n_obj * t / J->nt);
-  uint32_t s1 = (uint32_t)((uint64_t)n_obj * (t + 1) / J->nt);
-  unsigned nt = J->nt;
-  size_t stride = (size_t)n_obj + 1;
+  uint32_t *c = J->pc + (size_t)t * (J->np + 1);
+  const unsigned pb = J->pb;
   switch (J->phase) {
-  case 0: /* count the chunk's keys by slot a (and clear the thread's stamps) */
-    memset(J->mark + (size_t)t * n_obj, 0, (size_t)n_obj * sizeof *J->mark);
-    memset(c, 0, stride * sizeof *c);
-    for (const uint64_t *k = J->keys + k0, *e = J->keys + k1; k < e; k++) c[*k >> 32]++;
+  case 0: /* count the chunk's keys by partition */
+    memset(c, 0, ((size_t)J->np + 1) * sizeof *c);
+    for (size_t i = k0; i < k1; i++) c[(uint32_t)(J->keys[i] >> 32) >> pb]++;
     break;
-  case 1: { /* the slot range's pairs */
-    size_t s = 0;
-    for (unsigned u = 0; u < nt; u++)
-      for (uint32_t a = s0; a < s1; a++) s += J->cnt[u * stride + a];
-    J->rs[t] = s;
-    break;
-  }
-  case 2: { /* row starts and the chunks' cursors */
-    uint32_t base = (uint32_t)J->rs[t];
-    for (uint32_t a = s0; a < s1; a++) {
-      J->st[a] = base;
-      for (unsigned u = 0; u < nt; u++) {
-        uint32_t *p = &J->cnt[u * stride + a], q = *p;
-        *p = base, base += q;
+  case 1: /* scatter the chunk into the partitions */
+    if (J->bucketed) {
+      uint32_t *rb = J->r->b;
+      const uint32_t W = (uint32_t)1 << pb, bmul = J->g.bmask + 1;
+      for (size_t i = k0; i < k1; i++) {
+        uint64_t k = J->keys[i];
+        uint32_t a = (uint32_t)(k >> 32);
+        rb[c[a >> pb]++] = (a & (W - 1)) * bmul | (uint32_t)k;
+      }
+    } else {
+      uint64_t *pt = J->part;
+      for (size_t i = k0; i < k1; i++) {
+        uint64_t k = J->keys[i];
+        pt[c[(uint32_t)(k >> 32) >> pb]++] = k;
       }
     }
     break;
-  }
-  case 3: { /* scatter the chunk's b into the rows; then the row range's rows with
-             * pairs, and its longest */
-    uint32_t *rb = J->r->b;
-    for (const uint64_t *k = J->keys + k0, *e = J->keys + k1; k < e; k++)
-      rb[c[*k >> 32]++] = (uint32_t)*k;
-    size_t nz = 0, mx = 0;
-    for (uint32_t a = J->pr[t]; a < J->pr[t + 1]; a++) {
-      size_t l = J->st[a + 1] - J->st[a];
-      nz += l != 0, mx = l > mx ? l : mx;
-    }
-    J->nz[t] = nz;
-    J->mx[t] = mx;
+  case 2: /* the range's rows, began and ended */
+    if (!range_rows(J, t)) J->nomem[t] = 1;
     break;
-  }
-  default: { /* build the rows */
-    const qk__prows_t *o = J->o;
+  default: { /* the range's rows into the result */
+    const qk__prows_t *lr = &J->lr[t];
     qk__prows_t *r = J->r;
-    size_t q = 0, hi = o->n_nz, z = J->nz[t];
-    while (q < hi) { /* the first old row at or after the range */
-      size_t mid = q + (hi - q) / 2;
-      if (o->row[mid] < J->pr[t])
-        q = mid + 1;
-      else
-        hi = mid;
-    }
-    for (uint32_t a = J->pr[t]; a < J->pr[t + 1]; a++) {
-      size_t n = J->st[a + 1] - J->st[a], m = 0;
-      const uint32_t *ob = NULL;
-      if (q < o->n_nz && o->row[q] == a)
-        ob = o->b + o->start[q], m = o->start[q + 1] - o->start[q], q++;
-      if (!n && !m) continue;
-      if (n) r->row[z] = a, r->start[z++] = J->st[a];
-      if (!row_build(J, t, a, r->b + J->st[a], n, ob, m)) {
-        J->nomem[t] = 1;
-        return;
-      }
-    }
+    uint32_t base = (uint32_t)J->pst[J->rp[t]];
+    size_t z = J->nzo[t];
+    if (lr->n_nz) memcpy(r->row + z, lr->row, lr->n_nz * sizeof *r->row);
+    for (size_t k = 0; k < lr->n_nz; k++) r->start[z + k] = base + lr->start[k];
   }
   }
 }
 
-static void rjob_phase(rjob_t *J, int ph) {
+static void pjob_phase(pjob_t *J, int ph) {
   J->phase = ph;
-  qk__run_jobs(J->nt, J->nt, rjob_run, J);
+  qk__run_jobs(J->nt, J->nt, pjob_run, J);
 }
 
-/* Rows, began and ended for the dense case; QK_ERR_NOMEM leaves nothing allocated in
- * *r, *bv, *ev. */
-static int rows_frame(const qk_world_t *w, const uint64_t *keys, size_t n, qk__prows_t *r,
-                      int dirty, qk__kvec_t *bvo, qk__kvec_t *evo) {
+/* Rows, began and ended on nt threads (keys: the found keys, n of them, in a buffer of
+ * at least n; used as scratch); QK_ERR_NOMEM leaves nothing allocated in *r (but b),
+ * *bvo, *evo. */
+static int rows_frame(const qk_world_t *w, uint64_t *keys, size_t n, qk__prows_t *r, int dirty,
+                      unsigned nt, qk__kvec_t *bvo, qk__kvec_t *evo) {
   const qk_allocator_t *al = &w->alloc;
   uint32_t n_obj = w->n_obj;
-  unsigned nt = qk__world_update_threads(w);
-  if (nt < 1 || w->n_live < 4096) nt = 1;
   if (nt > QK__RMAX) nt = QK__RMAX;
-  rjob_t *J = qk__realloc(al, NULL, 0, sizeof *J);
+  pjob_t *J = qk__realloc(al, NULL, 0, sizeof *J);
   if (!J) return 0;
   memset(J, 0, sizeof *J);
   J->w = w, J->o = &w->cur, J->r = r, J->keys = keys, J->n = n, J->n_obj = n_obj, J->nt = nt;
   J->dirty = dirty;
-  size_t stride = (size_t)n_obj + 1, cbytes = nt * stride * sizeof *J->cnt;
-  size_t mbytes = (size_t)nt * n_obj * sizeof *J->mark, sbytes = stride * sizeof *J->st, scn = 0;
+  unsigned ab, bb;
+  if (n * 4 >= n_obj && bucket_plan(n, n_obj, &ab, &bb)) {
+    J->bucketed = 1, J->g = bucket_digits(ab, bb), J->pb = ab;
+  } else { /* about 256 partitions a thread */
+    unsigned pb = 0;
+    while (pb < 31 && ((uint64_t)n_obj >> pb) > 256u * nt) pb++;
+    J->pb = pb;
+  }
+  J->np = (uint32_t)(((uint64_t)n_obj + ((uint64_t)1 << J->pb) - 1) >> J->pb);
+  size_t pcn = (size_t)nt * (J->np + 1), psn = (size_t)J->np + 1;
+  size_t can = J->bucketed ? (size_t)n_obj + 1 : 0, ptn = J->bucketed ? 0 : n;
   int ok = 0;
-  J->cnt = qk__realloc(al, NULL, 0, cbytes);
-  J->st = J->cnt ? qk__realloc(al, NULL, 0, sbytes) : NULL;
-  J->mark = J->st ? qk__realloc(al, NULL, 0, mbytes ? mbytes : 1) : NULL;
-  if (!J->mark) goto out;
-  rjob_phase(J, 0);
-  rjob_phase(J, 1);
-  size_t acc = 0;
-  for (unsigned t = 0; t < nt; t++) {
-    size_t s = J->rs[t];
-    J->rs[t] = acc, acc += s;
-  }
-  rjob_phase(J, 2);
-  J->st[n_obj] = (uint32_t)n;
-  /* Row ranges of about n / nt pairs each. */
-  J->pr[0] = 0, J->pr[nt] = n_obj;
-  for (unsigned t = 1; t < nt; t++) {
-    size_t want = n * t / nt;
-    uint32_t lo = J->pr[t - 1], hi = n_obj;
-    while (lo < hi) {
-      uint32_t mid = lo + (hi - lo) / 2;
-      if (J->st[mid] < want)
-        lo = mid + 1;
-      else
-        hi = mid;
+  J->pc = qk__realloc(al, NULL, 0, (pcn + psn + can) * sizeof *J->pc);
+  if (!J->pc) goto out;
+  J->pst = J->pc + pcn, J->ca = can ? J->pst + psn : NULL;
+  if (ptn && !(J->part = qk__realloc(al, NULL, 0, ptn * sizeof *J->part))) goto out;
+  pjob_phase(J, 0);
+  /* The partitions' starts, the ranges (about n / nt keys each) and the chunks' cursors
+   * (a partition's keys chunk by chunk). */
+  size_t s = 0;
+  unsigned t = 1;
+  J->rp[0] = 0;
+  for (uint32_t p = 0; p < J->np; p++) {
+    J->pst[p] = (uint32_t)s;
+    for (; t < nt && s >= n * t / nt; t++) J->rp[t] = p;
+    for (unsigned u = 0; u < nt; u++) {
+      uint32_t *c = &J->pc[(size_t)u * (J->np + 1) + p], x = *c;
+      *c = (uint32_t)s, s += x;
     }
-    J->pr[t] = lo;
   }
-  rjob_phase(J, 3);
+  J->pst[J->np] = (uint32_t)n;
+  for (; t <= nt; t++) J->rp[t] = J->np;
+  pjob_phase(J, 1);
+  pjob_phase(J, 2);
+  for (t = 0; t < nt; t++)
+    if (J->nomem[t]) goto out;
   size_t nz = 0;
-  for (unsigned t = 0; t < nt; t++) {
-    size_t c = J->nz[t];
-    J->nz[t] = nz, nz += c;
-    J->scr_off[t] = scn, scn += 2 * J->mx[t];
-  }
-  J->scr = qk__realloc(al, NULL, 0, (scn ? scn : 1) * sizeof *J->scr);
-  if (!J->scr || !rows_alloc(al, r, nz)) goto out;
+  for (t = 0; t < nt; t++) J->nzo[t] = nz, nz += J->lr[t].n_nz;
+  if (!rows_alloc(al, r, nz)) goto out;
   r->n = n;
   r->start[nz] = (uint32_t)n;
-  for (unsigned t = 0; t < nt; t++) {
-    size_t bc = w->began.n / nt + 64, ec = w->ended.n / nt + 64;
-    if (!(J->bv[t].v = qk__realloc(al, NULL, 0, bc * sizeof(uint64_t)))) goto out;
-    J->bv[t].cap = bc;
-    if (!(J->ev[t].v = qk__realloc(al, NULL, 0, ec * sizeof(uint64_t)))) goto out;
-    J->ev[t].cap = ec;
-  }
-  rjob_phase(J, 4);
-  for (unsigned t = 0; t < nt; t++)
-    if (J->nomem[t]) goto out;
+  pjob_phase(J, 3);
   /* Thread 0's lists take the others'. */
   for (int which = 0; which < 2; which++) {
     qk__kvec_t *v = which ? J->ev : J->bv;
     size_t tot = 0;
-    for (unsigned t = 0; t < nt; t++) tot += v[t].n;
+    for (t = 0; t < nt; t++) tot += v[t].n;
     if (tot > v[0].cap) {
       uint64_t *p = qk__realloc(al, v[0].v, v[0].cap * sizeof *p, tot * sizeof *p);
       if (!p) goto out;
       v[0].v = p, v[0].cap = tot;
     }
-    for (unsigned t = 1; t < nt; t++) {
+    for (t = 1; t < nt; t++) {
       if (v[t].n) memcpy(v[0].v + v[0].n, v[t].v, v[t].n * sizeof *v[t].v);
       v[0].n += v[t].n;
     }
@@ -643,15 +594,14 @@ static int rows_frame(const qk_world_t *w, const uint64_t *keys, size_t n, qk__p
   J->bv[0] = J->ev[0] = (qk__kvec_t){0};
   ok = 1;
 out:
-  for (unsigned t = 0; t < nt; t++) {
+  for (t = 0; t < nt; t++) {
     qk__free(al, J->bv[t].v, J->bv[t].cap * sizeof(uint64_t));
     qk__free(al, J->ev[t].v, J->ev[t].cap * sizeof(uint64_t));
+    if (J->lr[t].row) qk__free(al, J->lr[t].row, 2 * (J->lr[t].n_nz + 1) * sizeof *J->lr[t].row);
   }
   if (!ok && r->row) qk__free(al, r->row, 2 * (r->n_nz + 1) * sizeof *r->row), r->row = NULL;
-  qk__free(al, J->scr, (scn ? scn : 1) * sizeof *J->scr);
-  qk__free(al, J->mark, mbytes ? mbytes : 1);
-  qk__free(al, J->st, sbytes);
-  qk__free(al, J->cnt, cbytes);
+  qk__free(al, J->part, ptn * sizeof *J->part);
+  qk__free(al, J->pc, (pcn + psn + can) * sizeof *J->pc);
   qk__free(al, J, sizeof *J);
   return ok;
 }
@@ -749,16 +699,11 @@ qk_status_t qk_world_update(qk_world_t *w) {
     if ((nr.b = qk__realloc(al, NULL, 0, c * sizeof *nr.b))) nr.cap = c;
   }
   unsigned nt = w->n_live < 4096 ? 1 : qk__world_update_threads(w);
-  unsigned bk_a, bk_b; /* (unused: whether the bucketed sort applies) */
-  if (nr.b && total * 4 >= n_obj && nt > 1 && !bucket_plan(total, (uint32_t)n_obj, &bk_a, &bk_b)) {
-    /* dense, on threads: rows and began / ended in one go. From 2^20 pairs the
-     * one-thread bucketed sort below is faster than this path's scatter through one
-     * cursor a slot (clustered 10^5: 369k objects/s on one thread against 341k on two
-     * this way), so a threaded world takes it there too. */
-    ok = rows_frame(w, found.v, total, &nr, dirty, &bv, &ev);
+  if (nr.b && nt > 1) {
+    /* on threads: the same sorts and merge, by ranges of slots */
+    ok = rows_frame(w, found.v, total, &nr, dirty, nt, &bv, &ev);
   } else if (nr.b) {
-    /* one thread, or sparse: the keys sorted into rows, then merged with the last
-     * frame's */
+    /* one thread: the keys sorted into rows, then merged with the last frame's */
     size_t ccap = total * 4 < n_obj ? 257 : rows_cnt((uint32_t)n_obj, total);
     /* (the dense sort's scratch holds 32-bit slots, the sparse one's keys) */
     size_t tbytes = (total * 4 < n_obj ? sizeof(uint64_t) : sizeof(uint32_t)) * tcap;
@@ -767,7 +712,8 @@ qk_status_t qk_world_update(qk_world_t *w) {
     int in_keys = total * 4 >= n_obj && (found.cap - total) * sizeof *found.v >= tbytes;
     uint64_t *tmp = in_keys ? found.v + total : qk__realloc(al, NULL, 0, tbytes);
     uint32_t *cnt = tmp ? qk__realloc(al, NULL, 0, ccap * sizeof *cnt) : NULL;
-    ok = cnt && make_rows(al, found.v, tmp, total, cnt, (uint32_t)n_obj, &nr);
+    ok =
+        cnt && make_rows(al, found.v, tmp, total, cnt, 0, (uint32_t)n_obj, (uint32_t)n_obj, 1, &nr);
     qk__free(al, cnt, ccap * sizeof *cnt);
     if (!in_keys) qk__free(al, tmp, tbytes);
     /* The lists start with room for the last frame's counts and some (frames are

@@ -551,6 +551,36 @@ static void test_world_dense_buckets(void **s) {
   qk_world_free(w);
 }
 
+/* From 4096 objects a threaded update sorts the pairs into rows and merges them with the
+ * last frame's by ranges of slots, one range a thread: scenes with few pairs (the radix
+ * sort of keys per range), with some pairs an object (the counting sorts per range) and
+ * over 2^20 pairs (the buckets, split between the threads), on two and three threads
+ * (ranges of uneven slot counts), each frame (moves, then a remove and an add reusing
+ * its slot) against brute force. */
+static void test_world_threads_ranges(void **s) {
+  (void)s;
+  static const struct {
+    int n;
+    double span;
+    size_t min_pairs;
+  } sc[] = {{5000, 3000, 300}, {5000, 250, 20000}, {6000, 50, (size_t)1 << 20}};
+  for (unsigned th = 2; th <= 3; th++)
+    for (size_t k = 0; k < sizeof sc / sizeof *sc; k++) {
+      qkt_rng_t r;
+      qkt_rng_seed(&r, g_seed + 61 + th * 8 + k);
+      qk_world_options_t o;
+      qk_world_options_init(&o);
+      o.threads = th;
+      o.thread_min = 0;
+      qk_world_t *w;
+      assert_int_equal(qk_world_new(&o, &w), QK_OK);
+      double c = sc[k].span / 2;
+      dense_scene(w, &r, sc[k].n, sc[k].span, 3, (qk_shape_t){QK_SHAPE_BOX, c, c, c + 10, c + 10},
+                  sc[k].min_pairs);
+      qk_world_free(w);
+    }
+}
+
 /* Enough objects that the update packs the boxes on both threads: frames of moves (by
  * the batch call), adds and removes give the same pairs, began and ended on two threads
  * as on one (checked against brute force by the scene tests). */
@@ -1221,6 +1251,7 @@ int main(void) {
       cmocka_unit_test(test_world_clustered),
       cmocka_unit_test(test_world_dense_kept_scratch),
       cmocka_unit_test(test_world_dense_buckets),
+      cmocka_unit_test(test_world_threads_ranges),
       cmocka_unit_test(test_world_mixed_sizes),
       cmocka_unit_test(test_world_all_kinds),
       cmocka_unit_test(test_world_huge),
