@@ -1,14 +1,31 @@
 /*
  * The static collider on several threads: all pairs and batches of rays. Work is cut into
  * more jobs than threads, in a fixed order (leaves in the order the one-thread search
- * visits them, rays by index), and qk__run_jobs (index/threads.c) hands them out statically, so
- * neither the answers nor their order depend on the number of threads.
+ * visits them, rays by index); every job writes only its own outputs, and the pairs are
+ * reported in job order, so neither the answers nor their order depend on the number of
+ * threads or on which thread ran which job.
  */
+#include <stdatomic.h>
 #include <string.h>
 
 #include "collide/collide_internal.h"
 
 /* ---- all pairs ------------------------------------------------------------------ */
+
+/*
+ * The leaves, in the order the one-thread search visits them, are cut into many jobs of
+ * consecutive leaves, taken from a shared counter (so the threads end together however
+ * unequal the jobs). Each job keeps its pairs in a buffer of its own. The calling thread,
+ * between its own jobs, reports every job finished so far in job order, and the rest
+ * after the join: the pairs come in the one-thread order while most of the reporting
+ * overlaps the other threads' searches, instead of all of it following them. A job that
+ * could not keep its pairs (no memory) is searched again by the reporter, straight into
+ * the callback, when its turn comes: the same pairs in the same place.
+ */
+
+/* Jobs per thread: a job's share of the pairs is what may be left to report after the
+ * join, and what one thread may still search after the others ran out of jobs. */
+#define PAIRS_JOBS_PER_THREAD 32
 
 /* One job's pairs, in the order its leaves produced them. */
 typedef struct pjob {
@@ -23,7 +40,12 @@ typedef struct pctx {
   const uint32_t *leaves;
   size_t n_leaves;
   unsigned n_jobs;
-  pjob_t *jobs;
+  pjob_t *jobs;       /* written by a job's thread, read by the reporter once done */
+  atomic_uchar *done; /* per job: set (release) when its pjob_t is final */
+  atomic_int stop;    /* the callback asked to stop: jobs not begun are skipped */
+  qk_pair_fn fn;      /* the reporter's (calling thread's) part from here on */
+  void *ud;
+  unsigned next; /* the next job to report */
 } pctx_t;
 
 static int keep_pair(qk_id_t a, qk_id_t b, void *ud) {
@@ -43,11 +65,50 @@ static int keep_pair(qk_id_t a, qk_id_t b, void *ud) {
   return 0;
 }
 
-static void pairs_job(unsigned i, void *ud) {
+static void job_leaves(const pctx_t *p, unsigned i, size_t *lo, size_t *hi) {
+  *lo = p->n_leaves * i / p->n_jobs;
+  *hi = p->n_leaves * (i + 1) / p->n_jobs;
+}
+
+/* Report job i's pairs (calling thread only), then release its buffer. */
+static void report_job(pctx_t *p, unsigned i) {
+  pjob_t *j = &p->jobs[i];
+  int stop = 0;
+  if (j->nomem) {
+    size_t lo, hi;
+    job_leaves(p, i, &lo, &hi);
+    for (size_t k = lo; k < hi && !stop; k++)
+      stop = qk__collider_leaf_pairs(p->c, p->leaves[k], p->fn, p->ud);
+  } else {
+    for (size_t k = 0; k < j->n && !stop; k++) stop = p->fn(j->buf[k].a, j->buf[k].b, p->ud);
+  }
+  qk__free(j->alloc, j->buf, j->cap * sizeof *j->buf);
+  j->buf = NULL, j->n = j->cap = 0;
+  if (stop) atomic_store_explicit(&p->stop, 1, memory_order_relaxed);
+}
+
+/* Report the finished jobs from p->next on, in order, up to the first unfinished one. */
+static void report_done(pctx_t *p) {
+  while (p->next < p->n_jobs && !atomic_load_explicit(&p->stop, memory_order_relaxed) &&
+         atomic_load_explicit(&p->done[p->next], memory_order_acquire))
+    report_job(p, p->next++);
+}
+
+static void pairs_job(unsigned i, unsigned w, void *ud) {
   pctx_t *p = ud;
-  size_t lo = p->n_leaves * i / p->n_jobs, hi = p->n_leaves * (i + 1) / p->n_jobs;
-  for (size_t k = lo; k < hi; k++)
-    if (qk__collider_leaf_pairs(p->c, p->leaves[k], keep_pair, &p->jobs[i])) return;
+  if (!atomic_load_explicit(&p->stop, memory_order_relaxed)) {
+    /* The job's state on this thread's stack while it grows: the jobs' records lie side by
+     * side, and every pair kept updates n (false sharing with the neighbouring job). */
+    pjob_t j = p->jobs[i];
+    size_t lo, hi;
+    job_leaves(p, i, &lo, &hi);
+    for (size_t k = lo; k < hi; k++)
+      if (qk__collider_leaf_pairs(p->c, p->leaves[k], keep_pair, &j)) break;
+    p->jobs[i] = j;
+  }
+  atomic_store_explicit(&p->done[i], 1, memory_order_release);
+  /* Share 0 runs on the calling thread, which alone may call the callback. */
+  if (w == 0) report_done(p);
 }
 
 typedef struct lctx {
@@ -75,27 +136,35 @@ qk_status_t qk__collider_pairs_threaded(const qk_collider_t *c, qk_pair_fn fn, v
     return QK_ERR_NOMEM;
   }
   const size_t n_leaves = l.n;
-  const uint32_t *leaves = l.out;
-  /* Eight jobs per thread even out leaves of unequal work. */
-  unsigned n_jobs = n_leaves < 8u * threads ? (unsigned)n_leaves : 8u * threads;
+  const size_t most = (size_t)PAIRS_JOBS_PER_THREAD * threads;
+  const unsigned n_jobs = (unsigned)(n_leaves < most ? n_leaves : most);
   pjob_t *jobs = qk__realloc(a, NULL, 0, n_jobs * sizeof *jobs);
-  qk_status_t st = QK_ERR_NOMEM;
-  if (jobs) {
-    for (unsigned i = 0; i < n_jobs; i++) jobs[i] = (pjob_t){NULL, 0, 0, 0, a};
-    pctx_t p = {c, leaves, n_leaves, n_jobs, jobs};
-    qk__run_jobs(threads, n_jobs, pairs_job, &p);
-    st = QK_OK;
-    for (unsigned i = 0; i < n_jobs; i++)
-      if (jobs[i].nomem) st = QK_ERR_NOMEM;
-    /* Only when every job finished are the pairs reported, in job order. */
-    for (unsigned i = 0, stop = 0; st == QK_OK && i < n_jobs && !stop; i++)
-      for (size_t k = 0; k < jobs[i].n && !stop; k++)
-        stop = fn(jobs[i].buf[k].a, jobs[i].buf[k].b, ud);
-    for (unsigned i = 0; i < n_jobs; i++)
+  atomic_uchar *done = qk__realloc(a, NULL, 0, n_jobs * sizeof *done);
+  qk_status_t st = QK_ERR_NOMEM; /* nothing reported yet: the caller searches serially */
+  if (jobs && done) {
+    pctx_t p = {.c = c,
+                .leaves = l.out,
+                .n_leaves = n_leaves,
+                .n_jobs = n_jobs,
+                .jobs = jobs,
+                .done = done,
+                .fn = fn,
+                .ud = ud,
+                .next = 0};
+    atomic_init(&p.stop, 0);
+    for (unsigned i = 0; i < n_jobs; i++) {
+      jobs[i] = (pjob_t){NULL, 0, 0, 0, a};
+      atomic_init(&done[i], 0);
+    }
+    qk__run_jobs_dynamic(threads, n_jobs, pairs_job, &p);
+    report_done(&p); /* every job is done now: the rest, unless stopped */
+    for (unsigned i = p.next; i < n_jobs; i++)
       qk__free(a, jobs[i].buf, jobs[i].cap * sizeof *jobs[i].buf);
+    st = QK_OK;
   }
   qk__free(a, l.out, l.cap * sizeof *l.out);
-  qk__free(a, jobs, n_jobs * sizeof *jobs);
+  qk__free(a, jobs, jobs ? n_jobs * sizeof *jobs : 0);
+  qk__free(a, done, done ? n_jobs * sizeof *done : 0);
   return st;
 }
 
