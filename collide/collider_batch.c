@@ -1,14 +1,33 @@
 /*
  * The static collider on several threads: all pairs and batches of rays. Work is cut into
  * more jobs than threads, in a fixed order (leaves in the order the one-thread search
- * visits them, rays by index), and qk__run_jobs (index/threads.c) hands them out statically, so
- * neither the answers nor their order depend on the number of threads.
+ * visits them, rays by index); every job writes only its own outputs, and the pairs are
+ * reported in job order, so neither the answers nor their order depend on the number of
+ * threads or on which thread ran which job.
  */
+#include <stdatomic.h>
 #include <string.h>
 
 #include "collide/collide_internal.h"
 
 /* ---- all pairs ------------------------------------------------------------------ */
+
+/*
+ * The tree is cut into subtrees of at most a share of the items each, listed in the order
+ * the one-thread search visits them (a depth-first descent that stops at such subtrees:
+ * a few hundred nodes, not every leaf). Each subtree is a job, taken from a shared
+ * counter (so the threads end together however unequal the jobs), whose leaves are
+ * searched in that same order, keeping their pairs in a buffer of the job's own. The
+ * calling thread, between its own jobs, reports every job finished so far in job order,
+ * and the rest after the join: the pairs come in the one-thread order while most of the
+ * reporting overlaps the other threads' searches, instead of all of it following them. A
+ * job that could not keep its pairs (no memory) is searched again by the reporter,
+ * straight into the callback, when its turn comes: the same pairs in the same place.
+ */
+
+/* Jobs per thread (about): a job's share of the pairs is what may be left to report after
+ * the join, and what one thread may still search after the others ran out of jobs. */
+#define PAIRS_JOBS_PER_THREAD 32
 
 /* One job's pairs, in the order its leaves produced them. */
 typedef struct pjob {
@@ -20,10 +39,15 @@ typedef struct pjob {
 
 typedef struct pctx {
   const qk_collider_t *c;
-  const uint32_t *leaves;
-  size_t n_leaves;
+  const qk_tree_t *t;
+  const uint32_t *roots; /* per job: the root of its subtree */
   unsigned n_jobs;
-  pjob_t *jobs;
+  pjob_t *jobs;       /* written by a job's thread, read by the reporter once done */
+  atomic_uchar *done; /* per job: set (release) when its pjob_t is final */
+  atomic_int stop;    /* the callback asked to stop: jobs not begun are skipped */
+  qk_pair_fn fn;      /* the reporter's (calling thread's) part from here on */
+  void *ud;
+  unsigned next; /* the next job to report */
 } pctx_t;
 
 static int keep_pair(qk_id_t a, qk_id_t b, void *ud) {
@@ -43,59 +67,124 @@ static int keep_pair(qk_id_t a, qk_id_t b, void *ud) {
   return 0;
 }
 
-static void pairs_job(unsigned i, void *ud) {
+/* The pairs of the non-empty leaves below `root`, in the one-thread order (as
+ * qk__collider_each_leaf visits them); nonzero when fn asked to stop. */
+static int subtree_pairs(const pctx_t *p, uint32_t root, qk_pair_fn fn, void *ud) {
+  uint32_t stack[QK__CSTACK_MAX];
+  int sp = 0;
+  stack[sp++] = root;
+  while (sp > 0) {
+    const uint32_t v = stack[--sp];
+    const uint32_t child = qk__node_child(p->t, v);
+    if (child != QK_NONE) {
+      for (int k = 3; k >= 0; k--) stack[sp++] = child + (uint32_t)k;
+      continue;
+    }
+    if (qk__node_count(p->t, v) > 0 && qk__collider_leaf_pairs(p->c, v, fn, ud)) return 1;
+  }
+  return 0;
+}
+
+/* Report job i's pairs (calling thread only), then release its buffer. */
+static void report_job(pctx_t *p, unsigned i) {
+  pjob_t *j = &p->jobs[i];
+  int stop = 0;
+  if (j->nomem)
+    stop = subtree_pairs(p, p->roots[i], p->fn, p->ud);
+  else
+    for (size_t k = 0; k < j->n && !stop; k++) stop = p->fn(j->buf[k].a, j->buf[k].b, p->ud);
+  qk__free(j->alloc, j->buf, j->cap * sizeof *j->buf);
+  j->buf = NULL, j->n = j->cap = 0;
+  if (stop) atomic_store_explicit(&p->stop, 1, memory_order_relaxed);
+}
+
+/* Report the finished jobs from p->next on, in order, up to the first unfinished one. */
+static void report_done(pctx_t *p) {
+  while (p->next < p->n_jobs && !atomic_load_explicit(&p->stop, memory_order_relaxed) &&
+         atomic_load_explicit(&p->done[p->next], memory_order_acquire))
+    report_job(p, p->next++);
+}
+
+static void pairs_job(unsigned i, unsigned w, void *ud) {
   pctx_t *p = ud;
-  size_t lo = p->n_leaves * i / p->n_jobs, hi = p->n_leaves * (i + 1) / p->n_jobs;
-  for (size_t k = lo; k < hi; k++)
-    if (qk__collider_leaf_pairs(p->c, p->leaves[k], keep_pair, &p->jobs[i])) return;
+  if (!atomic_load_explicit(&p->stop, memory_order_relaxed)) {
+    /* The job's state on this thread's stack while it grows: the jobs' records lie side by
+     * side, and every pair kept updates n (false sharing with the neighbouring job). */
+    pjob_t j = p->jobs[i];
+    subtree_pairs(p, p->roots[i], keep_pair, &j);
+    p->jobs[i] = j;
+  }
+  atomic_store_explicit(&p->done[i], 1, memory_order_release);
+  /* Share 0 runs on the calling thread, which alone may call the callback. */
+  if (w == 0) report_done(p);
 }
 
 typedef struct lctx {
+  const qk_tree_t *t;
   const qk_allocator_t *alloc;
+  uint32_t limit; /* a subtree of at most this many items is one job */
   uint32_t *out;
   size_t n, cap;
+  int nomem;
 } lctx_t;
 
-static int list_leaf(uint32_t leaf, void *ud) {
-  lctx_t *l = ud;
-  if (l->n == l->cap && qk__grow(l->alloc, (void **)&l->out, &l->cap, l->n + 1, sizeof *l->out))
-    return 1; /* no memory: stop (the caller sees l->n below the leaves' count) */
-  l->out[l->n++] = leaf;
-  return 0;
+/* The job roots below v in depth-first order: v itself when small enough or a leaf,
+ * else its children's. Empty subtrees have no pairs and make no job. Recursion depth is
+ * bounded by the tree's depth cap. */
+static void list_roots(lctx_t *l, uint32_t v) {
+  const uint32_t count = qk__node_count(l->t, v), child = qk__node_child(l->t, v);
+  if (count == 0 || l->nomem) return;
+  if (child == QK_NONE || count <= l->limit) {
+    if (l->n == l->cap && qk__grow(l->alloc, (void **)&l->out, &l->cap, l->n + 1, sizeof *l->out))
+      l->nomem = 1;
+    else
+      l->out[l->n++] = v;
+    return;
+  }
+  for (uint32_t k = 0; k < 4; k++) list_roots(l, child + k);
 }
 
 qk_status_t qk__collider_pairs_threaded(const qk_collider_t *c, qk_pair_fn fn, void *ud) {
   const qk_allocator_t *a = qk__collider_alloc(c);
+  const qk_tree_t *t = qk_collider_tree(c);
   unsigned threads = qk__threads_resolve(qk__collider_threads(c));
-  if (threads <= 1) return QK_ERR_NOMEM; /* nothing to share: the serial path */
-  /* The leaves in one pass, into a growing list. */
-  lctx_t l = {a, NULL, 0, 0};
-  if (qk__collider_each_leaf(c, list_leaf, &l) || l.n < 2) {
-    qk__free(a, l.out, l.cap * sizeof *l.out);
-    return QK_ERR_NOMEM;
+  const size_t items = qk__node_count(t, 0);
+  if (threads <= 1 || items < 2) return QK_ERR_NOMEM; /* nothing to share: the serial path */
+  const size_t limit = items / ((size_t)PAIRS_JOBS_PER_THREAD * threads);
+  lctx_t l = {t, a, limit > 0 ? (uint32_t)limit : 1u, NULL, 0, 0, 0};
+  list_roots(&l, 0);
+  const unsigned n_jobs = (unsigned)l.n;
+  pjob_t *jobs = NULL;
+  atomic_uchar *done = NULL;
+  qk_status_t st = QK_ERR_NOMEM; /* nothing reported yet: the caller searches serially */
+  if (!l.nomem && n_jobs >= 2) {
+    jobs = qk__realloc(a, NULL, 0, n_jobs * sizeof *jobs);
+    done = qk__realloc(a, NULL, 0, n_jobs * sizeof *done);
   }
-  const size_t n_leaves = l.n;
-  const uint32_t *leaves = l.out;
-  /* Eight jobs per thread even out leaves of unequal work. */
-  unsigned n_jobs = n_leaves < 8u * threads ? (unsigned)n_leaves : 8u * threads;
-  pjob_t *jobs = qk__realloc(a, NULL, 0, n_jobs * sizeof *jobs);
-  qk_status_t st = QK_ERR_NOMEM;
-  if (jobs) {
-    for (unsigned i = 0; i < n_jobs; i++) jobs[i] = (pjob_t){NULL, 0, 0, 0, a};
-    pctx_t p = {c, leaves, n_leaves, n_jobs, jobs};
-    qk__run_jobs(threads, n_jobs, pairs_job, &p);
-    st = QK_OK;
-    for (unsigned i = 0; i < n_jobs; i++)
-      if (jobs[i].nomem) st = QK_ERR_NOMEM;
-    /* Only when every job finished are the pairs reported, in job order. */
-    for (unsigned i = 0, stop = 0; st == QK_OK && i < n_jobs && !stop; i++)
-      for (size_t k = 0; k < jobs[i].n && !stop; k++)
-        stop = fn(jobs[i].buf[k].a, jobs[i].buf[k].b, ud);
-    for (unsigned i = 0; i < n_jobs; i++)
+  if (jobs && done) {
+    pctx_t p = {.c = c,
+                .t = t,
+                .roots = l.out,
+                .n_jobs = n_jobs,
+                .jobs = jobs,
+                .done = done,
+                .fn = fn,
+                .ud = ud,
+                .next = 0};
+    atomic_init(&p.stop, 0);
+    for (unsigned i = 0; i < n_jobs; i++) {
+      jobs[i] = (pjob_t){NULL, 0, 0, 0, a};
+      atomic_init(&done[i], 0);
+    }
+    qk__run_jobs_dynamic(threads, n_jobs, pairs_job, &p);
+    report_done(&p); /* every job is done now: the rest, unless stopped */
+    for (unsigned i = p.next; i < n_jobs; i++)
       qk__free(a, jobs[i].buf, jobs[i].cap * sizeof *jobs[i].buf);
+    st = QK_OK;
   }
   qk__free(a, l.out, l.cap * sizeof *l.out);
-  qk__free(a, jobs, n_jobs * sizeof *jobs);
+  qk__free(a, jobs, jobs ? n_jobs * sizeof *jobs : 0);
+  qk__free(a, done, done ? n_jobs * sizeof *done : 0);
   return st;
 }
 

@@ -231,8 +231,10 @@ qk_status_t qk_query_locate_batch(const qk_tree_t *tree, const qk_point_t *ps, s
  * Radius results are packed, so a share does not know where its results go until the
  * shares before it are done. Share 0 writes straight into the caller's buffer; every
  * other share into a buffer of its own (from the tree's allocator), copied into place
- * after the join. A share whose buffer was too small or could not be had is answered
- * again after the join, on the calling thread, straight into place.
+ * after the join, by all the shares at once when there is much to copy (the copy is
+ * memory-bound: on one thread it was the batch's serial part). A share whose buffer was
+ * too small or could not be had is answered again after the join, on the calling thread,
+ * straight into place.
  */
 typedef struct radius_job {
   const qk_tree_t *t;
@@ -244,8 +246,13 @@ typedef struct radius_job {
   size_t *counts;
   qk_neighbor_t *buf[QK__MAX_THREADS];
   size_t buf_cap[QK__MAX_THREADS], total[QK__MAX_THREADS];
+  size_t at[QK__MAX_THREADS], copy[QK__MAX_THREADS]; /* where each buffer goes; how much */
+  size_t copy_total;
   qk__first_err_t err[QK__MAX_THREADS];
 } radius_job_t;
+
+/* Results copied by all shares from this many on. */
+#define QK__RADIUS_COPY_PAR_MIN 16384
 
 static void radius_share(void *ctx, unsigned w, unsigned nw) {
   radius_job_t *j = ctx;
@@ -256,6 +263,23 @@ static void radius_share(void *ctx, unsigned w, unsigned nw) {
   qk_status_t st =
       qk__radius_range(j->t, j->centres, lo, hi, j->r, out, cap, j->counts, &j->total[w], &bad);
   j->err[w] = (qk__first_err_t){st, st == QK_OK ? SIZE_MAX : bad};
+}
+
+/* Share w's part of the copy: the results [lo, hi) of the buffers laid end to end, in
+ * share order. */
+static void radius_copy(void *ctx, unsigned w, unsigned nw) {
+  radius_job_t *j = ctx;
+  size_t lo, hi, base = 0;
+  qk__share_range(j->copy_total, w, nw, &lo, &hi);
+  for (unsigned s = 1; s < QK__MAX_THREADS && lo < hi; s++) {
+    const size_t end = base + j->copy[s];
+    if (lo < end) {
+      const size_t m = (hi < end ? hi : end) - lo;
+      memcpy(j->out + j->at[s] + (lo - base), j->buf[s] + (lo - base), m * sizeof *j->out);
+      lo += m;
+    }
+    base = end;
+  }
 }
 
 qk_status_t qk__radius_batch(const qk_tree_t *t, const qk_point_t *centres, size_t nq, double r,
@@ -274,23 +298,32 @@ qk_status_t qk__radius_batch(const qk_tree_t *t, const qk_point_t *centres, size
     j->buf_cap[w] = j->buf[w] ? want : 0;
   }
   qk__run_shares(nw, radius_share, j);
-  qk__first_err_t e = {QK_OK, SIZE_MAX};
+  /* Where each share's results go (the totals are known now), and what fits there. */
   size_t sum = 0;
+  for (unsigned w = 0; w < nw; w++) {
+    j->at[w] = sum;
+    if (w > 0 && j->total[w] <= j->buf_cap[w] && sum < cap) {
+      j->copy[w] = j->total[w] < cap - sum ? j->total[w] : cap - sum;
+      j->copy_total += j->copy[w];
+    }
+    sum += j->total[w];
+  }
+  if (j->copy_total >= QK__RADIUS_COPY_PAR_MIN)
+    qk__run_shares(nw, radius_copy, j);
+  else
+    radius_copy(j, 0, 1);
+  qk__first_err_t e = {QK_OK, SIZE_MAX};
   for (unsigned w = 0; w < nw; w++) {
     size_t lo, hi, bad;
     qk__share_range(nq, w, nw, &lo, &hi);
     if (w > 0 && j->total[w] > j->buf_cap[w]) {
       /* Answer this share again straight into place (what fits in the caller's buffer). */
-      size_t room = sum < cap ? cap - sum : 0;
+      size_t room = j->at[w] < cap ? cap - j->at[w] : 0;
       qk_status_t st = qk__radius_range(t, centres, lo, hi, r, out ? out + (cap - room) : NULL,
                                         room, counts, &j->total[w], &bad);
       j->err[w] = (qk__first_err_t){st, st == QK_OK ? SIZE_MAX : bad};
-    } else if (w > 0 && sum < cap) {
-      size_t m = j->total[w] < cap - sum ? j->total[w] : cap - sum;
-      if (m) memcpy(out + sum, j->buf[w], m * sizeof *out);
     }
     qk__note_err(&e, j->err[w].st, j->err[w].i);
-    sum += j->total[w];
     if (w > 0) qk__free(qk__tree_allocator(t), j->buf[w], j->buf_cap[w] * sizeof(qk_neighbor_t));
   }
   *n_out = sum;

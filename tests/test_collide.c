@@ -18,6 +18,8 @@
  *  - on Linux, the ray arrays advised for huge pages by default (huge_pages left 0): a
  *    region flagged "hg" in /proc/self/smaps appears with the build, and the answers are
  *    those of the same collider from an allocator that is never advised.
+ *  - a skewed scene (most pairs in a few leaves) on 2 and 3 threads: the one-thread
+ *    sequence, also stopped early at many places, the oracle's set, the calling thread.
  */
 #define _DEFAULT_SOURCE /* madvise and MADV_HUGEPAGE in <sys/mman.h> */
 #include <math.h>
@@ -596,6 +598,90 @@ static void test_collide_threads_worker_nomem(void **state) {
   pthread_mutex_destroy(&m.mu);
 }
 
+/* Pairs compared by (a, b), for sorting a callback sequence against the oracle's list. */
+static int pair_cmp(const void *x, const void *y) {
+  const qk_pair_t *p = x, *q = y;
+  if (p->a != q->a) return p->a < q->a ? -1 : 1;
+  return p->b < q->b ? -1 : p->b > q->b;
+}
+
+/* The callback of a threaded search: the pairs in order, and whether any came on another
+ * thread than the caller's (the API promises the calling thread). */
+typedef struct onthread {
+  seq_t s;
+  pthread_t caller;
+  int elsewhere;
+} onthread_t;
+
+static int onthread_pair(qk_id_t a, qk_id_t b, void *ud) {
+  onthread_t *o = ud;
+  if (!pthread_equal(pthread_self(), o->caller)) o->elsewhere = 1;
+  return seq_pair(a, b, &o->s);
+}
+
+/*
+ * A skewed scene on 2 and 3 threads: most boxes in one small square, packed so that a few
+ * leaves hold most of the pairs (jobs of very unequal work, taken from a shared counter
+ * and reported in job order while others still search), the rest scattered, a few large.
+ * The pairs, in callback order and stopped early at many places (job boundaries among
+ * them), are those of one thread; as a set they are the brute-force oracle's; every call
+ * of the callback is on the calling thread.
+ */
+static void test_collide_threads_skewed(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 9);
+  enum { NB = 6000 };
+  qk_box_t *b = malloc(NB * sizeof *b);
+  for (size_t i = 0; i < NB; i++) {
+    const int dense = i % 8 != 0;
+    double cx = qkt_rng_unit(&r), cy = qkt_rng_unit(&r);
+    if (dense) cx = 0.7 + 0.03 * cx, cy = 0.2 + 0.03 * cy;
+    double w = dense ? qkt_rng_range(&r, 0, 0.002) : qkt_rng_range(&r, 0, 0.004);
+    double h = dense ? qkt_rng_range(&r, 0, 0.002) : qkt_rng_range(&r, 0, 0.004);
+    if (i % 997 == 1) w = 0.1; /* a few long ones */
+    b[i] = (qk_box_t){cx - w, cy - h, cx + w, cy + h};
+  }
+  qk_tree_options_t o = opts(2);
+  qk_collider_t *c = NULL;
+  assert_int_equal(qk_collider_build(NULL, 0, b, NB, &o, &c), QK_OK);
+  qk_pair_t *want;
+  const size_t nw = qko_pairs(NULL, 0, b, NB, &want);
+  seq_t ref = pairs_seq(c, 0);
+  assert_int_equal(ref.n, nw);
+  assert_true(nw > 20000);
+  qk_pair_t *sorted = malloc(nw * sizeof *sorted);
+  const uint32_t ts[] = {2, 3};
+  for (size_t k = 0; k < sizeof ts / sizeof *ts; k++) {
+    qk_collider_set_threads(c, ts[k]);
+    onthread_t got = {{NULL, 0, 0, 0}, pthread_self(), 0};
+    assert_int_equal(qk_collider_pairs(c, onthread_pair, &got), QK_OK);
+    assert_false(got.elsewhere);
+    assert_same_seq(&ref, &got.s, ts[k]);
+    memcpy(sorted, got.s.p, nw * sizeof *sorted);
+    qsort(sorted, nw, sizeof *sorted, pair_cmp);
+    if (memcmp(sorted, want, nw * sizeof *want))
+      fail_msg("threads %u: the pairs differ from the oracle's (seed %llu)", ts[k],
+               (unsigned long long)g_seed);
+    free(got.s.p);
+    /* Stopped early: 1, 2, then spread over the whole sequence, and the last pair. */
+    for (size_t stop = 1; stop <= nw; stop = stop < 3 ? stop + 1 : stop + nw / 41 + 1) {
+      seq_t one = {ref.p, stop, stop, stop};
+      onthread_t part = {{NULL, 0, 0, stop}, pthread_self(), 0};
+      assert_int_equal(qk_collider_pairs(c, onthread_pair, &part), QK_OK);
+      assert_false(part.elsewhere);
+      assert_same_seq(&one, &part.s, ts[k]);
+      free(part.s.p);
+    }
+    onthread_t last = {{NULL, 0, 0, nw}, pthread_self(), 0};
+    assert_int_equal(qk_collider_pairs(c, onthread_pair, &last), QK_OK);
+    assert_same_seq(&ref, &last.s, ts[k]);
+    free(last.s.p);
+  }
+  qk_collider_free(c);
+  free(ref.p), free(want), free(sorted), free(b);
+}
+
 /* The build on several threads (the slot fill, the node boxes and the ray cast's nodes by
  * subtrees: from 4096 items on) gives the collider one thread gives: the same pairs in
  * the same order, the same hits to the last bit, which agree with the oracle; and every
@@ -794,6 +880,7 @@ int main(void) {
       cmocka_unit_test(test_collide_threaded_build),
       cmocka_unit_test(test_collide_threads_worker_nomem),
       cmocka_unit_test(test_collide_ray_arrays_huge),
+      cmocka_unit_test(test_collide_threads_skewed),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -22,7 +22,9 @@
  *  - point location: every stored point is located in the leaf that holds it, random
  *    locations land in a leaf whose half-open square contains them, outside/NaN fail;
  *  - batch forms equal the single-query answers; buffers that are too small report the
- *    full count; callbacks stop early when asked;
+ *    full count; callbacks stop early when asked; large radius batches on 1 to 3 threads
+ *    (the shares' results copied into place by all of them) against the single calls and
+ *    the oracle's counts, with the caller's buffer full size and cut short;
  *  - bad arguments; an empty tree;
  *  - four threads querying one tree at once get the single-threaded answers;
  *  - the real cities set (lon/lat as planar coordinates) when present.
@@ -1006,6 +1008,65 @@ static void test_query_batch_threaded_order(void **state) {
   free(p), free(qs), free(want), free(out), free(wleaf), free(leaves);
 }
 
+/*
+ * Radius batches on 1, 2 and 3 threads, large enough that the other shares' results are
+ * copied into place by all the shares at once: the results are the single calls' laid end
+ * to end, the counts the brute-force oracle's; with the caller's buffer cut short (inside
+ * a share, so that the shares' buffers are too small and answered again, and by one
+ * result) the buffer holds that sequence's prefix and the total is still the full count.
+ */
+static void test_query_radius_batch_threads(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 14);
+  const size_t n = 20000, nq = 12000;
+  const double rad = 0.002;
+  qk_point_t *p = malloc(n * sizeof *p), *qs = malloc(nq * sizeof *qs);
+  qkt_points(&r, QKT_CLUSTERED, p, n);
+  for (size_t i = 0; i < nq; i++) qs[i] = i % 3 == 0 ? p[qkt_rng_below(&r, n)] : rand_loc(&r);
+  qk_tree_t *t = build(p, n, 8);
+  size_t *want_n = malloc(nq * sizeof *want_n), *counts = malloc(nq * sizeof *counts);
+  qk_neighbor_t *tmp = malloc(n * sizeof *tmp);
+  size_t total = 0;
+  for (size_t i = 0; i < nq; i++) {
+    assert_int_equal(qk_query_radius_list(t, qs[i], rad, NULL, 0, &want_n[i]), QK_OK);
+    if (want_n[i] != qko_radius(p, n, qs[i], rad, tmp))
+      fail_msg("radius %zu: %zu vs oracle (seed %llu)", i, want_n[i], (unsigned long long)g_seed);
+    total += want_n[i];
+  }
+  assert_true(total > 3 * 16384); /* past the shared copy's threshold on any share count */
+  /* The first cap leaves the other shares' buffers (sized from it) room for all their
+   * results: the shared copy; the others cut into them: the shares answered again. */
+  const size_t caps[] = {total + total / 4, total, total - 1, total / 2, total / 5};
+  qk_neighbor_t *want = malloc(total * sizeof *want), *got = malloc(caps[0] * sizeof *got);
+  for (size_t i = 0, at = 0; i < nq; at += want_n[i++]) {
+    size_t m;
+    assert_int_equal(qk_query_radius_list(t, qs[i], rad, want + at, want_n[i], &m), QK_OK);
+  }
+  for (unsigned threads = 1; threads <= 3; threads++) {
+    qk_tree_set_threads(t, threads);
+    for (size_t c = 0; c < sizeof caps / sizeof *caps; c++) {
+      memset(got, 0xA5, caps[0] * sizeof *got);
+      size_t n_out = 0;
+      assert_int_equal(qk_query_radius_list_batch(t, qs, nq, rad, got, caps[c], counts, &n_out),
+                       QK_OK);
+      assert_int_equal(n_out, total);
+      assert_memory_equal(counts, want_n, nq * sizeof *counts);
+      const size_t held = caps[c] < total ? caps[c] : total;
+      for (size_t i = 0; i < held; i++)
+        if (got[i].id != want[i].id || got[i].dist != want[i].dist)
+          fail_msg("threads %u cap %zu: result %zu (%u, %.17g) vs single calls (%u, %.17g) "
+                   "(seed %llu)",
+                   threads, caps[c], i, got[i].id, got[i].dist, want[i].id, want[i].dist,
+                   (unsigned long long)g_seed);
+      for (size_t i = held; i < caps[0]; i++) /* nothing past the results or the cap */
+        assert_int_equal(got[i].id, 0xA5A5A5A5u);
+    }
+  }
+  qk_tree_free(t);
+  free(p), free(qs), free(want_n), free(counts), free(tmp), free(want), free(got);
+}
+
 int main(void) {
   g_seed = qkt_seed(20261122);
   const struct CMUnitTest tests[] = {
@@ -1027,6 +1088,7 @@ int main(void) {
     cmocka_unit_test(test_query_knn_ties_k),
     cmocka_unit_test(test_query_knn_kth_bound),
     cmocka_unit_test(test_query_knn_near_ties),
+    cmocka_unit_test(test_query_radius_batch_threads),
 #if defined(__SSE2__)
     cmocka_unit_test(test_query_knn_flush_subnormals),
 #endif
