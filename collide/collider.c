@@ -1068,6 +1068,32 @@ static inline double ray_disc(const qk_disc_t *d, double ox, double oy, double d
   return t <= tmax ? t : -1.0;
 }
 
+/* Coordinates (of the origin, or of any item box) beyond this take ray_disc_far(). */
+#define FAR_COORD 0x1p400
+
+/*
+ * ray_disc() for an origin or a disc beyond FAR_COORD, where its squares could overflow
+ * (a hit at t = inf, or a miss): the same operations on the origin, the disc and tmax
+ * scaled by the power of two 2^-k that brings the largest of them just below FAR_COORD,
+ * and t scaled back. |f + t d| = r is |2^-k f + (2^-k t) d| = 2^-k r, and scaling by a
+ * power of two commutes with every rounding, so t is ray_disc()'s own but for parts that
+ * fall below 2^-1022 (coordinates 2^1000 times smaller than the largest, which then count
+ * as 0). With the direction's largest component in [2^-100, 2^100] (the cast's scaling),
+ * no square or product of ray_disc() overflows below FAR_COORD.
+ */
+static double ray_disc_far(const qk_disc_t *d, double ox, double oy, double dx, double dy,
+                           double tmax) {
+  const double m =
+      qk__max(qk__max(fabs(ox), fabs(oy)), qk__max(qk__max(fabs(d->x), fabs(d->y)), d->r));
+  if (!(m > FAR_COORD)) return ray_disc(d, ox, oy, dx, dy, tmax);
+  int e;
+  (void)frexp(m, &e);
+  const int k = e - 400; /* m 2^-k in [2^399, 2^400) */
+  const qk_disc_t s = {ldexp(d->x, -k), ldexp(d->y, -k), ldexp(d->r, -k)};
+  const double t = ray_disc(&s, ldexp(ox, -k), ldexp(oy, -k), dx, dy, ldexp(tmax, -k));
+  return t < 0 ? t : ldexp(t, k);
+}
+
 #if defined(__SSE2__)
 /*
  * ray_disc() for the discs d[0] and d[1] at once, each lane the same sequence of IEEE
@@ -1134,13 +1160,13 @@ __attribute__((always_inline))
 #endif
 static inline void
 scan_leaf(const qk_collider_t *c, const ray_t *ray, uint32_t slot, uint32_t end, double tmax,
-          best_t *b) {
+          int far, best_t *b) {
   const qk_id_t *pid = qk__tree_ids(c->tree);
   const int all_discs = c->n_discs == c->n, no_discs = c->n_discs == 0;
 #if defined(__SSE2__)
   /* Discs two at a time, with the same operations as ray_disc() lane by lane (so the same
    * t to the last bit); only lanes that could be a new best go on. */
-  if (all_discs) {
+  if (all_discs && !far) {
     for (; slot + 1 < end; slot += 2) {
       double th[2];
       unsigned cand = ray_disc2(&c->sdisc[slot], ray, tmax, b->t, th);
@@ -1155,8 +1181,9 @@ scan_leaf(const qk_collider_t *c, const ray_t *ray, uint32_t slot, uint32_t end,
 #endif
   for (; slot < end; slot++) {
     int is_disc = all_discs || (!no_discs && pid[slot] < c->n_discs);
-    double th = is_disc ? ray_disc(&c->sdisc[slot].d, ray->ox, ray->oy, ray->dx, ray->dy, tmax)
-                        : ray_box(&c->sbox[slot], ray, tmax);
+    double th = !is_disc ? ray_box(&c->sbox[slot], ray, tmax)
+                : far    ? ray_disc_far(&c->sdisc[slot].d, ray->ox, ray->oy, ray->dx, ray->dy, tmax)
+                         : ray_disc(&c->sdisc[slot].d, ray->ox, ray->oy, ray->dx, ray->dy, tmax);
     if (th < 0 || th > b->t) continue;
     qk_id_t id = all_discs ? c->sdisc[slot].id : pid[slot];
     if (th < b->t || id < b->id) *b = (best_t){th, id};
@@ -1260,7 +1287,8 @@ static unsigned node_slab_general(const qk_collider_t *c, const cnode_t *n, cons
 }
 
 /* The cast with the general test, walking the cnode_t array (entries are node ids). */
-static void cast_general(const qk_collider_t *c, const ray_t *ray, double tmax, qk_hit_t *hit) {
+static void cast_general(const qk_collider_t *c, const ray_t *ray, double tmax, int far,
+                         qk_hit_t *hit) {
   best_t b = {INFINITY, QK_NONE};
   float tf = round_up(tmax);
   rentry_t stack[QK__CSTACK_MAX];
@@ -1280,7 +1308,7 @@ static void cast_general(const qk_collider_t *c, const ray_t *ray, double tmax, 
       }
     } else {
       const double best0 = b.t;
-      scan_leaf(c, ray, n->start, n->start + n->count, tmax, &b);
+      scan_leaf(c, ray, n->start, n->start + n->count, tmax, far, &b);
       if (b.t != best0) tf = round_up(b.t); /* b.t <= tmax: the items test t <= tmax */
     }
     while (sp > 0 && stack[sp - 1].bound > tf) sp--;
@@ -1371,7 +1399,7 @@ walk_float(const qk_collider_t *c, const ray_t *rp, double tmax, uint32_t from, 
       }
     } else {
       const double best0 = b.t;
-      scan_leaf(c, ray, cur.link, cur.link + cur.count, tmax, &b);
+      scan_leaf(c, ray, cur.link, cur.link + cur.count, tmax, 0, &b);
       if (b.t != best0) {
         tf = round_up_t(b.t); /* b.t <= tmax: the items test t <= tmax */
         tv = _mm_set1_ps(tf);
@@ -1441,7 +1469,7 @@ static void cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk
   best_t b = {INFINITY, QK_NONE};
   const cnode_t *root = &c->cn[0];
   if (root->child == QK_NONE) {
-    scan_leaf(c, ray, root->start, root->start + root->count, tmax, &b);
+    scan_leaf(c, ray, root->start, root->start + root->count, tmax, 0, &b);
   } else {
     const qk_tree_t *t = c->tree;
     /* The path, by the bits of the origin's position in the root square in 32-bit fixed
@@ -1528,27 +1556,31 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
   if ((o.x - o.x) + (o.y - o.y) + (d.x - d.x) + (d.y - d.y) != 0) return QK_ERR_NONFINITE;
   if (isnan(tmax) || tmax < 0) return QK_ERR_INVALID;
   if (c->n == 0) return QK_OK;
-  /* The cast's arithmetic squares and multiplies the direction's components: one beyond
-   * 2^500 would overflow and a largest one below 2^-500 underflow. Such a direction is
-   * scaled by a power of two to a largest component in [1/2, 1), which is exact (but for
-   * a component 2^1000 times smaller than the other, which then underflows: the ray's
-   * direction moves by less than 2^-1000 of a radian), and t is scaled back. */
+  /* The cast's arithmetic squares and multiplies the direction's components with
+   * coordinates and radii: a direction whose largest component is beyond 2^100 could
+   * overflow there (a radius of 1e10 with a direction of 1e150 did: t = 0, or a miss) and
+   * one below 2^-100 underflow. Such a direction is scaled by a power of two to a largest
+   * component in [1/2, 1), which is exact (but for a component 2^1000 times smaller than
+   * the other, which then underflows: the ray's direction moves by less than 2^-1000 of a
+   * radian), and t is scaled back: the same t, to the bit, as the unscaled cast's wherever
+   * that one does not overflow. Coordinates beyond FAR_COORD take ray_disc_far(). */
   const double m = qk__max(fabs(d.x), fabs(d.y)); /* finite: no call to fmax, no spills */
   int e = 0;
-  if (m > 0x1p500 || (m < 0x1p-500 && m > 0)) {
+  if (m > 0x1p100 || (m < 0x1p-100 && m > 0)) {
     (void)frexp(m, &e);
     d.x = ldexp(d.x, -e);
     d.y = ldexp(d.y, -e);
     tmax = ldexp(tmax, e); /* t along d / 2^e is t along d times 2^e */
   }
+  const int far = qk__max(qk__max(fabs(o.x), fabs(o.y)), c->mag) > FAR_COORD;
   ray_t ray;
   ray_init(&ray, c, o, d);
 #if defined(__SSE2__)
-  if (ray.simd)
+  if (ray.simd && !far)
     cast_float(c, &ray, tmax, hit);
   else
 #endif
-    cast_general(c, &ray, tmax, hit);
+    cast_general(c, &ray, tmax, far, hit);
   if (e != 0 && hit->id != QK_NONE) hit->t = ldexp(hit->t, -e);
   return QK_OK;
 }

@@ -449,6 +449,79 @@ static void test_collide_rays_extreme_directions(void **state) {
   free(d);
 }
 
+/* Coordinates and radii far from 1: a scene scaled by 2^k (centres, radii and origins) with
+ * its directions scaled by 2^j has the same hits at t scaled by 2^(k - j), to the bit
+ * (every operation of the cast commutes with scaling by a power of two). Beyond 2^400
+ * the squares of the plain disc test overflow (hits at t = inf, or t = 0), and a large
+ * direction times a large radius did so below it (a miss); hand cases besides. */
+static void test_collide_rays_far_coordinates(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 4);
+  enum { ND = 1500, NR = 600 };
+  qk_disc_t *d = malloc(ND * sizeof *d), *dk = malloc(ND * sizeof *dk);
+  assert_non_null(d), assert_non_null(dk);
+  for (int i = 0; i < ND; i++)
+    d[i] =
+        (qk_disc_t){qkt_rng_range(&r, 0, 1), qkt_rng_range(&r, 0, 1), qkt_rng_range(&r, 0, 0.01)};
+  qk_collider_t *c = NULL;
+  assert_int_equal(qk_collider_build(d, ND, NULL, 0, NULL, &c), QK_OK);
+  const int kj[][2] = {{420, 0}, {600, 0}, {1000, 0}, {600, 300}, {300, 400}, {390, 120}};
+  qk_point_t o[NR], v[NR];
+  qk_hit_t ref[NR];
+  long hits = 0;
+  for (int i = 0; i < NR; i++) {
+    const double ang = qkt_rng_range(&r, 0, 6.283185307179586);
+    o[i] = (qk_point_t){qkt_rng_range(&r, -0.5, 1.5), qkt_rng_range(&r, -0.5, 1.5)};
+    v[i] = (qk_point_t){cos(ang), sin(ang)};
+    assert_int_equal(qk_collider_raycast(c, o[i], v[i], INFINITY, &ref[i]), QK_OK);
+    hits += ref[i].id != QK_NONE;
+  }
+  assert_true(hits > NR / 4); /* the rays do hit things */
+  for (size_t s = 0; s < sizeof kj / sizeof kj[0]; s++) {
+    const int k = kj[s][0], j = kj[s][1];
+    for (int i = 0; i < ND; i++)
+      dk[i] = (qk_disc_t){ldexp(d[i].x, k), ldexp(d[i].y, k), ldexp(d[i].r, k)};
+    qk_collider_t *ck = NULL;
+    assert_int_equal(qk_collider_build(dk, ND, NULL, 0, NULL, &ck), QK_OK);
+    for (int i = 0; i < NR; i++) {
+      const qk_point_t ok = {ldexp(o[i].x, k), ldexp(o[i].y, k)};
+      const qk_point_t vj = {ldexp(v[i].x, j), ldexp(v[i].y, j)};
+      qk_hit_t h;
+      assert_int_equal(qk_collider_raycast(ck, ok, vj, INFINITY, &h), QK_OK);
+      const double want = ref[i].id == QK_NONE ? INFINITY : ldexp(ref[i].t, k - j);
+      if (h.id != ref[i].id || !(h.t == want || (isinf(h.t) && isinf(want))))
+        fail_msg("ray %d, scene times 2^%d, direction times 2^%d: (%u, %.17g), want (%u, %.17g) "
+                 "(seed %llu)",
+                 i, k, j, h.id, h.t, ref[i].id, want, (unsigned long long)g_seed);
+    }
+    qk_collider_free(ck);
+  }
+  qk_collider_free(c);
+  /* by hand: the first hit of a ray along an axis is the distance less the radius */
+  const struct {
+    qk_disc_t d;
+    qk_point_t o, v;
+    double t;
+  } cases[] = {
+      {{0, 0, 1e10}, {1e12, 0}, {-1e150, 0}, (1e12 - 1e10) / 1e150},
+      {{0, 0, 1}, {1e200, 0}, {-1, 0}, 1e200},
+      {{0, 0, 1}, {1e300, 1e300}, {-1e300, -1e300}, 1},
+      {{1e300, -1e300, 1e299}, {-1e300, -1e300}, {1, 0}, 2e300 - 1e299},
+  };
+  for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+    qk_collider_t *c1 = NULL;
+    assert_int_equal(qk_collider_build(&cases[i].d, 1, NULL, 0, NULL, &c1), QK_OK);
+    qk_hit_t h;
+    assert_int_equal(qk_collider_raycast(c1, cases[i].o, cases[i].v, INFINITY, &h), QK_OK);
+    if (h.id != 0 || !(fabs(h.t - cases[i].t) <= 1e-14 * cases[i].t))
+      fail_msg("case %zu: (%u, %.17g), want (0, %.17g)", i, h.id, h.t, cases[i].t);
+    qk_collider_free(c1);
+  }
+  free(dk);
+  free(d);
+}
+
 int main(void) {
   g_seed = qkt_seed(90211);
   const struct CMUnitTest tests[] = {
@@ -458,6 +531,7 @@ int main(void) {
       cmocka_unit_test(test_collide_rays_batch_matches_single),
       cmocka_unit_test(test_collide_rays_tied_discs),
       cmocka_unit_test(test_collide_rays_extreme_directions),
+      cmocka_unit_test(test_collide_rays_far_coordinates),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -133,7 +133,8 @@ qk_status_t qk_collider_pairs_list(const qk_collider_t *c, qk_pair_t *out, size_
  * item. For a segment from a to b pass dir = b - a and tmax = 1.
  * \param [in] c the collider.
  * \param [in] origin the ray's origin.
- * \param [in] dir its direction (any length; not normalised).
+ * \param [in] dir its direction (any length, not normalised: one far from 1 is scaled
+ *             internally by a power of two, which leaves t exact).
  * \param [in] tmax the largest t considered (INFINITY for a ray).
  * \param [out] hit the hit, or {QK_NONE, INFINITY}.
  * \return QK_OK, QK_ERR_NONFINITE or QK_ERR_INVALID (tmax < 0 or NaN).

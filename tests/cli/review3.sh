@@ -139,4 +139,10 @@ expect 0 '' -- "$cli" mesh "$tmp/nz.poly" -o "$tmp/nzm"
 same_text "mesh: no -0 in .node" "$(grep -c -- '-0\b' "$tmp/nzm.node")" "0"
 same_text "mesh: the corner at 0 0" "$(awk 'NR > 1 && $2 == "0" && $3 == "0"' "$tmp/nzm.node" | wc -l)" "1"
 
+# ---- raycast far from the origin: a unit disc hit from 1e300 away had t = inf ------------
+printf 'x,y,r\n0,0,1\n' >"$tmp/d1.csv"
+printf 'ox,oy,dx,dy\n1e300,1e300,-1e300,-1e300\n1e200,0,-1,0\n' >"$tmp/far_rays.csv"
+same_text "raycast from far away" "$("$cli" raycast "$tmp/d1.csv" "$tmp/far_rays.csv" | tr '\n' ' ')" \
+  "ray,disc,t 0,0,1 1,0,9.9999999999999997e+199 "
+
 report
