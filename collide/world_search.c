@@ -42,9 +42,10 @@ typedef struct share {
   int nomem;
   const lvinfo_t *lv; /* the occupied levels, ascending */
   int n_levels;
-  const uint32_t *chunk; /* chunk i: cells [chunk[i], chunk[i + 1]) */
+  const uint32_t *chunk; /* chunk i: cells (or bands) [chunk[i], chunk[i + 1]) */
   unsigned n_chunks;
   atomic_uint *next;
+  const struct bands *bd; /* the bands, when the search is by bands */
 } share_t;
 
 /* Room for `more` keys after the found ones; 0 when memory ran short. */
@@ -509,6 +510,346 @@ static inline double cell_work(const qk_world_t *w, uint32_t a, int finest) {
   return (double)(w->cells[a + 1].start - w->cells[a].start) * qk__pow2(d < 60 ? d : 60);
 }
 
+/* ---- bands: a sweep on x in horizontal bands ---------------------------------------- */
+
+/*
+ * The grid's search above finds the pairs of objects of one size cheaply (a cell, its
+ * right neighbour and the row above), but across sizes each coarse object walks the rows
+ * of every finer level its box covers: in a scene of sizes over three decades that walk
+ * costs more than the pairs it finds. Such scenes are searched in bands instead: the
+ * plane is cut into horizontal bands of one height (a few times the objects' mean
+ * height); each object is entered in every band its float box meets, and each band's
+ * entries are sorted by their float xmin. Within a band an entry is compared with the
+ * entries after it up to the first whose xmin lies beyond its xmax (a sweep on x), four
+ * at a time, and a pair is kept in one band only (see sweep).
+ */
+
+/* Four entries of a band: their float xmin, ymin, ymax and their objects' slots. 64
+ * bytes: a line per four candidates. */
+typedef struct egrp {
+  float x0[4], y0[4], y1[4];
+  uint32_t slot[4];
+} egrp_t;
+
+/* The bands: entries band after band, each band's by xmin (ascending; ties in any order),
+ * four to a group. */
+typedef struct bands {
+  egrp_t *g;
+  uint8_t *fm;     /* per group: bit l when lane l's band is the first of its object */
+  float *x1;       /* per entry: xmax */
+  uint8_t *exact;  /* per entry: the object's float box is its box (NULL: all are) */
+  uint32_t *start; /* band b holds entries [start[b], start[b + 1]) */
+  uint32_t nb;
+  size_t ne;
+} bands_t;
+
+/*
+ * The sweep of entry k over the entries after it in its band, [k + 1, e) (k + 1 < e).
+ * The float boxes are tested as in test_run (a prefilter that never drops a pair whose
+ * boxes meet; exact when both float boxes are). The entries after k have xmin >= k's, so
+ * a candidate meets k's box on x when its xmin <= k's xmax, and the first that does not
+ * ends the sweep.
+ *
+ * Each pair is kept once: two objects whose float boxes meet have y ranges that share
+ * m = the higher of their two ymin, whose band is entered by both and is the first band
+ * of one of them; in any later band both are entered, but neither first. So a pair is
+ * kept where one of the two is entered first (band_of is non-decreasing in y).
+ */
+#if defined(__SSE2__)
+static inline __attribute__((always_inline)) int sweep(share_t *s, uint32_t k, uint32_t e,
+                                                       const int all_exact) {
+  if (!kv_reserve(s, e - k - 1 + 3)) return 0;
+  const bands_t *bd = s->bd;
+  const egrp_t *G = bd->g;
+  const uint8_t *fm = bd->fm;
+  const egrp_t *gk = &G[k >> 2];
+  const unsigned lk = k & 3;
+  const __m128 x1 = _mm_set1_ps(bd->x1[k]), y0 = _mm_set1_ps(gk->y0[lk]),
+               y1 = _mm_set1_ps(gk->y1[lk]);
+  const uint32_t slot = gk->slot[lk];
+  const __m128i ks = _mm_set1_epi32((int32_t)slot),
+                kb = _mm_set1_epi32((int32_t)(slot ^ 0x80000000u)),
+                bias = _mm_set1_epi32(INT32_MIN);
+  /* k first in its band: every candidate may pair with it; else only those first here */
+  const unsigned any = fm[k >> 2] >> lk & 1 ? 15u : 0u;
+  const unsigned ek = all_exact ? 1 : bd->exact[k];
+  uint64_t *v = s->out.v + s->out.n;
+  uint32_t lo = k + 1, q = lo >> 2, qe = (e - 1) >> 2;
+  unsigned mask = ~((1u << (lo & 3)) - 1) & 15u;
+  const unsigned last = (2u << ((e - 1) & 3)) - 1;
+  for (;;) {
+    const egrp_t *g = &G[q];
+    __m128 cx = _mm_cmple_ps(_mm_loadu_ps(g->x0), x1);
+    __m128 m =
+        _mm_and_ps(_mm_cmple_ps(_mm_loadu_ps(g->y0), y1), _mm_cmple_ps(y0, _mm_loadu_ps(g->y1)));
+    if (q == qe) mask &= last;
+    unsigned bits = (unsigned)_mm_movemask_ps(_mm_and_ps(cx, m)) & mask & (any | fm[q]);
+    unsigned stop = ~(unsigned)_mm_movemask_ps(cx) & mask;
+    if (bits) {
+      /* the four keys at once: (min << 32 | max) of k's slot and each lane's */
+      __m128i sj = _mm_loadu_si128((const __m128i *)g->slot), x = _mm_xor_si128(sj, ks);
+      __m128i gt = _mm_cmpgt_epi32(_mm_xor_si128(sj, bias), kb); /* lane's slot > k's */
+      __m128i mn = _mm_xor_si128(sj, _mm_and_si128(x, gt)), mx = _mm_xor_si128(mn, x);
+      __m128i k01 = _mm_unpacklo_epi32(mx, mn), k23 = _mm_unpackhi_epi32(mx, mn);
+      if (all_exact) {
+        /* all four written, the end moved past the kept ones (room for three more than
+         * the candidates is reserved) */
+        _mm_storel_epi64((__m128i *)v, k01);
+        v += bits & 1;
+        _mm_storeh_pd((double *)v, _mm_castsi128_pd(k01));
+        v += bits >> 1 & 1;
+        _mm_storel_epi64((__m128i *)v, k23);
+        v += bits >> 2 & 1;
+        _mm_storeh_pd((double *)v, _mm_castsi128_pd(k23));
+        v += bits >> 3;
+      } else {
+        uint64_t key[4];
+        _mm_storeu_si128((__m128i *)key, k01);
+        _mm_storeu_si128((__m128i *)(key + 2), k23);
+        do {
+          unsigned l = (unsigned)__builtin_ctz(bits);
+          bits &= bits - 1;
+          *v = key[l];
+          v += (ek & bd->exact[q * 4 + l]) ? 1 : objects_meet(s->w, slot, g->slot[l]);
+        } while (bits);
+      }
+    }
+    if (stop || q == qe) break;
+    q++;
+    mask = 15u;
+  }
+  s->out.n = (size_t)(v - s->out.v);
+  return 1;
+}
+#else
+static int sweep(share_t *s, uint32_t k, uint32_t e, const int all_exact) {
+  if (!kv_reserve(s, e - k - 1)) return 0;
+  const bands_t *bd = s->bd;
+  const egrp_t *G = bd->g;
+  const egrp_t *gk = &G[k >> 2];
+  const float x1 = bd->x1[k], y0 = gk->y0[k & 3], y1 = gk->y1[k & 3];
+  const int any = bd->fm[k >> 2] >> (k & 3) & 1;
+  const uint32_t slot = gk->slot[k & 3];
+  const uint64_t hs = (uint64_t)slot << 32;
+  uint64_t *v = s->out.v + s->out.n;
+  for (uint32_t j = k + 1; j < e; j++) {
+    const egrp_t *g = &G[j >> 2];
+    unsigned l = j & 3;
+    if (!(g->x0[l] <= x1)) break;
+    if (!(g->y0[l] <= y1 && y0 <= g->y1[l] && (any || (bd->fm[j >> 2] >> l & 1)))) continue;
+    uint32_t sj = g->slot[l];
+    *v = pair_key(slot, hs, sj);
+    v += (all_exact || (bd->exact[k] & bd->exact[j])) ? 1 : objects_meet(s->w, slot, sj);
+  }
+  s->out.n = (size_t)(v - s->out.v);
+  return 1;
+}
+#endif
+
+/* The sweeps of bands [b0, b1): 0 when memory ran short. */
+static int sweep_bands(share_t *s, uint32_t b0, uint32_t b1) {
+  const uint32_t *st = s->bd->start;
+  if (!s->bd->exact) {
+    for (uint32_t b = b0; b < b1; b++)
+      for (uint32_t k = st[b], e = st[b + 1]; k + 1 < e; k++)
+        if (!sweep(s, k, e, 1)) return 0;
+  } else {
+    for (uint32_t b = b0; b < b1; b++)
+      for (uint32_t k = st[b], e = st[b + 1]; k + 1 < e; k++)
+        if (!sweep(s, k, e, 0)) return 0;
+  }
+  return 1;
+}
+
+static void run_bands(unsigned t, void *ud) {
+  share_t *s = &((share_t *)ud)[t];
+  for (;;) {
+    unsigned i = atomic_fetch_add_explicit(s->next, 1u, memory_order_relaxed);
+    if (i >= s->n_chunks) return;
+    if (!sweep_bands(s, s->chunk[i], s->chunk[i + 1])) {
+      s->nomem = 1;
+      return;
+    }
+  }
+}
+
+/* A float's bits as an unsigned key in the floats' order (-0 before +0). */
+static inline uint32_t fkey(float f) {
+  uint32_t u;
+  memcpy(&u, &f, sizeof u);
+  return u & 0x80000000u ? ~u : u | 0x80000000u;
+}
+
+/* The band of y: non-decreasing in y (a difference rounded to nearest, a product by a
+ * positive constant, a minimum and a truncation are each non-decreasing), and below
+ * top + 1. */
+static inline uint32_t band_of(float y, double ylo, double inv, double top) {
+  return (uint32_t)qk__min(((double)y - ylo) * inv, top);
+}
+
+/* Build the bands for the n objects of the pack, of a height of three times the objects'
+ * mean float height (measured: from 2 to 4 times the search costs within 5% on the
+ * clustered scene and on sizes over one and two decades), or higher when that would make
+ * more than about n / 2 bands or far too many entries. 0 when memory ran short. */
+static int build_bands(const qk_world_t *w, const qk__wpack_t *pk, bands_t *bd) {
+  const qk_allocator_t *al = &w->alloc;
+  const uint32_t n = w->n_order;
+  const float *fg = pk->fgrp;
+  const uint8_t *fx = pk->fexact;
+  memset(bd, 0, sizeof *bd);
+  /* per object its first and last bands (b01), and the sort's records (twice) */
+  uint64_t *rec = qk__realloc(al, NULL, 0, 3 * (size_t)n * sizeof *rec);
+  uint32_t *cnt = rec ? qk__realloc(al, NULL, 0, 3 * 2048 * sizeof *cnt) : NULL;
+  if (!cnt) {
+    qk__free(al, rec, 3 * (size_t)n * sizeof *rec);
+    return 0;
+  }
+  uint32_t *b01 = (uint32_t *)(rec + 2 * (size_t)n);
+  /* One pass: the y range, the mean height, the records by xmin and their digits'
+   * counts. */
+  memset(cnt, 0, 3 * 2048 * sizeof *cnt);
+  float ylo = INFINITY, yhi = -INFINITY;
+  double hs = 0;
+  unsigned all_exact = 1;
+  for (uint32_t k = 0; k < n; k++) {
+    const float *f = lane_of(fg, k);
+    ylo = f[4] < ylo ? f[4] : ylo;
+    yhi = f[12] > yhi ? f[12] : yhi;
+    hs += (double)f[12] - f[4];
+    all_exact &= fx[k];
+    uint32_t x = fkey(f[0]);
+    rec[k] = (uint64_t)x << 32 | k;
+    cnt[x & 2047]++, cnt[2048 + (x >> 11 & 2047)]++, cnt[4096 + (x >> 22)]++;
+  }
+  const size_t cap = (size_t)n / 2 + 16;
+  const double range = (double)yhi - (double)ylo, top = (double)(cap - 1);
+  double h = 3 * hs / n;
+  if (!(h >= range / top)) h = range / top;
+  if (!(h > 0)) h = 1; /* (one band) */
+  double inv;
+  uint32_t nb;
+  size_t ne;
+  uint32_t *start = NULL;
+  for (;;) {
+    inv = 1 / h;
+    nb = band_of(yhi, ylo, inv, top) + 1;
+    start = qk__realloc(al, NULL, 0, 2 * ((size_t)nb + 1) * sizeof *start);
+    if (!start) break;
+    memset(start, 0, ((size_t)nb + 1) * sizeof *start);
+    ne = 0;
+    for (uint32_t k = 0; k < n; k++) {
+      const float *f = lane_of(fg, k);
+      uint32_t a = band_of(f[4], ylo, inv, top), b = band_of(f[12], ylo, inv, top);
+      b01[2 * k] = a, b01[2 * k + 1] = b;
+      ne += b - a + 1;
+      do start[++a]++;
+      while (a <= b);
+    }
+    if (ne <= 16 * (size_t)n + 1024 && ne < UINT32_MAX / 2) break;
+    qk__free(al, start, 2 * ((size_t)nb + 1) * sizeof *start);
+    h *= 2;
+  }
+  size_t ng = start ? ne / 4 + 1 : 0, xbytes = ne * (sizeof(float) + (all_exact ? 0 : 1));
+  egrp_t *g = start ? qk__realloc(al, NULL, 0, ng * (sizeof *g + 1)) : NULL;
+  float *x1 = g ? qk__realloc(al, NULL, 0, xbytes) : NULL;
+  if (!x1) {
+    if (start) qk__free(al, start, 2 * ((size_t)nb + 1) * sizeof *start);
+    qk__free(al, g, ng * (sizeof *g + 1));
+    qk__free(al, cnt, 3 * 2048 * sizeof *cnt);
+    qk__free(al, rec, 3 * (size_t)n * sizeof *rec);
+    return 0;
+  }
+  uint8_t *fm = (uint8_t *)(g + ng);
+  uint8_t *exact = all_exact ? NULL : (uint8_t *)(x1 + ne);
+  uint32_t *pos = start + nb + 1;
+  for (uint32_t b = 0; b < nb; b++) start[b + 1] += start[b];
+  memcpy(pos, start, ((size_t)nb + 1) * sizeof *pos);
+  /* The records by xmin: an LSD radix sort of three digits, skipping those all share. */
+  uint64_t *a = rec, *t = rec + n;
+  for (int d = 0; d < 3; d++) {
+    uint32_t *c = cnt + 2048 * d, acc = 0;
+    int shared = 0;
+    for (int x = 0; x < 2048; x++) {
+      uint32_t v = c[x];
+      shared |= v == n;
+      c[x] = acc, acc += v;
+    }
+    if (shared) continue;
+    const int sh = 32 + 11 * d;
+    for (uint32_t j = 0; j < n; j++) t[c[a[j] >> sh & 2047]++] = a[j];
+    uint64_t *x = a;
+    a = t, t = x;
+  }
+  /* Then the entries, band by band, in that order: each band's come sorted. The last
+   * group's lanes past the entries hold boxes that meet nothing (never counted: the
+   * sweeps stop at their band's end). */
+  memset(fm, 0, ng);
+  for (int l = 0; l < 4; l++)
+    g[ng - 1].x0[l] = g[ng - 1].y0[l] = INFINITY, g[ng - 1].y1[l] = -INFINITY,
+           g[ng - 1].slot[l] = 0;
+  const uint32_t *ord = w->order;
+  for (uint32_t i = 0; i < n; i++) {
+    uint32_t k = (uint32_t)a[i];
+    const float *f = lane_of(fg, k);
+    uint32_t b = b01[2 * k], be = b01[2 * k + 1], s = ord[k];
+    uint32_t p = pos[b]++;
+    fm[p >> 2] |= (uint8_t)(1u << (p & 3)); /* its first band */
+    for (;;) {
+      egrp_t *q = &g[p >> 2];
+      q->x0[p & 3] = f[0], q->y0[p & 3] = f[4], q->y1[p & 3] = f[12], q->slot[p & 3] = s;
+      x1[p] = f[8];
+      if (exact) exact[p] = fx[k];
+      if (++b > be) break;
+      p = pos[b]++;
+    }
+  }
+  qk__free(al, cnt, 3 * 2048 * sizeof *cnt);
+  qk__free(al, rec, 3 * (size_t)n * sizeof *rec);
+  *bd = (bands_t){g, fm, x1, exact, start, nb, ne};
+  return 1;
+}
+
+static void free_bands(const qk_world_t *w, bands_t *bd) {
+  const qk_allocator_t *al = &w->alloc;
+  if (!bd->start) return;
+  qk__free(al, bd->g, (bd->ne / 4 + 1) * (sizeof *bd->g + 1));
+  qk__free(al, bd->x1, bd->ne * (sizeof(float) + (bd->exact ? 1 : 0)));
+  qk__free(al, bd->start, 2 * ((size_t)bd->nb + 1) * sizeof *bd->start);
+  memset(bd, 0, sizeof *bd);
+}
+
+/*
+ * Bands or the grid. The grid's cost beyond its pairs is the walk of each coarse object
+ * over the rows of the finer levels: about 2^(L - l - 1) + 2 rows for an object of level
+ * L over level l (or, where the coarse level is looked up from the fine one's cells, two
+ * rows a fine cell). The bands cost a sort and a sweep an entry, whatever the sizes. So
+ * the bands are taken unless those rows come to less than one for eight objects.
+ * Measured (search instructions a frame, 10^4 boxes moving as in the benchmark, grid
+ * against bands): one level (the benchmark's uniform scene: 3.46 M against 3.73 M; its
+ * sparse huge scene: 1.29 M against 2.79 M) stays on the grid; 95% of sizes 0.5 to 2 and
+ * 5% tiny ones (0.18 rows an object): 3.92 M against 3.67 M; 85% and 15% of sizes 2 to
+ * 8 (0.6): 6.23 M against 4.54 M; sizes over one decade (2.3): 6.46 M against 3.27 M; two
+ * decades (7.1): 16.3 M against 5.25 M; the benchmark's clustered scene (three decades,
+ * 42): 30.8 M against 10.9 M; two decades in a sparse world (20000 x 20000): 7.54 M
+ * against 2.92 M.
+ */
+static int use_bands(const qk_world_t *w) {
+  double n_obj[QK__NLEV], rows = 0;
+  int l[QK__NLEV], nl = 0;
+  uint32_t n_cells[QK__NLEV];
+  for (int i = 0; i < QK__NLEV; i++) {
+    if (!w->lv_n[i]) continue;
+    uint32_t f = w->lv_first[i], e = f + w->lv_n[i];
+    n_obj[nl] = (double)(w->cells[e].start - w->cells[f].start);
+    n_cells[nl] = w->lv_n[i], l[nl++] = i + QK__LMIN;
+  }
+  for (int c = 1; c < nl; c++)
+    for (int f = 0; f < c; f++) /* (a coarse level looked up from the fine cells: two rows each) */
+      rows += n_obj[c] > 16 * (double)n_cells[f] ? 2 * (double)n_cells[f]
+                                                 : n_obj[c] * (qk__pow2(l[c] - l[f] - 1) + 2);
+  return rows > (double)w->n_order / 8;
+}
+
 /* Free the given buffers (a failure before the search ran). */
 static qk_status_t search_nomem(const qk_world_t *w, qk__kvec_t *found, qk__kvec_t *tk) {
   qk__free(&w->alloc, found->v, found->cap * sizeof *found->v);
@@ -525,41 +866,52 @@ qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kve
   found.n = 0;
   *out = (qk__kvec_t){0};
   lvinfo_t lv[QK__NLEV];
-  int n_levels;
-  uint32_t *rf;
-  size_t n_rf;
-  if (!level_info(w, pk, lv, &n_levels, &rf, &n_rf)) return search_nomem(w, &found, tk);
+  int n_levels = 0;
+  uint32_t *rf = NULL;
+  size_t n_rf = 0;
+  bands_t bd = {0};
+  const int by_bands = w->n_order > 1 && use_bands(w);
+  if (by_bands ? !build_bands(w, pk, &bd) : !level_info(w, pk, lv, &n_levels, &rf, &n_rf))
+    return search_nomem(w, &found, tk);
   unsigned nt = qk__world_update_threads(w);
   if (w->n_live < 4096) nt = 1; /* not worth a thread */
-  /* Chunks of cells of about equal work, taken in turn by the workers (many more than
-   * the workers). An object's work grows with its size (the finer cells its box covers):
-   * it is taken as 2^(l - finest level), so the few coarse cells at the end of the order
-   * (which find most of the pairs of a mixed-size scene) are spread over many chunks. */
+  /* Chunks of about equal work, taken in turn by the workers (many more than the
+   * workers). By the grid, chunks of cells: an object's work grows with its size (the
+   * finer cells its box covers): it is taken as 2^(l - finest level), so the few coarse
+   * cells at the end of the order (which find most of the pairs of a mixed-size scene)
+   * are spread over many chunks. By bands, chunks of bands of about equal entries. */
   enum { PER_THREAD = 32 };
-  uint32_t chunk_one[2] = {0, w->n_cells}, *chunk = chunk_one;
+  uint32_t chunk_one[2] = {0, by_bands ? bd.nb : w->n_cells}, *chunk = chunk_one;
   unsigned n_chunks = 1;
   if (nt > 1) {
     n_chunks = nt * PER_THREAD;
     chunk = qk__realloc(&w->alloc, NULL, 0, (n_chunks + 1) * sizeof *chunk);
     if (!chunk) {
       qk__free(&w->alloc, rf, n_rf * sizeof *rf);
+      free_bands(w, &bd);
       return search_nomem(w, &found, tk);
     }
-    double total = 0, acc = 0;
-    for (uint32_t a = 0; a < w->n_cells; a++) total += cell_work(w, a, lv[0].l);
     unsigned i = 0;
     chunk[i++] = 0;
-    for (uint32_t a = 0; a < w->n_cells && i < n_chunks; a++) {
-      acc += cell_work(w, a, lv[0].l);
-      if (acc >= total * i / n_chunks) chunk[i++] = a + 1;
+    if (by_bands) {
+      for (uint32_t b = 0; b < bd.nb && i < n_chunks; b++)
+        if ((double)bd.start[b + 1] >= (double)bd.ne * i / n_chunks) chunk[i++] = b + 1;
+      while (i <= n_chunks) chunk[i++] = bd.nb;
+    } else {
+      double total = 0, acc = 0;
+      for (uint32_t a = 0; a < w->n_cells; a++) total += cell_work(w, a, lv[0].l);
+      for (uint32_t a = 0; a < w->n_cells && i < n_chunks; a++) {
+        acc += cell_work(w, a, lv[0].l);
+        if (acc >= total * i / n_chunks) chunk[i++] = a + 1;
+      }
+      while (i <= n_chunks) chunk[i++] = w->n_cells;
     }
-    while (i <= n_chunks) chunk[i++] = w->n_cells;
   }
   atomic_uint next;
   atomic_init(&next, 0u);
   share_t shares[256];
   for (unsigned t = 0; t < nt; t++)
-    shares[t] = (share_t){w, pk, {0}, &w->alloc, 0, lv, n_levels, chunk, n_chunks, &next};
+    shares[t] = (share_t){w, pk, {0}, &w->alloc, 0, lv, n_levels, chunk, n_chunks, &next, &bd};
   /* The other workers start in the buffers given (those of the last update). */
   for (unsigned t = 1; t <= QK__KEEP_THREADS; t++) {
     if (t < nt)
@@ -578,10 +930,11 @@ qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kve
     if (found.v) found.cap = guess;
   }
   shares[0].out = found;
-  qk__run_jobs(nt, nt, run_share, shares);
+  qk__run_jobs(nt, nt, by_bands ? run_bands : run_share, shares);
   found = shares[0].out;
   if (chunk != chunk_one) qk__free(&w->alloc, chunk, (n_chunks + 1) * sizeof *chunk);
   qk__free(&w->alloc, rf, n_rf * sizeof *rf);
+  free_bands(w, &bd);
   qk_status_t st = QK_OK;
   size_t total = 0;
   for (unsigned t = 0; t < nt; t++) {

@@ -830,6 +830,147 @@ static void test_world_clustered_mixed_sizes(void **s) {
   run_clustered_mixed(1, 1200, 12);
 }
 
+/*
+ * The search by bands (collide/world_search.c: sizes over several levels, here from 1/8
+ * to 40), at its edges: on a lattice of 1/8 so that many xmin are equal and many boxes
+ * touch; tall and wide boxes crossing many bands and one another in many of them (each
+ * pair must come once: in the band of the higher ymin); and, in the second half of the
+ * objects, corners moved by 2^-30 (below float precision there), so that the float boxes
+ * touch where the exact ones may or may not and the exact test decides. Moves on the
+ * lattice, removes and adds every third frame; every frame against brute force, on one
+ * thread and on two.
+ */
+static qk_shape_t bands_shape(qkt_rng_t *r, int off) {
+  double x = qkt_rng_below(r, 320) / 8.0, y = qkt_rng_below(r, 320) / 8.0, w, h;
+  switch (qkt_rng_below(r, 10)) {
+  case 0: /* tall */
+    w = (1 + qkt_rng_below(r, 2)) / 8.0, h = 8 + qkt_rng_below(r, 25);
+    break;
+  case 1: /* wide */
+    w = 8 + qkt_rng_below(r, 25), h = (1 + qkt_rng_below(r, 2)) / 8.0;
+    break;
+  case 2: /* large, or a point */
+    w = h = qkt_rng_below(r, 4) ? 0 : 12 + qkt_rng_below(r, 8);
+    break;
+  default: /* small */
+    w = (1 + qkt_rng_below(r, 3)) / 8.0, h = (1 + qkt_rng_below(r, 3)) / 8.0;
+  }
+  qk_shape_t s = {QK_SHAPE_BOX, x, y, x + w, y + h};
+  if (off) { /* each corner moved by 2^-30 one way or the other, or not */
+    double e = 0x1p-30;
+    s.x += e * ((int)qkt_rng_below(r, 3) - 1), s.y += e * ((int)qkt_rng_below(r, 3) - 1);
+    s.a += e * ((int)qkt_rng_below(r, 3) - 1), s.b += e * ((int)qkt_rng_below(r, 3) - 1);
+    if (s.a < s.x) s.a = s.x;
+    if (s.b < s.y) s.b = s.y;
+  }
+  return s;
+}
+
+static void test_world_bands_edges(void **s) {
+  (void)s;
+  for (unsigned th = 1; th <= 2; th++) {
+    qkt_rng_t r;
+    qkt_rng_seed(&r, g_seed + 71);
+    qk_world_options_t o;
+    qk_world_options_init(&o);
+    o.threads = th;
+    o.thread_min = 0;
+    qk_world_t *w;
+    assert_int_equal(qk_world_new(&o, &w), QK_OK);
+    mirror_t m = {0};
+    enum { N = 700 };
+    for (int i = 0; i < N; i++) m_add(w, &m, bands_shape(&r, i >= N / 2));
+    qk_world_pair_t *prev = NULL;
+    size_t np = 0, most = 0;
+    for (int f = 0; f < 12; f++) {
+      for (size_t i = 0; f && i < m.n; i++) {
+        if (qkt_rng_below(&r, 4) == 0) continue;
+        double dx = ((int)qkt_rng_below(&r, 5) - 2) / 8.0,
+               dy = ((int)qkt_rng_below(&r, 5) - 2) / 8.0;
+        qk_shape_t sh = m.s[i];
+        sh.x += dx, sh.a += dx, sh.y += dy, sh.b += dy;
+        assert_int_equal(qk_world_move(w, m.h[i], &sh), QK_OK);
+        m.s[i] = o_norm(sh);
+      }
+      if (f % 3 == 2) {
+        for (int k = 0; k < 8; k++) {
+          size_t i = qkt_rng_below(&r, (uint32_t)m.n);
+          assert_int_equal(qk_world_remove(w, m.h[i]), QK_OK);
+          m.h[i] = m.h[m.n - 1], m.s[i] = m.s[m.n - 1], m.n--;
+        }
+        for (int k = 0; k < 8; k++) m_add(w, &m, bands_shape(&r, k & 1));
+      }
+      update_and_check(w, &m, &prev, &np, "bands edges", f);
+      most = np > most ? np : most;
+    }
+    assert_true(most > 2 * N); /* tall and wide boxes over many small ones */
+    free(prev), free(m.h), free(m.s);
+    qk_world_free(w);
+  }
+}
+
+/*
+ * The grid's search across levels (collide/world_search.c), which the update keeps for
+ * scenes of mostly one size (few rows of finer levels for the coarse objects to walk;
+ * otherwise it searches by bands): sizes 0.6 to 2 of all kinds with, in the first scene,
+ * 0.5% of large boxes and discs (sides 10 to 30: levels up, walking the finer cells,
+ * whole cells inside a box recorded without a test), and in the second, 3% of tiny
+ * objects (levels down: the coarser cells looked up from theirs). Moves, removes and
+ * adds; every frame against brute force, on one thread and on two.
+ */
+static qk_shape_t levels_shape(qkt_rng_t *r, int scene) {
+  double x = qkt_rng_unit(r) * 60, y = qkt_rng_unit(r) * 60, s = qkt_rng_range(r, 0.6, 2);
+  uint32_t u = qkt_rng_below(r, 1000);
+  if (scene == 0 && u < 5) s = qkt_rng_range(r, 10, 30);
+  if (scene == 1 && u < 30) s = qkt_rng_range(r, 0.04, 0.06);
+  switch (qkt_rng_below(r, 4)) {
+  case 0:
+    return (qk_shape_t){QK_SHAPE_DISC, x, y, s / 2, 0};
+  case 1:
+    if (s < 10) return (qk_shape_t){QK_SHAPE_SEGMENT, x, y, x + s, y - s * 0.8};
+    /* fall through */
+  default:
+    return (qk_shape_t){QK_SHAPE_BOX, x, y, x + s, y + s * qkt_rng_range(r, 0.7, 1)};
+  }
+}
+
+static void test_world_grid_levels(void **s) {
+  (void)s;
+  for (int scene = 0; scene < 2; scene++)
+    for (unsigned th = 1; th <= 2; th++) {
+      qkt_rng_t r;
+      qkt_rng_seed(&r, g_seed + 83 + (uint64_t)scene);
+      qk_world_options_t o;
+      qk_world_options_init(&o);
+      o.threads = th;
+      o.thread_min = 0;
+      qk_world_t *w;
+      assert_int_equal(qk_world_new(&o, &w), QK_OK);
+      mirror_t m = {0};
+      for (int i = 0; i < 1500; i++) m_add(w, &m, levels_shape(&r, scene));
+      qk_world_pair_t *prev = NULL;
+      size_t np = 0;
+      for (int f = 0; f < 10; f++) {
+        for (size_t i = 0; f && i < m.n; i++) {
+          qk_shape_t sh = moved(&r, m.s[i]);
+          assert_int_equal(qk_world_move(w, m.h[i], &sh), QK_OK);
+          m.s[i] = o_norm(sh);
+        }
+        if (f % 3 == 2) {
+          for (int k = 0; k < 6; k++) {
+            size_t i = qkt_rng_below(&r, (uint32_t)m.n);
+            assert_int_equal(qk_world_remove(w, m.h[i]), QK_OK);
+            m.h[i] = m.h[m.n - 1], m.s[i] = m.s[m.n - 1], m.n--;
+          }
+          for (int k = 0; k < 6; k++) m_add(w, &m, levels_shape(&r, scene));
+        }
+        update_and_check(w, &m, &prev, &np, scene ? "grid levels (up)" : "grid levels (down)", f);
+      }
+      free(prev), free(m.h), free(m.s);
+      qk_world_free(w);
+    }
+}
+
 /* Touching cases on integers (every formula is exact there). */
 static void test_world_touching(void **s) {
   (void)s;
@@ -1256,6 +1397,8 @@ int main(void) {
       cmocka_unit_test(test_world_all_kinds),
       cmocka_unit_test(test_world_huge),
       cmocka_unit_test(test_world_clustered_mixed_sizes),
+      cmocka_unit_test(test_world_bands_edges),
+      cmocka_unit_test(test_world_grid_levels),
       cmocka_unit_test(test_world_prefilter_and_sort),
       cmocka_unit_test(test_world_touching),
       cmocka_unit_test(test_world_stale_handles),
