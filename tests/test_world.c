@@ -182,6 +182,16 @@ static void m_add(qk_world_t *w, mirror_t *m, qk_shape_t s) {
   m->s[m->n++] = o_norm(s);
 }
 
+/* Remove a random object from the world and the mirror (the last one takes its place);
+ * returns its index. */
+static size_t m_remove_random(qk_world_t *w, mirror_t *m, qkt_rng_t *r) {
+  size_t i = qkt_rng_below(r, (uint32_t)m->n);
+  assert_int_equal(qk_world_remove(w, m->h[i]), QK_OK);
+  m->n--;
+  m->h[i] = m->h[m->n], m->s[i] = m->s[m->n];
+  return i;
+}
+
 static int wp_cmp(const void *x, const void *y) {
   const qk_world_pair_t *p = x, *q = y;
   uint32_t pa = (uint32_t)p->a, qa = (uint32_t)q->a, pb = (uint32_t)p->b, qb = (uint32_t)q->b;
@@ -407,9 +417,7 @@ static void run_scene(int scene, int kinds, size_t n, int frames, unsigned threa
     assert_int_equal(qk_world_move_batch(w, bh, bs, nb, NULL), QK_OK);
     if (f % 3 == 1) { /* remove a few, add a few */
       for (int k = 0; k < 5 && m.n > 0; k++) {
-        size_t i = qkt_rng_below(&r, (uint32_t)m.n);
-        assert_int_equal(qk_world_remove(w, m.h[i]), QK_OK);
-        m.h[i] = m.h[m.n - 1], m.s[i] = m.s[m.n - 1], m.n--;
+        (void)m_remove_random(w, &m, &r);
       }
       for (int k = 0; k < 4; k++) m_add(w, &m, rnd_shape(&r, scene, kinds));
     }
@@ -506,9 +514,7 @@ static void dense_scene(qk_world_t *w, qkt_rng_t *r, int n, double span, int fra
       m.s[i] = o_norm(sh);
     }
     if (f == 2) {
-      size_t i = qkt_rng_below(r, (uint32_t)m.n);
-      assert_int_equal(qk_world_remove(w, m.h[i]), QK_OK);
-      m.h[i] = m.h[m.n - 1], m.s[i] = m.s[m.n - 1], m.n--;
+      (void)m_remove_random(w, &m, r);
       m_add(w, &m, add);
     }
     dense_check(w, &m, &prev, &np, f);
@@ -792,9 +798,7 @@ static void run_clustered_mixed(int kinds, size_t n, int frames) {
   for (int f = 0; f < frames; f++) {
     if (f == 0 || f % 3 == 1) { /* the scene, then a few removed and added */
       for (int k = 0; f && k < 6 && m.n > 0; k++) {
-        size_t i = qkt_rng_below(&r, (uint32_t)m.n);
-        assert_int_equal(qk_world_remove(w, m.h[i]), QK_OK);
-        m.h[i] = m.h[m.n - 1], m.s[i] = m.s[m.n - 1], m.n--;
+        size_t i = m_remove_random(w, &m, &r);
         vx[i] = vx[m.n], vy[i] = vy[m.n];
       }
       for (size_t k = 0, add = f ? 5 : n; k < add; k++) {
@@ -894,9 +898,7 @@ static void test_world_bands_edges(void **s) {
       }
       if (f % 3 == 2) {
         for (int k = 0; k < 8; k++) {
-          size_t i = qkt_rng_below(&r, (uint32_t)m.n);
-          assert_int_equal(qk_world_remove(w, m.h[i]), QK_OK);
-          m.h[i] = m.h[m.n - 1], m.s[i] = m.s[m.n - 1], m.n--;
+          (void)m_remove_random(w, &m, &r);
         }
         for (int k = 0; k < 8; k++) m_add(w, &m, bands_shape(&r, k & 1));
       }
@@ -958,9 +960,7 @@ static void test_world_grid_levels(void **s) {
         }
         if (f % 3 == 2) {
           for (int k = 0; k < 6; k++) {
-            size_t i = qkt_rng_below(&r, (uint32_t)m.n);
-            assert_int_equal(qk_world_remove(w, m.h[i]), QK_OK);
-            m.h[i] = m.h[m.n - 1], m.s[i] = m.s[m.n - 1], m.n--;
+            (void)m_remove_random(w, &m, &r);
           }
           for (int k = 0; k < 6; k++) m_add(w, &m, levels_shape(&r, scene));
         }
