@@ -346,7 +346,7 @@ static qk_status_t json_check(const qk_allocator_t *a, const char *text, size_t 
     } else if ((c == '}' || c == ']') && depth) {
       size_t b = base[--depth], first = 0, dup;
       if (b == SIZE_MAX) continue;
-      if ((dup = duplicate(text, keys + b, n - b, &first)) != SIZE_MAX) {
+      if (n - b >= 2 && (dup = duplicate(text, keys + b, n - b, &first)) != SIZE_MAX) {
         qk_error_t at;
         where(text, first - 1, &at);
         where(text, dup - 1, err);
