@@ -1165,18 +1165,25 @@ scan_leaf(const qk_collider_t *c, const ray_t *ray, uint32_t slot, uint32_t end,
   const int all_discs = c->n_discs == c->n, no_discs = c->n_discs == 0;
 #if defined(__SSE2__)
   /* Discs two at a time, with the same operations as ray_disc() lane by lane (so the same
-   * t to the last bit); only lanes that could be a new best go on. */
-  if (all_discs && !far) {
-    for (; slot + 1 < end; slot += 2) {
+   * t to the last bit); only lanes that could be a new best go on. An odd count's last
+   * pair is the last two discs: the one before the last is tested twice, which gives the
+   * same t and id again and so leaves the best as it is (cheaper than a scalar test). */
+  if (all_discs && !far && end - slot >= 2) {
+    const uint32_t last = end - 2;
+    for (uint32_t s2 = slot;; s2 += 2) {
+      if (s2 > last) s2 = last;
       double th[2];
-      unsigned cand = ray_disc2(&c->sdisc[slot], ray, tmax, b->t, th);
-      if (!cand) continue; /* the common case: neither disc can be a new best */
-      for (unsigned k = 0; k < 2; k++) {
-        if (!(cand >> k & 1) || th[k] > b->t) continue; /* the best may have moved */
-        qk_id_t id = c->sdisc[slot + k].id;
-        if (th[k] < b->t || id < b->id) *b = (best_t){th[k], id};
+      const unsigned cand = ray_disc2(&c->sdisc[s2], ray, tmax, b->t, th);
+      if (cand) { /* rare: neither disc can be a new best in most pairs */
+        for (unsigned k = 0; k < 2; k++) {
+          if (!(cand >> k & 1) || th[k] > b->t) continue; /* the best may have moved */
+          qk_id_t id = c->sdisc[s2 + k].id;
+          if (th[k] < b->t || id < b->id) *b = (best_t){th[k], id};
+        }
       }
+      if (s2 + 2 >= end) break;
     }
+    return;
   }
 #endif
   for (; slot < end; slot++) {
