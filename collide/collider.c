@@ -1362,7 +1362,10 @@ static inline unsigned qnode_slab_float(const qnode_t *q, const ray_t *r, __m128
 
 /*
  * The search with the float test over the subtree of quads entry `from` (its own box
- * untested), into *bp; entry `skip` (QK_NONE: none) is passed over with all beneath it.
+ * untested), into *bp; entry `skip` (QK_NONE: none), a child of `from`, is passed over
+ * with all beneath it: its lane is dropped from the first node's kept lanes, so that it
+ * is neither stacked nor visited. A node that keeps no child jumps to the pop, which sits
+ * in the loop over leaves.
  */
 #if defined(__GNUC__)
 __attribute__((always_inline))
@@ -1379,45 +1382,61 @@ walk_float(const qk_collider_t *c, const ray_t *rp, double tmax, uint32_t from, 
   int sp = 0;
   const int all_discs = c->n_discs == c->n;
   const unsigned s = ray->s;
-  rentry_t cur = {from, QK_NONE, 0.0f};
   const qnode_t *quads = c->quads;
+  const qnode_t *q = &quads[from];
+  float lo4[4];
+  unsigned keep = qnode_slab_float(q, ray, tv, lo4);
+  if (skip != QK_NONE) { /* a constant at the first search's call: no code there */
+    /* The children of `from` but `skip`, which the caller has searched (its lane found by
+     * comparing the four links at once: only an internal child can match), so that it is
+     * neither stacked nor visited. */
+    const __m128i is_skip =
+        _mm_and_si128(_mm_cmpeq_epi32(_mm_load_si128((const __m128i *)(const void *)q->link),
+                                      _mm_set1_epi32((int)skip)),
+                      _mm_cmpeq_epi32(_mm_load_si128((const __m128i *)(const void *)q->count),
+                                      _mm_set1_epi32(-1)));
+    keep &= ~(unsigned)_mm_movemask_ps(_mm_castsi128_ps(is_skip));
+  }
+  rentry_t cur;
   for (;;) {
-    if (cur.count == QK_NONE) {
-      const qnode_t *q = &quads[cur.link];
-      float lo4[4];
-      const unsigned keep = cur.link == skip ? 0 : qnode_slab_float(q, ray, tv, lo4);
-      if (keep) {
-        /* The kept children in the order the ray meets their squares (the item boxes
-         * mostly follow it; the bounds keep the pruning exact whatever the order): the
-         * nearest is taken at once, the others stacked far to near, each with its
-         * memory asked for now so that the misses overlap the work on the nearest. */
-        const unsigned v = visit[s][keep], k0 = v & 3;
-        for (unsigned j = v >> 2 & 3, o = v >> 4; j > 0; j--, o >>= 2) {
-          const unsigned k = o & 3;
-          const uint32_t nx = q->link[k], cnt = q->count[k];
-          stack[sp++] = (rentry_t){nx, cnt, lo4[k]};
-          if (cnt == QK_NONE)
-            QK__CPREFETCH(&quads[nx]);
-          else if (all_discs)
-            QK__CPREFETCH(&c->sdisc[nx]);
-        }
-        cur = (rentry_t){q->link[k0], q->count[k0], 0.0f};
-        continue;
+    if (keep) {
+      /* The kept children in the order the ray meets their squares (the item boxes
+       * mostly follow it; the bounds keep the pruning exact whatever the order): the
+       * nearest is taken at once, the others stacked far to near, each with its
+       * memory asked for now so that the misses overlap the work on the nearest. */
+      const unsigned v = visit[s][keep], k0 = v & 3;
+      for (unsigned j = v >> 2 & 3, o = v >> 4; j > 0; j--, o >>= 2) {
+        const unsigned k = o & 3;
+        const uint32_t nx = q->link[k], cnt = q->count[k];
+        stack[sp++] = (rentry_t){nx, cnt, lo4[k]};
+        if (cnt == QK_NONE)
+          QK__CPREFETCH(&quads[nx]);
+        else if (all_discs)
+          QK__CPREFETCH(&c->sdisc[nx]);
       }
+      cur = (rentry_t){q->link[k0], q->count[k0], 0.0f};
     } else {
+      goto pop;
+    }
+    /* Leaves are scanned, and the stack popped, until an entry comes up to be tested. */
+    while (cur.count != QK_NONE) {
       const double best0 = b.t;
       scan_leaf(c, ray, cur.link, cur.link + cur.count, tmax, 0, &b);
       if (b.t != best0) {
         tf = round_up_t(b.t); /* b.t <= tmax: the items test t <= tmax */
         tv = _mm_set1_ps(tf);
       }
+    pop:
+      /* Next, the nearest stacked node that may still hold a hit no farther than best
+       * (its bound re-checked: best may have come closer since it was stacked). */
+      while (sp > 0 && stack[sp - 1].bound > tf) sp--;
+      if (sp == 0) goto done;
+      cur = stack[--sp];
     }
-    /* Next, the nearest stacked node that may still hold a hit no farther than best
-     * (its bound re-checked: best may have come closer since it was stacked). */
-    while (sp > 0 && stack[sp - 1].bound > tf) sp--;
-    if (sp == 0) break;
-    cur = stack[--sp];
+    q = &quads[cur.link];
+    keep = qnode_slab_float(q, ray, tv, lo4);
   }
+done:
   *bp = b;
 }
 
