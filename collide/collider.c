@@ -104,6 +104,10 @@ struct qk_collider {
   int huge_pages;   /* the options' hint, applied to the collider's other arrays too */
   double mag;       /* largest coordinate magnitude of any item box, for rounding margins */
   double reach;     /* farthest any item box reaches from its centre on an axis (the ray cast) */
+  /* The ray cast's start (cast_float), from the root square, computed once: its corner,
+   * 2^32 / side (NaN when side <= 2^-900: no local start), side / 2^32, and the fixed part
+   * of the climb check's margin. */
+  double rs_x, rs_y, rs_f, rs_unit, rs_k;
 };
 
 /* Exact overlap predicates (touching counts). */
@@ -706,6 +710,12 @@ static qk_status_t fill_slots(qk_collider_t *c, const qk_disc_t *discs, const qk
   }
   unsigned threads = qk__threads_resolve(c->threads);
   fill_boxes_and_quads(c, c->n < RANGE_PAR_MIN ? 1 : threads);
+  /* (A root square below 2^-900 would make side / 2^32 subnormal: no local start.) */
+  const qk_square_t rs = qk__tree_root_square(c->tree);
+  c->rs_x = rs.x, c->rs_y = rs.y;
+  c->rs_f = rs.side > 0x1p-900 ? 0x1p32 / rs.side : NAN;
+  c->rs_unit = rs.side * 0x1p-32;
+  c->rs_k = (fabs(rs.x) + fabs(rs.y) + rs.side) * 0x1p-45;
   return c->n_quads ? build_ztab(c) : QK_OK;
 }
 
@@ -1502,13 +1512,12 @@ static void cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk
      * point (a lane's two bits per level): entries in quads. */
     uint32_t path[33];
     const double ox = ray->ox, oy = ray->oy;
-    const qk_square_t rs = qk__tree_root_square(t);
-    const double f = 0x1p32 / rs.side, ux = (ox - rs.x) * f, uy = (oy - rs.y) * f;
+    const double f = c->rs_f, ux = (ox - c->rs_x) * f, uy = (oy - c->rs_y) * f;
     uint32_t e = root->quad, ix = 0, iy = 0;
     path[0] = e;
     unsigned d = 0, known = 0; /* path[known .. d] are filled */
-    /* (A root square below 2^-900 would make side / 2^32 subnormal: no local start.) */
-    if (rs.side > 0x1p-900 && ux >= 0 && ux < 0x1p32 && uy >= 0 && uy < 0x1p32) {
+    /* (f is NaN for a root square below 2^-900: no local start; see fill_slots) */
+    if (ux >= 0 && ux < 0x1p32 && uy >= 0 && uy < 0x1p32) {
       const qnode_t *quads = c->quads;
       ix = (uint32_t)ux, iy = (uint32_t)uy;
       uint64_t z = morton32(ix, iy); /* the lanes, root first, from bit 63 */
@@ -1546,8 +1555,8 @@ static void cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk
     /* Up from N one level at a time while the segment to the best hit so far (or to
      * tmax) is not inside the square of the node searched: each step searches the
      * parent's other children, which may bring the hit closer. */
-    const double unit = rs.side * 0x1p-32;
-    const double mb = c->reach + 2 * ray->w + (fabs(rs.x) + fabs(rs.y) + rs.side) * 0x1p-45;
+    const double unit = c->rs_unit, rsx = c->rs_x, rsy = c->rs_y;
+    const double mb = c->reach + 2 * ray->w + c->rs_k;
     double t1_seen = -1.0, lx = 0, hx = 0, ly = 0, hy = 0; /* the widened segment's box */
     for (unsigned a = n; a > 0; a--) {
       const double t1 = b.t < tmax ? b.t : tmax;
@@ -1561,7 +1570,7 @@ static void cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk
         }
         const double side = qk__tree_side(t, a);
         const uint32_t keep = ~(uint32_t)0 << (32 - a); /* the path's first a bits */
-        const double x0 = rs.x + (double)(ix & keep) * unit, y0 = rs.y + (double)(iy & keep) * unit;
+        const double x0 = rsx + (double)(ix & keep) * unit, y0 = rsy + (double)(iy & keep) * unit;
         if (lx > x0 && hx < x0 + side && ly > y0 && hy < y0 + side) break;
       }
       if (a - 1 < known) path[--known] = c->qparent[path[a]];

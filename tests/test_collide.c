@@ -906,8 +906,9 @@ static void test_collide_raycast_leaf_counts(void **state) {
       const double cx = qkt_rng_range(&r, 0, 1), cy = qkt_rng_range(&r, 0, 1);
       const uint32_t k = 1 + qkt_rng_below(&r, 9);
       for (uint32_t j = 0; j < k; j++) {
-        qk_disc_t v = {cx + qkt_rng_range(&r, -0.004, 0.004), cy + qkt_rng_range(&r, -0.004, 0.004),
-                       qkt_rng_range(&r, 0, 0.003)};
+        const double vx = cx + qkt_rng_range(&r, -0.004, 0.004);
+        const double vy = cy + qkt_rng_range(&r, -0.004, 0.004);
+        const qk_disc_t v = {vx, vy, qkt_rng_range(&r, 0, 0.003)};
         uint32_t copies = qkt_rng_below(&r, 4) == 0 ? 1 + qkt_rng_below(&r, 2) : 0;
         d[n++] = v;
         for (uint32_t m = 0; m < copies; m++) d[n++] = v;
@@ -926,10 +927,11 @@ static void test_collide_raycast_leaf_counts(void **state) {
       qk_point_t org;
       if (qi % 3 == 0) {
         const qk_disc_t *e = &d[qkt_rng_below(&r, (uint32_t)n)];
-        org = (qk_point_t){e->x + qkt_rng_range(&r, -0.01, 0.01),
-                           e->y + qkt_rng_range(&r, -0.01, 0.01)};
+        org.x = e->x + qkt_rng_range(&r, -0.01, 0.01);
+        org.y = e->y + qkt_rng_range(&r, -0.01, 0.01);
       } else {
-        org = (qk_point_t){qkt_rng_range(&r, -0.2, 1.2), qkt_rng_range(&r, -0.2, 1.2)};
+        org.x = qkt_rng_range(&r, -0.2, 1.2);
+        org.y = qkt_rng_range(&r, -0.2, 1.2);
       }
       const double ang = qkt_rng_range(&r, 0, 6.283185307179586);
       const qk_point_t dir = {cos(ang), sin(ang)};
