@@ -19,7 +19,9 @@
  *    region flagged "hg" in /proc/self/smaps appears with the build, and the answers are
  *    those of the same collider from an allocator that is never advised.
  *  - a skewed scene (most pairs in a few leaves) on 2 and 3 threads: the one-thread
- *    sequence, also stopped early at many places, the oracle's set, the calling thread.
+ *    sequence, also stopped early at many places, the oracle's set, the calling thread;
+ *  - rays over leaves of every count up to the capacity, with discs given twice under
+ *    other ids, and searches that climb, against brute force to the last bit of t.
  */
 #define _DEFAULT_SOURCE /* madvise and MADV_HUGEPAGE in <sys/mman.h> */
 #include <math.h>
@@ -866,6 +868,90 @@ static void test_collide_ray_arrays_huge(void **state) {
 #endif
 }
 
+/* The library's disc test (collider.c ray_disc), the same operations in the same order:
+ * the brute force below must agree with the cast to the last bit of t. */
+static double bf_disc_t(qk_disc_t d, qk_point_t o, qk_point_t v, double tmax) {
+  double fx = o.x - d.x, fy = o.y - d.y;
+  double c = fx * fx + fy * fy - d.r * d.r;
+  if (c <= 0) return 0.0;
+  double b = fx * v.x + fy * v.y;
+  if (b >= 0) return -1.0;
+  double a = v.x * v.x + v.y * v.y, cr = fx * v.y - fy * v.x;
+  double disc = a * d.r * d.r - cr * cr;
+  if (disc < 0) return -1.0;
+  double t = c / (-b + sqrt(disc));
+  return t <= tmax ? t : -1.0;
+}
+
+/*
+ * Leaves of every count from 1 to the capacity, odd ones included (the leaf scan tests
+ * discs in pairs, an odd count's last pair overlapping the one before), and searches
+ * that climb above their start (which pass over the child searched already): random
+ * discs in small clusters of 1 to 9, some given twice or three times under other ids (ties
+ * decided by the smallest id, also within an overlapping pair), at capacities 1 to 8;
+ * rays from inside the clusters, from between them and from outside the set, short
+ * (tmax) and unbounded. Against brute force over every disc with the library's own disc
+ * test: the same id and the same t to the last bit.
+ */
+static void test_collide_raycast_leaf_counts(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 41);
+  const size_t cap_n = 3000;
+  qk_disc_t *d = malloc(cap_n * sizeof *d);
+  assert_non_null(d);
+  for (uint32_t cap = 1; cap <= 8; cap++) {
+    size_t n = 0;
+    while (n + 30 < cap_n) {
+      const double cx = qkt_rng_range(&r, 0, 1), cy = qkt_rng_range(&r, 0, 1);
+      const uint32_t k = 1 + qkt_rng_below(&r, 9);
+      for (uint32_t j = 0; j < k; j++) {
+        const double vx = cx + qkt_rng_range(&r, -0.004, 0.004);
+        const double vy = cy + qkt_rng_range(&r, -0.004, 0.004);
+        const qk_disc_t v = {vx, vy, qkt_rng_range(&r, 0, 0.003)};
+        uint32_t copies = qkt_rng_below(&r, 4) == 0 ? 1 + qkt_rng_below(&r, 2) : 0;
+        d[n++] = v;
+        for (uint32_t m = 0; m < copies; m++) d[n++] = v;
+      }
+    }
+    /* Shuffle, so that copies get ids far apart and in either order. */
+    for (size_t i = n - 1; i > 0; i--) {
+      size_t j = qkt_rng_below(&r, (uint32_t)(i + 1));
+      qk_disc_t t = d[i];
+      d[i] = d[j], d[j] = t;
+    }
+    qk_tree_options_t o = opts(cap);
+    qk_collider_t *c = NULL;
+    assert_int_equal(qk_collider_build(d, n, NULL, 0, &o, &c), QK_OK);
+    for (int qi = 0; qi < 3000; qi++) {
+      qk_point_t org;
+      if (qi % 3 == 0) {
+        const qk_disc_t *e = &d[qkt_rng_below(&r, (uint32_t)n)];
+        org.x = e->x + qkt_rng_range(&r, -0.01, 0.01);
+        org.y = e->y + qkt_rng_range(&r, -0.01, 0.01);
+      } else {
+        org.x = qkt_rng_range(&r, -0.2, 1.2);
+        org.y = qkt_rng_range(&r, -0.2, 1.2);
+      }
+      const double ang = qkt_rng_range(&r, 0, 6.283185307179586);
+      const qk_point_t dir = {cos(ang), sin(ang)};
+      const double tmax = qi % 4 == 0 ? qkt_rng_range(&r, 0, 0.05) : INFINITY;
+      qk_hit_t w = {QK_NONE, INFINITY};
+      for (size_t i = 0; i < n; i++) {
+        const double t = bf_disc_t(d[i], org, dir, tmax);
+        if (t >= 0 && (t < w.t || (t == w.t && i < w.id))) w = (qk_hit_t){(qk_id_t)i, t};
+      }
+      qk_hit_t h;
+      assert_int_equal(qk_collider_raycast(c, org, dir, tmax, &h), QK_OK);
+      if (h.id != w.id || memcmp(&h.t, &w.t, sizeof h.t) != 0)
+        fail_msg("cap %u ray %d: hit (%u, %a) vs brute force (%u, %a) (seed %llu)", cap, qi, h.id,
+                 h.t, w.id, w.t, (unsigned long long)g_seed);
+    }
+    qk_collider_free(c);
+  }
+  free(d);
+}
+
 int main(void) {
   g_seed = qkt_seed(7031);
   const struct CMUnitTest tests[] = {
@@ -881,6 +967,7 @@ int main(void) {
       cmocka_unit_test(test_collide_threads_worker_nomem),
       cmocka_unit_test(test_collide_ray_arrays_huge),
       cmocka_unit_test(test_collide_threads_skewed),
+      cmocka_unit_test(test_collide_raycast_leaf_counts),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
