@@ -897,6 +897,78 @@ static inline unsigned children_meet(const cnode_t *ch, __m128 q) {
 
 /* The lowest set bit of a nonzero 4-bit mask. */
 static const uint8_t low_bit4[16] = {0, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0};
+
+/*
+ * The depth-first search for the leaves whose boxes meet the box q holds (as
+ * children_meet takes it), from the root (internal), one leaf per leaf_next in
+ * depth-first order. The four children of a node are tested at once, and the node's entry
+ * on the stack holds its first child and the mask of those that met the box; the lowest
+ * bit left is visited next (its subtree stacked above the entry), so the children go in
+ * order.
+ */
+typedef struct leaf_iter {
+  int sp;
+  uint64_t stack[QK__CSTACK_MAX];
+} leaf_iter_t;
+
+static inline void leaf_first(leaf_iter_t *it, const cnode_t *cn, __m128 q) {
+  const unsigned m = children_meet(&cn[cn[0].child], q);
+  it->sp = 0;
+  if (m) it->stack[it->sp++] = (uint64_t)cn[0].child << 4 | m;
+}
+
+/* The next leaf met, or QK_NONE. */
+static inline uint32_t leaf_next(leaf_iter_t *it, const cnode_t *cn, __m128 q) {
+  while (it->sp > 0) {
+    const uint64_t e = it->stack[it->sp - 1], rest = e & (e - 1); /* the lowest bit cleared */
+    it->stack[it->sp - 1] = rest;
+    it->sp -= (rest & 15) == 0;
+    const uint32_t v = (uint32_t)(e >> 4) + low_bit4[e & 15];
+    const uint32_t child = cn[v].child;
+    if (child == QK_NONE) return v;
+    const unsigned m = children_meet(&cn[child], q);
+    if (m) it->stack[it->sp++] = (uint64_t)child << 4 | m;
+  }
+  return QK_NONE;
+}
+
+/* A node's box as children_meet takes it. */
+static inline __m128 meet_box(const cnode_t *n) {
+  return _mm_set_ps(-n->ymin, -n->xmin, n->ymax, n->xmax);
+}
+
+/* Does node n's box meet the box q holds (as children_meet takes it)? */
+static inline int node_meets(const cnode_t *n, __m128 q) {
+  const __m128 neg = _mm_castsi128_ps(_mm_set_epi32((int)0x80000000u, (int)0x80000000u, 0, 0));
+  return _mm_movemask_ps(_mm_cmple_ps(_mm_xor_ps(_mm_loadu_ps(&n->xmin), neg), q)) == 15;
+}
+
+/*
+ * The family list of internal node p in pc: every leaf whose box meets p's, in depth-first
+ * order, when p has two or more non-empty leaf children (n = QK_NONE otherwise, or when
+ * they are more than the list holds). The leaves meeting one of those children's boxes are
+ * among them (a child's float box lies in its parent's, both rounded outwards from nested
+ * boxes), in the same order, so a child then filters the list instead of descending from
+ * the root: one descent for the family instead of one per leaf.
+ */
+static void family_list(const qk_collider_t *c, uint32_t p, qk__pairs_cache_t *pc) {
+  const cnode_t *cn = c->cn;
+  const cnode_t *ch = &cn[cn[p].child];
+  pc->parent = p;
+  pc->n = QK_NONE;
+  int leaves = 0;
+  for (int k = 0; k < 4; k++) leaves += ch[k].child == QK_NONE && ch[k].count > 0;
+  if (leaves < 2) return;
+  const __m128 q = meet_box(&cn[p]);
+  uint32_t n = 0, v;
+  leaf_iter_t it;
+  leaf_first(&it, cn, q); /* the root's box holds p's */
+  while ((v = leaf_next(&it, cn, q)) != QK_NONE) {
+    if (n == QK__FAMILY_MAX) return;
+    pc->leaf[n++] = v;
+  }
+  pc->n = n;
+}
 #endif
 
 /*
@@ -904,7 +976,8 @@ static const uint8_t low_bit4[16] = {0, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1
  * own, and the items of the two are paired directly. That shares one descent among all
  * the items of a leaf instead of making one per item. This is the part for one leaf.
  */
-int qk__collider_leaf_pairs(const qk_collider_t *c, uint32_t leaf, qk_pair_fn fn, void *ud) {
+int qk__collider_leaf_pairs(const qk_collider_t *c, uint32_t leaf, qk__pairs_cache_t *pc,
+                            qk_pair_fn fn, void *ud) {
   const cnode_t *cn = c->cn;
   const cnode_t *la = &cn[leaf];
   /* The leaf's box, widened back to doubles, is what the other leaves must meet. */
@@ -912,30 +985,25 @@ int qk__collider_leaf_pairs(const qk_collider_t *c, uint32_t leaf, qk_pair_fn fn
   if (!cbox_box(&cn[0], &ba)) return 0;
   if (cn[0].child == QK_NONE) return leaf_pairs(c, la, &cn[0], fn, ud);
 #if defined(__SSE2__)
-  /*
-   * The same leaves in the same (depth-first) order as the plain search below. The four
-   * children of an internal node are tested at once, and the node's entry on the stack
-   * holds its first child and the mask of those that met the box; the lowest bit left is
-   * visited next (its subtree stacked above the entry), so the children go in order.
-   */
-  const __m128 q = _mm_set_ps(-la->ymin, -la->xmin, la->ymax, la->xmax);
-  uint64_t stack[QK__CSTACK_MAX];
-  int sp = 0;
-  unsigned m = children_meet(&cn[cn[0].child], q);
-  if (m) stack[sp++] = (uint64_t)cn[0].child << 4 | m;
-  while (sp > 0) {
-    const uint64_t e = stack[sp - 1], rest = e & (e - 1); /* the lowest bit cleared */
-    stack[sp - 1] = rest;
-    sp -= (rest & 15) == 0;
-    const cnode_t *lb = &cn[(uint32_t)(e >> 4) + low_bit4[e & 15]];
-    if (lb->child == QK_NONE) {
-      if (leaf_pairs(c, la, lb, fn, ud)) return 1;
-      continue;
+  /* The same leaves in the same (depth-first) order as the plain search below, from the
+   * family list of the leaf's parent when it has one, else by a descent of its own. */
+  const __m128 q = meet_box(la);
+  const uint32_t parent = qk__node_parent(c->tree, leaf);
+  if (pc->parent != parent) family_list(c, parent, pc);
+  if (pc->n != QK_NONE) {
+    for (uint32_t i = 0; i < pc->n; i++) {
+      const cnode_t *lb = &cn[pc->leaf[i]];
+      if (node_meets(lb, q) && leaf_pairs(c, la, lb, fn, ud)) return 1;
     }
-    m = children_meet(&cn[lb->child], q);
-    if (m) stack[sp++] = (uint64_t)lb->child << 4 | m;
+    return 0;
   }
+  uint32_t v;
+  leaf_iter_t it;
+  leaf_first(&it, cn, q);
+  while ((v = leaf_next(&it, cn, q)) != QK_NONE)
+    if (leaf_pairs(c, la, &cn[v], fn, ud)) return 1;
 #else
+  (void)pc;
   uint32_t inner[QK__CSTACK_MAX];
   int si = 0;
   for (int k = 3; k >= 0; k--) inner[si++] = cn[0].child + (uint32_t)k;
@@ -972,15 +1040,16 @@ typedef struct pairs_ctx {
   const qk_collider_t *c;
   qk_pair_fn fn;
   void *ud;
+  qk__pairs_cache_t pc;
 } pairs_ctx_t;
 
 static int serial_leaf(uint32_t leaf, void *ud) {
   pairs_ctx_t *p = ud;
-  return qk__collider_leaf_pairs(p->c, leaf, p->fn, p->ud);
+  return qk__collider_leaf_pairs(p->c, leaf, &p->pc, p->fn, p->ud);
 }
 
 void qk__collider_pairs_serial(const qk_collider_t *c, qk_pair_fn fn, void *ud) {
-  pairs_ctx_t p = {c, fn, ud};
+  pairs_ctx_t p = {c, fn, ud, {QK_NONE, QK_NONE, {0}}};
   qk__collider_each_leaf(c, serial_leaf, &p);
 }
 

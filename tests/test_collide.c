@@ -931,8 +931,9 @@ static void check_pairs_order(const qk_disc_t *d, size_t nd, const qk_box_t *b, 
  * then the other's leaf, then their places in the leaves) against the brute-force oracle's
  * set sorted into that order: discs, boxes and both, uniform and clustered, small and
  * large items (leaf boxes reaching over many leaves), capacities 1 to 16, coincident
- * centres (leaves over capacity at the depth cap), and items on a negative, far-off grid
- * (boxes touching exactly, sides that are not floats).
+ * centres (leaves over capacity at the depth cap), items on a negative, far-off grid
+ * (boxes touching exactly, sides that are not floats), and long items among small ones
+ * (the leaves near them meet more leaves than a family list holds).
  */
 static void test_collide_pairs_order(void **state) {
   (void)state;
@@ -964,6 +965,16 @@ static void test_collide_pairs_order(void **state) {
     b[i] = (qk_box_t){x, y, x + 0.1, y + 0.1};
   }
   check_pairs_order(NULL, 0, b, N, 4);
+  /* Small boxes and every 60th a long one: the leaves near a long one meet hundreds of
+   * others. */
+  for (size_t i = 0; i < N; i++) {
+    const double cx = qkt_rng_unit(&r), cy = qkt_rng_unit(&r);
+    const double w = i % 60 == 7 ? 0.4 : 0.004, h = i % 60 == 7 ? 0.01 : 0.004;
+    b[i] = (qk_box_t){cx - w, cy - h, cx + w, cy + h};
+    d[i] = (qk_disc_t){cx, cy, i % 60 == 7 ? 0.3 : 0.003};
+  }
+  check_pairs_order(NULL, 0, b, N, 1);
+  check_pairs_order(d, N / 2, b, N / 2, 2);
   free(d), free(b);
 }
 
