@@ -876,6 +876,29 @@ static inline int leaf_pairs(const qk_collider_t *c, const cnode_t *la, const cn
 }
 
 #if defined(__SSE2__)
+/* leaf_pairs of a leaf with itself: its items all meet its own box, so they go to the
+ * pairing without the test against it. */
+static int self_pairs(const qk_collider_t *c, const cnode_t *la, qk_pair_fn fn, void *ud) {
+  const qk_id_t *pid = qk__tree_ids(c->tree);
+  const qk_box_t *sbox = c->sbox;
+  const size_t n_discs = c->n_discs;
+  const uint32_t a0 = la->start, a1 = a0 + la->count;
+  for (uint32_t si = a0; si < a1; si++) {
+    const __m128d lo = _mm_loadu_pd(&sbox[si].xmin), hi = _mm_loadu_pd(&sbox[si].xmax);
+    const qk_id_t ia = pid[si];
+    const int a_disc = ia < n_discs;
+    for (uint32_t sj = a0; sj < a1; sj++) {
+      const qk_id_t ib = pid[sj];
+      if (ib <= ia ||
+          !box_meets(_mm_loadu_pd(&sbox[sj].xmin), _mm_loadu_pd(&sbox[sj].xmax), lo, hi))
+        continue;
+      if ((a_disc || ib < n_discs) && !slots_overlap(c, si, sj)) continue;
+      if (fn(ia, ib, ud)) return 1;
+    }
+  }
+  return 0;
+}
+
 /*
  * Which of the four children (32-byte cnode_t records side by side from ch) have a box
  * that meets the box whose sides q holds as (xmax, ymax, -xmin, -ymin): bit k for child
@@ -993,7 +1016,11 @@ int qk__collider_leaf_pairs(const qk_collider_t *c, uint32_t leaf, qk__pairs_cac
   if (pc->n != QK_NONE) {
     for (uint32_t i = 0; i < pc->n; i++) {
       const cnode_t *lb = &cn[pc->leaf[i]];
-      if (node_meets(lb, q) && leaf_pairs(c, la, lb, fn, ud)) return 1;
+      if (lb == la) {
+        if (self_pairs(c, la, fn, ud)) return 1;
+      } else if (node_meets(lb, q) && leaf_pairs(c, la, lb, fn, ud)) {
+        return 1;
+      }
     }
     return 0;
   }
