@@ -933,7 +933,8 @@ static void check_pairs_order(const qk_disc_t *d, size_t nd, const qk_box_t *b, 
  * large items (leaf boxes reaching over many leaves), capacities 1 to 16, coincident
  * centres (leaves over capacity at the depth cap), items on a negative, far-off grid
  * (boxes touching exactly, sides that are not floats), and long items among small ones
- * (the leaves near them meet more leaves than a family list holds).
+ * (the leaves near them meet more leaves than a family list holds), and boxes beyond the
+ * float range (node boxes with infinite sides).
  */
 static void test_collide_pairs_order(void **state) {
   (void)state;
@@ -975,6 +976,13 @@ static void test_collide_pairs_order(void **state) {
   }
   check_pairs_order(NULL, 0, b, N, 1);
   check_pairs_order(d, N / 2, b, N / 2, 2);
+  /* Beyond the float range: node boxes with infinite sides. */
+  for (size_t i = 0; i < N; i++) {
+    const double cx = 1e300 * qkt_rng_unit(&r), cy = -1e300 * qkt_rng_unit(&r);
+    const double w = 3e298 * qkt_rng_unit(&r), h = i % 9 ? 3e298 * qkt_rng_unit(&r) : 1e40;
+    b[i] = (qk_box_t){cx - w, cy - h, cx + w, cy + h};
+  }
+  check_pairs_order(NULL, 0, b, N, 3);
   free(d), free(b);
 }
 
