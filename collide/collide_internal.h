@@ -39,9 +39,20 @@ static inline void qk__csort4_desc(qk__centry_t *e, int n) {
 
 /* ---- the static collider's parts shared with collide/collider_batch.c --------------- */
 
+/* The leaves whose boxes meet one internal node's (the parent of the leaves searched
+ * next), kept by the caller of qk__collider_leaf_pairs between calls: parent QK_NONE
+ * before the first (a search's own; the collider must not change meanwhile). */
+#define QK__FAMILY_MAX 128
+typedef struct qk__pairs_cache {
+  uint32_t parent;
+  uint32_t n; /* QK_NONE: the leaves of this parent search on their own */
+  uint32_t leaf[QK__FAMILY_MAX];
+} qk__pairs_cache_t;
+
 /* Pairs of the items of one leaf with those of every leaf whose box meets its own, as
  * qk_collider_pairs() reports them; nonzero when fn asked to stop. */
-int qk__collider_leaf_pairs(const qk_collider_t *c, uint32_t leaf, qk_pair_fn fn, void *ud);
+int qk__collider_leaf_pairs(const qk_collider_t *c, uint32_t leaf, qk__pairs_cache_t *pc,
+                            qk_pair_fn fn, void *ud);
 /* fn on every non-empty leaf in the order qk_collider_pairs() visits them; nonzero when
  * fn asked to stop. */
 int qk__collider_each_leaf(const qk_collider_t *c, int (*fn)(uint32_t leaf, void *ud), void *ud);

@@ -816,26 +816,93 @@ qk_status_t qk_collider_query_disc(const qk_collider_t *c, qk_disc_t disc, qk_fo
   return QK_OK;
 }
 
+/* The exact overlap of the items in two slots whose boxes meet, when one is a disc (two
+ * boxes overlap exactly when their boxes meet). */
+static int slots_overlap(const qk_collider_t *c, uint32_t si, uint32_t sj) {
+  shape_t x = slot_shape(c, si), y = slot_shape(c, sj);
+  return shapes_overlap(&x, &y);
+}
+
+#if defined(__SSE2__)
+/* Does the box with corners lo, hi meet the one with corners qlo, qhi (each the x and y of
+ * a corner)? The comparisons of box_box, two at a time. */
+static inline int box_meets(__m128d lo, __m128d hi, __m128d qlo, __m128d qhi) {
+  return _mm_movemask_pd(_mm_and_pd(_mm_cmple_pd(lo, qhi), _mm_cmple_pd(qlo, hi))) == 3;
+}
+
+/* A node's corners (float pairs xmin, ymin and xmax, ymax) widened to doubles. */
+static inline __m128d cnode_lo(const cnode_t *n) {
+  return _mm_cvtps_pd(_mm_castsi128_ps(_mm_loadl_epi64((const __m128i *)(const void *)&n->xmin)));
+}
+static inline __m128d cnode_hi(const cnode_t *n) {
+  return _mm_cvtps_pd(_mm_castsi128_ps(_mm_loadl_epi64((const __m128i *)(const void *)&n->xmax)));
+}
+#endif
+
 /*
  * All pairs between the items of leaf `a` and those of leaf `b`, each pair reported from
  * the side of its smaller id. Boxes against boxes need no test beyond the bounding
- * boxes, which are exact for them.
+ * boxes, which are exact for them. The arrays are read through locals: the callback could
+ * write anywhere as far as the compiler knows, which would make it load them again for
+ * every item.
  */
-static int leaf_pairs(const qk_collider_t *c, const cnode_t *la, const cnode_t *lb, qk_pair_fn fn,
-                      void *ud) {
+static inline int leaf_pairs(const qk_collider_t *c, const cnode_t *la, const cnode_t *lb,
+                             qk_pair_fn fn, void *ud) {
   const qk_id_t *pid = qk__tree_ids(c->tree);
-  for (uint32_t si = la->start; si < la->start + la->count; si++) {
-    const qk_box_t *bi = &c->sbox[si];
+  const qk_box_t *sbox = c->sbox;
+  const size_t n_discs = c->n_discs;
+  const uint32_t a0 = la->start, a1 = a0 + la->count, b0 = lb->start, b1 = b0 + lb->count;
+#if defined(__SSE2__)
+  const __m128d blo = cnode_lo(lb), bhi = cnode_hi(lb);
+  for (uint32_t si = a0; si < a1; si++) {
+    const __m128d lo = _mm_loadu_pd(&sbox[si].xmin), hi = _mm_loadu_pd(&sbox[si].xmax);
+    if (!box_meets(lo, hi, blo, bhi)) continue;
+    const qk_id_t ia = pid[si];
+    const int a_disc = ia < n_discs;
+    for (uint32_t sj = b0; sj < b1; sj++) {
+      const qk_id_t ib = pid[sj];
+      if (ib <= ia ||
+          !box_meets(_mm_loadu_pd(&sbox[sj].xmin), _mm_loadu_pd(&sbox[sj].xmax), lo, hi))
+        continue;
+      if ((a_disc || ib < n_discs) && !slots_overlap(c, si, sj)) continue;
+      if (fn(ia, ib, ud)) return 1;
+    }
+  }
+#else
+  for (uint32_t si = a0; si < a1; si++) {
+    const qk_box_t *bi = &sbox[si];
     if (!cbox_box(lb, bi)) continue;
-    qk_id_t ia = pid[si];
-    int a_disc = ia < c->n_discs;
-    for (uint32_t sj = lb->start; sj < lb->start + lb->count; sj++) {
-      qk_id_t ib = pid[sj];
-      if (ib <= ia || !box_box(bi, &c->sbox[sj])) continue;
-      if (a_disc || ib < c->n_discs) {
-        shape_t x = slot_shape(c, si), y = slot_shape(c, sj);
-        if (!shapes_overlap(&x, &y)) continue;
-      }
+    const qk_id_t ia = pid[si];
+    const int a_disc = ia < n_discs;
+    for (uint32_t sj = b0; sj < b1; sj++) {
+      const qk_id_t ib = pid[sj];
+      if (ib <= ia || !box_box(bi, &sbox[sj])) continue;
+      if ((a_disc || ib < n_discs) && !slots_overlap(c, si, sj)) continue;
+      if (fn(ia, ib, ud)) return 1;
+    }
+  }
+#endif
+  return 0;
+}
+
+#if defined(__SSE2__)
+/* leaf_pairs of a leaf with itself: its items all meet its own box, so they go to the
+ * pairing without the test against it. */
+static int self_pairs(const qk_collider_t *c, const cnode_t *la, qk_pair_fn fn, void *ud) {
+  const qk_id_t *pid = qk__tree_ids(c->tree);
+  const qk_box_t *sbox = c->sbox;
+  const size_t n_discs = c->n_discs;
+  const uint32_t a0 = la->start, a1 = a0 + la->count;
+  for (uint32_t si = a0; si < a1; si++) {
+    const __m128d lo = _mm_loadu_pd(&sbox[si].xmin), hi = _mm_loadu_pd(&sbox[si].xmax);
+    const qk_id_t ia = pid[si];
+    const int a_disc = ia < n_discs;
+    for (uint32_t sj = a0; sj < a1; sj++) {
+      const qk_id_t ib = pid[sj];
+      if (ib <= ia ||
+          !box_meets(_mm_loadu_pd(&sbox[sj].xmin), _mm_loadu_pd(&sbox[sj].xmax), lo, hi))
+        continue;
+      if ((a_disc || ib < n_discs) && !slots_overlap(c, si, sj)) continue;
       if (fn(ia, ib, ud)) return 1;
     }
   }
@@ -843,19 +910,142 @@ static int leaf_pairs(const qk_collider_t *c, const cnode_t *la, const cnode_t *
 }
 
 /*
+ * Which of the four children (32-byte cnode_t records side by side from ch) have a box
+ * that meets the box whose sides q holds as (xmax, ymax, -xmin, -ymin): bit k for child
+ * k. A child meets it when xmin <= q.xmax, ymin <= q.ymax, -xmax <= -q.xmin and
+ * -ymax <= -q.ymin, all four float comparisons at once (negation is exact, and an empty
+ * child's box at +infinity fails the first): the comparisons of cbox_box, whose double
+ * operands are these floats widened.
+ */
+static inline unsigned children_meet(const cnode_t *ch, __m128 q) {
+  const __m128 neg = _mm_castsi128_ps(_mm_set_epi32((int)0x80000000u, (int)0x80000000u, 0, 0));
+  const __m128i m0 = _mm_castps_si128(_mm_cmple_ps(_mm_xor_ps(_mm_loadu_ps(&ch[0].xmin), neg), q));
+  const __m128i m1 = _mm_castps_si128(_mm_cmple_ps(_mm_xor_ps(_mm_loadu_ps(&ch[1].xmin), neg), q));
+  const __m128i m2 = _mm_castps_si128(_mm_cmple_ps(_mm_xor_ps(_mm_loadu_ps(&ch[2].xmin), neg), q));
+  const __m128i m3 = _mm_castps_si128(_mm_cmple_ps(_mm_xor_ps(_mm_loadu_ps(&ch[3].xmin), neg), q));
+  /* Each comparison to a byte, child k's four in 32-bit lane k: all ones when all hold. */
+  const __m128i all = _mm_packs_epi16(_mm_packs_epi32(m0, m1), _mm_packs_epi32(m2, m3));
+  return (unsigned)_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(all, _mm_set1_epi32(-1))));
+}
+
+/* The lowest set bit of a nonzero 4-bit mask. */
+static const uint8_t low_bit4[16] = {0, 0, 1, 0, 2, 0, 1, 0, 3, 0, 1, 0, 2, 0, 1, 0};
+
+/*
+ * The depth-first search for the leaves whose boxes meet the box q holds (as
+ * children_meet takes it), from the root (internal), one leaf per leaf_next in
+ * depth-first order. The four children of a node are tested at once, and the node's entry
+ * on the stack holds its first child and the mask of those that met the box; the lowest
+ * bit left is visited next (its subtree stacked above the entry), so the children go in
+ * order.
+ */
+typedef struct leaf_iter {
+  int sp;
+  uint64_t stack[QK__CSTACK_MAX];
+} leaf_iter_t;
+
+static inline void leaf_first(leaf_iter_t *it, const cnode_t *cn, __m128 q) {
+  const unsigned m = children_meet(&cn[cn[0].child], q);
+  it->sp = 0;
+  if (m) it->stack[it->sp++] = (uint64_t)cn[0].child << 4 | m;
+}
+
+/* The next leaf met, or QK_NONE. */
+static inline uint32_t leaf_next(leaf_iter_t *it, const cnode_t *cn, __m128 q) {
+  while (it->sp > 0) {
+    const uint64_t e = it->stack[it->sp - 1], rest = e & (e - 1); /* the lowest bit cleared */
+    it->stack[it->sp - 1] = rest;
+    it->sp -= (rest & 15) == 0;
+    const uint32_t v = (uint32_t)(e >> 4) + low_bit4[e & 15];
+    const uint32_t child = cn[v].child;
+    if (child == QK_NONE) return v;
+    const unsigned m = children_meet(&cn[child], q);
+    if (m) it->stack[it->sp++] = (uint64_t)child << 4 | m;
+  }
+  return QK_NONE;
+}
+
+/* A node's box as children_meet takes it. */
+static inline __m128 meet_box(const cnode_t *n) {
+  return _mm_set_ps(-n->ymin, -n->xmin, n->ymax, n->xmax);
+}
+
+/* Does node n's box meet the box q holds (as children_meet takes it)? */
+static inline int node_meets(const cnode_t *n, __m128 q) {
+  const __m128 neg = _mm_castsi128_ps(_mm_set_epi32((int)0x80000000u, (int)0x80000000u, 0, 0));
+  return _mm_movemask_ps(_mm_cmple_ps(_mm_xor_ps(_mm_loadu_ps(&n->xmin), neg), q)) == 15;
+}
+
+/*
+ * The family list of internal node p in pc: every leaf whose box meets p's, in depth-first
+ * order, when p has two or more non-empty leaf children (n = QK_NONE otherwise, or when
+ * they are more than the list holds). The leaves meeting one of those children's boxes are
+ * among them (a child's float box lies in its parent's, both rounded outwards from nested
+ * boxes), in the same order, so a child then filters the list instead of descending from
+ * the root: one descent for the family instead of one per leaf.
+ */
+static void family_list(const qk_collider_t *c, uint32_t p, qk__pairs_cache_t *pc) {
+  const cnode_t *cn = c->cn;
+  const cnode_t *ch = &cn[cn[p].child];
+  pc->parent = p;
+  pc->n = QK_NONE;
+  int leaves = 0;
+  for (int k = 0; k < 4; k++) leaves += ch[k].child == QK_NONE && ch[k].count > 0;
+  if (leaves < 2) return;
+  const __m128 q = meet_box(&cn[p]);
+  uint32_t n = 0, v;
+  leaf_iter_t it;
+  leaf_first(&it, cn, q); /* the root's box holds p's */
+  while ((v = leaf_next(&it, cn, q)) != QK_NONE) {
+    if (n == QK__FAMILY_MAX) return;
+    pc->leaf[n++] = v;
+  }
+  pc->n = n;
+}
+#endif
+
+/*
  * Leaf against leaf: for each leaf, one descent finds every leaf whose item box meets its
  * own, and the items of the two are paired directly. That shares one descent among all
  * the items of a leaf instead of making one per item. This is the part for one leaf.
  */
-int qk__collider_leaf_pairs(const qk_collider_t *c, uint32_t leaf, qk_pair_fn fn, void *ud) {
-  const cnode_t *la = &c->cn[leaf];
+int qk__collider_leaf_pairs(const qk_collider_t *c, uint32_t leaf, qk__pairs_cache_t *pc,
+                            qk_pair_fn fn, void *ud) {
+  const cnode_t *cn = c->cn;
+  const cnode_t *la = &cn[leaf];
   /* The leaf's box, widened back to doubles, is what the other leaves must meet. */
   const qk_box_t ba = {la->xmin, la->ymin, la->xmax, la->ymax};
+  if (!cbox_box(&cn[0], &ba)) return 0;
+  if (cn[0].child == QK_NONE) return leaf_pairs(c, la, &cn[0], fn, ud);
+#if defined(__SSE2__)
+  /* The same leaves in the same (depth-first) order as the plain search below, from the
+   * family list of the leaf's parent when it has one, else by a descent of its own. */
+  const __m128 q = meet_box(la);
+  const uint32_t parent = qk__node_parent(c->tree, leaf);
+  if (pc->parent != parent) family_list(c, parent, pc);
+  if (pc->n != QK_NONE) {
+    for (uint32_t i = 0; i < pc->n; i++) {
+      const cnode_t *lb = &cn[pc->leaf[i]];
+      if (lb == la) {
+        if (self_pairs(c, la, fn, ud)) return 1;
+      } else if (node_meets(lb, q) && leaf_pairs(c, la, lb, fn, ud)) {
+        return 1;
+      }
+    }
+    return 0;
+  }
+  uint32_t v;
+  leaf_iter_t it;
+  leaf_first(&it, cn, q);
+  while ((v = leaf_next(&it, cn, q)) != QK_NONE)
+    if (leaf_pairs(c, la, &cn[v], fn, ud)) return 1;
+#else
+  (void)pc;
   uint32_t inner[QK__CSTACK_MAX];
   int si = 0;
-  inner[si++] = 0;
+  for (int k = 3; k >= 0; k--) inner[si++] = cn[0].child + (uint32_t)k;
   while (si > 0) {
-    const cnode_t *lb = &c->cn[inner[--si]];
+    const cnode_t *lb = &cn[inner[--si]];
     if (!cbox_box(lb, &ba)) continue;
     if (lb->child != QK_NONE) {
       for (int k = 3; k >= 0; k--) inner[si++] = lb->child + (uint32_t)k;
@@ -863,6 +1053,7 @@ int qk__collider_leaf_pairs(const qk_collider_t *c, uint32_t leaf, qk_pair_fn fn
     }
     if (leaf_pairs(c, la, lb, fn, ud)) return 1;
   }
+#endif
   return 0;
 }
 
@@ -886,15 +1077,16 @@ typedef struct pairs_ctx {
   const qk_collider_t *c;
   qk_pair_fn fn;
   void *ud;
+  qk__pairs_cache_t pc;
 } pairs_ctx_t;
 
 static int serial_leaf(uint32_t leaf, void *ud) {
   pairs_ctx_t *p = ud;
-  return qk__collider_leaf_pairs(p->c, leaf, p->fn, p->ud);
+  return qk__collider_leaf_pairs(p->c, leaf, &p->pc, p->fn, p->ud);
 }
 
 void qk__collider_pairs_serial(const qk_collider_t *c, qk_pair_fn fn, void *ud) {
-  pairs_ctx_t p = {c, fn, ud};
+  pairs_ctx_t p = {c, fn, ud, {QK_NONE, QK_NONE, {0}}};
   qk__collider_each_leaf(c, serial_leaf, &p);
 }
 

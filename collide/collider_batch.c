@@ -71,6 +71,8 @@ static int keep_pair(qk_id_t a, qk_id_t b, void *ud) {
  * qk__collider_each_leaf visits them); nonzero when fn asked to stop. */
 static int subtree_pairs(const pctx_t *p, uint32_t root, qk_pair_fn fn, void *ud) {
   uint32_t stack[QK__CSTACK_MAX];
+  qk__pairs_cache_t pc;
+  pc.parent = pc.n = QK_NONE;
   int sp = 0;
   stack[sp++] = root;
   while (sp > 0) {
@@ -80,7 +82,7 @@ static int subtree_pairs(const pctx_t *p, uint32_t root, qk_pair_fn fn, void *ud
       for (int k = 3; k >= 0; k--) stack[sp++] = child + (uint32_t)k;
       continue;
     }
-    if (qk__node_count(p->t, v) > 0 && qk__collider_leaf_pairs(p->c, v, fn, ud)) return 1;
+    if (qk__node_count(p->t, v) > 0 && qk__collider_leaf_pairs(p->c, v, &pc, fn, ud)) return 1;
   }
   return 0;
 }

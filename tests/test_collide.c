@@ -21,7 +21,9 @@
  *  - a skewed scene (most pairs in a few leaves) on 2 and 3 threads: the one-thread
  *    sequence, also stopped early at many places, the oracle's set, the calling thread;
  *  - rays over leaves of every count up to the capacity, with discs given twice under
- *    other ids, and searches that climb, against brute force to the last bit of t.
+ *    other ids, and searches that climb, against brute force to the last bit of t;
+ *  - the order of the pairs (leaf of the smaller id in pre-order, then the other's leaf,
+ *    then their places in the leaves) against the oracle's set sorted into that order.
  */
 #define _DEFAULT_SOURCE /* madvise and MADV_HUGEPAGE in <sys/mman.h> */
 #include <math.h>
@@ -952,6 +954,124 @@ static void test_collide_raycast_leaf_counts(void **state) {
   free(d);
 }
 
+/* The place of an item in the callback order: its leaf's rank among the leaves in
+ * pre-order and its place among that leaf's points. */
+typedef struct place {
+  size_t leaf, pos;
+} place_t;
+
+static const place_t *g_place;
+
+/* Pairs (a < b) in the order qk_collider_pairs promises: by the leaf of a, then the leaf
+ * of b (both in pre-order), then the places of a and b within them. */
+static int place_cmp(const void *x, const void *y) {
+  const qk_pair_t *p = x, *q = y;
+  const place_t pa = g_place[p->a], pb = g_place[p->b], qa = g_place[q->a], qb = g_place[q->b];
+  if (pa.leaf != qa.leaf) return pa.leaf < qa.leaf ? -1 : 1;
+  if (pb.leaf != qb.leaf) return pb.leaf < qb.leaf ? -1 : 1;
+  if (pa.pos != qa.pos) return pa.pos < qa.pos ? -1 : 1;
+  return pb.pos < qb.pos ? -1 : pb.pos > qb.pos;
+}
+
+/* The callback order of one collider against the oracle's pairs put in that order from
+ * the tree's public leaf listing, on one and two threads. */
+static void check_pairs_order(const qk_disc_t *d, size_t nd, const qk_box_t *b, size_t nb,
+                              uint32_t cap) {
+  qk_tree_options_t o = opts(cap);
+  qk_collider_t *c = NULL;
+  assert_int_equal(qk_collider_build(d, nd, b, nb, &o, &c), QK_OK);
+  const qk_tree_t *t = qk_collider_tree(c);
+  size_t nl = 0;
+  assert_int_equal(qk_tree_leaves(t, NULL, 0, &nl), QK_OK);
+  qk_node_t *leaves = malloc(nl * sizeof *leaves);
+  assert_int_equal(qk_tree_leaves(t, leaves, nl, &nl), QK_OK);
+  place_t *place = malloc((nd + nb + 1) * sizeof *place);
+  for (size_t l = 0; l < nl; l++) {
+    const qk_id_t *ids;
+    size_t n;
+    assert_int_equal(qk_tree_leaf_points(t, leaves[l], NULL, NULL, &ids, &n), QK_OK);
+    for (size_t k = 0; k < n; k++) place[ids[k]] = (place_t){l, k};
+  }
+  qk_pair_t *want;
+  const size_t nw = qko_pairs(d, nd, b, nb, &want);
+  g_place = place;
+  qsort(want, nw, sizeof *want, place_cmp);
+  for (uint32_t th = 1; th <= 2; th++) {
+    qk_collider_set_threads(c, th);
+    seq_t got = pairs_seq(c, 0);
+    if (got.n != nw)
+      fail_msg("order: %zu pairs, oracle %zu (threads %u cap %u seed %llu)", got.n, nw, th, cap,
+               (unsigned long long)g_seed);
+    for (size_t i = 0; i < nw; i++)
+      if (got.p[i].a != want[i].a || got.p[i].b != want[i].b)
+        fail_msg("order: pair %zu is (%u,%u), expected (%u,%u) (threads %u cap %u seed %llu)", i,
+                 got.p[i].a, got.p[i].b, want[i].a, want[i].b, th, cap, (unsigned long long)g_seed);
+    free(got.p);
+  }
+  free(want), free(place), free(leaves);
+  qk_collider_free(c);
+}
+
+/*
+ * The order of the pairs (collide/collider.c: by the leaf of the smaller id in pre-order,
+ * then the other's leaf, then their places in the leaves) against the brute-force oracle's
+ * set sorted into that order: discs, boxes and both, uniform and clustered, small and
+ * large items (leaf boxes reaching over many leaves), capacities 1 to 16, coincident
+ * centres (leaves over capacity at the depth cap), items on a negative, far-off grid
+ * (boxes touching exactly, sides that are not floats), and long items among small ones
+ * (the leaves near them meet more leaves than a family list holds), and boxes beyond the
+ * float range (node boxes with infinite sides).
+ */
+static void test_collide_pairs_order(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 17);
+  enum { N = 1200 };
+  qk_disc_t *d = malloc(N * sizeof *d);
+  qk_box_t *b = malloc(N * sizeof *b);
+  const uint32_t caps[] = {1, 3, 8, 16};
+  for (int cl = 0; cl < 2; cl++)
+    for (int ci = 0; ci < 4; ci++) {
+      make_items(&r, d, N, b, N, cl, cl ? 0.003 : 0.02);
+      check_pairs_order(d, N, NULL, 0, caps[ci]);
+      check_pairs_order(NULL, 0, b, N, caps[ci]);
+      check_pairs_order(d, N / 3, b, N / 2, caps[ci]);
+    }
+  /* Coincident centres: 40 items on each of 20 points, boxes of several sizes. */
+  for (size_t i = 0; i < N; i++) {
+    const double cx = 0.05 * (double)(i % 20), cy = 0.3 + 0.01 * (double)(i % 20);
+    const double w = 0.001 * (double)(1 + i % 7), h = 0.02 * (double)(1 + i % 3);
+    b[i] = (qk_box_t){cx - w, cy - h, cx + w, cy + h};
+    d[i] = (qk_disc_t){cx, cy, 0.5 * w};
+  }
+  check_pairs_order(NULL, 0, b, 800, 4);
+  check_pairs_order(d, 500, b, 500, 2);
+  /* A grid of boxes with touching sides, far from the origin and not float-exact. */
+  for (size_t i = 0; i < N; i++) {
+    const double x = -1e7 + 0.1 * (double)(i % 40), y = 3e6 + 0.1 * (double)(i / 40);
+    b[i] = (qk_box_t){x, y, x + 0.1, y + 0.1};
+  }
+  check_pairs_order(NULL, 0, b, N, 4);
+  /* Small boxes and every 60th a long one: the leaves near a long one meet hundreds of
+   * others. */
+  for (size_t i = 0; i < N; i++) {
+    const double cx = qkt_rng_unit(&r), cy = qkt_rng_unit(&r);
+    const double w = i % 60 == 7 ? 0.4 : 0.004, h = i % 60 == 7 ? 0.01 : 0.004;
+    b[i] = (qk_box_t){cx - w, cy - h, cx + w, cy + h};
+    d[i] = (qk_disc_t){cx, cy, i % 60 == 7 ? 0.3 : 0.003};
+  }
+  check_pairs_order(NULL, 0, b, N, 1);
+  check_pairs_order(d, N / 2, b, N / 2, 2);
+  /* Beyond the float range: node boxes with infinite sides. */
+  for (size_t i = 0; i < N; i++) {
+    const double cx = 1e300 * qkt_rng_unit(&r), cy = -1e300 * qkt_rng_unit(&r);
+    const double w = 3e298 * qkt_rng_unit(&r), h = i % 9 ? 3e298 * qkt_rng_unit(&r) : 1e40;
+    b[i] = (qk_box_t){cx - w, cy - h, cx + w, cy + h};
+  }
+  check_pairs_order(NULL, 0, b, N, 3);
+  free(d), free(b);
+}
+
 int main(void) {
   g_seed = qkt_seed(7031);
   const struct CMUnitTest tests[] = {
@@ -968,6 +1088,7 @@ int main(void) {
       cmocka_unit_test(test_collide_ray_arrays_huge),
       cmocka_unit_test(test_collide_threads_skewed),
       cmocka_unit_test(test_collide_raycast_leaf_counts),
+      cmocka_unit_test(test_collide_pairs_order),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
