@@ -158,17 +158,6 @@ static void seed(uint32_t *label, int32_t piece, int dir) {
 }
 
 /*
- * Labelling works on cells: the parts of a leaf that no component edge separates. A leaf
- * is one cell, except a unit leaf cut by a component diagonal, which is two. cell_side
- * tells whether cell k of a leaf with diagonal kind `diag` (0 none, 1 SW-NE, 2 SE-NW)
- * touches side s (south, east, north, west).
- */
-static int cell_touches(int diag, int k, int s) {
-  static const unsigned char touch[3][2] = {{0xf, 0x0}, {0x3, 0xc}, {0x9, 0x6}};
-  return (touch[diag][k] >> s) & 1;
-}
-
-/*
  * Step 3 for one unit leaf holding component pieces: a component diagonal splits it
  * along that diagonal; otherwise the SW-NE diagonal does (its vertices are only its
  * corners, since no leaf is smaller than unit size). Seeds the labels of its cells.
@@ -224,19 +213,21 @@ typedef struct leaf_map {
   const uint32_t *corner; /* 4 per leaf: SW, SE, NE, NW vertex ids */
   const qk_node_t *leaves;
   const uint32_t *leaf_of; /* by node id */
-  const qk_square_t *sq;   /* by leaf index */
-  int64_t U;               /* the root square's side */
+  const uint32_t *side;    /* by leaf index: the leaf's side */
 } leaf_map_t;
 
 /*
  * The leaves across side sd (south, east, north, west) of leaf li, as
- * qk_tree_adjacent_leaves gives them, same order, into nb (room for 8) as leaf indices: in
- * a balanced tree one leaf of the same size, two of half the size (the one lower along the
- * side first, as the tree lists them), or one of twice the size; the tree's own search
- * otherwise (never, for a balanced tree, but it costs nothing to be sure). Side sd runs
- * from corner vertex p to q; the same-size neighbour, the first half-size one and the
- * double-size one when aligned with p have their corner kp at p, the second half-size one
- * and the double-size one otherwise their corner kq at q.
+ * qk_tree_adjacent_leaves gives them, same order, into nb (room for 8) as leaf indices,
+ * for a side that is not on the root square's boundary: in a balanced tree one leaf of
+ * the same size, two of half the size (the one lower along the side first, as the tree
+ * lists them), or one of twice the size; the tree's own search otherwise (never, for a
+ * balanced tree, but it costs nothing to be sure). Side sd runs from corner vertex p to
+ * q; the same-size neighbour, the first half-size one and the double-size one when
+ * aligned with p have their corner kp at p, the second half-size one and the double-size
+ * one otherwise their corner kq at q. The same-size neighbour is the one leaf with both
+ * (a == b); a double-size one leaves the other end without such a corner (it is the
+ * middle of the large leaf's side).
  */
 static size_t side_leaves(const qk_tree_t *t, const leaf_map_t *L, uint32_t li, int sd,
                           uint32_t *nb) {
@@ -245,41 +236,42 @@ static size_t side_leaves(const qk_tree_t *t, const leaf_map_t *L, uint32_t li, 
                                          {1, 0, 2, 3},
                                          {3, 0, 2, 1},
                                          {0, 1, 3, 2}};
-  qk_node_t v = L->leaves[li];
-  qk_square_t sq = L->sq[li];
-  int64_t X = (int64_t)sq.x, Y = (int64_t)sq.y, S = (int64_t)sq.side;
-  if ((sd == 0 && Y == 0) || (sd == 3 && X == 0) || (sd == 2 && Y + S == L->U) ||
-      (sd == 1 && X + S == L->U))
-    return 0; /* the root square's boundary */
   const uint32_t *c = &L->corner[4 * li];
   const unsigned char *e = pk[sd];
   uint32_t a = L->by[e[1]][c[e[0]]], b = L->by[e[3]][c[e[2]]];
-  int64_t sa = a != QK__MESH_UNSET ? (int64_t)L->sq[a].side : 0;
-  int64_t sb = b != QK__MESH_UNSET ? (int64_t)L->sq[b].side : 0;
-  if (sa == S || (sa == 2 * S)) {
-    nb[0] = a;
-    return 1;
-  }
-  if (sa && 2 * sa == S && 2 * sb == S) {
-    nb[0] = a, nb[1] = b;
-    return 2;
-  }
-  if (sb == 2 * S) {
-    nb[0] = b;
-    return 1;
+  if (a == b) {
+    if (a != QK__MESH_UNSET) {
+      nb[0] = a;
+      return 1;
+    }
+  } else {
+    uint64_t S = L->side[li];
+    uint64_t sa = a != QK__MESH_UNSET ? L->side[a] : 0, sb = b != QK__MESH_UNSET ? L->side[b] : 0;
+    if (sa == 2 * S && !sb) {
+      nb[0] = a;
+      return 1;
+    }
+    if (sb == 2 * S && !sa) {
+      nb[0] = b;
+      return 1;
+    }
+    if (sa && 2 * sa == S && 2 * sb == S) {
+      nb[0] = a, nb[1] = b;
+      return 2;
+    }
   }
   static const qk_dir_t side_dir[4] = {QK_SOUTH, QK_EAST, QK_NORTH, QK_WEST};
   qk_node_t nn[8];
   size_t n = 0;
-  qk_tree_adjacent_leaves(t, v, side_dir[sd], nn, 8, &n);
+  qk_tree_adjacent_leaves(t, L->leaves[li], side_dir[sd], nn, 8, &n);
   if (n > 8) n = 8;
   for (size_t i = 0; i < n; i++) nb[i] = L->leaf_of[nn[i]];
   return n;
 }
 
 static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, const qk_node_t *leaves,
-                               size_t nleaves, const uint32_t *rec_of, const uint32_t *cell_label,
-                               const leaf_map_t *L) {
+                               const qk_square_t *lsq, size_t nleaves, const uint32_t *rec_of,
+                               const uint32_t *cell_label, const leaf_map_t *L) {
   const qk_tree_t *t = g->tree;
   size_t ncell = 2 * nleaves;
   uint32_t *queue = qk__realloc(g->a, NULL, 0, (ncell + 1) * sizeof *queue);
@@ -295,42 +287,54 @@ static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, const qk_node_t
   }
   T->region = rp;
   memset(region, 0xff, (ncell + 1) * sizeof *region);
-  /* Per leaf, what the flood asks of its unit record: its diagonal kind (bits 0-1: 0 none,
-   * 1 SW-NE, 2 SE-NW) and which sides are component edges (bit 2 + side, sides south, east,
-   * north, west), read from one byte instead of through the node's record. */
+  /* Per leaf, what the flood asks of it, in one byte: its diagonal kind (bits 0-1: 0 none,
+   * 1 SW-NE, 2 SE-NW) and which sides the flood does not cross (bit 2 + side, sides south,
+   * east, north, west): component edges, from the node's unit record, and the root
+   * square's boundary. */
   static const int piece_of_side[4] = {QK__P_S, QK__P_E, QK__P_N, QK__P_W};
+  const double U = qk__tree_root_square(t).side;
   for (size_t li = 0; li < nleaves; li++) {
     uint32_t v = leaves[li];
-    const qk__unit_rec_t *r = rec_of[v] != QK__MESH_UNSET ? &g->rec[rec_of[v]] : NULL;
-    uint8_t f = 0;
-    if (r) {
-      f = r->piece[QK__P_D0] ? 1 : r->piece[QK__P_D1] ? 2 : 0;
+    const qk_square_t *q = &lsq[li];
+    uint8_t f = (uint8_t)((q->y == 0 ? 4 : 0) | (q->x + q->side == U ? 8 : 0) |
+                          (q->y + q->side == U ? 16 : 0) | (q->x == 0 ? 32 : 0));
+    if (rec_of[v] != QK__MESH_UNSET) {
+      const qk__unit_rec_t *r = &g->rec[rec_of[v]];
+      f |= r->piece[QK__P_D0] ? 1 : r->piece[QK__P_D1] ? 2 : 0;
       for (int sd = 0; sd < 4; sd++)
         if (r->piece[piece_of_side[sd]]) f |= (uint8_t)(4 << sd);
     }
     kind[li] = f;
   }
+  /* Labelling works on cells: the parts of a leaf that no component edge separates. A
+   * leaf is one cell, except a unit leaf cut by a component diagonal, which is two.
+   * touch[diag][k] is the set of sides (south, east, north, west) that cell k of a leaf
+   * with diagonal kind diag touches; other[diag] the sides where that is cell 1. */
+  static const unsigned char touch[4][2] = {{0xf, 0x0}, {0x3, 0xc}, {0x9, 0x6}, {0, 0}};
+  static const unsigned char other[4] = {0x0, 0xc, 0x6, 0x0};
   uint32_t nreg = 0;
-  /* Start a flood from the cell of every triangle not reached yet. */
-  for (size_t tr = 0; tr < T->nt; tr++) {
-    uint32_t c0 = T->label[tr];
-    if (region[c0] != QK__MESH_UNSET) continue;
+  /* Start a flood from every cell not reached yet that holds triangles, in the order of
+   * the triangles (leaf by leaf, cell 0 first): the region ids are as a flood started at
+   * every triangle in turn would number them. */
+  for (size_t c0 = 0; c0 < ncell; c0++) {
+    if (region[c0] != QK__MESH_UNSET || ((c0 & 1) && !(kind[c0 / 2] & 3))) continue;
     uint32_t rid = nreg++;
     rlabel[rid] = 0;
     size_t qh = 0, qt = 0;
-    region[c0] = rid, queue[qt++] = c0;
+    region[c0] = rid, queue[qt++] = (uint32_t)c0;
     while (qh < qt) {
       uint32_t c = queue[qh++], li = c / 2, k = c % 2;
       if (cell_label[c] != QK__MESH_UNSET) rlabel[rid] = cell_label[c];
-      int diag = kind[li] & 3;
-      for (int sd = 0; sd < 4; sd++) {
-        if (!cell_touches(diag, (int)k, sd)) continue;
-        if (kind[li] & (4 << sd)) continue; /* a component edge: a boundary */
+      unsigned kl = kind[li];
+      unsigned sides = touch[kl & 3][k] & ~(kl >> 2) & 0xf;
+      for (; sides; sides &= sides - 1) {
+        int sd = __builtin_ctz(sides);
         uint32_t nb[8];
         size_t n = side_leaves(t, L, li, sd, nb);
+        unsigned opp = (unsigned)(sd + 2) & 3;
         for (size_t i = 0; i < n; i++) {
           uint32_t lw = nb[i];
-          uint32_t cw = 2 * lw + (cell_touches(kind[lw] & 3, 0, (sd + 2) % 4) ? 0 : 1);
+          uint32_t cw = 2 * lw + ((other[kind[lw] & 3] >> opp) & 1);
           if (region[cw] == QK__MESH_UNSET) region[cw] = rid, queue[qt++] = cw;
         }
       }
@@ -429,7 +433,10 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
   /* First every leaf's corners, so that the vertex map holds every lattice point a leaf
    * has as a corner. */
   uint32_t *corner = qk__realloc(g->a, NULL, 0, (4 * nleaves + 4) * sizeof *corner);
-  if (!corner) {
+  uint32_t *lside = qk__realloc(g->a, NULL, 0, (nleaves + 1) * sizeof *lside);
+  if (!corner || !lside) {
+    qk__free(g->a, corner, (4 * nleaves + 4) * sizeof *corner);
+    qk__free(g->a, lside, (nleaves + 1) * sizeof *lside);
     st = QK_ERR_NOMEM;
     goto out;
   }
@@ -437,6 +444,7 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
     qk_square_t sq = lsq[li];
     int64_t S = 2 * (int64_t)sq.side, X = 2 * (int64_t)sq.x, Y = 2 * (int64_t)sq.y;
     uint32_t *c = &corner[4 * li];
+    lside[li] = (uint32_t)sq.side;
     /* One call site, so that the probe is inlined. */
     const int64_t cx[4] = {X, X + S, X + S, X}, cy[4] = {Y, Y, Y + S, Y + S};
     for (int q = 0; q < 4 && !st; q++) st = corner_vertex(T, cx[q], cy[q], &c[q]);
@@ -480,12 +488,7 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
   }
   /* The vertex map is no longer needed; give its memory back before labelling. */
   hmap_free(T->a, &T->vmap);
-  leaf_map_t L = {{NULL, NULL, NULL, NULL},
-                  corner,
-                  leaves,
-                  leaf_of,
-                  lsq,
-                  (int64_t)qk__tree_root_square(t).side};
+  leaf_map_t L = {{NULL, NULL, NULL, NULL}, corner, leaves, leaf_of, lside};
   for (int k = 0; k < 4 && !st; k++) {
     L.by[k] = qk__realloc(g->a, NULL, 0, (ncorner + 1) * sizeof *L.by[k]);
     if (!L.by[k])
@@ -495,9 +498,10 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
   }
   for (size_t li = 0; li < nleaves && !st; li++)
     for (int k = 0; k < 4; k++) L.by[k][corner[4 * li + k]] = (uint32_t)li;
-  if (!st) st = label_cells(g, T, leaves, nleaves, rec_of, cell_label, &L);
+  if (!st) st = label_cells(g, T, leaves, lsq, nleaves, rec_of, cell_label, &L);
   for (int k = 0; k < 4; k++) qk__free(g->a, L.by[k], (ncorner + 1) * sizeof *L.by[k]);
   qk__free(g->a, corner, (4 * nleaves + 4) * sizeof *corner);
+  qk__free(g->a, lside, (nleaves + 1) * sizeof *lside);
 out:
   qk__free(g->a, nsq, (nn + 1) * sizeof *nsq);
   qk__free(g->a, lsq, (nn + 1) * sizeof *lsq);
