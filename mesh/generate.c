@@ -299,24 +299,47 @@ static qk_status_t compact(qk__gen_t *g, const qk__tri_state_t *T, const uint8_t
     return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   double amin = 180, amax = 0;
   size_t j = 0;
-  shape_memo_t *sm = qk__realloc(g->a, NULL, 0, sizeof *sm);
-  if (!sm) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
-  shape_memo_init(sm);
-  for (size_t t = 0; t < T->nt; t++) {
-    if (dropped && drop[T->region[t]]) continue;
-    const uint32_t *tr = &T->tri[3 * t];
-    for (int i = 0; i < 3; i++) {
-      uint32_t *id = &newid[tr[i]];
-      if (*id == QK__MESH_UNSET) *id = (uint32_t)kv++;
-      m->tri[3 * j + i] = *id;
+  if (dropped) {
+    /* The angle extremes of the kept triangles: the shapes the triangulation made need
+     * not all be kept. */
+    shape_memo_t *sm = qk__realloc(g->a, NULL, 0, sizeof *sm);
+    if (!sm) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+    shape_memo_init(sm);
+    for (size_t t = 0; t < T->nt; t++) {
+      if (drop[T->region[t]]) continue;
+      const uint32_t *tr = &T->tri[3 * t];
+      for (int i = 0; i < 3; i++) m->tri[3 * j + i] = newid[tr[i]];
+      double lo, hi;
+      shape_angles(sm, T->vx, T->vy, tr, &lo, &hi);
+      if (lo < amin) amin = lo;
+      if (hi > amax) amax = hi;
+      m->comp[j++] = T->label[t];
     }
-    double lo, hi;
-    shape_angles(sm, T->vx, T->vy, tr, &lo, &hi);
-    if (lo < amin) amin = lo;
-    if (hi > amax) amax = hi;
-    m->comp[j++] = T->label[t];
+    qk__free(g->a, sm, sizeof *sm);
+  } else {
+    for (size_t t = 0; t < T->nt; t++) {
+      const uint32_t *tr = &T->tri[3 * t];
+      for (int i = 0; i < 3; i++) {
+        uint32_t *id = &newid[tr[i]];
+        if (*id == QK__MESH_UNSET) *id = (uint32_t)kv++;
+        m->tri[3 * j + i] = *id;
+      }
+      m->comp[j++] = T->label[t];
+    }
+    /* Every triangle is kept: the extremes over the shapes the triangulation made, each
+     * measured once on its own copy at the origin (angle_deg sees the same coordinate
+     * differences, so the same numbers as on every triangle of that shape). */
+    for (int l = 0; l < 64; l++)
+      for (unsigned bits = T->shapes[l]; bits; bits &= bits - 1) {
+        int64_t x[3], y[3];
+        qk__mesh_shape(__builtin_ctz(bits), (int64_t)1 << l, x, y);
+        for (int i = 0; i < 3; i++) {
+          double ang = angle_deg(x, y, (uint32_t)(i + 2) % 3, (uint32_t)i, (uint32_t)(i + 1) % 3);
+          if (ang < amin) amin = ang;
+          if (ang > amax) amax = ang;
+        }
+      }
   }
-  qk__free(g->a, sm, sizeof *sm);
   m->nv = kv;
   m->xy = qk__realloc(g->a, NULL, 0, (2 * kv + 2) * sizeof *m->xy);
   if (!m->xy) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");

@@ -147,7 +147,17 @@ typedef struct qk__tri_state {
   uint32_t *region; /* per triangle: its region (connected part between boundaries) */
   size_t nt, tcap, lcap, rcap;
   uint32_t nregion;
+  /* The triangle shapes made, by log2 of the doubled leaf side: bit 3s (s a side, south,
+   * east, north, west) the centre fan's triangle (corner s, corner s+1, centre), bits
+   * 3s+1 and 3s+2 (corner s, midpoint s, centre) and (midpoint s, corner s+1, centre),
+   * bits 12-13 the split along SW-NE (SW, SE, NE), (SW, NE, NW) and bits 14-15 along
+   * SE-NW (SW, SE, NW), (SE, NE, NW): every triangle is one of these, translated. */
+  uint16_t shapes[64];
 } qk__tri_state_t;
+
+/* The doubled-coordinate vertices of shape bit k (see qk__tri_state_t.shapes) in the
+ * leaf square [0, S]^2 (mesh/triangulate.c). */
+void qk__mesh_shape(int k, int64_t S, int64_t x[3], int64_t y[3]);
 
 /* Facts the triangulation hands to hole removal. */
 typedef struct qk__leaf_tris {

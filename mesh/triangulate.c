@@ -382,6 +382,35 @@ static size_t node_squares(const qk_tree_t *t, qk_square_t *sq, qk_node_t *leave
   return nl;
 }
 
+/* The shapes (qk__tri_state_t.shapes) of a leaf that is not a unit record, by which
+ * sides hold a midpoint: none, the SW-NE split; else per side two fan triangles with a
+ * midpoint, one without. */
+#define FAN(m, s) (((m) >> (s)) & 1 ? 6u << 3 * (s) : 1u << 3 * (s))
+#define FAN4(m) (m ? FAN(m, 0) | FAN(m, 1) | FAN(m, 2) | FAN(m, 3) : 0x3000u)
+static const uint16_t fan_shapes[16] = {FAN4(0),  FAN4(1),  FAN4(2),  FAN4(3), FAN4(4),  FAN4(5),
+                                        FAN4(6),  FAN4(7),  FAN4(8),  FAN4(9), FAN4(10), FAN4(11),
+                                        FAN4(12), FAN4(13), FAN4(14), FAN4(15)};
+#undef FAN4
+#undef FAN
+
+void qk__mesh_shape(int k, int64_t S, int64_t x[3], int64_t y[3]) {
+  /* Corners SW, SE, NE, NW (0-3), side midpoints south, east, north, west (4-7), centre. */
+  const int64_t h = S / 2;
+  const int64_t px[9] = {0, S, S, 0, h, S, h, 0, h}, py[9] = {0, 0, S, S, 0, h, S, h, h};
+  static const unsigned char split[4][3] = {{0, 1, 2}, {0, 2, 3}, {0, 1, 3}, {1, 2, 3}};
+  int s = k / 3, v[3];
+  if (k >= 12) {
+    for (int i = 0; i < 3; i++) v[i] = split[k - 12][i];
+  } else if (k % 3 == 0) {
+    v[0] = s, v[1] = (s + 1) % 4, v[2] = 8;
+  } else if (k % 3 == 1) {
+    v[0] = s, v[1] = 4 + s, v[2] = 8;
+  } else {
+    v[0] = 4 + s, v[1] = (s + 1) % 4, v[2] = 8;
+  }
+  for (int i = 0; i < 3; i++) x[i] = px[v[i]], y[i] = py[v[i]];
+}
+
 qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris_t *lt) {
   const qk_tree_t *t = g->tree;
   qk_status_t st = QK_OK;
@@ -458,7 +487,9 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
     lt->first[v] = (uint32_t)T->nt;
     const uint32_t *c = &corner[4 * li];
     if (rec_of[v] != QK__MESH_UNSET) {
-      st = tri_unit(T, &g->rec[rec_of[v]], c, cell, cell_label);
+      const qk__unit_rec_t *r = &g->rec[rec_of[v]];
+      T->shapes[1] |= r->piece[QK__P_D1] ? 0xc000 : 0x3000; /* S = 2 */
+      st = tri_unit(T, r, c, cell, cell_label);
       continue;
     }
     /* A side holds a midpoint vertex exactly when the neighbour across it (of at most
@@ -471,10 +502,13 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
     int64_t mx[4] = {X + S / 2, X + S, X + S / 2, X}, my[4] = {Y, Y + S / 2, Y + S, Y + S / 2};
     uint32_t ring[8];
     size_t nr = 0;
+    unsigned mids = 0;
     for (int s = 0; s < 4; s++) {
       ring[nr++] = c[s];
-      if (S > 2 && hmap_get(&T->vmap, ((uint64_t)mx[s] << 32) | (uint64_t)my[s], &ring[nr])) nr++;
+      if (S > 2 && hmap_get(&T->vmap, ((uint64_t)mx[s] << 32) | (uint64_t)my[s], &ring[nr]))
+        nr++, mids |= 1u << s;
     }
+    T->shapes[__builtin_ctzll((uint64_t)S)] |= fan_shapes[mids];
     if (nr == 4) {
       /* Vertices only at its corners: split along a diagonal (angles 45, 45, 90). */
       if (!(st = add_tri(T, c[0], c[1], c[2], cell))) st = add_tri(T, c[0], c[2], c[3], cell);
