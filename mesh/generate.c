@@ -391,7 +391,7 @@ static qk_status_t region_attributes(qk__gen_t *g, qk__tri_state_t *T, const qk_
   return st;
 }
 
-/* Step 3: triangulate, label, drop holes, compact. */
+/* Step 3: triangulate, label, drop holes, compact; the boundary markers. */
 static qk_status_t triangulate(qk__gen_t *g, qk_mesh_t *m) {
   qk__tri_state_t T;
   memset(&T, 0, sizeof T);
@@ -411,7 +411,8 @@ static qk_status_t triangulate(qk__gen_t *g, qk_mesh_t *m) {
   memset(drop, 0, (size_t)T.nregion + 1);
   if ((st = qk__mesh_find_holes(g, &T, &lt, drop))) goto out;
   if ((st = compact(g, &T, drop, newid, m))) goto out;
-  st = region_attributes(g, &T, &lt, drop, m);
+  if ((st = region_attributes(g, &T, &lt, drop, m))) goto out;
+  st = qk__mesh_markers(g, m, &T.vmap, newid);
 out:
   qk__free(g->a, drop, (size_t)T.nregion + 1);
   qk__free(g->a, newid, (T.nv ? T.nv : 1) * sizeof *newid);
@@ -475,7 +476,7 @@ qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *opt
       t2 = now();
       if (!(st = balance(&g))) {
         t3 = now();
-        if (!(st = triangulate(&g, m))) st = qk__mesh_markers(&g, m);
+        st = triangulate(&g, m);
       }
     }
   }

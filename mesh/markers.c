@@ -11,41 +11,20 @@
 #include <string.h>
 
 /*
- * Vertex ids by doubled lattice position: an open-addressing table of at least twice the
- * vertices (a power of two), id QK__MESH_UNSET marking an empty slot. Positions are
- * distinct; were one repeated, the lowest id keeps it, as a stable sort would.
+ * Vertex ids by doubled lattice position: the triangulation's map of leaf corners, then
+ * the ids the kept vertices have in the mesh. Every lattice point of a segment is a corner
+ * of the unit leaves around it, so the map holds it.
  */
 typedef struct vpos {
-  uint64_t *key;
-  uint32_t *id;
-  size_t mask;
+  const qk__hmap_t *vmap;
+  const uint32_t *newid;
 } vpos_t;
 
 static uint64_t pos_key(int64_t X2, int64_t Y2) { return (uint64_t)X2 << 32 | (uint64_t)Y2; }
 
-static size_t pos_slot(uint64_t key, size_t mask) {
-  key ^= key >> 31;
-  key *= 0x9e3779b97f4a7c15ull;
-  key ^= key >> 29;
-  return (size_t)key & mask;
-}
-
-static void pos_put(vpos_t *v, uint64_t key, uint32_t id) {
-  size_t j = pos_slot(key, v->mask);
-  while (v->id[j] != QK__MESH_UNSET) {
-    if (v->key[j] == key) return;
-    j = (j + 1) & v->mask;
-  }
-  v->key[j] = key, v->id[j] = id;
-}
-
 static uint32_t find(const vpos_t *v, uint64_t key) {
-  size_t j = pos_slot(key, v->mask);
-  while (v->id[j] != QK__MESH_UNSET) {
-    if (v->key[j] == key) return v->id[j];
-    j = (j + 1) & v->mask;
-  }
-  return QK__MESH_UNSET;
+  uint32_t t = qk__hmap_find(v->vmap, key);
+  return t == QK__MESH_UNSET ? t : v->newid[t];
 }
 
 static qk_status_t add_oseg(const qk_allocator_t *a, qk_mesh_t *m, size_t *cap, qk__oseg_t e) {
@@ -80,29 +59,19 @@ static qk_status_t walk_segment(qk__gen_t *g, qk_mesh_t *m, const vpos_t *pos, s
   return QK_OK;
 }
 
-qk_status_t qk__mesh_markers(qk__gen_t *g, qk_mesh_t *m) {
+qk_status_t qk__mesh_markers(qk__gen_t *g, qk_mesh_t *m, const qk__hmap_t *vmap,
+                             const uint32_t *newid) {
   const qk_poly_t *P = g->poly, *S = g->src;
   qk_status_t st = QK_OK;
   m->has_marks = S->vmark || S->smark;
   m->vmark = qk__realloc(g->a, NULL, 0, (m->nv + 1) * sizeof *m->vmark);
-  size_t pcap = 16;
-  while (pcap < 2 * m->nv) pcap *= 2;
-  vpos_t pos = {qk__realloc(g->a, NULL, 0, pcap * sizeof *pos.key),
-                qk__realloc(g->a, NULL, 0, pcap * sizeof *pos.id), pcap - 1};
+  vpos_t pos = {vmap, newid};
   size_t cap = 0;
-  if (!m->vmark || !pos.key || !pos.id) {
+  if (!m->vmark) {
     st = QK_ERR_NOMEM;
     goto out;
   }
   memset(m->vmark, 0, (m->nv + 1) * sizeof *m->vmark);
-  memset(pos.id, 0xff, pcap * sizeof *pos.id);
-  int k = g->lat.f + 1;
-  double sc = qk__pow2(k);
-  for (size_t i = 0; i < m->nv; i++) {
-    int64_t X2 = (int64_t)qk__ldexp_by(m->xy[2 * i] - g->lat.x0, sc, k);
-    int64_t Y2 = (int64_t)qk__ldexp_by(m->xy[2 * i + 1] - g->lat.y0, sc, k);
-    pos_put(&pos, pos_key(X2, Y2), (uint32_t)i);
-  }
   /* Input vertices' own markers first: they win over their segments'. */
   for (size_t i = 0; S->vmark && i < P->nv; i++) {
     uint32_t id = find(&pos, pos_key(2 * (int64_t)P->vx[i], 2 * (int64_t)P->vy[i]));
@@ -116,8 +85,6 @@ qk_status_t qk__mesh_markers(qk__gen_t *g, qk_mesh_t *m) {
   }
 out:
   m->noseg_cap = cap;
-  qk__free(g->a, pos.key, pcap * sizeof *pos.key);
-  qk__free(g->a, pos.id, pcap * sizeof *pos.id);
   if (st) return qk__mesh_fail(g->err, st, 0, "out of memory");
   return QK_OK;
 }

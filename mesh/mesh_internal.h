@@ -135,10 +135,26 @@ typedef struct qk__hmap {
   size_t cap, n; /* cap is a power of two; key UINT64_MAX marks an empty slot */
 } qk__hmap_t;
 
+/* The slot of a key in a map of cap slots (a power of two). */
+static inline size_t qk__hmap_slot(uint64_t key, size_t cap) {
+  key ^= key >> 31;
+  key *= 0x9e3779b97f4a7c15ull;
+  key ^= key >> 29;
+  return (size_t)key & (cap - 1);
+}
+
+/* The value of a key, or UINT32_MAX when absent. */
+static inline uint32_t qk__hmap_find(const qk__hmap_t *h, uint64_t key) {
+  size_t mask = h->cap - 1, j = qk__hmap_slot(key, h->cap);
+  for (uint64_t k; (k = h->k[j]) != UINT64_MAX; j = (j + 1) & mask)
+    if (k == key) return h->v[j];
+  return UINT32_MAX;
+}
+
 /* Triangulation state. Coordinates are doubled input coordinates. */
 typedef struct qk__tri_state {
   const qk_allocator_t *a;
-  qk__hmap_t vmap;
+  qk__hmap_t vmap;  /* vertex id by doubled lattice position (x << 32 | y): every leaf corner */
   int64_t *vx, *vy; /* doubled coordinates */
   uint8_t *steiner;
   size_t nv, vcap, vycap, scap;
@@ -277,7 +293,10 @@ qk_status_t qk__mesh_precheck(const qk_poly_t *lat, const qk_poly_t *src,
                               const qk_mesh_options_t *opt, uint64_t book_U, qk_allocator_t *a,
                               qk_mesh_error_t *err);
 
-/* The output segments and vertex markers of a finished mesh (mesh/markers.c). */
-qk_status_t qk__mesh_markers(qk__gen_t *g, qk_mesh_t *m);
+/* The output segments and vertex markers of a finished mesh (mesh/markers.c): vmap is the
+ * triangulation's map of leaf corners, newid its vertices' ids in m (QK__MESH_UNSET for
+ * vertices not kept). */
+qk_status_t qk__mesh_markers(qk__gen_t *g, qk_mesh_t *m, const qk__hmap_t *vmap,
+                             const uint32_t *newid);
 
 #endif /* QUADKIT_MESH_INTERNAL_H */

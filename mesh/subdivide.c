@@ -110,7 +110,7 @@ static qk_status_t unit_leaf(qk__gen_t *g, uint32_t node, int64_t x0, int64_t y0
                          "too many segments meet the unit square at (%lld, %lld)", (long long)x0,
                          (long long)y0);
   void *rp = g->rec;
-  if (qk__grow(g->a, &rp, &g->rec_cap, g->nrec + 1, sizeof *g->rec))
+  if (g->nrec >= g->rec_cap && qk__grow(g->a, &rp, &g->rec_cap, g->nrec + 1, sizeof *g->rec))
     return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   g->rec = rp;
   qk__unit_rec_t *r = &g->rec[g->nrec++];
@@ -164,7 +164,8 @@ qk_status_t qk__mesh_subdivide(qk__gen_t *g, uint32_t node, int64_t x0, int64_t 
   for (unsigned q = 0; q < 4; q++) {
     int64_t cx = x0 + (qk__q_east(q) ? h : 0), cy = y0 + (qk__q_north(q) ? h : 0);
     void *ap = g->arena;
-    if (qk__grow(g->a, &ap, &g->arena_cap, g->arena_n + k, sizeof *g->arena))
+    if (g->arena_n + k > g->arena_cap &&
+        qk__grow(g->a, &ap, &g->arena_cap, g->arena_n + k, sizeof *g->arena))
       return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
     g->arena = ap;
     size_t base = g->arena_n, n = 0;

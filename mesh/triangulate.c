@@ -9,12 +9,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-static size_t hslot(uint64_t key, size_t cap) {
-  key ^= key >> 31;
-  key *= 0x9e3779b97f4a7c15ull;
-  key ^= key >> 29;
-  return (size_t)key & (cap - 1);
-}
+static size_t hslot(uint64_t key, size_t cap) { return qk__hmap_slot(key, cap); }
 
 static void hmap_free(const qk_allocator_t *a, qk__hmap_t *h) {
   qk__free(a, h->k, h->cap * sizeof *h->k);
@@ -38,15 +33,10 @@ static qk_status_t hmap_init(const qk_allocator_t *a, qk__hmap_t *h, size_t expe
 
 /* The value of key into *v: 1 when present, 0 when not. */
 static int hmap_get(const qk__hmap_t *h, uint64_t key, uint32_t *v) {
-  size_t j = hslot(key, h->cap);
-  while (h->k[j] != UINT64_MAX) {
-    if (h->k[j] == key) {
-      *v = h->v[j];
-      return 1;
-    }
-    j = (j + 1) & (h->cap - 1);
-  }
-  return 0;
+  uint32_t r = qk__hmap_find(h, key);
+  if (r == QK__MESH_UNSET) return 0;
+  *v = r;
+  return 1;
 }
 
 /* Find key; if absent insert it with value *v. Returns 1 when found (*v set), 0 when
@@ -520,8 +510,8 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
     if ((st = new_vertex(T, X + S / 2, Y + S / 2, 1, &ctr))) break;
     for (size_t i = 0; i < nr && !st; i++) st = add_tri(T, ring[i], ring[(i + 1) % nr], ctr, cell);
   }
-  /* The vertex map is no longer needed; give its memory back before labelling. */
-  hmap_free(T->a, &T->vmap);
+  /* The vertex map stays: the boundary markers find the vertices along the segments in
+   * it (every lattice point of a segment is a corner of a unit leaf). */
   leaf_map_t L = {{NULL, NULL, NULL, NULL}, corner, leaves, leaf_of, lside};
   for (int k = 0; k < 4 && !st; k++) {
     L.by[k] = qk__realloc(g->a, NULL, 0, (ncorner + 1) * sizeof *L.by[k]);
