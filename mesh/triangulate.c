@@ -219,13 +219,14 @@ typedef struct leaf_map {
  * (a == b); a double-size one leaves the other end without such a corner (it is the
  * middle of the large leaf's side).
  */
+static const unsigned char pk[4][4] = {/* p's corner index, kp, q's index, kq */
+                                       {0, 3, 1, 2},
+                                       {1, 0, 2, 3},
+                                       {3, 0, 2, 1},
+                                       {0, 1, 3, 2}};
+
 static size_t side_leaves(const qk_tree_t *t, const leaf_map_t *L, uint32_t li, int sd,
                           uint32_t *nb) {
-  static const unsigned char pk[4][4] = {/* p's corner index, kp, q's index, kq */
-                                         {0, 3, 1, 2},
-                                         {1, 0, 2, 3},
-                                         {3, 0, 2, 1},
-                                         {0, 1, 3, 2}};
   const uint32_t *c = &L->corner[4 * li];
   const unsigned char *e = pk[sd];
   uint32_t a = L->by[e[1]][c[e[0]]], b = L->by[e[3]][c[e[2]]];
@@ -470,6 +471,16 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
     if (st) break;
   }
   size_t ncorner = T->nv; /* the corner vertices are the first ids */
+  leaf_map_t L = {{NULL, NULL, NULL, NULL}, corner, leaves, leaf_of, lside};
+  for (int k = 0; k < 4 && !st; k++) {
+    L.by[k] = qk__realloc(g->a, NULL, 0, (ncorner + 1) * sizeof *L.by[k]);
+    if (!L.by[k])
+      st = QK_ERR_NOMEM;
+    else
+      memset(L.by[k], 0xff, (ncorner + 1) * sizeof *L.by[k]);
+  }
+  for (size_t li = 0; li < nleaves && !st; li++)
+    for (int k = 0; k < 4; k++) L.by[k][corner[4 * li + k]] = (uint32_t)li;
   for (size_t li = 0; li < nleaves && !st; li++) {
     uint32_t v = leaves[li], cell = (uint32_t)(2 * li);
     qk_square_t sq = lsq[li];
@@ -486,16 +497,24 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
      * this depth) is internal: then, the tree being balanced, two leaves of half the size
      * meet this side, and share a corner at its midpoint. Otherwise no leaf has a corner
      * there (a leaf across the side is as large as this one or larger, with corners on a
-     * coarser grid), so the vertex map, holding every leaf corner, answers without
-     * neighbour finding. Unit leaves have no smaller neighbours. Sides in CCW order:
-     * south, east, north, west. */
-    int64_t mx[4] = {X + S / 2, X + S, X + S / 2, X}, my[4] = {Y, Y + S / 2, Y + S, Y + S / 2};
+     * coarser grid). The leaf across the side with its corner kp at the side's start p
+     * (side_leaves) is then of half the size, and the midpoint is its corner kq. Unit
+     * leaves have no smaller neighbours. Sides in CCW order: south, east, north, west. */
     uint32_t ring[8];
     size_t nr = 0;
     unsigned mids = 0;
     for (int s = 0; s < 4; s++) {
       ring[nr++] = c[s];
-      if (S > 2 && hmap_get(&T->vmap, ((uint64_t)mx[s] << 32) | (uint64_t)my[s], &ring[nr]))
+      if (S <= 2) continue;
+      uint32_t a = L.by[pk[s][1]][c[pk[s][0]]];
+      if (a == QK__MESH_UNSET || 4 * (int64_t)lside[a] > S) continue;
+      if (4 * (int64_t)lside[a] == S) {
+        ring[nr++] = corner[4 * a + pk[s][3]], mids |= 1u << s;
+        continue;
+      }
+      /* A smaller neighbour: never in a balanced tree; the vertex map answers. */
+      int64_t mx[4] = {X + S / 2, X + S, X + S / 2, X}, my[4] = {Y, Y + S / 2, Y + S, Y + S / 2};
+      if (hmap_get(&T->vmap, ((uint64_t)mx[s] << 32) | (uint64_t)my[s], &ring[nr]))
         nr++, mids |= 1u << s;
     }
     T->shapes[__builtin_ctzll((uint64_t)S)] |= fan_shapes[mids];
@@ -512,16 +531,6 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
   }
   /* The vertex map stays: the boundary markers find the vertices along the segments in
    * it (every lattice point of a segment is a corner of a unit leaf). */
-  leaf_map_t L = {{NULL, NULL, NULL, NULL}, corner, leaves, leaf_of, lside};
-  for (int k = 0; k < 4 && !st; k++) {
-    L.by[k] = qk__realloc(g->a, NULL, 0, (ncorner + 1) * sizeof *L.by[k]);
-    if (!L.by[k])
-      st = QK_ERR_NOMEM;
-    else
-      memset(L.by[k], 0xff, (ncorner + 1) * sizeof *L.by[k]);
-  }
-  for (size_t li = 0; li < nleaves && !st; li++)
-    for (int k = 0; k < 4; k++) L.by[k][corner[4 * li + k]] = (uint32_t)li;
   if (!st) st = label_cells(g, T, leaves, lsq, nleaves, rec_of, cell_label, &L);
   for (int k = 0; k < 4; k++) qk__free(g->a, L.by[k], (ncorner + 1) * sizeof *L.by[k]);
   qk__free(g->a, corner, (4 * nleaves + 4) * sizeof *corner);
