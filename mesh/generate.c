@@ -317,15 +317,15 @@ static qk_status_t compact(qk__gen_t *g, const qk__tri_state_t *T, const uint8_t
     }
     qk__free(g->a, sm, sizeof *sm);
   } else {
-    for (size_t t = 0; t < T->nt; t++) {
-      const uint32_t *tr = &T->tri[3 * t];
-      for (int i = 0; i < 3; i++) {
-        uint32_t *id = &newid[tr[i]];
-        if (*id == QK__MESH_UNSET) *id = (uint32_t)kv++;
-        m->tri[3 * j + i] = *id;
-      }
-      m->comp[j++] = T->label[t];
+    /* One pass over the corners of all triangles, then the labels in one copy. */
+    const uint32_t *in = T->tri;
+    uint32_t *to = m->tri;
+    for (size_t i = 0; i < 3 * T->nt; i++) {
+      uint32_t *id = &newid[in[i]];
+      if (*id == QK__MESH_UNSET) *id = (uint32_t)kv++;
+      to[i] = *id;
     }
+    if (T->nt) memcpy(m->comp, T->label, T->nt * sizeof *m->comp);
     /* Every triangle is kept: the extremes over the shapes the triangulation made, each
      * measured once on its own copy at the origin (angle_deg sees the same coordinate
      * differences, so the same numbers as on every triangle of that shape). */
