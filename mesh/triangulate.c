@@ -345,30 +345,29 @@ out:
   return st;
 }
 
-/* The square of every node reachable from the root, by node id, computed top-down in one
- * pass (qk__node_square recomputes a node's whole path at each call); `sq` has room for
- * the tree's node bound. Squares are dyadic and halving is exact, so these are the
- * tree's own squares. The same pass lists the leaves into `leaves` (room for the node
- * bound) in qk_tree_leaves' order, pre-order with the children first to last, with their
- * squares by leaf index into `leaf_sq` (same room), and returns their number: one walk
- * instead of a count, a list and the squares. */
-static size_t node_squares(const qk_tree_t *t, qk_square_t *sq, qk_node_t *leaves,
-                           qk_square_t *leaf_sq) {
-  qk_node_t stack[3 * (QK_MAX_DEPTH_LIMIT + 2) + 4]; /* 3 siblings a level wait */
+/* The leaves into `leaves` (room for the tree's node bound) in qk_tree_leaves' order,
+ * pre-order with the children first to last, with their squares by leaf index into
+ * `leaf_sq` (same room); returns their number. The squares are computed top-down, each
+ * node's from its parent's as the walk goes (qk__node_square recomputes a node's whole
+ * path at each call); squares are dyadic and halving is exact, so these are the tree's
+ * own squares. One walk instead of a count, a list and the squares. */
+static size_t node_squares(const qk_tree_t *t, qk_node_t *leaves, qk_square_t *leaf_sq) {
+  struct {
+    qk_node_t v;
+    qk_square_t sq;
+  } stack[3 * (QK_MAX_DEPTH_LIMIT + 2) + 4]; /* 3 siblings a level wait */
   size_t n = 0, nl = 0;
-  qk_node_t root = qk_tree_root(t);
-  sq[root] = qk__tree_root_square(t);
-  stack[n++] = root;
+  stack[n].v = qk_tree_root(t), stack[n++].sq = qk__tree_root_square(t);
   while (n) {
-    qk_node_t v = stack[--n];
+    qk_node_t v = stack[--n].v;
+    qk_square_t sq = stack[n].sq;
     uint32_t c = qk__node_child(t, v);
     if (c == QK_NONE) {
-      leaf_sq[nl] = sq[v];
+      leaf_sq[nl] = sq;
       leaves[nl++] = v;
       continue;
     }
-    for (unsigned q = 0; q < 4; q++) sq[c + q] = qk__child_square(sq[v], q);
-    for (unsigned q = 4; q-- > 0;) stack[n++] = c + q;
+    for (unsigned q = 4; q-- > 0;) stack[n].v = c + q, stack[n++].sq = qk__child_square(sq, q);
   }
   return nl;
 }
@@ -411,16 +410,13 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
   uint32_t *leaf_of = qk__realloc(g->a, NULL, 0, nn * sizeof *leaf_of);
   lt->cap = nn;
   lt->first = qk__realloc(g->a, NULL, 0, lt->cap * sizeof *lt->first);
-  /* The leaves and every node's square in one walk; a tree has fewer leaves than nodes. */
+  /* The leaves and their squares in one walk; a tree has fewer leaves than nodes. */
   size_t nleaves = 0;
   qk_node_t *leaves = qk__realloc(g->a, NULL, 0, (nn + 1) * sizeof *leaves);
-  qk_square_t *nsq = qk__realloc(g->a, NULL, 0, (nn + 1) * sizeof *nsq);
   qk_square_t *lsq = qk__realloc(g->a, NULL, 0, (nn + 1) * sizeof *lsq);
   uint32_t *cell_label = NULL;
-  if (leaves && nsq && lsq) {
-    nleaves = node_squares(t, nsq, leaves, lsq);
-    qk__free(g->a, nsq, (nn + 1) * sizeof *nsq); /* the leaves' squares are all we need */
-    nsq = NULL;
+  if (leaves && lsq) {
+    nleaves = node_squares(t, leaves, lsq);
     cell_label = qk__realloc(g->a, NULL, 0, (2 * nleaves + 1) * sizeof *cell_label);
   }
   lt->nleaves = nleaves;
@@ -500,7 +496,7 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
      * coarser grid). The leaf across the side with its corner kp at the side's start p
      * (side_leaves) is then of half the size, and the midpoint is its corner kq. Unit
      * leaves have no smaller neighbours. Sides in CCW order: south, east, north, west. */
-    uint32_t ring[8];
+    uint32_t ring[9];
     size_t nr = 0;
     unsigned mids = 0;
     for (int s = 0; s < 4; s++) {
@@ -527,7 +523,16 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
      * a right angle at the centre (corner-corner) or at the midpoint (corner-midpoint). */
     uint32_t ctr;
     if ((st = new_vertex(T, X + S / 2, Y + S / 2, 1, &ctr))) break;
-    for (size_t i = 0; i < nr && !st; i++) st = add_tri(T, ring[i], ring[(i + 1) % nr], ctr, cell);
+    ring[nr] = ring[0];
+    if (T->nt + nr > T->tcap || T->nt + nr > T->lcap) {
+      for (size_t i = 0; i < nr && !st; i++) st = add_tri(T, ring[i], ring[i + 1], ctr, cell);
+      continue;
+    }
+    /* The usual case: room for the whole fan, written without a check a triangle. */
+    uint32_t *tt = &T->tri[3 * T->nt], *tl = &T->label[T->nt];
+    for (size_t i = 0; i < nr; i++)
+      tt[3 * i] = ring[i], tt[3 * i + 1] = ring[i + 1], tt[3 * i + 2] = ctr, tl[i] = cell;
+    T->nt += nr;
   }
   /* The vertex map stays: the boundary markers find the vertices along the segments in
    * it (every lattice point of a segment is a corner of a unit leaf). */
@@ -536,7 +541,6 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
   qk__free(g->a, corner, (4 * nleaves + 4) * sizeof *corner);
   qk__free(g->a, lside, (nleaves + 1) * sizeof *lside);
 out:
-  qk__free(g->a, nsq, (nn + 1) * sizeof *nsq);
   qk__free(g->a, lsq, (nn + 1) * sizeof *lsq);
   qk__free(g->a, rec_of, nn * sizeof *rec_of);
   qk__free(g->a, leaf_of, nn * sizeof *leaf_of);
