@@ -34,6 +34,7 @@ void qk_mesh_options_init(qk_mesh_options_t *o) {
 static void gen_free(qk__gen_t *g) {
   qk__free(g->a, g->e, (g->poly->ns ? g->poly->ns : 1) * sizeof *g->e);
   qk__free(g->a, g->arena, g->arena_cap * sizeof *g->arena);
+  qk__free(g->a, g->box, (g->ne ? g->ne : 1) * sizeof *g->box);
   qk__free(g->a, g->rec, g->rec_cap * sizeof *g->rec);
 }
 
@@ -212,6 +213,13 @@ static qk_status_t subdivide(qk__gen_t *g, qk_mesh_t *m) {
     return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   g->arena = ap;
   for (size_t i = 0; i < g->ne; i++) g->arena[i] = (uint32_t)i;
+  g->box = qk__realloc(g->a, NULL, 0, (g->ne ? g->ne : 1) * sizeof *g->box);
+  if (!g->box) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  for (size_t i = 0; i < g->ne; i++) {
+    const qk__edge_t *e = &g->e[i];
+    g->box[i] = (qk__ebox_t){e->ax < e->bx ? e->ax : e->bx, e->ax < e->bx ? e->bx : e->ax,
+                             e->ay < e->by ? e->ay : e->by, e->ay < e->by ? e->by : e->ay};
+  }
   g->arena_n = g->ne;
   if ((st = qk__mesh_subdivide(g, qk_tree_root(g->tree), 0, 0, (int64_t)g->U, 0, g->ne))) return st;
   /* The tree starts as one leaf and every split turns a leaf into four. */

@@ -107,6 +107,11 @@ typedef struct qk__unit_rec {
   uint32_t nedge;
 } qk__unit_rec_t;
 
+/* An edge's bounding box, for the subdivision's tests. */
+typedef struct qk__ebox {
+  int64_t minx, maxx, miny, maxy;
+} qk__ebox_t;
+
 /* Generation state; freed in one place. */
 typedef struct qk__gen {
   const qk_allocator_t *a;
@@ -117,6 +122,7 @@ typedef struct qk__gen {
   qk_mesh_error_t *err;
   uint64_t U;
   qk__edge_t *e;
+  qk__ebox_t *box; /* per edge, made by the subdivision */
   size_t ne;
   uint32_t ncomp;
   /* The edge-list arena of the subdivision: lists of edge indices, a stack of them. */
