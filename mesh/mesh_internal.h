@@ -141,12 +141,11 @@ typedef struct qk__hmap {
   size_t cap, n; /* cap is a power of two; key UINT64_MAX marks an empty slot */
 } qk__hmap_t;
 
-/* The slot of a key in a map of cap slots (a power of two). */
+/* The slot of a key in a map of cap slots (a power of two, at least 2): the top bits of
+ * the key times 2^64 / phi (Fibonacci hashing), which spreads the lattice positions'
+ * regular keys (x << 32 | y) well. */
 static inline size_t qk__hmap_slot(uint64_t key, size_t cap) {
-  key ^= key >> 31;
-  key *= 0x9e3779b97f4a7c15ull;
-  key ^= key >> 29;
-  return (size_t)key & (cap - 1);
+  return (size_t)((key * 0x9e3779b97f4a7c15ull) >> (64 - __builtin_ctzll((uint64_t)cap)));
 }
 
 /* The value of a key, or UINT32_MAX when absent. */
