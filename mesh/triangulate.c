@@ -325,7 +325,8 @@ static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, const qk_node_t
         unsigned opp = (unsigned)(sd + 2) & 3;
         for (size_t i = 0; i < n; i++) {
           uint32_t lw = nb[i];
-          uint32_t cw = 2 * lw + ((other[kind[lw] & 3] >> opp) & 1);
+          uint32_t cw = 2 * lw, d = kind[lw] & 3u;
+          if (d) cw += (other[d] >> opp) & 1; /* a diagonal: which half faces this side */
           if (region[cw] == QK__MESH_UNSET) region[cw] = rid, queue[qt++] = cw;
         }
       }
