@@ -422,7 +422,7 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
   }
   lt->nleaves = nleaves;
   if (!rec_of || !leaf_of || !lt->first || !leaves || !lsq || !cell_label ||
-      hmap_init(g->a, &T->vmap, 2 * nleaves + 16) != QK_OK) {
+      hmap_init(g->a, &T->vmap, nleaves + nleaves / 4 + 16) != QK_OK) {
     st = QK_ERR_NOMEM;
     goto out;
   }
