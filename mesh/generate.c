@@ -420,7 +420,7 @@ static qk_status_t triangulate(qk__gen_t *g, qk_mesh_t *m) {
   if ((st = qk__mesh_find_holes(g, &T, &lt, drop))) goto out;
   if ((st = compact(g, &T, drop, newid, m))) goto out;
   if ((st = region_attributes(g, &T, &lt, drop, m))) goto out;
-  st = qk__mesh_markers(g, m, &T.vmap, newid);
+  st = qk__mesh_markers(g, m, T.segv, newid);
 out:
   qk__free(g->a, drop, (size_t)T.nregion + 1);
   qk__free(g->a, newid, (T.nv ? T.nv : 1) * sizeof *newid);

@@ -168,6 +168,11 @@ typedef struct qk__tri_state {
   uint32_t *region; /* per triangle: its region (connected part between boundaries) */
   size_t nt, tcap, lcap, rcap;
   uint32_t nregion;
+  /* Per input segment in order, its lattice points from its first endpoint to its last
+   * (n + 1 for n lattice steps): the vertex there, from the vertex map before it is freed
+   * (every lattice point of a segment is a corner of its unit leaves). */
+  uint32_t *segv;
+  size_t nsegv;
   /* The triangle shapes made, by log2 of the doubled leaf side: bit 3s (s a side, south,
    * east, north, west) the centre fan's triangle (corner s, corner s+1, centre), bits
    * 3s+1 and 3s+2 (corner s, midpoint s, centre) and (midpoint s, corner s+1, centre),
@@ -298,10 +303,10 @@ qk_status_t qk__mesh_precheck(const qk_poly_t *lat, const qk_poly_t *src,
                               const qk_mesh_options_t *opt, uint64_t book_U, qk_allocator_t *a,
                               qk_mesh_error_t *err);
 
-/* The output segments and vertex markers of a finished mesh (mesh/markers.c): vmap is the
- * triangulation's map of leaf corners, newid its vertices' ids in m (QK__MESH_UNSET for
- * vertices not kept). */
-qk_status_t qk__mesh_markers(qk__gen_t *g, qk_mesh_t *m, const qk__hmap_t *vmap,
+/* The output segments and vertex markers of a finished mesh (mesh/markers.c): segv is the
+ * triangulation's vertices along the segments (qk__tri_state_t.segv), newid their ids in m
+ * (QK__MESH_UNSET for vertices not kept). */
+qk_status_t qk__mesh_markers(qk__gen_t *g, qk_mesh_t *m, const uint32_t *segv,
                              const uint32_t *newid);
 
 #endif /* QUADKIT_MESH_INTERNAL_H */

@@ -373,6 +373,33 @@ static size_t node_squares(const qk_tree_t *t, qk_node_t *leaves, qk_square_t *l
   return nl;
 }
 
+/* T->segv: the vertex at every lattice point of every segment, in order. */
+static qk_status_t segment_vertices(const qk__gen_t *g, qk__tri_state_t *T) {
+  const qk_poly_t *P = g->poly;
+  size_t total = 0;
+  for (size_t s = 0; s < P->ns; s++) {
+    uint32_t u = P->seg[2 * s], w = P->seg[2 * s + 1];
+    int64_t dx = llabs((int64_t)P->vx[w] - (int64_t)P->vx[u]);
+    int64_t dy = llabs((int64_t)P->vy[w] - (int64_t)P->vy[u]);
+    total += (size_t)(dx > dy ? dx : dy) + 1;
+  }
+  T->segv = qk__realloc(T->a, NULL, 0, (total + 1) * sizeof *T->segv);
+  if (!T->segv) return QK_ERR_NOMEM;
+  T->nsegv = total;
+  size_t j = 0;
+  for (size_t s = 0; s < P->ns; s++) {
+    uint32_t u = P->seg[2 * s], w = P->seg[2 * s + 1];
+    int64_t ax = (int64_t)P->vx[u], ay = (int64_t)P->vy[u];
+    int64_t dx = (int64_t)P->vx[w] - ax, dy = (int64_t)P->vy[w] - ay;
+    int64_t n = llabs(dx) > llabs(dy) ? llabs(dx) : llabs(dy);
+    int64_t sx = n ? dx / n : 0, sy = n ? dy / n : 0;
+    for (int64_t k = 0; k <= n; k++)
+      T->segv[j++] = qk__hmap_find(&T->vmap, (uint64_t)(2 * (ax + k * sx)) << 32 |
+                                                 (uint64_t)(2 * (ay + k * sy)));
+  }
+  return QK_OK;
+}
+
 /* The shapes (qk__tri_state_t.shapes) of a leaf that is not a unit record, by which
  * sides hold a midpoint: none, the SW-NE split; else per side two fan triangles with a
  * midpoint, one without. */
@@ -535,8 +562,11 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
       tt[3 * i] = ring[i], tt[3 * i + 1] = ring[i + 1], tt[3 * i + 2] = ctr, tl[i] = cell;
     T->nt += nr;
   }
-  /* The vertex map stays: the boundary markers find the vertices along the segments in
-   * it (every lattice point of a segment is a corner of a unit leaf). */
+  /* The boundary markers' vertices: every lattice point of a segment is a corner of its
+   * unit leaves, so the vertex map holds it; then the map's memory goes back before
+   * labelling. */
+  if (!st) st = segment_vertices(g, T);
+  hmap_free(T->a, &T->vmap);
   if (!st) st = label_cells(g, T, leaves, lsq, nleaves, rec_of, cell_label, &L);
   for (int k = 0; k < 4; k++) qk__free(g->a, L.by[k], (ncorner + 1) * sizeof *L.by[k]);
   qk__free(g->a, corner, (4 * nleaves + 4) * sizeof *corner);
@@ -553,6 +583,7 @@ out:
 
 void qk__mesh_tri_free(qk__tri_state_t *T) {
   hmap_free(T->a, &T->vmap);
+  qk__free(T->a, T->segv, (T->nsegv + 1) * sizeof *T->segv);
   qk__free(T->a, T->vx, T->vcap * sizeof *T->vx);
   qk__free(T->a, T->vy, T->vycap * sizeof *T->vy);
   qk__free(T->a, T->steiner, T->scap);
