@@ -34,6 +34,7 @@ void qk_mesh_options_init(qk_mesh_options_t *o) {
 static void gen_free(qk__gen_t *g) {
   qk__free(g->a, g->e, (g->poly->ns ? g->poly->ns : 1) * sizeof *g->e);
   qk__free(g->a, g->arena, g->arena_cap * sizeof *g->arena);
+  qk__free(g->a, g->box, (g->ne ? g->ne : 1) * sizeof *g->box);
   qk__free(g->a, g->rec, g->rec_cap * sizeof *g->rec);
 }
 
@@ -212,6 +213,13 @@ static qk_status_t subdivide(qk__gen_t *g, qk_mesh_t *m) {
     return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   g->arena = ap;
   for (size_t i = 0; i < g->ne; i++) g->arena[i] = (uint32_t)i;
+  g->box = qk__realloc(g->a, NULL, 0, (g->ne ? g->ne : 1) * sizeof *g->box);
+  if (!g->box) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  for (size_t i = 0; i < g->ne; i++) {
+    const qk__edge_t *e = &g->e[i];
+    g->box[i] = (qk__ebox_t){e->ax < e->bx ? e->ax : e->bx, e->ax < e->bx ? e->bx : e->ax,
+                             e->ay < e->by ? e->ay : e->by, e->ay < e->by ? e->by : e->ay};
+  }
   g->arena_n = g->ne;
   if ((st = qk__mesh_subdivide(g, qk_tree_root(g->tree), 0, 0, (int64_t)g->U, 0, g->ne))) return st;
   /* The tree starts as one leaf and every split turns a leaf into four. */
@@ -299,24 +307,47 @@ static qk_status_t compact(qk__gen_t *g, const qk__tri_state_t *T, const uint8_t
     return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   double amin = 180, amax = 0;
   size_t j = 0;
-  shape_memo_t *sm = qk__realloc(g->a, NULL, 0, sizeof *sm);
-  if (!sm) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
-  shape_memo_init(sm);
-  for (size_t t = 0; t < T->nt; t++) {
-    if (dropped && drop[T->region[t]]) continue;
-    const uint32_t *tr = &T->tri[3 * t];
-    for (int i = 0; i < 3; i++) {
-      uint32_t *id = &newid[tr[i]];
-      if (*id == QK__MESH_UNSET) *id = (uint32_t)kv++;
-      m->tri[3 * j + i] = *id;
+  if (dropped) {
+    /* The angle extremes of the kept triangles: the shapes the triangulation made need
+     * not all be kept. */
+    shape_memo_t *sm = qk__realloc(g->a, NULL, 0, sizeof *sm);
+    if (!sm) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+    shape_memo_init(sm);
+    for (size_t t = 0; t < T->nt; t++) {
+      if (drop[T->region[t]]) continue;
+      const uint32_t *tr = &T->tri[3 * t];
+      for (int i = 0; i < 3; i++) m->tri[3 * j + i] = newid[tr[i]];
+      double lo, hi;
+      shape_angles(sm, T->vx, T->vy, tr, &lo, &hi);
+      if (lo < amin) amin = lo;
+      if (hi > amax) amax = hi;
+      m->comp[j++] = T->label[t];
     }
-    double lo, hi;
-    shape_angles(sm, T->vx, T->vy, tr, &lo, &hi);
-    if (lo < amin) amin = lo;
-    if (hi > amax) amax = hi;
-    m->comp[j++] = T->label[t];
+    qk__free(g->a, sm, sizeof *sm);
+  } else {
+    /* One pass over the corners of all triangles, then the labels in one copy. */
+    const uint32_t *in = T->tri;
+    uint32_t *to = m->tri;
+    for (size_t i = 0; i < 3 * T->nt; i++) {
+      uint32_t *id = &newid[in[i]];
+      if (*id == QK__MESH_UNSET) *id = (uint32_t)kv++;
+      to[i] = *id;
+    }
+    if (T->nt) memcpy(m->comp, T->label, T->nt * sizeof *m->comp);
+    /* Every triangle is kept: the extremes over the shapes the triangulation made, each
+     * measured once on its own copy at the origin (angle_deg sees the same coordinate
+     * differences, so the same numbers as on every triangle of that shape). */
+    for (int l = 0; l < 64; l++)
+      for (unsigned bits = T->shapes[l]; bits; bits &= bits - 1) {
+        int64_t x[3], y[3];
+        qk__mesh_shape(__builtin_ctz(bits), (int64_t)1 << l, x, y);
+        for (int i = 0; i < 3; i++) {
+          double ang = angle_deg(x, y, (uint32_t)(i + 2) % 3, (uint32_t)i, (uint32_t)(i + 1) % 3);
+          if (ang < amin) amin = ang;
+          if (ang > amax) amax = ang;
+        }
+      }
   }
-  qk__free(g->a, sm, sizeof *sm);
   m->nv = kv;
   m->xy = qk__realloc(g->a, NULL, 0, (2 * kv + 2) * sizeof *m->xy);
   if (!m->xy) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
@@ -368,7 +399,7 @@ static qk_status_t region_attributes(qk__gen_t *g, qk__tri_state_t *T, const qk_
   return st;
 }
 
-/* Step 3: triangulate, label, drop holes, compact. */
+/* Step 3: triangulate, label, drop holes, compact; the boundary markers. */
 static qk_status_t triangulate(qk__gen_t *g, qk_mesh_t *m) {
   qk__tri_state_t T;
   memset(&T, 0, sizeof T);
@@ -388,7 +419,8 @@ static qk_status_t triangulate(qk__gen_t *g, qk_mesh_t *m) {
   memset(drop, 0, (size_t)T.nregion + 1);
   if ((st = qk__mesh_find_holes(g, &T, &lt, drop))) goto out;
   if ((st = compact(g, &T, drop, newid, m))) goto out;
-  st = region_attributes(g, &T, &lt, drop, m);
+  if ((st = region_attributes(g, &T, &lt, drop, m))) goto out;
+  st = qk__mesh_markers(g, m, T.segv, newid);
 out:
   qk__free(g->a, drop, (size_t)T.nregion + 1);
   qk__free(g->a, newid, (T.nv ? T.nv : 1) * sizeof *newid);
@@ -452,7 +484,7 @@ qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *opt
       t2 = now();
       if (!(st = balance(&g))) {
         t3 = now();
-        if (!(st = triangulate(&g, m))) st = qk__mesh_markers(&g, m);
+        st = triangulate(&g, m);
       }
     }
   }

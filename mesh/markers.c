@@ -10,44 +10,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-/*
- * Vertex ids by doubled lattice position: an open-addressing table of at least twice the
- * vertices (a power of two), id QK__MESH_UNSET marking an empty slot. Positions are
- * distinct; were one repeated, the lowest id keeps it, as a stable sort would.
- */
-typedef struct vpos {
-  uint64_t *key;
-  uint32_t *id;
-  size_t mask;
-} vpos_t;
-
-static uint64_t pos_key(int64_t X2, int64_t Y2) { return (uint64_t)X2 << 32 | (uint64_t)Y2; }
-
-static size_t pos_slot(uint64_t key, size_t mask) {
-  key ^= key >> 31;
-  key *= 0x9e3779b97f4a7c15ull;
-  key ^= key >> 29;
-  return (size_t)key & mask;
-}
-
-static void pos_put(vpos_t *v, uint64_t key, uint32_t id) {
-  size_t j = pos_slot(key, v->mask);
-  while (v->id[j] != QK__MESH_UNSET) {
-    if (v->key[j] == key) return;
-    j = (j + 1) & v->mask;
-  }
-  v->key[j] = key, v->id[j] = id;
-}
-
-static uint32_t find(const vpos_t *v, uint64_t key) {
-  size_t j = pos_slot(key, v->mask);
-  while (v->id[j] != QK__MESH_UNSET) {
-    if (v->key[j] == key) return v->id[j];
-    j = (j + 1) & v->mask;
-  }
-  return QK__MESH_UNSET;
-}
-
 static qk_status_t add_oseg(const qk_allocator_t *a, qk_mesh_t *m, size_t *cap, qk__oseg_t e) {
   void *p = m->oseg;
   if (qk__grow(a, &p, cap, m->noseg + 2, sizeof *m->oseg)) return QK_ERR_NOMEM;
@@ -56,20 +18,29 @@ static qk_status_t add_oseg(const qk_allocator_t *a, qk_mesh_t *m, size_t *cap, 
   return QK_OK;
 }
 
-/* The output segments of input segment s, and the markers of their vertices. */
-static qk_status_t walk_segment(qk__gen_t *g, qk_mesh_t *m, const vpos_t *pos, size_t *cap,
-                                size_t s) {
-  const qk_poly_t *P = g->poly;
+/* The lattice steps of input segment s. */
+static int64_t seg_steps(const qk_poly_t *P, size_t s) {
   uint32_t u = P->seg[2 * s], w = P->seg[2 * s + 1];
-  int64_t ax = (int64_t)P->vx[u], ay = (int64_t)P->vy[u];
-  int64_t dx = (int64_t)P->vx[w] - ax, dy = (int64_t)P->vy[w] - ay;
-  int64_t n = llabs(dx) > llabs(dy) ? llabs(dx) : llabs(dy);
+  int64_t dx = llabs((int64_t)P->vx[w] - (int64_t)P->vx[u]);
+  int64_t dy = llabs((int64_t)P->vy[w] - (int64_t)P->vy[u]);
+  return dx > dy ? dx : dy;
+}
+
+/* The mesh vertex of a triangulation vertex (QK__MESH_UNSET: none, or not kept). */
+static uint32_t mesh_id(const uint32_t *newid, uint32_t t) {
+  return t == QK__MESH_UNSET ? t : newid[t];
+}
+
+/* The output segments of input segment s, whose lattice points' triangulation vertices
+ * are v[0..n], and the markers of their vertices. */
+static qk_status_t walk_segment(qk__gen_t *g, qk_mesh_t *m, const uint32_t *v,
+                                const uint32_t *newid, size_t *cap, size_t s) {
+  int64_t n = seg_steps(g->poly, s);
   int32_t mark = g->src->smark ? g->src->smark[s] : 0;
   if (n == 0) return QK_OK;
-  int64_t sx = dx / n, sy = dy / n;
   uint32_t prev = QK__MESH_UNSET;
   for (int64_t k = 0; k <= n; k++) {
-    uint32_t id = find(pos, pos_key(2 * (ax + k * sx), 2 * (ay + k * sy)));
+    uint32_t id = mesh_id(newid, v[k]);
     /* A vertex is missing only where holes dropped both sides of the segment. */
     if (id != QK__MESH_UNSET && mark && !m->vmark[id]) m->vmark[id] = mark;
     if (id != QK__MESH_UNSET && prev != QK__MESH_UNSET &&
@@ -80,35 +51,32 @@ static qk_status_t walk_segment(qk__gen_t *g, qk_mesh_t *m, const vpos_t *pos, s
   return QK_OK;
 }
 
-qk_status_t qk__mesh_markers(qk__gen_t *g, qk_mesh_t *m) {
+qk_status_t qk__mesh_markers(qk__gen_t *g, qk_mesh_t *m, const uint32_t *segv,
+                             const uint32_t *newid) {
   const qk_poly_t *P = g->poly, *S = g->src;
   qk_status_t st = QK_OK;
   m->has_marks = S->vmark || S->smark;
   m->vmark = qk__realloc(g->a, NULL, 0, (m->nv + 1) * sizeof *m->vmark);
-  size_t pcap = 16;
-  while (pcap < 2 * m->nv) pcap *= 2;
-  vpos_t pos = {qk__realloc(g->a, NULL, 0, pcap * sizeof *pos.key),
-                qk__realloc(g->a, NULL, 0, pcap * sizeof *pos.id), pcap - 1};
   size_t cap = 0;
-  if (!m->vmark || !pos.key || !pos.id) {
+  if (!m->vmark) {
     st = QK_ERR_NOMEM;
     goto out;
   }
   memset(m->vmark, 0, (m->nv + 1) * sizeof *m->vmark);
-  memset(pos.id, 0xff, pcap * sizeof *pos.id);
-  int k = g->lat.f + 1;
-  double sc = qk__pow2(k);
-  for (size_t i = 0; i < m->nv; i++) {
-    int64_t X2 = (int64_t)qk__ldexp_by(m->xy[2 * i] - g->lat.x0, sc, k);
-    int64_t Y2 = (int64_t)qk__ldexp_by(m->xy[2 * i + 1] - g->lat.y0, sc, k);
-    pos_put(&pos, pos_key(X2, Y2), (uint32_t)i);
+  /* Input vertices' own markers first: they win over their segments'. Every input vertex
+   * ends a segment (its degree is two), at lattice point 0 or n of it. */
+  for (size_t s = 0, j = 0; S->vmark && s < P->ns; s++) {
+    int64_t n = seg_steps(P, s);
+    for (int e = 0; e < 2; e++) {
+      uint32_t id = mesh_id(newid, segv[j + (e ? (size_t)n : 0)]);
+      if (id != QK__MESH_UNSET) m->vmark[id] = S->vmark[P->seg[2 * s + (size_t)e]];
+    }
+    j += (size_t)n + 1;
   }
-  /* Input vertices' own markers first: they win over their segments'. */
-  for (size_t i = 0; S->vmark && i < P->nv; i++) {
-    uint32_t id = find(&pos, pos_key(2 * (int64_t)P->vx[i], 2 * (int64_t)P->vy[i]));
-    if (id != QK__MESH_UNSET) m->vmark[id] = S->vmark[i];
+  for (size_t s = 0, j = 0; s < P->ns && !st; s++) {
+    st = walk_segment(g, m, &segv[j], newid, &cap, s);
+    j += (size_t)seg_steps(P, s) + 1;
   }
-  for (size_t s = 0; s < P->ns && !st; s++) st = walk_segment(g, m, &pos, &cap, s);
   if (!st && !m->oseg) {
     void *p = NULL;
     if (qk__grow(g->a, &p, &cap, 1, sizeof *m->oseg)) st = QK_ERR_NOMEM;
@@ -116,8 +84,6 @@ qk_status_t qk__mesh_markers(qk__gen_t *g, qk_mesh_t *m) {
   }
 out:
   m->noseg_cap = cap;
-  qk__free(g->a, pos.key, pcap * sizeof *pos.key);
-  qk__free(g->a, pos.id, pcap * sizeof *pos.id);
   if (st) return qk__mesh_fail(g->err, st, 0, "out of memory");
   return QK_OK;
 }

@@ -107,6 +107,11 @@ typedef struct qk__unit_rec {
   uint32_t nedge;
 } qk__unit_rec_t;
 
+/* An edge's bounding box, for the subdivision's tests. */
+typedef struct qk__ebox {
+  int64_t minx, maxx, miny, maxy;
+} qk__ebox_t;
+
 /* Generation state; freed in one place. */
 typedef struct qk__gen {
   const qk_allocator_t *a;
@@ -117,6 +122,7 @@ typedef struct qk__gen {
   qk_mesh_error_t *err;
   uint64_t U;
   qk__edge_t *e;
+  qk__ebox_t *box; /* per edge, made by the subdivision */
   size_t ne;
   uint32_t ncomp;
   /* The edge-list arena of the subdivision: lists of edge indices, a stack of them. */
@@ -135,10 +141,25 @@ typedef struct qk__hmap {
   size_t cap, n; /* cap is a power of two; key UINT64_MAX marks an empty slot */
 } qk__hmap_t;
 
+/* The slot of a key in a map of cap slots (a power of two, at least 2): the top bits of
+ * the key times 2^64 / phi (Fibonacci hashing), which spreads the lattice positions'
+ * regular keys (x << 32 | y) well. */
+static inline size_t qk__hmap_slot(uint64_t key, size_t cap) {
+  return (size_t)((key * 0x9e3779b97f4a7c15ull) >> (64 - __builtin_ctzll((uint64_t)cap)));
+}
+
+/* The value of a key, or UINT32_MAX when absent. */
+static inline uint32_t qk__hmap_find(const qk__hmap_t *h, uint64_t key) {
+  size_t mask = h->cap - 1, j = qk__hmap_slot(key, h->cap);
+  for (uint64_t k; (k = h->k[j]) != UINT64_MAX; j = (j + 1) & mask)
+    if (k == key) return h->v[j];
+  return UINT32_MAX;
+}
+
 /* Triangulation state. Coordinates are doubled input coordinates. */
 typedef struct qk__tri_state {
   const qk_allocator_t *a;
-  qk__hmap_t vmap;
+  qk__hmap_t vmap;  /* vertex id by doubled lattice position (x << 32 | y): every leaf corner */
   int64_t *vx, *vy; /* doubled coordinates */
   uint8_t *steiner;
   size_t nv, vcap, vycap, scap;
@@ -147,7 +168,22 @@ typedef struct qk__tri_state {
   uint32_t *region; /* per triangle: its region (connected part between boundaries) */
   size_t nt, tcap, lcap, rcap;
   uint32_t nregion;
+  /* Per input segment in order, its lattice points from its first endpoint to its last
+   * (n + 1 for n lattice steps): the vertex there, from the vertex map before it is freed
+   * (every lattice point of a segment is a corner of its unit leaves). */
+  uint32_t *segv;
+  size_t nsegv;
+  /* The triangle shapes made, by log2 of the doubled leaf side: bit 3s (s a side, south,
+   * east, north, west) the centre fan's triangle (corner s, corner s+1, centre), bits
+   * 3s+1 and 3s+2 (corner s, midpoint s, centre) and (midpoint s, corner s+1, centre),
+   * bits 12-13 the split along SW-NE (SW, SE, NE), (SW, NE, NW) and bits 14-15 along
+   * SE-NW (SW, SE, NW), (SE, NE, NW): every triangle is one of these, translated. */
+  uint16_t shapes[64];
 } qk__tri_state_t;
+
+/* The doubled-coordinate vertices of shape bit k (see qk__tri_state_t.shapes) in the
+ * leaf square [0, S]^2 (mesh/triangulate.c). */
+void qk__mesh_shape(int k, int64_t S, int64_t x[3], int64_t y[3]);
 
 /* Facts the triangulation hands to hole removal. */
 typedef struct qk__leaf_tris {
@@ -267,7 +303,10 @@ qk_status_t qk__mesh_precheck(const qk_poly_t *lat, const qk_poly_t *src,
                               const qk_mesh_options_t *opt, uint64_t book_U, qk_allocator_t *a,
                               qk_mesh_error_t *err);
 
-/* The output segments and vertex markers of a finished mesh (mesh/markers.c). */
-qk_status_t qk__mesh_markers(qk__gen_t *g, qk_mesh_t *m);
+/* The output segments and vertex markers of a finished mesh (mesh/markers.c): segv is the
+ * triangulation's vertices along the segments (qk__tri_state_t.segv), newid their ids in m
+ * (QK__MESH_UNSET for vertices not kept). */
+qk_status_t qk__mesh_markers(qk__gen_t *g, qk_mesh_t *m, const uint32_t *segv,
+                             const uint32_t *newid);
 
 #endif /* QUADKIT_MESH_INTERNAL_H */

@@ -32,6 +32,13 @@ static double wanted(const qk__gen_t *g, int64_t X, int64_t Y, int64_t S) {
 /* sc is qk__pow2(-f): a leaf's side in input units is S sc, exactly ldexp(S, -f), without
  * a call a leaf. */
 static qk_status_t refine(qk__gen_t *g, double sc, qk_node_t v, int64_t X, int64_t Y, int64_t S) {
+  /* With max_size alone the bound is the same everywhere and the test below is monotone
+   * in S (products of positive numbers, rounded): when a square of side S needs no split,
+   * neither does any square inside it, so its subtree is not visited. A size function is
+   * sampled at every leaf. */
+  if (!g->opt->size_fn &&
+      !(qk__ldexp_by((double)S, sc, -g->lat.f) * 1.4142135623730951 > g->opt->max_size))
+    return QK_OK;
   if (qk__node_leaf(g->tree, v)) {
     if (S <= 1 ||
         !(qk__ldexp_by((double)S, sc, -g->lat.f) * 1.4142135623730951 > wanted(g, X, Y, S)))

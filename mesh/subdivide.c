@@ -69,11 +69,11 @@ static qk_status_t pair_error(qk__gen_t *g, const qk__edge_t *p, const qk__edge_
                        p->comp, q->comp, qk__mesh_num(P, p->seg), lp, qk__mesh_num(P, q->seg), lq);
 }
 
-/* Does edge e meet the closed square [x0, x0+s] x [y0, y0+s]? */
-static int edge_meets_square(const qk__edge_t *e, int64_t x0, int64_t y0, int64_t s) {
+/* Does edge e, with bounding box b, meet the closed square [x0, x0+s] x [y0, y0+s]? */
+static int edge_meets_square(const qk__edge_t *e, const qk__ebox_t *b, int64_t x0, int64_t y0,
+                             int64_t s) {
   int64_t x1 = x0 + s, y1 = y0 + s;
-  int64_t minx = e->ax < e->bx ? e->ax : e->bx, maxx = e->ax < e->bx ? e->bx : e->ax;
-  int64_t miny = e->ay < e->by ? e->ay : e->by, maxy = e->ay < e->by ? e->by : e->ay;
+  int64_t minx = b->minx, maxx = b->maxx, miny = b->miny, maxy = b->maxy;
   if (maxx < x0 || minx > x1 || maxy < y0 || miny > y1) return 0;
   if (e->ax == e->bx || e->ay == e->by) return 1;
   /* A diagonal: the y-range it covers over the shared x-range must meet [y0, y1]. */
@@ -110,7 +110,7 @@ static qk_status_t unit_leaf(qk__gen_t *g, uint32_t node, int64_t x0, int64_t y0
                          "too many segments meet the unit square at (%lld, %lld)", (long long)x0,
                          (long long)y0);
   void *rp = g->rec;
-  if (qk__grow(g->a, &rp, &g->rec_cap, g->nrec + 1, sizeof *g->rec))
+  if (g->nrec >= g->rec_cap && qk__grow(g->a, &rp, &g->rec_cap, g->nrec + 1, sizeof *g->rec))
     return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   g->rec = rp;
   qk__unit_rec_t *r = &g->rec[g->nrec++];
@@ -164,14 +164,16 @@ qk_status_t qk__mesh_subdivide(qk__gen_t *g, uint32_t node, int64_t x0, int64_t 
   for (unsigned q = 0; q < 4; q++) {
     int64_t cx = x0 + (qk__q_east(q) ? h : 0), cy = y0 + (qk__q_north(q) ? h : 0);
     void *ap = g->arena;
-    if (qk__grow(g->a, &ap, &g->arena_cap, g->arena_n + k, sizeof *g->arena))
+    if (g->arena_n + k > g->arena_cap &&
+        qk__grow(g->a, &ap, &g->arena_cap, g->arena_n + k, sizeof *g->arena))
       return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
     g->arena = ap;
     size_t base = g->arena_n, n = 0;
     for (size_t i = 0; i < k; i++) {
       uint32_t ei = g->arena[off + i];
-      if (edge_meets_square(&g->e[ei], cx, cy, h)) g->arena[base + n++] = ei;
+      if (edge_meets_square(&g->e[ei], &g->box[ei], cx, cy, h)) g->arena[base + n++] = ei;
     }
+    if (!n) continue; /* a child no edge meets stays a leaf: no call */
     g->arena_n = base + n;
     st = qk__mesh_subdivide(g, child + q, cx, cy, h, base, n);
     g->arena_n = base;

@@ -9,12 +9,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-static size_t hslot(uint64_t key, size_t cap) {
-  key ^= key >> 31;
-  key *= 0x9e3779b97f4a7c15ull;
-  key ^= key >> 29;
-  return (size_t)key & (cap - 1);
-}
+static size_t hslot(uint64_t key, size_t cap) { return qk__hmap_slot(key, cap); }
 
 static void hmap_free(const qk_allocator_t *a, qk__hmap_t *h) {
   qk__free(a, h->k, h->cap * sizeof *h->k);
@@ -38,15 +33,10 @@ static qk_status_t hmap_init(const qk_allocator_t *a, qk__hmap_t *h, size_t expe
 
 /* The value of key into *v: 1 when present, 0 when not. */
 static int hmap_get(const qk__hmap_t *h, uint64_t key, uint32_t *v) {
-  size_t j = hslot(key, h->cap);
-  while (h->k[j] != UINT64_MAX) {
-    if (h->k[j] == key) {
-      *v = h->v[j];
-      return 1;
-    }
-    j = (j + 1) & (h->cap - 1);
-  }
-  return 0;
+  uint32_t r = qk__hmap_find(h, key);
+  if (r == QK__MESH_UNSET) return 0;
+  *v = r;
+  return 1;
 }
 
 /* Find key; if absent insert it with value *v. Returns 1 when found (*v set), 0 when
@@ -158,17 +148,6 @@ static void seed(uint32_t *label, int32_t piece, int dir) {
 }
 
 /*
- * Labelling works on cells: the parts of a leaf that no component edge separates. A leaf
- * is one cell, except a unit leaf cut by a component diagonal, which is two. cell_side
- * tells whether cell k of a leaf with diagonal kind `diag` (0 none, 1 SW-NE, 2 SE-NW)
- * touches side s (south, east, north, west).
- */
-static int cell_touches(int diag, int k, int s) {
-  static const unsigned char touch[3][2] = {{0xf, 0x0}, {0x3, 0xc}, {0x9, 0x6}};
-  return (touch[diag][k] >> s) & 1;
-}
-
-/*
  * Step 3 for one unit leaf holding component pieces: a component diagonal splits it
  * along that diagonal; otherwise the SW-NE diagonal does (its vertices are only its
  * corners, since no leaf is smaller than unit size). Seeds the labels of its cells.
@@ -224,62 +203,66 @@ typedef struct leaf_map {
   const uint32_t *corner; /* 4 per leaf: SW, SE, NE, NW vertex ids */
   const qk_node_t *leaves;
   const uint32_t *leaf_of; /* by node id */
-  const qk_square_t *sq;   /* by leaf index */
-  int64_t U;               /* the root square's side */
+  const uint32_t *side;    /* by leaf index: the leaf's side */
 } leaf_map_t;
 
 /*
  * The leaves across side sd (south, east, north, west) of leaf li, as
- * qk_tree_adjacent_leaves gives them, same order, into nb (room for 8) as leaf indices: in
- * a balanced tree one leaf of the same size, two of half the size (the one lower along the
- * side first, as the tree lists them), or one of twice the size; the tree's own search
- * otherwise (never, for a balanced tree, but it costs nothing to be sure). Side sd runs
- * from corner vertex p to q; the same-size neighbour, the first half-size one and the
- * double-size one when aligned with p have their corner kp at p, the second half-size one
- * and the double-size one otherwise their corner kq at q.
+ * qk_tree_adjacent_leaves gives them, same order, into nb (room for 8) as leaf indices,
+ * for a side that is not on the root square's boundary: in a balanced tree one leaf of
+ * the same size, two of half the size (the one lower along the side first, as the tree
+ * lists them), or one of twice the size; the tree's own search otherwise (never, for a
+ * balanced tree, but it costs nothing to be sure). Side sd runs from corner vertex p to
+ * q; the same-size neighbour, the first half-size one and the double-size one when
+ * aligned with p have their corner kp at p, the second half-size one and the double-size
+ * one otherwise their corner kq at q. The same-size neighbour is the one leaf with both
+ * (a == b); a double-size one leaves the other end without such a corner (it is the
+ * middle of the large leaf's side).
  */
+static const unsigned char pk[4][4] = {/* p's corner index, kp, q's index, kq */
+                                       {0, 3, 1, 2},
+                                       {1, 0, 2, 3},
+                                       {3, 0, 2, 1},
+                                       {0, 1, 3, 2}};
+
 static size_t side_leaves(const qk_tree_t *t, const leaf_map_t *L, uint32_t li, int sd,
                           uint32_t *nb) {
-  static const unsigned char pk[4][4] = {/* p's corner index, kp, q's index, kq */
-                                         {0, 3, 1, 2},
-                                         {1, 0, 2, 3},
-                                         {3, 0, 2, 1},
-                                         {0, 1, 3, 2}};
-  qk_node_t v = L->leaves[li];
-  qk_square_t sq = L->sq[li];
-  int64_t X = (int64_t)sq.x, Y = (int64_t)sq.y, S = (int64_t)sq.side;
-  if ((sd == 0 && Y == 0) || (sd == 3 && X == 0) || (sd == 2 && Y + S == L->U) ||
-      (sd == 1 && X + S == L->U))
-    return 0; /* the root square's boundary */
   const uint32_t *c = &L->corner[4 * li];
   const unsigned char *e = pk[sd];
   uint32_t a = L->by[e[1]][c[e[0]]], b = L->by[e[3]][c[e[2]]];
-  int64_t sa = a != QK__MESH_UNSET ? (int64_t)L->sq[a].side : 0;
-  int64_t sb = b != QK__MESH_UNSET ? (int64_t)L->sq[b].side : 0;
-  if (sa == S || (sa == 2 * S)) {
-    nb[0] = a;
-    return 1;
-  }
-  if (sa && 2 * sa == S && 2 * sb == S) {
-    nb[0] = a, nb[1] = b;
-    return 2;
-  }
-  if (sb == 2 * S) {
-    nb[0] = b;
-    return 1;
+  if (a == b) {
+    if (a != QK__MESH_UNSET) {
+      nb[0] = a;
+      return 1;
+    }
+  } else {
+    uint64_t S = L->side[li];
+    uint64_t sa = a != QK__MESH_UNSET ? L->side[a] : 0, sb = b != QK__MESH_UNSET ? L->side[b] : 0;
+    if (sa == 2 * S && !sb) {
+      nb[0] = a;
+      return 1;
+    }
+    if (sb == 2 * S && !sa) {
+      nb[0] = b;
+      return 1;
+    }
+    if (sa && 2 * sa == S && 2 * sb == S) {
+      nb[0] = a, nb[1] = b;
+      return 2;
+    }
   }
   static const qk_dir_t side_dir[4] = {QK_SOUTH, QK_EAST, QK_NORTH, QK_WEST};
   qk_node_t nn[8];
   size_t n = 0;
-  qk_tree_adjacent_leaves(t, v, side_dir[sd], nn, 8, &n);
+  qk_tree_adjacent_leaves(t, L->leaves[li], side_dir[sd], nn, 8, &n);
   if (n > 8) n = 8;
   for (size_t i = 0; i < n; i++) nb[i] = L->leaf_of[nn[i]];
   return n;
 }
 
 static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, const qk_node_t *leaves,
-                               size_t nleaves, const uint32_t *rec_of, const uint32_t *cell_label,
-                               const leaf_map_t *L) {
+                               const qk_square_t *lsq, size_t nleaves, const uint32_t *rec_of,
+                               const uint32_t *cell_label, const leaf_map_t *L) {
   const qk_tree_t *t = g->tree;
   size_t ncell = 2 * nleaves;
   uint32_t *queue = qk__realloc(g->a, NULL, 0, (ncell + 1) * sizeof *queue);
@@ -295,42 +278,55 @@ static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, const qk_node_t
   }
   T->region = rp;
   memset(region, 0xff, (ncell + 1) * sizeof *region);
-  /* Per leaf, what the flood asks of its unit record: its diagonal kind (bits 0-1: 0 none,
-   * 1 SW-NE, 2 SE-NW) and which sides are component edges (bit 2 + side, sides south, east,
-   * north, west), read from one byte instead of through the node's record. */
+  /* Per leaf, what the flood asks of it, in one byte: its diagonal kind (bits 0-1: 0 none,
+   * 1 SW-NE, 2 SE-NW) and which sides the flood does not cross (bit 2 + side, sides south,
+   * east, north, west): component edges, from the node's unit record, and the root
+   * square's boundary. */
   static const int piece_of_side[4] = {QK__P_S, QK__P_E, QK__P_N, QK__P_W};
+  const double U = qk__tree_root_square(t).side;
   for (size_t li = 0; li < nleaves; li++) {
     uint32_t v = leaves[li];
-    const qk__unit_rec_t *r = rec_of[v] != QK__MESH_UNSET ? &g->rec[rec_of[v]] : NULL;
-    uint8_t f = 0;
-    if (r) {
-      f = r->piece[QK__P_D0] ? 1 : r->piece[QK__P_D1] ? 2 : 0;
+    const qk_square_t *q = &lsq[li];
+    uint8_t f = (uint8_t)((q->y == 0 ? 4 : 0) | (q->x + q->side == U ? 8 : 0) |
+                          (q->y + q->side == U ? 16 : 0) | (q->x == 0 ? 32 : 0));
+    if (rec_of[v] != QK__MESH_UNSET) {
+      const qk__unit_rec_t *r = &g->rec[rec_of[v]];
+      f |= r->piece[QK__P_D0] ? 1 : r->piece[QK__P_D1] ? 2 : 0;
       for (int sd = 0; sd < 4; sd++)
         if (r->piece[piece_of_side[sd]]) f |= (uint8_t)(4 << sd);
     }
     kind[li] = f;
   }
+  /* Labelling works on cells: the parts of a leaf that no component edge separates. A
+   * leaf is one cell, except a unit leaf cut by a component diagonal, which is two.
+   * touch[diag][k] is the set of sides (south, east, north, west) that cell k of a leaf
+   * with diagonal kind diag touches; other[diag] the sides where that is cell 1. */
+  static const unsigned char touch[4][2] = {{0xf, 0x0}, {0x3, 0xc}, {0x9, 0x6}, {0, 0}};
+  static const unsigned char other[4] = {0x0, 0xc, 0x6, 0x0};
   uint32_t nreg = 0;
-  /* Start a flood from the cell of every triangle not reached yet. */
-  for (size_t tr = 0; tr < T->nt; tr++) {
-    uint32_t c0 = T->label[tr];
-    if (region[c0] != QK__MESH_UNSET) continue;
+  /* Start a flood from every cell not reached yet that holds triangles, in the order of
+   * the triangles (leaf by leaf, cell 0 first): the region ids are as a flood started at
+   * every triangle in turn would number them. */
+  for (size_t c0 = 0; c0 < ncell; c0++) {
+    if (region[c0] != QK__MESH_UNSET || ((c0 & 1) && !(kind[c0 / 2] & 3))) continue;
     uint32_t rid = nreg++;
     rlabel[rid] = 0;
     size_t qh = 0, qt = 0;
-    region[c0] = rid, queue[qt++] = c0;
+    region[c0] = rid, queue[qt++] = (uint32_t)c0;
     while (qh < qt) {
       uint32_t c = queue[qh++], li = c / 2, k = c % 2;
       if (cell_label[c] != QK__MESH_UNSET) rlabel[rid] = cell_label[c];
-      int diag = kind[li] & 3;
-      for (int sd = 0; sd < 4; sd++) {
-        if (!cell_touches(diag, (int)k, sd)) continue;
-        if (kind[li] & (4 << sd)) continue; /* a component edge: a boundary */
+      unsigned kl = kind[li];
+      unsigned sides = touch[kl & 3][k] & ~(kl >> 2) & 0xf;
+      for (; sides; sides &= sides - 1) {
+        int sd = __builtin_ctz(sides);
         uint32_t nb[8];
         size_t n = side_leaves(t, L, li, sd, nb);
+        unsigned opp = (unsigned)(sd + 2) & 3;
         for (size_t i = 0; i < n; i++) {
           uint32_t lw = nb[i];
-          uint32_t cw = 2 * lw + (cell_touches(kind[lw] & 3, 0, (sd + 2) % 4) ? 0 : 1);
+          uint32_t cw = 2 * lw, d = kind[lw] & 3u;
+          if (d) cw += (other[d] >> opp) & 1; /* a diagonal: which half faces this side */
           if (region[cw] == QK__MESH_UNSET) region[cw] = rid, queue[qt++] = cw;
         }
       }
@@ -350,32 +346,87 @@ out:
   return st;
 }
 
-/* The square of every node reachable from the root, by node id, computed top-down in one
- * pass (qk__node_square recomputes a node's whole path at each call); `sq` has room for
- * the tree's node bound. Squares are dyadic and halving is exact, so these are the
- * tree's own squares. The same pass lists the leaves into `leaves` (room for the node
- * bound) in qk_tree_leaves' order, pre-order with the children first to last, with their
- * squares by leaf index into `leaf_sq` (same room), and returns their number: one walk
- * instead of a count, a list and the squares. */
-static size_t node_squares(const qk_tree_t *t, qk_square_t *sq, qk_node_t *leaves,
-                           qk_square_t *leaf_sq) {
-  qk_node_t stack[3 * (QK_MAX_DEPTH_LIMIT + 2) + 4]; /* 3 siblings a level wait */
+/* The leaves into `leaves` (room for the tree's node bound) in qk_tree_leaves' order,
+ * pre-order with the children first to last, with their squares by leaf index into
+ * `leaf_sq` (same room); returns their number. The squares are computed top-down, each
+ * node's from its parent's as the walk goes (qk__node_square recomputes a node's whole
+ * path at each call); squares are dyadic and halving is exact, so these are the tree's
+ * own squares. One walk instead of a count, a list and the squares. */
+static size_t node_squares(const qk_tree_t *t, qk_node_t *leaves, qk_square_t *leaf_sq) {
+  struct {
+    qk_node_t v;
+    qk_square_t sq;
+  } stack[3 * (QK_MAX_DEPTH_LIMIT + 2) + 4]; /* 3 siblings a level wait */
   size_t n = 0, nl = 0;
-  qk_node_t root = qk_tree_root(t);
-  sq[root] = qk__tree_root_square(t);
-  stack[n++] = root;
+  stack[n].v = qk_tree_root(t), stack[n++].sq = qk__tree_root_square(t);
   while (n) {
-    qk_node_t v = stack[--n];
+    qk_node_t v = stack[--n].v;
+    qk_square_t sq = stack[n].sq;
     uint32_t c = qk__node_child(t, v);
     if (c == QK_NONE) {
-      leaf_sq[nl] = sq[v];
+      leaf_sq[nl] = sq;
       leaves[nl++] = v;
       continue;
     }
-    for (unsigned q = 0; q < 4; q++) sq[c + q] = qk__child_square(sq[v], q);
-    for (unsigned q = 4; q-- > 0;) stack[n++] = c + q;
+    for (unsigned q = 4; q-- > 0;) stack[n].v = c + q, stack[n++].sq = qk__child_square(sq, q);
   }
   return nl;
+}
+
+/* T->segv: the vertex at every lattice point of every segment, in order. */
+static qk_status_t segment_vertices(const qk__gen_t *g, qk__tri_state_t *T) {
+  const qk_poly_t *P = g->poly;
+  size_t total = 0;
+  for (size_t s = 0; s < P->ns; s++) {
+    uint32_t u = P->seg[2 * s], w = P->seg[2 * s + 1];
+    int64_t dx = llabs((int64_t)P->vx[w] - (int64_t)P->vx[u]);
+    int64_t dy = llabs((int64_t)P->vy[w] - (int64_t)P->vy[u]);
+    total += (size_t)(dx > dy ? dx : dy) + 1;
+  }
+  T->segv = qk__realloc(T->a, NULL, 0, (total + 1) * sizeof *T->segv);
+  if (!T->segv) return QK_ERR_NOMEM;
+  T->nsegv = total;
+  size_t j = 0;
+  for (size_t s = 0; s < P->ns; s++) {
+    uint32_t u = P->seg[2 * s], w = P->seg[2 * s + 1];
+    int64_t ax = (int64_t)P->vx[u], ay = (int64_t)P->vy[u];
+    int64_t dx = (int64_t)P->vx[w] - ax, dy = (int64_t)P->vy[w] - ay;
+    int64_t n = llabs(dx) > llabs(dy) ? llabs(dx) : llabs(dy);
+    int64_t sx = n ? dx / n : 0, sy = n ? dy / n : 0;
+    for (int64_t k = 0; k <= n; k++)
+      T->segv[j++] = qk__hmap_find(&T->vmap, (uint64_t)(2 * (ax + k * sx)) << 32 |
+                                                 (uint64_t)(2 * (ay + k * sy)));
+  }
+  return QK_OK;
+}
+
+/* The shapes (qk__tri_state_t.shapes) of a leaf that is not a unit record, by which
+ * sides hold a midpoint: none, the SW-NE split; else per side two fan triangles with a
+ * midpoint, one without. */
+#define FAN(m, s) (((m) >> (s)) & 1 ? 6u << 3 * (s) : 1u << 3 * (s))
+#define FAN4(m) (m ? FAN(m, 0) | FAN(m, 1) | FAN(m, 2) | FAN(m, 3) : 0x3000u)
+static const uint16_t fan_shapes[16] = {FAN4(0),  FAN4(1),  FAN4(2),  FAN4(3), FAN4(4),  FAN4(5),
+                                        FAN4(6),  FAN4(7),  FAN4(8),  FAN4(9), FAN4(10), FAN4(11),
+                                        FAN4(12), FAN4(13), FAN4(14), FAN4(15)};
+#undef FAN4
+#undef FAN
+
+void qk__mesh_shape(int k, int64_t S, int64_t x[3], int64_t y[3]) {
+  /* Corners SW, SE, NE, NW (0-3), side midpoints south, east, north, west (4-7), centre. */
+  const int64_t h = S / 2;
+  const int64_t px[9] = {0, S, S, 0, h, S, h, 0, h}, py[9] = {0, 0, S, S, 0, h, S, h, h};
+  static const unsigned char split[4][3] = {{0, 1, 2}, {0, 2, 3}, {0, 1, 3}, {1, 2, 3}};
+  int s = k / 3, v[3];
+  if (k >= 12) {
+    for (int i = 0; i < 3; i++) v[i] = split[k - 12][i];
+  } else if (k % 3 == 0) {
+    v[0] = s, v[1] = (s + 1) % 4, v[2] = 8;
+  } else if (k % 3 == 1) {
+    v[0] = s, v[1] = 4 + s, v[2] = 8;
+  } else {
+    v[0] = 4 + s, v[1] = (s + 1) % 4, v[2] = 8;
+  }
+  for (int i = 0; i < 3; i++) x[i] = px[v[i]], y[i] = py[v[i]];
 }
 
 qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris_t *lt) {
@@ -387,21 +438,18 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
   uint32_t *leaf_of = qk__realloc(g->a, NULL, 0, nn * sizeof *leaf_of);
   lt->cap = nn;
   lt->first = qk__realloc(g->a, NULL, 0, lt->cap * sizeof *lt->first);
-  /* The leaves and every node's square in one walk; a tree has fewer leaves than nodes. */
+  /* The leaves and their squares in one walk; a tree has fewer leaves than nodes. */
   size_t nleaves = 0;
   qk_node_t *leaves = qk__realloc(g->a, NULL, 0, (nn + 1) * sizeof *leaves);
-  qk_square_t *nsq = qk__realloc(g->a, NULL, 0, (nn + 1) * sizeof *nsq);
   qk_square_t *lsq = qk__realloc(g->a, NULL, 0, (nn + 1) * sizeof *lsq);
   uint32_t *cell_label = NULL;
-  if (leaves && nsq && lsq) {
-    nleaves = node_squares(t, nsq, leaves, lsq);
-    qk__free(g->a, nsq, (nn + 1) * sizeof *nsq); /* the leaves' squares are all we need */
-    nsq = NULL;
+  if (leaves && lsq) {
+    nleaves = node_squares(t, leaves, lsq);
     cell_label = qk__realloc(g->a, NULL, 0, (2 * nleaves + 1) * sizeof *cell_label);
   }
   lt->nleaves = nleaves;
   if (!rec_of || !leaf_of || !lt->first || !leaves || !lsq || !cell_label ||
-      hmap_init(g->a, &T->vmap, 2 * nleaves + 16) != QK_OK) {
+      hmap_init(g->a, &T->vmap, nleaves + nleaves / 4 + 16) != QK_OK) {
     st = QK_ERR_NOMEM;
     goto out;
   }
@@ -429,7 +477,10 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
   /* First every leaf's corners, so that the vertex map holds every lattice point a leaf
    * has as a corner. */
   uint32_t *corner = qk__realloc(g->a, NULL, 0, (4 * nleaves + 4) * sizeof *corner);
-  if (!corner) {
+  uint32_t *lside = qk__realloc(g->a, NULL, 0, (nleaves + 1) * sizeof *lside);
+  if (!corner || !lside) {
+    qk__free(g->a, corner, (4 * nleaves + 4) * sizeof *corner);
+    qk__free(g->a, lside, (nleaves + 1) * sizeof *lside);
     st = QK_ERR_NOMEM;
     goto out;
   }
@@ -437,55 +488,14 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
     qk_square_t sq = lsq[li];
     int64_t S = 2 * (int64_t)sq.side, X = 2 * (int64_t)sq.x, Y = 2 * (int64_t)sq.y;
     uint32_t *c = &corner[4 * li];
+    lside[li] = (uint32_t)sq.side;
     /* One call site, so that the probe is inlined. */
     const int64_t cx[4] = {X, X + S, X + S, X}, cy[4] = {Y, Y, Y + S, Y + S};
     for (int q = 0; q < 4 && !st; q++) st = corner_vertex(T, cx[q], cy[q], &c[q]);
     if (st) break;
   }
   size_t ncorner = T->nv; /* the corner vertices are the first ids */
-  for (size_t li = 0; li < nleaves && !st; li++) {
-    uint32_t v = leaves[li], cell = (uint32_t)(2 * li);
-    qk_square_t sq = lsq[li];
-    int64_t S = 2 * (int64_t)sq.side, X = 2 * (int64_t)sq.x, Y = 2 * (int64_t)sq.y;
-    lt->first[v] = (uint32_t)T->nt;
-    const uint32_t *c = &corner[4 * li];
-    if (rec_of[v] != QK__MESH_UNSET) {
-      st = tri_unit(T, &g->rec[rec_of[v]], c, cell, cell_label);
-      continue;
-    }
-    /* A side holds a midpoint vertex exactly when the neighbour across it (of at most
-     * this depth) is internal: then, the tree being balanced, two leaves of half the size
-     * meet this side, and share a corner at its midpoint. Otherwise no leaf has a corner
-     * there (a leaf across the side is as large as this one or larger, with corners on a
-     * coarser grid), so the vertex map, holding every leaf corner, answers without
-     * neighbour finding. Unit leaves have no smaller neighbours. Sides in CCW order:
-     * south, east, north, west. */
-    int64_t mx[4] = {X + S / 2, X + S, X + S / 2, X}, my[4] = {Y, Y + S / 2, Y + S, Y + S / 2};
-    uint32_t ring[8];
-    size_t nr = 0;
-    for (int s = 0; s < 4; s++) {
-      ring[nr++] = c[s];
-      if (S > 2 && hmap_get(&T->vmap, ((uint64_t)mx[s] << 32) | (uint64_t)my[s], &ring[nr])) nr++;
-    }
-    if (nr == 4) {
-      /* Vertices only at its corners: split along a diagonal (angles 45, 45, 90). */
-      if (!(st = add_tri(T, c[0], c[1], c[2], cell))) st = add_tri(T, c[0], c[2], c[3], cell);
-      continue;
-    }
-    /* A Steiner point at the centre, joined to every boundary vertex: each triangle has
-     * a right angle at the centre (corner-corner) or at the midpoint (corner-midpoint). */
-    uint32_t ctr;
-    if ((st = new_vertex(T, X + S / 2, Y + S / 2, 1, &ctr))) break;
-    for (size_t i = 0; i < nr && !st; i++) st = add_tri(T, ring[i], ring[(i + 1) % nr], ctr, cell);
-  }
-  /* The vertex map is no longer needed; give its memory back before labelling. */
-  hmap_free(T->a, &T->vmap);
-  leaf_map_t L = {{NULL, NULL, NULL, NULL},
-                  corner,
-                  leaves,
-                  leaf_of,
-                  lsq,
-                  (int64_t)qk__tree_root_square(t).side};
+  leaf_map_t L = {{NULL, NULL, NULL, NULL}, corner, leaves, leaf_of, lside};
   for (int k = 0; k < 4 && !st; k++) {
     L.by[k] = qk__realloc(g->a, NULL, 0, (ncorner + 1) * sizeof *L.by[k]);
     if (!L.by[k])
@@ -495,11 +505,73 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
   }
   for (size_t li = 0; li < nleaves && !st; li++)
     for (int k = 0; k < 4; k++) L.by[k][corner[4 * li + k]] = (uint32_t)li;
-  if (!st) st = label_cells(g, T, leaves, nleaves, rec_of, cell_label, &L);
+  for (size_t li = 0; li < nleaves && !st; li++) {
+    uint32_t v = leaves[li], cell = (uint32_t)(2 * li);
+    qk_square_t sq = lsq[li];
+    int64_t S = 2 * (int64_t)sq.side, X = 2 * (int64_t)sq.x, Y = 2 * (int64_t)sq.y;
+    lt->first[v] = (uint32_t)T->nt;
+    const uint32_t *c = &corner[4 * li];
+    if (rec_of[v] != QK__MESH_UNSET) {
+      const qk__unit_rec_t *r = &g->rec[rec_of[v]];
+      T->shapes[1] |= r->piece[QK__P_D1] ? 0xc000 : 0x3000; /* S = 2 */
+      st = tri_unit(T, r, c, cell, cell_label);
+      continue;
+    }
+    /* A side holds a midpoint vertex exactly when the neighbour across it (of at most
+     * this depth) is internal: then, the tree being balanced, two leaves of half the size
+     * meet this side, and share a corner at its midpoint. Otherwise no leaf has a corner
+     * there (a leaf across the side is as large as this one or larger, with corners on a
+     * coarser grid). The leaf across the side with its corner kp at the side's start p
+     * (side_leaves) is then of half the size, and the midpoint is its corner kq. Unit
+     * leaves have no smaller neighbours. Sides in CCW order: south, east, north, west. */
+    uint32_t ring[9];
+    size_t nr = 0;
+    unsigned mids = 0;
+    for (int s = 0; s < 4; s++) {
+      ring[nr++] = c[s];
+      if (S <= 2) continue;
+      uint32_t a = L.by[pk[s][1]][c[pk[s][0]]];
+      if (a == QK__MESH_UNSET || 4 * (int64_t)lside[a] > S) continue;
+      if (4 * (int64_t)lside[a] == S) {
+        ring[nr++] = corner[4 * a + pk[s][3]], mids |= 1u << s;
+        continue;
+      }
+      /* A smaller neighbour: never in a balanced tree; the vertex map answers. */
+      int64_t mx[4] = {X + S / 2, X + S, X + S / 2, X}, my[4] = {Y, Y + S / 2, Y + S, Y + S / 2};
+      if (hmap_get(&T->vmap, ((uint64_t)mx[s] << 32) | (uint64_t)my[s], &ring[nr]))
+        nr++, mids |= 1u << s;
+    }
+    T->shapes[__builtin_ctzll((uint64_t)S)] |= fan_shapes[mids];
+    if (nr == 4) {
+      /* Vertices only at its corners: split along a diagonal (angles 45, 45, 90). */
+      if (!(st = add_tri(T, c[0], c[1], c[2], cell))) st = add_tri(T, c[0], c[2], c[3], cell);
+      continue;
+    }
+    /* A Steiner point at the centre, joined to every boundary vertex: each triangle has
+     * a right angle at the centre (corner-corner) or at the midpoint (corner-midpoint). */
+    uint32_t ctr;
+    if ((st = new_vertex(T, X + S / 2, Y + S / 2, 1, &ctr))) break;
+    ring[nr] = ring[0];
+    if (T->nt + nr > T->tcap || T->nt + nr > T->lcap) {
+      for (size_t i = 0; i < nr && !st; i++) st = add_tri(T, ring[i], ring[i + 1], ctr, cell);
+      continue;
+    }
+    /* The usual case: room for the whole fan, written without a check a triangle. */
+    uint32_t *tt = &T->tri[3 * T->nt], *tl = &T->label[T->nt];
+    for (size_t i = 0; i < nr; i++)
+      tt[3 * i] = ring[i], tt[3 * i + 1] = ring[i + 1], tt[3 * i + 2] = ctr, tl[i] = cell;
+    T->nt += nr;
+  }
+  /* The boundary markers' vertices: every lattice point of a segment is a corner of its
+   * unit leaves, so the vertex map holds it; then the map's memory goes back before
+   * labelling. */
+  if (!st) st = segment_vertices(g, T);
+  hmap_free(T->a, &T->vmap);
+  if (!st) st = label_cells(g, T, leaves, lsq, nleaves, rec_of, cell_label, &L);
   for (int k = 0; k < 4; k++) qk__free(g->a, L.by[k], (ncorner + 1) * sizeof *L.by[k]);
   qk__free(g->a, corner, (4 * nleaves + 4) * sizeof *corner);
+  qk__free(g->a, lside, (nleaves + 1) * sizeof *lside);
 out:
-  qk__free(g->a, nsq, (nn + 1) * sizeof *nsq);
   qk__free(g->a, lsq, (nn + 1) * sizeof *lsq);
   qk__free(g->a, rec_of, nn * sizeof *rec_of);
   qk__free(g->a, leaf_of, nn * sizeof *leaf_of);
@@ -511,6 +583,7 @@ out:
 
 void qk__mesh_tri_free(qk__tri_state_t *T) {
   hmap_free(T->a, &T->vmap);
+  qk__free(T->a, T->segv, (T->nsegv + 1) * sizeof *T->segv);
   qk__free(T->a, T->vx, T->vcap * sizeof *T->vx);
   qk__free(T->a, T->vy, T->vycap * sizeof *T->vy);
   qk__free(T->a, T->steiner, T->scap);

@@ -9,10 +9,13 @@
  *  - random valid inputs from the polygon generator at U = 8 ... 1024;
  *  - non-uniformity: for a fixed component, doubling U adds a bounded number of
  *    triangles;
+ *  - the statistics' smallest and largest angle equal every triangle's angles' extremes,
+ *    by brute force (to the last bit), with and without holes;
  *  - the subdivision is a quadkit tree: qk_tree_check() passes and it is balanced;
  *  - allocation failure at every N: QK_ERR_NOMEM, no leak;
  *  - the writers: counts and headers of .node, .ele, .msh, .vtu, and an SVG.
  */
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -89,6 +92,36 @@ static size_t book_leaves(const double *xy, const uint32_t *seg, size_t ns, int6
          book_leaves(xy, seg, ns, x0, y0 + h, h) + book_leaves(xy, seg, ns, x0 + h, y0 + h, h);
 }
 
+/* The statistics' smallest and largest angle against every triangle's three angles, by
+ * brute force over the mesh as returned: on doubled coordinates, which are integers in the
+ * book's mode, with atan2 of |cross| and dot as the statistics document, so the extremes
+ * must agree to the last bit (the generator takes them from the few triangle shapes a
+ * quadtree mesh has, not from every triangle). */
+static void check_angle_extremes(const qk_mesh_t *m, const qk_mesh_stats_t *s, const char *what) {
+  size_t nv, nt;
+  const double *xy = qk_mesh_vertices(m, &nv);
+  const uint32_t *tri = qk_mesh_triangles(m, &nt);
+  double lo = 180, hi = 0;
+  for (size_t k = 0; k < nt; k++)
+    for (int i = 0; i < 3; i++) {
+      const double *a = &xy[2 * tri[3 * k + (i + 2) % 3]], *b = &xy[2 * tri[3 * k + i]],
+                   *c = &xy[2 * tri[3 * k + (i + 1) % 3]];
+      int64_t ux = (int64_t)(2 * a[0]) - (int64_t)(2 * b[0]);
+      int64_t uy = (int64_t)(2 * a[1]) - (int64_t)(2 * b[1]);
+      int64_t wx = (int64_t)(2 * c[0]) - (int64_t)(2 * b[0]);
+      int64_t wy = (int64_t)(2 * c[1]) - (int64_t)(2 * b[1]);
+      double dux = (double)ux, duy = (double)uy, dwx = (double)wx, dwy = (double)wy;
+      double ang = atan2(fabs(dux * dwy - duy * dwx), dux * dwx + duy * dwy) *
+                   (180.0 / 3.14159265358979323846);
+      if (ang < lo) lo = ang;
+      if (ang > hi) hi = ang;
+    }
+  if (!nt) lo = hi = 0;
+  if (s->min_angle_deg != lo || s->max_angle_deg != hi)
+    fail_msg("%s: statistics say angles %.17g..%.17g, the triangles %.17g..%.17g", what,
+             s->min_angle_deg, s->max_angle_deg, lo, hi);
+}
+
 /* Mesh an input given as arrays and run the checker; returns the triangle count. */
 static size_t mesh_and_check(const double *xy, size_t nv, const uint32_t *seg, size_t ns,
                              const double *holes, size_t nh, uint64_t U, const char *what) {
@@ -115,6 +148,7 @@ static size_t mesh_and_check(const double *xy, size_t nv, const uint32_t *seg, s
   qk_mesh_stats(m, &s);
   assert_int_equal(s.triangles, mm.nt);
   if (mm.nt) assert_true(s.min_angle_deg > 44.999 && s.max_angle_deg < 90.001);
+  check_angle_extremes(m, &s, what);
   check_leaf_order(m, &s, nh == 0, what);
   if (U <= 256 && ns <= 64) {
     size_t want = book_leaves(xy, seg, ns, 0, 0, (int64_t)U);
