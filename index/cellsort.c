@@ -389,6 +389,36 @@ static void bucket_starts(const bucket_job_t *j, size_t c) {
   j->deep[c] = deep;
 }
 
+#if QK__CELL_AVX2
+/* The scatter's buckets and tags of a block, sixteen keys a step (the compiler's SSE2 loop
+ * took 3.8 instructions a point): cb[q] = k[q] >> fbits, tag[q] = tq + (q << fbits) +
+ * (k[q] & mask). Returns how many were done (a multiple of 16). */
+__attribute__((target("avx2"))) static size_t
+tags_avx2(const uint16_t *k, size_t m, uint32_t tq, unsigned fbits, uint8_t *cb, uint32_t *tag) {
+  const __m128i sh = _mm_cvtsi32_si128((int)fbits);
+  const __m256i mask = _mm256_set1_epi32((int)((1u << fbits) - 1));
+  const __m256i lane =
+      _mm256_sllv_epi32(_mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7), _mm256_set1_epi32((int)fbits));
+  const __m256i eight = _mm256_set1_epi32((int)(8u << fbits));
+  __m256i t = _mm256_add_epi32(_mm256_set1_epi32((int)tq), lane);
+  size_t q = 0;
+  for (; q + 16 <= m; q += 16) {
+    __m256i v = _mm256_loadu_si256((const __m256i *)(const void *)&k[q]);
+    __m256i c = _mm256_srl_epi16(v, sh);
+    _mm_storeu_si128((__m128i *)(void *)&cb[q],
+                     _mm_packus_epi16(_mm256_castsi256_si128(c), _mm256_extracti128_si256(c, 1)));
+    __m256i lo = _mm256_cvtepu16_epi32(_mm256_castsi256_si128(v));
+    __m256i hi = _mm256_cvtepu16_epi32(_mm256_extracti128_si256(v, 1));
+    _mm256_storeu_si256((__m256i *)(void *)&tag[q], _mm256_or_si256(t, _mm256_and_si256(lo, mask)));
+    t = _mm256_add_epi32(t, eight);
+    _mm256_storeu_si256((__m256i *)(void *)&tag[q + 8],
+                        _mm256_or_si256(t, _mm256_and_si256(hi, mask)));
+    t = _mm256_add_epi32(t, eight);
+  }
+  return q;
+}
+#endif
+
 /* One point into its bucket's write-combining buffer as a record (its coordinates and
  * tag); a full buffer goes to the bucket's next WC records of the record array, through
  * the caches (mode 0) or around them (1: SSE2, 2: AVX). */
@@ -451,7 +481,12 @@ static void scatter_job(unsigned w, unsigned thread, void *ctx) {
      * so that the scatter loop does little more than copy. */
     uint32_t tq = (uint32_t)(i0 - lo) << fbits;
     const uint32_t step = 1u << fbits;
-    for (size_t q = 0; q < m; q++, tq += step) {
+    size_t q0 = 0;
+#if QK__CELL_AVX2
+    if (j->avx2) q0 = tags_avx2(k, m, tq, fbits, cb, tag);
+    tq += (uint32_t)q0 << fbits;
+#endif
+    for (size_t q = q0; q < m; q++, tq += step) {
       cb[q] = (uint8_t)(k[q] >> fbits);
       tag[q] = tq | (k[q] & mask);
     }
