@@ -132,7 +132,8 @@ static void axis_tables(const double *g, unsigned L, bool north, axis_tab_t *a) 
  * are one run of memory that the fine pass reads front to back.
  *
  * A record is 20 bytes: the point's coordinates, and a tag with its low digit in the low
- * fbits bits and its place in the share above them (shares hold at most 2^(32 - fbits)
+ * fbits bits and above them its index in the input when the input has at most
+ * 2^(32 - fbits) points (gid), else its place in its share (shares hold at most that many
  * points, so it fits). Byte arrays, read and written with memcpy (one move each). */
 typedef struct rec {
   unsigned char b[20];
@@ -175,6 +176,7 @@ typedef struct bucket_job {
   double near;   /* the scaling's error bound, in grid units */
   uint32_t even; /* the even bits of a key */
   bool avx2;     /* keys four at a time, copies 32 bytes a store */
+  bool gid;      /* tags hold the point's index in the input, not in its share */
 } bucket_job_t;
 
 /* The cell of one point by the tables: the truncated scaled coordinate, corrected by the
@@ -479,7 +481,7 @@ static void scatter_job(unsigned w, unsigned thread, void *ctx) {
     const uint16_t *k = key + i0;
     /* The block's buckets and tags in a loop of their own (the compiler vectorises it),
      * so that the scatter loop does little more than copy. */
-    uint32_t tq = (uint32_t)(i0 - lo) << fbits;
+    uint32_t tq = (uint32_t)(j->gid ? i0 : i0 - lo) << fbits;
     const uint32_t step = 1u << fbits;
     size_t q0 = 0;
 #if QK__CELL_AVX2
@@ -592,14 +594,15 @@ static void copy_out(void *dst, const void *src, size_t bytes, bool stream, bool
  * of fine digit f to slot next[f]++, its coordinates at px[stride * slot] and
  * py[stride * slot] (stride 2: pairs), its id at pid[slot]. */
 static QK__ALWAYS_INLINE void fine_records(const bucket_job_t *j, unsigned c, uint32_t *next,
-                                           double *px, double *py, size_t stride, qk_id_t *pid) {
+                                           double *px, double *py, size_t stride, qk_id_t *pid,
+                                           bool gid) {
   const size_t nc = j->nc;
   const unsigned fbits = j->fbits;
   const uint32_t mask = (1u << fbits) - 1;
   for (unsigned v = 0; v < j->ns; v++) {
     size_t lo, hi;
     qk__share_range(j->n, v, j->ns, &lo, &hi);
-    const uint32_t id0 = (uint32_t)lo;
+    const uint32_t id0 = gid ? 0u : (uint32_t)lo;
     const rec_t *r = j->rec + j->seg[(size_t)v * nc + c], *e = r + j->cnt[(size_t)v * nc + c];
     /* Two records a step: the second's slot is taken after the first's, as one at a time
      * would (they may share a fine bucket). The records come from memory (written around
@@ -727,7 +730,11 @@ static void fine_job(unsigned c, unsigned w, void *ud) {
     for (uint32_t f = 0; f < nf; f++) next[f] = cum[f] - a;
     double *sxy = j->sxy + (size_t)w * 2 * j->stage_cap;
     qk_id_t *sid = j->sid + (size_t)w * j->stage_cap;
-    fine_records(j, c, next, sxy, sxy + 1, 2, sid);
+    /* The tags' ids without an addition a record where they are the input's indices. */
+    if (j->gid)
+      fine_records(j, c, next, sxy, sxy + 1, 2, sid, true);
+    else
+      fine_records(j, c, next, sxy, sxy + 1, 2, sid, false);
     copy_pairs(j->t->px + a, j->t->py + a, sxy, b - a, j->stream, j->avx2);
     copy_out(j->t->pid + a, sid, (size_t)(b - a) * sizeof *sid, j->stream, j->avx2);
 #if defined(__SSE2__)
@@ -735,7 +742,7 @@ static void fine_job(unsigned c, unsigned w, void *ud) {
 #endif
   } else {
     for (uint32_t f = 0; f < nf; f++) next[f] = cum[f];
-    fine_records(j, c, next, j->t->px, j->t->py, 1, j->t->pid);
+    fine_records(j, c, next, j->t->px, j->t->py, 1, j->t->pid, j->gid);
   }
 }
 
@@ -870,6 +877,8 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
   j.cnt = s.cnt, j.cbase = s.cbase, j.cum = s.cum, j.deep = s.deep, j.nw = nw, j.ns = (unsigned)ns;
   j.near = delta;
   j.even = (uint32_t)qk__spread16((1u << L) - 1);
+  /* Up to 2^(32 - fbits) points (2^23 at the deepest grid), a tag holds the index itself. */
+  j.gid = ((uint64_t)n << fbits) <= ((uint64_t)1 << 32);
 #if QK__CELL_AVX2
   j.avx2 = __builtin_cpu_supports("avx2");
 #endif
