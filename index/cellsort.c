@@ -479,7 +479,7 @@ static void scatter_job(unsigned w, unsigned thread, void *ctx) {
   for (size_t i0 = lo; i0 < hi; i0 += BLOCK) {
     size_t m = hi - i0 < BLOCK ? hi - i0 : BLOCK;
     const uint16_t *k = key + i0;
-    /* The block's buckets and tags in a loop of their own (the compiler vectorises it),
+    /* The block's buckets and tags in a loop of their own (vectorised: by hand with AVX2),
      * so that the scatter loop does little more than copy. */
     uint32_t tq = (uint32_t)(j->gid ? i0 : i0 - lo) << fbits;
     const uint32_t step = 1u << fbits;
