@@ -14,8 +14,17 @@
  * The tree made from the counts beside the threaded sort's last pass (fewer than 2^16 points
  * in cells over the capacity), waiting for the buckets of the cells it splits: the same
  * tree on 2, 3 and 4 threads as on one, and the shape of inserting the points one by one.
+ *
+ * The streamed build (from 2^19 points: records and point arrays written around the
+ * caches, with AVX2 where the processor has it, the scatter's tags sixteen keys a step and
+ * the staged pairs copied out eight points a step): on a share size that is no multiple of
+ * 16 and with a tenth of the points on grid lines or duplicated, on one and two threads,
+ * the shape of inserting the points one by one, and in every leaf the input's points in
+ * input order (ids rising, each id once, its coordinates bit for bit); with libc's
+ * allocator and with point arrays on 32-byte boundaries or 8 bytes past them.
  */
 #include <math.h>
+#include <stdbool.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -189,11 +198,125 @@ static void test_build_tree_beside_sort(void **state) {
   free(p);
 }
 
+/* Every leaf holds input points with their coordinates bit for bit, every id once, and a
+ * leaf that is one cell of the build's grid (depth `grid`) holds them in input order: the
+ * sort by cell is stable (points in cells over the capacity are then split further by a
+ * partition, which does not keep their order, and a shallower leaf holds its cells one
+ * after another). */
+typedef struct order_check {
+  const qk_point_t *p;
+  size_t n, seen_n, bad, ordered;
+  unsigned grid;
+  unsigned char *seen;
+} order_check_t;
+
+static qk_visit_t order_visit(const qk_tree_t *t, qk_node_t v, void *ud) {
+  order_check_t *o = ud;
+  const double *x, *y;
+  const qk_id_t *id;
+  size_t m;
+  if (qk_tree_leaf_points(t, v, &x, &y, &id, &m) != QK_OK) return QK_VISIT_CONTINUE;
+  qk_node_info_t info;
+  assert_int_equal(qk_tree_node_info(t, v, &info), QK_OK);
+  bool cell = info.depth == o->grid;
+  for (size_t i = 0; i < m; i++) {
+    qk_id_t k = id[i];
+    if (k >= o->n || o->seen[k] || (cell && i > 0 && k <= id[i - 1]) ||
+        memcmp(&x[i], &o->p[k].x, sizeof x[i]) || memcmp(&y[i], &o->p[k].y, sizeof y[i])) {
+      o->bad++;
+      continue;
+    }
+    o->seen[k] = 1;
+    o->seen_n++;
+    o->ordered += cell;
+  }
+  return QK_VISIT_CONTINUE;
+}
+
+/* An allocator whose blocks start `*ud` bytes past a 64-byte boundary (0 or 8 here), so
+ * that the point arrays lie on 32-byte boundaries together, or 8 bytes past them together,
+ * whatever the C library's heap does: the build's 32-byte streaming copies run, with and
+ * without their unaligned head. */
+static void *offset_alloc(void *ud, void *ptr, size_t osize, size_t nsize) {
+  size_t off = *(const size_t *)ud;
+  void *fresh = NULL;
+  if (nsize) {
+    unsigned char *b = aligned_alloc(64, (nsize + off + 63) / 64 * 64);
+    if (!b) return NULL;
+    fresh = b + off;
+    if (ptr) memcpy(fresh, ptr, osize < nsize ? osize : nsize);
+  }
+  if (ptr) free((unsigned char *)ptr - off);
+  return fresh;
+}
+
+static void test_build_streamed_order(void **state) {
+  (void)state;
+  uint64_t seed = qkt_seed(1204);
+  qkt_rng_t r;
+  qkt_rng_seed(&r, seed);
+  print_message("seed %llu\n", (unsigned long long)seed);
+  enum { N = 600011 }; /* two shares of 300,005 and 300,006 points */
+  qk_point_t *p = malloc(N * sizeof *p);
+  unsigned char *seen = malloc(N);
+  assert_non_null(p);
+  assert_non_null(seen);
+  qkt_points(&r, QKT_UNIFORM, p, N);
+  for (size_t i = 0; i < N / 10; i++) {
+    size_t k = qkt_rng_below(&r, N);
+    if (i % 2) /* a duplicate of another point */
+      p[k] = p[qkt_rng_below(&r, N)];
+    else /* on a line of the 2^8 grid, or one ulp beside it */
+      p[k] = (qk_point_t){near_line(&r, 0.0, 1.0), near_line(&r, 0.0, 1.0)};
+  }
+  qk_tree_options_t o;
+  qk_tree_options_init(&o);
+  o.capacity = 16;
+  o.has_root = 1; /* the inserts' root */
+  o.root = (qk_square_t){0, 0, 1};
+  qk_tree_t *ins = NULL;
+  assert_int_equal(qk_tree_build(NULL, 0, &o, &ins), QK_OK);
+  for (size_t i = 0; i < N; i++) assert_int_equal(qk_tree_insert(ins, p[i], NULL), QK_OK);
+  qkt_shape_t want = qkt_tree_shape(ins);
+  qk_tree_free(ins);
+  /* libc's allocator, then blocks 0 and 8 bytes past a 64-byte boundary */
+  size_t offsets[] = {0, 8};
+  qk_allocator_t alloc[] = {{offset_alloc, &offsets[0]}, {offset_alloc, &offsets[1]}};
+  for (unsigned run = 0; run < 6; run++) {
+    uint32_t threads = 1 + run % 2;
+    o.threads = threads;
+    o.allocator = run < 2 ? NULL : &alloc[(run - 2) / 2];
+    qk_tree_t *t = NULL;
+    assert_int_equal(qk_tree_build(p, N, &o, &t), QK_OK);
+    QKT_CHECK_TREE(t);
+    qkt_shape_t got = qkt_tree_shape(t);
+    if (got.nodes != want.nodes || got.hash != want.hash)
+      print_error("seed %llu, run %u, %u threads: %zu nodes vs %zu by inserts\n",
+                  (unsigned long long)seed, run, threads, got.nodes, want.nodes);
+    assert_int_equal(got.nodes, want.nodes);
+    assert_true(got.hash == want.hash);
+    memset(seen, 0, N);
+    /* the build's grid: 2^8 x 2^8 cells from 2^18 points on (index/build.c) */
+    order_check_t oc = {p, N, 0, 0, 0, 8, seen};
+    assert_int_equal(qk_tree_visit(t, qk_tree_root(t), order_visit, &oc), QK_OK);
+    if (oc.bad)
+      print_error("seed %llu, run %u, %u threads: %zu points out of order or altered\n",
+                  (unsigned long long)seed, run, threads, oc.bad);
+    assert_int_equal(oc.bad, 0);
+    assert_int_equal(oc.seen_n, N);
+    assert_true(oc.ordered > N / 2); /* most leaves are cells of the grid */
+    qk_tree_free(t);
+  }
+  free(seen);
+  free(p);
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_build_deep_grid_lines),
       cmocka_unit_test(test_build_threads_adversarial),
       cmocka_unit_test(test_build_tree_beside_sort),
+      cmocka_unit_test(test_build_streamed_order),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
