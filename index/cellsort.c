@@ -45,6 +45,16 @@
 #define QK__CELL_AVX2 0
 #endif
 
+int qk__build_avx2_off;
+
+int qk__build_avx2(void) {
+#if QK__CELL_AVX2
+  return !qk__build_avx2_off && __builtin_cpu_supports("avx2");
+#else
+  return 0;
+#endif
+}
+
 /* Reading ahead, where the compiler offers it. */
 #if defined(__GNUC__)
 #define QK__PREFETCH(p) __builtin_prefetch(p)
@@ -880,7 +890,7 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
   /* Up to 2^(32 - fbits) points (2^23 at the deepest grid), a tag holds the index itself. */
   j.gid = ((uint64_t)n << fbits) <= ((uint64_t)1 << 32);
 #if QK__CELL_AVX2
-  j.avx2 = __builtin_cpu_supports("avx2");
+  j.avx2 = qk__build_avx2();
 #endif
   run_pass(&j, keys_share, keys_job);
   /* The buckets' starts, and each share's segment of every bucket: the shares before it

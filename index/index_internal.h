@@ -233,6 +233,14 @@ void qk__cell_wait(qk__cell_wait_t *w, uint32_t cell);
 qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned L, unsigned nw,
                           qk__cell_hook_t *hook, uint32_t **cum, size_t *deep);
 
+/* Nonzero: the build's passes take their SSE2 or plain paths even where the processor
+ * has AVX2 (index/cellsort.c), so tests cover both on one machine. 0 by default. */
+extern int qk__build_avx2_off;
+
+/* Whether the build may use its AVX2 paths: the processor has them and they are not
+ * turned off. */
+int qk__build_avx2(void);
+
 /* Bulk build by bucketing into a uniform grid (index/build.c). Sets *done when it built
  * the tree; leaves it false (and the tree untouched) when the plain build should run. */
 qk_status_t qk__build_bucketed(qk_tree_t *t, const qk_point_t *p, size_t n, bool *done);

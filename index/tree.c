@@ -412,7 +412,7 @@ static void bbox_share(void *ctx, unsigned w, unsigned nw) {
   qk__share_range(j->n, w, nw, &lo, &hi);
   const qk_point_t *p = j->p;
 #if QK__TREE_AVX2
-  if (__builtin_cpu_supports("avx2")) {
+  if (qk__build_avx2()) {
     bbox_avx2(p, lo, hi, &j->box[w], &j->finite[w]);
     return;
   }
