@@ -29,7 +29,7 @@ typedef struct cnode {
   uint32_t child; /* first of four children, or QK_NONE for a leaf */
   uint32_t start; /* a leaf's first slot */
   uint32_t count; /* a leaf's number of items */
-  uint32_t quad;  /* an internal node's entry in quads (QK_NONE when there are none) */
+  uint32_t quad;  /* an internal node's entry in quads (QK_NONE: none, or not prepared) */
 } cnode_t;
 
 /*
@@ -281,12 +281,12 @@ static uint8_t grid_step(double v, double lo, double sc, int up) {
 
 /* Pre-order: an internal node's qnode_t, then those of its internal children, so that a
  * descent mostly moves forward in memory. Returns the node's entry in quads. */
-/* The subtrees that a threaded build fills in parallel (see fill_boxes_and_quads). */
+/* The subtrees that a threaded build fills in parallel (see fill_boxes and fill_quads). */
 #define SPLIT_DEPTH 3
 #define SPLIT_MAX 64 /* 4^SPLIT_DEPTH */
 typedef struct split {
   uint32_t node[SPLIT_MAX];  /* roots: the nodes at SPLIT_DEPTH and shallower leaves */
-  uint32_t n_int[SPLIT_MAX]; /* their internal non-empty nodes (qnode_t entries) */
+  uint32_t n_int[SPLIT_MAX]; /* their internal non-empty nodes (qnode_t entries: count_quads) */
   uint32_t base[SPLIT_MAX];  /* their first entry in quads */
   qk_box_t box[SPLIT_MAX];   /* their item boxes, unrounded */
   unsigned n, iter;
