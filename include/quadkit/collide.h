@@ -67,11 +67,13 @@ void qk_collider_free(qk_collider_t *c);
  * now. Optional: qk_collider_build() does not make them, so a collider used for pairs and
  * overlap queries alone never pays for them; the first qk_collider_raycast() or
  * qk_collider_raycast_batch() makes them otherwise (safely when several threads cast at
- * once: one makes them, the others wait; that cast allocates them from the collider's
- * allocator). Call it after the build so that the first cast does not pay for them. Idempotent;
- * uses the collider's threads (qk_collider_set_threads()) and must not run concurrently with that
- * call. \param [in,out] c the collider. \return QK_OK, QK_ERR_INVALID (c NULL) or QK_ERR_NOMEM
- * (nothing kept: the collider is as before and a later call, or cast, tries again).
+ * once: one makes them, from the collider's allocator, and the others wait). Call it
+ * after the build so that the first cast does not pay for them. Idempotent; uses the
+ * collider's threads (qk_collider_set_threads()) and must not run concurrently with that
+ * call.
+ * \param [in,out] c the collider.
+ * \return QK_OK, QK_ERR_INVALID (c NULL) or QK_ERR_NOMEM (nothing kept: the collider is
+ *         as before and a later call, or cast, tries again).
  */
 qk_status_t qk_collider_prepare_rays(qk_collider_t *c);
 
