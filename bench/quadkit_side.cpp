@@ -141,7 +141,7 @@ bool quadkit_collide(const std::vector<Box> &boxes, PairSum &out, unsigned threa
   qk_status_t st = qk_collider_build(nullptr, 0, reinterpret_cast<const qk_box_t *>(boxes.data()),
                                      boxes.size(), &o, &c);
   if (st) die("qk_collider_build", st);
-  qk_collider_pairs(c, pair_fn, &out);
+  qk_collider_pairs(c, pair_fn, &out); // no rays: their structures are never made
   qk_collider_free(c);
   return true;
 }
@@ -157,6 +157,10 @@ QuadkitDiscs *quadkit_discs_build(const std::vector<double> &xyr) {
   const qk_tree_options_t o = collider_options();
   qk_status_t st = qk_collider_build(d.data(), d.size(), nullptr, 0, &o, &s->c);
   if (st) die("qk_collider_build", st);
+  // The ray structures are made on first need; made here they count as the build, as
+  // Embree's rtcCommitScene builds its BVH before the first ray.
+  st = qk_collider_prepare_rays(s->c);
+  if (st) die("qk_collider_prepare_rays", st);
   return s;
 }
 

@@ -61,6 +61,9 @@ void qk__collider_pairs_serial(const qk_collider_t *c, qk_pair_fn fn, void *ud);
 /* qk_collider_pairs() on the collider's threads: QK_OK, or QK_ERR_NOMEM (nothing
  * reported yet: the caller then runs the serial search). */
 qk_status_t qk__collider_pairs_threaded(const qk_collider_t *c, qk_pair_fn fn, void *ud);
+/* The ray cast's structures for a cast on a const collider, made on first need
+ * (qk_collider_prepare_rays): QK_OK or QK_ERR_NOMEM. The fast path is one acquire load. */
+qk_status_t qk__collider_rays_ready(const qk_collider_t *c);
 /* The threads option as set (0: every online core), and the allocator. */
 uint32_t qk__collider_threads(const qk_collider_t *c);
 const qk_allocator_t *qk__collider_alloc(const qk_collider_t *c);

@@ -7,6 +7,7 @@
  * largest item needs, and no more.
  */
 #include <float.h>
+#include <stdatomic.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -28,7 +29,7 @@ typedef struct cnode {
   uint32_t child; /* first of four children, or QK_NONE for a leaf */
   uint32_t start; /* a leaf's first slot */
   uint32_t count; /* a leaf's number of items */
-  uint32_t quad;  /* an internal node's entry in quads (QK_NONE when there are none) */
+  uint32_t quad;  /* an internal node's entry in quads (QK_NONE: none, or not prepared) */
 } cnode_t;
 
 /*
@@ -79,6 +80,8 @@ typedef struct sdisc {
  * that scanning a leaf reads consecutive memory instead of jumping to each item's id: for large
  * sets that is what the scans cost.
  */
+enum { RAYS_NONE = 0, RAYS_BUSY = 1, RAYS_READY = 2 };
+
 struct qk_collider {
   qk_allocator_t alloc;
   qk_tree_t *tree;
@@ -92,6 +95,10 @@ struct qk_collider {
   void *cn_block; /* the allocation holding cn (aligned inside it) */
   size_t cn_bytes;
   size_t n_nodes;
+  /* The ray cast's structures, made on first need (qk_collider_prepare_rays): rays_state
+   * RAYS_NONE, RAYS_BUSY while one thread makes them, RAYS_READY once they are made (the
+   * other fields below are then set, and read only after an acquire load of it). */
+  atomic_int rays_state;
   qnode_t *quads;    /* per internal node (cnode_t::quad), 64-byte aligned; NULL past 2^100 */
   void *quads_block; /* the allocation holding quads */
   size_t quads_bytes;
@@ -224,7 +231,7 @@ static void set_float_box(cnode_t *cn, uint32_t count, const qk_box_t *b) {
 
 /* Post-order: a node's box is the union of its children's (or its items'). Recursion
  * depth is bounded by the tree's depth cap. */
-static qk_box_t fill_node_boxes(qk_collider_t *c, uint32_t node, uint32_t *n_int) {
+static qk_box_t fill_node_boxes(qk_collider_t *c, uint32_t node) {
   const qk_tree_t *t = c->tree;
   cnode_t *cn = &c->cn[node];
   qk_box_t b = {INFINITY, INFINITY, -INFINITY, -INFINITY};
@@ -238,11 +245,10 @@ static qk_box_t fill_node_boxes(qk_collider_t *c, uint32_t node, uint32_t *n_int
     for (uint32_t i = 0; i < count; i++) box_union(&b, &c->sbox[start + i]);
   } else {
     for (uint32_t k = 0; k < 4; k++) {
-      qk_box_t cb = fill_node_boxes(c, cn->child + k, n_int);
+      qk_box_t cb = fill_node_boxes(c, cn->child + k);
       box_union(&b, &cb);
     }
   }
-  if (!leaf && count > 0) (*n_int)++; /* one qnode_t each (fill_qnodes) */
   set_float_box(cn, count, &b);
   return b; /* for an empty node the inverted box, which leaves a union unchanged */
 }
@@ -275,12 +281,12 @@ static uint8_t grid_step(double v, double lo, double sc, int up) {
 
 /* Pre-order: an internal node's qnode_t, then those of its internal children, so that a
  * descent mostly moves forward in memory. Returns the node's entry in quads. */
-/* The subtrees that a threaded build fills in parallel (see fill_boxes_and_quads). */
+/* The subtrees that a threaded build fills in parallel (see fill_boxes and fill_quads). */
 #define SPLIT_DEPTH 3
 #define SPLIT_MAX 64 /* 4^SPLIT_DEPTH */
 typedef struct split {
   uint32_t node[SPLIT_MAX];  /* roots: the nodes at SPLIT_DEPTH and shallower leaves */
-  uint32_t n_int[SPLIT_MAX]; /* their internal non-empty nodes (qnode_t entries) */
+  uint32_t n_int[SPLIT_MAX]; /* their internal non-empty nodes (qnode_t entries: count_quads) */
   uint32_t base[SPLIT_MAX];  /* their first entry in quads */
   qk_box_t box[SPLIT_MAX];   /* their item boxes, unrounded */
   unsigned n, iter;
@@ -363,7 +369,42 @@ static qk_box_t fill_top_boxes(qk_collider_t *c, uint32_t node, unsigned depth, 
 
 static void boxes_job(unsigned i, void *ud) {
   split_t *sp = ud;
-  sp->box[i] = fill_node_boxes(sp->c, sp->node[i], &sp->n_int[i]);
+  sp->box[i] = fill_node_boxes(sp->c, sp->node[i]);
+}
+
+/*
+ * The node boxes, on the build's threads: the subtrees below SPLIT_DEPTH are independent
+ * (each writes its own nodes' boxes), so they are filled in parallel, the levels above
+ * them by the calling thread. The arrays are the same whatever the threads.
+ */
+static void fill_boxes(qk_collider_t *c, unsigned threads) {
+  split_t *sp = NULL;
+  if (threads > 1) sp = qk__realloc(&c->alloc, NULL, 0, sizeof *sp);
+  if (!sp) { /* one thread (or no memory for the plan: the same arrays, serially) */
+    fill_node_boxes(c, 0);
+    return;
+  }
+  sp->n = sp->iter = 0;
+  sp->c = c;
+  split_roots(c, 0, 0, sp);
+  qk__run_jobs(threads, sp->n, boxes_job, sp);
+  fill_top_boxes(c, 0, 0, sp);
+  qk__free(&c->alloc, sp, sizeof *sp);
+}
+
+/* The internal non-empty nodes of a subtree: its qnode_t entries. Recursion depth is
+ * bounded by the tree's depth cap. */
+static uint32_t count_quads(const qk_collider_t *c, uint32_t node) {
+  const cnode_t *cn = &c->cn[node];
+  if (cn->child == QK_NONE || cn->xmin == INFINITY) return 0;
+  uint32_t n = 1;
+  for (uint32_t k = 0; k < 4; k++) n += count_quads(c, cn->child + k);
+  return n;
+}
+
+static void count_job(unsigned i, void *ud) {
+  split_t *sp = ud;
+  sp->n_int[i] = count_quads(sp->c, sp->node[i]);
 }
 
 static void quads_job(unsigned i, void *ud) {
@@ -375,34 +416,28 @@ static void quads_job(unsigned i, void *ud) {
 }
 
 /*
- * The node boxes and the ray cast's nodes, on the build's threads: the subtrees below
- * SPLIT_DEPTH are independent (each writes its own nodes' entries), so they are filled in
- * parallel, the levels above them by the calling thread. The quads entries are numbered
- * as the one-thread pre-order numbers them (each subtree's count is known from its boxes'
- * pass), so the arrays are the same whatever the threads.
+ * The ray cast's nodes from the node boxes, on `threads` threads: as for the boxes, the
+ * subtrees below SPLIT_DEPTH are filled in parallel and the levels above them by the
+ * calling thread. The entries are numbered as the one-thread pre-order numbers them (each
+ * subtree's count is taken first), so the array is the same whatever the threads.
  */
-static void fill_boxes_and_quads(qk_collider_t *c, unsigned threads) {
+static void fill_quads(qk_collider_t *c, unsigned threads) {
+  if (c->cn[0].child == QK_NONE || c->cn[0].xmin == INFINITY) return;
   split_t *sp = NULL;
   if (threads > 1) sp = qk__realloc(&c->alloc, NULL, 0, sizeof *sp);
-  if (!sp) { /* one thread (or no memory for the plan: the same arrays, serially) */
-    uint32_t n_int = 0;
-    fill_node_boxes(c, 0, &n_int);
-    if (c->quads && c->cn[0].child != QK_NONE && c->cn[0].xmin != INFINITY)
-      fill_qnodes(c, 0, &c->n_quads, NULL, 0);
+  if (!sp) { /* one thread (or no memory for the plan: the same array, serially) */
+    fill_qnodes(c, 0, &c->n_quads, NULL, 0);
     return;
   }
   sp->n = sp->iter = 0;
   sp->c = c;
   split_roots(c, 0, 0, sp);
-  qk__run_jobs(threads, sp->n, boxes_job, sp);
-  fill_top_boxes(c, 0, 0, sp);
-  if (c->quads && c->cn[0].child != QK_NONE && c->cn[0].xmin != INFINITY) {
-    if (sp->n == 1) { /* the root is the only subtree */
-      fill_qnodes(c, 0, &c->n_quads, NULL, 0);
-    } else {
-      fill_qnodes(c, 0, &c->n_quads, sp, 0);
-      qk__run_jobs(threads, sp->n, quads_job, sp);
-    }
+  if (sp->n == 1) { /* the root is the only subtree */
+    fill_qnodes(c, 0, &c->n_quads, NULL, 0);
+  } else {
+    qk__run_jobs(threads, sp->n, count_job, sp);
+    fill_qnodes(c, 0, &c->n_quads, sp, 0);
+    qk__run_jobs(threads, sp->n, quads_job, sp);
   }
   qk__free(&c->alloc, sp, sizeof *sp);
 }
@@ -473,15 +508,22 @@ static inline int cbox_box(const cnode_t *n, const qk_box_t *b) {
   return n->xmin <= b->xmax && b->xmin <= n->xmax && n->ymin <= b->ymax && b->ymin <= n->ymax;
 }
 
+/* Free the ray cast's structures (all, or what a failed preparation made) and forget them. */
+static void free_rays(qk_collider_t *c) {
+  qk__free(&c->alloc, c->quads_block, c->quads_bytes);
+  qk__free(&c->alloc, c->ztab, c->ztab_bytes);
+  qk__free(&c->alloc, c->qparent, c->n_quads * sizeof *c->qparent);
+  c->quads_block = NULL, c->quads = NULL, c->quads_bytes = 0, c->n_quads = 0;
+  c->ztab = NULL, c->qparent = NULL, c->ztab_bytes = 0, c->zdepth = 0;
+}
+
 void qk_collider_free(qk_collider_t *c) {
   if (!c) return;
   qk_allocator_t a = c->alloc;
+  free_rays(c);
   qk__free(&a, c->sbox, c->n_slots * sizeof *c->sbox);
   qk__free(&a, c->sdisc_block, c->sdisc_bytes);
   qk__free(&a, c->cn_block, c->cn_bytes);
-  qk__free(&a, c->quads_block, c->quads_bytes);
-  qk__free(&a, c->ztab, c->ztab_bytes);
-  qk__free(&a, c->qparent, c->n_quads * sizeof *c->qparent);
   qk_tree_free(c->tree);
   qk__free(&a, c, sizeof *c);
 }
@@ -632,26 +674,16 @@ static qk_status_t alloc_arrays(qk_collider_t *c) {
   c->cn_bytes = (c->n_nodes + 3) * sizeof(cnode_t) + 64;
   c->cn_block = qk__realloc(a, NULL, 0, c->cn_bytes);
   if (c->cn_block) c->cn = (cnode_t *)(((uintptr_t)c->cn_block + 63) & ~(uintptr_t)63) + 3;
-  /* Every internal node has four children, so there are at most n_nodes / 4 of them; each
-   * entry is one cache line. Items beyond 2^100 take the general test only (fact 2's
-   * range), and their boxes need not fit a float grid: no entries then. */
-  if (c->mag <= 0x1p100) {
-    c->quads_bytes = (c->n_nodes / 4 + 1) * sizeof(qnode_t) + 64;
-    c->quads_block = qk__realloc(a, NULL, 0, c->quads_bytes);
-    if (c->quads_block) c->quads = (qnode_t *)(((uintptr_t)c->quads_block + 63) & ~(uintptr_t)63);
-  }
-  if (!c->sbox || (c->n_discs && !c->sdisc) || !c->cn_block || (c->quads_bytes && !c->quads_block))
-    return QK_ERR_NOMEM;
+  if (!c->sbox || (c->n_discs && !c->sdisc) || !c->cn_block) return QK_ERR_NOMEM;
   /* Before the first touch, so that the pages are huge from the start. A ray jumps
-   * across the disc records and the ray entries, one or two lines per 4 KiB page, so
-   * those two arrays are always advised (as Embree advises its BVH on Linux): the rays
-   * then miss the TLB far less (10^6 discs: some 14 % less CPU time a ray) and the
-   * build pays nothing measurable (fewer page faults). Advising all four arrays cost the
-   * build at 10^7 discs up to 0.7 s more kernel time in 3.4 s (docs/collide.md), which
-   * is why the other searches' two arrays are left to the hint. qk__advise_huge skips
-   * arrays below 4 MB and custom allocators. */
+   * across the disc records and the ray entries (prepare_rays), one or two lines per
+   * 4 KiB page, so those two arrays are always advised (as Embree advises its BVH on
+   * Linux): the rays then miss the TLB far less (10^6 discs: some 14 % less CPU time a
+   * ray) and the build pays nothing measurable (fewer page faults). Advising all four
+   * arrays cost the build at 10^7 discs up to 0.7 s more kernel time in 3.4 s
+   * (docs/collide.md), which is why the other searches' two arrays are left to the hint.
+   * qk__advise_huge skips arrays below 4 MB and custom allocators. */
   qk__advise_huge(a, c->sdisc_block, c->sdisc_bytes);
-  qk__advise_huge(a, c->quads_block, c->quads_bytes);
   if (c->huge_pages) {
     qk__advise_huge(a, c->sbox, c->n_slots * sizeof *c->sbox);
     qk__advise_huge(a, c->cn_block, c->cn_bytes);
@@ -709,14 +741,64 @@ static qk_status_t fill_slots(qk_collider_t *c, const qk_disc_t *discs, const qk
     c->reach = run_ranges(&x, c->n, ids_range);
   }
   unsigned threads = qk__threads_resolve(c->threads);
-  fill_boxes_and_quads(c, c->n < RANGE_PAR_MIN ? 1 : threads);
+  fill_boxes(c, c->n < RANGE_PAR_MIN ? 1 : threads);
   /* (A root square below 2^-900 would make side / 2^32 subnormal: no local start.) */
   const qk_square_t rs = qk__tree_root_square(c->tree);
   c->rs_x = rs.x, c->rs_y = rs.y;
   c->rs_f = rs.side > 0x1p-900 ? 0x1p32 / rs.side : NAN;
   c->rs_unit = rs.side * 0x1p-32;
   c->rs_k = (fabs(rs.x) + fabs(rs.y) + rs.side) * 0x1p-45;
-  return c->n_quads ? build_ztab(c) : QK_OK;
+  return QK_OK;
+}
+
+/*
+ * Make the ray cast's structures from the node boxes: the 4-wide entries (quads), then
+ * the start table and the entries' parents (build_ztab). Every internal node has four
+ * children, so there are at most n_nodes / 4 of them; each entry is one cache line.
+ * Items beyond 2^100 take the general test only (fact 2's range), and their boxes need
+ * not fit a float grid: no entries then. On failure nothing is kept.
+ */
+static qk_status_t prepare_rays(qk_collider_t *c) {
+  if (c->mag > 0x1p100) return QK_OK;
+  c->quads_bytes = (c->n_nodes / 4 + 1) * sizeof(qnode_t) + 64;
+  c->quads_block = qk__realloc(&c->alloc, NULL, 0, c->quads_bytes);
+  if (!c->quads_block) {
+    c->quads_bytes = 0;
+    return QK_ERR_NOMEM;
+  }
+  c->quads = (qnode_t *)(((uintptr_t)c->quads_block + 63) & ~(uintptr_t)63);
+  qk__advise_huge(&c->alloc, c->quads_block, c->quads_bytes); /* see alloc_arrays */
+  fill_quads(c, c->n < RANGE_PAR_MIN ? 1 : qk__threads_resolve(c->threads));
+  qk_status_t st = c->n_quads ? build_ztab(c) : QK_OK;
+  if (st != QK_OK) free_rays(c);
+  return st;
+}
+
+qk_status_t qk_collider_prepare_rays(qk_collider_t *c) {
+  if (!c) return QK_ERR_INVALID;
+  /* Once-only initialisation that may fail: the thread that moves the state from NONE to
+   * BUSY prepares, the others wait (yielding) until it is READY, or NONE again after a
+   * failure, when the next of them tries in turn. */
+  for (;;) {
+    int s = atomic_load_explicit(&c->rays_state, memory_order_acquire);
+    if (s == RAYS_READY) return QK_OK;
+    if (s == RAYS_NONE &&
+        atomic_compare_exchange_strong_explicit(&c->rays_state, &s, RAYS_BUSY, memory_order_acquire,
+                                                memory_order_acquire)) {
+      const qk_status_t st = prepare_rays(c);
+      atomic_store_explicit(&c->rays_state, st == QK_OK ? RAYS_READY : RAYS_NONE,
+                            memory_order_release);
+      return st;
+    }
+    if (s == RAYS_BUSY) qk__thread_yield();
+  }
+}
+
+qk_status_t qk__collider_rays_ready(const qk_collider_t *c) {
+  if (atomic_load_explicit(&c->rays_state, memory_order_acquire) == RAYS_READY) return QK_OK;
+  /* The collider was not made const (qk_collider_build allocates it); only the ray
+   * fields change, under the state above. */
+  return qk_collider_prepare_rays((qk_collider_t *)c);
 }
 
 qk_status_t qk_collider_build(const qk_disc_t *discs, size_t n_discs, const qk_box_t *boxes,
@@ -739,6 +821,7 @@ qk_status_t qk_collider_build(const qk_disc_t *discs, size_t n_discs, const qk_b
   c->alloc = a;
   c->threads = opt.threads;
   c->huge_pages = opt.huge_pages;
+  atomic_init(&c->rays_state, RAYS_NONE);
   c->n_discs = n_discs;
   c->n = n_discs + n_boxes;
   if ((st = build_centre_tree(c, discs, boxes, &opt)) != QK_OK || (st = alloc_arrays(c)) != QK_OK ||
@@ -1786,6 +1869,8 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
   if ((o.x - o.x) + (o.y - o.y) + (d.x - d.x) + (d.y - d.y) != 0) return QK_ERR_NONFINITE;
   if (isnan(tmax) || tmax < 0) return QK_ERR_INVALID;
   if (c->n == 0) return QK_OK;
+  const qk_status_t st = qk__collider_rays_ready(c);
+  if (st != QK_OK) return st;
   /* The cast's arithmetic squares and multiplies the direction's components with
    * coordinates and radii: a direction whose largest component is beyond 2^100 could
    * overflow there (a radius of 1e10 with a direction of 1e150 did: t = 0, or a miss) and

@@ -324,6 +324,9 @@ qk_status_t qk_collider_raycast_batch(const qk_collider_t *c, const qk_point_t *
                                       qk_hit_t *hits) {
   if (!c || (n > 0 && (!origins || !dirs || !hits))) return QK_ERR_INVALID;
   if (n == 0) return QK_OK;
+  /* The ray structures first (made on first need), so that no ray fails for want of them. */
+  qk_status_t pst = qk__collider_rays_ready(c);
+  if (pst != QK_OK) return pst;
   size_t n_jobs = (n + RAYS_PER_JOB - 1) / RAYS_PER_JOB;
   if (n_jobs > UINT32_MAX) return QK_ERR_LIMIT;
   unsigned threads = qk__threads_resolve(qk__collider_threads(c));

@@ -23,11 +23,18 @@
  *  - rays over leaves of every count up to the capacity, with discs given twice under
  *    other ids, and searches that climb, against brute force to the last bit of t;
  *  - the order of the pairs (leaf of the smaller id in pre-order, then the other's leaf,
- *    then their places in the leaves) against the oracle's set sorted into that order.
+ *    then their places in the leaves) against the oracle's set sorted into that order;
+ *  - the ray structures made on first need: a collider never cast holds none and frees
+ *    cleanly, qk_collider_prepare_rays makes them (once: a second call allocates
+ *    nothing), rays from 2 and 4 threads at once on an unprepared collider (single casts
+ *    and a batch) give the oracle's answers, and allocation failure at every N during the
+ *    preparation (by each entry point) returns QK_ERR_NOMEM, holds nothing more, and a
+ *    retry answers as the oracle.
  */
 #define _DEFAULT_SOURCE /* madvise and MADV_HUGEPAGE in <sys/mman.h> */
 #include <math.h>
 #include <pthread.h>
+#include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -1072,6 +1079,236 @@ static void test_collide_pairs_order(void **state) {
   free(d), free(b);
 }
 
+/*
+ * The ray structures are made on first need (qk_collider_prepare_rays). A scene for the
+ * tests below: items and rays with their oracle answers, large enough (above 4096 items)
+ * that a collider with threads makes its ray entries on them, and deep enough for a start
+ * table.
+ */
+enum { LZ_ND = 3000, LZ_NB = 3000, LZ_NR = 200 };
+typedef struct lazy_scene {
+  qk_disc_t d[LZ_ND];
+  qk_box_t b[LZ_NB];
+  qk_point_t org[LZ_NR], dir[LZ_NR];
+  qk_hit_t want[LZ_NR];
+} lazy_scene_t;
+
+static lazy_scene_t *lazy_scene(uint64_t seed) {
+  lazy_scene_t *s = malloc(sizeof *s);
+  assert_non_null(s);
+  qkt_rng_t r;
+  qkt_rng_seed(&r, seed);
+  make_items(&r, s->d, LZ_ND, s->b, LZ_NB, 0, 0.003);
+  for (size_t i = 0; i < LZ_NR; i++) {
+    s->org[i] = (qk_point_t){qkt_rng_range(&r, -0.1, 1.1), qkt_rng_range(&r, -0.1, 1.1)};
+    double ang = qkt_rng_range(&r, 0, 6.283185307179586);
+    s->dir[i] = (qk_point_t){cos(ang), sin(ang)};
+    s->want[i] = qko_raycast(s->d, LZ_ND, s->b, LZ_NB, s->org[i], s->dir[i], INFINITY);
+  }
+  return s;
+}
+
+/* The oracle's answers for rays [lo, hi) of the scene, hits[i - lo] for ray i. */
+static int lazy_agrees(const lazy_scene_t *s, const qk_hit_t *hits, size_t lo, size_t hi) {
+  for (size_t i = lo; i < hi; i++)
+    if (!ray_agrees(hits[i - lo], s->want[i], s->d, LZ_ND, s->b, s->org[i], s->dir[i], INFINITY))
+      return 0;
+  return 1;
+}
+
+/* A collider that is never cast holds no ray structures and frees cleanly; preparing makes
+ * them (more memory held), preparing again changes nothing, and the casts then agree
+ * with the oracle. */
+static void test_collide_rays_lazy_prepare(void **state) {
+  (void)state;
+  lazy_scene_t *s = lazy_scene(g_seed + 21);
+  locked_t l;
+  pthread_mutex_init(&l.mu, NULL);
+  qk_allocator_t a = qkt_alloc_make(&l.st);
+  a.fn = locked_fn;
+  a.ud = &l;
+  for (uint32_t threads = 1; threads <= 2; threads++) {
+    qk_tree_options_t o = opts(4);
+    o.allocator = &a;
+    o.threads = threads;
+    /* Never cast: pairs and an overlap query, then free. */
+    qk_collider_t *c = NULL;
+    assert_int_equal(qk_collider_build(s->d, LZ_ND, s->b, LZ_NB, &o, &c), QK_OK);
+    size_t np = 0;
+    assert_int_equal(qk_collider_pairs_list(c, NULL, 0, &np), QK_OK);
+    assert_true(np > 0);
+    qk_collider_free(c);
+    assert_int_equal(l.st.live_blocks, 0);
+    /* Prepared explicitly, twice. */
+    assert_int_equal(qk_collider_build(s->d, LZ_ND, s->b, LZ_NB, &o, &c), QK_OK);
+    const size_t built = l.st.live_bytes, blocks = l.st.live_blocks;
+    assert_int_equal(qk_collider_prepare_rays(c), QK_OK);
+    if (!(l.st.live_bytes > built && l.st.live_blocks >= blocks + 3))
+      fail_msg("threads %u: the build already held the ray structures (%zu bytes, then %zu)",
+               threads, built, l.st.live_bytes);
+    const size_t prepared = l.st.live_bytes;
+    qkt_alloc_arm(&l.st, 0);
+    assert_int_equal(qk_collider_prepare_rays(c), QK_OK);
+    assert_int_equal(l.st.calls, 0); /* the second call allocates nothing */
+    assert_int_equal(l.st.live_bytes, prepared);
+    qk_hit_t h[LZ_NR];
+    for (size_t i = 0; i < LZ_NR; i++)
+      assert_int_equal(qk_collider_raycast(c, s->org[i], s->dir[i], INFINITY, &h[i]), QK_OK);
+    if (!lazy_agrees(s, h, 0, LZ_NR))
+      fail_msg("threads %u: prepared casts disagree with the oracle (seed %llu)", threads,
+               (unsigned long long)g_seed);
+    assert_int_equal(qk_collider_prepare_rays(c), QK_OK);
+    assert_int_equal(l.st.live_bytes, prepared);
+    qk_collider_free(c);
+    assert_int_equal(l.st.live_blocks, 0);
+  }
+  assert_int_equal(qk_collider_prepare_rays(NULL), QK_ERR_INVALID);
+  /* An empty collider and one beyond 2^100 (no ray entries) prepare and cast too. */
+  {
+    qk_collider_t *c = NULL;
+    assert_int_equal(qk_collider_build(NULL, 0, NULL, 0, NULL, &c), QK_OK);
+    assert_int_equal(qk_collider_prepare_rays(c), QK_OK);
+    qk_hit_t h;
+    assert_int_equal(qk_collider_raycast(c, (qk_point_t){0, 0}, (qk_point_t){1, 0}, 1, &h), QK_OK);
+    assert_int_equal(h.id, QK_NONE);
+    qk_collider_free(c);
+    const qk_disc_t far[2] = {{1e120, 0, 1e119}, {3e120, 0, 1e119}};
+    assert_int_equal(qk_collider_build(far, 2, NULL, 0, NULL, &c), QK_OK);
+    assert_int_equal(qk_collider_raycast(c, (qk_point_t){0, 0}, (qk_point_t){1, 0}, INFINITY, &h),
+                     QK_OK);
+    assert_int_equal(h.id, 0);
+    assert_int_equal(qk_collider_prepare_rays(c), QK_OK);
+    qk_collider_free(c);
+  }
+  pthread_mutex_destroy(&l.mu);
+  free(s);
+}
+
+/* Rays from several threads at once on a collider not yet prepared: one of them makes the
+ * ray structures, the others wait; every answer is the oracle's. */
+typedef struct lazy_thr {
+  const qk_collider_t *c;
+  const lazy_scene_t *s;
+  atomic_int *go;
+  unsigned k;
+  int batch, ok;
+} lazy_thr_t;
+
+static void *lazy_thread(void *arg) {
+  lazy_thr_t *t = arg;
+  qk_hit_t h[LZ_NR];
+  while (!atomic_load(t->go)) {
+  } /* start together */
+  /* Each thread from its own ray, so that different rays make the first call. */
+  const size_t first = (size_t)t->k * 37 % LZ_NR;
+  t->ok = 1;
+  if (t->batch) {
+    if (qk_collider_raycast_batch(t->c, t->s->org, t->s->dir, LZ_NR, INFINITY, h) != QK_OK)
+      t->ok = 0;
+  } else {
+    for (size_t j = 0; j < LZ_NR; j++) {
+      const size_t i = (first + j) % LZ_NR;
+      if (qk_collider_raycast(t->c, t->s->org[i], t->s->dir[i], INFINITY, &h[i]) != QK_OK)
+        t->ok = 0;
+    }
+  }
+  if (t->ok) t->ok = lazy_agrees(t->s, h, 0, LZ_NR);
+  return NULL;
+}
+
+static void test_collide_rays_lazy_threads(void **state) {
+  (void)state;
+  lazy_scene_t *s = lazy_scene(g_seed + 22);
+  for (unsigned nt = 2; nt <= 4; nt += 2) {
+    for (int round = 0; round < 4; round++) {
+      qk_tree_options_t o = opts(4);
+      qk_collider_t *c = NULL;
+      assert_int_equal(qk_collider_build(s->d, LZ_ND, s->b, LZ_NB, &o, &c), QK_OK);
+      /* odd rounds: the first caller makes the ray entries on two threads of its own */
+      qk_collider_set_threads(c, round % 2 ? 2 : 1);
+      atomic_int go;
+      atomic_init(&go, 0);
+      pthread_t th[4];
+      lazy_thr_t t[4];
+      for (unsigned k = 0; k < nt; k++) {
+        t[k] = (lazy_thr_t){c, s, &go, k, round >= 2 && k == 0, 0};
+        assert_int_equal(pthread_create(&th[k], NULL, lazy_thread, &t[k]), 0);
+      }
+      atomic_store(&go, 1);
+      for (unsigned k = 0; k < nt; k++) pthread_join(th[k], NULL);
+      for (unsigned k = 0; k < nt; k++)
+        if (!t[k].ok)
+          fail_msg("%u threads, round %d: thread %u disagrees with the oracle (seed %llu)", nt,
+                   round, k, (unsigned long long)g_seed);
+      qk_collider_free(c);
+    }
+  }
+  free(s);
+}
+
+/* Allocation failure at every N while the ray structures are made, through each entry
+ * point: QK_ERR_NOMEM, nothing kept; a retry then succeeds with the oracle's answers. */
+static void test_collide_rays_lazy_nomem(void **state) {
+  (void)state;
+  lazy_scene_t *s = lazy_scene(g_seed + 23);
+  locked_t l;
+  pthread_mutex_init(&l.mu, NULL);
+  qk_allocator_t a = qkt_alloc_make(&l.st);
+  a.fn = locked_fn;
+  a.ud = &l;
+  for (uint32_t threads = 1; threads <= 2; threads++) {
+    for (int entry = 0; entry < 3; entry++) { /* prepare, raycast, batch */
+      size_t fail_at, n_nomem = 0;
+      for (fail_at = 1;; fail_at++) {
+        qkt_alloc_arm(&l.st, 0);
+        qk_tree_options_t o = opts(4);
+        o.allocator = &a;
+        o.threads = threads;
+        qk_collider_t *c = NULL;
+        assert_int_equal(qk_collider_build(s->d, LZ_ND, s->b, LZ_NB, &o, &c), QK_OK);
+        const size_t built = l.st.live_bytes, blocks = l.st.live_blocks;
+        qk_hit_t h[LZ_NR];
+        qkt_alloc_arm(&l.st, fail_at);
+        qk_status_t st;
+        if (entry == 0) {
+          st = qk_collider_prepare_rays(c);
+        } else if (entry == 1) {
+          st = qk_collider_raycast(c, s->org[0], s->dir[0], INFINITY, &h[0]);
+          if (st != QK_OK) assert_int_equal(h[0].id, QK_NONE);
+        } else {
+          st = qk_collider_raycast_batch(c, s->org, s->dir, LZ_NR, INFINITY, h);
+        }
+        const int failed = l.st.failed;
+        qkt_alloc_arm(&l.st, 0);
+        if (st == QK_OK) { /* nothing failed, or the threads' plan (then made serially) */
+          assert_false(failed && threads == 1); /* one thread: every allocation is needed */
+          qk_collider_free(c);
+          assert_int_equal(l.st.live_blocks, 0);
+          if (!failed) break;
+          continue;
+        }
+        assert_int_equal(st, QK_ERR_NOMEM);
+        n_nomem++;
+        if (l.st.live_bytes != built || l.st.live_blocks != blocks)
+          fail_msg("threads %u entry %d fail_at %zu: %zu bytes held, %zu after the build", threads,
+                   entry, fail_at, l.st.live_bytes, built);
+        /* The retry (a cast) succeeds, with the oracle's answers. */
+        for (size_t i = 0; i < LZ_NR; i++)
+          assert_int_equal(qk_collider_raycast(c, s->org[i], s->dir[i], INFINITY, &h[i]), QK_OK);
+        if (!lazy_agrees(s, h, 0, LZ_NR))
+          fail_msg("threads %u entry %d fail_at %zu: retried casts disagree (seed %llu)", threads,
+                   entry, fail_at, (unsigned long long)g_seed);
+        qk_collider_free(c);
+        assert_int_equal(l.st.live_blocks, 0);
+        assert_true(fail_at < 100);
+      }
+      assert_int_equal(n_nomem, 3); /* quads, start table, parents: each failed once */
+    }
+  }
+  pthread_mutex_destroy(&l.mu);
+  free(s);
+}
+
 int main(void) {
   g_seed = qkt_seed(7031);
   const struct CMUnitTest tests[] = {
@@ -1089,6 +1326,9 @@ int main(void) {
       cmocka_unit_test(test_collide_threads_skewed),
       cmocka_unit_test(test_collide_raycast_leaf_counts),
       cmocka_unit_test(test_collide_pairs_order),
+      cmocka_unit_test(test_collide_rays_lazy_prepare),
+      cmocka_unit_test(test_collide_rays_lazy_threads),
+      cmocka_unit_test(test_collide_rays_lazy_nomem),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }

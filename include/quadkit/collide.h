@@ -59,8 +59,23 @@ qk_status_t qk_collider_build(const qk_disc_t *discs, size_t n_discs, const qk_b
                               size_t n_boxes, const qk_tree_options_t *options,
                               qk_collider_t **out);
 
-/** Free a collider; NULL does nothing. */
+/** Free a collider (and its ray structures, if they were made); NULL does nothing. */
 void qk_collider_free(qk_collider_t *c);
+
+/**
+ * Make the structures only the ray cast uses (its 4-wide quantised nodes and start table)
+ * now. Optional: qk_collider_build() does not make them, so a collider used for pairs and
+ * overlap queries alone never pays for them; the first qk_collider_raycast() or
+ * qk_collider_raycast_batch() makes them otherwise (safely when several threads cast at
+ * once: one makes them, from the collider's allocator, and the others wait). Call it
+ * after the build so that the first cast does not pay for them. Idempotent; uses the
+ * collider's threads (qk_collider_set_threads()) and must not run concurrently with that
+ * call.
+ * \param [in,out] c the collider.
+ * \return QK_OK, QK_ERR_INVALID (c NULL) or QK_ERR_NOMEM (nothing kept: the collider is
+ *         as before and a later call, or cast, tries again).
+ */
+qk_status_t qk_collider_prepare_rays(qk_collider_t *c);
 
 /** The collider's tree of item centres (borrowed; valid while the collider lives). */
 const qk_tree_t *qk_collider_tree(const qk_collider_t *c);
@@ -137,7 +152,8 @@ qk_status_t qk_collider_pairs_list(const qk_collider_t *c, qk_pair_t *out, size_
  *             internally by a power of two, which leaves t exact).
  * \param [in] tmax the largest t considered (INFINITY for a ray).
  * \param [out] hit the hit, or {QK_NONE, INFINITY}.
- * \return QK_OK, QK_ERR_NONFINITE or QK_ERR_INVALID (tmax < 0 or NaN).
+ * \return QK_OK, QK_ERR_NONFINITE, QK_ERR_INVALID (tmax < 0 or NaN) or QK_ERR_NOMEM (the
+ *         ray structures could not be made: see qk_collider_prepare_rays()).
  */
 qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t origin, qk_point_t dir,
                                 double tmax, qk_hit_t *hit);
@@ -155,7 +171,8 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t origin, qk_po
  * \param [in] tmax the largest t considered, for every ray (INFINITY for rays).
  * \param [out] hits n hits, hits[i] for ray i.
  * \return QK_OK, QK_ERR_INVALID (NULL arrays, or tmax < 0 or NaN), QK_ERR_NOMEM (nothing
- *         cast), or the error of the lowest-numbered failed ray (QK_ERR_NONFINITE).
+ *         cast; as for qk_collider_prepare_rays() when the ray structures could not be
+ *         made), or the error of the lowest-numbered failed ray (QK_ERR_NONFINITE).
  */
 qk_status_t qk_collider_raycast_batch(const qk_collider_t *c, const qk_point_t *origins,
                                       const qk_point_t *dirs, size_t n, double tmax,
