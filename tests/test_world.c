@@ -696,6 +696,18 @@ static void test_world_thread_min_sides(void **s) {
     }
     assert_int_equal(qk_world_size(w[1]), (size_t)n_live);
     same_lists(w[0], w[1], f);
+    /* the order and cells the update filed (on threads above thread_min) answer queries */
+    for (int q = 0; q < 4; q++) {
+      qk_shape_t qs = rnd_shape(&r, SC_MIXED, 1);
+      qs.kind = QK_SHAPE_BOX;
+      qs.a = qs.x + qkt_rng_range(&r, 0, 30), qs.b = qs.y + qkt_rng_range(&r, 0, 30);
+      static qk_handle_t g0[N], g1[N];
+      size_t n0, n1;
+      assert_int_equal(qk_world_query(w[0], &qs, g0, N, &n0), QK_OK);
+      assert_int_equal(qk_world_query(w[1], &qs, g1, N, &n1), QK_OK);
+      assert_int_equal(n0, n1);
+      assert_memory_equal(g0, g1, n0 * sizeof *g0);
+    }
   }
   for (int t = 0; t < 2; t++) qk_world_free(w[t]);
 }
