@@ -387,10 +387,11 @@ static int diff(const qk_world_t *w, const qk__prows_t *o, const qk__prows_t *nw
 #define QK__RMAX 64 /* = QK__MAX_THREADS */
 typedef struct pjob {
   const qk_world_t *w;
-  const qk__prows_t *o; /* the last frame's rows */
-  qk__prows_t *r;       /* the new rows */
-  uint64_t *keys;       /* the found keys; scratch after the scatter */
-  uint64_t *part;       /* the keys by partition (not bucketed) */
+  const qk__prows_t *o;  /* the last frame's rows */
+  qk__prows_t *r;        /* the new rows */
+  uint64_t *keys;        /* the found keys; scratch after the scatter */
+  const qk__kvec_t *src; /* or NULL: chunk t's keys (the search's thread t's), else keys' */
+  uint64_t *part;        /* the keys by partition (not bucketed) */
   size_t n;
   uint32_t n_obj, np; /* slots, partitions */
   unsigned nt, pb;    /* threads, slots per partition (2^pb) */
@@ -477,26 +478,28 @@ static int range_rows(pjob_t *J, unsigned t) {
 static void pjob_run(unsigned t, void *ud) {
   pjob_t *J = ud;
   size_t k0 = J->n * t / J->nt, k1 = J->n * (t + 1) / J->nt;
+  const uint64_t *keys = J->keys;
+  if (J->src) keys = J->src[t].v, k0 = 0, k1 = J->src[t].n;
   uint32_t *c = J->pc + (size_t)t * (J->np + 1);
   const unsigned pb = J->pb;
   switch (J->phase) {
   case 0: /* count the chunk's keys by partition */
     memset(c, 0, ((size_t)J->np + 1) * sizeof *c);
-    for (size_t i = k0; i < k1; i++) c[(uint32_t)(J->keys[i] >> 32) >> pb]++;
+    for (size_t i = k0; i < k1; i++) c[(uint32_t)(keys[i] >> 32) >> pb]++;
     break;
   case 1: /* scatter the chunk into the partitions */
     if (J->bucketed) {
       uint32_t *rb = J->r->b;
       const uint32_t W = (uint32_t)1 << pb, bmul = J->g.bmask + 1;
       for (size_t i = k0; i < k1; i++) {
-        uint64_t k = J->keys[i];
+        uint64_t k = keys[i];
         uint32_t a = (uint32_t)(k >> 32);
         rb[c[a >> pb]++] = (a & (W - 1)) * bmul | (uint32_t)k;
       }
     } else {
       uint64_t *pt = J->part;
       for (size_t i = k0; i < k1; i++) {
-        uint64_t k = J->keys[i];
+        uint64_t k = keys[i];
         pt[c[(uint32_t)(k >> 32) >> pb]++] = k;
       }
     }
@@ -523,8 +526,8 @@ static void pjob_phase(pjob_t *J, int ph) {
 /* Rows, began and ended on nt threads (keys: the found keys, n of them, in a buffer of
  * at least n; used as scratch); QK_ERR_NOMEM leaves nothing allocated in *r (but b),
  * *bvo, *evo. */
-static int rows_frame(const qk_world_t *w, uint64_t *keys, size_t n, qk__prows_t *r, int dirty,
-                      unsigned nt, qk__kvec_t *bvo, qk__kvec_t *evo) {
+static int rows_frame(const qk_world_t *w, uint64_t *keys, const qk__kvec_t *src, size_t n,
+                      qk__prows_t *r, int dirty, unsigned nt, qk__kvec_t *bvo, qk__kvec_t *evo) {
   const qk_allocator_t *al = &w->alloc;
   uint32_t n_obj = w->n_obj;
   if (nt > QK__RMAX) nt = QK__RMAX;
@@ -532,6 +535,7 @@ static int rows_frame(const qk_world_t *w, uint64_t *keys, size_t n, qk__prows_t
   if (!J) return 0;
   memset(J, 0, sizeof *J);
   J->w = w, J->o = &w->cur, J->r = r, J->keys = keys, J->n = n, J->n_obj = n_obj, J->nt = nt;
+  J->src = src;
   J->dirty = dirty;
   unsigned ab, bb;
   if (n * 4 >= n_obj && bucket_plan(n, n_obj, &ab, &bb)) {
@@ -654,6 +658,17 @@ static void keep_rows(qk_world_t *w) {
   rows_free(al, &w->cur);
 }
 
+/* The other search threads' buffers are kept when large (as the first's: see keep_keys). */
+static void keep_tkeys(qk_world_t *w, qk__kvec_t *tk) {
+  for (unsigned t = 0; t < QK__KEEP_THREADS; t++) {
+    if (keep_buf(tk[t].cap, tk[t].n + 32, sizeof *tk[t].v))
+      w->scr_tkeys[t] = tk[t], w->scr_tkeys[t].n = 0;
+    else
+      qk__free(&w->alloc, tk[t].v, tk[t].cap * sizeof *tk[t].v);
+    tk[t] = (qk__kvec_t){0};
+  }
+}
+
 qk_status_t qk_world_update(qk_world_t *w) {
   if (!w) return QK_ERR_INVALID;
   const qk_allocator_t *al = &w->alloc;
@@ -668,24 +683,41 @@ qk_status_t qk_world_update(qk_world_t *w) {
   w->scr_keys = (qk__kvec_t){0};
   memcpy(tk, w->scr_tkeys, sizeof tk);
   memset(w->scr_tkeys, 0, sizeof w->scr_tkeys);
-  qk_status_t st = qk__world_search(w, &pk, &found, tk);
+  int split;
+  qk_status_t st = qk__world_search(w, &pk, &found, tk, &split);
   qk__world_pack_free(w, &pk);
-  /* The other threads' buffers are kept when large (as the first's: see keep_keys). */
-  for (unsigned t = 0; t < QK__KEEP_THREADS; t++) {
-    if (keep_buf(tk[t].cap, tk[t].n + 32, sizeof *tk[t].v))
-      w->scr_tkeys[t] = tk[t], w->scr_tkeys[t].n = 0;
-    else
-      qk__free(al, tk[t].v, tk[t].cap * sizeof *tk[t].v);
+  unsigned nt = w->n_live < 4096 ? 1 : qk__world_update_threads(w);
+  if (nt > QK__RMAX) nt = QK__RMAX;
+  /* The keys of the search's threads: left where they were found when the rows run on
+   * as many threads (each reads its own in the rows' first pass), else joined here. */
+  qk__kvec_t src[1 + QK__KEEP_THREADS];
+  size_t total = found.n;
+  if (split) {
+    for (unsigned t = 0; t < QK__KEEP_THREADS; t++) {
+      total += tk[t].n;
+      if (tk[t].n && t + 1 >= nt) split = 0; /* (not expected: the same threads) */
+    }
+    if (nt > 1 + QK__KEEP_THREADS) split = 0;
+    if (!split) { /* (found's room holds them all) */
+      for (unsigned t = 0; t < QK__KEEP_THREADS; t++) {
+        if (tk[t].n) memcpy(found.v + found.n, tk[t].v, tk[t].n * sizeof *found.v);
+        found.n += tk[t].n;
+      }
+    } else {
+      src[0] = found;
+      for (unsigned t = 1; t < nt; t++) src[t] = tk[t - 1];
+    }
   }
-  if (st != QK_OK) return st;
-  if (found.n > UINT32_MAX) { /* (rows and counts hold 32-bit positions) */
+  if (st != QK_OK || total > UINT32_MAX) { /* (rows and counts hold 32-bit positions) */
+    keep_tkeys(w, tk);
+    if (st != QK_OK) return st;
     qk__free(al, found.v, found.cap * sizeof *found.v);
     return QK_ERR_LIMIT;
   }
   /* Everything else the update needs, before anything changes: the new rows and the
    * began and ended lists (sized by the last frame's, grown as needed): a failure keeps
    * the last frame's lists. */
-  size_t total = found.n, n_obj = w->n_obj, tcap = total ? total : 1;
+  size_t n_obj = w->n_obj, tcap = total ? total : 1;
   int dirty = w->ident_dirty, ok = 0;
   qk__prows_t nr = {0};
   qk__kvec_t bv = {0}, ev = {0};
@@ -698,10 +730,9 @@ qk_status_t qk_world_update(qk_world_t *w) {
     size_t c = tcap * sizeof *nr.b >= QK__KEEP_BYTES ? tcap + tcap / 8 + 64 : tcap;
     if ((nr.b = qk__realloc(al, NULL, 0, c * sizeof *nr.b))) nr.cap = c;
   }
-  unsigned nt = w->n_live < 4096 ? 1 : qk__world_update_threads(w);
   if (nr.b && nt > 1) {
     /* on threads: the same sorts and merge, by ranges of slots */
-    ok = rows_frame(w, found.v, total, &nr, dirty, nt, &bv, &ev);
+    ok = rows_frame(w, found.v, split ? src : NULL, total, &nr, dirty, nt, &bv, &ev);
   } else if (nr.b) {
     /* one thread: the keys sorted into rows, then merged with the last frame's */
     size_t ccap = total * 4 < n_obj ? 257 : rows_cnt((uint32_t)n_obj, total);
@@ -724,6 +755,7 @@ qk_status_t qk_world_update(qk_world_t *w) {
     ok = ev.v && diff(w, &w->cur, &nr, dirty, &bv, &ev);
   }
   if (ok) w->last_found = total;
+  keep_tkeys(w, tk);
   keep_keys(w, &found, total);
   size_t n_eg = 0;
   if (dirty)

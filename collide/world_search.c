@@ -905,7 +905,8 @@ static qk_status_t search_nomem(const qk_world_t *w, qk__kvec_t *found, qk__kvec
 }
 
 qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kvec_t *out,
-                             qk__kvec_t *tk) {
+                             qk__kvec_t *tk, int *split) {
+  *split = 0;
   qk__kvec_t found = *out;
   found.n = 0;
   *out = (qk__kvec_t){0};
@@ -989,7 +990,10 @@ qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kve
       st = QK_ERR_NOMEM;
     }
   }
-  if (st == QK_OK) {
+  /* With threads for the rows too (qk_world_update), the threads' keys stay where they
+   * are: the rows' first pass reads each thread's own (no serial copy here). */
+  int keep_split = nt > 1 && nt <= 1 + QK__KEEP_THREADS;
+  if (st == QK_OK && !keep_split) {
     for (unsigned t = 1; t < nt; t++) {
       if (shares[t].out.n)
         memcpy(found.v + found.n, shares[t].out.v, shares[t].out.n * sizeof(uint64_t));
@@ -1007,6 +1011,7 @@ qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kve
     qk__free(&w->alloc, found.v, found.cap * sizeof *found.v);
     found = (qk__kvec_t){0};
   }
+  *split = st == QK_OK && keep_split;
   *out = found;
   return st;
 }
