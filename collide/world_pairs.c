@@ -397,12 +397,14 @@ typedef struct pjob {
   unsigned nt, pb;    /* threads, slots per partition (2^pb) */
   int dirty, phase, bucketed;
   bdig_t g;
-  uint32_t *pc;              /* nt (np + 1): per chunk, counts by partition, then cursors */
-  uint32_t *pst;             /* np + 1: the partitions' starts */
-  uint32_t *ca;              /* bucketed: the rows' counts, n_obj + 1 */
-  uint32_t rp[QK__RMAX + 1]; /* the threads' partition ranges */
-  qk__prows_t lr[QK__RMAX];  /* each range's rows (starts from the range's first key) */
-  size_t nzo[QK__RMAX + 1];  /* the ranges' first rows in the result */
+  uint32_t *pc;                      /* nt (np + 1): per chunk, counts by partition, then cursors */
+  uint32_t *pst;                     /* np + 1: the partitions' starts */
+  uint32_t *ca;                      /* bucketed: the rows' counts, n_obj + 1 */
+  uint32_t rp[QK__RMAX + 1];         /* the threads' partition ranges */
+  qk__prows_t lr[QK__RMAX];          /* each range's rows (starts from the range's first key) */
+  size_t nzo[QK__RMAX + 1];          /* the ranges' first rows in the result */
+  qk__kvec_t bj, ej;                 /* the ranges' began and ended lists joined (phase 3) */
+  size_t bo[QK__RMAX], eo[QK__RMAX]; /* the ranges' places in them */
   qk__kvec_t bv[QK__RMAX], ev[QK__RMAX];
   int nomem[QK__RMAX];
 } pjob_t;
@@ -514,6 +516,9 @@ static void pjob_run(unsigned t, void *ud) {
     size_t z = J->nzo[t];
     if (lr->n_nz) memcpy(r->row + z, lr->row, lr->n_nz * sizeof *r->row);
     for (size_t k = 0; k < lr->n_nz; k++) r->start[z + k] = base + lr->start[k];
+    /* and its began and ended lists into the joined ones */
+    if (J->bv[t].n) memcpy(J->bj.v + J->bo[t], J->bv[t].v, J->bv[t].n * sizeof *J->bj.v);
+    if (J->ev[t].n) memcpy(J->ej.v + J->eo[t], J->ev[t].v, J->ev[t].n * sizeof *J->ej.v);
   }
   }
 }
@@ -578,26 +583,21 @@ static int rows_frame(const qk_world_t *w, uint64_t *keys, const qk__kvec_t *src
   if (!rows_alloc(al, r, nz)) goto out;
   r->n = n;
   r->start[nz] = (uint32_t)n;
+  /* The joined began and ended lists (each range copies its own into them in phase 3,
+   * so the calling thread copies nothing), at least one entry each. */
+  size_t bt = 0, et = 0;
+  for (t = 0; t < nt; t++) J->bo[t] = bt, bt += J->bv[t].n, J->eo[t] = et, et += J->ev[t].n;
+  if (!(J->bj.v = qk__realloc(al, NULL, 0, (bt ? bt : 1) * sizeof *J->bj.v))) goto out;
+  J->bj.n = bt, J->bj.cap = bt ? bt : 1;
+  if (!(J->ej.v = qk__realloc(al, NULL, 0, (et ? et : 1) * sizeof *J->ej.v))) goto out;
+  J->ej.n = et, J->ej.cap = et ? et : 1;
   pjob_phase(J, 3);
-  /* Thread 0's lists take the others'. */
-  for (int which = 0; which < 2; which++) {
-    qk__kvec_t *v = which ? J->ev : J->bv;
-    size_t tot = 0;
-    for (t = 0; t < nt; t++) tot += v[t].n;
-    if (tot > v[0].cap) {
-      uint64_t *p = qk__realloc(al, v[0].v, v[0].cap * sizeof *p, tot * sizeof *p);
-      if (!p) goto out;
-      v[0].v = p, v[0].cap = tot;
-    }
-    for (t = 1; t < nt; t++) {
-      if (v[t].n) memcpy(v[0].v + v[0].n, v[t].v, v[t].n * sizeof *v[t].v);
-      v[0].n += v[t].n;
-    }
-  }
-  *bvo = J->bv[0], *evo = J->ev[0];
-  J->bv[0] = J->ev[0] = (qk__kvec_t){0};
+  *bvo = J->bj, *evo = J->ej;
+  J->bj = J->ej = (qk__kvec_t){0};
   ok = 1;
 out:
+  qk__free(al, J->bj.v, J->bj.cap * sizeof(uint64_t));
+  qk__free(al, J->ej.v, J->ej.cap * sizeof(uint64_t));
   for (t = 0; t < nt; t++) {
     qk__free(al, J->bv[t].v, J->bv[t].cap * sizeof(uint64_t));
     qk__free(al, J->ev[t].v, J->ev[t].cap * sizeof(uint64_t));
