@@ -834,11 +834,17 @@ qk_status_t qk_world_pairs(const qk_world_t *w, qk_pairs_which_t which, qk_world
     return QK_OK;
   }
   if (which != QK_PAIRS_ALL) return QK_ERR_INVALID;
-  const qk__prows_t *r = &w->cur;
-  for (size_t k = 0; k < r->n_nz; k++) {
-    qk_handle_t ha = qk__uhandle(w, r->row[k]);
-    for (size_t i = r->start[k], e = r->start[k + 1]; i < e; i++)
-      if (fn(ha, qk__uhandle(w, r->b[i]), ud)) return QK_OK;
+  /* The arrays in locals: fn may write any memory the compiler knows of, so fields read
+   * through w in the loop would be read again after every call. */
+  const uint32_t *row = w->cur.row, *start = w->cur.start, *rb = w->cur.b, *ug = w->ugen;
+  const size_t n_nz = w->cur.n_nz;
+  for (size_t k = 0; k < n_nz; k++) {
+    uint32_t a = row[k];
+    qk_handle_t ha = (uint64_t)ug[a] << 32 | a;
+    for (size_t i = start[k], e = start[k + 1]; i < e; i++) {
+      uint32_t b = rb[i];
+      if (fn(ha, (uint64_t)ug[b] << 32 | b, ud)) return QK_OK;
+    }
   }
   return QK_OK;
 }
