@@ -69,13 +69,6 @@ static inline void box_join(qk_box_t *h, const qk_box_t *b) {
 
 static const qk_box_t empty_box = {INFINITY, INFINITY, -INFINITY, -INFINITY};
 
-/* Cell c of the new cells is complete: count it in its level's run. */
-static inline void count_cell(qk_world_t *w, const qk__wcell_t *cells, uint32_t c) {
-  int l = cells[c].level - QK__LMIN;
-  if (!w->lv_n[l]) w->lv_first[l] = c;
-  w->lv_n[l]++;
-}
-
 /* The boxes of cells [c0, c1) of a new order: per cell the box around its objects, per
  * object its float box and whether that is exact. */
 static void pack_cells(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
@@ -157,6 +150,174 @@ void qk__world_pack(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
   }
 }
 
+/* One merge of old cells [c0, c1) with the dirty records [j0, j1) (those that sort before
+ * old cell c1, or all that are left when c1 is the last), written from ord[m] and
+ * cells[nc] on, counting cells in lv_first / lv_n (positions in cells). */
+typedef struct merge {
+  const qk_world_t *w;
+  const drec_t *d;
+  uint32_t *ord;
+  qk__wcell_t *cells;
+  uint32_t *lv_first, *lv_n;
+  uint32_t m, nc; /* in: where to write; out: past the last written */
+} merge_t;
+
+static inline void count_in(merge_t *g, uint32_t c) {
+  int l = g->cells[c].level - QK__LMIN;
+  if (!g->lv_n[l]) g->lv_first[l] = c;
+  g->lv_n[l]++;
+}
+
+static void merge_range(merge_t *g, uint32_t c0, uint32_t c1, size_t j, size_t j1) {
+  const qk_world_t *w = g->w;
+  const drec_t *d = g->d;
+  const uint32_t *old = w->order;
+  const qk__wcell_t *oc = w->cells;
+  uint32_t *ord = g->ord, m = g->m, nc = g->nc;
+  qk__wcell_t *cells = g->cells;
+  for (uint32_t c = c0;; c++) {
+    uint64_t cly = 0;
+    uint32_t cxk = 0;
+    if (c < c1)
+      cly = (uint64_t)(uint32_t)(oc[c].level - QK__LMIN) << 32 | bias(oc[c].cy),
+      cxk = bias(oc[c].cx);
+    /* The dirty cells before old cell c (all that are left after the last one). */
+    while (j < j1 && (c == c1 || d[j].ly < cly || (d[j].ly == cly && d[j].x < cxk))) {
+      const qk__wobj_t *o = &w->obj[d[j].slot];
+      cells[nc] = (qk__wcell_t){o->u.cx, o->cy, m, o->level};
+      uint64_t ly = d[j].ly;
+      uint32_t x = d[j].x;
+      do ord[m++] = d[j++].slot;
+      while (j < j1 && d[j].ly == ly && d[j].x == x);
+      count_in(g, nc++);
+    }
+    if (c == c1) break;
+    cells[nc] = oc[c];
+    cells[nc].start = m;
+    for (uint32_t k = oc[c].start, ke = oc[c + 1].start; k < ke; k++) {
+      const qk__wobj_t *o = &w->obj[old[k]];
+      if (qk__wlive(o) && !(o->flags & QK__WDIRTY)) ord[m++] = old[k];
+    }
+    while (j < j1 && d[j].ly == cly && d[j].x == cxk) ord[m++] = d[j++].slot;
+    if (m > cells[nc].start) count_in(g, nc++); /* (one left empty is dropped) */
+  }
+  g->m = m, g->nc = nc;
+}
+
+/*
+ * The merge on the world's threads: the old cells cut into one range a thread (about
+ * equal objects), each range with the dirty records that sort from its first cell to
+ * the next range's first (the first range also those before, the last those after). A
+ * range's output is the serial merge's for those cells, and the ranges' outputs follow
+ * each other in the serial merge's order (their keys ascend from range to range). Each
+ * thread merges its range into scratch, then, once the ranges' sizes are known, copies
+ * it to its place (cell starts and level runs shifted by the ranges before it).
+ */
+#define QK__MMAX 64
+typedef struct mjob {
+  const qk_world_t *w;
+  const drec_t *d;
+  uint32_t *ord;       /* the new order */
+  qk__wcell_t *cells;  /* the new cells */
+  uint32_t *s_ord;     /* scratch: n_order + m_d */
+  qk__wcell_t *s_cell; /* scratch: n_oc + m_d */
+  int phase;
+  uint32_t c0[QK__MMAX + 1];
+  size_t j0[QK__MMAX + 1];
+  uint32_t om[QK__MMAX + 1], oc[QK__MMAX + 1]; /* the ranges' offsets in the result */
+  merge_t g[QK__MMAX];
+  uint32_t lv[QK__MMAX][2 * QK__NLEV]; /* per range: level runs (first, count) */
+} mjob_t;
+
+static void merge_run(unsigned t, void *ud) {
+  mjob_t *J = ud;
+  merge_t *g = &J->g[t];
+  /* (a range writes its scratch from its first cell's and first record's positions: at
+   * most that many entries come before it) */
+  uint32_t sm = J->w->cells[J->c0[t]].start + (uint32_t)J->j0[t];
+  uint32_t sc = J->c0[t] + (uint32_t)J->j0[t];
+  if (J->phase == 0) {
+    *g = (merge_t){J->w, J->d, J->s_ord, J->s_cell, J->lv[t], J->lv[t] + QK__NLEV, sm, sc};
+    memset(J->lv[t], 0, sizeof J->lv[t]);
+    merge_range(g, J->c0[t], J->c0[t + 1], J->j0[t], J->j0[t + 1]);
+  } else {
+    uint32_t nm = g->m - sm, ncl = g->nc - sc, dm = J->om[t] - sm;
+    if (nm) memcpy(J->ord + J->om[t], J->s_ord + sm, nm * sizeof *J->ord);
+    qk__wcell_t *dst = J->cells + J->oc[t];
+    const qk__wcell_t *src = J->s_cell + sc;
+    for (uint32_t k = 0; k < ncl; k++) dst[k] = src[k], dst[k].start += dm;
+  }
+}
+
+/* The merge on threads (see mjob_t); 0 when it is not worth them or its scratch cannot
+ * be had (the caller then merges here). */
+static int merge_threads(qk_world_t *w, const drec_t *d, size_t m_d, uint32_t *ord,
+                         qk__wcell_t *cells, uint32_t n_oc, uint32_t *m_out, uint32_t *nc_out) {
+  unsigned nt = qk__world_update_threads(w);
+  if (nt > QK__MMAX) nt = QK__MMAX;
+  if (nt < 2 || w->n_order < 4096 || n_oc < 4 * nt) return 0;
+  const qk_allocator_t *a = &w->alloc;
+  size_t so = (size_t)w->n_order + m_d, sc = (size_t)n_oc + m_d;
+  mjob_t *J = qk__realloc(a, NULL, 0, sizeof *J);
+  uint32_t *s_ord = J ? qk__realloc(a, NULL, 0, so * sizeof *s_ord) : NULL;
+  qk__wcell_t *s_cell = s_ord ? qk__realloc(a, NULL, 0, sc * sizeof *s_cell) : NULL;
+  if (!s_cell) {
+    qk__free(a, s_ord, so * sizeof *s_ord);
+    qk__free(a, J, sizeof *J);
+    return 0;
+  }
+  J->w = w, J->d = d, J->ord = ord, J->cells = cells, J->s_ord = s_ord, J->s_cell = s_cell;
+  /* Ranges of old cells of about equal objects; each range's dirty records from the
+   * first that does not sort before its first cell. */
+  const qk__wcell_t *oc = w->cells;
+  J->c0[0] = 0, J->j0[0] = 0;
+  for (unsigned t = 1; t < nt; t++) {
+    uint32_t c = cell_at(oc, n_oc, (uint32_t)((uint64_t)w->n_order * t / nt));
+    if (c < J->c0[t - 1]) c = J->c0[t - 1];
+    J->c0[t] = c;
+    size_t lo = J->j0[t - 1], hi = m_d;
+    if (c < n_oc) {
+      uint64_t cly = (uint64_t)(uint32_t)(oc[c].level - QK__LMIN) << 32 | bias(oc[c].cy);
+      uint32_t cxk = bias(oc[c].cx);
+      while (lo < hi) {
+        size_t mid = lo + (hi - lo) / 2;
+        if (d[mid].ly < cly || (d[mid].ly == cly && d[mid].x < cxk))
+          lo = mid + 1;
+        else
+          hi = mid;
+      }
+    } else {
+      lo = m_d;
+    }
+    J->j0[t] = lo;
+  }
+  J->c0[nt] = n_oc, J->j0[nt] = m_d;
+  J->phase = 0;
+  qk__run_jobs(nt, nt, merge_run, J);
+  /* The ranges' places, and the level runs (a level's cells are one run across ranges). */
+  uint32_t om = 0, ocn = 0;
+  memset(w->lv_first, 0, sizeof w->lv_first);
+  memset(w->lv_n, 0, sizeof w->lv_n);
+  for (unsigned t = 0; t < nt; t++) {
+    uint32_t sm = oc[J->c0[t]].start + (uint32_t)J->j0[t], scl = J->c0[t] + (uint32_t)J->j0[t];
+    J->om[t] = om, J->oc[t] = ocn;
+    const uint32_t *lf = J->lv[t], *ln = J->lv[t] + QK__NLEV;
+    for (int l = 0; l < QK__NLEV; l++) {
+      if (!ln[l]) continue;
+      if (!w->lv_n[l]) w->lv_first[l] = lf[l] - scl + ocn;
+      w->lv_n[l] += ln[l];
+    }
+    om += J->g[t].m - sm, ocn += J->g[t].nc - scl;
+  }
+  J->phase = 1;
+  qk__run_jobs(nt, nt, merge_run, J);
+  *m_out = om, *nc_out = ocn;
+  qk__free(a, s_cell, sc * sizeof *s_cell);
+  qk__free(a, s_ord, so * sizeof *s_ord);
+  qk__free(a, J, sizeof *J);
+  return 1;
+}
+
 void qk__world_pack_free(qk_world_t *w, qk__wpack_t *pk) {
   qk__free(&w->alloc, pk->fgrp, pk->cap_fgrp * (16 * sizeof *pk->fgrp + 4));
   qk__free(&w->alloc, pk->hb, pk->cap_hb * sizeof *pk->hb);
@@ -210,38 +371,14 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
   /* Merge, cell by cell: the old cells in order (their kept entries stay sorted: their
    * cells did not change), each preceded by the dirty cells that sort before it and
    * followed by the dirty entries of the same cell. The keys are compared once a cell,
-   * not once an object. */
-  memset(w->lv_first, 0, sizeof w->lv_first);
-  memset(w->lv_n, 0, sizeof w->lv_n);
-  const uint32_t *old = w->order;
-  const qk__wcell_t *oc = w->cells;
+   * not once an object. On threads by ranges of old cells (merge_threads), else here. */
   uint32_t m = 0, nc = 0, n_oc = w->order ? w->n_cells : 0;
-  size_t j = 0;
-  for (uint32_t c = 0;; c++) {
-    uint64_t cly = 0;
-    uint32_t cxk = 0;
-    if (c < n_oc)
-      cly = (uint64_t)(uint32_t)(oc[c].level - QK__LMIN) << 32 | bias(oc[c].cy),
-      cxk = bias(oc[c].cx);
-    /* The dirty cells before old cell c (all that are left after the last one). */
-    while (j < m_d && (c == n_oc || d[j].ly < cly || (d[j].ly == cly && d[j].x < cxk))) {
-      const qk__wobj_t *o = &w->obj[d[j].slot];
-      cells[nc] = (qk__wcell_t){o->u.cx, o->cy, m, o->level};
-      uint64_t ly = d[j].ly;
-      uint32_t x = d[j].x;
-      do ord[m++] = d[j++].slot;
-      while (j < m_d && d[j].ly == ly && d[j].x == x);
-      count_cell(w, cells, nc++);
-    }
-    if (c == n_oc) break;
-    cells[nc] = oc[c];
-    cells[nc].start = m;
-    for (uint32_t k = oc[c].start, ke = oc[c + 1].start; k < ke; k++) {
-      const qk__wobj_t *o = &w->obj[old[k]];
-      if (qk__wlive(o) && !(o->flags & QK__WDIRTY)) ord[m++] = old[k];
-    }
-    while (j < m_d && d[j].ly == cly && d[j].x == cxk) ord[m++] = d[j++].slot;
-    if (m > cells[nc].start) count_cell(w, cells, nc++); /* (one left empty is dropped) */
+  if (!merge_threads(w, d, m_d, ord, cells, n_oc, &m, &nc)) {
+    merge_t mg = {w, d, ord, cells, w->lv_first, w->lv_n, 0, 0};
+    memset(w->lv_first, 0, sizeof w->lv_first);
+    memset(w->lv_n, 0, sizeof w->lv_n);
+    merge_range(&mg, 0, n_oc, 0, m_d);
+    m = mg.m, nc = mg.nc;
   }
   cells[nc] = (qk__wcell_t){0, 0, m, INT32_MAX};
   qk__world_pack(w, pk, ord, cells, nc);

@@ -192,9 +192,12 @@ void qk__world_pack(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
  * a buffer to start with (its room in cap, n = 0), which the search then owns; so do
  * tk[0 .. QK__KEEP_THREADS), buffers for threads 1, 2, ..., which come back (n: the
  * keys they held) for the caller to keep or free. QK_ERR_NOMEM (found empty) when memory ran short.
+ * With *split nonzero on return, the keys were left where the threads found them: the first
+ * thread's in found (whose room holds them all), thread t's in tk[t - 1] (t < the threads
+ * of an update, which are then at most 1 + QK__KEEP_THREADS); else they are all in found.
  */
 qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kvec_t *found,
-                             qk__kvec_t *tk);
+                             qk__kvec_t *tk, int *split);
 
 /* The cell (level, cx, cy) a fat box is filed in; *forced when the magnitude of its
  * coordinates raised the level. */

@@ -387,21 +387,24 @@ static int diff(const qk_world_t *w, const qk__prows_t *o, const qk__prows_t *nw
 #define QK__RMAX 64 /* = QK__MAX_THREADS */
 typedef struct pjob {
   const qk_world_t *w;
-  const qk__prows_t *o; /* the last frame's rows */
-  qk__prows_t *r;       /* the new rows */
-  uint64_t *keys;       /* the found keys; scratch after the scatter */
-  uint64_t *part;       /* the keys by partition (not bucketed) */
+  const qk__prows_t *o;  /* the last frame's rows */
+  qk__prows_t *r;        /* the new rows */
+  uint64_t *keys;        /* the found keys; scratch after the scatter */
+  const qk__kvec_t *src; /* or NULL: chunk t's keys (the search's thread t's), else keys' */
+  uint64_t *part;        /* the keys by partition (not bucketed) */
   size_t n;
   uint32_t n_obj, np; /* slots, partitions */
   unsigned nt, pb;    /* threads, slots per partition (2^pb) */
   int dirty, phase, bucketed;
   bdig_t g;
-  uint32_t *pc;              /* nt (np + 1): per chunk, counts by partition, then cursors */
-  uint32_t *pst;             /* np + 1: the partitions' starts */
-  uint32_t *ca;              /* bucketed: the rows' counts, n_obj + 1 */
-  uint32_t rp[QK__RMAX + 1]; /* the threads' partition ranges */
-  qk__prows_t lr[QK__RMAX];  /* each range's rows (starts from the range's first key) */
-  size_t nzo[QK__RMAX + 1];  /* the ranges' first rows in the result */
+  uint32_t *pc;                      /* nt (np + 1): per chunk, counts by partition, then cursors */
+  uint32_t *pst;                     /* np + 1: the partitions' starts */
+  uint32_t *ca;                      /* bucketed: the rows' counts, n_obj + 1 */
+  uint32_t rp[QK__RMAX + 1];         /* the threads' partition ranges */
+  qk__prows_t lr[QK__RMAX];          /* each range's rows (starts from the range's first key) */
+  size_t nzo[QK__RMAX + 1];          /* the ranges' first rows in the result */
+  qk__kvec_t bj, ej;                 /* the ranges' began and ended lists joined (phase 3) */
+  size_t bo[QK__RMAX], eo[QK__RMAX]; /* the ranges' places in them */
   qk__kvec_t bv[QK__RMAX], ev[QK__RMAX];
   int nomem[QK__RMAX];
 } pjob_t;
@@ -477,26 +480,28 @@ static int range_rows(pjob_t *J, unsigned t) {
 static void pjob_run(unsigned t, void *ud) {
   pjob_t *J = ud;
   size_t k0 = J->n * t / J->nt, k1 = J->n * (t + 1) / J->nt;
+  const uint64_t *keys = J->keys;
+  if (J->src) keys = J->src[t].v, k0 = 0, k1 = J->src[t].n;
   uint32_t *c = J->pc + (size_t)t * (J->np + 1);
   const unsigned pb = J->pb;
   switch (J->phase) {
   case 0: /* count the chunk's keys by partition */
     memset(c, 0, ((size_t)J->np + 1) * sizeof *c);
-    for (size_t i = k0; i < k1; i++) c[(uint32_t)(J->keys[i] >> 32) >> pb]++;
+    for (size_t i = k0; i < k1; i++) c[(uint32_t)(keys[i] >> 32) >> pb]++;
     break;
   case 1: /* scatter the chunk into the partitions */
     if (J->bucketed) {
       uint32_t *rb = J->r->b;
       const uint32_t W = (uint32_t)1 << pb, bmul = J->g.bmask + 1;
       for (size_t i = k0; i < k1; i++) {
-        uint64_t k = J->keys[i];
+        uint64_t k = keys[i];
         uint32_t a = (uint32_t)(k >> 32);
         rb[c[a >> pb]++] = (a & (W - 1)) * bmul | (uint32_t)k;
       }
     } else {
       uint64_t *pt = J->part;
       for (size_t i = k0; i < k1; i++) {
-        uint64_t k = J->keys[i];
+        uint64_t k = keys[i];
         pt[c[(uint32_t)(k >> 32) >> pb]++] = k;
       }
     }
@@ -511,6 +516,9 @@ static void pjob_run(unsigned t, void *ud) {
     size_t z = J->nzo[t];
     if (lr->n_nz) memcpy(r->row + z, lr->row, lr->n_nz * sizeof *r->row);
     for (size_t k = 0; k < lr->n_nz; k++) r->start[z + k] = base + lr->start[k];
+    /* and its began and ended lists into the joined ones */
+    if (J->bv[t].n) memcpy(J->bj.v + J->bo[t], J->bv[t].v, J->bv[t].n * sizeof *J->bj.v);
+    if (J->ev[t].n) memcpy(J->ej.v + J->eo[t], J->ev[t].v, J->ev[t].n * sizeof *J->ej.v);
   }
   }
 }
@@ -523,8 +531,8 @@ static void pjob_phase(pjob_t *J, int ph) {
 /* Rows, began and ended on nt threads (keys: the found keys, n of them, in a buffer of
  * at least n; used as scratch); QK_ERR_NOMEM leaves nothing allocated in *r (but b),
  * *bvo, *evo. */
-static int rows_frame(const qk_world_t *w, uint64_t *keys, size_t n, qk__prows_t *r, int dirty,
-                      unsigned nt, qk__kvec_t *bvo, qk__kvec_t *evo) {
+static int rows_frame(const qk_world_t *w, uint64_t *keys, const qk__kvec_t *src, size_t n,
+                      qk__prows_t *r, int dirty, unsigned nt, qk__kvec_t *bvo, qk__kvec_t *evo) {
   const qk_allocator_t *al = &w->alloc;
   uint32_t n_obj = w->n_obj;
   if (nt > QK__RMAX) nt = QK__RMAX;
@@ -532,6 +540,7 @@ static int rows_frame(const qk_world_t *w, uint64_t *keys, size_t n, qk__prows_t
   if (!J) return 0;
   memset(J, 0, sizeof *J);
   J->w = w, J->o = &w->cur, J->r = r, J->keys = keys, J->n = n, J->n_obj = n_obj, J->nt = nt;
+  J->src = src;
   J->dirty = dirty;
   unsigned ab, bb;
   if (n * 4 >= n_obj && bucket_plan(n, n_obj, &ab, &bb)) {
@@ -574,26 +583,21 @@ static int rows_frame(const qk_world_t *w, uint64_t *keys, size_t n, qk__prows_t
   if (!rows_alloc(al, r, nz)) goto out;
   r->n = n;
   r->start[nz] = (uint32_t)n;
+  /* The joined began and ended lists (each range copies its own into them in phase 3,
+   * so the calling thread copies nothing), at least one entry each. */
+  size_t bt = 0, et = 0;
+  for (t = 0; t < nt; t++) J->bo[t] = bt, bt += J->bv[t].n, J->eo[t] = et, et += J->ev[t].n;
+  if (!(J->bj.v = qk__realloc(al, NULL, 0, (bt ? bt : 1) * sizeof *J->bj.v))) goto out;
+  J->bj.n = bt, J->bj.cap = bt ? bt : 1;
+  if (!(J->ej.v = qk__realloc(al, NULL, 0, (et ? et : 1) * sizeof *J->ej.v))) goto out;
+  J->ej.n = et, J->ej.cap = et ? et : 1;
   pjob_phase(J, 3);
-  /* Thread 0's lists take the others'. */
-  for (int which = 0; which < 2; which++) {
-    qk__kvec_t *v = which ? J->ev : J->bv;
-    size_t tot = 0;
-    for (t = 0; t < nt; t++) tot += v[t].n;
-    if (tot > v[0].cap) {
-      uint64_t *p = qk__realloc(al, v[0].v, v[0].cap * sizeof *p, tot * sizeof *p);
-      if (!p) goto out;
-      v[0].v = p, v[0].cap = tot;
-    }
-    for (t = 1; t < nt; t++) {
-      if (v[t].n) memcpy(v[0].v + v[0].n, v[t].v, v[t].n * sizeof *v[t].v);
-      v[0].n += v[t].n;
-    }
-  }
-  *bvo = J->bv[0], *evo = J->ev[0];
-  J->bv[0] = J->ev[0] = (qk__kvec_t){0};
+  *bvo = J->bj, *evo = J->ej;
+  J->bj = J->ej = (qk__kvec_t){0};
   ok = 1;
 out:
+  qk__free(al, J->bj.v, J->bj.cap * sizeof(uint64_t));
+  qk__free(al, J->ej.v, J->ej.cap * sizeof(uint64_t));
   for (t = 0; t < nt; t++) {
     qk__free(al, J->bv[t].v, J->bv[t].cap * sizeof(uint64_t));
     qk__free(al, J->ev[t].v, J->ev[t].cap * sizeof(uint64_t));
@@ -654,6 +658,17 @@ static void keep_rows(qk_world_t *w) {
   rows_free(al, &w->cur);
 }
 
+/* The other search threads' buffers are kept when large (as the first's: see keep_keys). */
+static void keep_tkeys(qk_world_t *w, qk__kvec_t *tk) {
+  for (unsigned t = 0; t < QK__KEEP_THREADS; t++) {
+    if (keep_buf(tk[t].cap, tk[t].n + 32, sizeof *tk[t].v))
+      w->scr_tkeys[t] = tk[t], w->scr_tkeys[t].n = 0;
+    else
+      qk__free(&w->alloc, tk[t].v, tk[t].cap * sizeof *tk[t].v);
+    tk[t] = (qk__kvec_t){0};
+  }
+}
+
 qk_status_t qk_world_update(qk_world_t *w) {
   if (!w) return QK_ERR_INVALID;
   const qk_allocator_t *al = &w->alloc;
@@ -668,24 +683,41 @@ qk_status_t qk_world_update(qk_world_t *w) {
   w->scr_keys = (qk__kvec_t){0};
   memcpy(tk, w->scr_tkeys, sizeof tk);
   memset(w->scr_tkeys, 0, sizeof w->scr_tkeys);
-  qk_status_t st = qk__world_search(w, &pk, &found, tk);
+  int split;
+  qk_status_t st = qk__world_search(w, &pk, &found, tk, &split);
   qk__world_pack_free(w, &pk);
-  /* The other threads' buffers are kept when large (as the first's: see keep_keys). */
-  for (unsigned t = 0; t < QK__KEEP_THREADS; t++) {
-    if (keep_buf(tk[t].cap, tk[t].n + 32, sizeof *tk[t].v))
-      w->scr_tkeys[t] = tk[t], w->scr_tkeys[t].n = 0;
-    else
-      qk__free(al, tk[t].v, tk[t].cap * sizeof *tk[t].v);
+  unsigned nt = w->n_live < 4096 ? 1 : qk__world_update_threads(w);
+  if (nt > QK__RMAX) nt = QK__RMAX;
+  /* The keys of the search's threads: left where they were found when the rows run on
+   * as many threads (each reads its own in the rows' first pass), else joined here. */
+  qk__kvec_t src[1 + QK__KEEP_THREADS];
+  size_t total = found.n;
+  if (split) {
+    for (unsigned t = 0; t < QK__KEEP_THREADS; t++) {
+      total += tk[t].n;
+      if (tk[t].n && t + 1 >= nt) split = 0; /* (not expected: the same threads) */
+    }
+    if (nt > 1 + QK__KEEP_THREADS) split = 0;
+    if (!split) { /* (found's room holds them all) */
+      for (unsigned t = 0; t < QK__KEEP_THREADS; t++) {
+        if (tk[t].n) memcpy(found.v + found.n, tk[t].v, tk[t].n * sizeof *found.v);
+        found.n += tk[t].n;
+      }
+    } else {
+      src[0] = found;
+      for (unsigned t = 1; t < nt; t++) src[t] = tk[t - 1];
+    }
   }
-  if (st != QK_OK) return st;
-  if (found.n > UINT32_MAX) { /* (rows and counts hold 32-bit positions) */
+  if (st != QK_OK || total > UINT32_MAX) { /* (rows and counts hold 32-bit positions) */
+    keep_tkeys(w, tk);
+    if (st != QK_OK) return st;
     qk__free(al, found.v, found.cap * sizeof *found.v);
     return QK_ERR_LIMIT;
   }
   /* Everything else the update needs, before anything changes: the new rows and the
    * began and ended lists (sized by the last frame's, grown as needed): a failure keeps
    * the last frame's lists. */
-  size_t total = found.n, n_obj = w->n_obj, tcap = total ? total : 1;
+  size_t n_obj = w->n_obj, tcap = total ? total : 1;
   int dirty = w->ident_dirty, ok = 0;
   qk__prows_t nr = {0};
   qk__kvec_t bv = {0}, ev = {0};
@@ -698,10 +730,9 @@ qk_status_t qk_world_update(qk_world_t *w) {
     size_t c = tcap * sizeof *nr.b >= QK__KEEP_BYTES ? tcap + tcap / 8 + 64 : tcap;
     if ((nr.b = qk__realloc(al, NULL, 0, c * sizeof *nr.b))) nr.cap = c;
   }
-  unsigned nt = w->n_live < 4096 ? 1 : qk__world_update_threads(w);
   if (nr.b && nt > 1) {
     /* on threads: the same sorts and merge, by ranges of slots */
-    ok = rows_frame(w, found.v, total, &nr, dirty, nt, &bv, &ev);
+    ok = rows_frame(w, found.v, split ? src : NULL, total, &nr, dirty, nt, &bv, &ev);
   } else if (nr.b) {
     /* one thread: the keys sorted into rows, then merged with the last frame's */
     size_t ccap = total * 4 < n_obj ? 257 : rows_cnt((uint32_t)n_obj, total);
@@ -724,6 +755,7 @@ qk_status_t qk_world_update(qk_world_t *w) {
     ok = ev.v && diff(w, &w->cur, &nr, dirty, &bv, &ev);
   }
   if (ok) w->last_found = total;
+  keep_tkeys(w, tk);
   keep_keys(w, &found, total);
   size_t n_eg = 0;
   if (dirty)
@@ -802,11 +834,17 @@ qk_status_t qk_world_pairs(const qk_world_t *w, qk_pairs_which_t which, qk_world
     return QK_OK;
   }
   if (which != QK_PAIRS_ALL) return QK_ERR_INVALID;
-  const qk__prows_t *r = &w->cur;
-  for (size_t k = 0; k < r->n_nz; k++) {
-    qk_handle_t ha = qk__uhandle(w, r->row[k]);
-    for (size_t i = r->start[k], e = r->start[k + 1]; i < e; i++)
-      if (fn(ha, qk__uhandle(w, r->b[i]), ud)) return QK_OK;
+  /* The arrays in locals: fn may write any memory the compiler knows of, so fields read
+   * through w in the loop would be read again after every call. */
+  const uint32_t *row = w->cur.row, *start = w->cur.start, *rb = w->cur.b, *ug = w->ugen;
+  const size_t n_nz = w->cur.n_nz;
+  for (size_t k = 0; k < n_nz; k++) {
+    uint32_t a = row[k];
+    qk_handle_t ha = (uint64_t)ug[a] << 32 | a;
+    for (size_t i = start[k], e = start[k + 1]; i < e; i++) {
+      uint32_t b = rb[i];
+      if (fn(ha, (uint64_t)ug[b] << 32 | b, ud)) return QK_OK;
+    }
   }
   return QK_OK;
 }

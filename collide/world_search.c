@@ -504,10 +504,54 @@ static int level_info(const qk_world_t *w, const qk__wpack_t *pk, lvinfo_t *lv, 
   return 1;
 }
 
-/* The work of cell a's objects, as a weight (see qk__world_search). */
-static inline double cell_work(const qk_world_t *w, uint32_t a, int finest) {
-  int d = w->cells[a].level - finest;
-  return (double)(w->cells[a + 1].start - w->cells[a].start) * qk__pow2(d < 60 ? d : 60);
+/* The first cell a in [lo, hi] with cells[a].start >= m (hi if none before it). */
+static uint32_t cell_from(const qk__wcell_t *cells, uint32_t lo, uint32_t hi, uint64_t m) {
+  while (lo < hi) {
+    uint32_t mid = lo + (hi - lo) / 2;
+    if (cells[mid].start < m)
+      lo = mid + 1;
+    else
+      hi = mid;
+  }
+  return lo;
+}
+
+/*
+ * The grid's chunks of cells of about equal work (see qk__world_search): chunk i ends at
+ * the first cell where the work of the cells before it reaches i / n_chunks of the
+ * total, an object of level l weighing 2^(l - finest). Within a level every object
+ * weighs the same, so the work up to a cell is the level's objects up to it, times the
+ * weight: each cut is a bisection of the cell starts in one level's run, not a pass
+ * over every cell (two such passes were most of the serial part of the search in a
+ * sparse world, where nearly every object has a cell of its own).
+ */
+static void grid_chunks(const qk_world_t *w, int finest, uint32_t *chunk, unsigned n_chunks) {
+  double wt[QK__NLEV], total = 0;
+  int ls[QK__NLEV], nl = 0; /* the occupied levels, ascending: their runs in cell order */
+  for (int l = 0; l < QK__NLEV; l++) {
+    if (!w->lv_n[l]) continue;
+    int d = l + QK__LMIN - finest;
+    uint32_t f = w->lv_first[l], e = f + w->lv_n[l];
+    wt[nl] = qk__pow2(d < 60 ? d : 60);
+    total += (double)(w->cells[e].start - w->cells[f].start) * wt[nl];
+    ls[nl++] = l;
+  }
+  unsigned i = 1;
+  double before = 0; /* the work of the levels before level k */
+  chunk[0] = 0;
+  for (int k = 0; k < nl && i < n_chunks; k++) {
+    uint32_t f = w->lv_first[ls[k]], e = f + w->lv_n[ls[k]];
+    double lw = (double)(w->cells[e].start - w->cells[f].start) * wt[k];
+    for (; i < n_chunks && before + lw >= total * i / n_chunks; i++) {
+      /* the objects of this level the chunk's cells must hold (at least one) */
+      double need = ceil((total * i / n_chunks - before) / wt[k]);
+      uint64_t m = (uint64_t)w->cells[f].start + (uint64_t)(need > 1 ? need : 1);
+      uint32_t a = cell_from(w->cells, f + 1, e, m);
+      chunk[i] = a > chunk[i - 1] ? a : chunk[i - 1];
+    }
+    before += lw;
+  }
+  while (i <= n_chunks) chunk[i++] = w->n_cells;
 }
 
 /* ---- bands: a sweep on x in horizontal bands ---------------------------------------- */
@@ -861,7 +905,8 @@ static qk_status_t search_nomem(const qk_world_t *w, qk__kvec_t *found, qk__kvec
 }
 
 qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kvec_t *out,
-                             qk__kvec_t *tk) {
+                             qk__kvec_t *tk, int *split) {
+  *split = 0;
   qk__kvec_t found = *out;
   found.n = 0;
   *out = (qk__kvec_t){0};
@@ -898,13 +943,7 @@ qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kve
         if ((double)bd.start[b + 1] >= (double)bd.ne * i / n_chunks) chunk[i++] = b + 1;
       while (i <= n_chunks) chunk[i++] = bd.nb;
     } else {
-      double total = 0, acc = 0;
-      for (uint32_t a = 0; a < w->n_cells; a++) total += cell_work(w, a, lv[0].l);
-      for (uint32_t a = 0; a < w->n_cells && i < n_chunks; a++) {
-        acc += cell_work(w, a, lv[0].l);
-        if (acc >= total * i / n_chunks) chunk[i++] = a + 1;
-      }
-      while (i <= n_chunks) chunk[i++] = w->n_cells;
+      grid_chunks(w, lv[0].l, chunk, n_chunks);
     }
   }
   atomic_uint next;
@@ -951,7 +990,10 @@ qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kve
       st = QK_ERR_NOMEM;
     }
   }
-  if (st == QK_OK) {
+  /* With threads for the rows too (qk_world_update), the threads' keys stay where they
+   * are: the rows' first pass reads each thread's own (no serial copy here). */
+  int keep_split = nt > 1 && nt <= 1 + QK__KEEP_THREADS;
+  if (st == QK_OK && !keep_split) {
     for (unsigned t = 1; t < nt; t++) {
       if (shares[t].out.n)
         memcpy(found.v + found.n, shares[t].out.v, shares[t].out.n * sizeof(uint64_t));
@@ -969,6 +1011,7 @@ qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kve
     qk__free(&w->alloc, found.v, found.cap * sizeof *found.v);
     found = (qk__kvec_t){0};
   }
+  *split = st == QK_OK && keep_split;
   *out = found;
   return st;
 }

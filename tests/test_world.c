@@ -17,7 +17,8 @@
  *  - churn: 10^5 frames of moves, adds and removes on a small world stay within 1.2x the
  *    memory of a fresh world holding the same objects;
  *  - allocation failure at every N in add and update leaves the world unchanged, no leak;
- *  - two threads give the same pairs and batch ray hits as one, and three reader threads
+ *  - two threads give the same pairs and batch ray hits as one (also on both sides of
+ *    thread_min, live objects crossing it), and three reader threads
  *    querying one world at once get the single-threaded answers (run under TSan by
  *    scripts/tsan.sh).
  * The oracle computes overlap in long double from the textbook formulas (distance from a
@@ -631,6 +632,84 @@ static void test_world_threads_frames(void **s) {
   }
   for (int t = 0; t < 2; t++) qk_world_free(w[t]), free(h[t]);
   free(sh);
+}
+
+/* The pairs, began and ended of two worlds are the same lists. */
+static void same_lists(qk_world_t *a, qk_world_t *b, int frame) {
+  for (int which = 0; which < 3; which++) {
+    size_t n0, n1;
+    qk_world_pairs_list(a, (qk_pairs_which_t)which, NULL, 0, &n0);
+    qk_world_pairs_list(b, (qk_pairs_which_t)which, NULL, 0, &n1);
+    if (n0 != n1)
+      fail_msg("frame %d list %d: %zu pairs against %zu (seed %llu)", frame, which, n0, n1,
+               (unsigned long long)g_seed);
+    qk_world_pair_t *p0 = malloc((n0 + 1) * sizeof *p0), *p1 = malloc((n0 + 1) * sizeof *p1);
+    qk_world_pairs_list(a, (qk_pairs_which_t)which, p0, n0, &n0);
+    qk_world_pairs_list(b, (qk_pairs_which_t)which, p1, n1, &n1);
+    assert_memory_equal(p0, p1, n0 * sizeof *p0);
+    free(p0), free(p1);
+  }
+}
+
+/* The threads option's threshold (thread_min): a world whose live objects go from below
+ * it to above and back, frame by frame (adds, removes and moves), gives on two threads
+ * the same pairs, began and ended as on one, on both sides (below it the update stays on
+ * the calling thread; above it the search, packing and rows run on the threads). */
+static void test_world_thread_min_sides(void **s) {
+  (void)s;
+  enum { N = 5200, MIN = 4600 };
+  qk_world_t *w[2];
+  qk_handle_t h[2][N];
+  static qk_shape_t sh[N];
+  int live[N] = {0};
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 83);
+  for (int i = 0; i < N; i++) sh[i] = rnd_shape(&r, SC_MIXED, 1);
+  for (int t = 0; t < 2; t++) {
+    qk_world_options_t o;
+    qk_world_options_init(&o);
+    o.threads = t ? 2 : 1;
+    o.thread_min = MIN;
+    assert_int_equal(qk_world_new(&o, &w[t]), QK_OK);
+  }
+  /* live counts per frame: below, across, above, back below */
+  static const int want[] = {4300, 4500, 4700, 5100, 4650, 4550, 4200, 4800};
+  int n_live = 0;
+  for (int f = 0; f < (int)(sizeof want / sizeof *want); f++) {
+    for (int i = 0; i < N; i++)
+      if (live[i]) sh[i] = moved(&r, sh[i]);
+    while (n_live != want[f]) {
+      int i = (int)qkt_rng_below(&r, N);
+      if (n_live < want[f] && !live[i]) {
+        for (int t = 0; t < 2; t++)
+          assert_int_equal(qk_world_add(w[t], &sh[i], 0, &h[t][i]), QK_OK);
+        live[i] = 1, n_live++;
+      } else if (n_live > want[f] && live[i]) {
+        for (int t = 0; t < 2; t++) assert_int_equal(qk_world_remove(w[t], h[t][i]), QK_OK);
+        live[i] = 0, n_live--;
+      }
+    }
+    for (int t = 0; t < 2; t++) {
+      for (int i = 0; i < N; i++)
+        if (live[i]) assert_int_equal(qk_world_move(w[t], h[t][i], &sh[i]), QK_OK);
+      assert_int_equal(qk_world_update(w[t]), QK_OK);
+    }
+    assert_int_equal(qk_world_size(w[1]), (size_t)n_live);
+    same_lists(w[0], w[1], f);
+    /* the order and cells the update filed (on threads above thread_min) answer queries */
+    for (int q = 0; q < 4; q++) {
+      qk_shape_t qs = rnd_shape(&r, SC_MIXED, 1);
+      qs.kind = QK_SHAPE_BOX;
+      qs.a = qs.x + qkt_rng_range(&r, 0, 30), qs.b = qs.y + qkt_rng_range(&r, 0, 30);
+      static qk_handle_t g0[N], g1[N];
+      size_t n0, n1;
+      assert_int_equal(qk_world_query(w[0], &qs, g0, N, &n0), QK_OK);
+      assert_int_equal(qk_world_query(w[1], &qs, g1, N, &n1), QK_OK);
+      assert_int_equal(n0, n1);
+      assert_memory_equal(g0, g1, n0 * sizeof *g0);
+    }
+  }
+  for (int t = 0; t < 2; t++) qk_world_free(w[t]);
 }
 
 /* qk_world_move_batch: the moves before a failing one are done, it and the later ones
@@ -1403,6 +1482,7 @@ int main(void) {
       cmocka_unit_test(test_world_touching),
       cmocka_unit_test(test_world_stale_handles),
       cmocka_unit_test(test_world_threads_frames),
+      cmocka_unit_test(test_world_thread_min_sides),
       cmocka_unit_test(test_world_move_batch_errors),
       cmocka_unit_test(test_world_pair_bytes),
       cmocka_unit_test(test_world_churn_memory),
