@@ -1,0 +1,35 @@
+#!/usr/bin/env bash
+# CLI regressions from a fourth review, on inputs not tried before (one block per finding;
+# each failed before its fix): GeoJSON numbers json-c cannot read exactly, mesh -o paths.
+# shellcheck source=lib/common.bash
+source "$(dirname "${BASH_SOURCE[0]}")/lib/common.bash" "$@"
+
+# ---- GeoJSON: an overflowing number is named as written (it said "(inf, 0)") -------------
+printf 'x,y\n0.5,0.5\n' >"$tmp/half.csv"
+printf '{"type":"Polygon","coordinates":[[[0,0],[2e308,0],[1,1],[0,1],[0,0]]]}\n' >"$tmp/ovf.geojson"
+expect 1 'ovf.geojson: feature 0: coordinate 2e308 is beyond the largest double \(not finite\) at polygon 0, ring 0, position 1$' \
+  -- "$cli" join "$tmp/ovf.geojson" "$tmp/half.csv" --planar
+printf '{"type":"Polygon","coordinates":[[[0,0],[1,0],[1,-1E+999],[0,1],[0,0]]]}\n' >"$tmp/ovf2.geojson"
+expect 1 'ovf2.geojson: feature 0: coordinate -1E\+999 is beyond the largest double' \
+  -- "$cli" mesh "$tmp/ovf2.geojson" -o "$tmp/ovf2"
+[ ! -e "$tmp/ovf2.node" ] || fail "ovf2.geojson: a .node file was written"
+
+# ---- GeoJSON: integers beyond 64 bits were clamped by json-c 0.16 without a word ---------
+# [0, 1e20] x [0, 1] written with integers became [0, 2^64 - 1]: (5e19, 0.5) was outside.
+printf '{"type":"Polygon","coordinates":[[[0,0],[100000000000000000000,0],[100000000000000000000,1],[0,1],[0,0]]]}\n' >"$tmp/bigint.geojson"
+printf 'x,y\n5e19,0.5\n' >"$tmp/big.csv"
+expect 1 'bigint.geojson:1:42: integer 100000000000000000000 is outside the 64-bit range json-c reads exactly' \
+  -- "$cli" join "$tmp/bigint.geojson" "$tmp/big.csv" --planar
+printf '{"type":"Feature","properties":{"v":-9223372036854775809},"geometry":null}\n' >"$tmp/bigp.geojson"
+expect 1 'bigp.geojson:1:37: integer -9223372036854775809 is outside' -- "$cli" join "$tmp/bigp.geojson" "$tmp/big.csv" --planar
+# the same polygon with an exponent, and integers at the 64-bit limits, read exactly
+sed 's/100000000000000000000/1e20/g' "$tmp/bigint.geojson" >"$tmp/bige.geojson"
+same_text "1e20 with an exponent" "$("$cli" join "$tmp/bige.geojson" "$tmp/big.csv" --planar | tr '\n' ' ')" \
+  "x,y,feature 5e19,0.5,0 "
+printf '{"type":"Feature","properties":{"u":18446744073709551615,"v":-9223372036854775808,"w":-000000000000000000001,"f":1.00000000000000000000001},"geometry":{"type":"Polygon","coordinates":[[[0,0],[18446744073709551615,0],[18446744073709551615,1],[0,1],[0,0]]]}}\n' >"$tmp/lim.geojson"
+printf 'x,y\n1.8e19,0.5\n1.9e19,0.5\n' >"$tmp/lim.csv"
+same_text "integers at the 64-bit limits" \
+  "$("$cli" join "$tmp/lim.geojson" "$tmp/lim.csv" --planar --field u --field v --field w | tr '\n' ' ')" \
+  "x,y,feature,u,v,w 1.8e19,0.5,0,18446744073709551615,-9223372036854775808,-1 1.9e19,0.5,-1,,, "
+
+report
