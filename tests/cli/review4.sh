@@ -32,4 +32,31 @@ same_text "integers at the 64-bit limits" \
   "$("$cli" join "$tmp/lim.geojson" "$tmp/lim.csv" --planar --field u --field v --field w | tr '\n' ' ')" \
   "x,y,feature,u,v,w 1.8e19,0.5,0,18446744073709551615,-9223372036854775808,-1 1.9e19,0.5,-1,,, "
 
+# ---- mesh -o PREFIX: checked before any work; a prefix with no file name is refused -------
+printf '4 2 0 0\n0 0 0\n1 4 0\n2 4 4\n3 0 4\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n0\n' >"$tmp/sq.poly"
+printf '4 2 0 0\n0 0 0\n1 4 0\n' >"$tmp/trunc.poly"
+# a bad output path is named before the input is even read (it was found after meshing)
+expect 1 "quadkit mesh: cannot write $tmp/no/such/m.node: No such file or directory" \
+  -- "$cli" mesh "$tmp/trunc.poly" -o "$tmp/no/such/m"
+touch "$tmp/plain"
+expect 1 "cannot write $tmp/plain/m.node: Not a directory" -- "$cli" mesh "$tmp/sq.poly" -o "$tmp/plain/m"
+expect 1 "cannot write $tmp/no/x.svg" -- "$cli" mesh "$tmp/trunc.poly" -o "$tmp/m" --svg "$tmp/no/x.svg"
+[ ! -e "$tmp/m.node" ] && [ -z "$(ls "$tmp" | grep '\.tmp\.')" ] || fail "mesh: an output or temporary was left"
+mkdir "$tmp/d"
+expect 2 "-o PREFIX names the files PREFIX.node and PREFIX.ele, so it needs a file name: '$tmp/d/' ends in '/'" \
+  -- "$cli" mesh "$tmp/sq.poly" -o "$tmp/d/"
+mkdir "$tmp/e"
+expect 2 "needs a file name: '' is empty" -- bash -c 'cd "$1" && "$2" mesh ../sq.poly -o ""' - "$tmp/e" "$cli"
+same_text "mesh -o DIR/: nothing in DIR" "$(ls -A "$tmp/d" "$tmp/e")" "$(printf "%s:\n\n%s:" "$tmp/d" "$tmp/e")"
+# a read-only directory (root writes there anyway, so only as another user)
+mkdir "$tmp/ro" && chmod 555 "$tmp/ro"
+if [ ! -w "$tmp/ro" ]; then
+  expect 1 "cannot write $tmp/ro/m.node: Permission denied" -- "$cli" mesh "$tmp/trunc.poly" -o "$tmp/ro/m"
+fi
+chmod 755 "$tmp/ro"
+# a good run still writes every output, and the help says PREFIX is a prefix
+expect 0 '' -- "$cli" mesh "$tmp/sq.poly" -o "$tmp/d/m" --svg "$tmp/d/m.svg"
+same_text "mesh outputs" "$(ls "$tmp/d" | tr '\n' ' ')" "m.ele m.node m.svg "
+expect 0 '-o out/m writes out/m.node and out/m.ele' -- "$cli" mesh --help
+
 report
