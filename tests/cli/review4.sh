@@ -59,4 +59,25 @@ expect 0 '' -- "$cli" mesh "$tmp/sq.poly" -o "$tmp/d/m" --svg "$tmp/d/m.svg"
 same_text "mesh outputs" "$(ls "$tmp/d" | tr '\n' ' ')" "m.ele m.node m.svg "
 expect 0 '-o out/m writes out/m.node and out/m.ele' -- "$cli" mesh --help
 
+# ---- join reads quotes as every other command does: "0.5"x and an open quote were 0.5 -----
+printf '{"type":"Polygon","coordinates":[[[0,0],[1,0],[1,1],[0,1],[0,0]]]}\n' >"$tmp/sq.geojson"
+printf 'x,y\n0.5,"0.5"x\n' >"$tmp/q1.csv"
+printf 'x,y\n0.5,0.5\n0.25,"0.5\n' >"$tmp/q2.csv"
+printf 'a,b,x,y\n"n"x,2,0.5,0.5\n' >"$tmp/q3.csv"
+printf '"0.5"x,"0.5"y\n0.5,0.5\n' >"$tmp/q4.csv"
+expect 1 'q1.csv:2: field 2: text after a closing quote' -- "$cli" join "$tmp/sq.geojson" "$tmp/q1.csv" --planar
+expect 1 'q2.csv:3: field 2: unterminated quoted field' -- "$cli" join "$tmp/sq.geojson" "$tmp/q2.csv" --planar
+expect 1 'q3.csv:2: field 1: text after a closing quote' -- "$cli" join "$tmp/sq.geojson" "$tmp/q3.csv" --planar --xy x,y
+expect 1 'q4.csv:1: field 1: text after a closing quote' -- "$cli" join "$tmp/sq.geojson" "$tmp/q4.csv" --planar
+# the library's reader says the same
+expect 1 'q1.csv:2:5: field 2: text after a closing quote' -- "$cli" knn "$tmp/q1.csv" "$tmp/q1.csv" -k 1
+expect 1 'q2.csv:3:6: field 2: unterminated quoted field' -- "$cli" knn "$tmp/q2.csv" "$tmp/q2.csv" -k 1
+expect 1 'q3.csv:2:1: field 1: text after a closing quote' -- "$cli" knn "$tmp/q3.csv" "$tmp/q3.csv" -k 1 --xy x,y
+# blanks around quotes are fine, as in the library's reader; a quoted header name still matches
+printf 'x,"y"\n "0.5" , 0.25\n"1.5",0.5\n' >"$tmp/q5.csv"
+same_text "join: blanks around quotes" "$("$cli" join "$tmp/sq.geojson" "$tmp/q5.csv" --planar --xy x,y | tr '\n' ' ')" \
+  'x,"y",feature  "0.5" , 0.25,0 "1.5",0.5,-1 '
+same_text "knn: blanks around quotes" "$("$cli" knn "$tmp/q5.csv" "$tmp/q5.csv" -k 1 --xy x,y | tr '\n' ' ')" \
+  'query,rank,point,distance 0,1,0,0 1,1,1,0 '
+
 report
