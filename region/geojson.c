@@ -10,6 +10,7 @@
  */
 #include <errno.h>
 #include <limits.h>
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -72,6 +73,11 @@ static qk_status_t ring(gj_t *g, json_object *arr, size_t f, size_t poly, size_t
                              "numbers, found %s",
                              f, poly, k, i, shown(p));
     double vx = json_object_get_double(x), vy = json_object_get_double(y);
+    if (!isfinite(vx) || !isfinite(vy)) /* (NaN and Infinity were refused: an overflow) */
+      return qk__region_fail(g->err, QK_ERR_NONFINITE, f,
+                             "feature %zu: coordinate %.60s is beyond the largest double (not "
+                             "finite) at polygon %zu, ring %zu, position %zu",
+                             f, shown(isfinite(vx) ? y : x), poly, k, i);
     if ((st = qk__region_check_coord(g->planar, vx, vy, f, g->err))) {
       size_t len = strlen(g->err->message);
       snprintf(g->err->message + len, sizeof g->err->message - len,
@@ -314,9 +320,11 @@ static qk_status_t json_check(const qk_allocator_t *a, const char *text, size_t 
   size_t depth = 0, n = 0, cap = 0;
   jkey_t *keys = NULL;
   qk_status_t st = QK_OK;
-  /* the bytes that matter (the rest, mostly digits, commas and blanks, are skipped) */
+  /* the bytes that matter (the rest, mostly commas, blanks and letters, are skipped) */
   static const unsigned char special[256] = {
-      ['"'] = 1, ['{'] = 1, ['['] = 1, ['}'] = 1, [']'] = 1, ['N'] = 1, ['I'] = 1, ['.'] = 1};
+      ['"'] = 1, ['{'] = 1, ['['] = 1, ['}'] = 1, [']'] = 1, ['N'] = 1, ['I'] = 1,
+      ['.'] = 1, ['-'] = 1, ['0'] = 1, ['1'] = 1, ['2'] = 1, ['3'] = 1, ['4'] = 1,
+      ['5'] = 1, ['6'] = 1, ['7'] = 1, ['8'] = 1, ['9'] = 1};
   for (size_t i = 0; i < len && !st; i++) {
     while (i < len && !special[(unsigned char)text[i]]) i++;
     if (i == len) break;
@@ -358,6 +366,43 @@ static qk_status_t json_check(const qk_allocator_t *a, const char *text, size_t 
                              (int)nl, text + dup, at.line, at.column);
       }
       n = b;
+    } else if (c == '-' || (c >= '0' && c <= '9')) {
+      /* A number, read whole. An integer (no fraction, no exponent) beyond 64 bits is
+       * clamped by json-c 0.16 to INT64_MIN or UINT64_MAX without a word (later versions
+       * refuse it in strict mode): 1e20 written as 100000000000000000000 became
+       * 1.8446744073709552e19, a wrong polygon. It is refused here, naming it. */
+      size_t d0 = i + (c == '-'), j = d0;
+      while (j < len && text[j] >= '0' && text[j] <= '9') j++;
+      size_t nd = j - d0;
+      bool integer = true;
+      if (j < len && text[j] == '.') {
+        integer = false;
+        if (j + 1 >= len || text[j + 1] < '0' || text[j + 1] > '9') {
+          where(text, j, err);
+          st = qk__region_fail(err, QK_ERR_PARSE, SIZE_MAX,
+                               "malformed JSON: a decimal point must be followed by digits");
+          break;
+        }
+        for (j++; j < len && text[j] >= '0' && text[j] <= '9';) j++;
+      }
+      if (j < len && (text[j] == 'e' || text[j] == 'E')) integer = false;
+      if (integer && nd >= 19) {
+        size_t z = 0; /* (leading zeros: json-c refuses them, but not after a minus) */
+        while (z + 1 < nd && text[d0 + z] == '0') z++;
+        const char *lim = c == '-' ? "9223372036854775808" : "18446744073709551615";
+        size_t m = nd - z, ml = strlen(lim);
+        if (m > ml || (m == ml && memcmp(text + d0 + z, lim, ml) > 0)) {
+          where(text, i, err);
+          st = qk__region_fail(
+              err, QK_ERR_PARSE, SIZE_MAX,
+              "integer %.*s%s is outside the 64-bit range json-c reads exactly (-2^63 "
+              "to 2^64-1); write it with an exponent (1e20, not "
+              "100000000000000000000)",
+              (int)(nd < 40 ? j - i : 40), text + i, nd < 40 ? "" : "...");
+          break;
+        }
+      }
+      i = j - 1; /* (the loop steps past the number; an exponent is skipped as plain text) */
     } else if (c == 'N' || c == 'I') {
       where(text, i, err);
       st = qk__region_fail(err, QK_ERR_PARSE, SIZE_MAX,

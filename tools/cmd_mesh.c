@@ -36,7 +36,9 @@ static const char *usage_text =
     "back bit-identical; mesh vertices on input segments lie on them exactly.\n"
     "\n"
     "  -o PREFIX       write PREFIX.node (with boundary markers when the input has them)\n"
-    "                  and PREFIX.ele (component id, then the regional attribute if any)\n"
+    "                  and PREFIX.ele (component id, then the regional attribute if any):\n"
+    "                  -o out/m writes out/m.node and out/m.ele (the directory must exist;\n"
+    "                  every output is checked writable before any work)\n"
     "  --book          insist on the book's mode (integer vertices in [0,U]^2)\n"
     "  --dyadic        insist on the dyadic-lattice mode\n"
     "  --general       insist on the general mode\n"
@@ -265,6 +267,14 @@ static int parse_args(const char *cmd, int argc, char **argv, mesh_args_t *o) {
   }
   if (!o->in) return usage(cmd, "no input file");
   if (!o->prefix) return usage(cmd, "-o PREFIX is required");
+  size_t plen = strlen(o->prefix);
+  if (!plen || o->prefix[plen - 1] == '/') { /* (it wrote DIR/.node and DIR/.ele) */
+    cli_error(cmd,
+              "-o PREFIX names the files PREFIX.node and PREFIX.ele, so it needs a file "
+              "name: '%s' %s (e.g. -o out/mesh)",
+              o->prefix, plen ? "ends in '/'" : "is empty");
+    return CLI_USAGE;
+  }
   if ((o->mode == QK_MESH_DYADIC || o->mode == QK_MESH_GENERAL) && o->size)
     return usage(cmd, "--size is the book's domain; the other modes use the input's extent");
   size_t len = strlen(o->in);
@@ -276,45 +286,74 @@ static int parse_args(const char *cmd, int argc, char **argv, mesh_args_t *o) {
   return distinct_outputs(cmd, o);
 }
 
-/* Write every output through temporary files, renamed only when all were written, so a
- * failure leaves nothing behind. */
-static int write_outputs(const char *cmd, const mesh_args_t *o, const qk_mesh_t *mesh,
-                         unsigned first) {
-  size_t plen = strlen(o->prefix);
-  char *node_path = malloc(plen + 6), *ele_path = malloc(plen + 5);
-  int rc = CLI_OK;
-  if (!node_path || !ele_path) {
-    cli_error(cmd, "out of memory");
-    free(node_path);
-    free(ele_path);
-    return CLI_INTERNAL;
-  }
-  memcpy(node_path, o->prefix, plen);
-  memcpy(node_path + plen, ".node", 6);
-  memcpy(ele_path, o->prefix, plen);
-  memcpy(ele_path + plen, ".ele", 5);
+/* The outputs, each through a temporary file renamed only when all were written, so a
+ * failure leaves nothing behind. They are opened before any work, so that a path that
+ * cannot be written (a missing or read-only directory) is named at once, not after a
+ * long meshing run. */
+typedef struct outputs {
+  char *node_path, *ele_path;
   struct {
     const char *path;
     writer_fn fn;
     cli_out_t out;
-  } outs[6] = {{node_path, w_node, {0}}, {ele_path, w_ele, {0}}, {o->svg, w_svg, {0}},
-               {o->msh, w_msh, {0}},     {o->vtk, w_vtu, {0}},   {o->poly, w_poly, {0}}};
-  int opened = 0;
-  for (int k = 0; k < 6 && rc == CLI_OK; k++) {
-    if (!outs[k].path) continue;
-    if ((rc = cli_out_open(cmd, outs[k].path, &outs[k].out)) != CLI_OK) break;
-    opened = k + 1;
-    qk_status_t ws = outs[k].fn(mesh, outs[k].out.f, first);
-    if (ws != QK_OK) rc = cli_status(cmd, outs[k].path, ws);
-  }
-  for (int k = 0; k < opened; k++) {
-    if (!outs[k].path || !outs[k].out.f) continue;
-    int c = cli_out_close(cmd, &outs[k].out, rc == CLI_OK);
+  } f[6];
+  int opened;
+} outputs_t;
+
+/* Close every opened output: renamed into place when ok, else removed. */
+static int close_outputs(const char *cmd, outputs_t *w, int ok) {
+  int rc = CLI_OK;
+  for (int k = 0; k < w->opened; k++) {
+    if (!w->f[k].path || !w->f[k].out.f) continue;
+    int c = cli_out_close(cmd, &w->f[k].out, ok && rc == CLI_OK);
     if (rc == CLI_OK) rc = c;
   }
-  free(node_path);
-  free(ele_path);
+  free(w->node_path);
+  free(w->ele_path);
+  memset(w, 0, sizeof *w);
   return rc;
+}
+
+static int open_outputs(const char *cmd, const mesh_args_t *o, outputs_t *w) {
+  memset(w, 0, sizeof *w);
+  size_t plen = strlen(o->prefix);
+  w->node_path = malloc(plen + 6);
+  w->ele_path = malloc(plen + 5);
+  if (!w->node_path || !w->ele_path) {
+    cli_error(cmd, "out of memory");
+    close_outputs(cmd, w, 0);
+    return CLI_INTERNAL;
+  }
+  memcpy(w->node_path, o->prefix, plen);
+  memcpy(w->node_path + plen, ".node", 6);
+  memcpy(w->ele_path, o->prefix, plen);
+  memcpy(w->ele_path + plen, ".ele", 5);
+  const char *path[6] = {w->node_path, w->ele_path, o->svg, o->msh, o->vtk, o->poly};
+  static const writer_fn fn[6] = {w_node, w_ele, w_svg, w_msh, w_vtu, w_poly};
+  for (int k = 0; k < 6; k++) {
+    w->f[k].path = path[k];
+    w->f[k].fn = fn[k];
+    if (!path[k]) continue;
+    int rc = cli_out_open(cmd, path[k], &w->f[k].out);
+    if (rc != CLI_OK) {
+      close_outputs(cmd, w, 0);
+      return rc;
+    }
+    w->opened = k + 1;
+  }
+  return CLI_OK;
+}
+
+/* Write the mesh into every output and close them all (renamed only if all succeeded). */
+static int write_outputs(const char *cmd, outputs_t *w, const qk_mesh_t *mesh, unsigned first) {
+  int rc = CLI_OK;
+  for (int k = 0; k < w->opened && rc == CLI_OK; k++) {
+    if (!w->f[k].path) continue;
+    qk_status_t ws = w->f[k].fn(mesh, w->f[k].out.f, first);
+    if (ws != QK_OK) rc = cli_status(cmd, w->f[k].path, ws);
+  }
+  int c = close_outputs(cmd, w, rc == CLI_OK);
+  return rc == CLI_OK ? c : rc;
 }
 
 /* What the input went through before meshing (for --stats and messages). */
@@ -570,10 +609,14 @@ int cmd_mesh(int argc, char **argv) {
   prep_t pp;
   memset(&pp, 0, sizeof pp);
   double t_read = 0;
+  outputs_t outs;
+  rc = open_outputs(cmd, &o, &outs);
+  if (rc) return rc;
   rc = make_mesh(cmd, &o, &poly, &mesh, &pp, &t_read);
+  if (rc != CLI_OK) close_outputs(cmd, &outs, 0);
   if (rc == CLI_OK) {
     double t_write = now();
-    rc = write_outputs(cmd, &o, mesh, qk_poly_first_index(poly));
+    rc = write_outputs(cmd, &outs, mesh, qk_poly_first_index(poly));
     t_write = now() - t_write;
     if (rc == CLI_OK && o.min_angle >= 0) report_bound(mesh, o.min_angle);
     if (rc == CLI_OK && o.stats) print_stats(mesh, &o, &pp, t_read, t_write);

@@ -49,26 +49,38 @@ static int parse_boundary(const char *cmd, const char *s, qk_boundary_t *b) {
 /* ---- CSV fields --------------------------------------------------------------------------- */
 
 /* Copy field `want` (0-based) of a CSV line into buf (quotes removed); returns 1 when
- * the line has that field. */
-static int csv_field(const char *line, int want, char *buf, size_t cap) {
+ * the line has that field, 0 when it has fewer, -1 - i when field i (that field or one
+ * before it) is a malformed quoted field (*why says how), with the library reader's rules
+ * (io/csv_scan.c): blanks may stand around the quotes, nothing else ("0.5"x and an unterminated
+ * quote were read as 0.5 here while every other command refused them). */
+static int csv_field(const char *line, int want, char *buf, size_t cap, const char **why) {
   const char *s = line;
   for (int i = 0;; i++) {
     size_t n = 0;
-    if (*s == '"') {
-      s++;
+    const char *q = s;
+    while (*q == ' ' || *q == '\t') q++;
+    if (*q == '"') {
+      s = q + 1;
       for (;;) {
         if (*s == '"' && s[1] == '"') {
           if (i == want && n + 1 < cap) buf[n++] = '"';
           s += 2;
-        } else if (*s == '"' || !*s) {
-          if (*s) s++;
+        } else if (*s == '"') {
+          s++;
           break;
+        } else if (!*s) {
+          if (why) *why = "unterminated quoted field";
+          return -1 - i;
         } else {
           if (i == want && n + 1 < cap) buf[n++] = *s;
           s++;
         }
       }
-      while (*s && *s != ',') s++;
+      while (*s == ' ' || *s == '\t') s++;
+      if (*s && *s != ',') {
+        if (why) *why = "text after a closing quote";
+        return -1 - i;
+      }
     } else {
       while (*s && *s != ',') {
         if (i == want && n + 1 < cap) buf[n++] = *s;
@@ -136,7 +148,7 @@ static int resolve_xy(const char *cmd, const char *path, const char *header, xy_
                 xy->name[k]);
       return 1;
     }
-    for (int i = 0; csv_field(header, i, buf, sizeof buf); i++) {
+    for (int i = 0; csv_field(header, i, buf, sizeof buf, NULL) == 1; i++) {
       char *b = buf;
       while (*b == ' ') b++;
       if (strcmp(b, xy->name[k])) continue;
@@ -308,9 +320,18 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
       double v;
       int named = xy->col[0] < 0 || xy->col[1] < 0;
       int xc = xy->col[0] >= 0 ? xy->col[0] : 0, yc = xy->col[1] >= 0 ? xy->col[1] : 1;
-      /* a header: neither x nor y is a number (as the library's reader decides) */
-      int header = named || ((!csv_field(line, xc, fx, fcap) || !number(fx, &v)) &&
-                             (!csv_field(line, yc, fy, fcap) || !number(fy, &v)));
+      /* a header: neither x nor y is a number (as the library's reader decides); a
+       * malformed quote there is an error, not a header */
+      const char *why = NULL;
+      int rx = named ? 1 : csv_field(line, xc, fx, fcap, &why);
+      int ry = named || rx < 0 ? 1 : csv_field(line, yc, fy, fcap, &why);
+      if (rx < 0 || ry < 0) {
+        fprintf(stderr, "quadkit join: %s:%ld: field %d: %s\n", j->pts_path, lineno,
+                -(rx < 0 ? rx : ry), why);
+        rc = CLI_BAD_INPUT;
+        break;
+      }
+      int header = named || ((rx != 1 || !number(fx, &v)) && (ry != 1 || !number(fy, &v)));
       if (header) {
         if (resolve_xy("join", j->pts_path, line, xy)) {
           rc = CLI_BAD_INPUT;
@@ -328,7 +349,15 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
       }
     }
     double x, y;
-    int hx = csv_field(line, xy->col[0], fx, fcap), hy = csv_field(line, xy->col[1], fy, fcap);
+    const char *why = NULL;
+    int hx = csv_field(line, xy->col[0], fx, fcap, &why);
+    int hy = hx < 0 ? 0 : csv_field(line, xy->col[1], fy, fcap, &why);
+    if (hx < 0 || hy < 0) {
+      fprintf(stderr, "quadkit join: %s:%ld: field %d: %s\n", j->pts_path, lineno,
+              -(hx < 0 ? hx : hy), why);
+      rc = CLI_BAD_INPUT;
+      break;
+    }
     if (!hx || !hy) {
       fprintf(stderr, "quadkit join: %s:%ld: no field %d (need x in field %d, y in field %d)\n",
               j->pts_path, lineno, (!hx ? xy->col[0] : xy->col[1]) + 1, xy->col[0] + 1,
