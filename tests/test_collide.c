@@ -877,21 +877,6 @@ static void test_collide_ray_arrays_huge(void **state) {
 #endif
 }
 
-/* The library's disc test (collider.c ray_disc), the same operations in the same order:
- * the brute force below must agree with the cast to the last bit of t. */
-static double bf_disc_t(qk_disc_t d, qk_point_t o, qk_point_t v, double tmax) {
-  double fx = o.x - d.x, fy = o.y - d.y;
-  double c = fx * fx + fy * fy - d.r * d.r;
-  if (c <= 0) return 0.0;
-  double b = fx * v.x + fy * v.y;
-  if (b >= 0) return -1.0;
-  double a = v.x * v.x + v.y * v.y, cr = fx * v.y - fy * v.x;
-  double disc = a * d.r * d.r - cr * cr;
-  if (disc < 0) return -1.0;
-  double t = c / (-b + sqrt(disc));
-  return t <= tmax ? t : -1.0;
-}
-
 /*
  * Leaves of every count from 1 to the capacity, odd ones included (the leaf scan tests
  * discs in pairs, an odd count's last pair overlapping the one before), and searches
@@ -947,7 +932,7 @@ static void test_collide_raycast_leaf_counts(void **state) {
       const double tmax = qi % 4 == 0 ? qkt_rng_range(&r, 0, 0.05) : INFINITY;
       qk_hit_t w = {QK_NONE, INFINITY};
       for (size_t i = 0; i < n; i++) {
-        const double t = bf_disc_t(d[i], org, dir, tmax);
+        const double t = qko_ray_disc_bits(d[i], org, dir, tmax);
         if (t >= 0 && (t < w.t || (t == w.t && i < w.id))) w = (qk_hit_t){(qk_id_t)i, t};
       }
       qk_hit_t h;

@@ -30,22 +30,9 @@
 #include <stdlib.h>
 
 #include "qk_test.h"
+#include "query_oracle.h"
 
 static uint64_t g_seed;
-
-/* The library's disc test (collider.c ray_disc): the same operations in the same order. */
-static double bf_ray_disc(qk_disc_t d, qk_point_t o, qk_point_t v, double tmax) {
-  double fx = o.x - d.x, fy = o.y - d.y;
-  double c = fx * fx + fy * fy - d.r * d.r;
-  if (c <= 0) return 0.0;
-  double b = fx * v.x + fy * v.y;
-  if (b >= 0) return -1.0;
-  double a = v.x * v.x + v.y * v.y, cr = fx * v.y - fy * v.x;
-  double disc = a * d.r * d.r - cr * cr;
-  if (disc < 0) return -1.0;
-  double t = c / (-b + sqrt(disc));
-  return t <= tmax ? t : -1.0;
-}
 
 /* The library's box test (collider.c ray_box: the slab test by division). */
 static int bf_axis(double mn, double mx, double o, double d, double *lo, double *hi) {
@@ -73,7 +60,7 @@ static qk_hit_t brute(const qk_disc_t *d, size_t nd, const qk_box_t *b, size_t n
                       qk_point_t v, double tmax) {
   qk_hit_t h = {QK_NONE, INFINITY};
   for (size_t i = 0; i < nd + nb; i++) {
-    double t = i < nd ? bf_ray_disc(d[i], o, v, tmax) : bf_ray_box(b[i - nd], o, v, tmax);
+    double t = i < nd ? qko_ray_disc_bits(d[i], o, v, tmax) : bf_ray_box(b[i - nd], o, v, tmax);
     if (t >= 0 && (t < h.t || (t == h.t && (qk_id_t)i < h.id))) {
       h.t = t;
       h.id = (qk_id_t)i;

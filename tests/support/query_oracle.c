@@ -129,6 +129,7 @@ size_t qko_overlap(const qk_disc_t *d, size_t nd, const qk_box_t *b, size_t nb, 
  * predicate "o + t v lies in the closed disc"), so the oracle's t is the double just at
  * or after the true entry. Without GMP the long-double answers stand.
  */
+
 #ifdef QK_HAVE_GMP
 #include <gmp.h>
 
@@ -358,4 +359,18 @@ qk_point_t *qko_load_cities(size_t *n) {
   fclose(f);
   *n = m;
   return v;
+}
+
+/* The library's disc test, operation for operation (collide/collider.c ray_disc). */
+double qko_ray_disc_bits(qk_disc_t d, qk_point_t o, qk_point_t v, double tmax) {
+  double fx = o.x - d.x, fy = o.y - d.y;
+  double c = fx * fx + fy * fy - d.r * d.r;
+  if (c <= 0) return 0.0;
+  double b = fx * v.x + fy * v.y;
+  if (b >= 0) return -1.0;
+  double a = v.x * v.x + v.y * v.y, cr = fx * v.y - fy * v.x;
+  double disc = a * d.r * d.r - cr * cr;
+  if (disc < 0) return -1.0;
+  double t = c / (-b + sqrt(disc));
+  return t <= tmax ? t : -1.0;
 }

@@ -31,6 +31,11 @@ qk_hit_t qko_raycast(const qk_disc_t *d, size_t nd, const qk_box_t *b, size_t nb
 double qko_ray_item(const qk_disc_t *d, size_t nd, const qk_box_t *b, size_t i, qk_point_t o,
                     qk_point_t dir, double tmax);
 
+/* The library's own disc test (collide/collider.c ray_disc), the same operations in the
+ * same order, for the tests that require the cast to match a brute force over it to the
+ * last bit of t: t of the entry, 0 from inside, -1 for a miss or t > tmax. */
+double qko_ray_disc_bits(qk_disc_t d, qk_point_t o, qk_point_t v, double tmax);
+
 /* Sort neighbours by (dist, id) / by id. */
 void qko_sort_by_dist(qk_neighbor_t *v, size_t n);
 void qko_sort_by_id(qk_neighbor_t *v, size_t n);
