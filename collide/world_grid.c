@@ -106,24 +106,11 @@ typedef struct pack_job {
   unsigned n_jobs;
 } pack_job_t;
 
-/* The first cell at or after order position m (m <= the sentinel's start). */
-static uint32_t cell_at(const qk__wcell_t *cells, uint32_t nc, uint32_t m) {
-  uint32_t lo = 0, hi = nc;
-  while (lo < hi) {
-    uint32_t mid = lo + (hi - lo) / 2;
-    if (cells[mid].start < m)
-      lo = mid + 1;
-    else
-      hi = mid;
-  }
-  return lo;
-}
-
 static void pack_run(unsigned t, void *ud) {
   pack_job_t *p = ud;
   uint32_t n = p->cells[p->nc].start;
-  uint32_t c0 = cell_at(p->cells, p->nc, (uint32_t)((uint64_t)n * t / p->n_jobs));
-  uint32_t c1 = cell_at(p->cells, p->nc, (uint32_t)((uint64_t)n * (t + 1) / p->n_jobs));
+  uint32_t c0 = qk__wcell_from(p->cells, 0, p->nc, (uint32_t)((uint64_t)n * t / p->n_jobs));
+  uint32_t c1 = qk__wcell_from(p->cells, 0, p->nc, (uint32_t)((uint64_t)n * (t + 1) / p->n_jobs));
   pack_cells(p->w, p->pk, p->ord, p->cells, c0, c1);
 }
 
@@ -272,7 +259,7 @@ static int merge_threads(qk_world_t *w, const drec_t *d, size_t m_d, uint32_t *o
   const qk__wcell_t *oc = w->cells;
   J->c0[0] = 0, J->j0[0] = 0;
   for (unsigned t = 1; t < nt; t++) {
-    uint32_t c = cell_at(oc, n_oc, (uint32_t)((uint64_t)w->n_order * t / nt));
+    uint32_t c = qk__wcell_from(oc, 0, n_oc, (uint32_t)((uint64_t)w->n_order * t / nt));
     if (c < J->c0[t - 1]) c = J->c0[t - 1];
     J->c0[t] = c;
     size_t lo = J->j0[t - 1], hi = m_d;

@@ -48,6 +48,20 @@ typedef struct qk__wcell {
   int32_t level;
 } qk__wcell_t;
 
+/* The first cell a in [lo, hi) with cells[a].start >= m, or hi if none (cells are sorted
+ * by start). */
+static inline uint32_t qk__wcell_from(const qk__wcell_t *cells, uint32_t lo, uint32_t hi,
+                                      uint64_t m) {
+  while (lo < hi) {
+    uint32_t mid = lo + (hi - lo) / 2;
+    if (cells[mid].start < m)
+      lo = mid + 1;
+    else
+      hi = mid;
+  }
+  return lo;
+}
+
 /* Pairs as 64-bit keys: slot a in the high half, slot b (> a) in the low half, so the
  * keys' order is the (slot a, slot b) order. The search finds them so, and the began
  * and ended lists keep them so; the current pairs are stored by rows (qk__prows_t). */

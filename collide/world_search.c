@@ -504,18 +504,6 @@ static int level_info(const qk_world_t *w, const qk__wpack_t *pk, lvinfo_t *lv, 
   return 1;
 }
 
-/* The first cell a in [lo, hi] with cells[a].start >= m (hi if none before it). */
-static uint32_t cell_from(const qk__wcell_t *cells, uint32_t lo, uint32_t hi, uint64_t m) {
-  while (lo < hi) {
-    uint32_t mid = lo + (hi - lo) / 2;
-    if (cells[mid].start < m)
-      lo = mid + 1;
-    else
-      hi = mid;
-  }
-  return lo;
-}
-
 /*
  * The grid's chunks of cells of about equal work (see qk__world_search): chunk i ends at
  * the first cell where the work of the cells before it reaches i / n_chunks of the
@@ -546,7 +534,7 @@ static void grid_chunks(const qk_world_t *w, int finest, uint32_t *chunk, unsign
       /* the objects of this level the chunk's cells must hold (at least one) */
       double need = ceil((total * i / n_chunks - before) / wt[k]);
       uint64_t m = (uint64_t)w->cells[f].start + (uint64_t)(need > 1 ? need : 1);
-      uint32_t a = cell_from(w->cells, f + 1, e, m);
+      uint32_t a = qk__wcell_from(w->cells, f + 1, e, m);
       chunk[i] = a > chunk[i - 1] ? a : chunk[i - 1];
     }
     before += lw;
