@@ -777,7 +777,7 @@ static qk_status_t prepare_rays(qk_collider_t *c) {
 qk_status_t qk_collider_prepare_rays(qk_collider_t *c) {
   if (!c) return QK_ERR_INVALID;
   /* Once-only initialisation that may fail: the thread that moves the state from NONE to
-   * BUSY prepares, the others wait (yielding) until it is READY, or NONE again after a
+   * BUSY prepares, the others wait (napping) until it is READY, or NONE again after a
    * failure, when the next of them tries in turn. */
   for (;;) {
     int s = atomic_load_explicit(&c->rays_state, memory_order_acquire);
@@ -790,7 +790,7 @@ qk_status_t qk_collider_prepare_rays(qk_collider_t *c) {
                             memory_order_release);
       return st;
     }
-    if (s == RAYS_BUSY) qk__thread_yield();
+    if (s == RAYS_BUSY) qk__thread_nap();
   }
 }
 

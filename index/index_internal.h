@@ -271,6 +271,11 @@ unsigned qk__threads_resolve(uint32_t threads);
 /* Let another thread run (a waiting loop's step). */
 void qk__thread_yield(void);
 
+/* A longer waiting loop's step: sleep for a few microseconds. (A bare yield let a waiter spin
+ * ahead of the thread it waited for where threads are run one at a time, as under
+ * valgrind: minutes for a wait of milliseconds.) */
+void qk__thread_nap(void);
+
 /* One share of a parallel region: share w of nw. */
 typedef void (*qk__share_fn)(void *ctx, unsigned w, unsigned nw);
 

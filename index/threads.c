@@ -6,6 +6,7 @@
  */
 #define _POSIX_C_SOURCE 200809L
 #include <stdatomic.h>
+#include <time.h>
 #include <unistd.h>
 
 #include "index/index_access.h"
@@ -30,6 +31,13 @@ unsigned qk__threads_resolve(uint32_t threads) {
 void qk__thread_yield(void) {
 #if defined(QK_HAVE_PTHREADS)
   sched_yield();
+#endif
+}
+
+void qk__thread_nap(void) {
+#if defined(QK_HAVE_PTHREADS)
+  struct timespec ts = {0, 20000}; /* 20 us */
+  nanosleep(&ts, NULL);
 #endif
 }
 

@@ -34,6 +34,7 @@
 #define _DEFAULT_SOURCE /* madvise and MADV_HUGEPAGE in <sys/mman.h> */
 #include <math.h>
 #include <pthread.h>
+#include <sched.h>
 #include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -1182,8 +1183,8 @@ typedef struct lazy_thr {
 static void *lazy_thread(void *arg) {
   lazy_thr_t *t = arg;
   qk_hit_t h[LZ_NR];
-  while (!atomic_load(t->go)) {
-  } /* start together */
+  while (!atomic_load(t->go)) /* start together (yielding: under valgrind the threads */
+    sched_yield();            /* take turns, and a bare spin starves the others) */
   /* Each thread from its own ray, so that different rays make the first call. */
   const size_t first = (size_t)t->k * 37 % LZ_NR;
   t->ok = 1;
