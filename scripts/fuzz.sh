@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Builds the libFuzzer targets in fuzz/ with clang (ASan + UBSan) and runs each for
-# FUZZ_SECONDS (default 60), one after another, at low priority.
+# FUZZ_SECONDS (default 60), FUZZ_JOBS targets at a time (default 2), at low priority.
+# The library is compiled once for all targets.
 #
 #   scripts/fuzz.sh                 build and run every target
 #   scripts/fuzz.sh tree_ops csv    only these targets
@@ -19,6 +20,7 @@ out=${FUZZ_BUILD_DIR:-$src/build-fuzz}
 seconds=${FUZZ_SECONDS:-60}
 cc=${FUZZ_CC:-clang}
 jobs_nice=${FUZZ_NICE:-15}
+jobs=${FUZZ_JOBS:-2}
 
 all_targets=(tree_ops csv poly geojson mesh_dyadic mesh_general)
 targets=("$@")
@@ -61,34 +63,57 @@ options() {
   esac
 }
 
+# The library once, JOBS files at a time, into objects named after their paths
+# (region/predicates.c is compiled without contracting a*b+c, as CMakeLists.txt does).
+echo "== build the library for the fuzz targets" >&2
+mkdir -p "$out/obj"
+export out jobs_nice cc
+# shellcheck disable=SC2016 # the script runs in the child bash, one file (the last word) each
+printf '%s\n' "${lib[@]}" | sed "s|^$src/||" | xargs -P "$jobs" -n 1 bash -c '
+  f=${!#} extra=
+  [ "$f" = region/predicates.c ] && extra=-ffp-contract=off
+  nice -n "$jobs_nice" "$cc" "${@:1:$#-1}" $extra -c "$f" -o "$out/obj/${f//\//_}.o"' _ "${flags[@]}"
+objs=()
+for f in "${lib[@]}"; do
+  f=${f#"$src"/}
+  objs+=("$out/obj/${f//\//_}.o")
+done
 for t in "${targets[@]}"; do
   s=$(sources "$t")
   echo "== build fuzz_$t" >&2
-  nice -n "$jobs_nice" "$cc" "${flags[@]}" "$s" "${lib[@]}" "${libs[@]}" -lm -o "$out/fuzz_$t"
+  nice -n "$jobs_nice" "$cc" "${flags[@]}" "$s" "${objs[@]}" "${libs[@]}" -lm -o "$out/fuzz_$t"
 done
 [ "${FUZZ_BUILD_ONLY:-0}" = 1 ] && exit 0
 
-status=0
-for t in "${targets[@]}"; do
-  work="$out/corpus/$t"
-  crashes="$out/crashes/$t"
+fuzz_one() { # fuzz_one TARGET: runs it, reports, and leaves its verdict in fuzz_TARGET.rc
+  local t=$1 work="$out/corpus/$1" crashes="$out/crashes/$1" log="$out/fuzz_$1.log" seeds=()
   mkdir -p "$work" "$crashes"
-  seeds=()
   [ -d "$src/fuzz/corpus/$t" ] && seeds+=("$src/fuzz/corpus/$t")
   [ -d "$src/fuzz/regressions/$t" ] && seeds+=("$src/fuzz/regressions/$t")
-  echo "== fuzz_$t for ${seconds}s" >&2
-  log="$out/fuzz_$t.log"
   # shellcheck disable=SC2046
   if nice -n "$jobs_nice" "$out/fuzz_$t" -max_total_time="$seconds" -timeout=10 -rss_limit_mb=1024 \
     -print_final_stats=1 -artifact_prefix="$crashes/" $(options "$t") "$work" "${seeds[@]}" \
     >"$log" 2>&1; then
     runs=$(grep -m1 -o 'stat::number_of_executed_units: *[0-9]*' "$log" | grep -o '[0-9]*$' || true)
     cov=$(grep -o 'cov: [0-9]*' "$log" | tail -n 1 || true)
-    echo "   ok: ${runs:-?} runs, ${cov:-cov: ?}, corpus $(find "$work" -type f | wc -l) files" >&2
+    echo "   ok: fuzz_$t ${runs:-?} runs, ${cov:-cov: ?}, corpus $(find "$work" -type f | wc -l) files" >&2
+    echo ok >"$out/fuzz_$t.rc"
   else
-    echo "   FAILED: see $log; input in $crashes/" >&2
+    echo "   FAILED: fuzz_$t: see $log; input in $crashes/" >&2
     grep -E 'fuzz oracle|ERROR|runtime error|SUMMARY' "$log" | head -n 5 >&2 || true
-    status=1
+    echo fail >"$out/fuzz_$t.rc"
   fi
+}
+
+for t in "${targets[@]}"; do
+  while [ "$(jobs -rp | wc -l)" -ge "$jobs" ]; do wait -n || true; done
+  rm -f "$out/fuzz_$t.rc"
+  echo "== fuzz_$t for ${seconds}s" >&2
+  fuzz_one "$t" &
+done
+wait
+status=0
+for t in "${targets[@]}"; do
+  [ "$(cat "$out/fuzz_$t.rc" 2>/dev/null)" = ok ] || status=1
 done
 exit $status

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # valgrind memcheck over a representative subset of the test suite and the CLI, in its
-# own build directory (no sanitizers: valgrind and ASan do not mix). Any memory error or
-# any leaked block (definite, indirect or possible) fails the run.
+# own build directory (no sanitizers: valgrind and ASan do not mix), JOBS runs at a time
+# (2 by default). Any memory error or any leaked block (definite, indirect or possible)
+# fails the run.
 #
 #   scripts/memcheck.sh                   the default subset
 #   MEMCHECK_TESTS="test_index" scripts/memcheck.sh
@@ -14,34 +15,42 @@ cd "$(dirname "$0")/.."
 src=$PWD
 dir=${MEMCHECK_BUILD_DIR:-build-memcheck}
 jobs=${JOBS:-2}
-tests=${MEMCHECK_TESTS:-"test_index test_collide test_poly test_mesh test_io test_reliability test_reliab_threads test_headers_c"}
+tests=${MEMCHECK_TESTS:-"test_index test_collide test_reliab_threads test_mesh test_poly test_reliability test_io test_headers_c"}
 
 if ! command -v valgrind >/dev/null; then
   echo "memcheck.sh: valgrind not found (make memcheck installs it)" >&2
   exit 2
 fi
 cmake -S . -B "$dir" -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
-nice cmake --build "$dir" -j"$jobs"
+# shellcheck disable=SC2086 # the test names are words
+nice cmake --build "$dir" -j"$jobs" --target quadkit_cli $tests
 
 vg=(valgrind --tool=memcheck --error-exitcode=99 --leak-check=full
   '--show-leak-kinds=definite,indirect,possible' '--errors-for-leak-kinds=definite,indirect,possible'
   --num-callers=30 --quiet)
 export QK_SOURCE_DIR="$src" QK_SHARED_DIR="$src/../shared"
 log="$dir/memcheck"
+rm -rf "$log"
 mkdir -p "$log"
-fails=0
-run() { # run NAME EXPECTED_EXIT command...  (valgrind itself exits 99 on any error)
+# run NAME EXPECTED_EXIT command...: in the background, at most $jobs at a time (the
+# longest tests come first in the list); valgrind itself exits 99 on any error. Each run
+# leaves NAME.rc with its verdict, counted once all have ended.
+run() {
+  while [ "$(jobs -rp | wc -l)" -ge "$jobs" ]; do wait -n || true; done
   local name=$1 want=$2
   shift 2
-  local start=$SECONDS rc=0
-  "${vg[@]}" --log-file="$log/$name.log" "$@" >"$log/$name.out" 2>&1 || rc=$?
-  if [ "$rc" -eq "$want" ]; then
-    echo "   ok   $name ($((SECONDS - start))s)" >&2
-  else
-    echo "   FAIL $name (exit $rc, want $want): see $log/$name.log and $log/$name.out" >&2
-    head -n 30 "$log/$name.log" >&2
-    fails=$((fails + 1))
-  fi
+  (
+    start=$SECONDS rc=0
+    "${vg[@]}" --log-file="$log/$name.log" "$@" >"$log/$name.out" 2>&1 || rc=$?
+    if [ "$rc" -eq "$want" ]; then
+      echo "   ok   $name ($((SECONDS - start))s)" >&2
+      echo ok >"$log/$name.rc"
+    else
+      echo "   FAIL $name (exit $rc, want $want): see $log/$name.log and $log/$name.out" >&2
+      head -n 30 "$log/$name.log" >&2
+      echo fail >"$log/$name.rc"
+    fi
+  ) &
 }
 
 echo "== valgrind memcheck" >&2
@@ -73,7 +82,9 @@ if "$cli" mesh --help >/dev/null 2>&1; then
   run cli_mesh 0 "$cli" mesh examples/mesh/notes.poly -o "$tmp/notes" --size 16
   run cli_mesh_bad_input 1 "$cli" mesh "$tmp/bad.csv" -o "$tmp/bad"
 fi
+wait
 [ "$ran" -gt 0 ] || { echo "memcheck.sh: no test binaries found" >&2; exit 1; }
+fails=$(grep -lx fail "$log"/*.rc 2>/dev/null | wc -l)
 if [ "$fails" -ne 0 ]; then
   echo "memcheck: $fails failed" >&2
   exit 1

@@ -201,11 +201,41 @@ static int wp_cmp(const void *x, const void *y) {
 }
 
 /* All pairs by brute force, ordered as the library orders them. */
+/* A box that holds shape s, widened by far more than the rounding of o_overlap's long
+ * double tests, so that every pair o_overlap accepts has overlapping boxes. */
+typedef struct obox {
+  double x0, x1, y0, y1;
+  size_t i;
+} obox_t;
+static obox_t o_bounds(qk_shape_t s, size_t i) {
+  s = o_norm(s);
+  double r = s.kind == QK_SHAPE_DISC ? s.a : 0;
+  double x1 = s.kind == QK_SHAPE_BOX || s.kind == QK_SHAPE_SEGMENT ? s.a : s.x;
+  double y1 = s.kind == QK_SHAPE_BOX || s.kind == QK_SHAPE_SEGMENT ? s.b : s.y;
+  obox_t b = {fmin(s.x, x1) - r, fmax(s.x, x1) + r, fmin(s.y, y1) - r, fmax(s.y, y1) + r, i};
+  double e = (fabs(s.x) + fabs(s.y) + fabs(x1) + fabs(y1) + r) * 0x1p-40;
+  b.x0 -= e, b.x1 += e, b.y0 -= e, b.y1 += e;
+  return b;
+}
+static int obox_cmp(const void *p, const void *q) {
+  const obox_t *a = p, *b = q;
+  return (a->x0 > b->x0) - (a->x0 < b->x0);
+}
+
+/* Every overlapping pair of the mirror, sorted. Brute force over all pairs, but pairs
+ * whose bounding boxes are apart in x are skipped by a sweep over the boxes sorted by
+ * their left edges (and those apart in y before the exact test), so that the scenes with
+ * thousands of objects check quickly. */
 static size_t o_pairs(const mirror_t *m, qk_world_pair_t **out) {
   size_t n = 0, cap = 64;
   qk_world_pair_t *v = malloc(cap * sizeof *v);
-  for (size_t i = 0; i < m->n; i++)
-    for (size_t j = i + 1; j < m->n; j++)
+  obox_t *bx = malloc((m->n ? m->n : 1) * sizeof *bx);
+  for (size_t i = 0; i < m->n; i++) bx[i] = o_bounds(m->s[i], i);
+  qsort(bx, m->n, sizeof *bx, obox_cmp);
+  for (size_t p = 0; p < m->n; p++)
+    for (size_t q = p + 1; q < m->n && bx[q].x0 <= bx[p].x1; q++) {
+      if (bx[q].y0 > bx[p].y1 || bx[p].y0 > bx[q].y1) continue;
+      size_t i = bx[p].i, j = bx[q].i;
       if (o_overlap(m->s[i], m->s[j])) {
         if (n == cap) v = realloc(v, (cap *= 2) * sizeof *v);
         qk_handle_t a = m->h[i], b = m->h[j];
@@ -215,6 +245,8 @@ static size_t o_pairs(const mirror_t *m, qk_world_pair_t **out) {
         }
         v[n].a = a, v[n++].b = b;
       }
+    }
+  free(bx);
   if (n > 1) qsort(v, n, sizeof *v, wp_cmp);
   *out = v;
   return n;

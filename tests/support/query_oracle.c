@@ -51,23 +51,22 @@ size_t qko_radius(const qk_point_t *pts, size_t n, qk_point_t c, double r, qk_ne
 
 size_t qko_knn(const qk_point_t *pts, const unsigned char *alive, size_t n, qk_point_t q, size_t k,
                double max_dist, qk_neighbor_t *out) {
-  qk_neighbor_t *all = malloc((n ? n : 1) * sizeof *all);
+  /* Every point is looked at; the k best so far stay sorted by (squared distance, id) in
+   * out, the order the library documents, and a better one is inserted in place. A full
+   * sort of all n per query made the tests that check thousands of queries slow. */
   size_t m = 0;
   double lim = max_dist * max_dist;
-  for (size_t i = 0; i < n; i++) {
+  for (size_t i = 0; i < n && k > 0; i++) {
     if (alive && !alive[i]) continue;
     double dx = pts[i].x - q.x, dy = pts[i].y - q.y, d2 = dx * dx + dy * dy;
     if (d2 > lim) continue;
-    all[m].id = (qk_id_t)i;
-    all[m++].dist = d2; /* sort on the squared distance, as the library does */
+    qk_neighbor_t c = {.id = (qk_id_t)i, .dist = d2};
+    if (m == k && cmp_dist(&c, &out[m - 1]) >= 0) continue;
+    size_t j = m < k ? m++ : m - 1;
+    for (; j > 0 && cmp_dist(&c, &out[j - 1]) < 0; j--) out[j] = out[j - 1];
+    out[j] = c;
   }
-  qko_sort_by_dist(all, m);
-  if (m > k) m = k;
-  for (size_t i = 0; i < m; i++) {
-    out[i].id = all[i].id;
-    out[i].dist = sqrt(all[i].dist);
-  }
-  free(all);
+  for (size_t i = 0; i < m; i++) out[i].dist = sqrt(out[i].dist);
   return m;
 }
 
