@@ -197,10 +197,12 @@ static qk_status_t subdivide(qk__gm_t *g, uint32_t node, double X, double Y, dou
   double h = s / 2, cx[4], cy[4], clo[4][2], chi[4][2];
   /* The four children's lists at once, child q's at base + q k (in the parent's order):
    * each feature's box is read once and tested against the children's columns and rows. */
-  void *ap = g->arena;
-  if (qk__grow(g->a, &ap, &g->arena_cap, g->arena_n + 4 * k + 1, sizeof *g->arena))
-    return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
-  g->arena = ap;
+  if (g->arena_n + 4 * k + 1 > g->arena_cap) {
+    void *ap = g->arena;
+    if (qk__grow(g->a, &ap, &g->arena_cap, g->arena_n + 4 * k + 1, sizeof *g->arena))
+      return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+    g->arena = ap;
+  }
   unsigned qwest = 0, qeast = 0, qsouth = 0, qnorth = 0;
   for (unsigned q = 0; q < 4; q++) {
     cx[q] = X + (qk__q_east(q) ? h : 0), cy[q] = Y + (qk__q_north(q) ? h : 0);
@@ -228,7 +230,14 @@ static qk_status_t subdivide(qk__gm_t *g, uint32_t node, double X, double Y, dou
 #undef GM_PUT
   }
   g->arena_n = base + 4 * k;
+  /* A child with no feature, or one, is a leaf unless the size bound splits leaves: settled
+   * here without the call (most children of the grading are such leaves). */
+  const int settle = !GM_SIZE_SPLITS(g) || !(g->opt->max_size > 0 || g->opt->size_fn);
   for (unsigned q = 0; q < 4; q++) {
+    if (settle && n[q] <= 1) {
+      if (!n[q] && (st = mark_free(g, child + q))) break;
+      continue;
+    }
     st = subdivide(g, child + q, cx[q], cy[q], h, clo[q], chi[q], depth + 1, base + q * k, n[q]);
     if (st) break;
   }
@@ -260,9 +269,11 @@ uint64_t qk__gm_morton(const qk__gm_t *g, double x, double y) {
 }
 
 static qk_status_t add_pt(qk__gm_t *g, uint64_t key, double x, double y, uint32_t seg, uint64_t k) {
-  void *p = g->pts;
-  if (qk__grow(g->a, &p, &g->pts_cap, g->npts + 1, sizeof *g->pts)) return QK_ERR_NOMEM;
-  g->pts = p;
+  if (g->npts + 1 > g->pts_cap) {
+    void *p = g->pts;
+    if (qk__grow(g->a, &p, &g->pts_cap, g->npts + 1, sizeof *g->pts)) return QK_ERR_NOMEM;
+    g->pts = p;
+  }
   g->pts[g->npts] = (qk__gm_pt_t){key, x, y, k, seg, (uint32_t)g->npts};
   g->npts++;
   return QK_OK;
