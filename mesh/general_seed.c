@@ -93,12 +93,8 @@ static int separate(const qk__gm_t *g, uint32_t f, uint32_t h, const double lo[2
  * when the bound leaves its sign open. f holds the segment as {ax, ay, bx, by}; the
  * caller has checked the bounding boxes (g->fbox: per feature {x0, y0, x1, y1} its bounding
  * box, then {ax, ay, bx, by} its ends, one cache line). */
-static int seg_box(const double *f, const double lo[2], const double hi[2]) {
+static int seg_box_line(const double *f, const double lo[2], const double hi[2]) {
   const double a[2] = {f[0], f[1]}, b[2] = {f[2], f[3]};
-  /* An end in the box settles it (most features of a small box end in it). */
-  if ((a[0] >= lo[0] && a[0] <= hi[0] && a[1] >= lo[1] && a[1] <= hi[1]) ||
-      (b[0] >= lo[0] && b[0] <= hi[0] && b[1] >= lo[1] && b[1] <= hi[1]))
-    return 1;
   double dx = b[0] - a[0], dy = b[1] - a[1];
   /* The corner maximising det: largest y when dx > 0, smallest x when dy > 0. */
   const double cmax[2] = {dy > 0 ? lo[0] : hi[0], dx > 0 ? hi[1] : lo[1]};
@@ -111,6 +107,15 @@ static int seg_box(const double *f, const double lo[2], const double hi[2]) {
     o[k] = det > bound ? 1 : -det > bound ? -1 : qk__orient2d(a, b, c[k]);
   }
   return o[0] >= 0 && o[1] <= 0;
+}
+
+/* seg_box: an end in the box settles it (most features of a small box end in it), inline;
+ * the line's test otherwise. */
+static inline int seg_box(const double *f, const double lo[2], const double hi[2]) {
+  if ((f[0] >= lo[0] && f[0] <= hi[0] && f[1] >= lo[1] && f[1] <= hi[1]) ||
+      (f[2] >= lo[0] && f[2] <= hi[0] && f[3] >= lo[1] && f[3] <= hi[1]))
+    return 1;
+  return seg_box_line(f, lo, hi);
 }
 
 static qk_status_t mark_free(qk__gm_t *g, uint32_t node) {
