@@ -453,7 +453,7 @@ static qk_status_t split_triangle(qk__gm_t *g, uint32_t t, size_t *rejected) {
   const double *W = &c->xy[2 * w];
   /* A circumcentre beyond the input's bounding box (grown by an eighth) lies in the
    * unbounded face: walk towards the box's edge instead, which is as hidden. */
-  double m = fmax(g->bx1 - g->bx0, g->by1 - g->by0) / 8;
+  double ew = g->bx1 - g->bx0, eh = g->by1 - g->by0, m = (ew > eh ? ew : eh) / 8; /* finite */
   double lo[2] = {g->bx0 - m, g->by0 - m}, hi[2] = {g->bx1 + m, g->by1 + m};
   int clamped = 0;
   if (!isfinite(p[0]) || !isfinite(p[1])) {

@@ -93,12 +93,8 @@ static int separate(const qk__gm_t *g, uint32_t f, uint32_t h, const double lo[2
  * when the bound leaves its sign open. f holds the segment as {ax, ay, bx, by}; the
  * caller has checked the bounding boxes (g->fbox: per feature {x0, y0, x1, y1} its bounding
  * box, then {ax, ay, bx, by} its ends, one cache line). */
-static int seg_box(const double *f, const double lo[2], const double hi[2]) {
+static int seg_box_line(const double *f, const double lo[2], const double hi[2]) {
   const double a[2] = {f[0], f[1]}, b[2] = {f[2], f[3]};
-  /* An end in the box settles it (most features of a small box end in it). */
-  if ((a[0] >= lo[0] && a[0] <= hi[0] && a[1] >= lo[1] && a[1] <= hi[1]) ||
-      (b[0] >= lo[0] && b[0] <= hi[0] && b[1] >= lo[1] && b[1] <= hi[1]))
-    return 1;
   double dx = b[0] - a[0], dy = b[1] - a[1];
   /* The corner maximising det: largest y when dx > 0, smallest x when dy > 0. */
   const double cmax[2] = {dy > 0 ? lo[0] : hi[0], dx > 0 ? hi[1] : lo[1]};
@@ -111,6 +107,15 @@ static int seg_box(const double *f, const double lo[2], const double hi[2]) {
     o[k] = det > bound ? 1 : -det > bound ? -1 : qk__orient2d(a, b, c[k]);
   }
   return o[0] >= 0 && o[1] <= 0;
+}
+
+/* seg_box: an end in the box settles it (most features of a small box end in it), inline;
+ * the line's test otherwise. */
+static inline int seg_box(const double *f, const double lo[2], const double hi[2]) {
+  if ((f[0] >= lo[0] && f[0] <= hi[0] && f[1] >= lo[1] && f[1] <= hi[1]) ||
+      (f[2] >= lo[0] && f[2] <= hi[0] && f[3] >= lo[1] && f[3] <= hi[1]))
+    return 1;
+  return seg_box_line(f, lo, hi);
 }
 
 static qk_status_t mark_free(qk__gm_t *g, uint32_t node) {
@@ -197,10 +202,12 @@ static qk_status_t subdivide(qk__gm_t *g, uint32_t node, double X, double Y, dou
   double h = s / 2, cx[4], cy[4], clo[4][2], chi[4][2];
   /* The four children's lists at once, child q's at base + q k (in the parent's order):
    * each feature's box is read once and tested against the children's columns and rows. */
-  void *ap = g->arena;
-  if (qk__grow(g->a, &ap, &g->arena_cap, g->arena_n + 4 * k + 1, sizeof *g->arena))
-    return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
-  g->arena = ap;
+  if (g->arena_n + 4 * k + 1 > g->arena_cap) {
+    void *ap = g->arena;
+    if (qk__grow(g->a, &ap, &g->arena_cap, g->arena_n + 4 * k + 1, sizeof *g->arena))
+      return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+    g->arena = ap;
+  }
   unsigned qwest = 0, qeast = 0, qsouth = 0, qnorth = 0;
   for (unsigned q = 0; q < 4; q++) {
     cx[q] = X + (qk__q_east(q) ? h : 0), cy[q] = Y + (qk__q_north(q) ? h : 0);
@@ -228,7 +235,14 @@ static qk_status_t subdivide(qk__gm_t *g, uint32_t node, double X, double Y, dou
 #undef GM_PUT
   }
   g->arena_n = base + 4 * k;
+  /* A child with no feature, or one, is a leaf unless the size bound splits leaves: settled
+   * here without the call (most children of the grading are such leaves). */
+  const int settle = !GM_SIZE_SPLITS(g) || !(g->opt->max_size > 0 || g->opt->size_fn);
   for (unsigned q = 0; q < 4; q++) {
+    if (settle && n[q] <= 1) {
+      if (!n[q] && (st = mark_free(g, child + q))) break;
+      continue;
+    }
     st = subdivide(g, child + q, cx[q], cy[q], h, clo[q], chi[q], depth + 1, base + q * k, n[q]);
     if (st) break;
   }
@@ -260,9 +274,11 @@ uint64_t qk__gm_morton(const qk__gm_t *g, double x, double y) {
 }
 
 static qk_status_t add_pt(qk__gm_t *g, uint64_t key, double x, double y, uint32_t seg, uint64_t k) {
-  void *p = g->pts;
-  if (qk__grow(g->a, &p, &g->pts_cap, g->npts + 1, sizeof *g->pts)) return QK_ERR_NOMEM;
-  g->pts = p;
+  if (g->npts + 1 > g->pts_cap) {
+    void *p = g->pts;
+    if (qk__grow(g->a, &p, &g->pts_cap, g->npts + 1, sizeof *g->pts)) return QK_ERR_NOMEM;
+    g->pts = p;
+  }
   g->pts[g->npts] = (qk__gm_pt_t){key, x, y, k, seg, (uint32_t)g->npts};
   g->npts++;
   return QK_OK;
