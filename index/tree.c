@@ -143,10 +143,20 @@ static qk_status_t reserve_slots(qk_tree_t *t, size_t need) {
   return QK_OK;
 }
 
-/* Rewrite the point arrays with every leaf's block in pre-order and no gaps, leaving
- * `headroom` free slots at the end. Allocates fresh arrays; on failure nothing changes. */
-static qk_status_t compact(qk_tree_t *t, size_t headroom) {
-  size_t live = t->n_points, ncap = live + headroom;
+static uint32_t grown_room(uint32_t count);
+
+/* The room a leaf of `count` points keeps through a compaction: a thirty-second more,
+ * so that a leaf of thousands of copies of one point at the depth cap is not full, and
+ * moved to the tail by the next insertion into it, after every compaction. */
+static uint32_t compact_room(uint32_t count) { return count + count / 32; }
+
+/* Rewrite the point arrays with every leaf's block in pre-order, each with its
+ * compact_room, leaving `headroom` free slots at the end; leaf `grow` (or QK_NONE), which
+ * is about to take a point, gets its grown room, so that it does not move to the tail
+ * right after. Allocates fresh arrays; on failure nothing changes. */
+static qk_status_t compact(qk_tree_t *t, size_t headroom, uint32_t grow) {
+  size_t live = t->n_points, ncap = live + live / 32 + headroom;
+  if (grow != QK_NONE) ncap += grown_room(t->nodes[grow].count);
   if (ncap < 16) ncap = 16;
   if (ncap > UINT32_MAX) return QK_ERR_LIMIT;
   slots_t s;
@@ -158,7 +168,8 @@ static qk_status_t compact(qk_tree_t *t, size_t headroom) {
   uint32_t *w = qk__id_map_if_made(t);
   stack[top++] = 0;
   while (top) {
-    qk__node_t *n = &t->nodes[stack[--top]];
+    uint32_t v = stack[--top];
+    qk__node_t *n = &t->nodes[v];
     if (!qk__is_leaf(n)) {
       for (int c = 3; c >= 0; c--) stack[top++] = n->child + (uint32_t)c;
       continue;
@@ -169,8 +180,8 @@ static qk_status_t compact(qk_tree_t *t, size_t headroom) {
     if (w)
       for (uint32_t i = 0; i < n->count; i++) w[ni[pos + i]] = pos + i;
     n->start = pos;
-    n->room = n->count;
-    pos += n->count;
+    n->room = v == grow ? grown_room(n->count) : compact_room(n->count);
+    pos += n->room;
   }
   slots_install(t, s, ncap);
   t->n_slots = pos;
@@ -182,10 +193,14 @@ static qk_status_t compact(qk_tree_t *t, size_t headroom) {
  * sixteenth of the used slots hold no point (garbage, or room reserved in leaves), the
  * arrays are compacted, with a thirty-second of headroom, rather than grown: so the arrays
  * of a tree under churn stay within about a sixth of its points (issue 10). A compaction
- * costs O(n) and comes after Omega(n / 16) slots were abandoned, so O(1) amortised each. */
-static qk_status_t reserve_tail(qk_tree_t *t, size_t extra) {
+ * costs O(n) and comes after Omega(n / 32) slots were abandoned (its leaves keep at most
+ * a thirty-second as room), so O(1) amortised each. `grow` is the leaf that is to take a
+ * point next (or QK_NONE): the compaction gives it room, else a big leaf would move to the
+ * tail right after, abandon its block, and so set off the next compaction. */
+static qk_status_t reserve_tail(qk_tree_t *t, size_t extra, uint32_t grow) {
   if ((size_t)t->n_slots + extra <= t->cap_slots) return QK_OK;
-  if (t->n_slots - t->n_points > t->n_points / 16) return compact(t, t->n_points / 32 + extra);
+  if (t->n_slots - t->n_points > t->n_points / 16)
+    return compact(t, t->n_points / 32 + extra, grow);
   return reserve_slots(t, (size_t)t->n_slots + extra);
 }
 
@@ -779,8 +794,9 @@ qk_status_t qk_tree_insert(qk_tree_t *t, qk_point_t p, qk_id_t *id_out) {
     atomic_store_explicit(&t->where, w, memory_order_release);
   }
   if ((st = qk__reserve_nodes(t, 4 * (t->max_depth + 1)))) return st;
-  const qk__node_t *n = &t->nodes[descend(t, p.x, p.y, NULL)];
-  if ((st = reserve_tail(t, place_need(n->count, n->room)))) return st;
+  uint32_t leaf = descend(t, p.x, p.y, NULL);
+  const qk__node_t *n = &t->nodes[leaf];
+  if ((st = reserve_tail(t, place_need(n->count, n->room), leaf))) return st;
 
   /* From here on nothing can fail. Removed ids are handed out again, the most recently
    * removed first; a new id only when none is free. */
@@ -866,7 +882,7 @@ qk_status_t qk_tree_remove(qk_tree_t *t, qk_id_t id) {
   if ((st = grow(&t->alloc, (void **)&t->free_ids, &t->cap_free_ids, (size_t)t->n_free_ids + 1,
                  sizeof(qk_id_t))))
     return st;
-  if (top != QK_NONE && (st = reserve_tail(t, t->nodes[top].count))) return st;
+  if (top != QK_NONE && (st = reserve_tail(t, t->nodes[top].count, QK_NONE))) return st;
 
   /* Nothing can fail from here on (the reservation may have compacted the arrays, so
    * the slot is read only in unplace). */
@@ -901,10 +917,10 @@ qk_status_t qk_tree_move(qk_tree_t *t, qk_id_t id, qk_point_t p) {
     for (uint32_t v = to; v != QK_NONE; v = qk__parent(t, v))
       if (v == top) count = t->nodes[top].count - 1;
   /* Reserve as if the target leaf were full: the reservation may compact the arrays,
-   * after which every leaf is. */
+   * after which every leaf is, but the target when no merge swallows it. */
   size_t need = (top != QK_NONE ? t->nodes[top].count : 0) + grown_room(count);
   if ((st = qk__reserve_nodes(t, 4 * (t->max_depth + 1)))) return st;
-  if ((st = reserve_tail(t, need))) return st;
+  if ((st = reserve_tail(t, need, top == QK_NONE ? to : QK_NONE))) return st;
 
   /* Nothing can fail from here on. */
   unplace(t, w, id, from, top);

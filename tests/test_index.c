@@ -26,6 +26,10 @@
  *    uniform, clustered and duplicate points at capacities 1, 8 and 32, with the default
  *    allocator (subtrees on threads) and with a counting one (built one after another);
  *    from 2^19 points (the build's non-temporal stores) likewise, and the tree valid;
+ *  - inserts of many copies of a few points (leaves at the depth cap that cannot split)
+ *    take linear work: the bytes the tree allocates over 40,000 one-by-one inserts stay
+ *    within 100 times its final size (each compaction used to leave every big leaf
+ *    full, so that almost every insert moved one and set off the next compaction);
  *  - compact storage (issue 11): at 1M uniform points and capacity 32 a built tree holds
  *    at most 22 bytes per point (16 of coordinates, 4 of ids, the nodes in the rest).
  */
@@ -867,6 +871,47 @@ static void test_index_rebuild(void **state) {
   free(p);
 }
 
+/* An allocator that counts the bytes asked for (every fresh block and every growth). */
+static void *counting_alloc(void *ud, void *ptr, size_t osize, size_t nsize) {
+  (void)osize;
+  if (nsize == 0) {
+    free(ptr);
+    return NULL;
+  }
+  *(size_t *)ud += nsize;
+  return realloc(ptr, nsize);
+}
+
+static void test_index_insert_duplicates_linear(void **state) {
+  (void)state;
+  const int spots[] = {1, 5, 50};
+  enum { N = 40000 };
+  for (size_t k = 0; k < sizeof spots / sizeof *spots; k++) {
+    size_t bytes = 0;
+    qk_allocator_t a = {counting_alloc, &bytes};
+    qk_tree_options_t o;
+    qk_tree_options_init(&o);
+    o.capacity = 8;
+    o.has_root = 1;
+    o.root = (qk_square_t){0, 0, 1};
+    o.allocator = &a;
+    qk_tree_t *t;
+    assert_int_equal(qk_tree_build(NULL, 0, &o, &t), QK_OK);
+    for (uint32_t i = 0; i < N; i++) { /* the spots in a scrambled order */
+      uint32_t s = (uint32_t)((i * 2654435761u) % (uint32_t)spots[k]);
+      assert_int_equal(qk_tree_insert(t, (qk_point_t){(s + 0.5) / spots[k], 0.5}, NULL), QK_OK);
+    }
+    QKT_CHECK_TREE(t);
+    size_t mem = qk_tree_memory(t);
+    print_message("%d spots: %zu bytes asked for, %zu held (%.1fx)\n", spots[k], bytes, mem,
+                  (double)bytes / (double)mem);
+    /* Here 3x, 33x and 53x of the final size; 7,500x for 5 spots before the fix. */
+    if (bytes > 100 * mem)
+      fail_msg("%d spots: %zu bytes allocated for a tree of %zu", spots[k], bytes, mem);
+    qk_tree_free(t);
+  }
+}
+
 static void test_index_churn_memory(void **state) {
   (void)state;
   qkt_rng_t r;
@@ -1029,6 +1074,7 @@ int main(void) {
       cmocka_unit_test(test_index_lazy_id_map),
       cmocka_unit_test(test_index_rebuild),
       cmocka_unit_test(test_index_churn_memory),
+      cmocka_unit_test(test_index_insert_duplicates_linear),
       cmocka_unit_test(test_index_build_threads),
       cmocka_unit_test(test_index_build_streamed),
       cmocka_unit_test(test_index_memory_compact),
