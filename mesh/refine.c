@@ -43,7 +43,9 @@ static qk_status_t refine(qk__gen_t *g, double sc, qk_node_t v, int64_t X, int64
     if (S <= 1 ||
         !(qk__ldexp_by((double)S, sc, -g->lat.f) * 1.4142135623730951 > wanted(g, X, Y, S)))
       return QK_OK;
-    qk_status_t st = qk_tree_split_leaf(g->tree, v);
+    /* The root square is (0, 0, U), U a power of two (as in the subdivision). */
+    unsigned depth = (unsigned)(__builtin_ctzll(g->U) - __builtin_ctzll((uint64_t)S));
+    qk_status_t st = qk__tree_split_leaf_at(g->tree, v, (double)X, (double)Y, depth);
     if (st) return qk__mesh_fail(g->err, st, 0, "%s while refining to size", qk_strerror(st));
   }
   uint32_t c = qk__node_child(g->tree, v);
