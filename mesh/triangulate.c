@@ -198,6 +198,12 @@ static qk_status_t tri_unit(qk__tri_state_t *T, const qk__unit_rec_t *r, const u
  * balanced tree has a corner at one of that side's ends, so the neighbours come from two
  * array reads with the leaf's own corner vertices, no coordinates and no hashing.
  */
+/* A leaf's square on the lattice: corner (x, y), side s (the tree's root is (0, 0, U) with
+ * U a power of two at most 2^30, so its squares are these integers exactly). */
+typedef struct lat_sq {
+  uint32_t x, y, s;
+} lat_sq_t;
+
 typedef struct leaf_map {
   uint32_t *by[4];        /* by corner kind, indexed by corner vertex id */
   const uint32_t *corner; /* 4 per leaf: SW, SE, NE, NW vertex ids */
@@ -261,7 +267,7 @@ static size_t side_leaves(const qk_tree_t *t, const leaf_map_t *L, uint32_t li, 
 }
 
 static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, const qk_node_t *leaves,
-                               const qk_square_t *lsq, size_t nleaves, const uint32_t *rec_of,
+                               const lat_sq_t *lsq, size_t nleaves, const uint32_t *rec_of,
                                const uint32_t *cell_label, const leaf_map_t *L) {
   const qk_tree_t *t = g->tree;
   size_t ncell = 2 * nleaves;
@@ -269,9 +275,11 @@ static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, const qk_node_t
   uint32_t *region = qk__realloc(g->a, NULL, 0, (ncell + 1) * sizeof *region);
   uint32_t *rlabel = qk__realloc(g->a, NULL, 0, (ncell + 1) * sizeof *rlabel);
   uint8_t *kind = qk__realloc(g->a, NULL, 0, nleaves + 1);
+  /* Per cell, the side it was reached across when that side holds nothing else new. */
+  uint8_t *back = qk__realloc(g->a, NULL, 0, ncell + 1);
   qk_status_t st = QK_OK;
   void *rp = T->region;
-  if (!queue || !region || !rlabel || !kind ||
+  if (!queue || !region || !rlabel || !kind || !back ||
       qk__grow(T->a, &rp, &T->rcap, T->nt + 1, sizeof *T->region)) {
     st = QK_ERR_NOMEM;
     goto out;
@@ -283,12 +291,12 @@ static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, const qk_node_t
    * east, north, west): component edges, from the node's unit record, and the root
    * square's boundary. */
   static const int piece_of_side[4] = {QK__P_S, QK__P_E, QK__P_N, QK__P_W};
-  const double U = qk__tree_root_square(t).side;
+  const uint32_t U = (uint32_t)g->U;
   for (size_t li = 0; li < nleaves; li++) {
     uint32_t v = leaves[li];
-    const qk_square_t *q = &lsq[li];
-    uint8_t f = (uint8_t)((q->y == 0 ? 4 : 0) | (q->x + q->side == U ? 8 : 0) |
-                          (q->y + q->side == U ? 16 : 0) | (q->x == 0 ? 32 : 0));
+    const lat_sq_t *q = &lsq[li];
+    uint8_t f = (uint8_t)((q->y == 0 ? 4 : 0) | (q->x + q->s == U ? 8 : 0) |
+                          (q->y + q->s == U ? 16 : 0) | (q->x == 0 ? 32 : 0));
     if (rec_of[v] != QK__MESH_UNSET) {
       const qk__unit_rec_t *r = &g->rec[rec_of[v]];
       f |= r->piece[QK__P_D0] ? 1 : r->piece[QK__P_D1] ? 2 : 0;
@@ -312,12 +320,12 @@ static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, const qk_node_t
     uint32_t rid = nreg++;
     rlabel[rid] = 0;
     size_t qh = 0, qt = 0;
-    region[c0] = rid, queue[qt++] = (uint32_t)c0;
+    region[c0] = rid, queue[qt++] = (uint32_t)c0, back[c0] = 0;
     while (qh < qt) {
       uint32_t c = queue[qh++], li = c / 2, k = c % 2;
       if (cell_label[c] != QK__MESH_UNSET) rlabel[rid] = cell_label[c];
       unsigned kl = kind[li];
-      unsigned sides = touch[kl & 3][k] & ~(kl >> 2) & 0xf;
+      unsigned sides = touch[kl & 3][k] & ~(kl >> 2) & ~(unsigned)back[c] & 0xf;
       for (; sides; sides &= sides - 1) {
         int sd = __builtin_ctz(sides);
         uint32_t nb[8];
@@ -327,7 +335,11 @@ static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, const qk_node_t
           uint32_t lw = nb[i];
           uint32_t cw = 2 * lw, d = kind[lw] & 3u;
           if (d) cw += (other[d] >> opp) & 1; /* a diagonal: which half faces this side */
-          if (region[cw] == QK__MESH_UNSET) region[cw] = rid, queue[qt++] = cw;
+          if (region[cw] != QK__MESH_UNSET) continue;
+          region[cw] = rid, queue[qt++] = cw;
+          /* A neighbour no larger than this leaf has only this leaf's cell c across its
+           * side opp (c touches side sd): nothing new there, so it is not looked up. */
+          back[cw] = L->side[lw] <= L->side[li] ? (uint8_t)(1u << opp) : 0;
         }
       }
     }
@@ -343,6 +355,7 @@ out:
   qk__free(g->a, region, (ncell + 1) * sizeof *region);
   qk__free(g->a, rlabel, (ncell + 1) * sizeof *rlabel);
   qk__free(g->a, kind, nleaves + 1);
+  qk__free(g->a, back, ncell + 1);
   return st;
 }
 
@@ -350,25 +363,28 @@ out:
  * pre-order with the children first to last, with their squares by leaf index into
  * `leaf_sq` (same room); returns their number. The squares are computed top-down, each
  * node's from its parent's as the walk goes (qk__node_square recomputes a node's whole
- * path at each call); squares are dyadic and halving is exact, so these are the tree's
- * own squares. One walk instead of a count, a list and the squares. */
-static size_t node_squares(const qk_tree_t *t, qk_node_t *leaves, qk_square_t *leaf_sq) {
+ * path at each call); in integers on the lattice, from the root (0, 0, U), the tree's own
+ * squares (dyadic, halving exact). One walk instead of a count, a list and the squares. */
+static size_t node_squares(const qk_tree_t *t, uint32_t U, qk_node_t *leaves, lat_sq_t *leaf_sq) {
   struct {
     qk_node_t v;
-    qk_square_t sq;
+    lat_sq_t sq;
   } stack[3 * (QK_MAX_DEPTH_LIMIT + 2) + 4]; /* 3 siblings a level wait */
   size_t n = 0, nl = 0;
-  stack[n].v = qk_tree_root(t), stack[n++].sq = qk__tree_root_square(t);
+  stack[n].v = qk_tree_root(t), stack[n++].sq = (lat_sq_t){0, 0, U};
   while (n) {
     qk_node_t v = stack[--n].v;
-    qk_square_t sq = stack[n].sq;
+    lat_sq_t sq = stack[n].sq;
     uint32_t c = qk__node_child(t, v);
     if (c == QK_NONE) {
       leaf_sq[nl] = sq;
       leaves[nl++] = v;
       continue;
     }
-    for (unsigned q = 4; q-- > 0;) stack[n].v = c + q, stack[n++].sq = qk__child_square(sq, q);
+    uint32_t h = sq.s / 2;
+    for (unsigned q = 4; q-- > 0;)
+      stack[n].v = c + q, stack[n++].sq = (lat_sq_t){sq.x + (qk__q_east(q) ? h : 0),
+                                                     sq.y + (qk__q_north(q) ? h : 0), h};
   }
   return nl;
 }
@@ -441,10 +457,10 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
   /* The leaves and their squares in one walk; a tree has fewer leaves than nodes. */
   size_t nleaves = 0;
   qk_node_t *leaves = qk__realloc(g->a, NULL, 0, (nn + 1) * sizeof *leaves);
-  qk_square_t *lsq = qk__realloc(g->a, NULL, 0, (nn + 1) * sizeof *lsq);
+  lat_sq_t *lsq = qk__realloc(g->a, NULL, 0, (nn + 1) * sizeof *lsq);
   uint32_t *cell_label = NULL;
   if (leaves && lsq) {
-    nleaves = node_squares(t, leaves, lsq);
+    nleaves = node_squares(t, (uint32_t)g->U, leaves, lsq);
     cell_label = qk__realloc(g->a, NULL, 0, (2 * nleaves + 1) * sizeof *cell_label);
   }
   lt->nleaves = nleaves;
@@ -485,10 +501,10 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
     goto out;
   }
   for (size_t li = 0; li < nleaves; li++) {
-    qk_square_t sq = lsq[li];
-    int64_t S = 2 * (int64_t)sq.side, X = 2 * (int64_t)sq.x, Y = 2 * (int64_t)sq.y;
+    lat_sq_t sq = lsq[li];
+    int64_t S = 2 * (int64_t)sq.s, X = 2 * (int64_t)sq.x, Y = 2 * (int64_t)sq.y;
     uint32_t *c = &corner[4 * li];
-    lside[li] = (uint32_t)sq.side;
+    lside[li] = sq.s;
     /* One call site, so that the probe is inlined. */
     const int64_t cx[4] = {X, X + S, X + S, X}, cy[4] = {Y, Y, Y + S, Y + S};
     for (int q = 0; q < 4 && !st; q++) st = corner_vertex(T, cx[q], cy[q], &c[q]);
@@ -507,8 +523,8 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
     for (int k = 0; k < 4; k++) L.by[k][corner[4 * li + k]] = (uint32_t)li;
   for (size_t li = 0; li < nleaves && !st; li++) {
     uint32_t v = leaves[li], cell = (uint32_t)(2 * li);
-    qk_square_t sq = lsq[li];
-    int64_t S = 2 * (int64_t)sq.side, X = 2 * (int64_t)sq.x, Y = 2 * (int64_t)sq.y;
+    lat_sq_t sq = lsq[li];
+    int64_t S = 2 * (int64_t)sq.s, X = 2 * (int64_t)sq.x, Y = 2 * (int64_t)sq.y;
     lt->first[v] = (uint32_t)T->nt;
     const uint32_t *c = &corner[4 * li];
     if (rec_of[v] != QK__MESH_UNSET) {
