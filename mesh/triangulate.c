@@ -210,6 +210,8 @@ typedef struct leaf_map {
   const qk_node_t *leaves;
   const uint32_t *leaf_of; /* by node id */
   const uint32_t *side;    /* by leaf index: the leaf's side */
+  const lat_sq_t *sq;      /* by leaf index: the leaf's square */
+  uint32_t U;              /* the root square's side */
 } leaf_map_t;
 
 /*
@@ -257,6 +259,16 @@ static size_t side_leaves(const qk_tree_t *t, const leaf_map_t *L, uint32_t li, 
       return 2;
     }
   }
+  if (a == QK__MESH_UNSET && b == QK__MESH_UNSET) {
+    /* No leaf has a corner at either end across the side: the root square's boundary
+     * (nothing across) in a balanced tree. */
+    const lat_sq_t *q = &L->sq[li];
+    if (sd == 0   ? q->y == 0
+        : sd == 1 ? q->x + q->s == L->U
+        : sd == 2 ? q->y + q->s == L->U
+                  : q->x == 0)
+      return 0;
+  }
   static const qk_dir_t side_dir[4] = {QK_SOUTH, QK_EAST, QK_NORTH, QK_WEST};
   qk_node_t nn[8];
   size_t n = 0;
@@ -267,10 +279,11 @@ static size_t side_leaves(const qk_tree_t *t, const leaf_map_t *L, uint32_t li, 
 }
 
 static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, const qk_node_t *leaves,
-                               const lat_sq_t *lsq, size_t nleaves, const uint32_t *rec_of,
-                               const uint32_t *cell_label, const leaf_map_t *L) {
+                               size_t nleaves, const uint32_t *rec_of, const uint32_t *cell_label,
+                               const leaf_map_t *L) {
   const qk_tree_t *t = g->tree;
   size_t ncell = 2 * nleaves;
+  const uint32_t *lside = L->side;
   uint32_t *queue = qk__realloc(g->a, NULL, 0, (ncell + 1) * sizeof *queue);
   uint32_t *region = qk__realloc(g->a, NULL, 0, (ncell + 1) * sizeof *region);
   uint32_t *rlabel = qk__realloc(g->a, NULL, 0, (ncell + 1) * sizeof *rlabel);
@@ -287,16 +300,13 @@ static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, const qk_node_t
   T->region = rp;
   memset(region, 0xff, (ncell + 1) * sizeof *region);
   /* Per leaf, what the flood asks of it, in one byte: its diagonal kind (bits 0-1: 0 none,
-   * 1 SW-NE, 2 SE-NW) and which sides the flood does not cross (bit 2 + side, sides south,
-   * east, north, west): component edges, from the node's unit record, and the root
-   * square's boundary. */
+   * 1 SW-NE, 2 SE-NW) and which sides are component edges, which the flood does not cross
+   * (bit 2 + side, sides south, east, north, west), from the node's unit record. (Across
+   * the root square's boundary side_leaves finds nothing.) */
   static const int piece_of_side[4] = {QK__P_S, QK__P_E, QK__P_N, QK__P_W};
-  const uint32_t U = (uint32_t)g->U;
   for (size_t li = 0; li < nleaves; li++) {
     uint32_t v = leaves[li];
-    const lat_sq_t *q = &lsq[li];
-    uint8_t f = (uint8_t)((q->y == 0 ? 4 : 0) | (q->x + q->s == U ? 8 : 0) |
-                          (q->y + q->s == U ? 16 : 0) | (q->x == 0 ? 32 : 0));
+    uint8_t f = 0;
     if (rec_of[v] != QK__MESH_UNSET) {
       const qk__unit_rec_t *r = &g->rec[rec_of[v]];
       f |= r->piece[QK__P_D0] ? 1 : r->piece[QK__P_D1] ? 2 : 0;
@@ -326,6 +336,7 @@ static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, const qk_node_t
       if (cell_label[c] != QK__MESH_UNSET) rlabel[rid] = cell_label[c];
       unsigned kl = kind[li];
       unsigned sides = touch[kl & 3][k] & ~(kl >> 2) & ~(unsigned)back[c] & 0xf;
+      const uint32_t sl = lside[li];
       for (; sides; sides &= sides - 1) {
         int sd = __builtin_ctz(sides);
         uint32_t nb[8];
@@ -339,7 +350,7 @@ static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, const qk_node_t
           region[cw] = rid, queue[qt++] = cw;
           /* A neighbour no larger than this leaf has only this leaf's cell c across its
            * side opp (c touches side sd): nothing new there, so it is not looked up. */
-          back[cw] = L->side[lw] <= L->side[li] ? (uint8_t)(1u << opp) : 0;
+          back[cw] = lside[lw] <= sl ? (uint8_t)(1u << opp) : 0;
         }
       }
     }
@@ -511,7 +522,7 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
     if (st) break;
   }
   size_t ncorner = T->nv; /* the corner vertices are the first ids */
-  leaf_map_t L = {{NULL, NULL, NULL, NULL}, corner, leaves, leaf_of, lside};
+  leaf_map_t L = {{NULL, NULL, NULL, NULL}, corner, leaves, leaf_of, lside, lsq, (uint32_t)g->U};
   for (int k = 0; k < 4 && !st; k++) {
     L.by[k] = qk__realloc(g->a, NULL, 0, (ncorner + 1) * sizeof *L.by[k]);
     if (!L.by[k])
@@ -583,7 +594,7 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
    * labelling. */
   if (!st) st = segment_vertices(g, T);
   hmap_free(T->a, &T->vmap);
-  if (!st) st = label_cells(g, T, leaves, lsq, nleaves, rec_of, cell_label, &L);
+  if (!st) st = label_cells(g, T, leaves, nleaves, rec_of, cell_label, &L);
   for (int k = 0; k < 4; k++) qk__free(g->a, L.by[k], (ncorner + 1) * sizeof *L.by[k]);
   qk__free(g->a, corner, (4 * nleaves + 4) * sizeof *corner);
   qk__free(g->a, lside, (nleaves + 1) * sizeof *lside);
