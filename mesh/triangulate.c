@@ -5,6 +5,7 @@
  */
 #include "mesh/mesh_internal.h"
 
+#include <assert.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -438,6 +439,13 @@ static const uint16_t fan_shapes[16] = {FAN4(0),  FAN4(1),  FAN4(2),  FAN4(3), F
 #undef FAN4
 #undef FAN
 
+/* Number vertex u at its first use: the next number, returned advanced, when it has none. */
+static inline uint32_t ord_use(uint32_t *ord, uint32_t next, uint32_t u) {
+  if (ord[u] != QK__MESH_UNSET) return next;
+  ord[u] = next;
+  return next + 1;
+}
+
 void qk__mesh_shape(int k, int64_t S, int64_t x[3], int64_t y[3]) {
   /* Corners SW, SE, NE, NW (0-3), side midpoints south, east, north, west (4-7), centre. */
   const int64_t h = S / 2;
@@ -532,6 +540,18 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
   }
   for (size_t li = 0; li < nleaves && !st; li++)
     for (int k = 0; k < 4; k++) L.by[k][corner[4 * li + k]] = (uint32_t)li;
+  /* The output's numbering (T->ord) as the triangles are made: a leaf's vertices in the
+   * order its triangles first use them, each numbered at its first use overall. */
+  uint32_t onext = 0;
+  if (!st) {
+    T->ocap = T->vcap;
+    T->ord = qk__realloc(g->a, NULL, 0, T->ocap * sizeof *T->ord);
+    if (!T->ord)
+      T->ocap = 0, st = QK_ERR_NOMEM;
+    else
+      memset(T->ord, 0xff, ncorner * sizeof *T->ord);
+  }
+  uint32_t *ord = T->ord;
   for (size_t li = 0; li < nleaves && !st; li++) {
     uint32_t v = leaves[li], cell = (uint32_t)(2 * li);
     lat_sq_t sq = lsq[li];
@@ -542,6 +562,12 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
       const qk__unit_rec_t *r = &g->rec[rec_of[v]];
       T->shapes[1] |= r->piece[QK__P_D1] ? 0xc000 : 0x3000; /* S = 2 */
       st = tri_unit(T, r, c, cell, cell_label);
+      /* (SW, SE, NW), (SE, NE, NW) along SE-NW; (SW, SE, NE), (SW, NE, NW) otherwise. */
+      onext = ord_use(ord, onext, c[0]);
+      onext = ord_use(ord, onext, c[1]);
+      int d1 = r->piece[QK__P_D1] != 0;
+      onext = ord_use(ord, onext, c[d1 ? 3 : 2]);
+      onext = ord_use(ord, onext, c[d1 ? 2 : 3]);
       continue;
     }
     /* A side holds a midpoint vertex exactly when the neighbour across it (of at most
@@ -572,12 +598,24 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
     if (nr == 4) {
       /* Vertices only at its corners: split along a diagonal (angles 45, 45, 90). */
       if (!(st = add_tri(T, c[0], c[1], c[2], cell))) st = add_tri(T, c[0], c[2], c[3], cell);
+      for (int q = 0; q < 4; q++) onext = ord_use(ord, onext, c[q]);
       continue;
     }
     /* A Steiner point at the centre, joined to every boundary vertex: each triangle has
      * a right angle at the centre (corner-corner) or at the midpoint (corner-midpoint). */
     uint32_t ctr;
     if ((st = new_vertex(T, X + S / 2, Y + S / 2, 1, &ctr))) break;
+    if (ctr >= T->ocap) {
+      void *p = T->ord;
+      if ((st = qk__grow(T->a, &p, &T->ocap, (size_t)ctr + 1, sizeof *T->ord))) break;
+      T->ord = ord = p;
+    }
+    /* The fan (ring[i], ring[i + 1], centre) first uses ring[0], ring[1], the centre, then
+     * the rest of the ring in turn. */
+    onext = ord_use(ord, onext, ring[0]);
+    onext = ord_use(ord, onext, ring[1]);
+    ord[ctr] = onext++;
+    for (size_t i = 2; i < nr; i++) onext = ord_use(ord, onext, ring[i]);
     ring[nr] = ring[0];
     if (T->nt + nr > T->tcap || T->nt + nr > T->lcap) {
       for (size_t i = 0; i < nr && !st; i++) st = add_tri(T, ring[i], ring[i + 1], ctr, cell);
@@ -589,6 +627,7 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
       tt[3 * i] = ring[i], tt[3 * i + 1] = ring[i + 1], tt[3 * i + 2] = ctr, tl[i] = cell;
     T->nt += nr;
   }
+  assert(st || onext == T->nv); /* every vertex is a corner or a centre of some leaf */
   /* The boundary markers' vertices: every lattice point of a segment is a corner of its
    * unit leaves, so the vertex map holds it; then the map's memory goes back before
    * labelling. */
@@ -617,4 +656,5 @@ void qk__mesh_tri_free(qk__tri_state_t *T) {
   qk__free(T->a, T->tri, T->tcap * 3 * sizeof *T->tri);
   qk__free(T->a, T->label, T->lcap * sizeof *T->label);
   qk__free(T->a, T->region, T->rcap * sizeof *T->region);
+  qk__free(T->a, T->ord, T->ocap * sizeof *T->ord);
 }
