@@ -524,10 +524,10 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
     int64_t S = 2 * (int64_t)sq.s, X = 2 * (int64_t)sq.x, Y = 2 * (int64_t)sq.y;
     uint32_t *c = &corner[4 * li];
     lside[li] = sq.s;
-    /* One call site, so that the probe is inlined. */
-    const int64_t cx[4] = {X, X + S, X + S, X}, cy[4] = {Y, Y, Y + S, Y + S};
-    for (int q = 0; q < 4 && !st; q++) st = corner_vertex(T, cx[q], cy[q], &c[q]);
-    if (st) break;
+    /* SW, SE, NE, NW; the probe is inlined at each. */
+    if ((st = corner_vertex(T, X, Y, &c[0])) || (st = corner_vertex(T, X + S, Y, &c[1])) ||
+        (st = corner_vertex(T, X + S, Y + S, &c[2])) || (st = corner_vertex(T, X, Y + S, &c[3])))
+      break;
   }
   size_t ncorner = T->nv; /* the corner vertices are the first ids */
   leaf_map_t L = {{NULL, NULL, NULL, NULL}, corner, leaves, leaf_of, lside, lsq, (uint32_t)g->U};
