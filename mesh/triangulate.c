@@ -371,6 +371,32 @@ out:
   return st;
 }
 
+/* Side s (south, east, north, west) of a leaf of doubled square (X, Y, S), S > 2, with
+ * corner vertices c, onto its ring from ring[nr]: corner s, then the side's midpoint when
+ * a vertex lies there (bit s of *mids); returns the new length. A side holds a midpoint
+ * exactly when the neighbour across it (of at most this depth) is internal: then, the tree
+ * being balanced, two leaves of half the size meet this side, and share a corner at its
+ * midpoint. Otherwise no leaf has a corner there (a leaf across the side is as large as
+ * this one or larger, with corners on a coarser grid). The leaf across the side with its
+ * corner kp at the side's start p (side_leaves) is then of half the size, and the midpoint
+ * is its corner kq. */
+static inline size_t ring_side(const qk__tri_state_t *T, const leaf_map_t *L, const uint32_t *c,
+                               int s, int64_t X, int64_t Y, int64_t S, uint32_t *ring, size_t nr,
+                               unsigned *mids) {
+  ring[nr++] = c[s];
+  uint32_t a = L->by[pk[s][1]][c[pk[s][0]]];
+  if (a == QK__MESH_UNSET || 4 * (int64_t)L->side[a] > S) return nr;
+  if (4 * (int64_t)L->side[a] == S) {
+    ring[nr++] = L->corner[4 * a + pk[s][3]], *mids |= 1u << s;
+    return nr;
+  }
+  /* A smaller neighbour: never in a balanced tree; the vertex map answers. */
+  int64_t mx[4] = {X + S / 2, X + S, X + S / 2, X}, my[4] = {Y, Y + S / 2, Y + S, Y + S / 2};
+  if (hmap_get(&T->vmap, ((uint64_t)mx[s] << 32) | (uint64_t)my[s], &ring[nr]))
+    nr++, *mids |= 1u << s;
+  return nr;
+}
+
 /* The leaves into `leaves` (room for the tree's node bound) in qk_tree_leaves' order,
  * pre-order with the children first to last, with their squares by leaf index into
  * `leaf_sq` (same room); returns their number. The squares are computed top-down, each
@@ -570,29 +596,19 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
       onext = ord_use(ord, onext, c[d1 ? 2 : 3]);
       continue;
     }
-    /* A side holds a midpoint vertex exactly when the neighbour across it (of at most
-     * this depth) is internal: then, the tree being balanced, two leaves of half the size
-     * meet this side, and share a corner at its midpoint. Otherwise no leaf has a corner
-     * there (a leaf across the side is as large as this one or larger, with corners on a
-     * coarser grid). The leaf across the side with its corner kp at the side's start p
-     * (side_leaves) is then of half the size, and the midpoint is its corner kq. Unit
-     * leaves have no smaller neighbours. Sides in CCW order: south, east, north, west. */
+    /* The boundary ring: the corners and the sides' midpoints that are vertices
+     * (ring_side), in CCW order, sides south, east, north, west. Unit leaves have no
+     * smaller neighbours. */
     uint32_t ring[9];
     size_t nr = 0;
     unsigned mids = 0;
-    for (int s = 0; s < 4; s++) {
-      ring[nr++] = c[s];
-      if (S <= 2) continue;
-      uint32_t a = L.by[pk[s][1]][c[pk[s][0]]];
-      if (a == QK__MESH_UNSET || 4 * (int64_t)lside[a] > S) continue;
-      if (4 * (int64_t)lside[a] == S) {
-        ring[nr++] = corner[4 * a + pk[s][3]], mids |= 1u << s;
-        continue;
-      }
-      /* A smaller neighbour: never in a balanced tree; the vertex map answers. */
-      int64_t mx[4] = {X + S / 2, X + S, X + S / 2, X}, my[4] = {Y, Y + S / 2, Y + S, Y + S / 2};
-      if (hmap_get(&T->vmap, ((uint64_t)mx[s] << 32) | (uint64_t)my[s], &ring[nr]))
-        nr++, mids |= 1u << s;
+    if (S <= 2) {
+      ring[0] = c[0], ring[1] = c[1], ring[2] = c[2], ring[3] = c[3], nr = 4;
+    } else { /* each side written out, its table entries folded */
+      nr = ring_side(T, &L, c, 0, X, Y, S, ring, nr, &mids);
+      nr = ring_side(T, &L, c, 1, X, Y, S, ring, nr, &mids);
+      nr = ring_side(T, &L, c, 2, X, Y, S, ring, nr, &mids);
+      nr = ring_side(T, &L, c, 3, X, Y, S, ring, nr, &mids);
     }
     T->shapes[__builtin_ctzll((uint64_t)S)] |= fan_shapes[mids];
     if (nr == 4) {
