@@ -279,12 +279,43 @@ static size_t side_leaves(const qk_tree_t *t, const leaf_map_t *L, uint32_t li, 
   return n;
 }
 
+/* What the flood of one region works with. */
+typedef struct flood {
+  const qk_tree_t *t;
+  const leaf_map_t *L;
+  const uint8_t *kind; /* per leaf: diagonal kind (bits 0-1), component sides (bits 2-5) */
+  uint32_t *region, *queue;
+  uint8_t *back;
+  uint32_t rid;
+} flood_t;
+
+/* The flood from leaf li's cell touching side sd across it: the cells facing it that no
+ * region holds yet join region f->rid and the queue (from qt); returns the queue's length.
+ * A neighbour no larger than li has only li's cell across its side opposite sd, so that
+ * side is not looked up from it (f->back). */
+static inline size_t flood_side(const flood_t *f, uint32_t li, int sd, size_t qt) {
+  /* other[diag]: the sides of a leaf with diagonal kind diag that its cell 1 touches. */
+  static const unsigned char other[4] = {0x0, 0xc, 0x6, 0x0};
+  uint32_t nb[8];
+  size_t n = side_leaves(f->t, f->L, li, sd, nb);
+  const unsigned opp = (unsigned)(sd + 2) & 3;
+  const uint32_t sl = f->L->side[li];
+  for (size_t i = 0; i < n; i++) {
+    uint32_t lw = nb[i];
+    uint32_t cw = 2 * lw, d = f->kind[lw] & 3u;
+    if (d) cw += (other[d] >> opp) & 1; /* a diagonal: which half faces this side */
+    if (f->region[cw] != QK__MESH_UNSET) continue;
+    f->region[cw] = f->rid, f->queue[qt++] = cw;
+    f->back[cw] = f->L->side[lw] <= sl ? (uint8_t)(1u << opp) : 0;
+  }
+  return qt;
+}
+
 static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, const qk_node_t *leaves,
                                size_t nleaves, const uint32_t *rec_of, const uint32_t *cell_label,
                                const leaf_map_t *L) {
   const qk_tree_t *t = g->tree;
   size_t ncell = 2 * nleaves;
-  const uint32_t *lside = L->side;
   uint32_t *queue = qk__realloc(g->a, NULL, 0, (ncell + 1) * sizeof *queue);
   uint32_t *region = qk__realloc(g->a, NULL, 0, (ncell + 1) * sizeof *region);
   uint32_t *rlabel = qk__realloc(g->a, NULL, 0, (ncell + 1) * sizeof *rlabel);
@@ -319,9 +350,8 @@ static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, const qk_node_t
   /* Labelling works on cells: the parts of a leaf that no component edge separates. A
    * leaf is one cell, except a unit leaf cut by a component diagonal, which is two.
    * touch[diag][k] is the set of sides (south, east, north, west) that cell k of a leaf
-   * with diagonal kind diag touches; other[diag] the sides where that is cell 1. */
+   * with diagonal kind diag touches (flood_side tells which cell faces a side). */
   static const unsigned char touch[4][2] = {{0xf, 0x0}, {0x3, 0xc}, {0x9, 0x6}, {0, 0}};
-  static const unsigned char other[4] = {0x0, 0xc, 0x6, 0x0};
   uint32_t nreg = 0;
   /* Start a flood from every cell not reached yet that holds triangles, in the order of
    * the triangles (leaf by leaf, cell 0 first): the region ids are as a flood started at
@@ -337,23 +367,12 @@ static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, const qk_node_t
       if (cell_label[c] != QK__MESH_UNSET) rlabel[rid] = cell_label[c];
       unsigned kl = kind[li];
       unsigned sides = touch[kl & 3][k] & ~(kl >> 2) & ~(unsigned)back[c] & 0xf;
-      const uint32_t sl = lside[li];
-      for (; sides; sides &= sides - 1) {
-        int sd = __builtin_ctz(sides);
-        uint32_t nb[8];
-        size_t n = side_leaves(t, L, li, sd, nb);
-        unsigned opp = (unsigned)(sd + 2) & 3;
-        for (size_t i = 0; i < n; i++) {
-          uint32_t lw = nb[i];
-          uint32_t cw = 2 * lw, d = kind[lw] & 3u;
-          if (d) cw += (other[d] >> opp) & 1; /* a diagonal: which half faces this side */
-          if (region[cw] != QK__MESH_UNSET) continue;
-          region[cw] = rid, queue[qt++] = cw;
-          /* A neighbour no larger than this leaf has only this leaf's cell c across its
-           * side opp (c touches side sd): nothing new there, so it is not looked up. */
-          back[cw] = lside[lw] <= sl ? (uint8_t)(1u << opp) : 0;
-        }
-      }
+      /* Side by side written out, so that each look-up's table entries fold. */
+      flood_t f = {t, L, kind, region, queue, back, rid};
+      if (sides & 1) qt = flood_side(&f, li, 0, qt);
+      if (sides & 2) qt = flood_side(&f, li, 1, qt);
+      if (sides & 4) qt = flood_side(&f, li, 2, qt);
+      if (sides & 8) qt = flood_side(&f, li, 3, qt);
     }
   }
   for (size_t tr = 0; tr < T->nt; tr++) {
