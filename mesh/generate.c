@@ -279,8 +279,8 @@ static qk_status_t restore_signed_zeros(const qk__gen_t *g, qk_mesh_t *m) {
   return QK_OK;
 }
 
-static qk_status_t compact(qk__gen_t *g, const qk__tri_state_t *T, const uint8_t *drop,
-                           uint32_t *newid, qk_mesh_t *m, const uint32_t **ids) {
+static qk_status_t compact(qk__gen_t *g, qk__tri_state_t *T, const uint8_t *drop, uint32_t *newid,
+                           qk_mesh_t *m, const uint32_t **ids) {
   const qk_poly_t *poly = g->poly;
   /* Vertices are numbered in order of first use by a kept triangle. With regions dropped,
    * a first pass counts and numbers into newid; without (the usual case), every triangle
@@ -304,7 +304,14 @@ static qk_status_t compact(qk__gen_t *g, const qk__tri_state_t *T, const uint8_t
   }
   m->nt = kt, m->ncv = poly->nv, m->ncs = poly->ns;
   m->tri = qk__realloc(g->a, NULL, 0, (3 * kt + 3) * sizeof *m->tri);
-  m->comp = qk__realloc(g->a, NULL, 0, (kt + 1) * sizeof *m->comp);
+  if (!dropped && T->lcap >= kt + 1) {
+    /* Every triangle kept: the labels are the components, in place; the array is cut to
+     * the mesh's size and handed over instead of copied. */
+    m->comp = qk__realloc(g->a, T->label, T->lcap * sizeof *T->label, (kt + 1) * sizeof *m->comp);
+    if (m->comp) T->label = NULL, T->lcap = 0;
+  } else {
+    m->comp = qk__realloc(g->a, NULL, 0, (kt + 1) * sizeof *m->comp);
+  }
   m->cxy = qk__realloc(g->a, NULL, 0, (2 * poly->nv + 2) * sizeof *m->cxy);
   m->cseg = qk__realloc(g->a, NULL, 0, (2 * poly->ns + 2) * sizeof *m->cseg);
   if (!m->tri || !m->comp || !m->cxy || !m->cseg)
@@ -329,12 +336,12 @@ static qk_status_t compact(qk__gen_t *g, const qk__tri_state_t *T, const uint8_t
     }
     qk__free(g->a, sm, sizeof *sm);
   } else {
-    /* The triangles renumbered in one pass, then the labels in one copy. */
+    /* The triangles renumbered in one pass; the labels, unless handed over above. */
     const uint32_t *in = T->tri, *ord = T->ord;
     uint32_t *to = m->tri;
     for (size_t t = 0; t < T->nt; t++, in += 3, to += 3) /* by triangle: a third of the loop */
       to[0] = ord[in[0]], to[1] = ord[in[1]], to[2] = ord[in[2]];
-    if (T->nt) memcpy(m->comp, T->label, T->nt * sizeof *m->comp);
+    if (T->label && T->nt) memcpy(m->comp, T->label, T->nt * sizeof *m->comp);
     /* Every triangle is kept: the extremes over the shapes the triangulation made, each
      * measured once on its own copy at the origin (angle_deg sees the same coordinate
      * differences, so the same numbers as on every triangle of that shape). */
