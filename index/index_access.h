@@ -165,6 +165,13 @@ static inline qk_node_t qk__tree_descend(const qk_tree_t *t, double x, double y,
   return v;
 }
 
+/* qk_tree_split_leaf() for a caller that descended to the leaf and knows its square's
+ * lower-left corner (x0, y0) and its depth, as the tree computes them (the root's corner
+ * plus the halved sides of the path: dyadic values, exact): the same checks, statuses and
+ * split, without walking the path back up to recompute them. Debug builds check them. */
+qk_status_t qk__tree_split_leaf_at(qk_tree_t *t, qk_node_t leaf, double x0, double y0,
+                                   unsigned depth);
+
 /* Room for `extra` more nodes before the tree next grows its node arrays (a caller that
  * knows roughly how many splits it will make saves the growth's copies). */
 static inline qk_status_t qk__tree_reserve(qk_tree_t *t, uint32_t extra) {

@@ -10,6 +10,7 @@
  * Every mutating call first makes all the allocations it may need, and only then changes
  * the tree, so that a failed allocation leaves the tree exactly as it was.
  */
+#include <assert.h>
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -294,6 +295,16 @@ uint32_t qk__split(qk_tree_t *t, uint32_t leaf, qk__geom_t g) {
   double half = t->side[g.depth + 1];
   double x0 = g.x0, y0 = g.y0;
   uint32_t start = n->start, count = n->count, room = n->room;
+  if (count == 0) {
+    /* No points to partition (the meshers' trees, balancing's new cells): the children
+     * start where the leaf did, empty, and the last one takes the leaf's room, as below. */
+    uint32_t b = qk__split_sorted(t, leaf, g.depth);
+    t->nodes[b + 3].room = room;
+    n = &t->nodes[leaf];
+    n->start = 0;
+    n->room = 0;
+    return b;
+  }
 
   /* Partition the leaf's slots into NE, NW, SW, SE order in place (American flag sort on
    * the quadrant). */
@@ -1011,15 +1022,36 @@ qk_status_t qk_tree_leaf_points(const qk_tree_t *t, qk_node_t leaf, const double
 
 /* ---- refinement beyond the capacity rule ---------------------------------------------- */
 
-qk_status_t qk_tree_split_leaf(qk_tree_t *t, qk_node_t leaf) {
-  if (!qk_tree_node_is_leaf(t, leaf)) return QK_ERR_INVALID;
-  qk__geom_t g = qk__node_geom(t, leaf);
+/* The split of qk_tree_split_leaf and qk__tree_split_leaf_at, for a live leaf of geometry
+ * g. The node arrays grow by half at least when full (qk__reserve_nodes would grow them by
+ * an eighth: callers that split leaf by leaf, as the meshers do, copied them often). */
+static qk_status_t split_leaf_at(qk_tree_t *t, qk_node_t leaf, qk__geom_t g) {
   if (!qk__can_split(t, g)) return QK_ERR_LIMIT;
-  qk_status_t st = qk__reserve_nodes(t, 4);
-  if (st) return st;
+  size_t need = (size_t)t->n_nodes + 4; /* as qk__reserve_nodes(t, 4) counts it */
+  if (t->n_free_blocks == 0 && (need > t->cap_nodes || (need + 2) / 4 > t->cap_blocks)) {
+    qk_status_t st = qk__reserve_nodes(t, t->n_nodes / 2 + 4);
+    if (st) st = qk__reserve_nodes(t, 4); /* no room for the half: the four are enough */
+    if (st) return st;
+  }
   qk__split(t, leaf, g);
   t->refined = true;
   return QK_OK;
+}
+
+qk_status_t qk_tree_split_leaf(qk_tree_t *t, qk_node_t leaf) {
+  if (!qk_tree_node_is_leaf(t, leaf)) return QK_ERR_INVALID;
+  return split_leaf_at(t, leaf, qk__node_geom(t, leaf));
+}
+
+qk_status_t qk__tree_split_leaf_at(qk_tree_t *t, qk_node_t leaf, double x0, double y0,
+                                   unsigned depth) {
+  if (!t || !qk__live(t, leaf) || !qk__is_leaf(&t->nodes[leaf])) return QK_ERR_INVALID;
+  qk__geom_t g = {x0, y0, depth};
+#ifndef NDEBUG
+  qk__geom_t w = qk__node_geom(t, leaf);
+  assert(w.depth == depth && w.x0 == x0 && w.y0 == y0);
+#endif
+  return split_leaf_at(t, leaf, g);
 }
 
 qk_status_t qk_tree_refine(qk_tree_t *t, qk_refine_fn fn, void *ud) {

@@ -179,6 +179,10 @@ typedef struct qk__tri_state {
    * bits 12-13 the split along SW-NE (SW, SE, NE), (SW, NE, NW) and bits 14-15 along
    * SE-NW (SW, SE, NW), (SE, NE, NW): every triangle is one of these, translated. */
   uint16_t shapes[64];
+  /* Per vertex, its number in the order of first use by the triangles as they are made
+   * (the numbering of the output when every triangle is kept), ocap entries. */
+  uint32_t *ord;
+  size_t ocap;
 } qk__tri_state_t;
 
 /* The doubled-coordinate vertices of shape bit k (see qk__tri_state_t.shapes) in the

@@ -43,7 +43,9 @@ static qk_status_t refine(qk__gen_t *g, double sc, qk_node_t v, int64_t X, int64
     if (S <= 1 ||
         !(qk__ldexp_by((double)S, sc, -g->lat.f) * 1.4142135623730951 > wanted(g, X, Y, S)))
       return QK_OK;
-    qk_status_t st = qk_tree_split_leaf(g->tree, v);
+    /* The root square is (0, 0, U), U a power of two (as in the subdivision). */
+    unsigned depth = (unsigned)(__builtin_ctzll(g->U) - __builtin_ctzll((uint64_t)S));
+    qk_status_t st = qk__tree_split_leaf_at(g->tree, v, (double)X, (double)Y, depth);
     if (st) return qk__mesh_fail(g->err, st, 0, "%s while refining to size", qk_strerror(st));
   }
   uint32_t c = qk__node_child(g->tree, v);
@@ -56,7 +58,38 @@ static qk_status_t refine(qk__gen_t *g, double sc, qk_node_t v, int64_t X, int64
   return QK_OK;
 }
 
+/* refine() with max_size alone, for a node of side S >= smin, where smin is the least
+ * side (a power of two) that the test splits: every side from smin up is split, none
+ * below (the test is monotone in S), so the test is a comparison of integers, and the
+ * children are visited only when they too need it. The same splits in the same order. */
+static qk_status_t refine_uniform(qk__gen_t *g, qk_node_t v, int64_t X, int64_t Y, int64_t S,
+                                  int64_t smin) {
+  if (S <= 1) return QK_OK;
+  if (qk__node_leaf(g->tree, v)) {
+    unsigned depth = (unsigned)(__builtin_ctzll(g->U) - __builtin_ctzll((uint64_t)S));
+    qk_status_t st = qk__tree_split_leaf_at(g->tree, v, (double)X, (double)Y, depth);
+    if (st) return qk__mesh_fail(g->err, st, 0, "%s while refining to size", qk_strerror(st));
+  }
+  int64_t h = S / 2;
+  if (h < smin) return QK_OK;
+  uint32_t c = qk__node_child(g->tree, v);
+  for (unsigned q = 0; q < 4; q++) {
+    qk_status_t st = refine_uniform(g, c + q, X + (qk__q_east(q) ? h : 0),
+                                    Y + (qk__q_north(q) ? h : 0), h, smin);
+    if (st) return st;
+  }
+  return QK_OK;
+}
+
 qk_status_t qk__mesh_refine(qk__gen_t *g) {
   if (!(g->opt->max_size > 0) && !g->opt->size_fn) return QK_OK;
-  return refine(g, qk__pow2(-g->lat.f), qk_tree_root(g->tree), 0, 0, (int64_t)g->U);
+  double sc = qk__pow2(-g->lat.f);
+  if (g->opt->size_fn) return refine(g, sc, qk_tree_root(g->tree), 0, 0, (int64_t)g->U);
+  /* The least side refine() splits: its test, side by side from U down. */
+  int64_t smin = (int64_t)g->U * 2;
+  while (smin > 1 &&
+         qk__ldexp_by((double)(smin / 2), sc, -g->lat.f) * 1.4142135623730951 > g->opt->max_size)
+    smin /= 2;
+  if (smin > (int64_t)g->U) return QK_OK; /* the root needs no split */
+  return refine_uniform(g, qk_tree_root(g->tree), 0, 0, (int64_t)g->U, smin);
 }

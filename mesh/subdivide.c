@@ -156,7 +156,10 @@ qk_status_t qk__mesh_subdivide(qk__gen_t *g, uint32_t node, int64_t x0, int64_t 
                                size_t off, size_t k) {
   if (k == 0) return QK_OK;
   if (s == 1) return unit_leaf(g, node, x0, y0, off, k);
-  qk_status_t st = qk_tree_split_leaf(g->tree, node);
+  /* The tree's root square is (0, 0, U), U a power of two: the node's depth is the number
+   * of halvings from U to s, and its corner is (x0, y0) exactly. */
+  unsigned depth = (unsigned)(__builtin_ctzll(g->U) - __builtin_ctzll((uint64_t)s));
+  qk_status_t st = qk__tree_split_leaf_at(g->tree, node, (double)x0, (double)y0, depth);
   if (st != QK_OK) return qk__mesh_fail(g->err, st, 0, "%s while subdividing", qk_strerror(st));
   g->nsplit++;
   uint32_t child = qk__node_child(g->tree, node);

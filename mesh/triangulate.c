@@ -5,6 +5,7 @@
  */
 #include "mesh/mesh_internal.h"
 
+#include <assert.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -198,12 +199,20 @@ static qk_status_t tri_unit(qk__tri_state_t *T, const qk__unit_rec_t *r, const u
  * balanced tree has a corner at one of that side's ends, so the neighbours come from two
  * array reads with the leaf's own corner vertices, no coordinates and no hashing.
  */
+/* A leaf's square on the lattice: corner (x, y), side s (the tree's root is (0, 0, U) with
+ * U a power of two at most 2^30, so its squares are these integers exactly). */
+typedef struct lat_sq {
+  uint32_t x, y, s;
+} lat_sq_t;
+
 typedef struct leaf_map {
   uint32_t *by[4];        /* by corner kind, indexed by corner vertex id */
   const uint32_t *corner; /* 4 per leaf: SW, SE, NE, NW vertex ids */
   const qk_node_t *leaves;
   const uint32_t *leaf_of; /* by node id */
   const uint32_t *side;    /* by leaf index: the leaf's side */
+  const lat_sq_t *sq;      /* by leaf index: the leaf's square */
+  uint32_t U;              /* the root square's side */
 } leaf_map_t;
 
 /*
@@ -251,6 +260,16 @@ static size_t side_leaves(const qk_tree_t *t, const leaf_map_t *L, uint32_t li, 
       return 2;
     }
   }
+  if (a == QK__MESH_UNSET && b == QK__MESH_UNSET) {
+    /* No leaf has a corner at either end across the side: the root square's boundary
+     * (nothing across) in a balanced tree. */
+    const lat_sq_t *q = &L->sq[li];
+    if (sd == 0   ? q->y == 0
+        : sd == 1 ? q->x + q->s == L->U
+        : sd == 2 ? q->y + q->s == L->U
+                  : q->x == 0)
+      return 0;
+  }
   static const qk_dir_t side_dir[4] = {QK_SOUTH, QK_EAST, QK_NORTH, QK_WEST};
   qk_node_t nn[8];
   size_t n = 0;
@@ -260,18 +279,52 @@ static size_t side_leaves(const qk_tree_t *t, const leaf_map_t *L, uint32_t li, 
   return n;
 }
 
+/* What the flood of one region works with. */
+typedef struct flood {
+  const qk_tree_t *t;
+  const leaf_map_t *L;
+  const uint8_t *kind; /* per leaf: diagonal kind (bits 0-1), component sides (bits 2-5) */
+  uint32_t *region, *queue;
+  uint8_t *back;
+  uint32_t rid;
+} flood_t;
+
+/* The flood from leaf li's cell touching side sd across it: the cells facing it that no
+ * region holds yet join region f->rid and the queue (from qt); returns the queue's length.
+ * A neighbour no larger than li has only li's cell across its side opposite sd, so that
+ * side is not looked up from it (f->back). */
+static inline size_t flood_side(const flood_t *f, uint32_t li, int sd, size_t qt) {
+  /* other[diag]: the sides of a leaf with diagonal kind diag that its cell 1 touches. */
+  static const unsigned char other[4] = {0x0, 0xc, 0x6, 0x0};
+  uint32_t nb[8];
+  size_t n = side_leaves(f->t, f->L, li, sd, nb);
+  const unsigned opp = (unsigned)(sd + 2) & 3;
+  const uint32_t sl = f->L->side[li];
+  for (size_t i = 0; i < n; i++) {
+    uint32_t lw = nb[i];
+    uint32_t cw = 2 * lw, d = f->kind[lw] & 3u;
+    if (d) cw += (other[d] >> opp) & 1; /* a diagonal: which half faces this side */
+    if (f->region[cw] != QK__MESH_UNSET) continue;
+    f->region[cw] = f->rid, f->queue[qt++] = cw;
+    f->back[cw] = f->L->side[lw] <= sl ? (uint8_t)(1u << opp) : 0;
+  }
+  return qt;
+}
+
 static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, const qk_node_t *leaves,
-                               const qk_square_t *lsq, size_t nleaves, const uint32_t *rec_of,
-                               const uint32_t *cell_label, const leaf_map_t *L) {
+                               size_t nleaves, const uint32_t *rec_of, const uint32_t *cell_label,
+                               const leaf_map_t *L) {
   const qk_tree_t *t = g->tree;
   size_t ncell = 2 * nleaves;
   uint32_t *queue = qk__realloc(g->a, NULL, 0, (ncell + 1) * sizeof *queue);
   uint32_t *region = qk__realloc(g->a, NULL, 0, (ncell + 1) * sizeof *region);
   uint32_t *rlabel = qk__realloc(g->a, NULL, 0, (ncell + 1) * sizeof *rlabel);
   uint8_t *kind = qk__realloc(g->a, NULL, 0, nleaves + 1);
+  /* Per cell, the side it was reached across when that side holds nothing else new. */
+  uint8_t *back = qk__realloc(g->a, NULL, 0, ncell + 1);
   qk_status_t st = QK_OK;
   void *rp = T->region;
-  if (!queue || !region || !rlabel || !kind ||
+  if (!queue || !region || !rlabel || !kind || !back ||
       qk__grow(T->a, &rp, &T->rcap, T->nt + 1, sizeof *T->region)) {
     st = QK_ERR_NOMEM;
     goto out;
@@ -279,16 +332,13 @@ static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, const qk_node_t
   T->region = rp;
   memset(region, 0xff, (ncell + 1) * sizeof *region);
   /* Per leaf, what the flood asks of it, in one byte: its diagonal kind (bits 0-1: 0 none,
-   * 1 SW-NE, 2 SE-NW) and which sides the flood does not cross (bit 2 + side, sides south,
-   * east, north, west): component edges, from the node's unit record, and the root
-   * square's boundary. */
+   * 1 SW-NE, 2 SE-NW) and which sides are component edges, which the flood does not cross
+   * (bit 2 + side, sides south, east, north, west), from the node's unit record. (Across
+   * the root square's boundary side_leaves finds nothing.) */
   static const int piece_of_side[4] = {QK__P_S, QK__P_E, QK__P_N, QK__P_W};
-  const double U = qk__tree_root_square(t).side;
   for (size_t li = 0; li < nleaves; li++) {
     uint32_t v = leaves[li];
-    const qk_square_t *q = &lsq[li];
-    uint8_t f = (uint8_t)((q->y == 0 ? 4 : 0) | (q->x + q->side == U ? 8 : 0) |
-                          (q->y + q->side == U ? 16 : 0) | (q->x == 0 ? 32 : 0));
+    uint8_t f = 0;
     if (rec_of[v] != QK__MESH_UNSET) {
       const qk__unit_rec_t *r = &g->rec[rec_of[v]];
       f |= r->piece[QK__P_D0] ? 1 : r->piece[QK__P_D1] ? 2 : 0;
@@ -300,9 +350,8 @@ static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, const qk_node_t
   /* Labelling works on cells: the parts of a leaf that no component edge separates. A
    * leaf is one cell, except a unit leaf cut by a component diagonal, which is two.
    * touch[diag][k] is the set of sides (south, east, north, west) that cell k of a leaf
-   * with diagonal kind diag touches; other[diag] the sides where that is cell 1. */
+   * with diagonal kind diag touches (flood_side tells which cell faces a side). */
   static const unsigned char touch[4][2] = {{0xf, 0x0}, {0x3, 0xc}, {0x9, 0x6}, {0, 0}};
-  static const unsigned char other[4] = {0x0, 0xc, 0x6, 0x0};
   uint32_t nreg = 0;
   /* Start a flood from every cell not reached yet that holds triangles, in the order of
    * the triangles (leaf by leaf, cell 0 first): the region ids are as a flood started at
@@ -312,24 +361,18 @@ static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, const qk_node_t
     uint32_t rid = nreg++;
     rlabel[rid] = 0;
     size_t qh = 0, qt = 0;
-    region[c0] = rid, queue[qt++] = (uint32_t)c0;
+    region[c0] = rid, queue[qt++] = (uint32_t)c0, back[c0] = 0;
     while (qh < qt) {
       uint32_t c = queue[qh++], li = c / 2, k = c % 2;
       if (cell_label[c] != QK__MESH_UNSET) rlabel[rid] = cell_label[c];
       unsigned kl = kind[li];
-      unsigned sides = touch[kl & 3][k] & ~(kl >> 2) & 0xf;
-      for (; sides; sides &= sides - 1) {
-        int sd = __builtin_ctz(sides);
-        uint32_t nb[8];
-        size_t n = side_leaves(t, L, li, sd, nb);
-        unsigned opp = (unsigned)(sd + 2) & 3;
-        for (size_t i = 0; i < n; i++) {
-          uint32_t lw = nb[i];
-          uint32_t cw = 2 * lw, d = kind[lw] & 3u;
-          if (d) cw += (other[d] >> opp) & 1; /* a diagonal: which half faces this side */
-          if (region[cw] == QK__MESH_UNSET) region[cw] = rid, queue[qt++] = cw;
-        }
-      }
+      unsigned sides = touch[kl & 3][k] & ~(kl >> 2) & ~(unsigned)back[c] & 0xf;
+      /* Side by side written out, so that each look-up's table entries fold. */
+      flood_t f = {t, L, kind, region, queue, back, rid};
+      if (sides & 1) qt = flood_side(&f, li, 0, qt);
+      if (sides & 2) qt = flood_side(&f, li, 1, qt);
+      if (sides & 4) qt = flood_side(&f, li, 2, qt);
+      if (sides & 8) qt = flood_side(&f, li, 3, qt);
     }
   }
   for (size_t tr = 0; tr < T->nt; tr++) {
@@ -343,32 +386,62 @@ out:
   qk__free(g->a, region, (ncell + 1) * sizeof *region);
   qk__free(g->a, rlabel, (ncell + 1) * sizeof *rlabel);
   qk__free(g->a, kind, nleaves + 1);
+  qk__free(g->a, back, ncell + 1);
   return st;
+}
+
+/* Side s (south, east, north, west) of a leaf of doubled square (X, Y, S), S > 2, with
+ * corner vertices c, onto its ring from ring[nr]: corner s, then the side's midpoint when
+ * a vertex lies there (bit s of *mids); returns the new length. A side holds a midpoint
+ * exactly when the neighbour across it (of at most this depth) is internal: then, the tree
+ * being balanced, two leaves of half the size meet this side, and share a corner at its
+ * midpoint. Otherwise no leaf has a corner there (a leaf across the side is as large as
+ * this one or larger, with corners on a coarser grid). The leaf across the side with its
+ * corner kp at the side's start p (side_leaves) is then of half the size, and the midpoint
+ * is its corner kq. */
+static inline size_t ring_side(const qk__tri_state_t *T, const leaf_map_t *L, const uint32_t *c,
+                               int s, int64_t X, int64_t Y, int64_t S, uint32_t *ring, size_t nr,
+                               unsigned *mids) {
+  ring[nr++] = c[s];
+  uint32_t a = L->by[pk[s][1]][c[pk[s][0]]];
+  if (a == QK__MESH_UNSET || 4 * (int64_t)L->side[a] > S) return nr;
+  if (4 * (int64_t)L->side[a] == S) {
+    ring[nr++] = L->corner[4 * a + pk[s][3]], *mids |= 1u << s;
+    return nr;
+  }
+  /* A smaller neighbour: never in a balanced tree; the vertex map answers. */
+  int64_t mx[4] = {X + S / 2, X + S, X + S / 2, X}, my[4] = {Y, Y + S / 2, Y + S, Y + S / 2};
+  if (hmap_get(&T->vmap, ((uint64_t)mx[s] << 32) | (uint64_t)my[s], &ring[nr]))
+    nr++, *mids |= 1u << s;
+  return nr;
 }
 
 /* The leaves into `leaves` (room for the tree's node bound) in qk_tree_leaves' order,
  * pre-order with the children first to last, with their squares by leaf index into
  * `leaf_sq` (same room); returns their number. The squares are computed top-down, each
  * node's from its parent's as the walk goes (qk__node_square recomputes a node's whole
- * path at each call); squares are dyadic and halving is exact, so these are the tree's
- * own squares. One walk instead of a count, a list and the squares. */
-static size_t node_squares(const qk_tree_t *t, qk_node_t *leaves, qk_square_t *leaf_sq) {
+ * path at each call); in integers on the lattice, from the root (0, 0, U), the tree's own
+ * squares (dyadic, halving exact). One walk instead of a count, a list and the squares. */
+static size_t node_squares(const qk_tree_t *t, uint32_t U, qk_node_t *leaves, lat_sq_t *leaf_sq) {
   struct {
     qk_node_t v;
-    qk_square_t sq;
+    lat_sq_t sq;
   } stack[3 * (QK_MAX_DEPTH_LIMIT + 2) + 4]; /* 3 siblings a level wait */
   size_t n = 0, nl = 0;
-  stack[n].v = qk_tree_root(t), stack[n++].sq = qk__tree_root_square(t);
+  stack[n].v = qk_tree_root(t), stack[n++].sq = (lat_sq_t){0, 0, U};
   while (n) {
     qk_node_t v = stack[--n].v;
-    qk_square_t sq = stack[n].sq;
+    lat_sq_t sq = stack[n].sq;
     uint32_t c = qk__node_child(t, v);
     if (c == QK_NONE) {
       leaf_sq[nl] = sq;
       leaves[nl++] = v;
       continue;
     }
-    for (unsigned q = 4; q-- > 0;) stack[n].v = c + q, stack[n++].sq = qk__child_square(sq, q);
+    uint32_t h = sq.s / 2;
+    for (unsigned q = 4; q-- > 0;)
+      stack[n].v = c + q, stack[n++].sq = (lat_sq_t){sq.x + (qk__q_east(q) ? h : 0),
+                                                     sq.y + (qk__q_north(q) ? h : 0), h};
   }
   return nl;
 }
@@ -411,6 +484,13 @@ static const uint16_t fan_shapes[16] = {FAN4(0),  FAN4(1),  FAN4(2),  FAN4(3), F
 #undef FAN4
 #undef FAN
 
+/* Number vertex u at its first use: the next number, returned advanced, when it has none. */
+static inline uint32_t ord_use(uint32_t *ord, uint32_t next, uint32_t u) {
+  if (ord[u] != QK__MESH_UNSET) return next;
+  ord[u] = next;
+  return next + 1;
+}
+
 void qk__mesh_shape(int k, int64_t S, int64_t x[3], int64_t y[3]) {
   /* Corners SW, SE, NE, NW (0-3), side midpoints south, east, north, west (4-7), centre. */
   const int64_t h = S / 2;
@@ -441,10 +521,10 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
   /* The leaves and their squares in one walk; a tree has fewer leaves than nodes. */
   size_t nleaves = 0;
   qk_node_t *leaves = qk__realloc(g->a, NULL, 0, (nn + 1) * sizeof *leaves);
-  qk_square_t *lsq = qk__realloc(g->a, NULL, 0, (nn + 1) * sizeof *lsq);
+  lat_sq_t *lsq = qk__realloc(g->a, NULL, 0, (nn + 1) * sizeof *lsq);
   uint32_t *cell_label = NULL;
   if (leaves && lsq) {
-    nleaves = node_squares(t, leaves, lsq);
+    nleaves = node_squares(t, (uint32_t)g->U, leaves, lsq);
     cell_label = qk__realloc(g->a, NULL, 0, (2 * nleaves + 1) * sizeof *cell_label);
   }
   lt->nleaves = nleaves;
@@ -485,17 +565,17 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
     goto out;
   }
   for (size_t li = 0; li < nleaves; li++) {
-    qk_square_t sq = lsq[li];
-    int64_t S = 2 * (int64_t)sq.side, X = 2 * (int64_t)sq.x, Y = 2 * (int64_t)sq.y;
+    lat_sq_t sq = lsq[li];
+    int64_t S = 2 * (int64_t)sq.s, X = 2 * (int64_t)sq.x, Y = 2 * (int64_t)sq.y;
     uint32_t *c = &corner[4 * li];
-    lside[li] = (uint32_t)sq.side;
-    /* One call site, so that the probe is inlined. */
-    const int64_t cx[4] = {X, X + S, X + S, X}, cy[4] = {Y, Y, Y + S, Y + S};
-    for (int q = 0; q < 4 && !st; q++) st = corner_vertex(T, cx[q], cy[q], &c[q]);
-    if (st) break;
+    lside[li] = sq.s;
+    /* SW, SE, NE, NW; the probe is inlined at each. */
+    if ((st = corner_vertex(T, X, Y, &c[0])) || (st = corner_vertex(T, X + S, Y, &c[1])) ||
+        (st = corner_vertex(T, X + S, Y + S, &c[2])) || (st = corner_vertex(T, X, Y + S, &c[3])))
+      break;
   }
   size_t ncorner = T->nv; /* the corner vertices are the first ids */
-  leaf_map_t L = {{NULL, NULL, NULL, NULL}, corner, leaves, leaf_of, lside};
+  leaf_map_t L = {{NULL, NULL, NULL, NULL}, corner, leaves, leaf_of, lside, lsq, (uint32_t)g->U};
   for (int k = 0; k < 4 && !st; k++) {
     L.by[k] = qk__realloc(g->a, NULL, 0, (ncorner + 1) * sizeof *L.by[k]);
     if (!L.by[k])
@@ -505,52 +585,72 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
   }
   for (size_t li = 0; li < nleaves && !st; li++)
     for (int k = 0; k < 4; k++) L.by[k][corner[4 * li + k]] = (uint32_t)li;
+  /* The output's numbering (T->ord) as the triangles are made: a leaf's vertices in the
+   * order its triangles first use them, each numbered at its first use overall. */
+  uint32_t onext = 0;
+  if (!st) {
+    T->ocap = T->vcap;
+    T->ord = qk__realloc(g->a, NULL, 0, T->ocap * sizeof *T->ord);
+    if (!T->ord)
+      T->ocap = 0, st = QK_ERR_NOMEM;
+    else
+      memset(T->ord, 0xff, ncorner * sizeof *T->ord);
+  }
+  uint32_t *ord = T->ord;
   for (size_t li = 0; li < nleaves && !st; li++) {
     uint32_t v = leaves[li], cell = (uint32_t)(2 * li);
-    qk_square_t sq = lsq[li];
-    int64_t S = 2 * (int64_t)sq.side, X = 2 * (int64_t)sq.x, Y = 2 * (int64_t)sq.y;
+    lat_sq_t sq = lsq[li];
+    int64_t S = 2 * (int64_t)sq.s, X = 2 * (int64_t)sq.x, Y = 2 * (int64_t)sq.y;
     lt->first[v] = (uint32_t)T->nt;
     const uint32_t *c = &corner[4 * li];
     if (rec_of[v] != QK__MESH_UNSET) {
       const qk__unit_rec_t *r = &g->rec[rec_of[v]];
       T->shapes[1] |= r->piece[QK__P_D1] ? 0xc000 : 0x3000; /* S = 2 */
       st = tri_unit(T, r, c, cell, cell_label);
+      /* (SW, SE, NW), (SE, NE, NW) along SE-NW; (SW, SE, NE), (SW, NE, NW) otherwise. */
+      onext = ord_use(ord, onext, c[0]);
+      onext = ord_use(ord, onext, c[1]);
+      int d1 = r->piece[QK__P_D1] != 0;
+      onext = ord_use(ord, onext, c[d1 ? 3 : 2]);
+      onext = ord_use(ord, onext, c[d1 ? 2 : 3]);
       continue;
     }
-    /* A side holds a midpoint vertex exactly when the neighbour across it (of at most
-     * this depth) is internal: then, the tree being balanced, two leaves of half the size
-     * meet this side, and share a corner at its midpoint. Otherwise no leaf has a corner
-     * there (a leaf across the side is as large as this one or larger, with corners on a
-     * coarser grid). The leaf across the side with its corner kp at the side's start p
-     * (side_leaves) is then of half the size, and the midpoint is its corner kq. Unit
-     * leaves have no smaller neighbours. Sides in CCW order: south, east, north, west. */
+    /* The boundary ring: the corners and the sides' midpoints that are vertices
+     * (ring_side), in CCW order, sides south, east, north, west. Unit leaves have no
+     * smaller neighbours. */
     uint32_t ring[9];
     size_t nr = 0;
     unsigned mids = 0;
-    for (int s = 0; s < 4; s++) {
-      ring[nr++] = c[s];
-      if (S <= 2) continue;
-      uint32_t a = L.by[pk[s][1]][c[pk[s][0]]];
-      if (a == QK__MESH_UNSET || 4 * (int64_t)lside[a] > S) continue;
-      if (4 * (int64_t)lside[a] == S) {
-        ring[nr++] = corner[4 * a + pk[s][3]], mids |= 1u << s;
-        continue;
-      }
-      /* A smaller neighbour: never in a balanced tree; the vertex map answers. */
-      int64_t mx[4] = {X + S / 2, X + S, X + S / 2, X}, my[4] = {Y, Y + S / 2, Y + S, Y + S / 2};
-      if (hmap_get(&T->vmap, ((uint64_t)mx[s] << 32) | (uint64_t)my[s], &ring[nr]))
-        nr++, mids |= 1u << s;
+    if (S <= 2) {
+      ring[0] = c[0], ring[1] = c[1], ring[2] = c[2], ring[3] = c[3], nr = 4;
+    } else { /* each side written out, its table entries folded */
+      nr = ring_side(T, &L, c, 0, X, Y, S, ring, nr, &mids);
+      nr = ring_side(T, &L, c, 1, X, Y, S, ring, nr, &mids);
+      nr = ring_side(T, &L, c, 2, X, Y, S, ring, nr, &mids);
+      nr = ring_side(T, &L, c, 3, X, Y, S, ring, nr, &mids);
     }
     T->shapes[__builtin_ctzll((uint64_t)S)] |= fan_shapes[mids];
     if (nr == 4) {
       /* Vertices only at its corners: split along a diagonal (angles 45, 45, 90). */
       if (!(st = add_tri(T, c[0], c[1], c[2], cell))) st = add_tri(T, c[0], c[2], c[3], cell);
+      for (int q = 0; q < 4; q++) onext = ord_use(ord, onext, c[q]);
       continue;
     }
     /* A Steiner point at the centre, joined to every boundary vertex: each triangle has
      * a right angle at the centre (corner-corner) or at the midpoint (corner-midpoint). */
     uint32_t ctr;
     if ((st = new_vertex(T, X + S / 2, Y + S / 2, 1, &ctr))) break;
+    if (ctr >= T->ocap) {
+      void *p = T->ord;
+      if ((st = qk__grow(T->a, &p, &T->ocap, (size_t)ctr + 1, sizeof *T->ord))) break;
+      T->ord = ord = p;
+    }
+    /* The fan (ring[i], ring[i + 1], centre) first uses ring[0], ring[1], the centre, then
+     * the rest of the ring in turn. */
+    onext = ord_use(ord, onext, ring[0]);
+    onext = ord_use(ord, onext, ring[1]);
+    ord[ctr] = onext++;
+    for (size_t i = 2; i < nr; i++) onext = ord_use(ord, onext, ring[i]);
     ring[nr] = ring[0];
     if (T->nt + nr > T->tcap || T->nt + nr > T->lcap) {
       for (size_t i = 0; i < nr && !st; i++) st = add_tri(T, ring[i], ring[i + 1], ctr, cell);
@@ -562,12 +662,13 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
       tt[3 * i] = ring[i], tt[3 * i + 1] = ring[i + 1], tt[3 * i + 2] = ctr, tl[i] = cell;
     T->nt += nr;
   }
+  assert(st || onext == T->nv); /* every vertex is a corner or a centre of some leaf */
   /* The boundary markers' vertices: every lattice point of a segment is a corner of its
    * unit leaves, so the vertex map holds it; then the map's memory goes back before
    * labelling. */
   if (!st) st = segment_vertices(g, T);
   hmap_free(T->a, &T->vmap);
-  if (!st) st = label_cells(g, T, leaves, lsq, nleaves, rec_of, cell_label, &L);
+  if (!st) st = label_cells(g, T, leaves, nleaves, rec_of, cell_label, &L);
   for (int k = 0; k < 4; k++) qk__free(g->a, L.by[k], (ncorner + 1) * sizeof *L.by[k]);
   qk__free(g->a, corner, (4 * nleaves + 4) * sizeof *corner);
   qk__free(g->a, lside, (nleaves + 1) * sizeof *lside);
@@ -590,4 +691,5 @@ void qk__mesh_tri_free(qk__tri_state_t *T) {
   qk__free(T->a, T->tri, T->tcap * 3 * sizeof *T->tri);
   qk__free(T->a, T->label, T->lcap * sizeof *T->label);
   qk__free(T->a, T->region, T->rcap * sizeof *T->region);
+  qk__free(T->a, T->ord, T->ocap * sizeof *T->ord);
 }

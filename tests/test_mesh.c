@@ -11,6 +11,8 @@
  *    triangles;
  *  - the statistics' smallest and largest angle equal every triangle's angles' extremes,
  *    by brute force (to the last bit), with and without holes;
+ *  - vertices are numbered in order of first use by the triangles, every one used (the
+ *    triangulation numbers them as it makes the triangles; a scan says so);
  *  - the subdivision is a quadkit tree: qk_tree_check() passes and it is balanced;
  *  - allocation failure at every N: QK_ERR_NOMEM, no leak;
  *  - the writers: counts and headers of .node, .ele, .msh, .vtu, and an SVG.
@@ -122,6 +124,21 @@ static void check_angle_extremes(const qk_mesh_t *m, const qk_mesh_stats_t *s, c
              s->min_angle_deg, s->max_angle_deg, lo, hi);
 }
 
+/* The vertices are numbered in order of first use by the triangles, and all are used:
+ * scanning the triangles, each vertex first met is the next number. */
+static void check_first_use(const qk_mesh_t *m, const char *what) {
+  size_t nv, nt;
+  qk_mesh_vertices(m, &nv);
+  const uint32_t *tri = qk_mesh_triangles(m, &nt);
+  size_t next = 0;
+  for (size_t i = 0; i < 3 * nt; i++) {
+    if (tri[i] > next)
+      fail_msg("%s: corner %zu is vertex %u before vertex %zu was used", what, i, tri[i], next);
+    if (tri[i] == next) next++;
+  }
+  if (next != nv) fail_msg("%s: %zu vertices, %zu used", what, nv, next);
+}
+
 /* Mesh an input given as arrays and run the checker; returns the triangle count. */
 static size_t mesh_and_check(const double *xy, size_t nv, const uint32_t *seg, size_t ns,
                              const double *holes, size_t nh, uint64_t U, const char *what) {
@@ -149,6 +166,7 @@ static size_t mesh_and_check(const double *xy, size_t nv, const uint32_t *seg, s
   assert_int_equal(s.triangles, mm.nt);
   if (mm.nt) assert_true(s.min_angle_deg > 44.999 && s.max_angle_deg < 90.001);
   check_angle_extremes(m, &s, what);
+  check_first_use(m, what);
   check_leaf_order(m, &s, nh == 0, what);
   if (U <= 256 && ns <= 64) {
     size_t want = book_leaves(xy, seg, ns, 0, 0, (int64_t)U);
