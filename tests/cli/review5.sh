@@ -1,0 +1,79 @@
+#!/usr/bin/env bash
+# CLI regressions from a fifth review, on hostile inputs not tried before (one block per
+# finding; each failed before its fix): .poly files cut short or whose rows do not match
+# their counts, mesh --stats fields in the general mode, GeoJSON errors without a line.
+# shellcheck source=lib/common.bash
+source "$(dirname "${BASH_SOURCE[0]}")/lib/common.bash" "$@"
+
+nothing_written() { # nothing_written PREFIX: no PREFIX.node / .ele, no temporary beside it
+  local d
+  d=$(dirname "$1")
+  if [ -e "$1.node" ] || [ -e "$1.ele" ] || ls "$d" | grep -q '\.tmp\.'; then
+    fail "$1: an output or a temporary was left after an error"
+  else
+    passes=$((passes + 1))
+  fi
+}
+
+# ---- .poly: a file that ends right after the segments was meshed with its holes solid -----
+# An 8x8 square with a 4x4 hole; cut after the segments it gave 128 triangles (the hole
+# filled). Triangle's reader refuses a file that ends before the hole section; so do we.
+sq8='8 2 0 0\n0 0 0\n1 8 0\n2 8 8\n3 0 8\n4 2 2\n5 6 2\n6 6 6\n7 2 6\n'
+seg8='8 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n4 4 5\n5 5 6\n6 6 7\n7 7 4\n'
+printf "$sq8$seg8"'1\n0 4 4\n' >"$tmp/full.poly"
+expect 0 '"triangles": 96,' -- "$cli" mesh "$tmp/full.poly" -o "$tmp/full" --stats
+printf "$sq8$seg8" >"$tmp/nohole.poly"
+expect 1 "^quadkit mesh: $tmp/nohole.poly:18: truncated input: the file ends here, where the hole section was expected \\(a line with the number of holes, 0 for none\\)$" \
+  -- "$cli" mesh "$tmp/nohole.poly" -o "$tmp/nohole"
+nothing_written "$tmp/nohole"
+# the line named is the file's last, comments and blank lines included; from stdin too
+printf "$sq8$seg8"'# no holes here\n\n' >"$tmp/nohole2.poly"
+expect 1 'nohole2.poly:20: truncated input: the file ends here, where the hole section' \
+  -- "$cli" mesh "$tmp/nohole2.poly" -o "$tmp/nohole2"
+expect 1 "^quadkit mesh: <stdin>:18: truncated input: the file ends here" \
+  -- bash -c '"$1" mesh - -o "$2" <"$3"' - "$cli" "$tmp/nh3" "$tmp/nohole.poly"
+nothing_written "$tmp/nh3"
+# "0" holes, and the optional regional attributes absent or present, are accepted
+printf "$sq8$seg8"'0\n' >"$tmp/zero.poly"
+expect 0 '"triangles": 128,' -- "$cli" mesh "$tmp/zero.poly" -o "$tmp/zero" --stats
+printf "$sq8$seg8"'1\n0 4 4\n1\n0 1 1 7\n' >"$tmp/reg.poly"
+expect 0 '"triangles": 96,' -- "$cli" mesh "$tmp/reg.poly" -o "$tmp/reg" --stats
+# the repository's own example that lacked the line still meshes (it gained a "0")
+expect 0 '"triangles": [1-9]' -- "$cli" mesh "$src/examples/mesh/notes.poly" -o "$tmp/notes" --stats
+
+# ---- .poly: every truncation point, and rows that do not match their counts ---------------
+V='4 2 0 0\n0 0 0\n1 4 0\n2 4 4\n3 0 4\n'
+S='4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n'
+poly_case() { # poly_case NAME TEXT PATTERN: refused with exit 1, PATTERN, nothing written
+  printf "$2" >"$tmp/$1.poly"
+  expect 1 "^quadkit mesh: $tmp/$1.poly:$3" -- "$cli" mesh "$tmp/$1.poly" -o "$tmp/$1"
+  nothing_written "$tmp/$1"
+}
+poly_case vhdr '4 2 0 0\n' '1: truncated input: expected 4 vertices, found 0$'
+poly_case vpart '4 2 0 0\n0 0 0\n1 4 0\n' '3: truncated input: expected 4 vertices, found 2$'
+poly_case vonly "$V" '5: truncated input: expected the segment section header$'
+poly_case shdr "$V"'4 0\n' '6: truncated input: expected 4 segments, found 0$'
+poly_case spart "$V"'4 0\n0 0 1\n1 1 2\n' '8: truncated input: expected 4 segments, found 2$'
+poly_case nohole "$V$S" '10: truncated input: the file ends here, where the hole section was expected'
+poly_case hpart "$V$S"'2\n0 1 1\n' '12: truncated input: expected 2 holes, found 1$'
+poly_case rpart "$V$S"'0\n2\n0 1 1 5\n' '13: truncated input: expected 2 regional attributes, found 1$'
+# too few rows: the next section's header is read as a row, and the message says so
+poly_case vfew '5 2 0 0\n0 0 0\n1 4 0\n2 4 4\n3 0 4\n'"$S"'0\n' \
+  '6: vertex 4: expected x and y, found 2 fields \(fewer vertex rows than the 5 that line 1 declares\?\)$'
+poly_case sfew "$V"'5 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n0\n' \
+  '11: segment 0: expected two endpoints, found 1 field \(fewer segment rows than the 5 that line 6 declares\?\)$'
+poly_case hfew "$V$S"'2\n0 1 1\n0\n' \
+  '13: hole 0: expected x and y only, found 1 field \(fewer hole rows than the 2 that line 11 declares\?\)$'
+poly_case rfew "$V$S"'0\n2\n0 1 1 5\n1\n' \
+  '14: region 1: expected 4 or 5 fields, found 1 \(fewer region rows than the 2 that line 12 declares\?\)$'
+# extra rows: the row after the counted ones is read as the next header
+poly_case vextra '3 2 0 0\n0 0 0\n1 4 0\n2 4 4\n3 0 4\n'"$S"'0\n' \
+  '5: segment section header has 3 fields, expected 2 \(more vertex rows than the 3 that line 1 declares\?\)$'
+poly_case sextra "$V"'3 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n0\n' \
+  '10: hole section header has 3 fields, expected 1 \(more segment rows than the 3 that line 6 declares\?\)$'
+poly_case hextra "$V$S"'0\n0 1 1\n' \
+  '12: region section header has 3 fields, expected 1 \(more hole rows than the 0 that line 11 declares\?\)$'
+poly_case rextra "$V$S"'0\n1\n0 1 1 5\n1 2 2 5\n' \
+  "14: unexpected content after the last section: '1' \\(more region rows than the 1 that line 12 declares\\?\\)$"
+
+report
