@@ -76,4 +76,25 @@ poly_case hextra "$V$S"'0\n0 1 1\n' \
 poly_case rextra "$V$S"'0\n1\n0 1 1 5\n1 2 2 5\n' \
   "14: unexpected content after the last section: '1' \\(more region rows than the 1 that line 12 declares\\?\\)$"
 
+# ---- mesh --stats: the general mode printed the lattice modes' "U": 1 --------------------
+# (and "uniform_triangles": 2 and a balance time of 0, which mean nothing there)
+printf '3 2 0 0\n0 0 0\n1 3 0\n2 0 1\n3 0\n0 0 1\n1 1 2\n2 2 0\n0\n' >"$tmp/tri.poly"
+gen=$("$cli" mesh "$tmp/tri.poly" -o "$tmp/tri" --stats)
+same_text "general mode: mode" "$(grep -o '"mode": "[a-z]*"' <<<"$gen")" '"mode": "general"'
+same_text "general mode: no lattice fields" "$(grep -oE '"(U|uniform_triangles|balance)":' <<<"$gen")" ""
+same_text "general mode: its own fields" \
+  "$(grep -oE '"(components|triangles|exempt_angles|smallest_input_angle_deg|lattice_exponent|triangulate)":' <<<"$gen" | tr '\n' ' ')" \
+  '"components": "triangles": "triangulate": "lattice_exponent": "exempt_angles": "smallest_input_angle_deg": '
+book=$("$cli" mesh "$tmp/zero.poly" -o "$tmp/zero" --stats)
+same_text "book mode: the lattice fields" "$(grep -oE '"(U|uniform_triangles|balance|exempt_angles)": [0-9]+' <<<"$book" | cut -d: -f1 | tr '\n' ' ')" \
+  '"U" "uniform_triangles" "balance" '
+same_text "book mode: U and the uniform grid" "$(grep -oE '"(U|uniform_triangles)": [0-9]+' <<<"$book" | tr '\n' ' ')" \
+  '"U": 8 "uniform_triangles": 128 '
+# both are JSON
+if command -v python3 >/dev/null; then
+  for j in "$gen" "$book"; do
+    if python3 -c 'import json, sys; json.loads(sys.argv[1])' "$j"; then passes=$((passes + 1)); else fail "not JSON: $j"; fi
+  done
+fi
+
 report
