@@ -97,4 +97,37 @@ if command -v python3 >/dev/null; then
   done
 fi
 
+# ---- GeoJSON: errors inside valid JSON had no line (only "FILE: feature 1: ...") --------
+cat >"$tmp/short.geojson" <<'EOF2'
+{"type": "FeatureCollection",
+ "features": [
+  {"type": "Feature", "properties": {"name": "ok"},
+   "geometry": {"type": "Polygon", "coordinates": [[[0,0],[1,0],[1,1],[0,1],[0,0]]]}},
+  {"type": "Feature", "properties": {"name": "bad"},
+   "geometry": {"type": "Polygon",
+     "coordinates": [
+       [[0,0],[1,0],[0,0]]
+     ]}}
+ ]}
+EOF2
+printf 'x,y\n0.5,0.5\n' >"$tmp/half.csv"
+echo keep >"$tmp/keep.csv"
+for c in "join $tmp/short.geojson $tmp/half.csv -o $tmp/keep.csv" "regions $tmp/short.geojson" \
+  "mesh $tmp/short.geojson -o $tmp/gm"; do
+  # shellcheck disable=SC2086
+  expect 1 "^quadkit ${c%% *}: $tmp/short.geojson:8:8: feature 1, polygon 0, ring 0: 3 positions \\(a ring needs at least 4\\)$" -- "$cli" $c
+done
+same_text "join: -o unchanged after a GeoJSON error" "$(cat "$tmp/keep.csv")" keep
+nothing_written "$tmp/gm"
+sed 's/\[\[0,0\],\[1,0\],\[0,0\]\]/[[0,0],[1,0],[1, 1e999],[0,0]]/' "$tmp/short.geojson" >"$tmp/huge.geojson"
+expect 1 'huge.geojson:8:25: feature 1: coordinate 1e999 is beyond the largest double' -- "$cli" regions "$tmp/huge.geojson"
+sed 's/\[\[0,0\],\[1,0\],\[0,0\]\]/[[0,0],[1,0],[1,"1"],[0,0]]/' "$tmp/short.geojson" >"$tmp/str.geojson"
+expect 1 'str.geojson:8:21: feature 1, polygon 0, ring 0, position 2: expected \[x, y\] numbers, found \[ 1, "1" \]' \
+  -- "$cli" regions "$tmp/str.geojson"
+sed 's/"type": "Polygon",$/"type": "polygon",/' "$tmp/short.geojson" >"$tmp/lower.geojson"
+expect 1 'lower.geojson:6:16: feature 1: unknown geometry type "polygon"' -- "$cli" regions "$tmp/lower.geojson"
+# lon/lat out of range (join without --planar): the position, with CRLF line ends
+sed 's/\[\[0,0\],\[1,0\],\[0,0\]\]/[[0,0],[181,0],[1,1],[0,0]]/' "$tmp/short.geojson" | sed 's/$/\r/' >"$tmp/lon.geojson"
+expect 1 'lon.geojson:8:15: feature 1: \(181, 0\) is not a longitude/latitude' -- "$cli" join "$tmp/lon.geojson" "$tmp/half.csv"
+
 report
