@@ -80,7 +80,9 @@ typedef struct obj {
   uint64_t id;
   qk_shape_t s;
   qk_handle_t h;
-  unsigned long line; /* in the objects file */
+  unsigned long line;   /* in the objects file */
+  unsigned long mline;  /* the line of its last move in the moves file, 0 for none, */
+  unsigned long mframe; /* and that move's frame */
 } obj_t;
 
 typedef struct move {
@@ -242,7 +244,7 @@ static int object_row(const char *path, unsigned long ln, row_t *r, scene_t *s) 
     s->o = o;
     s->cap = cap;
   }
-  s->o[s->n++] = (obj_t){id, sh, QK_HANDLE_NONE, ln};
+  s->o[s->n++] = (obj_t){id, sh, QK_HANDLE_NONE, ln, 0, 0};
   return CLI_OK;
 }
 
@@ -257,9 +259,19 @@ static int move_row(const char *path, unsigned long ln, row_t *r, scene_t *s) {
   if (why) return bad(path, ln, why, r->f[1]);
   size_t i = find_id(s, id);
   if (i == SIZE_MAX) return bad(path, ln, "unknown id '%s'", r->f[1]);
+  /* Two shapes for one object in one frame: only the last would count, the other row
+   * silently lost (moves are in frame order, so the object's last move tells). */
+  if (s->o[i].mline && s->o[i].mframe == frame) {
+    fprintf(stderr,
+            "quadkit world: %s:%lu: id %s moves twice in frame %lu (also on line %lu): one "
+            "shape per object and frame\n",
+            path, ln, r->f[1], (unsigned long)frame, s->o[i].mline);
+    return CLI_BAD_INPUT;
+  }
   qk_shape_t sh;
   int rc = shape_values(path, ln, s->o[i].s.kind, r->f + 2, r->n - 2, &sh);
   if (rc) return rc;
+  s->o[i].mline = ln, s->o[i].mframe = (unsigned long)frame;
   if (s->nm == s->capm) {
     size_t cap = s->capm ? 2 * s->capm : 256;
     move_t *m = realloc(s->m, cap * sizeof *m);
