@@ -113,6 +113,9 @@ int cli_out_close(const char *cmd, cli_out_t *o, int ok);
  * (cannot open: the system's reason; a directory: "is a directory", which fopen lets
  * through and the first read then fails on with a vague "read error"). */
 FILE *cli_open_input(const char *cmd, const char *path);
+/* Record an input that is read by other means than cli_open_input (the library's readers),
+ * before any output is opened: cli_out_open refuses to write over an input (exit 2). */
+void cli_note_input(const char *path);
 
 /* Subcommands: argv[0] is the subcommand's name. */
 int cmd_tree(int argc, char **argv);

@@ -618,6 +618,7 @@ int cmd_mesh(int argc, char **argv) {
   memset(&pp, 0, sizeof pp);
   double t_read = 0;
   outputs_t outs;
+  cli_note_input(o.in); /* (an output naming the input is refused) */
   rc = open_outputs(cmd, &o, &outs);
   if (rc) return rc;
   rc = make_mesh(cmd, &o, &poly, &mesh, &pp, &t_read);

@@ -19,6 +19,7 @@
 /* ---- reading the layer ---------------------------------------------------------------- */
 
 static int read_layer(const char *cmd, const char *path, int planar, qk_region_t **out) {
+  cli_note_input(path); /* (an output naming the layer is refused) */
   qk_region_options_t o;
   qk_region_options_init(&o);
   o.planar = planar;

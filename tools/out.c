@@ -9,6 +9,27 @@
 
 #include "cli.h"
 
+/* The regular files this process reads (device and inode), so that an output naming one
+ * of them is refused: `-o points.csv` or `--svg points.csv` replaced the input after
+ * reading it, without a word. */
+static struct {
+  dev_t dev;
+  ino_t ino;
+  const char *path;
+} inputs[16];
+static size_t n_inputs;
+
+static void note_stat(const char *path, const struct stat *st) {
+  if (!S_ISREG(st->st_mode) || n_inputs == sizeof inputs / sizeof *inputs) return;
+  inputs[n_inputs].dev = st->st_dev, inputs[n_inputs].ino = st->st_ino;
+  inputs[n_inputs++].path = path;
+}
+
+void cli_note_input(const char *path) {
+  struct stat st;
+  if (path && strcmp(path, "-") && stat(path, &st) == 0) note_stat(path, &st);
+}
+
 FILE *cli_open_input(const char *cmd, const char *path) {
   FILE *f = fopen(path, "rb");
   const char *why = f ? NULL : strerror(errno), *what = "cannot open";
@@ -18,6 +39,7 @@ FILE *cli_open_input(const char *cmd, const char *path) {
     fclose(f);
     f = NULL;
   }
+  if (f && fstat(fileno(f), &st) == 0) note_stat(path, &st);
   if (!f)
     fprintf(stderr, "quadkit%s%s: %s: %s: %s\n", cmd ? " " : "", cmd ? cmd : "", path, what, why);
   return f;
@@ -48,6 +70,14 @@ int cli_out_open(const char *cmd, const char *path, cli_out_t *o) {
     o->path = strdup(path); /* (for the message when a write fails) */
     return CLI_OK;
   }
+  if (stat(final, &st) == 0)
+    for (size_t i = 0; i < n_inputs; i++)
+      if (st.st_dev == inputs[i].dev && st.st_ino == inputs[i].ino) {
+        free(target);
+        cli_error(cmd, "cannot write %s: it is the input file %s, which it would replace", path,
+                  inputs[i].path);
+        return CLI_USAGE;
+      }
   size_t n = strlen(final) + 32;
   o->path = strdup(final);
   o->tmp = malloc(n);

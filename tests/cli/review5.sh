@@ -130,4 +130,60 @@ expect 1 'lower.geojson:6:16: feature 1: unknown geometry type "polygon"' -- "$c
 sed 's/\[\[0,0\],\[1,0\],\[0,0\]\]/[[0,0],[181,0],[1,1],[0,0]]/' "$tmp/short.geojson" | sed 's/$/\r/' >"$tmp/lon.geojson"
 expect 1 'lon.geojson:8:15: feature 1: \(181, 0\) is not a longitude/latitude' -- "$cli" join "$tmp/lon.geojson" "$tmp/half.csv"
 
+# ---- world: one object moved twice in one frame (only the last counted, the other lost) --
+printf '1,disc,0,0,1\n2,disc,5,0,1\n' >"$tmp/wobj.csv"
+printf 'frame,id,x,y,a\n0,2,1,0,1\n0,1,9,9,1\n0,2,9,9,1\n' >"$tmp/wtwice.csv"
+expect 1 '^quadkit world: .*wtwice.csv:4: id 2 moves twice in frame 0 \(also on line 2\): one shape per object and frame$' \
+  -- "$cli" world "$tmp/wobj.csv" "$tmp/wtwice.csv"
+# the same id in successive frames, and two ids in one frame, are fine
+printf '0,2,1,0,1\n0,1,9,9,1\n1,2,9,9,1\n1,1,9,9,1\n' >"$tmp/wok.csv"
+same_text "world: moves in successive frames" "$("$cli" world "$tmp/wobj.csv" "$tmp/wok.csv" | tr '\n' ' ')" \
+  "frame,a,b 1,1,2 "
+
+# ---- join: a layer without a single polygon answered -1 for every point, without a word --
+# (a points CSV given as REGIONS, which GDAL reads as a table; a layer of points or lines)
+printf 'x,y\n0.5,0.5\n' >"$tmp/pts.csv"
+printf '{"type":"FeatureCollection","features":[{"type":"Feature","properties":{},"geometry":{"type":"Point","coordinates":[0,0]}}]}\n' >"$tmp/onlypt.geojson"
+expect 1 '^quadkit join: .*onlypt.geojson: no polygons to join against \(1 features, 1 skipped geometries: points, lines, empty or null\)$' \
+  -- "$cli" join "$tmp/onlypt.geojson" "$tmp/pts.csv" -o "$tmp/keep.csv"
+same_text "join: -o unchanged" "$(cat "$tmp/keep.csv")" keep
+printf '{"type":"FeatureCollection","features":[]}\n' >"$tmp/nofeat.geojson"
+expect 1 'nofeat.geojson: no polygons to join against \(0 features' -- "$cli" join "$tmp/nofeat.geojson" "$tmp/pts.csv"
+if "$cli" regions "$tmp/pts.csv" >/dev/null 2>&1; then # GDAL is there: it reads the CSV as a table
+  expect 1 'pts.csv: no polygons to join against \(1 features, 1 skipped' -- "$cli" join "$tmp/pts.csv" "$tmp/pts.csv"
+fi
+# regions still describes such a layer (its statistics are the answer)
+expect 0 '"features": 1, "rings": 0' -- "$cli" regions "$tmp/onlypt.geojson"
+
+# ---- an output naming an input replaced the input after reading it ---------------------
+printf 'x,y\n0.1,0.2\n0.3,0.4\n' >"$tmp/in.csv"
+printf 'x,y,r\n0.1,0.2,0.1\n0.3,0.4,0.2\n' >"$tmp/discs.csv"
+cp "$tmp/in.csv" "$tmp/in.orig"
+cp "$tmp/discs.csv" "$tmp/discs.orig"
+sed 's/\[\[0,0\],\[1,0\],\[0,0\]\]/[[0,0],[1,0],[1,1],[0,0]]/' "$tmp/short.geojson" >"$tmp/layer.geojson"
+cp "$tmp/layer.geojson" "$tmp/layer.orig"
+cp "$tmp/zero.poly" "$tmp/in.poly"
+ln -s in.csv "$tmp/link.csv"
+same_input() { # same_input CMD...: exit 2 naming the input, nothing replaced, no temporary
+  expect 2 "cannot write .*: it is the input file .*, which it would replace" -- "$cli" "$@"
+}
+same_input tree "$tmp/in.csv" --svg "$tmp/in.csv"
+same_input tree "$tmp/in.csv" --svg "$tmp/link.csv"
+same_input knn "$tmp/in.csv" "$tmp/pts.csv" -k 1 -o "$tmp/in.csv"
+same_input knn "$tmp/pts.csv" "$tmp/in.csv" -k 1 -o "$tmp/in.csv"
+same_input collide "$tmp/discs.csv" -o "$tmp/discs.csv"
+same_input join "$tmp/layer.geojson" "$tmp/in.csv" -o "$tmp/in.csv"
+same_input join "$tmp/layer.geojson" "$tmp/in.csv" -o "$tmp/layer.geojson"
+same_input regions "$tmp/layer.geojson" --svg "$tmp/layer.geojson"
+same_input mesh "$tmp/in.poly" -o "$tmp/im" --poly "$tmp/in.poly"
+same_input mesh "$tmp/layer.geojson" -o "$tmp/im" --svg "$tmp/layer.geojson"
+same_input world "$tmp/wobj.csv" "$tmp/wok.csv" -o "$tmp/wok.csv"
+cmp -s "$tmp/in.csv" "$tmp/in.orig" && cmp -s "$tmp/discs.csv" "$tmp/discs.orig" &&
+  cmp -s "$tmp/layer.geojson" "$tmp/layer.orig" && cmp -s "$tmp/in.poly" "$tmp/zero.poly" &&
+  [ -L "$tmp/link.csv" ] && ! ls "$tmp" | grep -q '\.tmp\.' && [ ! -e "$tmp/im.node" ] ||
+  fail "an input was replaced, or a temporary or output left"
+# another file, and a device, are still fine
+expect 0 '' -- "$cli" knn "$tmp/in.csv" "$tmp/pts.csv" -k 1 -o "$tmp/knn.csv"
+expect 0 '' -- "$cli" tree "$tmp/in.csv" --svg /dev/null
+
 report
