@@ -47,6 +47,10 @@ FILE *cli_open_input(const char *cmd, const char *path) {
 
 int cli_out_open(const char *cmd, const char *path, cli_out_t *o) {
   memset(o, 0, sizeof *o);
+  if (!*path) { /* (it wrote ".tmp.PID.0" and failed renaming it to "", exit 3) */
+    cli_error(cmd, "an output file name is empty ('')");
+    return CLI_USAGE;
+  }
   if (!strcmp(path, "-")) {
     o->f = stdout;
     return CLI_OK;

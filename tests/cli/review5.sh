@@ -186,4 +186,13 @@ cmp -s "$tmp/in.csv" "$tmp/in.orig" && cmp -s "$tmp/discs.csv" "$tmp/discs.orig"
 expect 0 '' -- "$cli" knn "$tmp/in.csv" "$tmp/pts.csv" -k 1 -o "$tmp/knn.csv"
 expect 0 '' -- "$cli" tree "$tmp/in.csv" --svg /dev/null
 
+# ---- an empty output name: it wrote ".tmp.PID.0", failed renaming it to "" and exited 3 ---
+mkdir "$tmp/empty"
+for c in "knn $tmp/in.csv $tmp/pts.csv -k 1 -o" "tree $tmp/in.csv --svg" "regions $tmp/layer.geojson --svg" \
+  "world $tmp/wobj.csv $tmp/wok.csv -o" "simulate --n 5 --frames 1 --svg" "mesh $tmp/in.poly -o $tmp/em --vtk"; do
+  # shellcheck disable=SC2086
+  expect 2 "^quadkit ${c%% *}: an output file name is empty \\(''\\)$" -- bash -c 'cd "$1" && shift && "$@" ""' - "$tmp/empty" "$cli" $c
+done
+same_text "empty output name: nothing written" "$(ls -A "$tmp/empty")" ""
+
 report
