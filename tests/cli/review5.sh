@@ -195,4 +195,21 @@ for c in "knn $tmp/in.csv $tmp/pts.csv -k 1 -o" "tree $tmp/in.csv --svg" "region
 done
 same_text "empty output name: nothing written" "$(ls -A "$tmp/empty")" ""
 
+# ---- world: two moves 10^8 frames apart ran for minutes (an update per empty frame) ------
+printf '1,disc,0,0,1\n2,disc,5,0,1\n' >"$tmp/far.csv"
+printf '0,1,0,0,1\n100000000,1,5,0,1\n' >"$tmp/farmv.csv"
+same_text "world: frames 10^8 apart" "$(timeout 60 "$cli" world "$tmp/far.csv" "$tmp/farmv.csv" --pairs began | tr '\n' ' ')" \
+  "frame,a,b 100000000,1,2 "
+# Frames without moves answer as an update would: the same scene padded with moves that
+# leave object 9 where it is (which forces the update) gives the same output.
+printf '1,disc,0,0,1\n2,disc,1.5,0,1\n3,box,3,3,4,4\n9,point,50,50\n' >"$tmp/sc.csv"
+printf '0,2,9,9,1\n2,2,1,0,1\n2,3,0,0,1,1\n5,1,20,20,1\n8,1,0,0,1\n' >"$tmp/scmv.csv"
+printf '0,2,9,9,1\n1,9,50,50\n2,2,1,0,1\n2,3,0,0,1,1\n3,9,50,50\n4,9,50,50\n5,1,20,20,1\n6,9,50,50\n7,9,50,50\n8,1,0,0,1\n' >"$tmp/scpad.csv"
+for w in all began ended; do
+  same_text "world --pairs $w: empty frames" "$("$cli" world "$tmp/sc.csv" "$tmp/scmv.csv" --pairs $w | md5sum)" \
+    "$("$cli" world "$tmp/sc.csv" "$tmp/scpad.csv" --pairs $w | md5sum)"
+done
+same_text "world: the padded scene's pairs" "$("$cli" world "$tmp/sc.csv" "$tmp/scmv.csv" | tr '\n' ' ')" \
+  "frame,a,b 2,1,2 2,1,3 2,2,3 3,1,2 3,1,3 3,2,3 4,1,2 4,1,3 4,2,3 5,2,3 6,2,3 7,2,3 8,1,2 8,1,3 8,2,3 "
+
 report
