@@ -212,4 +212,12 @@ done
 same_text "world: the padded scene's pairs" "$("$cli" world "$tmp/sc.csv" "$tmp/scmv.csv" | tr '\n' ' ')" \
   "frame,a,b 2,1,2 2,1,3 2,2,3 3,1,2 3,1,3 3,2,3 4,1,2 4,1,3 4,2,3 5,2,3 6,2,3 7,2,3 8,1,2 8,1,3 8,2,3 "
 
+# ---- GDAL layers: a missing or unknown file said only "GDAL cannot open X as vector data" --
+if "$cli" regions "$tmp/no-such.shp" 2>&1 | grep -q 'GDAL cannot open'; then # built with GDAL
+  expect 1 "^quadkit regions: $tmp/no-such.shp: GDAL cannot open $tmp/no-such.shp as vector data: .*No such file or directory$" \
+    -- "$cli" regions "$tmp/no-such.shp"
+  printf 'garbage\n' >"$tmp/junk.shp"
+  expect 1 "junk.shp as vector data: .*junk.shp' not recognized as a supported file format" -- "$cli" join "$tmp/junk.shp" "$tmp/pts.csv"
+fi
+
 report
