@@ -103,6 +103,7 @@ typedef struct cli_out {
   char *path; /* final path (a link's target); the path given when writing directly */
   char *tmp;
   int direct; /* a FIFO or device: written in place, never renamed over */
+  char *key;  /* canonical name while open (two outputs naming one file are refused) */
 } cli_out_t;
 int cli_out_open(const char *cmd, const char *path, cli_out_t *o);
 /* Close and rename (ok != 0) or close and delete (ok == 0). Returns CLI_OK or an error. */

@@ -45,6 +45,34 @@ FILE *cli_open_input(const char *cmd, const char *path) {
   return f;
 }
 
+/* The outputs open now, by canonical name (the directory's real path and the file name):
+ * two outputs of one command naming one file (`-o x --svg x`, or `./x` and `x`) would
+ * leave whichever was renamed last, the other lost without a word. */
+static const char *open_keys[16];
+static size_t n_open;
+
+static char *out_key(const char *final) {
+  const char *slash = strrchr(final, '/'), *base = slash ? slash + 1 : final;
+  size_t dlen = slash ? (slash == final ? 1 : (size_t)(slash - final)) : 1;
+  char *dir = malloc(dlen + 1);
+  if (!dir) return NULL;
+  memcpy(dir, slash ? final : ".", dlen);
+  dir[dlen] = '\0';
+  char *real = realpath(dir, NULL), *key = NULL;
+  free(dir);
+  if (real && (key = malloc(strlen(real) + strlen(base) + 2))) sprintf(key, "%s/%s", real, base);
+  free(real);
+  return key;
+}
+
+static void forget_key(const char *key) {
+  for (size_t i = 0; key && i < n_open; i++)
+    if (open_keys[i] == key) {
+      open_keys[i] = open_keys[--n_open];
+      break;
+    }
+}
+
 int cli_out_open(const char *cmd, const char *path, cli_out_t *o) {
   memset(o, 0, sizeof *o);
   if (!*path) { /* (it wrote ".tmp.PID.0" and failed renaming it to "", exit 3) */
@@ -82,6 +110,16 @@ int cli_out_open(const char *cmd, const char *path, cli_out_t *o) {
                   inputs[i].path);
         return CLI_USAGE;
       }
+  o->key = out_key(final);
+  for (size_t i = 0; o->key && i < n_open; i++)
+    if (!strcmp(o->key, open_keys[i])) {
+      free(target);
+      free(o->key);
+      o->key = NULL;
+      cli_error(cmd, "cannot write %s: another output of this command writes that file too", path);
+      return CLI_USAGE;
+    }
+  if (o->key && n_open < sizeof open_keys / sizeof *open_keys) open_keys[n_open++] = o->key;
   size_t n = strlen(final) + 32;
   o->path = strdup(final);
   o->tmp = malloc(n);
@@ -89,6 +127,8 @@ int cli_out_open(const char *cmd, const char *path, cli_out_t *o) {
   if (!o->path || !o->tmp) {
     free(o->path);
     free(o->tmp);
+    forget_key(o->key);
+    free(o->key);
     cli_error(cmd, "out of memory");
     return CLI_INTERNAL;
   }
@@ -100,6 +140,8 @@ int cli_out_open(const char *cmd, const char *path, cli_out_t *o) {
     cli_error(cmd, "cannot write %s: %s", path, strerror(errno));
     free(o->path);
     free(o->tmp);
+    forget_key(o->key);
+    free(o->key);
     memset(o, 0, sizeof *o);
     return CLI_BAD_INPUT;
   }
@@ -141,6 +183,8 @@ int cli_out_close(const char *cmd, cli_out_t *o, int ok) {
   }
   free(o->path);
   free(o->tmp);
+  forget_key(o->key);
+  free(o->key);
   memset(o, 0, sizeof *o);
   return rc;
 }

@@ -220,4 +220,14 @@ if "$cli" regions "$tmp/no-such.shp" 2>&1 | grep -q 'GDAL cannot open'; then # b
   expect 1 "junk.shp as vector data: .*junk.shp' not recognized as a supported file format" -- "$cli" join "$tmp/junk.shp" "$tmp/pts.csv"
 fi
 
+# ---- two outputs of one command naming one file: the one renamed first was lost ---------
+mkdir "$tmp/two"
+expect 2 "^quadkit simulate: cannot write $tmp/two/s.out: another output of this command writes that file too$" \
+  -- "$cli" simulate --n 5 --frames 2 -o "$tmp/two/s.out" --svg "$tmp/two/s.out"
+expect 2 "cannot write $tmp/two/../two/s.out: another output" \
+  -- "$cli" simulate --n 5 --frames 2 -o "$tmp/two/s.out" --svg "$tmp/two/../two/s.out"
+expect 2 "cannot write ./m.node: another output" -- bash -c 'cd "$1" && "$2" mesh "$3" -o m --svg ./m.node' - "$tmp/two" "$cli" "$tmp/in.poly"
+same_text "two outputs, one file: nothing written" "$(ls -A "$tmp/two")" ""
+expect 0 '"frames": 2' -- "$cli" simulate --n 5 --frames 2 --svg "$tmp/two/s.svg"
+
 report
