@@ -36,7 +36,7 @@ typedef struct gj {
   /* The way from the root to the value being read (json-c's tree keeps no positions):
    * each function steps in before it reads a member or element and steps out after it
    * read it well, so after an error the path leads to the offending value, and
-   * qk__gj_locate() finds its line and column in the text. Deeper steps than
+   * locate() finds its line and column in the text. Deeper steps than
    * GJ_PATH_MAX are counted but not kept (the error then points at an ancestor). */
   gj_step_t path[GJ_PATH_MAX];
   size_t depth;
@@ -181,10 +181,9 @@ static qk_status_t geometry_rings(gj_t *g, json_object *geom, size_t f, size_t *
                              f, ty);
     return QK_OK;
   }
-  if (!json_object_object_get_ex(geom, "coordinates", &c)) {
+  if (!json_object_object_get_ex(geom, "coordinates", &c))
     return qk__region_fail(g->err, QK_ERR_PARSE, f,
                            "feature %zu: %s without a \"coordinates\" array", f, ty);
-  }
   step_in(g, "coordinates", 0);
   if (!json_object_is_type(c, json_type_array))
     return qk__region_fail(g->err, QK_ERR_PARSE, f,
