@@ -33,6 +33,7 @@ typedef struct reader {
    * count and header line, for the hint when the rows do not match the count. */
   const char *sec;
   unsigned long sec_n, sec_line;
+  size_t sec_fields; /* the fewest fields a row of that section has */
   char hint[128];
 } reader_t;
 
@@ -242,17 +243,19 @@ static qk_status_t rfail(const reader_t *r, qk_mesh_error_t *err, qk_status_t st
   return st;
 }
 
-/* Start the rows of a section: name, declared count (its header is the current line). */
-static void section(reader_t *r, const char *what, unsigned long n) {
-  r->sec = what, r->sec_n = n, r->sec_line = r->line;
+/* Start the rows of a section: name, declared count (its header is the current line),
+ * the fewest fields of a row. */
+static void section(reader_t *r, const char *what, unsigned long n, size_t fields) {
+  r->sec = what, r->sec_n = n, r->sec_line = r->line, r->sec_fields = fields;
 }
 
 /* A hint for a row or header that does not fit where the count says it should: the rows
  * of the current section are fewer than declared (`fewer`), or the last section has
- * more (a line read as the next header). "" when there is no section yet. */
+ * more (a line read as the next header, when it has the fields of such a row). "" when
+ * there is no section yet. */
 static const char *rows_hint(reader_t *r, int fewer) {
   r->hint[0] = '\0';
-  if (r->sec)
+  if (r->sec && (fewer || r->ntok >= r->sec_fields))
     snprintf(r->hint, sizeof r->hint, " (%s %s rows than the %lu that line %lu declares?)",
              fewer ? "fewer" : "more", r->sec, r->sec_n, r->sec_line);
   return r->hint;
@@ -317,7 +320,7 @@ static qk_status_t read_vertices(reader_t *r, qk_poly_t *p, qk_mesh_error_t *err
   if (nv == 0)
     return rfail(r, err, QK_ERR_PARSE,
                  "no vertices (vertices in a separate .node file are not supported)");
-  section(r, "vertex", nv);
+  section(r, "vertex", nv, 3);
   for (unsigned long i = 0; i < nv; i++) {
     if ((st = need_line(r, err, truncated(msg, sizeof msg, nv, i, "vertices")))) return st;
     long long idx;
@@ -371,7 +374,7 @@ static qk_status_t read_segments(reader_t *r, qk_poly_t *p, qk_mesh_error_t *err
   if (r->ntok > 1 && (!parse_count(r->tok[1], &smark) || smark > 1))
     return rfail(r, err, QK_ERR_PARSE,
                  "number of segment boundary markers must be 0 or 1, found '%s'", r->tok[1]);
-  section(r, "segment", ns);
+  section(r, "segment", ns, 3);
   for (unsigned long i = 0; i < ns; i++) {
     if ((st = need_line(r, err, truncated(msg, sizeof msg, ns, i, "segments")))) return st;
     long long idx, e[2];
@@ -410,7 +413,7 @@ static qk_status_t read_holes(reader_t *r, qk_poly_t *p, qk_mesh_error_t *err) {
   if (r->ntok > 1)
     return rfail(r, err, QK_ERR_PARSE, "hole section header has %zu fields, expected 1%s", r->ntok,
                  rows_hint(r, 0));
-  section(r, "hole", nh);
+  section(r, "hole", nh, 3);
   for (unsigned long i = 0; i < nh; i++) {
     if ((st = need_line(r, err, truncated(msg, sizeof msg, nh, i, "holes")))) return st;
     long long idx;
@@ -448,7 +451,7 @@ static qk_status_t read_regions(reader_t *r, qk_poly_t *p, qk_mesh_error_t *err)
   if (r->ntok > 1)
     return rfail(r, err, QK_ERR_PARSE, "region section header has %zu fields, expected 1%s",
                  r->ntok, rows_hint(r, 0));
-  section(r, "region", nr);
+  section(r, "region", nr, 4);
   for (unsigned long i = 0; i < nr; i++) {
     if ((st = need_line(r, err, truncated(msg, sizeof msg, nr, i, "regional attributes"))))
       return st;

@@ -203,6 +203,9 @@ static void test_poly_bad(void **state) {
        "(fewer hole rows than the 2 that line 11 declares?)"},
       {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS "0\n1\n0 1 1 5\n1 1 1 5\n", 0,
        QK_ERR_PARSE, 14, "(more region rows than the 1 that line 12 declares?)"},
+      /* A malformed header that cannot be a row of the section before: no hint. */
+      {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS "0 junk\n", 0, QK_ERR_PARSE, 11,
+       "hole section header has 2 fields, expected 1"},
       {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS "0\n0\nextra\n", 0, QK_ERR_PARSE, 13,
        "unexpected"},
       {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS "1\n0 nan 1\n", 0, QK_ERR_PARSE, 12,
@@ -268,6 +271,13 @@ static void test_poly_bad(void **state) {
         !strstr(err.message, cases[i].words))
       fail_msg("case %zu: status %s line %lu '%s'; expected %s line %lu '%s'", i, qk_strerror(st),
                err.line, err.message, qk_strerror(cases[i].status), cases[i].line, cases[i].words);
+  }
+  /* The rows hint only where the line could be a row of the section before. */
+  {
+    qk_mesh_error_t err;
+    assert_int_equal(run("4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS "0 junk\n", 0, &err),
+                     QK_ERR_PARSE);
+    assert_string_equal(err.message, "hole section header has 2 fields, expected 1");
   }
 }
 
