@@ -29,6 +29,12 @@ typedef struct reader {
   char *tok[16]; /* the first tokens of the current line */
   size_t ntok;   /* tokens on the line (may exceed 16; only 16 are kept) */
   int io_error;
+  /* The section whose rows are being read (or were read last): its name, declared row
+   * count and header line, for the hint when the rows do not match the count. */
+  const char *sec;
+  unsigned long sec_n, sec_line;
+  size_t sec_fields; /* the fewest fields a row of that section has */
+  char hint[128];
 } reader_t;
 
 /* Read the next line holding a token. Returns 1, 0 at end of input, -1 out of memory,
@@ -237,6 +243,24 @@ static qk_status_t rfail(const reader_t *r, qk_mesh_error_t *err, qk_status_t st
   return st;
 }
 
+/* Start the rows of a section: name, declared count (its header is the current line),
+ * the fewest fields of a row. */
+static void section(reader_t *r, const char *what, unsigned long n, size_t fields) {
+  r->sec = what, r->sec_n = n, r->sec_line = r->line, r->sec_fields = fields;
+}
+
+/* A hint for a row or header that does not fit where the count says it should: the rows
+ * of the current section are fewer than declared (`fewer`), or the last section has
+ * more (a line read as the next header, when it has the fields of such a row). "" when
+ * there is no section yet. */
+static const char *rows_hint(reader_t *r, int fewer) {
+  r->hint[0] = '\0';
+  if (r->sec && (fewer || r->ntok >= r->sec_fields))
+    snprintf(r->hint, sizeof r->hint, " (%s %s rows than the %lu that line %lu declares?)",
+             fewer ? "fewer" : "more", r->sec, r->sec_n, r->sec_line);
+  return r->hint;
+}
+
 /* Read the next line holding a token, if any: *got is 1, or 0 at the end of input. */
 static qk_status_t maybe_line(reader_t *r, qk_mesh_error_t *err, int *got) {
   int g = next_line(r);
@@ -296,6 +320,7 @@ static qk_status_t read_vertices(reader_t *r, qk_poly_t *p, qk_mesh_error_t *err
   if (nv == 0)
     return rfail(r, err, QK_ERR_PARSE,
                  "no vertices (vertices in a separate .node file are not supported)");
+  section(r, "vertex", nv, 3);
   for (unsigned long i = 0; i < nv; i++) {
     if ((st = need_line(r, err, truncated(msg, sizeof msg, nv, i, "vertices")))) return st;
     long long idx;
@@ -310,7 +335,9 @@ static qk_status_t read_vertices(reader_t *r, qk_poly_t *p, qk_mesh_error_t *err
       return rfail(r, err, QK_ERR_PARSE, "vertex number %lu expected, found %lld",
                    i + p->first_index, idx);
     }
-    if (r->ntok < 3) return rfail(r, err, QK_ERR_PARSE, "vertex %lld: expected x and y", idx);
+    if (r->ntok < 3)
+      return rfail(r, err, QK_ERR_PARSE, "vertex %lld: expected x and y, found %zu field%s%s", idx,
+                   r->ntok, r->ntok == 1 ? "" : "s", rows_hint(r, 1));
     if (!parse_num(r->tok[1], &x))
       return rfail(r, err, QK_ERR_PARSE, "vertex %lld: bad x coordinate '%s'", idx, r->tok[1]);
     if (!parse_num(r->tok[2], &y))
@@ -342,18 +369,21 @@ static qk_status_t read_segments(reader_t *r, qk_poly_t *p, qk_mesh_error_t *err
   qk_status_t st = need_line(r, err, "truncated input: expected the segment section header");
   if (st || (st = read_count(r, err, "segments", &ns))) return st;
   if (r->ntok > 2)
-    return rfail(r, err, QK_ERR_PARSE, "segment section header has %zu fields, expected 2",
-                 r->ntok);
+    return rfail(r, err, QK_ERR_PARSE, "segment section header has %zu fields, expected 2%s",
+                 r->ntok, rows_hint(r, 0));
   if (r->ntok > 1 && (!parse_count(r->tok[1], &smark) || smark > 1))
     return rfail(r, err, QK_ERR_PARSE,
                  "number of segment boundary markers must be 0 or 1, found '%s'", r->tok[1]);
+  section(r, "segment", ns, 3);
   for (unsigned long i = 0; i < ns; i++) {
     if ((st = need_line(r, err, truncated(msg, sizeof msg, ns, i, "segments")))) return st;
     long long idx, e[2];
     if (!parse_index(r->tok[0], &idx))
       return rfail(r, err, QK_ERR_PARSE, "bad segment number '%s'", r->tok[0]);
     if (r->ntok < 3)
-      return rfail(r, err, QK_ERR_PARSE, "segment %lld: expected two endpoints", idx);
+      return rfail(r, err, QK_ERR_PARSE,
+                   "segment %lld: expected two endpoints, found %zu field%s%s", idx, r->ntok,
+                   r->ntok == 1 ? "" : "s", rows_hint(r, 1));
     if (r->ntok > 3 + smark)
       return rfail(r, err, QK_ERR_PARSE, "segment %lld: %zu fields, at most %lu expected", idx,
                    r->ntok, 3 + smark);
@@ -381,14 +411,18 @@ static qk_status_t read_holes(reader_t *r, qk_poly_t *p, qk_mesh_error_t *err) {
   qk_status_t st = read_count(r, err, "holes", &nh);
   if (st) return st;
   if (r->ntok > 1)
-    return rfail(r, err, QK_ERR_PARSE, "hole section header has %zu fields, expected 1", r->ntok);
+    return rfail(r, err, QK_ERR_PARSE, "hole section header has %zu fields, expected 1%s", r->ntok,
+                 rows_hint(r, 0));
+  section(r, "hole", nh, 3);
   for (unsigned long i = 0; i < nh; i++) {
     if ((st = need_line(r, err, truncated(msg, sizeof msg, nh, i, "holes")))) return st;
     long long idx;
     double x, y;
     if (!parse_index(r->tok[0], &idx))
       return rfail(r, err, QK_ERR_PARSE, "bad hole number '%s'", r->tok[0]);
-    if (r->ntok != 3) return rfail(r, err, QK_ERR_PARSE, "hole %lld: expected x and y only", idx);
+    if (r->ntok != 3)
+      return rfail(r, err, QK_ERR_PARSE, "hole %lld: expected x and y only, found %zu field%s%s",
+                   idx, r->ntok, r->ntok == 1 ? "" : "s", r->ntok < 3 ? rows_hint(r, 1) : "");
     if (!parse_num(r->tok[1], &x) || !parse_num(r->tok[2], &y))
       return rfail(r, err, QK_ERR_PARSE, "hole %lld: bad coordinates '%s' '%s'", idx, r->tok[1],
                    r->tok[2]);
@@ -415,12 +449,15 @@ static qk_status_t read_regions(reader_t *r, qk_poly_t *p, qk_mesh_error_t *err)
   qk_status_t st = read_count(r, err, "regional attributes", &nr);
   if (st) return st;
   if (r->ntok > 1)
-    return rfail(r, err, QK_ERR_PARSE, "region section header has %zu fields, expected 1", r->ntok);
+    return rfail(r, err, QK_ERR_PARSE, "region section header has %zu fields, expected 1%s",
+                 r->ntok, rows_hint(r, 0));
+  section(r, "region", nr, 4);
   for (unsigned long i = 0; i < nr; i++) {
     if ((st = need_line(r, err, truncated(msg, sizeof msg, nr, i, "regional attributes"))))
       return st;
     if (r->ntok < 4 || r->ntok > 5)
-      return rfail(r, err, QK_ERR_PARSE, "region: expected 4 or 5 fields, found %zu", r->ntok);
+      return rfail(r, err, QK_ERR_PARSE, "region %lu: expected 4 or 5 fields, found %zu%s", i,
+                   r->ntok, r->ntok < 4 ? rows_hint(r, 1) : "");
     double v[5];
     for (size_t k = 0; k < r->ntok; k++)
       if (!parse_num(r->tok[k], &v[k]))
@@ -431,16 +468,20 @@ static qk_status_t read_regions(reader_t *r, qk_poly_t *p, qk_mesh_error_t *err)
   return QK_OK;
 }
 
-/* Everything after the segments: optional holes, optional regions, then nothing. */
+/* Everything after the segments: the hole section (required, as in Triangle, whose reader
+ * stops at a file that ends before it: a lost hole section would mesh the holes as solid),
+ * optional regions, then nothing. */
 static qk_status_t read_tail(reader_t *r, qk_poly_t *p, qk_mesh_error_t *err) {
   int got = 0;
-  qk_status_t st = maybe_line(r, err, &got);
-  if (st || !got) return st;
+  qk_status_t st = need_line(r, err,
+                             "truncated input: the file ends here, where the hole section was "
+                             "expected (a line with the number of holes, 0 for none)");
+  if (st) return st;
   if ((st = read_holes(r, p, err)) || (st = maybe_line(r, err, &got)) || !got) return st;
   if ((st = read_regions(r, p, err)) || (st = maybe_line(r, err, &got))) return st;
   if (got)
-    return rfail(r, err, QK_ERR_PARSE, "unexpected content after the last section: '%s'",
-                 r->tok[0]);
+    return rfail(r, err, QK_ERR_PARSE, "unexpected content after the last section: '%s'%s",
+                 r->tok[0], rows_hint(r, 0));
   return QK_OK;
 }
 
@@ -454,7 +495,9 @@ qk_status_t qk_poly_read(FILE *f, const qk_allocator_t *allocator, qk_poly_t **o
   if (!f || !out) return QK_ERR_INVALID;
   qk_poly_t *p = poly_new(allocator);
   if (!p) return qk__mesh_fail(err, QK_ERR_NOMEM, 0, "out of memory");
-  reader_t r = {f, &p->alloc, NULL, 0, 0, {0}, 0, 0};
+  reader_t r;
+  memset(&r, 0, sizeof r);
+  r.f = f, r.a = &p->alloc;
   qk_status_t st;
   if (!(st = read_vertices(&r, p, err)) && !(st = read_segments(&r, p, err)) &&
       !(st = read_tail(&r, p, err)) && r.io_error)

@@ -20,12 +20,34 @@
 #ifdef QK_HAVE_JSONC
 #include <json.h>
 
+/* One step from a JSON value to a member of it (name) or an element of it (idx, name NULL). */
+typedef struct gj_step {
+  const char *name;
+  size_t idx;
+} gj_step_t;
+
+enum { GJ_PATH_MAX = 24 };
+
 typedef struct gj {
   const qk_allocator_t *a;
   int planar;
   qk__rings_t rg;
   qk_error_t *err;
+  /* The way from the root to the value being read (json-c's tree keeps no positions):
+   * each function steps in before it reads a member or element and steps out after it
+   * read it well, so after an error the path leads to the offending value, and
+   * locate() finds its line and column in the text. Deeper steps than
+   * GJ_PATH_MAX are counted but not kept (the error then points at an ancestor). */
+  gj_step_t path[GJ_PATH_MAX];
+  size_t depth;
 } gj_t;
+
+static void step_in(gj_t *g, const char *name, size_t idx) {
+  if (g->depth < GJ_PATH_MAX) g->path[g->depth] = (gj_step_t){name, idx};
+  g->depth++;
+}
+
+static void step_out(gj_t *g) { g->depth--; }
 
 static qk_status_t nomem(gj_t *g, qk_status_t st) {
   return qk__region_fail(g->err, st, SIZE_MAX, "%s while reading", qk_strerror(st));
@@ -59,6 +81,7 @@ static qk_status_t ring(gj_t *g, json_object *arr, size_t f, size_t poly, size_t
   for (size_t i = 0; i < n; i++) {
     json_object *p = json_object_array_get_idx(arr, i);
     json_object *x = NULL, *y = NULL;
+    step_in(g, NULL, i);
     if (json_object_is_type(p, json_type_array) && json_object_array_length(p) >= 2) {
       x = json_object_array_get_idx(p, 0);
       y = json_object_array_get_idx(p, 1);
@@ -73,11 +96,13 @@ static qk_status_t ring(gj_t *g, json_object *arr, size_t f, size_t poly, size_t
                              "numbers, found %s",
                              f, poly, k, i, shown(p));
     double vx = json_object_get_double(x), vy = json_object_get_double(y);
-    if (!isfinite(vx) || !isfinite(vy)) /* (NaN and Infinity were refused: an overflow) */
+    if (!isfinite(vx) || !isfinite(vy)) { /* (NaN and Infinity were refused: an overflow) */
+      step_in(g, NULL, isfinite(vx) ? 1 : 0);
       return qk__region_fail(g->err, QK_ERR_NONFINITE, f,
                              "feature %zu: coordinate %.60s is beyond the largest double (not "
                              "finite) at polygon %zu, ring %zu, position %zu",
                              f, shown(isfinite(vx) ? y : x), poly, k, i);
+    }
     if ((st = qk__region_check_coord(g->planar, vx, vy, f, g->err))) {
       size_t len = strlen(g->err->message);
       snprintf(g->err->message + len, sizeof g->err->message - len,
@@ -86,6 +111,7 @@ static qk_status_t ring(gj_t *g, json_object *arr, size_t f, size_t poly, size_t
     }
     g->rg.xy[2 * (g->rg.nv + i)] = vx;
     g->rg.xy[2 * (g->rg.nv + i) + 1] = vy;
+    step_out(g);
   }
   const double *s = g->rg.xy + 2 * g->rg.nv, *e = g->rg.xy + 2 * (g->rg.nv + n - 1);
   if (s[0] != e[0] || s[1] != e[1])
@@ -104,8 +130,10 @@ static qk_status_t polygon(gj_t *g, json_object *rings, size_t f, size_t poly) {
                            poly, type_name(rings));
   size_t n = json_object_array_length(rings);
   for (size_t k = 0; k < n; k++) {
+    step_in(g, NULL, k);
     qk_status_t st = ring(g, json_object_array_get_idx(rings, k), f, poly, k);
     if (st) return st;
+    step_out(g);
   }
   return QK_OK;
 }
@@ -134,10 +162,15 @@ static qk_status_t geometry_rings(gj_t *g, json_object *geom, size_t f, size_t *
         !json_object_is_type(c, json_type_array))
       return qk__region_fail(g->err, QK_ERR_PARSE, f,
                              "feature %zu: GeometryCollection without a \"geometries\" array", f);
-    qk_status_t st = QK_OK;
-    for (size_t i = 0, n = json_object_array_length(c); i < n && !st; i++)
-      st = geometry_rings(g, json_object_array_get_idx(c, i), f, poly);
-    return st;
+    step_in(g, "geometries", 0);
+    for (size_t i = 0, n = json_object_array_length(c); i < n; i++) {
+      step_in(g, NULL, i);
+      qk_status_t st = geometry_rings(g, json_object_array_get_idx(c, i), f, poly);
+      if (st) return st;
+      step_out(g);
+    }
+    step_out(g);
+    return QK_OK;
   }
   bool one = !strcmp(ty, "Polygon"), multi = !strcmp(ty, "MultiPolygon");
   if (!one && !multi) {
@@ -148,14 +181,25 @@ static qk_status_t geometry_rings(gj_t *g, json_object *geom, size_t f, size_t *
                              f, ty);
     return QK_OK;
   }
-  if (!json_object_object_get_ex(geom, "coordinates", &c) ||
-      !json_object_is_type(c, json_type_array))
+  if (!json_object_object_get_ex(geom, "coordinates", &c))
     return qk__region_fail(g->err, QK_ERR_PARSE, f,
                            "feature %zu: %s without a \"coordinates\" array", f, ty);
-  if (one) return polygon(g, c, f, (*poly)++);
+  step_in(g, "coordinates", 0);
+  if (!json_object_is_type(c, json_type_array))
+    return qk__region_fail(g->err, QK_ERR_PARSE, f,
+                           "feature %zu: %s \"coordinates\" must be an array, found %s", f, ty,
+                           type_name(c));
   qk_status_t st = QK_OK;
-  for (size_t i = 0, n = json_object_array_length(c); i < n && !st; i++)
-    st = polygon(g, json_object_array_get_idx(c, i), f, (*poly)++);
+  if (one) {
+    st = polygon(g, c, f, (*poly)++);
+  } else {
+    for (size_t i = 0, n = json_object_array_length(c); i < n && !st; i++) {
+      step_in(g, NULL, i);
+      st = polygon(g, json_object_array_get_idx(c, i), f, (*poly)++);
+      if (!st) step_out(g);
+    }
+  }
+  if (!st) step_out(g);
   return st;
 }
 
@@ -188,6 +232,7 @@ static qk_status_t properties(gj_t *g, json_object *props, size_t f) {
       if (st) return nomem(g, st);
     }
   } else if (props) {
+    step_in(g, "properties", 0);
     return qk__region_fail(g->err, QK_ERR_PARSE, f,
                            "feature %zu: \"properties\" must be an object or null, found %s", f,
                            type_name(props));
@@ -212,8 +257,11 @@ static qk_status_t feature(gj_t *g, json_object *feat, size_t f) {
   if (!json_object_object_get_ex(feat, "geometry", &geom))
     return qk__region_fail(g->err, QK_ERR_PARSE, f, "feature %zu: no \"geometry\" member", f);
   json_object_object_get_ex(feat, "properties", &props);
+  step_in(g, "geometry", 0);
   qk_status_t st = geometry(g, geom, f);
-  if (!st) st = properties(g, props, f);
+  if (st) return st;
+  step_out(g);
+  st = properties(g, props, f);
   if (!st) st = end_feature(g);
   return st;
 }
@@ -231,10 +279,14 @@ static qk_status_t document(gj_t *g, json_object *root) {
       return qk__region_fail(g->err, QK_ERR_PARSE, SIZE_MAX,
                              "FeatureCollection without a \"features\" array");
     size_t n = json_object_array_length(feats);
+    step_in(g, "features", 0);
     for (size_t i = 0; i < n; i++) {
+      step_in(g, NULL, i);
       qk_status_t st = feature(g, json_object_array_get_idx(feats, i), i);
       if (st) return st;
+      step_out(g);
     }
+    step_out(g);
     return QK_OK;
   }
   if (!strcmp(ty, "Feature")) return feature(g, root, 0);
@@ -263,6 +315,77 @@ static void where(const char *text, size_t off, qk_error_t *err) {
     err->line = line;
     err->column = col;
   }
+}
+
+/* ---- finding a value in the text by its path (the text is well-formed JSON: json-c
+ * parsed it strictly and json_check() found no duplicate names) ---- */
+
+static size_t skip_blanks(const char *t, size_t n, size_t i) {
+  while (i < n && (t[i] == ' ' || t[i] == '\t' || t[i] == '\r' || t[i] == '\n')) i++;
+  return i;
+}
+
+/* t[i] is a quote: the index after the closing quote. */
+static size_t skip_string(const char *t, size_t n, size_t i) {
+  for (i++; i < n && t[i] != '"'; i++)
+    if (t[i] == '\\') i++;
+  return i < n ? i + 1 : n;
+}
+
+/* The index after the value starting at t[i] (blanks skipped before it). */
+static size_t skip_value(const char *t, size_t n, size_t i) {
+  i = skip_blanks(t, n, i);
+  if (i >= n) return n;
+  if (t[i] == '"') return skip_string(t, n, i);
+  if (t[i] != '{' && t[i] != '[') {
+    while (i < n && !strchr(",]} \t\r\n", t[i])) i++;
+    return i;
+  }
+  size_t depth = 0;
+  while (i < n) {
+    char c = t[i];
+    if (c == '"') {
+      i = skip_string(t, n, i);
+      continue;
+    }
+    if (c == '{' || c == '[') depth++;
+    if ((c == '}' || c == ']') && --depth == 0) return i + 1;
+    i++;
+  }
+  return n;
+}
+
+/* The offset of the value the path leads to in t[0, n) (the root's when depth is 0), or
+ * of the deepest value on the way that was found. A name is compared as written (the
+ * reader's names hold no escapes). */
+static size_t locate(const char *t, size_t n, const gj_step_t *path, size_t depth) {
+  size_t at = skip_blanks(t, n, 0);
+  for (size_t d = 0; d < depth && d < GJ_PATH_MAX; d++) {
+    const gj_step_t *s = &path[d];
+    if (at >= n || t[at] != (s->name ? '{' : '[')) return at;
+    size_t i = at + 1, k = 0, found = SIZE_MAX;
+    for (;;) {
+      i = skip_blanks(t, n, i);
+      if (i >= n || t[i] == '}' || t[i] == ']') break;
+      size_t v = i;
+      if (s->name) { /* "name" : value */
+        size_t e = skip_string(t, n, i), len = strlen(s->name);
+        int same = e - i == len + 2 && !memcmp(t + i + 1, s->name, len);
+        v = skip_blanks(t, n, e);
+        v = skip_blanks(t, n, v + (v < n && t[v] == ':'));
+        if (same) found = v;
+      } else if (k == s->idx) {
+        found = v;
+      }
+      if (found != SIZE_MAX) break;
+      i = skip_blanks(t, n, skip_value(t, n, v));
+      if (i < n && t[i] == ',') i++;
+      k++;
+    }
+    if (found == SIZE_MAX) return at;
+    at = found;
+  }
+  return at;
 }
 
 /* Where a whole JSON value (json-c's lenient syntax) ends in text[0, n), or SIZE_MAX when
@@ -512,6 +635,9 @@ qk_status_t qk_region_read_geojson_text(const char *text, size_t len,
   g.err = err ? err : &scratch;
   st = document(&g, root); /* json-c's allocations there are checked for NULL */
   json_object_put(root);
+  /* An error inside valid JSON (a short ring, a wrong type, a huge coordinate): the line
+   * and column of the value the walk stopped at. */
+  if (st && st != QK_ERR_NOMEM && err) where(text, locate(text, len, g.path, g.depth), err);
   if (!st) st = qk__rings_build(&g.rg, &o, out, err);
   qk__rings_free(g.a, &g.rg);
   return st;

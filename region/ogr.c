@@ -10,6 +10,7 @@
 #include "region/region_internal.h"
 
 #ifdef QK_HAVE_GDAL
+#include <cpl_error.h>
 #include <gdal.h>
 #include <ogr_api.h>
 
@@ -66,9 +67,18 @@ qk_status_t qk_region_read_ogr(const char *path, const qk_region_options_t *opti
   qk_status_t st0 = qk__read_begin(path, out, err);
   if (st0) return st0;
   GDALAllRegister();
-  GDALDatasetH ds = GDALOpenEx(path, GDAL_OF_VECTOR | GDAL_OF_READONLY, NULL, NULL, NULL);
-  if (!ds)
-    return qk__region_fail(err, QK_ERR_IO, SIZE_MAX, "GDAL cannot open %s as vector data", path);
+  /* GDAL's reason for a failure (a missing file said no more than "cannot open") is
+   * asked for with GDAL_OF_VERBOSE_ERROR and kept quiet: the library never prints. */
+  CPLPushErrorHandler(CPLQuietErrorHandler);
+  CPLErrorReset();
+  GDALDatasetH ds =
+      GDALOpenEx(path, GDAL_OF_VECTOR | GDAL_OF_READONLY | GDAL_OF_VERBOSE_ERROR, NULL, NULL, NULL);
+  CPLPopErrorHandler();
+  if (!ds) {
+    const char *why = CPLGetLastErrorMsg();
+    return qk__region_fail(err, QK_ERR_IO, SIZE_MAX, "GDAL cannot open %s as vector data%s%.160s",
+                           path, why && *why ? ": " : "", why ? why : "");
+  }
   qk_region_options_t o;
   qk_allocator_t alloc;
   qk__region_options(options, &o, &alloc);

@@ -10,7 +10,11 @@
  *  - a GeometryCollection's polygons (nested ones too) are the feature's (they were
  *    skipped as if it had no area);
  *  - a NUL byte, anywhere, and trailing commas are errors with their position (json-c
- *    took a NUL after the value for a blank and accepted "[0,0],]").
+ *    took a NUL after the value for a blank and accepted "[0,0],]");
+ *  - an error inside valid JSON (a short or open ring, a wrong type, a coordinate beyond
+ *    the largest double, an unknown geometry type, lon/lat out of range) gives the line
+ *    and column of the offending value, besides the feature index (it gave no line).
+ *    Oracle: the offset of a marked substring of the text, counted into line and column.
  */
 #include "support/qk_test.h"
 
@@ -164,12 +168,108 @@ static void test_geojson_collection_and_strict(void **state) {
 #endif
 }
 
+#ifdef QK_HAVE_JSONC
+/* The 1-based line and column of the first occurrence of `mark` in `text`. */
+static void mark_at(const char *text, const char *mark, unsigned long *line, unsigned long *col) {
+  const char *p = strstr(text, mark);
+  assert_non_null(p);
+  *line = 1, *col = 1;
+  for (const char *q = text; q < p; q++) {
+    if (*q == '\n')
+      ++*line, *col = 1;
+    else
+      ++*col;
+  }
+}
+
+/* text is refused with status st, feature f, and a position at `mark`. */
+static void refused_at(const char *text, int planar, qk_status_t st, size_t f, const char *mark,
+                       const char *words) {
+  qk_region_options_t o;
+  qk_region_options_init(&o);
+  o.planar = planar;
+  qk_region_t *r = NULL;
+  qk_error_t err;
+  unsigned long line, col;
+  mark_at(text, mark, &line, &col);
+  qk_status_t got = qk_region_read_geojson_text(text, strlen(text), &o, &r, &err);
+  if (got != st || err.item != f || err.line != line || err.column != col ||
+      !strstr(err.message, words))
+    fail_msg("got %s item %zu at %lu:%lu '%s'; want %s item %zu at %lu:%lu '%s'", qk_strerror(got),
+             err.item, err.line, err.column, err.message, qk_strerror(st), f, line, col, words);
+  assert_null(r);
+}
+#endif
+
+static void test_geojson_semantic_position(void **state) {
+  (void)state;
+#ifndef QK_HAVE_JSONC
+  skip();
+#else
+#define FC_HEAD                                                                                    \
+  "{\"type\": \"FeatureCollection\",\n \"features\": [\n"                                          \
+  "  {\"type\": \"Feature\", \"properties\": {\"name\": \"ok\"},\n   \"geometry\": " SQUARE "},\n"
+  /* a ring of 3 positions, on its own line, in feature 1 */
+  refused_at(FC_HEAD "  {\"type\": \"Feature\", \"properties\": {\"n\": 1},\n"
+                     "   \"geometry\": {\"type\": \"Polygon\", \"coordinates\": [\n"
+                     "     [[0,0],[1,0],[0,0]]\n   ]}}\n ]}\n",
+             1, QK_ERR_GEOMETRY, 1, "[[0,0],[1,0],[0,0]]", "3 positions");
+  /* a coordinate beyond the largest double: the number itself */
+  refused_at(FC_HEAD "  {\"type\": \"Feature\", \"properties\": null, \"geometry\":\n"
+                     "   {\"type\": \"Polygon\", \"coordinates\": [[[0,0],[1,0],\n"
+                     "    [1, 2e308],[0,0]]]}}]}",
+             1, QK_ERR_NONFINITE, 1, "2e308", "beyond the largest double");
+  /* a position that is not two numbers */
+  refused_at(FC_HEAD "  {\"type\": \"Feature\", \"properties\": {}, \"geometry\":\n"
+                     "   {\"type\": \"Polygon\", \"coordinates\": [[[0,0],[1,0],\n"
+                     "    [1,\"a\"],[0,0]]]}}]}",
+             1, QK_ERR_PARSE, 1, "[1,\"a\"]", "expected [x, y] numbers");
+  /* an unknown geometry type: the geometry object */
+  refused_at(FC_HEAD "  {\"type\": \"Feature\", \"properties\": {},\n"
+                     "   \"geometry\": {\"type\": \"Polgon\", \"coordinates\": []}}]}",
+             1, QK_ERR_PARSE, 1, "{\"type\": \"Polgon\"", "unknown geometry type");
+  /* a feature that is not a Feature: the element itself */
+  refused_at(FC_HEAD "  {\"type\": \"Feat\", \"geometry\": null}]}", 1, QK_ERR_PARSE, 1,
+             "{\"type\": \"Feat\"", "expected an object with \"type\": \"Feature\"");
+  /* "coordinates" of the wrong type: its value */
+  refused_at(FC_HEAD "  {\"type\": \"Feature\", \"properties\": {},\n"
+                     "   \"geometry\": {\"type\": \"Polygon\", \"coordinates\": {\"a\": 1}}}]}",
+             1, QK_ERR_PARSE, 1, "{\"a\": 1}", "\"coordinates\" must be an array, found object");
+  /* properties of the wrong type */
+  refused_at(FC_HEAD "  {\"type\": \"Feature\", \"geometry\": null,\n   \"properties\": [1]}]}", 1,
+             QK_ERR_PARSE, 1, "[1]}", "\"properties\" must be an object or null");
+  /* a ring not closed, in the second polygon of a MultiPolygon inside a GeometryCollection
+   * that is the document itself (feature 0), after a Point */
+  refused_at("{\"type\": \"GeometryCollection\", \"geometries\": [\n"
+             " {\"type\": \"Point\", \"coordinates\": [0, 0]},\n"
+             " {\"type\": \"MultiPolygon\", \"coordinates\": [\n"
+             "  [[[0,0],[1,0],[1,1],[0,0]]],\n"
+             "  [[[0,0],[1,0],[1,1],[0,0]], [[5,5],[6,5],[6,6],[5,6]]]]}]}",
+             1, QK_ERR_GEOMETRY, 0, "[[5,5]", "not closed");
+  /* longitude/latitude out of range (not planar): the position */
+  refused_at("{\"type\": \"Feature\", \"properties\": {}, \"geometry\": {\"type\": \"Polygon\",\n"
+             "\"coordinates\": [[[0,0],[10,0],[10,10],[0,0]], [[1,1],[200,1],[2,2],[1,1]]]}}",
+             0, QK_ERR_GEOMETRY, 0, "[200,1]", "is not a longitude/latitude");
+  /* a name written with an escape is not matched in the text: the error points at the
+   * deepest value found on the way (here the geometry), never at a wrong place */
+  refused_at("{\"type\": \"Polygon\", \"coordin\\u0061tes\": [[[0,0],[1,0],[0,0]]]}", 1,
+             QK_ERR_GEOMETRY, 0, "{\"type\"", "3 positions");
+  /* blanks of every kind, a string holding brackets and escaped quotes before the value */
+  refused_at("{\"type\": \"Feature\", \"properties\": {\"s\": \"]}[{\\\"\\\\\"},\r\n\t\"geometry\""
+             " :\r\n {\"type\": \"Polygon\", \"coordinates\" :\t[ [[0,0],[1,0],[1,1],[0,1],[0,0]] ,"
+             "\r\n [[0,0],[1,0]] ]}}",
+             1, QK_ERR_GEOMETRY, 0, "[[0,0],[1,0]] ]", "2 positions");
+#undef FC_HEAD
+#endif
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_geojson_bom),
       cmocka_unit_test(test_geojson_unknown_types),
       cmocka_unit_test(test_geojson_error_position),
       cmocka_unit_test(test_geojson_collection_and_strict),
+      cmocka_unit_test(test_geojson_semantic_position),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -150,8 +150,8 @@ static void test_poly_good(void **state) {
   assert_int_equal(run(DIAMOND "1\n0 3 1\n", 0, &err), QK_ERR_GEOMETRY);
   assert_int_equal(run(DIAMOND "1\n0 1e-300 2\n", 0, &err), QK_OK);
   assert_int_equal(run(DIAMOND "1\n0 2 4\n", 0, &err), QK_ERR_GEOMETRY);
-  /* First index 0, no holes section at all. */
-  assert_int_equal(run("4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS, 0, &err), QK_OK);
+  /* First index 0, no holes ("0"), no regional attributes (optional, as in Triangle). */
+  assert_int_equal(run("4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS "0\n", 0, &err), QK_OK);
 }
 
 typedef struct bad_case {
@@ -182,48 +182,74 @@ static void test_poly_bad(void **state) {
        "not a vertex number"},
       {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n4 0\n0 0 1\n", 0, QK_ERR_PARSE, 7, "truncated"},
       {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS "1\n", 0, QK_ERR_PARSE, 11, "truncated"},
+      /* The hole section is required, as in Triangle: a file cut after the segments would
+       * mesh its holes as solid. Named at the file's last line, comments included. */
+      {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS, 0, QK_ERR_PARSE, 10,
+       "the file ends here, where the hole section was expected"},
+      {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS "# end\n\n", 0, QK_ERR_PARSE, 12,
+       "hole section was expected"},
+      /* Rows that do not match their section's count: the hint names the count's line. */
+      {"5 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS "0\n", 0, QK_ERR_PARSE, 6,
+       "(fewer vertex rows than the 5 that line 1 declares?)"},
+      {"3 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS "0\n", 0, QK_ERR_PARSE, 5,
+       "(more vertex rows than the 3 that line 1 declares?)"},
+      {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n5 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n0\n", 0, QK_ERR_PARSE,
+       11, "(fewer segment rows than the 5 that line 6 declares?)"},
+      {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n3 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n0\n", 0, QK_ERR_PARSE,
+       10, "(more segment rows than the 3 that line 6 declares?)"},
+      {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS "0\n0 1 1\n", 0, QK_ERR_PARSE, 12,
+       "(more hole rows than the 0 that line 11 declares?)"},
+      {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS "2\n0 1 1\n0\n", 0, QK_ERR_PARSE, 13,
+       "(fewer hole rows than the 2 that line 11 declares?)"},
+      {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS "0\n1\n0 1 1 5\n1 1 1 5\n", 0,
+       QK_ERR_PARSE, 14, "(more region rows than the 1 that line 12 declares?)"},
+      /* A malformed header that cannot be a row of the section before: no hint. */
+      {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS "0 junk\n", 0, QK_ERR_PARSE, 11,
+       "hole section header has 2 fields, expected 1"},
       {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS "0\n0\nextra\n", 0, QK_ERR_PARSE, 13,
        "unexpected"},
       {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS "1\n0 nan 1\n", 0, QK_ERR_PARSE, 12,
        "hole"},
       /* Geometry. */
-      {"4 2 0 0\n0 0 0\n1 2.5 0\n2 2 2\n3 0 2\n" SQUARE_SEGS, 0, QK_ERR_GEOMETRY, 3,
+      {"4 2 0 0\n0 0 0\n1 2.5 0\n2 2 2\n3 0 2\n" SQUARE_SEGS "0\n", 0, QK_ERR_GEOMETRY, 3,
        "not integers"},
-      {"4 2 0 0\n0 0 0\n1 20 0\n2 20 2\n3 0 2\n" SQUARE_SEGS, 16, QK_ERR_GEOMETRY, 3,
+      {"4 2 0 0\n0 0 0\n1 20 0\n2 20 2\n3 0 2\n" SQUARE_SEGS "0\n", 16, QK_ERR_GEOMETRY, 3,
        "outside the domain"},
-      {"4 2 0 0\n0 0 0\n1 -2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS, 0, QK_ERR_GEOMETRY, 3,
+      {"4 2 0 0\n0 0 0\n1 -2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS "0\n", 0, QK_ERR_GEOMETRY, 3,
        "outside the domain"},
-      {"4 2 0 0\n0 0 0\n1 3 0\n2 2 2\n3 0 2\n" SQUARE_SEGS, 0, QK_ERR_GEOMETRY, 8, "degrees"},
-      {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n3 0\n0 0 1\n1 1 2\n2 2 3\n", 0, QK_ERR_GEOMETRY, 2,
+      {"4 2 0 0\n0 0 0\n1 3 0\n2 2 2\n3 0 2\n" SQUARE_SEGS "0\n", 0, QK_ERR_GEOMETRY, 8, "degrees"},
+      {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n3 0\n0 0 1\n1 1 2\n2 2 3\n0\n", 0, QK_ERR_GEOMETRY, 2,
        "open chain"},
-      {"5 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n4 3 3\n" SQUARE_SEGS, 0, QK_ERR_GEOMETRY, 6,
+      {"5 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n4 3 3\n" SQUARE_SEGS "0\n", 0, QK_ERR_GEOMETRY, 6,
        "degree 0"},
-      {"5 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n4 4 4\n5 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n4 2 4\n", 0,
+      {"5 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n4 4 4\n5 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n4 2 4\n0\n", 0,
        QK_ERR_GEOMETRY, 12, "degree more than 2"},
-      {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 0\n" SQUARE_SEGS, 0, QK_ERR_GEOMETRY, 5, "coincide"},
-      {"2 2 0 0\n0 0 0\n1 2 2\n2 0\n0 0 1\n1 1 0\n", 0, QK_ERR_GEOMETRY, 6, "coincide"},
+      {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 0\n" SQUARE_SEGS "0\n", 0, QK_ERR_GEOMETRY, 5,
+       "coincide"},
+      {"2 2 0 0\n0 0 0\n1 2 2\n2 0\n0 0 1\n1 1 0\n0\n", 0, QK_ERR_GEOMETRY, 6, "coincide"},
       /* A bow tie: the diagonals cross at (1,1). */
-      {"4 2 0 0\n0 0 0\n1 2 0\n2 0 2\n3 2 2\n" SQUARE_SEGS, 0, QK_ERR_GEOMETRY, 0,
+      {"4 2 0 0\n0 0 0\n1 2 0\n2 0 2\n3 2 2\n" SQUARE_SEGS "0\n", 0, QK_ERR_GEOMETRY, 0,
        "intersects itself"},
       /* Two squares sharing a corner point. */
       {"8 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n4 2 2\n5 4 2\n6 4 4\n7 2 4\n8 0\n0 0 1\n1 1 2\n"
-       "2 2 3\n3 3 0\n4 4 5\n5 5 6\n6 6 7\n7 7 4\n",
+       "2 2 3\n3 3 0\n4 4 5\n5 5 6\n6 6 7\n7 7 4\n0\n",
        0, QK_ERR_GEOMETRY, 0, "coincide"},
       /* A corner of one square on the other's edge. */
       {"8 2 0 0\n0 0 0\n1 4 0\n2 4 4\n3 0 4\n4 4 2\n5 5 1\n6 6 2\n7 5 3\n8 0\n0 0 1\n1 1 2\n"
-       "2 2 3\n3 3 0\n4 4 5\n5 5 6\n6 6 7\n7 7 4\n",
+       "2 2 3\n3 3 0\n4 4 5\n5 5 6\n6 6 7\n7 7 4\n0\n",
        0, QK_ERR_GEOMETRY, 0, "touch or cross"},
       /* Two crossing rectangles. */
       {"8 2 0 0\n0 1 0\n1 3 0\n2 3 6\n3 1 6\n4 0 2\n5 6 2\n6 6 4\n7 0 4\n8 0\n0 0 1\n1 1 2\n"
-       "2 2 3\n3 3 0\n4 4 5\n5 5 6\n6 6 7\n7 7 4\n",
+       "2 2 3\n3 3 0\n4 4 5\n5 5 6\n6 6 7\n7 7 4\n0\n",
        0, QK_ERR_GEOMETRY, 0, "touch or cross"},
       /* A polygon doubling back along itself. */
-      {"4 2 0 0\n0 0 0\n1 4 0\n2 2 0\n3 2 2\n" SQUARE_SEGS, 0, QK_ERR_GEOMETRY, 0, "itself"},
+      {"4 2 0 0\n0 0 0\n1 4 0\n2 2 0\n3 2 2\n" SQUARE_SEGS "0\n", 0, QK_ERR_GEOMETRY, 0, "itself"},
       {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS "1\n0 9 1\n", 4, QK_ERR_GEOMETRY, 12,
        "outside the domain"},
       {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS "1\n0 1 2\n", 4, QK_ERR_GEOMETRY, 12,
        "boundary"},
-      {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS, 12, QK_ERR_INVALID, 0, "power of two"},
+      {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS "0\n", 12, QK_ERR_INVALID, 0,
+       "power of two"},
   };
   /* A NUL byte: binary data, named with its line. */
   {
@@ -245,6 +271,13 @@ static void test_poly_bad(void **state) {
         !strstr(err.message, cases[i].words))
       fail_msg("case %zu: status %s line %lu '%s'; expected %s line %lu '%s'", i, qk_strerror(st),
                err.line, err.message, qk_strerror(cases[i].status), cases[i].line, cases[i].words);
+  }
+  /* The rows hint only where the line could be a row of the section before. */
+  {
+    qk_mesh_error_t err;
+    assert_int_equal(run("4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS "0 junk\n", 0, &err),
+                     QK_ERR_PARSE);
+    assert_string_equal(err.message, "hole section header has 2 fields, expected 1");
   }
 }
 

@@ -103,6 +103,7 @@ typedef struct cli_out {
   char *path; /* final path (a link's target); the path given when writing directly */
   char *tmp;
   int direct; /* a FIFO or device: written in place, never renamed over */
+  char *key;  /* canonical name while open (two outputs naming one file are refused) */
 } cli_out_t;
 int cli_out_open(const char *cmd, const char *path, cli_out_t *o);
 /* Close and rename (ok != 0) or close and delete (ok == 0). Returns CLI_OK or an error. */
@@ -113,6 +114,9 @@ int cli_out_close(const char *cmd, cli_out_t *o, int ok);
  * (cannot open: the system's reason; a directory: "is a directory", which fopen lets
  * through and the first read then fails on with a vague "read error"). */
 FILE *cli_open_input(const char *cmd, const char *path);
+/* Record an input that is read by other means than cli_open_input (the library's readers),
+ * before any output is opened: cli_out_open refuses to write over an input (exit 2). */
+void cli_note_input(const char *path);
 
 /* Subcommands: argv[0] is the subcommand's name. */
 int cmd_tree(int argc, char **argv);

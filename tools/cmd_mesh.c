@@ -381,15 +381,23 @@ static void print_stats(const qk_mesh_t *mesh, const mesh_args_t *o, const prep_
                         double t_read, double t_write) {
   qk_mesh_stats_t s;
   qk_mesh_stats(mesh, &s);
-  printf("{\"U\": %llu, \"components\": %zu, \"leaves_before_balance\": %zu, "
-         "\"leaves\": %zu, \"triangles\": %zu, \"vertices\": %zu, \"steiner\": %zu, "
-         "\"min_angle_deg\": %.10g, \"max_angle_deg\": %.10g, \"uniform_triangles\": %.0f, "
-         "\"seconds\": {\"read\": %.6f, \"validate\": %.6f, \"subdivide\": %.6f, "
-         "\"balance\": %.6f, \"triangulate\": %.6f, \"write\": %.6f}, ",
-         (unsigned long long)s.size, s.components, s.leaves_before_balance, s.leaves, s.triangles,
-         s.vertices, s.steiner, s.min_angle_deg, s.max_angle_deg, s.uniform_triangles, t_read,
-         s.seconds_validate, s.seconds_subdivide, s.seconds_balance, s.seconds_triangulate,
-         t_write);
+  /* The domain side U, the uniform grid's 2 U^2 triangles and a separate balancing step
+   * belong to the lattice modes; the general mode has none of them (its stats say U = 1
+   * and a balance time of 0), so they are left out there rather than printed as figures
+   * that mean nothing (docs/mesh.md, "--stats"). */
+  int lattice = s.mode != QK_MESH_GENERAL;
+  putchar('{');
+  if (lattice) printf("\"U\": %llu, ", (unsigned long long)s.size);
+  printf("\"components\": %zu, \"leaves_before_balance\": %zu, \"leaves\": %zu, "
+         "\"triangles\": %zu, \"vertices\": %zu, \"steiner\": %zu, \"min_angle_deg\": %.10g, "
+         "\"max_angle_deg\": %.10g, ",
+         s.components, s.leaves_before_balance, s.leaves, s.triangles, s.vertices, s.steiner,
+         s.min_angle_deg, s.max_angle_deg);
+  if (lattice) printf("\"uniform_triangles\": %.0f, ", s.uniform_triangles);
+  printf("\"seconds\": {\"read\": %.6f, \"validate\": %.6f, \"subdivide\": %.6f, ", t_read,
+         s.seconds_validate, s.seconds_subdivide);
+  if (lattice) printf("\"balance\": %.6f, ", s.seconds_balance);
+  printf("\"triangulate\": %.6f, \"write\": %.6f}, ", s.seconds_triangulate, t_write);
   printf("\"input\": {\"format\": \"%s\", ", pp->format);
   if (pp->features) {
     printf("\"features\": %zu, \"name\": \"", pp->features);
@@ -610,6 +618,7 @@ int cmd_mesh(int argc, char **argv) {
   memset(&pp, 0, sizeof pp);
   double t_read = 0;
   outputs_t outs;
+  cli_note_input(o.in); /* (an output naming the input is refused) */
   rc = open_outputs(cmd, &o, &outs);
   if (rc) return rc;
   rc = make_mesh(cmd, &o, &poly, &mesh, &pp, &t_read);

@@ -19,6 +19,7 @@
 /* ---- reading the layer ---------------------------------------------------------------- */
 
 static int read_layer(const char *cmd, const char *path, int planar, qk_region_t **out) {
+  cli_note_input(path); /* (an output naming the layer is refused) */
   qk_region_options_t o;
   qk_region_options_init(&o);
   o.planar = planar;
@@ -481,6 +482,20 @@ int cmd_join(int argc, char **argv) {
   }
   qk_region_t *r = NULL;
   rc = read_layer("join", pos[0], planar, &r);
+  if (!rc) {
+    /* A layer without a single polygon puts every point outside: no answer, and most
+     * likely the wrong file (a points CSV that GDAL reads as a table, the arguments
+     * swapped, a layer of lines). Said, not answered with a column of -1. */
+    qk_region_stats_t rs;
+    qk_region_stats(r, &rs);
+    if (rs.rings == 0) {
+      cli_error("join",
+                "%s: no polygons to join against (%zu features, %zu skipped geometries: "
+                "points, lines, empty or null)",
+                pos[0], rs.features, rs.skipped);
+      rc = CLI_BAD_INPUT;
+    }
+  }
   if (!rc) rc = check_fields(pos[0], r, fields, nf);
   join_t j = {pos[1], r, rule, all, (unsigned)threads, fields, nf, NULL, NULL, NULL, NULL, 0, 0};
   cli_out_t o = {0};

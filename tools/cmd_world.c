@@ -80,7 +80,9 @@ typedef struct obj {
   uint64_t id;
   qk_shape_t s;
   qk_handle_t h;
-  unsigned long line; /* in the objects file */
+  unsigned long line;   /* in the objects file */
+  unsigned long mline;  /* the line of its last move in the moves file, 0 for none, */
+  unsigned long mframe; /* and that move's frame */
 } obj_t;
 
 typedef struct move {
@@ -242,7 +244,7 @@ static int object_row(const char *path, unsigned long ln, row_t *r, scene_t *s) 
     s->o = o;
     s->cap = cap;
   }
-  s->o[s->n++] = (obj_t){id, sh, QK_HANDLE_NONE, ln};
+  s->o[s->n++] = (obj_t){id, sh, QK_HANDLE_NONE, ln, 0, 0};
   return CLI_OK;
 }
 
@@ -257,9 +259,19 @@ static int move_row(const char *path, unsigned long ln, row_t *r, scene_t *s) {
   if (why) return bad(path, ln, why, r->f[1]);
   size_t i = find_id(s, id);
   if (i == SIZE_MAX) return bad(path, ln, "unknown id '%s'", r->f[1]);
+  /* Two shapes for one object in one frame: only the last would count, the other row
+   * silently lost (moves are in frame order, so the object's last move tells). */
+  if (s->o[i].mline && s->o[i].mframe == frame) {
+    fprintf(stderr,
+            "quadkit world: %s:%lu: id %s moves twice in frame %lu (also on line %lu): one "
+            "shape per object and frame\n",
+            path, ln, r->f[1], (unsigned long)frame, s->o[i].mline);
+    return CLI_BAD_INPUT;
+  }
   qk_shape_t sh;
   int rc = shape_values(path, ln, s->o[i].s.kind, r->f + 2, r->n - 2, &sh);
   if (rc) return rc;
+  s->o[i].mline = ln, s->o[i].mframe = (unsigned long)frame;
   if (s->nm == s->capm) {
     size_t cap = s->capm ? 2 * s->capm : 256;
     move_t *m = realloc(s->m, cap * sizeof *m);
@@ -374,15 +386,27 @@ int cmd_world(int argc, char **argv) {
   if ((rc = cli_out_open(cmd, out, &o))) goto done;
   fprintf(o.f, "frame,a,b\n");
   unsigned long frames = s.nm ? s.m[s.nm - 1].frame + 1 : 1;
-  size_t mi = 0, cap = 0;
+  size_t mi = 0, cap = 0, np = 0;
   for (unsigned long f = 0; f < frames && rc == CLI_OK; f++) {
+    int moved = 0;
     for (; mi < s.nm && s.m[mi].frame == f; mi++) {
       obj_t *ob = &s.o[s.m[mi].obj];
       qk_shape_t sh = {ob->s.kind, s.m[mi].v[0], s.m[mi].v[1], s.m[mi].v[2], s.m[mi].v[3]};
+      moved = 1;
       if ((st = qk_world_move(w, ob->h, &sh)) != QK_OK) break;
     }
+    if (f > 0 && !moved) {
+      /* Nothing moved: the same pairs as the frame before, none began or ended. (An
+       * update per empty frame made two moves 10^8 frames apart run for minutes.) */
+      if (which == QK_PAIRS_ALL)
+        for (size_t i = 0; i < np; i++)
+          fprintf(o.f, "%lu,%llu,%llu\n", f, (unsigned long long)ids[i].a,
+                  (unsigned long long)ids[i].b);
+      if (ferror(o.f)) break; /* (cli_out_close reports it) */
+      continue;
+    }
     if (st == QK_OK) st = qk_world_update(w);
-    size_t np = 0;
+    np = 0;
     if (st == QK_OK) st = qk_world_pairs_list(w, which, NULL, 0, &np);
     if (st == QK_OK && np > cap) {
       free(pairs);

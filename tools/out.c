@@ -9,6 +9,27 @@
 
 #include "cli.h"
 
+/* The regular files this process reads (device and inode), so that an output naming one
+ * of them is refused: `-o points.csv` or `--svg points.csv` replaced the input after
+ * reading it, without a word. */
+static struct {
+  dev_t dev;
+  ino_t ino;
+  const char *path;
+} inputs[16];
+static size_t n_inputs;
+
+static void note_stat(const char *path, const struct stat *st) {
+  if (!S_ISREG(st->st_mode) || n_inputs == sizeof inputs / sizeof *inputs) return;
+  inputs[n_inputs].dev = st->st_dev, inputs[n_inputs].ino = st->st_ino;
+  inputs[n_inputs++].path = path;
+}
+
+void cli_note_input(const char *path) {
+  struct stat st;
+  if (path && strcmp(path, "-") && stat(path, &st) == 0) note_stat(path, &st);
+}
+
 FILE *cli_open_input(const char *cmd, const char *path) {
   FILE *f = fopen(path, "rb");
   const char *why = f ? NULL : strerror(errno), *what = "cannot open";
@@ -18,13 +39,46 @@ FILE *cli_open_input(const char *cmd, const char *path) {
     fclose(f);
     f = NULL;
   }
+  if (f && fstat(fileno(f), &st) == 0) note_stat(path, &st);
   if (!f)
     fprintf(stderr, "quadkit%s%s: %s: %s: %s\n", cmd ? " " : "", cmd ? cmd : "", path, what, why);
   return f;
 }
 
+/* The outputs open now, by canonical name (the directory's real path and the file name):
+ * two outputs of one command naming one file (`-o x --svg x`, or `./x` and `x`) would
+ * leave whichever was renamed last, the other lost without a word. */
+static const char *open_keys[16];
+static size_t n_open;
+
+static char *out_key(const char *final) {
+  const char *slash = strrchr(final, '/'), *base = slash ? slash + 1 : final;
+  size_t dlen = slash ? (slash == final ? 1 : (size_t)(slash - final)) : 1;
+  char *dir = malloc(dlen + 1);
+  if (!dir) return NULL;
+  memcpy(dir, slash ? final : ".", dlen);
+  dir[dlen] = '\0';
+  char *real = realpath(dir, NULL), *key = NULL;
+  free(dir);
+  if (real && (key = malloc(strlen(real) + strlen(base) + 2))) sprintf(key, "%s/%s", real, base);
+  free(real);
+  return key;
+}
+
+static void forget_key(const char *key) {
+  for (size_t i = 0; key && i < n_open; i++)
+    if (open_keys[i] == key) {
+      open_keys[i] = open_keys[--n_open];
+      break;
+    }
+}
+
 int cli_out_open(const char *cmd, const char *path, cli_out_t *o) {
   memset(o, 0, sizeof *o);
+  if (!*path) { /* (it wrote ".tmp.PID.0" and failed renaming it to "", exit 3) */
+    cli_error(cmd, "an output file name is empty ('')");
+    return CLI_USAGE;
+  }
   if (!strcmp(path, "-")) {
     o->f = stdout;
     return CLI_OK;
@@ -48,6 +102,24 @@ int cli_out_open(const char *cmd, const char *path, cli_out_t *o) {
     o->path = strdup(path); /* (for the message when a write fails) */
     return CLI_OK;
   }
+  if (stat(final, &st) == 0)
+    for (size_t i = 0; i < n_inputs; i++)
+      if (st.st_dev == inputs[i].dev && st.st_ino == inputs[i].ino) {
+        free(target);
+        cli_error(cmd, "cannot write %s: it is the input file %s, which it would replace", path,
+                  inputs[i].path);
+        return CLI_USAGE;
+      }
+  o->key = out_key(final);
+  for (size_t i = 0; o->key && i < n_open; i++)
+    if (!strcmp(o->key, open_keys[i])) {
+      free(target);
+      free(o->key);
+      o->key = NULL;
+      cli_error(cmd, "cannot write %s: another output of this command writes that file too", path);
+      return CLI_USAGE;
+    }
+  if (o->key && n_open < sizeof open_keys / sizeof *open_keys) open_keys[n_open++] = o->key;
   size_t n = strlen(final) + 32;
   o->path = strdup(final);
   o->tmp = malloc(n);
@@ -55,6 +127,8 @@ int cli_out_open(const char *cmd, const char *path, cli_out_t *o) {
   if (!o->path || !o->tmp) {
     free(o->path);
     free(o->tmp);
+    forget_key(o->key);
+    free(o->key);
     cli_error(cmd, "out of memory");
     return CLI_INTERNAL;
   }
@@ -66,6 +140,8 @@ int cli_out_open(const char *cmd, const char *path, cli_out_t *o) {
     cli_error(cmd, "cannot write %s: %s", path, strerror(errno));
     free(o->path);
     free(o->tmp);
+    forget_key(o->key);
+    free(o->key);
     memset(o, 0, sizeof *o);
     return CLI_BAD_INPUT;
   }
@@ -107,6 +183,8 @@ int cli_out_close(const char *cmd, cli_out_t *o, int ok) {
   }
   free(o->path);
   free(o->tmp);
+  forget_key(o->key);
+  free(o->key);
   memset(o, 0, sizeof *o);
   return rc;
 }

@@ -112,7 +112,8 @@ qk_status_t qk_region_from_arrays(const qk_region_arrays_t *in, const qk_region_
  * \param [in] path the file.
  * \param [in] options NULL for defaults (lon/lat).
  * \param [out] out the new layer, freed with qk_region_free(); NULL on error.
- * \param [out] err line and column (malformed JSON), feature index and reason; may be NULL.
+ * \param [out] err line and column (of the JSON error, or of the offending value inside
+ *        valid JSON), feature index and reason; may be NULL.
  * \return QK_OK, QK_ERR_IO, QK_ERR_PARSE, QK_ERR_GEOMETRY, QK_ERR_NONFINITE, QK_ERR_LIMIT,
  *         QK_ERR_NOMEM, or QK_ERR_UNSUPPORTED when built without json-c.
  */

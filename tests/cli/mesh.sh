@@ -38,16 +38,16 @@ expect 0 '"U": 64, "components": 6' -- "$cli" mesh "$src/examples/mesh/richer.po
 expect 0 '"components": 1' -- sh -c "\"$cli\" mesh - -o \"$tmp/s\" --stats < \"$src/examples/mesh/notes.poly\""
 
 # Bad input: file:line: reason, exit 1, nothing written.
-printf '4 2 0 0\n0 0 0\n1 3 0\n2 2 2\n3 0 2\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n' >"$tmp/angle.poly"
+printf '4 2 0 0\n0 0 0\n1 3 0\n2 2 2\n3 0 2\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n0\n' >"$tmp/angle.poly"
 expect 1 'angle.poly:8: segment 1 .* is not at 0, 45, 90 or 135 degrees' -- "$cli" mesh "$tmp/angle.poly" --book -o "$tmp/bad" --svg "$tmp/bad.svg"
 ls "$tmp"/bad* >/dev/null 2>&1 && { echo "FAIL: output written for bad input"; fails=$((fails + 1)); }
-printf '4 2 0 0\n0 0 0\n1 2.5 0\n2 2 2\n3 0 2\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n' >"$tmp/frac.poly"
+printf '4 2 0 0\n0 0 0\n1 2.5 0\n2 2 2\n3 0 2\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n0\n' >"$tmp/frac.poly"
 expect 1 'frac.poly:3: vertex 1: coordinates .* are not integers' -- "$cli" mesh "$tmp/frac.poly" --book -o "$tmp/bad"
 printf '4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n4 0\n0 0 1\n' >"$tmp/trunc.poly"
 expect 1 'trunc.poly:7: truncated input' -- "$cli" mesh "$tmp/trunc.poly" -o "$tmp/bad"
-printf '4 2 0 0\n0 0 0\n1 2 0\n2 0 2\n3 2 2\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n' >"$tmp/bowtie.poly"
+printf '4 2 0 0\n0 0 0\n1 2 0\n2 0 2\n3 2 2\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n0\n' >"$tmp/bowtie.poly"
 expect 1 'bowtie.poly:[0-9]+: component 1 intersects itself' -- "$cli" mesh "$tmp/bowtie.poly" -o "$tmp/bad"
-printf '4 2 0 0\n0 0 0\n1 20 0\n2 20 2\n3 0 2\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n' >"$tmp/out.poly"
+printf '4 2 0 0\n0 0 0\n1 20 0\n2 20 2\n3 0 2\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n0\n' >"$tmp/out.poly"
 expect 1 'out.poly:3: .*outside the domain \[0,16\]\^2' -- "$cli" mesh "$tmp/out.poly" --size 16 -o "$tmp/bad"
 expect 1 'cannot open' -- "$cli" mesh "$tmp/missing.poly" -o "$tmp/bad"
 ls "$tmp"/bad* >/dev/null 2>&1 && { echo "FAIL: output written for bad input"; fails=$((fails + 1)); }
@@ -73,7 +73,7 @@ expect 2 'must be between 0 and 45 degrees' -- "$cli" mesh "$tmp/real.poly" -o "
 expect 2 'exclude each other' -- "$cli" mesh "$tmp/real.poly" -o "$tmp/u" --book --dyadic
 # The issue's coastline-like polygon in the dyadic mode: refused, naming the segment and
 # the reason (without --dyadic the general mode meshes it: tests/cli/mesh_general.sh).
-printf '3 2 0 0\n0 5 5\n1 30.5 3\n2 5 20\n3 0\n0 0 1\n1 1 2\n2 2 0\n' >"$tmp/coast.poly"
+printf '3 2 0 0\n0 5 5\n1 30.5 3\n2 5 20\n3 0\n0 0 1\n1 1 2\n2 2 0\n0\n' >"$tmp/coast.poly"
 expect 1 'coast.poly:6: segment 0 from \(5, 5\) to \(30.5, 3\) is not at 0, 45, 90 or 135 degrees \(the dyadic mode keeps' -- "$cli" mesh "$tmp/coast.poly" --dyadic -o "$tmp/bad"
 ls "$tmp"/bad* >/dev/null 2>&1 && { echo "FAIL: output written for bad input"; fails=$((fails + 1)); }
 

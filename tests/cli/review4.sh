@@ -7,10 +7,10 @@ source "$(dirname "${BASH_SOURCE[0]}")/lib/common.bash" "$@"
 # ---- GeoJSON: an overflowing number is named as written (it said "(inf, 0)") -------------
 printf 'x,y\n0.5,0.5\n' >"$tmp/half.csv"
 printf '{"type":"Polygon","coordinates":[[[0,0],[2e308,0],[1,1],[0,1],[0,0]]]}\n' >"$tmp/ovf.geojson"
-expect 1 'ovf.geojson: feature 0: coordinate 2e308 is beyond the largest double \(not finite\) at polygon 0, ring 0, position 1$' \
+expect 1 'ovf.geojson:1:42: feature 0: coordinate 2e308 is beyond the largest double \(not finite\) at polygon 0, ring 0, position 1$' \
   -- "$cli" join "$tmp/ovf.geojson" "$tmp/half.csv" --planar
 printf '{"type":"Polygon","coordinates":[[[0,0],[1,0],[1,-1E+999],[0,1],[0,0]]]}\n' >"$tmp/ovf2.geojson"
-expect 1 'ovf2.geojson: feature 0: coordinate -1E\+999 is beyond the largest double' \
+expect 1 'ovf2.geojson:1:50: feature 0: coordinate -1E\+999 is beyond the largest double' \
   -- "$cli" mesh "$tmp/ovf2.geojson" -o "$tmp/ovf2"
 [ ! -e "$tmp/ovf2.node" ] || fail "ovf2.geojson: a .node file was written"
 
