@@ -72,13 +72,13 @@ int qk__build_avx2(void) {
  * a hint to the processor, computed outside C's pointer arithmetic). */
 #define QK__PREFETCH_PTS(p)                                                                        \
   QK__PREFETCH((const void *)((uintptr_t)(p) + PREFETCH_PTS * sizeof(qk_point_t)))
-/* How far ahead the key pass and the scatter read the input by hand, in points (4 KB,
- * a block of the key pass). The hardware's prefetch alone left the key pass reading the
- * input at half the rate of the bounding box: 3.2 against 1.8-1.9 ms at 1M points on one
- * thread, and the scatter 4.0 against 3.2-3.6 ms. */
+/* How far ahead the keys of the first pass read the input by hand, in points (4 KB, a
+ * block). The hardware's prefetch alone left the key pass (then a pass of its own)
+ * reading the input at half the rate of the bounding box: 3.2 against 1.8-1.9 ms at 1M
+ * points on one thread. The scatter reads the block from the first-level cache. */
 #define PREFETCH_PTS 256
 
-/* fine_records() is made twice, for pairs and for separate arrays. */
+/* fine_records() and fine_one() are made twice, for pairs and for separate arrays. */
 #if defined(__GNUC__)
 #define QK__ALWAYS_INLINE inline __attribute__((always_inline))
 #else
