@@ -475,7 +475,11 @@ static qk_status_t insert_points(qk__gm_t *g, const uint32_t *first) {
   uint32_t *rv = qk__realloc(g->a, NULL, 0, (g->npts + 1) * sizeof *rv);
   if (!rv) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   memset(rv, 0xff, (g->npts + 1) * sizeof *rv); /* QK__CDT_NONE */
+  /* Room for the points and the refinement at once, while the arrays are small: the CDT
+   * was sized for 8 points an input vertex, and inputs of short segments far apart make
+   * more (random PSLGs: 18 a vertex, three growths by half, each copying the arrays). */
   qk_status_t st = QK_OK;
+  if (qk__gm_reserve(g, g->npts)) st = qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   for (size_t i = 0; i < g->npts && !st; i++) {
     const qk__gm_pt_t *q = &g->pts[i];
     uint32_t t, v;
