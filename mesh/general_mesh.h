@@ -93,6 +93,7 @@ typedef struct qk__gm {
    * quality test's thresholds, computed once. */
   int size_plain;
   double h_plain, h2_hi, h2_lo;
+  int reserved; /* the refinement's room was reserved before the seeding's points */
   int refining;
   qk__gm_tq_t *bad;
   size_t nbad, bad_head, bad_cap;
@@ -153,6 +154,9 @@ qk_status_t qk__gm_seed(qk__gm_t *g, qk_mesh_stats_t *st);
 /* general_refine.c: split the subsegment a-b of segment s at an exact point (concentric
  * shells next to an input vertex); QK_ERR_GEOMETRY naming s when no exact point exists. */
 qk_status_t qk__gm_split(qk__gm_t *g, uint32_t a, uint32_t b, uint32_t s);
+/* Room in the CDT and its per-triangle arrays for `more` points about to be inserted and,
+ * with a plain size bound, for the refinement's estimated triangles. */
+qk_status_t qk__gm_reserve(qk__gm_t *g, size_t more);
 /* Quality refinement until no subsegment is encroached and no triangle is bad. */
 qk_status_t qk__gm_refine(qk__gm_t *g);
 /* Is triangle t bad (to be split)? 0 good or exempt, 1 bad. */

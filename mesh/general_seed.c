@@ -196,7 +196,10 @@ static qk_status_t subdivide(qk__gm_t *g, uint32_t node, double X, double Y, dou
   if (qk__tree_node_bound(g->tree) > GM_NODE_CAP)
     return qk__mesh_fail(g->err, QK_ERR_LIMIT, 0,
                          "the size bound asks for more than 2^27 quadtree cells");
-  qk_status_t st = qk_tree_split_leaf(g->tree, node);
+  /* The tree's root is (0, 0, 1) and every square here came from it by halvings, X and Y
+   * sums of the halved sides (dyadic, exact at depths to GM_DEPTH_CAP): the tree's own
+   * corner and depth, given so that the split does not walk the path back to the root. */
+  qk_status_t st = qk__tree_split_leaf_at(g->tree, node, X, Y, depth);
   if (st) return qk__mesh_fail(g->err, st, 0, "%s while grading the quadtree", qk_strerror(st));
   uint32_t child = qk__node_child(g->tree, node);
   double h = s / 2, cx[4], cy[4], clo[4][2], chi[4][2];
@@ -472,7 +475,11 @@ static qk_status_t insert_points(qk__gm_t *g, const uint32_t *first) {
   uint32_t *rv = qk__realloc(g->a, NULL, 0, (g->npts + 1) * sizeof *rv);
   if (!rv) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   memset(rv, 0xff, (g->npts + 1) * sizeof *rv); /* QK__CDT_NONE */
+  /* Room for the points and the refinement at once, while the arrays are small: the CDT
+   * was sized for 8 points an input vertex, and inputs of short segments far apart make
+   * more (random PSLGs: 18 a vertex, three growths by half, each copying the arrays). */
   qk_status_t st = QK_OK;
+  if (qk__gm_reserve(g, g->npts)) st = qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   for (size_t i = 0; i < g->npts && !st; i++) {
     const qk__gm_pt_t *q = &g->pts[i];
     uint32_t t, v;
