@@ -20,7 +20,8 @@
  * vertex of every ring (vertices of shared borders in the US states) and the double
  * midpoint of every edge (often exactly on it), and a cross of points 1 ulp around
  * sampled vertices, and the same vertices 360 degrees east and west (lon/lat). locate() must give
- * the oracle's lowest feature and locate_all() its whole set. Sampled in the default run
+ * the oracle's lowest feature and locate_all() its whole set; locate_batch() (one and two
+ * threads) the same answers as locate(). Sampled in the default run
  * (QK_SWEEP_ALL=1: every point). Skipped without the data (QK_SHARED_DIR), json-c or GMP.
  */
 #include <math.h>
@@ -246,6 +247,9 @@ static size_t oracle(const sw_layer_t *L, double x, double y, qk_boundary_t rule
 
 typedef struct sw_tally {
   size_t points, compared, skipped, mismatches;
+  qk_point_t *pts;    /* every point checked, for the batch calls */
+  uint32_t *first[3]; /* locate()'s answers, per rule */
+  size_t cap;
 } sw_tally_t;
 
 static void check_point(const qk_region_t *R, const sw_layer_t *L, double x, double y,
@@ -253,6 +257,16 @@ static void check_point(const qk_region_t *R, const sw_layer_t *L, double x, dou
   static const qk_boundary_t rules[3] = {QK_BOUNDARY_SEMI_OPEN, QK_BOUNDARY_CLOSED,
                                          QK_BOUNDARY_OPEN};
   static const char *const names[3] = {"semi-open", "closed", "open"};
+  if (t->points == t->cap) {
+    t->cap = t->cap ? 2 * t->cap : 4096;
+    t->pts = realloc(t->pts, t->cap * sizeof *t->pts);
+    for (int r = 0; r < 3; r++) t->first[r] = realloc(t->first[r], t->cap * sizeof *t->first[r]);
+    assert_true(t->pts && t->first[0] && t->first[1] && t->first[2]);
+  }
+  t->pts[t->points] = (qk_point_t){x, y};
+  for (int r = 0; r < 3; r++)
+    assert_int_equal(qk_region_locate(R, (qk_point_t){x, y}, rules[r], &t->first[r][t->points]),
+                     QK_OK);
   t->points++;
   for (int r = 0; r < 3; r++) {
     uint32_t want[64], got[64];
@@ -304,7 +318,8 @@ static void sweep_layer(const char *file, const char *cities, int planar) {
   qk_error_t err;
   assert_int_equal(qk_region_read_geojson(path, &o, &R, &err), QK_OK);
   assert_int_equal(qk_region_feature_count(R), L.nf);
-  sw_tally_t t = {0, 0, 0, 0};
+  sw_tally_t t;
+  memset(&t, 0, sizeof t);
   uint64_t seed = qkt_seed(77);
   qkt_rng_t rng;
   qkt_rng_seed(&rng, seed);
@@ -351,6 +366,20 @@ static void sweep_layer(const char *file, const char *cities, int planar) {
                 "%zu mismatches (seed %llu)\n",
                 file, planar ? "planar" : "lon/lat", t.points, t.compared, t.skipped, t.mismatches,
                 (unsigned long long)seed);
+  /* The batch calls (Morton order, chunks, two threads) give locate()'s answers. */
+  uint32_t *batch = malloc((t.points + 1) * sizeof *batch);
+  assert_non_null(batch);
+  static const qk_boundary_t brules[3] = {QK_BOUNDARY_SEMI_OPEN, QK_BOUNDARY_CLOSED,
+                                          QK_BOUNDARY_OPEN};
+  for (int r = 0; r < 3; r++)
+    for (unsigned th = 1; th <= 2; th++) {
+      assert_int_equal(qk_region_locate_batch(R, t.pts, t.points, brules[r], th, batch), QK_OK);
+      for (size_t i = 0; i < t.points; i++)
+        if (batch[i] != t.first[r][i])
+          fail_msg("%s: batch (%u threads, rule %d) point (%.17g, %.17g): %d, locate %d", file, th,
+                   r, t.pts[i].x, t.pts[i].y, (int)batch[i], (int)t.first[r][i]);
+    }
+  free(batch), free(t.pts), free(t.first[0]), free(t.first[1]), free(t.first[2]);
   qk_region_free(R);
   free_layer(&L);
   assert_int_equal(t.mismatches, 0);
