@@ -11,8 +11,8 @@
  * 60 degrees. A refusal fails the test (these are valid inputs), except Antarctica,
  * whose polar ring has no equirectangular picture (docs/mesh.md, "Meshing lon/lat data").
  *  - test_sweep_mesh_sample: a fixed sample (antimeridian features Fiji and Russia, tiny
- *    islands, many-ring features, states with holes and shared borders) plus every 23rd
- *    country and every 7th state, so the run stays short in Release;
+ *    islands, many-ring features, states with holes and shared borders) plus every 47th
+ *    country and every 11th state, so the run stays short in Release;
  *  - QK_SWEEP_ALL=1: every feature of both files (the full sweep; minutes);
  *    QK_SWEEP_FILE=F.geojson QK_SWEEP_FROM=a QK_SWEEP_TO=b: features a..b-1 of any file
  *    (one line per mesh on stdout: file, feature, name, k, vertices, triangles, seconds).
@@ -274,7 +274,7 @@ static void test_sweep_mesh_sample(void **state) {
   }
   int all = getenv("QK_SWEEP_ALL") != NULL;
   const char *paths[2] = {countries, states};
-  long steps[2] = {SW_SANITIZED ? 1000 : 23, SW_SANITIZED ? 1000 : 7};
+  long steps[2] = {SW_SANITIZED ? 1000 : 47, SW_SANITIZED ? 1000 : 11};
   for (int p = 0; p < 2; p++) {
     long n = feature_count(paths[p]);
     assert_true(n > 50);
