@@ -9,7 +9,8 @@
  *    a point is a disc of radius 0.
  *  - scenes: objects near 1e9 (and -1e9) with sizes from 1e-3 to 1e3 in one scene, all
  *    four kinds; exactly touching constructions (dyadic offsets, so the contact is exact);
- *    many coincident objects (identical discs, boxes, segments, points); then half the
+ *    many coincident objects (identical discs, boxes, segments, points); degenerate
+ *    shapes on a coarse grid (radius 0, zero-width boxes, zero-length segments); then half the
  *    objects moved, and the began / ended pairs checked as set differences.
  * QK_SEED=n replays a seed.
  */
@@ -354,6 +355,28 @@ static void test_sweep_world_scenes(void **state) {
     snprintf(what, sizeof what, "scene at %g", origins[o]);
     run_scene(s, n, what, &r, seed);
   }
+  /* Degenerate shapes on a coarse grid near 1e9, so many coincide or touch: discs of
+   * radius 0, boxes of zero width or height, segments of zero length, points. */
+  size_t n = 400;
+  for (size_t i = 0; i < n; i++) {
+    double x = 1e9 + 0.25 * qkt_rng_below(&r, 6), y = -1e9 + 0.25 * qkt_rng_below(&r, 6);
+    double dx = 0.25 * qkt_rng_below(&r, 3), dy = 0.25 * qkt_rng_below(&r, 3);
+    switch (qkt_rng_below(&r, 4)) {
+    case 0:
+      s[i] = (qk_shape_t){QK_SHAPE_DISC, x, y, qkt_rng_below(&r, 2) ? 0 : dx, 0};
+      break;
+    case 1:
+      s[i] = (qk_shape_t){QK_SHAPE_BOX, x, y, x + dx, y};
+      break;
+    case 2:
+      s[i] = (qk_shape_t){QK_SHAPE_SEGMENT, x, y, x + dx * qkt_rng_below(&r, 2), y - dy};
+      break;
+    default:
+      s[i] = (qk_shape_t){QK_SHAPE_POINT, x, y, 0, 0};
+      break;
+    }
+  }
+  run_scene(s, n, "degenerate shapes on a grid", &r, seed);
   free(s);
 }
 #else
