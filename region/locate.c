@@ -26,10 +26,13 @@ static ALWAYS_INLINE bool normalise(const qk_region_t *r, double *x, double *y) 
     if (!r->planar) {
       if (!(*y >= -90 && *y <= 90)) return false;
       if (*x < -180 || *x >= 180) {
-        double t = fmod(*x + 180.0, 360.0);
-        if (t < 0) t += 360.0;
-        *x = t - 180.0;
-        if (*x >= 180) *x -= 360;
+        /* Exactly x mod 360 in [-180, 180): fmod is exact, and so is the step by 360
+         * (Sterbenz: t is within a factor 2 of 360). fmod(x + 180, 360) - 180 rounded
+         * twice, so a vertex given 360 degrees away missed its own ring. */
+        double t = fmod(*x, 360.0);
+        if (t >= 180) t -= 360.0;
+        if (t < -180) t += 360.0;
+        *x = t;
       }
     }
     if (!(*x >= r->rx && *x < r->rx + r->rside && *y >= r->ry && *y < r->ry + r->rside))
