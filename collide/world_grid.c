@@ -121,7 +121,7 @@ void qk__world_pack(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
   if (n < 4096) nt = 1; /* not worth a thread */
   if (nt > 1) {
     pack_job_t p = {w, pk, ord, cells, nc, nt};
-    qk__run_jobs(nt, nt, pack_run, &p);
+    qk__world_run_jobs(w, nt, nt, pack_run, &p);
   } else {
     pack_cells(w, pk, ord, cells, 0, nc);
   }
@@ -280,7 +280,7 @@ static int merge_threads(qk_world_t *w, const drec_t *d, size_t m_d, uint32_t *o
   }
   J->c0[nt] = n_oc, J->j0[nt] = m_d;
   J->phase = 0;
-  qk__run_jobs(nt, nt, merge_run, J);
+  qk__world_run_jobs(w, nt, nt, merge_run, J);
   /* The ranges' places, and the level runs (a level's cells are one run across ranges). */
   uint32_t om = 0, ocn = 0;
   memset(w->lv_first, 0, sizeof w->lv_first);
@@ -297,7 +297,7 @@ static int merge_threads(qk_world_t *w, const drec_t *d, size_t m_d, uint32_t *o
     om += J->g[t].m - sm, ocn += J->g[t].nc - scl;
   }
   J->phase = 1;
-  qk__run_jobs(nt, nt, merge_run, J);
+  qk__world_run_jobs(w, nt, nt, merge_run, J);
   *m_out = om, *nc_out = ocn;
   qk__free(a, s_cell, sc * sizeof *s_cell);
   qk__free(a, s_ord, so * sizeof *s_ord);

@@ -525,7 +525,7 @@ static void pjob_run(unsigned t, void *ud) {
 
 static void pjob_phase(pjob_t *J, int ph) {
   J->phase = ph;
-  qk__run_jobs(J->nt, J->nt, pjob_run, J);
+  qk__world_run_jobs(J->w, J->nt, J->nt, pjob_run, J);
 }
 
 /* Rows, began and ended on nt threads (keys: the found keys, n of them, in a buffer of
@@ -672,6 +672,7 @@ static void keep_tkeys(qk_world_t *w, qk__kvec_t *tk) {
 qk_status_t qk_world_update(qk_world_t *w) {
   if (!w) return QK_ERR_INVALID;
   const qk_allocator_t *al = &w->alloc;
+  qk__world_pool_start(w, qk__world_update_threads(w));
   qk__wpack_t pk;
   qk_status_t pst = qk__world_reorder(w, &pk);
   if (pst != QK_OK) {
