@@ -146,6 +146,9 @@ static inline unsigned qk__world_update_threads(const qk_world_t *w) {
  * share 0 on the calling thread. */
 void qk__world_pool_start(qk_world_t *w, unsigned threads);
 void qk__world_pool_free(qk_world_t *w);
+/* While an update runs (on nonzero), the workers wait for its next step yielding for a
+ * while before they park; otherwise they park at once. */
+void qk__world_pool_hold(qk_world_t *w, int on);
 void qk__world_run_jobs(const qk_world_t *w, unsigned threads, unsigned n,
                         void (*fn)(unsigned i, void *ud), void *ud);
 

@@ -669,10 +669,19 @@ static void keep_tkeys(qk_world_t *w, qk__kvec_t *tk) {
   }
 }
 
+static qk_status_t update(qk_world_t *w);
+
 qk_status_t qk_world_update(qk_world_t *w) {
   if (!w) return QK_ERR_INVALID;
-  const qk_allocator_t *al = &w->alloc;
   qk__world_pool_start(w, qk__world_update_threads(w));
+  qk__world_pool_hold(w, 1);
+  qk_status_t st = update(w);
+  qk__world_pool_hold(w, 0);
+  return st;
+}
+
+static qk_status_t update(qk_world_t *w) {
+  const qk_allocator_t *al = &w->alloc;
   qk__wpack_t pk;
   qk_status_t pst = qk__world_reorder(w, &pk);
   if (pst != QK_OK) {

@@ -24,9 +24,12 @@
 #if defined(QK_HAVE_PTHREADS)
 #include <pthread.h>
 
-/* How long a waiting thread yields before it parks (the gaps between an update's steps
- * are well below this; between frames the workers park). */
+/* How long a waiting thread yields before it parks: a worker while an update holds the
+ * pool (the gaps between its steps are mostly well below this), the calling thread for
+ * the workers to finish a step. Otherwise (between frames, after a batch query) the
+ * workers park at once. */
 #define QK__WPOOL_SPIN_NS 200000
+#define QK__WPOOL_WAIT_NS 50000
 
 struct qk__wpool;
 typedef struct wworker {
@@ -40,6 +43,7 @@ struct qk__wpool {
   atomic_uint gen;     /* steps posted (the workers run each one once) */
   atomic_uint pending; /* workers still in the current step */
   atomic_int busy;     /* a step is running */
+  atomic_int hold;     /* an update runs: the workers yield between its steps */
   int quit;
   unsigned n_th; /* workers started */
   /* The current step (written before gen is advanced, read after it is seen). */
@@ -66,6 +70,7 @@ static void *worker(void *arg) {
     if (g == seen) {
       long long t0 = now_ns();
       while ((g = atomic_load_explicit(&p->gen, memory_order_acquire)) == seen &&
+             atomic_load_explicit(&p->hold, memory_order_relaxed) &&
              now_ns() - t0 < QK__WPOOL_SPIN_NS)
         qk__thread_yield();
       if (g == seen) {
@@ -101,7 +106,7 @@ static void wait_done(struct qk__wpool *p) {
   if (!atomic_load_explicit(&p->pending, memory_order_acquire)) return;
   long long t0 = now_ns();
   while (atomic_load_explicit(&p->pending, memory_order_acquire) &&
-         now_ns() - t0 < QK__WPOOL_SPIN_NS)
+         now_ns() - t0 < QK__WPOOL_WAIT_NS)
     qk__thread_yield();
   pthread_mutex_lock(&p->mu);
   while (atomic_load_explicit(&p->pending, memory_order_acquire))
@@ -121,6 +126,7 @@ void qk__world_pool_start(qk_world_t *w, unsigned threads) {
   atomic_init(&p->gen, 0u);
   atomic_init(&p->pending, 0u);
   atomic_init(&p->busy, 0);
+  atomic_init(&p->hold, 0);
   for (unsigned i = 0; i + 1 < threads; i++) {
     p->ww[i] = (wworker_t){p, i};
     if (pthread_create(&p->th[i], NULL, worker, &p->ww[i])) break;
@@ -151,6 +157,10 @@ void qk__world_pool_free(qk_world_t *w) {
   w->pool = NULL;
 }
 
+void qk__world_pool_hold(qk_world_t *w, int on) {
+  if (w->pool) atomic_store_explicit(&w->pool->hold, on, memory_order_relaxed);
+}
+
 /* Shares 0 .. nw - 1 of fn on the pool (share 0 here), or 0 when it is taken. */
 static int pool_run(struct qk__wpool *p, unsigned nw, qk__share_fn fn, void *ctx) {
   int idle = 0;
@@ -168,6 +178,7 @@ static int pool_run(struct qk__wpool *p, unsigned nw, qk__share_fn fn, void *ctx
 #else
 void qk__world_pool_start(qk_world_t *w, unsigned threads) { (void)w, (void)threads; }
 void qk__world_pool_free(qk_world_t *w) { (void)w; }
+void qk__world_pool_hold(qk_world_t *w, int on) { (void)w, (void)on; }
 #endif
 
 /* Jobs i = share, share + nw, ... of a qk__world_run_jobs call (qk__run_jobs' split). */
