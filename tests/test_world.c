@@ -588,22 +588,23 @@ static void test_world_threads_ranges(void **s) {
     }
 }
 
-/* Enough objects that the update packs the boxes on both threads: frames of moves (by
- * the batch call), adds and removes give the same pairs, began and ended on two threads
+/* Enough objects that the update packs the boxes on the threads and files the dirty
+ * ones there (from 1024 of them, by the merge's ranges): frames of moves (by the batch
+ * call), adds and removes give the same pairs, began and ended on two and three threads
  * as on one (checked against brute force by the scene tests). */
 static void test_world_threads_frames(void **s) {
   (void)s;
-  enum { N = 4500 };
-  qk_world_t *w[2];
-  qk_handle_t *h[2];
+  enum { N = 4500, W = 3 };
+  qk_world_t *w[W];
+  qk_handle_t *h[W];
   qk_shape_t *sh = malloc(N * sizeof *sh);
   qkt_rng_t r;
   qkt_rng_seed(&r, g_seed + 29);
   for (int i = 0; i < N; i++) sh[i] = rnd_shape(&r, SC_MIXED, 1);
-  for (int t = 0; t < 2; t++) {
+  for (int t = 0; t < W; t++) {
     qk_world_options_t o;
     qk_world_options_init(&o);
-    o.threads = t ? 2 : 1;
+    o.threads = (unsigned)t + 1;
     o.thread_min = 0; /* the threaded paths at this size too */
     assert_int_equal(qk_world_new(&o, &w[t]), QK_OK);
     h[t] = malloc(N * sizeof *h[t]);
@@ -612,25 +613,41 @@ static void test_world_threads_frames(void **s) {
   for (int f = 0; f < 6; f++) {
     for (int i = 0; i < N; i++) sh[i] = moved(&r, sh[i]);
     int gone = (int)qkt_rng_below(&r, N);
-    for (int t = 0; t < 2; t++) {
+    for (int t = 0; t < W; t++) {
       assert_int_equal(qk_world_move_batch(w[t], h[t], sh, N, NULL), QK_OK);
       assert_int_equal(qk_world_remove(w[t], h[t][gone]), QK_OK);
       assert_int_equal(qk_world_add(w[t], &sh[gone], 0, &h[t][gone]), QK_OK);
       assert_int_equal(qk_world_update(w[t]), QK_OK);
     }
-    for (int which = 0; which < 3; which++) {
+    for (int t = 1; t < W; t++)
+      for (int which = 0; which < 3; which++) {
+        size_t n0, n1;
+        qk_world_pairs_list(w[0], (qk_pairs_which_t)which, NULL, 0, &n0);
+        qk_world_pairs_list(w[t], (qk_pairs_which_t)which, NULL, 0, &n1);
+        assert_int_equal(n0, n1);
+        qk_world_pair_t *p0 = malloc((n0 + 1) * sizeof *p0), *p1 = malloc((n0 + 1) * sizeof *p1);
+        qk_world_pairs_list(w[0], (qk_pairs_which_t)which, p0, n0, &n0);
+        qk_world_pairs_list(w[t], (qk_pairs_which_t)which, p1, n1, &n1);
+        assert_memory_equal(p0, p1, n0 * sizeof *p0);
+        free(p0), free(p1);
+      }
+    /* the order and cells the threads filed answer queries (a misfiled cell breaks the
+     * queries' binary searches, even where the bands search finds every pair) */
+    for (int q = 0; q < 8; q++) {
+      qk_shape_t qs = rnd_shape(&r, SC_MIXED, 1);
+      qs.kind = QK_SHAPE_BOX;
+      qs.a = qs.x + qkt_rng_range(&r, 0, 30), qs.b = qs.y + qkt_rng_range(&r, 0, 30);
+      static qk_handle_t g0[N], g1[N];
       size_t n0, n1;
-      qk_world_pairs_list(w[0], (qk_pairs_which_t)which, NULL, 0, &n0);
-      qk_world_pairs_list(w[1], (qk_pairs_which_t)which, NULL, 0, &n1);
-      assert_int_equal(n0, n1);
-      qk_world_pair_t *p0 = malloc((n0 + 1) * sizeof *p0), *p1 = malloc((n0 + 1) * sizeof *p1);
-      qk_world_pairs_list(w[0], (qk_pairs_which_t)which, p0, n0, &n0);
-      qk_world_pairs_list(w[1], (qk_pairs_which_t)which, p1, n1, &n1);
-      assert_memory_equal(p0, p1, n0 * sizeof *p0);
-      free(p0), free(p1);
+      assert_int_equal(qk_world_query(w[0], &qs, g0, N, &n0), QK_OK);
+      for (int t = 1; t < W; t++) {
+        assert_int_equal(qk_world_query(w[t], &qs, g1, N, &n1), QK_OK);
+        assert_int_equal(n0, n1);
+        assert_memory_equal(g0, g1, n0 * sizeof *g0);
+      }
     }
   }
-  for (int t = 0; t < 2; t++) qk_world_free(w[t]), free(h[t]);
+  for (int t = 0; t < W; t++) qk_world_free(w[t]), free(h[t]);
   free(sh);
 }
 
