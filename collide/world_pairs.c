@@ -474,7 +474,12 @@ static int range_rows(pjob_t *J, unsigned t) {
   J->ev[t].cap = ec;
   /* (the last range takes the old rows of slots past n_obj too) */
   qk__prows_t ov = rows_view(J->o, t ? s0 : 0, t + 1 < J->nt ? s1 : UINT32_MAX);
-  return diff(J->w, &ov, lr, J->dirty, &J->bv[t], &J->ev[t]);
+  /* The lists grow in locals: the ranges' list heads share cache lines in J, and every
+   * key added writes its count (false sharing between the threads). */
+  qk__kvec_t bv = J->bv[t], ev = J->ev[t];
+  int ok = diff(J->w, &ov, lr, J->dirty, &bv, &ev);
+  J->bv[t] = bv, J->ev[t] = ev;
+  return ok;
 }
 
 static void pjob_run(unsigned t, void *ud) {
