@@ -18,6 +18,7 @@
 #include <stdatomic.h>
 #include <string.h>
 #include <time.h>
+#include <unistd.h>
 
 #include "collide/world_internal.h"
 
@@ -46,6 +47,7 @@ struct qk__wpool {
   atomic_int hold;     /* an update runs: the workers yield between its steps */
   int quit;
   unsigned n_th; /* workers started */
+  pid_t pid;     /* the process that started them (a forked child has none of them) */
   /* The current step (written before gen is advanced, read after it is seen). */
   qk__share_fn fn;
   void *ctx;
@@ -114,7 +116,13 @@ static void wait_done(struct qk__wpool *p) {
   pthread_mutex_unlock(&p->mu);
 }
 
+/* In a child forked after the workers started, they do not exist: the pool is left
+ * unused (its memory freed, its locks not touched) and the steps start threads as
+ * before, until the next update starts workers of the child's own. */
+static int forked(const struct qk__wpool *p) { return p->pid != getpid(); }
+
 void qk__world_pool_start(qk_world_t *w, unsigned threads) {
+  if (w->pool && forked(w->pool)) qk__free(&w->alloc, w->pool, sizeof *w->pool), w->pool = NULL;
   if (w->pool || threads < 2) return;
   if (threads > QK__MAX_THREADS) threads = QK__MAX_THREADS;
   struct qk__wpool *p = qk__realloc(&w->alloc, NULL, 0, sizeof *p);
@@ -127,6 +135,7 @@ void qk__world_pool_start(qk_world_t *w, unsigned threads) {
   atomic_init(&p->pending, 0u);
   atomic_init(&p->busy, 0);
   atomic_init(&p->hold, 0);
+  p->pid = getpid();
   for (unsigned i = 0; i + 1 < threads; i++) {
     p->ww[i] = (wworker_t){p, i};
     if (pthread_create(&p->th[i], NULL, worker, &p->ww[i])) break;
@@ -148,6 +157,11 @@ void qk__world_pool_start(qk_world_t *w, unsigned threads) {
 void qk__world_pool_free(qk_world_t *w) {
   struct qk__wpool *p = w->pool;
   if (!p) return;
+  if (forked(p)) {
+    qk__free(&w->alloc, p, sizeof *p);
+    w->pool = NULL;
+    return;
+  }
   post(p, NULL, NULL, 0, 1);
   for (unsigned i = 0; i < p->n_th; i++) pthread_join(p->th[i], NULL);
   pthread_cond_destroy(&p->done);
@@ -203,7 +217,7 @@ void qk__world_run_jobs(const qk_world_t *w, unsigned threads, unsigned n,
     return;
   }
 #if defined(QK_HAVE_PTHREADS)
-  if (w->pool && pool_run(w->pool, nw, wjobs_share, &j)) return;
+  if (w->pool && !forked(w->pool) && pool_run(w->pool, nw, wjobs_share, &j)) return;
 #else
   (void)w;
 #endif
