@@ -47,7 +47,7 @@ struct qk__wpool {
   atomic_int hold;     /* an update runs: the workers yield between its steps */
   int quit;
   unsigned n_th; /* workers started */
-  pid_t pid;     /* the process that started them (a forked child has none of them) */
+  pid_t proc;    /* the process that started them (a forked child has none of them) */
   /* The current step (written before gen is advanced, read after it is seen). */
   qk__share_fn fn;
   void *ctx;
@@ -119,7 +119,7 @@ static void wait_done(struct qk__wpool *p) {
 /* In a child forked after the workers started, they do not exist: the pool is left
  * unused (its memory freed, its locks not touched) and the steps start threads as
  * before, until the next update starts workers of the child's own. */
-static int forked(const struct qk__wpool *p) { return p->pid != getpid(); }
+static int forked(const struct qk__wpool *p) { return p->proc != getpid(); }
 
 void qk__world_pool_start(qk_world_t *w, unsigned threads) {
   if (w->pool && forked(w->pool)) qk__free(&w->alloc, w->pool, sizeof *w->pool), w->pool = NULL;
@@ -135,7 +135,7 @@ void qk__world_pool_start(qk_world_t *w, unsigned threads) {
   atomic_init(&p->pending, 0u);
   atomic_init(&p->busy, 0);
   atomic_init(&p->hold, 0);
-  p->pid = getpid();
+  p->proc = getpid();
   for (unsigned i = 0; i + 1 < threads; i++) {
     p->ww[i] = (wworker_t){p, i};
     if (pthread_create(&p->th[i], NULL, worker, &p->ww[i])) break;
