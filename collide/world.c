@@ -95,6 +95,7 @@ qk_status_t qk_world_new(const qk_world_options_t *options, qk_world_t **out) {
 
 void qk_world_free(qk_world_t *w) {
   if (!w) return;
+  qk__world_pool_free(w);
   qk_allocator_t a = w->alloc;
   qk__free(&a, w->obj, (size_t)w->cap_obj * sizeof *w->obj);
   qk__free(&a, w->order, (size_t)w->cap_order * sizeof *w->order);

@@ -17,6 +17,9 @@ typedef struct drec {
   uint32_t slot;
 } drec_t;
 
+/* Dirty objects from which the threads file them (merge_threads). */
+#define QK__REFILE_MIN 1024
+
 static inline uint32_t bias(int32_t v) { return (uint32_t)v ^ 0x80000000u; }
 
 static int drec_cmp(const void *p, const void *q) {
@@ -60,6 +63,17 @@ static void drec_sort(drec_t *d, drec_t *tmp, size_t n) {
 static inline drec_t rec_of(const qk__wobj_t *o, uint32_t slot) {
   return (drec_t){(uint64_t)(uint32_t)(o->level - QK__LMIN) << 32 | bias(o->cy), bias(o->u.cx),
                   slot};
+}
+
+/* File live dirty object o (slot i) in its new cell; its record. */
+static inline drec_t file_dirty(const qk_world_t *w, qk__wobj_t *o, uint32_t i) {
+  qk_box_t f = qk__world_fat_box(w, o);
+  int level, forced;
+  int32_t cx, cy;
+  qk__world_cell_of(&f, &level, &cx, &cy, &forced);
+  o->level = (int8_t)level, o->u.cx = cx, o->cy = cy;
+  o->flags = (uint8_t)((o->flags & ~QK__WFORCED) | (forced ? QK__WFORCED : 0));
+  return rec_of(o, i);
 }
 
 static inline void box_join(qk_box_t *h, const qk_box_t *b) {
@@ -121,7 +135,7 @@ void qk__world_pack(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
   if (n < 4096) nt = 1; /* not worth a thread */
   if (nt > 1) {
     pack_job_t p = {w, pk, ord, cells, nc, nt};
-    qk__run_jobs(nt, nt, pack_run, &p);
+    qk__world_run_jobs(w, nt, nt, pack_run, &p);
   } else {
     pack_cells(w, pk, ord, cells, 0, nc);
   }
@@ -211,10 +225,50 @@ typedef struct mjob {
   int phase;
   uint32_t c0[QK__MMAX + 1];
   size_t j0[QK__MMAX + 1];
+  /* Filing on the threads (refile): the live dirty slots sl[0 .. m_d), cut into nt
+   * chunks; their records (unsorted, in dd) go to the ranges by the ranges' first cells'
+   * keys (bly, bx; none past n_oc), each range's in d[j0[r] .. j0[r + 1]), sorted there. */
+  const uint32_t *sl;
+  size_t m_d;
+  drec_t *dd, *pd;
+  unsigned nt, nb; /* threads; ranges with a first cell (1 .. nb - 1 have bounds) */
+  uint64_t bly[QK__MMAX + 1];
+  uint32_t bx[QK__MMAX + 1];
+  size_t cnt[QK__MMAX][QK__MMAX];              /* per chunk, records per range; then cursors */
   uint32_t om[QK__MMAX + 1], oc[QK__MMAX + 1]; /* the ranges' offsets in the result */
   merge_t g[QK__MMAX];
   uint32_t lv[QK__MMAX][2 * QK__NLEV]; /* per range: level runs (first, count) */
 } mjob_t;
+
+/* The range a record goes to: the last whose first cell's key is at most its key. */
+static inline unsigned range_of(const mjob_t *J, const drec_t *r) {
+  unsigned lo = 1, hi = J->nb; /* ranges 1 .. nb - 1 have bounds, ascending */
+  while (lo < hi) {
+    unsigned mid = (lo + hi) / 2;
+    if (r->ly < J->bly[mid] || (r->ly == J->bly[mid] && r->x < J->bx[mid]))
+      hi = mid;
+    else
+      lo = mid + 1;
+  }
+  return lo - 1;
+}
+
+/* Phase 2: file chunk t's dirty objects, count its records by range; phase 3: move them
+ * to their ranges (chunk by chunk, so each range keeps the dirty list's order). */
+static void refile_run(mjob_t *J, unsigned t) {
+  size_t k0 = J->m_d * t / J->nt, k1 = J->m_d * (t + 1) / J->nt;
+  size_t *c = J->cnt[t];
+  if (J->phase == 2) {
+    memset(c, 0, J->nt * sizeof *c);
+    for (size_t k = k0; k < k1; k++) {
+      uint32_t i = J->sl[k];
+      J->dd[k] = file_dirty(J->w, &J->w->obj[i], i);
+      c[range_of(J, &J->dd[k])]++;
+    }
+  } else {
+    for (size_t k = k0; k < k1; k++) J->pd[c[range_of(J, &J->dd[k])]++] = J->dd[k];
+  }
+}
 
 static void merge_run(unsigned t, void *ud) {
   mjob_t *J = ud;
@@ -223,7 +277,15 @@ static void merge_run(unsigned t, void *ud) {
    * most that many entries come before it) */
   uint32_t sm = J->w->cells[J->c0[t]].start + (uint32_t)J->j0[t];
   uint32_t sc = J->c0[t] + (uint32_t)J->j0[t];
+  if (J->phase >= 2) {
+    refile_run(J, t);
+    return;
+  }
   if (J->phase == 0) {
+    /* (filed on the threads: this range's records are sorted here, as the serial sort
+     * would have them: the same stable radix sort, in the dirty list's order) */
+    if (J->sl && J->j0[t + 1] - J->j0[t] > 1)
+      drec_sort(J->pd + J->j0[t], J->dd + J->j0[t], J->j0[t + 1] - J->j0[t]);
     *g = (merge_t){J->w, J->d, J->s_ord, J->s_cell, J->lv[t], J->lv[t] + QK__NLEV, sm, sc};
     memset(J->lv[t], 0, sizeof J->lv[t]);
     merge_range(g, J->c0[t], J->c0[t + 1], J->j0[t], J->j0[t + 1]);
@@ -236,13 +298,22 @@ static void merge_run(unsigned t, void *ud) {
   }
 }
 
+/* Whether the merge runs on the threads (merge_threads), scratch permitting. */
+static int merge_fits(const qk_world_t *w, uint32_t n_oc) {
+  unsigned nt = qk__world_update_threads(w);
+  if (nt > QK__MMAX) nt = QK__MMAX;
+  return nt >= 2 && w->n_order >= 4096 && n_oc >= 4 * nt;
+}
+
 /* The merge on threads (see mjob_t); 0 when it is not worth them or its scratch cannot
- * be had (the caller then merges here). */
-static int merge_threads(qk_world_t *w, const drec_t *d, size_t m_d, uint32_t *ord,
+ * be had (the caller then merges here). With sl, the m_d live dirty slots sl[0 .. m_d)
+ * are filed on the threads too and their records sorted there, in d (room for 2 m_d);
+ * else d holds their records, sorted. */
+static int merge_threads(qk_world_t *w, drec_t *d, size_t m_d, const uint32_t *sl, uint32_t *ord,
                          qk__wcell_t *cells, uint32_t n_oc, uint32_t *m_out, uint32_t *nc_out) {
   unsigned nt = qk__world_update_threads(w);
   if (nt > QK__MMAX) nt = QK__MMAX;
-  if (nt < 2 || w->n_order < 4096 || n_oc < 4 * nt) return 0;
+  if (!merge_fits(w, n_oc)) return 0;
   const qk_allocator_t *a = &w->alloc;
   size_t so = (size_t)w->n_order + m_d, sc = (size_t)n_oc + m_d;
   mjob_t *J = qk__realloc(a, NULL, 0, sizeof *J);
@@ -254,6 +325,7 @@ static int merge_threads(qk_world_t *w, const drec_t *d, size_t m_d, uint32_t *o
     return 0;
   }
   J->w = w, J->d = d, J->ord = ord, J->cells = cells, J->s_ord = s_ord, J->s_cell = s_cell;
+  J->sl = NULL, J->nt = nt;
   /* Ranges of old cells of about equal objects; each range's dirty records from the
    * first that does not sort before its first cell. */
   const qk__wcell_t *oc = w->cells;
@@ -262,6 +334,35 @@ static int merge_threads(qk_world_t *w, const drec_t *d, size_t m_d, uint32_t *o
     uint32_t c = qk__wcell_from(oc, 0, n_oc, (uint32_t)((uint64_t)w->n_order * t / nt));
     if (c < J->c0[t - 1]) c = J->c0[t - 1];
     J->c0[t] = c;
+  }
+  J->c0[nt] = n_oc;
+  if (sl) {
+    /* The dirty objects filed on the threads, their records sent to the ranges (as the
+     * search below would cut the sorted records) and sorted there (merge_run). */
+    J->nb = 1;
+    while (J->nb < nt && J->c0[J->nb] < n_oc) {
+      const qk__wcell_t *b = &oc[J->c0[J->nb]];
+      J->bly[J->nb] = (uint64_t)(uint32_t)(b->level - QK__LMIN) << 32 | bias(b->cy);
+      J->bx[J->nb] = bias(b->cx);
+      J->nb++;
+    }
+    J->sl = sl, J->m_d = m_d, J->dd = d + m_d, J->pd = d;
+    J->phase = 2;
+    qk__world_run_jobs(w, nt, nt, merge_run, J);
+    size_t s = 0;
+    for (unsigned r = 0; r < nt; r++) {
+      J->j0[r] = s;
+      for (unsigned t = 0; t < nt; t++) {
+        size_t x = J->cnt[t][r];
+        J->cnt[t][r] = s, s += x;
+      }
+    }
+    J->j0[nt] = m_d;
+    J->phase = 3;
+    qk__world_run_jobs(w, nt, nt, merge_run, J);
+  }
+  for (unsigned t = 1; t < nt && !sl; t++) {
+    uint32_t c = J->c0[t];
     size_t lo = J->j0[t - 1], hi = m_d;
     if (c < n_oc) {
       uint64_t cly = (uint64_t)(uint32_t)(oc[c].level - QK__LMIN) << 32 | bias(oc[c].cy);
@@ -278,9 +379,9 @@ static int merge_threads(qk_world_t *w, const drec_t *d, size_t m_d, uint32_t *o
     }
     J->j0[t] = lo;
   }
-  J->c0[nt] = n_oc, J->j0[nt] = m_d;
+  J->j0[nt] = m_d;
   J->phase = 0;
-  qk__run_jobs(nt, nt, merge_run, J);
+  qk__world_run_jobs(w, nt, nt, merge_run, J);
   /* The ranges' places, and the level runs (a level's cells are one run across ranges). */
   uint32_t om = 0, ocn = 0;
   memset(w->lv_first, 0, sizeof w->lv_first);
@@ -297,7 +398,7 @@ static int merge_threads(qk_world_t *w, const drec_t *d, size_t m_d, uint32_t *o
     om += J->g[t].m - sm, ocn += J->g[t].nc - scl;
   }
   J->phase = 1;
-  qk__run_jobs(nt, nt, merge_run, J);
+  qk__world_run_jobs(w, nt, nt, merge_run, J);
   *m_out = om, *nc_out = ocn;
   qk__free(a, s_cell, sc * sizeof *s_cell);
   qk__free(a, s_ord, so * sizeof *s_ord);
@@ -336,31 +437,37 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
   pk->fgrp = fg, pk->cap_fgrp = gcap, pk->hb = hb, pk->cap_hb = ncap;
   pk->fexact = (uint8_t *)(fg + gcap * 16);
 
-  /* File the live dirty objects in their new cells. */
+  /* File the live dirty objects in their new cells and sort their records. With many
+   * (and the merge on threads), the threads file them and sort them by the merge's
+   * ranges, in the same stable order (merge_threads); the list is read here. */
+  uint32_t m = 0, nc = 0, n_oc = w->order ? w->n_cells : 0;
   size_t m_d = 0;
-  for (uint32_t i = w->dirty_head; i != QK_NONE; i = w->obj[i].dnext) {
-    qk__wobj_t *o = &w->obj[i];
-    if (!qk__wlive(o)) continue;
-    qk_box_t f = qk__world_fat_box(w, o);
-    int level, forced;
-    int32_t cx, cy;
-    qk__world_cell_of(&f, &level, &cx, &cy, &forced);
-    o->level = (int8_t)level, o->u.cx = cx, o->cy = cy;
-    o->flags = (uint8_t)((o->flags & ~QK__WFORCED) | (forced ? QK__WFORCED : 0));
-    d[m_d] = rec_of(o, i);
-    m_d++;
+  int merged = 0;
+  uint32_t *sl =
+      nd >= QK__REFILE_MIN && merge_fits(w, n_oc) ? qk__realloc(a, NULL, 0, nd * sizeof *sl) : NULL;
+  if (sl) {
+    for (uint32_t i = w->dirty_head; i != QK_NONE; i = w->obj[i].dnext)
+      if (qk__wlive(&w->obj[i])) sl[m_d++] = i;
+    if (m_d > 64) merged = merge_threads(w, d, m_d, sl, ord, cells, n_oc, &m, &nc);
+    if (!merged)
+      for (size_t k = 0; k < m_d; k++) d[k] = file_dirty(w, &w->obj[sl[k]], sl[k]);
+    qk__free(a, sl, nd * sizeof *sl);
+  } else {
+    for (uint32_t i = w->dirty_head; i != QK_NONE; i = w->obj[i].dnext)
+      if (qk__wlive(&w->obj[i])) d[m_d++] = file_dirty(w, &w->obj[i], i);
   }
-  if (m_d > 64)
-    drec_sort(d, d + nd, m_d);
-  else if (m_d > 1)
-    qsort(d, m_d, sizeof *d, drec_cmp);
+  if (!merged) {
+    if (m_d > 64)
+      drec_sort(d, d + nd, m_d);
+    else if (m_d > 1)
+      qsort(d, m_d, sizeof *d, drec_cmp);
+  }
 
   /* Merge, cell by cell: the old cells in order (their kept entries stay sorted: their
    * cells did not change), each preceded by the dirty cells that sort before it and
    * followed by the dirty entries of the same cell. The keys are compared once a cell,
    * not once an object. On threads by ranges of old cells (merge_threads), else here. */
-  uint32_t m = 0, nc = 0, n_oc = w->order ? w->n_cells : 0;
-  if (!merge_threads(w, d, m_d, ord, cells, n_oc, &m, &nc)) {
+  if (!merged && !merge_threads(w, d, m_d, NULL, ord, cells, n_oc, &m, &nc)) {
     merge_t mg = {w, d, ord, cells, w->lv_first, w->lv_n, 0, 0};
     memset(w->lv_first, 0, sizeof w->lv_first);
     memset(w->lv_n, 0, sizeof w->lv_n);

@@ -118,7 +118,8 @@ struct qk_world {
   qk__kvec_t scr_tkeys[QK__KEEP_THREADS]; /* the other threads' keys (threads 1, 2, ...) */
   uint32_t *spare_b;
   size_t cap_spare_b;
-  int ident_dirty; /* an object was added or removed since the last update */
+  int ident_dirty;        /* an object was added or removed since the last update */
+  struct qk__wpool *pool; /* the parked workers (collide/world_threads.c), or NULL */
 };
 
 /* 2^e for e in [-1022, 1023], exactly (cheaper than ldexp in the inner loops; scaling
@@ -137,6 +138,19 @@ static inline int qk__wlive(const qk__wobj_t *o) { return o->gen & 1; }
 static inline unsigned qk__world_update_threads(const qk_world_t *w) {
   return w->n_live < w->opt.thread_min ? 1 : w->opt.threads;
 }
+
+/* The world's workers (collide/world_threads.c): qk__world_pool_start(w, threads) starts
+ * threads - 1 of them, parked between parallel steps, unless it has or cannot (the steps
+ * then start threads of their own); qk__world_pool_free joins them. qk__world_run_jobs is
+ * qk__run_jobs on them: fn(i, ud) for i in [0, n), job i in share i mod min(threads, n),
+ * share 0 on the calling thread. */
+void qk__world_pool_start(qk_world_t *w, unsigned threads);
+void qk__world_pool_free(qk_world_t *w);
+/* While an update runs (on nonzero), the workers wait for its next step yielding for a
+ * while before they park; otherwise they park at once. */
+void qk__world_pool_hold(qk_world_t *w, int on);
+void qk__world_run_jobs(const qk_world_t *w, unsigned threads, unsigned n,
+                        void (*fn)(unsigned i, void *ud), void *ud);
 
 static inline qk_shape_t qk__wshape(const qk__wobj_t *o) {
   return (qk_shape_t){(qk_shape_kind_t)(o->flags & QK__WKIND), o->x, o->y, o->a, o->b};

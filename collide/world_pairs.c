@@ -474,7 +474,12 @@ static int range_rows(pjob_t *J, unsigned t) {
   J->ev[t].cap = ec;
   /* (the last range takes the old rows of slots past n_obj too) */
   qk__prows_t ov = rows_view(J->o, t ? s0 : 0, t + 1 < J->nt ? s1 : UINT32_MAX);
-  return diff(J->w, &ov, lr, J->dirty, &J->bv[t], &J->ev[t]);
+  /* The lists grow in locals: the ranges' list heads share cache lines in J, and every
+   * key added writes its count (false sharing between the threads). */
+  qk__kvec_t bv = J->bv[t], ev = J->ev[t];
+  int ok = diff(J->w, &ov, lr, J->dirty, &bv, &ev);
+  J->bv[t] = bv, J->ev[t] = ev;
+  return ok;
 }
 
 static void pjob_run(unsigned t, void *ud) {
@@ -525,7 +530,7 @@ static void pjob_run(unsigned t, void *ud) {
 
 static void pjob_phase(pjob_t *J, int ph) {
   J->phase = ph;
-  qk__run_jobs(J->nt, J->nt, pjob_run, J);
+  qk__world_run_jobs(J->w, J->nt, J->nt, pjob_run, J);
 }
 
 /* Rows, began and ended on nt threads (keys: the found keys, n of them, in a buffer of
@@ -669,8 +674,18 @@ static void keep_tkeys(qk_world_t *w, qk__kvec_t *tk) {
   }
 }
 
+static qk_status_t update(qk_world_t *w);
+
 qk_status_t qk_world_update(qk_world_t *w) {
   if (!w) return QK_ERR_INVALID;
+  qk__world_pool_start(w, qk__world_update_threads(w));
+  qk__world_pool_hold(w, 1);
+  qk_status_t st = update(w);
+  qk__world_pool_hold(w, 0);
+  return st;
+}
+
+static qk_status_t update(qk_world_t *w) {
   const qk_allocator_t *al = &w->alloc;
   qk__wpack_t pk;
   qk_status_t pst = qk__world_reorder(w, &pk);

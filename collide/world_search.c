@@ -957,7 +957,7 @@ qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kve
     if (found.v) found.cap = guess;
   }
   shares[0].out = found;
-  qk__run_jobs(nt, nt, by_bands ? run_bands : run_share, shares);
+  qk__world_run_jobs(w, nt, nt, by_bands ? run_bands : run_share, shares);
   found = shares[0].out;
   if (chunk != chunk_one) qk__free(&w->alloc, chunk, (n_chunks + 1) * sizeof *chunk);
   qk__free(&w->alloc, rf, n_rf * sizeof *rf);

@@ -20,12 +20,16 @@
  *  - two threads give the same pairs and batch ray hits as one (also on both sides of
  *    thread_min, live objects crossing it), and three reader threads
  *    querying one world at once get the single-threaded answers (run under TSan by
- *    scripts/tsan.sh).
+ *    scripts/tsan.sh); a child forked after the world's workers started (they are not in
+ *    it) updates on threads of its own, with one thread's answers.
  * The oracle computes overlap in long double from the textbook formulas (distance from a
  * point to a segment, orientation signs), independently of the library's exact code.
  */
+#define _POSIX_C_SOURCE 200809L /* fork, waitpid, alarm */
 #include <math.h>
 #include <pthread.h>
+#include <sys/wait.h>
+#include <unistd.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -620,22 +624,23 @@ static void test_world_threads_ranges(void **s) {
     }
 }
 
-/* Enough objects that the update packs the boxes on both threads: frames of moves (by
- * the batch call), adds and removes give the same pairs, began and ended on two threads
+/* Enough objects that the update packs the boxes on the threads and files the dirty
+ * ones there (from 1024 of them, by the merge's ranges): frames of moves (by the batch
+ * call), adds and removes give the same pairs, began and ended on two and three threads
  * as on one (checked against brute force by the scene tests). */
 static void test_world_threads_frames(void **s) {
   (void)s;
-  enum { N = 4500 };
-  qk_world_t *w[2];
-  qk_handle_t *h[2];
+  enum { N = 4500, W = 3 };
+  qk_world_t *w[W];
+  qk_handle_t *h[W];
   qk_shape_t *sh = malloc(N * sizeof *sh);
   qkt_rng_t r;
   qkt_rng_seed(&r, g_seed + 29);
   for (int i = 0; i < N; i++) sh[i] = rnd_shape(&r, SC_MIXED, 1);
-  for (int t = 0; t < 2; t++) {
+  for (int t = 0; t < W; t++) {
     qk_world_options_t o;
     qk_world_options_init(&o);
-    o.threads = t ? 2 : 1;
+    o.threads = (unsigned)t + 1;
     o.thread_min = 0; /* the threaded paths at this size too */
     assert_int_equal(qk_world_new(&o, &w[t]), QK_OK);
     h[t] = malloc(N * sizeof *h[t]);
@@ -644,25 +649,41 @@ static void test_world_threads_frames(void **s) {
   for (int f = 0; f < 6; f++) {
     for (int i = 0; i < N; i++) sh[i] = moved(&r, sh[i]);
     int gone = (int)qkt_rng_below(&r, N);
-    for (int t = 0; t < 2; t++) {
+    for (int t = 0; t < W; t++) {
       assert_int_equal(qk_world_move_batch(w[t], h[t], sh, N, NULL), QK_OK);
       assert_int_equal(qk_world_remove(w[t], h[t][gone]), QK_OK);
       assert_int_equal(qk_world_add(w[t], &sh[gone], 0, &h[t][gone]), QK_OK);
       assert_int_equal(qk_world_update(w[t]), QK_OK);
     }
-    for (int which = 0; which < 3; which++) {
+    for (int t = 1; t < W; t++)
+      for (int which = 0; which < 3; which++) {
+        size_t n0, n1;
+        qk_world_pairs_list(w[0], (qk_pairs_which_t)which, NULL, 0, &n0);
+        qk_world_pairs_list(w[t], (qk_pairs_which_t)which, NULL, 0, &n1);
+        assert_int_equal(n0, n1);
+        qk_world_pair_t *p0 = malloc((n0 + 1) * sizeof *p0), *p1 = malloc((n0 + 1) * sizeof *p1);
+        qk_world_pairs_list(w[0], (qk_pairs_which_t)which, p0, n0, &n0);
+        qk_world_pairs_list(w[t], (qk_pairs_which_t)which, p1, n1, &n1);
+        assert_memory_equal(p0, p1, n0 * sizeof *p0);
+        free(p0), free(p1);
+      }
+    /* the order and cells the threads filed answer queries (a misfiled cell breaks the
+     * queries' binary searches, even where the bands search finds every pair) */
+    for (int q = 0; q < 8; q++) {
+      qk_shape_t qs = rnd_shape(&r, SC_MIXED, 1);
+      qs.kind = QK_SHAPE_BOX;
+      qs.a = qs.x + qkt_rng_range(&r, 0, 30), qs.b = qs.y + qkt_rng_range(&r, 0, 30);
+      static qk_handle_t g0[N], g1[N];
       size_t n0, n1;
-      qk_world_pairs_list(w[0], (qk_pairs_which_t)which, NULL, 0, &n0);
-      qk_world_pairs_list(w[1], (qk_pairs_which_t)which, NULL, 0, &n1);
-      assert_int_equal(n0, n1);
-      qk_world_pair_t *p0 = malloc((n0 + 1) * sizeof *p0), *p1 = malloc((n0 + 1) * sizeof *p1);
-      qk_world_pairs_list(w[0], (qk_pairs_which_t)which, p0, n0, &n0);
-      qk_world_pairs_list(w[1], (qk_pairs_which_t)which, p1, n1, &n1);
-      assert_memory_equal(p0, p1, n0 * sizeof *p0);
-      free(p0), free(p1);
+      assert_int_equal(qk_world_query(w[0], &qs, g0, N, &n0), QK_OK);
+      for (int t = 1; t < W; t++) {
+        assert_int_equal(qk_world_query(w[t], &qs, g1, N, &n1), QK_OK);
+        assert_int_equal(n0, n1);
+        assert_memory_equal(g0, g1, n0 * sizeof *g0);
+      }
     }
   }
-  for (int t = 0; t < 2; t++) qk_world_free(w[t]), free(h[t]);
+  for (int t = 0; t < W; t++) qk_world_free(w[t]), free(h[t]);
   free(sh);
 }
 
@@ -1302,6 +1323,80 @@ static void test_world_nomem(void **s) {
   }
 }
 
+/* The world keeps its worker threads between updates; a child forked after they started
+ * has none of them, so its threaded updates must not wait for them: the child's frames
+ * (on two threads) give the pairs, began and ended of a one-thread world it builds itself.
+ * A child that hangs is stopped by an alarm and fails the test. (Not under TSan, which
+ * does not follow a multithreaded process into fork.) */
+static void test_world_threads_fork(void **s) {
+  (void)s;
+#if QKT_TSAN
+  skip();
+#else
+  enum { N = 4500 }; /* (the update runs on threads from 4096 objects) */
+  qk_shape_t *sh = malloc(N * sizeof *sh);
+  qk_handle_t *h[2] = {malloc(N * sizeof *h[0]), malloc(N * sizeof *h[1])};
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 41);
+  for (int i = 0; i < N; i++) sh[i] = rnd_shape(&r, SC_UNIFORM, 1);
+  qk_world_options_t o;
+  qk_world_options_init(&o);
+  o.threads = 2;
+  o.thread_min = 0; /* the threaded paths at this size too */
+  qk_world_t *w[2];
+  assert_int_equal(qk_world_new(&o, &w[1]), QK_OK);
+  for (int i = 0; i < N; i++) assert_int_equal(qk_world_add(w[1], &sh[i], 0, &h[1][i]), QK_OK);
+  assert_int_equal(qk_world_update(w[1]), QK_OK); /* (the workers start) */
+  fflush(NULL);
+  pid_t pid = fork();
+  assert_true(pid >= 0);
+  if (pid == 0) {
+    alarm(120);
+    o.threads = 1;
+    int bad = qk_world_new(&o, &w[0]) != QK_OK;
+    for (int i = 0; i < N && !bad; i++) bad = qk_world_add(w[0], &sh[i], 0, &h[0][i]) != QK_OK;
+    bad = bad || qk_world_update(w[0]) != QK_OK;
+    for (int f = 0; f < 3 && !bad; f++) {
+      for (int i = 0; i < N; i++) sh[i] = moved(&r, sh[i]);
+      for (int t = 0; t < 2 && !bad; t++) {
+        bad = qk_world_move_batch(w[t], h[t], sh, N, NULL) != QK_OK;
+        bad = bad || qk_world_update(w[t]) != QK_OK;
+      }
+      for (int which = 0; which < 3 && !bad; which++) {
+        size_t n0, n1;
+        qk_world_pairs_list(w[0], (qk_pairs_which_t)which, NULL, 0, &n0);
+        qk_world_pairs_list(w[1], (qk_pairs_which_t)which, NULL, 0, &n1);
+        qk_world_pair_t *p0 = malloc((n0 + 1) * sizeof *p0), *p1 = malloc((n0 + 1) * sizeof *p1);
+        bad = n0 != n1 || !p0 || !p1;
+        if (!bad) {
+          qk_world_pairs_list(w[0], (qk_pairs_which_t)which, p0, n0, &n0);
+          qk_world_pairs_list(w[1], (qk_pairs_which_t)which, p1, n1, &n1);
+          for (size_t k = 0; k < n0 && !bad; k++)
+            bad = QK_HANDLE_SLOT(p0[k].a) != QK_HANDLE_SLOT(p1[k].a) ||
+                  QK_HANDLE_SLOT(p0[k].b) != QK_HANDLE_SLOT(p1[k].b);
+        }
+        free(p0), free(p1);
+      }
+    }
+    qk_world_free(w[0]);
+    qk_world_free(w[1]);
+    _exit(bad ? 1 : 0);
+  }
+  int status = 0;
+  assert_int_equal(waitpid(pid, &status, 0), pid);
+  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0)
+    fail_msg("forked child: %s %d (seed %llu)", WIFEXITED(status) ? "exit" : "signal",
+             WIFEXITED(status) ? WEXITSTATUS(status) : WTERMSIG(status),
+             (unsigned long long)g_seed);
+  /* the parent's workers are still there */
+  for (int i = 0; i < N; i++) sh[i] = moved(&r, sh[i]);
+  assert_int_equal(qk_world_move_batch(w[1], h[1], sh, N, NULL), QK_OK);
+  assert_int_equal(qk_world_update(w[1]), QK_OK);
+  qk_world_free(w[1]);
+  free(h[0]), free(h[1]), free(sh);
+#endif
+}
+
 /* Two threads give the same pairs and ray hits as one. */
 static void test_world_threads(void **s) {
   (void)s;
@@ -1521,6 +1616,7 @@ int main(void) {
       cmocka_unit_test(test_world_nomem),
       cmocka_unit_test(test_world_nomem_threads),
       cmocka_unit_test(test_world_threads),
+      cmocka_unit_test(test_world_threads_fork),
       cmocka_unit_test(test_world_concurrent_readers),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
