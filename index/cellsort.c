@@ -11,12 +11,10 @@
  *     counted per cell and share, and the point with its place and low digit as a 20-byte
  *     record into its coarse bucket (high digit, at most 7 bits: 128 buckets), through a
  *     write-combining buffer per bucket (whole cache lines, non-temporal for large
- *     inputs) into a chain of chunks per bucket and share, which needs no count
- *     beforehand;
+ *     inputs) into chunk lists, which need no count beforehand;
  *  2. per coarse bucket (a job each): the fine buckets' slot ranges from the counts, and
- *     the records' coordinates and ids, read chain by chain with a read-ahead that follows
- *     the chains, sorted by the low digit into staging arrays in cache, then copied out in
- *     order to the tree's point arrays.
+ *     the records' coordinates and ids sorted by the low digit into staging arrays in
+ *     cache, then copied out in order to the tree's point arrays.
  * Both digits are counting sorts that keep input order, so the points of a cell keep
  * their input order and the result is the same for any number of threads.
  *
@@ -29,7 +27,6 @@
  * certain, the sort declines and the caller uses the plain build.
  */
 #include <float.h>
-#include <limits.h>
 #include <stdatomic.h>
 #include <math.h>
 #include <string.h>
@@ -72,13 +69,13 @@ int qk__build_avx2(void) {
  * a hint to the processor, computed outside C's pointer arithmetic). */
 #define QK__PREFETCH_PTS(p)                                                                        \
   QK__PREFETCH((const void *)((uintptr_t)(p) + PREFETCH_PTS * sizeof(qk_point_t)))
-/* How far ahead the keys of the first pass read the input by hand, in points (4 KB, a
- * block). The hardware's prefetch alone left the key pass (then a pass of its own)
- * reading the input at half the rate of the bounding box: 3.2 against 1.8-1.9 ms at 1M
- * points on one thread. The scatter reads the block from the first-level cache. */
+/* How far ahead the key pass and the scatter read the input by hand, in points (4 KB,
+ * a block of the key pass). The hardware's prefetch alone left the key pass reading the
+ * input at half the rate of the bounding box: 3.2 against 1.8-1.9 ms at 1M points on one
+ * thread, and the scatter 4.0 against 3.2-3.6 ms. */
 #define PREFETCH_PTS 256
 
-/* fine_records() and fine_one() are made twice, for pairs and for separate arrays. */
+/* fine_records() is made twice, for pairs and for separate arrays. */
 #if defined(__GNUC__)
 #define QK__ALWAYS_INLINE inline __attribute__((always_inline))
 #else
@@ -159,10 +156,6 @@ _Static_assert(sizeof(rec_t) == 20, "records of 20 bytes");
 #define MAX_COARSE_BITS 7u
 /* Most points a thread stages in pass 3: 320 KB, within a core's second-level cache. */
 #define STAGE_MAX 16384u
-/* A bucket of average size takes at least CHUNK_DIV chunks of a share, of at most
- * CHUNK_MAX records (a multiple of WC). */
-#define CHUNK_DIV 4u
-#define CHUNK_MAX 4096u
 /* Points per block of the key computation: their keys stay in the first-level cache
  * between the loop that computes them and the one that scatters them. */
 #define BLOCK 256u
@@ -176,22 +169,15 @@ typedef struct bucket_job {
   unsigned fbits;            /* bits of the low digit */
   size_t nc;                 /* coarse buckets */
   bool stream;               /* write records and points around the caches */
-  rec_t *rec;                /* the chunks, 64-byte aligned */
-  uint32_t chunk;            /* records per chunk, a multiple of WC */
-  uint32_t *chunk0;          /* ns + 1: share w's chunks are chunk0[w] .. chunk0[w + 1] - 1 */
-  uint32_t *head;            /* ns rows of nc: the first chunk of bucket c's records from share w */
-  uint32_t *link;            /* every chunk: the next chunk of its bucket and share */
+  uint16_t *key;             /* every point's cell */
+  rec_t *rec;                /* 64-byte aligned */
+  uint32_t *seg;             /* ns rows of nc: where the records of (w, c) start */
   uint32_t *cnt;             /* ns rows of nc: records of bucket c from share w */
   uint32_t *hist;            /* ns rows of 4^L: the points of every cell by share */
   size_t nb;                 /* cells, 4^L */
   uint32_t *cbase;           /* nc + 1 coarse bucket starts in the point arrays */
   uint32_t *cum;             /* 4^L + 1 fine bucket starts */
-  atomic_uchar *ready;       /* beside a hook, per coarse bucket: its starts not begun (0),
-                              * being summed (1), in cum (2); else NULL */
   uint32_t *deep;            /* nc: points of bucket c in cells over the capacity */
-  size_t *sdeep;             /* ns: share w's points in cells where it alone holds over
-                              * capacity / ns (an estimate of the deep points before the
-                              * counts are summed) */
   unsigned nw;               /* threads */
   unsigned ns;               /* shares of pass 1, at least nw */
   uint32_t stage_cap;        /* points per thread in the staging arrays (0: none) */
@@ -363,23 +349,43 @@ __attribute__((target("avx"))) static void flush_wc_avx(rec_t *d, const rec_t *s
 }
 #endif
 
-/* The counts of a block's cells into the share's histogram h. */
-static inline void count_cells(uint32_t *h, const uint16_t *k, size_t m) {
-  size_t q = 0;
-  for (; q + 4 <= m; q += 4) {
-    h[k[q]]++;
-    h[k[q + 1]]++;
-    h[k[q + 2]]++;
-    h[k[q + 3]]++;
+/* Pass 1 for share w: every point's cell, and the share's count of every cell and of
+ * every coarse bucket. */
+static void keys_job(unsigned w, unsigned thread, void *ctx) {
+  (void)thread;
+  const bucket_job_t *j = ctx;
+  size_t lo, hi;
+  qk__share_range(j->n, w, j->ns, &lo, &hi);
+  uint32_t *h = j->hist + (size_t)w * j->nb;
+  const qk_point_t *p = j->p;
+  uint16_t *key = j->key;
+  memset(h, 0, j->nb * sizeof *h);
+  for (size_t i0 = lo; i0 < hi; i0 += BLOCK) {
+    size_t m = hi - i0 < BLOCK ? hi - i0 : BLOCK;
+    const uint16_t *k = key + i0;
+    keys_block(j, p + i0, m, key + i0);
+    size_t q = 0;
+    for (; q + 4 <= m; q += 4) {
+      h[k[q]]++;
+      h[k[q + 1]]++;
+      h[k[q + 2]]++;
+      h[k[q + 3]]++;
+    }
+    for (; q < m; q++) h[k[q]]++;
   }
-  for (; q < m; q++) h[k[q]]++;
+  const size_t nc = j->nc, nf = (size_t)1 << j->fbits;
+  for (size_t c = 0; c < nc; c++) {
+    uint32_t k = 0;
+    for (size_t f = 0; f < nf; f++) k += h[c * nf + f];
+    j->cnt[(size_t)w * nc + c] = k;
+  }
 }
 
-/* Coarse bucket c's fine buckets' starts from the shares' counts of the first pass, into
- * cum and, with `sub` subtracted, into next[], and the points of its cells over the
- * capacity. */
-static void bucket_starts(const bucket_job_t *j, size_t c, uint32_t *next, uint32_t sub) {
+/* Coarse bucket c's fine buckets' starts from the shares' counts of pass 1, and the points
+ * of its cells over the capacity. */
+static void bucket_starts(const bucket_job_t *j, size_t c) {
   const uint32_t nf = 1u << j->fbits;
+  uint32_t next[1u << (16 - MAX_COARSE_BITS)];
   memcpy(next, j->hist + c * nf, nf * sizeof *next);
   for (unsigned v = 1; v < j->ns; v++) {
     const uint32_t *h = j->hist + (size_t)v * j->nb + c * nf;
@@ -389,28 +395,10 @@ static void bucket_starts(const bucket_job_t *j, size_t c, uint32_t *next, uint3
   for (uint32_t f = 0; f < nf; f++) {
     uint32_t k = next[f];
     cum[f] = acc;
-    next[f] = acc - sub;
     acc += k;
     deep += k > cap ? k : 0;
   }
   j->deep[c] = deep;
-}
-
-/* Bucket c's starts into next[] (less `sub`): summed here, or beside a hook (which needs
- * every bucket's) by whichever thread comes to them first, the other waiting for them (a
- * bucket's sums: a few thousand instructions). */
-static void starts_of(const bucket_job_t *j, size_t c, uint32_t *next, uint32_t sub) {
-  unsigned char none = 0;
-  if (!j->ready || atomic_compare_exchange_strong_explicit(
-                       &j->ready[c], &none, 1, memory_order_relaxed, memory_order_relaxed)) {
-    bucket_starts(j, c, next, sub);
-    if (j->ready) atomic_store_explicit(&j->ready[c], 2, memory_order_release);
-    return;
-  }
-  for (unsigned spins = 0; atomic_load_explicit(&j->ready[c], memory_order_acquire) != 2;)
-    if (++spins >= 64) qk__thread_yield();
-  const uint32_t nf = 1u << j->fbits, *cum = j->cum + c * nf;
-  for (uint32_t f = 0; f < nf; f++) next[f] = cum[f] - sub;
 }
 
 #if QK__CELL_AVX2
@@ -443,151 +431,109 @@ tags_avx2(const uint16_t *k, size_t m, uint32_t tq, unsigned fbits, uint8_t *cb,
 }
 #endif
 
-/* A share's chains of chunks, one per coarse bucket: chunks come from the share's own
- * range in the order the buckets fill them. */
-typedef struct chains {
-  size_t next[1u << MAX_COARSE_BITS];   /* where bucket c's next buffer goes, in records */
-  size_t cend[1u << MAX_COARSE_BITS];   /* the end of its current chunk */
-  uint32_t last[1u << MAX_COARSE_BITS]; /* its current chunk (QK_NONE: none yet) */
-  uint32_t *head, *link;                /* the share's row of heads; every chunk's link */
-  uint32_t ck;                          /* the share's next free chunk */
-  uint32_t chunk;                       /* records per chunk */
-} chains_t;
-
-/* Bucket c's current chunk is full (or it has none): the share's next chunk is its next. */
-static void chain_grow(chains_t *ch, size_t c) {
-  uint32_t k = ch->ck++;
-  if (ch->last[c] == QK_NONE)
-    ch->head[c] = k;
-  else
-    ch->link[ch->last[c]] = k;
-  ch->last[c] = k;
-  ch->next[c] = (size_t)k * ch->chunk;
-  ch->cend[c] = ch->next[c] + ch->chunk;
-}
-
 /* One point into its bucket's write-combining buffer as a record (its coordinates and
- * tag); a full buffer goes to the bucket's next WC records in its chain, through the
- * caches (mode 0) or around them (1: SSE2, 2: AVX). */
+ * tag); a full buffer goes to the bucket's next WC records of the record array, through
+ * the caches (mode 0) or around them (1: SSE2, 2: AVX). */
 static QK__ALWAYS_INLINE void put_rec(unsigned char *bytes, uint16_t *off, const uint16_t *end,
-                                      chains_t *ch, rec_t *rec, const qk_point_t *pt, uint32_t c,
+                                      uint32_t *next, rec_t *rec, const qk_point_t *pt, uint32_t c,
                                       uint32_t tag, unsigned mode) {
   uint32_t o = off[c];
   memcpy(bytes + o, pt, 16);
   memcpy(bytes + o + 16, &tag, 4);
   o += (uint32_t)sizeof(rec_t);
   if (QK__UNLIKELY(o == end[c])) {
-    /* chunks hold a multiple of WC records and the array is 64-byte aligned: whole lines */
+    /* next[c] is a multiple of WC and the array 64-byte aligned: whole lines */
     o -= WC * (uint32_t)sizeof(rec_t);
     const rec_t *src = (const rec_t *)(const void *)(bytes + o);
-    if (ch->next[c] == ch->cend[c]) chain_grow(ch, c);
 #if QK__CELL_AVX2
     if (mode == 2)
-      flush_wc_avx(&rec[ch->next[c]], src);
+      flush_wc_avx(&rec[next[c]], src);
     else
 #endif
-      flush_wc(&rec[ch->next[c]], src, mode != 0);
-    ch->next[c] += WC;
+      flush_wc(&rec[next[c]], src, mode != 0);
+    next[c] += WC;
   }
   off[c] = (uint16_t)o;
 }
 
-/* The first pass for share w, one read of its points: every point's cell, the share's
- * count of every cell and of every coarse bucket, and the points as records into their
- * coarse buckets' chains of chunks, stable. Each bucket's records gather in a buffer of
- * WC (five cache lines) that goes to memory whole, with non-temporal stores for large
- * inputs: no line of the record array is read before it is written, and 2^7 buffers,
- * unlike 2^7 scattered write streams, stay in cache. The keys of a block of BLOCK points
- * are computed, counted and scattered while the block is in the first-level cache: the
- * input is read from memory once, and no key array goes to memory and back. */
-static void first_job(unsigned w, unsigned thread, void *ctx) {
+/* Pass 2 for share w: the points as records into their coarse buckets' segments, stable.
+ * Each bucket's records gather in a buffer of WC (five cache lines) that goes to memory
+ * whole, with non-temporal stores for large inputs: no line of the record array is read
+ * before it is written, and 2^7 buffers, unlike 2^7 scattered write streams, stay in
+ * cache. */
+static void scatter_job(unsigned w, unsigned thread, void *ctx) {
   (void)thread;
   const bucket_job_t *j = ctx;
   size_t lo, hi;
   qk__share_range(j->n, w, j->ns, &lo, &hi);
   const size_t nc = j->nc;
   const qk_point_t *p = j->p;
+  const uint16_t *key = j->key;
   rec_t *rec = j->rec;
   const unsigned fbits = j->fbits;
   const uint32_t mask = (1u << fbits) - 1;
   const bool stream = j->stream;
   const unsigned mode = !stream ? 0u : j->avx2 ? 2u : 1u;
-  uint32_t *h = j->hist + (size_t)w * j->nb;
-  memset(h, 0, j->nb * sizeof *h);
-  chains_t ch;
-  ch.head = j->head + (size_t)w * nc;
-  ch.link = j->link;
-  ch.ck = j->chunk0[w];
-  ch.chunk = j->chunk;
+  uint32_t next[1u << MAX_COARSE_BITS]; /* where bucket c's next buffer goes */
   /* where bucket c's next record goes in buf, in bytes, and where its buffer ends */
   uint16_t off[1u << MAX_COARSE_BITS], end[1u << MAX_COARSE_BITS];
   _Alignas(64) rec_t buf[(1u << MAX_COARSE_BITS) * WC];
   _Alignas(16) uint32_t tag[BLOCK];
-  _Alignas(32) uint16_t key[BLOCK];
   _Alignas(16) uint8_t cb[BLOCK];
   for (size_t c = 0; c < nc; c++) {
-    ch.next[c] = ch.cend[c] = 0;
-    ch.last[c] = QK_NONE;
-    ch.head[c] = QK_NONE;
+    next[c] = j->seg[(size_t)w * nc + c];
     off[c] = (uint16_t)(c * WC * sizeof(rec_t));
     end[c] = (uint16_t)((c + 1) * WC * sizeof(rec_t));
   }
   unsigned char *bytes = buf[0].b;
   for (size_t i0 = lo; i0 < hi; i0 += BLOCK) {
     size_t m = hi - i0 < BLOCK ? hi - i0 : BLOCK;
-    const qk_point_t *pp = p + i0;
-    keys_block(j, pp, m, key);
-    count_cells(h, key, m);
+    const uint16_t *k = key + i0;
     /* The block's buckets and tags in a loop of their own (vectorised: by hand with AVX2),
      * so that the scatter loop does little more than copy. */
     uint32_t tq = (uint32_t)(j->gid ? i0 : i0 - lo) << fbits;
     const uint32_t step = 1u << fbits;
     size_t q0 = 0;
 #if QK__CELL_AVX2
-    if (j->avx2) q0 = tags_avx2(key, m, tq, fbits, cb, tag);
+    if (j->avx2) q0 = tags_avx2(k, m, tq, fbits, cb, tag);
     tq += (uint32_t)q0 << fbits;
 #endif
     for (size_t q = q0; q < m; q++, tq += step) {
-      cb[q] = (uint8_t)(key[q] >> fbits);
-      tag[q] = tq | (key[q] & mask);
+      cb[q] = (uint8_t)(k[q] >> fbits);
+      tag[q] = tq | (k[q] & mask);
     }
+    const qk_point_t *pp = p + i0;
     size_t q = 0;
+    /* Four points a step, with one prefetch for their line of the input. */
     for (; q + 4 <= m; q += 4) {
-      put_rec(bytes, off, end, &ch, rec, &pp[q], cb[q], tag[q], mode);
-      put_rec(bytes, off, end, &ch, rec, &pp[q + 1], cb[q + 1], tag[q + 1], mode);
-      put_rec(bytes, off, end, &ch, rec, &pp[q + 2], cb[q + 2], tag[q + 2], mode);
-      put_rec(bytes, off, end, &ch, rec, &pp[q + 3], cb[q + 3], tag[q + 3], mode);
+      QK__PREFETCH_PTS(&pp[q]);
+      put_rec(bytes, off, end, next, rec, &pp[q], cb[q], tag[q], mode);
+      put_rec(bytes, off, end, next, rec, &pp[q + 1], cb[q + 1], tag[q + 1], mode);
+      put_rec(bytes, off, end, next, rec, &pp[q + 2], cb[q + 2], tag[q + 2], mode);
+      put_rec(bytes, off, end, next, rec, &pp[q + 3], cb[q + 3], tag[q + 3], mode);
     }
-    for (; q < m; q++) put_rec(bytes, off, end, &ch, rec, &pp[q], cb[q], tag[q], mode);
+    for (; q < m; q++) put_rec(bytes, off, end, next, rec, &pp[q], cb[q], tag[q], mode);
   }
   for (size_t c = 0; c < nc; c++) {
     uint32_t fill = (uint32_t)(off[c] - c * WC * sizeof(rec_t)) / (uint32_t)sizeof(rec_t);
-    if (!fill) continue;
-    if (ch.next[c] == ch.cend[c]) chain_grow(&ch, c);
-    memcpy(&rec[ch.next[c]], &buf[c * WC], fill * sizeof *rec);
+    memcpy(&rec[next[c]], &buf[c * WC], fill * sizeof *rec);
   }
 #if defined(__SSE2__)
   if (stream) _mm_sfence(); /* the streamed lines before anything the caller does next */
 #endif
-  /* The share's count of every coarse bucket, and its estimate of the deep points where a
-   * hook may run. */
-  const size_t nf = (size_t)1 << fbits;
-  for (size_t c = 0; c < nc; c++) {
-    uint32_t k = 0;
-    for (size_t f = 0; f < nf; f++) k += h[c * nf + f];
-    j->cnt[(size_t)w * nc + c] = k;
-  }
-  if (j->sdeep) {
-    const uint32_t over = (uint32_t)(j->t->capacity / j->ns); /* e * ns > capacity */
-    size_t sdeep = 0;
-    for (size_t i = 0; i < j->nb; i++) sdeep += h[i] > over ? h[i] : 0;
-    j->sdeep[w] = sdeep;
-  }
+  /* The bucket starts, a share of the buckets each, so that the whole tree can be read off
+   * them before (or while) the fine pass runs. */
+  for (size_t c = w; c < nc; c += j->ns) bucket_starts(j, c);
 }
 
-static void first_share(void *ctx, unsigned w, unsigned nw) {
+static void keys_share(void *ctx, unsigned w, unsigned nw) {
   (void)nw;
-  first_job(w, w, ctx);
+  keys_job(w, w, ctx);
+}
+
+static void scatter_share(void *ctx, unsigned w, unsigned nw) {
+  (void)nw;
+  scatter_job(w, w, ctx);
 }
 
 /* Run a pass over the shares: share w on thread w when there are as many, else as jobs. */
@@ -654,91 +600,54 @@ static void copy_out(void *dst, const void *src, size_t bytes, bool stream, bool
   memcpy(dst, src, bytes);
 }
 
-/* Where a walk over coarse bucket c's records stands: every share's chain in turn, chunk
- * by chunk. */
-typedef struct run_it {
-  unsigned v;    /* the share */
-  uint32_t k;    /* its chunk to hand out next */
-  uint32_t left; /* its records not handed out yet */
-} run_it_t;
-
-/* The next run of bucket c's records, [*r, *e): a chunk or the part of it in use. False at
- * the end. */
-static inline bool next_run(const bucket_job_t *j, unsigned c, run_it_t *it, const rec_t **r,
-                            const rec_t **e) {
-  while (it->left == 0) {
-    if (++it->v >= j->ns) return false;
-    it->left = j->cnt[(size_t)it->v * j->nc + c];
-    it->k = j->head[(size_t)it->v * j->nc + c];
-  }
-  uint32_t m = it->left < j->chunk ? it->left : j->chunk;
-  *r = j->rec + (size_t)it->k * j->chunk;
-  *e = *r + m;
-  it->left -= m;
-  if (it->left) it->k = j->link[it->k];
-  return true;
-}
-
-/* The records of coarse bucket c, every share's chain in turn, to their slots: record of
- * fine digit f to slot next[f]++, its coordinates at px[stride * slot] and
+/* The records of coarse bucket c, every share's segment in turn, to their slots: record
+ * of fine digit f to slot next[f]++, its coordinates at px[stride * slot] and
  * py[stride * slot] (stride 2: pairs), its id at pid[slot]. */
-/* One record to its slot: its fine digit's next slot, its coordinates at px[stride * slot]
- * and py[stride * slot], its id at pid[slot]. */
-static QK__ALWAYS_INLINE void fine_one(const rec_t *r, uint32_t *next, double *px, double *py,
-                                       size_t stride, qk_id_t *pid, uint32_t id0, unsigned fbits) {
-  uint32_t g;
-  memcpy(&g, r->b + 16, 4);
-  uint32_t d = next[g & ((1u << fbits) - 1)]++;
-  if (stride == 2) {
-    memcpy(&px[2 * d], r->b, 16);
-  } else {
-    memcpy(&px[d], r->b, 8);
-    memcpy(&py[d], r->b + 8, 8);
-  }
-  pid[d] = id0 + (g >> fbits);
-}
-
-/* The records of coarse bucket c, every share's chain in turn, to their slots (fine_one).
- * Two records a step: the second's slot is taken after the first's, as one at a time
- * would (they may share a fine bucket). */
 static QK__ALWAYS_INLINE void fine_records(const bucket_job_t *j, unsigned c, uint32_t *next,
                                            double *px, double *py, size_t stride, qk_id_t *pid,
                                            bool gid) {
+  const size_t nc = j->nc;
   const unsigned fbits = j->fbits;
-  run_it_t it = {UINT_MAX, 0, 0};
-  const rec_t *r, *e;
-  while (next_run(j, c, &it, &r, &e)) {
-    uint32_t id0 = 0;
-    if (!gid) {
-      size_t lo, hi;
-      qk__share_range(j->n, it.v, j->ns, &lo, &hi);
-      id0 = (uint32_t)lo;
-    }
-    /* The records come from memory (written around the caches) and are read ahead by
-     * hand, PREFETCH_RECS records (about 2 KB): the hardware's prefetch alone left the
-     * pass a fifth slower on one thread (4.4-4.6 against 3.5-3.7 ms at 1M). Within the
-     * run, then, over its last PREFETCH_RECS records, at the start of the next run, so
-     * that the read-ahead crosses from chunk to chunk as the reads will and reads no line
-     * they will not. */
-    const rec_t *mid = (size_t)(e - r) > PREFETCH_RECS ? e - PREFETCH_RECS : r;
-    for (; r + 2 <= mid; r += 2) {
-      QK__PREFETCH(r + PREFETCH_RECS);
-      fine_one(r, next, px, py, stride, pid, id0, fbits);
-      fine_one(r + 1, next, px, py, stride, pid, id0, fbits);
-    }
-    run_it_t peek = it;
-    const rec_t *nr, *ne;
-    uintptr_t ar = 0, ae = 0; /* the next run's records still to read ahead, as addresses */
-    if (next_run(j, c, &peek, &nr, &ne)) ar = (uintptr_t)nr, ae = (uintptr_t)ne;
+  const uint32_t mask = (1u << fbits) - 1;
+  for (unsigned v = 0; v < j->ns; v++) {
+    size_t lo, hi;
+    qk__share_range(j->n, v, j->ns, &lo, &hi);
+    const uint32_t id0 = gid ? 0u : (uint32_t)lo;
+    const rec_t *r = j->rec + j->seg[(size_t)v * nc + c], *e = r + j->cnt[(size_t)v * nc + c];
+    /* Two records a step: the second's slot is taken after the first's, as one at a time
+     * would (they may share a fine bucket). The records come from memory (written around
+     * the caches) and are read ahead by hand, about 2 KB: the hardware's prefetch alone
+     * left the pass a fifth slower on one thread (4.4-4.6 against 3.5-3.7 ms at 1M). */
     for (; r + 2 <= e; r += 2) {
-      if (ar < ae) {
-        QK__PREFETCH((const void *)ar);
-        ar += 2 * sizeof(rec_t);
+      QK__PREFETCH((const void *)((uintptr_t)r + PREFETCH_RECS * sizeof *r));
+      uint32_t g0, g1;
+      memcpy(&g0, r[0].b + 16, 4);
+      memcpy(&g1, r[1].b + 16, 4);
+      uint32_t d = next[g0 & mask]++;
+      if (stride == 2) {
+        memcpy(&px[2 * d], r[0].b, 16);
+      } else {
+        memcpy(&px[d], r[0].b, 8);
+        memcpy(&py[d], r[0].b + 8, 8);
       }
-      fine_one(r, next, px, py, stride, pid, id0, fbits);
-      fine_one(r + 1, next, px, py, stride, pid, id0, fbits);
+      pid[d] = id0 + (g0 >> fbits);
+      uint32_t d1 = next[g1 & mask]++;
+      if (stride == 2) {
+        memcpy(&px[2 * d1], r[1].b, 16);
+      } else {
+        memcpy(&px[d1], r[1].b, 8);
+        memcpy(&py[d1], r[1].b + 8, 8);
+      }
+      pid[d1] = id0 + (g1 >> fbits);
     }
-    if (r < e) fine_one(r, next, px, py, stride, pid, id0, fbits);
+    if (r < e) {
+      uint32_t g;
+      memcpy(&g, r->b + 16, 4);
+      uint32_t d = next[g & mask]++;
+      memcpy(&px[stride * d], r->b, 8);
+      memcpy(&py[stride * d], r->b + 8, 8);
+      pid[d] = id0 + (g >> fbits);
+    }
   }
 }
 
@@ -815,19 +724,20 @@ static void copy_pairs(double *x, double *y, const double *xy, size_t m, bool st
   }
 }
 
-/* The second pass: coarse bucket c sorted by its low digit into the point arrays, stable,
- * its fine buckets' starts from the shares' counts of the first pass (written to cum unless
- * a hook wrote them all). The sort writes all over the bucket's slot range; when the range
- * fits the share's staging arrays, it writes there (in cache, reused from bucket to bucket)
- * and the range is then copied out in order, so that the point arrays are written front to
- * back rather than line by line at random. */
+/* Pass 3: coarse bucket c sorted by its low digit into the point arrays, stable, and its
+ * fine buckets' starts from the shares' counts of pass 1. The sort writes all over the bucket's
+ * slot range; when the range fits the share's staging arrays, it writes there (in cache, reused
+ * from bucket to bucket) and the range is then copied out in order, so that the point arrays are
+ * written front to back rather than line by line at random. */
 static void fine_job(unsigned c, unsigned w, void *ud) {
   const bucket_job_t *j = ud;
   uint32_t a = j->cbase[c], b = j->cbase[c + 1];
+  const uint32_t nf = 1u << j->fbits;
   uint32_t next[1u << (16 - MAX_COARSE_BITS)];
+  const uint32_t *cum = j->cum + (size_t)c * nf;
   if (b - a <= j->stage_cap) {
     /* Staged: coordinates as pairs (one line written a point, not two) and ids. */
-    starts_of(j, c, next, a);
+    for (uint32_t f = 0; f < nf; f++) next[f] = cum[f] - a;
     double *sxy = j->sxy + (size_t)w * 2 * j->stage_cap;
     qk_id_t *sid = j->sid + (size_t)w * j->stage_cap;
     /* The tags' ids without an addition a record where they are the input's indices. */
@@ -841,7 +751,7 @@ static void fine_job(unsigned c, unsigned w, void *ud) {
     if (j->stream) _mm_sfence();
 #endif
   } else {
-    starts_of(j, c, next, 0);
+    for (uint32_t f = 0; f < nf; f++) next[f] = cum[f];
     fine_records(j, c, next, j->t->px, j->t->py, 1, j->t->pid, j->gid);
   }
 }
@@ -857,7 +767,6 @@ struct qk__cell_wait {
   qk__cell_hook_t *hook;
   atomic_uint next;
   atomic_uchar state[1u << MAX_COARSE_BITS];
-  atomic_uchar ready[1u << MAX_COARSE_BITS]; /* bucket_job_t's `ready` */
 };
 
 static bool claim(qk__cell_wait_t *s, unsigned c) {
@@ -894,12 +803,7 @@ void qk__cell_wait(qk__cell_wait_t *s, uint32_t cell) {
 static void hook_share(void *ctx, unsigned w, unsigned nw) {
   (void)nw;
   qk__cell_wait_t *s = ctx;
-  if (w == 0) {
-    /* Every bucket's starts for the hook, then the hook. */
-    uint32_t next[1u << (16 - MAX_COARSE_BITS)];
-    for (size_t c = 0; c < s->j->nc; c++) starts_of(s->j, c, next, 0);
-    s->hook->st = s->hook->fn(s->hook->ctx, s->j->cum, s);
-  }
+  if (w == 0) s->hook->st = s->hook->fn(s->hook->ctx, s->j->cum, s);
   for (;;) {
     unsigned c = atomic_fetch_add_explicit(&s->next, 1u, memory_order_relaxed);
     if (c >= s->j->nc) return;
@@ -909,12 +813,12 @@ static void hook_share(void *ctx, unsigned w, unsigned nw) {
 
 /* The temporary arrays of the bucketed build. */
 typedef struct scratch {
-  uint32_t *cum, *cbase, *cnt, *hist, *deep, *chunk0, *head, *link;
-  size_t *sdeep;
+  uint32_t *cum, *cbase, *cnt, *seg, *hist, *deep;
+  uint16_t *key;
   void *rec_block; /* rec, before alignment */
   double *sxy;
   qk_id_t *sid;
-  size_t nb, nc, n, ns, n_chunks, rec_bytes, n_stage;
+  size_t nb, nc, n, ns, n_rec, rec_bytes, n_stage;
 } scratch_t;
 
 static void scratch_free(const qk_tree_t *t, scratch_t *s) {
@@ -922,11 +826,9 @@ static void scratch_free(const qk_tree_t *t, scratch_t *s) {
   qk__free(&t->alloc, s->cbase, (s->nc + 1) * sizeof *s->cbase);
   qk__free(&t->alloc, s->deep, s->nc * sizeof *s->deep);
   qk__free(&t->alloc, s->cnt, s->ns * s->nc * sizeof *s->cnt);
+  qk__free(&t->alloc, s->seg, s->ns * s->nc * sizeof *s->seg);
   qk__free(&t->alloc, s->hist, s->ns * s->nb * sizeof *s->hist);
-  qk__free(&t->alloc, s->chunk0, (s->ns + 1) * sizeof *s->chunk0);
-  qk__free(&t->alloc, s->head, s->ns * s->nc * sizeof *s->head);
-  qk__free(&t->alloc, s->link, s->n_chunks * sizeof *s->link);
-  qk__free(&t->alloc, s->sdeep, s->ns * sizeof *s->sdeep);
+  qk__free(&t->alloc, s->key, s->n * sizeof *s->key);
   qk__free(&t->alloc, s->rec_block, s->rec_bytes);
   qk__free(&t->alloc, s->sxy, 2 * s->n_stage * sizeof *s->sxy);
   qk__free(&t->alloc, s->sid, s->n_stage * sizeof *s->sid);
@@ -963,76 +865,25 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
    * 2^19 points (the tests' too) sorted in several shares, on any number of threads. */
   size_t per = (size_t)1 << 19, ns = (n + per - 1) / per;
   if (ns < nw) ns = nw;
-  /* Chunks: a share's records of a bucket go to a chain of chunks taken from the share's
-   * range as the buckets fill them, CHUNK_DIV or more chunks for a bucket of average size
-   * (the chains' unused tails are at most a chunk a bucket and share: address space, never
-   * touched), so that the first pass needs no counts beforehand. */
-  size_t share_max = (n + ns - 1) / ns, chunk = share_max / (nc * CHUNK_DIV) / WC * WC;
-  if (chunk < WC) chunk = WC;
-  if (chunk > CHUNK_MAX) chunk = CHUNK_MAX;
   scratch_t s = {0};
   s.nb = nb, s.nc = nc, s.n = n, s.ns = ns;
-  s.chunk0 = qk__realloc(&t->alloc, NULL, 0, (ns + 1) * sizeof *s.chunk0);
-  if (!s.chunk0) return QK_ERR_NOMEM;
-  /* Share w's chains take at most floor(points / chunk) + nc chunks (a bucket's last chunk
-   * may be part full). */
-  size_t at = 0;
-  for (unsigned w = 0; w < ns; w++) {
-    size_t lo, hi;
-    qk__share_range(n, w, (unsigned)ns, &lo, &hi);
-    s.chunk0[w] = (uint32_t)at;
-    at += (hi - lo) / chunk + nc;
-  }
-  s.chunk0[ns] = (uint32_t)at;
-  if (at > UINT32_MAX) {
-    scratch_free(t, &s);
-    return QK_OK; /* (not reached below 2^32 points) the plain build */
-  }
-  s.n_chunks = at;
   s.cum = qk__realloc(&t->alloc, NULL, 0, (nb + 1) * sizeof *s.cum);
   s.cbase = qk__realloc(&t->alloc, NULL, 0, (nc + 1) * sizeof *s.cbase);
   s.deep = qk__realloc(&t->alloc, NULL, 0, nc * sizeof *s.deep);
   s.cnt = qk__realloc(&t->alloc, NULL, 0, ns * nc * sizeof *s.cnt);
+  s.seg = qk__realloc(&t->alloc, NULL, 0, ns * nc * sizeof *s.seg);
   s.hist = qk__realloc(&t->alloc, NULL, 0, ns * nb * sizeof *s.hist);
-  s.head = qk__realloc(&t->alloc, NULL, 0, ns * nc * sizeof *s.head);
-  s.link = qk__realloc(&t->alloc, NULL, 0, s.n_chunks * sizeof *s.link);
-  s.sdeep = qk__realloc(&t->alloc, NULL, 0, ns * sizeof *s.sdeep);
-  if (!s.cum || !s.cbase || !s.deep || !s.cnt || !s.hist || !s.head || !s.link || !s.sdeep) {
+  s.key = qk__realloc(&t->alloc, NULL, 0, n * sizeof *s.key);
+  if (!s.cum || !s.cbase || !s.deep || !s.cnt || !s.seg || !s.hist || !s.key) {
     scratch_free(t, &s);
     return QK_ERR_NOMEM;
   }
-  /* From the default allocator, the record block is asked for at least as large as the
-   * rest of what a build holds (the tree's point arrays and nodes by estimate, the counts)
-   * and a megabyte. glibc's malloc gives the top of its heap back to the system when a
-   * free leaves more there than twice the largest block it recently had to map: freeing a
-   * tree after a build whose largest block were less than half of it all would hand back
-   * every page, and the next build would fault them all in again (10,000 faults for 1M
-   * points). The excess is never touched: address space, not memory. Blocks over 32 MB are
-   * mapped afresh whatever their size (glibc's largest mapping threshold). */
-  size_t pool = s.n_chunks * chunk * sizeof(rec_t);
-  s.rec_bytes = pool + 64;
-  if (!t->alloc.fn) {
-    size_t rest = n * (2 * sizeof(double) + sizeof(qk_id_t)) + ns * nb * 4 +
-                  (4 * (n / t->capacity) + 64) * sizeof(qk__node_t) + ((size_t)1 << 20);
-    if (s.rec_bytes < rest && rest <= ((size_t)32 << 20)) s.rec_bytes = rest;
-  }
-  s.rec_block = qk__realloc(&t->alloc, NULL, 0, s.rec_bytes);
-  if (!s.rec_block) {
-    scratch_free(t, &s);
-    return QK_ERR_NOMEM;
-  }
-  /* The first pass writes 2^7 streams at once: on huge pages, they need fewer TLB entries. */
-  if (t->huge_pages) qk__advise_huge(&t->alloc, s.rec_block, pool + 64);
   /* Large inputs go around the caches: their records and points would not stay there. */
   bool stream = n >= ((size_t)1 << 19);
   bucket_job_t j = {0};
   j.t = t, j.p = p, j.n = n, j.x0 = x0, j.y0 = y0, j.scale = scale;
   j.ax = &tabs[0], j.ay = &tabs[1], j.fbits = fbits, j.nc = nc, j.stream = stream;
-  j.hist = s.hist, j.nb = nb, j.chunk = (uint32_t)chunk, j.chunk0 = s.chunk0;
-  j.head = s.head, j.link = s.link;
-  /* the hook's condition but for the estimate */
-  bool hookable = hook && nw > 1 && nc > 1 && !t->alloc.fn;
-  if (hookable) j.sdeep = s.sdeep;
+  j.key = s.key, j.hist = s.hist, j.nb = nb, j.seg = s.seg;
   j.cnt = s.cnt, j.cbase = s.cbase, j.cum = s.cum, j.deep = s.deep, j.nw = nw, j.ns = (unsigned)ns;
   j.near = delta;
   j.even = (uint32_t)qk__spread16((1u << L) - 1);
@@ -1041,23 +892,51 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
 #if QK__CELL_AVX2
   j.avx2 = qk__build_avx2();
 #endif
-  j.rec = (rec_t *)(void *)((unsigned char *)s.rec_block + (-(uintptr_t)s.rec_block & 63u));
-  run_pass(&j, first_share, first_job);
-  /* The coarse buckets' starts: the shares before come first, so the order is the one
-   * thread's. */
+  run_pass(&j, keys_share, keys_job);
+  /* The buckets' starts, and each share's segment of every bucket: the shares before it
+   * come first, so the order is the one thread's. Segments start at multiples of WC. */
   uint32_t acc = 0, most = 0;
-  size_t est = 0;
+  size_t at = 0;
   for (size_t c = 0; c < nc; c++) {
     s.cbase[c] = acc;
-    for (size_t w = 0; w < ns; w++) acc += s.cnt[w * nc + c];
+    for (size_t w = 0; w < ns; w++) {
+      uint32_t k = s.cnt[w * nc + c];
+      s.seg[w * nc + c] = (uint32_t)at;
+      at += (k + WC - 1) / WC * WC;
+      acc += k;
+    }
     if (acc - s.cbase[c] > most) most = acc - s.cbase[c];
   }
   s.cbase[nc] = acc;
   s.cum[nb] = acc;
-  if (hookable)
-    for (size_t w = 0; w < ns; w++) est += s.sdeep[w];
-  /* Staging arrays for the second pass, each thread's as large as the largest coarse
-   * bucket up to STAGE_MAX points. */
+  s.n_rec = at ? at : 1;
+  /* From the default allocator, the record block is asked for at least as large as the
+   * rest of what a build holds (the tree's point arrays and nodes by estimate, the keys,
+   * the counts) and a megabyte. glibc's malloc gives the top of its heap back to the
+   * system when a free leaves more there than twice the largest block it recently had to
+   * map: freeing a tree after a build whose largest block were less than half of it all
+   * would hand back every page, and the next build would fault them all in again (10,000
+   * faults for 1M points). The excess is never touched: address space, not memory. Blocks
+   * over 32 MB are mapped afresh whatever their size (glibc's largest mapping threshold). */
+  s.rec_bytes = s.n_rec * sizeof(rec_t) + 64;
+  if (!t->alloc.fn) {
+    size_t rest = n * (2 * sizeof(double) + sizeof(qk_id_t) + sizeof *s.key) + ns * nb * 4 +
+                  (4 * (n / t->capacity) + 64) * sizeof(qk__node_t) + ((size_t)1 << 20);
+    if (s.rec_bytes < rest && rest <= ((size_t)32 << 20)) s.rec_bytes = rest;
+  }
+  s.rec_block = qk__realloc(&t->alloc, NULL, 0, s.rec_bytes);
+  if (!s.rec_block) {
+    scratch_free(t, &s);
+    return QK_ERR_NOMEM;
+  }
+  /* The scatter writes 2^7 streams at once: on huge pages, they need fewer TLB entries. */
+  if (t->huge_pages) qk__advise_huge(&t->alloc, s.rec_block, s.n_rec * sizeof(rec_t) + 64);
+  j.rec = (rec_t *)(void *)((unsigned char *)s.rec_block + (-(uintptr_t)s.rec_block & 63u));
+  run_pass(&j, scatter_share, scatter_job);
+  qk__free(&t->alloc, s.key, n * sizeof *s.key);
+  s.key = NULL;
+  /* Staging arrays for pass 3, each thread's as large as the largest coarse bucket up to
+   * STAGE_MAX points. */
   size_t cap = most < STAGE_MAX ? most : STAGE_MAX;
   s.n_stage = nw * cap;
   s.sxy = qk__realloc(&t->alloc, NULL, 0, 2 * s.n_stage * sizeof *s.sxy);
@@ -1068,24 +947,19 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
   }
   j.stage_cap = (uint32_t)cap;
   j.sxy = s.sxy, j.sid = s.sid;
-  /* The hook on the calling thread beside the sort (the other threads' allocations would
-   * come from arenas of their own), when the shares' estimate of the points in cells over
-   * the capacity is below the hook's bound: a choice of schedule, the tree is the same. */
-  if (hookable && est < hook->deep_below) {
+  for (size_t c = 0; c < nc; c++) *deep += s.deep[c];
+  if (hook && nw > 1 && nc > 1 && !t->alloc.fn && *deep < hook->deep_below) {
+    /* The hook on the calling thread beside the sort (the other threads' allocations would
+     * come from arenas of their own). */
     qk__cell_wait_t wt;
     wt.j = &j;
     wt.hook = hook;
     atomic_init(&wt.next, 0u);
-    for (size_t c = 0; c < nc; c++) {
-      atomic_init(&wt.state[c], 0);
-      atomic_init(&wt.ready[c], 0);
-    }
-    j.ready = wt.ready;
+    for (size_t c = 0; c < nc; c++) atomic_init(&wt.state[c], 0);
     hook->ran = true;
     qk__run_shares(nw < nc ? nw : (unsigned)nc, hook_share, &wt);
   } else {
     qk__run_jobs_dynamic(nw, (unsigned)nc, fine_job, &j);
-    for (size_t c = 0; c < nc; c++) *deep += s.deep[c];
   }
   *cum = s.cum;
   s.cum = NULL;

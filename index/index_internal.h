@@ -207,9 +207,7 @@ qk_status_t qk__build_subtree(qk_tree_t *t, uint32_t node, qk__geom_t g);
 
 /* Work that qk__cell_sort() runs on the calling thread beside its last pass (the points
  * sorted bucket by bucket on the other threads), when it runs on several threads with the
- * default allocator and, by an estimate from the shares' counts (a cell's points in a share
- * where that share alone holds over capacity / shares of them), fewer than deep_below
- * points lie in cells over the capacity (a choice of schedule: the tree is the same): fn
+ * default allocator and fewer than deep_below points lie in cells over the capacity: fn
  * gets the 4^L + 1 bucket starts, and must call qk__cell_wait() before it reads or moves
  * the points of a cell. `ran` and `st` say whether it ran and what it returned. */
 typedef struct qk__cell_wait qk__cell_wait_t;
@@ -229,9 +227,9 @@ void qk__cell_wait(qk__cell_wait_t *w, uint32_t cell);
  * 2^L x 2^L grid over the root square, in the tree's pre-order, on nw threads (a caller's
  * allocator is only called from the calling thread). *cum gets the 4^L + 1 bucket starts
  * (the caller frees them), or NULL, with QK_OK and nothing written, when the root is too
- * badly conditioned for exact cells by scaling (index/cellsort.c). Unless the hook ran,
- * *deep gets the number of points in cells holding more than the capacity (those the tree
- * splits point by point below the grid). */
+ * badly conditioned for exact cells by scaling (index/cellsort.c). *deep gets the number
+ * of points in cells holding more than the capacity (those the tree splits point by
+ * point below the grid). */
 qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned L, unsigned nw,
                           qk__cell_hook_t *hook, uint32_t **cum, size_t *deep);
 

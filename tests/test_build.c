@@ -24,10 +24,6 @@
  * allocator and with point arrays on 32-byte boundaries or 8 bytes past them; all of it
  * again with the AVX2 paths turned off (qk__build_avx2_off), so the SSE2 and plain paths
  * are checked on processors that have AVX2 too.
- *
- * The first pass's chains of chunks at their edges: a share's chain of one bucket exactly
- * full, one record short, or begun anew by the share's last partial buffer; every point
- * once with its coordinates, the cells' points in input order, and the tree's own check.
  */
 #include <math.h>
 #include <stdbool.h>
@@ -324,72 +320,12 @@ static void test_build_streamed_order(void **state) {
   free(p);
 }
 
-/* The first pass's chains of chunks at their edges (index/cellsort.c): a share whose points
- * fall into one coarse bucket (the grid's north-east cell) fills its chain with a whole
- * number of chunks, or a record short, or a few records more, so that the chain's last
- * chunk is begun by the share's final partial buffer. 2^19 points: one share with chunks
- * of 1,024 records on one thread, two with chunks of 512 on two; the first 2^18 + e points
- * in the north-east cell, the rest uniform in the south-west quadrant, for e in -1, 0, 5.
- * The oracle: every input point once in the tree with its coordinates bit for bit, the grid
- * cells' points in input order, and qk_tree_check (each point inside its leaf by every
- * ancestor's quadrant rule, a node internal exactly when over capacity and splittable),
- * which together fix the tree of the point set. */
-static void test_build_chain_edges(void **state) {
-  (void)state;
-  uint64_t seed = qkt_seed(1205);
-  qkt_rng_t r;
-  qkt_rng_seed(&r, seed);
-  print_message("seed %llu\n", (unsigned long long)seed);
-  enum { N = 1 << 19, HALF = 1 << 18 };
-  qk_point_t *p = malloc(N * sizeof *p);
-  unsigned char *seen = malloc(N);
-  assert_non_null(p);
-  assert_non_null(seen);
-  const int extra[] = {-1, 0, 5};
-  for (size_t k = 0; k < sizeof extra / sizeof extra[0]; k++) {
-    size_t m = (size_t)(HALF + extra[k]);
-    for (size_t i = 0; i < N; i++) {
-      if (i < m) /* in [1 - 2^-9, 1)^2, inside the cell [255/256, 1]^2 */
-        p[i] = (qk_point_t){1.0 - ldexp(1.0 + qkt_rng_below(&r, 1u << 20), -29),
-                            1.0 - ldexp(1.0 + qkt_rng_below(&r, 1u << 20), -29)};
-      else
-        p[i] = (qk_point_t){0.5 * ((double)qkt_rng_below(&r, 1u << 30) / (double)(1u << 30)),
-                            0.5 * ((double)qkt_rng_below(&r, 1u << 30) / (double)(1u << 30))};
-    }
-    qk_tree_options_t o;
-    qk_tree_options_init(&o);
-    o.capacity = 32;
-    o.max_depth = 24;
-    o.has_root = 1;
-    o.root = (qk_square_t){0, 0, 1};
-    for (uint32_t threads = 1; threads <= 2; threads++) {
-      o.threads = threads;
-      qk_tree_t *t = NULL;
-      assert_int_equal(qk_tree_build(p, N, &o, &t), QK_OK);
-      QKT_CHECK_TREE(t);
-      memset(seen, 0, N);
-      order_check_t oc = {p, N, 0, 0, 0, 8, seen};
-      assert_int_equal(qk_tree_visit(t, qk_tree_root(t), order_visit, &oc), QK_OK);
-      if (oc.bad)
-        print_error("seed %llu, e = %d, %u threads: %zu points out of order or altered\n",
-                    (unsigned long long)seed, extra[k], threads, oc.bad);
-      assert_int_equal(oc.bad, 0);
-      assert_int_equal(oc.seen_n, N);
-      assert_true(oc.ordered > N / 4); /* the uniform quadrant's cells */
-      qk_tree_free(t);
-    }
-  }
-  free(seen);
-  free(p);
-}
-
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_build_deep_grid_lines),
       cmocka_unit_test(test_build_threads_adversarial),
       cmocka_unit_test(test_build_tree_beside_sort),
       cmocka_unit_test(test_build_streamed_order),
-      cmocka_unit_test(test_build_chain_edges),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
