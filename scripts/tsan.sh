@@ -6,7 +6,7 @@
 # tests/test_region.c and tests/test_collide.c, whose threaded batches must equal the
 # single calls; tests/test_build.c, whose threaded bulk build must equal one thread's.
 # Any data race
-# TSan sees fails the run. Usage: scripts/tsan.sh [build-dir]
+# TSan sees fails the run; the tests run JOBS (2) at a time. Usage: scripts/tsan.sh [build-dir]
 set -euo pipefail
 cd "$(dirname "$0")/.."
 dir=${1:-build-tsan}
@@ -19,4 +19,4 @@ cmake -S . -B "$dir" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DQUADKIT_WERROR=ON \
 nice cmake --build "$dir" -j"$jobs" --target test_reliab_threads test_region test_world test_collide test_build
 # halt_on_error: the first race fails the test; second_deadlock_stack for lock reports.
 TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1 suppressions=$PWD/scripts/tsan.supp ${TSAN_OPTIONS:-}" \
-  ctest --test-dir "$dir" --output-on-failure -R '^(test_reliab_threads|test_region|test_world|test_collide|test_build)$'
+  ctest --test-dir "$dir" --output-on-failure -j"$jobs" -R '^(test_reliab_threads|test_region|test_world|test_collide|test_build)$'
