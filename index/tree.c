@@ -144,7 +144,8 @@ static qk_status_t reserve_slots(qk_tree_t *t, size_t need) {
   return QK_OK;
 }
 
-static uint32_t grown_room(uint32_t count);
+/* The room a full leaf of `count` points gets when it moves to the tail. */
+static uint32_t grown_room(uint32_t count) { return count + count / 4 + 2; }
 
 /* The room a leaf of `count` points keeps through a compaction: a thirty-second more,
  * so that a leaf of thousands of copies of one point at the depth cap is not full, and
@@ -747,9 +748,6 @@ static uint32_t descend(const qk_tree_t *t, double x, double y, qk__geom_t *g) {
   if (g) *g = c;
   return v;
 }
-
-/* The room a full leaf of `count` points gets when it moves to the tail. */
-static uint32_t grown_room(uint32_t count) { return count + count / 4 + 2; }
 
 /* Put point (p, id) into the tree: into the leaf that holds p, moved to the tail first
  * when its block is full, then split while over capacity. Everything must have been
