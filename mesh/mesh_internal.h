@@ -191,7 +191,7 @@ void qk__mesh_shape(int k, int64_t S, int64_t x[3], int64_t y[3]);
 
 /* Facts the triangulation hands to hole removal. */
 typedef struct qk__leaf_tris {
-  uint32_t *first; /* per node id: first triangle of the leaf, or QK__MESH_UNSET */
+  uint32_t *first; /* per leaf's node id: first triangle of the leaf (set at leaves only) */
   size_t cap;
   size_t nleaves; /* leaves of the balanced tree */
 } qk__leaf_tris_t;

@@ -18,9 +18,14 @@ static void hmap_free(const qk_allocator_t *a, qk__hmap_t *h) {
   h->k = NULL, h->v = NULL, h->cap = h->n = 0;
 }
 
+/* The map holds at most 3/4 of its slots (hmap_room): with linear probing and the
+ * Fibonacci hash a probe still takes under two slots on average, and the slots cleared
+ * at start (a mesh's corner map: 8 bytes a slot) are half those of a half-full bound. */
+static inline int hmap_room(const qk__hmap_t *h) { return 4 * (h->n + 1) <= 3 * h->cap; }
+
 static qk_status_t hmap_init(const qk_allocator_t *a, qk__hmap_t *h, size_t expect) {
   size_t cap = 64;
-  while (cap < 2 * expect) cap *= 2;
+  while (3 * cap < 4 * expect) cap *= 2;
   h->k = qk__realloc(a, NULL, 0, cap * sizeof *h->k);
   h->v = qk__realloc(a, NULL, 0, cap * sizeof *h->v);
   h->cap = cap, h->n = 0;
@@ -43,7 +48,7 @@ static int hmap_get(const qk__hmap_t *h, uint64_t key, uint32_t *v) {
 /* Find key; if absent insert it with value *v. Returns 1 when found (*v set), 0 when
  * inserted, -1 out of memory. */
 static int hmap_get_or_put(const qk_allocator_t *a, qk__hmap_t *h, uint64_t key, uint32_t *v) {
-  if (2 * (h->n + 1) > h->cap) {
+  if (!hmap_room(h)) {
     qk__hmap_t nh;
     if (hmap_init(a, &nh, h->cap)) return -1;
     for (size_t i = 0; i < h->cap; i++)
@@ -107,7 +112,7 @@ static inline qk_status_t corner_vertex(qk__tri_state_t *T, int64_t x, int64_t y
       return QK_OK;
     }
   uint32_t v = (uint32_t)T->nv;
-  if (2 * (h->n + 1) <= h->cap)
+  if (hmap_room(h))
     h->k[j] = key, h->v[j] = v, h->n++;
   else if (hmap_get_or_put(T->a, h, key, &v) < 0)
     return QK_ERR_NOMEM;
@@ -533,11 +538,13 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
     st = QK_ERR_NOMEM;
     goto out;
   }
-  memset(rec_of, 0xff, nn * sizeof *rec_of);
-  memset(lt->first, 0xff, lt->cap * sizeof *lt->first);
+  /* The per-node maps are read at leaves only, so only the leaves' entries are set, not
+   * the whole node bound's: here rec_of's and leaf_of's, lt->first's as each leaf is
+   * triangulated. */
   memset(cell_label, 0xff, (2 * nleaves + 1) * sizeof *cell_label);
+  for (size_t li = 0; li < nleaves; li++)
+    leaf_of[leaves[li]] = (uint32_t)li, rec_of[leaves[li]] = QK__MESH_UNSET;
   for (size_t i = 0; i < g->nrec; i++) rec_of[g->rec[i].node] = (uint32_t)i;
-  for (size_t li = 0; li < nleaves; li++) leaf_of[leaves[li]] = (uint32_t)li;
 
   /* Room for the usual counts (about 3 triangles and 1.5 vertices a leaf), so that the
    * arrays seldom grow while filled. */
