@@ -254,7 +254,16 @@ typedef struct leaf_map {
   const uint32_t *side;    /* by leaf index: the leaf's side */
   const lat_sq_t *sq;      /* by leaf index: the leaf's square */
   uint32_t U;              /* the root square's side */
+  const uint8_t *sib;      /* by leaf index: its sides facing a sibling leaf (sib_mask) */
 } leaf_map_t;
+
+/* The sides (bits south, east, north, west) of a parent's four leaf children (quadrants
+ * NE, NW, SW, SE, as corner_vertices4 finds them) that face one of the others, of the
+ * same size, and, per such side, the step from its leaf index to that sibling's. Other
+ * leaves have none (0). */
+static const uint8_t sib_mask[4] = {0x9, 0x3, 0x6, 0xc};
+static const signed char sib_step[16][4] = {
+    [0x9] = {3, 0, 0, 1}, [0x3] = {1, -1, 0, 0}, [0x6] = {0, 1, -1, 0}, [0xc] = {0, 0, -3, -1}};
 
 /*
  * The leaves across side sd (south, east, north, west) of leaf li, as
@@ -277,6 +286,10 @@ static const unsigned char pk[4][4] = {/* p's corner index, kp, q's index, kq */
 
 static size_t side_leaves(const qk_tree_t *t, const leaf_map_t *L, uint32_t li, int sd,
                           uint32_t *nb) {
+  if ((L->sib[li] >> sd) & 1) { /* a sibling leaf of the same size */
+    nb[0] = (uint32_t)((int64_t)li + sib_step[L->sib[li]][sd]);
+    return 1;
+  }
   const uint32_t *c = &L->corner[4 * li];
   const unsigned char *e = pk[sd];
   uint32_t a = L->by[e[1]][c[e[0]]], b = L->by[e[3]][c[e[2]]];
@@ -441,9 +454,10 @@ out:
  * corner kp at the side's start p (side_leaves) is then of half the size, and the midpoint
  * is its corner kq. */
 static inline size_t ring_side(const qk__tri_state_t *T, const leaf_map_t *L, const uint32_t *c,
-                               int s, int64_t X, int64_t Y, int64_t S, uint32_t *ring, size_t nr,
-                               unsigned *mids) {
+                               unsigned sib, int s, int64_t X, int64_t Y, int64_t S, uint32_t *ring,
+                               size_t nr, unsigned *mids) {
   ring[nr++] = c[s];
+  if ((sib >> s) & 1) return nr; /* a sibling leaf of the same size across: no midpoint */
   uint32_t a = L->by[pk[s][1]][c[pk[s][0]]];
   if (a == QK__MESH_UNSET || 4 * (int64_t)L->side[a] > S) return nr;
   if (4 * (int64_t)L->side[a] == S) {
@@ -601,23 +615,25 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
    * has as a corner. */
   uint32_t *corner = qk__realloc(g->a, NULL, 0, (4 * nleaves + 4) * sizeof *corner);
   uint32_t *lside = qk__realloc(g->a, NULL, 0, (nleaves + 1) * sizeof *lside);
-  if (!corner || !lside) {
+  uint8_t *sib = qk__realloc(g->a, NULL, 0, nleaves + 1);
+  if (!corner || !lside || !sib) {
     qk__free(g->a, corner, (4 * nleaves + 4) * sizeof *corner);
     qk__free(g->a, lside, (nleaves + 1) * sizeof *lside);
+    qk__free(g->a, sib, nleaves + 1);
     st = QK_ERR_NOMEM;
     goto out;
   }
   for (size_t li = 0; li < nleaves;) {
     if (li + 3 < nleaves && sibling_leaves(&lsq[li])) {
       if ((st = corner_vertices4(T, &lsq[li], &corner[4 * li]))) break;
-      for (int q = 0; q < 4; q++) lside[li + q] = lsq[li].s;
+      for (int q = 0; q < 4; q++) lside[li + q] = lsq[li].s, sib[li + q] = sib_mask[q];
       li += 4;
       continue;
     }
     lat_sq_t sq = lsq[li];
     int64_t S = 2 * (int64_t)sq.s, X = 2 * (int64_t)sq.x, Y = 2 * (int64_t)sq.y;
     uint32_t *c = &corner[4 * li];
-    lside[li] = sq.s;
+    lside[li] = sq.s, sib[li] = 0;
     /* SW, SE, NE, NW; the probe is inlined at each. */
     if ((st = corner_vertex(T, X, Y, &c[0])) || (st = corner_vertex(T, X + S, Y, &c[1])) ||
         (st = corner_vertex(T, X + S, Y + S, &c[2])) || (st = corner_vertex(T, X, Y + S, &c[3])))
@@ -625,7 +641,8 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
     li++;
   }
   size_t ncorner = T->nv; /* the corner vertices are the first ids */
-  leaf_map_t L = {{NULL, NULL, NULL, NULL}, corner, leaves, leaf_of, lside, lsq, (uint32_t)g->U};
+  leaf_map_t L = {{NULL, NULL, NULL, NULL}, corner, leaves, leaf_of, lside, lsq,
+                  (uint32_t)g->U,           sib};
   for (int k = 0; k < 4 && !st; k++) {
     L.by[k] = qk__realloc(g->a, NULL, 0, (ncorner + 1) * sizeof *L.by[k]);
     if (!L.by[k])
@@ -674,10 +691,11 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
     if (S <= 2) {
       ring[0] = c[0], ring[1] = c[1], ring[2] = c[2], ring[3] = c[3], nr = 4;
     } else { /* each side written out, its table entries folded */
-      nr = ring_side(T, &L, c, 0, X, Y, S, ring, nr, &mids);
-      nr = ring_side(T, &L, c, 1, X, Y, S, ring, nr, &mids);
-      nr = ring_side(T, &L, c, 2, X, Y, S, ring, nr, &mids);
-      nr = ring_side(T, &L, c, 3, X, Y, S, ring, nr, &mids);
+      const unsigned sibm = sib[li];
+      nr = ring_side(T, &L, c, sibm, 0, X, Y, S, ring, nr, &mids);
+      nr = ring_side(T, &L, c, sibm, 1, X, Y, S, ring, nr, &mids);
+      nr = ring_side(T, &L, c, sibm, 2, X, Y, S, ring, nr, &mids);
+      nr = ring_side(T, &L, c, sibm, 3, X, Y, S, ring, nr, &mids);
     }
     T->shapes[__builtin_ctzll((uint64_t)S)] |= fan_shapes[mids];
     if (nr == 4) {
@@ -722,6 +740,7 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
   for (int k = 0; k < 4; k++) qk__free(g->a, L.by[k], (ncorner + 1) * sizeof *L.by[k]);
   qk__free(g->a, corner, (4 * nleaves + 4) * sizeof *corner);
   qk__free(g->a, lside, (nleaves + 1) * sizeof *lside);
+  qk__free(g->a, sib, nleaves + 1);
 out:
   qk__free(g->a, lsq, (nn + 1) * sizeof *lsq);
   qk__free(g->a, rec_of, nn * sizeof *rec_of);
