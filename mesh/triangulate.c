@@ -221,6 +221,32 @@ static inline int sibling_leaves(const lat_sq_t *q) {
          q[2].x == q[1].x && q[2].y + h == q[0].y && q[3].x == q[0].x && q[3].y == q[2].y;
 }
 
+/* corner_vertex for corner_vertices4 when the map and the arrays have room for nine more:
+ * the same slot (qk__hmap_slot by a shift computed once) and the same vertex made. */
+typedef struct grid_probe {
+  uint64_t *k;
+  uint32_t *v;
+  size_t mask;
+  unsigned shift;
+  int64_t *vx, *vy;
+  uint8_t *steiner;
+  size_t nv;
+} grid_probe_t;
+
+static inline __attribute__((always_inline)) void grid_point(grid_probe_t *G, int64_t x, int64_t y,
+                                                             uint32_t *id) {
+  const uint64_t key = ((uint64_t)x << 32) | (uint64_t)y;
+  size_t j = (size_t)((key * 0x9e3779b97f4a7c15ull) >> G->shift);
+  for (uint64_t k; (k = G->k[j]) != UINT64_MAX; j = (j + 1) & G->mask)
+    if (k == key) {
+      *id = G->v[j];
+      return;
+    }
+  G->k[j] = key, G->v[j] = (uint32_t)G->nv;
+  G->vx[G->nv] = x, G->vy[G->nv] = y, G->steiner[G->nv] = 0;
+  *id = (uint32_t)G->nv++;
+}
+
 /* The corner vertices (into c, 4 a leaf: SW, SE, NE, NW) of four sibling leaves at q
  * (sibling_leaves): the nine lattice points of their 3 x 3 grid are looked up once each,
  * in the order the leaves' own corner_vertex calls would first meet them (NE's corners,
@@ -231,14 +257,30 @@ __attribute__((noinline)) static qk_status_t corner_vertices4(qk__tri_state_t *T
                                                               uint32_t *c) {
   const int64_t S = 2 * (int64_t)q[0].s, X = 2 * (int64_t)q[2].x, Y = 2 * (int64_t)q[2].y;
   uint32_t p00, p01, p02, p10, p11, p12, p20, p21, p22; /* pji: the point (X + i S, Y + j S) */
-  qk_status_t st;
-  if ((st = corner_vertex(T, X + S, Y + S, &p11)) ||
-      (st = corner_vertex(T, X + 2 * S, Y + S, &p12)) ||
-      (st = corner_vertex(T, X + 2 * S, Y + 2 * S, &p22)) ||
-      (st = corner_vertex(T, X + S, Y + 2 * S, &p21)) || (st = corner_vertex(T, X, Y + S, &p10)) ||
-      (st = corner_vertex(T, X, Y + 2 * S, &p20)) || (st = corner_vertex(T, X, Y, &p00)) ||
-      (st = corner_vertex(T, X + S, Y, &p01)) || (st = corner_vertex(T, X + 2 * S, Y, &p02)))
-    return st;
+  qk__hmap_t *h = &T->vmap;
+  if (T->nv + 9 <= T->vcap && T->nv + 9 <= T->vycap && T->nv + 9 <= T->scap &&
+      4 * (h->n + 9) <= 3 * h->cap) {
+    /* Room for nine new vertices in the arrays and the map: no checks a point, and the
+     * map's fields in registers. */
+    grid_probe_t G = {h->k,  h->v,  h->cap - 1, 64u - (unsigned)__builtin_ctzll((uint64_t)h->cap),
+                      T->vx, T->vy, T->steiner, T->nv};
+    grid_point(&G, X + S, Y + S, &p11), grid_point(&G, X + 2 * S, Y + S, &p12);
+    grid_point(&G, X + 2 * S, Y + 2 * S, &p22), grid_point(&G, X + S, Y + 2 * S, &p21);
+    grid_point(&G, X, Y + S, &p10), grid_point(&G, X, Y + 2 * S, &p20);
+    grid_point(&G, X, Y, &p00), grid_point(&G, X + S, Y, &p01);
+    grid_point(&G, X + 2 * S, Y, &p02);
+    h->n += G.nv - T->nv, T->nv = G.nv;
+  } else {
+    qk_status_t st;
+    if ((st = corner_vertex(T, X + S, Y + S, &p11)) ||
+        (st = corner_vertex(T, X + 2 * S, Y + S, &p12)) ||
+        (st = corner_vertex(T, X + 2 * S, Y + 2 * S, &p22)) ||
+        (st = corner_vertex(T, X + S, Y + 2 * S, &p21)) ||
+        (st = corner_vertex(T, X, Y + S, &p10)) || (st = corner_vertex(T, X, Y + 2 * S, &p20)) ||
+        (st = corner_vertex(T, X, Y, &p00)) || (st = corner_vertex(T, X + S, Y, &p01)) ||
+        (st = corner_vertex(T, X + 2 * S, Y, &p02)))
+      return st;
+  }
   c[0] = p11, c[1] = p12, c[2] = p22, c[3] = p21;     /* NE */
   c[4] = p10, c[5] = p11, c[6] = p21, c[7] = p20;     /* NW */
   c[8] = p00, c[9] = p01, c[10] = p11, c[11] = p10;   /* SW */
