@@ -407,42 +407,39 @@ static inline size_t flood_side(const flood_t *f, uint32_t li, int sd, size_t qt
   return qt;
 }
 
-static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, const qk_node_t *leaves,
-                               size_t nleaves, const uint32_t *rec_of, const uint32_t *cell_label,
+/* Per leaf, what the flood asks of it, in one byte: its diagonal kind (bits 0-1: 0 none,
+ * 1 SW-NE, 2 SE-NW) and which sides are component edges, which the flood does not cross
+ * (bit 2 + side, sides south, east, north, west), from the node's unit record r (a leaf
+ * without one has 0). (Across the root square's boundary side_leaves finds nothing.) */
+static inline uint8_t flood_kind(const qk__unit_rec_t *r) {
+  static const int piece_of_side[4] = {QK__P_S, QK__P_E, QK__P_N, QK__P_W};
+  uint8_t f = r->piece[QK__P_D0] ? 1 : r->piece[QK__P_D1] ? 2 : 0;
+  for (int sd = 0; sd < 4; sd++)
+    if (r->piece[piece_of_side[sd]]) f |= (uint8_t)(4 << sd);
+  return f;
+}
+
+/* The regions and labels from the leaves' flood_kind bytes (made as the leaves are
+ * triangulated) and the seeded cell labels. */
+static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, size_t nleaves,
+                               const uint8_t *kind, const uint32_t *cell_label,
                                const leaf_map_t *L) {
   const qk_tree_t *t = g->tree;
   size_t ncell = 2 * nleaves;
   uint32_t *queue = qk__realloc(g->a, NULL, 0, (ncell + 1) * sizeof *queue);
   uint32_t *region = qk__realloc(g->a, NULL, 0, (ncell + 1) * sizeof *region);
   uint32_t *rlabel = qk__realloc(g->a, NULL, 0, (ncell + 1) * sizeof *rlabel);
-  uint8_t *kind = qk__realloc(g->a, NULL, 0, nleaves + 1);
   /* Per cell, the side it was reached across when that side holds nothing else new. */
   uint8_t *back = qk__realloc(g->a, NULL, 0, ncell + 1);
   qk_status_t st = QK_OK;
   void *rp = T->region;
-  if (!queue || !region || !rlabel || !kind || !back ||
+  if (!queue || !region || !rlabel || !back ||
       qk__grow(T->a, &rp, &T->rcap, T->nt + 1, sizeof *T->region)) {
     st = QK_ERR_NOMEM;
     goto out;
   }
   T->region = rp;
   memset(region, 0xff, (ncell + 1) * sizeof *region);
-  /* Per leaf, what the flood asks of it, in one byte: its diagonal kind (bits 0-1: 0 none,
-   * 1 SW-NE, 2 SE-NW) and which sides are component edges, which the flood does not cross
-   * (bit 2 + side, sides south, east, north, west), from the node's unit record. (Across
-   * the root square's boundary side_leaves finds nothing.) */
-  static const int piece_of_side[4] = {QK__P_S, QK__P_E, QK__P_N, QK__P_W};
-  for (size_t li = 0; li < nleaves; li++) {
-    uint32_t v = leaves[li];
-    uint8_t f = 0;
-    if (rec_of[v] != QK__MESH_UNSET) {
-      const qk__unit_rec_t *r = &g->rec[rec_of[v]];
-      f |= r->piece[QK__P_D0] ? 1 : r->piece[QK__P_D1] ? 2 : 0;
-      for (int sd = 0; sd < 4; sd++)
-        if (r->piece[piece_of_side[sd]]) f |= (uint8_t)(4 << sd);
-    }
-    kind[li] = f;
-  }
   /* Labelling works on cells: the parts of a leaf that no component edge separates. A
    * leaf is one cell, except a unit leaf cut by a component diagonal, which is two.
    * touch[diag][k] is the set of sides (south, east, north, west) that cell k of a leaf
@@ -481,7 +478,6 @@ out:
   qk__free(g->a, queue, (ncell + 1) * sizeof *queue);
   qk__free(g->a, region, (ncell + 1) * sizeof *region);
   qk__free(g->a, rlabel, (ncell + 1) * sizeof *rlabel);
-  qk__free(g->a, kind, nleaves + 1);
   qk__free(g->a, back, ncell + 1);
   return st;
 }
@@ -658,10 +654,12 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
   uint32_t *corner = qk__realloc(g->a, NULL, 0, (4 * nleaves + 4) * sizeof *corner);
   uint32_t *lside = qk__realloc(g->a, NULL, 0, (nleaves + 1) * sizeof *lside);
   uint8_t *sib = qk__realloc(g->a, NULL, 0, nleaves + 1);
-  if (!corner || !lside || !sib) {
+  uint8_t *kind = qk__realloc(g->a, NULL, 0, nleaves + 1); /* flood_kind by leaf */
+  if (!corner || !lside || !sib || !kind) {
     qk__free(g->a, corner, (4 * nleaves + 4) * sizeof *corner);
     qk__free(g->a, lside, (nleaves + 1) * sizeof *lside);
     qk__free(g->a, sib, nleaves + 1);
+    qk__free(g->a, kind, nleaves + 1);
     st = QK_ERR_NOMEM;
     goto out;
   }
@@ -712,8 +710,10 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
     int64_t S = 2 * (int64_t)sq.s, X = 2 * (int64_t)sq.x, Y = 2 * (int64_t)sq.y;
     lt->first[v] = (uint32_t)T->nt;
     const uint32_t *c = &corner[4 * li];
+    kind[li] = 0;
     if (rec_of[v] != QK__MESH_UNSET) {
       const qk__unit_rec_t *r = &g->rec[rec_of[v]];
+      kind[li] = flood_kind(r);
       T->shapes[1] |= r->piece[QK__P_D1] ? 0xc000 : 0x3000; /* S = 2 */
       st = tri_unit(T, r, c, cell, cell_label);
       /* (SW, SE, NW), (SE, NE, NW) along SE-NW; (SW, SE, NE), (SW, NE, NW) otherwise. */
@@ -778,11 +778,12 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
    * labelling. */
   if (!st) st = segment_vertices(g, T);
   hmap_free(T->a, &T->vmap);
-  if (!st) st = label_cells(g, T, leaves, nleaves, rec_of, cell_label, &L);
+  if (!st) st = label_cells(g, T, nleaves, kind, cell_label, &L);
   for (int k = 0; k < 4; k++) qk__free(g->a, L.by[k], (ncorner + 1) * sizeof *L.by[k]);
   qk__free(g->a, corner, (4 * nleaves + 4) * sizeof *corner);
   qk__free(g->a, lside, (nleaves + 1) * sizeof *lside);
   qk__free(g->a, sib, nleaves + 1);
+  qk__free(g->a, kind, nleaves + 1);
 out:
   qk__free(g->a, lsq, (nn + 1) * sizeof *lsq);
   qk__free(g->a, rec_of, nn * sizeof *rec_of);
