@@ -165,7 +165,8 @@ typedef struct qk__tri_state {
   size_t nv, vcap, vycap, scap;
   uint32_t *tri;    /* 3 per triangle */
   uint32_t *label;  /* per triangle: its cell while triangulating, then its component */
-  uint32_t *region; /* per triangle: its region (connected part between boundaries) */
+  uint32_t *region; /* per triangle: its region (connected part between boundaries); NULL
+                     * when the input has no hole and no regional attribute point */
   size_t nt, tcap, lcap, rcap;
   uint32_t nregion;
   /* Per input segment in order, its lattice points from its first endpoint to its last

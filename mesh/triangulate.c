@@ -432,9 +432,13 @@ static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, size_t nleaves,
   /* Per cell, the side it was reached across when that side holds nothing else new. */
   uint8_t *back = qk__realloc(g->a, NULL, 0, ncell + 1);
   qk_status_t st = QK_OK;
+  /* The triangles' regions (T->region) are read only to find the regions of hole points
+   * (g->poly's) and of regional attribute points (g->src's); without any, they are not
+   * kept. */
+  const int keep_regions = g->poly->nh || g->src->nr;
   void *rp = T->region;
   if (!queue || !region || !rlabel || !back ||
-      qk__grow(T->a, &rp, &T->rcap, T->nt + 1, sizeof *T->region)) {
+      (keep_regions && qk__grow(T->a, &rp, &T->rcap, T->nt + 1, sizeof *T->region))) {
     st = QK_ERR_NOMEM;
     goto out;
   }
@@ -468,10 +472,14 @@ static qk_status_t label_cells(qk__gen_t *g, qk__tri_state_t *T, size_t nleaves,
       if (sides & 8) qt = flood_side(&f, li, 3, qt);
     }
   }
-  for (size_t tr = 0; tr < T->nt; tr++) {
-    uint32_t rid = region[T->label[tr]];
-    T->region[tr] = rid;
-    T->label[tr] = rlabel[rid];
+  if (keep_regions) {
+    for (size_t tr = 0; tr < T->nt; tr++) {
+      uint32_t rid = region[T->label[tr]];
+      T->region[tr] = rid;
+      T->label[tr] = rlabel[rid];
+    }
+  } else {
+    for (size_t tr = 0; tr < T->nt; tr++) T->label[tr] = rlabel[region[T->label[tr]]];
   }
   T->nregion = nreg;
 out:
