@@ -365,12 +365,23 @@ static qk_status_t compact(qk__gen_t *g, qk__tri_state_t *T, const uint8_t *drop
   int k = -(g->lat.f + 1);
   double sc = qk__pow2(k);
   const uint32_t *id = *ids;
-  for (size_t i = 0; i < T->nv; i++)
-    if (id[i] != QK__MESH_UNSET) {
-      m->xy[2 * id[i]] = qk__ldexp_by((double)T->vx[i], sc, k) + g->lat.x0;
-      m->xy[2 * id[i] + 1] = qk__ldexp_by((double)T->vy[i], sc, k) + g->lat.y0;
+  const double x0 = g->lat.x0, y0 = g->lat.y0; /* locals: the stores to m->xy may alias */
+  if (sc != 0 && id == T->ord) {
+    /* The usual case: every vertex kept (numbered by T->ord) and the scale a double. */
+    const int64_t *vx = T->vx, *vy = T->vy;
+    double *xy = m->xy;
+    for (size_t i = 0; i < T->nv; i++) {
+      xy[2 * id[i]] = (double)vx[i] * sc + x0, xy[2 * id[i] + 1] = (double)vy[i] * sc + y0;
       steiner += T->steiner[i];
     }
+  } else {
+    for (size_t i = 0; i < T->nv; i++)
+      if (id[i] != QK__MESH_UNSET) {
+        m->xy[2 * id[i]] = qk__ldexp_by((double)T->vx[i], sc, k) + x0;
+        m->xy[2 * id[i] + 1] = qk__ldexp_by((double)T->vy[i], sc, k) + y0;
+        steiner += T->steiner[i];
+      }
+  }
   qk_status_t st = restore_signed_zeros(g, m);
   if (st) return st;
   for (size_t i = 0; i < poly->nv; i++)
