@@ -652,10 +652,12 @@ static QK__ALWAYS_INLINE void fine_records(const bucket_job_t *j, unsigned c, ui
 }
 
 #if QK__CELL_AVX2
-/* copy_pairs()'s streaming path eight points a step, 32 bytes a store, for x and y on
- * 32-byte boundaries together: 2.4 instructions a point instead of 5. */
-__attribute__((target("avx2"))) static void pairs_avx2(double *x, double *y, const double *xy,
-                                                       size_t m) {
+/* copy_pairs()'s streaming path eight points a step, 32 bytes a store for x on a 32-byte
+ * boundary (2.4 instructions a point instead of 5), and for y too when it falls on one
+ * with x; else (y_half: y 16 bytes off, the usual case for two blocks from malloc) y
+ * takes two 16-byte stores. */
+__attribute__((target("avx2"))) static QK__ALWAYS_INLINE void
+pairs_avx2_body(double *x, double *y, const double *xy, size_t m, bool y_half) {
   size_t i = 0;
   for (; i < m && ((uintptr_t)(x + i) & 31u); i++) {
     x[i] = xy[2 * i];
@@ -666,25 +668,42 @@ __attribute__((target("avx2"))) static void pairs_avx2(double *x, double *y, con
      * y0 y2 y1 y3, then the middle two swapped */
     __m256d a = _mm256_loadu_pd(xy + 2 * i), b = _mm256_loadu_pd(xy + 2 * i + 4);
     __m256d c = _mm256_loadu_pd(xy + 2 * i + 8), d = _mm256_loadu_pd(xy + 2 * i + 12);
+    __m256d y0 = _mm256_permute4x64_pd(_mm256_unpackhi_pd(a, b), 0xd8);
+    __m256d y1 = _mm256_permute4x64_pd(_mm256_unpackhi_pd(c, d), 0xd8);
     _mm256_stream_pd(x + i, _mm256_permute4x64_pd(_mm256_unpacklo_pd(a, b), 0xd8));
-    _mm256_stream_pd(y + i, _mm256_permute4x64_pd(_mm256_unpackhi_pd(a, b), 0xd8));
     _mm256_stream_pd(x + i + 4, _mm256_permute4x64_pd(_mm256_unpacklo_pd(c, d), 0xd8));
-    _mm256_stream_pd(y + i + 4, _mm256_permute4x64_pd(_mm256_unpackhi_pd(c, d), 0xd8));
+    if (y_half) {
+      _mm_stream_pd(y + i, _mm256_castpd256_pd128(y0));
+      _mm_stream_pd(y + i + 2, _mm256_extractf128_pd(y0, 1));
+      _mm_stream_pd(y + i + 4, _mm256_castpd256_pd128(y1));
+      _mm_stream_pd(y + i + 6, _mm256_extractf128_pd(y1, 1));
+    } else {
+      _mm256_stream_pd(y + i, y0);
+      _mm256_stream_pd(y + i + 4, y1);
+    }
   }
   for (; i < m; i++) {
     x[i] = xy[2 * i];
     y[i] = xy[2 * i + 1];
   }
 }
+
+__attribute__((target("avx2"))) static void pairs_avx2(double *x, double *y, const double *xy,
+                                                       size_t m) {
+  if (((uintptr_t)x ^ (uintptr_t)y) & 31u)
+    pairs_avx2_body(x, y, xy, m, true);
+  else
+    pairs_avx2_body(x, y, xy, m, false);
+}
 #endif
 
 /* Copy m staged coordinate pairs out to x[] and y[], with non-temporal stores where
- * `stream` asks and both destinations fall on 16-byte boundaries together (32-byte ones,
- * with AVX2 where the processor has it). */
+ * `stream` asks and both destinations fall on 16-byte boundaries together (with AVX2 where
+ * the processor has it: x 32 bytes a store, and y too when it is 32-byte aligned with x). */
 static void copy_pairs(double *x, double *y, const double *xy, size_t m, bool stream, bool avx2) {
   size_t i = 0;
 #if QK__CELL_AVX2
-  if (stream && avx2 && (((uintptr_t)x ^ (uintptr_t)y) & 31u) == 0 && ((uintptr_t)x & 7u) == 0) {
+  if (stream && avx2 && (((uintptr_t)x ^ (uintptr_t)y) & 15u) == 0 && ((uintptr_t)x & 7u) == 0) {
     pairs_avx2(x, y, xy, m);
     return;
   }
