@@ -5,14 +5,14 @@
  * number into the tree's point arrays. The cell number's base-4 digits are the quadrants
  * (NE=0, NW=1, SW=2, SE=3), so cell order is the tree's pre-order.
  *
- * Two passes over the points, each split over threads (shares of the input, or jobs taken
- * from a counter):
- *  1. keys and scatter, one read of the input: the cell number of every point (2L bits),
- *     counted per cell and share, and the point with its place and low digit as a 20-byte
- *     record into its coarse bucket (high digit, at most 7 bits: 128 buckets), through a
- *     write-combining buffer per bucket (whole cache lines, non-temporal for large
- *     inputs) into chunk lists, which need no count beforehand;
- *  2. per coarse bucket (a job each): the fine buckets' slot ranges from the counts, and
+ * Three passes over the points, each split over threads (shares of the input, or jobs
+ * taken from a counter):
+ *  1. keys: the cell number of every point (2L bits), counted per cell and share;
+ *  2. scatter: the point with its place and low digit as a 20-byte record into its coarse
+ *     bucket (high digit, at most 8 bits: 256 buckets), through a write-combining buffer
+ *     per bucket (whole cache lines, non-temporal for large inputs) into the segment of
+ *     its bucket and share, placed by the counts of pass 1;
+ *  3. per coarse bucket (a job each): the fine buckets' slot ranges from the counts, and
  *     the records' coordinates and ids sorted by the low digit into staging arrays in
  *     cache, then copied out in order to the tree's point arrays.
  * Both digits are counting sorts that keep input order, so the points of a cell keep
@@ -152,8 +152,12 @@ _Static_assert(sizeof(rec_t) == 20, "records of 20 bytes");
 
 /* Records per write-combining buffer: 16 of 20 bytes are five cache lines. */
 #define WC 16u
-/* Most coarse buckets: their write-combining buffers take 40 KB. */
-#define MAX_COARSE_BITS 7u
+/* Most coarse buckets: their write-combining buffers take 80 KB (in the second-level
+ * cache). At the deepest grid the two digits are then 8 bits each: the fine pass writes
+ * 256 streams of pairs and 256 of ids, whose current lines fit the first-level cache,
+ * where 7 and 9 bits left it 1024 lines and a miss a point (callgrind, D1 48 KB, 1M
+ * uniform points: fine pass 1.01 -> 0.45 M write misses, scatter 0.22 -> 0.44 M). */
+#define MAX_COARSE_BITS 8u
 /* Most points a thread stages in pass 3: 320 KB, within a core's second-level cache. */
 #define STAGE_MAX 16384u
 /* Points per block of the key computation: their keys stay in the first-level cache
@@ -434,7 +438,7 @@ tags_avx2(const uint16_t *k, size_t m, uint32_t tq, unsigned fbits, uint8_t *cb,
 /* One point into its bucket's write-combining buffer as a record (its coordinates and
  * tag); a full buffer goes to the bucket's next WC records of the record array, through
  * the caches (mode 0) or around them (1: SSE2, 2: AVX). */
-static QK__ALWAYS_INLINE void put_rec(unsigned char *bytes, uint16_t *off, const uint16_t *end,
+static QK__ALWAYS_INLINE void put_rec(unsigned char *bytes, uint32_t *off, const uint32_t *end,
                                       uint32_t *next, rec_t *rec, const qk_point_t *pt, uint32_t c,
                                       uint32_t tag, unsigned mode) {
   uint32_t o = off[c];
@@ -453,13 +457,13 @@ static QK__ALWAYS_INLINE void put_rec(unsigned char *bytes, uint16_t *off, const
       flush_wc(&rec[next[c]], src, mode != 0);
     next[c] += WC;
   }
-  off[c] = (uint16_t)o;
+  off[c] = o;
 }
 
 /* Pass 2 for share w: the points as records into their coarse buckets' segments, stable.
  * Each bucket's records gather in a buffer of WC (five cache lines) that goes to memory
  * whole, with non-temporal stores for large inputs: no line of the record array is read
- * before it is written, and 2^7 buffers, unlike 2^7 scattered write streams, stay in
+ * before it is written, and 2^8 buffers, unlike 2^8 scattered write streams, stay in
  * cache. */
 static void scatter_job(unsigned w, unsigned thread, void *ctx) {
   (void)thread;
@@ -476,14 +480,14 @@ static void scatter_job(unsigned w, unsigned thread, void *ctx) {
   const unsigned mode = !stream ? 0u : j->avx2 ? 2u : 1u;
   uint32_t next[1u << MAX_COARSE_BITS]; /* where bucket c's next buffer goes */
   /* where bucket c's next record goes in buf, in bytes, and where its buffer ends */
-  uint16_t off[1u << MAX_COARSE_BITS], end[1u << MAX_COARSE_BITS];
+  uint32_t off[1u << MAX_COARSE_BITS], end[1u << MAX_COARSE_BITS];
   _Alignas(64) rec_t buf[(1u << MAX_COARSE_BITS) * WC];
   _Alignas(16) uint32_t tag[BLOCK];
   _Alignas(16) uint8_t cb[BLOCK];
   for (size_t c = 0; c < nc; c++) {
     next[c] = j->seg[(size_t)w * nc + c];
-    off[c] = (uint16_t)(c * WC * sizeof(rec_t));
-    end[c] = (uint16_t)((c + 1) * WC * sizeof(rec_t));
+    off[c] = (uint32_t)(c * WC * sizeof(rec_t));
+    end[c] = (uint32_t)((c + 1) * WC * sizeof(rec_t));
   }
   unsigned char *bytes = buf[0].b;
   for (size_t i0 = lo; i0 < hi; i0 += BLOCK) {
@@ -652,10 +656,12 @@ static QK__ALWAYS_INLINE void fine_records(const bucket_job_t *j, unsigned c, ui
 }
 
 #if QK__CELL_AVX2
-/* copy_pairs()'s streaming path eight points a step, 32 bytes a store, for x and y on
- * 32-byte boundaries together: 2.4 instructions a point instead of 5. */
-__attribute__((target("avx2"))) static void pairs_avx2(double *x, double *y, const double *xy,
-                                                       size_t m) {
+/* copy_pairs()'s streaming path eight points a step, 32 bytes a store for x on a 32-byte
+ * boundary (2.4 instructions a point instead of 5), and for y too when it falls on one
+ * with x; else (y_half: y 16 bytes off, the usual case for two blocks from malloc) y
+ * takes two 16-byte stores. */
+__attribute__((target("avx2"))) static QK__ALWAYS_INLINE void
+pairs_avx2_body(double *x, double *y, const double *xy, size_t m, bool y_half) {
   size_t i = 0;
   for (; i < m && ((uintptr_t)(x + i) & 31u); i++) {
     x[i] = xy[2 * i];
@@ -666,25 +672,42 @@ __attribute__((target("avx2"))) static void pairs_avx2(double *x, double *y, con
      * y0 y2 y1 y3, then the middle two swapped */
     __m256d a = _mm256_loadu_pd(xy + 2 * i), b = _mm256_loadu_pd(xy + 2 * i + 4);
     __m256d c = _mm256_loadu_pd(xy + 2 * i + 8), d = _mm256_loadu_pd(xy + 2 * i + 12);
+    __m256d y0 = _mm256_permute4x64_pd(_mm256_unpackhi_pd(a, b), 0xd8);
+    __m256d y1 = _mm256_permute4x64_pd(_mm256_unpackhi_pd(c, d), 0xd8);
     _mm256_stream_pd(x + i, _mm256_permute4x64_pd(_mm256_unpacklo_pd(a, b), 0xd8));
-    _mm256_stream_pd(y + i, _mm256_permute4x64_pd(_mm256_unpackhi_pd(a, b), 0xd8));
     _mm256_stream_pd(x + i + 4, _mm256_permute4x64_pd(_mm256_unpacklo_pd(c, d), 0xd8));
-    _mm256_stream_pd(y + i + 4, _mm256_permute4x64_pd(_mm256_unpackhi_pd(c, d), 0xd8));
+    if (y_half) {
+      _mm_stream_pd(y + i, _mm256_castpd256_pd128(y0));
+      _mm_stream_pd(y + i + 2, _mm256_extractf128_pd(y0, 1));
+      _mm_stream_pd(y + i + 4, _mm256_castpd256_pd128(y1));
+      _mm_stream_pd(y + i + 6, _mm256_extractf128_pd(y1, 1));
+    } else {
+      _mm256_stream_pd(y + i, y0);
+      _mm256_stream_pd(y + i + 4, y1);
+    }
   }
   for (; i < m; i++) {
     x[i] = xy[2 * i];
     y[i] = xy[2 * i + 1];
   }
 }
+
+__attribute__((target("avx2"))) static void pairs_avx2(double *x, double *y, const double *xy,
+                                                       size_t m) {
+  if (((uintptr_t)x ^ (uintptr_t)y) & 31u)
+    pairs_avx2_body(x, y, xy, m, true);
+  else
+    pairs_avx2_body(x, y, xy, m, false);
+}
 #endif
 
 /* Copy m staged coordinate pairs out to x[] and y[], with non-temporal stores where
- * `stream` asks and both destinations fall on 16-byte boundaries together (32-byte ones,
- * with AVX2 where the processor has it). */
+ * `stream` asks and both destinations fall on 16-byte boundaries together (with AVX2 where
+ * the processor has it: x 32 bytes a store, and y too when it is 32-byte aligned with x). */
 static void copy_pairs(double *x, double *y, const double *xy, size_t m, bool stream, bool avx2) {
   size_t i = 0;
 #if QK__CELL_AVX2
-  if (stream && avx2 && (((uintptr_t)x ^ (uintptr_t)y) & 31u) == 0 && ((uintptr_t)x & 7u) == 0) {
+  if (stream && avx2 && (((uintptr_t)x ^ (uintptr_t)y) & 15u) == 0 && ((uintptr_t)x & 7u) == 0) {
     pairs_avx2(x, y, xy, m);
     return;
   }
@@ -861,7 +884,7 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
   unsigned fbits = kbits - cbits;
   size_t nb = (size_t)1 << kbits, nc = (size_t)1 << cbits;
   /* Shares: one per thread, and more where a share would have more than 2^19 points. A tag
-   * numbers 2^(32 - fbits) >= 2^23 points; the lower bound also has every input of more than
+   * numbers 2^(32 - fbits) >= 2^24 points; the lower bound also has every input of more than
    * 2^19 points (the tests' too) sorted in several shares, on any number of threads. */
   size_t per = (size_t)1 << 19, ns = (n + per - 1) / per;
   if (ns < nw) ns = nw;
@@ -887,7 +910,7 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
   j.cnt = s.cnt, j.cbase = s.cbase, j.cum = s.cum, j.deep = s.deep, j.nw = nw, j.ns = (unsigned)ns;
   j.near = delta;
   j.even = (uint32_t)qk__spread16((1u << L) - 1);
-  /* Up to 2^(32 - fbits) points (2^23 at the deepest grid), a tag holds the index itself. */
+  /* Up to 2^(32 - fbits) points (2^24 at the deepest grid), a tag holds the index itself. */
   j.gid = ((uint64_t)n << fbits) <= ((uint64_t)1 << 32);
 #if QK__CELL_AVX2
   j.avx2 = qk__build_avx2();
@@ -929,7 +952,7 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
     scratch_free(t, &s);
     return QK_ERR_NOMEM;
   }
-  /* The scatter writes 2^7 streams at once: on huge pages, they need fewer TLB entries. */
+  /* The scatter writes 2^8 streams at once: on huge pages, they need fewer TLB entries. */
   if (t->huge_pages) qk__advise_huge(&t->alloc, s.rec_block, s.n_rec * sizeof(rec_t) + 64);
   j.rec = (rec_t *)(void *)((unsigned char *)s.rec_block + (-(uintptr_t)s.rec_block & 63u));
   run_pass(&j, scatter_share, scatter_job);

@@ -391,6 +391,17 @@ typedef struct bbox_job {
   int finite[QK__MAX_THREADS];
 } bbox_job_t;
 
+/* The input read ahead by hand, 4 KB (256 points), one prefetch a line, as the bulk
+ * build's key pass and scatter do (index/cellsort.c): the hardware's prefetch alone left
+ * the pass about a twentieth of the whole build slower (process CPU time, A/B in one
+ * process, 1M uniform points, one thread, medians 0.93-0.97 with it). An address past the
+ * array's end is only a hint, computed outside C's pointer arithmetic. */
+#if defined(__GNUC__)
+#define QK__BBOX_PREFETCH(p) __builtin_prefetch((const void *)((uintptr_t)(p) + 4096))
+#else
+#define QK__BBOX_PREFETCH(p) ((void)0)
+#endif
+
 #if QK__TREE_AVX2
 /* The same as the SSE2 loop below, two points per register: half the instructions. */
 __attribute__((target("avx2"))) static void bbox_avx2(const qk_point_t *p, size_t lo, size_t hi,
@@ -399,6 +410,8 @@ __attribute__((target("avx2"))) static void bbox_avx2(const qk_point_t *p, size_
   __m256d nan = _mm256_setzero_pd();
   size_t i = lo;
   for (; i + 8 <= hi; i += 8) {
+    QK__BBOX_PREFETCH(&p[i]); /* the step's two lines, 4 KB ahead */
+    QK__BBOX_PREFETCH(&p[i + 4]);
     __m256d a = _mm256_loadu_pd(&p[i].x), b = _mm256_loadu_pd(&p[i + 2].x);
     __m256d c = _mm256_loadu_pd(&p[i + 4].x), d = _mm256_loadu_pd(&p[i + 6].x);
     mn0 = _mm256_min_pd(mn0, a);
@@ -454,6 +467,7 @@ static void bbox_share(void *ctx, unsigned w, unsigned nw) {
   __m128d nan = _mm_setzero_pd();
   size_t i = lo;
   for (; i + 4 <= hi; i += 4) {
+    QK__BBOX_PREFETCH(&p[i]);
     __m128d a = _mm_loadu_pd(&p[i].x), b = _mm_loadu_pd(&p[i + 1].x);
     __m128d c = _mm_loadu_pd(&p[i + 2].x), d = _mm_loadu_pd(&p[i + 3].x);
     mn0 = _mm_min_pd(mn0, a);

@@ -21,7 +21,8 @@
  * 16 and with a tenth of the points on grid lines or duplicated, on one and two threads,
  * the shape of inserting the points one by one, and in every leaf the input's points in
  * input order (ids rising, each id once, its coordinates bit for bit); with libc's
- * allocator and with point arrays on 32-byte boundaries or 8 bytes past them; all of it
+ * allocator, with point arrays on 32-byte boundaries or 8 bytes past them, and with x and y
+ * 16 bytes apart modulo 32 (each of the two on a 32-byte boundary in turn); all of it
  * again with the AVX2 paths turned off (qk__build_avx2_off), so the SSE2 and plain paths
  * are checked on processors that have AVX2 too.
  */
@@ -252,6 +253,29 @@ static void *offset_alloc(void *ud, void *ptr, size_t osize, size_t nsize) {
   return fresh;
 }
 
+/* An allocator whose successive blocks start `base` and `base + 16` bytes past a 64-byte
+ * boundary in turn, so that the point arrays x and y (allocated one after the other) lie 16
+ * bytes apart modulo 32, as two blocks from glibc's heap usually do: the staged pairs' copy
+ * then streams x 32 bytes a store and y 16 (index/cellsort.c, pairs_avx2). */
+typedef struct alt_ud {
+  size_t base;
+  unsigned calls;
+} alt_ud_t;
+
+static void *alt_alloc(void *ud, void *ptr, size_t osize, size_t nsize) {
+  alt_ud_t *a = ud;
+  void *fresh = NULL;
+  if (nsize) {
+    size_t off = a->base + 16 * (a->calls++ % 2);
+    unsigned char *b = aligned_alloc(64, (nsize + off + 63) / 64 * 64);
+    if (!b) return NULL;
+    fresh = b + off;
+    if (ptr) memcpy(fresh, ptr, osize < nsize ? osize : nsize);
+  }
+  if (ptr) free((unsigned char *)ptr - ((uintptr_t)ptr & 63u));
+  return fresh;
+}
+
 /* index/cellsort.c: nonzero makes the build take its SSE2 and plain paths where the
  * processor has AVX2, so that both are checked here. */
 extern int qk__build_avx2_off;
@@ -287,13 +311,17 @@ static void test_build_streamed_order(void **state) {
   qk_tree_free(ins);
   /* libc's allocator, then blocks 0 and 8 bytes past a 64-byte boundary */
   size_t offsets[] = {0, 8};
-  qk_allocator_t alloc[] = {{offset_alloc, &offsets[0]}, {offset_alloc, &offsets[1]}};
-  /* runs 6 to 11 repeat 0 to 5 without the AVX2 paths */
-  for (unsigned run = 0; run < 12; run++) {
+  alt_ud_t alt[] = {{0, 0}, {8, 0}}; /* x and y 16 bytes apart modulo 32 */
+  qk_allocator_t alloc[] = {{offset_alloc, &offsets[0]},
+                            {offset_alloc, &offsets[1]},
+                            {alt_alloc, &alt[0]},
+                            {alt_alloc, &alt[1]}};
+  /* runs 10 to 19 repeat 0 to 9 without the AVX2 paths */
+  for (unsigned run = 0; run < 20; run++) {
     uint32_t threads = 1 + run % 2;
     o.threads = threads;
-    o.allocator = run % 6 < 2 ? NULL : &alloc[(run % 6 - 2) / 2];
-    qk__build_avx2_off = run >= 6;
+    o.allocator = run % 10 < 2 ? NULL : &alloc[(run % 10 - 2) / 2];
+    qk__build_avx2_off = run >= 10;
     qk_tree_t *t = NULL;
     assert_int_equal(qk_tree_build(p, N, &o, &t), QK_OK);
     QKT_CHECK_TREE(t);
