@@ -1750,6 +1750,32 @@ static inline uint64_t morton32(uint32_t x, uint32_t y) {
 #endif
 }
 
+/*
+ * Asks for what the first two climbs of cast_float read: the other children of the two
+ * nodes above the start N (path[n - 1], path[n - 2]; those the descent has filled in, from
+ * path[known] on), as their entries in quads or their leaves' disc records. A climb's reads
+ * otherwise begin only when the search below has ended, one chain of misses after the
+ * other, and most rays climb (at 10^6 discs 68% at least once, 42% twice, 23% three times);
+ * asked for here, these misses overlap those of N's own leaves. Some lines are asked for
+ * in vain (the children the ray passes by, the climbs not made). A prefetch changes no
+ * result.
+ */
+static inline void prefetch_climbs(const qk_collider_t *c, const uint32_t *path, unsigned n,
+                                   unsigned known) {
+  const int all_discs = c->n_discs == c->n;
+  for (unsigned a = n, up = 0; a > known && up < 2; a--, up++) {
+    const qnode_t *q = &c->quads[path[a - 1]];
+    for (unsigned k = 0; k < 4; k++) {
+      const uint32_t l = q->link[k], cnt = q->count[k];
+      if (cnt == QK_NONE) {
+        if (l != path[a]) QK__CPREFETCH(&c->quads[l]); /* path[a]: searched already */
+      } else if (cnt > 0 && all_discs) {
+        prefetch_discs(c, l, cnt);
+      }
+    }
+  }
+}
+
 /* Levels above the origin's deepest internal node at which the local search starts: none
  * since a climb no longer visits the child it has searched (one level up cost 14 more
  * instructions a ray at 10^6 discs, 15 at 10^4, 21 at 10^5, and 0.1-0.7 more
@@ -1829,6 +1855,7 @@ static void cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk
     }
     const unsigned n = d > QK__RAY_START_UP ? d - QK__RAY_START_UP : 0;
     for (; known > n; known--) path[known - 1] = c->qparent[path[known]];
+    prefetch_climbs(c, path, n, known);
     walk_float(c, ray, tmax, path[n], QK_NONE, &b);
     /* Up from N one level at a time while the segment to the best hit so far (or to
      * tmax) is not inside the square of the node searched: each step searches the
