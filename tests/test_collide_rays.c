@@ -23,7 +23,12 @@
  *    1.7), with rays from inside and outside the root;
  *  - the batch call (which reorders its rays by origin) against single calls;
  *  - ties: every disc three times at shuffled ids, so that each hit is decided by the
- *    smallest id among equal t.
+ *    smallest id among equal t;
+ *  - a scene as large as the benchmark's in its ray arrays' size (70,000 discs, over the
+ *    2 MiB from which the cast asks for lines ahead), discs only and with boxes, rays from
+ *    anywhere, from disc centres and along the leaves' split lines: the paths that only
+ *    large colliders take (the prefetches read the nodes above the start); and the batch
+ *    call there (rays sorted by origin) against single calls.
  */
 #include <math.h>
 #include <stdio.h>
@@ -509,6 +514,75 @@ static void test_collide_rays_far_coordinates(void **state) {
   free(d);
 }
 
+/* A collider over 2 MiB of ray arrays (70,000 records of 32 bytes), bench-like discs
+ * (radii up to 0.5 / sqrt(n), capacity 8), once of discs only and once with a tenth boxes:
+ * every ray against brute force. */
+static void test_collide_rays_large_scene(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 7);
+  enum { ND = 70000, NB = 7000, NR = 400 };
+  qk_disc_t *d = malloc(ND * sizeof *d);
+  qk_box_t *b = malloc(NB * sizeof *b);
+  assert_non_null(d && b);
+  const double rmax = 0.5 / sqrt((double)ND);
+  for (int i = 0; i < ND; i++)
+    d[i] =
+        (qk_disc_t){qkt_rng_range(&r, 0, 1), qkt_rng_range(&r, 0, 1), qkt_rng_range(&r, 0, rmax)};
+  for (int i = 0; i < NB; i++) {
+    const double x = qkt_rng_range(&r, 0, 1), y = qkt_rng_range(&r, 0, 1);
+    b[i] = (qk_box_t){x, y, x + qkt_rng_range(&r, 0, rmax), y + qkt_rng_range(&r, 0, rmax)};
+  }
+  qk_tree_options_t opt;
+  qk_tree_options_init(&opt);
+  opt.capacity = 8;
+  long checked = 0;
+  for (int variant = 0; variant < 2; variant++) {
+    const size_t nb = variant ? NB : 0;
+    qk_collider_t *c = NULL;
+    assert_int_equal(qk_collider_build(d, ND, variant ? b : NULL, nb, &opt, &c), QK_OK);
+    for (int i = 0; i < NR; i++) {
+      qk_point_t o = {qkt_rng_range(&r, -0.1, 1.1), qkt_rng_range(&r, -0.1, 1.1)};
+      if (i % 4 == 1) o = (qk_point_t){d[i].x, d[i].y};             /* inside a disc */
+      if (i % 4 == 2) o.x = (double)qkt_rng_below(&r, 257) / 256.0; /* on a split line */
+      const double ang = qkt_rng_range(&r, 0, 6.283185307179586);
+      qk_point_t v = {cos(ang), sin(ang)};
+      if (i % 8 == 2) v = (qk_point_t){0, ang < 3.14 ? 1 : -1}; /* along it */
+      const double tmax = qkt_rng_below(&r, 4) == 0 ? qkt_rng_range(&r, 0, 0.02) : INFINITY;
+      qk_hit_t h, w = brute(d, ND, b, nb, o, v, tmax);
+      assert_int_equal(qk_collider_raycast(c, o, v, tmax, &h), QK_OK);
+      if (h.id != w.id || !(h.t == w.t || (isinf(h.t) && isinf(w.t))))
+        fail_msg("variant %d ray %d (o %.17g %.17g, d %.17g %.17g, tmax %g): hit (%u, %.17g) vs "
+                 "brute force (%u, %.17g) (seed %llu)",
+                 variant, i, o.x, o.y, v.x, v.y, tmax, h.id, h.t, w.id, w.t,
+                 (unsigned long long)g_seed);
+      checked++;
+    }
+    /* The batch call sorts these many rays by origin: the same answers as single calls. */
+    enum { NBATCH = 2048 };
+    qk_point_t *bo = malloc(NBATCH * sizeof *bo), *bv = malloc(NBATCH * sizeof *bv);
+    qk_hit_t *bh = malloc(NBATCH * sizeof *bh);
+    assert_non_null(bo && bv && bh);
+    for (int i = 0; i < NBATCH; i++) {
+      const double ang = qkt_rng_range(&r, 0, 6.283185307179586);
+      bo[i] = (qk_point_t){qkt_rng_range(&r, -0.1, 1.1), qkt_rng_range(&r, -0.1, 1.1)};
+      bv[i] = (qk_point_t){cos(ang), sin(ang)};
+    }
+    assert_int_equal(qk_collider_raycast_batch(c, bo, bv, NBATCH, INFINITY, bh), QK_OK);
+    for (int i = 0; i < NBATCH; i++) {
+      qk_hit_t h;
+      assert_int_equal(qk_collider_raycast(c, bo[i], bv[i], INFINITY, &h), QK_OK);
+      if (h.id != bh[i].id || !(h.t == bh[i].t || (isinf(h.t) && isinf(bh[i].t))))
+        fail_msg("variant %d batch ray %d: batch (%u, %.17g) vs single (%u, %.17g) (seed %llu)",
+                 variant, i, bh[i].id, bh[i].t, h.id, h.t, (unsigned long long)g_seed);
+    }
+    free(bo), free(bv), free(bh);
+    qk_collider_free(c);
+  }
+  assert_true(checked == 2L * NR);
+  free(d), free(b);
+}
+
 int main(void) {
   g_seed = qkt_seed(90211);
   const struct CMUnitTest tests[] = {
@@ -519,6 +593,7 @@ int main(void) {
       cmocka_unit_test(test_collide_rays_tied_discs),
       cmocka_unit_test(test_collide_rays_extreme_directions),
       cmocka_unit_test(test_collide_rays_far_coordinates),
+      cmocka_unit_test(test_collide_rays_large_scene),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
