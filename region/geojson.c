@@ -643,6 +643,41 @@ qk_status_t qk_region_read_geojson_text(const char *text, size_t len,
   return st;
 }
 
+qk_status_t qk_region_geojson_locate(const char *text, size_t len, const char *pointer,
+                                     unsigned long *line, unsigned long *column) {
+  char buf[1024];
+  size_t n = pointer ? strlen(pointer) : 0;
+  if (!text || !pointer || !line || !column || n >= sizeof buf || (n && pointer[0] != '/'))
+    return QK_ERR_INVALID;
+  if (len >= 3 && !memcmp(text, "\xEF\xBB\xBF", 3)) text += 3, len -= 3;
+  /* The tokens, unescaped in place into buf, become the reader's path steps. */
+  gj_step_t path[GJ_PATH_MAX];
+  size_t depth = 0, w = 0;
+  for (size_t i = 0; i < n && depth < GJ_PATH_MAX;) {
+    char *tok = buf + w;
+    int digits = 1;
+    for (i++; i < n && pointer[i] != '/'; i++) {
+      char c = pointer[i];
+      if (c == '~' && i + 1 < n && (pointer[i + 1] == '0' || pointer[i + 1] == '1'))
+        c = pointer[++i] == '0' ? '~' : '/';
+      digits &= c >= '0' && c <= '9';
+      buf[w++] = c;
+    }
+    buf[w++] = '\0';
+    if (digits && *tok) {
+      errno = 0;
+      unsigned long long k = strtoull(tok, NULL, 10);
+      path[depth++] = (gj_step_t){NULL, errno || k > SIZE_MAX ? SIZE_MAX : (size_t)k};
+    } else {
+      path[depth++] = (gj_step_t){tok, 0};
+    }
+  }
+  qk_error_t at;
+  where(text, locate(text, len, path, depth), &at);
+  *line = at.line, *column = at.column;
+  return QK_OK;
+}
+
 qk_status_t qk_region_read_geojson(const char *path, const qk_region_options_t *options,
                                    qk_region_t **out, qk_error_t *err) {
   qk_status_t st0 = qk__read_begin(path, out, err);
@@ -683,6 +718,12 @@ qk_status_t qk_region_read_geojson_text(const char *text, size_t len,
   if (err) memset(err, 0, sizeof *err);
   return qk__region_fail(err, QK_ERR_UNSUPPORTED, SIZE_MAX,
                          "built without json-c: install libjson-c-dev and rebuild");
+}
+
+qk_status_t qk_region_geojson_locate(const char *text, size_t len, const char *pointer,
+                                     unsigned long *line, unsigned long *column) {
+  (void)text, (void)len, (void)pointer, (void)line, (void)column;
+  return QK_ERR_UNSUPPORTED;
 }
 
 qk_status_t qk_region_read_geojson(const char *path, const qk_region_options_t *options,

@@ -476,13 +476,18 @@ static qk_status_t round_poly(qk_poly_t **poly, double g, prep_t *pp, qk_mesh_er
   return st;
 }
 
-/* Append to a mesher's message what its "segment N" is in the GeoJSON input. */
-static void name_segment(const prep_t *pp, const char *msg, char *buf, size_t n) {
+/* Append to a mesher's message what its "segment N" is in the GeoJSON input (feature,
+ * polygon, ring and position, and that position's line and column in the file), and put
+ * in place "FILE:LINE:COL" of the first such position, or "FILE". */
+static void name_segment(const prep_t *pp, const char *file, const char *msg, char *buf, size_t n,
+                         char *place, size_t np) {
   /* "segment N ...", or "segments N and M ..." (crossing segments: both named) */
   const char *at = strstr(msg, "segment ");
   size_t skip = 8;
   if (!at && (at = strstr(msg, "segments "))) skip = 9;
-  char where[96] = "", where2[96] = "";
+  char where[160] = "", where2[160] = "";
+  unsigned long l1 = 0, c1 = 0, l2 = 0, c2 = 0;
+  snprintf(place, np, "%s", file);
   if (at && pp->gj.ns) {
     char *end;
     unsigned long s = strtoul(at + skip, &end, 10);
@@ -490,15 +495,18 @@ static void name_segment(const prep_t *pp, const char *msg, char *buf, size_t n)
       snprintf(buf, n, "%s", msg);
       return;
     }
-    mg_describe_segment(&pp->gj, s, where, sizeof where);
+    mg_describe_segment(&pp->gj, file, s, where, sizeof where, &l1, &c1);
     if (skip == 9 && !strncmp(end, " and ", 5)) {
       char *end2;
       unsigned long s2 = strtoul(end + 5, &end2, 10);
       if (end2 != end + 5 && s2 < pp->gj.ns)
-        mg_describe_segment(&pp->gj, s2, where2, sizeof where2);
+        mg_describe_segment(&pp->gj, file, s2, where2, sizeof where2, &l2, &c2);
     }
   }
-  if (where[0] && where2[0])
+  if (l1) snprintf(place, np, "%s:%lu:%lu", file, l1, c1);
+  if (where[0] && where2[0] && l2)
+    snprintf(buf, n, "%s (input segments %s and %s, at %lu:%lu)", msg, where, where2, l2, c2);
+  else if (where[0] && where2[0])
     snprintf(buf, n, "%s (input segments %s and %s)", msg, where, where2);
   else if (where[0])
     snprintf(buf, n, "%s (input segment %s)", msg, where);
@@ -588,17 +596,21 @@ static int make_mesh(const char *cmd, const mesh_args_t *o, qk_poly_t **poly, qk
     qk_mesh_stats_t s;
     qk_mesh_stats(*mesh, &s);
     if (s.triangles > 0) return CLI_OK;
-    cli_error(cmd, "%s: nothing to mesh: no closed ring encloses an area outside the holes", name);
+    char note[512];
+    cli_error(cmd, "%s: nothing to mesh: no closed ring encloses an area outside the holes%s", name,
+              mg_pole_note(&pp->gj, note, sizeof note));
     return CLI_BAD_INPUT;
   }
-  char msg[600];
-  name_segment(pp, err.message[0] ? err.message : qk_strerror(st), msg, sizeof msg);
+  char msg[800], place[1024], note[512];
+  name_segment(pp, name, err.message[0] ? err.message : qk_strerror(st), msg, sizeof msg, place,
+               sizeof place);
+  const char *pole = mg_pole_note(&pp->gj, note, sizeof note);
   if (err.line)
     cli_error(cmd, "%s:%lu: %s", name, err.line, msg);
   else if (pp->features == 1 && pp->name[0])
-    cli_error(cmd, "%s: feature %s: %s", name, pp->name, msg);
+    cli_error(cmd, "%s: feature %s: %s%s", place, pp->name, msg, pole);
   else
-    cli_error(cmd, "%s: %s", name, msg);
+    cli_error(cmd, "%s: %s%s", place, msg, pole);
   if (st == QK_ERR_INVALID) return CLI_USAGE;
   return (st == QK_ERR_NOMEM || st == QK_ERR_IO) ? CLI_INTERNAL : CLI_BAD_INPUT;
 }

@@ -98,9 +98,10 @@ else
   passes=$((passes + 1))
 fi
 
-# Crossing rings in GeoJSON: both segments named by feature, ring and point.
+# Crossing rings in GeoJSON: both segments named by feature, polygon, ring and position,
+# with their line and column (review6.sh has more).
 printf '{"type":"MultiPolygon","coordinates":[[[[0,0],[4,0],[4,4],[0,4],[0,0]]],[[[2,2],[6,2.5],[6,3],[2,2]]]]}\n' >"$tmp/crossing.geojson"
-expect 1 'segments 1 and 4 cross or overlap \(input segments feature 0 ring 0 point 1 and feature 0 ring 1 point 0\)' -- \
+expect 1 'crossing.geojson:1:47: segments 1 and 4 cross or overlap \(input segments feature 0, polygon 0, ring 0, position 1 and feature 0, polygon 1, ring 0, position 0, at 1:75\)' -- \
   "$cli" mesh "$tmp/crossing.geojson" -o "$tmp/crossing"
 
 # ---- .poly: BOM accepted; bad geometry refused naming the line, nothing written ------
