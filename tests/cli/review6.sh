@@ -1,0 +1,95 @@
+#!/usr/bin/env bash
+# CLI regressions from a sixth review, on hostile inputs not tried before (one block per
+# finding; each failed before its fix): the mesher's GeoJSON errors without a line and
+# column, and a ring round a pole (Antarctica) reported by its symptoms.
+# shellcheck source=lib/common.bash
+source "$(dirname "${BASH_SOURCE[0]}")/lib/common.bash" "$@"
+
+nothing_written() { # nothing_written PREFIX: no PREFIX.node / .ele, no temporary beside it
+  local d
+  d=$(dirname "$1")
+  if [ -e "$1.node" ] || [ -e "$1.ele" ] || ls "$d" | grep -q '\.tmp\.'; then
+    fail "$1: an output or a temporary was left after an error"
+  else
+    passes=$((passes + 1))
+  fi
+}
+
+# ---- mesh, GeoJSON: errors named "feature F ring R point P" and no place in the file ----
+# (the ring counted across the feature's polygons, the point after merging); now feature,
+# polygon, ring and position as the region reader numbers them, with line and column.
+# Nested GeometryCollections, a Point first, positions on lines of their own.
+cat >"$tmp/gc.geojson" <<'EOF2'
+{"type": "FeatureCollection",
+ "features": [
+  {"type": "Feature", "properties": {"name": "pt"}, "geometry": {"type": "Point", "coordinates": [9, 9]}},
+  {"type": "Feature", "properties": {"name": "gc"},
+   "geometry": {"type": "GeometryCollection", "geometries": [
+     {"type": "Point", "coordinates": [0, 0]},
+     {"type": "GeometryCollection", "geometries": [
+       {"type": "Polygon", "coordinates": [
+         [[0, 0], [4, 0], [4, 4], [0, 4], [0, 0]]]},
+       {"type": "MultiPolygon", "coordinates": [[[[10, 10], [11, 10], [11, 11], [10, 10]]],
+         [[[2, 2],
+           [6, 2.5],
+           [6, 3], [2, 2]]]]}]}]}}
+ ]}
+EOF2
+# [4, 0] is at line 9, column 19; [2, 2] of the third polygon at line 11, column 12
+expect 1 "^quadkit mesh: $tmp/gc.geojson:9:19: segments 1 and 7 cross or overlap \\(input segments feature 1, polygon 0, ring 0, position 1 and feature 1, polygon 2, ring 0, position 0, at 11:12\\)$" \
+  -- "$cli" mesh "$tmp/gc.geojson" -o "$tmp/gc"
+nothing_written "$tmp/gc"
+# the same with a byte order mark and CRLF line ends (columns count bytes after the mark)
+printf '\xEF\xBB\xBF' >"$tmp/gcbom.geojson"
+sed 's/$/\r/' "$tmp/gc.geojson" >>"$tmp/gcbom.geojson"
+expect 1 "gcbom.geojson:9:19: segments 1 and 7 cross or overlap .* at 11:12\\)$" \
+  -- "$cli" mesh "$tmp/gcbom.geojson" -o "$tmp/gc"
+# a feature without polygons: where its geometry is
+expect 1 "^quadkit mesh: $tmp/gc.geojson:3:65: feature 0 has no Polygon or MultiPolygon geometry$" \
+  -- "$cli" mesh "$tmp/gc.geojson" --field name=pt -o "$tmp/gc"
+expect 1 "gc.geojson:3:65: feature 0 has no Polygon" -- "$cli" mesh "$tmp/gc.geojson" --feature 0 -o "$tmp/gc"
+nothing_written "$tmp/gc"
+# a position inside a ring whose repeated points were merged (position counts the file's)
+cat >"$tmp/rep.geojson" <<'EOF2'
+{"type": "Polygon", "coordinates": [
+  [[0, 0], [0, 0], [0, 0], [4, 0], [4, 4], [0, 4], [0, 0]],
+  [[1, 1], [1, 1], [5, 2],
+   [3, 3], [1, 1]]]}
+EOF2
+# ([4, 0] is position 3, after two repeats of [0, 0]: it was "point 1")
+expect 1 "^quadkit mesh: $tmp/rep.geojson:2:28: segments 1 and 4 cross or overlap \\(input segments feature 0, polygon 0, ring 0, position 3 and feature 0, polygon 0, ring 1, position 0, at 3:4\\)$" \
+  -- "$cli" mesh "$tmp/rep.geojson" -o "$tmp/rep"
+# a hole ring covered by another polygon: no hole point; the ring is named and placed
+cat >"$tmp/hole.geojson" <<'EOF2'
+{"type": "MultiPolygon", "coordinates": [
+  [[[0, 0], [10, 0], [10, 10], [0, 10], [0, 0]],
+   [[2, 2], [2, 4], [4, 4], [4, 2], [2, 2]]],
+  [[[1, 1], [5, 1], [5, 5], [1, 5], [1, 1]]]
+]}
+EOF2
+expect 1 "^quadkit mesh: $tmp/hole.geojson:3:4: feature 0, polygon 0, ring 1: no point found strictly inside this hole ring \\(through \\(2, 2\\)\\) and outside every other ring$" \
+  -- "$cli" mesh "$tmp/hole.geojson" -o "$tmp/hole"
+nothing_written "$tmp/hole"
+
+# ---- mesh, GeoJSON: a ring round a pole said "no point found inside the hole ring" or,
+# projected, "segments ... cross" ---------------------------------------------------------
+cat >"$tmp/cap.geojson" <<'EOF2'
+{"type": "Feature", "properties": {"name": "cap"},
+ "geometry": {"type": "Polygon", "coordinates": [
+   [[-170, 80], [-50, 81], [70, 80], [-170, 80]]]}}
+EOF2
+pole='feature 0, polygon 0, ring 0 goes round the north pole'
+expect 1 "^quadkit mesh: $tmp/cap.geojson:3:4: $pole \\(its longitudes wind once round the globe, across the antimeridian\\): --project equirect cannot map it to a closed ring; cut it along the antimeridian into rings that close in longitude, or mesh other features with --feature N or --field NAME=VALUE$" \
+  -- "$cli" mesh "$tmp/cap.geojson" --project equirect -o "$tmp/cap"
+nothing_written "$tmp/cap"
+# unprojected the planar triangle is meshed (it is one), and nothing is refused up front
+expect 0 '"triangles": [1-9]' -- "$cli" mesh "$tmp/cap.geojson" -o "$tmp/cap" --stats
+# a ring cut along the antimeridian and closed along it (180 to -180) is not one
+cat >"$tmp/cut.geojson" <<'EOF2'
+{"type": "Polygon", "coordinates": [
+   [[-180, -80], [-90, -80], [0, -80], [90, -80], [180, -80], [180, -89], [-180, -89], [-180, -80]]]}
+EOF2
+expect 0 '"triangles": [1-9]' -- "$cli" mesh "$tmp/cut.geojson" -o "$tmp/cut" --stats
+# (the same on Antarctica in countries-50m: review6_data.sh, which needs ../shared/data)
+
+report
