@@ -188,7 +188,7 @@ static int read_input(qrun_t *q, int i) {
 
 /* Report bad data in row `row` of input i as "FILE:LINE: message". */
 static int bad_row(const qrun_t *q, int i, size_t row, const char *msg) {
-  fprintf(stderr, "quadkit: %s:%lu: %s\n", q->a.files[i], q->rows[i].lineno[row], msg);
+  cli_msg("quadkit: %s:%lu: %s\n", q->a.files[i], q->rows[i].lineno[row], msg);
   return CLI_BAD_INPUT;
 }
 
@@ -468,7 +468,7 @@ int cmd_locate(int argc, char **argv) { return run_query(argc, argv, &locate_cmd
 static int build_collider(qrun_t *q) {
   const cli_table_t *tb = &q->tab[0];
   if (tb->rows == 0) {
-    fprintf(stderr, "quadkit: %s: no data rows\n", q->a.files[0]);
+    cli_msg("quadkit: %s: no data rows\n", q->a.files[0]);
     return CLI_BAD_INPUT;
   }
   for (size_t i = 0; i < tb->rows; i++) {

@@ -297,8 +297,7 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
       fcap = (size_t)len + 1;
     }
     if ((size_t)len != strlen(line)) {
-      fprintf(stderr, "quadkit join: %s:%ld: binary data (NUL byte) in a text file\n", j->pts_path,
-              lineno);
+      cli_msg("quadkit join: %s:%ld: binary data (NUL byte) in a text file\n", j->pts_path, lineno);
       rc = CLI_BAD_INPUT;
       break;
     }
@@ -306,7 +305,7 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
     int lone_cr = cli_cut_line_end(line, &cut);
     len = (ssize_t)cut;
     if (lone_cr) {
-      fprintf(stderr, "quadkit join: %s:%ld: " CLI_LONE_CR "\n", j->pts_path, lineno);
+      cli_msg("quadkit join: %s:%ld: " CLI_LONE_CR "\n", j->pts_path, lineno);
       rc = CLI_BAD_INPUT;
       break;
     }
@@ -327,8 +326,8 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
       int rx = named ? 1 : csv_field(line, xc, fx, fcap, &why);
       int ry = named || rx < 0 ? 1 : csv_field(line, yc, fy, fcap, &why);
       if (rx < 0 || ry < 0) {
-        fprintf(stderr, "quadkit join: %s:%ld: field %d: %s\n", j->pts_path, lineno,
-                -(rx < 0 ? rx : ry), why);
+        cli_msg("quadkit join: %s:%ld: field %d: %s\n", j->pts_path, lineno, -(rx < 0 ? rx : ry),
+                why);
         rc = CLI_BAD_INPUT;
         break;
       }
@@ -354,13 +353,13 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
     int hx = csv_field(line, xy->col[0], fx, fcap, &why);
     int hy = hx < 0 ? 0 : csv_field(line, xy->col[1], fy, fcap, &why);
     if (hx < 0 || hy < 0) {
-      fprintf(stderr, "quadkit join: %s:%ld: field %d: %s\n", j->pts_path, lineno,
-              -(hx < 0 ? hx : hy), why);
+      cli_msg("quadkit join: %s:%ld: field %d: %s\n", j->pts_path, lineno, -(hx < 0 ? hx : hy),
+              why);
       rc = CLI_BAD_INPUT;
       break;
     }
     if (!hx || !hy) {
-      fprintf(stderr, "quadkit join: %s:%ld: no field %d (need x in field %d, y in field %d)\n",
+      cli_msg("quadkit join: %s:%ld: no field %d (need x in field %d, y in field %d)\n",
               j->pts_path, lineno, (!hx ? xy->col[0] : xy->col[1]) + 1, xy->col[0] + 1,
               xy->col[1] + 1);
       rc = CLI_BAD_INPUT;
@@ -369,8 +368,8 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
     if (number(fx, &x) != 1 || number(fy, &y) != 1 || !isfinite(x) || !isfinite(y)) {
       const char *bad = (number(fx, &x) != 1 || !isfinite(x)) ? fx : fy;
       int col = bad == fx ? xy->col[0] : xy->col[1];
-      fprintf(stderr, "quadkit join: %s:%ld: field %d is not a finite number: '%.40s'\n",
-              j->pts_path, lineno, col + 1, bad);
+      cli_msg("quadkit join: %s:%ld: field %d is not a finite number: '%.40s'\n", j->pts_path,
+              lineno, col + 1, bad);
       rc = CLI_BAD_INPUT;
       break;
     }
@@ -389,7 +388,7 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
     }
   }
   if (!rc && ferror(in)) {
-    fprintf(stderr, "quadkit join: %s: read error\n", j->pts_path);
+    cli_msg("quadkit join: %s: read error\n", j->pts_path);
     rc = CLI_BAD_INPUT;
   }
   if (!rc) rc = flush_chunk(j);

@@ -107,8 +107,8 @@ static void scene_free(scene_t *s) {
 }
 
 static int bad(const char *path, unsigned long line, const char *fmt, const char *val) {
-  fprintf(stderr, "quadkit world: %s:%lu: ", path, line);
-  fprintf(stderr, fmt, val);
+  cli_msg("quadkit world: %s:%lu: ", path, line);
+  cli_msg(fmt, val);
   fputc('\n', stderr);
   return CLI_BAD_INPUT;
 }
@@ -219,7 +219,7 @@ static int each_row(const char *path,
   }
   free(line);
   if (!rc && ferror(f)) {
-    fprintf(stderr, "quadkit world: %s: read error\n", path);
+    cli_msg("quadkit world: %s: read error\n", path);
     rc = CLI_BAD_INPUT;
   }
   fclose(f);
@@ -355,7 +355,7 @@ int cmd_world(int argc, char **argv) {
   int rc = each_row(files[0], object_row, &s);
   if (rc) goto done;
   if (s.n == 0) {
-    fprintf(stderr, "quadkit world: %s: no objects\n", files[0]);
+    cli_msg("quadkit world: %s: no objects\n", files[0]);
     rc = CLI_BAD_INPUT;
     goto done;
   }
@@ -370,7 +370,7 @@ int cmd_world(int argc, char **argv) {
   for (size_t i = 1; i < s.n; i++)
     if (s.o[s.by_id[i]].id == s.o[s.by_id[i - 1]].id) {
       unsigned long a = s.o[s.by_id[i - 1]].line, b = s.o[s.by_id[i]].line;
-      fprintf(stderr, "quadkit world: %s:%lu: id %llu appears twice (also on line %lu)\n", files[0],
+      cli_msg("quadkit world: %s:%lu: id %llu appears twice (also on line %lu)\n", files[0],
               a > b ? a : b, (unsigned long long)s.o[s.by_id[i]].id, a < b ? a : b);
       rc = CLI_BAD_INPUT;
       goto done;

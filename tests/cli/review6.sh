@@ -92,4 +92,25 @@ EOF2
 expect 0 '"triangles": [1-9]' -- "$cli" mesh "$tmp/cut.geojson" -o "$tmp/cut" --stats
 # (the same on Antarctica in countries-50m: review6_data.sh, which needs ../shared/data)
 
+# ---- messages quoted input bytes raw: an escape sequence in a file cleared the screen or
+# set the window title of whoever read the error; now \xNN (UTF-8 text is kept) ----------
+printf 'x,y\n1,2\n3,\033]0;pwned\007\033[2Jred\n' >"$tmp/esc.csv"
+expect 1 "^quadkit: $tmp/esc.csv:3:3: field 2 \\(y\\) is not a number: '\\\\x1B\\]0;pwned\\\\x07\\\\x1B\\[2Jred'$" -- "$cli" tree "$tmp/esc.csv"
+printf '1,\033[2Jdisc,0,0,1\n' >"$tmp/wesc.csv"
+printf '0,1,0,0,1\n' >"$tmp/wmv.csv"
+expect 1 "^quadkit world: $tmp/wesc.csv:1: unknown kind '\\\\x1B\\[2Jdisc'" -- "$cli" world "$tmp/wesc.csv" "$tmp/wmv.csv"
+printf '{"type":"Polyg\\u001b[2Jon","coordinates":[]}' >"$tmp/esc.geojson"
+expect 1 'unknown GeoJSON type "Polyg\\x1B\[2Jon"' -- "$cli" regions "$tmp/esc.geojson"
+printf '4 2 0 0\n0 0 0\n1 \033[2J 0\n' >"$tmp/esc.poly"
+expect 1 "^quadkit mesh: $tmp/esc.poly:3: vertex 1: bad x coordinate '\\\\x1B\\[2J'$" -- "$cli" mesh "$tmp/esc.poly" -o "$tmp/esc"
+printf 'x,y\n1,2\n3,\302\2331m\377\n' >"$tmp/c1.csv" # a C1 control (CSI) and a byte not UTF-8
+expect 1 "is not a number: '\\\\xC2\\\\x9B1m\\\\xFF'$" -- "$cli" tree "$tmp/c1.csv"
+printf 'x,y\n1,2\n3,C\303\264te\n' >"$tmp/utf8.csv"
+expect 1 "is not a number: 'C$(printf '\303\264')te'$" -- "$cli" tree "$tmp/utf8.csv"
+same_text "no raw escape byte in any message" \
+  "$(for c in "tree $tmp/esc.csv" "world $tmp/wesc.csv $tmp/wmv.csv" "regions $tmp/esc.geojson" "tree $tmp/c1.csv"; do
+    # shellcheck disable=SC2086
+    "$cli" $c 2>&1 | LC_ALL=C grep -c $'[\x01-\x08\x0b-\x1f\x7f]'
+  done | tr '\n' ' ')" "0 0 0 0 "
+
 report
