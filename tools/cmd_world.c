@@ -7,6 +7,7 @@
 #include <ctype.h>
 #include <errno.h>
 #include <math.h>
+#include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
@@ -106,8 +107,18 @@ static void scene_free(scene_t *s) {
   free(s->m);
 }
 
+/* The text of the line being read (after a byte order mark), for the column of a field:
+ * split() leaves each field where it was in the line (a quoted one starts at its quote). */
+static const char *g_row;
+static size_t g_row_len;
+
+/* "PATH:LINE[:COLUMN]: " and fmt with val; the column when val is a field of the line. */
 static int bad(const char *path, unsigned long line, const char *fmt, const char *val) {
-  cli_msg("quadkit world: %s:%lu: ", path, line);
+  uintptr_t v = (uintptr_t)val, r = (uintptr_t)g_row;
+  if (g_row && v >= r && v - r < g_row_len)
+    cli_msg("quadkit world: %s:%lu:%lu: ", path, line, (unsigned long)(v - r) + 1);
+  else
+    cli_msg("quadkit world: %s:%lu: ", path, line);
   cli_msg(fmt, val);
   fputc('\n', stderr);
   return CLI_BAD_INPUT;
@@ -215,7 +226,11 @@ static int each_row(const char *path,
       continue;
     }
     first = 0;
-    if ((rc = fn(path, ln, &r, s))) break;
+    g_row = line + (p - line >= 3 && ln == 1 && !strncmp(line, "\xEF\xBB\xBF", 3) ? 3 : 0);
+    g_row_len = n - (size_t)(g_row - line);
+    rc = fn(path, ln, &r, s);
+    g_row = NULL;
+    if (rc) break;
   }
   free(line);
   if (!rc && ferror(f)) {

@@ -29,10 +29,10 @@ printf '1,disc,0,0,1\r\n2,disc,0.5,0,1\r\n' >"$tmp/crlf.csv"
 same_text "world: CRLF" "$("$cli" world "$tmp/crlf.csv" "$tmp/none.csv" | tr '\n' ' ')" "frame,a,b 0,1,2 "
 echo keep >"$tmp/keep.csv"
 printf '1,1,5,5,1\n0,1,5,5,1\n' >"$tmp/order.csv"
-expect 1 'order.csv:2: frames out of order' -- "$cli" world "$tmp/obj2.csv" "$tmp/order.csv" -o "$tmp/keep.csv"
+expect 1 'order.csv:2:1: frames out of order' -- "$cli" world "$tmp/obj2.csv" "$tmp/order.csv" -o "$tmp/keep.csv"
 unchanged "$tmp/keep.csv"
 printf '0,7,5,5,1\n' >"$tmp/unknown.csv"
-expect 1 "unknown.csv:1: unknown id '7'" -- "$cli" world "$tmp/obj2.csv" "$tmp/unknown.csv" -o "$tmp/keep.csv"
+expect 1 "unknown.csv:1:3: unknown id '7'" -- "$cli" world "$tmp/obj2.csv" "$tmp/unknown.csv" -o "$tmp/keep.csv"
 unchanged "$tmp/keep.csv"
 
 # ---- join: fields longer than 255 characters ---------------------------------------------

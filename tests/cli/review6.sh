@@ -98,7 +98,7 @@ printf 'x,y\n1,2\n3,\033]0;pwned\007\033[2Jred\n' >"$tmp/esc.csv"
 expect 1 "^quadkit: $tmp/esc.csv:3:3: field 2 \\(y\\) is not a number: '\\\\x1B\\]0;pwned\\\\x07\\\\x1B\\[2Jred'$" -- "$cli" tree "$tmp/esc.csv"
 printf '1,\033[2Jdisc,0,0,1\n' >"$tmp/wesc.csv"
 printf '0,1,0,0,1\n' >"$tmp/wmv.csv"
-expect 1 "^quadkit world: $tmp/wesc.csv:1: unknown kind '\\\\x1B\\[2Jdisc'" -- "$cli" world "$tmp/wesc.csv" "$tmp/wmv.csv"
+expect 1 "^quadkit world: $tmp/wesc.csv:1:3: unknown kind '\\\\x1B\\[2Jdisc'" -- "$cli" world "$tmp/wesc.csv" "$tmp/wmv.csv"
 printf '{"type":"Polyg\\u001b[2Jon","coordinates":[]}' >"$tmp/esc.geojson"
 expect 1 'unknown GeoJSON type "Polyg\\x1B\[2Jon"' -- "$cli" regions "$tmp/esc.geojson"
 printf '4 2 0 0\n0 0 0\n1 \033[2J 0\n' >"$tmp/esc.poly"
@@ -112,5 +112,23 @@ same_text "no raw escape byte in any message" \
     # shellcheck disable=SC2086
     "$cli" $c 2>&1 | LC_ALL=C grep -c $'[\x01-\x08\x0b-\x1f\x7f]'
   done | tr '\n' ' ')" "0 0 0 0 "
+
+# ---- world: errors named the line only; the scene files are CSV, with columns ----------
+printf '0,1,0,0,1\n' >"$tmp/mv.csv"
+world_at() { # world_at NAME OBJECTS-TEXT PATTERN [MOVES-TEXT]
+  printf "$2" >"$tmp/$1.csv"
+  printf -- "${4:-0,1,0,0,1\\n}" >"$tmp/$1-mv.csv"
+  expect 1 "^quadkit world: $tmp/$3" -- "$cli" world "$tmp/$1.csv" "$tmp/$1-mv.csv" -o "$tmp/$1.out"
+  [ ! -e "$tmp/$1.out" ] || fail "world $1: output written after an error"
+}
+world_at wneg '1,disc,0,0,-1\n' "wneg.csv:1:12: disc radius is negative: '-1'$"
+world_at wkind 'id,kind,x,y,a\n1, blob ,0,0,1\n' "wkind.csv:2:4: unknown kind 'blob'"
+world_at wid '99999999999999999999,disc,0,0,1\n' "wid.csv:1:1: id is above 2\\^64 - 1"
+world_at wbig '1,disc,0,1e308,1\n' "wbig.csv:1:10: value outside \\[2\\^-100, 2\\^100\\] in magnitude: '1e308'$"
+world_at wquot '1,disc,0,0,"-1"\n' "wquot.csv:1:12: disc radius is negative: '-1'$"
+world_at wbom '\357\273\2771,disc,0,0,-1\n' "wbom.csv:1:12: disc radius is negative"
+world_at wmid '1,disc,0,0,1\n' "wmid-mv.csv:2:3: unknown id '7'$" '0,1,0,0,1\n1,7,0,0,1\n'
+world_at wfr '1,disc,0,0,1\n' "wfr-mv.csv:1:1: frame is not a whole number from 0 to 1e8: '-1'$" '-1,1,0,0,1\n'
+world_at wfew '1,box,0,0\n' "wfew.csv:1: too few fields for this kind of shape$"
 
 report
