@@ -192,6 +192,17 @@ static int bad_row(const qrun_t *q, int i, size_t row, const char *msg) {
   return CLI_BAD_INPUT;
 }
 
+/* A box (xmin, ymin, xmax, ymax: the first four fields) whose corners are swapped: which
+ * pair, with the values (bad_row's message). */
+static int bad_box(const qrun_t *q, int i, size_t row, const double *b) {
+  char msg[160];
+  int y = !(b[0] > b[2]);
+  snprintf(msg, sizeof msg,
+           "box has xmin > xmax or ymin > ymax: %s %.17g > %s %.17g (fields %d and %d)",
+           y ? "ymin" : "xmin", b[y], y ? "ymax" : "xmax", b[2 + y], 1 + y, 3 + y);
+  return bad_row(q, i, row, msg);
+}
+
 /* One output row: the result columns, then the kept rows of ids a and b (QK_NONE or
  * SIZE_MAX: empty fields). */
 static void emit(qrun_t *q, size_t a, size_t b, const char *fmt, ...) {
@@ -402,7 +413,7 @@ static void range_usage(FILE *f) {
 static int range_prepare(qrun_t *q) {
   for (size_t i = 0; i < q->tab[1].rows; i++) {
     const double *b = q->tab[1].v + 4 * i;
-    if (b[0] > b[2] || b[1] > b[3]) return bad_row(q, 1, i, "box has xmin > xmax or ymin > ymax");
+    if (b[0] > b[2] || b[1] > b[3]) return bad_box(q, 1, i, b);
   }
   int rc = build_tree(q);
   return rc ? rc : scratch(q, q->n[0], 1);
@@ -473,9 +484,12 @@ static int build_collider(qrun_t *q) {
   }
   for (size_t i = 0; i < tb->rows; i++) {
     const double *v = tb->v + (size_t)tb->cols * i;
-    if (!q->a.boxes && v[2] < 0) return bad_row(q, 0, i, "disc radius is negative");
-    if (q->a.boxes && (v[0] > v[2] || v[1] > v[3]))
-      return bad_row(q, 0, i, "box has xmin > xmax or ymin > ymax");
+    if (!q->a.boxes && v[2] < 0) {
+      char msg[96];
+      snprintf(msg, sizeof msg, "disc radius is negative: %.17g (field 3)", v[2]);
+      return bad_row(q, 0, i, msg);
+    }
+    if (q->a.boxes && (v[0] > v[2] || v[1] > v[3])) return bad_box(q, 0, i, v);
   }
   qk_tree_options_t opt;
   qk_tree_options_init(&opt);
