@@ -548,6 +548,18 @@ static int read_input(const char *cmd, const mesh_args_t *o, qk_poly_t **poly, p
   pp->format = "poly";
   FILE *f = strcmp(o->in, "-") ? cli_open_input(cmd, o->in) : stdin;
   if (!f) return CLI_BAD_INPUT;
+  /* GeoJSON under another name (or on stdin) would read as a .poly whose first line is
+   * not a count: say what it looks like and how it is read. The first byte, put back. */
+  int c0 = getc(f);
+  if (c0 != EOF) ungetc(c0, f);
+  if (c0 == '{' || c0 == '[') {
+    cli_error(cmd,
+              "%s: this looks like JSON, but the input is read as a .poly file: GeoJSON is "
+              "read from a file whose name ends in .geojson or .json (not from stdin)",
+              strcmp(o->in, "-") ? o->in : "<stdin>");
+    if (f != stdin) fclose(f);
+    return CLI_BAD_INPUT;
+  }
   qk_status_t st = qk_poly_read(f, NULL, poly, &err);
   if (f != stdin) fclose(f);
   if (st == QK_OK && o->round > 0) {

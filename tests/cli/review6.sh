@@ -143,4 +143,38 @@ printf 'x,y,r\n0,0,1\n0,0,-0.25\n' >"$tmp/negr.csv"
 expect 1 "^quadkit: $tmp/negr.csv:3: disc radius is negative: -0.25 \\(field 3\\)$" -- "$cli" collide "$tmp/negr.csv" -o "$tmp/negr.out"
 [ ! -e "$tmp/negr.out" ] || fail "collide: output written after an error"
 
+# ---- GDAL layers: the polygons of a GeometryCollection were skipped (the GeoJSON reader
+# takes them); a GeoJSON file under another name goes through GDAL ----------------------
+cat >"$tmp/gcok.geojson" <<'EOF2'
+{"type": "FeatureCollection", "features": [
+ {"type": "Feature", "properties": {"name": "pt"}, "geometry": {"type": "Point", "coordinates": [9, 9]}},
+ {"type": "Feature", "properties": {"name": "gc"}, "geometry": {"type": "GeometryCollection", "geometries": [
+   {"type": "Point", "coordinates": [0, 0]},
+   {"type": "GeometryCollection", "geometries": [
+     {"type": "Polygon", "coordinates": [[[0, 0], [4, 0], [4, 4], [0, 4], [0, 0]]]},
+     {"type": "MultiPolygon", "coordinates": [[[[10, 10], [11, 10], [11, 11], [10, 10]]]]}]}]}}]}
+EOF2
+cp "$tmp/gcok.geojson" "$tmp/gcok.txt"
+printf 'x,y\n2,2\n10.7,10.2\n9,9\n' >"$tmp/jp.csv"
+if "$cli" regions "$tmp/gcok.txt" 2>&1 | grep -q 'built without GDAL'; then
+  echo "SKIPPED: built without GDAL: the GeometryCollection check through GDAL did not run"
+else
+  same_text "GDAL: a GeometryCollection's polygons, as the GeoJSON reader takes them" \
+    "$("$cli" join "$tmp/gcok.txt" "$tmp/jp.csv" --field name 2>&1 | tr '\n' ' ')" \
+    "$("$cli" join "$tmp/gcok.geojson" "$tmp/jp.csv" --field name 2>&1 | tr '\n' ' ')"
+  same_text "the GeoJSON reader's answer" "$("$cli" join "$tmp/gcok.geojson" "$tmp/jp.csv" --field name | tr '\n' ' ')" \
+    "x,y,feature,name 2,2,1,gc 10.7,10.2,1,gc 9,9,-1, "
+  expect 0 '"features": 2, "rings": 2, "vertices": 9, "holes": 0, "self_intersecting_rings": 0, "skipped_geometries": 1,' \
+    -- "$cli" regions "$tmp/gcok.txt"
+fi
+
+# ---- mesh: GeoJSON on stdin or under another name read as a .poly ("expected the number
+# of vertices, found '{"type":'") --------------------------------------------------------
+expect 1 "^quadkit mesh: <stdin>: this looks like JSON, but the input is read as a .poly file: GeoJSON is read from a file whose name ends in .geojson or .json \\(not from stdin\\)$" \
+  -- bash -c '"$1" mesh - -o "$2" <"$3"' - "$cli" "$tmp/js" "$tmp/gcok.geojson"
+expect 1 "^quadkit mesh: $tmp/gcok.txt: this looks like JSON" -- "$cli" mesh "$tmp/gcok.txt" -o "$tmp/js"
+nothing_written "$tmp/js"
+printf '4 2 0 0\n0 0 0\n1 4 0\n2 4 4\n3 0 4\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n0\n' >"$tmp/sq.poly"
+expect 0 '"triangles": [1-9]' -- bash -c '"$1" mesh - -o "$2" --stats <"$3"' - "$cli" "$tmp/sq" "$tmp/sq.poly"
+
 report
