@@ -309,10 +309,20 @@ static void transform(rings_t *r, const mg_options_t *o, mg_input_t *out) {
       lat += r->xy[2 * i + 1];
     }
     out->lat0 = lat / (double)r->np;
+    /* Across the antimeridian (Fiji, Russia, Alaska: parts at both ends of the map), the
+     * negative longitudes move up by 360 so that the parts meet at 180. Not when an edge
+     * runs across the prime meridian (a ring cut at the antimeridian that goes round the
+     * globe, or the whole world): moving one of its ends would tear it across the map. */
+    int tear = 0;
+    for (size_t q = 0; q < r->nr && !tear; q++)
+      for (size_t i = r->start[q]; i < r->start[q + 1] && !tear; i++) {
+        double a = r->xy[2 * i], b = r->xy[2 * (i + 1 < r->start[q + 1] ? i + 1 : r->start[q])];
+        tear = (a < 0) != (b < 0) && fabs(b - a) < 180;
+      }
     double k = cos(out->lat0 * MG_PI / 180) * MG_EARTH_M * MG_PI / 180;
     for (size_t i = 0; i < r->np; i++) {
       double lon = r->xy[2 * i];
-      if (hi - lo > 180 && lon < 0) lon += 360; /* across the antimeridian: keep it whole */
+      if (hi - lo > 180 && !tear && lon < 0) lon += 360;
       r->xy[2 * i] = lon * k;
       r->xy[2 * i + 1] = r->xy[2 * i + 1] * MG_EARTH_M * MG_PI / 180;
     }

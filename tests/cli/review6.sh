@@ -90,6 +90,19 @@ cat >"$tmp/cut.geojson" <<'EOF2'
    [[-180, -80], [-90, -80], [0, -80], [90, -80], [180, -80], [180, -89], [-180, -89], [-180, -80]]]}
 EOF2
 expect 0 '"triangles": [1-9]' -- "$cli" mesh "$tmp/cut.geojson" -o "$tmp/cut" --stats
+# ... and projected: the shift that joins parts across the antimeridian (negative
+# longitudes + 360) tore it ("nothing to mesh"); the mesh must cover its rectangle exactly
+expect 0 '"triangles": [1-9]' -- "$cli" mesh "$tmp/cut.geojson" --project equirect --round 2^-4 -o "$tmp/cutp" --stats
+area_check() { # area_check PREFIX: the triangles' areas add up to the vertices' bounding box
+  awk 'FNR == 1 { file++; next }
+       file == 1 { x[$1] = $2; y[$1] = $3; if (!n++ || $2 < x0) x0 = $2; if ($2 > x1 || n == 1) x1 = $2;
+                   if (n == 1 || $3 < y0) y0 = $3; if (n == 1 || $3 > y1) y1 = $3; next }
+       file == 2 && NF >= 4 { a = (x[$3] - x[$2]) * (y[$4] - y[$2]) - (x[$4] - x[$2]) * (y[$3] - y[$2]);
+                   t += (a < 0 ? -a : a) / 2 }
+       END { box = (x1 - x0) * (y1 - y0); d = t - box; if (d < 0) d = -d;
+             if (box > 0 && d <= 1e-9 * box) exit 0; print "area " t " box " box; exit 1 }' "$1.node" "$1.ele"
+}
+if area_check "$tmp/cutp"; then passes=$((passes + 1)); else fail "cut ring, projected: the mesh does not cover its rectangle"; fi
 # (the same on Antarctica in countries-50m: review6_data.sh, which needs ../shared/data)
 
 # ---- messages quoted input bytes raw: an escape sequence in a file cleared the screen or
