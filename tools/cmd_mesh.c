@@ -519,7 +519,7 @@ static int read_input(const char *cmd, const mesh_args_t *o, qk_poly_t **poly, p
   qk_mesh_error_t err;
   memset(&err, 0, sizeof err);
   if (o->geojson) {
-    char name[256] = "", msg[512];
+    char name[256] = "", msg[2048];
     mg_options_t mo = {o->feature, NULL, NULL, o->project, o->round};
     if (o->field) {
       size_t k = (size_t)(o->field_value - 1 - o->field);

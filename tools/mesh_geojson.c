@@ -87,9 +87,10 @@ const char *mg_pole_note(const mg_input_t *in, char *buf, size_t n) {
   snprintf(buf, n,
            " (%s goes round the %s pole: its longitudes wind once round the globe, across "
            "the antimeridian, which no planar map of lon/lat closes; cut it along the "
-           "antimeridian into rings that close in longitude, or mesh other features with "
+           "antimeridian into rings that close in longitude, or project it with a polar "
+           "projection (PROJ: +proj=stere +lat_0=%s90), or mesh other features with "
            "--feature N or --field NAME=VALUE)",
-           what, in->pole_south ? "south" : "north");
+           what, in->pole_south ? "south" : "north", in->pole_south ? "-" : "");
   return buf;
 }
 
@@ -787,8 +788,10 @@ int mg_read(const char *path, const mg_options_t *o, mg_input_t *out, char *msg,
                  "%s: %s goes round the %s pole (its longitudes wind once round the globe, "
                  "across the antimeridian): --project equirect cannot map it to a closed "
                  "ring; cut it along the antimeridian into rings that close in longitude, or "
-                 "mesh other features with --feature N or --field NAME=VALUE",
-                 place, what, south ? "south" : "north");
+                 "project it with a polar projection (PROJ: +proj=stere +lat_0=%s90) and "
+                 "mesh the planar result without --project, or mesh other features with "
+                 "--feature N or --field NAME=VALUE",
+                 place, what, south ? "south" : "north", south ? "-" : "");
   }
   if (!rc && out->ns == 0) rc = mg_fail(msg, n, 1, "%s: no ring with 3 distinct points", path);
   if (!rc) rc = hole_points(out, path, msg, n);

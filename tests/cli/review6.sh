@@ -79,7 +79,7 @@ cat >"$tmp/cap.geojson" <<'EOF2'
    [[-170, 80], [-50, 81], [70, 80], [-170, 80]]]}}
 EOF2
 pole='feature 0, polygon 0, ring 0 goes round the north pole'
-expect 1 "^quadkit mesh: $tmp/cap.geojson:3:4: $pole \\(its longitudes wind once round the globe, across the antimeridian\\): --project equirect cannot map it to a closed ring; cut it along the antimeridian into rings that close in longitude, or mesh other features with --feature N or --field NAME=VALUE$" \
+expect 1 "^quadkit mesh: $tmp/cap.geojson:3:4: $pole \\(its longitudes wind once round the globe, across the antimeridian\\): --project equirect cannot map it to a closed ring; cut it along the antimeridian into rings that close in longitude, or project it with a polar projection \\(PROJ: \\+proj=stere \\+lat_0=90\\) and mesh the planar result without --project, or mesh other features with --feature N or --field NAME=VALUE$" \
   -- "$cli" mesh "$tmp/cap.geojson" --project equirect -o "$tmp/cap"
 nothing_written "$tmp/cap"
 # unprojected the planar triangle is meshed (it is one), and nothing is refused up front
