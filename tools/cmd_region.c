@@ -136,6 +136,11 @@ static int parse_xy(const char *cmd, const char *s, xy_spec_t *xy) {
       return 1;
     }
   }
+  /* x and y from one column would put every point on the diagonal, without a word. */
+  if (xy->col[0] >= 0 ? xy->col[0] == xy->col[1] : !strcmp(xy->name[0], xy->name[1])) {
+    cli_error(cmd, "--xy %s: x and y name the same column", s);
+    return 1;
+  }
   return 0;
 }
 
@@ -164,6 +169,11 @@ static int resolve_xy(const char *cmd, const char *path, const char *header, xy_
       cli_error(cmd, "%s:1: no column named '%s' in the header", path, xy->name[k]);
       return 1;
     }
+  }
+  if (xy->col[0] == xy->col[1]) { /* a name and a number for one column */
+    cli_error(cmd, "%s:1: --xy %s,%s: x and y name the same column (field %d)", path, xy->name[0],
+              xy->name[1], xy->col[0] + 1);
+    return 1;
   }
   return 0;
 }

@@ -190,4 +190,17 @@ nothing_written "$tmp/js"
 printf '4 2 0 0\n0 0 0\n1 4 0\n2 4 4\n3 0 4\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n0\n' >"$tmp/sq.poly"
 expect 0 '"triangles": [1-9]' -- bash -c '"$1" mesh - -o "$2" --stats <"$3"' - "$cli" "$tmp/sq" "$tmp/sq.poly"
 
+# ---- --xy naming one column for x and y read every point onto the diagonal, silently ----
+printf 'a,b\n1,2\n' >"$tmp/ab.csv"
+for c in "tree $tmp/ab.csv --xy 2,2" "tree $tmp/ab.csv --xy b,b" "knn $tmp/ab.csv $tmp/ab.csv -k 1 --xy 1,01" \
+  "join $tmp/gcok.geojson $tmp/ab.csv --xy a,a" "join $tmp/gcok.geojson $tmp/ab.csv --xy 1,1"; do
+  # shellcheck disable=SC2086
+  expect 2 "^quadkit ${c%% *}: --xy [0-9ab]+,[0-9ab]+: x and y name the same column$" -- "$cli" $c
+done
+expect 1 "^quadkit join: $tmp/ab.csv:1: --xy a,1: x and y name the same column \\(field 1\\)$" \
+  -- "$cli" join "$tmp/gcok.geojson" "$tmp/ab.csv" --xy a,1 -o "$tmp/ab.out"
+[ ! -e "$tmp/ab.out" ] || fail "join --xy a,1: output written after an error"
+# two columns, in either order, are fine
+same_text "--xy b,a" "$("$cli" join "$tmp/gcok.geojson" "$tmp/ab.csv" --xy b,a | tr '\n' ' ')" "a,b,feature 1,2,1 "
+
 report
