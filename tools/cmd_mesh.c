@@ -572,10 +572,17 @@ static int read_input(const char *cmd, const mesh_args_t *o, qk_poly_t **poly, p
   }
   if (st == QK_OK) return CLI_OK;
   const char *name = strcmp(o->in, "-") ? o->in : "<stdin>";
+  /* Triangle's .node file (vertices only) is not a mesh input: the reader's complaint
+   * about a missing segment section does not say so. */
+  size_t nl = strlen(name);
+  const char *node = st == QK_ERR_PARSE && nl > 5 && !strcmp(name + nl - 5, ".node")
+                         ? " (a .node file holds vertices only: mesh reads a .poly file, "
+                           "which holds the segments and holes too)"
+                         : "";
   if (err.line)
-    cli_error(cmd, "%s:%lu: %s", name, err.line, err.message);
+    cli_error(cmd, "%s:%lu: %s%s", name, err.line, err.message, node);
   else
-    cli_error(cmd, "%s: %s", name, err.message[0] ? err.message : qk_strerror(st));
+    cli_error(cmd, "%s: %s%s", name, err.message[0] ? err.message : qk_strerror(st), node);
   return (st == QK_ERR_NOMEM || st == QK_ERR_IO) ? CLI_INTERNAL : CLI_BAD_INPUT;
 }
 

@@ -203,4 +203,13 @@ expect 1 "^quadkit join: $tmp/ab.csv:1: --xy a,1: x and y name the same column \
 # two columns, in either order, are fine
 same_text "--xy b,a" "$("$cli" join "$tmp/gcok.geojson" "$tmp/ab.csv" --xy b,a | tr '\n' ' ')" "a,b,feature 1,2,1 "
 
+# ---- mesh of a .node file (vertices only): "truncated input: expected the segment section
+# header", without a word about what a .node is ------------------------------------------
+printf '4 2 0 0\n0 0 0\n1 4 0\n2 4 4\n3 0 4\n' >"$tmp/v.node"
+expect 1 "^quadkit mesh: $tmp/v.node:5: truncated input: expected the segment section header \\(a .node file holds vertices only: mesh reads a .poly file, which holds the segments and holes too\\)$" \
+  -- "$cli" mesh "$tmp/v.node" -o "$tmp/vn"
+nothing_written "$tmp/vn"
+cp "$tmp/v.node" "$tmp/v.poly"
+expect 1 "^quadkit mesh: $tmp/v.poly:5: truncated input: expected the segment section header$" -- "$cli" mesh "$tmp/v.poly" -o "$tmp/vn"
+
 report
