@@ -576,7 +576,11 @@ static void raycast_usage(FILE *f) {
 static int raycast_prepare(qrun_t *q) {
   for (size_t i = 0; i < q->tab[1].rows; i++) {
     double tmax = q->tab[1].v[5 * i + 4];
-    if (!isnan(tmax) && tmax < 0) return bad_row(q, 1, i, "tmax is negative");
+    if (!isnan(tmax) && tmax < 0) {
+      char msg[96];
+      snprintf(msg, sizeof msg, "tmax is negative: %.17g (field 5)", tmax);
+      return bad_row(q, 1, i, msg);
+    }
   }
   return build_collider(q);
 }

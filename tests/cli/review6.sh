@@ -144,7 +144,7 @@ world_at wmid '1,disc,0,0,1\n' "wmid-mv.csv:2:3: unknown id '7'$" '0,1,0,0,1\n1,
 world_at wfr '1,disc,0,0,1\n' "wfr-mv.csv:1:1: frame is not a whole number from 0 to 1e8: '-1'$" '-1,1,0,0,1\n'
 world_at wfew '1,box,0,0\n' "wfew.csv:1: too few fields for this kind of shape$"
 
-# ---- range / collide: an inverted box or a negative radius named no value -------------
+# ---- range / collide / raycast: an inverted box, a negative radius or tmax named no value -
 printf '0,0\n1,1\n' >"$tmp/qp.csv"
 printf '0,0,1,1\n0,3,1,2\n' >"$tmp/ybox.csv"
 expect 1 "^quadkit: $tmp/ybox.csv:2: box has xmin > xmax or ymin > ymax: ymin 3 > ymax 2 \\(fields 2 and 4\\)$" \
@@ -155,6 +155,12 @@ expect 1 "^quadkit: $tmp/xbox.csv:2: box has xmin > xmax or ymin > ymax: xmin 5 
 printf 'x,y,r\n0,0,1\n0,0,-0.25\n' >"$tmp/negr.csv"
 expect 1 "^quadkit: $tmp/negr.csv:3: disc radius is negative: -0.25 \\(field 3\\)$" -- "$cli" collide "$tmp/negr.csv" -o "$tmp/negr.out"
 [ ! -e "$tmp/negr.out" ] || fail "collide: output written after an error"
+printf '0,0,1
+' >"$tmp/disc.csv"
+printf '5,5,-1,-1,1
+5,5,-1,-1,-0.5
+' >"$tmp/rays.csv"
+expect 1 "^quadkit: $tmp/rays.csv:2: tmax is negative: -0.5 \\(field 5\\)$" -- "$cli" raycast "$tmp/disc.csv" "$tmp/rays.csv"
 
 # ---- GDAL layers: the polygons of a GeometryCollection were skipped (the GeoJSON reader
 # takes them); a GeoJSON file under another name goes through GDAL ----------------------
