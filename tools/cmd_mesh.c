@@ -303,6 +303,12 @@ typedef struct outputs {
 /* Close every opened output: renamed into place when ok, else removed. */
 static int close_outputs(const char *cmd, outputs_t *w, int ok) {
   int rc = CLI_OK;
+  /* Every output flushed before any is renamed into place: a write that fails only when
+   * its buffer goes out (a full disk, --msh /dev/full) left the outputs closed before it
+   * in place (PREFIX.node and .ele of a command that failed). That output says why. */
+  for (int k = 0; ok && k < w->opened; k++)
+    if (w->f[k].path && w->f[k].out.f && (fflush(w->f[k].out.f) != 0 || ferror(w->f[k].out.f)))
+      ok = 0;
   for (int k = 0; k < w->opened; k++) {
     if (!w->f[k].path || !w->f[k].out.f) continue;
     int c = cli_out_close(cmd, &w->f[k].out, ok && rc == CLI_OK);
@@ -350,7 +356,12 @@ static int write_outputs(const char *cmd, outputs_t *w, const qk_mesh_t *mesh, u
   for (int k = 0; k < w->opened && rc == CLI_OK; k++) {
     if (!w->f[k].path) continue;
     qk_status_t ws = w->f[k].fn(mesh, w->f[k].out.f, first);
-    if (ws != QK_OK) rc = cli_status(cmd, w->f[k].path, ws);
+    /* A failed write is said once, with its reason, when the output is closed (it was
+     * also "FILE: input/output error" here). */
+    if (ws == QK_ERR_IO && ferror(w->f[k].out.f))
+      rc = CLI_INTERNAL;
+    else if (ws != QK_OK)
+      rc = cli_status(cmd, w->f[k].path, ws);
   }
   int c = close_outputs(cmd, w, rc == CLI_OK);
   return rc == CLI_OK ? c : rc;

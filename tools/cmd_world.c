@@ -459,6 +459,9 @@ done:
 
 /* ---- simulate ---------------------------------------------------------------------- */
 
+/* An output (NULL: none) whose buffered text went out without an error. */
+static int flushed(FILE *f) { return !f || (fflush(f) == 0 && !ferror(f)); }
+
 static void simulate_usage(FILE *f) {
   fprintf(f, "usage: quadkit simulate [--n N] [--frames F] [--seed S] [--svg FILE] [-o FILE]\n"
              "Bounce N objects (discs, boxes, segments and points; sizes 0.5 to 2) around a\n"
@@ -657,6 +660,10 @@ int cmd_simulate(int argc, char **argv) {
     if (write_svg(&so, b, n, hit, side)) rc = CLI_INTERNAL;
   }
 done:
+  /* Both flushed before either is renamed into place: a write that fails only when its
+   * buffer goes out (-o /dev/full) left the picture behind. The one that failed says
+   * why when it is closed. */
+  if (rc == CLI_OK && !(flushed(o.f) && (!svg || flushed(so.f)))) rc = CLI_INTERNAL;
   /* The picture first: when it fails, the JSON file is not left behind either. */
   if (svg) {
     int rc2 = cli_out_close(cmd, &so, rc == CLI_OK);

@@ -218,4 +218,25 @@ nothing_written "$tmp/vn"
 cp "$tmp/v.node" "$tmp/v.poly"
 expect 1 "^quadkit mesh: $tmp/v.poly:5: truncated input: expected the segment section header$" -- "$cli" mesh "$tmp/v.poly" -o "$tmp/vn"
 
+# ---- a write that fails only when its buffer goes out (a full disk): the outputs closed
+# before it were left in place by a command that failed (mesh's PREFIX.node and .ele with
+# --msh /dev/full; simulate's picture with -o /dev/full), and mesh said it twice ----------
+if [ -w /dev/full ]; then
+  mkdir "$tmp/full"
+  for o in --msh --vtk --poly --svg; do
+    expect 3 "^quadkit mesh: cannot write /dev/full: No space left on device$" \
+      -- "$cli" mesh "$tmp/sq.poly" -o "$tmp/full/m" "$o" /dev/full
+    same_text "mesh $o /dev/full: one message" "$("$cli" mesh "$tmp/sq.poly" -o "$tmp/full/m" "$o" /dev/full 2>&1 | wc -l)" 1
+  done
+  expect 3 "^quadkit mesh: cannot write /dev/full" -- "$cli" mesh "$tmp/sq.poly" -o "$tmp/full/m" --poly "$tmp/full/p.poly" --msh /dev/full --vtk "$tmp/full/v.vtu"
+  expect 3 "^quadkit simulate: cannot write /dev/full" -- "$cli" simulate --n 5 --frames 2 -o /dev/full --svg "$tmp/full/s.svg"
+  expect 3 "^quadkit simulate: cannot write standard output" -- bash -c '"$1" simulate --n 5 --frames 2 --svg "$2" >/dev/full' - "$cli" "$tmp/full/s2.svg"
+  same_text "a failed write: nothing left" "$(ls -A "$tmp/full")" ""
+  # all well, everything is there
+  expect 0 '' -- "$cli" mesh "$tmp/sq.poly" -o "$tmp/full/m" --poly "$tmp/full/p.poly" --msh "$tmp/full/m.msh"
+  same_text "mesh: every output" "$(ls "$tmp/full" | tr '\n' ' ')" "m.ele m.msh m.node p.poly "
+else
+  echo "SKIPPED: no writable /dev/full: the failed-write checks did not run"
+fi
+
 report
