@@ -40,6 +40,7 @@ typedef struct gj {
    * GJ_PATH_MAX are counted but not kept (the error then points at an ancestor). */
   gj_step_t path[GJ_PATH_MAX];
   size_t depth;
+  char key[128]; /* a property name on the path (json-c's own is freed before locate()) */
 } gj_t;
 
 static void step_in(gj_t *g, const char *name, size_t idx) {
@@ -223,6 +224,17 @@ static qk_status_t properties(gj_t *g, json_object *props, size_t f) {
       if (json_object_is_type(v, json_type_string)) {
         s = json_object_get_string(v);
         len = (size_t)json_object_get_string_len(v);
+        /* "\u0000" in a value: a property is a C string, which would end there and drop
+         * the rest without a word (join's output, qk_region_property). */
+        if (memchr(s, '\0', len)) {
+          snprintf(g->key, sizeof g->key, "%s", k); /* (a longer one: the properties) */
+          step_in(g, "properties", 0);
+          step_in(g, g->key, 0);
+          return qk__region_fail(g->err, QK_ERR_PARSE, f,
+                                 "feature %zu: property \"%.60s\" holds a NUL character "
+                                 "(\\u0000), which a property value cannot keep",
+                                 f, k);
+        }
       } else if (v) {
         s = json_object_to_json_string_ext(v, JSON_C_TO_STRING_PLAIN);
         if (!s) return nomem(g, QK_ERR_NOMEM); /* json-c's malloc failed */

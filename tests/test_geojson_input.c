@@ -15,6 +15,8 @@
  *    the largest double, an unknown geometry type, lon/lat out of range) gives the line
  *    and column of the offending value, besides the feature index (it gave no line).
  *    Oracle: the offset of a marked substring of the text, counted into line and column.
+ *  - a property value holding "\u0000" is refused at its position (a property is a C
+ *    string: join wrote the value cut short there);
  *  - qk_region_geojson_locate (the same path following, public for the mesher's
  *    messages): a JSON Pointer's value, escapes (~0, ~1) in names, an index past the end
  *    (the deepest value found), a byte order mark; malformed pointers refused.
@@ -238,6 +240,10 @@ static void test_geojson_semantic_position(void **state) {
   refused_at(FC_HEAD "  {\"type\": \"Feature\", \"properties\": {},\n"
                      "   \"geometry\": {\"type\": \"Polygon\", \"coordinates\": {\"a\": 1}}}]}",
              1, QK_ERR_PARSE, 1, "{\"a\": 1}", "\"coordinates\" must be an array, found object");
+  /* a property value holding "\u0000" (a C string would end there): the value */
+  refused_at(FC_HEAD "  {\"type\": \"Feature\", \"geometry\": null,\n"
+                     "   \"properties\": {\"a\": 1, \"n\": \"x\\u0000y\"}}]}",
+             1, QK_ERR_PARSE, 1, "\"x\\u0000y\"", "property \"n\" holds a NUL character");
   /* properties of the wrong type */
   refused_at(FC_HEAD "  {\"type\": \"Feature\", \"geometry\": null,\n   \"properties\": [1]}]}", 1,
              QK_ERR_PARSE, 1, "[1]}", "\"properties\" must be an object or null");

@@ -239,4 +239,17 @@ else
   echo "SKIPPED: no writable /dev/full: the failed-write checks did not run"
 fi
 
+# ---- GeoJSON: a property value holding \u0000 was cut short there in join's output ------
+printf '{"type":"FeatureCollection","features":[\n{"type":"Feature","properties":{"a":1,\n  "name":"x\\u0000y"},"geometry":{"type":"Polygon","coordinates":[[[0,0],[1,0],[1,1],[0,0]]]}}]}\n' >"$tmp/nul.geojson"
+printf 'x,y\n0.5,0.2\n' >"$tmp/nulpt.csv"
+for c in join regions; do
+  args=("$tmp/nul.geojson")
+  [ $c = join ] && args+=("$tmp/nulpt.csv" --field name -o "$tmp/nul.out")
+  expect 1 "^quadkit $c: $tmp/nul.geojson:3:10: feature 0: property \"name\" holds a NUL character \\(\\\\u0000\\), which a property value cannot keep$" \
+    -- "$cli" $c "${args[@]}"
+done
+[ ! -e "$tmp/nul.out" ] || fail "join: output written after an error"
+sed 's/x\\u0000y/x\\u0001y/' "$tmp/nul.geojson" >"$tmp/one.geojson" # other escapes are kept
+expect 0 '^0.5,0.2,0,' -- "$cli" join "$tmp/one.geojson" "$tmp/nulpt.csv" --field name
+
 report
