@@ -588,19 +588,23 @@ int cmd_regions(int argc, char **argv) {
     qk_region_free(r);
     return rc;
   }
-  qk_region_stats_t s;
-  qk_region_stats(r, &s);
-  printf("{\"features\": %zu, \"rings\": %zu, \"vertices\": %zu, \"holes\": %zu, "
-         "\"self_intersecting_rings\": %zu, \"skipped_geometries\": %zu, \"edge_pieces\": %zu, "
-         "\"leaves\": %zu, \"leaf_edges\": %zu, \"depth\": %u, \"bytes\": %zu, "
-         "\"build_seconds\": %.6f, \"mode\": \"%s\", \"bbox\": [%.17g, %.17g, %.17g, %.17g]}\n",
-         s.features, s.rings, s.vertices, s.holes, s.self_intersecting, s.skipped, s.edges,
-         s.leaves, s.leaf_edges, s.depth, s.bytes, s.build_seconds, s.planar ? "planar" : "lonlat",
-         s.box.xmin + 0.0, s.box.ymin + 0.0, s.box.xmax + 0.0, s.box.ymax + 0.0); /* (-0 as 0) */
   if (svg) {
     qk_status_t st = qk_region_write_svg(r, o.f, 1200);
     rc = cli_out_close("regions", &o, st == QK_OK);
     if (st) rc = cli_status("regions", svg, st);
+  }
+  /* The statistics after the picture is in place (a failed write printed them too). */
+  if (!rc) {
+    qk_region_stats_t s;
+    qk_region_stats(r, &s);
+    printf("{\"features\": %zu, \"rings\": %zu, \"vertices\": %zu, \"holes\": %zu, "
+           "\"self_intersecting_rings\": %zu, \"skipped_geometries\": %zu, \"edge_pieces\": %zu, "
+           "\"leaves\": %zu, \"leaf_edges\": %zu, \"depth\": %u, \"bytes\": %zu, "
+           "\"build_seconds\": %.6f, \"mode\": \"%s\", \"bbox\": [%.17g, %.17g, %.17g, %.17g]}\n",
+           s.features, s.rings, s.vertices, s.holes, s.self_intersecting, s.skipped, s.edges,
+           s.leaves, s.leaf_edges, s.depth, s.bytes, s.build_seconds,
+           s.planar ? "planar" : "lonlat", s.box.xmin + 0.0, s.box.ymin + 0.0, s.box.xmax + 0.0,
+           s.box.ymax + 0.0); /* (-0 as 0) */
   }
   qk_region_free(r);
   return rc;

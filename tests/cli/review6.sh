@@ -231,6 +231,12 @@ if [ -w /dev/full ]; then
   expect 3 "^quadkit mesh: cannot write /dev/full" -- "$cli" mesh "$tmp/sq.poly" -o "$tmp/full/m" --poly "$tmp/full/p.poly" --msh /dev/full --vtk "$tmp/full/v.vtu"
   expect 3 "^quadkit simulate: cannot write /dev/full" -- "$cli" simulate --n 5 --frames 2 -o /dev/full --svg "$tmp/full/s.svg"
   expect 3 "^quadkit simulate: cannot write standard output" -- bash -c '"$1" simulate --n 5 --frames 2 --svg "$2" >/dev/full' - "$cli" "$tmp/full/s2.svg"
+  # tree and regions printed their statistics on stdout, then exited 3
+  printf 'x,y\n0,0\n1,1\n' >"$tmp/two.csv"
+  same_text "tree --svg /dev/full: no statistics" "$("$cli" tree "$tmp/two.csv" --svg /dev/full 2>/dev/null; echo "exit $?")" "exit 3"
+  same_text "regions --svg /dev/full: no statistics" "$("$cli" regions "$tmp/gcok.geojson" --svg /dev/full 2>/dev/null; echo "exit $?")" "exit 3"
+  expect 0 '^\{"points": 2, ' -- "$cli" tree "$tmp/two.csv" --svg "$tmp/t.svg"
+  expect 0 '^\{"features": 2, "rings": 2,' -- "$cli" regions "$tmp/gcok.geojson" --svg "$tmp/r.svg"
   same_text "a failed write: nothing left" "$(ls -A "$tmp/full")" ""
   # all well, everything is there
   expect 0 '' -- "$cli" mesh "$tmp/sq.poly" -o "$tmp/full/m" --poly "$tmp/full/p.poly" --msh "$tmp/full/m.msh"
