@@ -40,6 +40,7 @@ typedef struct gj {
    * GJ_PATH_MAX are counted but not kept (the error then points at an ancestor). */
   gj_step_t path[GJ_PATH_MAX];
   size_t depth;
+  char key[128]; /* a property name on the path (json-c's own is freed before locate()) */
 } gj_t;
 
 static void step_in(gj_t *g, const char *name, size_t idx) {
@@ -223,6 +224,17 @@ static qk_status_t properties(gj_t *g, json_object *props, size_t f) {
       if (json_object_is_type(v, json_type_string)) {
         s = json_object_get_string(v);
         len = (size_t)json_object_get_string_len(v);
+        /* "\u0000" in a value: a property is a C string, which would end there and drop
+         * the rest without a word (join's output, qk_region_property). */
+        if (memchr(s, '\0', len)) {
+          snprintf(g->key, sizeof g->key, "%s", k); /* (a longer one: the properties) */
+          step_in(g, "properties", 0);
+          step_in(g, g->key, 0);
+          return qk__region_fail(g->err, QK_ERR_PARSE, f,
+                                 "feature %zu: property \"%.60s\" holds a NUL character "
+                                 "(\\u0000), which a property value cannot keep",
+                                 f, k);
+        }
       } else if (v) {
         s = json_object_to_json_string_ext(v, JSON_C_TO_STRING_PLAIN);
         if (!s) return nomem(g, QK_ERR_NOMEM); /* json-c's malloc failed */
@@ -643,6 +655,41 @@ qk_status_t qk_region_read_geojson_text(const char *text, size_t len,
   return st;
 }
 
+qk_status_t qk_region_geojson_locate(const char *text, size_t len, const char *pointer,
+                                     unsigned long *line, unsigned long *column) {
+  char buf[1024];
+  size_t n = pointer ? strlen(pointer) : 0;
+  if (!text || !pointer || !line || !column || n >= sizeof buf || (n && pointer[0] != '/'))
+    return QK_ERR_INVALID;
+  if (len >= 3 && !memcmp(text, "\xEF\xBB\xBF", 3)) text += 3, len -= 3;
+  /* The tokens, unescaped in place into buf, become the reader's path steps. */
+  gj_step_t path[GJ_PATH_MAX];
+  size_t depth = 0, w = 0;
+  for (size_t i = 0; i < n && depth < GJ_PATH_MAX;) {
+    char *tok = buf + w;
+    int digits = 1;
+    for (i++; i < n && pointer[i] != '/'; i++) {
+      char c = pointer[i];
+      if (c == '~' && i + 1 < n && (pointer[i + 1] == '0' || pointer[i + 1] == '1'))
+        c = pointer[++i] == '0' ? '~' : '/';
+      digits &= c >= '0' && c <= '9';
+      buf[w++] = c;
+    }
+    buf[w++] = '\0';
+    if (digits && *tok) {
+      errno = 0;
+      unsigned long long k = strtoull(tok, NULL, 10);
+      path[depth++] = (gj_step_t){NULL, errno || k > SIZE_MAX ? SIZE_MAX : (size_t)k};
+    } else {
+      path[depth++] = (gj_step_t){tok, 0};
+    }
+  }
+  qk_error_t at;
+  where(text, locate(text, len, path, depth), &at);
+  *line = at.line, *column = at.column;
+  return QK_OK;
+}
+
 qk_status_t qk_region_read_geojson(const char *path, const qk_region_options_t *options,
                                    qk_region_t **out, qk_error_t *err) {
   qk_status_t st0 = qk__read_begin(path, out, err);
@@ -683,6 +730,12 @@ qk_status_t qk_region_read_geojson_text(const char *text, size_t len,
   if (err) memset(err, 0, sizeof *err);
   return qk__region_fail(err, QK_ERR_UNSUPPORTED, SIZE_MAX,
                          "built without json-c: install libjson-c-dev and rebuild");
+}
+
+qk_status_t qk_region_geojson_locate(const char *text, size_t len, const char *pointer,
+                                     unsigned long *line, unsigned long *column) {
+  (void)text, (void)len, (void)pointer, (void)line, (void)column;
+  return QK_ERR_UNSUPPORTED;
 }
 
 qk_status_t qk_region_read_geojson(const char *path, const qk_region_options_t *options,

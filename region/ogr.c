@@ -1,9 +1,9 @@
 /*
- * The GDAL/OGR reader: every layer's Polygon and MultiPolygon features of any vector
- * format GDAL opens, attribute fields as properties. As the GeoJSON reader, a feature of
- * another geometry type stays as an empty feature (counted as skipped), so that feature
- * indices follow the dataset's order. Validation (ring length, closure, coordinates) is
- * the builder's. Without GDAL the call says what to install.
+ * The GDAL/OGR reader: every layer's Polygon and MultiPolygon features (and the polygons
+ * of GeometryCollections) of any vector format GDAL opens, attribute fields as properties. As the
+ * GeoJSON reader, a feature of another geometry type stays as an empty feature (counted as
+ * skipped), so that feature indices follow the dataset's order. Validation (ring length, closure,
+ * coordinates) is the builder's. Without GDAL the call says what to install.
  */
 #include <string.h>
 
@@ -40,16 +40,22 @@ static qk_status_t add_polygon(ob_t *b, OGRGeometryH poly) {
   return QK_OK;
 }
 
-static qk_status_t add_feature(ob_t *b, OGRFeatureH feat) {
-  OGRGeometryH g = OGR_F_GetGeometryRef(feat);
-  size_t r0 = b->rg.nr;
-  qk_status_t st = QK_OK;
+/* The polygons of a geometry: a Polygon, the members of a MultiPolygon or of a
+ * GeometryCollection (nested ones too, as the GeoJSON reader takes them; they were
+ * counted as skipped). Other types add nothing. */
+static qk_status_t add_geometry(ob_t *b, OGRGeometryH g) {
   OGRwkbGeometryType t = g ? wkbFlatten(OGR_G_GetGeometryType(g)) : wkbUnknown;
-  if (t == wkbPolygon)
-    st = add_polygon(b, g);
-  else if (t == wkbMultiPolygon)
+  if (t == wkbPolygon) return add_polygon(b, g);
+  qk_status_t st = QK_OK;
+  if (t == wkbMultiPolygon || t == wkbGeometryCollection)
     for (int i = 0, n = OGR_G_GetGeometryCount(g); i < n && !st; i++)
-      st = add_polygon(b, OGR_G_GetGeometryRef(g, i));
+      st = add_geometry(b, OGR_G_GetGeometryRef(g, i));
+  return st;
+}
+
+static qk_status_t add_feature(ob_t *b, OGRFeatureH feat) {
+  size_t r0 = b->rg.nr;
+  qk_status_t st = add_geometry(b, OGR_F_GetGeometryRef(feat));
   if (st) return st;
   if (b->rg.nr == r0) b->rg.skipped++;
   for (int i = 0, n = OGR_F_GetFieldCount(feat); i < n && !st; i++) {

@@ -15,6 +15,11 @@
  *    the largest double, an unknown geometry type, lon/lat out of range) gives the line
  *    and column of the offending value, besides the feature index (it gave no line).
  *    Oracle: the offset of a marked substring of the text, counted into line and column.
+ *  - a property value holding "\u0000" is refused at its position (a property is a C
+ *    string: join wrote the value cut short there);
+ *  - qk_region_geojson_locate (the same path following, public for the mesher's
+ *    messages): a JSON Pointer's value, escapes (~0, ~1) in names, an index past the end
+ *    (the deepest value found), a byte order mark; malformed pointers refused.
  */
 #include "support/qk_test.h"
 
@@ -235,6 +240,10 @@ static void test_geojson_semantic_position(void **state) {
   refused_at(FC_HEAD "  {\"type\": \"Feature\", \"properties\": {},\n"
                      "   \"geometry\": {\"type\": \"Polygon\", \"coordinates\": {\"a\": 1}}}]}",
              1, QK_ERR_PARSE, 1, "{\"a\": 1}", "\"coordinates\" must be an array, found object");
+  /* a property value holding "\u0000" (a C string would end there): the value */
+  refused_at(FC_HEAD "  {\"type\": \"Feature\", \"geometry\": null,\n"
+                     "   \"properties\": {\"a\": 1, \"n\": \"x\\u0000y\"}}]}",
+             1, QK_ERR_PARSE, 1, "\"x\\u0000y\"", "property \"n\" holds a NUL character");
   /* properties of the wrong type */
   refused_at(FC_HEAD "  {\"type\": \"Feature\", \"geometry\": null,\n   \"properties\": [1]}]}", 1,
              QK_ERR_PARSE, 1, "[1]}", "\"properties\" must be an object or null");
@@ -263,8 +272,46 @@ static void test_geojson_semantic_position(void **state) {
 #endif
 }
 
+static void test_geojson_locate(void **state) {
+  (void)state;
+#ifndef QK_HAVE_JSONC
+  skip();
+#else
+  const char *t = "\xEF\xBB\xBF{\"type\": \"FeatureCollection\", \"a/b~c\": [7, 8],\n"
+                  " \"features\": [\n  {\"geometry\": {\"coordinates\": [[[0, 0],\n"
+                  "   [1, 0], [1, 1], [0, 0]]]}}]}";
+  const char *body = t + 3; /* lines and columns count after the byte order mark */
+  static const struct {
+    const char *ptr, *mark;
+  } cases[] = {
+      {"", "{\"type\""},
+      {"/features/0/geometry/coordinates/0/2", "[1, 1]"},
+      {"/features/0/geometry/coordinates/0/1/1", "0], [1, 1]"},
+      {"/a~1b~0c/1", "8]"},
+      {"/features/0/geometry/coordinates/0/9", "[[0, 0],\n"}, /* past the end: the ring */
+      {"/features/3", "[\n  {"},                              /* past the end: the array */
+      {"/nothing/0", "{\"type\""},                            /* no such member: the root */
+  };
+  for (size_t i = 0; i < sizeof cases / sizeof *cases; i++) {
+    unsigned long line, col, wl, wc;
+    mark_at(body, cases[i].mark, &wl, &wc);
+    assert_int_equal(qk_region_geojson_locate(t, strlen(t), cases[i].ptr, &line, &col), QK_OK);
+    if (line != wl || col != wc)
+      fail_msg("%s: got %lu:%lu, want %lu:%lu", cases[i].ptr, line, col, wl, wc);
+  }
+  unsigned long line, col;
+  assert_int_equal(qk_region_geojson_locate(t, strlen(t), "features", &line, &col), QK_ERR_INVALID);
+  assert_int_equal(qk_region_geojson_locate(NULL, 0, "", &line, &col), QK_ERR_INVALID);
+  char longp[1100];
+  memset(longp, 'a', sizeof longp - 1);
+  longp[0] = '/', longp[sizeof longp - 1] = '\0';
+  assert_int_equal(qk_region_geojson_locate(t, strlen(t), longp, &line, &col), QK_ERR_INVALID);
+#endif
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
+      cmocka_unit_test(test_geojson_locate),
       cmocka_unit_test(test_geojson_bom),
       cmocka_unit_test(test_geojson_unknown_types),
       cmocka_unit_test(test_geojson_error_position),

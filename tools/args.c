@@ -86,6 +86,14 @@ int cli_parse_xy(const char *cmd, const char *opt, const char *s, const char **o
       cli_error(cmd, "%s: column numbers start at 1, not '%.*s'", opt, (int)len[i], part[i]);
       return 1;
     }
+  /* x and y from one column (--xy 2,2 or lat,lat: a slip) would read every point onto
+   * the diagonal, without a word. Numbers are compared by value (2 and 02). */
+  int digits = strspn(part[0], "0123456789") == len[0] && strspn(part[1], "0123456789") == len[1];
+  if (digits ? strtoul(part[0], NULL, 10) == strtoul(part[1], NULL, 10)
+             : len[0] == len[1] && !memcmp(part[0], part[1], len[0])) {
+    cli_error(cmd, "%s %s: x and y name the same column", opt, s);
+    return 1;
+  }
   *out = s;
   return 0;
 }

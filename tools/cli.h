@@ -7,6 +7,7 @@
 #define QUADKIT_CLI_H
 
 #include <stddef.h>
+#include <stdarg.h>
 #include <stdio.h>
 
 #include "quadkit/quadkit.h"
@@ -65,7 +66,20 @@ int cli_read_queries(const char *path, const char *xy, cli_rows_t *rows, qk_poin
  * text is NULL). */
 void cli_write_fields(FILE *f, const char *text, size_t width, const char *prefix);
 
-/* Print "quadkit CMD: message" to stderr (printf-style). */
+/* Print a message to stderr (printf-style), every byte of it that a terminal would act on
+ * written as \xNN: control characters but newline and tab, DEL, C1 controls and bytes
+ * that are not UTF-8 (messages quote input text, which may hold escape sequences that
+ * would clear the screen or set the window title; valid UTF-8, a name such as "Côte
+ * d'Ivoire", is kept). */
+void cli_msg(const char *fmt, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 1, 2)))
+#endif
+    ;
+/* The same, from a va_list. */
+void cli_vmsg(const char *fmt, va_list ap);
+
+/* Print "quadkit CMD: message" to stderr (printf-style), as cli_msg. */
 void cli_error(const char *cmd, const char *fmt, ...)
 #if defined(__GNUC__)
     __attribute__((format(printf, 2, 3)))

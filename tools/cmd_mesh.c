@@ -303,6 +303,12 @@ typedef struct outputs {
 /* Close every opened output: renamed into place when ok, else removed. */
 static int close_outputs(const char *cmd, outputs_t *w, int ok) {
   int rc = CLI_OK;
+  /* Every output flushed before any is renamed into place: a write that fails only when
+   * its buffer goes out (a full disk, --msh /dev/full) left the outputs closed before it
+   * in place (PREFIX.node and .ele of a command that failed). That output says why. */
+  for (int k = 0; ok && k < w->opened; k++)
+    if (w->f[k].path && w->f[k].out.f && (fflush(w->f[k].out.f) != 0 || ferror(w->f[k].out.f)))
+      ok = 0;
   for (int k = 0; k < w->opened; k++) {
     if (!w->f[k].path || !w->f[k].out.f) continue;
     int c = cli_out_close(cmd, &w->f[k].out, ok && rc == CLI_OK);
@@ -350,7 +356,12 @@ static int write_outputs(const char *cmd, outputs_t *w, const qk_mesh_t *mesh, u
   for (int k = 0; k < w->opened && rc == CLI_OK; k++) {
     if (!w->f[k].path) continue;
     qk_status_t ws = w->f[k].fn(mesh, w->f[k].out.f, first);
-    if (ws != QK_OK) rc = cli_status(cmd, w->f[k].path, ws);
+    /* A failed write is said once, with its reason, when the output is closed (it was
+     * also "FILE: input/output error" here). */
+    if (ws == QK_ERR_IO && ferror(w->f[k].out.f))
+      rc = CLI_INTERNAL;
+    else if (ws != QK_OK)
+      rc = cli_status(cmd, w->f[k].path, ws);
   }
   int c = close_outputs(cmd, w, rc == CLI_OK);
   return rc == CLI_OK ? c : rc;
@@ -476,13 +487,18 @@ static qk_status_t round_poly(qk_poly_t **poly, double g, prep_t *pp, qk_mesh_er
   return st;
 }
 
-/* Append to a mesher's message what its "segment N" is in the GeoJSON input. */
-static void name_segment(const prep_t *pp, const char *msg, char *buf, size_t n) {
+/* Append to a mesher's message what its "segment N" is in the GeoJSON input (feature,
+ * polygon, ring and position, and that position's line and column in the file), and put
+ * in place "FILE:LINE:COL" of the first such position, or "FILE". */
+static void name_segment(const prep_t *pp, const char *file, const char *msg, char *buf, size_t n,
+                         char *place, size_t np) {
   /* "segment N ...", or "segments N and M ..." (crossing segments: both named) */
   const char *at = strstr(msg, "segment ");
   size_t skip = 8;
   if (!at && (at = strstr(msg, "segments "))) skip = 9;
-  char where[96] = "", where2[96] = "";
+  char where[160] = "", where2[160] = "";
+  unsigned long l1 = 0, c1 = 0, l2 = 0, c2 = 0;
+  snprintf(place, np, "%s", file);
   if (at && pp->gj.ns) {
     char *end;
     unsigned long s = strtoul(at + skip, &end, 10);
@@ -490,15 +506,18 @@ static void name_segment(const prep_t *pp, const char *msg, char *buf, size_t n)
       snprintf(buf, n, "%s", msg);
       return;
     }
-    mg_describe_segment(&pp->gj, s, where, sizeof where);
+    mg_describe_segment(&pp->gj, file, s, where, sizeof where, &l1, &c1);
     if (skip == 9 && !strncmp(end, " and ", 5)) {
       char *end2;
       unsigned long s2 = strtoul(end + 5, &end2, 10);
       if (end2 != end + 5 && s2 < pp->gj.ns)
-        mg_describe_segment(&pp->gj, s2, where2, sizeof where2);
+        mg_describe_segment(&pp->gj, file, s2, where2, sizeof where2, &l2, &c2);
     }
   }
-  if (where[0] && where2[0])
+  if (l1) snprintf(place, np, "%s:%lu:%lu", file, l1, c1);
+  if (where[0] && where2[0] && l2)
+    snprintf(buf, n, "%s (input segments %s and %s, at %lu:%lu)", msg, where, where2, l2, c2);
+  else if (where[0] && where2[0])
     snprintf(buf, n, "%s (input segments %s and %s)", msg, where, where2);
   else if (where[0])
     snprintf(buf, n, "%s (input segment %s)", msg, where);
@@ -511,7 +530,7 @@ static int read_input(const char *cmd, const mesh_args_t *o, qk_poly_t **poly, p
   qk_mesh_error_t err;
   memset(&err, 0, sizeof err);
   if (o->geojson) {
-    char name[256] = "", msg[512];
+    char name[256] = "", msg[2048];
     mg_options_t mo = {o->feature, NULL, NULL, o->project, o->round};
     if (o->field) {
       size_t k = (size_t)(o->field_value - 1 - o->field);
@@ -540,6 +559,18 @@ static int read_input(const char *cmd, const mesh_args_t *o, qk_poly_t **poly, p
   pp->format = "poly";
   FILE *f = strcmp(o->in, "-") ? cli_open_input(cmd, o->in) : stdin;
   if (!f) return CLI_BAD_INPUT;
+  /* GeoJSON under another name (or on stdin) would read as a .poly whose first line is
+   * not a count: say what it looks like and how it is read. The first byte, put back. */
+  int c0 = getc(f);
+  if (c0 != EOF) ungetc(c0, f);
+  if (c0 == '{' || c0 == '[') {
+    cli_error(cmd,
+              "%s: this looks like JSON, but the input is read as a .poly file: GeoJSON is "
+              "read from a file whose name ends in .geojson or .json (not from stdin)",
+              strcmp(o->in, "-") ? o->in : "<stdin>");
+    if (f != stdin) fclose(f);
+    return CLI_BAD_INPUT;
+  }
   qk_status_t st = qk_poly_read(f, NULL, poly, &err);
   if (f != stdin) fclose(f);
   if (st == QK_OK && o->round > 0) {
@@ -552,10 +583,17 @@ static int read_input(const char *cmd, const mesh_args_t *o, qk_poly_t **poly, p
   }
   if (st == QK_OK) return CLI_OK;
   const char *name = strcmp(o->in, "-") ? o->in : "<stdin>";
+  /* Triangle's .node file (vertices only) is not a mesh input: the reader's complaint
+   * about a missing segment section does not say so. */
+  size_t nl = strlen(name);
+  const char *node = st == QK_ERR_PARSE && nl > 5 && !strcmp(name + nl - 5, ".node")
+                         ? " (a .node file holds vertices only: mesh reads a .poly file, "
+                           "which holds the segments and holes too)"
+                         : "";
   if (err.line)
-    cli_error(cmd, "%s:%lu: %s", name, err.line, err.message);
+    cli_error(cmd, "%s:%lu: %s%s", name, err.line, err.message, node);
   else
-    cli_error(cmd, "%s: %s", name, err.message[0] ? err.message : qk_strerror(st));
+    cli_error(cmd, "%s: %s%s", name, err.message[0] ? err.message : qk_strerror(st), node);
   return (st == QK_ERR_NOMEM || st == QK_ERR_IO) ? CLI_INTERNAL : CLI_BAD_INPUT;
 }
 
@@ -588,17 +626,21 @@ static int make_mesh(const char *cmd, const mesh_args_t *o, qk_poly_t **poly, qk
     qk_mesh_stats_t s;
     qk_mesh_stats(*mesh, &s);
     if (s.triangles > 0) return CLI_OK;
-    cli_error(cmd, "%s: nothing to mesh: no closed ring encloses an area outside the holes", name);
+    char note[512];
+    cli_error(cmd, "%s: nothing to mesh: no closed ring encloses an area outside the holes%s", name,
+              mg_pole_note(&pp->gj, note, sizeof note));
     return CLI_BAD_INPUT;
   }
-  char msg[600];
-  name_segment(pp, err.message[0] ? err.message : qk_strerror(st), msg, sizeof msg);
+  char msg[800], place[1024], note[512];
+  name_segment(pp, name, err.message[0] ? err.message : qk_strerror(st), msg, sizeof msg, place,
+               sizeof place);
+  const char *pole = mg_pole_note(&pp->gj, note, sizeof note);
   if (err.line)
     cli_error(cmd, "%s:%lu: %s", name, err.line, msg);
   else if (pp->features == 1 && pp->name[0])
-    cli_error(cmd, "%s: feature %s: %s", name, pp->name, msg);
+    cli_error(cmd, "%s: feature %s: %s%s", place, pp->name, msg, pole);
   else
-    cli_error(cmd, "%s: %s", name, msg);
+    cli_error(cmd, "%s: %s%s", place, msg, pole);
   if (st == QK_ERR_INVALID) return CLI_USAGE;
   return (st == QK_ERR_NOMEM || st == QK_ERR_IO) ? CLI_INTERNAL : CLI_BAD_INPUT;
 }

@@ -188,8 +188,19 @@ static int read_input(qrun_t *q, int i) {
 
 /* Report bad data in row `row` of input i as "FILE:LINE: message". */
 static int bad_row(const qrun_t *q, int i, size_t row, const char *msg) {
-  fprintf(stderr, "quadkit: %s:%lu: %s\n", q->a.files[i], q->rows[i].lineno[row], msg);
+  cli_msg("quadkit: %s:%lu: %s\n", q->a.files[i], q->rows[i].lineno[row], msg);
   return CLI_BAD_INPUT;
+}
+
+/* A box (xmin, ymin, xmax, ymax: the first four fields) whose corners are swapped: which
+ * pair, with the values (bad_row's message). */
+static int bad_box(const qrun_t *q, int i, size_t row, const double *b) {
+  char msg[160];
+  int y = !(b[0] > b[2]);
+  snprintf(msg, sizeof msg,
+           "box has xmin > xmax or ymin > ymax: %s %.17g > %s %.17g (fields %d and %d)",
+           y ? "ymin" : "xmin", b[y], y ? "ymax" : "xmax", b[2 + y], 1 + y, 3 + y);
+  return bad_row(q, i, row, msg);
 }
 
 /* One output row: the result columns, then the kept rows of ids a and b (QK_NONE or
@@ -402,7 +413,7 @@ static void range_usage(FILE *f) {
 static int range_prepare(qrun_t *q) {
   for (size_t i = 0; i < q->tab[1].rows; i++) {
     const double *b = q->tab[1].v + 4 * i;
-    if (b[0] > b[2] || b[1] > b[3]) return bad_row(q, 1, i, "box has xmin > xmax or ymin > ymax");
+    if (b[0] > b[2] || b[1] > b[3]) return bad_box(q, 1, i, b);
   }
   int rc = build_tree(q);
   return rc ? rc : scratch(q, q->n[0], 1);
@@ -468,14 +479,17 @@ int cmd_locate(int argc, char **argv) { return run_query(argc, argv, &locate_cmd
 static int build_collider(qrun_t *q) {
   const cli_table_t *tb = &q->tab[0];
   if (tb->rows == 0) {
-    fprintf(stderr, "quadkit: %s: no data rows\n", q->a.files[0]);
+    cli_msg("quadkit: %s: no data rows\n", q->a.files[0]);
     return CLI_BAD_INPUT;
   }
   for (size_t i = 0; i < tb->rows; i++) {
     const double *v = tb->v + (size_t)tb->cols * i;
-    if (!q->a.boxes && v[2] < 0) return bad_row(q, 0, i, "disc radius is negative");
-    if (q->a.boxes && (v[0] > v[2] || v[1] > v[3]))
-      return bad_row(q, 0, i, "box has xmin > xmax or ymin > ymax");
+    if (!q->a.boxes && v[2] < 0) {
+      char msg[96];
+      snprintf(msg, sizeof msg, "disc radius is negative: %.17g (field 3)", v[2]);
+      return bad_row(q, 0, i, msg);
+    }
+    if (q->a.boxes && (v[0] > v[2] || v[1] > v[3])) return bad_box(q, 0, i, v);
   }
   qk_tree_options_t opt;
   qk_tree_options_init(&opt);
@@ -562,7 +576,11 @@ static void raycast_usage(FILE *f) {
 static int raycast_prepare(qrun_t *q) {
   for (size_t i = 0; i < q->tab[1].rows; i++) {
     double tmax = q->tab[1].v[5 * i + 4];
-    if (!isnan(tmax) && tmax < 0) return bad_row(q, 1, i, "tmax is negative");
+    if (!isnan(tmax) && tmax < 0) {
+      char msg[96];
+      snprintf(msg, sizeof msg, "tmax is negative: %.17g (field 5)", tmax);
+      return bad_row(q, 1, i, msg);
+    }
   }
   return build_collider(q);
 }

@@ -136,6 +136,11 @@ static int parse_xy(const char *cmd, const char *s, xy_spec_t *xy) {
       return 1;
     }
   }
+  /* x and y from one column would put every point on the diagonal, without a word. */
+  if (xy->col[0] >= 0 ? xy->col[0] == xy->col[1] : !strcmp(xy->name[0], xy->name[1])) {
+    cli_error(cmd, "--xy %s: x and y name the same column", s);
+    return 1;
+  }
   return 0;
 }
 
@@ -164,6 +169,11 @@ static int resolve_xy(const char *cmd, const char *path, const char *header, xy_
       cli_error(cmd, "%s:1: no column named '%s' in the header", path, xy->name[k]);
       return 1;
     }
+  }
+  if (xy->col[0] == xy->col[1]) { /* a name and a number for one column */
+    cli_error(cmd, "%s:1: --xy %s,%s: x and y name the same column (field %d)", path, xy->name[0],
+              xy->name[1], xy->col[0] + 1);
+    return 1;
   }
   return 0;
 }
@@ -297,8 +307,7 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
       fcap = (size_t)len + 1;
     }
     if ((size_t)len != strlen(line)) {
-      fprintf(stderr, "quadkit join: %s:%ld: binary data (NUL byte) in a text file\n", j->pts_path,
-              lineno);
+      cli_msg("quadkit join: %s:%ld: binary data (NUL byte) in a text file\n", j->pts_path, lineno);
       rc = CLI_BAD_INPUT;
       break;
     }
@@ -306,7 +315,7 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
     int lone_cr = cli_cut_line_end(line, &cut);
     len = (ssize_t)cut;
     if (lone_cr) {
-      fprintf(stderr, "quadkit join: %s:%ld: " CLI_LONE_CR "\n", j->pts_path, lineno);
+      cli_msg("quadkit join: %s:%ld: " CLI_LONE_CR "\n", j->pts_path, lineno);
       rc = CLI_BAD_INPUT;
       break;
     }
@@ -327,8 +336,8 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
       int rx = named ? 1 : csv_field(line, xc, fx, fcap, &why);
       int ry = named || rx < 0 ? 1 : csv_field(line, yc, fy, fcap, &why);
       if (rx < 0 || ry < 0) {
-        fprintf(stderr, "quadkit join: %s:%ld: field %d: %s\n", j->pts_path, lineno,
-                -(rx < 0 ? rx : ry), why);
+        cli_msg("quadkit join: %s:%ld: field %d: %s\n", j->pts_path, lineno, -(rx < 0 ? rx : ry),
+                why);
         rc = CLI_BAD_INPUT;
         break;
       }
@@ -354,13 +363,13 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
     int hx = csv_field(line, xy->col[0], fx, fcap, &why);
     int hy = hx < 0 ? 0 : csv_field(line, xy->col[1], fy, fcap, &why);
     if (hx < 0 || hy < 0) {
-      fprintf(stderr, "quadkit join: %s:%ld: field %d: %s\n", j->pts_path, lineno,
-              -(hx < 0 ? hx : hy), why);
+      cli_msg("quadkit join: %s:%ld: field %d: %s\n", j->pts_path, lineno, -(hx < 0 ? hx : hy),
+              why);
       rc = CLI_BAD_INPUT;
       break;
     }
     if (!hx || !hy) {
-      fprintf(stderr, "quadkit join: %s:%ld: no field %d (need x in field %d, y in field %d)\n",
+      cli_msg("quadkit join: %s:%ld: no field %d (need x in field %d, y in field %d)\n",
               j->pts_path, lineno, (!hx ? xy->col[0] : xy->col[1]) + 1, xy->col[0] + 1,
               xy->col[1] + 1);
       rc = CLI_BAD_INPUT;
@@ -369,8 +378,8 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
     if (number(fx, &x) != 1 || number(fy, &y) != 1 || !isfinite(x) || !isfinite(y)) {
       const char *bad = (number(fx, &x) != 1 || !isfinite(x)) ? fx : fy;
       int col = bad == fx ? xy->col[0] : xy->col[1];
-      fprintf(stderr, "quadkit join: %s:%ld: field %d is not a finite number: '%.40s'\n",
-              j->pts_path, lineno, col + 1, bad);
+      cli_msg("quadkit join: %s:%ld: field %d is not a finite number: '%.40s'\n", j->pts_path,
+              lineno, col + 1, bad);
       rc = CLI_BAD_INPUT;
       break;
     }
@@ -389,7 +398,7 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
     }
   }
   if (!rc && ferror(in)) {
-    fprintf(stderr, "quadkit join: %s: read error\n", j->pts_path);
+    cli_msg("quadkit join: %s: read error\n", j->pts_path);
     rc = CLI_BAD_INPUT;
   }
   if (!rc) rc = flush_chunk(j);
@@ -579,19 +588,23 @@ int cmd_regions(int argc, char **argv) {
     qk_region_free(r);
     return rc;
   }
-  qk_region_stats_t s;
-  qk_region_stats(r, &s);
-  printf("{\"features\": %zu, \"rings\": %zu, \"vertices\": %zu, \"holes\": %zu, "
-         "\"self_intersecting_rings\": %zu, \"skipped_geometries\": %zu, \"edge_pieces\": %zu, "
-         "\"leaves\": %zu, \"leaf_edges\": %zu, \"depth\": %u, \"bytes\": %zu, "
-         "\"build_seconds\": %.6f, \"mode\": \"%s\", \"bbox\": [%.17g, %.17g, %.17g, %.17g]}\n",
-         s.features, s.rings, s.vertices, s.holes, s.self_intersecting, s.skipped, s.edges,
-         s.leaves, s.leaf_edges, s.depth, s.bytes, s.build_seconds, s.planar ? "planar" : "lonlat",
-         s.box.xmin + 0.0, s.box.ymin + 0.0, s.box.xmax + 0.0, s.box.ymax + 0.0); /* (-0 as 0) */
   if (svg) {
     qk_status_t st = qk_region_write_svg(r, o.f, 1200);
     rc = cli_out_close("regions", &o, st == QK_OK);
     if (st) rc = cli_status("regions", svg, st);
+  }
+  /* The statistics after the picture is in place (a failed write printed them too). */
+  if (!rc) {
+    qk_region_stats_t s;
+    qk_region_stats(r, &s);
+    printf("{\"features\": %zu, \"rings\": %zu, \"vertices\": %zu, \"holes\": %zu, "
+           "\"self_intersecting_rings\": %zu, \"skipped_geometries\": %zu, \"edge_pieces\": %zu, "
+           "\"leaves\": %zu, \"leaf_edges\": %zu, \"depth\": %u, \"bytes\": %zu, "
+           "\"build_seconds\": %.6f, \"mode\": \"%s\", \"bbox\": [%.17g, %.17g, %.17g, %.17g]}\n",
+           s.features, s.rings, s.vertices, s.holes, s.self_intersecting, s.skipped, s.edges,
+           s.leaves, s.leaf_edges, s.depth, s.bytes, s.build_seconds,
+           s.planar ? "planar" : "lonlat", s.box.xmin + 0.0, s.box.ymin + 0.0, s.box.xmax + 0.0,
+           s.box.ymax + 0.0); /* (-0 as 0) */
   }
   qk_region_free(r);
   return rc;

@@ -72,17 +72,22 @@ int cmd_tree(int argc, char **argv) {
     qk_tree_free(tree);
     return rc;
   }
-  qk_tree_stats_t s;
-  qk_tree_stats(tree, &s);
-  printf("{\"points\": %zu, \"nodes\": %zu, \"leaves\": %zu, \"height\": %u, "
-         "\"max_leaf_points\": %zu, \"capped_leaves\": %zu, \"capacity\": %u, \"max_depth\": %u, "
-         "\"root\": {\"x\": %.17g, \"y\": %.17g, \"side\": %.17g}, \"memory_bytes\": %zu}\n",
-         s.points, s.nodes, s.leaves, s.height, s.max_leaf_points, s.capped_leaves, s.capacity,
-         s.max_depth, s.root.x + 0.0, s.root.y + 0.0, s.root.side /* (-0 as 0) */, s.memory_bytes);
   if (svg) {
     qk_status_t st = qk_tree_write_svg(tree, o.f, 800);
     rc = cli_out_close(cmd, &o, st == QK_OK);
     if (!rc && st) rc = cli_status(cmd, svg, st);
+  }
+  /* The statistics after the picture is in place: a command that failed printed them
+   * (exit 3 with the JSON on stdout, as if it had worked). */
+  if (!rc) {
+    qk_tree_stats_t s;
+    qk_tree_stats(tree, &s);
+    printf("{\"points\": %zu, \"nodes\": %zu, \"leaves\": %zu, \"height\": %u, "
+           "\"max_leaf_points\": %zu, \"capped_leaves\": %zu, \"capacity\": %u, \"max_depth\": %u, "
+           "\"root\": {\"x\": %.17g, \"y\": %.17g, \"side\": %.17g}, \"memory_bytes\": %zu}\n",
+           s.points, s.nodes, s.leaves, s.height, s.max_leaf_points, s.capped_leaves, s.capacity,
+           s.max_depth, s.root.x + 0.0, s.root.y + 0.0, s.root.side /* (-0 as 0) */,
+           s.memory_bytes);
   }
   qk_tree_free(tree);
   return rc;

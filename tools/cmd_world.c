@@ -7,6 +7,7 @@
 #include <ctype.h>
 #include <errno.h>
 #include <math.h>
+#include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
@@ -106,9 +107,19 @@ static void scene_free(scene_t *s) {
   free(s->m);
 }
 
+/* The text of the line being read (after a byte order mark), for the column of a field:
+ * split() leaves each field where it was in the line (a quoted one starts at its quote). */
+static const char *g_row;
+static size_t g_row_len;
+
+/* "PATH:LINE[:COLUMN]: " and fmt with val; the column when val is a field of the line. */
 static int bad(const char *path, unsigned long line, const char *fmt, const char *val) {
-  fprintf(stderr, "quadkit world: %s:%lu: ", path, line);
-  fprintf(stderr, fmt, val);
+  uintptr_t v = (uintptr_t)val, r = (uintptr_t)g_row;
+  if (g_row && v >= r && v - r < g_row_len)
+    cli_msg("quadkit world: %s:%lu:%lu: ", path, line, (unsigned long)(v - r) + 1);
+  else
+    cli_msg("quadkit world: %s:%lu: ", path, line);
+  cli_msg(fmt, val);
   fputc('\n', stderr);
   return CLI_BAD_INPUT;
 }
@@ -215,11 +226,15 @@ static int each_row(const char *path,
       continue;
     }
     first = 0;
-    if ((rc = fn(path, ln, &r, s))) break;
+    g_row = line + (p - line >= 3 && ln == 1 && !strncmp(line, "\xEF\xBB\xBF", 3) ? 3 : 0);
+    g_row_len = n - (size_t)(g_row - line);
+    rc = fn(path, ln, &r, s);
+    g_row = NULL;
+    if (rc) break;
   }
   free(line);
   if (!rc && ferror(f)) {
-    fprintf(stderr, "quadkit world: %s: read error\n", path);
+    cli_msg("quadkit world: %s: read error\n", path);
     rc = CLI_BAD_INPUT;
   }
   fclose(f);
@@ -355,7 +370,7 @@ int cmd_world(int argc, char **argv) {
   int rc = each_row(files[0], object_row, &s);
   if (rc) goto done;
   if (s.n == 0) {
-    fprintf(stderr, "quadkit world: %s: no objects\n", files[0]);
+    cli_msg("quadkit world: %s: no objects\n", files[0]);
     rc = CLI_BAD_INPUT;
     goto done;
   }
@@ -370,7 +385,7 @@ int cmd_world(int argc, char **argv) {
   for (size_t i = 1; i < s.n; i++)
     if (s.o[s.by_id[i]].id == s.o[s.by_id[i - 1]].id) {
       unsigned long a = s.o[s.by_id[i - 1]].line, b = s.o[s.by_id[i]].line;
-      fprintf(stderr, "quadkit world: %s:%lu: id %llu appears twice (also on line %lu)\n", files[0],
+      cli_msg("quadkit world: %s:%lu: id %llu appears twice (also on line %lu)\n", files[0],
               a > b ? a : b, (unsigned long long)s.o[s.by_id[i]].id, a < b ? a : b);
       rc = CLI_BAD_INPUT;
       goto done;
@@ -443,6 +458,9 @@ done:
 }
 
 /* ---- simulate ---------------------------------------------------------------------- */
+
+/* An output (NULL: none) whose buffered text went out without an error. */
+static int flushed(FILE *f) { return !f || (fflush(f) == 0 && !ferror(f)); }
 
 static void simulate_usage(FILE *f) {
   fprintf(f, "usage: quadkit simulate [--n N] [--frames F] [--seed S] [--svg FILE] [-o FILE]\n"
@@ -642,6 +660,10 @@ int cmd_simulate(int argc, char **argv) {
     if (write_svg(&so, b, n, hit, side)) rc = CLI_INTERNAL;
   }
 done:
+  /* Both flushed before either is renamed into place: a write that fails only when its
+   * buffer goes out (-o /dev/full) left the picture behind. The one that failed says
+   * why when it is closed. */
+  if (rc == CLI_OK && !(flushed(o.f) && (!svg || flushed(so.f)))) rc = CLI_INTERNAL;
   /* The picture first: when it fails, the JSON file is not left behind either. */
   if (svg) {
     int rc2 = cli_out_close(cmd, &so, rc == CLI_OK);

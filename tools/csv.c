@@ -66,11 +66,11 @@ static qk_status_t on_row(void *ud, size_t row, unsigned long lineno, const char
 /* Print the reader's error and map it to an exit code. */
 static int read_error(const char *path, qk_status_t st, const qk_error_t *e) {
   if (e->line && e->column)
-    fprintf(stderr, "quadkit: %s:%lu:%lu: %s\n", path, e->line, e->column, e->message);
+    cli_msg("quadkit: %s:%lu:%lu: %s\n", path, e->line, e->column, e->message);
   else if (e->line)
-    fprintf(stderr, "quadkit: %s:%lu: %s\n", path, e->line, e->message);
+    cli_msg("quadkit: %s:%lu: %s\n", path, e->line, e->message);
   else
-    fprintf(stderr, "quadkit: %s: %s\n", path, e->message[0] ? e->message : qk_strerror(st));
+    cli_msg("quadkit: %s: %s\n", path, e->message[0] ? e->message : qk_strerror(st));
   return st == QK_ERR_NOMEM ? CLI_INTERNAL : CLI_BAD_INPUT;
 }
 
@@ -113,7 +113,7 @@ static int read_points(const char *path, const char *xy, cli_rows_t *rows, qk_po
   int rc = read_values(path, xy, 2, 2, rows, &v, n);
   if (rc) return rc;
   if (*n == 0 && need_rows) {
-    fprintf(stderr, "quadkit: %s: no data rows\n", path);
+    cli_msg("quadkit: %s: no data rows\n", path);
     cli_rows_free(rows);
     return CLI_BAD_INPUT;
   }

@@ -47,8 +47,7 @@ static void usage(FILE *f) {
  * whichever command printed it. */
 static int finish(int rc) {
   if (fflush(stdout) != 0 || ferror(stdout)) {
-    if (rc == CLI_OK)
-      fprintf(stderr, "quadkit: cannot write standard output: %s\n", strerror(errno));
+    if (rc == CLI_OK) cli_msg("quadkit: cannot write standard output: %s\n", strerror(errno));
     return rc == CLI_OK ? CLI_INTERNAL : rc;
   }
   return rc;
@@ -65,6 +64,6 @@ int main(int argc, char **argv) {
   }
   for (size_t i = 0; i < sizeof commands / sizeof commands[0]; i++)
     if (!strcmp(argv[1], commands[i].name)) return finish(commands[i].run(argc - 1, argv + 1));
-  fprintf(stderr, "quadkit: unknown command '%s' (see quadkit --help)\n", argv[1]);
+  cli_msg("quadkit: unknown command '%s' (see quadkit --help)\n", argv[1]);
   return CLI_USAGE;
 }

@@ -33,16 +33,77 @@ static int mg_fail(char *msg, size_t n, int rc, const char *fmt, ...) {
 void mg_free(mg_input_t *in) {
   free(in->xy), free(in->seg), free(in->holes), free(in->ring_v), free(in->ring_start);
   free(in->ring_sign), free(in->seg_feature), free(in->seg_ring), free(in->seg_point);
+  free(in->ring_src), free(in->in_feature), free(in->in_poly), free(in->in_ring), free(in->in_path),
+      free(in->paths);
   memset(in, 0, sizeof *in);
 }
 
-void mg_describe_segment(const mg_input_t *in, size_t s, char *buf, size_t n) {
+static int slurp(const char *path, char **text, size_t *len, char *msg, size_t n);
+
+void mg_locate(const char *path, const char *pointer, unsigned long *line, unsigned long *col) {
+  *line = *col = 0;
+#ifdef QK_HAVE_JSONC
+  /* Read again: only on the way to an error, so a read costs nothing when all is well. */
+  char *text, msg[8];
+  size_t len;
+  if (slurp(path, &text, &len, msg, sizeof msg)) return;
+  if (qk_region_geojson_locate(text, len, pointer, line, col) != QK_OK) *line = *col = 0;
+  free(text);
+#else
+  (void)path, (void)pointer;
+#endif
+}
+
+void mg_describe_ring(const mg_input_t *in, size_t q, size_t pos, char *buf, size_t n, char *ptr,
+                      size_t np) {
+  if (!in->in_path || q >= in->nin) {
+    snprintf(buf, n, "ring %zu", q), snprintf(ptr, np, "%s", "");
+    return;
+  }
+  snprintf(buf, n, "feature %u, polygon %u, ring %u", in->in_feature[q], in->in_poly[q],
+           in->in_ring[q]);
+  if (pos != SIZE_MAX) {
+    size_t k = strlen(buf);
+    snprintf(buf + k, n - k, ", position %zu", pos);
+    snprintf(ptr, np, "%s/%zu", in->paths + in->in_path[q], pos);
+  } else {
+    snprintf(ptr, np, "%s", in->paths + in->in_path[q]);
+  }
+}
+
+void mg_place(const char *path, const char *pointer, char *buf, size_t n) {
+  unsigned long line, col;
+  mg_locate(path, pointer, &line, &col);
+  if (line)
+    snprintf(buf, n, "%s:%lu:%lu", path, line, col);
+  else
+    snprintf(buf, n, "%s", path);
+}
+
+const char *mg_pole_note(const mg_input_t *in, char *buf, size_t n) {
+  char what[128], ptr[512];
+  if (!in->in_path || in->pole_ring >= in->nin) return "";
+  mg_describe_ring(in, in->pole_ring, SIZE_MAX, what, sizeof what, ptr, sizeof ptr);
+  snprintf(buf, n,
+           " (%s goes round the %s pole: its longitudes wind once round the globe, across "
+           "the antimeridian, which no planar map of lon/lat closes; cut it along the "
+           "antimeridian into rings that close in longitude, or project it with a polar "
+           "projection (PROJ: +proj=stere +lat_0=%s90), or mesh other features with "
+           "--feature N or --field NAME=VALUE)",
+           what, in->pole_south ? "south" : "north", in->pole_south ? "-" : "");
+  return buf;
+}
+
+void mg_describe_segment(const mg_input_t *in, const char *path, size_t s, char *buf, size_t n,
+                         unsigned long *line, unsigned long *col) {
+  *line = *col = 0;
   if (s >= in->ns || !in->seg_feature) {
     snprintf(buf, n, "segment %zu", s);
     return;
   }
-  snprintf(buf, n, "feature %u ring %u point %u", in->seg_feature[s], in->seg_ring[s],
-           in->seg_point[s]);
+  char ptr[512];
+  mg_describe_ring(in, in->seg_ring[s], in->seg_point[s], buf, n, ptr, sizeof ptr);
+  if (ptr[0]) mg_locate(path, ptr, line, col);
 }
 
 #ifndef QK_HAVE_JSONC
@@ -58,10 +119,15 @@ int mg_read(const char *path, const mg_options_t *o, mg_input_t *out, char *msg,
 typedef struct rings {
   double *xy;
   size_t np, cap_p;
-  size_t *start; /* nr + 1 */
-  uint32_t *feat, *num;
+  size_t *start;               /* nr + 1 */
+  uint32_t *feat, *poly, *num; /* the feature, its polygon (as the region reader numbers
+                                  them) and the ring in the polygon */
+  size_t *path;                /* where the ring is in the text: a JSON Pointer in paths */
+  char *paths;
+  size_t paths_len, cap_paths;
   int *hole;
   size_t nr, cap_r;
+  int kind; /* the root: 0 a geometry, 1 a Feature, 2 a FeatureCollection */
 } rings_t;
 
 static int grow(void **p, size_t *cap, size_t need, size_t elem) {
@@ -75,8 +141,9 @@ static int grow(void **p, size_t *cap, size_t need, size_t elem) {
   return 0;
 }
 
-/* Append the rings of one GeoJSON polygon (an array of rings) of feature f. */
-static int add_polygon(rings_t *r, json_object *poly, uint32_t f, uint32_t *ring_no) {
+/* Append the rings of one GeoJSON polygon (an array of rings at JSON Pointer at) of
+ * feature f, its polygon number pno. */
+static int add_polygon(rings_t *r, json_object *poly, uint32_t f, uint32_t pno, const char *at) {
   size_t nring = json_object_array_length(poly);
   for (size_t k = 0; k < nring; k++) {
     json_object *ring = json_object_array_get_idx(poly, k);
@@ -85,7 +152,7 @@ static int add_polygon(rings_t *r, json_object *poly, uint32_t f, uint32_t *ring
     if (grow((void **)&r->xy, &r->cap_p, 2 * (r->np + np), sizeof *r->xy)) return 3;
     if (r->nr + 2 > r->cap_r) {
       size_t nc = r->cap_r ? 2 * r->cap_r : 16;
-      void *a = realloc(r->start, nc * sizeof *r->start), *b, *c, *d;
+      void *a = realloc(r->start, nc * sizeof *r->start), *b, *c, *d, *e, *g;
       if (!a) return 3;
       r->start = a;
       if (!(b = realloc(r->feat, nc * sizeof *r->feat))) return 3;
@@ -94,16 +161,24 @@ static int add_polygon(rings_t *r, json_object *poly, uint32_t f, uint32_t *ring
       r->num = c;
       if (!(d = realloc(r->hole, nc * sizeof *r->hole))) return 3;
       r->hole = d;
+      if (!(e = realloc(r->poly, nc * sizeof *r->poly))) return 3;
+      r->poly = e;
+      if (!(g = realloc(r->path, nc * sizeof *r->path))) return 3;
+      r->path = g;
       if (!r->cap_r) r->start[0] = 0;
       r->cap_r = nc;
     }
+    size_t pl = strlen(at) + 24;
+    if (grow((void **)&r->paths, &r->cap_paths, r->paths_len + pl, 1)) return 3;
+    r->path[r->nr] = r->paths_len;
+    r->paths_len += (size_t)snprintf(r->paths + r->paths_len, pl, "%s/%zu", at, k) + 1;
     for (size_t i = 0; i < np; i++) {
       json_object *pt = json_object_array_get_idx(ring, i);
       r->xy[2 * r->np] = json_object_get_double(json_object_array_get_idx(pt, 0));
       r->xy[2 * r->np + 1] = json_object_get_double(json_object_array_get_idx(pt, 1));
       r->np++;
     }
-    r->feat[r->nr] = f, r->num[r->nr] = (*ring_no)++, r->hole[r->nr] = k > 0;
+    r->feat[r->nr] = f, r->poly[r->nr] = pno, r->num[r->nr] = (uint32_t)k, r->hole[r->nr] = k > 0;
     r->start[++r->nr] = r->np;
   }
   return 0;
@@ -112,23 +187,38 @@ static int add_polygon(rings_t *r, json_object *poly, uint32_t f, uint32_t *ring
 /* The rings of one geometry (Polygon, MultiPolygon, or the polygons of a
  * GeometryCollection, as the region reader takes them) of feature f; anything else adds
  * nothing. */
-static int add_geometry(rings_t *r, json_object *geom, uint32_t f, uint32_t *ring_no) {
+static int add_geometry(rings_t *r, json_object *geom, uint32_t f, uint32_t *pno, const char *at) {
   json_object *t = NULL, *c = NULL;
   if (!geom || !json_object_object_get_ex(geom, "type", &t)) return 0;
   const char *ty = json_object_get_string(t);
+  size_t al = strlen(at) + 40;
+  char *sub = malloc(al); /* at, one or two steps deeper */
+  if (!sub) return 3;
+  int rc = 0;
   if (!strcmp(ty, "GeometryCollection")) {
-    if (!json_object_object_get_ex(geom, "geometries", &c)) return 0;
-    for (size_t k = 0, m = json_object_array_length(c); k < m; k++)
-      if (add_geometry(r, json_object_array_get_idx(c, k), f, ring_no)) return 3;
-    return 0;
+    if (json_object_object_get_ex(geom, "geometries", &c))
+      for (size_t k = 0, m = json_object_array_length(c); k < m && !rc; k++) {
+        snprintf(sub, al, "%s/geometries/%zu", at, k);
+        rc = add_geometry(r, json_object_array_get_idx(c, k), f, pno, sub);
+      }
+    free(sub);
+    return rc;
   }
   int multi = !strcmp(ty, "MultiPolygon");
-  if ((!multi && strcmp(ty, "Polygon")) || !json_object_object_get_ex(geom, "coordinates", &c))
+  if ((!multi && strcmp(ty, "Polygon")) || !json_object_object_get_ex(geom, "coordinates", &c)) {
+    free(sub);
     return 0;
-  if (!multi) return add_polygon(r, c, f, ring_no);
-  for (size_t k = 0, m = json_object_array_length(c); k < m; k++)
-    if (add_polygon(r, json_object_array_get_idx(c, k), f, ring_no)) return 3;
-  return 0;
+  }
+  if (!multi) {
+    snprintf(sub, al, "%s/coordinates", at);
+    rc = add_polygon(r, c, f, (*pno)++, sub);
+  }
+  for (size_t k = 0, m = multi ? json_object_array_length(c) : 0; k < m && !rc; k++) {
+    snprintf(sub, al, "%s/coordinates/%zu", at, k);
+    rc = add_polygon(r, json_object_array_get_idx(c, k), f, (*pno)++, sub);
+  }
+  free(sub);
+  return rc;
 }
 
 /* Gather the rings of the features wanted (want[f] nonzero), numbering features as the
@@ -142,12 +232,19 @@ static int gather(json_object *root, const unsigned char *want, size_t nf, rings
                    !strcmp(json_object_get_string(t), "FeatureCollection") &&
                    json_object_object_get_ex(root, "features", &feats);
   if (collection) n = json_object_array_length(feats);
+  r->kind = collection ? 2 : 0;
   for (size_t f = 0; f < n; f++) {
     json_object *obj = collection ? json_object_array_get_idx(feats, f) : root, *geom = obj;
-    if (json_object_object_get_ex(obj, "type", &t) && !strcmp(json_object_get_string(t), "Feature"))
+    char at[64] = "";
+    if (collection) snprintf(at, sizeof at, "/features/%zu", f);
+    if (json_object_object_get_ex(obj, "type", &t) &&
+        !strcmp(json_object_get_string(t), "Feature")) {
       if (!json_object_object_get_ex(obj, "geometry", &geom)) geom = NULL;
-    uint32_t ring_no = 0;
-    if (f < nf && want[f] && add_geometry(r, geom, (uint32_t)f, &ring_no)) return 3;
+      strcat(at, "/geometry");
+      if (!collection) r->kind = 1;
+    }
+    uint32_t pno = 0;
+    if (f < nf && want[f] && add_geometry(r, geom, (uint32_t)f, &pno, at)) return 3;
   }
   *seen = n;
   return 0;
@@ -177,6 +274,33 @@ static int cmp_skey(const void *pa, const void *pb) {
   return (a->i > b->i) - (a->i < b->i);
 }
 
+/* The first ring that goes round a pole (SIZE_MAX: none), *south for the south pole: as
+ * lon/lat (every coordinate in range), it has an edge that crosses the antimeridian (its
+ * longitudes more than 180 degrees apart, so the short way round is across), and its
+ * longitude steps, each taken the short way round, add up to +-360 degrees rather than
+ * 0. A ring cut along the antimeridian (an edge from 180 to -180, on one meridian) and
+ * closed along it is not one: as planar lon/lat it is closed. */
+static size_t pole_ring(const rings_t *r, int *south) {
+  for (size_t q = 0; q < r->nr; q++) {
+    size_t s0 = r->start[q], s1 = r->start[q + 1];
+    double turn = 0, lat = 0;
+    int lonlat = 1, across = 0;
+    for (size_t i = s0; i < s1 && lonlat; i++) {
+      const double *a = &r->xy[2 * i], *b = &r->xy[2 * (i + 1 < s1 ? i + 1 : s0)];
+      lonlat = fabs(a[0]) <= 180 && fabs(a[1]) <= 90;
+      double d = b[0] - a[0];
+      across |= fabs(d) > 180 && fabs(d) < 360;
+      turn += d > 180 ? d - 360 : d < -180 ? d + 360 : d;
+      lat += a[1];
+    }
+    if (lonlat && across && fabs(turn) > 180) {
+      *south = lat < 0;
+      return q;
+    }
+  }
+  return SIZE_MAX;
+}
+
 /* Project and round in place; counts rounded coordinates. */
 static void transform(rings_t *r, const mg_options_t *o, mg_input_t *out) {
   if (o->project && r->np) {
@@ -186,10 +310,20 @@ static void transform(rings_t *r, const mg_options_t *o, mg_input_t *out) {
       lat += r->xy[2 * i + 1];
     }
     out->lat0 = lat / (double)r->np;
+    /* Across the antimeridian (Fiji, Russia, Alaska: parts at both ends of the map), the
+     * negative longitudes move up by 360 so that the parts meet at 180. Not when an edge
+     * runs across the prime meridian (a ring cut at the antimeridian that goes round the
+     * globe, or the whole world): moving one of its ends would tear it across the map. */
+    int tear = 0;
+    for (size_t q = 0; q < r->nr && !tear; q++)
+      for (size_t i = r->start[q]; i < r->start[q + 1] && !tear; i++) {
+        double a = r->xy[2 * i], b = r->xy[2 * (i + 1 < r->start[q + 1] ? i + 1 : r->start[q])];
+        tear = (a < 0) != (b < 0) && fabs(b - a) < 180;
+      }
     double k = cos(out->lat0 * MG_PI / 180) * MG_EARTH_M * MG_PI / 180;
     for (size_t i = 0; i < r->np; i++) {
       double lon = r->xy[2 * i];
-      if (hi - lo > 180 && lon < 0) lon += 360; /* across the antimeridian: keep it whole */
+      if (hi - lo > 180 && !tear && lon < 0) lon += 360;
       r->xy[2 * i] = lon * k;
       r->xy[2 * i + 1] = r->xy[2 * i + 1] * MG_EARTH_M * MG_PI / 180;
     }
@@ -279,9 +413,11 @@ static int build(const rings_t *r, mg_input_t *out) {
   out->ring_v = malloc((r->np + 1) * sizeof *out->ring_v);
   out->ring_start = malloc((r->nr + 1) * sizeof *out->ring_start);
   out->ring_sign = malloc((r->nr + 1) * sizeof *out->ring_sign);
+  out->ring_src = malloc((r->nr + 1) * sizeof *out->ring_src);
+  uint32_t *rpos = NULL; /* beside ring_v: the position in the input ring it comes from */
   int rc = 0;
   if (!k || !vid || !out->xy || !out->seg || !out->seg_feature || !out->seg_ring ||
-      !out->seg_point || !out->ring_v || !out->ring_start || !out->ring_sign)
+      !out->seg_point || !out->ring_v || !out->ring_start || !out->ring_sign || !out->ring_src)
     rc = 3;
   if (!rc) {
     for (size_t i = 0; i < r->np; i++) k[i] = (vkey_t){r->xy[2 * i], r->xy[2 * i + 1], i};
@@ -327,14 +463,19 @@ static int build(const rings_t *r, mg_input_t *out) {
       if (!rv || !sg || !sf || !sr || !sp) rc = 3;
     }
     out->split_points = extra;
+    if (!rc && !(rpos = malloc((r->np + extra + 1) * sizeof *rpos))) rc = 3;
     for (size_t q = 0; !rc && q < r->nr; q++) {
       size_t s0 = r->start[q], s1 = r->start[q + 1], at = out->ring_start[out->nr], m = 0;
-      /* The ring's distinct consecutive vertices, with T-junction vertices inserted. */
+      /* The ring's distinct consecutive vertices, with T-junction vertices inserted (an
+       * inserted vertex is named by the position its edge starts from). */
       for (size_t i = s0; i < s1; i++) {
         uint32_t v = (uint32_t)vid[i];
-        if (!(m && out->ring_v[at + m - 1] == v)) out->ring_v[at + m++] = v;
+        if (!(m && out->ring_v[at + m - 1] == v))
+          rpos[at + m] = (uint32_t)(i - s0), out->ring_v[at + m++] = v;
         uint32_t w = (uint32_t)vid[i + 1 < s1 ? i + 1 : s0];
-        if (extra && v != w) m += tj_inside(&tj, v, w, out->ring_v + at + m);
+        size_t add = extra && v != w ? tj_inside(&tj, v, w, out->ring_v + at + m) : 0;
+        for (size_t j = 0; j < add; j++) rpos[at + m + j] = (uint32_t)(i - s0);
+        m += add;
       }
       while (m > 1 && out->ring_v[at] == out->ring_v[at + m - 1]) m--;
       if (m < 3) {
@@ -344,14 +485,15 @@ static int build(const rings_t *r, mg_input_t *out) {
       for (size_t i = 0; i < m; i++) {
         uint32_t a = out->ring_v[at + i], b = out->ring_v[at + (i + 1) % m];
         out->seg[2 * out->ns] = a, out->seg[2 * out->ns + 1] = b;
-        out->seg_feature[out->ns] = r->feat[q], out->seg_ring[out->ns] = r->num[q];
-        out->seg_point[out->ns] = (uint32_t)i;
+        out->seg_feature[out->ns] = r->feat[q], out->seg_ring[out->ns] = (uint32_t)q;
+        out->seg_point[out->ns] = rpos[at + i];
         out->ns++;
       }
       out->ring_sign[out->nr] = r->hole[q] ? -1 : 1;
+      out->ring_src[out->nr] = (uint32_t)q;
       out->ring_start[++out->nr] = at + m;
     }
-    free(by_y);
+    free(by_y), free(rpos);
     /* A segment given twice (rings sharing an edge) is kept once: the first copy. */
     skey_t *sk = NULL;
     unsigned char *dup = NULL;
@@ -479,9 +621,14 @@ static int hole_points(mg_input_t *in, const char *path, char *msg, size_t n) {
     }
     if (!found && !rc) {
       size_t v = in->ring_v[in->ring_start[q]];
+      char what[128], ptr[512], place[1024], note[512];
+      mg_describe_ring(in, in->ring_src[q], SIZE_MAX, what, sizeof what, ptr, sizeof ptr);
+      mg_place(path, ptr, place, sizeof place);
       rc = mg_fail(msg, n, 1,
-                   "%s: no point found strictly inside the hole ring through (%.17g, %.17g)", path,
-                   in->xy[2 * v], in->xy[2 * v + 1]);
+                   "%s: %s: no point found strictly inside this hole ring (through (%.17g, "
+                   "%.17g)) and outside every other ring%s",
+                   place, what, in->xy[2 * v], in->xy[2 * v + 1],
+                   mg_pole_note(in, note, sizeof note));
     }
   }
   qk_region_free(l_all), qk_region_free(l_each);
@@ -607,22 +754,48 @@ int mg_read(const char *path, const mg_options_t *o, mg_input_t *out, char *msg,
     for (size_t q = 0; q < r.nr; q++) out->features += q == 0 || r.feat[q] != r.feat[q - 1];
   }
   if (!rc && r.nr == 0) {
-    if (pick >= 0)
-      rc =
-          mg_fail(msg, n, 1, "%s: feature %ld has no Polygon or MultiPolygon geometry", path, pick);
-    else
+    if (pick >= 0) {
+      char ptr[64] = "", place[1024];
+      if (r.kind == 2) snprintf(ptr, sizeof ptr, "/features/%ld", pick);
+      if (r.kind) strcat(ptr, "/geometry");
+      mg_place(path, ptr, place, sizeof place);
+      rc = mg_fail(msg, n, 1, "%s: feature %ld has no Polygon or MultiPolygon geometry", place,
+                   pick);
+    } else
       rc = mg_fail(msg, n, 1, "%s: no Polygon or MultiPolygon features", path);
   }
   json_object_put(root);
   free(want);
+  int south = 0;
+  size_t pole = rc ? SIZE_MAX : pole_ring(&r, &south);
   if (!rc) {
     out->points = r.np;
     transform(&r, o, out);
     if (build(&r, out)) rc = mg_fail(msg, n, 3, "out of memory");
   }
+  /* The rings' table, for messages that name a ring or a position. */
+  out->nin = r.nr, out->in_feature = r.feat, out->in_poly = r.poly, out->in_ring = r.num;
+  out->in_path = r.path, out->paths = r.paths;
+  r.feat = r.poly = r.num = NULL, r.path = NULL, r.paths = NULL;
+  out->pole_ring = pole, out->pole_south = south;
+  if (!rc && pole != SIZE_MAX && o->project) {
+    /* Projected, such a ring is not closed (it runs from one side of the map to the
+     * other), and what follows would fail on it with a message about its symptoms. */
+    char what[128], ptr[512], place[1024];
+    mg_describe_ring(out, pole, SIZE_MAX, what, sizeof what, ptr, sizeof ptr);
+    mg_place(path, ptr, place, sizeof place);
+    rc = mg_fail(msg, n, 1,
+                 "%s: %s goes round the %s pole (its longitudes wind once round the globe, "
+                 "across the antimeridian): --project equirect cannot map it to a closed "
+                 "ring; cut it along the antimeridian into rings that close in longitude, or "
+                 "project it with a polar projection (PROJ: +proj=stere +lat_0=%s90) and "
+                 "mesh the planar result without --project, or mesh other features with "
+                 "--feature N or --field NAME=VALUE",
+                 place, what, south ? "south" : "north", south ? "-" : "");
+  }
   if (!rc && out->ns == 0) rc = mg_fail(msg, n, 1, "%s: no ring with 3 distinct points", path);
   if (!rc) rc = hole_points(out, path, msg, n);
-  free(r.xy), free(r.start), free(r.feat), free(r.num), free(r.hole);
+  free(r.xy), free(r.start), free(r.hole);
   if (rc) mg_free(out);
   return rc;
 }

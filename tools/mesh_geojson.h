@@ -39,8 +39,19 @@ typedef struct mg_input {
   size_t *ring_start;
   int *ring_sign;
   size_t nr;
-  /* Per segment: the feature, ring (within the feature) and point it starts from. */
+  /* Per segment: the feature, the input ring (below) and the position in it that the
+   * segment starts from (or lies on, for a segment split at a T-junction). */
   uint32_t *seg_feature, *seg_ring, *seg_point;
+  uint32_t *ring_src; /* per ring above: its input ring */
+  /* Input rings (the chosen features', in file order): feature, polygon within the
+   * feature and ring within the polygon as the region reader numbers them, and where the
+   * ring is in the text: a JSON Pointer at paths + in_path[q]. */
+  size_t nin;
+  uint32_t *in_feature, *in_poly, *in_ring;
+  size_t *in_path;
+  char *paths;
+  size_t pole_ring; /* an input ring that goes round a pole as lon/lat, or SIZE_MAX */
+  int pole_south;
   size_t features;      /* features that gave rings */
   size_t points;        /* ring points read (closing points not counted) */
   size_t rounded;       /* coordinates changed by rounding */
@@ -61,7 +72,21 @@ int mg_read(const char *path, const mg_options_t *o, mg_input_t *out, char *msg,
 
 void mg_free(mg_input_t *in);
 
-/* Describe input segment s (or vertex v) as "feature F ring R point P" into buf. */
-void mg_describe_segment(const mg_input_t *in, size_t s, char *buf, size_t n);
+/* Describe input segment s as "feature F, polygon P, ring R, position I" into buf, and
+ * where that position is in the file path: *line and *col (0 when unknown). */
+void mg_describe_segment(const mg_input_t *in, const char *path, size_t s, char *buf, size_t n,
+                         unsigned long *line, unsigned long *col);
+/* Describe input ring q ("feature F, polygon P, ring R", with ", position I" unless pos
+ * is SIZE_MAX) into buf, and its JSON Pointer into ptr. */
+void mg_describe_ring(const mg_input_t *in, size_t q, size_t pos, char *buf, size_t n, char *ptr,
+                      size_t np);
+/* The line and column of the value at a JSON Pointer in the GeoJSON file path (the file
+ * read again; 0 and 0 when that fails). */
+void mg_locate(const char *path, const char *pointer, unsigned long *line, unsigned long *col);
+/* "path:line:col" of the value at a JSON Pointer, or "path" when unknown, into buf. */
+void mg_place(const char *path, const char *pointer, char *buf, size_t n);
+/* A parenthesised note naming the input ring that goes round a pole, with what to do
+ * (in buf), or "" when there is none. */
+const char *mg_pole_note(const mg_input_t *in, char *buf, size_t n);
 
 #endif

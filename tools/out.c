@@ -40,8 +40,7 @@ FILE *cli_open_input(const char *cmd, const char *path) {
     f = NULL;
   }
   if (f && fstat(fileno(f), &st) == 0) note_stat(path, &st);
-  if (!f)
-    fprintf(stderr, "quadkit%s%s: %s: %s: %s\n", cmd ? " " : "", cmd ? cmd : "", path, what, why);
+  if (!f) cli_msg("quadkit%s%s: %s: %s: %s\n", cmd ? " " : "", cmd ? cmd : "", path, what, why);
   return f;
 }
 

@@ -134,6 +134,23 @@ qk_status_t qk_region_read_geojson_text(const char *text, size_t len,
                                         qk_error_t *err);
 
 /**
+ * Where a value is in a GeoJSON text: the line and column (1-based, counted in bytes, after
+ * a UTF-8 byte order mark, as the reader's errors count them) of the value a JSON Pointer
+ * (RFC 6901) leads to, for messages about data read from the text (json-c's tree keeps no
+ * positions). A token of digits is an array index, any other a member name ("~0" and "~1"
+ * stand for '~' and '/'). When the pointer leads nowhere, the deepest value on its way.
+ * \param [in] text a JSON text that qk_region_read_geojson_text() accepted.
+ * \param [in] len its length in bytes.
+ * \param [in] pointer e.g. "/features/3/geometry/coordinates/0/2" ("" is the root).
+ * \param [out] line the line.
+ * \param [out] column the column.
+ * \return QK_OK, QK_ERR_INVALID (a NULL argument, or a pointer not starting with '/' or
+ *         longer than 1023 bytes), or QK_ERR_UNSUPPORTED when built without json-c.
+ */
+qk_status_t qk_region_geojson_locate(const char *text, size_t len, const char *pointer,
+                                     unsigned long *line, unsigned long *column);
+
+/**
  * Read the polygons of a vector file through GDAL/OGR (Shapefile, GeoPackage, FlatGeobuf,
  * GeoJSON, ...): every layer's Polygon and MultiPolygon features, with their attribute
  * fields as properties. Coordinates are used as stored (no reprojection).

@@ -29,10 +29,10 @@ printf '1,disc,0,0,1\r\n2,disc,0.5,0,1\r\n' >"$tmp/crlf.csv"
 same_text "world: CRLF" "$("$cli" world "$tmp/crlf.csv" "$tmp/none.csv" | tr '\n' ' ')" "frame,a,b 0,1,2 "
 echo keep >"$tmp/keep.csv"
 printf '1,1,5,5,1\n0,1,5,5,1\n' >"$tmp/order.csv"
-expect 1 'order.csv:2: frames out of order' -- "$cli" world "$tmp/obj2.csv" "$tmp/order.csv" -o "$tmp/keep.csv"
+expect 1 'order.csv:2:1: frames out of order' -- "$cli" world "$tmp/obj2.csv" "$tmp/order.csv" -o "$tmp/keep.csv"
 unchanged "$tmp/keep.csv"
 printf '0,7,5,5,1\n' >"$tmp/unknown.csv"
-expect 1 "unknown.csv:1: unknown id '7'" -- "$cli" world "$tmp/obj2.csv" "$tmp/unknown.csv" -o "$tmp/keep.csv"
+expect 1 "unknown.csv:1:3: unknown id '7'" -- "$cli" world "$tmp/obj2.csv" "$tmp/unknown.csv" -o "$tmp/keep.csv"
 unchanged "$tmp/keep.csv"
 
 # ---- join: fields longer than 255 characters ---------------------------------------------
@@ -98,9 +98,10 @@ else
   passes=$((passes + 1))
 fi
 
-# Crossing rings in GeoJSON: both segments named by feature, ring and point.
+# Crossing rings in GeoJSON: both segments named by feature, polygon, ring and position,
+# with their line and column (review6.sh has more).
 printf '{"type":"MultiPolygon","coordinates":[[[[0,0],[4,0],[4,4],[0,4],[0,0]]],[[[2,2],[6,2.5],[6,3],[2,2]]]]}\n' >"$tmp/crossing.geojson"
-expect 1 'segments 1 and 4 cross or overlap \(input segments feature 0 ring 0 point 1 and feature 0 ring 1 point 0\)' -- \
+expect 1 'crossing.geojson:1:47: segments 1 and 4 cross or overlap \(input segments feature 0, polygon 0, ring 0, position 1 and feature 0, polygon 1, ring 0, position 0, at 1:75\)' -- \
   "$cli" mesh "$tmp/crossing.geojson" -o "$tmp/crossing"
 
 # ---- .poly: BOM accepted; bad geometry refused naming the line, nothing written ------

@@ -112,9 +112,9 @@ expect 1 'wq2.csv:1: unterminated quoted field' -- "$cli" world "$tmp/wq2.csv" "
 printf '1,"disc"x,0,0,1\n' >"$tmp/wq3.csv"
 expect 1 'wq3.csv:1: text after a closing quote' -- "$cli" world "$tmp/wq3.csv" "$tmp/none.csv"
 printf 'x1,disc,0,0,1\n2,disc,0,0,1\n' >"$tmp/wx1.csv"
-expect 1 "wx1.csv:1: id is not a whole number: 'x1'" -- "$cli" world "$tmp/wx1.csv" "$tmp/none.csv"
+expect 1 "wx1.csv:1:1: id is not a whole number: 'x1'" -- "$cli" world "$tmp/wx1.csv" "$tmp/none.csv"
 printf 'f0,1,0,0,1\n' >"$tmp/mf0.csv"
-expect 1 "mf0.csv:1: frame is not a whole number" -- "$cli" world "$tmp/wq.csv" "$tmp/mf0.csv"
+expect 1 "mf0.csv:1:1: frame is not a whole number" -- "$cli" world "$tmp/wq.csv" "$tmp/mf0.csv"
 
 # ---- points CSV: a first line with a number in it is data (x1,2 was a header, dropped) --
 printf 'x1,2\n3,4\n' >"$tmp/h1.csv"

@@ -58,9 +58,9 @@ expect 1 "hexh.csv:1: field 1 is not a finite number: '0x1'" -- "$cli" join "$tm
 expect 1 "hex.csv:2: field 1 is not a finite number: '0x10'" -- "$cli" join "$tmp/negz.geojson" "$tmp/hex.csv" --planar
 printf 'id,kind,x,y,a,b\n1,disc,0x1,0,1,\n' >"$tmp/hexo.csv"
 printf 'frame,id,x,y\n' >"$tmp/nomoves.csv"
-expect 1 "hexo.csv:2: not a decimal number: '0x1'" -- "$cli" world "$tmp/hexo.csv" "$tmp/nomoves.csv"
+expect 1 "hexo.csv:2:8: not a decimal number: '0x1'" -- "$cli" world "$tmp/hexo.csv" "$tmp/nomoves.csv"
 printf 'id,kind,x,y,a,b\n1,disc,1,0,1,0x3\n' >"$tmp/hexu.csv"
-expect 1 "hexu.csv:2: field '0x3' is not used" -- "$cli" world "$tmp/hexu.csv" "$tmp/nomoves.csv"
+expect 1 "hexu.csv:2:14: field '0x3' is not used" -- "$cli" world "$tmp/hexu.csv" "$tmp/nomoves.csv"
 expect 2 "-r must be a finite number, not '0x1'" -- "$cli" radius "$tmp/negz.csv" "$tmp/negz.csv" -r 0x1
 printf '4 2 0 0\n0 0 0\n1 4 0\n2 4 4\n3 0 4\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n0\n' >"$tmp/sq.poly"
 expect 2 "--round 0x1p-4: the grid step must be a positive number" -- "$cli" mesh "$tmp/sq.poly" -o "$tmp/r" --round 0x1p-4
