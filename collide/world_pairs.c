@@ -130,6 +130,7 @@ static void bucket_sort(const bdig_t *g, uint32_t *src, uint32_t m, uint32_t na,
   const unsigned d0 = g->d0, sh = g->sh;
   const uint32_t m0 = g->m0, bmask = g->bmask;
   memset(c0, 0, (((size_t)1 << d0) + ((size_t)1 << g->d1)) * sizeof *c0);
+  QK__UNROLL4
   for (uint32_t i = 0; i < m; i++) {
     uint32_t v = src[i];
     c0[v & m0]++, c1[v >> d0]++;
@@ -146,10 +147,12 @@ static void bucket_sort(const bdig_t *g, uint32_t *src, uint32_t m, uint32_t na,
     }
     ca[a] = s1 - from;
   }
+  QK__UNROLL4
   for (uint32_t i = 0; i < m; i++) {
     uint32_t v = src[i];
     t32[c0[v & m0]++] = v;
   }
+  QK__UNROLL4
   for (uint32_t i = 0; i < m; i++) {
     uint32_t v = t32[i];
     src[c1[v >> d0]++] = v & bmask;
@@ -168,6 +171,7 @@ __attribute__((noinline)) static int rows_buckets(const qk_allocator_t *al, cons
   uint32_t *ca = cnt, *bc = ca + n_obj + 1, *c0 = bc + nbk + 1, *c1 = c0 + g.m0 + 1;
   uint32_t *rb = r->b;
   memset(bc, 0, ((size_t)nbk + 1) * sizeof *bc);
+  QK__UNROLL4
   for (size_t i = 0; i < n; i++) bc[(uint32_t)(keys[i] >> 32) >> ab]++;
   for (uint32_t k = 0, s = 0; k <= nbk; k++) {
     uint32_t c = bc[k];
@@ -175,6 +179,7 @@ __attribute__((noinline)) static int rows_buckets(const qk_allocator_t *al, cons
   }
   /* The buckets, in place: bucket k's keys at rb[bc[k] ..), cursors in bc. */
   const uint32_t bmul = g.bmask + 1; /* (a mod W) << bb as a product: one shift by ab left */
+  QK__UNROLL4
   for (size_t i = 0; i < n; i++) {
     uint64_t k = keys[i];
     uint32_t a = (uint32_t)(k >> 32);
@@ -235,6 +240,7 @@ static int make_rows(const qk_allocator_t *al, uint64_t *keys, uint64_t *tmp, si
    * b is known from the place in the second. */
   uint32_t *cb = cnt, *ca = cnt + n_b + 1;
   memset(cnt, 0, ((size_t)n_a + n_b + 2) * sizeof *cnt);
+  QK__UNROLL4
   for (size_t i = 0; i < n; i++) {
     uint64_t k = keys[i];
     cb[(uint32_t)k + 1]++;
@@ -242,11 +248,12 @@ static int make_rows(const qk_allocator_t *al, uint64_t *keys, uint64_t *tmp, si
   }
   for (uint32_t b = 1; b <= n_b; b++) cb[b] += cb[b - 1];
   if (!rows_index(al, r, ca, a0, n_a, n, 1)) return 0;
+  QK__UNROLL4
   for (size_t i = 0; i < n; i++) t32[cb[(uint32_t)keys[i]]++] = (uint32_t)(keys[i] >> 32) - a0;
   /* cb[b] is now the end of b's run, where b + 1's starts. */
   size_t i = 0;
-  for (uint32_t b = 0; b < n_b; b++)
-    for (size_t e = cb[b]; i < e; i++) rb[ca[t32[i]]++] = b;
+  for (uint32_t b = 0; b < n_b; b++) QK__UNROLL4
+  for (size_t e = cb[b]; i < e; i++) rb[ca[t32[i]]++] = b;
   return 1;
 }
 
@@ -864,6 +871,7 @@ qk_status_t qk_world_pairs(const qk_world_t *w, qk_pairs_which_t which, qk_world
   for (size_t k = 0; k < n_nz; k++) {
     uint32_t a = row[k];
     qk_handle_t ha = (uint64_t)ug[a] << 32 | a;
+    QK__UNROLL4
     for (size_t i = start[k], e = start[k + 1]; i < e; i++) {
       uint32_t b = rb[i];
       if (fn(ha, (uint64_t)ug[b] << 32 | b, ud)) return QK_OK;
