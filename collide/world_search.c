@@ -604,16 +604,18 @@ static inline __attribute__((always_inline)) uint64_t *sweep(const share_t *s, c
   /* k first in its band: every candidate may pair with it; else only those first here */
   const unsigned any = fm[k >> 2] >> lk & 1 ? 15u : 0u;
   const unsigned ek = all_exact ? 1 : bd->exact[k];
-  uint32_t lo = k + 1, q = lo >> 2, qe = (e - 1) >> 2;
+  uint32_t lo = k + 1;
   unsigned mask = ~((1u << (lo & 3)) - 1) & 15u;
   const unsigned last = (2u << ((e - 1) & 3)) - 1;
+  /* the groups walked by pointers (group and first-band mask), to the last, gl */
+  const egrp_t *g = &G[lo >> 2], *const gl = &G[(e - 1) >> 2];
+  const uint8_t *fg = &fm[lo >> 2];
   for (;;) {
-    const egrp_t *g = &G[q];
     __m128 cx = _mm_cmple_ps(_mm_loadu_ps(g->x0), x1);
     __m128 m =
         _mm_and_ps(_mm_cmple_ps(_mm_loadu_ps(g->y0), y1), _mm_cmple_ps(y0, _mm_loadu_ps(g->y1)));
-    if (q == qe) mask &= last;
-    unsigned bits = (unsigned)_mm_movemask_ps(_mm_and_ps(cx, m)) & mask & (any | fm[q]);
+    if (g == gl) mask &= last;
+    unsigned bits = (unsigned)_mm_movemask_ps(_mm_and_ps(cx, m)) & mask & (any | *fg);
     unsigned stop = ~(unsigned)_mm_movemask_ps(cx) & mask;
     if (bits) {
       /* the four keys at once: (min << 32 | max) of k's slot and each lane's */
@@ -640,12 +642,12 @@ static inline __attribute__((always_inline)) uint64_t *sweep(const share_t *s, c
           unsigned l = (unsigned)__builtin_ctz(bits);
           bits &= bits - 1;
           *v = key[l];
-          v += (ek & bd->exact[q * 4 + l]) ? 1 : objects_meet(s->w, slot, g->slot[l]);
+          v += (ek & bd->exact[(size_t)(g - G) * 4 + l]) ? 1 : objects_meet(s->w, slot, g->slot[l]);
         } while (bits);
       }
     }
-    if (stop || q == qe) break;
-    q++;
+    if (stop || g == gl) break;
+    g++, fg++;
     mask = 15u;
   }
   return v;
