@@ -8,6 +8,17 @@
 
 #include "collide/collide_internal.h"
 
+/* Before a short hot loop over many keys (counting and scattering sorts): unrolled four
+ * times, its index update, compare and branch are paid once for four keys (measured on
+ * the frame's sorts: a few instructions a key of about ten). */
+#if defined(__GNUC__) && !defined(__clang__)
+#define QK__UNROLL4 _Pragma("GCC unroll 4")
+#elif defined(__clang__)
+#define QK__UNROLL4 _Pragma("clang loop unroll_count(4)")
+#else
+#define QK__UNROLL4
+#endif
+
 /* Levels: cells of side 2^L for L in [QK__LMIN, QK__LMIN + QK__NLEV); the filing keeps
  * L in [QK__LFLOOR, 127] so that it fits an int8_t. */
 #define QK__LMIN (-128)

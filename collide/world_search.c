@@ -588,10 +588,9 @@ typedef struct bands {
  * kept where one of the two is entered first (band_of is non-decreasing in y).
  */
 #if defined(__SSE2__)
-static inline __attribute__((always_inline)) int sweep(share_t *s, uint32_t k, uint32_t e,
-                                                       const int all_exact) {
-  if (!kv_reserve(s, e - k - 1 + 3)) return 0;
-  const bands_t *bd = s->bd;
+static inline __attribute__((always_inline)) uint64_t *sweep(const share_t *s, const bands_t *bd,
+                                                             uint32_t k, uint32_t e, uint64_t *v,
+                                                             const int all_exact) {
   const egrp_t *G = bd->g;
   const uint8_t *fm = bd->fm;
   const egrp_t *gk = &G[k >> 2];
@@ -605,17 +604,18 @@ static inline __attribute__((always_inline)) int sweep(share_t *s, uint32_t k, u
   /* k first in its band: every candidate may pair with it; else only those first here */
   const unsigned any = fm[k >> 2] >> lk & 1 ? 15u : 0u;
   const unsigned ek = all_exact ? 1 : bd->exact[k];
-  uint64_t *v = s->out.v + s->out.n;
-  uint32_t lo = k + 1, q = lo >> 2, qe = (e - 1) >> 2;
+  uint32_t lo = k + 1;
   unsigned mask = ~((1u << (lo & 3)) - 1) & 15u;
   const unsigned last = (2u << ((e - 1) & 3)) - 1;
+  /* the groups walked by pointers (group and first-band mask), to the last, gl */
+  const egrp_t *g = &G[lo >> 2], *const gl = &G[(e - 1) >> 2];
+  const uint8_t *fg = &fm[lo >> 2];
   for (;;) {
-    const egrp_t *g = &G[q];
     __m128 cx = _mm_cmple_ps(_mm_loadu_ps(g->x0), x1);
     __m128 m =
         _mm_and_ps(_mm_cmple_ps(_mm_loadu_ps(g->y0), y1), _mm_cmple_ps(y0, _mm_loadu_ps(g->y1)));
-    if (q == qe) mask &= last;
-    unsigned bits = (unsigned)_mm_movemask_ps(_mm_and_ps(cx, m)) & mask & (any | fm[q]);
+    if (g == gl) mask &= last;
+    unsigned bits = (unsigned)_mm_movemask_ps(_mm_and_ps(cx, m)) & mask & (any | *fg);
     unsigned stop = ~(unsigned)_mm_movemask_ps(cx) & mask;
     if (bits) {
       /* the four keys at once: (min << 32 | max) of k's slot and each lane's */
@@ -625,15 +625,15 @@ static inline __attribute__((always_inline)) int sweep(share_t *s, uint32_t k, u
       __m128i k01 = _mm_unpacklo_epi32(mx, mn), k23 = _mm_unpackhi_epi32(mx, mn);
       if (all_exact) {
         /* all four written, the end moved past the kept ones (room for three more than
-         * the candidates is reserved) */
-        _mm_storel_epi64((__m128i *)v, k01);
-        v += bits & 1;
-        _mm_storeh_pd((double *)v, _mm_castsi128_pd(k01));
-        v += bits >> 1 & 1;
-        _mm_storel_epi64((__m128i *)v, k23);
-        v += bits >> 2 & 1;
-        _mm_storeh_pd((double *)v, _mm_castsi128_pd(k23));
-        v += bits >> 3;
+         * the candidates is reserved): each pair of keys stored whole, then its second
+         * key again over the first when the first is not kept */
+        static const uint8_t kept[16] = {0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4};
+        uint64_t *v2 = v + kept[bits & 3];
+        _mm_storeu_si128((__m128i *)v, k01);
+        _mm_storeh_pd((double *)(v + (bits & 1)), _mm_castsi128_pd(k01));
+        _mm_storeu_si128((__m128i *)v2, k23);
+        _mm_storeh_pd((double *)(v2 + (bits >> 2 & 1)), _mm_castsi128_pd(k23));
+        v += kept[bits];
       } else {
         uint64_t key[4];
         _mm_storeu_si128((__m128i *)key, k01);
@@ -642,28 +642,25 @@ static inline __attribute__((always_inline)) int sweep(share_t *s, uint32_t k, u
           unsigned l = (unsigned)__builtin_ctz(bits);
           bits &= bits - 1;
           *v = key[l];
-          v += (ek & bd->exact[q * 4 + l]) ? 1 : objects_meet(s->w, slot, g->slot[l]);
+          v += (ek & bd->exact[(size_t)(g - G) * 4 + l]) ? 1 : objects_meet(s->w, slot, g->slot[l]);
         } while (bits);
       }
     }
-    if (stop || q == qe) break;
-    q++;
+    if (stop || g == gl) break;
+    g++, fg++;
     mask = 15u;
   }
-  s->out.n = (size_t)(v - s->out.v);
-  return 1;
+  return v;
 }
 #else
-static int sweep(share_t *s, uint32_t k, uint32_t e, const int all_exact) {
-  if (!kv_reserve(s, e - k - 1)) return 0;
-  const bands_t *bd = s->bd;
+static uint64_t *sweep(const share_t *s, const bands_t *bd, uint32_t k, uint32_t e, uint64_t *v,
+                       const int all_exact) {
   const egrp_t *G = bd->g;
   const egrp_t *gk = &G[k >> 2];
   const float x1 = bd->x1[k], y0 = gk->y0[k & 3], y1 = gk->y1[k & 3];
   const int any = bd->fm[k >> 2] >> (k & 3) & 1;
   const uint32_t slot = gk->slot[k & 3];
   const uint64_t hs = (uint64_t)slot << 32;
-  uint64_t *v = s->out.v + s->out.n;
   for (uint32_t j = k + 1; j < e; j++) {
     const egrp_t *g = &G[j >> 2];
     unsigned l = j & 3;
@@ -673,24 +670,34 @@ static int sweep(share_t *s, uint32_t k, uint32_t e, const int all_exact) {
     *v = pair_key(slot, hs, sj);
     v += (all_exact || (bd->exact[k] & bd->exact[j])) ? 1 : objects_meet(s->w, slot, sj);
   }
-  s->out.n = (size_t)(v - s->out.v);
-  return 1;
+  return v;
 }
 #endif
 
-/* The sweeps of bands [b0, b1): 0 when memory ran short. */
-static int sweep_bands(share_t *s, uint32_t b0, uint32_t b1) {
-  const uint32_t *st = s->bd->start;
-  if (!s->bd->exact) {
-    for (uint32_t b = b0; b < b1; b++)
-      for (uint32_t k = st[b], e = st[b + 1]; k + 1 < e; k++)
-        if (!sweep(s, k, e, 1)) return 0;
-  } else {
-    for (uint32_t b = b0; b < b1; b++)
-      for (uint32_t k = st[b], e = st[b + 1]; k + 1 < e; k++)
-        if (!sweep(s, k, e, 0)) return 0;
-  }
+/* The sweeps of bands [b0, b1) with the keys' end and room in locals (the room for a
+ * sweep's keys, its candidates and three more, checked before each); 0 when memory ran
+ * short. */
+static inline __attribute__((always_inline)) int sweep_run(share_t *s, uint32_t b0, uint32_t b1,
+                                                           const int all_exact) {
+  const bands_t *bd = s->bd;
+  const uint32_t *st = bd->start;
+  if (!s->out.v && !kv_reserve(s, 256)) return 0;
+  uint64_t *v = s->out.v + s->out.n, *vend = s->out.v + s->out.cap;
+  for (uint32_t b = b0; b < b1; b++)
+    for (uint32_t k = st[b], e = st[b + 1]; k + 1 < e; k++) {
+      if ((size_t)(vend - v) < (size_t)(e - k) + 2) {
+        s->out.n = (size_t)(v - s->out.v);
+        if (!kv_reserve(s, (size_t)(e - k) + 2)) return 0;
+        v = s->out.v + s->out.n, vend = s->out.v + s->out.cap;
+      }
+      v = sweep(s, bd, k, e, v, all_exact);
+    }
+  s->out.n = (size_t)(v - s->out.v);
   return 1;
+}
+
+static int sweep_bands(share_t *s, uint32_t b0, uint32_t b1) {
+  return s->bd->exact ? sweep_run(s, b0, b1, 0) : sweep_run(s, b0, b1, 1);
 }
 
 static void run_bands(unsigned t, void *ud) {
