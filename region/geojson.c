@@ -655,8 +655,8 @@ qk_status_t qk_region_read_geojson_text(const char *text, size_t len,
   return st;
 }
 
-qk_status_t qk_region_geojson_locate(const char *text, size_t len, const char *pointer,
-                                     unsigned long *line, unsigned long *column) {
+qk_status_t qk_region_find_json_pointer(const char *text, size_t len, const char *pointer,
+                                        unsigned long *line, unsigned long *column) {
   char buf[1024];
   size_t n = pointer ? strlen(pointer) : 0;
   if (!text || !pointer || !line || !column || n >= sizeof buf || (n && pointer[0] != '/'))
@@ -732,8 +732,8 @@ qk_status_t qk_region_read_geojson_text(const char *text, size_t len,
                          "built without json-c: install libjson-c-dev and rebuild");
 }
 
-qk_status_t qk_region_geojson_locate(const char *text, size_t len, const char *pointer,
-                                     unsigned long *line, unsigned long *column) {
+qk_status_t qk_region_find_json_pointer(const char *text, size_t len, const char *pointer,
+                                        unsigned long *line, unsigned long *column) {
   (void)text, (void)len, (void)pointer, (void)line, (void)column;
   return QK_ERR_UNSUPPORTED;
 }

@@ -17,7 +17,7 @@
  *    Oracle: the offset of a marked substring of the text, counted into line and column.
  *  - a property value holding "\u0000" is refused at its position (a property is a C
  *    string: join wrote the value cut short there);
- *  - qk_region_geojson_locate (the same path following, public for the mesher's
+ *  - qk_region_find_json_pointer (the same path following, public for the mesher's
  *    messages): a JSON Pointer's value, escapes (~0, ~1) in names, an index past the end
  *    (the deepest value found), a byte order mark; malformed pointers refused.
  */
@@ -295,17 +295,18 @@ static void test_geojson_locate(void **state) {
   for (size_t i = 0; i < sizeof cases / sizeof *cases; i++) {
     unsigned long line, col, wl, wc;
     mark_at(body, cases[i].mark, &wl, &wc);
-    assert_int_equal(qk_region_geojson_locate(t, strlen(t), cases[i].ptr, &line, &col), QK_OK);
+    assert_int_equal(qk_region_find_json_pointer(t, strlen(t), cases[i].ptr, &line, &col), QK_OK);
     if (line != wl || col != wc)
       fail_msg("%s: got %lu:%lu, want %lu:%lu", cases[i].ptr, line, col, wl, wc);
   }
   unsigned long line, col;
-  assert_int_equal(qk_region_geojson_locate(t, strlen(t), "features", &line, &col), QK_ERR_INVALID);
-  assert_int_equal(qk_region_geojson_locate(NULL, 0, "", &line, &col), QK_ERR_INVALID);
+  assert_int_equal(qk_region_find_json_pointer(t, strlen(t), "features", &line, &col),
+                   QK_ERR_INVALID);
+  assert_int_equal(qk_region_find_json_pointer(NULL, 0, "", &line, &col), QK_ERR_INVALID);
   char longp[1100];
   memset(longp, 'a', sizeof longp - 1);
   longp[0] = '/', longp[sizeof longp - 1] = '\0';
-  assert_int_equal(qk_region_geojson_locate(t, strlen(t), longp, &line, &col), QK_ERR_INVALID);
+  assert_int_equal(qk_region_find_json_pointer(t, strlen(t), longp, &line, &col), QK_ERR_INVALID);
 #endif
 }
 

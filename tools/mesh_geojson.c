@@ -47,7 +47,7 @@ void mg_locate(const char *path, const char *pointer, unsigned long *line, unsig
   char *text, msg[8];
   size_t len;
   if (slurp(path, &text, &len, msg, sizeof msg)) return;
-  if (qk_region_geojson_locate(text, len, pointer, line, col) != QK_OK) *line = *col = 0;
+  if (qk_region_find_json_pointer(text, len, pointer, line, col) != QK_OK) *line = *col = 0;
   free(text);
 #else
   (void)path, (void)pointer;

@@ -147,8 +147,8 @@ qk_status_t qk_region_read_geojson_text(const char *text, size_t len,
  * \return QK_OK, QK_ERR_INVALID (a NULL argument, or a pointer not starting with '/' or
  *         longer than 1023 bytes), or QK_ERR_UNSUPPORTED when built without json-c.
  */
-qk_status_t qk_region_geojson_locate(const char *text, size_t len, const char *pointer,
-                                     unsigned long *line, unsigned long *column);
+qk_status_t qk_region_find_json_pointer(const char *text, size_t len, const char *pointer,
+                                        unsigned long *line, unsigned long *column);
 
 /**
  * Read the polygons of a vector file through GDAL/OGR (Shapefile, GeoPackage, FlatGeobuf,
