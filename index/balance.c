@@ -254,6 +254,10 @@ static qk_status_t check_pass(work_t *w) {
     }
     for (int q = 3; q >= 0; q--) {
       if (!inner[q]) continue;
+      /* A node whose children are all leaves never fails the rule and has no internal
+       * child to pass on: it is not visited. */
+      const qk__node_t *gc = &t->nodes[t->nodes[b + (uint32_t)q].child];
+      if ((gc[0].child & gc[1].child & gc[2].child & gc[3].child) == QK_NONE) continue;
       item_t ch = {b + (uint32_t)q, {0, 0, 0, 0}};
       for (unsigned d = 0; d < 4; d++) {
         unsigned m = qk__mirror((unsigned)q, d);
