@@ -88,6 +88,13 @@ typedef struct work {
   size_t n, cap;   /* list length and capacity */
   bool check_only; /* qk_tree_is_balanced(): stop at the first failure */
   bool failed;     /* the rule failed somewhere (check_only) */
+  /* The last descent's path (the tree does not change until step 3): the nodes and
+   * geometries at depths 0..plen, toward the cell (px, py) of depth pe. A descent to a
+   * nearby cell starts at the deepest node the two paths share. */
+  uint32_t plen, pe;
+  uint64_t px, py;
+  uint32_t pv[QK_MAX_DEPTH_LIMIT + 2];
+  qk__geom_t pg[QK_MAX_DEPTH_LIMIT + 2];
 } work_t;
 
 static void work_free(work_t *w) {
@@ -132,14 +139,28 @@ static inline unsigned quadrant_of_bits(unsigned e, unsigned n) {
  * (a cell that cannot split stops the chain, as in a split of the tree itself). */
 static qk_status_t make_internal(work_t *w, uint64_t x, uint64_t y, uint32_t e) {
   const qk_tree_t *t = w->t;
-  uint32_t v = 0;
-  qk__geom_t g = {t->root_x, t->root_y, 0};
+  /* The deepest depth at which this cell's ancestor is the last descent's. */
+  uint32_t m = e < w->pe ? e : w->pe;
+  uint64_t diff = (x >> (e - m) ^ w->px >> (w->pe - m)) | (y >> (e - m) ^ w->py >> (w->pe - m));
+  while (diff) {
+    diff >>= 1;
+    m--;
+  }
+  if (m > w->plen) m = w->plen;
+  uint32_t v = w->pv[m];
+  qk__geom_t g = w->pg[m];
   while (g.depth < e && !qk__is_leaf(&t->nodes[v])) {
     unsigned sh = e - g.depth - 1;
     unsigned q = quadrant_of_bits((unsigned)(x >> sh) & 1u, (unsigned)(y >> sh) & 1u);
     v = t->nodes[v].child + q;
     g = qk__child_geom(t, g, q);
+    w->pv[g.depth] = v;
+    w->pg[g.depth] = g;
   }
+  w->plen = g.depth;
+  w->pe = e;
+  w->px = x;
+  w->py = y;
   if (!qk__is_leaf(&t->nodes[v])) return QK_OK; /* internal in the tree already */
   /* v is a leaf of depth g.depth <= e: the cells from there down to e on the way. */
   for (;;) {
@@ -233,6 +254,10 @@ static qk_status_t check_pass(work_t *w) {
     }
     for (int q = 3; q >= 0; q--) {
       if (!inner[q]) continue;
+      /* A node whose children are all leaves never fails the rule and has no internal
+       * child to pass on: it is not visited. */
+      const qk__node_t *gc = &t->nodes[t->nodes[b + (uint32_t)q].child];
+      if ((gc[0].child & gc[1].child & gc[2].child & gc[3].child) == QK_NONE) continue;
       item_t ch = {b + (uint32_t)q, {0, 0, 0, 0}};
       for (unsigned d = 0; d < 4; d++) {
         unsigned m = qk__mirror((unsigned)q, d);
@@ -248,18 +273,35 @@ static qk_status_t check_pass(work_t *w) {
 }
 
 /* Step 3: split the new cells, each after its parent. Nodes are reserved. */
-static void split_cells(qk_tree_t *t, const cell_t *list, size_t n) {
-  for (size_t i = 0; i < n; i++) {
-    const cell_t c = list[i];
-    uint32_t v = 0;
-    qk__geom_t g = {t->root_x, t->root_y, 0};
+static void split_cells(work_t *w) {
+  qk_tree_t *t = w->t;
+  /* Each descent starts where it leaves the last one's path, as in make_internal (a split
+   * only turns a leaf internal, and the nodes were reserved: the path stays valid). */
+  w->plen = w->pe = 0;
+  w->px = w->py = 0;
+  for (size_t i = 0; i < w->n; i++) {
+    const cell_t c = w->list[i];
+    uint32_t m = c.d < w->pe ? c.d : w->pe;
+    uint64_t diff =
+        (c.x >> (c.d - m) ^ w->px >> (w->pe - m)) | (c.y >> (c.d - m) ^ w->py >> (w->pe - m));
+    while (diff) {
+      diff >>= 1;
+      m--;
+    }
+    uint32_t v = w->pv[m];
+    qk__geom_t g = w->pg[m];
     while (g.depth < c.d) {
       unsigned sh = c.d - g.depth - 1;
       unsigned q = quadrant_of_bits((unsigned)(c.x >> sh) & 1u, (unsigned)(c.y >> sh) & 1u);
       v = t->nodes[v].child + q;
       g = qk__child_geom(t, g, q);
+      w->pv[g.depth] = v;
+      w->pg[g.depth] = g;
     }
     qk__split(t, v, g);
+    w->pe = c.d;
+    w->px = c.x;
+    w->py = c.y;
   }
 }
 
@@ -268,6 +310,7 @@ qk_status_t qk_tree_balance(qk_tree_t *t) {
   work_t w;
   memset(&w, 0, sizeof w);
   w.t = t;
+  w.pg[0] = (qk__geom_t){t->root_x, t->root_y, 0}; /* the path: the root, cell (0, 0, 0) */
   qk_status_t st = check_pass(&w);
   /* Step 2: every new cell applies the rule in turn; the list grows as it goes. */
   for (size_t i = 0; i < w.n && st == QK_OK; i++)
@@ -276,7 +319,7 @@ qk_status_t qk_tree_balance(qk_tree_t *t) {
     if (w.n > UINT32_MAX / 4)
       st = QK_ERR_LIMIT;
     else if ((st = qk__reserve_nodes(t, (uint32_t)(4 * w.n))) == QK_OK)
-      split_cells(t, w.list, w.n);
+      split_cells(&w);
   }
   if (st == QK_OK) t->refined = true;
   work_free(&w);

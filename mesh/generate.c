@@ -303,7 +303,14 @@ static qk_status_t compact(qk__gen_t *g, qk__tri_state_t *T, const uint8_t *drop
     }
   }
   m->nt = kt, m->ncv = poly->nv, m->ncs = poly->ns;
-  m->tri = qk__realloc(g->a, NULL, 0, (3 * kt + 3) * sizeof *m->tri);
+  if (T->tri_ord) {
+    /* Every triangle kept and written in the output's numbering: the array is cut to the
+     * mesh's size and handed over. */
+    m->tri = qk__realloc(g->a, T->tri, 3 * T->tcap * sizeof *T->tri, (3 * kt + 3) * sizeof *m->tri);
+    if (m->tri) T->tri = NULL, T->tcap = 0;
+  } else {
+    m->tri = qk__realloc(g->a, NULL, 0, (3 * kt + 3) * sizeof *m->tri);
+  }
   if (!dropped && T->lcap >= kt + 1) {
     /* Every triangle kept: the labels are the components, in place; the array is cut to
      * the mesh's size and handed over instead of copied. */
@@ -336,11 +343,14 @@ static qk_status_t compact(qk__gen_t *g, qk__tri_state_t *T, const uint8_t *drop
     }
     qk__free(g->a, sm, sizeof *sm);
   } else {
-    /* The triangles renumbered in one pass; the labels, unless handed over above. */
-    const uint32_t *in = T->tri, *ord = T->ord;
-    uint32_t *to = m->tri;
-    for (size_t t = 0; t < T->nt; t++, in += 3, to += 3) /* by triangle: a third of the loop */
-      to[0] = ord[in[0]], to[1] = ord[in[1]], to[2] = ord[in[2]];
+    /* The triangles renumbered in one pass, unless handed over above; the labels, unless
+     * handed over above. */
+    if (!T->tri_ord) {
+      const uint32_t *in = T->tri, *ord = T->ord;
+      uint32_t *to = m->tri;
+      for (size_t t = 0; t < T->nt; t++, in += 3, to += 3) /* by triangle: a third of the loop */
+        to[0] = ord[in[0]], to[1] = ord[in[1]], to[2] = ord[in[2]];
+    }
     if (T->label && T->nt) memcpy(m->comp, T->label, T->nt * sizeof *m->comp);
     /* Every triangle is kept: the extremes over the shapes the triangulation made, each
      * measured once on its own copy at the origin (angle_deg sees the same coordinate

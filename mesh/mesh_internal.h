@@ -183,6 +183,10 @@ typedef struct qk__tri_state {
   /* Per vertex, its number in the order of first use by the triangles as they are made
    * (the numbering of the output when every triangle is kept), ocap entries. */
   uint32_t *ord;
+  /* tri holds the output's numbering (ord's) rather than vertex ids: when no point is
+   * located in the triangles (no hole, no regional attribute point), so that every
+   * triangle is kept and no one reads the triangles' coordinates through tri. */
+  int tri_ord;
   size_t ocap;
 } qk__tri_state_t;
 

@@ -712,6 +712,9 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
       memset(T->ord, 0xff, ncorner * sizeof *T->ord);
   }
   uint32_t *ord = T->ord;
+  /* With no point to locate, the triangles are written in the output's numbering (each
+   * vertex is numbered before its first triangle is written). */
+  const int tri_ord = T->tri_ord = !g->poly->nh && !g->src->nr;
   for (size_t li = 0; li < nleaves && !st; li++) {
     uint32_t v = leaves[li], cell = (uint32_t)(2 * li);
     lat_sq_t sq = lsq[li];
@@ -723,13 +726,15 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
       const qk__unit_rec_t *r = &g->rec[rec_of[v]];
       kind[li] = flood_kind(r);
       T->shapes[1] |= r->piece[QK__P_D1] ? 0xc000 : 0x3000; /* S = 2 */
-      st = tri_unit(T, r, c, cell, cell_label);
       /* (SW, SE, NW), (SE, NE, NW) along SE-NW; (SW, SE, NE), (SW, NE, NW) otherwise. */
       onext = ord_use(ord, onext, c[0]);
       onext = ord_use(ord, onext, c[1]);
       int d1 = r->piece[QK__P_D1] != 0;
       onext = ord_use(ord, onext, c[d1 ? 3 : 2]);
       onext = ord_use(ord, onext, c[d1 ? 2 : 3]);
+      uint32_t oc[4];
+      if (tri_ord) oc[0] = ord[c[0]], oc[1] = ord[c[1]], oc[2] = ord[c[2]], oc[3] = ord[c[3]];
+      st = tri_unit(T, r, tri_ord ? oc : c, cell, cell_label);
       continue;
     }
     /* The boundary ring: the corners and the sides' midpoints that are vertices
@@ -750,8 +755,12 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
     T->shapes[__builtin_ctzll((uint64_t)S)] |= fan_shapes[mids];
     if (nr == 4) {
       /* Vertices only at its corners: split along a diagonal (angles 45, 45, 90). */
-      if (!(st = add_tri(T, c[0], c[1], c[2], cell))) st = add_tri(T, c[0], c[2], c[3], cell);
       for (int q = 0; q < 4; q++) onext = ord_use(ord, onext, c[q]);
+      uint32_t oc[4];
+      const uint32_t *tc = c;
+      if (tri_ord)
+        oc[0] = ord[c[0]], oc[1] = ord[c[1]], oc[2] = ord[c[2]], oc[3] = ord[c[3]], tc = oc;
+      if (!(st = add_tri(T, tc[0], tc[1], tc[2], cell))) st = add_tri(T, tc[0], tc[2], tc[3], cell);
       continue;
     }
     /* A Steiner point at the centre, joined to every boundary vertex: each triangle has
@@ -769,6 +778,10 @@ qk_status_t qk__mesh_triangulate(qk__gen_t *g, qk__tri_state_t *T, qk__leaf_tris
     onext = ord_use(ord, onext, ring[1]);
     ord[ctr] = onext++;
     for (size_t i = 2; i < nr; i++) onext = ord_use(ord, onext, ring[i]);
+    if (tri_ord) {
+      for (size_t i = 0; i < nr; i++) ring[i] = ord[ring[i]];
+      ctr = ord[ctr];
+    }
     ring[nr] = ring[0];
     if (T->nt + nr > T->tcap || T->nt + nr > T->lcap) {
       for (size_t i = 0; i < nr && !st; i++) st = add_tri(T, ring[i], ring[i + 1], ctr, cell);
