@@ -1925,6 +1925,42 @@ static void cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk
 }
 #endif
 
+/* The other rays (scaled, far or general test) and builds without SSE2: apart, so that
+ * the common ray's call saves and spills nothing for them. */
+#if defined(__GNUC__)
+__attribute__((noinline))
+#endif
+static qk_status_t
+raycast_rare(const qk_collider_t *c, qk_point_t o, qk_point_t d, double tmax, qk_hit_t *hit) {
+  /* The cast's arithmetic squares and multiplies the direction's components with
+   * coordinates and radii: a direction whose largest component is beyond 2^100 could
+   * overflow there (a radius of 1e10 with a direction of 1e150 did: t = 0, or a miss) and
+   * one below 2^-100 underflow. Such a direction is scaled by a power of two to a largest
+   * component in [1/2, 1), which is exact (but for a component 2^1000 times smaller than
+   * the other, which then underflows: the ray's direction moves by less than 2^-1000 of a
+   * radian), and t is scaled back: the same t, to the bit, as the unscaled cast's wherever
+   * that one does not overflow. Coordinates beyond FAR_COORD take ray_disc_far(). */
+  const double m = qk__max(fabs(d.x), fabs(d.y)); /* finite: no call to fmax, no spills */
+  int e = 0;
+  if (m > 0x1p100 || (m < 0x1p-100 && m > 0)) {
+    (void)frexp(m, &e);
+    d.x = ldexp(d.x, -e);
+    d.y = ldexp(d.y, -e);
+    tmax = ldexp(tmax, e); /* t along d / 2^e is t along d times 2^e */
+  }
+  const int far = qk__max(qk__max(fabs(o.x), fabs(o.y)), c->mag) > FAR_COORD;
+  ray_t ray;
+  ray_init(&ray, c, o, d);
+#if defined(__SSE2__)
+  if (ray.simd && !far)
+    cast_float(c, &ray, tmax, hit);
+  else
+#endif
+    cast_general(c, &ray, tmax, far, hit);
+  if (e != 0 && hit->id != QK_NONE) hit->t = ldexp(hit->t, -e);
+  return QK_OK;
+}
+
 qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t d, double tmax,
                                 qk_hit_t *hit) {
   if (!c || !hit) return QK_ERR_INVALID;
@@ -1956,31 +1992,5 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
     }
   }
 #endif
-  /* The cast's arithmetic squares and multiplies the direction's components with
-   * coordinates and radii: a direction whose largest component is beyond 2^100 could
-   * overflow there (a radius of 1e10 with a direction of 1e150 did: t = 0, or a miss) and
-   * one below 2^-100 underflow. Such a direction is scaled by a power of two to a largest
-   * component in [1/2, 1), which is exact (but for a component 2^1000 times smaller than
-   * the other, which then underflows: the ray's direction moves by less than 2^-1000 of a
-   * radian), and t is scaled back: the same t, to the bit, as the unscaled cast's wherever
-   * that one does not overflow. Coordinates beyond FAR_COORD take ray_disc_far(). */
-  const double m = qk__max(fabs(d.x), fabs(d.y)); /* finite: no call to fmax, no spills */
-  int e = 0;
-  if (m > 0x1p100 || (m < 0x1p-100 && m > 0)) {
-    (void)frexp(m, &e);
-    d.x = ldexp(d.x, -e);
-    d.y = ldexp(d.y, -e);
-    tmax = ldexp(tmax, e); /* t along d / 2^e is t along d times 2^e */
-  }
-  const int far = qk__max(qk__max(fabs(o.x), fabs(o.y)), c->mag) > FAR_COORD;
-  ray_t ray;
-  ray_init(&ray, c, o, d);
-#if defined(__SSE2__)
-  if (ray.simd && !far)
-    cast_float(c, &ray, tmax, hit);
-  else
-#endif
-    cast_general(c, &ray, tmax, far, hit);
-  if (e != 0 && hit->id != QK_NONE) hit->t = ldexp(hit->t, -e);
-  return QK_OK;
+  return raycast_rare(c, o, d, tmax, hit);
 }
