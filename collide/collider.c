@@ -1833,7 +1833,11 @@ static inline void prefetch_climbs(const qk_collider_t *c, const uint32_t *path,
  * whatever the bits, and only the check above decides. The answer is the smallest
  * (t, id) over A's items, the same as a search from the root finds.
  */
-static void cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk_hit_t *hit) {
+#if defined(__GNUC__)
+__attribute__((always_inline))
+#endif
+static inline void
+cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk_hit_t *hit) {
   best_t b = {INFINITY, QK_NONE};
   const cnode_t *root = &c->cn[0];
   if (root->child == QK_NONE) {
