@@ -1513,31 +1513,25 @@ static const uint16_t visit[4][16] = {
      0x08b, 0x09b, 0x24f},
 };
 
-/* Sets up the ray; fills the float test's constants when fact (2)'s ranges hold. */
-static void ray_init(ray_t *r, const qk_collider_t *c, qk_point_t o, qk_point_t d) {
-  const double ax = fabs(d.x), ay = fabs(d.y), dn = qk__max(ax, ay);
+/* Sets up what both tests read: the origin, the direction, w and the leaf test's
+ * constants. */
+static inline void ray_init_common(ray_t *r, const qk_collider_t *c, qk_point_t o, qk_point_t d) {
   r->ox = o.x, r->oy = o.y, r->dx = d.x, r->dy = d.y;
   r->w = (fabs(o.x) + fabs(o.y) + 2 * c->mag) * 0x1p-40;
-  r->ts = 0.0;
-  r->simd = 0;
 #if defined(__SSE2__)
-  const __m128d d2 = _mm_set_pd(d.y, d.x), dneg = _mm_cmplt_pd(d2, _mm_setzero_pd());
+  const __m128d dneg = _mm_cmplt_pd(_mm_set_pd(d.y, d.x), _mm_setzero_pd());
   r->s = (unsigned)_mm_movemask_pd(dneg); /* (dx < 0) + 2 (dy < 0) */
-#else
-  r->s = (unsigned)(d.x < 0) | (unsigned)(d.y < 0) << 1;
-#endif
-#if defined(__SSE2__)
   r->vox = _mm_set1_pd(o.x), r->voy = _mm_set1_pd(o.y);
   r->vdx = _mm_set1_pd(d.x), r->vdy = _mm_set1_pd(d.y);
   r->va = _mm_set1_pd(d.x * d.x + d.y * d.y); /* the same operations as ray_disc()'s a */
-  const double big = 0x1p100, mo = qk__max(qk__max(fabs(o.x), fabs(o.y)), c->mag);
-  r->simd = c->quads && mo <= big && qk__min(ax, ay) >= 0x1p-100 && dn <= big;
+#else
+  r->s = (unsigned)(d.x < 0) | (unsigned)(d.y < 0) << 1;
 #endif
-  if (!r->simd) {
-    r->ts = dn > 0 ? r->w / dn : 0.0;
-    return;
-  }
+}
+
 #if defined(__SSE2__)
+/* Fills the float test's constants (fact (2)'s ranges hold; r->w set). */
+static inline void ray_init_float(ray_t *r, qk_point_t o, qk_point_t d) {
   /* Pn, Pf: the origin moved by w (towards the exit for the entry side, back for the
    * exit side) and by m more, then converted to float: m exceeds the roundings of the
    * double sums and of the conversion, so Pn >= o + w and Pf <= o - w as fact (2) asks
@@ -1546,6 +1540,7 @@ static void ray_init(ray_t *r, const qk_collider_t *c, qk_point_t o, qk_point_t 
   /* Both axes at once (lane 0 x, lane 1 y), each lane the same IEEE operations as
    * mx = (|ox| + w) 2^-21 + 2^-140, xp = fl(ox + w + mx), xm = fl(ox - w - mx) and
    * fl(1/dx (1 -+ 2^-21)) written out per axis, so the same floats. */
+  const __m128d d2 = _mm_set_pd(d.y, d.x), dneg = _mm_cmplt_pd(d2, _mm_setzero_pd());
   const __m128d o2 = _mm_set_pd(o.y, o.x), w2 = _mm_set1_pd(r->w);
   const __m128d m2 = _mm_add_pd(
       _mm_mul_pd(_mm_add_pd(_mm_andnot_pd(_mm_set1_pd(-0.0), o2), w2), _mm_set1_pd(0x1p-21)),
@@ -1566,6 +1561,25 @@ static void ray_init(ray_t *r, const qk_collider_t *c, qk_point_t o, qk_point_t 
   r->pnx = _mm_shuffle_ps(pn, pn, 0x00), r->pny = _mm_shuffle_ps(pn, pn, 0x55);
   r->pfx = _mm_shuffle_ps(pf, pf, 0x00), r->pfy = _mm_shuffle_ps(pf, pf, 0x55);
   r->swap = neg;
+}
+#endif
+
+/* Sets up the ray; fills the float test's constants when fact (2)'s ranges hold. */
+static void ray_init(ray_t *r, const qk_collider_t *c, qk_point_t o, qk_point_t d) {
+  const double ax = fabs(d.x), ay = fabs(d.y), dn = qk__max(ax, ay);
+  ray_init_common(r, c, o, d);
+  r->ts = 0.0;
+  r->simd = 0;
+#if defined(__SSE2__)
+  const double big = 0x1p100, mo = qk__max(qk__max(fabs(o.x), fabs(o.y)), c->mag);
+  r->simd = c->quads && mo <= big && qk__min(ax, ay) >= 0x1p-100 && dn <= big;
+#endif
+  if (!r->simd) {
+    r->ts = dn > 0 ? r->w / dn : 0.0;
+    return;
+  }
+#if defined(__SSE2__)
+  ray_init_float(r, o, d);
 #endif
 }
 
@@ -1819,7 +1833,11 @@ static inline void prefetch_climbs(const qk_collider_t *c, const uint32_t *path,
  * whatever the bits, and only the check above decides. The answer is the smallest
  * (t, id) over A's items, the same as a search from the root finds.
  */
-static void cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk_hit_t *hit) {
+#if defined(__GNUC__)
+__attribute__((always_inline))
+#endif
+static inline void
+cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk_hit_t *hit) {
   best_t b = {INFINITY, QK_NONE};
   const cnode_t *root = &c->cn[0];
   if (root->child == QK_NONE) {
@@ -1911,17 +1929,13 @@ static void cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk
 }
 #endif
 
-qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t d, double tmax,
-                                qk_hit_t *hit) {
-  if (!c || !hit) return QK_ERR_INVALID;
-  hit->id = QK_NONE;
-  hit->t = INFINITY;
-  /* v - v is 0 for a finite v and NaN otherwise: one test for the four. */
-  if ((o.x - o.x) + (o.y - o.y) + (d.x - d.x) + (d.y - d.y) != 0) return QK_ERR_NONFINITE;
-  if (isnan(tmax) || tmax < 0) return QK_ERR_INVALID;
-  if (c->n == 0) return QK_OK;
-  const qk_status_t st = qk__collider_rays_ready(c);
-  if (st != QK_OK) return st;
+/* The other rays (scaled, far or general test) and builds without SSE2: apart, so that
+ * the common ray's call saves and spills nothing for them. */
+#if defined(__GNUC__)
+__attribute__((noinline))
+#endif
+static qk_status_t
+raycast_rare(const qk_collider_t *c, qk_point_t o, qk_point_t d, double tmax, qk_hit_t *hit) {
   /* The cast's arithmetic squares and multiplies the direction's components with
    * coordinates and radii: a direction whose largest component is beyond 2^100 could
    * overflow there (a radius of 1e10 with a direction of 1e150 did: t = 0, or a miss) and
@@ -1949,4 +1963,38 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
     cast_general(c, &ray, tmax, far, hit);
   if (e != 0 && hit->id != QK_NONE) hit->t = ldexp(hit->t, -e);
   return QK_OK;
+}
+
+qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t d, double tmax,
+                                qk_hit_t *hit) {
+  if (!c || !hit) return QK_ERR_INVALID;
+  hit->id = QK_NONE;
+  hit->t = INFINITY;
+  /* v - v is 0 for a finite v and NaN otherwise: one test for the four. */
+  if ((o.x - o.x) + (o.y - o.y) + (d.x - d.x) + (d.y - d.y) != 0) return QK_ERR_NONFINITE;
+  if (isnan(tmax) || tmax < 0) return QK_ERR_INVALID;
+  if (c->n == 0) return QK_OK;
+  if (atomic_load_explicit(&c->rays_state, memory_order_acquire) != RAYS_READY) {
+    /* the first cast: no call (and no spills around it) on the others */
+    const qk_status_t st = qk__collider_rays_ready(c);
+    if (st != QK_OK) return st;
+  }
+#if defined(__SSE2__)
+  /* The common ray, in one branch: components and coordinates within the float test's
+   * ranges (ray_init's simd), which also leave the direction unscaled and the
+   * coordinates below FAR_COORD; the same cast as below, with only what it reads set. */
+  {
+    const double ax = fabs(d.x), ay = fabs(d.y);
+    const double mo = qk__max(qk__max(fabs(o.x), fabs(o.y)), c->mag);
+    if (c->quads &&
+        ((mo <= 0x1p100) & (qk__min(ax, ay) >= 0x1p-100) & (qk__max(ax, ay) <= 0x1p100))) {
+      ray_t ray;
+      ray_init_common(&ray, c, o, d);
+      ray_init_float(&ray, o, d);
+      cast_float(c, &ray, tmax, hit);
+      return QK_OK;
+    }
+  }
+#endif
+  return raycast_rare(c, o, d, tmax, hit);
 }
