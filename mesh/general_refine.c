@@ -374,7 +374,12 @@ static qk_status_t grow_marks_to(qk__gm_t *g, size_t nt) {
   return QK_OK;
 }
 
-static qk_status_t grow_marks(qk__gm_t *g) { return grow_marks_to(g, g->cdt.nt); }
+/* The cavity search's call: nothing to do once the refinement has reserved (tested inline,
+ * the call per cavity was 0.16% of the instructions on Norway at 1/256). */
+static inline qk_status_t grow_marks(qk__gm_t *g) {
+  if (g->cdt.nt <= g->mark_cap && g->mark_gen < UINT32_MAX / 2) return QK_OK;
+  return grow_marks_to(g, g->cdt.nt);
+}
 
 /* The subsegments on the boundary of the insertion cavity of p (the triangles whose
  * circumcircles hold p, reached from t0 and t1 without crossing a constrained edge) that p
