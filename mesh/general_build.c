@@ -64,15 +64,19 @@ static qk_status_t star(qk__gm_t *g, uint32_t v, uint32_t f) {
    * across the edge after v in each triangle until back at the first. With f != NONE (one
    * face all round) each triangle is labelled on the way. */
   uint32_t first = c->vtri[v], t = first;
-  g->ndirty = 0;
+  size_t n = 0; /* the count in a register (g->ndirty is written back at the end) */
   do {
-    if (g->ndirty == g->dirty_cap && grow_dirty(g)) return QK_ERR_NOMEM;
-    g->dirty[g->ndirty++] = t;
+    if (n == g->dirty_cap) {
+      g->ndirty = n;
+      if (grow_dirty(g)) return QK_ERR_NOMEM;
+    }
+    g->dirty[n++] = t;
     if (f != QK__CDT_NONE) g->face[t] = f;
     const uint32_t *tv = &c->v[3 * (size_t)t];
     int i = tv[0] == v ? 1 : tv[1] == v ? 2 : 0; /* the slot after v's */
     t = c->nbr[3 * (size_t)t + i];
   } while (t != first && t != QK__CDT_NONE);
+  g->ndirty = n;
   return QK_OK;
 }
 

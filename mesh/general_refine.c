@@ -374,7 +374,12 @@ static qk_status_t grow_marks_to(qk__gm_t *g, size_t nt) {
   return QK_OK;
 }
 
-static qk_status_t grow_marks(qk__gm_t *g) { return grow_marks_to(g, g->cdt.nt); }
+/* The cavity search's call: nothing to do once the refinement has reserved (tested inline,
+ * the call per cavity was 0.16% of the instructions on Norway at 1/256). */
+static inline qk_status_t grow_marks(qk__gm_t *g) {
+  if (g->cdt.nt <= g->mark_cap && g->mark_gen < UINT32_MAX / 2) return QK_OK;
+  return grow_marks_to(g, g->cdt.nt);
+}
 
 /* The subsegments on the boundary of the insertion cavity of p (the triangles whose
  * circumcircles hold p, reached from t0 and t1 without crossing a constrained edge) that p
@@ -577,6 +582,16 @@ qk_status_t qk__gm_refine(qk__gm_t *g) {
     g->h_plain = h, g->h2_hi = h2 * (1 + 0x1p-48), g->h2_lo = h2 * (1 - 0x1p-48);
   }
   if (reserve(g, 0)) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  /* Room in the bad-triangle ring for every triangle the first pass may queue, taken while
+   * the ring is empty (nothing to unwrap; qk__grow keeps the power of two): it grew from
+   * 16 by doubling with copies before, 0.27% of the instructions on Norway at 1/256. */
+  if (g->nbad == g->bad_head && c->nt > g->bad_cap) {
+    void *p = g->bad;
+    if (qk__grow(g->a, &p, &g->bad_cap, c->nt, sizeof *g->bad))
+      return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+    g->bad = p;
+    g->nbad = g->bad_head = 0;
+  }
   for (uint32_t t = 0; t < c->nt; t++)
     if (check(g, t)) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   qk_status_t st = QK_OK;
