@@ -5,16 +5,6 @@
 # shellcheck source=lib/common.bash
 source "$(dirname "${BASH_SOURCE[0]}")/lib/common.bash" "$@"
 
-nothing_written() { # nothing_written PREFIX: no PREFIX.node / .ele, no temporary beside it
-  local d
-  d=$(dirname "$1")
-  if [ -e "$1.node" ] || [ -e "$1.ele" ] || ls "$d" | grep -q '\.tmp\.'; then
-    fail "$1: an output or a temporary was left after an error"
-  else
-    passes=$((passes + 1))
-  fi
-}
-
 # ---- .poly: a file that ends right after the segments was meshed with its holes solid -----
 # An 8x8 square with a 4x4 hole; cut after the segments it gave 128 triangles (the hole
 # filled). Triangle's reader refuses a file that ends before the hole section; so do we.

@@ -5,16 +5,6 @@
 # shellcheck source=lib/common.bash
 source "$(dirname "${BASH_SOURCE[0]}")/lib/common.bash" "$@"
 
-nothing_written() { # nothing_written PREFIX: no PREFIX.node / .ele, no temporary beside it
-  local d
-  d=$(dirname "$1")
-  if [ -e "$1.node" ] || [ -e "$1.ele" ] || ls "$d" | grep -q '\.tmp\.'; then
-    fail "$1: an output or a temporary was left after an error"
-  else
-    passes=$((passes + 1))
-  fi
-}
-
 # ---- mesh, GeoJSON: errors named "feature F ring R point P" and no place in the file ----
 # (the ring counted across the feature's polygons, the point after merging); now feature,
 # polygon, ring and position as the region reader numbers them, with line and column.

@@ -35,6 +35,16 @@ same_text() { # same_text NAME GOT WANT: two strings are equal
   fi
 }
 
+nothing_written() { # nothing_written PREFIX: no PREFIX.node / .ele, no temporary beside it
+  local d
+  d=$(dirname "$1")
+  if [ -e "$1.node" ] || [ -e "$1.ele" ] || ls "$d" | grep -q '\.tmp\.'; then
+    fail "$1: an output or a temporary was left after an error"
+  else
+    passes=$((passes + 1))
+  fi
+}
+
 report() { # the closing line ctest and CI read, and the script's status
   echo "$passes passed, $fails failed"
   [ "$fails" -eq 0 ]
