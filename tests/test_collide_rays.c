@@ -74,6 +74,18 @@ static qk_hit_t brute(const qk_disc_t *d, size_t nd, const qk_box_t *b, size_t n
   return h;
 }
 
+/* One cast against brute force; variant and ray number name it in a failure. */
+static void expect_brute(const qk_collider_t *c, const qk_disc_t *d, size_t nd, const qk_box_t *b,
+                         size_t nb, qk_point_t o, qk_point_t v, double tmax, int variant, int i) {
+  qk_hit_t h, w = brute(d, nd, b, nb, o, v, tmax);
+  assert_int_equal(qk_collider_raycast(c, o, v, tmax, &h), QK_OK);
+  if (h.id != w.id || !(h.t == w.t || (isinf(h.t) && isinf(w.t))))
+    fail_msg("variant %d ray %d (o %.17g %.17g, d %.17g %.17g, tmax %g): hit (%u, %.17g) vs "
+             "brute force (%u, %.17g) (seed %llu)",
+             variant, i, o.x, o.y, v.x, v.y, tmax, h.id, h.t, w.id, w.t,
+             (unsigned long long)g_seed);
+}
+
 enum { NB_MAX = 200, ND_MAX = 300, N_RAYS = 700 };
 
 /* Boxes on a 0.1 grid sharing edges (some cells left out), discs tangent to boxes'
@@ -293,13 +305,7 @@ static void test_collide_rays_deep_and_rooted(void **state) {
       qk_point_t v = {cos(ang), sin(ang)};
       if (i % 3 == 1) v = (qk_point_t){t->x - o.x, t->y - o.y};
       const double tmax = qkt_rng_below(&r, 4) == 0 ? qkt_rng_range(&r, 0, 0.3) : INFINITY;
-      qk_hit_t h, w = brute(d, ND, NULL, 0, o, v, tmax);
-      assert_int_equal(qk_collider_raycast(c, o, v, tmax, &h), QK_OK);
-      if (h.id != w.id || !(h.t == w.t || (isinf(h.t) && isinf(w.t))))
-        fail_msg("variant %d ray %d (o %.17g %.17g, d %.17g %.17g, tmax %g): hit (%u, %.17g) vs "
-                 "brute force (%u, %.17g) (seed %llu)",
-                 variant, i, o.x, o.y, v.x, v.y, tmax, h.id, h.t, w.id, w.t,
-                 (unsigned long long)g_seed);
+      expect_brute(c, d, ND, NULL, 0, o, v, tmax, variant, i);
       checked++;
     }
     qk_collider_free(c);
@@ -549,13 +555,7 @@ static void test_collide_rays_large_scene(void **state) {
       qk_point_t v = {cos(ang), sin(ang)};
       if (i % 8 == 2) v = (qk_point_t){0, ang < 3.14 ? 1 : -1}; /* along it */
       const double tmax = qkt_rng_below(&r, 4) == 0 ? qkt_rng_range(&r, 0, 0.02) : INFINITY;
-      qk_hit_t h, w = brute(d, ND, b, nb, o, v, tmax);
-      assert_int_equal(qk_collider_raycast(c, o, v, tmax, &h), QK_OK);
-      if (h.id != w.id || !(h.t == w.t || (isinf(h.t) && isinf(w.t))))
-        fail_msg("variant %d ray %d (o %.17g %.17g, d %.17g %.17g, tmax %g): hit (%u, %.17g) vs "
-                 "brute force (%u, %.17g) (seed %llu)",
-                 variant, i, o.x, o.y, v.x, v.y, tmax, h.id, h.t, w.id, w.t,
-                 (unsigned long long)g_seed);
+      expect_brute(c, d, ND, b, nb, o, v, tmax, variant, i);
       checked++;
     }
     /* The batch call sorts these many rays by origin: the same answers as single calls. */
