@@ -103,6 +103,17 @@ static int parse_num(const char *s, double *v) {
   return 1;
 }
 
+/* Why parse_num refused S, for the message: "" when S is simply not a number. */
+static const char *num_why(const char *s) {
+  const char *digits = s + (*s == '+' || *s == '-');
+  if (digits[0] == '0' && (digits[1] | 0x20) == 'x') return " (hexadecimal numbers are not read)";
+  char *end;
+  double d = strtod(s, &end);
+  if (end == s || *end) return "";
+  if (isnan(d) || (isinf(d) && strpbrk(s, "iI"))) return " (not a finite number)";
+  return " (beyond the range of a double)";
+}
+
 /* Parse a whole token as a non-negative integer count (digits only). */
 static int parse_count(const char *s, unsigned long *v) {
   if (!*s) return 0;
@@ -339,16 +350,19 @@ static qk_status_t read_vertices(reader_t *r, qk_poly_t *p, qk_mesh_error_t *err
       return rfail(r, err, QK_ERR_PARSE, "vertex %lld: expected x and y, found %zu field%s%s", idx,
                    r->ntok, r->ntok == 1 ? "" : "s", rows_hint(r, 1));
     if (!parse_num(r->tok[1], &x))
-      return rfail(r, err, QK_ERR_PARSE, "vertex %lld: bad x coordinate '%s'", idx, r->tok[1]);
+      return rfail(r, err, QK_ERR_PARSE, "vertex %lld: bad x coordinate '%s'%s", idx, r->tok[1],
+                   num_why(r->tok[1]));
     if (!parse_num(r->tok[2], &y))
-      return rfail(r, err, QK_ERR_PARSE, "vertex %lld: bad y coordinate '%s'", idx, r->tok[2]);
+      return rfail(r, err, QK_ERR_PARSE, "vertex %lld: bad y coordinate '%s'%s", idx, r->tok[2],
+                   num_why(r->tok[2]));
     if (r->ntok > 3 + nattr + nmark)
       return rfail(r, err, QK_ERR_PARSE, "vertex %lld: %zu fields, at most %lu expected", idx,
                    r->ntok, 3 + nattr + nmark);
     for (size_t k = 3; k < r->ntok && k < 16; k++) {
       double v;
       if (!parse_num(r->tok[k], &v))
-        return rfail(r, err, QK_ERR_PARSE, "vertex %lld: bad field '%s'", idx, r->tok[k]);
+        return rfail(r, err, QK_ERR_PARSE, "vertex %lld: bad field '%s'%s", idx, r->tok[k],
+                     num_why(r->tok[k]));
     }
     int32_t mark = 0;
     if (nmark && r->ntok == 4 + nattr && !parse_marker(r->tok[3 + nattr], &mark))
@@ -424,8 +438,8 @@ static qk_status_t read_holes(reader_t *r, qk_poly_t *p, qk_mesh_error_t *err) {
       return rfail(r, err, QK_ERR_PARSE, "hole %lld: expected x and y only, found %zu field%s%s",
                    idx, r->ntok, r->ntok == 1 ? "" : "s", r->ntok < 3 ? rows_hint(r, 1) : "");
     if (!parse_num(r->tok[1], &x) || !parse_num(r->tok[2], &y))
-      return rfail(r, err, QK_ERR_PARSE, "hole %lld: bad coordinates '%s' '%s'", idx, r->tok[1],
-                   r->tok[2]);
+      return rfail(r, err, QK_ERR_PARSE, "hole %lld: bad coordinates '%s' '%s'%s", idx, r->tok[1],
+                   r->tok[2], num_why(r->tok[parse_num(r->tok[1], &x) ? 2 : 1]));
     if (add_hole(p, &p->cap, x, y, r->line)) return rfail(r, err, QK_ERR_NOMEM, "out of memory");
   }
   return QK_OK;
@@ -461,7 +475,8 @@ static qk_status_t read_regions(reader_t *r, qk_poly_t *p, qk_mesh_error_t *err)
     double v[5];
     for (size_t k = 0; k < r->ntok; k++)
       if (!parse_num(r->tok[k], &v[k]))
-        return rfail(r, err, QK_ERR_PARSE, "region: bad field '%s'", r->tok[k]);
+        return rfail(r, err, QK_ERR_PARSE, "region: bad field '%s'%s", r->tok[k],
+                     num_why(r->tok[k]));
     if (add_region(p, v[1], v[2], v[3], r->line))
       return rfail(r, err, QK_ERR_NOMEM, "out of memory");
   }

@@ -248,4 +248,15 @@ done
 sed 's/x\\u0000y/x\\u0001y/' "$tmp/nul.geojson" >"$tmp/one.geojson" # other escapes are kept
 expect 0 '^0.5,0.2,0,' -- "$cli" join "$tmp/one.geojson" "$tmp/nulpt.csv" --field name
 
+# ---- a .poly coordinate beyond a double's range was only 'bad', like a typo -------------
+printf '3 2 0 0\n1 1e400 0\n2 1 0\n3 0 1\n3 0\n1 1 2\n2 2 3\n3 3 1\n0\n' >"$tmp/huge.poly"
+expect 1 "huge.poly:2: vertex 1: bad x coordinate '1e400' \\(beyond the range of a double\\)$" -- "$cli" mesh "$tmp/huge.poly" -o "$tmp/huge"
+nothing_written "$tmp/huge"
+sed 's/^2 1 0$/2 1 -1E+999/' "$tmp/huge.poly" | sed 's/1e400/0/' >"$tmp/huge2.poly"
+expect 1 "vertex 2: bad y coordinate '-1E\\+999' \\(beyond the range of a double\\)$" -- "$cli" mesh "$tmp/huge2.poly" -o "$tmp/huge"
+sed 's/1e400/Infinity/' "$tmp/huge.poly" >"$tmp/inf.poly"
+expect 1 "bad x coordinate 'Infinity' \\(not a finite number\\)$" -- "$cli" mesh "$tmp/inf.poly" -o "$tmp/huge"
+sed 's/1e400/0x1p3/' "$tmp/huge.poly" >"$tmp/hex.poly"
+expect 1 "bad x coordinate '0x1p3' \\(hexadecimal numbers are not read\\)$" -- "$cli" mesh "$tmp/hex.poly" -o "$tmp/huge"
+
 report
