@@ -143,6 +143,30 @@ static qk_status_t split(reader_t *r, const char *line, size_t len, size_t max, 
   return QK_OK;
 }
 
+/* Two selections of one field (x and y both from column 1, "x,1" when x is the first
+ * field) would read every point onto the diagonal: refused. Columns still unresolved (0)
+ * are skipped; line is the header's, or 0 before any line is read. */
+static qk_status_t distinct_columns(reader_t *r, unsigned long line) {
+  for (size_t c = 0; c < r->ncols; c++)
+    for (size_t d = c + 1; d < r->ncols; d++) {
+      if (r->col[c] == 0 || r->col[c] != r->col[d]) continue;
+      char a[NAME_LEN + 8], b[NAME_LEN + 8];
+      for (int k = 0; k < 2; k++) {
+        size_t i = k ? d : c;
+        char *o = k ? b : a;
+        if (r->want[i])
+          snprintf(o, sizeof a, "'%.*s'",
+                   (int)(r->want_len[i] < NAME_LEN ? r->want_len[i] : NAME_LEN), r->want[i]);
+        else
+          snprintf(o, sizeof a, "%zu", r->col[i]);
+      }
+      return fail(r, line ? QK_ERR_PARSE : QK_ERR_INVALID, line, 0, SIZE_MAX,
+                  "columns %s and %s (%zu and %zu of the selection) are both field %zu", a, b,
+                  c + 1, d + 1, r->col[c]);
+    }
+  return QK_OK;
+}
+
 /* The header: resolve the names asked for and remember every selected column's label. */
 static qk_status_t read_header(reader_t *r, const char *line, size_t len, unsigned long lineno) {
   size_t pos = 0, k = 0;
@@ -169,7 +193,8 @@ static qk_status_t read_header(reader_t *r, const char *line, size_t len, unsign
                   (int)r->want_len[c], r->want[c], k, line);
     if (r->col[c] > r->maxcol) r->maxcol = r->col[c];
   }
-  return spans_room(r);
+  qk_status_t st = distinct_columns(r, lineno);
+  return st ? st : spans_room(r);
 }
 
 /* Room for one more row of values. */
@@ -312,6 +337,7 @@ qk_status_t qk_csv_read_values(FILE *f, const qk_csv_options_t *opt, size_t ncol
       nrequired > ncols)
     return fail(&r, QK_ERR_INVALID, 0, 0, SIZE_MAX, "invalid arguments");
   qk_status_t st = parse_columns(&r);
+  if (!st) st = distinct_columns(&r, 0);
   if (st) return st;
   for (size_t c = 0; c < ncols; c++) {
     if (r.col[c] > r.maxcol) r.maxcol = r.col[c];

@@ -227,6 +227,13 @@ static void test_io_errors(void **state) {
                "column name 'x' appears twice in the header (fields 1 and 2)");
   expect_error("\"x,y\n0,0\n", -1, "x,y", A, QK_ERR_PARSE, 1, 1, SIZE_MAX,
                "header: unterminated quoted field");
+  /* One field selected twice read every point onto the diagonal (sixth review). */
+  expect_error("x,y\n0,1\n", -1, "x,1", A, QK_ERR_PARSE, 1, 0, SIZE_MAX,
+               "columns 'x' and 1 (1 and 2 of the selection) are both field 1");
+  expect_error("a,lon,lat\n0,1,2\n", -1, "lat,3", A, QK_ERR_PARSE, 1, 0, SIZE_MAX,
+               "columns 'lat' and 3 (1 and 2 of the selection) are both field 3");
+  expect_error("0,1\n", -1, "2,2", A, QK_ERR_INVALID, 0, 0, SIZE_MAX,
+               "columns 2 and 2 (1 and 2 of the selection) are both field 2");
   expect_error("0,0\n", -1, "x,y", QK_CSV_HEADER_NO, QK_ERR_INVALID, 0, 0, SIZE_MAX,
                "column 'x' is named, but the input has no header");
   expect_error("0,0\n", -1, "1", A, QK_ERR_INVALID, 0, 0, SIZE_MAX,

@@ -47,8 +47,9 @@ typedef qk_status_t (*qk_csv_row_fn)(void *ud, size_t row, unsigned long lineno,
 /** How to read a CSV input. Initialise with qk_csv_options_init(). */
 typedef struct qk_csv_options {
   /** The columns to read, in order, comma-separated: header names or 1-based numbers,
-   *  e.g. "lon,lat" or "3,2" (a name made of digits only is taken as a number). NULL: the
-   *  first columns (1,2 for points). */
+   *  e.g. "lon,lat" or "3,2" (a name made of digits only is taken as a number); two that
+   *  select one field ("x,1" when x is the first) are an error. NULL: the first columns
+   *  (1,2 for points). */
   const char *columns;
   qk_csv_header_t header; /**< default QK_CSV_HEADER_AUTO */
   qk_csv_row_fn on_row;   /**< optional; see qk_csv_row_fn */

@@ -259,4 +259,10 @@ expect 1 "bad x coordinate 'Infinity' \\(not a finite number\\)$" -- "$cli" mesh
 sed 's/1e400/0x1p3/' "$tmp/huge.poly" >"$tmp/hex.poly"
 expect 1 "bad x coordinate '0x1p3' \\(hexadecimal numbers are not read\\)$" -- "$cli" mesh "$tmp/hex.poly" -o "$tmp/huge"
 
+# ---- --xy naming the first column by its name and by its number (x,1) went past the
+# CLI's check (it compares the names it was given) and read every point onto the diagonal
+printf 'x,y\n1,2\n3,4\n' >"$tmp/xy1.csv"
+expect 1 "xy1.csv:1: columns 'x' and 1 \\(1 and 2 of the selection\\) are both field 1$" -- "$cli" tree "$tmp/xy1.csv" --xy x,1
+expect 0 '"points": 2' -- "$cli" tree "$tmp/xy1.csv" --xy y,1
+
 report
