@@ -146,7 +146,7 @@ static int parse_args(int argc, char **argv, const qcmd_t *c, qargs_t *a) {
   return -1;
 }
 
-/* --keep WHICH: the id columns named (comma-separated), or "both". */
+/* --keep WHICH: the id columns named (comma-separated), or "both" where there are two. */
 static int parse_keep(qrun_t *q) {
   const char *s = q->a.keep;
   if (!s) return CLI_OK;
@@ -155,7 +155,8 @@ static int parse_keep(qrun_t *q) {
   for (char *t = strtok(buf, ","); t; t = strtok(NULL, ",")) {
     int hit = 0;
     for (int k = 0; k < 2; k++)
-      if (q->c->side[k] && (!strcmp(t, q->c->side[k]) || !strcmp(t, "both"))) q->keep[k] = hit = 1;
+      if (q->c->side[k] && (!strcmp(t, q->c->side[k]) || (!strcmp(t, "both") && q->c->side[1])))
+        q->keep[k] = hit = 1;
     if (!hit) {
       cli_error(q->a.cmd, "--keep takes %s%s%s%s, not '%s'", q->c->side[0],
                 q->c->side[1] ? ", " : "", q->c->side[1] ? q->c->side[1] : "",

@@ -580,7 +580,8 @@ int cmd_simulate(int argc, char **argv) {
   int orc = cli_out_open(cmd, out, &o);
   if (!orc && svg && (orc = cli_out_open(cmd, svg, &so))) cli_out_close(cmd, &o, 0);
   if (orc) return orc;
-  /* About three overlaps per object: objects of mean area ~1 at density ~0.4. */
+  /* Objects of mean area ~1 at density ~0.4: each overlaps about one other (measured:
+   * 2 pairs / n is 1.0-1.1 at n = 500 to 20,000). */
   double side = sqrt((double)n * 2.5);
   uint64_t rs = seed;
   body_t *b = malloc(n * sizeof *b);

@@ -265,4 +265,9 @@ printf 'x,y\n1,2\n3,4\n' >"$tmp/xy1.csv"
 expect 1 "xy1.csv:1: columns 'x' and 1 \\(1 and 2 of the selection\\) are both field 1$" -- "$cli" tree "$tmp/xy1.csv" --xy x,1
 expect 0 '"points": 2' -- "$cli" tree "$tmp/xy1.csv" --xy y,1
 
+# ---- locate --keep both was accepted and kept the query's fields only (locate has one side)
+printf 'x,y\n0,0\n1,1\n' >"$tmp/kb.csv"
+expect 2 "--keep takes query, not 'both'" -- "$cli" locate "$tmp/kb.csv" "$tmp/kb.csv" --keep both
+expect 0 '^query,rank,point,distance,query_x,query_y,point_x,point_y$' -- "$cli" knn "$tmp/kb.csv" "$tmp/kb.csv" -k 1 --keep both
+
 report
