@@ -494,7 +494,9 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
         qk__realloc(a, w->obj, (size_t)w->cap_obj * sizeof *no, (size_t)cap * sizeof *no);
     if (no) w->obj = no, w->cap_obj = cap;
   }
-  if (w->cap_ugen > w->cap_obj) {
+  /* (Not with no object slots at all: an add whose slot array could not be grown leaves
+   * cap_obj 0 behind a grown ugen, and a realloc to 0 bytes frees it and returns NULL.) */
+  if (w->cap_ugen > w->cap_obj && w->cap_obj > 0) {
     uint32_t *nu =
         qk__realloc(a, w->ugen, (size_t)w->cap_ugen * sizeof *nu, (size_t)w->cap_obj * sizeof *nu);
     if (nu) w->ugen = nu, w->cap_ugen = w->cap_obj;

@@ -22,7 +22,7 @@ cc=${FUZZ_CC:-clang}
 jobs_nice=${FUZZ_NICE:-15}
 jobs=${FUZZ_JOBS:-2}
 
-all_targets=(tree_ops csv poly geojson mesh_dyadic mesh_general)
+all_targets=(tree_ops csv poly geojson mesh_dyadic mesh_general world)
 targets=("$@")
 [ ${#targets[@]} -eq 0 ] && targets=("${all_targets[@]}")
 
@@ -49,6 +49,7 @@ sources() {
     geojson) echo "$src/fuzz/fuzz_geojson.c" ;;
     mesh_dyadic) echo "$src/fuzz/fuzz_mesh_dyadic.c" ;;
     mesh_general) echo "$src/fuzz/fuzz_mesh_general.c" ;;
+    world) echo "$src/fuzz/fuzz_world.c" ;;
     *) echo "fuzz.sh: unknown target '$1' (have: ${all_targets[*]})" >&2; exit 2 ;;
   esac
 }
@@ -60,6 +61,7 @@ options() {
     geojson) echo "-max_len=4096 -dict=$src/fuzz/geojson.dict" ;;
     mesh_dyadic) echo "-max_len=2048 -dict=$src/fuzz/poly.dict" ;;
     mesh_general) echo "-max_len=1024 -dict=$src/fuzz/poly.dict" ;;
+    world) echo "-max_len=2048" ;;
   esac
 }
 

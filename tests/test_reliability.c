@@ -39,6 +39,7 @@ static const char *qkr_current = "";
 #include "fuzz/fuzz_csv.c"
 #include "fuzz/fuzz_poly.c"
 #include "fuzz/fuzz_tree_ops.c"
+#include "fuzz/fuzz_world.c"
 
 /* ---- replay of the fuzz corpus and regressions ---------------------------------------- */
 
@@ -124,6 +125,11 @@ static void test_reliability_replay_csv(void **state) {
 static void test_reliability_replay_poly(void **state) {
   (void)state;
   replay_target("poly", qkf_poly);
+}
+
+static void test_reliability_replay_world(void **state) {
+  (void)state;
+  replay_target("world", qkf_world);
 }
 
 /* ---- allocation failure ------------------------------------------------------------ */
@@ -696,6 +702,7 @@ int main(void) {
       cmocka_unit_test(test_reliability_replay_tree_ops),
       cmocka_unit_test(test_reliability_replay_csv),
       cmocka_unit_test(test_reliability_replay_poly),
+      cmocka_unit_test(test_reliability_replay_world),
       cmocka_unit_test(test_reliability_alloc_balance),
       cmocka_unit_test(test_reliability_alloc_refine),
       cmocka_unit_test(test_reliability_alloc_collider),
