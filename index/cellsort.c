@@ -604,6 +604,19 @@ static void copy_out(void *dst, const void *src, size_t bytes, bool stream, bool
   memcpy(dst, src, bytes);
 }
 
+/* Record r to slot d: its coordinates at px[stride * d] and py[stride * d] (stride 2:
+ * interleaved pairs, py = px + 1, one 16-byte copy), its id at pid[d]. */
+static QK__ALWAYS_INLINE void put_record(const rec_t *r, uint32_t d, qk_id_t id, double *px,
+                                         double *py, size_t stride, qk_id_t *pid) {
+  if (stride == 2) {
+    memcpy(&px[2 * (size_t)d], r->b, 16);
+  } else {
+    memcpy(&px[d], r->b, 8);
+    memcpy(&py[d], r->b + 8, 8);
+  }
+  pid[d] = id;
+}
+
 /* The records of coarse bucket c, every share's segment in turn, to their slots: record
  * of fine digit f to slot next[f]++, its coordinates at px[stride * slot] and
  * py[stride * slot] (stride 2: pairs), its id at pid[slot]. */
@@ -627,30 +640,13 @@ static QK__ALWAYS_INLINE void fine_records(const bucket_job_t *j, unsigned c, ui
       uint32_t g0, g1;
       memcpy(&g0, r[0].b + 16, 4);
       memcpy(&g1, r[1].b + 16, 4);
-      uint32_t d = next[g0 & mask]++;
-      if (stride == 2) {
-        memcpy(&px[2 * d], r[0].b, 16);
-      } else {
-        memcpy(&px[d], r[0].b, 8);
-        memcpy(&py[d], r[0].b + 8, 8);
-      }
-      pid[d] = id0 + (g0 >> fbits);
-      uint32_t d1 = next[g1 & mask]++;
-      if (stride == 2) {
-        memcpy(&px[2 * d1], r[1].b, 16);
-      } else {
-        memcpy(&px[d1], r[1].b, 8);
-        memcpy(&py[d1], r[1].b + 8, 8);
-      }
-      pid[d1] = id0 + (g1 >> fbits);
+      put_record(&r[0], next[g0 & mask]++, id0 + (g0 >> fbits), px, py, stride, pid);
+      put_record(&r[1], next[g1 & mask]++, id0 + (g1 >> fbits), px, py, stride, pid);
     }
     if (r < e) {
       uint32_t g;
       memcpy(&g, r->b + 16, 4);
-      uint32_t d = next[g & mask]++;
-      memcpy(&px[stride * d], r->b, 8);
-      memcpy(&py[stride * d], r->b + 8, 8);
-      pid[d] = id0 + (g >> fbits);
+      put_record(r, next[g & mask]++, id0 + (g >> fbits), px, py, stride, pid);
     }
   }
 }
