@@ -45,6 +45,7 @@ typedef struct qcmd {
   void (*usage)(FILE *);
   int (*prepare)(qrun_t *);
   int (*answer)(qrun_t *, size_t i); /* the rows for item i of the second input */
+  const struct qcmd *boxes;          /* the command --boxes turns it into (NULL: itself) */
 } qcmd_t;
 
 struct qrun {
@@ -253,6 +254,7 @@ static int run_query(int argc, char **argv, const qcmd_t *c) {
   q.c = c;
   int rc = parse_args(argc, argv, c, &q.a);
   if (rc >= 0) return rc;
+  if (q.a.boxes && c->boxes) q.c = c = c->boxes;
   if ((rc = parse_keep(&q))) return rc;
   for (int i = 0; i < c->nfiles && !rc; i++) rc = read_input(&q, i);
   if (!rc) rc = c->prepare(&q);
@@ -568,10 +570,13 @@ static void raycast_usage(FILE *f) {
              "the point at the origin: it hits the lowest-numbered disc that contains or\n"
              "touches it (t = 0), else nothing. With --boxes the first file holds boxes\n"
              "(xmin,ymin,xmax,ymax).\n"
-             "Output: ray,disc,t  (one row per ray; ray,-1,inf when nothing is hit)\n" KEEP_HELP(
-                 "ray, disc or both") "  --capacity C  items per leaf of the tree (default 16)\n"
-                                      "  -o FILE       write to FILE instead of standard "
-                                      "output\n");
+             "Output: ray,disc,t  (one row per ray; ray,-1,inf when nothing is hit), or\n"
+             "ray,box,t with --boxes\n" KEEP_HELP(
+                 "ray, disc (box with --boxes) or both") "  --capacity C  items per leaf of the "
+                                                         "tree (default 16)\n"
+                                                         "  -o FILE       write to FILE instead of "
+                                                         "standard "
+                                                         "output\n");
 }
 
 static int raycast_prepare(qrun_t *q) {
@@ -603,6 +608,16 @@ static int raycast_answer(qrun_t *q, size_t i) {
   return CLI_OK;
 }
 
+static const qcmd_t raycast_boxes_cmd = {.allow = "b",
+                                         .nfiles = 2,
+                                         .kind = {IN_ITEMS, IN_RAYS},
+                                         .head = "ray,box,t",
+                                         .side = {"ray", "box"},
+                                         .side_file = {1, 0},
+                                         .usage = raycast_usage,
+                                         .prepare = raycast_prepare,
+                                         .answer = raycast_answer};
+
 static const qcmd_t raycast_cmd = {.allow = "b",
                                    .nfiles = 2,
                                    .kind = {IN_ITEMS, IN_RAYS},
@@ -611,7 +626,8 @@ static const qcmd_t raycast_cmd = {.allow = "b",
                                    .side_file = {1, 0},
                                    .usage = raycast_usage,
                                    .prepare = raycast_prepare,
-                                   .answer = raycast_answer};
+                                   .answer = raycast_answer,
+                                   .boxes = &raycast_boxes_cmd};
 
 int cmd_raycast(int argc, char **argv) { return run_query(argc, argv, &raycast_cmd); }
 

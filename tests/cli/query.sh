@@ -157,6 +157,12 @@ if grep -q '^query,xmin,ymin,side,depth,count,query_lon,query_lat,query_tag$' "$
 "$cli" raycast "$tmp/d.csv" "$tmp/r.csv" --keep ray >"$tmp/got"
 if grep -q '^ray,disc,t,ray_ox,ray_oy,ray_dx,ray_dy,ray_tmax$' "$tmp/got" &&
   grep -q '^2,-1,inf,5,3,0,1,1$' "$tmp/got"; then passes=$((passes + 1)); else fail "raycast --keep ray: $(cat "$tmp/got")"; fi
+printf 'xmin,ymin,xmax,ymax\n4,-1,6,1\n' >"$tmp/rb.csv"
+printf 'ox,oy,dx,dy\n0,0,1,0\n' >"$tmp/rr.csv"
+"$cli" raycast "$tmp/rb.csv" "$tmp/rr.csv" --boxes --keep box >"$tmp/got"
+printf 'ray,box,t,box_xmin,box_ymin,box_xmax,box_ymax\n0,0,4,4,-1,6,1\n' >"$tmp/want"
+same "raycast --boxes --keep box" "$tmp/got" "$tmp/want"
+expect 2 "--keep takes ray, box or both, not 'disc'" -- "$cli" raycast "$tmp/rb.csv" "$tmp/rr.csv" --boxes --keep disc
 "$cli" collide "$tmp/d.csv" --keep both >"$tmp/got"
 if grep -q '^0,1,0,0,1,2,0,1$' "$tmp/got"; then passes=$((passes + 1)); else fail "collide --keep both: $(cat "$tmp/got")"; fi
 expect 2 "--keep takes query, point or both, not 'box'" -- "$cli" knn "$tmp/c.csv" "$tmp/cq.csv" -k 1 --keep box

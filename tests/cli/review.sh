@@ -85,7 +85,7 @@ open(f'{tmp}/zr.csv', 'w').write(''.join(f'{x},{y},0,0\n' for x, y in rays))
 def first(hit):
     return next((i for i in range(60) if hit(i)), -1)
 with open(f'{tmp}/zd.want', 'w') as f, open(f'{tmp}/zb.want', 'w') as g:
-    f.write('ray,disc,t\n'); g.write('ray,disc,t\n')
+    f.write('ray,disc,t\n'); g.write('ray,box,t\n')
     for k, (x, y) in enumerate(rays):
         d = first(lambda i: (x - discs[i][0])**2 + (y - discs[i][1])**2 <= discs[i][2]**2)
         b = first(lambda i: boxes[i][0] <= x <= boxes[i][2] and boxes[i][1] <= y <= boxes[i][3])
