@@ -143,6 +143,15 @@ static qk_status_t split(reader_t *r, const char *line, size_t len, size_t max, 
   return QK_OK;
 }
 
+/* How selection i was asked for: its quoted name, or its field number. */
+static void selection_label(const reader_t *r, size_t i, char *out, size_t size) {
+  if (r->want[i])
+    snprintf(out, size, "'%.*s'", (int)(r->want_len[i] < NAME_LEN ? r->want_len[i] : NAME_LEN),
+             r->want[i]);
+  else
+    snprintf(out, size, "%zu", r->col[i]);
+}
+
 /* Two selections of one field (x and y both from column 1, "x,1" when x is the first
  * field) would read every point onto the diagonal: refused. Columns still unresolved (0)
  * are skipped; line is the header's, or 0 before any line is read. */
@@ -151,15 +160,8 @@ static qk_status_t distinct_columns(reader_t *r, unsigned long line) {
     for (size_t d = c + 1; d < r->ncols; d++) {
       if (r->col[c] == 0 || r->col[c] != r->col[d]) continue;
       char a[NAME_LEN + 8], b[NAME_LEN + 8];
-      for (int k = 0; k < 2; k++) {
-        size_t i = k ? d : c;
-        char *o = k ? b : a;
-        if (r->want[i])
-          snprintf(o, sizeof a, "'%.*s'",
-                   (int)(r->want_len[i] < NAME_LEN ? r->want_len[i] : NAME_LEN), r->want[i]);
-        else
-          snprintf(o, sizeof a, "%zu", r->col[i]);
-      }
+      selection_label(r, c, a, sizeof a);
+      selection_label(r, d, b, sizeof b);
       return fail(r, line ? QK_ERR_PARSE : QK_ERR_INVALID, line, 0, SIZE_MAX,
                   "columns %s and %s (%zu and %zu of the selection) are both field %zu", a, b,
                   c + 1, d + 1, r->col[c]);
