@@ -191,6 +191,58 @@ static void put_csv(FILE *f, const char *s) {
   fputc('"', f);
 }
 
+/* Whether a field of the header line is `name` (blanks before it ignored, as --xy reads). */
+static int header_has(const char *header, const char *name, char *buf, size_t cap) {
+  for (int i = 0; csv_field(header, i, buf, cap, NULL) == 1; i++) {
+    const char *b = buf;
+    while (*b == ' ' || *b == '\t') b++;
+    if (!strcmp(b, name)) return 1;
+  }
+  return 0;
+}
+
+/* The header with the appended columns: `feature` and each --field, each under its own
+ * name, or prefixed with feature_ (again while still taken) when the input's header or an
+ * earlier appended column has it: --field name beside a points file with its own name
+ * column gives feature_name, so no two output columns share a name. */
+static int write_header(FILE *out, const char *line, const char *const *fields, int n_fields) {
+  size_t cap = strlen(line) + 1;
+  int n = n_fields + 1, rc = CLI_OK;
+  char *buf = malloc(cap), **name = calloc((size_t)n, sizeof *name);
+  fputs(line, out);
+  for (int k = 0; buf && name && k < n && !rc; k++) {
+    const char *want = k ? fields[k - 1] : "feature";
+    size_t pre = 0, len = strlen(want);
+    for (;;) {
+      char *c = malloc(pre * 8 + len + 1);
+      if (!c) {
+        rc = CLI_INTERNAL;
+        break;
+      }
+      for (size_t i = 0; i < pre; i++) memcpy(c + 8 * i, "feature_", 8);
+      memcpy(c + 8 * pre, want, len + 1);
+      int taken = header_has(line, c, buf, cap);
+      for (int i = 0; i < k && !taken; i++) taken = !strcmp(name[i], c);
+      if (!taken) {
+        name[k] = c;
+        break;
+      }
+      free(c);
+      pre++;
+    }
+    if (!rc) {
+      fputc(',', out);
+      put_csv(out, name[k]);
+    }
+  }
+  if (!buf || !name) rc = CLI_INTERNAL;
+  for (int k = 0; name && k < n; k++) free(name[k]);
+  free(name);
+  free(buf);
+  fputc('\n', out);
+  return rc;
+}
+
 /* ---- progress --------------------------------------------------------------------------- */
 
 static void progress(int on, long done, long total, size_t rows) {
@@ -348,13 +400,7 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
           break;
         }
         if (j->dry) continue;
-        fputs(line, j->out);
-        fputs(",feature", j->out);
-        for (int k = 0; k < j->n_fields; k++) {
-          fputc(',', j->out);
-          put_csv(j->out, j->fields[k]);
-        }
-        fputc('\n', j->out);
+        if ((rc = write_header(j->out, line, j->fields, j->n_fields))) break;
         continue;
       }
     }

@@ -49,7 +49,7 @@ same_text "join: 300-digit numbers" "$("$cli" join "$tmp/sq.geojson" "$tmp/long.
 printf '%sname,x,y\r\n"Rome, Lazio",0.5,0.5\r\n"a ""b""",2,2\r\n' "$bom" >"$tmp/q.csv"
 same_text "join: BOM, CRLF, quoted commas, --xy by name" \
   "$("$cli" join "$tmp/sq.geojson" "$tmp/q.csv" --xy x,y --field name | tr '\n' ' ')" \
-  'name,x,y,feature,name "Rome, Lazio",0.5,0.5,0,sq "a ""b""",2,2,-1, '
+  'name,x,y,feature,feature_name "Rome, Lazio",0.5,0.5,0,sq "a ""b""",2,2,-1, '
 same_text "join: --xy by number" "$("$cli" join "$tmp/sq.geojson" "$tmp/q.csv" --xy 2,3 | awk -F, '{ print $NF }' | tr '\n' ' ')" \
   "feature 0 -1 "
 

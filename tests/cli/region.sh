@@ -20,7 +20,7 @@ pts=$src/examples/region/places.csv
 
 "$cli" join "$layer" "$pts" --xy lon,lat --field name >"$tmp/got" 2>"$tmp/err"
 cat >"$tmp/want" <<'CSV'
-name,lon,lat,feature,name
+name,lon,lat,feature,feature_name
 centre west,1,1,0,West
 in the hole,3.5,3.5,-1,
 on the lake isle,4.5,4.5,2,Lake isle
@@ -31,6 +31,11 @@ east,15,5,1,East
 nowhere,30,30,-1,
 CSV
 same "join by name" "$tmp/got" "$tmp/want"
+# appended names already in the header are prefixed feature_ until unique
+printf 'feature,feature_feature,lon,lat\n7,8,1,1\n' >"$tmp/fh.csv"
+"$cli" join "$layer" "$tmp/fh.csv" --xy lon,lat --field name --field code >"$tmp/got"
+printf 'feature,feature_feature,lon,lat,feature_feature_feature,name,code\n7,8,1,1,0,West,W\n' >"$tmp/want"
+same "join: appended names unique" "$tmp/got" "$tmp/want"
 # by number, closed boundary: the shared edge is in both; --all lists both
 "$cli" join "$layer" "$pts" --xy 2,3 --all --boundary closed --field code -o "$tmp/all.csv"
 grep -c '^shared edge,10,5,' "$tmp/all.csv" | grep -qx 2 && passes=$((passes + 1)) ||
