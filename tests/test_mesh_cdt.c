@@ -30,6 +30,7 @@
 #include "mesh/cdt.h"
 #include "mesh/cdt_internal.h"
 #include "mesh/general_internal.h"
+#include "mesh/general_mesh.h"
 #include "qk_test.h"
 
 #ifdef QK_HAVE_GMP
@@ -943,6 +944,50 @@ static void skip_without_gmp(void **state) {
   skip();
 }
 
+/* qk__gm_sort_points (mesh/general_seed.c) against qsort: points in the stable order of
+ * their keys' bits 20 and up (the lower bits are left unsorted), at sizes on both sides of
+ * its switch from 8-bit to 11-bit digits (2048 points) and of the old switch (8192); keys
+ * at random, with few distinct high parts (many ties), and sharing their top bits (passes
+ * skipped). */
+static int sort_oracle_cmp(const void *a, const void *b) {
+  const qk__gm_pt_t *p = a, *q = b;
+  uint64_t x = p->key >> 20, y = q->key >> 20;
+  if (x != y) return x < y ? -1 : 1;
+  return p->rank < q->rank ? -1 : p->rank > q->rank;
+}
+
+static void test_gm_sort_points(void **state) {
+  (void)state;
+  g_seed = qkt_seed(12111);
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed);
+  qk__gm_t g;
+  memset(&g, 0, sizeof g); /* g.a NULL: the C library's allocator */
+  const size_t sizes[] = {1, 2, 255, 2047, 2048, 2049, 5000, 8191, 8192, 20000};
+  qk__gm_pt_t *pts = malloc(20000 * sizeof *pts), *want = malloc(20000 * sizeof *want);
+  assert_non_null(pts);
+  assert_non_null(want);
+  for (size_t z = 0; z < sizeof sizes / sizeof *sizes; z++)
+    for (int kind = 0; kind < 3; kind++) {
+      size_t n = sizes[z];
+      for (size_t i = 0; i < n; i++) {
+        uint64_t k = qkt_rng_next(&r);
+        if (kind == 1) k = (k & 0x7) << 61 | (k & 0xFFFFF); /* 8 high parts, low bits vary */
+        if (kind == 2) k = (uint64_t)5 << 59 | k >> 30;     /* the top 30 bits shared */
+        pts[i] = (qk__gm_pt_t){k, (double)i, 0, 0, 0, (uint32_t)i};
+      }
+      memcpy(want, pts, n * sizeof *pts);
+      qsort(want, n, sizeof *want, sort_oracle_cmp);
+      assert_int_equal(qk__gm_sort_points(&g, pts, n), QK_OK);
+      for (size_t i = 0; i < n; i++)
+        if (pts[i].rank != want[i].rank || pts[i].key != want[i].key)
+          fail_msg("seed %llu: %zu points, keys of kind %d: position %zu holds point %u, not %u",
+                   (unsigned long long)g_seed, n, kind, i, pts[i].rank, want[i].rank);
+    }
+  free(pts);
+  free(want);
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
 #ifdef QK_HAVE_GMP
@@ -955,7 +1000,7 @@ int main(void) {
       cmocka_unit_test(test_cdt_segments),      cmocka_unit_test(test_cdt_segment_refused),
       cmocka_unit_test(test_cdt_long_segments), cmocka_unit_test(test_cdt_segment_near_collinear),
       cmocka_unit_test(test_cdt_walk),          cmocka_unit_test(test_cdt_alloc_fail),
-      cmocka_unit_test(test_cdt_reserve),
+      cmocka_unit_test(test_cdt_reserve),       cmocka_unit_test(test_gm_sort_points),
   };
   (void)skip_without_gmp;
   return cmocka_run_group_tests(tests, NULL, NULL);
