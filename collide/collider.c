@@ -1685,11 +1685,12 @@ __attribute__((always_inline))
 #endif
 static inline void
 walk_float(const qk_collider_t *c, const ray_t *rp, double tmax, uint32_t from, uint32_t skip,
-           best_t *bp) {
+           best_t *bp, float *tfp) {
   const ray_t *const ray = rp;
   best_t b = *bp;
-  /* T of fact (2): min(tmax, best) rounded up to float; it only shrinks. */
-  float tf = round_up_t(b.t < tmax ? b.t : tmax);
+  /* T of fact (2): min(tmax, best) rounded up to float, kept by the caller from one search
+   * to the next (it only shrinks, and only here). */
+  float tf = *tfp;
   __m128 tv = _mm_set1_ps(tf);
   rentry_t stack[QK__CSTACK_MAX];
   int sp = 0;
@@ -1751,6 +1752,7 @@ walk_float(const qk_collider_t *c, const ray_t *rp, double tmax, uint32_t from, 
   }
 done:
   *bp = b;
+  *tfp = tf;
 }
 
 /* The Morton code of (x, y): the bits of x at the even positions of a 64-bit word, those
@@ -1898,7 +1900,8 @@ cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk_hit_t *hit)
     const unsigned n = d > QK__RAY_START_UP ? d - QK__RAY_START_UP : 0;
     for (; known > n; known--) path[known - 1] = c->qparent[path[known]];
     if (c->ray_prefetch) prefetch_climbs(c, path, n, known);
-    walk_float(c, ray, tmax, path[n], QK_NONE, &b);
+    float tf = round_up_t(tmax); /* T of fact (2) for best = infinity (see walk_float) */
+    walk_float(c, ray, tmax, path[n], QK_NONE, &b, &tf);
     /* Up from N one level at a time while the segment to the best hit so far (or to
      * tmax) is not inside the square of the node searched: each step searches the
      * parent's other children, which may bring the hit closer. */
@@ -1921,7 +1924,7 @@ cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk_hit_t *hit)
         if (lx > x0 && hx < x0 + side && ly > y0 && hy < y0 + side) break;
       }
       if (a - 1 < known) path[--known] = c->qparent[path[a]];
-      walk_float(c, ray, tmax, path[a - 1], path[a], &b);
+      walk_float(c, ray, tmax, path[a - 1], path[a], &b, &tf);
     }
   }
   hit->id = b.id;
