@@ -85,6 +85,8 @@ typedef struct sdisc {
   qk_id_t id;
   uint32_t pad;
 } sdisc_t;
+_Static_assert(sizeof(sdisc_t) == 32 && sizeof(qk_box_t) == 32,
+               "the ray cast's prefetch of a stacked leaf takes 32 bytes a slot");
 
 /*
  * Item data is kept in the tree's slot order (parallel to the tree's point arrays), not by id, so
@@ -1694,10 +1696,11 @@ walk_float(const qk_collider_t *c, const ray_t *rp, double tmax, uint32_t from, 
   __m128 tv = _mm_set1_ps(tf);
   rentry_t stack[QK__CSTACK_MAX];
   int sp = 0;
-  const int all_discs = c->n_discs == c->n;
   const unsigned s = ray->s;
   const qnode_t *quads = c->quads;
   const qnode_t *q = &quads[from];
+  /* The leaves' item records: discs with ids, else boxes (32 bytes a slot either way). */
+  const char *const leaf_base = c->sdisc ? (const char *)c->sdisc : (const char *)c->sbox;
   float lo4[4];
   unsigned keep = qnode_slab_float(q, ray, tv, lo4);
   if (skip != QK_NONE) { /* a constant at the first search's call: no code there */
@@ -1723,10 +1726,10 @@ walk_float(const qk_collider_t *c, const ray_t *rp, double tmax, uint32_t from, 
         const unsigned k = o & 3;
         const uint32_t nx = q->link[k], cnt = q->count[k];
         stack[sp++] = (rentry_t){nx, cnt, lo4[k]};
-        if (cnt == QK_NONE)
-          QK__CPREFETCH(&quads[nx]);
-        else if (all_discs)
-          QK__CPREFETCH(&c->sdisc[nx]);
+        /* The address by a conditional move, not a branch (which mispredicted 0.4 times a
+         * ray): the entry, or the leaf's first item record (32 bytes a slot either way). */
+        QK__CPREFETCH(cnt == QK_NONE ? (const char *)quads + (size_t)nx * sizeof(qnode_t)
+                                     : leaf_base + (size_t)nx * 32);
       }
       cur = (rentry_t){q->link[k0], q->count[k0], 0.0f};
     } else {
