@@ -1715,9 +1715,13 @@ walk_float(const qk_collider_t *c, const ray_t *rp, double tmax, uint32_t from, 
         const uint32_t nx = q->link[k], cnt = q->count[k];
         stack[sp++] = (rentry_t){nx, cnt, lo4[k]};
         /* The address by a conditional move, not a branch (which mispredicted 0.4 times a
-         * ray): the entry, or the leaf's first item record (32 bytes a slot either way). */
-        QK__CPREFETCH(cnt == QK_NONE ? (const char *)quads + (size_t)nx * sizeof(qnode_t)
-                                     : leaf_base + (size_t)nx * 32);
+         * ray): two lines from the entry (the next is its first child's when internal) or
+         * from the leaf's first item record (32 bytes a slot either way), as in
+         * prefetch_climbs (the second line: 2% less CPU time in a same-process A/B). */
+        const char *p = cnt == QK_NONE ? (const char *)quads + (size_t)nx * sizeof(qnode_t)
+                                       : leaf_base + (size_t)nx * 32;
+        QK__CPREFETCH(p);
+        QK__CPREFETCH((const void *)((uintptr_t)p + 64)); /* may pass the end of sbox */
       }
       cur = (rentry_t){q->link[k0], q->count[k0], 0.0f};
     } else {
