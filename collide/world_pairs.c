@@ -443,6 +443,108 @@ static int diff(const qk_world_t *w, const qk__prows_t *o, const qk__prows_t *nw
 }
 
 /*
+ * Rows, began and ended when the search kept only the pairs that began (see
+ * qk__world_search: no object added or removed since the last update, every float box
+ * exact then and now). The last frame's pairs whose boxes still meet (a test on the
+ * float boxes by slot, fb, exact here) stay and the others ended; the began keys (n, few
+ * when objects move little) are sorted into rows and merged in. The rows, began and
+ * ended are those of the sort-and-merge path, in the same order. tmp and cnt: make_rows'
+ * scratch for n keys. 0 when memory ran short (nothing allocated in *r but b).
+ */
+__attribute__((noinline)) static int rows_began(const qk_world_t *w, uint64_t *keys, uint64_t *tmp,
+                                                size_t n, uint32_t *cnt, const float *fb,
+                                                qk__prows_t *r, qk__kvec_t *bv, qk__kvec_t *ev) {
+  const qk_allocator_t *al = &w->alloc;
+  const qk__prows_t *o = &w->cur;
+  qk__prows_t nb = {0};
+  if (!(nb.b = qk__realloc(al, NULL, 0, (n ? n : 1) * sizeof *nb.b))) return 0;
+  nb.cap = n ? n : 1;
+  if (!make_rows_all(al, keys, tmp, n, cnt, w->n_obj, &nb)) {
+    rows_free(al, &nb);
+    return 0;
+  }
+  size_t mz = o->n_nz + nb.n_nz;
+  if (!rows_alloc(al, r, mz)) {
+    rows_free(al, &nb);
+    return 0;
+  }
+  qk__kvec_t lb = *bv, le = *ev;
+  uint32_t *restrict out = r->b;
+  const uint32_t *restrict ob = o->b, *restrict bb = nb.b;
+  size_t p = 0, q = 0, z = 0, d = 0;
+  int ok = 1;
+  while (p < nb.n_nz || q < o->n_nz) {
+    uint32_t an = p < nb.n_nz ? nb.row[p] : UINT32_MAX, ao = q < o->n_nz ? o->row[q] : UINT32_MAX;
+    uint32_t a = an < ao ? an : ao;
+    size_t i = 0, ie = 0, j = 0, je = 0;
+    if (an == a) i = nb.start[p], ie = nb.start[p + 1], p++;
+    if (ao == a) j = o->start[q], je = o->start[q + 1], q++;
+    const uint64_t ka = (uint64_t)a << 32;
+    const size_t d0 = d;
+    const float *fa = fb + 4 * (size_t)a;
+#if defined(__SSE2__)
+    /* b's box meets a's: (b.xmin, b.ymin) <= (a.xmax, a.ymax) and (b.xmax, b.ymax) >=
+     * (a.xmin, a.ymin), one comparison each way on the four floats */
+    const __m128 lo = _mm_setr_ps(fa[2], fa[3], INFINITY, INFINITY),
+                 hi = _mm_setr_ps(-INFINITY, -INFINITY, fa[0], fa[1]);
+#endif
+    /* The old row in order, each pair tested; the began slots (y, the next of them)
+     * are put in before the first old slot above them. */
+    uint32_t y = i < ie ? bb[i] : UINT32_MAX;
+    for (; j < je; j++) {
+      const uint32_t x = ob[j];
+      if (__builtin_expect(y < x, 0)) {
+        do {
+          out[d++] = y;
+          if (!(ok = kv_add(al, &lb, ka | y))) goto out;
+          y = ++i < ie ? bb[i] : UINT32_MAX;
+        } while (y < x);
+      }
+      const float *fx = fb + 4 * (size_t)x;
+#if defined(__SSE2__)
+      const __m128 bx = _mm_loadu_ps(fx);
+      const int meet = _mm_movemask_ps(_mm_and_ps(_mm_cmple_ps(bx, lo), _mm_cmpge_ps(bx, hi)));
+      out[d] = x; /* (kept when it meets) */
+      if (__builtin_expect(meet == 15, 1)) {
+        d++;
+        continue;
+      }
+#else
+      out[d] = x;
+      if (fx[0] <= fa[2] && fx[1] <= fa[3] && fx[2] >= fa[0] && fx[3] >= fa[1]) {
+        d++;
+        continue;
+      }
+#endif
+      if (!(ok = kv_add(al, &le, ka | x))) goto out;
+    }
+    for (; i < ie; i++) {
+      out[d++] = bb[i];
+      if (!(ok = kv_add(al, &lb, ka | bb[i]))) goto out;
+    }
+    if (d > d0) r->row[z] = a, r->start[z++] = (uint32_t)d0;
+  }
+  r->start[z] = (uint32_t)d;
+  r->n = d;
+  if (z < mz) { /* the index cut to its rows (its size follows n_nz) */
+    qk__prows_t t = {0};
+    if (!(ok = rows_alloc(al, &t, z))) goto out;
+    memcpy(t.row, r->row, z * sizeof *t.row);
+    memcpy(t.start, r->start, (z + 1) * sizeof *t.start);
+    qk__free(al, r->row, 2 * (mz + 1) * sizeof *r->row);
+    r->row = t.row, r->start = t.start, r->n_nz = z;
+  }
+out:
+  *bv = lb, *ev = le;
+  rows_free(al, &nb);
+  if (!ok) {
+    qk__free(al, r->row, 2 * (r->n_nz + 1) * sizeof *r->row);
+    r->row = r->start = NULL, r->n_nz = 0;
+  }
+  return ok;
+}
+
+/*
  * Rows, began and ended on the world's threads, by ranges of slots a. The keys are split
  * into nt chunks; each chunk is counted by partition (consecutive slots a: the buckets
  * of the bucketed sort, or 2^pb slots), the partitions are given to the threads in
@@ -773,7 +875,14 @@ static qk_status_t update(qk_world_t *w) {
   memcpy(tk, w->scr_tkeys, sizeof tk);
   memset(w->scr_tkeys, 0, sizeof w->scr_tkeys);
   int split;
-  qk_status_t st = qk__world_search(w, &pk, &found, tk, &split);
+  /* The float boxes by slot for the next update (when this one's are all exact), and
+   * the last update's, with which the search keeps only the pairs that began when no
+   * object was added or removed since (a failed allocation only loses that). */
+  const uint32_t nfb = w->n_obj;
+  float *fb = nfb ? qk__realloc(al, NULL, 0, (size_t)nfb * 4 * sizeof *fb) : NULL;
+  const float *prev = fb && !w->ident_dirty && w->fbox && w->n_fbox == nfb ? w->fbox : NULL;
+  int fb_ok, only_new;
+  qk_status_t st = qk__world_search(w, &pk, &found, tk, &split, prev, fb, &fb_ok, &only_new);
   qk__world_pack_free(w, &pk);
   unsigned nt = w->n_live < 4096 ? 1 : qk__world_update_threads(w);
   if (nt > QK__RMAX) nt = QK__RMAX;
@@ -797,7 +906,9 @@ static qk_status_t update(qk_world_t *w) {
       for (unsigned t = 1; t < nt; t++) src[t] = tk[t - 1];
     }
   }
-  if (st != QK_OK || total > UINT32_MAX) { /* (rows and counts hold 32-bit positions) */
+  if (st != QK_OK || total + (only_new ? w->cur.n : 0) > UINT32_MAX) {
+    /* (rows and counts hold 32-bit positions) */
+    qk__free(al, fb, (size_t)nfb * 4 * sizeof *fb);
     keep_tkeys(w, tk);
     if (st != QK_OK) return st;
     qk__free(al, found.v, found.cap * sizeof *found.v);
@@ -807,19 +918,21 @@ static qk_status_t update(qk_world_t *w) {
    * began and ended lists (sized by the last frame's, grown as needed): a failure keeps
    * the last frame's lists. */
   size_t n_obj = w->n_obj, tcap = total ? total : 1;
+  /* (the began pairs only: the rows are the last frame's that stay and these) */
+  size_t rcap = only_new ? total + w->cur.n + 1 : tcap;
   int dirty = w->ident_dirty, ok = 0;
   qk__prows_t nr = {0};
   qk__kvec_t bv = {0}, ev = {0};
   /* The new rows go in the buffer of the frame before last when it is large enough
    * (and not much larger), else in a new one with some room (frames are alike). */
-  if (w->spare_b && w->cap_spare_b >= tcap && keep_buf(w->cap_spare_b, tcap, sizeof *nr.b)) {
+  if (w->spare_b && w->cap_spare_b >= rcap && keep_buf(w->cap_spare_b, rcap, sizeof *nr.b)) {
     nr.b = w->spare_b, nr.cap = w->cap_spare_b;
     w->spare_b = NULL, w->cap_spare_b = 0;
   } else {
-    size_t c = tcap * sizeof *nr.b >= QK__KEEP_BYTES ? tcap + tcap / 8 + 64 : tcap;
+    size_t c = rcap * sizeof *nr.b >= QK__KEEP_BYTES ? rcap + rcap / 8 + 64 : rcap;
     if ((nr.b = qk__realloc(al, NULL, 0, c * sizeof *nr.b))) nr.cap = c;
   }
-  if (nr.b && nt > 1) {
+  if (nr.b && nt > 1 && !only_new) {
     /* on threads: the same sorts and merge, by ranges of slots */
     ok = rows_frame(w, found.v, split ? src : NULL, total, &nr, dirty, nt, &bv, &ev);
   } else if (nr.b) {
@@ -832,15 +945,18 @@ static qk_status_t update(qk_world_t *w) {
     int in_keys = total * 4 >= n_obj && (found.cap - total) * sizeof *found.v >= tbytes;
     uint64_t *tmp = in_keys ? found.v + total : qk__realloc(al, NULL, 0, tbytes);
     uint32_t *cnt = tmp ? qk__realloc(al, NULL, 0, ccap * sizeof *cnt) : NULL;
-    ok = cnt && make_rows_all(al, found.v, tmp, total, cnt, (uint32_t)n_obj, &nr);
-    qk__free(al, cnt, ccap * sizeof *cnt);
-    if (!in_keys) qk__free(al, tmp, tbytes);
     /* The lists start with room for the last frame's counts and some (frames are
      * alike), and grow if need be. */
     size_t bcap = w->began.n + w->began.n / 4 + 64, ecap = w->ended.n + w->ended.n / 4 + 64;
-    if (ok && (bv.v = qk__realloc(al, NULL, 0, bcap * sizeof *bv.v))) bv.cap = bcap;
+    if (cnt && (bv.v = qk__realloc(al, NULL, 0, bcap * sizeof *bv.v))) bv.cap = bcap;
     if (bv.v && (ev.v = qk__realloc(al, NULL, 0, ecap * sizeof *ev.v))) ev.cap = ecap;
-    ok = ev.v && diff(w, &w->cur, &nr, dirty, &bv, &ev);
+    if (ev.v && only_new)
+      ok = rows_began(w, found.v, tmp, total, cnt, fb, &nr, &bv, &ev);
+    else if (ev.v)
+      ok = make_rows_all(al, found.v, tmp, total, cnt, (uint32_t)n_obj, &nr) &&
+           diff(w, &w->cur, &nr, dirty, &bv, &ev);
+    qk__free(al, cnt, ccap * sizeof *cnt);
+    if (!in_keys) qk__free(al, tmp, tbytes);
   }
   if (ok) w->last_found = total;
   keep_tkeys(w, tk);
@@ -850,6 +966,7 @@ static qk_status_t update(qk_world_t *w) {
     for (uint32_t i = 0; i < w->n_obj; i++) n_eg += w->obj[i].gen != w->ugen[i];
   uint64_t *eg = NULL;
   if (!ok || (n_eg && !(eg = qk__realloc(al, NULL, 0, n_eg * sizeof *eg)))) {
+    qk__free(al, fb, (size_t)nfb * 4 * sizeof *fb);
     qk__free(al, bv.v, bv.cap * sizeof *bv.v);
     qk__free(al, ev.v, ev.cap * sizeof *ev.v);
     rows_free(al, &nr);
@@ -872,6 +989,13 @@ static qk_status_t update(qk_world_t *w) {
     if (p) nr.b = p, nr.cap = c;
   }
   w->cur = nr;
+  /* This update's float boxes for the next one, when they are all exact. */
+  qk__free(al, w->fbox, (size_t)w->n_fbox * 4 * sizeof *w->fbox);
+  w->fbox = NULL, w->n_fbox = 0;
+  if (fb_ok)
+    w->fbox = fb, w->n_fbox = nfb;
+  else
+    qk__free(al, fb, (size_t)nfb * 4 * sizeof *fb);
   if (dirty) {
     for (uint32_t i = 0; i < w->n_obj; i++) {
       if (w->obj[i].gen != w->ugen[i]) w->egen[w->n_egen++] = (uint64_t)i << 32 | w->ugen[i];
