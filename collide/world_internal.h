@@ -243,7 +243,7 @@ void qk__world_pack(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
  */
 /* Began pairs only: prev (or NULL) holds the float boxes by slot of the last update, with
  * no object added or removed since; cur (or NULL) room for n_obj slots' float boxes. When
- * the search is by bands on one thread and every float box is exact, it fills cur
+ * the search is by bands and every float box is exact, it fills cur
  * (*cur_ok) and, given prev, keeps only the pairs whose boxes at the last update did not
  * meet (*only_new): with exact float boxes those are exactly the pairs that began. */
 qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kvec_t *found,

@@ -972,8 +972,7 @@ qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kve
   const int by_bands = w->n_order > 1 && use_bands(w);
   unsigned nt = qk__world_update_threads(w);
   if (w->n_live < 4096) nt = 1; /* not worth a thread */
-  /* (the began pairs only on one thread: the threaded rows take every pair) */
-  if (by_bands ? !build_bands(w, pk, &bd, nt == 1 ? prev : NULL, cur)
+  if (by_bands ? !build_bands(w, pk, &bd, prev, cur)
                : !level_info(w, pk, lv, &n_levels, &rf, &n_rf))
     return search_nomem(w, &found, tk);
   *cur_ok = by_bands && cur && !bd.exact;
@@ -1049,8 +1048,9 @@ qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kve
     }
   }
   /* With threads for the rows too (qk_world_update), the threads' keys stay where they
-   * are: the rows' first pass reads each thread's own (no serial copy here). */
-  int keep_split = nt > 1 && nt <= 1 + QK__KEEP_THREADS;
+   * are: the rows' first pass reads each thread's own (no serial copy here); the began
+   * pairs only (few) are joined here. */
+  int keep_split = nt > 1 && nt <= 1 + QK__KEEP_THREADS && !*only_new;
   if (st == QK_OK && !keep_split) {
     for (unsigned t = 1; t < nt; t++) {
       if (shares[t].out.n)
