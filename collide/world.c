@@ -108,6 +108,7 @@ void qk_world_free(qk_world_t *w) {
   qk__free(&a, w->egen, w->n_egen * sizeof *w->egen);
   qk__free(&a, w->scr_keys.v, w->scr_keys.cap * sizeof *w->scr_keys.v);
   qk__free(&a, w->spare_b, w->cap_spare_b * sizeof *w->spare_b);
+  qk__free(&a, w->fbox, (size_t)w->n_fbox * 4 * sizeof *w->fbox);
   for (unsigned t = 0; t < QK__KEEP_THREADS; t++)
     qk__free(&a, w->scr_tkeys[t].v, w->scr_tkeys[t].cap * sizeof *w->scr_tkeys[t].v);
   qk__free(&a, w, sizeof *w);
@@ -127,7 +128,8 @@ size_t qk_world_pair_bytes(const qk_world_t *w) {
   return w->cur.cap * sizeof *w->cur.b +
          (w->cur.row ? 2 * (w->cur.n_nz + 1) * sizeof *w->cur.row : 0) +
          (w->began.cap + w->ended.cap + w->n_egen + w->scr_keys.cap) * sizeof(uint64_t) +
-         w->cap_spare_b * sizeof *w->spare_b + kept_tkeys(w);
+         w->cap_spare_b * sizeof *w->spare_b + kept_tkeys(w) +
+         (size_t)w->n_fbox * 4 * sizeof *w->fbox;
 }
 
 size_t qk_world_bytes(const qk_world_t *w) {

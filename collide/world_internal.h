@@ -129,6 +129,12 @@ struct qk_world {
   qk__kvec_t scr_tkeys[QK__KEEP_THREADS]; /* the other threads' keys (threads 1, 2, ...) */
   uint32_t *spare_b;
   size_t cap_spare_b;
+  /* The objects' float boxes at the last update, by slot (xmin, ymin, xmax, ymax), when
+   * that update's search was by bands and every float box was exact (else NULL): the
+   * next search then finds only the pairs whose boxes did not meet then (see
+   * qk__world_search). n_fbox slots. */
+  float *fbox;
+  uint32_t n_fbox;
   int ident_dirty;        /* an object was added or removed since the last update */
   struct qk__wpool *pool; /* the parked workers (collide/world_threads.c), or NULL */
 };
@@ -235,8 +241,14 @@ void qk__world_pack(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
  * thread's in found (whose room holds them all), thread t's in tk[t - 1] (t < the threads
  * of an update, which are then at most 1 + QK__KEEP_THREADS); else they are all in found.
  */
+/* Began pairs only: prev (or NULL) holds the float boxes by slot of the last update, with
+ * no object added or removed since; cur (or NULL) room for n_obj slots' float boxes. When
+ * the search is by bands and every float box is exact, it fills cur
+ * (*cur_ok) and, given prev, keeps only the pairs whose boxes at the last update did not
+ * meet (*only_new): with exact float boxes those are exactly the pairs that began. */
 qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kvec_t *found,
-                             qk__kvec_t *tk, int *split);
+                             qk__kvec_t *tk, int *split, const float *prev, float *cur, int *cur_ok,
+                             int *only_new);
 
 /* The cell (level, cx, cy) a fat box is filed in; *forced when the magnitude of its
  * coordinates raised the level. */

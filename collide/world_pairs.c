@@ -442,6 +442,223 @@ static int diff(const qk_world_t *w, const qk__prows_t *o, const qk__prows_t *nw
   return ok;
 }
 
+#define QK__RMAX 64 /* = QK__MAX_THREADS */
+
+/*
+ * Rows, began and ended when the search kept only the pairs that began (see
+ * qk__world_search: no object added or removed since the last update, every float box
+ * exact then and now). The last frame's pairs whose boxes still meet (a test on the
+ * float boxes by slot, fb, exact here) stay and the others ended; the began keys (few
+ * when objects move little) are sorted into rows and merged in. The rows, began and
+ * ended are those of the sort-and-merge path, in the same order. With threads, by
+ * ranges of slots a of about equal old pairs: range t writes its rows from the most
+ * places its slots could take (the old pairs and began ones before it), its row index
+ * and its lists apart; they are then joined in range order, each range's pairs moved
+ * down to where its rows go.
+ */
+typedef struct bjob {
+  const qk_world_t *w;
+  const qk__prows_t *o, *nb; /* the last frame's rows, the began ones */
+  const float *fb;
+  uint32_t *out; /* the new rows' pairs */
+  unsigned nt;
+  size_t q[QK__RMAX + 1], p[QK__RMAX + 1]; /* range t: old rows [q[t], q[t + 1]), began p */
+  size_t d[QK__RMAX], z[QK__RMAX];         /* its pairs and rows */
+  uint32_t *zr[QK__RMAX];                  /* its rows' slots, then (at zr + zc) starts */
+  size_t zc[QK__RMAX];
+  qk__kvec_t bv[QK__RMAX], ev[QK__RMAX];
+  int nomem[QK__RMAX];
+} bjob_t;
+
+static int began_range(bjob_t *J, unsigned t) {
+  const qk_allocator_t *al = &J->w->alloc;
+  const qk__prows_t *o = J->o, *nb = J->nb;
+  const float *fb = J->fb;
+  const size_t q0 = J->q[t], q1 = J->q[t + 1], p0 = J->p[t], p1 = J->p[t + 1];
+  const size_t zc = (q1 - q0) + (p1 - p0);
+  uint32_t *zr = qk__realloc(al, NULL, 0, (2 * zc + 1) * sizeof *zr);
+  if (!zr) return 0;
+  J->zr[t] = zr, J->zc[t] = zc;
+  qk__kvec_t lb = J->bv[t], le = J->ev[t];
+  uint32_t *restrict out =
+      J->out + (q0 < o->n_nz ? o->start[q0] : o->n) + (p0 < nb->n_nz ? nb->start[p0] : nb->n);
+  const uint32_t *restrict ob = o->b, *restrict bb = nb->b;
+  size_t p = p0, q = q0, z = 0, d = 0;
+  int ok = 1;
+  while (p < p1 || q < q1) {
+    uint32_t an = p < p1 ? nb->row[p] : UINT32_MAX, ao = q < q1 ? o->row[q] : UINT32_MAX;
+    uint32_t a = an < ao ? an : ao;
+    size_t i = 0, ie = 0, j = 0, je = 0;
+    if (an == a) i = nb->start[p], ie = nb->start[p + 1], p++;
+    if (ao == a) j = o->start[q], je = o->start[q + 1], q++;
+    const uint64_t ka = (uint64_t)a << 32;
+    const size_t d0 = d;
+    const float *fa = fb + 4 * (size_t)a;
+#if defined(__SSE2__)
+    /* b's box meets a's: (b.xmin, b.ymin) <= (a.xmax, a.ymax) and (b.xmax, b.ymax) >=
+     * (a.xmin, a.ymin), one comparison each way on the four floats */
+    const __m128 lo = _mm_setr_ps(fa[2], fa[3], INFINITY, INFINITY),
+                 hi = _mm_setr_ps(-INFINITY, -INFINITY, fa[0], fa[1]);
+#endif
+    /* The old row in order, each pair tested; the began slots (y, the next of them)
+     * are put in before the first old slot above them. */
+    uint32_t y = i < ie ? bb[i] : UINT32_MAX;
+    for (; j < je; j++) {
+      const uint32_t x = ob[j];
+      if (__builtin_expect(y < x, 0)) {
+        do {
+          out[d++] = y;
+          if (!(ok = kv_add(al, &lb, ka | y))) goto out;
+          y = ++i < ie ? bb[i] : UINT32_MAX;
+        } while (y < x);
+      }
+      const float *fx = fb + 4 * (size_t)x;
+#if defined(__SSE2__)
+      const __m128 bx = _mm_loadu_ps(fx);
+      const int meet = _mm_movemask_ps(_mm_and_ps(_mm_cmple_ps(bx, lo), _mm_cmpge_ps(bx, hi)));
+      out[d] = x; /* (kept when it meets) */
+      if (__builtin_expect(meet == 15, 1)) {
+        d++;
+        continue;
+      }
+#else
+      out[d] = x;
+      if (fx[0] <= fa[2] && fx[1] <= fa[3] && fx[2] >= fa[0] && fx[3] >= fa[1]) {
+        d++;
+        continue;
+      }
+#endif
+      if (!(ok = kv_add(al, &le, ka | x))) goto out;
+    }
+    for (; i < ie; i++) {
+      out[d++] = bb[i];
+      if (!(ok = kv_add(al, &lb, ka | bb[i]))) goto out;
+    }
+    if (d > d0) zr[z] = a, zr[zc + z++] = (uint32_t)d0;
+  }
+  J->d[t] = d, J->z[t] = z;
+out:
+  J->bv[t] = lb, J->ev[t] = le;
+  return ok;
+}
+
+static void bjob_run(unsigned t, void *ud) {
+  bjob_t *J = ud;
+  if (!began_range(J, t)) J->nomem[t] = 1;
+}
+
+/* The first of rows [lo, hi) of r whose slot is at least s. */
+static size_t row_from(const qk__prows_t *r, size_t lo, size_t hi, uint32_t s) {
+  while (lo < hi) {
+    size_t mid = lo + (hi - lo) / 2;
+    if (r->row[mid] < s)
+      lo = mid + 1;
+    else
+      hi = mid;
+  }
+  return lo;
+}
+
+/* tmp and cnt: make_rows' scratch for the n began keys; r->b has room for the last
+ * frame's pairs and these. 0 when memory ran short (nothing allocated in *r but b, nor
+ * in *bv and *ev beyond what they held). */
+__attribute__((noinline)) static int rows_began(const qk_world_t *w, uint64_t *keys, uint64_t *tmp,
+                                                size_t n, uint32_t *cnt, const float *fb,
+                                                unsigned nt, qk__prows_t *r, qk__kvec_t *bv,
+                                                qk__kvec_t *ev) {
+  const qk_allocator_t *al = &w->alloc;
+  const qk__prows_t *o = &w->cur;
+  qk__prows_t nb = {0};
+  if (!(nb.b = qk__realloc(al, NULL, 0, (n ? n : 1) * sizeof *nb.b))) return 0;
+  nb.cap = n ? n : 1;
+  bjob_t *J = make_rows_all(al, keys, tmp, n, cnt, w->n_obj, &nb)
+                  ? qk__realloc(al, NULL, 0, sizeof *J)
+                  : NULL;
+  if (!J) {
+    rows_free(al, &nb);
+    return 0;
+  }
+  memset(J, 0, sizeof *J);
+  if (nt > QK__RMAX) nt = QK__RMAX;
+  if (!o->n_nz) nt = 1;
+  J->w = w, J->o = o, J->nb = &nb, J->fb = fb, J->out = r->b, J->nt = nt;
+  /* the ranges: about equal old pairs */
+  J->q[0] = J->p[0] = 0, J->q[nt] = o->n_nz, J->p[nt] = nb.n_nz;
+  for (unsigned t = 1; t < nt; t++) {
+    size_t want = o->n * t / nt, lo = J->q[t - 1], hi = o->n_nz;
+    while (lo < hi) {
+      size_t mid = lo + (hi - lo) / 2;
+      if (o->start[mid] < want)
+        lo = mid + 1;
+      else
+        hi = mid;
+    }
+    J->q[t] = lo;
+    J->p[t] = lo < o->n_nz ? row_from(&nb, J->p[t - 1], nb.n_nz, o->row[lo]) : nb.n_nz;
+  }
+  int ok = 1;
+  if (nt == 1) {
+    J->bv[0] = *bv, J->ev[0] = *ev;
+    ok = began_range(J, 0);
+    *bv = J->bv[0], *ev = J->ev[0];
+    J->bv[0] = J->ev[0] = (qk__kvec_t){0};
+  } else {
+    for (unsigned t = 0; ok && t < nt; t++) {
+      size_t bc = w->began.n / nt + 64, ec = w->ended.n / nt + 64;
+      if (!(J->bv[t].v = qk__realloc(al, NULL, 0, bc * sizeof(uint64_t)))) ok = 0;
+      J->bv[t].cap = J->bv[t].v ? bc : 0;
+      if (ok && !(J->ev[t].v = qk__realloc(al, NULL, 0, ec * sizeof(uint64_t)))) ok = 0;
+      J->ev[t].cap = J->ev[t].v ? ec : 0;
+    }
+    if (ok) qk__world_run_jobs(w, nt, nt, bjob_run, J);
+    for (unsigned t = 0; ok && t < nt; t++) ok = !J->nomem[t];
+  }
+  /* The joined index, lists and pairs. */
+  size_t z = 0, nbg = bv->n, neg = ev->n;
+  for (unsigned t = 0; ok && t < nt; t++) z += J->z[t];
+  if (ok && nt > 1) {
+    for (unsigned t = 0; t < nt; t++) nbg += J->bv[t].n, neg += J->ev[t].n;
+    qk__kvec_t jb = *bv, je = *ev;
+    if (jb.cap < nbg) {
+      uint64_t *v = qk__realloc(al, jb.v, jb.cap * sizeof *v, nbg * sizeof *v);
+      if (v) jb.v = v, jb.cap = nbg;
+    }
+    if (je.cap < neg) {
+      uint64_t *v = qk__realloc(al, je.v, je.cap * sizeof *v, neg * sizeof *v);
+      if (v) je.v = v, je.cap = neg;
+    }
+    *bv = jb, *ev = je;
+    ok = jb.cap >= nbg && je.cap >= neg;
+    for (unsigned t = 0; ok && t < nt; t++) {
+      if (J->bv[t].n) memcpy(bv->v + bv->n, J->bv[t].v, J->bv[t].n * sizeof *bv->v);
+      if (J->ev[t].n) memcpy(ev->v + ev->n, J->ev[t].v, J->ev[t].n * sizeof *ev->v);
+      bv->n += J->bv[t].n, ev->n += J->ev[t].n;
+    }
+  }
+  if (ok && (ok = rows_alloc(al, r, z))) {
+    size_t zo = 0, d = 0;
+    for (unsigned t = 0; t < nt; t++) {
+      size_t base = (J->q[t] < o->n_nz ? o->start[J->q[t]] : o->n) +
+                    (J->p[t] < nb.n_nz ? nb.start[J->p[t]] : nb.n);
+      if (J->d[t] && base != d) memmove(r->b + d, r->b + base, J->d[t] * sizeof *r->b);
+      const uint32_t *zr = J->zr[t];
+      for (size_t k = 0; k < J->z[t]; k++)
+        r->row[zo + k] = zr[k], r->start[zo + k] = (uint32_t)(d + zr[J->zc[t] + k]);
+      zo += J->z[t], d += J->d[t];
+    }
+    r->start[z] = (uint32_t)d;
+    r->n = d;
+  }
+  for (unsigned t = 0; t < nt; t++) {
+    qk__free(al, J->zr[t], J->zr[t] ? (2 * J->zc[t] + 1) * sizeof *J->zr[t] : 0);
+    qk__free(al, J->bv[t].v, J->bv[t].cap * sizeof(uint64_t));
+    qk__free(al, J->ev[t].v, J->ev[t].cap * sizeof(uint64_t));
+  }
+  qk__free(al, J, sizeof *J);
+  rows_free(al, &nb);
+  return ok;
+}
+
 /*
  * Rows, began and ended on the world's threads, by ranges of slots a. The keys are split
  * into nt chunks; each chunk is counted by partition (consecutive slots a: the buckets
@@ -455,7 +672,6 @@ static int diff(const qk_world_t *w, const qk__prows_t *o, const qk__prows_t *nw
  * are in key order, joined in range order: the result is the one-thread path's, on any
  * number of threads. The found keys' buffer is the sort's scratch once scattered.
  */
-#define QK__RMAX 64 /* = QK__MAX_THREADS */
 typedef struct pjob {
   const qk_world_t *w;
   const qk__prows_t *o;  /* the last frame's rows */
@@ -773,7 +989,14 @@ static qk_status_t update(qk_world_t *w) {
   memcpy(tk, w->scr_tkeys, sizeof tk);
   memset(w->scr_tkeys, 0, sizeof w->scr_tkeys);
   int split;
-  qk_status_t st = qk__world_search(w, &pk, &found, tk, &split);
+  /* The float boxes by slot for the next update (when this one's are all exact), and
+   * the last update's, with which the search keeps only the pairs that began when no
+   * object was added or removed since (a failed allocation only loses that). */
+  const uint32_t nfb = w->n_obj;
+  float *fb = nfb ? qk__realloc(al, NULL, 0, (size_t)nfb * 4 * sizeof *fb) : NULL;
+  const float *prev = fb && !w->ident_dirty && w->fbox && w->n_fbox == nfb ? w->fbox : NULL;
+  int fb_ok, only_new;
+  qk_status_t st = qk__world_search(w, &pk, &found, tk, &split, prev, fb, &fb_ok, &only_new);
   qk__world_pack_free(w, &pk);
   unsigned nt = w->n_live < 4096 ? 1 : qk__world_update_threads(w);
   if (nt > QK__RMAX) nt = QK__RMAX;
@@ -797,7 +1020,9 @@ static qk_status_t update(qk_world_t *w) {
       for (unsigned t = 1; t < nt; t++) src[t] = tk[t - 1];
     }
   }
-  if (st != QK_OK || total > UINT32_MAX) { /* (rows and counts hold 32-bit positions) */
+  if (st != QK_OK || total + (only_new ? w->cur.n : 0) > UINT32_MAX) {
+    /* (rows and counts hold 32-bit positions) */
+    qk__free(al, fb, (size_t)nfb * 4 * sizeof *fb);
     keep_tkeys(w, tk);
     if (st != QK_OK) return st;
     qk__free(al, found.v, found.cap * sizeof *found.v);
@@ -807,19 +1032,21 @@ static qk_status_t update(qk_world_t *w) {
    * began and ended lists (sized by the last frame's, grown as needed): a failure keeps
    * the last frame's lists. */
   size_t n_obj = w->n_obj, tcap = total ? total : 1;
+  /* (the began pairs only: the rows are the last frame's that stay and these) */
+  size_t rcap = only_new ? total + w->cur.n + 1 : tcap;
   int dirty = w->ident_dirty, ok = 0;
   qk__prows_t nr = {0};
   qk__kvec_t bv = {0}, ev = {0};
   /* The new rows go in the buffer of the frame before last when it is large enough
    * (and not much larger), else in a new one with some room (frames are alike). */
-  if (w->spare_b && w->cap_spare_b >= tcap && keep_buf(w->cap_spare_b, tcap, sizeof *nr.b)) {
+  if (w->spare_b && w->cap_spare_b >= rcap && keep_buf(w->cap_spare_b, rcap, sizeof *nr.b)) {
     nr.b = w->spare_b, nr.cap = w->cap_spare_b;
     w->spare_b = NULL, w->cap_spare_b = 0;
   } else {
-    size_t c = tcap * sizeof *nr.b >= QK__KEEP_BYTES ? tcap + tcap / 8 + 64 : tcap;
+    size_t c = rcap * sizeof *nr.b >= QK__KEEP_BYTES ? rcap + rcap / 8 + 64 : rcap;
     if ((nr.b = qk__realloc(al, NULL, 0, c * sizeof *nr.b))) nr.cap = c;
   }
-  if (nr.b && nt > 1) {
+  if (nr.b && nt > 1 && !only_new) {
     /* on threads: the same sorts and merge, by ranges of slots */
     ok = rows_frame(w, found.v, split ? src : NULL, total, &nr, dirty, nt, &bv, &ev);
   } else if (nr.b) {
@@ -832,15 +1059,18 @@ static qk_status_t update(qk_world_t *w) {
     int in_keys = total * 4 >= n_obj && (found.cap - total) * sizeof *found.v >= tbytes;
     uint64_t *tmp = in_keys ? found.v + total : qk__realloc(al, NULL, 0, tbytes);
     uint32_t *cnt = tmp ? qk__realloc(al, NULL, 0, ccap * sizeof *cnt) : NULL;
-    ok = cnt && make_rows_all(al, found.v, tmp, total, cnt, (uint32_t)n_obj, &nr);
-    qk__free(al, cnt, ccap * sizeof *cnt);
-    if (!in_keys) qk__free(al, tmp, tbytes);
     /* The lists start with room for the last frame's counts and some (frames are
      * alike), and grow if need be. */
     size_t bcap = w->began.n + w->began.n / 4 + 64, ecap = w->ended.n + w->ended.n / 4 + 64;
-    if (ok && (bv.v = qk__realloc(al, NULL, 0, bcap * sizeof *bv.v))) bv.cap = bcap;
+    if (cnt && (bv.v = qk__realloc(al, NULL, 0, bcap * sizeof *bv.v))) bv.cap = bcap;
     if (bv.v && (ev.v = qk__realloc(al, NULL, 0, ecap * sizeof *ev.v))) ev.cap = ecap;
-    ok = ev.v && diff(w, &w->cur, &nr, dirty, &bv, &ev);
+    if (ev.v && only_new)
+      ok = rows_began(w, found.v, tmp, total, cnt, fb, nt, &nr, &bv, &ev);
+    else if (ev.v)
+      ok = make_rows_all(al, found.v, tmp, total, cnt, (uint32_t)n_obj, &nr) &&
+           diff(w, &w->cur, &nr, dirty, &bv, &ev);
+    qk__free(al, cnt, ccap * sizeof *cnt);
+    if (!in_keys) qk__free(al, tmp, tbytes);
   }
   if (ok) w->last_found = total;
   keep_tkeys(w, tk);
@@ -850,6 +1080,7 @@ static qk_status_t update(qk_world_t *w) {
     for (uint32_t i = 0; i < w->n_obj; i++) n_eg += w->obj[i].gen != w->ugen[i];
   uint64_t *eg = NULL;
   if (!ok || (n_eg && !(eg = qk__realloc(al, NULL, 0, n_eg * sizeof *eg)))) {
+    qk__free(al, fb, (size_t)nfb * 4 * sizeof *fb);
     qk__free(al, bv.v, bv.cap * sizeof *bv.v);
     qk__free(al, ev.v, ev.cap * sizeof *ev.v);
     rows_free(al, &nr);
@@ -872,6 +1103,13 @@ static qk_status_t update(qk_world_t *w) {
     if (p) nr.b = p, nr.cap = c;
   }
   w->cur = nr;
+  /* This update's float boxes for the next one, when they are all exact. */
+  qk__free(al, w->fbox, (size_t)w->n_fbox * 4 * sizeof *w->fbox);
+  w->fbox = NULL, w->n_fbox = 0;
+  if (fb_ok)
+    w->fbox = fb, w->n_fbox = nfb;
+  else
+    qk__free(al, fb, (size_t)nfb * 4 * sizeof *fb);
   if (dirty) {
     for (uint32_t i = 0; i < w->n_obj; i++) {
       if (w->obj[i].gen != w->ugen[i]) w->egen[w->n_egen++] = (uint64_t)i << 32 | w->ugen[i];

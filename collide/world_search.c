@@ -565,8 +565,15 @@ typedef struct egrp {
 
 /* The bands: entries band after band, each band's by xmin (ascending; ties in any order),
  * four to a group. */
+/* The same four entries' objects' float boxes at the last update (xmin, ymin, xmax,
+ * ymax), when the search keeps only the pairs that began. */
+typedef struct pgrp {
+  float x0[4], y0[4], x1[4], y1[4];
+} pgrp_t;
+
 typedef struct bands {
   egrp_t *g;
+  pgrp_t *pg;      /* or NULL: every pair is kept */
   uint8_t *fm;     /* per group: bit l when lane l's band is the first of its object */
   float *x1;       /* per entry: xmax */
   uint8_t *exact;  /* per entry: the object's float box is its box (NULL: all are) */
@@ -590,14 +597,22 @@ typedef struct bands {
 #if defined(__SSE2__)
 static inline __attribute__((always_inline)) uint64_t *sweep(const share_t *s, const bands_t *bd,
                                                              uint32_t k, uint32_t e, uint64_t *v,
-                                                             const int all_exact) {
+                                                             const int all_exact, const int began) {
   const egrp_t *G = bd->g;
+  const pgrp_t *P = bd->pg;
   const uint8_t *fm = bd->fm;
   const egrp_t *gk = &G[k >> 2];
   const unsigned lk = k & 3;
   const __m128 x1 = _mm_set1_ps(bd->x1[k]), y0 = _mm_set1_ps(gk->y0[lk]),
                y1 = _mm_set1_ps(gk->y1[lk]);
   const uint32_t slot = gk->slot[lk];
+  /* (began: k's box at the last update; a lane whose box then met it is dropped) */
+  __m128 px0 = _mm_setzero_ps(), py0 = px0, px1 = px0, py1 = px0;
+  if (began) {
+    const pgrp_t *pk = &P[k >> 2];
+    px0 = _mm_set1_ps(pk->x0[lk]), py0 = _mm_set1_ps(pk->y0[lk]);
+    px1 = _mm_set1_ps(pk->x1[lk]), py1 = _mm_set1_ps(pk->y1[lk]);
+  }
   const __m128i ks = _mm_set1_epi32((int32_t)slot),
                 kb = _mm_set1_epi32((int32_t)(slot ^ 0x80000000u)),
                 bias = _mm_set1_epi32(INT32_MIN);
@@ -617,6 +632,14 @@ static inline __attribute__((always_inline)) uint64_t *sweep(const share_t *s, c
     if (g == gl) mask &= last;
     unsigned bits = (unsigned)_mm_movemask_ps(_mm_and_ps(cx, m)) & mask & (any | *fg);
     unsigned stop = ~(unsigned)_mm_movemask_ps(cx) & mask;
+    if (began && bits) {
+      const pgrp_t *pq = &P[g - G];
+      __m128 met = _mm_and_ps(_mm_and_ps(_mm_cmple_ps(_mm_loadu_ps(pq->x0), px1),
+                                         _mm_cmple_ps(px0, _mm_loadu_ps(pq->x1))),
+                              _mm_and_ps(_mm_cmple_ps(_mm_loadu_ps(pq->y0), py1),
+                                         _mm_cmple_ps(py0, _mm_loadu_ps(pq->y1))));
+      bits &= ~(unsigned)_mm_movemask_ps(met);
+    }
     if (bits) {
       /* the four keys at once: (min << 32 | max) of k's slot and each lane's */
       __m128i sj = _mm_loadu_si128((const __m128i *)g->slot), x = _mm_xor_si128(sj, ks);
@@ -654,8 +677,9 @@ static inline __attribute__((always_inline)) uint64_t *sweep(const share_t *s, c
 }
 #else
 static uint64_t *sweep(const share_t *s, const bands_t *bd, uint32_t k, uint32_t e, uint64_t *v,
-                       const int all_exact) {
+                       const int all_exact, const int began) {
   const egrp_t *G = bd->g;
+  const pgrp_t *P = bd->pg;
   const egrp_t *gk = &G[k >> 2];
   const float x1 = bd->x1[k], y0 = gk->y0[k & 3], y1 = gk->y1[k & 3];
   const int any = bd->fm[k >> 2] >> (k & 3) & 1;
@@ -666,6 +690,13 @@ static uint64_t *sweep(const share_t *s, const bands_t *bd, uint32_t k, uint32_t
     unsigned l = j & 3;
     if (!(g->x0[l] <= x1)) break;
     if (!(g->y0[l] <= y1 && y0 <= g->y1[l] && (any || (bd->fm[j >> 2] >> l & 1)))) continue;
+    if (began) {
+      const pgrp_t *pk = &P[k >> 2], *pj = &P[j >> 2];
+      unsigned lk = k & 3;
+      if (pj->x0[l] <= pk->x1[lk] && pk->x0[lk] <= pj->x1[l] && pj->y0[l] <= pk->y1[lk] &&
+          pk->y0[lk] <= pj->y1[l])
+        continue;
+    }
     uint32_t sj = g->slot[l];
     *v = pair_key(slot, hs, sj);
     v += (all_exact || (bd->exact[k] & bd->exact[j])) ? 1 : objects_meet(s->w, slot, sj);
@@ -678,7 +709,7 @@ static uint64_t *sweep(const share_t *s, const bands_t *bd, uint32_t k, uint32_t
  * sweep's keys, its candidates and three more, checked before each); 0 when memory ran
  * short. */
 static inline __attribute__((always_inline)) int sweep_run(share_t *s, uint32_t b0, uint32_t b1,
-                                                           const int all_exact) {
+                                                           const int all_exact, const int began) {
   const bands_t *bd = s->bd;
   const uint32_t *st = bd->start;
   if (!s->out.v && !kv_reserve(s, 256)) return 0;
@@ -690,14 +721,16 @@ static inline __attribute__((always_inline)) int sweep_run(share_t *s, uint32_t 
         if (!kv_reserve(s, (size_t)(e - k) + 2)) return 0;
         v = s->out.v + s->out.n, vend = s->out.v + s->out.cap;
       }
-      v = sweep(s, bd, k, e, v, all_exact);
+      v = sweep(s, bd, k, e, v, all_exact, began);
     }
   s->out.n = (size_t)(v - s->out.v);
   return 1;
 }
 
 static int sweep_bands(share_t *s, uint32_t b0, uint32_t b1) {
-  return s->bd->exact ? sweep_run(s, b0, b1, 0) : sweep_run(s, b0, b1, 1);
+  /* (the began pairs only: every float box exact, see build_bands) */
+  if (s->bd->exact) return sweep_run(s, b0, b1, 0, 0);
+  return s->bd->pg ? sweep_run(s, b0, b1, 1, 1) : sweep_run(s, b0, b1, 1, 0);
 }
 
 static void run_bands(unsigned t, void *ud) {
@@ -730,7 +763,8 @@ static inline uint32_t band_of(float y, double ylo, double inv, double top) {
  * mean float height (measured: from 2 to 4 times the search costs within 5% on the
  * clustered scene and on sizes over one and two decades), or higher when that would make
  * more than about n / 2 bands or far too many entries. 0 when memory ran short. */
-static int build_bands(const qk_world_t *w, const qk__wpack_t *pk, bands_t *bd) {
+static int build_bands(const qk_world_t *w, const qk__wpack_t *pk, bands_t *bd, const float *prev,
+                       float *cur) {
   const qk_allocator_t *al = &w->alloc;
   const uint32_t n = w->n_order;
   const float *fg = pk->fgrp;
@@ -756,6 +790,10 @@ static int build_bands(const qk_world_t *w, const qk__wpack_t *pk, bands_t *bd) 
     yhi = f[12] > yhi ? f[12] : yhi;
     hs += (double)f[12] - f[4];
     all_exact &= fx[k];
+    if (cur) {
+      float *c = cur + 4 * (size_t)w->order[k];
+      c[0] = f[0], c[1] = f[4], c[2] = f[8], c[3] = f[12];
+    }
     uint32_t x = fkey(f[0]);
     rec[k] = (uint64_t)x << 32 | k;
     cnt[x & 2047]++, cnt[2048 + (x >> 11 & 2047)]++, cnt[4096 + (x >> 22)]++;
@@ -798,6 +836,15 @@ static int build_bands(const qk_world_t *w, const qk__wpack_t *pk, bands_t *bd) 
     qk__free(al, rec, 3 * (size_t)n * sizeof *rec);
     return 0;
   }
+  pgrp_t *pg = NULL;
+  if (prev && all_exact && !(pg = qk__realloc(al, NULL, 0, ng * sizeof *pg))) {
+    qk__free(al, x1, xbytes);
+    qk__free(al, start, 2 * ((size_t)nb + 1) * sizeof *start);
+    qk__free(al, g, ng * (sizeof *g + 1));
+    qk__free(al, cnt, 3 * 2048 * sizeof *cnt);
+    qk__free(al, rec, 3 * (size_t)n * sizeof *rec);
+    return 0;
+  }
   uint8_t *fm = (uint8_t *)(g + ng);
   uint8_t *exact = all_exact ? NULL : (uint8_t *)(x1 + ne);
   uint32_t *pos = start + nb + 1;
@@ -826,6 +873,10 @@ static int build_bands(const qk_world_t *w, const qk__wpack_t *pk, bands_t *bd) 
   for (int l = 0; l < 4; l++)
     g[ng - 1].x0[l] = g[ng - 1].y0[l] = INFINITY, g[ng - 1].y1[l] = -INFINITY,
            g[ng - 1].slot[l] = 0;
+  if (pg)
+    for (int l = 0; l < 4; l++)
+      pg[ng - 1].x0[l] = pg[ng - 1].y0[l] = INFINITY,
+              pg[ng - 1].x1[l] = pg[ng - 1].y1[l] = -INFINITY;
   const uint32_t *ord = w->order;
   for (uint32_t i = 0; i < n; i++) {
     uint32_t k = (uint32_t)a[i];
@@ -833,18 +884,23 @@ static int build_bands(const qk_world_t *w, const qk__wpack_t *pk, bands_t *bd) 
     uint32_t b = b01[2 * k], be = b01[2 * k + 1], s = ord[k];
     uint32_t p = pos[b]++;
     fm[p >> 2] |= (uint8_t)(1u << (p & 3)); /* its first band */
+    const float *pf = pg ? prev + 4 * (size_t)s : NULL;
     for (;;) {
       egrp_t *q = &g[p >> 2];
       q->x0[p & 3] = f[0], q->y0[p & 3] = f[4], q->y1[p & 3] = f[12], q->slot[p & 3] = s;
       x1[p] = f[8];
       if (exact) exact[p] = fx[k];
+      if (pf) {
+        pgrp_t *r = &pg[p >> 2];
+        r->x0[p & 3] = pf[0], r->y0[p & 3] = pf[1], r->x1[p & 3] = pf[2], r->y1[p & 3] = pf[3];
+      }
       if (++b > be) break;
       p = pos[b]++;
     }
   }
   qk__free(al, cnt, 3 * 2048 * sizeof *cnt);
   qk__free(al, rec, 3 * (size_t)n * sizeof *rec);
-  *bd = (bands_t){g, fm, x1, exact, start, nb, ne};
+  *bd = (bands_t){g, pg, fm, x1, exact, start, nb, ne};
   return 1;
 }
 
@@ -852,6 +908,7 @@ static void free_bands(const qk_world_t *w, bands_t *bd) {
   const qk_allocator_t *al = &w->alloc;
   if (!bd->start) return;
   qk__free(al, bd->g, (bd->ne / 4 + 1) * (sizeof *bd->g + 1));
+  if (bd->pg) qk__free(al, bd->pg, (bd->ne / 4 + 1) * sizeof *bd->pg);
   qk__free(al, bd->x1, bd->ne * (sizeof(float) + (bd->exact ? 1 : 0)));
   qk__free(al, bd->start, 2 * ((size_t)bd->nb + 1) * sizeof *bd->start);
   memset(bd, 0, sizeof *bd);
@@ -900,8 +957,10 @@ static qk_status_t search_nomem(const qk_world_t *w, qk__kvec_t *found, qk__kvec
 }
 
 qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kvec_t *out,
-                             qk__kvec_t *tk, int *split) {
+                             qk__kvec_t *tk, int *split, const float *prev, float *cur, int *cur_ok,
+                             int *only_new) {
   *split = 0;
+  *cur_ok = *only_new = 0;
   qk__kvec_t found = *out;
   found.n = 0;
   *out = (qk__kvec_t){0};
@@ -911,10 +970,13 @@ qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kve
   size_t n_rf = 0;
   bands_t bd = {0};
   const int by_bands = w->n_order > 1 && use_bands(w);
-  if (by_bands ? !build_bands(w, pk, &bd) : !level_info(w, pk, lv, &n_levels, &rf, &n_rf))
-    return search_nomem(w, &found, tk);
   unsigned nt = qk__world_update_threads(w);
   if (w->n_live < 4096) nt = 1; /* not worth a thread */
+  if (by_bands ? !build_bands(w, pk, &bd, prev, cur)
+               : !level_info(w, pk, lv, &n_levels, &rf, &n_rf))
+    return search_nomem(w, &found, tk);
+  *cur_ok = by_bands && cur && !bd.exact;
+  *only_new = bd.pg != NULL;
   /* Chunks of about equal work, taken in turn by the workers (many more than the
    * workers). By the grid, chunks of cells: an object's work grows with its size (the
    * finer cells its box covers): it is taken as 2^(l - finest level), so the few coarse
@@ -986,8 +1048,9 @@ qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kve
     }
   }
   /* With threads for the rows too (qk_world_update), the threads' keys stay where they
-   * are: the rows' first pass reads each thread's own (no serial copy here). */
-  int keep_split = nt > 1 && nt <= 1 + QK__KEEP_THREADS;
+   * are: the rows' first pass reads each thread's own (no serial copy here); the began
+   * pairs only (few) are joined here. */
+  int keep_split = nt > 1 && nt <= 1 + QK__KEEP_THREADS && !*only_new;
   if (st == QK_OK && !keep_split) {
     for (unsigned t = 1; t < nt; t++) {
       if (shares[t].out.n)

@@ -9,7 +9,9 @@
  *  - a huge world: unit objects at coordinates near 1e9, and sizes 1e-3 .. 1e3 together;
  *  - the bench's clustered mixed-size scene, small (boxes of 0.03 .. 30 on a 1/64 grid in
  *    eight clusters, moving; also with discs, segments and points): large objects over
- *    many finer levels' cells, inside them and on their borders;
+ *    many finer levels' cells, inside them and on their borders; and its frames in which
+ *    only the pairs that began are searched for (boxes on the float grid, none added or
+ *    removed; also frames without moves, with jumps, a box off the grid), on 1-3 threads;
  *  - a dense world (about 2.4 M pairs) whose update keeps its large buffers for the next
  *    one: pairs, began and ended every frame, on one thread and two;
  *  - hand-made touching cases of every pair of kinds (integers: the oracle is exact);
@@ -967,6 +969,74 @@ static void test_world_clustered_mixed_sizes(void **s) {
 }
 
 /*
+ * Frames in which no object is added or removed and every box is on the float grid (the
+ * bench's scene): the update then finds only the pairs that began (whose boxes did not
+ * meet at the last update) and keeps the last frame's pairs whose boxes still meet
+ * (collide/world_pairs.c, rows_began). The clustered boxes above, with frames where
+ * nothing moves (every pair stays), where a tenth of the boxes jump anywhere (whole rows
+ * begin and end), where one box leaves the float grid by 2^-30 (its float box is no longer
+ * exact: every pair is found again, as is the frame after) and where one is removed and
+ * one added; on one thread and, from 4096 objects, on two and three (rows_began by ranges
+ * of slots). Every frame against brute force (dense_check).
+ */
+static void run_began_only(unsigned threads, size_t n, int frames) {
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 131 + threads);
+  double cx[8], cy[8];
+  for (int c = 0; c < 8; c++)
+    cx[c] = q64(qkt_rng_range(&r, 5, 45)), cy[c] = q64(qkt_rng_range(&r, 5, 45));
+  qk_world_options_t o;
+  qk_world_options_init(&o);
+  o.threads = threads;
+  o.thread_min = 0;
+  qk_world_t *w;
+  assert_int_equal(qk_world_new(&o, &w), QK_OK);
+  mirror_t m = {0};
+  double *vx = malloc((n + 1) * sizeof *vx), *vy = malloc((n + 1) * sizeof *vy);
+  for (size_t k = 0; k < n; k++) {
+    m_add(w, &m, cm_shape(&r, cx, cy, 0));
+    double a = qkt_rng_range(&r, 0, 6.283185307179586);
+    vx[k] = q64(0.25 * cos(a)), vy[k] = q64(0.25 * sin(a));
+  }
+  qk_world_pair_t *prev = NULL;
+  size_t np = 0;
+  dense_check(w, &m, &prev, &np, 0);
+  for (int f = 1; f < frames; f++) {
+    int mode = f % 6; /* 0, 1: moves; 2: none; 3: jumps; 4: off the grid; 5: remove, add */
+    if (mode == 5) {
+      size_t i = m_remove_random(w, &m, &r);
+      vx[i] = vx[m.n], vy[i] = vy[m.n];
+      m_add(w, &m, cm_shape(&r, cx, cy, 0));
+    }
+    for (size_t i = 0; mode != 2 && i < m.n; i++) {
+      qk_shape_t sh = m.s[i];
+      if (mode == 3 && qkt_rng_below(&r, 10) == 0) {
+        sh = cm_shape(&r, cx, cy, 0);
+      } else {
+        if (sh.x + vx[i] < 0 || sh.x + vx[i] > 50) vx[i] = -vx[i];
+        if (sh.y + vy[i] < 0 || sh.y + vy[i] > 50) vy[i] = -vy[i];
+        sh.x += vx[i], sh.y += vy[i], sh.a += vx[i], sh.b += vy[i];
+      }
+      if (i == 0 && mode == 4) sh.x -= 0x1p-30; /* (still below sh.a) */
+      if (i == 0 && mode == 5) sh.x = q64(sh.x);
+      assert_int_equal(qk_world_move(w, m.h[i], &sh), QK_OK);
+      m.s[i] = o_norm(sh);
+    }
+    dense_check(w, &m, &prev, &np, f);
+  }
+  assert_true(np > 3 * n);
+  free(prev), free(vx), free(vy);
+  free(m.h), free(m.s);
+  qk_world_free(w);
+}
+
+static void test_world_began_only(void **s) {
+  (void)s;
+  run_began_only(1, 1200, 13);
+  for (unsigned th = 1; th <= 3; th++) run_began_only(th, 4200, 8);
+}
+
+/*
  * The search by bands (collide/world_search.c: sizes over several levels, here from 1/8
  * to 40), at its edges: on a lattice of 1/8 so that many xmin are equal and many boxes
  * touch; tall and wide boxes crossing many bands and one another in many of them (each
@@ -1603,6 +1673,7 @@ int main(void) {
       cmocka_unit_test(test_world_all_kinds),
       cmocka_unit_test(test_world_huge),
       cmocka_unit_test(test_world_clustered_mixed_sizes),
+      cmocka_unit_test(test_world_began_only),
       cmocka_unit_test(test_world_bands_edges),
       cmocka_unit_test(test_world_grid_levels),
       cmocka_unit_test(test_world_prefilter_and_sort),
