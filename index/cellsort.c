@@ -160,42 +160,37 @@ _Static_assert(sizeof(rec_t) == 20, "records of 20 bytes");
 #define MAX_COARSE_BITS 8u
 /* Most points a thread stages in pass 3: 320 KB, within a core's second-level cache. */
 #define STAGE_MAX 16384u
-/* Points per block of the key computation. */
+/* Points per block of the key computation: their keys stay in the first-level cache
+ * between the loop that computes them and the one that scatters them. */
 #define BLOCK 256u
-/* Points per chunk of pass 1 (512 KB of input): the key loop reads a chunk from memory,
- * the scatter reads it again from the second-level cache (with the chunk's keys, 64 KB,
- * the thread's histogram, 256 KB, and the buffers, 80 KB). A multiple of BLOCK and WC. */
-#define CHUNK 32768u
 
 typedef struct bucket_job {
   qk_tree_t *t;
   const qk_point_t *p;
   size_t n;
   double x0, y0, scale;
-  const axis_tab_t *ax, *ay;  /* the key tables of the two axes */
-  unsigned fbits;             /* bits of the low digit */
-  size_t nc;                  /* coarse buckets */
-  bool stream;                /* write records and points around the caches */
-  uint16_t *key;              /* CHUNK cells per thread */
-  rec_t *rec;                 /* 64-byte aligned */
-  size_t region;              /* records per chunk's region of rec */
-  uint32_t *seg;              /* ns rows of nc: where the records of (w, c) start */
-  uint32_t *cnt;              /* ns rows of nc: records of bucket c from chunk w */
-  uint32_t *hist;             /* nw rows of 4^L: the points of every cell by thread */
-  unsigned char *hist_zeroed; /* nw: whether the thread's row is zeroed yet */
-  size_t nb;                  /* cells, 4^L */
-  uint32_t *cbase;            /* nc + 1 coarse bucket starts in the point arrays */
-  uint32_t *cum;              /* 4^L + 1 fine bucket starts */
-  uint32_t *deep;             /* nc: points of bucket c in cells over the capacity */
-  unsigned nw;                /* threads */
-  unsigned ns;                /* chunks of pass 1, at least nw */
-  uint32_t stage_cap;         /* points per thread in the staging arrays (0: none) */
-  double *sxy;                /* the staging arrays, stage_cap per thread: coordinate pairs */
+  const axis_tab_t *ax, *ay; /* the key tables of the two axes */
+  unsigned fbits;            /* bits of the low digit */
+  size_t nc;                 /* coarse buckets */
+  bool stream;               /* write records and points around the caches */
+  uint16_t *key;             /* every point's cell */
+  rec_t *rec;                /* 64-byte aligned */
+  uint32_t *seg;             /* ns rows of nc: where the records of (w, c) start */
+  uint32_t *cnt;             /* ns rows of nc: records of bucket c from share w */
+  uint32_t *hist;            /* ns rows of 4^L: the points of every cell by share */
+  size_t nb;                 /* cells, 4^L */
+  uint32_t *cbase;           /* nc + 1 coarse bucket starts in the point arrays */
+  uint32_t *cum;             /* 4^L + 1 fine bucket starts */
+  uint32_t *deep;            /* nc: points of bucket c in cells over the capacity */
+  unsigned nw;               /* threads */
+  unsigned ns;               /* shares of pass 1, at least nw */
+  uint32_t stage_cap;        /* points per thread in the staging arrays (0: none) */
+  double *sxy;               /* the staging arrays, stage_cap per thread: coordinate pairs */
   qk_id_t *sid;
   double near;   /* the scaling's error bound, in grid units */
   uint32_t even; /* the even bits of a key */
   bool avx2;     /* keys four at a time, copies 32 bytes a store */
-  bool gid;      /* tags hold the point's index in the input, not in its chunk */
+  bool gid;      /* tags hold the point's index in the input, not in its share */
 } bucket_job_t;
 
 /* The cell of one point by the tables: the truncated scaled coordinate, corrected by the
@@ -358,14 +353,45 @@ __attribute__((target("avx"))) static void flush_wc_avx(rec_t *d, const rec_t *s
 }
 #endif
 
-/* Coarse bucket c's fine buckets' starts from the threads' counts of pass 1, and the points
+/* Pass 1 for share w: every point's cell, and the share's count of every cell and of
+ * every coarse bucket. */
+static void keys_job(unsigned w, unsigned thread, void *ctx) {
+  (void)thread;
+  const bucket_job_t *j = ctx;
+  size_t lo, hi;
+  qk__share_range(j->n, w, j->ns, &lo, &hi);
+  uint32_t *h = j->hist + (size_t)w * j->nb;
+  const qk_point_t *p = j->p;
+  uint16_t *key = j->key;
+  memset(h, 0, j->nb * sizeof *h);
+  for (size_t i0 = lo; i0 < hi; i0 += BLOCK) {
+    size_t m = hi - i0 < BLOCK ? hi - i0 : BLOCK;
+    const uint16_t *k = key + i0;
+    keys_block(j, p + i0, m, key + i0);
+    size_t q = 0;
+    for (; q + 4 <= m; q += 4) {
+      h[k[q]]++;
+      h[k[q + 1]]++;
+      h[k[q + 2]]++;
+      h[k[q + 3]]++;
+    }
+    for (; q < m; q++) h[k[q]]++;
+  }
+  const size_t nc = j->nc, nf = (size_t)1 << j->fbits;
+  for (size_t c = 0; c < nc; c++) {
+    uint32_t k = 0;
+    for (size_t f = 0; f < nf; f++) k += h[c * nf + f];
+    j->cnt[(size_t)w * nc + c] = k;
+  }
+}
+
+/* Coarse bucket c's fine buckets' starts from the shares' counts of pass 1, and the points
  * of its cells over the capacity. */
 static void bucket_starts(const bucket_job_t *j, size_t c) {
   const uint32_t nf = 1u << j->fbits;
   uint32_t next[1u << (16 - MAX_COARSE_BITS)];
-  memset(next, 0, nf * sizeof *next);
-  for (unsigned v = 0; v < j->nw; v++) {
-    if (!j->hist_zeroed[v]) continue; /* a thread that took no chunk */
+  memcpy(next, j->hist + c * nf, nf * sizeof *next);
+  for (unsigned v = 1; v < j->ns; v++) {
     const uint32_t *h = j->hist + (size_t)v * j->nb + c * nf;
     for (uint32_t f = 0; f < nf; f++) next[f] += h[f];
   }
@@ -409,18 +435,6 @@ tags_avx2(const uint16_t *k, size_t m, uint32_t tq, unsigned fbits, uint8_t *cb,
 }
 #endif
 
-/* A write-combining buffer to memory through the caches (mode 0) or around them (1: SSE2,
- * 2: AVX). */
-static QK__ALWAYS_INLINE void flush_mode(rec_t *d, const rec_t *s, unsigned mode) {
-#if QK__CELL_AVX2
-  if (mode == 2) {
-    flush_wc_avx(d, s);
-    return;
-  }
-#endif
-  flush_wc(d, s, mode != 0);
-}
-
 /* One point into its bucket's write-combining buffer as a record (its coordinates and
  * tag); a full buffer goes to the bucket's next WC records of the record array, through
  * the caches (mode 0) or around them (1: SSE2, 2: AVX). */
@@ -434,56 +448,33 @@ static QK__ALWAYS_INLINE void put_rec(unsigned char *bytes, uint32_t *off, const
   if (QK__UNLIKELY(o == end[c])) {
     /* next[c] is a multiple of WC and the array 64-byte aligned: whole lines */
     o -= WC * (uint32_t)sizeof(rec_t);
-    flush_mode(&rec[next[c]], (const rec_t *)(const void *)(bytes + o), mode);
+    const rec_t *src = (const rec_t *)(const void *)(bytes + o);
+#if QK__CELL_AVX2
+    if (mode == 2)
+      flush_wc_avx(&rec[next[c]], src);
+    else
+#endif
+      flush_wc(&rec[next[c]], src, mode != 0);
     next[c] += WC;
   }
   off[c] = o;
 }
 
-/* Pass 1 for chunk w (on thread `thread`): every point's cell, counted in the thread's
- * histogram of all cells and in the chunk's count of every coarse bucket; then the points
- * as records into their coarse buckets' segments of the chunk's region, stable. Each
- * bucket's records gather in a buffer of WC (five cache lines) that goes to memory whole,
- * with non-temporal stores for large inputs: no line of the record array is read before it
- * is written, and 2^8 buffers, unlike 2^8 scattered write streams, stay in cache. The
- * chunk (CHUNK points, 512 KB) is read from memory once, by the key loop; the scatter
- * reads it again from the second-level cache. */
-static void chunk_job(unsigned w, unsigned thread, void *ctx) {
+/* Pass 2 for share w: the points as records into their coarse buckets' segments, stable.
+ * Each bucket's records gather in a buffer of WC (five cache lines) that goes to memory
+ * whole, with non-temporal stores for large inputs: no line of the record array is read
+ * before it is written, and 2^8 buffers, unlike 2^8 scattered write streams, stay in
+ * cache. */
+static void scatter_job(unsigned w, unsigned thread, void *ctx) {
+  (void)thread;
   const bucket_job_t *j = ctx;
-  size_t lo = (size_t)w * CHUNK, hi = lo + CHUNK < j->n ? lo + CHUNK : j->n;
+  size_t lo, hi;
+  qk__share_range(j->n, w, j->ns, &lo, &hi);
   const size_t nc = j->nc;
   const qk_point_t *p = j->p;
-  uint16_t *key = j->key + (size_t)thread * CHUNK;
-  uint32_t *h = j->hist + (size_t)thread * j->nb;
-  if (!j->hist_zeroed[thread]) { /* only this thread touches its flag */
-    memset(h, 0, j->nb * sizeof *h);
-    j->hist_zeroed[thread] = 1;
-  }
-  const unsigned fbits = j->fbits;
-  uint32_t cc[1u << MAX_COARSE_BITS];
-  memset(cc, 0, nc * sizeof *cc);
-  for (size_t i0 = lo; i0 < hi; i0 += BLOCK) {
-    size_t m = hi - i0 < BLOCK ? hi - i0 : BLOCK;
-    uint16_t *k = key + (i0 - lo);
-    keys_block(j, p + i0, m, k);
-    size_t q = 0;
-    for (; q + 4 <= m; q += 4) {
-      h[k[q]]++;
-      h[k[q + 1]]++;
-      h[k[q + 2]]++;
-      h[k[q + 3]]++;
-      cc[k[q] >> fbits]++;
-      cc[k[q + 1] >> fbits]++;
-      cc[k[q + 2] >> fbits]++;
-      cc[k[q + 3] >> fbits]++;
-    }
-    for (; q < m; q++) {
-      h[k[q]]++;
-      cc[k[q] >> fbits]++;
-    }
-  }
-  /* The chunk's region: its buckets' segments in bucket order, each at a multiple of WC. */
+  const uint16_t *key = j->key;
   rec_t *rec = j->rec;
+  const unsigned fbits = j->fbits;
   const uint32_t mask = (1u << fbits) - 1;
   const bool stream = j->stream;
   const unsigned mode = !stream ? 0u : j->avx2 ? 2u : 1u;
@@ -493,18 +484,15 @@ static void chunk_job(unsigned w, unsigned thread, void *ctx) {
   _Alignas(64) rec_t buf[(1u << MAX_COARSE_BITS) * WC];
   _Alignas(16) uint32_t tag[BLOCK];
   _Alignas(16) uint8_t cb[BLOCK];
-  uint32_t at = (uint32_t)(w * j->region);
   for (size_t c = 0; c < nc; c++) {
-    j->seg[(size_t)w * nc + c] = next[c] = at;
-    j->cnt[(size_t)w * nc + c] = cc[c];
-    at += (cc[c] + WC - 1) / WC * WC;
+    next[c] = j->seg[(size_t)w * nc + c];
     off[c] = (uint32_t)(c * WC * sizeof(rec_t));
     end[c] = (uint32_t)((c + 1) * WC * sizeof(rec_t));
   }
   unsigned char *bytes = buf[0].b;
   for (size_t i0 = lo; i0 < hi; i0 += BLOCK) {
     size_t m = hi - i0 < BLOCK ? hi - i0 : BLOCK;
-    const uint16_t *k = key + (i0 - lo);
+    const uint16_t *k = key + i0;
     /* The block's buckets and tags in a loop of their own (vectorised: by hand with AVX2),
      * so that the scatter loop does little more than copy. */
     uint32_t tq = (uint32_t)(j->gid ? i0 : i0 - lo) << fbits;
@@ -520,7 +508,9 @@ static void chunk_job(unsigned w, unsigned thread, void *ctx) {
     }
     const qk_point_t *pp = p + i0;
     size_t q = 0;
+    /* Four points a step, with one prefetch for their line of the input. */
     for (; q + 4 <= m; q += 4) {
+      QK__PREFETCH_PTS(&pp[q]);
       put_rec(bytes, off, end, next, rec, &pp[q], cb[q], tag[q], mode);
       put_rec(bytes, off, end, next, rec, &pp[q + 1], cb[q + 1], tag[q + 1], mode);
       put_rec(bytes, off, end, next, rec, &pp[q + 2], cb[q + 2], tag[q + 2], mode);
@@ -528,25 +518,35 @@ static void chunk_job(unsigned w, unsigned thread, void *ctx) {
     }
     for (; q < m; q++) put_rec(bytes, off, end, next, rec, &pp[q], cb[q], tag[q], mode);
   }
-  /* The buffers' last records: a segment's length is a multiple of WC, so a whole buffer
-   * fits where its last records go (what follows them is never read). */
   for (size_t c = 0; c < nc; c++) {
     uint32_t fill = (uint32_t)(off[c] - c * WC * sizeof(rec_t)) / (uint32_t)sizeof(rec_t);
-    if (stream && fill)
-      flush_mode(&rec[next[c]], &buf[c * WC], mode);
-    else
-      memcpy(&rec[next[c]], &buf[c * WC], fill * sizeof *rec);
+    memcpy(&rec[next[c]], &buf[c * WC], fill * sizeof *rec);
   }
 #if defined(__SSE2__)
   if (stream) _mm_sfence(); /* the streamed lines before anything the caller does next */
 #endif
+  /* The bucket starts, a share of the buckets each, so that the whole tree can be read off
+   * them before (or while) the fine pass runs. */
+  for (size_t c = w; c < nc; c += j->ns) bucket_starts(j, c);
 }
 
-/* The bucket starts, a share of the buckets each, so that the whole tree can be read off
- * them before (or while) the fine pass runs. */
-static void starts_share(void *ctx, unsigned w, unsigned nw) {
-  const bucket_job_t *j = ctx;
-  for (size_t c = w; c < j->nc; c += nw) bucket_starts(j, c);
+static void keys_share(void *ctx, unsigned w, unsigned nw) {
+  (void)nw;
+  keys_job(w, w, ctx);
+}
+
+static void scatter_share(void *ctx, unsigned w, unsigned nw) {
+  (void)nw;
+  scatter_job(w, w, ctx);
+}
+
+/* Run a pass over the shares: share w on thread w when there are as many, else as jobs. */
+static void run_pass(const bucket_job_t *j, qk__share_fn share,
+                     void (*job)(unsigned, unsigned, void *)) {
+  if (j->ns == j->nw) /* not two shares on a thread that happened to start first */
+    qk__run_shares(j->nw, share, (void *)j);
+  else
+    qk__run_jobs_dynamic(j->nw, j->ns, job, (void *)j);
 }
 
 #if QK__CELL_AVX2
@@ -627,16 +627,10 @@ static QK__ALWAYS_INLINE void fine_records(const bucket_job_t *j, unsigned c, ui
   const unsigned fbits = j->fbits;
   const uint32_t mask = (1u << fbits) - 1;
   for (unsigned v = 0; v < j->ns; v++) {
-    const uint32_t id0 = gid ? 0u : v * CHUNK;
+    size_t lo, hi;
+    qk__share_range(j->n, v, j->ns, &lo, &hi);
+    const uint32_t id0 = gid ? 0u : (uint32_t)lo;
     const rec_t *r = j->rec + j->seg[(size_t)v * nc + c], *e = r + j->cnt[(size_t)v * nc + c];
-    /* The next chunk's segment read ahead as this one starts (the loop's prefetch runs
-     * PREFETCH_RECS records ahead within a segment). */
-    if (v + 1 < j->ns) {
-      const unsigned char *nx = (const unsigned char *)(j->rec + j->seg[(size_t)(v + 1) * nc + c]);
-      size_t nb = (size_t)j->cnt[(size_t)(v + 1) * nc + c] * sizeof *r;
-      if (nb > PREFETCH_RECS * sizeof *r) nb = PREFETCH_RECS * sizeof *r;
-      for (size_t o = 0; o < nb; o += 64) QK__PREFETCH(nx + o);
-    }
     /* Two records a step: the second's slot is taken after the first's, as one at a time
      * would (they may share a fine bucket). The records come from memory (written around
      * the caches) and are read ahead by hand, about 2 KB: the hardware's prefetch alone
@@ -840,11 +834,10 @@ static void hook_share(void *ctx, unsigned w, unsigned nw) {
 typedef struct scratch {
   uint32_t *cum, *cbase, *cnt, *seg, *hist, *deep;
   uint16_t *key;
-  unsigned char *hist_zeroed;
   void *rec_block; /* rec, before alignment */
   double *sxy;
   qk_id_t *sid;
-  size_t nb, nc, n, ns, nw, n_rec, rec_bytes, n_stage;
+  size_t nb, nc, n, ns, n_rec, rec_bytes, n_stage;
 } scratch_t;
 
 static void scratch_free(const qk_tree_t *t, scratch_t *s) {
@@ -853,9 +846,8 @@ static void scratch_free(const qk_tree_t *t, scratch_t *s) {
   qk__free(&t->alloc, s->deep, s->nc * sizeof *s->deep);
   qk__free(&t->alloc, s->cnt, s->ns * s->nc * sizeof *s->cnt);
   qk__free(&t->alloc, s->seg, s->ns * s->nc * sizeof *s->seg);
-  qk__free(&t->alloc, s->hist, s->nw * s->nb * sizeof *s->hist);
-  qk__free(&t->alloc, s->hist_zeroed, s->nw);
-  qk__free(&t->alloc, s->key, s->nw * CHUNK * sizeof *s->key);
+  qk__free(&t->alloc, s->hist, s->ns * s->nb * sizeof *s->hist);
+  qk__free(&t->alloc, s->key, s->n * sizeof *s->key);
   qk__free(&t->alloc, s->rec_block, s->rec_bytes);
   qk__free(&t->alloc, s->sxy, 2 * s->n_stage * sizeof *s->sxy);
   qk__free(&t->alloc, s->sid, s->n_stage * sizeof *s->sid);
@@ -887,24 +879,21 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
   if (cbits > MAX_COARSE_BITS) cbits = MAX_COARSE_BITS;
   unsigned fbits = kbits - cbits;
   size_t nb = (size_t)1 << kbits, nc = (size_t)1 << cbits;
-  /* Chunks of CHUNK points (the last one shorter), taken as jobs by the threads: the same
-   * chunks on any number of threads. A tag numbers 2^(32 - fbits) >= 2^24 points. */
-  size_t ns = (n + CHUNK - 1) / CHUNK;
-  /* A chunk's region: its points, and up to WC - 1 records of padding after each of its
-   * buckets' segments. Records are numbered in 32 bits. */
-  size_t region = CHUNK + nc * WC, n_rec = (ns - 1) * region + (n - (ns - 1) * CHUNK) + nc * WC;
-  if (n_rec > UINT32_MAX) return QK_OK;
+  /* Shares: one per thread, and more where a share would have more than 2^19 points. A tag
+   * numbers 2^(32 - fbits) >= 2^24 points; the lower bound also has every input of more than
+   * 2^19 points (the tests' too) sorted in several shares, on any number of threads. */
+  size_t per = (size_t)1 << 19, ns = (n + per - 1) / per;
+  if (ns < nw) ns = nw;
   scratch_t s = {0};
-  s.nb = nb, s.nc = nc, s.n = n, s.ns = ns, s.nw = nw;
+  s.nb = nb, s.nc = nc, s.n = n, s.ns = ns;
   s.cum = qk__realloc(&t->alloc, NULL, 0, (nb + 1) * sizeof *s.cum);
   s.cbase = qk__realloc(&t->alloc, NULL, 0, (nc + 1) * sizeof *s.cbase);
   s.deep = qk__realloc(&t->alloc, NULL, 0, nc * sizeof *s.deep);
   s.cnt = qk__realloc(&t->alloc, NULL, 0, ns * nc * sizeof *s.cnt);
   s.seg = qk__realloc(&t->alloc, NULL, 0, ns * nc * sizeof *s.seg);
-  s.hist = qk__realloc(&t->alloc, NULL, 0, nw * nb * sizeof *s.hist);
-  s.hist_zeroed = qk__realloc(&t->alloc, NULL, 0, nw);
-  s.key = qk__realloc(&t->alloc, NULL, 0, nw * CHUNK * sizeof *s.key);
-  if (!s.cum || !s.cbase || !s.deep || !s.cnt || !s.seg || !s.hist || !s.hist_zeroed || !s.key) {
+  s.hist = qk__realloc(&t->alloc, NULL, 0, ns * nb * sizeof *s.hist);
+  s.key = qk__realloc(&t->alloc, NULL, 0, n * sizeof *s.key);
+  if (!s.cum || !s.cbase || !s.deep || !s.cnt || !s.seg || !s.hist || !s.key) {
     scratch_free(t, &s);
     return QK_ERR_NOMEM;
   }
@@ -922,11 +911,27 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
 #if QK__CELL_AVX2
   j.avx2 = qk__build_avx2();
 #endif
-  s.n_rec = n_rec;
-  j.region = region;
+  run_pass(&j, keys_share, keys_job);
+  /* The buckets' starts, and each share's segment of every bucket: the shares before it
+   * come first, so the order is the one thread's. Segments start at multiples of WC. */
+  uint32_t acc = 0, most = 0;
+  size_t at = 0;
+  for (size_t c = 0; c < nc; c++) {
+    s.cbase[c] = acc;
+    for (size_t w = 0; w < ns; w++) {
+      uint32_t k = s.cnt[w * nc + c];
+      s.seg[w * nc + c] = (uint32_t)at;
+      at += (k + WC - 1) / WC * WC;
+      acc += k;
+    }
+    if (acc - s.cbase[c] > most) most = acc - s.cbase[c];
+  }
+  s.cbase[nc] = acc;
+  s.cum[nb] = acc;
+  s.n_rec = at ? at : 1;
   /* From the default allocator, the record block is asked for at least as large as the
-   * rest of what a build holds (the tree's point arrays and nodes by estimate, the
-   * counts) and a megabyte. glibc's malloc gives the top of its heap back to the
+   * rest of what a build holds (the tree's point arrays and nodes by estimate, the keys,
+   * the counts) and a megabyte. glibc's malloc gives the top of its heap back to the
    * system when a free leaves more there than twice the largest block it recently had to
    * map: freeing a tree after a build whose largest block were less than half of it all
    * would hand back every page, and the next build would fault them all in again (10,000
@@ -934,7 +939,7 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
    * over 32 MB are mapped afresh whatever their size (glibc's largest mapping threshold). */
   s.rec_bytes = s.n_rec * sizeof(rec_t) + 64;
   if (!t->alloc.fn) {
-    size_t rest = n * (2 * sizeof(double) + sizeof(qk_id_t) + sizeof(uint16_t)) + nw * nb * 4 +
+    size_t rest = n * (2 * sizeof(double) + sizeof(qk_id_t) + sizeof *s.key) + ns * nb * 4 +
                   (4 * (n / t->capacity) + 64) * sizeof(qk__node_t) + ((size_t)1 << 20);
     if (s.rec_bytes < rest && rest <= ((size_t)32 << 20)) s.rec_bytes = rest;
   }
@@ -946,22 +951,9 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
   /* The scatter writes 2^8 streams at once: on huge pages, they need fewer TLB entries. */
   if (t->huge_pages) qk__advise_huge(&t->alloc, s.rec_block, s.n_rec * sizeof(rec_t) + 64);
   j.rec = (rec_t *)(void *)((unsigned char *)s.rec_block + (-(uintptr_t)s.rec_block & 63u));
-  j.hist_zeroed = s.hist_zeroed;
-  memset(s.hist_zeroed, 0, nw);
-  qk__run_jobs_dynamic(nw, (unsigned)ns, chunk_job, &j);
-  qk__free(&t->alloc, s.key, nw * CHUNK * sizeof *s.key);
+  run_pass(&j, scatter_share, scatter_job);
+  qk__free(&t->alloc, s.key, n * sizeof *s.key);
   s.key = NULL;
-  /* The buckets' starts in the point arrays: each bucket's chunks in order, so the order
-   * is the one thread's. */
-  uint32_t acc = 0, most = 0;
-  for (size_t c = 0; c < nc; c++) {
-    s.cbase[c] = acc;
-    for (size_t w = 0; w < ns; w++) acc += s.cnt[w * nc + c];
-    if (acc - s.cbase[c] > most) most = acc - s.cbase[c];
-  }
-  s.cbase[nc] = acc;
-  s.cum[nb] = acc;
-  qk__run_shares(nw < nc ? nw : (unsigned)nc, starts_share, &j);
   /* Staging arrays for pass 3, each thread's as large as the largest coarse bucket up to
    * STAGE_MAX points. */
   size_t cap = most < STAGE_MAX ? most : STAGE_MAX;
