@@ -410,7 +410,7 @@ static void bucket_starts(const bucket_job_t *j, size_t c) {
  * took 3.8 instructions a point): cb[q] = k[q] >> fbits, tag[q] = tq + (q << fbits) +
  * (k[q] & mask). Returns how many were done (a multiple of 16). */
 __attribute__((target("avx2"))) static size_t
-tags_avx2(const uint16_t *k, size_t m, uint32_t tq, unsigned fbits, uint8_t *cb, uint32_t *tag) {
+tags_avx2(const uint16_t *k, size_t m, uint32_t tq, unsigned fbits, uint16_t *cb, uint32_t *tag) {
   const __m128i sh = _mm_cvtsi32_si128((int)fbits);
   const __m256i mask = _mm256_set1_epi32((int)((1u << fbits) - 1));
   const __m256i lane =
@@ -421,8 +421,7 @@ tags_avx2(const uint16_t *k, size_t m, uint32_t tq, unsigned fbits, uint8_t *cb,
   for (; q + 16 <= m; q += 16) {
     __m256i v = _mm256_loadu_si256((const __m256i *)(const void *)&k[q]);
     __m256i c = _mm256_srl_epi16(v, sh);
-    _mm_storeu_si128((__m128i *)(void *)&cb[q],
-                     _mm_packus_epi16(_mm256_castsi256_si128(c), _mm256_extracti128_si256(c, 1)));
+    _mm256_storeu_si256((__m256i *)(void *)&cb[q], c);
     __m256i lo = _mm256_cvtepu16_epi32(_mm256_castsi256_si128(v));
     __m256i hi = _mm256_cvtepu16_epi32(_mm256_extracti128_si256(v, 1));
     _mm256_storeu_si256((__m256i *)(void *)&tag[q], _mm256_or_si256(t, _mm256_and_si256(lo, mask)));
@@ -483,7 +482,7 @@ static void scatter_job(unsigned w, unsigned thread, void *ctx) {
   uint32_t off[1u << MAX_COARSE_BITS], end[1u << MAX_COARSE_BITS];
   _Alignas(64) rec_t buf[(1u << MAX_COARSE_BITS) * WC];
   _Alignas(16) uint32_t tag[BLOCK];
-  _Alignas(16) uint8_t cb[BLOCK];
+  _Alignas(32) uint16_t cb[BLOCK];
   for (size_t c = 0; c < nc; c++) {
     next[c] = j->seg[(size_t)w * nc + c];
     off[c] = (uint32_t)(c * WC * sizeof(rec_t));
@@ -503,7 +502,7 @@ static void scatter_job(unsigned w, unsigned thread, void *ctx) {
     tq += (uint32_t)q0 << fbits;
 #endif
     for (size_t q = q0; q < m; q++, tq += step) {
-      cb[q] = (uint8_t)(k[q] >> fbits);
+      cb[q] = (uint16_t)(k[q] >> fbits);
       tag[q] = tq | (k[q] & mask);
     }
     const qk_point_t *pp = p + i0;
