@@ -330,7 +330,9 @@ static void join_usage(FILE *f) {
              "containing feature (a point in none gets one row with -1). --xy picks the\n"
              "coordinate columns by header name or 1-based number (default: the first two).\n"
              "A header line (x and y fields not numbers) is copied with the new column names\n"
-             "appended. A bad line is an error before any row is written (-o FILE is replaced\n"
+             "appended, each prefixed feature_ (again while still taken) when the header or an\n"
+             "earlier new column has it (--field name beside a name column: feature_name).\n"
+             "A bad line is an error before any row is written (-o FILE is replaced\n"
              "only on success; on standard output a POINTS file is checked whole first, while\n"
              "points from a pipe are written as read). --threads N answers on N threads\n"
              "(default 1; 0: one per core; at most 256).\n");

@@ -36,6 +36,8 @@ printf 'feature,feature_feature,lon,lat\n7,8,1,1\n' >"$tmp/fh.csv"
 "$cli" join "$layer" "$tmp/fh.csv" --xy lon,lat --field name --field code >"$tmp/got"
 printf 'feature,feature_feature,lon,lat,feature_feature_feature,name,code\n7,8,1,1,0,West,W\n' >"$tmp/want"
 same "join: appended names unique" "$tmp/got" "$tmp/want"
+# ... and --help says so (it said only that the names are appended)
+expect 0 'prefixed feature_' -- "$cli" join --help
 # by number, closed boundary: the shared edge is in both; --all lists both
 "$cli" join "$layer" "$pts" --xy 2,3 --all --boundary closed --field code -o "$tmp/all.csv"
 grep -c '^shared edge,10,5,' "$tmp/all.csv" | grep -qx 2 && passes=$((passes + 1)) ||
