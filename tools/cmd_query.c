@@ -569,14 +569,11 @@ static void raycast_usage(FILE *f) {
              "optional tmax (a segment from o to o + d has tmax 1). A direction of 0,0 is\n"
              "the point at the origin: it hits the lowest-numbered disc that contains or\n"
              "touches it (t = 0), else nothing. With --boxes the first file holds boxes\n"
-             "(xmin,ymin,xmax,ymax).\n"
-             "Output: ray,disc,t  (one row per ray; ray,-1,inf when nothing is hit), or\n"
-             "ray,box,t with --boxes\n" KEEP_HELP(
-                 "ray, disc (box with --boxes) or both") "  --capacity C  items per leaf of the "
-                                                         "tree (default 16)\n"
-                                                         "  -o FILE       write to FILE instead of "
-                                                         "standard "
-                                                         "output\n");
+             "(xmin,ymin,xmax,ymax), and the output and --keep say box for disc (ray,box,t).\n"
+             "Output: ray,disc,t  (one row per ray; ray,-1,inf when nothing is hit)\n");
+  fputs(KEEP_HELP("ray, disc or both") "  --capacity C  items per leaf of the tree (default 16)\n"
+                                       "  -o FILE       write to FILE instead of standard output\n",
+        f);
 }
 
 static int raycast_prepare(qrun_t *q) {

@@ -115,6 +115,8 @@ expect 2 '-r R is required' -- "$cli" geo radius "$tmp/g.csv" "$tmp/gq.csv"
 for c in knn range radius locate collide raycast geo; do
   expect 0 "usage: quadkit $c" -- "$cli" $c --help
 done
+# no wider than knn's (raycast's --keep line ran to 101 columns once it named box)
+same_text "raycast --help width" "$("$cli" raycast --help | awk 'length > 85')" ""
 expect 2 '-k K is required' -- "$cli" knn "$tmp/p.csv" "$tmp/q.csv"
 expect 2 'must be a whole number' -- "$cli" knn "$tmp/p.csv" "$tmp/q.csv" -k 0
 expect 2 'must not be negative' -- "$cli" radius "$tmp/p.csv" "$tmp/q.csv" -r -1
