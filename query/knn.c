@@ -514,7 +514,7 @@ static inline void scan_sorted(const qk_tree_t *t, qk_node_t leaf, double qx, do
 }
 
 /* Ask for the x and y lines of a leaf's first points (at most 64). */
-static inline void prefetch_points(const qk_tree_t *t, qk_node_t leaf) {
+static QK__ALWAYS_INLINE void prefetch_points(const qk_tree_t *t, qk_node_t leaf) {
   const uint32_t start = qk__node_start(t, leaf), count = qk__node_count(t, leaf);
   const uint32_t m = count < 64 ? count : 64;
   if (m == 0) return;
@@ -536,7 +536,7 @@ static inline void prefetch_points(const qk_tree_t *t, qk_node_t leaf) {
  * being a miss of its own after the whole search. The first, middle and last of up to 32
  * ids (128 bytes) touch every line they span, with no test on the count.
  */
-static inline void prefetch_ids(const qk_tree_t *t, qk_node_t leaf) {
+static QK__ALWAYS_INLINE void prefetch_ids(const qk_tree_t *t, qk_node_t leaf) {
   const uint32_t start = qk__node_start(t, leaf), count = qk__node_count(t, leaf);
   if (count == 0) return;
   const uint32_t m = count < 32 ? count : 32;
@@ -559,7 +559,7 @@ static inline void prefetch_ids(const qk_tree_t *t, qk_node_t leaf) {
  * k = 8 and 32, whose searches are bound by their insertions rather than by misses. Only
  * hints: the search is the same.
  */
-static inline void prefetch_uncles(const qk_tree_t *t, const qk__path_t *p) {
+static QK__ALWAYS_INLINE void prefetch_uncles(const qk_tree_t *t, const qk__path_t *p) {
   if (p->len < 2) return;
   const unsigned g = p->len - 2; /* the grandparent's level */
   const uint32_t first = qk__node_child(t, p->cell[g].node);
