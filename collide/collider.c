@@ -1809,7 +1809,7 @@ prefetch_climbs(const qk_collider_t *c, const uint32_t *path, unsigned n, unsign
       const char *p =
           cnt == QK_NONE ? qb + (size_t)l * sizeof(qnode_t) : sb + (size_t)l * sizeof(sdisc_t);
       QK__CPREFETCH(p);
-      QK__CPREFETCH(p + 64);
+      QK__CPREFETCH((const void *)((uintptr_t)p + 64)); /* (may pass an array's end) */
     }
   }
 }
@@ -1897,7 +1897,7 @@ cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk_hit_t *hit)
                * prefetch_climbs, the hardware's adjacent-line fetch mostly brings the rest
                * (all five lines, as before, measured no faster). */
               QK__CPREFETCH(&c->sdisc[st]);
-              QK__CPREFETCH((const char *)&c->sdisc[st] + 64);
+              QK__CPREFETCH((const void *)((uintptr_t)&c->sdisc[st] + 64));
             } else {
               QK__CPREFETCH(c->sdisc ? (const void *)&c->sdisc[st] : (const void *)&c->sbox[st]);
               QK__CPREFETCH(&qk__tree_ids(t)[st]);
