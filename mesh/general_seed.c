@@ -297,7 +297,6 @@ static qk_status_t seeds(qk__gm_t *g, uint32_t node, double X, double Y, double 
     double x0 = in_x(g, X), y0 = in_y(g, Y), x1 = in_x(g, X + s), y1 = in_y(g, Y + s);
     if (x1 < g->bx0 || x0 > g->bx1 || y1 < g->by0 || y0 > g->by1) return QK_OK;
     g->free_leaves++;
-    if (!GM_SEED_LEAVES) return QK_OK;
     const double c[10] = {x0, y0, x1, y0, x0, y1, x1, y1, in_x(g, X + s / 2), in_y(g, Y + s / 2)};
     const double L[10] = {X, Y, X + s, Y, X, Y + s, X + s, Y + s, X + s / 2, Y + s / 2};
     /* The centre moves by a pattern of up to s/256 (any double is a valid seed): a grid's
