@@ -247,8 +247,8 @@ void qk__world_pack(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
  */
 /* Began pairs only: prev (or NULL) holds the float boxes by slot of the last update, with
  * no object added or removed since; cur (or NULL) room for n_obj slots' float boxes. When
- * the search is by bands and every float box is exact (*cur_ok = 1), or on one thread
- * (*cur_ok = 2: the candidates whose objects do not meet are in *found too, marked by
+ * the search is by bands and every float box is exact (*cur_ok = 1), or not (*cur_ok =
+ * 2: the candidates whose objects do not meet are in *found (or tk) too, marked by
  * QK__NEAR), it fills cur and, given prev, keeps only the candidates whose float boxes at
  * the last update did not meet (*only_new): with the last update's pairs and near
  * candidates re-tested, those make this update's. */

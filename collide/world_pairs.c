@@ -985,6 +985,21 @@ static void keep_tkeys(qk_world_t *w, qk__kvec_t *tk) {
 
 static qk_status_t update(qk_world_t *w);
 
+/* Move the keys of v marked near (QK__NEAR) to nn, unmarked; v keeps the others, in
+ * order. */
+static qk_status_t take_near(const qk_allocator_t *al, qk__kvec_t *v, qk__kvec_t *nn) {
+  size_t m = 0;
+  for (size_t i = 0; i < v->n; i++) {
+    uint64_t k = v->v[i];
+    if (!(k & QK__NEAR))
+      v->v[m++] = k;
+    else if (!kv_add(al, nn, k & ~QK__NEAR))
+      return QK_ERR_NOMEM;
+  }
+  v->n = m;
+  return QK_OK;
+}
+
 qk_status_t qk_world_update(qk_world_t *w) {
   if (!w) return QK_ERR_INVALID;
   qk__world_pool_start(w, qk__world_update_threads(w));
@@ -1008,18 +1023,15 @@ static qk_status_t update(qk_world_t *w) {
   memcpy(tk, w->scr_tkeys, sizeof tk);
   memset(w->scr_tkeys, 0, sizeof w->scr_tkeys);
   int split;
-  /* The float boxes by slot for the next update (when this one's are all exact, or on
-   * one thread with the near candidates), and the last update's, with which the search
+  /* The float boxes by slot for the next update (with the near candidates when they are
+   * not all exact), and the last update's, with which the search
    * keeps only the candidates that began when no object was added or removed since (a
    * failed allocation only loses that). */
   unsigned nt = w->n_live < 4096 ? 1 : qk__world_update_threads(w);
   if (nt > QK__RMAX) nt = QK__RMAX;
   const uint32_t nfb = w->n_obj;
   float *fb = nfb ? qk__realloc(al, NULL, 0, (size_t)nfb * 4 * sizeof *fb) : NULL;
-  /* (the last update's near candidates are re-tested on one thread only) */
-  const float *prev =
-      fb && !w->ident_dirty && w->fbox && w->n_fbox == nfb && (nt == 1 || w->near.n == 0) ? w->fbox
-                                                                                          : NULL;
+  const float *prev = fb && !w->ident_dirty && w->fbox && w->n_fbox == nfb ? w->fbox : NULL;
   int fb_ok, only_new;
   qk_status_t st = qk__world_search(w, &pk, &found, tk, &split, prev, fb, &fb_ok, &only_new);
   qk__world_pack_free(w, &pk);
@@ -1028,15 +1040,9 @@ static qk_status_t update(qk_world_t *w) {
    * still meet and whose objects do not (those that do are pairs that began). */
   qk__kvec_t nn = {0};
   if (st == QK_OK && fb_ok == 2) {
-    size_t m = 0;
-    for (size_t i = 0; i < found.n; i++) {
-      uint64_t k = found.v[i];
-      if (!(k & QK__NEAR))
-        found.v[m++] = k;
-      else if (!kv_add(al, &nn, k & ~QK__NEAR))
-        st = QK_ERR_NOMEM;
-    }
-    found.n = m;
+    st = take_near(al, &found, &nn);
+    for (unsigned t = 0; split && st == QK_OK && t < QK__KEEP_THREADS; t++)
+      st = take_near(al, &tk[t], &nn);
   }
   if (st == QK_OK && only_new)
     for (size_t i = 0; st == QK_OK && i < w->near.n; i++) {

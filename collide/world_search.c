@@ -1004,8 +1004,8 @@ qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kve
   const int by_bands = w->n_order > 1 && use_bands(w);
   unsigned nt = qk__world_update_threads(w);
   if (w->n_live < 4096) nt = 1; /* not worth a thread */
-  /* Near candidates kept (marked) on one thread only, with room for the mark. */
-  const int near_ok = cur && nt == 1 && w->n_obj <= INT32_MAX;
+  /* Near candidates kept (marked), with room for the mark. */
+  const int near_ok = cur && w->n_obj <= INT32_MAX;
   if (by_bands ? !build_bands(w, pk, &bd, prev, cur, near_ok)
                : !level_info(w, pk, lv, &n_levels, &rf, &n_rf))
     return search_nomem(w, &found, tk);
