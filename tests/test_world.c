@@ -1493,6 +1493,60 @@ static void test_world_nomem(void **s) {
   }
 }
 
+/* An allocation failing at each point of a began-only frame with near candidates (discs,
+ * segments, points, boxes off the float grid): the update fails and leaves the last
+ * frame, and the next (with memory) gives the pairs, began and ended against brute force
+ * from that frame; an update that succeeds is checked too. */
+static void test_world_nomem_began(void **s) {
+  (void)s;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 171);
+  double cx[8], cy[8];
+  for (int c = 0; c < 8; c++)
+    cx[c] = q64(qkt_rng_range(&r, 5, 45)), cy[c] = q64(qkt_rng_range(&r, 5, 45));
+  qkt_alloc_t st = {0};
+  qk_allocator_t al = qkt_alloc_make(&st);
+  qk_world_options_t o;
+  qk_world_options_init(&o);
+  o.allocator = &al;
+  qk_world_t *w;
+  assert_int_equal(qk_world_new(&o, &w), QK_OK);
+  mirror_t m = {0};
+  for (int k = 0; k < 600; k++) m_add(w, &m, bg_shape(&r, cx, cy, 1, 1));
+  qk_world_pair_t *prev = NULL;
+  size_t np = 0, failed = 0;
+  dense_check(w, &m, &prev, &np, 0);
+  for (size_t fail = 1; fail < (QKT_TSAN ? 10u : 60u); fail++) {
+    for (size_t i = 0; i < m.n; i++) {
+      qk_shape_t sh = shifted(m.s[i], 0.1 * ((int)qkt_rng_below(&r, 3) - 1), 0.1);
+      assert_int_equal(qk_world_move(w, m.h[i], &sh), QK_OK);
+      m.s[i] = o_norm(sh);
+    }
+    size_t before, after;
+    qk_world_pairs_list(w, QK_PAIRS_ALL, NULL, 0, &before);
+    qkt_alloc_arm(&st, fail);
+    qk_status_t rc = qk_world_update(w);
+    qkt_alloc_arm(&st, 0);
+    if (rc == QK_OK) {
+      qk_world_pair_t *want;
+      size_t nw = o_pairs(&m, &want);
+      list_equals(w, QK_PAIRS_ALL, want, nw, (int)fail);
+      free(prev);
+      prev = want, np = nw;
+      continue;
+    }
+    assert_int_equal(rc, QK_ERR_NOMEM);
+    qk_world_pairs_list(w, QK_PAIRS_ALL, NULL, 0, &after);
+    assert_int_equal(after, before);
+    failed++;
+    dense_check(w, &m, &prev, &np, (int)fail);
+  }
+  assert_true(failed > 5);
+  free(prev), free(m.h), free(m.s);
+  qk_world_free(w);
+  assert_int_equal(st.live_blocks, 0);
+}
+
 /* The world keeps its worker threads between updates; a child forked after they started
  * has none of them, so its threaded updates must not wait for them: the child's frames
  * (on two threads) give the pairs, began and ended of a one-thread world it builds itself.
@@ -1787,6 +1841,7 @@ int main(void) {
       cmocka_unit_test(test_world_churn_memory),
       cmocka_unit_test(test_world_nomem),
       cmocka_unit_test(test_world_nomem_threads),
+      cmocka_unit_test(test_world_nomem_began),
       cmocka_unit_test(test_world_threads),
       cmocka_unit_test(test_world_threads_fork),
       cmocka_unit_test(test_world_concurrent_readers),
