@@ -109,6 +109,7 @@ void qk_world_free(qk_world_t *w) {
   qk__free(&a, w->scr_keys.v, w->scr_keys.cap * sizeof *w->scr_keys.v);
   qk__free(&a, w->spare_b, w->cap_spare_b * sizeof *w->spare_b);
   qk__free(&a, w->fbox, (size_t)w->n_fbox * 4 * sizeof *w->fbox);
+  qk__free(&a, w->near.v, w->near.cap * sizeof *w->near.v);
   for (unsigned t = 0; t < QK__KEEP_THREADS; t++)
     qk__free(&a, w->scr_tkeys[t].v, w->scr_tkeys[t].cap * sizeof *w->scr_tkeys[t].v);
   qk__free(&a, w, sizeof *w);
@@ -129,7 +130,7 @@ size_t qk_world_pair_bytes(const qk_world_t *w) {
          (w->cur.row ? 2 * (w->cur.n_nz + 1) * sizeof *w->cur.row : 0) +
          (w->began.cap + w->ended.cap + w->n_egen + w->scr_keys.cap) * sizeof(uint64_t) +
          w->cap_spare_b * sizeof *w->spare_b + kept_tkeys(w) +
-         (size_t)w->n_fbox * 4 * sizeof *w->fbox;
+         (size_t)w->n_fbox * 4 * sizeof *w->fbox + w->near.cap * sizeof *w->near.v;
 }
 
 size_t qk_world_bytes(const qk_world_t *w) {

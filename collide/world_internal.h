@@ -135,6 +135,10 @@ struct qk_world {
    * qk__world_search). n_fbox slots. */
   float *fbox;
   uint32_t n_fbox;
+  /* With fbox: the pairs whose float boxes met at the last update but whose objects did
+   * not (the near candidates), as keys in no order. With the current pairs they are
+   * every pair whose float boxes then met. */
+  qk__kvec_t near;
   int ident_dirty;        /* an object was added or removed since the last update */
   struct qk__wpool *pool; /* the parked workers (collide/world_threads.c), or NULL */
 };
@@ -243,9 +247,14 @@ void qk__world_pack(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
  */
 /* Began pairs only: prev (or NULL) holds the float boxes by slot of the last update, with
  * no object added or removed since; cur (or NULL) room for n_obj slots' float boxes. When
- * the search is by bands and every float box is exact, it fills cur
- * (*cur_ok) and, given prev, keeps only the pairs whose boxes at the last update did not
- * meet (*only_new): with exact float boxes those are exactly the pairs that began. */
+ * the search is by bands and every float box is exact (*cur_ok = 1), or not (*cur_ok =
+ * 2: the candidates whose objects do not meet are in *found (or tk) too, marked by
+ * QK__NEAR), it fills cur and, given prev, keeps only the candidates whose float boxes at
+ * the last update did not meet (*only_new): with the last update's pairs and near
+ * candidates re-tested, those make this update's. */
+#define QK__NEAR ((uint64_t)1 << 63)
+/* The objects of slots i and j overlap, exactly. */
+int qk__world_objects_meet(const qk_world_t *w, uint32_t i, uint32_t j);
 qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kvec_t *found,
                              qk__kvec_t *tk, int *split, const float *prev, float *cur, int *cur_ok,
                              int *only_new);

@@ -462,15 +462,18 @@ typedef struct bjob {
   const float *fb;
   uint32_t *out; /* the new rows' pairs */
   unsigned nt;
+  int exact; /* the float boxes are exact: their test is the objects' */
   size_t q[QK__RMAX + 1], p[QK__RMAX + 1]; /* range t: old rows [q[t], q[t + 1]), began p */
   size_t d[QK__RMAX], z[QK__RMAX];         /* its pairs and rows */
   uint32_t *zr[QK__RMAX];                  /* its rows' slots, then (at zr + zc) starts */
   size_t zc[QK__RMAX];
   qk__kvec_t bv[QK__RMAX], ev[QK__RMAX];
+  qk__kvec_t nv[QK__RMAX]; /* (not exact) the old pairs that became near candidates */
   int nomem[QK__RMAX];
 } bjob_t;
 
-static int began_range(bjob_t *J, unsigned t) {
+static inline __attribute__((always_inline)) int began_range_(bjob_t *J, unsigned t,
+                                                              const int exact) {
   const qk_allocator_t *al = &J->w->alloc;
   const qk__prows_t *o = J->o, *nb = J->nb;
   const float *fb = J->fb;
@@ -479,7 +482,7 @@ static int began_range(bjob_t *J, unsigned t) {
   uint32_t *zr = qk__realloc(al, NULL, 0, (2 * zc + 1) * sizeof *zr);
   if (!zr) return 0;
   J->zr[t] = zr, J->zc[t] = zc;
-  qk__kvec_t lb = J->bv[t], le = J->ev[t];
+  qk__kvec_t lb = J->bv[t], le = J->ev[t], ln = J->nv[t];
   uint32_t *restrict out =
       J->out + (q0 < o->n_nz ? o->start[q0] : o->n) + (p0 < nb->n_nz ? nb->start[p0] : nb->n);
   const uint32_t *restrict ob = o->b, *restrict bb = nb->b;
@@ -518,16 +521,16 @@ static int began_range(bjob_t *J, unsigned t) {
       const int meet = _mm_movemask_ps(_mm_and_ps(_mm_cmple_ps(bx, lo), _mm_cmpge_ps(bx, hi)));
       out[d] = x; /* (kept when it meets) */
       if (__builtin_expect(meet == 15, 1)) {
-        d++;
-        continue;
-      }
 #else
       out[d] = x;
       if (fx[0] <= fa[2] && fx[1] <= fa[3] && fx[2] >= fa[0] && fx[3] >= fa[1]) {
-        d++;
-        continue;
-      }
 #endif
+        if (exact || qk__world_objects_meet(J->w, a, x)) {
+          d++;
+          continue;
+        }
+        if (!(ok = kv_add(al, &ln, ka | x))) goto out; /* (and it ended) */
+      }
       if (!(ok = kv_add(al, &le, ka | x))) goto out;
     }
     for (; i < ie; i++) {
@@ -538,8 +541,21 @@ static int began_range(bjob_t *J, unsigned t) {
   }
   J->d[t] = d, J->z[t] = z;
 out:
-  J->bv[t] = lb, J->ev[t] = le;
+  J->bv[t] = lb, J->ev[t] = le, J->nv[t] = ln;
   return ok;
+}
+
+/* (apart: one function for both, the exact one's loop takes an instruction more a pair) */
+__attribute__((noinline)) static int began_range_exact(bjob_t *J, unsigned t) {
+  return began_range_(J, t, 1);
+}
+
+__attribute__((noinline)) static int began_range_near(bjob_t *J, unsigned t) {
+  return began_range_(J, t, 0);
+}
+
+static int began_range(bjob_t *J, unsigned t) {
+  return J->exact ? began_range_exact(J, t) : began_range_near(J, t);
 }
 
 static void bjob_run(unsigned t, void *ud) {
@@ -563,9 +579,9 @@ static size_t row_from(const qk__prows_t *r, size_t lo, size_t hi, uint32_t s) {
  * frame's pairs and these. 0 when memory ran short (nothing allocated in *r but b, nor
  * in *bv and *ev beyond what they held). */
 __attribute__((noinline)) static int rows_began(const qk_world_t *w, uint64_t *keys, uint64_t *tmp,
-                                                size_t n, uint32_t *cnt, const float *fb,
+                                                size_t n, uint32_t *cnt, const float *fb, int exact,
                                                 unsigned nt, qk__prows_t *r, qk__kvec_t *bv,
-                                                qk__kvec_t *ev) {
+                                                qk__kvec_t *ev, qk__kvec_t *nv) {
   const qk_allocator_t *al = &w->alloc;
   const qk__prows_t *o = &w->cur;
   qk__prows_t nb = {0};
@@ -581,7 +597,7 @@ __attribute__((noinline)) static int rows_began(const qk_world_t *w, uint64_t *k
   memset(J, 0, sizeof *J);
   if (nt > QK__RMAX) nt = QK__RMAX;
   if (!o->n_nz) nt = 1;
-  J->w = w, J->o = o, J->nb = &nb, J->fb = fb, J->out = r->b, J->nt = nt;
+  J->w = w, J->o = o, J->nb = &nb, J->fb = fb, J->out = r->b, J->nt = nt, J->exact = exact;
   /* the ranges: about equal old pairs */
   J->q[0] = J->p[0] = 0, J->q[nt] = o->n_nz, J->p[nt] = nb.n_nz;
   for (unsigned t = 1; t < nt; t++) {
@@ -598,10 +614,10 @@ __attribute__((noinline)) static int rows_began(const qk_world_t *w, uint64_t *k
   }
   int ok = 1;
   if (nt == 1) {
-    J->bv[0] = *bv, J->ev[0] = *ev;
+    J->bv[0] = *bv, J->ev[0] = *ev, J->nv[0] = *nv;
     ok = began_range(J, 0);
-    *bv = J->bv[0], *ev = J->ev[0];
-    J->bv[0] = J->ev[0] = (qk__kvec_t){0};
+    *bv = J->bv[0], *ev = J->ev[0], *nv = J->nv[0];
+    J->bv[0] = J->ev[0] = J->nv[0] = (qk__kvec_t){0};
   } else {
     for (unsigned t = 0; ok && t < nt; t++) {
       size_t bc = w->began.n / nt + 64, ec = w->ended.n / nt + 64;
@@ -629,6 +645,8 @@ __attribute__((noinline)) static int rows_began(const qk_world_t *w, uint64_t *k
     }
     *bv = jb, *ev = je;
     ok = jb.cap >= nbg && je.cap >= neg;
+    for (unsigned t = 0; ok && t < nt; t++)
+      for (size_t i = 0; ok && i < J->nv[t].n; i++) ok = kv_add(al, nv, J->nv[t].v[i]);
     for (unsigned t = 0; ok && t < nt; t++) {
       if (J->bv[t].n) memcpy(bv->v + bv->n, J->bv[t].v, J->bv[t].n * sizeof *bv->v);
       if (J->ev[t].n) memcpy(ev->v + ev->n, J->ev[t].v, J->ev[t].n * sizeof *ev->v);
@@ -653,6 +671,7 @@ __attribute__((noinline)) static int rows_began(const qk_world_t *w, uint64_t *k
     qk__free(al, J->zr[t], J->zr[t] ? (2 * J->zc[t] + 1) * sizeof *J->zr[t] : 0);
     qk__free(al, J->bv[t].v, J->bv[t].cap * sizeof(uint64_t));
     qk__free(al, J->ev[t].v, J->ev[t].cap * sizeof(uint64_t));
+    qk__free(al, J->nv[t].v, J->nv[t].cap * sizeof(uint64_t));
   }
   qk__free(al, J, sizeof *J);
   rows_free(al, &nb);
@@ -966,6 +985,21 @@ static void keep_tkeys(qk_world_t *w, qk__kvec_t *tk) {
 
 static qk_status_t update(qk_world_t *w);
 
+/* Move the keys of v marked near (QK__NEAR) to nn, unmarked; v keeps the others, in
+ * order. */
+static qk_status_t take_near(const qk_allocator_t *al, qk__kvec_t *v, qk__kvec_t *nn) {
+  size_t m = 0;
+  for (size_t i = 0; i < v->n; i++) {
+    uint64_t k = v->v[i];
+    if (!(k & QK__NEAR))
+      v->v[m++] = k;
+    else if (!kv_add(al, nn, k & ~QK__NEAR))
+      return QK_ERR_NOMEM;
+  }
+  v->n = m;
+  return QK_OK;
+}
+
 qk_status_t qk_world_update(qk_world_t *w) {
   if (!w) return QK_ERR_INVALID;
   qk__world_pool_start(w, qk__world_update_threads(w));
@@ -989,17 +1023,39 @@ static qk_status_t update(qk_world_t *w) {
   memcpy(tk, w->scr_tkeys, sizeof tk);
   memset(w->scr_tkeys, 0, sizeof w->scr_tkeys);
   int split;
-  /* The float boxes by slot for the next update (when this one's are all exact), and
-   * the last update's, with which the search keeps only the pairs that began when no
-   * object was added or removed since (a failed allocation only loses that). */
+  /* The float boxes by slot for the next update (with the near candidates when they are
+   * not all exact), and the last update's, with which the search
+   * keeps only the candidates that began when no object was added or removed since (a
+   * failed allocation only loses that). */
+  unsigned nt = w->n_live < 4096 ? 1 : qk__world_update_threads(w);
+  if (nt > QK__RMAX) nt = QK__RMAX;
   const uint32_t nfb = w->n_obj;
   float *fb = nfb ? qk__realloc(al, NULL, 0, (size_t)nfb * 4 * sizeof *fb) : NULL;
   const float *prev = fb && !w->ident_dirty && w->fbox && w->n_fbox == nfb ? w->fbox : NULL;
   int fb_ok, only_new;
   qk_status_t st = qk__world_search(w, &pk, &found, tk, &split, prev, fb, &fb_ok, &only_new);
   qk__world_pack_free(w, &pk);
-  unsigned nt = w->n_live < 4096 ? 1 : qk__world_update_threads(w);
-  if (nt > QK__RMAX) nt = QK__RMAX;
+  /* This update's near candidates (see qk__world_search): those the search marked, and
+   * when it found only the new candidates, the last update's near ones whose float boxes
+   * still meet and whose objects do not (those that do are pairs that began). */
+  qk__kvec_t nn = {0};
+  if (st == QK_OK && fb_ok == 2) {
+    st = take_near(al, &found, &nn);
+    for (unsigned t = 0; split && st == QK_OK && t < QK__KEEP_THREADS; t++)
+      st = take_near(al, &tk[t], &nn);
+  }
+  if (st == QK_OK && only_new)
+    for (size_t i = 0; st == QK_OK && i < w->near.n; i++) {
+      uint64_t k = w->near.v[i];
+      uint32_t a = (uint32_t)(k >> 32), b = (uint32_t)k;
+      const float *fa = fb + 4 * (size_t)a, *fx = fb + 4 * (size_t)b;
+      if (!(fx[0] <= fa[2] && fx[1] <= fa[3] && fx[2] >= fa[0] && fx[3] >= fa[1])) continue;
+      if (fb_ok == 1 || qk__world_objects_meet(w, a, b)) {
+        if (!kv_add(al, &found, k)) st = QK_ERR_NOMEM;
+      } else if (!kv_add(al, &nn, k)) {
+        st = QK_ERR_NOMEM;
+      }
+    }
   /* The keys of the search's threads: left where they were found when the rows run on
    * as many threads (each reads its own in the rows' first pass), else joined here. */
   qk__kvec_t src[1 + QK__KEEP_THREADS];
@@ -1023,6 +1079,11 @@ static qk_status_t update(qk_world_t *w) {
   if (st != QK_OK || total + (only_new ? w->cur.n : 0) > UINT32_MAX) {
     /* (rows and counts hold 32-bit positions) */
     qk__free(al, fb, (size_t)nfb * 4 * sizeof *fb);
+    qk__free(al, nn.v, nn.cap * sizeof *nn.v);
+    if (st != QK_OK) {
+      qk__free(al, found.v, found.cap * sizeof *found.v);
+      found = (qk__kvec_t){0};
+    }
     keep_tkeys(w, tk);
     if (st != QK_OK) return st;
     qk__free(al, found.v, found.cap * sizeof *found.v);
@@ -1065,7 +1126,7 @@ static qk_status_t update(qk_world_t *w) {
     if (cnt && (bv.v = qk__realloc(al, NULL, 0, bcap * sizeof *bv.v))) bv.cap = bcap;
     if (bv.v && (ev.v = qk__realloc(al, NULL, 0, ecap * sizeof *ev.v))) ev.cap = ecap;
     if (ev.v && only_new)
-      ok = rows_began(w, found.v, tmp, total, cnt, fb, nt, &nr, &bv, &ev);
+      ok = rows_began(w, found.v, tmp, total, cnt, fb, fb_ok == 1, nt, &nr, &bv, &ev, &nn);
     else if (ev.v)
       ok = make_rows_all(al, found.v, tmp, total, cnt, (uint32_t)n_obj, &nr) &&
            diff(w, &w->cur, &nr, dirty, &bv, &ev);
@@ -1081,6 +1142,7 @@ static qk_status_t update(qk_world_t *w) {
   uint64_t *eg = NULL;
   if (!ok || (n_eg && !(eg = qk__realloc(al, NULL, 0, n_eg * sizeof *eg)))) {
     qk__free(al, fb, (size_t)nfb * 4 * sizeof *fb);
+    qk__free(al, nn.v, nn.cap * sizeof *nn.v);
     qk__free(al, bv.v, bv.cap * sizeof *bv.v);
     qk__free(al, ev.v, ev.cap * sizeof *ev.v);
     rows_free(al, &nr);
@@ -1106,10 +1168,16 @@ static qk_status_t update(qk_world_t *w) {
   /* This update's float boxes for the next one, when they are all exact. */
   qk__free(al, w->fbox, (size_t)w->n_fbox * 4 * sizeof *w->fbox);
   w->fbox = NULL, w->n_fbox = 0;
-  if (fb_ok)
+  qk__free(al, w->near.v, w->near.cap * sizeof *w->near.v);
+  w->near = (qk__kvec_t){0};
+  if (fb_ok) {
     w->fbox = fb, w->n_fbox = nfb;
-  else
+    shrink(al, &nn);
+    w->near = nn;
+  } else {
     qk__free(al, fb, (size_t)nfb * 4 * sizeof *fb);
+    qk__free(al, nn.v, nn.cap * sizeof *nn.v);
+  }
   if (dirty) {
     for (uint32_t i = 0; i < w->n_obj; i++) {
       if (w->obj[i].gen != w->ugen[i]) w->egen[w->n_egen++] = (uint64_t)i << 32 | w->ugen[i];

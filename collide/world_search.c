@@ -67,12 +67,16 @@ static inline int boxes_meet(const qk_box_t *a, const qk_box_t *b) {
 
 /* The objects of slots i and j overlap, exactly. (Not inlined: the rare path, and inlined
  * it takes the registers of the four-wide loop that calls it.) */
-__attribute__((noinline)) static int objects_meet(const qk_world_t *w, uint32_t i, uint32_t j) {
+__attribute__((noinline)) int qk__world_objects_meet(const qk_world_t *w, uint32_t i, uint32_t j) {
   const qk__wobj_t *p = &w->obj[i], *q = &w->obj[j];
   if ((p->flags & QK__WKIND) == QK_SHAPE_BOX && (q->flags & QK__WKIND) == QK_SHAPE_BOX)
     return p->x <= q->a && q->x <= p->a && p->y <= q->b && q->y <= p->b;
-  qk_box_t pb = qk__wbox(p), qb = qk__wbox(q);
-  if (!boxes_meet(&pb, &qb)) return 0;
+  /* (a disc's box is rounded outward, which costs more than the box test saves: the
+   * float boxes met, and the doubles' rarely do not) */
+  if ((p->flags & QK__WKIND) != QK_SHAPE_DISC && (q->flags & QK__WKIND) != QK_SHAPE_DISC) {
+    qk_box_t pb = qk__wbox(p), qb = qk__wbox(q);
+    if (!boxes_meet(&pb, &qb)) return 0;
+  }
   qk_shape_t ps = qk__wshape(p), qs = qk__wshape(q);
   return qk__shapes_overlap(&ps, &qs);
 }
@@ -88,7 +92,7 @@ static inline uint64_t pair_key(uint32_t a, uint64_t ha, uint32_t b) {
  * empty box), so one object is compared with four at once. Rounding to float is
  * monotone, so u <= v implies (float)u <= (float)v: every comparison of the box test
  * that holds in doubles holds in floats, and the prefilter never drops a pair whose
- * boxes meet. What it keeps is decided exactly (objects_meet), unless both boxes are
+ * boxes meet. What it keeps is decided exactly (qk__world_objects_meet), unless both boxes are
  * boxes whose floats are their doubles (fexact): the float test is then the exact one.
  */
 #if defined(__SSE2__)
@@ -164,7 +168,7 @@ static inline __attribute__((always_inline)) int test_run(share_t *s, const me_t
       bits &= bits - 1;
       uint32_t sj = ord[j];
       *v = pair_key(slot, hs, sj);
-      v += (ek & fx[j]) ? 1 : objects_meet(s->w, slot, sj);
+      v += (ek & fx[j]) ? 1 : qk__world_objects_meet(s->w, slot, sj);
     }
     if (q == qe) break;
     q++;
@@ -577,6 +581,8 @@ typedef struct bands {
   uint8_t *fm;     /* per group: bit l when lane l's band is the first of its object */
   float *x1;       /* per entry: xmax */
   uint8_t *exact;  /* per entry: the object's float box is its box (NULL: all are) */
+  int near;        /* (with exact) the candidates whose objects do not meet are kept,
+                      marked by QK__NEAR */
   uint32_t *start; /* band b holds entries [start[b], start[b + 1]) */
   uint32_t nb;
   size_t ne;
@@ -597,7 +603,8 @@ typedef struct bands {
 #if defined(__SSE2__)
 static inline __attribute__((always_inline)) uint64_t *sweep(const share_t *s, const bands_t *bd,
                                                              uint32_t k, uint32_t e, uint64_t *v,
-                                                             const int all_exact, const int began) {
+                                                             const int all_exact, const int began,
+                                                             const int near_) {
   const egrp_t *G = bd->g;
   const pgrp_t *P = bd->pg;
   const uint8_t *fm = bd->fm;
@@ -665,7 +672,15 @@ static inline __attribute__((always_inline)) uint64_t *sweep(const share_t *s, c
           unsigned l = (unsigned)__builtin_ctz(bits);
           bits &= bits - 1;
           *v = key[l];
-          v += (ek & bd->exact[(size_t)(g - G) * 4 + l]) ? 1 : objects_meet(s->w, slot, g->slot[l]);
+          if (near_)
+            *v++ |= (ek & bd->exact[(size_t)(g - G) * 4 + l]) ||
+                            qk__world_objects_meet(s->w, slot, g->slot[l])
+                        ? 0
+                        : QK__NEAR;
+          else
+            v += (ek & bd->exact[(size_t)(g - G) * 4 + l])
+                     ? 1
+                     : qk__world_objects_meet(s->w, slot, g->slot[l]);
         } while (bits);
       }
     }
@@ -677,7 +692,7 @@ static inline __attribute__((always_inline)) uint64_t *sweep(const share_t *s, c
 }
 #else
 static uint64_t *sweep(const share_t *s, const bands_t *bd, uint32_t k, uint32_t e, uint64_t *v,
-                       const int all_exact, const int began) {
+                       const int all_exact, const int began, const int near_) {
   const egrp_t *G = bd->g;
   const pgrp_t *P = bd->pg;
   const egrp_t *gk = &G[k >> 2];
@@ -699,7 +714,13 @@ static uint64_t *sweep(const share_t *s, const bands_t *bd, uint32_t k, uint32_t
     }
     uint32_t sj = g->slot[l];
     *v = pair_key(slot, hs, sj);
-    v += (all_exact || (bd->exact[k] & bd->exact[j])) ? 1 : objects_meet(s->w, slot, sj);
+    if (near_)
+      *v++ |= (all_exact || (bd->exact[k] & bd->exact[j])) || qk__world_objects_meet(s->w, slot, sj)
+                  ? 0
+                  : QK__NEAR;
+    else
+      v +=
+          (all_exact || (bd->exact[k] & bd->exact[j])) ? 1 : qk__world_objects_meet(s->w, slot, sj);
   }
   return v;
 }
@@ -709,7 +730,8 @@ static uint64_t *sweep(const share_t *s, const bands_t *bd, uint32_t k, uint32_t
  * sweep's keys, its candidates and three more, checked before each); 0 when memory ran
  * short. */
 static inline __attribute__((always_inline)) int sweep_run(share_t *s, uint32_t b0, uint32_t b1,
-                                                           const int all_exact, const int began) {
+                                                           const int all_exact, const int began,
+                                                           const int near_) {
   const bands_t *bd = s->bd;
   const uint32_t *st = bd->start;
   if (!s->out.v && !kv_reserve(s, 256)) return 0;
@@ -721,16 +743,30 @@ static inline __attribute__((always_inline)) int sweep_run(share_t *s, uint32_t 
         if (!kv_reserve(s, (size_t)(e - k) + 2)) return 0;
         v = s->out.v + s->out.n, vend = s->out.v + s->out.cap;
       }
-      v = sweep(s, bd, k, e, v, all_exact, began);
+      v = sweep(s, bd, k, e, v, all_exact, began, near_);
     }
   s->out.n = (size_t)(v - s->out.v);
   return 1;
 }
 
+/* The sweeps' variants, each a function of its own (their code apart, as measured). */
+#define QK__SWEEP_VARIANT(name, all_exact, began, near_)                                           \
+  __attribute__((noinline)) static int name(share_t *s, uint32_t b0, uint32_t b1) {                \
+    return sweep_run(s, b0, b1, all_exact, began, near_);                                          \
+  }
+QK__SWEEP_VARIANT(sweep_any, 0, 0, 0)
+QK__SWEEP_VARIANT(sweep_any_near, 0, 0, 1)
+QK__SWEEP_VARIANT(sweep_any_began, 0, 1, 1)
+QK__SWEEP_VARIANT(sweep_exact, 1, 0, 0)
+QK__SWEEP_VARIANT(sweep_exact_began, 1, 1, 0)
+
 static int sweep_bands(share_t *s, uint32_t b0, uint32_t b1) {
-  /* (the began pairs only: every float box exact, see build_bands) */
-  if (s->bd->exact) return sweep_run(s, b0, b1, 0, 0);
-  return s->bd->pg ? sweep_run(s, b0, b1, 1, 1) : sweep_run(s, b0, b1, 1, 0);
+  /* (the began candidates only: see build_bands; near ones kept marked: see bands_t) */
+  if (s->bd->exact) {
+    if (s->bd->pg) return sweep_any_began(s, b0, b1);
+    return s->bd->near ? sweep_any_near(s, b0, b1) : sweep_any(s, b0, b1);
+  }
+  return s->bd->pg ? sweep_exact_began(s, b0, b1) : sweep_exact(s, b0, b1);
 }
 
 static void run_bands(unsigned t, void *ud) {
@@ -764,7 +800,7 @@ static inline uint32_t band_of(float y, double ylo, double inv, double top) {
  * clustered scene and on sizes over one and two decades), or higher when that would make
  * more than about n / 2 bands or far too many entries. 0 when memory ran short. */
 static int build_bands(const qk_world_t *w, const qk__wpack_t *pk, bands_t *bd, const float *prev,
-                       float *cur) {
+                       float *cur, int near_ok) {
   const qk_allocator_t *al = &w->alloc;
   const uint32_t n = w->n_order;
   const float *fg = pk->fgrp;
@@ -837,7 +873,7 @@ static int build_bands(const qk_world_t *w, const qk__wpack_t *pk, bands_t *bd, 
     return 0;
   }
   pgrp_t *pg = NULL;
-  if (prev && all_exact && !(pg = qk__realloc(al, NULL, 0, ng * sizeof *pg))) {
+  if (prev && (all_exact || near_ok) && !(pg = qk__realloc(al, NULL, 0, ng * sizeof *pg))) {
     qk__free(al, x1, xbytes);
     qk__free(al, start, 2 * ((size_t)nb + 1) * sizeof *start);
     qk__free(al, g, ng * (sizeof *g + 1));
@@ -900,7 +936,7 @@ static int build_bands(const qk_world_t *w, const qk__wpack_t *pk, bands_t *bd, 
   }
   qk__free(al, cnt, 3 * 2048 * sizeof *cnt);
   qk__free(al, rec, 3 * (size_t)n * sizeof *rec);
-  *bd = (bands_t){g, pg, fm, x1, exact, start, nb, ne};
+  *bd = (bands_t){g, pg, fm, x1, exact, !all_exact && near_ok, start, nb, ne};
   return 1;
 }
 
@@ -972,10 +1008,12 @@ qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kve
   const int by_bands = w->n_order > 1 && use_bands(w);
   unsigned nt = qk__world_update_threads(w);
   if (w->n_live < 4096) nt = 1; /* not worth a thread */
-  if (by_bands ? !build_bands(w, pk, &bd, prev, cur)
+  /* Near candidates kept (marked), with room for the mark. */
+  const int near_ok = cur && w->n_obj <= INT32_MAX;
+  if (by_bands ? !build_bands(w, pk, &bd, prev, cur, near_ok)
                : !level_info(w, pk, lv, &n_levels, &rf, &n_rf))
     return search_nomem(w, &found, tk);
-  *cur_ok = by_bands && cur && !bd.exact;
+  *cur_ok = by_bands && cur ? (!bd.exact ? 1 : bd.near ? 2 : 0) : 0;
   *only_new = bd.pg != NULL;
   /* Chunks of about equal work, taken in turn by the workers (many more than the
    * workers). By the grid, chunks of cells: an object's work grows with its size (the

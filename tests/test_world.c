@@ -64,6 +64,19 @@ static ld o_seg_d2(ld px, ld py, ld ax, ld ay, ld bx, ld by) {
   ld dx = px - (ax + t * ux), dy = py - (ay + t * uy);
   return dx * dx + dy * dy;
 }
+/* A disc (centre px, py, radius r) meets a segment: without the division of o_seg_d2
+ * where the nearest point is inside the segment (the squared cross product against r^2
+ * times the squared length), so that a disc touching a segment (as one of radius 1/64 at
+ * distance 1/64 from a segment on the 1/64 grid) is decided exactly for short dyadic
+ * coordinates. */
+static int o_disc_seg(ld px, ld py, ld r, ld ax, ld ay, ld bx, ld by) {
+  ld ux = bx - ax, uy = by - ay, uu = ux * ux + uy * uy, wx = px - ax, wy = py - ay;
+  ld dot = wx * ux + wy * uy;
+  if (uu == 0 || dot <= 0) return wx * wx + wy * wy <= r * r;
+  if (dot >= uu) return (px - bx) * (px - bx) + (py - by) * (py - by) <= r * r;
+  ld cr = wx * uy - wy * ux;
+  return cr * cr <= r * r * uu;
+}
 static int o_orient(ld ax, ld ay, ld bx, ld by, ld cx, ld cy) {
   ld d = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax);
   return (d > 0) - (d < 0);
@@ -129,7 +142,7 @@ static int o_overlap(qk_shape_t a, qk_shape_t b) {
     ld px = fminl(fmaxl(a.x, b.x), b.a), py = fminl(fmaxl(a.y, b.y), b.b);
     return (px - a.x) * (px - a.x) + (py - a.y) * (py - a.y) <= (ld)a.a * a.a;
   }
-  if (a.kind == QK_SHAPE_DISC) return o_seg_d2(a.x, a.y, b.x, b.y, b.a, b.b) <= (ld)a.a * a.a;
+  if (a.kind == QK_SHAPE_DISC) return o_disc_seg(a.x, a.y, a.a, b.x, b.y, b.a, b.b);
   if (a.kind == QK_SHAPE_BOX && b.kind == QK_SHAPE_BOX)
     return a.x <= b.a && b.x <= a.a && a.y <= b.b && b.y <= a.b;
   if (a.kind == QK_SHAPE_BOX) { /* segment: an endpoint inside, or it crosses an edge */
@@ -1037,6 +1050,93 @@ static void test_world_began_only(void **s) {
 }
 
 /*
+ * The began-only frame in general (rows_began with the near candidates: pairs whose float
+ * boxes met at the last update but whose objects did not). The clustered scene of
+ * run_began_only with, by variant: discs, segments and points among the boxes (kinds);
+ * every coordinate off the float grid by a multiple of 0.1 and moves in steps of about
+ * 0.1 (off); or both. Frames of moves, of none, of jumps, of tiny moves (a third of the
+ * objects by +-2^-30, far below float precision here: their float boxes stay and the
+ * objects of touching pairs part and meet again, which only the near candidates' exact
+ * test sees), and of a remove and two adds (from 4095 objects this crosses the 4096 at
+ * which the threads start). Every frame against brute force (dense_check).
+ */
+static qk_shape_t shifted(qk_shape_t sh, double dx, double dy) {
+  sh.x += dx, sh.y += dy;
+  if (sh.kind == QK_SHAPE_BOX || sh.kind == QK_SHAPE_SEGMENT) sh.a += dx, sh.b += dy;
+  return sh;
+}
+
+static qk_shape_t bg_shape(qkt_rng_t *r, const double *cx, const double *cy, int kinds, int off) {
+  qk_shape_t sh = cm_shape(r, cx, cy, kinds);
+  return off ? shifted(sh, 0.1 * qkt_rng_below(r, 10), 0.1 * qkt_rng_below(r, 10)) : sh;
+}
+
+static void run_began_general(unsigned threads, size_t n, int frames, int kinds, int off) {
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 151 + threads + 2 * (uint64_t)kinds + 4 * (uint64_t)off);
+  double cx[8], cy[8];
+  for (int c = 0; c < 8; c++)
+    cx[c] = q64(qkt_rng_range(&r, 5, 45)), cy[c] = q64(qkt_rng_range(&r, 5, 45));
+  qk_world_options_t o;
+  qk_world_options_init(&o);
+  o.threads = threads;
+  o.thread_min = 0;
+  qk_world_t *w;
+  assert_int_equal(qk_world_new(&o, &w), QK_OK);
+  mirror_t m = {0};
+  size_t vcap = n + 2 * (size_t)frames + 2;
+  double *vx = malloc(vcap * sizeof *vx), *vy = malloc(vcap * sizeof *vy);
+  for (size_t k = 0; k < vcap; k++) {
+    double a = qkt_rng_range(&r, 0, 6.283185307179586);
+    vx[k] = 0.25 * cos(a), vy[k] = 0.25 * sin(a);
+    if (!off) vx[k] = q64(vx[k]), vy[k] = q64(vy[k]);
+    if (off) vx[k] = 0.1 * round(vx[k] * 10), vy[k] = 0.1 * round(vy[k] * 10);
+  }
+  for (size_t k = 0; k < n; k++) m_add(w, &m, bg_shape(&r, cx, cy, kinds, off));
+  qk_world_pair_t *prev = NULL;
+  size_t np = 0;
+  dense_check(w, &m, &prev, &np, 0);
+  for (int f = 1; f < frames; f++) {
+    int mode = f % 7; /* 0, 1: moves; 2: none; 3: jumps; 4, 5: tiny moves; 6: remove, adds */
+    if (mode == 6) {
+      size_t i = m_remove_random(w, &m, &r);
+      vx[i] = vx[m.n], vy[i] = vy[m.n];
+      m_add(w, &m, bg_shape(&r, cx, cy, kinds, off));
+      m_add(w, &m, bg_shape(&r, cx, cy, kinds, off));
+    }
+    for (size_t i = 0; mode != 2 && i < m.n; i++) {
+      qk_shape_t sh = m.s[i];
+      if (mode == 3 && qkt_rng_below(&r, 10) == 0) {
+        sh = bg_shape(&r, cx, cy, kinds, off);
+      } else if (mode == 4 || mode == 5) {
+        if (qkt_rng_below(&r, 3)) continue;
+        double t = 0x1p-30;
+        sh = shifted(sh, t * ((int)qkt_rng_below(&r, 3) - 1), t * ((int)qkt_rng_below(&r, 3) - 1));
+      } else {
+        if (sh.x + vx[i] < 0 || sh.x + vx[i] > 50) vx[i] = -vx[i];
+        if (sh.y + vy[i] < 0 || sh.y + vy[i] > 50) vy[i] = -vy[i];
+        sh = shifted(sh, vx[i], vy[i]);
+      }
+      assert_int_equal(qk_world_move(w, m.h[i], &sh), QK_OK);
+      m.s[i] = o_norm(sh);
+    }
+    dense_check(w, &m, &prev, &np, f);
+  }
+  assert_true(np > 2 * n);
+  free(prev), free(vx), free(vy);
+  free(m.h), free(m.s);
+  qk_world_free(w);
+}
+
+static void test_world_began_general(void **s) {
+  (void)s;
+  for (int v = 1; v <= 3; v++) run_began_general(1, 1200, 16, v & 1, v >> 1);
+  run_began_general(1, 1200, 16, 0, 0);
+  for (unsigned th = 1; th <= 2; th++)
+    for (int v = 1; v <= 3; v++) run_began_general(th, 4095, 13, v & 1, v >> 1);
+}
+
+/*
  * The search by bands (collide/world_search.c: sizes over several levels, here from 1/8
  * to 40), at its edges: on a lattice of 1/8 so that many xmin are equal and many boxes
  * touch; tall and wide boxes crossing many bands and one another in many of them (each
@@ -1393,6 +1493,60 @@ static void test_world_nomem(void **s) {
   }
 }
 
+/* An allocation failing at each point of a began-only frame with near candidates (discs,
+ * segments, points, boxes off the float grid): the update fails and leaves the last
+ * frame, and the next (with memory) gives the pairs, began and ended against brute force
+ * from that frame; an update that succeeds is checked too. */
+static void test_world_nomem_began(void **s) {
+  (void)s;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 171);
+  double cx[8], cy[8];
+  for (int c = 0; c < 8; c++)
+    cx[c] = q64(qkt_rng_range(&r, 5, 45)), cy[c] = q64(qkt_rng_range(&r, 5, 45));
+  qkt_alloc_t st = {0};
+  qk_allocator_t al = qkt_alloc_make(&st);
+  qk_world_options_t o;
+  qk_world_options_init(&o);
+  o.allocator = &al;
+  qk_world_t *w;
+  assert_int_equal(qk_world_new(&o, &w), QK_OK);
+  mirror_t m = {0};
+  for (int k = 0; k < 600; k++) m_add(w, &m, bg_shape(&r, cx, cy, 1, 1));
+  qk_world_pair_t *prev = NULL;
+  size_t np = 0, failed = 0;
+  dense_check(w, &m, &prev, &np, 0);
+  for (size_t fail = 1; fail < (QKT_TSAN ? 10u : 60u); fail++) {
+    for (size_t i = 0; i < m.n; i++) {
+      qk_shape_t sh = shifted(m.s[i], 0.1 * ((int)qkt_rng_below(&r, 3) - 1), 0.1);
+      assert_int_equal(qk_world_move(w, m.h[i], &sh), QK_OK);
+      m.s[i] = o_norm(sh);
+    }
+    size_t before, after;
+    qk_world_pairs_list(w, QK_PAIRS_ALL, NULL, 0, &before);
+    qkt_alloc_arm(&st, fail);
+    qk_status_t rc = qk_world_update(w);
+    qkt_alloc_arm(&st, 0);
+    if (rc == QK_OK) {
+      qk_world_pair_t *want;
+      size_t nw = o_pairs(&m, &want);
+      list_equals(w, QK_PAIRS_ALL, want, nw, (int)fail);
+      free(prev);
+      prev = want, np = nw;
+      continue;
+    }
+    assert_int_equal(rc, QK_ERR_NOMEM);
+    qk_world_pairs_list(w, QK_PAIRS_ALL, NULL, 0, &after);
+    assert_int_equal(after, before);
+    failed++;
+    dense_check(w, &m, &prev, &np, (int)fail);
+  }
+  assert_true(failed > 5);
+  free(prev), free(m.h), free(m.s);
+  qk_world_free(w);
+  assert_int_equal(st.live_blocks, 0);
+}
+
 /* The world keeps its worker threads between updates; a child forked after they started
  * has none of them, so its threaded updates must not wait for them: the child's frames
  * (on two threads) give the pairs, began and ended of a one-thread world it builds itself.
@@ -1674,6 +1828,7 @@ int main(void) {
       cmocka_unit_test(test_world_huge),
       cmocka_unit_test(test_world_clustered_mixed_sizes),
       cmocka_unit_test(test_world_began_only),
+      cmocka_unit_test(test_world_began_general),
       cmocka_unit_test(test_world_bands_edges),
       cmocka_unit_test(test_world_grid_levels),
       cmocka_unit_test(test_world_prefilter_and_sort),
@@ -1686,6 +1841,7 @@ int main(void) {
       cmocka_unit_test(test_world_churn_memory),
       cmocka_unit_test(test_world_nomem),
       cmocka_unit_test(test_world_nomem_threads),
+      cmocka_unit_test(test_world_nomem_began),
       cmocka_unit_test(test_world_threads),
       cmocka_unit_test(test_world_threads_fork),
       cmocka_unit_test(test_world_concurrent_readers),

@@ -318,9 +318,10 @@ size_t qk_world_size(const qk_world_t *w);
 size_t qk_world_bytes(const qk_world_t *w);
 
 /** The part of qk_world_bytes() that holds the pair state: the current pairs (4 bytes a
- * pair and 4 a slot), the began and ended lists (8 bytes a pair) and, after an update of
- * boxes on the float grid, their float boxes by slot (16 bytes a slot); the rest is the
- * index (objects, order, cells). */
+ * pair and 4 a slot), the began and ended lists (8 bytes a pair) and, after an update
+ * that searched by bands, the float boxes by slot (16 bytes a slot) and the pairs whose
+ * float boxes met but whose shapes did not (8 bytes each); the rest is the index
+ * (objects, order, cells). */
 size_t qk_world_pair_bytes(const qk_world_t *w);
 
 /**
