@@ -236,25 +236,28 @@ void qk__world_pack_free(qk_world_t *w, qk__wpack_t *pk);
 void qk__world_pack(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
                     const qk__wcell_t *cells, uint32_t nc);
 
+/* A key the search marks as a near candidate: the objects' float boxes meet, the objects
+ * do not (see qk__world_search). */
+#define QK__NEAR ((uint64_t)1 << 63)
+/* The objects of slots i and j overlap, exactly. */
+int qk__world_objects_meet(const qk_world_t *w, uint32_t i, uint32_t j);
+
 /* Every overlapping pair of the packed order (collide/world_search.c), as unsorted keys
  * in *found (the caller frees it), on the world's threads. *found comes in empty or with
  * a buffer to start with (its room in cap, n = 0), which the search then owns; so do
  * tk[0 .. QK__KEEP_THREADS), buffers for threads 1, 2, ..., which come back (n: the
- * keys they held) for the caller to keep or free. QK_ERR_NOMEM (found empty) when memory ran short.
- * With *split nonzero on return, the keys were left where the threads found them: the first
- * thread's in found (whose room holds them all), thread t's in tk[t - 1] (t < the threads
- * of an update, which are then at most 1 + QK__KEEP_THREADS); else they are all in found.
- */
-/* Began pairs only: prev (or NULL) holds the float boxes by slot of the last update, with
+ * keys they held) for the caller to keep or free. QK_ERR_NOMEM (found empty) when memory
+ * ran short. With *split nonzero on return, the keys were left where the threads found
+ * them: the first thread's in found (whose room holds them all), thread t's in tk[t - 1]
+ * (t < the threads of an update, which are then at most 1 + QK__KEEP_THREADS); else they
+ * are all in found.
+ * Began pairs only: prev (or NULL) holds the float boxes by slot of the last update, with
  * no object added or removed since; cur (or NULL) room for n_obj slots' float boxes. When
  * the search is by bands and every float box is exact (*cur_ok = 1), or not (*cur_ok =
  * 2: the candidates whose objects do not meet are in *found (or tk) too, marked by
  * QK__NEAR), it fills cur and, given prev, keeps only the candidates whose float boxes at
  * the last update did not meet (*only_new): with the last update's pairs and near
  * candidates re-tested, those make this update's. */
-#define QK__NEAR ((uint64_t)1 << 63)
-/* The objects of slots i and j overlap, exactly. */
-int qk__world_objects_meet(const qk_world_t *w, uint32_t i, uint32_t j);
 qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kvec_t *found,
                              qk__kvec_t *tk, int *split, const float *prev, float *cur, int *cur_ok,
                              int *only_new);

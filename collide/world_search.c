@@ -567,14 +567,14 @@ typedef struct egrp {
   uint32_t slot[4];
 } egrp_t;
 
-/* The bands: entries band after band, each band's by xmin (ascending; ties in any order),
- * four to a group. */
-/* The same four entries' objects' float boxes at the last update (xmin, ymin, xmax,
+/* A group's four entries' objects' float boxes at the last update (xmin, ymin, xmax,
  * ymax), when the search keeps only the pairs that began. */
 typedef struct pgrp {
   float x0[4], y0[4], x1[4], y1[4];
 } pgrp_t;
 
+/* The bands: entries band after band, each band's by xmin (ascending; ties in any order),
+ * four to a group. */
 typedef struct bands {
   egrp_t *g;
   pgrp_t *pg;      /* or NULL: every pair is kept */
