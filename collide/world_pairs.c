@@ -37,6 +37,24 @@ static inline int kv_add(const qk_allocator_t *a, qk__kvec_t *v, uint64_t k) {
   return 1;
 }
 
+/* Append src's keys to v. 0 when memory ran short (v's keys as they were). */
+static int kv_append(const qk_allocator_t *a, qk__kvec_t *v, const qk__kvec_t *src) {
+  if (v->n + src->n > v->cap) {
+    size_t cap = v->n + src->n > 2 * v->cap ? v->n + src->n : 2 * v->cap;
+    uint64_t *p = qk__realloc(a, v->v, v->cap * sizeof *p, cap * sizeof *p);
+    if (!p) return 0;
+    v->v = p, v->cap = cap;
+  }
+  if (src->n) memcpy(v->v + v->n, src->v, src->n * sizeof *v->v);
+  v->n += src->n;
+  return 1;
+}
+
+/* Whether two float boxes (xmin, ymin, xmax, ymax) meet (closed). */
+static inline int fboxes_meet(const float *a, const float *b) {
+  return b[0] <= a[2] && b[1] <= a[3] && b[2] >= a[0] && b[3] >= a[1];
+}
+
 static void rows_free(const qk_allocator_t *a, qk__prows_t *r) {
   qk__free(a, r->b, r->cap * sizeof *r->b);
   qk__free(a, r->row, r->row ? 2 * (r->n_nz + 1) * sizeof *r->row : 0);
@@ -523,7 +541,7 @@ static inline __attribute__((always_inline)) int began_range_(bjob_t *J, unsigne
       if (__builtin_expect(meet == 15, 1)) {
 #else
       out[d] = x;
-      if (fx[0] <= fa[2] && fx[1] <= fa[3] && fx[2] >= fa[0] && fx[3] >= fa[1]) {
+      if (fboxes_meet(fa, fx)) {
 #endif
         if (exact || qk__world_objects_meet(J->w, a, x)) {
           d++;
@@ -563,11 +581,11 @@ static void bjob_run(unsigned t, void *ud) {
   if (!began_range(J, t)) J->nomem[t] = 1;
 }
 
-/* The first of rows [lo, hi) of r whose slot is at least s. */
-static size_t row_from(const qk__prows_t *r, size_t lo, size_t hi, uint32_t s) {
+/* The first i in [lo, hi) with a[i] >= key (hi when none): a is ascending there. */
+static size_t first_at_least(const uint32_t *a, size_t lo, size_t hi, size_t key) {
   while (lo < hi) {
     size_t mid = lo + (hi - lo) / 2;
-    if (r->row[mid] < s)
+    if (a[mid] < key)
       lo = mid + 1;
     else
       hi = mid;
@@ -576,8 +594,8 @@ static size_t row_from(const qk__prows_t *r, size_t lo, size_t hi, uint32_t s) {
 }
 
 /* tmp and cnt: make_rows' scratch for the n began keys; r->b has room for the last
- * frame's pairs and these. 0 when memory ran short (nothing allocated in *r but b, nor
- * in *bv and *ev beyond what they held). */
+ * frame's pairs and these. 0 when memory ran short (the caller then frees *r, *bv, *ev
+ * and *nv). */
 __attribute__((noinline)) static int rows_began(const qk_world_t *w, uint64_t *keys, uint64_t *tmp,
                                                 size_t n, uint32_t *cnt, const float *fb, int exact,
                                                 unsigned nt, qk__prows_t *r, qk__kvec_t *bv,
@@ -601,16 +619,9 @@ __attribute__((noinline)) static int rows_began(const qk_world_t *w, uint64_t *k
   /* the ranges: about equal old pairs */
   J->q[0] = J->p[0] = 0, J->q[nt] = o->n_nz, J->p[nt] = nb.n_nz;
   for (unsigned t = 1; t < nt; t++) {
-    size_t want = o->n * t / nt, lo = J->q[t - 1], hi = o->n_nz;
-    while (lo < hi) {
-      size_t mid = lo + (hi - lo) / 2;
-      if (o->start[mid] < want)
-        lo = mid + 1;
-      else
-        hi = mid;
-    }
+    size_t lo = first_at_least(o->start, J->q[t - 1], o->n_nz, o->n * t / nt);
     J->q[t] = lo;
-    J->p[t] = lo < o->n_nz ? row_from(&nb, J->p[t - 1], nb.n_nz, o->row[lo]) : nb.n_nz;
+    J->p[t] = lo < o->n_nz ? first_at_least(nb.row, J->p[t - 1], nb.n_nz, o->row[lo]) : nb.n_nz;
   }
   int ok = 1;
   if (nt == 1) {
@@ -630,29 +641,11 @@ __attribute__((noinline)) static int rows_began(const qk_world_t *w, uint64_t *k
     for (unsigned t = 0; ok && t < nt; t++) ok = !J->nomem[t];
   }
   /* The joined index, lists and pairs. */
-  size_t z = 0, nbg = bv->n, neg = ev->n;
+  size_t z = 0;
   for (unsigned t = 0; ok && t < nt; t++) z += J->z[t];
-  if (ok && nt > 1) {
-    for (unsigned t = 0; t < nt; t++) nbg += J->bv[t].n, neg += J->ev[t].n;
-    qk__kvec_t jb = *bv, je = *ev;
-    if (jb.cap < nbg) {
-      uint64_t *v = qk__realloc(al, jb.v, jb.cap * sizeof *v, nbg * sizeof *v);
-      if (v) jb.v = v, jb.cap = nbg;
-    }
-    if (je.cap < neg) {
-      uint64_t *v = qk__realloc(al, je.v, je.cap * sizeof *v, neg * sizeof *v);
-      if (v) je.v = v, je.cap = neg;
-    }
-    *bv = jb, *ev = je;
-    ok = jb.cap >= nbg && je.cap >= neg;
-    for (unsigned t = 0; ok && t < nt; t++)
-      for (size_t i = 0; ok && i < J->nv[t].n; i++) ok = kv_add(al, nv, J->nv[t].v[i]);
-    for (unsigned t = 0; ok && t < nt; t++) {
-      if (J->bv[t].n) memcpy(bv->v + bv->n, J->bv[t].v, J->bv[t].n * sizeof *bv->v);
-      if (J->ev[t].n) memcpy(ev->v + ev->n, J->ev[t].v, J->ev[t].n * sizeof *ev->v);
-      bv->n += J->bv[t].n, ev->n += J->ev[t].n;
-    }
-  }
+  for (unsigned t = 0; ok && nt > 1 && t < nt; t++)
+    ok = kv_append(al, bv, &J->bv[t]) && kv_append(al, ev, &J->ev[t]) &&
+         kv_append(al, nv, &J->nv[t]);
   if (ok && (ok = rows_alloc(al, r, z))) {
     size_t zo = 0, d = 0;
     for (unsigned t = 0; t < nt; t++) {
@@ -719,23 +712,8 @@ typedef struct pjob {
 static qk__prows_t rows_view(const qk__prows_t *o, uint32_t s0, uint32_t s1) {
   qk__prows_t v = {0};
   if (!o->n_nz) return v;
-  size_t lo = 0, hi = o->n_nz;
-  while (lo < hi) {
-    size_t mid = lo + (hi - lo) / 2;
-    if (o->row[mid] < s0)
-      lo = mid + 1;
-    else
-      hi = mid;
-  }
-  size_t q0 = lo;
-  hi = o->n_nz;
-  while (lo < hi) {
-    size_t mid = lo + (hi - lo) / 2;
-    if (o->row[mid] < s1)
-      lo = mid + 1;
-    else
-      hi = mid;
-  }
+  size_t q0 = first_at_least(o->row, 0, o->n_nz, s0);
+  size_t lo = first_at_least(o->row, q0, o->n_nz, s1);
   v.b = o->b, v.row = o->row + q0, v.start = o->start + q0, v.n_nz = lo - q0;
   v.n = o->start[lo] - o->start[q0];
   return v;
@@ -1049,7 +1027,7 @@ static qk_status_t update(qk_world_t *w) {
       uint64_t k = w->near.v[i];
       uint32_t a = (uint32_t)(k >> 32), b = (uint32_t)k;
       const float *fa = fb + 4 * (size_t)a, *fx = fb + 4 * (size_t)b;
-      if (!(fx[0] <= fa[2] && fx[1] <= fa[3] && fx[2] >= fa[0] && fx[3] >= fa[1])) continue;
+      if (!fboxes_meet(fa, fx)) continue;
       if (fb_ok == 1 || qk__world_objects_meet(w, a, b)) {
         if (!kv_add(al, &found, k)) st = QK_ERR_NOMEM;
       } else if (!kv_add(al, &nn, k)) {
