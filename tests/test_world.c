@@ -929,12 +929,31 @@ static qk_shape_t cm_shape(qkt_rng_t *r, const double *cx, const double *cy, int
   return sh;
 }
 
+/* Eight cluster centres on the 1/64 grid in [5, 45]^2. */
+static void cluster_centres(qkt_rng_t *r, double *cx, double *cy) {
+  for (int c = 0; c < 8; c++)
+    cx[c] = q64(qkt_rng_range(r, 5, 45)), cy[c] = q64(qkt_rng_range(r, 5, 45));
+}
+
+/* The shape moved by (dx, dy). */
+static qk_shape_t shifted(qk_shape_t sh, double dx, double dy) {
+  sh.x += dx, sh.y += dy;
+  if (sh.kind == QK_SHAPE_BOX || sh.kind == QK_SHAPE_SEGMENT) sh.a += dx, sh.b += dy;
+  return sh;
+}
+
+/* The shape's next step by (*vx, *vy), which turn back off the walls of [0, 50]^2. */
+static qk_shape_t bounced(qk_shape_t sh, double *vx, double *vy) {
+  if (sh.x + *vx < 0 || sh.x + *vx > 50) *vx = -*vx;
+  if (sh.y + *vy < 0 || sh.y + *vy > 50) *vy = -*vy;
+  return shifted(sh, *vx, *vy);
+}
+
 static void run_clustered_mixed(int kinds, size_t n, int frames) {
   qkt_rng_t r;
   qkt_rng_seed(&r, g_seed + 101 + (uint64_t)kinds);
   double cx[8], cy[8];
-  for (int c = 0; c < 8; c++)
-    cx[c] = q64(qkt_rng_range(&r, 5, 45)), cy[c] = q64(qkt_rng_range(&r, 5, 45));
+  cluster_centres(&r, cx, cy);
   qk_world_t *w;
   assert_int_equal(qk_world_new(NULL, &w), QK_OK);
   mirror_t m = {0};
@@ -959,11 +978,7 @@ static void run_clustered_mixed(int kinds, size_t n, int frames) {
       }
     }
     for (size_t i = 0; f && i < m.n; i++) {
-      qk_shape_t sh = m.s[i];
-      if (sh.x + vx[i] < 0 || sh.x + vx[i] > 50) vx[i] = -vx[i];
-      if (sh.y + vy[i] < 0 || sh.y + vy[i] > 50) vy[i] = -vy[i];
-      sh.x += vx[i], sh.y += vy[i];
-      if (sh.kind == QK_SHAPE_BOX || sh.kind == QK_SHAPE_SEGMENT) sh.a += vx[i], sh.b += vy[i];
+      qk_shape_t sh = bounced(m.s[i], &vx[i], &vy[i]);
       assert_int_equal(qk_world_move(w, m.h[i], &sh), QK_OK);
       m.s[i] = o_norm(sh);
     }
@@ -996,8 +1011,7 @@ static void run_began_only(unsigned threads, size_t n, int frames) {
   qkt_rng_t r;
   qkt_rng_seed(&r, g_seed + 131 + threads);
   double cx[8], cy[8];
-  for (int c = 0; c < 8; c++)
-    cx[c] = q64(qkt_rng_range(&r, 5, 45)), cy[c] = q64(qkt_rng_range(&r, 5, 45));
+  cluster_centres(&r, cx, cy);
   qk_world_options_t o;
   qk_world_options_init(&o);
   o.threads = threads;
@@ -1026,9 +1040,7 @@ static void run_began_only(unsigned threads, size_t n, int frames) {
       if (mode == 3 && qkt_rng_below(&r, 10) == 0) {
         sh = cm_shape(&r, cx, cy, 0);
       } else {
-        if (sh.x + vx[i] < 0 || sh.x + vx[i] > 50) vx[i] = -vx[i];
-        if (sh.y + vy[i] < 0 || sh.y + vy[i] > 50) vy[i] = -vy[i];
-        sh.x += vx[i], sh.y += vy[i], sh.a += vx[i], sh.b += vy[i];
+        sh = bounced(sh, &vx[i], &vy[i]); /* (boxes) */
       }
       if (i == 0 && mode == 4) sh.x -= 0x1p-30; /* (still below sh.a) */
       if (i == 0 && mode == 5) sh.x = q64(sh.x);
@@ -1060,12 +1072,6 @@ static void test_world_began_only(void **s) {
  * test sees), and of a remove and two adds (from 4095 objects this crosses the 4096 at
  * which the threads start). Every frame against brute force (dense_check).
  */
-static qk_shape_t shifted(qk_shape_t sh, double dx, double dy) {
-  sh.x += dx, sh.y += dy;
-  if (sh.kind == QK_SHAPE_BOX || sh.kind == QK_SHAPE_SEGMENT) sh.a += dx, sh.b += dy;
-  return sh;
-}
-
 static qk_shape_t bg_shape(qkt_rng_t *r, const double *cx, const double *cy, int kinds, int off) {
   qk_shape_t sh = cm_shape(r, cx, cy, kinds);
   return off ? shifted(sh, 0.1 * qkt_rng_below(r, 10), 0.1 * qkt_rng_below(r, 10)) : sh;
@@ -1075,8 +1081,7 @@ static void run_began_general(unsigned threads, size_t n, int frames, int kinds,
   qkt_rng_t r;
   qkt_rng_seed(&r, g_seed + 151 + threads + 2 * (uint64_t)kinds + 4 * (uint64_t)off);
   double cx[8], cy[8];
-  for (int c = 0; c < 8; c++)
-    cx[c] = q64(qkt_rng_range(&r, 5, 45)), cy[c] = q64(qkt_rng_range(&r, 5, 45));
+  cluster_centres(&r, cx, cy);
   qk_world_options_t o;
   qk_world_options_init(&o);
   o.threads = threads;
@@ -1113,9 +1118,7 @@ static void run_began_general(unsigned threads, size_t n, int frames, int kinds,
         double t = 0x1p-30;
         sh = shifted(sh, t * ((int)qkt_rng_below(&r, 3) - 1), t * ((int)qkt_rng_below(&r, 3) - 1));
       } else {
-        if (sh.x + vx[i] < 0 || sh.x + vx[i] > 50) vx[i] = -vx[i];
-        if (sh.y + vy[i] < 0 || sh.y + vy[i] > 50) vy[i] = -vy[i];
-        sh = shifted(sh, vx[i], vy[i]);
+        sh = bounced(sh, &vx[i], &vy[i]);
       }
       assert_int_equal(qk_world_move(w, m.h[i], &sh), QK_OK);
       m.s[i] = o_norm(sh);
@@ -1502,8 +1505,7 @@ static void test_world_nomem_began(void **s) {
   qkt_rng_t r;
   qkt_rng_seed(&r, g_seed + 171);
   double cx[8], cy[8];
-  for (int c = 0; c < 8; c++)
-    cx[c] = q64(qkt_rng_range(&r, 5, 45)), cy[c] = q64(qkt_rng_range(&r, 5, 45));
+  cluster_centres(&r, cx, cy);
   qkt_alloc_t st = {0};
   qk_allocator_t al = qkt_alloc_make(&st);
   qk_world_options_t o;
