@@ -54,6 +54,7 @@ class QuadkitWorld : public WorldImpl {
   qk_world_t *w = nullptr;
   std::vector<qk_handle_t> h;
   unsigned threads;
+  double upd = 0;
 
 public:
   explicit QuadkitWorld(unsigned th = 1) : threads(th) {}
@@ -76,7 +77,9 @@ public:
       qk_shape_t s = {QK_SHAPE_BOX, boxes[i].xmin, boxes[i].ymin, boxes[i].xmax, boxes[i].ymax};
       qk_world_move(w, h[i], &s);
     }
+    double t0 = now_seconds();
     qk_world_update(w);
+    upd = now_seconds() - t0;
     qk_world_pairs(
         w, QK_PAIRS_ALL,
         [](qk_handle_t a, qk_handle_t b, void *ud) {
@@ -87,6 +90,7 @@ public:
   }
   size_t bytes() const override { return qk_world_bytes(w); }
   size_t pair_bytes() const override { return qk_world_pair_bytes(w); }
+  double update_seconds() const override { return upd; }
 };
 
 // ---- uniform grid ----------------------------------------------------------------------

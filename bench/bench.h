@@ -143,6 +143,10 @@ public:
   // The part of bytes() that is pair state kept between frames (the last frame's pairs,
   // began / ended), not the index: 0 when there is none or the library does not say.
   virtual size_t pair_bytes() const { return 0; }
+  // Seconds of the last frame() spent in the library's own pair search (quadkit:
+  // qk_world_update, without the caller's moves and walk of the pairs), by the bench's
+  // clock; 0 when not measured.
+  virtual double update_seconds() const { return 0; }
 };
 std::vector<std::unique_ptr<WorldImpl>> make_world_impls();
 std::unique_ptr<WorldImpl> make_world_quadkit(unsigned threads); // qk_world on that many threads
