@@ -218,16 +218,16 @@ static inline float round_up(double v) {
 }
 
 /* round_up for a parameter t >= 0 (or +infinity), without the branches for negative
- * values: the next float above is the next bit pattern. */
+ * values: the next float above is the next bit pattern. The step up is added as the
+ * comparison's 0 or 1, not under a branch: whether the conversion rounded down is a coin
+ * toss (0.44 mispredicted branches a ray at 10^6 discs, as the ray cast calls it). */
 static inline float round_up_t(double t) {
   if (!(t <= FLT_MAX)) return INFINITY;
   float f = (float)t;
-  if ((double)f < t) {
-    uint32_t b;
-    memcpy(&b, &f, sizeof b);
-    b++;
-    memcpy(&f, &b, sizeof f);
-  }
+  uint32_t b;
+  memcpy(&b, &f, sizeof b);
+  b += (uint32_t)((double)f < t);
+  memcpy(&f, &b, sizeof f);
   return f;
 }
 
@@ -1464,11 +1464,16 @@ scan_leaf(const qk_collider_t *c, const ray_t *ray, uint32_t slot, uint32_t end,
       double th[2];
       const unsigned cand = ray_disc2(&c->sdisc[s2], ray, tmax, b->t, th);
       if (cand) { /* rare: neither disc can be a new best in most pairs */
-        for (unsigned k = 0; k < 2; k++) {
-          if (!(cand >> k & 1) || th[k] > b->t) continue; /* the best may have moved */
-          qk_id_t id = c->sdisc[s2 + k].id;
-          if (th[k] < b->t || id < b->id) *b = (best_t){th[k], id};
-        }
+        /* The lane in cand, or the smaller (t, id) of both, by index (a loop over the two
+         * lanes mispredicted 0.7 times a ray; one ? th[1] : th[0] compiles to a branch). Each
+         * lane in cand has t <= b->t, so the chosen one replaces the best unless it ties
+         * with a smaller id. Both lanes are candidates in few pairs. */
+        unsigned k = cand >> 1;
+        if (cand == 3)
+          k = th[1] < th[0] || (th[1] == th[0] && c->sdisc[s2 + 1].id < c->sdisc[s2].id);
+        const double tk = th[k];
+        const qk_id_t id = c->sdisc[s2 + k].id;
+        if (tk < b->t || id < b->id) *b = (best_t){tk, id};
       }
       if (s2 + 2 >= end) break;
     }
