@@ -154,9 +154,9 @@ struct qk_collider {
   double mag;       /* largest coordinate magnitude of any item box, for rounding margins */
   double reach;     /* farthest any item box reaches from its centre on an axis (the ray cast) */
   /* The ray cast's start (cast_float), from the root square, computed once: its corner,
-   * 2^32 / side (NaN when side <= 2^-900: no local start), side / 2^32, and the fixed part
-   * of the climb check's margin. */
-  double rs_x, rs_y, rs_f, rs_unit, rs_k;
+   * 2^32 / side (NaN when side <= 2^-900: no local start), and the fixed part of the
+   * climb check's margin. */
+  double rs_x, rs_y, rs_f, rs_k;
 };
 
 /* Exact overlap predicates (touching counts). */
@@ -786,7 +786,6 @@ static qk_status_t fill_slots(qk_collider_t *c, const qk_disc_t *discs, const qk
   const qk_square_t rs = qk__tree_root_square(c->tree);
   c->rs_x = rs.x, c->rs_y = rs.y;
   c->rs_f = rs.side > 0x1p-900 ? 0x1p32 / rs.side : NAN;
-  c->rs_unit = rs.side * 0x1p-32;
   c->rs_k = (fabs(rs.x) + fabs(rs.y) + rs.side) * 0x1p-45;
   return QK_OK;
 }
@@ -1847,6 +1846,42 @@ prefetch_climbs(const qk_collider_t *c, const uint32_t *path, unsigned n, unsign
   }
 }
 
+/*
+ * The climbs' stop: the deepest level a (0 .. 32) such that the box [lo, hi] (x in lane 0,
+ * y in lane 1) lies strictly inside the origin's level-a square, the cells of the path's
+ * 32-bit fixed point (ix, iy) that share their first a bits (f = 2^32 / side of the
+ * root, rs = its corner). On each axis the ends are converted to fixed point,
+ * ul = (lo - rs) f and uh = (hi - rs) f, each within 2^-20 of its exact value (three
+ * roundings of 2^-53 relatively, below 2^32), and moved outwards: A = trunc(fl(ul - 2 -
+ * 2^31)) + 2^31 < ul - 1 + 2^-21 and B = trunc(fl(uh + 2 - 2^31)) + 2^31 > uh + 1 - 2^-21
+ * (the 2^31 shift makes the conversion's signed range the unsigned one; truncation
+ * errs by less than 1, the subtraction by at most 2^-22). If A and B share their first a
+ * bits with the path's, the exact ends lie strictly after the cell's start (at most A)
+ * and before its end (beyond B): the side holds [lo, hi] with the exact corner
+ * rs + (first a bits) side 2^-32, which the margin of cast_float relates to the tree's
+ * square. The first level at which either end of either axis leaves the path's cells is
+ * the count of leading zeros of the bits that differ, over all four at once. Ends within
+ * two units of the root's edges, beyond them or infinite give 0 (the root).
+ */
+static inline unsigned climb_stop(__m128d lo, __m128d hi, __m128d rs, __m128d f, __m128i path) {
+  const __m128d ul = _mm_mul_pd(_mm_sub_pd(lo, rs), f), uh = _mm_mul_pd(_mm_sub_pd(hi, rs), f);
+  const __m128d ok =
+      _mm_and_pd(_mm_cmpge_pd(ul, _mm_set1_pd(2.0)), _mm_cmplt_pd(uh, _mm_set1_pd(0x1p32 - 2)));
+  const __m128i a = _mm_cvttpd_epi32(_mm_sub_pd(ul, _mm_set1_pd(0x1p31 + 2)));
+  const __m128i b = _mm_cvttpd_epi32(_mm_add_pd(uh, _mm_set1_pd(2 - 0x1p31)));
+  __m128i diff = _mm_or_si128(_mm_xor_si128(a, path), _mm_xor_si128(b, path));
+  diff = _mm_or_si128(diff, _mm_shuffle_epi32(diff, _MM_SHUFFLE(1, 1, 1, 1)));
+  const uint32_t v = (uint32_t)_mm_cvtsi128_si32(diff);
+  if (_mm_movemask_pd(ok) != 3) return 0; /* (also for NaN, and a NaN f) */
+#if defined(__GNUC__)
+  return v ? (unsigned)__builtin_clz(v) : 32;
+#else
+  unsigned n = 0;
+  while (n < 32 && !(v >> (31 - n) & 1)) n++;
+  return n;
+#endif
+}
+
 /* Levels above the origin's deepest internal node at which the local search starts: none
  * since a climb no longer visits the child it has searched (one level up cost 14 more
  * instructions a ray at 10^6 discs, 15 at 10^4, 21 at 10^5, and 0.1-0.7 more
@@ -1949,25 +1984,34 @@ cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk_hit_t *hit)
     walk_float(c, ray, tmax, path[n], QK_NONE, &b, &tf);
     /* Up from N one level at a time while the segment to the best hit so far (or to
      * tmax) is not inside the square of the node searched: each step searches the
-     * parent's other children, which may bring the hit closer. */
-    const double unit = c->rs_unit, rsx = c->rs_x, rsy = c->rs_y;
+     * parent's other children, which may bring the hit closer. The deepest level whose
+     * square holds the widened segment is found from the path's bits (climb_stop), anew
+     * only when the best has moved; the climbs stop at or below it. For t1 = infinity the
+     * box is infinite (m is, and no NaN arises: |dx|, |dy| >= 2^-100), and the level 0. */
     const double mb = c->reach + 2 * ray->w + c->rs_k;
-    double t1_seen = -1.0, lx = 0, hx = 0, ly = 0, hy = 0; /* the widened segment's box */
+    const __m128d o2 = _mm_set_pd(oy, ox), d2 = _mm_set_pd(ray->dy, ray->dx);
+    const __m128d oa2 = _mm_andnot_pd(_mm_set1_pd(-0.0), o2); /* |ox|, |oy| */
+    const __m128d rs2 = _mm_set_pd(c->rs_y, c->rs_x), f2 = _mm_set1_pd(c->rs_f);
+    /* the path's bits, shifted as climb_stop's conversions are (lanes 0 and 1) */
+    const __m128i p2 =
+        _mm_xor_si128(_mm_set_epi32(0, 0, (int)iy, (int)ix), _mm_set1_epi32((int)0x80000000u));
+    double t1_seen = -1.0;
+    unsigned stop = 0;
     for (unsigned a = n; a > 0; a--) {
       const double t1 = b.t < tmax ? b.t : tmax;
-      if (t1 < INFINITY) {
-        if (t1 != t1_seen) { /* the box anew only when the best has moved */
-          const double ex = ox + t1 * ray->dx, ey = oy + t1 * ray->dy;
-          const double m = mb + (fabs(ox) + fabs(oy) + fabs(ex) + fabs(ey) + c->reach) * 0x1p-48;
-          lx = qk__min(ox, ex) - m, hx = qk__max(ox, ex) + m;
-          ly = qk__min(oy, ey) - m, hy = qk__max(oy, ey) + m;
-          t1_seen = t1;
-        }
-        const double side = qk__tree_side(t, a);
-        const uint32_t keep = ~(uint32_t)0 << (32 - a); /* the path's first a bits */
-        const double x0 = rsx + (double)(ix & keep) * unit, y0 = rsy + (double)(iy & keep) * unit;
-        if (lx > x0 && hx < x0 + side && ly > y0 && hy < y0 + side) break;
+      if (t1 != t1_seen) {
+        /* the segment's end, and m = mb + (|ox| + |ex| + |oy| + |ey| + reach) 2^-48 (the sum
+         * in any order: its roundings are some 2^-52 of it, far inside the 2^-48) */
+        const __m128d e2 = _mm_add_pd(o2, _mm_mul_pd(_mm_set1_pd(t1), d2));
+        const __m128d s2 = _mm_add_pd(oa2, _mm_andnot_pd(_mm_set1_pd(-0.0), e2));
+        const double m =
+            mb + (_mm_cvtsd_f64(s2) + _mm_cvtsd_f64(_mm_unpackhi_pd(s2, s2)) + c->reach) * 0x1p-48;
+        const __m128d m2 = _mm_set1_pd(m);
+        stop = climb_stop(_mm_sub_pd(_mm_min_pd(o2, e2), m2), _mm_add_pd(_mm_max_pd(o2, e2), m2),
+                          rs2, f2, p2);
+        t1_seen = t1;
       }
+      if (a <= stop) break;
       /* The parent from the line of the node just searched (see qnode_t), whether or not
        * the path holds it already: no branch, no miss. */
       path[a - 1] = qnode_parent(&c->quads[path[a]]);
