@@ -1851,7 +1851,7 @@ prefetch_climbs(const qk_collider_t *c, const uint32_t *path, unsigned n, unsign
  * y in lane 1) lies strictly inside the origin's level-a square, the cells of the path's
  * 32-bit fixed point (ix, iy) that share their first a bits (f = 2^32 / side of the
  * root, rs = its corner). On each axis the ends are converted to fixed point,
- * ul = (lo - rs) f and uh = (hi - rs) f, each within 2^-20 of its exact value (three
+ * ul = (lo - rs) f and uh = (hi - rs) f, each within 2^-19 of its exact value (three
  * roundings of 2^-53 relatively, below 2^32), and moved outwards: A = trunc(fl(ul - 2 -
  * 2^31)) + 2^31 < ul - 1 + 2^-21 and B = trunc(fl(uh + 2 - 2^31)) + 2^31 > uh + 1 - 2^-21
  * (the 2^31 shift makes the conversion's signed range the unsigned one; truncation
@@ -1904,7 +1904,8 @@ static inline unsigned climb_stop(__m128d lo, __m128d hi, __m128d rs, __m128d f,
  * root holds every item. Most rays stop at N. The margin adds w for the roundings
  * of reach, of the segment's end and of the comparisons (each below 2^-48 of the
  * magnitudes involved), and 2^-45 of the root square's for the corners: here they are
- * the root's corner plus the path's bits times side / 2^32 (two roundings), where the
+ * the root's corner plus the path's bits times side / 2^32 (exact: climb_stop compares
+ * in fixed point, its conversions' errors inside its two units of slack), where the
  * tree adds halves level by level (one rounding each, 60 levels at most), so the two
  * differ by less than 2^-46 of it. The descent need not pick, near a midline, the child
  * the tree would pick for the origin: the nodes on the path are nodes of the tree
