@@ -21,12 +21,16 @@
  *  - trees deeper than the 32 bits of the ray's descent (pairs of discs 2^-45 apart, depth
  *    cap 60) and a given root square whose halvings are not exact (corner -0.3, side
  *    1.7), with rays from inside and outside the root;
+ *  - the climbs' stop (computed in the path's 32-bit fixed point): discs centred a
+ *    fraction of 2^-32 beyond a square's side, hit from the other side with tmax at the
+ *    hit, which only a climb past that square finds;
  *  - the batch call (which reorders its rays by origin) against single calls;
  *  - ties: every disc three times at shuffled ids, so that each hit is decided by the
  *    smallest id among equal t;
  *  - a scene as large as the benchmark's in its ray arrays' size (70,000 discs, over the
- *    2 MiB from which the cast asks for lines ahead), discs only and with boxes, rays from
- *    anywhere, from disc centres and along the leaves' split lines: the paths that only
+ *    2 MiB from which the cast asks for lines ahead), discs only, with boxes, and built
+ *    on two threads (the entries' parents, which the climbs read, filled by subtrees),
+ *    rays from anywhere, from disc centres and along the leaves' split lines: the paths that only
  *    large colliders take (the prefetches read the nodes above the start); and the batch
  *    call there (rays sorted by origin) against single calls.
  */
@@ -313,6 +317,58 @@ static void test_collide_rays_deep_and_rooted(void **state) {
   assert_true(checked == 2L * 600);
 }
 
+/*
+ * The climbs' stop at the edges of the path's fixed point (collider.c climb_stop): in the
+ * root square [0, 1]^2, discs of the largest radius centred half a unit, one unit and a
+ * unit and a half of 2^-32 beyond a square's side (the root's midlines, and a level-2
+ * side), a ray from the other side along the centre's line with tmax at the disc's own
+ * hit: the widened segment then ends a fraction of a unit past the side, so the search
+ * must climb past the square (to the root for a midline) to find the disc. Small discs on
+ * a grid make the tree deep (capacity 1); every direction, each axis.
+ */
+static void test_collide_rays_climb_edges(void **state) {
+  (void)state;
+  enum { NG = 16, NPROBE = 4 * 2 * 3 };
+  qk_disc_t d[NG * NG + NPROBE];
+  size_t nd = 0;
+  for (int i = 0; i < NG; i++)
+    for (int j = 0; j < NG; j++) d[nd++] = (qk_disc_t){(i + 0.5) / NG, (j + 0.5) / NG, 1e-5};
+  static const double side[2] = {0.5, 0.25};                /* a midline, a level-2 side */
+  static const double off[3] = {0x1p-33, 0x1p-32, 0x3p-33}; /* beyond it, in 2^-32 */
+  qk_point_t org[NPROBE], dir[NPROBE];
+  int np = 0;
+  for (int s = 0; s < 2; s++)
+    for (int k = 0; k < 3; k++)
+      for (int q = 0; q < 4; q++) { /* +x, -x, +y, -y */
+        const double r = 1e-3, e = q % 2 ? side[s] - off[k] : side[s] + off[k];
+        const double along = 0.3 + 0.1 * q + 0.01 * k; /* clear of the grid's discs */
+        const double from = q % 2 ? side[s] + 0.003 : side[s] - 0.003;
+        const double sgn = q % 2 ? -1.0 : 1.0;
+        if (q < 2) {
+          d[nd++] = (qk_disc_t){e, along, r};
+          org[np] = (qk_point_t){from, along}, dir[np] = (qk_point_t){sgn, 0x1p-90};
+        } else {
+          d[nd++] = (qk_disc_t){along, e, r};
+          org[np] = (qk_point_t){along, from}, dir[np] = (qk_point_t){0x1p-90, sgn};
+        }
+        np++;
+      }
+  qk_tree_options_t opt;
+  qk_tree_options_init(&opt);
+  opt.capacity = 1;
+  opt.has_root = 1;
+  opt.root = (qk_square_t){0, 0, 1};
+  qk_collider_t *c = NULL;
+  assert_int_equal(qk_collider_build(d, nd, NULL, 0, &opt, &c), QK_OK);
+  for (int i = 0; i < np; i++) {
+    const qk_hit_t w = brute(d, nd, NULL, 0, org[i], dir[i], INFINITY);
+    assert_int_equal(w.id, NG * NG + i); /* the probe's own disc, first */
+    expect_brute(c, d, nd, NULL, 0, org[i], dir[i], w.t, 0, i);
+    expect_brute(c, d, nd, NULL, 0, org[i], dir[i], nextafter(w.t, INFINITY), 1, i);
+  }
+  qk_collider_free(c);
+}
+
 /* The batch call, on one and two threads, answers each ray as a single call does. */
 static void test_collide_rays_batch_matches_single(void **state) {
   (void)state;
@@ -543,10 +599,13 @@ static void test_collide_rays_large_scene(void **state) {
   qk_tree_options_init(&opt);
   opt.capacity = 8;
   long checked = 0;
-  for (int variant = 0; variant < 2; variant++) {
-    const size_t nb = variant ? NB : 0;
+  /* Variants: discs only, with boxes, and discs only built on two threads (the ray entries
+   * below the top levels, and their parents, then filled by subtrees on their own). */
+  for (int variant = 0; variant < 3; variant++) {
+    const size_t nb = variant == 1 ? NB : 0;
+    opt.threads = variant == 2 ? 2 : 1;
     qk_collider_t *c = NULL;
-    assert_int_equal(qk_collider_build(d, ND, variant ? b : NULL, nb, &opt, &c), QK_OK);
+    assert_int_equal(qk_collider_build(d, ND, nb ? b : NULL, nb, &opt, &c), QK_OK);
     for (int i = 0; i < NR; i++) {
       qk_point_t o = {qkt_rng_range(&r, -0.1, 1.1), qkt_rng_range(&r, -0.1, 1.1)};
       if (i % 4 == 1) o = (qk_point_t){d[i].x, d[i].y};             /* inside a disc */
@@ -579,7 +638,7 @@ static void test_collide_rays_large_scene(void **state) {
     free(bo), free(bv), free(bh);
     qk_collider_free(c);
   }
-  assert_true(checked == 2L * NR);
+  assert_true(checked == 3L * NR);
   free(d), free(b);
 }
 
@@ -589,6 +648,7 @@ int main(void) {
       cmocka_unit_test(test_collide_rays_float_edges),
       cmocka_unit_test(test_collide_rays_grid_edges),
       cmocka_unit_test(test_collide_rays_deep_and_rooted),
+      cmocka_unit_test(test_collide_rays_climb_edges),
       cmocka_unit_test(test_collide_rays_batch_matches_single),
       cmocka_unit_test(test_collide_rays_tied_discs),
       cmocka_unit_test(test_collide_rays_extreme_directions),
