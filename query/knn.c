@@ -636,6 +636,10 @@ static QK__ALWAYS_INLINE void climb(const qk_tree_t *t, double qx, double qy, be
  */
 static QK__ALWAYS_INLINE void search(const qk_tree_t *t, double qx, double qy, best_t *b, int kind,
                                      const qk__path_t *given) {
+  if (given) { /* a path is walked only for a query inside the root */
+    climb(t, qx, qy, b, kind, given);
+    return;
+  }
   if (!qk__tree_contains(t, qx, qy)) {
     const double e = qk__margin(t);
     const qk_square_t r = qk__tree_root_square(t);
@@ -643,10 +647,6 @@ static QK__ALWAYS_INLINE void search(const qk_tree_t *t, double qx, double qy, b
     int sp = 0;
     stack[sp++] = (qk__cell_entry_t){qk__root_cell(t), qk__square_d2(r.x, r.y, r.side, qx, qy, e)};
     drain(t, qx, qy, e, b, stack, &sp, kind);
-    return;
-  }
-  if (given) {
-    climb(t, qx, qy, b, kind, given);
     return;
   }
   qk__path_t p;

@@ -306,9 +306,11 @@ size_t qk__knn_one(const qk_tree_t *t, qk_point_t q, size_t k, double max_dist, 
 #define QK__DIST_RANGE 0x1p510
 static inline bool qk__dist_in_range(const qk_tree_t *t, qk_point_t q) {
   const qk_square_t r = qk__tree_root_square(t);
-  const double m =
-      fmax(fmax(fabs(q.x), fabs(q.y)),
-           fmax(fmax(fabs(r.x), fabs(r.y)), fmax(fabs(r.x + r.side), fabs(r.y + r.side))));
+  /* maxsd rather than fmax(), a library call (no NaN here: q is finite, checked first, and
+   * so is the root square). */
+  const double m = qk__max_d(qk__max_d(fabs(q.x), fabs(q.y)),
+                             qk__max_d(qk__max_d(fabs(r.x), fabs(r.y)),
+                                       qk__max_d(fabs(r.x + r.side), fabs(r.y + r.side))));
   return m <= QK__DIST_RANGE;
 }
 
