@@ -596,6 +596,9 @@ static QK__ALWAYS_INLINE void drain(const qk_tree_t *t, double qx, double qy, do
     for (;;) {
       const uint32_t child = qk__node_child(t, cur.c.node);
       if (child == QK_NONE) {
+        /* The sorted search reads the ids of its answers at the end: this leaf's are then
+         * in cache if it holds any, instead of a miss after the whole search. */
+        if (kind == KIND_SORTED) prefetch_ids(t, cur.c.node);
         scan(t, cur.c.node, qx, qy, b, kind);
         break;
       }
