@@ -92,28 +92,43 @@ static inline int expand(const qk_tree_t *t, qk__cell_entry_t *cur, uint32_t chi
 
 /*
  * Stack the children of the path cell p other than its child `skip` (which the first
- * descent entered), those with bound <= thr, nearest on top.
+ * descent entered, and which holds the query), those with bound <= thr, nearest on top.
+ * The query lies in skip's half on each axis, so the sibling across the x midline is
+ * bounded by the x gap alone (dx^2), the one across the y midline by dy^2 and the diagonal
+ * one by dx^2 + dy^2, at least either: the order needs one comparison, and the kept ones
+ * are always the nearest m (kept diagonal => both kept; kept farther => nearer kept). So the
+ * three are written in pushing order, farthest first, each over the last unless kept
+ * (the stack pointer advanced by its flag), with no branch on the bounds, which go either
+ * way at random. (Dropping the gap on the query's own side, 0 up to roundings inside the
+ * margin, only lowers a bound, which stays a lower bound.)
  */
 static inline void push_siblings(const qk_tree_t *t, qk__cell_t p, uint32_t child, unsigned skip,
                                  double qx, double qy, double e, double thr,
                                  qk__cell_entry_t *stack, int *sp) {
+  static const unsigned char quad[2][2] = {{QK_SW, QK_NW}, {QK_SE, QK_NE}}; /* [east][north] */
+  const unsigned ex = (0x9u >> skip) & 1u,
+                 no = (0x3u >> skip) & 1u; /* skip is NE or SE; NE or NW */
   const double hs = qk__tree_side(t, p.depth + 1);
   const double xm = p.x + hs, ym = p.y + hs;
-  const double dxw = qk__gap(qx, p.x - e, xm + e), dxe = qk__gap(qx, xm - e, xm + hs + e);
-  const double dys = qk__gap(qy, p.y - e, ym + e), dyn = qk__gap(qy, ym - e, ym + hs + e);
-  const double xw = dxw * dxw, xe = dxe * dxe, ys = dys * dys, yn = dyn * dyn;
-  const double b[4] = {xe + yn, xw + yn, xw + ys, xe + ys}; /* NE, NW, SW, SE */
-  qk__cell_t kc[4];
-  qk__cell_children(t, p, child, kc);
-  /* Each child written, and kept (m advanced) when it passes: no branch on the bounds. */
-  qk__cell_entry_t kids[4];
-  int m = 0;
-  for (unsigned q = 0; q < 4; q++) {
-    kids[m] = (qk__cell_entry_t){kc[q], b[q]};
-    m += (q != skip) & (b[q] <= thr);
-  }
-  qk__sort_cells_desc(kids, m);
-  for (int i = 0; i < m; i++) stack[(*sp)++] = kids[i];
+  const double xs[2] = {p.x, xm}, ys[2] = {p.y, ym};
+  /* The gaps to the other half on each axis, whose corner is chosen by index, not by a
+   * branch (the same intervals and values as expand's: x0 + hs is xm). */
+  const double ox = xs[!ex], oy = ys[!no];
+  const double dx = qk__gap(qx, ox - e, ox + hs + e), dy = qk__gap(qy, oy - e, oy + hs + e);
+  const double bx = dx * dx, by = dy * dy;
+  const double bd = bx + by, bn = qk__min_d(bx, by), bf = qk__max_d(bx, by);
+  const unsigned xn = bx < by; /* the sibling across the x midline is the nearer */
+  const uint32_t d = p.depth + 1;
+  int s = *sp;
+  stack[s] = (qk__cell_entry_t){{child + quad[!ex][!no], d, xs[!ex], ys[!no]}, bd};
+  s += bd <= thr;
+  const unsigned fe = ex ^ !xn, fn = no ^ xn; /* the farther: across y when x is nearer */
+  stack[s] = (qk__cell_entry_t){{child + quad[fe][fn], d, xs[fe], ys[fn]}, bf};
+  s += bf <= thr;
+  const unsigned ne = ex ^ xn, nn = no ^ !xn;
+  stack[s] = (qk__cell_entry_t){{child + quad[ne][nn], d, xs[ne], ys[nn]}, bn};
+  s += bn <= thr;
+  *sp = s;
 }
 
 /*
