@@ -139,9 +139,18 @@ static inline void push_siblings(const qk_tree_t *t, qk__cell_t p, uint32_t chil
  */
 static inline bool ball_inside(double qx, double qy, double x0, double y0, double side, double e,
                                double thr) {
-  double g = qk__min_d(qk__min_d(qx - (x0 + e), (x0 + side - e) - qx),
-                       qk__min_d(qy - (y0 + e), (y0 + side - e) - qy));
-  return g > 0 && g * g > thr;
+#if defined(__SSE2__)
+  /* Both axes at once: the same differences, lane by lane. */
+  const __m128d q = _mm_set_pd(qy, qx), c = _mm_set_pd(y0, x0), ve = _mm_set1_pd(e);
+  const __m128d lo = _mm_sub_pd(q, _mm_add_pd(c, ve));
+  const __m128d hi = _mm_sub_pd(_mm_sub_pd(_mm_add_pd(c, _mm_set1_pd(side)), ve), q);
+  const __m128d m = _mm_min_pd(lo, hi);
+  const double g = _mm_cvtsd_f64(_mm_min_sd(m, _mm_unpackhi_pd(m, m)));
+#else
+  const double g = qk__min_d(qk__min_d(qx - (x0 + e), (x0 + side - e) - qx),
+                             qk__min_d(qy - (y0 + e), (y0 + side - e) - qy));
+#endif
+  return (g > 0) & (g * g > thr);
 }
 
 /* Which of the three leaf scans a search runs (a constant in each caller, so that the
