@@ -744,8 +744,20 @@ static size_t knn_limited(const qk_tree_t *t, double qx, double qy, size_t k, do
     if (b.n < k) fill_sort(t, fill, keys, b.n, b.out); /* fewer than k within the limit */
     /* The entries hold slots: their ids now, whose reads do not wait for one another. */
     const qk_id_t *pid = qk__tree_ids(t);
-    for (size_t i = 0; i < b.n; i++)
-      out[i] = (qk_neighbor_t){pid[sorted[i + 1].id], sqrt(sorted[i + 1].dist)};
+    size_t i = 0;
+#if defined(__SSE2__)
+    /* Two square roots per sqrtpd (correctly rounded, as sqrt(); no errno test on these
+     * nonnegative values). */
+    for (; i + 2 <= b.n; i += 2) {
+      const __m128d d =
+          _mm_sqrt_pd(_mm_loadh_pd(_mm_load_sd(&sorted[i + 1].dist), &sorted[i + 2].dist));
+      out[i].id = pid[sorted[i + 1].id];
+      out[i + 1].id = pid[sorted[i + 2].id];
+      _mm_storel_pd(&out[i].dist, d);
+      _mm_storeh_pd(&out[i + 1].dist, d);
+    }
+#endif
+    for (; i < b.n; i++) out[i] = (qk_neighbor_t){pid[sorted[i + 1].id], sqrt(sorted[i + 1].dist)};
   } else {
     search(t, qx, qy, &b, KIND_HEAP, path);
     qk__heap_sort(out, b.n);
