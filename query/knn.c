@@ -62,6 +62,27 @@ static inline int expand(const qk_tree_t *t, qk__cell_entry_t *cur, uint32_t chi
   const qk__cell_t c = cur->c;
   const double hs = qk__tree_side(t, c.depth + 1);
   const double xm = c.x + hs, ym = c.y + hs;
+#if defined(__SSE2__)
+  /* Both axes in one register: the gaps to the west/south halves (ga) and to the east/north
+   * halves (gb), qk__gap's operations lane by lane, so the same values as below. */
+  const __m128d vq = _mm_set_pd(qy, qx), vc = _mm_set_pd(c.y, c.x), vm = _mm_set_pd(ym, xm);
+  const __m128d vh = _mm_set1_pd(hs), ve = _mm_set1_pd(e), zero = _mm_setzero_pd();
+  const __m128d ga = _mm_add_pd(_mm_max_pd(_mm_sub_pd(_mm_sub_pd(vc, ve), vq), zero),
+                                _mm_max_pd(_mm_sub_pd(vq, _mm_add_pd(vm, ve)), zero));
+  const __m128d gb =
+      _mm_add_pd(_mm_max_pd(_mm_sub_pd(_mm_sub_pd(vm, ve), vq), zero),
+                 _mm_max_pd(_mm_sub_pd(vq, _mm_add_pd(_mm_add_pd(vm, vh), ve)), zero));
+  const int nearer = _mm_movemask_pd(_mm_cmplt_pd(gb, ga));
+  const unsigned en = (unsigned)nearer & 1u, nn = (unsigned)nearer >> 1;
+  const __m128d vn = _mm_min_pd(gb, ga), vf = _mm_max_pd(gb, ga);
+  const __m128d n2 = _mm_mul_pd(vn, vn), f2 = _mm_mul_pd(vf, vf);
+  const __m128d s1 = _mm_add_pd(_mm_unpacklo_pd(n2, f2), _mm_unpackhi_pd(n2, f2)); /* nn, ff */
+  const double bnn = _mm_cvtsd_f64(s1);
+  if (bnn > thr) return 0;
+  const __m128d s2 = _mm_add_pd(_mm_unpacklo_pd(f2, n2), _mm_unpackhi_pd(n2, f2)); /* fn, nf */
+  const double bff = _mm_cvtsd_f64(_mm_unpackhi_pd(s1, s1));
+  const double bfn = _mm_cvtsd_f64(s2), bnf = _mm_cvtsd_f64(_mm_unpackhi_pd(s2, s2));
+#else
   const double dxw = qk__gap(qx, c.x - e, xm + e), dxe = qk__gap(qx, xm - e, xm + hs + e);
   const double dys = qk__gap(qy, c.y - e, ym + e), dyn = qk__gap(qy, ym - e, ym + hs + e);
   const unsigned en = dxe < dxw, nn = dyn < dys; /* is the east / north half the nearer? */
@@ -71,6 +92,7 @@ static inline int expand(const qk_tree_t *t, qk__cell_entry_t *cur, uint32_t chi
   const double bnn = xn * xn + yn * yn;
   if (bnn > thr) return 0;
   const double bff = xf * xf + yf * yf, bfn = xf * xf + yn * yn, bnf = xn * xn + yf * yf;
+#endif
   const uint32_t d = c.depth + 1;
   const double xs[2] = {c.x, xm}, ys[2] = {c.y, ym};
 #define QK__PUSH(east, north, bound)                                                               \
