@@ -22,6 +22,12 @@
 #include <emmintrin.h>
 #endif
 
+#if defined(__GNUC__)
+#define QK__ALWAYS_INLINE inline __attribute__((always_inline))
+#else
+#define QK__ALWAYS_INLINE inline
+#endif
+
 /* Largest k kept as a sorted array rather than a heap. */
 #define QK__KNN_SORTED 32
 
@@ -124,9 +130,9 @@ static inline int expand(const qk_tree_t *t, qk__cell_entry_t *cur, uint32_t chi
  * way at random. (Dropping the gap on the query's own side, 0 up to roundings inside the
  * margin, only lowers a bound, which stays a lower bound.)
  */
-static inline void push_siblings(const qk_tree_t *t, qk__cell_t p, uint32_t child, unsigned skip,
-                                 double qx, double qy, double e, double thr,
-                                 qk__cell_entry_t *stack, int *sp) {
+static QK__ALWAYS_INLINE void push_siblings(const qk_tree_t *t, qk__cell_t p, uint32_t child,
+                                            unsigned skip, double qx, double qy, double e,
+                                            double thr, qk__cell_entry_t *stack, int *sp) {
   static const unsigned char quad[2][2] = {{QK_SW, QK_NW}, {QK_SE, QK_NE}}; /* [east][north] */
   const unsigned ex = (0x9u >> skip) & 1u,
                  no = (0x3u >> skip) & 1u; /* skip is NE or SE; NE or NW */
@@ -178,12 +184,6 @@ static inline bool ball_inside(double qx, double qy, double x0, double y0, doubl
 /* Which of the three leaf scans a search runs (a constant in each caller, so that the
  * compiler makes one specialised search per kind). */
 enum { KIND_ONE, KIND_SORTED, KIND_HEAP };
-
-#if defined(__GNUC__)
-#define QK__ALWAYS_INLINE inline __attribute__((always_inline))
-#else
-#define QK__ALWAYS_INLINE inline
-#endif
 
 /* Points whose squared distances one pass of the leaf scans computes into a buffer. */
 #define QK__SCAN_CHUNK 64
