@@ -700,7 +700,7 @@ static QK__ALWAYS_INLINE void search(const qk_tree_t *t, double qx, double qy, b
   }
   qk__path_t p;
   qk__path_init(t, &p);
-  qk__path_finish(t, &p, qx, qy);
+  qk__path_descend(t, &p, qx, qy, 0);
   climb(t, qx, qy, b, kind, &p);
 }
 
@@ -796,7 +796,7 @@ static size_t knn_search(const qk_tree_t *t, double qx, double qy, size_t k, dou
   qk__path_t own;
   if (!path) {
     qk__path_init(t, &own);
-    qk__path_finish(t, &own, qx, qy);
+    qk__path_descend(t, &own, qx, qy, 0);
     path = &own;
   }
   const double guess2 = guess_limit(t, path, k);
