@@ -763,7 +763,7 @@ static size_t knn_limited(const qk_tree_t *t, double qx, double qy, size_t k, do
     b.fill = fill;
     b.keys = keys;
     search(t, qx, qy, &b, KIND_SORTED, path);
-    if (b.n < k) fill_sort(t, fill, keys, b.n, b.out); /* fewer than k within the limit */
+    if (b.n < k) fill_sort(t, b.fill, b.keys, b.n, b.out); /* fewer than k within the limit */
     /* The entries hold slots: their ids now, whose reads do not wait for one another. */
     const qk_id_t *pid = qk__tree_ids(t);
     size_t i = 0;
