@@ -22,6 +22,12 @@
 #include <emmintrin.h>
 #endif
 
+#if defined(__GNUC__)
+#define QK__ALWAYS_INLINE inline __attribute__((always_inline))
+#else
+#define QK__ALWAYS_INLINE inline
+#endif
+
 /* Largest k kept as a sorted array rather than a heap. */
 #define QK__KNN_SORTED 32
 
@@ -62,6 +68,27 @@ static inline int expand(const qk_tree_t *t, qk__cell_entry_t *cur, uint32_t chi
   const qk__cell_t c = cur->c;
   const double hs = qk__tree_side(t, c.depth + 1);
   const double xm = c.x + hs, ym = c.y + hs;
+#if defined(__SSE2__)
+  /* Both axes in one register: the gaps to the west/south halves (ga) and to the east/north
+   * halves (gb), qk__gap's operations lane by lane, so the same values as below. */
+  const __m128d vq = _mm_set_pd(qy, qx), vc = _mm_set_pd(c.y, c.x), vm = _mm_set_pd(ym, xm);
+  const __m128d vh = _mm_set1_pd(hs), ve = _mm_set1_pd(e), zero = _mm_setzero_pd();
+  const __m128d ga = _mm_add_pd(_mm_max_pd(_mm_sub_pd(_mm_sub_pd(vc, ve), vq), zero),
+                                _mm_max_pd(_mm_sub_pd(vq, _mm_add_pd(vm, ve)), zero));
+  const __m128d gb =
+      _mm_add_pd(_mm_max_pd(_mm_sub_pd(_mm_sub_pd(vm, ve), vq), zero),
+                 _mm_max_pd(_mm_sub_pd(vq, _mm_add_pd(_mm_add_pd(vm, vh), ve)), zero));
+  const int nearer = _mm_movemask_pd(_mm_cmplt_pd(gb, ga));
+  const unsigned en = (unsigned)nearer & 1u, nn = (unsigned)nearer >> 1;
+  const __m128d vn = _mm_min_pd(gb, ga), vf = _mm_max_pd(gb, ga);
+  const __m128d n2 = _mm_mul_pd(vn, vn), f2 = _mm_mul_pd(vf, vf);
+  const __m128d s1 = _mm_add_pd(_mm_unpacklo_pd(n2, f2), _mm_unpackhi_pd(n2, f2)); /* nn, ff */
+  const double bnn = _mm_cvtsd_f64(s1);
+  if (bnn > thr) return 0;
+  const __m128d s2 = _mm_add_pd(_mm_unpacklo_pd(f2, n2), _mm_unpackhi_pd(n2, f2)); /* fn, nf */
+  const double bff = _mm_cvtsd_f64(_mm_unpackhi_pd(s1, s1));
+  const double bfn = _mm_cvtsd_f64(s2), bnf = _mm_cvtsd_f64(_mm_unpackhi_pd(s2, s2));
+#else
   const double dxw = qk__gap(qx, c.x - e, xm + e), dxe = qk__gap(qx, xm - e, xm + hs + e);
   const double dys = qk__gap(qy, c.y - e, ym + e), dyn = qk__gap(qy, ym - e, ym + hs + e);
   const unsigned en = dxe < dxw, nn = dyn < dys; /* is the east / north half the nearer? */
@@ -71,6 +98,7 @@ static inline int expand(const qk_tree_t *t, qk__cell_entry_t *cur, uint32_t chi
   const double bnn = xn * xn + yn * yn;
   if (bnn > thr) return 0;
   const double bff = xf * xf + yf * yf, bfn = xf * xf + yn * yn, bnf = xn * xn + yf * yf;
+#endif
   const uint32_t d = c.depth + 1;
   const double xs[2] = {c.x, xm}, ys[2] = {c.y, ym};
 #define QK__PUSH(east, north, bound)                                                               \
@@ -92,28 +120,43 @@ static inline int expand(const qk_tree_t *t, qk__cell_entry_t *cur, uint32_t chi
 
 /*
  * Stack the children of the path cell p other than its child `skip` (which the first
- * descent entered), those with bound <= thr, nearest on top.
+ * descent entered, and which holds the query), those with bound <= thr, nearest on top.
+ * The query lies in skip's half on each axis, so the sibling across the x midline is
+ * bounded by the x gap alone (dx^2), the one across the y midline by dy^2 and the diagonal
+ * one by dx^2 + dy^2, at least either: the order needs one comparison, and the kept ones
+ * are always the nearest m (kept diagonal => both kept; kept farther => nearer kept). So the
+ * three are written in pushing order, farthest first, each over the last unless kept
+ * (the stack pointer advanced by its flag), with no branch on the bounds, which go either
+ * way at random. (Dropping the gap on the query's own side, 0 up to roundings inside the
+ * margin, only lowers a bound, which stays a lower bound.)
  */
-static inline void push_siblings(const qk_tree_t *t, qk__cell_t p, uint32_t child, unsigned skip,
-                                 double qx, double qy, double e, double thr,
-                                 qk__cell_entry_t *stack, int *sp) {
+static QK__ALWAYS_INLINE void push_siblings(const qk_tree_t *t, qk__cell_t p, uint32_t child,
+                                            unsigned skip, double qx, double qy, double e,
+                                            double thr, qk__cell_entry_t *stack, int *sp) {
+  static const unsigned char quad[2][2] = {{QK_SW, QK_NW}, {QK_SE, QK_NE}}; /* [east][north] */
+  const unsigned ex = (0x9u >> skip) & 1u,
+                 no = (0x3u >> skip) & 1u; /* skip is NE or SE; NE or NW */
   const double hs = qk__tree_side(t, p.depth + 1);
   const double xm = p.x + hs, ym = p.y + hs;
-  const double dxw = qk__gap(qx, p.x - e, xm + e), dxe = qk__gap(qx, xm - e, xm + hs + e);
-  const double dys = qk__gap(qy, p.y - e, ym + e), dyn = qk__gap(qy, ym - e, ym + hs + e);
-  const double xw = dxw * dxw, xe = dxe * dxe, ys = dys * dys, yn = dyn * dyn;
-  const double b[4] = {xe + yn, xw + yn, xw + ys, xe + ys}; /* NE, NW, SW, SE */
-  qk__cell_t kc[4];
-  qk__cell_children(t, p, child, kc);
-  /* Each child written, and kept (m advanced) when it passes: no branch on the bounds. */
-  qk__cell_entry_t kids[4];
-  int m = 0;
-  for (unsigned q = 0; q < 4; q++) {
-    kids[m] = (qk__cell_entry_t){kc[q], b[q]};
-    m += (q != skip) & (b[q] <= thr);
-  }
-  qk__sort_cells_desc(kids, m);
-  for (int i = 0; i < m; i++) stack[(*sp)++] = kids[i];
+  const double xs[2] = {p.x, xm}, ys[2] = {p.y, ym};
+  /* The gaps to the other half on each axis, whose corner is chosen by index, not by a
+   * branch (the same intervals and values as expand's: x0 + hs is xm). */
+  const double ox = xs[!ex], oy = ys[!no];
+  const double dx = qk__gap(qx, ox - e, ox + hs + e), dy = qk__gap(qy, oy - e, oy + hs + e);
+  const double bx = dx * dx, by = dy * dy;
+  const double bd = bx + by, bn = qk__min_d(bx, by), bf = qk__max_d(bx, by);
+  const unsigned xn = bx < by; /* the sibling across the x midline is the nearer */
+  const uint32_t d = p.depth + 1;
+  int s = *sp;
+  stack[s] = (qk__cell_entry_t){{child + quad[!ex][!no], d, xs[!ex], ys[!no]}, bd};
+  s += bd <= thr;
+  const unsigned fe = ex ^ !xn, fn = no ^ xn; /* the farther: across y when x is nearer */
+  stack[s] = (qk__cell_entry_t){{child + quad[fe][fn], d, xs[fe], ys[fn]}, bf};
+  s += bf <= thr;
+  const unsigned ne = ex ^ xn, nn = no ^ !xn;
+  stack[s] = (qk__cell_entry_t){{child + quad[ne][nn], d, xs[ne], ys[nn]}, bn};
+  s += bn <= thr;
+  *sp = s;
 }
 
 /*
@@ -124,20 +167,23 @@ static inline void push_siblings(const qk_tree_t *t, qk__cell_t p, uint32_t chil
  */
 static inline bool ball_inside(double qx, double qy, double x0, double y0, double side, double e,
                                double thr) {
-  double g = qk__min_d(qk__min_d(qx - (x0 + e), (x0 + side - e) - qx),
-                       qk__min_d(qy - (y0 + e), (y0 + side - e) - qy));
-  return g > 0 && g * g > thr;
+#if defined(__SSE2__)
+  /* Both axes at once: the same differences, lane by lane. */
+  const __m128d q = _mm_set_pd(qy, qx), c = _mm_set_pd(y0, x0), ve = _mm_set1_pd(e);
+  const __m128d lo = _mm_sub_pd(q, _mm_add_pd(c, ve));
+  const __m128d hi = _mm_sub_pd(_mm_sub_pd(_mm_add_pd(c, _mm_set1_pd(side)), ve), q);
+  const __m128d m = _mm_min_pd(lo, hi);
+  const double g = _mm_cvtsd_f64(_mm_min_sd(m, _mm_unpackhi_pd(m, m)));
+#else
+  const double g = qk__min_d(qk__min_d(qx - (x0 + e), (x0 + side - e) - qx),
+                             qk__min_d(qy - (y0 + e), (y0 + side - e) - qy));
+#endif
+  return (g > 0) & (g * g > thr);
 }
 
 /* Which of the three leaf scans a search runs (a constant in each caller, so that the
  * compiler makes one specialised search per kind). */
 enum { KIND_ONE, KIND_SORTED, KIND_HEAP };
-
-#if defined(__GNUC__)
-#define QK__ALWAYS_INLINE inline __attribute__((always_inline))
-#else
-#define QK__ALWAYS_INLINE inline
-#endif
 
 /* Points whose squared distances one pass of the leaf scans computes into a buffer. */
 #define QK__SCAN_CHUNK 64
@@ -596,6 +642,9 @@ static QK__ALWAYS_INLINE void drain(const qk_tree_t *t, double qx, double qy, do
     for (;;) {
       const uint32_t child = qk__node_child(t, cur.c.node);
       if (child == QK_NONE) {
+        /* The sorted search reads the ids of its answers at the end: this leaf's are then
+         * in cache if it holds any, instead of a miss after the whole search. */
+        if (kind == KIND_SORTED) prefetch_ids(t, cur.c.node);
         scan(t, cur.c.node, qx, qy, b, kind);
         break;
       }
@@ -636,6 +685,10 @@ static QK__ALWAYS_INLINE void climb(const qk_tree_t *t, double qx, double qy, be
  */
 static QK__ALWAYS_INLINE void search(const qk_tree_t *t, double qx, double qy, best_t *b, int kind,
                                      const qk__path_t *given) {
+  if (given) { /* a path is walked only for a query inside the root */
+    climb(t, qx, qy, b, kind, given);
+    return;
+  }
   if (!qk__tree_contains(t, qx, qy)) {
     const double e = qk__margin(t);
     const qk_square_t r = qk__tree_root_square(t);
@@ -645,13 +698,9 @@ static QK__ALWAYS_INLINE void search(const qk_tree_t *t, double qx, double qy, b
     drain(t, qx, qy, e, b, stack, &sp, kind);
     return;
   }
-  if (given) {
-    climb(t, qx, qy, b, kind, given);
-    return;
-  }
   qk__path_t p;
   qk__path_init(t, &p);
-  qk__path_finish(t, &p, qx, qy);
+  qk__path_descend(t, &p, qx, qy, 0);
   climb(t, qx, qy, b, kind, &p);
 }
 
@@ -714,11 +763,23 @@ static size_t knn_limited(const qk_tree_t *t, double qx, double qy, size_t k, do
     b.fill = fill;
     b.keys = keys;
     search(t, qx, qy, &b, KIND_SORTED, path);
-    if (b.n < k) fill_sort(t, fill, keys, b.n, b.out); /* fewer than k within the limit */
+    if (b.n < k) fill_sort(t, b.fill, b.keys, b.n, b.out); /* fewer than k within the limit */
     /* The entries hold slots: their ids now, whose reads do not wait for one another. */
     const qk_id_t *pid = qk__tree_ids(t);
-    for (size_t i = 0; i < b.n; i++)
-      out[i] = (qk_neighbor_t){pid[sorted[i + 1].id], sqrt(sorted[i + 1].dist)};
+    size_t i = 0;
+#if defined(__SSE2__)
+    /* Two square roots per sqrtpd (correctly rounded, as sqrt(); no errno test on these
+     * nonnegative values). */
+    for (; i + 2 <= b.n; i += 2) {
+      const __m128d d =
+          _mm_sqrt_pd(_mm_loadh_pd(_mm_load_sd(&sorted[i + 1].dist), &sorted[i + 2].dist));
+      out[i].id = pid[sorted[i + 1].id];
+      out[i + 1].id = pid[sorted[i + 2].id];
+      _mm_storel_pd(&out[i].dist, d);
+      _mm_storeh_pd(&out[i + 1].dist, d);
+    }
+#endif
+    for (; i < b.n; i++) out[i] = (qk_neighbor_t){pid[sorted[i + 1].id], sqrt(sorted[i + 1].dist)};
   } else {
     search(t, qx, qy, &b, KIND_HEAP, path);
     qk__heap_sort(out, b.n);
@@ -735,7 +796,7 @@ static size_t knn_search(const qk_tree_t *t, double qx, double qy, size_t k, dou
   qk__path_t own;
   if (!path) {
     qk__path_init(t, &own);
-    qk__path_finish(t, &own, qx, qy);
+    qk__path_descend(t, &own, qx, qy, 0);
     path = &own;
   }
   const double guess2 = guess_limit(t, path, k);

@@ -203,7 +203,8 @@ static inline int qk__path_step(const qk_tree_t *t, qk__path_t *p, double qx, do
  * keeps the cell in registers: the same decisions and squares as qk__path_step() (east
  * when qx > x + h, the child's corner moved by h), so the same path.
  */
-static inline void qk__path_finish(const qk_tree_t *t, qk__path_t *p, double qx, double qy) {
+static inline void qk__path_descend(const qk_tree_t *t, qk__path_t *p, double qx, double qy,
+                                    int keep_mids) {
   uint32_t node = p->leaf.node, depth = p->leaf.depth;
   unsigned len = p->len;
 #if defined(__SSE2__)
@@ -217,8 +218,10 @@ static inline void qk__path_finish(const qk_tree_t *t, qk__path_t *p, double qx,
     const __m128d vm = _mm_add_pd(v, _mm_set1_pd(qk__tree_side(t, depth + 1)));
     const __m128d go = _mm_cmplt_pd(vm, vq); /* qx > xm, qy > ym */
     const int bits = _mm_movemask_pd(go);
-    p->mid[len] = vm;
-    p->go[len] = (unsigned char)bits;
+    if (keep_mids) { /* a constant in each caller */
+      p->mid[len] = vm;
+      p->go[len] = (unsigned char)bits;
+    }
     const unsigned q = quad[bits];
     qk__cell_t *c = &p->cell[len];
     c->node = node;
@@ -253,6 +256,12 @@ static inline void qk__path_finish(const qk_tree_t *t, qk__path_t *p, double qx,
   p->leaf = (qk__cell_t){node, depth, x, y};
 #endif
   p->len = len;
+}
+
+/* qk__path_descend keeping each level's midlines and moves, for qk__path_reuse (a single
+ * query's path, never reused, need not store them). */
+static inline void qk__path_finish(const qk_tree_t *t, qk__path_t *p, double qx, double qy) {
+  qk__path_descend(t, p, qx, qy, 1);
 }
 
 /*
@@ -306,9 +315,11 @@ size_t qk__knn_one(const qk_tree_t *t, qk_point_t q, size_t k, double max_dist, 
 #define QK__DIST_RANGE 0x1p510
 static inline bool qk__dist_in_range(const qk_tree_t *t, qk_point_t q) {
   const qk_square_t r = qk__tree_root_square(t);
-  const double m =
-      fmax(fmax(fabs(q.x), fabs(q.y)),
-           fmax(fmax(fabs(r.x), fabs(r.y)), fmax(fabs(r.x + r.side), fabs(r.y + r.side))));
+  /* maxsd rather than fmax(), a library call (no NaN here: q is finite, checked first, and
+   * so is the root square). */
+  const double m = qk__max_d(qk__max_d(fabs(q.x), fabs(q.y)),
+                             qk__max_d(qk__max_d(fabs(r.x), fabs(r.y)),
+                                       qk__max_d(fabs(r.x + r.side), fabs(r.y + r.side))));
   return m <= QK__DIST_RANGE;
 }
 

@@ -16,6 +16,8 @@
  *  - squared distances a few units in the last place apart and exact ties among them
  *    (the sorted search's first sort keys drop the low bits), k from 2 to 33; kNN with
  *    subnormals flushed (the processor mode of -ffast-math programs) on stored points;
+ *  - kNN from the corners, edge midpoints and centres of leaves' squares (and one unit in
+ *    the last place off them) in a tree whose squares are rounded, k from 2 to 33;
  *  - batch kNN (Z-order, each query starting from the previous path) on every point set
  *    and capacity, one and two threads, against brute force;
  *  - kNN after random inserts and removals (qk_tree_check after each batch);
@@ -825,6 +827,52 @@ static void test_query_knn_kth_bound(void **state) {
 }
 
 /*
+ * Queries on the lines the climb bounds by (issue 11, thirteenth session): points uniform
+ * in a box off the origin whose side is not a power of two (the tree's squares are
+ * rounded), queries at the corners, edge midpoints and centres of leaves' squares and one
+ * unit in the last place off them, where the gaps to the neighbouring squares are 0 or
+ * nearly so on both axes and the siblings' bounds tie; k = 2, 3, 8, 17, 32 and 33, single
+ * calls, capacities 1, 4 and 32, against brute force.
+ */
+static void test_query_knn_cell_lines(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 19);
+  const size_t n = 3000;
+  const size_t ks[] = {2, 3, 8, 17, 32, 33};
+  qk_point_t *p = malloc(n * sizeof *p);
+  qk_neighbor_t got[33], want[33];
+  for (size_t i = 0; i < n; i++)
+    p[i] = (qk_point_t){-3.3 + 10.4 * qkt_rng_unit(&r), 0.7 + 10.4 * qkt_rng_unit(&r)};
+  for (size_t c = 0; c < 3; c++) {
+    qk_tree_t *t = build(p, n, caps[c]);
+    for (size_t j = 0; j < 40; j++) {
+      qk_location_t loc;
+      assert_int_equal(qk_query_locate(t, p[qkt_rng_below(&r, (uint32_t)n)], &loc), QK_OK);
+      const qk_square_t sq = loc.square;
+      for (unsigned a = 0; a < 9; a++) {
+        const double fx[3] = {sq.x, sq.x + 0.5 * sq.side, sq.x + sq.side};
+        const double fy[3] = {sq.y, sq.y + 0.5 * sq.side, sq.y + sq.side};
+        for (int off = 0; off < 3; off++) {
+          qk_point_t q = {fx[a % 3], fy[a / 3]};
+          if (off == 1) q = (qk_point_t){nextafter(q.x, -INFINITY), nextafter(q.y, INFINITY)};
+          if (off == 2) q = (qk_point_t){nextafter(q.x, INFINITY), nextafter(q.y, -INFINITY)};
+          for (size_t ki = 0; ki < 6; ki++) {
+            const size_t k = ks[ki], tag = c * 100000 + j * 1000 + a * 100 + (size_t)off * 10 + ki;
+            size_t ng;
+            assert_int_equal(qk_query_knn(t, q, k, INFINITY, got, &ng), QK_OK);
+            const size_t nw = qko_knn(p, NULL, n, q, k, INFINITY, want);
+            assert_nb_equal(got, ng, want, nw, "knn-cell-lines", tag);
+          }
+        }
+      }
+    }
+    qk_tree_free(t);
+  }
+  free(p);
+}
+
+/*
  * Distances that differ only in the last bits of their squares: the sorted search sorts
  * its first k candidates by keys that drop the six low bits of the squared distance
  * (query/knn.c, fill_sort), so the order of such points, and of exactly equal ones (by
@@ -1089,6 +1137,7 @@ int main(void) {
     cmocka_unit_test(test_query_knn_kth_bound),
     cmocka_unit_test(test_query_knn_near_ties),
     cmocka_unit_test(test_query_radius_batch_threads),
+    cmocka_unit_test(test_query_knn_cell_lines),
 #if defined(__SSE2__)
     cmocka_unit_test(test_query_knn_flush_subnormals),
 #endif
