@@ -30,8 +30,9 @@ static int drec_cmp(const void *p, const void *q) {
 }
 
 /* Sort n records by key, stably, through tmp (n entries): an LSD radix sort on the key's
- * nine bytes, skipping the bytes all records share (most of them: nearby cells). */
-static void drec_sort(drec_t *d, drec_t *tmp, size_t n) {
+ * nine bytes, skipping the bytes all records share (most of them: nearby cells). For
+ * cells too far apart for drec_sort's packed keys. */
+static void drec_sort_bytes(drec_t *d, drec_t *tmp, size_t n) {
   /* Keys relative to their minima, so that only the low bytes differ (a cell index of -1
    * and one of 0 differ in every byte once biased). */
   uint64_t ly_min = d[0].ly;
@@ -58,6 +59,87 @@ static void drec_sort(drec_t *d, drec_t *tmp, size_t n) {
     memcpy(d, tmp, n * sizeof *d);
   }
   for (size_t i = 0; i < n; i++) d[i].ly += ly_min, d[i].x += x_min;
+}
+
+/* The bits of v (0 for 0). */
+static inline unsigned bits_of(uint64_t v) {
+  unsigned b = 0;
+  while (b < 64 && v >> b) b++;
+  return b;
+}
+
+/*
+ * Sort n records by key, stably, through tmp (n entries). Each record's key relative to
+ * the minima (level, cy and cx each minus its least value) is packed with the record's
+ * index in one 64-bit word, ((level, cy, cx) << ib | i), when the fields' ranges fit;
+ * the words are sorted by an LSD radix sort of digits of at most 11 bits on the key bits
+ * only (the dirty objects of a frame lie in a few levels of nearby cells: some 30 bits,
+ * three passes over 8-byte words where the 8-bit digits of the records took five passes
+ * over 16-byte records), and the records rebuilt from them in that order. Otherwise (cells
+ * far apart) the records are sorted on their bytes (drec_sort_bytes). Both are stable, so
+ * the order is the same: by key, ties in the records' order.
+ */
+static void drec_sort(drec_t *d, drec_t *tmp, size_t n) {
+  uint64_t l0 = d[0].ly >> 32, l1 = l0;
+  uint32_t y0 = (uint32_t)d[0].ly, y1 = y0, x0 = d[0].x, x1 = x0;
+  for (size_t i = 1; i < n; i++) {
+    uint64_t l = d[i].ly >> 32;
+    uint32_t y = (uint32_t)d[i].ly, x = d[i].x;
+    l0 = l < l0 ? l : l0, l1 = l > l1 ? l : l1;
+    y0 = y < y0 ? y : y0, y1 = y > y1 ? y : y1;
+    x0 = x < x0 ? x : x0, x1 = x > x1 ? x : x1;
+  }
+  const unsigned ib = bits_of(n - 1), xb = bits_of(x1 - x0), yb = bits_of(y1 - y0),
+                 kb = bits_of(l1 - l0) + yb + xb;
+  if (ib + kb > 64 || n > UINT32_MAX) {
+    drec_sort_bytes(d, tmp, n);
+    return;
+  }
+  if (!kb) return; /* one cell: already in order */
+  /* As few digits of at most 11 bits as the key needs, each as narrow as that allows
+   * (the counts' prefix sums cost 2^DB a digit: few records take narrower digits). */
+  const unsigned nd = (kb + 10) / 11, DB = (kb + nd - 1) / nd; /* nd <= 6: kb <= 64 */
+  const uint32_t DN = (uint32_t)1 << DB;
+  uint64_t *a = (uint64_t *)tmp, *t = a + n; /* tmp: 16 n bytes */
+  uint32_t cnt[6][2048];
+  for (unsigned g = 0; g < (nd > 3 ? nd : 3); g++) memset(cnt[g], 0, DN * sizeof cnt[g][0]);
+  /* (up to three digits, the common case, counted without a loop over the digits; the
+   * counts of digits past nd are not read) */
+  for (size_t i = 0; i < n; i++) {
+    uint64_t k = ((d[i].ly >> 32) - l0) << (yb + xb) | (uint64_t)((uint32_t)d[i].ly - y0) << xb |
+                 (d[i].x - x0);
+    a[i] = k << ib | i;
+    if (nd <= 3) {
+      cnt[0][k & (DN - 1)]++, cnt[1][k >> DB & (DN - 1)]++, cnt[2][k >> (2 * DB) & (DN - 1)]++;
+    } else {
+      for (unsigned g = 0; g < nd; g++) cnt[g][k >> (DB * g) & (DN - 1)]++;
+    }
+  }
+  for (unsigned g = 0; g < nd; g++) {
+    uint32_t *c = cnt[g], acc = 0;
+    int shared = 0;
+    for (uint32_t x = 0; x < DN; x++) {
+      uint32_t v = c[x];
+      shared |= v == n;
+      c[x] = acc, acc += v;
+    }
+    if (shared) continue;
+    const unsigned sh = ib + DB * g;
+    QK__UNROLL4
+    for (size_t i = 0; i < n; i++) t[c[a[i] >> sh & (DN - 1)]++] = a[i];
+    uint64_t *x = a;
+    a = t, t = x;
+  }
+  /* The slots in the sorted order (in the other buffer: 8 n bytes), then the records. */
+  uint32_t *sl = (uint32_t *)t;
+  const uint64_t im = ((uint64_t)1 << ib) - 1;
+  for (size_t i = 0; i < n; i++) sl[i] = d[a[i] & im].slot;
+  const uint64_t xm = ((uint64_t)1 << xb) - 1, ym = ((uint64_t)1 << yb) - 1;
+  for (size_t i = 0; i < n; i++) {
+    uint64_t k = a[i] >> ib;
+    d[i] = (drec_t){((k >> (yb + xb)) + l0) << 32 | (uint32_t)((k >> xb & ym) + y0),
+                    (uint32_t)(k & xm) + x0, sl[i]};
+  }
 }
 
 static inline drec_t rec_of(const qk__wobj_t *o, uint32_t slot) {
