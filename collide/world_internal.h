@@ -258,6 +258,9 @@ int qk__world_objects_meet(const qk_world_t *w, uint32_t i, uint32_t j);
  * QK__NEAR), it fills cur and, given prev, keeps only the candidates whose float boxes at
  * the last update did not meet (*only_new): with the last update's pairs and near
  * candidates re-tested, those make this update's. */
+/* Whether the search of the order as it is now goes by bands (else by the grid): only then
+ * are the float boxes by slot (cur below) filled. */
+int qk__world_by_bands(const qk_world_t *w);
 qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kvec_t *found,
                              qk__kvec_t *tk, int *split, const float *prev, float *cur, int *cur_ok,
                              int *only_new);

@@ -966,6 +966,7 @@ static void free_bands(const qk_world_t *w, bands_t *bd) {
  * against 2.92 M.
  */
 static int use_bands(const qk_world_t *w) {
+  if (w->n_order <= 1) return 0;
   double n_obj[QK__NLEV], rows = 0;
   int l[QK__NLEV], nl = 0;
   uint32_t n_cells[QK__NLEV];
@@ -981,6 +982,8 @@ static int use_bands(const qk_world_t *w) {
                                                  : n_obj[c] * (qk__pow2(l[c] - l[f] - 1) + 2);
   return rows > (double)w->n_order / 8;
 }
+
+int qk__world_by_bands(const qk_world_t *w) { return use_bands(w); }
 
 /* Free the given buffers (a failure before the search ran). */
 static qk_status_t search_nomem(const qk_world_t *w, qk__kvec_t *found, qk__kvec_t *tk) {
@@ -1005,7 +1008,7 @@ qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kve
   uint32_t *rf = NULL;
   size_t n_rf = 0;
   bands_t bd = {0};
-  const int by_bands = w->n_order > 1 && use_bands(w);
+  const int by_bands = use_bands(w);
   unsigned nt = qk__world_update_threads(w);
   if (w->n_live < 4096) nt = 1; /* not worth a thread */
   /* Near candidates kept (marked), with room for the mark. */
