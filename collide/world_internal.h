@@ -129,7 +129,7 @@ struct qk_world {
   qk__kvec_t scr_tkeys[QK__KEEP_THREADS]; /* the other threads' keys (threads 1, 2, ...) */
   uint32_t *spare_b;
   size_t cap_spare_b;
-  /* The objects' float boxes at the last update, by slot (xmin, ymin, xmax, ymax), when
+  /* The objects' float boxes at the last update, by slot (xmin, ymin, -xmax, -ymax), when
    * that update's search was by bands and every float box was exact (else NULL): the
    * next search then finds only the pairs whose boxes did not meet then (see
    * qk__world_search). n_fbox slots. */
@@ -252,7 +252,9 @@ int qk__world_objects_meet(const qk_world_t *w, uint32_t i, uint32_t j);
  * (t < the threads of an update, which are then at most 1 + QK__KEEP_THREADS); else they
  * are all in found.
  * Began pairs only: prev (or NULL) holds the float boxes by slot of the last update, with
- * no object added or removed since; cur (or NULL) room for n_obj slots' float boxes. When
+ * no object added or removed since; cur (or NULL) room for n_obj slots' float boxes, each
+ * stored as (xmin, ymin, -xmax, -ymax): boxes a and b meet when b[i] <= -a[(i + 2) mod 4]
+ * for every i, one four-wide comparison (negation is exact). When
  * the search is by bands and every float box is exact (*cur_ok = 1), or not (*cur_ok =
  * 2: the candidates whose objects do not meet are in *found (or tk) too, marked by
  * QK__NEAR), it fills cur and, given prev, keeps only the candidates whose float boxes at

@@ -50,9 +50,9 @@ static int kv_append(const qk_allocator_t *a, qk__kvec_t *v, const qk__kvec_t *s
   return 1;
 }
 
-/* Whether two float boxes (xmin, ymin, xmax, ymax) meet (closed). */
+/* Whether two float boxes by slot (xmin, ymin, -xmax, -ymax) meet (closed). */
 static inline int fboxes_meet(const float *a, const float *b) {
-  return b[0] <= a[2] && b[1] <= a[3] && b[2] >= a[0] && b[3] >= a[1];
+  return b[0] <= -a[2] && b[1] <= -a[3] && b[2] <= -a[0] && b[3] <= -a[1];
 }
 
 static void rows_free(const qk_allocator_t *a, qk__prows_t *r) {
@@ -516,10 +516,12 @@ static inline __attribute__((always_inline)) int began_range_(bjob_t *J, unsigne
     const size_t d0 = d;
     const float *fa = fb + 4 * (size_t)a;
 #if defined(__SSE2__)
-    /* b's box meets a's: (b.xmin, b.ymin) <= (a.xmax, a.ymax) and (b.xmax, b.ymax) >=
-     * (a.xmin, a.ymin), one comparison each way on the four floats */
-    const __m128 lo = _mm_setr_ps(fa[2], fa[3], INFINITY, INFINITY),
-                 hi = _mm_setr_ps(-INFINITY, -INFINITY, fa[0], fa[1]);
+    /* b's box meets a's: (b.xmin, b.ymin, -b.xmax, -b.ymax) <= (a.xmax, a.ymax, -a.xmin,
+     * -a.ymin), one comparison on the four floats (the boxes by slot hold the maxima
+     * negated: lim is a's halves swapped and negated) */
+    const __m128 av = _mm_loadu_ps(fa);
+    const __m128 lim =
+        _mm_xor_ps(_mm_shuffle_ps(av, av, _MM_SHUFFLE(1, 0, 3, 2)), _mm_set1_ps(-0.0f));
 #endif
     /* The old row in order, each pair tested; the began slots (y, the next of them)
      * are put in before the first old slot above them. */
@@ -535,8 +537,7 @@ static inline __attribute__((always_inline)) int began_range_(bjob_t *J, unsigne
       }
       const float *fx = fb + 4 * (size_t)x;
 #if defined(__SSE2__)
-      const __m128 bx = _mm_loadu_ps(fx);
-      const int meet = _mm_movemask_ps(_mm_and_ps(_mm_cmple_ps(bx, lo), _mm_cmpge_ps(bx, hi)));
+      const int meet = _mm_movemask_ps(_mm_cmple_ps(_mm_loadu_ps(fx), lim));
       out[d] = x; /* (kept when it meets) */
       if (__builtin_expect(meet == 15, 1)) {
 #else

@@ -827,8 +827,8 @@ static int build_bands(const qk_world_t *w, const qk__wpack_t *pk, bands_t *bd, 
     hs += (double)f[12] - f[4];
     all_exact &= fx[k];
     if (cur) {
-      float *c = cur + 4 * (size_t)w->order[k];
-      c[0] = f[0], c[1] = f[4], c[2] = f[8], c[3] = f[12];
+      float *c = cur + 4 * (size_t)w->order[k]; /* (the maxima negated: see qk__world_search) */
+      c[0] = f[0], c[1] = f[4], c[2] = -f[8], c[3] = -f[12];
     }
     uint32_t x = fkey(f[0]);
     rec[k] = (uint64_t)x << 32 | k;
@@ -928,7 +928,7 @@ static int build_bands(const qk_world_t *w, const qk__wpack_t *pk, bands_t *bd, 
       if (exact) exact[p] = fx[k];
       if (pf) {
         pgrp_t *r = &pg[p >> 2];
-        r->x0[p & 3] = pf[0], r->y0[p & 3] = pf[1], r->x1[p & 3] = pf[2], r->y1[p & 3] = pf[3];
+        r->x0[p & 3] = pf[0], r->y0[p & 3] = pf[1], r->x1[p & 3] = -pf[2], r->y1[p & 3] = -pf[3];
       }
       if (++b > be) break;
       p = pos[b]++;
