@@ -120,7 +120,10 @@ struct qk_world {
   uint64_t *egen;   /* slot << 32 | generation before the last update, of the slots
                        that changed at it (sorted) */
   size_t n_egen;
-  size_t last_found; /* pairs of the last search (sizes the next one's buffer) */
+  size_t last_found; /* keys found by the last search, which size the next one's buffer: a
+                        frame's pairs, or after a began-only frame its began candidates
+                        (what the next began-only search finds; a full search after it
+                        grows the buffer as it goes) */
   /* Scratch kept from one update to the next, so that a dense frame's buffers (tens of
    * megabytes at 10^5 objects) are not fresh pages every frame: the search's keys (with
    * room for the row sort's 32-bit scratch after them), and the rows' buffer of the
