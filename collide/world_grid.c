@@ -165,10 +165,13 @@ static inline void box_join(qk_box_t *h, const qk_box_t *b) {
 
 static const qk_box_t empty_box = {INFINITY, INFINITY, -INFINITY, -INFINITY};
 
-/* The boxes of cells [c0, c1) of a new order: per cell the box around its objects, per
- * object its float box and whether that is exact. */
-static void pack_cells(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
-                       const qk__wcell_t *cells, uint32_t c0, uint32_t c1) {
+/* The boxes of cells [c0, c1) of a new order: per object its float box and whether that
+ * is exact, and (with cell boxes, which only the search on the grid reads) per cell the
+ * box around its objects. */
+static inline __attribute__((always_inline)) void pack_cells_(const qk_world_t *w, qk__wpack_t *pk,
+                                                              const uint32_t *ord,
+                                                              const qk__wcell_t *cells, uint32_t c0,
+                                                              uint32_t c1, const int cell_boxes) {
   float *fg = pk->fgrp;
   uint8_t *fx = pk->fexact;
   for (uint32_t c = c0; c < c1; c++) {
@@ -177,7 +180,7 @@ static void pack_cells(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord
       const qk__wobj_t *o = &w->obj[ord[m]];
       qk_box_t b =
           (o->flags & QK__WKIND) == QK_SHAPE_BOX ? (qk_box_t){o->x, o->y, o->a, o->b} : qk__wbox(o);
-      box_join(&h, &b);
+      if (cell_boxes) box_join(&h, &b);
       float *g = fg + (size_t)(m >> 2) * 16 + (m & 3);
       g[0] = (float)b.xmin, g[4] = (float)b.ymin, g[8] = (float)b.xmax, g[12] = (float)b.ymax;
       /* A box whose floats are its doubles: the float box test is then the exact one. Its
@@ -188,8 +191,16 @@ static void pack_cells(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord
       fx[m] = (o->flags & QK__WKIND) == QK_SHAPE_BOX &&
               !((u[0] | u[1] | u[2] | u[3]) & ((UINT64_C(1) << 29) - 1));
     }
-    pk->hb[c] = h;
+    if (cell_boxes) pk->hb[c] = h;
   }
+}
+
+static void pack_cells(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
+                       const qk__wcell_t *cells, uint32_t c0, uint32_t c1, int cell_boxes) {
+  if (cell_boxes)
+    pack_cells_(w, pk, ord, cells, c0, c1, 1);
+  else
+    pack_cells_(w, pk, ord, cells, c0, c1, 0);
 }
 
 /* One thread's share of the packing: a range of cells of about equal objects. */
@@ -200,6 +211,7 @@ typedef struct pack_job {
   const qk__wcell_t *cells;
   uint32_t nc;
   unsigned n_jobs;
+  int cell_boxes;
 } pack_job_t;
 
 static void pack_run(unsigned t, void *ud) {
@@ -207,7 +219,7 @@ static void pack_run(unsigned t, void *ud) {
   uint32_t n = p->cells[p->nc].start;
   uint32_t c0 = qk__wcell_from(p->cells, 0, p->nc, (uint32_t)((uint64_t)n * t / p->n_jobs));
   uint32_t c1 = qk__wcell_from(p->cells, 0, p->nc, (uint32_t)((uint64_t)n * (t + 1) / p->n_jobs));
-  pack_cells(p->w, p->pk, p->ord, p->cells, c0, c1);
+  pack_cells(p->w, p->pk, p->ord, p->cells, c0, c1, p->cell_boxes);
 }
 
 void qk__world_pack(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
@@ -215,18 +227,20 @@ void qk__world_pack(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
   uint32_t n = cells[nc].start;
   unsigned nt = qk__world_update_threads(w);
   if (n < 4096) nt = 1; /* not worth a thread */
+  /* (the cells' and levels' boxes are for the search on the grid) */
+  const int cell_boxes = !qk__world_by_bands(w);
   if (nt > 1) {
-    pack_job_t p = {w, pk, ord, cells, nc, nt};
+    pack_job_t p = {w, pk, ord, cells, nc, nt, cell_boxes};
     qk__world_run_jobs(w, nt, nt, pack_run, &p);
   } else {
-    pack_cells(w, pk, ord, cells, 0, nc);
+    pack_cells(w, pk, ord, cells, 0, nc, cell_boxes);
   }
   for (uint32_t k = n; k & 3; k++) { /* empty lanes: a box that meets nothing */
     float *g = pk->fgrp + (size_t)(k >> 2) * 16 + (k & 3);
     g[0] = g[4] = INFINITY, g[8] = g[12] = -INFINITY;
   }
   /* Each level's box: its cells are one run (joined in registers). */
-  for (int l = 0; l < QK__NLEV; l++) {
+  for (int l = 0; l < QK__NLEV && cell_boxes; l++) {
     qk_box_t b = empty_box;
     for (uint32_t c = w->lv_first[l], ce = c + w->lv_n[l]; c < ce; c++) box_join(&b, &pk->hb[c]);
     pk->lv_box[l] = b;
@@ -557,16 +571,17 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
     m = mg.m, nc = mg.nc;
   }
   cells[nc] = (qk__wcell_t){0, 0, m, INT32_MAX};
+  /* (the new order in place first: the pack asks whether the search will be by bands) */
+  qk__free(a, w->order, (size_t)w->cap_order * sizeof *w->order);
+  qk__free(a, w->cells, (size_t)w->cap_cells * sizeof *w->cells);
+  w->order = ord, w->n_order = m, w->cap_order = (uint32_t)ocap;
+  w->cells = cells, w->n_cells = nc, w->cap_cells = (uint32_t)ncap;
   qk__world_pack(w, pk, ord, cells, nc);
   for (uint32_t k = w->dirty_head; k != QK_NONE; k = w->obj[k].dnext)
     w->obj[k].flags &= (uint8_t)~QK__WDIRTY;
   w->dirty_head = QK_NONE;
   w->n_dirty = 0;
   qk__free(a, d, 2 * nd * sizeof *d);
-  qk__free(a, w->order, (size_t)w->cap_order * sizeof *w->order);
-  qk__free(a, w->cells, (size_t)w->cap_cells * sizeof *w->cells);
-  w->order = ord, w->n_order = m, w->cap_order = (uint32_t)ocap;
-  w->cells = cells, w->n_cells = nc, w->cap_cells = (uint32_t)ncap;
   /* Give back the cells' room for the dirty objects that joined existing cells (a
    * failed shrink is harmless). */
   /* And the object slots' slack after growth (a failed shrink is harmless). */

@@ -235,7 +235,8 @@ typedef struct qk__wpack {
 qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk);
 void qk__world_pack_free(qk_world_t *w, qk__wpack_t *pk);
 /* Fill the pack (sized for the order) for the order ord and its nc cells (with the
- * sentinel), on the world's threads. */
+ * sentinel), which are the world's order, on the world's threads. The cells' and levels'
+ * boxes only when the search will be on the grid (qk__world_by_bands). */
 void qk__world_pack(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
                     const qk__wcell_t *cells, uint32_t nc);
 
