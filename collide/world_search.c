@@ -898,6 +898,7 @@ static int build_bands(const qk_world_t *w, const qk__wpack_t *pk, bands_t *bd, 
     }
     if (shared) continue;
     const int sh = 32 + 11 * d;
+    QK__UNROLL4
     for (uint32_t j = 0; j < n; j++) t[c[a[j] >> sh & 2047]++] = a[j];
     uint64_t *x = a;
     a = t, t = x;
