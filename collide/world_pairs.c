@@ -525,6 +525,24 @@ static inline __attribute__((always_inline)) int began_range_(bjob_t *J, unsigne
 #endif
     /* The old row in order, each pair tested; the began slots (y, the next of them)
      * are put in before the first old slot above them. */
+#if defined(__SSE2__)
+    if (exact && i == ie) {
+      /* A row without began pairs (most rows): its old pairs tested in a loop of their
+       * own, without the began slot's comparison. */
+      for (; j < je; j++) {
+        const uint32_t x = ob[j];
+        out[d] = x; /* (kept when it meets) */
+        if (__builtin_expect(
+                _mm_movemask_ps(_mm_cmple_ps(_mm_loadu_ps(fb + 4 * (size_t)x), lim)) == 15, 1)) {
+          d++;
+          continue;
+        }
+        if (!(ok = kv_add(al, &le, ka | x))) goto out;
+      }
+      if (d > d0) zr[z] = a, zr[zc + z++] = (uint32_t)d0;
+      continue;
+    }
+#endif
     uint32_t y = i < ie ? bb[i] : UINT32_MAX;
     for (; j < je; j++) {
       const uint32_t x = ob[j];
