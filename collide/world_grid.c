@@ -228,7 +228,7 @@ void qk__world_pack(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
   unsigned nt = qk__world_update_threads(w);
   if (n < 4096) nt = 1; /* not worth a thread */
   /* (the cells' and levels' boxes are for the search on the grid) */
-  const int cell_boxes = !qk__world_by_bands(w);
+  const int cell_boxes = !w->by_bands;
   if (nt > 1) {
     pack_job_t p = {w, pk, ord, cells, nc, nt, cell_boxes};
     qk__world_run_jobs(w, nt, nt, pack_run, &p);
@@ -576,6 +576,7 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
   qk__free(a, w->cells, (size_t)w->cap_cells * sizeof *w->cells);
   w->order = ord, w->n_order = m, w->cap_order = (uint32_t)ocap;
   w->cells = cells, w->n_cells = nc, w->cap_cells = (uint32_t)ncap;
+  w->by_bands = qk__world_by_bands(w);
   qk__world_pack(w, pk, ord, cells, nc);
   for (uint32_t k = w->dirty_head; k != QK_NONE; k = w->obj[k].dnext)
     w->obj[k].flags &= (uint8_t)~QK__WDIRTY;

@@ -143,6 +143,8 @@ struct qk_world {
    * every pair whose float boxes then met. */
   qk__kvec_t near;
   int ident_dirty;        /* an object was added or removed since the last update */
+  int by_bands;           /* the order of the last update is searched by bands (qk__world_by_bands,
+                             asked once by qk__world_reorder) */
   struct qk__wpool *pool; /* the parked workers (collide/world_threads.c), or NULL */
 };
 
@@ -236,7 +238,7 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk);
 void qk__world_pack_free(qk_world_t *w, qk__wpack_t *pk);
 /* Fill the pack (sized for the order) for the order ord and its nc cells (with the
  * sentinel), which are the world's order, on the world's threads. The cells' and levels'
- * boxes only when the search will be on the grid (qk__world_by_bands). */
+ * boxes only when the search will be on the grid (w->by_bands zero). */
 void qk__world_pack(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
                     const qk__wcell_t *cells, uint32_t nc);
 

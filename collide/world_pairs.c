@@ -1027,7 +1027,7 @@ static qk_status_t update(qk_world_t *w) {
   unsigned nt = w->n_live < 4096 ? 1 : qk__world_update_threads(w);
   if (nt > QK__RMAX) nt = QK__RMAX;
   /* (only a search by bands fills them: a frame on the grid allocates none) */
-  const uint32_t nfb = qk__world_by_bands(w) ? w->n_obj : 0;
+  const uint32_t nfb = w->by_bands ? w->n_obj : 0;
   float *fb = nfb ? qk__realloc(al, NULL, 0, (size_t)nfb * 4 * sizeof *fb) : NULL;
   const float *prev = fb && !w->ident_dirty && w->fbox && w->n_fbox == nfb ? w->fbox : NULL;
   int fb_ok, only_new;

@@ -1009,7 +1009,7 @@ qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kve
   uint32_t *rf = NULL;
   size_t n_rf = 0;
   bands_t bd = {0};
-  const int by_bands = use_bands(w);
+  const int by_bands = w->by_bands; /* (use_bands, asked by qk__world_reorder) */
   unsigned nt = qk__world_update_threads(w);
   if (w->n_live < 4096) nt = 1; /* not worth a thread */
   /* Near candidates kept (marked), with room for the mark. */
