@@ -30,8 +30,9 @@ static int drec_cmp(const void *p, const void *q) {
 }
 
 /* Sort n records by key, stably, through tmp (n entries): an LSD radix sort on the key's
- * nine bytes, skipping the bytes all records share (most of them: nearby cells). */
-static void drec_sort(drec_t *d, drec_t *tmp, size_t n) {
+ * nine bytes, skipping the bytes all records share (most of them: nearby cells). For
+ * cells too far apart for drec_sort's packed keys. */
+static void drec_sort_bytes(drec_t *d, drec_t *tmp, size_t n) {
   /* Keys relative to their minima, so that only the low bytes differ (a cell index of -1
    * and one of 0 differ in every byte once biased). */
   uint64_t ly_min = d[0].ly;
@@ -60,6 +61,87 @@ static void drec_sort(drec_t *d, drec_t *tmp, size_t n) {
   for (size_t i = 0; i < n; i++) d[i].ly += ly_min, d[i].x += x_min;
 }
 
+/* The bits of v (0 for 0). */
+static inline unsigned bits_of(uint64_t v) {
+  unsigned b = 0;
+  while (b < 64 && v >> b) b++;
+  return b;
+}
+
+/*
+ * Sort n records by key, stably, through tmp (n entries). Each record's key relative to
+ * the minima (level, cy and cx each minus its least value) is packed with the record's
+ * index in one 64-bit word, ((level, cy, cx) << ib | i), when the fields' ranges fit;
+ * the words are sorted by an LSD radix sort of digits of at most 11 bits on the key bits
+ * only (the dirty objects of a frame lie in a few levels of nearby cells: some 30 bits,
+ * three passes over 8-byte words where the 8-bit digits of the records took five passes
+ * over 16-byte records), and the records rebuilt from them in that order. Otherwise (cells
+ * far apart) the records are sorted on their bytes (drec_sort_bytes). Both are stable, so
+ * the order is the same: by key, ties in the records' order.
+ */
+static void drec_sort(drec_t *d, drec_t *tmp, size_t n) {
+  uint64_t l0 = d[0].ly >> 32, l1 = l0;
+  uint32_t y0 = (uint32_t)d[0].ly, y1 = y0, x0 = d[0].x, x1 = x0;
+  for (size_t i = 1; i < n; i++) {
+    uint64_t l = d[i].ly >> 32;
+    uint32_t y = (uint32_t)d[i].ly, x = d[i].x;
+    l0 = l < l0 ? l : l0, l1 = l > l1 ? l : l1;
+    y0 = y < y0 ? y : y0, y1 = y > y1 ? y : y1;
+    x0 = x < x0 ? x : x0, x1 = x > x1 ? x : x1;
+  }
+  const unsigned ib = bits_of(n - 1), xb = bits_of(x1 - x0), yb = bits_of(y1 - y0),
+                 kb = bits_of(l1 - l0) + yb + xb;
+  if (ib + kb > 64 || n > UINT32_MAX) {
+    drec_sort_bytes(d, tmp, n);
+    return;
+  }
+  if (!kb) return; /* one cell: already in order */
+  /* As few digits of at most 11 bits as the key needs, each as narrow as that allows
+   * (the counts' prefix sums cost 2^DB a digit: few records take narrower digits). */
+  const unsigned nd = (kb + 10) / 11, DB = (kb + nd - 1) / nd; /* nd <= 6: kb <= 64 */
+  const uint32_t DN = (uint32_t)1 << DB;
+  uint64_t *a = (uint64_t *)tmp, *t = a + n; /* tmp: 16 n bytes */
+  uint32_t cnt[6][2048];
+  for (unsigned g = 0; g < (nd > 3 ? nd : 3); g++) memset(cnt[g], 0, DN * sizeof cnt[g][0]);
+  /* (up to three digits, the common case, counted without a loop over the digits; the
+   * counts of digits past nd are not read) */
+  for (size_t i = 0; i < n; i++) {
+    uint64_t k = ((d[i].ly >> 32) - l0) << (yb + xb) | (uint64_t)((uint32_t)d[i].ly - y0) << xb |
+                 (d[i].x - x0);
+    a[i] = k << ib | i;
+    if (nd <= 3) {
+      cnt[0][k & (DN - 1)]++, cnt[1][k >> DB & (DN - 1)]++, cnt[2][k >> (2 * DB) & (DN - 1)]++;
+    } else {
+      for (unsigned g = 0; g < nd; g++) cnt[g][k >> (DB * g) & (DN - 1)]++;
+    }
+  }
+  for (unsigned g = 0; g < nd; g++) {
+    uint32_t *c = cnt[g], acc = 0;
+    int shared = 0;
+    for (uint32_t x = 0; x < DN; x++) {
+      uint32_t v = c[x];
+      shared |= v == n;
+      c[x] = acc, acc += v;
+    }
+    if (shared) continue;
+    const unsigned sh = ib + DB * g;
+    QK__UNROLL4
+    for (size_t i = 0; i < n; i++) t[c[a[i] >> sh & (DN - 1)]++] = a[i];
+    uint64_t *x = a;
+    a = t, t = x;
+  }
+  /* The slots in the sorted order (in the other buffer: 8 n bytes), then the records. */
+  uint32_t *sl = (uint32_t *)t;
+  const uint64_t im = ((uint64_t)1 << ib) - 1;
+  for (size_t i = 0; i < n; i++) sl[i] = d[a[i] & im].slot;
+  const uint64_t xm = ((uint64_t)1 << xb) - 1, ym = ((uint64_t)1 << yb) - 1;
+  for (size_t i = 0; i < n; i++) {
+    uint64_t k = a[i] >> ib;
+    d[i] = (drec_t){((k >> (yb + xb)) + l0) << 32 | (uint32_t)((k >> xb & ym) + y0),
+                    (uint32_t)(k & xm) + x0, sl[i]};
+  }
+}
+
 static inline drec_t rec_of(const qk__wobj_t *o, uint32_t slot) {
   return (drec_t){(uint64_t)(uint32_t)(o->level - QK__LMIN) << 32 | bias(o->cy), bias(o->u.cx),
                   slot};
@@ -83,10 +165,13 @@ static inline void box_join(qk_box_t *h, const qk_box_t *b) {
 
 static const qk_box_t empty_box = {INFINITY, INFINITY, -INFINITY, -INFINITY};
 
-/* The boxes of cells [c0, c1) of a new order: per cell the box around its objects, per
- * object its float box and whether that is exact. */
-static void pack_cells(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
-                       const qk__wcell_t *cells, uint32_t c0, uint32_t c1) {
+/* The boxes of cells [c0, c1) of a new order: per object its float box and whether that
+ * is exact, and (with cell boxes, which only the search on the grid reads) per cell the
+ * box around its objects. */
+static inline __attribute__((always_inline)) void pack_cells_(const qk_world_t *w, qk__wpack_t *pk,
+                                                              const uint32_t *ord,
+                                                              const qk__wcell_t *cells, uint32_t c0,
+                                                              uint32_t c1, const int cell_boxes) {
   float *fg = pk->fgrp;
   uint8_t *fx = pk->fexact;
   for (uint32_t c = c0; c < c1; c++) {
@@ -95,7 +180,7 @@ static void pack_cells(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord
       const qk__wobj_t *o = &w->obj[ord[m]];
       qk_box_t b =
           (o->flags & QK__WKIND) == QK_SHAPE_BOX ? (qk_box_t){o->x, o->y, o->a, o->b} : qk__wbox(o);
-      box_join(&h, &b);
+      if (cell_boxes) box_join(&h, &b);
       float *g = fg + (size_t)(m >> 2) * 16 + (m & 3);
       g[0] = (float)b.xmin, g[4] = (float)b.ymin, g[8] = (float)b.xmax, g[12] = (float)b.ymax;
       /* A box whose floats are its doubles: the float box test is then the exact one. Its
@@ -106,8 +191,16 @@ static void pack_cells(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord
       fx[m] = (o->flags & QK__WKIND) == QK_SHAPE_BOX &&
               !((u[0] | u[1] | u[2] | u[3]) & ((UINT64_C(1) << 29) - 1));
     }
-    pk->hb[c] = h;
+    if (cell_boxes) pk->hb[c] = h;
   }
+}
+
+static void pack_cells(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
+                       const qk__wcell_t *cells, uint32_t c0, uint32_t c1, int cell_boxes) {
+  if (cell_boxes)
+    pack_cells_(w, pk, ord, cells, c0, c1, 1);
+  else
+    pack_cells_(w, pk, ord, cells, c0, c1, 0);
 }
 
 /* One thread's share of the packing: a range of cells of about equal objects. */
@@ -118,6 +211,7 @@ typedef struct pack_job {
   const qk__wcell_t *cells;
   uint32_t nc;
   unsigned n_jobs;
+  int cell_boxes;
 } pack_job_t;
 
 static void pack_run(unsigned t, void *ud) {
@@ -125,7 +219,7 @@ static void pack_run(unsigned t, void *ud) {
   uint32_t n = p->cells[p->nc].start;
   uint32_t c0 = qk__wcell_from(p->cells, 0, p->nc, (uint32_t)((uint64_t)n * t / p->n_jobs));
   uint32_t c1 = qk__wcell_from(p->cells, 0, p->nc, (uint32_t)((uint64_t)n * (t + 1) / p->n_jobs));
-  pack_cells(p->w, p->pk, p->ord, p->cells, c0, c1);
+  pack_cells(p->w, p->pk, p->ord, p->cells, c0, c1, p->cell_boxes);
 }
 
 void qk__world_pack(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
@@ -133,18 +227,20 @@ void qk__world_pack(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
   uint32_t n = cells[nc].start;
   unsigned nt = qk__world_update_threads(w);
   if (n < 4096) nt = 1; /* not worth a thread */
+  /* (the cells' and levels' boxes are for the search on the grid) */
+  const int cell_boxes = !w->by_bands;
   if (nt > 1) {
-    pack_job_t p = {w, pk, ord, cells, nc, nt};
+    pack_job_t p = {w, pk, ord, cells, nc, nt, cell_boxes};
     qk__world_run_jobs(w, nt, nt, pack_run, &p);
   } else {
-    pack_cells(w, pk, ord, cells, 0, nc);
+    pack_cells(w, pk, ord, cells, 0, nc, cell_boxes);
   }
   for (uint32_t k = n; k & 3; k++) { /* empty lanes: a box that meets nothing */
     float *g = pk->fgrp + (size_t)(k >> 2) * 16 + (k & 3);
     g[0] = g[4] = INFINITY, g[8] = g[12] = -INFINITY;
   }
   /* Each level's box: its cells are one run (joined in registers). */
-  for (int l = 0; l < QK__NLEV; l++) {
+  for (int l = 0; l < QK__NLEV && cell_boxes; l++) {
     qk_box_t b = empty_box;
     for (uint32_t c = w->lv_first[l], ce = c + w->lv_n[l]; c < ce; c++) box_join(&b, &pk->hb[c]);
     pk->lv_box[l] = b;
@@ -475,16 +571,18 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
     m = mg.m, nc = mg.nc;
   }
   cells[nc] = (qk__wcell_t){0, 0, m, INT32_MAX};
+  /* (the new order in place first: the pack asks whether the search will be by bands) */
+  qk__free(a, w->order, (size_t)w->cap_order * sizeof *w->order);
+  qk__free(a, w->cells, (size_t)w->cap_cells * sizeof *w->cells);
+  w->order = ord, w->n_order = m, w->cap_order = (uint32_t)ocap;
+  w->cells = cells, w->n_cells = nc, w->cap_cells = (uint32_t)ncap;
+  w->by_bands = qk__world_by_bands(w);
   qk__world_pack(w, pk, ord, cells, nc);
   for (uint32_t k = w->dirty_head; k != QK_NONE; k = w->obj[k].dnext)
     w->obj[k].flags &= (uint8_t)~QK__WDIRTY;
   w->dirty_head = QK_NONE;
   w->n_dirty = 0;
   qk__free(a, d, 2 * nd * sizeof *d);
-  qk__free(a, w->order, (size_t)w->cap_order * sizeof *w->order);
-  qk__free(a, w->cells, (size_t)w->cap_cells * sizeof *w->cells);
-  w->order = ord, w->n_order = m, w->cap_order = (uint32_t)ocap;
-  w->cells = cells, w->n_cells = nc, w->cap_cells = (uint32_t)ncap;
   /* Give back the cells' room for the dirty objects that joined existing cells (a
    * failed shrink is harmless). */
   /* And the object slots' slack after growth (a failed shrink is harmless). */

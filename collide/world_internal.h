@@ -120,7 +120,10 @@ struct qk_world {
   uint64_t *egen;   /* slot << 32 | generation before the last update, of the slots
                        that changed at it (sorted) */
   size_t n_egen;
-  size_t last_found; /* pairs of the last search (sizes the next one's buffer) */
+  size_t last_found; /* keys found by the last search, which size the next one's buffer: a
+                        frame's pairs, or after a began-only frame its began candidates
+                        (what the next began-only search finds; a full search after it
+                        grows the buffer as it goes) */
   /* Scratch kept from one update to the next, so that a dense frame's buffers (tens of
    * megabytes at 10^5 objects) are not fresh pages every frame: the search's keys (with
    * room for the row sort's 32-bit scratch after them), and the rows' buffer of the
@@ -129,7 +132,7 @@ struct qk_world {
   qk__kvec_t scr_tkeys[QK__KEEP_THREADS]; /* the other threads' keys (threads 1, 2, ...) */
   uint32_t *spare_b;
   size_t cap_spare_b;
-  /* The objects' float boxes at the last update, by slot (xmin, ymin, xmax, ymax), when
+  /* The objects' float boxes at the last update, by slot (xmin, ymin, -xmax, -ymax), when
    * that update's search was by bands and every float box was exact (else NULL): the
    * next search then finds only the pairs whose boxes did not meet then (see
    * qk__world_search). n_fbox slots. */
@@ -140,6 +143,8 @@ struct qk_world {
    * every pair whose float boxes then met. */
   qk__kvec_t near;
   int ident_dirty;        /* an object was added or removed since the last update */
+  int by_bands;           /* the order of the last update is searched by bands (qk__world_by_bands,
+                             asked once by qk__world_reorder) */
   struct qk__wpool *pool; /* the parked workers (collide/world_threads.c), or NULL */
 };
 
@@ -232,7 +237,8 @@ typedef struct qk__wpack {
 qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk);
 void qk__world_pack_free(qk_world_t *w, qk__wpack_t *pk);
 /* Fill the pack (sized for the order) for the order ord and its nc cells (with the
- * sentinel), on the world's threads. */
+ * sentinel), which are the world's order, on the world's threads. The cells' and levels'
+ * boxes only when the search will be on the grid (w->by_bands zero). */
 void qk__world_pack(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
                     const qk__wcell_t *cells, uint32_t nc);
 
@@ -252,12 +258,17 @@ int qk__world_objects_meet(const qk_world_t *w, uint32_t i, uint32_t j);
  * (t < the threads of an update, which are then at most 1 + QK__KEEP_THREADS); else they
  * are all in found.
  * Began pairs only: prev (or NULL) holds the float boxes by slot of the last update, with
- * no object added or removed since; cur (or NULL) room for n_obj slots' float boxes. When
+ * no object added or removed since; cur (or NULL) room for n_obj slots' float boxes, each
+ * stored as (xmin, ymin, -xmax, -ymax): boxes a and b meet when b[i] <= -a[(i + 2) mod 4]
+ * for every i, one four-wide comparison (negation is exact). When
  * the search is by bands and every float box is exact (*cur_ok = 1), or not (*cur_ok =
  * 2: the candidates whose objects do not meet are in *found (or tk) too, marked by
  * QK__NEAR), it fills cur and, given prev, keeps only the candidates whose float boxes at
  * the last update did not meet (*only_new): with the last update's pairs and near
  * candidates re-tested, those make this update's. */
+/* Whether the search of the order as it is now goes by bands (else by the grid): only then
+ * are the float boxes by slot (cur below) filled. */
+int qk__world_by_bands(const qk_world_t *w);
 qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kvec_t *found,
                              qk__kvec_t *tk, int *split, const float *prev, float *cur, int *cur_ok,
                              int *only_new);

@@ -50,9 +50,9 @@ static int kv_append(const qk_allocator_t *a, qk__kvec_t *v, const qk__kvec_t *s
   return 1;
 }
 
-/* Whether two float boxes (xmin, ymin, xmax, ymax) meet (closed). */
+/* Whether two float boxes by slot (xmin, ymin, -xmax, -ymax) meet (closed). */
 static inline int fboxes_meet(const float *a, const float *b) {
-  return b[0] <= a[2] && b[1] <= a[3] && b[2] >= a[0] && b[3] >= a[1];
+  return b[0] <= -a[2] && b[1] <= -a[3] && b[2] <= -a[0] && b[3] <= -a[1];
 }
 
 static void rows_free(const qk_allocator_t *a, qk__prows_t *r) {
@@ -516,13 +516,33 @@ static inline __attribute__((always_inline)) int began_range_(bjob_t *J, unsigne
     const size_t d0 = d;
     const float *fa = fb + 4 * (size_t)a;
 #if defined(__SSE2__)
-    /* b's box meets a's: (b.xmin, b.ymin) <= (a.xmax, a.ymax) and (b.xmax, b.ymax) >=
-     * (a.xmin, a.ymin), one comparison each way on the four floats */
-    const __m128 lo = _mm_setr_ps(fa[2], fa[3], INFINITY, INFINITY),
-                 hi = _mm_setr_ps(-INFINITY, -INFINITY, fa[0], fa[1]);
+    /* b's box meets a's: (b.xmin, b.ymin, -b.xmax, -b.ymax) <= (a.xmax, a.ymax, -a.xmin,
+     * -a.ymin), one comparison on the four floats (the boxes by slot hold the maxima
+     * negated: lim is a's halves swapped and negated) */
+    const __m128 av = _mm_loadu_ps(fa);
+    const __m128 lim =
+        _mm_xor_ps(_mm_shuffle_ps(av, av, _MM_SHUFFLE(1, 0, 3, 2)), _mm_set1_ps(-0.0f));
 #endif
     /* The old row in order, each pair tested; the began slots (y, the next of them)
      * are put in before the first old slot above them. */
+#if defined(__SSE2__)
+    if (exact && i == ie) {
+      /* A row without began pairs (most rows): its old pairs tested in a loop of their
+       * own, without the began slot's comparison. */
+      for (; j < je; j++) {
+        const uint32_t x = ob[j];
+        out[d] = x; /* (kept when it meets) */
+        if (__builtin_expect(
+                _mm_movemask_ps(_mm_cmple_ps(_mm_loadu_ps(fb + 4 * (size_t)x), lim)) == 15, 1)) {
+          d++;
+          continue;
+        }
+        if (!(ok = kv_add(al, &le, ka | x))) goto out;
+      }
+      if (d > d0) zr[z] = a, zr[zc + z++] = (uint32_t)d0;
+      continue;
+    }
+#endif
     uint32_t y = i < ie ? bb[i] : UINT32_MAX;
     for (; j < je; j++) {
       const uint32_t x = ob[j];
@@ -535,8 +555,7 @@ static inline __attribute__((always_inline)) int began_range_(bjob_t *J, unsigne
       }
       const float *fx = fb + 4 * (size_t)x;
 #if defined(__SSE2__)
-      const __m128 bx = _mm_loadu_ps(fx);
-      const int meet = _mm_movemask_ps(_mm_and_ps(_mm_cmple_ps(bx, lo), _mm_cmpge_ps(bx, hi)));
+      const int meet = _mm_movemask_ps(_mm_cmple_ps(_mm_loadu_ps(fx), lim));
       out[d] = x; /* (kept when it meets) */
       if (__builtin_expect(meet == 15, 1)) {
 #else
@@ -1007,7 +1026,8 @@ static qk_status_t update(qk_world_t *w) {
    * failed allocation only loses that). */
   unsigned nt = w->n_live < 4096 ? 1 : qk__world_update_threads(w);
   if (nt > QK__RMAX) nt = QK__RMAX;
-  const uint32_t nfb = w->n_obj;
+  /* (only a search by bands fills them: a frame on the grid allocates none) */
+  const uint32_t nfb = w->by_bands ? w->n_obj : 0;
   float *fb = nfb ? qk__realloc(al, NULL, 0, (size_t)nfb * 4 * sizeof *fb) : NULL;
   const float *prev = fb && !w->ident_dirty && w->fbox && w->n_fbox == nfb ? w->fbox : NULL;
   int fb_ok, only_new;

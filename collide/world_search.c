@@ -827,8 +827,8 @@ static int build_bands(const qk_world_t *w, const qk__wpack_t *pk, bands_t *bd, 
     hs += (double)f[12] - f[4];
     all_exact &= fx[k];
     if (cur) {
-      float *c = cur + 4 * (size_t)w->order[k];
-      c[0] = f[0], c[1] = f[4], c[2] = f[8], c[3] = f[12];
+      float *c = cur + 4 * (size_t)w->order[k]; /* (the maxima negated: see qk__world_search) */
+      c[0] = f[0], c[1] = f[4], c[2] = -f[8], c[3] = -f[12];
     }
     uint32_t x = fkey(f[0]);
     rec[k] = (uint64_t)x << 32 | k;
@@ -898,6 +898,7 @@ static int build_bands(const qk_world_t *w, const qk__wpack_t *pk, bands_t *bd, 
     }
     if (shared) continue;
     const int sh = 32 + 11 * d;
+    QK__UNROLL4
     for (uint32_t j = 0; j < n; j++) t[c[a[j] >> sh & 2047]++] = a[j];
     uint64_t *x = a;
     a = t, t = x;
@@ -928,7 +929,7 @@ static int build_bands(const qk_world_t *w, const qk__wpack_t *pk, bands_t *bd, 
       if (exact) exact[p] = fx[k];
       if (pf) {
         pgrp_t *r = &pg[p >> 2];
-        r->x0[p & 3] = pf[0], r->y0[p & 3] = pf[1], r->x1[p & 3] = pf[2], r->y1[p & 3] = pf[3];
+        r->x0[p & 3] = pf[0], r->y0[p & 3] = pf[1], r->x1[p & 3] = -pf[2], r->y1[p & 3] = -pf[3];
       }
       if (++b > be) break;
       p = pos[b]++;
@@ -966,6 +967,7 @@ static void free_bands(const qk_world_t *w, bands_t *bd) {
  * against 2.92 M.
  */
 static int use_bands(const qk_world_t *w) {
+  if (w->n_order <= 1) return 0;
   double n_obj[QK__NLEV], rows = 0;
   int l[QK__NLEV], nl = 0;
   uint32_t n_cells[QK__NLEV];
@@ -981,6 +983,8 @@ static int use_bands(const qk_world_t *w) {
                                                  : n_obj[c] * (qk__pow2(l[c] - l[f] - 1) + 2);
   return rows > (double)w->n_order / 8;
 }
+
+int qk__world_by_bands(const qk_world_t *w) { return use_bands(w); }
 
 /* Free the given buffers (a failure before the search ran). */
 static qk_status_t search_nomem(const qk_world_t *w, qk__kvec_t *found, qk__kvec_t *tk) {
@@ -1005,7 +1009,7 @@ qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kve
   uint32_t *rf = NULL;
   size_t n_rf = 0;
   bands_t bd = {0};
-  const int by_bands = w->n_order > 1 && use_bands(w);
+  const int by_bands = w->by_bands; /* (use_bands, asked by qk__world_reorder) */
   unsigned nt = qk__world_update_threads(w);
   if (w->n_live < 4096) nt = 1; /* not worth a thread */
   /* Near candidates kept (marked), with room for the mark. */

@@ -1276,6 +1276,124 @@ static void test_world_grid_levels(void **s) {
     }
 }
 
+/* The re-filing's sort of the dirty objects by cell (collide/world_grid.c, drec_sort),
+ * which packs each object's (level, cy, cx) relative to the frame's least ones with its
+ * index into 64 bits when they fit: objects jumping every frame (all dirty, hundreds of
+ * them) in groups of mixed sizes (1e-3 .. 10: five levels), over a span whose cells fit
+ * (+-3000: about 23 bits a coordinate at the finest level, more than three of the sort's
+ * 11-bit digits) and one whose cells do not (+-1e8: the level is raised by the
+ * magnitude, and the cell indices still span about 2^31 each, so the records are sorted
+ * on their bytes), every frame against brute force, on one thread and (the dirty ones
+ * filed and sorted by the merge's ranges) two. */
+static qk_shape_t refile_shape(qkt_rng_t *r, double gx, double gy) {
+  double s = pow(10, qkt_rng_range(r, -3, 1)), x = gx + qkt_rng_range(r, 0, 12),
+         y = gy + qkt_rng_range(r, 0, 12);
+  return (qk_shape_t){QK_SHAPE_BOX, x, y, x + s, y + s * qkt_rng_range(r, 0.5, 1)};
+}
+
+static void test_world_refile_sort(void **s) {
+  (void)s;
+  for (int far = 0; far < 2; far++)
+    for (unsigned th = 1; th <= 2; th++) {
+      qkt_rng_t r;
+      qkt_rng_seed(&r, g_seed + 97 + (uint64_t)far);
+      const double span = far ? 1e8 : 3000;
+      qk_world_options_t o;
+      qk_world_options_init(&o);
+      o.threads = th;
+      o.thread_min = 0;
+      qk_world_t *w;
+      assert_int_equal(qk_world_new(&o, &w), QK_OK);
+      mirror_t m = {0};
+      enum { GROUPS = 24, PER = 25 };
+      for (int g = 0; g < GROUPS; g++) {
+        double gx = qkt_rng_range(&r, -span, span), gy = qkt_rng_range(&r, -span, span);
+        for (int i = 0; i < PER; i++) m_add(w, &m, refile_shape(&r, gx, gy));
+      }
+      qk_world_pair_t *prev = NULL;
+      size_t np = 0;
+      for (int f = 0; f < 6; f++) {
+        /* each group jumps somewhere else, its objects with new sizes */
+        for (size_t g = 0; f && g < GROUPS; g++) {
+          double gx = qkt_rng_range(&r, -span, span), gy = qkt_rng_range(&r, -span, span);
+          for (size_t i = g * PER; i < (g + 1) * PER; i++) {
+            qk_shape_t sh = refile_shape(&r, gx, gy);
+            assert_int_equal(qk_world_move(w, m.h[i], &sh), QK_OK);
+            m.s[i] = o_norm(sh);
+          }
+        }
+        update_and_check(w, &m, &prev, &np, far ? "refile sort (far)" : "refile sort (near)", f);
+        assert_true(np > 0);
+      }
+      free(prev), free(m.h), free(m.s);
+      qk_world_free(w);
+    }
+}
+
+/* The float boxes by slot (16 bytes a slot) are for the search by bands and the next
+ * frame's began-only search: a frame searched on the grid (one level of sizes) allocates
+ * none, a frame by bands (the clustered mixed sizes) one. An allocator counts the
+ * allocations of exactly that size in the updates after the first, every frame checked
+ * against brute force. */
+typedef struct size_count {
+  size_t size, n;
+} size_count_t;
+
+static void *counting_alloc(void *ud, void *p, size_t osize, size_t nsize) {
+  (void)osize;
+  size_count_t *c = ud;
+  if (nsize == 0) {
+    free(p);
+    return NULL;
+  }
+  if (!p && nsize == c->size) c->n++;
+  return realloc(p, nsize);
+}
+
+static void test_world_fbox_only_bands(void **s) {
+  (void)s;
+  enum { N = 1001 };
+  for (int bands = 0; bands < 2; bands++) {
+    qkt_rng_t r;
+    qkt_rng_seed(&r, g_seed + 151);
+    size_count_t c = {16 * (size_t)N, 0};
+    qk_allocator_t al = {counting_alloc, &c};
+    qk_world_options_t o;
+    qk_world_options_init(&o);
+    o.allocator = &al;
+    qk_world_t *w;
+    assert_int_equal(qk_world_new(&o, &w), QK_OK);
+    double cx[8], cy[8];
+    cluster_centres(&r, cx, cy);
+    mirror_t m = {0};
+    for (int i = 0; i < N; i++) {
+      double x = qkt_rng_unit(&r) * 30, y = qkt_rng_unit(&r) * 30;
+      m_add(w, &m,
+            bands ? cm_shape(&r, cx, cy, 0)
+                  : (qk_shape_t){QK_SHAPE_BOX, x, y, x + 0.7, y + qkt_rng_range(&r, 0.6, 0.8)});
+    }
+    qk_world_pair_t *prev = NULL;
+    size_t np = 0;
+    update_and_check(w, &m, &prev, &np, "fbox", 0);
+    c.n = 0;
+    for (int f = 1; f < 5; f++) {
+      for (size_t i = 0; i < m.n; i++) {
+        qk_shape_t sh = shifted(m.s[i], 1.0 / 64, -1.0 / 64);
+        assert_int_equal(qk_world_move(w, m.h[i], &sh), QK_OK);
+        m.s[i] = o_norm(sh);
+      }
+      update_and_check(w, &m, &prev, &np, bands ? "fbox (bands)" : "fbox (grid)", f);
+    }
+    assert_true(np > N / 2);
+    if (bands)
+      assert_true(c.n >= 4);
+    else
+      assert_int_equal(c.n, 0);
+    free(prev), free(m.h), free(m.s);
+    qk_world_free(w);
+  }
+}
+
 /* Touching cases on integers (every formula is exact there). */
 static void test_world_touching(void **s) {
   (void)s;
@@ -1833,6 +1951,8 @@ int main(void) {
       cmocka_unit_test(test_world_began_general),
       cmocka_unit_test(test_world_bands_edges),
       cmocka_unit_test(test_world_grid_levels),
+      cmocka_unit_test(test_world_refile_sort),
+      cmocka_unit_test(test_world_fbox_only_bands),
       cmocka_unit_test(test_world_prefilter_and_sort),
       cmocka_unit_test(test_world_touching),
       cmocka_unit_test(test_world_stale_handles),
