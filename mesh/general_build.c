@@ -77,6 +77,7 @@ static qk_status_t star(qk__gm_t *g, uint32_t v, uint32_t f) {
     t = c->nbr[3 * (size_t)t + i];
   } while (t != first && t != QK__CDT_NONE);
   g->ndirty = n;
+  g->dirty_v = v;
   return QK_OK;
 }
 
