@@ -86,6 +86,15 @@ void qk__cdt_free(qk__cdt_t *c);
 qk__cdt_where_t qk__cdt_locate(const qk__cdt_t *c, double x, double y, uint32_t start,
                                uint32_t *tri, int *k);
 
+/* qk__cdt_locate for a triangulation without constrained edges (a Delaunay one), starting at
+ * vertex u (strictly inside the square): turn around u to the triangle whose angle at u
+ * holds (x, y), then a deterministic visibility walk (two orientation tests a step at most,
+ * no random choice). A walk longer than the triangle count (never seen; cocircular ties
+ * could in principle make one cycle) goes on as qk__cdt_locate. The triangle reported for
+ * a point on an edge may be either side of it (as for qk__cdt_locate from another start). */
+qk__cdt_where_t qk__cdt_locate_delaunay(const qk__cdt_t *c, double x, double y, uint32_t u,
+                                        uint32_t *tri, int *k);
+
 /* Insert the point (x, y) and restore the constrained Delaunay property by flips.
  * *v_out is the new vertex, or the existing vertex at exactly that position (then *existed
  * is set to 1 and nothing changes). A point in the relative interior of a constrained edge

@@ -161,21 +161,24 @@ static unsigned long vline(const qk_poly_t *P, size_t v) { return P->vline ? P->
  * input vertex i - 1 or i + 1 when one is inserted and nearer. Rings list their vertices
  * in order, so an index neighbour is usually a segment away, where the last insertion of
  * a round in Z-order may be a jump away (long walks across the thin triangles between
- * coastline vertices: 2,200 instructions a vertex on Norway). */
-static uint32_t walk_start(const qk__gm_t *g, size_t i) {
+ * coastline vertices: 2,200 instructions a vertex on Norway). Returns that start's
+ * triangle (the hint, or the neighbour's vtri) and its vertex in *u (the last insertion
+ * is vertex 0 of the hint). */
+static uint32_t walk_start(const qk__gm_t *g, size_t i, uint32_t *u) {
   const qk_poly_t *P = g->P;
   const qk__cdt_t *c = &g->cdt;
   double x = P->vx[i], y = P->vy[i];
   uint32_t best = c->hint < c->nt ? c->hint : 0;
-  const double *h = &c->xy[2 * c->v[3 * (size_t)best]];
+  *u = c->v[3 * (size_t)best];
+  const double *h = &c->xy[2 * *u];
   double bd = (h[0] - x) * (h[0] - x) + (h[1] - y) * (h[1] - y);
   for (int d = -1; d <= 1; d += 2) {
     if ((d < 0 && i == 0) || (d > 0 && i + 1 >= P->nv)) continue;
-    uint32_t u = g->cv[(size_t)((ptrdiff_t)i + d)];
-    if (u == QK__CDT_NONE) continue;
-    const double *q = &c->xy[2 * (size_t)u];
+    uint32_t w = g->cv[(size_t)((ptrdiff_t)i + d)];
+    if (w == QK__CDT_NONE) continue;
+    const double *q = &c->xy[2 * (size_t)w];
     double dd = (q[0] - x) * (q[0] - x) + (q[1] - y) * (q[1] - y);
-    if (dd < bd) bd = dd, best = c->vtri[u];
+    if (dd < bd) bd = dd, best = c->vtri[w], *u = w;
   }
   return best;
 }
@@ -203,8 +206,16 @@ static qk_status_t insert_vertices(qk__gm_t *g) {
     uint32_t v;
     int existed;
     double x = P->vx[i], y = P->vy[i];
-    if ((st = qk__cdt_insert(&g->cdt, x, y, walk_start(g, i), &v, &existed)) ||
-        (st = qk__gm_fit(g))) {
+    /* Located from the start vertex (the nearest of the last insertion and the ring
+     * neighbours; no segment is inserted yet, so the triangulation is Delaunay). A point on
+     * an edge is located again by the stochastic walk from the start's triangle, which
+     * picks the side of the edge the insertion splits from (and so the triangles'
+     * numbering) as before. */
+    uint32_t u, t0 = walk_start(g, i, &u), t;
+    int k;
+    qk__cdt_where_t w = qk__cdt_locate_delaunay(&g->cdt, x, y, u, &t, &k);
+    if (w == QK__CDT_EDGE) w = qk__cdt_locate(&g->cdt, x, y, t0, &t, &k);
+    if ((st = qk__cdt_insert_at(&g->cdt, x, y, t, k, w, &v, &existed)) || (st = qk__gm_fit(g))) {
       st = qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
     } else if (existed) {
       /* Name the pair in input order. */
