@@ -508,6 +508,10 @@ qk_status_t qk__cdt_insert_at(qk__cdt_t *c, double x, double y, uint32_t t, int 
   uint32_t p = (uint32_t)c->nv++;
   c->xy[2 * (size_t)p] = x, c->xy[2 * (size_t)p + 1] = y;
   int sp = w == QK__CDT_IN ? split3(c, t, p) : split_edge(c, t, k, p);
+  if (sp == 4 && c->legal_sides) { /* stacked: t's side (t, t1), then the other's */
+    if (!(c->legal_sides & 1)) c->stk[0] = c->stk[2], c->stk[1] = c->stk[3];
+    sp = (c->legal_sides & 1 ? 2 : 0) + (c->legal_sides & 2 ? 2 : 0);
+  }
   legalize(c, sp);
   c->hint = c->vtri[p];
   *v_out = p;

@@ -55,6 +55,12 @@ typedef struct qk__cdt {
    * not (r = 0), and the flips reuse that instead of testing again. NULL: no such record. */
   const uint32_t *known;
   uint32_t known_gen;
+  /* Optional, set by a caller for one insertion that splits a constrained edge and cleared
+   * after it: which sides of the edge the flips restore (bit 0: the side of the triangle
+   * the point was located in, bit 1: the other side, 4: neither; 0, the default: both). The
+   * general mode leaves the side it never outputs, searches or refines (the outside, holes)
+   * as it is: flips never cross the edge, so the other side's triangles come out the same. */
+  int legal_sides;
   /* Private to mesh/cdt*.c: the flip stack (cap_v + 8 entries, in the vertex block) and the
    * segment insertion's scratch. */
   uint32_t *stk;

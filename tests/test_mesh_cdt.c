@@ -17,6 +17,8 @@
  *    through a vertex refused with the right *block / *block_seg and nothing changed;
  *  - qk__cdt_locate_delaunay (from a vertex, on a triangulation without segments) against
  *    the exact orientations of the triangle it reports and against qk__cdt_locate;
+ *  - legal_sides: a point on a constrained edge restores the Delaunay property on the sides
+ *    asked for only, and the triangulation stays valid;
  *  - qk__cdt_walk (and qk__cdt_walk_from, its turn around w started anywhere in w's star)
  *    against a brute-force visibility oracle (does the closed segment from w to
  *    P meet a constrained edge anywhere but at w?) and against qk__cdt_locate;
@@ -914,6 +916,79 @@ static void test_cdt_locate_delaunay(void **state) {
   assert_true(seen[QK__CDT_IN] > 100 && seen[QK__CDT_EDGE] > 100 && seen[QK__CDT_VERT] > 100);
 }
 
+/* Unconstrained edges failing the in-circle test, between two triangles above (side 1) or
+ * below (side 2) the line y = 8, after checking every triangle counter-clockwise and every
+ * link symmetric. */
+static size_t not_delaunay(const qk__cdt_t *c, int side) {
+  size_t bad = 0;
+  for (size_t t = 0; t < c->nt; t++) {
+    const uint32_t *v = c->v + 3 * t;
+    assert_true(qk__orient2d(c->xy + 2 * v[0], c->xy + 2 * v[1], c->xy + 2 * v[2]) > 0);
+    double cy = (c->xy[2 * v[0] + 1] + c->xy[2 * v[1] + 1] + c->xy[2 * v[2] + 1]) / 3;
+    for (int k = 0; k < 3; k++) {
+      uint32_t n = c->nbr[3 * t + k];
+      if (n == NONE) continue;
+      assert_true(c->nbr[3 * n] == t || c->nbr[3 * n + 1] == t || c->nbr[3 * n + 2] == t);
+      if (c->seg[3 * t + k] != NONE || (cy > 8) != (side == 1)) continue;
+      int j = c->nbr[3 * n] == t ? 0 : c->nbr[3 * n + 1] == t ? 1 : 2;
+      bad += qk__incircle(c->xy + 2 * v[0], c->xy + 2 * v[1], c->xy + 2 * v[2],
+                          c->xy + 2 * c->v[3 * n + j]) > 0;
+    }
+  }
+  return bad;
+}
+
+/* legal_sides: points inserted on a constrained edge (y = 8) restore the Delaunay property
+ * on the sides asked for only (bit 0: the side of the located triangle, here above; bit 1:
+ * below; 4: neither; 0: both), and the triangulation stays valid either way. */
+static void test_cdt_legal_sides(void **state) {
+  (void)state;
+  g_seed = qkt_seed(12119);
+  size_t skipped[2] = {0, 0};
+  for (int round = 0; round < 20; round++) {
+    const int modes[4] = {0, 1, 2, 4};
+    for (int m = 0; m < 4; m++) {
+      qkt_rng_t r;
+      qkt_rng_seed(&r, g_seed + (uint64_t)round); /* the same points for every mode */
+      qk__cdt_t c;
+      assert_int_equal(qk__cdt_init(&c, NULL, 0, 0, 16, 0), QK_OK);
+      uint32_t A, B, v;
+      int ex;
+      assert_int_equal(qk__cdt_insert(&c, 1.5, 8, NONE, &A, &ex), QK_OK);
+      assert_int_equal(qk__cdt_insert(&c, 14.5, 8, NONE, &B, &ex), QK_OK);
+      for (int i = 0; i < 60; i++) {
+        double x = qkt_rng_range(&r, 1, 15), y = qkt_rng_range(&r, 1, 15);
+        if (y == 8) continue;
+        assert_int_equal(qk__cdt_insert(&c, x, y, NONE, &v, &ex), QK_OK);
+      }
+      uint32_t blk, bs;
+      assert_int_equal(qk__cdt_insert_segment(&c, A, B, 0, &blk, &bs), QK_OK);
+      assert_int_equal((int)not_delaunay(&c, 1) + (int)not_delaunay(&c, 2), 0);
+      uint32_t a = A;
+      for (int i = 1; i <= 12; i++) { /* left to right: the piece is a -> B, above on its left */
+        int k;
+        uint32_t t = qk__cdt_find_edge(&c, a, B, &k);
+        assert_true(t != NONE);
+        c.legal_sides = modes[m];
+        assert_int_equal(qk__cdt_insert_at(&c, 1.5 + i, 8, t, k, QK__CDT_EDGE, &v, &ex), QK_OK);
+        c.legal_sides = 0;
+        a = v;
+      }
+      size_t up = not_delaunay(&c, 1), down = not_delaunay(&c, 2);
+      if (modes[m] == 0) {
+        check_cdt(&c); /* also every other check */
+      } else {
+        if (modes[m] & 1) assert_int_equal(up, 0);
+        if (modes[m] & 2) assert_int_equal(down, 0);
+        skipped[0] += !(modes[m] & 1) ? up : 0, skipped[1] += !(modes[m] & 2) ? down : 0;
+      }
+      qk__cdt_free(&c);
+    }
+  }
+  /* The sides left alone were left alone: some of their edges fail the test. */
+  assert_true(skipped[0] > 0 && skipped[1] > 0);
+}
+
 static void test_cdt_alloc_fail(void **state) {
   (void)state;
   g_seed = qkt_seed(12110);
@@ -1083,6 +1158,7 @@ int main(void) {
       cmocka_unit_test(test_cdt_walk),
       cmocka_unit_test(test_cdt_alloc_fail),
       cmocka_unit_test(test_cdt_locate_delaunay),
+      cmocka_unit_test(test_cdt_legal_sides),
       cmocka_unit_test(test_cdt_reserve),
       cmocka_unit_test(test_gm_sort_points),
   };
