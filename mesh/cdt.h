@@ -55,6 +55,12 @@ typedef struct qk__cdt {
    * not (r = 0), and the flips reuse that instead of testing again. NULL: no such record. */
   const uint32_t *known;
   uint32_t known_gen;
+  /* Optional, set by a caller for one insertion that splits a constrained edge and cleared
+   * after it: which sides of the edge the flips restore (bit 0: the side of the triangle
+   * the point was located in, bit 1: the other side, 4: neither; 0, the default: both). The
+   * general mode leaves the side it never outputs, searches or refines (the outside, holes)
+   * as it is: flips never cross the edge, so the other side's triangles come out the same. */
+  int legal_sides;
   /* Private to mesh/cdt*.c: the flip stack (cap_v + 8 entries, in the vertex block) and the
    * segment insertion's scratch. */
   uint32_t *stk;
@@ -85,6 +91,15 @@ void qk__cdt_free(qk__cdt_t *c);
  * lie in the square. */
 qk__cdt_where_t qk__cdt_locate(const qk__cdt_t *c, double x, double y, uint32_t start,
                                uint32_t *tri, int *k);
+
+/* qk__cdt_locate for a triangulation without constrained edges (a Delaunay one), starting at
+ * vertex u (strictly inside the square): turn around u to the triangle whose angle at u
+ * holds (x, y), then a deterministic visibility walk (two orientation tests a step at most,
+ * no random choice). A walk longer than the triangle count (never seen; cocircular ties
+ * could in principle make one cycle) goes on as qk__cdt_locate. The triangle reported for
+ * a point on an edge may be either side of it (as for qk__cdt_locate from another start). */
+qk__cdt_where_t qk__cdt_locate_delaunay(const qk__cdt_t *c, double x, double y, uint32_t u,
+                                        uint32_t *tri, int *k);
 
 /* Insert the point (x, y) and restore the constrained Delaunay property by flips.
  * *v_out is the new vertex, or the existing vertex at exactly that position (then *existed

@@ -77,6 +77,7 @@ static qk_status_t star(qk__gm_t *g, uint32_t v, uint32_t f) {
     t = c->nbr[3 * (size_t)t + i];
   } while (t != first && t != QK__CDT_NONE);
   g->ndirty = n;
+  g->dirty_v = v;
   return QK_OK;
 }
 
@@ -87,13 +88,23 @@ qk_status_t qk__gm_insert(qk__gm_t *g, double x, double y, uint32_t t0, int k0, 
    * constrained edge, whose line then tells the sides apart (every triangle the insertion
    * makes has the new vertex as a corner, so its other corners are on one side). */
   uint32_t f0 = g->face[t0], f1 = f0, ea = 0, eb = 0;
+  g->ndirty = 0;
+  qk_status_t st;
   if (w == QK__CDT_EDGE && c->seg[3 * t0 + k0] != QK__CDT_NONE) {
     uint32_t n = c->nbr[3 * t0 + k0];
     if (n != QK__CDT_NONE) f1 = g->face[n];
     ea = c->v[3 * t0 + (k0 + 1) % 3], eb = c->v[3 * t0 + (k0 + 2) % 3];
+    /* A split segment between a kept and a dropped face (the coastline against the
+     * outside), or inside dropped faces: the flips restore the kept side only. The dropped
+     * side is never output, searched or refined, and flips never cross the segment, so
+     * the kept side comes out the same; about half of such a split's in-circle tests. */
+    int sides = (g->faces[f0].drop ? 0 : 1) | (g->faces[f1].drop ? 0 : 2);
+    c->legal_sides = sides == 3 ? 0 : sides ? sides : 4; /* 4: neither side */
+    st = qk__cdt_insert_at(c, x, y, t0, k0, w, v_out, existed);
+    c->legal_sides = 0;
+  } else {
+    st = qk__cdt_insert_at(c, x, y, t0, k0, w, v_out, existed);
   }
-  g->ndirty = 0;
-  qk_status_t st = qk__cdt_insert_at(c, x, y, t0, k0, w, v_out, existed);
   if (st) return st;
   if (qk__gm_fit(g)) return QK_ERR_NOMEM;
   if (*existed) return QK_OK;
@@ -160,21 +171,24 @@ static unsigned long vline(const qk_poly_t *P, size_t v) { return P->vline ? P->
  * input vertex i - 1 or i + 1 when one is inserted and nearer. Rings list their vertices
  * in order, so an index neighbour is usually a segment away, where the last insertion of
  * a round in Z-order may be a jump away (long walks across the thin triangles between
- * coastline vertices: 2,200 instructions a vertex on Norway). */
-static uint32_t walk_start(const qk__gm_t *g, size_t i) {
+ * coastline vertices: 2,200 instructions a vertex on Norway). Returns that start's
+ * triangle (the hint, or the neighbour's vtri) and its vertex in *u (the last insertion
+ * is vertex 0 of the hint). */
+static uint32_t walk_start(const qk__gm_t *g, size_t i, uint32_t *u) {
   const qk_poly_t *P = g->P;
   const qk__cdt_t *c = &g->cdt;
   double x = P->vx[i], y = P->vy[i];
   uint32_t best = c->hint < c->nt ? c->hint : 0;
-  const double *h = &c->xy[2 * c->v[3 * (size_t)best]];
+  *u = c->v[3 * (size_t)best];
+  const double *h = &c->xy[2 * *u];
   double bd = (h[0] - x) * (h[0] - x) + (h[1] - y) * (h[1] - y);
   for (int d = -1; d <= 1; d += 2) {
     if ((d < 0 && i == 0) || (d > 0 && i + 1 >= P->nv)) continue;
-    uint32_t u = g->cv[(size_t)((ptrdiff_t)i + d)];
-    if (u == QK__CDT_NONE) continue;
-    const double *q = &c->xy[2 * (size_t)u];
+    uint32_t w = g->cv[(size_t)((ptrdiff_t)i + d)];
+    if (w == QK__CDT_NONE) continue;
+    const double *q = &c->xy[2 * (size_t)w];
     double dd = (q[0] - x) * (q[0] - x) + (q[1] - y) * (q[1] - y);
-    if (dd < bd) bd = dd, best = c->vtri[u];
+    if (dd < bd) bd = dd, best = c->vtri[w], *u = w;
   }
   return best;
 }
@@ -202,8 +216,16 @@ static qk_status_t insert_vertices(qk__gm_t *g) {
     uint32_t v;
     int existed;
     double x = P->vx[i], y = P->vy[i];
-    if ((st = qk__cdt_insert(&g->cdt, x, y, walk_start(g, i), &v, &existed)) ||
-        (st = qk__gm_fit(g))) {
+    /* Located from the start vertex (the nearest of the last insertion and the ring
+     * neighbours; no segment is inserted yet, so the triangulation is Delaunay). A point on
+     * an edge is located again by the stochastic walk from the start's triangle, which
+     * picks the side of the edge the insertion splits from (and so the triangles'
+     * numbering) as before. */
+    uint32_t u, t0 = walk_start(g, i, &u), t;
+    int k;
+    qk__cdt_where_t w = qk__cdt_locate_delaunay(&g->cdt, x, y, u, &t, &k);
+    if (w == QK__CDT_EDGE) w = qk__cdt_locate(&g->cdt, x, y, t0, &t, &k);
+    if ((st = qk__cdt_insert_at(&g->cdt, x, y, t, k, w, &v, &existed)) || (st = qk__gm_fit(g))) {
       st = qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
     } else if (existed) {
       /* Name the pair in input order. */

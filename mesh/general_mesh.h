@@ -78,6 +78,7 @@ typedef struct qk__gm {
   uint32_t *dirty;
   size_t ndirty, dirty_cap;
   uint32_t dirty_face; /* their face when they all have one (NONE: a split segment's two) */
+  uint32_t dirty_v;    /* the vertex they surround, counter-clockwise in g->dirty */
   /* The graded quadtree (lattice coordinates: the root square is [0, 1]^2). */
   qk_tree_t *tree;
   uint8_t *free_node; /* per node id: its grown square meets no feature */

@@ -318,6 +318,68 @@ static qk_status_t check(qk__gm_t *g, uint32_t t) {
   return check_kept(g, t);
 }
 
+/* bad_kept for triangle t = (v, x, y) of a star, counter-clockwise from v's slot i, given
+ * the squared lengths of its edges opposite v, x and y (lo, ly, lx), with a plain size
+ * bound or none: around a vertex each spoke is a side of two triangles, and its length is
+ * computed once for both. The same tests as bad_kept on the same values (a squared length
+ * is the same either way round, the largest of three is, and the size test ORs three
+ * symmetric tests); when two lengths tie for the shortest, bad_kept itself breaks the tie
+ * by slot order. */
+static inline int bad_star(const qk__gm_t *g, uint32_t t, int i, const double *pv, const double *px,
+                           const double *py, double lo, double ly, double lx) {
+  double lmax = lo > ly ? lo : ly;
+  lmax = lx > lmax ? lx : lmax;
+  if (g->size_plain) {
+    if (lmax > g->h2_hi) return 1;
+    if (lmax >= g->h2_lo && (len2_exceeds(px, py, g->h_plain) || len2_exceeds(py, pv, g->h_plain) ||
+                             len2_exceeds(pv, px, g->h_plain)))
+      return 1;
+  }
+  const double *o, *u, *w;
+  double lu, lw;
+  int r;
+  if (lo < ly && lo < lx)
+    o = pv, u = px, w = py, lu = ly, lw = lx, r = 0;
+  else if (ly < lo && ly < lx)
+    o = px, u = py, w = pv, lu = lx, lw = lo, r = 1;
+  else if (lx < lo && lx < ly)
+    o = py, u = pv, w = px, lu = lo, lw = ly, r = 2;
+  else
+    return bad_kept(g, t);
+  double ux = u[0] - o[0], uy = u[1] - o[1], wx = w[0] - o[0], wy = w[1] - o[1];
+  double cr = ux * wy - uy * wx;
+  if (cr * cr >= g->sin2_bound * lw * lu) return 0;
+  if (g->smallest_input_angle > 61) return 1;
+  return !exempt_at(g, &g->cdt.v[3 * t], (i + r) % 3);
+}
+
+/* check_kept for the star of g->dirty_v in g->dirty (all of one kept face), each spoke's
+ * length computed once. */
+static qk_status_t check_star(qk__gm_t *g, size_t n) {
+  const qk__cdt_t *c = &g->cdt;
+  const uint32_t v = g->dirty_v;
+  const double *pv = &c->xy[2 * v];
+  uint32_t prev = QK__CDT_NONE;
+  double lx = 0;
+  for (size_t j = 0; j < n; j++) {
+    uint32_t t = g->dirty[j];
+    const uint32_t *tv = &c->v[3 * t], *ts = &c->seg[3 * t];
+    int i = tv[0] == v ? 0 : tv[1] == v ? 1 : 2;
+    uint32_t x = tv[i == 2 ? 0 : i + 1], y = tv[i == 0 ? 2 : i - 1];
+    const double *px = &c->xy[2 * x], *py = &c->xy[2 * y];
+    if (x != prev) lx = d2(pv, px); /* the first triangle (the ring is closed: x follows y) */
+    double ly = d2(pv, py), lo = d2(px, py);
+    if ((ts[0] & ts[1] & ts[2]) != QK__CDT_NONE)
+      for (int k = 0; k < 3; k++)
+        if (ts[k] != QK__CDT_NONE && apex_encroaches(g, t, k) &&
+            push_enc(g, c->v[3 * t + (k + 1) % 3], c->v[3 * t + (k + 2) % 3], c->seg[3 * t + k]))
+          return QK_ERR_NOMEM;
+    if (bad_star(g, t, i, pv, px, py, lo, ly, lx) && push_bad(g, t)) return QK_ERR_NOMEM;
+    lx = ly, prev = y;
+  }
+  return QK_OK;
+}
+
 /* Check the triangles the last insertion made (its star): when they share one face, its
  * label is looked at once. */
 static qk_status_t check_dirty(qk__gm_t *g) {
@@ -325,6 +387,8 @@ static qk_status_t check_dirty(qk__gm_t *g) {
   g->ndirty = 0;
   if (g->dirty_face != QK__CDT_NONE) {
     if (g->faces[g->dirty_face].drop) return QK_OK;
+    const qk_mesh_options_t *opt = g->opt;
+    if (g->size_plain || !(opt->max_size > 0 || opt->size_fn)) return check_star(g, n);
     for (size_t i = 0; i < n; i++)
       if (check_kept(g, g->dirty[i])) return QK_ERR_NOMEM;
     return QK_OK;

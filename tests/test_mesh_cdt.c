@@ -15,6 +15,10 @@
  *  - segment insertion on the edges of a jittered grid graph (non-crossing, with points
  *    inserted afterwards on the segments and elsewhere), a crossing segment and a segment
  *    through a vertex refused with the right *block / *block_seg and nothing changed;
+ *  - qk__cdt_locate_delaunay (from a vertex, on a triangulation without segments) against
+ *    the exact orientations of the triangle it reports and against qk__cdt_locate;
+ *  - legal_sides: a point on a constrained edge restores the Delaunay property on the sides
+ *    asked for only, and the triangulation stays valid;
  *  - qk__cdt_walk (and qk__cdt_walk_from, its turn around w started anywhere in w's star)
  *    against a brute-force visibility oracle (does the closed segment from w to
  *    P meet a constrained edge anywhere but at w?) and against qk__cdt_locate;
@@ -838,6 +842,153 @@ static void test_cdt_walk(void **state) {
 
 /* ---- allocation failure -------------------------------------------------------------------- */
 
+/* qk__cdt_locate_delaunay (the input vertices' location, before any segment) against the
+ * exact orientations of the triangle it reports and against qk__cdt_locate: on uniform
+ * points and on a coarse grid (collinear and cocircular ties), for random points, vertices
+ * and exact edge midpoints, from random start vertices (the square's corners included:
+ * their turn meets the boundary and hands over to qk__cdt_locate). */
+static void test_cdt_locate_delaunay(void **state) {
+  (void)state;
+  g_seed = qkt_seed(12117);
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed);
+  int seen[3] = {0, 0, 0};
+  for (int grid = 0; grid < 2; grid++) {
+    qk__cdt_t c;
+    assert_int_equal(qk__cdt_init(&c, NULL, 0, 0, 16, 0), QK_OK);
+    for (int i = 0; i < 400; i++) {
+      double x = qkt_rng_range(&r, 1, 15), y = qkt_rng_range(&r, 1, 15);
+      if (grid) x = floor(x * 2) / 2, y = floor(y * 2) / 2;
+      uint32_t v;
+      int ex;
+      assert_int_equal(qk__cdt_insert(&c, x, y, NONE, &v, &ex), QK_OK);
+    }
+    check_cdt(&c);
+    for (int q = 0; q < 4000; q++) {
+      double P[2];
+      int kind = (int)qkt_rng_below(&r, 3);
+      if (kind == 0) { /* anywhere inside the square */
+        P[0] = qkt_rng_range(&r, 0.5, 15.5), P[1] = qkt_rng_range(&r, 0.5, 15.5);
+      } else if (kind == 1) { /* a vertex */
+        const double *a = qk__cdt_pt(&c, 4 + qkt_rng_below(&r, (uint32_t)c.nv - 4));
+        P[0] = a[0], P[1] = a[1];
+      } else { /* the exact midpoint of an edge between two inserted vertices */
+        uint32_t t = qkt_rng_below(&r, (uint32_t)c.nt), e = qkt_rng_below(&r, 3);
+        const double *a = qk__cdt_pt(&c, c.v[3 * t + (e + 1) % 3]);
+        const double *b = qk__cdt_pt(&c, c.v[3 * t + (e + 2) % 3]);
+        P[0] = (a[0] + b[0]) / 2, P[1] = (a[1] + b[1]) / 2;
+      }
+      uint32_t u = q % 50 == 0 ? qkt_rng_below(&r, 4) : 4 + qkt_rng_below(&r, (uint32_t)c.nv - 4);
+      uint32_t t, t2;
+      int k, k2;
+      qk__cdt_where_t w = qk__cdt_locate_delaunay(&c, P[0], P[1], u, &t, &k);
+      assert_true(t < c.nt);
+      int o[3], nz = 0;
+      for (int e = 0; e < 3; e++) {
+        o[e] = qk__orient2d(qk__cdt_pt(&c, c.v[3 * t + (e + 1) % 3]),
+                            qk__cdt_pt(&c, c.v[3 * t + (e + 2) % 3]), P);
+        if (o[e] < 0)
+          fail_msg("seed %llu: (%.17g, %.17g) outside the triangle reported",
+                   (unsigned long long)g_seed, P[0], P[1]);
+        nz += o[e] == 0;
+      }
+      assert_int_equal((int)w, nz); /* IN 0, EDGE 1, VERT 2 zero edges */
+      if (w == QK__CDT_EDGE) assert_int_equal(o[k], 0);
+      if (w == QK__CDT_VERT) {
+        assert_true(o[k] != 0);
+        const double *a = qk__cdt_pt(&c, c.v[3 * t + k]);
+        assert_true(a[0] == P[0] && a[1] == P[1]);
+      }
+      seen[w]++;
+      /* The stochastic walk agrees: the same triangle, edge (either side) or vertex. */
+      qk__cdt_where_t w2 = qk__cdt_locate(&c, P[0], P[1], NONE, &t2, &k2);
+      assert_int_equal((int)w2, (int)w);
+      if (w == QK__CDT_IN) assert_int_equal(t2, t);
+      if (w == QK__CDT_VERT) assert_int_equal(c.v[3 * t2 + k2], c.v[3 * t + k]);
+      if (w == QK__CDT_EDGE) {
+        uint32_t a = c.v[3 * t + (k + 1) % 3], b = c.v[3 * t + (k + 2) % 3];
+        uint32_t a2 = c.v[3 * t2 + (k2 + 1) % 3], b2 = c.v[3 * t2 + (k2 + 2) % 3];
+        assert_true((a == a2 && b == b2) || (a == b2 && b == a2));
+      }
+    }
+    qk__cdt_free(&c);
+  }
+  assert_true(seen[QK__CDT_IN] > 100 && seen[QK__CDT_EDGE] > 100 && seen[QK__CDT_VERT] > 100);
+}
+
+/* Unconstrained edges failing the in-circle test, between two triangles above (side 1) or
+ * below (side 2) the line y = 8, after checking every triangle counter-clockwise and every
+ * link symmetric. */
+static size_t not_delaunay(const qk__cdt_t *c, int side) {
+  size_t bad = 0;
+  for (size_t t = 0; t < c->nt; t++) {
+    const uint32_t *v = c->v + 3 * t;
+    assert_true(qk__orient2d(c->xy + 2 * v[0], c->xy + 2 * v[1], c->xy + 2 * v[2]) > 0);
+    double cy = (c->xy[2 * v[0] + 1] + c->xy[2 * v[1] + 1] + c->xy[2 * v[2] + 1]) / 3;
+    for (int k = 0; k < 3; k++) {
+      uint32_t n = c->nbr[3 * t + k];
+      if (n == NONE) continue;
+      assert_true(c->nbr[3 * n] == t || c->nbr[3 * n + 1] == t || c->nbr[3 * n + 2] == t);
+      if (c->seg[3 * t + k] != NONE || (cy > 8) != (side == 1)) continue;
+      int j = c->nbr[3 * n] == t ? 0 : c->nbr[3 * n + 1] == t ? 1 : 2;
+      bad += qk__incircle(c->xy + 2 * v[0], c->xy + 2 * v[1], c->xy + 2 * v[2],
+                          c->xy + 2 * c->v[3 * n + j]) > 0;
+    }
+  }
+  return bad;
+}
+
+/* legal_sides: points inserted on a constrained edge (y = 8) restore the Delaunay property
+ * on the sides asked for only (bit 0: the side of the located triangle, here above; bit 1:
+ * below; 4: neither; 0: both), and the triangulation stays valid either way. */
+static void test_cdt_legal_sides(void **state) {
+  (void)state;
+  g_seed = qkt_seed(12119);
+  size_t skipped[2] = {0, 0};
+  for (int round = 0; round < 20; round++) {
+    const int modes[4] = {0, 1, 2, 4};
+    for (int m = 0; m < 4; m++) {
+      qkt_rng_t r;
+      qkt_rng_seed(&r, g_seed + (uint64_t)round); /* the same points for every mode */
+      qk__cdt_t c;
+      assert_int_equal(qk__cdt_init(&c, NULL, 0, 0, 16, 0), QK_OK);
+      uint32_t A, B, v;
+      int ex;
+      assert_int_equal(qk__cdt_insert(&c, 1.5, 8, NONE, &A, &ex), QK_OK);
+      assert_int_equal(qk__cdt_insert(&c, 14.5, 8, NONE, &B, &ex), QK_OK);
+      for (int i = 0; i < 60; i++) {
+        double x = qkt_rng_range(&r, 1, 15), y = qkt_rng_range(&r, 1, 15);
+        if (y == 8) continue;
+        assert_int_equal(qk__cdt_insert(&c, x, y, NONE, &v, &ex), QK_OK);
+      }
+      uint32_t blk, bs;
+      assert_int_equal(qk__cdt_insert_segment(&c, A, B, 0, &blk, &bs), QK_OK);
+      assert_int_equal((int)not_delaunay(&c, 1) + (int)not_delaunay(&c, 2), 0);
+      uint32_t a = A;
+      for (int i = 1; i <= 12; i++) { /* left to right: the piece is a -> B, above on its left */
+        int k;
+        uint32_t t = qk__cdt_find_edge(&c, a, B, &k);
+        assert_true(t != NONE);
+        c.legal_sides = modes[m];
+        assert_int_equal(qk__cdt_insert_at(&c, 1.5 + i, 8, t, k, QK__CDT_EDGE, &v, &ex), QK_OK);
+        c.legal_sides = 0;
+        a = v;
+      }
+      size_t up = not_delaunay(&c, 1), down = not_delaunay(&c, 2);
+      if (modes[m] == 0) {
+        check_cdt(&c); /* also every other check */
+      } else {
+        if (modes[m] & 1) assert_int_equal(up, 0);
+        if (modes[m] & 2) assert_int_equal(down, 0);
+        skipped[0] += !(modes[m] & 1) ? up : 0, skipped[1] += !(modes[m] & 2) ? down : 0;
+      }
+      qk__cdt_free(&c);
+    }
+  }
+  /* The sides left alone were left alone: some of their edges fail the test. */
+  assert_true(skipped[0] > 0 && skipped[1] > 0);
+}
+
 static void test_cdt_alloc_fail(void **state) {
   (void)state;
   g_seed = qkt_seed(12110);
@@ -991,16 +1142,25 @@ static void test_gm_sort_points(void **state) {
 int main(void) {
   const struct CMUnitTest tests[] = {
 #ifdef QK_HAVE_GMP
-      cmocka_unit_test(test_cdt_incircle_gmp),  cmocka_unit_test(test_cdt_encroach_gmp),
+      cmocka_unit_test(test_cdt_incircle_gmp),
+      cmocka_unit_test(test_cdt_encroach_gmp),
 #else
       cmocka_unit_test(skip_without_gmp),
 #endif
-      cmocka_unit_test(test_cdt_uniform),       cmocka_unit_test(test_cdt_grid),
-      cmocka_unit_test(test_cdt_scales),        cmocka_unit_test(test_cdt_near_degenerate),
-      cmocka_unit_test(test_cdt_segments),      cmocka_unit_test(test_cdt_segment_refused),
-      cmocka_unit_test(test_cdt_long_segments), cmocka_unit_test(test_cdt_segment_near_collinear),
-      cmocka_unit_test(test_cdt_walk),          cmocka_unit_test(test_cdt_alloc_fail),
-      cmocka_unit_test(test_cdt_reserve),       cmocka_unit_test(test_gm_sort_points),
+      cmocka_unit_test(test_cdt_uniform),
+      cmocka_unit_test(test_cdt_grid),
+      cmocka_unit_test(test_cdt_scales),
+      cmocka_unit_test(test_cdt_near_degenerate),
+      cmocka_unit_test(test_cdt_segments),
+      cmocka_unit_test(test_cdt_segment_refused),
+      cmocka_unit_test(test_cdt_long_segments),
+      cmocka_unit_test(test_cdt_segment_near_collinear),
+      cmocka_unit_test(test_cdt_walk),
+      cmocka_unit_test(test_cdt_alloc_fail),
+      cmocka_unit_test(test_cdt_locate_delaunay),
+      cmocka_unit_test(test_cdt_legal_sides),
+      cmocka_unit_test(test_cdt_reserve),
+      cmocka_unit_test(test_gm_sort_points),
   };
   (void)skip_without_gmp;
   return cmocka_run_group_tests(tests, NULL, NULL);
