@@ -1007,11 +1007,12 @@ static void test_world_clustered_mixed_sizes(void **s) {
  * one added; on one thread and, from 4096 objects, on two and three (rows_began by ranges
  * of slots). Every frame against brute force (dense_check).
  */
-static void run_began_only(unsigned threads, size_t n, int frames) {
+static void run_began_only_(unsigned threads, size_t n, int frames, int strip) {
   qkt_rng_t r;
   qkt_rng_seed(&r, g_seed + 131 + threads);
   double cx[8], cy[8];
   cluster_centres(&r, cx, cy);
+  for (int c = 0; strip && c < 8; c++) cy[c] = 25;
   qk_world_options_t o;
   qk_world_options_init(&o);
   o.threads = threads;
@@ -1053,6 +1054,23 @@ static void run_began_only(unsigned threads, size_t n, int frames) {
   free(prev), free(vx), free(vy);
   free(m.h), free(m.s);
   qk_world_free(w);
+}
+
+static void run_began_only(unsigned threads, size_t n, int frames) {
+  run_began_only_(threads, n, frames, 0);
+}
+
+/* The bands' entries scattered on the threads (collide/world_search.c, scatter_run: each
+ * thread writes a range of entries, sharing its first and last bands with its
+ * neighbours): the scene of run_began_only on 5 and 8 threads, and with every cluster on
+ * one horizontal line (a strip a few bands high: several threads' ranges inside one
+ * band). Every frame against brute force. */
+static void test_world_bands_threads(void **s) {
+  (void)s;
+  for (unsigned th = 2; th <= 8; th += 3) {
+    run_began_only_(th, 4200, 8, 1);
+    if (th > 2) run_began_only_(th, 4200, 8, 0);
+  }
 }
 
 static void test_world_began_only(void **s) {
@@ -1948,6 +1966,7 @@ int main(void) {
       cmocka_unit_test(test_world_huge),
       cmocka_unit_test(test_world_clustered_mixed_sizes),
       cmocka_unit_test(test_world_began_only),
+      cmocka_unit_test(test_world_bands_threads),
       cmocka_unit_test(test_world_began_general),
       cmocka_unit_test(test_world_bands_edges),
       cmocka_unit_test(test_world_grid_levels),
