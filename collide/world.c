@@ -157,6 +157,14 @@ static int ceil_log2(double e) {
   return m ? ex + 1 : ex;
 }
 
+/* floor(v) for |v| < 2^30 (the cell indices below: no range check, no rounding mode),
+ * exactly: truncated, then one less when that lies above v. (-0.0 gives +0.0, the same
+ * cell index and square.) */
+static inline double floor30(double v) {
+  double t = (double)(int64_t)v;
+  return t > v ? t - 1 : t;
+}
+
 void qk__world_cell_of(const qk_box_t *f, int *level, int32_t *cx, int32_t *cy, int *forced) {
   double e = qk__max(f->xmax - f->xmin, f->ymax - f->ymin);
   double mag =
@@ -171,7 +179,7 @@ void qk__world_cell_of(const qk_box_t *f, int *level, int32_t *cx, int32_t *cy, 
   if (lm > l) l = lm, *forced = 1;
   for (;; l++) {
     double inv = qk__pow2(-l), s = qk__pow2(l);
-    double x = floor(f->xmin * inv), y = floor(f->ymin * inv);
+    double x = floor30(f->xmin * inv), y = floor30(f->ymin * inv);
     if (f->xmax < (x + 2) * s && f->ymax < (y + 2) * s) {
       *level = l;
       *cx = (int32_t)x;
