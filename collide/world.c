@@ -42,6 +42,7 @@
  * allocate; update allocates the new order and its scratch before anything changes, and
  * builds its new pair lists aside, swapping them in only when all succeeded.
  */
+#include <stddef.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -54,10 +55,8 @@
 
 #if defined(__GNUC__)
 #define QK__NOINLINE __attribute__((noinline))
-#define QK__ALIGN16 __attribute__((aligned(16)))
 #else
 #define QK__NOINLINE
-#define QK__ALIGN16
 #endif
 
 void qk_world_options_init(qk_world_options_t *o) {
@@ -158,6 +157,14 @@ static int ceil_log2(double e) {
   return m ? ex + 1 : ex;
 }
 
+/* floor(v) for |v| < 2^30 (the cell indices below: no range check, no rounding mode),
+ * exactly: truncated, then one less when that lies above v. (-0.0 gives +0.0, the same
+ * cell index and square.) */
+static inline double floor30(double v) {
+  double t = (double)(int64_t)v;
+  return t > v ? t - 1 : t;
+}
+
 void qk__world_cell_of(const qk_box_t *f, int *level, int32_t *cx, int32_t *cy, int *forced) {
   double e = qk__max(f->xmax - f->xmin, f->ymax - f->ymin);
   double mag =
@@ -172,7 +179,7 @@ void qk__world_cell_of(const qk_box_t *f, int *level, int32_t *cx, int32_t *cy, 
   if (lm > l) l = lm, *forced = 1;
   for (;; l++) {
     double inv = qk__pow2(-l), s = qk__pow2(l);
-    double x = floor(f->xmin * inv), y = floor(f->ymin * inv);
+    double x = floor30(f->xmin * inv), y = floor30(f->ymin * inv);
     if (f->xmax < (x + 2) * s && f->ymax < (y + 2) * s) {
       *level = l;
       *cx = (int32_t)x;
@@ -262,25 +269,19 @@ qk_status_t qk_world_add(qk_world_t *w, const qk_shape_t *shape, uint64_t tag, q
   return QK_OK;
 }
 
+#if !defined(__SSE2__)
 /* qk__shape_normalize for a box whose values need no change (the common move): corners
  * in order and every value of magnitude in [2^-100, 2^100] (zeros, NaN and the
- * infinities take the general path). */
+ * infinities take the general path). (With SSE2 move_obj checks this itself.) */
 static inline int box_ok(const qk_shape_t *s) {
   if (s->kind != QK_SHAPE_BOX || !(s->x <= s->a && s->y <= s->b)) return 0;
-#if defined(__SSE2__)
-  /* (constants from memory: building them in registers costs more than the test) */
-  static const double k[6] QK__ALIGN16 = {-0.0, -0.0, 0x1p-100, 0x1p-100, 0x1p100, 0x1p100};
-  const __m128d sign = _mm_load_pd(k), lo = _mm_load_pd(k + 2), hi = _mm_load_pd(k + 4);
-  __m128d p = _mm_andnot_pd(sign, _mm_loadu_pd(&s->x)),
-          q = _mm_andnot_pd(sign, _mm_loadu_pd(&s->a));
-  __m128d ok = _mm_and_pd(_mm_and_pd(_mm_cmpge_pd(p, lo), _mm_cmple_pd(p, hi)),
-                          _mm_and_pd(_mm_cmpge_pd(q, lo), _mm_cmple_pd(q, hi)));
-  return _mm_movemask_pd(ok) == 3;
-#else
   return qk__value_ok(s->x) && qk__value_ok(s->y) && qk__value_ok(s->a) && qk__value_ok(s->b) &&
          s->x && s->y && s->a && s->b;
-#endif
 }
+#endif
+
+/* (move_obj reads the cell as two adjacent int32: cx, then cy) */
+_Static_assert(offsetof(qk__wobj_t, cy) == offsetof(qk__wobj_t, u) + 4, "cx, cy adjacent");
 
 /* The move of a live object o (slot i) to a shape: the common case (a box needing no
  * normalisation, staying in its loose square) is inline and branch-light, as the batch
@@ -310,9 +311,43 @@ static QK__NOINLINE qk_status_t move_general(qk_world_t *w, qk__wobj_t *o, uint3
 
 /* The move of a live object o (slot i) to a shape: the common case (a box needing no
  * normalisation, staying in its loose square) inline and branch-light, as the batch
- * call runs it once per object. */
+ * call runs it once per object. With SSE2 the box's two corners are loaded once as
+ * (x, y) and (a, b) and checked, stored and compared with the loose square two lanes at
+ * a time: corners in order, every magnitude in [2^-100, 2^100] (for each axis the lesser
+ * and the greater magnitude of its two values), then the square from (cx, cy) (adjacent
+ * in the object) times 2^level. The same answers as box_ok and refile_check. */
 static inline qk_status_t move_obj(qk_world_t *w, qk__wobj_t *o, uint32_t i,
                                    const qk_shape_t *shape) {
+#if defined(__SSE2__)
+  if (shape->kind != QK_SHAPE_BOX) return move_general(w, o, i, shape);
+  const __m128d p = _mm_loadu_pd(&shape->x), q = _mm_loadu_pd(&shape->a);
+  {
+    const __m128d sign = _mm_set1_pd(-0.0);
+    const __m128d ap = _mm_andnot_pd(sign, p), aq = _mm_andnot_pd(sign, q);
+    /* (NaN fails p <= q, so min / max never see one that matters) */
+    const __m128d ok = _mm_and_pd(
+        _mm_cmple_pd(p, q), _mm_and_pd(_mm_cmpge_pd(_mm_min_pd(ap, aq), _mm_set1_pd(0x1p-100)),
+                                       _mm_cmple_pd(_mm_max_pd(ap, aq), _mm_set1_pd(0x1p100))));
+    if (_mm_movemask_pd(ok) != 3) return move_general(w, o, i, shape);
+  }
+  /* (stored as given: no copy through a normalised shape) */
+  _mm_storeu_pd(&o->x, p);
+  _mm_storeu_pd(&o->a, q);
+  const unsigned fl = o->flags;
+  o->flags = (uint8_t)((fl & ~QK__WKIND) | QK_SHAPE_BOX);
+  if (fl & QK__WDIRTY) return QK_OK; /* filed at the next update anyway */
+  const double s = qk__pow2(o->level);
+  const __m128d s2 = _mm_set1_pd(s);
+  const __m128d lo = _mm_mul_pd(_mm_cvtepi32_pd(_mm_loadl_epi64((const __m128i *)&o->u.cx)), s2);
+  const __m128d hi = _mm_add_pd(lo, _mm_add_pd(s2, s2));
+  if (_mm_movemask_pd(_mm_and_pd(_mm_cmpge_pd(p, lo), _mm_cmplt_pd(q, hi))) == 3) {
+    if (fl & QK__WFORCED) return QK_OK;
+    const qk_box_t nb = {shape->x, shape->y, shape->a, shape->b};
+    if (!(fat_extent(w, &nb) * 16 <= s)) return QK_OK;
+  }
+  make_dirty(w, i);
+  return QK_OK;
+#else
   if (!box_ok(shape)) return move_general(w, o, i, shape);
   /* (stored as given: no copy through a normalised shape) */
   qk_box_t nb = {shape->x, shape->y, shape->a, shape->b};
@@ -320,6 +355,7 @@ static inline qk_status_t move_obj(qk_world_t *w, qk__wobj_t *o, uint32_t i,
   o->flags = (uint8_t)((o->flags & ~QK__WKIND) | QK_SHAPE_BOX);
   refile_check(w, o, i, &nb);
   return QK_OK;
+#endif
 }
 
 qk_status_t qk_world_move(qk_world_t *w, qk_handle_t h, const qk_shape_t *shape) {

@@ -9,6 +9,10 @@
 
 #include "collide/world_internal.h"
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 /* A dirty object to merge in: its cell as a sortable key (level, then cy, then cx, each
  * biased to unsigned), and its slot (ties: by slot, so the order is deterministic). */
 typedef struct drec {
@@ -165,6 +169,23 @@ static inline void box_join(qk_box_t *h, const qk_box_t *b) {
 
 static const qk_box_t empty_box = {INFINITY, INFINITY, -INFINITY, -INFINITY};
 
+/* Object o at position m of the order: its float box, whether that is exact, and (with
+ * h) its box joined into h. */
+static inline void pack_one(const qk__wobj_t *o, float *fg, uint8_t *fx, uint32_t m, qk_box_t *h) {
+  qk_box_t b =
+      (o->flags & QK__WKIND) == QK_SHAPE_BOX ? (qk_box_t){o->x, o->y, o->a, o->b} : qk__wbox(o);
+  if (h) box_join(h, &b);
+  float *g = fg + (size_t)(m >> 2) * 16 + (m & 3);
+  g[0] = (float)b.xmin, g[4] = (float)b.ymin, g[8] = (float)b.xmax, g[12] = (float)b.ymax;
+  /* A box whose floats are its doubles: the float box test is then the exact one. Its
+   * values are zero or of magnitude in [2^-100, 2^100], inside the floats' normal
+   * range, so they are floats exactly when their last 29 mantissa bits are zero. */
+  uint64_t u[4];
+  memcpy(u, &b, sizeof u);
+  fx[m] = (o->flags & QK__WKIND) == QK_SHAPE_BOX &&
+          !((u[0] | u[1] | u[2] | u[3]) & ((UINT64_C(1) << 29) - 1));
+}
+
 /* The boxes of cells [c0, c1) of a new order: per object its float box and whether that
  * is exact, and (with cell boxes, which only the search on the grid reads) per cell the
  * box around its objects. */
@@ -176,21 +197,45 @@ static inline __attribute__((always_inline)) void pack_cells_(const qk_world_t *
   uint8_t *fx = pk->fexact;
   for (uint32_t c = c0; c < c1; c++) {
     qk_box_t h = empty_box;
-    for (uint32_t m = cells[c].start, me = cells[c + 1].start; m < me; m++) {
+    const uint32_t m0 = cells[c].start, me = cells[c + 1].start;
+#if defined(__SSE2__)
+    /* A box, the common object, two lanes at a time: its corners (x, y) and (a, b)
+     * rounded to floats by two conversions (as the scalar ones round), exact when they
+     * convert back to themselves (the same answer as the mantissa bits: the values are
+     * in the floats' normal range), the cell box joined by one min and one max. Other
+     * kinds are left to a second loop over the cell, so that this one makes no call (and
+     * keeps its registers). The cell box is the same up to the sign of a zero, which no
+     * comparison sees. */
+    __m128d hlo = _mm_set1_pd(INFINITY), hhi = _mm_set1_pd(-INFINITY);
+    int other = 0;
+    for (uint32_t m = m0; m < me; m++) {
       const qk__wobj_t *o = &w->obj[ord[m]];
-      qk_box_t b =
-          (o->flags & QK__WKIND) == QK_SHAPE_BOX ? (qk_box_t){o->x, o->y, o->a, o->b} : qk__wbox(o);
-      if (cell_boxes) box_join(&h, &b);
+      if ((o->flags & QK__WKIND) != QK_SHAPE_BOX) {
+        other = 1;
+        continue;
+      }
+      const __m128d p = _mm_loadu_pd(&o->x), q = _mm_loadu_pd(&o->a);
+      if (cell_boxes) hlo = _mm_min_pd(hlo, p), hhi = _mm_max_pd(hhi, q);
+      const __m128 fp = _mm_cvtpd_ps(p), fq = _mm_cvtpd_ps(q);
       float *g = fg + (size_t)(m >> 2) * 16 + (m & 3);
-      g[0] = (float)b.xmin, g[4] = (float)b.ymin, g[8] = (float)b.xmax, g[12] = (float)b.ymax;
-      /* A box whose floats are its doubles: the float box test is then the exact one. Its
-       * values are zero or of magnitude in [2^-100, 2^100], inside the floats' normal
-       * range, so they are floats exactly when their last 29 mantissa bits are zero. */
-      uint64_t u[4];
-      memcpy(u, &b, sizeof u);
-      fx[m] = (o->flags & QK__WKIND) == QK_SHAPE_BOX &&
-              !((u[0] | u[1] | u[2] | u[3]) & ((UINT64_C(1) << 29) - 1));
+      _mm_store_ss(g, fp);
+      _mm_store_ss(g + 4, _mm_shuffle_ps(fp, fp, 1));
+      _mm_store_ss(g + 8, fq);
+      _mm_store_ss(g + 12, _mm_shuffle_ps(fq, fq, 1));
+      fx[m] = !_mm_movemask_pd(
+          _mm_or_pd(_mm_cmpneq_pd(_mm_cvtps_pd(fp), p), _mm_cmpneq_pd(_mm_cvtps_pd(fq), q)));
     }
+    for (uint32_t m = m0; other && m < me; m++) {
+      const qk__wobj_t *o = &w->obj[ord[m]];
+      if ((o->flags & QK__WKIND) != QK_SHAPE_BOX) pack_one(o, fg, fx, m, cell_boxes ? &h : NULL);
+    }
+    if (cell_boxes) {
+      _mm_storeu_pd(&h.xmin, _mm_min_pd(_mm_loadu_pd(&h.xmin), hlo));
+      _mm_storeu_pd(&h.xmax, _mm_max_pd(_mm_loadu_pd(&h.xmax), hhi));
+    }
+#else
+    for (uint32_t m = m0; m < me; m++) pack_one(&w->obj[ord[m]], fg, fx, m, cell_boxes ? &h : NULL);
+#endif
     if (cell_boxes) pk->hb[c] = h;
   }
 }

@@ -782,6 +782,82 @@ static void test_world_thread_min_sides(void **s) {
 
 /* qk_world_move_batch: the moves before a failing one are done, it and the later ones
  * are not; err names the failing move. */
+/* A box moved with each edge value in each coordinate (the common move's checks, two
+ * lanes at a time: corners in order, magnitudes in [2^-100, 2^100]), by qk_world_move
+ * and by qk_world_move_batch: the status and the stored shape are those the definitions
+ * give (nonfinite, out of range, corners sorted), a failed move leaves the object as it
+ * was, and after each move the pair with a fixed box and a query agree with comparisons. */
+static int edge_ok(double v) {
+  double a = fabs(v);
+  return v == 0 || (a >= 0x1p-100 && a <= 0x1p100);
+}
+static void test_world_move_box_edges(void **s) {
+  (void)s;
+  const double V[] = {1.5,
+                      -2,
+                      0,
+                      -0.0,
+                      0x1p100,
+                      -0x1p100,
+                      nextafter(0x1p100, INFINITY),
+                      -nextafter(0x1p100, INFINITY),
+                      0x1p-100,
+                      -0x1p-100,
+                      nextafter(0x1p-100, 0),
+                      0x1p-101,
+                      4e-320,
+                      1e31,
+                      -1e31,
+                      7,
+                      INFINITY,
+                      -INFINITY,
+                      NAN};
+  const size_t nv = sizeof V / sizeof V[0];
+  for (int batch = 0; batch < 2; batch++) {
+    qk_world_t *w;
+    assert_int_equal(qk_world_new(NULL, &w), QK_OK);
+    qk_handle_t h, f;
+    qk_shape_t cur = {QK_SHAPE_BOX, 1, 2, 3, 4}, fixed = {QK_SHAPE_BOX, 0.5, 0.5, 2.5, 2.5};
+    assert_int_equal(qk_world_add(w, &cur, 1, &h), QK_OK);
+    assert_int_equal(qk_world_add(w, &fixed, 2, &f), QK_OK);
+    assert_int_equal(qk_world_update(w), QK_OK);
+    for (size_t k = 0; k < 4 * nv; k++) {
+      double c[4] = {1, 2, 3, 4};
+      c[k % 4] = V[k / 4];
+      qk_shape_t sh = {QK_SHAPE_BOX, c[0], c[1], c[2], c[3]};
+      qk_status_t want = QK_OK;
+      for (int i = 0; i < 4; i++)
+        if (!isfinite(c[i])) want = QK_ERR_NONFINITE;
+      for (int i = 0; i < 4 && want == QK_OK; i++)
+        if (!edge_ok(c[i])) want = QK_ERR_LIMIT;
+      qk_status_t got;
+      if (batch) {
+        qk_error_t err;
+        got = qk_world_move_batch(w, &h, &sh, 1, &err);
+      } else {
+        got = qk_world_move(w, h, &sh);
+      }
+      assert_int_equal(got, want);
+      if (want == QK_OK)
+        cur = (qk_shape_t){QK_SHAPE_BOX, fmin(c[0], c[2]), fmin(c[1], c[3]), fmax(c[0], c[2]),
+                           fmax(c[1], c[3])};
+      qk_shape_t st;
+      assert_int_equal(qk_world_get(w, h, &st, NULL), QK_OK);
+      assert_true(st.kind == QK_SHAPE_BOX);
+      assert_true(memcmp(&st.x, &cur.x, 4 * sizeof(double)) == 0); /* -0.0 kept as given */
+      assert_int_equal(qk_world_update(w), QK_OK);
+      size_t np;
+      assert_int_equal(qk_world_pairs_list(w, QK_PAIRS_ALL, NULL, 0, &np), QK_OK);
+      int meet = cur.x <= fixed.a && fixed.x <= cur.a && cur.y <= fixed.b && fixed.y <= cur.b;
+      assert_int_equal(np, (size_t)meet);
+      qk_handle_t out[2];
+      assert_int_equal(qk_world_query(w, &cur, out, 2, &np), QK_OK);
+      assert_int_equal(np, (size_t)(1 + meet));
+    }
+    qk_world_free(w);
+  }
+}
+
 static void test_world_move_batch_errors(void **s) {
   (void)s;
   qk_world_t *w;
@@ -1978,6 +2054,7 @@ int main(void) {
       cmocka_unit_test(test_world_threads_frames),
       cmocka_unit_test(test_world_thread_min_sides),
       cmocka_unit_test(test_world_move_batch_errors),
+      cmocka_unit_test(test_world_move_box_edges),
       cmocka_unit_test(test_world_pair_bytes),
       cmocka_unit_test(test_world_churn_memory),
       cmocka_unit_test(test_world_nomem),
