@@ -435,15 +435,21 @@ static void check_queries(qkt_rng_t *r, qk_world_t *w, const mirror_t *m, int sc
   free(got);
 }
 
-static void run_scene(int scene, int kinds, size_t n, int frames, unsigned threads) {
-  qkt_rng_t r;
-  qkt_rng_seed(&r, g_seed + (uint64_t)scene * 7 + (uint64_t)kinds);
+/* A new world on that many threads, its threaded paths taken at any size (thread_min 0). */
+static qk_world_t *threaded_world(unsigned threads) {
   qk_world_options_t o;
   qk_world_options_init(&o);
   o.threads = threads;
-  o.thread_min = 0; /* the threaded paths from the smallest scenes on */
+  o.thread_min = 0;
   qk_world_t *w;
   assert_int_equal(qk_world_new(&o, &w), QK_OK);
+  return w;
+}
+
+static void run_scene(int scene, int kinds, size_t n, int frames, unsigned threads) {
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + (uint64_t)scene * 7 + (uint64_t)kinds);
+  qk_world_t *w = threaded_world(threads);
   mirror_t m = {0};
   for (size_t i = 0; i < n; i++) m_add(w, &m, rnd_shape(&r, scene, kinds));
   qk_world_pair_t *prev = NULL;
@@ -584,12 +590,7 @@ static void test_world_dense_kept_scratch(void **s) {
   for (unsigned th = 1; th <= 2; th++) {
     qkt_rng_t r;
     qkt_rng_seed(&r, g_seed + 31 + th);
-    qk_world_options_t o;
-    qk_world_options_init(&o);
-    o.threads = th;
-    o.thread_min = 0;
-    qk_world_t *w;
-    assert_int_equal(qk_world_new(&o, &w), QK_OK);
+    qk_world_t *w = threaded_world(th);
     dense_scene(w, &r, 2200, 11, 4, (qk_shape_t){QK_SHAPE_BOX, 3, 3, 13, 13}, 2000000);
     qk_world_free(w);
   }
@@ -626,12 +627,7 @@ static void test_world_threads_ranges(void **s) {
     for (size_t k = 0; k < sizeof sc / sizeof *sc; k++) {
       qkt_rng_t r;
       qkt_rng_seed(&r, g_seed + 61 + th * 8 + k);
-      qk_world_options_t o;
-      qk_world_options_init(&o);
-      o.threads = th;
-      o.thread_min = 0;
-      qk_world_t *w;
-      assert_int_equal(qk_world_new(&o, &w), QK_OK);
+      qk_world_t *w = threaded_world(th);
       double c = sc[k].span / 2;
       dense_scene(w, &r, sc[k].n, sc[k].span, 3, (qk_shape_t){QK_SHAPE_BOX, c, c, c + 10, c + 10},
                   sc[k].min_pairs);
@@ -1089,12 +1085,7 @@ static void run_began_only_(unsigned threads, size_t n, int frames, int strip) {
   double cx[8], cy[8];
   cluster_centres(&r, cx, cy);
   for (int c = 0; strip && c < 8; c++) cy[c] = 25;
-  qk_world_options_t o;
-  qk_world_options_init(&o);
-  o.threads = threads;
-  o.thread_min = 0;
-  qk_world_t *w;
-  assert_int_equal(qk_world_new(&o, &w), QK_OK);
+  qk_world_t *w = threaded_world(threads);
   mirror_t m = {0};
   double *vx = malloc((n + 1) * sizeof *vx), *vy = malloc((n + 1) * sizeof *vy);
   for (size_t k = 0; k < n; k++) {
@@ -1176,12 +1167,7 @@ static void run_began_general(unsigned threads, size_t n, int frames, int kinds,
   qkt_rng_seed(&r, g_seed + 151 + threads + 2 * (uint64_t)kinds + 4 * (uint64_t)off);
   double cx[8], cy[8];
   cluster_centres(&r, cx, cy);
-  qk_world_options_t o;
-  qk_world_options_init(&o);
-  o.threads = threads;
-  o.thread_min = 0;
-  qk_world_t *w;
-  assert_int_equal(qk_world_new(&o, &w), QK_OK);
+  qk_world_t *w = threaded_world(threads);
   mirror_t m = {0};
   size_t vcap = n + 2 * (size_t)frames + 2;
   double *vx = malloc(vcap * sizeof *vx), *vy = malloc(vcap * sizeof *vy);
@@ -1274,12 +1260,7 @@ static void test_world_bands_edges(void **s) {
   for (unsigned th = 1; th <= 2; th++) {
     qkt_rng_t r;
     qkt_rng_seed(&r, g_seed + 71);
-    qk_world_options_t o;
-    qk_world_options_init(&o);
-    o.threads = th;
-    o.thread_min = 0;
-    qk_world_t *w;
-    assert_int_equal(qk_world_new(&o, &w), QK_OK);
+    qk_world_t *w = threaded_world(th);
     mirror_t m = {0};
     enum { N = 700 };
     for (int i = 0; i < N; i++) m_add(w, &m, bands_shape(&r, i >= N / 2));
@@ -1341,12 +1322,7 @@ static void test_world_grid_levels(void **s) {
     for (unsigned th = 1; th <= 2; th++) {
       qkt_rng_t r;
       qkt_rng_seed(&r, g_seed + 83 + (uint64_t)scene);
-      qk_world_options_t o;
-      qk_world_options_init(&o);
-      o.threads = th;
-      o.thread_min = 0;
-      qk_world_t *w;
-      assert_int_equal(qk_world_new(&o, &w), QK_OK);
+      qk_world_t *w = threaded_world(th);
       mirror_t m = {0};
       for (int i = 0; i < 1500; i++) m_add(w, &m, levels_shape(&r, scene));
       qk_world_pair_t *prev = NULL;
@@ -1392,12 +1368,7 @@ static void test_world_refile_sort(void **s) {
       qkt_rng_t r;
       qkt_rng_seed(&r, g_seed + 97 + (uint64_t)far);
       const double span = far ? 1e8 : 3000;
-      qk_world_options_t o;
-      qk_world_options_init(&o);
-      o.threads = th;
-      o.thread_min = 0;
-      qk_world_t *w;
-      assert_int_equal(qk_world_new(&o, &w), QK_OK);
+      qk_world_t *w = threaded_world(th);
       mirror_t m = {0};
       enum { GROUPS = 24, PER = 25 };
       for (int g = 0; g < GROUPS; g++) {
