@@ -202,6 +202,12 @@ static void m_add(qk_world_t *w, mirror_t *m, qk_shape_t s) {
   m->s[m->n++] = o_norm(s);
 }
 
+/* Move object i of the mirror to s, in the world and the mirror. */
+static void m_move(qk_world_t *w, mirror_t *m, size_t i, qk_shape_t s) {
+  assert_int_equal(qk_world_move(w, m->h[i], &s), QK_OK);
+  m->s[i] = o_norm(s);
+}
+
 /* Remove a random object from the world and the mirror (the last one takes its place);
  * returns its index. */
 static size_t m_remove_random(qk_world_t *w, mirror_t *m, qkt_rng_t *r) {
@@ -568,8 +574,7 @@ static void dense_scene(qk_world_t *w, qkt_rng_t *r, int n, double span, int fra
   for (int f = 0; f < frames; f++) {
     for (size_t i = 0; i < m.n; i++) {
       qk_shape_t sh = moved(r, m.s[i]);
-      assert_int_equal(qk_world_move(w, m.h[i], &sh), QK_OK);
-      m.s[i] = o_norm(sh);
+      m_move(w, &m, i, sh);
     }
     if (f == 2) {
       (void)m_remove_random(w, &m, r);
@@ -955,8 +960,7 @@ static void test_world_prefilter_and_sort(void **s) {
         double d = (qkt_rng_below(&r, 2) ? 1 : -1) * eps * (double)qkt_rng_below(&r, 3);
         sh.x += d;
         if (sh.kind == QK_SHAPE_BOX) sh.a += d;
-        assert_int_equal(qk_world_move(w, m.h[i], &sh), QK_OK);
-        m.s[i] = o_norm(sh);
+        m_move(w, &m, i, sh);
       }
     }
     update_and_check(w, &m, &prev, &np, "prefilter", f);
@@ -1051,8 +1055,7 @@ static void run_clustered_mixed(int kinds, size_t n, int frames) {
     }
     for (size_t i = 0; f && i < m.n; i++) {
       qk_shape_t sh = bounced(m.s[i], &vx[i], &vy[i]);
-      assert_int_equal(qk_world_move(w, m.h[i], &sh), QK_OK);
-      m.s[i] = o_norm(sh);
+      m_move(w, &m, i, sh);
     }
     update_and_check(w, &m, &prev, &np, "clustered mixed", f);
   }
@@ -1112,8 +1115,7 @@ static void run_began_only_(unsigned threads, size_t n, int frames, int strip) {
       }
       if (i == 0 && mode == 4) sh.x -= 0x1p-30; /* (still below sh.a) */
       if (i == 0 && mode == 5) sh.x = q64(sh.x);
-      assert_int_equal(qk_world_move(w, m.h[i], &sh), QK_OK);
-      m.s[i] = o_norm(sh);
+      m_move(w, &m, i, sh);
     }
     dense_check(w, &m, &prev, &np, f);
   }
@@ -1200,8 +1202,7 @@ static void run_began_general(unsigned threads, size_t n, int frames, int kinds,
       } else {
         sh = bounced(sh, &vx[i], &vy[i]);
       }
-      assert_int_equal(qk_world_move(w, m.h[i], &sh), QK_OK);
-      m.s[i] = o_norm(sh);
+      m_move(w, &m, i, sh);
     }
     dense_check(w, &m, &prev, &np, f);
   }
@@ -1273,8 +1274,7 @@ static void test_world_bands_edges(void **s) {
                dy = ((int)qkt_rng_below(&r, 5) - 2) / 8.0;
         qk_shape_t sh = m.s[i];
         sh.x += dx, sh.a += dx, sh.y += dy, sh.b += dy;
-        assert_int_equal(qk_world_move(w, m.h[i], &sh), QK_OK);
-        m.s[i] = o_norm(sh);
+        m_move(w, &m, i, sh);
       }
       if (f % 3 == 2) {
         for (int k = 0; k < 8; k++) {
@@ -1330,8 +1330,7 @@ static void test_world_grid_levels(void **s) {
       for (int f = 0; f < 10; f++) {
         for (size_t i = 0; f && i < m.n; i++) {
           qk_shape_t sh = moved(&r, m.s[i]);
-          assert_int_equal(qk_world_move(w, m.h[i], &sh), QK_OK);
-          m.s[i] = o_norm(sh);
+          m_move(w, &m, i, sh);
         }
         if (f % 3 == 2) {
           for (int k = 0; k < 6; k++) {
@@ -1383,8 +1382,7 @@ static void test_world_refile_sort(void **s) {
           double gx = qkt_rng_range(&r, -span, span), gy = qkt_rng_range(&r, -span, span);
           for (size_t i = g * PER; i < (g + 1) * PER; i++) {
             qk_shape_t sh = refile_shape(&r, gx, gy);
-            assert_int_equal(qk_world_move(w, m.h[i], &sh), QK_OK);
-            m.s[i] = o_norm(sh);
+            m_move(w, &m, i, sh);
           }
         }
         update_and_check(w, &m, &prev, &np, far ? "refile sort (far)" : "refile sort (near)", f);
@@ -1444,8 +1442,7 @@ static void test_world_fbox_only_bands(void **s) {
     for (int f = 1; f < 5; f++) {
       for (size_t i = 0; i < m.n; i++) {
         qk_shape_t sh = shifted(m.s[i], 1.0 / 64, -1.0 / 64);
-        assert_int_equal(qk_world_move(w, m.h[i], &sh), QK_OK);
-        m.s[i] = o_norm(sh);
+        m_move(w, &m, i, sh);
       }
       update_and_check(w, &m, &prev, &np, bands ? "fbox (bands)" : "fbox (grid)", f);
     }
@@ -1612,8 +1609,7 @@ static void test_world_churn_memory(void **s) {
     } else {
       qk_shape_t sh = moved(&r, m.s[i]);
       if (sh.x < 0 || sh.x > 100 || sh.y < 0 || sh.y > 100) sh = rnd_shape(&r, SC_UNIFORM, 1);
-      assert_int_equal(qk_world_move(w, m.h[i], &sh), QK_OK);
-      m.s[i] = o_norm(sh);
+      m_move(w, &m, i, sh);
     }
     if (f % 20 == 0) assert_int_equal(qk_world_update(w), QK_OK);
     if (qk_world_bytes(w) > peak) peak = qk_world_bytes(w);
@@ -1704,8 +1700,7 @@ static void test_world_nomem_began(void **s) {
   for (size_t fail = 1; fail < (QKT_TSAN ? 10u : 60u); fail++) {
     for (size_t i = 0; i < m.n; i++) {
       qk_shape_t sh = shifted(m.s[i], 0.1 * ((int)qkt_rng_below(&r, 3) - 1), 0.1);
-      assert_int_equal(qk_world_move(w, m.h[i], &sh), QK_OK);
-      m.s[i] = o_norm(sh);
+      m_move(w, &m, i, sh);
     }
     size_t before, after;
     qk_world_pairs_list(w, QK_PAIRS_ALL, NULL, 0, &before);
