@@ -167,6 +167,22 @@ void qk__cdt_free(qk__cdt_t *c) {
 
 /* ---- point location ----------------------------------------------------------------- */
 
+/* Where p lies in the closed triangle t, from the signs o[] of its edges (edge e's the
+ * orientation of v[e + 1], v[e + 2], p): inside, on edge *k, or at the vertex *k between
+ * the two zero edges. */
+static qk__cdt_where_t where_in(const int o[3], uint32_t t, uint32_t *tri, int *k) {
+  *tri = t;
+  *k = 0;
+  int nz = (o[0] == 0) + (o[1] == 0) + (o[2] == 0);
+  if (nz == 0) return QK__CDT_IN;
+  if (nz == 1) {
+    *k = o[0] == 0 ? 0 : o[1] == 0 ? 1 : 2;
+    return QK__CDT_EDGE;
+  }
+  *k = o[0] != 0 ? 0 : o[1] != 0 ? 1 : 2; /* the vertex between the two zero edges */
+  return QK__CDT_VERT;
+}
+
 /*
  * The remembering stochastic walk (Devillers, Pion and Teillaud, "Walking in a
  * triangulation", 2002): from the current triangle, cross an edge that has p strictly on
@@ -174,10 +190,12 @@ void qk__cdt_free(qk__cdt_t *c) {
  * It ends with probability 1 on any triangulation (a deterministic visibility walk may
  * cycle on a non-Delaunay one, and a constrained one is not Delaunay).
  */
-/* The walk from triangle t (entered from `from`, NONE at the start), o[] the edges' signs;
- * rnd seeded from the start triangle as qk__cdt_locate does. */
-static qk__cdt_where_t walk(const qk__cdt_t *c, const double p[2], uint32_t t, uint32_t from,
-                            uint32_t rnd, uint32_t *tri, int *k) {
+qk__cdt_where_t qk__cdt_locate(const qk__cdt_t *c, double x, double y, uint32_t start,
+                               uint32_t *tri, int *k) {
+  const double p[2] = {x, y};
+  uint32_t t = start != NONE ? start : c->hint;
+  if (t >= c->nt) t = 0;
+  uint32_t from = NONE, rnd = 0x9E3779B9u ^ t;
   int o[3];
   for (;;) {
     const uint32_t *tv = c->v + 3 * (size_t)t, *tn = c->nbr + 3 * (size_t)t;
@@ -202,24 +220,7 @@ static qk__cdt_where_t walk(const qk__cdt_t *c, const double p[2], uint32_t t, u
     from = t, t = next;
   }
   /* p is in the closed triangle t (outside the square only if it was asked for there) */
-  *tri = t;
-  *k = 0;
-  int nz = (o[0] == 0) + (o[1] == 0) + (o[2] == 0);
-  if (nz == 0) return QK__CDT_IN;
-  if (nz == 1) {
-    *k = o[0] == 0 ? 0 : o[1] == 0 ? 1 : 2;
-    return QK__CDT_EDGE;
-  }
-  *k = o[0] != 0 ? 0 : o[1] != 0 ? 1 : 2; /* the vertex between the two zero edges */
-  return QK__CDT_VERT;
-}
-
-qk__cdt_where_t qk__cdt_locate(const qk__cdt_t *c, double x, double y, uint32_t start,
-                               uint32_t *tri, int *k) {
-  const double p[2] = {x, y};
-  uint32_t t = start != NONE ? start : c->hint;
-  if (t >= c->nt) t = 0;
-  return walk(c, p, t, NONE, 0x9E3779B9u ^ t, tri, k);
+  return where_in(o, t, tri, k);
 }
 
 qk__cdt_where_t qk__cdt_locate_delaunay(const qk__cdt_t *c, double x, double y, uint32_t u,
@@ -307,24 +308,9 @@ qk__cdt_where_t qk__cdt_locate_delaunay(const qk__cdt_t *c, double x, double y, 
       break;
     }
     /* In the closed triangle t, strictly inside edge j's half-plane. */
-    *tri = t, *k = 0;
-    if (o1 != 0 && o2 != 0) return QK__CDT_IN;
-    if (o1 != 0 || o2 != 0) {
-      *k = o1 == 0 ? e1 : e2;
-      return QK__CDT_EDGE;
-    }
-    *k = j; /* the vertex the two edges share */
-    return QK__CDT_VERT;
+    o[j] = 1, o[e1] = o1, o[e2] = o2;
   }
-  *tri = t, *k = 0;
-  int nz = (o[0] == 0) + (o[1] == 0) + (o[2] == 0);
-  if (nz == 0) return QK__CDT_IN;
-  if (nz == 1) {
-    *k = o[0] == 0 ? 0 : o[1] == 0 ? 1 : 2;
-    return QK__CDT_EDGE;
-  }
-  *k = o[0] != 0 ? 0 : o[1] != 0 ? 1 : 2;
-  return QK__CDT_VERT;
+  return where_in(o, t, tri, k);
 }
 
 /* ---- the changes: split, flip -------------------------------------------------------- */
