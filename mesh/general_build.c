@@ -89,7 +89,6 @@ qk_status_t qk__gm_insert(qk__gm_t *g, double x, double y, uint32_t t0, int k0, 
    * makes has the new vertex as a corner, so its other corners are on one side). */
   uint32_t f0 = g->face[t0], f1 = f0, ea = 0, eb = 0;
   g->ndirty = 0;
-  qk_status_t st;
   if (w == QK__CDT_EDGE && c->seg[3 * t0 + k0] != QK__CDT_NONE) {
     uint32_t n = c->nbr[3 * t0 + k0];
     if (n != QK__CDT_NONE) f1 = g->face[n];
@@ -100,11 +99,9 @@ qk_status_t qk__gm_insert(qk__gm_t *g, double x, double y, uint32_t t0, int k0, 
      * the kept side comes out the same; about half of such a split's in-circle tests. */
     int sides = (g->faces[f0].drop ? 0 : 1) | (g->faces[f1].drop ? 0 : 2);
     c->legal_sides = sides == 3 ? 0 : sides ? sides : 4; /* 4: neither side */
-    st = qk__cdt_insert_at(c, x, y, t0, k0, w, v_out, existed);
-    c->legal_sides = 0;
-  } else {
-    st = qk__cdt_insert_at(c, x, y, t0, k0, w, v_out, existed);
   }
+  qk_status_t st = qk__cdt_insert_at(c, x, y, t0, k0, w, v_out, existed);
+  c->legal_sides = 0; /* (both sides for every other insertion) */
   if (st) return st;
   if (qk__gm_fit(g)) return QK_ERR_NOMEM;
   if (*existed) return QK_OK;
