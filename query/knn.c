@@ -646,13 +646,14 @@ static QK__ALWAYS_INLINE void prefetch_uncles(const qk_tree_t *t, const qk__path
 /*
  * Before a 1-NN search scans the leaf at the end of path p, ask for the lines of the
  * leaf's nearest sibling, the one across the parent's midline nearer the query: its points
- * (the first, middle and last of up to 32, all of their lines for the usual 16), or its
- * children's block when it is internal. Half the searches scan a second leaf after the
- * query leaf (1.50 leaves a query at 1M uniform points), most often that sibling, and
- * without this its points would be a miss after the scan that admitted them. Its node
- * shares the leaf's block, whose two lines the descent asked for. The other two siblings
- * are not asked for: they are reached less often, and asking for all three cost more
- * than it saved in an earlier round. Only hints: the search is the same.
+ * (the first, middle and last of up to 32, every line of up to 16), or its children's
+ * block when it is internal. At 1M uniform points 38% of the searches go on after the
+ * query leaf (0.5 more leaves a query), most often into that sibling, whose points were
+ * then a miss after the scan that admitted it. Its node shares the leaf's block, whose two
+ * lines the descent asked for. The other two siblings are not asked for: they are reached
+ * less often; asking for all three gave nothing measurable in an earlier round, and for
+ * both edge siblings was no steadier than for the nearest alone (docs/query.md). Only
+ * hints: the search is the same.
  */
 static QK__ALWAYS_INLINE void prefetch_sibling(const qk_tree_t *t, const qk__path_t *p, double qx,
                                                double qy) {
