@@ -201,7 +201,12 @@ static inline int qk__path_step(const qk_tree_t *t, qk__path_t *p, double qx, do
 /*
  * The rest of a descent towards (qx, qy) from p->leaf down to the leaf, in one loop that
  * keeps the cell in registers: the same decisions and squares as qk__path_step() (east
- * when qx > x + h, the child's corner moved by h), so the same path.
+ * when qx > x + h, the child's corner moved by h), so the same path. A single query's descent
+ * (keep_mids 0) asks at each level for both lines of the children's block (four 16-byte
+ * nodes over two lines), not only the one holding the child it reads next: the kNN search
+ * then reads the path's other children (the climb's siblings and uncles) without a miss of
+ * their own, the other line having come in while the descent waited for its child. A
+ * batch's queries, in Z-order, share their paths' blocks, which are in cache. Only hints.
  */
 static inline void qk__path_descend(const qk_tree_t *t, qk__path_t *p, double qx, double qy,
                                     int keep_mids) {
@@ -223,6 +228,10 @@ static inline void qk__path_descend(const qk_tree_t *t, qk__path_t *p, double qx
       p->go[len] = (unsigned char)bits;
     }
     const unsigned q = quad[bits];
+    if (!keep_mids) {
+      qk__node_prefetch(t, child);
+      qk__node_prefetch(t, child + 3);
+    }
     qk__cell_t *c = &p->cell[len];
     c->node = node;
     c->depth = depth;
@@ -246,6 +255,10 @@ static inline void qk__path_descend(const qk_tree_t *t, qk__path_t *p, double qx
     const double xm = x + h, ym = y + h;
     const unsigned east = qx > xm, north = qy > ym;
     const unsigned q = quad[east][north];
+    if (!keep_mids) {
+      qk__node_prefetch(t, child);
+      qk__node_prefetch(t, child + 3);
+    }
     p->cell[len] = (qk__cell_t){node, depth, x, y};
     p->q[len++] = (unsigned char)q;
     node = child + q;
