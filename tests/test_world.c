@@ -1215,6 +1215,50 @@ static void test_world_began_ranges(void **s) {
     for (size_t k = 0; k < sizeof th / sizeof *th; k++) run_began_ranges(th[k], g);
 }
 
+/*
+ * The re-filing's merge on the threads, its ranges cut by work (collide/world_grid.c,
+ * merge_cuts: the dirty objects counted by level on the threads, each weighing eight old
+ * ones, spread over its level's run of the old order): small boxes over large ones, where
+ * only the small ones jump (every dirty object in the finest level, the first of the
+ * order: the cuts fall inside it), only the large ones (the last level: ranges without a
+ * dirty object, one with them all), or all of them. Any cuts give the same order, so this
+ * checks the counting pass and the merge on the ranges it gives, on 2, 3 and 8 threads,
+ * every frame against brute force (dense_check).
+ */
+static void run_refile_split(unsigned threads, int which) {
+  enum { N = 5800, BIG = 1600 }; /* (from 1024 dirty objects they are filed on the threads) */
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 211 + threads + 16 * (uint64_t)which);
+  qk_world_t *w = threaded_world(threads);
+  mirror_t m = {0};
+  qk_world_pair_t *prev = NULL;
+  size_t np = 0;
+  for (int f = 0; f < 7; f++) {
+    for (size_t i = 0; i < N; i++) {
+      int big = i >= N - BIG;
+      if (f && !(which == 2 || (which == 1) == big)) continue;
+      double e = big ? 4 : 0.25, x = q64(qkt_rng_range(&r, 0, 60)),
+             y = q64(qkt_rng_range(&r, 0, 60));
+      qk_shape_t sh = {QK_SHAPE_BOX, x, y, x + e, y + e};
+      if (f)
+        m_move(w, &m, i, sh);
+      else
+        m_add(w, &m, sh);
+    }
+    dense_check(w, &m, &prev, &np, f);
+  }
+  assert_true(np > N);
+  free(prev), free(m.h), free(m.s);
+  qk_world_free(w);
+}
+
+static void test_world_refile_split(void **s) {
+  (void)s;
+  static const unsigned th[] = {2, 3, 8};
+  for (int which = 0; which < 3; which++)
+    for (size_t k = 0; k < sizeof th / sizeof *th; k++) run_refile_split(th[k], which);
+}
+
 static void test_world_began_only(void **s) {
   (void)s;
   run_began_only(1, 1200, 13);
@@ -2153,6 +2197,7 @@ int main(void) {
       cmocka_unit_test(test_world_began_only),
       cmocka_unit_test(test_world_bands_threads),
       cmocka_unit_test(test_world_began_ranges),
+      cmocka_unit_test(test_world_refile_split),
       cmocka_unit_test(test_world_began_general),
       cmocka_unit_test(test_world_bands_edges),
       cmocka_unit_test(test_world_grid_levels),
