@@ -12,13 +12,19 @@
  *    many finer levels' cells, inside them and on their borders; and its frames in which
  *    only the pairs that began are searched for (boxes on the float grid, none added or
  *    removed; also frames without moves, with jumps, a box off the grid), on 1-3 threads;
+ *    the began pairs' sort and the rows' join by ranges of slots on 1, 2, 3 and 8 threads
+ *    where the began pairs fall unevenly (a box over every cluster: empty ranges; only
+ *    the lowest or highest slots jumping; pairs past the last old row alone; none), and
+ *    the re-filing's merge on ranges cut by work (only small, only large, all objects
+ *    re-filed), every frame against brute force;
  *  - a dense world (about 2.4 M pairs) whose update keeps its large buffers for the next
  *    one: pairs, began and ended every frame, on one thread and two;
  *  - hand-made touching cases of every pair of kinds (integers: the oracle is exact);
  *  - stale handles are rejected after removal and slot reuse;
  *  - churn: 10^5 frames of moves, adds and removes on a small world stay within 1.2x the
  *    memory of a fresh world holding the same objects;
- *  - allocation failure at every N in add and update leaves the world unchanged, no leak;
+ *  - allocation failure at every N in add and update leaves the world unchanged, no leak
+ *    (also in a began-only update on two and three threads);
  *  - two threads give the same pairs and batch ray hits as one (also on both sides of
  *    thread_min, live objects crossing it), and three reader threads
  *    querying one world at once get the single-threaded answers (run under TSan by
