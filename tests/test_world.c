@@ -12,13 +12,19 @@
  *    many finer levels' cells, inside them and on their borders; and its frames in which
  *    only the pairs that began are searched for (boxes on the float grid, none added or
  *    removed; also frames without moves, with jumps, a box off the grid), on 1-3 threads;
+ *    the began pairs' sort and the rows' join by ranges of slots on 1, 2, 3 and 8 threads
+ *    where the began pairs fall unevenly (a box over every cluster: empty ranges; only
+ *    the lowest or highest slots jumping; pairs past the last old row alone; none), and
+ *    the re-filing's merge on ranges cut by work (only small, only large, all objects
+ *    re-filed), every frame against brute force;
  *  - a dense world (about 2.4 M pairs) whose update keeps its large buffers for the next
  *    one: pairs, began and ended every frame, on one thread and two;
  *  - hand-made touching cases of every pair of kinds (integers: the oracle is exact);
  *  - stale handles are rejected after removal and slot reuse;
  *  - churn: 10^5 frames of moves, adds and removes on a small world stay within 1.2x the
  *    memory of a fresh world holding the same objects;
- *  - allocation failure at every N in add and update leaves the world unchanged, no leak;
+ *  - allocation failure at every N in add and update leaves the world unchanged, no leak
+ *    (also in a began-only update on two and three threads);
  *  - two threads give the same pairs and batch ray hits as one (also on both sides of
  *    thread_min, live objects crossing it), and three reader threads
  *    querying one world at once get the single-threaded answers (run under TSan by
@@ -1142,6 +1148,123 @@ static void test_world_bands_threads(void **s) {
   }
 }
 
+/*
+ * The began pairs' rows sorted on the threads (collide/world_pairs.c, began_rows_threads:
+ * the began keys cut by the ranges of slots that then merge them with the last frame's
+ * rows, each range's keys sorted on its thread). Began-only frames (boxes on the float
+ * grid, none added or removed) whose began pairs fall unevenly over the slots: with a
+ * box over every cluster in slot 0 (its row holds a quarter of the old pairs, so on 8
+ * threads ranges are empty); frames where only the lowest slots jump (the began pairs in
+ * the first ranges), where only the highest of the clusters' slots jump, where nothing
+ * moves but pairs of boxes in the last slots, far from the clusters, meet or part (began
+ * rows past the last old row, and no other), and where nothing moves at all (no began
+ * pair). On 1, 2, 3 and 8 threads, every frame against brute force (dense_check).
+ */
+/* A box of the clusters (cm_shape); with the giant, a sixteenth of its size (few pairs
+ * among the clusters' boxes, so that the giant's row holds most). */
+static qk_shape_t ranges_shape(qkt_rng_t *r, const double *cx, const double *cy, int giant) {
+  qk_shape_t sh = cm_shape(r, cx, cy, 0);
+  if (giant)
+    sh.a = sh.x + fmax(1.0 / 64, q64((sh.a - sh.x) / 16)),
+    sh.b = sh.y + fmax(1.0 / 64, q64((sh.b - sh.y) / 16));
+  return sh;
+}
+
+static void run_began_ranges(unsigned threads, int giant) {
+  enum { N = 4400, TAIL = 120, FRAMES = 13 };
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 191 + threads + 16 * (uint64_t)giant);
+  double cx[8], cy[8];
+  cluster_centres(&r, cx, cy);
+  qk_world_t *w = threaded_world(threads);
+  mirror_t m = {0};
+  double vx[N], vy[N];
+  for (size_t k = 0; k < N; k++) {
+    qk_shape_t sh = ranges_shape(&r, cx, cy, giant);
+    if (giant && k == 0) sh = (qk_shape_t){QK_SHAPE_BOX, -2, -2, 52, 52};
+    if (k >= N - TAIL) { /* pairs of unit boxes at y = 100, apart (a gap of 0.5) */
+      double x = 100 + 4 * (double)((k - (N - TAIL)) / 2) + 1.5 * (double)(k & 1);
+      sh = (qk_shape_t){QK_SHAPE_BOX, x, 100, x + 1, 101};
+    }
+    m_add(w, &m, sh);
+    double a = qkt_rng_range(&r, 0, 6.283185307179586);
+    vx[k] = q64(0.25 * cos(a)), vy[k] = q64(0.25 * sin(a));
+  }
+  qk_world_pair_t *prev = NULL;
+  size_t np = 0;
+  dense_check(w, &m, &prev, &np, 0);
+  for (int f = 1; f < FRAMES; f++) {
+    int mode = f % 5; /* 0: all move; 1: the tail alone; 2: none; 3, 4: low, high slots jump */
+    for (size_t i = giant ? 1 : 0; i < N - TAIL; i++) {
+      if (mode == 0) m_move(w, &m, i, bounced(m.s[i], &vx[i], &vy[i]));
+      if ((mode == 3 && i < N / 8) || (mode == 4 && i >= N - TAIL - N / 8))
+        m_move(w, &m, i, ranges_shape(&r, cx, cy, giant));
+    }
+    /* the tail's odd boxes move against their even ones (from f = 1 on, in turns) or away */
+    for (size_t i = N - TAIL + 1; (mode == 0 || mode == 1) && i < N; i += 2) {
+      if ((i / 2 + (size_t)f) % 3 == 0) continue;
+      qk_shape_t sh = m.s[i];
+      double x = m.s[i - 1].x + (sh.x > m.s[i - 1].x + 1.25 ? 0.75 : 1.5);
+      m_move(w, &m, i, (qk_shape_t){QK_SHAPE_BOX, x, 100, x + 1, 101});
+    }
+    dense_check(w, &m, &prev, &np, f);
+  }
+  assert_true(np > N);
+  free(prev), free(m.h), free(m.s);
+  qk_world_free(w);
+}
+
+static void test_world_began_ranges(void **s) {
+  (void)s;
+  static const unsigned th[] = {1, 2, 3, 8};
+  for (int g = 0; g <= 1; g++)
+    for (size_t k = 0; k < sizeof th / sizeof *th; k++) run_began_ranges(th[k], g);
+}
+
+/*
+ * The re-filing's merge on the threads, its ranges cut by work (collide/world_grid.c,
+ * merge_cuts: the dirty objects counted by level on the threads, each weighing eight old
+ * ones, spread over its level's run of the old order): small boxes over large ones, where
+ * only the small ones jump (every dirty object in the finest level, the first of the
+ * order: the cuts fall inside it), only the large ones (the last level: ranges without a
+ * dirty object, one with them all), or all of them. Any cuts give the same order, so this
+ * checks the counting pass and the merge on the ranges it gives, on 2, 3 and 8 threads,
+ * every frame against brute force (dense_check).
+ */
+static void run_refile_split(unsigned threads, int which) {
+  enum { N = 5800, BIG = 1600 }; /* (from 1024 dirty objects they are filed on the threads) */
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 211 + threads + 16 * (uint64_t)which);
+  qk_world_t *w = threaded_world(threads);
+  mirror_t m = {0};
+  qk_world_pair_t *prev = NULL;
+  size_t np = 0;
+  for (int f = 0; f < 7; f++) {
+    for (size_t i = 0; i < N; i++) {
+      int big = i >= N - BIG;
+      if (f && !(which == 2 || (which == 1) == big)) continue;
+      double e = big ? 4 : 0.25, x = q64(qkt_rng_range(&r, 0, 60)),
+             y = q64(qkt_rng_range(&r, 0, 60));
+      qk_shape_t sh = {QK_SHAPE_BOX, x, y, x + e, y + e};
+      if (f)
+        m_move(w, &m, i, sh);
+      else
+        m_add(w, &m, sh);
+    }
+    dense_check(w, &m, &prev, &np, f);
+  }
+  assert_true(np > N);
+  free(prev), free(m.h), free(m.s);
+  qk_world_free(w);
+}
+
+static void test_world_refile_split(void **s) {
+  (void)s;
+  static const unsigned th[] = {2, 3, 8};
+  for (int which = 0; which < 3; which++)
+    for (size_t k = 0; k < sizeof th / sizeof *th; k++) run_refile_split(th[k], which);
+}
+
 static void test_world_began_only(void **s) {
   (void)s;
   run_began_only(1, 1200, 13);
@@ -1995,6 +2118,76 @@ static void test_world_nomem_threads(void **s) {
   free(sh);
 }
 
+/* Allocation failure at every N in a began-only update on two and three threads (the
+ * scene of run_began_ranges: the began keys sorted by ranges on the threads, the rows
+ * merged by ranges): a failed update keeps the last frame's pairs, began and ended (their
+ * contents), frees all it took, and the next update (the same moves, and more) gives the
+ * pairs, began and ended against brute force. */
+static void test_world_nomem_began_threads(void **s) {
+  (void)s;
+  enum { N = 4400 };
+  for (unsigned th = 2; th <= 3; th++) {
+    qkt_rng_t r;
+    qkt_rng_seed(&r, g_seed + 181 + th);
+    double cx[8], cy[8];
+    cluster_centres(&r, cx, cy);
+    qkt_alloc_t st = {0};
+    (void)qkt_alloc_make(&st);
+    qk_allocator_t al = {locked_alloc, &st};
+    qk_world_options_t o;
+    qk_world_options_init(&o);
+    o.allocator = &al, o.threads = th, o.thread_min = 0;
+    qk_world_t *w;
+    assert_int_equal(qk_world_new(&o, &w), QK_OK);
+    mirror_t m = {0};
+    double vx[N], vy[N];
+    for (size_t k = 0; k < N; k++) {
+      m_add(w, &m, cm_shape(&r, cx, cy, 0));
+      double a = qkt_rng_range(&r, 0, 6.283185307179586);
+      vx[k] = q64(0.25 * cos(a)), vy[k] = q64(0.25 * sin(a));
+    }
+    qk_world_pair_t *prev = NULL;
+    size_t np = 0, failed = 0;
+    dense_check(w, &m, &prev, &np, 0);
+    /* a began-only update, counting its allocating calls */
+    for (size_t i = 0; i < m.n; i++) m_move(w, &m, i, bounced(m.s[i], &vx[i], &vy[i]));
+    qkt_alloc_arm(&st, 0);
+    dense_check(w, &m, &prev, &np, 1);
+    size_t calls = st.calls;
+    for (size_t fail = 1; fail <= calls; fail += QKT_TSAN ? 7 : 1) {
+      for (size_t i = 0; i < m.n; i++) m_move(w, &m, i, bounced(m.s[i], &vx[i], &vy[i]));
+      qk_world_pair_t *before[3];
+      size_t nb[3];
+      for (int which = 0; which < 3; which++) {
+        qk_world_pairs_list(w, (qk_pairs_which_t)which, NULL, 0, &nb[which]);
+        before[which] = malloc((nb[which] + 1) * sizeof *before[which]);
+        qk_world_pairs_list(w, (qk_pairs_which_t)which, before[which], nb[which], &nb[which]);
+      }
+      qkt_alloc_arm(&st, fail);
+      qk_status_t rc = qk_world_update(w);
+      qkt_alloc_arm(&st, 0);
+      if (rc == QK_ERR_NOMEM) {
+        failed++;
+        for (int which = 0; which < 3; which++)
+          list_equals(w, (qk_pairs_which_t)which, before[which], nb[which], (int)fail);
+        dense_check(w, &m, &prev, &np, (int)fail);
+      } else {
+        assert_int_equal(rc, QK_OK); /* (the failed call's result was not needed) */
+        qk_world_pair_t *want;
+        size_t nw = o_pairs(&m, &want);
+        list_equals(w, QK_PAIRS_ALL, want, nw, (int)fail);
+        free(prev);
+        prev = want, np = nw;
+      }
+      for (int which = 0; which < 3; which++) free(before[which]);
+    }
+    assert_true(calls >= 12 && failed >= (QKT_TSAN ? 2 : 10));
+    free(prev), free(m.h), free(m.s);
+    qk_world_free(w);
+    assert_int_equal(st.live_blocks, 0);
+  }
+}
+
 int main(void) {
   g_seed = qkt_seed(20261130);
   const struct CMUnitTest tests[] = {
@@ -2009,6 +2202,8 @@ int main(void) {
       cmocka_unit_test(test_world_clustered_mixed_sizes),
       cmocka_unit_test(test_world_began_only),
       cmocka_unit_test(test_world_bands_threads),
+      cmocka_unit_test(test_world_began_ranges),
+      cmocka_unit_test(test_world_refile_split),
       cmocka_unit_test(test_world_began_general),
       cmocka_unit_test(test_world_bands_edges),
       cmocka_unit_test(test_world_grid_levels),
@@ -2025,6 +2220,7 @@ int main(void) {
       cmocka_unit_test(test_world_churn_memory),
       cmocka_unit_test(test_world_nomem),
       cmocka_unit_test(test_world_nomem_threads),
+      cmocka_unit_test(test_world_nomem_began_threads),
       cmocka_unit_test(test_world_nomem_began),
       cmocka_unit_test(test_world_threads),
       cmocka_unit_test(test_world_threads_fork),
