@@ -166,9 +166,19 @@ static inline double floor30(double v) {
 }
 
 void qk__world_cell_of(const qk_box_t *f, int *level, int32_t *cx, int32_t *cy, int *forced) {
+#if defined(__SSE2__)
+  /* (the extent and the magnitude from (xmin, ymin) and (xmax, ymax) as pairs: the same
+   * values, up to the sign of a zero, which neither use below sees) */
+  const __m128d lo = _mm_loadu_pd(&f->xmin), hi = _mm_loadu_pd(&f->xmax);
+  const __m128d ext = _mm_sub_pd(hi, lo), sign = _mm_set1_pd(-0.0);
+  const __m128d am = _mm_max_pd(_mm_andnot_pd(sign, lo), _mm_andnot_pd(sign, hi));
+  double e = _mm_cvtsd_f64(_mm_max_sd(ext, _mm_unpackhi_pd(ext, ext)));
+  double mag = _mm_cvtsd_f64(_mm_max_sd(am, _mm_unpackhi_pd(am, am)));
+#else
   double e = qk__max(f->xmax - f->xmin, f->ymax - f->ymin);
   double mag =
       qk__max(qk__max(fabs(f->xmin), fabs(f->xmax)), qk__max(fabs(f->ymin), fabs(f->ymax)));
+#endif
   int l = ceil_log2(e);
   l += l & 1; /* levels a factor of 4 apart: fewer levels to visit, a few more objects per cell */
   if (l < QK__LFLOOR) l = QK__LFLOOR;
@@ -177,6 +187,25 @@ void qk__world_cell_of(const qk_box_t *f, int *level, int32_t *cx, int32_t *cy, 
   uint64_t mant;
   int lm = mag >= 0x1p-1000 ? exp_of(mag, &mant) - 29 : QK__LFLOOR; /* ilogb(mag) - 29 */
   if (lm > l) l = lm, *forced = 1;
+#if defined(__SSE2__)
+  /* Both axes at once: (xmin, ymin) scaled, truncated to int32 (exact: below 2^30 in
+   * magnitude), one less where that lies above (floor30 on two lanes), the loose square's
+   * far sides compared with (xmax, ymax). */
+  for (;; l++) {
+    const __m128d v = _mm_mul_pd(lo, _mm_set1_pd(qk__pow2(-l)));
+    const __m128i ti = _mm_cvttpd_epi32(v);
+    const __m128d t = _mm_cvtepi32_pd(ti);
+    const __m128i above = _mm_castpd_si128(_mm_cmpgt_pd(t, v)); /* (all ones: -1 in int32) */
+    const __m128i xi = _mm_add_epi32(ti, _mm_shuffle_epi32(above, _MM_SHUFFLE(3, 3, 2, 0)));
+    const __m128d x = _mm_cvtepi32_pd(xi), s = _mm_set1_pd(qk__pow2(l));
+    if (_mm_movemask_pd(_mm_cmplt_pd(hi, _mm_mul_pd(_mm_add_pd(x, _mm_set1_pd(2)), s))) == 3) {
+      *level = l;
+      *cx = _mm_cvtsi128_si32(xi);
+      *cy = _mm_cvtsi128_si32(_mm_shuffle_epi32(xi, _MM_SHUFFLE(1, 1, 1, 1)));
+      return;
+    }
+  }
+#else
   for (;; l++) {
     double inv = qk__pow2(-l), s = qk__pow2(l);
     double x = floor30(f->xmin * inv), y = floor30(f->ymin * inv);
@@ -187,6 +216,7 @@ void qk__world_cell_of(const qk_box_t *f, int *level, int32_t *cx, int32_t *cy, 
       return;
     }
   }
+#endif
 }
 
 /* The fat extent of a box: its size widened by the margins on both sides. */

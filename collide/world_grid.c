@@ -25,6 +25,9 @@ typedef struct drec {
 #define QK__REFILE_MIN 1024
 
 static inline uint32_t bias(int32_t v) { return (uint32_t)v ^ 0x80000000u; }
+static inline int32_t unbias(uint32_t u) {
+  return u >= 0x80000000u ? (int32_t)(u - 0x80000000u) : (int32_t)((int64_t)u - 0x80000000);
+}
 
 static int drec_cmp(const void *p, const void *q) {
   const drec_t *a = p, *b = q;
@@ -302,6 +305,10 @@ typedef struct merge {
   qk__wcell_t *cells;
   uint32_t *lv_first, *lv_n;
   uint32_t m, nc; /* in: where to write; out: past the last written */
+  /* Or NULL: a bit a slot, set for the dirty ones, when every slot of the old order is
+   * live (no add or remove since the last update). The old entries are then kept by this
+   * bit alone, without reading their objects (64 bytes each, out of cache). */
+  const uint64_t *skip;
 } merge_t;
 
 static inline void count_in(merge_t *g, uint32_t c) {
@@ -325,8 +332,9 @@ static void merge_range(merge_t *g, uint32_t c0, uint32_t c1, size_t j, size_t j
       cxk = bias(oc[c].cx);
     /* The dirty cells before old cell c (all that are left after the last one). */
     while (j < j1 && (c == c1 || d[j].ly < cly || (d[j].ly == cly && d[j].x < cxk))) {
-      const qk__wobj_t *o = &w->obj[d[j].slot];
-      cells[nc] = (qk__wcell_t){o->u.cx, o->cy, m, o->level};
+      /* (the cell from the record's key, not from the object: see rec_of) */
+      cells[nc] = (qk__wcell_t){unbias(d[j].x), unbias((uint32_t)d[j].ly), m,
+                                (int32_t)(d[j].ly >> 32) + QK__LMIN};
       uint64_t ly = d[j].ly;
       uint32_t x = d[j].x;
       do ord[m++] = d[j++].slot;
@@ -336,9 +344,18 @@ static void merge_range(merge_t *g, uint32_t c0, uint32_t c1, size_t j, size_t j
     if (c == c1) break;
     cells[nc] = oc[c];
     cells[nc].start = m;
-    for (uint32_t k = oc[c].start, ke = oc[c + 1].start; k < ke; k++) {
-      const qk__wobj_t *o = &w->obj[old[k]];
-      if (qk__wlive(o) && !(o->flags & QK__WDIRTY)) ord[m++] = old[k];
+    if (g->skip) {
+      const uint64_t *sk = g->skip;
+      for (uint32_t k = oc[c].start, ke = oc[c + 1].start; k < ke; k++) {
+        const uint32_t i = old[k];
+        ord[m] = i; /* (kept unless dirty: written, then counted) */
+        m += !(sk[i >> 6] >> (i & 63) & 1);
+      }
+    } else {
+      for (uint32_t k = oc[c].start, ke = oc[c + 1].start; k < ke; k++) {
+        const qk__wobj_t *o = &w->obj[old[k]];
+        if (qk__wlive(o) && !(o->flags & QK__WDIRTY)) ord[m++] = old[k];
+      }
     }
     while (j < j1 && d[j].ly == cly && d[j].x == cxk) ord[m++] = d[j++].slot;
     if (m > cells[nc].start) count_in(g, nc++); /* (one left empty is dropped) */
@@ -435,7 +452,7 @@ static void merge_run(unsigned t, void *ud) {
      * would have them: the same stable radix sort, in the dirty list's order) */
     if (J->sl && J->j0[t + 1] - J->j0[t] > 1)
       drec_sort(J->pd + J->j0[t], J->dd + J->j0[t], J->j0[t + 1] - J->j0[t]);
-    *g = (merge_t){J->w, J->d, J->s_ord, J->s_cell, J->lv[t], J->lv[t] + QK__NLEV, sm, sc};
+    *g = (merge_t){J->w, J->d, J->s_ord, J->s_cell, J->lv[t], J->lv[t] + QK__NLEV, sm, sc, NULL};
     memset(J->lv[t], 0, sizeof J->lv[t]);
     merge_range(g, J->c0[t], J->c0[t + 1], J->j0[t], J->j0[t + 1]);
   } else {
@@ -616,15 +633,22 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
    * order, the new cells (at most the old ones plus one per dirty object, and the
    * sentinel) and the pack. */
   size_t nd = w->n_dirty, n = w->n_live, ncap = (size_t)w->n_cells + nd + 1;
-  size_t ocap = n ? n : 1, gcap = (n + 3) / 4 + 1;
-  /* (the dirty records and, for the radix sort, as many again) */
-  drec_t *d = nd ? qk__realloc(a, NULL, 0, 2 * nd * sizeof *d) : NULL;
+  /* (one more: the one-thread merge writes an old entry before it knows whether to keep
+   * it) */
+  size_t ocap = n + 1, gcap = (n + 3) / 4 + 1;
+  /* The dirty records and, for the radix sort, as many again; then, when every slot of
+   * the old order is live and the merge runs here, the dirty slots' bits (merge_t). */
+  const size_t nsk = nd && !w->ident_dirty && !merge_fits(w, w->order ? w->n_cells : 0)
+                         ? ((size_t)w->n_obj + 63) / 64
+                         : 0;
+  const size_t dbytes = 2 * nd * sizeof(drec_t) + nsk * sizeof(uint64_t);
+  drec_t *d = nd ? qk__realloc(a, NULL, 0, dbytes) : NULL;
   uint32_t *ord = (!nd || d) ? qk__realloc(a, NULL, 0, ocap * sizeof *ord) : NULL;
   qk__wcell_t *cells = ord ? qk__realloc(a, NULL, 0, ncap * sizeof *cells) : NULL;
   float *fg = cells ? qk__realloc(a, NULL, 0, gcap * (16 * sizeof *fg + 4)) : NULL;
   qk_box_t *hb = fg ? qk__realloc(a, NULL, 0, ncap * sizeof *hb) : NULL;
   if (!hb) {
-    qk__free(a, d, 2 * nd * sizeof *d);
+    qk__free(a, d, dbytes);
     qk__free(a, ord, ocap * sizeof *ord);
     qk__free(a, cells, ncap * sizeof *cells);
     qk__free(a, fg, gcap * (16 * sizeof *fg + 4));
@@ -639,6 +663,7 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
   uint32_t m = 0, nc = 0, n_oc = w->order ? w->n_cells : 0;
   size_t m_d = 0;
   int merged = 0;
+  uint64_t *skip = NULL; /* (merge_t) */
   uint32_t *sl =
       nd >= QK__REFILE_MIN && merge_fits(w, n_oc) ? qk__realloc(a, NULL, 0, nd * sizeof *sl) : NULL;
   if (sl) {
@@ -648,6 +673,16 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
     if (!merged)
       for (size_t k = 0; k < m_d; k++) d[k] = file_dirty(w, &w->obj[sl[k]], sl[k]);
     qk__free(a, sl, nd * sizeof *sl);
+  } else if (nsk) {
+    /* Every dirty object is live (see nsk), marked in skip, and no longer dirty once filed
+     * (the merge reads skip, nothing else the flag): no second walk of the list. */
+    skip = (uint64_t *)(d + 2 * nd);
+    memset(skip, 0, nsk * sizeof *skip);
+    for (uint32_t i = w->dirty_head; i != QK_NONE; i = w->obj[i].dnext) {
+      d[m_d++] = file_dirty(w, &w->obj[i], i);
+      w->obj[i].flags &= (uint8_t)~QK__WDIRTY;
+      skip[i >> 6] |= (uint64_t)1 << (i & 63);
+    }
   } else {
     for (uint32_t i = w->dirty_head; i != QK_NONE; i = w->obj[i].dnext)
       if (qk__wlive(&w->obj[i])) d[m_d++] = file_dirty(w, &w->obj[i], i);
@@ -664,7 +699,7 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
    * followed by the dirty entries of the same cell. The keys are compared once a cell,
    * not once an object. On threads by ranges of old cells (merge_threads), else here. */
   if (!merged && !merge_threads(w, d, m_d, NULL, ord, cells, n_oc, &m, &nc)) {
-    merge_t mg = {w, d, ord, cells, w->lv_first, w->lv_n, 0, 0};
+    merge_t mg = {w, d, ord, cells, w->lv_first, w->lv_n, 0, 0, skip};
     memset(w->lv_first, 0, sizeof w->lv_first);
     memset(w->lv_n, 0, sizeof w->lv_n);
     merge_range(&mg, 0, n_oc, 0, m_d);
@@ -678,11 +713,11 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
   w->cells = cells, w->n_cells = nc, w->cap_cells = (uint32_t)ncap;
   w->by_bands = qk__world_by_bands(w);
   qk__world_pack(w, pk, ord, cells, nc);
-  for (uint32_t k = w->dirty_head; k != QK_NONE; k = w->obj[k].dnext)
+  for (uint32_t k = w->dirty_head; k != QK_NONE && !skip; k = w->obj[k].dnext)
     w->obj[k].flags &= (uint8_t)~QK__WDIRTY;
   w->dirty_head = QK_NONE;
   w->n_dirty = 0;
-  qk__free(a, d, 2 * nd * sizeof *d);
+  qk__free(a, d, dbytes);
   /* Give back the cells' room for the dirty objects that joined existing cells (a
    * failed shrink is harmless). */
   /* And the object slots' slack after growth (a failed shrink is harmless). */

@@ -1140,6 +1140,68 @@ static void run_began_only(unsigned threads, size_t n, int frames) {
  * neighbours): the scene of run_began_only on 5 and 8 threads, and with every cluster on
  * one horizontal line (a strip a few bands high: several threads' ranges inside one
  * band). Every frame against brute force. */
+/* Re-filing in place (collide/world_grid.c, merge_t's skip): frames with moves only keep
+ * the old order's entries by a bit a dirty slot and take the dirty objects' cells from
+ * their sort keys. Boxes on a 1/16 grid across 0 (cells of negative and positive indices),
+ * sizes 1/16 .. 2 (six levels), moved by multiples of 1/16 so that many land exactly on
+ * their loose squares' sides (kept: the far sides are open, the near ones closed) or just
+ * past them; every fifth frame adds and removes some (the other path). Pairs, began and
+ * ended and box queries against brute force every frame. */
+static qk_shape_t grid_box(qkt_rng_t *r) {
+  double x = (double)((int)qkt_rng_below(r, 257) - 128) / 16;
+  double y = (double)((int)qkt_rng_below(r, 257) - 128) / 16;
+  double w = ldexp(1, (int)qkt_rng_below(r, 6) - 4), h = ldexp(1, (int)qkt_rng_below(r, 6) - 4);
+  return (qk_shape_t){QK_SHAPE_BOX, x, y, x + w, y + h};
+}
+
+static void test_world_refile_in_place(void **s) {
+  (void)s;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 4242);
+  qk_world_t *w;
+  assert_int_equal(qk_world_new(NULL, &w), QK_OK);
+  mirror_t m = {0};
+  for (int i = 0; i < 400; i++) m_add(w, &m, grid_box(&r));
+  qk_world_pair_t *prev = NULL;
+  size_t np = 0;
+  qk_handle_t *got = malloc(1024 * sizeof *got);
+  for (int f = 0; f < 40; f++) {
+    for (size_t i = 0; i < m.n; i++) {
+      if (!qkt_rng_below(&r, 4)) continue;
+      qk_shape_t b = m.s[i];
+      double dx = (double)((int)qkt_rng_below(&r, 17) - 8) / 16;
+      double dy = (double)((int)qkt_rng_below(&r, 17) - 8) / 16;
+      if (fabs(b.x + dx) > 9 || fabs(b.y + dy) > 9) dx = -dx, dy = -dy;
+      b.x += dx, b.a += dx, b.y += dy, b.b += dy;
+      m_move(w, &m, i, b);
+    }
+    if (f % 5 == 4) {
+      for (int k = 0; k < 3; k++) (void)m_remove_random(w, &m, &r);
+      for (int k = 0; k < 3; k++) m_add(w, &m, grid_box(&r));
+    }
+    update_and_check(w, &m, &prev, &np, "refile", f);
+    for (int q = 0; q < 4; q++) {
+      qk_shape_t qb = grid_box(&r);
+      qb.a += qkt_rng_range(&r, 0, 4), qb.b += qkt_rng_range(&r, 0, 4);
+      size_t n = 0, want = 0;
+      assert_int_equal(qk_world_query(w, &qb, got, 1024, &n), QK_OK);
+      for (size_t i = 0; i < m.n; i++) {
+        if (!o_overlap(qb, m.s[i])) continue;
+        want++;
+        int found = 0;
+        for (size_t k = 0; k < n && k < 1024 && !found; k++) found = got[k] == m.h[i];
+        if (!found)
+          fail_msg("seed %llu frame %d: query misses object %zu", (unsigned long long)g_seed, f, i);
+      }
+      assert_int_equal(n, want);
+    }
+  }
+  free(got);
+  free(prev);
+  free(m.h), free(m.s);
+  qk_world_free(w);
+}
+
 static void test_world_bands_threads(void **s) {
   (void)s;
   for (unsigned th = 2; th <= 8; th += 3) {
@@ -2201,6 +2263,7 @@ int main(void) {
       cmocka_unit_test(test_world_huge),
       cmocka_unit_test(test_world_clustered_mixed_sizes),
       cmocka_unit_test(test_world_began_only),
+      cmocka_unit_test(test_world_refile_in_place),
       cmocka_unit_test(test_world_bands_threads),
       cmocka_unit_test(test_world_began_ranges),
       cmocka_unit_test(test_world_refile_split),
