@@ -16,6 +16,7 @@
 #include "mesh/expansion.h"
 #include "mesh/general_mesh.h"
 
+#include <assert.h>
 #include <math.h>
 #include <string.h>
 
@@ -318,14 +319,14 @@ static qk_status_t check(qk__gm_t *g, uint32_t t) {
   return check_kept(g, t);
 }
 
-/* bad_kept for triangle t = (v, x, y) of a star, counter-clockwise from v's slot i, given
+/* bad_kept for triangle t = (v, x, y) of a star (v in slot 0, mesh/cdt.h), given
  * the squared lengths of its edges opposite v, x and y (lo, ly, lx), with a plain size
  * bound or none: around a vertex each spoke is a side of two triangles, and its length is
  * computed once for both. The same tests as bad_kept on the same values (a squared length
  * is the same either way round, the largest of three is, and the size test ORs three
  * symmetric tests); when two lengths tie for the shortest, bad_kept itself breaks the tie
  * by slot order. */
-static inline int bad_star(const qk__gm_t *g, uint32_t t, int i, const double *pv, const double *px,
+static inline int bad_star(const qk__gm_t *g, uint32_t t, const double *pv, const double *px,
                            const double *py, double lo, double ly, double lx) {
   double lmax = lo > ly ? lo : ly;
   lmax = lx > lmax ? lx : lmax;
@@ -350,11 +351,12 @@ static inline int bad_star(const qk__gm_t *g, uint32_t t, int i, const double *p
   double cr = ux * wy - uy * wx;
   if (cr * cr >= g->sin2_bound * lw * lu) return 0;
   if (g->smallest_input_angle > 61) return 1;
-  return !exempt_at(g, &g->cdt.v[3 * t], (i + r) % 3);
+  return !exempt_at(g, &g->cdt.v[3 * t], r);
 }
 
 /* check_kept for the star of g->dirty_v in g->dirty (all of one kept face), each spoke's
- * length computed once. */
+ * length computed once. The star is the last insertion's, so v is in slot 0 of each
+ * triangle (mesh/cdt.h): no search for it (about 4 instructions a triangle). */
 static qk_status_t check_star(qk__gm_t *g, size_t n) {
   const qk__cdt_t *c = &g->cdt;
   const uint32_t v = g->dirty_v;
@@ -364,8 +366,8 @@ static qk_status_t check_star(qk__gm_t *g, size_t n) {
   for (size_t j = 0; j < n; j++) {
     uint32_t t = g->dirty[j];
     const uint32_t *tv = &c->v[3 * t], *ts = &c->seg[3 * t];
-    int i = tv[0] == v ? 0 : tv[1] == v ? 1 : 2;
-    uint32_t x = tv[i == 2 ? 0 : i + 1], y = tv[i == 0 ? 2 : i - 1];
+    assert(tv[0] == v);
+    uint32_t x = tv[1], y = tv[2];
     const double *px = &c->xy[2 * x], *py = &c->xy[2 * y];
     if (x != prev) lx = d2(pv, px); /* the first triangle (the ring is closed: x follows y) */
     double ly = d2(pv, py), lo = d2(px, py);
@@ -374,7 +376,7 @@ static qk_status_t check_star(qk__gm_t *g, size_t n) {
         if (ts[k] != QK__CDT_NONE && apex_encroaches(g, t, k) &&
             push_enc(g, c->v[3 * t + (k + 1) % 3], c->v[3 * t + (k + 2) % 3], c->seg[3 * t + k]))
           return QK_ERR_NOMEM;
-    if (bad_star(g, t, i, pv, px, py, lo, ly, lx) && push_bad(g, t)) return QK_ERR_NOMEM;
+    if (bad_star(g, t, pv, px, py, lo, ly, lx) && push_bad(g, t)) return QK_ERR_NOMEM;
     lx = ly, prev = y;
   }
   return QK_OK;
