@@ -459,28 +459,34 @@ static int cavity_encroach(qk__gm_t *g, uint32_t t0, uint32_t t1, const double p
   int found = 0;
   /* Room for the whole search at once: it stops growing past 4096 triangles. */
   if (grow_stack(g, 4096 + 8) || grow_marks(g)) return -1;
-  uint32_t gen = ++g->mark_gen, *mark = g->mark;
-  g->stack[n++] = t0, mark[t0] = 2 * gen + 1;
-  if (t1 != QK__CDT_NONE) g->stack[n++] = t1, mark[t1] = 2 * gen + 1;
-  /* g->stack[0..seen) are done, [seen, n) to do. */
+  /* The arrays in locals: nothing in the loop moves them (push_enc grows g->enc only), and
+   * the compiler cannot tell that across push_enc's call. A stamp of this search is
+   * 2 gen or 2 gen + 1, i.e. stamp | 1 == in. */
+  const uint32_t *V = c->v, *N = c->nbr, *S = c->seg;
+  const double *XY = c->xy;
+  uint32_t *mark = g->mark, *stack = g->stack;
+  const uint32_t in = 2 * ++g->mark_gen + 1;
+  stack[n++] = t0, mark[t0] = in;
+  if (t1 != QK__CDT_NONE) stack[n++] = t1, mark[t1] = in;
+  /* stack[0..seen) are done, [seen, n) to do. */
   while (seen < n) {
-    uint32_t t = g->stack[seen++];
+    const size_t t = stack[seen++];
     for (int k = 0; k < 3; k++) {
-      if (c->seg[3 * t + k] != QK__CDT_NONE) {
-        uint32_t a = c->v[3 * t + (k + 1) % 3], b = c->v[3 * t + (k + 2) % 3];
-        if (qk__cdt_encroach(&c->xy[2 * a], &c->xy[2 * b], p) < 0) {
-          if (push_enc(g, a, b, c->seg[3 * t + k])) return -1;
+      if (S[3 * t + k] != QK__CDT_NONE) {
+        uint32_t a = V[3 * t + (k + 1) % 3], b = V[3 * t + (k + 2) % 3];
+        if (qk__cdt_encroach(&XY[2 * (size_t)a], &XY[2 * (size_t)b], p) < 0) {
+          if (push_enc(g, a, b, S[3 * t + k])) return -1;
           found++;
         }
         continue;
       }
-      uint32_t u = c->nbr[3 * t + k];
-      if (u == QK__CDT_NONE || n > 4096 || mark[u] >> 1 == gen) continue;
-      const uint32_t *uv = &c->v[3 * u];
-      int in = qk__cdt_incircle(&c->xy[2 * uv[0]], &c->xy[2 * uv[1]], &c->xy[2 * uv[2]], p) > 0;
-      mark[u] = 2 * gen + (uint32_t)in; /* tested once */
-      if (!in) continue;
-      g->stack[n++] = u;
+      uint32_t u = N[3 * t + k];
+      if (u == QK__CDT_NONE || n > 4096 || (mark[u] | 1) == in) continue;
+      const uint32_t *uv = &V[3 * (size_t)u];
+      int r = qk__cdt_incircle(&XY[2 * (size_t)uv[0]], &XY[2 * (size_t)uv[1]],
+                               &XY[2 * (size_t)uv[2]], p) > 0;
+      mark[u] = in - 1 + (uint32_t)r; /* tested once */
+      if (r) stack[n++] = u;
     }
   }
   return found;
