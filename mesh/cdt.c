@@ -12,6 +12,7 @@
  * old plus new, and nothing to move). A failed realloc leaves the block as it was. Every
  * operation reserves what it may need before it changes anything.
  */
+#include <assert.h>
 #include <string.h>
 
 #include "index/index_access.h"
@@ -369,7 +370,12 @@ static ALWAYS_INLINE void flip0(qk__cdt_t *c, uint32_t t, uint32_t n, int j) {
   nv[0] = p, nv[1] = s, nv[2] = r;
   nn[0] = D, nn[1] = A, nn[2] = t;
   ns[0] = sD, ns[1] = sA, ns[2] = NONE;
-  relink(c, A, t, n);
+  /* A, across the spoke p-r, is in p's star too, with p in slot 0 (every triangle the
+   * split and the flips make has it there), so that spoke is its edge 2 (p to r). */
+  if (A != NONE) {
+    assert(c->v[3 * (size_t)A] == p && c->nbr[3 * (size_t)A + 2] == t);
+    c->nbr[3 * (size_t)A + 2] = n;
+  }
   relink(c, C, n, t);
   c->vtri[q] = t, c->vtri[r] = n;
   changed(c, t);
