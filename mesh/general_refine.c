@@ -695,12 +695,21 @@ qk_status_t qk__gm_refine(qk__gm_t *g) {
     /* A triangle was queued when found bad; the slot holding the same three vertices in
      * the same order is the same triangle (its face, and so its quality, unchanged), so it
      * is still bad and is not tested again. A changed slot is skipped: its new triangle was
-     * checked (and queued if bad) when the CDT changed it. */
-    qk__gm_tq_t q = BAD_AT(g, g->bad_head);
-    g->bad_head++;
-    const uint32_t *tv = &c->v[3 * q.t];
-    if (tv[0] != q.a || tv[1] != q.b || tv[2] != q.c) continue;
-    if ((st = split_triangle(g, q.t, &rejected))) break;
+     * checked (and queued if bad) when the CDT changed it. Most entries are stale (about
+     * 70% with a size bound, which queues nearly every new triangle): they are skipped in
+     * a loop of their own, as nothing else changes while they are popped. */
+    const qk__gm_tq_t *ring = g->bad;
+    const size_t mask = g->bad_cap - 1, end = g->nbad;
+    size_t head = g->bad_head;
+    qk__gm_tq_t q;
+    int same;
+    do {
+      q = ring[head++ & mask];
+      const uint32_t *tv = &c->v[3 * (size_t)q.t];
+      same = tv[0] == q.a && tv[1] == q.b && tv[2] == q.c;
+    } while (!same && head != end);
+    g->bad_head = head;
+    if (same && (st = split_triangle(g, q.t, &rejected))) break;
   }
   if (st == QK_ERR_NOMEM) return qk__mesh_fail(g->err, st, 0, "out of memory");
   if (st) return st;
