@@ -89,7 +89,7 @@ qk_status_t qk__gm_insert(qk__gm_t *g, double x, double y, uint32_t t0, int k0, 
    * constrained edge, whose line then tells the sides apart (every triangle the insertion
    * makes has the new vertex as a corner, so its other corners are on one side). */
   uint32_t f0 = g->face[t0], f1 = f0, ea = 0, eb = 0;
-  g->ndirty = 0;
+  g->ndirty = 0, g->star_pending = 0;
   if (w == QK__CDT_EDGE && c->seg[3 * t0 + k0] != QK__CDT_NONE) {
     uint32_t n = c->nbr[3 * t0 + k0];
     if (n != QK__CDT_NONE) f1 = g->face[n];
@@ -107,7 +107,10 @@ qk_status_t qk__gm_insert(qk__gm_t *g, double x, double y, uint32_t t0, int k0, 
   if (qk__gm_fit(g)) return QK_ERR_NOMEM;
   if (*existed) return QK_OK;
   uint32_t v = *v_out;
-  if (star(g, v, f0 == f1 ? f0 : QK__CDT_NONE)) return QK_ERR_NOMEM;
+  if (f0 == f1 && g->star_later)
+    g->star_pending = 1, g->dirty_v = v; /* listed and labelled by the refinement's check */
+  else if (star(g, v, f0 == f1 ? f0 : QK__CDT_NONE))
+    return QK_ERR_NOMEM;
   g->vi[v] = (qk__gm_vert_t){QK__CDT_NONE, seg, k};
   g->dirty_face = f0 == f1 ? f0 : QK__CDT_NONE;
   if (f0 != f1) {
