@@ -12,6 +12,7 @@
  * old plus new, and nothing to move). A failed realloc leaves the block as it was. Every
  * operation reserves what it may need before it changes anything.
  */
+#include <assert.h>
 #include <string.h>
 
 #include "index/index_access.h"
@@ -369,7 +370,12 @@ static ALWAYS_INLINE void flip0(qk__cdt_t *c, uint32_t t, uint32_t n, int j) {
   nv[0] = p, nv[1] = s, nv[2] = r;
   nn[0] = D, nn[1] = A, nn[2] = t;
   ns[0] = sD, ns[1] = sA, ns[2] = NONE;
-  relink(c, A, t, n);
+  /* A, across the spoke p-r, is in p's star too, with p in slot 0 (every triangle the
+   * split and the flips make has it there), so that spoke is its edge 2 (p to r). */
+  if (A != NONE) {
+    assert(c->v[3 * (size_t)A] == p && c->nbr[3 * (size_t)A + 2] == t);
+    c->nbr[3 * (size_t)A + 2] = n;
+  }
   relink(c, C, n, t);
   c->vtri[q] = t, c->vtri[r] = n;
   changed(c, t);
@@ -439,34 +445,58 @@ static int split_edge(qk__cdt_t *c, uint32_t t, int k, uint32_t p) {
   return 4;
 }
 
+/* Is the vertex across edge 0 of t (slot j of n) strictly inside t's circumcircle? With
+ * t = (p, q, r) holding the new point p and n = (r, q, s) an old triangle, that is p inside
+ * n's (an even permutation of the in-circle determinant). */
+static inline int across_in(const qk__cdt_t *c, uint32_t t, uint32_t n, int j) {
+  const uint32_t *tv = c->v + 3 * (size_t)t;
+  const double *pp = c->xy + 2 * (size_t)tv[0], *pq = c->xy + 2 * (size_t)tv[1];
+  const double *pr = c->xy + 2 * (size_t)tv[2];
+  const double *ps = c->xy + 2 * (size_t)c->v[3 * (size_t)n + j];
+  return qk__cdt_incircle(pp, pq, pr, ps) > 0;
+}
+
+/* across_in out of line, for the loop below when the caller's record decides (almost)
+ * every test: the test inline there cost registers (spills and reloads) on every pass. */
+#if defined(__GNUC__)
+__attribute__((noinline))
+#endif
+static int
+across_in_call(const qk__cdt_t *c, uint32_t t, uint32_t n, int j) {
+  return across_in(c, t, n, j);
+}
+
 /* Lawson's flips after inserting p: every stacked triangle has p in slot 0; its edge 0 is
  * flipped when the vertex across it lies strictly inside its circumcircle (ties keep the
  * edge, so flips end). Each flip adds one triangle to p's star, so the stack never holds
- * more than its initial four plus nv entries. */
-static void legalize(qk__cdt_t *c, int sp) {
+ * more than its initial four plus nv entries. With_known (a constant in each of the two
+ * copies): c->known records the tests (the refinement's cavity search made them all but
+ * past its cap), which the loop reads; without, it tests. The same flips either way. */
+static ALWAYS_INLINE void legalize_with(qk__cdt_t *c, int sp, const int with_known) {
   uint32_t *stk = c->stk;
-  const uint32_t *known = c->known, gen = c->known_gen;
+  const uint32_t *known = c->known, in = 2 * c->known_gen + 1;
   while (sp > 0) {
     uint32_t t = stk[--sp];
     uint32_t n = c->nbr[3 * (size_t)t];
     if (n == NONE || c->seg[3 * (size_t)t] != NONE) continue;
     int j;
-    if (known && known[n] >> 1 == gen) { /* decided without the slot across */
-      if (!(known[n] & 1)) continue;
+    if (with_known && (known[n] | 1) == in) { /* stamped 2 gen (outside) or 2 gen + 1 */
+      if (known[n] != in) continue;
       j = facing(c, n, t);
     } else {
-      /* t = (p, q, r) holds the new point p and n = (r, q, s) is an old triangle: s inside
-       * t's circle is p inside n's (an even permutation of the in-circle determinant). */
       j = facing(c, n, t);
-      const uint32_t *tv = c->v + 3 * (size_t)t;
-      const double *pp = c->xy + 2 * (size_t)tv[0], *pq = c->xy + 2 * (size_t)tv[1];
-      const double *pr = c->xy + 2 * (size_t)tv[2];
-      const double *ps = c->xy + 2 * (size_t)c->v[3 * (size_t)n + j];
-      if (qk__cdt_incircle(pp, pq, pr, ps) <= 0) continue;
+      if (!(with_known ? across_in_call(c, t, n, j) : across_in(c, t, n, j))) continue;
     }
     flip0(c, t, n, j);
     stk[sp++] = t, stk[sp++] = n;
   }
+}
+
+static void legalize(qk__cdt_t *c, int sp) {
+  if (c->known)
+    legalize_with(c, sp, 1);
+  else
+    legalize_with(c, sp, 0);
 }
 
 qk_status_t qk__cdt_insert(qk__cdt_t *c, double x, double y, uint32_t start, uint32_t *v_out,

@@ -115,7 +115,10 @@ qk_status_t qk__cdt_insert(qk__cdt_t *c, double x, double y, uint32_t start, uin
 
 /* qk__cdt_insert for a point the caller has located already: (t, k, w) as qk__cdt_locate (or
  * qk__cdt_walk, when it returns 1) reports for (x, y), the triangulation unchanged since.
- * Saves the second walk and its orientation tests (exact ones for a point on an edge). */
+ * Saves the second walk and its orientation tests (exact ones for a point on an edge).
+ * After a new vertex's insertion (also by qk__cdt_insert) it is in slot 0 of every
+ * triangle around it: the split puts it there and each flip keeps it there in both
+ * triangles (callers walking its star need not search for it). */
 qk_status_t qk__cdt_insert_at(qk__cdt_t *c, double x, double y, uint32_t t, int k,
                               qk__cdt_where_t w, uint32_t *v_out, int *existed);
 

@@ -170,9 +170,9 @@ int qk__incircle_exact(const double a[2], const double b[2], const double c[2], 
  * The filter: with u = 2^-53, the computed determinant is the exact one with each of its
  * twelve degree-4 monomials perturbed by at most eleven relative roundings (one per
  * difference, square or product, subtraction, lift sum, scaling and the two final sums), so
- * its error is below ((1 + u)^11 - 1) times the sum of the monomials' magnitudes, which the
- * computed permanent (the same expression with absolute values) bounds within a factor
- * (1 - u)^-12: below 12u * permanent < 2^-49 * permanent.
+ * its error is below ((1 + u)^11 - 1) times the sum of the monomials' magnitudes, which
+ * mesh/cdt_internal.h bounds by a computed quantity S within a factor (1 - u)^-11: below
+ * 12u S < 2^-49 S.
  */
 int qk__incircle(const double a[2], const double b[2], const double c[2], const double d[2]) {
   return qk__cdt_incircle(a, b, c, d);

@@ -6,6 +6,7 @@
  */
 #include "mesh/general_mesh.h"
 
+#include <assert.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -61,8 +62,9 @@ grow_dirty(qk__gm_t *g) {
 static qk_status_t star(qk__gm_t *g, uint32_t v, uint32_t f) {
   const qk__cdt_t *c = &g->cdt;
   /* v lies strictly inside the square, so its star is a closed ring: counter-clockwise
-   * across the edge after v in each triangle until back at the first. With f != NONE (one
-   * face all round) each triangle is labelled on the way. */
+   * across the edge after v in each triangle (edge 1: v is in slot 0 of each, mesh/cdt.h)
+   * until back at the first. With f != NONE (one face all round) each triangle is labelled
+   * on the way. */
   uint32_t first = c->vtri[v], t = first;
   size_t n = 0; /* the count in a register (g->ndirty is written back at the end) */
   do {
@@ -72,9 +74,8 @@ static qk_status_t star(qk__gm_t *g, uint32_t v, uint32_t f) {
     }
     g->dirty[n++] = t;
     if (f != QK__CDT_NONE) g->face[t] = f;
-    const uint32_t *tv = &c->v[3 * (size_t)t];
-    int i = tv[0] == v ? 1 : tv[1] == v ? 2 : 0; /* the slot after v's */
-    t = c->nbr[3 * (size_t)t + i];
+    assert(c->v[3 * (size_t)t] == v);
+    t = c->nbr[3 * (size_t)t + 1];
   } while (t != first && t != QK__CDT_NONE);
   g->ndirty = n;
   g->dirty_v = v;
@@ -88,7 +89,7 @@ qk_status_t qk__gm_insert(qk__gm_t *g, double x, double y, uint32_t t0, int k0, 
    * constrained edge, whose line then tells the sides apart (every triangle the insertion
    * makes has the new vertex as a corner, so its other corners are on one side). */
   uint32_t f0 = g->face[t0], f1 = f0, ea = 0, eb = 0;
-  g->ndirty = 0;
+  g->ndirty = 0, g->star_pending = 0;
   if (w == QK__CDT_EDGE && c->seg[3 * t0 + k0] != QK__CDT_NONE) {
     uint32_t n = c->nbr[3 * t0 + k0];
     if (n != QK__CDT_NONE) f1 = g->face[n];
@@ -106,7 +107,10 @@ qk_status_t qk__gm_insert(qk__gm_t *g, double x, double y, uint32_t t0, int k0, 
   if (qk__gm_fit(g)) return QK_ERR_NOMEM;
   if (*existed) return QK_OK;
   uint32_t v = *v_out;
-  if (star(g, v, f0 == f1 ? f0 : QK__CDT_NONE)) return QK_ERR_NOMEM;
+  if (f0 == f1 && g->star_later)
+    g->star_pending = 1, g->dirty_v = v; /* listed and labelled by the refinement's check */
+  else if (star(g, v, f0 == f1 ? f0 : QK__CDT_NONE))
+    return QK_ERR_NOMEM;
   g->vi[v] = (qk__gm_vert_t){QK__CDT_NONE, seg, k};
   g->dirty_face = f0 == f1 ? f0 : QK__CDT_NONE;
   if (f0 != f1) {
@@ -125,9 +129,8 @@ qk_status_t qk__gm_insert(qk__gm_t *g, double x, double y, uint32_t t0, int k0, 
     }
     g->face[t] = f;
     for (size_t i = 1; i < g->ndirty; i++) {
-      const uint32_t *tv = &c->v[3 * (size_t)t];
-      int j = tv[0] == v ? 1 : tv[1] == v ? 2 : 0; /* the edge star() crossed from t */
-      if (c->seg[3 * (size_t)t + j] != QK__CDT_NONE) f = f == f0 ? f1 : f0;
+      /* edge 1, the one star() crossed from t (v is in slot 0) */
+      if (c->seg[3 * (size_t)t + 1] != QK__CDT_NONE) f = f == f0 ? f1 : f0;
       t = g->dirty[i];
       g->face[t] = f;
     }

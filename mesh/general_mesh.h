@@ -79,6 +79,10 @@ typedef struct qk__gm {
   size_t ndirty, dirty_cap;
   uint32_t dirty_face; /* their face when they all have one (NONE: a split segment's two) */
   uint32_t dirty_v;    /* the vertex they surround, counter-clockwise in g->dirty */
+  /* Set by the refinement when it checks stars whole (general_refine.c): an insertion
+   * whose star lies in one face then neither lists nor labels it (star_pending says so,
+   * g->dirty stays empty) and the refinement's check walks the ring once for both. */
+  int star_later, star_pending;
   /* The graded quadtree (lattice coordinates: the root square is [0, 1]^2). */
   qk_tree_t *tree;
   uint8_t *free_node; /* per node id: its grown square meets no feature */

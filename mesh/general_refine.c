@@ -16,6 +16,7 @@
 #include "mesh/expansion.h"
 #include "mesh/general_mesh.h"
 
+#include <assert.h>
 #include <math.h>
 #include <string.h>
 
@@ -318,14 +319,14 @@ static qk_status_t check(qk__gm_t *g, uint32_t t) {
   return check_kept(g, t);
 }
 
-/* bad_kept for triangle t = (v, x, y) of a star, counter-clockwise from v's slot i, given
+/* bad_kept for triangle t = (v, x, y) of a star (v in slot 0, mesh/cdt.h), given
  * the squared lengths of its edges opposite v, x and y (lo, ly, lx), with a plain size
  * bound or none: around a vertex each spoke is a side of two triangles, and its length is
  * computed once for both. The same tests as bad_kept on the same values (a squared length
  * is the same either way round, the largest of three is, and the size test ORs three
  * symmetric tests); when two lengths tie for the shortest, bad_kept itself breaks the tie
  * by slot order. */
-static inline int bad_star(const qk__gm_t *g, uint32_t t, int i, const double *pv, const double *px,
+static inline int bad_star(const qk__gm_t *g, uint32_t t, const double *pv, const double *px,
                            const double *py, double lo, double ly, double lx) {
   double lmax = lo > ly ? lo : ly;
   lmax = lx > lmax ? lx : lmax;
@@ -350,22 +351,35 @@ static inline int bad_star(const qk__gm_t *g, uint32_t t, int i, const double *p
   double cr = ux * wy - uy * wx;
   if (cr * cr >= g->sin2_bound * lw * lu) return 0;
   if (g->smallest_input_angle > 61) return 1;
-  return !exempt_at(g, &g->cdt.v[3 * t], (i + r) % 3);
+  return !exempt_at(g, &g->cdt.v[3 * t], r);
 }
 
-/* check_kept for the star of g->dirty_v in g->dirty (all of one kept face), each spoke's
- * length computed once. */
-static qk_status_t check_star(qk__gm_t *g, size_t n) {
+/* The star of the last insertion's vertex v = g->dirty_v, all in face f = g->dirty_face
+ * (g->star_pending): label its triangles f and, when f is kept, check_kept them, each
+ * spoke's length computed once; one walk around v for both (the insertion leaves them to
+ * this walk: a separate listing walk cost about 1.5% of the instructions). The ring is
+ * counter-clockwise from vtri[v] across edge 1 of each triangle, as star() in
+ * general_build.c lists it, v in slot 0 of each (mesh/cdt.h): the same triangles in the
+ * same order, so the same queue. */
+static qk_status_t check_star(qk__gm_t *g) {
   const qk__cdt_t *c = &g->cdt;
-  const uint32_t v = g->dirty_v;
+  const uint32_t v = g->dirty_v, f = g->dirty_face, first = c->vtri[v];
+  uint32_t t = first;
+  if (g->faces[f].drop) {
+    do {
+      g->face[t] = f;
+      t = c->nbr[3 * (size_t)t + 1];
+    } while (t != first && t != QK__CDT_NONE);
+    return QK_OK;
+  }
   const double *pv = &c->xy[2 * v];
   uint32_t prev = QK__CDT_NONE;
   double lx = 0;
-  for (size_t j = 0; j < n; j++) {
-    uint32_t t = g->dirty[j];
+  do {
+    g->face[t] = f;
     const uint32_t *tv = &c->v[3 * t], *ts = &c->seg[3 * t];
-    int i = tv[0] == v ? 0 : tv[1] == v ? 1 : 2;
-    uint32_t x = tv[i == 2 ? 0 : i + 1], y = tv[i == 0 ? 2 : i - 1];
+    assert(tv[0] == v);
+    uint32_t x = tv[1], y = tv[2];
     const double *px = &c->xy[2 * x], *py = &c->xy[2 * y];
     if (x != prev) lx = d2(pv, px); /* the first triangle (the ring is closed: x follows y) */
     double ly = d2(pv, py), lo = d2(px, py);
@@ -374,9 +388,10 @@ static qk_status_t check_star(qk__gm_t *g, size_t n) {
         if (ts[k] != QK__CDT_NONE && apex_encroaches(g, t, k) &&
             push_enc(g, c->v[3 * t + (k + 1) % 3], c->v[3 * t + (k + 2) % 3], c->seg[3 * t + k]))
           return QK_ERR_NOMEM;
-    if (bad_star(g, t, i, pv, px, py, lo, ly, lx) && push_bad(g, t)) return QK_ERR_NOMEM;
+    if (bad_star(g, t, pv, px, py, lo, ly, lx) && push_bad(g, t)) return QK_ERR_NOMEM;
     lx = ly, prev = y;
-  }
+    t = c->nbr[3 * (size_t)t + 1];
+  } while (t != first && t != QK__CDT_NONE);
   return QK_OK;
 }
 
@@ -385,10 +400,12 @@ static qk_status_t check_star(qk__gm_t *g, size_t n) {
 static qk_status_t check_dirty(qk__gm_t *g) {
   size_t n = g->ndirty;
   g->ndirty = 0;
+  if (g->star_pending) {
+    g->star_pending = 0;
+    return check_star(g);
+  }
   if (g->dirty_face != QK__CDT_NONE) {
     if (g->faces[g->dirty_face].drop) return QK_OK;
-    const qk_mesh_options_t *opt = g->opt;
-    if (g->size_plain || !(opt->max_size > 0 || opt->size_fn)) return check_star(g, n);
     for (size_t i = 0; i < n; i++)
       if (check_kept(g, g->dirty[i])) return QK_ERR_NOMEM;
     return QK_OK;
@@ -457,28 +474,34 @@ static int cavity_encroach(qk__gm_t *g, uint32_t t0, uint32_t t1, const double p
   int found = 0;
   /* Room for the whole search at once: it stops growing past 4096 triangles. */
   if (grow_stack(g, 4096 + 8) || grow_marks(g)) return -1;
-  uint32_t gen = ++g->mark_gen, *mark = g->mark;
-  g->stack[n++] = t0, mark[t0] = 2 * gen + 1;
-  if (t1 != QK__CDT_NONE) g->stack[n++] = t1, mark[t1] = 2 * gen + 1;
-  /* g->stack[0..seen) are done, [seen, n) to do. */
+  /* The arrays in locals: nothing in the loop moves them (push_enc grows g->enc only), and
+   * the compiler cannot tell that across push_enc's call. A stamp of this search is
+   * 2 gen or 2 gen + 1, i.e. stamp | 1 == in. */
+  const uint32_t *V = c->v, *N = c->nbr, *S = c->seg;
+  const double *XY = c->xy;
+  uint32_t *mark = g->mark, *stack = g->stack;
+  const uint32_t in = 2 * ++g->mark_gen + 1;
+  stack[n++] = t0, mark[t0] = in;
+  if (t1 != QK__CDT_NONE) stack[n++] = t1, mark[t1] = in;
+  /* stack[0..seen) are done, [seen, n) to do. */
   while (seen < n) {
-    uint32_t t = g->stack[seen++];
+    const size_t t = stack[seen++];
     for (int k = 0; k < 3; k++) {
-      if (c->seg[3 * t + k] != QK__CDT_NONE) {
-        uint32_t a = c->v[3 * t + (k + 1) % 3], b = c->v[3 * t + (k + 2) % 3];
-        if (qk__cdt_encroach(&c->xy[2 * a], &c->xy[2 * b], p) < 0) {
-          if (push_enc(g, a, b, c->seg[3 * t + k])) return -1;
+      if (S[3 * t + k] != QK__CDT_NONE) {
+        uint32_t a = V[3 * t + (k + 1) % 3], b = V[3 * t + (k + 2) % 3];
+        if (qk__cdt_encroach(&XY[2 * (size_t)a], &XY[2 * (size_t)b], p) < 0) {
+          if (push_enc(g, a, b, S[3 * t + k])) return -1;
           found++;
         }
         continue;
       }
-      uint32_t u = c->nbr[3 * t + k];
-      if (u == QK__CDT_NONE || n > 4096 || mark[u] >> 1 == gen) continue;
-      const uint32_t *uv = &c->v[3 * u];
-      int in = qk__cdt_incircle(&c->xy[2 * uv[0]], &c->xy[2 * uv[1]], &c->xy[2 * uv[2]], p) > 0;
-      mark[u] = 2 * gen + (uint32_t)in; /* tested once */
-      if (!in) continue;
-      g->stack[n++] = u;
+      uint32_t u = N[3 * t + k];
+      if (u == QK__CDT_NONE || n > 4096 || (mark[u] | 1) == in) continue;
+      const uint32_t *uv = &V[3 * (size_t)u];
+      int r = qk__cdt_incircle(&XY[2 * (size_t)uv[0]], &XY[2 * (size_t)uv[1]],
+                               &XY[2 * (size_t)uv[2]], p) > 0;
+      mark[u] = in - 1 + (uint32_t)r; /* tested once */
+      if (r) stack[n++] = u;
     }
   }
   return found;
@@ -637,7 +660,7 @@ static qk_status_t reserve(qk__gm_t *g, size_t more) {
  * refinement loop's code, 0.04% more instructions on Iceland). */
 qk_status_t qk__gm_reserve(qk__gm_t *g, size_t more) { return reserve(g, more); }
 
-qk_status_t qk__gm_refine(qk__gm_t *g) {
+static qk_status_t refine(qk__gm_t *g) {
   qk__cdt_t *c = &g->cdt;
   g->ndirty = 0;
   g->size_plain = g->opt->max_size > 0 && !g->opt->size_fn;
@@ -687,12 +710,21 @@ qk_status_t qk__gm_refine(qk__gm_t *g) {
     /* A triangle was queued when found bad; the slot holding the same three vertices in
      * the same order is the same triangle (its face, and so its quality, unchanged), so it
      * is still bad and is not tested again. A changed slot is skipped: its new triangle was
-     * checked (and queued if bad) when the CDT changed it. */
-    qk__gm_tq_t q = BAD_AT(g, g->bad_head);
-    g->bad_head++;
-    const uint32_t *tv = &c->v[3 * q.t];
-    if (tv[0] != q.a || tv[1] != q.b || tv[2] != q.c) continue;
-    if ((st = split_triangle(g, q.t, &rejected))) break;
+     * checked (and queued if bad) when the CDT changed it. Most entries are stale (about
+     * 70% with a size bound, which queues nearly every new triangle): they are skipped in
+     * a loop of their own, as nothing else changes while they are popped. */
+    const qk__gm_tq_t *ring = g->bad;
+    const size_t mask = g->bad_cap - 1, end = g->nbad;
+    size_t head = g->bad_head;
+    qk__gm_tq_t q;
+    int same;
+    do {
+      q = ring[head++ & mask];
+      const uint32_t *tv = &c->v[3 * (size_t)q.t];
+      same = tv[0] == q.a && tv[1] == q.b && tv[2] == q.c;
+    } while (!same && head != end);
+    g->bad_head = head;
+    if (same && (st = split_triangle(g, q.t, &rejected))) break;
   }
   if (st == QK_ERR_NOMEM) return qk__mesh_fail(g->err, st, 0, "out of memory");
   if (st) return st;
@@ -708,4 +740,15 @@ qk_status_t qk__gm_refine(qk__gm_t *g) {
                          q[0], q[1]);
   }
   return QK_OK;
+}
+
+qk_status_t qk__gm_refine(qk__gm_t *g) {
+  /* Stars whole (check_star) with a plain size bound or none; the others are checked
+   * triangle by triangle from the insertion's list. */
+  const qk_mesh_options_t *opt = g->opt;
+  g->star_later = (opt->max_size > 0 && !opt->size_fn) || !(opt->max_size > 0 || opt->size_fn);
+  g->star_pending = 0;
+  qk_status_t st = refine(g);
+  g->star_later = g->star_pending = 0;
+  return st;
 }

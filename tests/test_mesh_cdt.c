@@ -19,6 +19,9 @@
  *    the exact orientations of the triangle it reports and against qk__cdt_locate;
  *  - legal_sides: a point on a constrained edge restores the Delaunay property on the sides
  *    asked for only, and the triangulation stays valid;
+ *  - the known record (c->known, the refinement's cavity stamps): an insertion reading a
+ *    partial record (stamps by the GMP in-circle oracle, the rest stale and wrong) makes
+ *    the same triangulation, array for array, as one that tests every circle itself;
  *  - qk__cdt_walk (and qk__cdt_walk_from, its turn around w started anywhere in w's star)
  *    against a brute-force visibility oracle (does the closed segment from w to
  *    P meet a constrained edge anywhere but at w?) and against qk__cdt_locate;
@@ -989,6 +992,74 @@ static void test_cdt_legal_sides(void **state) {
   assert_true(skipped[0] > 0 && skipped[1] > 0);
 }
 
+#ifdef QK_HAVE_GMP
+/* The known record: twin triangulations get the same points (uniform, and on a coarse grid
+ * for cocircular ties), one by qk__cdt_insert, the other by qk__cdt_insert_at with
+ * c->known set. Its record stamps the slots within three steps of the located triangle:
+ * three in four with this generation and the GMP in-circle answer for the new point, the
+ * rest with the previous generation and the wrong answer (which the insertion must ignore
+ * and test itself). The two must agree in every array after every insertion. */
+static void test_cdt_known_record(void **state) {
+  (void)state;
+  g_seed = qkt_seed(12120);
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed);
+  const size_t n = 1500;
+  size_t read = 0, ignored = 0;
+  for (int grid = 0; grid < 2; grid++) {
+    qk__cdt_t a, b;
+    assert_int_equal(qk__cdt_init(&a, NULL, 0, 0, 32, n), QK_OK);
+    assert_int_equal(qk__cdt_init(&b, NULL, 0, 0, 32, n), QK_OK);
+    size_t cap = b.nt + 2 * n + 8;
+    uint32_t *mark = calloc(cap, sizeof *mark), stack[64];
+    for (uint32_t gen = 1; gen <= n; gen++) {
+      double x = grid ? 1 + (double)qkt_rng_below(&r, 30) : qkt_rng_range(&r, 0.5, 31.5);
+      double y = grid ? 1 + (double)qkt_rng_below(&r, 30) : qkt_rng_range(&r, 0.5, 31.5);
+      const double p[2] = {x, y};
+      uint32_t t, va, vb;
+      int k, ea, eb;
+      qk__cdt_where_t w = qk__cdt_locate(&b, x, y, NONE, &t, &k);
+      /* Three steps around t, breadth first (a slot may be listed twice: stamped alike). */
+      size_t sn = 0, seen = 0;
+      stack[sn++] = t;
+      for (int depth = 0; depth < 3; depth++) {
+        size_t end = sn;
+        for (; seen < end; seen++)
+          for (int e = 0; e < 3; e++) {
+            uint32_t u = b.nbr[3 * stack[seen] + e];
+            if (u != NONE && sn < 64) stack[sn++] = u;
+          }
+      }
+      for (size_t i = 0; i < sn; i++) {
+        const uint32_t *tv = b.v + 3 * stack[i];
+        uint32_t in = incircle_q(b.xy + 2 * tv[0], b.xy + 2 * tv[1], b.xy + 2 * tv[2], p) > 0;
+        if (qkt_rng_below(&r, 4))
+          mark[stack[i]] = 2 * gen + in, read++;
+        else
+          mark[stack[i]] = 2 * (gen - 1) + !in, ignored++;
+      }
+      b.known = mark, b.known_gen = gen;
+      assert_int_equal(qk__cdt_insert_at(&b, x, y, t, k, w, &vb, &eb), QK_OK);
+      b.known = NULL;
+      assert_int_equal(qk__cdt_insert(&a, x, y, NONE, &va, &ea), QK_OK);
+      assert_true(va == vb && ea == eb);
+      if (a.nt != b.nt || memcmp(a.v, b.v, 3 * a.nt * sizeof *a.v) ||
+          memcmp(a.nbr, b.nbr, 3 * a.nt * sizeof *a.v) ||
+          memcmp(a.seg, b.seg, 3 * a.nt * sizeof *a.v) ||
+          memcmp(a.vtri, b.vtri, a.nv * sizeof *a.vtri))
+        fail_msg("seed %llu: point %u (%.17g, %.17g): the record changed the insertion",
+                 (unsigned long long)g_seed, gen, x, y);
+      if (gen % 300 == 0) check_cdt(&b);
+    }
+    check_cdt(&b);
+    free(mark);
+    qk__cdt_free(&a);
+    qk__cdt_free(&b);
+  }
+  assert_true(read > 10000 && ignored > 3000);
+}
+#endif
+
 static void test_cdt_alloc_fail(void **state) {
   (void)state;
   g_seed = qkt_seed(12110);
@@ -1144,6 +1215,7 @@ int main(void) {
 #ifdef QK_HAVE_GMP
       cmocka_unit_test(test_cdt_incircle_gmp),
       cmocka_unit_test(test_cdt_encroach_gmp),
+      cmocka_unit_test(test_cdt_known_record),
 #else
       cmocka_unit_test(skip_without_gmp),
 #endif
