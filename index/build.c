@@ -94,8 +94,13 @@ static qk_status_t from_buckets(qk_tree_t *t, uint32_t v, const qk__geom_t *gp, 
 static qk_status_t reserve_exact(qk_tree_t *t, uint64_t extra) {
   uint64_t need = t->n_nodes + extra, blocks = (need + 2) / 4;
   if (need > UINT32_MAX / 2) return qk__reserve_nodes(t, (uint32_t)extra);
-  qk_status_t st;
-  if (need > t->cap_nodes && (st = qk__nodes_resize(t, (size_t)need))) return st;
+  if (need > t->cap_nodes) {
+    qk__node_t *p = qk__realloc(&t->alloc, t->nodes, (size_t)t->cap_nodes * sizeof *p,
+                                (size_t)need * sizeof *p);
+    if (!p) return QK_ERR_NOMEM;
+    t->nodes = p;
+    t->cap_nodes = (uint32_t)need;
+  }
   if (blocks > t->cap_blocks) {
     qk__block_t *p = qk__realloc(&t->alloc, t->blocks, (size_t)t->cap_blocks * sizeof *p,
                                  (size_t)blocks * sizeof *p);
@@ -179,7 +184,7 @@ static void sub_append_job(unsigned i, unsigned w, void *ud) {
 }
 
 static void sub_free(const qk_tree_t *t, qk_tree_t *o) {
-  qk__nodes_free(o); /* through o's allocator, which is t's */
+  qk__free(&t->alloc, o->nodes, (size_t)o->cap_nodes * sizeof(qk__node_t));
   qk__free(&t->alloc, o->blocks, (size_t)o->cap_blocks * sizeof(qk__block_t));
 }
 

@@ -119,16 +119,6 @@ qk_status_t qk_tree_check(const qk_tree_t *t, char *msg, size_t msg_size) {
       (t->n_nodes - 1) / 4 > t->cap_blocks)
     return fail(&c, "node count %u / capacity %u / blocks %u inconsistent", t->n_nodes,
                 t->cap_nodes, t->cap_blocks);
-  /* Every block of four children on one cache line (qk__nodes_resize), whenever the
-   * allocation is aligned as allocators align it. */
-  uintptr_t mem = (uintptr_t)t->nodes_mem, one = (uintptr_t)&t->nodes[1];
-  if (mem % 16 == 0 && one % QK__NODES_LINE != 0)
-    return fail(&c, "node 1 at %u bytes past a %u-byte line (allocation at %u mod %u)",
-                (unsigned)(one % QK__NODES_LINE), QK__NODES_LINE, (unsigned)(mem % QK__NODES_LINE),
-                QK__NODES_LINE);
-  if ((char *)t->nodes < (char *)t->nodes_mem ||
-      (char *)t->nodes > (char *)t->nodes_mem + QK__NODES_SLACK)
-    return fail(&c, "node array outside its allocation's slack");
   const qk__node_t *r = &t->nodes[0];
   if (r->count != t->n_points)
     return fail(&c, "root count %u != points %zu", r->count, t->n_points);

@@ -120,12 +120,6 @@ static inline uint32_t qk__node_start(const qk_tree_t *t, qk_node_t v) { return 
 /* Points in a node's subtree (for a leaf: its own). */
 static inline uint32_t qk__node_count(const qk_tree_t *t, qk_node_t v) { return t->nodes[v].count; }
 
-/* Where node v's record lies (for tests of the array's placement: node 1, the first of
- * every block of four, starts a 64-byte line when the allocator aligns to 16). */
-static inline const void *qk__tree_node_addr(const qk_tree_t *t, qk_node_t v) {
-  return &t->nodes[v];
-}
-
 /* A hint that node v will be read soon. */
 static inline void qk__node_prefetch(const qk_tree_t *t, qk_node_t v) {
 #if defined(__GNUC__)

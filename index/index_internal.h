@@ -50,11 +50,8 @@ struct qk_tree {
   double root_x, root_y; /* the root square's lower-left corner */
   double side[QK_MAX_DEPTH_LIMIT + 2]; /* side length at each depth, exact halvings */
 
-  /* Nodes: node 0 is the root; children come in blocks of four. The array starts inside
-   * its allocation `nodes_mem` (of qk__nodes_bytes(cap_nodes) bytes) at the offset that puts
-   * node 1, and so every block, on a 64-byte line (qk__nodes_resize). */
+  /* Nodes: node 0 is the root; children come in blocks of four. */
   qk__node_t *nodes;
-  void *nodes_mem;
   qk__block_t *blocks; /* cold records of the blocks, cap_nodes / 4 of them */
   uint32_t n_nodes;    /* slots used (high-water mark, including free blocks) */
   uint32_t cap_nodes;  /* node slots allocated (1 + 4 * cap_blocks once grown) */
@@ -301,27 +298,5 @@ void qk__run_jobs_dynamic(unsigned threads, unsigned n,
 
 /* Make room for at least `extra` more node slots. */
 qk_status_t qk__reserve_nodes(qk_tree_t *t, uint32_t extra);
-
-/* ---- the node array's allocation (index/tree.c) ---- */
-
-/* A block of four 16-byte nodes is one 64-byte cache line when node 1 starts a line; the
- * allocator guarantees 16 bytes of alignment only (glibc's large blocks start 16 bytes into
- * a page, which put every block across two lines), so the array is placed up to 48 bytes
- * into its allocation. */
-#define QK__NODES_LINE 64u
-#define QK__NODES_SLACK 48u
-
-/* Bytes allocated for an array of cap node slots (0 for none). */
-static inline size_t qk__nodes_bytes(uint32_t cap) {
-  return cap ? (size_t)cap * sizeof(qk__node_t) + QK__NODES_SLACK : 0;
-}
-
-/* Resize the node array to ncap slots (ncap >= n_nodes), keeping nodes [0, n_nodes) and
- * moving them when the allocation's new address needs another offset. QK_ERR_NOMEM, with
- * the tree unchanged, when the allocation fails. */
-qk_status_t qk__nodes_resize(qk_tree_t *t, size_t ncap);
-
-/* Free the node array. */
-void qk__nodes_free(qk_tree_t *t);
 
 #endif /* QUADKIT_INDEX_INTERNAL_H */

@@ -56,21 +56,16 @@ static qk_status_t say(qk_error_t *err, qk_status_t st, size_t item, const char 
 
 /* ---- allocation helpers ---------------------------------------------------------- */
 
-/* The capacity an array of *cap items grows to for `need` items: growth is by an eighth,
- * not a doubling, so that a tree under churn stays near the size of a fresh build (issue
- * 10); the copies stay amortised O(1) per item. */
-static size_t grown_cap(uint32_t cap, size_t need) {
-  size_t ncap = cap ? (size_t)cap : 16;
-  while (ncap < need) ncap += ncap / 8 + 16;
-  return ncap > UINT32_MAX ? UINT32_MAX : ncap;
-}
-
-/* Grow an array of `elem`-byte items from *cap to at least `need` items. */
+/* Grow an array of `elem`-byte items from *cap to at least `need` items. Growth is by an
+ * eighth, not a doubling, so that a tree under churn stays near the size of a fresh build
+ * (issue 10); the copies stay amortised O(1) per item. */
 static qk_status_t grow(const qk_allocator_t *a, void **arr, uint32_t *cap, size_t need,
                         size_t elem) {
   if (need <= *cap) return QK_OK;
   if (need > UINT32_MAX) return QK_ERR_LIMIT;
-  size_t ncap = grown_cap(*cap, need);
+  size_t ncap = *cap ? (size_t)*cap : 16;
+  while (ncap < need) ncap += ncap / 8 + 16;
+  if (ncap > UINT32_MAX) ncap = UINT32_MAX;
   if (ncap > SIZE_MAX / elem) return QK_ERR_LIMIT;
   void *p = qk__realloc(a, *arr, (size_t)*cap * elem, ncap * elem);
   if (!p) return QK_ERR_NOMEM;
@@ -79,52 +74,13 @@ static qk_status_t grow(const qk_allocator_t *a, void **arr, uint32_t *cap, size
   return QK_OK;
 }
 
-qk_status_t qk__nodes_resize(qk_tree_t *t, size_t ncap) {
-  assert(ncap >= t->n_nodes && ncap > 0);
-  if (ncap > UINT32_MAX || ncap > (SIZE_MAX - QK__NODES_SLACK) / sizeof(qk__node_t))
-    return QK_ERR_LIMIT;
-  char *old = t->nodes_mem;
-  size_t off = old ? (size_t)((char *)t->nodes - old) : 0;
-  char *m =
-      qk__realloc(&t->alloc, old, qk__nodes_bytes(t->cap_nodes), qk__nodes_bytes((uint32_t)ncap));
-  if (!m) return QK_ERR_NOMEM;
-  /* The offset that puts node 1 on a line: 0, 16, 32 or 48 bytes from an address aligned to
-   * 16, as every allocator's is for these sizes (one aligned to less gets offset 0, which is
-   * correct, only slower). The allocation kept the first min(old, new) bytes, which hold
-   * nodes [0, n_nodes) at the old offset: a shrink keeps ncap >= n_nodes nodes past an
-   * offset of at most the slack. */
-  size_t noff =
-      (QK__NODES_LINE - ((uintptr_t)m + sizeof(qk__node_t)) % QK__NODES_LINE) % QK__NODES_LINE;
-  if (noff > QK__NODES_SLACK) noff = 0;
-  if (noff != off && t->n_nodes)
-    memmove(m + noff, m + off, (size_t)t->n_nodes * sizeof(qk__node_t));
-  t->nodes_mem = m;
-  t->nodes = (qk__node_t *)(void *)(m + noff);
-  t->cap_nodes = (uint32_t)ncap;
-  return QK_OK;
-}
-
-void qk__nodes_free(qk_tree_t *t) {
-  qk__free(&t->alloc, t->nodes_mem, qk__nodes_bytes(t->cap_nodes));
-  t->nodes_mem = NULL;
-  t->nodes = NULL;
-  t->cap_nodes = 0;
-}
-
-/* Grow the node array to at least `need` slots, as grow() the other arrays. */
-static qk_status_t grow_nodes(qk_tree_t *t, size_t need) {
-  if (need <= t->cap_nodes) return QK_OK;
-  if (need > UINT32_MAX) return QK_ERR_LIMIT;
-  return qk__nodes_resize(t, grown_cap(t->cap_nodes, need));
-}
-
 qk_status_t qk__reserve_nodes(qk_tree_t *t, uint32_t extra) {
   /* Blocks on the free list can be reused; the rest must fit after n_nodes. The hot and
    * the cold arrays grow separately: if the second fails, the first is only larger. */
   size_t reusable = (size_t)t->n_free_blocks * 4;
   if (extra <= reusable) return QK_OK;
   size_t need = (size_t)t->n_nodes + (extra - reusable);
-  qk_status_t st = grow_nodes(t, need);
+  qk_status_t st = grow(&t->alloc, (void **)&t->nodes, &t->cap_nodes, need, sizeof(qk__node_t));
   if (st) return st;
   return grow(&t->alloc, (void **)&t->blocks, &t->cap_blocks, (need - 1 + 3) / 4,
               sizeof(qk__block_t));
@@ -675,7 +631,7 @@ static qk_status_t fill(qk_tree_t *t, const qk_point_t *points, size_t n, qk_squ
   t->n_slots = t->n_ids = 0;
   t->n_points = 0;
   t->n_nodes = 0;
-  if ((st = grow_nodes(t, 1))) return st;
+  if ((st = grow(&t->alloc, (void **)&t->nodes, &t->cap_nodes, 1, sizeof(qk__node_t)))) return st;
   t->n_nodes = 1;
   t->nodes[0] = (qk__node_t){.child = QK_NONE, .start = 0, .count = 0, .room = 0};
   /* At least one slot even for an empty tree, so that a leaf's points are never a NULL
@@ -731,7 +687,14 @@ qk_status_t qk_tree_build_ex(const qk_point_t *points, size_t n, const qk_tree_o
   t->huge_pages = options->huge_pages != 0;
   if ((st = fill(t, points, n, root))) goto fail;
   /* Give back the node arrays' growth slack; if the allocator will not shrink, keep it. */
-  if (t->cap_nodes > t->n_nodes + t->n_nodes / 16) (void)qk__nodes_resize(t, t->n_nodes);
+  if (t->cap_nodes > t->n_nodes + t->n_nodes / 16) {
+    qk__node_t *nn = qk__realloc(&t->alloc, t->nodes, (size_t)t->cap_nodes * sizeof *nn,
+                                 (size_t)t->n_nodes * sizeof *nn);
+    if (nn) {
+      t->nodes = nn;
+      t->cap_nodes = t->n_nodes;
+    }
+  }
   uint32_t nb = (t->n_nodes - 1) / 4;
   if (t->cap_blocks > nb + nb / 16 && nb > 0) {
     qk__block_t *nk = qk__realloc(&t->alloc, t->blocks, (size_t)t->cap_blocks * sizeof *nk,
@@ -776,7 +739,7 @@ qk_status_t qk_tree_rebuild(qk_tree_t *t, const qk_point_t *points, size_t n, qk
 void qk_tree_free(qk_tree_t *t) {
   if (!t) return;
   qk_allocator_t a = t->alloc;
-  qk__nodes_free(t);
+  qk__free(&a, t->nodes, (size_t)t->cap_nodes * sizeof(qk__node_t));
   qk__free(&a, t->blocks, (size_t)t->cap_blocks * sizeof(qk__block_t));
   qk__free(&a, t->free_ids, (size_t)t->cap_free_ids * sizeof(qk_id_t));
   slots_t pts = {t->px, t->py, t->pid};

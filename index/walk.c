@@ -42,8 +42,8 @@ qk_status_t qk_tree_leaves(const qk_tree_t *t, qk_node_t *leaves, size_t cap, si
 
 size_t qk_tree_memory(const qk_tree_t *t) {
   if (!t) return 0;
-  return sizeof *t + qk__nodes_bytes(t->cap_nodes) + (size_t)t->cap_blocks * sizeof(qk__block_t) +
-         (size_t)t->cap_free_ids * sizeof(qk_id_t) +
+  return sizeof *t + (size_t)t->cap_nodes * sizeof(qk__node_t) +
+         (size_t)t->cap_blocks * sizeof(qk__block_t) + (size_t)t->cap_free_ids * sizeof(qk_id_t) +
          (size_t)t->cap_slots * (2 * sizeof(double) + sizeof(qk_id_t)) +
          (qk__id_map_if_made(t) ? (size_t)qk__id_map_capacity(t) * sizeof(uint32_t) : 0);
 }

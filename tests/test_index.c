@@ -31,13 +31,7 @@
  *    within 100 times its final size (each compaction used to leave every big leaf
  *    full, so that almost every insert moved one and set off the next compaction);
  *  - compact storage (issue 11): at 1M uniform points and capacity 32 a built tree holds
- *    at most 22 bytes per point (16 of coordinates, 4 of ids, the nodes in the rest);
- *  - node blocks on one line (issue 11): node 1, and so every block of four 16-byte nodes,
- *    starts a 64-byte line, with libc's allocator (a 1M-point build, whose node array is a
- *    large block 16 bytes into a page, on one and two threads) and with one that places
- *    every block 0, 16, 32 or 48 bytes past a line at random, so that growths move the
- *    array to new offsets: through inserts, removals, rebuilds and bulk builds, the tree is
- *    the same as with libc's allocator and valid, and nothing leaks.
+ *    at most 22 bytes per point (16 of coordinates, 4 of ids, the nodes in the rest).
  */
 #include <float.h>
 #include <pthread.h>
@@ -46,7 +40,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "index/index_access.h" /* qk__tree_node_addr, for the node array's placement */
 #include "qk_test.h"
 
 static const qkt_dist_t dists[] = {QKT_UNIFORM, QKT_CLUSTERED, QKT_DUPLICATES, QKT_GRID_EDGES};
@@ -1065,130 +1058,6 @@ static void test_index_build_streamed(void **state) {
   free(p);
 }
 
-/* ---- node blocks on cache lines ------------------------------------------------------ */
-
-/* An allocator whose blocks start 0, 16, 32 or 48 bytes past a 64-byte line, at random;
- * the underlying block's address is kept in the 16 bytes before the one handed out. */
-typedef struct shift_alloc {
-  qkt_rng_t r;
-  size_t live;
-} shift_alloc_t;
-
-static void *shift_alloc(void *ud, void *ptr, size_t osize, size_t nsize) {
-  shift_alloc_t *s = ud;
-  void *q = NULL;
-  if (nsize) {
-    size_t shift = 16 * qkt_rng_below(&s->r, 4);
-    char *base = aligned_alloc(64, (nsize + 64 + 64 + 63) / 64 * 64);
-    if (!base) return NULL;
-    q = base + 64 + shift;
-    memcpy((char *)q - 16, &base, sizeof base);
-    if (ptr) memcpy(q, ptr, osize < nsize ? osize : nsize);
-    s->live++;
-  }
-  if (ptr) {
-    char *old;
-    memcpy(&old, (char *)ptr - 16, sizeof old);
-    free(old);
-    s->live--;
-  }
-  return q;
-}
-
-static void assert_nodes_on_lines(const qk_tree_t *t) {
-  uintptr_t one = (uintptr_t)qk__tree_node_addr(t, 1);
-  if (one % 64) fail_msg("node 1 at %u bytes past a line", (unsigned)(one % 64));
-  QKT_CHECK_TREE(t);
-}
-
-static void test_index_nodes_on_lines(void **state) {
-  (void)state;
-  uint64_t seed = qkt_seed(1164);
-  qkt_rng_t r;
-  qkt_rng_seed(&r, seed);
-  print_message("seed %llu\n", (unsigned long long)seed);
-  shift_alloc_t sa = {.live = 0};
-  qkt_rng_seed(&sa.r, seed + 1);
-  qk_allocator_t al = {shift_alloc, &sa};
-  enum { N = 6000 };
-  qk_point_t *p = malloc(N * sizeof *p);
-  assert_non_null(p);
-  qkt_points(&r, QKT_CLUSTERED, p, N);
-  /* Inserts one by one, with every node growth on the shifting allocator: the array moves
-   * to other offsets (the node addresses change by other than a multiple of 64). */
-  qk_tree_options_t o = unit_root(2);
-  qk_tree_t *ref = NULL, *t = NULL;
-  assert_int_equal(qk_tree_build(NULL, 0, &o, &ref), QK_OK);
-  o.allocator = &al;
-  assert_int_equal(qk_tree_build(NULL, 0, &o, &t), QK_OK);
-  uintptr_t was = (uintptr_t)qk__tree_node_addr(t, 0);
-  int moves = 0;
-  for (size_t i = 0; i < N; i++) {
-    qk_id_t a, b;
-    assert_int_equal(qk_tree_insert(ref, p[i], &a), QK_OK);
-    assert_int_equal(qk_tree_insert(t, p[i], &b), QK_OK);
-    assert_int_equal(a, b);
-    uintptr_t now = (uintptr_t)qk__tree_node_addr(t, 0);
-    if (now != was) {
-      moves++;
-      assert_nodes_on_lines(t);
-    }
-    was = now;
-  }
-  assert_true(moves >= 10);
-  assert_nodes_on_lines(t);
-  qkt_assert_same_tree(ref, t);
-  /* Removals (merges free blocks), then more inserts into reused blocks and growth. */
-  for (qk_id_t id = 0; id < N; id += 3) {
-    assert_int_equal(qk_tree_remove(ref, id), QK_OK);
-    assert_int_equal(qk_tree_remove(t, id), QK_OK);
-  }
-  assert_nodes_on_lines(t);
-  qkt_assert_same_tree(ref, t);
-  /* Rebuilds into the arrays already there, smaller and then larger (growth). */
-  assert_int_equal(qk_tree_rebuild(ref, p, N / 4, NULL), QK_OK);
-  assert_int_equal(qk_tree_rebuild(t, p, N / 4, NULL), QK_OK);
-  assert_nodes_on_lines(t);
-  qkt_assert_same_tree(ref, t);
-  assert_int_equal(qk_tree_rebuild(ref, p, N, NULL), QK_OK);
-  assert_int_equal(qk_tree_rebuild(t, p, N, NULL), QK_OK);
-  assert_nodes_on_lines(t);
-  qkt_assert_same_tree(ref, t);
-  qk_tree_free(t);
-  /* Bulk builds (reserved to size, then shrunk) at several capacities. */
-  for (uint32_t cap = 1; cap <= 16; cap *= 4) {
-    qk_tree_options_t d = unit_root(cap);
-    qk_tree_t *a = NULL, *b = NULL;
-    assert_int_equal(qk_tree_build(p, N, &d, &a), QK_OK);
-    d.allocator = &al;
-    assert_int_equal(qk_tree_build(p, N, &d, &b), QK_OK);
-    assert_nodes_on_lines(b);
-    qkt_assert_same_tree(a, b);
-    qk_tree_free(a);
-    qk_tree_free(b);
-  }
-  qk_tree_free(ref);
-  assert_int_equal(sa.live, 0);
-  free(p);
-  /* libc's allocator: a large node array starts 16 bytes into a page, yet node 1 starts a
-   * line, on one thread and on two (the subtrees built in arrays of their own). */
-  enum { M = 1000000 };
-  p = malloc(M * sizeof *p);
-  assert_non_null(p);
-  qkt_points(&r, QKT_UNIFORM, p, M);
-  qk_tree_options_t u;
-  qk_tree_options_init(&u);
-  u.capacity = 32;
-  for (uint32_t threads = 1; threads <= 2; threads++) {
-    u.threads = threads;
-    qk_tree_t *b = NULL;
-    assert_int_equal(qk_tree_build(p, M, &u, &b), QK_OK);
-    assert_nodes_on_lines(b);
-    qk_tree_free(b);
-  }
-  free(p);
-}
-
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_index_build_invariants),
@@ -1209,7 +1078,6 @@ int main(void) {
       cmocka_unit_test(test_index_build_threads),
       cmocka_unit_test(test_index_build_streamed),
       cmocka_unit_test(test_index_memory_compact),
-      cmocka_unit_test(test_index_nodes_on_lines),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
