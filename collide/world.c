@@ -83,7 +83,7 @@ qk_status_t qk_world_new(const qk_world_options_t *options, qk_world_t **out) {
   qk_world_t *w = qk__realloc(&a, NULL, 0, sizeof *w);
   if (!w) return QK_ERR_NOMEM;
   memset(w, 0, sizeof *w);
-  w->alloc = a;
+  qk__wscr_init(w, &a); /* w->alloc: the scratch cache in front of a */
   w->opt = o;
   w->opt.allocator = NULL;
   w->free_head = QK_NONE;
@@ -111,6 +111,8 @@ void qk_world_free(qk_world_t *w) {
   qk__free(&a, w->near.v, w->near.cap * sizeof *w->near.v);
   for (unsigned t = 0; t < QK__KEEP_THREADS; t++)
     qk__free(&a, w->scr_tkeys[t].v, w->scr_tkeys[t].cap * sizeof *w->scr_tkeys[t].v);
+  qk__wscr_flush(w);
+  a = w->scr.user;
   qk__free(&a, w, sizeof *w);
 }
 
@@ -129,7 +131,8 @@ size_t qk_world_pair_bytes(const qk_world_t *w) {
          (w->cur.row ? 2 * (w->cur.n_nz + 1) * sizeof *w->cur.row : 0) +
          (w->began.cap + w->ended.cap + w->n_egen + w->scr_keys.cap) * sizeof(uint64_t) +
          w->cap_spare_b * sizeof *w->spare_b + kept_tkeys(w) +
-         (size_t)w->n_fbox * 4 * sizeof *w->fbox + w->near.cap * sizeof *w->near.v;
+         (size_t)w->n_fbox * 4 * sizeof *w->fbox + w->near.cap * sizeof *w->near.v +
+         qk__wscr_bytes(w);
 }
 
 size_t qk_world_bytes(const qk_world_t *w) {

@@ -8,6 +8,8 @@
 
 #include "collide/collide_internal.h"
 
+#include <stdatomic.h>
+
 /* Before a short hot loop over many keys (counting and scattering sorts): unrolled four
  * times, its index update, compare and branch are paid once for four keys (measured on
  * the frame's sorts: a few instructions a key of about ten). */
@@ -96,8 +98,34 @@ typedef struct qk__prows {
 /* The search threads whose key buffers an update keeps (beyond the first). */
 #define QK__KEEP_THREADS 7
 
+/* The update's large scratch kept between updates (collide/world_scratch.c): freed
+ * blocks of QK__WSCR_MIN bytes and more, up to QK__WSCR_BLOCKS, and the blocks taken from
+ * them (lent), larger than their users asked, with their true sizes. */
+#define QK__WSCR_MIN ((size_t)256 << 10)
+#define QK__WSCR_BLOCKS 32
+#define QK__WSCR_LENT 64
+typedef struct qk__wscr_blk {
+  void *p;
+  size_t cap;
+  unsigned epoch; /* the update that kept it */
+} qk__wscr_blk_t;
+typedef struct qk__wscr_lent {
+  void *p;
+  size_t cap, size; /* its true size, and the size its user believes */
+} qk__wscr_lent_t;
+typedef struct qk__wscr {
+  qk_allocator_t user; /* the allocator the world was given */
+  atomic_flag lock;
+  int active;                     /* in an update */
+  unsigned epoch;                 /* updates begun */
+  unsigned n_blk, n_lent, n_resv; /* (n_resv: lent entries held for blocks being allocated) */
+  qk__wscr_blk_t blk[QK__WSCR_BLOCKS];
+  qk__wscr_lent_t lent[QK__WSCR_LENT];
+} qk__wscr_t;
+
 struct qk_world {
-  qk_allocator_t alloc;
+  qk_allocator_t alloc; /* the cache below, in front of scr.user */
+  qk__wscr_t scr;
   qk_world_options_t opt;
   qk__wobj_t *obj;
   uint32_t n_obj, cap_obj; /* slots used (high-water mark) and allocated */
@@ -147,6 +175,17 @@ struct qk_world {
                              asked once by qk__world_reorder) */
   struct qk__wpool *pool; /* the parked workers (collide/world_threads.c), or NULL */
 };
+
+/* The scratch cache: qk__wscr_init makes it the world's allocator (w->alloc) in front
+ * of user; between qk__wscr_begin and qk__wscr_end (an update) it keeps freed large
+ * blocks and hands them out again, and at the end frees those kept before the update
+ * began and not taken since. qk__wscr_flush frees every kept block (before the world is
+ * freed); qk__wscr_bytes is what it holds beyond what the world's users asked for. */
+void qk__wscr_init(qk_world_t *w, const qk_allocator_t *user);
+void qk__wscr_begin(qk_world_t *w);
+void qk__wscr_end(qk_world_t *w);
+void qk__wscr_flush(qk_world_t *w);
+size_t qk__wscr_bytes(const qk_world_t *w);
 
 /* 2^e for e in [-1022, 1023], exactly (cheaper than ldexp in the inner loops; scaling
  * by it is exact for the world's values, which never come near the subnormals). */

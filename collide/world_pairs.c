@@ -1186,7 +1186,9 @@ qk_status_t qk_world_update(qk_world_t *w) {
   if (!w) return QK_ERR_INVALID;
   qk__world_pool_start(w, qk__world_update_threads(w));
   qk__world_pool_hold(w, 1);
+  qk__wscr_begin(w);
   qk_status_t st = update(w);
+  qk__wscr_end(w);
   qk__world_pool_hold(w, 0);
   return st;
 }

@@ -24,7 +24,11 @@
  *  - churn: 10^5 frames of moves, adds and removes on a small world stay within 1.2x the
  *    memory of a fresh world holding the same objects;
  *  - allocation failure at every N in add and update leaves the world unchanged, no leak
- *    (also in a began-only update on two and three threads);
+ *    (also in a began-only update on two and three threads, and in a threaded update
+ *    whose large scratch comes from the blocks the update before kept);
+ *  - the update's kept scratch: a steady frame allocates (almost) no fresh large block,
+ *    every block given back with the size it was allocated with and its canary intact,
+ *    the kept bytes dropping when the world shrinks, every byte back after free;
  *  - two threads give the same pairs and batch ray hits as one (also on both sides of
  *    thread_min, live objects crossing it), and three reader threads
  *    querying one world at once get the single-threaded answers (run under TSan by
@@ -2135,9 +2139,10 @@ static void *locked_alloc(void *ud, void *p, size_t osize, size_t nsize) {
   return r;
 }
 
-static void test_world_nomem_threads(void **s) {
-  (void)s;
-  enum { N = 4400 };
+/* (N 4 400: the update's blocks are below the scratch cache's 256 KB, so each failing
+ * update allocates fresh; 20 000: the failing update is the second, its large scratch
+ * taken from the blocks the first kept.) */
+static void nomem_threads(int N) {
   qkt_rng_t r;
   qkt_rng_seed(&r, g_seed + 41);
   qk_shape_t *sh = malloc(2 * N * sizeof *sh);
@@ -2178,6 +2183,114 @@ static void test_world_nomem_threads(void **s) {
   assert_true(calls >= 12); /* (the threaded rows allocate a dozen blocks and more) */
   qk_world_free(w0);
   free(sh);
+}
+
+static void test_world_nomem_threads(void **s) {
+  (void)s;
+  nomem_threads(4400);
+}
+
+static void test_world_nomem_threads_warm(void **s) {
+  (void)s;
+  nomem_threads(QKT_TSAN ? 4400 : 20000);
+}
+
+/* The update's large scratch kept between updates: an allocator that counts the fresh
+ * blocks of 256 KB and more and puts a canary after every block (checked when it comes
+ * back, so a kept block handed out smaller than its request fails here, as does a size
+ * that does not match the block). After two frames of warm-up a steady frame allocates
+ * (almost) no fresh large block, with pairs equal to a world on one thread; when most
+ * objects are removed the kept bytes drop within three updates; after qk_world_free every
+ * byte is back. */
+typedef struct canary_alloc {
+  pthread_mutex_t mu;
+  size_t live, big_fresh;
+} canary_alloc_t;
+
+static const uint64_t g_canary = 0x5ca1ab1ec0ffee11u;
+static void *canary_fn(void *ud, void *p, size_t osize, size_t nsize) {
+  canary_alloc_t *a = ud;
+  size_t *h = p ? (size_t *)p - 2 : NULL;
+  pthread_mutex_lock(&a->mu);
+  if (h) {
+    uint64_t c;
+    memcpy(&c, (char *)p + h[0], sizeof c);
+    if (h[0] != osize || c != g_canary)
+      fail_msg("block of %zu given back as %zu (canary %d)", h[0], osize, c == g_canary);
+    a->live -= osize;
+  }
+  if (!p && nsize >= (256u << 10)) a->big_fresh++;
+  a->live += nsize;
+  pthread_mutex_unlock(&a->mu);
+  if (nsize == 0) {
+    free(h);
+    return NULL;
+  }
+  size_t *n = realloc(h, 2 * sizeof *n + nsize + sizeof g_canary);
+  if (!n) return NULL; /* (not reached in this test) */
+  n[0] = nsize;
+  memcpy((char *)(n + 2) + nsize, &g_canary, sizeof g_canary);
+  return n + 2;
+}
+
+static void test_world_scratch_kept(void **s) {
+  (void)s;
+  enum { N = 30000 };
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 171);
+  canary_alloc_t ca = {PTHREAD_MUTEX_INITIALIZER, 0, 0};
+  qk_allocator_t al = {canary_fn, &ca};
+  qk_shape_t *sh = malloc(N * sizeof *sh);
+  qk_handle_t *h = malloc(N * sizeof *h), *h0 = malloc(N * sizeof *h0);
+  for (int i = 0; i < N; i++) sh[i] = rnd_shape(&r, SC_UNIFORM, 1);
+  qk_world_options_t o;
+  qk_world_options_init(&o);
+  o.threads = 2, o.thread_min = 0, o.allocator = &al;
+  qk_world_t *w, *w0;
+  assert_int_equal(qk_world_new(&o, &w), QK_OK);
+  assert_int_equal(qk_world_new(NULL, &w0), QK_OK);
+  for (int i = 0; i < N; i++) {
+    assert_int_equal(qk_world_add(w, &sh[i], 0, &h[i]), QK_OK);
+    assert_int_equal(qk_world_add(w0, &sh[i], 0, &h0[i]), QK_OK);
+  }
+  size_t fresh[5];
+  for (int f = 0; f < 5; f++) {
+    size_t b0 = ca.big_fresh;
+    assert_int_equal(qk_world_update(w), QK_OK);
+    assert_int_equal(qk_world_update(w0), QK_OK);
+    fresh[f] = ca.big_fresh - b0;
+    for (int which = 0; which < 3; which++) {
+      size_t n0, n1;
+      qk_world_pairs_list(w0, (qk_pairs_which_t)which, NULL, 0, &n0);
+      qk_world_pairs_list(w, (qk_pairs_which_t)which, NULL, 0, &n1);
+      assert_int_equal(n0, n1);
+      qk_world_pair_t *p0 = malloc((n0 + 1) * sizeof *p0), *p1 = malloc((n1 + 1) * sizeof *p1);
+      qk_world_pairs_list(w0, (qk_pairs_which_t)which, p0, n0, &n0);
+      qk_world_pairs_list(w, (qk_pairs_which_t)which, p1, n1, &n1);
+      assert_memory_equal(p0, p1, n0 * sizeof *p0);
+      free(p0), free(p1);
+    }
+    for (int i = 0; i < N; i++) {
+      qk_shape_t m = moved(&r, sh[i]);
+      sh[i] = m;
+      assert_int_equal(qk_world_move(w, h[i], &m), QK_OK);
+      assert_int_equal(qk_world_move(w0, h0[i], &m), QK_OK);
+    }
+  }
+  if (fresh[0] < 5 || fresh[3] + fresh[4] > 2)
+    fail_msg("fresh blocks of 256 KB and more by frame: %zu %zu %zu %zu %zu", fresh[0], fresh[1],
+             fresh[2], fresh[3], fresh[4]);
+  size_t big = qk_world_bytes(w);
+  for (int i = 1000; i < N; i++) assert_int_equal(qk_world_remove(w, h[i]), QK_OK);
+  /* (the first update after the removals still ends 30 000 objects' pairs; its blocks
+   * are given back at the third) */
+  for (int f = 0; f < 3; f++) assert_int_equal(qk_world_update(w), QK_OK);
+  size_t small = qk_world_bytes(w);
+  if (small * 4 > big) fail_msg("kept %zu bytes after shrinking from %zu", small, big);
+  assert_true(ca.live >= small);
+  qk_world_free(w), qk_world_free(w0);
+  assert_int_equal(ca.live, 0);
+  free(sh), free(h), free(h0);
 }
 
 /* Allocation failure at every N in a began-only update on two and three threads (the
@@ -2283,6 +2396,8 @@ int main(void) {
       cmocka_unit_test(test_world_churn_memory),
       cmocka_unit_test(test_world_nomem),
       cmocka_unit_test(test_world_nomem_threads),
+      cmocka_unit_test(test_world_nomem_threads_warm),
+      cmocka_unit_test(test_world_scratch_kept),
       cmocka_unit_test(test_world_nomem_began_threads),
       cmocka_unit_test(test_world_nomem_began),
       cmocka_unit_test(test_world_threads),

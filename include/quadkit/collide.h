@@ -314,13 +314,16 @@ qk_status_t qk_world_get(const qk_world_t *w, qk_handle_t h, qk_shape_t *shape, 
 size_t qk_world_size(const qk_world_t *w);
 
 /** Bytes the world holds from its allocator (between updates: an update's scratch is
- * freed before it returns). */
+ * freed before it returns, except its large blocks kept for the next update, counted
+ * in qk_world_pair_bytes()). */
 size_t qk_world_bytes(const qk_world_t *w);
 
 /** The part of qk_world_bytes() that holds the pair state: the current pairs (4 bytes a
  * pair and 4 a slot), the began and ended lists (8 bytes a pair) and, after an update
  * that searched by bands, the float boxes by slot (16 bytes a slot) and the pairs whose
- * float boxes met but whose shapes did not (8 bytes each); the rest is the index
+ * float boxes met but whose shapes did not (8 bytes each), and the update's scratch kept
+ * for the next one (blocks of 256 KB and more, and the keys and rows of 8 MB and more);
+ * the rest is the index
  * (objects, order, cells). */
 size_t qk_world_pair_bytes(const qk_world_t *w);
 
