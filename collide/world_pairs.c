@@ -611,7 +611,8 @@ static void bjob_join(bjob_t *J, unsigned t) {
     r->row[zo + k] = zr[k], r->start[zo + k] = (uint32_t)(d + zr[zc + k]);
   if (J->bv[t].n) memcpy(J->jb + J->bo[t], J->bv[t].v, J->bv[t].n * sizeof *J->jb);
   if (J->ev[t].n) memcpy(J->je + J->eo[t], J->ev[t].v, J->ev[t].n * sizeof *J->je);
-  for (unsigned u = 1; t + 1 == J->nt && u < J->nt; u++)
+  if (t + 1 < J->nt) return;
+  for (unsigned u = 1; u < J->nt; u++)
     if (J->d[u] && J->base[u] != J->dd[u])
       memmove(r->b + J->dd[u], r->b + J->base[u], J->d[u] * sizeof *r->b);
 }

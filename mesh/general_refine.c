@@ -743,10 +743,9 @@ static qk_status_t refine(qk__gm_t *g) {
 }
 
 qk_status_t qk__gm_refine(qk__gm_t *g) {
-  /* Stars whole (check_star) with a plain size bound or none; the others are checked
-   * triangle by triangle from the insertion's list. */
-  const qk_mesh_options_t *opt = g->opt;
-  g->star_later = (opt->max_size > 0 && !opt->size_fn) || !(opt->max_size > 0 || opt->size_fn);
+  /* Stars whole (check_star) with a plain size bound or none, i.e. without a size
+   * function; with one, triangle by triangle from the insertion's list. */
+  g->star_later = !g->opt->size_fn;
   g->star_pending = 0;
   qk_status_t st = refine(g);
   g->star_later = g->star_pending = 0;
