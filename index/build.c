@@ -71,10 +71,12 @@ static qk_status_t from_buckets(qk_tree_t *t, uint32_t v, const qk__geom_t *gp, 
     uint32_t b = t->n_nodes, span = 1u << (2 * (L - depth - 1));
     t->n_nodes += 4;
     qk__node_t *n = t->nodes;
-    for (uint32_t q = 0; q < 4; q++) {
-      uint32_t s = cum[it.lo + q * span], e = cum[it.lo + (q + 1) * span];
-      n[b + q] = (qk__node_t){.child = QK_NONE, .start = s, .count = e - s, .room = e - s};
-    }
+    /* The five bounds of the four children's slot ranges, each read once. */
+    const uint32_t *cb = cum + it.lo;
+    uint32_t e[5] = {cb[0], cb[span], cb[2 * span], cb[3 * span], cb[4 * span]};
+    for (uint32_t q = 0; q < 4; q++)
+      n[b + q] = (qk__node_t){
+          .child = QK_NONE, .start = e[q], .count = e[q + 1] - e[q], .room = e[q + 1] - e[q]};
     n[it.v].child = b;
     n[it.v].start = 0;
     n[it.v].room = 0;

@@ -75,7 +75,8 @@ int qk__build_avx2(void) {
  * thread, and the scatter 4.0 against 3.2-3.6 ms. */
 #define PREFETCH_PTS 256
 
-/* fine_records() is made twice, for pairs and for separate arrays. */
+/* fine_staged() is made three times: for tags of the input's index with the 8-bit fine
+ * digit of the deepest grid, and of any digit, with and without the index. */
 #if defined(__GNUC__)
 #define QK__ALWAYS_INLINE inline __attribute__((always_inline))
 #else
@@ -434,17 +435,24 @@ tags_avx2(const uint16_t *k, size_t m, uint32_t tq, unsigned fbits, uint16_t *cb
 }
 #endif
 
+/* Where the next record of a bucket goes in the write-combining buffers, in bytes, and
+ * where its buffer ends: side by side, so that a point's bucket number indexes both with
+ * one address (two arrays took a shift and an address computation a point more). */
+typedef struct wc_at {
+  uint32_t off, end;
+} wc_at_t;
+
 /* One point into its bucket's write-combining buffer as a record (its coordinates and
  * tag); a full buffer goes to the bucket's next WC records of the record array, through
  * the caches (mode 0) or around them (1: SSE2, 2: AVX). */
-static QK__ALWAYS_INLINE void put_rec(unsigned char *bytes, uint32_t *off, const uint32_t *end,
-                                      uint32_t *next, rec_t *rec, const qk_point_t *pt, uint32_t c,
-                                      uint32_t tag, unsigned mode) {
-  uint32_t o = off[c];
+static QK__ALWAYS_INLINE void put_rec(unsigned char *bytes, wc_at_t *at, uint32_t *next, rec_t *rec,
+                                      const qk_point_t *pt, uint32_t c, uint32_t tag,
+                                      unsigned mode) {
+  uint32_t o = at[c].off;
   memcpy(bytes + o, pt, 16);
   memcpy(bytes + o + 16, &tag, 4);
   o += (uint32_t)sizeof(rec_t);
-  if (QK__UNLIKELY(o == end[c])) {
+  if (QK__UNLIKELY(o == at[c].end)) {
     /* next[c] is a multiple of WC and the array 64-byte aligned: whole lines */
     o -= WC * (uint32_t)sizeof(rec_t);
     const rec_t *src = (const rec_t *)(const void *)(bytes + o);
@@ -456,7 +464,7 @@ static QK__ALWAYS_INLINE void put_rec(unsigned char *bytes, uint32_t *off, const
       flush_wc(&rec[next[c]], src, mode != 0);
     next[c] += WC;
   }
-  off[c] = o;
+  at[c].off = o;
 }
 
 /* Pass 2 for share w: the points as records into their coarse buckets' segments, stable.
@@ -478,15 +486,14 @@ static void scatter_job(unsigned w, unsigned thread, void *ctx) {
   const bool stream = j->stream;
   const unsigned mode = !stream ? 0u : j->avx2 ? 2u : 1u;
   uint32_t next[1u << MAX_COARSE_BITS]; /* where bucket c's next buffer goes */
-  /* where bucket c's next record goes in buf, in bytes, and where its buffer ends */
-  uint32_t off[1u << MAX_COARSE_BITS], end[1u << MAX_COARSE_BITS];
+  wc_at_t at[1u << MAX_COARSE_BITS];    /* bucket c's place in buf */
   _Alignas(64) rec_t buf[(1u << MAX_COARSE_BITS) * WC];
   _Alignas(16) uint32_t tag[BLOCK];
   _Alignas(32) uint16_t cb[BLOCK];
   for (size_t c = 0; c < nc; c++) {
     next[c] = j->seg[(size_t)w * nc + c];
-    off[c] = (uint32_t)(c * WC * sizeof(rec_t));
-    end[c] = (uint32_t)((c + 1) * WC * sizeof(rec_t));
+    at[c].off = (uint32_t)(c * WC * sizeof(rec_t));
+    at[c].end = (uint32_t)((c + 1) * WC * sizeof(rec_t));
   }
   unsigned char *bytes = buf[0].b;
   for (size_t i0 = lo; i0 < hi; i0 += BLOCK) {
@@ -510,15 +517,15 @@ static void scatter_job(unsigned w, unsigned thread, void *ctx) {
     /* Four points a step, with one prefetch for their line of the input. */
     for (; q + 4 <= m; q += 4) {
       QK__PREFETCH_PTS(&pp[q]);
-      put_rec(bytes, off, end, next, rec, &pp[q], cb[q], tag[q], mode);
-      put_rec(bytes, off, end, next, rec, &pp[q + 1], cb[q + 1], tag[q + 1], mode);
-      put_rec(bytes, off, end, next, rec, &pp[q + 2], cb[q + 2], tag[q + 2], mode);
-      put_rec(bytes, off, end, next, rec, &pp[q + 3], cb[q + 3], tag[q + 3], mode);
+      put_rec(bytes, at, next, rec, &pp[q], cb[q], tag[q], mode);
+      put_rec(bytes, at, next, rec, &pp[q + 1], cb[q + 1], tag[q + 1], mode);
+      put_rec(bytes, at, next, rec, &pp[q + 2], cb[q + 2], tag[q + 2], mode);
+      put_rec(bytes, at, next, rec, &pp[q + 3], cb[q + 3], tag[q + 3], mode);
     }
-    for (; q < m; q++) put_rec(bytes, off, end, next, rec, &pp[q], cb[q], tag[q], mode);
+    for (; q < m; q++) put_rec(bytes, at, next, rec, &pp[q], cb[q], tag[q], mode);
   }
   for (size_t c = 0; c < nc; c++) {
-    uint32_t fill = (uint32_t)(off[c] - c * WC * sizeof(rec_t)) / (uint32_t)sizeof(rec_t);
+    uint32_t fill = (uint32_t)(at[c].off - c * WC * sizeof(rec_t)) / (uint32_t)sizeof(rec_t);
     memcpy(&rec[next[c]], &buf[c * WC], fill * sizeof *rec);
   }
 #if defined(__SSE2__)
@@ -603,25 +610,19 @@ static void copy_out(void *dst, const void *src, size_t bytes, bool stream, bool
   memcpy(dst, src, bytes);
 }
 
-/* Record r to slot d: its coordinates at px[stride * d] and py[stride * d] (stride 2:
- * interleaved pairs, py = px + 1, one 16-byte copy), its id at pid[d]. */
+/* Record r to slot d: its coordinates at px[d] and py[d], its id at pid[d]. */
 static QK__ALWAYS_INLINE void put_record(const rec_t *r, uint32_t d, qk_id_t id, double *px,
-                                         double *py, size_t stride, qk_id_t *pid) {
-  if (stride == 2) {
-    memcpy(&px[2 * (size_t)d], r->b, 16);
-  } else {
-    memcpy(&px[d], r->b, 8);
-    memcpy(&py[d], r->b + 8, 8);
-  }
+                                         double *py, qk_id_t *pid) {
+  memcpy(&px[d], r->b, 8);
+  memcpy(&py[d], r->b + 8, 8);
   pid[d] = id;
 }
 
-/* The records of coarse bucket c, every share's segment in turn, to their slots: record
- * of fine digit f to slot next[f]++, its coordinates at px[stride * slot] and
- * py[stride * slot] (stride 2: pairs), its id at pid[slot]. */
+/* The records of coarse bucket c, every share's segment in turn, to their slots in the
+ * point arrays (a bucket too large for the staging arrays): record of fine digit f to slot
+ * next[f]++. */
 static QK__ALWAYS_INLINE void fine_records(const bucket_job_t *j, unsigned c, uint32_t *next,
-                                           double *px, double *py, size_t stride, qk_id_t *pid,
-                                           bool gid) {
+                                           double *px, double *py, qk_id_t *pid, bool gid) {
   const size_t nc = j->nc;
   const unsigned fbits = j->fbits;
   const uint32_t mask = (1u << fbits) - 1;
@@ -639,13 +640,57 @@ static QK__ALWAYS_INLINE void fine_records(const bucket_job_t *j, unsigned c, ui
       uint32_t g0, g1;
       memcpy(&g0, r[0].b + 16, 4);
       memcpy(&g1, r[1].b + 16, 4);
-      put_record(&r[0], next[g0 & mask]++, id0 + (g0 >> fbits), px, py, stride, pid);
-      put_record(&r[1], next[g1 & mask]++, id0 + (g1 >> fbits), px, py, stride, pid);
+      put_record(&r[0], next[g0 & mask]++, id0 + (g0 >> fbits), px, py, pid);
+      put_record(&r[1], next[g1 & mask]++, id0 + (g1 >> fbits), px, py, pid);
     }
     if (r < e) {
       uint32_t g;
       memcpy(&g, r->b + 16, 4);
-      put_record(r, next[g & mask]++, id0 + (g >> fbits), px, py, stride, pid);
+      put_record(r, next[g & mask]++, id0 + (g >> fbits), px, py, pid);
+    }
+  }
+}
+
+/* fine_records() into the staging arrays: the record of fine digit f to staged slot d =
+ * at[f] / 4 (at[f] += 4), its pair at byte 16 d of sxy and its id at byte 4 d of sid. The
+ * slots counted in bytes of ids, which the pair's place scales by four in its address: a
+ * slot number took a copy and a shift more a record. The digit's bits as a constant where
+ * they are the deepest grid's eight (a byte: one move for the mask). */
+static QK__ALWAYS_INLINE void fine_staged(const bucket_job_t *j, unsigned c, uint32_t *at,
+                                          unsigned char *sxy, unsigned char *sid, bool gid,
+                                          unsigned fbits) {
+  const size_t nc = j->nc;
+  const uint32_t mask = (1u << fbits) - 1;
+  for (unsigned v = 0; v < j->ns; v++) {
+    size_t lo, hi;
+    qk__share_range(j->n, v, j->ns, &lo, &hi);
+    const uint32_t id0 = gid ? 0u : (uint32_t)lo;
+    const rec_t *r = j->rec + j->seg[(size_t)v * nc + c], *e = r + j->cnt[(size_t)v * nc + c];
+    /* Two records a step, read ahead as in fine_records(). */
+    for (; r + 2 <= e; r += 2) {
+      QK__PREFETCH((const void *)((uintptr_t)r + PREFETCH_RECS * sizeof *r));
+      uint32_t g0, g1;
+      memcpy(&g0, r[0].b + 16, 4);
+      memcpy(&g1, r[1].b + 16, 4);
+      uint32_t d0 = at[g0 & mask];
+      at[g0 & mask] = d0 + 4;
+      uint32_t i0 = id0 + (g0 >> fbits);
+      memcpy(sxy + 4 * (size_t)d0, r[0].b, 16);
+      memcpy(sid + d0, &i0, 4);
+      uint32_t d1 = at[g1 & mask];
+      at[g1 & mask] = d1 + 4;
+      uint32_t i1 = id0 + (g1 >> fbits);
+      memcpy(sxy + 4 * (size_t)d1, r[1].b, 16);
+      memcpy(sid + d1, &i1, 4);
+    }
+    if (r < e) {
+      uint32_t g;
+      memcpy(&g, r->b + 16, 4);
+      uint32_t d = at[g & mask];
+      at[g & mask] = d + 4;
+      uint32_t i = id0 + (g >> fbits);
+      memcpy(sxy + 4 * (size_t)d, r->b, 16);
+      memcpy(sid + d, &i, 4);
     }
   }
 }
@@ -755,14 +800,17 @@ static void fine_job(unsigned c, unsigned w, void *ud) {
   const uint32_t *cum = j->cum + (size_t)c * nf;
   if (b - a <= j->stage_cap) {
     /* Staged: coordinates as pairs (one line written a point, not two) and ids. */
-    for (uint32_t f = 0; f < nf; f++) next[f] = cum[f] - a;
+    for (uint32_t f = 0; f < nf; f++) next[f] = 4 * (cum[f] - a);
     double *sxy = j->sxy + (size_t)w * 2 * j->stage_cap;
     qk_id_t *sid = j->sid + (size_t)w * j->stage_cap;
+    unsigned char *bxy = (unsigned char *)sxy, *bid = (unsigned char *)sid;
     /* The tags' ids without an addition a record where they are the input's indices. */
-    if (j->gid)
-      fine_records(j, c, next, sxy, sxy + 1, 2, sid, true);
+    if (j->gid && j->fbits == 8)
+      fine_staged(j, c, next, bxy, bid, true, 8);
+    else if (j->gid)
+      fine_staged(j, c, next, bxy, bid, true, j->fbits);
     else
-      fine_records(j, c, next, sxy, sxy + 1, 2, sid, false);
+      fine_staged(j, c, next, bxy, bid, false, j->fbits);
     copy_pairs(j->t->px + a, j->t->py + a, sxy, b - a, j->stream, j->avx2);
     copy_out(j->t->pid + a, sid, (size_t)(b - a) * sizeof *sid, j->stream, j->avx2);
 #if defined(__SSE2__)
@@ -770,7 +818,7 @@ static void fine_job(unsigned c, unsigned w, void *ud) {
 #endif
   } else {
     for (uint32_t f = 0; f < nf; f++) next[f] = cum[f];
-    fine_records(j, c, next, j->t->px, j->t->py, 1, j->t->pid, j->gid);
+    fine_records(j, c, next, j->t->px, j->t->py, j->t->pid, j->gid);
   }
 }
 

@@ -120,6 +120,9 @@ static inline uint32_t qk__node_start(const qk_tree_t *t, qk_node_t v) { return 
 /* Points in a node's subtree (for a leaf: its own). */
 static inline uint32_t qk__node_count(const qk_tree_t *t, qk_node_t v) { return t->nodes[v].count; }
 
+/* Slots a leaf owns from its first (at least its count; 0 for an internal node). */
+static inline uint32_t qk__node_room(const qk_tree_t *t, qk_node_t v) { return t->nodes[v].room; }
+
 /* A hint that node v will be read soon. */
 static inline void qk__node_prefetch(const qk_tree_t *t, qk_node_t v) {
 #if defined(__GNUC__)
