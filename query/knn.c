@@ -644,16 +644,19 @@ static QK__ALWAYS_INLINE void prefetch_uncles(const qk_tree_t *t, const qk__path
 }
 
 /*
- * Before a 1-NN search scans the leaf at the end of path p, ask for the lines of the
- * leaf's nearest sibling, the one across the parent's midline nearer the query: its points
- * (the first, middle and last of up to 32, every line of up to 16), or its children's
- * block when it is internal. At 1M uniform points 38% of the searches go on after the
- * query leaf (0.5 more leaves a query), most often into that sibling, whose points were
- * then a miss after the scan that admitted it. Its node shares the leaf's block, whose two
- * lines the descent asked for. The other two siblings are not asked for: they are reached
- * less often; asking for all three gave nothing measurable in an earlier round, and for
- * both edge siblings was no steadier than for the nearest alone (docs/query.md). Only
- * hints: the search is the same.
+ * Before a 1-NN or sorted (k <= 32) search scans the leaf at the end of path p, ask for
+ * the lines of the leaf's nearest sibling, the one across the parent's midline nearer the
+ * query: its points (the first, middle and last of up to 32, every line of up to 16), or
+ * its children's block when it is internal. At 1M uniform points 38% of the 1-NN searches
+ * go on after the query leaf (0.5 more leaves a query), most often into that sibling,
+ * whose points were then a miss after the scan that admitted it. Its node shares the
+ * leaf's block, whose two lines the descent asked for. The other two siblings are not
+ * asked for: they are reached less often; asking for all three gave nothing measurable in
+ * an earlier round, and for both edge siblings was no steadier than for the nearest alone
+ * (docs/query.md). A k = 8 search scans 3 leaves a query, nearly all within its final
+ * k-th distance, the sibling most often among them: asking for it made k = 8 0.86-0.90
+ * and k = 32 0.95 of the time (in-process A/B, fifteenth session). Only hints: the search
+ * is the same.
  */
 static QK__ALWAYS_INLINE void prefetch_sibling(const qk_tree_t *t, const qk__path_t *p, double qx,
                                                double qy) {
@@ -695,6 +698,33 @@ static QK__ALWAYS_INLINE void scan(const qk_tree_t *t, qk_node_t leaf, double qx
     scan_one(t, leaf, qx, qy, b);
 }
 
+/*
+ * Before a leaf's scan in a search for k > 1, ask for what the search reads next: the top
+ * of the stack, its points when it is a leaf, else its children's block. Its node shares
+ * a block with the leaf or with one of the path's cells, read already. The scan then
+ * overlaps that miss instead of being followed by it. Whatever its bound: a test of it
+ * against the threshold would go either way at random (with the test, 24.1 mispredicted
+ * branches a k = 8 query and 52.4 for k = 32 under callgrind, without it 23.2 and 50.8,
+ * and no slower in the A/B). Only a hint: the search is the same.
+ * In-process A/B at 1M uniform points (fifteenth session), with the sibling asked for
+ * (prefetch_sibling) in both: k = 32 0.86-0.89 of the time against 0.95 without this,
+ * k = 8 about 0.01-0.02 better, k = 64 0.95-0.98 (the same driver against itself 1.03);
+ * for k = 1, whose climb rarely goes past the sibling, nothing measurable (1.005-1.01
+ * against 1.007-1.02), so it is not asked for there.
+ */
+static QK__ALWAYS_INLINE void prefetch_next(const qk_tree_t *t, const qk__cell_entry_t *stack,
+                                            int sp) {
+  if (sp == 0) return;
+  const qk__cell_entry_t *n = &stack[sp - 1];
+  const uint32_t c = qk__node_child(t, n->c.node);
+  if (c == QK_NONE) {
+    prefetch_points(t, n->c.node);
+  } else {
+    qk__node_prefetch(t, c);
+    qk__node_prefetch(t, c + 3);
+  }
+}
+
 /* Depth-first search of everything on the stack: pop, descend nearest-first, scan. */
 static QK__ALWAYS_INLINE void drain(const qk_tree_t *t, double qx, double qy, double e, best_t *b,
                                     qk__cell_entry_t *stack, int *sp, int kind) {
@@ -707,6 +737,7 @@ static QK__ALWAYS_INLINE void drain(const qk_tree_t *t, double qx, double qy, do
         /* The sorted search reads the ids of its answers at the end: this leaf's are then
          * in cache if it holds any, instead of a miss after the whole search. */
         if (kind == KIND_SORTED) prefetch_ids(t, cur.c.node);
+        if (kind != KIND_ONE) prefetch_next(t, stack, *sp);
         scan(t, cur.c.node, qx, qy, b, kind);
         /* The 1-NN search reads its answer's id at the end: the query leaf's ids were
          * asked for with its points, but a best found on the climb (13.9% of the answers
@@ -731,7 +762,7 @@ static QK__ALWAYS_INLINE void climb(const qk_tree_t *t, double qx, double qy, be
   unsigned len = p->len;
   if (kind == KIND_ONE) prefetch_uncles(t, p);
   if (kind != KIND_HEAP) prefetch_ids(t, c.node);
-  if (kind == KIND_ONE) prefetch_sibling(t, p, qx, qy);
+  if (kind != KIND_HEAP) prefetch_sibling(t, p, qx, qy);
   scan(t, c.node, qx, qy, b, kind);
   while (len > 0) {
     /* Everything inside c is done. When the threshold's ball lies inside c's square

@@ -338,6 +338,21 @@ static inline bool qk__dist_in_range(const qk_tree_t *t, qk_point_t q) {
 
 /* QK_OK, or why a kNN query cannot be answered. */
 static inline qk_status_t qk__knn_check(const qk_tree_t *t, qk_point_t q, double max_dist) {
+#if defined(__SSE2__)
+  {
+    /* The common case first, both axes at once: |q| and the root square's corners within
+     * the range (a NaN or an infinity fails the comparison) and a limit >= 0 (NaN fails it)
+     * mean all three tests below pass. Otherwise they say which fails first. */
+    const qk_square_t r = qk__tree_root_square(t);
+    const __m128d lim = _mm_set1_pd(QK__DIST_RANGE);
+    const __m128d mag = _mm_castsi128_pd(_mm_set1_epi64x(0x7fffffffffffffffLL));
+    const __m128d r0 = _mm_set_pd(r.y, r.x), r1 = _mm_add_pd(r0, _mm_set1_pd(r.side));
+    const __m128d aq = _mm_and_pd(_mm_unpacklo_pd(_mm_set_sd(q.x), _mm_set_sd(q.y)), mag);
+    const __m128d ar = _mm_max_pd(_mm_and_pd(r0, mag), _mm_and_pd(r1, mag));
+    const __m128d ok = _mm_and_pd(_mm_cmple_pd(aq, lim), _mm_cmple_pd(ar, lim));
+    if (_mm_movemask_pd(ok) == 3 && max_dist >= 0) return QK_OK;
+  }
+#endif
   if (!isfinite(q.x) || !isfinite(q.y)) return QK_ERR_NONFINITE;
   if (isnan(max_dist) || max_dist < 0) return QK_ERR_INVALID;
   if (!qk__dist_in_range(t, q)) return QK_ERR_LIMIT;

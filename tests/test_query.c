@@ -439,6 +439,57 @@ static void test_query_knn_distance_range(void **state) {
   }
 }
 
+/*
+ * The kNN argument checks in every combination of query coordinate and limit, single and
+ * batch: a non-finite query first (QK_ERR_NONFINITE), then a NaN or negative limit
+ * (QK_ERR_INVALID; a batch checks its limit first), then a coordinate beyond 2^510
+ * (QK_ERR_LIMIT), checked against those
+ * rules written out here. The checks take a shortcut for the common case (every value in
+ * range, both axes at once, query/query_internal.h): each value of the table fails it in
+ * its own way, and -0.0, 0, infinity and 2^510 itself must pass.
+ */
+static void test_query_knn_check_order(void **state) {
+  (void)state;
+  const qk_point_t p[3] = {{0.25, 0.5}, {0.75, 0.5}, {0.5, 0.9}};
+  qk_tree_t *t = NULL;
+  assert_int_equal(qk_tree_build(p, 3, NULL, &t), QK_OK);
+  const double big = 0x1p510, over = nextafter(0x1p510, INFINITY);
+  const double coords[] = {0.5, -0.0, big, -big, over, -over, 1e300, INFINITY, -INFINITY, NAN};
+  const double limits[] = {INFINITY, 1.0, 0.0, -0.0, -1.0, -INFINITY, NAN};
+  const size_t nc = sizeof coords / sizeof coords[0], nl = sizeof limits / sizeof limits[0];
+  int tag = 0;
+  for (size_t i = 0; i < nc; i++)
+    for (size_t j = 0; j < nc; j++)
+      for (size_t l = 0; l < nl; l++, tag++) {
+        const qk_point_t q = {coords[i], coords[j]};
+        const double md = limits[l];
+        qk_status_t want = QK_OK;
+        if (!isfinite(q.x) || !isfinite(q.y))
+          want = QK_ERR_NONFINITE;
+        else if (isnan(md) || md < 0)
+          want = QK_ERR_INVALID;
+        else if (fabs(q.x) > 0x1p510 || fabs(q.y) > 0x1p510)
+          want = QK_ERR_LIMIT;
+        /* The batch checks its one limit before any query. */
+        const qk_status_t want_b = (isnan(md) || md < 0) ? QK_ERR_INVALID : want;
+        for (size_t k = 1; k <= 4; k += 3) {
+          qk_neighbor_t nb[4];
+          size_t m = 9, counts[1] = {9};
+          if (qk_query_knn(t, q, k, md, nb, &m) != want ||
+              qk_query_knn_batch(t, &q, 1, k, md, nb, counts) != want_b)
+            fail_msg("knn check: case %d (%g, %g) limit %g k %zu", tag, q.x, q.y, md, k);
+          if (want != QK_OK) continue;
+          /* In range: the brute-force answer. */
+          qk_neighbor_t w[4];
+          const size_t nw = qko_knn(p, NULL, 3, q, k, md, w);
+          assert_nb_equal(nb, counts[0], w, nw, "knn-check-batch", (size_t)tag);
+          assert_int_equal(qk_query_knn(t, q, k, md, nb, &m), QK_OK);
+          assert_nb_equal(nb, m, w, nw, "knn-check", (size_t)tag);
+        }
+      }
+  qk_tree_free(t);
+}
+
 static void test_query_stop_and_bad_args(void **state) {
   (void)state;
   qk_point_t p[100];
@@ -1120,6 +1171,7 @@ int main(void) {
   const struct CMUnitTest tests[] = {
     cmocka_unit_test(test_query_range_radius),
     cmocka_unit_test(test_query_knn_all_k),
+    cmocka_unit_test(test_query_knn_check_order),
     cmocka_unit_test(test_query_knn_large),
     cmocka_unit_test(test_query_knn_after_mutation),
     cmocka_unit_test(test_query_locate),
