@@ -1114,12 +1114,19 @@ out:
  * pages from the system (glibc: from 32 MB always), each page faulted in and zeroed every
  * frame: measured, a quarter of such a frame's time went to the kernel. So buffers from
  * QK__KEEP_BYTES on are kept for the next update: the keys' buffer (grown to hold the
- * sort's scratch after the keys), and the rows' buffer of the last frame once the new
- * rows replace it (the next rows are built in it). Smaller ones are freed, as the
- * allocator recycles them cheaply. A kept buffer more than twice what its frame used is
- * freed (the next frame allocates afresh).
+ * sort's scratch after the keys), the other search threads' keys, and the rows' buffer of
+ * the last frame once the new rows replace it (the next rows are built in it). Smaller
+ * ones are freed, as the allocator recycles them cheaply. A kept buffer more than twice
+ * what its frame used is freed (the next frame allocates afresh).
+ *
+ * The bound is the scratch cache's (world_scratch.c), which keeps the update's freed
+ * blocks from QK__WSCR_MIN on: a buffer of that size freed here would only be kept by the
+ * cache, or given back and faulted in again. It was 8 MB: then a search thread's keys
+ * (2 to 4 MB at 10^5 clustered boxes, 300 000 began candidates a thread) started each
+ * update from nothing and grew by doubling past the cache (a realloc that grows is the
+ * given allocator's), 3 MB of fresh pages an update on two threads.
  */
-#define QK__KEEP_BYTES ((size_t)8 << 20)
+#define QK__KEEP_BYTES QK__WSCR_MIN
 
 /* The rule for every kept buffer: cap elements of elem bytes are kept for a frame that
  * uses `used` of them when they are at least QK__KEEP_BYTES and at most twice that. */
@@ -1343,9 +1350,13 @@ static qk_status_t update(qk_world_t *w) {
   w->egen = eg, w->n_egen = 0;
   /* This frame's rows become the current pairs (their room cut to size when it is much
    * larger: a failed shrink is harmless), and the handles they stand for are the present
-   * generations. */
+   * generations. A buffer the rule of kept buffers keeps is not cut: the scratch cache
+   * keeps the room of a block cut to half or more in an update anyway, so the cut only
+   * hid that room, and two frames on, the rows, grown past the cut, found the buffer too
+   * small and took a fresh one (40 MB at 10^5 clustered boxes whose pairs fall by 1% a
+   * frame: 10 000 page faults every eighth update). */
   keep_rows(w);
-  if (nr.cap > nr.n + nr.n / 4 + 64) {
+  if (nr.cap > nr.n + nr.n / 4 + 64 && !keep_buf(nr.cap, nr.n, sizeof *nr.b)) {
     size_t c = nr.n ? nr.n : 1;
     uint32_t *p = qk__realloc(al, nr.b, nr.cap * sizeof *p, c * sizeof *p);
     if (p) nr.b = p, nr.cap = c;
