@@ -662,6 +662,7 @@ static size_t first_at_least(const uint32_t *a, size_t lo, size_t hi, size_t key
 typedef struct sjob {
   const qk_world_t *w;
   uint64_t *keys, *part;
+  const qk__kvec_t *src; /* (or NULL) chunk t: the keys thread t of the search found */
   size_t n;
   unsigned nt;
   int phase;
@@ -691,9 +692,9 @@ static inline __attribute__((always_inline)) unsigned sjob_range(const sjob_t *J
 
 /* Chunk [k0, k1)'s keys counted by range (scatter zero) or scattered into the ranges from
  * the cursors c. */
-static inline __attribute__((always_inline)) void sjob_pass(sjob_t *J, size_t k0, size_t k1,
-                                                            size_t *c, int scatter, const int two) {
-  const uint64_t *keys = J->keys;
+static inline __attribute__((always_inline)) void sjob_pass(sjob_t *J, const uint64_t *keys,
+                                                            size_t k0, size_t k1, size_t *c,
+                                                            int scatter, const int two) {
   uint64_t *pt = J->part;
   if (!scatter) {
     QK__UNROLL4
@@ -710,7 +711,9 @@ static inline __attribute__((always_inline)) void sjob_pass(sjob_t *J, size_t k0
 static void sjob_run(unsigned t, void *ud) {
   sjob_t *J = ud;
   const unsigned nt = J->nt;
-  const size_t k0 = J->n * t / nt, k1 = J->n * (t + 1) / nt;
+  /* chunk t: a share of the keys, or the ones thread t of the search found */
+  const uint64_t *keys = J->src ? J->src[t].v : J->keys;
+  const size_t k0 = J->src ? 0 : J->n * t / nt, k1 = J->src ? J->src[t].n : J->n * (t + 1) / nt;
   /* (the counts and cursors in locals: the chunks' rows of pc share cache lines) */
   size_t c[QK__RMAX];
   if (J->phase <= 1) { /* count the chunk's keys by range, or scatter them */
@@ -719,9 +722,9 @@ static void sjob_run(unsigned t, void *ud) {
     else
       memcpy(c, J->pc + (size_t)t * nt, nt * sizeof *c);
     if (nt == 2)
-      sjob_pass(J, k0, k1, c, J->phase, 1);
+      sjob_pass(J, keys, k0, k1, c, J->phase, 1);
     else
-      sjob_pass(J, k0, k1, c, J->phase, 0);
+      sjob_pass(J, keys, k0, k1, c, J->phase, 0);
     if (J->phase == 0) memcpy(J->pc + (size_t)t * nt, c, nt * sizeof *c);
   } else { /* range t's rows */
     const qk_allocator_t *al = &J->w->alloc;
@@ -737,8 +740,9 @@ static void sjob_run(unsigned t, void *ud) {
   }
 }
 
-static int began_rows_threads(const qk_world_t *w, uint64_t *keys, uint32_t *room, size_t n_room,
-                              size_t n, const uint32_t *cut, unsigned nt, qk__prows_t *nb) {
+static int began_rows_threads(const qk_world_t *w, uint64_t *keys, const qk__kvec_t *src,
+                              uint32_t *room, size_t n_room, size_t n, const uint32_t *cut,
+                              unsigned nt, qk__prows_t *nb) {
   const qk_allocator_t *al = &w->alloc;
   sjob_t *J = qk__realloc(al, NULL, 0, sizeof *J);
   if (!J) return 0;
@@ -746,7 +750,7 @@ static int began_rows_threads(const qk_world_t *w, uint64_t *keys, uint32_t *roo
   /* (the keys by range go in the new rows' buffer, not written yet, when it has the room:
    * it is usually the kept buffer of the frame before last, whose pages are in memory) */
   int own = n_room / 2 < n, ok = 0;
-  J->w = w, J->keys = keys, J->n = n, J->nt = nt, J->b = nb->b;
+  J->w = w, J->keys = keys, J->src = src, J->n = n, J->nt = nt, J->b = nb->b;
   J->part = own ? qk__realloc(al, NULL, 0, (n ? n : 1) * sizeof *keys) : (uint64_t *)room;
   if (!J->part) goto out;
   memcpy(J->cut, cut, (nt + 1) * sizeof *cut);
@@ -791,9 +795,12 @@ out:
 
 /* tmp and cnt: make_rows' scratch for the n began keys (one thread; on threads each range
  * takes its own, and the keys' room); r->b has room for the last frame's pairs and these. 0 when
- * memory ran short (the caller then frees *r, *bv, *ev and *nv). */
-__attribute__((noinline)) static int rows_began(const qk_world_t *w, uint64_t *keys, uint64_t *tmp,
-                                                size_t n, uint32_t *cnt, const float *fb, int exact,
+ * memory ran short (the caller then frees *r, *bv, *ev and *nv). With src (nt threads, and
+ * last frame's pairs), the keys are where the search's threads found them (src[t], nt of
+ * them) and keys is only room for n. */
+__attribute__((noinline)) static int rows_began(const qk_world_t *w, uint64_t *keys,
+                                                const qk__kvec_t *src, uint64_t *tmp, size_t n,
+                                                uint32_t *cnt, const float *fb, int exact,
                                                 unsigned nt, qk__prows_t *r, qk__kvec_t *bv,
                                                 qk__kvec_t *ev, qk__kvec_t *nv) {
   const qk_allocator_t *al = &w->alloc;
@@ -819,7 +826,7 @@ __attribute__((noinline)) static int rows_began(const qk_world_t *w, uint64_t *k
   }
   /* the began keys' rows: sorted by the same ranges on the threads */
   if (!(nt == 1 ? make_rows_all(al, keys, tmp, n, cnt, w->n_obj, &nb)
-                : began_rows_threads(w, keys, r->b, r->cap, n, cut, nt, &nb))) {
+                : began_rows_threads(w, keys, src, r->b, r->cap, n, cut, nt, &nb))) {
     qk__free(al, J, sizeof *J);
     rows_free(al, &nb);
     return 0;
@@ -1114,12 +1121,19 @@ out:
  * pages from the system (glibc: from 32 MB always), each page faulted in and zeroed every
  * frame: measured, a quarter of such a frame's time went to the kernel. So buffers from
  * QK__KEEP_BYTES on are kept for the next update: the keys' buffer (grown to hold the
- * sort's scratch after the keys), and the rows' buffer of the last frame once the new
- * rows replace it (the next rows are built in it). Smaller ones are freed, as the
- * allocator recycles them cheaply. A kept buffer more than twice what its frame used is
- * freed (the next frame allocates afresh).
+ * sort's scratch after the keys), the other search threads' keys, and the rows' buffer of
+ * the last frame once the new rows replace it (the next rows are built in it). Smaller
+ * ones are freed, as the allocator recycles them cheaply. A kept buffer more than twice
+ * what its frame used is freed (the next frame allocates afresh).
+ *
+ * The bound is the scratch cache's (world_scratch.c), which keeps the update's freed
+ * blocks from QK__WSCR_MIN on: a buffer of that size freed here would only be kept by the
+ * cache, or given back and faulted in again. It was 8 MB: then a search thread's keys
+ * (2 to 4 MB at 10^5 clustered boxes, 300 000 began candidates a thread) started each
+ * update from nothing and grew by doubling past the cache (a realloc that grows is the
+ * given allocator's), 3 MB of fresh pages an update on two threads.
  */
-#define QK__KEEP_BYTES ((size_t)8 << 20)
+#define QK__KEEP_BYTES QK__WSCR_MIN
 
 /* The rule for every kept buffer: cap elements of elem bytes are kept for a frame that
  * uses `used` of them when they are at least QK__KEEP_BYTES and at most twice that. */
@@ -1252,7 +1266,11 @@ static qk_status_t update(qk_world_t *w) {
       if (tk[t].n && t + 1 >= nt) split = 0; /* (not expected: the same threads) */
     }
     if (nt > 1 + QK__KEEP_THREADS) split = 0;
-    if (!split) { /* (found's room holds them all) */
+    /* (the began-only rows read them where they are, with found's room for all as the
+     * scratch: see rows_began; with no last frame's pairs they run on one thread) */
+    if (only_new && (nt < 2 || nt > QK__RMAX || !w->cur.n_nz)) split = 0;
+    if (st == QK_OK && !kv_room(al, &found, total)) st = QK_ERR_NOMEM;
+    if (st == QK_OK && !split) { /* (found's room holds them all) */
       for (unsigned t = 0; t < QK__KEEP_THREADS; t++) {
         if (tk[t].n) memcpy(found.v + found.n, tk[t].v, tk[t].n * sizeof *found.v);
         found.n += tk[t].n;
@@ -1312,7 +1330,8 @@ static qk_status_t update(qk_world_t *w) {
     if (cnt && (bv.v = qk__realloc(al, NULL, 0, bcap * sizeof *bv.v))) bv.cap = bcap;
     if (bv.v && (ev.v = qk__realloc(al, NULL, 0, ecap * sizeof *ev.v))) ev.cap = ecap;
     if (ev.v && only_new)
-      ok = rows_began(w, found.v, tmp, total, cnt, fb, fb_ok == 1, nt, &nr, &bv, &ev, &nn);
+      ok = rows_began(w, found.v, split ? src : NULL, tmp, total, cnt, fb, fb_ok == 1, nt, &nr, &bv,
+                      &ev, &nn);
     else if (ev.v)
       ok = make_rows_all(al, found.v, tmp, total, cnt, (uint32_t)n_obj, &nr) &&
            diff(w, &w->cur, &nr, dirty, &bv, &ev);
@@ -1343,9 +1362,13 @@ static qk_status_t update(qk_world_t *w) {
   w->egen = eg, w->n_egen = 0;
   /* This frame's rows become the current pairs (their room cut to size when it is much
    * larger: a failed shrink is harmless), and the handles they stand for are the present
-   * generations. */
+   * generations. A buffer the rule of kept buffers keeps is not cut: the scratch cache
+   * keeps the room of a block cut to half or more in an update anyway, so the cut only
+   * hid that room, and two frames on, the rows, grown past the cut, found the buffer too
+   * small and took a fresh one (40 MB at 10^5 clustered boxes whose pairs fall by 1% a
+   * frame: 10 000 page faults every eighth update). */
   keep_rows(w);
-  if (nr.cap > nr.n + nr.n / 4 + 64) {
+  if (nr.cap > nr.n + nr.n / 4 + 64 && !keep_buf(nr.cap, nr.n, sizeof *nr.b)) {
     size_t c = nr.n ? nr.n : 1;
     uint32_t *p = qk__realloc(al, nr.b, nr.cap * sizeof *p, c * sizeof *p);
     if (p) nr.b = p, nr.cap = c;
