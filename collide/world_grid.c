@@ -156,11 +156,20 @@ static inline drec_t rec_of(const qk__wobj_t *o, uint32_t slot) {
 
 /* File live dirty object o (slot i) in its new cell; its record. */
 static inline drec_t file_dirty(const qk_world_t *w, qk__wobj_t *o, uint32_t i) {
-  qk_box_t f = qk__world_fat_box(w, o);
+  double e;
+  qk_box_t f = qk__world_fat_box(w, o, &e);
   int level, forced;
   int32_t cx, cy;
   qk__world_cell_of(&f, &level, &cx, &cy, &forced);
   o->level = (int8_t)level, o->u.cx = cx, o->cy = cy;
+  /* Re-filed by a move that leaves the fat box (its extent e' widened by the margins, the
+   * speed's as of now) small enough for a level two steps finer, 2^level / 16: when
+   * e' (1 + 2 margin) + 2 min_margin and e' + 2 step margin are both at most that. (Not
+   * when its coordinates set its level.) */
+  double s = qk__pow2(level) / 16, t = (s - 2 * w->opt.min_margin) / (1 + 2 * w->opt.margin);
+  double ts = s - 2 * qk__world_step_margin(o->k.step, e);
+  if (ts < t) t = ts;
+  o->k.shrink = forced || !(t >= 0) ? -1.0f : (float)t;
   o->flags = (uint8_t)((o->flags & ~QK__WFORCED) | (forced ? QK__WFORCED : 0));
   return rec_of(o, i);
 }

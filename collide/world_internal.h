@@ -52,6 +52,10 @@ typedef struct qk__wobj {
   uint32_t dnext; /* the dirty list */
   int8_t level;
   uint8_t flags;
+  union {
+    float step;   /* while DIRTY: how far the move that made it dirty took it (its speed) */
+    float shrink; /* while filed: re-filed when its extent falls to this (a finer level) */
+  } k;
 } qk__wobj_t;
 
 /* A cell of the sorted loose grid: the objects order[start .. next cell's start). */
@@ -316,11 +320,22 @@ qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kve
  * coordinates raised the level. */
 void qk__world_cell_of(const qk_box_t *f, int *level, int32_t *cx, int32_t *cy, int *forced);
 
-/* The fat box of object o (its box widened by the margins). */
-static inline qk_box_t qk__world_fat_box(const qk_world_t *w, const qk__wobj_t *o) {
+/* The margin for a dirty object's speed: QK__WSTEP times the step of the move that made it
+ * dirty, at most QK__WSTEP_CAP times its extent e. */
+#define QK__WSTEP 2.0
+#define QK__WSTEP_CAP 32.0
+static inline double qk__world_step_margin(double step, double e) {
+  double m = QK__WSTEP * step, cap = QK__WSTEP_CAP * e;
+  return m < cap ? m : cap;
+}
+
+/* The fat box of dirty object o (its box widened by the margins: the larger of the size's and
+ * the speed's), and in *e its extent. */
+static inline qk_box_t qk__world_fat_box(const qk_world_t *w, const qk__wobj_t *o, double *e) {
   qk_box_t b = qk__wbox(o);
-  double e = qk__max(b.xmax - b.xmin, b.ymax - b.ymin);
-  double m = w->opt.margin * e + w->opt.min_margin;
+  *e = qk__max(b.xmax - b.xmin, b.ymax - b.ymin);
+  double m = w->opt.margin * *e + w->opt.min_margin, ms = qk__world_step_margin(o->k.step, *e);
+  if (ms > m) m = ms;
   if (!isfinite(m)) m = 0;
   return (qk_box_t){b.xmin - m, b.ymin - m, b.xmax + m, b.ymax + m};
 }

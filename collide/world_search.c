@@ -209,6 +209,41 @@ static int cross_run(share_t *s, uint32_t a, uint32_t blo, uint32_t bhi, const q
   return 1;
 }
 
+/* Every object of cell a against the objects of cells [u, u1) (two or three consecutive
+ * cells of the row above), each against the run of those cells whose boxes its float box
+ * meets at the ends: a cell whose float box (rounded from its box: monotone) misses the
+ * object's misses every object's float box in it. */
+static int cross_cells(share_t *s, uint32_t a, uint32_t u, uint32_t u1) {
+  const qk__wcell_t *cl = s->w->cells;
+  const qk_box_t *hb = s->pk->hb;
+  const float *fg = s->pk->fgrp;
+  float cb[3][4] = {{0}}; /* the cells' boxes as floats */
+  const uint32_t n = u1 - u;
+  for (uint32_t i = 0; i < n; i++) {
+    const qk_box_t *h = &hb[u + i];
+    cb[i][0] = (float)h->xmin, cb[i][1] = (float)h->ymin;
+    cb[i][2] = (float)h->xmax, cb[i][3] = (float)h->ymax;
+  }
+  float ub[4] = {cb[0][0], cb[0][1], cb[0][2], cb[0][3]}; /* the box around them */
+  for (uint32_t i = 1; i < n; i++) {
+    ub[0] = ub[0] < cb[i][0] ? ub[0] : cb[i][0], ub[1] = ub[1] < cb[i][1] ? ub[1] : cb[i][1];
+    ub[2] = ub[2] > cb[i][2] ? ub[2] : cb[i][2], ub[3] = ub[3] > cb[i][3] ? ub[3] : cb[i][3];
+  }
+  for (uint32_t k = cl[a].start, ke = cl[a + 1].start; k < ke; k++) {
+    const float *f = lane_of(fg, k);
+    uint32_t i = 0, j = n;
+#define QK__MEETS(c) (f[0] <= (c)[2] && (c)[0] <= f[8] && f[4] <= (c)[3] && (c)[1] <= f[12])
+    if (!QK__MEETS(ub)) continue;
+    while (i < j && !QK__MEETS(cb[i])) i++;
+    while (j > i && !QK__MEETS(cb[j - 1])) j--;
+#undef QK__MEETS
+    if (i == j) continue;
+    me_t m = me_of(s, k);
+    if (!test_run(s, &m, cl[u + i].start, cl[u + j].start)) return 0;
+  }
+  return 1;
+}
+
 /* The pairs of cell a with its own level: within it, with the next cell of its row when
  * adjacent, and with the cells of the row above whose loose squares meet its own (three
  * consecutive ones at most, found by *up, a cursor that only moves forward). */
@@ -220,11 +255,24 @@ static int same_level(share_t *s, uint32_t a, uint32_t *up) {
   /* Its objects and the next cell's follow in the order, so each object meets one run of
    * the ones after it. */
   uint32_t lo = c->start, hi = c[1].start, hi2 = hi;
+  float nx = 0; /* the next cell's least xmin as a float */
   if (c[1].level == l && c[1].cy == c->cy && c[1].cx == c->cx + 1 && boxes_meet(ha, &hb[a + 1]))
-    hi2 = c[2].start;
-  for (uint32_t k = lo; k < hi && k + 1 < hi2; k++) {
-    me_t m = me_of(s, k);
-    if (!test_run(s, &m, k + 1, hi2)) return 0;
+    hi2 = c[2].start, nx = (float)hb[a + 1].xmin;
+  /* (an object whose float xmax is below nx misses every float box of the next cell:
+   * rounding is monotone; its run then ends with its own cell) */
+  if (hi2 == hi) {
+    for (uint32_t k = lo; k + 1 < hi; k++) {
+      me_t m = me_of(s, k);
+      if (!test_run(s, &m, k + 1, hi)) return 0;
+    }
+  } else {
+    const float *fg = s->pk->fgrp;
+    for (uint32_t k = lo; k < hi; k++) {
+      uint32_t e = lane_of(fg, k)[8] >= nx ? hi2 : hi;
+      if (k + 1 >= e) continue;
+      me_t m = me_of(s, k);
+      if (!test_run(s, &m, k + 1, e)) return 0;
+    }
   }
   /* The row above: up to three consecutive cells, so one run too (without the end cells
    * whose boxes miss this one's). */
@@ -237,15 +285,16 @@ static int same_level(share_t *s, uint32_t a, uint32_t *up) {
   while (u1 < end && w->cells[u1].cy == ty && w->cells[u1].cx <= tx + 2) u1++;
   while (u < u1 && !boxes_meet(ha, &hb[u])) u++;
   while (u1 > u && !boxes_meet(ha, &hb[u1 - 1])) u1--;
-  if (u < u1) {
-    qk_box_t ub = hb[u];
-    for (uint32_t k = u + 1; k < u1; k++) {
-      ub.xmin = qk__min(ub.xmin, hb[k].xmin), ub.ymin = qk__min(ub.ymin, hb[k].ymin);
-      ub.xmax = qk__max(ub.xmax, hb[k].xmax), ub.ymax = qk__max(ub.ymax, hb[k].ymax);
-    }
-    if (!cross_run(s, a, w->cells[u].start, w->cells[u1].start, &ub)) return 0;
+  if (u == u1) return 1;
+  /* (a few objects: one run, checked against the box around the cells; trimming each
+   * object's run costs more than it saves) */
+  if (u + 1 < u1 && hi - lo >= 4) return cross_cells(s, a, u, u1);
+  qk_box_t ub = hb[u];
+  for (uint32_t k = u + 1; k < u1; k++) {
+    ub.xmin = qk__min(ub.xmin, hb[k].xmin), ub.ymin = qk__min(ub.ymin, hb[k].ymin);
+    ub.xmax = qk__max(ub.xmax, hb[k].xmax), ub.ymax = qk__max(ub.ymax, hb[k].ymax);
   }
-  return 1;
+  return cross_run(s, a, w->cells[u].start, w->cells[u1].start, &ub);
 }
 
 /* ---- finer levels: the coarser object's box walked over their sorted cells ---------- */

@@ -46,6 +46,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "collide/world_internal.h" /* (the re-filings: test_world_step_margin) */
 #include "qk_test.h"
 
 static uint64_t g_seed;
@@ -2426,6 +2427,81 @@ static void test_world_rows_kept_falling(void **s) {
   }
 }
 
+/* ---- the speed's margin (collide/world.c: a re-filed object's margin is at least twice
+ * its last step, at most 32 times its size) ---------------------------------------------- */
+
+/* Small boxes (1/64 .. 1/16, on the 1/64 grid) moving 1/4 or 3/16 an axis every frame,
+ * bouncing in a 24 x 24 square: every frame against brute force, and the re-filings (the
+ * dirty list after the moves) counted. With the size's margin alone such a box leaves its
+ * cell's loose square (1/4 .. 1/2 wide) nearly every frame; with the speed's it takes a
+ * few frames. Then one box jumps 1000 and stays: filed at a level no coarser than 65
+ * times its size allows (the cap), and not re-filed while it stays (the shrink rule
+ * keeps the margins it was filed with); a box shrinking from 4 to 1/64 in place is
+ * re-filed at a fine level. */
+static void test_world_step_margin(void **s) {
+  (void)s;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 9191);
+  qk_world_t *w;
+  assert_int_equal(qk_world_new(NULL, &w), QK_OK);
+  mirror_t m = {0};
+  enum { N = 400, FRAMES = 30 };
+  double vx[N], vy[N];
+  for (int i = 0; i < N; i++) {
+    double e = (double)(1 + qkt_rng_below(&r, 4)) / 64;
+    double x = (double)qkt_rng_below(&r, 20 * 64) / 64, y = (double)qkt_rng_below(&r, 20 * 64) / 64;
+    m_add(w, &m, (qk_shape_t){QK_SHAPE_BOX, x, y, x + e, y + e});
+    vx[i] = (qkt_rng_below(&r, 2) ? 0.25 : 0.1875) * (qkt_rng_below(&r, 2) ? 1 : -1);
+    vy[i] = (qkt_rng_below(&r, 2) ? 0.25 : 0.1875) * (qkt_rng_below(&r, 2) ? 1 : -1);
+  }
+  qk_world_pair_t *prev = NULL;
+  size_t np = 0, refiled = 0;
+  for (int f = 0; f < FRAMES; f++) {
+    for (size_t i = 0; f && i < m.n; i++) {
+      qk_shape_t b = m.s[i];
+      if (b.x + vx[i] < 0 || b.a + vx[i] > 24) vx[i] = -vx[i];
+      if (b.y + vy[i] < 0 || b.b + vy[i] > 24) vy[i] = -vy[i];
+      b.x += vx[i], b.a += vx[i], b.y += vy[i], b.b += vy[i];
+      m_move(w, &m, i, b);
+    }
+    if (f >= 5) refiled += w->n_dirty; /* (none added or removed) */
+    update_and_check(w, &m, &prev, &np, "step margin", f);
+  }
+  /* (measured: 0.09 a box a frame; 0.90 with the size's margin alone) */
+  double rate = (double)refiled / ((double)N * (FRAMES - 5));
+  if (getenv("QKT_VERBOSE")) printf("step margin: %.3f re-filings a box a frame\n", rate);
+  if (!(rate < 0.5))
+    fail_msg("seed %llu: %.2f re-filings a box a frame", (unsigned long long)g_seed, rate);
+
+  /* A jump of 1000, then still: the cap bounds the level (the fat box at most 65 times its
+   * extent e, so the level's square under 4 times that; 2^12 without the cap). */
+  qk_shape_t b = m.s[0];
+  const double e0 = b.a - b.x;
+  b.x += 1000, b.a += 1000;
+  m_move(w, &m, 0, b);
+  update_and_check(w, &m, &prev, &np, "step margin (jump)", FRAMES);
+  const qk__wobj_t *o = &w->obj[(uint32_t)m.h[0]];
+  assert_true(ldexp(1, o->level) < 4 * 65 * e0);
+  for (int f = 0; f < 3; f++) {
+    m_move(w, &m, 0, m.s[0]);
+    assert_int_equal(w->n_dirty, 0);
+    update_and_check(w, &m, &prev, &np, "step margin (still)", FRAMES + 1 + f);
+  }
+  /* Grown to 4 in place, then shrunk back to 1/64: re-filed, at level -4 or finer. */
+  b = m.s[1];
+  b.a = b.x + 4, b.b = b.y + 4;
+  m_move(w, &m, 1, b);
+  update_and_check(w, &m, &prev, &np, "step margin (grown)", FRAMES + 4);
+  assert_true(w->obj[(uint32_t)m.h[1]].level >= 2);
+  b.a = b.x + 1.0 / 64, b.b = b.y + 1.0 / 64;
+  m_move(w, &m, 1, b);
+  assert_int_equal(w->n_dirty, 1);
+  update_and_check(w, &m, &prev, &np, "step margin (shrunk)", FRAMES + 5);
+  assert_true(w->obj[(uint32_t)m.h[1]].level <= -4);
+  free(prev), free(m.h), free(m.s);
+  qk_world_free(w);
+}
+
 int main(void) {
   g_seed = qkt_seed(20261130);
   const struct CMUnitTest tests[] = {
@@ -2467,6 +2543,7 @@ int main(void) {
       cmocka_unit_test(test_world_threads_fork),
       cmocka_unit_test(test_world_concurrent_readers),
       cmocka_unit_test(test_world_rows_kept_falling),
+      cmocka_unit_test(test_world_step_margin),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
