@@ -621,16 +621,23 @@ static QK__ALWAYS_INLINE void put_record(const rec_t *r, uint32_t d, qk_id_t id,
 /* The records of coarse bucket c, every share's segment in turn, to their slots in the
  * point arrays (a bucket too large for the staging arrays): record of fine digit f to slot
  * next[f]++. */
+/* Share v's segment of coarse bucket c: its records [*r, *e), and the id of its share's
+ * first point (0 when the records carry global ids). */
+static QK__ALWAYS_INLINE uint32_t share_segment(const bucket_job_t *j, unsigned c, unsigned v,
+                                                bool gid, const rec_t **r, const rec_t **e) {
+  size_t lo, hi, k = (size_t)v * j->nc + c;
+  qk__share_range(j->n, v, j->ns, &lo, &hi);
+  *r = j->rec + j->seg[k], *e = *r + j->cnt[k];
+  return gid ? 0u : (uint32_t)lo;
+}
+
 static QK__ALWAYS_INLINE void fine_records(const bucket_job_t *j, unsigned c, uint32_t *next,
                                            double *px, double *py, qk_id_t *pid, bool gid) {
-  const size_t nc = j->nc;
   const unsigned fbits = j->fbits;
   const uint32_t mask = (1u << fbits) - 1;
   for (unsigned v = 0; v < j->ns; v++) {
-    size_t lo, hi;
-    qk__share_range(j->n, v, j->ns, &lo, &hi);
-    const uint32_t id0 = gid ? 0u : (uint32_t)lo;
-    const rec_t *r = j->rec + j->seg[(size_t)v * nc + c], *e = r + j->cnt[(size_t)v * nc + c];
+    const rec_t *r, *e;
+    const uint32_t id0 = share_segment(j, c, v, gid, &r, &e);
     /* Two records a step: the second's slot is taken after the first's, as one at a time
      * would (they may share a fine bucket). The records come from memory (written around
      * the caches) and are read ahead by hand, about 2 KB: the hardware's prefetch alone
@@ -656,41 +663,37 @@ static QK__ALWAYS_INLINE void fine_records(const bucket_job_t *j, unsigned c, ui
  * slots counted in bytes of ids, which the pair's place scales by four in its address: a
  * slot number took a copy and a shift more a record. The digit's bits as a constant where
  * they are the deepest grid's eight (a byte: one move for the mask). */
+/* Record r (its digits g) staged: to slot at[f] / 4 of fine digit f, at[f] += 4. */
+static QK__ALWAYS_INLINE void stage_record(const rec_t *r, uint32_t g, uint32_t *at,
+                                           unsigned char *sxy, unsigned char *sid, uint32_t id0,
+                                           uint32_t mask, unsigned fbits) {
+  uint32_t d = at[g & mask];
+  at[g & mask] = d + 4;
+  uint32_t i = id0 + (g >> fbits);
+  memcpy(sxy + 4 * (size_t)d, r->b, 16);
+  memcpy(sid + d, &i, 4);
+}
+
 static QK__ALWAYS_INLINE void fine_staged(const bucket_job_t *j, unsigned c, uint32_t *at,
                                           unsigned char *sxy, unsigned char *sid, bool gid,
                                           unsigned fbits) {
-  const size_t nc = j->nc;
   const uint32_t mask = (1u << fbits) - 1;
   for (unsigned v = 0; v < j->ns; v++) {
-    size_t lo, hi;
-    qk__share_range(j->n, v, j->ns, &lo, &hi);
-    const uint32_t id0 = gid ? 0u : (uint32_t)lo;
-    const rec_t *r = j->rec + j->seg[(size_t)v * nc + c], *e = r + j->cnt[(size_t)v * nc + c];
+    const rec_t *r, *e;
+    const uint32_t id0 = share_segment(j, c, v, gid, &r, &e);
     /* Two records a step, read ahead as in fine_records(). */
     for (; r + 2 <= e; r += 2) {
       QK__PREFETCH((const void *)((uintptr_t)r + PREFETCH_RECS * sizeof *r));
       uint32_t g0, g1;
       memcpy(&g0, r[0].b + 16, 4);
       memcpy(&g1, r[1].b + 16, 4);
-      uint32_t d0 = at[g0 & mask];
-      at[g0 & mask] = d0 + 4;
-      uint32_t i0 = id0 + (g0 >> fbits);
-      memcpy(sxy + 4 * (size_t)d0, r[0].b, 16);
-      memcpy(sid + d0, &i0, 4);
-      uint32_t d1 = at[g1 & mask];
-      at[g1 & mask] = d1 + 4;
-      uint32_t i1 = id0 + (g1 >> fbits);
-      memcpy(sxy + 4 * (size_t)d1, r[1].b, 16);
-      memcpy(sid + d1, &i1, 4);
+      stage_record(&r[0], g0, at, sxy, sid, id0, mask, fbits);
+      stage_record(&r[1], g1, at, sxy, sid, id0, mask, fbits);
     }
     if (r < e) {
       uint32_t g;
       memcpy(&g, r->b + 16, 4);
-      uint32_t d = at[g & mask];
-      at[g & mask] = d + 4;
-      uint32_t i = id0 + (g >> fbits);
-      memcpy(sxy + 4 * (size_t)d, r->b, 16);
-      memcpy(sid + d, &i, 4);
+      stage_record(r, g, at, sxy, sid, id0, mask, fbits);
     }
   }
 }
