@@ -658,11 +658,6 @@ static QK__ALWAYS_INLINE void fine_records(const bucket_job_t *j, unsigned c, ui
   }
 }
 
-/* fine_records() into the staging arrays: the record of fine digit f to staged slot d =
- * at[f] / 4 (at[f] += 4), its pair at byte 16 d of sxy and its id at byte 4 d of sid. The
- * slots counted in bytes of ids, which the pair's place scales by four in its address: a
- * slot number took a copy and a shift more a record. The digit's bits as a constant where
- * they are the deepest grid's eight (a byte: one move for the mask). */
 /* Record r (its digits g) staged: to slot at[f] / 4 of fine digit f, at[f] += 4. */
 static QK__ALWAYS_INLINE void stage_record(const rec_t *r, uint32_t g, uint32_t *at,
                                            unsigned char *sxy, unsigned char *sid, uint32_t id0,
@@ -674,6 +669,11 @@ static QK__ALWAYS_INLINE void stage_record(const rec_t *r, uint32_t g, uint32_t 
   memcpy(sid + d, &i, 4);
 }
 
+/* fine_records() into the staging arrays: the record of fine digit f to staged slot d =
+ * at[f] / 4 (at[f] += 4), its pair at byte 16 d of sxy and its id at byte 4 d of sid. The
+ * slots counted in bytes of ids, which the pair's place scales by four in its address: a
+ * slot number took a copy and a shift more a record. The digit's bits as a constant where
+ * they are the deepest grid's eight (a byte: one move for the mask). */
 static QK__ALWAYS_INLINE void fine_staged(const bucket_job_t *j, unsigned c, uint32_t *at,
                                           unsigned char *sxy, unsigned char *sid, bool gid,
                                           unsigned fbits) {
