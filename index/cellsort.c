@@ -618,9 +618,6 @@ static QK__ALWAYS_INLINE void put_record(const rec_t *r, uint32_t d, qk_id_t id,
   pid[d] = id;
 }
 
-/* The records of coarse bucket c, every share's segment in turn, to their slots in the
- * point arrays (a bucket too large for the staging arrays): record of fine digit f to slot
- * next[f]++. */
 /* Share v's segment of coarse bucket c: its records [*r, *e), and the id of its share's
  * first point (0 when the records carry global ids). */
 static QK__ALWAYS_INLINE uint32_t share_segment(const bucket_job_t *j, unsigned c, unsigned v,
@@ -629,33 +626,6 @@ static QK__ALWAYS_INLINE uint32_t share_segment(const bucket_job_t *j, unsigned 
   qk__share_range(j->n, v, j->ns, &lo, &hi);
   *r = j->rec + j->seg[k], *e = *r + j->cnt[k];
   return gid ? 0u : (uint32_t)lo;
-}
-
-static QK__ALWAYS_INLINE void fine_records(const bucket_job_t *j, unsigned c, uint32_t *next,
-                                           double *px, double *py, qk_id_t *pid, bool gid) {
-  const unsigned fbits = j->fbits;
-  const uint32_t mask = (1u << fbits) - 1;
-  for (unsigned v = 0; v < j->ns; v++) {
-    const rec_t *r, *e;
-    const uint32_t id0 = share_segment(j, c, v, gid, &r, &e);
-    /* Two records a step: the second's slot is taken after the first's, as one at a time
-     * would (they may share a fine bucket). The records come from memory (written around
-     * the caches) and are read ahead by hand, about 2 KB: the hardware's prefetch alone
-     * left the pass a fifth slower on one thread (4.4-4.6 against 3.5-3.7 ms at 1M). */
-    for (; r + 2 <= e; r += 2) {
-      QK__PREFETCH((const void *)((uintptr_t)r + PREFETCH_RECS * sizeof *r));
-      uint32_t g0, g1;
-      memcpy(&g0, r[0].b + 16, 4);
-      memcpy(&g1, r[1].b + 16, 4);
-      put_record(&r[0], next[g0 & mask]++, id0 + (g0 >> fbits), px, py, pid);
-      put_record(&r[1], next[g1 & mask]++, id0 + (g1 >> fbits), px, py, pid);
-    }
-    if (r < e) {
-      uint32_t g;
-      memcpy(&g, r->b + 16, 4);
-      put_record(r, next[g & mask]++, id0 + (g >> fbits), px, py, pid);
-    }
-  }
 }
 
 /* Record r (its digits g) staged: to slot at[f] / 4 of fine digit f, at[f] += 4. */
@@ -669,7 +639,56 @@ static QK__ALWAYS_INLINE void stage_record(const rec_t *r, uint32_t g, uint32_t 
   memcpy(sid + d, &i, 4);
 }
 
-/* fine_records() into the staging arrays: the record of fine digit f to staged slot d =
+/* Where fine_bucket() puts a record: staged (at, sxy, sid), or straight to the point
+ * arrays (the slots next, px, py, pid). */
+typedef struct fine_dst {
+  uint32_t *slot; /* next[f], or at[f] in bytes of ids */
+  double *px, *py;
+  qk_id_t *pid;
+  unsigned char *sxy, *sid;
+} fine_dst_t;
+
+/* The records of coarse bucket c, every share's segment in turn, each to the place of
+ * its fine digit f (the low fbits of its tag) in d: staged (a constant here), or slot
+ * next[f]++ of the point arrays. Two records a step: the second's slot is taken after the
+ * first's, as one at a time would (they may share a fine bucket). The records come from
+ * memory (written around the caches) and are read ahead by hand, about 2 KB: the
+ * hardware's prefetch alone left the pass a fifth slower on one thread (4.4-4.6 against
+ * 3.5-3.7 ms at 1M). */
+static QK__ALWAYS_INLINE void fine_bucket(const bucket_job_t *j, unsigned c, bool gid,
+                                          unsigned fbits, bool staged, const fine_dst_t *d) {
+  const uint32_t mask = (1u << fbits) - 1;
+  for (unsigned v = 0; v < j->ns; v++) {
+    const rec_t *r, *e;
+    const uint32_t id0 = share_segment(j, c, v, gid, &r, &e);
+#define QK__PLACE(rp, g)                                                                           \
+  (staged ? stage_record((rp), (g), d->slot, d->sxy, d->sid, id0, mask, fbits)                     \
+          : put_record((rp), d->slot[(g)&mask]++, id0 + ((g) >> fbits), d->px, d->py, d->pid))
+    for (; r + 2 <= e; r += 2) {
+      QK__PREFETCH((const void *)((uintptr_t)r + PREFETCH_RECS * sizeof *r));
+      uint32_t g0, g1;
+      memcpy(&g0, r[0].b + 16, 4);
+      memcpy(&g1, r[1].b + 16, 4);
+      QK__PLACE(&r[0], g0);
+      QK__PLACE(&r[1], g1);
+    }
+    if (r < e) {
+      uint32_t g;
+      memcpy(&g, r->b + 16, 4);
+      QK__PLACE(r, g);
+    }
+#undef QK__PLACE
+  }
+}
+
+/* fine_bucket() to the point arrays (a bucket too large for the staging arrays). */
+static QK__ALWAYS_INLINE void fine_records(const bucket_job_t *j, unsigned c, uint32_t *next,
+                                           double *px, double *py, qk_id_t *pid, bool gid) {
+  const fine_dst_t d = {.slot = next, .px = px, .py = py, .pid = pid};
+  fine_bucket(j, c, gid, j->fbits, false, &d);
+}
+
+/* fine_bucket() into the staging arrays: the record of fine digit f to staged slot
  * at[f] / 4 (at[f] += 4), its pair at byte 16 d of sxy and its id at byte 4 d of sid. The
  * slots counted in bytes of ids, which the pair's place scales by four in its address: a
  * slot number took a copy and a shift more a record. The digit's bits as a constant where
@@ -677,25 +696,8 @@ static QK__ALWAYS_INLINE void stage_record(const rec_t *r, uint32_t g, uint32_t 
 static QK__ALWAYS_INLINE void fine_staged(const bucket_job_t *j, unsigned c, uint32_t *at,
                                           unsigned char *sxy, unsigned char *sid, bool gid,
                                           unsigned fbits) {
-  const uint32_t mask = (1u << fbits) - 1;
-  for (unsigned v = 0; v < j->ns; v++) {
-    const rec_t *r, *e;
-    const uint32_t id0 = share_segment(j, c, v, gid, &r, &e);
-    /* Two records a step, read ahead as in fine_records(). */
-    for (; r + 2 <= e; r += 2) {
-      QK__PREFETCH((const void *)((uintptr_t)r + PREFETCH_RECS * sizeof *r));
-      uint32_t g0, g1;
-      memcpy(&g0, r[0].b + 16, 4);
-      memcpy(&g1, r[1].b + 16, 4);
-      stage_record(&r[0], g0, at, sxy, sid, id0, mask, fbits);
-      stage_record(&r[1], g1, at, sxy, sid, id0, mask, fbits);
-    }
-    if (r < e) {
-      uint32_t g;
-      memcpy(&g, r->b + 16, 4);
-      stage_record(r, g, at, sxy, sid, id0, mask, fbits);
-    }
-  }
+  const fine_dst_t d = {.slot = at, .sxy = sxy, .sid = sid};
+  fine_bucket(j, c, gid, fbits, true, &d);
 }
 
 #if QK__CELL_AVX2
