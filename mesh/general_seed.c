@@ -239,13 +239,19 @@ static qk_status_t subdivide(qk__gm_t *g, uint32_t node, double X, double Y, dou
   }
   g->arena_n = base + 4 * k;
   /* A child with no feature, or one, is a leaf unless the size bound splits leaves: settled
-   * here without the call (most children of the grading are such leaves). */
+   * here without the call (most children of the grading are such leaves). So is a child with
+   * two features that need no separating there (two consecutive segments of a ring whose
+   * shared vertex lies in the child's grown square: a coastline's commonest leaf), by the
+   * test the call would make first. */
   const int settle = !GM_SIZE_SPLITS(g) || !(g->opt->max_size > 0 || g->opt->size_fn);
   for (unsigned q = 0; q < 4; q++) {
     if (settle && n[q] <= 1) {
       if (!n[q] && (st = mark_free(g, child + q))) break;
       continue;
     }
+    /* g->arena, not A: a sibling's subdivision may have moved it. */
+    const uint32_t *Lq = g->arena + base + q * k;
+    if (settle && n[q] == 2 && !separate(g, Lq[0], Lq[1], clo[q], chi[q])) continue;
     st = subdivide(g, child + q, cx[q], cy[q], h, clo[q], chi[q], depth + 1, base + q * k, n[q]);
     if (st) break;
   }
