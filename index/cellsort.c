@@ -63,8 +63,10 @@ int qk__build_avx2(void) {
 #define QK__PREFETCH(p) ((void)0)
 #define QK__UNLIKELY(c) (c)
 #endif
-/* How far ahead the fine pass reads its records. */
-#define PREFETCH_RECS 96
+/* How far ahead the fine pass reads its records (3.8 KB). On the Zen 5 machine 192
+ * records took the fine pass from 2.26 to 2.10 ms (minima; medians 2.71 to 2.53) at 1M
+ * uniform points on one thread, against 96; 48 was slower, 384 and 768 alike. */
+#define PREFETCH_RECS 192
 /* Read ahead of point p by PREFETCH_PTS points (an address past the array's end is only
  * a hint to the processor, computed outside C's pointer arithmetic). */
 #define QK__PREFETCH_PTS(p)                                                                        \
@@ -151,13 +153,18 @@ typedef struct rec {
 } rec_t;
 _Static_assert(sizeof(rec_t) == 20, "records of 20 bytes");
 
-/* Records per write-combining buffer: 16 of 20 bytes are five cache lines. */
-#define WC 16u
-/* Most coarse buckets: their write-combining buffers take 80 KB (in the second-level
- * cache). At the deepest grid the two digits are then 8 bits each: the fine pass writes
- * 256 streams of pairs and 256 of ids, whose current lines fit the first-level cache,
- * where 7 and 9 bits left it 1024 lines and a miss a point (callgrind, D1 48 KB, 1M
- * uniform points: fine pass 1.01 -> 0.45 M write misses, scatter 0.22 -> 0.44 M). */
+/* Records per write-combining buffer: 64 of 20 bytes are twenty cache lines, streamed to
+ * memory as one run. The scatter is bounded by its non-temporal stores' drain (their
+ * stores took a third of its samples); runs of twenty lines instead of five cut it from
+ * 2.40 to 1.93 ms (minima; medians 3.05 to 2.48) at 1M uniform points on one thread, 32
+ * records 2.11, 128 records 2.04 (AMD EPYC, Zen 5, 1 MB L2). */
+#define WC 64u
+/* Most coarse buckets: their write-combining buffers take 320 KB a thread (in the
+ * second-level cache, allocated with the scratch arrays, not on a worker's stack). At the deepest
+ * grid the two digits are then 8 bits each: the fine pass writes 256 streams of pairs and 256 of
+ * ids, whose current lines fit the first-level cache, where 7 and 9 bits left it 1024 lines and a
+ * miss a point (callgrind, D1 48 KB, 1M uniform points: fine pass 1.01 -> 0.45 M write misses,
+ * scatter 0.22 -> 0.44 M). */
 #define MAX_COARSE_BITS 8u
 /* Most points a thread stages in pass 3: 320 KB, within a core's second-level cache. */
 #define STAGE_MAX 16384u
@@ -176,6 +183,8 @@ typedef struct bucket_job {
   bool stream;               /* write records and points around the caches */
   uint16_t *key;             /* every point's cell */
   rec_t *rec;                /* 64-byte aligned */
+  unsigned char *wcb;        /* the scatter's write-combining buffers, nc * WC records a
+                                thread, 64-byte aligned */
   uint32_t *seg;             /* ns rows of nc: where the records of (w, c) start */
   uint32_t *cnt;             /* ns rows of nc: records of bucket c from share w */
   uint32_t *hist;            /* ns rows of 4^L: the points of every cell by share */
@@ -324,7 +333,7 @@ static void flush_wc(rec_t *d, const rec_t *s, bool stream) {
   if (stream) {
     __m128i *o = (__m128i *)(void *)d;
     const __m128i *i = (const __m128i *)(const void *)s;
-    /* five lines of four stores each, unrolled by hand (compilers keep a loop of 20) */
+    /* a line of four stores a step, unrolled by hand */
     for (unsigned q = 0; q < WC * sizeof(rec_t) / 16; q += 4) {
       __m128i a = i[q], b = i[q + 1], c = i[q + 2], e = i[q + 3];
       _mm_stream_si128(o + q, a);
@@ -341,8 +350,8 @@ static void flush_wc(rec_t *d, const rec_t *s, bool stream) {
 }
 
 #if QK__CELL_AVX2
-/* flush_wc()'s streaming path 32 bytes a store: ten loads and ten stores for the five
- * lines instead of twenty each (both places are 64-byte aligned). */
+/* flush_wc()'s streaming path 32 bytes a store: two loads and two stores a line instead
+ * of four each (both places are 64-byte aligned). */
 __attribute__((target("avx"))) static void flush_wc_avx(rec_t *d, const rec_t *s) {
   __m256i *o = (__m256i *)(void *)d;
   const __m256i *i = (const __m256i *)(const void *)s;
@@ -468,12 +477,11 @@ static QK__ALWAYS_INLINE void put_rec(unsigned char *bytes, wc_at_t *at, uint32_
 }
 
 /* Pass 2 for share w: the points as records into their coarse buckets' segments, stable.
- * Each bucket's records gather in a buffer of WC (five cache lines) that goes to memory
+ * Each bucket's records gather in a buffer of WC (twenty cache lines) that goes to memory
  * whole, with non-temporal stores for large inputs: no line of the record array is read
  * before it is written, and 2^8 buffers, unlike 2^8 scattered write streams, stay in
  * cache. */
 static void scatter_job(unsigned w, unsigned thread, void *ctx) {
-  (void)thread;
   const bucket_job_t *j = ctx;
   size_t lo, hi;
   qk__share_range(j->n, w, j->ns, &lo, &hi);
@@ -487,7 +495,7 @@ static void scatter_job(unsigned w, unsigned thread, void *ctx) {
   const unsigned mode = !stream ? 0u : j->avx2 ? 2u : 1u;
   uint32_t next[1u << MAX_COARSE_BITS]; /* where bucket c's next buffer goes */
   wc_at_t at[1u << MAX_COARSE_BITS];    /* bucket c's place in buf */
-  _Alignas(64) rec_t buf[(1u << MAX_COARSE_BITS) * WC];
+  rec_t *buf = (rec_t *)(void *)(j->wcb + (size_t)thread * nc * WC * sizeof(rec_t));
   _Alignas(16) uint32_t tag[BLOCK];
   _Alignas(32) uint16_t cb[BLOCK];
   for (size_t c = 0; c < nc; c++) {
@@ -652,7 +660,7 @@ typedef struct fine_dst {
  * its fine digit f (the low fbits of its tag) in d: staged (a constant here), or slot
  * next[f]++ of the point arrays. Two records a step: the second's slot is taken after the
  * first's, as one at a time would (they may share a fine bucket). The records come from
- * memory (written around the caches) and are read ahead by hand, about 2 KB: the
+ * memory (written around the caches) and are read ahead by hand, about 4 KB: the
  * hardware's prefetch alone left the pass a fifth slower on one thread (4.4-4.6 against
  * 3.5-3.7 ms at 1M). */
 static QK__ALWAYS_INLINE void fine_bucket(const bucket_job_t *j, unsigned c, bool gid,
@@ -887,9 +895,10 @@ typedef struct scratch {
   uint32_t *cum, *cbase, *cnt, *seg, *hist, *deep;
   uint16_t *key;
   void *rec_block; /* rec, before alignment */
+  void *wc_block;  /* the write-combining buffers, before alignment */
   double *sxy;
   qk_id_t *sid;
-  size_t nb, nc, n, ns, n_rec, rec_bytes, n_stage;
+  size_t nb, nc, n, ns, n_rec, rec_bytes, n_stage, wc_bytes;
 } scratch_t;
 
 static void scratch_free(const qk_tree_t *t, scratch_t *s) {
@@ -901,6 +910,7 @@ static void scratch_free(const qk_tree_t *t, scratch_t *s) {
   qk__free(&t->alloc, s->hist, s->ns * s->nb * sizeof *s->hist);
   qk__free(&t->alloc, s->key, s->n * sizeof *s->key);
   qk__free(&t->alloc, s->rec_block, s->rec_bytes);
+  qk__free(&t->alloc, s->wc_block, s->wc_bytes);
   qk__free(&t->alloc, s->sxy, 2 * s->n_stage * sizeof *s->sxy);
   qk__free(&t->alloc, s->sid, s->n_stage * sizeof *s->sid);
   memset(s, 0, sizeof *s);
@@ -1003,9 +1013,18 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
   /* The scatter writes 2^8 streams at once: on huge pages, they need fewer TLB entries. */
   if (t->huge_pages) qk__advise_huge(&t->alloc, s.rec_block, s.n_rec * sizeof(rec_t) + 64);
   j.rec = (rec_t *)(void *)((unsigned char *)s.rec_block + (-(uintptr_t)s.rec_block & 63u));
+  s.wc_bytes = (size_t)nw * nc * WC * sizeof(rec_t) + 64;
+  s.wc_block = qk__realloc(&t->alloc, NULL, 0, s.wc_bytes);
+  if (!s.wc_block) {
+    scratch_free(t, &s);
+    return QK_ERR_NOMEM;
+  }
+  j.wcb = (unsigned char *)s.wc_block + (-(uintptr_t)s.wc_block & 63u);
   run_pass(&j, scatter_share, scatter_job);
   qk__free(&t->alloc, s.key, n * sizeof *s.key);
   s.key = NULL;
+  qk__free(&t->alloc, s.wc_block, s.wc_bytes);
+  s.wc_block = NULL;
   /* Staging arrays for pass 3, each thread's as large as the largest coarse bucket up to
    * STAGE_MAX points. */
   size_t cap = most < STAGE_MAX ? most : STAGE_MAX;
