@@ -144,9 +144,46 @@ static inline me_t me_of(const share_t *s, uint32_t k) {
   return (me_t){probe_of(lane_of(s->pk->fgrp, k)), (uint64_t)slot << 32, slot, s->pk->fexact[k]};
 }
 
+/* test_run's rest from a lane whose pair the float boxes cannot decide: lanes `bits` of
+ * group q (the first of them that lane), then groups up to qe (the last masked by
+ * `last`), each pair decided exactly where it must be. Returns past the keys kept. */
+#if defined(__SSE2__)
+#define QK__PROBE_ARGS __m128 p0, __m128 p1, __m128 p2, __m128 p3
+#define QK__PROBE_PASS(p) (p).x0, (p).y0, (p).x1, (p).y1
+#else
+#define QK__PROBE_ARGS float p0, float p1, float p2, float p3
+#define QK__PROBE_PASS(p) (p).x0, (p).y0, (p).x1, (p).y1
+#endif
+static __attribute__((noinline)) uint64_t *test_run_exact(share_t *s, uint32_t slot, unsigned ek,
+                                                          QK__PROBE_ARGS, uint32_t q, unsigned bits,
+                                                          uint32_t qe, unsigned last, uint64_t *v) {
+  const probe_t p = {p0, p1, p2, p3}; /* (the probe apart: passed in registers) */
+  const uint64_t hs = (uint64_t)slot << 32;
+  const float *fg = s->pk->fgrp;
+  const uint32_t *ord = s->w->order;
+  const uint8_t *fx = s->pk->fexact;
+  for (;;) {
+    while (bits) {
+      uint32_t j = q * 4 + (uint32_t)__builtin_ctz(bits);
+      bits &= bits - 1;
+      uint32_t sj = ord[j];
+      *v = pair_key(slot, hs, sj);
+      v += (ek & fx[j]) ? 1 : qk__world_objects_meet(s->w, slot, sj);
+    }
+    if (q == qe) return v;
+    q++;
+    bits = group_hits(fg + (size_t)q * 16, &p);
+    if (q == qe) bits &= last;
+  }
+}
+
 /* The pairs of object m with the objects at order positions [lo, hi) (lo < hi): the
  * first and last groups masked to the range. The keys are written at once, and kept
- * when the pair is decided (the room for them all is reserved first). */
+ * when the pair is decided (the room for them all is reserved first). The loop makes no
+ * call while the float boxes decide (both exact: every box of the benchmark's scenes),
+ * so the probe stays in registers (a call would clobber them all, every group reloading
+ * it from the stack); the first pair they cannot decide hands the rest to
+ * test_run_exact. */
 static inline __attribute__((always_inline)) int test_run(share_t *s, const me_t *m, uint32_t lo,
                                                           uint32_t hi) {
   if (!kv_reserve(s, hi - lo)) return 0;
@@ -165,15 +202,18 @@ static inline __attribute__((always_inline)) int test_run(share_t *s, const me_t
     if (q == qe) bits &= last;
     while (bits) {
       uint32_t j = q * 4 + (uint32_t)__builtin_ctz(bits);
+      if (!(ek & fx[j])) {
+        v = test_run_exact(s, slot, ek, QK__PROBE_PASS(p), q, bits, qe, last, v);
+        goto done;
+      }
       bits &= bits - 1;
-      uint32_t sj = ord[j];
-      *v = pair_key(slot, hs, sj);
-      v += (ek & fx[j]) ? 1 : qk__world_objects_meet(s->w, slot, sj);
+      *v++ = pair_key(slot, hs, ord[j]);
     }
     if (q == qe) break;
     q++;
     bits = group_hits(fg + (size_t)q * 16, &p);
   }
+done:
   s->out.n = (size_t)(v - s->out.v);
   return 1;
 }
