@@ -61,6 +61,24 @@ static int kv_reserve(share_t *s, size_t more) {
   return 1;
 }
 
+/* Where the keys go, in locals for the loops of the grid's search (the count stored in
+ * s->out through the keys' own type would be reloaded after every key written): the next
+ * key and the end of the room. s->out.v is never NULL here (run_share reserves first). */
+typedef struct kc {
+  uint64_t *v, *end;
+} kc_t;
+static inline kc_t kc_open(const share_t *s) {
+  return (kc_t){s->out.v + s->out.n, s->out.v + s->out.cap};
+}
+static inline void kc_close(share_t *s, const kc_t *k) { s->out.n = (size_t)(k->v - s->out.v); }
+/* Room for `more` keys after k->v; 0 when memory ran short. */
+static __attribute__((noinline)) int kc_grow(share_t *s, kc_t *k, size_t more) {
+  kc_close(s, k);
+  if (!kv_reserve(s, more)) return 0;
+  *k = kc_open(s);
+  return 1;
+}
+
 static inline int boxes_meet(const qk_box_t *a, const qk_box_t *b) {
   return a->xmin <= b->xmax && b->xmin <= a->xmax && a->ymin <= b->ymax && b->ymin <= a->ymax;
 }
@@ -144,25 +162,25 @@ static inline me_t me_of(const share_t *s, uint32_t k) {
   return (me_t){probe_of(lane_of(s->pk->fgrp, k)), (uint64_t)slot << 32, slot, s->pk->fexact[k]};
 }
 
-/* The pairs of object m with the objects at order positions [lo, hi) (lo < hi): the
- * first and last groups masked to the range. The keys are written at once, and kept
- * when the pair is decided (the room for them all is reserved first). */
-static inline __attribute__((always_inline)) int test_run(share_t *s, const me_t *m, uint32_t lo,
-                                                          uint32_t hi) {
-  if (!kv_reserve(s, hi - lo)) return 0;
+/* test_run's rest from a lane whose pair the float boxes cannot decide: lanes `bits` of
+ * group q (the first of them that lane), then groups up to qe (the last masked by
+ * `last`), each pair decided exactly where it must be. Returns past the keys kept. */
+#if defined(__SSE2__)
+#define QK__PROBE_ARGS __m128 p0, __m128 p1, __m128 p2, __m128 p3
+#define QK__PROBE_PASS(p) (p).x0, (p).y0, (p).x1, (p).y1
+#else
+#define QK__PROBE_ARGS float p0, float p1, float p2, float p3
+#define QK__PROBE_PASS(p) (p).x0, (p).y0, (p).x1, (p).y1
+#endif
+static __attribute__((noinline)) uint64_t *test_run_exact(share_t *s, uint32_t slot, unsigned ek,
+                                                          QK__PROBE_ARGS, uint32_t q, unsigned bits,
+                                                          uint32_t qe, unsigned last, uint64_t *v) {
+  const probe_t p = {p0, p1, p2, p3}; /* (the probe apart: passed in registers) */
+  const uint64_t hs = (uint64_t)slot << 32;
   const float *fg = s->pk->fgrp;
   const uint32_t *ord = s->w->order;
   const uint8_t *fx = s->pk->fexact;
-  const uint32_t slot = m->slot;
-  const uint64_t hs = m->hs;
-  const unsigned ek = m->exact;
-  const probe_t p = m->p; /* (in registers: the keys' stores could alias m) */
-  uint64_t *v = s->out.v + s->out.n;
-  uint32_t q = lo >> 2, qe = (hi - 1) >> 2;
-  unsigned bits = group_hits(fg + (size_t)q * 16, &p) & ~((1u << (lo & 3)) - 1) & 15u;
-  const unsigned last = (2u << ((hi - 1) & 3)) - 1;
   for (;;) {
-    if (q == qe) bits &= last;
     while (bits) {
       uint32_t j = q * 4 + (uint32_t)__builtin_ctz(bits);
       bits &= bits - 1;
@@ -170,12 +188,61 @@ static inline __attribute__((always_inline)) int test_run(share_t *s, const me_t
       *v = pair_key(slot, hs, sj);
       v += (ek & fx[j]) ? 1 : qk__world_objects_meet(s->w, slot, sj);
     }
+    if (q == qe) return v;
+    q++;
+    bits = group_hits(fg + (size_t)q * 16, &p);
+    if (q == qe) bits &= last;
+  }
+}
+
+/* The pairs of object m with the objects at order positions [lo, hi) (lo < hi): the
+ * first and last groups masked to the range. The keys are written at once, and kept
+ * when the pair is decided (the room for them all is reserved first). The loop makes no
+ * call while the float boxes decide (both exact: every box of the benchmark's scenes),
+ * so the probe stays in registers (a call would clobber them all, every group reloading
+ * it from the stack); the first pair they cannot decide hands the rest to
+ * test_run_exact. */
+static inline __attribute__((always_inline)) int test_run_k(share_t *s, kc_t *kc, const me_t *m,
+                                                            uint32_t lo, uint32_t hi) {
+  if ((size_t)(kc->end - kc->v) < hi - lo && !kc_grow(s, kc, hi - lo)) return 0;
+  const float *fg = s->pk->fgrp;
+  const uint32_t *ord = s->w->order;
+  const uint8_t *fx = s->pk->fexact;
+  const uint32_t slot = m->slot;
+  const uint64_t hs = m->hs;
+  const unsigned ek = m->exact;
+  const probe_t p = m->p; /* (in registers: the keys' stores could alias m) */
+  uint64_t *v = kc->v;
+  uint32_t q = lo >> 2, qe = (hi - 1) >> 2;
+  unsigned bits = group_hits(fg + (size_t)q * 16, &p) & ~((1u << (lo & 3)) - 1) & 15u;
+  const unsigned last = (2u << ((hi - 1) & 3)) - 1;
+  for (;;) {
+    if (q == qe) bits &= last;
+    while (bits) {
+      uint32_t j = q * 4 + (uint32_t)__builtin_ctz(bits);
+      if (!(ek & fx[j])) {
+        v = test_run_exact(s, slot, ek, QK__PROBE_PASS(p), q, bits, qe, last, v);
+        goto done;
+      }
+      bits &= bits - 1;
+      *v++ = pair_key(slot, hs, ord[j]);
+    }
     if (q == qe) break;
     q++;
     bits = group_hits(fg + (size_t)q * 16, &p);
   }
-  s->out.n = (size_t)(v - s->out.v);
+done:
+  kc->v = v;
   return 1;
+}
+
+/* test_run_k with the keys' place read from and stored to s->out. */
+static inline __attribute__((always_inline)) int test_run(share_t *s, const me_t *m, uint32_t lo,
+                                                          uint32_t hi) {
+  kc_t k = kc_open(s);
+  int ok = test_run_k(s, &k, m, lo, hi);
+  kc_close(s, &k);
+  return ok;
 }
 
 /* Record the pairs of object m with the objects at order positions [lo, hi), all known
@@ -195,7 +262,8 @@ static int emit_run(share_t *s, const me_t *m, uint32_t lo, uint32_t hi) {
 
 /* Every object of cell a against the objects at order positions [blo, bhi) (other
  * cells' objects), whose boxes lie in ub. */
-static int cross_run(share_t *s, uint32_t a, uint32_t blo, uint32_t bhi, const qk_box_t *ub) {
+static int cross_run(share_t *s, kc_t *kc, uint32_t a, uint32_t blo, uint32_t bhi,
+                     const qk_box_t *ub) {
   const qk__wcell_t *cl = s->w->cells;
   const float *fg = s->pk->fgrp;
   /* ub as floats, for a one-lane check of each of a's objects first. */
@@ -204,7 +272,7 @@ static int cross_run(share_t *s, uint32_t a, uint32_t blo, uint32_t bhi, const q
     const float *f = lane_of(fg, k);
     if (!(f[0] <= bx1 && bx0 <= f[8] && f[4] <= by1 && by0 <= f[12])) continue;
     me_t m = me_of(s, k);
-    if (!test_run(s, &m, blo, bhi)) return 0;
+    if (!test_run_k(s, kc, &m, blo, bhi)) return 0;
   }
   return 1;
 }
@@ -213,7 +281,7 @@ static int cross_run(share_t *s, uint32_t a, uint32_t blo, uint32_t bhi, const q
  * cells of the row above), each against the run of those cells whose boxes its float box
  * meets at the ends: a cell whose float box (rounded from its box: monotone) misses the
  * object's misses every object's float box in it. */
-static int cross_cells(share_t *s, uint32_t a, uint32_t u, uint32_t u1) {
+static int cross_cells(share_t *s, kc_t *kc, uint32_t a, uint32_t u, uint32_t u1) {
   const qk__wcell_t *cl = s->w->cells;
   const qk_box_t *hb = s->pk->hb;
   const float *fg = s->pk->fgrp;
@@ -239,7 +307,7 @@ static int cross_cells(share_t *s, uint32_t a, uint32_t u, uint32_t u1) {
 #undef QK__MEETS
     if (i == j) continue;
     me_t m = me_of(s, k);
-    if (!test_run(s, &m, cl[u + i].start, cl[u + j].start)) return 0;
+    if (!test_run_k(s, kc, &m, cl[u + i].start, cl[u + j].start)) return 0;
   }
   return 1;
 }
@@ -247,7 +315,7 @@ static int cross_cells(share_t *s, uint32_t a, uint32_t u, uint32_t u1) {
 /* The pairs of cell a with its own level: within it, with the next cell of its row when
  * adjacent, and with the cells of the row above whose loose squares meet its own (three
  * consecutive ones at most, found by *up, a cursor that only moves forward). */
-static int same_level(share_t *s, uint32_t a, uint32_t *up) {
+static int same_level(share_t *s, kc_t *kc, uint32_t a, uint32_t *up) {
   const qk_world_t *w = s->w;
   const qk__wcell_t *c = &w->cells[a];
   const qk_box_t *hb = s->pk->hb, *ha = &hb[a];
@@ -263,7 +331,7 @@ static int same_level(share_t *s, uint32_t a, uint32_t *up) {
   if (hi2 == hi) {
     for (uint32_t k = lo; k + 1 < hi; k++) {
       me_t m = me_of(s, k);
-      if (!test_run(s, &m, k + 1, hi)) return 0;
+      if (!test_run_k(s, kc, &m, k + 1, hi)) return 0;
     }
   } else {
     const float *fg = s->pk->fgrp;
@@ -271,7 +339,7 @@ static int same_level(share_t *s, uint32_t a, uint32_t *up) {
       uint32_t e = lane_of(fg, k)[8] >= nx ? hi2 : hi;
       if (k + 1 >= e) continue;
       me_t m = me_of(s, k);
-      if (!test_run(s, &m, k + 1, e)) return 0;
+      if (!test_run_k(s, kc, &m, k + 1, e)) return 0;
     }
   }
   /* The row above: up to three consecutive cells, so one run too (without the end cells
@@ -288,13 +356,13 @@ static int same_level(share_t *s, uint32_t a, uint32_t *up) {
   if (u == u1) return 1;
   /* (a few objects: one run, checked against the box around the cells; trimming each
    * object's run costs more than it saves) */
-  if (u + 1 < u1 && hi - lo >= 4) return cross_cells(s, a, u, u1);
+  if (u + 1 < u1 && hi - lo >= 4) return cross_cells(s, kc, a, u, u1);
   qk_box_t ub = hb[u];
   for (uint32_t k = u + 1; k < u1; k++) {
     ub.xmin = qk__min(ub.xmin, hb[k].xmin), ub.ymin = qk__min(ub.ymin, hb[k].ymin);
     ub.xmax = qk__max(ub.xmax, hb[k].xmax), ub.ymax = qk__max(ub.ymax, hb[k].ymax);
   }
-  return cross_run(s, a, w->cells[u].start, w->cells[u1].start, &ub);
+  return cross_run(s, kc, a, w->cells[u].start, w->cells[u1].start, &ub);
 }
 
 /* ---- finer levels: the coarser object's box walked over their sorted cells ---------- */
@@ -453,8 +521,12 @@ static int cell_vs_level(share_t *s, uint32_t a, const lvinfo_t *lv) {
   for (int64_t y = y0 > lv->cy0 ? y0 : lv->cy0; y <= y1 && y <= lv->cy1; y++)
     for (uint32_t k = bisect(cl, lv->first, lv->end, y, x0);
          k < lv->end && cl[k].cy == y && cl[k].cx <= x1; k++)
-      if (boxes_meet(ha, &hb[k]) && !cross_run(s, a, cl[k].start, cl[k + 1].start, &hb[k]))
-        return 0;
+      if (boxes_meet(ha, &hb[k])) {
+        kc_t kc = kc_open(s);
+        int ok = cross_run(s, &kc, a, cl[k].start, cl[k + 1].start, &hb[k]);
+        kc_close(s, &kc);
+        if (!ok) return 0;
+      }
   return 1;
 }
 
@@ -462,7 +534,10 @@ static int cell_vs_level(share_t *s, uint32_t a, const lvinfo_t *lv) {
  * objects of the finer levels it descends to; and with the cells of the coarser levels that look up
  * (look_up), in each case only where the levels' boxes meet a's. */
 static int cell_pairs(share_t *s, uint32_t a, uint32_t *up, int me) {
-  if (!same_level(s, a, up)) return 0;
+  kc_t kc = kc_open(s);
+  int ok = same_level(s, &kc, a, up);
+  kc_close(s, &kc);
+  if (!ok) return 0;
   if (!s->lv[me].other) return 1;
   const qk_world_t *w = s->w;
   const qk__wcell_t *c = &w->cells[a];
@@ -488,6 +563,10 @@ static int cell_pairs(share_t *s, uint32_t a, uint32_t *up, int me) {
 
 static void run_share(unsigned t, void *ud) {
   share_t *s = &((share_t *)ud)[t];
+  if (!s->out.v && !kv_reserve(s, 256)) { /* (the keys' place is never NULL: kc_open) */
+    s->nomem = 1;
+    return;
+  }
   for (;;) {
     unsigned i = atomic_fetch_add_explicit(s->next, 1u, memory_order_relaxed);
     if (i >= s->n_chunks) return;

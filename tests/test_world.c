@@ -987,6 +987,63 @@ static void test_world_prefilter_and_sort(void **s) {
   qk_world_free(w);
 }
 
+/* The grid's runs with pairs the float boxes cannot decide among those they can
+ * (collide/world_search.c, test_run: its loop hands the rest of a run to test_run_exact at
+ * the first such lane): one level of dense cells (boxes of side 0.75 to 1, about 12 an
+ * object's neighbourhood, so the search is on the grid and its runs span several groups of
+ * four with several pairs each), most boxes on the float grid (multiples of 1/64) and
+ * some off it by 2^-30 (their floats are not their doubles), a few of those touching or
+ * missing an exact box by 2^-30 only (the float boxes meet, the doubles may not), and a
+ * few discs; each frame every object moves by a multiple of 1/64 (the off-grid ones keep
+ * their offset), every frame against brute force, on one thread and two. The off-grid
+ * objects take several positions in a group (object i off when i mod 7 is 3 or 5), so that
+ * the first undecided lane comes first, in the middle or last of a group with hits before
+ * and after it. */
+static void test_world_grid_undecided_runs(void **s) {
+  (void)s;
+  for (unsigned th = 1; th <= 2; th++) {
+    qkt_rng_t r;
+    qkt_rng_seed(&r, g_seed + 97);
+    qk_world_t *w = threaded_world(th);
+    mirror_t m = {0};
+    const double off = 0x1p-30;
+    for (int i = 0; i < 1200; i++) {
+      double x = (double)qkt_rng_below(&r, 64 * 30) / 64,
+             y = (double)qkt_rng_below(&r, 64 * 30) / 64;
+      double e = (48 + (double)qkt_rng_below(&r, 17)) / 64;
+      qk_shape_t b = {QK_SHAPE_BOX, x, y, x + e, y + e};
+      if (i % 7 == 3 || i % 7 == 5) b.x += off, b.y += off, b.a += off, b.b += off;
+      if (i % 31 == 7) b = (qk_shape_t){QK_SHAPE_DISC, x + e / 2, y + e / 2, e / 2, 0};
+      m_add(w, &m, b);
+    }
+    /* Pairs that touch or miss by 2^-30: a box just right of an exact one. */
+    for (int i = 0; i < 60; i++) {
+      const qk_shape_t *a = &m.s[(size_t)i * 11];
+      if (a->kind != QK_SHAPE_BOX) continue;
+      double gap = i % 2 ? off : 0;
+      m_add(w, &m, (qk_shape_t){QK_SHAPE_BOX, a->a + gap, a->y, a->a + gap + 0.75, a->y + 0.75});
+    }
+    qk_world_pair_t *prev = NULL;
+    size_t np = 0;
+    for (int f = 0; f < 8; f++) {
+      for (size_t i = 0; f && i < m.n; i++) {
+        if (qkt_rng_below(&r, 2)) continue;
+        double dx = ((double)qkt_rng_below(&r, 9) - 4) / 64,
+               dy = ((double)qkt_rng_below(&r, 9) - 4) / 64;
+        qk_shape_t sh = m.s[i];
+        sh.x += dx, sh.y += dy;
+        if (sh.kind == QK_SHAPE_BOX) sh.a += dx, sh.b += dy;
+        m_move(w, &m, i, sh);
+      }
+      update_and_check(w, &m, &prev, &np, "grid undecided runs", f);
+      assert_false(qk__world_by_bands(w)); /* (the grid's search, not the bands') */
+    }
+    assert_true(np > 2000);
+    free(prev), free(m.h), free(m.s);
+    qk_world_free(w);
+  }
+}
+
 /* The bench's clustered mixed-size scene, small: boxes in eight clusters with sizes over
  * three decades (0.03 .. 30, most small), on a grid of 1/64 so that edges touch exactly
  * and often, moving with constant velocities (bouncing off the scene's edges), a few
@@ -2525,6 +2582,7 @@ int main(void) {
       cmocka_unit_test(test_world_refile_sort),
       cmocka_unit_test(test_world_fbox_only_bands),
       cmocka_unit_test(test_world_prefilter_and_sort),
+      cmocka_unit_test(test_world_grid_undecided_runs),
       cmocka_unit_test(test_world_touching),
       cmocka_unit_test(test_world_stale_handles),
       cmocka_unit_test(test_world_threads_frames),
