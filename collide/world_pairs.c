@@ -908,15 +908,17 @@ typedef struct pjob {
   unsigned nt, pb;    /* threads, slots per partition (2^pb) */
   int dirty, phase, bucketed;
   bdig_t g;
-  uint32_t *pc;                      /* nt (np + 1): per chunk, counts by partition, then cursors */
-  uint32_t *pst;                     /* np + 1: the partitions' starts */
-  uint32_t *ca;                      /* bucketed: the rows' counts, n_obj + 1 */
-  uint32_t rp[QK__RMAX + 1];         /* the threads' partition ranges */
-  qk__prows_t lr[QK__RMAX];          /* each range's rows (starts from the range's first key) */
-  size_t nzo[QK__RMAX + 1];          /* the ranges' first rows in the result */
-  qk__kvec_t bj, ej;                 /* the ranges' began and ended lists joined (phase 3) */
-  size_t bo[QK__RMAX], eo[QK__RMAX]; /* the ranges' places in them */
+  uint32_t *pc;              /* nt (np + 1): per chunk, counts by partition, then cursors */
+  uint32_t *pst;             /* np + 1: the partitions' starts */
+  uint32_t *ca;              /* bucketed: the rows' counts, n_obj + 1 */
+  uint32_t rp[QK__RMAX + 1]; /* the threads' partition ranges */
+  qk__prows_t lr[QK__RMAX];  /* each range's rows (starts from the range's first key) */
+  size_t nzo[QK__RMAX + 1];  /* the ranges' first rows in the result */
+  qk__kvec_t bj, ej;         /* the began and ended lists joined */
+  /* each range's lists, in bj from its first pair's place (bbase) and in ej from its
+   * first old pair's (ebase) */
   qk__kvec_t bv[QK__RMAX], ev[QK__RMAX];
+  size_t bbase[QK__RMAX], ebase[QK__RMAX];
   int nomem[QK__RMAX];
 } pjob_t;
 
@@ -963,13 +965,16 @@ static int range_rows(pjob_t *J, unsigned t) {
     qk__free(al, cnt, cn * sizeof *cnt);
     if (!ok) return 0;
   }
-  size_t bc = J->w->began.n / J->nt + 64, ec = J->w->ended.n / J->nt + 64;
-  if (!(J->bv[t].v = qk__realloc(al, NULL, 0, bc * sizeof(uint64_t)))) return 0;
-  J->bv[t].cap = bc;
-  if (!(J->ev[t].v = qk__realloc(al, NULL, 0, ec * sizeof(uint64_t)))) return 0;
-  J->ev[t].cap = ec;
   /* (the last range takes the old rows of slots past n_obj too) */
   qk__prows_t ov = rows_view(J->o, t ? s0 : 0, t + 1 < J->nt ? s1 : UINT32_MAX);
+  /* The range's lists go straight into the joined ones (rows_frame moves them down): its
+   * began keys from its first pair's place on, with room for its pairs (a pair began at
+   * most once), its ended ones from its first old pair's, with room for those. So they
+   * never grow, and are not copied into the joined lists' fresh pages (on the first frame
+   * of 10^5 clustered boxes, 9.8 M began keys: 19 000 page faults more than one thread). */
+  J->bbase[t] = k0, J->ebase[t] = ov.n_nz ? ov.start[0] : 0;
+  J->bv[t] = (qk__kvec_t){J->bj.v + k0, 0, m};
+  J->ev[t] = (qk__kvec_t){J->ej.v + J->ebase[t], 0, ov.n};
   /* The lists grow in locals: the ranges' list heads share cache lines in J, and every
    * key added writes its count (false sharing between the threads). */
   qk__kvec_t bv = J->bv[t], ev = J->ev[t];
@@ -1020,9 +1025,6 @@ static void pjob_run(unsigned t, void *ud) {
     size_t z = J->nzo[t];
     if (lr->n_nz) memcpy(r->row + z, lr->row, lr->n_nz * sizeof *r->row);
     for (size_t k = 0; k < lr->n_nz; k++) r->start[z + k] = base + lr->start[k];
-    /* and its began and ended lists into the joined ones */
-    if (J->bv[t].n) memcpy(J->bj.v + J->bo[t], J->bv[t].v, J->bv[t].n * sizeof *J->bj.v);
-    if (J->ev[t].n) memcpy(J->ej.v + J->eo[t], J->ev[t].v, J->ev[t].n * sizeof *J->ej.v);
   }
   }
 }
@@ -1079,6 +1081,13 @@ static int rows_frame(const qk_world_t *w, uint64_t *keys, const qk__kvec_t *src
   J->pst[J->np] = (uint32_t)n;
   for (; t <= nt; t++) J->rp[t] = J->np;
   pjob_phase(J, 1);
+  /* The joined began and ended lists, with room for every pair and every old pair: each
+   * range writes its own in place (range_rows), at least one entry each. */
+  size_t bcap = n ? n : 1, ecap = J->o->n ? J->o->n : 1;
+  if (!(J->bj.v = qk__realloc(al, NULL, 0, bcap * sizeof *J->bj.v))) goto out;
+  J->bj.cap = bcap;
+  if (!(J->ej.v = qk__realloc(al, NULL, 0, ecap * sizeof *J->ej.v))) goto out;
+  J->ej.cap = ecap;
   pjob_phase(J, 2);
   for (t = 0; t < nt; t++)
     if (J->nomem[t]) goto out;
@@ -1087,14 +1096,18 @@ static int rows_frame(const qk_world_t *w, uint64_t *keys, const qk__kvec_t *src
   if (!rows_alloc(al, r, nz)) goto out;
   r->n = n;
   r->start[nz] = (uint32_t)n;
-  /* The joined began and ended lists (each range copies its own into them in phase 3,
-   * so the calling thread copies nothing), at least one entry each. */
+  /* Each range's lists moved down to follow the ones before, in range order (a range's
+   * new place may overlap the one before's old): none move on a frame where every pair
+   * began or none ended, and a few where they are few. */
   size_t bt = 0, et = 0;
-  for (t = 0; t < nt; t++) J->bo[t] = bt, bt += J->bv[t].n, J->eo[t] = et, et += J->ev[t].n;
-  if (!(J->bj.v = qk__realloc(al, NULL, 0, (bt ? bt : 1) * sizeof *J->bj.v))) goto out;
-  J->bj.n = bt, J->bj.cap = bt ? bt : 1;
-  if (!(J->ej.v = qk__realloc(al, NULL, 0, (et ? et : 1) * sizeof *J->ej.v))) goto out;
-  J->ej.n = et, J->ej.cap = et ? et : 1;
+  for (t = 0; t < nt; t++) {
+    if (J->bv[t].n && bt != J->bbase[t])
+      memmove(J->bj.v + bt, J->bv[t].v, J->bv[t].n * sizeof *J->bj.v);
+    if (J->ev[t].n && et != J->ebase[t])
+      memmove(J->ej.v + et, J->ev[t].v, J->ev[t].n * sizeof *J->ej.v);
+    bt += J->bv[t].n, et += J->ev[t].n;
+  }
+  J->bj.n = bt, J->ej.n = et;
   pjob_phase(J, 3);
   *bvo = J->bj, *evo = J->ej;
   J->bj = J->ej = (qk__kvec_t){0};
@@ -1103,8 +1116,6 @@ out:
   qk__free(al, J->bj.v, J->bj.cap * sizeof(uint64_t));
   qk__free(al, J->ej.v, J->ej.cap * sizeof(uint64_t));
   for (t = 0; t < nt; t++) {
-    qk__free(al, J->bv[t].v, J->bv[t].cap * sizeof(uint64_t));
-    qk__free(al, J->ev[t].v, J->ev[t].cap * sizeof(uint64_t));
     if (J->lr[t].row) qk__free(al, J->lr[t].row, 2 * (J->lr[t].n_nz + 1) * sizeof *J->lr[t].row);
   }
   if (!ok && r->row) qk__free(al, r->row, 2 * (r->n_nz + 1) * sizeof *r->row), r->row = NULL;

@@ -1278,6 +1278,55 @@ static void test_world_bands_threads(void **s) {
 }
 
 /*
+ * The bands' build on the threads (collide/world_search.c, bb_job: the first pass, the
+ * bands' counts and the radix sort by xmin, each thread over its blocks of 1024 objects,
+ * the sort's passes as stable counting sorts by thread). 5437 boxes (five whole blocks and
+ * part of a sixth) of sizes 1/8 to 32 on 1 to 7 threads (6 and 7: one a block), their
+ * xmin from 48 columns (ties across the blocks and the threads' ranges). First positive
+ * multiples of 1/8 below 256, moving by 1/8 on x, so that the sort's lowest digit is the
+ * same in every record (that pass skipped, the next taken from the first pass's counts);
+ * then shifted across zero (float keys of both signs) and moving by 1/64 (every digit
+ * sorted, the later passes counted again on the threads). Every frame against brute force
+ * (dense_check).
+ */
+static void run_bands_build(unsigned threads) {
+  enum { N = 5 * 1024 + 317, FRAMES = 6 };
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 211 + threads);
+  qk_world_t *w = threaded_world(threads);
+  mirror_t m = {0};
+  for (size_t k = 0; k < N; k++) {
+    double x = 4 + 4 * (double)qkt_rng_below(&r, 48), y = -80 + qkt_rng_below(&r, 1280) / 8.0;
+    double e = qkt_rng_below(&r, 10) ? (1 + qkt_rng_below(&r, 8)) / 8.0 : 4 + qkt_rng_below(&r, 29);
+    m_add(w, &m, (qk_shape_t){QK_SHAPE_BOX, x, y, x + e, y + e * (1 + qkt_rng_below(&r, 2))});
+  }
+  qk_world_pair_t *prev = NULL;
+  size_t np = 0;
+  dense_check(w, &m, &prev, &np, 0);
+  assert_true(w->by_bands);
+  for (int f = 1; f < FRAMES; f++) {
+    const double step = f < 3 ? 1.0 / 8 : 1.0 / 64; /* (on the grid of 1/8, then off it) */
+    for (size_t i = 0; i < m.n; i++)
+      if (f == 3 || qkt_rng_below(&r, 2)) {
+        qk_shape_t sh = m.s[i];
+        double d = (f == 3 ? -100 : 0) + step * ((int)qkt_rng_below(&r, 3) - 1);
+        sh.x += d, sh.a += d;
+        m_move(w, &m, i, sh);
+      }
+    dense_check(w, &m, &prev, &np, f);
+    assert_true(w->by_bands);
+  }
+  assert_true(np > N);
+  free(prev), free(m.h), free(m.s);
+  qk_world_free(w);
+}
+
+static void test_world_bands_build_threads(void **s) {
+  (void)s;
+  for (unsigned th = 1; th <= 7; th++) run_bands_build(th);
+}
+
+/*
  * The began pairs' rows sorted on the threads (collide/world_pairs.c, began_rows_threads:
  * the began keys cut by the ranges of slots that then merge them with the last frame's
  * rows, each range's keys sorted on its thread). Began-only frames (boxes on the float
@@ -2574,6 +2623,7 @@ int main(void) {
       cmocka_unit_test(test_world_began_only),
       cmocka_unit_test(test_world_refile_in_place),
       cmocka_unit_test(test_world_bands_threads),
+      cmocka_unit_test(test_world_bands_build_threads),
       cmocka_unit_test(test_world_began_ranges),
       cmocka_unit_test(test_world_refile_split),
       cmocka_unit_test(test_world_began_general),
