@@ -538,6 +538,24 @@ static void collide_usage(FILE *f) {
 }
 
 static int collide_prepare(qrun_t *q) {
+  /* Discs overlap when dx^2 + dy^2 <= (r1 + r2)^2 in doubles (qk_collider_build): with
+   * values beyond 2^200 the squares overflowed to inf <= inf, and with nonzero values
+   * below 2^-200 they underflowed to 0 <= 0, so discs 1.4e300 or 2.8e-170 apart were
+   * listed as touching. In [2^-200, 2^200] (or 0) a nonzero difference is at least
+   * 2^-252 and no square overflows or underflows. Boxes are only compared. */
+  const cli_table_t *tb = &q->tab[0];
+  for (size_t i = 0; !q->a.boxes && i < tb->rows; i++)
+    for (int k = 0; k < 3; k++) {
+      double a = fabs(tb->v[3 * i + (size_t)k]);
+      if (a != 0 && (a < 0x1p-200 || a > 0x1p200)) {
+        char msg[256];
+        snprintf(msg, sizeof msg,
+                 "field %d: %.17g is outside [2^-200, 2^200] in magnitude, where the disc "
+                 "overlap test's squares overflow or underflow; scale the data by a power of two",
+                 k + 1, tb->v[3 * i + (size_t)k]);
+        return bad_row(q, 0, i, msg);
+      }
+    }
   int rc = build_collider(q);
   if (rc) return rc;
   size_t np = 0;

@@ -22,4 +22,22 @@ same_text "radius: huge r within 2^510" \
   "$("$cli" radius "$tmp/p.csv" "$tmp/q0.csv" -r 1e300 | tr '\n' ' ')" \
   "query,point,distance 0,0,0 0,1,1.4142135623730951 "
 
+# ---- collide: disc squares that overflow or underflow ----------------------------------
+# Disc 2 at (0, 1e300) is 1.4e300 from discs 0 and 1 (radius 1e300): the squares were
+# inf <= inf and both pairs came out; two discs of radius 1e-170 whose centres are
+# 2.8e-170 apart had squares 0 <= 0. Now refused, naming the row and field.
+printf 'x,y,r\n1e300,0,1e300\n-1e300,0,1e300\n0,1e300,1\n' >"$tmp/dover.csv"
+expect 1 "^quadkit: $tmp/dover.csv:2: field 1: 1.0000000000000001e\\+300 is outside \\[2\\^-200, 2\\^200\\] in magnitude, where the disc overlap test's squares overflow or underflow; scale the data by a power of two$" \
+  -- "$cli" collide "$tmp/dover.csv"
+printf 'x,y,r\n0,0,1e-170\n2e-170,2e-170,1e-170\n' >"$tmp/dunder.csv"
+expect 1 "^quadkit: $tmp/dunder.csv:2: field 3: 9.9999999999999998e-171 is outside" -- "$cli" collide "$tmp/dunder.csv"
+same_text "collide: nothing on stdout for overflowing discs" \
+  "$("$cli" collide "$tmp/dover.csv" 2>/dev/null)" ""
+# the same scene scaled into the range: one pair (0 and 1 touch at the origin), as the
+# exact test says; zero values and boxes of any size stay accepted
+printf 'x,y,r\n1e50,0,1e50\n-1e50,0,1e50\n0,1e50,1\n0,0,0\n' >"$tmp/dok.csv"
+same_text "collide: scaled scene" "$("$cli" collide "$tmp/dok.csv" | tr '\n' ' ')" "a,b 0,1 0,3 1,3 "
+printf 'x0,y0,x1,y1\n1e300,1e300,1e308,1e308\n-1e308,-1e308,1e300,1e300\n' >"$tmp/bbig.csv"
+same_text "collide: huge boxes" "$("$cli" collide "$tmp/bbig.csv" --boxes | tr '\n' ' ')" "a,b 0,1 "
+
 report
