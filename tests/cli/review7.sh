@@ -40,4 +40,26 @@ same_text "collide: scaled scene" "$("$cli" collide "$tmp/dok.csv" | tr '\n' ' '
 printf 'x0,y0,x1,y1\n1e300,1e300,1e308,1e308\n-1e308,-1e308,1e300,1e300\n' >"$tmp/bbig.csv"
 same_text "collide: huge boxes" "$("$cli" collide "$tmp/bbig.csv" --boxes | tr '\n' ' ')" "a,b 0,1 "
 
+# ---- mesh --project equirect: edges across the whole map -------------------------------
+# The whole world [-180, -90] .. [180, 90] and the band [-180, -10] .. [180, 10] (edges
+# from -180 to 180 that run across the map, docs/region.md rule 6) had their negative
+# longitudes moved up by 360 like Fiji's, every point went to longitude 180, and the
+# mesher said "no ring with 3 distinct points". Now the map's full width, 2 x 20015114.4375
+# m at the equator; Fiji's zero-length step still joins its two sides (its md5 unchanged).
+printf '{"type":"Polygon","coordinates":[[[-180,-90],[180,-90],[180,90],[-180,90],[-180,-90]]]}\n' >"$tmp/world.geojson"
+printf '{"type":"Polygon","coordinates":[[[-180,-10],[180,-10],[180,10],[-180,10],[-180,-10]]]}\n' >"$tmp/band.geojson"
+for w in world band; do
+  expect 0 "" -- "$cli" mesh "$tmp/$w.geojson" --project equirect --round 2^-4 -o "$tmp/$w"
+  same_text "mesh --project: $w spans the map" \
+    "$(awk 'NR > 1 && NF >= 3 {print $2}' "$tmp/$w.node" 2>/dev/null | sort -g | sed -n '1p;$p' | tr '\n' ' ')" \
+    "-20015114.4375 20015114.4375 "
+done
+# a ring crossing the antimeridian and coming back by a step (as Fiji's) stays 2 degrees wide
+# (179 to 181 times cos(-16.43 degrees) R pi / 180, rounded to 1/16)
+printf '{"type":"Polygon","coordinates":[[[179,-17],[180,-17],[-179,-17],[-179,-16],[-180,-16],[180,-16],[179,-16],[179,-17]]]}\n' >"$tmp/step.geojson"
+expect 0 "" -- "$cli" mesh "$tmp/step.geojson" --project equirect --round 2^-4 -o "$tmp/step"
+same_text "mesh --project: a step across the antimeridian" \
+  "$(awk 'NR > 1 && NF >= 3 {print $2}' "$tmp/step.node" 2>/dev/null | sort -g | sed -n '1p;$p' | tr '\n' ' ')" \
+  "19091303.25 19304613.9375 "
+
 report
