@@ -118,16 +118,29 @@ static int parse_round(const char *cmd, const char *v, double *out) {
   double g;
   if (!strncmp(v, "2^", 2)) {
     long q = strtol(v + 2, &end, 10);
-    if (end == v + 2 || *end || q < -1000 || q > 1000) {
+    if (end == v + 2 || *end) {
       cli_error(cmd, "--round %s: expected 2^-q with an integer q, or a positive number", v);
+      return 1;
+    }
+    /* (2^-2000 was "expected 2^-q with an integer q", and 2^-1000 "must be a positive
+     * number": both are; they are below the smallest step taken, 1e-300.) */
+    if (q < -996 || q > 1000) {
+      cli_error(cmd,
+                "--round %s: the exponent must be from -996 to 1000 (the grid step from "
+                "about 1e-300 to 1e301)",
+                v);
       return 1;
     }
     g = ldexp(1, (int)q);
   } else {
     if (cli_number(v, &g) != 1) g = -1; /* (decimal only, as every number the tool reads) */
   }
-  if (!(g > 0) || !isfinite(g) || g < 1e-300) {
+  if (!(g > 0) || !isfinite(g)) {
     cli_error(cmd, "--round %s: the grid step must be a positive number (e.g. 2^-4 or 0.5)", v);
+    return 1;
+  }
+  if (g < 1e-300) {
+    cli_error(cmd, "--round %s: the grid step must be at least 1e-300", v);
     return 1;
   }
   *out = g;

@@ -62,4 +62,14 @@ same_text "mesh --project: a step across the antimeridian" \
   "$(awk 'NR > 1 && NF >= 3 {print $2}' "$tmp/step.node" 2>/dev/null | sort -g | sed -n '1p;$p' | tr '\n' ' ')" \
   "19091303.25 19304613.9375 "
 
+# ---- mesh --round: exponents out of range ----------------------------------------------
+# 2^-2000 was "expected 2^-q with an integer q" (it is one) and 2^-1000 "the grid step
+# must be a positive number" (it is); both are below the smallest step taken, 1e-300.
+printf '3 2 0 0\n1 0 0\n2 4 0\n3 0 4\n3 0\n1 1 2\n2 2 3\n3 3 1\n0\n' >"$tmp/tri.poly"
+expect 2 "^quadkit mesh: --round 2\\^-2000: the exponent must be from -996 to 1000 \\(the grid step from about 1e-300 to 1e301\\)$" \
+  -- "$cli" mesh "$tmp/tri.poly" -o "$tmp/tri" --round 2^-2000
+expect 2 "^quadkit mesh: --round 2\\^-997: the exponent must be from -996" -- "$cli" mesh "$tmp/tri.poly" -o "$tmp/tri" --round 2^-997
+expect 2 "^quadkit mesh: --round 1e-301: the grid step must be at least 1e-300$" -- "$cli" mesh "$tmp/tri.poly" -o "$tmp/tri" --round 1e-301
+expect 0 "" -- "$cli" mesh "$tmp/tri.poly" -o "$tmp/tri" --round 2^-996
+
 report
