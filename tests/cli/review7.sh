@@ -72,4 +72,22 @@ expect 2 "^quadkit mesh: --round 2\\^-997: the exponent must be from -996" -- "$
 expect 2 "^quadkit mesh: --round 1e-301: the grid step must be at least 1e-300$" -- "$cli" mesh "$tmp/tri.poly" -o "$tmp/tri" --round 1e-301
 expect 0 "" -- "$cli" mesh "$tmp/tri.poly" -o "$tmp/tri" --round 2^-996
 
+# ---- mesh --round on a .poly file: lines, numbers and markers kept ----------------------
+# The input was rebuilt from arrays: "dup.poly: vertices 0 and 3 coincide" for the file's
+# vertices 1 and 4 (line 5), and boundary markers and regional attributes were dropped.
+printf '4 2 0 0\n1 0 0\n2 4 0\n3 0 4\n4 0.2 0\n3 0\n1 1 2\n2 2 3\n3 3 1\n0\n' >"$tmp/dup.poly"
+expect 1 "^quadkit mesh: $tmp/dup.poly:5: vertices 1 and 4 coincide at \\(0, 0\\)$" \
+  -- "$cli" mesh "$tmp/dup.poly" -o "$tmp/dup" --round 1
+nothing_written "$tmp/dup"
+printf '4 2 0 1\n1 0 0 5\n2 4.3 0 5\n3 4 4 6\n4 0 4 6\n4 1\n1 1 2 7\n2 2 3 7\n3 3 4 8\n4 4 1 8\n0\n' >"$tmp/mk.poly"
+expect 0 "^quadkit mesh: --round 1: 1 coordinates of $tmp/mk.poly moved to the grid$" \
+  -- "$cli" mesh "$tmp/mk.poly" -o "$tmp/mk" --round 1
+same_text "mesh --round: markers kept" "$(head -n 1 "$tmp/mk.node" 2>/dev/null; awk 'NR > 1 && NF == 4 {print $4}' "$tmp/mk.node" 2>/dev/null | sort -un | tr '\n' ' ')" \
+  "$(printf '25 2 0 1\n0 5 6 7 8 ')"
+# a coordinate that rounds beyond the largest double: said, nothing written
+printf '3 2 0 0\n1 0 0\n2 1.7976931348623157e308 0\n3 0 4\n3 0\n1 1 2\n2 2 3\n3 3 1\n0\n' >"$tmp/ovf.poly"
+expect 1 "^quadkit mesh: $tmp/ovf.poly: --round 2\\^1000: a rounded coordinate is beyond the largest double$" \
+  -- "$cli" mesh "$tmp/ovf.poly" -o "$tmp/ovf" --round 2^1000
+nothing_written "$tmp/ovf"
+
 report
