@@ -184,6 +184,23 @@ static qk_poly_t *poly_new(const qk_allocator_t *allocator) {
 
 unsigned qk_poly_first_index(const qk_poly_t *p) { return p ? p->first_index : 0; }
 
+qk_status_t qk_poly_round(qk_poly_t *p, double step, size_t *rounded) {
+  if (rounded) *rounded = 0;
+  if (!p || !(step > 0) || !isfinite(step)) return QK_ERR_INVALID;
+  for (size_t i = 0; i < p->nv; i++) /* all or nothing */
+    if (!isfinite(nearbyint(p->vx[i] / step) * step) ||
+        !isfinite(nearbyint(p->vy[i] / step) * step))
+      return QK_ERR_NONFINITE;
+  size_t n = 0;
+  for (size_t i = 0; i < p->nv; i++) {
+    double x = nearbyint(p->vx[i] / step) * step, y = nearbyint(p->vy[i] / step) * step;
+    n += (x != p->vx[i]) + (y != p->vy[i]);
+    p->vx[i] = x, p->vy[i] = y;
+  }
+  if (rounded) *rounded = n;
+  return QK_OK;
+}
+
 void qk_poly_counts(const qk_poly_t *p, size_t *nv, size_t *ns, size_t *nh) {
   if (nv) *nv = p ? p->nv : 0;
   if (ns) *ns = p ? p->ns : 0;

@@ -14,6 +14,7 @@
  *  - 3000 random mutations of a valid file: success or a clean error with a message;
  *  - allocation failure at every N while reading: QK_ERR_NOMEM, no leak.
  */
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -359,12 +360,46 @@ static void test_poly_alloc_failure(void **state) {
   }
 }
 
+/* qk_poly_round: vertices rounded in place (ties to even), numbers, lines and holes kept;
+ * a coordinate that would round past the largest double leaves everything unchanged. */
+static void test_poly_round(void **state) {
+  (void)state;
+  FILE *f = from_string("3 2 0 1\n1 0.5 1.5 3\n2 4.25 -0.75 3\n3 -2.5 4 4\n3 1\n1 1 2 9\n"
+                        "2 2 3 9\n3 3 1 9\n1\n1 0.3 0.3\n");
+  qk_poly_t *p;
+  qk_mesh_error_t err;
+  assert_int_equal(qk_poly_read(f, NULL, &p, &err), QK_OK);
+  fclose(f);
+  size_t changed = 99;
+  assert_int_equal(qk_poly_round(p, 0, &changed), QK_ERR_INVALID);
+  assert_int_equal(qk_poly_round(p, NAN, &changed), QK_ERR_INVALID);
+  assert_int_equal(qk_poly_round(NULL, 1, &changed), QK_ERR_INVALID);
+  assert_int_equal(qk_poly_round(p, 1, &changed), QK_OK);
+  assert_int_equal(changed, 5); /* 0.5, 1.5, 4.25, -0.75, -2.5 move; 4 does not */
+  double xy[6], h[2];
+  size_t n;
+  qk_poly_vertices(p, xy, 3, &n);
+  const double want[6] = {0, 2, 4, -1, -2, 4}; /* nearest, ties to even */
+  for (int i = 0; i < 6; i++) assert_true(xy[i] == want[i]);
+  qk_poly_holes(p, h, 1, &n);
+  assert_true(h[0] == 0.3 && h[1] == 0.3);
+  assert_int_equal(qk_poly_first_index(p), 1);
+  qk_poly_free(p);
+  f = from_string("2 2 0 0\n1 1.7976931348623157e308 0\n2 0 1\n0 0\n0\n");
+  assert_int_equal(qk_poly_read(f, NULL, &p, &err), QK_OK);
+  fclose(f);
+  assert_int_equal(qk_poly_round(p, 0x1p1000, &changed), QK_ERR_NONFINITE);
+  assert_int_equal(changed, 0);
+  qk_poly_vertices(p, xy, 2, &n);
+  assert_true(xy[0] == 1.7976931348623157e308 && xy[3] == 1);
+  qk_poly_free(p);
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
-      cmocka_unit_test(test_poly_good),
-      cmocka_unit_test(test_poly_bad),
-      cmocka_unit_test(test_poly_mutations),
-      cmocka_unit_test(test_poly_alloc_failure),
+      cmocka_unit_test(test_poly_good),      cmocka_unit_test(test_poly_bad),
+      cmocka_unit_test(test_poly_mutations), cmocka_unit_test(test_poly_alloc_failure),
+      cmocka_unit_test(test_poly_round),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -330,11 +330,12 @@ static int knn_beyond(qrun_t *q, size_t i) {
   return CLI_BAD_INPUT;
 }
 
-static int knn_prepare(qrun_t *q) {
-  int rc = build_tree(q);
-  if (rc) return rc;
-  /* qk_query_knn's QK_ERR_LIMIT (the query or the root square beyond 2^510 on an axis),
-   * found before the header: standard output cannot be taken back. */
+/* qk_query_knn's QK_ERR_LIMIT (the query or the root square beyond 2^510 on an axis),
+ * found before the header: standard output cannot be taken back. radius too: there
+ * squared distances overflow to infinity and compare <= r * r, so points 1.4e300 away
+ * were listed within -r 1e300, at distance inf. Within 2^510 every squared distance is
+ * finite, and an r whose square overflows is farther than any point. */
+static int beyond_check(qrun_t *q) {
   qk_tree_stats_t s;
   qk_tree_stats(q->tree, &s);
   double m = fmax(fmax(fabs(s.root.x), fabs(s.root.y)),
@@ -342,7 +343,13 @@ static int knn_prepare(qrun_t *q) {
   for (size_t i = 0; i < q->n[1]; i++)
     if (fmax(m, fmax(fabs(q->pts[1][i].x), fabs(q->pts[1][i].y))) > 0x1p510)
       return knn_beyond(q, i);
-  return scratch(q, q->a.k, 0);
+  return CLI_OK;
+}
+
+static int knn_prepare(qrun_t *q) {
+  int rc = build_tree(q);
+  if (!rc) rc = beyond_check(q);
+  return rc ? rc : scratch(q, q->a.k, 0);
 }
 
 static int knn_answer(qrun_t *q, size_t i) {
@@ -378,6 +385,7 @@ static void radius_usage(FILE *f) {
 
 static int radius_prepare(qrun_t *q) {
   int rc = build_tree(q);
+  if (!rc) rc = beyond_check(q);
   return rc ? rc : scratch(q, q->n[0], 0);
 }
 
@@ -530,6 +538,24 @@ static void collide_usage(FILE *f) {
 }
 
 static int collide_prepare(qrun_t *q) {
+  /* Discs overlap when dx^2 + dy^2 <= (r1 + r2)^2 in doubles (qk_collider_build): with
+   * values beyond 2^200 the squares overflowed to inf <= inf, and with nonzero values
+   * below 2^-200 they underflowed to 0 <= 0, so discs 1.4e300 or 2.8e-170 apart were
+   * listed as touching. In [2^-200, 2^200] (or 0) a nonzero difference is at least
+   * 2^-252 and no square overflows or underflows. Boxes are only compared. */
+  const cli_table_t *tb = &q->tab[0];
+  for (size_t i = 0; !q->a.boxes && i < tb->rows; i++)
+    for (int k = 0; k < 3; k++) {
+      double a = fabs(tb->v[3 * i + (size_t)k]);
+      if (a != 0 && (a < 0x1p-200 || a > 0x1p200)) {
+        char msg[256];
+        snprintf(msg, sizeof msg,
+                 "field %d: %.17g is outside [2^-200, 2^200] in magnitude, where the disc "
+                 "overlap test's squares overflow or underflow; scale the data by a power of two",
+                 k + 1, tb->v[3 * i + (size_t)k]);
+        return bad_row(q, 0, i, msg);
+      }
+    }
   int rc = build_collider(q);
   if (rc) return rc;
   size_t np = 0;

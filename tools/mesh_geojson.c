@@ -301,6 +301,29 @@ static size_t pole_ring(const rings_t *r, int *south) {
   return SIZE_MAX;
 }
 
+/* The far end of ring q's nearest edge of non-zero length before (dir -1) or after (dir
+ * +1) its edge i (from point i to the next; the ring is stored without its closing point). */
+static const double *neighbour_end(const rings_t *r, size_t q, size_t i, int dir) {
+  size_t s = r->start[q], m = r->start[q + 1] - s, j = i - s;
+  for (size_t step = 1; step < m; step++) {
+    j = dir < 0 ? (j + m - 1) % m : (j + 1) % m;
+    const double *a = r->xy + 2 * (s + j), *b = r->xy + 2 * (s + (j + 1) % m);
+    if (a[0] != b[0] || a[1] != b[1]) return dir < 0 ? a : b;
+  }
+  return r->xy + 2 * i;
+}
+
+/* Does edge i of ring q, from (-180, y) to (180, y) or back, run across the whole map
+ * along latitude y, as the region reader takes it (docs/region.md, rule 6), rather than
+ * being a zero-length step on the antimeridian (Fiji)? At the poles, and where the ring
+ * read as a step would double back on the antimeridian (a band, the whole world). */
+static int across_map(const rings_t *r, size_t q, size_t i, double y) {
+  if (y == 90 || y == -90) return 1;
+  const double *p = neighbour_end(r, q, i, -1), *n = neighbour_end(r, q, i, +1);
+  return fabs(p[0]) == 180 && fabs(n[0]) == 180 &&
+         ((p[1] > y && n[1] > y) || (p[1] < y && n[1] < y));
+}
+
 /* Project and round in place; counts rounded coordinates. */
 static void transform(rings_t *r, const mg_options_t *o, mg_input_t *out) {
   if (o->project && r->np) {
@@ -313,12 +336,17 @@ static void transform(rings_t *r, const mg_options_t *o, mg_input_t *out) {
     /* Across the antimeridian (Fiji, Russia, Alaska: parts at both ends of the map), the
      * negative longitudes move up by 360 so that the parts meet at 180. Not when an edge
      * runs across the prime meridian (a ring cut at the antimeridian that goes round the
-     * globe, or the whole world): moving one of its ends would tear it across the map. */
+     * globe, or the whole world): moving one of its ends would tear it across the map.
+     * Nor when an edge from -180 to 180 runs across the map (the whole world
+     * [-180, -90] .. [180, 90], a band): moved, all its points went to longitude 180 and
+     * the world was "no ring with 3 distinct points". */
     int tear = 0;
     for (size_t q = 0; q < r->nr && !tear; q++)
       for (size_t i = r->start[q]; i < r->start[q + 1] && !tear; i++) {
-        double a = r->xy[2 * i], b = r->xy[2 * (i + 1 < r->start[q + 1] ? i + 1 : r->start[q])];
+        size_t j = i + 1 < r->start[q + 1] ? i + 1 : r->start[q];
+        double a = r->xy[2 * i], b = r->xy[2 * j], y = r->xy[2 * i + 1];
         tear = (a < 0) != (b < 0) && fabs(b - a) < 180;
+        if (fabs(b - a) == 360 && y == r->xy[2 * j + 1]) tear = across_map(r, q, i, y);
       }
     double k = cos(out->lat0 * MG_PI / 180) * MG_EARTH_M * MG_PI / 180;
     for (size_t i = 0; i < r->np; i++) {

@@ -98,6 +98,18 @@ void qk_poly_free(qk_poly_t *poly);
 /** First vertex index used by the input file (0 or 1; 0 for arrays). */
 unsigned qk_poly_first_index(const qk_poly_t *poly);
 
+/**
+ * Round every vertex coordinate to the nearest multiple of step (ties to even), in place:
+ * vertex numbers, line numbers, boundary markers, hole points and regional attributes
+ * stay as read, so errors still name the file's lines and numbers.
+ * \param [in,out] poly the input.
+ * \param [in] step the grid step, positive and finite.
+ * \param [out] rounded how many coordinates changed (may be NULL).
+ * \return QK_OK, QK_ERR_INVALID (no input, or step not positive and finite) or
+ *         QK_ERR_NONFINITE (a rounded coordinate would overflow; nothing is changed).
+ */
+qk_status_t qk_poly_round(qk_poly_t *poly, double step, size_t *rounded);
+
 /** Number of vertices, segments and hole points of an input (any pointer may be NULL). */
 void qk_poly_counts(const qk_poly_t *poly, size_t *nv, size_t *ns, size_t *nh);
 
