@@ -42,7 +42,8 @@ static qk_status_t root_square(const qk__pieces_t *pc, qk_region_t *r, qk_error_
 }
 
 /* The query window (region_internal.h): inside the root square, and in lon/lat mode inside
- * (-180, 180) x [-90, 90], so that normalising such a point changes nothing. The bounds are
+ * (-180, 180) x (-90, 90), so that normalising such a point changes nothing (the poles and
+ * the antimeridian take the single-point path). The bounds are
  * doubles a query compares with directly: x < rx + rside is x <= the double below it. */
 static void query_window(qk_region_t *r) {
   double x0 = r->rx, x1 = nextafter(r->rx + r->rside, -INFINITY);
@@ -52,8 +53,8 @@ static void query_window(qk_region_t *r) {
      * handles it for the closed and open rules; see locate.c) */
     x0 = qk__max(x0, nextafter(-180.0, 0.0));
     x1 = qk__min(x1, nextafter(180.0, 0.0));
-    y0 = qk__max(y0, -90.0);
-    y1 = qk__min(y1, 90.0);
+    y0 = qk__max(y0, nextafter(-90.0, 0.0));
+    y1 = qk__min(y1, nextafter(90.0, 0.0));
   }
   r->qx0 = x0, r->qx1 = x1, r->qy0 = y0, r->qy1 = y1;
 }

@@ -25,6 +25,12 @@ static ALWAYS_INLINE bool normalise(const qk_region_t *r, double *x, double *y) 
   if (!(*x >= r->qx0 && *x <= r->qx1 && *y >= r->qy0 && *y <= r->qy1)) {
     if (!r->planar) {
       if (!(*y >= -90 && *y <= 90)) return false;
+      /* A pole is one point of the sphere, inside whatever holds the area around it (the
+       * whole world, a polar cap, a ring around it), yet on the map's top or bottom line,
+       * which the semi-open rule's shift would take it off and which a feature reaching
+       * the pole has as an edge: it is answered one step of the double toward the
+       * equator, at its longitude. */
+      if (*y == 90 || *y == -90) *y = nextafter(*y, 0.0);
       if (*x < -180 || *x >= 180) {
         /* Exactly x mod 360 in [-180, 180): fmod is exact, and so is the step by 360
          * (Sterbenz: t is within a factor 2 of 360). fmod(x + 180, 360) - 180 rounded

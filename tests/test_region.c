@@ -586,6 +586,13 @@ static void test_region_lonlat(void **state) {
   assert_int_equal(at(r, 0, 85, 0), 2);
   assert_int_equal(at(r, 179.5, 89, 0), 2);
   assert_int_equal(at(r, 0, 75, 0), QK_NONE);
+  /* the poles lie inside the rings around them, under every rule (before, the north pole
+   * was in no feature: the map's top line is the closure's edge) */
+  for (int rule = 0; rule < 3; rule++)
+    for (double x = -180; x <= 180; x += 45) {
+      assert_int_equal(at(r, x, 90, (qk_boundary_t)rule), 2);
+      assert_int_equal(at(r, x, -90, (qk_boundary_t)rule), 1);
+    }
   assert_int_equal(at(r, 0, 91, 0), QK_NONE);
   assert_int_equal(at(r, 0, -91, 0), QK_NONE);
   /* the seam inside the square is not a boundary */
@@ -654,6 +661,28 @@ static void test_region_across_map(void **state) {
     for (int f = 0; f < 6; f++)
       if (got[f] != want[f])
         fail_msg("(%.17g, %.17g) feature %d: got %d, want %d", x, y, f, got[f], want[f]);
+  }
+  /* The poles, at any longitude and under every rule, by single, all and batch calls: the
+   * north one in the world and the cap, the south one in the world, the south cap and
+   * Antarctica (each holds the area around it; the map's top and bottom lines are edges
+   * of those rings, and the semi-open shift took the north pole off the map). */
+  const uint32_t north[] = {0, 1}, south[] = {0, 3, 5};
+  qk_point_t poles[18];
+  /* (off the antimeridian: under `open` the whole world's sides along +-180 are its ring) */
+  for (int k = 0; k < 18; k++) poles[k] = (qk_point_t){-170 + 40 * (k / 2), k % 2 ? -90 : 90};
+  for (int rule = 0; rule < 3; rule++) {
+    uint32_t one[18];
+    assert_int_equal(qk_region_locate_batch(r, poles, 18, (qk_boundary_t)rule, 1, one), QK_OK);
+    for (int k = 0; k < 18; k++) {
+      const uint32_t *want = k % 2 ? south : north;
+      size_t nw = k % 2 ? 3 : 2, n;
+      uint32_t all[8];
+      assert_int_equal(qk_region_locate_all(r, poles[k], (qk_boundary_t)rule, all, 8, &n), QK_OK);
+      assert_int_equal(n, nw);
+      for (size_t j = 0; j < n; j++) assert_int_equal(all[j], want[j]);
+      assert_int_equal(at(r, poles[k].x, poles[k].y, (qk_boundary_t)rule), want[0]);
+      assert_int_equal(one[k], want[0]);
+    }
   }
   qk_region_free(r);
 }
