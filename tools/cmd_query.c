@@ -624,6 +624,15 @@ static int raycast_answer(qrun_t *q, size_t i) {
     snprintf(msg, sizeof msg, "ray %zu: %s", i, qk_strerror(st));
     return bad_row(q, 1, i, msg);
   }
+  if (h.id != QK_NONE && !isfinite(h.t)) {
+    /* a hit whose t overflows (a tiny direction, a far disc) would print as the miss's inf */
+    char msg[256];
+    snprintf(msg, sizeof msg,
+             "ray %zu hits %u at a t beyond the largest double (direction %.17g,%.17g too "
+             "short for the distance); scale the direction",
+             i, (unsigned)h.id, v[2], v[3]);
+    return bad_row(q, 1, i, msg);
+  }
   if (h.id == QK_NONE)
     emit(q, i, SIZE_MAX, "%zu,-1,inf", i);
   else

@@ -50,7 +50,8 @@ static int parse_boundary(const char *cmd, const char *s, qk_boundary_t *b) {
 /* ---- CSV fields --------------------------------------------------------------------------- */
 
 /* Copy field `want` (0-based) of a CSV line into buf (quotes removed); returns 1 when
- * the line has that field, 0 when it has fewer, -1 - i when field i (that field or one
+ * the line has that field, 0 when it has fewer (with want < 0: the number of fields, buf
+ * unused), -1 - i when field i (that field or one
  * before it) is a malformed quoted field (*why says how), with the library reader's rules
  * (io/csv_scan.c): blanks may stand around the quotes, nothing else ("0.5"x and an unterminated
  * quote were read as 0.5 here while every other command refused them). */
@@ -92,7 +93,7 @@ static int csv_field(const char *line, int want, char *buf, size_t cap, const ch
       buf[n] = '\0';
       return 1;
     }
-    if (*s != ',') return 0;
+    if (*s != ',') return want < 0 ? i + 1 : 0;
     s++;
   }
 }
@@ -331,7 +332,8 @@ static void join_usage(FILE *f) {
              "coordinate columns by header name or 1-based number (default: the first two).\n"
              "A header line (x and y fields not numbers) is copied with the new column names\n"
              "appended, each prefixed feature_ (again while still taken) when the header or an\n"
-             "earlier new column has it (--field name beside a name column: feature_name).\n"
+             "earlier new column has it (--field name beside a name column: feature_name);\n"
+             "then every row must have as many fields as the header.\n"
              "A bad line is an error before any row is written (-o FILE is replaced\n"
              "only on success; on standard output a POINTS file is checked whole first, while\n"
              "points from a pipe are written as read). --threads N answers on N threads\n"
@@ -344,6 +346,8 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
   ssize_t len;
   long lineno = 0;
   int seen = 0, rc = CLI_OK;
+  int width = 0;  /* the header's number of fields (0: no header), which every row must have */
+  long hline = 0; /* the header's line */
   /* The x and y fields, as long as the line (a field cut short could turn
    * '0.5   <300 spaces>junk' into a number). */
   char *fx = NULL, *fy = NULL;
@@ -401,6 +405,12 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
           rc = CLI_BAD_INPUT;
           break;
         }
+        width = csv_field(line, -1, NULL, 0, &why), hline = lineno;
+        if (width < 0) {
+          cli_msg("quadkit join: %s:%ld: field %d: %s\n", j->pts_path, lineno, -width, why);
+          rc = CLI_BAD_INPUT;
+          break;
+        }
         if (j->dry) continue;
         if ((rc = write_header(j->out, line, j->fields, j->n_fields))) break;
         continue;
@@ -428,6 +438,20 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
       int col = bad == fx ? xy->col[0] : xy->col[1];
       cli_msg("quadkit join: %s:%ld: field %d is not a finite number: '%.40s'\n", j->pts_path,
               lineno, col + 1, bad);
+      rc = CLI_BAD_INPUT;
+      break;
+    }
+    int nf = width ? csv_field(line, -1, NULL, 0, &why) : 0;
+    if (nf < 0) {
+      cli_msg("quadkit join: %s:%ld: field %d: %s\n", j->pts_path, lineno, -nf, why);
+      rc = CLI_BAD_INPUT;
+      break;
+    }
+    if (nf != width) {
+      /* the row is copied as read under the header's names: a wider or narrower one would
+       * put `feature` and the properties under other columns */
+      cli_msg("quadkit join: %s:%ld: %d fields where the header (line %ld) has %d\n", j->pts_path,
+              lineno, nf, hline, width);
       rc = CLI_BAD_INPUT;
       break;
     }

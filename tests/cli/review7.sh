@@ -90,4 +90,34 @@ expect 1 "^quadkit mesh: $tmp/ovf.poly: --round 2\\^1000: a rounded coordinate i
   -- "$cli" mesh "$tmp/ovf.poly" -o "$tmp/ovf" --round 2^1000
 nothing_written "$tmp/ovf"
 
+# ---- join: rows wider or narrower than the header ---------------------------------------
+# A row is copied as read and `feature` appended: a row with a third field put `feature`
+# under another column than the header's. Now refused, naming line and counts.
+printf '{"type":"Polygon","coordinates":[[[0,0],[4,0],[4,4],[0,4],[0,0]]]}\n' >"$tmp/sq.geojson"
+printf '"x","y"\n"1","1"\n1,1,"a,b"\n' >"$tmp/wide.csv"
+expect 1 "^quadkit join: $tmp/wide.csv:3: 3 fields where the header \\(line 1\\) has 2$" \
+  -- "$cli" join "$tmp/sq.geojson" "$tmp/wide.csv" --planar
+printf '\nx,y,name\n1,1,a\n2,2\n' >"$tmp/narrow.csv"
+expect 1 "^quadkit join: $tmp/narrow.csv:4: 2 fields where the header \\(line 2\\) has 3$" \
+  -- "$cli" join "$tmp/sq.geojson" "$tmp/narrow.csv" --planar -o "$tmp/narrow.out"
+[ -e "$tmp/narrow.out" ] && fail "join: an output was left after an error"
+printf 'x,y,name\n1,1,"a,b"\n5,5,c\n' >"$tmp/even.csv"
+same_text "join: rows as wide as the header" \
+  "$("$cli" join "$tmp/sq.geojson" "$tmp/even.csv" --planar | tr '\n' ' ')" \
+  'x,y,name,feature 1,1,"a,b",0 5,5,c,-1 '
+# without a header rows may differ (no columns to keep aligned)
+printf '1,1\n5,5,c\n' >"$tmp/nohead.csv"
+same_text "join: no header" "$("$cli" join "$tmp/sq.geojson" "$tmp/nohead.csv" --planar | tr '\n' ' ')" \
+  '1,1,0 5,5,c,-1 '
+
+# ---- raycast: a hit whose t overflows --------------------------------------------------
+# Direction 1e-300 towards a disc 1e300 away: t = 1e600 printed as inf, the miss's mark.
+printf 'x,y,r\n0,0,1\n' >"$tmp/disc.csv"
+printf 'x,y,dx,dy\n-2,0,1,0\n-1e300,0,1e-300,0\n' >"$tmp/tinf.csv"
+expect 1 "^quadkit: $tmp/tinf.csv:3: ray 1 hits 0 at a t beyond the largest double" \
+  -- "$cli" raycast "$tmp/disc.csv" "$tmp/tinf.csv"
+printf 'x,y,dx,dy\n-2,0,1,0\n-2,0,1e300,0\n-1e300,0,1,0\n' >"$tmp/tok.csv"
+same_text "raycast: large but finite t" "$("$cli" raycast "$tmp/disc.csv" "$tmp/tok.csv" | tr '\n' ' ')" \
+  "ray,disc,t 0,0,1 1,0,1e-300 2,0,1.0000000000000001e+300 "
+
 report
