@@ -51,7 +51,11 @@ void qk_mesh_free(qk_mesh_t *m) {
   qk__free(&a, m->vmark, (m->nv + 1) * sizeof *m->vmark);
   qk__free(&a, m->oseg, m->noseg_cap * sizeof *m->oseg);
   qk__free(&a, m->attr, (m->nt + 1) * sizeof *m->attr);
-  qk__free(&a, m, sizeof *m);
+  if (m->arena) {
+    qk__mesh_arena_free(m->arena);
+    free(m);
+  } else
+    qk__free(&a, m, sizeof *m);
 }
 
 /* Angle at b of triangle a-b-c, in degrees. */
@@ -493,6 +497,10 @@ qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *opt
     *out = m;
     return QK_OK;
   }
+  /* Large blocks from huge-page chunks when the caller gives no allocator (mesh/arena.c):
+   * malloc's fresh 4 KB pages cost one fault each on every call. */
+  if (!opt.allocator && qk__mesh_arena_available() && (m->arena = qk__mesh_arena_new()))
+    m->alloc = (qk_allocator_t){qk__mesh_arena_fn, m->arena};
   qk_poly_t *onlat = NULL;
 
   double t0 = now(), t1 = t0, t2 = t0, t3 = t0;
@@ -537,6 +545,7 @@ qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *opt
   m->stats.origin_y = g.lat.y0;
   m->stats.proven_min_angle_deg = 45;
   m->stats.proven_max_angle_deg = 90;
+  qk__mesh_arena_seal(m->arena);
   *out = m;
   return QK_OK;
 }

@@ -56,8 +56,18 @@ typedef struct qk__oseg {
   uint32_t seg;
 } qk__oseg_t;
 
+/* The lattice modes' arena for large blocks when the caller gives no allocator
+ * (mesh/arena.c): qk__mesh_arena_fn is a qk_alloc_fn over it. */
+typedef struct qk__mesh_arena qk__mesh_arena_t;
+int qk__mesh_arena_available(void);
+qk__mesh_arena_t *qk__mesh_arena_new(void);
+void *qk__mesh_arena_fn(void *ud, void *ptr, size_t osize, size_t nsize);
+void qk__mesh_arena_seal(qk__mesh_arena_t *r);
+void qk__mesh_arena_free(qk__mesh_arena_t *r);
+
 struct qk_mesh {
   qk_allocator_t alloc;
+  qk__mesh_arena_t *arena; /* NULL, or the arena alloc runs on (the mesh is libc's) */
   qk_tree_t *tree;
   uint64_t size;
   double *xy; /* 2 * nv */

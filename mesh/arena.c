@@ -1,0 +1,194 @@
+/*
+ * The lattice modes' block arena (issue 12, seventeenth session): where the caller gives
+ * no allocator, the book's and the dyadic mode take their large blocks (64 KB and more:
+ * the tree's nodes, the corner map, the triangle and vertex arrays) from 2 MB-aligned
+ * chunks marked for transparent huge pages, instead of from malloc.
+ *
+ * Why: malloc hands a freed large block back to the kernel (munmap, or a trim of the heap
+ * top), so every call touched its 5-8 MB of blocks as fresh 4 KB pages, one page fault
+ * each. On the seventeenth session's virtual machine a fault costs 6-30 us (about 0.2 us
+ * on a usual machine), and the dyadic bench input's 1,433 faults a call took 5-10x the
+ * mesher's own work. A chunk with MADV_HUGEPAGE faults once per 2 MB.
+ *
+ * The arena is a qk_alloc_fn. Blocks are placed by bumping a chunk's top; a freed block at
+ * a top is taken back, a chunk whose blocks are all freed is unmapped (or kept empty when
+ * it is the last one, of one huge page), and a block at a top grows in place. A block of
+ * 2 MB or more has its chunk to itself, so that freeing it gives the chunk back. Smaller blocks,
+ * and blocks reallocated below 64 KB from libc, stay with libc; where a block lives is known from
+ * its address. Once the mesh is made the arena is sealed: from then on it only passes new
+ * blocks to libc and counts frees of its own blocks, so threads that read (write out) one
+ * mesh at once never change it; its chunks go when the mesh is freed.
+ */
+#define _DEFAULT_SOURCE
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "mesh/mesh_internal.h"
+
+#if defined(__linux__)
+#include <sys/mman.h>
+#endif
+
+/* Off under AddressSanitizer, which does not see inside the chunks: the mesher's large
+ * arrays stay where it checks them. */
+#if defined(__has_feature)
+#if __has_feature(address_sanitizer)
+#define ARENA_ASAN 1
+#endif
+#endif
+#if defined(__SANITIZE_ADDRESS__)
+#define ARENA_ASAN 1
+#endif
+
+#if defined(__linux__) && defined(MADV_HUGEPAGE) && defined(MAP_ANONYMOUS) && !defined(ARENA_ASAN)
+#define ARENA_ON 1
+#else
+#define ARENA_ON 0
+#endif
+
+#define ARENA_MIN ((size_t)64 << 10) /* smaller blocks stay with libc */
+#define CHUNK ((size_t)2 << 20)      /* a transparent huge page */
+#define ALIGN ((size_t)64)
+
+typedef struct chunk {
+  char *base;
+  size_t size, top; /* bytes mapped, bytes handed out from base */
+  size_t live;      /* blocks not yet freed */
+} chunk_t;
+
+struct qk__mesh_arena {
+  chunk_t *c;
+  size_t n, cap;
+  int sealed;
+};
+
+/* Whether the mesher takes its large blocks from an arena when the caller gives no
+ * allocator: only where chunks get huge pages. */
+int qk__mesh_arena_available(void) { return ARENA_ON; }
+
+qk__mesh_arena_t *qk__mesh_arena_new(void) {
+  qk__mesh_arena_t *r = calloc(1, sizeof *r);
+  return r;
+}
+
+#if ARENA_ON
+/* A mapping of `size` bytes (a multiple of CHUNK) aligned to CHUNK, marked for huge pages;
+ * NULL when the kernel refuses. */
+static char *map_chunk(size_t size) {
+  char *p = mmap(NULL, size + CHUNK, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+  if (p == MAP_FAILED) return NULL;
+  uintptr_t a = ((uintptr_t)p + CHUNK - 1) & ~(uintptr_t)(CHUNK - 1);
+  size_t head = (size_t)(a - (uintptr_t)p);
+  if (head) munmap(p, head);
+  munmap((char *)a + size, CHUNK - head);
+  (void)madvise((void *)a, size, MADV_HUGEPAGE); /* a hint; a refusal leaves 4 KB pages */
+  return (char *)a;
+}
+
+static void unmap_chunk(chunk_t *c) { munmap(c->base, c->size); }
+#else
+/* Elsewhere (and under AddressSanitizer) the mesher does not use the arena; its chunks
+ * come from malloc so that the tests still run its bookkeeping. */
+static char *map_chunk(size_t size) { return malloc(size); }
+static void unmap_chunk(chunk_t *c) { free(c->base); }
+#endif
+
+void qk__mesh_arena_free(qk__mesh_arena_t *r) {
+  if (!r) return;
+  for (size_t i = 0; i < r->n; i++) unmap_chunk(&r->c[i]);
+  free(r->c);
+  free(r);
+}
+
+void qk__mesh_arena_seal(qk__mesh_arena_t *r) {
+  if (r) r->sealed = 1;
+}
+
+static size_t round_up(size_t n, size_t to) { return (n + to - 1) / to * to; }
+
+/* The chunk holding p, or NULL for a block of libc's. */
+static chunk_t *chunk_of(qk__mesh_arena_t *r, const void *p) {
+  for (size_t i = 0; i < r->n; i++)
+    if ((const char *)p >= r->c[i].base && (const char *)p < r->c[i].base + r->c[i].size)
+      return &r->c[i];
+  return NULL;
+}
+
+/* A new block of n bytes from some chunk's top, or from a new chunk; NULL when out of
+ * memory. */
+static void *arena_get(qk__mesh_arena_t *r, size_t n) {
+  size_t need = round_up(n, ALIGN);
+  if (need < n) return NULL;
+  for (size_t i = r->n; i-- > 0;) {
+    chunk_t *c = &r->c[i];
+    if (c->size - c->top >= need) {
+      void *p = c->base + c->top;
+      c->top += need, c->live++;
+      return p;
+    }
+  }
+  if (r->n == r->cap) {
+    size_t nc = r->cap ? 2 * r->cap : 8;
+    chunk_t *c = realloc(r->c, nc * sizeof *c);
+    if (!c) return NULL;
+    r->c = c, r->cap = nc;
+  }
+  size_t size = round_up(need, CHUNK);
+  if (size < need) return NULL;
+  char *base = map_chunk(size);
+  if (!base) return NULL;
+  /* A block of a chunk or more has its chunk to itself, which goes when it does. */
+  r->c[r->n++] = (chunk_t){base, size, need >= CHUNK ? size : need, 1};
+  return base;
+}
+
+/* Free block p of n bytes in chunk c: a block at the top is taken back; a chunk with no
+ * blocks left is emptied, and unmapped unless it is the last (reused next). */
+static void arena_put(qk__mesh_arena_t *r, chunk_t *c, char *p, size_t n) {
+  c->live--;
+  if (r->sealed) return;
+  if (p + round_up(n, ALIGN) == c->base + c->top) c->top = (size_t)(p - c->base);
+  if (c->live) return;
+  c->top = 0;
+  if (c == &r->c[r->n - 1] && c->size == CHUNK) return;
+  unmap_chunk(c);
+  *c = r->c[--r->n];
+}
+
+void *qk__mesh_arena_fn(void *ud, void *ptr, size_t osize, size_t nsize) {
+  qk__mesh_arena_t *r = ud;
+  chunk_t *c = ptr ? chunk_of(r, ptr) : NULL;
+  if (!c) {
+    /* libc's block (or none): it stays with libc unless it grows to ARENA_MIN. */
+    if (nsize == 0) {
+      free(ptr);
+      return NULL;
+    }
+    if (r->sealed || nsize < ARENA_MIN) return realloc(ptr, nsize);
+    void *q = arena_get(r, nsize);
+    if (q && ptr) memcpy(q, ptr, osize < nsize ? osize : nsize), free(ptr);
+    return q;
+  }
+  char *p = ptr;
+  if (nsize == 0) {
+    arena_put(r, c, p, osize);
+    return NULL;
+  }
+  if (nsize <= osize && (r->sealed || p + round_up(osize, ALIGN) != c->base + c->top))
+    return p; /* shrinks in place; the tail is lost until the chunk empties */
+  if (!r->sealed && p == c->base && c->top == c->size && c->live == 1 && nsize <= c->size)
+    return p; /* a block alone in its chunk, within the chunk */
+  if (!r->sealed && p + round_up(osize, ALIGN) == c->base + c->top &&
+      (size_t)(p - c->base) + round_up(nsize, ALIGN) <= c->size &&
+      round_up(nsize, ALIGN) >= nsize) {
+    c->top = (size_t)(p - c->base) + round_up(nsize, ALIGN); /* the top block, in place */
+    return p;
+  }
+  void *q = r->sealed || nsize < ARENA_MIN ? malloc(nsize) : arena_get(r, nsize);
+  if (!q) return NULL;
+  memcpy(q, p, osize < nsize ? osize : nsize);
+  c = chunk_of(r, p); /* arena_get may have moved the chunk records */
+  arena_put(r, c, p, osize);
+  return q;
+}
