@@ -42,4 +42,13 @@ printf 'x,y,n\n1,1,"a\r\nb"\r\n2,2\x00,c\n' >"$tmp/ml-nul.csv"
 expect 1 "^quadkit join: $tmp/ml-nul.csv:4: binary data \\(NUL byte\\) in a text file$" \
   -- "$cli" join "$tmp/sq.geojson" "$tmp/ml-nul.csv"
 
+# ---- join --boundary open on the antimeridian -------------------------------------------
+# The whole world's sides along -180 and +180 are one meridian on the sphere: a point on
+# it is inside under `open` (it was in no feature).
+printf '{"type":"FeatureCollection","features":[{"type":"Feature","properties":{"n":"W"},"geometry":{"type":"Polygon","coordinates":[[[-180,-90],[180,-90],[180,90],[-180,90],[-180,-90]]]}}]}\n' >"$tmp/world.geojson"
+printf 'x,y\n180,5\n-180,0\n540,-45\n0,0\n' >"$tmp/am.csv"
+same_text "join --boundary open: the antimeridian in the whole world" \
+  "$("$cli" join "$tmp/world.geojson" "$tmp/am.csv" --boundary open | tr '\n' ' ')" \
+  "x,y,feature 180,5,0 -180,0,0 540,-45,0 0,0,0 "
+
 report
