@@ -61,8 +61,9 @@ int cli_cut_line_end(char *line, size_t *len);
  * does (include/quadkit/io.h); each line's ending cut. *phys counts the physical lines
  * read, *first is set to the one where the record starts. Returns the record's length;
  * -1 at the end of the input or on a read error (ferror tells); -2 for a NUL byte or a
- * lone CR (*why says which, on physical line *phys) or a quote left open at the end of
- * the input (on line *first, where the record starts); -3 out of memory. */
+ * lone CR (*why says which, on physical line *phys); -3 out of memory. A record that the
+ * input ends inside a quoted field is returned with *why set (NULL otherwise): the
+ * caller names the field. */
 long cli_read_record(FILE *f, char **line, size_t *cap, unsigned long *phys, unsigned long *first,
                      const char **why);
 

@@ -358,6 +358,13 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
    * the physical line where it starts. */
   while ((len = cli_read_record(in, &line, &cap, &phys, &first, &bad)) >= 0) {
     lineno = (long)first;
+    if (bad) { /* the input ends inside a quoted field: name it, whatever its column */
+      int nf = csv_field(line, -1, NULL, 0, &bad);
+      cli_msg("quadkit join: %s:%ld: field %d: %s\n", j->pts_path, lineno, nf < 0 ? -nf : nf,
+              "unterminated quoted field (it runs to the end of the file)");
+      rc = CLI_BAD_INPUT;
+      break;
+    }
     if ((size_t)len + 1 > fcap) {
       char *nx = realloc(fx, (size_t)len + 1), *ny = nx ? realloc(fy, (size_t)len + 1) : NULL;
       if (nx) fx = nx;
@@ -461,7 +468,7 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
     }
   }
   if (!rc && len == -2) {
-    cli_msg("quadkit join: %s:%lu: %s\n", j->pts_path, !strncmp(bad, "unterminated", 12) ? first : phys, bad);
+    cli_msg("quadkit join: %s:%lu: %s\n", j->pts_path, phys, bad);
     rc = CLI_BAD_INPUT;
   } else if (!rc && len == -3) {
     rc = CLI_INTERNAL;

@@ -52,16 +52,18 @@ long cli_read_record(FILE *f, char **line, size_t *cap, unsigned long *phys, uns
   size_t n = 0;
   int q = 0, part = 0;
   char *buf = NULL;
+  *why = NULL;
   size_t bcap = 0;
   long rc;
   for (;; part++) {
     ssize_t got = getline(part ? &buf : line, part ? &bcap : cap, f);
     if (got < 0) {
       if (!part) return -1;
-      /* the input ends inside quotes: the rows after the quote would be lost */
-      *why = "unterminated quoted field: it runs to the end of the file";
-      rc = -2;
-      goto out;
+      /* the input ends inside quotes: the record is returned, flagged (the rows after
+       * the quote would be lost without a word) */
+      *why = "unterminated quoted field (it runs to the end of the file)";
+      n--; /* the added LF */
+      break;
     }
     char *l = part ? buf : *line;
     ++*phys;
