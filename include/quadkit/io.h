@@ -11,8 +11,8 @@
  * record starts, or for an error in a field, where that field starts (its column counted
  * from that line's start); lines holding only blanks are skipped. A quote left open to
  * the end of the input is an error, in a field not read too. The first non-blank line is
- * a header when options say so, or (by default) when none of its selected fields is a number (a first
- * line "x1,2" is data, and an error); columns may then be selected by name.
+ * a header when options say so, or (by default) when none of its selected fields is a
+ * number (a first line "x1,2" is data, and an error); columns may then be selected by name.
  * Every other line is a data row: its selected fields must be decimal numbers (an optional
  * sign, digits with an optional decimal point, an optional exponent: `-1.5e3`, `.5`, `5.`;
  * blanks around allowed; strtod's hexadecimal `0x10` is refused) and finite; the other
