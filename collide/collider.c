@@ -12,6 +12,7 @@
 #include <string.h>
 
 #include "collide/collide_internal.h"
+#include "query/dist_exact.h"
 
 #if defined(__SSE2__)
 #include <emmintrin.h>
@@ -159,10 +160,14 @@ struct qk_collider {
   double rs_x, rs_y, rs_f, rs_k;
 };
 
-/* Exact overlap predicates (touching counts). */
+/* Exact overlap predicates (touching counts): the squares in doubles decide unless the
+ * distance is within a relative 2^-45 of the radii's sum or the values are beyond 2^500
+ * (query/dist_exact.h), where the exact test does, for any finite values. */
 static inline int disc_disc(const qk_disc_t *a, const qk_disc_t *b) {
   double dx = a->x - b->x, dy = a->y - b->y, rs = a->r + b->r;
-  return dx * dx + dy * dy <= rs * rs;
+  double d2 = dx * dx + dy * dy, r2 = rs * rs;
+  if (d2 > qk__filter_hi(r2)) return 0;
+  return d2 <= qk__filter_lo(r2) || qk__within_exact(a->x, a->y, b->x, b->y, a->r, b->r);
 }
 
 static inline int box_box(const qk_box_t *a, const qk_box_t *b) {
@@ -173,7 +178,9 @@ static inline int disc_box(const qk_disc_t *d, const qk_box_t *b) {
   double px = d->x < b->xmin ? b->xmin : (d->x > b->xmax ? b->xmax : d->x);
   double py = d->y < b->ymin ? b->ymin : (d->y > b->ymax ? b->ymax : d->y);
   double dx = d->x - px, dy = d->y - py;
-  return dx * dx + dy * dy <= d->r * d->r;
+  double d2 = dx * dx + dy * dy, r2 = d->r * d->r;
+  if (d2 > qk__filter_hi(r2)) return 0;
+  return d2 <= qk__filter_lo(r2) || qk__within_exact(d->x, d->y, px, py, d->r, 0);
 }
 
 /* A query shape or an item: a disc or a box. */

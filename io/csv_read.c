@@ -26,8 +26,10 @@ typedef struct reader {
   size_t maxcol;                  /* the largest selected column number */
   qk__span_t *spans;              /* fields of the current line (nspans >= maxcol) */
   size_t nspans;
-  size_t bom; /* 3 when line 1 started with a byte order mark */
-  double *v;  /* rows * ncols values */
+  size_t bom;             /* 3 when line 1 started with a byte order mark */
+  const char *rec;        /* the current record (several lines when a quoted field holds breaks) */
+  unsigned long rec_line; /* the physical line where it starts */
+  double *v;              /* rows * ncols values */
   size_t rows, cap;
 } reader_t;
 
@@ -36,6 +38,13 @@ void qk_csv_options_init(qk_csv_options_t *opt) { memset(opt, 0, sizeof *opt); }
 static qk_status_t fail(reader_t *r, qk_status_t st, unsigned long line, size_t column, size_t item,
                         const char *fmt, ...) {
   if (r->err) {
+    /* A column of a record that spans lines: name the physical line and column. */
+    if (line && column && r->rec && line == r->rec_line) {
+      size_t lb = 0; /* where column's physical line starts in the record */
+      for (size_t i = 0; i + 1 < column && r->rec[i]; i++)
+        if (r->rec[i] == '\n') line++, lb = i + 1;
+      column -= lb;
+    }
     r->err->line = line;
     r->err->column = line && column ? (unsigned long)(column + (line == 1 ? r->bom : 0)) : 0;
     r->err->item = item;
@@ -289,7 +298,8 @@ static qk_status_t read_lines(reader_t *r, qk__lines_t *in) {
   int first = 1, got;
   while ((got = qk__lines_next(in, &len)) > 0) {
     char *line = in->line;
-    unsigned long lineno = in->lineno;
+    unsigned long lineno = in->first; /* a record names the line where it starts */
+    r->rec = line, r->rec_line = lineno;
     if (memchr(line, '\0', len))
       return fail(r, QK_ERR_PARSE, lineno, (size_t)((char *)memchr(line, '\0', len) - line) + 1,
                   SIZE_MAX, "binary data (NUL byte) in a text file");
@@ -316,8 +326,20 @@ static qk_status_t read_lines(reader_t *r, qk__lines_t *in) {
       continue;
     }
     first = 0;
+    if (in->open_quote) { /* (a header reports it: all its fields are read) */
+      /* A quote left open takes the rest of the input into its field, in a column not
+       * read too: name it, as the rows after it would be lost. */
+      size_t pos = 0, k = 0;
+      qk__span_t sp;
+      const char *msg = NULL;
+      while (pos <= len && !(msg = qk__csv_field(line, len, &pos, &sp))) k++;
+      if (k >= r->maxcol) /* (in a selected field the row reports it, as any bad quote) */
+        return fail(r, QK_ERR_PARSE, lineno, msg ? sp.start + 1 : 0, SIZE_MAX,
+                    "field %zu: unterminated quoted field (it runs to the end of the file)", k + 1);
+    }
     if ((st = read_row(r, line, len, lineno))) return st;
   }
+  r->rec = NULL;
   if (got < 0) return fail(r, QK_ERR_NOMEM, in->lineno + 1, 0, SIZE_MAX, "out of memory");
   if (in->ioerr) return fail(r, QK_ERR_IO, 0, 0, SIZE_MAX, "read error");
   return QK_OK;

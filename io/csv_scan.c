@@ -41,39 +41,89 @@ static int line_room(qk__lines_t *r, size_t need) {
   return 0;
 }
 
+/* Quote state of a CSV record at the end of a physical line: 0 at a field's start, 1 in
+ * an unquoted field (or after a closing quote), 2 inside quotes, 3 just after a quote seen
+ * inside quotes (a closing quote, or the first of ""). Only a quote at a field's start
+ * (blanks before it allowed) opens a quoted field, as in qk__csv_field. */
+static int quote_state(int q, const char *s, size_t n) {
+  for (size_t i = 0; i < n; i++) {
+    char c = s[i];
+    switch (q) {
+    case 0:
+      if (c == '"')
+        q = 2;
+      else if (c != ',' && c != ' ' && c != '\t')
+        q = 1;
+      break;
+    case 1:
+      if (c == ',') q = 0;
+      break;
+    case 2:
+      if (c == '"') q = 3;
+      break;
+    default: /* 3 */
+      q = c == '"' ? 2 : c == ',' ? 0 : 1;
+      break;
+    }
+  }
+  return q;
+}
+
 int qk__lines_next(qk__lines_t *r, size_t *len) {
   if (!r->chunk) {
     r->chunk = qk__io_realloc(r->alloc, NULL, 0, CHUNK);
     if (!r->chunk) return -1;
   }
-  size_t n = 0;
-  int got = 0;
+  size_t n = 0;        /* bytes of the record so far */
+  size_t pl = 0;       /* where the current physical line starts in it */
+  int q = 0, open = 0; /* open: a physical line has begun and is not yet complete */
+  r->open_quote = 0;
   for (;;) {
-    if (r->cpos == r->clen) {
-      if (r->eof) break;
+    if (r->cpos == r->clen && !r->eof) {
       r->clen = fread(r->chunk, 1, CHUNK, r->f);
       r->cpos = 0;
       if (r->clen < CHUNK) {
         r->eof = 1;
         r->ioerr = ferror(r->f) != 0;
       }
-      if (r->clen == 0) break;
     }
-    const char *s = r->chunk + r->cpos;
-    size_t avail = r->clen - r->cpos;
-    const char *nl = memchr(s, '\n', avail);
-    size_t take = nl ? (size_t)(nl - s) + 1 : avail;
-    if (line_room(r, n + take + 1)) return -1;
-    memcpy(r->line + n, s, take);
-    n += take;
-    r->cpos += take;
-    got = 1;
-    if (nl) break;
+    if (r->cpos == r->clen) { /* the input ends */
+      if (!open) {
+        if (pl == 0) return 0; /* no record */
+        n--;                   /* a record inside quotes at the end: drop its added LF */
+        r->open_quote = 1;
+        break;
+      }
+    } else {
+      const char *s = r->chunk + r->cpos;
+      size_t avail = r->clen - r->cpos;
+      const char *nl = memchr(s, '\n', avail);
+      size_t take = nl ? (size_t)(nl - s) + 1 : avail;
+      if (line_room(r, n + take + 2)) return -1;
+      memcpy(r->line + n, s, take);
+      n += take;
+      r->cpos += take;
+      open = 1;
+      if (!nl) continue; /* the line goes on in the next chunk */
+    }
+    /* A physical line is complete: cut its ending. */
+    open = 0;
+    while (n > pl && (r->line[n - 1] == '\n' || r->line[n - 1] == '\r')) n--;
+    if (pl == 0) r->first = r->lineno + 1;
+    r->lineno++;
+    size_t bom = r->lineno == 1 && n >= 3 && !memcmp(r->line, "\xEF\xBB\xBF", 3) ? 3 : 0;
+    q = quote_state(q, r->line + pl + bom, n - pl - bom);
+    /* Inside quotes at the line's end: the record goes on, with a line feed in the field
+     * (RFC 4180); at the end of the input the reader reports the open quote. */
+    if (q != 2) break;
+    if (r->eof && r->cpos == r->clen) { /* the input ends inside quotes */
+      r->open_quote = 1;
+      break;
+    }
+    r->line[n++] = '\n';
+    pl = n;
   }
-  if (!got) return 0;
-  while (n > 0 && (r->line[n - 1] == '\n' || r->line[n - 1] == '\r')) n--;
   r->line[n] = '\0';
-  r->lineno++;
   *len = n;
   return 1;
 }

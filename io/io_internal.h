@@ -20,13 +20,17 @@ typedef struct qk__lines {
   size_t clen, cpos;
   char *line; /* the current line */
   size_t cap;
-  unsigned long lineno;
+  unsigned long lineno; /* physical lines read */
+  unsigned long first;  /* the physical line where the current record starts */
   int eof, ioerr;
+  int open_quote; /* the current record ends with the input inside a quoted field */
 } qk__lines_t;
 
 /* Start reading f. */
 void qk__lines_init(qk__lines_t *r, FILE *f, const qk_allocator_t *alloc);
-/* The next line into r->line (*len bytes): 1, or 0 at the end, or -1 out of memory. */
+/* The next CSV record into r->line (*len bytes): one line, or several when a quoted field
+ * holds line breaks (each kept as one LF, a CRLF inside quotes included); it starts on
+ * physical line r->first. 1, or 0 at the end, or -1 out of memory. */
 int qk__lines_next(qk__lines_t *r, size_t *len);
 /* Free the buffers. */
 void qk__lines_free(qk__lines_t *r);

@@ -4,6 +4,7 @@
  * each point of the leaves reached. The traversal uses a fixed stack, so it never
  * allocates.
  */
+#include "query/dist_exact.h"
 #include "query/query_internal.h"
 
 /* A box test for the leaves, shared by the callback and the buffer form. */
@@ -47,14 +48,28 @@ static qk_status_t range_walk(const qk_tree_t *t, qk_box_t b, qk__emit_fn emit, 
   return QK_OK;
 }
 
+/* The radius query's rare case, out of line: a point within a relative 2^-45 of the
+ * circle, or r beyond 2^500 (or infinite). Its distance, as rounded (without the overflow
+ * of the squares), when it lies within r of c exactly; -1 when not. */
+static __attribute__((noinline, cold)) double near_circle(double x, double y, qk_point_t c,
+                                                          double r) {
+  if (!isinf(r) && !qk__within_exact(x, y, c.x, c.y, r, 0)) return -1;
+  double dx = x - c.x, dy = y - c.y, d2 = dx * dx + dy * dy;
+  return d2 < 0x1p1000 ? sqrt(d2) : hypot(dx, dy);
+}
+
 static qk_status_t radius_walk(const qk_tree_t *t, qk_point_t c, double r, qk__emit_fn emit,
                                void *ctx) {
   if (!isfinite(c.x) || !isfinite(c.y) || isnan(r)) return QK_ERR_NONFINITE;
   if (r < 0) return QK_ERR_INVALID;
   if (qk__tree_count(t) == 0) return QK_OK;
-  const double r2 = r * r, e = qk__margin(t);
+  /* Exact: d2 at most lo is inside, above hi outside, and between them (a point within a
+   * relative 2^-45 of the circle, or r beyond 2^500) the exact test decides
+   * (query/dist_exact.h). Squares are pruned against hi, which keeps every square holding
+   * a point the exact test accepts. */
+  const double r2 = r * r, lo = qk__filter_lo(r2), hi = qk__filter_hi(r2), e = qk__margin(t);
   const qk_square_t root = qk__tree_root_square(t);
-  if (qk__square_d2(root.x, root.y, root.side, c.x, c.y, e) > r2) return QK_OK;
+  if (qk__square_d2(root.x, root.y, root.side, c.x, c.y, e) > hi) return QK_OK;
   const double *xs = qk__tree_xs(t), *ys = qk__tree_ys(t);
   const qk_id_t *ids = qk__tree_ids(t);
   qk__cell_t stack[QK__STACK_MAX];
@@ -70,8 +85,11 @@ static qk_status_t radius_walk(const qk_tree_t *t, qk_point_t c, double r, qk__e
       for (uint32_t i = 0; i < count; i++) {
         double dx = px[i] - c.x, dy = py[i] - c.y;
         double d2 = dx * dx + dy * dy;
-        if (d2 <= r2)
-          if (emit(ctx, pid[i], px[i], py[i], sqrt(d2))) return QK_OK;
+        if (d2 <= hi) {
+          double dist = d2 <= lo ? sqrt(d2) : near_circle(px[i], py[i], c, r);
+          if (dist < 0) continue;
+          if (emit(ctx, pid[i], px[i], py[i], dist)) return QK_OK;
+        }
       }
       continue;
     }
@@ -80,7 +98,7 @@ static qk_status_t radius_walk(const qk_tree_t *t, qk_point_t c, double r, qk__e
     qk__cell_t kids[4];
     qk__cell_children(t, n, child, kids);
     for (int q = 3; q >= 0; q--)
-      if (qk__square_d2(kids[q].x, kids[q].y, hs, c.x, c.y, e) <= r2) stack[sp++] = kids[q];
+      if (qk__square_d2(kids[q].x, kids[q].y, hs, c.x, c.y, e) <= hi) stack[sp++] = kids[q];
   }
   return QK_OK;
 }

@@ -305,6 +305,16 @@ static ALWAYS_INLINE uint32_t leaf_first(const qk_region_t *r, const qk__leaf_t 
  * the antimeridian), so written for clarity. Hands features to out[] while below cap and
  * returns how many hold the point (the first only unless `all`).
  */
+/* For an edge given along the antimeridian through (x, y), x = -180 or 180: count it in
+ * *sides when it covers [y, y + e^2] (the semi-open side of the point); any other edge
+ * through the point sets *across (the point is on a boundary that crosses the meridian). */
+static void along_meridian(const qk__seg_t *g, double x, double y, unsigned *sides, bool *across) {
+  if (g->ax != x || g->bx != x)
+    *across = true;
+  else if (qk__min(g->ay, g->by) <= y && y < qk__max(g->ay, g->by))
+    ++*sides; /* (a zero-length piece on the meridian is neither) */
+}
+
 static size_t antimeridian_features(const qk_region_t *r, double y, qk_boundary_t b, bool all,
                                     uint32_t *out, size_t cap) {
   leaf_box_t w, e;
@@ -326,20 +336,30 @@ static size_t antimeridian_features(const qk_region_t *r, double y, qk_boundary_
     if (iw < nw && (TW[iw] >> 2) < f) f = TW[iw] >> 2;
     if (ie < ne && (TE[ie] >> 2) < f) f = TE[ie] >> 2;
     if (f == QK_NONE) return n;
-    bool par = si < ns && S[si] == f, on = false;
+    bool par = si < ns && S[si] == f, on = false, across = false;
+    unsigned sides = 0; /* given edges along the antimeridian covering [y, y + e^2] */
     if (par) si++;
     for (; iw < nw && (TW[iw] >> 2) == f; iw++) {
       const qk__seg_t *g = &r->segs[EW[iw]];
-      if (!(TW[iw] & 2) && qk__on_edge(g->ax, g->ay, g->bx, g->by, -180.0, y)) on = true;
+      if (!(TW[iw] & 2) && qk__on_edge(g->ax, g->ay, g->bx, g->by, -180.0, y))
+        on = true, along_meridian(g, -180.0, y, &sides, &across);
       if (!same)
         par ^=
             qk__crosses(w.cx, w.cy, -180.0, y, g->ax, g->ay, g->bx, g->by, (TW[iw] & 1) ? 1 : -1);
     }
     for (; ie < ne && (TE[ie] >> 2) == f; ie++) {
       const qk__seg_t *g = &r->segs[EE[ie]];
-      if (!(TE[ie] & 2) && qk__on_edge(g->ax, g->ay, g->bx, g->by, 180.0, y)) on = true;
+      if (!(TE[ie] & 2) && qk__on_edge(g->ax, g->ay, g->bx, g->by, 180.0, y))
+        on = true, along_meridian(g, 180.0, y, &sides, &across);
     }
-    if (b == QK_BOUNDARY_CLOSED ? (par || on) : (par && !on)) {
+    /* `open`: the point is inside when the feature holds the map's west edge beside it
+     * (par: the point moved by (e, e^2)) and the east edge too, and no given edge off the
+     * meridian passes through it. Along the meridian the parity changes, from (180 - e, y)
+     * to (-180 + e, y), with the given edges there (the added closures come in pairs, one
+     * on each side over the same latitudes): an even number of them (a ring whose sides on
+     * -180 and +180 are one meridian, the whole world, a band, an island split in two) is
+     * no boundary on the sphere, an odd number is. */
+    if (b == QK_BOUNDARY_CLOSED ? (par || on) : (par && (!on || (!across && !(sides & 1))))) {
       if (n < cap) out[n] = f;
       n++;
       if (!all) return n;

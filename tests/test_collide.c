@@ -229,6 +229,41 @@ static void test_collide_raycast(void **state) {
   free(d), free(b);
 }
 
+/* Disc tests exact for any finite values (seventeenth session): discs and boxes that
+ * touch exactly (3-4-5 triangles) or miss by one ulp, at scales from 2^-1074 to 2^1017,
+ * against the exact oracle. Before, squares overflowed (inf <= inf: discs 1e300 apart
+ * overlapped) or underflowed (0 <= 0). */
+static void test_collide_exact_extremes(void **state) {
+  (void)state;
+  const int scales[] = {-1074, -1070, -1000, -600, -537, -300, 0, 300, 511, 600, 900, 1017};
+  for (size_t si = 0; si < sizeof scales / sizeof scales[0]; si++) {
+    double s = ldexp(1, scales[si]), cx = 7 * s, cy = -2 * s;
+    qk_disc_t d[64];
+    qk_box_t b[32];
+    size_t nd = 0, nb = 0;
+    d[nd++] = (qk_disc_t){cx, cy, 2 * s};
+    const double tr[][2] = {{3, 4}, {4, 3}};
+    for (int t = 0; t < 2; t++)
+      for (int sg = 0; sg < 4; sg++) {
+        double ux = sg & 1 ? -1 : 1, uy = sg & 2 ? -1 : 1;
+        double x = cx + ux * tr[t][0] * s, y = cy + uy * tr[t][1] * s;
+        d[nd++] = (qk_disc_t){x, y, 3 * s};                        /* touches disc 0 */
+        d[nd++] = (qk_disc_t){x, y, nextafter(3 * s, 0)};          /* misses it */
+        d[nd++] = (qk_disc_t){nextafter(x, x + ux * s), y, 3 * s}; /* misses it */
+        d[nd++] = (qk_disc_t){nextafter(x, x - ux * s), y, 3 * s}; /* overlaps it */
+        /* a box whose nearest corner is 5 s from the centre: touches a disc of radius 5 s */
+        double bx = x + ux * 2 * s, by = y + uy * 2 * s;
+        b[nb++] = (qk_box_t){fmin(x, bx), fmin(y, by), fmax(x, bx), fmax(y, by)};
+        double nx = nextafter(x, bx);
+        b[nb++] = (qk_box_t){fmin(nx, bx), fmin(y, by), fmax(nx, bx), fmax(y, by)};
+      }
+    d[nd++] = (qk_disc_t){cx, cy, 5 * s};
+    d[nd++] = (qk_disc_t){cx, cy, nextafter(5 * s, 0)};
+    check_pairs(d, nd, b, nb, 1);
+    check_pairs(d, nd, b, nb, 8);
+  }
+}
+
 static void test_collide_exact_cases(void **state) {
   (void)state;
   /* Two tangent discs and a box touching the second at one corner point. */
@@ -1315,6 +1350,7 @@ int main(void) {
       cmocka_unit_test(test_collide_rays_lazy_prepare),
       cmocka_unit_test(test_collide_rays_lazy_threads),
       cmocka_unit_test(test_collide_rays_lazy_nomem),
+      cmocka_unit_test(test_collide_exact_extremes),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -78,8 +78,9 @@ static void test_io_good_files(void **state) {
   expect_points("\n  \n0,0\n\t\n1,2", NULL, QK_CSV_HEADER_AUTO, a, 2);
   expect_points("\xEF\xBB\xBFx,y\r\n0,0\r\n1,2\r\n", NULL, QK_CSV_HEADER_AUTO, a, 2);
   expect_points("x,y,name\n 0 , 0 ,a\n\"1\",2,\"b, \"\"c\"\"\"\n", NULL, QK_CSV_HEADER_AUTO, a, 2);
-  expect_points("0,0,\"unclosed\n1,2,x\n", NULL, QK_CSV_HEADER_AUTO, a,
-                2); /* fields not read are not checked */
+  /* Fields not read are not checked, but a quote left open there would take the rest of
+   * the file into its field (a record may span lines): an error (seventeenth session). */
+  expect_points("0,0,\"closed\"x\n1,2,x\n", NULL, QK_CSV_HEADER_AUTO, a, 2);
   expect_points("", NULL, QK_CSV_HEADER_AUTO, NULL, 0);
   expect_points("x,y\n", NULL, QK_CSV_HEADER_AUTO, NULL, 0);
   /* Header rules: YES skips a numeric first line, NO reads it. */
@@ -312,6 +313,52 @@ static void test_io_callback(void **state) {
   free(path);
 }
 
+/* A quoted field may hold line breaks (RFC 4180): its record spans several lines of the
+ * file, and every line number is still the file's physical line (seventeenth session: a
+ * break inside quotes in a column not read ended the record there, so the rest of the
+ * field was read as rows, e.g. a row (5, 6) that the file does not have). */
+static void test_io_multiline_quotes(void **state) {
+  (void)state;
+  const qk_csv_header_t A = QK_CSV_HEADER_AUTO;
+  const double xy[] = {1, 2, 3, 4, 7, 8};
+  expect_points("x,y,note\n1,2,\"a\n5,6,\"\n3,4,ok\n7,8,\"\"\"q\"\"\n\n,\"\n", NULL, A, xy, 3);
+  expect_points("x,y,note\r\n1,2,\"a\r\n5,6,\"\r\n3,4,ok\r\n7,8,\"\n\"\n", NULL, A, xy, 3);
+  /* A quote inside an unquoted field is text and opens nothing. */
+  expect_points("x,y,note\n1,2,5\" long\n3,4,ok\n7,8,x\n", NULL, A, xy, 3);
+  /* An error on a later row names the physical line where that row starts. */
+  expect_error("x,y,note\n1,2,\"a\n5,6,\"\n3,4,ok\nnan,1,z\n", -1, NULL, A, QK_ERR_NONFINITE, 5, 1,
+               2, "field 1 (x) is not finite: 'nan'");
+  expect_error("x,y,note\n1,2,\"a\n\n\nb\"\n3,4,\"\n\"\n5\n", -1, NULL, A, QK_ERR_PARSE, 8, 2, 2,
+               "field 2 (y) is missing: the line has 1 field");
+  /* An error in a field names the line and column where that field starts. */
+  expect_error("name,x,y\n\"A\nB\",1,zz\n", -1, "2,3", A, QK_ERR_PARSE, 3, 6, 0,
+               "field 3 (y) is not a number: 'zz'");
+  expect_error("\xEF\xBB\xBF\"a\nb\",x,y\n1,2,zz\n", -1, "x,y", A, QK_ERR_PARSE, 3, 5, 0,
+               "field 3 (y) is not a number: 'zz'");
+  /* A quote left open runs to the end of the file and is reported where its field starts,
+   * in a field not read too (its rows would be lost without a word). */
+  expect_error("x,y,n\n1,2,ok\n3,4,\"open\n5,6,7\n", -1, NULL, A, QK_ERR_PARSE, 3, 5, SIZE_MAX,
+               "field 3: unterminated quoted field (it runs to the end of the file)");
+  expect_error("0,0,\"unclosed\n1,2,x\n", -1, NULL, A, QK_ERR_PARSE, 1, 5, SIZE_MAX,
+               "field 3: unterminated quoted field (it runs to the end of the file)");
+  /* The row callback gets each record's first line and its whole text. */
+  char *path = write_tmp("x,y,n\n0,0,\"a\nb\"\n1,1,c\n", -1);
+  qk_csv_options_t o;
+  qk_csv_options_init(&o);
+  seen_t s = {0};
+  o.on_row = on_row;
+  o.ud = &s;
+  qk_point_t *p;
+  size_t n;
+  qk_error_t err;
+  assert_int_equal(qk_points_read_csv(path, &o, NULL, &p, &n, &err), QK_OK);
+  assert_int_equal(n, 2);
+  assert_int_equal(s.last_line, 4);
+  free(p);
+  remove(path);
+  free(path);
+}
+
 /* Allocation failure at every N, on a file that makes every buffer grow. */
 static void test_io_alloc_failure(void **state) {
   (void)state;
@@ -369,7 +416,7 @@ int main(void) {
       cmocka_unit_test(test_io_good_files),    cmocka_unit_test(test_io_columns),
       cmocka_unit_test(test_io_values),        cmocka_unit_test(test_io_round_trip),
       cmocka_unit_test(test_io_errors),        cmocka_unit_test(test_io_callback),
-      cmocka_unit_test(test_io_alloc_failure),
+      cmocka_unit_test(test_io_alloc_failure), cmocka_unit_test(test_io_multiline_quotes),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }

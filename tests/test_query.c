@@ -985,6 +985,58 @@ static void test_query_knn_near_ties(void **state) {
  * alone or, where a point repeats, with its copy) and between two, k = 2, 8, 32, single
  * and batch, against brute force computed before the mode is set.
  */
+/* The radius query is exact for any finite values (seventeenth session): points on a
+ * circle of radius 5 s through Pythagorean triples (3 s, 4 s), their neighbours one ulp
+ * inside and outside, and random points, for scales s from 2^-1074 (subnormal) to 2^1017,
+ * and radii 5 s and its neighbours, against the exact oracle (rationals). Before, squares
+ * overflowed (inf <= inf: every point within r) or underflowed (0 <= 0). */
+static void test_query_radius_exact(void **state) {
+  (void)state;
+  const int scales[] = {-1074, -1073, -1060, -1000, -600, -537, -300,
+                        0,     1,     300,   511,   600,  900,  1017};
+  qkt_rng_t g;
+  qkt_rng_seed(&g, 1717);
+  for (size_t si = 0; si < sizeof scales / sizeof scales[0]; si++) {
+    double s = ldexp(1, scales[si]);
+    qk_point_t c = {7 * s, -2 * s}, p[200];
+    size_t n = 0;
+    const double tr[][2] = {{3, 4}, {4, 3}, {5, 0}, {0, 5}};
+    for (int t = 0; t < 4; t++)
+      for (int sg = 0; sg < 4; sg++) {
+        double x = c.x + (sg & 1 ? -1 : 1) * tr[t][0] * s,
+               y = c.y + (sg & 2 ? -1 : 1) * tr[t][1] * s;
+        p[n++] = (qk_point_t){x, y};
+        p[n++] = (qk_point_t){nextafter(x, c.x), y};
+        p[n++] = (qk_point_t){nextafter(x, -c.x * 4), y};
+        p[n++] = (qk_point_t){x, nextafter(y, 1e308)};
+        p[n++] = (qk_point_t){x, nextafter(y, -1e308)};
+      }
+    while (n < 200)
+      p[n++] = (qk_point_t){c.x + qkt_rng_range(&g, -6, 6) * s, c.y + qkt_rng_range(&g, -6, 6) * s};
+    qk_tree_t *t;
+    qk_tree_options_t o;
+    qk_tree_options_init(&o);
+    o.capacity = 4;
+    assert_int_equal(qk_tree_build(p, n, &o, &t), QK_OK);
+    const double radii[] = {5 * s,   nextafter(5 * s, 0), nextafter(5 * s, INFINITY), 3 * s, 0,
+                            INFINITY};
+    for (size_t ri = 0; ri < sizeof radii / sizeof radii[0]; ri++) {
+      qk_neighbor_t got[200], want[200];
+      size_t ng, nw = qko_radius(p, n, c, radii[ri], want);
+      assert_int_equal(qk_query_radius_list(t, c, radii[ri], got, 200, &ng), QK_OK);
+      qko_sort_by_id(got, ng);
+      if (ng != nw)
+        fail_msg("scale 2^%d, r %.17g: %zu points, oracle %zu", scales[si], radii[ri], ng, nw);
+      for (size_t i = 0; i < nw; i++) {
+        if (got[i].id != want[i].id || got[i].dist != want[i].dist)
+          fail_msg("scale 2^%d, r %.17g: point %u at %.17g, oracle %u at %.17g", scales[si],
+                   radii[ri], (unsigned)got[i].id, got[i].dist, (unsigned)want[i].id, want[i].dist);
+      }
+    }
+    qk_tree_free(t);
+  }
+}
+
 static void test_query_knn_flush_subnormals(void **state) {
   (void)state;
   qkt_rng_t r;
@@ -1192,6 +1244,7 @@ int main(void) {
     cmocka_unit_test(test_query_knn_cell_lines),
 #if defined(__SSE2__)
     cmocka_unit_test(test_query_knn_flush_subnormals),
+    cmocka_unit_test(test_query_radius_exact),
 #endif
   };
   return cmocka_run_group_tests(tests, NULL, NULL);

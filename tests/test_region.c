@@ -746,6 +746,113 @@ static void test_region_antimeridian_boundary(void **state) {
   qk_region_free(r);
 }
 
+/* `open` on the antimeridian against an oracle that reads the sphere (seventeenth
+ * session). Features are lon/lat rectangles on an integer grid: the whole world (with a
+ * hole touching one side of the map or not), a band [-180, 180] x [y0, y1], and sets of
+ * rectangles [-180, -170] or [170, 180] or both (an island split by the antimeridian)
+ * over disjoint latitude ranges. A point (+-180, y) is inside a feature on the sphere when
+ * the feature holds both sides of the meridian around it: a rectangle or band reaching
+ * -180 and one reaching 180 hold latitudes strictly between their bounds, and no hole
+ * touching the meridian holds y on its closed range. Before, the given sides along -180
+ * and 180 (one meridian on the sphere) counted as boundary: the whole world, a band and a
+ * split island held no point of the antimeridian under `open`. */
+static void test_region_antimeridian_open_oracle(void **state) {
+  (void)state;
+  uint64_t seed = 20261202;
+  for (int round = 0; round < 40; round++) {
+    enum { NF = 6, MAXR = 8 };
+    double xy[NF * MAXR * 10];
+    size_t rs[NF * MAXR + 1], fs[NF + 1], nr = 0, nv = 0;
+    /* per feature: latitude ranges of the parts reaching west (-180) and east (180),
+     * holes touching the meridian */
+    double wy[NF][MAXR][2], ey[NF][MAXR][2], hy[NF][2];
+    int nw[NF] = {0}, ne[NF] = {0}, nh[NF] = {0};
+#define RNG() (seed = seed * 6364136223846793005u + 1442695040888963407u, (unsigned)(seed >> 33))
+#define RING(...)                                                                                  \
+  do {                                                                                             \
+    const double v_[] = {__VA_ARGS__};                                                             \
+    rs[nr++] = nv / 2;                                                                             \
+    for (size_t k_ = 0; k_ < sizeof v_ / sizeof v_[0]; k_++) xy[nv++] = v_[k_];                    \
+  } while (0)
+    for (int f = 0; f < NF; f++) {
+      fs[f] = nr;
+      unsigned kind = RNG() % 4;
+      if (kind == 0) { /* the whole world, a hole maybe touching a side */
+        RING(-180, -90, 180, -90, 180, 90, -180, 90, -180, -90);
+        wy[f][0][0] = ey[f][0][0] = -90, wy[f][0][1] = ey[f][0][1] = 90, nw[f] = ne[f] = 1;
+        double h0 = -80 + (double)(RNG() % 150), h1 = h0 + 1 + (double)(RNG() % 8);
+        unsigned side = RNG() % 3; /* 0: west, 1: east, 2: inside, touching neither */
+        double x0 = side == 0 ? -180 : side == 1 ? 170 : 0, x1 = x0 + 10;
+        RING(x0, h0, x1, h0, x1, h1, x0, h1, x0, h0);
+        if (side < 2) hy[f][0] = h0, hy[f][1] = h1, nh[f] = 1;
+      } else if (kind == 1) { /* a band */
+        double y0 = -80 + (double)(RNG() % 150), y1 = y0 + 1 + (double)(RNG() % 9);
+        RING(-180, y0, 180, y0, 180, y1, -180, y1, -180, y0);
+        wy[f][0][0] = ey[f][0][0] = y0, wy[f][0][1] = ey[f][0][1] = y1, nw[f] = ne[f] = 1;
+      } else { /* rectangles on one side or both, over disjoint latitude ranges */
+        double y = -85 + (double)(RNG() % 20);
+        int parts = 1 + (int)(RNG() % 3);
+        for (int k = 0; k < parts; k++) {
+          double y0 = y, y1 = y0 + 1 + (double)(RNG() % 6);
+          unsigned side = RNG() % 3; /* 0: west, 1: east, 2: both */
+          if (side != 1) {
+            RING(-180, y0, -170, y0, -170, y1, -180, y1, -180, y0);
+            wy[f][nw[f]][0] = y0, wy[f][nw[f]++][1] = y1;
+          }
+          if (side != 0) {
+            RING(170, y0, 180, y0, 180, y1, 170, y1, 170, y0);
+            ey[f][ne[f]][0] = y0, ey[f][ne[f]++][1] = y1;
+          }
+          /* next part: just above (touching: a shared corner latitude) or further up */
+          y = y1 + (double)(RNG() % 3) * 5;
+        }
+      }
+    }
+#undef RING
+#undef RNG
+    fs[NF] = nr;
+    rs[nr] = nv / 2;
+    qk_region_t *r = lonlat(xy, rs, nr, fs, NF, 0);
+    qk_point_t q[4 * 717];
+    size_t nq = 0;
+    for (int i = -179 * 2; i <= 179 * 2; i++) /* every quarter degree but near the poles */
+      for (int s = 0; s < 4; s++)
+        q[nq++] = (qk_point_t){s == 0 ? 180 : s == 1 ? -180 : s == 2 ? 540 : -900, i * 0.25};
+    uint32_t *batch = malloc(nq * sizeof *batch);
+    assert_int_equal(qk_region_locate_batch(r, q, nq, QK_BOUNDARY_OPEN, 1, batch), QK_OK);
+    for (size_t i = 0; i < nq; i++) {
+      double y = q[i].y;
+      uint32_t want = QK_NONE;
+      bool in[NF];
+      for (int f = NF - 1; f >= 0; f--) {
+        bool w = false, e = false, h = false;
+        for (int k = 0; k < nw[f]; k++) w |= wy[f][k][0] < y && y < wy[f][k][1];
+        for (int k = 0; k < ne[f]; k++) e |= ey[f][k][0] < y && y < ey[f][k][1];
+        for (int k = 0; k < nh[f]; k++) h |= hy[f][0] <= y && y <= hy[f][1];
+        in[f] = w && e && !h;
+        if (in[f]) want = (uint32_t)f;
+      }
+      uint32_t got = at(r, q[i].x, y, QK_BOUNDARY_OPEN);
+      if (got != want || batch[i] != want)
+        fail_msg("round %d: (%g, %g) open: got %u (batch %u), want %u", round, q[i].x, y,
+                 (unsigned)got, (unsigned)batch[i], (unsigned)want);
+      uint32_t all[NF];
+      size_t n;
+      assert_int_equal(qk_region_locate_all(r, q[i], QK_BOUNDARY_OPEN, all, NF, &n), QK_OK);
+      size_t k = 0;
+      for (int f = 0; f < NF; f++)
+        if (in[f]) {
+          if (k >= n || all[k] != (uint32_t)f)
+            fail_msg("round %d: (%g, %g) open, all: feature %d missing", round, q[i].x, y, f);
+          k++;
+        }
+      assert_int_equal(n, k);
+    }
+    free(batch);
+    qk_region_free(r);
+  }
+}
+
 /* ---- batch and threads ------------------------------------------------------------------- */
 
 static void test_region_batch_threads(void **state) {
@@ -1356,6 +1463,7 @@ int main(void) {
       cmocka_unit_test(test_region_self_intersecting_oracle),
       cmocka_unit_test(test_region_lonlat),
       cmocka_unit_test(test_region_antimeridian_boundary),
+      cmocka_unit_test(test_region_antimeridian_open_oracle),
       cmocka_unit_test(test_region_across_map),
       cmocka_unit_test(test_region_batch_threads),
       cmocka_unit_test(test_region_batch_morton),

@@ -56,6 +56,17 @@ int cli_read_points(const char *path, const char *xy, cli_rows_t *rows, qk_point
  * read as this one line. */
 int cli_cut_line_end(char *line, size_t *len);
 
+/* One CSV record of f into *line (a getline buffer, *cap its size): one physical line, or
+ * several joined by LF while a quoted field is open (RFC 4180), as the library's reader
+ * does (include/quadkit/io.h); each line's ending cut. *phys counts the physical lines
+ * read, *first is set to the one where the record starts. Returns the record's length;
+ * -1 at the end of the input or on a read error (ferror tells); -2 for a NUL byte or a
+ * lone CR (*why says which, on physical line *phys); -3 out of memory. A record that the
+ * input ends inside a quoted field is returned with *why set (NULL otherwise): the
+ * caller names the field. */
+long cli_read_record(FILE *f, char **line, size_t *cap, unsigned long *phys, unsigned long *first,
+                     const char **why);
+
 /* The same for a file of queries, which may have no data rows (*n = 0, *pts NULL): a
  * query command answers an empty batch with its header line alone. */
 int cli_read_queries(const char *path, const char *xy, cli_rows_t *rows, qk_point_t **pts,

@@ -352,8 +352,19 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
    * '0.5   <300 spaces>junk' into a number). */
   char *fx = NULL, *fy = NULL;
   size_t fcap = 0;
-  while ((len = getline(&line, &cap, in)) >= 0) {
-    lineno++;
+  unsigned long phys = 0, first = 0; /* physical lines read; where the record starts */
+  const char *bad = NULL;
+  /* A record is a line, or several when a quoted field holds line breaks: messages name
+   * the physical line where it starts. */
+  while ((len = cli_read_record(in, &line, &cap, &phys, &first, &bad)) >= 0) {
+    lineno = (long)first;
+    if (bad) { /* the input ends inside a quoted field: name it, whatever its column */
+      int nf = csv_field(line, -1, NULL, 0, &bad);
+      cli_msg("quadkit join: %s:%ld: field %d: %s\n", j->pts_path, lineno, nf < 0 ? -nf : nf,
+              "unterminated quoted field (it runs to the end of the file)");
+      rc = CLI_BAD_INPUT;
+      break;
+    }
     if ((size_t)len + 1 > fcap) {
       char *nx = realloc(fx, (size_t)len + 1), *ny = nx ? realloc(fy, (size_t)len + 1) : NULL;
       if (nx) fx = nx;
@@ -363,19 +374,6 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
         break;
       }
       fcap = (size_t)len + 1;
-    }
-    if ((size_t)len != strlen(line)) {
-      cli_msg("quadkit join: %s:%ld: binary data (NUL byte) in a text file\n", j->pts_path, lineno);
-      rc = CLI_BAD_INPUT;
-      break;
-    }
-    size_t cut = (size_t)len;
-    int lone_cr = cli_cut_line_end(line, &cut);
-    len = (ssize_t)cut;
-    if (lone_cr) {
-      cli_msg("quadkit join: %s:%ld: " CLI_LONE_CR "\n", j->pts_path, lineno);
-      rc = CLI_BAD_INPUT;
-      break;
     }
     if (lineno == 1 && (unsigned char)line[0] == 0xEF && (unsigned char)line[1] == 0xBB &&
         (unsigned char)line[2] == 0xBF)
@@ -468,6 +466,12 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
       if ((rc = flush_chunk(j))) break;
       progress(progress_on, ftell(in), total, (size_t)lineno);
     }
+  }
+  if (!rc && len == -2) {
+    cli_msg("quadkit join: %s:%lu: %s\n", j->pts_path, phys, bad);
+    rc = CLI_BAD_INPUT;
+  } else if (!rc && len == -3) {
+    rc = CLI_INTERNAL;
   }
   if (!rc && ferror(in)) {
     cli_msg("quadkit join: %s: read error\n", j->pts_path);

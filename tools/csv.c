@@ -1,5 +1,6 @@
 /* CSV input of the command-line tool: the library's reader, its errors printed with
  * file, line and column, and the rows' text kept for --keep. */
+#define _POSIX_C_SOURCE 200809L /* getline */
 #include <errno.h>
 #include <math.h>
 #include <stdint.h>
@@ -19,15 +20,95 @@ void cli_rows_free(cli_rows_t *r) {
   r->keep_text = keep;
 }
 
-/* Fields of a CSV line (quotes respected). */
+/* The quote state of CSV text after s[0, n), from state q: 0 at a field's start, 1 in an
+ * unquoted field or after a closing quote, 2 inside quotes, 3 just after a quote inside
+ * quotes (a closing one, or the first of ""). Only a quote at a field's start (blanks
+ * before it allowed) opens a quoted field, as the library's reader says. */
+static int quote_state(int q, const char *s, size_t n, size_t *commas) {
+  for (size_t i = 0; i < n; i++) {
+    char c = s[i];
+    if (q == 0)
+      q = c == '"' ? 2 : c == ',' || c == ' ' || c == '\t' ? 0 : 1;
+    else if (q == 1)
+      q = c == ',' ? 0 : 1;
+    else if (q == 2)
+      q = c == '"' ? 3 : 2;
+    else
+      q = c == '"' ? 2 : c == ',' ? 0 : 1;
+    if (q == 0 && c == ',' && commas) ++*commas;
+  }
+  return q;
+}
+
+/* Fields of a CSV record (quotes respected). */
 static size_t count_fields(const char *s) {
   size_t n = 1;
-  int quoted = 0;
-  for (; *s; s++) {
-    if (*s == '"') quoted = !quoted; /* "" toggles twice: no change */
-    if (*s == ',' && !quoted) n++;
-  }
+  quote_state(0, s, strlen(s), &n);
   return n;
+}
+
+long cli_read_record(FILE *f, char **line, size_t *cap, unsigned long *phys, unsigned long *first,
+                     const char **why) {
+  size_t n = 0;
+  int q = 0, part = 0;
+  char *buf = NULL;
+  *why = NULL;
+  size_t bcap = 0;
+  long rc;
+  for (;; part++) {
+    ssize_t got = getline(part ? &buf : line, part ? &bcap : cap, f);
+    if (got < 0) {
+      if (!part) return -1;
+      /* the input ends inside quotes: the record is returned, flagged (the rows after
+       * the quote would be lost without a word) */
+      *why = "unterminated quoted field (it runs to the end of the file)";
+      n--; /* the added LF */
+      break;
+    }
+    char *l = part ? buf : *line;
+    ++*phys;
+    if (!part) *first = *phys;
+    if ((size_t)got != strlen(l)) {
+      *why = "binary data (NUL byte) in a text file";
+      rc = -2;
+      goto out;
+    }
+    size_t c = (size_t)got;
+    if (cli_cut_line_end(l, &c)) {
+      *why = CLI_LONE_CR;
+      rc = -2;
+      goto out;
+    }
+    if (part) {
+      if (n + c + 2 > *cap) {
+        char *p = realloc(*line, n + c + 2);
+        if (!p) {
+          rc = -3;
+          goto out;
+        }
+        *line = p, *cap = n + c + 2;
+      }
+      memcpy(*line + n, l, c);
+    }
+    size_t bom = *phys == 1 && c >= 3 && !memcmp(*line, "\xEF\xBB\xBF", 3) ? 3 : 0;
+    q = quote_state(q, *line + n + bom, c - bom, NULL);
+    n += c;
+    if (q != 2) break;
+    if (n + 2 > *cap) {
+      char *p = realloc(*line, n + 2);
+      if (!p) {
+        rc = -3;
+        goto out;
+      }
+      *line = p, *cap = n + 2;
+    }
+    (*line)[n++] = '\n';
+  }
+  (*line)[n] = '\0';
+  rc = (long)n;
+out:
+  free(buf);
+  return rc;
 }
 
 static char *dup_text(const char *s, size_t len) {

@@ -43,7 +43,10 @@ typedef struct qk_collider qk_collider_t;
  * Build a collider. Discs get ids 0 .. n_discs-1, boxes n_discs .. n_discs+n_boxes-1.
  * Items overlap when they share at least one point (touching counts): discs when
  * dx^2 + dy^2 <= (r1 + r2)^2, boxes when their closed intervals meet on both axes, a
- * disc and a box when the box point nearest the centre is within r.
+ * disc and a box when the box point nearest the centre is within r; decided exactly for
+ * any finite values (the disc tests in double unless within a relative 2^-45 of touching
+ * or beyond 2^500, then by an exact test; before December 2026 the double formula,
+ * whose squares overflow beyond 1e154 and underflow below 1e-154).
  * \param [in] discs n_discs discs (copied; may be NULL when n_discs is 0).
  * \param [in] n_discs how many.
  * \param [in] boxes n_boxes closed boxes (copied; may be NULL when n_boxes is 0).

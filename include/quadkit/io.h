@@ -5,10 +5,14 @@
  *
  * The rules: one record per line (LF or CRLF; a UTF-8 byte order mark on the first line
  * is skipped); fields separated by commas, a field may be quoted with double quotes
- * (`""` inside for a quote; no line breaks inside; a CR alone inside a line is an error);
- * lines holding only blanks are skipped. The first non-blank line is a header when
- * options say so, or (by default) when none of its selected fields is a number (a first
- * line "x1,2" is data, and an error); columns may then be selected by name.
+ * (`""` inside for a quote; a CR alone inside a line is an error); a quoted field may hold
+ * line breaks (RFC 4180), and its record then spans several lines of the file: every
+ * line number (errors, the row callback) is the file's physical line, 1-based, where the
+ * record starts, or for an error in a field, where that field starts (its column counted
+ * from that line's start); lines holding only blanks are skipped. A quote left open to
+ * the end of the input is an error, in a field not read too. The first non-blank line is
+ * a header when options say so, or (by default) when none of its selected fields is a
+ * number (a first line "x1,2" is data, and an error); columns may then be selected by name.
  * Every other line is a data row: its selected fields must be decimal numbers (an optional
  * sign, digits with an optional decimal point, an optional exponent: `-1.5e3`, `.5`, `5.`;
  * blanks around allowed; strtod's hexadecimal `0x10` is refused) and finite; the other
@@ -37,8 +41,9 @@ typedef enum qk_csv_header {
 
 /**
  * Called for the header line (row == SIZE_MAX) and for each data row once it has been
- * read without error, with its 1-based line number and the line's whole text, every field included
- * (NUL-terminated, len bytes, byte order mark and line ending removed), valid only during the call.
+ * read without error, with the 1-based physical line where it starts and the record's whole text,
+ * every field included (NUL-terminated, len bytes, byte order mark and line ending removed; a
+ * line break inside a quoted field kept as one LF), valid only during the call.
  * Returning anything but QK_OK stops the reader, which returns that status.
  */
 typedef qk_status_t (*qk_csv_row_fn)(void *ud, size_t row, unsigned long lineno, const char *line,

@@ -76,10 +76,14 @@ static inline qk_status_t qk_query_range_ids(const qk_tree_t *tree, qk_box_t box
 
 /**
  * Report every point p within distance r of c, that is with
- * (p.x - c.x)^2 + (p.y - c.y)^2 <= r * r in double precision, in no particular order.
- * That formula is the definition, overflow included: with coordinates beyond about
- * 1e154 apart squares become infinite (and r * r too, for r beyond that), so compare
- * such data after scaling it by a power of two.
+ * (p.x - c.x)^2 + (p.y - c.y)^2 <= r^2 in exact arithmetic, in no particular order: exact
+ * for any finite values (no rounding, no overflow of the squares beyond 1e154, no
+ * underflow below 1e-154). The squares in double decide all but the points within a
+ * relative 2^-45 of the circle, and every point when r is beyond 2^500, which an exact
+ * test (big integers, microseconds) decides. The distance passed is the rounded one
+ * (sqrt of the double squares, or hypot where they overflow), so a point exactly on the
+ * circle may be reported at a distance an ulp above r. (Before December 2026 the double
+ * formula was the definition, overflow included.)
  * \param [in] tree the tree.
  * \param [in] c the centre; may lie outside the root square.
  * \param [in] r the radius, >= 0 (INFINITY reports every point).

@@ -4,6 +4,35 @@
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
+#if defined(QK_HAVE_GMP)
+#include <gmp.h>
+#endif
+
+/* Is (ax - bx)^2 + (ay - by)^2 <= (r1 + r2)^2 exactly? Rationals (GMP converts doubles
+ * exactly) wherever a long double filter with a wide margin cannot tell; without GMP, the
+ * double formula (the exact cases of the tests then fail rather than pass). */
+static int o_within(double ax, double ay, double bx, double by, double r1, double r2) {
+  long double dx = (long double)ax - bx, dy = (long double)ay - by, rs = (long double)r1 + r2;
+  long double d2 = dx * dx + dy * dy, s2 = rs * rs;
+  if (d2 > 1e-200L && d2 < 1e200L && s2 > 1e-200L && s2 < 1e200L) {
+    if (d2 < s2 * (1 - 1e-9L)) return 1;
+    if (d2 > s2 * (1 + 1e-9L)) return 0;
+  }
+#if defined(QK_HAVE_GMP)
+  mpq_t a, b, x, y, r;
+  mpq_inits(a, b, x, y, r, NULL);
+  mpq_set_d(a, ax), mpq_set_d(b, bx), mpq_sub(x, a, b), mpq_mul(x, x, x);
+  mpq_set_d(a, ay), mpq_set_d(b, by), mpq_sub(y, a, b), mpq_mul(y, y, y);
+  mpq_add(x, x, y);
+  mpq_set_d(a, r1), mpq_set_d(b, r2), mpq_add(r, a, b), mpq_mul(r, r, r);
+  int in = mpq_cmp(x, r) <= 0;
+  mpq_clears(a, b, x, y, r, NULL);
+  return in;
+#else
+  double ex = ax - bx, ey = ay - by, er = r1 + r2;
+  return ex * ex + ey * ey <= er * er;
+#endif
+}
 
 static int cmp_dist(const void *x, const void *y) {
   const qk_neighbor_t *a = x, *b = y;
@@ -38,12 +67,11 @@ size_t qko_range(const qk_point_t *pts, size_t n, qk_box_t b, qk_id_t *out) {
 
 size_t qko_radius(const qk_point_t *pts, size_t n, qk_point_t c, double r, qk_neighbor_t *out) {
   size_t m = 0;
-  double r2 = r * r;
   for (size_t i = 0; i < n; i++) {
     double dx = pts[i].x - c.x, dy = pts[i].y - c.y, d2 = dx * dx + dy * dy;
-    if (d2 <= r2) {
+    if (isinf(r) || o_within(pts[i].x, pts[i].y, c.x, c.y, r, 0)) {
       out[m].id = (qk_id_t)i;
-      out[m++].dist = sqrt(d2);
+      out[m++].dist = d2 < 0x1p1000 ? sqrt(d2) : hypot(dx, dy); /* (as the library rounds it) */
     }
   }
   return m;
@@ -70,18 +98,14 @@ size_t qko_knn(const qk_point_t *pts, const unsigned char *alive, size_t n, qk_p
   return m;
 }
 
-/* Item predicates, written out again (same formulas as documented in query.h). */
-static int o_disc_disc(qk_disc_t a, qk_disc_t b) {
-  double dx = a.x - b.x, dy = a.y - b.y, rs = a.r + b.r;
-  return dx * dx + dy * dy <= rs * rs;
-}
+/* Item predicates, exact (as documented in query.h). */
+static int o_disc_disc(qk_disc_t a, qk_disc_t b) { return o_within(a.x, a.y, b.x, b.y, a.r, b.r); }
 static int o_box_box(qk_box_t a, qk_box_t b) {
   return a.xmin <= b.xmax && b.xmin <= a.xmax && a.ymin <= b.ymax && b.ymin <= a.ymax;
 }
 static int o_disc_box(qk_disc_t d, qk_box_t b) {
   double px = fmin(fmax(d.x, b.xmin), b.xmax), py = fmin(fmax(d.y, b.ymin), b.ymax);
-  double dx = d.x - px, dy = d.y - py;
-  return dx * dx + dy * dy <= d.r * d.r;
+  return o_within(d.x, d.y, px, py, d.r, 0);
 }
 static int o_items(const qk_disc_t *d, size_t nd, const qk_box_t *b, size_t i, size_t j) {
   if (i < nd && j < nd) return o_disc_disc(d[i], d[j]);

@@ -1,0 +1,117 @@
+/*
+ * The exact distance test behind the radius query's and the static collider's filters:
+ * every finite double is an integer multiple of 2^-1074 below 2^1024, so after scaling by
+ * a common power of two the five inputs are integers of at most 2100 bits, and the test
+ * is one comparison of sums of squares of integers (at most 4200 bits). Schoolbook
+ * arithmetic on 32-bit limbs: slow, and only reached when a point lies within a relative
+ * 2^-45 of the boundary or the values are beyond 2^500.
+ */
+#include <math.h>
+#include <stdint.h>
+#include <string.h>
+
+#include "query/dist_exact.h"
+
+enum { LIMBS = 68, WIDE = 2 * LIMBS + 2 };
+
+typedef struct big {
+  uint32_t w[WIDE]; /* little-endian magnitude */
+} big_t;
+
+/* |v| as an integer multiple of 2^e0 (e0 no larger than v's lowest digit's exponent). */
+static void big_set(big_t *b, double v, int e0) {
+  memset(b, 0, sizeof *b);
+  if (v == 0) return;
+  int e;
+  double m = frexp(fabs(v), &e);        /* |v| = m 2^e, m in [0.5, 1) */
+  uint64_t mi = (uint64_t)ldexp(m, 53); /* |v| = mi 2^(e - 53), exactly */
+  int shift = e - 53 - e0;              /* >= 0 */
+  int limb = shift / 32, bit = shift % 32;
+  uint64_t lo = mi << bit, hi = bit ? mi >> (64 - bit) : 0; /* mi 2^bit, below 2^86 */
+  const uint32_t part[3] = {(uint32_t)lo, (uint32_t)(lo >> 32), (uint32_t)hi};
+  for (int k = 0; k < 3 && limb + k < WIDE; k++) b->w[limb + k] = part[k];
+}
+
+static int big_cmp(const big_t *a, const big_t *b) {
+  for (int k = WIDE - 1; k >= 0; k--)
+    if (a->w[k] != b->w[k]) return a->w[k] < b->w[k] ? -1 : 1;
+  return 0;
+}
+
+static void big_add(big_t *out, const big_t *a, const big_t *b) {
+  uint64_t c = 0;
+  for (int k = 0; k < WIDE; k++) {
+    c += (uint64_t)a->w[k] + b->w[k];
+    out->w[k] = (uint32_t)c;
+    c >>= 32;
+  }
+}
+
+/* out = a - b, a >= b. */
+static void big_sub(big_t *out, const big_t *a, const big_t *b) {
+  int64_t c = 0;
+  for (int k = 0; k < WIDE; k++) {
+    c += (int64_t)a->w[k] - b->w[k];
+    out->w[k] = (uint32_t)c;
+    c = c < 0 ? -1 : 0;
+  }
+}
+
+/* |sa A - sb B| for magnitudes A, B with signs sa, sb (1 for negative). */
+static void big_absdiff(big_t *out, const big_t *a, int sa, const big_t *b, int sb) {
+  if (sa != sb)
+    big_add(out, a, b);
+  else if (big_cmp(a, b) >= 0)
+    big_sub(out, a, b);
+  else
+    big_sub(out, b, a);
+}
+
+/* out = a^2 (a below 2^(32 LIMBS)). */
+static void big_sqr(big_t *out, const big_t *a) {
+  int n = LIMBS;
+  while (n > 0 && a->w[n - 1] == 0) n--;
+  memset(out, 0, sizeof *out);
+  for (int i = 0; i < n; i++) {
+    uint64_t c = 0;
+    for (int j = 0; j < n; j++) {
+      c += (uint64_t)a->w[i] * a->w[j] + out->w[i + j];
+      out->w[i + j] = (uint32_t)c;
+      c >>= 32;
+    }
+    for (int k = i + n; c && k < WIDE; k++) {
+      c += out->w[k];
+      out->w[k] = (uint32_t)c;
+      c >>= 32;
+    }
+  }
+}
+
+/* A power of two that divides v: 2^(e - 53) for |v| = m 2^e (a large value for 0). */
+static int low_exp(double v) {
+  if (v == 0) return 1 << 20;
+  int e;
+  frexp(v, &e);
+  return e - 53;
+}
+
+int qk__within_exact(double ax, double ay, double bx, double by, double r1, double r2) {
+  const double v[6] = {ax, bx, ay, by, r1, r2};
+  int e0 = 1 << 20;
+  for (int k = 0; k < 6; k++) {
+    int e = low_exp(v[k]);
+    if (e < e0) e0 = e;
+  }
+  big_t a, b, dx, dy, rs, s, t;
+  big_set(&a, ax, e0), big_set(&b, bx, e0);
+  big_absdiff(&dx, &a, ax < 0, &b, bx < 0);
+  big_set(&a, ay, e0), big_set(&b, by, e0);
+  big_absdiff(&dy, &a, ay < 0, &b, by < 0);
+  big_set(&a, r1, e0), big_set(&b, r2, e0);
+  big_add(&rs, &a, &b); /* radii are >= 0 */
+  big_sqr(&s, &dx);
+  big_sqr(&t, &dy);
+  big_add(&a, &s, &t);
+  big_sqr(&b, &rs);
+  return big_cmp(&a, &b) <= 0;
+}

@@ -1,0 +1,38 @@
+/*
+ * The narrow interface of query/'s exact distance test, shared with collide/ (the static
+ * collider's disc tests): whether two points lie within a distance of each other, in
+ * exact arithmetic for any finite doubles, behind a floating-point filter. Not API.
+ */
+#ifndef QUADKIT_QUERY_DIST_EXACT_H
+#define QUADKIT_QUERY_DIST_EXACT_H
+
+#include <math.h>
+
+/*
+ * Is (ax - bx)^2 + (ay - by)^2 <= (r1 + r2)^2, computed exactly (no rounding, no overflow,
+ * no underflow) for any finite doubles with r1, r2 >= 0? 1 or 0. Slow (big integers):
+ * for the cases the filter below cannot decide.
+ */
+int qk__within_exact(double ax, double ay, double bx, double by, double r1, double r2);
+
+/*
+ * The filter: with d2 = dx*dx + dy*dy and r2 = rs*rs computed in doubles (dx, dy, rs each
+ * one rounded operation on the inputs), d2 < qk__filter_lo(r2) means inside and
+ * d2 > qk__filter_hi(r2) outside, exactly; in between, or when r2 >= 2^1000 (where squares
+ * may have overflowed), only qk__within_exact() tells. The bounds: every rounding is within
+ * a relative 2^-53, or an absolute 2^-1075 where a product underflows, so d2 and r2 are
+ * within a relative 6 * 2^-53 plus an absolute 2^-1073 of the exact values; the margins
+ * 2^-45 relative and 2^-1060 absolute exceed that. A pruning test that compares a lower
+ * bound of d2 with qk__filter_hi(r2) keeps every point the exact test accepts.
+ */
+#define QK__FILTER_REL 0x1p-45
+#define QK__FILTER_ABS 0x1p-1060
+#define QK__FILTER_MAX 0x1p1000
+static inline double qk__filter_lo(double r2) {
+  return r2 < QK__FILTER_MAX ? r2 * (1 - QK__FILTER_REL) - QK__FILTER_ABS : -1.0;
+}
+static inline double qk__filter_hi(double r2) {
+  return r2 < QK__FILTER_MAX ? r2 * (1 + QK__FILTER_REL) + QK__FILTER_ABS : INFINITY;
+}
+
+#endif /* QUADKIT_QUERY_DIST_EXACT_H */
