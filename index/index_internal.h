@@ -283,6 +283,14 @@ typedef void (*qk__share_fn)(void *ctx, unsigned w, unsigned nw);
  * done. Shares must write disjoint memory. */
 void qk__run_shares(unsigned nw, qk__share_fn fn, void *ctx);
 
+/* Hold a team of nw - 1 workers on the calling thread until qk__team_end(): the regions it
+ * starts meanwhile (qk__run_shares, the jobs) run on them instead of on threads started for
+ * each. Calls nest (the outermost's team serves); a region started inside another region's
+ * share, or asking for more shares than the team has, starts threads of its own; without
+ * workers (none could be started) every region does. */
+void qk__team_begin(unsigned nw);
+void qk__team_end(void);
+
 /* The half-open range of [0, n) that share w of nw covers. */
 static inline void qk__share_range(size_t n, unsigned w, unsigned nw, size_t *lo, size_t *hi) {
   *lo = n / nw * w + (w < n % nw ? w : n % nw);

@@ -661,8 +661,15 @@ static qk_status_t fill(qk_tree_t *t, const qk_point_t *points, size_t n, qk_squ
   return st;
 }
 
-qk_status_t qk_tree_build_ex(const qk_point_t *points, size_t n, const qk_tree_options_t *options,
-                             qk_tree_t **out, qk_error_t *err) {
+/* The threads a build of n points runs its regions on: the bucketed build gives no thread a
+ * share of fewer than 2^16 points (the bounding box none of fewer than 2^17). */
+static unsigned build_team(uint32_t threads, size_t n) {
+  unsigned nw = qk__threads_resolve(threads);
+  return nw > n / 65536 ? (n / 65536 > 0 ? (unsigned)(n / 65536) : 1) : nw;
+}
+
+static qk_status_t build_ex(const qk_point_t *points, size_t n, const qk_tree_options_t *options,
+                            qk_tree_t **out, qk_error_t *err) {
   qk_tree_options_t def;
   qk_status_t st;
   if (!out) return say(err, QK_ERR_INVALID, SIZE_MAX, "no place for the tree (out is NULL)");
@@ -711,7 +718,26 @@ fail:
   return say(err, st, SIZE_MAX, "%s", qk_strerror(st));
 }
 
+/* The build's parallel regions (bounding box, keys, scatter, fine pass, subtrees) on one
+ * team of workers, started once (index/threads.c). */
+qk_status_t qk_tree_build_ex(const qk_point_t *points, size_t n, const qk_tree_options_t *options,
+                             qk_tree_t **out, qk_error_t *err) {
+  qk__team_begin(options && points ? build_team(options->threads, n) : 1);
+  qk_status_t st = build_ex(points, n, options, out, err);
+  qk__team_end();
+  return st;
+}
+
+static qk_status_t rebuild(qk_tree_t *t, const qk_point_t *points, size_t n, qk_error_t *err);
+
 qk_status_t qk_tree_rebuild(qk_tree_t *t, const qk_point_t *points, size_t n, qk_error_t *err) {
+  qk__team_begin(t && points ? build_team(t->threads, n) : 1);
+  qk_status_t st = rebuild(t, points, n, err);
+  qk__team_end();
+  return st;
+}
+
+static qk_status_t rebuild(qk_tree_t *t, const qk_point_t *points, size_t n, qk_error_t *err) {
   if (!t) return say(err, QK_ERR_INVALID, SIZE_MAX, "no tree to rebuild");
   qk_tree_options_t o;
   qk_tree_options_init(&o);

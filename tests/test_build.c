@@ -33,6 +33,13 @@
  * compared with the hashes of the build as it was before its sort was reworked (commit
  * 817321d), on one thread and on two, with and without AVX2: speed-ups of the build must
  * leave its output byte for byte.
+ *
+ * The team a build holds for its parallel regions (qk__team_begin): the regions started
+ * while it is held run their shares 1.. on the same workers (a thread-local count of the
+ * shares each thread ran reaches the number of regions; threads started per region would
+ * count one each), every share and every job exactly once, also for a region inside a
+ * share (on threads of its own), one asking for more shares than the team has, and after
+ * the team ended; nested teams serve as the outermost one.
  */
 #include <math.h>
 #include <stdbool.h>
@@ -439,8 +446,80 @@ static void test_build_output_pinned(void **state) {
   free(p);
 }
 
+/* Shares run by the thread; 0 on every new thread. */
+static _Thread_local unsigned team_runs;
+
+typedef struct team_probe {
+  unsigned ran[8];    /* times each share ran */
+  unsigned runs[8];   /* the running thread's count of shares run, with this one */
+  unsigned nested[8]; /* shares of a region started inside share 1 */
+  bool nest;
+} team_probe_t;
+
+static void team_nested_share(void *ctx, unsigned w, unsigned nw) {
+  (void)nw;
+  unsigned *nested = ctx;
+  nested[w]++;
+}
+
+static void team_share(void *ctx, unsigned w, unsigned nw) {
+  (void)nw;
+  team_probe_t *tp = ctx;
+  tp->ran[w]++;
+  tp->runs[w] = ++team_runs;
+  if (tp->nest && w == 1) qk__run_shares(3, team_nested_share, tp->nested + 4);
+}
+
+static void team_job(unsigned i, unsigned w, void *ud) {
+  (void)w;
+  unsigned *done = ud;
+  done[i]++;
+}
+
+static void test_build_team(void **state) {
+  (void)state;
+  qk__team_begin(3);
+  qk__team_begin(2); /* nested: the outer team (two workers) serves */
+  for (unsigned region = 1; region <= 5; region++) {
+    team_probe_t tp = {.nest = region == 3};
+    qk__run_shares(3, team_share, &tp);
+    for (unsigned w = 0; w < 3; w++) assert_int_equal(tp.ran[w], 1);
+    /* the workers ran a share of every region so far; thread 0 is the caller */
+    assert_int_equal(tp.runs[1], region);
+    assert_int_equal(tp.runs[2], region);
+    for (unsigned w = 0; w < 3; w++) assert_int_equal(tp.nested[4 + w], region == 3 ? 1 : 0);
+  }
+  /* a region of two shares: worker 2 only reports back */
+  team_probe_t two = {0};
+  qk__run_shares(2, team_share, &two);
+  assert_int_equal(two.ran[0] + two.ran[1] + two.ran[2], 2);
+  assert_int_equal(two.runs[1], 6);
+  /* more shares than the team: threads of its own, every share once */
+  team_probe_t five = {0};
+  qk__run_shares(5, team_share, &five);
+  for (unsigned w = 0; w < 5; w++) assert_int_equal(five.ran[w], 1);
+  assert_int_equal(five.runs[1], 1);
+  unsigned done[100] = {0};
+  qk__run_jobs_dynamic(3, 100, team_job, done);
+  for (unsigned i = 0; i < 100; i++) assert_int_equal(done[i], 1);
+  qk__team_end();
+  /* the outer team still holds */
+  team_probe_t more = {0};
+  qk__run_shares(3, team_share, &more);
+  assert_int_equal(more.runs[1], 7);
+  assert_int_equal(more.runs[2], 6); /* (its share of the two-share region did not run) */
+  qk__team_end();
+  /* no team: threads started for the region */
+  team_probe_t after = {0};
+  qk__run_shares(3, team_share, &after);
+  for (unsigned w = 0; w < 3; w++) assert_int_equal(after.ran[w], 1);
+  assert_int_equal(after.runs[1], 1);
+  assert_int_equal(after.runs[2], 1);
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
+      cmocka_unit_test(test_build_team),
       cmocka_unit_test(test_build_deep_grid_lines),
       cmocka_unit_test(test_build_threads_adversarial),
       cmocka_unit_test(test_build_tree_beside_sort),
