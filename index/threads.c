@@ -6,10 +6,10 @@
  *
  * A call of several parallel regions (the bulk build: four to six) can hold a team for
  * its length (qk__team_begin/qk__team_end): its workers are started once, run the shares
- * of every region the calling thread starts, and wait in between, first by yielding, then
- * parked on a condition variable. Starting a thread and waking it on the other core cost
- * 0.03-2 ms a region on the two vCPUs of the seventeenth session's machine (more than the
- * build's regions take on two threads); a team pays that once per call.
+ * of every region the calling thread starts, and wait in between, first spinning (with the
+ * processor's pause, not a yield), then parked on a condition variable. Starting a thread and
+ * waking it on the other core cost 0.03-2 ms a region on the two vCPUs of the seventeenth session's
+ * machine (more than the build's regions take on two threads); a team pays that once per call.
  */
 #define _POSIX_C_SOURCE 200809L
 #include <stdatomic.h>
