@@ -747,16 +747,16 @@ typedef struct sw {
   __m128 x1, y0, y1, px0, py0, px1, py1;
   __m128i ks, kb;
   uint32_t slot;
-  unsigned any, ek;
+  unsigned ek;
 } sw_t;
 static inline __attribute__((always_inline)) uint64_t *
 sweep_grp(const sw_t *w, const egrp_t *g, const uint8_t *fm, unsigned mask, uint64_t *v, int *stop,
-          const int all_exact, const int began, const int near_) {
+          const int any, const int all_exact, const int began, const int near_) {
   const __m128 cx = _mm_cmple_ps(_mm_loadu_ps(g->x0), w->x1);
   const __m128 m = _mm_and_ps(_mm_cmple_ps(_mm_loadu_ps(g->y0), w->y1),
                               _mm_cmpnlt_ps(_mm_loadu_ps(g->y1), w->y0));
   const unsigned cxm = (unsigned)_mm_movemask_ps(cx);
-  unsigned bits = (unsigned)_mm_movemask_ps(_mm_and_ps(cx, m)) & mask & (w->any | *fm);
+  unsigned bits = (unsigned)_mm_movemask_ps(_mm_and_ps(cx, m)) & mask & (any ? 15u : *fm);
   *stop = cxm != 15u;
   if (began && bits) {
     const pgrp_t *pq = (const pgrp_t *)(const void *)((const char *)g + w->pd);
@@ -822,8 +822,6 @@ static inline __attribute__((always_inline)) uint64_t *sweep(const share_t *s, c
     w.px1 = _mm_set1_ps(pk->x1[lk]), w.py1 = _mm_set1_ps(pk->y1[lk]);
   }
   w.ks = _mm_set1_epi32((int32_t)w.slot), w.kb = _mm_set1_epi32((int32_t)(w.slot ^ 0x80000000u));
-  /* k first in its band: every candidate may pair with it; else only those first here */
-  w.any = bd->fm[k >> 2] >> lk & 1 ? 15u : 0u;
   w.ek = all_exact ? 1 : bd->exact[k];
   /* The groups from k + 1's: the first masked to the lanes after k (those before it, k's
    * band's, hold no xmin beyond k's xmax: sorted), then whole ones up to the first lane
@@ -831,9 +829,16 @@ static inline __attribute__((always_inline)) uint64_t *sweep(const share_t *s, c
   const uint32_t lo = k + 1;
   const egrp_t *g = &bd->g[lo >> 2];
   const uint8_t *fm = &bd->fm[lo >> 2];
+  const unsigned first = ~((1u << (lo & 3)) - 1) & 15u;
   int stop;
-  v = sweep_grp(&w, g, fm, ~((1u << (lo & 3)) - 1) & 15u, v, &stop, all_exact, began, near_);
-  while (!stop) v = sweep_grp(&w, ++g, ++fm, ~0u, v, &stop, all_exact, began, near_);
+  /* k first in its band: every candidate may pair with it; else only those first here */
+  if (bd->fm[k >> 2] >> lk & 1) {
+    v = sweep_grp(&w, g, fm, first, v, &stop, 1, all_exact, began, near_);
+    while (!stop) v = sweep_grp(&w, ++g, ++fm, ~0u, v, &stop, 1, all_exact, began, near_);
+  } else {
+    v = sweep_grp(&w, g, fm, first, v, &stop, 0, all_exact, began, near_);
+    while (!stop) v = sweep_grp(&w, ++g, ++fm, ~0u, v, &stop, 0, all_exact, began, near_);
+  }
   return v;
 }
 #else
