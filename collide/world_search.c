@@ -703,7 +703,9 @@ typedef struct pgrp {
 } pgrp_t;
 
 /* The bands: entries band after band, each band's by xmin (ascending; ties in any order),
- * four to a group. */
+ * four to a group. Each band starts a group and ends with one to four stop lanes (xmin a
+ * NaN, which no comparison passes: see sweep), so a sweep needs no test of its band's
+ * end. */
 typedef struct bands {
   egrp_t *g;
   pgrp_t *pg;      /* or NULL: every pair is kept */
@@ -712,7 +714,8 @@ typedef struct bands {
   uint8_t *exact;  /* per entry: the object's float box is its box (NULL: all are) */
   int near;        /* (with exact) the candidates whose objects do not meet are kept,
                       marked by QK__NEAR */
-  uint32_t *start; /* band b holds entries [start[b], start[b + 1]) */
+  uint32_t *start; /* band b's entries are [start[b], end[b]), then its stop lanes up to */
+  uint32_t *end;   /* start[b + 1], a multiple of four */
   uint32_t nb;
   size_t ne;
 } bands_t;
@@ -730,92 +733,111 @@ typedef struct bands {
  * kept where one of the two is entered first (band_of is non-decreasing in y).
  */
 #if defined(__SSE2__)
+/* One group g of the sweep of an entry (its broadcast bounds below), lanes `mask` (the
+ * first group: the lanes after the entry; else all): its keys written at v, returned
+ * past the kept ones; *stop set when a lane's xmin lies beyond the entry's xmax (or is a
+ * band's stop lane). y1 is compared by "not less than", which a NaN passes: only a stop
+ * lane holds one, and its xmin fails first. */
+typedef struct sw {
+  const share_t *s;
+  const bands_t *bd;
+  const egrp_t *g0;  /* the groups */
+  const uint8_t *e0; /* the exact bytes (when not all_exact) */
+  ptrdiff_t pd;      /* from a group to its boxes at the last update, in bytes */
+  __m128 x1, y0, y1, px0, py0, px1, py1;
+  __m128i ks, kb;
+  uint32_t slot;
+  unsigned ek;
+} sw_t;
+static inline __attribute__((always_inline)) uint64_t *
+sweep_grp(const sw_t *w, const egrp_t *g, const uint8_t *fm, unsigned mask, uint64_t *v, int *stop,
+          const int any, const int all_exact, const int began, const int near_) {
+  const __m128 cx = _mm_cmple_ps(_mm_loadu_ps(g->x0), w->x1);
+  const __m128 m = _mm_and_ps(_mm_cmple_ps(_mm_loadu_ps(g->y0), w->y1),
+                              _mm_cmpnlt_ps(_mm_loadu_ps(g->y1), w->y0));
+  const unsigned cxm = (unsigned)_mm_movemask_ps(cx);
+  unsigned bits = (unsigned)_mm_movemask_ps(_mm_and_ps(cx, m)) & mask & (any ? 15u : *fm);
+  *stop = cxm != 15u;
+  if (began && bits) {
+    const pgrp_t *pq = (const pgrp_t *)(const void *)((const char *)g + w->pd);
+    __m128 met = _mm_and_ps(_mm_and_ps(_mm_cmple_ps(_mm_loadu_ps(pq->x0), w->px1),
+                                       _mm_cmpnlt_ps(_mm_loadu_ps(pq->x1), w->px0)),
+                            _mm_and_ps(_mm_cmple_ps(_mm_loadu_ps(pq->y0), w->py1),
+                                       _mm_cmpnlt_ps(_mm_loadu_ps(pq->y1), w->py0)));
+    bits &= ~(unsigned)_mm_movemask_ps(met);
+  }
+  if (!bits) return v;
+  /* the four keys at once: (min << 32 | max) of the entry's slot and each lane's */
+  const __m128i bias = _mm_set1_epi32(INT32_MIN);
+  __m128i sj = _mm_loadu_si128((const __m128i *)g->slot), x = _mm_xor_si128(sj, w->ks);
+  __m128i gt = _mm_cmpgt_epi32(_mm_xor_si128(sj, bias), w->kb); /* lane's slot > k's */
+  __m128i mn = _mm_xor_si128(sj, _mm_and_si128(x, gt)), mx = _mm_xor_si128(mn, x);
+  __m128i k01 = _mm_unpacklo_epi32(mx, mn), k23 = _mm_unpackhi_epi32(mx, mn);
+  if (all_exact) {
+    /* all four written, the end moved past the kept ones (room for three more than
+     * the candidates is reserved): each pair of keys stored whole, then its second
+     * key again over the first when the first is not kept */
+    static const uint8_t kept[16] = {0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4};
+    uint64_t *v2 = v + kept[bits & 3];
+    _mm_storeu_si128((__m128i *)v, k01);
+    _mm_storeh_pd((double *)(v + (bits & 1)), _mm_castsi128_pd(k01));
+    _mm_storeu_si128((__m128i *)v2, k23);
+    _mm_storeh_pd((double *)(v2 + (bits >> 2 & 1)), _mm_castsi128_pd(k23));
+    return v + kept[bits];
+  }
+  uint64_t key[4];
+  _mm_storeu_si128((__m128i *)key, k01);
+  _mm_storeu_si128((__m128i *)(key + 2), k23);
+  const uint8_t *ex = w->e0 + (size_t)(g - w->g0) * 4;
+  do {
+    unsigned l = (unsigned)__builtin_ctz(bits);
+    bits &= bits - 1;
+    *v = key[l];
+    if (near_)
+      *v++ |=
+          (w->ek & ex[l]) || qk__world_objects_meet(w->s->w, w->slot, g->slot[l]) ? 0 : QK__NEAR;
+    else
+      v += (w->ek & ex[l]) ? 1 : qk__world_objects_meet(w->s->w, w->slot, g->slot[l]);
+  } while (bits);
+  return v;
+}
+
 static inline __attribute__((always_inline)) uint64_t *sweep(const share_t *s, const bands_t *bd,
                                                              uint32_t k, uint32_t e, uint64_t *v,
                                                              const int all_exact, const int began,
                                                              const int near_) {
-  const egrp_t *G = bd->g;
-  const pgrp_t *P = bd->pg;
-  const uint8_t *fm = bd->fm;
-  const egrp_t *gk = &G[k >> 2];
+  (void)e; /* (the band's stop lane ends the sweep) */
+  const egrp_t *gk = &bd->g[k >> 2];
   const unsigned lk = k & 3;
-  const __m128 x1 = _mm_set1_ps(bd->x1[k]), y0 = _mm_set1_ps(gk->y0[lk]),
-               y1 = _mm_set1_ps(gk->y1[lk]);
-  const uint32_t slot = gk->slot[lk];
+  sw_t w;
+  w.s = s, w.bd = bd, w.g0 = bd->g, w.e0 = bd->exact;
+  w.pd = began ? (const char *)bd->pg - (const char *)bd->g : 0;
+  w.x1 = _mm_set1_ps(bd->x1[k]), w.y0 = _mm_set1_ps(gk->y0[lk]), w.y1 = _mm_set1_ps(gk->y1[lk]);
+  w.slot = gk->slot[lk];
   /* (began: k's box at the last update; a lane whose box then met it is dropped) */
-  __m128 px0 = _mm_setzero_ps(), py0 = px0, px1 = px0, py1 = px0;
+  w.px0 = w.py0 = w.px1 = w.py1 = _mm_setzero_ps();
   if (began) {
-    const pgrp_t *pk = &P[k >> 2];
-    px0 = _mm_set1_ps(pk->x0[lk]), py0 = _mm_set1_ps(pk->y0[lk]);
-    px1 = _mm_set1_ps(pk->x1[lk]), py1 = _mm_set1_ps(pk->y1[lk]);
+    const pgrp_t *pk = &bd->pg[k >> 2];
+    w.px0 = _mm_set1_ps(pk->x0[lk]), w.py0 = _mm_set1_ps(pk->y0[lk]);
+    w.px1 = _mm_set1_ps(pk->x1[lk]), w.py1 = _mm_set1_ps(pk->y1[lk]);
   }
-  const __m128i ks = _mm_set1_epi32((int32_t)slot),
-                kb = _mm_set1_epi32((int32_t)(slot ^ 0x80000000u)),
-                bias = _mm_set1_epi32(INT32_MIN);
+  w.ks = _mm_set1_epi32((int32_t)w.slot), w.kb = _mm_set1_epi32((int32_t)(w.slot ^ 0x80000000u));
+  w.ek = all_exact ? 1 : bd->exact[k];
+  /* The groups from k + 1's: the first masked to the lanes after k (those before it, k's
+   * band's, hold no xmin beyond k's xmax: sorted), then whole ones up to the first lane
+   * whose xmin lies beyond k's xmax, at the latest the band's stop lane. */
+  const uint32_t lo = k + 1;
+  const egrp_t *g = &bd->g[lo >> 2];
+  const uint8_t *fm = &bd->fm[lo >> 2];
+  const unsigned first = ~((1u << (lo & 3)) - 1) & 15u;
+  int stop;
   /* k first in its band: every candidate may pair with it; else only those first here */
-  const unsigned any = fm[k >> 2] >> lk & 1 ? 15u : 0u;
-  const unsigned ek = all_exact ? 1 : bd->exact[k];
-  uint32_t lo = k + 1;
-  unsigned mask = ~((1u << (lo & 3)) - 1) & 15u;
-  const unsigned last = (2u << ((e - 1) & 3)) - 1;
-  /* the groups walked by pointers (group and first-band mask), to the last, gl */
-  const egrp_t *g = &G[lo >> 2], *const gl = &G[(e - 1) >> 2];
-  const uint8_t *fg = &fm[lo >> 2];
-  for (;;) {
-    __m128 cx = _mm_cmple_ps(_mm_loadu_ps(g->x0), x1);
-    __m128 m =
-        _mm_and_ps(_mm_cmple_ps(_mm_loadu_ps(g->y0), y1), _mm_cmple_ps(y0, _mm_loadu_ps(g->y1)));
-    if (g == gl) mask &= last;
-    unsigned bits = (unsigned)_mm_movemask_ps(_mm_and_ps(cx, m)) & mask & (any | *fg);
-    unsigned stop = ~(unsigned)_mm_movemask_ps(cx) & mask;
-    if (began && bits) {
-      const pgrp_t *pq = &P[g - G];
-      __m128 met = _mm_and_ps(_mm_and_ps(_mm_cmple_ps(_mm_loadu_ps(pq->x0), px1),
-                                         _mm_cmple_ps(px0, _mm_loadu_ps(pq->x1))),
-                              _mm_and_ps(_mm_cmple_ps(_mm_loadu_ps(pq->y0), py1),
-                                         _mm_cmple_ps(py0, _mm_loadu_ps(pq->y1))));
-      bits &= ~(unsigned)_mm_movemask_ps(met);
-    }
-    if (bits) {
-      /* the four keys at once: (min << 32 | max) of k's slot and each lane's */
-      __m128i sj = _mm_loadu_si128((const __m128i *)g->slot), x = _mm_xor_si128(sj, ks);
-      __m128i gt = _mm_cmpgt_epi32(_mm_xor_si128(sj, bias), kb); /* lane's slot > k's */
-      __m128i mn = _mm_xor_si128(sj, _mm_and_si128(x, gt)), mx = _mm_xor_si128(mn, x);
-      __m128i k01 = _mm_unpacklo_epi32(mx, mn), k23 = _mm_unpackhi_epi32(mx, mn);
-      if (all_exact) {
-        /* all four written, the end moved past the kept ones (room for three more than
-         * the candidates is reserved): each pair of keys stored whole, then its second
-         * key again over the first when the first is not kept */
-        static const uint8_t kept[16] = {0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4};
-        uint64_t *v2 = v + kept[bits & 3];
-        _mm_storeu_si128((__m128i *)v, k01);
-        _mm_storeh_pd((double *)(v + (bits & 1)), _mm_castsi128_pd(k01));
-        _mm_storeu_si128((__m128i *)v2, k23);
-        _mm_storeh_pd((double *)(v2 + (bits >> 2 & 1)), _mm_castsi128_pd(k23));
-        v += kept[bits];
-      } else {
-        uint64_t key[4];
-        _mm_storeu_si128((__m128i *)key, k01);
-        _mm_storeu_si128((__m128i *)(key + 2), k23);
-        do {
-          unsigned l = (unsigned)__builtin_ctz(bits);
-          bits &= bits - 1;
-          *v = key[l];
-          if (near_)
-            *v++ |= (ek & bd->exact[(size_t)(g - G) * 4 + l]) ||
-                            qk__world_objects_meet(s->w, slot, g->slot[l])
-                        ? 0
-                        : QK__NEAR;
-          else
-            v += (ek & bd->exact[(size_t)(g - G) * 4 + l])
-                     ? 1
-                     : qk__world_objects_meet(s->w, slot, g->slot[l]);
-        } while (bits);
-      }
-    }
-    if (stop || g == gl) break;
-    g++, fg++;
-    mask = 15u;
+  if (bd->fm[k >> 2] >> lk & 1) {
+    v = sweep_grp(&w, g, fm, first, v, &stop, 1, all_exact, began, near_);
+    while (!stop) v = sweep_grp(&w, ++g, ++fm, ~0u, v, &stop, 1, all_exact, began, near_);
+  } else {
+    v = sweep_grp(&w, g, fm, first, v, &stop, 0, all_exact, began, near_);
+    while (!stop) v = sweep_grp(&w, ++g, ++fm, ~0u, v, &stop, 0, all_exact, began, near_);
   }
   return v;
 }
@@ -862,11 +884,11 @@ static inline __attribute__((always_inline)) int sweep_run(share_t *s, uint32_t 
                                                            const int all_exact, const int began,
                                                            const int near_) {
   const bands_t *bd = s->bd;
-  const uint32_t *st = bd->start;
+  const uint32_t *st = bd->start, *en = bd->end;
   if (!s->out.v && !kv_reserve(s, 256)) return 0;
   uint64_t *v = s->out.v + s->out.n, *vend = s->out.v + s->out.cap;
   for (uint32_t b = b0; b < b1; b++)
-    for (uint32_t k = st[b], e = st[b + 1]; k + 1 < e; k++) {
+    for (uint32_t k = st[b], e = en[b]; k + 1 < e; k++) {
       if ((size_t)(vend - v) < (size_t)(e - k) + 2) {
         s->out.n = (size_t)(v - s->out.v);
         if (!kv_reserve(s, (size_t)(e - k) + 2)) return 0;
@@ -1281,25 +1303,25 @@ static int build_bands(const qk_world_t *w, const qk__wpack_t *pk, bands_t *bd, 
   for (;;) {
     inv = 1 / h;
     nb = band_of(yhi, ylo, inv, top) + 1;
-    start = qk__realloc(al, NULL, 0, 2 * ((size_t)nb + 1) * sizeof *start);
+    start = qk__realloc(al, NULL, 0, 3 * ((size_t)nb + 1) * sizeof *start);
     if (!start) break;
     /* each object's bands, counted (by the threads apart: bb_bands) */
     J.ylo0 = ylo, J.inv = inv, J.top = top, J.nb = nb, J.start = start;
     if (!bb_bands(&J)) {
-      qk__free(al, start, 2 * ((size_t)nb + 1) * sizeof *start);
+      qk__free(al, start, 3 * ((size_t)nb + 1) * sizeof *start);
       start = NULL;
       break;
     }
-    ne = J.ne_all;
-    if (ne <= 16 * (size_t)n + 1024 && ne < UINT32_MAX / 2) break;
-    qk__free(al, start, 2 * ((size_t)nb + 1) * sizeof *start);
+    ne = J.ne_all + 4 * (size_t)nb; /* (with the stop lanes, at most) */
+    if (J.ne_all <= 16 * (size_t)n + 1024 && ne < UINT32_MAX / 2) break;
+    qk__free(al, start, 3 * ((size_t)nb + 1) * sizeof *start);
     h *= 2;
   }
   size_t ng = start ? ne / 4 + 1 : 0, xbytes = ne * (sizeof(float) + (all_exact ? 0 : 1));
   egrp_t *g = start ? qk__realloc(al, NULL, 0, ng * (sizeof *g + 1)) : NULL;
   float *x1 = g ? qk__realloc(al, NULL, 0, xbytes) : NULL;
   if (!x1) {
-    if (start) qk__free(al, start, 2 * ((size_t)nb + 1) * sizeof *start);
+    if (start) qk__free(al, start, 3 * ((size_t)nb + 1) * sizeof *start);
     qk__free(al, g, ng * (sizeof *g + 1));
     bb_free(&J);
     qk__free(al, cnt, 3 * 2048 * sizeof *cnt);
@@ -1309,7 +1331,7 @@ static int build_bands(const qk_world_t *w, const qk__wpack_t *pk, bands_t *bd, 
   pgrp_t *pg = NULL;
   if (prev && (all_exact || near_ok) && !(pg = qk__realloc(al, NULL, 0, ng * sizeof *pg))) {
     qk__free(al, x1, xbytes);
-    qk__free(al, start, 2 * ((size_t)nb + 1) * sizeof *start);
+    qk__free(al, start, 3 * ((size_t)nb + 1) * sizeof *start);
     qk__free(al, g, ng * (sizeof *g + 1));
     bb_free(&J);
     qk__free(al, cnt, 3 * 2048 * sizeof *cnt);
@@ -1318,16 +1340,19 @@ static int build_bands(const qk_world_t *w, const qk__wpack_t *pk, bands_t *bd, 
   }
   uint8_t *fm = (uint8_t *)(g + ng);
   uint8_t *exact = all_exact ? NULL : (uint8_t *)(x1 + ne);
-  uint32_t *pos = start + nb + 1;
-  for (uint32_t b = 0; b < nb; b++) start[b + 1] += start[b];
+  uint32_t *pos = start + nb + 1, *end = pos + nb + 1;
+  /* (each band from a group, its entries followed by one to four stop lanes) */
+  for (uint32_t b = 0; b < nb; b++)
+    end[b] = start[b] + start[b + 1], start[b + 1] = (end[b] + 4) & ~UINT32_C(3);
+  end[nb] = start[nb];
   memcpy(pos, start, ((size_t)nb + 1) * sizeof *pos);
   /* The records by xmin: an LSD radix sort of three digits, skipping those all share
    * (on the threads: bb_sort). */
   const uint64_t *a = bb_sort(&J);
   bb_free(&J);
-  /* Then the entries, band by band, in that order: each band's come sorted. The last
-   * group's lanes past the entries hold boxes that meet nothing (never counted: the
-   * sweeps stop at their band's end). */
+  /* Then the entries, band by band, in that order: each band's come sorted; then the
+   * bands' stop lanes. The last group's lanes hold boxes that meet nothing (no sweep
+   * reaches it: each stops at its band's stop lane). */
   memset(fm, 0, ng);
   for (int l = 0; l < 4; l++)
     g[ng - 1].x0[l] = g[ng - 1].y0[l] = INFINITY, g[ng - 1].y1[l] = -INFINITY,
@@ -1336,14 +1361,25 @@ static int build_bands(const qk_world_t *w, const qk__wpack_t *pk, bands_t *bd, 
     for (int l = 0; l < 4; l++)
       pg[ng - 1].x0[l] = pg[ng - 1].y0[l] = INFINITY,
               pg[ng - 1].x1[l] = pg[ng - 1].y1[l] = -INFINITY;
-  scat_t sc = {w, pk, a, b01, g, pg, fm, exact, x1, prev, start, pos, nb, ne, nt};
+  scat_t sc = {w, pk, a, b01, g, pg, fm, exact, x1, prev, start, pos, nb, start[nb], nt};
   if (nt > 1)
     qk__world_run_jobs(w, nt, nt, scatter_run, &sc);
   else
     scatter_(&sc, 0, 1);
+  for (uint32_t b = 0; b < nb; b++)
+    for (uint32_t p = end[b]; p < start[b + 1]; p++) {
+      egrp_t *q = &g[p >> 2];
+      q->x0[p & 3] = q->y0[p & 3] = q->y1[p & 3] = NAN, q->slot[p & 3] = 0;
+      x1[p] = NAN;
+      if (exact) exact[p] = 0;
+      if (pg) {
+        pgrp_t *r = &pg[p >> 2];
+        r->x0[p & 3] = r->y0[p & 3] = INFINITY, r->x1[p & 3] = r->y1[p & 3] = -INFINITY;
+      }
+    }
   qk__free(al, cnt, 3 * 2048 * sizeof *cnt);
   qk__free(al, rec, 3 * (size_t)n * sizeof *rec);
-  *bd = (bands_t){g, pg, fm, x1, exact, !all_exact && near_ok, start, nb, ne};
+  *bd = (bands_t){g, pg, fm, x1, exact, !all_exact && near_ok, start, end, nb, ne};
   return 1;
 }
 
@@ -1353,7 +1389,7 @@ static void free_bands(const qk_world_t *w, bands_t *bd) {
   qk__free(al, bd->g, (bd->ne / 4 + 1) * (sizeof *bd->g + 1));
   if (bd->pg) qk__free(al, bd->pg, (bd->ne / 4 + 1) * sizeof *bd->pg);
   qk__free(al, bd->x1, bd->ne * (sizeof(float) + (bd->exact ? 1 : 0)));
-  qk__free(al, bd->start, 2 * ((size_t)bd->nb + 1) * sizeof *bd->start);
+  qk__free(al, bd->start, 3 * ((size_t)bd->nb + 1) * sizeof *bd->start);
   memset(bd, 0, sizeof *bd);
 }
 
@@ -1445,7 +1481,7 @@ qk_status_t qk__world_search(const qk_world_t *w, const qk__wpack_t *pk, qk__kve
     chunk[i++] = 0;
     if (by_bands) {
       for (uint32_t b = 0; b < bd.nb && i < n_chunks; b++)
-        if ((double)bd.start[b + 1] >= (double)bd.ne * i / n_chunks) chunk[i++] = b + 1;
+        if ((double)bd.start[b + 1] >= (double)bd.start[bd.nb] * i / n_chunks) chunk[i++] = b + 1;
       while (i <= n_chunks) chunk[i++] = bd.nb;
     } else {
       grid_chunks(w, lv[0].l, chunk, n_chunks);

@@ -1594,6 +1594,57 @@ static void test_world_bands_edges(void **s) {
 }
 
 /*
+ * The bands' stop lanes (collide/world_search.c): each band starts a group of four and
+ * ends with one to four lanes whose xmin is a NaN, which end every sweep that reaches
+ * them, so a sweep tests no band end and masks only its first group (to the lanes after
+ * its entry). Here the boxes lie in a narrow column (xmin in [0, 1/2], widths 1/64 to 1
+ * over six levels: searched by bands), so the sweeps of the wide ones run to their band's
+ * end, where the next band's entries meet them on x: a sweep that ran on (a band whose
+ * entries fill its last group without a stop lane after it) or a first group left
+ * unmasked (the entry itself and those before it) reports pairs twice, or an object with
+ * itself. Bands of every count modulo four over the frames; moves, removes and adds;
+ * every frame against brute force, on one thread and on two.
+ */
+static void test_world_bands_stop_lanes(void **s) {
+  (void)s;
+  for (unsigned th = 1; th <= 2; th++) {
+    qkt_rng_t r;
+    qkt_rng_seed(&r, g_seed + 173);
+    qk_world_t *w = threaded_world(th);
+    mirror_t m = {0};
+    enum { N = 600 };
+    for (int i = 0; i < N; i++) {
+      double x = qkt_rng_below(&r, 33) / 64.0, y = qkt_rng_below(&r, 64 * 12) / 64.0;
+      double wd = (double)(1u << qkt_rng_below(&r, 7)) / 64.0,
+             h = (1 + qkt_rng_below(&r, 8)) / 64.0;
+      m_add(w, &m, (qk_shape_t){QK_SHAPE_BOX, x, y, x + wd, y + h});
+    }
+    qk_world_pair_t *prev = NULL;
+    size_t np = 0;
+    for (int f = 0; f < 16; f++) {
+      for (size_t i = 0; f && i < m.n; i++) {
+        if (qkt_rng_below(&r, 3) == 0) continue;
+        double dx = ((int)qkt_rng_below(&r, 3) - 1) / 64.0,
+               dy = ((int)qkt_rng_below(&r, 9) - 4) / 64.0;
+        m_move(w, &m, i, shifted(m.s[i], dx, dy));
+      }
+      if (f % 4 == 3) {
+        for (int k = 0; k < 5; k++) (void)m_remove_random(w, &m, &r);
+        for (int k = 0; k < 3 + f % 5; k++) {
+          double x = qkt_rng_below(&r, 33) / 64.0, y = qkt_rng_below(&r, 64 * 12) / 64.0;
+          m_add(w, &m, (qk_shape_t){QK_SHAPE_BOX, x, y, x + 1, y + 1.0 / 64});
+        }
+      }
+      update_and_check(w, &m, &prev, &np, "bands stop lanes", f);
+      assert_true(qk__world_by_bands(w));
+    }
+    assert_true(np > N);
+    free(prev), free(m.h), free(m.s);
+    qk_world_free(w);
+  }
+}
+
+/*
  * The grid's search across levels (collide/world_search.c), which the update keeps for
  * scenes of mostly one size (few rows of finer levels for the coarse objects to walk;
  * otherwise it searches by bands): sizes 0.6 to 2 of all kinds with, in the first scene,
@@ -2628,6 +2679,7 @@ int main(void) {
       cmocka_unit_test(test_world_refile_split),
       cmocka_unit_test(test_world_began_general),
       cmocka_unit_test(test_world_bands_edges),
+      cmocka_unit_test(test_world_bands_stop_lanes),
       cmocka_unit_test(test_world_grid_levels),
       cmocka_unit_test(test_world_refile_sort),
       cmocka_unit_test(test_world_fbox_only_bands),
