@@ -13,6 +13,10 @@
  * The pool serves one step at a time. The update has the world to itself, but the batch
  * queries (const, maybe from several threads at once) also run steps: a step that finds
  * the pool taken runs on threads started for it instead (qk__run_shares).
+ *
+ * A detached job (qk__world_pool_detach: the scratch cache's blocks given back at the end
+ * of an update) is a step of its own that only the first worker runs and nobody waits
+ * for: the caller goes on, and the pool's next step, or its end, first waits for it.
  */
 #define _POSIX_C_SOURCE 200809L
 #include <stdatomic.h>
