@@ -2108,11 +2108,13 @@ static void test_world_threads_fork(void **s) {
  * collide/world_threads.c, qk__world_pool_detach): the calling thread returns while the
  * worker frees them, and the pool's next step waits for it. An allocator whose free of a
  * block of 256 KB and more sleeps off the test's thread keeps that job running into the
- * next update; the scene swings between 2 000 boxes in a 10 x 10 square (some 80 000 pairs)
- * and far apart (few), so that large blocks are given back every few frames. Every frame
- * against brute force (dense_check) on 1 to 7 threads, and the frees off the test's thread
- * counted: there are some from 2 threads on (none on one). A step posted while the job
- * runs would count the job's end as its own and go on before its worker's share.
+ * next update; the scene swings between 4 500 boxes in a 20 x 20 square (some 100 000
+ * pairs) and far apart (few), so that large blocks are given back every few frames. Every
+ * frame against brute force (dense_check) on 1 to 7 threads, and the frees off the test's
+ * thread counted: there are some from 2 threads on (none on one). A step posted while the
+ * job runs would count the job's end as its own and go on before its worker's share (with
+ * pool_run's wait removed this test did not end within 10 minutes; with no job detached it
+ * fails on the count).
  */
 typedef struct slow_alloc {
   pthread_t main;
@@ -2132,7 +2134,7 @@ static void *slow_fn(void *ud, void *p, size_t osize, size_t nsize) {
 }
 
 static void run_threads_detach(unsigned threads) {
-  enum { N = 2000 };
+  enum { N = 4500 }; /* (the update's steps run on the threads from 4096 objects) */
   slow_alloc_t sa = {pthread_self(), 0};
   qk_allocator_t al = {slow_fn, &sa};
   qk_world_options_t o;
@@ -2148,7 +2150,7 @@ static void run_threads_detach(unsigned threads) {
   qk_world_pair_t *prev = NULL;
   size_t np = 0, most = 0;
   for (int f = 0; f < 8; f++) {
-    double span = f % 3 == 0 ? 10 : 2000;
+    double span = f % 3 == 0 ? 20 : 4000;
     for (size_t i = 0; i < N; i++) {
       double x = q64(qkt_rng_range(&r, 0, span)), y = q64(qkt_rng_range(&r, 0, span));
       qk_shape_t sh = {QK_SHAPE_BOX, x, y, x + 1, y + 1};
