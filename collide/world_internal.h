@@ -218,6 +218,9 @@ void qk__world_pool_free(qk_world_t *w);
 /* While an update runs (on nonzero), the workers wait for its next step yielding for a
  * while before they park; otherwise they park at once. */
 void qk__world_pool_hold(qk_world_t *w, int on);
+/* fn(ctx) on the first worker while the caller goes on (the pool's next step and its end
+ * wait for it); 0, fn not run, when there is no pool here or it is taken. */
+int qk__world_pool_detach(qk_world_t *w, void (*fn)(void *), void *ctx);
 void qk__world_run_jobs(const qk_world_t *w, unsigned threads, unsigned n,
                         void (*fn)(unsigned i, void *ud), void *ud);
 

@@ -1336,8 +1336,14 @@ static qk_status_t update(qk_world_t *w) {
     uint64_t *tmp = in_keys ? found.v + total : qk__realloc(al, NULL, 0, tbytes);
     uint32_t *cnt = tmp ? qk__realloc(al, NULL, 0, ccap * sizeof *cnt) : NULL;
     /* The lists start with room for the last frame's counts and some (frames are
-     * alike), and grow if need be. */
+     * alike), and grow if need be; began holds at most this frame's keys, ended the last
+     * frame's pairs. (Frame 1 follows a frame where every pair began: 9.8 M at 10^5
+     * clustered boxes, against some 600 000 now. Its room was then 98 MB, and the list cut
+     * to size after the rows was copied to a fresh block on the calling thread alone:
+     * 1 200 page faults, 17 ms of the update's CPU time on this machine.) */
     size_t bcap = w->began.n + w->began.n / 4 + 64, ecap = w->ended.n + w->ended.n / 4 + 64;
+    if (bcap > total + 64) bcap = total + 64;
+    if (ecap > w->cur.n + 64) ecap = w->cur.n + 64;
     if (cnt && (bv.v = qk__realloc(al, NULL, 0, bcap * sizeof *bv.v))) bv.cap = bcap;
     if (bv.v && (ev.v = qk__realloc(al, NULL, 0, ecap * sizeof *ev.v))) ev.cap = ecap;
     if (ev.v && only_new)

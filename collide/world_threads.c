@@ -13,6 +13,10 @@
  * The pool serves one step at a time. The update has the world to itself, but the batch
  * queries (const, maybe from several threads at once) also run steps: a step that finds
  * the pool taken runs on threads started for it instead (qk__run_shares).
+ *
+ * A detached job (qk__world_pool_detach: the scratch cache's blocks given back at the end
+ * of an update) is a step of its own that only the first worker runs and nobody waits
+ * for: the caller goes on, and the pool's next step, or its end, first waits for it.
  */
 #define _POSIX_C_SOURCE 200809L
 #include <stdatomic.h>
@@ -52,6 +56,10 @@ struct qk__wpool {
   qk__share_fn fn;
   void *ctx;
   unsigned nw;
+  /* A detached job (qk__world_pool_detach): run by the first worker as a step of its own
+   * that nobody waits for until the pool's next step or its end. */
+  void (*dfn)(void *);
+  void *dctx;
   pthread_t th[QK__MAX_THREADS];
   wworker_t ww[QK__MAX_THREADS];
 };
@@ -162,6 +170,7 @@ void qk__world_pool_free(qk_world_t *w) {
     w->pool = NULL;
     return;
   }
+  wait_done(p); /* (a detached job) */
   post(p, NULL, NULL, 0, 1);
   for (unsigned i = 0; i < p->n_th; i++) pthread_join(p->th[i], NULL);
   pthread_cond_destroy(&p->done);
@@ -181,6 +190,7 @@ static int pool_run(struct qk__wpool *p, unsigned nw, qk__share_fn fn, void *ctx
   if (!atomic_compare_exchange_strong_explicit(&p->busy, &idle, 1, memory_order_acquire,
                                                memory_order_relaxed))
     return 0;
+  wait_done(p); /* (a detached job: the workers are ours once it ends) */
   post(p, fn, ctx, nw, 0);
   fn(ctx, 0, nw);
   /* Shares beyond the workers started (a creation failed) run here. */
@@ -189,7 +199,31 @@ static int pool_run(struct qk__wpool *p, unsigned nw, qk__share_fn fn, void *ctx
   atomic_store_explicit(&p->busy, 0, memory_order_release);
   return 1;
 }
+
+static void detach_share(void *ctx, unsigned s, unsigned nw) {
+  const struct qk__wpool *p = ctx;
+  (void)nw;
+  if (s == 1) p->dfn(p->dctx);
+}
+
+int qk__world_pool_detach(qk_world_t *w, void (*fn)(void *), void *ctx) {
+  struct qk__wpool *p = w->pool;
+  int idle = 0;
+  if (!p || forked(p) ||
+      !atomic_compare_exchange_strong_explicit(&p->busy, &idle, 1, memory_order_acquire,
+                                               memory_order_relaxed))
+    return 0;
+  wait_done(p); /* (the one before) */
+  p->dfn = fn, p->dctx = ctx;
+  post(p, detach_share, p, 2, 0);
+  atomic_store_explicit(&p->busy, 0, memory_order_release);
+  return 1;
+}
 #else
+int qk__world_pool_detach(qk_world_t *w, void (*fn)(void *), void *ctx) {
+  (void)w, (void)fn, (void)ctx;
+  return 0;
+}
 void qk__world_pool_start(qk_world_t *w, unsigned threads) { (void)w, (void)threads; }
 void qk__world_pool_free(qk_world_t *w) { (void)w; }
 void qk__world_pool_hold(qk_world_t *w, int on) { (void)w, (void)on; }

@@ -2154,6 +2154,80 @@ static void test_world_threads_fork(void **s) {
 #endif
 }
 
+/*
+ * The scratch cache's blocks given back on a worker (collide/world_scratch.c, drop, and
+ * collide/world_threads.c, qk__world_pool_detach): the calling thread returns while the
+ * worker frees them, and the pool's next step waits for it. An allocator whose free of a
+ * block of 256 KB and more sleeps off the test's thread keeps that job running into the
+ * next update; the scene swings between 4 500 boxes in a 20 x 20 square (some 100 000
+ * pairs) and far apart (few), so that large blocks are given back every few frames. Every
+ * frame against brute force (dense_check) on 1 to 7 threads, and the frees off the test's
+ * thread counted: there are some from 2 threads on (none on one). A step posted while the
+ * job runs would count the job's end as its own and go on before its worker's share (with
+ * pool_run's wait removed this test did not end within 10 minutes; with no job detached it
+ * fails on the count).
+ */
+typedef struct slow_alloc {
+  pthread_t main;
+  int off; /* large frees off the main thread (atomic) */
+} slow_alloc_t;
+
+static void *slow_fn(void *ud, void *p, size_t osize, size_t nsize) {
+  slow_alloc_t *a = ud;
+  if (nsize) return realloc(p, nsize);
+  if (p && osize >= ((size_t)256 << 10) && !pthread_equal(pthread_self(), a->main)) {
+    __atomic_fetch_add(&a->off, 1, __ATOMIC_RELAXED);
+    struct timespec ts = {0, 20 * 1000 * 1000};
+    nanosleep(&ts, NULL);
+  }
+  free(p);
+  return NULL;
+}
+
+static void run_threads_detach(unsigned threads) {
+  enum { N = 4500 }; /* (the update's steps run on the threads from 4096 objects) */
+  slow_alloc_t sa = {pthread_self(), 0};
+  qk_allocator_t al = {slow_fn, &sa};
+  qk_world_options_t o;
+  qk_world_options_init(&o);
+  o.threads = threads;
+  o.thread_min = 0;
+  o.allocator = &al;
+  qk_world_t *w;
+  assert_int_equal(qk_world_new(&o, &w), QK_OK);
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 977 + threads);
+  mirror_t m = {0};
+  qk_world_pair_t *prev = NULL;
+  size_t np = 0, most = 0;
+  for (int f = 0; f < 8; f++) {
+    double span = f % 3 == 0 ? 20 : 4000;
+    for (size_t i = 0; i < N; i++) {
+      double x = q64(qkt_rng_range(&r, 0, span)), y = q64(qkt_rng_range(&r, 0, span));
+      qk_shape_t sh = {QK_SHAPE_BOX, x, y, x + 1, y + 1};
+      if (f)
+        m_move(w, &m, i, sh);
+      else
+        m_add(w, &m, sh);
+    }
+    dense_check(w, &m, &prev, &np, f);
+    if (np > most) most = np;
+  }
+  qk_world_free(w); /* (with a job maybe still running: the pool's end waits for it) */
+  assert_true(most > 40000);
+  int off = __atomic_load_n(&sa.off, __ATOMIC_RELAXED);
+  if (threads == 1)
+    assert_int_equal(off, 0);
+  else if (!off)
+    fail_msg("%u threads: no block given back off the calling thread", threads);
+  free(prev), free(m.h), free(m.s);
+}
+
+static void test_world_threads_detach(void **s) {
+  (void)s;
+  for (unsigned th = 1; th <= 7; th++) run_threads_detach(th);
+}
+
 /* Two threads give the same pairs and ray hits as one. */
 static void test_world_threads(void **s) {
   (void)s;
@@ -2700,6 +2774,7 @@ int main(void) {
       cmocka_unit_test(test_world_nomem_began_threads),
       cmocka_unit_test(test_world_nomem_began),
       cmocka_unit_test(test_world_threads),
+      cmocka_unit_test(test_world_threads_detach),
       cmocka_unit_test(test_world_threads_fork),
       cmocka_unit_test(test_world_concurrent_readers),
       cmocka_unit_test(test_world_rows_kept_falling),
