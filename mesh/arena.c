@@ -1,8 +1,9 @@
 /*
- * The lattice modes' block arena (issue 12, seventeenth session): where the caller gives
- * no allocator, the book's and the dyadic mode take their large blocks (64 KB and more:
- * the tree's nodes, the corner map, the triangle and vertex arrays) from 2 MB-aligned
- * chunks marked for transparent huge pages, instead of from malloc.
+ * The mesher's block arena (issue 12, seventeenth session): where the caller gives no
+ * allocator, all three modes take their large blocks (64 KB and more: the tree's nodes,
+ * the corner map, the general mode's triangulation and queues, the triangle and vertex
+ * arrays) from 2 MB-aligned chunks marked for transparent huge pages, instead of from
+ * malloc.
  *
  * Why: malloc hands a freed large block back to the kernel (munmap, or a trim of the heap
  * top), so every call touched its 5-8 MB of blocks as fresh 4 KB pages, one page fault

@@ -489,18 +489,19 @@ qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *opt
     qk_mesh_free(m);
     return qk__mesh_fail(err, st, 0, "out of memory while choosing the mode");
   }
+  /* Large blocks from huge-page chunks when the caller gives no allocator (mesh/arena.c):
+   * malloc's fresh 4 KB pages cost one fault each on every call (all three modes). */
+  if (!opt.allocator && qk__mesh_arena_available() && (m->arena = qk__mesh_arena_new()))
+    m->alloc = (qk_allocator_t){qk__mesh_arena_fn, m->arena};
   if (!classic) {
     if ((st = qk__mesh_general(poly, &opt, m, err))) {
       qk_mesh_free(m);
       return st;
     }
+    qk__mesh_arena_seal(m->arena);
     *out = m;
     return QK_OK;
   }
-  /* Large blocks from huge-page chunks when the caller gives no allocator (mesh/arena.c):
-   * malloc's fresh 4 KB pages cost one fault each on every call. */
-  if (!opt.allocator && qk__mesh_arena_available() && (m->arena = qk__mesh_arena_new()))
-    m->alloc = (qk_allocator_t){qk__mesh_arena_fn, m->arena};
   qk_poly_t *onlat = NULL;
 
   double t0 = now(), t1 = t0, t2 = t0, t3 = t0;

@@ -56,7 +56,7 @@ typedef struct qk__oseg {
   uint32_t seg;
 } qk__oseg_t;
 
-/* The lattice modes' arena for large blocks when the caller gives no allocator
+/* The mesher's arena for large blocks (all modes) when the caller gives no allocator
  * (mesh/arena.c): qk__mesh_arena_fn is a qk_alloc_fn over it. */
 typedef struct qk__mesh_arena qk__mesh_arena_t;
 int qk__mesh_arena_available(void);

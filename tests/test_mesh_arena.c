@@ -12,7 +12,9 @@
  *    the bench's octagons at U = 256 in the book's mode and scaled by 2^-10 in the dyadic
  *    mode, every vertex bit, triangle, component, statistic but the seconds, and the
  *    .node/.ele/.poly text the same; the arena ran where it is available; writing the
- *    mesh from the arena's mesh works (its sealed arena passes new blocks to libc).
+ *    mesh from the arena's mesh works (its sealed arena passes new blocks to libc);
+ *  - the same for the general mode, on the bench's kind of random polygon with holes (a
+ *    star-shaped outer ring of 512 corners, star-shaped holes inside, on the grid 2^-20).
  */
 #define _DEFAULT_SOURCE /* open_memstream */
 #include <math.h>
@@ -196,10 +198,53 @@ static void test_mesh_arena_same_mesh(void **state) {
   qk_poly_free(p);
 }
 
+/* A star-shaped ring of k corners at radius 0.8R to R around (cx, cy), on the grid 2^-20,
+ * appended to xy / seg; returns the new vertex count. */
+static size_t star(double cx, double cy, double R, size_t k, qkt_rng_t *r, double *xy,
+                   uint32_t *seg, size_t nv) {
+  for (size_t i = 0; i < k; i++) {
+    double th = 2 * 3.14159265358979323846 * ((double)i + 0.8 * qkt_rng_unit(r)) / (double)k;
+    double rho = R * (0.8 + 0.2 * qkt_rng_unit(r));
+    xy[2 * (nv + i)] = nearbyint(ldexp(cx + rho * cos(th), 20)) * 0x1p-20;
+    xy[2 * (nv + i) + 1] = nearbyint(ldexp(cy + rho * sin(th), 20)) * 0x1p-20;
+    seg[2 * (nv + i)] = (uint32_t)(nv + i), seg[2 * (nv + i) + 1] = (uint32_t)(nv + (i + 1) % k);
+  }
+  return nv + k;
+}
+
+static void test_mesh_arena_general(void **state) {
+  (void)state;
+  enum { N = 512, CELLS = 6, CAP = N + CELLS * CELLS * 13 };
+  double xy[2 * CAP], holes[2 * CELLS * CELLS];
+  uint32_t seg[2 * CAP];
+  qkt_rng_t r;
+  qkt_rng_seed(&r, 7);
+  size_t nv = star(0, 0, 1, N, &r, xy, seg, 0), nh = 0;
+  const double w = 1.4 / CELLS;
+  for (int i = 0; i < CELLS; i++)
+    for (int j = 0; j < CELLS; j++) {
+      double cx = -0.7 + (i + 0.5) * w, cy = -0.7 + (j + 0.5) * w;
+      if (cx * cx + cy * cy > 0.6 * 0.6 || qkt_rng_unit(&r) < 0.5) continue;
+      nv = star(cx, cy, 0.3 * w, 5 + qkt_rng_below(&r, 8), &r, xy, seg, nv);
+      holes[2 * nh] = nearbyint(ldexp(cx, 20)) * 0x1p-20;
+      holes[2 * nh + 1] = nearbyint(ldexp(cy, 20)) * 0x1p-20, nh++;
+    }
+  assert_true(nh > 0);
+  qk_poly_t *p = NULL;
+  assert_int_equal(qk_poly_from_arrays(xy, nv, seg, nv, holes, nh, NULL, &p, NULL), QK_OK);
+  qk_mesh_options_t o;
+  qk_mesh_options_init(&o);
+  o.mode = QK_MESH_GENERAL;
+  o.max_size = 2.0 / 128;
+  same_mesh(p, o);
+  qk_poly_free(p);
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_mesh_arena_blocks),
       cmocka_unit_test(test_mesh_arena_same_mesh),
+      cmocka_unit_test(test_mesh_arena_general),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -196,8 +196,8 @@ typedef struct qk_mesh_options {
   /** Domain side U, a power of two; 0 means the smallest power of two >= every
    *  coordinate (and >= 1). The book's mode only. */
   uint64_t size;
-  /** Allocator for the mesh and its tree; NULL means libc (on Linux the book's and the
-   *  dyadic mode then take blocks of 64 KB and more from 2 MB chunks of their own, mapped
+  /** Allocator for the mesh and its tree; NULL means libc (on Linux the mesher then
+   *  takes blocks of 64 KB and more from 2 MB chunks of their own, mapped
    *  with transparent huge pages and kept until qk_mesh_free(); docs/mesh.md, "Speed"). */
   const qk_allocator_t *allocator;
   /** Which mesher; QK_MESH_AUTO by default. */
