@@ -283,18 +283,27 @@ static qk_status_t on_row(void *ud, size_t row, unsigned long lineno, const char
   return QK_OK;
 }
 
+/* Reads path's points with on_row reporting into *s (cleared first). */
+static qk_status_t read_seen(const char *path, seen_t *s, qk_point_t **p, size_t *n,
+                             qk_error_t *err) {
+  int stop_at = s->stop_at;
+  memset(s, 0, sizeof *s);
+  s->stop_at = stop_at;
+  qk_csv_options_t o;
+  qk_csv_options_init(&o);
+  o.on_row = on_row;
+  o.ud = s;
+  return qk_points_read_csv(path, &o, NULL, p, n, err);
+}
+
 static void test_io_callback(void **state) {
   (void)state;
   char *path = write_tmp("\xEF\xBB\xBFx,y,name\r\n\n0,0,a\n1,1,\"b\"\n2,2,c\n", -1);
-  qk_csv_options_t o;
-  qk_csv_options_init(&o);
   seen_t s = {0};
-  o.on_row = on_row;
-  o.ud = &s;
   qk_point_t *p;
   size_t n;
   qk_error_t err;
-  assert_int_equal(qk_points_read_csv(path, &o, NULL, &p, &n, &err), QK_OK);
+  assert_int_equal(read_seen(path, &s, &p, &n, &err), QK_OK);
   assert_int_equal(n, 3);
   assert_int_equal(s.rows, 3);
   assert_int_equal(s.headers, 1);
@@ -302,9 +311,8 @@ static void test_io_callback(void **state) {
   assert_int_equal(s.last_line, 5);
   free(p);
   /* A callback's failure stops the reader with its status. */
-  memset(&s, 0, sizeof s);
   s.stop_at = 2;
-  assert_int_equal(qk_points_read_csv(path, &o, NULL, &p, &n, &err), QK_ERR_INVALID);
+  assert_int_equal(read_seen(path, &s, &p, &n, &err), QK_ERR_INVALID);
   assert_null(p);
   assert_int_equal(err.line, 4);
   assert_int_equal(err.item, 1);
@@ -343,15 +351,11 @@ static void test_io_multiline_quotes(void **state) {
                "field 3: unterminated quoted field (it runs to the end of the file)");
   /* The row callback gets each record's first line and its whole text. */
   char *path = write_tmp("x,y,n\n0,0,\"a\nb\"\n1,1,c\n", -1);
-  qk_csv_options_t o;
-  qk_csv_options_init(&o);
   seen_t s = {0};
-  o.on_row = on_row;
-  o.ud = &s;
   qk_point_t *p;
   size_t n;
   qk_error_t err;
-  assert_int_equal(qk_points_read_csv(path, &o, NULL, &p, &n, &err), QK_OK);
+  assert_int_equal(read_seen(path, &s, &p, &n, &err), QK_OK);
   assert_int_equal(n, 2);
   assert_int_equal(s.last_line, 4);
   free(p);
