@@ -360,9 +360,18 @@ static void to_radius(to_state_t *s) {
     return;
   }
   QKF_ASSERT(rc == QK_OK, "radius = %d", rc);
+  /* The query is exact (query.h); the oracle's squares in long double decide only away
+   * from the circle and from underflow: a point it cannot decide leaves this query to the
+   * exact tests of tests/test_query.c (radius_exact, against rationals). */
+  const long double s2 = (long double)r * r;
   for (size_t i = 0; i < s->n_ids; i++) {
-    double dx = s->x[i] - c.x, dy = s->y[i] - c.y;
-    if (s->alive[i] && dx * dx + dy * dy <= r * r) want[nw++] = (qk_id_t)i;
+    if (!s->alive[i]) continue;
+    long double dx = (long double)s->x[i] - c.x, dy = (long double)s->y[i] - c.y;
+    long double d2 = dx * dx + dy * dy;
+    if (!(d2 > 1e-200L && d2 < 1e200L && s2 > 1e-200L && s2 < 1e200L) ||
+        fabsl(d2 - s2) <= s2 * 1e-9L)
+      return;
+    if (d2 < s2) want[nw++] = (qk_id_t)i;
   }
   QKF_ASSERT(ng == nw, "radius %g around (%.17g, %.17g) found %zu, brute force %zu", r, c.x, c.y,
              ng, nw);
