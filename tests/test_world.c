@@ -51,24 +51,15 @@
 
 static uint64_t g_seed;
 
-/* Under ThreadSanitizer (scripts/tsan.sh, which is here for the threaded tests) the
- * single-threaded churn and allocation-failure loops run shorter. */
-#if defined(__SANITIZE_THREAD__)
-#define QKT_TSAN 1
-#elif defined(__has_feature)
-#if __has_feature(thread_sanitizer)
-#define QKT_TSAN 1
-#endif
-#endif
-#ifndef QKT_TSAN
-#define QKT_TSAN 0
-#endif
+/* Under ThreadSanitizer (QKT_TSAN: scripts/tsan.sh, which is here for the threaded tests)
+ * the single-threaded churn and allocation-failure loops run shorter, and the oracle's
+ * own code is not instrumented (QKT_SERIAL). */
 
 /* ---- oracle --------------------------------------------------------------------------- */
 
 typedef long double ld;
 
-static ld o_seg_d2(ld px, ld py, ld ax, ld ay, ld bx, ld by) {
+static QKT_SERIAL ld o_seg_d2(ld px, ld py, ld ax, ld ay, ld bx, ld by) {
   ld ux = bx - ax, uy = by - ay, uu = ux * ux + uy * uy;
   ld t = uu > 0 ? ((px - ax) * ux + (py - ay) * uy) / uu : 0;
   t = t < 0 ? 0 : t > 1 ? 1 : t;
@@ -80,7 +71,7 @@ static ld o_seg_d2(ld px, ld py, ld ax, ld ay, ld bx, ld by) {
  * times the squared length), so that a disc touching a segment (as one of radius 1/64 at
  * distance 1/64 from a segment on the 1/64 grid) is decided exactly for short dyadic
  * coordinates. */
-static int o_disc_seg(ld px, ld py, ld r, ld ax, ld ay, ld bx, ld by) {
+static QKT_SERIAL int o_disc_seg(ld px, ld py, ld r, ld ax, ld ay, ld bx, ld by) {
   ld ux = bx - ax, uy = by - ay, uu = ux * ux + uy * uy, wx = px - ax, wy = py - ay;
   ld dot = wx * ux + wy * uy;
   if (uu == 0 || dot <= 0) return wx * wx + wy * wy <= r * r;
@@ -88,15 +79,15 @@ static int o_disc_seg(ld px, ld py, ld r, ld ax, ld ay, ld bx, ld by) {
   ld cr = wx * uy - wy * ux;
   return cr * cr <= r * r * uu;
 }
-static int o_orient(ld ax, ld ay, ld bx, ld by, ld cx, ld cy) {
+static QKT_SERIAL int o_orient(ld ax, ld ay, ld bx, ld by, ld cx, ld cy) {
   ld d = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax);
   return (d > 0) - (d < 0);
 }
-static int o_onseg(ld px, ld py, const qk_shape_t *s) {
+static QKT_SERIAL int o_onseg(ld px, ld py, const qk_shape_t *s) {
   return o_orient(s->x, s->y, s->a, s->b, px, py) == 0 && px >= fminl(s->x, s->a) &&
          px <= fmaxl(s->x, s->a) && py >= fminl(s->y, s->b) && py <= fmaxl(s->y, s->b);
 }
-static int o_segseg(const qk_shape_t *g, const qk_shape_t *h) {
+static QKT_SERIAL int o_segseg(const qk_shape_t *g, const qk_shape_t *h) {
   int o1 = o_orient(g->x, g->y, g->a, g->b, h->x, h->y),
       o2 = o_orient(g->x, g->y, g->a, g->b, h->a, h->b);
   int o3 = o_orient(h->x, h->y, h->a, h->b, g->x, g->y),
@@ -106,7 +97,7 @@ static int o_segseg(const qk_shape_t *g, const qk_shape_t *h) {
          o_onseg(g->a, g->b, h);
 }
 /* Squared distance from a point to a shape (0 inside). */
-static ld o_d2(const qk_shape_t *s, ld px, ld py) {
+static QKT_SERIAL ld o_d2(const qk_shape_t *s, ld px, ld py) {
   switch (s->kind) {
   case QK_SHAPE_DISC: {
     ld dx = px - s->x, dy = py - s->y, d = sqrtl(dx * dx + dy * dy) - s->a;
@@ -123,14 +114,14 @@ static ld o_d2(const qk_shape_t *s, ld px, ld py) {
     return (px - s->x) * (px - s->x) + (py - s->y) * (py - s->y);
   }
 }
-static qk_shape_t o_norm(qk_shape_t s) {
+static QKT_SERIAL qk_shape_t o_norm(qk_shape_t s) {
   if (s.kind == QK_SHAPE_BOX) {
     double x0 = fmin(s.x, s.a), x1 = fmax(s.x, s.a), y0 = fmin(s.y, s.b), y1 = fmax(s.y, s.b);
     s.x = x0, s.a = x1, s.y = y0, s.b = y1;
   }
   return s;
 }
-static int o_overlap(qk_shape_t a, qk_shape_t b) {
+static QKT_SERIAL int o_overlap(qk_shape_t a, qk_shape_t b) {
   a = o_norm(a), b = o_norm(b);
   if (a.kind > b.kind) {
     qk_shape_t t = a;
@@ -229,7 +220,7 @@ static size_t m_remove_random(qk_world_t *w, mirror_t *m, qkt_rng_t *r) {
   return i;
 }
 
-static int wp_cmp(const void *x, const void *y) {
+static QKT_SERIAL int wp_cmp(const void *x, const void *y) {
   const qk_world_pair_t *p = x, *q = y;
   uint32_t pa = (uint32_t)p->a, qa = (uint32_t)q->a, pb = (uint32_t)p->b, qb = (uint32_t)q->b;
   if (pa != qa) return pa < qa ? -1 : 1;
@@ -243,7 +234,7 @@ typedef struct obox {
   double x0, x1, y0, y1;
   size_t i;
 } obox_t;
-static obox_t o_bounds(qk_shape_t s, size_t i) {
+static QKT_SERIAL obox_t o_bounds(qk_shape_t s, size_t i) {
   s = o_norm(s);
   double r = s.kind == QK_SHAPE_DISC ? s.a : 0;
   double x1 = s.kind == QK_SHAPE_BOX || s.kind == QK_SHAPE_SEGMENT ? s.a : s.x;
@@ -253,7 +244,7 @@ static obox_t o_bounds(qk_shape_t s, size_t i) {
   b.x0 -= e, b.x1 += e, b.y0 -= e, b.y1 += e;
   return b;
 }
-static int obox_cmp(const void *p, const void *q) {
+static QKT_SERIAL int obox_cmp(const void *p, const void *q) {
   const obox_t *a = p, *b = q;
   return (a->x0 > b->x0) - (a->x0 < b->x0);
 }
@@ -262,7 +253,7 @@ static int obox_cmp(const void *p, const void *q) {
  * whose bounding boxes are apart in x are skipped by a sweep over the boxes sorted by
  * their left edges (and those apart in y before the exact test), so that the scenes with
  * thousands of objects check quickly. */
-static size_t o_pairs(const mirror_t *m, qk_world_pair_t **out) {
+static QKT_SERIAL size_t o_pairs(const mirror_t *m, qk_world_pair_t **out) {
   size_t n = 0, cap = 64;
   qk_world_pair_t *v = malloc(cap * sizeof *v);
   obox_t *bx = malloc((m->n ? m->n : 1) * sizeof *bx);
@@ -288,7 +279,7 @@ static size_t o_pairs(const mirror_t *m, qk_world_pair_t **out) {
   return n;
 }
 
-static int in_list(const qk_world_pair_t *v, size_t n, qk_world_pair_t p) {
+static QKT_SERIAL int in_list(const qk_world_pair_t *v, size_t n, qk_world_pair_t p) {
   for (size_t i = 0; i < n; i++)
     if (v[i].a == p.a && v[i].b == p.b) return 1;
   return 0;
@@ -313,8 +304,9 @@ static int cb_stop(qk_handle_t a, qk_handle_t b, void *ud) {
   return 1;
 }
 
-static void check_pairs(qk_world_t *w, const qk_world_pair_t *want, size_t nw,
-                        const qk_world_pair_t *prev, size_t np, const char *what, int frame) {
+static QKT_SERIAL void check_pairs(qk_world_t *w, const qk_world_pair_t *want, size_t nw,
+                                   const qk_world_pair_t *prev, size_t np, const char *what,
+                                   int frame) {
   size_t n;
   qk_world_pair_t *got = malloc((nw + np + 1) * sizeof *got);
   assert_int_equal(qk_world_pairs_list(w, QK_PAIRS_ALL, got, nw + np + 1, &n), QK_OK);
@@ -371,7 +363,7 @@ static void update_and_check(qk_world_t *w, const mirror_t *m, qk_world_pair_t *
   *prev = want, *np = nw;
 }
 
-static void check_queries(qkt_rng_t *r, qk_world_t *w, const mirror_t *m, int scene) {
+static QKT_SERIAL void check_queries(qkt_rng_t *r, qk_world_t *w, const mirror_t *m, int scene) {
   qk_handle_t *got = malloc((m->n + 1) * sizeof *got);
   for (int qi = 0; qi < 5; qi++) {
     /* kinds in turn; the fifth a long segment across the whole scene (walked cell by
@@ -529,8 +521,8 @@ static void test_world_huge(void **s) {
   run_scene(SC_HUGE, 1, 300, 30, 1);
 }
 /* The library's list `which` equals v[0 .. n). */
-static void list_equals(qk_world_t *w, qk_pairs_which_t which, const qk_world_pair_t *v, size_t n,
-                        int frame) {
+static QKT_SERIAL void list_equals(qk_world_t *w, qk_pairs_which_t which, const qk_world_pair_t *v,
+                                   size_t n, int frame) {
   size_t got;
   assert_int_equal(qk_world_pairs_list(w, which, NULL, 0, &got), QK_OK);
   if (got != n) fail_msg("dense frame %d list %d: %zu pairs, oracle %zu", frame, which, got, n);
@@ -546,8 +538,8 @@ static void list_equals(qk_world_t *w, qk_pairs_which_t which, const qk_world_pa
 /* update_and_check for many pairs: the pairs against brute force, began and ended
  * against a merge of the sorted last and new lists (a pair whose slots stay but whose
  * handles changed ended and began). */
-static void dense_check(qk_world_t *w, const mirror_t *m, qk_world_pair_t **prev, size_t *np,
-                        int frame) {
+static QKT_SERIAL void dense_check(qk_world_t *w, const mirror_t *m, qk_world_pair_t **prev,
+                                   size_t *np, int frame) {
   assert_int_equal(qk_world_update(w), QK_OK);
   qk_world_pair_t *want;
   size_t nw = o_pairs(m, &want), i = 0, j = 0, nb = 0, ne = 0;
@@ -720,7 +712,7 @@ static void test_world_threads_frames(void **s) {
 }
 
 /* The pairs, began and ended of two worlds are the same lists. */
-static void same_lists(qk_world_t *a, qk_world_t *b, int frame) {
+static QKT_SERIAL void same_lists(qk_world_t *a, qk_world_t *b, int frame) {
   for (int which = 0; which < 3; which++) {
     size_t n0, n1;
     qk_world_pairs_list(a, (qk_pairs_which_t)which, NULL, 0, &n0);

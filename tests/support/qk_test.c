@@ -66,7 +66,7 @@ static int cmp_id(const void *a, const void *b) {
   return (x > y) - (x < y);
 }
 
-static qk_visit_t shape_visit(const qk_tree_t *t, qk_node_t v, void *ud) {
+static QKT_SERIAL qk_visit_t shape_visit(const qk_tree_t *t, qk_node_t v, void *ud) {
   qkt_shape_t *s = ud;
   qk_node_info_t info;
   assert_int_equal(qk_tree_node_info(t, v, &info), QK_OK);
@@ -87,13 +87,13 @@ static qk_visit_t shape_visit(const qk_tree_t *t, qk_node_t v, void *ud) {
   return QK_VISIT_CONTINUE;
 }
 
-qkt_shape_t qkt_tree_shape(const qk_tree_t *t) {
+QKT_SERIAL qkt_shape_t qkt_tree_shape(const qk_tree_t *t) {
   qkt_shape_t s = {1469598103934665603ull, 0};
   qk_tree_visit(t, qk_tree_root(t), shape_visit, &s);
   return s;
 }
 
-void qkt_assert_same_tree(const qk_tree_t *a, const qk_tree_t *b) {
+QKT_SERIAL void qkt_assert_same_tree(const qk_tree_t *a, const qk_tree_t *b) {
   qk_tree_stats_t sa, sb;
   qk_tree_stats(a, &sa);
   qk_tree_stats(b, &sb);

@@ -12,6 +12,28 @@
 #include "quadkit/quadkit.h"
 #include "mesh_check_real.h"
 
+/* ThreadSanitizer builds (scripts/tsan.sh, run for the threaded tests): QKT_TSAN is 1 there
+ * and 0 elsewhere, for tests that run their single-threaded parts shorter under it.
+ * QKT_SERIAL marks a test's own oracle code (brute force, sorting, comparing lists) that
+ * runs on one thread while no library call is under way: TSan does not instrument it,
+ * since there is no race for it to find there, and instrumented such code was most of
+ * test_world's time under TSan. The library's code stays instrumented. */
+#if defined(__SANITIZE_THREAD__)
+#define QKT_TSAN 1
+#elif defined(__has_feature)
+#if __has_feature(thread_sanitizer)
+#define QKT_TSAN 1
+#endif
+#endif
+#ifndef QKT_TSAN
+#define QKT_TSAN 0
+#endif
+#if QKT_TSAN
+#define QKT_SERIAL __attribute__((no_sanitize("thread")))
+#else
+#define QKT_SERIAL
+#endif
+
 /* splitmix64-seeded xoshiro-style generator; deterministic across platforms. */
 typedef struct qkt_rng {
   uint64_t s;
