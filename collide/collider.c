@@ -2088,8 +2088,8 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
   {
     const double ax = fabs(d.x), ay = fabs(d.y);
     const double mo = qk__max(qk__max(fabs(o.x), fabs(o.y)), c->mag);
-    if (c->quads &&
-        ((mo <= 0x1p100) & (qk__min(ax, ay) >= 0x1p-100) & (qk__max(ax, ay) <= 0x1p100))) {
+    if (c->quads && ((int)(mo <= 0x1p100) & (int)(qk__min(ax, ay) >= 0x1p-100) &
+                     (int)(qk__max(ax, ay) <= 0x1p100))) {
       ray_t ray;
       ray_init_common(&ray, c, o, d);
       ray_init_float(&ray, o, d);

@@ -166,6 +166,7 @@ static int ceil_log2(double e) {
   return m ? ex + 1 : ex;
 }
 
+#if !defined(__SSE2__)
 /* floor(v) for |v| < 2^30 (the cell indices below: no range check, no rounding mode),
  * exactly: truncated, then one less when that lies above v. (-0.0 gives +0.0, the same
  * cell index and square.) */
@@ -173,6 +174,7 @@ static inline double floor30(double v) {
   double t = (double)(int64_t)v;
   return t > v ? t - 1 : t;
 }
+#endif
 
 void qk__world_cell_of(const qk_box_t *f, int *level, int32_t *cx, int32_t *cy, int *forced) {
 #if defined(__SSE2__)
