@@ -565,7 +565,21 @@ static qk_status_t split_triangle(qk__gm_t *g, uint32_t t, size_t *rejected) {
   int k;
   qk__cdt_where_t where;
   qk__gm_tq_t self = {t, tv[0], tv[1], tv[2]};
-  if (!qk__cdt_walk_from(c, w, t, p[0], p[1], &tri, &k, &where)) {
+  /* A circumcentre strictly inside t itself (t acute), as the filters decide it: where the
+   * walk would end at once (from w, its first triangle t holds p strictly inside), without
+   * the walk; any doubt walks. */
+  int inside = 0;
+  if (!clamped) {
+    inside = 1;
+    for (int i = 0; i < 3 && inside; i++) {
+      const double *a = &c->xy[2 * tv[i]], *b = &c->xy[2 * tv[i == 2 ? 0 : i + 1]];
+      double l = (b[0] - a[0]) * (p[1] - a[1]), r = (b[1] - a[1]) * (p[0] - a[0]);
+      inside = l - r > (fabs(l) + fabs(r)) * 0x1p-50;
+    }
+  }
+  if (inside) {
+    tri = t, k = 0, where = QK__CDT_IN;
+  } else if (!qk__cdt_walk_from(c, w, t, p[0], p[1], &tri, &k, &where)) {
     uint32_t a, b, s;
     if (where == QK__CDT_EDGE) {
       a = c->v[3 * tri + (k + 1) % 3], b = c->v[3 * tri + (k + 2) % 3], s = c->seg[3 * tri + k];
