@@ -47,6 +47,17 @@ static inline int qk__cdt_incircle(const double *a, const double *b, const doubl
   return qk__incircle_exact(a, b, c, d);
 }
 
+/* qk__cdt_encroach with its filter inline (the same estimate and bound as its first lines
+ * in mesh/cdt_exact.c, so the same sign), for the refinement's cavity search, which tests
+ * each constrained edge it meets; the filter decides all but ties. */
+static inline int qk__cdt_encroach_in(const double *a, const double *b, const double *p) {
+  double l = (a[0] - p[0]) * (b[0] - p[0]), r = (a[1] - p[1]) * (b[1] - p[1]);
+  double dot = l + r, bound = (fabs(l) + fabs(r)) * 0x1p-50;
+  if (dot > bound) return 1;
+  if (-dot > bound) return -1;
+  return qk__cdt_encroach(a, b, p);
+}
+
 /* The coordinates of vertex v. */
 static inline const double *qk__cdt_pt(const qk__cdt_t *c, uint32_t v) {
   return c->xy + 2 * (size_t)v;

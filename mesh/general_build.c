@@ -18,20 +18,42 @@ static size_t fit_cap(size_t cap, size_t need, int exact) {
 }
 
 qk_status_t qk__gm_fit_to(qk__gm_t *g, size_t nv, size_t nt, int exact) {
+  /* Entries past the CDT's vertices and triangles hold their initial values (no vertex
+   * or triangle has used them yet), so when those are fewer than half the room (a
+   * reservation ahead), a new block takes the live entries only and initializes the rest:
+   * a realloc may copy the whole old block (the mesher's arena does). */
   if (nv > g->vcap) {
-    size_t c = fit_cap(g->vcap, nv, exact);
-    qk__gm_vert_t *p = qk__realloc(g->a, g->vi, g->vcap * sizeof *p, c * sizeof *p);
-    if (!p) return QK_ERR_NOMEM;
+    size_t c = fit_cap(g->vcap, nv, exact), live = g->cdt.nv < g->vcap ? g->cdt.nv : g->vcap;
+    qk__gm_vert_t *p;
+    if (g->vi && 2 * live < g->vcap) {
+      p = qk__realloc(g->a, NULL, 0, c * sizeof *p);
+      if (!p) return QK_ERR_NOMEM;
+      memcpy(p, g->vi, live * sizeof *p);
+      qk__free(g->a, g->vi, g->vcap * sizeof *p);
+    } else {
+      p = qk__realloc(g->a, g->vi, g->vcap * sizeof *p, c * sizeof *p);
+      if (!p) return QK_ERR_NOMEM;
+      live = g->vcap;
+    }
     g->vi = p;
-    for (size_t i = g->vcap; i < c; i++) g->vi[i] = (qk__gm_vert_t){QK__CDT_NONE, QK__CDT_NONE, 0};
+    for (size_t i = live; i < c; i++) g->vi[i] = (qk__gm_vert_t){QK__CDT_NONE, QK__CDT_NONE, 0};
     g->vcap = c;
   }
   if (nt > g->fcap) {
-    size_t c = fit_cap(g->fcap, nt, exact);
-    uint32_t *p = qk__realloc(g->a, g->face, g->fcap * sizeof *p, c * sizeof *p);
-    if (!p) return QK_ERR_NOMEM;
+    size_t c = fit_cap(g->fcap, nt, exact), live = g->cdt.nt < g->fcap ? g->cdt.nt : g->fcap;
+    uint32_t *p;
+    if (g->face && 2 * live < g->fcap) {
+      p = qk__realloc(g->a, NULL, 0, c * sizeof *p);
+      if (!p) return QK_ERR_NOMEM;
+      memcpy(p, g->face, live * sizeof *p);
+      qk__free(g->a, g->face, g->fcap * sizeof *p);
+    } else {
+      p = qk__realloc(g->a, g->face, g->fcap * sizeof *p, c * sizeof *p);
+      if (!p) return QK_ERR_NOMEM;
+      live = g->fcap;
+    }
     g->face = p;
-    memset(g->face + g->fcap, 0xff, (c - g->fcap) * sizeof *g->face); /* QK__CDT_NONE */
+    memset(g->face + live, 0xff, (c - live) * sizeof *g->face); /* QK__CDT_NONE */
     g->fcap = c;
   }
   return QK_OK;

@@ -489,7 +489,7 @@ static int cavity_encroach(qk__gm_t *g, uint32_t t0, uint32_t t1, const double p
     for (int k = 0; k < 3; k++) {
       if (S[3 * t + k] != QK__CDT_NONE) {
         uint32_t a = V[3 * t + (k + 1) % 3], b = V[3 * t + (k + 2) % 3];
-        if (qk__cdt_encroach(&XY[2 * (size_t)a], &XY[2 * (size_t)b], p) < 0) {
+        if (qk__cdt_encroach_in(&XY[2 * (size_t)a], &XY[2 * (size_t)b], p) < 0) {
           if (push_enc(g, a, b, S[3 * t + k])) return -1;
           found++;
         }
@@ -528,6 +528,13 @@ static int constrained_at(const qk__gm_t *g, uint32_t t, uint32_t x, uint32_t *a
   return 0;
 }
 
+/* The corner of triangle tv opposite its longest edge (the first of the longest). */
+static uint32_t far_corner(const qk__cdt_t *c, const uint32_t *tv) {
+  double l[3];
+  for (int i = 0; i < 3; i++) l[i] = d2(&c->xy[2 * tv[(i + 1) % 3]], &c->xy[2 * tv[(i + 2) % 3]]);
+  return tv[l[0] >= l[1] && l[0] >= l[2] ? 0 : l[1] >= l[2] ? 1 : 2];
+}
+
 /* Split a bad triangle: its circumcentre, or the subsegments hiding or encroached by it.
  * *rejected counts the triangles left because only protected pieces stood in the way. */
 static qk_status_t split_triangle(qk__gm_t *g, uint32_t t, size_t *rejected) {
@@ -537,35 +544,47 @@ static qk_status_t split_triangle(qk__gm_t *g, uint32_t t, size_t *rejected) {
   double bx = B[0] - A[0], by = B[1] - A[1], cx = C[0] - A[0], cy = C[1] - A[1];
   double D = 2 * (bx * cy - by * cx), b2 = bx * bx + by * by, c2 = cx * cx + cy * cy;
   double p[2] = {A[0] + (cy * b2 - by * c2) / D, A[1] + (bx * c2 - cx * b2) / D};
-  /* Walk from the vertex opposite the longest edge (the circumcentre lies beyond it when
-   * it lies outside the triangle). */
-  double l[3];
-  for (int i = 0; i < 3; i++) l[i] = d2(&c->xy[2 * tv[(i + 1) % 3]], &c->xy[2 * tv[(i + 2) % 3]]);
-  uint32_t w = tv[l[0] >= l[1] && l[0] >= l[2] ? 0 : l[1] >= l[2] ? 1 : 2];
-  const double *W = &c->xy[2 * w];
   /* A circumcentre beyond the input's bounding box (grown by an eighth) lies in the
    * unbounded face: walk towards the box's edge instead, which is as hidden. */
   double ew = g->bx1 - g->bx0, eh = g->by1 - g->by0, m = (ew > eh ? ew : eh) / 8; /* finite */
   double lo[2] = {g->bx0 - m, g->by0 - m}, hi[2] = {g->bx1 + m, g->by1 + m};
-  int clamped = 0;
   if (!isfinite(p[0]) || !isfinite(p[1])) {
+    const double *W = &c->xy[2 * far_corner(c, tv)];
     return qk__mesh_fail(g->err, QK_ERR_LIMIT, 0,
                          "no circumcentre for the triangle at (%.17g, %.17g): precision "
                          "exhausted",
                          W[0], W[1]);
   }
-  double lam = 1;
-  for (int j = 0; j < 2; j++) {
-    double dj = p[j] - W[j];
-    if (p[j] > hi[j]) lam = fmin(lam, (hi[j] - W[j]) / dj), clamped = 1;
-    if (p[j] < lo[j]) lam = fmin(lam, (lo[j] - W[j]) / dj), clamped = 1;
-  }
-  if (clamped) p[0] = W[0] + lam * (p[0] - W[0]), p[1] = W[1] + lam * (p[1] - W[1]);
+  const int clamped = p[0] > hi[0] || p[0] < lo[0] || p[1] > hi[1] || p[1] < lo[1];
   uint32_t tri;
   int k;
   qk__cdt_where_t where;
   qk__gm_tq_t self = {t, tv[0], tv[1], tv[2]};
-  if (!qk__cdt_walk_from(c, w, t, p[0], p[1], &tri, &k, &where)) {
+  /* A circumcentre strictly inside t itself (t acute), as the filters decide it: where the
+   * walk would end at once (from w below, its first triangle t holds p strictly inside),
+   * without the walk or w; any doubt walks. */
+  int inside = !clamped;
+  for (int i = 0; i < 3 && inside; i++) {
+    const double *a = &c->xy[2 * tv[i]], *b = &c->xy[2 * tv[i == 2 ? 0 : i + 1]];
+    double l = (b[0] - a[0]) * (p[1] - a[1]), r = (b[1] - a[1]) * (p[0] - a[0]);
+    inside = l - r > (fabs(l) + fabs(r)) * 0x1p-50;
+  }
+  /* Else walk from the vertex opposite the longest edge (the circumcentre lies beyond it
+   * when it lies outside the triangle). */
+  const uint32_t w = inside ? tv[0] : far_corner(c, tv);
+  const double *W = &c->xy[2 * w];
+  if (clamped) {
+    double lam = 1;
+    for (int j = 0; j < 2; j++) {
+      double dj = p[j] - W[j];
+      if (p[j] > hi[j]) lam = fmin(lam, (hi[j] - W[j]) / dj);
+      if (p[j] < lo[j]) lam = fmin(lam, (lo[j] - W[j]) / dj);
+    }
+    p[0] = W[0] + lam * (p[0] - W[0]), p[1] = W[1] + lam * (p[1] - W[1]);
+  }
+  if (inside) {
+    tri = t, k = 0, where = QK__CDT_IN;
+  } else if (!qk__cdt_walk_from(c, w, t, p[0], p[1], &tri, &k, &where)) {
     uint32_t a, b, s;
     if (where == QK__CDT_EDGE) {
       a = c->v[3 * tri + (k + 1) % 3], b = c->v[3 * tri + (k + 2) % 3], s = c->seg[3 * tri + k];

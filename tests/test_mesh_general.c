@@ -8,13 +8,20 @@
  *    segments, segments through box corners, along box sides and one ulp off them;
  *  - qk__seg_budget and qk__seg_point: every point a + (k/2^m)(b - a) with m within the
  *    budget is exactly that rational point (dyadic endpoints of many magnitudes, axis-
- *    parallel segments, full-precision doubles), and requests beyond it are refused.
+ *    parallel segments, full-precision doubles), and requests beyond it are refused;
+ *  - a CDT reserved far ahead of need (most of its room unused) and then grown, as the
+ *    mesher's seeding does, keeps every live entry (the growth copies only those: a new
+ *    block rather than a realloc) and stays a valid Delaunay triangulation as points follow,
+ *    with libc's allocator and with the mesher's arena (no GMP needed).
  */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
 
+#include "mesh/cdt_internal.h"
 #include "mesh/general_internal.h"
+#include "mesh/mesh_internal.h"
 #include "qk_test.h"
 
 #ifdef QK_HAVE_GMP
@@ -243,6 +250,83 @@ static void test_seg_points(void **state) {
 }
 #endif
 
+/* The triangulation's links agree (every neighbour links back across the same two vertices)
+ * and it is Delaunay: no vertex across an edge strictly inside a triangle's circumcircle. */
+static void check_cdt(const qk__cdt_t *c) {
+  for (size_t t = 0; t < c->nt; t++)
+    for (int k = 0; k < 3; k++) {
+      uint32_t n = c->nbr[3 * t + k], a = c->v[3 * t + (k + 1) % 3], b = c->v[3 * t + (k + 2) % 3];
+      if (n == QK__CDT_NONE) continue;
+      int j = c->nbr[3 * n] == t ? 0 : c->nbr[3 * n + 1] == t ? 1 : 2;
+      assert_int_equal(c->nbr[3 * n + j], t);
+      assert_int_equal(c->v[3 * n + (j + 1) % 3], b);
+      assert_int_equal(c->v[3 * n + (j + 2) % 3], a);
+      const double *q = &c->xy[2 * c->v[3 * n + j]];
+      assert_true(qk__cdt_incircle(&c->xy[2 * c->v[3 * t]], &c->xy[2 * c->v[3 * t + 1]],
+                                   &c->xy[2 * c->v[3 * t + 2]], q) <= 0);
+    }
+  for (size_t v = 4; v < c->nv; v++) {
+    uint32_t t = c->vtri[v];
+    assert_true(c->v[3 * t] == v || c->v[3 * t + 1] == v || c->v[3 * t + 2] == v);
+  }
+}
+
+static void reserve_grow_run(const qk_allocator_t *alloc) {
+  qk__cdt_t c;
+  assert_int_equal(qk__cdt_init(&c, alloc, 0, 0, 1024, 4000), QK_OK);
+  uint64_t s = 12345;
+  double xy[2 * 600];
+  for (int i = 0; i < 2 * 600; i++) {
+    s ^= s << 13, s ^= s >> 7, s ^= s << 17;
+    xy[i] = 1 + (double)(s >> 11) * 0x1p-53 * 1022;
+  }
+  uint32_t v;
+  int existed;
+  for (int i = 0; i < 50; i++)
+    assert_int_equal(qk__cdt_insert(&c, xy[2 * i], xy[2 * i + 1], QK__CDT_NONE, &v, &existed),
+                     QK_OK);
+  /* Less than half the room in use on both sides: the growth below copies the live part. */
+  assert_true(2 * c.nt < c.cap_t && 2 * c.nv < c.cap_v);
+  size_t nt = c.nt, nv = c.nv;
+  uint32_t *keep = malloc(3 * 3 * nt * sizeof *keep + nv * sizeof *keep);
+  double *kxy = malloc(2 * nv * sizeof *kxy);
+  assert_non_null(keep);
+  assert_non_null(kxy);
+  memcpy(keep, c.v, 3 * nt * sizeof *keep);
+  memcpy(keep + 3 * nt, c.nbr, 3 * nt * sizeof *keep);
+  memcpy(keep + 6 * nt, c.seg, 3 * nt * sizeof *keep);
+  memcpy(keep + 9 * nt, c.vtri, nv * sizeof *keep);
+  memcpy(kxy, c.xy, 2 * nv * sizeof *kxy);
+  size_t cap_t = c.cap_t, cap_v = c.cap_v;
+  assert_int_equal(qk__cdt_reserve(&c, 3 * cap_v, 3 * cap_t), QK_OK);
+  assert_true(c.cap_t >= 3 * cap_t && c.cap_v >= 3 * cap_v);
+  assert_memory_equal(c.v, keep, 3 * nt * sizeof *keep);
+  assert_memory_equal(c.nbr, keep + 3 * nt, 3 * nt * sizeof *keep);
+  assert_memory_equal(c.seg, keep + 6 * nt, 3 * nt * sizeof *keep);
+  assert_memory_equal(c.vtri, keep + 9 * nt, nv * sizeof *keep);
+  assert_memory_equal(c.xy, kxy, 2 * nv * sizeof *kxy);
+  check_cdt(&c);
+  for (int i = 50; i < 600; i++)
+    assert_int_equal(qk__cdt_insert(&c, xy[2 * i], xy[2 * i + 1], QK__CDT_NONE, &v, &existed),
+                     QK_OK);
+  assert_int_equal(c.nv, 604);
+  assert_int_equal(c.nt, 2 * 604 - 6); /* a triangulated square: 2n - 2 - 4 hull vertices */
+  check_cdt(&c);
+  free(keep);
+  free(kxy);
+  qk__cdt_free(&c);
+}
+
+static void test_cdt_reserve_grow(void **state) {
+  (void)state;
+  reserve_grow_run(NULL);
+  qk__mesh_arena_t *r = qk__mesh_arena_new();
+  assert_non_null(r);
+  qk_allocator_t a = {qk__mesh_arena_fn, r};
+  reserve_grow_run(&a);
+  qk__mesh_arena_free(r);
+}
+
 static void skip_without_gmp(void **state) {
   (void)state;
   skip();
@@ -253,11 +337,12 @@ int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_orient_random_scales),   cmocka_unit_test(test_orient_near_collinear),
       cmocka_unit_test(test_orient_exact_collinear), cmocka_unit_test(test_seg_points),
-      cmocka_unit_test(test_seg_meets_box),
+      cmocka_unit_test(test_seg_meets_box),          cmocka_unit_test(test_cdt_reserve_grow),
   };
   (void)skip_without_gmp;
 #else
-  const struct CMUnitTest tests[] = {cmocka_unit_test(skip_without_gmp)};
+  const struct CMUnitTest tests[] = {cmocka_unit_test(skip_without_gmp),
+                                     cmocka_unit_test(test_cdt_reserve_grow)};
 #endif
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
