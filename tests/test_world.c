@@ -227,6 +227,35 @@ static QKT_SERIAL int wp_cmp(const void *x, const void *y) {
   return (pb > qb) - (pb < qb);
 }
 
+/* Sorts v as wp_cmp orders it: by the slot of a, then of b. Many pairs go through an LSD
+ * radix sort on the two 32-bit slots (four passes of 16 bits): qsort's comparisons of the
+ * dense scenes' millions of pairs were half of this test's time. */
+static QKT_SERIAL uint32_t pair_digit(const qk_world_pair_t *p, int pass) {
+  uint64_t key = (uint64_t)(uint32_t)p->a << 32 | (uint32_t)p->b;
+  return (uint32_t)(key >> (16 * pass)) & 0xFFFFu;
+}
+static QKT_SERIAL void sort_pairs(qk_world_pair_t *v, size_t n) {
+  if (n < 4096) {
+    if (n > 1) qsort(v, n, sizeof *v, wp_cmp);
+    return;
+  }
+  qk_world_pair_t *tmp = malloc(n * sizeof *tmp), *src = v, *dst = tmp;
+  size_t *at = malloc(65536 * sizeof *at);
+  assert_true(tmp && at);
+  for (int pass = 0; pass < 4; pass++) { /* an even number: the last lands in v */
+    memset(at, 0, 65536 * sizeof *at);
+    for (size_t i = 0; i < n; i++) at[pair_digit(&src[i], pass)]++;
+    for (size_t d = 0, sum = 0; d < 65536; d++) {
+      size_t c = at[d];
+      at[d] = sum, sum += c;
+    }
+    for (size_t i = 0; i < n; i++) dst[at[pair_digit(&src[i], pass)]++] = src[i];
+    qk_world_pair_t *t = src;
+    src = dst, dst = t;
+  }
+  free(tmp), free(at);
+}
+
 /* All pairs by brute force, ordered as the library orders them. */
 /* A box that holds shape s, widened by far more than the rounding of o_overlap's long
  * double tests, so that every pair o_overlap accepts has overlapping boxes. */
@@ -274,7 +303,7 @@ static QKT_SERIAL size_t o_pairs(const mirror_t *m, qk_world_pair_t **out) {
       }
     }
   free(bx);
-  if (n > 1) qsort(v, n, sizeof *v, wp_cmp);
+  sort_pairs(v, n);
   *out = v;
   return n;
 }
