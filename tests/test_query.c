@@ -16,6 +16,10 @@
  *  - squared distances a few units in the last place apart and exact ties among them
  *    (the sorted search's first sort keys drop the low bits), k from 2 to 33; kNN with
  *    subnormals flushed (the processor mode of -ffast-math programs) on stored points;
+ *  - kNN exact against rationals (GMP) at scales 2^-1074 to 2^1017: squares that
+ *    underflow, near-ties whose double squares are equal or misordered, caps one ulp
+ *    either side of a point's distance, k from 1 to past the heap threshold, single and
+ *    batch (the oracle qko_knn is exact too);
  *  - kNN from the corners, edge midpoints and centres of leaves' squares (and one unit in
  *    the last place off them) in a tree whose squares are rounded, k from 2 to 33;
  *  - batch kNN (Z-order, each query starting from the previous path) on every point set
