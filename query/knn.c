@@ -997,8 +997,10 @@ static size_t knn_limited(const qk_tree_t *t, double qx, double qy, size_t k, do
     }
 #endif
     for (; i < b.n; i++) out[i] = (qk_neighbor_t){pid[sorted[i + 1].id], sqrt(sorted[i + 1].dist)};
-    /* Squares that may have overflowed: hypot of the differences (report_dist). */
-    if (b.n > 0 && sorted[b.n].dist >= QK__FILTER_MAX)
+    /* Squares from 2^1000 on: hypot of the differences (report_dist). The last entry's
+     * square is within the filter's margin of the largest (the exact order), so at least
+     * half of 2^1000 when any is that large. */
+    if (b.n > 0 && sorted[b.n].dist >= 0.5 * QK__FILTER_MAX)
       for (i = 0; i < b.n; i++)
         out[i].dist = report_dist(t, qx, qy, sorted[i + 1].dist, sorted[i + 1].id);
   } else {
