@@ -4,7 +4,9 @@
  * a common power of two the five inputs are integers of at most 2100 bits, and the test
  * is one comparison of sums of squares of integers (at most 4200 bits). Schoolbook
  * arithmetic on 32-bit limbs: slow, and only reached when a point lies within a relative
- * 2^-45 of the boundary or the values are beyond 2^500.
+ * 2^-45 of the boundary or the values are beyond 2^500. The kNN searches compare two
+ * points' distances to a query the same way (qk__dist_cmp_exact) when their squares in
+ * doubles lie within the filter's margin of each other.
  */
 #include <math.h>
 #include <stdint.h>
@@ -114,4 +116,30 @@ int qk__within_exact(double ax, double ay, double bx, double by, double r1, doub
   big_add(&a, &s, &t);
   big_sqr(&b, &rs);
   return big_cmp(&a, &b) <= 0;
+}
+
+/* The squared distance from (qx, qy) to (px, py) into *out, all four inputs integers in
+ * units of 2^e0. */
+static void big_d2(big_t *out, double qx, double qy, double px, double py, int e0) {
+  big_t a, b, dx, dy, s;
+  big_set(&a, px, e0), big_set(&b, qx, e0);
+  big_absdiff(&dx, &a, px < 0, &b, qx < 0);
+  big_set(&a, py, e0), big_set(&b, qy, e0);
+  big_absdiff(&dy, &a, py < 0, &b, qy < 0);
+  big_sqr(&s, &dx);
+  big_sqr(&a, &dy);
+  big_add(out, &s, &a);
+}
+
+int qk__dist_cmp_exact(double qx, double qy, double ax, double ay, double bx, double by) {
+  const double v[6] = {qx, qy, ax, ay, bx, by};
+  int e0 = 1 << 20;
+  for (int k = 0; k < 6; k++) {
+    int e = low_exp(v[k]);
+    if (e < e0) e0 = e;
+  }
+  big_t da, db;
+  big_d2(&da, qx, qy, ax, ay, e0);
+  big_d2(&db, qx, qy, bx, by, e0);
+  return big_cmp(&da, &db);
 }

@@ -16,6 +16,12 @@
 int qk__within_exact(double ax, double ay, double bx, double by, double r1, double r2);
 
 /*
+ * The sign (-1, 0 or 1) of |a - q|^2 - |b - q|^2, computed exactly for any finite doubles:
+ * the kNN searches' order when the filter below cannot tell two squares apart.
+ */
+int qk__dist_cmp_exact(double qx, double qy, double ax, double ay, double bx, double by);
+
+/*
  * The filter: with d2 = dx*dx + dy*dy and r2 = rs*rs computed in doubles (dx, dy, rs each
  * one rounded operation on the inputs), d2 < qk__filter_lo(r2) means inside and
  * d2 > qk__filter_hi(r2) outside, exactly; in between, or when r2 >= 2^1000 (where squares
@@ -24,6 +30,9 @@ int qk__within_exact(double ax, double ay, double bx, double by, double r1, doub
  * within a relative 6 * 2^-53 plus an absolute 2^-1073 of the exact values; the margins
  * 2^-45 relative and 2^-1060 absolute exceed that. A pruning test that compares a lower
  * bound of d2 with qk__filter_hi(r2) keeps every point the exact test accepts.
+ * Two squared distances da and db computed the same way compare the same way: da <
+ * qk__filter_lo(db) means the first point is nearer, da > qk__filter_hi(db) farther,
+ * exactly (both carry the errors above, which the margins cover twice over).
  */
 #define QK__FILTER_REL 0x1p-45
 #define QK__FILTER_ABS 0x1p-1060

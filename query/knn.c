@@ -18,6 +18,8 @@
 
 #include <string.h>
 
+#include "query/dist_exact.h"
+
 #if defined(__SSE2__)
 #include <emmintrin.h>
 #endif
@@ -31,27 +33,177 @@
 /* Largest k kept as a sorted array rather than a heap. */
 #define QK__KNN_SORTED 32
 
-/* The best-so-far set of one search. */
+/*
+ * The best-so-far set of one search. Its order is exact (docs/query.md, "Exactness"):
+ * candidates are ranked by their squared distances in doubles wherever those are farther
+ * apart than the filter's margin (query/dist_exact.h), and by qk__dist_cmp_exact()
+ * otherwise, then by id. Pruning compares lower bounds with `lim`, the filter's upper
+ * bound of the k-th's square (qk__filter_hi), so that no point the exact order puts
+ * before the k-th is pruned.
+ */
 typedef struct best {
-  qk_neighbor_t *out; /* sorted array or heap, on squared distances */
+  qk_neighbor_t *out; /* sorted array or heap of (slot, squared distance) */
   size_t k, n;
-  double thr;    /* prune strictly above this: the cap until full, then the k-th best */
+  double thr;    /* full: the k-th's squared distance */
+  double lim;    /* prune strictly above this: lim0 until full, then min(hi(thr), lim0) */
+  double lim0;   /* the limit's upper bound: hi(max_dist^2), or a guessed limit as is */
+  double cap_lo; /* a candidate below this is within max_dist; at or above, the exact test */
+  double cap;    /* max_dist, for that test */
   uint32_t slot; /* k = 1: the best point's slot (its squared distance is thr), or QK_NONE */
   /* The sorted search's first k candidates, in the order they came (fill_sort). */
   qk_neighbor_t *fill; /* (slot, squared distance) */
   double *keys;        /* their sort keys, 16-byte aligned, room for a power of two >= k */
 } best_t;
 
+/*
+ * The filter's bounds (query/dist_exact.h) without its overflow clause, which kNN does
+ * not need: its queries keep the query and the tree within 2^510 (qk__knn_check), so a
+ * difference is below 2^511 and a square below 2^1023 (2^1023 (1 + 2^-45) + 2^-1060 too):
+ * nothing overflows. Two squares computed the same way: da < kx_lo(db) means a is
+ * nearer, da > kx_hi(db) farther, exactly (dist_exact.h's argument); a lower bound above
+ * kx_hi(db) means every point it bounds is farther than b. kx_hi(inf) and kx_lo(inf) are
+ * inf (a cap whose square overflows holds every point).
+ */
+static inline double kx_lo(double v) { return v * (1 - QK__FILTER_REL) - QK__FILTER_ABS; }
+static inline double kx_hi(double v) { return v * (1 + QK__FILTER_REL) + QK__FILTER_ABS; }
+
+/* A search's limits: the caller's max_dist (guess2 < 0), or a guessed squared limit. */
+static inline void best_limits(best_t *b, double max_dist, double guess2) {
+  if (guess2 >= 0) {
+    b->lim0 = guess2;
+    b->cap_lo = INFINITY;
+  } else {
+    const double cap2 = max_dist * max_dist;
+    b->lim0 = kx_hi(cap2);
+    b->cap_lo = kx_lo(cap2);
+  }
+  b->cap = max_dist;
+  b->lim = b->thr = b->lim0;
+}
+
+/* After the k-th changed (its square now thr): the pruning limit. */
+static inline void best_tighten(best_t *b) { b->lim = qk__min_d(kx_hi(b->thr), b->lim0); }
+
+/*
+ * The squared distance from q to p in doubles when every operation of it is exact (then
+ * *d2 is the exact value; returns 1), else 0: each difference's rounding error is 0
+ * (Knuth's two-sum), each difference has at most 26 significant bits and lies above
+ * 2^-480 or is 0 (so its square is exact and normal), and the sum's error is 0. Points on
+ * grids of dyadic steps (integers, halves) pass, so their ties cost no big integers.
+ */
+static inline int exact_sum(double a, double b, double s) {
+  const double bb = s - a;
+  return (a - (s - bb)) + (b - bb) == 0;
+}
+static inline int short_enough(double v) {
+  uint64_t u;
+  memcpy(&u, &v, sizeof u);
+  return v == 0 || (fabs(v) >= 0x1p-480 && (u & ((UINT64_C(1) << 27) - 1)) == 0);
+}
+static int d2_exact(double qx, double qy, double px, double py, double *d2) {
+  const double dx = px - qx, dy = py - qy;
+  if (!exact_sum(px, -qx, dx) || !exact_sum(py, -qy, dy)) return 0;
+  if (!short_enough(dx) || !short_enough(dy)) return 0;
+  const double a = dx * dx, b = dy * dy;
+  *d2 = a + b;
+  return exact_sum(a, b, *d2);
+}
+
+/* Slots a and b in the exact (distance, id) order, their squares too close to tell. */
+#if defined(__GNUC__)
+__attribute__((noinline, cold))
+#endif
+static int
+before_exact(const qk_tree_t *t, double qx, double qy, uint32_t a, uint32_t b) {
+  const double *xs = qk__tree_xs(t), *ys = qk__tree_ys(t);
+  double da, db;
+  int c;
+  if (d2_exact(qx, qy, xs[a], ys[a], &da) && d2_exact(qx, qy, xs[b], ys[b], &db))
+    c = (da > db) - (da < db);
+  else
+    c = qk__dist_cmp_exact(qx, qy, xs[a], ys[a], xs[b], ys[b]);
+  if (c) return c < 0;
+  return qk__tree_ids(t)[a] < qk__tree_ids(t)[b];
+}
+
+/* Is slot a (squared distance da) before slot b (db) in the exact (distance, id) order? */
+static inline int before(const qk_tree_t *t, double qx, double qy, double da, uint32_t a, double db,
+                         uint32_t b) {
+  if (da < kx_lo(db)) return 1;
+  if (da > kx_hi(db)) return 0;
+  return before_exact(t, qx, qy, a, b);
+}
+
+/* May slot s (squared distance v) enter while the set is not full: within max_dist? */
+static inline int in_cap(const qk_tree_t *t, double qx, double qy, const best_t *b, double v,
+                         uint32_t s) {
+  return v < b->cap_lo || qk__within_exact(qk__tree_xs(t)[s], qk__tree_ys(t)[s], qx, qy, b->cap, 0);
+}
+
+/* The reported distance of a squared distance d2 (that of slot s): sqrt, or beyond
+ * 2^1000, where the square may have overflowed, hypot of the differences (as the radius
+ * query reports it). */
+static inline double report_dist(const qk_tree_t *t, double qx, double qy, double d2, uint32_t s) {
+  if (d2 < QK__FILTER_MAX) return sqrt(d2);
+  return hypot(qk__tree_xs(t)[s] - qx, qk__tree_ys(t)[s] - qy);
+}
+
+/* The max-heap of (slot, squared distance) of the search for k > QK__KNN_SORTED, the
+ * exact last at h[0]. */
+static void xheap_down(const qk_tree_t *t, double qx, double qy, qk_neighbor_t *h, size_t n,
+                       size_t i) {
+  const qk_neighbor_t v = h[i];
+  for (;;) {
+    size_t l = 2 * i + 1, m = i;
+    qk_neighbor_t w = v;
+    if (l < n && before(t, qx, qy, w.dist, w.id, h[l].dist, h[l].id)) m = l, w = h[l];
+    if (l + 1 < n && before(t, qx, qy, w.dist, w.id, h[l + 1].dist, h[l + 1].id)) m = l + 1;
+    if (m == i) break;
+    h[i] = h[m];
+    i = m;
+  }
+  h[i] = v;
+}
+
 /* Offer a leaf's points to a heap of at most k. */
 static inline void scan_heap(const qk_tree_t *t, qk_node_t leaf, double qx, double qy, best_t *b) {
   const uint32_t start = qk__node_start(t, leaf), count = qk__node_count(t, leaf);
   const double *px = qk__tree_xs(t) + start, *py = qk__tree_ys(t) + start;
-  const qk_id_t *pid = qk__tree_ids(t) + start;
+  qk_neighbor_t *h = b->out;
   for (uint32_t i = 0; i < count; i++) {
-    double dx = px[i] - qx, dy = py[i] - qy;
-    double d2 = dx * dx + dy * dy;
-    if (d2 <= b->thr) qk__heap_offer(b->out, &b->n, b->k, pid[i], d2, &b->thr);
+    const double dx = px[i] - qx, dy = py[i] - qy;
+    const double d2 = dx * dx + dy * dy;
+    if (!(d2 <= b->lim)) continue;
+    const uint32_t s = start + i;
+    if (b->n < b->k) {
+      if (!in_cap(t, qx, qy, b, d2, s)) continue;
+      size_t j = b->n++;
+      for (; j > 0 && before(t, qx, qy, h[(j - 1) / 2].dist, h[(j - 1) / 2].id, d2, s);
+           j = (j - 1) / 2)
+        h[j] = h[(j - 1) / 2];
+      h[j] = (qk_neighbor_t){s, d2};
+      if (b->n < b->k) continue;
+    } else {
+      if (!before(t, qx, qy, d2, s, h[0].dist, h[0].id)) continue;
+      h[0] = (qk_neighbor_t){s, d2};
+      xheap_down(t, qx, qy, h, b->n, 0);
+    }
+    b->thr = h[0].dist;
+    best_tighten(b);
   }
+}
+
+/* Sort the heap ascending in place, then slots to ids and squares to distances. */
+static void xheap_finish(const qk_tree_t *t, double qx, double qy, qk_neighbor_t *h, size_t n) {
+  for (size_t m = n; m > 1;) {
+    const qk_neighbor_t top = h[0];
+    h[0] = h[--m];
+    xheap_down(t, qx, qy, h, m, 0);
+    h[m] = top;
+  }
+  const qk_id_t *pid = qk__tree_ids(t);
+  for (size_t i = 0; i < n; i++)
+    h[i] = (qk_neighbor_t){pid[h[i].id], report_dist(t, qx, qy, h[i].dist, h[i].id)};
 }
 
 /*
@@ -240,27 +392,29 @@ static inline uint32_t ctz64(uint64_t v) {
 #endif
 }
 
-/* Bit i set when d2[i] == v, for the m <= 64 values of d2[] (usually one bit). */
-static inline uint64_t equal_mask(const double *d2, uint32_t m, double v) {
+/* Bit i set when d2[i] <= v, for the m <= 64 values of d2[] (usually one bit: v is the
+ * filter's upper bound of their minimum). */
+static inline uint64_t le_mask(const double *d2, uint32_t m, double v) {
   uint64_t mask = 0;
 #if defined(__SSE2__)
   if (m >= 2) {
     const __m128d vv = _mm_set1_pd(v);
-    mask = (uint64_t)_mm_movemask_pd(_mm_cmpeq_pd(_mm_loadu_pd(d2 + m - 2), vv)) << (m - 2);
+    mask = (uint64_t)_mm_movemask_pd(_mm_cmple_pd(_mm_loadu_pd(d2 + m - 2), vv)) << (m - 2);
     for (uint32_t i = 0; i + 2 < m; i += 2)
-      mask |= (uint64_t)_mm_movemask_pd(_mm_cmpeq_pd(_mm_loadu_pd(d2 + i), vv)) << i;
+      mask |= (uint64_t)_mm_movemask_pd(_mm_cmple_pd(_mm_loadu_pd(d2 + i), vv)) << i;
     return mask;
   }
 #endif
-  for (uint32_t i = 0; i < m; i++) mask |= (uint64_t)(d2[i] == v) << i;
+  for (uint32_t i = 0; i < m; i++) mask |= (uint64_t)(d2[i] <= v) << i;
   return mask;
 }
 
 /*
  * The k = 1 leaf scan, in two steps per chunk: the smallest squared distance (leaf_d2),
  * and only when it can beat or tie the best so far, which point has it. The best is kept
- * as a slot, and ids are read only to break a tie (several points at the same distance),
- * which is what offering every point in turn with the (distance, id) order gives. The
+ * as a slot, and ids are read only to break a tie (several points whose squares lie
+ * within the filter's margin of the minimum, ranked exactly: before()), which is what
+ * offering every point in turn with the exact (distance, id) order gives. The
  * point's id is read once, at the end (knn1): in a tree larger than the cache an id is a
  * miss of its own, and reading it here would put that miss between the scan and every
  * decision after it.
@@ -268,23 +422,25 @@ static inline uint64_t equal_mask(const double *d2, uint32_t m, double v) {
 static inline void scan_one(const qk_tree_t *t, qk_node_t leaf, double qx, double qy, best_t *b) {
   const uint32_t start = qk__node_start(t, leaf), count = qk__node_count(t, leaf);
   const double *xs = qk__tree_xs(t) + start, *ys = qk__tree_ys(t) + start;
-  const qk_id_t *pid = qk__tree_ids(t);
   double d2[QK__SCAN_CHUNK];
   for (uint32_t base = 0; base < count; base += QK__SCAN_CHUNK) {
     const uint32_t m = count - base < QK__SCAN_CHUNK ? count - base : QK__SCAN_CHUNK;
     const double lo = leaf_d2(xs + base, ys + base, m, qx, qy, d2);
-    if (lo > b->thr) continue;
-    const uint64_t at = equal_mask(d2, m, lo);
-    uint32_t s = start + base + ctz64(at);
-    if (at & (at - 1)) { /* several points at that distance: the smallest id wins */
+    if (!(lo <= b->lim)) continue;
+    const uint64_t at = le_mask(d2, m, kx_hi(lo));
+    uint32_t i = ctz64(at), s = start + base + i;
+    double ds = d2[i];
+    if (at & (at - 1)) { /* several points near that distance: the exact order decides */
       for (uint64_t r = at & (at - 1); r; r &= r - 1) {
-        const uint32_t s2 = start + base + ctz64(r);
-        if (pid[s2] < pid[s]) s = s2;
+        const uint32_t i2 = ctz64(r), s2 = start + base + i2;
+        if (before(t, qx, qy, d2[i2], s2, ds, s)) s = s2, ds = d2[i2];
       }
     }
-    if (lo < b->thr || b->slot == QK_NONE || pid[s] < pid[b->slot]) {
-      b->thr = lo;
+    if (b->slot == QK_NONE ? in_cap(t, qx, qy, b, ds, s)
+                           : before(t, qx, qy, ds, s, b->thr, b->slot)) {
+      b->thr = ds;
       b->slot = s;
+      best_tighten(b);
     }
   }
 }
@@ -464,39 +620,23 @@ static inline void sort_keys(double *a, unsigned n) {
  * The n first candidates fill[] of a sorted search, sorted by (distance, id) into o[],
  * through their keys[] (fill_sort's comment above).
  */
-static void fill_sort(const qk_tree_t *t, const qk_neighbor_t *fill, double *keys, size_t n,
-                      qk_neighbor_t *o) {
+static void fill_sort(const qk_tree_t *t, double qx, double qy, const qk_neighbor_t *fill,
+                      double *keys, size_t n, qk_neighbor_t *o) {
   sort_keys(keys, (unsigned)n);
-  /* In key order the distances are ordered unless two agree above the low bits. */
-  uint64_t clash = 0;
-#if defined(__SSE2__)
-  if (n >= 3) {
-    /* Two neighbour pairs per step, the last step at n - 3 (overlapping the one before
-     * when n is even). A clash compares the keys without their low bits. */
-    const __m128d hi = _mm_castsi128_pd(_mm_set1_epi64x(~(long long)QK__FILL_LOW));
-    int c = 0;
-    for (size_t i = 0;; i += 2) {
-      if (i + 3 > n) i = n - 3;
-      const __m128d x = _mm_and_pd(_mm_loadu_pd(keys + i), hi);
-      const __m128d y = _mm_and_pd(_mm_loadu_pd(keys + i + 1), hi);
-      c |= _mm_movemask_pd(_mm_cmple_pd(y, x));
-      if (i + 3 == n) break;
-    }
-    clash = (uint64_t)c;
-  } else
-#endif
-    for (size_t i = 0; i + 1 < n; i++)
-      clash |= (key_bits(keys[i + 1]) >> 6) <= (key_bits(keys[i]) >> 6);
-  if (!clash) {
-    for (size_t i = 0; i < n; i++) o[i] = fill[key_bits(keys[i]) & QK__FILL_LOW];
-    return;
+  /* In key order the squares are increasing unless two agree above the low bits, and the
+   * exact order is theirs when each is beyond the filter's margin of the one before. */
+  int clash = 0;
+  o[0] = fill[key_bits(keys[0]) & QK__FILL_LOW];
+  for (size_t i = 1; i < n; i++) {
+    o[i] = fill[key_bits(keys[i]) & QK__FILL_LOW];
+    clash |= !(o[i].dist > kx_hi(o[i - 1].dist));
   }
-  /* Equal (or nearly equal) distances: by comparisons, ties by id. */
-  const qk_id_t *pid = qk__tree_ids(t);
+  if (!clash) return;
+  /* Equal (or nearly equal) distances: by exact comparisons, ties by id. */
   for (size_t i = 0; i < n; i++) {
     const qk_neighbor_t v = fill[i];
     size_t j = i;
-    for (; j > 0 && qk__nb_less(v.dist, pid[v.id], o[j - 1].dist, pid[o[j - 1].id]); j--)
+    for (; j > 0 && before(t, qx, qy, v.dist, v.id, o[j - 1].dist, o[j - 1].id); j--)
       o[j] = o[j - 1];
     o[j] = v;
   }
@@ -514,49 +654,51 @@ static inline void scan_sorted(const qk_tree_t *t, qk_node_t leaf, double qx, do
                                best_t *b) {
   const uint32_t start = qk__node_start(t, leaf), count = qk__node_count(t, leaf);
   const double *xs = qk__tree_xs(t) + start, *ys = qk__tree_ys(t) + start;
-  const qk_id_t *pid = qk__tree_ids(t);
   qk_neighbor_t *o = b->out;
   const size_t k = b->k;
   /* In locals: the stores into o could alias them. */
   size_t n = b->n;
-  double thr = b->thr;
+  double lim = b->lim;
   double d2[QK__SCAN_CHUNK];
   for (uint32_t base = 0; base < count; base += QK__SCAN_CHUNK) {
     const uint32_t m = count - base < QK__SCAN_CHUNK ? count - base : QK__SCAN_CHUNK;
-    for (uint64_t r = within(xs + base, ys + base, m, qx, qy, thr, d2); r; r &= r - 1) {
+    for (uint64_t r = within(xs + base, ys + base, m, qx, qy, lim, d2); r; r &= r - 1) {
       const uint32_t i = ctz64(r), s = start + base + i;
       const double v = d2[i];
       qk_neighbor_t *at;
       if (n < k) {
-        /* Appended; sorted once the k-th is there (fill_sort), the threshold then its
-         * distance. */
+        /* Within the cap, appended; sorted once the k-th is there (fill_sort), the
+         * threshold then its distance. */
+        if (!in_cap(t, qx, qy, b, v, s)) continue;
         b->fill[n] = (qk_neighbor_t){s, v};
         b->keys[n] = make_key(v, (uint32_t)n);
         if (++n == k) {
-          fill_sort(t, b->fill, b->keys, k, o);
-          thr = o[k - 1].dist;
+          fill_sort(t, qx, qy, b->fill, b->keys, k, o);
+          b->thr = o[k - 1].dist;
+          best_tighten(b);
+          lim = b->lim;
         }
         continue;
       }
       {
         /* The threshold is the last entry's distance, which may have shrunk since. */
         const qk_neighbor_t w = o[k - 1];
-        if (!(v < w.dist || (v == w.dist && pid[s] < pid[w.id]))) continue;
+        if (!before(t, qx, qy, v, s, w.dist, w.id)) continue;
         at = o + k - 1;
       }
       /* o[-1] is a sentinel at distance -infinity (knn_search), so no bound check, and
-       * the tie loop never reads its slot. */
-      for (; at[-1].dist > v; at--) *at = at[-1];
-      if (at[-1].dist == v) {
-        const qk_id_t id = pid[s];
-        for (; at[-1].dist == v && pid[at[-1].id] > id; at--) *at = at[-1];
-      }
+       * the exact loop never reads its slot. Entries whose squares are beyond the filter's
+       * margin above v's come after it; within the margin the exact order decides. */
+      const double vhi = kx_hi(v), vlo = kx_lo(v);
+      for (; at[-1].dist > vhi; at--) *at = at[-1];
+      for (; at[-1].dist >= vlo && before_exact(t, qx, qy, s, at[-1].id); at--) *at = at[-1];
       *at = (qk_neighbor_t){s, v};
-      thr = o[k - 1].dist;
+      b->thr = o[k - 1].dist;
+      best_tighten(b);
+      lim = b->lim;
     }
   }
   b->n = n;
-  b->thr = thr;
 }
 
 /* Ask for the x and y lines of a leaf's first points (at most 64). */
@@ -730,7 +872,7 @@ static QK__ALWAYS_INLINE void drain(const qk_tree_t *t, double qx, double qy, do
                                     qk__cell_entry_t *stack, int *sp, int kind) {
   while (*sp > 0) {
     qk__cell_entry_t cur = stack[--*sp];
-    if (cur.bound > b->thr) continue;
+    if (cur.bound > b->lim) continue;
     for (;;) {
       const uint32_t child = qk__node_child(t, cur.c.node);
       if (child == QK_NONE) {
@@ -746,7 +888,7 @@ static QK__ALWAYS_INLINE void drain(const qk_tree_t *t, double qx, double qy, do
         if (kind == KIND_ONE && b->slot != QK_NONE) QK__PREFETCH(qk__tree_ids(t) + b->slot);
         break;
       }
-      if (!expand(t, &cur, child, qx, qy, e, b->thr, stack, sp)) break;
+      if (!expand(t, &cur, child, qx, qy, e, b->lim, stack, sp)) break;
     }
   }
 }
@@ -767,10 +909,10 @@ static QK__ALWAYS_INLINE void climb(const qk_tree_t *t, double qx, double qy, be
   while (len > 0) {
     /* Everything inside c is done. When the threshold's ball lies inside c's square
      * (narrowed by the margin), nothing outside can come within it: stop climbing. */
-    if (ball_inside(qx, qy, c.x, c.y, qk__tree_side(t, c.depth), e, b->thr)) break;
+    if (ball_inside(qx, qy, c.x, c.y, qk__tree_side(t, c.depth), e, b->lim)) break;
     len--;
     push_siblings(t, p->cell[len], qk__node_child(t, p->cell[len].node), p->q[len], qx, qy, e,
-                  b->thr, stack, &sp);
+                  b->lim, stack, &sp);
     drain(t, qx, qy, e, b, stack, &sp, kind);
     c = p->cell[len];
   }
@@ -804,12 +946,13 @@ static QK__ALWAYS_INLINE void search(const qk_tree_t *t, double qx, double qy, b
 }
 
 /* k = 1: the best pair in registers. Returns 0 or 1. */
-static size_t knn1(const qk_tree_t *t, double qx, double qy, double limit2, qk_neighbor_t *out,
+static size_t knn1(const qk_tree_t *t, double qx, double qy, double max_dist, qk_neighbor_t *out,
                    const qk__path_t *path) {
-  best_t b = {out, 1, 0, limit2, QK_NONE, NULL, NULL};
+  best_t b = {.out = out, .k = 1, .slot = QK_NONE};
+  best_limits(&b, max_dist, -1);
   search(t, qx, qy, &b, KIND_ONE, path);
   if (b.slot == QK_NONE) return 0;
-  out[0] = (qk_neighbor_t){qk__tree_ids(t)[b.slot], b.thr};
+  out[0] = (qk_neighbor_t){qk__tree_ids(t)[b.slot], report_dist(t, qx, qy, b.thr, b.slot)};
   return 1;
 }
 
@@ -847,11 +990,14 @@ static double guess_limit(const qk_tree_t *t, const qk__path_t *p, size_t k) {
   return ((double)k + 2.0 * sqrt((double)k) + 4.0) * side * side / (3.14159 * (double)cnt);
 }
 
-/* Any k > 1 with a limit (squared): how many of out hold neighbours (squared distances
- * in b->out), sorted, into out; the ids of a sorted search's slots are read at the end. */
-static size_t knn_limited(const qk_tree_t *t, double qx, double qy, size_t k, double limit2,
-                          qk_neighbor_t *out, const qk__path_t *path) {
-  best_t b = {out, k, 0, limit2, QK_NONE, NULL, NULL};
+/* Any k > 1 within max_dist, or within the guessed squared limit guess2 (>= 0): how many
+ * of out hold neighbours, sorted, with their distances; the ids of a sorted search's slots
+ * are read at the end. A guessed search returns 0 unless it found k and every point it
+ * did not look at lies beyond the filter's margin of the k-th (so after it, exactly). */
+static size_t knn_limited(const qk_tree_t *t, double qx, double qy, size_t k, double max_dist,
+                          double guess2, qk_neighbor_t *out, const qk__path_t *path) {
+  best_t b = {.out = out, .k = k, .slot = QK_NONE};
+  best_limits(&b, max_dist, guess2);
   if (k <= QK__KNN_SORTED) {
     /* The sorted array lives here, after a sentinel that ends every insertion's shift
      * without a bound check. */
@@ -862,7 +1008,9 @@ static size_t knn_limited(const qk_tree_t *t, double qx, double qy, size_t k, do
     b.fill = fill;
     b.keys = keys;
     search(t, qx, qy, &b, KIND_SORTED, path);
-    if (b.n < k) fill_sort(t, b.fill, b.keys, b.n, b.out); /* fewer than k within the limit */
+    if (guess2 >= 0 && (b.n < k || kx_hi(b.thr) > guess2)) return 0;
+    if (b.n < k && b.n > 0) /* fewer than k within the limit */
+      fill_sort(t, qx, qy, b.fill, b.keys, b.n, b.out);
     /* The entries hold slots: their ids now, whose reads do not wait for one another. */
     const qk_id_t *pid = qk__tree_ids(t);
     size_t i = 0;
@@ -879,36 +1027,45 @@ static size_t knn_limited(const qk_tree_t *t, double qx, double qy, size_t k, do
     }
 #endif
     for (; i < b.n; i++) out[i] = (qk_neighbor_t){pid[sorted[i + 1].id], sqrt(sorted[i + 1].dist)};
+    /* Squares from 2^1000 on: hypot of the differences (report_dist). The last entry's
+     * square is within the filter's margin of the largest (the exact order), so at least
+     * half of 2^1000 when any is that large. */
+    if (b.n > 0 && sorted[b.n].dist >= 0.5 * QK__FILTER_MAX)
+      for (i = 0; i < b.n; i++)
+        out[i].dist = report_dist(t, qx, qy, sorted[i + 1].dist, sorted[i + 1].id);
   } else {
     search(t, qx, qy, &b, KIND_HEAP, path);
-    qk__heap_sort(out, b.n);
-    for (size_t i = 0; i < b.n; i++) out[i].dist = sqrt(out[i].dist);
+    if (guess2 >= 0 && (b.n < k || kx_hi(b.thr) > guess2)) return 0;
+    xheap_finish(t, qx, qy, out, b.n);
   }
   return b.n;
 }
 
 /* Any k > 1: returns how many of out hold neighbours (distances), sorted. A query inside
  * the root is searched first within the guessed limit (guess_limit), from its path. */
-static size_t knn_search(const qk_tree_t *t, double qx, double qy, size_t k, double limit2,
+static size_t knn_search(const qk_tree_t *t, double qx, double qy, size_t k, double max_dist,
                          qk_neighbor_t *out, const qk__path_t *path) {
-  if (!qk__tree_contains(t, qx, qy)) return knn_limited(t, qx, qy, k, limit2, out, NULL);
+  if (!qk__tree_contains(t, qx, qy)) return knn_limited(t, qx, qy, k, max_dist, -1, out, NULL);
   qk__path_t own;
   if (!path) {
     qk__path_init(t, &own);
     qk__path_descend(t, &own, qx, qy, 0);
     path = &own;
   }
+  /* Guessed only where every square within it is surely within max_dist. */
   const double guess2 = guess_limit(t, path, k);
-  if (guess2 < limit2) {
+  best_t c;
+  best_limits(&c, max_dist, -1);
+  if (guess2 < c.cap_lo) {
 #ifdef QK_KNN_STATS
     qk__knn_guess_runs++;
 #endif
-    if (knn_limited(t, qx, qy, k, guess2, out, path) == k) return k;
+    if (knn_limited(t, qx, qy, k, max_dist, guess2, out, path) == k) return k;
 #ifdef QK_KNN_STATS
     qk__knn_guess_misses++;
 #endif
   }
-  return knn_limited(t, qx, qy, k, limit2, out, path);
+  return knn_limited(t, qx, qy, k, max_dist, -1, out, path);
 }
 
 /*
@@ -954,11 +1111,8 @@ size_t qk__knn_one(const qk_tree_t *t, qk_point_t q, size_t k, double max_dist, 
   const size_t np = qk__tree_count(t);
   if (np == 0 || k == 0) return 0;
   if (k > np) k = np;
-  double limit2 = max_dist * max_dist;
-  if (k > 1) return knn_search(t, q.x, q.y, k, limit2, out, path);
-  const size_t n = knn1(t, q.x, q.y, limit2, out, path);
-  if (n) out[0].dist = sqrt(out[0].dist);
-  return n;
+  if (k > 1) return knn_search(t, q.x, q.y, k, max_dist, out, path);
+  return knn1(t, q.x, q.y, max_dist, out, path);
 }
 
 qk_status_t qk_query_knn(const qk_tree_t *tree, qk_point_t q, size_t k, double max_dist,
@@ -969,9 +1123,7 @@ qk_status_t qk_query_knn(const qk_tree_t *tree, qk_point_t q, size_t k, double m
   if (st != QK_OK) return st;
   if (k == 1 && qk__tree_count(tree) > 0) {
     /* The common case straight to its search. */
-    const size_t n = knn1(tree, q.x, q.y, max_dist * max_dist, out, NULL);
-    if (n) out[0].dist = sqrt(out[0].dist);
-    *n_out = n;
+    *n_out = knn1(tree, q.x, q.y, max_dist, out, NULL);
     return QK_OK;
   }
   *n_out = qk__knn_one(tree, q, k, max_dist, out, NULL);

@@ -65,6 +65,16 @@ static const char *shown(json_object *o) {
   return s ? s : "?";
 }
 
+/* Is o a number written with a nonzero digit before its exponent (json-c keeps a parsed
+ * double's text)? Then reading it as 0 (an underflow, such as 1e-400) changed it. */
+static bool nonzero_text(json_object *o) {
+  if (!json_object_is_type(o, json_type_double)) return false;
+  const char *s = json_object_to_json_string(o);
+  for (; s && *s && *s != 'e' && *s != 'E'; s++)
+    if (*s >= '1' && *s <= '9') return true;
+  return false;
+}
+
 static qk_status_t ring(gj_t *g, json_object *arr, size_t f, size_t poly, size_t k) {
   if (!json_object_is_type(arr, json_type_array))
     return qk__region_fail(g->err, QK_ERR_PARSE, f,
@@ -103,6 +113,15 @@ static qk_status_t ring(gj_t *g, json_object *arr, size_t f, size_t poly, size_t
                              "feature %zu: coordinate %.60s is beyond the largest double (not "
                              "finite) at polygon %zu, ring %zu, position %zu",
                              f, shown(isfinite(vx) ? y : x), poly, k, i);
+    }
+    const bool zx = vx == 0 && nonzero_text(x);
+    if (zx || (vy == 0 && nonzero_text(y))) { /* (it read as 0, silently) */
+      step_in(g, NULL, zx ? 0 : 1);
+      return qk__region_fail(g->err, QK_ERR_GEOMETRY, f,
+                             "feature %zu: absurd coordinate %.60s (below the smallest double, "
+                             "it reads as 0; magnitude must be 0 or within [1e-100, 1e100]) at "
+                             "polygon %zu, ring %zu, position %zu",
+                             f, shown(zx ? x : y), poly, k, i);
     }
     if ((st = qk__region_check_coord(g->planar, vx, vy, f, g->err))) {
       size_t len = strlen(g->err->message);

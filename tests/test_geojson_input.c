@@ -224,6 +224,16 @@ static void test_geojson_semantic_position(void **state) {
                      "   {\"type\": \"Polygon\", \"coordinates\": [[[0,0],[1,0],\n"
                      "    [1, 2e308],[0,0]]]}}]}",
              1, QK_ERR_NONFINITE, 1, "2e308", "beyond the largest double");
+  /* a nonzero coordinate below the smallest double, which json-c reads as 0 (it was
+   * taken as 0; eighteenth session), in either place, also written without exponent */
+  refused_at(FC_HEAD "  {\"type\": \"Feature\", \"properties\": null, \"geometry\":\n"
+                     "   {\"type\": \"Polygon\", \"coordinates\": [[[0,0],[1,0],\n"
+                     "    [1, 1e-400],[0,0]]]}}]}",
+             1, QK_ERR_GEOMETRY, 1, "1e-400", "below the smallest double");
+  refused_at(FC_HEAD "  {\"type\": \"Feature\", \"properties\": null, \"geometry\":\n"
+                     "   {\"type\": \"Polygon\", \"coordinates\": [[[0,0],[1,0],\n"
+                     "    [-2.5E-999, 1],[0,0]]]}}]}",
+             1, QK_ERR_GEOMETRY, 1, "-2.5E-999", "below the smallest double");
   /* a position that is not two numbers */
   refused_at(FC_HEAD "  {\"type\": \"Feature\", \"properties\": {}, \"geometry\":\n"
                      "   {\"type\": \"Polygon\", \"coordinates\": [[[0,0],[1,0],\n"

@@ -16,6 +16,10 @@
  *  - squared distances a few units in the last place apart and exact ties among them
  *    (the sorted search's first sort keys drop the low bits), k from 2 to 33; kNN with
  *    subnormals flushed (the processor mode of -ffast-math programs) on stored points;
+ *  - kNN exact against rationals (GMP) at scales 2^-1074 to 2^1017: squares that
+ *    underflow, near-ties whose double squares are equal or misordered, caps one ulp
+ *    either side of a point's distance, k from 1 to past the heap threshold, single and
+ *    batch (the oracle qko_knn is exact too);
  *  - kNN from the corners, edge midpoints and centres of leaves' squares (and one unit in
  *    the last place off them) in a tree whose squares are rounded, k from 2 to 33;
  *  - batch kNN (Z-order, each query starting from the previous path) on every point set
@@ -1037,6 +1041,139 @@ static void test_query_radius_exact(void **state) {
   }
 }
 
+#if defined(QK_HAVE_GMP)
+#include <gmp.h>
+
+/* The exact oracle of kNN: every point's squared distance to q as a rational, the points
+ * with D <= max_dist^2 (all when max_dist is infinite) sorted by (D, id), the first k;
+ * distances as the library rounds them (sqrt of the double square, hypot beyond 2^1000). */
+typedef struct xknn {
+  mpq_t d;
+  qk_id_t id;
+} xknn_t;
+static int xknn_cmp(const void *a, const void *b) {
+  const xknn_t *x = a, *y = b;
+  int c = mpq_cmp(x->d, y->d);
+  return c ? c : (x->id > y->id) - (x->id < y->id);
+}
+static size_t xknn_oracle(const qk_point_t *p, size_t n, qk_point_t q, size_t k, double max_dist,
+                          qk_neighbor_t *out) {
+  xknn_t *v = malloc(n * sizeof *v);
+  mpq_t a, b, cap;
+  mpq_inits(a, b, cap, NULL);
+  mpq_set_d(cap, isinf(max_dist) ? 0 : max_dist), mpq_mul(cap, cap, cap);
+  size_t m = 0;
+  for (size_t i = 0; i < n; i++) {
+    mpq_init(v[m].d);
+    mpq_set_d(a, p[i].x), mpq_set_d(b, q.x), mpq_sub(a, a, b), mpq_mul(v[m].d, a, a);
+    mpq_set_d(a, p[i].y), mpq_set_d(b, q.y), mpq_sub(a, a, b), mpq_mul(a, a, a);
+    mpq_add(v[m].d, v[m].d, a);
+    v[m].id = (qk_id_t)i;
+    if (isinf(max_dist) || mpq_cmp(v[m].d, cap) <= 0)
+      m++;
+    else
+      mpq_clear(v[m].d);
+  }
+  qsort(v, m, sizeof *v, xknn_cmp);
+  size_t r = m < k ? m : k;
+  for (size_t i = 0; i < r; i++) {
+    const double dx = p[v[i].id].x - q.x, dy = p[v[i].id].y - q.y, d2 = dx * dx + dy * dy;
+    out[i] = (qk_neighbor_t){v[i].id, d2 < 0x1p1000 ? sqrt(d2) : hypot(dx, dy)};
+  }
+  for (size_t i = 0; i < m; i++) mpq_clear(v[i].d);
+  mpq_clears(a, b, cap, NULL);
+  free(v);
+  return r;
+}
+#endif
+
+/*
+ * kNN is exact for any finite values (eighteenth session): points on a circle of radius
+ * 5 s through Pythagorean triples, their neighbours one ulp inside and outside, pairs
+ * whose squares in doubles are equal or misordered but not their exact values ((s, 0)
+ * and (s, 2^-27 s), whose square rounds to s^2; (3 s, 4 s) against (5 s, 2^-27 s)), and
+ * random points, at scales s from 2^-1074 (subnormal) to 2^1017, with caps at 5 s and one
+ * ulp either side, 3 s and 0; k from 1 to past the sorted array (33, 40) and all; single
+ * queries and batches, against the rational oracle. Before, the double squares decided:
+ * below 2^-537 they underflowed (every point at distance 0, ranked by id), near-equal
+ * squares ranked by their roundings, and the cap admitted points one ulp outside.
+ * A scale whose values reach beyond 2^510 may be refused (QK_ERR_LIMIT, as documented).
+ */
+static void test_query_knn_exact(void **state) {
+  (void)state;
+#if !defined(QK_HAVE_GMP)
+  skip();
+#else
+  const int scales[] = {-1074, -1073, -1060, -1000, -600, -537, -300, -30,
+                        0,     1,     300,   505,   511,  600,  900,  1017};
+  const size_t ks[] = {1, 2, 3, 5, 8, 16, 32, 33, 40, 1000};
+  qkt_rng_t g;
+  qkt_rng_seed(&g, 1818);
+  enum { N = 240, NQ = 4 };
+  static qk_neighbor_t got[NQ * 1000], want[1000], one[1000];
+  for (size_t si = 0; si < sizeof scales / sizeof scales[0]; si++) {
+    const double s = ldexp(1, scales[si]);
+    const qk_point_t c = {7 * s, -2 * s};
+    qk_point_t p[N];
+    size_t n = 0;
+    /* The near-ties first, then their mirror images with larger ids. */
+    p[n++] = (qk_point_t){c.x + s, c.y + 0x1p-27 * s};
+    p[n++] = (qk_point_t){c.x + s, c.y};
+    p[n++] = (qk_point_t){c.x - 5 * s, c.y + 0x1p-27 * s};
+    p[n++] = (qk_point_t){c.x + 3 * s, c.y - 4 * s};
+    p[n++] = (qk_point_t){c.x - 2 * s, c.y + nextafter(2 * s, 0)};
+    p[n++] = (qk_point_t){c.x + nextafter(2 * s, INFINITY), c.y - 2 * s};
+    const double tr[][2] = {{3, 4}, {4, 3}, {5, 0}, {0, 5}};
+    for (int t = 0; t < 4; t++)
+      for (int sg = 0; sg < 4; sg++) {
+        double x = c.x + (sg & 1 ? -1 : 1) * tr[t][0] * s,
+               y = c.y + (sg & 2 ? -1 : 1) * tr[t][1] * s;
+        p[n++] = (qk_point_t){x, y};
+        p[n++] = (qk_point_t){nextafter(x, c.x), y};
+        p[n++] = (qk_point_t){nextafter(x, -c.x * 4), y};
+        p[n++] = (qk_point_t){x, nextafter(y, 1e308)};
+        p[n++] = (qk_point_t){x, nextafter(y, -1e308)};
+      }
+    while (n < N)
+      p[n++] = (qk_point_t){c.x + qkt_rng_range(&g, -6, 6) * s, c.y + qkt_rng_range(&g, -6, 6) * s};
+    const qk_point_t qs[NQ] = {c, p[7], {c.x + 0.5 * s, c.y}, {c.x - 20 * s, c.y + 9 * s}};
+    const double caps_[] = {INFINITY, 5 * s, nextafter(5 * s, 0), nextafter(5 * s, INFINITY),
+                            3 * s,    0};
+    const int beyond = 20 * s > 0x1p510;
+    for (uint32_t cap = 1; cap <= 32; cap *= 4) {
+      qk_tree_t *t = build(p, n, cap);
+      for (size_t ki = 0; ki < sizeof ks / sizeof ks[0]; ki++)
+        for (size_t li = 0; li < sizeof caps_ / sizeof caps_[0]; li++) {
+          const size_t k = ks[ki];
+          const double md = caps_[li];
+          size_t counts[NQ];
+          const qk_status_t bs = qk_query_knn_batch(t, qs, NQ, k, md, got, counts);
+          for (size_t i = 0; i < NQ; i++) {
+            size_t ng, nw = xknn_oracle(p, n, qs[i], k, md, want);
+            const qk_status_t st = qk_query_knn(t, qs[i], k, md, one, &ng);
+            if (st == QK_ERR_LIMIT && beyond && bs == QK_ERR_LIMIT) continue;
+            if (st != QK_OK || bs != QK_OK)
+              fail_msg("scale 2^%d k %zu cap %.17g query %zu: status %d, batch %d", scales[si], k,
+                       md, i, (int)st, (int)bs);
+            if (ng != nw || counts[i] != nw)
+              fail_msg("scale 2^%d cap %u k %zu max %.17g query %zu: %zu (batch %zu), oracle %zu",
+                       scales[si], cap, k, md, i, ng, counts[i], nw);
+            for (size_t j = 0; j < nw; j++) {
+              const qk_neighbor_t a = one[j], b = got[i * k + j], w = want[j];
+              if (a.id != w.id || a.dist != w.dist || b.id != w.id || b.dist != w.dist)
+                fail_msg("scale 2^%d cap %u k %zu max %.17g query %zu rank %zu: %u at %.17g "
+                         "(batch %u at %.17g), oracle %u at %.17g",
+                         scales[si], cap, k, md, i, j, (unsigned)a.id, a.dist, (unsigned)b.id,
+                         b.dist, (unsigned)w.id, w.dist);
+            }
+          }
+        }
+      qk_tree_free(t);
+    }
+  }
+#endif
+}
+
 static void test_query_knn_flush_subnormals(void **state) {
   (void)state;
   qkt_rng_t r;
@@ -1245,6 +1382,7 @@ int main(void) {
 #if defined(__SSE2__)
     cmocka_unit_test(test_query_knn_flush_subnormals),
     cmocka_unit_test(test_query_radius_exact),
+    cmocka_unit_test(test_query_knn_exact),
 #endif
   };
   return cmocka_run_group_tests(tests, NULL, NULL);

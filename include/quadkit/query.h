@@ -165,8 +165,12 @@ static inline qk_status_t qk_query_radius_batch(const qk_tree_t *tree, const qk_
  * \param [out] n_out how many were written: min(k, points within max_dist).
  * \return QK_OK, QK_ERR_NONFINITE, QK_ERR_INVALID (max_dist < 0 or NaN) or QK_ERR_LIMIT
  *         (q or the root square reaches beyond 2^510 ~ 3.4e153 on an axis, where squared
- *         distances could overflow). Distances are ranked by their squares in double:
- *         points nearer to q than about 1e-162 (2^-537) all rank at distance 0.
+ *         distances could overflow). The ranking and the cap are exact (the exact
+ *         squared distances, compared behind a floating-point filter), also below
+ *         2^-537, where squares in double underflow; the distances reported are
+ *         sqrt(dx*dx + dy*dy) in double, as qk_query_radius() reports them, so two
+ *         neighbours whose distances differ by less than rounding may report them
+ *         equal or even in reverse.
  */
 qk_status_t qk_query_knn(const qk_tree_t *tree, qk_point_t q, size_t k, double max_dist,
                          qk_neighbor_t *out, size_t *n_out);

@@ -77,24 +77,52 @@ size_t qko_radius(const qk_point_t *pts, size_t n, qk_point_t c, double r, qk_ne
   return m;
 }
 
+/* Is point a nearer to q than point b, or as near with a smaller id, exactly? Squares in
+ * long double (no overflow or underflow for doubles' squares; a relative error of a few
+ * 2^-64) decide away from a tie, rationals (GMP) near one; without GMP, long double. */
+static int o_nearer(const qk_point_t *pts, qk_point_t q, size_t a, size_t b) {
+  long double ax = (long double)pts[a].x - q.x, ay = (long double)pts[a].y - q.y;
+  long double bx = (long double)pts[b].x - q.x, by = (long double)pts[b].y - q.y;
+  long double da = ax * ax + ay * ay, db = bx * bx + by * by;
+  if (da < db * (1 - 1e-15L)) return 1;
+  if (da > db * (1 + 1e-15L)) return 0;
+  int c;
+#if defined(QK_HAVE_GMP)
+  mpq_t u, v, w;
+  mpq_inits(u, v, w, NULL);
+  mpq_set_d(u, pts[a].x), mpq_set_d(v, q.x), mpq_sub(u, u, v), mpq_mul(w, u, u);
+  mpq_set_d(u, pts[a].y), mpq_set_d(v, q.y), mpq_sub(u, u, v), mpq_mul(u, u, u);
+  mpq_add(w, w, u);
+  mpq_set_d(u, pts[b].x), mpq_set_d(v, q.x), mpq_sub(u, u, v), mpq_mul(v, u, u);
+  mpq_set_d(u, pts[b].y), mpq_sub(w, w, v), mpq_set_d(v, q.y), mpq_sub(u, u, v), mpq_mul(u, u, u);
+  mpq_sub(w, w, u);
+  c = mpq_sgn(w);
+  mpq_clears(u, v, w, NULL);
+#else
+  c = (da > db) - (da < db);
+#endif
+  return c ? c < 0 : a < b;
+}
+
 size_t qko_knn(const qk_point_t *pts, const unsigned char *alive, size_t n, qk_point_t q, size_t k,
                double max_dist, qk_neighbor_t *out) {
-  /* Every point is looked at; the k best so far stay sorted by (squared distance, id) in
-   * out, the order the library documents, and a better one is inserted in place. A full
-   * sort of all n per query made the tests that check thousands of queries slow. */
+  /* Every point is looked at; the k best so far stay sorted in out by the exact (distance,
+   * id) order the library documents (ids in out until the end), and a better one is
+   * inserted in place. Within max_dist exactly. A full sort of all n per query made the
+   * tests that check thousands of queries slow. */
   size_t m = 0;
-  double lim = max_dist * max_dist;
   for (size_t i = 0; i < n && k > 0; i++) {
     if (alive && !alive[i]) continue;
-    double dx = pts[i].x - q.x, dy = pts[i].y - q.y, d2 = dx * dx + dy * dy;
-    if (d2 > lim) continue;
-    qk_neighbor_t c = {.id = (qk_id_t)i, .dist = d2};
-    if (m == k && cmp_dist(&c, &out[m - 1]) >= 0) continue;
+    if (!isinf(max_dist) && !o_within(pts[i].x, pts[i].y, q.x, q.y, max_dist, 0)) continue;
+    if (m == k && !o_nearer(pts, q, i, out[m - 1].id)) continue;
     size_t j = m < k ? m++ : m - 1;
-    for (; j > 0 && cmp_dist(&c, &out[j - 1]) < 0; j--) out[j] = out[j - 1];
-    out[j] = c;
+    for (; j > 0 && o_nearer(pts, q, i, out[j - 1].id); j--) out[j] = out[j - 1];
+    out[j].id = (qk_id_t)i;
   }
-  for (size_t i = 0; i < m; i++) out[i].dist = sqrt(out[i].dist);
+  for (size_t i = 0; i < m; i++) {
+    const double dx = pts[out[i].id].x - q.x, dy = pts[out[i].id].y - q.y, d2 = dx * dx + dy * dy;
+    out[i].dist = d2 < 0x1p1000 ? sqrt(d2) : hypot(dx, dy); /* (as the library rounds it) */
+  }
   return m;
 }
 
