@@ -81,6 +81,8 @@ size_t qko_radius(const qk_point_t *pts, size_t n, qk_point_t c, double r, qk_ne
  * long double (no overflow or underflow for doubles' squares; a relative error of a few
  * 2^-64) decide away from a tie, rationals (GMP) near one; without GMP, long double. */
 static int o_nearer(const qk_point_t *pts, qk_point_t q, size_t a, size_t b) {
+  /* the same place: the same distance (the duplicates' ties, without the rationals) */
+  if (pts[a].x == pts[b].x && pts[a].y == pts[b].y) return a < b;
   long double ax = (long double)pts[a].x - q.x, ay = (long double)pts[a].y - q.y;
   long double bx = (long double)pts[b].x - q.x, by = (long double)pts[b].y - q.y;
   long double da = ax * ax + ay * ay, db = bx * bx + by * by;
