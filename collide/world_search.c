@@ -721,7 +721,8 @@ typedef struct bands {
 } bands_t;
 
 /*
- * The sweep of entry k over the entries after it in its band, [k + 1, e) (k + 1 < e).
+ * The sweep of entry k over the entries after it in its band (at least one), up to the
+ * band's stop lanes.
  * The float boxes are tested as in test_run (a prefilter that never drops a pair whose
  * boxes meet; exact when both float boxes are). The entries after k have xmin >= k's, so
  * a candidate meets k's box on x when its xmin <= k's xmax, and the first that does not
@@ -803,10 +804,9 @@ sweep_grp(const sw_t *w, const egrp_t *g, const uint8_t *fm, unsigned mask, uint
 }
 
 static inline __attribute__((always_inline)) uint64_t *sweep(const share_t *s, const bands_t *bd,
-                                                             uint32_t k, uint32_t e, uint64_t *v,
+                                                             uint32_t k, uint64_t *v,
                                                              const int all_exact, const int began,
                                                              const int near_) {
-  (void)e; /* (the band's stop lane ends the sweep) */
   const egrp_t *gk = &bd->g[k >> 2];
   const unsigned lk = k & 3;
   sw_t w;
@@ -831,7 +831,11 @@ static inline __attribute__((always_inline)) uint64_t *sweep(const share_t *s, c
   const uint8_t *fm = &bd->fm[lo >> 2];
   const unsigned first = ~((1u << (lo & 3)) - 1) & 15u;
   int stop;
-  /* k first in its band: every candidate may pair with it; else only those first here */
+  /* k first in its band: every candidate may pair with it; else only those first here.
+   * The two branches differ only in the constant `any` they give sweep_grp, which is
+   * always inlined: each loop is then compiled with its own test (none for the first,
+   * the lane's first-in-band byte for the second), instead of one loop that reads the
+   * bytes and masks by a flag it tests every group. Keep them alike. */
   if (bd->fm[k >> 2] >> lk & 1) {
     v = sweep_grp(&w, g, fm, first, v, &stop, 1, all_exact, began, near_);
     while (!stop) v = sweep_grp(&w, ++g, ++fm, ~0u, v, &stop, 1, all_exact, began, near_);
@@ -842,7 +846,7 @@ static inline __attribute__((always_inline)) uint64_t *sweep(const share_t *s, c
   return v;
 }
 #else
-static uint64_t *sweep(const share_t *s, const bands_t *bd, uint32_t k, uint32_t e, uint64_t *v,
+static uint64_t *sweep(const share_t *s, const bands_t *bd, uint32_t k, uint64_t *v,
                        const int all_exact, const int began, const int near_) {
   const egrp_t *G = bd->g;
   const pgrp_t *P = bd->pg;
@@ -851,7 +855,8 @@ static uint64_t *sweep(const share_t *s, const bands_t *bd, uint32_t k, uint32_t
   const int any = bd->fm[k >> 2] >> (k & 3) & 1;
   const uint32_t slot = gk->slot[k & 3];
   const uint64_t hs = (uint64_t)slot << 32;
-  for (uint32_t j = k + 1; j < e; j++) {
+  /* (the band's stop lane, xmin a NaN, ends the sweep at the latest) */
+  for (uint32_t j = k + 1;; j++) {
     const egrp_t *g = &G[j >> 2];
     unsigned l = j & 3;
     if (!(g->x0[l] <= x1)) break;
@@ -894,7 +899,7 @@ static inline __attribute__((always_inline)) int sweep_run(share_t *s, uint32_t 
         if (!kv_reserve(s, (size_t)(e - k) + 2)) return 0;
         v = s->out.v + s->out.n, vend = s->out.v + s->out.cap;
       }
-      v = sweep(s, bd, k, e, v, all_exact, began, near_);
+      v = sweep(s, bd, k, v, all_exact, began, near_);
     }
   s->out.n = (size_t)(v - s->out.v);
   return 1;
