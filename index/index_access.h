@@ -52,12 +52,9 @@ int qk__pool_live(const qk__pool_t *p);
  * then runs the region otherwise, e.g. qk__run_shares). One region at a time; calls from
  * several threads are safe (all but one get 0). */
 int qk__pool_run(qk__pool_t *p, unsigned nw, qk__share_fn fn, void *ctx);
-/* While held (on nonzero) the workers spin between regions before they park; when released,
- * they go on spinning for QK__POOL_LINGER_NS, then park. */
+/* While held (on nonzero) the workers spin between regions (200 us) before they park; when
+ * released, they park at once. */
 void qk__pool_hold(qk__pool_t *p, int on);
-#define QK__POOL_LINGER_NS 0
-/* Times a worker of p parked to wait for a region (for tests). */
-unsigned qk__pool_parks(qk__pool_t *p);
 /* fn(ctx) on the first worker while the caller goes on (the pool's next region and its end
  * wait for it); 0, fn not run, when there is no pool here or it is taken. */
 int qk__pool_detach(qk__pool_t *p, void (*fn)(void *), void *ctx);

@@ -76,11 +76,6 @@ static void *run_share(void *arg) {
  * scheduler's preference for a waking thread. */
 #define POOL_SPIN_NS 200000
 #define POOL_WAIT_NS 50000
-/* How long the workers of a pool its owner stopped holding go on spinning before they park
- * (qk__pool_hold). */
-#ifndef POOL_LINGER_NS
-#define POOL_LINGER_NS QK__POOL_LINGER_NS
-#endif
 
 /* A spinning loop's step. */
 static inline void pool_relax(void) {
@@ -103,8 +98,6 @@ struct qk__pool {
   atomic_uint pending; /* workers still in the current region */
   atomic_int busy;     /* a region (or the start of a detached job) is being run */
   atomic_int hold;     /* the owner runs regions back to back: the workers spin between them */
-  atomic_llong linger; /* (not held) the workers spin for the next region until this time */
-  atomic_uint parks;   /* times a worker parked to wait for a region (qk__pool_parks) */
   int quit;
   unsigned n_th;        /* workers started */
   pid_t proc;           /* the process that started them (a forked child has none of them) */
@@ -127,10 +120,10 @@ static long long now_ns(void) {
   return (long long)ts.tv_sec * 1000000000LL + ts.tv_nsec;
 }
 
-/* Whether a worker that began waiting at t0 still spins at time t. */
+/* Whether a worker that began waiting at t0 still spins at time t: while the pool is held,
+ * for POOL_SPIN_NS; otherwise it parks at once. */
 static bool pool_spins(qk__pool_t *p, long long t0, long long t) {
-  if (atomic_load_explicit(&p->hold, memory_order_relaxed)) return t - t0 < POOL_SPIN_NS;
-  return t < atomic_load_explicit(&p->linger, memory_order_relaxed);
+  return atomic_load_explicit(&p->hold, memory_order_relaxed) && t - t0 < POOL_SPIN_NS;
 }
 
 static void *pool_worker(void *arg) {
@@ -146,7 +139,6 @@ static void *pool_worker(void *arg) {
              pool_spins(p, t0, now_ns()))
         pool_relax();
       if (g == seen) {
-        atomic_fetch_add_explicit(&p->parks, 1u, memory_order_relaxed);
         pthread_mutex_lock(&p->mu);
         while ((g = atomic_load_explicit(&p->gen, memory_order_acquire)) == seen)
           pthread_cond_wait(&p->go, &p->mu);
@@ -203,8 +195,6 @@ qk__pool_t *qk__pool_new(const qk_allocator_t *a, unsigned nw) {
   atomic_init(&p->pending, 0u);
   atomic_init(&p->busy, 0);
   atomic_init(&p->hold, 0);
-  atomic_init(&p->linger, 0LL);
-  atomic_init(&p->parks, 0u);
   p->proc = getpid();
   for (unsigned i = 0; i + 1 < nw; i++) {
     p->ww[i] = (pworker_t){p, i};
@@ -240,14 +230,8 @@ unsigned qk__pool_threads(const qk__pool_t *p) { return p ? p->n_th + 1 : 1; }
 
 int qk__pool_live(const qk__pool_t *p) { return p && !pool_forked(p); }
 
-unsigned qk__pool_parks(qk__pool_t *p) {
-  return p ? atomic_load_explicit(&p->parks, memory_order_relaxed) : 0;
-}
-
 void qk__pool_hold(qk__pool_t *p, int on) {
-  if (!p) return;
-  if (!on) atomic_store_explicit(&p->linger, now_ns() + POOL_LINGER_NS, memory_order_relaxed);
-  atomic_store_explicit(&p->hold, on, memory_order_relaxed);
+  if (p) atomic_store_explicit(&p->hold, on, memory_order_relaxed);
 }
 
 int qk__pool_run(qk__pool_t *p, unsigned nw, qk__share_fn fn, void *ctx) {
@@ -293,10 +277,6 @@ unsigned qk__pool_threads(const qk__pool_t *p) {
   return 1;
 }
 int qk__pool_live(const qk__pool_t *p) {
-  (void)p;
-  return 0;
-}
-unsigned qk__pool_parks(qk__pool_t *p) {
   (void)p;
   return 0;
 }
