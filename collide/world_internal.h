@@ -178,10 +178,10 @@ struct qk_world {
    * not (the near candidates), as keys in no order. With the current pairs they are
    * every pair whose float boxes then met. */
   qk__kvec_t near;
-  int ident_dirty;        /* an object was added or removed since the last update */
-  int by_bands;           /* the order of the last update is searched by bands (qk__world_by_bands,
-                             asked once by qk__world_reorder) */
-  struct qk__wpool *pool; /* the parked workers (collide/world_threads.c), or NULL */
+  int ident_dirty;  /* an object was added or removed since the last update */
+  int by_bands;     /* the order of the last update is searched by bands (qk__world_by_bands,
+                       asked once by qk__world_reorder) */
+  qk__pool_t *pool; /* the world's workers (collide/world_threads.c), or NULL */
 };
 
 /* The scratch cache: qk__wscr_init makes it the world's allocator (w->alloc) in front
@@ -212,15 +212,16 @@ static inline unsigned qk__world_update_threads(const qk_world_t *w) {
   return w->n_live < w->opt.thread_min ? 1 : w->opt.threads;
 }
 
-/* The world's workers (collide/world_threads.c): qk__world_pool_start(w, threads) starts
- * threads - 1 of them, parked between parallel steps, unless it has or cannot (the steps
- * then start threads of their own); qk__world_pool_free joins them. qk__world_run_jobs is
+/* The world's workers (collide/world_threads.c), a pool of index/ (qk__pool_t):
+ * qk__world_pool_start(w, threads) starts threads - 1 of them, waiting between parallel
+ * steps, unless it has or cannot (the steps then start threads of their own);
+ * qk__world_pool_free joins them. qk__world_run_jobs is
  * qk__run_jobs on them: fn(i, ud) for i in [0, n), job i in share i mod min(threads, n),
  * share 0 on the calling thread. */
 void qk__world_pool_start(qk_world_t *w, unsigned threads);
 void qk__world_pool_free(qk_world_t *w);
-/* While an update runs (on nonzero), the workers wait for its next step yielding for a
- * while before they park; otherwise they park at once. */
+/* While an update runs (on nonzero), the workers wait for its next step spinning for a
+ * while before they park (qk__pool_hold). */
 void qk__world_pool_hold(qk_world_t *w, int on);
 /* fn(ctx) on the first worker while the caller goes on (the pool's next step and its end
  * wait for it); 0, fn not run, when there is no pool here or it is taken. */

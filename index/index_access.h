@@ -31,6 +31,34 @@ qk_status_t qk__grow(const qk_allocator_t *a, void **p, size_t *cap, size_t need
  * shares, job i in share i mod their number (0 or 1 thread: all on the caller). */
 void qk__run_jobs(unsigned threads, unsigned n, void (*fn)(unsigned i, void *ud), void *ud);
 
+/* A pool of worker threads kept between parallel regions (index/threads.c): the build's team
+ * (qk__team_begin) and the world's workers (collide/world_threads.c) are pools. The calling
+ * thread runs share 0 of a region, the workers shares 1..; between regions the workers wait
+ * for the next one, spinning for a while when their owner holds the pool (regions follow
+ * each other within microseconds), then parked.
+ * qk__pool_new(a, nw) starts nw - 1 workers (memory from a, NULL: libc), or returns NULL
+ * when it cannot start one; qk__pool_free (which accepts NULL) waits for a detached job,
+ * joins them and frees the pool. qk__pool_threads: 1 + the workers (1 for NULL). */
+typedef struct qk__pool qk__pool_t;
+qk__pool_t *qk__pool_new(const qk_allocator_t *a, unsigned nw);
+void qk__pool_free(qk__pool_t *p);
+unsigned qk__pool_threads(const qk__pool_t *p);
+/* Whether p's workers run in this process (0 for NULL, and in a child forked after they
+ * started: there qk__pool_free only frees its memory). */
+int qk__pool_live(const qk__pool_t *p);
+/* Shares 0 .. nw - 1 of fn, share 0 on the calling thread, the others on the workers, and
+ * return 1 when all are done; 0, nothing run, when there is no pool (NULL, or a child forked
+ * after it started), another region holds it, or it has fewer than nw threads (the caller
+ * then runs the region otherwise, e.g. qk__run_shares). One region at a time; calls from
+ * several threads are safe (all but one get 0). */
+int qk__pool_run(qk__pool_t *p, unsigned nw, qk__share_fn fn, void *ctx);
+/* While held (on nonzero) the workers spin between regions (200 us) before they park; when
+ * released, they park at once. */
+void qk__pool_hold(qk__pool_t *p, int on);
+/* fn(ctx) on the first worker while the caller goes on (the pool's next region and its end
+ * wait for it); 0, fn not run, when there is no pool here or it is taken. */
+int qk__pool_detach(qk__pool_t *p, void (*fn)(void *), void *ctx);
+
 /* The short-buffer rule of the buffer-form calls: count every item in n, write it to out[n]
  * only while n < cap (value is evaluated only then). */
 #define QK__SINK_PUT(out, cap, n, value)                                                           \

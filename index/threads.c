@@ -4,15 +4,19 @@
  * created for it; a share whose thread cannot be created runs on the calling thread
  * afterwards, so the result never depends on how many threads actually ran.
  *
- * A call of several parallel regions (the bulk build: four to six) can hold a team for
- * its length (qk__team_begin/qk__team_end): its workers are started once, run the shares
- * of every region the calling thread starts, and wait in between, first spinning (with the
- * processor's pause, not a yield), then parked on a condition variable. Starting a thread and
- * waking it on the other core cost 0.03-2 ms a region on the two vCPUs of the seventeenth session's
- * machine (more than the build's regions take on two threads); a team pays that once per call.
+ * Callers that run many parallel regions in a row keep a pool of workers (qk__pool_t): they
+ * are started once, run the shares of every region the owner starts on the pool, and wait
+ * in between, first spinning (with the processor's pause, not a yield) while the owner
+ * holds the pool, then parked on a condition variable. Starting a thread and waking it on
+ * the other core cost 0.03-2 ms a region on the two vCPUs of the seventeenth session's
+ * machine (more than the build's regions take on two threads); a pool pays that once. The
+ * bulk build holds one for its length (a team: qk__team_begin/qk__team_end, four to six
+ * regions); a world keeps one from its first threaded update to qk_world_free (eight steps
+ * an update, collide/world_threads.c), with a detached job for the end of an update.
  */
 #define _POSIX_C_SOURCE 200809L
 #include <stdatomic.h>
+#include <string.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -63,17 +67,18 @@ static void *run_share(void *arg) {
 #endif
 
 #if defined(QK_HAVE_PTHREADS)
-/* How long a worker spins for the next region before it parks, and the calling thread for
- * the workers to finish one before it parks: the gaps between a build's regions (its
- * allocations and prefix sums) are well below this. A spinning thread does not yield: on a
- * loaded machine a yield hands its core to another process for a time slice, which made the
- * worker start a region 0.35-0.6 ms late at best (later than a thread created for it); a
- * parked one is woken with the scheduler's preference for a waking thread. */
-#define TEAM_SPIN_NS 200000
-#define TEAM_WAIT_NS 50000
+/* How long a worker spins for the next region before it parks while its pool is held (the
+ * gaps between a build's regions, its allocations and prefix sums, and between an update's
+ * steps are well below this), and the calling thread for the workers to finish a region
+ * before it parks. A spinning thread does not yield: on a loaded machine a yield hands its
+ * core to another process for a time slice, which made the worker start a region 0.35-0.6
+ * ms late at best (later than a thread created for it); a parked one is woken with the
+ * scheduler's preference for a waking thread. */
+#define POOL_SPIN_NS 200000
+#define POOL_WAIT_NS 50000
 
 /* A spinning loop's step. */
-static inline void team_relax(void) {
+static inline void pool_relax(void) {
 #if defined(__x86_64__) || defined(__i386__)
   __builtin_ia32_pause();
 #elif defined(__aarch64__)
@@ -81,32 +86,33 @@ static inline void team_relax(void) {
 #endif
 }
 
-typedef struct team team_t;
-typedef struct tworker {
-  team_t *p;
+typedef struct pworker {
+  qk__pool_t *p;
   unsigned idx; /* runs share idx + 1 */
-} tworker_t;
+} pworker_t;
 
-struct team {
+struct qk__pool {
   pthread_mutex_t mu;
   pthread_cond_t go, done;
   atomic_uint gen;     /* regions posted (each worker runs each once) */
   atomic_uint pending; /* workers still in the current region */
+  atomic_int busy;     /* a region (or the start of a detached job) is being run */
+  atomic_int hold;     /* the owner runs regions back to back: the workers spin between them */
   int quit;
-  bool busy;      /* a region is running on the team (the calling thread's flag) */
-  unsigned n_th;  /* workers started */
-  unsigned depth; /* nested qk__team_begin calls on the calling thread */
+  unsigned n_th;        /* workers started */
+  pid_t proc;           /* the process that started them (a forked child has none of them) */
+  qk_allocator_t alloc; /* the pool's memory came from here */
   /* The current region (written before gen is advanced, read after it is seen). */
   qk__share_fn fn;
   void *ctx;
   unsigned nw;
+  /* A detached job: run by the first worker as a region of its own that nobody waits for
+   * until the pool's next region or its end. */
+  void (*dfn)(void *);
+  void *dctx;
   pthread_t th[QK__MAX_THREADS];
-  tworker_t ww[QK__MAX_THREADS];
+  pworker_t ww[QK__MAX_THREADS];
 };
-
-/* The calling thread's team, if it holds one; its storage. */
-static _Thread_local team_t *cur_team;
-static _Thread_local team_t team_store;
 
 static long long now_ns(void) {
   struct timespec ts;
@@ -114,17 +120,24 @@ static long long now_ns(void) {
   return (long long)ts.tv_sec * 1000000000LL + ts.tv_nsec;
 }
 
-static void *team_worker(void *arg) {
-  tworker_t *me = arg;
-  team_t *p = me->p;
-  unsigned seen = 0;
+/* Whether a worker that began waiting at t0 still spins at time t: while the pool is held,
+ * for POOL_SPIN_NS; otherwise it parks at once. */
+static bool pool_spins(qk__pool_t *p, long long t0, long long t) {
+  return atomic_load_explicit(&p->hold, memory_order_relaxed) && t - t0 < POOL_SPIN_NS;
+}
+
+static void *pool_worker(void *arg) {
+  pworker_t *me = arg;
+  qk__pool_t *p = me->p;
+  unsigned seen = 0; /* (the pool posts nothing before its workers are started) */
   for (;;) {
+    /* The next region: spin a while, then park. */
     unsigned g = atomic_load_explicit(&p->gen, memory_order_acquire);
     if (g == seen) {
       long long t0 = now_ns();
       while ((g = atomic_load_explicit(&p->gen, memory_order_acquire)) == seen &&
-             now_ns() - t0 < TEAM_SPIN_NS)
-        team_relax();
+             pool_spins(p, t0, now_ns()))
+        pool_relax();
       if (g == seen) {
         pthread_mutex_lock(&p->mu);
         while ((g = atomic_load_explicit(&p->gen, memory_order_acquire)) == seen)
@@ -145,7 +158,7 @@ static void *team_worker(void *arg) {
 
 /* Post a region to every worker (under the mutex, so that a parking worker's check and wait
  * are one step and no wake-up is lost). */
-static void team_post(team_t *p, qk__share_fn fn, void *ctx, unsigned nw, int quit) {
+static void pool_post(qk__pool_t *p, qk__share_fn fn, void *ctx, unsigned nw, int quit) {
   pthread_mutex_lock(&p->mu);
   p->fn = fn, p->ctx = ctx, p->nw = nw, p->quit = quit;
   atomic_store_explicit(&p->pending, p->n_th, memory_order_relaxed);
@@ -154,65 +167,149 @@ static void team_post(team_t *p, qk__share_fn fn, void *ctx, unsigned nw, int qu
   pthread_mutex_unlock(&p->mu);
 }
 
-static void team_wait(team_t *p) {
+/* Wait for the workers to finish the region posted last. */
+static void pool_wait(qk__pool_t *p) {
+  if (!atomic_load_explicit(&p->pending, memory_order_acquire)) return;
   long long t0 = now_ns();
-  while (atomic_load_explicit(&p->pending, memory_order_acquire) && now_ns() - t0 < TEAM_WAIT_NS)
-    team_relax();
+  while (atomic_load_explicit(&p->pending, memory_order_acquire) && now_ns() - t0 < POOL_WAIT_NS)
+    pool_relax();
   pthread_mutex_lock(&p->mu);
   while (atomic_load_explicit(&p->pending, memory_order_acquire))
     pthread_cond_wait(&p->done, &p->mu);
   pthread_mutex_unlock(&p->mu);
 }
-#endif
 
-void qk__team_begin(unsigned nw) {
-#if defined(QK_HAVE_PTHREADS)
-  if (cur_team) {
-    cur_team->depth++;
-    return;
-  }
-  if (nw <= 1) return;
+static bool pool_forked(const qk__pool_t *p) { return p->proc != getpid(); }
+
+qk__pool_t *qk__pool_new(const qk_allocator_t *a, unsigned nw) {
+  if (nw <= 1) return NULL;
   if (nw > QK__MAX_THREADS) nw = QK__MAX_THREADS;
-  team_t *p = &team_store;
-  p->n_th = 0;
-  p->depth = 1;
-  p->busy = false;
-  if (pthread_mutex_init(&p->mu, NULL)) return;
+  qk__pool_t *p = qk__realloc(a, NULL, 0, sizeof *p);
+  if (!p) return NULL;
+  memset(p, 0, sizeof *p);
+  p->alloc = a ? *a : (qk_allocator_t){NULL, NULL};
+  if (pthread_mutex_init(&p->mu, NULL)) goto fail_mu;
   if (pthread_cond_init(&p->go, NULL)) goto fail_go;
   if (pthread_cond_init(&p->done, NULL)) goto fail_done;
   atomic_init(&p->gen, 0u);
   atomic_init(&p->pending, 0u);
-  p->quit = 0;
+  atomic_init(&p->busy, 0);
+  atomic_init(&p->hold, 0);
+  p->proc = getpid();
   for (unsigned i = 0; i + 1 < nw; i++) {
-    p->ww[i] = (tworker_t){p, i};
-    if (pthread_create(&p->th[i], NULL, team_worker, &p->ww[i])) break;
+    p->ww[i] = (pworker_t){p, i};
+    if (pthread_create(&p->th[i], NULL, pool_worker, &p->ww[i])) break;
     p->n_th++;
   }
-  if (p->n_th) {
-    cur_team = p;
-    return;
-  }
+  if (p->n_th) return p;
   pthread_cond_destroy(&p->done);
 fail_done:
   pthread_cond_destroy(&p->go);
 fail_go:
   pthread_mutex_destroy(&p->mu);
-#else
+fail_mu:
+  qk__free(a, p, sizeof *p);
+  return NULL;
+}
+
+void qk__pool_free(qk__pool_t *p) {
+  if (!p) return;
+  qk_allocator_t a = p->alloc;
+  if (!pool_forked(p)) {
+    pool_wait(p); /* (a detached job) */
+    pool_post(p, NULL, NULL, 0, 1);
+    for (unsigned i = 0; i < p->n_th; i++) pthread_join(p->th[i], NULL);
+    pthread_cond_destroy(&p->done);
+    pthread_cond_destroy(&p->go);
+    pthread_mutex_destroy(&p->mu);
+  } /* (else the workers and the locks are the parent's: only the memory is ours) */
+  qk__free(&a, p, sizeof *p);
+}
+
+unsigned qk__pool_threads(const qk__pool_t *p) { return p ? p->n_th + 1 : 1; }
+
+int qk__pool_live(const qk__pool_t *p) { return p && !pool_forked(p); }
+
+void qk__pool_hold(qk__pool_t *p, int on) {
+  if (p) atomic_store_explicit(&p->hold, on, memory_order_relaxed);
+}
+
+int qk__pool_run(qk__pool_t *p, unsigned nw, qk__share_fn fn, void *ctx) {
+  int idle = 0;
+  if (!p || nw > p->n_th + 1 || pool_forked(p) ||
+      !atomic_compare_exchange_strong_explicit(&p->busy, &idle, 1, memory_order_acquire,
+                                               memory_order_relaxed))
+    return 0;
+  pool_wait(p); /* (a detached job: the workers are ours once it ends) */
+  pool_post(p, fn, ctx, nw, 0);
+  fn(ctx, 0, nw);
+  pool_wait(p);
+  atomic_store_explicit(&p->busy, 0, memory_order_release);
+  return 1;
+}
+
+static void detach_share(void *ctx, unsigned s, unsigned nw) {
+  const qk__pool_t *p = ctx;
   (void)nw;
+  if (s == 1) p->dfn(p->dctx);
+}
+
+int qk__pool_detach(qk__pool_t *p, void (*fn)(void *), void *ctx) {
+  int idle = 0;
+  if (!p || pool_forked(p) ||
+      !atomic_compare_exchange_strong_explicit(&p->busy, &idle, 1, memory_order_acquire,
+                                               memory_order_relaxed))
+    return 0;
+  pool_wait(p); /* (the one before) */
+  p->dfn = fn, p->dctx = ctx;
+  pool_post(p, detach_share, p, 2, 0);
+  atomic_store_explicit(&p->busy, 0, memory_order_release);
+  return 1;
+}
+#else
+qk__pool_t *qk__pool_new(const qk_allocator_t *a, unsigned nw) {
+  (void)a, (void)nw;
+  return NULL;
+}
+void qk__pool_free(qk__pool_t *p) { (void)p; }
+unsigned qk__pool_threads(const qk__pool_t *p) {
+  (void)p;
+  return 1;
+}
+int qk__pool_live(const qk__pool_t *p) {
+  (void)p;
+  return 0;
+}
+void qk__pool_hold(qk__pool_t *p, int on) { (void)p, (void)on; }
+int qk__pool_run(qk__pool_t *p, unsigned nw, qk__share_fn fn, void *ctx) {
+  (void)p, (void)nw, (void)fn, (void)ctx;
+  return 0;
+}
+int qk__pool_detach(qk__pool_t *p, void (*fn)(void *), void *ctx) {
+  (void)p, (void)fn, (void)ctx;
+  return 0;
+}
 #endif
+
+/* The calling thread's team, if it holds one: a pool held for its length. */
+static _Thread_local qk__pool_t *cur_team;
+static _Thread_local unsigned team_depth; /* nested qk__team_begin calls */
+
+void qk__team_begin(unsigned nw) {
+  if (cur_team) {
+    team_depth++;
+    return;
+  }
+  cur_team = qk__pool_new(NULL, nw);
+  if (!cur_team) return;
+  team_depth = 1;
+  qk__pool_hold(cur_team, 1);
 }
 
 void qk__team_end(void) {
-#if defined(QK_HAVE_PTHREADS)
-  team_t *p = cur_team;
-  if (!p || --p->depth > 0) return;
-  team_post(p, NULL, NULL, 0, 1);
-  for (unsigned i = 0; i < p->n_th; i++) pthread_join(p->th[i], NULL);
-  pthread_cond_destroy(&p->done);
-  pthread_cond_destroy(&p->go);
-  pthread_mutex_destroy(&p->mu);
+  if (!cur_team || --team_depth > 0) return;
+  qk__pool_free(cur_team);
   cur_team = NULL;
-#endif
 }
 
 void qk__run_shares(unsigned nw, qk__share_fn fn, void *ctx) {
@@ -221,18 +318,10 @@ void qk__run_shares(unsigned nw, qk__share_fn fn, void *ctx) {
     return;
   }
   if (nw > QK__MAX_THREADS) nw = QK__MAX_THREADS;
+  /* On the calling thread's team: share 0 here, the others on its workers (a worker whose
+   * share number is nw or more only reports back). */
+  if (qk__pool_run(cur_team, nw, fn, ctx)) return;
 #if defined(QK_HAVE_PTHREADS)
-  team_t *tp = cur_team;
-  if (tp && !tp->busy && nw <= tp->n_th + 1) {
-    /* On the calling thread's team: share 0 here, the others on its workers (a worker
-     * whose share number is nw or more only reports back). */
-    tp->busy = true;
-    team_post(tp, fn, ctx, nw, 0);
-    fn(ctx, 0, nw);
-    team_wait(tp);
-    tp->busy = false;
-    return;
-  }
   pthread_t th[QK__MAX_THREADS];
   share_t sh[QK__MAX_THREADS];
   bool started[QK__MAX_THREADS] = {false};

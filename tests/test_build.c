@@ -40,14 +40,39 @@
  * count one each), every share and every job exactly once, also for a region inside a
  * share (on threads of its own), one asking for more shares than the team has, and after
  * the team ended; nested teams serve as the outermost one.
+ *
+ * The pool the team and the world's workers are (qk__pool_t, index/threads.c): the same
+ * workers run every region; a region started while the pool runs one (from a share), or
+ * asking for more shares than it has threads, is refused (0, nothing run); a detached job
+ * runs on a worker while the caller goes on, and the next region waits for it; in a child
+ * forked after the workers started the pool refuses every region and its free only frees
+ * memory.
  */
+#define _POSIX_C_SOURCE 200809L
 #include <math.h>
+#include <pthread.h>
+#include <stdatomic.h>
 #include <stdbool.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/wait.h>
+#include <time.h>
+#include <unistd.h>
 
 #include "index/index_access.h"
 #include "qk_test.h"
+
+/* Under ThreadSanitizer, which does not follow a multithreaded process into fork. */
+#if defined(__SANITIZE_THREAD__)
+#define QKT_TSAN 1
+#elif defined(__has_feature)
+#if __has_feature(thread_sanitizer)
+#define QKT_TSAN 1
+#endif
+#endif
+#ifndef QKT_TSAN
+#define QKT_TSAN 0
+#endif
 
 /* A coordinate on grid line k of 2^8 over [x0, x0 + side], or one ulp either side of it,
  * or anywhere (a quarter of them). */
@@ -525,9 +550,93 @@ static void test_build_team(void **state) {
   assert_int_equal(after.runs[2], 1);
 }
 
+static void pool_inner(void *ctx, unsigned w, unsigned nw) {
+  (void)ctx, (void)w, (void)nw;
+  fail_msg("a refused region ran");
+}
+
+typedef struct pool_probe {
+  unsigned ran[4], runs[4];
+  qk__pool_t *p;
+  int inner; /* qk__pool_run from share 1 */
+} pool_probe_t;
+
+static void pool_share(void *ctx, unsigned w, unsigned nw) {
+  (void)nw;
+  pool_probe_t *pp = ctx;
+  pp->ran[w]++;
+  pp->runs[w] = ++team_runs;
+  if (w == 1) pp->inner = qk__pool_run(pp->p, 2, pool_inner, NULL);
+}
+
+typedef struct pool_job {
+  atomic_int done;
+  pthread_t by;
+} pool_job_t;
+
+static void pool_slow_job(void *ctx) {
+  pool_job_t *j = ctx;
+  struct timespec ts = {0, 20000000}; /* 20 ms */
+  nanosleep(&ts, NULL);
+  j->by = pthread_self();
+  atomic_store(&j->done, 1);
+}
+
+static void test_build_pool(void **state) {
+  (void)state;
+  assert_null(qk__pool_new(NULL, 1));
+  assert_int_equal(qk__pool_threads(NULL), 1);
+  assert_int_equal(qk__pool_run(NULL, 2, pool_inner, NULL), 0);
+  assert_int_equal(qk__pool_detach(NULL, pool_slow_job, NULL), 0);
+  qk__pool_free(NULL);
+  qk__pool_t *p = qk__pool_new(NULL, 3);
+  assert_non_null(p);
+  assert_int_equal(qk__pool_threads(p), 3);
+  assert_true(qk__pool_live(p));
+  unsigned base = 0;
+  for (unsigned region = 1; region <= 4; region++) {
+    pool_probe_t pp = {.p = p, .inner = -1};
+    assert_int_equal(qk__pool_run(p, 3, pool_share, &pp), 1);
+    for (unsigned w = 0; w < 3; w++) assert_int_equal(pp.ran[w], 1);
+    if (region == 1) base = pp.runs[0] - 1;
+    assert_int_equal(pp.runs[0], base + region); /* (the calling thread) */
+    assert_int_equal(pp.runs[1], region);        /* the same two workers every time */
+    assert_int_equal(pp.runs[2], region);
+    assert_int_equal(pp.inner, 0); /* taken */
+  }
+  /* more shares than threads: refused */
+  assert_int_equal(qk__pool_run(p, 4, pool_inner, NULL), 0);
+  /* a detached job: the caller goes on, the next region waits for it */
+  pool_job_t job = {0};
+  assert_int_equal(qk__pool_detach(p, pool_slow_job, &job), 1);
+  assert_int_equal(atomic_load(&job.done), 0);
+  pool_probe_t after = {.p = p};
+  assert_int_equal(qk__pool_run(p, 2, pool_share, &after), 1);
+  assert_int_equal(atomic_load(&job.done), 1);
+  assert_false(pthread_equal(job.by, pthread_self()));
+  assert_int_equal(after.ran[0] + after.ran[1] + after.ran[2], 2);
+#if !QKT_TSAN /* (TSan does not follow a multithreaded process into fork) */
+  pid_t pid = fork();
+  assert_true(pid >= 0);
+  if (pid == 0) {
+    int ok = !qk__pool_live(p) && qk__pool_run(p, 2, pool_inner, NULL) == 0 &&
+             qk__pool_detach(p, pool_slow_job, NULL) == 0;
+    qk__pool_free(p); /* (only the memory) */
+    _exit(ok ? 0 : 1);
+  }
+  int st = 0;
+  assert_int_equal(waitpid(pid, &st, 0), pid);
+  assert_true(WIFEXITED(st) && WEXITSTATUS(st) == 0);
+#endif
+  pool_probe_t last = {.p = p};
+  assert_int_equal(qk__pool_run(p, 3, pool_share, &last), 1);
+  qk__pool_free(p);
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_build_team),
+      cmocka_unit_test(test_build_pool),
       cmocka_unit_test(test_build_deep_grid_lines),
       cmocka_unit_test(test_build_threads_adversarial),
       cmocka_unit_test(test_build_tree_beside_sort),
