@@ -118,7 +118,9 @@ before_exact(const qk_tree_t *t, double qx, double qy, uint32_t a, uint32_t b) {
   const double *xs = qk__tree_xs(t), *ys = qk__tree_ys(t);
   double da, db;
   int c;
-  if (d2_exact(qx, qy, xs[a], ys[a], &da) && d2_exact(qx, qy, xs[b], ys[b], &db))
+  if (xs[a] == xs[b] && ys[a] == ys[b]) /* one place twice (duplicates): the same distance */
+    c = 0;
+  else if (d2_exact(qx, qy, xs[a], ys[a], &da) && d2_exact(qx, qy, xs[b], ys[b], &db))
     c = (da > db) - (da < db);
   else
     c = qk__dist_cmp_exact(qx, qy, xs[a], ys[a], xs[b], ys[b]);
