@@ -70,6 +70,15 @@ static inline qk_status_t grow_vertices(qk__cdt_t *c, size_t need) {
   return need <= c->cap_v ? QK_OK : grow_vertices_slow(c, need, 0);
 }
 
+void *qk__cdt_grow_live(const qk_allocator_t *a, void *p, size_t osize, size_t nsize, size_t live) {
+  if (!p || 2 * live >= osize) return qk__realloc(a, p, osize, nsize);
+  void *q = qk__realloc(a, NULL, 0, nsize);
+  if (!q) return NULL;
+  memcpy(q, p, live);
+  qk__free(a, p, osize);
+  return q;
+}
+
 /* One per-triangle array (3 entries a triangle) to `cap` triangles; *have its capacity.
  * When less than half of it is in use (the mesher reserves ahead: on Norway at 1/256 of its
  * extent the seeding's reservation grew arrays of 35,065 triangles holding 3,908), a new
@@ -77,16 +86,9 @@ static inline qk_status_t grow_vertices(qk__cdt_t *c, size_t need) {
  * arena does: 1.26 MB of the 78 M instructions there, counted by byte). */
 static int grow_array(qk__cdt_t *c, uint32_t **arr, size_t *have, size_t cap) {
   if (*have >= cap) return 1;
-  uint32_t *a;
-  if (*arr && 2 * c->nt < *have) {
-    a = qk__realloc(c->alloc, NULL, 0, cap * 3 * sizeof **arr);
-    if (!a) return 0;
-    memcpy(a, *arr, c->nt * 3 * sizeof **arr);
-    qk__free(c->alloc, *arr, *have * 3 * sizeof **arr);
-  } else {
-    a = qk__realloc(c->alloc, *arr, *arr ? *have * 3 * sizeof **arr : 0, cap * 3 * sizeof **arr);
-    if (!a) return 0;
-  }
+  const size_t e = 3 * sizeof **arr, live = c->nt < *have ? c->nt : *have;
+  uint32_t *a = qk__cdt_grow_live(c->alloc, *arr, *arr ? *have * e : 0, cap * e, live * e);
+  if (!a) return 0;
   *arr = a, *have = cap;
   return 1;
 }

@@ -79,6 +79,12 @@ qk_status_t qk__cdt_init(qk__cdt_t *c, const qk_allocator_t *alloc, double x0, d
  * the room of arrays already grown). */
 qk_status_t qk__cdt_reserve(qk__cdt_t *c, size_t nv, size_t nt);
 
+/* Grow block p of osize bytes to nsize, keeping its first `live` bytes (NULL when out of
+ * memory; p is then unchanged). When those are under half of it (room reserved ahead), a
+ * new block gets the live part only, where a realloc may copy the whole old block (the
+ * mesher's arena does). */
+void *qk__cdt_grow_live(const qk_allocator_t *a, void *p, size_t osize, size_t nsize, size_t live);
+
 /* Give back the arrays' spare room (realloc to the current counts; a failed shrink changes
  * nothing). Later insertions grow them again. */
 void qk__cdt_shrink(qk__cdt_t *c);

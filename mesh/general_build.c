@@ -24,36 +24,22 @@ qk_status_t qk__gm_fit_to(qk__gm_t *g, size_t nv, size_t nt, int exact) {
    * a realloc may copy the whole old block (the mesher's arena does). */
   if (nv > g->vcap) {
     size_t c = fit_cap(g->vcap, nv, exact), live = g->cdt.nv < g->vcap ? g->cdt.nv : g->vcap;
-    qk__gm_vert_t *p;
-    if (g->vi && 2 * live < g->vcap) {
-      p = qk__realloc(g->a, NULL, 0, c * sizeof *p);
-      if (!p) return QK_ERR_NOMEM;
-      memcpy(p, g->vi, live * sizeof *p);
-      qk__free(g->a, g->vi, g->vcap * sizeof *p);
-    } else {
-      p = qk__realloc(g->a, g->vi, g->vcap * sizeof *p, c * sizeof *p);
-      if (!p) return QK_ERR_NOMEM;
-      live = g->vcap;
-    }
+    qk__gm_vert_t *p =
+        qk__cdt_grow_live(g->a, g->vi, g->vcap * sizeof *p, c * sizeof *p, live * sizeof *p);
+    if (!p) return QK_ERR_NOMEM;
     g->vi = p;
-    for (size_t i = live; i < c; i++) g->vi[i] = (qk__gm_vert_t){QK__CDT_NONE, QK__CDT_NONE, 0};
+    const size_t from = 2 * live < g->vcap ? live : g->vcap; /* (a realloc kept the rest) */
+    for (size_t i = from; i < c; i++) g->vi[i] = (qk__gm_vert_t){QK__CDT_NONE, QK__CDT_NONE, 0};
     g->vcap = c;
   }
   if (nt > g->fcap) {
     size_t c = fit_cap(g->fcap, nt, exact), live = g->cdt.nt < g->fcap ? g->cdt.nt : g->fcap;
-    uint32_t *p;
-    if (g->face && 2 * live < g->fcap) {
-      p = qk__realloc(g->a, NULL, 0, c * sizeof *p);
-      if (!p) return QK_ERR_NOMEM;
-      memcpy(p, g->face, live * sizeof *p);
-      qk__free(g->a, g->face, g->fcap * sizeof *p);
-    } else {
-      p = qk__realloc(g->a, g->face, g->fcap * sizeof *p, c * sizeof *p);
-      if (!p) return QK_ERR_NOMEM;
-      live = g->fcap;
-    }
+    uint32_t *p =
+        qk__cdt_grow_live(g->a, g->face, g->fcap * sizeof *p, c * sizeof *p, live * sizeof *p);
+    if (!p) return QK_ERR_NOMEM;
     g->face = p;
-    memset(g->face + live, 0xff, (c - live) * sizeof *g->face); /* QK__CDT_NONE */
+    const size_t from = 2 * live < g->fcap ? live : g->fcap;    /* (a realloc kept the rest) */
+    memset(g->face + from, 0xff, (c - from) * sizeof *g->face); /* QK__CDT_NONE */
     g->fcap = c;
   }
   return QK_OK;

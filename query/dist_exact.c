@@ -97,27 +97,6 @@ static int low_exp(double v) {
   return e - 53;
 }
 
-int qk__within_exact(double ax, double ay, double bx, double by, double r1, double r2) {
-  const double v[6] = {ax, bx, ay, by, r1, r2};
-  int e0 = 1 << 20;
-  for (int k = 0; k < 6; k++) {
-    int e = low_exp(v[k]);
-    if (e < e0) e0 = e;
-  }
-  big_t a, b, dx, dy, rs, s, t;
-  big_set(&a, ax, e0), big_set(&b, bx, e0);
-  big_absdiff(&dx, &a, ax < 0, &b, bx < 0);
-  big_set(&a, ay, e0), big_set(&b, by, e0);
-  big_absdiff(&dy, &a, ay < 0, &b, by < 0);
-  big_set(&a, r1, e0), big_set(&b, r2, e0);
-  big_add(&rs, &a, &b); /* radii are >= 0 */
-  big_sqr(&s, &dx);
-  big_sqr(&t, &dy);
-  big_add(&a, &s, &t);
-  big_sqr(&b, &rs);
-  return big_cmp(&a, &b) <= 0;
-}
-
 /* The squared distance from (qx, qy) to (px, py) into *out, all four inputs integers in
  * units of 2^e0. */
 static void big_d2(big_t *out, double qx, double qy, double px, double py, int e0) {
@@ -131,13 +110,29 @@ static void big_d2(big_t *out, double qx, double qy, double px, double py, int e
   big_add(out, &s, &a);
 }
 
-int qk__dist_cmp_exact(double qx, double qy, double ax, double ay, double bx, double by) {
-  const double v[6] = {qx, qy, ax, ay, bx, by};
+/* The lowest of the six values' low_exp: every one an integer in units of 2^that. */
+static int low_exp6(double a, double b, double c, double d, double e, double f) {
+  const double v[6] = {a, b, c, d, e, f};
   int e0 = 1 << 20;
   for (int k = 0; k < 6; k++) {
-    int e = low_exp(v[k]);
-    if (e < e0) e0 = e;
+    int x = low_exp(v[k]);
+    if (x < e0) e0 = x;
   }
+  return e0;
+}
+
+int qk__within_exact(double ax, double ay, double bx, double by, double r1, double r2) {
+  const int e0 = low_exp6(ax, bx, ay, by, r1, r2);
+  big_t a, b, d2, rs;
+  big_d2(&d2, bx, by, ax, ay, e0);
+  big_set(&a, r1, e0), big_set(&b, r2, e0);
+  big_add(&rs, &a, &b); /* radii are >= 0 */
+  big_sqr(&a, &rs);
+  return big_cmp(&d2, &a) <= 0;
+}
+
+int qk__dist_cmp_exact(double qx, double qy, double ax, double ay, double bx, double by) {
+  const int e0 = low_exp6(qx, qy, ax, ay, bx, by);
   big_t da, db;
   big_d2(&da, qx, qy, ax, ay, e0);
   big_d2(&db, qx, qy, bx, by, e0);

@@ -62,18 +62,6 @@
 #include "index/index_access.h"
 #include "qk_test.h"
 
-/* Under ThreadSanitizer, which does not follow a multithreaded process into fork. */
-#if defined(__SANITIZE_THREAD__)
-#define QKT_TSAN 1
-#elif defined(__has_feature)
-#if __has_feature(thread_sanitizer)
-#define QKT_TSAN 1
-#endif
-#endif
-#ifndef QKT_TSAN
-#define QKT_TSAN 0
-#endif
-
 /* A coordinate on grid line k of 2^8 over [x0, x0 + side], or one ulp either side of it,
  * or anywhere (a quarter of them). */
 static double near_line(qkt_rng_t *r, double x0, double side) {

@@ -989,6 +989,22 @@ static void test_query_knn_near_ties(void **state) {
  * alone or, where a point repeats, with its copy) and between two, k = 2, 8, 32, single
  * and batch, against brute force computed before the mode is set.
  */
+/* The 80 points at distance exactly 5 s from c on the (3, 4, 5) triangles' corners, and
+ * each one ulp off in x (both ways) and in y (both ways), appended to p[n ..): the new n. */
+static size_t on_circle_5s(qk_point_t *p, size_t n, qk_point_t c, double s) {
+  const double tr[][2] = {{3, 4}, {4, 3}, {5, 0}, {0, 5}};
+  for (int t = 0; t < 4; t++)
+    for (int sg = 0; sg < 4; sg++) {
+      double x = c.x + (sg & 1 ? -1 : 1) * tr[t][0] * s, y = c.y + (sg & 2 ? -1 : 1) * tr[t][1] * s;
+      p[n++] = (qk_point_t){x, y};
+      p[n++] = (qk_point_t){nextafter(x, c.x), y};
+      p[n++] = (qk_point_t){nextafter(x, -c.x * 4), y};
+      p[n++] = (qk_point_t){x, nextafter(y, 1e308)};
+      p[n++] = (qk_point_t){x, nextafter(y, -1e308)};
+    }
+  return n;
+}
+
 /* The radius query is exact for any finite values (seventeenth session): points on a
  * circle of radius 5 s through Pythagorean triples (3 s, 4 s), their neighbours one ulp
  * inside and outside, and random points, for scales s from 2^-1074 (subnormal) to 2^1017,
@@ -1004,17 +1020,7 @@ static void test_query_radius_exact(void **state) {
     double s = ldexp(1, scales[si]);
     qk_point_t c = {7 * s, -2 * s}, p[200];
     size_t n = 0;
-    const double tr[][2] = {{3, 4}, {4, 3}, {5, 0}, {0, 5}};
-    for (int t = 0; t < 4; t++)
-      for (int sg = 0; sg < 4; sg++) {
-        double x = c.x + (sg & 1 ? -1 : 1) * tr[t][0] * s,
-               y = c.y + (sg & 2 ? -1 : 1) * tr[t][1] * s;
-        p[n++] = (qk_point_t){x, y};
-        p[n++] = (qk_point_t){nextafter(x, c.x), y};
-        p[n++] = (qk_point_t){nextafter(x, -c.x * 4), y};
-        p[n++] = (qk_point_t){x, nextafter(y, 1e308)};
-        p[n++] = (qk_point_t){x, nextafter(y, -1e308)};
-      }
+    n = on_circle_5s(p, n, c, s);
     while (n < 200)
       p[n++] = (qk_point_t){c.x + qkt_rng_range(&g, -6, 6) * s, c.y + qkt_rng_range(&g, -6, 6) * s};
     qk_tree_t *t;
@@ -1123,17 +1129,7 @@ static void test_query_knn_exact(void **state) {
     p[n++] = (qk_point_t){c.x + 3 * s, c.y - 4 * s};
     p[n++] = (qk_point_t){c.x - 2 * s, c.y + nextafter(2 * s, 0)};
     p[n++] = (qk_point_t){c.x + nextafter(2 * s, INFINITY), c.y - 2 * s};
-    const double tr[][2] = {{3, 4}, {4, 3}, {5, 0}, {0, 5}};
-    for (int t = 0; t < 4; t++)
-      for (int sg = 0; sg < 4; sg++) {
-        double x = c.x + (sg & 1 ? -1 : 1) * tr[t][0] * s,
-               y = c.y + (sg & 2 ? -1 : 1) * tr[t][1] * s;
-        p[n++] = (qk_point_t){x, y};
-        p[n++] = (qk_point_t){nextafter(x, c.x), y};
-        p[n++] = (qk_point_t){nextafter(x, -c.x * 4), y};
-        p[n++] = (qk_point_t){x, nextafter(y, 1e308)};
-        p[n++] = (qk_point_t){x, nextafter(y, -1e308)};
-      }
+    n = on_circle_5s(p, n, c, s);
     while (n < N)
       p[n++] = (qk_point_t){c.x + qkt_rng_range(&g, -6, 6) * s, c.y + qkt_rng_range(&g, -6, 6) * s};
     const qk_point_t qs[NQ] = {c, p[7], {c.x + 0.5 * s, c.y}, {c.x - 20 * s, c.y + 9 * s}};
