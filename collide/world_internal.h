@@ -105,13 +105,9 @@ typedef struct qk__prows {
 /* The update's large scratch kept between updates (collide/world_scratch.c): freed
  * blocks of QK__WSCR_MIN bytes and more, up to QK__WSCR_BLOCKS, and the blocks taken from
  * them (lent), larger than their users asked, with their true sizes. */
-#define QK__WSCR_MIN ((size_t)16 << 10)
-/* Below this (where fresh blocks are not marked for huge pages, qk__advise_huge), a block
- * is kept one update longer, a request may take one up to four times its size, and a
- * block cut in an update keeps its room. */
-#define QK__WSCR_SMALL ((size_t)4 << 20)
-#define QK__WSCR_BLOCKS 64
-#define QK__WSCR_LENT 128
+#define QK__WSCR_MIN ((size_t)256 << 10)
+#define QK__WSCR_BLOCKS 32
+#define QK__WSCR_LENT 64
 typedef struct qk__wscr_blk {
   void *p;
   size_t cap;

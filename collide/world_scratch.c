@@ -8,30 +8,16 @@
  * thread, 6 000 on two). So the world's allocator is this cache in front of the one the
  * world was given: during an update a freed block of QK__WSCR_MIN bytes or more is kept
  * (up to QK__WSCR_BLOCKS of them), and a fresh request of that size takes the smallest
- * kept block that holds it and is at most twice its size (see find). A block kept at the
- * start of an update and not taken by its end is freed then (a small one at the end of
- * the next), so a world that shrinks gives its memory back within a few updates. Outside an update
- * the cache keeps nothing and takes nothing. Allocation sites need no change: they call the world's
- * allocator as before.
+ * kept block that holds it and is at most twice its size. A block kept at the start of
+ * an update and not taken by its end is freed then, so a world that shrinks gives its
+ * memory back within a few updates. Outside an update the cache keeps nothing and takes
+ * nothing. Allocation sites need no change: they call the world's allocator as before.
  *
  * A block taken from the cache may be larger than its user believes (its request); such
  * blocks are listed (lent) with their true size, so that their later free or realloc
  * hands the given allocator the size it allocated. The update's worker threads allocate
  * too, so the lists are behind a spin lock (held for a few list operations, never across
  * a call of the given allocator).
- *
- * The bound was 256 KB until the eighteenth session. At 10^4 objects an update's scratch
- * is blocks of 16 to 250 KB, which then went to the given allocator every frame; glibc
- * gives such blocks back to the kernel now and then (trimming its heap, unmapping one
- * above its mmap threshold), and their pages fault in again: over the benchmark's 29 timed
- * frames, 244 page faults at 10^4 uniform boxes and 1 340 clustered (a fault costs 15 to 31
- * us on a paravirtualised guest). Blocks below QK__WSCR_SMALL (4 MB: larger fresh ones are
- * marked for huge pages, below) are also kept one update longer, may serve a request of a
- * quarter of their size and more, and keep their room when cut in an update; a block that
- * grows in an update moves to a kept one (lists that grow by doubling). Faults over those
- * frames 89 (uniform) and 405 (clustered); the held blocks, between updates, 1.3 MB and
- * 4.9 MB more (memory at 10^5 clustered boxes unchanged, its faults in frames 1-5 5 442 ->
- * 1 706).
  *
  * A fresh block of 4 MB or more from the default allocator is marked for transparent huge
  * pages (qk__advise_huge): where a first touch of a 4 KB page is dear (15 us of CPU time on
@@ -56,44 +42,24 @@ static int lent_of(const qk__wscr_t *c, const void *p) {
   return -1;
 }
 
-/* The kept block for a request of nsize bytes, or -1: the smallest that holds it and is
- * at most twice it, else the smallest below QK__WSCR_SMALL at most four times it (a
- * request whose size fell or rose by more than half since the last frame, often in the
- * first frames after a build, otherwise takes fresh pages while such a block is given
- * back). */
-static int find(const qk__wscr_t *c, size_t nsize) {
-  int best = -1;
-  for (unsigned i = 0; i < c->n_blk; i++)
-    if (c->blk[i].cap >= nsize && c->blk[i].cap / 2 <= nsize &&
-        (best < 0 || c->blk[i].cap < c->blk[best].cap))
-      best = (int)i;
-  if (best < 0)
-    for (unsigned i = 0; i < c->n_blk; i++)
-      if (c->blk[i].cap >= nsize && c->blk[i].cap / 4 <= nsize && c->blk[i].cap < QK__WSCR_SMALL &&
-          (best < 0 || c->blk[i].cap < c->blk[best].cap))
-        best = (int)i;
-  return best;
-}
-
-/* Lends kept block b for a request of nsize bytes (the lock held). */
-static void *lend(qk__wscr_t *c, int b, size_t nsize) {
-  void *q = c->blk[b].p;
-  c->lent[c->n_lent++] = (qk__wscr_lent_t){q, c->blk[b].cap, nsize};
-  c->blk[b] = c->blk[--c->n_blk];
-  return q;
-}
-
 static void *cache_fn(void *ud, void *p, size_t osize, size_t nsize) {
   qk__wscr_t *c = ud;
   /* Small blocks (never lent: a lent block's size is at least QK__WSCR_MIN) pass. */
   if (osize < QK__WSCR_MIN && (p || nsize < QK__WSCR_MIN))
     return qk__realloc(&c->user, p, osize, nsize);
   if (!p) {
-    /* A fresh block: a kept one (find). */
+    /* A fresh block: the smallest kept one that holds it and is at most twice it. */
     lock(c);
-    int best = c->active && c->n_lent < QK__WSCR_LENT ? find(c, nsize) : -1;
+    int best = -1;
+    if (c->active && c->n_lent < QK__WSCR_LENT)
+      for (unsigned i = 0; i < c->n_blk; i++)
+        if (c->blk[i].cap >= nsize && c->blk[i].cap / 2 <= nsize &&
+            (best < 0 || c->blk[i].cap < c->blk[best].cap))
+          best = (int)i;
     if (best >= 0) {
-      void *q = lend(c, best, nsize);
+      void *q = c->blk[best].p;
+      c->lent[c->n_lent++] = (qk__wscr_lent_t){q, c->blk[best].cap, nsize};
+      c->blk[best] = c->blk[--c->n_blk];
       unlock(c);
       return q;
     }
@@ -140,51 +106,6 @@ static void *cache_fn(void *ud, void *p, size_t osize, size_t nsize) {
   }
   int active = c->active;
   unlock(c);
-  if (active && nsize > cap && nsize >= QK__WSCR_MIN) {
-    /* Grown in an update: moved to a kept block (or a fresh one, an eighth larger), its
-     * old block kept. A list that grows by doubling from a small start (the search's
-     * keys, the began pairs of a range) took fresh pages from the given allocator at
-     * every step, every frame. */
-    void *q = cache_fn(c, NULL, 0, nsize);
-    if (q) {
-      memcpy(q, p, osize);
-      if (cap < QK__WSCR_SMALL) {
-        cache_fn(c, p, osize, 0);
-      } else {
-        lock(c);
-        if ((k = lent_of(c, p)) >= 0) c->lent[k] = c->lent[--c->n_lent];
-        unlock(c);
-        qk__realloc(&c->user, p, cap, 0);
-      }
-      return q;
-    }
-  }
-  if (active && nsize < osize && nsize >= QK__WSCR_MIN) {
-    /* Cut to less than half in an update: moved to a kept block that fits, else, below
-     * QK__WSCR_SMALL, left where it is with its room (lent): a fresh block of the new
-     * size would be fresh pages, and a list cut after a frame of many pairs (the rows,
-     * the began pairs) wants its room again within a few frames. */
-    lock(c);
-    int b = c->n_lent < QK__WSCR_LENT ? find(c, nsize) : -1;
-    if (b >= 0) {
-      void *q = lend(c, b, nsize);
-      unlock(c);
-      memcpy(q, p, nsize);
-      cache_fn(c, p, osize, 0);
-      return q;
-    }
-    k = lent_of(c, p); /* (other threads may have moved the entries) */
-    if (cap < QK__WSCR_SMALL) {
-      if (k < 0 && c->n_lent + c->n_resv < QK__WSCR_LENT)
-        k = (int)c->n_lent++, c->lent[k] = (qk__wscr_lent_t){p, cap, 0};
-      if (k >= 0) {
-        c->lent[k].size = nsize;
-        unlock(c);
-        return p;
-      }
-    }
-    unlock(c);
-  }
   if (active && nsize < osize) {
     /* Cut to less than half in an update: moved to a block of its new size, and its old
      * block kept for a request of about its size (the next frame's, or this one's). */
@@ -249,8 +170,7 @@ static void drop(qk__wscr_t *c, unsigned keep, qk_world_t *w) {
   g0.n = 0;
   lock(c);
   for (unsigned i = 0; i < c->n_blk;)
-    if (!keep || (c->blk[i].epoch != keep &&
-                  (c->blk[i].epoch + 1 != keep || c->blk[i].cap >= QK__WSCR_SMALL)))
+    if (!keep || c->blk[i].epoch != keep)
       g0.b[g0.n++] = c->blk[i], c->blk[i] = c->blk[--c->n_blk];
     else
       i++;
