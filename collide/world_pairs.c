@@ -73,10 +73,10 @@ static int rows_alloc(const qk_allocator_t *a, qk__prows_t *r, size_t n_nz) {
 /* The rows over n_obj slots from a0 on from their lengths ca (ca[a] for slot a0 + a; n
  * keys in all): row and start of every slot that has pairs; with cursors, ca[a] becomes
  * its row's first place. 0 when memory ran short. */
-static int rows_index(const qk_allocator_t *al, qk__prows_t *r, uint32_t *ca, uint32_t a0,
-                      uint32_t n_obj, size_t n, int cursors) {
-  size_t nz = 0;
-  for (uint32_t a = 0; a < n_obj; a++) nz += ca[a] != 0;
+static inline __attribute__((always_inline)) int rows_fill(const qk_allocator_t *al, qk__prows_t *r,
+                                                           uint32_t *ca, uint32_t a0,
+                                                           uint32_t n_obj, size_t n, int cursors,
+                                                           size_t nz) {
   if (!rows_alloc(al, r, nz)) return 0;
   uint32_t sa = 0;
   nz = 0;
@@ -88,6 +88,12 @@ static int rows_index(const qk_allocator_t *al, qk__prows_t *r, uint32_t *ca, ui
   }
   r->start[nz] = (uint32_t)n;
   return 1;
+}
+static int rows_index(const qk_allocator_t *al, qk__prows_t *r, uint32_t *ca, uint32_t a0,
+                      uint32_t n_obj, size_t n, int cursors) {
+  size_t nz = 0;
+  for (uint32_t a = 0; a < n_obj; a++) nz += ca[a] != 0;
+  return rows_fill(al, r, ca, a0, n_obj, n, cursors, nz);
 }
 
 /*
@@ -250,10 +256,9 @@ __attribute__((noinline)) static int rows_buckets(const qk_allocator_t *al, cons
  * bytes that differ (cnt: 257 entries), so the passes cost the keys, not the slots, then the rows
  * from the sorted keys.
  */
-static inline __attribute__((always_inline)) int make_rows(const qk_allocator_t *al, uint64_t *keys,
-                                                           uint64_t *tmp, size_t n, uint32_t *cnt,
-                                                           uint32_t a0, uint32_t n_a, uint32_t n_b,
-                                                           int bucket, qk__prows_t *r) {
+static inline __attribute__((always_inline)) int
+make_rows(const qk_allocator_t *al, uint64_t *keys, uint64_t *tmp, size_t n, uint32_t *cnt,
+          uint32_t a0, uint32_t n_a, uint32_t n_b, int bucket, const int whole, qk__prows_t *r) {
   uint32_t *rb = r->b;
   r->n = n;
   if (n * 4 < n_b) {
@@ -294,8 +299,16 @@ static inline __attribute__((always_inline)) int make_rows(const qk_allocator_t 
     cb[(uint32_t)k + 1]++;
     ca[(k >> 32) - a0]++;
   }
-  for (uint32_t b = 1; b <= n_b; b++) cb[b] += cb[b - 1];
-  if (!rows_index(al, r, ca, a0, n_a, n, 1)) return 0;
+  if (whole) {
+    /* (slots a and b the same range from 0: the b counts' prefix and the count of rows
+     * in one pass over the slots) */
+    size_t nz = 0;
+    for (uint32_t b = 1; b <= n_b; b++) cb[b] += cb[b - 1], nz += ca[b - 1] != 0;
+    if (!rows_fill(al, r, ca, 0, n_b, n, 1, nz)) return 0;
+  } else {
+    for (uint32_t b = 1; b <= n_b; b++) cb[b] += cb[b - 1];
+    if (!rows_index(al, r, ca, a0, n_a, n, 1)) return 0;
+  }
   QK__UNROLL4
   for (size_t i = 0; i < n; i++) t32[cb[(uint32_t)keys[i]]++] = (uint32_t)(keys[i] >> 32) - a0;
   /* cb[b] is now the end of b's run, where b + 1's starts. */
@@ -311,7 +324,7 @@ static inline __attribute__((always_inline)) int make_rows(const qk_allocator_t 
 __attribute__((noinline)) static int make_rows_all(const qk_allocator_t *al, uint64_t *keys,
                                                    uint64_t *tmp, size_t n, uint32_t *cnt,
                                                    uint32_t n_obj, qk__prows_t *r) {
-  return make_rows(al, keys, tmp, n, cnt, 0, n_obj, n_obj, 1, r);
+  return make_rows(al, keys, tmp, n, cnt, 0, n_obj, n_obj, 1, 1, r);
 }
 
 /* make_rows for a thread's range of slots (no buckets: rows_frame did those). */
@@ -319,7 +332,7 @@ __attribute__((noinline)) static int make_rows_range(const qk_allocator_t *al, u
                                                      uint64_t *tmp, size_t n, uint32_t *cnt,
                                                      uint32_t a0, uint32_t n_a, uint32_t n_b,
                                                      qk__prows_t *r) {
-  return make_rows(al, keys, tmp, n, cnt, a0, n_a, n_b, 0, r);
+  return make_rows(al, keys, tmp, n, cnt, a0, n_a, n_b, 0, 0, r);
 }
 
 /* A slot's object is not the one it held at the last update (removed, or a new one). */

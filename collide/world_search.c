@@ -196,24 +196,16 @@ static __attribute__((noinline)) uint64_t *test_run_exact(share_t *s, uint32_t s
   }
 }
 
-/* The pairs of object m with the objects at order positions [lo, hi) (lo < hi): the
- * first and last groups masked to the range. The keys are written at once, and kept
- * when the pair is decided (the room for them all is reserved first). The loop makes no
- * call while the float boxes decide (both exact: every box of the benchmark's scenes),
- * so the probe stays in registers (a call would clobber them all, every group reloading
- * it from the stack); the first pair they cannot decide hands the rest to
- * test_run_exact. */
-static inline __attribute__((always_inline)) int test_run_k(share_t *s, kc_t *kc, const me_t *m,
-                                                            uint32_t lo, uint32_t hi) {
-  if ((size_t)(kc->end - kc->v) < hi - lo && !kc_grow(s, kc, hi - lo)) return 0;
-  const float *fg = s->pk->fgrp;
-  const uint32_t *ord = s->w->order;
-  const uint8_t *fx = s->pk->fexact;
-  const uint32_t slot = m->slot;
-  const uint64_t hs = m->hs;
-  const unsigned ek = m->exact;
-  const probe_t p = m->p; /* (in registers: the keys' stores could alias m) */
-  uint64_t *v = kc->v;
+/* The pairs of the object of slot `slot` (key half hs, float box exact when ek, broadcast
+ * in p) with the objects at order positions [lo, hi) (lo < hi): the first and last groups
+ * masked to the range. The keys are written at v, which has room for hi - lo of them, and
+ * kept when the pair is decided; returns past the kept ones. The loop makes no call while
+ * the float boxes decide (both exact: every box of the benchmark's scenes), so the probe
+ * stays in registers (a call would clobber them all, every group reloading it from the
+ * stack); the first pair they cannot decide hands the rest to test_run_exact. */
+static inline __attribute__((always_inline)) uint64_t *
+run_keys(share_t *s, const float *fg, const uint32_t *ord, const uint8_t *fx, uint32_t slot,
+         uint64_t hs, unsigned ek, probe_t p, uint32_t lo, uint32_t hi, uint64_t *v) {
   uint32_t q = lo >> 2, qe = (hi - 1) >> 2;
   unsigned bits = group_hits(fg + (size_t)q * 16, &p) & ~((1u << (lo & 3)) - 1) & 15u;
   const unsigned last = (2u << ((hi - 1) & 3)) - 1;
@@ -221,19 +213,25 @@ static inline __attribute__((always_inline)) int test_run_k(share_t *s, kc_t *kc
     if (q == qe) bits &= last;
     while (bits) {
       uint32_t j = q * 4 + (uint32_t)__builtin_ctz(bits);
-      if (!(ek & fx[j])) {
-        v = test_run_exact(s, slot, ek, QK__PROBE_PASS(p), q, bits, qe, last, v);
-        goto done;
-      }
+      if (!(ek & fx[j]))
+        return test_run_exact(s, slot, ek, QK__PROBE_PASS(p), q, bits, qe, last, v);
       bits &= bits - 1;
       *v++ = pair_key(slot, hs, ord[j]);
     }
-    if (q == qe) break;
+    if (q == qe) return v;
     q++;
     bits = group_hits(fg + (size_t)q * 16, &p);
   }
-done:
-  kc->v = v;
+}
+
+/* The pairs of object m with the objects at order positions [lo, hi) (lo < hi), the keys
+ * at kc (room reserved here). */
+static inline __attribute__((always_inline)) int test_run_k(share_t *s, kc_t *kc, const me_t *m,
+                                                            uint32_t lo, uint32_t hi) {
+  if ((size_t)(kc->end - kc->v) < hi - lo && !kc_grow(s, kc, hi - lo)) return 0;
+  const probe_t p = m->p; /* (in registers: the keys' stores could alias m) */
+  kc->v = run_keys(s, s->pk->fgrp, s->w->order, s->pk->fexact, m->slot, m->hs, m->exact, p, lo, hi,
+                   kc->v);
   return 1;
 }
 
@@ -278,73 +276,64 @@ static int cross_run(share_t *s, kc_t *kc, uint32_t a, uint32_t blo, uint32_t bh
   return 1;
 }
 
-/* Every object of cell a against the objects of cells [u, u1) (two or three consecutive
- * cells of the row above), each against the run of those cells whose boxes its float box
- * meets at the ends: a cell whose float box (rounded from its box: monotone) misses the
- * object's misses every object's float box in it. */
-static int cross_cells(share_t *s, kc_t *kc, uint32_t a, uint32_t u, uint32_t u1) {
-  const qk__wcell_t *cl = s->w->cells;
-  const qk_box_t *hb = s->pk->hb;
+/* same_level's runs for the objects [lo, hi) of a cell: each against the objects after it
+ * up to hi, or up to hi2 when its float xmax reaches nx (the next cell's least xmin); and,
+ * with `up`, against the row above's cells whose float boxes (cg, one lane a cell) its
+ * float box meets, from the first such cell to the last (ust: where their objects start,
+ * `above` of them in all). */
+static inline __attribute__((always_inline)) int level_runs(share_t *s, kc_t *kc, uint32_t lo,
+                                                            uint32_t hi, uint32_t hi2, float nx,
+                                                            const float *cg, const uint32_t *ust,
+                                                            uint32_t above, const int up) {
   const float *fg = s->pk->fgrp;
-  float cb[3][4] = {{0}}; /* the cells' boxes as floats */
-  const uint32_t n = u1 - u;
-  for (uint32_t i = 0; i < n; i++) {
-    const qk_box_t *h = &hb[u + i];
-    cb[i][0] = (float)h->xmin, cb[i][1] = (float)h->ymin;
-    cb[i][2] = (float)h->xmax, cb[i][3] = (float)h->ymax;
-  }
-  float ub[4] = {cb[0][0], cb[0][1], cb[0][2], cb[0][3]}; /* the box around them */
-  for (uint32_t i = 1; i < n; i++) {
-    ub[0] = ub[0] < cb[i][0] ? ub[0] : cb[i][0], ub[1] = ub[1] < cb[i][1] ? ub[1] : cb[i][1];
-    ub[2] = ub[2] > cb[i][2] ? ub[2] : cb[i][2], ub[3] = ub[3] > cb[i][3] ? ub[3] : cb[i][3];
-  }
-  for (uint32_t k = cl[a].start, ke = cl[a + 1].start; k < ke; k++) {
+  const uint32_t *ord = s->w->order;
+  const uint8_t *fx = s->pk->fexact;
+  uint64_t *v = kc->v;
+  for (uint32_t k = lo; k < hi; k++) {
     const float *f = lane_of(fg, k);
-    uint32_t i = 0, j = n;
-#define QK__MEETS(c) (f[0] <= (c)[2] && (c)[0] <= f[8] && f[4] <= (c)[3] && (c)[1] <= f[12])
-    if (!QK__MEETS(ub)) continue;
-    while (i < j && !QK__MEETS(cb[i])) i++;
-    while (j > i && !QK__MEETS(cb[j - 1])) j--;
-#undef QK__MEETS
-    if (i == j) continue;
-    me_t m = me_of(s, k);
-    if (!test_run_k(s, kc, &m, cl[u + i].start, cl[u + j].start)) return 0;
+    const uint32_t e = f[8] >= nx ? hi2 : hi;
+    if (!up && k + 1 >= e) continue;
+    if ((size_t)(kc->end - v) < (e - k) + above) {
+      kc->v = v;
+      if (!kc_grow(s, kc, (e - k) + above)) return 0;
+      v = kc->v;
+    }
+    const probe_t p = probe_of(f);
+    const uint32_t slot = ord[k];
+    const uint64_t hs = (uint64_t)slot << 32;
+    const unsigned ek = fx[k];
+    if (k + 1 < e) v = run_keys(s, fg, ord, fx, slot, hs, ek, p, k + 1, e, v);
+    if (up) {
+      const unsigned m = group_hits(cg, &p);
+      if (m) {
+        uint32_t i = (uint32_t)__builtin_ctz(m), j = 32u - (uint32_t)__builtin_clz(m);
+        v = run_keys(s, fg, ord, fx, slot, hs, ek, p, ust[i], ust[j], v);
+      }
+    }
   }
+  kc->v = v;
   return 1;
 }
-
 /* The pairs of cell a with its own level: within it, with the next cell of its row when
  * adjacent, and with the cells of the row above whose loose squares meet its own (three
- * consecutive ones at most, found by *up, a cursor that only moves forward). */
+ * consecutive ones at most, found by *up, a cursor that only moves forward). Each of a's
+ * objects is broadcast once and meets two runs: the objects after it in its cell and,
+ * when its float box reaches the next cell's, that cell's (they follow in the order); and
+ * the row above's cells whose float boxes its float box meets, found by one four-wide test
+ * against those boxes (rounded from the cells' boxes: monotone, so a cell whose float box
+ * misses the object's misses every object's float box in it), from the first such cell to
+ * the last (consecutive in the order too). */
 static int same_level(share_t *s, kc_t *kc, uint32_t a, uint32_t *up) {
   const qk_world_t *w = s->w;
   const qk__wcell_t *c = &w->cells[a];
   const qk_box_t *hb = s->pk->hb, *ha = &hb[a];
   int l = c->level;
-  /* Its objects and the next cell's follow in the order, so each object meets one run of
-   * the ones after it. */
   uint32_t lo = c->start, hi = c[1].start, hi2 = hi;
-  float nx = 0; /* the next cell's least xmin as a float */
+  float nx = INFINITY; /* the next cell's least xmin as a float */
   if (c[1].level == l && c[1].cy == c->cy && c[1].cx == c->cx + 1 && boxes_meet(ha, &hb[a + 1]))
     hi2 = c[2].start, nx = (float)hb[a + 1].xmin;
-  /* (an object whose float xmax is below nx misses every float box of the next cell:
-   * rounding is monotone; its run then ends with its own cell) */
-  if (hi2 == hi) {
-    for (uint32_t k = lo; k + 1 < hi; k++) {
-      me_t m = me_of(s, k);
-      if (!test_run_k(s, kc, &m, k + 1, hi)) return 0;
-    }
-  } else {
-    const float *fg = s->pk->fgrp;
-    for (uint32_t k = lo; k < hi; k++) {
-      uint32_t e = lane_of(fg, k)[8] >= nx ? hi2 : hi;
-      if (k + 1 >= e) continue;
-      me_t m = me_of(s, k);
-      if (!test_run_k(s, kc, &m, k + 1, e)) return 0;
-    }
-  }
-  /* The row above: up to three consecutive cells, so one run too (without the end cells
-   * whose boxes miss this one's). */
+  /* The row above: up to three consecutive cells (without the end cells whose boxes miss
+   * this one's). */
   uint32_t end = w->lv_first[l - QK__LMIN] + w->lv_n[l - QK__LMIN];
   uint32_t u = *up > a + 1 ? *up : a + 1;
   int64_t ty = (int64_t)c->cy + 1, tx = (int64_t)c->cx - 1;
@@ -354,16 +343,32 @@ static int same_level(share_t *s, kc_t *kc, uint32_t a, uint32_t *up) {
   while (u1 < end && w->cells[u1].cy == ty && w->cells[u1].cx <= tx + 2) u1++;
   while (u < u1 && !boxes_meet(ha, &hb[u])) u++;
   while (u1 > u && !boxes_meet(ha, &hb[u1 - 1])) u1--;
-  if (u == u1) return 1;
-  /* (a few objects: one run, checked against the box around the cells; trimming each
-   * object's run costs more than it saves) */
-  if (u + 1 < u1 && hi - lo >= 4) return cross_cells(s, kc, a, u, u1);
-  qk_box_t ub = hb[u];
-  for (uint32_t k = u + 1; k < u1; k++) {
-    ub.xmin = qk__min(ub.xmin, hb[k].xmin), ub.ymin = qk__min(ub.ymin, hb[k].ymin);
-    ub.xmax = qk__max(ub.xmax, hb[k].xmax), ub.ymax = qk__max(ub.ymax, hb[k].ymax);
+  if (u == u1) { /* (the common cell of a sparse world: nothing above) */
+    if (hi2 == hi) {
+      for (uint32_t k = lo; k + 1 < hi; k++) {
+        me_t m = me_of(s, k);
+        if (!test_run_k(s, kc, &m, k + 1, hi)) return 0;
+      }
+      return 1;
+    }
+    return level_runs(s, kc, lo, hi, hi2, nx, NULL, NULL, 0, 0);
   }
-  return cross_run(s, kc, a, w->cells[u].start, w->cells[u1].start, &ub);
+  /* Their boxes as floats, one lane a cell (the lanes after them an empty box), and where
+   * their objects start in the order (ust[i] for cell u + i, and its end). */
+  float cg[16];
+  uint32_t ust[4];
+  const uint32_t nu = u1 - u;
+  for (uint32_t i = 0; i < 4; i++) {
+    if (i < nu) {
+      const qk_box_t *h = &hb[u + i];
+      cg[i] = (float)h->xmin, cg[4 + i] = (float)h->ymin;
+      cg[8 + i] = (float)h->xmax, cg[12 + i] = (float)h->ymax;
+    } else {
+      cg[i] = cg[4 + i] = INFINITY, cg[8 + i] = cg[12 + i] = -INFINITY;
+    }
+  }
+  for (uint32_t i = 0; i <= nu; i++) ust[i] = w->cells[u + i].start;
+  return level_runs(s, kc, lo, hi, hi2, nx, cg, ust, ust[nu] - ust[0], 1);
 }
 
 /* ---- finer levels: the coarser object's box walked over their sorted cells ---------- */
