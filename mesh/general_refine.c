@@ -361,7 +361,7 @@ static inline int bad_star(const qk__gm_t *g, uint32_t t, const double *pv, cons
  * counter-clockwise from vtri[v] across edge 1 of each triangle, as star() in
  * general_build.c lists it, v in slot 0 of each (mesh/cdt.h): the same triangles in the
  * same order, so the same queue. */
-static qk_status_t check_star(qk__gm_t *g) {
+static qk_status_t check_star(qk__gm_t *g, int clear) {
   const qk__cdt_t *c = &g->cdt;
   const uint32_t v = g->dirty_v, f = g->dirty_face, first = c->vtri[v];
   uint32_t t = first;
@@ -383,7 +383,15 @@ static qk_status_t check_star(qk__gm_t *g) {
     const double *px = &c->xy[2 * x], *py = &c->xy[2 * y];
     if (x != prev) lx = d2(pv, px); /* the first triangle (the ring is closed: x follows y) */
     double ly = d2(pv, py), lo = d2(px, py);
-    if ((ts[0] & ts[1] & ts[2]) != QK__CDT_NONE)
+    /* After a clear cavity (clear), v is a circumcentre inside a kept face, so no spoke is
+     * constrained, and each far edge x-y was an edge of a cavity triangle (Lawson's flips
+     * from p's triangle remove exactly the triangles the search found: those whose
+     * circumcircles hold p, reached without crossing a constraint), whose constrained
+     * edges the search tested against p with the same exact test and found none
+     * encroached: nothing to test here. */
+    assert(!clear || (ts[1] == QK__CDT_NONE && ts[2] == QK__CDT_NONE &&
+                      (ts[0] == QK__CDT_NONE || !apex_encroaches(g, t, 0))));
+    if (!clear && (ts[0] & ts[1] & ts[2]) != QK__CDT_NONE)
       for (int k = 0; k < 3; k++)
         if (ts[k] != QK__CDT_NONE && apex_encroaches(g, t, k) &&
             push_enc(g, c->v[3 * t + (k + 1) % 3], c->v[3 * t + (k + 2) % 3], c->seg[3 * t + k]))
@@ -396,13 +404,14 @@ static qk_status_t check_star(qk__gm_t *g) {
 }
 
 /* Check the triangles the last insertion made (its star): when they share one face, its
- * label is looked at once. */
-static qk_status_t check_dirty(qk__gm_t *g) {
+ * label is looked at once. clear: the insertion was a circumcentre whose cavity search
+ * was complete and found no encroached subsegment (g->cavity_clear). */
+static qk_status_t check_dirty_after(qk__gm_t *g, int clear) {
   size_t n = g->ndirty;
   g->ndirty = 0;
   if (g->star_pending) {
     g->star_pending = 0;
-    return check_star(g);
+    return check_star(g, clear);
   }
   if (g->dirty_face != QK__CDT_NONE) {
     if (g->faces[g->dirty_face].drop) return QK_OK;
@@ -414,6 +423,8 @@ static qk_status_t check_dirty(qk__gm_t *g) {
     if (check(g, g->dirty[i])) return QK_ERR_NOMEM;
   return QK_OK;
 }
+
+static qk_status_t check_dirty(qk__gm_t *g) { return check_dirty_after(g, 0); }
 
 /* Is subsegment a-b still an edge, encroached from a kept side? */
 static int still_encroached(const qk__gm_t *g, uint32_t a, uint32_t b) {
@@ -471,7 +482,7 @@ static inline qk_status_t grow_marks(qk__gm_t *g) {
 static int cavity_encroach(qk__gm_t *g, uint32_t t0, uint32_t t1, const double p[2]) {
   const qk__cdt_t *c = &g->cdt;
   size_t n = 0, seen = 0;
-  int found = 0;
+  int found = 0, capped = 0;
   /* Room for the whole search at once: it stops growing past 4096 triangles. */
   if (grow_stack(g, 4096 + 8) || grow_marks(g)) return -1;
   /* The arrays in locals: nothing in the loop moves them (push_enc grows g->enc only), and
@@ -496,7 +507,11 @@ static int cavity_encroach(qk__gm_t *g, uint32_t t0, uint32_t t1, const double p
         continue;
       }
       uint32_t u = N[3 * t + k];
-      if (u == QK__CDT_NONE || n > 4096 || (mark[u] | 1) == in) continue;
+      if (u == QK__CDT_NONE || (mark[u] | 1) == in) continue;
+      if (n > 4096) {
+        capped = 1;
+        continue;
+      }
       const uint32_t *uv = &V[3 * (size_t)u];
       int r = qk__cdt_incircle(&XY[2 * (size_t)uv[0]], &XY[2 * (size_t)uv[1]],
                                &XY[2 * (size_t)uv[2]], p) > 0;
@@ -504,6 +519,7 @@ static int cavity_encroach(qk__gm_t *g, uint32_t t0, uint32_t t1, const double p
       if (r) stack[n++] = u;
     }
   }
+  g->cavity_clear = !found && !capped;
   return found;
 }
 
@@ -636,7 +652,7 @@ static qk_status_t split_triangle(qk__gm_t *g, uint32_t t, size_t *rejected) {
   qk_status_t st = qk__gm_insert(g, p[0], p[1], tri, k, where, QK__CDT_NONE, 0, &v, &existed);
   c->known = NULL;
   if (st) return qk__mesh_fail(g->err, st, 0, "out of memory");
-  return check_dirty(g);
+  return check_dirty_after(g, g->cavity_clear);
 }
 
 /* With a plain size bound h, the refined mesh holds about 5.1 triangles per h^2 of kept
