@@ -746,6 +746,61 @@ static void test_region_antimeridian_boundary(void **state) {
   qk_region_free(r);
 }
 
+/* The same for a layer that reaches the antimeridian from one side only, whose root square
+ * therefore ends short of the other side (nineteenth session): [170, 180] x [0, 10] alone
+ * held no point (180, y) under `closed` (the query, mapped to (-180, y), fell outside the
+ * root and was answered "none" before the antimeridian was looked at), and a layer of
+ * enough pieces for a query grid must not descend the missing side. Single, all and both
+ * batch paths; the mirror layer on [-180, -170] too. */
+static void test_region_antimeridian_one_side(void **state) {
+  (void)state;
+  for (int west = 0; west < 2; west++)
+    for (int fine = 0; fine < 2; fine++) {
+      /* a rectangle [170, 180] x [0, 10] (or its mirror), its side along the meridian
+       * split into 4096 edges when `fine` (a query grid) */
+      size_t nv = fine ? 4096 + 5 : 6, k = 0;
+      double *xy = malloc(2 * nv * sizeof *xy);
+      double sg = west ? -1 : 1;
+      xy[k++] = sg * 170, xy[k++] = 0;
+      xy[k++] = sg * 180, xy[k++] = 0;
+      for (size_t i = 1; i + 5 < nv; i++) xy[k++] = sg * 180, xy[k++] = 10.0 * (double)i / 4096;
+      xy[k++] = sg * 180, xy[k++] = 10;
+      xy[k++] = sg * 170, xy[k++] = 10;
+      xy[k++] = sg * 170, xy[k++] = 0;
+      assert_int_equal(k, 2 * nv - 2);
+      nv--;
+      size_t rs[] = {0, nv}, fs[] = {0, 1};
+      qk_region_t *r = lonlat(xy, rs, 1, fs, 1, 0);
+      /* {x, y, semi-open, closed, open} */
+      const double cases[][5] = {{180, 5, west ? 0 : -1, 0, -1}, {-180, 5, west ? 0 : -1, 0, -1},
+                                 {540, 0, west ? 0 : -1, 0, -1}, {-540, 10, -1, 0, -1},
+                                 {180, 10.5, -1, -1, -1},        {sg * 175, 5, 0, 0, 0}};
+      for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++)
+        for (int rule = 0; rule < 3; rule++) {
+          uint32_t want = cases[i][2 + rule] < 0 ? QK_NONE : (uint32_t)cases[i][2 + rule];
+          uint32_t got = at(r, cases[i][0], cases[i][1], (qk_boundary_t)rule);
+          if (got != want)
+            fail_msg("west %d fine %d (%g, %g) rule %d: got %u, want %u", west, fine, cases[i][0],
+                     cases[i][1], rule, (unsigned)got, (unsigned)want);
+          uint32_t all[2];
+          size_t n;
+          assert_int_equal(qk_region_locate_all(r, (qk_point_t){cases[i][0], cases[i][1]},
+                                                (qk_boundary_t)rule, all, 2, &n),
+                           QK_OK);
+          assert_int_equal(n, want != QK_NONE);
+        }
+      size_t m = 5000;
+      qk_point_t *p = malloc(m * sizeof *p);
+      uint32_t *b = malloc(m * sizeof *b);
+      for (size_t i = 0; i < m; i++)
+        p[i] = (qk_point_t){i % 2 ? 180.0 : sg * 175, (double)(i % 11)};
+      assert_int_equal(qk_region_locate_batch(r, p, m, QK_BOUNDARY_CLOSED, 1, b), QK_OK);
+      for (size_t i = 0; i < m; i++) assert_int_equal(b[i], 0);
+      free(p), free(b), free(xy);
+      qk_region_free(r);
+    }
+}
+
 /* `open` on the antimeridian against an oracle that reads the sphere (seventeenth
  * session). Features are lon/lat rectangles on an integer grid: the whole world (with a
  * hole touching one side of the map or not), a band [-180, 180] x [y0, y1], and sets of
@@ -1463,6 +1518,7 @@ int main(void) {
       cmocka_unit_test(test_region_self_intersecting_oracle),
       cmocka_unit_test(test_region_lonlat),
       cmocka_unit_test(test_region_antimeridian_boundary),
+      cmocka_unit_test(test_region_antimeridian_one_side),
       cmocka_unit_test(test_region_antimeridian_open_oracle),
       cmocka_unit_test(test_region_across_map),
       cmocka_unit_test(test_region_batch_threads),
