@@ -21,7 +21,11 @@
 
 /* Map a query to the plane of the index; false when it is in no feature. Most points lie
  * in the query window, where the mapping changes nothing but the tiny coordinates. */
-static ALWAYS_INLINE bool normalise(const qk_region_t *r, double *x, double *y) {
+static ALWAYS_INLINE bool in_root(const qk_region_t *r, double x, double y) {
+  return x >= r->rx && x < r->rx + r->rside && y >= r->ry && y < r->ry + r->rside;
+}
+
+static ALWAYS_INLINE bool normalise(const qk_region_t *r, double *x, double *y, qk_boundary_t b) {
   if (!(*x >= r->qx0 && *x <= r->qx1 && *y >= r->qy0 && *y <= r->qy1)) {
     if (!r->planar) {
       if (!(*y >= -90 && *y <= 90)) return false;
@@ -41,8 +45,11 @@ static ALWAYS_INLINE bool normalise(const qk_region_t *r, double *x, double *y) 
         *x = t;
       }
     }
-    if (!(*x >= r->rx && *x < r->rx + r->rside && *y >= r->ry && *y < r->ry + r->rside))
-      return false;
+    if (!in_root(r, *x, *y))
+      /* A point on the antimeridian is also (180, y): under `closed` and `open` a layer
+       * that reaches the meridian from the east only (its root square ends short of -180)
+       * may have it on a ring (antimeridian_features). */
+      return !r->planar && *x == -180.0 && b != QK_BOUNDARY_SEMI_OPEN && in_root(r, 180.0, *y);
   }
   /* Coordinates too small for the exact predicates are zero (the layer has none). */
   if (fabs(*x) < QK_REGION_MIN_COORD) *x = 0.0;
@@ -317,12 +324,15 @@ static void along_meridian(const qk__seg_t *g, double x, double y, unsigned *sid
 
 static size_t antimeridian_features(const qk_region_t *r, double y, qk_boundary_t b, bool all,
                                     uint32_t *out, size_t cap) {
-  leaf_box_t w, e;
-  descend(r, -180.0, y, &w);
-  descend(r, 180.0, y, &e);
+  /* A side outside the root square has no leaf: nothing of the layer is there (the layer
+   * reaches the antimeridian from one side only). */
+  leaf_box_t w = {.k = QK__LEAF | QK__DIRECT}, e = {.k = QK__LEAF | QK__DIRECT};
+  bool has_w = in_root(r, -180.0, y);
+  if (has_w) descend(r, -180.0, y, &w);
+  if (in_root(r, 180.0, y)) descend(r, 180.0, y, &e);
   const qk__leaf_t *LW = (w.k & QK__DIRECT) ? NULL : &r->leaves[w.k & ~QK__LEAF];
   const qk__leaf_t *LE = (e.k & QK__DIRECT) ? NULL : &r->leaves[e.k & ~QK__LEAF];
-  uint32_t dw = (w.k & QK__DIRECT) ? direct(w.k) : QK_NONE;
+  uint32_t dw = has_w && (w.k & QK__DIRECT) ? direct(w.k) : QK_NONE;
   const uint32_t *S = LW && LW->ns ? r->sets + LW->s0 : (dw != QK_NONE ? &dw : NULL);
   uint32_t ns = LW ? LW->ns : (dw != QK_NONE), nw = LW ? LW->ne : 0, ne = LE ? LE->ne : 0;
   const uint32_t *EW = nw ? r->le + LW->e0 : NULL, *TW = nw ? r->le_tag + LW->e0 : NULL;
@@ -374,7 +384,7 @@ static inline bool on_antimeridian(const qk_region_t *r, double x, qk_boundary_t
 }
 
 uint32_t qk__region_locate1(const qk_region_t *r, double x, double y, qk_boundary_t b) {
-  if (!normalise(r, &x, &y)) return QK_NONE;
+  if (!normalise(r, &x, &y, b)) return QK_NONE;
   if (on_antimeridian(r, x, b)) {
     uint32_t f = QK_NONE;
     antimeridian_features(r, y, b, false, &f, 1);
@@ -501,7 +511,7 @@ qk_status_t qk_region_locate_all(const qk_region_t *r, qk_point_t p, qk_boundary
   *n_out = 0;
   if (!isfinite(p.x) || !isfinite(p.y)) return QK_ERR_NONFINITE;
   double x = p.x, y = p.y;
-  if (!normalise(r, &x, &y)) return QK_OK;
+  if (!normalise(r, &x, &y, b)) return QK_OK;
   if (on_antimeridian(r, x, b)) {
     *n_out = antimeridian_features(r, y, b, true, features, cap);
     return QK_OK;
@@ -700,7 +710,7 @@ static ALWAYS_INLINE void run_impl(const qk_region_t *r, qk_boundary_t b, const 
 #endif
     } else {
       if (!isfinite(x) || !isfinite(y)) *nonfinite = 1;
-      if (!normalise(r, &x, &y)) {
+      if (!normalise(r, &x, &y, b)) {
         out[i] = QK_NONE;
         continue;
       }

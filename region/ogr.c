@@ -5,6 +5,8 @@
  * skipped), so that feature indices follow the dataset's order. Validation (ring length, closure,
  * coordinates) is the builder's. Without GDAL the call says what to install.
  */
+#include <stdbool.h>
+#include <stdio.h>
 #include <string.h>
 
 #include "region/region_internal.h"
@@ -92,17 +94,37 @@ qk_status_t qk_region_read_ogr(const char *path, const qk_region_options_t *opti
   memset(&b, 0, sizeof b);
   b.a = &alloc;
   qk_status_t st = QK_OK;
-  for (int l = 0, nl = GDALDatasetGetLayerCount(ds); l < nl && !st; l++) {
+  /* GDAL reports a damaged record (a truncated .shp: "Error in fread() ...") by an error
+   * and a feature without geometry, or by ending the layer early: either would drop
+   * features without a word, and the default handler prints. Errors are kept quiet and
+   * any failure while reading fails the read, naming the feature. */
+  bool gdal_failed = false;
+  size_t bad_feature = 0;
+  char why[200] = "";
+  CPLPushErrorHandler(CPLQuietErrorHandler);
+  for (int l = 0, nl = GDALDatasetGetLayerCount(ds); l < nl && !st && !gdal_failed; l++) {
     OGRLayerH layer = GDALDatasetGetLayer(ds, l);
     OGR_L_ResetReading(layer);
-    OGRFeatureH feat;
-    while (!st && (feat = OGR_L_GetNextFeature(layer))) {
-      st = add_feature(&b, feat);
+    for (;;) {
+      CPLErrorReset();
+      OGRFeatureH feat = OGR_L_GetNextFeature(layer);
+      if (CPLGetLastErrorType() >= CE_Failure) {
+        gdal_failed = true;
+        bad_feature = b.rg.nf;
+        snprintf(why, sizeof why, "%s", CPLGetLastErrorMsg());
+      }
+      if (!feat) break;
+      if (!gdal_failed) st = add_feature(&b, feat);
       OGR_F_Destroy(feat);
+      if (st || gdal_failed) break;
     }
   }
+  CPLPopErrorHandler();
   GDALClose(ds);
-  if (st) {
+  if (gdal_failed) {
+    st = qk__region_fail(err, QK_ERR_IO, bad_feature, "GDAL failed reading feature %zu: %.160s",
+                         bad_feature, why);
+  } else if (st) {
     qk__region_fail(err, st, SIZE_MAX, "%s while reading %s", qk_strerror(st), path);
   } else {
     st = qk__rings_build(&b.rg, &o, out, err);
