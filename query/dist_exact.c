@@ -6,7 +6,9 @@
  * arithmetic on 32-bit limbs: slow, and only reached when a point lies within a relative
  * 2^-45 of the boundary or the values are beyond 2^500. The kNN searches compare two
  * points' distances to a query the same way (qk__dist_cmp_exact) when their squares in
- * doubles lie within the filter's margin of each other.
+ * doubles lie within the filter's margin of each other. Both first try the doubles
+ * themselves (qk__d2_exact): where every operation is exact, as on grids of dyadic steps,
+ * whose ties are the common case, no big integer is made.
  */
 #include <math.h>
 #include <stdint.h>
@@ -122,6 +124,11 @@ static int low_exp6(double a, double b, double c, double d, double e, double f) 
 }
 
 int qk__within_exact(double ax, double ay, double bx, double by, double r1, double r2) {
+  double dd, rr = r1 + r2;
+  /* Exact in doubles (grids of dyadic steps): rs * rs is then exact too, or overflows to
+   * inf where the exact square exceeds every double, d2 included. */
+  if (qk__d2_exact(bx, by, ax, ay, &dd) && qk__sum_exact(r1, r2, rr) && qk__square_exact(rr))
+    return dd <= rr * rr;
   const int e0 = low_exp6(ax, bx, ay, by, r1, r2);
   big_t a, b, d2, rs;
   big_d2(&d2, bx, by, ax, ay, e0);
@@ -132,9 +139,12 @@ int qk__within_exact(double ax, double ay, double bx, double by, double r1, doub
 }
 
 int qk__dist_cmp_exact(double qx, double qy, double ax, double ay, double bx, double by) {
+  double da, db;
+  if (qk__d2_exact(qx, qy, ax, ay, &da) && qk__d2_exact(qx, qy, bx, by, &db))
+    return (da > db) - (da < db);
   const int e0 = low_exp6(qx, qy, ax, ay, bx, by);
-  big_t da, db;
-  big_d2(&da, qx, qy, ax, ay, e0);
-  big_d2(&db, qx, qy, bx, by, e0);
-  return big_cmp(&da, &db);
+  big_t ba, bb;
+  big_d2(&ba, qx, qy, ax, ay, e0);
+  big_d2(&bb, qx, qy, bx, by, e0);
+  return big_cmp(&ba, &bb);
 }

@@ -7,6 +7,8 @@
 #define QUADKIT_QUERY_DIST_EXACT_H
 
 #include <math.h>
+#include <stdint.h>
+#include <string.h>
 
 /*
  * Is (ax - bx)^2 + (ay - by)^2 <= (r1 + r2)^2, computed exactly (no rounding, no overflow,
@@ -20,6 +22,32 @@ int qk__within_exact(double ax, double ay, double bx, double by, double r1, doub
  * the kNN searches' order when the filter below cannot tell two squares apart.
  */
 int qk__dist_cmp_exact(double qx, double qy, double ax, double ay, double bx, double by);
+
+/*
+ * The squared distance from q to p in doubles when every operation of it is exact (then
+ * *d2 is the exact value; returns 1), else 0: each difference's rounding error is 0
+ * (Knuth's two-sum), each difference has at most 26 significant bits and lies above
+ * 2^-480 or is 0 (so its square is exact and normal), and the sum's error is 0 (an
+ * overflow makes the two-sum check NaN, which fails it). Points on grids of dyadic steps
+ * (integers, halves) pass, so their ties cost no big integers.
+ */
+static inline int qk__sum_exact(double a, double b, double s) {
+  const double bb = s - a;
+  return (a - (s - bb)) + (b - bb) == 0;
+}
+static inline int qk__square_exact(double v) {
+  uint64_t u;
+  memcpy(&u, &v, sizeof u);
+  return v == 0 || (fabs(v) >= 0x1p-480 && (u & ((UINT64_C(1) << 27) - 1)) == 0);
+}
+static inline int qk__d2_exact(double qx, double qy, double px, double py, double *d2) {
+  const double dx = px - qx, dy = py - qy;
+  if (!qk__sum_exact(px, -qx, dx) || !qk__sum_exact(py, -qy, dy)) return 0;
+  if (!qk__square_exact(dx) || !qk__square_exact(dy)) return 0;
+  const double a = dx * dx, b = dy * dy;
+  *d2 = a + b;
+  return qk__sum_exact(a, b, *d2);
+}
 
 /*
  * The filter: with d2 = dx*dx + dy*dy and r2 = rs*rs computed in doubles (dx, dy, rs each

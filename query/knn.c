@@ -84,31 +84,6 @@ static inline void best_limits(best_t *b, double max_dist, double guess2) {
 /* After the k-th changed (its square now thr): the pruning limit. */
 static inline void best_tighten(best_t *b) { b->lim = qk__min_d(kx_hi(b->thr), b->lim0); }
 
-/*
- * The squared distance from q to p in doubles when every operation of it is exact (then
- * *d2 is the exact value; returns 1), else 0: each difference's rounding error is 0
- * (Knuth's two-sum), each difference has at most 26 significant bits and lies above
- * 2^-480 or is 0 (so its square is exact and normal), and the sum's error is 0. Points on
- * grids of dyadic steps (integers, halves) pass, so their ties cost no big integers.
- */
-static inline int exact_sum(double a, double b, double s) {
-  const double bb = s - a;
-  return (a - (s - bb)) + (b - bb) == 0;
-}
-static inline int short_enough(double v) {
-  uint64_t u;
-  memcpy(&u, &v, sizeof u);
-  return v == 0 || (fabs(v) >= 0x1p-480 && (u & ((UINT64_C(1) << 27) - 1)) == 0);
-}
-static int d2_exact(double qx, double qy, double px, double py, double *d2) {
-  const double dx = px - qx, dy = py - qy;
-  if (!exact_sum(px, -qx, dx) || !exact_sum(py, -qy, dy)) return 0;
-  if (!short_enough(dx) || !short_enough(dy)) return 0;
-  const double a = dx * dx, b = dy * dy;
-  *d2 = a + b;
-  return exact_sum(a, b, *d2);
-}
-
 /* Slots a and b in the exact (distance, id) order, their squares too close to tell. */
 #if defined(__GNUC__)
 __attribute__((noinline, cold))
@@ -116,12 +91,9 @@ __attribute__((noinline, cold))
 static int
 before_exact(const qk_tree_t *t, double qx, double qy, uint32_t a, uint32_t b) {
   const double *xs = qk__tree_xs(t), *ys = qk__tree_ys(t);
-  double da, db;
   int c;
   if (xs[a] == xs[b] && ys[a] == ys[b]) /* one place twice (duplicates): the same distance */
     c = 0;
-  else if (d2_exact(qx, qy, xs[a], ys[a], &da) && d2_exact(qx, qy, xs[b], ys[b], &db))
-    c = (da > db) - (da < db);
   else
     c = qk__dist_cmp_exact(qx, qy, xs[a], ys[a], xs[b], ys[b]);
   if (c) return c < 0;

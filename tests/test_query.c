@@ -1094,6 +1094,122 @@ static size_t xknn_oracle(const qk_point_t *p, size_t n, qk_point_t q, size_t k,
 #endif
 
 /*
+ * The exact distance tests themselves (query/dist_exact.h, behind the radius query, the
+ * kNN searches and the static collider), against rationals: they first try the doubles
+ * (twentieth session), which must decide only where every operation is exact. Inputs:
+ * dyadic grids at scales 2^-600 to 2^520 with radii on, one ulp off and far from a grid
+ * distance and the rounded root of one that is no square (the doubles decide, or
+ * overflow or fall below 2^-480 and hand over); values
+ * of 27 to 53 significant bits and sums that round (the doubles must refuse); random
+ * reals; pairs of points at equal and near-equal distances for the comparison.
+ */
+#include "query/dist_exact.h"
+
+static int xwithin(double ax, double ay, double bx, double by, double r1, double r2) {
+  mpq_t a, b, x, y, r;
+  mpq_inits(a, b, x, y, r, NULL);
+  mpq_set_d(a, ax), mpq_set_d(b, bx), mpq_sub(x, a, b), mpq_mul(x, x, x);
+  mpq_set_d(a, ay), mpq_set_d(b, by), mpq_sub(y, a, b), mpq_mul(y, y, y);
+  mpq_add(x, x, y);
+  mpq_set_d(a, r1), mpq_set_d(b, r2), mpq_add(r, a, b), mpq_mul(r, r, r);
+  const int in = mpq_cmp(x, r) <= 0;
+  mpq_clears(a, b, x, y, r, NULL);
+  return in;
+}
+static int xcmp(double qx, double qy, double ax, double ay, double bx, double by) {
+  mpq_t a, b, x, y;
+  mpq_inits(a, b, x, y, NULL);
+  mpq_set_d(a, ax), mpq_set_d(b, qx), mpq_sub(a, a, b), mpq_mul(x, a, a);
+  mpq_set_d(a, ay), mpq_set_d(b, qy), mpq_sub(a, a, b), mpq_mul(a, a, a), mpq_add(x, x, a);
+  mpq_set_d(a, bx), mpq_set_d(b, qx), mpq_sub(a, a, b), mpq_mul(y, a, a);
+  mpq_set_d(a, by), mpq_set_d(b, qy), mpq_sub(a, a, b), mpq_mul(a, a, a), mpq_add(y, y, a);
+  const int c = mpq_cmp(x, y);
+  mpq_clears(a, b, x, y, NULL);
+  return (c > 0) - (c < 0);
+}
+
+/* A value for the cases: a small integer, or one with `bits` significant bits, at 2^e. */
+static double dx_value(qkt_rng_t *r, int bits, int e) {
+  uint64_t m = qkt_rng_next(r) >> (64 - bits) | UINT64_C(1) << (bits - 1);
+  if (qkt_rng_below(r, 3) == 0) m = qkt_rng_below(r, 40);
+  const double v = ldexp((double)m, e - bits);
+  return qkt_rng_below(r, 2) ? -v : v;
+}
+
+static void test_query_dist_exact(void **state) {
+  (void)state;
+#if !defined(QK_HAVE_GMP)
+  skip();
+#else
+  static const int scales[] = {-600, -500, -470, -60, -1, 0, 3, 40, 480, 500, 508, 520};
+  static const int bits[] = {1, 5, 20, 26, 27, 30, 53};
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed ^ 0xd157);
+  size_t checked = 0, on = 0;
+  for (size_t si = 0; si < sizeof scales / sizeof *scales; si++) {
+    for (size_t bi = 0; bi < sizeof bits / sizeof *bits; bi++) {
+      for (int rep = 0; rep < 300; rep++) {
+        const int e = scales[si], nb = bits[bi];
+        const double bx = dx_value(&r, nb, e), by = dx_value(&r, nb, e);
+        /* b + (dx, dy) for dx, dy of a Pythagorean triple (3, 4, 5) or random. */
+        static const int trip[][3] = {{3, 4, 5}, {5, 12, 13}, {8, 15, 17}, {0, 7, 7}};
+        const int *t = trip[qkt_rng_below(&r, 4)];
+        const int sh = e - 4 - (int)qkt_rng_below(&r, 8);
+        double ax = bx + ldexp(t[0], sh), ay = by + ldexp(t[1], sh);
+        if (qkt_rng_below(&r, 4) == 0) ax = dx_value(&r, nb, e), ay = dx_value(&r, nb, e);
+        double rad = ldexp(t[2], sh);
+        switch (qkt_rng_below(&r, 6)) {
+        case 0:
+          rad = nextafter(rad, 0);
+          break;
+        case 1:
+          rad = nextafter(rad, INFINITY);
+          break;
+        case 2:
+          rad = fabs(dx_value(&r, nb, e));
+          break;
+        case 3: /* the rounded root of a sum of squares that is no square: rad^2 in doubles
+                 * often rounds back to that sum */
+          ax = bx + ldexp((double)qkt_rng_below(&r, 1u << 20), sh - 20);
+          ay = by + ldexp((double)qkt_rng_below(&r, 1u << 20), sh - 20);
+          rad = sqrt((ax - bx) * (ax - bx) + (ay - by) * (ay - by));
+          break;
+        default:
+          break;
+        }
+        double r1 = rad, r2 = 0;
+        if (qkt_rng_below(&r, 2)) { /* split it: r1 + r2 exact or rounded */
+          r1 = ldexp(floor(ldexp(rad, -sh) / 3), sh);
+          r2 = rad - r1;
+          if (qkt_rng_below(&r, 3) == 0) r2 = nextafter(r2, INFINITY);
+        }
+        if (!isfinite(ax) || !isfinite(ay) || !isfinite(r1) || !isfinite(r2)) continue;
+        const int want = xwithin(ax, ay, bx, by, r1, r2);
+        const int got = qk__within_exact(ax, ay, bx, by, r1, r2);
+        if (got != want)
+          fail_msg("within: a (%a, %a) b (%a, %a) r %a + %a: %d, rationals %d", ax, ay, bx, by, r1,
+                   r2, got, want);
+        on += want;
+        /* c: a rotated about b by a quarter turn (same distance), or nudged one ulp. */
+        double cx = bx - (ay - by), cy = by + (ax - bx);
+        if (qkt_rng_below(&r, 2)) cx = nextafter(cx, qkt_rng_below(&r, 2) ? INFINITY : -INFINITY);
+        if (!isfinite(cx) || !isfinite(cy)) continue;
+        const int wc = xcmp(bx, by, ax, ay, cx, cy),
+                  gc = qk__dist_cmp_exact(bx, by, ax, ay, cx, cy);
+        if ((gc > 0) - (gc < 0) != wc)
+          fail_msg("cmp: q (%a, %a) a (%a, %a) c (%a, %a): %d, rationals %d", bx, by, ax, ay, cx,
+                   cy, gc, wc);
+        checked++;
+      }
+    }
+  }
+  /* Both answers occur often enough for the cases to mean something. */
+  assert_true(checked > 20000);
+  assert_true(on > checked / 5 && on < checked - checked / 5);
+#endif
+}
+
+/*
  * kNN is exact for any finite values (eighteenth session): points on a circle of radius
  * 5 s through Pythagorean triples, their neighbours one ulp inside and outside, pairs
  * whose squares in doubles are equal or misordered but not their exact values ((s, 0)
@@ -1357,6 +1473,7 @@ int main(void) {
     cmocka_unit_test(test_query_range_radius),
     cmocka_unit_test(test_query_knn_all_k),
     cmocka_unit_test(test_query_knn_check_order),
+    cmocka_unit_test(test_query_dist_exact),
     cmocka_unit_test(test_query_knn_large),
     cmocka_unit_test(test_query_knn_after_mutation),
     cmocka_unit_test(test_query_locate),
