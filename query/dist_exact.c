@@ -19,46 +19,58 @@
 enum { LIMBS = 68, WIDE = 2 * LIMBS + 2 };
 
 typedef struct big {
+  int n;            /* limbs in use: the value is w[0] .. w[n - 1] */
   uint32_t w[WIDE]; /* little-endian magnitude */
 } big_t;
 
+/* Limb k of a, 0 beyond its length. */
+static inline uint32_t limb_at(const big_t *a, int k) { return k < a->n ? a->w[k] : 0; }
+static inline int max_i(int a, int b) { return a > b ? a : b; }
+
 /* |v| as an integer multiple of 2^e0 (e0 no larger than v's lowest digit's exponent). */
 static void big_set(big_t *b, double v, int e0) {
-  memset(b, 0, sizeof *b);
+  b->n = 0;
   if (v == 0) return;
   int e;
   double m = frexp(fabs(v), &e);        /* |v| = m 2^e, m in [0.5, 1) */
   uint64_t mi = (uint64_t)ldexp(m, 53); /* |v| = mi 2^(e - 53), exactly */
-  int shift = e - 53 - e0;              /* >= 0 */
+  int shift = e - 53 - e0;              /* >= 0, below 32 LIMBS - 86 */
   int limb = shift / 32, bit = shift % 32;
   uint64_t lo = mi << bit, hi = bit ? mi >> (64 - bit) : 0; /* mi 2^bit, below 2^86 */
-  const uint32_t part[3] = {(uint32_t)lo, (uint32_t)(lo >> 32), (uint32_t)hi};
-  for (int k = 0; k < 3 && limb + k < WIDE; k++) b->w[limb + k] = part[k];
+  memset(b->w, 0, (size_t)limb * sizeof b->w[0]);
+  b->w[limb] = (uint32_t)lo, b->w[limb + 1] = (uint32_t)(lo >> 32), b->w[limb + 2] = (uint32_t)hi;
+  b->n = limb + 3;
 }
 
 static int big_cmp(const big_t *a, const big_t *b) {
-  for (int k = WIDE - 1; k >= 0; k--)
-    if (a->w[k] != b->w[k]) return a->w[k] < b->w[k] ? -1 : 1;
+  for (int k = max_i(a->n, b->n) - 1; k >= 0; k--) {
+    const uint32_t x = limb_at(a, k), y = limb_at(b, k);
+    if (x != y) return x < y ? -1 : 1;
+  }
   return 0;
 }
 
 static void big_add(big_t *out, const big_t *a, const big_t *b) {
+  const int n = max_i(a->n, b->n);
   uint64_t c = 0;
-  for (int k = 0; k < WIDE; k++) {
-    c += (uint64_t)a->w[k] + b->w[k];
+  for (int k = 0; k < n; k++) {
+    c += (uint64_t)limb_at(a, k) + limb_at(b, k);
     out->w[k] = (uint32_t)c;
     c >>= 32;
   }
+  out->w[n] = (uint32_t)c;
+  out->n = n + 1;
 }
 
 /* out = a - b, a >= b. */
 static void big_sub(big_t *out, const big_t *a, const big_t *b) {
   int64_t c = 0;
-  for (int k = 0; k < WIDE; k++) {
-    c += (int64_t)a->w[k] - b->w[k];
+  for (int k = 0; k < a->n; k++) {
+    c += (int64_t)a->w[k] - limb_at(b, k);
     out->w[k] = (uint32_t)c;
     c = c < 0 ? -1 : 0;
   }
+  out->n = a->n;
 }
 
 /* |sa A - sb B| for magnitudes A, B with signs sa, sb (1 for negative). */
@@ -71,11 +83,12 @@ static void big_absdiff(big_t *out, const big_t *a, int sa, const big_t *b, int 
     big_sub(out, b, a);
 }
 
-/* out = a^2 (a below 2^(32 LIMBS)). */
+/* out = a^2 (a below 2^(32 LIMBS)): 2n limbs for a of n. */
 static void big_sqr(big_t *out, const big_t *a) {
-  int n = LIMBS;
+  int n = a->n;
   while (n > 0 && a->w[n - 1] == 0) n--;
-  memset(out, 0, sizeof *out);
+  memset(out->w, 0, (size_t)(2 * n) * sizeof out->w[0]);
+  out->n = 2 * n;
   for (int i = 0; i < n; i++) {
     uint64_t c = 0;
     for (int j = 0; j < n; j++) {
@@ -83,7 +96,7 @@ static void big_sqr(big_t *out, const big_t *a) {
       out->w[i + j] = (uint32_t)c;
       c >>= 32;
     }
-    for (int k = i + n; c && k < WIDE; k++) {
+    for (int k = i + n; c; k++) { /* below 2n: the partial sums stay below a^2 */
       c += out->w[k];
       out->w[k] = (uint32_t)c;
       c >>= 32;
