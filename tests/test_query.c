@@ -1105,29 +1105,6 @@ static size_t xknn_oracle(const qk_point_t *p, size_t n, qk_point_t q, size_t k,
  */
 #include "query/dist_exact.h"
 
-static int xwithin(double ax, double ay, double bx, double by, double r1, double r2) {
-  mpq_t a, b, x, y, r;
-  mpq_inits(a, b, x, y, r, NULL);
-  mpq_set_d(a, ax), mpq_set_d(b, bx), mpq_sub(x, a, b), mpq_mul(x, x, x);
-  mpq_set_d(a, ay), mpq_set_d(b, by), mpq_sub(y, a, b), mpq_mul(y, y, y);
-  mpq_add(x, x, y);
-  mpq_set_d(a, r1), mpq_set_d(b, r2), mpq_add(r, a, b), mpq_mul(r, r, r);
-  const int in = mpq_cmp(x, r) <= 0;
-  mpq_clears(a, b, x, y, r, NULL);
-  return in;
-}
-static int xcmp(double qx, double qy, double ax, double ay, double bx, double by) {
-  mpq_t a, b, x, y;
-  mpq_inits(a, b, x, y, NULL);
-  mpq_set_d(a, ax), mpq_set_d(b, qx), mpq_sub(a, a, b), mpq_mul(x, a, a);
-  mpq_set_d(a, ay), mpq_set_d(b, qy), mpq_sub(a, a, b), mpq_mul(a, a, a), mpq_add(x, x, a);
-  mpq_set_d(a, bx), mpq_set_d(b, qx), mpq_sub(a, a, b), mpq_mul(y, a, a);
-  mpq_set_d(a, by), mpq_set_d(b, qy), mpq_sub(a, a, b), mpq_mul(a, a, a), mpq_add(y, y, a);
-  const int c = mpq_cmp(x, y);
-  mpq_clears(a, b, x, y, NULL);
-  return (c > 0) - (c < 0);
-}
-
 /* A value for the cases: a small integer, or one with `bits` significant bits, at 2^e. */
 static double dx_value(qkt_rng_t *r, int bits, int e) {
   uint64_t m = qkt_rng_next(r) >> (64 - bits) | UINT64_C(1) << (bits - 1);
@@ -1184,7 +1161,7 @@ static void test_query_dist_exact(void **state) {
           if (qkt_rng_below(&r, 3) == 0) r2 = nextafter(r2, INFINITY);
         }
         if (!isfinite(ax) || !isfinite(ay) || !isfinite(r1) || !isfinite(r2)) continue;
-        const int want = xwithin(ax, ay, bx, by, r1, r2);
+        const int want = qko_within(ax, ay, bx, by, r1, r2);
         const int got = qk__within_exact(ax, ay, bx, by, r1, r2);
         if (got != want)
           fail_msg("within: a (%a, %a) b (%a, %a) r %a + %a: %d, rationals %d", ax, ay, bx, by, r1,
@@ -1194,7 +1171,8 @@ static void test_query_dist_exact(void **state) {
         double cx = bx - (ay - by), cy = by + (ax - bx);
         if (qkt_rng_below(&r, 2)) cx = nextafter(cx, qkt_rng_below(&r, 2) ? INFINITY : -INFINITY);
         if (!isfinite(cx) || !isfinite(cy)) continue;
-        const int wc = xcmp(bx, by, ax, ay, cx, cy),
+        const int wc = qko_dist_cmp((qk_point_t){bx, by}, (qk_point_t){ax, ay},
+                                    (qk_point_t){cx, cy}),
                   gc = qk__dist_cmp_exact(bx, by, ax, ay, cx, cy);
         if ((gc > 0) - (gc < 0) != wc)
           fail_msg("cmp: q (%a, %a) a (%a, %a) c (%a, %a): %d, rationals %d", bx, by, ax, ay, cx,

@@ -11,7 +11,7 @@
 /* Is (ax - bx)^2 + (ay - by)^2 <= (r1 + r2)^2 exactly? Rationals (GMP converts doubles
  * exactly) wherever a long double filter with a wide margin cannot tell; without GMP, the
  * double formula (the exact cases of the tests then fail rather than pass). */
-static int o_within(double ax, double ay, double bx, double by, double r1, double r2) {
+int qko_within(double ax, double ay, double bx, double by, double r1, double r2) {
   long double dx = (long double)ax - bx, dy = (long double)ay - by, rs = (long double)r1 + r2;
   long double d2 = dx * dx + dy * dy, s2 = rs * rs;
   if (d2 > 1e-200L && d2 < 1e200L && s2 > 1e-200L && s2 < 1e200L) {
@@ -69,7 +69,7 @@ size_t qko_radius(const qk_point_t *pts, size_t n, qk_point_t c, double r, qk_ne
   size_t m = 0;
   for (size_t i = 0; i < n; i++) {
     double dx = pts[i].x - c.x, dy = pts[i].y - c.y, d2 = dx * dx + dy * dy;
-    if (isinf(r) || o_within(pts[i].x, pts[i].y, c.x, c.y, r, 0)) {
+    if (isinf(r) || qko_within(pts[i].x, pts[i].y, c.x, c.y, r, 0)) {
       out[m].id = (qk_id_t)i;
       out[m++].dist = d2 < 0x1p1000 ? sqrt(d2) : hypot(dx, dy); /* (as the library rounds it) */
     }
@@ -80,29 +80,33 @@ size_t qko_radius(const qk_point_t *pts, size_t n, qk_point_t c, double r, qk_ne
 /* Is point a nearer to q than point b, or as near with a smaller id, exactly? Squares in
  * long double (no overflow or underflow for doubles' squares; a relative error of a few
  * 2^-64) decide away from a tie, rationals (GMP) near one; without GMP, long double. */
-static int o_nearer(const qk_point_t *pts, qk_point_t q, size_t a, size_t b) {
-  /* the same place: the same distance (the duplicates' ties, without the rationals) */
-  if (pts[a].x == pts[b].x && pts[a].y == pts[b].y) return a < b;
-  long double ax = (long double)pts[a].x - q.x, ay = (long double)pts[a].y - q.y;
-  long double bx = (long double)pts[b].x - q.x, by = (long double)pts[b].y - q.y;
+int qko_dist_cmp(qk_point_t q, qk_point_t a, qk_point_t b) {
+  long double ax = (long double)a.x - q.x, ay = (long double)a.y - q.y;
+  long double bx = (long double)b.x - q.x, by = (long double)b.y - q.y;
   long double da = ax * ax + ay * ay, db = bx * bx + by * by;
-  if (da < db * (1 - 1e-15L)) return 1;
-  if (da > db * (1 + 1e-15L)) return 0;
-  int c;
+  if (da < db * (1 - 1e-15L)) return -1;
+  if (da > db * (1 + 1e-15L)) return 1;
 #if defined(QK_HAVE_GMP)
   mpq_t u, v, w;
   mpq_inits(u, v, w, NULL);
-  mpq_set_d(u, pts[a].x), mpq_set_d(v, q.x), mpq_sub(u, u, v), mpq_mul(w, u, u);
-  mpq_set_d(u, pts[a].y), mpq_set_d(v, q.y), mpq_sub(u, u, v), mpq_mul(u, u, u);
+  mpq_set_d(u, a.x), mpq_set_d(v, q.x), mpq_sub(u, u, v), mpq_mul(w, u, u);
+  mpq_set_d(u, a.y), mpq_set_d(v, q.y), mpq_sub(u, u, v), mpq_mul(u, u, u);
   mpq_add(w, w, u);
-  mpq_set_d(u, pts[b].x), mpq_set_d(v, q.x), mpq_sub(u, u, v), mpq_mul(v, u, u);
-  mpq_set_d(u, pts[b].y), mpq_sub(w, w, v), mpq_set_d(v, q.y), mpq_sub(u, u, v), mpq_mul(u, u, u);
+  mpq_set_d(u, b.x), mpq_set_d(v, q.x), mpq_sub(u, u, v), mpq_mul(v, u, u);
+  mpq_set_d(u, b.y), mpq_sub(w, w, v), mpq_set_d(v, q.y), mpq_sub(u, u, v), mpq_mul(u, u, u);
   mpq_sub(w, w, u);
-  c = mpq_sgn(w);
+  const int c = mpq_sgn(w);
   mpq_clears(u, v, w, NULL);
+  return c;
 #else
-  c = (da > db) - (da < db);
+  return (da > db) - (da < db);
 #endif
+}
+
+static int o_nearer(const qk_point_t *pts, qk_point_t q, size_t a, size_t b) {
+  /* the same place: the same distance (the duplicates' ties, without the rationals) */
+  if (pts[a].x == pts[b].x && pts[a].y == pts[b].y) return a < b;
+  const int c = qko_dist_cmp(q, pts[a], pts[b]);
   return c ? c < 0 : a < b;
 }
 
@@ -115,7 +119,7 @@ size_t qko_knn(const qk_point_t *pts, const unsigned char *alive, size_t n, qk_p
   size_t m = 0;
   for (size_t i = 0; i < n && k > 0; i++) {
     if (alive && !alive[i]) continue;
-    if (!isinf(max_dist) && !o_within(pts[i].x, pts[i].y, q.x, q.y, max_dist, 0)) continue;
+    if (!isinf(max_dist) && !qko_within(pts[i].x, pts[i].y, q.x, q.y, max_dist, 0)) continue;
     if (m == k && !o_nearer(pts, q, i, out[m - 1].id)) continue;
     size_t j = m < k ? m++ : m - 1;
     for (; j > 0 && o_nearer(pts, q, i, out[j - 1].id); j--) out[j] = out[j - 1];
@@ -129,13 +133,15 @@ size_t qko_knn(const qk_point_t *pts, const unsigned char *alive, size_t n, qk_p
 }
 
 /* Item predicates, exact (as documented in query.h). */
-static int o_disc_disc(qk_disc_t a, qk_disc_t b) { return o_within(a.x, a.y, b.x, b.y, a.r, b.r); }
+static int o_disc_disc(qk_disc_t a, qk_disc_t b) {
+  return qko_within(a.x, a.y, b.x, b.y, a.r, b.r);
+}
 static int o_box_box(qk_box_t a, qk_box_t b) {
   return a.xmin <= b.xmax && b.xmin <= a.xmax && a.ymin <= b.ymax && b.ymin <= a.ymax;
 }
 static int o_disc_box(qk_disc_t d, qk_box_t b) {
   double px = fmin(fmax(d.x, b.xmin), b.xmax), py = fmin(fmax(d.y, b.ymin), b.ymax);
-  return o_within(d.x, d.y, px, py, d.r, 0);
+  return qko_within(d.x, d.y, px, py, d.r, 0);
 }
 static int o_items(const qk_disc_t *d, size_t nd, const qk_box_t *b, size_t i, size_t j) {
   if (i < nd && j < nd) return o_disc_disc(d[i], d[j]);

@@ -7,6 +7,11 @@
 
 #include "quadkit/quadkit.h"
 
+/* Is (ax - bx)^2 + (ay - by)^2 <= (r1 + r2)^2? And the sign of |a - q|^2 - |b - q|^2.
+ * Exact (rationals) when built with GMP; else long doubles, then doubles. */
+int qko_within(double ax, double ay, double bx, double by, double r1, double r2);
+int qko_dist_cmp(qk_point_t q, qk_point_t a, qk_point_t b);
+
 /* Ids of the points inside a closed box, ascending. Returns the count. */
 size_t qko_range(const qk_point_t *pts, size_t n, qk_box_t box, qk_id_t *out);
 
