@@ -246,6 +246,19 @@ __attribute__((noinline)) static int rows_buckets(const qk_allocator_t *al, cons
   return rows_index(al, r, ca, 0, n_obj, n, 0);
 }
 
+/* The b counts' prefix over slots b (cb[b] becomes the first place of b's keys); with
+ * `whole` (slots a and b the same range from 0, ca their counts), the count of rows in
+ * the same pass over the slots, else 0. */
+static inline __attribute__((always_inline)) size_t b_prefix(uint32_t *cb, const uint32_t *ca,
+                                                             uint32_t n_b, const int whole) {
+  size_t nz = 0;
+  for (uint32_t b = 1; b <= n_b; b++) {
+    cb[b] += cb[b - 1];
+    if (whole) nz += ca[b - 1] != 0;
+  }
+  return nz;
+}
+
 /*
  * The found keys (unsorted, n of them) as rows, each row ascending; 0 when memory ran
  * short. Slots a are in [a0, a0 + n_a), slots b below n_b; bucket: a0 = 0, n_a = n_b,
@@ -299,16 +312,10 @@ make_rows(const qk_allocator_t *al, uint64_t *keys, uint64_t *tmp, size_t n, uin
     cb[(uint32_t)k + 1]++;
     ca[(k >> 32) - a0]++;
   }
-  if (whole) {
-    /* (slots a and b the same range from 0: the b counts' prefix and the count of rows
-     * in one pass over the slots) */
-    size_t nz = 0;
-    for (uint32_t b = 1; b <= n_b; b++) cb[b] += cb[b - 1], nz += ca[b - 1] != 0;
-    if (!rows_fill(al, r, ca, 0, n_b, n, 1, nz)) return 0;
-  } else {
-    for (uint32_t b = 1; b <= n_b; b++) cb[b] += cb[b - 1];
-    if (!rows_index(al, r, ca, a0, n_a, n, 1)) return 0;
-  }
+  size_t nz = b_prefix(cb, ca, n_b, whole);
+  if (!whole)
+    for (uint32_t a = 0; a < n_a; a++) nz += ca[a] != 0;
+  if (!rows_fill(al, r, ca, a0, n_a, n, 1, nz)) return 0;
   QK__UNROLL4
   for (size_t i = 0; i < n; i++) t32[cb[(uint32_t)keys[i]]++] = (uint32_t)(keys[i] >> 32) - a0;
   /* cb[b] is now the end of b's run, where b + 1's starts. */
