@@ -405,7 +405,7 @@ static qk_status_t check_star(qk__gm_t *g, int clear) {
 
 /* Check the triangles the last insertion made (its star): when they share one face, its
  * label is looked at once. clear: the insertion was a circumcentre whose cavity search
- * was complete and found no encroached subsegment (g->cavity_clear). */
+ * was complete and found no encroached subsegment (CAVITY_CLEAR). */
 static qk_status_t check_dirty_after(qk__gm_t *g, int clear) {
   size_t n = g->ndirty;
   g->ndirty = 0;
@@ -473,18 +473,28 @@ static inline qk_status_t grow_marks(qk__gm_t *g) {
   return grow_marks_to(g, g->cdt.nt);
 }
 
+/* What the cavity search found (cavity_encroach). */
+enum {
+  CAVITY_NOMEM = -1,
+  CAVITY_CLEAR = 0,     /* the whole cavity searched, no subsegment encroached */
+  CAVITY_CAPPED = 1,    /* none encroached in the part searched, but the search stopped at
+                         * its cap: the rest of the cavity's edges were not tested */
+  CAVITY_ENCROACHED = 2 /* some encroached subsegments queued in g->enc */
+};
+
 /* The subsegments on the boundary of the insertion cavity of p (the triangles whose
  * circumcircles hold p, reached from t0 and t1 without crossing a constrained edge) that p
- * would encroach: queued (as triples) in g->enc. Returns the number queued, or -1 on NOMEM.
- * Every slot tested gets a stamp, g->mark[t] = 2 g->mark_gen + (1 inside the circle, 0
- * not): membership without a scan, and the insertion of p that follows reuses the results
- * for its flips (qk__cdt_t's known) instead of testing the same circles again. */
+ * would encroach: queued (as triples) in g->enc. Returns a CAVITY_ value: CAVITY_CLEAR says
+ * the new vertex's star will have no encroached edge (check_star). Every slot tested gets a stamp,
+ * g->mark[t] = 2 g->mark_gen + (1 inside the circle, 0 not): membership without a scan, and the
+ * insertion of p that follows reuses the results for its flips (qk__cdt_t's known) instead of
+ * testing the same circles again. */
 static int cavity_encroach(qk__gm_t *g, uint32_t t0, uint32_t t1, const double p[2]) {
   const qk__cdt_t *c = &g->cdt;
   size_t n = 0, seen = 0;
   int found = 0, capped = 0;
   /* Room for the whole search at once: it stops growing past 4096 triangles. */
-  if (grow_stack(g, 4096 + 8) || grow_marks(g)) return -1;
+  if (grow_stack(g, 4096 + 8) || grow_marks(g)) return CAVITY_NOMEM;
   /* The arrays in locals: nothing in the loop moves them (push_enc grows g->enc only), and
    * the compiler cannot tell that across push_enc's call. A stamp of this search is
    * 2 gen or 2 gen + 1, i.e. stamp | 1 == in. */
@@ -501,8 +511,8 @@ static int cavity_encroach(qk__gm_t *g, uint32_t t0, uint32_t t1, const double p
       if (S[3 * t + k] != QK__CDT_NONE) {
         uint32_t a = V[3 * t + (k + 1) % 3], b = V[3 * t + (k + 2) % 3];
         if (qk__cdt_encroach_in(&XY[2 * (size_t)a], &XY[2 * (size_t)b], p) < 0) {
-          if (push_enc(g, a, b, S[3 * t + k])) return -1;
-          found++;
+          if (push_enc(g, a, b, S[3 * t + k])) return CAVITY_NOMEM;
+          found = 1;
         }
         continue;
       }
@@ -519,8 +529,7 @@ static int cavity_encroach(qk__gm_t *g, uint32_t t0, uint32_t t1, const double p
       if (r) stack[n++] = u;
     }
   }
-  g->cavity_clear = !found && !capped;
-  return found;
+  return found ? CAVITY_ENCROACHED : capped ? CAVITY_CAPPED : CAVITY_CLEAR;
 }
 
 /* A constrained edge at vertex x (found by turning around it from triangle t): the
@@ -623,9 +632,9 @@ static qk_status_t split_triangle(qk__gm_t *g, uint32_t t, size_t *rejected) {
                          "precision exhausted refining the triangle at (%.17g, %.17g)", W[0], W[1]);
   uint32_t t1 = where == QK__CDT_EDGE ? c->nbr[3 * tri + k] : QK__CDT_NONE;
   size_t before = g->nenc;
-  int f = cavity_encroach(g, tri, t1, p);
-  if (f < 0) return QK_ERR_NOMEM;
-  if (f > 0) {
+  const int f = cavity_encroach(g, tri, t1, p);
+  if (f == CAVITY_NOMEM) return QK_ERR_NOMEM;
+  if (f == CAVITY_ENCROACHED) {
     /* Split those instead (the queue's front part is still empty here: the refinement
      * handles encroached subsegments before triangles), then retry the triangle. */
     int any = 0;
@@ -652,7 +661,7 @@ static qk_status_t split_triangle(qk__gm_t *g, uint32_t t, size_t *rejected) {
   qk_status_t st = qk__gm_insert(g, p[0], p[1], tri, k, where, QK__CDT_NONE, 0, &v, &existed);
   c->known = NULL;
   if (st) return qk__mesh_fail(g->err, st, 0, "out of memory");
-  return check_dirty_after(g, g->cavity_clear);
+  return check_dirty_after(g, f == CAVITY_CLEAR);
 }
 
 /* With a plain size bound h, the refined mesh holds about 5.1 triangles per h^2 of kept
