@@ -109,6 +109,10 @@ typedef struct qk__gm {
   uint32_t *mark; /* per triangle slot: the cavity search's stamp (general_refine.c) */
   size_t mark_cap;
   uint32_t mark_gen;
+  /* The CDT's record of a circumcentre's insertion, to take it back (general_refine.c,
+   * insert_circumcentre; mesh/cdt.h, undo). */
+  uint32_t *undo;
+  size_t undo_cap;
   size_t insertions, work_cap;
   size_t seeds, free_leaves; /* seeds inserted; free leaves meeting the bounding box */
   double smallest_input_angle;
