@@ -500,14 +500,21 @@ across_in_call(const qk__cdt_t *c, uint32_t t, uint32_t n, int j) {
  * past its cap), which the loop reads; without, it tests. The same flips either way. */
 static ALWAYS_INLINE void legalize_with(qk__cdt_t *c, int sp, const int with_known,
                                         const int with_undo) {
-  uint32_t *stk = c->stk, *undo = c->undo;
-  size_t nu = c->nundo;
+  uint32_t *stk = c->stk, *undo = c->undo, *useg = c->undo_seg;
+  size_t nu = c->nundo, nus = 0;
   const uint32_t *known = c->known, in = 2 * c->known_gen + 1;
   const double *xy = c->xy, *pp = c->xy + 2 * (c->nv - 1); /* p, the last vertex */
   while (sp > 0) {
     uint32_t t = stk[--sp];
     uint32_t n = c->nbr[3 * (size_t)t];
-    if (n == NONE || c->seg[3 * (size_t)t] != NONE) continue;
+    if (with_undo) {
+      if (c->seg[3 * (size_t)t] != NONE) { /* final: a star triangle flips only across edge 0 */
+        useg[nus++] = t;
+        continue;
+      }
+      if (n == NONE) continue;
+    } else if (n == NONE || c->seg[3 * (size_t)t] != NONE)
+      continue;
     int j;
     if (with_known && (known[n] | 1) == in) { /* stamped 2 gen (outside) or 2 gen + 1 */
       if (known[n] != in) continue;
@@ -534,7 +541,7 @@ static ALWAYS_INLINE void legalize_with(qk__cdt_t *c, int sp, const int with_kno
     flip0(c, t, n, j);
     stk[sp++] = t, stk[sp++] = n;
   }
-  if (with_undo) c->nundo = nu;
+  if (with_undo) c->nundo = nu, c->nundo_seg = nus;
 }
 
 static void legalize(qk__cdt_t *c, int sp) {

@@ -68,6 +68,11 @@ typedef struct qk__cdt {
    * most nv). nundo counts the words written. NULL: no record. */
   uint32_t *undo;
   size_t nundo;
+  /* With undo, also set by the caller: room for nv + 4 entries, where the flips list the
+   * point's star triangles whose edge 0 (the side away from the point) is constrained,
+   * nundo_seg of them (the flips meet each triangle of the final star once). */
+  uint32_t *undo_seg;
+  size_t nundo_seg;
   /* Private to mesh/cdt*.c: the flip stack (cap_v + 8 entries, in the vertex block) and the
    * segment insertion's scratch. */
   uint32_t *stk;

@@ -533,20 +533,17 @@ static int cavity_encroach(qk__gm_t *g, uint32_t t0, uint32_t t1, const double p
 }
 
 /* Does the new vertex v encroach a constrained edge of its star? v lies strictly inside a
- * kept face, so its spokes are not constrained: the edges to test are the far edges (edge
- * 0, v in slot 0), with the cavity search's exact test. */
+ * kept face, so its spokes are not constrained: the edges to test are the constrained far
+ * edges (edge 0, v in slot 0), which the insertion's flips listed in c->undo_seg; the
+ * cavity search's exact test. */
 static int star_encroached(const qk__gm_t *g, uint32_t v) {
   const qk__cdt_t *c = &g->cdt;
-  const uint32_t first = c->vtri[v];
   const double *pv = &c->xy[2 * (size_t)v];
-  uint32_t t = first;
-  do {
-    const uint32_t *tv = &c->v[3 * (size_t)t];
-    if (c->seg[3 * (size_t)t] != QK__CDT_NONE &&
-        qk__cdt_encroach_in(&c->xy[2 * (size_t)tv[1]], &c->xy[2 * (size_t)tv[2]], pv) < 0)
-      return 1;
-    t = c->nbr[3 * (size_t)t + 1];
-  } while (t != first);
+  for (size_t i = 0; i < c->nundo_seg; i++) {
+    const uint32_t *tv = &c->v[3 * (size_t)c->undo_seg[i]];
+    assert(tv[0] == v && c->seg[3 * (size_t)c->undo_seg[i]] != QK__CDT_NONE);
+    if (qk__cdt_encroach_in(&c->xy[2 * (size_t)tv[1]], &c->xy[2 * (size_t)tv[2]], pv) < 0) return 1;
+  }
   return 0;
 }
 
@@ -565,8 +562,9 @@ static int star_encroached(const qk__gm_t *g, uint32_t v) {
  * for the others: the flips make the same tests themselves. */
 static int insert_circumcentre(qk__gm_t *g, const double p[2], uint32_t t) {
   qk__cdt_t *c = &g->cdt;
-  /* Room for the record: two words and four a flip, at most one flip a vertex. */
-  size_t need = 4 * (c->nv + 2) + 2;
+  /* Room for the record: two words and four a flip, at most one flip a vertex; then the
+   * list of constrained far edges, at most one a vertex. */
+  size_t need = 5 * (c->nv + 4) + 2;
   if (need > g->undo_cap) {
     void *b = g->undo;
     if (qk__grow(g->a, &b, &g->undo_cap, need + need / 2, sizeof *g->undo)) return -1;
@@ -574,7 +572,7 @@ static int insert_circumcentre(qk__gm_t *g, const double p[2], uint32_t t) {
   }
   uint32_t v;
   int existed;
-  c->undo = g->undo;
+  c->undo = g->undo, c->undo_seg = g->undo + 4 * (c->nv + 2) + 2;
   qk_status_t st = qk__gm_insert(g, p[0], p[1], t, 0, QK__CDT_IN, QK__CDT_NONE, 0, &v, &existed);
   if (st) return c->undo = NULL, -1;
   assert(!existed && g->star_pending && g->dirty_v == v);

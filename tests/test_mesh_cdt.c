@@ -23,7 +23,8 @@
  *    partial record (stamps by the GMP in-circle oracle, the rest stale and wrong) makes
  *    the same triangulation, array for array, as one that tests every circle itself;
  *  - the undo record (c->undo): an insertion taken back by qk__cdt_undo_insert leaves every
- *    array, count and the hint as before, and one kept matches a plain insertion;
+ *    array, count and the hint as before, one kept matches a plain insertion, and the
+ *    record's list of constrained far edges (c->undo_seg) is exactly the star's;
  *  - qk__cdt_walk (and qk__cdt_walk_from, its turn around w started anywhere in w's star)
  *    against a brute-force visibility oracle (does the closed segment from w to
  *    P meet a constrained edge anywhere but at w?) and against qk__cdt_locate;
@@ -1024,7 +1025,9 @@ static void test_cdt_undo_record(void **state) {
   assert_int_equal(qk__cdt_init(&a, NULL, 0, 0, 16, n + 64), QK_OK);
   assert_int_equal(qk__cdt_init(&b, NULL, 0, 0, 16, n + 64), QK_OK);
   uint32_t vid[64], *rec = malloc((4 * (n + 80) + 2) * sizeof *rec);
-  assert_non_null(rec);
+  uint32_t *segs = malloc((n + 80) * sizeof *segs);
+  assert_true(rec && segs);
+  size_t listed = 0;
   for (int i = 0; i < g * g; i++) {
     int e;
     assert_int_equal(qk__cdt_insert(&a, gxy[2 * i], gxy[2 * i + 1], NONE, &vid[i], &e), QK_OK);
@@ -1048,9 +1051,28 @@ static void test_cdt_undo_record(void **state) {
       snap_take(&sn, &b);
       uint32_t *vt = malloc(b.nv * sizeof *vt + 1), hint = b.hint;
       memcpy(vt, b.vtri, b.nv * sizeof *vt);
-      b.undo = rec;
+      b.undo = rec, b.undo_seg = segs;
       assert_int_equal(qk__cdt_insert_at(&b, x, y, t, k, w, &vb, &eb), QK_OK);
       assert_true(!eb && b.nt == sn.nt + 2 && b.nundo >= 2 && (b.nundo - 2) % 4 == 0);
+      /* The list of constrained far edges: exactly the star's triangles (around vb, vb in
+       * slot 0) whose edge 0 is constrained, each once. */
+      size_t want = 0;
+      uint32_t u = b.vtri[vb];
+      do {
+        assert_int_equal(b.v[3 * u], vb);
+        if (b.seg[3 * u] != NONE) {
+          size_t hits = 0;
+          for (size_t m = 0; m < b.nundo_seg; m++) hits += segs[m] == u;
+          if (hits != 1)
+            fail_msg("seed %llu: point %zu: star triangle %u with a constrained far edge "
+                     "listed %zu times",
+                     (unsigned long long)g_seed, i, u, hits);
+          want++;
+        }
+        u = b.nbr[3 * u + 1];
+      } while (u != b.vtri[vb]);
+      assert_int_equal(b.nundo_seg, want);
+      listed += want;
       flips += (b.nundo - 2) / 4;
       qk__cdt_undo_insert(&b, t);
       b.undo = NULL;
@@ -1062,7 +1084,7 @@ static void test_cdt_undo_record(void **state) {
       snap_free(&sn);
       free(vt);
       undone++;
-      b.undo = rec;
+      b.undo = rec, b.undo_seg = segs;
     }
     assert_int_equal(qk__cdt_insert_at(&b, x, y, t, k, w, &vb, &eb), QK_OK);
     b.undo = NULL;
@@ -1078,9 +1100,10 @@ static void test_cdt_undo_record(void **state) {
   }
   check_cdt(&b);
   free(rec);
+  free(segs);
   qk__cdt_free(&a);
   qk__cdt_free(&b);
-  assert_true(undone > n / 2 && flips > undone);
+  assert_true(undone > n / 2 && flips > undone && listed > n / 10);
 }
 
 static void test_cdt_known_record(void **state) {
