@@ -547,19 +547,18 @@ static int star_encroached(const qk__gm_t *g, uint32_t v) {
   return 0;
 }
 
-/* Insert circumcentre p, strictly inside kept triangle t (stars checked whole: g->star_later),
- * before asking whether it encroaches a subsegment: returns 0 when it does not (then it
- * stays, its star not yet checked), 1 when it does (then it has been taken back: the CDT,
- * the vertex's record and the insertion count are as they were, and the caller does what
- * the cavity search says), -1 on NOMEM. Lawson's flips from t replace exactly the insertion
- * cavity (the triangles whose circumcircles hold p, reached without crossing a constraint),
- * so the star's far edges are the cavity's boundary: the edges the cavity search would
- * have tested, with the same exact test, and one of them is encroached exactly when the
- * search would have found one; the point is taken back for about 0.4% of the
- * circumcentres (46 of 11,018 on Norway at extent/256, 144 of 63,367 on Iceland), where the
- * search then runs as it always did, so the mesh is the same. The search itself, a walk
- * over the cavity and its neighbours whose in-circle results the flips reused, is saved
- * for the others: the flips make the same tests themselves. */
+/* Insert circumcentre p, strictly inside kept triangle t, before asking whether it encroaches a
+ * subsegment: returns 0 when it does not (then it stays, its star not yet checked), 1 when it does
+ * (then it has been taken back: the CDT, the vertex's record and the insertion count are as they
+ * were, and the caller does what the cavity search says), -1 on NOMEM. Lawson's flips from t
+ * replace exactly the insertion cavity (the triangles whose circumcircles hold p, reached without
+ * crossing a constraint), so the star's far edges are the cavity's boundary: the edges the cavity
+ * search would have tested, with the same exact test, and one of them is encroached exactly when
+ * the search would have found one; the point is taken back for about 0.4% of the circumcentres (46
+ * of 11,018 on Norway at extent/256, 144 of 63,367 on Iceland), where the search then runs as it
+ * always did, so the mesh is the same. The search itself, a walk over the cavity and its neighbours
+ * whose in-circle results the flips reused, is saved for the others: the flips make the same tests
+ * themselves. */
 static int insert_circumcentre(qk__gm_t *g, const double p[2], uint32_t t) {
   qk__cdt_t *c = &g->cdt;
   /* Room for the record: two words and four a flip, at most one flip a vertex; then the
@@ -575,13 +574,15 @@ static int insert_circumcentre(qk__gm_t *g, const double p[2], uint32_t t) {
   c->undo = g->undo, c->undo_seg = g->undo + 4 * (c->nv + 2) + 2;
   qk_status_t st = qk__gm_insert(g, p[0], p[1], t, 0, QK__CDT_IN, QK__CDT_NONE, 0, &v, &existed);
   if (st) return c->undo = NULL, -1;
-  assert(!existed && g->star_pending && g->dirty_v == v);
+  assert(!existed && g->dirty_v == v && g->dirty_face == g->face[t]);
   if (!star_encroached(g, v)) return c->undo = NULL, 0;
   qk__cdt_undo_insert(c, t);
   c->undo = NULL;
   /* (g->vi[v] holds the values of a vertex never used, as before: no input vertex, no
-   * segment, parameter 0.) */
-  g->star_pending = 0, g->insertions--;
+   * segment, parameter 0. Without star_later the insertion listed its star and labelled it
+   * with the face its old triangles had, the cavity's one face; the two new slots are past
+   * the count now and get their face when they are made again.) */
+  g->star_pending = 0, g->ndirty = 0, g->insertions--;
   return 1;
 }
 
@@ -685,7 +686,7 @@ static qk_status_t split_triangle(qk__gm_t *g, uint32_t t, size_t *rejected) {
                          "precision exhausted refining the triangle at (%.17g, %.17g)", W[0], W[1]);
   uint32_t v;
   int existed;
-  if (where == QK__CDT_IN && g->star_later) {
+  if (where == QK__CDT_IN) {
     int enc = insert_circumcentre(g, p, tri);
     if (enc < 0) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
     if (!enc) return check_dirty_after(g, 1);
