@@ -495,9 +495,11 @@ across_in_call(const qk__cdt_t *c, uint32_t t, uint32_t n, int j) {
 /* Lawson's flips after inserting p: every stacked triangle has p in slot 0; its edge 0 is
  * flipped when the vertex across it lies strictly inside its circumcircle (ties keep the
  * edge, so flips end). Each flip adds one triangle to p's star, so the stack never holds
- * more than its initial four plus nv entries. With_known (a constant in each of the two
- * copies): c->known records the tests (the refinement's cavity search made them all but
- * past its cap), which the loop reads; without, it tests. The same flips either way. */
+ * more than its initial four plus nv entries. With_known and with_undo (constants in each
+ * of the three copies): c->known records the tests (the refinement's cavity search made
+ * them all but past its cap), which the loop reads; without, it tests. The same flips
+ * either way. With_undo it also writes c->undo's record of each flip (what undo_flip0
+ * needs) and lists the star's constrained far edges in c->undo_seg. */
 static ALWAYS_INLINE void legalize_with(qk__cdt_t *c, int sp, const int with_known,
                                         const int with_undo) {
   uint32_t *stk = c->stk, *undo = c->undo, *useg = c->undo_seg;
