@@ -495,34 +495,108 @@ across_in_call(const qk__cdt_t *c, uint32_t t, uint32_t n, int j) {
 /* Lawson's flips after inserting p: every stacked triangle has p in slot 0; its edge 0 is
  * flipped when the vertex across it lies strictly inside its circumcircle (ties keep the
  * edge, so flips end). Each flip adds one triangle to p's star, so the stack never holds
- * more than its initial four plus nv entries. With_known (a constant in each of the two
- * copies): c->known records the tests (the refinement's cavity search made them all but
- * past its cap), which the loop reads; without, it tests. The same flips either way. */
-static ALWAYS_INLINE void legalize_with(qk__cdt_t *c, int sp, const int with_known) {
-  uint32_t *stk = c->stk;
+ * more than its initial four plus nv entries. With_known and with_undo (constants in each
+ * of the three copies): c->known records the tests (the refinement's cavity search made
+ * them all but past its cap), which the loop reads; without, it tests. The same flips
+ * either way. With_undo it also writes c->undo's record of each flip (what undo_flip0
+ * needs) and lists the star's constrained far edges in c->undo_seg. */
+static ALWAYS_INLINE void legalize_with(qk__cdt_t *c, int sp, const int with_known,
+                                        const int with_undo) {
+  uint32_t *stk = c->stk, *undo = c->undo, *useg = c->undo_seg;
+  size_t nu = c->nundo, nus = 0;
   const uint32_t *known = c->known, in = 2 * c->known_gen + 1;
+  const double *xy = c->xy, *pp = c->xy + 2 * (c->nv - 1); /* p, the last vertex */
   while (sp > 0) {
     uint32_t t = stk[--sp];
     uint32_t n = c->nbr[3 * (size_t)t];
-    if (n == NONE || c->seg[3 * (size_t)t] != NONE) continue;
+    if (with_undo) {
+      if (c->seg[3 * (size_t)t] != NONE) { /* final: a star triangle flips only across edge 0 */
+        useg[nus++] = t;
+        continue;
+      }
+      if (n == NONE) continue;
+    } else if (n == NONE || c->seg[3 * (size_t)t] != NONE)
+      continue;
     int j;
     if (with_known && (known[n] | 1) == in) { /* stamped 2 gen (outside) or 2 gen + 1 */
       if (known[n] != in) continue;
+      j = facing(c, n, t);
+    } else if (with_undo) {
+      /* The same test as across_in's, written as the cavity search writes it: p against
+       * n's circumcircle, n's corners in its own order (an even permutation, so the same
+       * exact sign), p's coordinates loaded once for the loop. */
+      const uint32_t *nv = c->v + 3 * (size_t)n;
+      if (!(qk__cdt_incircle(xy + 2 * (size_t)nv[0], xy + 2 * (size_t)nv[1], xy + 2 * (size_t)nv[2],
+                             pp) > 0))
+        continue;
       j = facing(c, n, t);
     } else {
       j = facing(c, n, t);
       if (!(with_known ? across_in_call(c, t, n, j) : across_in(c, t, n, j))) continue;
     }
+    if (with_undo) { /* what undo_flip0 needs besides the flipped pair */
+      const uint32_t *tv = c->v + 3 * (size_t)t;
+      undo[nu] = t, undo[nu + 1] = (uint32_t)j;
+      undo[nu + 2] = c->vtri[tv[1]], undo[nu + 3] = c->vtri[tv[2]];
+      nu += 4;
+    }
     flip0(c, t, n, j);
     stk[sp++] = t, stk[sp++] = n;
   }
+  if (with_undo) c->nundo = nu, c->nundo_seg = nus;
 }
 
 static void legalize(qk__cdt_t *c, int sp) {
   if (c->known)
-    legalize_with(c, sp, 1);
+    legalize_with(c, sp, 1, 0);
+  else if (c->undo)
+    legalize_with(c, sp, 0, 1);
   else
-    legalize_with(c, sp, 0);
+    legalize_with(c, sp, 0, 0);
+}
+
+/* flip0(c, t, n, j) taken back, n = t's edge-1 neighbour, q's and r's vertex triangles
+ * restored to vq and vr. After the flip t = (p, q, s) with neighbours (C, n, B) and n =
+ * (p, s, r) with (D, A, t); before it t was (p, q, r) with (n, A, B), its edge 0
+ * unconstrained, and n held s in slot j, r and q after it, with t, C, D across. */
+static void undo_flip0(qk__cdt_t *c, uint32_t t, int j, uint32_t vq, uint32_t vr) {
+  const int j1 = j == 2 ? 0 : j + 1, j2 = j == 0 ? 2 : j - 1;
+  uint32_t *tv = c->v + 3 * (size_t)t, *tn = c->nbr + 3 * (size_t)t, *ts = c->seg + 3 * (size_t)t;
+  const uint32_t n = tn[1];
+  uint32_t *nv = c->v + 3 * (size_t)n, *nn = c->nbr + 3 * (size_t)n, *ns = c->seg + 3 * (size_t)n;
+  const uint32_t p = tv[0], q = tv[1], s = tv[2], r = nv[2];
+  const uint32_t C = tn[0], sC = ts[0], B = tn[2], sB = ts[2];
+  const uint32_t D = nn[0], sD = ns[0], A = nn[1], sA = ns[1];
+  set_tri(c, t, p, q, r, n, A, B, NONE, sA, sB);
+  nv[j] = s, nv[j1] = r, nv[j2] = q;
+  nn[j] = t, nn[j1] = C, nn[j2] = D;
+  ns[j] = NONE, ns[j1] = sC, ns[j2] = sD;
+  if (A != NONE) c->nbr[3 * (size_t)A + 2] = t;
+  relink(c, C, t, n);
+  c->vtri[q] = vq, c->vtri[r] = vr;
+}
+
+void qk__cdt_undo_insert(qk__cdt_t *c, uint32_t t) {
+  const uint32_t *u = c->undo;
+  assert(u && c->nundo >= 2 && (c->nundo - 2) % 4 == 0);
+  for (size_t i = c->nundo; i > 2; i -= 4)
+    undo_flip0(c, u[i - 4], (int)u[i - 3], u[i - 2], u[i - 1]);
+  /* split3 taken back: t = (p, b, d), t1 = (p, d, a), t2 = (p, a, b), the last two slots. */
+  const uint32_t t1 = (uint32_t)c->nt - 2, t2 = t1 + 1;
+  const uint32_t *tv = c->v + 3 * (size_t)t, *v1 = c->v + 3 * (size_t)t1;
+  assert(c->nbr[3 * (size_t)t + 1] == t1 && c->nbr[3 * (size_t)t + 2] == t2);
+  const uint32_t a = v1[2], b = tv[1], d = tv[2];
+  const uint32_t na = c->nbr[3 * (size_t)t], nb = c->nbr[3 * (size_t)t1],
+                 nd = c->nbr[3 * (size_t)t2];
+  const uint32_t sa = c->seg[3 * (size_t)t], sb = c->seg[3 * (size_t)t1],
+                 sd = c->seg[3 * (size_t)t2];
+  set_tri(c, t, a, b, d, na, nb, nd, sa, sb, sd);
+  relink(c, nb, t1, t);
+  relink(c, nd, t2, t);
+  c->vtri[a] = u[1];
+  c->nt -= 2, c->nv -= 1;
+  c->hint = u[0];
+  c->nundo = 0;
 }
 
 qk_status_t qk__cdt_insert(qk__cdt_t *c, double x, double y, uint32_t start, uint32_t *v_out,
@@ -549,6 +623,11 @@ qk_status_t qk__cdt_insert_at(qk__cdt_t *c, double x, double y, uint32_t t, int 
     return QK_ERR_NOMEM;
   uint32_t p = (uint32_t)c->nv++;
   c->xy[2 * (size_t)p] = x, c->xy[2 * (size_t)p + 1] = y;
+  if (c->undo) { /* (a point inside t: split3's changes are known from t's three slots) */
+    assert(w == QK__CDT_IN);
+    c->undo[0] = c->hint, c->undo[1] = c->vtri[c->v[3 * (size_t)t]];
+    c->nundo = 2;
+  }
   int sp = w == QK__CDT_IN ? split3(c, t, p) : split_edge(c, t, k, p);
   if (sp == 4 && c->legal_sides) { /* stacked: t's side (t, t1), then the other's */
     if (!(c->legal_sides & 1)) c->stk[0] = c->stk[2], c->stk[1] = c->stk[3];

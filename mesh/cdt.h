@@ -61,6 +61,18 @@ typedef struct qk__cdt {
    * general mode leaves the side it never outputs, searches or refines (the outside, holes)
    * as it is: flips never cross the edge, so the other side's triangles come out the same. */
   int legal_sides;
+  /* Optional, set by a caller for one insertion of a point strictly inside a triangle
+   * (QK__CDT_IN) and cleared after it: a record of the insertion's changes, with which
+   * qk__cdt_undo_insert takes the point out again. Two words, then four a Lawson flip: room
+   * for 4 (nv + 1) + 2 words (a flip adds a triangle to the point's star, so there are at
+   * most nv). nundo counts the words written. NULL: no record. */
+  uint32_t *undo;
+  size_t nundo;
+  /* With undo, also set by the caller: room for nv + 4 entries, where the flips list the
+   * point's star triangles whose edge 0 (the side away from the point) is constrained,
+   * nundo_seg of them (the flips meet each triangle of the final star once). */
+  uint32_t *undo_seg;
+  size_t nundo_seg;
   /* Private to mesh/cdt*.c: the flip stack (cap_v + 8 entries, in the vertex block) and the
    * segment insertion's scratch. */
   uint32_t *stk;
@@ -127,6 +139,11 @@ qk_status_t qk__cdt_insert(qk__cdt_t *c, double x, double y, uint32_t start, uin
  * triangles (callers walking its star need not search for it). */
 qk_status_t qk__cdt_insert_at(qk__cdt_t *c, double x, double y, uint32_t t, int k,
                               qk__cdt_where_t w, uint32_t *v_out, int *existed);
+
+/* Take back the last insertion, made with c->undo set (and still set) into triangle t: every
+ * triangle slot, link, vertex triangle, count and the hint as they were before it (slots
+ * past the counts keep what the insertion wrote there). Nothing else may have changed. */
+void qk__cdt_undo_insert(qk__cdt_t *c, uint32_t t);
 
 /* Make the edge from vertex a to vertex b a constrained edge with segment id `seg`,
  * removing the edges it crosses and restoring the constrained Delaunay property.

@@ -109,10 +109,10 @@ typedef struct qk__gm {
   uint32_t *mark; /* per triangle slot: the cavity search's stamp (general_refine.c) */
   size_t mark_cap;
   uint32_t mark_gen;
-  /* The cavity search of the circumcentre just inserted covered its whole cavity (it never
-   * stopped at its cap) and found no constrained edge that the circumcentre encroaches:
-   * the new vertex's star then has no encroached edge (general_refine.c, check_star). */
-  int cavity_clear;
+  /* The CDT's record of a circumcentre's insertion, to take it back (general_refine.c,
+   * insert_circumcentre; mesh/cdt.h, undo). */
+  uint32_t *undo;
+  size_t undo_cap;
   size_t insertions, work_cap;
   size_t seeds, free_leaves; /* seeds inserted; free leaves meeting the bounding box */
   double smallest_input_angle;

@@ -25,6 +25,8 @@ static void free_refinement(qk__gm_t *g) {
   qk__free(a, g->stack, g->stack_cap * sizeof *g->stack);
   qk__free(a, g->dirty, g->dirty_cap * sizeof *g->dirty);
   qk__free(a, g->mark, g->mark_cap * sizeof *g->mark);
+  qk__free(a, g->undo, g->undo_cap * sizeof *g->undo);
+  g->undo = NULL, g->undo_cap = 0;
   qk__free(a, g->arena, g->arena_cap * sizeof *g->arena);
   qk__free(a, g->pts, g->pts_cap * sizeof *g->pts);
   qk__free(a, g->fbox, (g->P->nv + g->P->ns + 1) * 8 * sizeof *g->fbox);

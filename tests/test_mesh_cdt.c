@@ -22,6 +22,9 @@
  *  - the known record (c->known, the refinement's cavity stamps): an insertion reading a
  *    partial record (stamps by the GMP in-circle oracle, the rest stale and wrong) makes
  *    the same triangulation, array for array, as one that tests every circle itself;
+ *  - the undo record (c->undo): an insertion taken back by qk__cdt_undo_insert leaves every
+ *    array, count and the hint as before, one kept matches a plain insertion, and the
+ *    record's list of constrained far edges (c->undo_seg) is exactly the star's;
  *  - qk__cdt_walk (and qk__cdt_walk_from, its turn around w started anywhere in w's star)
  *    against a brute-force visibility oracle (does the closed segment from w to
  *    P meet a constrained edge anywhere but at w?) and against qk__cdt_locate;
@@ -665,7 +668,8 @@ static void test_cdt_long_segments(void **state) {
   qk__cdt_test_flips = 0;
 }
 
-/* Snapshot of a triangulation, to check that a refused call changed nothing. */
+/* Snapshot of a triangulation, to check that a refused call (or an insertion taken back)
+ * changed nothing. */
 
 static void snap_take(snap_t *s, const qk__cdt_t *c) {
   s->nv = c->nv, s->nt = c->nt;
@@ -684,7 +688,8 @@ static void snap_expect(const snap_t *s, const qk__cdt_t *c) {
       memcmp(s->v, c->v, 3 * c->nt * sizeof *s->v) ||
       memcmp(s->nbr, c->nbr, 3 * c->nt * sizeof *s->v) ||
       memcmp(s->seg, c->seg, 3 * c->nt * sizeof *s->v))
-    fail_msg("seed %llu: a refused call changed the triangulation", (unsigned long long)g_seed);
+    fail_msg("seed %llu: the triangulation changed (a refused call, or an insertion taken back)",
+             (unsigned long long)g_seed);
 }
 
 static void snap_free(snap_t *s) { free(s->xy), free(s->v), free(s->nbr), free(s->seg); }
@@ -999,6 +1004,108 @@ static void test_cdt_legal_sides(void **state) {
  * three in four with this generation and the GMP in-circle answer for the new point, the
  * rest with the previous generation and the wrong answer (which the insertion must ignore
  * and test itself). The two must agree in every array after every insertion. */
+/* The undo record (c->undo, qk__cdt_undo_insert: the refinement inserts a circumcentre
+ * first and takes it back when it encroaches a subsegment): on a jittered grid graph with
+ * constrained edges, then random and half-integer points (cocircular ties), each point
+ * strictly inside a triangle is inserted with the record and taken back, which must leave
+ * every array of the triangulation, the counts and the hint as they were; then inserted
+ * with the record again and kept, which must make the same triangulation, array for array,
+ * as a plain insertion into a copy. */
+static void test_cdt_undo_record(void **state) {
+  (void)state;
+  g_seed = qkt_seed(12201);
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed);
+  const int g = 8;
+  const size_t n = 1200;
+  double gxy[2 * 64];
+  segrec_t sg[3 * 64];
+  size_t ns = grid_graph(&r, g, gxy, sg), undone = 0, flips = 0;
+  qk__cdt_t a, b;
+  assert_int_equal(qk__cdt_init(&a, NULL, 0, 0, 16, n + 64), QK_OK);
+  assert_int_equal(qk__cdt_init(&b, NULL, 0, 0, 16, n + 64), QK_OK);
+  uint32_t vid[64], *rec = malloc((4 * (n + 80) + 2) * sizeof *rec);
+  uint32_t *segs = malloc((n + 80) * sizeof *segs);
+  assert_true(rec && segs);
+  size_t listed = 0;
+  for (int i = 0; i < g * g; i++) {
+    int e;
+    assert_int_equal(qk__cdt_insert(&a, gxy[2 * i], gxy[2 * i + 1], NONE, &vid[i], &e), QK_OK);
+    assert_int_equal(qk__cdt_insert(&b, gxy[2 * i], gxy[2 * i + 1], NONE, &vid[i], &e), QK_OK);
+  }
+  for (size_t i = 0; i < ns; i += 2) { /* half the grid's edges constrained */
+    uint32_t blk, bs;
+    qk_status_t sa = qk__cdt_insert_segment(&a, vid[sg[i].a], vid[sg[i].b], (uint32_t)i, &blk, &bs);
+    qk_status_t sb = qk__cdt_insert_segment(&b, vid[sg[i].a], vid[sg[i].b], (uint32_t)i, &blk, &bs);
+    assert_int_equal(sa, sb);
+  }
+  for (size_t i = 0; i < n; i++) {
+    int half = i % 2;
+    double x = half ? 0.5 * (1 + qkt_rng_below(&r, 28)) : qkt_rng_range(&r, 0.25, 15.75);
+    double y = half ? 0.5 * (1 + qkt_rng_below(&r, 28)) : qkt_rng_range(&r, 0.25, 15.75);
+    uint32_t t, va, vb;
+    int k, ea, eb;
+    qk__cdt_where_t w = qk__cdt_locate(&b, x, y, NONE, &t, &k);
+    if (w == QK__CDT_IN) {
+      snap_t sn;
+      snap_take(&sn, &b);
+      uint32_t *vt = malloc(b.nv * sizeof *vt + 1), hint = b.hint;
+      memcpy(vt, b.vtri, b.nv * sizeof *vt);
+      b.undo = rec, b.undo_seg = segs;
+      assert_int_equal(qk__cdt_insert_at(&b, x, y, t, k, w, &vb, &eb), QK_OK);
+      assert_true(!eb && b.nt == sn.nt + 2 && b.nundo >= 2 && (b.nundo - 2) % 4 == 0);
+      /* The list of constrained far edges: exactly the star's triangles (around vb, vb in
+       * slot 0) whose edge 0 is constrained, each once. */
+      size_t want = 0;
+      uint32_t u = b.vtri[vb];
+      do {
+        assert_int_equal(b.v[3 * u], vb);
+        if (b.seg[3 * u] != NONE) {
+          size_t hits = 0;
+          for (size_t m = 0; m < b.nundo_seg; m++) hits += segs[m] == u;
+          if (hits != 1)
+            fail_msg("seed %llu: point %zu: star triangle %u with a constrained far edge "
+                     "listed %zu times",
+                     (unsigned long long)g_seed, i, u, hits);
+          want++;
+        }
+        u = b.nbr[3 * u + 1];
+      } while (u != b.vtri[vb]);
+      assert_int_equal(b.nundo_seg, want);
+      listed += want;
+      flips += (b.nundo - 2) / 4;
+      qk__cdt_undo_insert(&b, t);
+      b.undo = NULL;
+      snap_expect(&sn, &b);
+      if (b.hint != hint || memcmp(vt, b.vtri, b.nv * sizeof *vt))
+        fail_msg("seed %llu: point %zu (%.17g, %.17g): undo left the vertex triangles or the "
+                 "hint changed",
+                 (unsigned long long)g_seed, i, x, y);
+      snap_free(&sn);
+      free(vt);
+      undone++;
+      b.undo = rec, b.undo_seg = segs;
+    }
+    assert_int_equal(qk__cdt_insert_at(&b, x, y, t, k, w, &vb, &eb), QK_OK);
+    b.undo = NULL;
+    assert_int_equal(qk__cdt_insert(&a, x, y, NONE, &va, &ea), QK_OK);
+    assert_true(va == vb && ea == eb);
+    if (a.nt != b.nt || a.hint != b.hint || memcmp(a.v, b.v, 3 * a.nt * sizeof *a.v) ||
+        memcmp(a.nbr, b.nbr, 3 * a.nt * sizeof *a.v) ||
+        memcmp(a.seg, b.seg, 3 * a.nt * sizeof *a.v) ||
+        memcmp(a.vtri, b.vtri, a.nv * sizeof *a.vtri))
+      fail_msg("seed %llu: point %zu (%.17g, %.17g): the record changed the insertion",
+               (unsigned long long)g_seed, i, x, y);
+    if (i % 300 == 0) check_cdt(&b);
+  }
+  check_cdt(&b);
+  free(rec);
+  free(segs);
+  qk__cdt_free(&a);
+  qk__cdt_free(&b);
+  assert_true(undone > n / 2 && flips > undone && listed > n / 10);
+}
+
 static void test_cdt_known_record(void **state) {
   (void)state;
   g_seed = qkt_seed(12120);
@@ -1216,6 +1323,7 @@ int main(void) {
       cmocka_unit_test(test_cdt_incircle_gmp),
       cmocka_unit_test(test_cdt_encroach_gmp),
       cmocka_unit_test(test_cdt_known_record),
+      cmocka_unit_test(test_cdt_undo_record),
 #else
       cmocka_unit_test(skip_without_gmp),
 #endif
