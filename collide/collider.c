@@ -2042,14 +2042,19 @@ raycast_rare(const qk_collider_t *c, qk_point_t o, qk_point_t d, double tmax, qk
    * coordinates and radii: a direction whose largest component is beyond 2^100 could
    * overflow there (a radius of 1e10 with a direction of 1e150 did: t = 0, or a miss) and
    * one below 2^-100 underflow. Such a direction is scaled by a power of two to a largest
-   * component in [1/2, 1), which is exact (but for a component 2^1000 times smaller than
-   * the other, which then underflows: the ray's direction moves by less than 2^-1000 of a
-   * radian), and t is scaled back: the same t, to the bit, as the unscaled cast's wherever
-   * that one does not overflow. Coordinates beyond FAR_COORD take ray_disc_far(). */
+   * component in [1/2, 1) (a small one) or [2^50, 2^51) (a large one), which is exact (but
+   * for a component 2^1000 times smaller than the other, which then underflows: the ray's
+   * direction moves by less than 2^-1000 of a radian), and t is scaled back: the same t, to
+   * the bit, as the unscaled cast's wherever that one does not overflow. A large direction
+   * stops at 2^50 so that t along it stays below 2^975 for any two doubles' distance: at
+   * [1/2, 1) it overflowed beyond 2^1023 (from (0, -1e308) along (0, 1e308), a disc at the
+   * origin, t = 1, came back at t = inf, and a farther item with a smaller id won the tie of
+   * two infinities). Coordinates beyond FAR_COORD take ray_disc_far(). */
   const double m = qk__max(fabs(d.x), fabs(d.y)); /* finite: no call to fmax, no spills */
   int e = 0;
   if (m > 0x1p100 || (m < 0x1p-100 && m > 0)) {
-    (void)frexp(m, &e);
+    (void)frexp(m, &e); /* m in [2^(e-1), 2^e) */
+    if (m > 0x1p100) e -= 51;
     d.x = ldexp(d.x, -e);
     d.y = ldexp(d.y, -e);
     tmax = ldexp(tmax, e); /* t along d / 2^e is t along d times 2^e */

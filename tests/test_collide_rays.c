@@ -576,6 +576,98 @@ static void test_collide_rays_far_coordinates(void **state) {
   free(d);
 }
 
+/* Scenes spanning nearly the whole double range (items from -2^1023 to 2^1023), cast
+ * with directions beyond 2^100, which the cast scales by a power of two: t must stay
+ * what it is, though t along a direction scaled to [1/2, 1) would exceed the largest
+ * double there (such casts answered t = inf, and a farther item of smaller id won the
+ * tie of two infinities). Hand cases whose every t is a dyadic number (exact); then
+ * random scenes, where the ray with direction v 2^j must give the hit of the ray with
+ * direction v (largest component in [2, 6]: not scaled) at t 2^-j, exactly. */
+static void test_collide_rays_span_of_doubles(void **state) {
+  (void)state;
+  const double h = 0x1p1023, q = 0x1p1021;
+  /* disc 0 farther than disc 1 on the ray up the y axis from -2^1023 */
+  const qk_disc_t hd[] = {
+      {0, 0x1.8p1022, 0x1p1020}, {0, q, 0x1p1020}, {0x1p1022, 0x1p1022, 0x1p1020}};
+  const qk_box_t hb[] = {{-1, q, 1, 0x1p1022},
+                         {0x1p1022 - q, -h, 0x1p1022 + q, -0x1p1022},
+                         {-0x1p1022 - 1, q + 0x1p1020, -0x1p1022 + 1, 0x1p1022}};
+  qk_collider_t *c = NULL;
+  assert_int_equal(qk_collider_build(hd, 3, hb, 3, NULL, &c), QK_OK);
+  const struct {
+    qk_point_t o, v;
+    double tmax;
+    qk_id_t id;
+    double t;
+  } cases[] = {
+      {{0, -h}, {0, h}, INFINITY, 1, 1.125},            /* (2^1023 + 2^1020) / 2^1023 */
+      {{0, -h}, {0, 0x1p200}, INFINITY, 1, 0x1.2p823},  /* the same point along 2^200 */
+      {{0, h}, {0, -h}, INFINITY, 0, 0.125},            /* from the top: disc 0 first */
+      {{0, -h}, {0, h}, 1, QK_NONE, INFINITY},          /* tmax short of disc 1 */
+      {{-0x1p1022, -h}, {0, h}, INFINITY, 5, 1.375},    /* box 5 from below */
+      {{-q, -h}, {0x1p1022, 0x1p1022}, INFINITY, 4, 1}, /* box 4's corner (2^1021, -2^1022) */
+      {{0x1p1022, -h}, {0, 0x1p1000}, INFINITY, 4, 0},  /* from inside box 4: t = 0 */
+      {{0x1p1022, -0x1.8p1022}, {0, 0x1p900}, INFINITY, 4, 0},
+      {{0x1p1022, -0x1p1022}, {0, 0x1p700}, INFINITY, 4, 0},
+      {{0x1p1022, -0x1.fp1022}, {0, -0x1p101}, INFINITY, 4, 0},
+      {{0x1p1022, h}, {0, -h}, INFINITY, 2, 0.375}, /* down onto disc 2's top */
+  };
+  for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+    qk_hit_t hit;
+    assert_int_equal(qk_collider_raycast(c, cases[i].o, cases[i].v, cases[i].tmax, &hit), QK_OK);
+    if (hit.id != cases[i].id || !(hit.t == cases[i].t))
+      fail_msg("case %zu: (%u, %.17g), want (%u, %.17g)", i, hit.id, hit.t, cases[i].id,
+               cases[i].t);
+  }
+  qk_collider_free(c);
+
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 9);
+  enum { ND = 60, NB = 15, NR = 600 };
+  qk_disc_t *d = malloc(ND * sizeof *d);
+  qk_box_t *b = malloc(NB * sizeof *b);
+  assert_non_null(d), assert_non_null(b);
+  const double span = 0x1.ep1022; /* 0.9375 of 2^1023 */
+  for (int i = 0; i < ND; i++)
+    d[i] = (qk_disc_t){qkt_rng_range(&r, -span, span), qkt_rng_range(&r, -span, span),
+                       qkt_rng_range(&r, 0, 0x1p1017)};
+  for (int i = 0; i < NB; i++) {
+    const double x = qkt_rng_range(&r, -span, span), y = qkt_rng_range(&r, -span, span);
+    b[i] = (qk_box_t){x, y, x + qkt_rng_range(&r, 0, 0x1p1017), y + qkt_rng_range(&r, 0, 0x1p1017)};
+  }
+  assert_int_equal(qk_collider_build(d, ND, b, NB, NULL, &c), QK_OK);
+  const int js[] = {99, 100, 200, 600, 1019};
+  long hits = 0, far_hits = 0;
+  for (int i = 0; i < NR; i++) {
+    const double ang = qkt_rng_range(&r, 0, 6.283185307179586);
+    /* from the square's bottom edge, upwards; the largest component in [2, 6], so that t
+     * stays below 2^1024 (1.33 times 2^1024 of distance at most, over 2) */
+    const qk_point_t o = {qkt_rng_range(&r, -span, span), -span};
+    const qk_point_t v = {2 * cos(ang), 4 * fabs(sin(ang)) + 2};
+    qk_hit_t ref;
+    assert_int_equal(qk_collider_raycast(c, o, v, INFINITY, &ref), QK_OK);
+    hits += ref.id != QK_NONE;
+    /* t along v scaled to [1/2, 1) beyond the largest double */
+    far_hits += ref.id != QK_NONE && isinf(ldexp(ref.t, ilogb(fmax(fabs(v.x), v.y)) + 1));
+    for (size_t k = 0; k < sizeof js / sizeof js[0]; k++) {
+      const int j = js[k];
+      const qk_point_t vj = {ldexp(v.x, j), ldexp(v.y, j)};
+      if (ldexp(vj.x, -j) != v.x || ldexp(vj.y, -j) != v.y) continue; /* (underflow) */
+      qk_hit_t hj;
+      assert_int_equal(qk_collider_raycast(c, o, vj, INFINITY, &hj), QK_OK);
+      const double want = ref.id == QK_NONE ? INFINITY : ldexp(ref.t, -j);
+      if (hj.id != ref.id || !(hj.t == want || (isinf(hj.t) && isinf(want))))
+        fail_msg("ray %d, direction times 2^%d: (%u, %.17g), want (%u, %.17g) (seed %llu)", i, j,
+                 hj.id, hj.t, ref.id, want, (unsigned long long)g_seed);
+    }
+  }
+  assert_true(hits > NR / 8); /* the rays do hit things, */
+  assert_true(far_hits > 10); /* some beyond where [1/2, 1) overflowed */
+  qk_collider_free(c);
+  free(d);
+  free(b);
+}
+
 /* A collider over 2 MiB of ray arrays (70,000 records of 32 bytes), bench-like discs
  * (radii up to 0.5 / sqrt(n), capacity 8), once of discs only and once with a tenth boxes:
  * every ray against brute force. */
@@ -653,6 +745,7 @@ int main(void) {
       cmocka_unit_test(test_collide_rays_tied_discs),
       cmocka_unit_test(test_collide_rays_extreme_directions),
       cmocka_unit_test(test_collide_rays_far_coordinates),
+      cmocka_unit_test(test_collide_rays_span_of_doubles),
       cmocka_unit_test(test_collide_rays_large_scene),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
