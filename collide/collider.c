@@ -2049,17 +2049,20 @@ raycast_rare(const qk_collider_t *c, qk_point_t o, qk_point_t d, double tmax, qk
    * stops at 2^50 so that t along it stays below 2^975 for any two doubles' distance: at
    * [1/2, 1) it overflowed beyond 2^1023 (from (0, -1e308) along (0, 1e308), a disc at the
    * origin, t = 1, came back at t = inf, and a farther item with a smaller id won the tie of
-   * two infinities). Coordinates beyond FAR_COORD take ray_disc_far(). */
+   * two infinities). Beyond FAR_COORD (coordinates, then ray_disc_far()) every direction
+   * is scaled to [2^50, 2^51): from (-1e308, -1e308) along (1e-10, 1e-10) t overflowed in
+   * the box test, which then reported a box the ray misses at t = inf. A hit whose t, scaled
+   * back, is beyond the largest double still reports inf (its id now the nearest item's). */
   const double m = qk__max(fabs(d.x), fabs(d.y)); /* finite: no call to fmax, no spills */
+  const int far = qk__max(qk__max(fabs(o.x), fabs(o.y)), c->mag) > FAR_COORD;
   int e = 0;
-  if (m > 0x1p100 || (m < 0x1p-100 && m > 0)) {
+  if (m > 0 && (far || m > 0x1p100 || m < 0x1p-100)) {
     (void)frexp(m, &e); /* m in [2^(e-1), 2^e) */
-    if (m > 0x1p100) e -= 51;
+    if (far || m > 0x1p100) e -= 51;
     d.x = ldexp(d.x, -e);
     d.y = ldexp(d.y, -e);
     tmax = ldexp(tmax, e); /* t along d / 2^e is t along d times 2^e */
   }
-  const int far = qk__max(qk__max(fabs(o.x), fabs(o.y)), c->mag) > FAR_COORD;
   ray_t ray;
   ray_init(&ray, c, o, d);
 #if defined(__SSE2__)

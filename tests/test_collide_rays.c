@@ -576,6 +576,37 @@ static void test_collide_rays_far_coordinates(void **state) {
   free(d);
 }
 
+/* Far coordinates with a short direction (twentieth session): t overflows along the
+ * direction as given. From (-8e307, -8e307) along (1e-10, 1e-10) the box test reported a
+ * zero-width box beside the ray (x = 8e307, y in [-8e307, -7e307]) as hit at t = inf,
+ * and of two boxes on the ray, both beyond t = DBL_MAX, the farther one (smaller id) won
+ * the tie of two infinities. Now: a miss, and the nearer box at t = inf; the same ray
+ * along (1, 1) (t finite) agrees on every item. */
+static void test_collide_rays_short_direction_far(void **state) {
+  (void)state;
+  const qk_box_t b[] = {{8e307, -8e307, 8e307, -7e307}, /* beside the ray */
+                        {6e307, 6e307, 7e307, 7e307},
+                        {1e307, 1e307, 2e307, 2e307}};
+  const qk_point_t o = {-8e307, -8e307};
+  const struct {
+    size_t first, n;
+    qk_id_t id;
+  } cases[] = {{0, 1, QK_NONE}, {1, 2, 1}, {0, 3, 2}};
+  for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+    qk_collider_t *c = NULL;
+    assert_int_equal(qk_collider_build(NULL, 0, b + cases[i].first, cases[i].n, NULL, &c), QK_OK);
+    qk_hit_t h, unit;
+    assert_int_equal(qk_collider_raycast(c, o, (qk_point_t){1e-10, 1e-10}, INFINITY, &h), QK_OK);
+    assert_int_equal(qk_collider_raycast(c, o, (qk_point_t){1, 1}, INFINITY, &unit), QK_OK);
+    if (h.id != cases[i].id || unit.id != cases[i].id)
+      fail_msg("case %zu: short direction %u at %.17g, unit direction %u at %.17g, want %u", i,
+               (unsigned)h.id, h.t, (unsigned)unit.id, unit.t, (unsigned)cases[i].id);
+    assert_true(isinf(h.t)); /* beyond the largest double, or a miss */
+    assert_true(cases[i].id == QK_NONE ? isinf(unit.t) : isfinite(unit.t));
+    qk_collider_free(c);
+  }
+}
+
 /* Scenes spanning nearly the whole double range (items from -2^1023 to 2^1023), cast
  * with directions beyond 2^100, which the cast scales by a power of two: t must stay
  * what it is, though t along a direction scaled to [1/2, 1) would exceed the largest
@@ -746,6 +777,7 @@ int main(void) {
       cmocka_unit_test(test_collide_rays_extreme_directions),
       cmocka_unit_test(test_collide_rays_far_coordinates),
       cmocka_unit_test(test_collide_rays_span_of_doubles),
+      cmocka_unit_test(test_collide_rays_short_direction_far),
       cmocka_unit_test(test_collide_rays_large_scene),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
