@@ -136,7 +136,10 @@ int cli_out_open(const char *cmd, const char *path, cli_out_t *o) {
   snprintf(o->tmp, n, "%s.tmp.%ld.%u", o->path, (long)getpid(), serial++);
   o->f = fopen(o->tmp, "wb");
   if (!o->f) {
-    cli_error(cmd, "cannot write %s: %s", path, strerror(errno));
+    /* The output is written beside its path first: that file may fail where the path
+     * itself exists (-o /proc/version said "No such file or directory"). */
+    cli_error(cmd, "cannot write %s: %s (creating the temporary file %s beside it)", path,
+              strerror(errno), o->tmp);
     free(o->path);
     free(o->tmp);
     forget_key(o->key);

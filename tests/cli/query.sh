@@ -129,6 +129,10 @@ expect 0 '' -- "$cli" knn "$tmp/p.csv" "$tmp/q.csv" -k 1 -o "$tmp/out.csv"
 grep -q '^1,1,3,' "$tmp/out.csv" && passes=$((passes + 1)) ||
   { echo "FAIL: -o file"; fails=$((fails + 1)); }
 expect 1 'cannot write' -- "$cli" knn "$tmp/p.csv" "$tmp/q.csv" -k 1 -o "$tmp/no/dir/x.csv"
+# a path that exists but whose directory takes no new file: the message says which file failed
+if [ -f /proc/version ]; then
+  expect 1 'cannot write /proc/version: .*temporary file /proc/version[.]tmp' -- "$cli" knn "$tmp/p.csv" "$tmp/q.csv" -k 1 -o /proc/version
+fi
 
 # --xy by name and number, --query-xy, and --keep joining the input rows.
 printf 'name,lat,lon\nParis,48.85,2.35\n"Rome, Lazio",41.9,12.5\nOslo,59.91,10.75\n' >"$tmp/c.csv"
