@@ -1,4 +1,5 @@
 /* Option values of the command-line tool: whole numbers, finite numbers, column pairs. */
+#include <ctype.h>
 #include <errno.h>
 #include <math.h>
 #include <stdlib.h>
@@ -15,7 +16,8 @@ int cli_parse_u32(const char *cmd, const char *opt, const char *s, unsigned long
   }
   errno = 0;
   unsigned long v = strtoul(s, &end, 10);
-  if (errno || end == s || *end || s[0] == '-' || v < min || v > max) {
+  /* digits only: strtoul also takes leading blanks and a sign (' 3' was 3, '3 ' an error) */
+  if (errno || !isdigit((unsigned char)s[0]) || *end || v < min || v > max) {
     cli_error(cmd, "%s must be a whole number from %lu to %lu, not '%s'", opt, min, max, s);
     return 1;
   }

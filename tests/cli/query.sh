@@ -129,6 +129,10 @@ expect 0 '' -- "$cli" knn "$tmp/p.csv" "$tmp/q.csv" -k 1 -o "$tmp/out.csv"
 grep -q '^1,1,3,' "$tmp/out.csv" && passes=$((passes + 1)) ||
   { echo "FAIL: -o file"; fails=$((fails + 1)); }
 expect 1 'cannot write' -- "$cli" knn "$tmp/p.csv" "$tmp/q.csv" -k 1 -o "$tmp/no/dir/x.csv"
+# whole numbers are digits only (a leading blank or a sign was taken, a trailing blank not)
+for v in ' 3' '+3' '3 '; do
+  expect 2 '--capacity must be a whole number from 1 to 4294967295' -- "$cli" locate "$tmp/p.csv" "$tmp/q.csv" --capacity "$v"
+done
 # a path that exists but whose directory takes no new file: the message says which file failed
 if [ -f /proc/version ]; then
   expect 1 'cannot write /proc/version: .*temporary file /proc/version[.]tmp' -- "$cli" knn "$tmp/p.csv" "$tmp/q.csv" -k 1 -o /proc/version
