@@ -455,6 +455,23 @@ static void test_collide_rays_tied_discs(void **state) {
   free(u), free(d), free(perm);
 }
 
+/* The ray from o along v times 2^k, for each k of ks (those whose direction scales back to
+ * v exactly), must hit what the ray along v hit (ref), at t times 2^-k, exactly. */
+static void expect_scaled_hits(const qk_collider_t *c, qk_point_t o, qk_point_t v, qk_hit_t ref,
+                               const int *ks, size_t nk, int ray) {
+  for (size_t j = 0; j < nk; j++) {
+    const int k = ks[j];
+    const qk_point_t vk = {ldexp(v.x, k), ldexp(v.y, k)};
+    if (ldexp(vk.x, -k) != v.x || ldexp(vk.y, -k) != v.y) continue; /* underflowed */
+    qk_hit_t h;
+    assert_int_equal(qk_collider_raycast(c, o, vk, INFINITY, &h), QK_OK);
+    const double want = ref.id == QK_NONE ? INFINITY : ldexp(ref.t, -k);
+    if (h.id != ref.id || !(h.t == want || (isinf(h.t) && isinf(want))))
+      fail_msg("ray %d, direction times 2^%d: (%u, %.17g), want (%u, %.17g) (seed %llu)", ray, k,
+               h.id, h.t, ref.id, want, (unsigned long long)g_seed);
+  }
+}
+
 /*
  * Directions far beyond the arithmetic's range (components of 2^600 and more, or all
  * below 2^-600): the same ray with its direction multiplied by 2^k hits the same item at
@@ -486,17 +503,7 @@ static void test_collide_rays_extreme_directions(void **state) {
     qk_hit_t ref;
     assert_int_equal(qk_collider_raycast(c, o, v, INFINITY, &ref), QK_OK);
     hits += ref.id != QK_NONE;
-    for (size_t j = 0; j < sizeof ks / sizeof ks[0]; j++) {
-      const int k = ks[j];
-      const qk_point_t vk = {ldexp(v.x, k), ldexp(v.y, k)};
-      if (ldexp(vk.x, -k) != v.x || ldexp(vk.y, -k) != v.y) continue; /* underflowed */
-      qk_hit_t h;
-      assert_int_equal(qk_collider_raycast(c, o, vk, INFINITY, &h), QK_OK);
-      const double want = ref.id == QK_NONE ? INFINITY : ldexp(ref.t, -k);
-      if (h.id != ref.id || !(h.t == want || (isinf(h.t) && isinf(want))))
-        fail_msg("ray %d, direction times 2^%d: (%u, %.17g), want (%u, %.17g) (seed %llu)", i, k,
-                 h.id, h.t, ref.id, want, (unsigned long long)g_seed);
-    }
+    expect_scaled_hits(c, o, v, ref, ks, sizeof ks / sizeof ks[0], i);
   }
   assert_true(hits > NR / 4); /* the rays do hit things */
   qk_collider_free(c);
@@ -680,17 +687,7 @@ static void test_collide_rays_span_of_doubles(void **state) {
     hits += ref.id != QK_NONE;
     /* t along v scaled to [1/2, 1) beyond the largest double */
     far_hits += ref.id != QK_NONE && isinf(ldexp(ref.t, ilogb(fmax(fabs(v.x), v.y)) + 1));
-    for (size_t k = 0; k < sizeof js / sizeof js[0]; k++) {
-      const int j = js[k];
-      const qk_point_t vj = {ldexp(v.x, j), ldexp(v.y, j)};
-      if (ldexp(vj.x, -j) != v.x || ldexp(vj.y, -j) != v.y) continue; /* (underflow) */
-      qk_hit_t hj;
-      assert_int_equal(qk_collider_raycast(c, o, vj, INFINITY, &hj), QK_OK);
-      const double want = ref.id == QK_NONE ? INFINITY : ldexp(ref.t, -j);
-      if (hj.id != ref.id || !(hj.t == want || (isinf(hj.t) && isinf(want))))
-        fail_msg("ray %d, direction times 2^%d: (%u, %.17g), want (%u, %.17g) (seed %llu)", i, j,
-                 hj.id, hj.t, ref.id, want, (unsigned long long)g_seed);
-    }
+    expect_scaled_hits(c, o, v, ref, js, sizeof js / sizeof js[0], i);
   }
   assert_true(hits > NR / 8); /* the rays do hit things, */
   assert_true(far_hits > 10); /* some beyond where [1/2, 1) overflowed */

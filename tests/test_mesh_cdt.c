@@ -998,12 +998,15 @@ static void test_cdt_legal_sides(void **state) {
 }
 
 #ifdef QK_HAVE_GMP
-/* The known record: twin triangulations get the same points (uniform, and on a coarse grid
- * for cocircular ties), one by qk__cdt_insert, the other by qk__cdt_insert_at with
- * c->known set. Its record stamps the slots within three steps of the located triangle:
- * three in four with this generation and the GMP in-circle answer for the new point, the
- * rest with the previous generation and the wrong answer (which the insertion must ignore
- * and test itself). The two must agree in every array after every insertion. */
+/* Do twin triangulations a and b hold the same triangles, links, constraints and vertex
+ * triangles, array for array? */
+static int same_cdt(const qk__cdt_t *a, const qk__cdt_t *b) {
+  return a->nt == b->nt && !memcmp(a->v, b->v, 3 * a->nt * sizeof *a->v) &&
+         !memcmp(a->nbr, b->nbr, 3 * a->nt * sizeof *a->v) &&
+         !memcmp(a->seg, b->seg, 3 * a->nt * sizeof *a->v) &&
+         !memcmp(a->vtri, b->vtri, a->nv * sizeof *a->vtri);
+}
+
 /* The undo record (c->undo, qk__cdt_undo_insert: the refinement inserts a circumcentre
  * first and takes it back when it encroaches a subsegment): on a jittered grid graph with
  * constrained edges, then random and half-integer points (cocircular ties), each point
@@ -1090,10 +1093,7 @@ static void test_cdt_undo_record(void **state) {
     b.undo = NULL;
     assert_int_equal(qk__cdt_insert(&a, x, y, NONE, &va, &ea), QK_OK);
     assert_true(va == vb && ea == eb);
-    if (a.nt != b.nt || a.hint != b.hint || memcmp(a.v, b.v, 3 * a.nt * sizeof *a.v) ||
-        memcmp(a.nbr, b.nbr, 3 * a.nt * sizeof *a.v) ||
-        memcmp(a.seg, b.seg, 3 * a.nt * sizeof *a.v) ||
-        memcmp(a.vtri, b.vtri, a.nv * sizeof *a.vtri))
+    if (a.hint != b.hint || !same_cdt(&a, &b))
       fail_msg("seed %llu: point %zu (%.17g, %.17g): the record changed the insertion",
                (unsigned long long)g_seed, i, x, y);
     if (i % 300 == 0) check_cdt(&b);
@@ -1106,6 +1106,12 @@ static void test_cdt_undo_record(void **state) {
   assert_true(undone > n / 2 && flips > undone && listed > n / 10);
 }
 
+/* The known record: twin triangulations get the same points (uniform, and on a coarse grid
+ * for cocircular ties), one by qk__cdt_insert, the other by qk__cdt_insert_at with
+ * c->known set. Its record stamps the slots within three steps of the located triangle:
+ * three in four with this generation and the GMP in-circle answer for the new point, the
+ * rest with the previous generation and the wrong answer (which the insertion must ignore
+ * and test itself). The two must agree in every array after every insertion. */
 static void test_cdt_known_record(void **state) {
   (void)state;
   g_seed = qkt_seed(12120);
@@ -1150,10 +1156,7 @@ static void test_cdt_known_record(void **state) {
       b.known = NULL;
       assert_int_equal(qk__cdt_insert(&a, x, y, NONE, &va, &ea), QK_OK);
       assert_true(va == vb && ea == eb);
-      if (a.nt != b.nt || memcmp(a.v, b.v, 3 * a.nt * sizeof *a.v) ||
-          memcmp(a.nbr, b.nbr, 3 * a.nt * sizeof *a.v) ||
-          memcmp(a.seg, b.seg, 3 * a.nt * sizeof *a.v) ||
-          memcmp(a.vtri, b.vtri, a.nv * sizeof *a.vtri))
+      if (!same_cdt(&a, &b))
         fail_msg("seed %llu: point %u (%.17g, %.17g): the record changed the insertion",
                  (unsigned long long)g_seed, gen, x, y);
       if (gen % 300 == 0) check_cdt(&b);
