@@ -678,7 +678,7 @@ static void test_query_knn_batch_paths(void **state) {
   const size_t n = 4000, nq = 1000;
   const size_t ks[] = {1, 8, 32};
   qk_point_t *p = malloc(n * sizeof *p), *qs = malloc(nq * sizeof *qs);
-  qk_neighbor_t *got = malloc(nq * 32 * sizeof *got), *want = malloc(32 * sizeof *want);
+  qk_neighbor_t *got = malloc(nq * 32 * sizeof *got), *want = malloc(nq * 32 * sizeof *want);
   size_t *counts = malloc(nq * sizeof *counts);
   for (size_t d = 0; d < 4; d++)
     for (size_t c = 0; c < 3; c++) {
@@ -686,15 +686,16 @@ static void test_query_knn_batch_paths(void **state) {
       for (size_t i = 0; i < nq; i++)
         qs[i] = i % 7 == 0 ? p[qkt_rng_below(&r, n)] : i % 11 == 0 ? qs[i / 2] : rand_loc(&r);
       qk_tree_t *t = build(p, n, caps[c]);
+      /* brute force once for the largest k; a smaller k's answer is its prefix */
+      for (size_t i = 0; i < nq; i++)
+        assert_int_equal(qko_knn(p, NULL, n, qs[i], 32, INFINITY, want + i * 32), 32);
       for (unsigned threads = 1; threads <= 2; threads++) {
         qk_tree_set_threads(t, threads);
         const size_t k = ks[(d + c + threads) % 3];
         assert_int_equal(qk_query_knn_batch(t, qs, nq, k, INFINITY, got, counts), QK_OK);
-        for (size_t i = 0; i < nq; i++) {
-          size_t nw = qko_knn(p, NULL, n, qs[i], k, INFINITY, want);
-          assert_nb_equal(got + i * k, counts[i], want, nw, "knn-batch-paths",
+        for (size_t i = 0; i < nq; i++)
+          assert_nb_equal(got + i * k, counts[i], want + i * 32, k, "knn-batch-paths",
                           d * 100000 + c * 10000 + i);
-        }
       }
       qk_tree_free(t);
     }
@@ -844,7 +845,8 @@ static void test_query_knn_kth_bound(void **state) {
   const size_t ks[] = {8, 32, 100};
   const uint32_t bcaps[] = {4, 32};
   qk_point_t *p = malloc(n * sizeof *p), *qs = malloc(nq * sizeof *qs);
-  qk_neighbor_t *got = malloc(nq * 100 * sizeof *got), one[100], want[100], full[100];
+  qk_neighbor_t *got = malloc(nq * 100 * sizeof *got), *full = malloc(nq * 100 * sizeof *full);
+  qk_neighbor_t one[100];
   size_t *counts = malloc(nq * sizeof *counts);
   for (int set = 0; set < 3; set++) {
     qkt_points(&r, set == 1 ? QKT_DUPLICATES : QKT_CLUSTERED, p, n);
@@ -856,6 +858,10 @@ static void test_query_knn_kth_bound(void **state) {
               : i % 3 == 1 ? (qk_point_t){0.5 * (a.x + b.x), 0.5 * (a.y + b.y)}
                            : rand_loc(&r);
     }
+    /* Brute force once per query for the largest k: the answer for a smaller k is its
+     * prefix (the order is total), and under a cap the prefix the cap holds exactly. */
+    for (size_t i = 0; i < nq; i++)
+      assert_int_equal(qko_knn(p, NULL, n, qs[i], 100, INFINITY, full + i * 100), 100);
     for (size_t c = 0; c < 2; c++) {
       qk_tree_t *t = build(p, n, bcaps[c]);
       for (size_t ki = 0; ki < 3; ki++) {
@@ -863,13 +869,16 @@ static void test_query_knn_kth_bound(void **state) {
         assert_int_equal(qk_query_knn_batch(t, qs, nq, k, INFINITY, got, counts), QK_OK);
         for (size_t i = 0; i < nq; i++) {
           const size_t tag = (size_t)set * 100000 + c * 10000 + k * 100 + i;
-          size_t ng, nf = qko_knn(p, NULL, n, qs[i], k, INFINITY, full);
-          assert_int_equal(nf, k);
-          assert_nb_equal(got + i * k, counts[i], full, nf, "knn-kth-batch", tag);
-          const double caps_k[] = {INFINITY, full[k - 1].dist, full[k / 2 - 1].dist,
-                                   nextafter(full[k - 1].dist, 0)};
+          const qk_neighbor_t *want = full + i * 100;
+          size_t ng;
+          assert_nb_equal(got + i * k, counts[i], want, k, "knn-kth-batch", tag);
+          const double caps_k[] = {INFINITY, want[k - 1].dist, want[k / 2 - 1].dist,
+                                   nextafter(want[k - 1].dist, 0)};
           for (size_t j = 0; j < 4; j++) {
-            size_t nw = qko_knn(p, NULL, n, qs[i], k, caps_k[j], want);
+            size_t nw = 0;
+            while (nw < k && (isinf(caps_k[j]) || qko_within(p[want[nw].id].x, p[want[nw].id].y,
+                                                             qs[i].x, qs[i].y, caps_k[j], 0)))
+              nw++;
             assert_int_equal(qk_query_knn(t, qs[i], k, caps_k[j], one, &ng), QK_OK);
             assert_nb_equal(one, ng, want, nw, "knn-kth", tag * 10 + j);
           }
@@ -878,7 +887,7 @@ static void test_query_knn_kth_bound(void **state) {
       qk_tree_free(t);
     }
   }
-  free(p), free(qs), free(got), free(counts);
+  free(p), free(qs), free(got), free(counts), free(full);
 }
 
 /*
@@ -912,12 +921,13 @@ static void test_query_knn_cell_lines(void **state) {
           qk_point_t q = {fx[a % 3], fy[a / 3]};
           if (off == 1) q = (qk_point_t){nextafter(q.x, -INFINITY), nextafter(q.y, INFINITY)};
           if (off == 2) q = (qk_point_t){nextafter(q.x, INFINITY), nextafter(q.y, -INFINITY)};
+          /* brute force once for the largest k; a smaller k's answer is its prefix */
+          const size_t nall = qko_knn(p, NULL, n, q, 33, INFINITY, want);
           for (size_t ki = 0; ki < 6; ki++) {
             const size_t k = ks[ki], tag = c * 100000 + j * 1000 + a * 100 + (size_t)off * 10 + ki;
             size_t ng;
             assert_int_equal(qk_query_knn(t, q, k, INFINITY, got, &ng), QK_OK);
-            const size_t nw = qko_knn(p, NULL, n, q, k, INFINITY, want);
-            assert_nb_equal(got, ng, want, nw, "knn-cell-lines", tag);
+            assert_nb_equal(got, ng, want, nall < k ? nall : k, "knn-cell-lines", tag);
           }
         }
       }
@@ -1210,7 +1220,7 @@ static void test_query_knn_exact(void **state) {
   qkt_rng_t g;
   qkt_rng_seed(&g, 1818);
   enum { N = 240, NQ = 4 };
-  static qk_neighbor_t got[NQ * 1000], want[1000], one[1000];
+  static qk_neighbor_t got[NQ * 1000], all[NQ * N], one[1000];
   for (size_t si = 0; si < sizeof scales / sizeof scales[0]; si++) {
     const double s = ldexp(1, scales[si]);
     const qk_point_t c = {7 * s, -2 * s};
@@ -1230,36 +1240,43 @@ static void test_query_knn_exact(void **state) {
     const double caps_[] = {INFINITY, 5 * s, nextafter(5 * s, 0), nextafter(5 * s, INFINITY),
                             3 * s,    0};
     const int beyond = 20 * s > 0x1p510;
-    for (uint32_t cap = 1; cap <= 32; cap *= 4) {
-      qk_tree_t *t = build(p, n, cap);
-      for (size_t ki = 0; ki < sizeof ks / sizeof ks[0]; ki++)
-        for (size_t li = 0; li < sizeof caps_ / sizeof caps_[0]; li++) {
+    /* The oracle once per cap and query: every point within the cap in the exact order,
+     * whose first k are the answer for k (the order is total). */
+    const uint32_t tcaps[] = {1, 4, 16};
+    qk_tree_t *trees[3];
+    for (size_t c = 0; c < 3; c++) trees[c] = build(p, n, tcaps[c]);
+    for (size_t li = 0; li < sizeof caps_ / sizeof caps_[0]; li++) {
+      const double md = caps_[li];
+      size_t nall[NQ];
+      for (size_t i = 0; i < NQ; i++) nall[i] = xknn_oracle(p, n, qs[i], n, md, all + i * N);
+      for (size_t c = 0; c < 3; c++)
+        for (size_t ki = 0; ki < sizeof ks / sizeof ks[0]; ki++) {
           const size_t k = ks[ki];
-          const double md = caps_[li];
           size_t counts[NQ];
-          const qk_status_t bs = qk_query_knn_batch(t, qs, NQ, k, md, got, counts);
+          const qk_status_t bs = qk_query_knn_batch(trees[c], qs, NQ, k, md, got, counts);
           for (size_t i = 0; i < NQ; i++) {
-            size_t ng, nw = xknn_oracle(p, n, qs[i], k, md, want);
-            const qk_status_t st = qk_query_knn(t, qs[i], k, md, one, &ng);
+            const qk_neighbor_t *want = all + i * N;
+            size_t ng, nw = nall[i] < k ? nall[i] : k;
+            const qk_status_t st = qk_query_knn(trees[c], qs[i], k, md, one, &ng);
             if (st == QK_ERR_LIMIT && beyond && bs == QK_ERR_LIMIT) continue;
             if (st != QK_OK || bs != QK_OK)
               fail_msg("scale 2^%d k %zu cap %.17g query %zu: status %d, batch %d", scales[si], k,
                        md, i, (int)st, (int)bs);
             if (ng != nw || counts[i] != nw)
               fail_msg("scale 2^%d cap %u k %zu max %.17g query %zu: %zu (batch %zu), oracle %zu",
-                       scales[si], cap, k, md, i, ng, counts[i], nw);
+                       scales[si], tcaps[c], k, md, i, ng, counts[i], nw);
             for (size_t j = 0; j < nw; j++) {
               const qk_neighbor_t a = one[j], b = got[i * k + j], w = want[j];
               if (a.id != w.id || a.dist != w.dist || b.id != w.id || b.dist != w.dist)
                 fail_msg("scale 2^%d cap %u k %zu max %.17g query %zu rank %zu: %u at %.17g "
                          "(batch %u at %.17g), oracle %u at %.17g",
-                         scales[si], cap, k, md, i, j, (unsigned)a.id, a.dist, (unsigned)b.id,
+                         scales[si], tcaps[c], k, md, i, j, (unsigned)a.id, a.dist, (unsigned)b.id,
                          b.dist, (unsigned)w.id, w.dist);
             }
           }
         }
-      qk_tree_free(t);
     }
+    for (size_t c = 0; c < 3; c++) qk_tree_free(trees[c]);
   }
 #endif
 }
@@ -1393,6 +1410,33 @@ static void test_query_batch_threaded_order(void **state) {
  * a share, so that the shares' buffers are too small and answered again, and by one
  * result) the buffer holds that sequence's prefix and the total is still the full count.
  */
+/* How many of the points lie within r of q, exactly: each point whose x is within 2 r of
+ * q's (a band around the disc, wide enough that rounding its ends cannot cut the disc;
+ * found in the points sorted by x) tested with the oracle's exact test. */
+typedef struct {
+  double x;
+  uint32_t id;
+} by_x_t;
+static int by_x_cmp(const void *a, const void *b) {
+  const double u = ((const by_x_t *)a)->x, v = ((const by_x_t *)b)->x;
+  return (u > v) - (u < v);
+}
+static size_t radius_count_by_x(const qk_point_t *p, const by_x_t *s, size_t n, qk_point_t q,
+                                double r) {
+  const double from = q.x - 2 * r, to = q.x + 2 * r;
+  size_t lo = 0, hi = n, m = 0;
+  while (lo < hi) {
+    const size_t mid = lo + (hi - lo) / 2;
+    if (s[mid].x < from)
+      lo = mid + 1;
+    else
+      hi = mid;
+  }
+  for (size_t i = lo; i < n && s[i].x <= to; i++)
+    m += (size_t)qko_within(p[s[i].id].x, p[s[i].id].y, q.x, q.y, r, 0);
+  return m;
+}
+
 static void test_query_radius_batch_threads(void **state) {
   (void)state;
   qkt_rng_t r;
@@ -1404,11 +1448,13 @@ static void test_query_radius_batch_threads(void **state) {
   for (size_t i = 0; i < nq; i++) qs[i] = i % 3 == 0 ? p[qkt_rng_below(&r, n)] : rand_loc(&r);
   qk_tree_t *t = build(p, n, 8);
   size_t *want_n = malloc(nq * sizeof *want_n), *counts = malloc(nq * sizeof *counts);
-  qk_neighbor_t *tmp = malloc(n * sizeof *tmp);
+  by_x_t *sx = malloc(n * sizeof *sx);
+  for (size_t i = 0; i < n; i++) sx[i] = (by_x_t){p[i].x, (uint32_t)i};
+  qsort(sx, n, sizeof *sx, by_x_cmp);
   size_t total = 0;
   for (size_t i = 0; i < nq; i++) {
     assert_int_equal(qk_query_radius_list(t, qs[i], rad, NULL, 0, &want_n[i]), QK_OK);
-    if (want_n[i] != qko_radius(p, n, qs[i], rad, tmp))
+    if (want_n[i] != radius_count_by_x(p, sx, n, qs[i], rad))
       fail_msg("radius %zu: %zu vs oracle (seed %llu)", i, want_n[i], (unsigned long long)g_seed);
     total += want_n[i];
   }
@@ -1442,7 +1488,7 @@ static void test_query_radius_batch_threads(void **state) {
     }
   }
   qk_tree_free(t);
-  free(p), free(qs), free(want_n), free(counts), free(tmp), free(want), free(got);
+  free(p), free(qs), free(want_n), free(counts), free(sx), free(want), free(got);
 }
 
 int main(void) {
