@@ -4,6 +4,12 @@
  * GeoJSON reader, a feature of another geometry type stays as an empty feature (counted as
  * skipped), so that feature indices follow the dataset's order. Validation (ring length, closure,
  * coordinates) is the builder's. Without GDAL the call says what to install.
+ *
+ * GDAL is loaded by the first read (dlopen), not linked: linked, it made every program
+ * using quadkit load GDAL and the seventy-odd libraries it needs when it started (the CLI
+ * took four times as long to print its help), for a reader few runs use. The library
+ * loaded is the one quadkit was built against (its soname, QK_GDAL_SONAME), or the file the
+ * environment variable QK_GDAL_LIBRARY names.
  */
 #include <stdbool.h>
 #include <stdio.h>
@@ -13,8 +19,56 @@
 
 #ifdef QK_HAVE_GDAL
 #include <cpl_error.h>
+#include <dlfcn.h>
 #include <gdal.h>
 #include <ogr_api.h>
+#include <pthread.h>
+#include <stdlib.h>
+
+/* The GDAL functions the reader calls, through pointers of the headers' own types. */
+#define GDAL_FUNCTIONS(X)                                                                          \
+  X(GDALAllRegister)                                                                               \
+  X(GDALOpenEx) X(GDALClose) X(GDALDatasetGetLayerCount) X(GDALDatasetGetLayer)                    \
+      X(OGR_L_ResetReading) X(OGR_L_GetNextFeature) X(OGR_F_Destroy) X(OGR_F_GetGeometryRef)       \
+          X(OGR_F_GetFieldCount) X(OGR_F_GetFieldDefnRef) X(OGR_F_IsFieldSetAndNotNull)            \
+              X(OGR_F_GetFieldAsString) X(OGR_Fld_GetNameRef) X(OGR_G_GetGeometryType)             \
+                  X(OGR_GT_Flatten) X(OGR_G_GetGeometryCount) X(OGR_G_GetGeometryRef)              \
+                      X(OGR_G_GetPointCount) X(OGR_G_GetX) X(OGR_G_GetY) X(CPLQuietErrorHandler)   \
+                          X(CPLPushErrorHandler) X(CPLPopErrorHandler) X(CPLErrorReset)            \
+                              X(CPLGetLastErrorType) X(CPLGetLastErrorMsg)
+
+static struct {
+#define GDAL_POINTER(f) __typeof__(&f) f;
+  GDAL_FUNCTIONS(GDAL_POINTER)
+#undef GDAL_POINTER
+} gd;
+static bool gd_loaded;
+static char gd_why[320]; /* why GDAL could not be loaded */
+static pthread_once_t gd_once = PTHREAD_ONCE_INIT;
+
+static void gd_load(void) {
+  const char *file = getenv("QK_GDAL_LIBRARY");
+  if (!file || !*file) file = QK_GDAL_SONAME;
+  void *h = dlopen(file, RTLD_NOW | RTLD_LOCAL);
+  if (!h) {
+    const char *e = dlerror();
+    snprintf(gd_why, sizeof gd_why, "%.250s", e ? e : file);
+    return;
+  }
+  void *sym;
+  /* dlsym's object pointer copied into a function pointer (POSIX makes them the same size) */
+#define GDAL_LOAD(f)                                                                               \
+  if (!(sym = dlsym(h, #f))) {                                                                     \
+    snprintf(gd_why, sizeof gd_why, "%.200s has no %s", file, #f);                                 \
+    dlclose(h);                                                                                    \
+    return;                                                                                        \
+  }                                                                                                \
+  memcpy(&gd.f, &sym, sizeof sym);
+  GDAL_FUNCTIONS(GDAL_LOAD)
+#undef GDAL_LOAD
+  gd.GDALAllRegister();
+  gd_loaded = true; /* GDAL stays loaded: its drivers are registered once */
+}
 
 typedef struct ob {
   const qk_allocator_t *a;
@@ -22,21 +76,21 @@ typedef struct ob {
 } ob_t;
 
 static qk_status_t add_ring(ob_t *b, OGRGeometryH ring, int k) {
-  int n = OGR_G_GetPointCount(ring);
+  int n = gd.OGR_G_GetPointCount(ring);
   qk_status_t st = qk__rings_reserve(b->a, &b->rg, (size_t)n);
   if (st) return st;
   for (int j = 0; j < n; j++) {
-    b->rg.xy[2 * (b->rg.nv + (size_t)j)] = OGR_G_GetX(ring, j);
-    b->rg.xy[2 * (b->rg.nv + (size_t)j) + 1] = OGR_G_GetY(ring, j);
+    b->rg.xy[2 * (b->rg.nv + (size_t)j)] = gd.OGR_G_GetX(ring, j);
+    b->rg.xy[2 * (b->rg.nv + (size_t)j) + 1] = gd.OGR_G_GetY(ring, j);
   }
   qk__rings_close(&b->rg, (size_t)n, (size_t)k);
   return QK_OK;
 }
 
 static qk_status_t add_polygon(ob_t *b, OGRGeometryH poly) {
-  int n = OGR_G_GetGeometryCount(poly);
+  int n = gd.OGR_G_GetGeometryCount(poly);
   for (int k = 0; k < n; k++) {
-    qk_status_t st = add_ring(b, OGR_G_GetGeometryRef(poly, k), k);
+    qk_status_t st = add_ring(b, gd.OGR_G_GetGeometryRef(poly, k), k);
     if (st) return st;
   }
   return QK_OK;
@@ -46,23 +100,24 @@ static qk_status_t add_polygon(ob_t *b, OGRGeometryH poly) {
  * GeometryCollection (nested ones too, as the GeoJSON reader takes them; they were
  * counted as skipped). Other types add nothing. */
 static qk_status_t add_geometry(ob_t *b, OGRGeometryH g) {
-  OGRwkbGeometryType t = g ? wkbFlatten(OGR_G_GetGeometryType(g)) : wkbUnknown;
+  OGRwkbGeometryType t = g ? gd.OGR_GT_Flatten(gd.OGR_G_GetGeometryType(g)) : wkbUnknown;
   if (t == wkbPolygon) return add_polygon(b, g);
   qk_status_t st = QK_OK;
   if (t == wkbMultiPolygon || t == wkbGeometryCollection)
-    for (int i = 0, n = OGR_G_GetGeometryCount(g); i < n && !st; i++)
-      st = add_geometry(b, OGR_G_GetGeometryRef(g, i));
+    for (int i = 0, n = gd.OGR_G_GetGeometryCount(g); i < n && !st; i++)
+      st = add_geometry(b, gd.OGR_G_GetGeometryRef(g, i));
   return st;
 }
 
 static qk_status_t add_feature(ob_t *b, OGRFeatureH feat) {
   size_t r0 = b->rg.nr;
-  qk_status_t st = add_geometry(b, OGR_F_GetGeometryRef(feat));
+  qk_status_t st = add_geometry(b, gd.OGR_F_GetGeometryRef(feat));
   if (st) return st;
   if (b->rg.nr == r0) b->rg.skipped++;
-  for (int i = 0, n = OGR_F_GetFieldCount(feat); i < n && !st; i++) {
-    const char *name = OGR_Fld_GetNameRef(OGR_F_GetFieldDefnRef(feat, i));
-    const char *v = OGR_F_IsFieldSetAndNotNull(feat, i) ? OGR_F_GetFieldAsString(feat, i) : "";
+  for (int i = 0, n = gd.OGR_F_GetFieldCount(feat); i < n && !st; i++) {
+    const char *name = gd.OGR_Fld_GetNameRef(gd.OGR_F_GetFieldDefnRef(feat, i));
+    const char *v =
+        gd.OGR_F_IsFieldSetAndNotNull(feat, i) ? gd.OGR_F_GetFieldAsString(feat, i) : "";
     st = qk__props_add(b->a, &b->rg.props, name, v, strlen(v));
   }
   if (!st) st = qk__props_end_feature(b->a, &b->rg.props, b->rg.nf);
@@ -74,16 +129,21 @@ qk_status_t qk_region_read_ogr(const char *path, const qk_region_options_t *opti
                                qk_region_t **out, qk_error_t *err) {
   qk_status_t st0 = qk__read_begin(path, out, err);
   if (st0) return st0;
-  GDALAllRegister();
+  pthread_once(&gd_once, gd_load);
+  if (!gd_loaded)
+    return qk__region_fail(err, QK_ERR_UNSUPPORTED, SIZE_MAX,
+                           "GDAL could not be loaded to read %s (%s); install GDAL's library or "
+                           "name it in QK_GDAL_LIBRARY",
+                           path, gd_why);
   /* GDAL's reason for a failure (a missing file said no more than "cannot open") is
    * asked for with GDAL_OF_VERBOSE_ERROR and kept quiet: the library never prints. */
-  CPLPushErrorHandler(CPLQuietErrorHandler);
-  CPLErrorReset();
-  GDALDatasetH ds =
-      GDALOpenEx(path, GDAL_OF_VECTOR | GDAL_OF_READONLY | GDAL_OF_VERBOSE_ERROR, NULL, NULL, NULL);
-  CPLPopErrorHandler();
+  gd.CPLPushErrorHandler(gd.CPLQuietErrorHandler);
+  gd.CPLErrorReset();
+  GDALDatasetH ds = gd.GDALOpenEx(path, GDAL_OF_VECTOR | GDAL_OF_READONLY | GDAL_OF_VERBOSE_ERROR,
+                                  NULL, NULL, NULL);
+  gd.CPLPopErrorHandler();
   if (!ds) {
-    const char *why = CPLGetLastErrorMsg();
+    const char *why = gd.CPLGetLastErrorMsg();
     return qk__region_fail(err, QK_ERR_IO, SIZE_MAX, "GDAL cannot open %s as vector data%s%.160s",
                            path, why && *why ? ": " : "", why ? why : "");
   }
@@ -101,26 +161,26 @@ qk_status_t qk_region_read_ogr(const char *path, const qk_region_options_t *opti
   bool gdal_failed = false;
   size_t bad_feature = 0;
   char why[200] = "";
-  CPLPushErrorHandler(CPLQuietErrorHandler);
-  for (int l = 0, nl = GDALDatasetGetLayerCount(ds); l < nl && !st && !gdal_failed; l++) {
-    OGRLayerH layer = GDALDatasetGetLayer(ds, l);
-    OGR_L_ResetReading(layer);
+  gd.CPLPushErrorHandler(gd.CPLQuietErrorHandler);
+  for (int l = 0, nl = gd.GDALDatasetGetLayerCount(ds); l < nl && !st && !gdal_failed; l++) {
+    OGRLayerH layer = gd.GDALDatasetGetLayer(ds, l);
+    gd.OGR_L_ResetReading(layer);
     for (;;) {
-      CPLErrorReset();
-      OGRFeatureH feat = OGR_L_GetNextFeature(layer);
-      if (CPLGetLastErrorType() >= CE_Failure) {
+      gd.CPLErrorReset();
+      OGRFeatureH feat = gd.OGR_L_GetNextFeature(layer);
+      if (gd.CPLGetLastErrorType() >= CE_Failure) {
         gdal_failed = true;
         bad_feature = b.rg.nf;
-        snprintf(why, sizeof why, "%s", CPLGetLastErrorMsg());
+        snprintf(why, sizeof why, "%s", gd.CPLGetLastErrorMsg());
       }
       if (!feat) break;
       if (!gdal_failed) st = add_feature(&b, feat);
-      OGR_F_Destroy(feat);
+      gd.OGR_F_Destroy(feat);
       if (st || gdal_failed) break;
     }
   }
-  CPLPopErrorHandler();
-  GDALClose(ds);
+  gd.CPLPopErrorHandler();
+  gd.GDALClose(ds);
   if (gdal_failed) {
     st = qk__region_fail(err, QK_ERR_IO, bad_feature, "GDAL failed reading feature %zu: %.160s",
                          bad_feature, why);

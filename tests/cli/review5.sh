@@ -208,6 +208,22 @@ if "$cli" regions "$tmp/no-such.shp" 2>&1 | grep -q 'GDAL cannot open'; then # b
     -- "$cli" regions "$tmp/no-such.shp"
   printf 'garbage\n' >"$tmp/junk.shp"
   expect 1 "junk.shp as vector data: .*junk.shp' not recognized as a supported file format" -- "$cli" join "$tmp/junk.shp" "$tmp/pts.csv"
+  # GDAL is loaded by the first read of such a layer (region/ogr.c), not when a program
+  # starts: a library that cannot be loaded, or is not GDAL, is named (exit 3: the machine's
+  # set-up, not the input), and neither the CLI nor the shared library needs libgdal.
+  expect 3 "^quadkit regions: $tmp/junk.shp: GDAL could not be loaded to read $tmp/junk.shp \(/nonexistent/libgdal.so.0: .*No such file or directory\); install GDAL's library or name it in QK_GDAL_LIBRARY$" \
+    -- env QK_GDAL_LIBRARY=/nonexistent/libgdal.so.0 "$cli" regions "$tmp/junk.shp"
+  expect 3 "GDAL could not be loaded to read .*\(libm.so.6 has no GDALAllRegister\)" \
+    -- env QK_GDAL_LIBRARY=libm.so.6 "$cli" join "$tmp/junk.shp" "$tmp/pts.csv"
+  if command -v readelf >/dev/null; then
+    for f in "$cli" "$(dirname "$cli")/libquadkit.so"; do
+      if [ -e "$f" ] && readelf -d "$f" | grep -q 'NEEDED.*libgdal'; then
+        fail "$f needs libgdal at start-up: $(readelf -d "$f" | grep 'NEEDED.*libgdal')"
+      else
+        passes=$((passes + 1))
+      fi
+    done
+  fi
 fi
 
 # ---- two outputs of one command naming one file: the one renamed first was lost ---------
