@@ -52,12 +52,10 @@
 static uint64_t g_seed;
 
 /* Under ThreadSanitizer (QKT_TSAN: scripts/tsan.sh, which is here for the threaded tests)
- * the single-threaded churn and allocation-failure loops run shorter, and the oracle's
- * own code is not instrumented (QKT_SERIAL). */
-
-/* A test that starts no thread (each run alone under strace -f makes no clone) is skipped
- * under ThreadSanitizer, which finds nothing without a second thread; the other builds run
- * it. Tests of several thread counts skip their one-thread runs there likewise. */
+ * a test that starts no thread (each run alone under strace -f makes no clone) is skipped,
+ * since TSan finds nothing without a second thread (the other builds run it); tests of
+ * several thread counts skip their one-thread runs there likewise, some threaded loops run
+ * shorter, and the oracle's own code is not instrumented (QKT_SERIAL). */
 #define ONE_THREAD_TEST()                                                                          \
   do {                                                                                             \
     if (QKT_TSAN) skip();                                                                          \
@@ -2042,7 +2040,7 @@ static void test_world_churn_memory(void **s) {
   mirror_t m = {0};
   for (int i = 0; i < 60; i++) m_add(w, &m, rnd_shape(&r, SC_UNIFORM, 1));
   size_t peak = 0;
-  for (int f = 0; f < (QKT_TSAN ? 10000 : 100000); f++) {
+  for (int f = 0; f < 100000; f++) {
     size_t i = qkt_rng_below(&r, (uint32_t)m.n);
     if (f % 10 == 0) { /* churn: remove one, add one */
       assert_int_equal(qk_world_remove(w, m.h[i]), QK_OK);
@@ -2077,7 +2075,7 @@ static void test_world_nomem(void **s) {
   ONE_THREAD_TEST();
   qkt_rng_t r;
   qkt_rng_seed(&r, g_seed + 5);
-  for (size_t fail = 1; fail < (QKT_TSAN ? 40u : 400u); fail++) {
+  for (size_t fail = 1; fail < 400; fail++) {
     qkt_alloc_t st = {0};
     qk_allocator_t al = qkt_alloc_make(&st);
     qk_world_options_t o;
@@ -2141,7 +2139,7 @@ static void test_world_nomem_began(void **s) {
   qk_world_pair_t *prev = NULL;
   size_t np = 0, failed = 0;
   dense_check(w, &m, &prev, &np, 0);
-  for (size_t fail = 1; fail < (QKT_TSAN ? 10u : 60u); fail++) {
+  for (size_t fail = 1; fail < 60; fail++) {
     for (size_t i = 0; i < m.n; i++) {
       qk_shape_t sh = shifted(m.s[i], 0.1 * ((int)qkt_rng_below(&r, 3) - 1), 0.1);
       m_move(w, &m, i, sh);
