@@ -5,6 +5,8 @@
 # geodesic index and mesh at once, and threads changing trees of their own; and
 # tests/test_region.c and tests/test_collide.c, whose threaded batches must equal the
 # single calls; tests/test_build.c, whose threaded bulk build must equal one thread's.
+# In test_world and test_build the tests and runs that start no thread skip themselves
+# here (QKT_TSAN, tests/support/qk_test.h): TSan finds nothing without a second thread.
 # Any data race
 # TSan sees fails the run; the tests run JOBS (2) at a time. Usage: scripts/tsan.sh [build-dir]
 set -euo pipefail
