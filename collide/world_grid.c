@@ -295,6 +295,7 @@ void qk__world_pack(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
   for (uint32_t k = n; k & 3; k++) { /* empty lanes: a box that meets nothing */
     float *g = pk->fgrp + (size_t)(k >> 2) * 16 + (k & 3);
     g[0] = g[4] = INFINITY, g[8] = g[12] = -INFINITY;
+    pk->fexact[k] = 1; /* (read four at a time by the search, masked off) */
   }
   /* Each level's box: its cells are one run (joined in registers). */
   for (int l = 0; l < QK__NLEV && cell_boxes; l++) {
@@ -644,7 +645,9 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
   size_t nd = w->n_dirty, n = w->n_live, ncap = (size_t)w->n_cells + nd + 1;
   /* (one more: the one-thread merge writes an old entry before it knows whether to keep
    * it) */
-  size_t ocap = n + 1, gcap = (n + 3) / 4 + 1;
+  /* (and three more: the search reads the order four at a time, the last group's lanes
+   * past the end too) */
+  size_t ocap = n + 4, gcap = (n + 3) / 4 + 1;
   /* The dirty records and, for the radix sort, as many again; then, when every slot of
    * the old order is live and the merge runs here, the dirty slots' bits (merge_t). */
   const size_t nsk = nd && !w->ident_dirty && !merge_fits(w, w->order ? w->n_cells : 0)
@@ -715,6 +718,7 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
     m = mg.m, nc = mg.nc;
   }
   cells[nc] = (qk__wcell_t){0, 0, m, INT32_MAX};
+  ord[m] = ord[m + 1] = ord[m + 2] = 0; /* (read, masked off: see ocap) */
   /* (the new order in place first: the pack asks whether the search will be by bands) */
   qk__free(a, w->order, (size_t)w->cap_order * sizeof *w->order);
   qk__free(a, w->cells, (size_t)w->cap_cells * sizeof *w->cells);

@@ -50,9 +50,14 @@ typedef struct share {
 } share_t;
 
 /* Room for `more` keys after the found ones; 0 when memory ran short. */
+/* Beyond the room asked for, the keys' buffer always has QK__KSLACK places more: the
+ * grid's runs write each group's four candidate keys whatever the lanes kept (run_keys),
+ * one place past the kept ones at most. */
+#define QK__KSLACK 4
 static int kv_reserve(share_t *s, size_t more) {
   qk__kvec_t *p = &s->out;
-  if (p->cap - p->n >= more) return 1;
+  more += QK__KSLACK;
+  if (p->cap >= p->n && p->cap - p->n >= more) return 1;
   size_t cap = p->cap ? p->cap * 2 : 256;
   if (cap < p->n + more) cap = p->n + more;
   uint64_t *v = qk__realloc(s->alloc, p->v, p->cap * sizeof *v, cap * sizeof *v);
@@ -69,7 +74,7 @@ typedef struct kc {
   uint64_t *v, *end;
 } kc_t;
 static inline kc_t kc_open(const share_t *s) {
-  return (kc_t){s->out.v + s->out.n, s->out.v + s->out.cap};
+  return (kc_t){s->out.v + s->out.n, s->out.v + s->out.cap - QK__KSLACK};
 }
 static inline void kc_close(share_t *s, const kc_t *k) { s->out.n = (size_t)(k->v - s->out.v); }
 /* Room for `more` keys after k->v; 0 when memory ran short. */
@@ -102,7 +107,11 @@ __attribute__((noinline)) int qk__world_objects_meet(const qk_world_t *w, uint32
 
 /* The key of the pair of slot a (whose key half is ha = a << 32) and slot b. */
 static inline uint64_t pair_key(uint32_t a, uint64_t ha, uint32_t b) {
-  return b > a ? ha | b : (uint64_t)b << 32 | a;
+  /* The smaller of the two ways round, without a branch: objects within a cell are in
+   * no slot order, so which slot is smaller is a coin toss the branch predictor lost
+   * about half the time. */
+  const uint64_t k1 = ha | b, k2 = (uint64_t)b << 32 | a;
+  return k1 < k2 ? k1 : k2;
 }
 
 /*
@@ -203,6 +212,50 @@ static __attribute__((noinline)) uint64_t *test_run_exact(share_t *s, uint32_t s
  * the float boxes decide (both exact: every box of the benchmark's scenes), so the probe
  * stays in registers (a call would clobber them all, every group reloading it from the
  * stack); the first pair they cannot decide hands the rest to test_run_exact. */
+#if defined(__SSE2__)
+/* With SSE2 a group's four keys are made and stored whatever its lanes that met, each
+ * store's place moved on by its lane's bit: no branch on which lanes met, which about
+ * one group in three has, at random (perf: the run loop's branches on the lanes' bits
+ * were the search's most mispredicted). Each lane's key is the smaller of its two slots
+ * above the larger, by a signed comparison of the slots biased by 2^31. The four places
+ * written lie within the kept keys and one place past them (QK__KSLACK). The order's
+ * lanes past its end are read (the order and the exactness bytes have room for them, see
+ * qk__world_reorder) and masked off. A lane whose pair the float boxes cannot decide
+ * (this probe's or its float box not exact) hands the group on to test_run_exact. */
+static inline __attribute__((always_inline)) uint64_t *
+run_keys(share_t *s, const float *fg, const uint32_t *ord, const uint8_t *fx, uint32_t slot,
+         uint64_t hs, unsigned ek, probe_t p, uint32_t lo, uint32_t hi, uint64_t *v) {
+  (void)hs;
+  uint32_t q = lo >> 2, qe = (hi - 1) >> 2;
+  unsigned bits = group_hits(fg + (size_t)q * 16, &p) & ~((1u << (lo & 3)) - 1) & 15u;
+  const unsigned last = (2u << ((hi - 1) & 3)) - 1, ekm = ek ? 15u : 0u;
+  const __m128i bias = _mm_set1_epi32(INT32_MIN), sv = _mm_set1_epi32((int)slot);
+  const __m128i svb = _mm_xor_si128(sv, bias);
+  for (;;) {
+    if (q == qe) bits &= last;
+    uint32_t f4; /* the lanes' exactness bytes (0 or 1), gathered into four bits */
+    memcpy(&f4, fx + (size_t)q * 4, sizeof f4);
+    if (bits & ~((f4 * 0x01020408u) >> 24 & ekm))
+      return test_run_exact(s, slot, ek, QK__PROBE_PASS(p), q, bits, qe, last, v);
+    const __m128i o = _mm_loadu_si128((const __m128i *)(ord + (size_t)q * 4));
+    const __m128i gt = _mm_cmpgt_epi32(_mm_xor_si128(o, bias), svb);
+    const __m128i mn = _mm_or_si128(_mm_and_si128(gt, sv), _mm_andnot_si128(gt, o));
+    const __m128i mx = _mm_xor_si128(_mm_xor_si128(o, sv), mn);
+    const __m128i k01 = _mm_unpacklo_epi32(mx, mn), k23 = _mm_unpackhi_epi32(mx, mn);
+    _mm_storel_epi64((__m128i *)v, k01);
+    v += bits & 1;
+    _mm_storeh_pd((double *)v, _mm_castsi128_pd(k01));
+    v += bits >> 1 & 1;
+    _mm_storel_epi64((__m128i *)v, k23);
+    v += bits >> 2 & 1;
+    _mm_storeh_pd((double *)v, _mm_castsi128_pd(k23));
+    v += bits >> 3;
+    if (q == qe) return v;
+    q++;
+    bits = group_hits(fg + (size_t)q * 16, &p);
+  }
+}
+#else
 static inline __attribute__((always_inline)) uint64_t *
 run_keys(share_t *s, const float *fg, const uint32_t *ord, const uint8_t *fx, uint32_t slot,
          uint64_t hs, unsigned ek, probe_t p, uint32_t lo, uint32_t hi, uint64_t *v) {
@@ -223,6 +276,7 @@ run_keys(share_t *s, const float *fg, const uint32_t *ord, const uint8_t *fx, ui
     bits = group_hits(fg + (size_t)q * 16, &p);
   }
 }
+#endif
 
 /* The pairs of object m with the objects at order positions [lo, hi) (lo < hi), the keys
  * at kc (room reserved here). */
@@ -569,7 +623,7 @@ static int cell_pairs(share_t *s, uint32_t a, uint32_t *up, int me) {
 
 static void run_share(unsigned t, void *ud) {
   share_t *s = &((share_t *)ud)[t];
-  if (!s->out.v && !kv_reserve(s, 256)) { /* (the keys' place is never NULL: kc_open) */
+  if (!kv_reserve(s, 256)) { /* (the keys' place is never NULL, its slack there: kc_open) */
     s->nomem = 1;
     return;
   }

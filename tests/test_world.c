@@ -2946,6 +2946,73 @@ static void test_world_step_margin(void **s) {
   qk_world_free(w);
 }
 
+/*
+ * Allocation failure at each call of a one-thread frame that only moves objects, in a
+ * sparse world (rows of a pair or two): its began / ended come from the merge without
+ * branches (collide/world_pairs.c, diff_flat_nobranch), whose scratch failing falls back
+ * to the merge with branches and whose lists failing to grow fail the update. A failed
+ * update leaves the pairs, began and ended as they were; one that succeeds gives the same
+ * lists, in the same order, as a world whose allocator never fails. Fails with the
+ * fallback's merge left out (began and ended empty).
+ */
+static void test_world_nomem_moves(void **s) {
+  (void)s;
+  enum { N = 3000 };
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 61);
+  qk_shape_t *sh = malloc(2 * N * sizeof *sh);
+  /* (boxes of one size class, as the bench's uniform scene: one level, searched on the
+   * grid, about 1.5 pairs an object) */
+  const double side = sqrt(N / 0.48);
+  for (int i = 0; i < N; i++) {
+    double x = qkt_rng_unit(&r) * side, y = qkt_rng_unit(&r) * side;
+    sh[i] = (qk_shape_t){QK_SHAPE_BOX, x, y, x + qkt_rng_range(&r, 0.5, 2),
+                         y + qkt_rng_range(&r, 0.5, 2)};
+    sh[N + i] = moved(&r, sh[i]);
+  }
+  qk_world_t *w0 = nomem_world(NULL, 1, sh, sh + N, N);
+  assert_int_equal(qk_world_update(w0), QK_OK);
+  size_t calls = 0, ok_after_fail = 0;
+  for (size_t fail = 1; fail <= calls + 1; fail++) {
+    qkt_alloc_t st;
+    qk_allocator_t al = qkt_alloc_make(&st);
+    qk_world_t *w = nomem_world(&al, 1, sh, sh + N, N);
+    size_t before[3];
+    for (int which = 0; which < 3; which++)
+      qk_world_pairs_list(w, (qk_pairs_which_t)which, NULL, 0, &before[which]);
+    qkt_alloc_arm(&st, calls ? fail : 0);
+    qk_status_t rc = qk_world_update(w);
+    if (!calls) calls = st.calls, fail = 0; /* the first round counts the calls */
+    ok_after_fail += rc == QK_OK && st.failed;
+    for (int which = 0; which < 3; which++) {
+      size_t n0, n1;
+      qk_world_pairs_list(w0, (qk_pairs_which_t)which, NULL, 0, &n0);
+      qk_world_pairs_list(w, (qk_pairs_which_t)which, NULL, 0, &n1);
+      if (rc == QK_ERR_NOMEM) {
+        assert_int_equal(n1, before[which]);
+        continue;
+      }
+      assert_int_equal(rc, QK_OK);
+      assert_int_equal(n0, n1);
+      qk_world_pair_t *p0 = malloc((n0 + 1) * sizeof *p0), *p1 = malloc((n1 + 1) * sizeof *p1);
+      qk_world_pairs_list(w0, (qk_pairs_which_t)which, p0, n0, &n0);
+      qk_world_pairs_list(w, (qk_pairs_which_t)which, p1, n1, &n1);
+      assert_memory_equal(p0, p1, n0 * sizeof *p0);
+      free(p0), free(p1);
+    }
+    qk_world_free(w);
+    assert_int_equal(st.live_blocks, 0);
+  }
+  /* (failures the update survives: the merge's scratch, a list's shrink) */
+  assert_true(ok_after_fail >= 1);
+  size_t nb, ne;
+  qk_world_pairs_list(w0, QK_PAIRS_BEGAN, NULL, 0, &nb);
+  qk_world_pairs_list(w0, QK_PAIRS_ENDED, NULL, 0, &ne);
+  assert_true(nb > 0 && ne > 0);
+  qk_world_free(w0);
+  free(sh);
+}
+
 int main(void) {
   g_seed = qkt_seed(20261130);
   const char *only = getenv("QKT_TEST_FILTER"); /* (a cmocka pattern: run the tests it matches) */
@@ -2996,6 +3063,7 @@ int main(void) {
       cmocka_unit_test(test_world_step_margin),
       cmocka_unit_test(test_world_scratch_huge_pages),
       cmocka_unit_test(test_world_rows_slot_bits),
+      cmocka_unit_test(test_world_nomem_moves),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
