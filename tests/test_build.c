@@ -81,6 +81,22 @@ static double near_line(qkt_rng_t *r, double x0, double side) {
   return v < x0 ? x0 : v > x0 + side ? x0 + side : v;
 }
 
+/* The tree's shape the builds must give: the points inserted one by one with options o;
+ * under TSan, which is here for the threads, the one-thread build instead. */
+static qkt_shape_t oracle_shape(const qk_point_t *p, size_t n, qk_tree_options_t o) {
+  qk_tree_t *ins = NULL;
+  if (QKT_TSAN) {
+    o.threads = 1;
+    assert_int_equal(qk_tree_build(p, n, &o, &ins), QK_OK);
+  } else {
+    assert_int_equal(qk_tree_build(NULL, 0, &o, &ins), QK_OK);
+    for (size_t i = 0; i < n; i++) assert_int_equal(qk_tree_insert(ins, p[i], NULL), QK_OK);
+  }
+  qkt_shape_t want = qkt_tree_shape(ins);
+  qk_tree_free(ins);
+  return want;
+}
+
 static void test_build_deep_grid_lines(void **state) {
   (void)state;
   uint64_t seed = qkt_seed(1201);
@@ -101,18 +117,8 @@ static void test_build_deep_grid_lines(void **state) {
     o.capacity = 8;
     o.has_root = 1;
     o.root = (qk_square_t){x0[k], -x0[k], side[k]};
-    /* the oracle: the points inserted one by one; under TSan, which is here for the
-     * threads, the one-thread build instead (the other builds check it against inserts) */
-    qk_tree_t *ins = NULL;
-    if (QKT_TSAN) {
-      o.threads = 1;
-      assert_int_equal(qk_tree_build(p, N, &o, &ins), QK_OK);
-    } else {
-      assert_int_equal(qk_tree_build(NULL, 0, &o, &ins), QK_OK);
-      for (size_t i = 0; i < N; i++) assert_int_equal(qk_tree_insert(ins, p[i], NULL), QK_OK);
-    }
-    qkt_shape_t want = qkt_tree_shape(ins);
-    qk_tree_free(ins);
+    /* the oracle (the other builds check the one-thread build against inserts) */
+    qkt_shape_t want = oracle_shape(p, N, o);
     for (uint32_t threads = QKT_TSAN ? 2 : 1; threads <= 2; threads++) {
       o.threads = threads;
       qk_tree_t *t = NULL;
@@ -341,19 +347,8 @@ static void test_build_streamed_order(void **state) {
   o.capacity = 16;
   o.has_root = 1; /* the inserts' root */
   o.root = (qk_square_t){0, 0, 1};
-  /* the oracle: the points inserted one by one; under TSan, which is here for the threads,
-   * the one-thread build instead (the other builds check it against inserts, and run the
-   * one-thread runs below, which TSan skips) */
-  qk_tree_t *ins = NULL;
-  if (QKT_TSAN) {
-    o.threads = 1;
-    assert_int_equal(qk_tree_build(p, N, &o, &ins), QK_OK);
-  } else {
-    assert_int_equal(qk_tree_build(NULL, 0, &o, &ins), QK_OK);
-    for (size_t i = 0; i < N; i++) assert_int_equal(qk_tree_insert(ins, p[i], NULL), QK_OK);
-  }
-  qkt_shape_t want = qkt_tree_shape(ins);
-  qk_tree_free(ins);
+  /* the oracle (TSan skips the one-thread runs below, which check it against inserts) */
+  qkt_shape_t want = oracle_shape(p, N, o);
   /* libc's allocator, then blocks 0 and 8 bytes past a 64-byte boundary */
   size_t offsets[] = {0, 8};
   alt_ud_t alt[] = {{0, 0}, {8, 0}}; /* x and y 16 bytes apart modulo 32 */

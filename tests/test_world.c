@@ -2466,6 +2466,29 @@ static void *locked_alloc(void *ud, void *p, size_t osize, size_t nsize) {
   return r;
 }
 
+/* After an update that returned rc: on QK_ERR_NOMEM, w's pairs, began and ended lists
+ * have the lengths they had before it (before, read only then); else rc is QK_OK and the
+ * three lists equal w0's (a world whose allocator never failed), in the same order. */
+static void expect_update_outcome(qk_world_t *w0, qk_world_t *w, qk_status_t rc,
+                                  const size_t before[3]) {
+  for (int which = 0; which < 3; which++) {
+    size_t n0, n1;
+    qk_world_pairs_list(w0, (qk_pairs_which_t)which, NULL, 0, &n0);
+    qk_world_pairs_list(w, (qk_pairs_which_t)which, NULL, 0, &n1);
+    if (rc == QK_ERR_NOMEM) {
+      assert_int_equal(n1, before[which]);
+      continue;
+    }
+    assert_int_equal(rc, QK_OK);
+    assert_int_equal(n0, n1);
+    qk_world_pair_t *p0 = malloc((n0 + 1) * sizeof *p0), *p1 = malloc((n1 + 1) * sizeof *p1);
+    qk_world_pairs_list(w0, (qk_pairs_which_t)which, p0, n0, &n0);
+    qk_world_pairs_list(w, (qk_pairs_which_t)which, p1, n1, &n1);
+    assert_memory_equal(p0, p1, n0 * sizeof *p0);
+    free(p0), free(p1);
+  }
+}
+
 /* (N 4 400: the update's blocks are below the scratch cache's 256 KB, so each failing
  * update allocates fresh; 20 000: the failing update is the second, its large scratch
  * taken from the blocks the first kept.) */
@@ -2488,22 +2511,7 @@ static void nomem_threads(int N) {
     st.calls = 0, st.fail_at = calls ? fail : 0, st.failed = 0;
     qk_status_t rc = qk_world_update(w);
     if (!calls) calls = st.calls, fail = 0; /* the first round counts the calls */
-    for (int which = 0; which < 3; which++) {
-      size_t n0, n1;
-      qk_world_pairs_list(w0, (qk_pairs_which_t)which, NULL, 0, &n0);
-      qk_world_pairs_list(w, (qk_pairs_which_t)which, NULL, 0, &n1);
-      if (rc == QK_ERR_NOMEM) {
-        assert_int_equal(n1, before[which]);
-        continue;
-      }
-      assert_int_equal(rc, QK_OK);
-      assert_int_equal(n0, n1);
-      qk_world_pair_t *p0 = malloc((n0 + 1) * sizeof *p0), *p1 = malloc((n1 + 1) * sizeof *p1);
-      qk_world_pairs_list(w0, (qk_pairs_which_t)which, p0, n0, &n0);
-      qk_world_pairs_list(w, (qk_pairs_which_t)which, p1, n1, &n1);
-      assert_memory_equal(p0, p1, n0 * sizeof *p0);
-      free(p0), free(p1);
-    }
+    expect_update_outcome(w0, w, rc, before);
     qk_world_free(w);
     assert_int_equal(st.live_blocks, 0);
   }
@@ -2586,17 +2594,7 @@ static void test_world_scratch_kept(void **s) {
     assert_int_equal(qk_world_update(w), QK_OK);
     assert_int_equal(qk_world_update(w0), QK_OK);
     fresh[f] = ca.big_fresh - b0;
-    for (int which = 0; which < 3; which++) {
-      size_t n0, n1;
-      qk_world_pairs_list(w0, (qk_pairs_which_t)which, NULL, 0, &n0);
-      qk_world_pairs_list(w, (qk_pairs_which_t)which, NULL, 0, &n1);
-      assert_int_equal(n0, n1);
-      qk_world_pair_t *p0 = malloc((n0 + 1) * sizeof *p0), *p1 = malloc((n1 + 1) * sizeof *p1);
-      qk_world_pairs_list(w0, (qk_pairs_which_t)which, p0, n0, &n0);
-      qk_world_pairs_list(w, (qk_pairs_which_t)which, p1, n1, &n1);
-      assert_memory_equal(p0, p1, n0 * sizeof *p0);
-      free(p0), free(p1);
-    }
+    expect_update_outcome(w0, w, QK_OK, NULL);
     for (int i = 0; i < N; i++) {
       qk_shape_t m = moved(&r, sh[i]);
       sh[i] = m;
@@ -2984,22 +2982,7 @@ static void test_world_nomem_moves(void **s) {
     qk_status_t rc = qk_world_update(w);
     if (!calls) calls = st.calls, fail = 0; /* the first round counts the calls */
     ok_after_fail += rc == QK_OK && st.failed;
-    for (int which = 0; which < 3; which++) {
-      size_t n0, n1;
-      qk_world_pairs_list(w0, (qk_pairs_which_t)which, NULL, 0, &n0);
-      qk_world_pairs_list(w, (qk_pairs_which_t)which, NULL, 0, &n1);
-      if (rc == QK_ERR_NOMEM) {
-        assert_int_equal(n1, before[which]);
-        continue;
-      }
-      assert_int_equal(rc, QK_OK);
-      assert_int_equal(n0, n1);
-      qk_world_pair_t *p0 = malloc((n0 + 1) * sizeof *p0), *p1 = malloc((n1 + 1) * sizeof *p1);
-      qk_world_pairs_list(w0, (qk_pairs_which_t)which, p0, n0, &n0);
-      qk_world_pairs_list(w, (qk_pairs_which_t)which, p1, n1, &n1);
-      assert_memory_equal(p0, p1, n0 * sizeof *p0);
-      free(p0), free(p1);
-    }
+    expect_update_outcome(w0, w, rc, before);
     qk_world_free(w);
     assert_int_equal(st.live_blocks, 0);
   }
