@@ -26,16 +26,17 @@
 #include <stdlib.h>
 
 /* The GDAL functions the reader calls, through pointers of the headers' own types. */
-#define GDAL_FUNCTIONS(X)                                                                          \
-  X(GDALAllRegister)                                                                               \
-  X(GDALOpenEx) X(GDALClose) X(GDALDatasetGetLayerCount) X(GDALDatasetGetLayer)                    \
-      X(OGR_L_ResetReading) X(OGR_L_GetNextFeature) X(OGR_F_Destroy) X(OGR_F_GetGeometryRef)       \
-          X(OGR_F_GetFieldCount) X(OGR_F_GetFieldDefnRef) X(OGR_F_IsFieldSetAndNotNull)            \
-              X(OGR_F_GetFieldAsString) X(OGR_Fld_GetNameRef) X(OGR_G_GetGeometryType)             \
-                  X(OGR_GT_Flatten) X(OGR_G_GetGeometryCount) X(OGR_G_GetGeometryRef)              \
-                      X(OGR_G_GetPointCount) X(OGR_G_GetX) X(OGR_G_GetY) X(CPLQuietErrorHandler)   \
-                          X(CPLPushErrorHandler) X(CPLPopErrorHandler) X(CPLErrorReset)            \
-                              X(CPLGetLastErrorType) X(CPLGetLastErrorMsg)
+/* clang-format off */
+#define GDAL_FUNCTIONS(X) \
+  X(GDALAllRegister) X(GDALOpenEx) X(GDALClose) X(GDALDatasetGetLayerCount) \
+  X(GDALDatasetGetLayer) X(OGR_L_ResetReading) X(OGR_L_GetNextFeature) X(OGR_F_Destroy) \
+  X(OGR_F_GetGeometryRef) X(OGR_F_GetFieldCount) X(OGR_F_GetFieldDefnRef) \
+  X(OGR_F_IsFieldSetAndNotNull) X(OGR_F_GetFieldAsString) X(OGR_Fld_GetNameRef) \
+  X(OGR_G_GetGeometryType) X(OGR_GT_Flatten) X(OGR_G_GetGeometryCount) X(OGR_G_GetGeometryRef) \
+  X(OGR_G_GetPointCount) X(OGR_G_GetX) X(OGR_G_GetY) X(CPLQuietErrorHandler) \
+  X(CPLPushErrorHandler) X(CPLPopErrorHandler) X(CPLErrorReset) X(CPLGetLastErrorType) \
+  X(CPLGetLastErrorMsg)
+/* clang-format on */
 
 static struct {
 #define GDAL_POINTER(f) __typeof__(&f) f;
