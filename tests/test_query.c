@@ -991,14 +991,6 @@ static void test_query_knn_near_ties(void **state) {
   free(p), free(got), free(counts);
 }
 
-#if defined(__SSE2__)
-/*
- * kNN with the processor set to flush subnormal numbers (DAZ and FTZ in MXCSR, as a
- * program linked with -ffast-math runs): the sorted search sorts by keys that are
- * doubles, and a subnormal key would read as 0. Queries on stored points (distance 0,
- * alone or, where a point repeats, with its copy) and between two, k = 2, 8, 32, single
- * and batch, against brute force computed before the mode is set.
- */
 /* The 80 points at distance exactly 5 s from c on the (3, 4, 5) triangles' corners, and
  * each one ulp off in x (both ways) and in y (both ways), appended to p[n ..): the new n. */
 static size_t on_circle_5s(qk_point_t *p, size_t n, qk_point_t c, double s) {
@@ -1281,6 +1273,14 @@ static void test_query_knn_exact(void **state) {
 #endif
 }
 
+#if defined(__SSE2__)
+/*
+ * kNN with the processor set to flush subnormal numbers (DAZ and FTZ in MXCSR, as a
+ * program linked with -ffast-math runs): the sorted search sorts by keys that are
+ * doubles, and a subnormal key would read as 0. Queries on stored points (distance 0,
+ * alone or, where a point repeats, with its copy) and between two, k = 2, 8, 32, single
+ * and batch, against brute force computed before the mode is set.
+ */
 static void test_query_knn_flush_subnormals(void **state) {
   (void)state;
   qkt_rng_t r;
@@ -1516,10 +1516,10 @@ int main(void) {
     cmocka_unit_test(test_query_knn_near_ties),
     cmocka_unit_test(test_query_radius_batch_threads),
     cmocka_unit_test(test_query_knn_cell_lines),
-#if defined(__SSE2__)
-    cmocka_unit_test(test_query_knn_flush_subnormals),
     cmocka_unit_test(test_query_radius_exact),
     cmocka_unit_test(test_query_knn_exact),
+#if defined(__SSE2__) /* (the flush mode is set through SSE's MXCSR) */
+    cmocka_unit_test(test_query_knn_flush_subnormals),
 #endif
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
