@@ -3,7 +3,7 @@ BUILD ?= build
 JOBS ?= 2
 CMAKE_FLAGS ?=
 
-.PHONY: all deps build demo test asan tsan memcheck fuzz bench format format-check check-layout install clean
+.PHONY: all deps build demo test asan scalar tsan memcheck fuzz bench format format-check check-layout install clean
 
 all: build
 
@@ -25,6 +25,13 @@ asan: deps
 	@cmake -S . -B build-asan -DCMAKE_BUILD_TYPE=RelWithDebInfo -DQUADKIT_SANITIZE=ON -DQUADKIT_WERROR=ON >/dev/null
 	@cmake --build build-asan -j$(JOBS)
 	@ctest --test-dir build-asan --output-on-failure -j$(JOBS)
+
+# The library and the unit tests without SSE2 (-U__SSE2__): the portable code that ARM and
+# other targets compile, which an x86-64 build never does, warnings as errors.
+scalar: deps
+	@cmake -S . -B build-scalar -DCMAKE_BUILD_TYPE=Release -DQUADKIT_WERROR=ON -DCMAKE_C_FLAGS=-U__SSE2__ >/dev/null
+	@cmake --build build-scalar -j$(JOBS)
+	@ctest --test-dir build-scalar --output-on-failure -j$(JOBS) -R '^test_'
 
 format-check: deps
 	@cmake -S . -B $(BUILD) >/dev/null
