@@ -535,14 +535,9 @@ static __attribute__((noinline)) int diff_flat_lists(const qk_world_t *w, const 
   return ok;
 }
 
-/* Room for `more` keys after v's; 0 when memory ran short. */
+/* Room for `more` keys after v's (the shared doubling growth); 0 when memory ran short. */
 static int kv_more(const qk_allocator_t *a, qk__kvec_t *v, size_t more) {
-  if (v->cap - v->n >= more) return 1;
-  size_t cap = v->cap * 2 > v->n + more ? v->cap * 2 : v->n + more;
-  uint64_t *p = qk__realloc(a, v->v, v->cap * sizeof *p, cap * sizeof *p);
-  if (!p) return 0;
-  v->v = p, v->cap = cap;
-  return 1;
+  return qk__grow(a, (void **)&v->v, &v->cap, v->n + more, sizeof *v->v) == QK_OK;
 }
 
 /* The last frame's pairs o as keys in order, at k (room for o->n + 4). Each row writes
