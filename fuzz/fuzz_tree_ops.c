@@ -413,11 +413,15 @@ static void to_knn(to_state_t *s) {
   }
   qsort(all, na, sizeof *all, to_cmp_nb);
   size_t nw = na < k ? na : k;
-  for (size_t i = 0; i + 1 < na && i < nw; i++) {
-    const qk_id_t a = all[i].id, b = all[i + 1].id;
-    if (all[i + 1].d2 - all[i].d2 <= all[i].d2 * 1e-9L &&
-        (s->x[a] != s->x[b] || s->y[a] != s->y[b]))
-      return;
+  /* Every near tie of an answer with a point elsewhere, not only with the next in the
+   * sorted list: copies of one point tie exactly and sit together, and a point apart from
+   * them whose square rounds alike may come after the whole group. */
+  for (size_t i = 0; i < nw; i++) {
+    const qk_id_t a = all[i].id;
+    for (size_t j = i + 1; j < na && all[j].d2 - all[i].d2 <= all[i].d2 * 1e-9L; j++) {
+      const qk_id_t b = all[j].id;
+      if (s->x[a] != s->x[b] || s->y[a] != s->y[b]) return;
+    }
   }
   QKF_ASSERT(ng == nw, "knn k=%zu at (%.17g, %.17g) gave %zu, want %zu", k, q.x, q.y, ng, nw);
   for (size_t i = 0; i < nw; i++) {
