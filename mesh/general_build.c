@@ -384,25 +384,38 @@ static qk_status_t input_angles(qk__gm_t *g) {
   memset(g->vsmall, 0, P->nv + 1);
   if (P->ns < 2) return QK_OK;
   uint32_t *start = qk__realloc(g->a, NULL, 0, (P->nv + 2) * sizeof *start);
+  uint32_t *nb = qk__realloc(g->a, NULL, 0, 2 * P->ns * sizeof *nb);
   double *d = qk__realloc(g->a, NULL, 0, 2 * P->ns * sizeof *d);
-  if (!start || !d) {
+  if (!start || !nb || !d) {
     qk__free(g->a, start, (P->nv + 2) * sizeof *start);
+    qk__free(g->a, nb, 2 * P->ns * sizeof *nb);
     qk__free(g->a, d, 2 * P->ns * sizeof *d);
     return QK_ERR_NOMEM;
   }
   memset(start, 0, (P->nv + 2) * sizeof *start);
   for (size_t j = 0; j < 2 * P->ns; j++) start[P->seg[j] + 2]++;
   for (size_t v = 0; v < P->nv; v++) start[v + 2] += start[v + 1];
-  /* start[v + 1] is now where vertex v's directions go; filling moves it to their end. */
+  /* start[v + 1] is now where vertex v's neighbours go; filling moves it to their end. */
   for (size_t s = 0; s < P->ns; s++)
-    for (int j = 0; j < 2; j++) {
-      uint32_t u = P->seg[2 * s + j], w = P->seg[2 * s + 1 - j];
-      d[start[u + 1]++] = atan2(P->vy[w] - P->vy[u], P->vx[w] - P->vx[u]);
-    }
+    for (int j = 0; j < 2; j++) nb[start[P->seg[2 * s + j] + 1]++] = P->seg[2 * s + 1 - j];
   const double pi = 3.14159265358979323846;
   for (size_t v = 0; v < P->nv; v++) {
     size_t i = start[v], e = start[v + 1];
     if (i == e) continue;
+    const double vx = P->vx[v], vy = P->vy[v];
+    if (e - i == 2) {
+      /* Two segments (every vertex of a ring): the smaller of the two angles between them,
+       * one atan2 instead of one a direction (0.55 M instructions of 55 M on Norway at
+       * extent/64 went to atan2 here). The same angle as the gaps between the sorted
+       * directions below, to rounding far below the 0.001 degree margin of vsmall. */
+      double ux = P->vx[nb[i]] - vx, uy = P->vy[nb[i]] - vy;
+      double wx = P->vx[nb[i + 1]] - vx, wy = P->vy[nb[i + 1]] - vy;
+      double amin = atan2(fabs(ux * wy - uy * wx), ux * wx + uy * wy) * 180 / pi;
+      g->smallest_input_angle = fmin(g->smallest_input_angle, amin);
+      g->vsmall[v] = amin < 60.001;
+      continue;
+    }
+    for (size_t j = i; j < e; j++) d[j] = atan2(P->vy[nb[j]] - vy, P->vx[nb[j]] - vx);
     for (size_t j = i + 1; j < e; j++) {
       double a = d[j];
       size_t k = j;
@@ -420,6 +433,7 @@ static qk_status_t input_angles(qk__gm_t *g) {
     g->vsmall[v] = amin < 60.001;
   }
   qk__free(g->a, start, (P->nv + 2) * sizeof *start);
+  qk__free(g->a, nb, 2 * P->ns * sizeof *nb);
   qk__free(g->a, d, 2 * P->ns * sizeof *d);
   return QK_OK;
 }

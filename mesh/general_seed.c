@@ -118,7 +118,16 @@ static inline int seg_box(const double *f, const double lo[2], const double hi[2
   return seg_box_line(f, lo, hi);
 }
 
-static qk_status_t mark_free(qk__gm_t *g, uint32_t node) {
+static int free_leaf(const qk__gm_t *g, double X, double Y, double s);
+
+/* A leaf of the grading whose grown square meets no feature (X, Y, s its lattice square).
+ * Without seeds only their number is wanted (it sizes the work cap), so it is counted here
+ * (the leaves meeting the input's bounding box); with seeds the node is marked for seeds(). */
+static qk_status_t mark_free(qk__gm_t *g, uint32_t node, double X, double Y, double s) {
+  if (!GM_SEED_LEAVES) {
+    g->free_leaves += (size_t)free_leaf(g, X, Y, s);
+    return QK_OK;
+  }
   if (node >= g->free_cap) {
     size_t old = g->free_cap;
     void *p = g->free_node;
@@ -192,7 +201,7 @@ static qk_status_t subdivide(qk__gm_t *g, uint32_t node, double X, double Y, dou
       }
     }
   }
-  if (!split) return k == 0 ? mark_free(g, node) : QK_OK;
+  if (!split) return k == 0 ? mark_free(g, node, X, Y, s) : QK_OK;
   if (qk__tree_node_bound(g->tree) > GM_NODE_CAP)
     return qk__mesh_fail(g->err, QK_ERR_LIMIT, 0,
                          "the size bound asks for more than 2^27 quadtree cells");
@@ -246,7 +255,7 @@ static qk_status_t subdivide(qk__gm_t *g, uint32_t node, double X, double Y, dou
   const int settle = !GM_SIZE_SPLITS(g) || !(g->opt->max_size > 0 || g->opt->size_fn);
   for (unsigned q = 0; q < 4; q++) {
     if (settle && n[q] <= 1) {
-      if (!n[q] && (st = mark_free(g, child + q))) break;
+      if (!n[q] && (st = mark_free(g, child + q, cx[q], cy[q], h))) break;
       continue;
     }
     /* g->arena, not A: a sibling's subdivision may have moved it. */
@@ -330,30 +339,11 @@ static qk_status_t seeds(qk__gm_t *g, uint32_t node, double X, double Y, double 
   return QK_OK;
 }
 
-/* seeds() without the seeds (GM_SEED_LEAVES off): the count of free leaves meeting the
- * input's bounding box, the same tests, but each node's four children looked at from the
- * node, so that a leaf (three in four nodes) costs no call: 1.5 M instructions of 86 M on
- * Norway at 1/256 before. fr: the node or an ancestor is free. */
+/* Whether the leaf (X, Y, s) meets the input's bounding box (seeds() places seeds only in
+ * such free leaves, and only those are counted). */
 static int free_leaf(const qk__gm_t *g, double X, double Y, double s) {
   double x0 = in_x(g, X), y0 = in_y(g, Y), x1 = in_x(g, X + s), y1 = in_y(g, Y + s);
   return !(x1 < g->bx0 || x0 > g->bx1 || y1 < g->by0 || y0 > g->by1);
-}
-
-static size_t count_free(const qk__gm_t *g, uint32_t node, double X, double Y, double s, int fr) {
-  const qk_tree_t *t = g->tree;
-  uint32_t child = qk__node_child(t, node);
-  double h = s / 2;
-  size_t n = 0;
-  for (unsigned q = 0; q < 4; q++) {
-    uint32_t u = child + q;
-    int f = fr | (u < g->free_cap && g->free_node[u]);
-    double x = X + (qk__q_east(q) ? h : 0), y = Y + (qk__q_north(q) ? h : 0);
-    if (qk__node_child(t, u) != QK_NONE)
-      n += count_free(g, u, x, y, h, f);
-    else if (f)
-      n += (size_t)free_leaf(g, x, y, h);
-  }
-  return n;
 }
 
 /* The leaves a grading by max_size alone would make over the input's bounding box: squares
@@ -612,14 +602,16 @@ qk_status_t qk__gm_seed(qk__gm_t *g, qk_mesh_stats_t *stats) {
   if ((st = qk_tree_balance(g->tree)))
     return qk__mesh_fail(g->err, st, 0, "%s while balancing", qk_strerror(st));
   stats->leaves = 1 + 3 * ((size_t)qk__tree_node_bound(g->tree) - 1) / 4;
-  qk_node_t root = qk_tree_root(g->tree);
   if (GM_SEED_LEAVES) {
-    if (seeds(g, root, 0, 0, 1, 0)) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+    if (seeds(g, qk_tree_root(g->tree), 0, 0, 1, 0))
+      return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   } else {
-    int fr = root < g->free_cap && g->free_node[root];
-    g->free_leaves += qk__node_child(g->tree, root) != QK_NONE ? count_free(g, root, 0, 0, 1, fr)
-                      : fr                                     ? (size_t)free_leaf(g, 0, 0, 1)
-                                                               : 0;
+    /* The free leaves were counted as the grading made them (mark_free). Balancing splits
+     * leaves, and a free leaf's children are free: the leaves it adds bound the free ones
+     * it adds, so the count stays at least the free leaves of the balanced tree (the walk
+     * over the balanced tree that counted them exactly cost 1.7 M instructions of 55 M on
+     * Norway at extent/64; the work cap it sizes is a resource limit). */
+    g->free_leaves += stats->leaves - stats->leaves_before_balance;
   }
   g->free_leaves += size_cells(g);
   /* The split points of segment s get ranks first[s] .. first[s + 1] - 1 in parameter
