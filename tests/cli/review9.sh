@@ -1,0 +1,44 @@
+#!/usr/bin/env bash
+# CLI regressions from a ninth review (twenty-second session), on inputs not tried before
+# (one block per finding; each failed before its fix).
+# shellcheck source=lib/common.bash
+source "$(dirname "${BASH_SOURCE[0]}")/lib/common.bash" "$@"
+
+# ---- GDAL layers: areal geometries other than (Multi)Polygon were dropped silently ------
+# A MultiSurface (what GML and NAS files, such as INSPIRE cadastral parcels, hold), a
+# CurvePolygon or CompoundCurve with straight edges only, a TIN, a PolyhedralSurface and a
+# Triangle are all areas made of straight edges; the reader left them empty (counted as
+# skipped), so join answered -1 for every point in them with exit status 0. They are read
+# exactly now, and a geometry with a true arc (which no finite set of edges is) is refused,
+# naming the feature, instead of being dropped. GDAL's CSV driver reads the WKT column.
+cat >"$tmp/w.csv" <<'EOF2'
+WKT,name
+"POLYGON ((0 0,1 0,1 1,0 1,0 0))",poly
+"CURVEPOLYGON ((2 0,3 0,3 1,2 1,2 0),COMPOUNDCURVE ((2.25 0.25,2.25 0.75),(2.25 0.75,2.75 0.75,2.75 0.25,2.25 0.25)))",curvepoly
+"MULTISURFACE (((4 0,5 0,5 1,4 1,4 0)),CURVEPOLYGON ((4 2,5 2,5 3,4 2)))",msurf
+"TIN Z (((6 0 1,7 0 1,7 1 1,6 0 1)),((6 0 1,7 1 1,6 1 1,6 0 1)))",tin
+"POLYHEDRALSURFACE (((8 0,9 0,9 1,8 1,8 0)))",phs
+"TRIANGLE ((10 0,11 0,11 1,10 0))",tri
+"GEOMETRYCOLLECTION (POINT (0 9),MULTISURFACE (((12 0,13 0,13 1,12 1,12 0))))",gc
+"LINESTRING (14 0,15 1)",line
+EOF2
+printf 'x,y\n0.5,0.5\n2.9,0.1\n2.5,0.5\n4.5,0.5\n4.75,2.5\n4.25,2.5\n6.9,0.1\n6.1,0.9\n8.5,0.5\n10.9,0.1\n10.1,0.9\n12.5,0.5\n14.5,0.5\n' >"$tmp/wp.csv"
+if "$cli" regions "$tmp/w.csv" --planar 2>&1 | grep -q 'built without GDAL'; then
+  echo "SKIPPED: built without GDAL: the areal geometry types through GDAL did not run"
+else
+  same_text "GDAL: every areal type of straight edges is read" \
+    "$("$cli" join "$tmp/w.csv" "$tmp/wp.csv" --planar --field name 2>&1 | tr '\n' ' ')" \
+    "x,y,feature,name 0.5,0.5,0,poly 2.9,0.1,1,curvepoly 2.5,0.5,-1, 4.5,0.5,2,msurf 4.75,2.5,2,msurf 4.25,2.5,-1, 6.9,0.1,3,tin 6.1,0.9,3,tin 8.5,0.5,4,phs 10.9,0.1,5,tri 10.1,0.9,-1, 12.5,0.5,6,gc 14.5,0.5,-1, "
+  expect 0 '"features": 8, "rings": 10, "vertices": 46, "holes": 1, "self_intersecting_rings": 0, "skipped_geometries": 1,' \
+    -- "$cli" regions "$tmp/w.csv" --planar
+  # a true arc: refused, naming the feature and the layer, exit 1, nothing written
+  printf 'WKT,name\n"POLYGON ((0 0,1 0,1 1,0 0))",a\n"CURVEPOLYGON (CIRCULARSTRING (0 0,1 1,2 0,1 -1,0 0))",b\n' >"$tmp/arc.csv"
+  expect 1 "^quadkit join: $tmp/arc.csv: feature 1: a curved geometry \\(an arc of a CircularString\\) cannot be read exactly; convert it to straight edges first \\(ogr2ogr -nlt CONVERT_TO_LINEAR\\)$" \
+    -- "$cli" join "$tmp/arc.csv" "$tmp/wp.csv" --planar -o "$tmp/arc-out.csv"
+  [ -e "$tmp/arc-out.csv" ] && fail "join wrote $tmp/arc-out.csv after an error" || passes=$((passes + 1))
+  printf 'WKT,n\n"MULTISURFACE (((0 0,1 0,1 1,0 0)),CURVEPOLYGON (COMPOUNDCURVE ((0 5,1 5),CIRCULARSTRING (1 5,2 6,3 5),(3 5,0 5))))",x\n' >"$tmp/arc2.csv"
+  expect 1 "^quadkit regions: $tmp/arc2.csv: feature 0: a curved geometry \\(an arc of a CircularString\\) cannot be read exactly" \
+    -- "$cli" regions "$tmp/arc2.csv" --planar
+fi
+
+report
