@@ -769,13 +769,3 @@ qk_status_t qk_region_from_arrays(const qk_region_arrays_t *in, const qk_region_
                                   qk_region_t **out, qk_error_t *err) {
   return qk__region_build(in, options, NULL, 0, SIZE_MAX, out, err);
 }
-
-qk_status_t qk_region_read(const char *path, const qk_region_options_t *options, qk_region_t **out,
-                           qk_error_t *err) {
-  size_t n = path ? strlen(path) : 0;
-  if (n >= 8 && !strcmp(path + n - 8, ".geojson"))
-    return qk_region_read_geojson(path, options, out, err);
-  if (n >= 5 && !strcmp(path + n - 5, ".json"))
-    return qk_region_read_geojson(path, options, out, err);
-  return qk_region_read_ogr(path, options, out, err);
-}

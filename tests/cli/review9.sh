@@ -41,4 +41,21 @@ else
     -- "$cli" regions "$tmp/arc2.csv" --planar
 fi
 
+# ---- a layer from a pipe: process substitution, /dev/stdin and FIFOs went to GDAL --------
+# qk_region_read chose the reader by name alone, so `join <(curl ...) pts.csv` sent
+# /dev/fd/63 to GDAL, which seeks and cannot read a pipe ("Failed to read GeoJSON data",
+# exit 1). A layer that is not a regular file is now read as GeoJSON, the one format that
+# streams; the GeoJSON reader reads it to the end.
+printf '{"type": "Polygon", "coordinates": [[[0, 0], [2, 0], [2, 2], [0, 2], [0, 0]]]}' >"$tmp/sq.json"
+printf 'x,y\n1,1\n3,3\n' >"$tmp/sqp.csv"
+same_text "join, a layer through process substitution" \
+  "$("$cli" join <(cat "$tmp/sq.json") "$tmp/sqp.csv" --planar 2>&1 | tr '\n' ' ')" "x,y,feature 1,1,0 3,3,-1 "
+same_text "join, a layer on /dev/stdin" \
+  "$("$cli" join /dev/stdin "$tmp/sqp.csv" --planar <"$tmp/sq.json" 2>&1 | tr '\n' ' ')" "x,y,feature 1,1,0 3,3,-1 "
+mkfifo "$tmp/fifo"
+(cat "$tmp/sq.json" >"$tmp/fifo" &)
+expect 0 '"features": 1, "rings": 1, "vertices": 5,' -- "$cli" regions "$tmp/fifo" --planar
+# a pipe that is not GeoJSON: the GeoJSON reader's error, with its line and column
+expect 1 "^quadkit join: /dev/fd/[0-9]+:1:1: malformed JSON" -- bash -c '"$1" join <(printf "WKT\n") "$2"' - "$cli" "$tmp/sqp.csv"
+
 report
