@@ -58,4 +58,12 @@ expect 0 '"features": 1, "rings": 1, "vertices": 5,' -- "$cli" regions "$tmp/fif
 # a pipe that is not GeoJSON: the GeoJSON reader's error, with its line and column
 expect 1 "^quadkit join: /dev/fd/[0-9]+:1:1: malformed JSON" -- bash -c '"$1" join <(printf "WKT\n") "$2"' - "$cli" "$tmp/sqp.csv"
 
+# devices are not pipes: /dev/zero goes to GDAL, refused at once; an endless binary
+# pipe, or a .geojson name for /dev/zero, stops at its first NUL byte instead of filling
+# memory
+expect 1 "^quadkit join: /dev/zero: GDAL cannot open /dev/zero" -- timeout 60 "$cli" join /dev/zero "$tmp/sqp.csv"
+expect 1 "^quadkit join: /dev/fd/[0-9]+:1:1: binary data \\(NUL byte\\) in a text file$" -- timeout 60 bash -c '"$1" join <(cat /dev/zero) "$2"' - "$cli" "$tmp/sqp.csv"
+ln -s /dev/zero "$tmp/zero.geojson"
+expect 1 "^quadkit join: $tmp/zero.geojson:1:1: binary data \\(NUL byte\\) in a text file$" -- timeout 60 "$cli" join "$tmp/zero.geojson" "$tmp/sqp.csv"
+
 report
