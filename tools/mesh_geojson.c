@@ -682,6 +682,13 @@ static int slurp(const char *path, char **text, size_t *len, char *msg, size_t n
       *text = p, cap = nc;
     }
     size_t got = fread(*text + *len, 1, cap - 1 - *len, f);
+    /* Reading stops at a NUL byte, which the GeoJSON reader refuses where it is: an
+     * endless binary stream (a .geojson name for /dev/zero) filled memory before. */
+    const char *nul = got ? memchr(*text + *len, '\0', got) : NULL;
+    if (nul) {
+      *len = (size_t)(nul - *text) + 1;
+      break;
+    }
     *len += got;
     if (got == 0) break;
   }

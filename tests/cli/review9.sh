@@ -65,6 +65,9 @@ expect 1 "^quadkit join: /dev/zero: GDAL cannot open /dev/zero" -- timeout 60 "$
 expect 1 "^quadkit join: /dev/fd/[0-9]+:1:1: binary data \\(NUL byte\\) in a text file$" -- timeout 60 bash -c '"$1" join <(cat /dev/zero) "$2"' - "$cli" "$tmp/sqp.csv"
 ln -s /dev/zero "$tmp/zero.geojson"
 expect 1 "^quadkit join: $tmp/zero.geojson:1:1: binary data \\(NUL byte\\) in a text file$" -- timeout 60 "$cli" join "$tmp/zero.geojson" "$tmp/sqp.csv"
+# the mesher's own read of GeoJSON too (it said "out of memory reading it" once memory ran out)
+expect 1 "^quadkit mesh: $tmp/zero.geojson:1:1: binary data \\(NUL byte\\) in a text file$" -- timeout 60 "$cli" mesh "$tmp/zero.geojson" -o "$tmp/zm"
+nothing_written "$tmp/zm"
 
 # ---- a line too long for memory was taken for the end of the input ---------------------
 # getline's -1 on ENOMEM ended the loops of join's and world's readers as if the file had
