@@ -654,7 +654,8 @@ static int hole_points(mg_input_t *in, const char *path, char *msg, size_t n) {
       mg_place(path, ptr, place, sizeof place);
       rc = mg_fail(msg, n, 1,
                    "%s: %s: no point found strictly inside this hole ring (through (%.17g, "
-                   "%.17g)) and outside every other ring%s",
+                   "%.17g)) and outside the area (even-odd over every ring): a hole must "
+                   "lie inside its shell, not outside it or covered by another polygon%s",
                    place, what, in->xy[2 * v], in->xy[2 * v + 1],
                    mg_pole_note(in, note, sizeof note));
     }

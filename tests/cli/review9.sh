@@ -84,4 +84,11 @@ if [ "${QK_SANITIZE:-0}" != 1 ]; then
     -- bash -c 'ulimit -v 1000000; timeout 120 "$1" world "$2" /dev/zero' - "$cli" "$tmp/obj.csv"
 fi
 
+# ---- mesh, GeoJSON: a hole outside its shell was said to have no point "outside every
+# other ring", which every point inside it is (under even-odd it is area, not a hole) --------
+printf '{"type": "Polygon", "coordinates": [[[0, 0], [1, 0], [1, 1], [0, 1], [0, 0]],\n [[2, 2], [3, 2], [3, 3], [2, 2]]]}\n' >"$tmp/holeout.geojson"
+expect 1 "^quadkit mesh: $tmp/holeout.geojson:2:2: feature 0, polygon 0, ring 1: no point found strictly inside this hole ring \\(through \\(2, 2\\)\\) and outside the area \\(even-odd over every ring\\): a hole must lie inside its shell, not outside it or covered by another polygon$" \
+  -- "$cli" mesh "$tmp/holeout.geojson" -o "$tmp/holeout"
+nothing_written "$tmp/holeout"
+
 report
