@@ -726,6 +726,14 @@ qk_status_t qk_region_read_geojson(const char *path, const qk_region_options_t *
   for (;;) {
     if ((st = qk__grow(&a, (void **)&buf, &cap, len + (1 << 16), 1))) break;
     size_t got = fread(buf + len, 1, cap - len, f);
+    /* A NUL byte is refused where it is (qk_region_read_geojson_text): reading stops there,
+     * so that an endless binary stream (/dev/zero, a pipe from one) fails at once instead
+     * of filling memory. */
+    const char *nul = got ? memchr(buf + len, '\0', got) : NULL;
+    if (nul) {
+      len = (size_t)(nul - buf) + 1;
+      break;
+    }
     len += got;
     if (len < cap) break;
   }
@@ -768,14 +776,4 @@ qk_status_t qk_region_read_geojson(const char *path, const qk_region_options_t *
 qk_status_t qk_region_from_arrays(const qk_region_arrays_t *in, const qk_region_options_t *options,
                                   qk_region_t **out, qk_error_t *err) {
   return qk__region_build(in, options, NULL, 0, SIZE_MAX, out, err);
-}
-
-qk_status_t qk_region_read(const char *path, const qk_region_options_t *options, qk_region_t **out,
-                           qk_error_t *err) {
-  size_t n = path ? strlen(path) : 0;
-  if (n >= 8 && !strcmp(path + n - 8, ".geojson"))
-    return qk_region_read_geojson(path, options, out, err);
-  if (n >= 5 && !strcmp(path + n - 5, ".json"))
-    return qk_region_read_geojson(path, options, out, err);
-  return qk_region_read_ogr(path, options, out, err);
 }

@@ -35,7 +35,8 @@
   X(OGR_G_GetGeometryType) X(OGR_GT_Flatten) X(OGR_G_GetGeometryCount) X(OGR_G_GetGeometryRef) \
   X(OGR_G_GetPointCount) X(OGR_G_GetX) X(OGR_G_GetY) X(CPLQuietErrorHandler) \
   X(CPLPushErrorHandler) X(CPLPopErrorHandler) X(CPLErrorReset) X(CPLGetLastErrorType) \
-  X(CPLGetLastErrorMsg)
+  X(CPLGetLastErrorMsg) X(OGR_G_HasCurveGeometry) X(OGR_G_GetLinearGeometry) \
+  X(OGR_G_DestroyGeometry)
 /* clang-format on */
 
 static struct {
@@ -74,6 +75,7 @@ static void gd_load(void) {
 typedef struct ob {
   const qk_allocator_t *a;
   qk__rings_t rg;
+  bool curved; /* the feature read last has a true arc (the read fails, naming it) */
 } ob_t;
 
 static qk_status_t add_ring(ob_t *b, OGRGeometryH ring, int k) {
@@ -97,14 +99,35 @@ static qk_status_t add_polygon(ob_t *b, OGRGeometryH poly) {
   return QK_OK;
 }
 
-/* The polygons of a geometry: a Polygon, the members of a MultiPolygon or of a
- * GeometryCollection (nested ones too, as the GeoJSON reader takes them; they were
- * counted as skipped). Other types add nothing. */
+/* The polygons of a geometry: a Polygon or a Triangle, the members of a MultiPolygon, a
+ * GeometryCollection (nested ones too, as the GeoJSON reader takes them; they were counted
+ * as skipped), a MultiSurface, a PolyhedralSurface or a TIN, and a CurvePolygon whose rings
+ * are straight (LineStrings, or CompoundCurves of them), which GDAL converts to a Polygon
+ * exactly. Every one of these is an area bounded by straight edges: GML and NAS layers
+ * hold MultiSurfaces, and until the twenty-second session they were all dropped without a
+ * word (their features empty, every point in them answered -1). A true arc has no exact
+ * set of edges, and approximating it would make answers depend on a tolerance the caller
+ * never chose: it sets b->curved and fails the read. Other types (points, lines, curves
+ * that bound nothing) add nothing. */
 static qk_status_t add_geometry(ob_t *b, OGRGeometryH g) {
   OGRwkbGeometryType t = g ? gd.OGR_GT_Flatten(gd.OGR_G_GetGeometryType(g)) : wkbUnknown;
-  if (t == wkbPolygon) return add_polygon(b, g);
+  if (t == wkbPolygon || t == wkbTriangle) return add_polygon(b, g);
+  if (t == wkbCurvePolygon) {
+    if (gd.OGR_G_HasCurveGeometry(g, TRUE)) {
+      b->curved = true;
+      return QK_ERR_PARSE;
+    }
+    OGRGeometryH lin = gd.OGR_G_GetLinearGeometry(g, 0, NULL);
+    if (!lin) return QK_ERR_NOMEM;
+    qk_status_t st = gd.OGR_GT_Flatten(gd.OGR_G_GetGeometryType(lin)) == wkbPolygon
+                         ? add_polygon(b, lin)
+                         : QK_ERR_CORRUPT;
+    gd.OGR_G_DestroyGeometry(lin);
+    return st;
+  }
   qk_status_t st = QK_OK;
-  if (t == wkbMultiPolygon || t == wkbGeometryCollection)
+  if (t == wkbMultiPolygon || t == wkbGeometryCollection || t == wkbMultiSurface ||
+      t == wkbPolyhedralSurface || t == wkbTIN)
     for (int i = 0, n = gd.OGR_G_GetGeometryCount(g); i < n && !st; i++)
       st = add_geometry(b, gd.OGR_G_GetGeometryRef(g, i));
   return st;
@@ -185,6 +208,12 @@ qk_status_t qk_region_read_ogr(const char *path, const qk_region_options_t *opti
   if (gdal_failed) {
     st = qk__region_fail(err, QK_ERR_IO, bad_feature, "GDAL failed reading feature %zu: %.160s",
                          bad_feature, why);
+  } else if (b.curved) {
+    st = qk__region_fail(err, QK_ERR_PARSE, b.rg.nf,
+                         "feature %zu: a curved geometry (an arc of a CircularString) cannot be "
+                         "read exactly; convert it to straight edges first (ogr2ogr -nlt "
+                         "CONVERT_TO_LINEAR)",
+                         b.rg.nf);
   } else if (st) {
     qk__region_fail(err, st, SIZE_MAX, "%s while reading %s", qk_strerror(st), path);
   } else {

@@ -471,6 +471,7 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
     cli_msg("quadkit join: %s:%lu: %s\n", j->pts_path, phys, bad);
     rc = CLI_BAD_INPUT;
   } else if (!rc && len == -3) {
+    cli_msg("quadkit join: %s:%lu: out of memory reading the line\n", j->pts_path, phys + 1);
     rc = CLI_INTERNAL;
   }
   if (!rc && ferror(in)) {

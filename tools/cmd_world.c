@@ -236,6 +236,11 @@ static int each_row(const char *path,
   if (!rc && ferror(f)) {
     cli_msg("quadkit world: %s: read error\n", path);
     rc = CLI_BAD_INPUT;
+  } else if (!rc && !feof(f)) {
+    /* getline failed without an end or an error: a line too long for memory (binary
+     * data without a line break: /dev/zero said "no objects") */
+    cli_msg("quadkit world: %s:%lu: out of memory reading the line\n", path, ln + 1);
+    rc = CLI_INTERNAL;
   }
   fclose(f);
   return rc;

@@ -58,6 +58,14 @@ long cli_read_record(FILE *f, char **line, size_t *cap, unsigned long *phys, uns
   for (;; part++) {
     ssize_t got = getline(part ? &buf : line, part ? &bcap : cap, f);
     if (got < 0) {
+      /* getline's -1 is the end of the input, a read error (ferror, which the caller
+       * reports) or a line too long for memory (neither flag set; errno ENOMEM): that
+       * one was taken for the end, so join wrote nothing and exited 0 on a binary
+       * input of no line break (/dev/zero). */
+      if (!feof(f) && !ferror(f)) {
+        rc = -3;
+        goto out;
+      }
       if (!part) return -1;
       /* the input ends inside quotes: the record is returned, flagged (the rows after
        * the quote would be lost without a word) */

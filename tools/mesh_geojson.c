@@ -654,7 +654,8 @@ static int hole_points(mg_input_t *in, const char *path, char *msg, size_t n) {
       mg_place(path, ptr, place, sizeof place);
       rc = mg_fail(msg, n, 1,
                    "%s: %s: no point found strictly inside this hole ring (through (%.17g, "
-                   "%.17g)) and outside every other ring%s",
+                   "%.17g)) and outside the area (even-odd over every ring): a hole must "
+                   "lie inside its shell, not outside it or covered by another polygon%s",
                    place, what, in->xy[2 * v], in->xy[2 * v + 1],
                    mg_pole_note(in, note, sizeof note));
     }
@@ -682,6 +683,13 @@ static int slurp(const char *path, char **text, size_t *len, char *msg, size_t n
       *text = p, cap = nc;
     }
     size_t got = fread(*text + *len, 1, cap - 1 - *len, f);
+    /* Reading stops at a NUL byte, which the GeoJSON reader refuses where it is: an
+     * endless binary stream (a .geojson name for /dev/zero) filled memory before. */
+    const char *nul = got ? memchr(*text + *len, '\0', got) : NULL;
+    if (nul) {
+      *len = (size_t)(nul - *text) + 1;
+      break;
+    }
     *len += got;
     if (got == 0) break;
   }

@@ -166,7 +166,9 @@ qk_status_t qk_region_read_ogr(const char *path, const qk_region_options_t *opti
 
 /**
  * Read a layer, choosing the reader by name: ".geojson" and ".json" go to the GeoJSON
- * reader, everything else to OGR.
+ * reader, everything else to OGR, except a path that is not a regular file or directory (a
+ * pipe, a FIFO, /dev/stdin from a pipe), which goes to the GeoJSON reader: GDAL cannot
+ * read a stream.
  * \param [in] path the file.
  * \param [in] options NULL for defaults.
  * \param [out] out the new layer; NULL on error.

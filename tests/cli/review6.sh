@@ -57,7 +57,7 @@ cat >"$tmp/hole.geojson" <<'EOF2'
   [[[1, 1], [5, 1], [5, 5], [1, 5], [1, 1]]]
 ]}
 EOF2
-expect 1 "^quadkit mesh: $tmp/hole.geojson:3:4: feature 0, polygon 0, ring 1: no point found strictly inside this hole ring \\(through \\(2, 2\\)\\) and outside every other ring$" \
+expect 1 "^quadkit mesh: $tmp/hole.geojson:3:4: feature 0, polygon 0, ring 1: no point found strictly inside this hole ring \\(through \\(2, 2\\)\\) and outside the area \\(even-odd over every ring\\): a hole must lie inside its shell, not outside it or covered by another polygon$" \
   -- "$cli" mesh "$tmp/hole.geojson" -o "$tmp/hole"
 nothing_written "$tmp/hole"
 
