@@ -101,10 +101,16 @@ static qk_status_t ring(gj_t *g, json_object *arr, size_t f, size_t poly, size_t
         x && (json_object_is_type(x, json_type_double) || json_object_is_type(x, json_type_int));
     bool oky =
         y && (json_object_is_type(y, json_type_double) || json_object_is_type(y, json_type_int));
+    /* Elements after x and y (altitude, measure) are not used, but a position holds
+     * numbers only (RFC 7946, 3.1.1): [0, 0, "a"] is not a position. */
+    for (size_t j = 2; okx && oky && j < json_object_array_length(p); j++) {
+      json_object *z = json_object_array_get_idx(p, j);
+      oky = json_object_is_type(z, json_type_double) || json_object_is_type(z, json_type_int);
+    }
     if (!okx || !oky)
       return qk__region_fail(g->err, QK_ERR_PARSE, f,
                              "feature %zu, polygon %zu, ring %zu, position %zu: expected [x, y] "
-                             "numbers, found %s",
+                             "numbers (and optional further numbers), found %s",
                              f, poly, k, i, shown(p));
     double vx = json_object_get_double(x), vy = json_object_get_double(y);
     if (!isfinite(vx) || !isfinite(vy)) { /* (NaN and Infinity were refused: an overflow) */

@@ -239,6 +239,12 @@ static void test_geojson_semantic_position(void **state) {
                      "   {\"type\": \"Polygon\", \"coordinates\": [[[0,0],[1,0],\n"
                      "    [1,\"a\"],[0,0]]]}}]}",
              1, QK_ERR_PARSE, 1, "[1,\"a\"]", "expected [x, y] numbers");
+  /* a third element that is not a number (the altitude is not used, but it is part of the
+   * position; it was accepted without a word) */
+  refused_at(FC_HEAD "  {\"type\": \"Feature\", \"properties\": {}, \"geometry\":\n"
+                     "   {\"type\": \"Polygon\", \"coordinates\": [[[0,0],[1,0],\n"
+                     "    [1,1,\"a\"],[0,0]]]}}]}",
+             1, QK_ERR_PARSE, 1, "[1,1,\"a\"]", "expected [x, y] numbers");
   /* an unknown geometry type: the geometry object */
   refused_at(FC_HEAD "  {\"type\": \"Feature\", \"properties\": {},\n"
                      "   \"geometry\": {\"type\": \"Polgon\", \"coordinates\": []}}]}",
