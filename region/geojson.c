@@ -110,7 +110,7 @@ static qk_status_t ring(gj_t *g, json_object *arr, size_t f, size_t poly, size_t
     if (!okx || !oky)
       return qk__region_fail(g->err, QK_ERR_PARSE, f,
                              "feature %zu, polygon %zu, ring %zu, position %zu: expected [x, y] "
-                             "numbers (and optional further numbers), found %s",
+                             "numbers, found %s",
                              f, poly, k, i, shown(p));
     double vx = json_object_get_double(x), vy = json_object_get_double(y);
     if (!isfinite(vx) || !isfinite(vy)) { /* (NaN and Infinity were refused: an overflow) */
