@@ -7,9 +7,12 @@
  * nothing. An accepted layer is queried at every vertex, at the midpoints of edges and at
  * lattice points: locate, locate_all and the batch call must agree with each other, and,
  * in planar mode when every coordinate is a small integer, with a brute-force crossing
- * parity on the rings as json-c parsed them here (integer arithmetic, exact).
+ * parity on the rings as json-c parsed them here (integer arithmetic, exact). Without a
+ * failing allocation, the reader's answer (a FeatureCollection is read one feature at a
+ * time) must be the whole-text reading's: the same status and error, or the same stats.
  */
 #include "fuzz/fuzz_common.h"
+#include "region/region_internal.h"
 
 #include <json.h>
 
@@ -139,6 +142,24 @@ int qkf_geojson(const uint8_t *data, size_t size) {
   qk_region_t *r = (qk_region_t *)&o;
   qk_error_t err;
   qk_status_t st = qk_region_read_geojson_text(text, len, &o, &r, &err);
+  qk_region_t *w = NULL;
+  qk_error_t werr;
+  qk_status_t wst = QK_OK;
+  const char *wt = len >= 3 && !memcmp(text, "\xEF\xBB\xBF", 3) ? text + 3 : text;
+  size_t wn = len - (size_t)(wt - text);
+  int compare = !(mode & 0x80) && !memchr(wt, '\0', wn);
+  if (compare) {
+    qk_region_options_t wo = o;
+    wo.allocator = NULL;
+    wst = qk__geojson_read_whole(wt, wn, &wo, &w, &werr);
+    QKF_ASSERT(wst == st, "status %s, whole-text reading %s (%s)", qk_strerror(st),
+               qk_strerror(wst), wst ? werr.message : "");
+    if (st)
+      QKF_ASSERT(!strcmp(err.message, werr.message) && err.line == werr.line &&
+                     err.column == werr.column && err.item == werr.item,
+                 "error \"%s\" at %lu:%lu, whole-text reading \"%s\" at %lu:%lu", err.message,
+                 err.line, err.column, werr.message, werr.line, werr.column);
+  }
   if (st != QK_OK) {
     QKF_ASSERT(r == NULL, "failed read left a layer");
     QKF_ASSERT(err.message[0] != '\0', "status %s without a message", qk_strerror(st));
@@ -151,6 +172,15 @@ int qkf_geojson(const uint8_t *data, size_t size) {
   int oracle = o.planar && gf_read(text, len, &g);
   qk_region_stats_t s;
   qk_region_stats(r, &s);
+  if (compare) {
+    qk_region_stats_t ws;
+    qk_region_stats(w, &ws);
+    QKF_ASSERT(s.features == ws.features && s.rings == ws.rings && s.vertices == ws.vertices &&
+                   s.skipped == ws.skipped,
+               "layer %zu features %zu rings %zu vertices, whole-text reading %zu %zu %zu",
+               s.features, s.rings, s.vertices, ws.features, ws.rings, ws.vertices);
+    qk_region_free(w);
+  }
   if (oracle) {
     for (size_t v = 0; v < g.nv; v++)
       gf_check(r, &g, 1, (double)g.xy[2 * v], (double)g.xy[2 * v + 1]);

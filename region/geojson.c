@@ -1,9 +1,11 @@
 /*
  * The GeoJSON reader (RFC 7946), on json-c. The text is parsed into json-c's tree, then
  * walked into the array form of a layer (rings, features, properties) and handed to the
- * builder; on any error nothing is built. A layer's feature i is the file's feature i:
- * features whose geometry is not a Polygon or MultiPolygon stay as empty features (their
- * properties kept) and are counted as skipped, so indices match the file.
+ * builder; on any error nothing is built. A FeatureCollection's tree is made one
+ * feature at a time (read_streamed), the whole text's only when that fails. A layer's
+ * feature i is the file's feature i: features whose geometry is not a Polygon or
+ * MultiPolygon stay as empty features (their properties kept) and are counted as
+ * skipped, so indices match the file.
  *
  * json-c allocates with malloc, not through the layer's allocator; the allocation-failure
  * tests therefore cover the rest of the reader and the builder.
@@ -362,15 +364,25 @@ static size_t skip_blanks(const char *t, size_t n, size_t i) {
   return i;
 }
 
-/* t[i] is a quote: the index after the closing quote. */
+/* t[i] is a quote: the index after the closing quote (one not escaped by an odd run of
+ * backslashes). */
 static size_t skip_string(const char *t, size_t n, size_t i) {
-  for (i++; i < n && t[i] != '"'; i++)
-    if (t[i] == '\\') i++;
-  return i < n ? i + 1 : n;
+  for (size_t b = ++i;;) {
+    const char *q = i < n ? memchr(t + i, '"', n - i) : NULL;
+    if (!q) return n;
+    i = (size_t)(q - t);
+    size_t bs = 0;
+    while (bs < i - b && t[i - 1 - bs] == '\\') bs++;
+    if (bs % 2 == 0) return i + 1;
+    i++;
+  }
 }
 
-/* The index after the value starting at t[i] (blanks skipped before it). */
+/* The index after the value starting at t[i] (blanks skipped before it). Only quotes and
+ * brackets matter inside an object or array: the bytes between are skipped by a table
+ * (a coordinate array is mostly digits). */
 static size_t skip_value(const char *t, size_t n, size_t i) {
+  static const unsigned char mark[256] = {['"'] = 1, ['{'] = 1, ['['] = 1, ['}'] = 1, [']'] = 1};
   i = skip_blanks(t, n, i);
   if (i >= n) return n;
   if (t[i] == '"') return skip_string(t, n, i);
@@ -380,6 +392,8 @@ static size_t skip_value(const char *t, size_t n, size_t i) {
   }
   size_t depth = 0;
   while (i < n) {
+    while (i < n && !mark[(unsigned char)t[i]]) i++;
+    if (i == n) break;
     char c = t[i];
     if (c == '"') {
       i = skip_string(t, n, i);
@@ -578,6 +592,119 @@ static qk_status_t json_check(const qk_allocator_t *a, const char *text, size_t 
   return st == QK_ERR_NOMEM ? qk__region_fail(err, st, SIZE_MAX, "out of memory") : st;
 }
 
+/* text[0, n) parsed strictly by json-c, allowing `depth` levels of nesting: the value,
+ * or NULL when those bytes are not exactly one value (blanks around it allowed). */
+static json_object *parse_exact(const char *text, size_t n, int depth) {
+  while (n && strchr(" \t\r\n", text[n - 1])) n--;
+  if (n > (size_t)INT_MAX) return NULL;
+  json_tokener *tok = json_tokener_new_ex(depth);
+  if (!tok) return NULL;
+  json_tokener_set_flags(tok, JSON_TOKENER_STRICT);
+  json_object *v = json_tokener_parse_ex(tok, text, (int)n);
+  if (v && (json_tokener_get_error(tok) != json_tokener_success ||
+            json_tokener_get_parse_end(tok) != n)) {
+    json_object_put(v);
+    v = NULL;
+  }
+  json_tokener_free(tok);
+  return v;
+}
+
+/* A FeatureCollection, one feature at a time. json-c's tree of a whole collection takes
+ * some nine times the text (a 41 MB file, ten copies of the countries, took 350 MB of
+ * tree besides its text), so the root object is parsed with its "features" array
+ * emptied, then each element on its own, walked into the rings before the next is
+ * parsed. The elements are found by skip_value(), which is exact on well-formed JSON;
+ * each must be exactly one value to json-c (two levels less deep allowed, as it sits two
+ * levels down), with one comma between two: then the whole text is JSON that json-c
+ * parses into the same values.
+ *
+ * This path only ever succeeds: QK_OK with *out built, or QK_ERR_NOMEM. Anything else
+ * (another layout, a root that is not a FeatureCollection, malformed JSON, an error in a
+ * feature) gives QK_ERR_PARSE with nothing built, and the caller reads the text whole as
+ * before, which finds and words the error as it always has. */
+static qk_status_t read_streamed(const char *text, size_t len, const qk_region_options_t *o,
+                                 const qk_allocator_t *a, qk_region_t **out, qk_error_t *err) {
+  /* the root object's "features" member (names compared as written), and the spans of
+   * its elements: [sp[2k], sp[2k + 1]) */
+  size_t i = skip_blanks(text, len, 0), lb = SIZE_MAX, rb = SIZE_MAX, *sp = NULL, ns = 0, cap = 0;
+  qk_status_t st = QK_OK;
+  if (i >= len || text[i] != '{') return QK_ERR_PARSE;
+  for (i = skip_blanks(text, len, i + 1); !st && i < len && text[i] == '"';) {
+    size_t e = skip_string(text, len, i);
+    if (memchr(text + i, '\\', e - i)) st = QK_ERR_PARSE; /* (json-c decodes escapes) */
+    bool features = e - i == 10 && !memcmp(text + i, "\"features\"", 10);
+    i = skip_blanks(text, len, e);
+    if (i >= len || text[i] != ':') st = QK_ERR_PARSE;
+    i = skip_blanks(text, len, i + 1);
+    if (!st && features && i < len && text[i] == '[') {
+      lb = i, ns = 0; /* (a second "features" is refused later, by json_check) */
+      for (i = skip_blanks(text, len, i + 1); i < len && text[i] != ']';) {
+        size_t v = i, e = skip_value(text, len, i);
+        if ((st = qk__grow(a, (void **)&sp, &cap, ns + 2, sizeof *sp))) break;
+        sp[ns++] = v, sp[ns++] = e;
+        i = skip_blanks(text, len, e);
+        if (i >= len || text[i] != ',') break;
+        i = skip_blanks(text, len, i + 1);
+      }
+      if (!st && (i >= len || text[i] != ']')) st = QK_ERR_PARSE;
+      rb = i++;
+    } else {
+      i = skip_value(text, len, i);
+    }
+    i = skip_blanks(text, len, i);
+    if (i < len && text[i] == ',') i = skip_blanks(text, len, i + 1);
+  }
+  if (!st && (lb == SIZE_MAX || rb >= len)) st = QK_ERR_PARSE;
+
+  /* the root with "features": [] */
+  size_t sn = st ? 0 : len - (rb - lb - 1);
+  char *sk = st ? NULL : qk__realloc(a, NULL, 0, sn);
+  if (!st && !sk) st = QK_ERR_NOMEM;
+  if (!st) {
+    memcpy(sk, text, lb + 1);
+    memcpy(sk + lb + 1, text + rb, len - rb);
+    json_object *root = parse_exact(sk, sn, JSON_TOKENER_DEFAULT_DEPTH), *t = NULL;
+    qk__free(a, sk, sn);
+    bool collection = root && json_object_is_type(root, json_type_object) &&
+                      json_object_object_get_ex(root, "type", &t) &&
+                      json_object_is_type(t, json_type_string) &&
+                      !strcmp(json_object_get_string(t), "FeatureCollection");
+    json_object_put(root);
+    if (!collection) st = QK_ERR_PARSE;
+  }
+  if (!st) st = json_check(a, text, len, err);
+
+  qk_error_t scratch;
+  gj_t g;
+  memset(&g, 0, sizeof g);
+  g.a = a;
+  g.planar = o->planar;
+  g.err = err ? err : &scratch;
+  step_in(&g, "features", 0);
+  for (size_t k = 0; !st && k < ns; k += 2) {
+    /* (a comma follows every element but the last, which the bracket must follow) */
+    size_t e = sp[k + 1];
+    bool sep = k + 2 < ns || skip_blanks(text, len, e) == rb;
+    json_object *feat =
+        sep ? parse_exact(text + sp[k], e - sp[k], JSON_TOKENER_DEFAULT_DEPTH - 2) : NULL;
+    if (!feat) {
+      st = QK_ERR_PARSE;
+      break;
+    }
+    step_in(&g, NULL, k / 2);
+    st = feature(&g, feat, k / 2);
+    json_object_put(feat);
+    if (!st) step_out(&g);
+  }
+  qk__free(a, sp, cap * sizeof *sp);
+  if (!st) st = qk__rings_build(&g.rg, o, out, err);
+  qk__rings_free(g.a, &g.rg);
+  if (st == QK_ERR_NOMEM && err && !err->message[0]) /* (the skeleton's or the spans') */
+    qk__region_fail(err, st, SIZE_MAX, "out of memory");
+  return !st || st == QK_ERR_NOMEM ? st : QK_ERR_PARSE;
+}
+
 qk_status_t qk_region_read_geojson_text(const char *text, size_t len,
                                         const qk_region_options_t *options, qk_region_t **out,
                                         qk_error_t *err) {
@@ -596,6 +723,23 @@ qk_status_t qk_region_read_geojson_text(const char *text, size_t len,
     where(text, (size_t)(nul - text), err);
     return qk__region_fail(err, QK_ERR_PARSE, SIZE_MAX, "binary data (NUL byte) in a text file");
   }
+  qk_region_options_t o;
+  qk_allocator_t alloc;
+  qk__region_options(options, &o, &alloc);
+  qk_status_t st = read_streamed(text, len, &o, &alloc, out, err);
+  return st != QK_ERR_PARSE ? st : qk__geojson_read_whole(text, len, options, out, err);
+}
+
+qk_status_t qk__geojson_read_whole(const char *text, size_t len, const qk_region_options_t *options,
+                                   qk_region_t **out, qk_error_t *err) {
+  if (err) {
+    memset(err, 0, sizeof *err);
+    err->item = SIZE_MAX;
+  }
+  *out = NULL;
+  qk_region_options_t o;
+  qk_allocator_t alloc;
+  qk__region_options(options, &o, &alloc);
   json_tokener *tok = json_tokener_new();
   if (!tok) return qk__region_fail(err, QK_ERR_NOMEM, SIZE_MAX, "out of memory");
   /* RFC 8259 JSON: no trailing commas, no single quotes (json-c accepts both otherwise). */
@@ -656,9 +800,6 @@ qk_status_t qk_region_read_geojson_text(const char *text, size_t len,
       json_object_put(root);
       return qk__region_fail(err, QK_ERR_PARSE, SIZE_MAX, "unexpected text after the JSON value");
     }
-  qk_region_options_t o;
-  qk_allocator_t alloc;
-  qk__region_options(options, &o, &alloc);
   qk_status_t st = json_check(&alloc, text, len, err);
   if (st) {
     json_object_put(root);

@@ -209,6 +209,11 @@ qk_status_t qk__rings_end_feature(const qk_allocator_t *a, qk__rings_t *r);
 qk_status_t qk__rings_build(qk__rings_t *r, const qk_region_options_t *o, qk_region_t **out,
                             qk_error_t *err);
 void qk__rings_free(const qk_allocator_t *a, qk__rings_t *r);
+/* The GeoJSON text (no byte order mark, no NUL byte) parsed whole by json-c and walked
+ * into a layer: what qk_region_read_geojson_text does when a FeatureCollection cannot be
+ * read one feature at a time (region/geojson.c), and the tests' oracle for that path. */
+qk_status_t qk__geojson_read_whole(const char *text, size_t len, const qk_region_options_t *options,
+                                   qk_region_t **out, qk_error_t *err);
 /* The start of every reader: clear *err, check path and out, set *out to NULL. */
 qk_status_t qk__read_begin(const char *path, qk_region_t **out, qk_error_t *err);
 

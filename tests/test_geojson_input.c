@@ -19,9 +19,17 @@
  *    string: join wrote the value cut short there);
  *  - qk_region_find_json_pointer (the same path following, public for the mesher's
  *    messages): a JSON Pointer's value, escapes (~0, ~1) in names, an index past the end
- *    (the deepest value found), a byte order mark; malformed pointers refused.
+ *    (the deepest value found), a byte order mark; malformed pointers refused;
+ *  - a FeatureCollection is read one feature at a time (json-c's tree of a whole file
+ *    took nine times its size): the layer is the one the whole-text reading gives, and
+ *    JSON that reading refuses is refused the same way. Oracle: the whole-text reading
+ *    (qk__geojson_read_whole): stats, properties and locate_all over a grid compared; on
+ *    errors the status, message, item, line and column; the countries file too when
+ *    present.
  */
 #include "support/qk_test.h"
+
+#include "region/region_internal.h"
 
 #include <string.h>
 
@@ -31,6 +39,11 @@ static qk_status_t read_text(const char *text, qk_region_t **r, qk_error_t *err)
   qk_region_options_init(&o);
   o.planar = 1;
   return qk_region_read_geojson_text(text, strlen(text), &o, r, err);
+}
+
+static qk_status_t read_text_with(const char *text, const qk_region_options_t *o, qk_region_t **r,
+                                  qk_error_t *err) {
+  return qk_region_read_geojson_text(text, strlen(text), o, r, err);
 }
 
 #define SQUARE "{\"type\":\"Polygon\",\"coordinates\":[[[0,0],[1,0],[1,1],[0,1],[0,0]]]}"
@@ -288,6 +301,200 @@ static void test_geojson_semantic_position(void **state) {
 #endif
 }
 
+/* ---- a FeatureCollection read one feature at a time ---- */
+
+#ifdef QK_HAVE_JSONC
+/* The layer read from text equals the one read whole: the same status and error, or the
+ * same stats, properties (names[]) and features at every point of a grid over box. */
+static void same_as_whole(const char *text, size_t len, int planar, const char *const *names,
+                          const double box[4], unsigned grid) {
+  qk_region_options_t o;
+  qk_region_options_init(&o);
+  o.planar = planar;
+  qk_region_t *a = NULL, *b = NULL;
+  qk_error_t ea, eb;
+  qk_status_t sa = qk_region_read_geojson_text(text, len, &o, &a, &ea);
+  qk_status_t sb = qk__geojson_read_whole(text, len, &o, &b, &eb);
+  if (sa != sb)
+    fail_msg("status %d (%s), whole %d (%s)", sa, sa ? ea.message : "", sb, sb ? eb.message : "");
+  if (sa) {
+    if (strcmp(ea.message, eb.message))
+      fail_msg("%s\nread whole: %s\nin: %.300s", ea.message, eb.message, text);
+    assert_true(ea.item == eb.item && ea.line == eb.line && ea.column == eb.column);
+    return;
+  }
+  qk_region_stats_t ta, tb;
+  qk_region_stats(a, &ta);
+  qk_region_stats(b, &tb);
+  assert_true(ta.features == tb.features && ta.rings == tb.rings && ta.vertices == tb.vertices &&
+              ta.skipped == tb.skipped);
+  assert_int_equal(qk_region_feature_count(a), qk_region_feature_count(b));
+  for (uint32_t f = 0; f < qk_region_feature_count(a); f++)
+    for (size_t k = 0; names && names[k]; k++) {
+      const char *pa = qk_region_property(a, f, names[k]), *pb = qk_region_property(b, f, names[k]);
+      if (!pa || !pb)
+        assert_true(pa == pb);
+      else
+        assert_string_equal(pa, pb);
+    }
+  for (unsigned i = 0; i <= grid; i++)
+    for (unsigned j = 0; j <= grid; j++) {
+      qk_point_t p = {box[0] + (box[2] - box[0]) * i / grid, box[1] + (box[3] - box[1]) * j / grid};
+      uint32_t fa[16], fb[16];
+      size_t na = 0, nb = 0;
+      assert_int_equal(qk_region_locate_all(a, p, QK_BOUNDARY_CLOSED, fa, 16, &na), QK_OK);
+      assert_int_equal(qk_region_locate_all(b, p, QK_BOUNDARY_CLOSED, fb, 16, &nb), QK_OK);
+      assert_int_equal(na, nb);
+      assert_memory_equal(fa, fb, (na < 16 ? na : 16) * sizeof *fa);
+    }
+  qk_region_free(a);
+  qk_region_free(b);
+}
+
+#define FA                                                                                         \
+  "{\"type\":\"Feature\",\"properties\":{\"name\":\"a]},\\\"[{\",\"k\":\"\\\\\",\"n\":[1,{\"x\":"  \
+  "null}],"                                                                                        \
+  "\"z\":1.5e3},\"geometry\":{\"type\":\"Polygon\",\"coordinates\":[[[0,0],[2,0],[2,2],[0,2],[0,"  \
+  "0]],"                                                                                           \
+  "[[0.5,0.5],[1,0.5],[1,1],[0.5,0.5]]]}}"
+#define FB                                                                                         \
+  "{ \"geometry\" : {\"type\":\"GeometryCollection\",\"geometries\":[{\"type\":\"Point\","         \
+  "\"coordinates\":[9,9]},{\"type\":\"GeometryCollection\",\"geometries\":[{\"type\":"             \
+  "\"MultiPolygon\",\"coordinates\":[[[[1,1],[3,1],[3,3],[1,1]]],[[[2.5,0],[3,0],[3,0.5],"         \
+  "[2.5,0]]]]}]}]},\n\t\"type\" : \"Feature\", \"properties\": {\"name\": \"b\"} }"
+#define FC "{\"type\":\"Feature\",\"properties\":null,\"geometry\":null}"
+#define FD                                                                                         \
+  "{\"type\":\"Feature\",\"properties\":{\"name\":\"d\"},\"geometry\":{\"type\":\"Point\","        \
+  "\"coordinates\":[1,1]}}"
+#define SHORT                                                                                      \
+  "{\"type\":\"Feature\",\"properties\":{},\"geometry\":{\"type\":\"Polygon\",\"coordinates\":"    \
+  "[[[0,0],[1,0],[0,0]]]}}"
+#endif
+
+static void test_geojson_streamed(void **state) {
+  (void)state;
+#ifndef QK_HAVE_JSONC
+  skip();
+#else
+  static const char *const names[] = {"name", "k", "n", "z", NULL};
+  const double box[4] = {-0.25, -0.25, 3.25, 3.25};
+  static const char *const valid[] = {
+      /* members in any order, around the array too; strings holding brackets, commas,
+       * escaped quotes and backslashes; nested collections; null and point geometries */
+      "{\"features\":[" FA "," FB "," FC "," FD "],\"type\":\"FeatureCollection\",\"bbox\":[0,0,"
+      "3,3],\"crs\":{\"a\":[1,{\"b\":\"]\"}]}}",
+      " \r\n{ \"type\" :\"FeatureCollection\" ,\n \"features\"\t:\n[\n " FB " ,\r\n\t" FA
+      "\n ]\n}\n ",
+      "{\"type\":\"FeatureCollection\",\"features\":[]}",
+      "{\"type\":\"FeatureCollection\",\"features\":[ \n ]}",
+      "{\"type\":\"FeatureCollection\",\"features\":[" FA "]}",
+      "{\"type\":\"FeatureCollection\",\"features\":[" FB "," FB "," FA "]}",
+      /* the same name written with an escape: json-c keeps the later array */
+      "{\"type\":\"FeatureCollection\",\"features\":[" FA "],\"feat\\u0075res\":[" FB "]}",
+  };
+  for (size_t i = 0; i < sizeof valid / sizeof *valid; i++) {
+    qk_region_t *r = NULL;
+    qk_error_t e;
+    if (read_text(valid[i], &r, &e)) fail_msg("valid %zu: %s", i, e.message);
+    qk_region_free(r);
+    same_as_whole(valid[i], strlen(valid[i]), 1, names, box, 28);
+  }
+  /* The streamed reading is the one taken (it allocates the emptied root and the spans
+   * through the layer's allocator besides what the whole-text one does), and an
+   * allocation failure at any of its calls is QK_ERR_NOMEM with nothing left allocated. */
+  qkt_alloc_t ca;
+  qk_region_options_t ao;
+  qk_region_options_init(&ao);
+  ao.planar = 1;
+  qk_allocator_t al = qkt_alloc_make(&ca);
+  ao.allocator = &al;
+  qk_region_t *r = NULL;
+  qk_error_t e;
+  assert_int_equal(qk__geojson_read_whole(valid[0], strlen(valid[0]), &ao, &r, &e), QK_OK);
+  qk_region_free(r);
+  size_t whole_calls = ca.calls;
+  qkt_alloc_arm(&ca, 0);
+  assert_int_equal(read_text_with(valid[0], &ao, &r, &e), QK_OK);
+  qk_region_free(r);
+  size_t calls = ca.calls;
+  if (calls < whole_calls + 2) fail_msg("%zu allocations, whole %zu", calls, whole_calls);
+  for (size_t k = 1; k <= calls; k++) {
+    qkt_alloc_arm(&ca, k);
+    qk_status_t st = read_text_with(valid[0], &ao, &r, &e);
+    /* (QK_OK: only a shrink failed, which keeps the block; the first call is the
+     * spans' and fails the read, not sends it to the whole-text reading) */
+    if (st != QK_OK || k == 1) {
+      assert_int_equal(st, QK_ERR_NOMEM);
+      assert_null(r);
+      assert_non_null(strstr(e.message, "out of memory"));
+    }
+    qk_region_free(r);
+    assert_int_equal(ca.live_blocks, 0);
+  }
+  /* JSON the whole-text reading refuses, and errors inside valid JSON */
+  static const char *const invalid[] = {
+      "{\"type\":\"FeatureCollection\",\"features\":[" FA ",]}",
+      "{\"type\":\"FeatureCollection\",\"features\":[" FA " " FB "]}",
+      "{\"type\":\"FeatureCollection\",\"features\":[" FA ",," FB "]}",
+      "{\"type\":\"FeatureCollection\",\"features\":[," FA "]}",
+      "{\"type\":\"FeatureCollection\",\"features\":[" FA "}]}",
+      "{\"type\":\"FeatureCollection\",\"features\":[" FA "," FB "] ]}",
+      "{\"type\":\"FeatureCollection\",\"features\":[" FA "," FB ",{\"type\":\"Feature\"]}",
+      "{\"type\":\"FeatureCollection\",\"features\":[{\"type\":\"Feature\",\"properties\":"
+      "{\"s\":\"x}]}\"}," FB "]}",
+      "{\"type\":\"FeatureCollection\",\"features\":[null," FA "]}",
+      "{\"type\":\"FeatureCollection\",\"features\":[" FA "," SHORT "]}",
+      "{\"type\":\"FeatureCollection\",\"features\":[" FA "," FA "],\"features\":[]}",
+      "{\"type\":\"FeatureColection\",\"features\":[" FA "]}",
+      "{\"type\":\"FeatureCollection\",\"features\":[" FA "]} x}",
+      "{\"type\":\"FeatureCollection\",\"features\":[" FA "],}",
+      "{\"type\":\"FeatureCollection\",\"features\":[" FA "] \"bbox\":[]}",
+      "{\"type\":\"FeatureCollection\",\"features\":[" FA "," FB "]",
+      "{\"type\":\"FeatureCollection\",\"features\":[1e400]}",
+      "{\"type\":\"FeatureCollection\",\"features\":[\"" FA "\"]}",
+  };
+  for (size_t i = 0; i < sizeof invalid / sizeof *invalid; i++) {
+    if (read_text(invalid[i], &r, &e) == QK_OK) fail_msg("invalid %zu accepted", i);
+    assert_null(r);
+    same_as_whole(invalid[i], strlen(invalid[i]), 1, names, box, 4);
+  }
+  /* json-c's nesting limit holds as for the whole text: 31 levels in all, 32 refused */
+  for (int d = 27; d <= 30; d++) {
+    char t[1024];
+    int n = snprintf(t, sizeof t,
+                     "{\"type\":\"FeatureCollection\",\"features\":[{\"type\":\"Feature\","
+                     "\"properties\":{\"n\":%.*s%.*s},\"geometry\":null}]}",
+                     d, "[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[", d,
+                     "]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]]");
+    qk_status_t st = read_text(t, &r, &e);
+    qk_region_free(r);
+    if ((st == QK_OK) != (d <= 28)) fail_msg("depth %d: status %d", d, st);
+    same_as_whole(t, (size_t)n, 1, names, box, 2);
+  }
+  /* the countries, when present: every country's name and a 1-degree grid */
+  const char *dir = getenv("QK_SHARED_DIR");
+  char path[1024];
+  snprintf(path, sizeof path, "%s/data/countries-50m.geojson", dir ? dir : "../shared");
+  FILE *f = fopen(path, "rb");
+  if (!f) {
+    print_message("no %s: the countries part skipped\n", path);
+    skip();
+  }
+  assert_int_equal(fseek(f, 0, SEEK_END), 0);
+  long n = ftell(f);
+  assert_true(n > 0);
+  rewind(f);
+  char *text = malloc((size_t)n);
+  assert_non_null(text);
+  assert_int_equal(fread(text, 1, (size_t)n, f), (size_t)n);
+  fclose(f);
+  static const char *const cnames[] = {"name", NULL};
+  const double world[4] = {-180, -90, 180, 90};
+  same_as_whole(text, (size_t)n, 0, cnames, world, 360);
+  free(text);
+#endif
+}
+
 static void test_geojson_locate(void **state) {
   (void)state;
 #ifndef QK_HAVE_JSONC
@@ -334,6 +541,7 @@ int main(void) {
       cmocka_unit_test(test_geojson_error_position),
       cmocka_unit_test(test_geojson_collection_and_strict),
       cmocka_unit_test(test_geojson_semantic_position),
+      cmocka_unit_test(test_geojson_streamed),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
