@@ -10,6 +10,12 @@
 
 namespace qkb {
 
+std::string shared_data(const std::string &name) {
+  const char *shared = getenv("QK_SHARED_DIR");
+  return (shared && *shared ? std::string(shared) + "/data" : std::string(QKB_DATA_DIR)) + "/" +
+         name;
+}
+
 namespace {
 
 double clamp01(double v) { return v < 0 ? 0 : v > 1 ? 1 : v; }
@@ -98,10 +104,7 @@ std::vector<Pt> degenerate(size_t n, std::mt19937_64 &rng) {
 }
 
 std::vector<Pt> cities(size_t cap, std::string *why) {
-  // QK_SHARED_DIR (as for the tests) overrides the data directory fixed at build time.
-  const char *shared = getenv("QK_SHARED_DIR");
-  std::string path = (shared && *shared ? std::string(shared) + "/data" : std::string(QKB_DATA_DIR)) +
-                     "/cities.csv";
+  std::string path = shared_data("cities.csv");
   FILE *f = fopen(path.c_str(), "r");
   std::vector<Pt> p;
   if (!f) {

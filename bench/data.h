@@ -23,6 +23,10 @@ namespace qkb {
 //               set) as (lon, lat); empty when the file is absent.
 std::vector<Pt> make_dataset(const std::string &name, size_t n, std::string *why_empty);
 
+// The path of a file of the shared data directory: $QK_SHARED_DIR/data/NAME when that
+// is set (as for the tests), else ../shared/data as fixed at build time.
+std::string shared_data(const std::string &name);
+
 // Query points drawn near the data: a random data point plus a small uniform offset
 // (about one inter-point spacing), so clustered sets get clustered queries.
 std::vector<Pt> make_queries(const std::vector<Pt> &pts, size_t nq, uint64_t seed);

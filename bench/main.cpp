@@ -985,10 +985,7 @@ void run_mesh_dyadic(unsigned U) {
 // A country from countries-50m.geojson as the CLI and tests make it: projected
 // equirectangularly at its mean latitude (metres), rounded to 1/16 m.
 static bool coast_pslg(const std::string &name, Pslg &out, std::string *why) {
-  const char *shared = getenv("QK_SHARED_DIR");
-  std::string path =
-      (shared && *shared ? std::string(shared) + "/data" : std::string(QKB_DATA_DIR)) +
-      "/countries-50m.geojson";
+  std::string path = shared_data("countries-50m.geojson");
   mg_options_t o = {-1, "name", name.c_str(), 1, 1.0 / 16};
   mg_input_t in;
   char msg[512];
@@ -1210,7 +1207,7 @@ void run_region() {
   for (const char *name : {"countries-50m", "us-states-10m"}) {
     RegionLayer L;
     std::string why;
-    if (!region_load(std::string(QKB_DATA_DIR) + "/" + name + ".geojson", L, &why)) {
+    if (!region_load(shared_data(std::string(name) + ".geojson"), L, &why)) {
       fprintf(stderr, "quadkit-bench: region %s skipped: %s\n", name, why.c_str());
       continue;
     }
