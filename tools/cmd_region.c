@@ -341,9 +341,9 @@ static void join_usage(FILE *f) {
 }
 
 static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long total) {
-  char *line = NULL;
-  size_t cap = 0;
-  ssize_t len;
+  cli_lines_t rd;
+  cli_lines_init(&rd, in);
+  long len;
   long lineno = 0;
   int seen = 0, rc = CLI_OK;
   int width = 0;  /* the header's number of fields (0: no header), which every row must have */
@@ -352,12 +352,12 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
    * '0.5   <300 spaces>junk' into a number). */
   char *fx = NULL, *fy = NULL;
   size_t fcap = 0;
-  unsigned long phys = 0, first = 0; /* physical lines read; where the record starts */
   const char *bad = NULL;
   /* A record is a line, or several when a quoted field holds line breaks: messages name
    * the physical line where it starts. */
-  while ((len = cli_read_record(in, &line, &cap, &phys, &first, &bad)) >= 0) {
-    lineno = (long)first;
+  while ((len = cli_read_record(&rd, &bad)) >= 0) {
+    char *line = rd.line;
+    lineno = (long)rd.first;
     if (bad) { /* the input ends inside a quoted field: name it, whatever its column */
       int nf = csv_field(line, -1, NULL, 0, &bad);
       cli_msg("quadkit join: %s:%ld: field %d: %s\n", j->pts_path, lineno, nf < 0 ? -nf : nf,
@@ -468,10 +468,10 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
     }
   }
   if (!rc && len == -2) {
-    cli_msg("quadkit join: %s:%lu: %s\n", j->pts_path, phys, bad);
+    cli_msg("quadkit join: %s:%lu: %s\n", j->pts_path, rd.phys, bad);
     rc = CLI_BAD_INPUT;
   } else if (!rc && len == -3) {
-    cli_msg("quadkit join: %s:%lu: out of memory reading the line\n", j->pts_path, phys + 1);
+    cli_msg("quadkit join: %s:%lu: out of memory reading the line\n", j->pts_path, rd.phys);
     rc = CLI_INTERNAL;
   }
   if (!rc && ferror(in)) {
@@ -481,7 +481,7 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
   if (!rc) rc = flush_chunk(j);
   for (size_t i = 0; i < j->n; i++) free(j->lines[i]);
   j->n = 0;
-  free(line);
+  cli_lines_free(&rd);
   free(fx);
   free(fy);
   if (progress_on && !j->dry) {
