@@ -98,6 +98,31 @@ static int csv_field(const char *line, int want, char *buf, size_t cap, const ch
   }
 }
 
+/* Where field `want` (0-based; the line holds it, well formed up to it) starts: its
+ * physical line, counted from the record's first line `first` (a quoted field before it
+ * may hold line breaks), and its 1-based byte column on that line, blanks before it
+ * included, as the library's reader counts them (the other commands' messages). bom: the
+ * bytes of a byte order mark cut from the first line, which a column on it counts. */
+static void field_at(const char *line, int want, unsigned long first, size_t bom, unsigned long *ln,
+                     unsigned long *col) {
+  const char *s = line;
+  for (int i = 0; i < want && *s; i++) {
+    const char *q = s;
+    while (*q == ' ' || *q == '\t') q++;
+    if (*q == '"') {
+      for (s = q + 1; *s && !(*s == '"' && s[1] != '"'); s += *s == '"' ? 2 : 1) continue;
+      if (*s) s++;
+    }
+    while (*s && *s != ',') s++;
+    if (*s) s++;
+  }
+  const char *bol = line;
+  *ln = first;
+  for (const char *p = line; p < s; p++)
+    if (*p == '\n') ++*ln, bol = p + 1;
+  *col = (unsigned long)(s - bol) + 1 + (bol == line ? bom : 0);
+}
+
 /* A field as a number, blanks around allowed (cli_number: 1, 0, or -1 for hexadecimal). */
 static int number(char *f, double *v) {
   while (*f == ' ' || *f == '\t') f++;
@@ -353,6 +378,7 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
   char *fx = NULL, *fy = NULL;
   size_t fcap = 0;
   const char *bad = NULL;
+  char xname[64] = "", yname[64] = ""; /* the header's names of the x and y fields */
   /* A record is a line, or several when a quoted field holds line breaks: messages name
    * the physical line where it starts. */
   while ((len = cli_read_record(&rd, &bad)) >= 0) {
@@ -375,9 +401,10 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
       }
       fcap = (size_t)len + 1;
     }
+    size_t bom = 0;
     if (lineno == 1 && (unsigned char)line[0] == 0xEF && (unsigned char)line[1] == 0xBB &&
         (unsigned char)line[2] == 0xBF)
-      memmove(line, line + 3, (size_t)len - 2);
+      memmove(line, line + 3, (size_t)len - 2), bom = 3;
     const char *q = line;
     while (*q == ' ' || *q == '\t') q++;
     if (!*q) continue;
@@ -404,6 +431,8 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
           break;
         }
         width = csv_field(line, -1, NULL, 0, &why), hline = lineno;
+        csv_field(line, xy->col[0], xname, sizeof xname, NULL); /* (for messages) */
+        csv_field(line, xy->col[1], yname, sizeof yname, NULL);
         if (width < 0) {
           cli_msg("quadkit join: %s:%ld: field %d: %s\n", j->pts_path, lineno, -width, why);
           rc = CLI_BAD_INPUT;
@@ -434,8 +463,13 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
     if (number(fx, &x) != 1 || number(fy, &y) != 1 || !isfinite(x) || !isfinite(y)) {
       const char *bad = (number(fx, &x) != 1 || !isfinite(x)) ? fx : fy;
       int col = bad == fx ? xy->col[0] : xy->col[1];
-      cli_msg("quadkit join: %s:%ld: field %d is not a finite number: '%.40s'\n", j->pts_path,
-              lineno, col + 1, bad);
+      const char *name = bad == fx ? xname : yname;
+      /* FILE:LINE:COLUMN and the header's name of the field, as the other commands'
+       * reader says it (it said "FILE:LINE: field 2", leaving the column to count). */
+      unsigned long fl, fc;
+      field_at(line, col, (unsigned long)lineno, bom, &fl, &fc);
+      cli_msg("quadkit join: %s:%lu:%lu: field %d%s%s%s is not a finite number: '%.40s'\n",
+              j->pts_path, fl, fc, col + 1, name[0] ? " (" : "", name, name[0] ? ")" : "", bad);
       rc = CLI_BAD_INPUT;
       break;
     }

@@ -249,8 +249,15 @@ static int each_row(const char *path,
   return rc;
 }
 
+/* How many fields a row has, for a message (split() stops counting past 6). */
+static const char *fields_text(int n) {
+  static const char *const t[] = {"no fields", "1 field", "2 fields", "3 fields"};
+  return n < 4 ? t[n] : "more than 6 fields";
+}
+
 static int object_row(const char *path, unsigned long ln, row_t *r, scene_t *s) {
-  if (r->n < 4 || r->n > 6) return bad(path, ln, "%s", "expected id,kind,x,y[,a,b]");
+  if (r->n < 4 || r->n > 6)
+    return bad(path, ln, "expected id,kind,x,y[,a,b]: the line has %s", fields_text(r->n));
   uint64_t id;
   const char *why = parse_id(r->f[0], &id);
   if (why) return bad(path, ln, why, r->f[0]);
@@ -272,7 +279,8 @@ static int object_row(const char *path, unsigned long ln, row_t *r, scene_t *s) 
 }
 
 static int move_row(const char *path, unsigned long ln, row_t *r, scene_t *s) {
-  if (r->n < 4 || r->n > 6) return bad(path, ln, "%s", "expected frame,id,x,y[,a,b]");
+  if (r->n < 4 || r->n > 6)
+    return bad(path, ln, "expected frame,id,x,y[,a,b]: the line has %s", fields_text(r->n));
   uint64_t frame, id;
   if (parse_id(r->f[0], &frame) || frame > 100000000)
     return bad(path, ln, "frame is not a whole number from 0 to 1e8: '%s'", r->f[0]);

@@ -73,11 +73,33 @@ same_text "knn, points from a pipe" \
   "$(cat "$tmp/p.csv" | "$cli" knn /dev/stdin "$tmp/p.csv" -k 1 | tr '\n' ' ')" \
   "$("$cli" knn "$tmp/p.csv" "$tmp/p.csv" -k 1 | tr '\n' ' ')"
 
+# ---- join: a bad number named its field but not its column ------------------------------
+# "FILE:LINE: field 2 is not a finite number" where the other commands say
+# FILE:LINE:COLUMN and the header's name of the field.
+printf 'id,x,y\n7,1,abc\n' >"$tmp/bad2.csv"
+expect 1 "^quadkit join: $tmp/bad2.csv:2:5: field 3 \\(y\\) is not a finite number: 'abc'$" \
+  -- "$cli" join "$tmp/sq.json" "$tmp/bad2.csv" --planar --xy x,y
+# (the other commands' wording, which passed before: the reference)
+expect 1 "^quadkit: $tmp/bad2.csv:2:5: field 3 \\(y\\) is not a number: 'abc'$" \
+  -- "$cli" tree "$tmp/bad2.csv" --xy x,y
+# in a record that a quoted field spreads over two lines: the field's own line and column
+printf 'n,x,y\n"a\nb",1,nan\n' >"$tmp/bad3.csv"
+expect 1 "^quadkit join: $tmp/bad3.csv:3:6: field 3 \\(y\\) is not a finite number: 'nan'$" \
+  -- "$cli" join "$tmp/sq.json" "$tmp/bad3.csv" --planar --xy x,y
+
 # ---- UTF-16 text (Windows "Unicode"): named, not "binary data" -------------------------
 printf 'x,y\n1,1\n' | iconv -f UTF-8 -t UTF-16 >"$tmp/u16.csv"
 u16='UTF-16 text \(a UTF-16 byte order mark\): CSV input must be UTF-8 or ASCII; convert it first \(iconv -f UTF-16 -t UTF-8\)$'
 expect 1 "^quadkit: $tmp/u16.csv:1:1: $u16" -- "$cli" tree "$tmp/u16.csv"
 expect 1 "^quadkit join: $tmp/u16.csv:1: $u16" -- "$cli" join "$tmp/sq.json" "$tmp/u16.csv" --planar
 expect 1 "^quadkit world: $tmp/u16.csv:1:1: $u16" -- "$cli" world "$tmp/u16.csv" "$tmp/obj.csv"
+
+# ---- world: a row of the wrong width said what it expected, not what it found ----------
+printf '1,disc\n' >"$tmp/narrow.csv"
+expect 1 "^quadkit world: $tmp/narrow.csv:1: expected id,kind,x,y\\[,a,b\\]: the line has 2 fields$" \
+  -- "$cli" world "$tmp/narrow.csv" "$tmp/obj.csv"
+printf '0,1,0,0,1,2,3\n' >"$tmp/wide.csv"
+expect 1 "^quadkit world: $tmp/wide.csv:1: expected frame,id,x,y\\[,a,b\\]: the line has more than 6 fields$" \
+  -- "$cli" world "$tmp/obj.csv" "$tmp/wide.csv"
 
 report
