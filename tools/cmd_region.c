@@ -98,6 +98,21 @@ static int csv_field(const char *line, int want, char *buf, size_t cap, const ch
   }
 }
 
+/* The start of the field after the one at s (NULL after the last field), with
+ * csv_field's quoting rules: a walk over a header's fields with it is linear, where
+ * csv_field(header, i, ...) for i = 0, 1, ... read the line from its start each time
+ * (a header of 100,000 names kept `join` busy for minutes before its first row). */
+static const char *field_end(const char *s) {
+  const char *q = s;
+  while (*q == ' ' || *q == '\t') q++;
+  if (*q == '"') {
+    for (s = q + 1; *s && !(*s == '"' && s[1] != '"'); s += *s == '"' ? 2 : 1) continue;
+    if (*s) s++;
+  }
+  while (*s && *s != ',') s++;
+  return *s ? s + 1 : NULL;
+}
+
 /* Where field `want` (0-based; the line holds it, well formed up to it) starts: its
  * physical line, counted from the record's first line `first` (a quoted field before it
  * may hold line breaks), and its 1-based byte column on that line, blanks before it
@@ -106,16 +121,8 @@ static int csv_field(const char *line, int want, char *buf, size_t cap, const ch
 static void field_at(const char *line, int want, unsigned long first, size_t bom, unsigned long *ln,
                      unsigned long *col) {
   const char *s = line;
-  for (int i = 0; i < want && *s; i++) {
-    const char *q = s;
-    while (*q == ' ' || *q == '\t') q++;
-    if (*q == '"') {
-      for (s = q + 1; *s && !(*s == '"' && s[1] != '"'); s += *s == '"' ? 2 : 1) continue;
-      if (*s) s++;
-    }
-    while (*s && *s != ',') s++;
-    if (*s) s++;
-  }
+  for (int i = 0; i < want && s; i++) s = field_end(s);
+  if (!s) s = line + strlen(line); /* (not reached: the line holds the field) */
   const char *bol = line;
   *ln = first;
   for (const char *p = line; p < s; p++)
@@ -180,7 +187,9 @@ static int resolve_xy(const char *cmd, const char *path, const char *header, xy_
                 xy->name[k]);
       return 1;
     }
-    for (int i = 0; csv_field(header, i, buf, sizeof buf, NULL) == 1; i++) {
+    int i = 0;
+    for (const char *f = header; f && csv_field(f, 0, buf, sizeof buf, NULL) == 1;
+         f = field_end(f), i++) {
       char *b = buf;
       while (*b == ' ') b++;
       if (strcmp(b, xy->name[k])) continue;
@@ -219,7 +228,7 @@ static void put_csv(FILE *f, const char *s) {
 
 /* Whether a field of the header line is `name` (blanks before it ignored, as --xy reads). */
 static int header_has(const char *header, const char *name, char *buf, size_t cap) {
-  for (int i = 0; csv_field(header, i, buf, cap, NULL) == 1; i++) {
+  for (const char *f = header; f && csv_field(f, 0, buf, cap, NULL) == 1; f = field_end(f)) {
     const char *b = buf;
     while (*b == ' ' || *b == '\t') b++;
     if (!strcmp(b, name)) return 1;

@@ -87,6 +87,14 @@ printf 'n,x,y\n"a\nb",1,nan\n' >"$tmp/bad3.csv"
 expect 1 "^quadkit join: $tmp/bad3.csv:3:6: field 3 \\(y\\) is not a finite number: 'nan'$" \
   -- "$cli" join "$tmp/sq.json" "$tmp/bad3.csv" --planar --xy x,y
 
+# ---- join: a header of many names took minutes ------------------------------------------
+# Looking for a name among the header's fields read the header from its start for every
+# field (quadratic): 100,000 names (890 KB, under the line limit) kept join busy past 100
+# s before its first row. Linear now: well under a second.
+{ seq -f 'c%g' 100000 | paste -sd, | sed 's/$/,x,y/'; seq 100002 | sed 's/.*/1/' | paste -sd,; } >"$tmp/wide.csv"
+expect 0 '^c1,c2,c3,' -- timeout 30 "$cli" join "$tmp/sq.json" "$tmp/wide.csv" --planar --xy x,y
+expect 0 '^1,1,1,' -- timeout 30 "$cli" join "$tmp/sq.json" "$tmp/wide.csv" --planar
+
 # ---- UTF-16 text (Windows "Unicode"): named, not "binary data" -------------------------
 printf 'x,y\n1,1\n' | iconv -f UTF-8 -t UTF-16 >"$tmp/u16.csv"
 u16='UTF-16 text \(a UTF-16 byte order mark\): CSV input must be UTF-8 or ASCII; convert it first \(iconv -f UTF-16 -t UTF-8\)$'
