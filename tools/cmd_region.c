@@ -130,6 +130,15 @@ static void field_at(const char *line, int want, unsigned long first, size_t bom
   *col = (unsigned long)(s - bol) + 1 + (bol == line ? bom : 0);
 }
 
+/* A malformed field k (1-based) of join's points file, named with the line and column
+ * where it starts, as the other commands' reader names it. */
+static void field_error(const char *path, const char *line, int k, long lineno, size_t bom,
+                        const char *why) {
+  unsigned long fl, fc;
+  field_at(line, k - 1, (unsigned long)lineno, bom, &fl, &fc);
+  cli_msg("quadkit join: %s:%lu:%lu: field %d: %s\n", path, fl, fc, k, why);
+}
+
 /* A field as a number, blanks around allowed (cli_number: 1, 0, or -1 for hexadecimal). */
 static int number(char *f, double *v) {
   while (*f == ' ' || *f == '\t') f++;
@@ -395,8 +404,8 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
     lineno = (long)rd.first;
     if (bad) { /* the input ends inside a quoted field: name it, whatever its column */
       int nf = csv_field(line, -1, NULL, 0, &bad);
-      cli_msg("quadkit join: %s:%ld: field %d: %s\n", j->pts_path, lineno, nf < 0 ? -nf : nf,
-              "unterminated quoted field (it runs to the end of the file)");
+      field_error(j->pts_path, line, nf < 0 ? -nf : nf, lineno, 0,
+                  "unterminated quoted field (it runs to the end of the file)");
       rc = CLI_BAD_INPUT;
       break;
     }
@@ -428,8 +437,7 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
       int rx = named ? 1 : csv_field(line, xc, fx, fcap, &why);
       int ry = named || rx < 0 ? 1 : csv_field(line, yc, fy, fcap, &why);
       if (rx < 0 || ry < 0) {
-        cli_msg("quadkit join: %s:%ld: field %d: %s\n", j->pts_path, lineno, -(rx < 0 ? rx : ry),
-                why);
+        field_error(j->pts_path, line, -(rx < 0 ? rx : ry), lineno, bom, why);
         rc = CLI_BAD_INPUT;
         break;
       }
@@ -443,7 +451,7 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
         csv_field(line, xy->col[0], xname, sizeof xname, NULL); /* (for messages) */
         csv_field(line, xy->col[1], yname, sizeof yname, NULL);
         if (width < 0) {
-          cli_msg("quadkit join: %s:%ld: field %d: %s\n", j->pts_path, lineno, -width, why);
+          field_error(j->pts_path, line, -width, lineno, bom, why);
           rc = CLI_BAD_INPUT;
           break;
         }
@@ -457,8 +465,7 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
     int hx = csv_field(line, xy->col[0], fx, fcap, &why);
     int hy = hx < 0 ? 0 : csv_field(line, xy->col[1], fy, fcap, &why);
     if (hx < 0 || hy < 0) {
-      cli_msg("quadkit join: %s:%ld: field %d: %s\n", j->pts_path, lineno, -(hx < 0 ? hx : hy),
-              why);
+      field_error(j->pts_path, line, -(hx < 0 ? hx : hy), lineno, bom, why);
       rc = CLI_BAD_INPUT;
       break;
     }
@@ -484,7 +491,7 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
     }
     int nf = width ? csv_field(line, -1, NULL, 0, &why) : 0;
     if (nf < 0) {
-      cli_msg("quadkit join: %s:%ld: field %d: %s\n", j->pts_path, lineno, -nf, why);
+      field_error(j->pts_path, line, -nf, lineno, bom, why);
       rc = CLI_BAD_INPUT;
       break;
     }

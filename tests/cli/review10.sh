@@ -87,6 +87,14 @@ printf 'n,x,y\n"a\nb",1,nan\n' >"$tmp/bad3.csv"
 expect 1 "^quadkit join: $tmp/bad3.csv:3:6: field 3 \\(y\\) is not a finite number: 'nan'$" \
   -- "$cli" join "$tmp/sq.json" "$tmp/bad3.csv" --planar --xy x,y
 
+# the same for a malformed quote, which join named by field alone: now the line and
+# column where the field starts, as tree says it (a byte order mark counted on line 1)
+printf '\xef\xbb\xbfx,"y"z\n1,1\n' >"$tmp/bq.csv"
+expect 1 "^quadkit join: $tmp/bq.csv:1:6: field 2: text after a closing quote$" -- "$cli" join "$tmp/sq.json" "$tmp/bq.csv" --planar
+expect 1 "^quadkit: $tmp/bq.csv:1:6: field 2: text after a closing quote$" -- "$cli" tree "$tmp/bq.csv"
+printf 'x,y,n\n1,1,1\n2,2,"open\n3,3\n' >"$tmp/mlo.csv"
+expect 1 "^quadkit join: $tmp/mlo.csv:3:5: field 3: unterminated quoted field \\(it runs to the end of the file\\)$" -- "$cli" join "$tmp/sq.json" "$tmp/mlo.csv" --planar
+
 # ---- join: a header of many names took minutes ------------------------------------------
 # Looking for a name among the header's fields read the header from its start for every
 # field (quadratic): 100,000 names (890 KB, under the line limit) kept join busy past 100
