@@ -103,6 +103,15 @@ long cli_read_line(cli_lines_t *r, const char **why);
  * a quoted field is returned with *why set (NULL otherwise): the caller names the field. */
 long cli_read_record(cli_lines_t *r, const char **why);
 
+/* Screen an open input with the tool's line reader before a library reader (which takes
+ * a line of any length into memory) reads it: a NUL byte or a line past CLI_MAX_LINE is
+ * refused ("quadkit CMD: PATH:LINE[:COL]: why", the column when `columns`, as the
+ * command's other messages; cmd NULL: "quadkit: ..."). A regular file
+ * is then rewound; any other input is kept in memory as read and *f becomes a stream
+ * over it (*f closed unless it is stdin; *copy, the bytes, freed by the caller after
+ * fclose(*f); NULL when nothing was kept). Returns an exit code. */
+int cli_screen_input(const char *cmd, const char *path, int columns, FILE **f, char **copy);
+
 /* The same for a file of queries, which may have no data rows (*n = 0, *pts NULL): a
  * query command answers an empty batch with its header line alone. */
 int cli_read_queries(const char *path, const char *xy, cli_rows_t *rows, qk_point_t **pts,

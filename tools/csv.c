@@ -52,7 +52,7 @@ enum { CHUNK = 1 << 16 };
 
 /* The message for a line past CLI_MAX_LINE (its number written out: the limit a user
  * meets is the one to state). */
-#define TOO_LONG "line longer than 1048576 bytes (1 MiB), the limit for a line of CSV input"
+#define TOO_LONG "line longer than 1048576 bytes (1 MiB), the limit for a line of text input"
 _Static_assert(CLI_MAX_LINE == 1048576, "TOO_LONG states the limit");
 
 void cli_lines_init(cli_lines_t *r, FILE *f) {
@@ -112,7 +112,7 @@ static long line_into(cli_lines_t *r, char **buf, size_t *cap, const char **why)
       /* A UTF-16 byte order mark (what Windows tools write as "Unicode"): every other
        * byte of ASCII text is a NUL there, which "binary data" would not explain. */
       r->col = 1;
-      *why = "UTF-16 text (a UTF-16 byte order mark): CSV input must be UTF-8 or ASCII; "
+      *why = "UTF-16 text (a UTF-16 byte order mark): text input must be UTF-8 or ASCII; "
              "convert it first (iconv -f UTF-16 -t UTF-8)";
       return -2;
     }
@@ -233,15 +233,16 @@ static int read_error(const char *path, qk_status_t st, const qk_error_t *e) {
   return st == QK_ERR_NOMEM ? CLI_INTERNAL : CLI_BAD_INPUT;
 }
 
-/* Screen an input with the tool's line reader before the library's reader sees it: that
- * one takes a line of any length into memory before it checks it (a library matter,
+/* Screen an input with the tool's line reader before a library reader sees it (cli.h):
+ * the CSV reader takes a line of any length into memory before it checks it (a library matter,
  * include/quadkit/io.h), so /dev/zero or a file without line breaks grew the process
  * until "out of memory". A NUL byte or a line past CLI_MAX_LINE is refused here, within
  * 64 KiB of it. A regular file is read again from its start (the screen keeps nothing:
  * a pass over text in the page cache, a few per cent of the read); a pipe, FIFO or
  * device cannot be, so its bytes as read are kept and *f becomes a stream over them
  * (*copy, which the caller frees once the library is done). Returns an exit code. */
-static int screen(const char *path, FILE **f, char **copy) {
+int cli_screen_input(const char *cmd, const char *path, int columns, FILE **f, char **copy) {
+  const char *sp = cmd ? " " : "", *c = cmd ? cmd : "";
   struct stat st;
   int regular = !fstat(fileno(*f), &st) && S_ISREG(st.st_mode);
   cli_lines_t r;
@@ -251,26 +252,27 @@ static int screen(const char *path, FILE **f, char **copy) {
   long got;
   while ((got = cli_read_line(&r, &why)) >= 0) continue;
   int rc = CLI_OK;
-  if (got == -2 && r.col)
-    cli_msg("quadkit: %s:%lu:%lu: %s\n", path, r.phys, r.col, why), rc = CLI_BAD_INPUT;
+  if (got == -2 && r.col && columns)
+    cli_msg("quadkit%s%s: %s:%lu:%lu: %s\n", sp, c, path, r.phys, r.col, why), rc = CLI_BAD_INPUT;
   else if (got == -2)
-    cli_msg("quadkit: %s:%lu: %s\n", path, r.phys, why), rc = CLI_BAD_INPUT;
+    cli_msg("quadkit%s%s: %s:%lu: %s\n", sp, c, path, r.phys, why), rc = CLI_BAD_INPUT;
   else if (got == -3)
-    cli_msg("quadkit: %s:%lu: out of memory reading the line\n", path, r.phys), rc = CLI_INTERNAL;
+    cli_msg("quadkit%s%s: %s:%lu: out of memory reading the line\n", sp, c, path, r.phys),
+        rc = CLI_INTERNAL;
   else if (ferror(*f))
-    cli_msg("quadkit: %s: read error\n", path), rc = CLI_BAD_INPUT;
+    cli_msg("quadkit%s%s: %s: read error\n", sp, c, path), rc = CLI_BAD_INPUT;
   cli_lines_free(&r);
   if (!rc && regular && fseek(*f, 0, SEEK_SET) != 0) {
-    cli_msg("quadkit: %s: cannot read it again: %s\n", path, strerror(errno));
+    cli_msg("quadkit%s%s: %s: cannot read it again: %s\n", sp, c, path, strerror(errno));
     rc = CLI_BAD_INPUT;
   }
   if (!rc && !regular && r.tee_len) { /* (empty: *f is at its end, as the copy would be) */
     FILE *m = fmemopen(r.tee_buf, r.tee_len, "r");
     if (!m) {
-      cli_msg("quadkit: %s: cannot keep it in memory: %s\n", path, strerror(errno));
+      cli_msg("quadkit%s%s: %s: cannot keep it in memory: %s\n", sp, c, path, strerror(errno));
       rc = CLI_INTERNAL;
     } else {
-      fclose(*f);
+      if (*f != stdin) fclose(*f); /* (stdin is the caller's to keep) */
       *f = m;
       *copy = r.tee_buf;
       return CLI_OK;
@@ -294,7 +296,7 @@ static int read_values(const char *path, const char *columns, int required, int 
   FILE *f = cli_open_input(NULL, path);
   if (!f) return CLI_BAD_INPUT;
   char *copy = NULL;
-  int rc = screen(path, &f, &copy);
+  int rc = cli_screen_input(NULL, path, 1, &f, &copy);
   if (rc) {
     fclose(f);
     return rc;

@@ -42,13 +42,13 @@ expect 1 "^quadkit join: /dev/zero:1: $nul" -- limited "$cli" join "$tmp/sq.json
 expect 1 "^quadkit world: /dev/zero:1:1: $nul" -- limited "$cli" world /dev/zero "$tmp/obj.csv"
 # a NUL byte after a 2 MB line without a line break: the line limit speaks first
 { printf 'x,y\n1,'; head -c 2000000 /dev/zero | tr '\0' 1; printf '\0\n'; } >"$tmp/long-nul.csv"
-expect 1 "^quadkit: $tmp/long-nul.csv:2: line longer than 1048576 bytes \\(1 MiB\\), the limit for a line of CSV input$" \
+expect 1 "^quadkit: $tmp/long-nul.csv:2: line longer than 1048576 bytes \\(1 MiB\\), the limit for a line of text input$" \
   -- limited "$cli" tree "$tmp/long-nul.csv"
 
 # ---- an endless line without a NUL byte: a documented limit of 1 MiB per line -----------
 # A pipe of text without line breaks (a wrong file, `yes | tr -d '\n'`) grew memory the
 # same way. A line past 1 MiB is refused with its line number and the limit, exit 1.
-long='line longer than 1048576 bytes \(1 MiB\), the limit for a line of CSV input$'
+long='line longer than 1048576 bytes \(1 MiB\), the limit for a line of text input$'
 endless() { yes 1 | tr -d '\n'; }
 expect 1 "^quadkit: /dev/stdin:1: $long" -- limited bash -c "$(declare -f endless); endless | \"\$1\" tree /dev/stdin" - "$cli"
 expect 1 "^quadkit join: /dev/stdin:1: $long" -- limited bash -c "$(declare -f endless); endless | \"\$1\" join \"\$2\" /dev/stdin --planar" - "$cli" "$tmp/sq.json"
@@ -72,6 +72,16 @@ expect 1 "^quadkit: $tmp/cr.csv:1:4: a carriage return inside the line" -- "$cli
 same_text "knn, points from a pipe" \
   "$(cat "$tmp/p.csv" | "$cli" knn /dev/stdin "$tmp/p.csv" -k 1 | tr '\n' ' ')" \
   "$("$cli" knn "$tmp/p.csv" "$tmp/p.csv" -k 1 | tr '\n' ' ')"
+
+# ---- mesh: a .poly file is screened the same way -----------------------------------------
+# The .poly reader took an endless line from a pipe into memory too ("out of memory",
+# exit 3, after 1 GB under this limit).
+expect 1 "^quadkit mesh: <stdin>:1: $long" -- limited bash -c "$(declare -f endless); endless | \"\$1\" mesh - -o \"\$2\"" - "$cli" "$tmp/pm"
+nothing_written "$tmp/pm"
+printf '4 2 0 0\n1 0 0\n2 1 0\n3 1 1\n4 0 1\n4 0\n1 1 2\n2 2 3\n3 3 4\n4 4 1\n0\n' >"$tmp/sq.poly"
+# (a guard of the new path, which passed before: a .poly from a pipe is still meshed)
+expect 0 '' -- bash -c 'cat "$2" | "$1" mesh - -o "$3"' - "$cli" "$tmp/sq.poly" "$tmp/pm2"
+[ -s "$tmp/pm2.ele" ] && passes=$((passes + 1)) || fail "mesh from a pipe wrote no $tmp/pm2.ele"
 
 # ---- join: a bad number named its field but not its column ------------------------------
 # "FILE:LINE: field 2 is not a finite number" where the other commands say
@@ -105,7 +115,7 @@ expect 0 '^1,1,1,' -- timeout 30 "$cli" join "$tmp/sq.json" "$tmp/wide.csv" --pl
 
 # ---- UTF-16 text (Windows "Unicode"): named, not "binary data" -------------------------
 printf 'x,y\n1,1\n' | iconv -f UTF-8 -t UTF-16 >"$tmp/u16.csv"
-u16='UTF-16 text \(a UTF-16 byte order mark\): CSV input must be UTF-8 or ASCII; convert it first \(iconv -f UTF-16 -t UTF-8\)$'
+u16='UTF-16 text \(a UTF-16 byte order mark\): text input must be UTF-8 or ASCII; convert it first \(iconv -f UTF-16 -t UTF-8\)$'
 expect 1 "^quadkit: $tmp/u16.csv:1:1: $u16" -- "$cli" tree "$tmp/u16.csv"
 expect 1 "^quadkit join: $tmp/u16.csv:1: $u16" -- "$cli" join "$tmp/sq.json" "$tmp/u16.csv" --planar
 expect 1 "^quadkit world: $tmp/u16.csv:1:1: $u16" -- "$cli" world "$tmp/u16.csv" "$tmp/obj.csv"
