@@ -56,16 +56,61 @@ int cli_read_points(const char *path, const char *xy, cli_rows_t *rows, qk_point
  * read as this one line. */
 int cli_cut_line_end(char *line, size_t *len);
 
-/* One CSV record of f into *line (a getline buffer, *cap its size): one physical line, or
- * several joined by LF while a quoted field is open (RFC 4180), as the library's reader
- * does (include/quadkit/io.h); each line's ending cut. *phys counts the physical lines
- * read, *first is set to the one where the record starts. Returns the record's length;
- * -1 at the end of the input or on a read error (ferror tells); -2 for a NUL byte or a
- * lone CR (*why says which, on physical line *phys); -3 out of memory. A record that the
- * input ends inside a quoted field is returned with *why set (NULL otherwise): the
- * caller names the field. */
-long cli_read_record(FILE *f, char **line, size_t *cap, unsigned long *phys, unsigned long *first,
-                     const char **why);
+/* The longest physical line a CSV input (points, queries, boxes, discs, rays, objects,
+ * moves) may have: 1 MiB, thousands of times a real row. Past it the input is refused
+ * with its line and the limit, before more is read: a binary file or an endless line
+ * without a line break (/dev/zero, a wrong file) would otherwise be taken into memory
+ * until it ran out. Documented in the README's CLI section and `quadkit --help`. */
+#define CLI_MAX_LINE (1024UL * 1024UL)
+
+/* The tool's one line reader for CSV text: read in 64 KiB chunks (fread), each physical
+ * line checked as it comes in, so that a NUL byte (binary data) or a line longer than
+ * CLI_MAX_LINE stops it at once. Initialise with cli_lines_init, free with
+ * cli_lines_free. With `tee` set, every byte read is also kept in tee_buf (tee_len bytes,
+ * malloc'd; the caller frees it): the input as read, for a second reader when it cannot
+ * be read again (a pipe, a FIFO, a device). */
+typedef struct cli_lines {
+  FILE *f;
+  char *chunk;
+  size_t cpos, clen;
+  int eof;
+  char *line; /* the current line (cli_read_line) or record (cli_read_record) */
+  size_t cap;
+  char *part; /* a record's later lines, before they are joined to `line` */
+  size_t pcap;
+  unsigned long phys;  /* physical lines read (the current one included) */
+  unsigned long first; /* the physical line where the current record starts */
+  unsigned long col;   /* on -2 from cli_read_line: the 1-based byte column, or 0 */
+  int tee;
+  char *tee_buf;
+  size_t tee_len, tee_cap;
+} cli_lines_t;
+void cli_lines_init(cli_lines_t *r, FILE *f);
+void cli_lines_free(cli_lines_t *r);
+
+/* One physical line into r->line (NUL-terminated, its LF cut but not a CR before it:
+ * cli_cut_line_end does that). Returns its length; -1 at the end of the input or on a
+ * read error (ferror(r->f) tells); -2 for a NUL byte or a line past CLI_MAX_LINE (*why
+ * says which, r->phys its line, r->col the NUL's column); -3 out of memory. */
+long cli_read_line(cli_lines_t *r, const char **why);
+
+/* One CSV record into r->line: one physical line, or several joined by LF while a
+ * quoted field is open (RFC 4180), as the library's reader does (include/quadkit/io.h);
+ * each line's ending cut. r->phys counts the physical lines read, r->first is the one
+ * where the record starts. Returns the record's length; -1 at the end of the input or on
+ * a read error (ferror tells); -2 for a NUL byte, a line too long or a lone CR (*why says
+ * which, on physical line r->phys); -3 out of memory. A record that the input ends inside
+ * a quoted field is returned with *why set (NULL otherwise): the caller names the field. */
+long cli_read_record(cli_lines_t *r, const char **why);
+
+/* Screen an open input with the tool's line reader before a library reader (which takes
+ * a line of any length into memory) reads it: a NUL byte or a line past CLI_MAX_LINE is
+ * refused ("quadkit CMD: PATH:LINE[:COL]: why", the column when `columns`, as the
+ * command's other messages; cmd NULL: "quadkit: ..."). A regular file
+ * is then rewound; any other input is kept in memory as read and *f becomes a stream
+ * over it (*f closed unless it is stdin; *copy, the bytes, freed by the caller after
+ * fclose(*f); NULL when nothing was kept). Returns an exit code. */
+int cli_screen_input(const char *cmd, const char *path, int columns, FILE **f, char **copy);
 
 /* The same for a file of queries, which may have no data rows (*n = 0, *pts NULL): a
  * query command answers an empty batch with its header line alone. */

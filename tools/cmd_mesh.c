@@ -559,8 +559,17 @@ static int read_input(const char *cmd, const mesh_args_t *o, qk_poly_t **poly, p
     if (f != stdin) fclose(f);
     return CLI_BAD_INPUT;
   }
+  /* The .poly reader takes a line of any length into memory: an endless line from a
+   * pipe (or a file without line breaks) grew the process until "out of memory". */
+  char *copy = NULL;
+  int src = cli_screen_input(cmd, strcmp(o->in, "-") ? o->in : "<stdin>", 0, &f, &copy);
+  if (src) {
+    if (f != stdin) fclose(f);
+    return src;
+  }
   qk_status_t st = qk_poly_read(f, NULL, poly, &err);
   if (f != stdin) fclose(f);
+  free(copy);
   if (st == QK_OK && o->round > 0) {
     /* In place: errors keep the file's lines and vertex numbers, and markers and regional
      * attributes stay (the input was rebuilt from arrays, which lost all of them: "vertices

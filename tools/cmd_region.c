@@ -98,6 +98,47 @@ static int csv_field(const char *line, int want, char *buf, size_t cap, const ch
   }
 }
 
+/* The start of the field after the one at s (NULL after the last field), with
+ * csv_field's quoting rules: a walk over a header's fields with it is linear, where
+ * csv_field(header, i, ...) for i = 0, 1, ... read the line from its start each time
+ * (a header of 100,000 names kept `join` busy for minutes before its first row). */
+static const char *field_end(const char *s) {
+  const char *q = s;
+  while (*q == ' ' || *q == '\t') q++;
+  if (*q == '"') {
+    for (s = q + 1; *s && !(*s == '"' && s[1] != '"'); s += *s == '"' ? 2 : 1) continue;
+    if (*s) s++;
+  }
+  while (*s && *s != ',') s++;
+  return *s ? s + 1 : NULL;
+}
+
+/* Where field `want` (0-based; the line holds it, well formed up to it) starts: its
+ * physical line, counted from the record's first line `first` (a quoted field before it
+ * may hold line breaks), and its 1-based byte column on that line, blanks before it
+ * included, as the library's reader counts them (the other commands' messages). bom: the
+ * bytes of a byte order mark cut from the first line, which a column on it counts. */
+static void field_at(const char *line, int want, unsigned long first, size_t bom, unsigned long *ln,
+                     unsigned long *col) {
+  const char *s = line;
+  for (int i = 0; i < want && s; i++) s = field_end(s);
+  if (!s) s = line + strlen(line); /* (not reached: the line holds the field) */
+  const char *bol = line;
+  *ln = first;
+  for (const char *p = line; p < s; p++)
+    if (*p == '\n') ++*ln, bol = p + 1;
+  *col = (unsigned long)(s - bol) + 1 + (bol == line ? bom : 0);
+}
+
+/* A malformed field k (1-based) of join's points file, named with the line and column
+ * where it starts, as the other commands' reader names it. */
+static void field_error(const char *path, const char *line, int k, long lineno, size_t bom,
+                        const char *why) {
+  unsigned long fl, fc;
+  field_at(line, k - 1, (unsigned long)lineno, bom, &fl, &fc);
+  cli_msg("quadkit join: %s:%lu:%lu: field %d: %s\n", path, fl, fc, k, why);
+}
+
 /* A field as a number, blanks around allowed (cli_number: 1, 0, or -1 for hexadecimal). */
 static int number(char *f, double *v) {
   while (*f == ' ' || *f == '\t') f++;
@@ -155,7 +196,9 @@ static int resolve_xy(const char *cmd, const char *path, const char *header, xy_
                 xy->name[k]);
       return 1;
     }
-    for (int i = 0; csv_field(header, i, buf, sizeof buf, NULL) == 1; i++) {
+    int i = 0;
+    for (const char *f = header; f && csv_field(f, 0, buf, sizeof buf, NULL) == 1;
+         f = field_end(f), i++) {
       char *b = buf;
       while (*b == ' ') b++;
       if (strcmp(b, xy->name[k])) continue;
@@ -194,7 +237,7 @@ static void put_csv(FILE *f, const char *s) {
 
 /* Whether a field of the header line is `name` (blanks before it ignored, as --xy reads). */
 static int header_has(const char *header, const char *name, char *buf, size_t cap) {
-  for (int i = 0; csv_field(header, i, buf, cap, NULL) == 1; i++) {
+  for (const char *f = header; f && csv_field(f, 0, buf, cap, NULL) == 1; f = field_end(f)) {
     const char *b = buf;
     while (*b == ' ' || *b == '\t') b++;
     if (!strcmp(b, name)) return 1;
@@ -341,9 +384,9 @@ static void join_usage(FILE *f) {
 }
 
 static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long total) {
-  char *line = NULL;
-  size_t cap = 0;
-  ssize_t len;
+  cli_lines_t rd;
+  cli_lines_init(&rd, in);
+  long len;
   long lineno = 0;
   int seen = 0, rc = CLI_OK;
   int width = 0;  /* the header's number of fields (0: no header), which every row must have */
@@ -352,16 +395,17 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
    * '0.5   <300 spaces>junk' into a number). */
   char *fx = NULL, *fy = NULL;
   size_t fcap = 0;
-  unsigned long phys = 0, first = 0; /* physical lines read; where the record starts */
   const char *bad = NULL;
+  char xname[64] = "", yname[64] = ""; /* the header's names of the x and y fields */
   /* A record is a line, or several when a quoted field holds line breaks: messages name
    * the physical line where it starts. */
-  while ((len = cli_read_record(in, &line, &cap, &phys, &first, &bad)) >= 0) {
-    lineno = (long)first;
+  while ((len = cli_read_record(&rd, &bad)) >= 0) {
+    char *line = rd.line;
+    lineno = (long)rd.first;
     if (bad) { /* the input ends inside a quoted field: name it, whatever its column */
       int nf = csv_field(line, -1, NULL, 0, &bad);
-      cli_msg("quadkit join: %s:%ld: field %d: %s\n", j->pts_path, lineno, nf < 0 ? -nf : nf,
-              "unterminated quoted field (it runs to the end of the file)");
+      field_error(j->pts_path, line, nf < 0 ? -nf : nf, lineno, 0,
+                  "unterminated quoted field (it runs to the end of the file)");
       rc = CLI_BAD_INPUT;
       break;
     }
@@ -375,9 +419,10 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
       }
       fcap = (size_t)len + 1;
     }
+    size_t bom = 0;
     if (lineno == 1 && (unsigned char)line[0] == 0xEF && (unsigned char)line[1] == 0xBB &&
         (unsigned char)line[2] == 0xBF)
-      memmove(line, line + 3, (size_t)len - 2);
+      memmove(line, line + 3, (size_t)len - 2), bom = 3;
     const char *q = line;
     while (*q == ' ' || *q == '\t') q++;
     if (!*q) continue;
@@ -392,8 +437,7 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
       int rx = named ? 1 : csv_field(line, xc, fx, fcap, &why);
       int ry = named || rx < 0 ? 1 : csv_field(line, yc, fy, fcap, &why);
       if (rx < 0 || ry < 0) {
-        cli_msg("quadkit join: %s:%ld: field %d: %s\n", j->pts_path, lineno, -(rx < 0 ? rx : ry),
-                why);
+        field_error(j->pts_path, line, -(rx < 0 ? rx : ry), lineno, bom, why);
         rc = CLI_BAD_INPUT;
         break;
       }
@@ -404,8 +448,10 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
           break;
         }
         width = csv_field(line, -1, NULL, 0, &why), hline = lineno;
+        csv_field(line, xy->col[0], xname, sizeof xname, NULL); /* (for messages) */
+        csv_field(line, xy->col[1], yname, sizeof yname, NULL);
         if (width < 0) {
-          cli_msg("quadkit join: %s:%ld: field %d: %s\n", j->pts_path, lineno, -width, why);
+          field_error(j->pts_path, line, -width, lineno, bom, why);
           rc = CLI_BAD_INPUT;
           break;
         }
@@ -419,8 +465,7 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
     int hx = csv_field(line, xy->col[0], fx, fcap, &why);
     int hy = hx < 0 ? 0 : csv_field(line, xy->col[1], fy, fcap, &why);
     if (hx < 0 || hy < 0) {
-      cli_msg("quadkit join: %s:%ld: field %d: %s\n", j->pts_path, lineno, -(hx < 0 ? hx : hy),
-              why);
+      field_error(j->pts_path, line, -(hx < 0 ? hx : hy), lineno, bom, why);
       rc = CLI_BAD_INPUT;
       break;
     }
@@ -434,14 +479,19 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
     if (number(fx, &x) != 1 || number(fy, &y) != 1 || !isfinite(x) || !isfinite(y)) {
       const char *bad = (number(fx, &x) != 1 || !isfinite(x)) ? fx : fy;
       int col = bad == fx ? xy->col[0] : xy->col[1];
-      cli_msg("quadkit join: %s:%ld: field %d is not a finite number: '%.40s'\n", j->pts_path,
-              lineno, col + 1, bad);
+      const char *name = bad == fx ? xname : yname;
+      /* FILE:LINE:COLUMN and the header's name of the field, as the other commands'
+       * reader says it (it said "FILE:LINE: field 2", leaving the column to count). */
+      unsigned long fl, fc;
+      field_at(line, col, (unsigned long)lineno, bom, &fl, &fc);
+      cli_msg("quadkit join: %s:%lu:%lu: field %d%s%s%s is not a finite number: '%.40s'\n",
+              j->pts_path, fl, fc, col + 1, name[0] ? " (" : "", name, name[0] ? ")" : "", bad);
       rc = CLI_BAD_INPUT;
       break;
     }
     int nf = width ? csv_field(line, -1, NULL, 0, &why) : 0;
     if (nf < 0) {
-      cli_msg("quadkit join: %s:%ld: field %d: %s\n", j->pts_path, lineno, -nf, why);
+      field_error(j->pts_path, line, -nf, lineno, bom, why);
       rc = CLI_BAD_INPUT;
       break;
     }
@@ -468,10 +518,10 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
     }
   }
   if (!rc && len == -2) {
-    cli_msg("quadkit join: %s:%lu: %s\n", j->pts_path, phys, bad);
+    cli_msg("quadkit join: %s:%lu: %s\n", j->pts_path, rd.phys, bad);
     rc = CLI_BAD_INPUT;
   } else if (!rc && len == -3) {
-    cli_msg("quadkit join: %s:%lu: out of memory reading the line\n", j->pts_path, phys + 1);
+    cli_msg("quadkit join: %s:%lu: out of memory reading the line\n", j->pts_path, rd.phys);
     rc = CLI_INTERNAL;
   }
   if (!rc && ferror(in)) {
@@ -481,7 +531,7 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
   if (!rc) rc = flush_chunk(j);
   for (size_t i = 0; i < j->n; i++) free(j->lines[i]);
   j->n = 0;
-  free(line);
+  cli_lines_free(&rd);
   free(fx);
   free(fy);
   if (progress_on && !j->dry) {

@@ -187,17 +187,16 @@ static int each_row(const char *path,
                     scene_t *s) {
   FILE *f = cli_open_input("world", path);
   if (!f) return CLI_BAD_INPUT;
-  char *line = NULL;
-  size_t cap = 0;
+  /* The tool's line reader: a NUL byte or a line past CLI_MAX_LINE stops it at once. */
+  cli_lines_t rd;
+  cli_lines_init(&rd, f);
   unsigned long ln = 0;
   int rc = CLI_OK, first = 1;
-  ssize_t len;
-  while ((len = getline(&line, &cap, f)) >= 0) {
-    ln++;
-    if ((size_t)len != strlen(line)) {
-      rc = bad(path, ln, "%s", "line contains a NUL byte");
-      break;
-    }
+  long len;
+  const char *rwhy;
+  while ((len = cli_read_line(&rd, &rwhy)) >= 0) {
+    char *line = rd.line;
+    ln = rd.phys;
     size_t n = (size_t)len;
     if (cli_cut_line_end(line, &n)) {
       rc = bad(path, ln, "%s", CLI_LONE_CR);
@@ -232,22 +231,33 @@ static int each_row(const char *path,
     g_row = NULL;
     if (rc) break;
   }
-  free(line);
-  if (!rc && ferror(f)) {
+  cli_lines_free(&rd);
+  if (!rc && len == -2) {
+    if (rd.col)
+      cli_msg("quadkit world: %s:%lu:%lu: %s\n", path, rd.phys, rd.col, rwhy);
+    else
+      cli_msg("quadkit world: %s:%lu: %s\n", path, rd.phys, rwhy);
+    rc = CLI_BAD_INPUT;
+  } else if (!rc && len == -3) {
+    cli_msg("quadkit world: %s:%lu: out of memory reading the line\n", path, rd.phys);
+    rc = CLI_INTERNAL;
+  } else if (!rc && ferror(f)) {
     cli_msg("quadkit world: %s: read error\n", path);
     rc = CLI_BAD_INPUT;
-  } else if (!rc && !feof(f)) {
-    /* getline failed without an end or an error: a line too long for memory (binary
-     * data without a line break: /dev/zero said "no objects") */
-    cli_msg("quadkit world: %s:%lu: out of memory reading the line\n", path, ln + 1);
-    rc = CLI_INTERNAL;
   }
   fclose(f);
   return rc;
 }
 
+/* How many fields a row has, for a message (split() stops counting past 6). */
+static const char *fields_text(int n) {
+  static const char *const t[] = {"no fields", "1 field", "2 fields", "3 fields"};
+  return n < 4 ? t[n] : "more than 6 fields";
+}
+
 static int object_row(const char *path, unsigned long ln, row_t *r, scene_t *s) {
-  if (r->n < 4 || r->n > 6) return bad(path, ln, "%s", "expected id,kind,x,y[,a,b]");
+  if (r->n < 4 || r->n > 6)
+    return bad(path, ln, "expected id,kind,x,y[,a,b]: the line has %s", fields_text(r->n));
   uint64_t id;
   const char *why = parse_id(r->f[0], &id);
   if (why) return bad(path, ln, why, r->f[0]);
@@ -269,7 +279,8 @@ static int object_row(const char *path, unsigned long ln, row_t *r, scene_t *s) 
 }
 
 static int move_row(const char *path, unsigned long ln, row_t *r, scene_t *s) {
-  if (r->n < 4 || r->n > 6) return bad(path, ln, "%s", "expected frame,id,x,y[,a,b]");
+  if (r->n < 4 || r->n > 6)
+    return bad(path, ln, "expected frame,id,x,y[,a,b]: the line has %s", fields_text(r->n));
   uint64_t frame, id;
   if (parse_id(r->f[0], &frame) || frame > 100000000)
     return bad(path, ln, "frame is not a whole number from 0 to 1e8: '%s'", r->f[0]);

@@ -1,11 +1,12 @@
 /* CSV input of the command-line tool: the library's reader, its errors printed with
  * file, line and column, and the rows' text kept for --keep. */
-#define _POSIX_C_SOURCE 200809L /* getline */
+#define _POSIX_C_SOURCE 200809L /* fmemopen */
 #include <errno.h>
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 
 #include "cli.h"
 
@@ -47,76 +48,145 @@ static size_t count_fields(const char *s) {
   return n;
 }
 
-long cli_read_record(FILE *f, char **line, size_t *cap, unsigned long *phys, unsigned long *first,
-                     const char **why) {
+enum { CHUNK = 1 << 16 };
+
+/* The message for a line past CLI_MAX_LINE (its number written out: the limit a user
+ * meets is the one to state). */
+#define TOO_LONG "line longer than 1048576 bytes (1 MiB), the limit for a line of text input"
+_Static_assert(CLI_MAX_LINE == 1048576, "TOO_LONG states the limit");
+
+void cli_lines_init(cli_lines_t *r, FILE *f) {
+  memset(r, 0, sizeof *r);
+  r->f = f;
+}
+
+void cli_lines_free(cli_lines_t *r) {
+  free(r->chunk);
+  free(r->line);
+  free(r->part);
+  r->chunk = r->line = r->part = NULL;
+  r->cap = r->pcap = 0;
+}
+
+/* Room for `need` bytes in *buf (*cap its size), grown by doubling. */
+static int room(char **buf, size_t *cap, size_t need) {
+  if (need <= *cap) return 0;
+  size_t nc = *cap ? *cap : 256;
+  while (nc < need) nc *= 2;
+  char *p = realloc(*buf, nc);
+  if (!p) return -1;
+  *buf = p, *cap = nc;
+  return 0;
+}
+
+/* One physical line into *buf, as cli_read_line says. Each piece of a chunk is checked
+ * before it is kept: a NUL byte or a line past the limit stops the reader within one
+ * chunk (64 KiB) of it, whatever follows (getline, used before, took a line of any
+ * length into memory first: /dev/zero grew the process to gigabytes before "out of
+ * memory"). */
+static long line_into(cli_lines_t *r, char **buf, size_t *cap, const char **why) {
+  if (!r->chunk && !(r->chunk = malloc(CHUNK))) return -3;
   size_t n = 0;
-  int q = 0, part = 0;
-  char *buf = NULL;
-  *why = NULL;
-  size_t bcap = 0;
-  long rc;
-  for (;; part++) {
-    ssize_t got = getline(part ? &buf : line, part ? &bcap : cap, f);
-    if (got < 0) {
-      /* getline's -1 is the end of the input, a read error (ferror, which the caller
-       * reports) or a line too long for memory (neither flag set; errno ENOMEM): that
-       * one was taken for the end, so join wrote nothing and exited 0 on a binary
-       * input of no line break (/dev/zero). */
-      if (!feof(f) && !ferror(f)) {
-        rc = -3;
-        goto out;
+  int open = 0;
+  r->col = 0;
+  for (;;) {
+    if (r->cpos == r->clen) {
+      if (r->eof) break;
+      r->clen = fread(r->chunk, 1, CHUNK, r->f);
+      r->cpos = 0;
+      if (r->clen < CHUNK) r->eof = 1; /* the end, or a read error (ferror tells) */
+      if (r->tee && r->clen) {
+        if (room(&r->tee_buf, &r->tee_cap, r->tee_len + r->clen)) return -3;
+        memcpy(r->tee_buf + r->tee_len, r->chunk, r->clen);
+        r->tee_len += r->clen;
       }
-      if (!part) return -1;
+      if (!r->clen) break;
+    }
+    const char *s = r->chunk + r->cpos;
+    size_t avail = r->clen - r->cpos;
+    const char *nl = memchr(s, '\n', avail);
+    size_t take = nl ? (size_t)(nl - s) : avail;
+    if (!open) open = 1, r->phys++;
+    if (r->phys == 1 && n == 0 && s == r->chunk && avail >= 2 &&
+        ((s[0] == '\xFF' && s[1] == '\xFE') || (s[0] == '\xFE' && s[1] == '\xFF'))) {
+      /* A UTF-16 byte order mark (what Windows tools write as "Unicode"): every other
+       * byte of ASCII text is a NUL there, which "binary data" would not explain. */
+      r->col = 1;
+      *why = "UTF-16 text (a UTF-16 byte order mark): text input must be UTF-8 or ASCII; "
+             "convert it first (iconv -f UTF-16 -t UTF-8)";
+      return -2;
+    }
+    const char *z = memchr(s, '\0', take);
+    if (z) {
+      r->col = (unsigned long)(n + (size_t)(z - s)) + 1;
+      *why = "binary data (NUL byte) in a text file";
+      return -2;
+    }
+    if (n + take > CLI_MAX_LINE) {
+      /* A CR alone inside it is the likelier cause (a file with CR line ends reads as
+       * one line): say that, where it is. */
+      size_t lim = nl && take && s[take - 1] == '\r' ? take - 1 : take;
+      const char *cr = memchr(*buf ? *buf : "", '\r', n);
+      const char *cr2 = cr ? NULL : memchr(s, '\r', lim);
+      if (cr || cr2) {
+        r->col = (unsigned long)(cr ? (size_t)(cr - *buf) : n + (size_t)(cr2 - s)) + 1;
+        *why = CLI_LONE_CR;
+      } else {
+        *why = TOO_LONG;
+      }
+      return -2;
+    }
+    if (room(buf, cap, n + take + 1)) return -3;
+    memcpy(*buf + n, s, take);
+    n += take;
+    r->cpos += take + (nl != NULL);
+    if (nl) break;
+  }
+  if (!open) return -1;
+  (*buf)[n] = '\0';
+  return (long)n;
+}
+
+long cli_read_line(cli_lines_t *r, const char **why) {
+  *why = NULL;
+  return line_into(r, &r->line, &r->cap, why);
+}
+
+long cli_read_record(cli_lines_t *r, const char **why) {
+  *why = NULL;
+  long got = line_into(r, &r->line, &r->cap, why);
+  if (got < 0) return got;
+  r->first = r->phys;
+  size_t n = (size_t)got;
+  if (cli_cut_line_end(r->line, &n)) {
+    *why = CLI_LONE_CR;
+    return -2;
+  }
+  size_t bom = r->phys == 1 && n >= 3 && !memcmp(r->line, "\xEF\xBB\xBF", 3) ? 3 : 0;
+  int q = quote_state(0, r->line + bom, n - bom, NULL);
+  /* Inside quotes at the line's end: the record goes on, with a line feed in the field. */
+  while (q == 2) {
+    got = line_into(r, &r->part, &r->pcap, why);
+    if (got == -1) {
       /* the input ends inside quotes: the record is returned, flagged (the rows after
        * the quote would be lost without a word) */
       *why = "unterminated quoted field (it runs to the end of the file)";
-      n--; /* the added LF */
       break;
     }
-    char *l = part ? buf : *line;
-    ++*phys;
-    if (!part) *first = *phys;
-    if ((size_t)got != strlen(l)) {
-      *why = "binary data (NUL byte) in a text file";
-      rc = -2;
-      goto out;
-    }
+    if (got < 0) return got;
     size_t c = (size_t)got;
-    if (cli_cut_line_end(l, &c)) {
+    if (cli_cut_line_end(r->part, &c)) {
       *why = CLI_LONE_CR;
-      rc = -2;
-      goto out;
+      return -2;
     }
-    if (part) {
-      if (n + c + 2 > *cap) {
-        char *p = realloc(*line, n + c + 2);
-        if (!p) {
-          rc = -3;
-          goto out;
-        }
-        *line = p, *cap = n + c + 2;
-      }
-      memcpy(*line + n, l, c);
-    }
-    size_t bom = *phys == 1 && c >= 3 && !memcmp(*line, "\xEF\xBB\xBF", 3) ? 3 : 0;
-    q = quote_state(q, *line + n + bom, c - bom, NULL);
+    if (room(&r->line, &r->cap, n + c + 2)) return -3;
+    r->line[n++] = '\n';
+    memcpy(r->line + n, r->part, c);
+    q = quote_state(q, r->line + n, c, NULL);
     n += c;
-    if (q != 2) break;
-    if (n + 2 > *cap) {
-      char *p = realloc(*line, n + 2);
-      if (!p) {
-        rc = -3;
-        goto out;
-      }
-      *line = p, *cap = n + 2;
-    }
-    (*line)[n++] = '\n';
   }
-  (*line)[n] = '\0';
-  rc = (long)n;
-out:
-  free(buf);
-  return rc;
+  r->line[n] = '\0';
+  return (long)n;
 }
 
 static char *dup_text(const char *s, size_t len) {
@@ -163,6 +233,55 @@ static int read_error(const char *path, qk_status_t st, const qk_error_t *e) {
   return st == QK_ERR_NOMEM ? CLI_INTERNAL : CLI_BAD_INPUT;
 }
 
+/* Screen an input with the tool's line reader before a library reader sees it (cli.h):
+ * the CSV reader takes a line of any length into memory before it checks it (a library matter,
+ * include/quadkit/io.h), so /dev/zero or a file without line breaks grew the process
+ * until "out of memory". A NUL byte or a line past CLI_MAX_LINE is refused here, within
+ * 64 KiB of it. A regular file is read again from its start (the screen keeps nothing:
+ * a pass over text in the page cache, a few per cent of the read); a pipe, FIFO or
+ * device cannot be, so its bytes as read are kept and *f becomes a stream over them
+ * (*copy, which the caller frees once the library is done). Returns an exit code. */
+int cli_screen_input(const char *cmd, const char *path, int columns, FILE **f, char **copy) {
+  const char *sp = cmd ? " " : "", *c = cmd ? cmd : "";
+  struct stat st;
+  int regular = !fstat(fileno(*f), &st) && S_ISREG(st.st_mode);
+  cli_lines_t r;
+  cli_lines_init(&r, *f);
+  r.tee = !regular;
+  const char *why;
+  long got;
+  while ((got = cli_read_line(&r, &why)) >= 0) continue;
+  int rc = CLI_OK;
+  if (got == -2 && r.col && columns)
+    cli_msg("quadkit%s%s: %s:%lu:%lu: %s\n", sp, c, path, r.phys, r.col, why), rc = CLI_BAD_INPUT;
+  else if (got == -2)
+    cli_msg("quadkit%s%s: %s:%lu: %s\n", sp, c, path, r.phys, why), rc = CLI_BAD_INPUT;
+  else if (got == -3)
+    cli_msg("quadkit%s%s: %s:%lu: out of memory reading the line\n", sp, c, path, r.phys),
+        rc = CLI_INTERNAL;
+  else if (ferror(*f))
+    cli_msg("quadkit%s%s: %s: read error\n", sp, c, path), rc = CLI_BAD_INPUT;
+  cli_lines_free(&r);
+  if (!rc && regular && fseek(*f, 0, SEEK_SET) != 0) {
+    cli_msg("quadkit%s%s: %s: cannot read it again: %s\n", sp, c, path, strerror(errno));
+    rc = CLI_BAD_INPUT;
+  }
+  if (!rc && !regular && r.tee_len) { /* (empty: *f is at its end, as the copy would be) */
+    FILE *m = fmemopen(r.tee_buf, r.tee_len, "r");
+    if (!m) {
+      cli_msg("quadkit%s%s: %s: cannot keep it in memory: %s\n", sp, c, path, strerror(errno));
+      rc = CLI_INTERNAL;
+    } else {
+      if (*f != stdin) fclose(*f); /* (stdin is the caller's to keep) */
+      *f = m;
+      *copy = r.tee_buf;
+      return CLI_OK;
+    }
+  }
+  free(r.tee_buf);
+  return rc;
+}
+
 /* Read through the library with `columns` selected, rows collected into *rows. */
 static int read_values(const char *path, const char *columns, int required, int cols,
                        cli_rows_t *rows, double **v, size_t *n) {
@@ -176,9 +295,16 @@ static int read_values(const char *path, const char *columns, int required, int 
   qk_error_t err;
   FILE *f = cli_open_input(NULL, path);
   if (!f) return CLI_BAD_INPUT;
+  char *copy = NULL;
+  int rc = cli_screen_input(NULL, path, 1, &f, &copy);
+  if (rc) {
+    fclose(f);
+    return rc;
+  }
   qk_status_t st = qk_csv_read_values(f, &opt, (size_t)cols, (size_t)required, NULL, v, n, &err);
   fclose(f);
-  int rc = st == QK_OK ? CLI_OK : read_error(path, st, &err);
+  free(copy);
+  rc = st == QK_OK ? CLI_OK : read_error(path, st, &err);
   if (rc || rows == &scratch) cli_rows_free(rows);
   return rc;
 }

@@ -38,7 +38,9 @@ static void usage(FILE *f) {
   fprintf(f, "\nEvery command accepts --help. Points CSV: x and y are the first two fields of "
              "each line,\nor the columns named by --xy X,Y (header names or 1-based numbers). "
              "The first line is\na header when neither its x nor its y field is a number, or "
-             "when --xy gives\nnames. A point's id is its 0-based data row.\n\nexit status: 0 "
+             "when --xy gives\nnames. A point's id is its 0-based data row. Limits: a line of CSV "
+             "or .poly\ninput may hold at most 1 MiB (1048576 bytes); a NUL byte is refused "
+             "as binary data.\n\nexit status: 0 "
              "success, 1 bad "
              "input, 2 usage error, 3 internal error or out of memory\n");
 }

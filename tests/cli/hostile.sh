@@ -40,7 +40,7 @@ sq='{"type":"Polygon","coordinates":[[[0,0],[1,0],[1,1],[0,1],[0,0]]]}'
 printf '{"type":"FeatureCollection","features":[{"type":"Feature","properties":{"name":"sq"},"geometry":%s}]}\n' "$sq" >"$tmp/sq.geojson"
 pad=$(printf '%300s' '')
 printf 'x,y\n0.5,0.5%sjunk\n' "$pad" >"$tmp/junk.csv"
-expect 1 'junk.csv:2: field 2 is not a finite number' -- "$cli" join "$tmp/sq.geojson" "$tmp/junk.csv" -o "$tmp/keep.csv"
+expect 1 'junk.csv:2:5: field 2 \(y\) is not a finite number' -- "$cli" join "$tmp/sq.geojson" "$tmp/junk.csv" -o "$tmp/keep.csv"
 unchanged "$tmp/keep.csv"
 zeros=$(printf '%0300d' 0)
 printf 'x,y\n0.5,%s0.5\n0.5,0.%s1\n' "$zeros" "$zeros" >"$tmp/long.csv"

@@ -55,7 +55,7 @@ grep -q '</svg>' "$tmp/r.svg" && passes=$((passes + 1)) || fail "svg written"
 
 # errors
 printf 'lon,lat\n1,1\n2,abc\n' >"$tmp/bad.csv"
-expect 1 'bad.csv:3: field 2 is not a finite number' -- "$cli" join "$layer" "$tmp/bad.csv" -o "$tmp/none.csv"
+expect 1 'bad.csv:3:3: field 2 \(lat\) is not a finite number' -- "$cli" join "$layer" "$tmp/bad.csv" -o "$tmp/none.csv"
 [ ! -e "$tmp/none.csv" ] && passes=$((passes + 1)) || fail "half-written output left behind"
 printf '1\n' >"$tmp/short.csv"
 expect 1 'short.csv:1: no field 2' -- "$cli" join "$layer" "$tmp/short.csv"

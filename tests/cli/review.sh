@@ -119,7 +119,7 @@ expect 1 "mf0.csv:1:1: frame is not a whole number" -- "$cli" world "$tmp/wq.csv
 # ---- points CSV: a first line with a number in it is data (x1,2 was a header, dropped) --
 printf 'x1,2\n3,4\n' >"$tmp/h1.csv"
 expect 1 "h1.csv:1:1: field 1 is not a number: 'x1'" -- "$cli" tree "$tmp/h1.csv"
-expect 1 "h1.csv:1: field 1 is not a finite number: 'x1'" -- "$cli" join "$tmp/gc.geojson" "$tmp/h1.csv" --planar
+expect 1 "h1.csv:1:1: field 1 is not a finite number: 'x1'" -- "$cli" join "$tmp/gc.geojson" "$tmp/h1.csv" --planar
 printf 'x,y\n3,4\n' >"$tmp/h2.csv"
 same_text "join: a header still is one" "$("$cli" join "$tmp/gc.geojson" "$tmp/h2.csv" --planar | tr '\n' ' ')" "x,y,feature 3,4,-1 "
 

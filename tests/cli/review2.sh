@@ -33,7 +33,7 @@ printf '{"type":"Polygon","coordinates":[[[0,0],[1,0],[1,1],[0,1],[0,0]]]}\n' >"
 same_text "join: BOM and CRLF" "$("$cli" join "$tmp/sq.geojson" "$tmp/dos.csv" --planar | tr '\n' ' ')" \
   "x,y,feature 0.5,0.5,0 1,1,-1 -0.0,0.25,0 "
 printf 'x,y\n0,0\nnan,1\n' >"$tmp/bad.csv"
-expect 1 'bad.csv:3: field 1 is not a finite number' -- "$cli" join "$tmp/sq.geojson" "$tmp/bad.csv" --planar
+expect 1 'bad.csv:3:1: field 1 \(x\) is not a finite number' -- "$cli" join "$tmp/sq.geojson" "$tmp/bad.csv" --planar
 # standard output cannot be taken back: a bad line stops join before the header or any row
 same_text "join: nothing on stdout before a bad line" \
   "$("$cli" join "$tmp/sq.geojson" "$tmp/bad.csv" --planar 2>/dev/null)" ""

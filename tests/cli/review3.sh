@@ -54,8 +54,8 @@ expect 1 "hexf.csv:2:3: field 2 \\(y\\) is not a decimal number: '-0X1p-3'" -- "
 # a first line of hexadecimal numbers is data (an error), not a header dropped in silence
 printf '0x1,0x2\n0.5,0.5\n' >"$tmp/hexh.csv"
 expect 1 "hexh.csv:1:1: field 1 is not a decimal number: '0x1'" -- "$cli" tree "$tmp/hexh.csv"
-expect 1 "hexh.csv:1: field 1 is not a finite number: '0x1'" -- "$cli" join "$tmp/negz.geojson" "$tmp/hexh.csv" --planar
-expect 1 "hex.csv:2: field 1 is not a finite number: '0x10'" -- "$cli" join "$tmp/negz.geojson" "$tmp/hex.csv" --planar
+expect 1 "hexh.csv:1:1: field 1 is not a finite number: '0x1'" -- "$cli" join "$tmp/negz.geojson" "$tmp/hexh.csv" --planar
+expect 1 "hex.csv:2:1: field 1 \\(x\\) is not a finite number: '0x10'" -- "$cli" join "$tmp/negz.geojson" "$tmp/hex.csv" --planar
 printf 'id,kind,x,y,a,b\n1,disc,0x1,0,1,\n' >"$tmp/hexo.csv"
 printf 'frame,id,x,y\n' >"$tmp/nomoves.csv"
 expect 1 "hexo.csv:2:8: not a decimal number: '0x1'" -- "$cli" world "$tmp/hexo.csv" "$tmp/nomoves.csv"

@@ -65,10 +65,10 @@ printf 'x,y\n0.5,"0.5"x\n' >"$tmp/q1.csv"
 printf 'x,y\n0.5,0.5\n0.25,"0.5\n' >"$tmp/q2.csv"
 printf 'a,b,x,y\n"n"x,2,0.5,0.5\n' >"$tmp/q3.csv"
 printf '"0.5"x,"0.5"y\n0.5,0.5\n' >"$tmp/q4.csv"
-expect 1 'q1.csv:2: field 2: text after a closing quote' -- "$cli" join "$tmp/sq.geojson" "$tmp/q1.csv" --planar
-expect 1 'q2.csv:3: field 2: unterminated quoted field' -- "$cli" join "$tmp/sq.geojson" "$tmp/q2.csv" --planar
-expect 1 'q3.csv:2: field 1: text after a closing quote' -- "$cli" join "$tmp/sq.geojson" "$tmp/q3.csv" --planar --xy x,y
-expect 1 'q4.csv:1: field 1: text after a closing quote' -- "$cli" join "$tmp/sq.geojson" "$tmp/q4.csv" --planar
+expect 1 'q1.csv:2:5: field 2: text after a closing quote' -- "$cli" join "$tmp/sq.geojson" "$tmp/q1.csv" --planar
+expect 1 'q2.csv:3:6: field 2: unterminated quoted field' -- "$cli" join "$tmp/sq.geojson" "$tmp/q2.csv" --planar
+expect 1 'q3.csv:2:1: field 1: text after a closing quote' -- "$cli" join "$tmp/sq.geojson" "$tmp/q3.csv" --planar --xy x,y
+expect 1 'q4.csv:1:1: field 1: text after a closing quote' -- "$cli" join "$tmp/sq.geojson" "$tmp/q4.csv" --planar
 # the library's reader says the same
 expect 1 'q1.csv:2:5: field 2: text after a closing quote' -- "$cli" knn "$tmp/q1.csv" "$tmp/q1.csv" -k 1
 expect 1 'q2.csv:3:6: field 2: unterminated quoted field' -- "$cli" knn "$tmp/q2.csv" "$tmp/q2.csv" -k 1

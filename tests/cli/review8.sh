@@ -32,12 +32,12 @@ printf '{"type":"FeatureCollection","features":[{"type":"Feature","properties":{
 same_text "join: a multi-line field" \
   "$("$cli" join "$tmp/sq.geojson" "$tmp/ml.csv" --field n | tr '\n' '|')" \
   'x,y,note,feature,n|1,2,"a|5,6,",0,A|3,4,ok,0,A|'
-expect 1 "^quadkit join: $tmp/ml-bad.csv:5: field 1 is not a finite number: 'nan'$" \
+expect 1 "^quadkit join: $tmp/ml-bad.csv:5:1: field 1 \\(x\\) is not a finite number: 'nan'$" \
   -- "$cli" join "$tmp/sq.geojson" "$tmp/ml-bad.csv"
-expect 1 "^quadkit join: $tmp/ml-open.csv:1: field 3: unterminated quoted field \\(it runs to the end of the file\\)$" \
+expect 1 "^quadkit join: $tmp/ml-open.csv:1:5: field 3: unterminated quoted field \\(it runs to the end of the file\\)$" \
   -- "$cli" join "$tmp/sq.geojson" "$tmp/ml-open.csv"
 printf 'x,y\n1,1\n2,2\n3,"3\n' >"$tmp/ml-open2.csv"
-expect 1 "^quadkit join: $tmp/ml-open2.csv:4: field 2: unterminated quoted field" -- "$cli" join "$tmp/sq.geojson" "$tmp/ml-open2.csv"
+expect 1 "^quadkit join: $tmp/ml-open2.csv:4:3: field 2: unterminated quoted field" -- "$cli" join "$tmp/sq.geojson" "$tmp/ml-open2.csv"
 printf 'x,y,n\n1,1,"a\r\nb"\r\n2,2\x00,c\n' >"$tmp/ml-nul.csv"
 expect 1 "^quadkit join: $tmp/ml-nul.csv:4: binary data \\(NUL byte\\) in a text file$" \
   -- "$cli" join "$tmp/sq.geojson" "$tmp/ml-nul.csv"
