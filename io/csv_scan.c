@@ -77,6 +77,7 @@ int qk__lines_next(qk__lines_t *r, size_t *len) {
   size_t n = 0;        /* bytes of the record so far */
   size_t pl = 0;       /* where the current physical line starts in it */
   int q = 0, open = 0; /* open: a physical line has begun and is not yet complete */
+  int nul = 0;         /* a NUL byte ended the line */
   r->open_quote = 0;
   for (;;) {
     if (r->cpos == r->clen && !r->eof) {
@@ -99,12 +100,17 @@ int qk__lines_next(qk__lines_t *r, size_t *len) {
       size_t avail = r->clen - r->cpos;
       const char *nl = memchr(s, '\n', avail);
       size_t take = nl ? (size_t)(nl - s) + 1 : avail;
+      /* Text has no NUL byte: the line ends at one, which the caller refuses as binary
+       * data. Without this stop a binary stream of no line break (/dev/zero) was taken
+       * into memory whole before the line was checked. */
+      const char *z = memchr(s, '\0', take);
+      if (z) take = (size_t)(z - s) + 1, nul = 1;
       if (line_room(r, n + take + 2)) return -1;
       memcpy(r->line + n, s, take);
       n += take;
       r->cpos += take;
       open = 1;
-      if (!nl) continue; /* the line goes on in the next chunk */
+      if (!nl && !nul) continue; /* the line goes on in the next chunk */
     }
     /* A physical line is complete: cut its ending. */
     open = 0;
@@ -115,7 +121,7 @@ int qk__lines_next(qk__lines_t *r, size_t *len) {
     q = quote_state(q, r->line + pl + bom, n - pl - bom);
     /* Inside quotes at the line's end: the record goes on, with a line feed in the field
      * (RFC 4180); at the end of the input the reader reports the open quote. */
-    if (q != 2) break;
+    if (q != 2 || nul) break;
     if (r->eof && r->cpos == r->clen) { /* the input ends inside quotes */
       r->open_quote = 1;
       break;

@@ -30,7 +30,8 @@ typedef struct qk__lines {
 void qk__lines_init(qk__lines_t *r, FILE *f, const qk_allocator_t *alloc);
 /* The next CSV record into r->line (*len bytes): one line, or several when a quoted field
  * holds line breaks (each kept as one LF, a CRLF inside quotes included); it starts on
- * physical line r->first. 1, or 0 at the end, or -1 out of memory. */
+ * physical line r->first; a NUL byte ends it (kept as its last byte, for the caller to
+ * refuse). 1, or 0 at the end, or -1 out of memory. */
 int qk__lines_next(qk__lines_t *r, size_t *len);
 /* Free the buffers. */
 void qk__lines_free(qk__lines_t *r);

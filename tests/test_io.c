@@ -9,7 +9,10 @@
  *  - every error kind with its status, line, column, row and message;
  *  - the row callback: every data row and the header, with line numbers, and its status;
  *  - allocation failure at every N: QK_ERR_NOMEM, nothing allocated, no leak; the
- *    unfailed run gives the same points.
+ *    unfailed run gives the same points;
+ *  - binary input (32 MiB of NUL bytes, after a header, inside an open quote): refused at
+ *    the first NUL with its line and column, the reader's memory staying under 1 MiB
+ *    (it took the whole "line" into memory first, as it would /dev/zero).
  */
 #define _POSIX_C_SOURCE 200809L
 #include <math.h>
@@ -364,6 +367,54 @@ static void test_io_multiline_quotes(void **state) {
 }
 
 /* Allocation failure at every N, on a file that makes every buffer grow. */
+/* An allocator that keeps the peak of the bytes live. */
+typedef struct peak {
+  size_t live, peak;
+} peak_t;
+
+static void *peak_fn(void *ud, void *ptr, size_t osize, size_t nsize) {
+  peak_t *p = ud;
+  p->live = p->live - (ptr ? osize : 0) + nsize;
+  if (p->live > p->peak) p->peak = p->live;
+  if (nsize == 0) {
+    free(ptr);
+    return NULL;
+  }
+  return realloc(ptr, nsize);
+}
+
+static void test_io_binary_stream(void **state) {
+  (void)state;
+  static const struct {
+    const char *head;
+    unsigned long line, column;
+  } cases[] = {{"", 1, 1}, {"x,y\n1,2\n3,", 3, 3}, {"x,y\n\"1", 2, 3}};
+  size_t big = (size_t)32 << 20;
+  char *text = calloc(big, 1);
+  assert_non_null(text);
+  for (size_t c = 0; c < sizeof cases / sizeof *cases; c++) {
+    size_t h = strlen(cases[c].head);
+    memset(text, 0, 64); /* (the previous case's head) */
+    memcpy(text, cases[c].head, h);
+    FILE *f = fmemopen(text, big, "r");
+    assert_non_null(f);
+    peak_t pk = {0, 0};
+    qk_allocator_t a = {peak_fn, &pk};
+    double *v = NULL;
+    size_t rows = 0;
+    qk_error_t err;
+    qk_status_t st = qk_csv_read_values(f, NULL, 2, 2, &a, &v, &rows, &err);
+    fclose(f);
+    if (st != QK_ERR_PARSE || !strstr(err.message, "binary data (NUL byte)"))
+      fail_msg("case %zu: %s: %s", c, qk_strerror(st), err.message);
+    assert_int_equal(err.line, cases[c].line);
+    assert_int_equal(err.column, cases[c].column);
+    if (pk.peak > (1u << 20)) fail_msg("case %zu: %zu bytes at the peak", c, pk.peak);
+    assert_int_equal(pk.live, 0);
+  }
+  free(text);
+}
+
 static void test_io_alloc_failure(void **state) {
   (void)state;
   size_t cap = 2000 * 40 + 140000;
@@ -421,6 +472,7 @@ int main(void) {
       cmocka_unit_test(test_io_values),        cmocka_unit_test(test_io_round_trip),
       cmocka_unit_test(test_io_errors),        cmocka_unit_test(test_io_callback),
       cmocka_unit_test(test_io_alloc_failure), cmocka_unit_test(test_io_multiline_quotes),
+      cmocka_unit_test(test_io_binary_stream),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -17,8 +17,10 @@
  * sign, digits with an optional decimal point, an optional exponent: `-1.5e3`, `.5`, `5.`;
  * blanks around allowed; strtod's hexadecimal `0x10` is refused) and finite; the other
  * fields may hold anything. A row's 0-based index among the data rows is its id. Data
- * rows are limited to 2^32 - 2 (the ids a tree holds). The library never prints: a
- * rejected input fills a qk_error_t.
+ * rows are limited to 2^32 - 2 (the ids a tree holds). A NUL byte is binary data, refused
+ * at its line and column: reading stops there, so a binary stream without line breaks
+ * (/dev/zero) is not taken into memory first. The library never prints: a rejected input
+ * fills a qk_error_t.
  */
 #ifndef QUADKIT_IO_H
 #define QUADKIT_IO_H
