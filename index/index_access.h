@@ -43,6 +43,11 @@ typedef struct qk__pool qk__pool_t;
 qk__pool_t *qk__pool_new(const qk_allocator_t *a, unsigned nw);
 void qk__pool_free(qk__pool_t *p);
 unsigned qk__pool_threads(const qk__pool_t *p);
+/* Where worker i first ran, and in *home where the thread that started it ran then, when
+ * the workers were started away from that processor (Linux, with another processor to
+ * start on); -1 in both otherwise. The worker writes its processor before it runs any
+ * region: read it after a region has run. */
+int qk__pool_start_cpu(const qk__pool_t *p, unsigned i, int *home);
 /* Whether p's workers run in this process (0 for NULL, and in a child forked after they
  * started: there qk__pool_free only frees its memory). */
 int qk__pool_live(const qk__pool_t *p);

@@ -14,7 +14,11 @@
  * regions); a world keeps one from its first threaded update to qk_world_free (eight steps
  * an update, collide/world_threads.c), with a detached job for the end of an update.
  */
+#if defined(__linux__)
+#define _GNU_SOURCE /* sched_getcpu, CPU_SET, pthread_attr_setaffinity_np */
+#else
 #define _POSIX_C_SOURCE 200809L
+#endif
 #include <stdatomic.h>
 #include <string.h>
 #include <time.h>
@@ -25,6 +29,12 @@
 #if defined(QK_HAVE_PTHREADS)
 #include <pthread.h>
 #include <sched.h>
+#endif
+/* Workers started away from the starting thread's processor (see pool_away()). */
+#if defined(QK_HAVE_PTHREADS) && defined(__linux__) && defined(CPU_SET)
+#define QK__POOL_AWAY 1
+#else
+#define QK__POOL_AWAY 0
 #endif
 
 unsigned qk__threads_resolve(uint32_t threads) {
@@ -112,6 +122,12 @@ struct qk__pool {
   void *dctx;
   pthread_t th[QK__MAX_THREADS];
   pworker_t ww[QK__MAX_THREADS];
+#if QK__POOL_AWAY
+  int away;       /* the workers were started away from processor `home_cpu` */
+  int home_cpu;   /* the starting thread's processor when the workers were started */
+  cpu_set_t home; /* the starting thread's processors, which each worker takes back */
+  int start_cpu[QK__MAX_THREADS]; /* where each worker first ran (tests), -1 before */
+#endif
 };
 
 static long long now_ns(void) {
@@ -130,6 +146,14 @@ static void *pool_worker(void *arg) {
   pworker_t *me = arg;
   qk__pool_t *p = me->p;
   unsigned seen = 0; /* (the pool posts nothing before its workers are started) */
+#if QK__POOL_AWAY
+  if (p->away) {
+    /* Started on another processor: from here on the scheduler may place it anywhere the
+     * starting thread may run. */
+    p->start_cpu[me->idx] = sched_getcpu();
+    (void)pthread_setaffinity_np(pthread_self(), sizeof p->home, &p->home);
+  }
+#endif
   for (;;) {
     /* The next region: spin a while, then park. */
     unsigned g = atomic_load_explicit(&p->gen, memory_order_acquire);
@@ -181,6 +205,34 @@ static void pool_wait(qk__pool_t *p) {
 
 static bool pool_forked(const qk__pool_t *p) { return p->proc != getpid(); }
 
+#if QK__POOL_AWAY
+/* Thread attributes that start a worker on any of the calling thread's processors but the
+ * one it runs on; false (start it as usual) where there is no other. This guest's
+ * scheduler placed a new thread on its creator's processor, next to the running creator,
+ * and left it there for the whole of a build (one vCPU idle, the two shares of every region
+ * run one after the other: 1M uniform points took as long on two threads as on one); a
+ * worker started elsewhere stays there while it spins between regions. The worker takes
+ * the creator's full set of processors back as soon as it runs (pool_worker). */
+static bool pool_away(qk__pool_t *p, pthread_attr_t *attr) {
+  p->away = 0;
+  for (unsigned i = 0; i < QK__MAX_THREADS; i++) p->start_cpu[i] = -1;
+  int me = sched_getcpu();
+  if (me < 0 || me >= CPU_SETSIZE ||
+      pthread_getaffinity_np(pthread_self(), sizeof p->home, &p->home) != 0)
+    return false;
+  cpu_set_t away = p->home;
+  CPU_CLR(me, &away);
+  if (CPU_COUNT(&away) == 0 || pthread_attr_init(attr) != 0) return false;
+  if (pthread_attr_setaffinity_np(attr, sizeof away, &away) != 0) {
+    pthread_attr_destroy(attr);
+    return false;
+  }
+  p->home_cpu = me;
+  p->away = 1;
+  return true;
+}
+#endif
+
 qk__pool_t *qk__pool_new(const qk_allocator_t *a, unsigned nw) {
   if (nw <= 1) return NULL;
   if (nw > QK__MAX_THREADS) nw = QK__MAX_THREADS;
@@ -196,11 +248,18 @@ qk__pool_t *qk__pool_new(const qk_allocator_t *a, unsigned nw) {
   atomic_init(&p->busy, 0);
   atomic_init(&p->hold, 0);
   p->proc = getpid();
+  pthread_attr_t attr, *ap = NULL;
+#if QK__POOL_AWAY
+  if (pool_away(p, &attr)) ap = &attr;
+#else
+  (void)attr;
+#endif
   for (unsigned i = 0; i + 1 < nw; i++) {
     p->ww[i] = (pworker_t){p, i};
-    if (pthread_create(&p->th[i], NULL, pool_worker, &p->ww[i])) break;
+    if (pthread_create(&p->th[i], ap, pool_worker, &p->ww[i])) break;
     p->n_th++;
   }
+  if (ap) pthread_attr_destroy(ap);
   if (p->n_th) return p;
   pthread_cond_destroy(&p->done);
 fail_done:
@@ -227,6 +286,18 @@ void qk__pool_free(qk__pool_t *p) {
 }
 
 unsigned qk__pool_threads(const qk__pool_t *p) { return p ? p->n_th + 1 : 1; }
+
+int qk__pool_start_cpu(const qk__pool_t *p, unsigned i, int *home) {
+  *home = -1;
+#if QK__POOL_AWAY
+  if (!p || !p->away || i >= p->n_th) return -1;
+  *home = p->home_cpu;
+  return p->start_cpu[i];
+#else
+  (void)p, (void)i;
+  return -1;
+#endif
+}
 
 int qk__pool_live(const qk__pool_t *p) { return p && !pool_forked(p); }
 
@@ -275,6 +346,11 @@ void qk__pool_free(qk__pool_t *p) { (void)p; }
 unsigned qk__pool_threads(const qk__pool_t *p) {
   (void)p;
   return 1;
+}
+int qk__pool_start_cpu(const qk__pool_t *p, unsigned i, int *home) {
+  (void)p, (void)i;
+  *home = -1;
+  return -1;
 }
 int qk__pool_live(const qk__pool_t *p) {
   (void)p;
