@@ -80,12 +80,19 @@ static void *run_share(void *arg) {
 /* How long a worker spins for the next region before it parks while its pool is held (the
  * gaps between a build's regions, its allocations and prefix sums, and between an update's
  * steps are well below this), and the calling thread for the workers to finish a region
- * before it parks. A spinning thread does not yield: on a loaded machine a yield hands its
- * core to another process for a time slice, which made the worker start a region 0.35-0.6
- * ms late at best (later than a thread created for it); a parked one is woken with the
- * scheduler's preference for a waking thread. */
+ * before it parks when it does not hold the pool. A spinning thread does not yield: on a loaded
+ * machine a yield hands its core to another process for a time slice, which made the worker start a
+ * region 0.35-0.6 ms late at best (later than a thread created for it); a parked one is woken with
+ * the scheduler's preference for a waking thread. */
 #define POOL_SPIN_NS 200000
 #define POOL_WAIT_NS 50000
+/* How long the calling thread waits for the workers to finish a region by spinning while it
+ * holds the pool, before it parks. A parked owner was woken 1-2.6 ms after the last worker
+ * had finished in some regions of the two-thread build (load 9 from other helpers' sessions,
+ * the driver's session at high weight): summed over a build's four regions, 0.88-0.92 ms in
+ * the mean waiting with 50 us of spinning, 0.06-0.25 ms with this (1M uniform points, 40
+ * builds). The shares of a region are unequal by up to half a millisecond (the scatter's). */
+#define POOL_OWNER_SPIN_NS 1000000
 
 /* A spinning loop's step. */
 static inline void pool_relax(void) {
@@ -110,6 +117,7 @@ struct qk__pool {
   atomic_int hold;     /* the owner runs regions back to back: the workers spin between them */
   int quit;
   unsigned n_th;        /* workers started */
+  unsigned owner_parks; /* waits for a region's end that parked (tests) */
   pid_t proc;           /* the process that started them (a forked child has none of them) */
   qk_allocator_t alloc; /* the pool's memory came from here */
   /* The current region (written before gen is advanced, read after it is seen). */
@@ -195,9 +203,12 @@ static void pool_post(qk__pool_t *p, qk__share_fn fn, void *ctx, unsigned nw, in
 static void pool_wait(qk__pool_t *p) {
   if (!atomic_load_explicit(&p->pending, memory_order_acquire)) return;
   long long t0 = now_ns();
-  while (atomic_load_explicit(&p->pending, memory_order_acquire) && now_ns() - t0 < POOL_WAIT_NS)
+  long long spin =
+      atomic_load_explicit(&p->hold, memory_order_relaxed) ? POOL_OWNER_SPIN_NS : POOL_WAIT_NS;
+  while (atomic_load_explicit(&p->pending, memory_order_acquire) && now_ns() - t0 < spin)
     pool_relax();
   pthread_mutex_lock(&p->mu);
+  if (atomic_load_explicit(&p->pending, memory_order_acquire)) p->owner_parks++;
   while (atomic_load_explicit(&p->pending, memory_order_acquire))
     pthread_cond_wait(&p->done, &p->mu);
   pthread_mutex_unlock(&p->mu);
@@ -287,6 +298,8 @@ void qk__pool_free(qk__pool_t *p) {
 
 unsigned qk__pool_threads(const qk__pool_t *p) { return p ? p->n_th + 1 : 1; }
 
+unsigned qk__pool_owner_parks(const qk__pool_t *p) { return p ? p->owner_parks : 0; }
+
 int qk__pool_start_cpu(const qk__pool_t *p, unsigned i, int *home) {
   *home = -1;
 #if QK__POOL_AWAY
@@ -346,6 +359,10 @@ void qk__pool_free(qk__pool_t *p) { (void)p; }
 unsigned qk__pool_threads(const qk__pool_t *p) {
   (void)p;
   return 1;
+}
+unsigned qk__pool_owner_parks(const qk__pool_t *p) {
+  (void)p;
+  return 0;
 }
 int qk__pool_start_cpu(const qk__pool_t *p, unsigned i, int *home) {
   (void)p, (void)i;
