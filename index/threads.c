@@ -199,12 +199,14 @@ static void pool_post(qk__pool_t *p, qk__share_fn fn, void *ctx, unsigned nw, in
   pthread_mutex_unlock(&p->mu);
 }
 
+unsigned long qk__pool_wait_spin_ns(const qk__pool_t *p) {
+  return atomic_load_explicit(&p->hold, memory_order_relaxed) ? POOL_OWNER_SPIN_NS : POOL_WAIT_NS;
+}
+
 /* Wait for the workers to finish the region posted last. */
 static void pool_wait(qk__pool_t *p) {
   if (!atomic_load_explicit(&p->pending, memory_order_acquire)) return;
-  long long t0 = now_ns();
-  long long spin =
-      atomic_load_explicit(&p->hold, memory_order_relaxed) ? POOL_OWNER_SPIN_NS : POOL_WAIT_NS;
+  long long t0 = now_ns(), spin = (long long)qk__pool_wait_spin_ns(p);
   while (atomic_load_explicit(&p->pending, memory_order_acquire) && now_ns() - t0 < spin)
     pool_relax();
   pthread_mutex_lock(&p->mu);
@@ -267,7 +269,10 @@ qk__pool_t *qk__pool_new(const qk_allocator_t *a, unsigned nw) {
 #endif
   for (unsigned i = 0; i + 1 < nw; i++) {
     p->ww[i] = (pworker_t){p, i};
-    if (pthread_create(&p->th[i], ap, pool_worker, &p->ww[i])) break;
+    /* (where the system refuses the placement, a worker started as usual) */
+    if (pthread_create(&p->th[i], ap, pool_worker, &p->ww[i]) &&
+        (!ap || pthread_create(&p->th[i], NULL, pool_worker, &p->ww[i])))
+      break;
     p->n_th++;
   }
   if (ap) pthread_attr_destroy(ap);
@@ -361,6 +366,10 @@ unsigned qk__pool_threads(const qk__pool_t *p) {
   return 1;
 }
 unsigned qk__pool_owner_parks(const qk__pool_t *p) {
+  (void)p;
+  return 0;
+}
+unsigned long qk__pool_wait_spin_ns(const qk__pool_t *p) {
   (void)p;
   return 0;
 }

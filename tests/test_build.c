@@ -657,24 +657,29 @@ static void owner_share(void *ctx, unsigned w, unsigned nw) {
   (void)nw;
   const long *ns = ctx;
   if (w != 1) return;
-  struct timespec ts = {0, *ns};
-  nanosleep(&ts, NULL);
+  /* busy, as a share's work is (a sleeping worker is woken late on a loaded machine) */
+  struct timespec a, b;
+  clock_gettime(CLOCK_MONOTONIC, &a);
+  do clock_gettime(CLOCK_MONOTONIC, &b);
+  while ((b.tv_sec - a.tv_sec) * 1000000000L + (b.tv_nsec - a.tv_nsec) < *ns);
 }
 
 static void test_build_pool_owner_spins(void **state) {
   (void)state;
   qk__pool_t *p = qk__pool_new(NULL, 2);
   assert_non_null(p);
-  /* Not held: a worker 2 ms behind has the caller parked. */
-  long slow = 2000000, short_ = 200000;
+  /* Not held: 50 us, then parked (a worker 2 ms behind has the caller parked). */
+  assert_int_equal(qk__pool_wait_spin_ns(p), 50000);
+  long slow = 2000000, short_ = 150000;
   for (int r = 0; r < 3; r++) assert_int_equal(qk__pool_run(p, 2, owner_share, &slow), 1);
   unsigned parked = qk__pool_owner_parks(p);
   assert_true(parked >= 1); /* (unless the caller itself lost its processor for 2 ms) */
-  /* Held: 0.2 ms behind, the caller spins (at least once in five: a loaded machine may
-   * take the worker's processor for longer than the spin). */
+  /* Held: 1 ms; a worker 0.15 ms behind finds the caller still spinning (in at least one of
+   * twenty regions: a loaded machine may take the worker's processor for longer). */
   qk__pool_hold(p, 1);
-  for (int r = 0; r < 5; r++) assert_int_equal(qk__pool_run(p, 2, owner_share, &short_), 1);
-  assert_true(qk__pool_owner_parks(p) - parked < 5);
+  assert_int_equal(qk__pool_wait_spin_ns(p), 1000000);
+  for (int r = 0; r < 20; r++) assert_int_equal(qk__pool_run(p, 2, owner_share, &short_), 1);
+  assert_true(qk__pool_owner_parks(p) - parked < 20);
   qk__pool_hold(p, 0);
   qk__pool_free(p);
 }
