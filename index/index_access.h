@@ -43,6 +43,17 @@ typedef struct qk__pool qk__pool_t;
 qk__pool_t *qk__pool_new(const qk_allocator_t *a, unsigned nw);
 void qk__pool_free(qk__pool_t *p);
 unsigned qk__pool_threads(const qk__pool_t *p);
+/* How many times the calling thread parked waiting for the end of one of p's regions (it
+ * spins first: 1 ms while it holds the pool, 50 us otherwise); 0 for NULL (tests). */
+unsigned qk__pool_owner_parks(const qk__pool_t *p);
+/* How long the calling thread spins for the end of p's region before it parks, in ns
+ * (p not NULL). */
+unsigned long qk__pool_wait_spin_ns(const qk__pool_t *p);
+/* Where worker i first ran, and in *home where the thread that started it ran then, when
+ * the workers were started away from that processor (Linux, with another processor to
+ * start on); -1 in both otherwise. The worker writes its processor before it runs any
+ * region: read it after a region has run. */
+int qk__pool_start_cpu(const qk__pool_t *p, unsigned i, int *home);
 /* Whether p's workers run in this process (0 for NULL, and in a child forked after they
  * started: there qk__pool_free only frees its memory). */
 int qk__pool_live(const qk__pool_t *p);

@@ -14,7 +14,11 @@
  * regions); a world keeps one from its first threaded update to qk_world_free (eight steps
  * an update, collide/world_threads.c), with a detached job for the end of an update.
  */
+#if defined(__linux__)
+#define _GNU_SOURCE /* sched_getcpu, CPU_SET, pthread_attr_setaffinity_np */
+#else
 #define _POSIX_C_SOURCE 200809L
+#endif
 #include <stdatomic.h>
 #include <string.h>
 #include <time.h>
@@ -25,6 +29,12 @@
 #if defined(QK_HAVE_PTHREADS)
 #include <pthread.h>
 #include <sched.h>
+#endif
+/* Workers started away from the starting thread's processor (see pool_away()). */
+#if defined(QK_HAVE_PTHREADS) && defined(__linux__) && defined(CPU_SET)
+#define QK__POOL_AWAY 1
+#else
+#define QK__POOL_AWAY 0
 #endif
 
 unsigned qk__threads_resolve(uint32_t threads) {
@@ -70,12 +80,19 @@ static void *run_share(void *arg) {
 /* How long a worker spins for the next region before it parks while its pool is held (the
  * gaps between a build's regions, its allocations and prefix sums, and between an update's
  * steps are well below this), and the calling thread for the workers to finish a region
- * before it parks. A spinning thread does not yield: on a loaded machine a yield hands its
- * core to another process for a time slice, which made the worker start a region 0.35-0.6
- * ms late at best (later than a thread created for it); a parked one is woken with the
- * scheduler's preference for a waking thread. */
+ * before it parks when it does not hold the pool. A spinning thread does not yield: on a loaded
+ * machine a yield hands its core to another process for a time slice, which made the worker start a
+ * region 0.35-0.6 ms late at best (later than a thread created for it); a parked one is woken with
+ * the scheduler's preference for a waking thread. */
 #define POOL_SPIN_NS 200000
 #define POOL_WAIT_NS 50000
+/* How long the calling thread waits for the workers to finish a region by spinning while it
+ * holds the pool, before it parks. A parked owner was woken 1-2.6 ms after the last worker
+ * had finished in some regions of the two-thread build (load 9 from other helpers' sessions,
+ * the driver's session at high weight): summed over a build's four regions, 0.88-0.92 ms in
+ * the mean waiting with 50 us of spinning, 0.06-0.25 ms with this (1M uniform points, 40
+ * builds). The shares of a region are unequal by up to half a millisecond (the scatter's). */
+#define POOL_OWNER_SPIN_NS 1000000
 
 /* A spinning loop's step. */
 static inline void pool_relax(void) {
@@ -100,6 +117,7 @@ struct qk__pool {
   atomic_int hold;     /* the owner runs regions back to back: the workers spin between them */
   int quit;
   unsigned n_th;        /* workers started */
+  unsigned owner_parks; /* waits for a region's end that parked (tests) */
   pid_t proc;           /* the process that started them (a forked child has none of them) */
   qk_allocator_t alloc; /* the pool's memory came from here */
   /* The current region (written before gen is advanced, read after it is seen). */
@@ -112,6 +130,12 @@ struct qk__pool {
   void *dctx;
   pthread_t th[QK__MAX_THREADS];
   pworker_t ww[QK__MAX_THREADS];
+#if QK__POOL_AWAY
+  int away;       /* the workers were started away from processor `home_cpu` */
+  int home_cpu;   /* the starting thread's processor when the workers were started */
+  cpu_set_t home; /* the starting thread's processors, which each worker takes back */
+  int start_cpu[QK__MAX_THREADS]; /* where each worker first ran (tests), -1 before */
+#endif
 };
 
 static long long now_ns(void) {
@@ -130,6 +154,14 @@ static void *pool_worker(void *arg) {
   pworker_t *me = arg;
   qk__pool_t *p = me->p;
   unsigned seen = 0; /* (the pool posts nothing before its workers are started) */
+#if QK__POOL_AWAY
+  if (p->away) {
+    /* Started on another processor: from here on the scheduler may place it anywhere the
+     * starting thread may run. */
+    p->start_cpu[me->idx] = sched_getcpu();
+    (void)pthread_setaffinity_np(pthread_self(), sizeof p->home, &p->home);
+  }
+#endif
   for (;;) {
     /* The next region: spin a while, then park. */
     unsigned g = atomic_load_explicit(&p->gen, memory_order_acquire);
@@ -167,19 +199,52 @@ static void pool_post(qk__pool_t *p, qk__share_fn fn, void *ctx, unsigned nw, in
   pthread_mutex_unlock(&p->mu);
 }
 
+unsigned long qk__pool_wait_spin_ns(const qk__pool_t *p) {
+  return atomic_load_explicit(&p->hold, memory_order_relaxed) ? POOL_OWNER_SPIN_NS : POOL_WAIT_NS;
+}
+
 /* Wait for the workers to finish the region posted last. */
 static void pool_wait(qk__pool_t *p) {
   if (!atomic_load_explicit(&p->pending, memory_order_acquire)) return;
-  long long t0 = now_ns();
-  while (atomic_load_explicit(&p->pending, memory_order_acquire) && now_ns() - t0 < POOL_WAIT_NS)
+  long long t0 = now_ns(), spin = (long long)qk__pool_wait_spin_ns(p);
+  while (atomic_load_explicit(&p->pending, memory_order_acquire) && now_ns() - t0 < spin)
     pool_relax();
   pthread_mutex_lock(&p->mu);
+  if (atomic_load_explicit(&p->pending, memory_order_acquire)) p->owner_parks++;
   while (atomic_load_explicit(&p->pending, memory_order_acquire))
     pthread_cond_wait(&p->done, &p->mu);
   pthread_mutex_unlock(&p->mu);
 }
 
 static bool pool_forked(const qk__pool_t *p) { return p->proc != getpid(); }
+
+#if QK__POOL_AWAY
+/* Thread attributes that start a worker on any of the calling thread's processors but the
+ * one it runs on; false (start it as usual) where there is no other. This guest's
+ * scheduler placed a new thread on its creator's processor, next to the running creator,
+ * and left it there for the whole of a build (one vCPU idle, the two shares of every region
+ * run one after the other: 1M uniform points took as long on two threads as on one); a
+ * worker started elsewhere stays there while it spins between regions. The worker takes
+ * the creator's full set of processors back as soon as it runs (pool_worker). */
+static bool pool_away(qk__pool_t *p, pthread_attr_t *attr) {
+  p->away = 0;
+  for (unsigned i = 0; i < QK__MAX_THREADS; i++) p->start_cpu[i] = -1;
+  int me = sched_getcpu();
+  if (me < 0 || me >= CPU_SETSIZE ||
+      pthread_getaffinity_np(pthread_self(), sizeof p->home, &p->home) != 0)
+    return false;
+  cpu_set_t away = p->home;
+  CPU_CLR(me, &away);
+  if (CPU_COUNT(&away) == 0 || pthread_attr_init(attr) != 0) return false;
+  if (pthread_attr_setaffinity_np(attr, sizeof away, &away) != 0) {
+    pthread_attr_destroy(attr);
+    return false;
+  }
+  p->home_cpu = me;
+  p->away = 1;
+  return true;
+}
+#endif
 
 qk__pool_t *qk__pool_new(const qk_allocator_t *a, unsigned nw) {
   if (nw <= 1) return NULL;
@@ -196,11 +261,21 @@ qk__pool_t *qk__pool_new(const qk_allocator_t *a, unsigned nw) {
   atomic_init(&p->busy, 0);
   atomic_init(&p->hold, 0);
   p->proc = getpid();
+  pthread_attr_t attr, *ap = NULL;
+#if QK__POOL_AWAY
+  if (pool_away(p, &attr)) ap = &attr;
+#else
+  (void)attr;
+#endif
   for (unsigned i = 0; i + 1 < nw; i++) {
     p->ww[i] = (pworker_t){p, i};
-    if (pthread_create(&p->th[i], NULL, pool_worker, &p->ww[i])) break;
+    /* (where the system refuses the placement, a worker started as usual) */
+    if (pthread_create(&p->th[i], ap, pool_worker, &p->ww[i]) &&
+        (!ap || pthread_create(&p->th[i], NULL, pool_worker, &p->ww[i])))
+      break;
     p->n_th++;
   }
+  if (ap) pthread_attr_destroy(ap);
   if (p->n_th) return p;
   pthread_cond_destroy(&p->done);
 fail_done:
@@ -227,6 +302,20 @@ void qk__pool_free(qk__pool_t *p) {
 }
 
 unsigned qk__pool_threads(const qk__pool_t *p) { return p ? p->n_th + 1 : 1; }
+
+unsigned qk__pool_owner_parks(const qk__pool_t *p) { return p ? p->owner_parks : 0; }
+
+int qk__pool_start_cpu(const qk__pool_t *p, unsigned i, int *home) {
+  *home = -1;
+#if QK__POOL_AWAY
+  if (!p || !p->away || i >= p->n_th) return -1;
+  *home = p->home_cpu;
+  return p->start_cpu[i];
+#else
+  (void)p, (void)i;
+  return -1;
+#endif
+}
 
 int qk__pool_live(const qk__pool_t *p) { return p && !pool_forked(p); }
 
@@ -275,6 +364,19 @@ void qk__pool_free(qk__pool_t *p) { (void)p; }
 unsigned qk__pool_threads(const qk__pool_t *p) {
   (void)p;
   return 1;
+}
+unsigned qk__pool_owner_parks(const qk__pool_t *p) {
+  (void)p;
+  return 0;
+}
+unsigned long qk__pool_wait_spin_ns(const qk__pool_t *p) {
+  (void)p;
+  return 0;
+}
+int qk__pool_start_cpu(const qk__pool_t *p, unsigned i, int *home) {
+  (void)p, (void)i;
+  *home = -1;
+  return -1;
 }
 int qk__pool_live(const qk__pool_t *p) {
   (void)p;

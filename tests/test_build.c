@@ -47,8 +47,21 @@
  * runs on a worker while the caller goes on, and the next region waits for it; in a child
  * forked after the workers started the pool refuses every region and its free only frees
  * memory.
+ *
+ * Where the pool's workers start (Linux, with more than one processor allowed): away from
+ * the processor the starting thread ran on (this guest's scheduler left a new thread next
+ * to its creator), and, once running, free to run wherever the starting thread may (the
+ * same set of processors, not pinned).
+ *
+ * How the calling thread waits for a region's end: while it holds the pool it spins (up to
+ * 1 ms) rather than parks for a worker that takes a few hundred microseconds more than it
+ * (parked, it was woken late); not held, it parks after 50 us.
  */
+#if defined(__linux__)
+#define _GNU_SOURCE /* sched_getaffinity, CPU_EQUAL */
+#else
 #define _POSIX_C_SOURCE 200809L
+#endif
 #include <math.h>
 #include <pthread.h>
 #include <stdatomic.h>
@@ -624,10 +637,86 @@ static void test_build_pool(void **state) {
   qk__pool_free(p);
 }
 
+#if defined(__linux__) && defined(CPU_SET)
+typedef struct away_probe {
+  cpu_set_t mine; /* the test's processors */
+  int same;       /* share 1 ran with the test's set of processors */
+} away_probe_t;
+
+static void away_share(void *ctx, unsigned w, unsigned nw) {
+  (void)nw;
+  away_probe_t *ap = ctx;
+  if (w != 1) return;
+  cpu_set_t s;
+  CPU_ZERO(&s);
+  ap->same = pthread_getaffinity_np(pthread_self(), sizeof s, &s) == 0 && CPU_EQUAL(&s, &ap->mine);
+}
+#endif
+
+static void owner_share(void *ctx, unsigned w, unsigned nw) {
+  (void)nw;
+  const long *ns = ctx;
+  if (w != 1) return;
+  /* busy, as a share's work is (a sleeping worker is woken late on a loaded machine) */
+  struct timespec a, b;
+  clock_gettime(CLOCK_MONOTONIC, &a);
+  do clock_gettime(CLOCK_MONOTONIC, &b);
+  while ((b.tv_sec - a.tv_sec) * 1000000000L + (b.tv_nsec - a.tv_nsec) < *ns);
+}
+
+static void test_build_pool_owner_spins(void **state) {
+  (void)state;
+  qk__pool_t *p = qk__pool_new(NULL, 2);
+  assert_non_null(p);
+  /* Not held: 50 us, then parked (a worker 2 ms behind has the caller parked). */
+  assert_int_equal(qk__pool_wait_spin_ns(p), 50000);
+  long slow = 2000000, short_ = 150000;
+  for (int r = 0; r < 3; r++) assert_int_equal(qk__pool_run(p, 2, owner_share, &slow), 1);
+  unsigned parked = qk__pool_owner_parks(p);
+  assert_true(parked >= 1); /* (unless the caller itself lost its processor for 2 ms) */
+  /* Held: 1 ms; a worker 0.15 ms behind finds the caller still spinning (in at least one of
+   * twenty regions: a loaded machine may take the worker's processor for longer). */
+  qk__pool_hold(p, 1);
+  assert_int_equal(qk__pool_wait_spin_ns(p), 1000000);
+  for (int r = 0; r < 20; r++) assert_int_equal(qk__pool_run(p, 2, owner_share, &short_), 1);
+  assert_true(qk__pool_owner_parks(p) - parked < 20);
+  qk__pool_hold(p, 0);
+  qk__pool_free(p);
+}
+
+static void test_build_pool_away(void **state) {
+  (void)state;
+#if defined(__linux__) && defined(CPU_SET)
+  away_probe_t ap = {.same = -1};
+  CPU_ZERO(&ap.mine);
+  assert_int_equal(sched_getaffinity(0, sizeof ap.mine, &ap.mine), 0);
+  for (int round = 0; round < 4; round++) {
+    qk__pool_t *p = qk__pool_new(NULL, 2);
+    assert_non_null(p);
+    assert_int_equal(qk__pool_run(p, 2, away_share, &ap), 1);
+    int home, start = qk__pool_start_cpu(p, 0, &home);
+    if (CPU_COUNT(&ap.mine) > 1 && sched_getcpu() >= 0) {
+      assert_true(home >= 0 && CPU_ISSET(home, &ap.mine));
+      assert_true(start >= 0 && CPU_ISSET(start, &ap.mine));
+      assert_int_not_equal(start, home); /* started away */
+    } else {
+      assert_int_equal(start, -1); /* nowhere else to go: started as usual */
+    }
+    assert_int_equal(ap.same, 1); /* and not pinned there */
+    ap.same = -1;
+    qk__pool_free(p);
+  }
+#else
+  skip();
+#endif
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_build_team),
       cmocka_unit_test(test_build_pool),
+      cmocka_unit_test(test_build_pool_away),
+      cmocka_unit_test(test_build_pool_owner_spins),
       cmocka_unit_test(test_build_deep_grid_lines),
       cmocka_unit_test(test_build_threads_adversarial),
       cmocka_unit_test(test_build_tree_beside_sort),
