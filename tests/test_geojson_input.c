@@ -472,10 +472,8 @@ static void test_geojson_streamed(void **state) {
     same_as_whole(t, (size_t)n, 1, names, box, 2);
   }
   /* the countries, when present: every country's name and a 1-degree grid */
-  const char *dir = getenv("QK_SHARED_DIR");
   char path[1024];
-  snprintf(path, sizeof path, "%s/data/countries-50m.geojson", dir ? dir : "../shared");
-  FILE *f = fopen(path, "rb");
+  FILE *f = qkt_open_shared("countries-50m.geojson", path, sizeof path);
   if (!f) {
     print_message("no %s: the countries part skipped\n", path);
     skip();

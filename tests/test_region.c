@@ -1376,10 +1376,8 @@ static void test_region_geojson(void **state) {
 
 static void test_region_countries(void **state) {
   (void)state;
-  const char *dir = getenv("QK_SHARED_DIR");
   char path[1024];
-  snprintf(path, sizeof path, "%s/data/countries-50m.geojson", dir ? dir : "../shared");
-  FILE *f = fopen(path, "rb");
+  FILE *f = qkt_open_shared("countries-50m.geojson", path, sizeof path);
   if (!f) {
     print_message("no %s: skipped\n", path);
     skip();

@@ -103,6 +103,14 @@ long cli_read_line(cli_lines_t *r, const char **why);
  * a quoted field is returned with *why set (NULL otherwise): the caller names the field. */
 long cli_read_record(cli_lines_t *r, const char **why);
 
+/* The exit code for how a line reader stopped: `got` is cli_read_line's or
+ * cli_read_record's last return, `why` its reason. -2 is refused as bad input and -3 as
+ * out of memory, and the end of the input is CLI_OK unless the stream had a read error;
+ * each failure prints "quadkit CMD: PATH:LINE[:COL]: ..." (the column when `columns` and
+ * known; cmd NULL: "quadkit: ..."). */
+int cli_lines_status(const char *cmd, const char *path, const cli_lines_t *r, long got,
+                     const char *why, int columns);
+
 /* Screen an open input with the tool's line reader before a library reader (which takes
  * a line of any length into memory) reads it: a NUL byte or a line past CLI_MAX_LINE is
  * refused ("quadkit CMD: PATH:LINE[:COL]: why", the column when `columns`, as the

@@ -517,17 +517,7 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
       progress(progress_on, ftell(in), total, (size_t)lineno);
     }
   }
-  if (!rc && len == -2) {
-    cli_msg("quadkit join: %s:%lu: %s\n", j->pts_path, rd.phys, bad);
-    rc = CLI_BAD_INPUT;
-  } else if (!rc && len == -3) {
-    cli_msg("quadkit join: %s:%lu: out of memory reading the line\n", j->pts_path, rd.phys);
-    rc = CLI_INTERNAL;
-  }
-  if (!rc && ferror(in)) {
-    cli_msg("quadkit join: %s: read error\n", j->pts_path);
-    rc = CLI_BAD_INPUT;
-  }
+  if (!rc) rc = cli_lines_status("join", j->pts_path, &rd, len, bad, 0);
   if (!rc) rc = flush_chunk(j);
   for (size_t i = 0; i < j->n; i++) free(j->lines[i]);
   j->n = 0;

@@ -232,19 +232,7 @@ static int each_row(const char *path,
     if (rc) break;
   }
   cli_lines_free(&rd);
-  if (!rc && len == -2) {
-    if (rd.col)
-      cli_msg("quadkit world: %s:%lu:%lu: %s\n", path, rd.phys, rd.col, rwhy);
-    else
-      cli_msg("quadkit world: %s:%lu: %s\n", path, rd.phys, rwhy);
-    rc = CLI_BAD_INPUT;
-  } else if (!rc && len == -3) {
-    cli_msg("quadkit world: %s:%lu: out of memory reading the line\n", path, rd.phys);
-    rc = CLI_INTERNAL;
-  } else if (!rc && ferror(f)) {
-    cli_msg("quadkit world: %s: read error\n", path);
-    rc = CLI_BAD_INPUT;
-  }
+  if (!rc) rc = cli_lines_status("world", path, &rd, len, rwhy, 1);
   fclose(f);
   return rc;
 }

@@ -233,6 +233,28 @@ static int read_error(const char *path, qk_status_t st, const qk_error_t *e) {
   return st == QK_ERR_NOMEM ? CLI_INTERNAL : CLI_BAD_INPUT;
 }
 
+int cli_lines_status(const char *cmd, const char *path, const cli_lines_t *r, long got,
+                     const char *why, int columns) {
+  const char *sp = cmd ? " " : "", *c = cmd ? cmd : "";
+  if (got == -2 && r->col && columns) {
+    cli_msg("quadkit%s%s: %s:%lu:%lu: %s\n", sp, c, path, r->phys, r->col, why);
+    return CLI_BAD_INPUT;
+  }
+  if (got == -2) {
+    cli_msg("quadkit%s%s: %s:%lu: %s\n", sp, c, path, r->phys, why);
+    return CLI_BAD_INPUT;
+  }
+  if (got == -3) {
+    cli_msg("quadkit%s%s: %s:%lu: out of memory reading the line\n", sp, c, path, r->phys);
+    return CLI_INTERNAL;
+  }
+  if (ferror(r->f)) {
+    cli_msg("quadkit%s%s: %s: read error\n", sp, c, path);
+    return CLI_BAD_INPUT;
+  }
+  return CLI_OK;
+}
+
 /* Screen an input with the tool's line reader before a library reader sees it (cli.h):
  * the CSV reader takes a line of any length into memory before it checks it (a library matter,
  * include/quadkit/io.h), so /dev/zero or a file without line breaks grew the process
@@ -251,16 +273,7 @@ int cli_screen_input(const char *cmd, const char *path, int columns, FILE **f, c
   const char *why;
   long got;
   while ((got = cli_read_line(&r, &why)) >= 0) continue;
-  int rc = CLI_OK;
-  if (got == -2 && r.col && columns)
-    cli_msg("quadkit%s%s: %s:%lu:%lu: %s\n", sp, c, path, r.phys, r.col, why), rc = CLI_BAD_INPUT;
-  else if (got == -2)
-    cli_msg("quadkit%s%s: %s:%lu: %s\n", sp, c, path, r.phys, why), rc = CLI_BAD_INPUT;
-  else if (got == -3)
-    cli_msg("quadkit%s%s: %s:%lu: out of memory reading the line\n", sp, c, path, r.phys),
-        rc = CLI_INTERNAL;
-  else if (ferror(*f))
-    cli_msg("quadkit%s%s: %s: read error\n", sp, c, path), rc = CLI_BAD_INPUT;
+  int rc = cli_lines_status(cmd, path, &r, got, why, columns);
   cli_lines_free(&r);
   if (!rc && regular && fseek(*f, 0, SEEK_SET) != 0) {
     cli_msg("quadkit%s%s: %s: cannot read it again: %s\n", sp, c, path, strerror(errno));

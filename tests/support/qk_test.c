@@ -147,3 +147,9 @@ void qkt_mesh_view_free(mcr_mesh_t *v) {
   free((void *)v->oseg_of);
   v->oseg = v->oseg_of = NULL;
 }
+
+FILE *qkt_open_shared(const char *name, char *path, size_t cap) {
+  const char *dir = getenv("QK_SHARED_DIR");
+  snprintf(path, cap, "%s/data/%s", dir ? dir : "../shared", name);
+  return fopen(path, "rb");
+}

@@ -56,6 +56,11 @@ void qkt_points(qkt_rng_t *r, qkt_dist_t d, qk_point_t *out, size_t n);
 /* The seed for a test: QK_SEED from the environment, else `def`. Printed by the test. */
 uint64_t qkt_seed(uint64_t def);
 
+/* A file of the shared data, $QK_SHARED_DIR/data/NAME (../shared/data/NAME when that is
+ * unset), opened for reading; its path in path[0, cap). NULL when it cannot be opened
+ * (the caller skips, naming the path). */
+FILE *qkt_open_shared(const char *name, char *path, size_t cap);
+
 /* A canonical description of a tree's shape: every node's depth, leaf flag and count in
  * pre-order, and every leaf's ids sorted (inserts and the bulk build may order a leaf's
  * points apart), hashed. Two trees over the same points with the same rule agree. */
