@@ -517,7 +517,7 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
       progress(progress_on, ftell(in), total, (size_t)lineno);
     }
   }
-  if (!rc) rc = cli_lines_status("join", j->pts_path, &rd, len, bad, 0);
+  if (!rc) rc = cli_lines_status("join", j->pts_path, &rd, len, bad, 1);
   if (!rc) rc = flush_chunk(j);
   for (size_t i = 0; i < j->n; i++) free(j->lines[i]);
   j->n = 0;

@@ -26,4 +26,15 @@ fi
 expect 0 '' -- "$cli" mesh "$tmp/sq.poly" -o "$tmp/ok"
 [ -s "$tmp/ok.node" ] && [ -s "$tmp/ok.ele" ] || fail "mesh -o $tmp/ok wrote no mesh"
 
+# ---- join: a NUL byte or a lone CR in the points is named with its column --------------
+sq='{"type":"Polygon","coordinates":[[[0,0],[1,0],[1,1],[0,1],[0,0]]]}'
+printf '{"type":"FeatureCollection","features":[{"type":"Feature","properties":{"name":"sq"},"geometry":%s}]}\n' "$sq" >"$tmp/sq.geojson"
+printf 'x,y\n0.5,0\0000.5\n' >"$tmp/nul.csv"
+expect 1 'nul.csv:2:6: binary data \(NUL byte\)' -- "$cli" join "$tmp/sq.geojson" "$tmp/nul.csv"
+printf 'x,y\n0.5,0.5\n0.25,0.5\r0.5\n' >"$tmp/cr.csv"
+expect 1 'cr.csv:3:9: a carriage return inside the line' -- "$cli" join "$tmp/sq.geojson" "$tmp/cr.csv"
+# ... in a quoted field's second line: the column on that physical line
+printf 'n,x,y\n"a\nbb\rb",0.5,0.5\n' >"$tmp/cr2.csv"
+expect 1 'cr2.csv:3:3: a carriage return inside the line' -- "$cli" join "$tmp/sq.geojson" "$tmp/cr2.csv" --xy x,y
+
 report
