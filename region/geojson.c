@@ -765,6 +765,24 @@ qk_status_t qk__geojson_read_whole(const char *text, size_t len, const qk_region
   /* Only a failed parse consults errno: a successful call may leave ENOMEM behind (C allows
    * it, and json-c 0.16 under valgrind does on every document), and the failures json-c
    * absorbs were seen to leave the document whole (docs/region.md). */
+  if (!root && jerr == json_tokener_continue && at == len) {
+    /* A number or a word at the very end ("42", "null") leaves json-c waiting for more of
+     * it: the NUL that ends a C string tells it the text ended. Any other wait is a
+     * truncated text, reported below as before. */
+    json_object *v = json_tokener_parse_ex(tok, "", 1);
+    if (json_tokener_get_error(tok) == json_tokener_success)
+      root = v, jerr = json_tokener_success;
+    else
+      json_object_put(v);
+  }
+  if (!root && jerr == json_tokener_success) {
+    /* The document is JSON's null, which json-c gives as no object at all: it was
+     * reported as "unexpected end of input" or "malformed JSON: success". */
+    json_tokener_free(tok);
+    where(text, skip_blanks(text, len, 0), err);
+    return qk__region_fail(err, QK_ERR_PARSE, SIZE_MAX,
+                           "expected a GeoJSON object with a string \"type\", found null");
+  }
   if (errno == ENOMEM && (!root || jerr != json_tokener_success)) {
     json_object_put(root);
     json_tokener_free(tok);

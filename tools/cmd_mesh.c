@@ -55,7 +55,8 @@ static const char *usage_text =
     "                  latitude, in metres (use --round after it, e.g. --round 2^-4)\n"
     "  --feature N     GeoJSON: mesh only feature N (0-based, in file order; default: all)\n"
     "  --field NAME=VALUE\n"
-    "                  GeoJSON: mesh the first feature whose property NAME is VALUE\n"
+    "                  GeoJSON: mesh the first feature whose property NAME is VALUE (as\n"
+    "                  join prints it: null reads as empty); stderr says when others match\n"
     "  --poly FILE     the mesh edges along input segments, with markers (.poly)\n"
     "  --svg FILE      picture of the components, quadtree leaves and triangles\n"
     "  --msh FILE      gmsh 4.1 ASCII mesh: a physical group per component and per marker\n"
@@ -567,6 +568,10 @@ static int read_input(const char *cmd, const mesh_args_t *o, qk_poly_t **poly, p
       return rc == 3 ? CLI_INTERNAL : CLI_BAD_INPUT;
     }
     pp->format = "geojson";
+    if (pp->gj.field_matches > 1)
+      cli_msg("quadkit mesh: --field %s: %zu features match; meshing the first, feature %ld "
+              "(--feature N takes another)\n",
+              o->field, pp->gj.field_matches, pp->gj.field_pick);
     pp->rounded = pp->gj.rounded, pp->merged = pp->gj.merged;
     pp->dropped_rings = pp->gj.dropped_rings, pp->dup_segments = pp->gj.dup_segments;
     pp->split_points = pp->gj.split_points;

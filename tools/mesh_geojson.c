@@ -752,11 +752,15 @@ int mg_read(const char *path, const mg_options_t *o, mg_input_t *out, char *msg,
   if (rc) mg_fail(msg, n, 3, "out of memory");
   long pick = o->feature;
   if (!rc && o->field_name) {
+    /* Every match counted: the first is meshed, and the caller says when there were
+     * others (they would be left out without a word). A property's text is what join
+     * prints: JSON null reads as "", so --field NAME= matches null and "" alike. */
     pick = -1;
-    for (size_t f = 0; f < nf && pick < 0; f++) {
+    for (size_t f = 0; f < nf; f++) {
       const char *v = qk_region_property(layer, (uint32_t)f, o->field_name);
-      if (v && !strcmp(v, o->field_value)) pick = (long)f;
+      if (v && !strcmp(v, o->field_value) && !out->field_matches++) pick = (long)f;
     }
+    out->field_pick = pick;
     if (pick < 0)
       rc = mg_fail(msg, n, 1, "%s: no feature has %s=%s (of %zu features)", path, o->field_name,
                    o->field_value, nf);

@@ -37,4 +37,26 @@ expect 1 'cr.csv:3:9: a carriage return inside the line' -- "$cli" join "$tmp/sq
 printf 'n,x,y\n"a\nbb\rb",0.5,0.5\n' >"$tmp/cr2.csv"
 expect 1 'cr2.csv:3:3: a carriage return inside the line' -- "$cli" join "$tmp/sq.geojson" "$tmp/cr2.csv" --xy x,y
 
+# ---- GeoJSON whose document is null or a bare number ----------------------------------
+# json-c gives null as no object and waits for more after a number at the very end: the
+# messages were "unexpected end of input" and "malformed JSON: success".
+printf 'x,y\n0.5,0.5\n' >"$tmp/p.csv"
+printf 'null' >"$tmp/null.geojson"
+expect 1 'null.geojson:1:1: expected a GeoJSON object with a string "type", found null$' -- "$cli" regions "$tmp/null.geojson"
+printf '  null\n' >"$tmp/null2.geojson"
+expect 1 'null2.geojson:1:3: expected a GeoJSON object with a string "type", found null$' -- "$cli" join "$tmp/null2.geojson" "$tmp/p.csv"
+printf '42' >"$tmp/num.geojson"
+expect 1 'num.geojson:1:1: expected a GeoJSON object with a string "type"$' -- "$cli" regions "$tmp/num.geojson"
+printf '[1' >"$tmp/open.geojson"
+expect 1 'open.geojson:1:3: unexpected end of input$' -- "$cli" regions "$tmp/open.geojson"
+
+# ---- mesh --field: every match counted; null reads as empty text ----------------------
+sq2='{"type":"Polygon","coordinates":[[[2,0],[3,0],[3,1],[2,1],[2,0]]]}'
+printf '{"type":"FeatureCollection","features":[{"type":"Feature","properties":{"name":null},"geometry":%s},{"type":"Feature","properties":{"name":""},"geometry":%s}]}\n' "$sq" "$sq2" >"$tmp/two.geojson"
+expect 0 '^quadkit mesh: --field name=: 2 features match; meshing the first, feature 0 \(--feature N takes another\)$' -- \
+  "$cli" mesh "$tmp/two.geojson" --field name= -o "$tmp/two"
+expect 0 '"features": 1' -- "$cli" mesh "$tmp/two.geojson" --field name= -o "$tmp/two" --stats
+out=$("$cli" mesh "$tmp/sq.geojson" --field name=sq -o "$tmp/one" 2>&1)
+same_text "mesh --field: one match, no note" "$out" ""
+
 report
