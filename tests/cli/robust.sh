@@ -59,4 +59,17 @@ expect 0 '"features": 1' -- "$cli" mesh "$tmp/two.geojson" --field name= -o "$tm
 out=$("$cli" mesh "$tmp/sq.geojson" --field name=sq -o "$tmp/one" 2>&1)
 same_text "mesh --field: one match, no note" "$out" ""
 
+# ---- a signal that ends the process removes the temporaries ----------------------------
+# Outputs are opened before the work (an unwritable path fails at once): a mesh killed
+# while it waited for its input (here a FIFO nobody writes) left m.node.tmp.PID.0,
+# m.ele.tmp.PID.1 and m.svg.tmp.PID.2 behind.
+mkfifo "$tmp/wait.poly"
+mkdir "$tmp/kill"
+for sig in TERM INT HUP; do
+  timeout -s "$sig" 1 "$cli" mesh "$tmp/wait.poly" -o "$tmp/kill/m" --svg "$tmp/kill/m.svg"
+  left=$(ls "$tmp/kill")
+  same_text "SIG$sig: nothing left in the output directory" "$left" ""
+  rm -f "$tmp/kill/"*
+done
+
 report
