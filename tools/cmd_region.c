@@ -608,6 +608,7 @@ int cmd_join(int argc, char **argv) {
   }
   qk_region_t *r = NULL;
   rc = read_layer("join", pos[0], planar, &r);
+  int said = rc != CLI_OK; /* (read_layer printed why, out of memory included) */
   if (!rc) {
     /* A layer without a single polygon puts every point outside: no answer, and most
      * likely the wrong file (a points CSV that GDAL reads as a table, the arguments
@@ -656,7 +657,7 @@ int cmd_join(int argc, char **argv) {
     if (rc2) wfail = 1;
     if (!rc) rc = rc2;
   }
-  if (rc == CLI_INTERNAL && !wfail) cli_error("join", "out of memory");
+  if (rc == CLI_INTERNAL && !wfail && !said) cli_error("join", "out of memory");
   free(j.lines);
   free(j.p);
   free(j.feat);

@@ -72,4 +72,25 @@ for sig in TERM INT HUP; do
   rm -f "$tmp/kill/"*
 done
 
+# ---- join: a layer that runs out of memory is said once, naming the file ---------------
+# An endless GeoJSON from a pipe (a FIFO named .geojson) under a 1 GB address-space limit:
+# "quadkit join: FILE: out of memory reading FILE" was followed by a bare "quadkit join:
+# out of memory". (Not under the sanitizers, which reserve more than the limit.)
+if [ "${QK_SANITIZE:-0}" != 1 ]; then
+  mkfifo "$tmp/endless.geojson"
+  printf 'x,y\n0.5,0.5\n' >"$tmp/p1.csv"
+  yes '[0,0],' >"$tmp/endless.geojson" &
+  writer=$!
+  err=$(
+    ulimit -v 1000000
+    timeout 60 "$cli" join "$tmp/endless.geojson" "$tmp/p1.csv" 2>&1 >/dev/null
+    echo "exit $?"
+  )
+  kill "$writer" 2>/dev/null
+  wait "$writer" 2>/dev/null
+  same_text "join: endless GeoJSON, out of memory said once" \
+    "$(sed "s|$tmp/||g" <<<"$err" | tr '\n' '|')" \
+    "quadkit join: endless.geojson: out of memory reading endless.geojson|exit 3|"
+fi
+
 report
