@@ -18,6 +18,11 @@
 #define POLY_MAX_COUNT (1ul << 26)
 /* Vertex attributes per line beyond this are rejected as absurd. */
 #define POLY_MAX_ATTRIBUTES 1000ul
+/* A line longer than this is refused (the command-line tool's limit for a line of text
+ * input): a row holds at most a number, two coordinates, POLY_MAX_ATTRIBUTES attributes
+ * and a marker, some 25 KB, and without a limit an endless line (a pipe from `yes | tr -d
+ * '\n'`, a file without line breaks) was taken into memory until it ran out. */
+#define POLY_MAX_LINE 1048576ul
 
 /* A line reader that strips `#` comments and splits on blanks, skipping empty lines. */
 typedef struct reader {
@@ -39,7 +44,8 @@ typedef struct reader {
 
 /* Read the next line holding a token. Returns 1, 0 at end of input, -1 out of memory,
  * -2 for a NUL byte (binary data, which no text format holds), -3 for a carriage return
- * not followed by a line feed (CR-only line ends would read as one long line). */
+ * not followed by a line feed (CR-only line ends would read as one long line), -4 for a
+ * line longer than POLY_MAX_LINE (reading stops there). */
 static int next_line(reader_t *r) {
   for (;;) {
     size_t n = 0;
@@ -59,6 +65,10 @@ static int next_line(reader_t *r) {
           return -3;
         }
         if (d == '\n') ungetc(d, r->f);
+      }
+      if (n == POLY_MAX_LINE) {
+        r->line++;
+        return -4;
       }
       if (n + 2 > r->cap) {
         void *p = r->buf;
@@ -293,6 +303,9 @@ static const char *rows_hint(reader_t *r, int fewer) {
 static qk_status_t maybe_line(reader_t *r, qk_mesh_error_t *err, int *got) {
   int g = next_line(r);
   if (g == -2) return rfail(r, err, QK_ERR_PARSE, "binary data (a NUL byte)");
+  if (g == -4)
+    return rfail(r, err, QK_ERR_LIMIT, "line longer than %lu bytes (1 MiB), the limit for a line",
+                 POLY_MAX_LINE);
   if (g == -3)
     return rfail(r, err, QK_ERR_PARSE,
                  "a carriage return inside the line (line ends must be LF or CRLF, not CR alone)");

@@ -43,7 +43,52 @@ typedef struct gj {
   gj_step_t path[GJ_PATH_MAX];
   size_t depth;
   char key[128]; /* a property name on the path (json-c's own is freed before locate()) */
+  /* The text being walked (a whole document, or one feature of a collection read a
+   * feature at a time) and how many steps of the path lead to it: where a value's own
+   * digits are needed (raw()). */
+  const char *text;
+  size_t len, base;
 } gj_t;
+
+static size_t skip_value(const char *t, size_t n, size_t i);
+static size_t locate(const char *t, size_t n, const gj_step_t *path, size_t depth);
+
+/* json-c 0.16 reads an integer beyond 64 bits as INT64_MIN or UINT64_MAX without a word
+ * (later versions refuse it in strict mode): 1e20 written as 100000000000000000000
+ * became 1.8446744073709552e19. Such a value, or a container holding one, is read from
+ * the text instead (raw()). */
+static bool clamped(json_object *o) {
+  return json_object_is_type(o, json_type_int) &&
+         (json_object_get_int64(o) == INT64_MIN || json_object_get_uint64(o) == UINT64_MAX);
+}
+
+static bool clamped_text(const char *s) {
+  return strstr(s, "18446744073709551615") || strstr(s, "-9223372036854775808");
+}
+
+/* The text of the value the path leads to: *off and *end in g->text; false when the path
+ * is not kept whole or the value found is not what `number` asks (a number: '-'
+ * or a digit; else any value). */
+static bool raw(const gj_t *g, bool number, size_t *off, size_t *end) {
+  if (!g->text || g->depth > GJ_PATH_MAX || g->depth < g->base) return false;
+  *off = locate(g->text, g->len, g->path + g->base, g->depth - g->base);
+  if (*off >= g->len) return false;
+  char c = g->text[*off];
+  if (number && c != '-' && (c < '0' || c > '9')) return false;
+  *end = skip_value(g->text, g->len, *off);
+  return true;
+}
+
+/* Is the integer written at text[off, end) beyond what json-c reads exactly (below -2^63,
+ * above 2^64 - 1)? */
+static bool beyond_64_bits(const char *t, size_t off, size_t end) {
+  bool neg = t[off] == '-';
+  size_t d0 = off + neg, z = 0;
+  while (d0 + z + 1 < end && t[d0 + z] == '0') z++;
+  const char *lim = neg ? "9223372036854775808" : "18446744073709551615";
+  size_t m = end - d0 - z, ml = strlen(lim);
+  return m > ml || (m == ml && memcmp(t + d0 + z, lim, ml) > 0);
+}
 
 static void step_in(gj_t *g, const char *name, size_t idx) {
   if (g->depth < GJ_PATH_MAX) g->path[g->depth] = (gj_step_t){name, idx};
@@ -114,6 +159,23 @@ static qk_status_t ring(gj_t *g, json_object *arr, size_t f, size_t poly, size_t
                              "feature %zu, polygon %zu, ring %zu, position %zu: expected [x, y] "
                              "numbers, found %s",
                              f, poly, k, i, shown(p));
+    for (int c = 0; c < 2; c++) {
+      size_t off, end;
+      if (!clamped(c ? y : x)) continue;
+      step_in(g, NULL, (size_t)c);
+      if (!raw(g, true, &off, &end) || beyond_64_bits(g->text, off, end)) {
+        bool shown_raw = raw(g, true, &off, &end);
+        size_t nd = shown_raw ? end - off : 0;
+        return qk__region_fail(g->err, QK_ERR_PARSE, f,
+                               "feature %zu, polygon %zu, ring %zu, position %zu: integer "
+                               "%.*s%s is outside the 64-bit range json-c reads exactly (-2^63 "
+                               "to 2^64-1); write it with an exponent (1e20, not "
+                               "100000000000000000000)",
+                               f, poly, k, i, (int)(nd < 40 ? nd : 40),
+                               shown_raw ? g->text + off : "", nd < 40 ? "" : "...");
+      }
+      step_out(g);
+    }
     double vx = json_object_get_double(x), vy = json_object_get_double(y);
     if (!isfinite(vx) || !isfinite(vy)) { /* (NaN and Infinity were refused: an overflow) */
       step_in(g, NULL, isfinite(vx) ? 1 : 0);
@@ -266,6 +328,21 @@ static qk_status_t properties(gj_t *g, json_object *props, size_t f) {
         s = json_object_to_json_string_ext(v, JSON_C_TO_STRING_PLAIN);
         if (!s) return nomem(g, QK_ERR_NOMEM); /* json-c's malloc failed */
         len = strlen(s);
+        if (clamped_text(s)) {
+          /* An integer beyond 64 bits (an id such as 123456789012345678901234) as written,
+           * not as json-c clamped it; it refused the whole file before. */
+          size_t off, end;
+          snprintf(g->key, sizeof g->key, "%s", k);
+          step_in(g, "properties", 0);
+          step_in(g, g->key, 0);
+          if (strlen(k) >= sizeof g->key || !raw(g, false, &off, &end))
+            return qk__region_fail(g->err, QK_ERR_PARSE, f,
+                                   "feature %zu: property \"%.60s\" holds an integer beyond "
+                                   "64 bits that cannot be read exactly here",
+                                   f, k);
+          step_out(g), step_out(g);
+          s = g->text + off, len = end - off;
+        }
       }
       qk_status_t st = qk__props_add(g->a, &g->rg.props, k, s, len);
       if (st) return nomem(g, st);
@@ -541,16 +618,11 @@ static qk_status_t json_check(const qk_allocator_t *a, const char *text, size_t 
       }
       n = b;
     } else if (c == '-' || (c >= '0' && c <= '9')) {
-      /* A number, read whole. An integer (no fraction, no exponent) beyond 64 bits is
-       * clamped by json-c 0.16 to INT64_MIN or UINT64_MAX without a word (later versions
-       * refuse it in strict mode): 1e20 written as 100000000000000000000 became
-       * 1.8446744073709552e19, a wrong polygon. It is refused here, naming it. */
-      size_t d0 = i + (c == '-'), j = d0;
+      /* A number, read whole: its decimal point needs digits after it. (An integer
+       * beyond 64 bits is dealt with where its value is used: clamped().) */
+      size_t j = i + (c == '-');
       while (j < len && text[j] >= '0' && text[j] <= '9') j++;
-      size_t nd = j - d0;
-      bool integer = true;
       if (j < len && text[j] == '.') {
-        integer = false;
         if (j + 1 >= len || text[j + 1] < '0' || text[j + 1] > '9') {
           where(text, j, err);
           st = qk__region_fail(err, QK_ERR_PARSE, SIZE_MAX,
@@ -558,23 +630,6 @@ static qk_status_t json_check(const qk_allocator_t *a, const char *text, size_t 
           break;
         }
         for (j++; j < len && text[j] >= '0' && text[j] <= '9';) j++;
-      }
-      if (j < len && (text[j] == 'e' || text[j] == 'E')) integer = false;
-      if (integer && nd >= 19) {
-        size_t z = 0; /* (leading zeros: json-c refuses them, but not after a minus) */
-        while (z + 1 < nd && text[d0 + z] == '0') z++;
-        const char *lim = c == '-' ? "9223372036854775808" : "18446744073709551615";
-        size_t m = nd - z, ml = strlen(lim);
-        if (m > ml || (m == ml && memcmp(text + d0 + z, lim, ml) > 0)) {
-          where(text, i, err);
-          st = qk__region_fail(
-              err, QK_ERR_PARSE, SIZE_MAX,
-              "integer %.*s%s is outside the 64-bit range json-c reads exactly (-2^63 "
-              "to 2^64-1); write it with an exponent (1e20, not "
-              "100000000000000000000)",
-              (int)(nd < 40 ? j - i : 40), text + i, nd < 40 ? "" : "...");
-          break;
-        }
       }
       i = j - 1; /* (the loop steps past the number; an exponent is skipped as plain text) */
     } else if (c == 'N' || c == 'I') {
@@ -693,6 +748,7 @@ static qk_status_t read_streamed(const char *text, size_t len, const qk_region_o
       break;
     }
     step_in(&g, NULL, k / 2);
+    g.text = text + sp[k], g.len = e - sp[k], g.base = 2; /* (the path's features/k) */
     st = feature(&g, feat, k / 2);
     json_object_put(feat);
     if (!st) step_out(&g);
@@ -765,6 +821,24 @@ qk_status_t qk__geojson_read_whole(const char *text, size_t len, const qk_region
   /* Only a failed parse consults errno: a successful call may leave ENOMEM behind (C allows
    * it, and json-c 0.16 under valgrind does on every document), and the failures json-c
    * absorbs were seen to leave the document whole (docs/region.md). */
+  if (!root && jerr == json_tokener_continue && at == len) {
+    /* A number or a word at the very end ("42", "null") leaves json-c waiting for more of
+     * it: the NUL that ends a C string tells it the text ended. Any other wait is a
+     * truncated text, reported below as before. */
+    json_object *v = json_tokener_parse_ex(tok, "", 1);
+    if (json_tokener_get_error(tok) == json_tokener_success)
+      root = v, jerr = json_tokener_success;
+    else
+      json_object_put(v);
+  }
+  if (!root && jerr == json_tokener_success) {
+    /* The document is JSON's null, which json-c gives as no object at all: it was
+     * reported as "unexpected end of input" or "malformed JSON: success". */
+    json_tokener_free(tok);
+    where(text, skip_blanks(text, len, 0), err);
+    return qk__region_fail(err, QK_ERR_PARSE, SIZE_MAX,
+                           "expected a GeoJSON object with a string \"type\", found null");
+  }
   if (errno == ENOMEM && (!root || jerr != json_tokener_success)) {
     json_object_put(root);
     json_tokener_free(tok);
@@ -811,6 +885,7 @@ qk_status_t qk__geojson_read_whole(const char *text, size_t len, const qk_region
   g.a = &alloc;
   g.planar = o.planar;
   g.err = err ? err : &scratch;
+  g.text = text, g.len = len, g.base = 0;
   st = document(&g, root); /* json-c's allocations there are checked for NULL */
   json_object_put(root);
   /* An error inside valid JSON (a short ring, a wrong type, a huge coordinate): the line

@@ -12,7 +12,8 @@
  *    two;
  *  - hole points a hair off a boundary, decided exactly;
  *  - 3000 random mutations of a valid file: success or a clean error with a message;
- *  - allocation failure at every N while reading: QK_ERR_NOMEM, no leak.
+ *  - allocation failure at every N while reading: QK_ERR_NOMEM, no leak;
+ *  - a line without end is refused at 1 MiB with little memory taken.
  */
 #include <math.h>
 #include <stdio.h>
@@ -360,6 +361,50 @@ static void test_poly_alloc_failure(void **state) {
   }
 }
 
+/* The allocator of test_poly_endless_line: qkt_alloc_fn, with the peak of live bytes. */
+typedef struct peak_alloc {
+  qkt_alloc_t a;
+  size_t peak;
+} peak_alloc_t;
+
+static void *peak_fn(void *ud, void *ptr, size_t osize, size_t nsize) {
+  peak_alloc_t *p = ud;
+  void *q = qkt_alloc_fn(&p->a, ptr, osize, nsize);
+  if (p->a.live_bytes > p->peak) p->peak = p->a.live_bytes;
+  return q;
+}
+
+/* A line without end (32 MiB of digits, no line break; an endless pipe through the
+ * library API, which the command line's screen does not guard) is refused at 1 MiB on
+ * its line, with the reader's memory under 4 MiB (its buffer doubles to 2 MiB); the same after a
+ * good first line. */
+static void test_poly_endless_line(void **state) {
+  (void)state;
+  const size_t big = (size_t)32 << 20;
+  for (int lead = 0; lead < 2; lead++) {
+    FILE *f = tmpfile();
+    assert_non_null(f);
+    if (lead) fputs("4 2 0 0\n", f);
+    char chunk[4096];
+    memset(chunk, '7', sizeof chunk);
+    for (size_t w = 0; w < big; w += sizeof chunk) fwrite(chunk, 1, sizeof chunk, f);
+    rewind(f);
+    peak_alloc_t pa = {.peak = 0};
+    memset(&pa.a, 0, sizeof pa.a);
+    qk_allocator_t a = {peak_fn, &pa};
+    qk_poly_t *p = NULL;
+    qk_mesh_error_t err;
+    qk_status_t st = qk_poly_read(f, &a, &p, &err);
+    fclose(f);
+    assert_int_equal(st, QK_ERR_LIMIT);
+    assert_null(p);
+    assert_int_equal(err.line, 1 + lead);
+    assert_non_null(strstr(err.message, "line longer than 1048576 bytes"));
+    assert_int_equal(pa.a.live_bytes, 0);
+    if (pa.peak > ((size_t)4 << 20)) fail_msg("lead %d: peak %zu bytes", lead, pa.peak);
+  }
+}
+
 /* qk_poly_round: vertices rounded in place (ties to even), numbers, lines and holes kept;
  * a coordinate that would round past the largest double leaves everything unchanged. */
 static void test_poly_round(void **state) {
@@ -399,7 +444,7 @@ int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_poly_good),      cmocka_unit_test(test_poly_bad),
       cmocka_unit_test(test_poly_mutations), cmocka_unit_test(test_poly_alloc_failure),
-      cmocka_unit_test(test_poly_round),
+      cmocka_unit_test(test_poly_round),     cmocka_unit_test(test_poly_endless_line),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -80,7 +80,8 @@ typedef struct cli_lines {
   size_t pcap;
   unsigned long phys;  /* physical lines read (the current one included) */
   unsigned long first; /* the physical line where the current record starts */
-  unsigned long col;   /* on -2 from cli_read_line: the 1-based byte column, or 0 */
+  unsigned long col;   /* on -2: the 1-based byte column (of a NUL, or of a lone CR
+                          from cli_read_record), or 0 */
   int tee;
   char *tee_buf;
   size_t tee_len, tee_cap;

@@ -4,7 +4,7 @@
  * (projection, rounding: tools/mesh_geojson.c) live here; parsing, meshing and the
  * writers are the library's.
  */
-#define _POSIX_C_SOURCE 200809L
+#define _XOPEN_SOURCE 700 /* realpath, and POSIX 2008 */
 #include "cli.h"
 #include "mesh_geojson.h"
 
@@ -55,7 +55,8 @@ static const char *usage_text =
     "                  latitude, in metres (use --round after it, e.g. --round 2^-4)\n"
     "  --feature N     GeoJSON: mesh only feature N (0-based, in file order; default: all)\n"
     "  --field NAME=VALUE\n"
-    "                  GeoJSON: mesh the first feature whose property NAME is VALUE\n"
+    "                  GeoJSON: mesh the first feature whose property NAME is VALUE (as\n"
+    "                  join prints it: null reads as empty); stderr says when others match\n"
     "  --poly FILE     the mesh edges along input segments, with markers (.poly)\n"
     "  --svg FILE      picture of the components, quadtree leaves and triangles\n"
     "  --msh FILE      gmsh 4.1 ASCII mesh: a physical group per component and per marker\n"
@@ -238,6 +239,40 @@ static int distinct_outputs(const char *cmd, const mesh_args_t *o) {
   return rc;
 }
 
+/* The files PREFIX.node and PREFIX.ele are made beside PREFIX. When PREFIX is a device,
+ * FIFO or socket, or lies in /dev, they would be regular files in the device directory:
+ * `-o /dev/full` (meant as "write nowhere", or to test a full disk) left /dev/full.node
+ * and /dev/full.ele there. Refused as a usage error before any work (/dev/shm, a
+ * directory for files, is not /dev). */
+static int prefix_place(const char *cmd, const char *prefix) {
+  struct stat st;
+  const char *kind = NULL;
+  if (stat(prefix, &st) == 0 && !S_ISREG(st.st_mode) && !S_ISDIR(st.st_mode))
+    kind = S_ISCHR(st.st_mode)    ? "a character device"
+           : S_ISBLK(st.st_mode)  ? "a block device"
+           : S_ISFIFO(st.st_mode) ? "a FIFO"
+                                  : "not a regular file";
+  const char *slash = strrchr(prefix, '/');
+  size_t dlen = slash ? (slash == prefix ? 1 : (size_t)(slash - prefix)) : 1;
+  char *dir = malloc(dlen + 1);
+  if (!dir) {
+    cli_error(cmd, "out of memory");
+    return CLI_INTERNAL;
+  }
+  memcpy(dir, slash ? prefix : ".", dlen);
+  dir[dlen] = '\0';
+  char *real = realpath(dir, NULL);
+  free(dir);
+  int in_dev = real && !strcmp(real, "/dev");
+  free(real);
+  if (!kind && !in_dev) return CLI_OK;
+  cli_error(cmd,
+            "-o PREFIX names the files PREFIX.node and PREFIX.ele, made beside it: '%s' is %s, "
+            "where they must not be made (e.g. -o out/mesh)",
+            prefix, kind ? kind : "in /dev");
+  return CLI_USAGE;
+}
+
 static int parse_args(const char *cmd, int argc, char **argv, mesh_args_t *o) {
   memset(o, 0, sizeof *o);
   o->min_angle = -1;
@@ -288,6 +323,8 @@ static int parse_args(const char *cmd, int argc, char **argv, mesh_args_t *o) {
               o->prefix, plen ? "ends in '/'" : "is empty");
     return CLI_USAGE;
   }
+  int place = prefix_place(cmd, o->prefix);
+  if (place) return place;
   if ((o->mode == QK_MESH_DYADIC || o->mode == QK_MESH_GENERAL) && o->size)
     return usage(cmd, "--size is the book's domain; the other modes use the input's extent");
   size_t len = strlen(o->in);
@@ -531,6 +568,10 @@ static int read_input(const char *cmd, const mesh_args_t *o, qk_poly_t **poly, p
       return rc == 3 ? CLI_INTERNAL : CLI_BAD_INPUT;
     }
     pp->format = "geojson";
+    if (pp->gj.field_matches > 1)
+      cli_msg("quadkit mesh: --field %s: %zu features match; meshing the first, feature %ld "
+              "(--feature N takes another)\n",
+              o->field, pp->gj.field_matches, pp->gj.field_pick);
     pp->rounded = pp->gj.rounded, pp->merged = pp->gj.merged;
     pp->dropped_rings = pp->gj.dropped_rings, pp->dup_segments = pp->gj.dup_segments;
     pp->split_points = pp->gj.split_points;

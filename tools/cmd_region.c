@@ -517,7 +517,7 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
       progress(progress_on, ftell(in), total, (size_t)lineno);
     }
   }
-  if (!rc) rc = cli_lines_status("join", j->pts_path, &rd, len, bad, 0);
+  if (!rc) rc = cli_lines_status("join", j->pts_path, &rd, len, bad, 1);
   if (!rc) rc = flush_chunk(j);
   for (size_t i = 0; i < j->n; i++) free(j->lines[i]);
   j->n = 0;
@@ -608,6 +608,7 @@ int cmd_join(int argc, char **argv) {
   }
   qk_region_t *r = NULL;
   rc = read_layer("join", pos[0], planar, &r);
+  int said = rc != CLI_OK; /* (read_layer printed why, out of memory included) */
   if (!rc) {
     /* A layer without a single polygon puts every point outside: no answer, and most
      * likely the wrong file (a points CSV that GDAL reads as a table, the arguments
@@ -656,7 +657,7 @@ int cmd_join(int argc, char **argv) {
     if (rc2) wfail = 1;
     if (!rc) rc = rc2;
   }
-  if (rc == CLI_INTERNAL && !wfail) cli_error("join", "out of memory");
+  if (rc == CLI_INTERNAL && !wfail && !said) cli_error("join", "out of memory");
   free(j.lines);
   free(j.p);
   free(j.feat);

@@ -198,8 +198,11 @@ static int each_row(const char *path,
     char *line = rd.line;
     ln = rd.phys;
     size_t n = (size_t)len;
-    if (cli_cut_line_end(line, &n)) {
-      rc = bad(path, ln, "%s", CLI_LONE_CR);
+    if (cli_cut_line_end(line, &n)) { /* (named with its column, as a NUL byte is) */
+      const char *cr = memchr(line, '\r', n);
+      cli_msg("quadkit world: %s:%lu:%lu: %s\n", path, ln, (unsigned long)(cr - line) + 1,
+              CLI_LONE_CR);
+      rc = CLI_BAD_INPUT;
       break;
     }
     char *p = line;

@@ -159,6 +159,7 @@ long cli_read_record(cli_lines_t *r, const char **why) {
   r->first = r->phys;
   size_t n = (size_t)got;
   if (cli_cut_line_end(r->line, &n)) {
+    r->col = (unsigned long)((const char *)memchr(r->line, '\r', n) - r->line) + 1;
     *why = CLI_LONE_CR;
     return -2;
   }
@@ -176,6 +177,7 @@ long cli_read_record(cli_lines_t *r, const char **why) {
     if (got < 0) return got;
     size_t c = (size_t)got;
     if (cli_cut_line_end(r->part, &c)) {
+      r->col = (unsigned long)((const char *)memchr(r->part, '\r', c) - r->part) + 1;
       *why = CLI_LONE_CR;
       return -2;
     }

@@ -2,6 +2,7 @@
 #include "mesh_geojson.h"
 
 #include <errno.h>
+#include <limits.h>
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -221,6 +222,22 @@ static int add_geometry(rings_t *r, json_object *geom, uint32_t f, uint32_t *pno
   return rc;
 }
 
+/* The rings of feature f (obj, a Feature or, at the root, a bare geometry) when wanted. */
+static int gather_one(json_object *obj, int collection, size_t f, const unsigned char *want,
+                      size_t nf, rings_t *r) {
+  json_object *t = NULL, *geom = obj;
+  char at[64] = "";
+  if (collection) snprintf(at, sizeof at, "/features/%zu", f);
+  if (json_object_object_get_ex(obj, "type", &t) && !strcmp(json_object_get_string(t), "Feature")) {
+    if (!json_object_object_get_ex(obj, "geometry", &geom)) geom = NULL;
+    strcat(at, "/geometry");
+    if (!collection) r->kind = 1;
+  }
+  uint32_t pno = 0;
+  if (f < nf && want[f] && add_geometry(r, geom, (uint32_t)f, &pno, at)) return 3;
+  return 0;
+}
+
 /* Gather the rings of the features wanted (want[f] nonzero), numbering features as the
  * region reader does: feature f is the file's feature f, whatever its geometry (a bare
  * geometry is feature 0). */
@@ -233,20 +250,121 @@ static int gather(json_object *root, const unsigned char *want, size_t nf, rings
                    json_object_object_get_ex(root, "features", &feats);
   if (collection) n = json_object_array_length(feats);
   r->kind = collection ? 2 : 0;
-  for (size_t f = 0; f < n; f++) {
-    json_object *obj = collection ? json_object_array_get_idx(feats, f) : root, *geom = obj;
-    char at[64] = "";
-    if (collection) snprintf(at, sizeof at, "/features/%zu", f);
-    if (json_object_object_get_ex(obj, "type", &t) &&
-        !strcmp(json_object_get_string(t), "Feature")) {
-      if (!json_object_object_get_ex(obj, "geometry", &geom)) geom = NULL;
-      strcat(at, "/geometry");
-      if (!collection) r->kind = 1;
-    }
-    uint32_t pno = 0;
-    if (f < nf && want[f] && add_geometry(r, geom, (uint32_t)f, &pno, at)) return 3;
-  }
+  for (size_t f = 0; f < n; f++)
+    if (gather_one(collection ? json_object_array_get_idx(feats, f) : root, collection, f, want, nf,
+                   r))
+      return 3;
   *seen = n;
+  return 0;
+}
+
+/* ---- a FeatureCollection one feature at a time: json-c's tree of a whole collection
+ * takes several times its text (a 41 MB file: 399 MB for mesh against 258 MB for
+ * regions, which reads a feature at a time), so when the root is written as
+ * {"type": "FeatureCollection", ..., "features": [...]} each element is parsed on its
+ * own. The text was accepted by the region reader: it is strict JSON without duplicate
+ * names, so a scan of quotes and brackets finds the elements exactly. ---- */
+
+static size_t j_blanks(const char *t, size_t n, size_t i) {
+  while (i < n && (t[i] == ' ' || t[i] == '\t' || t[i] == '\r' || t[i] == '\n')) i++;
+  return i;
+}
+
+/* t[i] is a quote: the index after its closing quote. */
+static size_t j_string(const char *t, size_t n, size_t i) {
+  for (i++; i < n; i++) {
+    if (t[i] == '\\')
+      i++;
+    else if (t[i] == '"')
+      return i + 1;
+  }
+  return n;
+}
+
+/* The index after the value at t[i]. */
+static size_t j_value(const char *t, size_t n, size_t i) {
+  if (i < n && t[i] == '"') return j_string(t, n, i);
+  if (i < n && t[i] != '{' && t[i] != '[') {
+    while (i < n && !strchr(",]} \t\r\n", t[i])) i++;
+    return i;
+  }
+  size_t depth = 0;
+  while (i < n) {
+    char c = t[i];
+    if (c == '"') {
+      i = j_string(t, n, i);
+      continue;
+    }
+    if (c == '{' || c == '[') depth++;
+    if ((c == '}' || c == ']') && --depth == 0) return i + 1;
+    i++;
+  }
+  return n;
+}
+
+/* The spans [sp[2k], sp[2k + 1]) of the root's "features" elements when the root's
+ * "type" is written "FeatureCollection": 0, or 1 (another layout: read it whole), or 3
+ * (out of memory). */
+static int feature_spans(const char *t, size_t n, size_t **sp, size_t *ns) {
+  size_t cap = 0, i = j_blanks(t, n, 0);
+  int is_fc = 0, found = 0;
+  *sp = NULL, *ns = 0;
+  if (n >= 3 && !memcmp(t, "\xEF\xBB\xBF", 3)) i = j_blanks(t, n, 3);
+  if (i >= n || t[i] != '{') return 1;
+  for (i = j_blanks(t, n, i + 1); i < n && t[i] == '"';) {
+    size_t e = j_string(t, n, i);
+    int type = e - i == 6 && !memcmp(t + i, "\"type\"", 6);
+    int feats = e - i == 10 && !memcmp(t + i, "\"features\"", 10);
+    i = j_blanks(t, n, e);
+    if (i >= n || t[i] != ':') break;
+    i = j_blanks(t, n, i + 1);
+    size_t v = i;
+    if (feats && i < n && t[i] == '[') {
+      found = 1;
+      for (i = j_blanks(t, n, i + 1); i < n && t[i] != ']';) {
+        size_t b = i;
+        i = j_value(t, n, i);
+        if (*ns + 2 > cap) {
+          size_t nc = cap ? 2 * cap : 64;
+          size_t *q = realloc(*sp, nc * sizeof *q);
+          if (!q) return 3;
+          *sp = q, cap = nc;
+        }
+        (*sp)[(*ns)++] = b, (*sp)[(*ns)++] = i;
+        i = j_blanks(t, n, i);
+        if (i < n && t[i] == ',') i = j_blanks(t, n, i + 1);
+      }
+      i++;
+    } else {
+      i = j_value(t, n, i);
+      if (type && i - v == 19 && !memcmp(t + v, "\"FeatureCollection\"", 19)) is_fc = 1;
+    }
+    i = j_blanks(t, n, i);
+    if (i < n && t[i] == ',') i = j_blanks(t, n, i + 1);
+  }
+  return is_fc && found ? 0 : 1;
+}
+
+/* gather() over the spans, each element parsed alone: 0, or 3 (out of memory, or an
+ * element json-c does not read alone, which the region reader's check rules out). */
+static int gather_spans(const char *t, const size_t *sp, size_t ns, const unsigned char *want,
+                        size_t nf, rings_t *r, size_t *seen) {
+  r->kind = 2;
+  for (size_t k = 0; k < ns; k += 2) {
+    size_t f = k / 2, len = sp[k + 1] - sp[k];
+    json_object *obj = NULL;
+    if (f < nf && want[f]) { /* (a feature not wanted is not parsed) */
+      json_tokener *tok = len <= INT_MAX ? json_tokener_new() : NULL;
+      if (!tok) return 3;
+      obj = json_tokener_parse_ex(tok, t + sp[k], (int)len);
+      json_tokener_free(tok);
+      if (!obj) return 3;
+    }
+    int rc = obj ? gather_one(obj, 1, f, want, nf, r) : 0;
+    json_object_put(obj);
+    if (rc) return rc;
+  }
+  *seen = ns / 2;
   return 0;
 }
 
@@ -752,11 +870,15 @@ int mg_read(const char *path, const mg_options_t *o, mg_input_t *out, char *msg,
   if (rc) mg_fail(msg, n, 3, "out of memory");
   long pick = o->feature;
   if (!rc && o->field_name) {
+    /* Every match counted: the first is meshed, and the caller says when there were
+     * others (they would be left out without a word). A property's text is what join
+     * prints: JSON null reads as "", so --field NAME= matches null and "" alike. */
     pick = -1;
-    for (size_t f = 0; f < nf && pick < 0; f++) {
+    for (size_t f = 0; f < nf; f++) {
       const char *v = qk_region_property(layer, (uint32_t)f, o->field_name);
-      if (v && !strcmp(v, o->field_value)) pick = (long)f;
+      if (v && !strcmp(v, o->field_value) && !out->field_matches++) pick = (long)f;
     }
+    out->field_pick = pick;
     if (pick < 0)
       rc = mg_fail(msg, n, 1, "%s: no feature has %s=%s (of %zu features)", path, o->field_name,
                    o->field_value, nf);
@@ -776,13 +898,18 @@ int mg_read(const char *path, const mg_options_t *o, mg_input_t *out, char *msg,
   rings_t r;
   memset(&r, 0, sizeof r);
   json_object *root = NULL;
-  if (!rc) {
+  size_t *sp = NULL, ns = 0, seen = 0;
+  int spans = rc ? 1 : feature_spans(text, len, &sp, &ns);
+  if (!rc && spans == 3) rc = mg_fail(msg, n, 3, "out of memory");
+  if (!rc && spans == 0 && gather_spans(text, sp, ns, want, nf, &r, &seen))
+    rc = mg_fail(msg, n, 3, "%s: out of memory parsing its features again", path);
+  free(sp);
+  if (!rc && spans == 1) {
     root = parse_again(text, len);
     if (!root) rc = mg_fail(msg, n, 3, "%s: out of memory parsing it again", path);
   }
   free(text);
-  size_t seen = 0;
-  if (!rc && gather(root, want, nf, &r, &seen)) rc = mg_fail(msg, n, 3, "out of memory");
+  if (!rc && root && gather(root, want, nf, &r, &seen)) rc = mg_fail(msg, n, 3, "out of memory");
   if (!rc && seen != nf)
     rc = mg_fail(msg, n, 3, "%s: %zu features here, %zu for the region reader", path, seen, nf);
   if (!rc) { /* the features that gave rings */

@@ -62,6 +62,8 @@ typedef struct mg_input {
   size_t split_points;  /* vertices inserted into axis-parallel ring edges they lay on */
   double lat0;          /* the projection's latitude (degrees) */
   char name[128];       /* the feature's name (NAME / name / ADMIN), or "" */
+  size_t field_matches; /* --field: how many features match (the first is meshed) */
+  long field_pick;      /* --field: the feature meshed */
 } mg_input_t;
 
 /*

@@ -1,6 +1,7 @@
 /* The atomic output writer: a temporary file renamed over the target on success. */
 #define _XOPEN_SOURCE 700
 #include <errno.h>
+#include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -72,6 +73,48 @@ static void forget_key(const char *key) {
     }
 }
 
+/* The temporaries being written, removed by a signal that ends the process (Ctrl-C, a
+ * `timeout` or `kill`): outputs are opened before the work, so that an unwritable path
+ * fails at once, and a mesh killed while it read or meshed left PREFIX.node.tmp.PID.0
+ * and the like behind. Each entry is set once its string is whole and cleared only after
+ * the file was renamed or removed (a signal between the two unlinks a name no longer
+ * there, which does no harm). */
+static const char *volatile live_tmp[16];
+
+static void remove_temporaries(int sig) {
+  for (size_t i = 0; i < sizeof live_tmp / sizeof *live_tmp; i++)
+    if (live_tmp[i]) unlink(live_tmp[i]); /* (async-signal-safe) */
+  signal(sig, SIG_DFL);
+  raise(sig); /* the status the signal gives, as if unhandled */
+}
+
+static void track_tmp(const char *tmp) {
+  static int installed;
+  if (!installed) {
+    installed = 1;
+    static const int sigs[] = {SIGINT, SIGTERM, SIGHUP};
+    for (size_t i = 0; i < sizeof sigs / sizeof *sigs; i++) {
+      struct sigaction sa, old;
+      memset(&sa, 0, sizeof sa);
+      sa.sa_handler = remove_temporaries;
+      sigemptyset(&sa.sa_mask);
+      /* A signal the caller ignores (nohup's SIGHUP) stays ignored. */
+      if (sigaction(sigs[i], NULL, &old) == 0 && old.sa_handler != SIG_IGN)
+        sigaction(sigs[i], &sa, NULL);
+    }
+  }
+  for (size_t i = 0; i < sizeof live_tmp / sizeof *live_tmp; i++)
+    if (!live_tmp[i]) {
+      live_tmp[i] = tmp;
+      return;
+    }
+}
+
+static void untrack_tmp(const char *tmp) {
+  for (size_t i = 0; i < sizeof live_tmp / sizeof *live_tmp; i++)
+    if (live_tmp[i] == tmp) live_tmp[i] = NULL;
+}
+
 int cli_out_open(const char *cmd, const char *path, cli_out_t *o) {
   memset(o, 0, sizeof *o);
   if (!*path) { /* (it wrote ".tmp.PID.0" and failed renaming it to "", exit 3) */
@@ -134,8 +177,10 @@ int cli_out_open(const char *cmd, const char *path, cli_out_t *o) {
   /* One temporary per output of this process, even when two names reach one file. */
   static unsigned serial;
   snprintf(o->tmp, n, "%s.tmp.%ld.%u", o->path, (long)getpid(), serial++);
+  track_tmp(o->tmp); /* (before it exists: a signal in between unlinks nothing) */
   o->f = fopen(o->tmp, "wb");
   if (!o->f) {
+    untrack_tmp(o->tmp);
     /* The output is written beside its path first: that file may fail where the path
      * itself exists (-o /proc/version said "No such file or directory"). */
     cli_error(cmd, "cannot write %s: %s (creating the temporary file %s beside it)", path,
@@ -183,6 +228,7 @@ int cli_out_close(const char *cmd, cli_out_t *o, int ok) {
     remove(o->tmp);
     if (rc == CLI_INTERNAL) cli_error(cmd, "failed writing %s", o->path);
   }
+  untrack_tmp(o->tmp);
   free(o->path);
   free(o->tmp);
   forget_key(o->key);

@@ -65,11 +65,16 @@ typedef struct qk_poly qk_poly_t;
 /**
  * Read Triangle's `.poly` format: vertices (`#` comments, first index 0 or 1, optional
  * attributes and boundary markers, which are ignored), segments, a holes section
- * (required, "0" for none, as in Triangle) and optional regional attributes. Only syntax is checked
- * here; the geometry is checked by qk_mesh_generate(). \param [in] f an open stream, owned by the
- * caller. \param [in] allocator NULL for libc; copied. \param [out] out the input, freed with
- * qk_poly_free(); NULL on error. \param [out] err where and why the input was rejected (may be
- * NULL). \return QK_OK, QK_ERR_PARSE, QK_ERR_LIMIT (absurd counts), QK_ERR_IO or QK_ERR_NOMEM.
+ * (required, "0" for none, as in Triangle) and optional regional attributes. Only syntax
+ * is checked here; the geometry is checked by qk_mesh_generate(). Reading stops at the
+ * first NUL byte (binary data), at a carriage return not followed by a line feed and at a
+ * line longer than 1 MiB (1048576 bytes), so an endless stream is never taken into memory.
+ * \param [in] f an open stream, owned by the caller.
+ * \param [in] allocator NULL for libc; copied.
+ * \param [out] out the input, freed with qk_poly_free(); NULL on error.
+ * \param [out] err where and why the input was rejected (may be NULL).
+ * \return QK_OK, QK_ERR_PARSE, QK_ERR_LIMIT (absurd counts, a line past 1 MiB), QK_ERR_IO
+ *         or QK_ERR_NOMEM.
  */
 qk_status_t qk_poly_read(FILE *f, const qk_allocator_t *allocator, qk_poly_t **out,
                          qk_mesh_error_t *err);

@@ -137,9 +137,9 @@ nothing "$tmp/dp"
 # ---- CR-only line ends: an error naming the line (world and join read one line, the
 # rest dropped without a word) ------------------------------------------------------------
 printf '1,disc,0,0,1\r2,disc,0.5,0,1\r' >"$tmp/wcr.csv"
-expect 1 'wcr.csv:1: a carriage return inside the line' -- "$cli" world "$tmp/wcr.csv" "$tmp/none.csv"
+expect 1 'wcr.csv:1:13: a carriage return inside the line' -- "$cli" world "$tmp/wcr.csv" "$tmp/none.csv"
 printf 'x,y\r0.5,0.5\r' >"$tmp/jcr.csv"
-expect 1 'jcr.csv:1: a carriage return inside the line' -- "$cli" join "$tmp/gc.geojson" "$tmp/jcr.csv" --planar
+expect 1 'jcr.csv:1:4: a carriage return inside the line' -- "$cli" join "$tmp/gc.geojson" "$tmp/jcr.csv" --planar
 expect 1 'jcr.csv:1:4: a carriage return inside the line' -- "$cli" tree "$tmp/jcr.csv"
 printf '1,disc,0,0,1\r\n2,disc,0.5,0,1\r\n' >"$tmp/wcrlf.csv"
 same_text "world: CRLF still fine" "$("$cli" world "$tmp/wcrlf.csv" "$tmp/none.csv" | tr '\n' ' ')" "frame,a,b 0,1,2 "

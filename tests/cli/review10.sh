@@ -38,7 +38,7 @@ expect 1 "^quadkit: /dev/zero:1:1: $nul" -- limited "$cli" locate "$tmp/p.csv" /
 expect 1 "^quadkit: /dev/zero:1:1: $nul" -- limited "$cli" collide /dev/zero
 expect 1 "^quadkit: /dev/zero:1:1: $nul" -- limited "$cli" raycast "$tmp/d.csv" /dev/zero
 expect 1 "^quadkit: /dev/zero:1:1: $nul" -- limited "$cli" geo knn /dev/zero "$tmp/p.csv" -k 1
-expect 1 "^quadkit join: /dev/zero:1: $nul" -- limited "$cli" join "$tmp/sq.json" /dev/zero --planar
+expect 1 "^quadkit join: /dev/zero:1:1: $nul" -- limited "$cli" join "$tmp/sq.json" /dev/zero --planar
 expect 1 "^quadkit world: /dev/zero:1:1: $nul" -- limited "$cli" world /dev/zero "$tmp/obj.csv"
 # a NUL byte after a 2 MB line without a line break: the line limit speaks first
 { printf 'x,y\n1,'; head -c 2000000 /dev/zero | tr '\0' 1; printf '\0\n'; } >"$tmp/long-nul.csv"
@@ -117,7 +117,7 @@ expect 0 '^1,1,1,' -- timeout 30 "$cli" join "$tmp/sq.json" "$tmp/wide.csv" --pl
 printf 'x,y\n1,1\n' | iconv -f UTF-8 -t UTF-16 >"$tmp/u16.csv"
 u16='UTF-16 text \(a UTF-16 byte order mark\): text input must be UTF-8 or ASCII; convert it first \(iconv -f UTF-16 -t UTF-8\)$'
 expect 1 "^quadkit: $tmp/u16.csv:1:1: $u16" -- "$cli" tree "$tmp/u16.csv"
-expect 1 "^quadkit join: $tmp/u16.csv:1: $u16" -- "$cli" join "$tmp/sq.json" "$tmp/u16.csv" --planar
+expect 1 "^quadkit join: $tmp/u16.csv:1:1: $u16" -- "$cli" join "$tmp/sq.json" "$tmp/u16.csv" --planar
 expect 1 "^quadkit world: $tmp/u16.csv:1:1: $u16" -- "$cli" world "$tmp/u16.csv" "$tmp/obj.csv"
 
 # ---- world: a row of the wrong width said what it expected, not what it found ----------

@@ -39,7 +39,7 @@ expect 1 "^quadkit join: $tmp/ml-open.csv:1:5: field 3: unterminated quoted fiel
 printf 'x,y\n1,1\n2,2\n3,"3\n' >"$tmp/ml-open2.csv"
 expect 1 "^quadkit join: $tmp/ml-open2.csv:4:3: field 2: unterminated quoted field" -- "$cli" join "$tmp/sq.geojson" "$tmp/ml-open2.csv"
 printf 'x,y,n\n1,1,"a\r\nb"\r\n2,2\x00,c\n' >"$tmp/ml-nul.csv"
-expect 1 "^quadkit join: $tmp/ml-nul.csv:4: binary data \\(NUL byte\\) in a text file$" \
+expect 1 "^quadkit join: $tmp/ml-nul.csv:4:4: binary data \\(NUL byte\\) in a text file$" \
   -- "$cli" join "$tmp/sq.geojson" "$tmp/ml-nul.csv"
 
 # ---- join --boundary open on the antimeridian -------------------------------------------

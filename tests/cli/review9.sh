@@ -75,7 +75,7 @@ nothing_written "$tmp/zm"
 # wrote nothing, not even the header, and exited 0; world said "no objects". (The tool's
 # line reader now stops at the first NUL byte, and at a line past 1 MiB, before memory
 # runs out: tests/cli/review10.sh; these checked "out of memory reading the line", exit 3.)
-expect 1 "^quadkit join: /dev/zero:1: binary data \\(NUL byte\\) in a text file$" \
+expect 1 "^quadkit join: /dev/zero:1:1: binary data \\(NUL byte\\) in a text file$" \
   -- timeout 60 "$cli" join "$tmp/sq.json" /dev/zero --planar
 printf '1,disc,0,0,1\n' >"$tmp/obj.csv"
 expect 1 "^quadkit world: /dev/zero:1:1: binary data \\(NUL byte\\) in a text file$" \
