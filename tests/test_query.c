@@ -521,6 +521,15 @@ static void test_query_stop_and_bad_args(void **state) {
   assert_int_equal(m, 0);
   assert_int_equal(qk_query_knn(NULL, (qk_point_t){0, 0}, 1, INFINITY, nb, &m), QK_ERR_INVALID);
   assert_int_equal(qk_query_range_ids(t, (qk_box_t){0, 0, 1, 1}, NULL, 5, &m), QK_ERR_INVALID);
+  /* Either handle missing is invalid on its own (the mutation sweep found neither case
+   * tested: `!tree && !loc` passed). */
+  /* qk_query_radius_list's own argument checks (no other test reached them). */
+  assert_int_equal(qk_query_radius_list(NULL, p[0], 1, nb, 4, &m), QK_ERR_INVALID);
+  assert_int_equal(qk_query_radius_list(t, p[0], 1, nb, 4, NULL), QK_ERR_INVALID);
+  assert_int_equal(qk_query_radius_list(t, p[0], 1, NULL, 4, &m), QK_ERR_INVALID);
+  qk_location_t lc;
+  assert_int_equal(qk_query_locate(NULL, p[0], &lc), QK_ERR_INVALID);
+  assert_int_equal(qk_query_locate(t, p[0], NULL), QK_ERR_INVALID);
   /* Radius of infinity reaches everything; a zero radius on a stored point finds it. */
   assert_int_equal(qk_query_radius_list(t, (qk_point_t){-1e300, 1e300}, INFINITY, NULL, 0, &m),
                    QK_OK);

@@ -15,9 +15,13 @@
  *    on random layers == a brute force over each ring's pairs of edges;
  *  - lon/lat mode: an antimeridian-crossing square, a ring around the south pole,
  *    longitudes 180 / -180 / 540, latitudes beyond the poles, planar mode switching it off;
+ *    slanted edges across the antimeridian, both ways == even-odd on the unwrapped rings;
+ *  - the refinement's decisions (answers cannot see them): on separated squares of 4
+ *    edges with capacity 4, every leaf holds at most 4 edges;
  *  - batch == single, threaded batch == single; batches large enough for the Morton order
  *    (with vertices, far and non-finite points, failed scratch allocation) == single;
  *  - allocation failure at every N (arrays and GeoJSON): QK_ERR_NOMEM, nothing leaked;
+ *    a build that succeeds despite a failure (a shrink) has the index of a clean build;
  *  - without keep_tree: the same index and answers as with the tree, allocation failures;
  *  - GeoJSON: Feature, bare geometry, skipped geometries, properties; errors with line
  *    and column, feature index and reason;
@@ -1186,13 +1190,26 @@ static void test_region_without_tree(void **state) {
     qk_region_free(r0);
     qk_region_free(r1);
   }
+  /* A build that succeeds although an allocation failed (only a shrink may fail so: it
+   * keeps the block) makes the same index as one without failures; the mutation sweep
+   * found a failed split turned into a leaf (a coarser index, answers unchanged) accepted
+   * here. */
+  qk_region_t *ref = tl_build(&t, 2, NULL, NULL);
+  qk_region_stats_t sref;
+  qk_region_stats(ref, &sref);
+  qk_region_free(ref);
   for (size_t k = 1;; k++) {
     qkt_alloc_t as;
     qk_allocator_t al = qkt_alloc_make(&as); /* (it clears the counts) */
     as.fail_at = k;
     qk_status_t st;
     qk_region_t *r = tl_build(&t, 2, &al, &st);
-    if (st == QK_OK) { /* all succeeded, or only a shrink failed (it keeps the block) */
+    if (st == QK_OK) {
+      qk_region_stats_t sr;
+      qk_region_stats(r, &sr);
+      assert_int_equal(sr.leaves, sref.leaves);
+      assert_int_equal(sr.leaf_edges, sref.leaf_edges);
+      assert_int_equal(sr.depth, sref.depth);
       qk_region_free(r);
       assert_int_equal(as.live_blocks, 0);
       if (!as.failed) break;
@@ -1597,8 +1614,104 @@ static void test_region_fuzz_corpus(void **state) {
 #endif
 }
 
+/* Even-odd test of (x, y) against the ring q[0..n) (closed by its first vertex), on the
+ * unwrapped plane. Exact here: every coordinate is a multiple of 1/4 below 2^9, so each
+ * product is exact in a double. */
+static int unwrapped_inside(const double *q, size_t n, double x, double y) {
+  int in = 0;
+  for (size_t i = 0; i < n; i++) {
+    double ax = q[2 * i], ay = q[2 * i + 1];
+    double bx = q[2 * ((i + 1) % n)], by = q[2 * ((i + 1) % n) + 1];
+    if ((ay > y) != (by > y)) {
+      double side = (bx - ax) * (y - ay) - (by - ay) * (x - ax);
+      if ((by > ay) ? side > 0 : side < 0) in = !in;
+    }
+  }
+  return in;
+}
+
+/* Slanted edges across the antimeridian: the cut's latitude is interpolated (prepare.c's
+ * cut_lat), in both directions. Feature 0 crosses eastward, from (170, 0) to (-170, 20)
+ * (cut at latitude 10); feature 1 westward, from (-170, -40) to (170, -20) (cut at -30).
+ * The oracle is the even-odd rule on the rings with their western longitudes moved by
+ * 360 (an unwrapped plane where the rings do not cross anything), at points off every
+ * edge. The mutation sweep found the eastward cut's latitude untested: with `ax <= m` for
+ * `ax == m` every eastward cut took the start's latitude, and only edges along a
+ * latitude crossed the antimeridian in the other tests. */
+static void test_region_antimeridian_slanted(void **state) {
+  (void)state;
+  double xy[] = {170,  0,   -170, 20,  -170, 30,  170,  30,  170,  0,
+                 -170, -40, 170,  -20, 170,  -10, -170, -10, -170, -40};
+  const double u0[] = {170, 0, 190, 20, 190, 30, 170, 30};
+  const double u1[] = {190, -40, 170, -20, 170, -10, 190, -10};
+  size_t rs[] = {0, 5, 10}, fs[] = {0, 1, 2};
+  qk_region_t *r = lonlat(xy, rs, 2, fs, 2, 0);
+  size_t checked = 0;
+  for (double lon = 165.5; lon < 195; lon += 1)
+    for (double lat = -44.75; lat < 35; lat += 0.5) {
+      uint32_t want = unwrapped_inside(u0, 4, lon, lat)   ? 0
+                      : unwrapped_inside(u1, 4, lon, lat) ? 1
+                                                          : QK_NONE;
+      double x = lon > 180 ? lon - 360 : lon;
+      for (int rule = 0; rule < 3; rule++) {
+        uint32_t got = at(r, x, lat, (qk_boundary_t)rule);
+        if (got != want)
+          fail_msg("(%g, %g) rule %d: locate %d, unwrapped even-odd %d", x, lat, rule, (int)got,
+                   (int)want);
+      }
+      checked += want != QK_NONE;
+    }
+  assert_true(checked > 200); /* (the grid does meet both features) */
+  qk_region_free(r);
+}
+
+/* The refinement splits a cell while more than C edges meet it and the split makes
+ * progress (refine.c, and build_top.c's one pass over the top levels, which must make the
+ * same decisions). On a lattice of separated squares of 4 edges each, with C = 4, a cell
+ * holding edges of two squares always separates them within the stall budget (two squares
+ * 21+ units apart cannot share a quadrant for three halvings without the parent holding
+ * others), so every leaf ends with at most C edges. The answers alone cannot see a cell
+ * left unsplit: the mutation sweep found the leaf test of refine.c (d + 1 < maxd) and
+ * build_top.c's progress test (the children's counts) free to change. */
+static void test_region_leaves_split_to_capacity(void **state) {
+  (void)state;
+  uint64_t seed = qkt_seed(4242);
+  qkt_rng_t g;
+  qkt_rng_seed(&g, seed);
+  for (int round = 0; round < 4; round++) {
+    tl_t t;
+    tl_init(&t);
+    long G = 10 + 4 * round; /* G rows of G squares: one feature per row */
+    for (long i = 0; i < G; i++) {
+      for (long j = 0; j < G; j++) {
+        long x = 100 * j + (long)qkt_rng_below(&g, 60), y = 100 * i + (long)qkt_rng_below(&g, 60);
+        long sq[8] = {x, y, x + 20, y, x + 20, y + 20, x, y + 20};
+        tl_ring(&t, sq, 4);
+      }
+      tl_end_feature(&t);
+    }
+    qk_region_t *r = tl_build(&t, 4, NULL, NULL);
+    qk_region_stats_t st;
+    qk_region_stats(r, &st);
+    size_t sum = 0;
+    for (size_t i = 0; i < r->n_leaves; i++) {
+      if (r->leaves[i].ne > 4)
+        fail_msg("seed %llu, %ld x %ld squares: leaf %zu holds %u edges (capacity 4)",
+                 (unsigned long long)seed, G, G, i, (unsigned)r->leaves[i].ne);
+      sum += r->leaves[i].ne;
+    }
+    assert_int_equal(sum, st.leaf_edges);
+    /* Every square's four edges are in some leaf. */
+    assert_true(st.leaf_edges >= 4 * (size_t)(G * G));
+    qk_region_free(r);
+    tl_free(&t);
+  }
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
+      cmocka_unit_test(test_region_leaves_split_to_capacity),
+      cmocka_unit_test(test_region_antimeridian_slanted),
       cmocka_unit_test(test_region_random_vs_oracle),
       cmocka_unit_test(test_region_grid_sides),
       cmocka_unit_test(test_region_build_grid_lines),
