@@ -2,7 +2,10 @@
 //
 // Implementations (each fed the same boxes every frame, each answering with the pair
 // count and a checksum of (a, b), a < b, that the driver compares before timing):
-//   quadkit   qk_world: move every box, qk_world_update, walk the pairs.
+//   quadkit   qk_world: move every box, qk_world_update, walk the pairs with
+//             qk_world_pairs_parallel on the world's threads (one: the same call on the
+//             calling thread alone), each worker counting and hashing its pairs into an
+//             accumulator of its own, summed after the walk.
 //   grid      a uniform grid as users write one: cell = the largest box, boxes filed by
 //             their lower-left corner with a counting sort every frame, 3x3 cells checked.
 //   sap       sort and sweep on x with the order kept from frame to frame (insertion
@@ -55,9 +58,13 @@ class QuadkitWorld : public WorldImpl {
   std::vector<qk_handle_t> h;
   unsigned threads;
   double upd = 0;
+  struct alignas(64) Sum {
+    PairSum s;
+  };
+  std::vector<Sum> sums;
 
 public:
-  explicit QuadkitWorld(unsigned th = 1) : threads(th) {}
+  explicit QuadkitWorld(unsigned th = 1) : threads(th), sums(th) {}
   ~QuadkitWorld() override { qk_world_free(w); }
   const char *name() const override { return "quadkit"; }
   void init(const std::vector<Box> &boxes) override {
@@ -80,13 +87,18 @@ public:
     double t0 = now_seconds();
     qk_world_update(w);
     upd = now_seconds() - t0;
-    qk_world_pairs(
+    // Worker t of the walk adds into sums[t], a cache line of its own (two workers adding
+    // into one line would pass it between their cores at every pair); every worker
+    // number is below the threads option.
+    for (Sum &s : sums) s.s = PairSum();
+    qk_world_pairs_parallel(
         w, QK_PAIRS_ALL,
-        [](qk_handle_t a, qk_handle_t b, void *ud) {
-          add_pair(*(PairSum *)ud, QK_HANDLE_SLOT(a), QK_HANDLE_SLOT(b));
+        [](qk_handle_t a, qk_handle_t b, unsigned worker, void *ud) {
+          add_pair(((Sum *)ud)[worker].s, QK_HANDLE_SLOT(a), QK_HANDLE_SLOT(b));
           return 0;
         },
-        &out);
+        sums.data());
+    for (const Sum &s : sums) out.pairs += s.s.pairs, out.hash += s.s.hash;
   }
   size_t bytes() const override { return qk_world_bytes(w); }
   size_t pair_bytes() const override { return qk_world_pair_bytes(w); }

@@ -235,13 +235,15 @@ typedef enum qk_pairs_which {
 /** World options; initialise with qk_world_options_init(). */
 typedef struct qk_world_options {
   const qk_allocator_t *allocator; /**< NULL: libc. Must be thread-safe when threads > 1. */
-  unsigned threads;                /**< threads for update and batch queries (1: none) */
+  unsigned threads;                /**< threads for update, batch queries and
+                                        qk_world_pairs_parallel (1: none) */
   double margin;                   /**< fattening of each object's box, as a fraction of its
                                         size, 0..16 (default 0.5); larger: fewer re-filings */
   double min_margin;               /**< absolute fattening added, 0..2^100 (default 0) */
-  size_t thread_min;               /**< an update uses the threads only from this many live
-                                        objects (default 32768: below it, starting threads
-                                        costs more than they save) */
+  size_t thread_min;               /**< an update (and qk_world_pairs_parallel) uses the
+                                        threads only from this many live objects (default
+                                        32768: below it, starting threads costs more than
+                                        they save) */
 } qk_world_options_t;
 
 /** A moving-objects world; see docs/collide.md. */
@@ -356,6 +358,58 @@ qk_status_t qk_world_pairs(const qk_world_t *w, qk_pairs_which_t which, qk_world
  */
 qk_status_t qk_world_pairs_list(const qk_world_t *w, qk_pairs_which_t which, qk_world_pair_t *out,
                                 size_t cap, size_t *n_out);
+
+/**
+ * The pairs of the last update from index first on, in the order of qk_world_pairs_list():
+ * pairs first, first + 1, ... into a buffer, so that threads of the caller's own can each
+ * take a slice of the pairs (first = 0 is qk_world_pairs_list()). Finding pair first costs
+ * a bisection over the rows of the pairs, not a walk of the pairs before it. Like every
+ * read-only call it may run from many threads at once while the world is not changed.
+ * \param [in] w the world.
+ * \param [in] which all, began or ended.
+ * \param [in] first the index of the first pair wanted (any value: from the count on,
+ *             there are none).
+ * \param [out] out up to cap pairs: pairs first .. first + cap - 1 of the order, those of
+ *              them below the count (may be NULL when cap is 0).
+ * \param [in] cap the buffer's size.
+ * \param [out] n_out the full count of the list, as qk_world_pairs_list() gives it, whatever
+ *              first and cap: min(cap, n_out - first) pairs were written when first <
+ *              n_out, none otherwise.
+ * \return QK_OK or QK_ERR_INVALID (w or n_out NULL, out NULL with cap > 0, which not a
+ *         qk_pairs_which_t).
+ */
+qk_status_t qk_world_pairs_range(const qk_world_t *w, qk_pairs_which_t which, size_t first,
+                                 qk_world_pair_t *out, size_t cap, size_t *n_out);
+
+/** Called per pair by qk_world_pairs_parallel() on worker `worker`; nonzero stops the walk. */
+typedef int (*qk_world_pair_worker_fn)(qk_handle_t a, qk_handle_t b, unsigned worker, void *ud);
+
+/**
+ * qk_world_pairs() on the world's threads. The pairs of the last update, in the order of
+ * qk_world_pairs_list(), are cut into nw contiguous ranges of nearly equal counts (nw: the
+ * threads an update uses, that is the threads option, or 1 below thread_min live
+ * objects; at most 64, and at most the count); worker t in [0, nw) gets range t, in
+ * order, on one thread (worker 0 on the calling thread). So the workers' pairs
+ * concatenated in worker order are qk_world_pairs_list()'s, and accumulators indexed by
+ * worker need no lock (keep them on cache lines of their own: workers writing one line
+ * slow each other). fn runs on several threads at once: it must be safe so, and may call
+ * the world's read-only functions, but the world must not be changed until this call
+ * returns. The threads are the world's workers (those of qk_world_update(), started by
+ * the first update that used them) when they are free, else threads started for the
+ * call; it allocates nothing. A nonzero return from fn stops the walk: that worker calls
+ * fn no more, and each other worker stops within 64 pairs after it sees the request (it
+ * looks before each block of 64 of its pairs); each worker's pairs are a prefix of its
+ * range.
+ * \param [in] w the world.
+ * \param [in] which all, began or ended.
+ * \param [in] fn called once per pair (unless stopped) with the pair's handles, a's slot
+ *             below b's, and the worker.
+ * \param [in] ud passed to fn.
+ * \return QK_OK (also when fn stopped the walk) or QK_ERR_INVALID (w or fn NULL, which
+ *         not a qk_pairs_which_t).
+ */
+qk_status_t qk_world_pairs_parallel(const qk_world_t *w, qk_pairs_which_t which,
+                                    qk_world_pair_worker_fn fn, void *ud);
 
 /**
  * Objects overlapping a shape (a box, disc, point or segment; touching counts), exactly,
