@@ -11,8 +11,11 @@
  * the other core cost 0.03-2 ms a region on the two vCPUs of the seventeenth session's
  * machine (more than the build's regions take on two threads); a pool pays that once. The
  * bulk build holds one for its length (a team: qk__team_begin/qk__team_end, four to six
- * regions); a world keeps one from its first threaded update to qk_world_free (eight steps
- * an update, collide/world_threads.c), with a detached job for the end of an update.
+ * regions), and so do the kNN, locate, radius and ray batches (their sorts' regions and the
+ * queries'); a world keeps one from its first threaded update to qk_world_free (eight steps
+ * an update, collide/world_threads.c), with a detached job for the end of an update. Threads
+ * created for a region, and a pool's workers, start away from the creating thread's
+ * processor (start_away).
  */
 #if defined(__linux__)
 #define _GNU_SOURCE /* sched_getcpu, CPU_SET, pthread_attr_setaffinity_np */
