@@ -208,7 +208,8 @@ typedef struct rctx {
   qk_status_t *bad_st;
 } rctx_t;
 
-static void rays_job(unsigned i, void *ud) {
+static void rays_job(unsigned i, unsigned w, void *ud) {
+  (void)w;
   rctx_t *r = ud;
   size_t lo = (size_t)i * RAYS_PER_JOB, hi = lo + RAYS_PER_JOB < r->n ? lo + RAYS_PER_JOB : r->n;
   for (size_t k = lo; k < hi; k++) {
@@ -347,11 +348,17 @@ qk_status_t qk_collider_raycast_batch(const qk_collider_t *c, const qk_point_t *
   }
   size_t order_bytes = 0;
   uint64_t *order = NULL;
+  /* The sort's nine regions and the rays' on one team of workers, started once (as a
+   * tree's batches: QK__BATCH_TEAM in query/batch.c). */
+  qk__team_begin(threads < n_jobs ? threads : (unsigned)n_jobs);
   if (n >= RAYS_SORT_MIN && n <= UINT32_MAX)
     order = ray_order(c, origins, n, threads, &order_bytes);
   for (size_t i = 0; i < n_jobs; i++) first_bad[i] = n;
   rctx_t r = {c, origins, dirs, n, tmax, hits, order, first_bad, bad_st};
-  qk__run_jobs(threads, (unsigned)n_jobs, rays_job, &r);
+  /* The jobs from a shared counter, not job i on thread i mod threads: a thread slowed
+   * by another process on its processor, or started late, then casts fewer of them. */
+  qk__run_jobs_dynamic(threads, (unsigned)n_jobs, rays_job, &r);
+  qk__team_end();
   /* The error of the lowest-numbered failed ray. */
   qk_status_t st = QK_OK;
   size_t bad = n;

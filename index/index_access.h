@@ -54,6 +54,10 @@ unsigned long qk__pool_wait_spin_ns(const qk__pool_t *p);
  * start on); -1 in both otherwise. The worker writes its processor before it runs any
  * region: read it after a region has run. */
 int qk__pool_start_cpu(const qk__pool_t *p, unsigned i, int *home);
+/* The same for the calling thread when qk__run_shares started it for a region (away from
+ * the starting thread's processor, as a pool's workers): where it first ran, and in *home
+ * where the starting thread ran then; -1 in both otherwise (tests, from inside a share). */
+int qk__share_start_cpu(int *home);
 /* Whether p's workers run in this process (0 for NULL, and in a child forked after they
  * started: there qk__pool_free only frees its memory). */
 int qk__pool_live(const qk__pool_t *p);

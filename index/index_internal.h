@@ -282,6 +282,10 @@ typedef void (*qk__share_fn)(void *ctx, unsigned w, unsigned nw);
 /* Run fn for shares 0 .. nw-1, share 0 on the calling thread, and return when all are
  * done. Shares must write disjoint memory. */
 void qk__run_shares(unsigned nw, qk__share_fn fn, void *ctx);
+/* Nonzero: qk__run_shares starts its threads as usual, not away from the calling thread's
+ * processor (for paired measurements in one process; not thread-safe to change while
+ * regions run). */
+extern int qk__shares_away_off;
 
 /* Hold a team of nw - 1 workers on the calling thread until qk__team_end(): the regions it
  * starts meanwhile (qk__run_shares, the jobs) run on them instead of on threads started for
@@ -295,6 +299,33 @@ void qk__team_end(void);
 static inline void qk__share_range(size_t n, unsigned w, unsigned nw, size_t *lo, size_t *hi) {
   *lo = n / nw * w + (w < n % nw ? w : n % nw);
   *hi = *lo + n / nw + (w < n % nw);
+}
+
+/* A range [0, n) handed out in chunks from a shared counter (dynamic shares): a share takes
+ * the next chunk when it finishes one, so that shares end together when one thread is
+ * slowed (another process on its processor, a late start) or the work is uneven. Which
+ * share runs a chunk varies from run to run: every index must write only its own outputs.
+ * qk__chunks_init cuts about QK__CHUNKS_PER_SHARE chunks per share, of at least `least`. */
+#define QK__CHUNKS_PER_SHARE 16
+typedef struct qk__chunks {
+  atomic_size_t next;
+  size_t n, size;
+} qk__chunks_t;
+
+static inline void qk__chunks_init(qk__chunks_t *c, size_t n, unsigned nw, size_t least) {
+  size_t size = n / ((size_t)QK__CHUNKS_PER_SHARE * (nw ? nw : 1));
+  atomic_init(&c->next, 0);
+  c->n = n;
+  c->size = size > least ? size : least > 0 ? least : 1;
+}
+
+/* The next chunk [*lo, *hi), or false when none is left. */
+static inline bool qk__chunks_take(qk__chunks_t *c, size_t *lo, size_t *hi) {
+  size_t at = atomic_fetch_add_explicit(&c->next, c->size, memory_order_relaxed);
+  if (at >= c->n) return false;
+  *lo = at;
+  *hi = c->n - at < c->size ? c->n : at + c->size;
+  return true;
 }
 
 /* Run fn(i, w, ud) for i in [0, n) on min(threads, n) shares, each share taking the next

@@ -11,8 +11,11 @@
  * the other core cost 0.03-2 ms a region on the two vCPUs of the seventeenth session's
  * machine (more than the build's regions take on two threads); a pool pays that once. The
  * bulk build holds one for its length (a team: qk__team_begin/qk__team_end, four to six
- * regions); a world keeps one from its first threaded update to qk_world_free (eight steps
- * an update, collide/world_threads.c), with a detached job for the end of an update.
+ * regions), and so do the kNN, locate, radius and ray batches (their sorts' regions and the
+ * queries'); a world keeps one from its first threaded update to qk_world_free (eight steps
+ * an update, collide/world_threads.c), with a detached job for the end of an update. Threads
+ * created for a region, and a pool's workers, start away from the creating thread's
+ * processor (start_away).
  */
 #if defined(__linux__)
 #define _GNU_SOURCE /* sched_getcpu, CPU_SET, pthread_attr_setaffinity_np */
@@ -30,12 +33,14 @@
 #include <pthread.h>
 #include <sched.h>
 #endif
-/* Workers started away from the starting thread's processor (see pool_away()). */
+/* Workers started away from the starting thread's processor (see start_away()). */
 #if defined(QK_HAVE_PTHREADS) && defined(__linux__) && defined(CPU_SET)
 #define QK__POOL_AWAY 1
 #else
 #define QK__POOL_AWAY 0
 #endif
+
+int qk__shares_away_off;
 
 unsigned qk__threads_resolve(uint32_t threads) {
   if (threads == 0) {
@@ -66,11 +71,53 @@ typedef struct share {
   qk__share_fn fn;
   void *ctx;
   unsigned w, nw;
+#if QK__POOL_AWAY
+  const cpu_set_t *home; /* started away: the starting thread's processors to take back */
+  int home_cpu;          /* and the processor it ran on */
+#endif
 } share_t;
+
+#if QK__POOL_AWAY
+/* Thread attributes that start a thread on any of the calling thread's processors but the
+ * one it runs on, with the caller's processor in *me and its whole set in *home; false
+ * (start it as usual) where there is no other. This guest's scheduler placed a new thread
+ * on its creator's processor, next to the running creator, and left it there: a pool's
+ * worker for the whole of a build (one vCPU idle, the two shares of every region run one
+ * after the other), and a region's thread for all of its share (see qk__run_shares). The
+ * thread takes the creator's full set of processors back as soon as it runs. */
+static bool start_away(pthread_attr_t *attr, cpu_set_t *home, int *me) {
+  *me = sched_getcpu();
+  if (*me < 0 || *me >= CPU_SETSIZE || pthread_getaffinity_np(pthread_self(), sizeof *home, home))
+    return false;
+  cpu_set_t away = *home;
+  CPU_CLR(*me, &away);
+  if (CPU_COUNT(&away) == 0 || pthread_attr_init(attr) != 0) return false;
+  if (pthread_attr_setaffinity_np(attr, sizeof away, &away) != 0) {
+    pthread_attr_destroy(attr);
+    return false;
+  }
+  return true;
+}
+#endif
+
+#if QK__POOL_AWAY
+/* Where a region's thread first ran and where the thread that started it ran then, when it
+ * was started away (tests: qk__share_start_cpu). */
+static _Thread_local int share_start_cpu = -1, share_home_cpu = -1;
+#endif
 
 #if defined(QK_HAVE_PTHREADS)
 static void *run_share(void *arg) {
   share_t *s = arg;
+#if QK__POOL_AWAY
+  /* Started on another processor: from here on the scheduler may place it anywhere the
+   * starting thread may run. */
+  if (s->home) {
+    share_start_cpu = sched_getcpu();
+    share_home_cpu = s->home_cpu;
+    (void)pthread_setaffinity_np(pthread_self(), sizeof *s->home, s->home);
+  }
+#endif
   s->fn(s->ctx, s->w, s->nw);
   return NULL;
 }
@@ -219,28 +266,12 @@ static void pool_wait(qk__pool_t *p) {
 static bool pool_forked(const qk__pool_t *p) { return p->proc != getpid(); }
 
 #if QK__POOL_AWAY
-/* Thread attributes that start a worker on any of the calling thread's processors but the
- * one it runs on; false (start it as usual) where there is no other. This guest's
- * scheduler placed a new thread on its creator's processor, next to the running creator,
- * and left it there for the whole of a build (one vCPU idle, the two shares of every region
- * run one after the other: 1M uniform points took as long on two threads as on one); a
- * worker started elsewhere stays there while it spins between regions. The worker takes
- * the creator's full set of processors back as soon as it runs (pool_worker). */
+/* The workers' start away from the starting thread's processor (start_away); a worker
+ * started elsewhere stays there while it spins between regions. */
 static bool pool_away(qk__pool_t *p, pthread_attr_t *attr) {
   p->away = 0;
   for (unsigned i = 0; i < QK__MAX_THREADS; i++) p->start_cpu[i] = -1;
-  int me = sched_getcpu();
-  if (me < 0 || me >= CPU_SETSIZE ||
-      pthread_getaffinity_np(pthread_self(), sizeof p->home, &p->home) != 0)
-    return false;
-  cpu_set_t away = p->home;
-  CPU_CLR(me, &away);
-  if (CPU_COUNT(&away) == 0 || pthread_attr_init(attr) != 0) return false;
-  if (pthread_attr_setaffinity_np(attr, sizeof away, &away) != 0) {
-    pthread_attr_destroy(attr);
-    return false;
-  }
-  p->home_cpu = me;
+  if (!start_away(attr, &p->home, &p->home_cpu)) return false;
   p->away = 1;
   return true;
 }
@@ -427,10 +458,34 @@ void qk__run_shares(unsigned nw, qk__share_fn fn, void *ctx) {
   pthread_t th[QK__MAX_THREADS];
   share_t sh[QK__MAX_THREADS];
   bool started[QK__MAX_THREADS] = {false};
+  pthread_attr_t attr, *ap = NULL;
+#if QK__POOL_AWAY
+  /* Each thread started away from this one's processor, as a pool's workers: started as
+   * usual, this guest ran a region's new thread on the processor of the thread that
+   * started it (which then runs share 0) until the end of its share, often the whole
+   * region: 100,000 kNN queries on two threads took 31 ms, one thread 28 ms. */
+  cpu_set_t home;
+  int me;
+  if (!qk__shares_away_off && start_away(&attr, &home, &me)) ap = &attr;
+#else
+  (void)attr;
+#endif
   for (unsigned w = 1; w < nw; w++) {
-    sh[w] = (share_t){fn, ctx, w, nw};
-    started[w] = pthread_create(&th[w], NULL, run_share, &sh[w]) == 0;
+    sh[w] = (share_t){.fn = fn, .ctx = ctx, .w = w, .nw = nw};
+#if QK__POOL_AWAY
+    sh[w].home = ap ? &home : NULL;
+    sh[w].home_cpu = ap ? me : -1;
+#endif
+    started[w] = pthread_create(&th[w], ap, run_share, &sh[w]) == 0;
+    if (!started[w] && ap) {
+      /* (where the system refuses the placement, the thread is started as usual) */
+#if QK__POOL_AWAY
+      sh[w].home = NULL;
+#endif
+      started[w] = pthread_create(&th[w], NULL, run_share, &sh[w]) == 0;
+    }
   }
+  if (ap) pthread_attr_destroy(ap);
   fn(ctx, 0, nw);
   for (unsigned w = 1; w < nw; w++) {
     if (started[w])
@@ -440,6 +495,16 @@ void qk__run_shares(unsigned nw, qk__share_fn fn, void *ctx) {
   }
 #else
   for (unsigned w = 0; w < nw; w++) fn(ctx, w, nw);
+#endif
+}
+
+int qk__share_start_cpu(int *home) {
+#if QK__POOL_AWAY
+  *home = share_home_cpu;
+  return share_start_cpu;
+#else
+  *home = -1;
+  return -1;
 #endif
 }
 

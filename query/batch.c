@@ -3,9 +3,11 @@
  * that consecutive searches reuse the cache and most of one another's descent; point
  * location also walks the descents of the next QK__LANES queries in lockstep, so that
  * their cache misses overlap), and the queries spread
- * over the tree's threads in contiguous runs of that order. Every query writes only its
- * own outputs, so the results are those of one thread; a failed query is reported by the
- * lowest index, whatever thread met it.
+ * over the tree's threads in contiguous runs of that order: kNN and point location in
+ * chunks that each thread takes from a shared counter when it is done with the one before
+ * (qk__chunks_t), radius in one run per thread (its packed results go in thread order).
+ * Every query writes only its own outputs, so the results are those of one thread; a
+ * failed query is reported by the lowest index, whatever thread met it.
  */
 #include <string.h>
 
@@ -13,6 +15,15 @@
 
 /* How many places ahead in Z-order a kNN batch asks for a query and its answer slots. */
 #define QK__BATCH_AHEAD 8
+
+/*
+ * QK__BATCH_TEAM: a batch on several threads holds a team (qk__team_begin) for its length,
+ * so that its regions (the Z-order's six and the queries', radius's search and copy) run
+ * on one set of workers, started once and away from the calling thread's processor,
+ * instead of a thread started for each region. On this guest a thread took 0.1-3.5 ms from
+ * its creation to its share in a busy session: paid seven times, that was most of a
+ * 100,000-query kNN batch's 15 ms on two threads.
+ */
 
 /* ---- the Z-order on the batch's threads ------------------------------------------- */
 
@@ -131,47 +142,53 @@ typedef struct knn_job {
   double max_dist;
   qk_neighbor_t *out;
   size_t *counts;
+  qk__chunks_t chunks; /* runs of the Z-order, taken by the threads as they go */
   qk__first_err_t err[QK__MAX_THREADS];
 } knn_job_t;
 
+/* Queries per chunk at least: a chunk's first search descends the whole path and its
+ * first QK__BATCH_AHEAD queries are not asked for ahead. */
+#define QK__BATCH_CHUNK_MIN 256
+
 static void knn_share(void *ctx, unsigned w, unsigned nw) {
+  (void)nw;
   knn_job_t *j = ctx;
   size_t lo, hi;
-  qk__share_range(j->nq, w, nw, &lo, &hi);
   qk__first_err_t e = {QK_OK, SIZE_MAX};
   /* One path, carried from query to query: in Z-order each shares most of it with the
    * one before (qk__path_reuse), so only the last levels are descended again. */
   qk__path_t path;
   qk__path_init(j->t, &path);
-  for (size_t jj = lo; jj < hi; jj++) {
-    size_t i = j->order ? j->order[jj] : jj;
-    if (j->order && jj + QK__BATCH_AHEAD < hi) {
-      /* In Z-order the queries and their answers are read and written at random: ask for
-       * those of a query a few places ahead, so that their misses overlap the searches. */
-      const size_t a = j->order[jj + QK__BATCH_AHEAD];
-      QK__PREFETCH(&j->qs[a]);
-      if (j->out && j->k) {
-        const char *row = (const char *)&j->out[a * j->k];
-        const size_t bytes = j->k * sizeof(qk_neighbor_t);
-        for (size_t off = 0; off < bytes && off < 16 * 64; off += 64) QK__PREFETCH_W(row + off);
-        QK__PREFETCH_W(row + bytes - 1);
+  while (qk__chunks_take(&j->chunks, &lo, &hi))
+    for (size_t jj = lo; jj < hi; jj++) {
+      size_t i = j->order ? j->order[jj] : jj;
+      if (j->order && jj + QK__BATCH_AHEAD < hi) {
+        /* In Z-order the queries and their answers are read and written at random: ask for
+         * those of a query a few places ahead, so that their misses overlap the searches. */
+        const size_t a = j->order[jj + QK__BATCH_AHEAD];
+        QK__PREFETCH(&j->qs[a]);
+        if (j->out && j->k) {
+          const char *row = (const char *)&j->out[a * j->k];
+          const size_t bytes = j->k * sizeof(qk_neighbor_t);
+          for (size_t off = 0; off < bytes && off < 16 * 64; off += 64) QK__PREFETCH_W(row + off);
+          QK__PREFETCH_W(row + bytes - 1);
+        }
+        if (j->counts) QK__PREFETCH_W(&j->counts[a]);
       }
-      if (j->counts) QK__PREFETCH_W(&j->counts[a]);
+      const qk_point_t q = j->qs[i];
+      qk_neighbor_t *o = j->out ? j->out + i * j->k : NULL;
+      size_t n = 0;
+      qk_status_t st = qk__knn_check(j->t, q, j->max_dist);
+      if (st == QK_OK) {
+        const int inside = qk__tree_contains(j->t, q.x, q.y);
+        if (inside) qk__path_reuse(j->t, &path, q.x, q.y);
+        n = qk__knn_one(j->t, q, j->k, j->max_dist, o, inside ? &path : NULL);
+      } else {
+        qk__note_err(&e, st, i);
+      }
+      for (size_t m = n; m < j->k; m++) o[m] = (qk_neighbor_t){QK_NONE, INFINITY};
+      if (j->counts) j->counts[i] = n;
     }
-    const qk_point_t q = j->qs[i];
-    qk_neighbor_t *o = j->out ? j->out + i * j->k : NULL;
-    size_t n = 0;
-    qk_status_t st = qk__knn_check(j->t, q, j->max_dist);
-    if (st == QK_OK) {
-      const int inside = qk__tree_contains(j->t, q.x, q.y);
-      if (inside) qk__path_reuse(j->t, &path, q.x, q.y);
-      n = qk__knn_one(j->t, q, j->k, j->max_dist, o, inside ? &path : NULL);
-    } else {
-      qk__note_err(&e, st, i);
-    }
-    for (size_t m = n; m < j->k; m++) o[m] = (qk_neighbor_t){QK_NONE, INFINITY};
-    if (j->counts) j->counts[i] = n;
-  }
   j->err[w] = e;
 }
 
@@ -181,9 +198,19 @@ qk_status_t qk_query_knn_batch(const qk_tree_t *tree, const qk_point_t *qs, size
   if (isnan(max_dist) || max_dist < 0) return QK_ERR_INVALID;
   uint32_t *order;
   unsigned nw = qk__batch_threads(tree, nq);
+  qk__team_begin(nw); /* (see QK__BATCH_TEAM) */
   void *block = morton_order_par(tree, qs, nq, nw, &order);
-  knn_job_t j = {tree, qs, order, nq, k, max_dist, out, counts, {{QK_OK, 0}}};
+  knn_job_t j = {.t = tree,
+                 .qs = qs,
+                 .order = order,
+                 .nq = nq,
+                 .k = k,
+                 .max_dist = max_dist,
+                 .out = out,
+                 .counts = counts};
+  qk__chunks_init(&j.chunks, nq, nw, QK__BATCH_CHUNK_MIN);
   qk__run_shares(nw, knn_share, &j);
+  qk__team_end();
   if (block) qk__morton_free(tree, block, nq);
   qk__first_err_t e = {QK_OK, SIZE_MAX};
   for (unsigned w = 0; w < nw; w++) qk__note_err(&e, j.err[w].st, j.err[w].i);
@@ -198,19 +225,21 @@ typedef struct locate_job {
   const uint32_t *order;
   size_t n;
   qk_node_t *leaves;
+  qk__chunks_t chunks;
 } locate_job_t;
 
 static void locate_share(void *ctx, unsigned w, unsigned nw) {
+  (void)w, (void)nw;
   locate_job_t *j = ctx;
   size_t lo, hi;
-  qk__share_range(j->n, w, nw, &lo, &hi);
   qk__path_t paths[QK__LANES];
-  for (size_t jj = lo; jj < hi; jj++) {
-    if ((jj - lo) % QK__LANES == 0) qk__walk_lanes(j->t, j->ps, j->order, jj, hi, paths);
-    const qk__path_t *path = &paths[(jj - lo) % QK__LANES];
-    size_t i = j->order ? j->order[jj] : jj;
-    j->leaves[i] = path->valid ? path->leaf.node : QK_NONE;
-  }
+  while (qk__chunks_take(&j->chunks, &lo, &hi))
+    for (size_t jj = lo; jj < hi; jj++) {
+      if ((jj - lo) % QK__LANES == 0) qk__walk_lanes(j->t, j->ps, j->order, jj, hi, paths);
+      const qk__path_t *path = &paths[(jj - lo) % QK__LANES];
+      size_t i = j->order ? j->order[jj] : jj;
+      j->leaves[i] = path->valid ? path->leaf.node : QK_NONE;
+    }
 }
 
 qk_status_t qk_query_locate_batch(const qk_tree_t *tree, const qk_point_t *ps, size_t n,
@@ -218,9 +247,12 @@ qk_status_t qk_query_locate_batch(const qk_tree_t *tree, const qk_point_t *ps, s
   if (!tree || (n > 0 && (!ps || !leaves))) return QK_ERR_INVALID;
   uint32_t *order;
   const unsigned nw = qk__batch_threads(tree, n);
+  qk__team_begin(nw); /* (see QK__BATCH_TEAM) */
   void *block = morton_order_par(tree, ps, n, nw, &order);
-  locate_job_t j = {tree, ps, order, n, leaves};
+  locate_job_t j = {.t = tree, .ps = ps, .order = order, .n = n, .leaves = leaves};
+  qk__chunks_init(&j.chunks, n, nw, QK__BATCH_CHUNK_MIN);
   qk__run_shares(nw, locate_share, &j);
+  qk__team_end();
   if (block) qk__morton_free(tree, block, n);
   return QK_OK;
 }
@@ -297,6 +329,7 @@ qk_status_t qk__radius_batch(const qk_tree_t *t, const qk_point_t *centres, size
     j->buf[w] = qk__realloc(qk__tree_allocator(t), NULL, 0, want * sizeof(qk_neighbor_t));
     j->buf_cap[w] = j->buf[w] ? want : 0;
   }
+  qk__team_begin(nw); /* (see QK__BATCH_TEAM) */
   qk__run_shares(nw, radius_share, j);
   /* Where each share's results go (the totals are known now), and what fits there. */
   size_t sum = 0;
@@ -312,6 +345,7 @@ qk_status_t qk__radius_batch(const qk_tree_t *t, const qk_point_t *centres, size
     qk__run_shares(nw, radius_copy, j);
   else
     radius_copy(j, 0, 1);
+  qk__team_end();
   qk__first_err_t e = {QK_OK, SIZE_MAX};
   for (unsigned w = 0; w < nw; w++) {
     size_t lo, hi, bad;

@@ -359,23 +359,25 @@ typedef struct geo_job {
   double max_metres;
   qk_neighbor_t *out;
   size_t *counts;
+  qk__chunks_t chunks; /* runs of the Z-order, taken by the threads as they go */
   qk__first_err_t err[QK__MAX_THREADS];
 } geo_job_t;
 
 static void geo_share(void *ctx, unsigned w, unsigned nw) {
+  (void)nw;
   geo_job_t *j = ctx;
   size_t lo, hi;
-  qk__share_range(j->nq, w, nw, &lo, &hi);
   qk__first_err_t e = {QK_OK, SIZE_MAX};
-  for (size_t jj = lo; jj < hi; jj++) {
-    size_t i = j->order ? j->order[jj] : jj;
-    qk_neighbor_t *o = j->out ? j->out + i * j->k : NULL;
-    size_t n = 0;
-    qk_status_t st = qk_geo_knn(j->g, j->qs[i], j->k, j->max_metres, o, &n);
-    qk__note_err(&e, st, i);
-    for (size_t m = n; m < j->k; m++) o[m] = (qk_neighbor_t){QK_NONE, INFINITY};
-    if (j->counts) j->counts[i] = n;
-  }
+  while (qk__chunks_take(&j->chunks, &lo, &hi))
+    for (size_t jj = lo; jj < hi; jj++) {
+      size_t i = j->order ? j->order[jj] : jj;
+      qk_neighbor_t *o = j->out ? j->out + i * j->k : NULL;
+      size_t n = 0;
+      qk_status_t st = qk_geo_knn(j->g, j->qs[i], j->k, j->max_metres, o, &n);
+      qk__note_err(&e, st, i);
+      for (size_t m = n; m < j->k; m++) o[m] = (qk_neighbor_t){QK_NONE, INFINITY};
+      if (j->counts) j->counts[i] = n;
+    }
   j->err[w] = e;
 }
 
@@ -395,6 +397,7 @@ qk_status_t qk_geo_knn_batch(const qk_geo_t *g, const qk_point_t *qs, size_t nq,
                  .max_metres = max_metres,
                  .out = out,
                  .counts = counts};
+  qk__chunks_init(&j.chunks, nq, nw, 64);
   qk__run_shares(nw, geo_share, &j);
   if (block) qk__morton_free(g->tree, block, nq);
   qk__first_err_t e = {QK_OK, SIZE_MAX};

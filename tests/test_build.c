@@ -51,7 +51,8 @@
  * Where the pool's workers start (Linux, with more than one processor allowed): away from
  * the processor the starting thread ran on (this guest's scheduler left a new thread next
  * to its creator), and, once running, free to run wherever the starting thread may (the
- * same set of processors, not pinned).
+ * same set of processors, not pinned); the same for the threads qk__run_shares starts for a
+ * region when no team is held (on two and three shares).
  *
  * How the calling thread waits for a region's end: while it holds the pool it spins (up to
  * 1 ms) rather than parks for a worker that takes a few hundred microseconds more than it
@@ -651,6 +652,18 @@ static void away_share(void *ctx, unsigned w, unsigned nw) {
   CPU_ZERO(&s);
   ap->same = pthread_getaffinity_np(pthread_self(), sizeof s, &s) == 0 && CPU_EQUAL(&s, &ap->mine);
 }
+
+/* What the threads qk__run_shares starts for a region report about their start. */
+typedef struct shares_probe {
+  away_probe_t ap;
+  int start[QK__MAX_THREADS], home[QK__MAX_THREADS];
+} shares_probe_t;
+
+static void shares_away_share(void *ctx, unsigned w, unsigned nw) {
+  shares_probe_t *sp = ctx;
+  sp->start[w] = qk__share_start_cpu(&sp->home[w]);
+  if (w == 1) away_share(&sp->ap, w, nw);
+}
 #endif
 
 static void owner_share(void *ctx, unsigned w, unsigned nw) {
@@ -711,11 +724,44 @@ static void test_build_pool_away(void **state) {
 #endif
 }
 
+/* The threads qk__run_shares starts for a region (no team held) start away from the
+ * calling thread's processor too, and then run wherever it may. */
+static void test_build_shares_away(void **state) {
+  (void)state;
+#if defined(__linux__) && defined(CPU_SET)
+  cpu_set_t mine;
+  CPU_ZERO(&mine);
+  assert_int_equal(sched_getaffinity(0, sizeof mine, &mine), 0);
+  const int many = CPU_COUNT(&mine) > 1 && sched_getcpu() >= 0;
+  for (int round = 0; round < 8; round++) {
+    const unsigned nw = 2 + (unsigned)round % 2;
+    shares_probe_t sp = {.ap = {.mine = mine, .same = -1}};
+    qk__run_shares(nw, shares_away_share, &sp);
+    int home;
+    assert_int_equal(sp.start[0], -1); /* share 0: the calling thread */
+    assert_int_equal(qk__share_start_cpu(&home), -1);
+    for (unsigned w = 1; w < nw; w++) {
+      if (many) {
+        assert_true(sp.home[w] >= 0 && CPU_ISSET(sp.home[w], &mine));
+        assert_true(sp.start[w] >= 0 && CPU_ISSET(sp.start[w], &mine));
+        assert_int_not_equal(sp.start[w], sp.home[w]); /* started away */
+      } else {
+        assert_int_equal(sp.start[w], -1); /* nowhere else to go: started as usual */
+      }
+    }
+    assert_int_equal(sp.ap.same, 1); /* and not pinned there */
+  }
+#else
+  skip();
+#endif
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_build_team),
       cmocka_unit_test(test_build_pool),
       cmocka_unit_test(test_build_pool_away),
+      cmocka_unit_test(test_build_shares_away),
       cmocka_unit_test(test_build_pool_owner_spins),
       cmocka_unit_test(test_build_deep_grid_lines),
       cmocka_unit_test(test_build_threads_adversarial),

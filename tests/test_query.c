@@ -33,6 +33,9 @@
  *    the oracle's counts, with the caller's buffer full size and cut short;
  *  - bad arguments; an empty tree;
  *  - four threads querying one tree at once get the single-threaded answers;
+ *  - kNN and locate batches of 300,001 queries on two and three threads (chunks taken from a
+ *    shared counter) equal one thread's bit for bit, and report the lower-numbered of two
+ *    bad queries met by different threads;
  *  - the real cities set (lon/lat as planar coordinates) when present.
  */
 #include <math.h>
@@ -1413,6 +1416,71 @@ static void test_query_batch_threaded_order(void **state) {
 }
 
 /*
+ * kNN and locate batches of 300,001 queries (their threads take chunks of the Z-order from
+ * a shared counter, a few thousand queries each, the last one short): on two and three
+ * threads every answer is the one thread's, bit for bit; with a non-finite query and one
+ * beyond the search's range (which sort to opposite ends of the Z-order, so different
+ * threads meet them) the status is that of the lower-numbered one, either way round, and
+ * every other query is still answered.
+ */
+/* The same ids and the same distances bit for bit (the records have padding). */
+static int same_neighbors(const qk_neighbor_t *a, const qk_neighbor_t *b, size_t k) {
+  for (size_t m = 0; m < k; m++)
+    if (a[m].id != b[m].id || memcmp(&a[m].dist, &b[m].dist, sizeof a[m].dist) != 0) return 0;
+  return 1;
+}
+
+static void test_query_batch_chunks(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 14);
+  const size_t n = 20000, nq = 300001, k = 3;
+  qk_point_t *p = malloc(n * sizeof *p), *qs = malloc(nq * sizeof *qs);
+  qk_neighbor_t *want = malloc(nq * k * sizeof *want), *out = malloc(nq * k * sizeof *out);
+  size_t *wc = malloc(nq * sizeof *wc), *counts = malloc(nq * sizeof *counts);
+  qk_node_t *wleaf = malloc(nq * sizeof *wleaf), *leaves = malloc(nq * sizeof *leaves);
+  assert_non_null(p && qs && want && out && wc && counts && wleaf && leaves);
+  qkt_points(&r, QKT_CLUSTERED, p, n);
+  for (size_t i = 0; i < nq; i++) qs[i] = i % 5 == 0 ? p[qkt_rng_below(&r, n)] : rand_loc(&r);
+  qk_tree_t *t = build(p, n, 8);
+  for (int round = 0; round < 3; round++) {
+    /* round 0: no bad query; 1: the non-finite one first; 2: the far one first */
+    const size_t lo = 123457, hi = 271829;
+    const qk_point_t nan_q = {NAN, 0.5}, far_q = {0x1p600, 0.5};
+    qk_status_t expect = QK_OK;
+    if (round > 0) {
+      qs[lo] = round == 1 ? nan_q : far_q;
+      qs[hi] = round == 1 ? far_q : nan_q;
+      expect = round == 1 ? QK_ERR_NONFINITE : QK_ERR_LIMIT;
+    }
+    qk_tree_set_threads(t, 1);
+    assert_int_equal(qk_query_knn_batch(t, qs, nq, k, INFINITY, want, wc), expect);
+    assert_int_equal(qk_query_locate_batch(t, qs, nq, wleaf), QK_OK);
+    for (size_t i = 0; i < nq; i += 997) { /* the one-thread batch against single calls */
+      qk_neighbor_t one[3];
+      size_t m = 0;
+      if (qk_query_knn(t, qs[i], k, INFINITY, one, &m) != QK_OK) m = 0;
+      assert_nb_equal(want + i * k, wc[i], one, m, "knn-chunks-one", i);
+    }
+    for (unsigned threads = 2; threads <= 3; threads++) {
+      qk_tree_set_threads(t, threads);
+      memset(out, 0xA5, nq * k * sizeof *out);
+      memset(counts, 0xA5, nq * sizeof *counts);
+      memset(leaves, 0xA5, nq * sizeof *leaves);
+      assert_int_equal(qk_query_knn_batch(t, qs, nq, k, INFINITY, out, counts), expect);
+      for (size_t i = 0; i < nq; i++)
+        if (counts[i] != wc[i] || !same_neighbors(out + i * k, want + i * k, k))
+          fail_msg("round %d threads %u: query %zu differs from one thread's (seed %llu)", round,
+                   threads, i, (unsigned long long)g_seed);
+      assert_int_equal(qk_query_locate_batch(t, qs, nq, leaves), QK_OK);
+      assert_memory_equal(leaves, wleaf, nq * sizeof *leaves);
+    }
+  }
+  qk_tree_free(t);
+  free(p), free(qs), free(want), free(out), free(wc), free(counts), free(wleaf), free(leaves);
+}
+
+/*
  * Radius batches on 1, 2 and 3 threads, large enough that the other shares' results are
  * copied into place by all the shares at once: the results are the single calls' laid end
  * to end, the counts the brute-force oracle's; with the caller's buffer cut short (inside
@@ -1516,6 +1584,7 @@ int main(void) {
     cmocka_unit_test(test_query_knn_distance_range),
     cmocka_unit_test(test_query_threads),
     cmocka_unit_test(test_query_batch_threaded_order),
+    cmocka_unit_test(test_query_batch_chunks),
     cmocka_unit_test(test_query_cities),
     cmocka_unit_test(test_query_knn_big_leaves),
     cmocka_unit_test(test_query_knn_batch_paths),
