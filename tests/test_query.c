@@ -1600,5 +1600,14 @@ int main(void) {
     cmocka_unit_test(test_query_knn_flush_subnormals),
 #endif
   };
+  /* Under ThreadSanitizer (scripts/tsan.sh) only the tests that start threads: the others
+   * would take minutes there and TSan finds nothing without a second thread. */
+  const struct CMUnitTest threaded[] = {
+      cmocka_unit_test(test_query_threads),
+      cmocka_unit_test(test_query_batch_threaded_order),
+      cmocka_unit_test(test_query_batch_chunks),
+      cmocka_unit_test(test_query_radius_batch_threads),
+  };
+  if (QKT_TSAN) return cmocka_run_group_tests(threaded, NULL, NULL);
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
