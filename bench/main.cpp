@@ -710,9 +710,9 @@ void run_world(const std::string &kind, size_t n) {
     r.matches = 1;
     r.threads = nth[i];
     if (!ratio[i].empty()) r.extra["speedup_wall"] = median(ratio[i]);
-    // The search alone (qk_world_update): the caller's moves and its walk of the pairs
-    // stay on the calling thread whatever the world's threads, so the frame's speedup
-    // is bounded by their share; this one is the library's.
+    // The search alone (qk_world_update): the caller's moves stay on the calling thread
+    // whatever the world's threads (the walk of the pairs runs on them), so the frame's
+    // speedup is bounded by their share; this one is the update's alone.
     if (!ratio_upd[i].empty()) r.extra["speedup_update_wall"] = median(ratio_upd[i]);
     r.seconds = median(t[i]);
     r.per_second = n / r.seconds;
