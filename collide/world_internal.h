@@ -358,4 +358,28 @@ static inline qk_world_pair_t qk__key_pair(const qk_world_t *w, uint64_t k) {
   return (qk_world_pair_t){qk__uhandle(w, (uint32_t)(k >> 32)), qk__uhandle(w, (uint32_t)k)};
 }
 
+/* The generation slot s had at the update before the last: kept apart (egen, sorted by
+ * slot) for the slots that changed at the last update, else its generation at the last. */
+static inline uint32_t qk__ended_gen(const qk_world_t *w, uint32_t s) {
+  size_t lo = 0, hi = w->n_egen;
+  while (lo < hi) {
+    size_t mid = lo + (hi - lo) / 2;
+    uint32_t ms = (uint32_t)(w->egen[mid] >> 32);
+    if (ms == s) return (uint32_t)w->egen[mid];
+    if (ms < s)
+      lo = mid + 1;
+    else
+      hi = mid;
+  }
+  return w->ugen[s];
+}
+
+/* The handles of an ended pair's key: the generations its slots had at the update before
+ * the last. */
+static inline qk_world_pair_t qk__ended_pair(const qk_world_t *w, uint64_t k) {
+  uint32_t a = (uint32_t)(k >> 32), b = (uint32_t)k;
+  return (qk_world_pair_t){(uint64_t)qk__ended_gen(w, a) << 32 | a,
+                           (uint64_t)qk__ended_gen(w, b) << 32 | b};
+}
+
 #endif /* QUADKIT_WORLD_INTERNAL_H */

@@ -1674,34 +1674,12 @@ static qk_status_t update(qk_world_t *w) {
   return QK_OK;
 }
 
-/* The handles of an ended pair: the generations its slots had at the update before the
- * last (those of the slots that changed at the last one are kept aside). */
-static uint32_t ended_gen(const qk_world_t *w, uint32_t s) {
-  size_t lo = 0, hi = w->n_egen;
-  while (lo < hi) {
-    size_t mid = lo + (hi - lo) / 2;
-    uint32_t ms = (uint32_t)(w->egen[mid] >> 32);
-    if (ms == s) return (uint32_t)w->egen[mid];
-    if (ms < s)
-      lo = mid + 1;
-    else
-      hi = mid;
-  }
-  return w->ugen[s];
-}
-
-static inline qk_world_pair_t ended_pair(const qk_world_t *w, uint64_t k) {
-  uint32_t a = (uint32_t)(k >> 32), b = (uint32_t)k;
-  return (qk_world_pair_t){(uint64_t)ended_gen(w, a) << 32 | a,
-                           (uint64_t)ended_gen(w, b) << 32 | b};
-}
-
 qk_status_t qk_world_pairs(const qk_world_t *w, qk_pairs_which_t which, qk_world_pair_fn fn,
                            void *ud) {
   if (!w || !fn) return QK_ERR_INVALID;
   if (which == QK_PAIRS_ENDED) {
     for (size_t i = 0; i < w->ended.n; i++) {
-      qk_world_pair_t q = ended_pair(w, w->ended.v[i]);
+      qk_world_pair_t q = qk__ended_pair(w, w->ended.v[i]);
       if (fn(q.a, q.b, ud)) break;
     }
     return QK_OK;
@@ -1752,7 +1730,7 @@ qk_status_t qk_world_pairs_list(const qk_world_t *w, qk_pairs_which_t which, qk_
   if (!w || !n_out || (cap && !out)) return QK_ERR_INVALID;
   if (which == QK_PAIRS_ENDED) {
     *n_out = w->ended.n;
-    for (size_t i = 0; i < w->ended.n && i < cap; i++) out[i] = ended_pair(w, w->ended.v[i]);
+    for (size_t i = 0; i < w->ended.n && i < cap; i++) out[i] = qk__ended_pair(w, w->ended.v[i]);
     return QK_OK;
   }
   if (which == QK_PAIRS_BEGAN) {

@@ -11,29 +11,6 @@
  */
 #include "collide/world_internal.h"
 
-/* The generation slot s had at the update before the last: kept apart (egen, sorted by
- * slot) for the slots that changed at the last update, else its generation at the last
- * (world_pairs.c answers the ended pairs' handles the same way). */
-static uint32_t ended_gen(const qk_world_t *w, uint32_t s) {
-  size_t lo = 0, hi = w->n_egen;
-  while (lo < hi) {
-    size_t mid = lo + (hi - lo) / 2;
-    uint32_t ms = (uint32_t)(w->egen[mid] >> 32);
-    if (ms == s) return (uint32_t)w->egen[mid];
-    if (ms < s)
-      lo = mid + 1;
-    else
-      hi = mid;
-  }
-  return w->ugen[s];
-}
-
-static inline qk_world_pair_t ended_pair(const qk_world_t *w, uint64_t k) {
-  uint32_t a = (uint32_t)(k >> 32), b = (uint32_t)k;
-  return (qk_world_pair_t){(uint64_t)ended_gen(w, a) << 32 | a,
-                           (uint64_t)ended_gen(w, b) << 32 | b};
-}
-
 /* How many pairs `which` names, or SIZE_MAX when it names none of the lists. */
 static size_t pairs_count(const qk_world_t *w, qk_pairs_which_t which) {
   switch (which) {
@@ -70,7 +47,7 @@ qk_status_t qk_world_pairs_range(const qk_world_t *w, qk_pairs_which_t which, si
   if (first >= n || cap == 0) return QK_OK;
   size_t end = n - first < cap ? n : first + cap;
   if (which == QK_PAIRS_ENDED) {
-    for (size_t i = first; i < end; i++) out[i - first] = ended_pair(w, w->ended.v[i]);
+    for (size_t i = first; i < end; i++) out[i - first] = qk__ended_pair(w, w->ended.v[i]);
   } else if (which == QK_PAIRS_BEGAN) {
     for (size_t i = first; i < end; i++) out[i - first] = qk__key_pair(w, w->began.v[i]);
   } else {
@@ -210,7 +187,7 @@ static void walk_run(unsigned t, void *arg) {
   } else {
     for (size_t i = lo; i < hi && !WALK_STOPPED();)
       for (const size_t be = WALK_BLOCK_END(i, hi); i < be; i++) {
-        qk_world_pair_t q = ended_pair(w, w->ended.v[i]);
+        qk_world_pair_t q = qk__ended_pair(w, w->ended.v[i]);
         WALK_CALL(q.a, q.b, t);
       }
   }
