@@ -23,7 +23,7 @@ expect 0 '"input": \{"format": "poly", "round": 9.5367431640625e-07, "rounded_co
 # The input vertices in the .node file are the input rounded to 2^-20 (0.1 * 2^20 =
 # 104857.6 -> 104858; 37.7 * 2^20 = 39531315.2 -> 39531315), bit-identical through %.17g.
 same_text "t2 --round auto: input vertices 1 and 2 rounded to 2^-20" \
-  "$(sed -n '2,3p' "$tmp/t2.node" | awk '{printf "%s %s %s;", $1, $2 * 1048576, $3 * 1048576}')" \
+  "$(sed -n '2,3p' "$tmp/t2.node" | awk '{printf "%s %.17g %.17g;", $1, $2 * 1048576, $3 * 1048576}')" \
   "1 104858 104858;2 39531315 209715;"
 # An explicit grid too fine: the suggestion names it and auto's grid.
 expect 1 "needs a split point .* Round the input to a coarser grid than --round 2\\^-50 \\(--round auto: 2\\^-20 here\\)$" \
