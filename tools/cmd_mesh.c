@@ -664,11 +664,12 @@ static int read_input(const char *cmd, const mesh_args_t *o, qk_poly_t **poly, p
      * 0 and 3 coincide" for the file's 1 and 4, on no line). Points that round to one are
      * the mesher's to refuse ("vertices 1 and 4 coincide"), with a note on the grid. */
     st = qk_poly_round(*poly, pp->round, &pp->rounded);
+    const char *nm = strcmp(o->in, "-") ? o->in : "<stdin>";
     if (st == QK_OK && o->round == MG_ROUND_AUTO)
-      auto_note(o->in, 0, pp);
+      auto_note(nm, 0, pp);
     else if (st == QK_OK)
       fprintf(stderr, "quadkit mesh: --round %s: %zu coordinates of %s moved to the grid\n",
-              o->round_text, pp->rounded, o->in);
+              o->round_text, pp->rounded, nm);
     else
       snprintf(err.message, sizeof err.message,
                "--round %s: a rounded coordinate is beyond the largest double", o->round_text),

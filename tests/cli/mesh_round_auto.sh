@@ -25,6 +25,9 @@ expect 0 '"input": \{"format": "poly", "round": 9.5367431640625e-07, "rounded_co
 same_text "t2 --round auto: input vertices 1 and 2 rounded to 2^-20" \
   "$(sed -n '2,3p' "$tmp/t2.node" | awk '{printf "%s %.17g %.17g;", $1, $2 * 1048576, $3 * 1048576}')" \
   "1 104858 104858;2 39531315 209715;"
+# From standard input, named as the errors name it (the note said "coordinates of -").
+expect 0 "^quadkit mesh: --round auto: the grid 2\\^-20 .*: 8 coordinates of <stdin> moved to it" \
+  -- bash -c "'$cli' mesh - -o '$tmp/t2in' --max-size 5 --round auto <'$tmp/t2.poly'"
 # An explicit grid too fine: the suggestion names it and auto's grid.
 expect 1 "needs a split point .* Round the input to a coarser grid than --round 2\\^-50 \\(--round auto: 2\\^-20 here\\)$" \
   -- "$cli" mesh "$tmp/t2.poly" -o "$tmp/t2f" --max-size 5 --round 2^-50
