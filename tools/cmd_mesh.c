@@ -22,8 +22,9 @@ static double now(void) {
 
 static const char *usage_text =
     "usage: quadkit mesh IN.poly|IN.geojson -o PREFIX [--book | --dyadic | --general]\n"
-    "                    [--size U] [--max-size H] [--min-angle DEG] [--round 2^-q|Q]\n"
-    "                    [--project equirect] [--feature N | --field NAME=VALUE]\n"
+    "                    [--size U] [--max-size H] [--min-angle DEG]\n"
+    "                    [--project equirect] [--round 2^-q|Q|auto]\n"
+    "                    [--feature N | --field NAME=VALUE]\n"
     "                    [--poly FILE] [--svg FILE] [--msh FILE] [--vtk FILE] [--stats]\n"
     "\n"
     "Mesh a planar straight-line graph: polygons with holes, internal segments, any angles\n"
@@ -50,9 +51,15 @@ static const char *usage_text =
     "                  the bound that applies on stderr\n"
     "  --round G       round every input coordinate to the nearest multiple of G (2^-q or\n"
     "                  a number) before anything else; --stats says how many changed\n"
+    "  --round auto    choose G = 2^k from the input (after --project): the finest grid\n"
+    "                  on which every segment has exact split points at steps of G\n"
+    "                  (2k >= M + W - 52 for coordinates below 2^M and extent below 2^W),\n"
+    "                  so a vertex moves at most G/2, about 2^-26 of the extent; stderr\n"
+    "                  says the grid. Distinct points that round to one are refused\n"
     "  --project equirect\n"
     "                  GeoJSON lon/lat in degrees: project equirectangularly at the mean\n"
-    "                  latitude, in metres (use --round after it, e.g. --round 2^-4)\n"
+    "                  latitude, in metres (use --round after it: --round auto, or e.g.\n"
+    "                  --round 2^-4)\n"
     "  --feature N     GeoJSON: mesh only feature N (0-based, in file order; default: all)\n"
     "  --field NAME=VALUE\n"
     "                  GeoJSON: mesh the first feature whose property NAME is VALUE (as\n"
@@ -105,7 +112,7 @@ static qk_status_t w_svg(const qk_mesh_t *m, FILE *f, unsigned a) {
 typedef struct mesh_args {
   const char *in, *prefix, *svg, *msh, *vtk, *poly, *round_text;
   unsigned long size;
-  double max_size, min_angle, round;
+  double max_size, min_angle, round; /* round: the grid, or MG_ROUND_AUTO */
   qk_mesh_mode_t mode;
   int stats, help, geojson, project;
   long feature;
@@ -113,14 +120,18 @@ typedef struct mesh_args {
   const char *field_value;
 } mesh_args_t;
 
-/* --round G: "2^-q", "2^q" or a positive number. */
+/* --round G: "2^-q", "2^q", a positive number, or "auto" (MG_ROUND_AUTO). */
 static int parse_round(const char *cmd, const char *v, double *out) {
   char *end;
   double g;
+  if (!strcmp(v, "auto")) {
+    *out = MG_ROUND_AUTO;
+    return 0;
+  }
   if (!strncmp(v, "2^", 2)) {
     long q = strtol(v + 2, &end, 10);
     if (end == v + 2 || *end) {
-      cli_error(cmd, "--round %s: expected 2^-q with an integer q, or a positive number", v);
+      cli_error(cmd, "--round %s: expected 2^-q with an integer q, a positive number or auto", v);
       return 1;
     }
     /* (2^-2000 was "expected 2^-q with an integer q", and 2^-1000 "must be a positive
@@ -137,7 +148,8 @@ static int parse_round(const char *cmd, const char *v, double *out) {
     if (cli_number(v, &g) != 1) g = -1; /* (decimal only, as every number the tool reads) */
   }
   if (!(g > 0) || !isfinite(g)) {
-    cli_error(cmd, "--round %s: the grid step must be a positive number (e.g. 2^-4 or 0.5)", v);
+    cli_error(cmd,
+              "--round %s: the grid step must be a positive number (e.g. 2^-4 or 0.5), or auto", v);
     return 1;
   }
   if (g < 1e-300) {
@@ -422,6 +434,8 @@ typedef struct prep {
   const char *format;
   size_t rounded, merged, dropped_rings, dup_segments, split_points, features;
   double lat0;
+  double round;                        /* the grid rounded to (0: none) */
+  int round_exp, round_mag, round_ext; /* --round auto: 2^round_exp, and why (mg_auto_grid) */
   char name[128];
   mg_input_t gj; /* GeoJSON input (for naming segments in messages) */
 } prep_t;
@@ -469,7 +483,7 @@ static void print_stats(const qk_mesh_t *mesh, const mesh_args_t *o, const prep_
            "\"split_points\": %zu, ",
            pp->merged, pp->dropped_rings, pp->dup_segments, pp->split_points);
   }
-  printf("\"round\": %.17g, \"rounded_coordinates\": %zu}, ", o->round, pp->rounded);
+  printf("\"round\": %.17g, \"rounded_coordinates\": %zu}, ", pp->round, pp->rounded);
   printf("\"mode\": \"%s\", \"lattice_exponent\": %d, \"origin\": [%.17g, %.17g], "
          "\"proven_min_angle_deg\": %g, \"proven_max_angle_deg\": %g, ",
          mode_name(s.mode), s.lattice_exponent, s.origin_x, s.origin_y, s.proven_min_angle_deg,
@@ -550,6 +564,28 @@ static void name_segment(const prep_t *pp, const char *file, const char *msg, ch
     snprintf(buf, n, "%s", msg);
 }
 
+/* --round auto's grid exponent for the vertices of p (mg_auto_grid), with M and W in pp;
+ * returns 0, or 1 out of memory. */
+static int poly_auto_grid(const qk_poly_t *p, prep_t *pp) {
+  size_t nv = 0;
+  qk_poly_counts(p, &nv, NULL, NULL);
+  double *xy = malloc((nv ? nv : 1) * 2 * sizeof *xy);
+  if (!xy) return 1;
+  qk_poly_vertices(p, xy, nv, &nv);
+  pp->round_exp = mg_auto_grid(xy, nv, &pp->round_mag, &pp->round_ext);
+  free(xy);
+  return 0;
+}
+
+/* The stderr note of --round auto: the grid, why, and how much moved. */
+static void auto_note(const char *in, int projected, const prep_t *pp) {
+  fprintf(stderr,
+          "quadkit mesh: --round auto: the grid 2^%d (coordinates%s below 2^%d, extent below "
+          "2^%d): %zu coordinates of %s moved to it, each by at most 2^%d\n",
+          pp->round_exp, projected ? " in metres" : "", pp->round_mag, pp->round_ext, pp->rounded,
+          in, pp->round_exp - 1);
+}
+
 /* Read (and prepare) the input; on failure prints why and returns an exit code. */
 static int read_input(const char *cmd, const mesh_args_t *o, qk_poly_t **poly, prep_t *pp) {
   qk_mesh_error_t err;
@@ -576,6 +612,9 @@ static int read_input(const char *cmd, const mesh_args_t *o, qk_poly_t **poly, p
     pp->dropped_rings = pp->gj.dropped_rings, pp->dup_segments = pp->gj.dup_segments;
     pp->split_points = pp->gj.split_points;
     pp->features = pp->gj.features, pp->lat0 = pp->gj.lat0;
+    pp->round = pp->gj.round, pp->round_exp = pp->gj.round_exp;
+    pp->round_mag = pp->gj.round_mag, pp->round_ext = pp->gj.round_ext;
+    if (o->round == MG_ROUND_AUTO) auto_note(o->in, o->project, pp);
     snprintf(pp->name, sizeof pp->name, "%s", pp->gj.name);
     qk_status_t st = qk_poly_from_arrays(pp->gj.xy, pp->gj.nv, pp->gj.seg, pp->gj.ns, pp->gj.holes,
                                          pp->gj.nh, NULL, poly, &err);
@@ -611,14 +650,26 @@ static int read_input(const char *cmd, const mesh_args_t *o, qk_poly_t **poly, p
   qk_status_t st = qk_poly_read(f, NULL, poly, &err);
   if (f != stdin) fclose(f);
   free(copy);
-  if (st == QK_OK && o->round > 0) {
+  if (st == QK_OK && o->round != 0) {
+    pp->round = o->round;
+    if (o->round == MG_ROUND_AUTO) {
+      if (poly_auto_grid(*poly, pp)) {
+        cli_error(cmd, "out of memory");
+        return CLI_INTERNAL;
+      }
+      pp->round = ldexp(1, pp->round_exp);
+    }
     /* In place: errors keep the file's lines and vertex numbers, and markers and regional
      * attributes stay (the input was rebuilt from arrays, which lost all of them: "vertices
-     * 0 and 3 coincide" for the file's 1 and 4, on no line). */
-    st = qk_poly_round(*poly, o->round, &pp->rounded);
-    if (st == QK_OK)
+     * 0 and 3 coincide" for the file's 1 and 4, on no line). Points that round to one are
+     * the mesher's to refuse ("vertices 1 and 4 coincide"), with a note on the grid. */
+    st = qk_poly_round(*poly, pp->round, &pp->rounded);
+    const char *nm = strcmp(o->in, "-") ? o->in : "<stdin>";
+    if (st == QK_OK && o->round == MG_ROUND_AUTO)
+      auto_note(nm, 0, pp);
+    else if (st == QK_OK)
       fprintf(stderr, "quadkit mesh: --round %s: %zu coordinates of %s moved to the grid\n",
-              o->round_text, pp->rounded, o->in);
+              o->round_text, pp->rounded, nm);
     else
       snprintf(err.message, sizeof err.message,
                "--round %s: a rounded coordinate is beyond the largest double", o->round_text),
@@ -674,9 +725,48 @@ static int make_mesh(const char *cmd, const mesh_args_t *o, qk_poly_t **poly, qk
               mg_pole_note(&pp->gj, note, sizeof note));
     return CLI_BAD_INPUT;
   }
-  char msg[800], place[1024], note[512];
-  name_segment(pp, name, err.message[0] ? err.message : qk_strerror(st), msg, sizeof msg, place,
-               sizeof place);
+  char msg[1000], place[1024], note[512], why[600];
+  snprintf(why, sizeof why, "%s", err.message[0] ? err.message : qk_strerror(st));
+  /* A split point without an exact double (mesh/general_refine.c: "... needs a split point
+   * ...; exact ones: ... Round the input to a grid (--round; a coarser one if it was rounded
+   * already)"). The library's message is cut at 255 characters, often inside that last
+   * sentence, which is said here in full instead, with the option to type: the grid
+   * --round auto takes, computed from the input as meshed (projected, and rounded if it
+   * was). */
+  int auto_given = o->round == MG_ROUND_AUTO, split = 0;
+  if (st == QK_ERR_GEOMETRY && strstr(why, "needs a split point")) {
+    char *cut = strstr(why, " Round the input to a grid");
+    if (cut)
+      *cut = '\0';
+    else
+      strcat(why, "."); /* (cut before that sentence) */
+    size_t k = strlen(why);
+    prep_t a;
+    memset(&a, 0, sizeof a);
+    split = 1;
+    if (auto_given)
+      snprintf(why + k, sizeof why - k,
+               " Round the input to a coarser grid than 2^%d, which --round auto chose (e.g. "
+               "--round 2^%d)",
+               pp->round_exp, pp->round_exp + 2);
+    else if (poly_auto_grid(*poly, &a))
+      snprintf(why + k, sizeof why - k, " Round the input to a grid (--round auto)");
+    else if (o->round > 0)
+      snprintf(why + k, sizeof why - k,
+               " Round the input to a coarser grid than --round %s (--round auto: 2^%d here)",
+               o->round_text, a.round_exp);
+    else
+      snprintf(why + k, sizeof why - k, " Round the input to a grid: --round auto (2^%d here)",
+               a.round_exp);
+  }
+  name_segment(pp, name, why, msg, sizeof msg, place, sizeof place);
+  /* After --round auto, an error may come from the rounding (points that became one, a
+   * segment now crossing another): say which grid the coordinates were moved to. */
+  if (auto_given && !split && st != QK_ERR_NOMEM) {
+    size_t k = strlen(msg);
+    snprintf(msg + k, sizeof msg - k,
+             " (the coordinates were rounded to the grid 2^%d by --round auto)", pp->round_exp);
+  }
   const char *pole = mg_pole_note(&pp->gj, note, sizeof note);
   if (err.line)
     cli_error(cmd, "%s:%lu: %s", name, err.line, msg);

@@ -107,6 +107,29 @@ void mg_describe_segment(const mg_input_t *in, const char *path, size_t s, char 
   if (ptr[0]) mg_locate(path, ptr, line, col);
 }
 
+int mg_auto_grid(const double *xy, size_t n, int *mag, int *ext) {
+  double big = 0, lo[2] = {0, 0}, hi[2] = {0, 0};
+  for (size_t i = 0; i < n; i++)
+    for (int c = 0; c < 2; c++) {
+      double v = xy[2 * i + c];
+      big = fmax(big, fabs(v));
+      lo[c] = i ? fmin(lo[c], v) : v, hi[c] = i ? fmax(hi[c], v) : v;
+    }
+  /* The extent's subtraction rounds, but monotonically: a side of at least 2^W (a
+   * double) never comes out below it, so W is never too small. */
+  double side = fmax(hi[0] - lo[0], hi[1] - lo[1]);
+  int m = 0, w = 0;
+  if (big > 0) (void)frexp(big, &m); /* 2^(m-1) <= big < 2^m */
+  if (side > 0)
+    (void)frexp(side, &w);
+  else
+    w = m; /* one point: nothing to split; the grid from the magnitude alone */
+  *mag = m, *ext = w;
+  if (big == 0) return 0;
+  int s = m + w - 52, k = s >= 0 ? (s + 1) / 2 : -(-s / 2); /* ceil(s / 2) */
+  return k < -996 ? -996 : k > 1000 ? 1000 : k;
+}
+
 #ifndef QK_HAVE_JSONC
 int mg_read(const char *path, const mg_options_t *o, mg_input_t *out, char *msg, size_t n) {
   (void)o;
@@ -442,8 +465,27 @@ static int across_map(const rings_t *r, size_t q, size_t i, double y) {
          ((p[1] > y && n[1] > y) || (p[1] < y && n[1] < y));
 }
 
-/* Project and round in place; counts rounded coordinates. */
-static void transform(rings_t *r, const mg_options_t *o, mg_input_t *out) {
+/* A point before and after rounding, for --round auto's check that no two distinct points
+ * become one. */
+typedef struct moved {
+  double x, y, ox, oy;
+  size_t i;
+} moved_t;
+
+static int moved_cmp(const void *pa, const void *pb) {
+  const moved_t *a = pa, *b = pb;
+  const double ka[4] = {a->x, a->y, a->ox, a->oy}, kb[4] = {b->x, b->y, b->ox, b->oy};
+  for (int k = 0; k < 4; k++)
+    if (ka[k] != kb[k]) return ka[k] < kb[k] ? -1 : 1;
+  return a->i < b->i ? -1 : a->i > b->i;
+}
+
+/* Project and round in place; counts rounded coordinates. With --round auto, *p1 < *p2
+ * receive two points that were distinct and coincide after rounding (SIZE_MAX: none):
+ * merging them, as points that coincide in the input are merged, would change the
+ * input's shape on a grid the user did not choose. Returns 0, or 3 out of memory. */
+static int transform(rings_t *r, const mg_options_t *o, mg_input_t *out, size_t *p1, size_t *p2) {
+  *p1 = *p2 = SIZE_MAX;
   if (o->project && r->np) {
     double lo = r->xy[0], hi = r->xy[0], lat = 0;
     for (size_t i = 0; i < r->np; i++) {
@@ -474,12 +516,35 @@ static void transform(rings_t *r, const mg_options_t *o, mg_input_t *out) {
       r->xy[2 * i + 1] = r->xy[2 * i + 1] * MG_EARTH_M * MG_PI / 180;
     }
   }
-  if (o->round > 0)
+  double g = o->round;
+  int autog = g == MG_ROUND_AUTO;
+  if (autog) { /* after the projection: the grid is for the coordinates meshed */
+    out->round_exp = mg_auto_grid(r->xy, r->np, &out->round_mag, &out->round_ext);
+    g = ldexp(1, out->round_exp);
+  }
+  out->round = g > 0 ? g : 0;
+  moved_t *mv = NULL;
+  if (autog && r->np && !(mv = malloc(r->np * sizeof *mv))) return 3;
+  for (size_t i = 0; mv && i < r->np; i++)
+    mv[i].ox = r->xy[2 * i], mv[i].oy = r->xy[2 * i + 1], mv[i].i = i;
+  if (g > 0)
     for (size_t i = 0; i < 2 * r->np; i++) {
-      double v = nearbyint(r->xy[i] / o->round) * o->round;
+      double v = nearbyint(r->xy[i] / g) * g;
       out->rounded += v != r->xy[i];
       r->xy[i] = v;
     }
+  if (!mv) return 0;
+  for (size_t i = 0; i < r->np; i++) mv[i].x = r->xy[2 * i], mv[i].y = r->xy[2 * i + 1];
+  qsort(mv, r->np, sizeof *mv, moved_cmp);
+  for (size_t i = 1; i < r->np; i++)
+    if (mv[i].x == mv[i - 1].x && mv[i].y == mv[i - 1].y &&
+        (mv[i].ox != mv[i - 1].ox || mv[i].oy != mv[i - 1].oy)) {
+      size_t a = mv[i - 1].i, b = mv[i].i;
+      if (*p1 == SIZE_MAX || (a < b ? a : b) < *p1) /* the first in file order */
+        *p1 = a < b ? a : b, *p2 = a < b ? b : a;
+    }
+  free(mv);
+  return 0;
 }
 
 /* Vertices lying exactly inside an axis-parallel ring edge (a T-junction: parts of a
@@ -931,11 +996,36 @@ int mg_read(const char *path, const mg_options_t *o, mg_input_t *out, char *msg,
   free(want);
   int south = 0;
   size_t pole = rc ? SIZE_MAX : pole_ring(&r, &south);
+  size_t c1 = SIZE_MAX, c2 = SIZE_MAX;
   if (!rc) {
     out->points = r.np;
-    transform(&r, o, out);
-    if (build(&r, out)) rc = mg_fail(msg, n, 3, "out of memory");
+    if (transform(&r, o, out, &c1, &c2)) rc = mg_fail(msg, n, 3, "out of memory");
   }
+  if (!rc && c1 != SIZE_MAX) {
+    /* Said before anything is merged: the rings' table names the two positions. */
+    size_t q1 = 0, q2 = 0;
+    while (r.start[q1 + 1] <= c1) q1++;
+    while (r.start[q2 + 1] <= c2) q2++;
+    out->nin = r.nr, out->in_feature = r.feat, out->in_poly = r.poly, out->in_ring = r.num;
+    out->in_path = r.path, out->paths = r.paths;
+    char w1[128], w2[128], ptr1[512], ptr2[512], place1[1024];
+    unsigned long l2, col2;
+    mg_describe_ring(out, q1, c1 - r.start[q1], w1, sizeof w1, ptr1, sizeof ptr1);
+    mg_describe_ring(out, q2, c2 - r.start[q2], w2, sizeof w2, ptr2, sizeof ptr2);
+    mg_place(path, ptr1, place1, sizeof place1);
+    mg_locate(path, ptr2, &l2, &col2);
+    out->nin = 0, out->in_feature = out->in_poly = out->in_ring = NULL;
+    out->in_path = NULL, out->paths = NULL;
+    rc =
+        mg_fail(msg, n, 1,
+                "%s: %s and %s (at %lu:%lu) are distinct points that both round to (%.17g, "
+                "%.17g) on the grid 2^%d that --round auto chose (coordinates%s below 2^%d, "
+                "extent below 2^%d): merged, they would change the input's shape. Give a "
+                "finer grid (--round 2^%d, say) or remove one of the points",
+                place1, w1, w2, l2, col2, r.xy[2 * c1], r.xy[2 * c1 + 1], out->round_exp,
+                o->project ? " in metres" : "", out->round_mag, out->round_ext, out->round_exp - 8);
+  }
+  if (!rc && build(&r, out)) rc = mg_fail(msg, n, 3, "out of memory");
   /* The rings' table, for messages that name a ring or a position. */
   out->nin = r.nr, out->in_feature = r.feat, out->in_poly = r.poly, out->in_ring = r.num;
   out->in_path = r.path, out->paths = r.paths;

@@ -22,8 +22,13 @@ typedef struct mg_options {
   const char *field_name; /* with field_value: the first feature whose property matches */
   const char *field_value;
   int project;  /* nonzero: equirectangular projection at the mean latitude, metres */
-  double round; /* grid step to round every coordinate to (0: none) */
+  double round; /* grid step to round every coordinate to (0: none; MG_ROUND_AUTO: the
+                   grid mg_auto_grid() chooses from the coordinates after projection) */
 } mg_options_t;
+
+/* mg_options_t.round for `--round auto` (a sentinel, so that the positional initialisers
+ * of the tests and the benchmark keep their meaning). */
+#define MG_ROUND_AUTO (-1.0)
 
 /* The input for qk_poly_from_arrays, and what happened on the way. */
 typedef struct mg_input {
@@ -52,19 +57,44 @@ typedef struct mg_input {
   char *paths;
   size_t pole_ring; /* an input ring that goes round a pole as lon/lat, or SIZE_MAX */
   int pole_south;
-  size_t features;      /* features that gave rings */
-  size_t points;        /* ring points read (closing points not counted) */
-  size_t rounded;       /* coordinates changed by rounding */
-  size_t merged;        /* ring points that became an existing vertex */
-  size_t dropped_rings; /* rings with fewer than 3 distinct points left */
-  size_t unused_points; /* vertices left only by dropped rings (removed) */
-  size_t dup_segments;  /* segments given twice */
-  size_t split_points;  /* vertices inserted into axis-parallel ring edges they lay on */
-  double lat0;          /* the projection's latitude (degrees) */
-  char name[128];       /* the feature's name (NAME / name / ADMIN), or "" */
-  size_t field_matches; /* --field: how many features match (the first is meshed) */
-  long field_pick;      /* --field: the feature meshed */
+  size_t features;          /* features that gave rings */
+  size_t points;            /* ring points read (closing points not counted) */
+  size_t rounded;           /* coordinates changed by rounding */
+  double round;             /* the grid rounded to (0: none): o->round, or the auto grid */
+  int round_exp;            /* MG_ROUND_AUTO: the grid is 2^round_exp ... */
+  int round_mag, round_ext; /* ... chosen from these (mg_auto_grid) */
+  size_t merged;            /* ring points that became an existing vertex */
+  size_t dropped_rings;     /* rings with fewer than 3 distinct points left */
+  size_t unused_points;     /* vertices left only by dropped rings (removed) */
+  size_t dup_segments;      /* segments given twice */
+  size_t split_points;      /* vertices inserted into axis-parallel ring edges they lay on */
+  double lat0;              /* the projection's latitude (degrees) */
+  char name[128];           /* the feature's name (NAME / name / ADMIN), or "" */
+  size_t field_matches;     /* --field: how many features match (the first is meshed) */
+  long field_pick;          /* --field: the feature meshed */
 } mg_input_t;
+
+/*
+ * `--round auto`: the exponent k of the grid 2^k for the n points xy (x, y pairs, finite).
+ * *mag and *ext receive M and W with every |coordinate| < 2^M and the larger side of the
+ * bounding box < 2^W; k = ceil((M + W - 52) / 2), kept in [-996, 1000] (the range
+ * --round takes).
+ *
+ * Why: the general mode splits a segment only at a + (j / 2^m)(b - a) computed exactly
+ * (mesh/general_points.c, qk__seg_budget): with both ends multiples of 2^k and below 2^M,
+ * every such point is an exact double for m <= 52 - (M - k). A segment's coordinate
+ * differences are below 2^W, so splits at steps of the grid itself (pieces down to 2^k,
+ * m = W - k) are exact when 52 - M + k >= W - k, i.e. 2k >= M + W - 52; k is the finest
+ * grid with that property. Rounding moves a vertex by at most 2^(k-1), at most
+ * 2^(k-W) of the extent: 2^-26 of it when the input lies about the origin (M = W), a
+ * factor 2 more for each factor 4 that the coordinates' magnitude exceeds the extent
+ * (Norway in metres: 2^-24). The input's own detail after rounding (distances between
+ * distinct vertices) is at least the grid step, so splits down to the grid step are what
+ * its features need; deeper splits (a vertex nearer than 2^k to a segment, the descent
+ * into a small input angle) may still be refused, naming the segment, as without --round.
+ * No points (n = 0) or only zeros: k = 0.
+ */
+int mg_auto_grid(const double *xy, size_t n, int *mag, int *ext);
 
 /*
  * Read path. Returns 0, or 1 (bad input) / 3 (out of memory, internal) with a message
