@@ -728,7 +728,7 @@ static int make_mesh(const char *cmd, const mesh_args_t *o, qk_poly_t **poly, qk
   char msg[1000], place[1024], note[512], why[600];
   snprintf(why, sizeof why, "%s", err.message[0] ? err.message : qk_strerror(st));
   /* A split point without an exact double (mesh/general_refine.c: "... needs a split point
-   * ...; exact ones: ... Round the input to a grid (--round; a coarser one if it was rounded
+   * ...; exact ones: ... Round the input to a grid (a coarser one if it was rounded
    * already)"). The library's message is cut at 255 characters, often inside that last
    * sentence, which is said here in full instead, with the option to type: the grid
    * --round auto takes, computed from the input as meshed (projected, and rounded if it
