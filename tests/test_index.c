@@ -535,14 +535,16 @@ static void test_index_build_ex_names_point(void **state) {
   assert_int_equal(qk_tree_build_ex(p, 8, &o, &t, &err), QK_ERR_OUTSIDE);
   assert_int_equal(err.item, 3);
   assert_non_null(strstr(err.message, "point 3 (1.5,"));
-  /* Outside in y alone (above the root, the next point inside): the first such point. */
+  /* One point outside, in y alone (above the root, the next point inside). */
   p[3].x = 0.9;
   p[4].y = 1.25;
+  p[7].y = 0.35;
   assert_int_equal(qk_tree_build_ex(p, 8, &o, &t, &err), QK_ERR_OUTSIDE);
   assert_int_equal(err.item, 4);
   assert_non_null(strstr(err.message, "point 4 (0.40000000000000002, 1.25)"));
   p[4].y = 0.2;
   p[3].x = 1.5;
+  p[7].y = -2;
   o.max_depth = QK_MAX_DEPTH_LIMIT + 1;
   assert_int_equal(qk_tree_build_ex(p, 8, &o, &t, &err), QK_ERR_INVALID);
   assert_int_equal(err.item, SIZE_MAX);
