@@ -32,6 +32,8 @@
  *    full, so that almost every insert moved one and set off the next compaction);
  *  - compact storage (issue 11): at 1M uniform points and capacity 32 a built tree holds
  *    at most 22 bytes per point (16 of coordinates, 4 of ids, the nodes in the rest);
+ *  - the bounding box on two threads: the extremes in the second share alone decide the
+ *    fitted root (the same as on one thread) and a point outside a given root is refused;
  *  - qk_tree_check() itself: each invariant broken one field at a time (counts, child
  *    blocks, slots, ids, the id map, the free lists, block records, a point in the wrong
  *    leaf) is reported as QK_ERR_CORRUPT, and the mended tree passes again.
@@ -1003,6 +1005,49 @@ static void test_index_memory_compact(void **state) {
   free(p);
 }
 
+/* The bounding box on two threads (from 2^18 points a share each): the extremes lie in the
+ * second share only, one per side, so each of the four merges decides the fitted root; with
+ * a given root, a point outside it in the second share only must be refused. */
+static void test_index_bbox_threads(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, qkt_seed(1131));
+  enum { N = (1 << 18) + 1000 };
+  qk_point_t *p = malloc(N * sizeof *p);
+  assert_non_null(p);
+  qkt_points(&r, QKT_UNIFORM, p, N);
+  const qk_point_t far[4] = {{-3, 0.5}, {0.5, -5}, {6, 0.5}, {0.5, 7}};
+  qk_tree_options_t o;
+  qk_tree_options_init(&o);
+  o.capacity = 16;
+  for (int k = 0; k < 4; k++) {
+    qk_point_t keep = p[N - 1 - k];
+    p[N - 1 - k] = far[k];
+    qk_tree_t *one, *two;
+    o.threads = 1;
+    assert_int_equal(qk_tree_build(p, N, &o, &one), QK_OK);
+    o.threads = 2;
+    assert_int_equal(qk_tree_build(p, N, &o, &two), QK_OK);
+    qk_node_info_t a, b;
+    assert_int_equal(qk_tree_node_info(one, 0, &a), QK_OK);
+    assert_int_equal(qk_tree_node_info(two, 0, &b), QK_OK);
+    /* The fitted root holds the far point, and is the same on one thread and two. */
+    assert_true(far[k].x >= a.square.x && far[k].x <= a.square.x + a.square.side);
+    assert_true(far[k].y >= a.square.y && far[k].y <= a.square.y + a.square.side);
+    assert_true(a.square.x == b.square.x && a.square.y == b.square.y &&
+                a.square.side == b.square.side);
+    qk_tree_free(one);
+    qk_tree_free(two);
+    qk_tree_options_t u = unit_root(16);
+    u.threads = 2;
+    qk_tree_t *t = (qk_tree_t *)1;
+    assert_int_equal(qk_tree_build(p, N, &u, &t), QK_ERR_OUTSIDE);
+    assert_null(t);
+    p[N - 1 - k] = keep;
+  }
+  free(p);
+}
+
 static void test_index_build_threads(void **state) {
   (void)state;
   uint64_t seed = qkt_seed(1130);
@@ -1216,6 +1261,7 @@ int main(void) {
       cmocka_unit_test(test_index_churn_memory),
       cmocka_unit_test(test_index_insert_duplicates_linear),
       cmocka_unit_test(test_index_build_threads),
+      cmocka_unit_test(test_index_bbox_threads),
       cmocka_unit_test(test_index_build_streamed),
       cmocka_unit_test(test_index_memory_compact),
       cmocka_unit_test(test_index_check_detects_corruption),
