@@ -31,7 +31,12 @@
  *    within 100 times its final size (each compaction used to leave every big leaf
  *    full, so that almost every insert moved one and set off the next compaction);
  *  - compact storage (issue 11): at 1M uniform points and capacity 32 a built tree holds
- *    at most 22 bytes per point (16 of coordinates, 4 of ids, the nodes in the rest).
+ *    at most 22 bytes per point (16 of coordinates, 4 of ids, the nodes in the rest);
+ *  - the bounding box on two threads: the extremes in the second share alone decide the
+ *    fitted root (the same as on one thread) and a point outside a given root is refused;
+ *  - qk_tree_check() itself: each invariant broken one field at a time (counts, child
+ *    blocks, slots, ids, the id map, the free lists, block records, a point in the wrong
+ *    leaf) is reported as QK_ERR_CORRUPT, and the mended tree passes again.
  */
 #include <float.h>
 #include <pthread.h>
@@ -41,6 +46,7 @@
 #include <string.h>
 
 #include "qk_test.h"
+#include "index/index_access.h" /* the tree struct, for the checker's test */
 
 static const qkt_dist_t dists[] = {QKT_UNIFORM, QKT_CLUSTERED, QKT_DUPLICATES, QKT_GRID_EDGES};
 static const uint32_t caps[] = {1, 4, 32};
@@ -531,6 +537,16 @@ static void test_index_build_ex_names_point(void **state) {
   assert_int_equal(qk_tree_build_ex(p, 8, &o, &t, &err), QK_ERR_OUTSIDE);
   assert_int_equal(err.item, 3);
   assert_non_null(strstr(err.message, "point 3 (1.5,"));
+  /* One point outside, in y alone (above the root, the next point inside). */
+  p[3].x = 0.9;
+  p[4].y = 1.25;
+  p[7].y = 0.35;
+  assert_int_equal(qk_tree_build_ex(p, 8, &o, &t, &err), QK_ERR_OUTSIDE);
+  assert_int_equal(err.item, 4);
+  assert_non_null(strstr(err.message, "point 4 (0.40000000000000002, 1.25)"));
+  p[4].y = 0.2;
+  p[3].x = 1.5;
+  p[7].y = -2;
   o.max_depth = QK_MAX_DEPTH_LIMIT + 1;
   assert_int_equal(qk_tree_build_ex(p, 8, &o, &t, &err), QK_ERR_INVALID);
   assert_int_equal(err.item, SIZE_MAX);
@@ -989,6 +1005,49 @@ static void test_index_memory_compact(void **state) {
   free(p);
 }
 
+/* The bounding box on two threads (from 2^18 points a share each): the extremes lie in the
+ * second share only, one per side, so each of the four merges decides the fitted root; with
+ * a given root, a point outside it in the second share only must be refused. */
+static void test_index_bbox_threads(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, qkt_seed(1131));
+  enum { N = (1 << 18) + 1000 };
+  qk_point_t *p = malloc(N * sizeof *p);
+  assert_non_null(p);
+  qkt_points(&r, QKT_UNIFORM, p, N);
+  const qk_point_t far[4] = {{-3, 0.5}, {0.5, -5}, {6, 0.5}, {0.5, 7}};
+  qk_tree_options_t o;
+  qk_tree_options_init(&o);
+  o.capacity = 16;
+  for (int k = 0; k < 4; k++) {
+    qk_point_t keep = p[N - 1 - k];
+    p[N - 1 - k] = far[k];
+    qk_tree_t *one, *two;
+    o.threads = 1;
+    assert_int_equal(qk_tree_build(p, N, &o, &one), QK_OK);
+    o.threads = 2;
+    assert_int_equal(qk_tree_build(p, N, &o, &two), QK_OK);
+    qk_node_info_t a, b;
+    assert_int_equal(qk_tree_node_info(one, 0, &a), QK_OK);
+    assert_int_equal(qk_tree_node_info(two, 0, &b), QK_OK);
+    /* The fitted root holds the far point, and is the same on one thread and two. */
+    assert_true(far[k].x >= a.square.x && far[k].x <= a.square.x + a.square.side);
+    assert_true(far[k].y >= a.square.y && far[k].y <= a.square.y + a.square.side);
+    assert_true(a.square.x == b.square.x && a.square.y == b.square.y &&
+                a.square.side == b.square.side);
+    qk_tree_free(one);
+    qk_tree_free(two);
+    qk_tree_options_t u = unit_root(16);
+    u.threads = 2;
+    qk_tree_t *t = (qk_tree_t *)1;
+    assert_int_equal(qk_tree_build(p, N, &u, &t), QK_ERR_OUTSIDE);
+    assert_null(t);
+    p[N - 1 - k] = keep;
+  }
+  free(p);
+}
+
 static void test_index_build_threads(void **state) {
   (void)state;
   uint64_t seed = qkt_seed(1130);
@@ -1058,6 +1117,148 @@ static void test_index_build_streamed(void **state) {
   free(p);
 }
 
+/* qk_tree_check(), which every other test trusts, against trees broken one field at a
+ * time: each invariant it promises to verify is violated in a valid tree (ids reused, a
+ * block freed, garbage slots, the id map made), the checker must answer QK_ERR_CORRUPT,
+ * and after the field is restored it must pass again. A checker that passes everything
+ * would let every other test pass. */
+static void expect_corrupt(const qk_tree_t *t, const char *what) {
+  char msg[256];
+  qk_status_t st = qk_tree_check(t, msg, sizeof msg);
+  if (st != QK_ERR_CORRUPT) fail_msg("%s: qk_tree_check gave %s", what, qk_strerror(st));
+}
+
+#define BREAK_U32(t, field, bad, what)                                                             \
+  do {                                                                                             \
+    uint32_t keep_ = (field);                                                                      \
+    (field) = (bad);                                                                               \
+    expect_corrupt((t), (what));                                                                   \
+    (field) = keep_;                                                                               \
+    QKT_CHECK_TREE(t);                                                                             \
+  } while (0)
+
+/* libc's realloc with 64 zero bytes after every block: a checker reading one entry past
+ * its scratch (an id one past the last handed out, through `>` for `>=`) then reads a
+ * zero, not whatever the heap held there, and so misses the bad id every time. */
+static void *zero_tail_alloc(void *ud, void *ptr, size_t osize, size_t nsize) {
+  (void)ud, (void)osize;
+  if (nsize == 0) {
+    free(ptr);
+    return NULL;
+  }
+  unsigned char *q = realloc(ptr, nsize + 64);
+  if (q) memset(q + nsize, 0, 64);
+  return q;
+}
+
+static void test_index_check_detects_corruption(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, qkt_seed(25));
+  enum { N = 400 };
+  qk_point_t p[N];
+  qkt_points(&r, QKT_UNIFORM, p, N);
+  qk_tree_options_t o = unit_root(4);
+  const qk_allocator_t zt = {zero_tail_alloc, NULL};
+  o.allocator = &zt;
+  qk_tree_t *t;
+  assert_int_equal(qk_tree_build(p, N, &o, &t), QK_OK);
+  /* Remove a clustered third (whole blocks merge and go on the free list), then insert a
+   * few back (ids come off the free list). */
+  for (qk_id_t id = 0; id < N; id++)
+    if (p[id].x < 0.4 && p[id].y < 0.4) assert_int_equal(qk_tree_remove(t, id), QK_OK);
+  for (int i = 0; i < 5; i++) {
+    qk_id_t id;
+    assert_int_equal(qk_tree_insert(t, (qk_point_t){0.9 - 0.01 * i, 0.8}, &id), QK_OK);
+  }
+  QKT_CHECK_TREE(t);
+  qk_tree_t *m = t; /* the test breaks and mends its own tree, field by field */
+  uint32_t *map = qk__id_map_if_made(m);
+  assert_non_null(map);
+  assert_true(m->n_free_blocks > 0 && m->n_free_ids > 0 && m->garbage > 0 && !m->refined);
+
+  /* Two non-empty leaves a and b, and an internal node v other than the root. */
+  uint32_t a = QK_NONE, b = QK_NONE, v = QK_NONE;
+  for (uint32_t k = 1; k < m->n_nodes; k++) {
+    if (!qk__node_live(m, k)) continue;
+    if (!qk__node_leaf(m, k))
+      v = v == QK_NONE ? k : v;
+    else if (qk__node_count(m, k) > 0) {
+      if (a == QK_NONE)
+        a = k;
+      else if (b == QK_NONE)
+        b = k;
+    }
+  }
+  assert_true(a != QK_NONE && b != QK_NONE && v != QK_NONE);
+  /* The layout is index/'s own (index/index_access.h reads it); this test must write it,
+   * so it names the fields, and the points through the accessors with const cast away. */
+  struct qk__node *na = &m->nodes[a], *nb = &m->nodes[b], *nv = &m->nodes[v];
+  uint32_t ia = na->start, ib = nb->start;
+  double *px = (double *)qk__tree_xs(m), *py = (double *)qk__tree_ys(m);
+  qk_id_t *pid = (qk_id_t *)qk__tree_ids(m);
+
+  BREAK_U32(m, m->n_nodes, m->n_nodes + 1, "node count not 1 + 4k");
+  BREAK_U32(m, m->nodes[0].count, m->nodes[0].count + 1, "root count");
+  BREAK_U32(m, nv->count, nv->count + 1, "internal count != children's sum");
+  BREAK_U32(m, nv->child, nv->child + 1, "child block not at 1 mod 4");
+  BREAK_U32(m, nb->start, na->start, "a slot in two leaves");
+  BREAK_U32(m, na->room, m->n_slots + 1, "slot range beyond the slots");
+  BREAK_U32(m, na->count, na->room + 1, "count beyond room");
+  BREAK_U32(m, m->capacity, 1, "a leaf over capacity that can split");
+  BREAK_U32(m, m->capacity, (uint32_t)m->n_points, "an internal node within capacity");
+  BREAK_U32(m, m->max_depth, qk__depth(m, a) - 1, "a leaf below the depth cap");
+  BREAK_U32(m, pid[ia], m->n_ids, "an id never handed out");
+  BREAK_U32(m, pid[ia], pid[ib], "an id stored twice");
+  BREAK_U32(m, map[pid[ia]], ib, "an id mapped to another slot");
+  BREAK_U32(m, m->garbage, m->garbage + 1, "garbage count");
+  BREAK_U32(m, m->n_free_blocks, m->n_free_blocks + 1, "free list shorter than its count");
+  BREAK_U32(m, m->free_block, QK_NONE, "free list empty, count not");
+  BREAK_U32(m, m->n_free_ids, m->n_ids - (uint32_t)m->n_points + 1, "too many free ids");
+  BREAK_U32(m, m->free_ids[0], pid[ia], "a stored id on the free list");
+  BREAK_U32(m, m->free_ids[0], m->n_ids, "a free id never handed out");
+  if (m->n_free_ids > 1) BREAK_U32(m, m->free_ids[1], m->free_ids[0], "a free id listed twice");
+  if (m->n_nodes + 4 <= m->cap_nodes)
+    BREAK_U32(m, m->n_nodes, m->n_nodes + 4, "slots of nodes neither live nor free");
+
+  qk__block_t *kv = qk__block_of(m, nv->child), *kf = qk__block_of(m, m->free_block);
+  uint8_t keep = kv->depth;
+  kv->depth = (uint8_t)(keep + 1);
+  expect_corrupt(t, "a block's depth");
+  kv->depth = keep;
+  kv->live = 0;
+  expect_corrupt(t, "a reachable block not live");
+  kv->live = 1;
+  BREAK_U32(m, kv->parent, 0, "a block's parent"); /* v, not the root, is its parent */
+  kf->live = 1;
+  expect_corrupt(t, "a free block marked live");
+  kf->live = 0;
+  QKT_CHECK_TREE(t);
+
+  /* The bounds on ids once more with the id map hidden: the map's own check would
+   * otherwise report an id one past the last handed out. */
+  m->where = NULL;
+  BREAK_U32(m, pid[ia], m->n_ids, "an id never handed out, no map");
+  BREAK_U32(m, m->free_ids[0], m->n_ids, "a free id never handed out, no map");
+  m->where = map;
+  QKT_CHECK_TREE(t);
+
+  size_t keep_points = m->n_points;
+  m->n_points++;
+  expect_corrupt(t, "point count");
+  m->n_points = keep_points;
+  /* Points swapped between two leaves: each id and slot is consistent, but the points do
+   * not lie where the tie rules send them. */
+  double x = px[ia], y = py[ia];
+  px[ia] = px[ib], py[ia] = py[ib];
+  px[ib] = x, py[ib] = y;
+  expect_corrupt(t, "points in the wrong leaves");
+  px[ib] = px[ia], py[ib] = py[ia];
+  px[ia] = x, py[ia] = y;
+  QKT_CHECK_TREE(t);
+  qk_tree_free(t);
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_index_build_invariants),
@@ -1076,8 +1277,10 @@ int main(void) {
       cmocka_unit_test(test_index_churn_memory),
       cmocka_unit_test(test_index_insert_duplicates_linear),
       cmocka_unit_test(test_index_build_threads),
+      cmocka_unit_test(test_index_bbox_threads),
       cmocka_unit_test(test_index_build_streamed),
       cmocka_unit_test(test_index_memory_compact),
+      cmocka_unit_test(test_index_check_detects_corruption),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }

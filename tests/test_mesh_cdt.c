@@ -15,6 +15,8 @@
  *  - segment insertion on the edges of a jittered grid graph (non-crossing, with points
  *    inserted afterwards on the segments and elsewhere), a crossing segment and a segment
  *    through a vertex refused with the right *block / *block_seg and nothing changed;
+ *  - long segments across random points: the cavity's retriangulation, not its flip
+ *    fallback, is what ran (on_change reports each cavity triangle once; flips repeat);
  *  - qk__cdt_locate_delaunay (from a vertex, on a triangulation without segments) against
  *    the exact orientations of the triangle it reports and against qk__cdt_locate;
  *  - legal_sides: a point on a constrained edge restores the Delaunay property on the sides
@@ -610,7 +612,7 @@ static void test_cdt_long_segments(void **state) {
     }
     segrec_t used[200];
     size_t nu = 0;
-    int refused = 0;
+    int refused = 0, big = 0, repeated = 0;
     for (int q = 0; q < 200; q++) {
       uint32_t a = 4 + qkt_rng_below(&r, (uint32_t)c.nv - 4),
                b = 4 + qkt_rng_below(&r, (uint32_t)c.nv - 4);
@@ -619,9 +621,14 @@ static void test_cdt_long_segments(void **state) {
       snap_take(&before, &c);
       uint8_t *seen = calloc(c.nt, 1);
       c.on_change = count_change, c.user = seen;
+      size_t reports = g_changes;
       qk_status_t st = qk__cdt_insert_segment(&c, a, b, (uint32_t)q, &blk, &bs);
+      reports = g_changes - reports;
       c.on_change = NULL, c.user = NULL;
       assert_int_equal(c.nt, before.nt);
+      size_t changed = 0;
+      for (size_t t = 0; t < c.nt; t++) changed += seen[t];
+      if (st == QK_OK && changed >= 3) big++, repeated += reports > changed;
       for (size_t t = 0; t < c.nt; t++)
         if ((memcmp(before.v + 3 * t, c.v + 3 * t, 3 * sizeof *c.v) ||
              memcmp(before.seg + 3 * t, c.seg + 3 * t, 3 * sizeof *c.v)) &&
@@ -663,6 +670,18 @@ static void test_cdt_long_segments(void **state) {
     check_cdt(&c);
     check_segments(&c, used, nu);
     assert_true(nu > 10 && refused > 10);
+    /* The flip fallback also makes the constrained Delaunay triangulation, so only the
+     * reports tell which path ran: the cavity's retriangulation reports each of its
+     * triangles once (more only where slits were flipped after it: rare), while k >= 2
+     * flips report 2k > k + 1 triangles. A cavity path that fell back every time (a wrong
+     * chain slot, a plan refused) would pass every other check here. */
+    if (qk__cdt_test_flips)
+      assert_int_equal(repeated, big);
+    else if (4 * repeated > big)
+      fail_msg("seed %llu: %d of %d segment insertions reported a triangle twice (the flip "
+               "fallback?)",
+               (unsigned long long)g_seed, repeated, big);
+    assert_true(big >= 10);
     qk__cdt_free(&c);
   }
   qk__cdt_test_flips = 0;
