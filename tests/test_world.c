@@ -1892,6 +1892,136 @@ static void test_world_fbox_only_bands(void **s) {
   }
 }
 
+/* Moves that take an object just out of its cell's loose square (by 1/32 of the cell's
+ * side, through each of its four sides) and nowhere else: the object must be re-filed,
+ * since the cells searched for a box beyond that side do not include its old one (a
+ * square's far sides are open). Discs, segments, points and boxes given with their
+ * corners swapped take the general move (collide/world.c: move_general, in_loose), boxes
+ * in order the inline one. The cell is read from the object (world_internal.h). The
+ * part of the moved object's box beyond the side is queried before and after the update,
+ * and the pairs with a box there are checked, all against the oracle. */
+/* The box of a sorted shape whose values are on a fine dyadic grid (exact). */
+static qk_box_t exact_box(qk_shape_t s) {
+  double r = s.kind == QK_SHAPE_DISC ? s.a : 0;
+  double x1 = s.kind == QK_SHAPE_BOX || s.kind == QK_SHAPE_SEGMENT ? s.a : s.x;
+  double y1 = s.kind == QK_SHAPE_BOX || s.kind == QK_SHAPE_SEGMENT ? s.b : s.y;
+  return (qk_box_t){fmin(s.x, x1) - r, fmin(s.y, y1) - r, fmax(s.x, x1) + r, fmax(s.y, y1) + r};
+}
+static void test_world_move_out_of_loose(void **s) {
+  (void)s;
+  ONE_THREAD_TEST();
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 401);
+  for (int kind = 0; kind < 5; kind++)
+    for (int side = 0; side < 4; side++)
+      for (int trial = 0; trial < 6; trial++) {
+        qk_world_t *w;
+        assert_int_equal(qk_world_new(NULL, &w), QK_OK);
+        mirror_t m = {0};
+        double x = q64(qkt_rng_range(&r, 1, 60)), y = q64(qkt_rng_range(&r, 1, 60));
+        double e = q64(qkt_rng_range(&r, 0.25, 4));
+        qk_shape_t sh = {QK_SHAPE_POINT, x, y, 0, 0};
+        if (kind == 0) sh = (qk_shape_t){QK_SHAPE_DISC, x, y, e / 2, 0};
+        if (kind == 1 || kind == 2) sh = (qk_shape_t){QK_SHAPE_BOX, x, y, x + e, y + e / 2};
+        if (kind == 3) sh = (qk_shape_t){QK_SHAPE_SEGMENT, x, y, x + e, y - e / 4};
+        m_add(w, &m, sh);
+        assert_int_equal(qk_world_update(w), QK_OK);
+        const qk__wobj_t *o = &w->obj[(uint32_t)m.h[0]];
+        double cs = ldexp(1, o->level), x0 = o->u.cx * cs, y0 = o->cy * cs, d = cs / 32;
+        qk_box_t b = exact_box(m.s[0]);
+        double dx = side == 0 ? x0 - d - b.xmin : side == 1 ? x0 + 2 * cs + d - b.xmax : 0;
+        double dy = side == 2 ? y0 - d - b.ymin : side == 3 ? y0 + 2 * cs + d - b.ymax : 0;
+        qk_shape_t mv = shifted(m.s[0], dx, dy);
+        if (kind == 2) { /* corners swapped: the general move */
+          double t = mv.x;
+          mv.x = mv.a, mv.a = t;
+        }
+        m_move(w, &m, 0, mv);
+        /* The part of the moved box beyond the side, the square's near sides excluded. */
+        b = exact_box(m.s[0]);
+        assert_true(side == 0   ? b.xmin == x0 - d
+                    : side == 1 ? b.xmax == x0 + 2 * cs + d
+                    : side == 2 ? b.ymin == y0 - d
+                                : b.ymax == y0 + 2 * cs + d);
+        qk_shape_t q = {QK_SHAPE_BOX, b.xmin, b.ymin, b.xmax, b.ymax};
+        if (side == 0) q.a = x0 - d / 2;
+        if (side == 1) q.x = x0 + 2 * cs;
+        if (side == 2) q.b = y0 - d / 2;
+        if (side == 3) q.y = y0 + 2 * cs;
+        assert_true(q.x <= q.a && q.y <= q.b && o_overlap(q, m.s[0]));
+        for (int pass = 0; pass < 2; pass++) {
+          qk_handle_t got[2];
+          size_t n;
+          assert_int_equal(qk_world_query(w, &q, got, 2, &n), QK_OK);
+          if (n != 1 || got[0] != m.h[0])
+            fail_msg("kind %d side %d trial %d pass %d: %zu objects, not the moved one (seed "
+                     "%llu)",
+                     kind, side, trial, pass, n, (unsigned long long)g_seed);
+          if (!pass) {
+            m_add(w, &m, q);
+            qk_world_pair_t *prev = NULL;
+            size_t np = 0;
+            update_and_check(w, &m, &prev, &np, "out of loose", side);
+            assert_int_equal(np, 1);
+            free(prev);
+            assert_int_equal(qk_world_remove(w, m.h[1]), QK_OK);
+            m.n = 1;
+          }
+        }
+        free(m.h), free(m.s);
+        qk_world_free(w);
+      }
+}
+
+/* The world's batch of first hits (qk_world_raycast_batch) on one and two threads, for
+ * counts around its chunks of 256 rays and past 64 chunks (where the chunks grow): every
+ * ray's hit is that of qk_world_raycast (checked against the oracle in check_queries),
+ * and no hit where no object meets the segment by brute force. The hits are filled with
+ * a value no ray gives first, so that a ray the batch skips shows. */
+static void test_world_raycast_batch(void **s) {
+  (void)s;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 409);
+  enum { NOBJ = 300, NMAX = 64 * 256 + 300 };
+  static const size_t counts[] = {0, 1, 2, 255, 256, 257, 511, 513, 64 * 256, 64 * 256 + 1, NMAX};
+  qk_point_t *from = malloc(NMAX * sizeof *from), *to = malloc(NMAX * sizeof *to);
+  qk_world_hit_t *got = malloc(NMAX * sizeof *got), *one = malloc(NMAX * sizeof *one);
+  for (unsigned threads = 1; threads <= 2; threads++) {
+    if (QKT_TSAN && threads == 1) continue;
+    qk_world_t *w = threaded_world(threads);
+    mirror_t m = {0};
+    for (size_t i = 0; i < NOBJ; i++) m_add(w, &m, rnd_shape(&r, SC_UNIFORM, 1));
+    assert_int_equal(qk_world_update(w), QK_OK);
+    for (size_t i = 0; i < NMAX; i++) {
+      from[i] = (qk_point_t){qkt_rng_range(&r, -10, 110), qkt_rng_range(&r, -10, 110)};
+      to[i] =
+          (qk_point_t){from[i].x + qkt_rng_range(&r, -8, 8), from[i].y + qkt_rng_range(&r, -8, 8)};
+      assert_int_equal(qk_world_raycast(w, from[i], to[i], &one[i]), QK_OK);
+    }
+    for (size_t c = 0; c < sizeof counts / sizeof *counts; c++) {
+      size_t n = counts[c];
+      for (size_t i = 0; i < NMAX; i++) got[i] = (qk_world_hit_t){m.h[0], -1};
+      assert_int_equal(qk_world_raycast_batch(w, from, to, n, got), QK_OK);
+      size_t none = 0;
+      for (size_t i = 0; i < n; i++) {
+        if (got[i].h != one[i].h || !(got[i].t == one[i].t))
+          fail_msg("threads %u, %zu rays: ray %zu hit %llx at %g, alone %llx at %g (seed %llu)",
+                   threads, n, i, (unsigned long long)got[i].h, got[i].t,
+                   (unsigned long long)one[i].h, one[i].t, (unsigned long long)g_seed);
+        if (got[i].h != QK_HANDLE_NONE) continue;
+        none++;
+        qk_shape_t seg = {QK_SHAPE_SEGMENT, from[i].x, from[i].y, to[i].x, to[i].y};
+        for (size_t j = 0; j < m.n; j++) assert_false(o_overlap(seg, m.s[j]));
+      }
+      for (size_t i = n; i < NMAX; i++) assert_true(got[i].h == m.h[0] && got[i].t == -1);
+      if (n > 1000) assert_true(none > 0 && none < n); /* (both kinds of answer occur) */
+    }
+    free(m.h), free(m.s);
+    qk_world_free(w);
+  }
+  free(from), free(to), free(got), free(one);
+}
+
 /* Touching cases on integers (every formula is exact there). */
 static void test_world_touching(void **s) {
   (void)s;
@@ -3025,6 +3155,8 @@ int main(void) {
       cmocka_unit_test(test_world_prefilter_and_sort),
       cmocka_unit_test(test_world_grid_undecided_runs),
       cmocka_unit_test(test_world_touching),
+      cmocka_unit_test(test_world_move_out_of_loose),
+      cmocka_unit_test(test_world_raycast_batch),
       cmocka_unit_test(test_world_stale_handles),
       cmocka_unit_test(test_world_threads_frames),
       cmocka_unit_test(test_world_thread_min_sides),
