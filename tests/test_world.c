@@ -2060,6 +2060,53 @@ static void test_world_touching(void **s) {
   qk_world_free(w);
 }
 
+/* Near misses by one unit in the last place at small coordinates, where the orientation
+ * is decided by the exact expansions (its filter cannot) and the exact value is a tiny
+ * positive number: a point, the end of a segment and the corner of a box one ulp off the
+ * segment from (0, 0) to (1, 1) (scaled by 2^-k), on its left, and the same reflected in
+ * the line x = y (on its right). None meets the segment; the oracle's long double products
+ * are exact here. Pairs and queries of every object against the oracle. */
+static qk_shape_t swap_xy(qk_shape_t s) {
+  double t = s.x;
+  s.x = s.y, s.y = t;
+  t = s.a, s.a = s.b, s.b = t;
+  return s;
+}
+static void test_world_one_ulp_off(void **s) {
+  (void)s;
+  ONE_THREAD_TEST();
+  for (int k = 0; k < 4; k++)
+    for (int mirror = 0; mirror < 2; mirror++) {
+      double c = ldexp(1, -k), m = c / 2, u = nextafter(m, 1) - m;
+      qk_shape_t sh[] = {
+          {QK_SHAPE_SEGMENT, 0, 0, c, c},
+          {QK_SHAPE_POINT, m, m + u, 0, 0},
+          {QK_SHAPE_SEGMENT, m, m + u, m - c / 4, m + c / 4},
+          {QK_SHAPE_BOX, m - c / 4, m + u, m, m + c / 4},
+      };
+      size_t n = sizeof sh / sizeof *sh;
+      qk_world_t *w;
+      assert_int_equal(qk_world_new(NULL, &w), QK_OK);
+      mirror_t mi = {0};
+      for (size_t i = 0; i < n; i++) m_add(w, &mi, mirror ? swap_xy(sh[i]) : sh[i]);
+      for (size_t i = 1; i < n; i++) assert_false(o_overlap(mi.s[0], mi.s[i]));
+      qk_world_pair_t *prev = NULL;
+      size_t np = 0;
+      update_and_check(w, &mi, &prev, &np, "one ulp off", k);
+      for (size_t i = 0; i < n; i++) {
+        qk_handle_t got[8];
+        size_t ng, want = 0;
+        assert_int_equal(qk_world_query(w, &mi.s[i], got, 8, &ng), QK_OK);
+        for (size_t j = 0; j < n; j++) want += o_overlap(mi.s[i], mi.s[j]);
+        if (ng != want)
+          fail_msg("scale 2^-%d mirror %d object %zu: %zu objects met, oracle %zu", k, mirror, i,
+                   ng, want);
+      }
+      free(prev), free(mi.h), free(mi.s);
+      qk_world_free(w);
+    }
+}
+
 /* qk_world_pair_bytes: at least what the pairs of the last update need (4 bytes a current
  * pair, 8 a began or ended pair), never more than qk_world_bytes. */
 static void test_world_pair_bytes(void **s) {
@@ -3155,6 +3202,7 @@ int main(void) {
       cmocka_unit_test(test_world_prefilter_and_sort),
       cmocka_unit_test(test_world_grid_undecided_runs),
       cmocka_unit_test(test_world_touching),
+      cmocka_unit_test(test_world_one_ulp_off),
       cmocka_unit_test(test_world_move_out_of_loose),
       cmocka_unit_test(test_world_raycast_batch),
       cmocka_unit_test(test_world_stale_handles),
