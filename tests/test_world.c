@@ -2107,6 +2107,52 @@ static void test_world_one_ulp_off(void **s) {
     }
 }
 
+/* Queries on the integer grid 0..6 against one object of each kind near its middle (a
+ * box, a segment, a disc of radius 2, a point): every box and every segment between grid
+ * points, every grid point, and discs of radius 1 and 2 at every grid point, so that
+ * every side and corner is touched exactly (the oracle is exact on integers). The
+ * world's queries reach the exact test only for candidates whose boxes meet the query's,
+ * so touching is where that test alone decides. */
+static void grid_query(qk_world_t *w, const qk_shape_t *obj, qk_shape_t q, size_t *met) {
+  qk_handle_t got[2];
+  size_t n, want = (size_t)o_overlap(q, *obj);
+  assert_int_equal(qk_world_query(w, &q, got, 2, &n), QK_OK);
+  if (n != want)
+    fail_msg("object kind %d, query kind %d (%g %g %g %g): %zu met, oracle %zu", obj->kind, q.kind,
+             q.x, q.y, q.a, q.b, n, want);
+  *met += want;
+}
+static void test_world_query_grid_touching(void **s) {
+  (void)s;
+  ONE_THREAD_TEST();
+  const qk_shape_t obj[] = {{QK_SHAPE_BOX, 2, 2, 4, 3},
+                            {QK_SHAPE_SEGMENT, 2, 4, 4, 2},
+                            {QK_SHAPE_DISC, 3, 3, 2, 0},
+                            {QK_SHAPE_POINT, 3, 2, 0, 0}};
+  for (size_t o = 0; o < sizeof obj / sizeof *obj; o++) {
+    qk_world_t *w;
+    assert_int_equal(qk_world_new(NULL, &w), QK_OK);
+    qk_handle_t h;
+    assert_int_equal(qk_world_add(w, &obj[o], 0, &h), QK_OK);
+    assert_int_equal(qk_world_update(w), QK_OK);
+    size_t met = 0;
+    for (int x0 = 0; x0 <= 6; x0++)
+      for (int y0 = 0; y0 <= 6; y0++) {
+        grid_query(w, &obj[o], (qk_shape_t){QK_SHAPE_POINT, x0, y0, 0, 0}, &met);
+        for (int r = 1; r <= 2; r++)
+          grid_query(w, &obj[o], (qk_shape_t){QK_SHAPE_DISC, x0, y0, r, 0}, &met);
+        for (int x1 = 0; x1 <= 6; x1++)
+          for (int y1 = 0; y1 <= 6; y1++) {
+            grid_query(w, &obj[o], (qk_shape_t){QK_SHAPE_SEGMENT, x0, y0, x1, y1}, &met);
+            if (x0 <= x1 && y0 <= y1)
+              grid_query(w, &obj[o], (qk_shape_t){QK_SHAPE_BOX, x0, y0, x1, y1}, &met);
+          }
+      }
+    assert_true(met > 100);
+    qk_world_free(w);
+  }
+}
+
 /* qk_world_pair_bytes: at least what the pairs of the last update need (4 bytes a current
  * pair, 8 a began or ended pair), never more than qk_world_bytes. */
 static void test_world_pair_bytes(void **s) {
@@ -3203,6 +3249,7 @@ int main(void) {
       cmocka_unit_test(test_world_grid_undecided_runs),
       cmocka_unit_test(test_world_touching),
       cmocka_unit_test(test_world_one_ulp_off),
+      cmocka_unit_test(test_world_query_grid_touching),
       cmocka_unit_test(test_world_move_out_of_loose),
       cmocka_unit_test(test_world_raycast_batch),
       cmocka_unit_test(test_world_stale_handles),
