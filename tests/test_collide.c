@@ -14,7 +14,9 @@
  *  - the threads option: pairs (in callback order, also stopped early), the pairs list
  *    and ray batches on 2, 3 and all cores equal to one thread; allocation failure at
  *    every N on the threaded paths (the same answers, or a clean QK_ERR_NOMEM), and
- *    every allocation of the worker threads failing (the same pairs, in order);
+ *    every allocation of the worker threads failing (the same pairs, in order); ray
+ *    batches of counts around the 16 jobs whose error records live on the stack (every
+ *    block given back after each batch);
  *  - on Linux, the ray arrays advised for huge pages by default (huge_pages left 0): a
  *    region flagged "hg" in /proc/self/smaps appears with the build, and the answers are
  *    those of the same collider from an allocator that is never advised.

@@ -20,6 +20,12 @@
  *  - a dense world (about 2.4 M pairs) whose update keeps its large buffers for the next
  *    one: pairs, began and ended every frame, on one thread and two;
  *  - hand-made touching cases of every pair of kinds (integers: the oracle is exact);
+ *    queries of every kind between the points of an integer grid against one object of
+ *    each kind; near misses by one ulp at small coordinates, which the exact expansions
+ *    decide (their value a tiny positive number);
+ *  - objects moved just out of their cells' loose squares through each side (re-filed:
+ *    queries beyond that side and the pairs there, before and after the update);
+ *  - the batch of first hits against single casts, for counts around its chunks;
  *  - stale handles are rejected after removal and slot reuse;
  *  - churn: 10^5 frames of moves, adds and removes on a small world stay within 1.2x the
  *    memory of a fresh world holding the same objects;
