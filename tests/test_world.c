@@ -2118,7 +2118,8 @@ static void test_world_one_ulp_off(void **s) {
  * points, every grid point, and discs of radius 1 and 2 at every grid point, so that
  * every side and corner is touched exactly (the oracle is exact on integers). The
  * world's queries reach the exact test only for candidates whose boxes meet the query's,
- * so touching is where that test alone decides. */
+ * so touching is where that test alone decides. The nearest object to each grid point
+ * too: at distance 0 exactly on the boundary (four grid points lie on the disc's circle). */
 static void grid_query(qk_world_t *w, const qk_shape_t *obj, qk_shape_t q, size_t *met) {
   qk_handle_t got[2];
   size_t n, want = (size_t)o_overlap(q, *obj);
@@ -2127,6 +2128,18 @@ static void grid_query(qk_world_t *w, const qk_shape_t *obj, qk_shape_t q, size_
     fail_msg("object kind %d, query kind %d (%g %g %g %g): %zu met, oracle %zu", obj->kind, q.kind,
              q.x, q.y, q.a, q.b, n, want);
   *met += want;
+}
+/* The nearest object to p (the only one) is at the oracle's distance: 0 exactly where p
+ * is on the shape (its boundary included), else within rounding. */
+static void grid_knn(qk_world_t *w, const qk_shape_t *obj, qk_point_t p) {
+  qk_world_hit_t hit;
+  size_t n;
+  assert_int_equal(qk_world_knn(w, p, 1, &hit, &n), QK_OK);
+  assert_int_equal(n, 1);
+  ld d = sqrtl(o_d2(obj, p.x, p.y));
+  if ((d == 0) != (hit.t == 0) || fabsl(hit.t - d) > 1e-12L)
+    fail_msg("object kind %d, point (%g %g): distance %a, oracle %La", obj->kind, p.x, p.y, hit.t,
+             d);
 }
 static void test_world_query_grid_touching(void **s) {
   (void)s;
@@ -2145,6 +2158,7 @@ static void test_world_query_grid_touching(void **s) {
     for (int x0 = 0; x0 <= 6; x0++)
       for (int y0 = 0; y0 <= 6; y0++) {
         grid_query(w, &obj[o], (qk_shape_t){QK_SHAPE_POINT, x0, y0, 0, 0}, &met);
+        grid_knn(w, &obj[o], (qk_point_t){x0, y0});
         for (int r = 1; r <= 2; r++)
           grid_query(w, &obj[o], (qk_shape_t){QK_SHAPE_DISC, x0, y0, r, 0}, &met);
         for (int x1 = 0; x1 <= 6; x1++)
@@ -2157,6 +2171,44 @@ static void test_world_query_grid_touching(void **s) {
     assert_true(met > 100);
     qk_world_free(w);
   }
+}
+
+/* qk_world_bytes is the bytes the world holds from its allocator (between updates):
+ * exactly the live bytes of a counting allocator, after every update and every batch of
+ * moves, adds and removes of a random scene of all kinds (the empty world first, and with
+ * pairs and without). */
+static void test_world_bytes_exact(void **s) {
+  (void)s;
+  ONE_THREAD_TEST();
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 419);
+  qkt_alloc_t st;
+  qk_allocator_t a = qkt_alloc_make(&st);
+  qk_world_options_t o;
+  qk_world_options_init(&o);
+  o.allocator = &a;
+  qk_world_t *w;
+  assert_int_equal(qk_world_new(&o, &w), QK_OK);
+  assert_int_equal(qk_world_bytes(w), st.live_bytes);
+  assert_int_equal(qk_world_update(w), QK_OK);
+  assert_int_equal(qk_world_bytes(w), st.live_bytes);
+  mirror_t m = {0};
+  for (int f = 0; f < 30; f++) {
+    size_t add = f < 10 ? 40 : 5;
+    for (size_t i = 0; i < add; i++) m_add(w, &m, rnd_shape(&r, SC_UNIFORM, 1));
+    for (size_t i = 0; i < m.n; i++)
+      if (qkt_rng_below(&r, 2)) m_move(w, &m, i, moved(&r, m.s[i]));
+    for (int k = 0; k < 3 && m.n; k++) (void)m_remove_random(w, &m, &r);
+    if (qk_world_bytes(w) != st.live_bytes)
+      fail_msg("frame %d before the update: %zu bytes counted, %zu held", f, qk_world_bytes(w),
+               st.live_bytes);
+    assert_int_equal(qk_world_update(w), QK_OK);
+    if (qk_world_bytes(w) != st.live_bytes)
+      fail_msg("frame %d: %zu bytes counted, %zu held", f, qk_world_bytes(w), st.live_bytes);
+  }
+  qk_world_free(w);
+  assert_int_equal(st.live_bytes, 0);
+  free(m.h), free(m.s);
 }
 
 /* qk_world_pair_bytes: at least what the pairs of the last update need (4 bytes a current
@@ -2231,9 +2283,20 @@ static void test_world_stale_handles(void **s) {
   qk_world_options_init(&o);
   o.margin = 17;
   assert_int_equal(qk_world_new(&o, &w), QK_ERR_INVALID);
+  o.margin = nextafter(16, 17);
+  assert_int_equal(qk_world_new(&o, &w), QK_ERR_INVALID);
   qk_world_options_init(&o);
   o.min_margin = INFINITY;
   assert_int_equal(qk_world_new(&o, &w), QK_ERR_INVALID);
+  o.min_margin = nextafter(0x1p100, INFINITY);
+  assert_int_equal(qk_world_new(&o, &w), QK_ERR_INVALID);
+  /* the bounds themselves are accepted (margin 0..16, min_margin 0..2^100) */
+  o.margin = 16;
+  o.min_margin = 0x1p100;
+  assert_int_equal(qk_world_new(&o, &w), QK_OK);
+  assert_int_equal(qk_world_add(w, &got, 0, &hc), QK_OK);
+  assert_int_equal(qk_world_update(w), QK_OK);
+  qk_world_free(w);
   qk_world_options_init(&o);
   o.threads = 0;
   assert_int_equal(qk_world_new(&o, &w), QK_ERR_INVALID);
@@ -3264,6 +3327,7 @@ int main(void) {
       cmocka_unit_test(test_world_move_batch_errors),
       cmocka_unit_test(test_world_move_box_edges),
       cmocka_unit_test(test_world_pair_bytes),
+      cmocka_unit_test(test_world_bytes_exact),
       cmocka_unit_test(test_world_churn_memory),
       cmocka_unit_test(test_world_nomem),
       cmocka_unit_test(test_world_nomem_threads),
