@@ -3,7 +3,8 @@
  *  - all overlapping pairs of random discs, boxes and mixed sets (small and large items,
  *    touching items, zero radii and degenerate boxes, clustered centres) at several
  *    capacities, against the O(n^2) loop;
- *  - items overlapping a query box or disc against brute force;
+ *  - items overlapping a query box (also of zero width, height or both) or disc
+ *    against brute force;
  *  - first hit of rays and segments against an oracle derived independently (exact
  *    rational arithmetic with GMP; tests/support/query_oracle.c): origins inside
  *    items (t = 0), outside the whole set, axis-parallel directions, components so
@@ -157,6 +158,11 @@ static void test_collide_query_shapes(void **state) {
     double s = qkt_rng_range(&r, 0, 0.2);
     qk_disc_t qd = {x, y, qi % 20 == 0 ? 0 : s};
     qk_box_t qb = {x - s, y - s * 0.5, x + s, y + s * 0.5};
+    /* degenerate boxes too (valid, as items): a horizontal line's, a vertical one's and a
+     * point's */
+    if (qi % 20 == 10) qb.ymin = qb.ymax = y;
+    if (qi % 20 == 15) qb.xmin = qb.xmax = x;
+    if (qi % 40 == 5) qb = (qk_box_t){x, y, x, y};
     got.n = 0;
     assert_int_equal(qk_collider_query_disc(c, qd, add_id, &got), QK_OK);
     qko_sort_ids(got.v, got.n);
