@@ -2211,6 +2211,38 @@ static void test_world_bytes_exact(void **s) {
   free(m.h), free(m.s);
 }
 
+/* Frames in which most pairs end, or begin, at once while few stay, with no object added
+ * or removed: 2000 pairs of touching boxes, of which all but the 60 of the lowest slots
+ * part and then meet again, over and over. The merge of this frame's pairs with the last
+ * frame's then has one list far longer than the other (few keys left in one when many are
+ * left in the other, where its blocks of unchecked steps must stop at the shorter list's
+ * end). Began and ended every frame against brute force. */
+static void test_world_most_pairs_change(void **s) {
+  (void)s;
+  ONE_THREAD_TEST();
+  enum { NP = 2000, KEEP = 60 };
+  qk_world_t *w;
+  assert_int_equal(qk_world_new(NULL, &w), QK_OK);
+  mirror_t m = {0};
+  for (int k = 0; k < NP; k++) {
+    double x = (k % 50) * 4, y = (k / 50) * 4;
+    m_add(w, &m, (qk_shape_t){QK_SHAPE_BOX, x, y, x + 1, y + 1});
+    m_add(w, &m, (qk_shape_t){QK_SHAPE_BOX, x + 1, y, x + 2, y + 1}); /* touching */
+  }
+  qk_world_pair_t *prev = NULL;
+  size_t np = 0;
+  update_and_check(w, &m, &prev, &np, "most change", 0);
+  assert_int_equal(np, NP);
+  for (int f = 1; f <= 6; f++) {
+    double dx = f & 1 ? 0.5 : -0.5; /* apart, then back */
+    for (size_t i = 2 * KEEP + 1; i < m.n; i += 2) m_move(w, &m, i, shifted(m.s[i], dx, 0));
+    update_and_check(w, &m, &prev, &np, "most change", f);
+    assert_int_equal(np, f & 1 ? KEEP : NP);
+  }
+  free(prev), free(m.h), free(m.s);
+  qk_world_free(w);
+}
+
 /* qk_world_pair_bytes: at least what the pairs of the last update need (4 bytes a current
  * pair, 8 a began or ended pair), never more than qk_world_bytes. */
 static void test_world_pair_bytes(void **s) {
@@ -3328,6 +3360,7 @@ int main(void) {
       cmocka_unit_test(test_world_move_box_edges),
       cmocka_unit_test(test_world_pair_bytes),
       cmocka_unit_test(test_world_bytes_exact),
+      cmocka_unit_test(test_world_most_pairs_change),
       cmocka_unit_test(test_world_churn_memory),
       cmocka_unit_test(test_world_nomem),
       cmocka_unit_test(test_world_nomem_threads),
