@@ -2243,6 +2243,35 @@ static void test_world_most_pairs_change(void **s) {
   qk_world_free(w);
 }
 
+/* The dirty objects' radix sort (more than 64 of them) with about the widest keys it
+ * packs: unit boxes (level 2) in three rows of 34 touching ones about 2^28 apart, cell
+ * indices 2^26 from 0 either way: 28 bits a coordinate, 56 with the 7 of the index, six
+ * digits (a wider range takes the byte sort). The pairs after adding them all, and after
+ * moving them all, against brute force. */
+static void test_world_sort_wide_keys(void **s) {
+  (void)s;
+  ONE_THREAD_TEST();
+  qk_world_t *w;
+  assert_int_equal(qk_world_new(NULL, &w), QK_OK);
+  mirror_t m = {0};
+  const double at[3] = {-0x1p28, 0, 0x1p28};
+  for (int g = 0; g < 3; g++)
+    for (int k = 0; k < 34; k++) {
+      double x = at[g] + k, y = at[2 - g] + (k & 1);
+      m_add(w, &m, (qk_shape_t){QK_SHAPE_BOX, x, y, x + 1, y + 1});
+    }
+  qk_world_pair_t *prev = NULL;
+  size_t np = 0;
+  update_and_check(w, &m, &prev, &np, "wide keys", 0);
+  assert_true(np >= 99);
+  for (int f = 1; f <= 2; f++) {
+    for (size_t i = 0; i < m.n; i++) m_move(w, &m, i, shifted(m.s[i], 3, -3));
+    update_and_check(w, &m, &prev, &np, "wide keys", f);
+  }
+  free(prev), free(m.h), free(m.s);
+  qk_world_free(w);
+}
+
 /* qk_world_pair_bytes: at least what the pairs of the last update need (4 bytes a current
  * pair, 8 a began or ended pair), never more than qk_world_bytes. */
 static void test_world_pair_bytes(void **s) {
@@ -3361,6 +3390,7 @@ int main(void) {
       cmocka_unit_test(test_world_pair_bytes),
       cmocka_unit_test(test_world_bytes_exact),
       cmocka_unit_test(test_world_most_pairs_change),
+      cmocka_unit_test(test_world_sort_wide_keys),
       cmocka_unit_test(test_world_churn_memory),
       cmocka_unit_test(test_world_nomem),
       cmocka_unit_test(test_world_nomem_threads),
