@@ -26,6 +26,7 @@
  *  - objects moved just out of their cells' loose squares through each side (re-filed:
  *    queries beyond that side and the pairs there, before and after the update);
  *  - the batch of first hits against single casts, for counts around its chunks;
+ *    segments ending on a circle along its tangent: every hit's t in [0, 1];
  *  - stale handles are rejected after removal and slot reuse;
  *  - churn: 10^5 frames of moves, adds and removes on a small world stay within 1.2x the
  *    memory of a fresh world holding the same objects;
@@ -2272,6 +2273,51 @@ static void test_world_sort_wide_keys(void **s) {
   qk_world_free(w);
 }
 
+/* Segments that end on a disc's circle at a Pythagorean point and run along its tangent
+ * there, from a start rounded off the tangent: the hits that graze the disc are where
+ * the long double root of the entry parameter lies farthest from its value (its
+ * discriminant near zero), above 1 by up to about 1e-15. The documented parameter is in
+ * [0, 1]: every hit's t, by qk_world_raycast and qk_world_raycast_all. */
+static void test_world_ray_tangent_end(void **s) {
+  (void)s;
+  ONE_THREAD_TEST();
+  static const int tri[][3] = {{3, 4, 5}, {5, 12, 13}, {8, 15, 17}, {7, 24, 25}, {20, 21, 29}};
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 433);
+  qk_world_t *w;
+  assert_int_equal(qk_world_new(NULL, &w), QK_OK);
+  qk_handle_t h;
+  qk_shape_t d = {QK_SHAPE_DISC, 0, 0, 1, 0};
+  assert_int_equal(qk_world_add(w, &d, 0, &h), QK_OK);
+  assert_int_equal(qk_world_update(w), QK_OK);
+  int hits = 0;
+  for (int it = 0; it < 20000; it++) {
+    const int *p = tri[qkt_rng_below(&r, 5)];
+    double k = ldexp(1, (int)qkt_rng_below(&r, 8) - 4);
+    int sw = (int)qkt_rng_below(&r, 2);
+    double ux = p[sw] * (qkt_rng_below(&r, 2) ? 1 : -1),
+           uy = p[1 - sw] * (qkt_rng_below(&r, 2) ? 1 : -1);
+    d.x = ((int)qkt_rng_below(&r, 2001) - 1000) * 0.125;
+    d.y = ((int)qkt_rng_below(&r, 2001) - 1000) * 0.125;
+    d.a = p[2] * k;
+    assert_int_equal(qk_world_move(w, h, &d), QK_OK);
+    qk_point_t to = {d.x + ux * k, d.y + uy * k};
+    double m = (qkt_rng_below(&r, 1000) + 1) / 3.0 * k / p[2];
+    qk_point_t from = {to.x - uy * m, to.y + ux * m};
+    qk_world_hit_t first, all[2];
+    size_t n;
+    assert_int_equal(qk_world_raycast(w, from, to, &first), QK_OK);
+    assert_int_equal(qk_world_raycast_all(w, from, to, all, 2, &n), QK_OK);
+    assert_int_equal(n, first.h == h);
+    if (first.h != h) continue;
+    hits++;
+    if (!(first.t >= 0 && first.t <= 1 && all[0].t == first.t))
+      fail_msg("case %d: t %a outside [0, 1] (seed %llu)", it, first.t, (unsigned long long)g_seed);
+  }
+  assert_true(hits > 1000);
+  qk_world_free(w);
+}
+
 /* qk_world_pair_bytes: at least what the pairs of the last update need (4 bytes a current
  * pair, 8 a began or ended pair), never more than qk_world_bytes. */
 static void test_world_pair_bytes(void **s) {
@@ -3391,6 +3437,7 @@ int main(void) {
       cmocka_unit_test(test_world_bytes_exact),
       cmocka_unit_test(test_world_most_pairs_change),
       cmocka_unit_test(test_world_sort_wide_keys),
+      cmocka_unit_test(test_world_ray_tangent_end),
       cmocka_unit_test(test_world_churn_memory),
       cmocka_unit_test(test_world_nomem),
       cmocka_unit_test(test_world_nomem_threads),
