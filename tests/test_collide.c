@@ -3,7 +3,8 @@
  *  - all overlapping pairs of random discs, boxes and mixed sets (small and large items,
  *    touching items, zero radii and degenerate boxes, clustered centres) at several
  *    capacities, against the O(n^2) loop;
- *  - items overlapping a query box or disc against brute force;
+ *  - items overlapping a query box (also of zero width, height or both) or disc
+ *    against brute force;
  *  - first hit of rays and segments against an oracle derived independently (exact
  *    rational arithmetic with GMP; tests/support/query_oracle.c): origins inside
  *    items (t = 0), outside the whole set, axis-parallel directions, components so
@@ -14,7 +15,9 @@
  *  - the threads option: pairs (in callback order, also stopped early), the pairs list
  *    and ray batches on 2, 3 and all cores equal to one thread; allocation failure at
  *    every N on the threaded paths (the same answers, or a clean QK_ERR_NOMEM), and
- *    every allocation of the worker threads failing (the same pairs, in order);
+ *    every allocation of the worker threads failing (the same pairs, in order); ray
+ *    batches of counts around the 16 jobs whose error records live on the stack (every
+ *    block given back after each batch);
  *  - on Linux, the ray arrays advised for huge pages by default (huge_pages left 0): a
  *    region flagged "hg" in /proc/self/smaps appears with the build, and the answers are
  *    those of the same collider from an allocator that is never advised.
@@ -155,6 +158,11 @@ static void test_collide_query_shapes(void **state) {
     double s = qkt_rng_range(&r, 0, 0.2);
     qk_disc_t qd = {x, y, qi % 20 == 0 ? 0 : s};
     qk_box_t qb = {x - s, y - s * 0.5, x + s, y + s * 0.5};
+    /* degenerate boxes too (valid, as items): a horizontal line's, a vertical one's and a
+     * point's */
+    if (qi % 20 == 10) qb.ymin = qb.ymax = y;
+    if (qi % 20 == 15) qb.xmin = qb.xmax = x;
+    if (qi % 40 == 5) qb = (qk_box_t){x, y, x, y};
     got.n = 0;
     assert_int_equal(qk_collider_query_disc(c, qd, add_id, &got), QK_OK);
     qko_sort_ids(got.v, got.n);
@@ -446,6 +454,57 @@ static void assert_same_seq(const seq_t *x, const seq_t *y, uint32_t threads) {
   if (x->n != y->n || (x->n && memcmp(x->p, y->p, x->n * sizeof *x->p)))
     fail_msg("threads %u: %zu pairs vs %zu on one thread, or another order (seed %llu)", threads,
              y->n, x->n, (unsigned long long)g_seed);
+}
+
+/* Ray batches of counts around the per-job records' room on the stack (16 jobs of 256
+ * rays; more borrow them from the allocator) and around a job's 256 rays, on one and two
+ * threads: every hit equals the single cast's, and each batch gives back every block and
+ * byte it took (a batch of 17 jobs, the first that borrows, must free them too). */
+static void test_collide_rays_batch_counts(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 17);
+  enum { ND = 400, NB = 400, NMAX = 20 * 256 };
+  static const size_t counts[] = {
+      1, 255, 256, 257, 16 * 256, 16 * 256 + 1, 17 * 256 - 1, 17 * 256, 17 * 256 + 1, NMAX};
+  qk_disc_t *d = malloc(ND * sizeof *d);
+  qk_box_t *b = malloc(NB * sizeof *b);
+  qk_point_t *org = malloc(NMAX * sizeof *org), *dir = malloc(NMAX * sizeof *dir);
+  qk_hit_t *one = malloc(NMAX * sizeof *one), *many = malloc(NMAX * sizeof *many);
+  make_items(&r, d, ND, b, NB, 0, 0.02);
+  for (size_t i = 0; i < NMAX; i++) {
+    org[i] = (qk_point_t){qkt_rng_range(&r, -0.2, 1.2), qkt_rng_range(&r, -0.2, 1.2)};
+    double ang = qkt_rng_range(&r, 0, 6.283185307179586);
+    dir[i] = (qk_point_t){cos(ang), sin(ang)};
+  }
+  qkt_alloc_t st;
+  qk_allocator_t a = qkt_alloc_make(&st);
+  qk_tree_options_t o = opts(4);
+  o.allocator = &a;
+  qk_collider_t *c = NULL;
+  assert_int_equal(qk_collider_build(d, ND, b, NB, &o, &c), QK_OK);
+  for (size_t i = 0; i < NMAX; i++)
+    assert_int_equal(qk_collider_raycast(c, org[i], dir[i], 0.5, &one[i]), QK_OK);
+  const size_t blocks = st.live_blocks, bytes = st.live_bytes; /* (the ray structures made) */
+  for (uint32_t threads = 1; threads <= 2; threads++) {
+    qk_collider_set_threads(c, threads);
+    for (size_t k = 0; k < sizeof counts / sizeof *counts; k++) {
+      size_t n = counts[k];
+      assert_int_equal(qk_collider_raycast_batch(c, org, dir, n, 0.5, many), QK_OK);
+      if (st.live_blocks != blocks || st.live_bytes != bytes)
+        fail_msg("threads %u, %zu rays: %zu blocks (%zu bytes) held after the batch, %zu (%zu) "
+                 "before",
+                 threads, n, st.live_blocks, st.live_bytes, blocks, bytes);
+      for (size_t i = 0; i < n; i++)
+        if (many[i].id != one[i].id || !(many[i].t == one[i].t))
+          fail_msg("threads %u, %zu rays: ray %zu %u at %g, one call %u at %g (seed %llu)", threads,
+                   n, i, (unsigned)many[i].id, many[i].t, (unsigned)one[i].id, one[i].t,
+                   (unsigned long long)g_seed);
+    }
+  }
+  qk_collider_free(c);
+  assert_int_equal(st.live_blocks, 0);
+  free(d), free(b), free(org), free(dir), free(one), free(many);
 }
 
 static void test_collide_threads_option(void **state) {
@@ -1340,6 +1399,7 @@ int main(void) {
       cmocka_unit_test(test_collide_nomem),
       cmocka_unit_test(test_collide_threads),
       cmocka_unit_test(test_collide_threads_option),
+      cmocka_unit_test(test_collide_rays_batch_counts),
       cmocka_unit_test(test_collide_threads_nomem),
       cmocka_unit_test(test_collide_threaded_build),
       cmocka_unit_test(test_collide_threads_worker_nomem),

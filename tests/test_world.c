@@ -20,6 +20,13 @@
  *  - a dense world (about 2.4 M pairs) whose update keeps its large buffers for the next
  *    one: pairs, began and ended every frame, on one thread and two;
  *  - hand-made touching cases of every pair of kinds (integers: the oracle is exact);
+ *    queries of every kind between the points of an integer grid against one object of
+ *    each kind; near misses by one ulp at small coordinates, which the exact expansions
+ *    decide (their value a tiny positive number);
+ *  - objects moved just out of their cells' loose squares through each side (re-filed:
+ *    queries beyond that side and the pairs there, before and after the update);
+ *  - the batch of first hits against single casts, for counts around its chunks;
+ *    segments ending on a circle along its tangent: every hit's t in [0, 1];
  *  - stale handles are rejected after removal and slot reuse;
  *  - churn: 10^5 frames of moves, adds and removes on a small world stay within 1.2x the
  *    memory of a fresh world holding the same objects;
@@ -1892,6 +1899,136 @@ static void test_world_fbox_only_bands(void **s) {
   }
 }
 
+/* Moves that take an object just out of its cell's loose square (by 1/32 of the cell's
+ * side, through each of its four sides) and nowhere else: the object must be re-filed,
+ * since the cells searched for a box beyond that side do not include its old one (a
+ * square's far sides are open). Discs, segments, points and boxes given with their
+ * corners swapped take the general move (collide/world.c: move_general, in_loose), boxes
+ * in order the inline one. The cell is read from the object (world_internal.h). The
+ * part of the moved object's box beyond the side is queried before and after the update,
+ * and the pairs with a box there are checked, all against the oracle. */
+/* The box of a sorted shape whose values are on a fine dyadic grid (exact). */
+static qk_box_t exact_box(qk_shape_t s) {
+  double r = s.kind == QK_SHAPE_DISC ? s.a : 0;
+  double x1 = s.kind == QK_SHAPE_BOX || s.kind == QK_SHAPE_SEGMENT ? s.a : s.x;
+  double y1 = s.kind == QK_SHAPE_BOX || s.kind == QK_SHAPE_SEGMENT ? s.b : s.y;
+  return (qk_box_t){fmin(s.x, x1) - r, fmin(s.y, y1) - r, fmax(s.x, x1) + r, fmax(s.y, y1) + r};
+}
+static void test_world_move_out_of_loose(void **s) {
+  (void)s;
+  ONE_THREAD_TEST();
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 401);
+  for (int kind = 0; kind < 5; kind++)
+    for (int side = 0; side < 4; side++)
+      for (int trial = 0; trial < 6; trial++) {
+        qk_world_t *w;
+        assert_int_equal(qk_world_new(NULL, &w), QK_OK);
+        mirror_t m = {0};
+        double x = q64(qkt_rng_range(&r, 1, 60)), y = q64(qkt_rng_range(&r, 1, 60));
+        double e = q64(qkt_rng_range(&r, 0.25, 4));
+        qk_shape_t sh = {QK_SHAPE_POINT, x, y, 0, 0};
+        if (kind == 0) sh = (qk_shape_t){QK_SHAPE_DISC, x, y, e / 2, 0};
+        if (kind == 1 || kind == 2) sh = (qk_shape_t){QK_SHAPE_BOX, x, y, x + e, y + e / 2};
+        if (kind == 3) sh = (qk_shape_t){QK_SHAPE_SEGMENT, x, y, x + e, y - e / 4};
+        m_add(w, &m, sh);
+        assert_int_equal(qk_world_update(w), QK_OK);
+        const qk__wobj_t *o = &w->obj[(uint32_t)m.h[0]];
+        double cs = ldexp(1, o->level), x0 = o->u.cx * cs, y0 = o->cy * cs, d = cs / 32;
+        qk_box_t b = exact_box(m.s[0]);
+        double dx = side == 0 ? x0 - d - b.xmin : side == 1 ? x0 + 2 * cs + d - b.xmax : 0;
+        double dy = side == 2 ? y0 - d - b.ymin : side == 3 ? y0 + 2 * cs + d - b.ymax : 0;
+        qk_shape_t mv = shifted(m.s[0], dx, dy);
+        if (kind == 2) { /* corners swapped: the general move */
+          double t = mv.x;
+          mv.x = mv.a, mv.a = t;
+        }
+        m_move(w, &m, 0, mv);
+        /* The part of the moved box beyond the side, the square's near sides excluded. */
+        b = exact_box(m.s[0]);
+        assert_true(side == 0   ? b.xmin == x0 - d
+                    : side == 1 ? b.xmax == x0 + 2 * cs + d
+                    : side == 2 ? b.ymin == y0 - d
+                                : b.ymax == y0 + 2 * cs + d);
+        qk_shape_t q = {QK_SHAPE_BOX, b.xmin, b.ymin, b.xmax, b.ymax};
+        if (side == 0) q.a = x0 - d / 2;
+        if (side == 1) q.x = x0 + 2 * cs;
+        if (side == 2) q.b = y0 - d / 2;
+        if (side == 3) q.y = y0 + 2 * cs;
+        assert_true(q.x <= q.a && q.y <= q.b && o_overlap(q, m.s[0]));
+        for (int pass = 0; pass < 2; pass++) {
+          qk_handle_t got[2];
+          size_t n;
+          assert_int_equal(qk_world_query(w, &q, got, 2, &n), QK_OK);
+          if (n != 1 || got[0] != m.h[0])
+            fail_msg("kind %d side %d trial %d pass %d: %zu objects, not the moved one (seed "
+                     "%llu)",
+                     kind, side, trial, pass, n, (unsigned long long)g_seed);
+          if (!pass) {
+            m_add(w, &m, q);
+            qk_world_pair_t *prev = NULL;
+            size_t np = 0;
+            update_and_check(w, &m, &prev, &np, "out of loose", side);
+            assert_int_equal(np, 1);
+            free(prev);
+            assert_int_equal(qk_world_remove(w, m.h[1]), QK_OK);
+            m.n = 1;
+          }
+        }
+        free(m.h), free(m.s);
+        qk_world_free(w);
+      }
+}
+
+/* The world's batch of first hits (qk_world_raycast_batch) on one and two threads, for
+ * counts around its chunks of 256 rays and past 64 chunks (where the chunks grow): every
+ * ray's hit is that of qk_world_raycast (checked against the oracle in check_queries),
+ * and no hit where no object meets the segment by brute force. The hits are filled with
+ * a value no ray gives first, so that a ray the batch skips shows. */
+static void test_world_raycast_batch(void **s) {
+  (void)s;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 409);
+  enum { NOBJ = 300, NMAX = 64 * 256 + 300 };
+  static const size_t counts[] = {0, 1, 2, 255, 256, 257, 511, 513, 64 * 256, 64 * 256 + 1, NMAX};
+  qk_point_t *from = malloc(NMAX * sizeof *from), *to = malloc(NMAX * sizeof *to);
+  qk_world_hit_t *got = malloc(NMAX * sizeof *got), *one = malloc(NMAX * sizeof *one);
+  for (unsigned threads = 1; threads <= 2; threads++) {
+    if (QKT_TSAN && threads == 1) continue;
+    qk_world_t *w = threaded_world(threads);
+    mirror_t m = {0};
+    for (size_t i = 0; i < NOBJ; i++) m_add(w, &m, rnd_shape(&r, SC_UNIFORM, 1));
+    assert_int_equal(qk_world_update(w), QK_OK);
+    for (size_t i = 0; i < NMAX; i++) {
+      from[i] = (qk_point_t){qkt_rng_range(&r, -10, 110), qkt_rng_range(&r, -10, 110)};
+      to[i] =
+          (qk_point_t){from[i].x + qkt_rng_range(&r, -8, 8), from[i].y + qkt_rng_range(&r, -8, 8)};
+      assert_int_equal(qk_world_raycast(w, from[i], to[i], &one[i]), QK_OK);
+    }
+    for (size_t c = 0; c < sizeof counts / sizeof *counts; c++) {
+      size_t n = counts[c];
+      for (size_t i = 0; i < NMAX; i++) got[i] = (qk_world_hit_t){m.h[0], -1};
+      assert_int_equal(qk_world_raycast_batch(w, from, to, n, got), QK_OK);
+      size_t none = 0;
+      for (size_t i = 0; i < n; i++) {
+        if (got[i].h != one[i].h || !(got[i].t == one[i].t))
+          fail_msg("threads %u, %zu rays: ray %zu hit %llx at %g, alone %llx at %g (seed %llu)",
+                   threads, n, i, (unsigned long long)got[i].h, got[i].t,
+                   (unsigned long long)one[i].h, one[i].t, (unsigned long long)g_seed);
+        if (got[i].h != QK_HANDLE_NONE) continue;
+        none++;
+        qk_shape_t seg = {QK_SHAPE_SEGMENT, from[i].x, from[i].y, to[i].x, to[i].y};
+        for (size_t j = 0; j < m.n; j++) assert_false(o_overlap(seg, m.s[j]));
+      }
+      for (size_t i = n; i < NMAX; i++) assert_true(got[i].h == m.h[0] && got[i].t == -1);
+      if (n > 1000) assert_true(none > 0 && none < n); /* (both kinds of answer occur) */
+    }
+    free(m.h), free(m.s);
+    qk_world_free(w);
+  }
+  free(from), free(to), free(got), free(one);
+}
+
 /* Touching cases on integers (every formula is exact there). */
 static void test_world_touching(void **s) {
   (void)s;
@@ -1927,6 +2064,257 @@ static void test_world_touching(void **s) {
   assert_int_equal(qk_world_query(w, &q, got, 16, &ng), QK_OK);
   for (size_t i = 0; i < ng; i++) assert_true(got[i] != m.h[1]);
   free(want), free(m.h), free(m.s);
+  qk_world_free(w);
+}
+
+/* Near misses by one unit in the last place at small coordinates, where the orientation
+ * is decided by the exact expansions (its filter cannot) and the exact value is a tiny
+ * positive number: a point, the end of a segment and the corner of a box one ulp off the
+ * segment from (0, 0) to (1, 1) (scaled by 2^-k), on its left, and the same reflected in
+ * the line x = y (on its right). None meets the segment; the oracle's long double products
+ * are exact here. Pairs and queries of every object against the oracle. */
+static qk_shape_t swap_xy(qk_shape_t s) {
+  double t = s.x;
+  s.x = s.y, s.y = t;
+  t = s.a, s.a = s.b, s.b = t;
+  return s;
+}
+static void test_world_one_ulp_off(void **s) {
+  (void)s;
+  ONE_THREAD_TEST();
+  for (int k = 0; k < 4; k++)
+    for (int mirror = 0; mirror < 2; mirror++) {
+      double c = ldexp(1, -k), m = c / 2, u = nextafter(m, 1) - m;
+      qk_shape_t sh[] = {
+          {QK_SHAPE_SEGMENT, 0, 0, c, c},
+          {QK_SHAPE_POINT, m, m + u, 0, 0},
+          {QK_SHAPE_SEGMENT, m, m + u, m - c / 4, m + c / 4},
+          {QK_SHAPE_BOX, m - c / 4, m + u, m, m + c / 4},
+      };
+      size_t n = sizeof sh / sizeof *sh;
+      qk_world_t *w;
+      assert_int_equal(qk_world_new(NULL, &w), QK_OK);
+      mirror_t mi = {0};
+      for (size_t i = 0; i < n; i++) m_add(w, &mi, mirror ? swap_xy(sh[i]) : sh[i]);
+      for (size_t i = 1; i < n; i++) assert_false(o_overlap(mi.s[0], mi.s[i]));
+      qk_world_pair_t *prev = NULL;
+      size_t np = 0;
+      update_and_check(w, &mi, &prev, &np, "one ulp off", k);
+      for (size_t i = 0; i < n; i++) {
+        qk_handle_t got[8];
+        size_t ng, want = 0;
+        assert_int_equal(qk_world_query(w, &mi.s[i], got, 8, &ng), QK_OK);
+        for (size_t j = 0; j < n; j++) want += o_overlap(mi.s[i], mi.s[j]);
+        if (ng != want)
+          fail_msg("scale 2^-%d mirror %d object %zu: %zu objects met, oracle %zu", k, mirror, i,
+                   ng, want);
+      }
+      free(prev), free(mi.h), free(mi.s);
+      qk_world_free(w);
+    }
+}
+
+/* Queries on the integer grid 0..6 against one object of each kind near its middle (a
+ * box, a segment, a disc of radius 2, a point): every box and every segment between grid
+ * points, every grid point, and discs of radius 1 and 2 at every grid point, so that
+ * every side and corner is touched exactly (the oracle is exact on integers). The
+ * world's queries reach the exact test only for candidates whose boxes meet the query's,
+ * so touching is where that test alone decides. The nearest object to each grid point
+ * too: at distance 0 exactly on the boundary (four grid points lie on the disc's circle). */
+static void grid_query(qk_world_t *w, const qk_shape_t *obj, qk_shape_t q, size_t *met) {
+  qk_handle_t got[2];
+  size_t n, want = (size_t)o_overlap(q, *obj);
+  assert_int_equal(qk_world_query(w, &q, got, 2, &n), QK_OK);
+  if (n != want)
+    fail_msg("object kind %d, query kind %d (%g %g %g %g): %zu met, oracle %zu", obj->kind, q.kind,
+             q.x, q.y, q.a, q.b, n, want);
+  *met += want;
+}
+/* The nearest object to p (the only one) is at the oracle's distance: 0 exactly where p
+ * is on the shape (its boundary included), else within rounding. */
+static void grid_knn(qk_world_t *w, const qk_shape_t *obj, qk_point_t p) {
+  qk_world_hit_t hit;
+  size_t n;
+  assert_int_equal(qk_world_knn(w, p, 1, &hit, &n), QK_OK);
+  assert_int_equal(n, 1);
+  ld d = sqrtl(o_d2(obj, p.x, p.y));
+  if ((d == 0) != (hit.t == 0) || fabsl(hit.t - d) > 1e-12L)
+    fail_msg("object kind %d, point (%g %g): distance %a, oracle %La", obj->kind, p.x, p.y, hit.t,
+             d);
+}
+static void test_world_query_grid_touching(void **s) {
+  (void)s;
+  ONE_THREAD_TEST();
+  const qk_shape_t obj[] = {{QK_SHAPE_BOX, 2, 2, 4, 3},
+                            {QK_SHAPE_SEGMENT, 2, 4, 4, 2},
+                            {QK_SHAPE_DISC, 3, 3, 2, 0},
+                            {QK_SHAPE_POINT, 3, 2, 0, 0}};
+  for (size_t o = 0; o < sizeof obj / sizeof *obj; o++) {
+    qk_world_t *w;
+    assert_int_equal(qk_world_new(NULL, &w), QK_OK);
+    qk_handle_t h;
+    assert_int_equal(qk_world_add(w, &obj[o], 0, &h), QK_OK);
+    assert_int_equal(qk_world_update(w), QK_OK);
+    size_t met = 0;
+    for (int x0 = 0; x0 <= 6; x0++)
+      for (int y0 = 0; y0 <= 6; y0++) {
+        grid_query(w, &obj[o], (qk_shape_t){QK_SHAPE_POINT, x0, y0, 0, 0}, &met);
+        grid_knn(w, &obj[o], (qk_point_t){x0, y0});
+        for (int r = 1; r <= 2; r++)
+          grid_query(w, &obj[o], (qk_shape_t){QK_SHAPE_DISC, x0, y0, r, 0}, &met);
+        for (int x1 = 0; x1 <= 6; x1++)
+          for (int y1 = 0; y1 <= 6; y1++) {
+            grid_query(w, &obj[o], (qk_shape_t){QK_SHAPE_SEGMENT, x0, y0, x1, y1}, &met);
+            if (x0 <= x1 && y0 <= y1)
+              grid_query(w, &obj[o], (qk_shape_t){QK_SHAPE_BOX, x0, y0, x1, y1}, &met);
+          }
+      }
+    assert_true(met > 100);
+    qk_world_free(w);
+  }
+}
+
+/* qk_world_bytes is the bytes the world holds from its allocator (between updates):
+ * exactly the live bytes of a counting allocator, after every update and every batch of
+ * moves, adds and removes of a random scene of all kinds (the empty world first, and with
+ * pairs and without). */
+static void test_world_bytes_exact(void **s) {
+  (void)s;
+  ONE_THREAD_TEST();
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 419);
+  qkt_alloc_t st;
+  qk_allocator_t a = qkt_alloc_make(&st);
+  qk_world_options_t o;
+  qk_world_options_init(&o);
+  o.allocator = &a;
+  qk_world_t *w;
+  assert_int_equal(qk_world_new(&o, &w), QK_OK);
+  assert_int_equal(qk_world_bytes(w), st.live_bytes);
+  assert_int_equal(qk_world_update(w), QK_OK);
+  assert_int_equal(qk_world_bytes(w), st.live_bytes);
+  mirror_t m = {0};
+  for (int f = 0; f < 30; f++) {
+    size_t add = f < 10 ? 40 : 5;
+    for (size_t i = 0; i < add; i++) m_add(w, &m, rnd_shape(&r, SC_UNIFORM, 1));
+    for (size_t i = 0; i < m.n; i++)
+      if (qkt_rng_below(&r, 2)) m_move(w, &m, i, moved(&r, m.s[i]));
+    for (int k = 0; k < 3 && m.n; k++) (void)m_remove_random(w, &m, &r);
+    if (qk_world_bytes(w) != st.live_bytes)
+      fail_msg("frame %d before the update: %zu bytes counted, %zu held", f, qk_world_bytes(w),
+               st.live_bytes);
+    assert_int_equal(qk_world_update(w), QK_OK);
+    if (qk_world_bytes(w) != st.live_bytes)
+      fail_msg("frame %d: %zu bytes counted, %zu held", f, qk_world_bytes(w), st.live_bytes);
+  }
+  qk_world_free(w);
+  assert_int_equal(st.live_bytes, 0);
+  free(m.h), free(m.s);
+}
+
+/* Frames in which most pairs end, or begin, at once while few stay, with no object added
+ * or removed: 2000 pairs of touching boxes, of which all but the 60 of the lowest slots
+ * part and then meet again, over and over. The merge of this frame's pairs with the last
+ * frame's then has one list far longer than the other (few keys left in one when many are
+ * left in the other, where its blocks of unchecked steps must stop at the shorter list's
+ * end). Began and ended every frame against brute force. */
+static void test_world_most_pairs_change(void **s) {
+  (void)s;
+  ONE_THREAD_TEST();
+  enum { NP = 2000, KEEP = 60 };
+  qk_world_t *w;
+  assert_int_equal(qk_world_new(NULL, &w), QK_OK);
+  mirror_t m = {0};
+  for (int k = 0; k < NP; k++) {
+    double x = (k % 50) * 4, y = (k / 50) * 4;
+    m_add(w, &m, (qk_shape_t){QK_SHAPE_BOX, x, y, x + 1, y + 1});
+    m_add(w, &m, (qk_shape_t){QK_SHAPE_BOX, x + 1, y, x + 2, y + 1}); /* touching */
+  }
+  qk_world_pair_t *prev = NULL;
+  size_t np = 0;
+  update_and_check(w, &m, &prev, &np, "most change", 0);
+  assert_int_equal(np, NP);
+  for (int f = 1; f <= 6; f++) {
+    double dx = f & 1 ? 0.5 : -0.5; /* apart, then back */
+    for (size_t i = 2 * KEEP + 1; i < m.n; i += 2) m_move(w, &m, i, shifted(m.s[i], dx, 0));
+    update_and_check(w, &m, &prev, &np, "most change", f);
+    assert_int_equal(np, f & 1 ? KEEP : NP);
+  }
+  free(prev), free(m.h), free(m.s);
+  qk_world_free(w);
+}
+
+/* The dirty objects' radix sort (more than 64 of them) with about the widest keys it
+ * packs: unit boxes (level 2) in three rows of 34 touching ones about 2^28 apart, cell
+ * indices 2^26 from 0 either way: 28 bits a coordinate, 56 with the 7 of the index, six
+ * digits (a wider range takes the byte sort). The pairs after adding them all, and after
+ * moving them all, against brute force. */
+static void test_world_sort_wide_keys(void **s) {
+  (void)s;
+  ONE_THREAD_TEST();
+  qk_world_t *w;
+  assert_int_equal(qk_world_new(NULL, &w), QK_OK);
+  mirror_t m = {0};
+  const double at[3] = {-0x1p28, 0, 0x1p28};
+  for (int g = 0; g < 3; g++)
+    for (int k = 0; k < 34; k++) {
+      double x = at[g] + k, y = at[2 - g] + (k & 1);
+      m_add(w, &m, (qk_shape_t){QK_SHAPE_BOX, x, y, x + 1, y + 1});
+    }
+  qk_world_pair_t *prev = NULL;
+  size_t np = 0;
+  update_and_check(w, &m, &prev, &np, "wide keys", 0);
+  assert_true(np >= 99);
+  for (int f = 1; f <= 2; f++) {
+    for (size_t i = 0; i < m.n; i++) m_move(w, &m, i, shifted(m.s[i], 3, -3));
+    update_and_check(w, &m, &prev, &np, "wide keys", f);
+  }
+  free(prev), free(m.h), free(m.s);
+  qk_world_free(w);
+}
+
+/* Segments that end on a disc's circle at a Pythagorean point and run along its tangent
+ * there, from a start rounded off the tangent: the hits that graze the disc are where
+ * the long double root of the entry parameter lies farthest from its value (its
+ * discriminant near zero), above 1 by up to about 1e-15. The documented parameter is in
+ * [0, 1]: every hit's t, by qk_world_raycast and qk_world_raycast_all. */
+static void test_world_ray_tangent_end(void **s) {
+  (void)s;
+  ONE_THREAD_TEST();
+  static const int tri[][3] = {{3, 4, 5}, {5, 12, 13}, {8, 15, 17}, {7, 24, 25}, {20, 21, 29}};
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 433);
+  qk_world_t *w;
+  assert_int_equal(qk_world_new(NULL, &w), QK_OK);
+  qk_handle_t h;
+  qk_shape_t d = {QK_SHAPE_DISC, 0, 0, 1, 0};
+  assert_int_equal(qk_world_add(w, &d, 0, &h), QK_OK);
+  assert_int_equal(qk_world_update(w), QK_OK);
+  int hits = 0;
+  for (int it = 0; it < 20000; it++) {
+    const int *p = tri[qkt_rng_below(&r, 5)];
+    double k = ldexp(1, (int)qkt_rng_below(&r, 8) - 4);
+    int sw = (int)qkt_rng_below(&r, 2);
+    double ux = p[sw] * (qkt_rng_below(&r, 2) ? 1 : -1),
+           uy = p[1 - sw] * (qkt_rng_below(&r, 2) ? 1 : -1);
+    d.x = ((int)qkt_rng_below(&r, 2001) - 1000) * 0.125;
+    d.y = ((int)qkt_rng_below(&r, 2001) - 1000) * 0.125;
+    d.a = p[2] * k;
+    assert_int_equal(qk_world_move(w, h, &d), QK_OK);
+    qk_point_t to = {d.x + ux * k, d.y + uy * k};
+    double m = (qkt_rng_below(&r, 1000) + 1) / 3.0 * k / p[2];
+    qk_point_t from = {to.x - uy * m, to.y + ux * m};
+    qk_world_hit_t first, all[2];
+    size_t n;
+    assert_int_equal(qk_world_raycast(w, from, to, &first), QK_OK);
+    assert_int_equal(qk_world_raycast_all(w, from, to, all, 2, &n), QK_OK);
+    assert_int_equal(n, first.h == h);
+    if (first.h != h) continue;
+    hits++;
+    if (!(first.t >= 0 && first.t <= 1 && all[0].t == first.t))
+      fail_msg("case %d: t %a outside [0, 1] (seed %llu)", it, first.t, (unsigned long long)g_seed);
+  }
+  assert_true(hits > 1000);
   qk_world_free(w);
 }
 
@@ -2002,9 +2390,20 @@ static void test_world_stale_handles(void **s) {
   qk_world_options_init(&o);
   o.margin = 17;
   assert_int_equal(qk_world_new(&o, &w), QK_ERR_INVALID);
+  o.margin = nextafter(16, 17);
+  assert_int_equal(qk_world_new(&o, &w), QK_ERR_INVALID);
   qk_world_options_init(&o);
   o.min_margin = INFINITY;
   assert_int_equal(qk_world_new(&o, &w), QK_ERR_INVALID);
+  o.min_margin = nextafter(0x1p100, INFINITY);
+  assert_int_equal(qk_world_new(&o, &w), QK_ERR_INVALID);
+  /* the bounds themselves are accepted (margin 0..16, min_margin 0..2^100) */
+  o.margin = 16;
+  o.min_margin = 0x1p100;
+  assert_int_equal(qk_world_new(&o, &w), QK_OK);
+  assert_int_equal(qk_world_add(w, &got, 0, &hc), QK_OK);
+  assert_int_equal(qk_world_update(w), QK_OK);
+  qk_world_free(w);
   qk_world_options_init(&o);
   o.threads = 0;
   assert_int_equal(qk_world_new(&o, &w), QK_ERR_INVALID);
@@ -3025,12 +3424,20 @@ int main(void) {
       cmocka_unit_test(test_world_prefilter_and_sort),
       cmocka_unit_test(test_world_grid_undecided_runs),
       cmocka_unit_test(test_world_touching),
+      cmocka_unit_test(test_world_one_ulp_off),
+      cmocka_unit_test(test_world_query_grid_touching),
+      cmocka_unit_test(test_world_move_out_of_loose),
+      cmocka_unit_test(test_world_raycast_batch),
       cmocka_unit_test(test_world_stale_handles),
       cmocka_unit_test(test_world_threads_frames),
       cmocka_unit_test(test_world_thread_min_sides),
       cmocka_unit_test(test_world_move_batch_errors),
       cmocka_unit_test(test_world_move_box_edges),
       cmocka_unit_test(test_world_pair_bytes),
+      cmocka_unit_test(test_world_bytes_exact),
+      cmocka_unit_test(test_world_most_pairs_change),
+      cmocka_unit_test(test_world_sort_wide_keys),
+      cmocka_unit_test(test_world_ray_tangent_end),
       cmocka_unit_test(test_world_churn_memory),
       cmocka_unit_test(test_world_nomem),
       cmocka_unit_test(test_world_nomem_threads),
