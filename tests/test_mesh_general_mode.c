@@ -868,6 +868,35 @@ static void test_mesh_general_mode_refusals(void **state) {
   assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_ERR_GEOMETRY);
   assert_non_null(strstr(err.message, "vertices 1 and 2"));
   qk_poly_free(p);
+  /* The same two vertices joined twice (segments 1 and 3 of a triangle with a tail), and a
+   * segment from a vertex to itself: each named. Without the first check the mesh would
+   * be made with one of the two segments lost. */
+  double x6[8] = {0, 0, 3, 0, 1, 2, 4, 4};
+  uint32_t s6[8] = {0, 1, 1, 2, 2, 0, 2, 1}, s7[8] = {0, 1, 1, 2, 2, 0, 3, 3};
+  assert_int_equal(qk_poly_from_arrays(x6, 4, s6, 4, NULL, 0, NULL, &p, &err), QK_OK);
+  assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_ERR_GEOMETRY);
+  assert_non_null(strstr(err.message, "segments 1 and 3 both join vertices"));
+  assert_null(m);
+  qk_poly_free(p);
+  assert_int_equal(qk_poly_from_arrays(x6, 4, s7, 4, NULL, 0, NULL, &p, &err), QK_OK);
+  assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_ERR_GEOMETRY);
+  assert_non_null(strstr(err.message, "segment 3 joins vertex 3 to itself"));
+  assert_null(m);
+  qk_poly_free(p);
+  /* A hole point on a vertex, and regional attributes on a vertex and on a segment:
+   * their face is ambiguous, so each is refused and named. */
+  double h8[2] = {3, 3}, r8[3][3] = {{3, 0, 7}, {1.5, 3, 7}, {0, 1, 7}};
+  const char *w8[] = {"hole 0 at (3, 3) is vertex 2", "regional attribute 0 at (3, 0) is vertex 1",
+                      "regional attribute 0 at (1.5, 3) lies on segment 2",
+                      "regional attribute 0 at (0, 1) lies on segment 3"};
+  for (int k = 0; k < 4; k++) {
+    assert_int_equal(qk_poly_from_arrays(x5, 4, s5, 4, h8, k == 0, NULL, &p, &err), QK_OK);
+    if (k) assert_int_equal(qk_poly_set_regions(p, r8[k - 1], 1, &err), QK_OK);
+    assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_ERR_GEOMETRY);
+    if (!strstr(err.message, w8[k])) fail_msg("\"%s\" not in \"%s\"", w8[k], err.message);
+    assert_null(m);
+    qk_poly_free(p);
+  }
 }
 
 /* An allocator that records the most bytes live at once: a refusal's peak memory
