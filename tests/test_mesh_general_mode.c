@@ -752,10 +752,12 @@ static void test_mesh_general_mode_markers(void **state) {
   sh_seg(s, 0, 2); /* the diagonal: two regions */
   qk_poly_t *p = sh_poly(s, NULL);
   int32_t vm[4] = {0, 0, 9, 0}, sm[5] = {1, 2, 3, 4, 5};
-  double reg[6] = {3, 1, 10, 1, 2.5, 20};
+  /* The third regional attribute lies outside the mesh's square: it names no face and
+   * must leave the face of the one before it alone. */
+  double reg[9] = {3, 1, 10, 1, 2.5, 20, 1e6, 1e6, 30};
   qk_mesh_error_t err;
   assert_int_equal(qk_poly_set_markers(p, vm, sm, &err), QK_OK);
-  assert_int_equal(qk_poly_set_regions(p, reg, 2, &err), QK_OK);
+  assert_int_equal(qk_poly_set_regions(p, reg, 3, &err), QK_OK);
   qk_mesh_options_t o = general_opts();
   o.max_size = 0.7;
   qk_mesh_t *m = mesh_of(p, &o);
