@@ -154,6 +154,27 @@ static void test_poly_good(void **state) {
   assert_int_equal(run(DIAMOND "1\n0 2 4\n", 0, &err), QK_ERR_GEOMETRY);
   /* First index 0, no holes ("0"), no regional attributes (optional, as in Triangle). */
   assert_int_equal(run("4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS "0\n", 0, &err), QK_OK);
+  /* Regional attributes are read from the columns after their number (numbered 7 and 8, so
+   * that reading the number as x would put both outside the square): the diagonal splits
+   * the square into a part below it (10) and one above (20). */
+  f = from_string("4 2 0 0\n0 0 0\n1 4 0\n2 4 4\n3 0 4\n5 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n"
+                  "4 0 2\n0\n2\n7 3 1 10\n8 1 3 20 0.5\n");
+  assert_int_equal(qk_poly_read(f, NULL, &p, &err), QK_OK);
+  fclose(f);
+  assert_int_equal(qk_mesh_generate(p, NULL, &m, &err), QK_OK);
+  t = qk_mesh_triangles(m, &nt);
+  v = qk_mesh_vertices(m, NULL);
+  size_t na;
+  const double *attr = qk_mesh_triangle_attributes(m, &na);
+  assert_non_null(attr);
+  assert_int_equal(na, nt);
+  for (size_t i = 0; i < nt; i++) {
+    double cx = 0, cy = 0;
+    for (int k = 0; k < 3; k++) cx += v[2 * t[3 * i + k]], cy += v[2 * t[3 * i + k] + 1];
+    assert_true(attr[i] == (cy < cx ? 10 : 20));
+  }
+  qk_mesh_free(m);
+  qk_poly_free(p);
 }
 
 typedef struct bad_case {
