@@ -485,6 +485,49 @@ static void test_mesh_general_mode_small_angle(void **state) {
   free(s);
 }
 
+/* Concentric shells reach every input angle below 60 degrees, up to its 0.001-degree
+ * margin: at a 59.5-degree apex between segments of lengths 1 and 1.37 (whose midpoints
+ * would never meet at equal radii), the vertices nearest the apex on the two segments lie
+ * at the same distance from it (the power of two nearest half a piece). Twice: the apex
+ * of a triangle (two segments), and the same triangle turned so that its angle straddles
+ * the direction 180 degrees with a third segment leaving the apex outside it (the angle
+ * between the last and the first of the apex's sorted directions); inside a square, so
+ * that the whole input is meshed. */
+static void test_mesh_general_mode_shells_near_60(void **state) {
+  (void)state;
+  for (int turned = 0; turned < 2; turned++) {
+    double r0 = turned ? 150 * M_PI / 180 : 0, a = r0 + 59.5 * M_PI / 180, L = 1.37;
+    double A[2] = {grid(cos(r0), 24), grid(sin(r0), 24)};
+    double B[2] = {grid(L * cos(a), 24), grid(L * sin(a), 24)};
+    double pts[6] = {0, 0, A[0], A[1], B[0], B[1]};
+    double box[8] = {-1.5, -1.5, 1.5, -1.5, 1.5, 1.5, -1.5, 1.5};
+    shape_t *s = calloc(1, sizeof *s);
+    sh_loop(s, pts, 3);
+    if (turned) sh_seg(s, 0, sh_vertex(s, 0.5, 0.125));
+    sh_ring(s, box, 4);
+    qk_mesh_options_t o = general_opts();
+    o.max_size = 0.08;
+    run(s, &o, 20, turned ? "turned 59.5-degree apex with a third segment" : "59.5-degree apex");
+    qk_poly_t *p = sh_poly(s, NULL);
+    qk_mesh_t *m = mesh_of(p, &o);
+    size_t nv;
+    const double *xy = qk_mesh_vertices(m, &nv);
+    double r1 = INFINITY, r2 = INFINITY;
+    for (size_t v = 0; v < nv; v++) {
+      double x = xy[2 * v], y = xy[2 * v + 1], r = hypot(x, y);
+      if (r == 0) continue;
+      if (x * A[0] + y * A[1] > 0 && fabs(x * A[1] - y * A[0]) <= 1e-12 * r) r1 = fmin(r1, r);
+      if (x * B[0] + y * B[1] > 0 && fabs(x * B[1] - y * B[0]) <= 1e-12 * r * L) r2 = fmin(r2, r);
+    }
+    printf("# nearest to the apex: %.17g and %.17g\n", r1, r2);
+    assert_true(r1 < 0.5 && r2 < 0.5);
+    if (!(fabs(r1 - r2) <= 1e-3 * fmax(r1, r2))) fail_msg("radii %.17g and %.17g differ", r1, r2);
+    qk_mesh_free(m);
+    qk_poly_free(p);
+    free(s);
+  }
+}
+
 /* A random star polygon around (0, 0) on a 2^-16 grid, with spokes from the centre to
  * some of its vertices (internal segments, some at small angles) and an open chain. */
 static void star(shape_t *s, qkt_rng_t *r, size_t n) {
@@ -1238,6 +1281,7 @@ int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_mesh_general_mode_square_holes),
       cmocka_unit_test(test_mesh_general_mode_small_angle),
+      cmocka_unit_test(test_mesh_general_mode_shells_near_60),
       cmocka_unit_test(test_mesh_general_mode_random),
       cmocka_unit_test(test_mesh_general_mode_small_fans),
       cmocka_unit_test(test_mesh_general_mode_near),
