@@ -485,6 +485,48 @@ static void test_mesh_general_mode_small_angle(void **state) {
   free(s);
 }
 
+static double size_one(double x, double y, void *user) {
+  (void)x, (void)y, (void)user;
+  return 1;
+}
+
+/* The size bound is exact: a square of side 1 + 2^-50 under a bound of 1 (max_size, then
+ * size_fn) has its sides split, though their squared length lies within the 2^-48
+ * rounding margin of the bound's square; every mesh edge is at most 1, compared exactly
+ * (the differences of these coordinates and their squares are exact in doubles, with the
+ * sum checked against 1 on both halves of a two-sum). */
+static void test_mesh_general_mode_size_exact(void **state) {
+  (void)state;
+  double a = 1 + 0x1p-50, pts[8] = {0, 0, a, 0, a, a, 0, a};
+  for (int fn = 0; fn < 2; fn++) {
+    shape_t *s = calloc(1, sizeof *s);
+    sh_ring(s, pts, 4);
+    qk_mesh_options_t o = general_opts();
+    if (fn)
+      o.size_fn = size_one;
+    else
+      o.max_size = 1;
+    run(s, &o, 20, fn ? "square of side 1 + 2^-50, size_fn 1" : "square of side 1 + 2^-50, max 1");
+    qk_poly_t *p = sh_poly(s, NULL);
+    qk_mesh_t *m = mesh_of(p, &o);
+    size_t nv, nt;
+    const double *xy = qk_mesh_vertices(m, &nv);
+    const uint32_t *tri = qk_mesh_triangles(m, &nt);
+    for (size_t t = 0; t < nt; t++)
+      for (int i = 0; i < 3; i++) {
+        const double *u = &xy[2 * tri[3 * t + i]], *w = &xy[2 * tri[3 * t + (i + 1) % 3]];
+        double dx = w[0] - u[0], dy = w[1] - u[1];
+        double q = fma(dx, dx, 0), e1 = fma(dx, dx, -q), r = fma(dy, dy, 0), e2 = fma(dy, dy, -r);
+        double sum = q + r, bv = sum - q, err = (q - (sum - bv)) + (r - bv) + e1 + e2;
+        if (sum > 1 || (sum == 1 && err > 0))
+          fail_msg("edge (%.17g, %.17g)-(%.17g, %.17g) is longer than 1", u[0], u[1], w[0], w[1]);
+      }
+    qk_mesh_free(m);
+    qk_poly_free(p);
+    free(s);
+  }
+}
+
 /* Concentric shells reach every input angle below 60 degrees, up to its 0.001-degree
  * margin: at a 59.5-degree apex between segments of lengths 1 and 1.37 (whose midpoints
  * would never meet at equal radii), the vertices nearest the apex on the two segments lie
@@ -1281,6 +1323,7 @@ int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_mesh_general_mode_square_holes),
       cmocka_unit_test(test_mesh_general_mode_small_angle),
+      cmocka_unit_test(test_mesh_general_mode_size_exact),
       cmocka_unit_test(test_mesh_general_mode_shells_near_60),
       cmocka_unit_test(test_mesh_general_mode_random),
       cmocka_unit_test(test_mesh_general_mode_small_fans),

@@ -203,6 +203,9 @@ static void test_poly_bad(void **state) {
       {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n", 0, QK_ERR_PARSE, 5, "segment section"},
       {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n4 0\n0 0 1\n1 1 9\n", 0, QK_ERR_PARSE, 8,
        "not a vertex number"},
+      /* A vertex number with a fraction is not rounded to a vertex. */
+      {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n4 0\n0 0 1\n1 1.5 2\n2 2 3\n3 3 0\n0\n", 0,
+       QK_ERR_PARSE, 8, "1.5"},
       {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n4 0\n0 0 1\n", 0, QK_ERR_PARSE, 7, "truncated"},
       {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS "1\n", 0, QK_ERR_PARSE, 11, "truncated"},
       /* The hole section is required, as in Triangle: a file cut after the segments would
