@@ -148,6 +148,8 @@ static void test_poly_good(void **state) {
 #define DIAMOND "4 2 0 0\n0 2 0\n1 4 2\n2 2 4\n3 0 2\n" SQUARE_SEGS
   assert_int_equal(run(DIAMOND "1\n0 1 1.0000000000000002\n", 0, &err), QK_OK);
   assert_int_equal(run(DIAMOND "1\n0 1 1\n", 0, &err), QK_ERR_GEOMETRY);
+  /* On the same side with x's fraction at least 1/2 and y's below (the other exact branch). */
+  assert_int_equal(run(DIAMOND "1\n0 0.75 1.25\n", 0, &err), QK_ERR_GEOMETRY);
   assert_int_equal(run(DIAMOND "1\n0 3 0.9999999999999999\n", 0, &err), QK_OK);
   assert_int_equal(run(DIAMOND "1\n0 3 1\n", 0, &err), QK_ERR_GEOMETRY);
   assert_int_equal(run(DIAMOND "1\n0 1e-300 2\n", 0, &err), QK_OK);
