@@ -177,6 +177,27 @@ static void test_poly_good(void **state) {
   }
   qk_mesh_free(m);
   qk_poly_free(p);
+  /* Input vertices keep their own markers (5 to 8 round the square), the vertices inside
+   * the unmarked segments none. */
+  f = from_string("4 2 0 1\n0 0 0 5\n1 4 0 6\n2 4 4 7\n3 0 4 8\n" SQUARE_SEGS "0\n");
+  assert_int_equal(qk_poly_read(f, NULL, &p, &err), QK_OK);
+  fclose(f);
+  assert_int_equal(qk_mesh_generate(p, NULL, &m, &err), QK_OK);
+  size_t nmv;
+  v = qk_mesh_vertices(m, &nmv);
+  const int32_t *mk = qk_mesh_vertex_markers(m, &nmv);
+  assert_non_null(mk);
+  for (size_t i = 0; i < nmv; i++) {
+    double x = v[2 * i], y = v[2 * i + 1];
+    int32_t want = x == 0 && y == 0   ? 5
+                   : x == 4 && y == 0 ? 6
+                   : x == 4 && y == 4 ? 7
+                   : x == 0 && y == 4 ? 8
+                                      : 0;
+    if (mk[i] != want) fail_msg("vertex (%g, %g): marker %d, not %d", x, y, mk[i], want);
+  }
+  qk_mesh_free(m);
+  qk_poly_free(p);
 }
 
 typedef struct bad_case {
