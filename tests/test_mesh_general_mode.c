@@ -485,6 +485,91 @@ static void test_mesh_general_mode_small_angle(void **state) {
   free(s);
 }
 
+static double size_one(double x, double y, void *user) {
+  (void)x, (void)y, (void)user;
+  return 1;
+}
+
+/* The size bound is exact: a square of side 1 + 2^-50 under a bound of 1 (max_size, then
+ * size_fn) has its sides split, though their squared length lies within the 2^-48
+ * rounding margin of the bound's square; every mesh edge is at most 1, compared exactly
+ * (the differences of these coordinates and their squares are exact in doubles, with the
+ * sum checked against 1 on both halves of a two-sum). */
+static void test_mesh_general_mode_size_exact(void **state) {
+  (void)state;
+  double a = 1 + 0x1p-50, pts[8] = {0, 0, a, 0, a, a, 0, a};
+  for (int fn = 0; fn < 2; fn++) {
+    shape_t *s = calloc(1, sizeof *s);
+    sh_ring(s, pts, 4);
+    qk_mesh_options_t o = general_opts();
+    if (fn)
+      o.size_fn = size_one;
+    else
+      o.max_size = 1;
+    run(s, &o, 20, fn ? "square of side 1 + 2^-50, size_fn 1" : "square of side 1 + 2^-50, max 1");
+    qk_poly_t *p = sh_poly(s, NULL);
+    qk_mesh_t *m = mesh_of(p, &o);
+    size_t nv, nt;
+    const double *xy = qk_mesh_vertices(m, &nv);
+    const uint32_t *tri = qk_mesh_triangles(m, &nt);
+    for (size_t t = 0; t < nt; t++)
+      for (int i = 0; i < 3; i++) {
+        const double *u = &xy[2 * tri[3 * t + i]], *w = &xy[2 * tri[3 * t + (i + 1) % 3]];
+        double dx = w[0] - u[0], dy = w[1] - u[1];
+        double q = fma(dx, dx, 0), e1 = fma(dx, dx, -q), r = fma(dy, dy, 0), e2 = fma(dy, dy, -r);
+        double sum = q + r, bv = sum - q, err = (q - (sum - bv)) + (r - bv) + e1 + e2;
+        if (sum > 1 || (sum == 1 && err > 0))
+          fail_msg("edge (%.17g, %.17g)-(%.17g, %.17g) is longer than 1", u[0], u[1], w[0], w[1]);
+      }
+    qk_mesh_free(m);
+    qk_poly_free(p);
+    free(s);
+  }
+}
+
+/* Concentric shells reach every input angle below 60 degrees, up to its 0.001-degree
+ * margin: at a 59.5-degree apex between segments of lengths 1 and 1.37 (whose midpoints
+ * would never meet at equal radii), the vertices nearest the apex on the two segments lie
+ * at the same distance from it (the power of two nearest half a piece). Twice: the apex
+ * of a triangle (two segments), and the same triangle turned so that its angle straddles
+ * the direction 180 degrees with a third segment leaving the apex outside it (the angle
+ * between the last and the first of the apex's sorted directions); inside a square, so
+ * that the whole input is meshed. */
+static void test_mesh_general_mode_shells_near_60(void **state) {
+  (void)state;
+  for (int turned = 0; turned < 2; turned++) {
+    double r0 = turned ? 150 * M_PI / 180 : 0, a = r0 + 59.5 * M_PI / 180, L = 1.37;
+    double A[2] = {grid(cos(r0), 24), grid(sin(r0), 24)};
+    double B[2] = {grid(L * cos(a), 24), grid(L * sin(a), 24)};
+    double pts[6] = {0, 0, A[0], A[1], B[0], B[1]};
+    double box[8] = {-1.5, -1.5, 1.5, -1.5, 1.5, 1.5, -1.5, 1.5};
+    shape_t *s = calloc(1, sizeof *s);
+    sh_loop(s, pts, 3);
+    if (turned) sh_seg(s, 0, sh_vertex(s, 0.5, 0.125));
+    sh_ring(s, box, 4);
+    qk_mesh_options_t o = general_opts();
+    o.max_size = 0.08;
+    run(s, &o, 20, turned ? "turned 59.5-degree apex with a third segment" : "59.5-degree apex");
+    qk_poly_t *p = sh_poly(s, NULL);
+    qk_mesh_t *m = mesh_of(p, &o);
+    size_t nv;
+    const double *xy = qk_mesh_vertices(m, &nv);
+    double r1 = INFINITY, r2 = INFINITY;
+    for (size_t v = 0; v < nv; v++) {
+      double x = xy[2 * v], y = xy[2 * v + 1], r = hypot(x, y);
+      if (r == 0) continue;
+      if (x * A[0] + y * A[1] > 0 && fabs(x * A[1] - y * A[0]) <= 1e-12 * r) r1 = fmin(r1, r);
+      if (x * B[0] + y * B[1] > 0 && fabs(x * B[1] - y * B[0]) <= 1e-12 * r * L) r2 = fmin(r2, r);
+    }
+    printf("# nearest to the apex: %.17g and %.17g\n", r1, r2);
+    assert_true(r1 < 0.5 && r2 < 0.5);
+    if (!(fabs(r1 - r2) <= 1e-3 * fmax(r1, r2))) fail_msg("radii %.17g and %.17g differ", r1, r2);
+    qk_mesh_free(m);
+    qk_poly_free(p);
+    free(s);
+  }
+}
+
 /* A random star polygon around (0, 0) on a 2^-16 grid, with spokes from the centre to
  * some of its vertices (internal segments, some at small angles) and an open chain. */
 static void star(shape_t *s, qkt_rng_t *r, size_t n) {
@@ -752,10 +837,12 @@ static void test_mesh_general_mode_markers(void **state) {
   sh_seg(s, 0, 2); /* the diagonal: two regions */
   qk_poly_t *p = sh_poly(s, NULL);
   int32_t vm[4] = {0, 0, 9, 0}, sm[5] = {1, 2, 3, 4, 5};
-  double reg[6] = {3, 1, 10, 1, 2.5, 20};
+  /* The third regional attribute lies outside the mesh's square: it names no face and
+   * must leave the face of the one before it alone. */
+  double reg[9] = {3, 1, 10, 1, 2.5, 20, 1e6, 1e6, 30};
   qk_mesh_error_t err;
   assert_int_equal(qk_poly_set_markers(p, vm, sm, &err), QK_OK);
-  assert_int_equal(qk_poly_set_regions(p, reg, 2, &err), QK_OK);
+  assert_int_equal(qk_poly_set_regions(p, reg, 3, &err), QK_OK);
   qk_mesh_options_t o = general_opts();
   o.max_size = 0.7;
   qk_mesh_t *m = mesh_of(p, &o);
@@ -868,6 +955,35 @@ static void test_mesh_general_mode_refusals(void **state) {
   assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_ERR_GEOMETRY);
   assert_non_null(strstr(err.message, "vertices 1 and 2"));
   qk_poly_free(p);
+  /* The same two vertices joined twice (segments 1 and 3 of a triangle with a tail), and a
+   * segment from a vertex to itself: each named. Without the first check the mesh would
+   * be made with one of the two segments lost. */
+  double x6[8] = {0, 0, 3, 0, 1, 2, 4, 4};
+  uint32_t s6[8] = {0, 1, 1, 2, 2, 0, 2, 1}, s7[8] = {0, 1, 1, 2, 2, 0, 3, 3};
+  assert_int_equal(qk_poly_from_arrays(x6, 4, s6, 4, NULL, 0, NULL, &p, &err), QK_OK);
+  assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_ERR_GEOMETRY);
+  assert_non_null(strstr(err.message, "segments 1 and 3 both join vertices"));
+  assert_null(m);
+  qk_poly_free(p);
+  assert_int_equal(qk_poly_from_arrays(x6, 4, s7, 4, NULL, 0, NULL, &p, &err), QK_OK);
+  assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_ERR_GEOMETRY);
+  assert_non_null(strstr(err.message, "segment 3 joins vertex 3 to itself"));
+  assert_null(m);
+  qk_poly_free(p);
+  /* A hole point on a vertex, and regional attributes on a vertex and on a segment:
+   * their face is ambiguous, so each is refused and named. */
+  double h8[2] = {3, 3}, r8[3][3] = {{3, 0, 7}, {1.5, 3, 7}, {0, 1, 7}};
+  const char *w8[] = {"hole 0 at (3, 3) is vertex 2", "regional attribute 0 at (3, 0) is vertex 1",
+                      "regional attribute 0 at (1.5, 3) lies on segment 2",
+                      "regional attribute 0 at (0, 1) lies on segment 3"};
+  for (int k = 0; k < 4; k++) {
+    assert_int_equal(qk_poly_from_arrays(x5, 4, s5, 4, h8, k == 0, NULL, &p, &err), QK_OK);
+    if (k) assert_int_equal(qk_poly_set_regions(p, r8[k - 1], 1, &err), QK_OK);
+    assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_ERR_GEOMETRY);
+    if (!strstr(err.message, w8[k])) fail_msg("\"%s\" not in \"%s\"", w8[k], err.message);
+    assert_null(m);
+    qk_poly_free(p);
+  }
 }
 
 /* An allocator that records the most bytes live at once: a refusal's peak memory
@@ -1207,6 +1323,8 @@ int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_mesh_general_mode_square_holes),
       cmocka_unit_test(test_mesh_general_mode_small_angle),
+      cmocka_unit_test(test_mesh_general_mode_size_exact),
+      cmocka_unit_test(test_mesh_general_mode_shells_near_60),
       cmocka_unit_test(test_mesh_general_mode_random),
       cmocka_unit_test(test_mesh_general_mode_small_fans),
       cmocka_unit_test(test_mesh_general_mode_near),

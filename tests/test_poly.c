@@ -148,12 +148,56 @@ static void test_poly_good(void **state) {
 #define DIAMOND "4 2 0 0\n0 2 0\n1 4 2\n2 2 4\n3 0 2\n" SQUARE_SEGS
   assert_int_equal(run(DIAMOND "1\n0 1 1.0000000000000002\n", 0, &err), QK_OK);
   assert_int_equal(run(DIAMOND "1\n0 1 1\n", 0, &err), QK_ERR_GEOMETRY);
+  /* On the same side with x's fraction at least 1/2 and y's below (the other exact branch). */
+  assert_int_equal(run(DIAMOND "1\n0 0.75 1.25\n", 0, &err), QK_ERR_GEOMETRY);
   assert_int_equal(run(DIAMOND "1\n0 3 0.9999999999999999\n", 0, &err), QK_OK);
   assert_int_equal(run(DIAMOND "1\n0 3 1\n", 0, &err), QK_ERR_GEOMETRY);
   assert_int_equal(run(DIAMOND "1\n0 1e-300 2\n", 0, &err), QK_OK);
   assert_int_equal(run(DIAMOND "1\n0 2 4\n", 0, &err), QK_ERR_GEOMETRY);
   /* First index 0, no holes ("0"), no regional attributes (optional, as in Triangle). */
   assert_int_equal(run("4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS "0\n", 0, &err), QK_OK);
+  /* Regional attributes are read from the columns after their number (numbered 7 and 8, so
+   * that reading the number as x would put both outside the square): the diagonal splits
+   * the square into a part below it (10) and one above (20). */
+  f = from_string("4 2 0 0\n0 0 0\n1 4 0\n2 4 4\n3 0 4\n5 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n"
+                  "4 0 2\n0\n2\n7 3 1 10\n8 1 3 20 0.5\n");
+  assert_int_equal(qk_poly_read(f, NULL, &p, &err), QK_OK);
+  fclose(f);
+  assert_int_equal(qk_mesh_generate(p, NULL, &m, &err), QK_OK);
+  t = qk_mesh_triangles(m, &nt);
+  v = qk_mesh_vertices(m, NULL);
+  size_t na;
+  const double *attr = qk_mesh_triangle_attributes(m, &na);
+  assert_non_null(attr);
+  assert_int_equal(na, nt);
+  for (size_t i = 0; i < nt; i++) {
+    double cx = 0, cy = 0;
+    for (int k = 0; k < 3; k++) cx += v[2 * t[3 * i + k]], cy += v[2 * t[3 * i + k] + 1];
+    assert_true(attr[i] == (cy < cx ? 10 : 20));
+  }
+  qk_mesh_free(m);
+  qk_poly_free(p);
+  /* Input vertices keep their own markers (5 to 8 round the square), the vertices inside
+   * the unmarked segments none. */
+  f = from_string("4 2 0 1\n0 0 0 5\n1 4 0 6\n2 4 4 7\n3 0 4 8\n" SQUARE_SEGS "0\n");
+  assert_int_equal(qk_poly_read(f, NULL, &p, &err), QK_OK);
+  fclose(f);
+  assert_int_equal(qk_mesh_generate(p, NULL, &m, &err), QK_OK);
+  size_t nmv;
+  v = qk_mesh_vertices(m, &nmv);
+  const int32_t *mk = qk_mesh_vertex_markers(m, &nmv);
+  assert_non_null(mk);
+  for (size_t i = 0; i < nmv; i++) {
+    double x = v[2 * i], y = v[2 * i + 1];
+    int32_t want = x == 0 && y == 0   ? 5
+                   : x == 4 && y == 0 ? 6
+                   : x == 4 && y == 4 ? 7
+                   : x == 0 && y == 4 ? 8
+                                      : 0;
+    if (mk[i] != want) fail_msg("vertex (%g, %g): marker %d, not %d", x, y, mk[i], want);
+  }
+  qk_mesh_free(m);
+  qk_poly_free(p);
 }
 
 typedef struct bad_case {
@@ -182,6 +226,9 @@ static void test_poly_bad(void **state) {
       {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n", 0, QK_ERR_PARSE, 5, "segment section"},
       {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n4 0\n0 0 1\n1 1 9\n", 0, QK_ERR_PARSE, 8,
        "not a vertex number"},
+      /* A vertex number with a fraction is not rounded to a vertex. */
+      {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n4 0\n0 0 1\n1 1.5 2\n2 2 3\n3 3 0\n0\n", 0,
+       QK_ERR_PARSE, 8, "1.5"},
       {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n4 0\n0 0 1\n", 0, QK_ERR_PARSE, 7, "truncated"},
       {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS "1\n", 0, QK_ERR_PARSE, 11, "truncated"},
       /* The hole section is required, as in Triangle: a file cut after the segments would
