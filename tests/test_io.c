@@ -217,6 +217,10 @@ static void test_io_errors(void **state) {
                "field 1 is not a decimal number: '0x1'"); /* data, not a header */
   expect_error("0,0\n1.5.1,0\n", -1, NULL, A, QK_ERR_PARSE, 2, 1, 1,
                "field 1 is not a number: '1.5.1'");
+  /* A header's name is named without the blanks around it (the sweep: a label keeping its
+   * trailing blanks passed every test). */
+  expect_error(" x ,\t y \t\n0,abc\n", -1, NULL, A, QK_ERR_PARSE, 2, 3, 0,
+               "field 2 (y) is not a number: 'abc'");
   /* A long value is echoed cut to its first 40 bytes, for both messages that show one
    * (the mutation sweep of io/: a cut at 39 passed every test). */
   expect_error("0,0\n1,0123456789abcdefghij0123456789ABCDEFGHIJxyz\n", -1, NULL, A, QK_ERR_PARSE, 2,
