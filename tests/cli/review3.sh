@@ -56,6 +56,10 @@ printf '0x1,0x2\n0.5,0.5\n' >"$tmp/hexh.csv"
 expect 1 "hexh.csv:1:1: field 1 is not a decimal number: '0x1'" -- "$cli" tree "$tmp/hexh.csv"
 expect 1 "hexh.csv:1:1: field 1 is not a finite number: '0x1'" -- "$cli" join "$tmp/negz.geojson" "$tmp/hexh.csv" --planar
 expect 1 "hex.csv:2:1: field 1 \\(x\\) is not a finite number: '0x10'" -- "$cli" join "$tmp/negz.geojson" "$tmp/hex.csv" --planar
+# with a sign too: a first line "-0x1,-0x2" is data, not a header dropped in silence
+# (the io/ mutation sweep: cli_number testing s[-1] for the sign passed every test)
+printf -- '-0x1,-0x2\n0.5,0.5\n' >"$tmp/hexn.csv"
+expect 1 "hexn.csv:1:1: field 1 is not a finite number: '-0x1'" -- "$cli" join "$tmp/negz.geojson" "$tmp/hexn.csv" --planar
 printf 'id,kind,x,y,a,b\n1,disc,0x1,0,1,\n' >"$tmp/hexo.csv"
 printf 'frame,id,x,y\n' >"$tmp/nomoves.csv"
 expect 1 "hexo.csv:2:8: not a decimal number: '0x1'" -- "$cli" world "$tmp/hexo.csv" "$tmp/nomoves.csv"
