@@ -117,6 +117,9 @@ expect 1 'qo3.csv:2: text after a closing quote' -- "$cli" world "$tmp/qo3.csv" 
 
 # ---- join --help says what --threads 0 means (it was accepted, undocumented) -------------
 expect 0 '--threads N answers on N threads' -- "$cli" join --help
+# a bad --threads is a usage error (exit 2), not a message on a run that goes on and
+# succeeds (the io/ mutation sweep: join without its rc = CLI_USAGE passed every test)
+expect 2 "--threads must be a whole number from 0 to 256, not '999'" -- "$cli" join "$tmp/negz.geojson" "$tmp/negz.csv" --planar --threads 999
 expect 0 '0: one per core' -- "$cli" join --help
 
 # ---- knn beyond 2^510: the error before the header (it came after the header and rows) -
