@@ -112,8 +112,10 @@ static void test_io_columns(void **state) {
 
 static void test_io_values(void **state) {
   (void)state;
-  /* Rays: four required columns and an optional fifth. */
-  const char *t = "ox,oy,dx,dy,tmax\n0,0,1,0\n1,1,0,1,2.5\n2,2,1,1,\n";
+  /* Rays: four required columns and an optional fifth. The quoted 2.5 above an empty
+   * field checks that a field's quoting is not carried over to the same column of the
+   * next row (the sweep: without `sp->quoted = 0` the empty field was refused). */
+  const char *t = "ox,oy,dx,dy,tmax\n0,0,1,0\n1,1,0,1,\"2.5\"\n2,2,1,1,\n";
   char *path = write_tmp(t, -1);
   FILE *f = fopen(path, "rb");
   assert_non_null(f);
