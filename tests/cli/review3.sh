@@ -56,6 +56,10 @@ printf '0x1,0x2\n0.5,0.5\n' >"$tmp/hexh.csv"
 expect 1 "hexh.csv:1:1: field 1 is not a decimal number: '0x1'" -- "$cli" tree "$tmp/hexh.csv"
 expect 1 "hexh.csv:1:1: field 1 is not a finite number: '0x1'" -- "$cli" join "$tmp/negz.geojson" "$tmp/hexh.csv" --planar
 expect 1 "hex.csv:2:1: field 1 \\(x\\) is not a finite number: '0x10'" -- "$cli" join "$tmp/negz.geojson" "$tmp/hex.csv" --planar
+# with a sign too: a first line "-0x1,-0x2" is data, not a header dropped in silence
+# (the io/ mutation sweep: cli_number testing s[-1] for the sign passed every test)
+printf -- '-0x1,-0x2\n0.5,0.5\n' >"$tmp/hexn.csv"
+expect 1 "hexn.csv:1:1: field 1 is not a finite number: '-0x1'" -- "$cli" join "$tmp/negz.geojson" "$tmp/hexn.csv" --planar
 printf 'id,kind,x,y,a,b\n1,disc,0x1,0,1,\n' >"$tmp/hexo.csv"
 printf 'frame,id,x,y\n' >"$tmp/nomoves.csv"
 expect 1 "hexo.csv:2:8: not a decimal number: '0x1'" -- "$cli" world "$tmp/hexo.csv" "$tmp/nomoves.csv"
@@ -113,6 +117,9 @@ expect 1 'qo3.csv:2: text after a closing quote' -- "$cli" world "$tmp/qo3.csv" 
 
 # ---- join --help says what --threads 0 means (it was accepted, undocumented) -------------
 expect 0 '--threads N answers on N threads' -- "$cli" join --help
+# a bad --threads is a usage error (exit 2), not a message on a run that goes on and
+# succeeds (the io/ mutation sweep: join without its rc = CLI_USAGE passed every test)
+expect 2 "--threads must be a whole number from 0 to 256, not '999'" -- "$cli" join "$tmp/negz.geojson" "$tmp/negz.csv" --planar --threads 999
 expect 0 '0: one per core' -- "$cli" join --help
 
 # ---- knn beyond 2^510: the error before the header (it came after the header and rows) -

@@ -60,6 +60,13 @@ EOF2
 expect 1 "^quadkit mesh: $tmp/hole.geojson:3:4: feature 0, polygon 0, ring 1: no point found strictly inside this hole ring \\(through \\(2, 2\\)\\) and outside the area \\(even-odd over every ring\\): a hole must lie inside its shell, not outside it or covered by another polygon$" \
   -- "$cli" mesh "$tmp/hole.geojson" -o "$tmp/hole"
 nothing_written "$tmp/hole"
+# the same hole from its corner (4, 2): the point named is x then y (the io/ mutation
+# sweep: a message printing y twice passed with the corner (2, 2))
+sed 's/\[\[2, 2\], \[2, 4\], \[4, 4\], \[4, 2\], \[2, 2\]\]/[[4, 2], [2, 2], [2, 4], [4, 4], [4, 2]]/' \
+  "$tmp/hole.geojson" >"$tmp/hole42.geojson"
+expect 1 "^quadkit mesh: $tmp/hole42.geojson:3:4: feature 0, polygon 0, ring 1: no point found strictly inside this hole ring \\(through \\(4, 2\\)\\) and outside" \
+  -- "$cli" mesh "$tmp/hole42.geojson" -o "$tmp/hole42"
+nothing_written "$tmp/hole42"
 
 # ---- mesh, GeoJSON: a ring round a pole said "no point found inside the hole ring" or,
 # projected, "segments ... cross" ---------------------------------------------------------
