@@ -867,8 +867,7 @@ static void bjob_join(bjob_t *J, unsigned t) {
   const size_t zo = J->zo[t], zc = J->zc[t], d = J->dd[t];
   for (size_t k = 0; k < J->z[t]; k++)
     r->row[zo + k] = zr[k], r->start[zo + k] = (uint32_t)(d + zr[zc + k]);
-  if (J->bv[t].n && J->bv[t].v != J->jb + J->bo[t]) /* (with threads, written in place) */
-    memcpy(J->jb + J->bo[t], J->bv[t].v, J->bv[t].n * sizeof *J->jb);
+  if (J->bv[t].n) memcpy(J->jb + J->bo[t], J->bv[t].v, J->bv[t].n * sizeof *J->jb);
   if (J->ev[t].n) memcpy(J->je + J->eo[t], J->ev[t].v, J->ev[t].n * sizeof *J->je);
   if (t + 1 < J->nt) return;
   for (unsigned u = 1; u < J->nt; u++)
@@ -1099,24 +1098,11 @@ __attribute__((noinline)) static int rows_began(const qk_world_t *w, uint64_t *k
     *bv = J->bv[0], *ev = J->ev[0], *nv = J->nv[0];
     J->bv[0] = J->ev[0] = J->nv[0] = (qk__kvec_t){0};
   } else {
-    /* Range t's began keys are its began rows' pairs, in order: they go straight to their
-     * place in the joined list (its room holds every began key: see update). Its ended
-     * keys are at most its old pairs, and about as many as the last frame's share or its
-     * began keys (frame 1 follows a frame that ended none); a list that outgrows its
-     * room moves to a block twice its size. (The began lists were sized by the last
-     * frame's count, all 9.8 M pairs on frame 1 at 10^5 clustered boxes, the ended ones
-     * from 64 keys on, doubling: 1 100 page faults.) */
-    ok = kv_room(al, bv, bv->n + nb.n); /* (so the join's kv_room keeps bv where it is) */
     for (unsigned t = 0; ok && t < nt; t++) {
-      const size_t b0 = J->p[t] < nb.n_nz ? nb.start[J->p[t]] : nb.n;
-      const size_t b1 = J->p[t + 1] < nb.n_nz ? nb.start[J->p[t + 1]] : nb.n;
-      const size_t o0 = J->q[t] < o->n_nz ? o->start[J->q[t]] : o->n;
-      const size_t o1 = J->q[t + 1] < o->n_nz ? o->start[J->q[t + 1]] : o->n;
-      J->bv[t] = (qk__kvec_t){bv->v + bv->n + b0, 0, b1 - b0};
-      size_t ec = w->ended.n / nt > b1 - b0 ? w->ended.n / nt : b1 - b0;
-      ec += ec / 8 + 64;
-      if (ec > o1 - o0 + 64) ec = o1 - o0 + 64;
-      if (!(J->ev[t].v = qk__realloc(al, NULL, 0, ec * sizeof(uint64_t)))) ok = 0;
+      size_t bc = w->began.n / nt + 64, ec = w->ended.n / nt + 64;
+      if (!(J->bv[t].v = qk__realloc(al, NULL, 0, bc * sizeof(uint64_t)))) ok = 0;
+      J->bv[t].cap = J->bv[t].v ? bc : 0;
+      if (ok && !(J->ev[t].v = qk__realloc(al, NULL, 0, ec * sizeof(uint64_t)))) ok = 0;
       J->ev[t].cap = J->ev[t].v ? ec : 0;
     }
     if (ok) qk__world_run_jobs(w, nt, nt, bjob_run, J);
@@ -1146,7 +1132,7 @@ __attribute__((noinline)) static int rows_began(const qk_world_t *w, uint64_t *k
   }
   for (unsigned t = 0; t < nt; t++) {
     qk__free(al, J->zr[t], J->zr[t] ? (2 * J->zc[t] + 1) * sizeof *J->zr[t] : 0);
-    if (nt == 1) qk__free(al, J->bv[t].v, J->bv[t].cap * sizeof(uint64_t)); /* (else in bv) */
+    qk__free(al, J->bv[t].v, J->bv[t].cap * sizeof(uint64_t));
     qk__free(al, J->ev[t].v, J->ev[t].cap * sizeof(uint64_t));
     qk__free(al, J->nv[t].v, J->nv[t].cap * sizeof(uint64_t));
   }
@@ -1452,28 +1438,13 @@ static void keep_rows(qk_world_t *w) {
   rows_free(al, &w->cur);
 }
 
-/* The other search threads' buffers are kept when large (as the first's: see keep_keys),
- * with room for half as much again as their keys or the threads' mean share (share),
- * whichever is more: the threads take the search's chunks as they come, so a thread's
- * keys differ from frame to frame by tens of percent. A buffer outside that room and
- * twice it is replaced by one of that room. (The buffer much larger than its keys was
- * freed, and the next frame's keys grew from nothing by doubling: at 10^5 boxes, every
- * few frames four fresh blocks of 256 KB to 2 MB, for each thread; one kept at its size
- * grew again when the thread's share was larger the next frame.) */
-static void keep_tkeys(qk_world_t *w, qk__kvec_t *tk, size_t share, unsigned nw) {
-  const qk_allocator_t *al = &w->alloc;
+/* The other search threads' buffers are kept when large (as the first's: see keep_keys). */
+static void keep_tkeys(qk_world_t *w, qk__kvec_t *tk) {
   for (unsigned t = 0; t < QK__KEEP_THREADS; t++) {
-    /* (threads past the search's nw have no keys and keep nothing) */
-    const size_t need = t < nw && share > tk[t].n ? share : tk[t].n;
-    const size_t want = need + need / 2 + 64;
-    if (tk[t].cap < want || !keep_buf(tk[t].cap, want, sizeof *tk[t].v)) {
-      qk__free(al, tk[t].v, tk[t].cap * sizeof *tk[t].v);
-      tk[t] = (qk__kvec_t){0};
-      if (t < nw && keep_buf(want, want, sizeof *tk[t].v) &&
-          (tk[t].v = qk__realloc(al, NULL, 0, want * sizeof *tk[t].v)))
-        tk[t].cap = want;
-    }
-    w->scr_tkeys[t] = tk[t], w->scr_tkeys[t].n = 0;
+    if (keep_buf(tk[t].cap, tk[t].n + 32, sizeof *tk[t].v))
+      w->scr_tkeys[t] = tk[t], w->scr_tkeys[t].n = 0;
+    else
+      qk__free(&w->alloc, tk[t].v, tk[t].cap * sizeof *tk[t].v);
     tk[t] = (qk__kvec_t){0};
   }
 }
@@ -1538,10 +1509,6 @@ static qk_status_t update(qk_world_t *w) {
    * still meet and whose objects do not (those that do are pairs that began). */
   qk__kvec_t nn = {0};
   if (st == QK_OK && fb_ok == 2) {
-    /* (with room for about the last update's: grown from nothing by doubling, its steps
-     * from 256 KB on took the scratch cache's blocks kept for other buffers) */
-    const size_t c = w->near.n + w->near.n / 4 + 64;
-    if ((nn.v = qk__realloc(al, NULL, 0, c * sizeof *nn.v))) nn.cap = c;
     st = take_near(al, &found, &nn);
     for (unsigned t = 0; split && st == QK_OK && t < QK__KEEP_THREADS; t++)
       st = take_near(al, &tk[t], &nn);
@@ -1590,7 +1557,7 @@ static qk_status_t update(qk_world_t *w) {
       qk__free(al, found.v, found.cap * sizeof *found.v);
       found = (qk__kvec_t){0};
     }
-    keep_tkeys(w, tk, 0, 0);
+    keep_tkeys(w, tk);
     if (st != QK_OK) return st;
     qk__free(al, found.v, found.cap * sizeof *found.v);
     return QK_ERR_LIMIT;
@@ -1632,12 +1599,8 @@ static qk_status_t update(qk_world_t *w) {
      * clustered boxes, against some 600 000 now. Its room was then 98 MB, and the list cut
      * to size after the rows was copied to a fresh block on the calling thread alone:
      * 1 200 page faults, 17 ms of the update's CPU time on this machine.) */
-    /* When the search found only the began pairs, they are the began list, and the
-     * ended ones about as many as the last frame's or these (frame 1, after a frame that
-     * ended none). */
-    const size_t eg = only_new && total > w->ended.n ? total : w->ended.n;
-    size_t bcap = w->began.n + w->began.n / 4 + 64, ecap = eg + eg / 4 + 64;
-    if (bcap > total + 64 || only_new) bcap = total + 64;
+    size_t bcap = w->began.n + w->began.n / 4 + 64, ecap = w->ended.n + w->ended.n / 4 + 64;
+    if (bcap > total + 64) bcap = total + 64;
     if (ecap > w->cur.n + 64) ecap = w->cur.n + 64;
     if (cnt && (bv.v = qk__realloc(al, NULL, 0, bcap * sizeof *bv.v))) bv.cap = bcap;
     if (bv.v && (ev.v = qk__realloc(al, NULL, 0, ecap * sizeof *ev.v))) ev.cap = ecap;
@@ -1653,7 +1616,7 @@ static qk_status_t update(qk_world_t *w) {
     if (!in_keys) qk__free(al, tmp, tbytes);
   }
   if (ok) w->last_found = total;
-  keep_tkeys(w, tk, total / nt, nt - 1);
+  keep_tkeys(w, tk);
   keep_keys(w, &found, total);
   size_t n_eg = 0;
   if (dirty)

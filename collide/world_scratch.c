@@ -19,104 +19,15 @@
  * too, so the lists are behind a spin lock (held for a few list operations, never across
  * a call of the given allocator).
  *
- * Where a first touch of a 4 KB page is dear (15 us of CPU time on a paravirtualised
- * guest), the blocks the cache has not kept yet, in the first frames after a build or
- * when the counts change, are what a frame waits for. With the default allocator, blocks
- * from 1.6 MB on are mapped apart on 2 MB boundaries and marked for transparent huge
- * pages (sys_fn), so that they fault in by 2 MB (4 MB and more were marked from the
- * seventeenth session, in place: 3 900 page faults an update -> 1 000-1 150 on frames 1-5
- * of the bench's clustered 10^5 scene, one thread). A block that grows in an update is
- * moved to one from the cache (twenty-fifth session: see docs/collide.md, "Memory").
+ * A fresh block of 4 MB or more from the default allocator is marked for transparent huge
+ * pages (qk__advise_huge): where a first touch of a 4 KB page is dear (15 us of CPU time on
+ * a paravirtualised guest), the blocks the cache has not kept yet, in the first frames
+ * after a build or when the counts change, fault in by 2 MB (the bench's clustered 10^5
+ * scene, frames 1-5 on one thread: 3 900 page faults an update -> 1 000-1 150).
  */
-#define _DEFAULT_SOURCE /* (mmap's MAP_ANONYMOUS, madvise, sysconf) */
 #include "collide/world_internal.h"
 
-#include <stdint.h>
-#include <stdlib.h>
 #include <string.h>
-
-#if defined(__linux__)
-#include <sys/mman.h>
-#include <unistd.h>
-#endif
-
-/* A transparent huge page's size (x86-64, arm64 with 4 KB pages). */
-#define QK__WSCR_HUGE ((size_t)2 << 20)
-
-#if defined(__linux__) && defined(MADV_HUGEPAGE) && defined(MAP_ANONYMOUS)
-/*
- * The cache's allocator when the world was given the default one: blocks of 2 MB and more
- * are mapped apart, on 2 MB boundaries, and marked MADV_HUGEPAGE; smaller ones are the C
- * library's. The kernel backs a 2 MB range with a huge page only when the range lies
- * wholly in the mapping and has never had small pages: a block from malloc starts 16
- * bytes past a page (its first and last 2 MB, up to 1 024 pages, faulted by 4 KB), and
- * below glibc's mmap threshold (raised up to 32 MB by the first large free) it is cut
- * from the heap, whose ranges given back and taken again keep small pages (a 2.4 MB
- * block there faulted all its 590 pages by 4 KB). A block's mapping is its size in whole
- * huge pages when that adds a quarter at most, else in whole pages; the size given back
- * is the size asked for (the allocator contract), which gives the same mapping.
- */
-static size_t sys_len(size_t size) {
-  const size_t round = (size + QK__WSCR_HUGE - 1) & ~(QK__WSCR_HUGE - 1);
-  if (round - size <= size / 4) return round;
-  return (size + 4095) & ~(size_t)4095;
-}
-
-static void *sys_map(size_t size) {
-  const size_t len = sys_len(size);
-  char *m =
-      mmap(NULL, len + QK__WSCR_HUGE, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
-  if (m == MAP_FAILED) return NULL;
-  char *q = (char *)(((uintptr_t)m + QK__WSCR_HUGE - 1) & ~(uintptr_t)(QK__WSCR_HUGE - 1));
-  if (q > m) munmap(m, (size_t)(q - m));
-  if (m + QK__WSCR_HUGE > q) munmap(q + len, (size_t)(m + QK__WSCR_HUGE - q));
-  (void)madvise(q, len & ~(QK__WSCR_HUGE - 1), MADV_HUGEPAGE);
-  return q;
-}
-
-/* Whether a block of size bytes is mapped apart: from 2 MB, or when one huge page holds it
- * with a quarter to spare at most (from 1.6 MB). */
-static int sys_mapped(size_t size) {
-  return size >= QK__WSCR_HUGE || sys_len(size) == QK__WSCR_HUGE;
-}
-
-static void *sys_fn(void *ud, void *p, size_t osize, size_t nsize) {
-  (void)ud;
-  const int mo = p && sys_mapped(osize), mn = sys_mapped(nsize);
-  if (!mo && !mn) {
-    if (nsize) return realloc(p, nsize);
-    free(p);
-    return NULL;
-  }
-  if (mo && mn && sys_len(nsize) <= sys_len(osize)) {
-    /* (the same mapping, or its tail given back) */
-    if (sys_len(nsize) < sys_len(osize))
-      munmap((char *)p + sys_len(nsize), sys_len(osize) - sys_len(nsize));
-    return p;
-  }
-  void *q = NULL;
-  if (nsize && !(q = mn ? sys_map(nsize) : malloc(nsize))) return NULL;
-  if (q && p) memcpy(q, p, osize < nsize ? osize : nsize);
-  if (mo)
-    munmap(p, sys_len(osize));
-  else
-    free(p);
-  return q;
-}
-#define QK__WSCR_SYS 1
-#endif
-
-/* A fresh block of at least size bytes from the given allocator; *cap its true size (a
- * mapped block's whole huge pages). */
-static void *fresh(qk__wscr_t *c, size_t size, size_t *cap) {
-  void *q = qk__realloc(&c->user, NULL, 0, size);
-  *cap = size;
-#if defined(QK__WSCR_SYS)
-  if (c->user.fn == sys_fn && sys_mapped(size) && sys_len(size) % QK__WSCR_HUGE == 0)
-    *cap = sys_len(size);
-#endif
-  return q;
-}
 
 static void lock(qk__wscr_t *c) {
   while (atomic_flag_test_and_set_explicit(&c->lock, memory_order_acquire)) {
@@ -133,9 +44,9 @@ static int lent_of(const qk__wscr_t *c, const void *p) {
 
 static void *cache_fn(void *ud, void *p, size_t osize, size_t nsize) {
   qk__wscr_t *c = ud;
-  /* Small blocks (never lent: a lent block's size is at least QK__WSCR_MIN) pass, unless
-   * one grows large (below). */
-  if (osize < QK__WSCR_MIN && nsize < QK__WSCR_MIN) return qk__realloc(&c->user, p, osize, nsize);
+  /* Small blocks (never lent: a lent block's size is at least QK__WSCR_MIN) pass. */
+  if (osize < QK__WSCR_MIN && (p || nsize < QK__WSCR_MIN))
+    return qk__realloc(&c->user, p, osize, nsize);
   if (!p) {
     /* A fresh block: the smallest kept one that holds it and is at most twice it. */
     lock(c);
@@ -157,9 +68,14 @@ static void *cache_fn(void *ud, void *p, size_t osize, size_t nsize) {
     int roomy = c->active && c->n_lent + c->n_resv < QK__WSCR_LENT;
     c->n_resv += roomy;
     unlock(c);
-    size_t cap;
-    if (!roomy) return fresh(c, nsize, &cap);
-    void *q = fresh(c, nsize + nsize / 8, &cap);
+    if (!roomy) {
+      void *q = qk__realloc(&c->user, NULL, 0, nsize);
+      qk__advise_huge(&c->user, q, nsize);
+      return q;
+    }
+    size_t cap = nsize + nsize / 8;
+    void *q = qk__realloc(&c->user, NULL, 0, cap);
+    qk__advise_huge(&c->user, q, cap);
     lock(c);
     c->n_resv--;
     if (q) c->lent[c->n_lent++] = (qk__wscr_lent_t){q, cap, nsize};
@@ -190,25 +106,6 @@ static void *cache_fn(void *ud, void *p, size_t osize, size_t nsize) {
   }
   int active = c->active;
   unlock(c);
-  if (active && nsize > osize) {
-    /* Grown in an update (a list doubling, or a short list joined into a long one): a
-     * block from the cache, or a fresh one with room on huge pages, and the old block
-     * given back. (The given allocator's realloc faulted the new pages in by 4 KB, and a
-     * block it gave was never the cache's, so the next frame's list, asked for at about
-     * its final size, missed too. The old block is not kept: the steps of a list that
-     * doubled, kept, were taken by the next frames' requests of up to half their size,
-     * and held on to: 40 MB more between updates at 10^5 clustered boxes.) */
-    void *q = cache_fn(c, NULL, 0, nsize);
-    if (q) {
-      memcpy(q, p, osize);
-      lock(c);
-      int j = lent_of(c, p);
-      if (j >= 0) c->lent[j] = c->lent[--c->n_lent];
-      unlock(c);
-      qk__realloc(&c->user, p, cap, 0);
-      return q;
-    }
-  }
   if (active && nsize < osize) {
     /* Cut to less than half in an update: moved to a block of its new size, and its old
      * block kept for a request of about its size (the next frame's, or this one's). */
@@ -234,10 +131,6 @@ void qk__wscr_init(qk_world_t *w, const qk_allocator_t *user) {
   memset(c, 0, sizeof *c);
   atomic_flag_clear(&c->lock);
   c->user = *user;
-#if defined(QK__WSCR_SYS)
-  /* (4 KB pages only: sys_len rounds to them) */
-  if (!user->fn && sysconf(_SC_PAGESIZE) == 4096) c->user = (qk_allocator_t){sys_fn, NULL};
-#endif
   w->alloc = (qk_allocator_t){cache_fn, c};
 }
 
