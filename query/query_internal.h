@@ -239,7 +239,8 @@ static inline void qk__prefetch_slots(const qk_tree_t *t, uint32_t start, uint32
  * that a search goes on to scan. In-process A/B at 10^6 uniform points, 16 rounds of 10^5
  * random queries, one per call (twenty-seventh session; both libraries in one driver,
  * alternating), new time over old, median of the rounds: k = 1 0.83-0.87 at capacity 32,
- * 0.78 at capacity 8, 0.85 at capacity 1; k = 8 0.85; k = 32 0.96 (identical answers).
+ * 0.78-0.90 at capacity 8, 0.84-0.85 at capacity 1; k = 8 0.85-0.88; k = 32 0.93-0.98
+ * (identical answers; docs/query.md, eleventh round).
  * Thresholds of 96 and 192 did about as well; 256 (the grandparent's 240 points at
  * capacity 32, 60 lines at once) was slower than none in separate processes.
  */
