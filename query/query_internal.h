@@ -384,6 +384,10 @@ static inline bool qk__dist_in_range(const qk_tree_t *t, qk_point_t q) {
   return m <= QK__DIST_RANGE;
 }
 
+/* Nonzero: the k = 1 leaf scan takes its SSE2 path even where the processor has AVX2
+ * (query/knn.c), so that tests check both on one machine. 0 by default. */
+extern int qk__knn_avx2_off;
+
 /* QK_OK, or why a kNN query cannot be answered. */
 static inline qk_status_t qk__knn_check(const qk_tree_t *t, qk_point_t q, double max_dist) {
 #if defined(__SSE2__)
