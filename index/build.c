@@ -78,7 +78,6 @@ static qk_status_t from_buckets(qk_tree_t *t, uint32_t v, const qk__geom_t *gp, 
       n[b + q] = (qk__node_t){
           .child = QK_NONE, .start = e[q], .count = e[q + 1] - e[q], .room = e[q + 1] - e[q]};
     n[it.v].child = b;
-    n[it.v].start = 0;
     n[it.v].room = 0;
     t->blocks[(b - 1) >> 2] =
         (qk__block_t){.parent = it.v, .depth = (uint8_t)(depth + 1), .live = 1};

@@ -157,7 +157,9 @@ static inline qk_square_t qk__node_square(const qk_tree_t *t, qk_node_t v) {
   return (qk_square_t){g.x0, g.y0, t->side[g.depth]};
 }
 
-/* First slot of a leaf's points. */
+/* First slot of a leaf's points. For an internal node, a hint to prefetch by, never to read
+ * points from: after a bulk build, its subtree's points are the slots [start, start + count)
+ * (index_internal.h); after inserts and removals they may lie elsewhere. */
 static inline uint32_t qk__node_start(const qk_tree_t *t, qk_node_t v) { return t->nodes[v].start; }
 
 /* Points in a node's subtree (for a leaf: its own). */

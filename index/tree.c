@@ -180,6 +180,7 @@ static qk_status_t compact(qk_tree_t *t, size_t headroom, uint32_t grow) {
     uint32_t v = stack[--top];
     qk__node_t *n = &t->nodes[v];
     if (!qk__is_leaf(n)) {
+      n->start = pos; /* its subtree's first slot (pre-order), the hint of index_internal.h */
       for (int c = 3; c >= 0; c--) stack[top++] = n->child + (uint32_t)c;
       continue;
     }
@@ -309,7 +310,6 @@ uint32_t qk__split(qk_tree_t *t, uint32_t leaf, qk__geom_t g) {
     uint32_t b = qk__split_sorted(t, leaf, g.depth);
     t->nodes[b + 3].room = room;
     n = &t->nodes[leaf];
-    n->start = 0;
     n->room = 0;
     return b;
   }
@@ -357,7 +357,6 @@ uint32_t qk__split(qk_tree_t *t, uint32_t leaf, qk__geom_t g) {
   /* The leaf's unused room goes to the last child so that no slot is lost. */
   t->nodes[b + 3].room += room - count;
   n = &t->nodes[leaf];
-  n->start = 0;
   n->room = 0;
   return b;
 }

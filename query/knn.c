@@ -23,6 +23,17 @@
 #if defined(__SSE2__)
 #include <emmintrin.h>
 #endif
+/* The k = 1 leaf scan four points at a time, where the compiler can target AVX2 in one
+ * function and the processor has it (checked at each scan: a load and a test). */
+#if defined(__SSE2__) && defined(__GNUC__) && defined(__x86_64__) &&                               \
+    (defined(__clang__) || __GNUC__ >= 8)
+#define QK__KNN_AVX2 1
+#include <immintrin.h>
+#else
+#define QK__KNN_AVX2 0
+#endif
+
+int qk__knn_avx2_off;
 
 #if defined(__GNUC__)
 #define QK__ALWAYS_INLINE inline __attribute__((always_inline))
@@ -383,6 +394,42 @@ static inline uint64_t le_mask(const double *d2, uint32_t m, double v) {
   return mask;
 }
 
+#if QK__KNN_AVX2
+/* Squared distances to the points i .. i + 3 into d2[i ..], the same IEEE operations lane by
+ * lane as pair_d2 (AVX2 without FMA: nothing is contracted), so the same values. */
+__attribute__((target("avx2"))) static inline __m256d
+quad_d2(const double *xs, const double *ys, uint32_t i, __m256d vx, __m256d vy, double *d2) {
+  const __m256d dx = _mm256_sub_pd(_mm256_loadu_pd(xs + i), vx);
+  const __m256d dy = _mm256_sub_pd(_mm256_loadu_pd(ys + i), vy);
+  const __m256d d = _mm256_add_pd(_mm256_mul_pd(dx, dx), _mm256_mul_pd(dy, dy));
+  _mm256_storeu_pd(d2 + i, d);
+  return d;
+}
+
+/* leaf_d2 and, when the smallest value is at most lim, le_mask(d2, m, kx_hi(lo)), four
+ * points at a time, for 4 <= m <= 64; *lo gets the smallest value. 0 when it is above lim
+ * (the mask is never 0 otherwise: it holds the smallest). */
+__attribute__((target("avx2"), noinline)) static uint64_t
+one_chunk_avx2(const double *xs, const double *ys, uint32_t m, double qx, double qy, double lim,
+               double *d2, double *lo) {
+  const __m256d vx = _mm256_set1_pd(qx), vy = _mm256_set1_pd(qy);
+  __m256d vlo = quad_d2(xs, ys, m - 4, vx, vy, d2); /* the last four, first (as leaf_d2) */
+  for (uint32_t i = 0; i + 4 < m; i += 4) vlo = _mm256_min_pd(vlo, quad_d2(xs, ys, i, vx, vy, d2));
+  const __m128d h = _mm_min_pd(_mm256_castpd256_pd128(vlo), _mm256_extractf128_pd(vlo, 1));
+  const double v = _mm_cvtsd_f64(_mm_min_sd(h, _mm_unpackhi_pd(h, h)));
+  *lo = v;
+  if (!(v <= lim)) return 0;
+  const __m256d vv = _mm256_set1_pd(kx_hi(v));
+  uint64_t mask =
+      (uint64_t)_mm256_movemask_pd(_mm256_cmp_pd(_mm256_loadu_pd(d2 + m - 4), vv, _CMP_LE_OQ))
+      << (m - 4);
+  for (uint32_t i = 0; i + 4 < m; i += 4)
+    mask |= (uint64_t)_mm256_movemask_pd(_mm256_cmp_pd(_mm256_loadu_pd(d2 + i), vv, _CMP_LE_OQ))
+            << i;
+  return mask;
+}
+#endif
+
 /*
  * The k = 1 leaf scan, in two steps per chunk: the smallest squared distance (leaf_d2),
  * and only when it can beat or tie the best so far, which point has it. The best is kept
@@ -399,9 +446,19 @@ static inline void scan_one(const qk_tree_t *t, qk_node_t leaf, double qx, doubl
   double d2[QK__SCAN_CHUNK];
   for (uint32_t base = 0; base < count; base += QK__SCAN_CHUNK) {
     const uint32_t m = count - base < QK__SCAN_CHUNK ? count - base : QK__SCAN_CHUNK;
-    const double lo = leaf_d2(xs + base, ys + base, m, qx, qy, d2);
-    if (!(lo <= b->lim)) continue;
-    const uint64_t at = le_mask(d2, m, kx_hi(lo));
+    uint64_t at;
+#if QK__KNN_AVX2
+    if (m >= 4 && !qk__knn_avx2_off && __builtin_cpu_supports("avx2")) {
+      double lo;
+      at = one_chunk_avx2(xs + base, ys + base, m, qx, qy, b->lim, d2, &lo);
+      if (!at) continue;
+    } else
+#endif
+    {
+      const double lo = leaf_d2(xs + base, ys + base, m, qx, qy, d2);
+      if (!(lo <= b->lim)) continue;
+      at = le_mask(d2, m, kx_hi(lo));
+    }
     uint32_t i = ctz64(at), s = start + base + i;
     double ds = d2[i];
     if (at & (at - 1)) { /* several points near that distance: the exact order decides */

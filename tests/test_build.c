@@ -32,7 +32,13 @@
  * duplicates, points on dyadic grid lines, one point and all points equal, hashed and
  * compared with the hashes of the build as it was before its sort was reworked (commit
  * 817321d), on one thread and on two, with and without AVX2: speed-ups of the build must
- * leave its output byte for byte.
+ * leave its output byte for byte. (An internal node's start, 0 when they were pinned, is
+ * hashed as 0: it is checked by the next test.)
+ *
+ * Internal nodes keep their start (a prefetch hint for the searches): on the same inputs,
+ * on one thread and two, and on a root far from the origin (the plain recursive build),
+ * every internal node's start is its first child's and the leaves hold consecutive slots
+ * in pre-order, so a subtree's points are the slots [start, start + count).
  *
  * The team a build holds for its parallel regions (qk__team_begin): the regions started
  * while it is held run their shares 1.. on the same workers (a thread-local count of the
@@ -422,7 +428,9 @@ static uint64_t raw_hash(const qk_tree_t *t) {
   h = mix(h, ns);
   for (qk_node_t v = 0; v < nn; v++) {
     h = mix(h, qk__node_child(t, v));
-    h = mix(h, qk__node_start(t, v));
+    /* An internal node's start is a prefetch hint, checked by test_build_internal_start
+     * (it was 0 when these hashes were pinned). */
+    h = mix(h, qk__node_leaf(t, v) ? qk__node_start(t, v) : 0);
     h = mix(h, qk__node_count(t, v));
     h = mix(h, qk__node_room(t, v));
     h = mix(h, qk__node_live(t, v));
@@ -437,6 +445,73 @@ static uint64_t raw_hash(const qk_tree_t *t) {
     h = mix(h, id[s]);
   }
   return h;
+}
+
+/* Every internal node's start is its first child's, and the leaves, in pre-order, hold
+ * consecutive slots from 0: so a node's subtree is the slots [start, start + count), what the
+ * searches' prefetch of a subtree's points relies on (query_internal.h). */
+static void check_internal_start(const qk_tree_t *t) {
+  uint32_t stack[4 * (QK_MAX_DEPTH_LIMIT + 2)], top = 0, pos = 0;
+  stack[top++] = 0;
+  while (top) {
+    const qk_node_t v = stack[--top];
+    const uint32_t c = qk__node_child(t, v);
+    if (c == QK_NONE) {
+      assert_int_equal(qk__node_start(t, v), pos);
+      pos += qk__node_count(t, v);
+      continue;
+    }
+    assert_int_equal(qk__node_start(t, v), qk__node_start(t, c));
+    for (uint32_t q = 4; q-- > 0;) stack[top++] = c + q;
+  }
+  assert_int_equal(pos, qk__tree_count(t));
+}
+
+static void test_build_internal_start(void **state) {
+  (void)state;
+  struct {
+    qkt_dist_t d;
+    size_t n;
+    uint32_t capacity;
+    uint64_t seed;
+  } cases[] = {
+      {QKT_UNIFORM, 1000000, 32, 1},  {QKT_CLUSTERED, 300000, 16, 2},
+      {QKT_DUPLICATES, 100000, 8, 3}, {QKT_GRID_EDGES, 600011, 16, 4},
+      {QKT_UNIFORM, 5000, 1, 5},      {QKT_DUPLICATES, 70001, 16, 6},
+  };
+  qk_point_t *p = malloc(1000000 * sizeof *p);
+  assert_non_null(p);
+  for (size_t c = 0; c <= sizeof cases / sizeof *cases; c++) {
+    size_t n = 20000;
+    uint32_t capacity = 4;
+    if (c < sizeof cases / sizeof *cases) {
+      qkt_rng_t r;
+      qkt_rng_seed(&r, cases[c].seed);
+      qkt_points(&r, cases[c].d, p, cases[c].n);
+      if (c == 5) /* all points equal */
+        for (size_t i = 1; i < cases[c].n; i++) p[i] = p[0];
+      n = cases[c].n, capacity = cases[c].capacity;
+    } else {
+      /* Far from the origin, where the grid's cells cannot be found by scaling: the plain
+       * recursive build, whose splits keep their starts too. */
+      qkt_rng_t r;
+      qkt_rng_seed(&r, 7);
+      for (size_t i = 0; i < n; i++)
+        p[i] = (qk_point_t){1e15 + 0.125 * (double)(qkt_rng_next(&r) % 512),
+                            1e15 + 0.125 * (double)(qkt_rng_next(&r) % 512)};
+    }
+    for (uint32_t threads = 1; threads <= 2; threads++) {
+      qk_tree_options_t o;
+      qk_tree_options_init(&o);
+      o.capacity = capacity;
+      o.threads = threads;
+      qk_tree_t *t = NULL;
+      assert_int_equal(qk_tree_build(p, n, &o, &t), QK_OK);
+      check_internal_start(t);
+      qk_tree_free(t);
+    }
+  }
+  free(p);
 }
 
 static void test_build_output_pinned(void **state) {
@@ -768,6 +843,7 @@ int main(void) {
       cmocka_unit_test(test_build_tree_beside_sort),
       cmocka_unit_test(test_build_streamed_order),
       cmocka_unit_test(test_build_output_pinned),
+      cmocka_unit_test(test_build_internal_start),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }

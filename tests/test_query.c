@@ -51,6 +51,9 @@
 #include "qk_test.h"
 #include "query_oracle.h"
 
+/* Nonzero: the k = 1 scan's SSE2 path on processors with AVX2 (query/knn.c). */
+extern int qk__knn_avx2_off;
+
 static const qkt_dist_t dists[] = {QKT_UNIFORM, QKT_CLUSTERED, QKT_DUPLICATES, QKT_GRID_EDGES};
 static const uint32_t caps[] = {1, 4, 32};
 static uint64_t g_seed;
@@ -1568,6 +1571,18 @@ static void test_query_radius_batch_threads(void **state) {
   free(p), free(qs), free(want_n), free(counts), free(sx), free(want), free(got);
 }
 
+static int sse2_on(void **state) {
+  (void)state;
+  qk__knn_avx2_off = 1;
+  return 0;
+}
+
+static int sse2_off(void **state) {
+  (void)state;
+  qk__knn_avx2_off = 0;
+  return 0;
+}
+
 int main(void) {
   g_seed = qkt_seed(20261122);
   const struct CMUnitTest tests[] = {
@@ -1608,6 +1623,25 @@ int main(void) {
       cmocka_unit_test(test_query_batch_chunks),
       cmocka_unit_test(test_query_radius_batch_threads),
   };
+  /* The kNN tests again with the k = 1 scan's SSE2 path where the processor has AVX2 (the
+   * group above takes the AVX2 path there). */
+  const struct CMUnitTest sse2[] = {
+    cmocka_unit_test(test_query_knn_all_k),
+    cmocka_unit_test(test_query_knn_large),
+    cmocka_unit_test(test_query_knn_after_mutation),
+    cmocka_unit_test(test_query_batch),
+    cmocka_unit_test(test_query_knn_distance_range),
+    cmocka_unit_test(test_query_knn_big_leaves),
+    cmocka_unit_test(test_query_knn_batch_paths),
+    cmocka_unit_test(test_query_knn1_ties),
+    cmocka_unit_test(test_query_knn_near_ties),
+    cmocka_unit_test(test_query_knn_cell_lines),
+    cmocka_unit_test(test_query_knn_exact),
+#if defined(__SSE2__)
+    cmocka_unit_test(test_query_knn_flush_subnormals),
+#endif
+  };
   if (QKT_TSAN) return cmocka_run_group_tests(threaded, NULL, NULL);
-  return cmocka_run_group_tests(tests, NULL, NULL);
+  int failed = cmocka_run_group_tests(tests, NULL, NULL);
+  return failed + cmocka_run_group_tests_name("knn, SSE2 scans", sse2, sse2_on, sse2_off);
 }
