@@ -862,6 +862,11 @@ qk_status_t qk__geojson_read_whole(const char *text, size_t len, const qk_region
   }
   if (!root || jerr != json_tokener_success) {
     size_t off = at ? at - 1 : 0;
+    /* json-c stops at a character that starts no token, not after it: "  x" and "[1, x]"
+     * were placed one column early, at the blank before the x (other errors are placed
+     * as before). The reader of a stream, which refuses such a first byte itself, places
+     * it at that byte too. */
+    if (jerr == json_tokener_error_parse_unexpected && at < len) off = at;
     where(text, off, err);
     qk_status_t st = qk__region_fail(err, QK_ERR_PARSE, SIZE_MAX, "malformed JSON: %s",
                                      json_tokener_error_desc(jerr));
