@@ -1,4 +1,5 @@
 /* GeoJSON polygons as a mesh input; see mesh_geojson.h. */
+#define _POSIX_C_SOURCE 200809L /* fileno, fstat */
 #include "mesh_geojson.h"
 
 #include <errno.h>
@@ -8,6 +9,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 
 #include "quadkit/quadkit.h"
 
@@ -848,16 +850,43 @@ static int hole_points(mg_input_t *in, const char *path, char *msg, size_t n) {
   return rc;
 }
 
+/* The most bytes read from a stream (a pipe, a FIFO, a device: not a regular file), as
+ * the library's GeoJSON reader (region/geojson.c): a stream gives no size in advance and
+ * may never end, while the whole text is kept. */
+#define MG_STREAM_MAX ((size_t)INT_MAX)
+
+/* A text whose first value (after a byte order mark and blanks) is not an object is
+ * refused at that value, in the library reader's words, without reading further; *scan
+ * keeps how far only blanks were seen. 0 while the text may still be GeoJSON. */
+static int not_an_object(const char *path, const char *t, size_t len, size_t *scan, char *msg,
+                         size_t n) {
+  size_t bom = len >= 3 && !memcmp(t, "\xEF\xBB\xBF", 3) ? 3 : 0, i = *scan ? *scan : bom;
+  while (i < len && strchr(" \t\r\n", t[i]) && t[i]) i++;
+  *scan = i;
+  if (i >= len || t[i] == '{') return 0;
+  unsigned long line = 1, col = 1;
+  for (size_t k = bom; k < i; k++) t[k] == '\n' ? (line++, col = 1) : col++;
+  const char *why = t[i] && strchr("[\"-0123456789tfn", t[i])
+                        ? "expected a GeoJSON object with a string \"type\""
+                        : "malformed JSON: unexpected character";
+  return mg_fail(msg, n, 1, "%s:%lu:%lu: %s", path, line, col, why);
+}
+
 /* The whole file into a malloc'd buffer (NUL-terminated); 0, or an exit code with msg. */
 static int slurp(const char *path, char **text, size_t *len, char *msg, size_t n) {
   *text = NULL, *len = 0;
   FILE *f = fopen(path, "rb");
   if (!f) return mg_fail(msg, n, 1, "%s: cannot open: %s", path, strerror(errno));
-  size_t cap = 0;
-  int rc = 0;
+  struct stat sb;
+  size_t max = fstat(fileno(f), &sb) == 0 && S_ISREG(sb.st_mode) ? SIZE_MAX - 2 : MG_STREAM_MAX;
+  size_t cap = 0, scan = 0;
+  int rc = 0, checked = 0;
   for (;;) {
     if (*len + 1 >= cap) {
+      /* (one byte past the limit is read, to tell a text of that length from a longer one,
+       * and the buffer never grows past it and the NUL) */
       size_t nc = cap ? 2 * cap : 1 << 16;
+      if (nc > max + 2) nc = max + 2;
       char *p = realloc(*text, nc);
       if (!p) {
         rc = mg_fail(msg, n, 3, "%s: out of memory reading it", path);
@@ -865,7 +894,8 @@ static int slurp(const char *path, char **text, size_t *len, char *msg, size_t n
       }
       *text = p, cap = nc;
     }
-    size_t got = fread(*text + *len, 1, cap - 1 - *len, f);
+    size_t room = cap - 1 - *len;
+    size_t got = fread(*text + *len, 1, room, f);
     /* Reading stops at a NUL byte, which the GeoJSON reader refuses where it is: an
      * endless binary stream (a .geojson name for /dev/zero) filled memory before. */
     const char *nul = got ? memchr(*text + *len, '\0', got) : NULL;
@@ -874,6 +904,16 @@ static int slurp(const char *path, char **text, size_t *len, char *msg, size_t n
       break;
     }
     *len += got;
+    if (*len > max) {
+      rc = mg_fail(msg, n, 1,
+                   "%s: GeoJSON text from a pipe or device longer than %zu bytes, the limit for "
+                   "a stream (a regular file has none)",
+                   path, max);
+      break;
+    }
+    /* (when the text ended within this read, the reader words its error as it always has) */
+    if (!checked && got == room && (rc = not_an_object(path, *text, *len, &scan, msg, n))) break;
+    checked = scan < *len;
     if (got == 0) break;
   }
   if (!rc && ferror(f)) rc = mg_fail(msg, n, 1, "%s: cannot read: %s", path, strerror(errno));
