@@ -1,5 +1,4 @@
 /* GeoJSON polygons as a mesh input; see mesh_geojson.h. */
-#define _POSIX_C_SOURCE 200809L /* fileno, fstat */
 #include "mesh_geojson.h"
 
 #include <errno.h>
@@ -33,23 +32,41 @@ static int mg_fail(char *msg, size_t n, int rc, const char *fmt, ...) {
   return rc;
 }
 
+/* The text of an input read from a stream (a FIFO named .geojson), kept for mg_locate:
+ * a stream cannot be read again, and opening a FIFO again waited for a writer forever
+ * (`quadkit mesh f.geojson` hung on its way to a "segments cross" message). */
+static struct {
+  char *path, *text;
+  size_t len;
+} mg_kept;
+
 void mg_free(mg_input_t *in) {
   free(in->xy), free(in->seg), free(in->holes), free(in->ring_v), free(in->ring_start);
   free(in->ring_sign), free(in->seg_feature), free(in->seg_ring), free(in->seg_point);
   free(in->ring_src), free(in->in_feature), free(in->in_poly), free(in->in_ring), free(in->in_path),
       free(in->paths);
   memset(in, 0, sizeof *in);
+  free(mg_kept.path), free(mg_kept.text);
+  memset(&mg_kept, 0, sizeof mg_kept);
 }
 
-static int slurp(const char *path, char **text, size_t *len, char *msg, size_t n);
+static int slurp(const char *path, char **text, size_t *len, int *stream, char *msg, size_t n);
 
 void mg_locate(const char *path, const char *pointer, unsigned long *line, unsigned long *col) {
   *line = *col = 0;
 #ifdef QK_HAVE_JSONC
   /* Read again: only on the way to an error, so a read costs nothing when all is well. */
+  if (mg_kept.text && !strcmp(mg_kept.path, path)) {
+    if (qk_region_find_json_pointer(mg_kept.text, mg_kept.len, pointer, line, col) != QK_OK)
+      *line = *col = 0;
+    return;
+  }
+  struct stat sb;
+  if (stat(path, &sb) != 0 || !S_ISREG(sb.st_mode)) return; /* (not to be read again) */
   char *text, msg[8];
   size_t len;
-  if (slurp(path, &text, &len, msg, sizeof msg)) return;
+  int stream;
+  if (slurp(path, &text, &len, &stream, msg, sizeof msg)) return;
   if (qk_region_find_json_pointer(text, len, pointer, line, col) != QK_OK) *line = *col = 0;
   free(text);
 #else
@@ -873,12 +890,14 @@ static int not_an_object(const char *path, const char *t, size_t len, size_t *sc
 }
 
 /* The whole file into a malloc'd buffer (NUL-terminated); 0, or an exit code with msg. */
-static int slurp(const char *path, char **text, size_t *len, char *msg, size_t n) {
-  *text = NULL, *len = 0;
+static int slurp(const char *path, char **text, size_t *len, int *stream, char *msg, size_t n) {
+  *text = NULL, *len = 0, *stream = 0;
   FILE *f = fopen(path, "rb");
   if (!f) return mg_fail(msg, n, 1, "%s: cannot open: %s", path, strerror(errno));
+  /* (stat, not fstat of fileno: this file is also compiled into tests as strict C11) */
   struct stat sb;
-  size_t max = fstat(fileno(f), &sb) == 0 && S_ISREG(sb.st_mode) ? SIZE_MAX - 2 : MG_STREAM_MAX;
+  *stream = !(stat(path, &sb) == 0 && S_ISREG(sb.st_mode));
+  size_t max = *stream ? MG_STREAM_MAX : SIZE_MAX - 2;
   size_t cap = 0, scan = 0;
   int rc = 0, checked = 0;
   for (;;) {
@@ -959,7 +978,8 @@ int mg_read(const char *path, const mg_options_t *o, mg_input_t *out, char *msg,
    * walked for the rings. */
   char *text = NULL;
   size_t len = 0;
-  int rc0 = slurp(path, &text, &len, msg, n);
+  int stream = 0;
+  int rc0 = slurp(path, &text, &len, &stream, msg, n);
   if (rc0) return rc0;
   qk_status_t st = qk_region_read_geojson_text(text, len, &ro, &layer, &err);
   if (st != QK_OK) {
@@ -1013,7 +1033,14 @@ int mg_read(const char *path, const mg_options_t *o, mg_input_t *out, char *msg,
     root = parse_again(text, len);
     if (!root) rc = mg_fail(msg, n, 3, "%s: out of memory parsing it again", path);
   }
-  free(text);
+  char *kept_path = stream ? malloc(strlen(path) + 1) : NULL;
+  if (kept_path) {
+    strcpy(kept_path, path);
+    free(mg_kept.path), free(mg_kept.text);
+    mg_kept.path = kept_path, mg_kept.text = text, mg_kept.len = len;
+  } else {
+    free(text); /* (a stream's text without memory for its name: positions are left out) */
+  }
   if (!rc && root && gather(root, want, nf, &r, &seen)) rc = mg_fail(msg, n, 3, "out of memory");
   if (!rc && seen != nf)
     rc = mg_fail(msg, n, 3, "%s: %zu features here, %zu for the region reader", path, seen, nf);

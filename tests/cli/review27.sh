@@ -51,7 +51,7 @@ mkfifo "$tmp/f.geojson"
 mesh_fifo() { # mesh_fifo WRITER-COMMAND: quadkit mesh f.geojson, the FIFO fed by the writer
   bash -c "$1" >"$tmp/f.geojson" &
   local writer=$! rc
-  timeout 60 "$cli" mesh "$tmp/f.geojson" -o "$tmp/m"
+  timeout 20 "$cli" mesh "$tmp/f.geojson" -o "$tmp/m"
   rc=$?
   kill "$writer" 2>/dev/null
   wait "$writer" 2>/dev/null
@@ -70,5 +70,14 @@ expect 1 "^quadkit join: /dev/stdin: $limit" -- limited 4000000 join_pipe "yes '
 expect 1 "^quadkit mesh: $tmp/f.geojson: $limit" -- \
   limited 4000000 mesh_fifo "printf '%s' '$coll'; yes '$feat'"
 [ -e "$tmp/m.node" ] && fail "mesh: an output was written after the limit"
+
+# ---- a FIFO's text is not read twice ---------------------------------------------------
+# The mesher found the position of a bad segment by reading the file again: a FIFO opened
+# again waited for a writer forever (killed by the timeout, exit 124). Its text is kept.
+cross='{"type":"Polygon","coordinates":[[[0,0],[2,2],[2,0],[0,2],[0,0]]]}'
+printf '%s' "$cross" >"$tmp/cross.geojson"
+at='1:35: segments 0 and 2 cross or overlap \(input segments feature 0, polygon 0, ring 0, position 0 and feature 0, polygon 0, ring 0, position 2, at 1:47\)$'
+expect 1 "^quadkit mesh: $tmp/cross.geojson:$at" -- "$cli" mesh "$tmp/cross.geojson" -o "$tmp/c"
+expect 1 "^quadkit mesh: $tmp/f.geojson:$at" -- limited 1000000 mesh_fifo "printf '%s' '$cross'"
 
 report
