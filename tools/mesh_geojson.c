@@ -8,6 +8,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 
 #include "quadkit/quadkit.h"
 
@@ -31,23 +32,41 @@ static int mg_fail(char *msg, size_t n, int rc, const char *fmt, ...) {
   return rc;
 }
 
+/* The text of an input read from a stream (a FIFO named .geojson), kept for mg_locate:
+ * a stream cannot be read again, and opening a FIFO again waited for a writer forever
+ * (`quadkit mesh f.geojson` hung on its way to a "segments cross" message). */
+static struct {
+  char *path, *text;
+  size_t len;
+} mg_kept;
+
 void mg_free(mg_input_t *in) {
   free(in->xy), free(in->seg), free(in->holes), free(in->ring_v), free(in->ring_start);
   free(in->ring_sign), free(in->seg_feature), free(in->seg_ring), free(in->seg_point);
   free(in->ring_src), free(in->in_feature), free(in->in_poly), free(in->in_ring), free(in->in_path),
       free(in->paths);
   memset(in, 0, sizeof *in);
+  free(mg_kept.path), free(mg_kept.text);
+  memset(&mg_kept, 0, sizeof mg_kept);
 }
 
-static int slurp(const char *path, char **text, size_t *len, char *msg, size_t n);
+static int slurp(const char *path, char **text, size_t *len, int *stream, char *msg, size_t n);
 
 void mg_locate(const char *path, const char *pointer, unsigned long *line, unsigned long *col) {
   *line = *col = 0;
 #ifdef QK_HAVE_JSONC
   /* Read again: only on the way to an error, so a read costs nothing when all is well. */
+  if (mg_kept.text && !strcmp(mg_kept.path, path)) {
+    if (qk_region_find_json_pointer(mg_kept.text, mg_kept.len, pointer, line, col) != QK_OK)
+      *line = *col = 0;
+    return;
+  }
+  struct stat sb;
+  if (stat(path, &sb) != 0 || !S_ISREG(sb.st_mode)) return; /* (not to be read again) */
   char *text, msg[8];
   size_t len;
-  if (slurp(path, &text, &len, msg, sizeof msg)) return;
+  int stream;
+  if (slurp(path, &text, &len, &stream, msg, sizeof msg)) return;
   if (qk_region_find_json_pointer(text, len, pointer, line, col) != QK_OK) *line = *col = 0;
   free(text);
 #else
@@ -848,16 +867,45 @@ static int hole_points(mg_input_t *in, const char *path, char *msg, size_t n) {
   return rc;
 }
 
+/* The most bytes read from a stream (a pipe, a FIFO, a device: not a regular file), as
+ * the library's GeoJSON reader (region/geojson.c): a stream gives no size in advance and
+ * may never end, while the whole text is kept. */
+#define MG_STREAM_MAX ((size_t)INT_MAX)
+
+/* A text whose first value (after a byte order mark and blanks) is not an object is
+ * refused at that value, in the library reader's words, without reading further; *scan
+ * keeps how far only blanks were seen. 0 while the text may still be GeoJSON. */
+static int not_an_object(const char *path, const char *t, size_t len, size_t *scan, char *msg,
+                         size_t n) {
+  size_t bom = len >= 3 && !memcmp(t, "\xEF\xBB\xBF", 3) ? 3 : 0, i = *scan ? *scan : bom;
+  while (i < len && strchr(" \t\r\n", t[i]) && t[i]) i++;
+  *scan = i;
+  if (i >= len || t[i] == '{') return 0;
+  unsigned long line = 1, col = 1;
+  for (size_t k = bom; k < i; k++) t[k] == '\n' ? (line++, col = 1) : col++;
+  const char *why = t[i] && strchr("[\"-0123456789tfn", t[i])
+                        ? "expected a GeoJSON object with a string \"type\""
+                        : "malformed JSON: unexpected character";
+  return mg_fail(msg, n, 1, "%s:%lu:%lu: %s", path, line, col, why);
+}
+
 /* The whole file into a malloc'd buffer (NUL-terminated); 0, or an exit code with msg. */
-static int slurp(const char *path, char **text, size_t *len, char *msg, size_t n) {
-  *text = NULL, *len = 0;
+static int slurp(const char *path, char **text, size_t *len, int *stream, char *msg, size_t n) {
+  *text = NULL, *len = 0, *stream = 0;
   FILE *f = fopen(path, "rb");
   if (!f) return mg_fail(msg, n, 1, "%s: cannot open: %s", path, strerror(errno));
-  size_t cap = 0;
-  int rc = 0;
+  /* (stat, not fstat of fileno: this file is also compiled into tests as strict C11) */
+  struct stat sb;
+  *stream = !(stat(path, &sb) == 0 && S_ISREG(sb.st_mode));
+  size_t max = *stream ? MG_STREAM_MAX : SIZE_MAX - 2;
+  size_t cap = 0, scan = 0;
+  int rc = 0, checked = 0;
   for (;;) {
     if (*len + 1 >= cap) {
+      /* (one byte past the limit is read, to tell a text of that length from a longer one,
+       * and the buffer never grows past it and the NUL) */
       size_t nc = cap ? 2 * cap : 1 << 16;
+      if (nc > max + 2) nc = max + 2;
       char *p = realloc(*text, nc);
       if (!p) {
         rc = mg_fail(msg, n, 3, "%s: out of memory reading it", path);
@@ -865,7 +913,8 @@ static int slurp(const char *path, char **text, size_t *len, char *msg, size_t n
       }
       *text = p, cap = nc;
     }
-    size_t got = fread(*text + *len, 1, cap - 1 - *len, f);
+    size_t room = cap - 1 - *len;
+    size_t got = fread(*text + *len, 1, room, f);
     /* Reading stops at a NUL byte, which the GeoJSON reader refuses where it is: an
      * endless binary stream (a .geojson name for /dev/zero) filled memory before. */
     const char *nul = got ? memchr(*text + *len, '\0', got) : NULL;
@@ -874,6 +923,16 @@ static int slurp(const char *path, char **text, size_t *len, char *msg, size_t n
       break;
     }
     *len += got;
+    if (*len > max) {
+      rc = mg_fail(msg, n, 1,
+                   "%s: GeoJSON text from a pipe or device longer than %zu bytes, the limit for "
+                   "a stream (a regular file has none)",
+                   path, max);
+      break;
+    }
+    /* (when the text ended within this read, the reader words its error as it always has) */
+    if (!checked && got == room && (rc = not_an_object(path, *text, *len, &scan, msg, n))) break;
+    checked = scan < *len;
     if (got == 0) break;
   }
   if (!rc && ferror(f)) rc = mg_fail(msg, n, 1, "%s: cannot read: %s", path, strerror(errno));
@@ -919,7 +978,8 @@ int mg_read(const char *path, const mg_options_t *o, mg_input_t *out, char *msg,
    * walked for the rings. */
   char *text = NULL;
   size_t len = 0;
-  int rc0 = slurp(path, &text, &len, msg, n);
+  int stream = 0;
+  int rc0 = slurp(path, &text, &len, &stream, msg, n);
   if (rc0) return rc0;
   qk_status_t st = qk_region_read_geojson_text(text, len, &ro, &layer, &err);
   if (st != QK_OK) {
@@ -973,7 +1033,14 @@ int mg_read(const char *path, const mg_options_t *o, mg_input_t *out, char *msg,
     root = parse_again(text, len);
     if (!root) rc = mg_fail(msg, n, 3, "%s: out of memory parsing it again", path);
   }
-  free(text);
+  char *kept_path = stream ? malloc(strlen(path) + 1) : NULL;
+  if (kept_path) {
+    strcpy(kept_path, path);
+    free(mg_kept.path), free(mg_kept.text);
+    mg_kept.path = kept_path, mg_kept.text = text, mg_kept.len = len;
+  } else {
+    free(text); /* (a stream's text without memory for its name: positions are left out) */
+  }
   if (!rc && root && gather(root, want, nf, &r, &seen)) rc = mg_fail(msg, n, 3, "out of memory");
   if (!rc && seen != nf)
     rc = mg_fail(msg, n, 3, "%s: %zu features here, %zu for the region reader", path, seen, nf);

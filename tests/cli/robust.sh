@@ -75,11 +75,16 @@ done
 # ---- join: a layer that runs out of memory is said once, naming the file ---------------
 # An endless GeoJSON from a pipe (a FIFO named .geojson) under a 1 GB address-space limit:
 # "quadkit join: FILE: out of memory reading FILE" was followed by a bare "quadkit join:
-# out of memory". (Not under the sanitizers, which reserve more than the limit.)
+# out of memory". (Not under the sanitizers, which reserve more than the limit.) The text
+# opens an object: one that does not is now refused at its first byte (review27.sh), and
+# the 1 GB limit is reached before the reader's 2 GiB limit for a stream.
 if [ "${QK_SANITIZE:-0}" != 1 ]; then
   mkfifo "$tmp/endless.geojson"
   printf 'x,y\n0.5,0.5\n' >"$tmp/p1.csv"
-  yes '[0,0],' >"$tmp/endless.geojson" &
+  (
+    printf '{"type":"FeatureCollection","features":['
+    yes '[0,0],'
+  ) >"$tmp/endless.geojson" &
   writer=$!
   err=$(
     ulimit -v 1000000
