@@ -63,6 +63,14 @@ int cli_cut_line_end(char *line, size_t *len);
  * until it ran out. Documented in the README's CLI section and `quadkit --help`. */
 #define CLI_MAX_LINE (1024UL * 1024UL)
 
+/* The most bytes the line reader keeps of an input that is not a regular file (a pipe, a
+ * FIFO, a device: cli_screen_input keeps such an input in memory as read, since it cannot
+ * be read twice): 2^31 - 1, the limit the GeoJSON readers put on a stream
+ * (region/geojson.c). An endless stream of short lines (`yes 1,2 | quadkit join ...`) would
+ * otherwise be kept until memory ran out; past the limit it is refused, exit 1. A regular
+ * file has none. */
+#define CLI_STREAM_MAX 2147483647UL
+
 /* The tool's one line reader for CSV text: read in 64 KiB chunks (fread), each physical
  * line checked as it comes in, so that a NUL byte (binary data) or a line longer than
  * CLI_MAX_LINE stops it at once. Initialise with cli_lines_init, free with
@@ -92,7 +100,8 @@ void cli_lines_free(cli_lines_t *r);
 /* One physical line into r->line (NUL-terminated, its LF cut but not a CR before it:
  * cli_cut_line_end does that). Returns its length; -1 at the end of the input or on a
  * read error (ferror(r->f) tells); -2 for a NUL byte or a line past CLI_MAX_LINE (*why
- * says which, r->phys its line, r->col the NUL's column); -3 out of memory. */
+ * says which, r->phys its line, r->col the NUL's column); -3 out of memory; -4, with tee
+ * set, when the input passes CLI_STREAM_MAX bytes (*why says so). */
 long cli_read_line(cli_lines_t *r, const char **why);
 
 /* One CSV record into r->line: one physical line, or several joined by LF while a

@@ -96,6 +96,11 @@ static long line_into(cli_lines_t *r, char **buf, size_t *cap, const char **why)
       r->cpos = 0;
       if (r->clen < CHUNK) r->eof = 1; /* the end, or a read error (ferror tells) */
       if (r->tee && r->clen) {
+        if (r->tee_len + r->clen > CLI_STREAM_MAX) {
+          *why = "input from a pipe or device longer than 2147483647 bytes, the limit for a "
+                 "stream (a regular file has none)";
+          return -4;
+        }
         if (room(&r->tee_buf, &r->tee_cap, r->tee_len + r->clen)) return -3;
         memcpy(r->tee_buf + r->tee_len, r->chunk, r->clen);
         r->tee_len += r->clen;
@@ -249,6 +254,10 @@ int cli_lines_status(const char *cmd, const char *path, const cli_lines_t *r, lo
   if (got == -3) {
     cli_msg("quadkit%s%s: %s:%lu: out of memory reading the line\n", sp, c, path, r->phys);
     return CLI_INTERNAL;
+  }
+  if (got == -4) { /* the input as a whole, no line of it */
+    cli_msg("quadkit%s%s: %s: %s\n", sp, c, path, why);
+    return CLI_BAD_INPUT;
   }
   if (ferror(r->f)) {
     cli_msg("quadkit%s%s: %s: read error\n", sp, c, path);

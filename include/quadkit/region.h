@@ -108,7 +108,10 @@ qk_status_t qk_region_from_arrays(const qk_region_arrays_t *in, const qk_region_
  * of a GeometryCollection) give its rings; a feature left without rings (a Point, null or
  * empty geometry) stays empty and is counted as skipped in the stats. Properties are kept
  * (qk_region_property()). The syntax is strict RFC 8259 (no trailing commas; a NUL byte is
- * an error).
+ * an error). A path that is not a regular file (a pipe, a FIFO, a device: /dev/stdin) is
+ * read to at most 2^31 - 1 bytes (QK_ERR_LIMIT past that, as soon as it is passed), and a
+ * text whose first value is not an object is refused there, before more is read; a regular
+ * file has no size limit.
  * \param [in] path the file.
  * \param [in] options NULL for defaults (lon/lat).
  * \param [out] out the new layer, freed with qk_region_free(); NULL on error.

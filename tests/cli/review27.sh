@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# CLI regressions from the twenty-seventh session: GeoJSON from a pipe that never ends.
+# CLI regressions from the twenty-seventh session: GeoJSON, CSV and .poly from a pipe that
+# never ends.
 # The GeoJSON readers (join's, through the library, and the mesher's) keep the whole text,
 # so an endless text grew until the machine ran out of memory (24 GiB here). Now a text
 # whose first value is not an object is refused at that value after one read, and a
@@ -70,6 +71,20 @@ expect 1 "^quadkit join: /dev/stdin: $limit" -- limited 4000000 join_pipe "yes '
 expect 1 "^quadkit mesh: $tmp/f.geojson: $limit" -- \
   limited 4000000 mesh_fifo "printf '%s' '$coll'; yes '$feat'"
 [ -e "$tmp/m.node" ] && fail "mesh: an output was written after the limit"
+
+# ---- CSV and .poly from a pipe: the same limit ------------------------------------------
+# The commands that read a whole CSV or .poly input keep a stream's bytes as read (the
+# line reader's screen, tools/csv.c): an endless stream of short, valid lines grew until
+# memory ran out ("out of memory reading the line", exit 3). join streams its points and
+# answers as it reads, so it is not among them. (The mesher's .poly from stdin: `yes x`
+# is bad at line 1, but the screen reads the whole input before the reader sees it.)
+stream='input from a pipe or device longer than 2147483647 bytes, the limit for a stream \(a regular file has none\)$'
+long=$(printf '%0200d' 0) # (long lines: fewer of them to read before the limit)
+tree_pipe() { yes "0.5,0.5,$long" | timeout 60 "$cli" tree /dev/stdin; }
+mesh_pipe() { yes "x $long" | timeout 60 "$cli" mesh - -o "$tmp/s"; }
+expect 1 "^quadkit: /dev/stdin: $stream" -- limited 4000000 tree_pipe
+expect 1 "^quadkit mesh: <stdin>: $stream" -- limited 4000000 mesh_pipe
+[ -e "$tmp/s.node" ] && fail "mesh: an output was written after the limit"
 
 # ---- a FIFO's text is not read twice ---------------------------------------------------
 # The mesher found the position of a bad segment by reading the file again: a FIFO opened
