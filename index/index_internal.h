@@ -11,18 +11,18 @@
 #include <stdbool.h>
 
 /*
- * One node: the hot part, 16 bytes, all that a descent reads. `child` is the first of
- * four consecutive children (NE, NW, SW, SE) or QK_NONE for a leaf. For a leaf, its
- * points occupy slots [start, start + count) of the point arrays, with `room` slots
- * reserved there so that inserts usually need no move. `count` is the number of points
- * in the subtree for every node. An internal node keeps the `start` it had as a leaf (a
- * split leaves its points in its slot range, ordered by quadrant, and a bulk build's nodes
- * begin as leaves over their cells' runs; a compaction of the point arrays, which lays the
+ * One node: the hot part, 16 bytes, all that a descent reads. `child` is the first of four
+ * consecutive children (NE, NW, SW, SE) or QK_NONE for a leaf. For a leaf, its points
+ * occupy slots [start, start + count) of the point arrays, with `room` slots reserved
+ * there so that inserts usually need no move. `count` is the number of points in the
+ * subtree for every node. An internal node keeps the `start` it had as a leaf (a split
+ * leaves its points in its slot range, ordered by quadrant, and a bulk build's nodes begin
+ * as leaves over their cells' runs; a compaction of the point arrays, which lays the
  * leaves out in pre-order, sets it to the subtree's first slot): after a bulk build its
  * subtree's points are the slots [start, start + count), which the searches use to ask for
- * them early; once inserts move a leaf or merges gather one, it is only a hint. A node's square is
- * not stored: descents compute it from the root's along their path (qk__node_geom() recomputes it,
- * in O(depth), for the cold callers).
+ * them early; once inserts move a leaf or merges gather one, it is only a hint. A node's
+ * square is not stored: descents compute it from the root's along their path
+ * (qk__node_geom() recomputes it, in O(depth), for the cold callers).
  */
 typedef struct qk__node {
   uint32_t child;

@@ -220,6 +220,20 @@ static inline void qk__prefetch_slots(const qk_tree_t *t, uint32_t start, uint32
 }
 
 /*
+ * Ask for the points of internal node `node` when it holds at most QK__SUBTREE_PREFETCH of
+ * them, unless its start lies within [*lo, *hi), the slots asked for last (0, 0 before the
+ * first): a walk reaches a node's descendants after it, and after a bulk build their
+ * points lie within its run, so each run is asked for once. The descents and the box and
+ * radius walks share it.
+ */
+static inline void qk__ask_subtree(const qk_tree_t *t, uint32_t node, uint32_t *lo, uint32_t *hi) {
+  const uint32_t count = qk__node_count(t, node), start = qk__node_start(t, node);
+  if (count - 1 >= QK__SUBTREE_PREFETCH || (start >= *lo && start < *hi)) return;
+  qk__prefetch_slots(t, start, count);
+  *lo = start, *hi = start + count;
+}
+
+/*
  * The rest of a descent towards (qx, qy) from p->leaf down to the leaf, in one loop that
  * keeps the cell in registers: the same decisions and squares as qk__path_step() (east
  * when qx > x + h, the child's corner moved by h), so the same path. A single query's descent
@@ -229,20 +243,20 @@ static inline void qk__prefetch_slots(const qk_tree_t *t, uint32_t start, uint32
  * their own, the other line having come in while the descent waited for its child. A
  * batch's queries, in Z-order, share their paths' blocks, which are in cache. Only hints.
  *
- * It also asks, once, for the points below the first node on the path whose subtree holds
- * at most QK__SUBTREE_PREFETCH points (from the node's start, a hint of index/: after a
- * bulk build a subtree's points are one run of slots). Without it the leaf's points are
- * asked for only once the leaf's node has been read, itself a miss after its parent's: two
- * misses one after the other at the end of every descent. Asked for from the leaf's parent
- * (at capacity 32) or higher up (smaller capacities, whose last levels are more misses in
- * a row), they come in while the descent reads its last nodes, and they cover the siblings
- * that a search goes on to scan. In-process A/B at 10^6 uniform points, 16 rounds of 10^5
- * random queries, one per call (twenty-seventh session; both libraries in one driver,
- * alternating), new time over old, median of the rounds: k = 1 0.83-0.87 at capacity 32,
- * 0.78-0.90 at capacity 8, 0.84-0.85 at capacity 1; k = 8 0.85-0.88; k = 32 0.93-0.98
- * (identical answers; docs/query.md, eleventh round).
- * Thresholds of 96 and 192 did about as well; 256 (the grandparent's 240 points at
- * capacity 32, 60 lines at once) was slower than none in separate processes.
+ * It also asks (qk__ask_subtree) for the points below the first node on the path whose
+ * subtree holds at most QK__SUBTREE_PREFETCH points (from the node's start, a hint of
+ * index/: after a bulk build a subtree's points are one run of slots). Without it the
+ * leaf's points are asked for only once the leaf's node has been read, itself a miss after
+ * its parent's: two misses one after the other at the end of every descent. Asked for from
+ * the leaf's parent (at capacity 32) or higher up (smaller capacities, whose last levels
+ * are more misses in a row), they come in while the descent reads its last nodes, and they
+ * cover the siblings that a search goes on to scan. In-process A/B at 10^6 uniform points,
+ * 16 rounds of 10^5 random queries, one per call (twenty-seventh session; both libraries
+ * in one driver, alternating), new time over old, median of the rounds: k = 1 0.83-0.87 at
+ * capacity 32, 0.78-0.90 at capacity 8, 0.84-0.85 at capacity 1; k = 8 0.85-0.88; k = 32
+ * 0.93-0.98 (identical answers; docs/query.md, eleventh round). Thresholds of 96 and 192
+ * did about as well; 256 (the grandparent's 240 points at capacity 32, 60 lines at once)
+ * was slower than none in separate processes.
  */
 static inline void qk__path_descend(const qk_tree_t *t, qk__path_t *p, double qx, double qy,
                                     int keep_mids) {
@@ -254,7 +268,7 @@ static inline void qk__path_descend(const qk_tree_t *t, qk__path_t *p, double qx
   static const unsigned char quad[4] = {QK_SW, QK_SE, QK_NW, QK_NE};
   const __m128d vq = _mm_set_pd(qy, qx);
   __m128d v = _mm_set_pd(p->leaf.y, p->leaf.x);
-  uint32_t pf_below = QK__SUBTREE_PREFETCH; /* 0 once asked */
+  uint32_t pf_lo = 0, pf_hi = 0; /* the slots asked for (qk__ask_subtree) */
   for (uint32_t child = qk__node_child(t, node); child != QK_NONE;
        child = qk__node_child(t, node)) {
     const __m128d vm = _mm_add_pd(v, _mm_set1_pd(qk__tree_side(t, depth + 1)));
@@ -268,11 +282,7 @@ static inline void qk__path_descend(const qk_tree_t *t, qk__path_t *p, double qx
     if (!keep_mids) {
       qk__node_prefetch(t, child);
       qk__node_prefetch(t, child + 3);
-      const uint32_t cnt = qk__node_count(t, node);
-      if (cnt - 1 < pf_below) { /* 1 <= cnt <= pf_below */
-        qk__prefetch_slots(t, qk__node_start(t, node), cnt);
-        pf_below = 0;
-      }
+      qk__ask_subtree(t, node, &pf_lo, &pf_hi);
     }
     qk__cell_t *c = &p->cell[len];
     c->node = node;
@@ -291,7 +301,7 @@ static inline void qk__path_descend(const qk_tree_t *t, qk__path_t *p, double qx
 #else
   static const unsigned char quad[2][2] = {{QK_SW, QK_NW}, {QK_SE, QK_NE}}; /* [east][north] */
   double x = p->leaf.x, y = p->leaf.y;
-  uint32_t pf_below = QK__SUBTREE_PREFETCH; /* 0 once asked */
+  uint32_t pf_lo = 0, pf_hi = 0; /* the slots asked for (qk__ask_subtree) */
   for (uint32_t child = qk__node_child(t, node); child != QK_NONE;
        child = qk__node_child(t, node)) {
     const double h = qk__tree_side(t, depth + 1);
@@ -301,11 +311,7 @@ static inline void qk__path_descend(const qk_tree_t *t, qk__path_t *p, double qx
     if (!keep_mids) {
       qk__node_prefetch(t, child);
       qk__node_prefetch(t, child + 3);
-      const uint32_t cnt = qk__node_count(t, node);
-      if (cnt - 1 < pf_below) { /* 1 <= cnt <= pf_below */
-        qk__prefetch_slots(t, qk__node_start(t, node), cnt);
-        pf_below = 0;
-      }
+      qk__ask_subtree(t, node, &pf_lo, &pf_hi);
     }
     p->cell[len] = (qk__cell_t){node, depth, x, y};
     p->q[len++] = (unsigned char)q;

@@ -7,24 +7,6 @@
 #include "query/dist_exact.h"
 #include "query/query_internal.h"
 
-/*
- * Ask for the points of an internal node the walk has reached when it holds at most
- * QK__SUBTREE_PREFETCH of them (query_internal.h), unless they lie within [*lo, *hi), the
- * slots asked for last: the walk is depth first, so that node's descendants come next
- * and are not asked for again. After a bulk build a subtree's points are one run of slots
- * (a node's start is a hint otherwise), so the leaves the walk goes on to scan are no
- * longer each a miss after their node's. In-process A/B (twenty-seventh session, 10^6
- * uniform points, queries holding about 16 of them, 15 rounds of 10^5 one per call, on
- * a machine busy with CI): new time over old 0.86 (radius), 0.87 (box) at capacity 32,
- * 0.78 (radius) at capacity 8; the same answers.
- */
-static inline void subtree_prefetch(const qk_tree_t *t, uint32_t node, uint32_t *lo, uint32_t *hi) {
-  const uint32_t count = qk__node_count(t, node), start = qk__node_start(t, node);
-  if (count - 1 >= QK__SUBTREE_PREFETCH || (start >= *lo && start < *hi)) return;
-  qk__prefetch_slots(t, start, count);
-  *lo = start, *hi = start + count;
-}
-
 /* A box test for the leaves, shared by the callback and the buffer form. */
 typedef int (*qk__emit_fn)(void *ctx, qk_id_t id, double x, double y, double dist);
 
@@ -41,7 +23,6 @@ static qk_status_t range_walk(const qk_tree_t *t, qk_box_t b, qk__emit_fn emit, 
   while (sp > 0) {
     const qk__cell_t c = stack[--sp];
     const uint32_t child = qk__node_child(t, c.node);
-    if (child != QK_NONE) subtree_prefetch(t, c.node, &pf_lo, &pf_hi);
     if (child == QK_NONE) {
       const uint32_t start = qk__node_start(t, c.node), count = qk__node_count(t, c.node);
       const double *px = xs + start, *py = ys + start;
@@ -53,6 +34,8 @@ static qk_status_t range_walk(const qk_tree_t *t, qk_box_t b, qk__emit_fn emit, 
       }
       continue;
     }
+    /* A small subtree's points, ahead of its leaves (docs/query.md, eleventh round). */
+    qk__ask_subtree(t, c.node, &pf_lo, &pf_hi);
     /* Test the children's squares, derived from this node's, before pushing them, so
      * that a pruned child's node is never read. */
     const double hs = qk__tree_side(t, c.depth + 1);
@@ -99,7 +82,6 @@ static qk_status_t radius_walk(const qk_tree_t *t, qk_point_t c, double r, qk__e
   while (sp > 0) {
     const qk__cell_t n = stack[--sp];
     const uint32_t child = qk__node_child(t, n.node);
-    if (child != QK_NONE) subtree_prefetch(t, n.node, &pf_lo, &pf_hi);
     if (child == QK_NONE) {
       const uint32_t start = qk__node_start(t, n.node), count = qk__node_count(t, n.node);
       const double *px = xs + start, *py = ys + start;
@@ -115,6 +97,7 @@ static qk_status_t radius_walk(const qk_tree_t *t, qk_point_t c, double r, qk__e
       }
       continue;
     }
+    qk__ask_subtree(t, n.node, &pf_lo, &pf_hi);
     /* As for boxes: bound the children from this node's square before pushing them. */
     const double hs = qk__tree_side(t, n.depth + 1);
     qk__cell_t kids[4];

@@ -66,8 +66,9 @@ int cli_cut_line_end(char *line, size_t *len);
 /* The most bytes the line reader keeps of an input that is not a regular file (a pipe, a
  * FIFO, a device: cli_screen_input keeps such an input in memory as read, since it cannot
  * be read twice): 2^31 - 1, the limit the GeoJSON readers put on a stream
- * (region/geojson.c). An endless stream of short lines (`yes 1,2 | quadkit join ...`) would
- * otherwise be kept until memory ran out; past the limit it is refused, exit 1. A regular
+ * (region/geojson.c), and the mesher's GeoJSON input's (tools/mesh_geojson.c). An endless
+ * stream of short lines (`yes 1,2 | quadkit tree /dev/stdin`) would otherwise be kept until
+ * memory ran out; past the limit it is refused, exit 1. A regular
  * file has none. */
 #define CLI_STREAM_MAX 2147483647UL
 

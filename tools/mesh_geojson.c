@@ -10,6 +10,7 @@
 #include <string.h>
 #include <sys/stat.h>
 
+#include "cli.h"
 #include "quadkit/quadkit.h"
 
 #ifdef QK_HAVE_JSONC
@@ -867,11 +868,6 @@ static int hole_points(mg_input_t *in, const char *path, char *msg, size_t n) {
   return rc;
 }
 
-/* The most bytes read from a stream (a pipe, a FIFO, a device: not a regular file), as
- * the library's GeoJSON reader (region/geojson.c): a stream gives no size in advance and
- * may never end, while the whole text is kept. */
-#define MG_STREAM_MAX ((size_t)INT_MAX)
-
 /* A text whose first value (after a byte order mark and blanks) is not an object is
  * refused at that value, in the library reader's words, without reading further; *scan
  * keeps how far only blanks were seen. 0 while the text may still be GeoJSON. */
@@ -897,7 +893,7 @@ static int slurp(const char *path, char **text, size_t *len, int *stream, char *
   /* (stat, not fstat of fileno: this file is also compiled into tests as strict C11) */
   struct stat sb;
   *stream = !(stat(path, &sb) == 0 && S_ISREG(sb.st_mode));
-  size_t max = *stream ? MG_STREAM_MAX : SIZE_MAX - 2;
+  size_t max = *stream ? (size_t)CLI_STREAM_MAX : SIZE_MAX - 2; /* (tools/cli.h) */
   size_t cap = 0, scan = 0;
   int rc = 0, checked = 0;
   for (;;) {
