@@ -61,7 +61,8 @@ int qk__share_start_cpu(int *home);
 /* Whether p's workers run in this process (0 for NULL, and in a child forked after they
  * started: there qk__pool_free only frees its memory). */
 int qk__pool_live(const qk__pool_t *p);
-/* Shares 0 .. nw - 1 of fn, share 0 on the calling thread, the others on the workers, and
+/* Shares 0 .. nw - 1 of fn, share 0 on the calling thread, the others on the workers (a
+ * share its worker has not taken when share 0 ends runs on the calling thread next), and
  * return 1 when all are done; 0, nothing run, when there is no pool (NULL, or a child forked
  * after it started), another region holds it, or it has fewer than nw threads (the caller
  * then runs the region otherwise, e.g. qk__run_shares). One region at a time; calls from

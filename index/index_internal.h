@@ -291,6 +291,13 @@ void qk__run_shares(unsigned nw, qk__share_fn fn, void *ctx);
  * processor (for paired measurements in one process; not thread-safe to change while
  * regions run). */
 extern int qk__shares_away_off;
+/* Tests (not thread-safe to change while regions run): nonzero qk__pool_steal_off keeps the
+ * owner of a pool from running the shares its workers have not taken yet, so that each share
+ * runs on its worker; nonzero qk__pool_workers_idle has the workers take no share at all,
+ * so that the owner runs every share of every region (never with a detached job; atomic,
+ * as a worker may still be reading it when a region has ended without it). */
+extern int qk__pool_steal_off;
+extern _Atomic int qk__pool_workers_idle;
 
 /* Hold a team of nw - 1 workers on the calling thread until qk__team_end(): the regions it
  * starts meanwhile (qk__run_shares, the jobs) run on them instead of on threads started for

@@ -7,7 +7,9 @@
  * Callers that run many parallel regions in a row keep a pool of workers (qk__pool_t): they
  * are started once, run the shares of every region the owner starts on the pool, and wait
  * in between, first spinning (with the processor's pause, not a yield) while the owner
- * holds the pool, then parked on a condition variable. Starting a thread and waking it on
+ * holds the pool, then parked on a condition variable. When the owner has run share 0 it
+ * runs the shares no worker has taken yet itself, so a region never waits for a worker
+ * that is slow to start (3 ms on the PVM guest of the twenty-eighth session). Starting a thread and waking it on
  * the other core cost 0.03-2 ms a region on the two vCPUs of the seventeenth session's
  * machine (more than the build's regions take on two threads); a pool pays that once. The
  * bulk build holds one for its length (a team: qk__team_begin/qk__team_end, four to six
@@ -41,6 +43,8 @@
 #endif
 
 int qk__shares_away_off;
+int qk__pool_steal_off;
+_Atomic int qk__pool_workers_idle;
 
 unsigned qk__threads_resolve(uint32_t threads) {
   if (threads == 0) {
@@ -158,19 +162,24 @@ typedef struct pworker {
 struct qk__pool {
   pthread_mutex_t mu;
   pthread_cond_t go, done;
-  atomic_uint gen;     /* regions posted (each worker runs each once) */
-  atomic_uint pending; /* workers still in the current region */
-  atomic_int busy;     /* a region (or the start of a detached job) is being run */
-  atomic_int hold;     /* the owner runs regions back to back: the workers spin between them */
-  int quit;
+  /* The region posted last: its number (from 1) times 2^8 plus its number of shares, in one
+   * word, so that a worker that reads it knows how many shares that region has. */
+  _Atomic uint64_t gen;
+  atomic_uint running; /* workers taking a share or running one */
+  /* taken[s - 1]: the last region (its gen) share s was taken in, by its worker or by the
+   * owner; a share runs once, on whoever takes it first */
+  _Atomic uint64_t taken[QK__MAX_THREADS];
+  atomic_int busy;      /* a region (or the start of a detached job) is being run */
+  atomic_int hold;      /* the owner runs regions back to back: the workers spin between them */
+  atomic_int quit;      /* the last region posted tells the workers to end */
   unsigned n_th;        /* workers started */
   unsigned owner_parks; /* waits for a region's end that parked (tests) */
   pid_t proc;           /* the process that started them (a forked child has none of them) */
   qk_allocator_t alloc; /* the pool's memory came from here */
-  /* The current region (written before gen is advanced, read after it is seen). */
+  /* The current region (written before gen is advanced, read by a worker once it has taken
+   * a share of it). */
   qk__share_fn fn;
   void *ctx;
-  unsigned nw;
   /* A detached job: run by the first worker as a region of its own that nobody waits for
    * until the pool's next region or its end. */
   void (*dfn)(void *);
@@ -197,10 +206,23 @@ static bool pool_spins(qk__pool_t *p, long long t0, long long t) {
   return atomic_load_explicit(&p->hold, memory_order_relaxed) && t - t0 < POOL_SPIN_NS;
 }
 
+#define GEN_SHARES(g) ((unsigned)((g)&0xffu))
+
+/* Take share s (< the region's shares) of region g: true for the first taker only. A worker
+ * late for region g (its owner has posted others since) finds its share taken: the owner
+ * takes every share no worker has before it leaves a region. */
+static bool take(qk__pool_t *p, unsigned s, uint64_t g) {
+  _Atomic uint64_t *t = &p->taken[s - 1];
+  uint64_t v = atomic_load(t);
+  while (v < g)
+    if (atomic_compare_exchange_weak(t, &v, g)) return true;
+  return false;
+}
+
 static void *pool_worker(void *arg) {
   pworker_t *me = arg;
   qk__pool_t *p = me->p;
-  unsigned seen = 0; /* (the pool posts nothing before its workers are started) */
+  uint64_t seen = 0; /* (the pool posts nothing before its workers are started) */
 #if QK__POOL_AWAY
   if (p->away) {
     /* Started on another processor: from here on the scheduler may place it anywhere the
@@ -211,7 +233,7 @@ static void *pool_worker(void *arg) {
 #endif
   for (;;) {
     /* The next region: spin a while, then park. */
-    unsigned g = atomic_load_explicit(&p->gen, memory_order_acquire);
+    uint64_t g = atomic_load_explicit(&p->gen, memory_order_acquire);
     if (g == seen) {
       long long t0 = now_ns();
       while ((g = atomic_load_explicit(&p->gen, memory_order_acquire)) == seen &&
@@ -225,9 +247,15 @@ static void *pool_worker(void *arg) {
       }
     }
     seen = g;
-    if (p->quit) return NULL;
-    if (me->idx + 1 < p->nw) p->fn(p->ctx, me->idx + 1, p->nw);
-    if (atomic_fetch_sub_explicit(&p->pending, 1u, memory_order_acq_rel) == 1u) {
+    if (atomic_load_explicit(&p->quit, memory_order_relaxed)) return NULL;
+    const unsigned s = me->idx + 1, nw = GEN_SHARES(g);
+    if (s >= nw || atomic_load_explicit(&qk__pool_workers_idle, memory_order_relaxed)) continue;
+    /* Counted as running before the attempt, so that an owner who finds the share taken
+     * also finds the count raised until its run ends. The region's fields are read only
+     * once the share is ours: the owner waits for the count before it posts another. */
+    atomic_fetch_add(&p->running, 1u);
+    if (take(p, s, g)) p->fn(p->ctx, s, nw);
+    if (atomic_fetch_sub(&p->running, 1u) == 1u) {
       pthread_mutex_lock(&p->mu);
       pthread_cond_signal(&p->done);
       pthread_mutex_unlock(&p->mu);
@@ -237,29 +265,39 @@ static void *pool_worker(void *arg) {
 
 /* Post a region to every worker (under the mutex, so that a parking worker's check and wait
  * are one step and no wake-up is lost). */
-static void pool_post(qk__pool_t *p, qk__share_fn fn, void *ctx, unsigned nw, int quit) {
+static uint64_t pool_post(qk__pool_t *p, qk__share_fn fn, void *ctx, unsigned nw, int quit) {
   pthread_mutex_lock(&p->mu);
-  p->fn = fn, p->ctx = ctx, p->nw = nw, p->quit = quit;
-  atomic_store_explicit(&p->pending, p->n_th, memory_order_relaxed);
-  atomic_fetch_add_explicit(&p->gen, 1u, memory_order_release);
+  p->fn = fn, p->ctx = ctx;
+  atomic_store_explicit(&p->quit, quit, memory_order_relaxed);
+  uint64_t g0 = atomic_load_explicit(&p->gen, memory_order_relaxed);
+  uint64_t g = ((g0 >> 8) + 1) << 8 | nw;
+  atomic_store_explicit(&p->gen, g, memory_order_release);
   pthread_cond_broadcast(&p->go);
   pthread_mutex_unlock(&p->mu);
+  return g;
 }
 
 unsigned long qk__pool_wait_spin_ns(const qk__pool_t *p) {
   return atomic_load_explicit(&p->hold, memory_order_relaxed) ? POOL_OWNER_SPIN_NS : POOL_WAIT_NS;
 }
 
+/* Whether the region posted last still runs: a share of it not yet taken, or a worker
+ * taking or running one. */
+static bool pool_busy(qk__pool_t *p) {
+  uint64_t g = atomic_load_explicit(&p->gen, memory_order_relaxed);
+  for (unsigned s = 1; s < GEN_SHARES(g); s++)
+    if (atomic_load(&p->taken[s - 1]) < g) return true;
+  return atomic_load(&p->running) != 0;
+}
+
 /* Wait for the workers to finish the region posted last. */
 static void pool_wait(qk__pool_t *p) {
-  if (!atomic_load_explicit(&p->pending, memory_order_acquire)) return;
+  if (!pool_busy(p)) return;
   long long t0 = now_ns(), spin = (long long)qk__pool_wait_spin_ns(p);
-  while (atomic_load_explicit(&p->pending, memory_order_acquire) && now_ns() - t0 < spin)
-    pool_relax();
+  while (pool_busy(p) && now_ns() - t0 < spin) pool_relax();
   pthread_mutex_lock(&p->mu);
-  if (atomic_load_explicit(&p->pending, memory_order_acquire)) p->owner_parks++;
-  while (atomic_load_explicit(&p->pending, memory_order_acquire))
-    pthread_cond_wait(&p->done, &p->mu);
+  if (pool_busy(p)) p->owner_parks++;
+  while (pool_busy(p)) pthread_cond_wait(&p->done, &p->mu);
   pthread_mutex_unlock(&p->mu);
 }
 
@@ -287,8 +325,10 @@ qk__pool_t *qk__pool_new(const qk_allocator_t *a, unsigned nw) {
   if (pthread_mutex_init(&p->mu, NULL)) goto fail_mu;
   if (pthread_cond_init(&p->go, NULL)) goto fail_go;
   if (pthread_cond_init(&p->done, NULL)) goto fail_done;
-  atomic_init(&p->gen, 0u);
-  atomic_init(&p->pending, 0u);
+  atomic_init(&p->gen, 0);
+  atomic_init(&p->running, 0u);
+  atomic_init(&p->quit, 0);
+  for (unsigned s = 0; s < QK__MAX_THREADS; s++) atomic_init(&p->taken[s], 0);
   atomic_init(&p->busy, 0);
   atomic_init(&p->hold, 0);
   p->proc = getpid();
@@ -361,8 +401,16 @@ int qk__pool_run(qk__pool_t *p, unsigned nw, qk__share_fn fn, void *ctx) {
                                                memory_order_relaxed))
     return 0;
   pool_wait(p); /* (a detached job: the workers are ours once it ends) */
-  pool_post(p, fn, ctx, nw, 0);
+  uint64_t g = pool_post(p, fn, ctx, nw, 0);
   fn(ctx, 0, nw);
+  /* The shares no worker has taken yet, here: a worker that is slow to start (on the two
+   * vCPUs of this work, a new one ran its first region 3-5 ms after it was posted inside the
+   * benchmark's process) does not hold the region up. Whoever runs a share, it is the same
+   * share: the shares of a region must be correct run one after another on one thread
+   * anyway (qk__run_shares does so when it cannot start a thread). */
+  if (!qk__pool_steal_off)
+    for (unsigned s = 1; s < nw; s++)
+      if (take(p, s, g)) fn(ctx, s, nw);
   pool_wait(p);
   atomic_store_explicit(&p->busy, 0, memory_order_release);
   return 1;

@@ -537,10 +537,15 @@ static void test_build_output_pinned(void **state) {
     qkt_points(&r, cases[c].d, p, cases[c].n);
     if (c == 5) /* all points equal */
       for (size_t i = 1; i < cases[c].n; i++) p[i] = p[0];
-    /* runs 2 and 3 without the AVX2 paths (under TSan only the two-thread runs, 1 and 3) */
-    for (unsigned run = QKT_TSAN ? 1 : 0; run < 4; run += QKT_TSAN ? 2 : 1) {
+    /* runs 2 and 3 without the AVX2 paths (under TSan only the two-thread runs, 1, 3, 5
+     * and 7); two threads, the owner of the team running every share (run 5), or each share
+     * on its worker (run 7) */
+    for (unsigned run = QKT_TSAN ? 1 : 0; run < 8; run += QKT_TSAN ? 2 : 1) {
+      if (run == 4 || run == 6) continue;
       uint32_t threads = 1 + run % 2;
-      qk__build_avx2_off = run >= 2;
+      qk__build_avx2_off = run == 2 || run == 3;
+      qk__pool_workers_idle = run == 5;
+      qk__pool_steal_off = run == 7;
       qk_tree_options_t o;
       qk_tree_options_init(&o);
       o.capacity = cases[c].capacity;
@@ -556,6 +561,8 @@ static void test_build_output_pinned(void **state) {
     }
   }
   qk__build_avx2_off = 0;
+  qk__pool_workers_idle = 0;
+  qk__pool_steal_off = 0;
   free(p);
 }
 
@@ -591,6 +598,7 @@ static void team_job(unsigned i, unsigned w, void *ud) {
 
 static void test_build_team(void **state) {
   (void)state;
+  qk__pool_steal_off = 1; /* (the workers' own counts of shares run are asserted) */
   qk__team_begin(3);
   qk__team_begin(2); /* nested: the outer team (two workers) serves */
   for (unsigned region = 1; region <= 5; region++) {
@@ -628,6 +636,7 @@ static void test_build_team(void **state) {
   for (unsigned w = 0; w < 3; w++) assert_int_equal(after.ran[w], 1);
   assert_int_equal(after.runs[1], 1);
   assert_int_equal(after.runs[2], 1);
+  qk__pool_steal_off = 0;
 }
 
 static void pool_inner(void *ctx, unsigned w, unsigned nw) {
@@ -664,6 +673,7 @@ static void pool_slow_job(void *ctx) {
 
 static void test_build_pool(void **state) {
   (void)state;
+  qk__pool_steal_off = 1; /* (which thread ran a share is asserted) */
   assert_null(qk__pool_new(NULL, 1));
   assert_int_equal(qk__pool_threads(NULL), 1);
   assert_int_equal(qk__pool_run(NULL, 2, pool_inner, NULL), 0);
@@ -711,6 +721,55 @@ static void test_build_pool(void **state) {
   pool_probe_t last = {.p = p};
   assert_int_equal(qk__pool_run(p, 3, pool_share, &last), 1);
   qk__pool_free(p);
+  qk__pool_steal_off = 0;
+}
+
+/* Shares that count their runs, in a region of many (the race between a worker taking its
+ * share and the owner taking it). */
+static void steal_share(void *ctx, unsigned w, unsigned nw) {
+  (void)nw;
+  atomic_uint *ran = ctx;
+  atomic_fetch_add(&ran[w], 1u);
+}
+
+/* The owner of a pool runs the shares its workers have not taken when share 0 ends: with
+ * workers that take none, every share of every region on the calling thread, once; with
+ * workers that do, every share once whoever takes it, over many short regions. */
+static void test_build_pool_steal(void **state) {
+  (void)state;
+  qk__pool_t *p = qk__pool_new(NULL, 3);
+  assert_non_null(p);
+  qk__pool_workers_idle = 1;
+  unsigned before = team_runs;
+  for (unsigned region = 1; region <= 4; region++) {
+    pool_probe_t pp = {.p = p, .inner = -1};
+    assert_int_equal(qk__pool_run(p, 3, pool_share, &pp), 1);
+    for (unsigned w = 0; w < 3; w++) assert_int_equal(pp.ran[w], 1);
+    /* in order, on this thread */
+    for (unsigned w = 0; w < 3; w++)
+      assert_int_equal(pp.runs[w], before + 3 * (region - 1) + w + 1);
+    assert_int_equal(pp.inner, 0); /* (the pool is taken while share 1 runs here too) */
+  }
+  qk__pool_workers_idle = 0;
+  for (int hold = 0; hold <= 1; hold++) {
+    qk__pool_hold(p, hold);
+    for (unsigned region = 0; region < 3000; region++) {
+      atomic_uint ran[3];
+      for (unsigned w = 0; w < 3; w++) atomic_init(&ran[w], 0u);
+      unsigned nw = 2 + region % 2;
+      assert_int_equal(qk__pool_run(p, nw, steal_share, ran), 1);
+      for (unsigned w = 0; w < 3; w++) assert_int_equal(atomic_load(&ran[w]), w < nw ? 1u : 0u);
+    }
+  }
+  qk__pool_hold(p, 0);
+  /* a detached job is never the owner's: it runs on a worker */
+  pool_job_t job = {0};
+  assert_int_equal(qk__pool_detach(p, pool_slow_job, &job), 1);
+  pool_probe_t after = {.p = p};
+  assert_int_equal(qk__pool_run(p, 2, pool_share, &after), 1);
+  assert_int_equal(atomic_load(&job.done), 1);
+  assert_false(pthread_equal(job.by, pthread_self()));
+  qk__pool_free(p);
 }
 
 #if defined(__linux__) && defined(CPU_SET)
@@ -754,6 +813,7 @@ static void owner_share(void *ctx, unsigned w, unsigned nw) {
 
 static void test_build_pool_owner_spins(void **state) {
   (void)state;
+  qk__pool_steal_off = 1; /* (share 1 is the worker's, however late) */
   qk__pool_t *p = qk__pool_new(NULL, 2);
   assert_non_null(p);
   /* Not held: 50 us, then parked (a worker 2 ms behind has the caller parked). */
@@ -770,11 +830,13 @@ static void test_build_pool_owner_spins(void **state) {
   assert_true(qk__pool_owner_parks(p) - parked < 20);
   qk__pool_hold(p, 0);
   qk__pool_free(p);
+  qk__pool_steal_off = 0;
 }
 
 static void test_build_pool_away(void **state) {
   (void)state;
 #if defined(__linux__) && defined(CPU_SET)
+  qk__pool_steal_off = 1; /* (share 1 runs on the worker, which has started when it ends) */
   away_probe_t ap = {.same = -1};
   CPU_ZERO(&ap.mine);
   assert_int_equal(sched_getaffinity(0, sizeof ap.mine, &ap.mine), 0);
@@ -794,6 +856,7 @@ static void test_build_pool_away(void **state) {
     ap.same = -1;
     qk__pool_free(p);
   }
+  qk__pool_steal_off = 0;
 #else
   skip();
 #endif
@@ -835,6 +898,7 @@ int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_build_team),
       cmocka_unit_test(test_build_pool),
+      cmocka_unit_test(test_build_pool_steal),
       cmocka_unit_test(test_build_pool_away),
       cmocka_unit_test(test_build_shares_away),
       cmocka_unit_test(test_build_pool_owner_spins),
