@@ -9,8 +9,8 @@
  * in between, first spinning (with the processor's pause, not a yield) while the owner
  * holds the pool, then parked on a condition variable. When the owner has run share 0 it
  * runs the shares no worker has taken yet itself, so a region never waits for a worker
- * that is slow to start (3 ms on the PVM guest of the twenty-eighth session). Starting a thread and waking it on
- * the other core cost 0.03-2 ms a region on the two vCPUs of the seventeenth session's
+ * that is slow to start (3 ms on the PVM guest of the twenty-eighth session). Starting a thread and
+ * waking it on the other core cost 0.03-2 ms a region on the two vCPUs of the seventeenth session's
  * machine (more than the build's regions take on two threads); a pool pays that once. The
  * bulk build holds one for its length (a team: qk__team_begin/qk__team_end, four to six
  * regions), and so do the kNN, locate, radius and ray batches (their sorts' regions and the
@@ -25,6 +25,7 @@
 #define _POSIX_C_SOURCE 200809L
 #endif
 #include <stdatomic.h>
+#include <stddef.h>
 #include <string.h>
 #include <time.h>
 #include <unistd.h>
@@ -154,8 +155,11 @@ static inline void pool_relax(void) {
 #endif
 }
 
+/* A worker's slot in its pool: which share it runs, and the last region (its gen) that share
+ * was taken in, by the worker or by the owner; a share runs once, on whoever takes it
+ * first. */
 typedef struct pworker {
-  qk__pool_t *p;
+  _Atomic uint64_t taken;
   unsigned idx; /* runs share idx + 1 */
 } pworker_t;
 
@@ -165,10 +169,7 @@ struct qk__pool {
   /* The region posted last: its number (from 1) times 2^8 plus its number of shares, in one
    * word, so that a worker that reads it knows how many shares that region has. */
   _Atomic uint64_t gen;
-  atomic_uint running; /* workers taking a share or running one */
-  /* taken[s - 1]: the last region (its gen) share s was taken in, by its worker or by the
-   * owner; a share runs once, on whoever takes it first */
-  _Atomic uint64_t taken[QK__MAX_THREADS];
+  atomic_uint running;  /* workers taking a share or running one */
   atomic_int busy;      /* a region (or the start of a detached job) is being run */
   atomic_int hold;      /* the owner runs regions back to back: the workers spin between them */
   atomic_int quit;      /* the last region posted tells the workers to end */
@@ -212,7 +213,7 @@ static bool pool_spins(qk__pool_t *p, long long t0, long long t) {
  * late for region g (its owner has posted others since) finds its share taken: the owner
  * takes every share no worker has before it leaves a region. */
 static bool take(qk__pool_t *p, unsigned s, uint64_t g) {
-  _Atomic uint64_t *t = &p->taken[s - 1];
+  _Atomic uint64_t *t = &p->ww[s - 1].taken;
   uint64_t v = atomic_load(t);
   while (v < g)
     if (atomic_compare_exchange_weak(t, &v, g)) return true;
@@ -221,7 +222,10 @@ static bool take(qk__pool_t *p, unsigned s, uint64_t g) {
 
 static void *pool_worker(void *arg) {
   pworker_t *me = arg;
-  qk__pool_t *p = me->p;
+  /* (the pool the slot lies in: a pointer in each slot made the pool 512 bytes larger, which
+   * moved glibc's heap top in the benchmark's process so that it was trimmed and faulted
+   * back in between one-thread calls: 3.4 times the page faults in `--op collide`) */
+  qk__pool_t *p = (qk__pool_t *)(void *)((char *)(me - me->idx) - offsetof(qk__pool_t, ww));
   uint64_t seen = 0; /* (the pool posts nothing before its workers are started) */
 #if QK__POOL_AWAY
   if (p->away) {
@@ -286,7 +290,7 @@ unsigned long qk__pool_wait_spin_ns(const qk__pool_t *p) {
 static bool pool_busy(qk__pool_t *p) {
   uint64_t g = atomic_load_explicit(&p->gen, memory_order_relaxed);
   for (unsigned s = 1; s < GEN_SHARES(g); s++)
-    if (atomic_load(&p->taken[s - 1]) < g) return true;
+    if (atomic_load(&p->ww[s - 1].taken) < g) return true;
   return atomic_load(&p->running) != 0;
 }
 
@@ -328,7 +332,6 @@ qk__pool_t *qk__pool_new(const qk_allocator_t *a, unsigned nw) {
   atomic_init(&p->gen, 0);
   atomic_init(&p->running, 0u);
   atomic_init(&p->quit, 0);
-  for (unsigned s = 0; s < QK__MAX_THREADS; s++) atomic_init(&p->taken[s], 0);
   atomic_init(&p->busy, 0);
   atomic_init(&p->hold, 0);
   p->proc = getpid();
@@ -339,7 +342,8 @@ qk__pool_t *qk__pool_new(const qk_allocator_t *a, unsigned nw) {
   (void)attr;
 #endif
   for (unsigned i = 0; i + 1 < nw; i++) {
-    p->ww[i] = (pworker_t){p, i};
+    atomic_init(&p->ww[i].taken, 0);
+    p->ww[i].idx = i;
     /* (where the system refuses the placement, a worker started as usual) */
     if (pthread_create(&p->th[i], ap, pool_worker, &p->ww[i]) &&
         (!ap || pthread_create(&p->th[i], NULL, pool_worker, &p->ww[i])))
