@@ -9,15 +9,15 @@
  * in between, first spinning (with the processor's pause, not a yield) while the owner
  * holds the pool, then parked on a condition variable. When the owner has run share 0 it
  * runs the shares no worker has taken yet itself, so a region never waits for a worker
- * that is slow to start (3 ms on the PVM guest of the twenty-eighth session). Starting a thread and
- * waking it on the other core cost 0.03-2 ms a region on the two vCPUs of the seventeenth session's
- * machine (more than the build's regions take on two threads); a pool pays that once. The
- * bulk build holds one for its length (a team: qk__team_begin/qk__team_end, four to six
- * regions), and so do the kNN, locate, radius and ray batches (their sorts' regions and the
- * queries'); a world keeps one from its first threaded update to qk_world_free (eight steps
- * an update, collide/world_threads.c), with a detached job for the end of an update. Threads
- * created for a region, and a pool's workers, start away from the creating thread's
- * processor (start_away).
+ * that is slow to start (3 ms on the PVM guest of the twenty-eighth session). Starting a
+ * thread and waking it on the other core cost 0.03-2 ms a region on the two vCPUs of the
+ * seventeenth session's machine (more than the build's regions take on two threads); a
+ * pool pays that once. The bulk build holds one for its length (a team:
+ * qk__team_begin/qk__team_end, four to six regions), and so do the kNN, locate, radius and
+ * ray batches (their sorts' regions and the queries'); a world keeps one from its first
+ * threaded update to qk_world_free (eight steps an update, collide/world_threads.c), with a
+ * detached job for the end of an update. Threads created for a region, and a pool's
+ * workers, start away from the creating thread's processor (start_away).
  */
 #if defined(__linux__)
 #define _GNU_SOURCE /* sched_getcpu, CPU_SET, pthread_attr_setaffinity_np */
@@ -208,6 +208,7 @@ static bool pool_spins(qk__pool_t *p, long long t0, long long t) {
 }
 
 #define GEN_SHARES(g) ((unsigned)((g)&0xffu))
+_Static_assert(QK__MAX_THREADS < 256, "a region's share count fits the low byte of its gen");
 
 /* Take share s (< the region's shares) of region g: true for the first taker only. A worker
  * late for region g (its owner has posted others since) finds its share taken: the owner
