@@ -64,8 +64,8 @@ int qk__pool_live(const qk__pool_t *p);
 /* Shares 0 .. nw - 1 of fn, share 0 on the calling thread, the others on the workers (a
  * share its worker has not taken when share 0 ends runs on the calling thread next), and
  * return 1 when all are done; 0, nothing run, when there is no pool (NULL, or a child forked
- * after it started), another region holds it, or it has fewer than nw threads (the caller
- * then runs the region otherwise, e.g. qk__run_shares). One region at a time; calls from
+ * after it started), another region holds it, nw is 0, or it has fewer than nw threads (the
+ * caller then runs the region otherwise, e.g. qk__run_shares). One region at a time; calls from
  * several threads are safe (all but one get 0). */
 int qk__pool_run(qk__pool_t *p, unsigned nw, qk__share_fn fn, void *ctx);
 /* While held (on nonzero) the workers spin between regions (200 us) before they park; when

@@ -167,12 +167,12 @@ struct qk__pool {
   pthread_mutex_t mu;
   pthread_cond_t go, done;
   /* The region posted last: its number (from 1) times 2^8 plus its number of shares, in one
-   * word, so that a worker that reads it knows how many shares that region has. */
+   * word, so that a worker that reads it knows how many shares that region has (none: the
+   * workers end). */
   _Atomic uint64_t gen;
   atomic_uint running;  /* workers taking a share or running one */
   atomic_int busy;      /* a region (or the start of a detached job) is being run */
   atomic_int hold;      /* the owner runs regions back to back: the workers spin between them */
-  atomic_int quit;      /* the last region posted tells the workers to end */
   unsigned n_th;        /* workers started */
   unsigned owner_parks; /* waits for a region's end that parked (tests) */
   pid_t proc;           /* the process that started them (a forked child has none of them) */
@@ -252,8 +252,8 @@ static void *pool_worker(void *arg) {
       }
     }
     seen = g;
-    if (atomic_load_explicit(&p->quit, memory_order_relaxed)) return NULL;
     const unsigned s = me->idx + 1, nw = GEN_SHARES(g);
+    if (nw == 0) return NULL;
     if (s >= nw || atomic_load_explicit(&qk__pool_workers_idle, memory_order_relaxed)) continue;
     /* Counted as running before the attempt, so that an owner who finds the share taken
      * also finds the count raised until its run ends. The region's fields are read only
@@ -270,10 +270,9 @@ static void *pool_worker(void *arg) {
 
 /* Post a region to every worker (under the mutex, so that a parking worker's check and wait
  * are one step and no wake-up is lost). */
-static uint64_t pool_post(qk__pool_t *p, qk__share_fn fn, void *ctx, unsigned nw, int quit) {
+static uint64_t pool_post(qk__pool_t *p, qk__share_fn fn, void *ctx, unsigned nw) {
   pthread_mutex_lock(&p->mu);
   p->fn = fn, p->ctx = ctx;
-  atomic_store_explicit(&p->quit, quit, memory_order_relaxed);
   uint64_t g0 = atomic_load_explicit(&p->gen, memory_order_relaxed);
   uint64_t g = ((g0 >> 8) + 1) << 8 | nw;
   atomic_store_explicit(&p->gen, g, memory_order_release);
@@ -332,7 +331,6 @@ qk__pool_t *qk__pool_new(const qk_allocator_t *a, unsigned nw) {
   if (pthread_cond_init(&p->done, NULL)) goto fail_done;
   atomic_init(&p->gen, 0);
   atomic_init(&p->running, 0u);
-  atomic_init(&p->quit, 0);
   atomic_init(&p->busy, 0);
   atomic_init(&p->hold, 0);
   p->proc = getpid();
@@ -367,8 +365,8 @@ void qk__pool_free(qk__pool_t *p) {
   if (!p) return;
   qk_allocator_t a = p->alloc;
   if (!pool_forked(p)) {
-    pool_wait(p); /* (a detached job) */
-    pool_post(p, NULL, NULL, 0, 1);
+    pool_wait(p);                /* (a detached job) */
+    pool_post(p, NULL, NULL, 0); /* (a region of no shares: the workers end) */
     for (unsigned i = 0; i < p->n_th; i++) pthread_join(p->th[i], NULL);
     pthread_cond_destroy(&p->done);
     pthread_cond_destroy(&p->go);
@@ -401,12 +399,12 @@ void qk__pool_hold(qk__pool_t *p, int on) {
 
 int qk__pool_run(qk__pool_t *p, unsigned nw, qk__share_fn fn, void *ctx) {
   int idle = 0;
-  if (!p || nw > p->n_th + 1 || pool_forked(p) ||
+  if (!p || nw == 0 || nw > p->n_th + 1 || pool_forked(p) ||
       !atomic_compare_exchange_strong_explicit(&p->busy, &idle, 1, memory_order_acquire,
                                                memory_order_relaxed))
     return 0;
   pool_wait(p); /* (a detached job: the workers are ours once it ends) */
-  uint64_t g = pool_post(p, fn, ctx, nw, 0);
+  uint64_t g = pool_post(p, fn, ctx, nw);
   fn(ctx, 0, nw);
   /* The shares no worker has taken yet, here: a worker that is slow to start (on the two
    * vCPUs of this work, a new one ran its first region 3-5 ms after it was posted inside the
@@ -435,7 +433,7 @@ int qk__pool_detach(qk__pool_t *p, void (*fn)(void *), void *ctx) {
     return 0;
   pool_wait(p); /* (the one before) */
   p->dfn = fn, p->dctx = ctx;
-  pool_post(p, detach_share, p, 2, 0);
+  pool_post(p, detach_share, p, 2);
   atomic_store_explicit(&p->busy, 0, memory_order_release);
   return 1;
 }

@@ -537,15 +537,19 @@ static void test_build_output_pinned(void **state) {
     qkt_points(&r, cases[c].d, p, cases[c].n);
     if (c == 5) /* all points equal */
       for (size_t i = 1; i < cases[c].n; i++) p[i] = p[0];
-    /* runs 2 and 3 without the AVX2 paths (under TSan only the two-thread runs, 1, 3, 5
-     * and 7); two threads, the owner of the team running every share (run 5), or each share
-     * on its worker (run 7) */
-    for (unsigned run = QKT_TSAN ? 1 : 0; run < 8; run += QKT_TSAN ? 2 : 1) {
-      if (run == 4 || run == 6) continue;
-      uint32_t threads = 1 + run % 2;
-      qk__build_avx2_off = run == 2 || run == 3;
-      qk__pool_workers_idle = run == 5;
-      qk__pool_steal_off = run == 7;
+    /* one and two threads, with and without the AVX2 paths; two threads with the team's
+     * owner running every share, and with each share on its worker (under TSan only the
+     * two-thread runs) */
+    static const struct {
+      uint32_t threads;
+      int avx2_off, workers_idle, steal_off;
+    } runs[] = {{1, 0, 0, 0}, {2, 0, 0, 0}, {1, 1, 0, 0}, {2, 1, 0, 0}, {2, 0, 1, 0}, {2, 0, 0, 1}};
+    for (unsigned run = 0; run < sizeof runs / sizeof *runs; run++) {
+      uint32_t threads = runs[run].threads;
+      if (QKT_TSAN && threads == 1) continue;
+      qk__build_avx2_off = runs[run].avx2_off;
+      qk__pool_workers_idle = runs[run].workers_idle;
+      qk__pool_steal_off = runs[run].steal_off;
       qk_tree_options_t o;
       qk_tree_options_init(&o);
       o.capacity = cases[c].capacity;
