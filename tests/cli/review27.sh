@@ -17,6 +17,16 @@ source "$(dirname "${BASH_SOURCE[0]}")/lib/common.bash" "$@"
 # twenty-eighth session (it had 20 s then, and CI's ASan run failed on it).
 secs=60
 [ "${QK_SANITIZE:-0}" = 1 ] && secs=180
+# once CMD...: a read of 2^31 bytes that repeats a reader's path already read to the limit
+# here; run in Release, skipped under the sanitizers (each such read took 30 s there, and
+# five of them made this script the longest of CI's ASan run: 149 s of its 321).
+once() {
+  if [ "${QK_SANITIZE:-0}" = 1 ]; then
+    skip "under the sanitizers, a second read to the limit: ${*: -1}"
+  else
+    "$@"
+  fi
+}
 limited() {
   local kb=$1
   shift
@@ -71,8 +81,8 @@ expect 1 "^quadkit mesh: $tmp/f.geojson:1:1: $obj" -- limited 100000 mesh_fifo "
 # realloc may make. Before: memory filled until the limit, "out of memory", exit 3.)
 expect 1 "^quadkit join: /dev/stdin: $limit" -- \
   limited 4000000 join_pipe "printf '%s' '$coll'; yes '$feat'"
-expect 1 "^quadkit join: /dev/stdin: $limit" -- limited 4000000 join_pipe "yes ' '"
-expect 1 "^quadkit mesh: $tmp/f.geojson: $limit" -- \
+once expect 1 "^quadkit join: /dev/stdin: $limit" -- limited 4000000 join_pipe "yes ' '"
+once expect 1 "^quadkit mesh: $tmp/f.geojson: $limit" -- \
   limited 4000000 mesh_fifo "printf '%s' '$coll'; yes '$feat'"
 [ -e "$tmp/m.node" ] && fail "mesh: an output was written after the limit"
 
@@ -87,7 +97,7 @@ long=$(printf '%0200d' 0) # (long lines: fewer of them to read before the limit)
 tree_pipe() { yes "0.5,0.5,$long" | timeout "$secs" "$cli" tree /dev/stdin; }
 mesh_pipe() { yes "x $long" | timeout "$secs" "$cli" mesh - -o "$tmp/s"; }
 expect 1 "^quadkit: /dev/stdin: $stream" -- limited 4000000 tree_pipe
-expect 1 "^quadkit mesh: <stdin>: $stream" -- limited 4000000 mesh_pipe
+once expect 1 "^quadkit mesh: <stdin>: $stream" -- limited 4000000 mesh_pipe
 [ -e "$tmp/s.node" ] && fail "mesh: an output was written after the limit"
 
 # ---- a FIFO's text is not read twice ---------------------------------------------------
