@@ -72,6 +72,8 @@ public:
     qk_world_options_t o;
     qk_world_options_init(&o);
     o.threads = threads;
+    // QKB_WORLD_THREAD_MIN: the worlds' thread_min (an A/B of threads on small worlds).
+    if (const char *m = std::getenv("QKB_WORLD_THREAD_MIN")) o.thread_min = std::strtoul(m, nullptr, 10);
     qk_world_new(&o, &w);
     h.resize(boxes.size());
     for (size_t i = 0; i < boxes.size(); i++) {
