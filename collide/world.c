@@ -106,6 +106,7 @@ void qk_world_free(qk_world_t *w) {
   qk__free(&a, w->order, (size_t)w->cap_order * sizeof *w->order);
   qk__free(&a, w->cells, (size_t)w->cap_cells * sizeof *w->cells);
   qk__free(&a, w->ugen, (size_t)w->cap_ugen * sizeof *w->ugen);
+  qk__free(&a, w->dnext, (size_t)w->cap_dnext * sizeof *w->dnext);
   qk__free(&a, w->cur.b, w->cur.cap * sizeof *w->cur.b);
   qk__free(&a, w->cur.row, w->cur.row ? 2 * (w->cur.n_nz + 1) * sizeof *w->cur.row : 0);
   qk__free(&a, w->began.v, w->began.cap * sizeof *w->began.v);
@@ -144,8 +145,8 @@ size_t qk_world_pair_bytes(const qk_world_t *w) {
 size_t qk_world_bytes(const qk_world_t *w) {
   if (!w) return 0;
   return sizeof *w + (size_t)w->cap_obj * sizeof *w->obj + (size_t)w->cap_ugen * sizeof *w->ugen +
-         (size_t)w->cap_order * sizeof *w->order + (size_t)w->cap_cells * sizeof *w->cells +
-         qk_world_pair_bytes(w);
+         (size_t)w->cap_dnext * sizeof *w->dnext + (size_t)w->cap_order * sizeof *w->order +
+         (size_t)w->cap_cells * sizeof *w->cells + qk_world_pair_bytes(w);
 }
 
 /* ---- filing ---------------------------------------------------------------------- */
@@ -241,7 +242,7 @@ static inline void make_dirty(qk_world_t *w, uint32_t i) {
   qk__wobj_t *o = &w->obj[i];
   if (o->flags & QK__WDIRTY) return;
   o->flags |= QK__WDIRTY;
-  o->dnext = w->dirty_head;
+  w->dnext[i] = w->dirty_head;
   w->dirty_head = i;
   w->n_dirty++;
 }
@@ -281,6 +282,13 @@ qk_status_t qk_world_add(qk_world_t *w, const qk_shape_t *shape, uint64_t tag, q
       if (!nu) return QK_ERR_NOMEM;
       w->ugen = nu;
       w->cap_ugen = cap;
+    }
+    if (w->cap_dnext < cap) {
+      uint32_t *nd = qk__realloc(&w->alloc, w->dnext, (size_t)w->cap_dnext * sizeof *nd,
+                                 (size_t)cap * sizeof *nd);
+      if (!nd) return QK_ERR_NOMEM;
+      w->dnext = nd;
+      w->cap_dnext = cap;
     }
     qk__wobj_t *no =
         qk__realloc(&w->alloc, w->obj, (size_t)w->cap_obj * sizeof *no, (size_t)cap * sizeof *no);

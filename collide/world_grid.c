@@ -155,7 +155,7 @@ static inline drec_t rec_of(const qk__wobj_t *o, uint32_t slot) {
 }
 
 /* File live dirty object o (slot i) in its new cell; its record. */
-static inline drec_t file_dirty(const qk_world_t *w, qk__wobj_t *o, uint32_t i) {
+static inline drec_t file_dirty(const qk_world_t *w, qk__wobj_t *o, uint32_t i, bool undirty) {
   double e;
   qk_box_t f = qk__world_fat_box(w, o, &e);
   int level, forced;
@@ -170,7 +170,8 @@ static inline drec_t file_dirty(const qk_world_t *w, qk__wobj_t *o, uint32_t i) 
   double ts = s - 2 * qk__world_step_margin(o->k.step, e);
   if (ts < t) t = ts;
   o->k.shrink = forced || !(t >= 0) ? -1.0f : (float)t;
-  o->flags = (uint8_t)((o->flags & ~QK__WFORCED) | (forced ? QK__WFORCED : 0));
+  o->flags = (uint8_t)((o->flags & ~(QK__WFORCED | (undirty ? QK__WDIRTY : 0))) |
+                       (forced ? QK__WFORCED : 0));
   return rec_of(o, i);
 }
 
@@ -432,7 +433,7 @@ static void refile_run(mjob_t *J, unsigned t) {
     memset(c, 0, J->nt * sizeof *c);
     for (size_t k = k0; k < k1; k++) {
       uint32_t i = J->sl[k];
-      J->dd[k] = file_dirty(J->w, &J->w->obj[i], i);
+      J->dd[k] = file_dirty(J->w, &J->w->obj[i], i, J->skip != NULL);
       c[range_of(J, &J->dd[k])]++;
     }
   } else {
@@ -683,35 +684,33 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
   uint32_t *sl =
       nd >= QK__REFILE_MIN && merge_fits(w, n_oc) ? qk__realloc(a, NULL, 0, nd * sizeof *sl) : NULL;
   if (sl && skip) {
-    /* Every dirty object is live (see nsk): marked in skip and no longer dirty as it is
-     * listed, so that neither the merge nor the end of the update reads its object again
-     * (both did, at 10^5 objects on two threads the update's largest serial cost: lines
-     * the threads had filed, read one after another along the list). */
-    for (uint32_t i = w->dirty_head; i != QK_NONE; i = w->obj[i].dnext) {
+    /* Every dirty object is live (see nsk): marked in skip, and no longer dirty once filed
+     * (file_dirty), so that neither this walk, the merge nor the end of the update reads
+     * its object (at 10^5 objects on two threads they were the update's largest serial
+     * cost: lines the threads had filed, read one after another). */
+    for (uint32_t i = w->dirty_head; i != QK_NONE; i = w->dnext[i]) {
       sl[m_d++] = i;
-      w->obj[i].flags &= (uint8_t)~QK__WDIRTY;
       skip[i >> 6] |= (uint64_t)1 << (i & 63);
     }
   } else if (sl) {
-    for (uint32_t i = w->dirty_head; i != QK_NONE; i = w->obj[i].dnext)
+    for (uint32_t i = w->dirty_head; i != QK_NONE; i = w->dnext[i])
       if (qk__wlive(&w->obj[i])) sl[m_d++] = i;
   }
   if (sl) {
     if (m_d > 64) merged = merge_threads(w, d, m_d, sl, skip, ord, cells, n_oc, &m, &nc);
     if (!merged)
-      for (size_t k = 0; k < m_d; k++) d[k] = file_dirty(w, &w->obj[sl[k]], sl[k]);
+      for (size_t k = 0; k < m_d; k++) d[k] = file_dirty(w, &w->obj[sl[k]], sl[k], skip != NULL);
     qk__free(a, sl, nd * sizeof *sl);
   } else if (nsk) {
     /* Every dirty object is live (see nsk), marked in skip, and no longer dirty once filed
      * (the merge reads skip, nothing else the flag): no second walk of the list. */
-    for (uint32_t i = w->dirty_head; i != QK_NONE; i = w->obj[i].dnext) {
-      d[m_d++] = file_dirty(w, &w->obj[i], i);
-      w->obj[i].flags &= (uint8_t)~QK__WDIRTY;
+    for (uint32_t i = w->dirty_head; i != QK_NONE; i = w->dnext[i]) {
+      d[m_d++] = file_dirty(w, &w->obj[i], i, true);
       skip[i >> 6] |= (uint64_t)1 << (i & 63);
     }
   } else {
-    for (uint32_t i = w->dirty_head; i != QK_NONE; i = w->obj[i].dnext)
-      if (qk__wlive(&w->obj[i])) d[m_d++] = file_dirty(w, &w->obj[i], i);
+    for (uint32_t i = w->dirty_head; i != QK_NONE; i = w->dnext[i])
+      if (qk__wlive(&w->obj[i])) d[m_d++] = file_dirty(w, &w->obj[i], i, false);
   }
   if (!merged) {
     if (m_d > 64)
@@ -740,7 +739,7 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
   w->cells = cells, w->n_cells = nc, w->cap_cells = (uint32_t)ncap;
   w->by_bands = qk__world_by_bands(w);
   qk__world_pack(w, pk, ord, cells, nc);
-  for (uint32_t k = w->dirty_head; k != QK_NONE && !skip; k = w->obj[k].dnext)
+  for (uint32_t k = w->dirty_head; k != QK_NONE && !skip; k = w->dnext[k])
     w->obj[k].flags &= (uint8_t)~QK__WDIRTY;
   w->dirty_head = QK_NONE;
   w->n_dirty = 0;
@@ -760,6 +759,11 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
     uint32_t *nu =
         qk__realloc(a, w->ugen, (size_t)w->cap_ugen * sizeof *nu, (size_t)w->cap_obj * sizeof *nu);
     if (nu) w->ugen = nu, w->cap_ugen = w->cap_obj;
+  }
+  if (w->cap_dnext > w->cap_obj && w->cap_obj > 0) {
+    uint32_t *nd = qk__realloc(a, w->dnext, (size_t)w->cap_dnext * sizeof *nd,
+                               (size_t)w->cap_obj * sizeof *nd);
+    if (nd) w->dnext = nd, w->cap_dnext = w->cap_obj;
   }
   if (ncap > (size_t)nc + 1 + 16) {
     qk__wcell_t *c = qk__realloc(a, w->cells, ncap * sizeof *c, ((size_t)nc + 1) * sizeof *c);

@@ -49,7 +49,6 @@ typedef struct qk__wobj {
     uint32_t free_next; /* while the slot is free: the next free slot */
   } u;
   int32_t cy;
-  uint32_t dnext; /* the dirty list */
   int8_t level;
   uint8_t flags;
   union {
@@ -135,6 +134,11 @@ struct qk_world {
   uint32_t n_obj, cap_obj; /* slots used (high-water mark) and allocated */
   uint32_t *ugen;          /* per slot: its generation at the last update */
   uint32_t cap_ugen;
+  /* Per slot: the next slot of the dirty list. Apart from the objects so that the update
+   * reads the list without reading each dirty object's 64 bytes one after another (on
+   * two threads the lines a worker had just filed, from the other core). */
+  uint32_t *dnext;
+  uint32_t cap_dnext;
   uint32_t free_head; /* first free slot, or QK_NONE */
   size_t n_live;
   uint32_t dirty_head; /* objects added or re-filed since the last update */

@@ -128,7 +128,7 @@ void qk__world_visit_seg(const qk_world_t *w, qk_box_t qb, const qk_point_t *seg
     if (scan_level(w, l, r, qb, fn, ud)) return;
   }
   /* The objects added or re-filed since the last update, one by one. */
-  for (uint32_t i = w->dirty_head; i != QK_NONE; i = w->obj[i].dnext) {
+  for (uint32_t i = w->dirty_head; i != QK_NONE; i = w->dnext[i]) {
     const qk__wobj_t *o = &w->obj[i];
     if (!qk__wlive(o)) continue;
     qk_box_t b = qk__wbox(o);
