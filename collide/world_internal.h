@@ -228,6 +228,10 @@ void qk__world_pool_hold(qk_world_t *w, int on);
 int qk__world_pool_detach(qk_world_t *w, void (*fn)(void *), void *ctx);
 void qk__world_run_jobs(const qk_world_t *w, unsigned threads, unsigned n,
                         void (*fn)(unsigned i, void *ud), void *ud);
+/* The same jobs handed out in order to whichever thread is free (for jobs whose results
+ * do not depend on the thread that runs them: fn must not take i for a thread's index). */
+void qk__world_run_jobs_shared(const qk_world_t *w, unsigned threads, unsigned n,
+                               void (*fn)(unsigned i, void *ud), void *ud);
 
 static inline qk_shape_t qk__wshape(const qk__wobj_t *o) {
   return (qk_shape_t){(qk_shape_kind_t)(o->flags & QK__WKIND), o->x, o->y, o->a, o->b};
