@@ -521,11 +521,20 @@ static void merge_cuts(const qk_world_t *w, const mjob_t *J, uint32_t *cut) {
   }
 }
 
+/* The merge's ranges a thread, taken in order by whichever thread is free: a range's
+ * work is only estimated (merge_cuts), and a worker is slower on the lines the caller's
+ * moves left in its cache. */
+#define QK__MERGE_JOBS 4
+
+/* The merge's ranges on nth threads. */
+static unsigned merge_ranges(unsigned nth) {
+  return nth > QK__MMAX / QK__MERGE_JOBS ? QK__MMAX : QK__MERGE_JOBS * nth;
+}
+
 /* Whether the merge runs on the threads (merge_threads), scratch permitting. */
 static int merge_fits(const qk_world_t *w, uint32_t n_oc) {
-  unsigned nt = qk__world_update_threads(w);
-  if (nt > QK__MMAX) nt = QK__MMAX;
-  return nt >= 2 && w->n_order >= 4096 && n_oc >= 4 * nt;
+  unsigned nth = qk__world_update_threads(w);
+  return nth >= 2 && w->n_order >= 4096 && n_oc >= 4 * merge_ranges(nth);
 }
 
 /* The merge on threads (see mjob_t); 0 when it is not worth them or its scratch cannot
@@ -535,8 +544,7 @@ static int merge_fits(const qk_world_t *w, uint32_t n_oc) {
 static int merge_threads(qk_world_t *w, drec_t *d, size_t m_d, const uint32_t *sl,
                          const uint64_t *skip, uint32_t *ord, qk__wcell_t *cells, uint32_t n_oc,
                          uint32_t *m_out, uint32_t *nc_out) {
-  unsigned nt = qk__world_update_threads(w);
-  if (nt > QK__MMAX) nt = QK__MMAX;
+  const unsigned nth = qk__world_update_threads(w), nt = merge_ranges(nth);
   if (!merge_fits(w, n_oc)) return 0;
   const qk_allocator_t *a = &w->alloc;
   size_t so = (size_t)w->n_order + m_d, sc = (size_t)n_oc + m_d;
@@ -558,7 +566,7 @@ static int merge_threads(qk_world_t *w, drec_t *d, size_t m_d, const uint32_t *s
   for (unsigned t = 0; t <= nt; t++) cut[t] = (uint32_t)((uint64_t)w->n_order * t / nt);
   if (sl) {
     J->sl = sl, J->m_d = m_d, J->phase = 4;
-    qk__world_run_jobs(w, nt, nt, merge_run, J);
+    qk__world_run_jobs_shared(w, nth, nt, merge_run, J);
     merge_cuts(w, J, cut);
   }
   J->c0[0] = 0, J->j0[0] = 0;
@@ -580,7 +588,7 @@ static int merge_threads(qk_world_t *w, drec_t *d, size_t m_d, const uint32_t *s
     }
     J->sl = sl, J->m_d = m_d, J->dd = d + m_d, J->pd = d;
     J->phase = 2;
-    qk__world_run_jobs(w, nt, nt, merge_run, J);
+    qk__world_run_jobs_shared(w, nth, nt, merge_run, J);
     size_t s = 0;
     for (unsigned r = 0; r < nt; r++) {
       J->j0[r] = s;
@@ -591,7 +599,7 @@ static int merge_threads(qk_world_t *w, drec_t *d, size_t m_d, const uint32_t *s
     }
     J->j0[nt] = m_d;
     J->phase = 3;
-    qk__world_run_jobs(w, nt, nt, merge_run, J);
+    qk__world_run_jobs_shared(w, nth, nt, merge_run, J);
   }
   for (unsigned t = 1; t < nt && !sl; t++) {
     uint32_t c = J->c0[t];
@@ -613,7 +621,7 @@ static int merge_threads(qk_world_t *w, drec_t *d, size_t m_d, const uint32_t *s
   }
   J->j0[nt] = m_d;
   J->phase = 0;
-  qk__world_run_jobs(w, nt, nt, merge_run, J);
+  qk__world_run_jobs_shared(w, nth, nt, merge_run, J);
   /* The ranges' places, and the level runs (a level's cells are one run across ranges). */
   uint32_t om = 0, ocn = 0;
   memset(w->lv_first, 0, sizeof w->lv_first);
@@ -630,7 +638,7 @@ static int merge_threads(qk_world_t *w, drec_t *d, size_t m_d, const uint32_t *s
     om += J->g[t].m - sm, ocn += J->g[t].nc - scl;
   }
   J->phase = 1;
-  qk__world_run_jobs(w, nt, nt, merge_run, J);
+  qk__world_run_jobs_shared(w, nth, nt, merge_run, J);
   *m_out = om, *nc_out = ocn;
   qk__free(a, s_cell, sc * sizeof *s_cell);
   qk__free(a, s_ord, so * sizeof *s_ord);
