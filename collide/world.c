@@ -330,6 +330,21 @@ static inline int box_ok(const qk_shape_t *s) {
 }
 #endif
 
+/* How far ahead a run of moves in slot order fetches its objects (64 objects: about 0.45
+ * us of moves, more than a line's transfer between two cores). */
+#define QK__MOVE_AHEAD 64
+
+/* A write to come at p: the line fetched for writing (PREFETCHW; a no-op where the
+ * processor lacks it), so that a line a worker thread read stays one fetch, not a
+ * read and then an upgrade. */
+static inline void qk__prefetch_write(const void *p) {
+#if defined(__x86_64__) || defined(__i386__)
+  __asm__ __volatile__("prefetchw %0" : : "m"(*(const char *)p));
+#else
+  __builtin_prefetch(p, 1);
+#endif
+}
+
 /* (move_obj reads the cell as two adjacent int32: cx, then cy) */
 _Static_assert(offsetof(qk__wobj_t, cy) == offsetof(qk__wobj_t, u) + 4, "cx, cy adjacent");
 _Static_assert(sizeof(qk__wobj_t) == 64, "an object: 64 bytes");
@@ -420,6 +435,15 @@ qk_status_t qk_world_move(qk_world_t *w, qk_handle_t h, const qk_shape_t *shape)
   if (!w || !shape) return QK_ERR_INVALID;
   qk__wobj_t *o = lookup(w, h);
   if (!o) return QK_ERR_NOT_FOUND;
+  /* Moves in slot order (a caller's loop over its objects, added in that order): the
+   * object QK__MOVE_AHEAD slots on, fetched for writing. On the two-vCPU guest of the
+   * twenty-ninth session, where a line moves between the vCPUs' caches in about 220 ns,
+   * the moves after an update on two threads (whose worker had read half the objects)
+   * took 1.7-1.9 ms for 10^5 boxes without it and 0.75-0.8 ms with it, as after one. */
+  const uint32_t slot = (uint32_t)h;
+  if (slot == w->move_next && slot + QK__MOVE_AHEAD < w->n_obj)
+    qk__prefetch_write(o + QK__MOVE_AHEAD);
+  w->move_next = slot + 1;
   return move_obj(w, o, (uint32_t)h, shape);
 }
 
@@ -431,6 +455,9 @@ qk_status_t qk_world_move_batch(qk_world_t *w, const qk_handle_t *h, const qk_sh
     /* The handle check: a live slot's generation is odd and a removed one's even, so an
      * odd generation equal to the slot's names its live object. */
     uint32_t slot = (uint32_t)h[k], gen = (uint32_t)(h[k] >> 32);
+    /* (the object QK__MOVE_AHEAD moves on, fetched for writing: see qk_world_move) */
+    if (k + QK__MOVE_AHEAD < n && (uint32_t)h[k + QK__MOVE_AHEAD] < n_obj)
+      qk__prefetch_write(&w->obj[(uint32_t)h[k + QK__MOVE_AHEAD]]);
     qk_status_t st = QK_ERR_NOT_FOUND;
     if (slot < n_obj) {
       qk__wobj_t *o = &w->obj[slot];

@@ -143,6 +143,7 @@ struct qk_world {
   size_t n_live;
   uint32_t dirty_head; /* objects added or re-filed since the last update */
   uint32_t n_dirty;    /* entries of the dirty list (removed ones included) */
+  uint32_t move_next;  /* the slot after the last qk_world_move's (a run in slot order) */
   /* The order: the slots of the last update sorted by cell (level, cy, cx), and its
    * cells, sorted the same way, with a sentinel (start = n_order). */
   uint32_t *order;
