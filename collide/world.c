@@ -437,7 +437,7 @@ qk_status_t qk_world_move(qk_world_t *w, qk_handle_t h, const qk_shape_t *shape)
   if (!o) return QK_ERR_NOT_FOUND;
   /* Moves in slot order (a caller's loop over its objects, added in that order): the
    * object QK__MOVE_AHEAD slots on, fetched for writing. On the two-vCPU guest of the
-   * twenty-ninth session, where a line moves between the vCPUs' caches in about 220 ns,
+   * twenty-ninth session, where a line moved between the vCPUs' caches in 90-240 ns,
    * the moves after an update on two threads (whose worker had read half the objects)
    * took 1.7-1.9 ms for 10^5 boxes without it and 0.75-0.8 ms with it, as after one. */
   const uint32_t slot = (uint32_t)h;
