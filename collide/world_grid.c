@@ -381,13 +381,14 @@ static void merge_range(merge_t *g, uint32_t c0, uint32_t c1, size_t j, size_t j
 }
 
 /*
- * The merge on the world's threads: the old cells cut into one range a thread (about
- * equal objects), each range with the dirty records that sort from its first cell to
- * the next range's first (the first range also those before, the last those after). A
- * range's output is the serial merge's for those cells, and the ranges' outputs follow
- * each other in the serial merge's order (their keys ascend from range to range). Each
- * thread merges its range into scratch, then, once the ranges' sizes are known, copies
- * it to its place (cell starts and level runs shifted by the ranges before it).
+ * The merge on the world's threads: the old cells cut into ranges (QK__MERGE_JOBS a
+ * thread, of about equal work, taken by whichever thread is free), each range with the
+ * dirty records that sort from its first cell to the next range's first (the first range
+ * also those before, the last those after). A range's output is the serial merge's for
+ * those cells, and the ranges' outputs follow each other in the serial merge's order
+ * (their keys ascend from range to range). A range is merged into scratch, then, once
+ * the ranges' sizes are known, copied to its place (cell starts and level runs shifted
+ * by the ranges before it).
  */
 #define QK__MMAX 64
 typedef struct mjob {
