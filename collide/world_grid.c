@@ -278,7 +278,8 @@ typedef struct pack_job {
   int cell_boxes;
 } pack_job_t;
 
-static void pack_run(unsigned t, void *ud) {
+static void pack_run(unsigned t, unsigned s, void *ud) {
+  (void)s;
   pack_job_t *p = ud;
   uint32_t n = p->cells[p->nc].start;
   uint32_t c0 = qk__wcell_from(p->cells, 0, p->nc, (uint32_t)((uint64_t)n * t / p->n_jobs));
@@ -448,7 +449,8 @@ static void refile_run(mjob_t *J, unsigned t) {
   }
 }
 
-static void merge_run(unsigned t, void *ud) {
+static void merge_run(unsigned t, unsigned s, void *ud) {
+  (void)s;
   mjob_t *J = ud;
   if (J->phase == 4) { /* chunk t's dirty slots counted by their level (at the last update) */
     size_t k0 = J->m_d * t / J->nt, k1 = J->m_d * (t + 1) / J->nt;

@@ -216,8 +216,8 @@ static inline unsigned qk__world_update_threads(const qk_world_t *w) {
 /* The world's workers (collide/world_threads.c), a pool of index/ (qk__pool_t):
  * qk__world_pool_start(w, threads) starts threads - 1 of them, waiting between parallel
  * steps, unless it has or cannot (the steps then start threads of their own);
- * qk__world_pool_free joins them. qk__world_run_jobs is
- * qk__run_jobs on them: fn(i, ud) for i in [0, n), job i in share i mod min(threads, n),
+ * qk__world_pool_free joins them. qk__world_run_jobs is qk__run_jobs on them
+ * (qk__pool_run_jobs): fn(i, ud) for i in [0, n), job i in share i mod min(threads, n),
  * share 0 on the calling thread. */
 void qk__world_pool_start(qk_world_t *w, unsigned threads);
 void qk__world_pool_free(qk_world_t *w);
@@ -229,10 +229,10 @@ void qk__world_pool_hold(qk_world_t *w, int on);
 int qk__world_pool_detach(qk_world_t *w, void (*fn)(void *), void *ctx);
 void qk__world_run_jobs(const qk_world_t *w, unsigned threads, unsigned n,
                         void (*fn)(unsigned i, void *ud), void *ud);
-/* The same jobs handed out in order to whichever thread is free (for jobs whose results
- * do not depend on the thread that runs them: fn must not take i for a thread's index). */
+/* The same jobs handed out in order to whichever thread is free (qk__run_jobs_dynamic: s is
+ * the share running job i; results must not depend on it). */
 void qk__world_run_jobs_shared(const qk_world_t *w, unsigned threads, unsigned n,
-                               void (*fn)(unsigned i, void *ud), void *ud);
+                               void (*fn)(unsigned i, unsigned s, void *ud), void *ud);
 
 static inline qk_shape_t qk__wshape(const qk__wobj_t *o) {
   return (qk_shape_t){(qk_shape_kind_t)(o->flags & QK__WKIND), o->x, o->y, o->a, o->b};

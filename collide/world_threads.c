@@ -41,53 +41,12 @@ int qk__world_pool_detach(qk_world_t *w, void (*fn)(void *), void *ctx) {
   return qk__pool_detach(w->pool, fn, ctx);
 }
 
-/* Jobs i = share, share + nw, ... of a qk__world_run_jobs call (qk__run_jobs' split). */
-typedef struct wjobs {
-  unsigned n;
-  void (*fn)(unsigned, void *);
-  void *ud;
-} wjobs_t;
-
-static void wjobs_share(void *ctx, unsigned s, unsigned nw) {
-  const wjobs_t *j = ctx;
-  for (unsigned i = s; i < j->n; i += nw) j->fn(i, j->ud);
-}
-
-/* Jobs taken from a counter (qk__world_run_jobs_shared). */
-typedef struct wjobs_shared {
-  unsigned n;
-  void (*fn)(unsigned, void *);
-  void *ud;
-  atomic_uint next;
-} wjobs_shared_t;
-
-static void wjobs_take(void *ctx, unsigned s, unsigned nw) {
-  (void)s, (void)nw;
-  wjobs_shared_t *j = ctx;
-  for (unsigned i; (i = atomic_fetch_add_explicit(&j->next, 1u, memory_order_relaxed)) < j->n;)
-    j->fn(i, j->ud);
+void qk__world_run_jobs(const qk_world_t *w, unsigned threads, unsigned n,
+                        void (*fn)(unsigned i, void *ud), void *ud) {
+  qk__pool_run_jobs(w->pool, threads, n, fn, ud);
 }
 
 void qk__world_run_jobs_shared(const qk_world_t *w, unsigned threads, unsigned n,
-                               void (*fn)(unsigned i, void *ud), void *ud) {
-  unsigned nw = threads < n ? threads : n;
-  if (nw > QK__MAX_THREADS) nw = QK__MAX_THREADS;
-  if (nw <= 1) {
-    for (unsigned i = 0; i < n; i++) fn(i, ud);
-    return;
-  }
-  wjobs_shared_t j = {n, fn, ud, 0};
-  if (!qk__pool_run(w->pool, nw, wjobs_take, &j)) qk__run_shares(nw, wjobs_take, &j);
-}
-
-void qk__world_run_jobs(const qk_world_t *w, unsigned threads, unsigned n,
-                        void (*fn)(unsigned i, void *ud), void *ud) {
-  wjobs_t j = {n, fn, ud};
-  unsigned nw = threads < n ? threads : n;
-  if (nw > QK__MAX_THREADS) nw = QK__MAX_THREADS;
-  if (nw <= 1) {
-    wjobs_share(&j, 0, 1);
-    return;
-  }
-  if (!qk__pool_run(w->pool, nw, wjobs_share, &j)) qk__run_shares(nw, wjobs_share, &j);
+                               void (*fn)(unsigned i, unsigned s, void *ud), void *ud) {
+  qk__pool_run_jobs_dynamic(w->pool, threads, n, fn, ud);
 }

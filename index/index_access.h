@@ -68,6 +68,12 @@ int qk__pool_live(const qk__pool_t *p);
  * caller then runs the region otherwise, e.g. qk__run_shares). One region at a time; calls from
  * several threads are safe (all but one get 0). */
 int qk__pool_run(qk__pool_t *p, unsigned nw, qk__share_fn fn, void *ctx);
+/* qk__run_jobs and qk__run_jobs_dynamic (index_internal.h) on p's workers when qk__pool_run
+ * gives it the region, on threads started for it otherwise (p NULL: always). */
+void qk__pool_run_jobs(qk__pool_t *p, unsigned threads, unsigned n,
+                       void (*fn)(unsigned i, void *ud), void *ud);
+void qk__pool_run_jobs_dynamic(qk__pool_t *p, unsigned threads, unsigned n,
+                               void (*fn)(unsigned i, unsigned w, void *ud), void *ud);
 /* While held (on nonzero) the workers spin between regions (200 us) before they park; when
  * released, they park at once. */
 void qk__pool_hold(qk__pool_t *p, int on);

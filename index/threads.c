@@ -570,9 +570,28 @@ static void jobs_share(void *ctx, unsigned w, unsigned nw) {
   for (unsigned i = w; i < j->n; i += nw) j->fn(i, j->ud);
 }
 
-void qk__run_jobs(unsigned threads, unsigned n, void (*fn)(unsigned i, void *ud), void *ud) {
+/* The shares of n jobs on `threads` threads: at most one a job, at most QK__MAX_THREADS. */
+static unsigned jobs_shares(unsigned threads, unsigned n) {
+  unsigned nw = threads < n ? threads : n;
+  return nw < QK__MAX_THREADS ? nw : QK__MAX_THREADS;
+}
+
+/* A region on p's workers when it takes it, on threads started for it otherwise. */
+static void run_region(qk__pool_t *p, unsigned nw, qk__share_fn fn, void *ctx) {
+  if (nw <= 1)
+    fn(ctx, 0, 1);
+  else if (!qk__pool_run(p, nw, fn, ctx))
+    qk__run_shares(nw, fn, ctx);
+}
+
+void qk__pool_run_jobs(qk__pool_t *p, unsigned threads, unsigned n,
+                       void (*fn)(unsigned i, void *ud), void *ud) {
   jobs_t j = {n, fn, ud};
-  qk__run_shares(threads < n ? threads : n, jobs_share, &j);
+  run_region(p, jobs_shares(threads, n), jobs_share, &j);
+}
+
+void qk__run_jobs(unsigned threads, unsigned n, void (*fn)(unsigned i, void *ud), void *ud) {
+  qk__pool_run_jobs(NULL, threads, n, fn, ud);
 }
 
 /* Jobs handed out by a shared counter: a share takes the next job when it finishes one,
@@ -594,12 +613,17 @@ static void djobs_share(void *ctx, unsigned w, unsigned nw) {
   }
 }
 
-void qk__run_jobs_dynamic(unsigned threads, unsigned n,
-                          void (*fn)(unsigned i, unsigned w, void *ud), void *ud) {
+void qk__pool_run_jobs_dynamic(qk__pool_t *p, unsigned threads, unsigned n,
+                               void (*fn)(unsigned i, unsigned w, void *ud), void *ud) {
   djobs_t j;
   atomic_init(&j.next, 0u);
   j.n = n;
   j.fn = fn;
   j.ud = ud;
-  qk__run_shares(threads < n ? threads : n, djobs_share, &j);
+  run_region(p, jobs_shares(threads, n), djobs_share, &j);
+}
+
+void qk__run_jobs_dynamic(unsigned threads, unsigned n,
+                          void (*fn)(unsigned i, unsigned w, void *ud), void *ud) {
+  qk__pool_run_jobs_dynamic(NULL, threads, n, fn, ud);
 }
