@@ -101,6 +101,7 @@ static qk_status_t reserve_exact(qk_tree_t *t, uint64_t extra) {
     if (!p) return QK_ERR_NOMEM;
     t->nodes = p;
     t->cap_nodes = (uint32_t)need;
+    qk__tree_advise_huge(t, p, (size_t)need * sizeof *p);
   }
   if (blocks > t->cap_blocks) {
     qk__block_t *p = qk__realloc(&t->alloc, t->blocks, (size_t)t->cap_blocks * sizeof *p,
@@ -108,6 +109,7 @@ static qk_status_t reserve_exact(qk_tree_t *t, uint64_t extra) {
     if (!p) return QK_ERR_NOMEM;
     t->blocks = p;
     t->cap_blocks = (uint32_t)blocks;
+    qk__tree_advise_huge(t, p, (size_t)blocks * sizeof *p);
   }
   return QK_OK;
 }
@@ -194,7 +196,7 @@ static void sub_free(const qk_tree_t *t, qk_tree_t *o) {
  * allocator is the default one (a caller's allocator is only ever called from one thread
  * at a time). */
 static qk_status_t from_grid(qk_tree_t *t, qk__geom_t g, const uint32_t *cum, unsigned L,
-                             unsigned nw, qk__cell_wait_t *wait) {
+                             size_t deep, unsigned nw, qk__cell_wait_t *wait) {
   subtree_t list[1u << (2 * TOP_DEPTH)];
   size_t n = 0;
   unsigned top = L > TOP_DEPTH ? TOP_DEPTH : L;
@@ -205,6 +207,14 @@ static qk_status_t from_grid(qk_tree_t *t, qk__geom_t g, const uint32_t *cum, un
            est = 4 * (cum[(size_t)1 << (2 * L)] / t->capacity) + 64;
   uint64_t want = full < est ? full : est;
   want += want / 16;
+  /* And four per `capacity` points in the cells still over it, for the splits below the
+   * grid (capacity 1, 1M uniform points: 2.8 nodes a point there). Grown an eighth at a
+   * time by those splits instead, the array was copied about 30 times: that build took
+   * 96 ms rather than 87 with every page already mapped, 390 rather than 230 in this
+   * work's PVM guest, where a fresh page faults for 15-30 us (the reserve is large enough
+   * for the tree's huge-page rule, qk__tree_advise_huge). The excess is given back at the
+   * end (qk_tree_build_ex). */
+  want += 4 * ((uint64_t)deep / t->capacity);
   qk_status_t st = reserve_exact(t, want);
   if (st) return st;
   st = from_buckets(t, 0, &g, cum, 0, L, top, list, &n, wait);
@@ -250,12 +260,13 @@ static qk_status_t from_grid(qk_tree_t *t, qk__geom_t g, const uint32_t *cum, un
 typedef struct grid_hook {
   qk_tree_t *t;
   unsigned L;
+  const qk__cell_hook_t *hook;
 } grid_hook_t;
 
 static qk_status_t grid_hook(void *ctx, const uint32_t *cum, qk__cell_wait_t *wait) {
   const grid_hook_t *h = ctx;
   qk_tree_t *t = h->t;
-  return from_grid(t, (qk__geom_t){t->root_x, t->root_y, 0}, cum, h->L, 1, wait);
+  return from_grid(t, (qk__geom_t){t->root_x, t->root_y, 0}, cum, h->L, h->hook->deep, 1, wait);
 }
 
 qk_status_t qk__build_bucketed(qk_tree_t *t, const qk_point_t *p, size_t n, bool *done) {
@@ -272,8 +283,9 @@ qk_status_t qk__build_bucketed(qk_tree_t *t, const qk_point_t *p, size_t n, bool
    * thread beside the sort's last pass (which had it wait 0.4 ms at 1M uniform points on
    * two threads: a twentieth of the build), waiting only for the buckets whose cells it
    * splits point by point. */
-  grid_hook_t gh = {t, L};
-  qk__cell_hook_t hook = {.deep_below = DEEP_MIN, .fn = grid_hook, .ctx = &gh};
+  qk__cell_hook_t hook = {.deep_below = DEEP_MIN, .fn = grid_hook};
+  grid_hook_t gh = {t, L, &hook};
+  hook.ctx = &gh;
   qk_status_t st = qk__cell_sort(t, p, n, L, nw, &hook, &cum, &deep);
   if (st || !cum) return st; /* !cum: badly conditioned, the plain build runs */
   if (hook.ran) {
@@ -285,7 +297,8 @@ qk_status_t qk__build_bucketed(qk_tree_t *t, const qk_point_t *p, size_t n, bool
   /* The tree on threads only when points are left to split below the grid: from the
    * counts alone (1M uniform points: 0.4 ms on one thread), the subtrees' own node arrays,
    * their appending and two more thread starts cost more than they save. */
-  st = from_grid(t, (qk__geom_t){t->root_x, t->root_y, 0}, cum, L, deep < DEEP_MIN ? 1 : nw, NULL);
+  st = from_grid(t, (qk__geom_t){t->root_x, t->root_y, 0}, cum, L, deep, deep < DEEP_MIN ? 1 : nw,
+                 NULL);
   qk__free(&t->alloc, cum, (((size_t)1 << (2 * L)) + 1) * sizeof *cum);
   *done = st == QK_OK;
   return st;

@@ -1056,6 +1056,7 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
     atomic_init(&wt.next, 0u);
     for (size_t c = 0; c < nc; c++) atomic_init(&wt.state[c], 0);
     hook->ran = true;
+    hook->deep = *deep;
     qk__run_shares(nw < nc ? nw : (unsigned)nc, hook_share, &wt);
   } else {
     qk__run_jobs_dynamic(nw, (unsigned)nc, fine_job, &j);

@@ -94,6 +94,9 @@ void qk__free(const qk_allocator_t *a, void *ptr, size_t size);
 /* Ask for transparent huge pages over a large block from the default allocator (a hint;
  * index/hugepages.c). */
 void qk__advise_huge(const qk_allocator_t *a, void *p, size_t size);
+/* qk__advise_huge() by the tree's rule: every array with its huge_pages option, else
+ * arrays over 32 MB (index/tree.c). */
+void qk__tree_advise_huge(const qk_tree_t *t, void *p, size_t size);
 
 static inline bool qk__is_leaf(const qk__node_t *n) { return n->child == QK_NONE; }
 
@@ -218,6 +221,7 @@ qk_status_t qk__build_subtree(qk_tree_t *t, uint32_t node, qk__geom_t g);
 typedef struct qk__cell_wait qk__cell_wait_t;
 typedef struct qk__cell_hook {
   size_t deep_below;
+  size_t deep; /* set before fn runs: the sort's *deep */
   qk_status_t (*fn)(void *ctx, const uint32_t *cum, qk__cell_wait_t *wait);
   void *ctx;
   bool ran;

@@ -86,6 +86,15 @@ qk_status_t qk__reserve_nodes(qk_tree_t *t, uint32_t extra) {
               sizeof(qk__block_t));
 }
 
+void qk__tree_advise_huge(const qk_tree_t *t, void *p, size_t size) {
+  /* With the tree's option every array, else those over 32 MB (more than 4M points for
+   * the coordinates, 8M for the ids, 2M nodes): glibc maps such a block afresh for every
+   * call and unmaps it when freed, so that each build would fault it in 4 KB at a time
+   * (15-31 us a fault in the PVM guest of this work; see qk__cell_sort()'s record block).
+   * Smaller arrays come from the heap, faulted once and reused, and are left alone. */
+  if (t->huge_pages || size > ((size_t)32 << 20)) qk__advise_huge(&t->alloc, p, size);
+}
+
 /* A set of the three parallel point arrays. */
 typedef struct slots {
   double *x, *y;
@@ -104,18 +113,9 @@ static qk_status_t slots_alloc(const qk_tree_t *t, size_t cap, slots_t *s) {
   s->y = qk__realloc(a, NULL, 0, cap * sizeof(double));
   s->id = qk__realloc(a, NULL, 0, cap * sizeof(qk_id_t));
   if (s->x && s->y && s->id) {
-    /* With the tree's option every array, else those over 32 MB (more than 4M points for
-     * the coordinates, 8M for the ids): glibc maps such a block afresh for every call and
-     * unmaps it when freed, so that each build would fault it in 4 KB at a time (15-31 us a
-     * fault in the PVM guest of this work; see qk__cell_sort()'s record block). Smaller
-     * arrays come from the heap, faulted once and reused, and are left alone. */
-    const size_t big = (size_t)32 << 20;
-    if (t->huge_pages || cap * sizeof(double) > big) {
-      qk__advise_huge(a, s->x, cap * sizeof(double));
-      qk__advise_huge(a, s->y, cap * sizeof(double));
-    }
-    if (t->huge_pages || cap * sizeof(qk_id_t) > big)
-      qk__advise_huge(a, s->id, cap * sizeof(qk_id_t));
+    qk__tree_advise_huge(t, s->x, cap * sizeof(double));
+    qk__tree_advise_huge(t, s->y, cap * sizeof(double));
+    qk__tree_advise_huge(t, s->id, cap * sizeof(qk_id_t));
     return QK_OK;
   }
   slots_free(a, s, cap);
