@@ -562,11 +562,18 @@ static int inside_root(const qk_tree_t *t, double x, double y) {
  * capacity. The recursion depth is bounded by max_depth. */
 qk_status_t qk__build_subtree(qk_tree_t *t, uint32_t node, qk__geom_t g) {
   if (t->nodes[node].count <= t->capacity || !qk__can_split(t, g)) return QK_OK;
-  qk_status_t st = qk__reserve_nodes(t, 4);
-  if (st) return st;
+  qk_status_t st;
+  if (t->free_block == QK_NONE &&
+      (t->n_nodes + 4 > t->cap_nodes || (t->n_nodes + 3) / 4 > t->cap_blocks) &&
+      (st = qk__reserve_nodes(t, 4)))
+    return st;
   uint32_t b = qk__split(t, node, g);
+  /* Only the children over capacity are visited (most are leaves at once: a call each
+   * was a tenth of a capacity-1 build). */
   for (uint32_t q = 0; q < 4; q++)
-    if ((st = qk__build_subtree(t, b + q, qk__child_geom(t, g, q)))) return st;
+    if (t->nodes[b + q].count > t->capacity &&
+        (st = qk__build_subtree(t, b + q, qk__child_geom(t, g, q))))
+      return st;
   return QK_OK;
 }
 
