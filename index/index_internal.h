@@ -70,6 +70,7 @@ struct qk_tree {
   uint32_t n_slots;   /* slots used (high-water mark) */
   uint32_t cap_slots; /* slots allocated */
   uint32_t garbage;   /* slots inside [0, n_slots) owned by no leaf */
+  uint32_t spare;     /* room the last compaction left in leaves beyond their points */
 
   /* Id map: where[id] is the slot of point id, or QK_NONE once removed. A bulk build
    * does not make it (it costs a random write per point and 4 bytes per point): it is

@@ -154,18 +154,25 @@ static qk_status_t reserve_slots(qk_tree_t *t, size_t need) {
 /* The room a full leaf of `count` points gets when it moves to the tail. */
 static uint32_t grown_room(uint32_t count) { return count + count / 4 + 2; }
 
-/* The room a leaf of `count` points keeps through a compaction: a thirty-second more,
- * so that a leaf of thousands of copies of one point at the depth cap is not full, and
- * moved to the tail by the next insertion into it, after every compaction. */
-static uint32_t compact_room(uint32_t count) { return count + count / 32; }
+/* The room a leaf of `count` points keeps through a compaction: an eighth more from 8
+ * points on, a thirty-second below (so that a leaf of thousands of copies of one point at
+ * the depth cap is not full either). A compaction that left every leaf full had the next
+ * insert into each move it to the tail, abandoning its block: at capacity 32 the
+ * abandoned blocks set off the next compaction after about n / 500 inserts, and 1M
+ * inserts copied some 500 slots each (8.4 s). */
+static uint32_t compact_room(uint32_t count) {
+  return count + (count >= 8 ? count / 8 : count / 32);
+}
 
 /* Rewrite the point arrays with every leaf's block in pre-order, each with its
  * compact_room, leaving `headroom` free slots at the end; leaf `grow` (or QK_NONE), which
  * is about to take a point, gets its grown room, so that it does not move to the tail
  * right after. Allocates fresh arrays; on failure nothing changes. */
 static qk_status_t compact(qk_tree_t *t, size_t headroom, uint32_t grow) {
-  size_t live = t->n_points, ncap = live + live / 32 + headroom;
-  if (grow != QK_NONE) ncap += grown_room(t->nodes[grow].count);
+  size_t ncap = headroom;
+  for (uint32_t v = 0; v < t->n_nodes; v++)
+    if (qk__live(t, v) && qk__is_leaf(&t->nodes[v]))
+      ncap += v == grow ? grown_room(t->nodes[v].count) : compact_room(t->nodes[v].count);
   if (ncap < 16) ncap = 16;
   if (ncap > UINT32_MAX) return QK_ERR_LIMIT;
   slots_t s;
@@ -194,23 +201,28 @@ static qk_status_t compact(qk_tree_t *t, size_t headroom, uint32_t grow) {
     pos += n->room;
   }
   slots_install(t, s, ncap);
+  t->spare = pos - (uint32_t)t->n_points;
   t->n_slots = pos;
   t->garbage = 0;
   return QK_OK;
 }
 
-/* Make sure `extra` slots are free at the end of the point arrays. When more than a
- * sixteenth of the used slots hold no point (garbage, or room reserved in leaves), the
- * arrays are compacted, with a thirty-second of headroom, rather than grown: so the arrays
- * of a tree under churn stay within about a sixth of its points (issue 10). A compaction
- * costs O(n) and comes after Omega(n / 32) slots were abandoned (its leaves keep at most
- * a thirty-second as room), so O(1) amortised each. `grow` is the leaf that is to take a
- * point next (or QK_NONE): the compaction gives it room, else a big leaf would move to the
- * tail right after, abandon its block, and so set off the next compaction. */
+/* Make sure `extra` slots are free at the end of the point arrays. The arrays are
+ * compacted, with a sixteenth of headroom, rather than grown when that gives back at least
+ * a thirty-second of the points (slots that are neither points nor the room the last
+ * compaction left in leaves) and either more than a sixteenth is garbage (blocks that
+ * leaves abandoned) or growing would take the arrays past a fifth over the points: so the
+ * arrays of a tree under churn stay within about a fifth of its points (issue 10), and a
+ * growing tree grows. A compaction costs O(n) and comes after Omega(n / 32) slots were
+ * abandoned, so O(1) amortised each. `grow` is the leaf that is to take a point next (or
+ * QK_NONE): the compaction gives it room, else a big leaf would move to the tail right
+ * after, abandon its block, and so set off the next compaction. */
 static qk_status_t reserve_tail(qk_tree_t *t, size_t extra, uint32_t grow) {
   if ((size_t)t->n_slots + extra <= t->cap_slots) return QK_OK;
-  if (t->n_slots - t->n_points > t->n_points / 16)
-    return compact(t, t->n_points / 32 + extra, grow);
+  size_t n = t->n_points, slack = t->n_slots - n;
+  size_t grown = (size_t)t->cap_slots + t->cap_slots / 8 + 16; /* as reserve_slots grows */
+  if (slack > t->spare + n / 32 && (t->garbage > n / 16 || grown > n + n / 5))
+    return compact(t, n / 16 + extra, grow);
   return reserve_slots(t, (size_t)t->n_slots + extra);
 }
 
@@ -641,6 +653,7 @@ static qk_status_t fill(qk_tree_t *t, const qk_point_t *points, size_t n, qk_squ
   t->n_free_blocks = 0;
   t->refined = false;
   t->garbage = 0;
+  t->spare = 0;
   t->n_slots = t->n_ids = 0;
   t->n_points = 0;
   t->n_nodes = 0;
