@@ -169,10 +169,15 @@ static uint32_t compact_room(uint32_t count) {
  * is about to take a point, gets its grown room, so that it does not move to the tail
  * right after. Allocates fresh arrays; on failure nothing changes. */
 static qk_status_t compact(qk_tree_t *t, size_t headroom, uint32_t grow) {
+  /* The arrays' size: every live leaf's room (the root, then the blocks in use). */
   size_t ncap = headroom;
-  for (uint32_t v = 0; v < t->n_nodes; v++)
-    if (qk__live(t, v) && qk__is_leaf(&t->nodes[v]))
-      ncap += v == grow ? grown_room(t->nodes[v].count) : compact_room(t->nodes[v].count);
+  const qk__node_t *nd = t->nodes;
+  if (qk__is_leaf(&nd[0])) ncap += compact_room(nd[0].count);
+  for (uint32_t b = 1; b + 3 < t->n_nodes; b += 4)
+    if (t->blocks[(b - 1) >> 2].live)
+      for (uint32_t v = b; v < b + 4; v++)
+        if (qk__is_leaf(&nd[v])) ncap += compact_room(nd[v].count);
+  if (grow != QK_NONE) ncap += grown_room(nd[grow].count) - compact_room(nd[grow].count);
   if (ncap < 16) ncap = 16;
   if (ncap > UINT32_MAX) return QK_ERR_LIMIT;
   slots_t s;
@@ -191,9 +196,16 @@ static qk_status_t compact(qk_tree_t *t, size_t headroom, uint32_t grow) {
       for (int c = 3; c >= 0; c--) stack[top++] = n->child + (uint32_t)c;
       continue;
     }
-    memcpy(nx + pos, t->px + n->start, (size_t)n->count * sizeof(double));
-    memcpy(ny + pos, t->py + n->start, (size_t)n->count * sizeof(double));
-    memcpy(ni + pos, t->pid + n->start, (size_t)n->count * sizeof(qk_id_t));
+    const uint32_t from = n->start;
+    if (n->count == 1) { /* (most leaves of a small capacity hold one point or none) */
+      nx[pos] = t->px[from];
+      ny[pos] = t->py[from];
+      ni[pos] = t->pid[from];
+    } else if (n->count > 1) {
+      memcpy(nx + pos, t->px + from, (size_t)n->count * sizeof(double));
+      memcpy(ny + pos, t->py + from, (size_t)n->count * sizeof(double));
+      memcpy(ni + pos, t->pid + from, (size_t)n->count * sizeof(qk_id_t));
+    }
     if (w)
       for (uint32_t i = 0; i < n->count; i++) w[ni[pos + i]] = pos + i;
     n->start = pos;
