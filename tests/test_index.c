@@ -900,6 +900,23 @@ static void *counting_alloc(void *ud, void *ptr, size_t osize, size_t nsize) {
   return realloc(ptr, nsize);
 }
 
+/* An empty tree over [0,1]^2 at `capacity` whose allocations go through `a` (a
+ * counting_alloc). */
+static qk_tree_t *counted_tree(unsigned capacity, qk_allocator_t *a) {
+  qk_tree_options_t o = qkt_unit_options(capacity, a);
+  qk_tree_t *t;
+  assert_int_equal(qk_tree_build(NULL, 0, &o, &t), QK_OK);
+  return t;
+}
+
+/* The bytes a counted tree asked for against what it holds: more than `bound` times fails. */
+static void assert_linear_work(const char *what, size_t bytes, const qk_tree_t *t, size_t bound) {
+  size_t mem = qk_tree_memory(t);
+  print_message("%s: %zu bytes asked for, %zu held (%.1fx)\n", what, bytes, mem,
+                (double)bytes / (double)mem);
+  if (bytes > bound * mem) fail_msg("%s: %zu bytes allocated for a tree of %zu", what, bytes, mem);
+}
+
 static void test_index_insert_duplicates_linear(void **state) {
   (void)state;
   const int spots[] = {1, 5, 50};
@@ -907,26 +924,17 @@ static void test_index_insert_duplicates_linear(void **state) {
   for (size_t k = 0; k < sizeof spots / sizeof *spots; k++) {
     size_t bytes = 0;
     qk_allocator_t a = {counting_alloc, &bytes};
-    qk_tree_options_t o;
-    qk_tree_options_init(&o);
-    o.capacity = 8;
-    o.has_root = 1;
-    o.root = (qk_square_t){0, 0, 1};
-    o.allocator = &a;
-    qk_tree_t *t;
-    assert_int_equal(qk_tree_build(NULL, 0, &o, &t), QK_OK);
+    qk_tree_t *t = counted_tree(8, &a);
     for (uint32_t i = 0; i < N; i++) { /* the spots in a scrambled order */
       uint32_t s = (uint32_t)((i * 2654435761u) % (uint32_t)spots[k]);
       assert_int_equal(qk_tree_insert(t, (qk_point_t){(s + 0.5) / spots[k], 0.5}, NULL), QK_OK);
     }
     QKT_CHECK_TREE(t);
-    size_t mem = qk_tree_memory(t);
-    print_message("%d spots: %zu bytes asked for, %zu held (%.1fx)\n", spots[k], bytes, mem,
-                  (double)bytes / (double)mem);
     /* Here 5x, 9x and 20x of the final size (3x, 33x and 53x before the thirtieth
      * session); 7,500x for 5 spots before the first fix. */
-    if (bytes > 100 * mem)
-      fail_msg("%d spots: %zu bytes allocated for a tree of %zu", spots[k], bytes, mem);
+    char what[32];
+    snprintf(what, sizeof what, "%d spots", spots[k]);
+    assert_linear_work(what, bytes, t, 100);
     qk_tree_free(t);
   }
 }
@@ -948,14 +956,7 @@ static void test_index_insert_uniform_linear(void **state) {
   for (size_t k = 0; k < sizeof caps / sizeof *caps; k++) {
     size_t bytes = 0;
     qk_allocator_t a = {counting_alloc, &bytes};
-    qk_tree_options_t o;
-    qk_tree_options_init(&o);
-    o.capacity = caps[k];
-    o.has_root = 1;
-    o.root = (qk_square_t){0, 0, 1};
-    o.allocator = &a;
-    qk_tree_t *t;
-    assert_int_equal(qk_tree_build(NULL, 0, &o, &t), QK_OK);
+    qk_tree_t *t = counted_tree(caps[k], &a);
     qkt_points(&r, QKT_UNIFORM, p, N);
     for (uint32_t i = 0; i < N; i++) {
       qk_id_t id;
@@ -973,11 +974,9 @@ static void test_index_insert_uniform_linear(void **state) {
       assert_int_equal(qk_tree_point(t, i, &q), QK_OK);
       assert_true(q.x == p[i].x && q.y == p[i].y);
     }
-    size_t mem = qk_tree_memory(t);
-    print_message("capacity %u: %zu bytes asked for, %zu held (%.1fx)\n", caps[k], bytes, mem,
-                  (double)bytes / (double)mem);
-    if (bytes > 150 * mem)
-      fail_msg("capacity %u: %zu bytes allocated for a tree of %zu", caps[k], bytes, mem);
+    char what[32];
+    snprintf(what, sizeof what, "capacity %u", caps[k]);
+    assert_linear_work(what, bytes, t, 150);
     qk_tree_free(t);
   }
   free(p);

@@ -134,16 +134,6 @@ static void test_reliability_replay_world(void **state) {
 
 /* ---- allocation failure ------------------------------------------------------------ */
 
-static qk_tree_options_t opts_with(const qk_allocator_t *al, uint32_t capacity) {
-  qk_tree_options_t o;
-  qk_tree_options_init(&o);
-  o.capacity = capacity;
-  o.has_root = 1;
-  o.root = (qk_square_t){0, 0, 1};
-  o.allocator = al;
-  return o;
-}
-
 /* Shape of a tree, to tell whether a failed call changed it. */
 typedef struct shape {
   qk_tree_stats_t s;
@@ -174,7 +164,7 @@ static void sweep_tree_change(int which) {
   qkt_points(&r, QKT_CLUSTERED, p, N);
   qkt_alloc_t a;
   qk_allocator_t al = qkt_alloc_make(&a);
-  qk_tree_options_t o = opts_with(&al, 2);
+  qk_tree_options_t o = qkt_unit_options(2, &al);
   size_t failures = 0;
   for (size_t k = 1;; k++) {
     a.fail_at = 0;
@@ -342,7 +332,7 @@ static void test_reliability_queries_do_not_allocate(void **state) {
   qkt_points(&r, QKT_UNIFORM, p, N);
   qkt_alloc_t a;
   qk_allocator_t al = qkt_alloc_make(&a);
-  qk_tree_options_t o = opts_with(&al, 8);
+  qk_tree_options_t o = qkt_unit_options(8, &al);
   qk_tree_t *t;
   assert_int_equal(qk_tree_build(p, N, &o, &t), QK_OK);
   a.calls = 0;
@@ -381,7 +371,7 @@ static void test_reliability_batches_fall_back(void **state) {
   qkt_points(&r, QKT_UNIFORM, q, NQ);
   qkt_alloc_t a;
   qk_allocator_t al = qkt_alloc_make(&a);
-  qk_tree_options_t o = opts_with(&al, 8);
+  qk_tree_options_t o = qkt_unit_options(8, &al);
   qk_tree_t *t;
   assert_int_equal(qk_tree_build(p, N, &o, &t), QK_OK);
   static qk_neighbor_t ref[NQ * K], got[NQ * K];
@@ -583,7 +573,7 @@ static void test_reliability_limits(void **state) {
   (void)state;
   qkt_alloc_t a;
   qk_allocator_t al = qkt_alloc_make(&a);
-  qk_tree_options_t o = opts_with(&al, 1);
+  qk_tree_options_t o = qkt_unit_options(1, &al);
   qk_point_t one = {0.5, 0.5};
   qk_tree_t *t = (qk_tree_t *)&a;
   /* Counts past 32-bit ids are refused before the points are read or memory taken. */

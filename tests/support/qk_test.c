@@ -54,6 +54,16 @@ void qkt_points(qkt_rng_t *r, qkt_dist_t d, qk_point_t *out, size_t n) {
   }
 }
 
+qk_tree_options_t qkt_unit_options(uint32_t capacity, const qk_allocator_t *a) {
+  qk_tree_options_t o;
+  qk_tree_options_init(&o);
+  o.capacity = capacity;
+  o.has_root = 1;
+  o.root = (qk_square_t){0, 0, 1};
+  o.allocator = a;
+  return o;
+}
+
 uint64_t qkt_seed(uint64_t def) {
   const char *s = getenv("QK_SEED");
   uint64_t seed = s ? strtoull(s, NULL, 0) : def;

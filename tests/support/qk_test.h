@@ -53,6 +53,10 @@ typedef enum qkt_dist {
 } qkt_dist_t;
 void qkt_points(qkt_rng_t *r, qkt_dist_t d, qk_point_t *out, size_t n);
 
+/* Tree options over the unit square [0,1]^2 at `capacity`, allocations through `a` (NULL:
+ * libc); the rest the defaults. */
+qk_tree_options_t qkt_unit_options(uint32_t capacity, const qk_allocator_t *a);
+
 /* The seed for a test: QK_SEED from the environment, else `def`. Printed by the test. */
 uint64_t qkt_seed(uint64_t def);
 
