@@ -19,7 +19,8 @@
  *    are large enough; a bad point leaves the tree unchanged; allocation failure at every
  *    N leaves a valid tree and no leak; huge pages asked for change no result;
  *  - uniform inserts and moves one by one take linear work: the bytes the tree asks for
- *    stay within 150 times its final size at capacities 1, 16 and 32;
+ *    stay within 150 times its final size at capacities 1, 16 and 32; a bulk build at
+ *    capacity 1 and 4 asks for at most 4 times the tree it makes;
  *  - churn (issue 10): 10^5 random moves, removes and inserts keep ids below twice the
  *    live count and the tree within 1.2x the memory of a fresh build of the same points
  *    (both with their id map);
@@ -939,6 +940,34 @@ static void test_index_insert_duplicates_linear(void **state) {
   }
 }
 
+/* A bulk build at capacity 1 and 4 asks for little more than the tree it makes: its
+ * node array is reserved for the splits below the build's grid rather than grown an
+ * eighth at a time by them (about 30 copies of the array at capacity 1 before the
+ * thirtieth session). */
+static void test_index_build_small_capacity_linear(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, qkt_seed(32));
+  enum { N = 1 << 18 };
+  qk_point_t *p = malloc(N * sizeof *p);
+  assert_non_null(p);
+  qkt_points(&r, QKT_UNIFORM, p, N);
+  const unsigned caps[] = {1, 4};
+  for (size_t k = 0; k < sizeof caps / sizeof *caps; k++) {
+    size_t bytes = 0;
+    qk_allocator_t a = {counting_alloc, &bytes};
+    qk_tree_options_t o = qkt_unit_options(caps[k], &a);
+    qk_tree_t *t;
+    assert_int_equal(qk_tree_build(p, N, &o, &t), QK_OK);
+    QKT_CHECK_TREE(t);
+    char what[48];
+    snprintf(what, sizeof what, "build at capacity %u", caps[k]);
+    assert_linear_work(what, bytes, t, 4);
+    qk_tree_free(t);
+  }
+  free(p);
+}
+
 /* Uniform points inserted one by one into an empty tree, then moved one by one: the
  * bytes the tree asks for (each compaction and growth allocates the point arrays anew)
  * stay within a bound times its final size. Each compaction used to leave every leaf
@@ -1328,6 +1357,7 @@ int main(void) {
       cmocka_unit_test(test_index_visit_and_svg),
       cmocka_unit_test(test_index_lazy_id_map),
       cmocka_unit_test(test_index_rebuild),
+      cmocka_unit_test(test_index_build_small_capacity_linear),
       cmocka_unit_test(test_index_insert_uniform_linear),
       cmocka_unit_test(test_index_churn_memory),
       cmocka_unit_test(test_index_insert_duplicates_linear),
