@@ -260,13 +260,12 @@ static qk_status_t from_grid(qk_tree_t *t, qk__geom_t g, const uint32_t *cum, un
 typedef struct grid_hook {
   qk_tree_t *t;
   unsigned L;
-  const qk__cell_hook_t *hook;
 } grid_hook_t;
 
-static qk_status_t grid_hook(void *ctx, const uint32_t *cum, qk__cell_wait_t *wait) {
+static qk_status_t grid_hook(void *ctx, const uint32_t *cum, size_t deep, qk__cell_wait_t *wait) {
   const grid_hook_t *h = ctx;
   qk_tree_t *t = h->t;
-  return from_grid(t, (qk__geom_t){t->root_x, t->root_y, 0}, cum, h->L, h->hook->deep, 1, wait);
+  return from_grid(t, (qk__geom_t){t->root_x, t->root_y, 0}, cum, h->L, deep, 1, wait);
 }
 
 qk_status_t qk__build_bucketed(qk_tree_t *t, const qk_point_t *p, size_t n, bool *done) {
@@ -283,9 +282,8 @@ qk_status_t qk__build_bucketed(qk_tree_t *t, const qk_point_t *p, size_t n, bool
    * thread beside the sort's last pass (which had it wait 0.4 ms at 1M uniform points on
    * two threads: a twentieth of the build), waiting only for the buckets whose cells it
    * splits point by point. */
-  qk__cell_hook_t hook = {.deep_below = DEEP_MIN, .fn = grid_hook};
-  grid_hook_t gh = {t, L, &hook};
-  hook.ctx = &gh;
+  grid_hook_t gh = {t, L};
+  qk__cell_hook_t hook = {.deep_below = DEEP_MIN, .fn = grid_hook, .ctx = &gh};
   qk_status_t st = qk__cell_sort(t, p, n, L, nw, &hook, &cum, &deep);
   if (st || !cum) return st; /* !cum: badly conditioned, the plain build runs */
   if (hook.ran) {

@@ -844,6 +844,7 @@ static void fine_job(unsigned c, unsigned w, void *ud) {
 struct qk__cell_wait {
   const bucket_job_t *j;
   qk__cell_hook_t *hook;
+  size_t deep; /* the points in cells over the capacity, for the hook */
   atomic_uint next;
   atomic_uchar state[1u << MAX_COARSE_BITS];
 };
@@ -882,7 +883,7 @@ void qk__cell_wait(qk__cell_wait_t *s, uint32_t cell) {
 static void hook_share(void *ctx, unsigned w, unsigned nw) {
   (void)nw;
   qk__cell_wait_t *s = ctx;
-  if (w == 0) s->hook->st = s->hook->fn(s->hook->ctx, s->j->cum, s);
+  if (w == 0) s->hook->st = s->hook->fn(s->hook->ctx, s->j->cum, s->deep, s);
   for (;;) {
     unsigned c = atomic_fetch_add_explicit(&s->next, 1u, memory_order_relaxed);
     if (c >= s->j->nc) return;
@@ -1061,8 +1062,8 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
     wt.hook = hook;
     atomic_init(&wt.next, 0u);
     for (size_t c = 0; c < nc; c++) atomic_init(&wt.state[c], 0);
+    wt.deep = *deep;
     hook->ran = true;
-    hook->deep = *deep;
     qk__run_shares(nw < nc ? nw : (unsigned)nc, hook_share, &wt);
   } else {
     qk__run_jobs_dynamic(nw, (unsigned)nc, fine_job, &j);

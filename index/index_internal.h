@@ -217,13 +217,13 @@ qk_status_t qk__build_subtree(qk_tree_t *t, uint32_t node, qk__geom_t g);
 /* Work that qk__cell_sort() runs on the calling thread beside its last pass (the points
  * sorted bucket by bucket on the other threads), when it runs on several threads with the
  * default allocator and fewer than deep_below points lie in cells over the capacity: fn
- * gets the 4^L + 1 bucket starts, and must call qk__cell_wait() before it reads or moves
+ * gets the 4^L + 1 bucket starts and the points in cells over the capacity (`deep`, as
+ * qk__cell_sort returns it), and must call qk__cell_wait() before it reads or moves
  * the points of a cell. `ran` and `st` say whether it ran and what it returned. */
 typedef struct qk__cell_wait qk__cell_wait_t;
 typedef struct qk__cell_hook {
   size_t deep_below;
-  size_t deep; /* set before fn runs: the sort's *deep */
-  qk_status_t (*fn)(void *ctx, const uint32_t *cum, qk__cell_wait_t *wait);
+  qk_status_t (*fn)(void *ctx, const uint32_t *cum, size_t deep, qk__cell_wait_t *wait);
   void *ctx;
   bool ran;
   qk_status_t st;

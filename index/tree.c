@@ -132,13 +132,16 @@ static void slots_install(qk_tree_t *t, slots_t s, size_t cap) {
   t->cap_slots = (uint32_t)cap;
 }
 
+/* The point arrays' next size when they grow: an eighth more (and 16). */
+static size_t slots_step(size_t cap) { return cap + cap / 8 + 16; }
+
 /* Grow the three point arrays together to at least `need` slots. */
 static qk_status_t reserve_slots(qk_tree_t *t, size_t need) {
   if (need <= t->cap_slots) return QK_OK;
   if (need > UINT32_MAX) return QK_ERR_LIMIT;
   /* The first allocation (a bulk build) is exact; growth is by an eighth. */
   size_t ncap = t->cap_slots ? (size_t)t->cap_slots : need;
-  while (ncap < need) ncap += ncap / 8 + 16;
+  while (ncap < need) ncap = slots_step(ncap);
   if (ncap > UINT32_MAX) ncap = UINT32_MAX;
   slots_t s;
   if (slots_alloc(t, ncap, &s)) return QK_ERR_NOMEM;
@@ -232,8 +235,7 @@ static qk_status_t compact(qk_tree_t *t, size_t headroom, uint32_t grow) {
 static qk_status_t reserve_tail(qk_tree_t *t, size_t extra, uint32_t grow) {
   if ((size_t)t->n_slots + extra <= t->cap_slots) return QK_OK;
   size_t n = t->n_points, slack = t->n_slots - n;
-  size_t grown = (size_t)t->cap_slots + t->cap_slots / 8 + 16; /* as reserve_slots grows */
-  if (slack > t->spare + n / 32 && (t->garbage > n / 16 || grown > n + n / 5))
+  if (slack > t->spare + n / 32 && (t->garbage > n / 16 || slots_step(t->cap_slots) > n + n / 5))
     return compact(t, n / 16 + extra, grow);
   return reserve_slots(t, (size_t)t->n_slots + extra);
 }
