@@ -19,8 +19,23 @@
  * its address. Once the mesh is made the arena is sealed: from then on it only passes new
  * blocks to libc and counts frees of its own blocks, so threads that read (write out) one
  * mesh at once never change it; its chunks go when the mesh is freed.
+ *
+ * Chunks kept between meshes (thirty-first session). A chunk given back goes to a
+ * process-wide cache of at most KEEP_BYTES instead of to the kernel, and the next
+ * arena's chunks come from there first (the smallest kept mapping that holds the size,
+ * whose rest stays kept). Why: on this guest, memory newly mapped after other code has
+ * used and freed much of it costs far more to touch than memory reused at once (the host
+ * backs it again): the bench's coastline meshes, each timed right after a CGAL or gmsh
+ * run, took 1.5-2.5x as long as the same call repeated (Iceland at extent/256: 34-71 ms
+ * against 19-20), with almost no page faults counted in the process. Kept chunks keep
+ * their pages. A kept chunk is handed out as it was left (nothing in the mesher reads a
+ * block before writing it; test_mesh_arena_reuse fills the kept chunks with garbage
+ * and meshes again). qk_mesh_trim() gives the cache back. The cache's lock is only
+ * ever tried: a thread that finds it taken maps or unmaps by itself, so no thread
+ * waits and a child forked while another thread held it still works.
  */
 #define _DEFAULT_SOURCE
+#include <stdatomic.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
@@ -74,9 +89,81 @@ qk__mesh_arena_t *qk__mesh_arena_new(void) {
 }
 
 #if ARENA_ON
+/* The kept chunks: mappings of whole CHUNKs, oldest first, KEEP_BYTES at most. */
+#define KEEP_BYTES ((size_t)64 << 20)
+#define KEEP_SLOTS 64
+static struct {
+  char *base;
+  size_t size;
+} keep[KEEP_SLOTS];
+static size_t keep_n, keep_bytes;
+static atomic_flag keep_lock = ATOMIC_FLAG_INIT;
+
+static int keep_take(void) {
+  return !atomic_flag_test_and_set_explicit(&keep_lock, memory_order_acquire);
+}
+static void keep_give(void) { atomic_flag_clear_explicit(&keep_lock, memory_order_release); }
+
+/* The oldest kept mapping unmapped and dropped (lock held). */
+static void keep_drop_oldest(void) {
+  munmap(keep[0].base, keep[0].size);
+  keep_bytes -= keep[0].size;
+  memmove(keep, keep + 1, --keep_n * sizeof *keep);
+}
+
+/* `size` bytes from the smallest kept mapping that holds them, or NULL. */
+static char *keep_get(size_t size) {
+  if (!keep_take()) return NULL;
+  size_t best = keep_n;
+  for (size_t i = 0; i < keep_n; i++)
+    if (keep[i].size >= size && (best == keep_n || keep[i].size < keep[best].size)) best = i;
+  char *p = NULL;
+  if (best < keep_n) {
+    p = keep[best].base;
+    keep_bytes -= size;
+    if (keep[best].size > size)
+      keep[best].base += size, keep[best].size -= size;
+    else
+      memmove(keep + best, keep + best + 1, (--keep_n - best) * sizeof *keep);
+  }
+  keep_give();
+  return p;
+}
+
+/* Keep a mapping for later arenas; 0 when it is not kept (too large, or the lock taken). */
+static int keep_put(char *base, size_t size) {
+  if (size > KEEP_BYTES || !keep_take()) return 0;
+  while (keep_n && (keep_n == KEEP_SLOTS || keep_bytes + size > KEEP_BYTES)) keep_drop_oldest();
+  keep[keep_n].base = base, keep[keep_n].size = size;
+  keep_n++, keep_bytes += size;
+  keep_give();
+  return 1;
+}
+
+void qk_mesh_trim(void) {
+  if (!keep_take()) return; /* another thread is at the cache: it stays as it is */
+  while (keep_n) keep_drop_oldest();
+  keep_give();
+}
+
+size_t qk__mesh_arena_kept_bytes(void) {
+  if (!keep_take()) return 0;
+  size_t n = keep_bytes;
+  keep_give();
+  return n;
+}
+
+void qk__mesh_arena_poison_kept(unsigned char byte) {
+  if (!keep_take()) return;
+  for (size_t i = 0; i < keep_n; i++) memset(keep[i].base, byte, keep[i].size);
+  keep_give();
+}
+
 /* A mapping of `size` bytes (a multiple of CHUNK) aligned to CHUNK, marked for huge pages;
  * NULL when the kernel refuses. */
 static char *map_chunk(size_t size) {
+  char *k = keep_get(size);
+  if (k) return k;
   char *p = mmap(NULL, size + CHUNK, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
   if (p == MAP_FAILED) return NULL;
   uintptr_t a = ((uintptr_t)p + CHUNK - 1) & ~(uintptr_t)(CHUNK - 1);
@@ -87,12 +174,17 @@ static char *map_chunk(size_t size) {
   return (char *)a;
 }
 
-static void unmap_chunk(chunk_t *c) { munmap(c->base, c->size); }
+static void unmap_chunk(chunk_t *c) {
+  if (!keep_put(c->base, c->size)) munmap(c->base, c->size);
+}
 #else
 /* Elsewhere (and under AddressSanitizer) the mesher does not use the arena; its chunks
  * come from malloc so that the tests still run its bookkeeping. */
 static char *map_chunk(size_t size) { return malloc(size); }
 static void unmap_chunk(chunk_t *c) { free(c->base); }
+void qk_mesh_trim(void) {}
+size_t qk__mesh_arena_kept_bytes(void) { return 0; }
+void qk__mesh_arena_poison_kept(unsigned char byte) { (void)byte; }
 #endif
 
 void qk__mesh_arena_free(qk__mesh_arena_t *r) {

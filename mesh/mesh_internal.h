@@ -64,6 +64,10 @@ qk__mesh_arena_t *qk__mesh_arena_new(void);
 void *qk__mesh_arena_fn(void *ud, void *ptr, size_t osize, size_t nsize);
 void qk__mesh_arena_seal(qk__mesh_arena_t *r);
 void qk__mesh_arena_free(qk__mesh_arena_t *r);
+/* Tests: the bytes of chunks kept for later meshes (qk_mesh_trim), and every kept
+ * chunk filled with `byte`. */
+size_t qk__mesh_arena_kept_bytes(void);
+void qk__mesh_arena_poison_kept(unsigned char byte);
 
 struct qk_mesh {
   qk_allocator_t alloc;

@@ -14,7 +14,12 @@
  *    .node/.ele/.poly text the same; the arena ran where it is available; writing the
  *    mesh from the arena's mesh works (its sealed arena passes new blocks to libc);
  *  - the same for the general mode, on the bench's kind of random polygon with holes (a
- *    star-shaped outer ring of 512 corners, star-shaped holes inside, on the grid 2^-20).
+ *    star-shaped outer ring of 512 corners, star-shaped holes inside, on the grid 2^-20);
+ *  - in each of those, the chunks a freed mesh leaves kept for the next (qk_mesh_trim):
+ *    where the arena runs, freeing the arena's mesh keeps some, they are filled with
+ *    garbage, and the same input meshed again takes kept chunks (fewer kept bytes after)
+ *    and gives the same mesh, bit for bit: nothing may read a block before writing it;
+ *    qk_mesh_trim() leaves none kept.
  */
 #define _DEFAULT_SOURCE /* open_memstream */
 #include <math.h>
@@ -164,8 +169,32 @@ static void same_mesh(const qk_poly_t *p, qk_mesh_options_t o) {
   assert_memory_equal(xa, xb, la);
   free(xa), free(xb);
   qk_mesh_free(ma);
+  /* Again with the arena, from the kept chunks filled with garbage. */
+  const size_t kept = qk__mesh_arena_kept_bytes();
+  assert_true((kept > 0) == (qk__mesh_arena_available() != 0));
+  qk__mesh_arena_poison_kept(0xa5);
+  o.allocator = NULL;
+  if (qk_mesh_generate(p, &o, &ma, &err)) fail_msg("%s", err.message);
+  if (kept) assert_true(qk__mesh_arena_kept_bytes() < kept);
+  va = qk_mesh_vertices(ma, &nva), ta = qk_mesh_triangles(ma, &nta);
+  assert_int_equal(nva, nvb);
+  assert_int_equal(nta, ntb);
+  assert_memory_equal(va, vb, 2 * nva * sizeof *va);
+  assert_memory_equal(ta, tb, 3 * nta * sizeof *ta);
+  assert_memory_equal(qk_mesh_triangle_components(ma, NULL), qk_mesh_triangle_components(mb, NULL),
+                      nta * sizeof(uint32_t));
+  qk_mesh_stats(ma, &sa);
+  sa.seconds_validate = sa.seconds_subdivide = sa.seconds_balance = sa.seconds_triangulate = 0;
+  assert_memory_equal(&sa, &sb, sizeof sa);
+  xa = mesh_text(ma, &la), xb = mesh_text(mb, &lb);
+  assert_int_equal(la, lb);
+  assert_memory_equal(xa, xb, la);
+  free(xa), free(xb);
+  qk_mesh_free(ma);
   qk_mesh_free(mb);
   assert_int_equal(st.live_blocks, 0);
+  qk_mesh_trim();
+  assert_int_equal(qk__mesh_arena_kept_bytes(), 0);
 }
 
 static void test_mesh_arena_same_mesh(void **state) {

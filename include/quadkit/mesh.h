@@ -203,7 +203,8 @@ typedef struct qk_mesh_options {
   uint64_t size;
   /** Allocator for the mesh and its tree; NULL means libc (on Linux the mesher then
    *  takes blocks of 64 KB and more from 2 MB chunks of their own, mapped
-   *  with transparent huge pages and kept until qk_mesh_free(); docs/mesh.md, "Speed"). */
+   *  with transparent huge pages and kept until qk_mesh_free(), after which up to 64 MB
+   *  of them stay mapped for the next mesh until qk_mesh_trim(); docs/mesh.md, "Speed"). */
   const qk_allocator_t *allocator;
   /** Which mesher; QK_MESH_AUTO by default. */
   qk_mesh_mode_t mode;
@@ -249,6 +250,14 @@ qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *opt
 
 /** Free a mesh; NULL is a no-op. */
 void qk_mesh_free(qk_mesh_t *mesh);
+
+/**
+ * Give back to the system the memory the mesher keeps mapped for later meshes (up to
+ * 64 MB of the chunks of freed meshes made without an allocator; see
+ * qk_mesh_options_t.allocator). Safe from any thread; a call made while another thread
+ * is taking or returning chunks returns without trimming.
+ */
+void qk_mesh_trim(void);
 
 /**
  * The mesh vertices as 2*n doubles (x, y), borrowed until qk_mesh_free().
