@@ -355,11 +355,12 @@ bool quadkit_mesh_dyadic(const std::vector<Ring> &rings, double max_edge, MeshRe
 }
 
 bool quadkit_mesh_general(const Pslg &in, double max_edge, MeshResult &out, std::string *err,
-                          size_t *exempt) {
+                          size_t *exempt, double min_angle_deg) {
   qk_mesh_options_t o;
   qk_mesh_options_init(&o);
   o.mode = QK_MESH_GENERAL;
   o.max_size = max_edge;
+  o.min_angle_deg = min_angle_deg;
   double t0 = now_seconds();
   qk_poly_t *poly = nullptr;
   qk_mesh_error_t e;

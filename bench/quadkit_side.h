@@ -48,9 +48,10 @@ bool quadkit_mesh_dyadic(const std::vector<Ring> &rings, double max_edge, MeshRe
 
 // The general mode (QK_MESH_GENERAL) with a longest-edge bound (0: none); the time
 // includes making the input from the arrays. The mesh's exempt angles (inside input
-// angles below 60 degrees) are counted in *exempt when not NULL.
+// angles below 60 degrees) are counted in *exempt when not NULL. min_angle_deg: the
+// mode's option (0: its default, the proven 20 degrees).
 bool quadkit_mesh_general(const Pslg &in, double max_edge, MeshResult &out, std::string *err,
-                          size_t *exempt = nullptr);
+                          size_t *exempt = nullptr, double min_angle_deg = 0);
 
 // Geodesic kNN through qk_geo_knn().
 struct QuadkitGeo;

@@ -10,7 +10,10 @@
  *    leaves, leaf points, stats, qk_tree_check, is_balanced, collider box/disc queries,
  *    pairs and ray casts, geodesic kNN and radius, and the mesh and tree writers into
  *    memory streams;
- *  - several threads mesh one .poly input at once and get the same mesh;
+ *  - several threads mesh one .poly input at once, three times each, and get the same
+ *    mesh; again with a general-mode input large enough for the mesher's arena, whose
+ *    kept chunks (mesh.h, qk_mesh_trim) the threads then take and give back at once, one
+ *    of them trimming the cache meanwhile;
  *  - the library's own threads (issue 11): a bulk build and the kNN, locate and radius
  *    batches with threads = 2 and 0 (every core) give exactly what one thread gives;
  *  - scripts/tsan.sh runs this test under ThreadSanitizer, which reports any data race
@@ -308,23 +311,44 @@ typedef struct gen_job {
   const qk_poly_t *poly;
   size_t nt, nv;
   const qk_mesh_t *ref;
+  const qk_mesh_options_t *opt;
   int bad;
 } gen_job_t;
 
 static void *gen_one(void *arg) {
   gen_job_t *j = arg;
-  qk_mesh_t *m;
-  if (qk_mesh_generate(j->poly, NULL, &m, NULL) != QK_OK) {
-    j->bad = 1;
-    return NULL;
+  for (int round = 0; round < ROUNDS && !j->bad; round++) {
+    qk_mesh_t *m;
+    if (qk_mesh_generate(j->poly, j->opt, &m, NULL) != QK_OK) {
+      j->bad = 1;
+      return NULL;
+    }
+    size_t nt, nv, rt, rv;
+    const uint32_t *tri = qk_mesh_triangles(m, &nt), *rtri = qk_mesh_triangles(j->ref, &rt);
+    const double *xy = qk_mesh_vertices(m, &nv), *rxy = qk_mesh_vertices(j->ref, &rv);
+    j->bad = nt != rt || nv != rv || memcmp(tri, rtri, 3 * nt * sizeof *tri) ||
+             memcmp(xy, rxy, 2 * nv * sizeof *xy);
+    qk_mesh_free(m);
+    if (round == 1) qk_mesh_trim(); /* while the others take and give back chunks */
   }
-  size_t nt, nv, rt, rv;
-  const uint32_t *tri = qk_mesh_triangles(m, &nt), *rtri = qk_mesh_triangles(j->ref, &rt);
-  const double *xy = qk_mesh_vertices(m, &nv), *rxy = qk_mesh_vertices(j->ref, &rv);
-  j->bad = nt != rt || nv != rv || memcmp(tri, rtri, 3 * nt * sizeof *tri) ||
-           memcmp(xy, rxy, 2 * nv * sizeof *xy);
-  qk_mesh_free(m);
   return NULL;
+}
+
+/* THREADS threads mesh poly ROUNDS times each with options o, each mesh compared with
+ * one made first on this thread. */
+static void generate_on_threads(const qk_poly_t *poly, const qk_mesh_options_t *o) {
+  qk_mesh_t *ref;
+  assert_int_equal(qk_mesh_generate(poly, o, &ref, NULL), QK_OK);
+  gen_job_t jobs[THREADS];
+  for (unsigned t = 0; t < THREADS; t++) {
+    jobs[t] = (gen_job_t){.poly = poly, .ref = ref, .opt = o};
+    assert_int_equal(pthread_create(&jobs[t].th, NULL, gen_one, &jobs[t]), 0);
+  }
+  for (unsigned t = 0; t < THREADS; t++) {
+    assert_int_equal(pthread_join(jobs[t].th, NULL), 0);
+    assert_int_equal(jobs[t].bad, 0);
+  }
+  qk_mesh_free(ref);
 }
 
 static void test_reliab_threads_generate_from_one_input(void **state) {
@@ -341,18 +365,24 @@ static void test_reliab_threads_generate_from_one_input(void **state) {
   fclose(f);
   qk_mesh_options_t mo;
   qk_mesh_options_init(&mo);
-  qk_mesh_t *ref;
-  assert_int_equal(qk_mesh_generate(poly, &mo, &ref, NULL), QK_OK);
-  gen_job_t jobs[THREADS];
-  for (unsigned t = 0; t < THREADS; t++) {
-    jobs[t] = (gen_job_t){.poly = poly, .ref = ref};
-    assert_int_equal(pthread_create(&jobs[t].th, NULL, gen_one, &jobs[t]), 0);
+  generate_on_threads(poly, &mo);
+  qk_poly_free(poly);
+  /* Large enough for the mesher's arena (blocks of 64 KB and more), whose chunks freed
+   * meshes leave kept for the next: a 256-gon of radius 1 on the grid 2^-20 in the
+   * general mode, edges at most 1/32 (some 20,000 triangles). */
+  enum { K = 256 };
+  double xy[2 * K];
+  uint32_t seg[2 * K];
+  for (uint32_t i = 0; i < K; i++) {
+    double a = 2 * 3.14159265358979323846 * i / K;
+    xy[2 * i] = nearbyint(ldexp(cos(a), 20)) * 0x1p-20;
+    xy[2 * i + 1] = nearbyint(ldexp(sin(a), 20)) * 0x1p-20;
+    seg[2 * i] = i, seg[2 * i + 1] = (i + 1) % K;
   }
-  for (unsigned t = 0; t < THREADS; t++) {
-    assert_int_equal(pthread_join(jobs[t].th, NULL), 0);
-    assert_int_equal(jobs[t].bad, 0);
-  }
-  qk_mesh_free(ref);
+  assert_int_equal(qk_poly_from_arrays(xy, K, seg, K, NULL, 0, NULL, &poly, NULL), QK_OK);
+  mo.mode = QK_MESH_GENERAL;
+  mo.max_size = 1.0 / 32;
+  generate_on_threads(poly, &mo);
   qk_poly_free(poly);
 }
 
