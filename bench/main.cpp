@@ -211,6 +211,24 @@ double median(std::vector<double> v) {
   return v.size() % 2 ? v[m] : 0.5 * (v[m - 1] + v[m]);
 }
 
+// The C library's deferred work from the frees of the call before, done before a timed
+// call and not timed. glibc sorts freed blocks into its bins only at later mallocs (up to
+// 10,000 blocks a malloc): right after CGAL's or gmsh's mesh was freed, the next call's
+// first few mallocs took 2-9 ms each, 4-24 ms in all, charged to whichever implementation
+// ran next (quadkit's Iceland mesh: 31-33 ms against 19-22; docs/benchmarks.md, thirty-first
+// session). Rounds of mallocs and frees of 8 bytes to 96 KB until a round takes under 50 us
+// (at most 1000 rounds).
+void settle_heap() {
+  for (int round = 0; round < 1000; round++) {
+    double t0 = wall_seconds();
+    void *b[32];
+    int n = 0;
+    for (size_t z = 16; z <= 65536; z *= 2) b[n++] = std::malloc(z - 8), b[n++] = std::malloc(z + z / 2);
+    for (int i = 0; i < n; i++) std::free(b[i]);
+    if (wall_seconds() - t0 < 50e-6) return;
+  }
+}
+
 // Run every function reps times, interleaved in a rotating order; medians per function.
 // `wall` marks the functions that run more than one thread (timed by the wall clock).
 // `partner[i]`, when given and >= 0, is the one-thread function of the same call as the
@@ -233,10 +251,12 @@ std::vector<double> interleaved(const std::vector<std::function<void()>> &fns,
       int p = wall_clock && i < partner.size() ? partner[i] : -1;
       double one = NAN;
       if (p >= 0) {
+        settle_heap();
         double t0 = now_seconds();
         fns[(size_t)p]();
         one = now_seconds() - t0;
       }
+      settle_heap();
       double t0 = now_seconds();
       fns[i]();
       t[i].push_back(now_seconds() - t0);
@@ -898,6 +918,7 @@ static void time_mesh_sides(std::vector<MeshSide> &sides, int reps) {
   for (MeshSide &sd : sides) (sd.name.rfind("quadkit", 0) == 0 ? q : b).push_back(&sd);
   auto run = [](MeshSide *sd) {
     if (!sd->ok) return;
+    settle_heap();
     MeshResult o;
     sd->run(o);
     sd->t.push_back(o.seconds);
