@@ -137,6 +137,31 @@ static char *mesh_text(const qk_mesh_t *m, size_t *len) {
   return buf;
 }
 
+/* Mesh a and mesh b equal: every vertex bit, triangle, component, statistic but the
+ * seconds, and the .node/.ele/.poly text. */
+static void assert_same(const qk_mesh_t *a, const qk_mesh_t *b) {
+  size_t nva, nvb, nta, ntb;
+  const double *va = qk_mesh_vertices(a, &nva), *vb = qk_mesh_vertices(b, &nvb);
+  const uint32_t *ta = qk_mesh_triangles(a, &nta), *tb = qk_mesh_triangles(b, &ntb);
+  assert_true(nta > 30000);
+  assert_int_equal(nva, nvb);
+  assert_int_equal(nta, ntb);
+  assert_memory_equal(va, vb, 2 * nva * sizeof *va);
+  assert_memory_equal(ta, tb, 3 * nta * sizeof *ta);
+  assert_memory_equal(qk_mesh_triangle_components(a, NULL), qk_mesh_triangle_components(b, NULL),
+                      nta * sizeof(uint32_t));
+  qk_mesh_stats_t sa, sb;
+  qk_mesh_stats(a, &sa), qk_mesh_stats(b, &sb);
+  sa.seconds_validate = sa.seconds_subdivide = sa.seconds_balance = sa.seconds_triangulate = 0;
+  sb.seconds_validate = sb.seconds_subdivide = sb.seconds_balance = sb.seconds_triangulate = 0;
+  assert_memory_equal(&sa, &sb, sizeof sa);
+  size_t la, lb;
+  char *xa = mesh_text(a, &la), *xb = mesh_text(b, &lb);
+  assert_int_equal(la, lb);
+  assert_memory_equal(xa, xb, la);
+  free(xa), free(xb);
+}
+
 static void same_mesh(const qk_poly_t *p, qk_mesh_options_t o) {
   qk_mesh_t *ma = NULL, *mb = NULL;
   qk_mesh_error_t err;
@@ -148,26 +173,7 @@ static void same_mesh(const qk_poly_t *p, qk_mesh_options_t o) {
   if (qk_mesh_generate(p, &o, &mb, &err)) fail_msg("%s", err.message);
   assert_true((ma->arena != NULL) == (qk__mesh_arena_available() != 0));
   assert_null(mb->arena);
-  size_t nva, nvb, nta, ntb;
-  const double *va = qk_mesh_vertices(ma, &nva), *vb = qk_mesh_vertices(mb, &nvb);
-  const uint32_t *ta = qk_mesh_triangles(ma, &nta), *tb = qk_mesh_triangles(mb, &ntb);
-  assert_true(nta > 30000);
-  assert_int_equal(nva, nvb);
-  assert_int_equal(nta, ntb);
-  assert_memory_equal(va, vb, 2 * nva * sizeof *va);
-  assert_memory_equal(ta, tb, 3 * nta * sizeof *ta);
-  assert_memory_equal(qk_mesh_triangle_components(ma, NULL), qk_mesh_triangle_components(mb, NULL),
-                      nta * sizeof(uint32_t));
-  qk_mesh_stats_t sa, sb;
-  qk_mesh_stats(ma, &sa), qk_mesh_stats(mb, &sb);
-  sa.seconds_validate = sa.seconds_subdivide = sa.seconds_balance = sa.seconds_triangulate = 0;
-  sb.seconds_validate = sb.seconds_subdivide = sb.seconds_balance = sb.seconds_triangulate = 0;
-  assert_memory_equal(&sa, &sb, sizeof sa);
-  size_t la, lb;
-  char *xa = mesh_text(ma, &la), *xb = mesh_text(mb, &lb);
-  assert_int_equal(la, lb);
-  assert_memory_equal(xa, xb, la);
-  free(xa), free(xb);
+  assert_same(ma, mb);
   qk_mesh_free(ma);
   /* Again with the arena, from the kept chunks filled with garbage. */
   const size_t kept = qk__mesh_arena_kept_bytes();
@@ -176,20 +182,7 @@ static void same_mesh(const qk_poly_t *p, qk_mesh_options_t o) {
   o.allocator = NULL;
   if (qk_mesh_generate(p, &o, &ma, &err)) fail_msg("%s", err.message);
   if (kept) assert_true(qk__mesh_arena_kept_bytes() < kept);
-  va = qk_mesh_vertices(ma, &nva), ta = qk_mesh_triangles(ma, &nta);
-  assert_int_equal(nva, nvb);
-  assert_int_equal(nta, ntb);
-  assert_memory_equal(va, vb, 2 * nva * sizeof *va);
-  assert_memory_equal(ta, tb, 3 * nta * sizeof *ta);
-  assert_memory_equal(qk_mesh_triangle_components(ma, NULL), qk_mesh_triangle_components(mb, NULL),
-                      nta * sizeof(uint32_t));
-  qk_mesh_stats(ma, &sa);
-  sa.seconds_validate = sa.seconds_subdivide = sa.seconds_balance = sa.seconds_triangulate = 0;
-  assert_memory_equal(&sa, &sb, sizeof sa);
-  xa = mesh_text(ma, &la), xb = mesh_text(mb, &lb);
-  assert_int_equal(la, lb);
-  assert_memory_equal(xa, xb, la);
-  free(xa), free(xb);
+  assert_same(ma, mb);
   qk_mesh_free(ma);
   qk_mesh_free(mb);
   assert_int_equal(st.live_blocks, 0);
