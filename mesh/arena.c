@@ -23,16 +23,17 @@
  * Chunks kept between meshes (thirty-first session). A chunk given back goes to a
  * process-wide cache of at most KEEP_BYTES instead of to the kernel, and the next
  * arena's chunks come from there first (the smallest kept mapping that holds the size,
- * whose rest stays kept). Why: on this guest, memory newly mapped after other code has
- * used and freed much of it costs far more to touch than memory reused at once (the host
- * backs it again): the bench's coastline meshes, each timed right after a CGAL or gmsh
- * run, took 1.5-2.5x as long as the same call repeated (Iceland at extent/256: 34-71 ms
- * against 19-20), with almost no page faults counted in the process. Kept chunks keep
- * their pages. A kept chunk is handed out as it was left (nothing in the mesher reads a
- * block before writing it; test_mesh_arena_reuse fills the kept chunks with garbage
- * and meshes again). qk_mesh_trim() gives the cache back. The cache's lock is only
- * ever tried: a thread that finds it taken maps or unmaps by itself, so no thread
- * waits and a child forked while another thread held it still works.
+ * whose rest stays kept). Why: on this guest, memory mapped anew after other code has
+ * used and freed much memory costs more to touch than memory reused at once, though the
+ * process counts almost no page faults: with 200 MB malloc'd, written and freed before
+ * each call, Iceland at extent/256 took 24.7-25.7 ms a call against 19.6-20.5 without,
+ * and 20.7-21.2 with chunks kept; the bench's random polygon, each call timed after CGAL's
+ * and gmsh's, went from 8.6x to 15.7-16.2x CGAL (docs/mesh.md, "Chunks kept between
+ * meshes"). A kept chunk is handed out as it was left (nothing in the mesher reads a block
+ * before writing it; test_mesh_arena fills the kept chunks with garbage and meshes again).
+ * qk_mesh_trim() gives the cache back. The cache's lock is only ever tried: a thread
+ * that finds it taken maps or unmaps by itself, so no thread waits and a child forked
+ * while another thread held it still works.
  */
 #define _DEFAULT_SOURCE
 #include <stdatomic.h>
