@@ -968,6 +968,54 @@ static void test_index_build_small_capacity_linear(void **state) {
   free(p);
 }
 
+/* An allocator that counts fresh blocks of 1 KB and more (a compaction allocates the
+ * three point arrays anew; growths in place are not counted). */
+static void *fresh_counting_alloc(void *ud, void *ptr, size_t osize, size_t nsize) {
+  (void)osize;
+  if (nsize == 0) {
+    free(ptr);
+    return NULL;
+  }
+  if (!ptr && nsize >= 1024) ++*(size_t *)ud;
+  return realloc(ptr, nsize);
+}
+
+/* Every point of a bulk-built tree removed one by one, at capacities 1 and 4: the point
+ * arrays are compacted a few dozen times at most. A compaction walks the node array's
+ * blocks, which removals do not shrink, so its headroom counts them too: with a sixteenth
+ * of the points alone the compactions came ever closer as the tree emptied (here 146 and
+ * 192 fresh arrays, about three a compaction; 100,000 points at capacity 1 took 69
+ * compactions, half the removals' instructions), now 22 and 61. */
+static void test_index_remove_all_linear(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, qkt_seed(33));
+  enum { N = 1 << 16 };
+  qk_point_t *p = malloc(N * sizeof *p);
+  assert_non_null(p);
+  qkt_points(&r, QKT_UNIFORM, p, N);
+  const unsigned caps[] = {1, 4};
+  for (size_t k = 0; k < sizeof caps / sizeof *caps; k++) {
+    size_t fresh = 0;
+    qk_allocator_t a = {fresh_counting_alloc, &fresh};
+    qk_tree_options_t o = qkt_unit_options(caps[k], &a);
+    qk_tree_t *t;
+    assert_int_equal(qk_tree_build(p, N, &o, &t), QK_OK);
+    fresh = 0;
+    for (uint32_t i = 0; i < N; i++) /* every id once, scrambled (odd multiplier) */
+      assert_int_equal(qk_tree_remove(t, (qk_id_t)((i * 2654435761u) % N)), QK_OK);
+    QKT_CHECK_TREE(t);
+    qk_tree_stats_t st;
+    qk_tree_stats(t, &st);
+    assert_int_equal(st.points, 0);
+    print_message("remove all at capacity %u: %zu fresh arrays\n", caps[k], fresh);
+    if (fresh > 120)
+      fail_msg("removing every point at capacity %u allocated %zu fresh arrays", caps[k], fresh);
+    qk_tree_free(t);
+  }
+  free(p);
+}
+
 /* Uniform points inserted one by one into an empty tree, then moved one by one: the
  * bytes the tree asks for (each compaction and growth allocates the point arrays anew)
  * stay within a bound times its final size. Each compaction used to leave every leaf
@@ -1360,6 +1408,7 @@ int main(void) {
       cmocka_unit_test(test_index_build_small_capacity_linear),
       cmocka_unit_test(test_index_insert_uniform_linear),
       cmocka_unit_test(test_index_churn_memory),
+      cmocka_unit_test(test_index_remove_all_linear),
       cmocka_unit_test(test_index_insert_duplicates_linear),
       cmocka_unit_test(test_index_build_threads),
       cmocka_unit_test(test_index_bbox_threads),
