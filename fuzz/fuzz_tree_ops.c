@@ -450,7 +450,14 @@ static int to_scaled_le(double xa, double xb, double ya, double yb, double ra, d
   double dx = ldexp(xa, -e) - ldexp(xb, -e), dy = ldexp(ya, -e) - ldexp(yb, -e);
   double rs = ldexp(ra, -e) + ldexp(rb, -e);
   double big = fmax(fmax(fabs(dx), fabs(dy)), rs);
-  if (big == 0) return 1;
+  if (big == 0) {
+    /* Every scaled difference and the radii rounded to 0: touching only when the two
+     * points are the same (a degenerate box 2^-1074 from a zero-radius disc's centre at
+     * 2^60 is not; fuzz/regressions/tree_ops/collider-zero-radius-subnormal-gap). */
+    if (xa == xb && ya == yb) return 1;
+    *unsure = 1;
+    return 0;
+  }
   if (big < 0x1p-400) { /* all differences negligible against the coordinates */
     *unsure = 1;
     return 0;
