@@ -890,23 +890,42 @@ static void test_index_rebuild(void **state) {
   free(p);
 }
 
-/* An allocator that counts the bytes asked for (every fresh block and every growth). */
+/* What a counting_alloc saw: the bytes asked for (every fresh block and every growth),
+ * and the fresh blocks of 1 KB and more (a compaction allocates the three point arrays
+ * anew; growths in place are not among them). */
+typedef struct alloc_count {
+  size_t bytes, fresh;
+} alloc_count_t;
+
 static void *counting_alloc(void *ud, void *ptr, size_t osize, size_t nsize) {
   (void)osize;
   if (nsize == 0) {
     free(ptr);
     return NULL;
   }
-  *(size_t *)ud += nsize;
+  alloc_count_t *c = ud;
+  c->bytes += nsize;
+  if (!ptr && nsize >= 1024) c->fresh++;
   return realloc(ptr, nsize);
 }
 
-/* An empty tree over [0,1]^2 at `capacity` whose allocations go through `a` (a
- * counting_alloc). */
-static qk_tree_t *counted_tree(unsigned capacity, qk_allocator_t *a) {
-  qk_tree_options_t o = qkt_unit_options(capacity, a);
+/* n uniform points in [0,1)^2 from the test's seed (QK_SEED or `seed`); freed by the caller. */
+static qk_point_t *uniform_points(uint64_t seed, size_t n) {
+  qkt_rng_t r;
+  qkt_rng_seed(&r, qkt_seed(seed));
+  qk_point_t *p = malloc(n * sizeof *p);
+  assert_non_null(p);
+  qkt_points(&r, QKT_UNIFORM, p, n);
+  return p;
+}
+
+/* A tree over [0,1]^2 at `capacity` built from p[0, n) (none: empty), whose allocations
+ * go through a counting_alloc into *c (the tree keeps its own copy of the allocator). */
+static qk_tree_t *counted_tree(unsigned capacity, alloc_count_t *c, const qk_point_t *p, size_t n) {
+  qk_allocator_t a = {counting_alloc, c};
+  qk_tree_options_t o = qkt_unit_options(capacity, &a);
   qk_tree_t *t;
-  assert_int_equal(qk_tree_build(NULL, 0, &o, &t), QK_OK);
+  assert_int_equal(qk_tree_build(p, n, &o, &t), QK_OK);
   return t;
 }
 
@@ -923,9 +942,8 @@ static void test_index_insert_duplicates_linear(void **state) {
   const int spots[] = {1, 5, 50};
   enum { N = 40000 };
   for (size_t k = 0; k < sizeof spots / sizeof *spots; k++) {
-    size_t bytes = 0;
-    qk_allocator_t a = {counting_alloc, &bytes};
-    qk_tree_t *t = counted_tree(8, &a);
+    alloc_count_t c = {0, 0};
+    qk_tree_t *t = counted_tree(8, &c, NULL, 0);
     for (uint32_t i = 0; i < N; i++) { /* the spots in a scrambled order */
       uint32_t s = (uint32_t)((i * 2654435761u) % (uint32_t)spots[k]);
       assert_int_equal(qk_tree_insert(t, (qk_point_t){(s + 0.5) / spots[k], 0.5}, NULL), QK_OK);
@@ -935,7 +953,7 @@ static void test_index_insert_duplicates_linear(void **state) {
      * session); 7,500x for 5 spots before the first fix. */
     char what[32];
     snprintf(what, sizeof what, "%d spots", spots[k]);
-    assert_linear_work(what, bytes, t, 100);
+    assert_linear_work(what, c.bytes, t, 100);
     qk_tree_free(t);
   }
 }
@@ -946,68 +964,43 @@ static void test_index_insert_duplicates_linear(void **state) {
  * thirtieth session). */
 static void test_index_build_small_capacity_linear(void **state) {
   (void)state;
-  qkt_rng_t r;
-  qkt_rng_seed(&r, qkt_seed(32));
   enum { N = 1 << 18 };
-  qk_point_t *p = malloc(N * sizeof *p);
-  assert_non_null(p);
-  qkt_points(&r, QKT_UNIFORM, p, N);
+  qk_point_t *p = uniform_points(32, N);
   const unsigned caps[] = {1, 4};
   for (size_t k = 0; k < sizeof caps / sizeof *caps; k++) {
-    size_t bytes = 0;
-    qk_allocator_t a = {counting_alloc, &bytes};
-    qk_tree_options_t o = qkt_unit_options(caps[k], &a);
-    qk_tree_t *t;
-    assert_int_equal(qk_tree_build(p, N, &o, &t), QK_OK);
+    alloc_count_t c = {0, 0};
+    qk_tree_t *t = counted_tree(caps[k], &c, p, N);
     QKT_CHECK_TREE(t);
     char what[48];
     snprintf(what, sizeof what, "build at capacity %u", caps[k]);
-    assert_linear_work(what, bytes, t, 4);
+    assert_linear_work(what, c.bytes, t, 4);
     qk_tree_free(t);
   }
   free(p);
 }
 
-/* An allocator that counts fresh blocks of 1 KB and more (a compaction allocates the
- * three point arrays anew; growths in place are not counted). */
-static void *fresh_counting_alloc(void *ud, void *ptr, size_t osize, size_t nsize) {
-  (void)osize;
-  if (nsize == 0) {
-    free(ptr);
-    return NULL;
-  }
-  if (!ptr && nsize >= 1024) ++*(size_t *)ud;
-  return realloc(ptr, nsize);
-}
-
 /* Every point of a bulk-built tree removed one by one, at capacities 1 and 4: the point
  * arrays are compacted a few dozen times at most. A compaction walks the node array's
  * blocks, which removals do not shrink, so its headroom counts them too: with a sixteenth
- * of the points alone the compactions came ever closer as the tree emptied (here 146 and
+ * of the points alone the compactions came ever closer as the tree emptied (here 147 and
  * 192 fresh arrays, about three a compaction; 100,000 points at capacity 1 took 69
- * compactions, half the removals' instructions), now 22 and 61. */
+ * compactions, half the removals' instructions), now 24 and 63. */
 static void test_index_remove_all_linear(void **state) {
   (void)state;
-  qkt_rng_t r;
-  qkt_rng_seed(&r, qkt_seed(33));
   enum { N = 1 << 16 };
-  qk_point_t *p = malloc(N * sizeof *p);
-  assert_non_null(p);
-  qkt_points(&r, QKT_UNIFORM, p, N);
+  qk_point_t *p = uniform_points(33, N);
   const unsigned caps[] = {1, 4};
   for (size_t k = 0; k < sizeof caps / sizeof *caps; k++) {
-    size_t fresh = 0;
-    qk_allocator_t a = {fresh_counting_alloc, &fresh};
-    qk_tree_options_t o = qkt_unit_options(caps[k], &a);
-    qk_tree_t *t;
-    assert_int_equal(qk_tree_build(p, N, &o, &t), QK_OK);
-    fresh = 0;
+    alloc_count_t c = {0, 0};
+    qk_tree_t *t = counted_tree(caps[k], &c, p, N);
+    const size_t fresh_before = c.fresh;
     for (uint32_t i = 0; i < N; i++) /* every id once, scrambled (odd multiplier) */
       assert_int_equal(qk_tree_remove(t, (qk_id_t)((i * 2654435761u) % N)), QK_OK);
     QKT_CHECK_TREE(t);
     qk_tree_stats_t st;
     qk_tree_stats(t, &st);
     assert_int_equal(st.points, 0);
+    const size_t fresh = c.fresh - fresh_before;
     print_message("remove all at capacity %u: %zu fresh arrays\n", caps[k], fresh);
     if (fresh > 120)
       fail_msg("removing every point at capacity %u allocated %zu fresh arrays", caps[k], fresh);
@@ -1031,9 +1024,8 @@ static void test_index_insert_uniform_linear(void **state) {
   qk_point_t *p = malloc(N * sizeof *p);
   assert_non_null(p);
   for (size_t k = 0; k < sizeof caps / sizeof *caps; k++) {
-    size_t bytes = 0;
-    qk_allocator_t a = {counting_alloc, &bytes};
-    qk_tree_t *t = counted_tree(caps[k], &a);
+    alloc_count_t c = {0, 0};
+    qk_tree_t *t = counted_tree(caps[k], &c, NULL, 0);
     qkt_points(&r, QKT_UNIFORM, p, N);
     for (uint32_t i = 0; i < N; i++) {
       qk_id_t id;
@@ -1053,7 +1045,7 @@ static void test_index_insert_uniform_linear(void **state) {
     }
     char what[32];
     snprintf(what, sizeof what, "capacity %u", caps[k]);
-    assert_linear_work(what, bytes, t, 150);
+    assert_linear_work(what, c.bytes, t, 150);
     qk_tree_free(t);
   }
   free(p);
