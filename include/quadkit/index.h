@@ -28,8 +28,9 @@
  *
  * Node and point storage: nodes live in one flat array, the four children of a node
  * stored together in NE, NW, SW, SE order; a leaf's points are a contiguous range of
- * the coordinate arrays. Pointers and ranges obtained from a tree stay valid until the
- * next call that changes it.
+ * the coordinate arrays. Pointers, ranges and node numbers obtained from a tree stay valid
+ * until the next call that changes it (a removal that gives memory back renumbers the
+ * nodes).
  */
 #ifndef QUADKIT_INDEX_H
 #define QUADKIT_INDEX_H
@@ -162,7 +163,9 @@ qk_status_t qk_tree_insert(qk_tree_t *tree, qk_point_t p, qk_id_t *id_out);
 
 /**
  * Remove a point by id; sibling leaves that now fit in one merge into their parent. The id
- * goes on the stack of ids the next inserts reuse (see qk_tree_insert()).
+ * goes on the stack of ids the next inserts reuse (see qk_tree_insert()). When the tree has
+ * shrunk to two thirds of what its node or point arrays hold, they are rewritten at its size
+ * (nodes renumbered): O(1) amortised a removal.
  * \param [in,out] tree the tree; unchanged on error.
  * \param [in] id the point's id.
  * \return QK_OK, QK_ERR_NOT_FOUND (unknown or already removed id) or QK_ERR_NOMEM.
