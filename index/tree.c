@@ -246,60 +246,73 @@ static qk_status_t reserve_tail(qk_tree_t *t, size_t extra, uint32_t grow) {
 
 /* ---- giving memory back as the tree shrinks ------------------------------------------ */
 
-/* Renumber the nodes: the blocks in use, in pre-order, packed from node 1 into arrays of
- * just their size, without the free blocks merges left. Node numbers change (as every
- * changing call allows; index.h); on failure nothing does. */
-static qk_status_t pack_nodes(qk_tree_t *t) {
-  const qk_allocator_t *a = &t->alloc;
-  const uint32_t live = (t->n_nodes - 1) / 4 - t->n_free_blocks; /* blocks in use */
-  const size_t nn = 1 + 4 * (size_t)live;
-  qk__node_t *nodes = qk__realloc(a, NULL, 0, nn * sizeof *nodes);
-  qk__block_t *blocks = live ? qk__realloc(a, NULL, 0, (size_t)live * sizeof *blocks) : NULL;
-  if (!nodes || (live && !blocks)) {
-    qk__free(a, nodes, nn * sizeof *nodes);
-    qk__free(a, blocks, (size_t)live * sizeof *blocks);
-    return QK_ERR_NOMEM;
-  }
-  /* Each old node goes to its new number: a block's four children get the next block
-   * when their parent is reached (pre-order), and are reached in turn NE to SE. */
-  uint32_t stack[2 * 4 * (QK_MAX_DEPTH_LIMIT + 2)], top = 0, next = 1;
-  stack[top++] = 0, stack[top++] = 0; /* (old number, new number) */
-  while (top) {
-    const uint32_t to = stack[--top], v = stack[--top];
-    qk__node_t n = t->nodes[v];
-    if (!qk__is_leaf(&n)) {
-      const uint32_t b = next;
-      next += 4;
-      blocks[(b - 1) >> 2] =
-          (qk__block_t){.parent = to, .depth = (uint8_t)(qk__depth(t, v) + 1), .live = 1};
-      for (int q = 3; q >= 0; q--)
-        stack[top++] = n.child + (uint32_t)q, stack[top++] = b + (uint32_t)q;
-      n.child = b;
-    }
-    nodes[to] = n;
-  }
-  assert(next == nn);
-  qk__free(a, t->nodes, (size_t)t->cap_nodes * sizeof(qk__node_t));
-  qk__free(a, t->blocks, (size_t)t->cap_blocks * sizeof(qk__block_t));
-  t->nodes = nodes, t->blocks = blocks;
-  t->n_nodes = t->cap_nodes = (uint32_t)nn;
-  t->cap_blocks = live;
-  t->free_block = QK_NONE;
-  t->n_free_blocks = 0;
-  return QK_OK;
+/* Move the node block at src (its first node) to the free block at dst: its parent's link,
+ * its children's blocks' parent links and its record follow. */
+static void move_block(qk_tree_t *t, uint32_t src, uint32_t dst) {
+  memcpy(&t->nodes[dst], &t->nodes[src], 4 * sizeof(qk__node_t));
+  *qk__block_of(t, dst) = *qk__block_of(t, src);
+  t->nodes[qk__block_of(t, dst)->parent].child = dst;
+  for (uint32_t q = 0; q < 4; q++)
+    if (!qk__is_leaf(&t->nodes[dst + q]))
+      qk__block_of(t, t->nodes[dst + q].child)->parent = dst + q;
 }
 
-/* After a removal: when the node arrays hold more than twice the nodes in use, or the point
- * arrays more than twice the points, rewrite them at their size (with a compaction's
- * headroom), so that a tree that has shrunk holds about what a fresh build of its points
- * would (issue 10: 8.6 times that after 90% of 10^6 points were removed at capacity 1, with
- * nothing given back). Each rewrite costs O(its arrays) and comes after they have lost
- * half of their entries since the last one, so O(1) amortised a removal. Optional: when
- * memory is short the tree stays as it is, valid and larger. */
-static void give_back(qk_tree_t *t) {
+/* Give back the node blocks merges freed: the blocks in use beyond the first `live` are
+ * moved into the free ones before them, in place, and both arrays shrink to `live` blocks.
+ * Node numbers change (as every changing call allows; index.h). The work is a move per
+ * block that lay beyond, so it is proportional to the blocks freed since the last time, and
+ * the arrays shrink where they are (no new pages to fault in). */
+static void defrag_nodes(qk_tree_t *t) {
+  const uint32_t live = (t->n_nodes - 1) / 4 - t->n_free_blocks, end = 1 + 4 * live;
+  uint32_t hi = t->n_nodes; /* the blocks from hi on are moved or free */
+  for (uint32_t f = t->free_block; f != QK_NONE;) {
+    const uint32_t next = qk__block_of(t, f)->parent;
+    if (f < end) {
+      do hi -= 4;
+      while (!qk__block_of(t, hi)->live);
+      move_block(t, hi, f);
+    }
+    f = next;
+  }
+  t->n_nodes = end;
+  t->free_block = QK_NONE;
+  t->n_free_blocks = 0;
+  /* Shrunk where they lie; a refused shrink keeps the larger arrays, which are as good. */
+  qk__node_t *nodes = qk__realloc(&t->alloc, t->nodes, (size_t)t->cap_nodes * sizeof *nodes,
+                                  (size_t)end * sizeof *nodes);
+  if (nodes) t->nodes = nodes, t->cap_nodes = end;
+  if (!live) { /* (no block records left) */
+    qk__free(&t->alloc, t->blocks, (size_t)t->cap_blocks * sizeof *t->blocks);
+    t->blocks = NULL, t->cap_blocks = 0;
+    return;
+  }
+  qk__block_t *blocks = qk__realloc(&t->alloc, t->blocks, (size_t)t->cap_blocks * sizeof *blocks,
+                                    (size_t)live * sizeof *blocks);
+  if (blocks) t->blocks = blocks, t->cap_blocks = live;
+}
+
+/* After a removal: when the node arrays hold more than 1.2 times the nodes in use (plus 64),
+ * give back the blocks merges freed (defrag_nodes: work proportional to the blocks freed);
+ * when the point arrays hold more than 1.5 times the points (plus 256: a compaction leaves
+ * about 1.2 times), compact them (O(n) after a third of them was given up, so O(1)
+ * amortised a removal). So a tree that has shrunk holds about what a fresh build of its
+ * points would (issue 10: 8.6 times that after 90% of 10^6 points were removed at capacity
+ * 1, with nothing given back; and the node arrays' high-water mark took churn at capacity 1
+ * to 1.19 times a fresh build). Optional: when memory is short the tree stays as it is,
+ * valid and larger. */
+#if defined(__GNUC__)
+__attribute__((noinline))
+#endif
+static void
+give_back_now(qk_tree_t *t, bool nodes, bool slots) {
+  if (nodes) defrag_nodes(t);
+  if (slots) (void)compact(t, t->n_points / 16 + t->n_nodes / 64, QK_NONE);
+}
+
+static inline void give_back(qk_tree_t *t) {
   const size_t n = t->n_points, used = (size_t)t->n_nodes - 4 * (size_t)t->n_free_blocks;
-  if (t->cap_nodes > used + used / 2 + 256 && pack_nodes(t) != QK_OK) return;
-  if (t->cap_slots > n + n / 2 + 256) (void)compact(t, n / 16 + t->n_nodes / 64, QK_NONE);
+  const bool nodes = t->cap_nodes > used + used / 5 + 64, slots = t->cap_slots > n + n / 2 + 256;
+  if (nodes || slots) give_back_now(t, nodes, slots);
 }
 
 /* ---- the id map ------------------------------------------------------------------- */

@@ -164,8 +164,8 @@ qk_status_t qk_tree_insert(qk_tree_t *tree, qk_point_t p, qk_id_t *id_out);
 /**
  * Remove a point by id; sibling leaves that now fit in one merge into their parent. The id
  * goes on the stack of ids the next inserts reuse (see qk_tree_insert()). When the tree has
- * shrunk to two thirds of what its node or point arrays hold, they are rewritten at its size
- * (nodes renumbered): O(1) amortised a removal.
+ * shrunk well below what its node or point arrays hold, they are rewritten at its size
+ * (nodes renumbered), so that memory follows the points: O(1) amortised a removal.
  * \param [in,out] tree the tree; unchanged on error.
  * \param [in] id the point's id.
  * \return QK_OK, QK_ERR_NOT_FOUND (unknown or already removed id) or QK_ERR_NOMEM.
