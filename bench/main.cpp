@@ -14,6 +14,8 @@ extern "C" {
 
 #include "quadkit/region.h"
 
+#include <pthread.h>
+#include <sched.h>
 #include <time.h>
 #if defined(__GLIBC__)
 #include <malloc.h>
@@ -229,6 +231,40 @@ void settle_heap() {
   }
 }
 
+// The other processors brought up to date with this process's memory, before a timed call
+// and not timed: a thread that returns at once is started on each processor but this one
+// and joined. On the PVM guest of the thirty-second session a thread's first run on the
+// other vCPU after this process had mapped new pages (the baselines' builds and frees
+// between two quadkit calls) waited for the hypervisor to catch up with them: a new thread
+// started there 0.1-0.2 ms after its creation in a small process, 0.95 ms after the process
+// had faulted in 40 MB of 4 KB pages (0.28 ms when they were huge pages), 16 ms after 200
+// MB (quadkit-proto-cores, "start"). So the worker of quadkit's two-thread build (a 4-6 ms
+// call) ran its first share 3-5 ms late, the calling thread had done most of the work by
+// then, and the row measured 0.9-1.0x one thread: the cost of the pages the calls before
+// it had mapped, not of the build. One-thread calls (every baseline's here) never wait for
+// it; this is for the several-thread calls, and it is done before every timed call alike.
+static void *settle_nothing(void *) { return nullptr; }
+
+void settle_processors() {
+#if defined(__linux__)
+  const int me = sched_getcpu();
+  const long n = sysconf(_SC_NPROCESSORS_ONLN);
+  for (long c = 0; c < n && c < CPU_SETSIZE; c++) {
+    if (c == me) continue;
+    pthread_attr_t at;
+    if (pthread_attr_init(&at) != 0) return;
+    cpu_set_t s;
+    CPU_ZERO(&s);
+    CPU_SET((int)c, &s);
+    pthread_t th;
+    if (pthread_attr_setaffinity_np(&at, sizeof s, &s) == 0 &&
+        pthread_create(&th, &at, settle_nothing, nullptr) == 0)
+      pthread_join(th, nullptr);
+    pthread_attr_destroy(&at);
+  }
+#endif
+}
+
 // Run every function reps times, interleaved in a rotating order; medians per function.
 // `wall` marks the functions that run more than one thread (timed by the wall clock).
 // `partner[i]`, when given and >= 0, is the one-thread function of the same call as the
@@ -252,11 +288,13 @@ std::vector<double> interleaved(const std::vector<std::function<void()>> &fns,
       double one = NAN;
       if (p >= 0) {
         settle_heap();
+        settle_processors();
         double t0 = now_seconds();
         fns[(size_t)p]();
         one = now_seconds() - t0;
       }
       settle_heap();
+      settle_processors();
       double t0 = now_seconds();
       fns[i]();
       t[i].push_back(now_seconds() - t0);
@@ -919,6 +957,7 @@ static void time_mesh_sides(std::vector<MeshSide> &sides, int reps) {
   auto run = [](MeshSide *sd) {
     if (!sd->ok) return;
     settle_heap();
+    settle_processors();
     MeshResult o;
     sd->run(o);
     sd->t.push_back(o.seconds);

@@ -8,7 +8,11 @@
  *   - memory: each thread reads its own 64 MB, a line a step, twenty times: the ratio
  *     when the memory system is shared;
  *   - transfer: one cache line passed back and forth between two pinned threads: how
- *     long a line one thread wrote takes to reach the other (one way).
+ *     long a line one thread wrote takes to reach the other (one way);
+ *   - start: how long a thread started on the other processor takes to run, as it is, and
+ *     right after this process faulted in 40 MB of new pages (4 KB ones, then huge pages):
+ *     on a guest whose hypervisor must catch up with a process's new page mappings before
+ *     another vCPU runs it, the first run there waits for that (docs/design.md, "Threads").
  *
  * Usage: quadkit-proto-cores [cpu_a cpu_b]   (default 0 and 1)
  */
@@ -19,6 +23,8 @@
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
+#include <sys/mman.h>
 #include <time.h>
 
 static int cpu_a = 0, cpu_b = 1;
@@ -100,6 +106,63 @@ static void *bounce(void *arg) {
   return NULL;
 }
 
+static _Atomic double started_at;
+
+static void *note_start(void *arg) {
+  (void)arg;
+  atomic_store(&started_at, now());
+  return NULL;
+}
+
+static int by_value(const void *a, const void *b) {
+  double x = *(const double *)a, y = *(const double *)b;
+  return (x > y) - (x < y);
+}
+
+/* The median time from pthread_create to the thread's first instruction, a thread pinned to
+ * cpu_b started from cpu_a after a pause, over 9 starts; before each, with `mb` > 0, this
+ * process maps and writes `mb` MB of new pages (huge pages asked for with `huge`), which
+ * stay mapped until the thread has run. */
+static void start(size_t mb, int huge, const char *what) {
+  double d[9];
+  for (int r = 0; r < 9; r++) {
+    size_t bytes = mb << 20;
+    char *m = NULL;
+    if (bytes) {
+      m = mmap(NULL, bytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+      if (m == MAP_FAILED) {
+        fprintf(stderr, "quadkit-proto-cores: cannot map %zu MB\n", mb);
+        exit(1);
+      }
+#if defined(MADV_HUGEPAGE)
+      if (huge) madvise(m, bytes, MADV_HUGEPAGE);
+#endif
+      memset(m, r + 1, bytes);
+    }
+    struct timespec pause = {0, 20000000}; /* 20 ms: the other vCPU idles */
+    nanosleep(&pause, NULL);
+    pthread_attr_t at;
+    cpu_set_t s;
+    CPU_ZERO(&s);
+    CPU_SET(cpu_b, &s);
+    pthread_t th;
+    if (pthread_attr_init(&at) || pthread_attr_setaffinity_np(&at, sizeof s, &s)) exit(1);
+    atomic_store(&started_at, 0.0);
+    double t0 = now();
+    if (pthread_create(&th, &at, note_start, NULL) != 0) {
+      fprintf(stderr, "quadkit-proto-cores: cannot start a thread\n");
+      exit(1);
+    }
+    pthread_join(th, NULL);
+    pthread_attr_destroy(&at);
+    d[r] = (atomic_load(&started_at) - t0) * 1e3;
+    if (m) munmap(m, bytes);
+  }
+  qsort(d, 9, sizeof *d, by_value);
+  printf("start     a thread on the other processor %s: median %.2f ms (%.2f-%.2f)\n", what, d[4],
+         d[0], d[8]);
+}
+
 int main(int argc, char **argv) {
   if (argc == 3) cpu_a = atoi(argv[1]), cpu_b = atoi(argv[2]);
   nbuf = (size_t)16 << 20; /* 128 MB: 64 MB a thread */
@@ -127,5 +190,8 @@ int main(int argc, char **argv) {
   printf("transfer  a line between the two: %.0f ns one way (%.0f ns a round trip)\n",
          (t1 - t0) / ROUNDS / 2 * 1e9, (t1 - t0) / ROUNDS * 1e9);
   free(buf);
+  start(0, 0, "as it is");
+  start(40, 0, "after 40 MB of new 4 KB pages");
+  start(40, 1, "after 40 MB of new huge pages");
   return 0;
 }
