@@ -489,7 +489,8 @@ static void test_index_alloc_failure(void **state) {
       st = ins   ? qk_tree_insert(t, q, &id)
            : mov ? qk_tree_move(t, victim, q)
                  : qk_tree_remove(t, victim);
-      if (!a.failed) {
+      if (!a.failed || st == QK_OK) { /* (a failed allocation of an optional give-back is
+                                          absorbed: test_index_give_back_nomem) */
         assert_true(st == QK_OK || (!ins && !victim_live && st == QK_ERR_NOT_FOUND));
         if (ins) assert_int_equal(id, n_freed ? freed[--n_freed] : next++);
         if (!ins && !mov && st == QK_OK) freed[n_freed++] = victim;
@@ -1015,6 +1016,55 @@ static void test_index_shrink_memory(void **state) {
   free(p), free(kept), free(ids);
 }
 
+/* Giving memory back is optional: when its allocations fail (the point arrays' compaction;
+ * the shrinking reallocs of the node arrays and of the stack of removed ids) the removal or
+ * insert still succeeds and the tree stays valid, larger. Every removal of an emptying tree
+ * has each of its allocations failed in turn: those of the removal itself give
+ * QK_ERR_NOMEM and change nothing, a give-back's are absorbed. */
+static void test_index_give_back_nomem(void **state) {
+  (void)state;
+  enum { N = 4000 };
+  qk_point_t *p = uniform_points(35, N);
+  qkt_alloc_t a;
+  qk_allocator_t al = qkt_alloc_make(&a);
+  qk_tree_options_t o = qkt_unit_options(1, &al);
+  qk_tree_t *t;
+  assert_int_equal(qk_tree_build(p, N, &o, &t), QK_OK);
+  size_t absorbed = 0, refused = 0;
+  for (uint32_t i = 0; i < N; i++) {
+    const qk_id_t id = (qk_id_t)((uint64_t)i * 48271u % N);
+    for (size_t k = 1;; k++) {
+      qkt_alloc_arm(&a, k);
+      qk_status_t st = qk_tree_remove(t, id);
+      if (!a.failed) {
+        assert_int_equal(st, QK_OK);
+        break;
+      }
+      if (st == QK_OK) { /* the give-back's allocation failed: the removal stands */
+        absorbed++;
+        QKT_CHECK_TREE(t);
+        break;
+      }
+      assert_int_equal(st, QK_ERR_NOMEM);
+      refused++;
+      qk_point_t q;
+      assert_int_equal(qk_tree_point(t, id, &q), QK_OK); /* still there */
+      assert_true(q.x == p[id].x && q.y == p[id].y);
+    }
+    qkt_alloc_arm(&a, 0);
+    qk_point_t q;
+    assert_int_equal(qk_tree_point(t, id, &q), QK_ERR_NOT_FOUND);
+  }
+  QKT_CHECK_TREE(t);
+  print_message("emptied with failing allocations: %zu refused, %zu give-backs absorbed\n", refused,
+                absorbed);
+  assert_true(absorbed > 0 && refused > 0);
+  qk_tree_free(t);
+  assert_int_equal(a.live_blocks, 0);
+  assert_int_equal(a.live_bytes, 0);
+  free(p);
+}
+
 static void test_index_insert_duplicates_linear(void **state) {
   (void)state;
   const int spots[] = {1, 5, 50};
@@ -1497,6 +1547,7 @@ int main(void) {
       cmocka_unit_test(test_index_churn_memory),
       cmocka_unit_test(test_index_remove_all_linear),
       cmocka_unit_test(test_index_shrink_memory),
+      cmocka_unit_test(test_index_give_back_nomem),
       cmocka_unit_test(test_index_insert_duplicates_linear),
       cmocka_unit_test(test_index_build_threads),
       cmocka_unit_test(test_index_bbox_threads),
