@@ -950,7 +950,7 @@ static void assert_linear_work(const char *what, size_t bytes, const qk_tree_t *
   if (bytes > bound * mem) fail_msg("%s: %zu bytes allocated for a tree of %zu", what, bytes, mem);
 }
 
-/* A tree that shrinks gives memory back: 90% of 100,000 points removed in a scrambled
+/* A tree that shrinks gives memory back: 90% of 50,000 points removed in a scrambled
  * order, at capacities 1, 4 and 16, leaves at most 1.5 times a fresh build of the rest (its
  * id map made) plus 9 bytes a removed id (the id map's entry and the stack of ids to hand
  * out again). Before, nothing was given back: 6.3 to 8.6 times a fresh build at 10^6
@@ -958,7 +958,7 @@ static void assert_linear_work(const char *what, size_t bytes, const qk_tree_t *
  * left is found by its id in the leaf that holds its coordinates. */
 static void test_index_shrink_memory(void **state) {
   (void)state;
-  enum { N = 100000 };
+  enum { N = 50000 };
   qk_point_t *p = uniform_points(34, N), *kept = malloc(N * sizeof *kept);
   qk_id_t *ids = malloc(N * sizeof *ids);
   assert_non_null(kept);
@@ -1041,8 +1041,7 @@ static void test_index_give_back_nomem(void **state) {
         break;
       }
       if (st == QK_OK) { /* the give-back's allocation failed: the removal stands */
-        absorbed++;
-        QKT_CHECK_TREE(t);
+        if (absorbed++ % 256 == 0) QKT_CHECK_TREE(t);
         break;
       }
       assert_int_equal(st, QK_ERR_NOMEM);
