@@ -265,6 +265,12 @@ void settle_processors() {
 #endif
 }
 
+// What every timed call gets first, untimed: the heap, then the other processors.
+static void settle() {
+  settle_heap();
+  settle_processors();
+}
+
 // Run every function reps times, interleaved in a rotating order; medians per function.
 // `wall` marks the functions that run more than one thread (timed by the wall clock).
 // `partner[i]`, when given and >= 0, is the one-thread function of the same call as the
@@ -287,14 +293,12 @@ std::vector<double> interleaved(const std::vector<std::function<void()>> &fns,
       int p = wall_clock && i < partner.size() ? partner[i] : -1;
       double one = NAN;
       if (p >= 0) {
-        settle_heap();
-        settle_processors();
+        settle();
         double t0 = now_seconds();
         fns[(size_t)p]();
         one = now_seconds() - t0;
       }
-      settle_heap();
-      settle_processors();
+      settle();
       double t0 = now_seconds();
       fns[i]();
       t[i].push_back(now_seconds() - t0);
@@ -956,8 +960,7 @@ static void time_mesh_sides(std::vector<MeshSide> &sides, int reps) {
   for (MeshSide &sd : sides) (sd.name.rfind("quadkit", 0) == 0 ? q : b).push_back(&sd);
   auto run = [](MeshSide *sd) {
     if (!sd->ok) return;
-    settle_heap();
-    settle_processors();
+    settle();
     MeshResult o;
     sd->run(o);
     sd->t.push_back(o.seconds);

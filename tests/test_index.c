@@ -950,6 +950,11 @@ static void assert_linear_work(const char *what, size_t bytes, const qk_tree_t *
   if (bytes > bound * mem) fail_msg("%s: %zu bytes allocated for a tree of %zu", what, bytes, mem);
 }
 
+/* The i-th of 0 .. n-1 in a scrambled order, each once as i runs over 0 .. n-1 (48271 is
+ * prime, so prime to any n it does not divide; the product is taken in 64 bits, where a
+ * 32-bit one would wrap and repeat ids unless n is a power of two). */
+static qk_id_t scrambled(uint32_t i, uint32_t n) { return (qk_id_t)((uint64_t)i * 48271u % n); }
+
 /* A tree that shrinks gives memory back: 90% of 50,000 points removed in a scrambled
  * order, at capacities 1, 4 and 16, leaves at most 1.5 times a fresh build of the rest (its
  * id map made) plus 9 bytes a removed id (the id map's entry and the stack of ids to hand
@@ -969,8 +974,8 @@ static void test_index_shrink_memory(void **state) {
     qk_tree_t *t, *f;
     assert_int_equal(qk_tree_build(p, N, &o, &t), QK_OK);
     size_t n_kept = 0;
-    for (uint32_t i = 0; i < N; i++) { /* every id once, scrambled (48271 is prime to N) */
-      qk_id_t id = (qk_id_t)((uint64_t)i * 48271u % N);
+    for (uint32_t i = 0; i < N; i++) {
+      qk_id_t id = scrambled(i, N);
       if (id % 10 == 3)
         kept[n_kept] = p[id], ids[n_kept++] = id;
       else
@@ -1032,7 +1037,7 @@ static void test_index_give_back_nomem(void **state) {
   assert_int_equal(qk_tree_build(p, N, &o, &t), QK_OK);
   size_t absorbed = 0, refused = 0;
   for (uint32_t i = 0; i < N; i++) {
-    const qk_id_t id = (qk_id_t)((uint64_t)i * 48271u % N);
+    const qk_id_t id = scrambled(i, N);
     for (size_t k = 1;; k++) {
       qkt_alloc_arm(&a, k);
       qk_status_t st = qk_tree_remove(t, id);
