@@ -114,7 +114,8 @@ typedef struct qk__gm {
   uint32_t *undo;
   size_t undo_cap;
   size_t insertions, work_cap;
-  size_t seeds, free_leaves; /* seeds inserted; free leaves meeting the bounding box */
+  size_t seeds;      /* seeds inserted */
+  size_t cap_leaves; /* leaves that size the work cap (general_run.c) */
   double smallest_input_angle;
   size_t deep_splits, deep_cap; /* the grading's splits below 2^-36 of the root square */
   size_t sep_splits, sep_cap;   /* the grading's splits that separate features, at any depth */

@@ -112,10 +112,10 @@ qk_status_t qk__mesh_general(const qk_poly_t *P, const qk_mesh_options_t *opt, q
     t2 = now();
   }
   if (!st) {
-    /* The work cap: the refinement inserts fewer points than the seeding would propose
-     * (the pre-split points, and five a free leaf: the seeds it would have placed); ten
-     * times that means it does not settle. */
-    g.work_cap = 10 * (g.npts + 5 * g.free_leaves + P->nv + P->ns) + 100000;
+    /* The work cap: the refinement inserts fewer points than five a leaf of the graded
+     * tree (its corners and centre: about what the seeds and the pre-split to the leaves'
+     * sides once placed) and the pre-split points; ten times that means it does not settle. */
+    g.work_cap = 10 * (g.npts + 5 * g.cap_leaves + P->nv + P->ns) + 100000;
     g.stage = "refining the triangulation";
     st = qk__gm_refine(&g);
   }

@@ -17,15 +17,14 @@
 /* Deepest subdivision: beyond it, the refinement alone separates features. */
 #define GM_DEPTH_CAP 50
 /* Whether the free leaves' corners and centres are inserted as seeds. They are not: on
- * the coastlines (Iceland, Norway; docs/mesh.md, "Mesh size") the refinement alone, from the
- * segments' pre-split points, makes half the triangles (2.6 times fewer with a size bound)
- * in 20-45% fewer instructions in all, though more a triangle. The free leaves are still
- * counted: they size the refinement's work cap. */
+ * the coastlines (Iceland, Norway; docs/mesh.md, "Mesh size") the refinement alone makes
+ * half the triangles (2.6 times fewer with a size bound) in 20-45% fewer instructions in
+ * all, though more a triangle. The leaves still size the refinement's work cap. */
 #define GM_SEED_LEAVES 0
 /* Whether the grading splits leaves larger than the size bound. Only a size function needs
  * it (the tree samples it, which sizes the refinement's work cap); with seeds off, nothing
- * else reads those leaves: the pre-split takes the smaller of the leaf and the bound at each
- * piece's middle, and the refinement enforces the bound on every triangle. A plain max_size
+ * else reads those leaves: the pre-split and the refinement take the bound where they are.
+ * A plain max_size
  * is counted instead (size_cells): on Norway with a bound of 1/256 of its extent the
  * size-split leaves were 3.9 million, three times the triangles, a third of the meshing
  * instructions and most of its memory. */
@@ -118,16 +117,10 @@ static inline int seg_box(const double *f, const double lo[2], const double hi[2
   return seg_box_line(f, lo, hi);
 }
 
-static int free_leaf(const qk__gm_t *g, double X, double Y, double s);
-
-/* A leaf of the grading whose grown square meets no feature (X, Y, s its lattice square).
- * Without seeds only their number is wanted (it sizes the work cap), so it is counted here
- * (the leaves meeting the input's bounding box); with seeds the node is marked for seeds(). */
-static qk_status_t mark_free(qk__gm_t *g, uint32_t node, double X, double Y, double s) {
-  if (!GM_SEED_LEAVES) {
-    g->free_leaves += (size_t)free_leaf(g, X, Y, s);
-    return QK_OK;
-  }
+/* A leaf of the grading whose grown square meets no feature: with seeds the node is marked
+ * for seeds(); without them nothing is wanted (the work cap counts every leaf). */
+static qk_status_t mark_free(qk__gm_t *g, uint32_t node) {
+  if (!GM_SEED_LEAVES) return QK_OK;
   if (node >= g->free_cap) {
     size_t old = g->free_cap;
     void *p = g->free_node;
@@ -201,7 +194,7 @@ static qk_status_t subdivide(qk__gm_t *g, uint32_t node, double X, double Y, dou
       }
     }
   }
-  if (!split) return k == 0 ? mark_free(g, node, X, Y, s) : QK_OK;
+  if (!split) return k == 0 ? mark_free(g, node) : QK_OK;
   if (qk__tree_node_bound(g->tree) > GM_NODE_CAP)
     return qk__mesh_fail(g->err, QK_ERR_LIMIT, 0,
                          "the size bound asks for more than 2^27 quadtree cells");
@@ -255,7 +248,7 @@ static qk_status_t subdivide(qk__gm_t *g, uint32_t node, double X, double Y, dou
   const int settle = !GM_SIZE_SPLITS(g) || !(g->opt->max_size > 0 || g->opt->size_fn);
   for (unsigned q = 0; q < 4; q++) {
     if (settle && n[q] <= 1) {
-      if (!n[q] && (st = mark_free(g, child + q, cx[q], cy[q], h))) break;
+      if (!n[q] && (st = mark_free(g, child + q))) break;
       continue;
     }
     /* g->arena, not A: a sibling's subdivision may have moved it. */
@@ -311,7 +304,7 @@ static qk_status_t seeds(qk__gm_t *g, uint32_t node, double X, double Y, double 
     if (!fr) return QK_OK;
     double x0 = in_x(g, X), y0 = in_y(g, Y), x1 = in_x(g, X + s), y1 = in_y(g, Y + s);
     if (x1 < g->bx0 || x0 > g->bx1 || y1 < g->by0 || y0 > g->by1) return QK_OK;
-    g->free_leaves++;
+    g->cap_leaves++;
     const double c[10] = {x0, y0, x1, y0, x0, y1, x1, y1, in_x(g, X + s / 2), in_y(g, Y + s / 2)};
     const double L[10] = {X, Y, X + s, Y, X, Y + s, X + s, Y + s, X + s / 2, Y + s / 2};
     /* The centre moves by a pattern of up to s/256 (any double is a valid seed): a grid's
@@ -337,13 +330,6 @@ static qk_status_t seeds(qk__gm_t *g, uint32_t node, double X, double Y, double 
     if (st) return st;
   }
   return QK_OK;
-}
-
-/* Whether the leaf (X, Y, s) meets the input's bounding box (seeds() places seeds only in
- * such free leaves, and only those are counted). */
-static int free_leaf(const qk__gm_t *g, double X, double Y, double s) {
-  double x0 = in_x(g, X), y0 = in_y(g, Y), x1 = in_x(g, X + s), y1 = in_y(g, Y + s);
-  return !(x1 < g->bx0 || x0 > g->bx1 || y1 < g->by0 || y0 > g->by1);
 }
 
 /* The leaves a grading by max_size alone would make over the input's bounding box: squares
@@ -373,71 +359,24 @@ static int ctz62(uint64_t k) {
  * next to an input vertex, the midpoint otherwise (general_refine.c). */
 int qk__gm_split_param(const qk__gm_t *g, uint32_t s, uint64_t lo, uint64_t hi, uint64_t *k);
 
-/* The path from the root to the leaf of the last lookup (leaf_side): node, lower-left
- * corner and side per level. Lookups along a segment are close to each other, so most of
- * the path is shared. */
-typedef struct leaf_path {
-  int depth; /* levels below the root on the path; -1: empty */
-  qk_node_t node[QK_MAX_DEPTH_LIMIT + 2];
-  double x0[QK_MAX_DEPTH_LIMIT + 2], y0[QK_MAX_DEPTH_LIMIT + 2], side[QK_MAX_DEPTH_LIMIT + 2];
-} leaf_path_t;
-
-/* Whether lattice point (X, Y) in [0, 1]^2 goes to the node with lower-left corner (x0, y0)
- * and side s under the descent's rule (a point on a midline goes west or south): the node
- * holds (x0, x0 + s] x (y0, y0 + s], and the closed sides at 0. */
-static int in_node(double X, double Y, double x0, double y0, double s) {
-  return (X > x0 || x0 == 0) && X <= x0 + s && (Y > y0 || y0 == 0) && Y <= y0 + s;
-}
-
-/* The side of the leaf holding lattice point (X, Y): qk__tree_descend's walk (a point on
- * a midline goes west or south) in the root square [0, 1]^2, whose halvings are exact,
- * without its square geometry a level; it resumes from the deepest node of the last
- * lookup's path that holds the point (the same leaf as a walk from the root). */
-static double leaf_side(const qk_tree_t *t, leaf_path_t *lp, double X, double Y) {
-  int d = lp->depth;
-  while (d > 0 && !in_node(X, Y, lp->x0[d], lp->y0[d], lp->side[d])) d--;
-  if (d < 0) {
-    d = 0;
-    lp->node[0] = qk_tree_root(t), lp->x0[0] = 0, lp->y0[0] = 0, lp->side[0] = 1;
-  }
-  qk_node_t v = lp->node[d];
-  double x0 = lp->x0[d], y0 = lp->y0[d], side = lp->side[d];
-  int full = 0;
-  for (uint32_t c = qk__node_child(t, v); c != QK_NONE; c = qk__node_child(t, v)) {
-    double h = side * 0.5;
-    int e = X > x0 + h, n = Y > y0 + h;
-    v = c + (e ? (n ? QK_NE : QK_SE) : (n ? QK_NW : QK_SW));
-    x0 += e ? h : 0, y0 += n ? h : 0, side = h;
-    if (d < QK_MAX_DEPTH_LIMIT + 1) {
-      d++;
-      lp->node[d] = v, lp->x0[d] = x0, lp->y0[d] = y0, lp->side[d] = side;
-    } else {
-      full = 1; /* deeper than the path holds (cannot happen): the next lookup starts over */
-    }
-  }
-  lp->depth = full ? -1 : d;
-  return side;
-}
-
-/* Step 6: split segment s's piece (lo, hi) while it is longer than the leaf at its middle
- * (or the size bound there). A piece with no exact split point is left to the refinement,
- * which refuses the input only if it must split it. */
-static qk_status_t presplit(qk__gm_t *g, leaf_path_t *lp, uint32_t s, const double *A,
-                            const double *B, double len, uint64_t lo, uint64_t hi) {
+/* Step 6: split segment s's piece (lo, hi) while it is longer than the size bound at its
+ * middle. Not to the graded leaves' sides: the refinement splits what is encroached, and
+ * pieces cut to the leaves made meshes up to 3.8 times larger than the bound needs at coarse
+ * bounds (docs/mesh.md, "Mesh size"). A piece with no exact split point is left to the
+ * refinement, which refuses the input only if it must split it. */
+static qk_status_t presplit(qk__gm_t *g, uint32_t s, const double *A, const double *B, double len,
+                            uint64_t lo, uint64_t hi) {
   double t = (double)(lo / 2 + hi / 2) * 0x1p-62;
   double mid[2] = {A[0] + t * (B[0] - A[0]), A[1] + t * (B[1] - A[1])};
-  double X = (mid[0] - g->X0) * g->inv_S, Y = (mid[1] - g->Y0) * g->inv_S;
-  X = X < 0 ? 0 : X > 1 ? 1 : X, Y = Y < 0 ? 0 : Y > 1 ? 1 : Y;
-  double want = fmin(leaf_side(g->tree, lp, X, Y) * g->S, size_at(g, mid, 1));
-  if (!(len * ((double)(hi - lo) * 0x1p-62) > want)) return QK_OK;
+  if (!(len * ((double)(hi - lo) * 0x1p-62) > size_at(g, mid, 1))) return QK_OK;
   uint64_t k;
   if (!qk__gm_split_param(g, s, lo, hi, &k)) return QK_OK;
   int tz = ctz62(k);
   double p[2];
   qk__seg_point_in(A, B, k >> tz, 62 - tz, p); /* 0 < k < 2^62 on the budget's grid */
-  qk_status_t st = presplit(g, lp, s, A, B, len, lo, k);
+  qk_status_t st = presplit(g, s, A, B, len, lo, k);
   if (!st) st = add_pt(g, qk__gm_morton(g, p[0], p[1]), p[0], p[1], s, k);
-  if (!st) st = presplit(g, lp, s, A, B, len, k, hi);
+  if (!st) st = presplit(g, s, A, B, len, k, hi);
   return st;
 }
 
@@ -606,31 +545,21 @@ qk_status_t qk__gm_seed(qk__gm_t *g, qk_mesh_stats_t *stats) {
     if (seeds(g, qk_tree_root(g->tree), 0, 0, 1, 0))
       return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   } else {
-    /* The free leaves were counted as the grading made them (mark_free). Balancing splits
-     * leaves, and a free leaf's children are free: the leaves it adds bound the free ones
-     * it adds, so the count stays at least the free leaves of the balanced tree (the walk
-     * over the balanced tree that counted them exactly cost 1.7 M instructions of 55 M on
-     * Norway at extent/64; the work cap it sizes is a resource limit). */
-    g->free_leaves += stats->leaves - stats->leaves_before_balance;
+    /* Every leaf of the balanced tree: the refinement's points near the features, which
+     * the grading sized, and in the free leaves (the seeds' leaves, when seeds are on). */
+    g->cap_leaves = stats->leaves;
   }
-  g->free_leaves += size_cells(g);
+  g->cap_leaves += size_cells(g);
   /* The split points of segment s get ranks first[s] .. first[s + 1] - 1 in parameter
    * order (presplit makes them in order; seeds, when enabled, come before them all). */
   uint32_t *first = qk__realloc(g->a, NULL, 0, (P->ns + 1) * sizeof *first);
-  leaf_path_t *lp = qk__realloc(g->a, NULL, 0, sizeof *lp);
-  if (!first || !lp) {
-    qk__free(g->a, first, (P->ns + 1) * sizeof *first);
-    qk__free(g->a, lp, sizeof *lp);
-    return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
-  }
-  lp->depth = -1;
+  if (!first) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   for (size_t s = 0; s < P->ns && !st; s++) {
     uint32_t u = P->seg[2 * s], w = P->seg[2 * s + 1];
     const double A[2] = {P->vx[u], P->vy[u]}, B[2] = {P->vx[w], P->vy[w]};
     first[s] = (uint32_t)g->npts;
-    st = presplit(g, lp, (uint32_t)s, A, B, hypot(B[0] - A[0], B[1] - A[1]), 0, QK__GM_ONE);
+    st = presplit(g, (uint32_t)s, A, B, hypot(B[0] - A[0], B[1] - A[1]), 0, QK__GM_ONE);
   }
-  qk__free(g->a, lp, sizeof *lp);
   if (!st) first[P->ns] = (uint32_t)g->npts;
   if (!st && g->npts) st = qk__gm_sort_points(g, g->pts, g->npts);
   if (st)
