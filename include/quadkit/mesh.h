@@ -323,8 +323,11 @@ qk_status_t qk_mesh_angle_histogram(const qk_mesh_t *mesh, uint64_t bins[180]);
  */
 const uint32_t *qk_mesh_triangle_components(const qk_mesh_t *mesh, size_t *n);
 
-/** The balanced quadtree subdivision the mesh was made from (borrowed); in the general
- *  mode the graded tree that placed the seeds, over [0, 1]^2 in lattice coordinates. */
+/** The balanced quadtree subdivision the mesh was made from (borrowed). In the general
+ *  mode, the tree graded by the input's features (a leaf is split while it is near two
+ *  features that need separating), over [0, 1]^2 in lattice coordinates, and not balanced:
+ *  that mode's points are the refinement's, and the tree only checks the input and sizes
+ *  the work (docs/mesh.md, "The general mode"). */
 const qk_tree_t *qk_mesh_tree(const qk_mesh_t *mesh);
 
 /** Figures about a mesh and its generation. */
@@ -332,7 +335,7 @@ typedef struct qk_mesh_stats {
   uint64_t size;                   /**< the domain side U (general mode: 1, in lattice units) */
   size_t components;               /**< number of components */
   size_t leaves_before_balance;    /**< leaves of the subdivision */
-  size_t leaves;                   /**< leaves after balancing */
+  size_t leaves;                   /**< leaves after balancing (general mode: not balanced) */
   size_t triangles;                /**< triangles kept */
   size_t vertices;                 /**< vertices used by them */
   size_t steiner;                  /**< Steiner points used (square centres; general mode:
