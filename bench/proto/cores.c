@@ -7,6 +7,11 @@
  *     two threads reach when nothing is shared;
  *   - memory: each thread reads its own 64 MB, a line a step, twenty times: the ratio
  *     when the memory system is shared;
+ *   - latency: a chain of dependent loads at random through 64 MB (each load's address is
+ *     the one before's value), on each processor alone and on both at once: whether the
+ *     two processors wait as long for memory (on this guest they need not; a search that
+ *     misses the caches, one nearest-neighbour query a call, ran up to a third slower on
+ *     the slower one), so what a two-thread row bound by latency can gain at most;
  *   - transfer: one cache line passed back and forth between two pinned threads: how
  *     long a line one thread wrote takes to reach the other (one way);
  *   - start: how long a thread started on the other processor takes to run, as it is, and
@@ -47,10 +52,15 @@ static void pin(int cpu) {
 
 typedef struct task {
   int kind, cpu, half;
+  double ns; /* latency: nanoseconds a load */
 } task_t;
 
+static uint64_t *chain; /* latency: two random cycles of CHAIN words, one a thread */
+#define CHAIN ((size_t)8 << 20)
+#define CHASE 4000000L
+
 static void *work(void *arg) {
-  const task_t *t = arg;
+  task_t *t = arg;
   pin(t->cpu);
   uint64_t a = 1, b = 2, c = 3, d = 4, e = 5, f = 6;
   if (t->kind == 0) {
@@ -63,6 +73,13 @@ static void *work(void *arg) {
     for (long i = 0; i < 150000000L; i++)
       for (int k = 0; k < 8; k++) x[k] = x[k] * 1.0000001 + 1e-9;
     a = (uint64_t)x[3];
+  } else if (t->kind == 3) {
+    const uint64_t *c = chain + (size_t)t->half * CHAIN;
+    uint64_t at = 0;
+    double t0 = now();
+    for (long i = 0; i < CHASE; i++) at = c[at];
+    t->ns = (now() - t0) / CHASE * 1e9;
+    a = at;
   } else {
     const double *p = buf + (size_t)t->half * (nbuf / 2);
     double s = 0;
@@ -90,6 +107,54 @@ static void scaling(int kind, const char *what) {
   double t3 = now();
   printf("%-9s one thread %.3f s, two threads (twice the work) %.3f s: %.2fx\n", what, t1 - t0,
          t3 - t2, 2 * (t1 - t0) / (t3 - t2));
+}
+
+/* Two random cycles through CHAIN words each (Sattolo's shuffle: one cycle), so every load
+ * depends on the one before and lands on a line the caches do not hold. */
+static void make_chains(void) {
+  chain = malloc(2 * CHAIN * sizeof *chain);
+  if (!chain) {
+    fprintf(stderr, "quadkit-proto-cores: out of memory\n");
+    exit(1);
+  }
+  uint64_t z = 88172645463325252ull;
+  for (int h = 0; h < 2; h++) {
+    uint64_t *c = chain + (size_t)h * CHAIN;
+    for (size_t i = 0; i < CHAIN; i++) c[i] = i;
+    for (size_t i = CHAIN - 1; i > 0; i--) {
+      z ^= z << 13, z ^= z >> 7, z ^= z << 17;
+      size_t j = z % i;
+      uint64_t v = c[i];
+      c[i] = c[j], c[j] = v;
+    }
+  }
+}
+
+/* Dependent loads on cpu_a alone, on cpu_b alone (the calling thread moved there), then on
+ * both at once (each its own cycle). */
+static void latency(void) {
+  make_chains();
+  task_t a = {3, cpu_a, 0, 0}, b = {3, cpu_b, 1, 0};
+  work(&a);
+  double alone_a = a.ns;
+  work(&b);
+  double alone_b = b.ns;
+  pin(cpu_a);
+  pthread_t th;
+  if (pthread_create(&th, NULL, work, &b) != 0) {
+    fprintf(stderr, "quadkit-proto-cores: cannot start a thread\n");
+    exit(1);
+  }
+  work(&a);
+  pthread_join(th, NULL);
+  double fast = alone_a < alone_b ? alone_a : alone_b, slow = alone_a < alone_b ? alone_b : alone_a;
+  printf("latency   a load at random in 64 MB: %.0f ns on %d alone, %.0f ns on %d alone; "
+         "both at once %.0f and %.0f ns\n",
+         alone_a, cpu_a, alone_b, cpu_b, a.ns, b.ns);
+  printf("          a two-thread row bound by latency gains at most %.2fx over one thread on the "
+         "faster processor (1 + its time a load / the slower's)\n",
+         1 + fast / slow);
+  free(chain);
 }
 
 #define ROUNDS 2000000
@@ -177,6 +242,7 @@ int main(int argc, char **argv) {
   scaling(0, "integer");
   scaling(1, "float");
   scaling(2, "memory");
+  latency();
   pthread_t th;
   if (pthread_create(&th, NULL, bounce, NULL) != 0) return 1;
   double t0 = now();
