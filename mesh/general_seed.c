@@ -24,10 +24,9 @@
 /* Whether the grading splits leaves larger than the size bound. Only a size function needs
  * it (the tree samples it, which sizes the refinement's work cap); with seeds off, nothing
  * else reads those leaves: the pre-split and the refinement take the bound where they are.
- * A plain max_size
- * is counted instead (size_cells): on Norway with a bound of 1/256 of its extent the
- * size-split leaves were 3.9 million, three times the triangles, a third of the meshing
- * instructions and most of its memory. */
+ * A plain max_size is counted instead (size_cells): on Norway with a bound of 1/256 of its
+ * extent the size-split leaves were 3.9 million, three times the triangles, a third of the
+ * meshing instructions and most of its memory. */
 #define GM_SIZE_SPLITS(g) (GM_SEED_LEAVES || (g)->opt->size_fn)
 /* Most tree nodes the grading may make (a size bound asking for more is refused). */
 #define GM_NODE_CAP ((uint32_t)1 << 27)
@@ -334,7 +333,7 @@ static qk_status_t seeds(qk__gm_t *g, uint32_t node, double X, double Y, double 
 
 /* The leaves a grading by max_size alone would make over the input's bounding box: squares
  * of the root's side halved until within the bound, in a grid over the box. They size the
- * work cap as the free leaves do (a few more: the grid counts leaves near features too). */
+ * work cap with the graded tree's leaves (which the plain bound does not split). */
 static size_t size_cells(const qk__gm_t *g) {
   double h = g->opt->max_size;
   if (GM_SIZE_SPLITS(g) || !(h > 0)) return 0;
