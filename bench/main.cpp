@@ -1468,6 +1468,20 @@ std::string rate(double v) {
   return b;
 }
 
+// The 1, 5 and 15-minute load averages (/proc/loadavg), or "unknown": printed with the
+// table, so that a row can be read against what else ran on the machine.
+static std::string load_average() {
+  char buf[64] = "";
+  FILE *f = fopen("/proc/loadavg", "r");
+  double a = 0, b = 0, c = 0;
+  bool ok = f && fscanf(f, "%lf %lf %lf", &a, &b, &c) == 3;
+  if (f) fclose(f);
+  if (!ok) return "unknown";
+  snprintf(buf, sizeof buf, "%.2f %.2f %.2f", a, b, c);
+  return buf;
+}
+static std::string load_at_start;
+
 void print_table() {
   const char *bases[] = {"flann", "nanoflann",     "embree",       "cgal",   "p4est",
                          "gmsh",  "geographiclib", "proto-morton", "geos",   "s2",
@@ -1485,7 +1499,9 @@ void print_table() {
   };
   std::map<std::string, const Rec *> by;
   for (auto &r : records) by[key(r, r.batch) + "|" + r.impl] = &r;
-  printf("\nquadkit-bench: ratio = quadkit rate / baseline rate (>1: quadkit faster); medians of "
+  printf("\nquadkit-bench: load average (1, 5, 15 min) %s at the start, %s at the end\n",
+         load_at_start.c_str(), load_average().c_str());
+  printf("quadkit-bench: ratio = quadkit rate / baseline rate (>1: quadkit faster); medians of "
          "%d interleaved runs in one process; process CPU time (wall time for t2 rows)\n"
          "t2 rows end with their speedup: each run's one-thread wall time (the same call, run "
          "just before it) over its own\n",
@@ -1696,6 +1712,7 @@ int main(int argc, char **argv) {
     }
   }
   t_start = wall_seconds();
+  load_at_start = load_average();
   progress_on = isatty(STDERR_FILENO);
   double wall_start = wall_seconds();
   fprintf(stderr, "quadkit-bench: baselines built in:");
