@@ -11,7 +11,8 @@
  *     the one before's value), on each processor alone and on both at once: whether the
  *     two processors wait as long for memory (on this guest they need not; a search that
  *     misses the caches, one nearest-neighbour query a call, ran up to a third slower on
- *     the slower one), so what a two-thread row bound by latency can gain at most;
+ *     the slower one), and the loads a second of both at once against one thread on the
+ *     faster processor alone: what a two-thread row bound by latency can gain at most;
  *   - transfer: one cache line passed back and forth between two pinned threads: how
  *     long a line one thread wrote takes to reach the other (one way);
  *   - start: how long a thread started on the other processor takes to run, as it is, and
@@ -147,13 +148,13 @@ static void latency(void) {
   }
   work(&a);
   pthread_join(th, NULL);
-  double fast = alone_a < alone_b ? alone_a : alone_b, slow = alone_a < alone_b ? alone_b : alone_a;
+  double fast = alone_a < alone_b ? alone_a : alone_b;
   printf("latency   a load at random in 64 MB: %.0f ns on %d alone, %.0f ns on %d alone; "
          "both at once %.0f and %.0f ns\n",
          alone_a, cpu_a, alone_b, cpu_b, a.ns, b.ns);
-  printf("          a two-thread row bound by latency gains at most %.2fx over one thread on the "
-         "faster processor (1 + its time a load / the slower's)\n",
-         1 + fast / slow);
+  printf("          two threads at once made %.2fx the loads a second of one thread on the faster "
+         "processor alone: what a latency-bound two-thread row can gain at most\n",
+         fast / a.ns + fast / b.ns);
   free(chain);
 }
 
