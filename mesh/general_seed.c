@@ -360,8 +360,8 @@ int qk__gm_split_param(const qk__gm_t *g, uint32_t s, uint64_t lo, uint64_t hi, 
 
 /* Step 6: split segment s's piece (lo, hi) while it is longer than the size bound at its
  * middle. Not to the graded leaves' sides: the refinement splits what is encroached, and
- * pieces cut to the leaves made meshes up to 3.8 times larger than the bound needs at coarse
- * bounds (docs/mesh.md, "Mesh size"). A piece with no exact split point is left to the
+ * pieces cut to the leaves made meshes up to 9.5 times larger than needed at coarse
+ * bounds or none (docs/mesh.md, "Mesh size"). A piece with no exact split point is left to the
  * refinement, which refuses the input only if it must split it. */
 static qk_status_t presplit(qk__gm_t *g, uint32_t s, const double *A, const double *B, double len,
                             uint64_t lo, uint64_t hi) {
