@@ -64,8 +64,16 @@ double wall_seconds() {
   return duration<double>(steady_clock::now().time_since_epoch()).count();
 }
 
+// QKB_SKIP=a,b,...: leave those baselines out of this run (an A/B of what the other
+// libraries' threads and memory do to quadkit's rows in the same process).
+static bool skipped(const std::string &s) {
+  const char *skip = std::getenv("QKB_SKIP");
+  return skip && ("," + std::string(skip) + ",").find("," + s + ",") != std::string::npos;
+}
+
 bool have(const char *w) {
   std::string s = w;
+  if (skipped(s)) return false;
 #ifdef QKB_HAVE_FLANN
   if (s == "flann") return true;
 #endif
@@ -361,7 +369,8 @@ std::vector<Impl> point_impls(size_t n) {
   v.push_back({make_quadkit(), true});
   for (auto f : {make_flann, make_nanoflann, make_embree_points}) {
     if (n > 1000000 && f != make_nanoflann) continue;
-    if (auto p = f()) v.push_back({std::move(p), true});
+    if (auto p = f())
+      if (!skipped(p->name())) v.push_back({std::move(p), true});
   }
   return v;
 }
