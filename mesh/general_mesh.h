@@ -83,8 +83,10 @@ typedef struct qk__gm {
    * whose star lies in one face then neither lists nor labels it (star_pending says so,
    * g->dirty stays empty) and the refinement's check walks the ring once for both. */
   int star_later, star_pending;
-  /* The graded quadtree (lattice coordinates: the root square is [0, 1]^2). */
+  /* The graded quadtree (lattice coordinates: the root square is [0, 1]^2), NULL until
+   * graded (qk__gm_grade), and the statistics its leaves go to. */
   qk_tree_t *tree;
+  qk_mesh_stats_t *stats;
   uint8_t *free_node; /* per node id: its grown square meets no feature */
   size_t free_cap;
   uint32_t *arena; /* feature lists of the subdivision */
@@ -159,8 +161,22 @@ qk_status_t qk__gm_insert(qk__gm_t *g, double x, double y, uint32_t t0, int k0, 
  * by key (general_seed.c). */
 uint64_t qk__gm_morton(const qk__gm_t *g, double x, double y);
 qk_status_t qk__gm_sort_points(const qk__gm_t *g, qk__gm_pt_t *pts, size_t n);
-/* general_seed.c: the graded quadtree, its seeds and the pre-split points, inserted. */
-qk_status_t qk__gm_seed(qk__gm_t *g, qk_mesh_stats_t *st);
+/* general_seed.c: the pre-split points (and the seeds, when compiled in), inserted; the
+ * graded quadtree first only with a size function or seeds. */
+qk_status_t qk__gm_seed(qk__gm_t *g);
+/* general_seed.c: the graded quadtree (g->tree, g->stats' leaves; its leaves added to
+ * g->cap_leaves), or the refusal of an input whose grading would not end soon. */
+qk_status_t qk__gm_grade(qk__gm_t *g);
+/* The refinement's work cap (general_run.c): ten times five insertions a leaf that counts
+ * (size cells, and the graded tree's leaves once graded), the pre-split points and the
+ * input's vertices and segments, plus 10^5; plus 10^4 while the tree is not graded, so that
+ * an input whose features stay close along a stretch reaches the grading's refusal soon. */
+static inline size_t qk__gm_work_cap(const qk__gm_t *g) {
+  return 10 * (g->npts + 5 * g->cap_leaves + g->P->nv + g->P->ns) + (g->tree ? 100000 : 10000);
+}
+/* Tests only: nonzero has the refinement grade the tree at its start (general_run.c), not
+ * at the input-sized work cap, so that small inputs take the late grading's path. */
+extern int qk__gm_test_grade_late;
 /* general_refine.c: split the subsegment a-b of segment s at an exact point (concentric
  * shells next to an input vertex); QK_ERR_GEOMETRY naming s when no exact point exists. */
 qk_status_t qk__gm_split(qk__gm_t *g, uint32_t a, uint32_t b, uint32_t s);

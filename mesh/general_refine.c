@@ -787,6 +787,15 @@ static qk_status_t refine(qk__gm_t *g) {
   qk_status_t st = QK_OK;
   size_t rejected = 0;
   for (;;) {
+    if (!g->tree && g->insertions >= g->work_cap) {
+      /* The input's size did not cap the work: the graded tree's leaves do (general_run.c),
+       * or its grading refuses an input whose features stay close along a stretch. */
+      const char *stage = g->stage;
+      g->stage = "grading the quadtree";
+      if ((st = qk__gm_grade(g))) return st;
+      g->stage = stage;
+      g->work_cap = qk__gm_work_cap(g);
+    }
     if (g->insertions > g->work_cap) {
       double x = 0, y = 0;
       if (g->bad_head < g->nbad) {

@@ -76,6 +76,8 @@ static qk_status_t name_failure(const qk__gm_t *g, qk_status_t st) {
   return st;
 }
 
+int qk__gm_test_grade_late = 0;
+
 qk_status_t qk__mesh_general_check(const qk_poly_t *P, const qk_mesh_options_t *opt,
                                    qk_allocator_t *a, qk_mesh_error_t *err) {
   qk__gm_t g;
@@ -95,7 +97,7 @@ qk_status_t qk__mesh_general(const qk_poly_t *P, const qk_mesh_options_t *opt, q
                          opt->min_angle_deg);
   qk__gm_t g;
   memset(&g, 0, sizeof g);
-  g.a = &m->alloc, g.P = P, g.opt = opt, g.err = err;
+  g.a = &m->alloc, g.P = P, g.opt = opt, g.err = err, g.stats = &m->stats;
   g.bound_deg = opt->min_angle_deg > 0 ? opt->min_angle_deg : 20;
   /* A triangle is good only with a margin above the bound, so that the floating-point
    * angle test never passes an angle below it. */
@@ -107,15 +109,16 @@ qk_status_t qk__mesh_general(const qk_poly_t *P, const qk_mesh_options_t *opt, q
   if (!st) st = check_size(&g);
   if (!st) {
     t1 = now();
-    g.stage = "grading the quadtree and placing the seeds";
-    st = qk__gm_seed(&g, &m->stats);
+    g.stage = "splitting the segments to the size bound";
+    st = qk__gm_seed(&g);
     t2 = now();
   }
   if (!st) {
     /* The work cap: the refinement inserts fewer points than five a leaf of the graded
      * tree (its corners and centre: about what the seeds and the pre-split to the leaves'
-     * sides once placed) and the pre-split points; ten times that means it does not settle. */
-    g.work_cap = 10 * (g.npts + 5 * g.cap_leaves + P->nv + P->ns) + 100000;
+     * sides once placed) and the pre-split points; ten times that means it does not settle.
+     * Until the tree is graded (at this cap, general_refine.c) its leaves count none. */
+    g.work_cap = qk__gm_test_grade_late && !g.tree ? 0 : qk__gm_work_cap(&g);
     g.stage = "refining the triangulation";
     st = qk__gm_refine(&g);
   }

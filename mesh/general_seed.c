@@ -472,18 +472,10 @@ static qk_status_t insert_points(qk__gm_t *g, const uint32_t *first) {
   return st;
 }
 
-qk_status_t qk__gm_seed(qk__gm_t *g, qk_mesh_stats_t *stats) {
+/* Step 4, the grading, with its statistics (g->stats) and the leaves it adds to the work
+ * cap's count. */
+qk_status_t qk__gm_grade(qk__gm_t *g) {
   const qk_poly_t *P = g->P;
-  g->inv_S = ldexp(1.0, -g->e);
-  /* Each segment's precision budget once (every split point asks for it). */
-  g->sbud = qk__realloc(g->a, NULL, 0, P->ns + 1);
-  if (!g->sbud) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
-  for (size_t s = 0; s < P->ns; s++) {
-    uint32_t u = P->seg[2 * s], w = P->seg[2 * s + 1];
-    const double A[2] = {P->vx[u], P->vy[u]}, B[2] = {P->vx[w], P->vy[w]};
-    int b = qk__seg_budget(A, B);
-    g->sbud[s] = (int8_t)(b > 62 ? 62 : b < -1 ? -1 : b);
-  }
   qk_tree_options_t to;
   qk_tree_options_init(&to);
   to.has_root = 1;
@@ -536,22 +528,41 @@ qk_status_t qk__gm_seed(qk__gm_t *g, qk_mesh_stats_t *stats) {
   if ((st = subdivide(g, qk_tree_root(g->tree), 0, 0, 1, rlo, rhi, 0, 0, nf))) return st;
   /* The tree grew from its root by splits alone (four nodes each, three more leaves), so
    * its node count gives its leaves without a walk. */
-  stats->leaves_before_balance = 1 + 3 * ((size_t)qk__tree_node_bound(g->tree) - 1) / 4;
+  g->stats->leaves_before_balance = 1 + 3 * ((size_t)qk__tree_node_bound(g->tree) - 1) / 4;
   /* Balanced only for the seeds, whose corners must conform: without them nothing reads the
    * leaves (the pre-split and the refinement follow the size bound), and balancing was
    * 10-13% of the meshing on coastlines at extent/32, 7% on Norway at extent/256. */
   if (GM_SEED_LEAVES && (st = qk_tree_balance(g->tree)))
     return qk__mesh_fail(g->err, st, 0, "%s while balancing", qk_strerror(st));
-  stats->leaves = 1 + 3 * ((size_t)qk__tree_node_bound(g->tree) - 1) / 4;
-  if (GM_SEED_LEAVES) {
-    if (seeds(g, qk_tree_root(g->tree), 0, 0, 1, 0))
-      return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
-  } else {
-    /* Every leaf of the graded tree: the refinement's points near the features, which the
-     * grading sized, and in the free leaves (the seeds' leaves, when seeds are on). */
-    g->cap_leaves = stats->leaves;
+  g->stats->leaves = 1 + 3 * ((size_t)qk__tree_node_bound(g->tree) - 1) / 4;
+  /* Every leaf of the graded tree: the refinement's points near the features, which the
+   * grading sized, and in the free leaves (with seeds, seeds() counts the seeds' leaves). */
+  if (!GM_SEED_LEAVES) g->cap_leaves += g->stats->leaves;
+  return QK_OK;
+}
+
+qk_status_t qk__gm_seed(qk__gm_t *g) {
+  const qk_poly_t *P = g->P;
+  g->inv_S = ldexp(1.0, -g->e);
+  /* Each segment's precision budget once (every split point asks for it). */
+  g->sbud = qk__realloc(g->a, NULL, 0, P->ns + 1);
+  if (!g->sbud) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  for (size_t s = 0; s < P->ns; s++) {
+    uint32_t u = P->seg[2 * s], w = P->seg[2 * s + 1];
+    const double A[2] = {P->vx[u], P->vy[u]}, B[2] = {P->vx[w], P->vy[w]};
+    int b = qk__seg_budget(A, B);
+    g->sbud[s] = (int8_t)(b > 62 ? 62 : b < -1 ? -1 : b);
   }
-  g->cap_leaves += size_cells(g);
+  qk_status_t st = QK_OK;
+  g->cap_leaves = size_cells(g);
+  /* The grading waits for the refinement to need it (general_refine.c, at the work cap),
+   * unless a size function splits its leaves (they size the cap then) or the seeds are on:
+   * on coastlines most meshes end within the cap the input's size sets, and grading first
+   * was a third of the meshing with no size bound on Norway (1,953 segments), a fifth at
+   * 1/256 of its extent. */
+  if (GM_SIZE_SPLITS(g) && (st = qk__gm_grade(g))) return st;
+  if (GM_SEED_LEAVES && seeds(g, qk_tree_root(g->tree), 0, 0, 1, 0))
+    return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   /* The split points of segment s get ranks first[s] .. first[s + 1] - 1 in parameter
    * order (presplit makes them in order; seeds, when enabled, come before them all). */
   uint32_t *first = qk__realloc(g->a, NULL, 0, (P->ns + 1) * sizeof *first);

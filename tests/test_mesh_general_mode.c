@@ -441,7 +441,9 @@ static void test_mesh_general_mode_square_holes(void **state) {
   assert_int_equal(st.exempt_angles, 0);
   assert_true(st.min_angle_deg >= 20 && st.max_angle_deg <= 140);
   assert_int_equal(st.components, 1);
-  assert_non_null(qk_mesh_tree(m));
+  /* No quadtree: the refinement ended within the input-sized work cap (graded_late). */
+  assert_null(qk_mesh_tree(m));
+  assert_int_equal(st.leaves, 0);
   /* The input vertices come first, in input order, bit-identical. */
   assert_memory_equal(qk_mesh_vertices(m, NULL), s->xy, 2 * s->nv * sizeof(double));
   qk_mesh_free(m);
@@ -986,6 +988,69 @@ static void test_mesh_general_mode_refusals(void **state) {
   }
 }
 
+/* The grading, put off until the refinement reaches the input-sized work cap, changes no
+ * mesh: with qk__gm_test_grade_late = 1 the refinement grades it at its start, and
+ * every vertex and triangle is the same; the mesh then has the tree (qk_mesh_tree, leaves
+ * in the statistics), and without it none. A size function grades first either way. */
+extern int qk__gm_test_grade_late;
+
+static void same_mesh_graded_late(const shape_t *s, qk_mesh_options_t o, const char *what) {
+  qk_poly_t *p = sh_poly(s, NULL);
+  qk_mesh_t *m[2];
+  qk_mesh_stats_t st[2];
+  for (int late = 0; late < 2; late++) {
+    qk__gm_test_grade_late = late;
+    m[late] = mesh_of(p, &o);
+    qk_mesh_stats(m[late], &st[late]);
+  }
+  qk__gm_test_grade_late = 0;
+  size_t nv[2], nt[2];
+  const double *v0 = qk_mesh_vertices(m[0], &nv[0]), *v1 = qk_mesh_vertices(m[1], &nv[1]);
+  const uint32_t *t0 = qk_mesh_triangles(m[0], &nt[0]), *t1 = qk_mesh_triangles(m[1], &nt[1]);
+  printf("# %s: %zu triangles; leaves %zu, graded late %zu\n", what, nt[0], st[0].leaves,
+         st[1].leaves);
+  assert_true(nt[0] > 0);
+  assert_int_equal(nv[0], nv[1]);
+  assert_int_equal(nt[0], nt[1]);
+  assert_memory_equal(v0, v1, 2 * nv[0] * sizeof *v0);
+  assert_memory_equal(t0, t1, 3 * nt[0] * sizeof *t0);
+  assert_true(st[1].leaves > 0 && qk_mesh_tree(m[1]) != NULL);
+  if (o.size_fn)
+    assert_true(st[0].leaves == st[1].leaves && qk_mesh_tree(m[0]) != NULL);
+  else
+    assert_true(st[0].leaves == 0 && qk_mesh_tree(m[0]) == NULL);
+  for (int i = 0; i < 2; i++) qk_mesh_free(m[i]);
+  qk_poly_free(p);
+}
+
+static void test_mesh_general_mode_graded_late(void **state) {
+  (void)state;
+  shape_t *s = calloc(1, sizeof *s);
+  double pts[10] = {0, 0, 7, 1, 6, 5, 2.5, 6, -1, 3};
+  sh_ring(s, pts, 5);
+  qk_mesh_options_t o = general_opts();
+  same_mesh_graded_late(s, o, "pentagon");
+  o.max_size = 0.5;
+  same_mesh_graded_late(s, o, "pentagon, max_size 0.5");
+  o.max_size = 0, o.size_fn = size_fn;
+  same_mesh_graded_late(s, o, "pentagon, size_fn");
+  free(s);
+  qkt_rng_t r;
+  qkt_rng_seed(&r, qkt_seed(34));
+  for (int k = 0; k < 6; k++) {
+    s = calloc(1, sizeof *s);
+    star(s, &r, 5 + qkt_rng_below(&r, 40));
+    qk_poly_t *p = sh_poly(s, NULL);
+    qk_mesh_t *m = NULL;
+    o = general_opts();
+    qk_status_t st = qk_mesh_generate(p, &o, &m, NULL);
+    qk_mesh_free(m);
+    qk_poly_free(p);
+    if (st == QK_OK) same_mesh_graded_late(s, o, "random star");
+    free(s);
+  }
+}
+
 /* An allocator that records the most bytes live at once: a refusal's peak memory
  * measures the work done before it, deterministically (no clock). */
 typedef struct peak_alloc {
@@ -1041,15 +1106,33 @@ static void refused_quickly(const double *xy, size_t nv, const uint32_t *seg, si
   refused_small(xy, nv, seg, ns, QK_MESH_GENERAL, st, w, 64);
 }
 
-/* Hostile inputs get a clear refusal at once (fuzz/regressions/mesh_general/isolated-*). */
+/* Hostile inputs get a clear answer at once (fuzz/regressions/mesh_general/isolated-*). */
 static void test_mesh_general_mode_hostile(void **state) {
   (void)state;
   /* Two segments 1e-10 apart along 1.1e10 (an input angle of 1e-18 degrees), with a vertex
-   * 1e-14 from them: the grading once made 2^27 cells before refusing. */
+   * 1e-14 from them: the grading once made 2^27 cells before refusing, and then refused it
+   * at once. It bounds nothing: the mesh is empty, found without grading. */
   double a[8] = {0, 0, 5, 1e-14, 2, 0, 11e9, 1};
-  uint32_t as[4] = {2, 3, 3, 0};
-  refused_quickly(a, 4, as, 2, QK_ERR_LIMIT, "stay within");
-  refused_quickly(a, 4, as, 2, QK_ERR_LIMIT, "segment 0 and segment 1");
+  uint32_t as[6] = {2, 3, 3, 0, 0, 2};
+  {
+    qk_poly_t *p;
+    qk_mesh_t *m = NULL;
+    peak_alloc_t pa = {0, 0};
+    qk_allocator_t al = {peak_fn, &pa};
+    assert_int_equal(qk_poly_from_arrays(a, 4, as, 2, NULL, 0, NULL, &p, NULL), QK_OK);
+    qk_mesh_options_t o = general_opts();
+    o.allocator = &al;
+    m = mesh_of(p, &o);
+    size_t nt;
+    qk_mesh_triangles(m, &nt);
+    assert_int_equal(nt, 0);
+    qk_mesh_free(m);
+    qk_poly_free(p);
+    assert_true(pa.peak < 1048576);
+  }
+  /* Closed into a triangle, it bounds a sliver whose refinement needs split points finer
+   * than its coordinates allow: refused, naming the segment. */
+  refused_quickly(a, 4, as, 3, QK_ERR_GEOMETRY, "segment 0 from (2, 0) to (11000000000, 1)");
   /* Three isolated vertices 3e144 apart: the in-circle test overflowed and the point
    * location walked forever. */
   double b[6] = {0, 0, 8, 3.3333333333333333e144, 10737418248.0, 1};
@@ -1062,8 +1145,9 @@ static void test_mesh_general_mode_hostile(void **state) {
 /* Two features close along a stretch far longer than their gap, above the 2^-36 of the
  * extent that the deep-split budget watches: a 2^31 by 1 rectangle (once 2^27 cells, 18 s
  * and 2.5 GB before "the size bound asks for more than 2^27 quadtree cells", with no size
- * bound), and 400 segments 1e-9 apart across a unit square (the same). Refused by the
- * grading's separation budget, naming two features, after a few MB. */
+ * bound), and 400 segments 2^-30 apart across a unit square (the same). The refinement
+ * reaches its input-sized work cap, and the grading then refuses, naming two features,
+ * after tens of MB. */
 static void test_mesh_general_mode_long_gap(void **state) {
   (void)state;
   double r[8] = {0, 0, 2147483648.0, 0, 2147483648.0, 1, 0, 1};
@@ -1077,8 +1161,8 @@ static void test_mesh_general_mode_long_gap(void **state) {
   memcpy(st, sq, sizeof sq);
   for (uint32_t i = 0; i < 4; i++) ss[2 * i] = i, ss[2 * i + 1] = (i + 1) % 4;
   for (uint32_t i = 0; i < 200; i++) {
-    double y = 0.1 + i * 1e-9;
-    st[8 + 4 * i] = 0.1, st[9 + 4 * i] = y, st[10 + 4 * i] = 0.9, st[11 + 4 * i] = y + 1e-12;
+    double y = 0.125 + i * 0x1p-30;
+    st[8 + 4 * i] = 0.125, st[9 + 4 * i] = y, st[10 + 4 * i] = 0.875, st[11 + 4 * i] = y + 0x1p-40;
     ss[8 + 2 * i] = 4 + 2 * i, ss[9 + 2 * i] = 5 + 2 * i;
   }
   const char *w2[] = {"stay within", "cell splits", NULL};
@@ -1230,19 +1314,28 @@ static void test_mesh_general_mode_alloc_failure(void **state) {
         hypot(s->xy[2 * near] - s->xy[4], s->xy[2 * near + 1] - s->xy[5]))
       near = v;
   sh_seg(s, 2, near);
+  /* Each input twice: as it runs, and with the tree graded late (at the refinement's
+   * start, as an input that reaches the input-sized work cap has it), whose allocations
+   * come on top. */
   size_t fail_at = alloc_failures(s, 1, 2);
-  printf("# %zu allocations\n", fail_at);
-  assert_true(fail_at > 10);
+  qk__gm_test_grade_late = 1;
+  size_t late = alloc_failures(s, 1, 2);
+  qk__gm_test_grade_late = 0;
+  printf("# %zu allocations, %zu graded late\n", fail_at, late);
+  assert_true(fail_at > 10 && late > fail_at);
   free(s);
   /* Three isolated vertices, no segment (fuzz/regressions/mesh_general/nomem-no-message):
-   * the 30th allocation failed without a message. */
+   * the 30th allocation failed without a message when the tree was graded first. */
   s = calloc(1, sizeof *s);
   sh_vertex(s, 0, 0);
   sh_vertex(s, 8, 0);
   sh_vertex(s, 8, 1073741824.0);
   fail_at = alloc_failures(s, 0, 0);
-  printf("# %zu allocations (three isolated vertices)\n", fail_at);
-  assert_true(fail_at > 30);
+  qk__gm_test_grade_late = 1;
+  late = alloc_failures(s, 0, 0);
+  qk__gm_test_grade_late = 0;
+  printf("# %zu allocations, %zu graded late (three isolated vertices)\n", fail_at, late);
+  assert_true(fail_at > 20 && late > 30);
   free(s);
 }
 
@@ -1334,6 +1427,7 @@ int main(void) {
       cmocka_unit_test(test_mesh_general_mode_markers),
       cmocka_unit_test(test_mesh_general_mode_refusals),
       cmocka_unit_test(test_mesh_general_mode_auto),
+      cmocka_unit_test(test_mesh_general_mode_graded_late),
       cmocka_unit_test(test_mesh_general_mode_hostile),
       cmocka_unit_test(test_mesh_general_mode_long_gap),
       cmocka_unit_test(test_mesh_general_mode_book_extent),

@@ -325,16 +325,19 @@ const uint32_t *qk_mesh_triangle_components(const qk_mesh_t *mesh, size_t *n);
 
 /** The balanced quadtree subdivision the mesh was made from (borrowed). In the general
  *  mode, the tree graded by the input's features (a leaf is split while it is near two
- *  features that need separating), over [0, 1]^2 in lattice coordinates, and not balanced:
+ *  features that need separating), over [0, 1]^2 in lattice coordinates, and not balanced;
  *  that mode's points are the refinement's, and the tree only checks the input and sizes
- *  the work (docs/mesh.md, "The general mode"). */
+ *  the work, so it is graded only when needed: with a size function, or when the
+ *  refinement outgrew the work the input's size allows (docs/mesh.md, "The general mode").
+ *  Otherwise NULL, as on most inputs. */
 const qk_tree_t *qk_mesh_tree(const qk_mesh_t *mesh);
 
 /** Figures about a mesh and its generation. */
 typedef struct qk_mesh_stats {
   uint64_t size;                   /**< the domain side U (general mode: 1, in lattice units) */
   size_t components;               /**< number of components */
-  size_t leaves_before_balance;    /**< leaves of the subdivision */
+  size_t leaves_before_balance;    /**< leaves of the subdivision (general mode: of the
+                                        graded tree; 0 when it was not graded) */
   size_t leaves;                   /**< leaves after balancing (general mode: not balanced) */
   size_t triangles;                /**< triangles kept */
   size_t vertices;                 /**< vertices used by them */
