@@ -375,20 +375,18 @@ level_runs(share_t *s, kc_t *kc, uint32_t lo, uint32_t hi, uint32_t hi2, float n
  * the row above's cells whose float boxes its float box meets, found by one four-wide test
  * against those boxes (rounded from the cells' boxes: monotone, so a cell whose float box
  * misses the object's misses every object's float box in it), from the first such cell to
- * the last (consecutive in the order too). */
-static inline __attribute__((always_inline)) int same_level(share_t *s, kc_t *kc, uint32_t a,
-                                                            uint32_t *up, const int ax) {
+ * the last (consecutive in the order too). end: past the last cell of a's level. */
+static inline __attribute__((always_inline)) int
+same_level(share_t *s, kc_t *kc, uint32_t a, uint32_t end, uint32_t *up, const int ax) {
   const qk_world_t *w = s->w;
   const qk__wcell_t *c = &w->cells[a];
   const qk_box_t *hb = s->pk->hb, *ha = &hb[a];
-  int l = c->level;
   uint32_t lo = c->start, hi = c[1].start, hi2 = hi;
   float nx = INFINITY; /* the next cell's least xmin as a float */
-  if (c[1].level == l && c[1].cy == c->cy && c[1].cx == c->cx + 1 && boxes_meet(ha, &hb[a + 1]))
+  if (a + 1 < end && c[1].cy == c->cy && c[1].cx == c->cx + 1 && boxes_meet(ha, &hb[a + 1]))
     hi2 = c[2].start, nx = (float)hb[a + 1].xmin;
   /* The row above: up to three consecutive cells (without the end cells whose boxes miss
    * this one's). */
-  uint32_t end = w->lv_first[l - QK__LMIN] + w->lv_n[l - QK__LMIN];
   uint32_t u = *up > a + 1 ? *up : a + 1;
   int64_t ty = (int64_t)c->cy + 1, tx = (int64_t)c->cx - 1;
   while (u < end && (w->cells[u].cy < ty || (w->cells[u].cy == ty && w->cells[u].cx < tx))) u++;
@@ -615,13 +613,27 @@ static __attribute__((noinline)) int cell_others(share_t *s, uint32_t a, int me)
   }
   return 1;
 }
-static inline __attribute__((always_inline)) int cell_pairs(share_t *s, uint32_t a, uint32_t *up,
-                                                            int me, const int ax) {
+/* The pairs of cells [a, a1) of level s->lv[me] (see cell_others). Where that level finds
+ * no pairs with others (every cell of a one-level world), the keys' place stays in locals
+ * from cell to cell: opened and closed around each cell, it cost about 20 instructions a
+ * cell, most of a sparse world's cell of one object. */
+static inline __attribute__((always_inline)) int level_cells(share_t *s, uint32_t a, uint32_t a1,
+                                                             uint32_t *up, int me, const int ax) {
+  if (s->lv[me].other) {
+    for (; a < a1; a++) {
+      kc_t kc = kc_open(s);
+      int ok = same_level(s, &kc, a, s->lv[me].end, up, ax);
+      kc_close(s, &kc);
+      if (!ok || !cell_others(s, a, me)) return 0;
+    }
+    return 1;
+  }
   kc_t kc = kc_open(s);
-  int ok = same_level(s, &kc, a, up, ax);
+  const uint32_t end = s->lv[me].end;
+  int ok = 1;
+  for (; ok && a < a1; a++) ok = same_level(s, &kc, a, end, up, ax);
   kc_close(s, &kc);
-  if (!ok) return 0;
-  return !s->lv[me].other || cell_others(s, a, me);
+  return ok;
 }
 
 /* Every key of keys[0 .. n) the right way round, the smaller slot above (run_keys writes
@@ -648,14 +660,17 @@ static void run_share(unsigned t, void *ud) {
       return;
     }
     uint32_t up = 0;
-    int me = 0; /* the level of cell a */
-    /* (two copies of the cells' loop: with every float box exact, the runs check none) */
-    for (uint32_t a = s->chunk[i]; a < s->chunk[i + 1]; a++) {
+    /* The chunk's cells level by level (me: the level of cell a). (Two copies of the
+     * cells' loop: with every float box exact, the runs check none.) */
+    for (uint32_t a = s->chunk[i], ae = s->chunk[i + 1], me = 0; a < ae;) {
       while (s->lv[me].end <= a) me++;
-      if (!(s->ax ? cell_pairs(s, a, &up, me, 1) : cell_pairs(s, a, &up, me, 0))) {
+      const uint32_t a1 = s->lv[me].end < ae ? s->lv[me].end : ae;
+      if (!(s->ax ? level_cells(s, a, a1, &up, (int)me, 1)
+                  : level_cells(s, a, a1, &up, (int)me, 0))) {
         s->nomem = 1;
         return;
       }
+      a = a1;
     }
   }
 }
