@@ -154,6 +154,18 @@ static inline drec_t rec_of(const qk__wobj_t *o, uint32_t slot) {
                   slot};
 }
 
+/* Whether the loose square of cell (level, cx, cy), [c 2^level, (c + 2) 2^level) per
+ * axis, lies on one side of zero with every value's magnitude in [2^-100, 2^100]
+ * (QK__WCLEAN). (The products are exact: |c| < 2^30.) */
+static inline int square_clean(int level, int32_t cx, int32_t cy) {
+  const double s = qk__pow2(level);
+  const double lo[2] = {cx * s, cy * s}, hi[2] = {(cx + 2.0) * s, (cy + 2.0) * s};
+  for (int k = 0; k < 2; k++)
+    if (!((lo[k] >= 0x1p-100 && hi[k] <= 0x1p100) || (lo[k] >= -0x1p100 && hi[k] <= -0x1p-100)))
+      return 0;
+  return 1;
+}
+
 /* File live dirty object o (slot i) in its new cell; its record. */
 static inline drec_t file_dirty(const qk_world_t *w, qk__wobj_t *o, uint32_t i, bool undirty) {
   double e;
@@ -170,8 +182,8 @@ static inline drec_t file_dirty(const qk_world_t *w, qk__wobj_t *o, uint32_t i, 
   double ts = s - 2 * qk__world_step_margin(o->k.step, e);
   if (ts < t) t = ts;
   o->k.shrink = forced || !(t >= 0) ? -1.0f : (float)t;
-  o->flags = (uint8_t)((o->flags & ~(QK__WFORCED | (undirty ? QK__WDIRTY : 0))) |
-                       (forced ? QK__WFORCED : 0));
+  o->flags = (uint8_t)((o->flags & ~(QK__WFORCED | QK__WCLEAN | (undirty ? QK__WDIRTY : 0))) |
+                       (forced ? QK__WFORCED : 0) | (square_clean(level, cx, cy) ? QK__WCLEAN : 0));
   return rec_of(o, i);
 }
 
