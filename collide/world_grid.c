@@ -250,18 +250,20 @@ static inline __attribute__((always_inline)) void pack_cells_(const qk_world_t *
       fx[m] = !_mm_movemask_pd(
           _mm_or_pd(_mm_cmpneq_pd(_mm_cvtps_pd(fp), p), _mm_cmpneq_pd(_mm_cvtps_pd(fq), q)));
     }
-    for (uint32_t m = m0; other && m < me; m++) {
-      const qk__wobj_t *o = &w->obj[ord[m]];
-      if ((o->flags & QK__WKIND) != QK_SHAPE_BOX) pack_one(o, fg, fx, m, cell_boxes ? &h : NULL);
+    if (__builtin_expect(other, 0)) {
+      for (uint32_t m = m0; m < me; m++) {
+        const qk__wobj_t *o = &w->obj[ord[m]];
+        if ((o->flags & QK__WKIND) != QK_SHAPE_BOX) pack_one(o, fg, fx, m, cell_boxes ? &h : NULL);
+      }
+      hlo = _mm_min_pd(_mm_loadu_pd(&h.xmin), hlo), hhi = _mm_max_pd(_mm_loadu_pd(&h.xmax), hhi);
     }
-    if (cell_boxes) {
-      _mm_storeu_pd(&h.xmin, _mm_min_pd(_mm_loadu_pd(&h.xmin), hlo));
-      _mm_storeu_pd(&h.xmax, _mm_max_pd(_mm_loadu_pd(&h.xmax), hhi));
-    }
+    /* (the cell box stored from the registers: a cell of boxes only, the common one,
+     * passes nothing through memory) */
+    if (cell_boxes) _mm_storeu_pd(&pk->hb[c].xmin, hlo), _mm_storeu_pd(&pk->hb[c].xmax, hhi);
 #else
     for (uint32_t m = m0; m < me; m++) pack_one(&w->obj[ord[m]], fg, fx, m, cell_boxes ? &h : NULL);
-#endif
     if (cell_boxes) pk->hb[c] = h;
+#endif
   }
 }
 
