@@ -389,6 +389,24 @@ static inline qk_status_t move_obj(qk_world_t *w, qk__wobj_t *o, uint32_t i,
 #if defined(__SSE2__)
   if (shape->kind != QK_SHAPE_BOX) return move_general(w, o, i, shape);
   const __m128d p = _mm_loadu_pd(&shape->x), q = _mm_loadu_pd(&shape->a);
+  /* The most common move: a box that stays a box in its cell's loose square, which holds
+   * only values the world accepts (QK__WCLEAN): corners in order and inside the square
+   * (a NaN fails the comparisons) need no check of the values themselves. */
+  if ((o->flags & (QK__WKIND | QK__WDIRTY | QK__WCLEAN)) == (QK_SHAPE_BOX | QK__WCLEAN)) {
+    const __m128d s2 = _mm_set1_pd(qk__pow2(o->level));
+    const __m128d lo = _mm_mul_pd(_mm_cvtepi32_pd(_mm_loadl_epi64((const __m128i *)&o->u.cx)), s2);
+    const __m128d hi = _mm_add_pd(lo, _mm_add_pd(s2, s2));
+    const __m128d in =
+        _mm_and_pd(_mm_cmple_pd(p, q), _mm_and_pd(_mm_cmpge_pd(p, lo), _mm_cmplt_pd(q, hi)));
+    if (_mm_movemask_pd(in) == 3) {
+      const __m128d ext = _mm_sub_pd(q, p);
+      if (!(_mm_cvtsd_f64(_mm_max_sd(ext, _mm_unpackhi_pd(ext, ext))) <= o->k.shrink)) {
+        _mm_storeu_pd(&o->x, p);
+        _mm_storeu_pd(&o->a, q);
+        return QK_OK;
+      }
+    }
+  }
   {
     const __m128d sign = _mm_set1_pd(-0.0);
     const __m128d ap = _mm_andnot_pd(sign, p), aq = _mm_andnot_pd(sign, q);

@@ -154,6 +154,18 @@ static inline drec_t rec_of(const qk__wobj_t *o, uint32_t slot) {
                   slot};
 }
 
+/* Whether the loose square of cell (level, cx, cy), [c 2^level, (c + 2) 2^level) per
+ * axis, lies on one side of zero with every value's magnitude in [2^-100, 2^100]
+ * (QK__WCLEAN). (The products are exact: |c| < 2^30.) */
+static inline int square_clean(int level, int32_t cx, int32_t cy) {
+  const double s = qk__pow2(level);
+  const double lo[2] = {cx * s, cy * s}, hi[2] = {(cx + 2.0) * s, (cy + 2.0) * s};
+  for (int k = 0; k < 2; k++)
+    if (!((lo[k] >= 0x1p-100 && hi[k] <= 0x1p100) || (lo[k] >= -0x1p100 && hi[k] <= -0x1p-100)))
+      return 0;
+  return 1;
+}
+
 /* File live dirty object o (slot i) in its new cell; its record. */
 static inline drec_t file_dirty(const qk_world_t *w, qk__wobj_t *o, uint32_t i, bool undirty) {
   double e;
@@ -170,8 +182,8 @@ static inline drec_t file_dirty(const qk_world_t *w, qk__wobj_t *o, uint32_t i, 
   double ts = s - 2 * qk__world_step_margin(o->k.step, e);
   if (ts < t) t = ts;
   o->k.shrink = forced || !(t >= 0) ? -1.0f : (float)t;
-  o->flags = (uint8_t)((o->flags & ~(QK__WFORCED | (undirty ? QK__WDIRTY : 0))) |
-                       (forced ? QK__WFORCED : 0));
+  o->flags = (uint8_t)((o->flags & ~(QK__WFORCED | QK__WCLEAN | (undirty ? QK__WDIRTY : 0))) |
+                       (forced ? QK__WFORCED : 0) | (square_clean(level, cx, cy) ? QK__WCLEAN : 0));
   return rec_of(o, i);
 }
 
@@ -238,18 +250,20 @@ static inline __attribute__((always_inline)) void pack_cells_(const qk_world_t *
       fx[m] = !_mm_movemask_pd(
           _mm_or_pd(_mm_cmpneq_pd(_mm_cvtps_pd(fp), p), _mm_cmpneq_pd(_mm_cvtps_pd(fq), q)));
     }
-    for (uint32_t m = m0; other && m < me; m++) {
-      const qk__wobj_t *o = &w->obj[ord[m]];
-      if ((o->flags & QK__WKIND) != QK_SHAPE_BOX) pack_one(o, fg, fx, m, cell_boxes ? &h : NULL);
+    if (__builtin_expect(other, 0)) {
+      for (uint32_t m = m0; m < me; m++) {
+        const qk__wobj_t *o = &w->obj[ord[m]];
+        if ((o->flags & QK__WKIND) != QK_SHAPE_BOX) pack_one(o, fg, fx, m, cell_boxes ? &h : NULL);
+      }
+      hlo = _mm_min_pd(_mm_loadu_pd(&h.xmin), hlo), hhi = _mm_max_pd(_mm_loadu_pd(&h.xmax), hhi);
     }
-    if (cell_boxes) {
-      _mm_storeu_pd(&h.xmin, _mm_min_pd(_mm_loadu_pd(&h.xmin), hlo));
-      _mm_storeu_pd(&h.xmax, _mm_max_pd(_mm_loadu_pd(&h.xmax), hhi));
-    }
+    /* (the cell box stored from the registers: a cell of boxes only, the common one,
+     * passes nothing through memory) */
+    if (cell_boxes) _mm_storeu_pd(&pk->hb[c].xmin, hlo), _mm_storeu_pd(&pk->hb[c].xmax, hhi);
 #else
     for (uint32_t m = m0; m < me; m++) pack_one(&w->obj[ord[m]], fg, fx, m, cell_boxes ? &h : NULL);
-#endif
     if (cell_boxes) pk->hb[c] = h;
+#endif
   }
 }
 
@@ -329,56 +343,100 @@ typedef struct merge {
   const uint64_t *skip;
 } merge_t;
 
-static inline void count_in(merge_t *g, uint32_t c) {
-  int l = g->cells[c].level - QK__LMIN;
-  if (!g->lv_n[l]) g->lv_first[l] = c;
-  g->lv_n[l]++;
+/* The cells a merge writes, counted into its level runs (lv_first / lv_n) a run at a
+ * time: they come in (level, cy, cx) order, so each level's cells are one run, and its
+ * count is kept in locals until the level changes (count_in for every cell reloaded the
+ * counts, which the cells' stores may alias). */
+typedef struct lvrun {
+  int l;          /* the level of the run (biased), or -1 before the first cell */
+  uint32_t first; /* its first cell */
+} lvrun_t;
+
+static inline void lvrun_flush(merge_t *g, const lvrun_t *r, uint32_t nc) {
+  if (r->l < 0) return;
+  if (!g->lv_n[r->l]) g->lv_first[r->l] = r->first;
+  g->lv_n[r->l] += nc - r->first;
+}
+
+/* Cell nc, of biased level l, is written: a new run when l is not the run's. */
+static inline void lvrun_add(merge_t *g, lvrun_t *r, int l, uint32_t nc) {
+  if (l != r->l) {
+    lvrun_flush(g, r, nc);
+    r->l = l, r->first = nc;
+  }
+}
+
+/* The objects of old cell c but the dirty and removed ones, written from ord[m]: by the
+ * skip bits when there are (merge_t), else by their objects' flags. Returns past them. */
+static inline __attribute__((always_inline)) uint32_t
+keep_old(const qk_world_t *w, const uint64_t *sk, const qk__wcell_t *oc, uint32_t c, uint32_t *ord,
+         uint32_t m, const int skipping) {
+  const uint32_t *old = w->order;
+  for (uint32_t k = oc[c].start, ke = oc[c + 1].start; k < ke; k++) {
+    const uint32_t i = old[k];
+    if (skipping) {
+      ord[m] = i; /* (kept unless dirty: written, then counted) */
+      m += !(sk[i >> 6] >> (i & 63) & 1);
+    } else {
+      const qk__wobj_t *o = &w->obj[i];
+      if (qk__wlive(o) && !(o->flags & QK__WDIRTY)) ord[m++] = i;
+    }
+  }
+  return m;
+}
+
+static inline __attribute__((always_inline)) void
+merge_range_(merge_t *g, uint32_t c0, uint32_t c1, size_t j, size_t j1, const int skipping) {
+  const qk_world_t *w = g->w;
+  const drec_t *d = g->d;
+  const qk__wcell_t *oc = w->cells;
+  const uint64_t *sk = g->skip;
+  uint32_t *ord = g->ord, m = g->m, nc = g->nc;
+  qk__wcell_t *cells = g->cells;
+  lvrun_t run = {-1, nc};
+  uint32_t c = c0;
+  for (;;) {
+    /* The next dirty record's cell in locals (the stores below may alias the records),
+     * past every cell's key when none is left. */
+    const uint64_t jly = j < j1 ? d[j].ly : UINT64_MAX;
+    const uint32_t jx = j < j1 ? d[j].x : UINT32_MAX;
+    /* The old cells before it (all that are left after the last record) keep their
+     * objects but the dirty and removed ones: most cells of a frame where few objects
+     * left their cells. */
+    for (; c < c1; c++) {
+      const uint64_t cly = (uint64_t)(uint32_t)(oc[c].level - QK__LMIN) << 32 | bias(oc[c].cy);
+      if (cly > jly || (cly == jly && bias(oc[c].cx) >= jx)) break;
+      const uint32_t m0 = m;
+      m = keep_old(w, sk, oc, c, ord, m, skipping);
+      if (m > m0) { /* (one left empty is dropped) */
+        lvrun_add(g, &run, (int)(cly >> 32), nc);
+        cells[nc] = oc[c];
+        cells[nc++].start = m0;
+      }
+    }
+    if (j == j1) break;
+    /* The records of the next dirty cell: a cell of their own, or (the same key) old cell
+     * c's after its kept objects. */
+    const uint32_t m0 = m;
+    const int l = (int)(jly >> 32);
+    if (c < c1 && bias(oc[c].cx) == jx &&
+        ((uint64_t)(uint32_t)(oc[c].level - QK__LMIN) << 32 | bias(oc[c].cy)) == jly)
+      m = keep_old(w, sk, oc, c++, ord, m, skipping);
+    do ord[m++] = d[j++].slot;
+    while (j < j1 && d[j].ly == jly && d[j].x == jx);
+    lvrun_add(g, &run, l, nc);
+    /* (the cell from the record's key, not from the object: see rec_of) */
+    cells[nc++] = (qk__wcell_t){unbias(jx), unbias((uint32_t)jly), m0, l + QK__LMIN};
+  }
+  lvrun_flush(g, &run, nc);
+  g->m = m, g->nc = nc;
 }
 
 static void merge_range(merge_t *g, uint32_t c0, uint32_t c1, size_t j, size_t j1) {
-  const qk_world_t *w = g->w;
-  const drec_t *d = g->d;
-  const uint32_t *old = w->order;
-  const qk__wcell_t *oc = w->cells;
-  uint32_t *ord = g->ord, m = g->m, nc = g->nc;
-  qk__wcell_t *cells = g->cells;
-  for (uint32_t c = c0;; c++) {
-    uint64_t cly = 0;
-    uint32_t cxk = 0;
-    if (c < c1)
-      cly = (uint64_t)(uint32_t)(oc[c].level - QK__LMIN) << 32 | bias(oc[c].cy),
-      cxk = bias(oc[c].cx);
-    /* The dirty cells before old cell c (all that are left after the last one). */
-    while (j < j1 && (c == c1 || d[j].ly < cly || (d[j].ly == cly && d[j].x < cxk))) {
-      /* (the cell from the record's key, not from the object: see rec_of) */
-      cells[nc] = (qk__wcell_t){unbias(d[j].x), unbias((uint32_t)d[j].ly), m,
-                                (int32_t)(d[j].ly >> 32) + QK__LMIN};
-      uint64_t ly = d[j].ly;
-      uint32_t x = d[j].x;
-      do ord[m++] = d[j++].slot;
-      while (j < j1 && d[j].ly == ly && d[j].x == x);
-      count_in(g, nc++);
-    }
-    if (c == c1) break;
-    cells[nc] = oc[c];
-    cells[nc].start = m;
-    if (g->skip) {
-      const uint64_t *sk = g->skip;
-      for (uint32_t k = oc[c].start, ke = oc[c + 1].start; k < ke; k++) {
-        const uint32_t i = old[k];
-        ord[m] = i; /* (kept unless dirty: written, then counted) */
-        m += !(sk[i >> 6] >> (i & 63) & 1);
-      }
-    } else {
-      for (uint32_t k = oc[c].start, ke = oc[c + 1].start; k < ke; k++) {
-        const qk__wobj_t *o = &w->obj[old[k]];
-        if (qk__wlive(o) && !(o->flags & QK__WDIRTY)) ord[m++] = old[k];
-      }
-    }
-    while (j < j1 && d[j].ly == cly && d[j].x == cxk) ord[m++] = d[j++].slot;
-    if (m > cells[nc].start) count_in(g, nc++); /* (one left empty is dropped) */
-  }
-  g->m = m, g->nc = nc;
+  if (g->skip)
+    merge_range_(g, c0, c1, j, j1, 1);
+  else
+    merge_range_(g, c0, c1, j, j1, 0);
 }
 
 /*

@@ -31,6 +31,9 @@
 #define QK__WKIND 3u
 #define QK__WDIRTY 4u  /* on the dirty list: not (or no longer) where the order files it */
 #define QK__WFORCED 8u /* its level was raised by its coordinates' magnitude */
+/* Its cell's loose square holds only values the world accepts (magnitudes in [2^-100,
+ * 2^100], no zero), so that a box inside it needs no check of its values (qk_world_move). */
+#define QK__WCLEAN 16u
 
 /*
  * An object: 64 bytes. The shape is stored once (x, y, a, b as qk_shape_t, the kind in

@@ -214,6 +214,27 @@ static __attribute__((noinline)) uint64_t *test_run_exact(share_t *s, uint32_t s
  * stays in registers (a call would clobber them all, every group reloading it from the
  * stack); the first pair they cannot decide hands the rest to test_run_exact. */
 #if defined(__SSE2__)
+/* Where a group's lanes 1, 2 and 3 are stored, and how far the keys move on, for each
+ * mask of lanes kept: lane i goes after the kept lanes before it (lane 0 at the start).
+ * Read from a table, the places cost a load each, where computed from the mask's bits
+ * they cost some ten instructions a group (two in three of which keep nothing). */
+static const uint8_t lane_place[16][4] = {{0, 0, 0, 0}, {1, 1, 1, 1}, {0, 1, 1, 1}, {1, 2, 2, 2},
+                                          {0, 0, 1, 1}, {1, 1, 2, 2}, {0, 1, 2, 2}, {1, 2, 3, 3},
+                                          {0, 0, 0, 1}, {1, 1, 1, 2}, {0, 1, 1, 2}, {1, 2, 2, 3},
+                                          {0, 0, 1, 2}, {1, 1, 2, 3}, {0, 1, 2, 3}, {1, 2, 3, 4}};
+/* A group's four keys (the probe's slot sv above the lanes' og) stored at v, those of
+ * lanes `bits` kept; returns past them. */
+static inline __attribute__((always_inline)) uint64_t *group_keys(uint64_t *v, const uint32_t *og,
+                                                                  __m128i sv, unsigned bits) {
+  const __m128i o = _mm_loadu_si128((const __m128i *)og);
+  const __m128i k01 = _mm_unpacklo_epi32(o, sv), k23 = _mm_unpackhi_epi32(o, sv);
+  const uint8_t *at = lane_place[bits];
+  _mm_storel_epi64((__m128i *)v, k01);
+  _mm_storeh_pd((double *)(v + at[0]), _mm_castsi128_pd(k01));
+  _mm_storel_epi64((__m128i *)(v + at[1]), k23);
+  _mm_storeh_pd((double *)(v + at[2]), _mm_castsi128_pd(k23));
+  return v + at[3];
+}
 /* With SSE2 a group's four keys are made and stored whatever its lanes that met, each
  * store's place moved on by its lane's bit: no branch on which lanes met, which about
  * one group in three has, at random (perf: the run loop's branches on the lanes' bits
@@ -230,29 +251,31 @@ static inline __attribute__((always_inline)) uint64_t *
 run_keys(share_t *s, const float *fg, const uint32_t *ord, const uint8_t *fx, uint32_t slot,
          uint64_t hs, unsigned ek, probe_t p, uint32_t lo, uint32_t hi, uint64_t *v, const int ax) {
   (void)hs;
-  uint32_t q = lo >> 2, qe = (hi - 1) >> 2;
-  unsigned bits = group_hits(fg + (size_t)q * 16, &p) & ~((1u << (lo & 3)) - 1) & 15u;
+  /* (the groups and their lanes' slots walked by pointers, the last group known by its
+   * place) */
+  const float *g = fg + (size_t)(lo >> 2) * 16, *const ge = fg + (size_t)((hi - 1) >> 2) * 16;
+  const uint32_t *og = ord + (size_t)(lo >> 2) * 4;
+  unsigned bits = group_hits(g, &p) & ~((1u << (lo & 3)) - 1) & 15u;
   const unsigned last = (2u << ((hi - 1) & 3)) - 1, ekm = ek ? 15u : 0u;
   const __m128i sv = _mm_set1_epi32((int)slot);
-  for (;;) {
-    if (q == qe) bits &= last;
-    uint32_t f4 = 0; /* the lanes' exactness bytes (0 or 1), gathered into four bits */
-    if (!ax) memcpy(&f4, fx + (size_t)q * 4, sizeof f4);
-    if (!ax && (bits & ~((f4 * 0x01020408u) >> 24 & ekm)))
+  if (ax) {
+    /* (the groups before the last, then the last one masked: no other group pays for the
+     * mask) */
+    for (; g != ge; g += 16, og += 4) {
+      v = group_keys(v, og, sv, bits);
+      bits = group_hits(g + 16, &p);
+    }
+    return group_keys(v, og, sv, bits & last);
+  }
+  for (;; g += 16, og += 4, bits = group_hits(g, &p)) {
+    if (g == ge) bits &= last;
+    const uint32_t q = (uint32_t)((size_t)(g - fg) / 16), qe = (uint32_t)((size_t)(ge - fg) / 16);
+    uint32_t f4; /* the lanes' exactness bytes (0 or 1), gathered into four bits */
+    memcpy(&f4, fx + (size_t)q * 4, sizeof f4);
+    if (bits & ~((f4 * 0x01020408u) >> 24 & ekm))
       return test_run_exact(s, slot, ek, QK__PROBE_PASS(p), q, bits, qe, last, v);
-    const __m128i o = _mm_loadu_si128((const __m128i *)(ord + (size_t)q * 4));
-    const __m128i k01 = _mm_unpacklo_epi32(o, sv), k23 = _mm_unpackhi_epi32(o, sv);
-    _mm_storel_epi64((__m128i *)v, k01);
-    v += bits & 1;
-    _mm_storeh_pd((double *)v, _mm_castsi128_pd(k01));
-    v += bits >> 1 & 1;
-    _mm_storel_epi64((__m128i *)v, k23);
-    v += bits >> 2 & 1;
-    _mm_storeh_pd((double *)v, _mm_castsi128_pd(k23));
-    v += bits >> 3;
-    if (q == qe) return v;
-    q++;
-    bits = group_hits(fg + (size_t)q * 16, &p);
+    v = group_keys(v, og, sv, bits);
+    if (g == ge) return v;
   }
 }
 #else
@@ -375,20 +398,18 @@ level_runs(share_t *s, kc_t *kc, uint32_t lo, uint32_t hi, uint32_t hi2, float n
  * the row above's cells whose float boxes its float box meets, found by one four-wide test
  * against those boxes (rounded from the cells' boxes: monotone, so a cell whose float box
  * misses the object's misses every object's float box in it), from the first such cell to
- * the last (consecutive in the order too). */
-static inline __attribute__((always_inline)) int same_level(share_t *s, kc_t *kc, uint32_t a,
-                                                            uint32_t *up, const int ax) {
+ * the last (consecutive in the order too). end: past the last cell of a's level. */
+static inline __attribute__((always_inline)) int
+same_level(share_t *s, kc_t *kc, uint32_t a, uint32_t end, uint32_t *up, const int ax) {
   const qk_world_t *w = s->w;
   const qk__wcell_t *c = &w->cells[a];
   const qk_box_t *hb = s->pk->hb, *ha = &hb[a];
-  int l = c->level;
   uint32_t lo = c->start, hi = c[1].start, hi2 = hi;
   float nx = INFINITY; /* the next cell's least xmin as a float */
-  if (c[1].level == l && c[1].cy == c->cy && c[1].cx == c->cx + 1 && boxes_meet(ha, &hb[a + 1]))
+  if (a + 1 < end && c[1].cy == c->cy && c[1].cx == c->cx + 1 && boxes_meet(ha, &hb[a + 1]))
     hi2 = c[2].start, nx = (float)hb[a + 1].xmin;
   /* The row above: up to three consecutive cells (without the end cells whose boxes miss
    * this one's). */
-  uint32_t end = w->lv_first[l - QK__LMIN] + w->lv_n[l - QK__LMIN];
   uint32_t u = *up > a + 1 ? *up : a + 1;
   int64_t ty = (int64_t)c->cy + 1, tx = (int64_t)c->cx - 1;
   while (u < end && (w->cells[u].cy < ty || (w->cells[u].cy == ty && w->cells[u].cx < tx))) u++;
@@ -615,13 +636,27 @@ static __attribute__((noinline)) int cell_others(share_t *s, uint32_t a, int me)
   }
   return 1;
 }
-static inline __attribute__((always_inline)) int cell_pairs(share_t *s, uint32_t a, uint32_t *up,
-                                                            int me, const int ax) {
+/* The pairs of cells [a, a1) of level s->lv[me] (see cell_others). Where that level finds
+ * no pairs with others (every cell of a one-level world), the keys' place stays in locals
+ * from cell to cell: opened and closed around each cell, it cost about 20 instructions a
+ * cell, most of a sparse world's cell of one object. */
+static inline __attribute__((always_inline)) int level_cells(share_t *s, uint32_t a, uint32_t a1,
+                                                             uint32_t *up, int me, const int ax) {
+  if (s->lv[me].other) {
+    for (; a < a1; a++) {
+      kc_t kc = kc_open(s);
+      int ok = same_level(s, &kc, a, s->lv[me].end, up, ax);
+      kc_close(s, &kc);
+      if (!ok || !cell_others(s, a, me)) return 0;
+    }
+    return 1;
+  }
   kc_t kc = kc_open(s);
-  int ok = same_level(s, &kc, a, up, ax);
+  const uint32_t end = s->lv[me].end;
+  int ok = 1;
+  for (; ok && a < a1; a++) ok = same_level(s, &kc, a, end, up, ax);
   kc_close(s, &kc);
-  if (!ok) return 0;
-  return !s->lv[me].other || cell_others(s, a, me);
+  return ok;
 }
 
 /* Every key of keys[0 .. n) the right way round, the smaller slot above (run_keys writes
@@ -648,14 +683,17 @@ static void run_share(unsigned t, void *ud) {
       return;
     }
     uint32_t up = 0;
-    int me = 0; /* the level of cell a */
-    /* (two copies of the cells' loop: with every float box exact, the runs check none) */
-    for (uint32_t a = s->chunk[i]; a < s->chunk[i + 1]; a++) {
+    /* The chunk's cells level by level (me: the level of cell a). (Two copies of the
+     * cells' loop: with every float box exact, the runs check none.) */
+    for (uint32_t a = s->chunk[i], ae = s->chunk[i + 1], me = 0; a < ae;) {
       while (s->lv[me].end <= a) me++;
-      if (!(s->ax ? cell_pairs(s, a, &up, me, 1) : cell_pairs(s, a, &up, me, 0))) {
+      const uint32_t a1 = s->lv[me].end < ae ? s->lv[me].end : ae;
+      if (!(s->ax ? level_cells(s, a, a1, &up, (int)me, 1)
+                  : level_cells(s, a, a1, &up, (int)me, 0))) {
         s->nomem = 1;
         return;
       }
+      a = a1;
     }
   }
 }
