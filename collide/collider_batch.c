@@ -194,6 +194,9 @@ qk_status_t qk__collider_pairs_threaded(const qk_collider_t *c, qk_pair_fn fn, v
 
 /* Rays per job: enough to amortise a hand-out, few enough to balance the threads. */
 #define RAYS_PER_JOB 256
+/* In Z order, a ray's origin, direction and hit lie anywhere in their arrays: those of the
+ * ray this many places on are asked for ahead. */
+#define RAYS_AHEAD 8
 /* Batches from this size on are cast in the Z order of their origins. */
 #define RAYS_SORT_MIN 1024
 
@@ -213,6 +216,12 @@ static void rays_job(unsigned i, unsigned w, void *ud) {
   rctx_t *r = ud;
   size_t lo = (size_t)i * RAYS_PER_JOB, hi = lo + RAYS_PER_JOB < r->n ? lo + RAYS_PER_JOB : r->n;
   for (size_t k = lo; k < hi; k++) {
+    if (r->order && k + RAYS_AHEAD < hi) {
+      const size_t a = (size_t)(uint32_t)r->order[k + RAYS_AHEAD];
+      __builtin_prefetch(&r->origins[a]);
+      __builtin_prefetch(&r->dirs[a]);
+      __builtin_prefetch(&r->hits[a], 1);
+    }
     const size_t j = r->order ? (size_t)(uint32_t)r->order[k] : k;
     qk_status_t st = qk_collider_raycast(r->c, r->origins[j], r->dirs[j], r->tmax, &r->hits[j]);
     if (st != QK_OK && j < r->first_bad[i]) {
