@@ -773,11 +773,18 @@ static double size_fn(double x, double y, void *user) {
   return 0.2 + 0.1 * fabs(x) + 0.05 * fabs(y);
 }
 
+/* A pentagon with no two sides parallel (the size tests' shape). */
+static shape_t *pentagon(void) {
+  shape_t *s = calloc(1, sizeof *s);
+  assert_non_null(s);
+  const double pts[10] = {0, 0, 7, 1, 6, 5, 2.5, 6, -1, 3};
+  sh_ring(s, pts, 5);
+  return s;
+}
+
 static void test_mesh_general_mode_size(void **state) {
   (void)state;
-  shape_t *s = calloc(1, sizeof *s);
-  double pts[10] = {0, 0, 7, 1, 6, 5, 2.5, 6, -1, 3};
-  sh_ring(s, pts, 5);
+  shape_t *s = pentagon();
   qk_mesh_options_t o = general_opts();
   size_t n0 = run(s, &o, 20, "pentagon");
   o.max_size = 0.25;
@@ -1025,9 +1032,7 @@ static void same_mesh_graded_late(const shape_t *s, qk_mesh_options_t o, const c
 
 static void test_mesh_general_mode_graded_late(void **state) {
   (void)state;
-  shape_t *s = calloc(1, sizeof *s);
-  double pts[10] = {0, 0, 7, 1, 6, 5, 2.5, 6, -1, 3};
-  sh_ring(s, pts, 5);
+  shape_t *s = pentagon();
   qk_mesh_options_t o = general_opts();
   same_mesh_graded_late(s, o, "pentagon");
   o.max_size = 0.5;
