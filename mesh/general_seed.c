@@ -558,7 +558,7 @@ qk_status_t qk__gm_seed(qk__gm_t *g) {
   /* The grading waits for the refinement to need it (general_refine.c, at the work cap),
    * unless a size function splits its leaves (they size the cap then) or the seeds are on:
    * on coastlines most meshes end within the cap the input's size sets, and grading first
-   * was a third of the meshing with no size bound on Norway (1,953 segments), a fifth at
+   * was a third of the meshing with no size bound on Norway (1,953 segments), a sixth at
    * 1/256 of its extent. */
   if (GM_SIZE_SPLITS(g) && (st = qk__gm_grade(g))) return st;
   if (GM_SEED_LEAVES && seeds(g, qk_tree_root(g->tree), 0, 0, 1, 0))
