@@ -4,7 +4,15 @@
 # prints the ratio table. `make bench` installs the baselines first.
 #
 # Usage: scripts/bench.sh [--quick] [any other quadkit-bench arguments]
+#        scripts/bench.sh --targets
 #   BUILD_DIR (default build-bench), JOBS (default 2), RESULTS (default bench/results).
+#
+# --targets runs only what the issues' targets compare, each operation in its own run
+# (about a quarter of an hour on the 2-vCPU guest, where the full suite takes about an
+# hour): 1M uniform points (build, kNN), 1M boxes and discs (all pairs, rays), the
+# balance at 1M, every mesh case, the world at 10^4 and 10^5 objects, the region layer;
+# with --threads 2. It writes RESULTS/targets.jsonl (each run's lines in turn),
+# targets.txt (each run's table) and targets-targets.md; no plots.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BUILD_DIR=${BUILD_DIR:-build-bench}
@@ -13,6 +21,11 @@ RESULTS=${RESULTS:-bench/results}
 
 name=full
 for a in "$@"; do [ "$a" = "--quick" ] && name=quick; done
+targets=0
+if [ "${1:-}" = "--targets" ]; then
+  targets=1 name=targets
+  shift
+fi
 
 # PLOT_ONLY=1 redraws the plots (and the targets table) from an existing JSON lines file.
 if [ "${PLOT_ONLY:-0}" != 1 ]; then
@@ -28,6 +41,36 @@ fi
 mkdir -p "$RESULTS"
 jsonl="$RESULTS/$name.jsonl"
 table="$RESULTS/$name.txt"
+if [ "$targets" = 1 ] && [ "${PLOT_ONLY:-0}" != 1 ]; then
+  start=$(date +%s)
+  : >"$jsonl"
+  : >"$table"
+  part=$(mktemp)
+  # (each run's JSON lines appended in turn; the table file gets each run's header and rows)
+  for run in "--op build --dataset uniform --n 1000000 --threads 2" \
+    "--op knn --dataset uniform --n 1000000 --threads 2" \
+    "--op collide --n 1000000 --threads 2" \
+    "--op raycast --n 1000000 --threads 2" \
+    "--op balance --n 1000000" \
+    "--op mesh" \
+    "--op world --n 10000 --threads 2" \
+    "--op world --n 100000 --threads 2" \
+    "--op region"; do
+    {
+      echo "# $(date -u '+%Y-%m-%d %H:%M UTC') $(uname -m), $(nproc) CPUs, load $(cut -d' ' -f1-3 /proc/loadavg)"
+      echo "# command: $BUILD_DIR/bench/quadkit-bench $run"
+      # shellcheck disable=SC2086 # (the run's words are its arguments)
+      "$BUILD_DIR/bench/quadkit-bench" $run --json-out "$part"
+    } | tee -a "$table"
+    cat "$part" >>"$jsonl"
+  done
+  rm -f "$part"
+  echo "bench: targets took $(( $(date +%s) - start )) s; results in $jsonl, tables in $table" >&2
+fi
+if [ "$targets" = 1 ]; then # (PLOT_ONLY=1: the tables again from targets.jsonl)
+  python3 bench/summarize.py "$jsonl" | tee "$RESULTS/$name-targets.md"
+  exit 0
+fi
 if [ "${PLOT_ONLY:-0}" != 1 ]; then
 threads=2
 start=$(date +%s)
