@@ -361,7 +361,7 @@ static STAR_INLINE qk_status_t check_star_with(qk__gm_t *g, const int clear, con
     const uint32_t x = tv[1], y = tv[2];
     const double *px = &XY[2 * (size_t)x], *py = &XY[2 * (size_t)y];
     if (x != prev) lx = d2(pv, px); /* the first triangle (the ring is closed: x follows y) */
-    const double ly = d2(pv, py), lo = d2(px, py);
+    const double ly = d2(pv, py);
     /* After a clear cavity (clear), v is a circumcentre inside a kept face, so no spoke is
      * constrained, and each far edge x-y was an edge of a cavity triangle (Lawson's flips
      * from p's triangle remove exactly the triangles the search found: those whose
@@ -375,13 +375,16 @@ static STAR_INLINE qk_status_t check_star_with(qk__gm_t *g, const int clear, con
         if (ts[k] != QK__CDT_NONE && apex_encroaches(g, t, k) &&
             push_enc(g, V[3 * t + (k + 1) % 3], V[3 * t + (k + 2) % 3], S[3 * t + k]))
           return QK_ERR_NOMEM;
-    /* bad_star's tests, written out here with the bounds in locals */
+    /* bad_star's tests, written out here with the bounds in locals; a spoke longer than the
+     * bound (most triangles bad by size have one) decides before the far edge's length is
+     * computed. */
     int bad;
-    double lmax = lo > ly ? lo : ly;
-    lmax = lx > lmax ? lx : lmax;
-    if (plain && lmax > h2_hi) {
+    double lo = 0;
+    if (plain && (lx > h2_hi || ly > h2_hi)) {
       bad = 1;
-    } else if (plain && lmax >= h2_lo &&
+    } else if (lo = d2(px, py), plain && lo > h2_hi) {
+      bad = 1;
+    } else if (plain && (lo > ly ? (lo > lx ? lo : lx) : (ly > lx ? ly : lx)) >= h2_lo &&
                (len2_exceeds(px, py, h) || len2_exceeds(py, pv, h) || len2_exceeds(pv, px, h))) {
       bad = 1;
     } else {
