@@ -639,6 +639,21 @@ qk_status_t qk__cdt_insert_at(qk__cdt_t *c, double x, double y, uint32_t t, int 
   return QK_OK;
 }
 
+qk_status_t qk__cdt_insert_in_undo(qk__cdt_t *c, double x, double y, uint32_t t,
+                                   uint32_t *v_out) {
+  assert(c->undo && !c->known && !c->legal_sides && !c->on_change);
+  if (grow_vertices(c, c->nv + 1) != QK_OK || grow_triangles(c, c->nt + 2) != QK_OK)
+    return QK_ERR_NOMEM;
+  uint32_t p = (uint32_t)c->nv++;
+  c->xy[2 * (size_t)p] = x, c->xy[2 * (size_t)p + 1] = y;
+  c->undo[0] = c->hint, c->undo[1] = c->vtri[c->v[3 * (size_t)t]];
+  c->nundo = 2;
+  legalize_with(c, split3(c, t, p), 0, 1);
+  c->hint = c->vtri[p];
+  *v_out = p;
+  return QK_OK;
+}
+
 /* ---- around a vertex ---------------------------------------------------------------- */
 
 uint32_t qk__cdt_ring_next(const qk__cdt_t *c, qk__cdt_ring_t *r) {

@@ -157,6 +157,9 @@ uint64_t qk__gm_param(const qk__gm_t *g, uint32_t v, uint32_t s);
  * (seg NONE for a free point). *v_out is the vertex; *existed as qk__cdt_insert. */
 qk_status_t qk__gm_insert(qk__gm_t *g, double x, double y, uint32_t t0, int k0, qk__cdt_where_t w,
                           uint32_t seg, uint64_t k, uint32_t *v_out, int *existed);
+/* qk__gm_insert of a free point strictly inside triangle t0 (QK__CDT_IN, seg NONE), the
+ * CDT's undo record set: by qk__cdt_insert_in_undo, with the same bookkeeping. */
+qk_status_t qk__gm_insert_in(qk__gm_t *g, double x, double y, uint32_t t0, uint32_t *v_out);
 /* The Morton key of input point (x, y) in the root square, and a stable sort of points
  * by key (general_seed.c). */
 uint64_t qk__gm_morton(const qk__gm_t *g, double x, double y);

@@ -601,11 +601,10 @@ static int insert_circumcentre(qk__gm_t *g, const double p[2], uint32_t t) {
     if (!g->undo) return -1;
   }
   uint32_t v;
-  int existed;
   c->undo = g->undo, c->undo_seg = g->undo + 4 * (c->nv + 2) + 2;
-  qk_status_t st = qk__gm_insert(g, p[0], p[1], t, 0, QK__CDT_IN, QK__CDT_NONE, 0, &v, &existed);
+  qk_status_t st = qk__gm_insert_in(g, p[0], p[1], t, &v);
   if (st) return c->undo = NULL, -1;
-  assert(!existed && g->dirty_v == v && g->dirty_face == g->face[t]);
+  assert(g->dirty_v == v && g->dirty_face == g->face[t]);
   if (!star_encroached(g, v)) return c->undo = NULL, 0;
   qk__cdt_undo_insert(c, t);
   c->undo = NULL;
