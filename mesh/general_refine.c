@@ -646,17 +646,17 @@ static uint32_t far_corner(const qk__cdt_t *c, const uint32_t *tv) {
 
 /* Split a bad triangle: its circumcentre, or the subsegments hiding or encroached by it.
  * *rejected counts the triangles left because only protected pieces stood in the way. */
-static qk_status_t split_triangle(qk__gm_t *g, uint32_t t, size_t *rejected) {
+static qk_status_t split_triangle(qk__gm_t *g, uint32_t t, const double lo[2],
+                                  const double hi[2], size_t *rejected) {
   qk__cdt_t *c = &g->cdt;
   const uint32_t *tv = &c->v[3 * t];
   const double *A = &c->xy[2 * tv[0]], *B = &c->xy[2 * tv[1]], *C = &c->xy[2 * tv[2]];
   double bx = B[0] - A[0], by = B[1] - A[1], cx = C[0] - A[0], cy = C[1] - A[1];
   double D = 2 * (bx * cy - by * cx), b2 = bx * bx + by * by, c2 = cx * cx + cy * cy;
   double p[2] = {A[0] + (cy * b2 - by * c2) / D, A[1] + (bx * c2 - cx * b2) / D};
-  /* A circumcentre beyond the input's bounding box (grown by an eighth) lies in the
-   * unbounded face: walk towards the box's edge instead, which is as hidden. */
-  double ew = g->bx1 - g->bx0, eh = g->by1 - g->by0, m = (ew > eh ? ew : eh) / 8; /* finite */
-  double lo[2] = {g->bx0 - m, g->by0 - m}, hi[2] = {g->bx1 + m, g->by1 + m};
+  /* A circumcentre beyond the input's bounding box grown by an eighth (lo, hi: refine()
+   * computes them once) lies in the unbounded face: walk towards the box's edge instead,
+   * which is as hidden. */
   if (!isfinite(p[0]) || !isfinite(p[1])) {
     const double *W = &c->xy[2 * far_corner(c, tv)];
     return qk__mesh_fail(g->err, QK_ERR_LIMIT, 0,
@@ -816,6 +816,8 @@ static qk_status_t refine(qk__gm_t *g) {
     if (check(g, t)) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
   qk_status_t st = QK_OK;
   size_t rejected = 0;
+  const double ew = g->bx1 - g->bx0, eh = g->by1 - g->by0, m = (ew > eh ? ew : eh) / 8; /* finite */
+  const double clip_lo[2] = {g->bx0 - m, g->by0 - m}, clip_hi[2] = {g->bx1 + m, g->by1 + m};
   for (;;) {
     if (!g->tree && g->insertions >= g->work_cap) {
       /* The input's size did not cap the work: the graded tree's leaves do (general_run.c),
@@ -866,7 +868,7 @@ static qk_status_t refine(qk__gm_t *g) {
       same = tv[0] == q.a && tv[1] == q.b && tv[2] == q.c;
     } while (!same && head != end);
     g->bad_head = head;
-    if (same && (st = split_triangle(g, q.t, &rejected))) break;
+    if (same && (st = split_triangle(g, q.t, clip_lo, clip_hi, &rejected))) break;
   }
   if (st == QK_ERR_NOMEM) return qk__mesh_fail(g->err, st, 0, "out of memory");
   if (st) return st;
