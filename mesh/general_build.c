@@ -147,22 +147,7 @@ qk_status_t qk__gm_insert(qk__gm_t *g, double x, double y, uint32_t t0, int k0, 
   return QK_OK;
 }
 
-qk_status_t qk__gm_insert_in(qk__gm_t *g, double x, double y, uint32_t t0, uint32_t *v_out) {
-  const uint32_t f0 = g->face[t0];
-  g->ndirty = 0, g->star_pending = 0;
-  qk_status_t st = qk__cdt_insert_in_undo(&g->cdt, x, y, t0, v_out);
-  if (st) return st;
-  if (qk__gm_fit(g)) return QK_ERR_NOMEM;
-  const uint32_t v = *v_out;
-  if (g->star_later)
-    g->star_pending = 1, g->dirty_v = v; /* as qk__gm_insert */
-  else if (star(g, v, f0))
-    return QK_ERR_NOMEM;
-  g->vi[v] = (qk__gm_vert_t){QK__CDT_NONE, QK__CDT_NONE, 0};
-  g->dirty_face = f0;
-  g->insertions++;
-  return QK_OK;
-}
+qk_status_t qk__gm_star(qk__gm_t *g, uint32_t v, uint32_t f) { return star(g, v, f); }
 
 /* Step 2: the root square, a power of two S = 2^e with corners at multiples of S / 4 (an
  * aligned square could not straddle zero), holding the input's bounding box grown by a
