@@ -39,6 +39,7 @@ static void vertex_markers(qk__gm_t *g, qk_mesh_t *m, const uint32_t *newid) {
   const qk__cdt_t *c = &g->cdt;
   const qk_poly_t *P = g->P;
   memset(m->vmark, 0, (m->nv + 1) * sizeof *m->vmark);
+  if (!P->vmark && !P->smark) return; /* (no markers: the pass over the vertices sets none) */
   for (size_t v = 0; v < c->nv; v++) {
     uint32_t id = newid[v];
     if (id == QK__CDT_NONE) continue;
