@@ -147,6 +147,8 @@ qk_status_t qk__gm_insert(qk__gm_t *g, double x, double y, uint32_t t0, int k0, 
   return QK_OK;
 }
 
+qk_status_t qk__gm_star(qk__gm_t *g, uint32_t v, uint32_t f) { return star(g, v, f); }
+
 /* Step 2: the root square, a power of two S = 2^e with corners at multiples of S / 4 (an
  * aligned square could not straddle zero), holding the input's bounding box grown by a
  * quarter of its extent on every side. */

@@ -39,6 +39,7 @@ static void vertex_markers(qk__gm_t *g, qk_mesh_t *m, const uint32_t *newid) {
   const qk__cdt_t *c = &g->cdt;
   const qk_poly_t *P = g->P;
   memset(m->vmark, 0, (m->nv + 1) * sizeof *m->vmark);
+  if (!P->vmark && !P->smark) return; /* (no markers: the pass over the vertices sets none) */
   for (size_t v = 0; v < c->nv; v++) {
     uint32_t id = newid[v];
     if (id == QK__CDT_NONE) continue;
@@ -103,7 +104,7 @@ qk_status_t qk__gm_output(qk__gm_t *g, qk_mesh_t *m) {
    * root). thr_hi (for positive cosines) and thr_lo (negative ones) are those squared
    * limits, with the margin; 0 (never a pass) until cmax > 0 > cmin. Any doubt (zero, NaN) takes
    * the full computation, so the results are those of computing every corner. */
-  double thr_hi = 0, thr_lo = 0;
+  double thr_hi = 0, thr_lo = 0, nthr_hi = -0.0;
   size_t j = 0, exempt = 0;
   for (uint32_t t = 0; t < c->nt; t++) {
     if (!kept(g, t)) continue;
@@ -121,12 +122,18 @@ qk_status_t qk__gm_output(qk__gm_t *g, qk_mesh_t *m) {
       m->tri[3 * j + i] = newid[tv[i]];
       const double *u = e[(i + 2) % 3], *w = e[(i + 1) % 3];
       double dot = u[0] * w[0] + u[1] * w[1], ll = l[(i + 2) % 3] * l[(i + 1) % 3];
-      if (dot * dot < (dot < 0 ? thr_hi : thr_lo) * ll) continue; /* cosine -dot / sqrt(ll) */
+      /* cosine -dot / sqrt(ll): skipped when dot^2 < thr_hi ll for dot < 0 or dot^2 < thr_lo ll
+       * for dot > 0, both as comparisons of dot |dot| (the same products, signed): choosing
+       * the threshold by dot's sign took eight instructions a corner. (A zero dot may be
+       * computed where it was passed over: the full computation is what the pass stands for.) */
+      double sq = dot * fabs(dot);
+      if (sq > nthr_hi * ll && sq < thr_lo * ll) continue;
       double cs = -dot / sqrt(ll);
       if (cs > cmax || cs < cmin) {
         cmax = cs > cmax ? cs : cmax, cmin = cs < cmin ? cs : cmin; /* NaN: neither, as fmax */
         double hi = (cmax < cb ? cmax : cb) * (1 - 1e-9), lo = cmin * (1 - 1e-9);
         thr_hi = hi > 0 && cmin < 0 ? hi * hi : 0, thr_lo = lo < 0 && cmax > 0 ? lo * lo : 0;
+        nthr_hi = -thr_hi;
       }
       exempt += cs > cb;
     }
