@@ -8,8 +8,8 @@
 #   BUILD_DIR (default build-bench), JOBS (default 2), RESULTS (default bench/results).
 #
 # --targets runs only what the issues' targets compare, each operation in its own run
-# (about a quarter of an hour on the 2-vCPU guest, where the full suite takes about an
-# hour): 1M uniform points (build, kNN), 1M boxes and discs (all pairs, rays), the
+# (23 minutes on the 2-vCPU guest, most of it the mesh cases' gmsh and the world at 10^5;
+# the full suite takes well over an hour): 1M uniform points (build, kNN), 1M boxes and discs (all pairs, rays), the
 # balance at 1M, every mesh case, the world at 10^4 and 10^5 objects, the region layer;
 # with --threads 2. It writes RESULTS/targets.jsonl (each run's lines in turn),
 # targets.txt (each run's table) and targets-targets.md; no plots.
