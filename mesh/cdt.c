@@ -641,8 +641,7 @@ qk_status_t qk__cdt_insert_at(qk__cdt_t *c, double x, double y, uint32_t t, int 
   return QK_OK;
 }
 
-qk_status_t qk__cdt_insert_in_undo(qk__cdt_t *c, double x, double y, uint32_t t,
-                                   uint32_t *v_out) {
+qk_status_t qk__cdt_insert_in_undo(qk__cdt_t *c, double x, double y, uint32_t t, uint32_t *v_out) {
   assert(c->undo && !c->known && !c->legal_sides && !c->on_change);
   if (grow_vertices(c, c->nv + 1) != QK_OK || grow_triangles(c, c->nt + 2) != QK_OK)
     return QK_ERR_NOMEM;

@@ -145,8 +145,7 @@ qk_status_t qk__cdt_insert_at(qk__cdt_t *c, double x, double y, uint32_t t, int 
  * the choice of legalisation that the general call makes, and one call fewer with
  * qk__gm_insert_in (the refinement's circumcentres: about 40 instructions of the 2,650 that
  * qk_mesh_generate spends a circumcentre on South Africa at extent/256). */
-qk_status_t qk__cdt_insert_in_undo(qk__cdt_t *c, double x, double y, uint32_t t,
-                                   uint32_t *v_out);
+qk_status_t qk__cdt_insert_in_undo(qk__cdt_t *c, double x, double y, uint32_t t, uint32_t *v_out);
 
 /* Take back the last insertion, made with c->undo set (and still set) into triangle t: every
  * triangle slot, link, vertex triangle, count and the hint as they were before it (slots

@@ -422,8 +422,7 @@ static STAR_INLINE qk_status_t check_star_with(qk__gm_t *g, const int clear, con
 }
 
 static qk_status_t check_star(qk__gm_t *g, int clear) {
-  if (g->size_plain)
-    return clear ? check_star_with(g, 1, 1) : check_star_with(g, 0, 1);
+  if (g->size_plain) return clear ? check_star_with(g, 1, 1) : check_star_with(g, 0, 1);
   return clear ? check_star_with(g, 1, 0) : check_star_with(g, 0, 0);
 }
 
@@ -646,8 +645,8 @@ static uint32_t far_corner(const qk__cdt_t *c, const uint32_t *tv) {
 
 /* Split a bad triangle: its circumcentre, or the subsegments hiding or encroached by it.
  * *rejected counts the triangles left because only protected pieces stood in the way. */
-static qk_status_t split_triangle(qk__gm_t *g, uint32_t t, const double lo[2],
-                                  const double hi[2], size_t *rejected) {
+static qk_status_t split_triangle(qk__gm_t *g, uint32_t t, const double lo[2], const double hi[2],
+                                  size_t *rejected) {
   qk__cdt_t *c = &g->cdt;
   const uint32_t *tv = &c->v[3 * t];
   const double *A = &c->xy[2 * tv[0]], *B = &c->xy[2 * tv[1]], *C = &c->xy[2 * tv[2]];
