@@ -72,6 +72,12 @@ def two_threads(t, what, r):
         t.value(what, "≥ 1.8x", f"{s:.2f}x", s >= 1.8, "paired wall clock")
 
 
+def t2_row(rows, **kw):
+    """quadkit's two-thread row matching kw, or None."""
+    return next((r for r in rows if r.get("threads", 1) > 1 and r["impl"] == "quadkit"
+                 and all(r.get(k) == v for k, v in kw.items())), None)
+
+
 def tree_targets(rows):
     big = max((r["n"] for r in rows if r["op"] == "knn" and r["dataset"] == "uniform" and r["n"] <= 1000000), default=0)
     n = big
@@ -119,16 +125,12 @@ def tree_targets(rows):
             rate(pick(rows, op="mesh", impl="quadkit", dataset="octagons", n=um)),
             rate(pick(rows, op="mesh", impl="cgal", dataset="octagons", n=um)))
 
-    def t2(**kw):
-        return next((r for r in rows if r.get("threads", 1) > 1 and r["impl"] == "quadkit"
-                     and all(r.get(k) == v for k, v in kw.items())), None)
-
-    two_threads(t, "build, two threads / one", t2(op="build", **u))
+    two_threads(t, "build, two threads / one", t2_row(rows, op="build", **u))
     two_threads(t, "1-NN one query a call, two threads / one",
-                t2(op="knn", k=1, order="random", batch=False, **u))
-    two_threads(t, "1-NN batch, two threads / one", t2(op="knn", k=1, order="random", batch=True, **u))
-    two_threads(t, f"all pairs of {sz(nc)} boxes, two threads / one", t2(op="collide", n=nc))
-    two_threads(t, f"rays batch ({sz(nr)} discs), two threads / one", t2(op="raycast", n=nr, batch=True))
+                t2_row(rows, op="knn", k=1, order="random", batch=False, **u))
+    two_threads(t, "1-NN batch, two threads / one", t2_row(rows, op="knn", k=1, order="random", batch=True, **u))
+    two_threads(t, f"all pairs of {sz(nc)} boxes, two threads / one", t2_row(rows, op="collide", n=nc))
+    two_threads(t, f"rays batch ({sz(nr)} discs), two threads / one", t2_row(rows, op="raycast", n=nr, batch=True))
     b = pick(rows, op="build", impl="quadkit", threads=1, **u)
     if b and b.get("bytes_per_point") is not None:
         bp = b["bytes_per_point"]
@@ -165,13 +167,8 @@ def world_targets(rows):
                 t.missing(f"{where}, two threads / one", "≥ 1.8x",
                           "one thread by design below the world's thread_min (32768 objects)")
             else:
-                two_threads(t, f"{where}, two threads / one", t2_world(rows, scene, n))
+                two_threads(t, f"{where}, two threads / one", t2_row(rows, op="world", dataset=scene, n=n))
     return t
-
-
-def t2_world(rows, scene, n):
-    return next((r for r in rows if r["op"] == "world" and r["impl"] == "quadkit" and r["dataset"] == scene
-                 and r["n"] == n and r.get("threads", 1) > 1), None)
 
 
 def mesh_targets(rows):
