@@ -405,6 +405,48 @@ void embree_collide(const std::vector<Box> &boxes, PairSum &out) {
   out.hash = geom.hash;
 }
 
+struct EmbreeBoxes {
+  RTCScene scene;
+  RTCGeometry g;
+  BoxGeom geom;
+};
+
+EmbreeBoxes *embree_boxes_new(size_t n) {
+  RTCDevice dev = device_for(1);
+  EmbreeBoxes *s = new EmbreeBoxes;
+  s->geom.boxes = nullptr;
+  s->scene = rtcNewScene(dev);
+  rtcSetSceneFlags(s->scene, RTC_SCENE_FLAG_ROBUST);
+  s->g = rtcNewGeometry(dev, RTC_GEOMETRY_TYPE_USER);
+  rtcSetGeometryUserPrimitiveCount(s->g, (unsigned)n);
+  rtcSetGeometryUserData(s->g, &s->geom);
+  rtcSetGeometryBoundsFunction(s->g, box_bounds, nullptr);
+  rtcSetGeometryIntersectFunction(s->g, no_intersect);
+  rtcSetGeometryOccludedFunction(s->g, no_occluded);
+  rtcAttachGeometry(s->scene, s->g);
+  return s;
+}
+
+void embree_boxes_collide(EmbreeBoxes *s, const std::vector<Box> &boxes, PairSum &out) {
+  // The geometry committed again counts as modified: the scene's commit rebuilds the BVH
+  // (run_collide_reused checks that it does, with other boxes before).
+  s->geom.boxes = &boxes;
+  rtcCommitGeometry(s->g);
+  rtcCommitScene(s->scene);
+  s->geom.pairs = 0;
+  s->geom.hash = 0;
+  rtcCollide(s->scene, s->scene, collide_cb, &s->geom);
+  out.pairs = s->geom.pairs;
+  out.hash = s->geom.hash;
+}
+
+void embree_boxes_free(EmbreeBoxes *s) {
+  if (!s) return;
+  rtcReleaseGeometry(s->g);
+  rtcReleaseScene(s->scene);
+  delete s;
+}
+
 std::unique_ptr<PointIndex> make_embree_points() {
   return std::unique_ptr<PointIndex>(new EmbreePoints);
 }
@@ -415,6 +457,10 @@ std::unique_ptr<PointIndex> make_embree_points() {
 namespace qkb {
 std::unique_ptr<PointIndex> make_embree_points() { return nullptr; }
 void embree_collide(const std::vector<Box> &, PairSum &) {}
+struct EmbreeBoxes {};
+EmbreeBoxes *embree_boxes_new(size_t) { return nullptr; }
+void embree_boxes_collide(EmbreeBoxes *, const std::vector<Box> &, PairSum &) {}
+void embree_boxes_free(EmbreeBoxes *) {}
 struct EmbreeDiscs {};
 EmbreeDiscs *embree_discs_build(const std::vector<double> &) { return nullptr; }
 void embree_discs_raycast(EmbreeDiscs *, const std::vector<Ray> &, HitSum &) {}

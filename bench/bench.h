@@ -69,6 +69,14 @@ struct HitSum {
 
 // Embree: all overlapping pairs among boxes (BVH build included in the timing).
 void embree_collide(const std::vector<Box> &boxes, PairSum &out);
+// The same, on a scene kept from call to call: each call points the geometry at the
+// boxes (as many as the first call's) and commits it and the scene again (a full rebuild
+// of the BVH in Embree's kept memory) before rtcCollide, as an application that
+// rebuilds every frame would.
+struct EmbreeBoxes;
+EmbreeBoxes *embree_boxes_new(size_t n);
+void embree_boxes_collide(EmbreeBoxes *s, const std::vector<Box> &boxes, PairSum &out);
+void embree_boxes_free(EmbreeBoxes *s);
 // Embree: first hit of each ray among discs (x, y, r); the BVH is built by
 // embree_discs_build and reused.
 struct EmbreeDiscs;

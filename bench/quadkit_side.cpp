@@ -162,6 +162,37 @@ bool quadkit_collide(const std::vector<Box> &boxes, PairSum &out, unsigned threa
   return true;
 }
 
+struct QuadkitBoxes {
+  qk_collider_t *c = nullptr;
+  unsigned threads = 1;
+};
+
+QuadkitBoxes *quadkit_boxes_new(unsigned threads) {
+  QuadkitBoxes *s = new QuadkitBoxes;
+  s->threads = threads;
+  return s;
+}
+
+void quadkit_boxes_collide(QuadkitBoxes *s, const std::vector<Box> &boxes, PairSum &out) {
+  const qk_box_t *b = reinterpret_cast<const qk_box_t *>(boxes.data());
+  qk_status_t st;
+  if (s->c) {
+    st = qk_collider_rebuild(s->c, nullptr, 0, b, boxes.size());
+  } else {
+    qk_tree_options_t o = collider_options();
+    o.threads = s->threads;
+    st = qk_collider_build(nullptr, 0, b, boxes.size(), &o, &s->c);
+  }
+  if (st) die("qk_collider_rebuild", st);
+  qk_collider_pairs(s->c, pair_fn, &out);
+}
+
+void quadkit_boxes_free(QuadkitBoxes *s) {
+  if (!s) return;
+  qk_collider_free(s->c);
+  delete s;
+}
+
 struct QuadkitDiscs {
   qk_collider_t *c;
 };

@@ -15,6 +15,13 @@ std::unique_ptr<PointIndex> make_quadkit(unsigned capacity = kQuadkitCapacity);
 // pairs on `threads` threads; the build on one).
 bool quadkit_collide(const std::vector<Box> &boxes, PairSum &out, unsigned threads = 1);
 
+// The same on a collider kept from call to call: built by the first call, rebuilt over
+// the boxes (qk_collider_rebuild, in its kept memory) by every later one.
+struct QuadkitBoxes;
+QuadkitBoxes *quadkit_boxes_new(unsigned threads = 1);
+void quadkit_boxes_collide(QuadkitBoxes *s, const std::vector<Box> &boxes, PairSum &out);
+void quadkit_boxes_free(QuadkitBoxes *s);
+
 // Rays: a collider over discs, built once, then first hits.
 struct QuadkitDiscs;
 QuadkitDiscs *quadkit_discs_build(const std::vector<double> &xyr);

@@ -101,8 +101,11 @@ def tree_targets(rows):
             t.ratio(f"k={k} random, {base}", 2, knn(k, "random", False), knn(k, "random", False, base))
     nc = max((r["n"] for r in rows if r["op"] == "collide"), default=0)
     t.ratio(f"all pairs of {sz(nc)} boxes, embree rtcCollide", 3,
-            rate(pick(rows, op="collide", impl="quadkit", n=nc, threads=1)),
-            rate(pick(rows, op="collide", impl="embree", n=nc)))
+            rate(pick(rows, op="collide", impl="quadkit", n=nc, threads=1, order="-")),
+            rate(pick(rows, op="collide", impl="embree", n=nc, order="-")))
+    t.ratio(f"all pairs of {sz(nc)} boxes, both rebuilt in kept memory, embree rtcCollide", 3,
+            rate(pick(rows, op="collide", impl="quadkit", n=nc, threads=1, order="reused")),
+            rate(pick(rows, op="collide", impl="embree", n=nc, order="reused")))
     nr = max((r["n"] for r in rows if r["op"] == "raycast"), default=0)
     for batch, what in ((False, "one ray a call"), (True, "a batch of rays")):
         t.ratio(f"first hit, {sz(nr)} discs, {what}, embree rtcIntersect1", 2,
@@ -129,7 +132,7 @@ def tree_targets(rows):
     two_threads(t, "1-NN one query a call, two threads / one",
                 t2_row(rows, op="knn", k=1, order="random", batch=False, **u))
     two_threads(t, "1-NN batch, two threads / one", t2_row(rows, op="knn", k=1, order="random", batch=True, **u))
-    two_threads(t, f"all pairs of {sz(nc)} boxes, two threads / one", t2_row(rows, op="collide", n=nc))
+    two_threads(t, f"all pairs of {sz(nc)} boxes, two threads / one", t2_row(rows, op="collide", n=nc, order="-"))
     two_threads(t, f"rays batch ({sz(nr)} discs), two threads / one", t2_row(rows, op="raycast", n=nr, batch=True))
     b = pick(rows, op="build", impl="quadkit", threads=1, **u)
     if b and b.get("bytes_per_point") is not None:

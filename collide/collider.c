@@ -6,6 +6,7 @@
  * when that box meets the query, which widens each node's reach by just as much as its
  * largest item needs, and no more.
  */
+#include <assert.h>
 #include <float.h>
 #include <stdatomic.h>
 #include <stdlib.h>
@@ -129,10 +130,11 @@ struct qk_collider {
   qk_allocator_t alloc;
   qk_tree_t *tree;
   size_t n_discs, n;
-  size_t n_slots;
+  size_t n_slots;    /* slots in use (the tree's slot bound, at least 1) */
+  size_t sbox_cap;   /* slots sbox has room for (qk_collider_rebuild keeps it) */
   qk_box_t *sbox;    /* per slot: the item's box, or a disc's (padded) bounding box */
   sdisc_t *sdisc;    /* per slot: the disc and its id (NULL without discs), 64-byte aligned */
-  void *sdisc_block; /* the allocation holding sdisc */
+  void *sdisc_block; /* the allocation holding sdisc (kept by a rebuild without discs) */
   size_t sdisc_bytes;
   cnode_t *cn;    /* per node id: see cnode_t */
   void *cn_block; /* the allocation holding cn (aligned inside it) */
@@ -568,7 +570,7 @@ void qk_collider_free(qk_collider_t *c) {
   if (!c) return;
   qk_allocator_t a = c->alloc;
   free_rays(c);
-  qk__free(&a, c->sbox, c->n_slots * sizeof *c->sbox);
+  qk__free(&a, c->sbox, c->sbox_cap * sizeof *c->sbox);
   qk__free(&a, c->sdisc_block, c->sdisc_bytes);
   qk__free(&a, c->cn_block, c->cn_bytes);
   qk_tree_free(c->tree);
@@ -637,6 +639,7 @@ typedef struct range_ctx {
   qk_collider_t *c;
   const qk_disc_t *discs;
   const qk_box_t *boxes;
+  size_t n_discs;        /* discs are items [0, n_discs) */
   qk_point_t *centres;   /* build_centre_tree's output */
   const uint32_t *where; /* fill_slots' id map (ids_range) */
   size_t n, n_jobs;
@@ -666,7 +669,7 @@ static double run_ranges(range_ctx_t *x, size_t n, double (*fn)(range_ctx_t *, s
 
 /* Items [lo, hi): their centres; the largest coordinate magnitude of their boxes. */
 static double centres_range(range_ctx_t *x, size_t lo, size_t hi) {
-  const size_t n_discs = x->c->n_discs;
+  const size_t n_discs = x->n_discs;
   double mag = 0;
   for (size_t i = lo; i < hi; i++) {
     qk_box_t bb;
@@ -687,41 +690,47 @@ static double centres_range(range_ctx_t *x, size_t lo, size_t hi) {
   return mag;
 }
 
-/* Phase 2: the tree of item centres (ids in input order, discs first), and the largest
- * coordinate magnitude of any item box. */
-static qk_status_t build_centre_tree(qk_collider_t *c, const qk_disc_t *discs,
-                                     const qk_box_t *boxes, const qk_tree_options_t *opt) {
-  size_t n = c->n;
+/* Phase 2: the tree of the centres of n items, the first n_discs of them discs (ids in
+ * input order, discs first): built afresh, or c's tree rebuilt when opt is NULL; the
+ * largest coordinate magnitude of any item box to *mag. On an error other than
+ * QK_ERR_NOMEM a rebuilt tree is as it was. */
+static qk_status_t build_centre_tree(qk_collider_t *c, const qk_disc_t *discs, size_t n_discs,
+                                     const qk_box_t *boxes, size_t n, const qk_tree_options_t *opt,
+                                     double *mag) {
   qk_point_t *centres = NULL;
   if (n) centres = qk__realloc(&c->alloc, NULL, 0, n * sizeof *centres);
   if (n && !centres) return QK_ERR_NOMEM;
   range_ctx_t x;
-  x.c = c, x.discs = discs, x.boxes = boxes, x.centres = centres, x.where = NULL;
-  c->mag = run_ranges(&x, n, centres_range);
-  qk_status_t st = qk_tree_build(centres, n, opt, &c->tree);
+  x.c = c, x.discs = discs, x.boxes = boxes, x.n_discs = n_discs, x.centres = centres;
+  x.where = NULL;
+  *mag = run_ranges(&x, n, centres_range);
+  qk_status_t st =
+      opt ? qk_tree_build(centres, n, opt, &c->tree) : qk_tree_rebuild(c->tree, centres, n, NULL);
   qk__free(&c->alloc, centres, n * sizeof *centres);
   return st;
 }
 
-/* Phase 3: the per-slot item arrays and the node array, sized from the tree. */
+/* A block of `need` bytes at *block, holding `*have` bytes: kept when large enough, else
+ * replaced by a new one (the old contents are not needed). The new block is had before
+ * the old one goes, so that on failure the old one stays. Returns whether it was newly
+ * made, or -1 on failure. */
+static int grow_block(const qk_allocator_t *a, void **block, size_t *have, size_t need) {
+  if (*block && *have >= need) return 0;
+  void *b = qk__realloc(a, NULL, 0, need);
+  if (!b) return -1;
+  qk__free(a, *block, *have);
+  *block = b, *have = need;
+  return 1;
+}
+
+/* Phase 3: the per-slot item arrays and the node array, sized from the tree; those of an
+ * earlier build are kept when large enough (qk_collider_rebuild). On failure every array
+ * the collider had is still there. */
 static qk_status_t alloc_arrays(qk_collider_t *c) {
   const qk_allocator_t *a = &c->alloc;
   /* Sizes of at least one, so that every array exists even for an empty set. */
   uint32_t slots = qk__tree_slot_bound(c->tree), nodes = qk__tree_node_bound(c->tree);
-  c->n_slots = slots ? slots : 1;
-  c->n_nodes = nodes ? nodes : 1;
-  c->sbox = qk__realloc(a, NULL, 0, c->n_slots * sizeof *c->sbox);
-  if (c->n_discs) {
-    c->sdisc_bytes = c->n_slots * sizeof(sdisc_t) + 64;
-    c->sdisc_block = qk__realloc(a, NULL, 0, c->sdisc_bytes);
-    if (c->sdisc_block) c->sdisc = (sdisc_t *)(((uintptr_t)c->sdisc_block + 63) & ~(uintptr_t)63);
-  }
-  /* Three spare entries in front put each block of four children (which start at ids
-   * 1, 5, 9, ...) on a 128-byte boundary, with 64 bytes of slack for the alignment. */
-  c->cn_bytes = (c->n_nodes + 3) * sizeof(cnode_t) + 64;
-  c->cn_block = qk__realloc(a, NULL, 0, c->cn_bytes);
-  if (c->cn_block) c->cn = (cnode_t *)(((uintptr_t)c->cn_block + 63) & ~(uintptr_t)63) + 3;
-  if (!c->sbox || (c->n_discs && !c->sdisc) || !c->cn_block) return QK_ERR_NOMEM;
+  const size_t n_slots = slots ? slots : 1, n_nodes = nodes ? nodes : 1;
   /* Before the first touch, so that the pages are huge from the start. A ray jumps
    * across the disc records and the ray entries (prepare_rays), one or two lines per
    * 4 KiB page, so those two arrays are always advised (as Embree advises its BVH on
@@ -730,11 +739,25 @@ static qk_status_t alloc_arrays(qk_collider_t *c) {
    * arrays cost the build at 10^7 discs up to 0.7 s more kernel time in 3.4 s
    * (docs/collide.md), which is why the other searches' two arrays are left to the hint.
    * qk__advise_huge skips arrays below 4 MB and custom allocators. */
-  qk__advise_huge(a, c->sdisc_block, c->sdisc_bytes);
-  if (c->huge_pages) {
-    qk__advise_huge(a, c->sbox, c->n_slots * sizeof *c->sbox);
-    qk__advise_huge(a, c->cn_block, c->cn_bytes);
+  void *sbox = c->sbox;
+  size_t sbox_bytes = c->sbox_cap * sizeof *c->sbox;
+  int made = grow_block(a, &sbox, &sbox_bytes, n_slots * sizeof *c->sbox);
+  if (made < 0) return QK_ERR_NOMEM;
+  c->sbox = sbox, c->sbox_cap = sbox_bytes / sizeof *c->sbox;
+  if (made && c->huge_pages) qk__advise_huge(a, c->sbox, sbox_bytes);
+  if (c->n_discs) {
+    made = grow_block(a, &c->sdisc_block, &c->sdisc_bytes, n_slots * sizeof(sdisc_t) + 64);
+    if (made < 0) return QK_ERR_NOMEM;
+    if (made) qk__advise_huge(a, c->sdisc_block, c->sdisc_bytes);
   }
+  /* Three spare entries in front put each block of four children (which start at ids
+   * 1, 5, 9, ...) on a 128-byte boundary, with 64 bytes of slack for the alignment. */
+  made = grow_block(a, &c->cn_block, &c->cn_bytes, (n_nodes + 3) * sizeof(cnode_t) + 64);
+  if (made < 0) return QK_ERR_NOMEM;
+  if (made && c->huge_pages) qk__advise_huge(a, c->cn_block, c->cn_bytes);
+  c->n_slots = n_slots, c->n_nodes = n_nodes;
+  c->sdisc = c->n_discs ? (sdisc_t *)(((uintptr_t)c->sdisc_block + 63) & ~(uintptr_t)63) : NULL;
+  c->cn = (cnode_t *)(((uintptr_t)c->cn_block + 63) & ~(uintptr_t)63) + 3;
   return QK_OK;
 }
 
@@ -779,7 +802,8 @@ static double ids_range(range_ctx_t *x, size_t lo, size_t hi) {
  * order); otherwise id by id through the tree's id map. */
 static qk_status_t fill_slots(qk_collider_t *c, const qk_disc_t *discs, const qk_box_t *boxes) {
   range_ctx_t x;
-  x.c = c, x.discs = discs, x.boxes = boxes, x.centres = NULL, x.where = NULL;
+  x.c = c, x.discs = discs, x.boxes = boxes, x.n_discs = c->n_discs, x.centres = NULL;
+  x.where = NULL;
   if (qk__tree_slot_bound(c->tree) == c->n) {
     c->reach = run_ranges(&x, c->n, slots_range);
   } else {
@@ -872,13 +896,57 @@ qk_status_t qk_collider_build(const qk_disc_t *discs, size_t n_discs, const qk_b
   atomic_init(&c->rays_state, RAYS_NONE);
   c->n_discs = n_discs;
   c->n = n_discs + n_boxes;
-  if ((st = build_centre_tree(c, discs, boxes, &opt)) != QK_OK || (st = alloc_arrays(c)) != QK_OK ||
-      (st = fill_slots(c, discs, boxes)) != QK_OK) {
+  if ((st = build_centre_tree(c, discs, n_discs, boxes, c->n, &opt, &c->mag)) != QK_OK ||
+      (st = alloc_arrays(c)) != QK_OK || (st = fill_slots(c, discs, boxes)) != QK_OK) {
     qk_collider_free(c);
     return st;
   }
   *out = c;
   return QK_OK;
+}
+
+/* Forget the ray structures of the items before a rebuild. */
+static void drop_rays(qk_collider_t *c) {
+  free_rays(c);
+  atomic_store_explicit(&c->rays_state, RAYS_NONE, memory_order_relaxed);
+}
+
+/* A collider without items after a rebuild ran out of memory: the tree emptied and the
+ * arrays of the last build (every one at least one entry long) filled for no items;
+ * nothing is allocated. */
+static void make_empty(qk_collider_t *c) {
+  c->n_discs = c->n = 0;
+  c->mag = 0;
+  qk_status_t st = qk_tree_rebuild(c->tree, NULL, 0, NULL);
+  if (st == QK_OK) st = alloc_arrays(c);
+  if (st == QK_OK) st = fill_slots(c, NULL, NULL);
+  assert(st == QK_OK); /* no points and arrays of one entry need no memory */
+  (void)st;
+}
+
+qk_status_t qk_collider_rebuild(qk_collider_t *c, const qk_disc_t *discs, size_t n_discs,
+                                const qk_box_t *boxes, size_t n_boxes) {
+  if (!c) return QK_ERR_INVALID;
+  qk_status_t st = check_items(discs, n_discs, boxes, n_boxes, c->threads);
+  if (st != QK_OK) return st;
+  /* The tree on the collider's threads, as the build's other phases. A centre outside a
+   * given root is found by the tree's rebuild, which then leaves the tree as it was: so
+   * is the collider, whose own arrays are not touched before. */
+  qk_tree_set_threads(c->tree, c->threads);
+  double mag;
+  st = build_centre_tree(c, discs, n_discs, boxes, n_discs + n_boxes, NULL, &mag);
+  if (st == QK_OK) {
+    drop_rays(c); /* made for the old items; the next cast makes them again */
+    c->n_discs = n_discs;
+    c->n = n_discs + n_boxes;
+    c->mag = mag;
+    if ((st = alloc_arrays(c)) == QK_OK) st = fill_slots(c, discs, boxes);
+  }
+  if (st == QK_ERR_NOMEM) {
+    drop_rays(c);
+    make_empty(c);
+  }
+  return st;
 }
 
 const qk_tree_t *qk_collider_tree(const qk_collider_t *c) { return c ? c->tree : NULL; }

@@ -237,6 +237,166 @@ static void test_collide_raycast(void **state) {
   free(d), free(b);
 }
 
+/* The failing allocator behind a lock, for the worker threads. */
+typedef struct locked {
+  pthread_mutex_t mu;
+  qkt_alloc_t st;
+} locked_t;
+
+static void *locked_fn(void *ud, void *ptr, size_t osize, size_t nsize) {
+  locked_t *l = ud;
+  pthread_mutex_lock(&l->mu);
+  void *p = qkt_alloc_fn(&l->st, ptr, osize, nsize);
+  pthread_mutex_unlock(&l->mu);
+  return p;
+}
+
+/* A collider holds exactly the given items: its size and tree, every overlapping pair,
+ * items overlapping query boxes and discs, and first hits of rays, all against the
+ * oracle. */
+static void expect_items(const qk_collider_t *c, const qk_disc_t *d, size_t nd, const qk_box_t *b,
+                         size_t nb, qkt_rng_t *r, const char *what) {
+  const size_t n = nd + nb;
+  if (qk_collider_size(c) != n)
+    fail_msg("%s: %zu items, %zu given (seed %llu)", what, qk_collider_size(c), n,
+             (unsigned long long)g_seed);
+  QKT_CHECK_TREE(qk_collider_tree(c));
+  qk_pair_t *want;
+  size_t nw = qko_pairs(d, nd, b, nb, &want), ng = 0;
+  assert_int_equal(qk_collider_pairs_list(c, NULL, 0, &ng), QK_OK);
+  if (ng != nw)
+    fail_msg("%s: %zu pairs, oracle %zu (seed %llu)", what, ng, nw, (unsigned long long)g_seed);
+  qk_pair_t *got = malloc((ng ? ng : 1) * sizeof *got);
+  assert_int_equal(qk_collider_pairs_list(c, got, ng, &ng), QK_OK);
+  for (size_t i = 0; i < nw; i++)
+    if (got[i].a != want[i].a || got[i].b != want[i].b)
+      fail_msg("%s: pair %zu (%u,%u) vs oracle (%u,%u) (seed %llu)", what, i, got[i].a, got[i].b,
+               want[i].a, want[i].b, (unsigned long long)g_seed);
+  free(got);
+  free(want);
+  qk_id_t *wid = malloc((n ? n : 1) * sizeof *wid);
+  ids_t gid = {malloc((n ? n : 1) * sizeof(qk_id_t)), 0};
+  for (int qi = 0; qi < 40; qi++) {
+    double x = qkt_rng_range(r, -0.2, 1.2), y = qkt_rng_range(r, -0.2, 1.2);
+    double h = qkt_rng_range(r, 0, 0.1);
+    qk_disc_t qd = {x, y, h};
+    qk_box_t qb = {x - h, y - 2 * h, x + h, y + h};
+    for (int is_disc = 0; is_disc < 2; is_disc++) {
+      gid.n = 0;
+      if (is_disc)
+        assert_int_equal(qk_collider_query_disc(c, qd, add_id, &gid), QK_OK);
+      else
+        assert_int_equal(qk_collider_query_box(c, qb, add_id, &gid), QK_OK);
+      qko_sort_ids(gid.v, gid.n);
+      size_t k = qko_overlap(d, nd, b, nb, is_disc, qd, qb, wid);
+      if (gid.n != k || memcmp(gid.v, wid, k * sizeof *wid))
+        fail_msg("%s: %s query %d: %zu items, oracle %zu (seed %llu)", what,
+                 is_disc ? "disc" : "box", qi, gid.n, k, (unsigned long long)g_seed);
+    }
+    double ang = qkt_rng_range(r, 0, 6.283185307179586);
+    qk_point_t org = {x, y}, dir = {cos(ang), sin(ang)};
+    qk_hit_t hit, w = qko_raycast(d, nd, b, nb, org, dir, INFINITY);
+    assert_int_equal(qk_collider_raycast(c, org, dir, INFINITY, &hit), QK_OK);
+    if (!ray_agrees(hit, w, d, nd, b, org, dir, INFINITY))
+      fail_msg("%s: ray %d hit (%u, %.17g), oracle (%u, %.17g) (seed %llu)", what, qi, hit.id,
+               hit.t, w.id, w.t, (unsigned long long)g_seed);
+  }
+  free(wid);
+  free(gid.v);
+}
+
+/*
+ * qk_collider_rebuild: a collider rebuilt over sets that grow, shrink, change kind (discs
+ * only, boxes only, both, none) and pass the threaded passes' size, on one and two
+ * threads, holds exactly the new items (pairs, queries and rays against the oracle, the
+ * rays after structures made for the old items); once its arrays are large enough a
+ * rebuild holds no more memory; bad input and a centre outside a given root leave it as
+ * it was; allocation failure at every N leaves it valid and empty with nothing more held,
+ * and a rebuild after that holds the items again.
+ */
+static void test_collide_rebuild(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 11);
+  const size_t nmax = 6000;
+  qk_disc_t *d = malloc(nmax * sizeof *d);
+  qk_box_t *b = malloc(nmax * sizeof *b);
+  static const size_t sets[][2] = {{300, 300}, {1500, 0},  {0, 2000}, {0, 0},
+                                   {5000, 10}, {200, 100}, {10, 6000}};
+  for (unsigned threads = 1; threads <= 2; threads++)
+    for (int given_root = 0; given_root < 2; given_root++) {
+      locked_t l; /* the worker threads allocate too */
+      pthread_mutex_init(&l.mu, NULL);
+      qkt_alloc_make(&l.st);
+      qkt_alloc_t *const st = &l.st;
+      const qk_allocator_t a = {locked_fn, &l};
+      qk_tree_options_t o = opts(given_root ? 1 : 8);
+      o.allocator = &a;
+      o.threads = threads;
+      o.has_root = given_root;
+      o.root = (qk_square_t){-1, -1, 3};
+      make_items(&r, d, 300, b, 300, 0, 0.02);
+      qk_collider_t *c = NULL;
+      assert_int_equal(qk_collider_build(d, 300, b, 300, &o, &c), QK_OK);
+      assert_int_equal(qk_collider_prepare_rays(c), QK_OK);
+      for (size_t k = 0; k < sizeof sets / sizeof *sets; k++) {
+        const size_t nd = sets[k][0], nb = sets[k][1];
+        make_items(&r, d, nd, b, nb, k % 2, k % 3 ? 0.003 : 0.02);
+        assert_int_equal(qk_collider_rebuild(c, nd ? d : NULL, nd, nb ? b : NULL, nb), QK_OK);
+        char what[64];
+        snprintf(what, sizeof what, "rebuild %zu (threads %u root %d)", k, threads, given_root);
+        expect_items(c, d, nd, b, nb, &r, what);
+        /* Again over the same numbers of items: no more memory held. */
+        const size_t held = st->live_bytes;
+        make_items(&r, d, nd, b, nb, 1, 0.01);
+        assert_int_equal(qk_collider_rebuild(c, nd ? d : NULL, nd, nb ? b : NULL, nb), QK_OK);
+        if (st->live_bytes > held)
+          fail_msg("%s, again: %zu bytes held, %zu before", what, st->live_bytes, held);
+        expect_items(c, d, nd, b, nb, &r, what);
+      }
+      /* Rejected input: the collider as it was. */
+      const size_t nd = sets[6][0], nb = sets[6][1];
+      qk_box_t bad = b[7];
+      b[7].xmin = NAN;
+      assert_int_equal(qk_collider_rebuild(c, d, nd, b, nb), QK_ERR_NONFINITE);
+      b[7] = (qk_box_t){bad.xmax, bad.ymin, bad.xmin, bad.ymax};
+      if (bad.xmin < bad.xmax)
+        assert_int_equal(qk_collider_rebuild(c, d, nd, b, nb), QK_ERR_GEOMETRY);
+      b[7] = (qk_box_t){5, 5, 6, 6};
+      assert_int_equal(qk_collider_rebuild(c, d, nd, b, nb), given_root ? QK_ERR_OUTSIDE : QK_OK);
+      if (!given_root) expect_items(c, d, nd, b, nb, &r, "box far out");
+      b[7] = bad;
+      if (given_root) expect_items(c, d, nd, b, nb, &r, "after rejected rebuilds");
+      assert_int_equal(qk_collider_rebuild(NULL, d, nd, b, nb), QK_ERR_INVALID);
+      assert_int_equal(qk_collider_rebuild(c, NULL, 3, b, nb), QK_ERR_INVALID);
+      /* Allocation failure at every N: valid, empty, nothing more held; then a rebuild
+       * without failure holds the items. */
+      assert_int_equal(qk_collider_rebuild(c, d, 200, b, 200), QK_OK);
+      for (size_t fail_at = 1;; fail_at++) {
+        const size_t held = st->live_bytes;
+        qkt_alloc_arm(st, fail_at);
+        qk_status_t s = qk_collider_rebuild(c, d, nd, b, nb);
+        qkt_alloc_arm(st, 0);
+        if (s == QK_OK) {
+          assert_true(fail_at > 1);
+          expect_items(c, d, nd, b, nb, &r, "rebuild after the failures");
+          break;
+        }
+        assert_int_equal(s, QK_ERR_NOMEM);
+        if (st->live_bytes > held)
+          fail_msg("fail_at %zu: %zu bytes held, %zu before", fail_at, st->live_bytes, held);
+        expect_items(c, NULL, 0, NULL, 0, &r, "emptied by a failed rebuild");
+        assert_int_equal(qk_collider_rebuild(c, d, 200, b, 200), QK_OK);
+        expect_items(c, d, 200, b, 200, &r, "rebuilt after a failure");
+        assert_true(fail_at < 1000);
+      }
+      qk_collider_free(c);
+      assert_int_equal(st->live_blocks, 0);
+      pthread_mutex_destroy(&l.mu);
+    }
+  free(d), free(b);
+}
+
 /* Disc tests exact for any finite values (seventeenth session): discs and boxes that
  * touch exactly (3-4-5 triangles) or miss by one ulp, at scales from 2^-1074 to 2^1017,
  * against the exact oracle. Before, squares overflowed (inf <= inf: discs 1e300 apart
@@ -567,20 +727,6 @@ static void test_collide_threads_option(void **state) {
   qk_collider_free(c);
   free(ref.p), free(ref_stop.p), free(list1), free(list2);
   free(d), free(b), free(org), free(dir), free(one), free(many);
-}
-
-/* The failing allocator behind a lock, for the worker threads. */
-typedef struct locked {
-  pthread_mutex_t mu;
-  qkt_alloc_t st;
-} locked_t;
-
-static void *locked_fn(void *ud, void *ptr, size_t osize, size_t nsize) {
-  locked_t *l = ud;
-  pthread_mutex_lock(&l->mu);
-  void *p = qkt_alloc_fn(&l->st, ptr, osize, nsize);
-  pthread_mutex_unlock(&l->mu);
-  return p;
 }
 
 static void test_collide_threads_nomem(void **state) {
@@ -1407,6 +1553,7 @@ int main(void) {
       cmocka_unit_test(test_collide_threads_skewed),
       cmocka_unit_test(test_collide_raycast_leaf_counts),
       cmocka_unit_test(test_collide_pairs_order),
+      cmocka_unit_test(test_collide_rebuild),
       cmocka_unit_test(test_collide_rays_lazy_prepare),
       cmocka_unit_test(test_collide_rays_lazy_threads),
       cmocka_unit_test(test_collide_rays_lazy_nomem),
