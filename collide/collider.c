@@ -13,7 +13,7 @@
 #include <string.h>
 
 #include "collide/collide_internal.h"
-#include "query/dist_exact.h"
+#include "index/dist_exact.h"
 
 #if defined(__SSE2__)
 #include <emmintrin.h>
@@ -164,7 +164,7 @@ struct qk_collider {
 
 /* Exact overlap predicates (touching counts): the squares in doubles decide unless the
  * distance is within a relative 2^-45 of the radii's sum or the values are beyond 2^500
- * (query/dist_exact.h), where the exact test does, for any finite values. */
+ * (index/dist_exact.h), where the exact test does, for any finite values. */
 static inline int disc_disc(const qk_disc_t *a, const qk_disc_t *b) {
   double dx = a->x - b->x, dy = a->y - b->y, rs = a->r + b->r;
   double d2 = dx * dx + dy * dy, r2 = rs * rs;

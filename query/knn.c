@@ -18,7 +18,7 @@
 
 #include <string.h>
 
-#include "query/dist_exact.h"
+#include "index/dist_exact.h"
 
 #if defined(__SSE2__)
 #include <emmintrin.h>
@@ -47,7 +47,7 @@ int qk__knn_avx2_off;
 /*
  * The best-so-far set of one search. Its order is exact (docs/query.md, "Exactness"):
  * candidates are ranked by their squared distances in doubles wherever those are farther
- * apart than the filter's margin (query/dist_exact.h), and by qk__dist_cmp_exact()
+ * apart than the filter's margin (index/dist_exact.h), and by qk__dist_cmp_exact()
  * otherwise, then by id. Pruning compares lower bounds with `lim`, the filter's upper
  * bound of the k-th's square (qk__filter_hi), so that no point the exact order puts
  * before the k-th is pruned.
@@ -67,7 +67,7 @@ typedef struct best {
 } best_t;
 
 /*
- * The filter's bounds (query/dist_exact.h) without its overflow clause, which kNN does
+ * The filter's bounds (index/dist_exact.h) without its overflow clause, which kNN does
  * not need: its queries keep the query and the tree within 2^510 (qk__knn_check), so a
  * difference is below 2^511 and a square below 2^1023 (2^1023 (1 + 2^-45) + 2^-1060 too):
  * nothing overflows. Two squares computed the same way: da < kx_lo(db) means a is

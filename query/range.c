@@ -4,7 +4,7 @@
  * each point of the leaves reached. The traversal uses a fixed stack, so it never
  * allocates.
  */
-#include "query/dist_exact.h"
+#include "index/dist_exact.h"
 #include "query/query_internal.h"
 
 /* A box test for the leaves, shared by the callback and the buffer form. */
@@ -68,7 +68,7 @@ static qk_status_t radius_walk(const qk_tree_t *t, qk_point_t c, double r, qk__e
   if (qk__tree_count(t) == 0) return QK_OK;
   /* Exact: d2 at most lo is inside, above hi outside, and between them (a point within a
    * relative 2^-45 of the circle, or r beyond 2^500) the exact test decides
-   * (query/dist_exact.h). Squares are pruned against hi, which keeps every square holding
+   * (index/dist_exact.h). Squares are pruned against hi, which keeps every square holding
    * a point the exact test accepts. */
   const double r2 = r * r, lo = qk__filter_lo(r2), hi = qk__filter_hi(r2), e = qk__margin(t);
   const qk_square_t root = qk__tree_root_square(t);

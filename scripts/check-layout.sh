@@ -22,4 +22,21 @@ if [ -n "$bad" ]; then
   printf '%s\n' "$bad" >&2
   exit 1
 fi
+# The modules on index/ stand side by side: a source of query/, region/, collide/, mesh/
+# or io/ includes headers of its own module, of index/ and the public ones (quadkit/)
+# only. index/ includes none but its own and the public ones.
+cross=$(printf '%s\n' "$hits" | grep -E '^(index|query|region|collide|mesh|io)/[^/]*\.[ch]$' |
+  while IFS= read -r f; do
+    [ -f "$f" ] || continue
+    own=${f%%/*}
+    allowed="$own|quadkit"
+    [ "$own" = index ] || allowed="$allowed|index"
+    grep -n -H -E '^[[:space:]]*#[[:space:]]*include[[:space:]]*"[a-z_]+/' "$f" |
+      grep -v -E "#[[:space:]]*include[[:space:]]*\"($allowed)/" || true
+  done)
+if [ -n "$cross" ]; then
+  echo "check-layout: a module includes another module's header (only its own, index/ and quadkit/):" >&2
+  printf '%s\n' "$cross" >&2
+  exit 1
+fi
 echo "check-layout: OK"

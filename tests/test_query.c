@@ -1111,7 +1111,7 @@ static size_t xknn_oracle(const qk_point_t *p, size_t n, qk_point_t q, size_t k,
 #endif
 
 /*
- * The exact distance tests themselves (query/dist_exact.h, behind the radius query, the
+ * The exact distance tests themselves (index/dist_exact.h, behind the radius query, the
  * kNN searches and the static collider), against rationals: they first try the doubles
  * (twentieth session), which must decide only where every operation is exact. Inputs:
  * dyadic grids at scales 2^-600 to 2^520 with radii on, one ulp off and far from a grid
@@ -1120,7 +1120,7 @@ static size_t xknn_oracle(const qk_point_t *p, size_t n, qk_point_t q, size_t k,
  * of 27 to 53 significant bits and sums that round (the doubles must refuse); random
  * reals; pairs of points at equal and near-equal distances for the comparison.
  */
-#include "query/dist_exact.h"
+#include "index/dist_exact.h"
 
 /* A value for the cases: a small integer, or one with `bits` significant bits, at 2^e. */
 static double dx_value(qkt_rng_t *r, int bits, int e) {

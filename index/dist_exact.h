@@ -1,10 +1,12 @@
 /*
- * The narrow interface of query/'s exact distance test, shared with collide/ (the static
- * collider's disc tests): whether two points lie within a distance of each other, in
- * exact arithmetic for any finite doubles, behind a floating-point filter. Not API.
+ * The exact distance test of the point-set queries (query/: radius and kNN) and of the
+ * static collider's disc tests (collide/): whether two points lie within a distance of
+ * each other, in exact arithmetic for any finite doubles, behind a floating-point filter.
+ * It lives in index/, the one module the others build on, so that neither of them
+ * depends on the other (it was in query/ until December 2026). Not API.
  */
-#ifndef QUADKIT_QUERY_DIST_EXACT_H
-#define QUADKIT_QUERY_DIST_EXACT_H
+#ifndef QUADKIT_INDEX_DIST_EXACT_H
+#define QUADKIT_INDEX_DIST_EXACT_H
 
 #include <math.h>
 #include <stdint.h>
@@ -72,4 +74,4 @@ static inline double qk__filter_hi(double r2) {
   return r2 < QK__FILTER_MAX ? r2 * (1 + QK__FILTER_REL) + QK__FILTER_ABS : INFINITY;
 }
 
-#endif /* QUADKIT_QUERY_DIST_EXACT_H */
+#endif /* QUADKIT_INDEX_DIST_EXACT_H */

@@ -14,7 +14,7 @@
 #include <stdint.h>
 #include <string.h>
 
-#include "query/dist_exact.h"
+#include "index/dist_exact.h"
 
 enum { LIMBS = 68, WIDE = 2 * LIMBS + 2 };
 
