@@ -294,6 +294,12 @@ static qk_status_t insert_segments(qk__gm_t *g) {
                            qk__gm_name(P, "", s, ls, n2) + 1, qk__mesh_num(P, u),
                            qk__mesh_num(P, w));
     }
+    if (t != QK__CDT_NONE) {
+      /* Already an edge (most of a coastline's segments): marked here, rather than found a
+       * second time by qk__cdt_insert_segment. */
+      qk__cdt_mark_segment(c, t, k, (uint32_t)s);
+      continue;
+    }
     uint32_t block = QK__CDT_NONE, bseg = QK__CDT_NONE;
     qk_status_t st = qk__cdt_insert_segment(c, g->cv[u], g->cv[w], (uint32_t)s, &block, &bseg);
     if (st == QK_ERR_NOMEM) return qk__mesh_fail(g->err, st, 0, "out of memory");
