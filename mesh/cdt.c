@@ -523,10 +523,11 @@ static ALWAYS_INLINE void legalize_with(qk__cdt_t *c, int sp, const int with_kno
     if (with_known && (known[n] | 1) == in) { /* stamped 2 gen (outside) or 2 gen + 1 */
       if (known[n] != in) continue;
       j = facing(c, n, t);
-    } else if (with_undo) {
+    } else if (with_undo || !with_known) {
       /* The same test as across_in's, written as the cavity search writes it: p against
        * n's circumcircle, n's corners in its own order (an even permutation, so the same
-       * exact sign), p's coordinates loaded once for the loop. */
+       * exact sign), p's coordinates loaded once for the loop; n's slot facing t is looked
+       * up only for a flip (most tests keep the edge). */
       const uint32_t *nv = c->v + 3 * (size_t)n;
       if (!(qk__cdt_incircle(xy + 2 * (size_t)nv[0], xy + 2 * (size_t)nv[1], xy + 2 * (size_t)nv[2],
                              pp) > 0))
@@ -534,7 +535,7 @@ static ALWAYS_INLINE void legalize_with(qk__cdt_t *c, int sp, const int with_kno
       j = facing(c, n, t);
     } else {
       j = facing(c, n, t);
-      if (!(with_known ? across_in_call(c, t, n, j) : across_in(c, t, n, j))) continue;
+      if (!across_in_call(c, t, n, j)) continue;
     }
     if (with_undo) { /* what undo_flip0 needs besides the flipped pair */
       const uint32_t *tv = c->v + 3 * (size_t)t;
