@@ -544,15 +544,11 @@ qk_status_t qk__gm_grade(qk__gm_t *g) {
 qk_status_t qk__gm_seed(qk__gm_t *g) {
   const qk_poly_t *P = g->P;
   g->inv_S = ldexp(1.0, -g->e);
-  /* Each segment's precision budget once (every split point asks for it). */
+  /* Each segment's precision budget, computed once when a split point first asks for it
+   * (qk__gm_split_param): most of a coastline's segments are never split. */
   g->sbud = qk__realloc(g->a, NULL, 0, P->ns + 1);
   if (!g->sbud) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
-  for (size_t s = 0; s < P->ns; s++) {
-    uint32_t u = P->seg[2 * s], w = P->seg[2 * s + 1];
-    const double A[2] = {P->vx[u], P->vy[u]}, B[2] = {P->vx[w], P->vy[w]};
-    int b = qk__seg_budget(A, B);
-    g->sbud[s] = (int8_t)(b > 62 ? 62 : b < -1 ? -1 : b);
-  }
+  memset(g->sbud, QK__GM_SBUD_UNSET & 0xff, P->ns + 1);
   qk_status_t st = QK_OK;
   g->cap_leaves = size_cells(g);
   /* The grading waits for the refinement to need it (general_refine.c, at the work cap),
