@@ -523,10 +523,11 @@ static ALWAYS_INLINE void legalize_with(qk__cdt_t *c, int sp, const int with_kno
     if (with_known && (known[n] | 1) == in) { /* stamped 2 gen (outside) or 2 gen + 1 */
       if (known[n] != in) continue;
       j = facing(c, n, t);
-    } else if (with_undo) {
+    } else if (with_undo || !with_known) {
       /* The same test as across_in's, written as the cavity search writes it: p against
        * n's circumcircle, n's corners in its own order (an even permutation, so the same
-       * exact sign), p's coordinates loaded once for the loop. */
+       * exact sign), p's coordinates loaded once for the loop; n's slot facing t is looked
+       * up only for a flip (most tests keep the edge). */
       const uint32_t *nv = c->v + 3 * (size_t)n;
       if (!(qk__cdt_incircle(xy + 2 * (size_t)nv[0], xy + 2 * (size_t)nv[1], xy + 2 * (size_t)nv[2],
                              pp) > 0))
@@ -534,7 +535,7 @@ static ALWAYS_INLINE void legalize_with(qk__cdt_t *c, int sp, const int with_kno
       j = facing(c, n, t);
     } else {
       j = facing(c, n, t);
-      if (!(with_known ? across_in_call(c, t, n, j) : across_in(c, t, n, j))) continue;
+      if (!across_in_call(c, t, n, j)) continue;
     }
     if (with_undo) { /* what undo_flip0 needs besides the flipped pair */
       const uint32_t *tv = c->v + 3 * (size_t)t;
@@ -676,13 +677,40 @@ uint32_t qk__cdt_ring_next(const qk__cdt_t *c, qk__cdt_ring_t *r) {
 }
 
 uint32_t qk__cdt_find_edge(const qk__cdt_t *c, uint32_t a, uint32_t b, int *k) {
-  qk__cdt_ring_t r = {a, NONE, NONE, 1};
-  for (uint32_t t = qk__cdt_ring_next(c, &r); t != NONE; t = qk__cdt_ring_next(c, &r)) {
-    int i = qk__cdt_slot(c, t, a);
-    if (c->v[3 * (size_t)t + (i + 1) % 3] == b) {
-      *k = (i + 2) % 3;
-      return t;
+  /* The turn of qk__cdt_ring_next, written out: one slot lookup a triangle instead of a call
+   * and two lookups (the segments' insertion, the pre-split and the splits call this once
+   * for every input segment or piece; on Norway the calls were 2% of the meshing). A
+   * triangle holding b after a clockwise (edge b -> a) has ab's triangle across its edge
+   * b-a, so the turn ends there too: the answer is the one triangle with the edge a -> b
+   * whatever turns reach it. */
+  const uint32_t *V = c->v, *N = c->nbr;
+  const uint32_t first = c->vtri[a];
+  uint32_t t = first;
+  int ccw = 1;
+  for (;;) {
+    const uint32_t *tv = V + 3 * (size_t)t;
+    const int i = tv[0] == a ? 0 : tv[1] == a ? 1 : 2;
+    const int i1 = i == 2 ? 0 : i + 1, i2 = i == 0 ? 2 : i - 1;
+    if (tv[i1] == b) return *k = i2, t;
+    if (tv[i2] == b) {
+      uint32_t u = N[3 * (size_t)t + i1];
+      if (u == NONE) return NONE;
+      const uint32_t *uv = V + 3 * (size_t)u;
+      const int j = uv[0] == a ? 0 : uv[1] == a ? 1 : 2;
+      return *k = j == 0 ? 2 : j - 1, u;
     }
+    /* Counter-clockwise around a until back at the first triangle; at the square's edge,
+     * clockwise from the first. */
+    uint32_t n = N[3 * (size_t)t + (ccw ? i1 : i2)];
+    if (ccw && n == first) return NONE;
+    if (n == NONE) {
+      if (!ccw) return NONE;
+      ccw = 0;
+      const uint32_t *fv = V + 3 * (size_t)first;
+      const int f = fv[0] == a ? 0 : fv[1] == a ? 1 : 2;
+      n = N[3 * (size_t)first + (f == 0 ? 2 : f - 1)];
+      if (n == NONE) return NONE;
+    }
+    t = n;
   }
-  return NONE;
 }

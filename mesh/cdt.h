@@ -165,6 +165,12 @@ void qk__cdt_undo_insert(qk__cdt_t *c, uint32_t t);
 qk_status_t qk__cdt_insert_segment(qk__cdt_t *c, uint32_t a, uint32_t b, uint32_t seg,
                                    uint32_t *block, uint32_t *block_seg);
 
+/* Mark the existing edge of triangle t opposite slot k (qk__cdt_find_edge's answer) as
+ * constrained with id seg, on both its sides, reporting both triangles to on_change: what
+ * qk__cdt_insert_segment does for an edge already there, for a caller that found the edge
+ * itself. */
+void qk__cdt_mark_segment(qk__cdt_t *c, uint32_t t, int k, uint32_t seg);
+
 /* The triangle and edge slot of the edge from vertex a to vertex b (oriented so that the
  * triangle lies on its left), or QK__CDT_NONE when ab is not an edge. */
 uint32_t qk__cdt_find_edge(const qk__cdt_t *c, uint32_t a, uint32_t b, int *k);

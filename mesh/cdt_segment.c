@@ -36,6 +36,8 @@ static void mark(qk__cdt_t *c, uint32_t t, int k, uint32_t seg) {
   if (c->on_change) c->on_change(c->user, n);
 }
 
+void qk__cdt_mark_segment(qk__cdt_t *c, uint32_t t, int k, uint32_t seg) { mark(c, t, k, seg); }
+
 /* Trace ab from a through the triangles it crosses, T_0 (at a) .. T_k (at b). Each gets a
  * record of REC words in c->scr: its id, the slot of its edge on the left chain (the
  * region's boundary left of a -> b; 3 if none), the same on the right, its vertex opposite

@@ -17,6 +17,8 @@
 
 /* Parameters on a segment are K / 2^62, K in [0, 2^62]. */
 #define QK__GM_ONE ((uint64_t)1 << 62)
+/* g->sbud[s] not computed yet (budgets lie in -1 .. 62). */
+#define QK__GM_SBUD_UNSET (-128)
 
 /* A point to insert before the refinement: a seed (seg == QK__CDT_NONE) or a segment's
  * pre-split point (at parameter k on input segment seg). */
@@ -61,7 +63,8 @@ typedef struct qk__gm {
    * below 60 degrees there (the concentric shells' apexes). */
   uint32_t *cv;
   uint8_t *vsmall;
-  /* Per input segment: its precision budget (qk__seg_budget, at most 62), computed once. */
+  /* Per input segment: its precision budget (qk__seg_budget, -1 to 62), computed once
+   * when first asked for; QK__GM_SBUD_UNSET until then. */
   int8_t *sbud;
   /* Per CDT vertex. */
   qk__gm_vert_t *vi;

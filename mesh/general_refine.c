@@ -28,6 +28,11 @@ int qk__gm_split_param(const qk__gm_t *g, uint32_t s, uint64_t lo, uint64_t hi, 
   uint32_t u = P->seg[2 * s], w = P->seg[2 * s + 1];
   const double A[2] = {P->vx[u], P->vy[u]}, B[2] = {P->vx[w], P->vy[w]};
   int bud = g->sbud[s];
+  if (bud == QK__GM_SBUD_UNSET) {
+    bud = qk__seg_budget(A, B);
+    bud = bud > 62 ? 62 : bud < -1 ? -1 : bud;
+    g->sbud[s] = (int8_t)bud;
+  }
   if (bud < 1 || hi - lo < 2 || protected_piece(g, s, lo, hi)) return 0;
   uint64_t q = (uint64_t)1 << (62 - bud), target = lo + (hi - lo) / 2;
   int shell = lo == 0 ? g->vsmall[u] : hi == QK__GM_ONE ? g->vsmall[w] : 0;

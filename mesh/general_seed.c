@@ -544,15 +544,11 @@ qk_status_t qk__gm_grade(qk__gm_t *g) {
 qk_status_t qk__gm_seed(qk__gm_t *g) {
   const qk_poly_t *P = g->P;
   g->inv_S = ldexp(1.0, -g->e);
-  /* Each segment's precision budget once (every split point asks for it). */
+  /* Each segment's precision budget, computed once when a split point first asks for it
+   * (qk__gm_split_param): most of a coastline's segments are never split. */
   g->sbud = qk__realloc(g->a, NULL, 0, P->ns + 1);
   if (!g->sbud) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
-  for (size_t s = 0; s < P->ns; s++) {
-    uint32_t u = P->seg[2 * s], w = P->seg[2 * s + 1];
-    const double A[2] = {P->vx[u], P->vy[u]}, B[2] = {P->vx[w], P->vy[w]};
-    int b = qk__seg_budget(A, B);
-    g->sbud[s] = (int8_t)(b > 62 ? 62 : b < -1 ? -1 : b);
-  }
+  memset(g->sbud, QK__GM_SBUD_UNSET & 0xff, P->ns + 1);
   qk_status_t st = QK_OK;
   g->cap_leaves = size_cells(g);
   /* The grading waits for the refinement to need it (general_refine.c, at the work cap),
@@ -567,11 +563,23 @@ qk_status_t qk__gm_seed(qk__gm_t *g) {
    * order (presplit makes them in order; seeds, when enabled, come before them all). */
   uint32_t *first = qk__realloc(g->a, NULL, 0, (P->ns + 1) * sizeof *first);
   if (!first) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  /* Without a size function a segment whose squared length is at most (1 - 2^-40) h^2 is
+   * not split: hypot, within an ulp of a length below (1 - 2^-41) h, cannot exceed h, so
+   * presplit's first test would say no (no bound, h infinite: none is split). The test
+   * skips the hypot and the call for most of a coastline's segments. Beyond h^2 below
+   * 2^-1000 the squares may underflow: the test is not made. */
+  double skip2 = -1;
+  if (!g->opt->size_fn) {
+    double h = g->opt->max_size;
+    skip2 = !(h > 0) ? INFINITY : h * h >= 0x1p-1000 ? h * h * (1 - 0x1p-40) : -1;
+  }
   for (size_t s = 0; s < P->ns && !st; s++) {
     uint32_t u = P->seg[2 * s], w = P->seg[2 * s + 1];
     const double A[2] = {P->vx[u], P->vy[u]}, B[2] = {P->vx[w], P->vy[w]};
+    const double dx = B[0] - A[0], dy = B[1] - A[1];
     first[s] = (uint32_t)g->npts;
-    st = presplit(g, (uint32_t)s, A, B, hypot(B[0] - A[0], B[1] - A[1]), 0, QK__GM_ONE);
+    if (dx * dx + dy * dy <= skip2) continue;
+    st = presplit(g, (uint32_t)s, A, B, hypot(dx, dy), 0, QK__GM_ONE);
   }
   if (!st) first[P->ns] = (uint32_t)g->npts;
   if (!st && g->npts) st = qk__gm_sort_points(g, g->pts, g->npts);
