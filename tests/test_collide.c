@@ -293,6 +293,7 @@ static void expect_items(const qk_collider_t *c, const qk_disc_t *d, size_t nd, 
         fail_msg("%s: %s query %d: %zu items, oracle %zu (seed %llu)", what,
                  is_disc ? "disc" : "box", qi, gid.n, k, (unsigned long long)g_seed);
     }
+    if (qi % 3) continue; /* (a ray every third query: the oracle's exact entries are dear) */
     double ang = qkt_rng_range(r, 0, 6.283185307179586);
     qk_point_t org = {x, y}, dir = {cos(ang), sin(ang)};
     qk_hit_t hit, w = qko_raycast(d, nd, b, nb, org, dir, INFINITY);
@@ -322,7 +323,7 @@ static void test_collide_rebuild(void **state) {
   qk_disc_t *d = malloc(nmax * sizeof *d);
   qk_box_t *b = malloc(nmax * sizeof *b);
   /* (the fifth: past the build's threaded passes, 4096 items; with two threads only) */
-  static const size_t sets[][2] = {{300, 300}, {800, 0}, {0, 900}, {0, 0}, {4090, 10}, {200, 100}};
+  static const size_t sets[][2] = {{300, 300}, {800, 0}, {0, 900}, {0, 0}, {10, 4090}, {200, 100}};
   for (unsigned threads = 1; threads <= 2; threads++)
     for (int given_root = 0; given_root < 2; given_root++) {
       locked_t l; /* the worker threads allocate too */

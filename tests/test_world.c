@@ -730,6 +730,8 @@ static void test_world_threads_ranges(void **s) {
   } sc[] = {{5000, 3000, 300}, {5000, 250, 20000}, {6000, 50, (size_t)1 << 20}};
   for (unsigned th = 2; th <= 3; th++)
     for (size_t k = 0; k < sizeof sc / sizeof *sc; k++) {
+      /* (under TSan the buckets' scene on two threads only: the longest by far there) */
+      if (QKT_TSAN && th == 3 && k == 2) continue;
       qkt_rng_t r;
       qkt_rng_seed(&r, g_seed + 61 + th * 8 + k);
       qk_world_t *w = threaded_world(th);
@@ -1529,8 +1531,10 @@ static void run_refile_split(unsigned threads, int which) {
 static void test_world_refile_split(void **s) {
   (void)s;
   static const unsigned th[] = {2, 3, 8};
+  /* (under TSan 2 and 3 threads: eight on this test's two processors took a third of its
+   * time there, for the same code) */
   for (int which = 0; which < 3; which++)
-    for (size_t k = 0; k < sizeof th / sizeof *th; k++) run_refile_split(th[k], which);
+    for (size_t k = 0; k < sizeof th / sizeof *th - QKT_TSAN; k++) run_refile_split(th[k], which);
 }
 
 static void test_world_began_only(void **s) {
