@@ -136,6 +136,8 @@ struct qk_collider {
   sdisc_t *sdisc;    /* per slot: the disc and its id (NULL without discs), 64-byte aligned */
   void *sdisc_block; /* the allocation holding sdisc (kept by a rebuild without discs) */
   size_t sdisc_bytes;
+  qk_point_t *centres; /* kept by qk_collider_rebuild for the next one (NULL: none) */
+  size_t centres_cap;
   cnode_t *cn;    /* per node id: see cnode_t */
   void *cn_block; /* the allocation holding cn (aligned inside it) */
   size_t cn_bytes;
@@ -573,6 +575,7 @@ void qk_collider_free(qk_collider_t *c) {
   qk__free(&a, c->sbox, c->sbox_cap * sizeof *c->sbox);
   qk__free(&a, c->sdisc_block, c->sdisc_bytes);
   qk__free(&a, c->cn_block, c->cn_bytes);
+  qk__free(&a, c->centres, c->centres_cap * sizeof *c->centres);
   qk_tree_free(c->tree);
   qk__free(&a, c, sizeof *c);
 }
@@ -690,26 +693,6 @@ static double centres_range(range_ctx_t *x, size_t lo, size_t hi) {
   return mag;
 }
 
-/* Phase 2: the tree of the centres of n items, the first n_discs of them discs (ids in
- * input order, discs first): built afresh, or c's tree rebuilt when opt is NULL; the
- * largest coordinate magnitude of any item box to *mag. On an error other than
- * QK_ERR_NOMEM a rebuilt tree is as it was. */
-static qk_status_t build_centre_tree(qk_collider_t *c, const qk_disc_t *discs, size_t n_discs,
-                                     const qk_box_t *boxes, size_t n, const qk_tree_options_t *opt,
-                                     double *mag) {
-  qk_point_t *centres = NULL;
-  if (n) centres = qk__realloc(&c->alloc, NULL, 0, n * sizeof *centres);
-  if (n && !centres) return QK_ERR_NOMEM;
-  range_ctx_t x;
-  x.c = c, x.discs = discs, x.boxes = boxes, x.n_discs = n_discs, x.centres = centres;
-  x.where = NULL;
-  *mag = run_ranges(&x, n, centres_range);
-  qk_status_t st =
-      opt ? qk_tree_build(centres, n, opt, &c->tree) : qk_tree_rebuild(c->tree, centres, n, NULL);
-  qk__free(&c->alloc, centres, n * sizeof *centres);
-  return st;
-}
-
 /* A block of `need` bytes at *block, holding `*have` bytes: kept when large enough, else
  * replaced by a new one (the old contents are not needed). The new block is had before
  * the old one goes, so that on failure the old one stays. Returns whether it was newly
@@ -721,6 +704,36 @@ static int grow_block(const qk_allocator_t *a, void **block, size_t *have, size_
   qk__free(a, *block, *have);
   *block = b, *have = need;
   return 1;
+}
+
+/* Phase 2: the tree of the centres of n items, the first n_discs of them discs (ids in
+ * input order, discs first): built afresh, or c's tree rebuilt when opt is NULL (the
+ * centres then in a block the collider keeps for the next rebuild: a block borrowed per
+ * call may be given back to the system by the C library and faulted in again); the
+ * largest coordinate magnitude of any item box to *mag. On an error other than
+ * QK_ERR_NOMEM a rebuilt tree is as it was. */
+static qk_status_t build_centre_tree(qk_collider_t *c, const qk_disc_t *discs, size_t n_discs,
+                                     const qk_box_t *boxes, size_t n, const qk_tree_options_t *opt,
+                                     double *mag) {
+  qk_point_t *centres = NULL;
+  if (opt) {
+    if (n) centres = qk__realloc(&c->alloc, NULL, 0, n * sizeof *centres);
+    if (n && !centres) return QK_ERR_NOMEM;
+  } else { /* a rebuild keeps them for the next one */
+    void *block = c->centres;
+    size_t bytes = c->centres_cap * sizeof *c->centres;
+    if (grow_block(&c->alloc, &block, &bytes, (n ? n : 1) * sizeof *centres) < 0)
+      return QK_ERR_NOMEM;
+    c->centres = centres = block, c->centres_cap = bytes / sizeof *centres;
+  }
+  range_ctx_t x;
+  x.c = c, x.discs = discs, x.boxes = boxes, x.n_discs = n_discs, x.centres = centres;
+  x.where = NULL;
+  *mag = run_ranges(&x, n, centres_range);
+  qk_status_t st =
+      opt ? qk_tree_build(centres, n, opt, &c->tree) : qk_tree_rebuild(c->tree, centres, n, NULL);
+  if (opt) qk__free(&c->alloc, centres, n * sizeof *centres);
+  return st;
 }
 
 /* Phase 3: the per-slot item arrays and the node array, sized from the tree; those of an
@@ -915,6 +928,8 @@ static void drop_rays(qk_collider_t *c) {
  * arrays of the last build (every one at least one entry long) filled for no items;
  * nothing is allocated. */
 static void make_empty(qk_collider_t *c) {
+  qk__free(&c->alloc, c->centres, c->centres_cap * sizeof *c->centres);
+  c->centres = NULL, c->centres_cap = 0;
   c->n_discs = c->n = 0;
   c->mag = 0;
   qk_status_t st = qk_tree_rebuild(c->tree, NULL, 0, NULL);

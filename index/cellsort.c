@@ -902,7 +902,12 @@ typedef struct scratch {
   size_t nb, nc, n, ns, n_rec, rec_bytes, n_stage, wc_bytes;
 } scratch_t;
 
-static void scratch_free(const qk_tree_t *t, scratch_t *s) {
+/* Free the scratch; the record block goes to the tree instead when it keeps one. */
+static void scratch_free(qk_tree_t *t, scratch_t *s) {
+  if (t->keep_rec && s->rec_block && !t->kept_rec) {
+    t->kept_rec = s->rec_block, t->kept_rec_bytes = s->rec_bytes;
+    s->rec_block = NULL;
+  }
   qk__free(&t->alloc, s->cum, (s->nb + 1) * sizeof *s->cum);
   qk__free(&t->alloc, s->cbase, (s->nc + 1) * sizeof *s->cbase);
   qk__free(&t->alloc, s->deep, s->nc * sizeof *s->deep);
@@ -1012,7 +1017,16 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
     size_t want = rest < most ? rest : most;
     if (s.rec_bytes < want) s.rec_bytes = want;
   }
-  s.rec_block = qk__realloc(&t->alloc, NULL, 0, s.rec_bytes);
+  /* A record block kept from the last build when large enough (a rebuilt tree: see
+   * scratch_free); one too small goes first. */
+  bool kept = false;
+  if (t->kept_rec && t->kept_rec_bytes >= s.rec_bytes) {
+    s.rec_block = t->kept_rec, s.rec_bytes = t->kept_rec_bytes, kept = true;
+  } else {
+    qk__free(&t->alloc, t->kept_rec, t->kept_rec_bytes);
+    s.rec_block = qk__realloc(&t->alloc, NULL, 0, s.rec_bytes);
+  }
+  t->kept_rec = NULL, t->kept_rec_bytes = 0;
   if (!s.rec_block) {
     scratch_free(t, &s);
     return QK_ERR_NOMEM;
@@ -1026,7 +1040,7 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
    * one-thread build at 1M two to three times slower on that machine (other libraries'
    * blocks come and go in the same heap between its builds), though a loop of builds alone
    * gained 3-10%. */
-  if (t->huge_pages || s.rec_bytes > ((size_t)32 << 20))
+  if (!kept && (t->huge_pages || s.rec_bytes > ((size_t)32 << 20)))
     qk__advise_huge(&t->alloc, s.rec_block, s.n_rec * sizeof(rec_t) + 64);
   j.rec = (rec_t *)(void *)((unsigned char *)s.rec_block + (-(uintptr_t)s.rec_block & 63u));
   s.wc_bytes = (size_t)nw * nc * WC * sizeof(rec_t) + 64;

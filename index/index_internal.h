@@ -86,6 +86,13 @@ struct qk_tree {
   /* Removed ids, handed out again by inserts, the most recently removed first. */
   qk_id_t *free_ids;
   uint32_t n_free_ids, cap_free_ids;
+
+  /* The bulk build's record block, kept between builds once the tree has been rebuilt
+   * (qk_tree_rebuild sets keep_rec): a tree rebuilt every frame then asks for its largest
+   * scratch block once (index/cellsort.c). NULL: none kept. */
+  void *kept_rec;
+  size_t kept_rec_bytes;
+  bool keep_rec;
 };
 
 /* Allocation goes through here and only here. */

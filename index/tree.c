@@ -873,6 +873,10 @@ static qk_status_t rebuild(qk_tree_t *t, const qk_point_t *points, size_t n, qk_
     if (slots_alloc(t, need, &s)) return say(err, QK_ERR_NOMEM, SIZE_MAX, "out of memory");
     slots_install(t, s, need);
   }
+  /* From now on the bulk build keeps its record block for the next one (a tree rebuilt
+   * once is likely rebuilt every frame): it is the largest block a build borrows, which a
+   * C library may give back to the system between builds and fault in again. */
+  t->keep_rec = true;
   if ((st = fill(t, points, n, root))) return say(err, st, SIZE_MAX, "%s", qk_strerror(st));
   return QK_OK;
 }
@@ -886,6 +890,7 @@ void qk_tree_free(qk_tree_t *t) {
   slots_t pts = {t->px, t->py, t->pid};
   slots_free(&a, &pts, t->cap_slots);
   qk__free(&a, qk__id_map_if_made(t), (size_t)qk__id_map_capacity(t) * sizeof(uint32_t));
+  qk__free(&a, t->kept_rec, t->kept_rec_bytes);
   qk__free(&a, t, sizeof *t);
 }
 

@@ -45,7 +45,8 @@ size_t qk_tree_memory(const qk_tree_t *t) {
   return sizeof *t + (size_t)t->cap_nodes * sizeof(qk__node_t) +
          (size_t)t->cap_blocks * sizeof(qk__block_t) + (size_t)t->cap_free_ids * sizeof(qk_id_t) +
          (size_t)t->cap_slots * (2 * sizeof(double) + sizeof(qk_id_t)) +
-         (qk__id_map_if_made(t) ? (size_t)qk__id_map_capacity(t) * sizeof(uint32_t) : 0);
+         (qk__id_map_if_made(t) ? (size_t)qk__id_map_capacity(t) * sizeof(uint32_t) : 0) +
+         t->kept_rec_bytes;
 }
 
 static qk_visit_t count_node(const qk_tree_t *t, qk_node_t v, void *ud) {

@@ -17,7 +17,9 @@
  *  - qk_tree_rebuild (issue 11): the same tree as a fresh build, for a fitted and a given
  *    root, growing and shrinking, after removals and moves; no allocation once the arrays
  *    are large enough; a bad point leaves the tree unchanged; allocation failure at every
- *    N leaves a valid tree and no leak; huge pages asked for change no result;
+ *    N leaves a valid tree and no leak; huge pages asked for change no result; the bulk
+ *    build's record block kept from rebuild to rebuild (one allocation fewer, counted in
+ *    the tree's memory);
  *  - uniform inserts and moves one by one take linear work: the bytes the tree asks for
  *    stay within 150 times its final size at capacities 1, 16 and 32; a bulk build at
  *    capacity 1 and 4 asks for at most 4 times the tree it makes;
@@ -805,6 +807,18 @@ static void assert_same_shape(const qk_tree_t *a, const qk_tree_t *b) {
   free(lb);
 }
 
+/* An allocator that notes the largest block asked for (through the failing one). */
+typedef struct biggest {
+  qkt_alloc_t *inner;
+  size_t largest;
+} biggest_t;
+
+static void *biggest_fn(void *ud, void *ptr, size_t osize, size_t nsize) {
+  biggest_t *b = ud;
+  if (nsize > b->largest) b->largest = nsize;
+  return qkt_alloc_fn(b->inner, ptr, osize, nsize);
+}
+
 static void test_index_rebuild(void **state) {
   (void)state;
   qkt_rng_t r;
@@ -892,6 +906,27 @@ static void test_index_rebuild(void **state) {
     failures++;
   }
   assert_true(failures >= 2);
+  /* The bulk build's record block (20 bytes a point, the largest block a build asks for)
+   * stays with a rebuilt tree for the next rebuild, counted in its memory: the first
+   * rebuild of a tree just built asks for it, the next one asks for no block that large
+   * and holds what the first left. */
+  biggest_t big = {&a, 0};
+  qk_allocator_t bal = {biggest_fn, &big};
+  o.allocator = &bal;
+  qk_tree_t *u;
+  assert_int_equal(qk_tree_build(p, N, &o, &u), QK_OK);
+  const size_t built_mem = qk_tree_memory(u);
+  big.largest = 0;
+  assert_int_equal(qk_tree_rebuild(u, p, N, NULL), QK_OK);
+  assert_true(big.largest >= (size_t)N * 20);
+  const size_t kept_mem = qk_tree_memory(u);
+  assert_true(kept_mem >= built_mem + (size_t)N * 20);
+  big.largest = 0;
+  assert_int_equal(qk_tree_rebuild(u, p, N, NULL), QK_OK);
+  assert_true(big.largest < (size_t)N * 20);
+  assert_int_equal(qk_tree_memory(u), kept_mem);
+  assert_same_shape(t, u);
+  qk_tree_free(u);
   qk_tree_free(t);
   assert_int_equal(a.live_blocks, 0);
   free(p);

@@ -65,9 +65,9 @@ qk_status_t qk_collider_build(const qk_disc_t *discs, size_t n_discs, const qk_b
 /**
  * Build the collider again over new items, reusing its memory: the item and node arrays
  * are kept and grown only when too small, so a collider rebuilt every frame stops asking
- * for large blocks once it has reached its largest size (the tree's bulk build still
- * borrows its scratch for the call, see qk_tree_rebuild(), and the centres take 16 bytes
- * an item meanwhile). A fresh build asks for every array anew, and a C library may give
+ * for large blocks once it has reached its largest size: it keeps as well the item centres
+ * (16 bytes an item) and its tree the build's record block (see qk_tree_rebuild()) for
+ * the next rebuild. A fresh build asks for every array anew, and a C library may give
  * large freed blocks back to the system, so that each build touches fresh pages: at 10^6
  * boxes a rebuild can take a third of the time of a build and free. The options the collider was
  * built with stay (capacity, depth cap, a given root, allocator, huge pages); the build runs on the
@@ -76,7 +76,8 @@ qk_status_t qk_collider_build(const qk_disc_t *discs, size_t n_discs, const qk_b
  * them again. Must not run concurrently with any other call on the collider.
  * \param [in,out] c the collider.
  * \param [in] discs,n_discs,boxes,n_boxes the items, as qk_collider_build() (copied).
- * eturn as qk_collider_build(), or QK_ERR_INVALID (c NULL). The collider is unchanged
+ *
+eturn as qk_collider_build(), or QK_ERR_INVALID (c NULL). The collider is unchanged
  *         when the input is rejected; on QK_ERR_NOMEM it is left valid and empty.
  */
 qk_status_t qk_collider_rebuild(qk_collider_t *c, const qk_disc_t *discs, size_t n_discs,
