@@ -69,15 +69,15 @@ qk_status_t qk_collider_build(const qk_disc_t *discs, size_t n_discs, const qk_b
  * (16 bytes an item) and its tree the build's record block (see qk_tree_rebuild()) for
  * the next rebuild. A fresh build asks for every array anew, and a C library may give
  * large freed blocks back to the system, so that each build touches fresh pages: at 10^6
- * boxes a rebuild can take a third of the time of a build and free. The options the collider was
- * built with stay (capacity, depth cap, a given root, allocator, huge pages); the build runs on the
- * collider's threads (qk_collider_set_threads()). Ids as for qk_collider_build(). Ray structures
- * made for the old items are dropped; the next cast (or qk_collider_prepare_rays()) makes
- * them again. Must not run concurrently with any other call on the collider.
+ * boxes a rebuild can take a third of the time of a build and free. The options the
+ * collider was built with stay (capacity, depth cap, a given root, allocator, huge
+ * pages); the build runs on the collider's threads (qk_collider_set_threads()). Ids as
+ * for qk_collider_build(). Ray structures made for the old items are dropped; the next
+ * cast (or qk_collider_prepare_rays()) makes them again. Must not run concurrently with
+ * any other call on the collider.
  * \param [in,out] c the collider.
  * \param [in] discs,n_discs,boxes,n_boxes the items, as qk_collider_build() (copied).
- *
-eturn as qk_collider_build(), or QK_ERR_INVALID (c NULL). The collider is unchanged
+ * \return as qk_collider_build(), or QK_ERR_INVALID (c NULL). The collider is unchanged
  *         when the input is rejected; on QK_ERR_NOMEM it is left valid and empty.
  */
 qk_status_t qk_collider_rebuild(qk_collider_t *c, const qk_disc_t *discs, size_t n_discs,

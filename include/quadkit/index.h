@@ -125,13 +125,17 @@ qk_status_t qk_tree_build_ex(const qk_point_t *points, size_t n, const qk_tree_o
  * keeps the bulk build's record block (20 to 32 bytes a point, counted by
  * qk_tree_memory()) for the next build: the largest block a build asks for, which a C
  * library may give back to the system between builds and fault in again; the rest of the
- * scratch (some 6 bytes a point and the bucket counts) is borrowed for the call. The options it was
- * built with stay (capacity, depth cap, threads, allocator; a given root stays, a fitted root is
- * fitted to the new points). Point i gets id i; the id map and the removed ids are dropped. \param
- * [in,out] tree the tree; unchanged when the input is rejected, and left valid but empty on
- * QK_ERR_NOMEM. \param [in] points n points; copied. \param [in] n how many. \param [out] err where
- * and why the input was rejected, as qk_tree_build_ex() (may be NULL). \return as
- * qk_tree_build_ex().
+ * scratch (some 6 bytes a point and the bucket counts) is borrowed for the call. The
+ * options it was built with stay (capacity, depth cap, threads, allocator; a given root
+ * stays, a fitted root is fitted to the new points). Point i gets id i; the id map and the
+ * removed ids are dropped.
+ * \param [in,out] tree the tree; unchanged when the input is rejected, and left valid but
+ *                  empty on QK_ERR_NOMEM.
+ * \param [in] points n points; copied.
+ * \param [in] n how many.
+ * \param [out] err where and why the input was rejected, as qk_tree_build_ex() (may be
+ *              NULL).
+ * \return as qk_tree_build_ex().
  */
 qk_status_t qk_tree_rebuild(qk_tree_t *tree, const qk_point_t *points, size_t n, qk_error_t *err);
 
