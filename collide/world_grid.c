@@ -267,12 +267,103 @@ static inline __attribute__((always_inline)) void pack_cells_(const qk_world_t *
   }
 }
 
+#if defined(__SSE2__)
+/* The same as pack_cells_, walking the objects of cells [c0, c1) in one run instead of
+ * cell by cell (most cells of a sparse world hold one or two objects, and a cell's loop
+ * cost as much as its objects): four boxes filling a group are converted and stored as
+ * the group's four rows (a transpose), the others one at a time, and the cell box is
+ * stored where the next cell starts. A group is written whole only when it lies inside
+ * the range (ranges on threads share their end groups). */
+static inline __attribute__((always_inline)) void pack_run_(const qk_world_t *w, qk__wpack_t *pk,
+                                                            const uint32_t *ord,
+                                                            const qk__wcell_t *cells, uint32_t c0,
+                                                            uint32_t c1, const int cell_boxes) {
+  if (c0 >= c1) return;
+  float *fg = pk->fgrp;
+  uint8_t *fx = pk->fexact;
+  const __m128d inf = _mm_set1_pd(INFINITY), ninf = _mm_set1_pd(-INFINITY);
+  __m128d hlo = inf, hhi = ninf;
+  uint32_t c = c0, m = cells[c0].start, next = cells[c0 + 1].start;
+  const uint32_t me = cells[c1].start;
+  const qk__wobj_t *obj = w->obj;
+  while (m < me) {
+    if (!(m & 3) && m + 4 <= me) {
+      const qk__wobj_t *o0 = &obj[ord[m]], *o1 = &obj[ord[m + 1]], *o2 = &obj[ord[m + 2]],
+                       *o3 = &obj[ord[m + 3]];
+      if (((o0->flags & QK__WKIND) == QK_SHAPE_BOX) & ((o1->flags & QK__WKIND) == QK_SHAPE_BOX) &
+          ((o2->flags & QK__WKIND) == QK_SHAPE_BOX) & ((o3->flags & QK__WKIND) == QK_SHAPE_BOX)) {
+        const __m128d p[4] = {_mm_loadu_pd(&o0->x), _mm_loadu_pd(&o1->x), _mm_loadu_pd(&o2->x),
+                              _mm_loadu_pd(&o3->x)};
+        const __m128d q[4] = {_mm_loadu_pd(&o0->a), _mm_loadu_pd(&o1->a), _mm_loadu_pd(&o2->a),
+                              _mm_loadu_pd(&o3->a)};
+        __m128 f[4];
+        uint32_t ex = 0;
+        for (int k = 0; k < 4; k++) {
+          const __m128 fp = _mm_cvtpd_ps(p[k]), fq = _mm_cvtpd_ps(q[k]);
+          f[k] = _mm_movelh_ps(fp, fq); /* (x, y, a, b) */
+          const int bad = _mm_movemask_pd(_mm_or_pd(_mm_cmpneq_pd(_mm_cvtps_pd(fp), p[k]),
+                                                    _mm_cmpneq_pd(_mm_cvtps_pd(fq), q[k])));
+          ex |= (uint32_t)!bad << (8 * k);
+        }
+        _MM_TRANSPOSE4_PS(f[0], f[1], f[2], f[3]);
+        float *g = fg + (size_t)(m >> 2) * 16;
+        _mm_storeu_ps(g, f[0]), _mm_storeu_ps(g + 4, f[1]);
+        _mm_storeu_ps(g + 8, f[2]), _mm_storeu_ps(g + 12, f[3]);
+        memcpy(fx + m, &ex, 4);
+        if (cell_boxes)
+          for (int k = 0; k < 4; k++) {
+            hlo = _mm_min_pd(hlo, p[k]), hhi = _mm_max_pd(hhi, q[k]);
+            if (m + (uint32_t)k + 1 == next) {
+              _mm_storeu_pd(&pk->hb[c].xmin, hlo), _mm_storeu_pd(&pk->hb[c].xmax, hhi);
+              hlo = inf, hhi = ninf;
+              c++, next = c < c1 ? cells[c + 1].start : me;
+            }
+          }
+        m += 4;
+        continue;
+      }
+    }
+    const qk__wobj_t *o = &obj[ord[m]];
+    if ((o->flags & QK__WKIND) == QK_SHAPE_BOX) {
+      const __m128d p = _mm_loadu_pd(&o->x), q = _mm_loadu_pd(&o->a);
+      if (cell_boxes) hlo = _mm_min_pd(hlo, p), hhi = _mm_max_pd(hhi, q);
+      const __m128 fp = _mm_cvtpd_ps(p), fq = _mm_cvtpd_ps(q);
+      float *g = fg + (size_t)(m >> 2) * 16 + (m & 3);
+      _mm_store_ss(g, fp);
+      _mm_store_ss(g + 4, _mm_shuffle_ps(fp, fp, 1));
+      _mm_store_ss(g + 8, fq);
+      _mm_store_ss(g + 12, _mm_shuffle_ps(fq, fq, 1));
+      fx[m] = !_mm_movemask_pd(
+          _mm_or_pd(_mm_cmpneq_pd(_mm_cvtps_pd(fp), p), _mm_cmpneq_pd(_mm_cvtps_pd(fq), q)));
+    } else {
+      qk_box_t h = empty_box;
+      pack_one(o, fg, fx, m, &h);
+      if (cell_boxes)
+        hlo = _mm_min_pd(_mm_loadu_pd(&h.xmin), hlo), hhi = _mm_max_pd(_mm_loadu_pd(&h.xmax), hhi);
+    }
+    if (cell_boxes && m + 1 == next) {
+      _mm_storeu_pd(&pk->hb[c].xmin, hlo), _mm_storeu_pd(&pk->hb[c].xmax, hhi);
+      hlo = inf, hhi = ninf;
+      c++, next = c < c1 ? cells[c + 1].start : me;
+    }
+    m++;
+  }
+}
+#endif
+
 static void pack_cells(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
                        const qk__wcell_t *cells, uint32_t c0, uint32_t c1, int cell_boxes) {
+#if defined(__SSE2__)
+  if (cell_boxes)
+    pack_run_(w, pk, ord, cells, c0, c1, 1);
+  else
+    pack_run_(w, pk, ord, cells, c0, c1, 0);
+#else
   if (cell_boxes)
     pack_cells_(w, pk, ord, cells, c0, c1, 1);
   else
     pack_cells_(w, pk, ord, cells, c0, c1, 0);
+#endif
 }
 
 /* The packing's jobs a thread, taken in order by whichever thread is free: the objects
