@@ -283,7 +283,11 @@ static inline __attribute__((always_inline)) void pack_run_(const qk_world_t *w,
   uint8_t *fx = pk->fexact;
   const __m128d inf = _mm_set1_pd(INFINITY), ninf = _mm_set1_pd(-INFINITY);
   __m128d hlo = inf, hhi = ninf;
-  uint32_t c = c0, m = cells[c0].start, next = cells[c0 + 1].start;
+  /* (the next cell's start read past the last cell too: the cells have room, see
+   * qk__world_reorder) */
+  const qk__wcell_t *cn = &cells[c0 + 1];
+  qk_box_t *hp = &pk->hb[c0];
+  uint32_t m = cells[c0].start, next = cn->start;
   const uint32_t me = cells[c1].start;
   const qk__wobj_t *obj = w->obj;
   while (m < me) {
@@ -314,9 +318,9 @@ static inline __attribute__((always_inline)) void pack_run_(const qk_world_t *w,
           for (int k = 0; k < 4; k++) {
             hlo = _mm_min_pd(hlo, p[k]), hhi = _mm_max_pd(hhi, q[k]);
             if (m + (uint32_t)k + 1 == next) {
-              _mm_storeu_pd(&pk->hb[c].xmin, hlo), _mm_storeu_pd(&pk->hb[c].xmax, hhi);
+              _mm_storeu_pd(&hp->xmin, hlo), _mm_storeu_pd(&hp->xmax, hhi);
               hlo = inf, hhi = ninf;
-              c++, next = c < c1 ? cells[c + 1].start : me;
+              hp++, next = (++cn)->start;
             }
           }
         m += 4;
@@ -342,9 +346,9 @@ static inline __attribute__((always_inline)) void pack_run_(const qk_world_t *w,
         hlo = _mm_min_pd(_mm_loadu_pd(&h.xmin), hlo), hhi = _mm_max_pd(_mm_loadu_pd(&h.xmax), hhi);
     }
     if (cell_boxes && m + 1 == next) {
-      _mm_storeu_pd(&pk->hb[c].xmin, hlo), _mm_storeu_pd(&pk->hb[c].xmax, hhi);
+      _mm_storeu_pd(&hp->xmin, hlo), _mm_storeu_pd(&hp->xmax, hhi);
       hlo = inf, hhi = ninf;
-      c++, next = c < c1 ? cells[c + 1].start : me;
+      hp++, next = (++cn)->start;
     }
     m++;
   }
@@ -811,7 +815,8 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
   /* Everything the pass needs, before anything changes: the dirty records, the new
    * order, the new cells (at most the old ones plus one per dirty object, and the
    * sentinel) and the pack. */
-  size_t nd = w->n_dirty, n = w->n_live, ncap = (size_t)w->n_cells + nd + 1;
+  /* (and one past the sentinel, which the pack reads: pack_run_) */
+  size_t nd = w->n_dirty, n = w->n_live, ncap = (size_t)w->n_cells + nd + 2;
   /* (one more: the one-thread merge writes an old entry before it knows whether to keep
    * it) */
   /* (and three more: the search reads the order four at a time, the last group's lanes
