@@ -301,14 +301,25 @@ static inline __attribute__((always_inline)) void pack_run_(const qk_world_t *w,
         const __m128d q[4] = {_mm_loadu_pd(&o0->a), _mm_loadu_pd(&o1->a), _mm_loadu_pd(&o2->a),
                               _mm_loadu_pd(&o3->a)};
         __m128 f[4];
-        uint32_t ex = 0;
+        /* (exact: the last 29 mantissa bits of its four values zero, as in pack_one; a
+         * word per lane, its low half's, all ones when they are) */
+        const __m128i lowm = _mm_set1_epi64x((INT64_C(1) << 29) - 1);
+        __m128 z[4];
         for (int k = 0; k < 4; k++) {
-          const __m128 fp = _mm_cvtpd_ps(p[k]), fq = _mm_cvtpd_ps(q[k]);
-          f[k] = _mm_movelh_ps(fp, fq); /* (x, y, a, b) */
-          const int bad = _mm_movemask_pd(_mm_or_pd(_mm_cmpneq_pd(_mm_cvtps_pd(fp), p[k]),
-                                                    _mm_cmpneq_pd(_mm_cvtps_pd(fq), q[k])));
-          ex |= (uint32_t)!bad << (8 * k);
+          f[k] = _mm_movelh_ps(_mm_cvtpd_ps(p[k]), _mm_cvtpd_ps(q[k])); /* (x, y, a, b) */
+          z[k] = _mm_castsi128_ps(_mm_cmpeq_epi32(
+              _mm_and_si128(_mm_or_si128(_mm_castpd_si128(p[k]), _mm_castpd_si128(q[k])), lowm),
+              _mm_setzero_si128()));
         }
+        /* (each box's two words, lanes 0 and 2 of its z, anded: one word a box, then a
+         * byte a box) */
+        const __m128 z01 = _mm_shuffle_ps(z[0], z[1], _MM_SHUFFLE(2, 0, 2, 0)),
+                     z23 = _mm_shuffle_ps(z[2], z[3], _MM_SHUFFLE(2, 0, 2, 0));
+        __m128i e = _mm_castps_si128(_mm_and_ps(_mm_shuffle_ps(z01, z23, _MM_SHUFFLE(2, 0, 2, 0)),
+                                                _mm_shuffle_ps(z01, z23, _MM_SHUFFLE(3, 1, 3, 1))));
+        e = _mm_and_si128(e, _mm_set1_epi32(1));
+        e = _mm_packs_epi32(e, e);
+        const uint32_t ex = (uint32_t)_mm_cvtsi128_si32(_mm_packs_epi16(e, e));
         _MM_TRANSPOSE4_PS(f[0], f[1], f[2], f[3]);
         float *g = fg + (size_t)(m >> 2) * 16;
         _mm_storeu_ps(g, f[0]), _mm_storeu_ps(g + 4, f[1]);
