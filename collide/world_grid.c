@@ -287,13 +287,13 @@ static inline __attribute__((always_inline)) void pack_run_(const qk_world_t *w,
    * qk__world_reorder) */
   const qk__wcell_t *cn = &cells[c0 + 1];
   qk_box_t *hp = &pk->hb[c0];
-  uint32_t m = cells[c0].start, next = cn->start;
+  uint32_t m = cells[c0].start, next = cn->start, ci = c0; /* (ci: the cell, noted in obj) */
   const uint32_t me = cells[c1].start;
-  const qk__wobj_t *obj = w->obj;
+  qk__wobj_t *obj = w->obj;
   while (m < me) {
     if (!(m & 3) && m + 4 <= me) {
-      const qk__wobj_t *o0 = &obj[ord[m]], *o1 = &obj[ord[m + 1]], *o2 = &obj[ord[m + 2]],
-                       *o3 = &obj[ord[m + 3]];
+      qk__wobj_t *o0 = &obj[ord[m]], *o1 = &obj[ord[m + 1]], *o2 = &obj[ord[m + 2]],
+                 *o3 = &obj[ord[m + 3]];
       if (((o0->flags & QK__WKIND) == QK_SHAPE_BOX) & ((o1->flags & QK__WKIND) == QK_SHAPE_BOX) &
           ((o2->flags & QK__WKIND) == QK_SHAPE_BOX) & ((o3->flags & QK__WKIND) == QK_SHAPE_BOX)) {
         const __m128d p[4] = {_mm_loadu_pd(&o0->x), _mm_loadu_pd(&o1->x), _mm_loadu_pd(&o2->x),
@@ -325,20 +325,23 @@ static inline __attribute__((always_inline)) void pack_run_(const qk_world_t *w,
         _mm_storeu_ps(g, f[0]), _mm_storeu_ps(g + 4, f[1]);
         _mm_storeu_ps(g + 8, f[2]), _mm_storeu_ps(g + 12, f[3]);
         memcpy(fx + m, &ex, 4);
+        qk__wobj_t *const o[4] = {o0, o1, o2, o3};
         if (cell_boxes)
           for (int k = 0; k < 4; k++) {
+            o[k]->cell = ci;
             hlo = _mm_min_pd(hlo, p[k]), hhi = _mm_max_pd(hhi, q[k]);
             if (m + (uint32_t)k + 1 == next) {
               _mm_storeu_pd(&hp->xmin, hlo), _mm_storeu_pd(&hp->xmax, hhi);
               hlo = inf, hhi = ninf;
-              hp++, next = (++cn)->start;
+              hp++, next = (++cn)->start, ci++;
             }
           }
         m += 4;
         continue;
       }
     }
-    const qk__wobj_t *o = &obj[ord[m]];
+    qk__wobj_t *o = &obj[ord[m]];
+    if (cell_boxes) o->cell = ci;
     if ((o->flags & QK__WKIND) == QK_SHAPE_BOX) {
       const __m128d p = _mm_loadu_pd(&o->x), q = _mm_loadu_pd(&o->a);
       if (cell_boxes) hlo = _mm_min_pd(hlo, p), hhi = _mm_max_pd(hhi, q);
@@ -359,7 +362,7 @@ static inline __attribute__((always_inline)) void pack_run_(const qk_world_t *w,
     if (cell_boxes && m + 1 == next) {
       _mm_storeu_pd(&hp->xmin, hlo), _mm_storeu_pd(&hp->xmax, hhi);
       hlo = inf, hhi = ninf;
-      hp++, next = (++cn)->start;
+      hp++, next = (++cn)->start, ci++;
     }
     m++;
   }
@@ -447,6 +450,11 @@ typedef struct merge {
    * live (no add or remove since the last update). The old entries are then kept by this
    * bit alone, without reading their objects (64 bytes each, out of cache). */
   const uint64_t *skip;
+  /* Or NULL (only with skip): a bit an old cell, set for those that lose a dirty object
+   * and those before which (or in which) a dirty record goes. The cells between two set
+   * bits keep every object and meet no record: copied as a run, without a key or a skip
+   * bit read (cells_touched). */
+  const uint64_t *touch;
 } merge_t;
 
 /* The cells a merge writes, counted into its level runs (lv_first / lv_n) a run at a
@@ -491,8 +499,36 @@ keep_old(const qk_world_t *w, const uint64_t *sk, const qk__wcell_t *oc, uint32_
   return m;
 }
 
-static inline __attribute__((always_inline)) void
-merge_range_(merge_t *g, uint32_t c0, uint32_t c1, size_t j, size_t j1, const int skipping) {
+/* The first touched cell (merge_t) in [c, c1), or c1. */
+static inline uint32_t next_touched(const uint64_t *tb, uint32_t c, uint32_t c1) {
+  size_t k = c >> 6;
+  const size_t ke = ((size_t)c1 + 63) >> 6;
+  uint64_t x = tb[k] & (~UINT64_C(0) << (c & 63));
+  while (!x) {
+    if (++k >= ke) return c1;
+    x = tb[k];
+  }
+  const size_t e = k * 64 + (size_t)__builtin_ctzll(x);
+  return e < c1 ? (uint32_t)e : c1;
+}
+
+/* Old cells [c, e), which keep every object, written from cells with their starts moved
+ * by dm. */
+static inline void copy_cells(qk__wcell_t *cells, const qk__wcell_t *oc, uint32_t c, uint32_t e,
+                              uint32_t dm) {
+#if defined(__SSE2__)
+  const __m128i dv = _mm_set_epi32(0, (int)dm, 0, 0); /* (the start is the third word) */
+  for (; c < e; c++, cells++)
+    _mm_storeu_si128((__m128i *)cells, _mm_add_epi32(_mm_loadu_si128((const __m128i *)&oc[c]), dv));
+#else
+  for (; c < e; c++, cells++) *cells = oc[c], cells->start += dm;
+#endif
+}
+
+static inline __attribute__((always_inline)) void merge_range_(merge_t *g, uint32_t c0, uint32_t c1,
+                                                               size_t j, size_t j1,
+                                                               const int skipping,
+                                                               const int touching) {
   const qk_world_t *w = g->w;
   const drec_t *d = g->d;
   const qk__wcell_t *oc = w->cells;
@@ -510,6 +546,25 @@ merge_range_(merge_t *g, uint32_t c0, uint32_t c1, size_t j, size_t j1, const in
      * objects but the dirty and removed ones: most cells of a frame where few objects
      * left their cells. */
     for (; c < c1; c++) {
+      if (touching && !(g->touch[c >> 6] >> (c & 63) & 1)) {
+        /* Cells c .. e - 1 keep their objects, and every record left sorts after them
+         * (where a record goes is touched): copied, their starts moved. */
+        const uint32_t e = next_touched(g->touch, c, c1);
+        const uint32_t s0 = oc[c].start, se = oc[e].start, dm = m - s0;
+        memcpy(ord + m, w->order + s0, (size_t)(se - s0) * sizeof *ord);
+        if (oc[c].level == oc[e - 1].level) {
+          lvrun_add(g, &run, oc[c].level - QK__LMIN, nc);
+          copy_cells(cells + nc, oc, c, e, dm);
+          nc += e - c;
+        } else {
+          for (uint32_t k = c; k < e; k++) {
+            lvrun_add(g, &run, oc[k].level - QK__LMIN, nc);
+            copy_cells(cells + nc++, oc, k, k + 1, dm);
+          }
+        }
+        m = se + dm, c = e;
+        if (c == c1) break;
+      }
       const uint64_t cly = (uint64_t)(uint32_t)(oc[c].level - QK__LMIN) << 32 | bias(oc[c].cy);
       if (cly > jly || (cly == jly && bias(oc[c].cx) >= jx)) break;
       const uint32_t m0 = m;
@@ -539,10 +594,12 @@ merge_range_(merge_t *g, uint32_t c0, uint32_t c1, size_t j, size_t j1, const in
 }
 
 static void merge_range(merge_t *g, uint32_t c0, uint32_t c1, size_t j, size_t j1) {
-  if (g->skip)
-    merge_range_(g, c0, c1, j, j1, 1);
+  if (g->touch)
+    merge_range_(g, c0, c1, j, j1, 1, 1);
+  else if (g->skip)
+    merge_range_(g, c0, c1, j, j1, 1, 0);
   else
-    merge_range_(g, c0, c1, j, j1, 0);
+    merge_range_(g, c0, c1, j, j1, 0, 0);
 }
 
 /*
@@ -637,7 +694,8 @@ static void merge_run(unsigned t, unsigned s, void *ud) {
      * would have them: the same stable radix sort, in the dirty list's order) */
     if (J->sl && J->j0[t + 1] - J->j0[t] > 1)
       drec_sort(J->pd + J->j0[t], J->dd + J->j0[t], J->j0[t + 1] - J->j0[t]);
-    *g = (merge_t){J->w, J->d, J->s_ord, J->s_cell, J->lv[t], J->lv[t] + QK__NLEV, sm, sc, J->skip};
+    *g = (merge_t){J->w, J->d, J->s_ord, J->s_cell, J->lv[t], J->lv[t] + QK__NLEV,
+                   sm,   sc,   J->skip,  NULL};
     memset(J->lv[t], 0, sizeof J->lv[t]);
     merge_range(g, J->c0[t], J->c0[t + 1], J->j0[t], J->j0[t + 1]);
   } else {
@@ -813,6 +871,49 @@ static int merge_threads(qk_world_t *w, drec_t *d, size_t m_d, const uint32_t *s
   return 1;
 }
 
+/* Whether old cell c sorts before key (ly, x). */
+static inline int cell_lt(const qk__wcell_t *c, uint64_t ly, uint32_t x) {
+  const uint64_t cly = (uint64_t)(uint32_t)(c->level - QK__LMIN) << 32 | bias(c->cy);
+  return cly < ly || (cly == ly && bias(c->cx) < x);
+}
+
+static inline void touch_set(uint64_t *tb, uint32_t c) { tb[c >> 6] |= UINT64_C(1) << (c & 63); }
+
+/*
+ * Touch (merge_t) the old cells [0, n) that the dirty records d[0 .. m_d) go before or
+ * into: the first cell not before each, searched from the cell its object left (noted by
+ * the last pack: a moved object's new cell is mostly a neighbour of its old one, a few
+ * cells or a row away in the order) by galloping, then bisection.
+ */
+static void cells_touched(const qk_world_t *w, uint64_t *tb, const drec_t *d, size_t m_d,
+                          uint32_t n) {
+  const qk__wcell_t *oc = w->cells;
+  for (size_t k = 0; k < m_d; k++) {
+    const uint64_t ly = d[k].ly;
+    const uint32_t x = d[k].x, h = w->obj[d[k].slot].cell;
+    uint32_t lo, hi; /* the answer in [lo, hi] */
+    if (cell_lt(&oc[h], ly, x)) {
+      uint32_t s = 1;
+      lo = h + 1;
+      while (lo + s - 1 < n && cell_lt(&oc[lo + s - 1], ly, x)) lo += s, s *= 2;
+      hi = lo + s - 1 < n ? lo + s - 1 : n;
+    } else {
+      uint32_t s = 1;
+      hi = h;
+      while (hi >= s && !cell_lt(&oc[hi - s], ly, x)) hi -= s, s *= 2;
+      lo = hi >= s ? hi - s + 1 : 0;
+    }
+    while (lo < hi) {
+      const uint32_t mid = lo + (hi - lo) / 2;
+      if (cell_lt(&oc[mid], ly, x))
+        lo = mid + 1;
+      else
+        hi = mid;
+    }
+    if (lo < n) touch_set(tb, lo);
+  }
+}
+
 void qk__world_pack_free(qk_world_t *w, qk__wpack_t *pk) {
   qk__free(&w->alloc, pk->fgrp, pk->cap_fgrp * (16 * sizeof *pk->fgrp + 4));
   qk__free(&w->alloc, pk->hb, pk->cap_hb * sizeof *pk->hb);
@@ -836,7 +937,16 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
   /* The dirty records and, for the radix sort, as many again; then, when every slot of
    * the old order is live, the dirty slots' bits (merge_t). */
   const size_t nsk = nd && !w->ident_dirty ? ((size_t)w->n_obj + 63) / 64 : 0;
-  const size_t dbytes = 2 * nd * sizeof(drec_t) + nsk * sizeof(uint64_t);
+  /* And, when the merge will be here and the last pack noted each object's cell, a bit an
+   * old cell (merge_t's touch): when the dirty objects touch few of the cells (at most two
+   * each: the one left and the one before which the new one goes), as in a sparse world
+   * (in the benchmark's uniform scene, some eight objects a cell, most cells are touched
+   * and finding them cost more than the runs saved). */
+  const uint32_t n_oc0 = w->order ? w->n_cells : 0;
+  const size_t ntw = nsk && w->cells_noted && n_oc0 >= 64 && nd < n_oc0 / 4 && !merge_fits(w, n_oc0)
+                         ? ((size_t)n_oc0 + 64) / 64
+                         : 0;
+  const size_t dbytes = 2 * nd * sizeof(drec_t) + (nsk + ntw) * sizeof(uint64_t);
   drec_t *d = nd ? qk__realloc(a, NULL, 0, dbytes) : NULL;
   uint32_t *ord = (!nd || d) ? qk__realloc(a, NULL, 0, ocap * sizeof *ord) : NULL;
   qk__wcell_t *cells = ord ? qk__realloc(a, NULL, 0, ncap * sizeof *cells) : NULL;
@@ -858,10 +968,14 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
   uint32_t m = 0, nc = 0, n_oc = w->order ? w->n_cells : 0;
   size_t m_d = 0;
   int merged = 0;
-  uint64_t *skip = NULL; /* (merge_t) */
+  uint64_t *skip = NULL, *touch = NULL; /* (merge_t) */
   if (nsk) {
     skip = (uint64_t *)(d + 2 * nd);
     memset(skip, 0, nsk * sizeof *skip);
+  }
+  if (ntw) {
+    touch = skip + nsk;
+    memset(touch, 0, ntw * sizeof *touch);
   }
   uint32_t *sl =
       nd >= QK__REFILE_MIN && merge_fits(w, n_oc) ? qk__realloc(a, NULL, 0, nd * sizeof *sl) : NULL;
@@ -887,6 +1001,7 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
     /* Every dirty object is live (see nsk), marked in skip, and no longer dirty once filed
      * (the merge reads skip, nothing else the flag): no second walk of the list. */
     for (uint32_t i = w->dirty_head; i != QK_NONE; i = w->dnext[i]) {
+      if (touch) touch_set(touch, w->obj[i].cell); /* (its old cell, which loses it) */
       d[m_d++] = file_dirty(w, &w->obj[i], i, true);
       skip[i >> 6] |= (uint64_t)1 << (i & 63);
     }
@@ -906,7 +1021,8 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
    * followed by the dirty entries of the same cell. The keys are compared once a cell,
    * not once an object. On threads by ranges of old cells (merge_threads), else here. */
   if (!merged && !merge_threads(w, d, m_d, NULL, skip, ord, cells, n_oc, &m, &nc)) {
-    merge_t mg = {w, d, ord, cells, w->lv_first, w->lv_n, 0, 0, skip};
+    if (touch) cells_touched(w, touch, d, m_d, n_oc);
+    merge_t mg = {w, d, ord, cells, w->lv_first, w->lv_n, 0, 0, skip, touch};
     memset(w->lv_first, 0, sizeof w->lv_first);
     memset(w->lv_n, 0, sizeof w->lv_n);
     merge_range(&mg, 0, n_oc, 0, m_d);
@@ -921,6 +1037,7 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
   w->cells = cells, w->n_cells = nc, w->cap_cells = (uint32_t)ncap;
   w->by_bands = qk__world_by_bands(w);
   qk__world_pack(w, pk, ord, cells, nc);
+  w->cells_noted = !w->by_bands; /* (the pack notes the cells with the cell boxes) */
   for (uint32_t k = w->dirty_head; k != QK_NONE && !skip; k = w->dnext[k])
     w->obj[k].flags &= (uint8_t)~QK__WDIRTY;
   w->dirty_head = QK_NONE;
