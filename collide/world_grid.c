@@ -213,7 +213,8 @@ static inline void pack_one(const qk__wobj_t *o, float *fg, uint8_t *fx, uint32_
 
 /* The boxes of cells [c0, c1) of a new order: per object its float box and whether that
  * is exact, and (with cell boxes, which only the search on the grid reads) per cell the
- * box around its objects. */
+ * box around its objects; with cell_boxes 2 each object's cell noted in it too
+ * (cells_noted). Without SSE2 (pack_run_ is the same with it). */
 static inline __attribute__((always_inline)) void pack_cells_(const qk_world_t *w, qk__wpack_t *pk,
                                                               const uint32_t *ord,
                                                               const qk__wcell_t *cells, uint32_t c0,
@@ -222,48 +223,12 @@ static inline __attribute__((always_inline)) void pack_cells_(const qk_world_t *
   uint8_t *fx = pk->fexact;
   for (uint32_t c = c0; c < c1; c++) {
     qk_box_t h = empty_box;
-    const uint32_t m0 = cells[c].start, me = cells[c + 1].start;
-#if defined(__SSE2__)
-    /* A box, the common object, two lanes at a time: its corners (x, y) and (a, b)
-     * rounded to floats by two conversions (as the scalar ones round), exact when they
-     * convert back to themselves (the same answer as the mantissa bits: the values are
-     * in the floats' normal range), the cell box joined by one min and one max. Other
-     * kinds are left to a second loop over the cell, so that this one makes no call (and
-     * keeps its registers). The cell box is the same up to the sign of a zero, which no
-     * comparison sees. */
-    __m128d hlo = _mm_set1_pd(INFINITY), hhi = _mm_set1_pd(-INFINITY);
-    int other = 0;
-    for (uint32_t m = m0; m < me; m++) {
-      const qk__wobj_t *o = &w->obj[ord[m]];
-      if ((o->flags & QK__WKIND) != QK_SHAPE_BOX) {
-        other = 1;
-        continue;
-      }
-      const __m128d p = _mm_loadu_pd(&o->x), q = _mm_loadu_pd(&o->a);
-      if (cell_boxes) hlo = _mm_min_pd(hlo, p), hhi = _mm_max_pd(hhi, q);
-      const __m128 fp = _mm_cvtpd_ps(p), fq = _mm_cvtpd_ps(q);
-      float *g = fg + (size_t)(m >> 2) * 16 + (m & 3);
-      _mm_store_ss(g, fp);
-      _mm_store_ss(g + 4, _mm_shuffle_ps(fp, fp, 1));
-      _mm_store_ss(g + 8, fq);
-      _mm_store_ss(g + 12, _mm_shuffle_ps(fq, fq, 1));
-      fx[m] = !_mm_movemask_pd(
-          _mm_or_pd(_mm_cmpneq_pd(_mm_cvtps_pd(fp), p), _mm_cmpneq_pd(_mm_cvtps_pd(fq), q)));
+    for (uint32_t m = cells[c].start, me = cells[c + 1].start; m < me; m++) {
+      qk__wobj_t *o = &w->obj[ord[m]];
+      pack_one(o, fg, fx, m, cell_boxes ? &h : NULL);
+      if (cell_boxes == 2) o->cell = c;
     }
-    if (__builtin_expect(other, 0)) {
-      for (uint32_t m = m0; m < me; m++) {
-        const qk__wobj_t *o = &w->obj[ord[m]];
-        if ((o->flags & QK__WKIND) != QK_SHAPE_BOX) pack_one(o, fg, fx, m, cell_boxes ? &h : NULL);
-      }
-      hlo = _mm_min_pd(_mm_loadu_pd(&h.xmin), hlo), hhi = _mm_max_pd(_mm_loadu_pd(&h.xmax), hhi);
-    }
-    /* (the cell box stored from the registers: a cell of boxes only, the common one,
-     * passes nothing through memory) */
-    if (cell_boxes) _mm_storeu_pd(&pk->hb[c].xmin, hlo), _mm_storeu_pd(&pk->hb[c].xmax, hhi);
-#else
-    for (uint32_t m = m0; m < me; m++) pack_one(&w->obj[ord[m]], fg, fx, m, cell_boxes ? &h : NULL);
     if (cell_boxes) pk->hb[c] = h;
-#endif
   }
 }
 
@@ -328,7 +293,7 @@ static inline __attribute__((always_inline)) void pack_run_(const qk_world_t *w,
         qk__wobj_t *const o[4] = {o0, o1, o2, o3};
         if (cell_boxes)
           for (int k = 0; k < 4; k++) {
-            o[k]->cell = ci;
+            if (cell_boxes == 2) o[k]->cell = ci;
             hlo = _mm_min_pd(hlo, p[k]), hhi = _mm_max_pd(hhi, q[k]);
             if (m + (uint32_t)k + 1 == next) {
               _mm_storeu_pd(&hp->xmin, hlo), _mm_storeu_pd(&hp->xmax, hhi);
@@ -341,7 +306,7 @@ static inline __attribute__((always_inline)) void pack_run_(const qk_world_t *w,
       }
     }
     qk__wobj_t *o = &obj[ord[m]];
-    if (cell_boxes) o->cell = ci;
+    if (cell_boxes == 2) o->cell = ci;
     if ((o->flags & QK__WKIND) == QK_SHAPE_BOX) {
       const __m128d p = _mm_loadu_pd(&o->x), q = _mm_loadu_pd(&o->a);
       if (cell_boxes) hlo = _mm_min_pd(hlo, p), hhi = _mm_max_pd(hhi, q);
@@ -372,12 +337,16 @@ static inline __attribute__((always_inline)) void pack_run_(const qk_world_t *w,
 static void pack_cells(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
                        const qk__wcell_t *cells, uint32_t c0, uint32_t c1, int cell_boxes) {
 #if defined(__SSE2__)
-  if (cell_boxes)
+  if (cell_boxes == 2)
+    pack_run_(w, pk, ord, cells, c0, c1, 2);
+  else if (cell_boxes)
     pack_run_(w, pk, ord, cells, c0, c1, 1);
   else
     pack_run_(w, pk, ord, cells, c0, c1, 0);
 #else
-  if (cell_boxes)
+  if (cell_boxes == 2)
+    pack_cells_(w, pk, ord, cells, c0, c1, 2);
+  else if (cell_boxes)
     pack_cells_(w, pk, ord, cells, c0, c1, 1);
   else
     pack_cells_(w, pk, ord, cells, c0, c1, 0);
@@ -411,12 +380,12 @@ static void pack_run(unsigned t, unsigned s, void *ud) {
 }
 
 void qk__world_pack(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
-                    const qk__wcell_t *cells, uint32_t nc) {
+                    const qk__wcell_t *cells, uint32_t nc, int note) {
   uint32_t n = cells[nc].start;
   unsigned nt = qk__world_update_threads(w);
   if (n < 4096) nt = 1; /* not worth a thread */
   /* (the cells' and levels' boxes are for the search on the grid) */
-  const int cell_boxes = !w->by_bands;
+  const int cell_boxes = w->by_bands ? 0 : note ? 2 : 1;
   if (nt > 1) {
     pack_job_t p = {w, pk, ord, cells, nc, QK__PACK_JOBS * nt, cell_boxes};
     qk__world_run_jobs_shared(w, nt, p.n_jobs, pack_run, &p);
@@ -1036,8 +1005,12 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
   w->order = ord, w->n_order = m, w->cap_order = (uint32_t)ocap;
   w->cells = cells, w->n_cells = nc, w->cap_cells = (uint32_t)ncap;
   w->by_bands = qk__world_by_bands(w);
-  qk__world_pack(w, pk, ord, cells, nc);
-  w->cells_noted = !w->by_bands; /* (the pack notes the cells with the cell boxes) */
+  /* Each object's cell noted for the next update's merge when it is likely to use them:
+   * when this one's dirty objects were few for the cells (frames are alike; see ntw), or
+   * it filed every object (the first update: nothing to go by). */
+  const int note = nd < nc / 4 || !n_oc;
+  qk__world_pack(w, pk, ord, cells, nc, note);
+  w->cells_noted = !w->by_bands && note;
   for (uint32_t k = w->dirty_head; k != QK_NONE && !skip; k = w->dnext[k])
     w->obj[k].flags &= (uint8_t)~QK__WDIRTY;
   w->dirty_head = QK_NONE;

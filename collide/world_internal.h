@@ -300,9 +300,10 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk);
 void qk__world_pack_free(qk_world_t *w, qk__wpack_t *pk);
 /* Fill the pack (sized for the order) for the order ord and its nc cells (with the
  * sentinel), which are the world's order, on the world's threads. The cells' and levels'
- * boxes only when the search will be on the grid (w->by_bands zero). */
+ * boxes only when the search will be on the grid (w->by_bands zero); then, with note,
+ * each object's cell noted in the object too (cells_noted). */
 void qk__world_pack(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
-                    const qk__wcell_t *cells, uint32_t nc);
+                    const qk__wcell_t *cells, uint32_t nc, int note);
 
 /* A key the search marks as a near candidate: the objects' float boxes meet, the objects
  * do not (see qk__world_search). */
