@@ -213,7 +213,8 @@ static inline void pack_one(const qk__wobj_t *o, float *fg, uint8_t *fx, uint32_
 
 /* The boxes of cells [c0, c1) of a new order: per object its float box and whether that
  * is exact, and (with cell boxes, which only the search on the grid reads) per cell the
- * box around its objects. */
+ * box around its objects; with cell_boxes 2 each object's cell noted in it too
+ * (cells_noted). Without SSE2 (pack_run_ is the same with it). */
 static inline __attribute__((always_inline)) void pack_cells_(const qk_world_t *w, qk__wpack_t *pk,
                                                               const uint32_t *ord,
                                                               const qk__wcell_t *cells, uint32_t c0,
@@ -222,23 +223,91 @@ static inline __attribute__((always_inline)) void pack_cells_(const qk_world_t *
   uint8_t *fx = pk->fexact;
   for (uint32_t c = c0; c < c1; c++) {
     qk_box_t h = empty_box;
-    const uint32_t m0 = cells[c].start, me = cells[c + 1].start;
+    for (uint32_t m = cells[c].start, me = cells[c + 1].start; m < me; m++) {
+      qk__wobj_t *o = &w->obj[ord[m]];
+      pack_one(o, fg, fx, m, cell_boxes ? &h : NULL);
+      if (cell_boxes == 2) o->cell = c;
+    }
+    if (cell_boxes) pk->hb[c] = h;
+  }
+}
+
 #if defined(__SSE2__)
-    /* A box, the common object, two lanes at a time: its corners (x, y) and (a, b)
-     * rounded to floats by two conversions (as the scalar ones round), exact when they
-     * convert back to themselves (the same answer as the mantissa bits: the values are
-     * in the floats' normal range), the cell box joined by one min and one max. Other
-     * kinds are left to a second loop over the cell, so that this one makes no call (and
-     * keeps its registers). The cell box is the same up to the sign of a zero, which no
-     * comparison sees. */
-    __m128d hlo = _mm_set1_pd(INFINITY), hhi = _mm_set1_pd(-INFINITY);
-    int other = 0;
-    for (uint32_t m = m0; m < me; m++) {
-      const qk__wobj_t *o = &w->obj[ord[m]];
-      if ((o->flags & QK__WKIND) != QK_SHAPE_BOX) {
-        other = 1;
+/* The same as pack_cells_, walking the objects of cells [c0, c1) in one run instead of
+ * cell by cell (most cells of a sparse world hold one or two objects, and a cell's loop
+ * cost as much as its objects): four boxes filling a group are converted and stored as
+ * the group's four rows (a transpose), the others one at a time, and the cell box is
+ * stored where the next cell starts. A group is written whole only when it lies inside
+ * the range (ranges on threads share their end groups). */
+static inline __attribute__((always_inline)) void pack_run_(const qk_world_t *w, qk__wpack_t *pk,
+                                                            const uint32_t *ord,
+                                                            const qk__wcell_t *cells, uint32_t c0,
+                                                            uint32_t c1, const int cell_boxes) {
+  if (c0 >= c1) return;
+  float *fg = pk->fgrp;
+  uint8_t *fx = pk->fexact;
+  const __m128d inf = _mm_set1_pd(INFINITY), ninf = _mm_set1_pd(-INFINITY);
+  __m128d hlo = inf, hhi = ninf;
+  /* (the next cell's start read past the last cell too: the cells have room, see
+   * qk__world_reorder) */
+  const qk__wcell_t *cn = &cells[c0 + 1];
+  qk_box_t *hp = &pk->hb[c0];
+  uint32_t m = cells[c0].start, next = cn->start, ci = c0; /* (ci: the cell, noted in obj) */
+  const uint32_t me = cells[c1].start;
+  qk__wobj_t *obj = w->obj;
+  while (m < me) {
+    if (!(m & 3) && m + 4 <= me) {
+      qk__wobj_t *o0 = &obj[ord[m]], *o1 = &obj[ord[m + 1]], *o2 = &obj[ord[m + 2]],
+                 *o3 = &obj[ord[m + 3]];
+      if (((o0->flags & QK__WKIND) == QK_SHAPE_BOX) & ((o1->flags & QK__WKIND) == QK_SHAPE_BOX) &
+          ((o2->flags & QK__WKIND) == QK_SHAPE_BOX) & ((o3->flags & QK__WKIND) == QK_SHAPE_BOX)) {
+        const __m128d p[4] = {_mm_loadu_pd(&o0->x), _mm_loadu_pd(&o1->x), _mm_loadu_pd(&o2->x),
+                              _mm_loadu_pd(&o3->x)};
+        const __m128d q[4] = {_mm_loadu_pd(&o0->a), _mm_loadu_pd(&o1->a), _mm_loadu_pd(&o2->a),
+                              _mm_loadu_pd(&o3->a)};
+        __m128 f[4];
+        /* (exact: the last 29 mantissa bits of its four values zero, as in pack_one; a
+         * word per lane, its low half's, all ones when they are) */
+        const __m128i lowm = _mm_set1_epi64x((INT64_C(1) << 29) - 1);
+        __m128 z[4];
+        for (int k = 0; k < 4; k++) {
+          f[k] = _mm_movelh_ps(_mm_cvtpd_ps(p[k]), _mm_cvtpd_ps(q[k])); /* (x, y, a, b) */
+          z[k] = _mm_castsi128_ps(_mm_cmpeq_epi32(
+              _mm_and_si128(_mm_or_si128(_mm_castpd_si128(p[k]), _mm_castpd_si128(q[k])), lowm),
+              _mm_setzero_si128()));
+        }
+        /* (each box's two words, lanes 0 and 2 of its z, anded: one word a box, then a
+         * byte a box) */
+        const __m128 z01 = _mm_shuffle_ps(z[0], z[1], _MM_SHUFFLE(2, 0, 2, 0)),
+                     z23 = _mm_shuffle_ps(z[2], z[3], _MM_SHUFFLE(2, 0, 2, 0));
+        __m128i e = _mm_castps_si128(_mm_and_ps(_mm_shuffle_ps(z01, z23, _MM_SHUFFLE(2, 0, 2, 0)),
+                                                _mm_shuffle_ps(z01, z23, _MM_SHUFFLE(3, 1, 3, 1))));
+        e = _mm_and_si128(e, _mm_set1_epi32(1));
+        e = _mm_packs_epi32(e, e);
+        const uint32_t ex = (uint32_t)_mm_cvtsi128_si32(_mm_packs_epi16(e, e));
+        _MM_TRANSPOSE4_PS(f[0], f[1], f[2], f[3]);
+        float *g = fg + (size_t)(m >> 2) * 16;
+        _mm_storeu_ps(g, f[0]), _mm_storeu_ps(g + 4, f[1]);
+        _mm_storeu_ps(g + 8, f[2]), _mm_storeu_ps(g + 12, f[3]);
+        memcpy(fx + m, &ex, 4);
+        qk__wobj_t *const o[4] = {o0, o1, o2, o3};
+        if (cell_boxes)
+          for (int k = 0; k < 4; k++) {
+            if (cell_boxes == 2) o[k]->cell = ci;
+            hlo = _mm_min_pd(hlo, p[k]), hhi = _mm_max_pd(hhi, q[k]);
+            if (m + (uint32_t)k + 1 == next) {
+              _mm_storeu_pd(&hp->xmin, hlo), _mm_storeu_pd(&hp->xmax, hhi);
+              hlo = inf, hhi = ninf;
+              hp++, next = (++cn)->start, ci++;
+            }
+          }
+        m += 4;
         continue;
       }
+    }
+    qk__wobj_t *o = &obj[ord[m]];
+    if (cell_boxes == 2) o->cell = ci;
+    if ((o->flags & QK__WKIND) == QK_SHAPE_BOX) {
       const __m128d p = _mm_loadu_pd(&o->x), q = _mm_loadu_pd(&o->a);
       if (cell_boxes) hlo = _mm_min_pd(hlo, p), hhi = _mm_max_pd(hhi, q);
       const __m128 fp = _mm_cvtpd_ps(p), fq = _mm_cvtpd_ps(q);
@@ -249,30 +318,39 @@ static inline __attribute__((always_inline)) void pack_cells_(const qk_world_t *
       _mm_store_ss(g + 12, _mm_shuffle_ps(fq, fq, 1));
       fx[m] = !_mm_movemask_pd(
           _mm_or_pd(_mm_cmpneq_pd(_mm_cvtps_pd(fp), p), _mm_cmpneq_pd(_mm_cvtps_pd(fq), q)));
+    } else {
+      qk_box_t h = empty_box;
+      pack_one(o, fg, fx, m, &h);
+      if (cell_boxes)
+        hlo = _mm_min_pd(_mm_loadu_pd(&h.xmin), hlo), hhi = _mm_max_pd(_mm_loadu_pd(&h.xmax), hhi);
     }
-    if (__builtin_expect(other, 0)) {
-      for (uint32_t m = m0; m < me; m++) {
-        const qk__wobj_t *o = &w->obj[ord[m]];
-        if ((o->flags & QK__WKIND) != QK_SHAPE_BOX) pack_one(o, fg, fx, m, cell_boxes ? &h : NULL);
-      }
-      hlo = _mm_min_pd(_mm_loadu_pd(&h.xmin), hlo), hhi = _mm_max_pd(_mm_loadu_pd(&h.xmax), hhi);
+    if (cell_boxes && m + 1 == next) {
+      _mm_storeu_pd(&hp->xmin, hlo), _mm_storeu_pd(&hp->xmax, hhi);
+      hlo = inf, hhi = ninf;
+      hp++, next = (++cn)->start, ci++;
     }
-    /* (the cell box stored from the registers: a cell of boxes only, the common one,
-     * passes nothing through memory) */
-    if (cell_boxes) _mm_storeu_pd(&pk->hb[c].xmin, hlo), _mm_storeu_pd(&pk->hb[c].xmax, hhi);
-#else
-    for (uint32_t m = m0; m < me; m++) pack_one(&w->obj[ord[m]], fg, fx, m, cell_boxes ? &h : NULL);
-    if (cell_boxes) pk->hb[c] = h;
-#endif
+    m++;
   }
 }
+#endif
 
 static void pack_cells(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
                        const qk__wcell_t *cells, uint32_t c0, uint32_t c1, int cell_boxes) {
-  if (cell_boxes)
+#if defined(__SSE2__)
+  if (cell_boxes == 2)
+    pack_run_(w, pk, ord, cells, c0, c1, 2);
+  else if (cell_boxes)
+    pack_run_(w, pk, ord, cells, c0, c1, 1);
+  else
+    pack_run_(w, pk, ord, cells, c0, c1, 0);
+#else
+  if (cell_boxes == 2)
+    pack_cells_(w, pk, ord, cells, c0, c1, 2);
+  else if (cell_boxes)
     pack_cells_(w, pk, ord, cells, c0, c1, 1);
   else
     pack_cells_(w, pk, ord, cells, c0, c1, 0);
+#endif
 }
 
 /* The packing's jobs a thread, taken in order by whichever thread is free: the objects
@@ -302,12 +380,12 @@ static void pack_run(unsigned t, unsigned s, void *ud) {
 }
 
 void qk__world_pack(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
-                    const qk__wcell_t *cells, uint32_t nc) {
+                    const qk__wcell_t *cells, uint32_t nc, int note) {
   uint32_t n = cells[nc].start;
   unsigned nt = qk__world_update_threads(w);
   if (n < 4096) nt = 1; /* not worth a thread */
   /* (the cells' and levels' boxes are for the search on the grid) */
-  const int cell_boxes = !w->by_bands;
+  const int cell_boxes = w->by_bands ? 0 : note ? 2 : 1;
   if (nt > 1) {
     pack_job_t p = {w, pk, ord, cells, nc, QK__PACK_JOBS * nt, cell_boxes};
     qk__world_run_jobs_shared(w, nt, p.n_jobs, pack_run, &p);
@@ -341,6 +419,11 @@ typedef struct merge {
    * live (no add or remove since the last update). The old entries are then kept by this
    * bit alone, without reading their objects (64 bytes each, out of cache). */
   const uint64_t *skip;
+  /* Or NULL (only with skip): a bit an old cell, set for those that lose a dirty object
+   * and those before which (or in which) a dirty record goes. The cells between two set
+   * bits keep every object and meet no record: copied as a run, without a key or a skip
+   * bit read (cells_touched). */
+  const uint64_t *touch;
 } merge_t;
 
 /* The cells a merge writes, counted into its level runs (lv_first / lv_n) a run at a
@@ -385,8 +468,36 @@ keep_old(const qk_world_t *w, const uint64_t *sk, const qk__wcell_t *oc, uint32_
   return m;
 }
 
-static inline __attribute__((always_inline)) void
-merge_range_(merge_t *g, uint32_t c0, uint32_t c1, size_t j, size_t j1, const int skipping) {
+/* The first touched cell (merge_t) in [c, c1), or c1. */
+static inline uint32_t next_touched(const uint64_t *tb, uint32_t c, uint32_t c1) {
+  size_t k = c >> 6;
+  const size_t ke = ((size_t)c1 + 63) >> 6;
+  uint64_t x = tb[k] & (~UINT64_C(0) << (c & 63));
+  while (!x) {
+    if (++k >= ke) return c1;
+    x = tb[k];
+  }
+  const size_t e = k * 64 + (size_t)__builtin_ctzll(x);
+  return e < c1 ? (uint32_t)e : c1;
+}
+
+/* Old cells [c, e), which keep every object, written from cells with their starts moved
+ * by dm. */
+static inline void copy_cells(qk__wcell_t *cells, const qk__wcell_t *oc, uint32_t c, uint32_t e,
+                              uint32_t dm) {
+#if defined(__SSE2__)
+  const __m128i dv = _mm_set_epi32(0, (int)dm, 0, 0); /* (the start is the third word) */
+  for (; c < e; c++, cells++)
+    _mm_storeu_si128((__m128i *)cells, _mm_add_epi32(_mm_loadu_si128((const __m128i *)&oc[c]), dv));
+#else
+  for (; c < e; c++, cells++) *cells = oc[c], cells->start += dm;
+#endif
+}
+
+static inline __attribute__((always_inline)) void merge_range_(merge_t *g, uint32_t c0, uint32_t c1,
+                                                               size_t j, size_t j1,
+                                                               const int skipping,
+                                                               const int touching) {
   const qk_world_t *w = g->w;
   const drec_t *d = g->d;
   const qk__wcell_t *oc = w->cells;
@@ -404,6 +515,25 @@ merge_range_(merge_t *g, uint32_t c0, uint32_t c1, size_t j, size_t j1, const in
      * objects but the dirty and removed ones: most cells of a frame where few objects
      * left their cells. */
     for (; c < c1; c++) {
+      if (touching && !(g->touch[c >> 6] >> (c & 63) & 1)) {
+        /* Cells c .. e - 1 keep their objects, and every record left sorts after them
+         * (where a record goes is touched): copied, their starts moved. */
+        const uint32_t e = next_touched(g->touch, c, c1);
+        const uint32_t s0 = oc[c].start, se = oc[e].start, dm = m - s0;
+        memcpy(ord + m, w->order + s0, (size_t)(se - s0) * sizeof *ord);
+        if (oc[c].level == oc[e - 1].level) {
+          lvrun_add(g, &run, oc[c].level - QK__LMIN, nc);
+          copy_cells(cells + nc, oc, c, e, dm);
+          nc += e - c;
+        } else {
+          for (uint32_t k = c; k < e; k++) {
+            lvrun_add(g, &run, oc[k].level - QK__LMIN, nc);
+            copy_cells(cells + nc++, oc, k, k + 1, dm);
+          }
+        }
+        m = se + dm, c = e;
+        if (c == c1) break;
+      }
       const uint64_t cly = (uint64_t)(uint32_t)(oc[c].level - QK__LMIN) << 32 | bias(oc[c].cy);
       if (cly > jly || (cly == jly && bias(oc[c].cx) >= jx)) break;
       const uint32_t m0 = m;
@@ -433,10 +563,12 @@ merge_range_(merge_t *g, uint32_t c0, uint32_t c1, size_t j, size_t j1, const in
 }
 
 static void merge_range(merge_t *g, uint32_t c0, uint32_t c1, size_t j, size_t j1) {
-  if (g->skip)
-    merge_range_(g, c0, c1, j, j1, 1);
+  if (g->touch)
+    merge_range_(g, c0, c1, j, j1, 1, 1);
+  else if (g->skip)
+    merge_range_(g, c0, c1, j, j1, 1, 0);
   else
-    merge_range_(g, c0, c1, j, j1, 0);
+    merge_range_(g, c0, c1, j, j1, 0, 0);
 }
 
 /*
@@ -531,7 +663,8 @@ static void merge_run(unsigned t, unsigned s, void *ud) {
      * would have them: the same stable radix sort, in the dirty list's order) */
     if (J->sl && J->j0[t + 1] - J->j0[t] > 1)
       drec_sort(J->pd + J->j0[t], J->dd + J->j0[t], J->j0[t + 1] - J->j0[t]);
-    *g = (merge_t){J->w, J->d, J->s_ord, J->s_cell, J->lv[t], J->lv[t] + QK__NLEV, sm, sc, J->skip};
+    *g = (merge_t){J->w, J->d, J->s_ord, J->s_cell, J->lv[t], J->lv[t] + QK__NLEV,
+                   sm,   sc,   J->skip,  NULL};
     memset(J->lv[t], 0, sizeof J->lv[t]);
     merge_range(g, J->c0[t], J->c0[t + 1], J->j0[t], J->j0[t + 1]);
   } else {
@@ -707,6 +840,49 @@ static int merge_threads(qk_world_t *w, drec_t *d, size_t m_d, const uint32_t *s
   return 1;
 }
 
+/* Whether old cell c sorts before key (ly, x). */
+static inline int cell_lt(const qk__wcell_t *c, uint64_t ly, uint32_t x) {
+  const uint64_t cly = (uint64_t)(uint32_t)(c->level - QK__LMIN) << 32 | bias(c->cy);
+  return cly < ly || (cly == ly && bias(c->cx) < x);
+}
+
+static inline void touch_set(uint64_t *tb, uint32_t c) { tb[c >> 6] |= UINT64_C(1) << (c & 63); }
+
+/*
+ * Touch (merge_t) the old cells [0, n) that the dirty records d[0 .. m_d) go before or
+ * into: the first cell not before each, searched from the cell its object left (noted by
+ * the last pack: a moved object's new cell is mostly a neighbour of its old one, a few
+ * cells or a row away in the order) by galloping, then bisection.
+ */
+static void cells_touched(const qk_world_t *w, uint64_t *tb, const drec_t *d, size_t m_d,
+                          uint32_t n) {
+  const qk__wcell_t *oc = w->cells;
+  for (size_t k = 0; k < m_d; k++) {
+    const uint64_t ly = d[k].ly;
+    const uint32_t x = d[k].x, h = w->obj[d[k].slot].cell;
+    uint32_t lo, hi; /* the answer in [lo, hi] */
+    if (cell_lt(&oc[h], ly, x)) {
+      uint32_t s = 1;
+      lo = h + 1;
+      while (lo + s - 1 < n && cell_lt(&oc[lo + s - 1], ly, x)) lo += s, s *= 2;
+      hi = lo + s - 1 < n ? lo + s - 1 : n;
+    } else {
+      uint32_t s = 1;
+      hi = h;
+      while (hi >= s && !cell_lt(&oc[hi - s], ly, x)) hi -= s, s *= 2;
+      lo = hi >= s ? hi - s + 1 : 0;
+    }
+    while (lo < hi) {
+      const uint32_t mid = lo + (hi - lo) / 2;
+      if (cell_lt(&oc[mid], ly, x))
+        lo = mid + 1;
+      else
+        hi = mid;
+    }
+    if (lo < n) touch_set(tb, lo);
+  }
+}
+
 void qk__world_pack_free(qk_world_t *w, qk__wpack_t *pk) {
   qk__free(&w->alloc, pk->fgrp, pk->cap_fgrp * (16 * sizeof *pk->fgrp + 4));
   qk__free(&w->alloc, pk->hb, pk->cap_hb * sizeof *pk->hb);
@@ -720,7 +896,8 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
   /* Everything the pass needs, before anything changes: the dirty records, the new
    * order, the new cells (at most the old ones plus one per dirty object, and the
    * sentinel) and the pack. */
-  size_t nd = w->n_dirty, n = w->n_live, ncap = (size_t)w->n_cells + nd + 1;
+  /* (and one past the sentinel, which the pack reads: pack_run_) */
+  size_t nd = w->n_dirty, n = w->n_live, ncap = (size_t)w->n_cells + nd + 2;
   /* (one more: the one-thread merge writes an old entry before it knows whether to keep
    * it) */
   /* (and three more: the search reads the order four at a time, the last group's lanes
@@ -729,7 +906,16 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
   /* The dirty records and, for the radix sort, as many again; then, when every slot of
    * the old order is live, the dirty slots' bits (merge_t). */
   const size_t nsk = nd && !w->ident_dirty ? ((size_t)w->n_obj + 63) / 64 : 0;
-  const size_t dbytes = 2 * nd * sizeof(drec_t) + nsk * sizeof(uint64_t);
+  /* And, when the merge will be here and the last pack noted each object's cell, a bit an
+   * old cell (merge_t's touch): when the dirty objects touch few of the cells (at most two
+   * each: the one left and the one before which the new one goes), as in a sparse world
+   * (in the benchmark's uniform scene, some eight objects a cell, most cells are touched
+   * and finding them cost more than the runs saved). */
+  const uint32_t n_oc0 = w->order ? w->n_cells : 0;
+  const size_t ntw = nsk && w->cells_noted && n_oc0 >= 64 && nd < n_oc0 / 4 && !merge_fits(w, n_oc0)
+                         ? ((size_t)n_oc0 + 64) / 64
+                         : 0;
+  const size_t dbytes = 2 * nd * sizeof(drec_t) + (nsk + ntw) * sizeof(uint64_t);
   drec_t *d = nd ? qk__realloc(a, NULL, 0, dbytes) : NULL;
   uint32_t *ord = (!nd || d) ? qk__realloc(a, NULL, 0, ocap * sizeof *ord) : NULL;
   qk__wcell_t *cells = ord ? qk__realloc(a, NULL, 0, ncap * sizeof *cells) : NULL;
@@ -751,10 +937,14 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
   uint32_t m = 0, nc = 0, n_oc = w->order ? w->n_cells : 0;
   size_t m_d = 0;
   int merged = 0;
-  uint64_t *skip = NULL; /* (merge_t) */
+  uint64_t *skip = NULL, *touch = NULL; /* (merge_t) */
   if (nsk) {
     skip = (uint64_t *)(d + 2 * nd);
     memset(skip, 0, nsk * sizeof *skip);
+  }
+  if (ntw) {
+    touch = skip + nsk;
+    memset(touch, 0, ntw * sizeof *touch);
   }
   uint32_t *sl =
       nd >= QK__REFILE_MIN && merge_fits(w, n_oc) ? qk__realloc(a, NULL, 0, nd * sizeof *sl) : NULL;
@@ -780,6 +970,7 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
     /* Every dirty object is live (see nsk), marked in skip, and no longer dirty once filed
      * (the merge reads skip, nothing else the flag): no second walk of the list. */
     for (uint32_t i = w->dirty_head; i != QK_NONE; i = w->dnext[i]) {
+      if (touch) touch_set(touch, w->obj[i].cell); /* (its old cell, which loses it) */
       d[m_d++] = file_dirty(w, &w->obj[i], i, true);
       skip[i >> 6] |= (uint64_t)1 << (i & 63);
     }
@@ -799,7 +990,8 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
    * followed by the dirty entries of the same cell. The keys are compared once a cell,
    * not once an object. On threads by ranges of old cells (merge_threads), else here. */
   if (!merged && !merge_threads(w, d, m_d, NULL, skip, ord, cells, n_oc, &m, &nc)) {
-    merge_t mg = {w, d, ord, cells, w->lv_first, w->lv_n, 0, 0, skip};
+    if (touch) cells_touched(w, touch, d, m_d, n_oc);
+    merge_t mg = {w, d, ord, cells, w->lv_first, w->lv_n, 0, 0, skip, touch};
     memset(w->lv_first, 0, sizeof w->lv_first);
     memset(w->lv_n, 0, sizeof w->lv_n);
     merge_range(&mg, 0, n_oc, 0, m_d);
@@ -813,7 +1005,12 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
   w->order = ord, w->n_order = m, w->cap_order = (uint32_t)ocap;
   w->cells = cells, w->n_cells = nc, w->cap_cells = (uint32_t)ncap;
   w->by_bands = qk__world_by_bands(w);
-  qk__world_pack(w, pk, ord, cells, nc);
+  /* Each object's cell noted for the next update's merge when it is likely to use them:
+   * when this one's dirty objects were few for the cells (frames are alike; see ntw), or
+   * it filed every object (the first update: nothing to go by). */
+  const int note = nd < nc / 4 || !n_oc;
+  qk__world_pack(w, pk, ord, cells, nc, note);
+  w->cells_noted = !w->by_bands && note;
   for (uint32_t k = w->dirty_head; k != QK_NONE && !skip; k = w->dnext[k])
     w->obj[k].flags &= (uint8_t)~QK__WDIRTY;
   w->dirty_head = QK_NONE;

@@ -58,6 +58,8 @@ typedef struct qk__wobj {
     float step;   /* while DIRTY: how far the move that made it dirty took it (its speed) */
     float shrink; /* while filed: re-filed when its extent falls to this (a finer level) */
   } k;
+  uint32_t cell; /* its cell's index in the cells of the last update when it was packed for
+                    the grid (cells_noted; in the object's padding) */
 } qk__wobj_t;
 
 /* A cell of the sorted loose grid: the objects order[start .. next cell's start). */
@@ -183,6 +185,7 @@ struct qk_world {
    * every pair whose float boxes then met. */
   qk__kvec_t near;
   int ident_dirty;  /* an object was added or removed since the last update */
+  int cells_noted;  /* each live object's `cell` is its index in the cells (the last pack) */
   int by_bands;     /* the order of the last update is searched by bands (qk__world_by_bands,
                        asked once by qk__world_reorder) */
   qk__pool_t *pool; /* the world's workers (collide/world_threads.c), or NULL */
@@ -297,9 +300,10 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk);
 void qk__world_pack_free(qk_world_t *w, qk__wpack_t *pk);
 /* Fill the pack (sized for the order) for the order ord and its nc cells (with the
  * sentinel), which are the world's order, on the world's threads. The cells' and levels'
- * boxes only when the search will be on the grid (w->by_bands zero). */
+ * boxes only when the search will be on the grid (w->by_bands zero); then, with note,
+ * each object's cell noted in the object too (cells_noted). */
 void qk__world_pack(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
-                    const qk__wcell_t *cells, uint32_t nc);
+                    const qk__wcell_t *cells, uint32_t nc, int note);
 
 /* A key the search marks as a near candidate: the objects' float boxes meet, the objects
  * do not (see qk__world_search). */
