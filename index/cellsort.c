@@ -1017,10 +1017,11 @@ qk_status_t qk__cell_sort(qk_tree_t *t, const qk_point_t *p, size_t n, unsigned 
     size_t want = rest < most ? rest : most;
     if (s.rec_bytes < want) s.rec_bytes = want;
   }
-  /* A record block kept from the last build when large enough (a rebuilt tree: see
-   * scratch_free); one too small goes first. */
+  /* A record block kept from the last build when large enough and not four times too
+   * large (a rebuilt tree: see scratch_free; a tree rebuilt smaller keeps no more than four
+   * times what it needs); another goes first. */
   bool kept = false;
-  if (t->kept_rec && t->kept_rec_bytes >= s.rec_bytes) {
+  if (t->kept_rec && t->kept_rec_bytes >= s.rec_bytes && t->kept_rec_bytes / 4 <= s.rec_bytes) {
     s.rec_block = t->kept_rec, s.rec_bytes = t->kept_rec_bytes, kept = true;
   } else {
     qk__free(&t->alloc, t->kept_rec, t->kept_rec_bytes);

@@ -18,8 +18,8 @@
  *    root, growing and shrinking, after removals and moves; no allocation once the arrays
  *    are large enough; a bad point leaves the tree unchanged; allocation failure at every
  *    N leaves a valid tree and no leak; huge pages asked for change no result; the bulk
- *    build's record block kept from rebuild to rebuild (one allocation fewer, counted in
- *    the tree's memory);
+ *    build's record block kept from rebuild to rebuild (asked for once, counted in the
+ *    tree's memory, not kept when four times too large);
  *  - uniform inserts and moves one by one take linear work: the bytes the tree asks for
  *    stay within 150 times its final size at capacities 1, 16 and 32; a bulk build at
  *    capacity 1 and 4 asks for at most 4 times the tree it makes;
@@ -926,6 +926,12 @@ static void test_index_rebuild(void **state) {
   assert_true(big.largest < (size_t)N * 20);
   assert_int_equal(qk_tree_memory(u), kept_mem);
   assert_same_shape(t, u);
+  /* Rebuilt with an eighth of the points: a block four times too large is not kept. */
+  big.largest = 0;
+  assert_int_equal(qk_tree_rebuild(u, p, N / 8, NULL), QK_OK);
+  QKT_CHECK_TREE(u);
+  assert_true(big.largest >= (size_t)N / 8 * 20);
+  assert_true(qk_tree_memory(u) + (size_t)N * 10 < kept_mem);
   qk_tree_free(u);
   qk_tree_free(t);
   assert_int_equal(a.live_blocks, 0);
