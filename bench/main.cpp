@@ -614,6 +614,21 @@ void run_radius_range(const std::string &ds, const std::vector<Pt> &pts, bool bo
   }
 }
 
+// Times the collide calls fns (interleaved) and emits their records as rows of `order`.
+void time_collide(const std::vector<std::function<void()>> &fns, std::vector<Rec> &recs, size_t n,
+                  const PairSum &q, const char *order, const char *note) {
+  auto med = interleaved_recs(fns, recs);
+  for (size_t i = 0; i < fns.size(); i++) {
+    Rec &r = recs[i];
+    r.op = "collide", r.dataset = "boxes", r.n = n, r.order = order;
+    r.seconds = med[i];
+    r.per_second = n / med[i];
+    r.extra["pairs"] = (double)q.pairs;
+    r.note = note;
+    emit(r);
+  }
+}
+
 // The same boxes on a structure kept from call to call (order "reused"): quadkit's
 // collider rebuilt by qk_collider_rebuild, Embree's scene committed again; what an
 // application that rebuilds every frame does, without a fresh allocation per frame (which
@@ -675,18 +690,7 @@ void run_collide_reused(const std::vector<Box> &boxes, const PairSum &q) {
       recs.push_back(r);
     }
   }
-  if (!fns.empty()) {
-    auto med = interleaved_recs(fns, recs);
-    for (size_t i = 0; i < fns.size(); i++) {
-      Rec &r = recs[i];
-      r.op = "collide", r.dataset = "boxes", r.n = n, r.order = "reused";
-      r.seconds = med[i];
-      r.per_second = n / med[i];
-      r.extra["pairs"] = (double)q.pairs;
-      r.note = "rebuild in kept memory + all pairs";
-      emit(r);
-    }
-  }
+  if (!fns.empty()) time_collide(fns, recs, n, q, "reused", "rebuild in kept memory + all pairs");
   for (QuadkitBoxes *s : qs) quadkit_boxes_free(s);
   embree_boxes_free(e);
 }
@@ -737,16 +741,7 @@ void run_collide(size_t n) {
       emit(r);
     }
   }
-  auto med = interleaved_recs(fns, recs);
-  for (size_t i = 0; i < fns.size(); i++) {
-    Rec &r = recs[i];
-    r.op = "collide", r.dataset = "boxes", r.n = n, r.order = "-";
-    r.seconds = med[i];
-    r.per_second = n / med[i];
-    r.extra["pairs"] = (double)q.pairs;
-    r.note = "build + all pairs";
-    emit(r);
-  }
+  time_collide(fns, recs, n, q, "-", "build + all pairs");
   run_collide_reused(boxes, q);
 }
 

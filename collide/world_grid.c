@@ -337,20 +337,18 @@ static inline __attribute__((always_inline)) void pack_run_(const qk_world_t *w,
 static void pack_cells(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
                        const qk__wcell_t *cells, uint32_t c0, uint32_t c1, int cell_boxes) {
 #if defined(__SSE2__)
-  if (cell_boxes == 2)
-    pack_run_(w, pk, ord, cells, c0, c1, 2);
-  else if (cell_boxes)
-    pack_run_(w, pk, ord, cells, c0, c1, 1);
-  else
-    pack_run_(w, pk, ord, cells, c0, c1, 0);
+#define QK__PACK pack_run_
 #else
-  if (cell_boxes == 2)
-    pack_cells_(w, pk, ord, cells, c0, c1, 2);
-  else if (cell_boxes)
-    pack_cells_(w, pk, ord, cells, c0, c1, 1);
-  else
-    pack_cells_(w, pk, ord, cells, c0, c1, 0);
+#define QK__PACK pack_cells_
 #endif
+  /* (each with its cell_boxes a constant) */
+  if (cell_boxes == 2)
+    QK__PACK(w, pk, ord, cells, c0, c1, 2);
+  else if (cell_boxes)
+    QK__PACK(w, pk, ord, cells, c0, c1, 1);
+  else
+    QK__PACK(w, pk, ord, cells, c0, c1, 0);
+#undef QK__PACK
 }
 
 /* The packing's jobs a thread, taken in order by whichever thread is free: the objects
