@@ -662,8 +662,9 @@ void run_collide_reused(const std::vector<Box> &boxes, const PairSum &q) {
     }
     return r.matches == 1;
   };
-  for (unsigned th : {1u, (unsigned)opt.threads}) {
-    if (th < 1 || (th == 1 && !qs.empty())) continue;
+  std::vector<unsigned> thread_counts{1};
+  if (opt.threads > 1) thread_counts.push_back((unsigned)opt.threads);
+  for (unsigned th : thread_counts) {
     QuadkitBoxes *s = quadkit_boxes_new(th);
     qs.push_back(s);
     Rec r;

@@ -924,10 +924,11 @@ static void drop_rays(qk_collider_t *c) {
   atomic_store_explicit(&c->rays_state, RAYS_NONE, memory_order_relaxed);
 }
 
-/* A collider without items after a rebuild ran out of memory: the tree emptied and the
- * arrays of the last build (every one at least one entry long) filled for no items;
- * nothing is allocated. */
+/* A collider without items after a rebuild ran out of memory: no ray structures, the tree
+ * emptied and the arrays of the last build (every one at least one entry long) filled for
+ * no items; nothing is allocated. */
 static void make_empty(qk_collider_t *c) {
+  drop_rays(c);
   qk__free(&c->alloc, c->centres, c->centres_cap * sizeof *c->centres);
   c->centres = NULL, c->centres_cap = 0;
   c->n_discs = c->n = 0;
@@ -957,10 +958,7 @@ qk_status_t qk_collider_rebuild(qk_collider_t *c, const qk_disc_t *discs, size_t
     c->mag = mag;
     if ((st = alloc_arrays(c)) == QK_OK) st = fill_slots(c, discs, boxes);
   }
-  if (st == QK_ERR_NOMEM) {
-    drop_rays(c);
-    make_empty(c);
-  }
+  if (st == QK_ERR_NOMEM) make_empty(c);
   return st;
 }
 
