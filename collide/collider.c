@@ -13,6 +13,7 @@
 #include <string.h>
 
 #include "collide/collide_internal.h"
+#include "index/inline.h"
 #include "index/dist_exact.h"
 
 #if defined(__SSE2__)
@@ -1557,12 +1558,8 @@ typedef struct best {
 
 /* The items of slots [slot, end) against the ray, into *b. Discs carry their ids; the
  * tree's id array is read only for hits on boxes and for the kind in mixed sets. */
-#if defined(__GNUC__)
-__attribute__((always_inline))
-#endif
-static inline void
-scan_leaf(const qk_collider_t *c, const ray_t *ray, uint32_t slot, uint32_t end, double tmax,
-          int far, best_t *b) {
+static QK__ALWAYS_INLINE void scan_leaf(const qk_collider_t *c, const ray_t *ray, uint32_t slot,
+                                        uint32_t end, double tmax, int far, best_t *b) {
   const qk_id_t *pid = qk__tree_ids(c->tree);
   const int all_discs = c->n_discs == c->n, no_discs = c->n_discs == 0;
 #if defined(__SSE2__)
@@ -1790,12 +1787,8 @@ static inline unsigned qnode_slab_float(const qnode_t *q, const ray_t *r, __m128
  * is neither stacked nor visited. A node that keeps no child jumps to the pop, which sits
  * in the loop over leaves.
  */
-#if defined(__GNUC__)
-__attribute__((always_inline))
-#endif
-static inline void
-walk_float(const qk_collider_t *c, const ray_t *rp, double tmax, uint32_t from, uint32_t skip,
-           best_t *bp, float *tfp) {
+static QK__ALWAYS_INLINE void walk_float(const qk_collider_t *c, const ray_t *rp, double tmax,
+                                         uint32_t from, uint32_t skip, best_t *bp, float *tfp) {
   const ray_t *const ray = rp;
   best_t b = *bp;
   /* T of fact (2): min(tmax, best) rounded up to float, kept by the caller from one search
@@ -1910,11 +1903,8 @@ static inline uint64_t morton32(uint32_t x, uint32_t y) {
  * Until the twelfth session the leaves' prefetch (prefetch_discs, called here and for the
  * origin's leaf) was such a call: the origin leaf's records and the climbs' leaves were
  * never asked for. -fdump-tree-optimized shows whether the prefetches remain. */
-#if defined(__GNUC__)
-__attribute__((always_inline))
-#endif
-static inline void
-prefetch_climbs(const qk_collider_t *c, const uint32_t *path, unsigned n, unsigned known) {
+static QK__ALWAYS_INLINE void prefetch_climbs(const qk_collider_t *c, const uint32_t *path,
+                                              unsigned n, unsigned known) {
   if (c->n_discs != c->n) return;
   const char *qb = (const char *)c->quads, *sb = (const char *)c->sdisc;
   for (unsigned a = n, up = 0; a > known && up < 2; a--, up++) {
@@ -2000,11 +1990,8 @@ static inline unsigned climb_stop(__m128d lo, __m128d hi, __m128d rs, __m128d f,
  * whatever the bits, and only the check above decides. The answer is the smallest
  * (t, id) over A's items, the same as a search from the root finds.
  */
-#if defined(__GNUC__)
-__attribute__((always_inline))
-#endif
-static inline void
-cast_float(const qk_collider_t *c, const ray_t *ray, double tmax, qk_hit_t *hit) {
+static QK__ALWAYS_INLINE void cast_float(const qk_collider_t *c, const ray_t *ray, double tmax,
+                                         qk_hit_t *hit) {
   best_t b = {INFINITY, QK_NONE};
   const cnode_t *root = &c->cn[0];
   if (root->child == QK_NONE) {

@@ -8,6 +8,7 @@
 #include <string.h>
 
 #include "collide/world_internal.h"
+#include "index/inline.h"
 
 #if defined(__SSE2__)
 #include <emmintrin.h>
@@ -215,10 +216,10 @@ static inline void pack_one(const qk__wobj_t *o, float *fg, uint8_t *fx, uint32_
  * is exact, and (with cell boxes, which only the search on the grid reads) per cell the
  * box around its objects; with cell_boxes 2 each object's cell noted in it too
  * (cells_noted). Without SSE2 (pack_run_ is the same with it). */
-static inline __attribute__((always_inline)) void pack_cells_(const qk_world_t *w, qk__wpack_t *pk,
-                                                              const uint32_t *ord,
-                                                              const qk__wcell_t *cells, uint32_t c0,
-                                                              uint32_t c1, const int cell_boxes) {
+#if !defined(__SSE2__)
+static QK__ALWAYS_INLINE void pack_cells_(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
+                                          const qk__wcell_t *cells, uint32_t c0, uint32_t c1,
+                                          const int cell_boxes) {
   float *fg = pk->fgrp;
   uint8_t *fx = pk->fexact;
   for (uint32_t c = c0; c < c1; c++) {
@@ -231,6 +232,7 @@ static inline __attribute__((always_inline)) void pack_cells_(const qk_world_t *
     if (cell_boxes) pk->hb[c] = h;
   }
 }
+#endif
 
 #if defined(__SSE2__)
 /* The same as pack_cells_, walking the objects of cells [c0, c1) in one run instead of
@@ -239,10 +241,9 @@ static inline __attribute__((always_inline)) void pack_cells_(const qk_world_t *
  * the group's four rows (a transpose), the others one at a time, and the cell box is
  * stored where the next cell starts. A group is written whole only when it lies inside
  * the range (ranges on threads share their end groups). */
-static inline __attribute__((always_inline)) void pack_run_(const qk_world_t *w, qk__wpack_t *pk,
-                                                            const uint32_t *ord,
-                                                            const qk__wcell_t *cells, uint32_t c0,
-                                                            uint32_t c1, const int cell_boxes) {
+static QK__ALWAYS_INLINE void pack_run_(const qk_world_t *w, qk__wpack_t *pk, const uint32_t *ord,
+                                        const qk__wcell_t *cells, uint32_t c0, uint32_t c1,
+                                        const int cell_boxes) {
   if (c0 >= c1) return;
   float *fg = pk->fgrp;
   uint8_t *fx = pk->fexact;
@@ -449,9 +450,9 @@ static inline void lvrun_add(merge_t *g, lvrun_t *r, int l, uint32_t nc) {
 
 /* The objects of old cell c but the dirty and removed ones, written from ord[m]: by the
  * skip bits when there are (merge_t), else by their objects' flags. Returns past them. */
-static inline __attribute__((always_inline)) uint32_t
-keep_old(const qk_world_t *w, const uint64_t *sk, const qk__wcell_t *oc, uint32_t c, uint32_t *ord,
-         uint32_t m, const int skipping) {
+static QK__ALWAYS_INLINE uint32_t keep_old(const qk_world_t *w, const uint64_t *sk,
+                                           const qk__wcell_t *oc, uint32_t c, uint32_t *ord,
+                                           uint32_t m, const int skipping) {
   const uint32_t *old = w->order;
   for (uint32_t k = oc[c].start, ke = oc[c + 1].start; k < ke; k++) {
     const uint32_t i = old[k];
@@ -492,10 +493,8 @@ static inline void copy_cells(qk__wcell_t *cells, const qk__wcell_t *oc, uint32_
 #endif
 }
 
-static inline __attribute__((always_inline)) void merge_range_(merge_t *g, uint32_t c0, uint32_t c1,
-                                                               size_t j, size_t j1,
-                                                               const int skipping,
-                                                               const int touching) {
+static QK__ALWAYS_INLINE void merge_range_(merge_t *g, uint32_t c0, uint32_t c1, size_t j,
+                                           size_t j1, const int skipping, const int touching) {
   const qk_world_t *w = g->w;
   const drec_t *d = g->d;
   const qk__wcell_t *oc = w->cells;

@@ -8,6 +8,7 @@
 #include <string.h>
 
 #include "collide/world_internal.h"
+#include "index/inline.h"
 
 #if defined(__SSE2__)
 #include <emmintrin.h>
@@ -73,10 +74,9 @@ static int rows_alloc(const qk_allocator_t *a, qk__prows_t *r, size_t n_nz) {
 /* The rows over n_obj slots from a0 on from their lengths ca (ca[a] for slot a0 + a; n
  * keys in all): row and start of every slot that has pairs; with cursors, ca[a] becomes
  * its row's first place. 0 when memory ran short. */
-static inline __attribute__((always_inline)) int rows_fill(const qk_allocator_t *al, qk__prows_t *r,
-                                                           uint32_t *ca, uint32_t a0,
-                                                           uint32_t n_obj, size_t n, int cursors,
-                                                           size_t nz) {
+static QK__ALWAYS_INLINE int rows_fill(const qk_allocator_t *al, qk__prows_t *r, uint32_t *ca,
+                                       uint32_t a0, uint32_t n_obj, size_t n, int cursors,
+                                       size_t nz) {
   if (!rows_alloc(al, r, nz)) return 0;
   uint32_t sa = 0;
   nz = 0;
@@ -254,8 +254,8 @@ __attribute__((noinline)) static int rows_buckets(const qk_allocator_t *al, cons
 /* The b counts' prefix over slots b (cb[b] becomes the first place of b's keys); with
  * `whole` (slots a and b the same range from 0, ca their counts), the count of rows in
  * the same pass over the slots, else 0. */
-static inline __attribute__((always_inline)) size_t b_prefix(uint32_t *cb, const uint32_t *ca,
-                                                             uint32_t n_b, const int whole) {
+static QK__ALWAYS_INLINE size_t b_prefix(uint32_t *cb, const uint32_t *ca, uint32_t n_b,
+                                         const int whole) {
   size_t nz = 0;
   for (uint32_t b = 1; b <= n_b; b++) {
     cb[b] += cb[b - 1];
@@ -274,11 +274,10 @@ static inline __attribute__((always_inline)) size_t b_prefix(uint32_t *cb, const
  * bytes that differ (cnt: 257 entries), so the passes cost the keys, not the slots, then the rows
  * from the sorted keys.
  */
-static inline __attribute__((always_inline)) int make_rows(const qk_allocator_t *al, uint64_t *keys,
-                                                           uint64_t *tmp, size_t n, uint32_t *cnt,
-                                                           uint32_t a0, uint32_t n_a, uint32_t n_b,
-                                                           int bucket, const int whole,
-                                                           qk__prows_t *r, uint64_t **flat) {
+static QK__ALWAYS_INLINE int make_rows(const qk_allocator_t *al, uint64_t *keys, uint64_t *tmp,
+                                       size_t n, uint32_t *cnt, uint32_t a0, uint32_t n_a,
+                                       uint32_t n_b, int bucket, const int whole, qk__prows_t *r,
+                                       uint64_t **flat) {
   uint32_t *rb = r->b;
   r->n = n;
   if (flat) *flat = NULL;
@@ -433,9 +432,9 @@ static inline uint64_t rc_next(rcur_t *c) {
  * list in key order (nn of them). Returns 0 when memory ran short (the lists are then the
  * caller's to free).
  */
-static inline __attribute__((always_inline)) int
-diff_merge(const qk_world_t *w, const qk__prows_t *o, const qk__prows_t *nw, const uint64_t *nk,
-           size_t nn, int dirty, qk__kvec_t *bv, qk__kvec_t *ev) {
+static QK__ALWAYS_INLINE int diff_merge(const qk_world_t *w, const qk__prows_t *o,
+                                        const qk__prows_t *nw, const uint64_t *nk, size_t nn,
+                                        int dirty, qk__kvec_t *bv, qk__kvec_t *ev) {
   const qk_allocator_t *al = &w->alloc;
   rcur_t cn, co;
   size_t i = 0;
@@ -462,10 +461,9 @@ diff_merge(const qk_world_t *w, const qk__prows_t *o, const qk__prows_t *nw, con
 
 /* The same merge row by row, for long rows (a dense world): a row's pairs are compared
  * as 32-bit slots in a tight loop, and a row's key is made once. */
-static inline __attribute__((always_inline)) int diff_rows(const qk_world_t *w,
-                                                           const qk__prows_t *o,
-                                                           const qk__prows_t *nw, int dirty,
-                                                           qk__kvec_t *bv, qk__kvec_t *ev) {
+static QK__ALWAYS_INLINE int diff_rows(const qk_world_t *w, const qk__prows_t *o,
+                                       const qk__prows_t *nw, int dirty, qk__kvec_t *bv,
+                                       qk__kvec_t *ev) {
   const qk_allocator_t *al = &w->alloc;
   const uint32_t *nb = nw->b, *ob = o->b;
   size_t p = 0, q = 0; /* the next row with pairs, new and old */
@@ -573,9 +571,9 @@ static void rows_keys(const qk__prows_t *o, uint64_t *k) {
  */
 #define QK__DIFF_STEPS 256
 /* One step of the merge of x = nk[*i] and y = ok[*j] (see diff_flat_nobranch). */
-static inline __attribute__((always_inline)) void diff_step(const uint64_t *nk, const uint64_t *ok,
-                                                            size_t *i, size_t *j, uint64_t *B,
-                                                            size_t *nb, uint64_t *E, size_t *ne) {
+static QK__ALWAYS_INLINE void diff_step(const uint64_t *nk, const uint64_t *ok, size_t *i,
+                                        size_t *j, uint64_t *B, size_t *nb, uint64_t *E,
+                                        size_t *ne) {
   const uint64_t x = nk[*i], y = ok[*j];
   B[*nb] = x, E[*ne] = y;
   *nb += x < y, *ne += y < x;
@@ -754,8 +752,7 @@ typedef struct bjob {
   uint64_t *jb, *je;
 } bjob_t;
 
-static inline __attribute__((always_inline)) int began_range_(bjob_t *J, unsigned t,
-                                                              const int exact) {
+static QK__ALWAYS_INLINE int began_range_(bjob_t *J, unsigned t, const int exact) {
   const qk_allocator_t *al = &J->w->alloc;
   const qk__prows_t *o = J->o, *nb = J->nb;
   const float *fb = J->fb;
@@ -934,8 +931,7 @@ typedef struct sjob {
 
 /* The range of slot a: the last u with cut[u] <= a (cut[0] = 0); two ranges (two
  * threads, the common case) by one comparison. */
-static inline __attribute__((always_inline)) unsigned sjob_range(const sjob_t *J, uint32_t a,
-                                                                 const int two) {
+static QK__ALWAYS_INLINE unsigned sjob_range(const sjob_t *J, uint32_t a, const int two) {
   if (two) return a >= J->cut[1];
   unsigned lo = 0, hi = J->nt;
   while (hi - lo > 1) {
@@ -950,9 +946,8 @@ static inline __attribute__((always_inline)) unsigned sjob_range(const sjob_t *J
 
 /* Chunk [k0, k1)'s keys counted by range (scatter zero) or scattered into the ranges from
  * the cursors c. */
-static inline __attribute__((always_inline)) void sjob_pass(sjob_t *J, const uint64_t *keys,
-                                                            size_t k0, size_t k1, size_t *c,
-                                                            int scatter, const int two) {
+static QK__ALWAYS_INLINE void sjob_pass(sjob_t *J, const uint64_t *keys, size_t k0, size_t k1,
+                                        size_t *c, int scatter, const int two) {
   uint64_t *pt = J->part;
   if (!scatter) {
     QK__UNROLL4

@@ -17,6 +17,7 @@
 #include <string.h>
 
 #include "collide/world_internal.h"
+#include "index/inline.h"
 
 #if defined(__SSE2__)
 #include <emmintrin.h>
@@ -224,8 +225,8 @@ static const uint8_t lane_place[16][4] = {{0, 0, 0, 0}, {1, 1, 1, 1}, {0, 1, 1, 
                                           {0, 0, 1, 2}, {1, 1, 2, 3}, {0, 1, 2, 3}, {1, 2, 3, 4}};
 /* A group's four keys (the probe's slot sv above the lanes' og) stored at v, those of
  * lanes `bits` kept; returns past them. */
-static inline __attribute__((always_inline)) uint64_t *group_keys(uint64_t *v, const uint32_t *og,
-                                                                  __m128i sv, unsigned bits) {
+static QK__ALWAYS_INLINE uint64_t *group_keys(uint64_t *v, const uint32_t *og, __m128i sv,
+                                              unsigned bits) {
   const __m128i o = _mm_loadu_si128((const __m128i *)og);
   const __m128i k01 = _mm_unpacklo_epi32(o, sv), k23 = _mm_unpackhi_epi32(o, sv);
   const uint8_t *at = lane_place[bits];
@@ -247,9 +248,10 @@ static inline __attribute__((always_inline)) uint64_t *group_keys(uint64_t *v, c
  * lanes past its end are read (the order and the exactness bytes have room for them, see
  * qk__world_reorder) and masked off. A lane whose pair the float boxes cannot decide
  * (this probe's or its float box not exact) hands the group on to test_run_exact. */
-static inline __attribute__((always_inline)) uint64_t *
-run_keys(share_t *s, const float *fg, const uint32_t *ord, const uint8_t *fx, uint32_t slot,
-         uint64_t hs, unsigned ek, probe_t p, uint32_t lo, uint32_t hi, uint64_t *v, const int ax) {
+static QK__ALWAYS_INLINE uint64_t *run_keys(share_t *s, const float *fg, const uint32_t *ord,
+                                            const uint8_t *fx, uint32_t slot, uint64_t hs,
+                                            unsigned ek, probe_t p, uint32_t lo, uint32_t hi,
+                                            uint64_t *v, const int ax) {
   (void)hs;
   /* (the groups and their lanes' slots walked by pointers, the last group known by its
    * place) */
@@ -279,9 +281,10 @@ run_keys(share_t *s, const float *fg, const uint32_t *ord, const uint8_t *fx, ui
   }
 }
 #else
-static inline __attribute__((always_inline)) uint64_t *
-run_keys(share_t *s, const float *fg, const uint32_t *ord, const uint8_t *fx, uint32_t slot,
-         uint64_t hs, unsigned ek, probe_t p, uint32_t lo, uint32_t hi, uint64_t *v, const int ax) {
+static QK__ALWAYS_INLINE uint64_t *run_keys(share_t *s, const float *fg, const uint32_t *ord,
+                                            const uint8_t *fx, uint32_t slot, uint64_t hs,
+                                            unsigned ek, probe_t p, uint32_t lo, uint32_t hi,
+                                            uint64_t *v, const int ax) {
   uint32_t q = lo >> 2, qe = (hi - 1) >> 2;
   unsigned bits = group_hits(fg + (size_t)q * 16, &p) & ~((1u << (lo & 3)) - 1) & 15u;
   const unsigned last = (2u << ((hi - 1) & 3)) - 1;
@@ -303,8 +306,8 @@ run_keys(share_t *s, const float *fg, const uint32_t *ord, const uint8_t *fx, ui
 
 /* The pairs of object m with the objects at order positions [lo, hi) (lo < hi), the keys
  * at kc (room reserved here). */
-static inline __attribute__((always_inline)) int
-test_run_k(share_t *s, kc_t *kc, const me_t *m, uint32_t lo, uint32_t hi, const int ax) {
+static QK__ALWAYS_INLINE int test_run_k(share_t *s, kc_t *kc, const me_t *m, uint32_t lo,
+                                        uint32_t hi, const int ax) {
   if ((size_t)(kc->end - kc->v) < hi - lo && !kc_grow(s, kc, hi - lo)) return 0;
   const probe_t p = m->p; /* (in registers: the keys' stores could alias m) */
   kc->v = run_keys(s, s->pk->fgrp, s->w->order, s->pk->fexact, m->slot, m->hs, m->exact, p, lo, hi,
@@ -313,8 +316,7 @@ test_run_k(share_t *s, kc_t *kc, const me_t *m, uint32_t lo, uint32_t hi, const 
 }
 
 /* test_run_k with the keys' place read from and stored to s->out. */
-static inline __attribute__((always_inline)) int test_run(share_t *s, const me_t *m, uint32_t lo,
-                                                          uint32_t hi) {
+static QK__ALWAYS_INLINE int test_run(share_t *s, const me_t *m, uint32_t lo, uint32_t hi) {
   kc_t k = kc_open(s);
   int ok = test_run_k(s, &k, m, lo, hi, 0);
   kc_close(s, &k);
@@ -358,9 +360,10 @@ static int cross_run(share_t *s, kc_t *kc, uint32_t a, uint32_t blo, uint32_t bh
  * with `up`, against the row above's cells whose float boxes (cg, one lane a cell) its
  * float box meets, from the first such cell to the last (ust: where their objects start,
  * `above` of them in all). */
-static inline __attribute__((always_inline)) int
-level_runs(share_t *s, kc_t *kc, uint32_t lo, uint32_t hi, uint32_t hi2, float nx, const float *cg,
-           const uint32_t *ust, uint32_t above, const int up, const int ax) {
+static QK__ALWAYS_INLINE int level_runs(share_t *s, kc_t *kc, uint32_t lo, uint32_t hi,
+                                        uint32_t hi2, float nx, const float *cg,
+                                        const uint32_t *ust, uint32_t above, const int up,
+                                        const int ax) {
   const float *fg = s->pk->fgrp;
   const uint32_t *ord = s->w->order;
   const uint8_t *fx = s->pk->fexact;
@@ -399,8 +402,8 @@ level_runs(share_t *s, kc_t *kc, uint32_t lo, uint32_t hi, uint32_t hi2, float n
  * against those boxes (rounded from the cells' boxes: monotone, so a cell whose float box
  * misses the object's misses every object's float box in it), from the first such cell to
  * the last (consecutive in the order too). end: past the last cell of a's level. */
-static inline __attribute__((always_inline)) int
-same_level(share_t *s, kc_t *kc, uint32_t a, uint32_t end, uint32_t *up, const int ax) {
+static QK__ALWAYS_INLINE int same_level(share_t *s, kc_t *kc, uint32_t a, uint32_t end,
+                                        uint32_t *up, const int ax) {
   const qk_world_t *w = s->w;
   const qk__wcell_t *c = &w->cells[a];
   const qk_box_t *hb = s->pk->hb, *ha = &hb[a];
@@ -494,8 +497,8 @@ typedef struct span {
 /* The cells [c, hi) of row y (hi: the row's end) from the first one with cx >= xa: those
  * up to xb tested, or recorded whole when inside; returns the first cell after them. A
  * row of a few objects is tested in one run (finding its inside cells would cost more). */
-static inline __attribute__((always_inline)) uint32_t
-do_row(share_t *s, const me_t *m, const span_t *sp, uint32_t c, uint32_t hi, int64_t y, int *ok) {
+static QK__ALWAYS_INLINE uint32_t do_row(share_t *s, const me_t *m, const span_t *sp, uint32_t c,
+                                         uint32_t hi, int64_t y, int *ok) {
   const qk__wcell_t *cl = s->w->cells;
   uint32_t c1 = c;
   while (c1 < hi && cl[c1].cx <= sp->xb) c1++;
@@ -640,8 +643,8 @@ static __attribute__((noinline)) int cell_others(share_t *s, uint32_t a, int me)
  * no pairs with others (every cell of a one-level world), the keys' place stays in locals
  * from cell to cell: opened and closed around each cell, it cost about 20 instructions a
  * cell, most of a sparse world's cell of one object. */
-static inline __attribute__((always_inline)) int level_cells(share_t *s, uint32_t a, uint32_t a1,
-                                                             uint32_t *up, int me, const int ax) {
+static QK__ALWAYS_INLINE int level_cells(share_t *s, uint32_t a, uint32_t a1, uint32_t *up, int me,
+                                         const int ax) {
   if (s->lv[me].other) {
     for (; a < a1; a++) {
       kc_t kc = kc_open(s);
@@ -865,9 +868,10 @@ typedef struct sw {
   uint32_t slot;
   unsigned ek;
 } sw_t;
-static inline __attribute__((always_inline)) uint64_t *
-sweep_grp(const sw_t *w, const egrp_t *g, const uint8_t *fm, unsigned mask, uint64_t *v, int *stop,
-          const int any, const int all_exact, const int began, const int near_) {
+static QK__ALWAYS_INLINE uint64_t *sweep_grp(const sw_t *w, const egrp_t *g, const uint8_t *fm,
+                                             unsigned mask, uint64_t *v, int *stop, const int any,
+                                             const int all_exact, const int began,
+                                             const int near_) {
   const __m128 cx = _mm_cmple_ps(_mm_loadu_ps(g->x0), w->x1);
   const __m128 m = _mm_and_ps(_mm_cmple_ps(_mm_loadu_ps(g->y0), w->y1),
                               _mm_cmpnlt_ps(_mm_loadu_ps(g->y1), w->y0));
@@ -918,10 +922,9 @@ sweep_grp(const sw_t *w, const egrp_t *g, const uint8_t *fm, unsigned mask, uint
   return v;
 }
 
-static inline __attribute__((always_inline)) uint64_t *sweep(const share_t *s, const bands_t *bd,
-                                                             uint32_t k, uint64_t *v,
-                                                             const int all_exact, const int began,
-                                                             const int near_) {
+static QK__ALWAYS_INLINE uint64_t *sweep(const share_t *s, const bands_t *bd, uint32_t k,
+                                         uint64_t *v, const int all_exact, const int began,
+                                         const int near_) {
   const egrp_t *gk = &bd->g[k >> 2];
   const unsigned lk = k & 3;
   sw_t w;
@@ -1000,9 +1003,8 @@ static uint64_t *sweep(const share_t *s, const bands_t *bd, uint32_t k, uint64_t
 /* The sweeps of bands [b0, b1) with the keys' end and room in locals (the room for a
  * sweep's keys, its candidates and three more, checked before each); 0 when memory ran
  * short. */
-static inline __attribute__((always_inline)) int sweep_run(share_t *s, uint32_t b0, uint32_t b1,
-                                                           const int all_exact, const int began,
-                                                           const int near_) {
+static QK__ALWAYS_INLINE int sweep_run(share_t *s, uint32_t b0, uint32_t b1, const int all_exact,
+                                       const int began, const int near_) {
   const bands_t *bd = s->bd;
   const uint32_t *st = bd->start, *en = bd->end;
   if (!s->out.v && !kv_reserve(s, 256)) return 0;
@@ -1103,8 +1105,8 @@ static uint32_t band_at(const uint32_t *start, uint32_t nb, size_t p) {
 }
 
 /* Entry p: the object's float box f, its slot s and its last update's box pf (or NULL). */
-static inline __attribute__((always_inline)) void
-put_entry(const scat_t *sc, uint32_t p, const float *f, uint32_t s, const float *pf, uint8_t ex) {
+static QK__ALWAYS_INLINE void put_entry(const scat_t *sc, uint32_t p, const float *f, uint32_t s,
+                                        const float *pf, uint8_t ex) {
   egrp_t *q = &sc->g[p >> 2];
   q->x0[p & 3] = f[0], q->y0[p & 3] = f[4], q->y1[p & 3] = f[12], q->slot[p & 3] = s;
   sc->x1[p] = f[8];
@@ -1116,8 +1118,7 @@ put_entry(const scat_t *sc, uint32_t p, const float *f, uint32_t s, const float 
 }
 
 /* Thread t's entries (whole: all of them, on one thread, without the range's tests). */
-static inline __attribute__((always_inline)) void scatter_(const scat_t *sc, unsigned t,
-                                                           int whole) {
+static QK__ALWAYS_INLINE void scatter_(const scat_t *sc, unsigned t, int whole) {
   const qk_world_t *w = sc->w;
   const uint32_t n = w->n_order;
   const float *fg = sc->pk->fgrp;

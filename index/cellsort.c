@@ -32,6 +32,7 @@
 #include <string.h>
 
 #include "index/index_access.h"
+#include "index/inline.h"
 
 #if defined(__SSE2__)
 #include <emmintrin.h>
@@ -79,11 +80,6 @@ int qk__build_avx2(void) {
 
 /* fine_staged() is made three times: for tags of the input's index with the 8-bit fine
  * digit of the deepest grid, and of any digit, with and without the index. */
-#if defined(__GNUC__)
-#define QK__ALWAYS_INLINE inline __attribute__((always_inline))
-#else
-#define QK__ALWAYS_INLINE inline
-#endif
 
 /* The grid lines along one axis as the tree computes them: line k (0 < k < 2^L) splits
  * the node of depth d = L - 1 - ctz(k) whose lower corner is the origin plus the sides of

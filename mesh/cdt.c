@@ -16,15 +16,10 @@
 #include <string.h>
 
 #include "index/index_access.h"
+#include "index/inline.h"
 #include "mesh/cdt_internal.h"
 
 #define NONE QK__CDT_NONE
-
-#if defined(__GNUC__)
-#define ALWAYS_INLINE inline __attribute__((always_inline))
-#else
-#define ALWAYS_INLINE inline
-#endif
 
 /* ---- storage ------------------------------------------------------------------------ */
 
@@ -385,7 +380,7 @@ static inline void flip(qk__cdt_t *c, uint32_t t, int i, uint32_t n, int j) {
 }
 
 /* flip() with i = 0, for the legalisation after a point insertion (always inlined there). */
-static ALWAYS_INLINE void flip0(qk__cdt_t *c, uint32_t t, uint32_t n, int j) {
+static QK__ALWAYS_INLINE void flip0(qk__cdt_t *c, uint32_t t, uint32_t n, int j) {
   const int j1 = j == 2 ? 0 : j + 1, j2 = j == 0 ? 2 : j - 1;
   uint32_t *tv = c->v + 3 * (size_t)t, *tn = c->nbr + 3 * (size_t)t, *ts = c->seg + 3 * (size_t)t;
   uint32_t *nv = c->v + 3 * (size_t)n, *nn = c->nbr + 3 * (size_t)n, *ns = c->seg + 3 * (size_t)n;
@@ -420,7 +415,7 @@ static inline int facing(const qk__cdt_t *c, uint32_t n, uint32_t t) {
  * t2 = (p, a, b). Pushes the three on the flip stack. Always inlined: with its second
  * caller, qk__cdt_insert_in_undo, it was a call of 128 instructions where inlined it is
  * about 96 (0.9 M instructions of 69 M on South Africa at extent/256). */
-static ALWAYS_INLINE int split3(qk__cdt_t *c, uint32_t t, uint32_t p) {
+static QK__ALWAYS_INLINE int split3(qk__cdt_t *c, uint32_t t, uint32_t p) {
   uint32_t *tv = c->v + 3 * (size_t)t, *tn = c->nbr + 3 * (size_t)t, *ts = c->seg + 3 * (size_t)t;
   uint32_t a = tv[0], b = tv[1], d = tv[2];
   uint32_t na = tn[0], nb = tn[1], nd = tn[2], sa = ts[0], sb = ts[1], sd = ts[2];
@@ -502,8 +497,8 @@ across_in_call(const qk__cdt_t *c, uint32_t t, uint32_t n, int j) {
  * them all but past its cap), which the loop reads; without, it tests. The same flips
  * either way. With_undo it also writes c->undo's record of each flip (what undo_flip0
  * needs) and lists the star's constrained far edges in c->undo_seg. */
-static ALWAYS_INLINE void legalize_with(qk__cdt_t *c, int sp, const int with_known,
-                                        const int with_undo) {
+static QK__ALWAYS_INLINE void legalize_with(qk__cdt_t *c, int sp, const int with_known,
+                                            const int with_undo) {
   uint32_t *stk = c->stk, *undo = c->undo, *useg = c->undo_seg;
   size_t nu = c->nundo, nus = 0;
   const uint32_t *known = c->known, in = 2 * c->known_gen + 1;

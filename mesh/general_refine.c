@@ -13,6 +13,7 @@
  * is rejected, and a mesh still holding a bad triangle at the end is refused.
  */
 #include "mesh/cdt_internal.h"
+#include "index/inline.h"
 #include "mesh/expansion.h"
 #include "mesh/general_mesh.h"
 
@@ -324,12 +325,6 @@ static qk_status_t check(qk__gm_t *g, uint32_t t) {
   return check_kept(g, t);
 }
 
-#if defined(__GNUC__)
-#define STAR_INLINE inline __attribute__((always_inline))
-#else
-#define STAR_INLINE inline
-#endif
-
 /* The star of the last insertion's vertex v = g->dirty_v, all in face f = g->dirty_face
  * (g->star_pending): label its triangles f and, when f is kept, check_kept them, each
  * spoke's length computed once; one walk around v for both (the insertion leaves them to
@@ -340,7 +335,8 @@ static qk_status_t check(qk__gm_t *g, uint32_t t) {
  * constants there, with the arrays and the bounds in locals: the loop read them from g and
  * tested both flags on every triangle (about 5 of its 100 instructions a triangle: 14.1 M
  * against 13.3 M in all on South Africa at extent/256). */
-static STAR_INLINE qk_status_t check_star_with(qk__gm_t *g, const int clear, const int plain) {
+static QK__ALWAYS_INLINE qk_status_t check_star_with(qk__gm_t *g, const int clear,
+                                                     const int plain) {
   const qk__cdt_t *c = &g->cdt;
   const uint32_t v = g->dirty_v, f = g->dirty_face, first = c->vtri[v];
   const uint32_t *V = c->v, *N = c->nbr, *S = c->seg;

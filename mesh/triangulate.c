@@ -4,6 +4,7 @@
  * Coordinates here are doubled, so Steiner points at unit-square centres are integers.
  */
 #include "mesh/mesh_internal.h"
+#include "index/inline.h"
 
 #include <assert.h>
 #include <math.h>
@@ -103,8 +104,8 @@ static inline qk_status_t new_vertex(qk__tri_state_t *T, int64_t x, int64_t y, i
  * Four calls a leaf: the probe is inlined, and a new key is stored in the slot the probe
  * ended at while the map has room (hmap_get_or_put, which grows it, otherwise). */
 /* (Always inlined: GCC leaves it out of line where it is called nine times in a row.) */
-static inline __attribute__((always_inline)) qk_status_t
-corner_vertex(qk__tri_state_t *T, int64_t x, int64_t y, uint32_t *id) {
+static QK__ALWAYS_INLINE qk_status_t corner_vertex(qk__tri_state_t *T, int64_t x, int64_t y,
+                                                   uint32_t *id) {
   uint64_t key = ((uint64_t)x << 32) | (uint64_t)y;
   qk__hmap_t *h = &T->vmap;
   size_t mask = h->cap - 1, j = hslot(key, h->cap);
@@ -233,8 +234,7 @@ typedef struct grid_probe {
   size_t nv;
 } grid_probe_t;
 
-static inline __attribute__((always_inline)) void grid_point(grid_probe_t *G, int64_t x, int64_t y,
-                                                             uint32_t *id) {
+static QK__ALWAYS_INLINE void grid_point(grid_probe_t *G, int64_t x, int64_t y, uint32_t *id) {
   const uint64_t key = ((uint64_t)x << 32) | (uint64_t)y;
   size_t j = (size_t)((key * 0x9e3779b97f4a7c15ull) >> G->shift);
   for (uint64_t k; (k = G->k[j]) != UINT64_MAX; j = (j + 1) & G->mask)

@@ -15,6 +15,7 @@
  * beyond that a bounded max-heap in the caller's buffer (query/heap.c).
  */
 #include "query/query_internal.h"
+#include "index/inline.h"
 
 #include <string.h>
 
@@ -34,12 +35,6 @@
 #endif
 
 int qk__knn_avx2_off;
-
-#if defined(__GNUC__)
-#define QK__ALWAYS_INLINE inline __attribute__((always_inline))
-#else
-#define QK__ALWAYS_INLINE inline
-#endif
 
 /* Largest k kept as a sorted array rather than a heap. */
 #define QK__KNN_SORTED 32
@@ -525,8 +520,11 @@ static inline uint64_t within(const double *xs, const double *ys, uint32_t m, do
  */
 #define QK__FILL_LOW 63u /* the low bits of a key that hold the candidate's place */
 
-/* Unroll the loop that follows (the sorting network's, whose bounds are constants). */
-#if defined(__GNUC__) && !defined(__clang__)
+/* Unroll the loop that follows (the sorting network's, whose bounds are constants once it
+ * is inlined; not under the sanitizers, which inline nothing by force: index/inline.h). */
+#if defined(QK__SANITIZED)
+#define QK__UNROLL
+#elif defined(__GNUC__) && !defined(__clang__)
 #define QK__UNROLL _Pragma("GCC unroll 32")
 #elif defined(__clang__)
 #define QK__UNROLL _Pragma("unroll")

@@ -12,20 +12,16 @@
 #endif
 
 #include "region/region_internal.h"
-
-#if defined(__GNUC__)
-#define ALWAYS_INLINE inline __attribute__((always_inline))
-#else
-#define ALWAYS_INLINE inline
-#endif
+#include "index/inline.h"
 
 /* Map a query to the plane of the index; false when it is in no feature. Most points lie
  * in the query window, where the mapping changes nothing but the tiny coordinates. */
-static ALWAYS_INLINE bool in_root(const qk_region_t *r, double x, double y) {
+static QK__ALWAYS_INLINE bool in_root(const qk_region_t *r, double x, double y) {
   return x >= r->rx && x < r->rx + r->rside && y >= r->ry && y < r->ry + r->rside;
 }
 
-static ALWAYS_INLINE bool normalise(const qk_region_t *r, double *x, double *y, qk_boundary_t b) {
+static QK__ALWAYS_INLINE bool normalise(const qk_region_t *r, double *x, double *y,
+                                        qk_boundary_t b) {
   if (!(*x >= r->qx0 && *x <= r->qx1 && *y >= r->qy0 && *y <= r->qy1)) {
     if (!r->planar) {
       if (!(*y >= -90 && *y <= 90)) return false;
@@ -74,12 +70,12 @@ typedef struct leaf_box {
   uint32_t k; /* the kid[] value of the leaf */
 } leaf_box_t;
 
-static ALWAYS_INLINE bool in_box(const leaf_box_t *c, double x, double y) {
+static QK__ALWAYS_INLINE bool in_box(const leaf_box_t *c, double x, double y) {
   return x >= c->lx && x < c->ux && y >= c->ly && y < c->uy;
 }
 
 /* Descend to the leaf holding (x, y), which normalise() accepted. */
-static ALWAYS_INLINE void descend(const qk_region_t *r, double x, double y, leaf_box_t *c) {
+static QK__ALWAYS_INLINE void descend(const qk_region_t *r, double x, double y, leaf_box_t *c) {
   const uint32_t *kid = r->kid;
   uint32_t k = kid[0];
   double sx = r->rx, sy = r->ry, h = r->rside, ux = INFINITY, uy = INFINITY;
@@ -127,8 +123,8 @@ static inline uint32_t direct(uint32_t k) { return (k & 0x3fffffffu) - 1u; }
 
 /* Does the box of leaf L's edges lie strictly beside the box [lox, hix] x [loy, hiy]?
  * Then every edge does (beside()), and none is touched or crossed by a segment in it. */
-static ALWAYS_INLINE bool box_beside(const qk__leaf_t *L, double lox, double hix, double loy,
-                                     double hiy) {
+static QK__ALWAYS_INLINE bool box_beside(const qk__leaf_t *L, double lox, double hix, double loy,
+                                         double hiy) {
   return hix < L->ex0 || lox > L->ex1 || hiy < L->ey0 || loy > L->ey1;
 }
 
@@ -136,9 +132,9 @@ static ALWAYS_INLINE bool box_beside(const qk__leaf_t *L, double lox, double hix
  * point to the sink; with `all` false, stop at the first. Returns how many were found
  * (and written while below cap). Inlined per rule, so the semi-open rule, which needs no
  * on-edge test, gets a loop of its own. */
-static ALWAYS_INLINE size_t leaf_features(const qk_region_t *r, const qk__leaf_t *L, double cx,
-                                          double cy, double x, double y, qk_boundary_t b, bool all,
-                                          uint32_t *out, size_t cap) {
+static QK__ALWAYS_INLINE size_t leaf_features(const qk_region_t *r, const qk__leaf_t *L, double cx,
+                                              double cy, double x, double y, qk_boundary_t b,
+                                              bool all, uint32_t *out, size_t cap) {
   /* (the arrays may be NULL when the whole layer has no sets or no edges) */
   uint32_t ns = L->ns, si = 0, ne = L->ne, i = 0;
   const uint32_t *S = ns ? r->sets + L->s0 : NULL;
@@ -186,8 +182,9 @@ static ALWAYS_INLINE size_t leaf_features(const qk_region_t *r, const qk__leaf_t
  * walk as leaf_features() stopping at the first feature, written for that case (the
  * features that hold the reference point and have no pieces here come from the set,
  * held one ahead in `s`). Inlined per rule. */
-static ALWAYS_INLINE uint32_t leaf_first_exact(const qk_region_t *r, const qk__leaf_t *L, double cx,
-                                               double cy, double x, double y, qk_boundary_t b) {
+static QK__ALWAYS_INLINE uint32_t leaf_first_exact(const qk_region_t *r, const qk__leaf_t *L,
+                                                   double cx, double cy, double x, double y,
+                                                   qk_boundary_t b) {
   uint32_t ne = L->ne, ns = L->ns, s0 = L->s0;
   /* features are below 2^29 (prepare.c), so QK_NONE follows every one */
   uint32_t s = ns ? r->sets[s0] : QK_NONE, si = 0;
@@ -223,8 +220,8 @@ static ALWAYS_INLINE uint32_t leaf_first_exact(const qk_region_t *r, const qk__l
 
 /* Does edge g lie strictly beside the box [lox, hix] x [loy, hiy]? (Then it crosses no
  * segment in the box, whatever the perturbation, which is infinitesimal.) */
-static ALWAYS_INLINE bool beside(const qk__seg_t *g, double lox, double hix, double loy,
-                                 double hiy) {
+static QK__ALWAYS_INLINE bool beside(const qk__seg_t *g, double lox, double hix, double loy,
+                                     double hiy) {
   return qk__max(g->ax, g->bx) < lox || qk__min(g->ax, g->bx) > hix ||
          qk__max(g->ay, g->by) < loy || qk__min(g->ay, g->by) > hiy;
 }
@@ -234,8 +231,8 @@ static ALWAYS_INLINE bool beside(const qk__seg_t *g, double lox, double hix, dou
  * is zero, so the perturbation never matters and the point is on no edge (the three rules
  * agree), and the loop makes no call (which would cost the registers holding the points).
  * Returns UNSURE when some filter cannot decide; the caller then runs the exact walk. */
-static ALWAYS_INLINE uint32_t leaf_first_filtered(const qk_region_t *r, const qk__leaf_t *L,
-                                                  double cx, double cy, double x, double y) {
+static QK__ALWAYS_INLINE uint32_t leaf_first_filtered(const qk_region_t *r, const qk__leaf_t *L,
+                                                      double cx, double cy, double x, double y) {
   static const double sign[2] = {-1.0, 1.0};
   uint32_t ne = L->ne, ns = L->ns, s0 = L->s0;
   uint32_t s = ns ? r->sets[s0] : QK_NONE, si = 0;
@@ -294,8 +291,8 @@ leaf_first_slow(const qk_region_t *r, const qk__leaf_t *L, double cx, double cy,
 }
 
 /* The lowest feature holding the point in leaf record L (QK_NONE for none). */
-static ALWAYS_INLINE uint32_t leaf_first(const qk_region_t *r, const qk__leaf_t *L, double cx,
-                                         double cy, double x, double y, qk_boundary_t b) {
+static QK__ALWAYS_INLINE uint32_t leaf_first(const qk_region_t *r, const qk__leaf_t *L, double cx,
+                                             double cy, double x, double y, qk_boundary_t b) {
   uint32_t f = leaf_first_filtered(r, L, cx, cy, x, y);
   return f != UNSURE ? f : leaf_first_slow(r, L, cx, cy, x, y, b);
 }
@@ -693,9 +690,9 @@ static size_t sort_chunk(const qk_region_t *r, const qk_point_t *pts, size_t n, 
  * together after a prefetch of their leaf records, so that those loads overlap. */
 #define BLOCK 32
 
-static ALWAYS_INLINE void run_impl(const qk_region_t *r, qk_boundary_t b, const qk_point_t *pts,
-                                   const uint32_t *items, size_t m, uint32_t *out, int *nonfinite,
-                                   bool sorted) {
+static QK__ALWAYS_INLINE void run_impl(const qk_region_t *r, qk_boundary_t b, const qk_point_t *pts,
+                                       const uint32_t *items, size_t m, uint32_t *out,
+                                       int *nonfinite, bool sorted) {
   leaf_box_t c = {INFINITY, INFINITY, -INFINITY, -INFINITY, 0, 0, 0};
   uint32_t bi[BLOCK], bk[BLOCK];
   double bx[BLOCK], by[BLOCK], bcx[BLOCK], bcy[BLOCK];

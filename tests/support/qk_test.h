@@ -28,8 +28,20 @@
 #ifndef QKT_TSAN
 #define QKT_TSAN 0
 #endif
+#if defined(__SANITIZE_ADDRESS__)
+#define QKT_ASAN 1
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+#define QKT_ASAN 1
+#endif
+#endif
+#ifndef QKT_ASAN
+#define QKT_ASAN 0
+#endif
 #if QKT_TSAN
 #define QKT_SERIAL __attribute__((no_sanitize("thread")))
+#elif QKT_ASAN
+#define QKT_SERIAL __attribute__((no_sanitize("address")))
 #else
 #define QKT_SERIAL
 #endif
