@@ -157,7 +157,12 @@ struct qk_world {
   uint32_t n_cells, cap_cells;
   uint32_t lv_first[QK__NLEV], lv_n[QK__NLEV]; /* each level's run of cells */
   qk__prows_t cur;                             /* this frame's pairs (handles: ugen) */
-  qk__kvec_t began;                            /* pairs that began (handles: ugen) */
+  /* The current pairs also as keys in order (8 bytes a pair), when the last update's
+   * merge was the key merge of short rows (then ckeys.n == cur.n, else ckeys.n is 0):
+   * the next merge reads the last frame's keys here instead of writing them out of the
+   * rows again. */
+  qk__kvec_t ckeys;
+  qk__kvec_t began; /* pairs that began (handles: ugen) */
   qk__kvec_t ended; /* pairs that ended (handles: ugen, or egen for changed slots) */
   uint64_t *egen;   /* slot << 32 | generation before the last update, of the slots
                        that changed at it (sorted) */
