@@ -362,6 +362,18 @@ static inline __attribute__((always_inline)) int make_rows(const qk_allocator_t 
   for (size_t i = 0; i < n; i++) t32[cb[(uint32_t)keys[i]]++] = (uint32_t)(keys[i] >> 32) - a0;
   /* cb[b] is now the end of b's run, where b + 1's starts. */
   size_t i = 0;
+  if (flat) {
+    /* (as above: the keys in order too, one store more a key; measured on the uniform
+     * scene at 10^5, whose merge then takes the keys: 62.40 -> 59.89 M a frame) */
+    for (uint32_t b = 0; b < n_b; b++) QK__UNROLL4
+    for (size_t e = cb[b]; i < e; i++) {
+      const uint32_t a = t32[i], p = ca[a]++;
+      rb[p] = b;
+      keys[p] = (uint64_t)(a + a0) << 32 | b;
+    }
+    *flat = keys;
+    return 1;
+  }
   for (uint32_t b = 0; b < n_b; b++) QK__UNROLL4
   for (size_t e = cb[b]; i < e; i++) rb[ca[t32[i]]++] = b;
   return 1;
