@@ -399,8 +399,9 @@ level_runs(share_t *s, kc_t *kc, uint32_t lo, uint32_t hi, uint32_t hi2, float n
  * against those boxes (rounded from the cells' boxes: monotone, so a cell whose float box
  * misses the object's misses every object's float box in it), from the first such cell to
  * the last (consecutive in the order too). end: past the last cell of a's level. */
-static inline __attribute__((always_inline)) int
-same_level(share_t *s, kc_t *kc, uint32_t a, uint32_t end, uint32_t *up, const int ax) {
+static inline __attribute__((always_inline)) int same_level(share_t *s, kc_t *kc, uint32_t a,
+                                                            uint32_t end, double side, uint32_t *up,
+                                                            const int ax) {
   const qk_world_t *w = s->w;
   const qk__wcell_t *c = &w->cells[a];
   const qk_box_t *hb = s->pk->hb, *ha = &hb[a];
@@ -409,15 +410,22 @@ same_level(share_t *s, kc_t *kc, uint32_t a, uint32_t end, uint32_t *up, const i
   if (a + 1 < end && c[1].cy == c->cy && c[1].cx == c->cx + 1 && boxes_meet(ha, &hb[a + 1]))
     hi2 = c[2].start, nx = (float)hb[a + 1].xmin;
   /* The row above: up to three consecutive cells (without the end cells whose boxes miss
-   * this one's). */
-  uint32_t u = *up > a + 1 ? *up : a + 1;
-  int64_t ty = (int64_t)c->cy + 1, tx = (int64_t)c->cx - 1;
-  while (u < end && (w->cells[u].cy < ty || (w->cells[u].cy == ty && w->cells[u].cx < tx))) u++;
-  *up = u;
-  uint32_t u1 = u;
-  while (u1 < end && w->cells[u1].cy == ty && w->cells[u1].cx <= tx + 2) u1++;
-  while (u < u1 && !boxes_meet(ha, &hb[u])) u++;
-  while (u1 > u && !boxes_meet(ha, &hb[u1 - 1])) u1--;
+   * this one's). Their objects lie in their loose squares, at or above (cy + 1) side, so
+   * a cell whose box ends below that meets none of them, and its search is skipped (the
+   * cursor stays: the next cell moves it on). In a sparse world most cells are such
+   * (measured on the huge scene at 10^4, 1.2 objects a cell: the search 0.89 -> 0.81 M a
+   * frame; the uniform scene's cells pay about 10 instructions each for the test). */
+  uint32_t u = a + 1, u1 = a + 1;
+  if (ha->ymax >= ((double)c->cy + 1) * side) {
+    u = *up > a + 1 ? *up : a + 1;
+    int64_t ty = (int64_t)c->cy + 1, tx = (int64_t)c->cx - 1;
+    while (u < end && (w->cells[u].cy < ty || (w->cells[u].cy == ty && w->cells[u].cx < tx))) u++;
+    *up = u;
+    u1 = u;
+    while (u1 < end && w->cells[u1].cy == ty && w->cells[u1].cx <= tx + 2) u1++;
+    while (u < u1 && !boxes_meet(ha, &hb[u])) u++;
+    while (u1 > u && !boxes_meet(ha, &hb[u1 - 1])) u1--;
+  }
   if (u == u1) { /* (the common cell of a sparse world: nothing above) */
     if (hi2 == hi) {
       for (uint32_t k = lo; k + 1 < hi; k++) {
@@ -642,10 +650,11 @@ static __attribute__((noinline)) int cell_others(share_t *s, uint32_t a, int me)
  * cell, most of a sparse world's cell of one object. */
 static inline __attribute__((always_inline)) int level_cells(share_t *s, uint32_t a, uint32_t a1,
                                                              uint32_t *up, int me, const int ax) {
+  const double side = qk__pow2(s->lv[me].l); /* (the level's cell side) */
   if (s->lv[me].other) {
     for (; a < a1; a++) {
       kc_t kc = kc_open(s);
-      int ok = same_level(s, &kc, a, s->lv[me].end, up, ax);
+      int ok = same_level(s, &kc, a, s->lv[me].end, side, up, ax);
       kc_close(s, &kc);
       if (!ok || !cell_others(s, a, me)) return 0;
     }
@@ -654,7 +663,7 @@ static inline __attribute__((always_inline)) int level_cells(share_t *s, uint32_
   kc_t kc = kc_open(s);
   const uint32_t end = s->lv[me].end;
   int ok = 1;
-  for (; ok && a < a1; a++) ok = same_level(s, &kc, a, end, up, ax);
+  for (; ok && a < a1; a++) ok = same_level(s, &kc, a, end, side, up, ax);
   kc_close(s, &kc);
   return ok;
 }
