@@ -31,10 +31,14 @@
 #if defined(__x86_64__) && defined(__SSE2__) && defined(__GLIBC__) && defined(__has_attribute)
 #if __has_attribute(target_clones)
 #define QK__CLONES __attribute__((target_clones("avx2", "default")))
+/* (a function compiled twice is called through the loader's choice, never inlined; clang
+ * rejects noinline beside target_clones) */
+#define QK__CLONES_NOINLINE QK__CLONES
 #endif
 #endif
 #ifndef QK__CLONES
 #define QK__CLONES
+#define QK__CLONES_NOINLINE __attribute__((noinline))
 #endif
 
 /* Levels: cells of side 2^L for L in [QK__LMIN, QK__LMIN + QK__NLEV); the filing keeps

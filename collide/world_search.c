@@ -1031,7 +1031,7 @@ static inline __attribute__((always_inline)) int sweep_run(share_t *s, uint32_t 
 
 /* The sweeps' variants, each a function of its own (their code apart, as measured). */
 #define QK__SWEEP_VARIANT(name, all_exact, began, near_)                                           \
-  QK__CLONES __attribute__((noinline)) static int name(share_t *s, uint32_t b0, uint32_t b1) {     \
+  QK__CLONES_NOINLINE static int name(share_t *s, uint32_t b0, uint32_t b1) {                      \
     return sweep_run(s, b0, b1, all_exact, began, near_);                                          \
   }
 QK__SWEEP_VARIANT(sweep_any, 0, 0, 0)
