@@ -109,6 +109,7 @@ void qk_world_free(qk_world_t *w) {
   qk__free(&a, w->dnext, (size_t)w->cap_dnext * sizeof *w->dnext);
   qk__free(&a, w->cur.b, w->cur.cap * sizeof *w->cur.b);
   qk__free(&a, w->cur.row, w->cur.row ? 2 * (w->cur.n_nz + 1) * sizeof *w->cur.row : 0);
+  qk__free(&a, w->ckeys.v, w->ckeys.cap * sizeof *w->ckeys.v);
   qk__free(&a, w->began.v, w->began.cap * sizeof *w->began.v);
   qk__free(&a, w->ended.v, w->ended.cap * sizeof *w->ended.v);
   qk__free(&a, w->egen, w->n_egen * sizeof *w->egen);
@@ -136,7 +137,8 @@ size_t qk_world_pair_bytes(const qk_world_t *w) {
   if (!w) return 0;
   return w->cur.cap * sizeof *w->cur.b +
          (w->cur.row ? 2 * (w->cur.n_nz + 1) * sizeof *w->cur.row : 0) +
-         (w->began.cap + w->ended.cap + w->n_egen + w->scr_keys.cap) * sizeof(uint64_t) +
+         (w->ckeys.cap + w->began.cap + w->ended.cap + w->n_egen + w->scr_keys.cap) *
+             sizeof(uint64_t) +
          w->cap_spare_b * sizeof *w->spare_b + kept_tkeys(w) +
          (size_t)w->n_fbox * 4 * sizeof *w->fbox + w->near.cap * sizeof *w->near.v +
          qk__wscr_bytes(w);

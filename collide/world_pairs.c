@@ -4,6 +4,7 @@
  * sorted into rows (one per slot that has pairs), and the began / ended sets by merging
  * them with the previous frame's.
  */
+#include <assert.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -360,6 +361,18 @@ static QK__ALWAYS_INLINE int make_rows(const qk_allocator_t *al, uint64_t *keys,
   for (size_t i = 0; i < n; i++) t32[cb[(uint32_t)keys[i]]++] = (uint32_t)(keys[i] >> 32) - a0;
   /* cb[b] is now the end of b's run, where b + 1's starts. */
   size_t i = 0;
+  if (flat) {
+    /* (as above: the keys in order too, one store more a key; measured on the uniform
+     * scene at 10^5, whose merge then takes the keys: 62.40 -> 59.89 M a frame) */
+    for (uint32_t b = 0; b < n_b; b++) QK__UNROLL4
+    for (size_t e = cb[b]; i < e; i++) {
+      const uint32_t a = t32[i], p = ca[a]++;
+      rb[p] = b;
+      keys[p] = (uint64_t)(a + a0) << 32 | b;
+    }
+    *flat = keys;
+    return 1;
+  }
   for (uint32_t b = 0; b < n_b; b++) QK__UNROLL4
   for (size_t e = cb[b]; i < e; i++) rb[ca[t32[i]]++] = b;
   return 1;
@@ -633,14 +646,17 @@ static int kv_put(const qk_allocator_t *al, qk__kvec_t *v, const uint64_t *a, si
  * ran short (the merge's scratch failing falls back to diff_merge).
  */
 static __attribute__((noinline)) int diff_flat_nobranch(const qk_world_t *w, const qk__prows_t *o,
-                                                        uint64_t *nk, size_t nn, qk__kvec_t *bv,
+                                                        uint64_t *ck, uint64_t *nk, size_t nn,
+                                                        uint64_t *b2, qk__kvec_t *bv,
                                                         qk__kvec_t *ev) {
   const qk_allocator_t *al = &w->alloc;
   const size_t no = o->n;
-  const size_t n_ok = no ? no + 4 : 0;
-  uint64_t *ok = no ? qk__realloc(al, NULL, 0, n_ok * sizeof *ok) : NULL;
+  /* The last frame's keys: those the last update kept (ck), else written out of its rows
+   * into scratch. */
+  const size_t n_ok = no && !ck ? no + 4 : 0;
+  uint64_t *ok = ck ? ck : n_ok ? qk__realloc(al, NULL, 0, n_ok * sizeof *ok) : NULL;
   if (no && !ok) return diff_flat_lists(w, o, nk, nn, 0, bv, ev);
-  if (no) rows_keys(o, ok);
+  if (n_ok) rows_keys(o, ok);
   qk__kvec_t lb = *bv, le = *ev;
   int res = 1;
   /* The halves: nk[0 .. h) with ok[0 .. h2) and nk[h .. nn) with ok[h2 .. no), where
@@ -658,12 +674,14 @@ static __attribute__((noinline)) int diff_flat_nobranch(const qk_world_t *w, con
     }
     h2 = lo;
   }
-  /* The second half's began and ended lists are written over the keys it has read (each
-   * list takes at most one place a key read, so a key is written at or before the place
-   * read next): this frame's keys are not needed after the merge, nor the last frame's
-   * copy. (In a block of their own, 123 KB more at 10^4 objects, the C library's heap
-   * gave back and took again more pages: 6 700 -> 10 800 page faults in 600 frames.) */
-  uint64_t *B2 = nk + h, *E2 = ok ? ok + h2 : NULL;
+  /* The second half's ended list is written over the old keys it has read (it takes at
+   * most one place a key read, so a key is written at or before the place read next):
+   * the last frame's keys are not needed after the merge. Its began list goes to b2 when
+   * given (room for nn - h keys: this frame's keys then stay, to be kept for the next
+   * merge), else over this frame's keys in the same way. (In a block of their own, 123 KB
+   * more at 10^4 objects, the C library's heap gave back and took again more pages:
+   * 6 700 -> 10 800 page faults in 600 frames.) */
+  uint64_t *B2 = b2 ? b2 : nk + h, *E2 = ok ? ok + h2 : NULL;
   size_t i = 0, j = 0, i2 = h, j2 = h2, nb2 = 0, ne2 = 0;
   while (no && h) {
     size_t sb = QK__DIFF_STEPS;
@@ -688,7 +706,7 @@ static __attribute__((noinline)) int diff_flat_nobranch(const qk_world_t *w, con
   if (res)
     res = diff_flat_run(al, nk, i, h, ok, j, h2, &lb, &le) && kv_put(al, &lb, B2, nb2) &&
           kv_put(al, &le, E2, ne2) && diff_flat_run(al, nk, i2, nn, ok, j2, no, &lb, &le);
-  qk__free(al, ok, n_ok * sizeof *ok);
+  qk__free(al, n_ok ? ok : NULL, n_ok * sizeof *ok);
   *bv = lb, *ev = le;
   return res;
 }
@@ -708,11 +726,20 @@ static __attribute__((noinline)) int diff_lists(const qk_world_t *w, const qk__p
   *bv = lb, *ev = le;
   return ok;
 }
+/* Began and ended from the last frame's rows o (and its keys ck in order, when kept)
+ * and this frame's nw (and its keys nk in order, when the sort left them so). *kept: this
+ * frame's keys are still in nk, in order, after the merge (the next one may read them):
+ * the key merge of short rows, which with b2 (room for half of nk) writes its scratch
+ * there, not over nk. */
 static int diff(const qk_world_t *w, const qk__prows_t *o, const qk__prows_t *nw, int dirty,
-                uint64_t *nk, qk__kvec_t *bv, qk__kvec_t *ev) {
-  if (nk && nw->n + o->n < 4 * (nw->n_nz + o->n_nz))
+                uint64_t *ck, uint64_t *nk, uint64_t *b2, qk__kvec_t *bv, qk__kvec_t *ev,
+                int *kept) {
+  *kept = 0;
+  if (nk && nw->n + o->n < 4 * (nw->n_nz + o->n_nz)) {
+    *kept = dirty || b2;
     return dirty ? diff_flat_lists(w, o, nk, nw->n, dirty, bv, ev)
-                 : diff_flat_nobranch(w, o, nk, nw->n, bv, ev);
+                 : diff_flat_nobranch(w, o, ck, nk, nw->n, b2, bv, ev);
+  }
   return diff_lists(w, o, nw, dirty, bv, ev);
 }
 
@@ -1231,7 +1258,8 @@ static int range_rows(pjob_t *J, unsigned t) {
   /* The lists grow in locals: the ranges' list heads share cache lines in J, and every
    * key added writes its count (false sharing between the threads). */
   qk__kvec_t bv = J->bv[t], ev = J->ev[t];
-  int ok = diff(J->w, &ov, lr, J->dirty, NULL, &bv, &ev);
+  int kept;
+  int ok = diff(J->w, &ov, lr, J->dirty, NULL, NULL, NULL, &bv, &ev, &kept);
   J->bv[t] = bv, J->ev[t] = ev;
   return ok;
 }
@@ -1563,7 +1591,8 @@ static qk_status_t update(qk_world_t *w) {
   size_t n_obj = w->n_obj, tcap = total ? total : 1;
   /* (the began pairs only: the rows are the last frame's that stay and these) */
   size_t rcap = only_new ? total + w->cur.n + 1 : tcap;
-  int dirty = w->ident_dirty, ok = 0;
+  int dirty = w->ident_dirty, ok = 0, kept = 0;
+  const uint64_t *keep = NULL; /* this frame's keys in order, to be kept (see ckeys) */
   qk__prows_t nr = {0};
   qk__kvec_t bv = {0}, ev = {0};
   /* The new rows go in the buffer of the frame before last when it is large enough
@@ -1583,6 +1612,8 @@ static qk_status_t update(qk_world_t *w) {
     size_t ccap = total * 4 < n_obj ? 257 : rows_cnt((uint32_t)n_obj, total);
     /* (the dense sort's scratch holds 32-bit slots, the sparse one's keys) */
     size_t tbytes = (total * 4 < n_obj ? sizeof(uint64_t) : sizeof(uint32_t)) * tcap;
+    /* (and the key merge's scratch after the sort, half of the keys: see diff) */
+    if (tbytes < (tcap / 2 + 1) * sizeof(uint64_t)) tbytes = (tcap / 2 + 1) * sizeof(uint64_t);
     /* The dense sort's scratch goes after the keys when their buffer has the room (it is
      * given the room when it is kept: see keep_keys). */
     int in_keys = total * 4 >= n_obj && (found.cap - total) * sizeof *found.v >= tbytes;
@@ -1604,13 +1635,29 @@ static qk_status_t update(qk_world_t *w) {
                       &ev, &nn);
     else if (ev.v) {
       uint64_t *nk = NULL; /* (this frame's keys in order, when the sort left them so) */
+      /* The last frame's keys when kept; the merge's scratch in the sort's (free after
+       * it), so that this frame's keys stay. */
+      uint64_t *ck = !dirty && w->ckeys.n == w->cur.n && w->cur.n ? w->ckeys.v : NULL;
       ok = make_rows_flat(al, found.v, tmp, total, cnt, (uint32_t)n_obj, &nr, &nk) &&
-           diff(w, &w->cur, &nr, dirty, nk, &bv, &ev);
+           diff(w, &w->cur, &nr, dirty, ck, nk, tmp, &bv, &ev, &kept);
+      if (ok && kept && nk) keep = nk;
     }
     qk__free(al, cnt, ccap * sizeof *cnt);
     if (!in_keys) qk__free(al, tmp, tbytes);
   }
   if (ok) w->last_found = total;
+  /* This frame's keys in order for the next merge, when the merge left them so: their
+   * buffer (the search's) becomes ckeys, and the last frame's ckeys the buffer that
+   * keep_keys keeps or frees (no copy). */
+  if (keep) {
+    assert(keep == found.v);
+    const qk__kvec_t t = w->ckeys;
+    w->ckeys = found, w->ckeys.n = total;
+    found = t, found.n = 0;
+  } else {
+    qk__free(al, w->ckeys.v, w->ckeys.cap * sizeof *w->ckeys.v);
+    w->ckeys = (qk__kvec_t){0};
+  }
   keep_tkeys(w, tk);
   keep_keys(w, &found, total);
   size_t n_eg = 0;
@@ -1618,6 +1665,7 @@ static qk_status_t update(qk_world_t *w) {
     for (uint32_t i = 0; i < w->n_obj; i++) n_eg += w->obj[i].gen != w->ugen[i];
   uint64_t *eg = NULL;
   if (!ok || (n_eg && !(eg = qk__realloc(al, NULL, 0, n_eg * sizeof *eg)))) {
+    w->ckeys.n = 0; /* (they are this frame's, and the last frame's rows stay) */
     qk__free(al, fb, (size_t)nfb * 4 * sizeof *fb);
     qk__free(al, nn.v, nn.cap * sizeof *nn.v);
     qk__free(al, bv.v, bv.cap * sizeof *bv.v);
@@ -1691,6 +1739,15 @@ qk_status_t qk_world_pairs(const qk_world_t *w, qk_pairs_which_t which, qk_world
    * through w in the loop would be read again after every call. */
   const uint32_t *row = w->cur.row, *start = w->cur.start, *rb = w->cur.b, *ug = w->ugen;
   const size_t n_nz = w->cur.n_nz;
+  if (w->ckeys.n == w->cur.n && w->cur.n) {
+    /* The pairs also as keys in order (see ckeys): each pair from its key. */
+    const uint64_t *ck = w->ckeys.v;
+    for (size_t i = 0, n = w->cur.n; i < n; i++) {
+      const uint32_t a = (uint32_t)(ck[i] >> 32), b = (uint32_t)ck[i];
+      if (fn((uint64_t)ug[a] << 32 | a, (uint64_t)ug[b] << 32 | b, ud)) return QK_OK;
+    }
+    return QK_OK;
+  }
   if (w->cur.n < 4 * n_nz) {
     /* Short rows (a sparse world): a plain loop (the unrolled one's set-up costs more than
      * it saves in a row of a pair or two; measured on the uniform scene at 10^4: 36.5 ->

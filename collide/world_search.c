@@ -402,7 +402,7 @@ static QK__ALWAYS_INLINE int level_runs(share_t *s, kc_t *kc, uint32_t lo, uint3
  * against those boxes (rounded from the cells' boxes: monotone, so a cell whose float box
  * misses the object's misses every object's float box in it), from the first such cell to
  * the last (consecutive in the order too). end: past the last cell of a's level. */
-static QK__ALWAYS_INLINE int same_level(share_t *s, kc_t *kc, uint32_t a, uint32_t end,
+static QK__ALWAYS_INLINE int same_level(share_t *s, kc_t *kc, uint32_t a, uint32_t end, double side,
                                         uint32_t *up, const int ax) {
   const qk_world_t *w = s->w;
   const qk__wcell_t *c = &w->cells[a];
@@ -412,15 +412,22 @@ static QK__ALWAYS_INLINE int same_level(share_t *s, kc_t *kc, uint32_t a, uint32
   if (a + 1 < end && c[1].cy == c->cy && c[1].cx == c->cx + 1 && boxes_meet(ha, &hb[a + 1]))
     hi2 = c[2].start, nx = (float)hb[a + 1].xmin;
   /* The row above: up to three consecutive cells (without the end cells whose boxes miss
-   * this one's). */
-  uint32_t u = *up > a + 1 ? *up : a + 1;
-  int64_t ty = (int64_t)c->cy + 1, tx = (int64_t)c->cx - 1;
-  while (u < end && (w->cells[u].cy < ty || (w->cells[u].cy == ty && w->cells[u].cx < tx))) u++;
-  *up = u;
-  uint32_t u1 = u;
-  while (u1 < end && w->cells[u1].cy == ty && w->cells[u1].cx <= tx + 2) u1++;
-  while (u < u1 && !boxes_meet(ha, &hb[u])) u++;
-  while (u1 > u && !boxes_meet(ha, &hb[u1 - 1])) u1--;
+   * this one's). Their objects lie in their loose squares, at or above (cy + 1) side, so
+   * a cell whose box ends below that meets none of them, and its search is skipped (the
+   * cursor stays: the next cell moves it on). In a sparse world most cells are such
+   * (measured on the huge scene at 10^4, 1.2 objects a cell: the search 0.89 -> 0.81 M a
+   * frame; the uniform scene's cells pay about 10 instructions each for the test). */
+  uint32_t u = a + 1, u1 = a + 1;
+  if (ha->ymax >= ((double)c->cy + 1) * side) {
+    u = *up > a + 1 ? *up : a + 1;
+    int64_t ty = (int64_t)c->cy + 1, tx = (int64_t)c->cx - 1;
+    while (u < end && (w->cells[u].cy < ty || (w->cells[u].cy == ty && w->cells[u].cx < tx))) u++;
+    *up = u;
+    u1 = u;
+    while (u1 < end && w->cells[u1].cy == ty && w->cells[u1].cx <= tx + 2) u1++;
+    while (u < u1 && !boxes_meet(ha, &hb[u])) u++;
+    while (u1 > u && !boxes_meet(ha, &hb[u1 - 1])) u1--;
+  }
   if (u == u1) { /* (the common cell of a sparse world: nothing above) */
     if (hi2 == hi) {
       for (uint32_t k = lo; k + 1 < hi; k++) {
@@ -645,10 +652,11 @@ static __attribute__((noinline)) int cell_others(share_t *s, uint32_t a, int me)
  * cell, most of a sparse world's cell of one object. */
 static QK__ALWAYS_INLINE int level_cells(share_t *s, uint32_t a, uint32_t a1, uint32_t *up, int me,
                                          const int ax) {
+  const double side = qk__pow2(s->lv[me].l); /* (the level's cell side) */
   if (s->lv[me].other) {
     for (; a < a1; a++) {
       kc_t kc = kc_open(s);
-      int ok = same_level(s, &kc, a, s->lv[me].end, up, ax);
+      int ok = same_level(s, &kc, a, s->lv[me].end, side, up, ax);
       kc_close(s, &kc);
       if (!ok || !cell_others(s, a, me)) return 0;
     }
@@ -657,7 +665,7 @@ static QK__ALWAYS_INLINE int level_cells(share_t *s, uint32_t a, uint32_t a1, ui
   kc_t kc = kc_open(s);
   const uint32_t end = s->lv[me].end;
   int ok = 1;
-  for (; ok && a < a1; a++) ok = same_level(s, &kc, a, end, up, ax);
+  for (; ok && a < a1; a++) ok = same_level(s, &kc, a, end, side, up, ax);
   kc_close(s, &kc);
   return ok;
 }
@@ -673,7 +681,7 @@ static void keys_ordered(uint64_t *keys, size_t n) {
   }
 }
 
-static void run_share(unsigned t, void *ud) {
+QK__CLONES static void run_share(unsigned t, void *ud) {
   share_t *s = &((share_t *)ud)[t];
   if (!kv_reserve(s, 256)) { /* (the keys' place is never NULL, its slack there: kc_open) */
     s->nomem = 1;
@@ -1024,7 +1032,7 @@ static QK__ALWAYS_INLINE int sweep_run(share_t *s, uint32_t b0, uint32_t b1, con
 
 /* The sweeps' variants, each a function of its own (their code apart, as measured). */
 #define QK__SWEEP_VARIANT(name, all_exact, began, near_)                                           \
-  __attribute__((noinline)) static int name(share_t *s, uint32_t b0, uint32_t b1) {                \
+  QK__CLONES_NOINLINE static int name(share_t *s, uint32_t b0, uint32_t b1) {                      \
     return sweep_run(s, b0, b1, all_exact, began, near_);                                          \
   }
 QK__SWEEP_VARIANT(sweep_any, 0, 0, 0)

@@ -103,6 +103,17 @@ static __attribute__((noinline)) void walk_rows1(walk_t *J, size_t lo, size_t hi
   const qk_world_pair_worker_fn fn = J->fn;
   void *const ud = J->ud;
   atomic_int *const stop = &J->stop;
+  if (w->ckeys.n == w->cur.n && w->cur.n) {
+    /* The pairs also as keys in order (kept for the next update's merge: short rows):
+     * each pair from its key, with no row to follow. */
+    const uint64_t *ck = w->ckeys.v;
+    for (size_t i = lo; i < hi; i++) {
+      const uint64_t key = ck[i];
+      const uint32_t a = (uint32_t)(key >> 32), b = (uint32_t)key;
+      WALK_CALL((uint64_t)ug[a] << 32 | a, (uint64_t)ug[b] << 32 | b, 0);
+    }
+    return;
+  }
   size_t k = row_of(&w->cur, lo);
   if (w->cur.n < 4 * w->cur.n_nz) {
     /* Short rows (a sparse world): one loop over the pairs, moving to the next row at
