@@ -27,15 +27,16 @@ static inline int qk__cdt_orient(const double *a, const double *b, const double 
  * |bdx cdy| + |cdx bdy| <= (lb + lc) / 2 as 2|xy| <= x^2 + y^2, and so for the other two
  * pairs. That in turn is at most s^2 / 3, s = la + lb + lc (s^2 is the sum of the three
  * squares and twice the three products, and the squares sum to at least the products).
- * The computed s^2 is at most thirteen roundings below its exact value (four in each
- * lift: the two differences, the squares, their sum; two in the sums, one in the square),
- * so the error is below 11u (1 - u)^-13 / 3 < 4u = 2^-51 times it. Two products fewer a
- * test than the sum of the products (the bound before, 2^-49 times it; 0.4% of the
- * meshing's instructions on the coastlines at extent/256), and about as tight: equal when
- * the point is near a corner, tighter when the three lifts are alike; the exact fallback
- * ran 15 times instead of 18 on South Africa at extent/256. The sum of the products
- * replaced the computed permanent (det's expression with absolute values, M within
- * rounding), which cost six absolute values and four more operations a test; the
+ * The computed s is at most six roundings below its exact value (four in each lift: the
+ * two differences, the squares, their sum; two in the sums), so the computed s^2 at most
+ * thirteen (twice six, and the square's own), and the error is below 11u (1 - u)^-13 / 3
+ * < 4u = 2^-51 times it. Two products fewer a test than the sum of the products (the
+ * bound before, 2^-49 times it; 0.4% of the meshing's instructions on the coastlines at
+ * extent/256). Equal to it when the point is near a corner, tighter when the three lifts
+ * are alike, looser only when one lift dominates (the point far from two close corners);
+ * the exact fallback ran 15 times instead of 18 on South Africa at extent/256. The sum of
+ * the products replaced the computed permanent (det's expression with absolute values, M
+ * within rounding), which cost six absolute values and four more operations a test; the
  * refinement makes about eight tests a point it inserts. */
 static inline int qk__cdt_incircle(const double *a, const double *b, const double *c,
                                    const double *d) {
