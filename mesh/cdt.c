@@ -379,8 +379,11 @@ static inline void flip(qk__cdt_t *c, uint32_t t, int i, uint32_t n, int j) {
   changed(c, n);
 }
 
-/* flip() with i = 0, for the legalisation after a point insertion (always inlined there). */
-static QK__ALWAYS_INLINE void flip0(qk__cdt_t *c, uint32_t t, uint32_t n, int j) {
+/* flip() with i = 0, for the legalisation after a point insertion (always inlined there).
+ * report: a constant, 0 in the copy that never has on_change set (the undo record's): with
+ * no call through c->on_change the compiler keeps the arrays and the loop's state in
+ * registers instead of reloading them from c after every flip. */
+static QK__ALWAYS_INLINE void flip0(qk__cdt_t *c, uint32_t t, uint32_t n, int j, const int report) {
   const int j1 = j == 2 ? 0 : j + 1, j2 = j == 0 ? 2 : j - 1;
   uint32_t *tv = c->v + 3 * (size_t)t, *tn = c->nbr + 3 * (size_t)t, *ts = c->seg + 3 * (size_t)t;
   uint32_t *nv = c->v + 3 * (size_t)n, *nn = c->nbr + 3 * (size_t)n, *ns = c->seg + 3 * (size_t)n;
@@ -399,8 +402,7 @@ static QK__ALWAYS_INLINE void flip0(qk__cdt_t *c, uint32_t t, uint32_t n, int j)
   }
   relink(c, C, n, t);
   c->vtri[q] = t, c->vtri[r] = n;
-  changed(c, t);
-  changed(c, n);
+  if (report) changed(c, t), changed(c, n);
 }
 
 void qk__cdt_flip(qk__cdt_t *c, uint32_t t, int i, uint32_t n, int j) { flip(c, t, i, n, j); }
@@ -415,7 +417,7 @@ static inline int facing(const qk__cdt_t *c, uint32_t n, uint32_t t) {
  * t2 = (p, a, b). Pushes the three on the flip stack. Always inlined: with its second
  * caller, qk__cdt_insert_in_undo, it was a call of 128 instructions where inlined it is
  * about 96 (0.9 M instructions of 69 M on South Africa at extent/256). */
-static QK__ALWAYS_INLINE int split3(qk__cdt_t *c, uint32_t t, uint32_t p) {
+static QK__ALWAYS_INLINE int split3(qk__cdt_t *c, uint32_t t, uint32_t p, const int report) {
   uint32_t *tv = c->v + 3 * (size_t)t, *tn = c->nbr + 3 * (size_t)t, *ts = c->seg + 3 * (size_t)t;
   uint32_t a = tv[0], b = tv[1], d = tv[2];
   uint32_t na = tn[0], nb = tn[1], nd = tn[2], sa = ts[0], sb = ts[1], sd = ts[2];
@@ -427,7 +429,7 @@ static QK__ALWAYS_INLINE int split3(qk__cdt_t *c, uint32_t t, uint32_t p) {
   relink(c, nb, t, t1);
   relink(c, nd, t, t2);
   c->vtri[p] = t, c->vtri[a] = t1;
-  changed(c, t), changed(c, t1), changed(c, t2);
+  if (report) changed(c, t), changed(c, t1), changed(c, t2);
   c->stk[0] = t, c->stk[1] = t1, c->stk[2] = t2;
   return 3;
 }
@@ -492,27 +494,36 @@ across_in_call(const qk__cdt_t *c, uint32_t t, uint32_t n, int j) {
 /* Lawson's flips after inserting p: every stacked triangle has p in slot 0; its edge 0 is
  * flipped when the vertex across it lies strictly inside its circumcircle (ties keep the
  * edge, so flips end). Each flip adds one triangle to p's star, so the stack never holds
- * more than its initial four plus nv entries. With_known and with_undo (constants in each
- * of the three copies): c->known records the tests (the refinement's cavity search made
+ * more than its initial four plus nv entries. With_known, with_undo and report (constants in
+ * each of the three copies): c->known records the tests (the refinement's cavity search made
  * them all but past its cap), which the loop reads; without, it tests. The same flips
  * either way. With_undo it also writes c->undo's record of each flip (what undo_flip0
- * needs) and lists the star's constrained far edges in c->undo_seg. */
+ * needs) and lists the star's constrained far edges in c->undo_seg. Report: each flip goes
+ * to on_change; the undo copy has it 0 (on_change must be NULL there: the refinement, its
+ * user, never sets it), which was 0.4% of the meshing's instructions with the arrays in
+ * locals (a copy without reports for the plain insertions gained nothing). */
 static QK__ALWAYS_INLINE void legalize_with(qk__cdt_t *c, int sp, const int with_known,
-                                            const int with_undo) {
-  uint32_t *stk = c->stk, *undo = c->undo, *useg = c->undo_seg;
+                                            const int with_undo, const int report) {
+  assert(!with_undo || !c->on_change);
+  /* The arrays in locals: nothing in the loop moves them, and with no call in the loop but
+   * the exact in-circle test's (rare) the compiler keeps them in registers. */
+  uint32_t *const stk = c->stk, *const undo = c->undo, *const useg = c->undo_seg;
+  const uint32_t *const N = c->nbr, *const S = c->seg, *const V = c->v;
+  const uint32_t *const vtri = c->vtri;
   size_t nu = c->nundo, nus = 0;
   const uint32_t *known = c->known, in = 2 * c->known_gen + 1;
-  const double *xy = c->xy, *pp = c->xy + 2 * (c->nv - 1); /* p, the last vertex */
+  const double *xy = c->xy;
+  const double *pv = c->xy + 2 * (c->nv - 1), pp[2] = {pv[0], pv[1]}; /* p, the last vertex */
   while (sp > 0) {
     uint32_t t = stk[--sp];
-    uint32_t n = c->nbr[3 * (size_t)t];
+    uint32_t n = N[3 * (size_t)t];
     if (with_undo) {
-      if (c->seg[3 * (size_t)t] != NONE) { /* final: a star triangle flips only across edge 0 */
+      if (S[3 * (size_t)t] != NONE) { /* final: a star triangle flips only across edge 0 */
         useg[nus++] = t;
         continue;
       }
       if (n == NONE) continue;
-    } else if (n == NONE || c->seg[3 * (size_t)t] != NONE)
+    } else if (n == NONE || S[3 * (size_t)t] != NONE)
       continue;
     int j;
     if (with_known && (known[n] | 1) == in) { /* stamped 2 gen (outside) or 2 gen + 1 */
@@ -523,7 +534,7 @@ static QK__ALWAYS_INLINE void legalize_with(qk__cdt_t *c, int sp, const int with
        * n's circumcircle, n's corners in its own order (an even permutation, so the same
        * exact sign), p's coordinates loaded once for the loop; n's slot facing t is looked
        * up only for a flip (most tests keep the edge). */
-      const uint32_t *nv = c->v + 3 * (size_t)n;
+      const uint32_t *nv = V + 3 * (size_t)n;
       if (!(qk__cdt_incircle(xy + 2 * (size_t)nv[0], xy + 2 * (size_t)nv[1], xy + 2 * (size_t)nv[2],
                              pp) > 0))
         continue;
@@ -533,12 +544,12 @@ static QK__ALWAYS_INLINE void legalize_with(qk__cdt_t *c, int sp, const int with
       if (!across_in_call(c, t, n, j)) continue;
     }
     if (with_undo) { /* what undo_flip0 needs besides the flipped pair */
-      const uint32_t *tv = c->v + 3 * (size_t)t;
+      const uint32_t *tv = V + 3 * (size_t)t;
       undo[nu] = t, undo[nu + 1] = (uint32_t)j;
-      undo[nu + 2] = c->vtri[tv[1]], undo[nu + 3] = c->vtri[tv[2]];
+      undo[nu + 2] = vtri[tv[1]], undo[nu + 3] = vtri[tv[2]];
       nu += 4;
     }
-    flip0(c, t, n, j);
+    flip0(c, t, n, j, report);
     stk[sp++] = t, stk[sp++] = n;
   }
   if (with_undo) c->nundo = nu, c->nundo_seg = nus;
@@ -546,13 +557,12 @@ static QK__ALWAYS_INLINE void legalize_with(qk__cdt_t *c, int sp, const int with
 
 static void legalize(qk__cdt_t *c, int sp) {
   if (c->known)
-    legalize_with(c, sp, 1, 0);
+    legalize_with(c, sp, 1, 0, 1);
   else if (c->undo)
-    legalize_with(c, sp, 0, 1);
+    legalize_with(c, sp, 0, 1, 0);
   else
-    legalize_with(c, sp, 0, 0);
+    legalize_with(c, sp, 0, 0, 1);
 }
-
 /* flip0(c, t, n, j) taken back, n = t's edge-1 neighbour, q's and r's vertex triangles
  * restored to vq and vr. After the flip t = (p, q, s) with neighbours (C, n, B) and n =
  * (p, s, r) with (D, A, t); before it t was (p, q, r) with (n, A, B), its edge 0
@@ -626,7 +636,7 @@ qk_status_t qk__cdt_insert_at(qk__cdt_t *c, double x, double y, uint32_t t, int 
     c->undo[0] = c->hint, c->undo[1] = c->vtri[c->v[3 * (size_t)t]];
     c->nundo = 2;
   }
-  int sp = w == QK__CDT_IN ? split3(c, t, p) : split_edge(c, t, k, p);
+  int sp = w == QK__CDT_IN ? split3(c, t, p, 1) : split_edge(c, t, k, p);
   if (sp == 4 && c->legal_sides) { /* stacked: t's side (t, t1), then the other's */
     if (!(c->legal_sides & 1)) c->stk[0] = c->stk[2], c->stk[1] = c->stk[3];
     sp = (c->legal_sides & 1 ? 2 : 0) + (c->legal_sides & 2 ? 2 : 0);
@@ -645,7 +655,7 @@ qk_status_t qk__cdt_insert_in_undo(qk__cdt_t *c, double x, double y, uint32_t t,
   c->xy[2 * (size_t)p] = x, c->xy[2 * (size_t)p + 1] = y;
   c->undo[0] = c->hint, c->undo[1] = c->vtri[c->v[3 * (size_t)t]];
   c->nundo = 2;
-  legalize_with(c, split3(c, t, p), 0, 1);
+  legalize_with(c, split3(c, t, p, 0), 0, 1, 0);
   c->hint = c->vtri[p];
   *v_out = p;
   return QK_OK;

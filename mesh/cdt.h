@@ -63,9 +63,10 @@ typedef struct qk__cdt {
   int legal_sides;
   /* Optional, set by a caller for one insertion of a point strictly inside a triangle
    * (QK__CDT_IN) and cleared after it: a record of the insertion's changes, with which
-   * qk__cdt_undo_insert takes the point out again. Two words, then four a Lawson flip: room
-   * for 4 (nv + 1) + 2 words (a flip adds a triangle to the point's star, so there are at
-   * most nv). nundo counts the words written. NULL: no record. */
+   * qk__cdt_undo_insert takes the point out again (on_change must be NULL then). Two words,
+   * then four a Lawson flip: room for 4 (nv + 1) + 2 words (a flip adds a triangle to the
+   * point's star, so there are at most nv). nundo counts the words written. NULL: no
+   * record. */
   uint32_t *undo;
   size_t nundo;
   /* With undo, also set by the caller: room for nv + 4 entries, where the flips list the

@@ -63,11 +63,15 @@ qk_status_t qk__gm_output(qk__gm_t *g, qk_mesh_t *m) {
   uint32_t nf = 0;
   for (uint32_t f = 0; f < g->nface; f++) g->faces[f].id = g->faces[f].drop ? 0 : ++nf;
   size_t ns = 0;
+  /* The arrays in locals in both passes over the triangles: the compiler reloaded them
+   * from g, c and m on every triangle. */
+  const uint32_t *const V = c->v, *const S = c->seg, *const face = g->face;
+  const qk__gm_face_t *const faces = g->faces;
   for (uint32_t t = 0; t < c->nt; t++)
-    if (kept(g, t)) {
+    if (!faces[face[t]].drop) {
       kt++;
-      const uint32_t *ts = &c->seg[3 * t];
-      for (int i = 0; i < 3; i++) newid[c->v[3 * t + i]] = 0;
+      const uint32_t *ts = &S[3 * t];
+      for (int i = 0; i < 3; i++) newid[V[3 * t + i]] = 0;
       if ((ts[0] & ts[1] & ts[2]) != QK__CDT_NONE)
         for (int i = 0; i < 3; i++) ns += own_seg(g, t, i) != QK__CDT_NONE;
     }
@@ -106,20 +110,23 @@ qk_status_t qk__gm_output(qk__gm_t *g, qk_mesh_t *m) {
    * the full computation, so the results are those of computing every corner. */
   double thr_hi = 0, thr_lo = 0, nthr_hi = -0.0;
   size_t j = 0, exempt = 0;
+  const double *const XY = c->xy;
+  uint32_t *const tri = m->tri, *const comp = m->comp;
+  double *const attr = m->attr;
   for (uint32_t t = 0; t < c->nt; t++) {
-    if (!kept(g, t)) continue;
-    const uint32_t *tv = &c->v[3 * t];
+    if (faces[face[t]].drop) continue;
+    const uint32_t *tv = &V[3 * t];
     /* e[i] runs from corner i + 1 to corner i + 2, so the sides at corner i are e[i+2] and
      * -e[i+1]: the same roundings as differences from the corner (a - b is exactly
      * -(b - a)), with each squared length computed once. */
     double e[3][2], l[3];
     for (int i = 0; i < 3; i++) {
-      const double *a = &c->xy[2 * tv[(i + 1) % 3]], *b = &c->xy[2 * tv[(i + 2) % 3]];
+      const double *a = &XY[2 * tv[(i + 1) % 3]], *b = &XY[2 * tv[(i + 2) % 3]];
       e[i][0] = b[0] - a[0], e[i][1] = b[1] - a[1];
       l[i] = e[i][0] * e[i][0] + e[i][1] * e[i][1];
     }
     for (int i = 0; i < 3; i++) {
-      m->tri[3 * j + i] = newid[tv[i]];
+      tri[3 * j + i] = newid[tv[i]];
       const double *u = e[(i + 2) % 3], *w = e[(i + 1) % 3];
       double dot = u[0] * w[0] + u[1] * w[1], ll = l[(i + 2) % 3] * l[(i + 1) % 3];
       /* cosine -dot / sqrt(ll): skipped when dot^2 < thr_hi ll for dot < 0 or dot^2 < thr_lo ll
@@ -139,15 +146,15 @@ qk_status_t qk__gm_output(qk__gm_t *g, qk_mesh_t *m) {
     }
     /* NONE has every bit set: the AND of the three is NONE only when no side is on a
      * segment, as in most triangles. */
-    const uint32_t *ts = &c->seg[3 * t];
+    const uint32_t *ts = &S[3 * t];
     if ((ts[0] & ts[1] & ts[2]) != QK__CDT_NONE)
       for (int i = 0; i < 3; i++) {
         uint32_t sg = own_seg(g, t, i);
         if (sg != QK__CDT_NONE) m->oseg[m->noseg++] = out_seg(g, t, i, sg, newid);
       }
-    const qk__gm_face_t *f = &g->faces[g->face[t]];
-    m->comp[j] = f->id;
-    if (m->attr) m->attr[j] = f->attr;
+    const qk__gm_face_t *f = &faces[face[t]];
+    comp[j] = f->id;
+    if (attr) attr[j] = f->attr;
     j++;
   }
   for (size_t i = 0; i < P->nv; i++) m->cxy[2 * i] = P->vx[i], m->cxy[2 * i + 1] = P->vy[i];
