@@ -1546,6 +1546,7 @@ static void test_collide_rays_lazy_nomem(void **state) {
 }
 
 int main(void) {
+  qkt_filters_from_env();
   g_seed = qkt_seed(7031);
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_collide_pairs),

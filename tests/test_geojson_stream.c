@@ -247,8 +247,7 @@ static void test_geojson_stream_not_object(void **state) {
 }
 
 int main(void) {
-  const char *only = getenv("QKT_TEST_FILTER"); /* (a cmocka pattern: run the tests it matches) */
-  if (only && *only) cmocka_set_test_filter(only);
+  qkt_filters_from_env();
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_geojson_stream_endless),
       cmocka_unit_test(test_geojson_stream_bounded),

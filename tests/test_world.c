@@ -3401,8 +3401,7 @@ static void test_world_nomem_moves(void **s) {
 
 int main(void) {
   g_seed = qkt_seed(20261130);
-  const char *only = getenv("QKT_TEST_FILTER"); /* (a cmocka pattern: run the tests it matches) */
-  if (only && *only) cmocka_set_test_filter(only);
+  qkt_filters_from_env();
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_world_uniform),
       cmocka_unit_test(test_world_clustered),

@@ -64,6 +64,12 @@ qk_tree_options_t qkt_unit_options(uint32_t capacity, const qk_allocator_t *a) {
   return o;
 }
 
+void qkt_filters_from_env(void) {
+  const char *only = getenv("QKT_TEST_FILTER"), *skip = getenv("QKT_SKIP_FILTER");
+  if (only && *only) cmocka_set_test_filter(only);
+  if (skip && *skip) cmocka_set_skip_filter(skip);
+}
+
 uint64_t qkt_seed(uint64_t def) {
   const char *s = getenv("QK_SEED");
   uint64_t seed = s ? strtoull(s, NULL, 0) : def;

@@ -69,6 +69,11 @@ void qkt_points(qkt_rng_t *r, qkt_dist_t d, qk_point_t *out, size_t n);
  * libc); the rest the defaults. */
 qk_tree_options_t qkt_unit_options(uint32_t capacity, const qk_allocator_t *a);
 
+/* cmocka's filters from the environment, for a main to call before running its tests:
+ * QKT_TEST_FILTER (a pattern: run only the tests it matches) and QKT_SKIP_FILTER (skip
+ * those it matches; scripts/memcheck.sh). */
+void qkt_filters_from_env(void);
+
 /* The seed for a test: QK_SEED from the environment, else `def`. Printed by the test. */
 uint64_t qkt_seed(uint64_t def);
 
