@@ -21,8 +21,12 @@ if [ ${#missing[@]} -gt 0 ]; then
   exit 77
 fi
 bdir="$(cd "$(dirname "$cli")" && pwd)/bench-smoke"
+# (linked with the library of the build under test when it has one: built once, not twice)
+lib="$(cd "$(dirname "$cli")" && pwd)/libquadkit.a"
+[ -f "$lib" ] || lib=
 if ! cmake -S "$src" -B "$bdir" -DCMAKE_BUILD_TYPE=Release -DQUADKIT_BUILD_BENCH=ON \
-  -DQUADKIT_BUILD_TESTS=OFF -DQUADKIT_BUILD_TOOLS=OFF >"$bdir-build.log" 2>&1 ||
+  -DQUADKIT_BUILD_TESTS=OFF -DQUADKIT_BUILD_TOOLS=OFF -DQUADKIT_BENCH_LIBRARY="$lib" \
+  >"$bdir-build.log" 2>&1 ||
   ! nice -n 5 cmake --build "$bdir" --target quadkit_bench -j2 >>"$bdir-build.log" 2>&1; then
   echo "FAIL: building quadkit-bench (log: $bdir-build.log)"
   tail -n 30 "$bdir-build.log"
