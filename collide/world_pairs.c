@@ -449,7 +449,7 @@ static QK__ALWAYS_INLINE int diff_merge(const qk_world_t *w, const qk__prows_t *
                                         const qk__prows_t *nw, const uint64_t *nk, size_t nn,
                                         int dirty, qk__kvec_t *bv, qk__kvec_t *ev) {
   const qk_allocator_t *al = &w->alloc;
-  rcur_t cn, co;
+  rcur_t cn = {0}, co; /* (cn unused when nk is given; set for the compilers that warn) */
   size_t i = 0;
   /* this frame's keys: through the rows (nk NULL), or from the flat list nk */
   uint64_t x = nk ? (nn ? nk[0] : END) : rc_first(&cn, nw), y = rc_first(&co, o);
