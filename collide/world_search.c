@@ -1100,6 +1100,7 @@ typedef struct scat {
   uint8_t *fm, *exact;
   float *x1;
   const float *prev;
+  const float *cur; /* (on one thread with SSE2, the boxes by slot: see fill_groups) */
   const uint32_t *start;
   uint32_t *pos;
   uint32_t nb;
@@ -1133,6 +1134,59 @@ static QK__ALWAYS_INLINE void put_entry(const scat_t *sc, uint32_t p, const floa
   }
 }
 
+#if defined(__SSE2__)
+#define QK__PG_GROUPS 1
+/* What scatter_ on one thread left out, a whole group at a time by a transpose of its four
+ * objects' boxes by slot, the same values as put_entry's: the entries' boxes from this
+ * update's (cur, when there is one: the maxima negated) and their last update's (prev,
+ * with pg). */
+static void fill_groups(const bands_t *bd, const float *prev, const float *cur) {
+  const __m128 neg = _mm_setr_ps(0.0f, 0.0f, -0.0f, -0.0f), all = _mm_set1_ps(-0.0f);
+  for (uint32_t b = 0; b < bd->nb; b++) {
+    uint32_t p = bd->start[b];
+    const uint32_t e = bd->end[b];
+    for (; p + 4 <= e; p += 4) {
+      egrp_t *q = &bd->g[p >> 2];
+      const uint32_t *sl = q->slot;
+      if (cur) {
+        __m128 c0 = _mm_loadu_ps(cur + 4 * (size_t)sl[0]),
+               c1 = _mm_loadu_ps(cur + 4 * (size_t)sl[1]),
+               c2 = _mm_loadu_ps(cur + 4 * (size_t)sl[2]),
+               c3 = _mm_loadu_ps(cur + 4 * (size_t)sl[3]);
+        _MM_TRANSPOSE4_PS(c0, c1, c2, c3);
+        _mm_storeu_ps(q->x0, c0), _mm_storeu_ps(q->y0, c1);
+        _mm_storeu_ps(bd->x1 + p, _mm_xor_ps(c2, all)), _mm_storeu_ps(q->y1, _mm_xor_ps(c3, all));
+      }
+      if (bd->pg) {
+        __m128 r0 = _mm_xor_ps(_mm_loadu_ps(prev + 4 * (size_t)sl[0]), neg),
+               r1 = _mm_xor_ps(_mm_loadu_ps(prev + 4 * (size_t)sl[1]), neg),
+               r2 = _mm_xor_ps(_mm_loadu_ps(prev + 4 * (size_t)sl[2]), neg),
+               r3 = _mm_xor_ps(_mm_loadu_ps(prev + 4 * (size_t)sl[3]), neg);
+        _MM_TRANSPOSE4_PS(r0, r1, r2, r3);
+        pgrp_t *r = &bd->pg[p >> 2];
+        _mm_storeu_ps(r->x0, r0), _mm_storeu_ps(r->y0, r1);
+        _mm_storeu_ps(r->x1, r2), _mm_storeu_ps(r->y1, r3);
+      }
+    }
+    for (; p < e; p++) {
+      egrp_t *q = &bd->g[p >> 2];
+      const uint32_t s = q->slot[p & 3];
+      if (cur) {
+        const float *c = cur + 4 * (size_t)s;
+        q->x0[p & 3] = c[0], q->y0[p & 3] = c[1], bd->x1[p] = -c[2], q->y1[p & 3] = -c[3];
+      }
+      if (bd->pg) {
+        const float *pf = prev + 4 * (size_t)s;
+        pgrp_t *r = &bd->pg[p >> 2];
+        r->x0[p & 3] = pf[0], r->y0[p & 3] = pf[1], r->x1[p & 3] = -pf[2], r->y1[p & 3] = -pf[3];
+      }
+    }
+  }
+}
+#else
+#define QK__PG_GROUPS 0
+#endif
+
 /* Thread t's entries (whole: all of them, on one thread, without the range's tests). */
 static QK__ALWAYS_INLINE void scatter_(const scat_t *sc, unsigned t, int whole) {
   const qk_world_t *w = sc->w;
@@ -1148,20 +1202,25 @@ static QK__ALWAYS_INLINE void scatter_(const scat_t *sc, unsigned t, int whole) 
   uint32_t clo = sc->start[blo], chi = sc->start[bhi];
   const scat_t d = *sc; /* (a copy: the byte stores cannot change it) */
   uint32_t *pos = sc->pos;
-  const pgrp_t *pg = sc->pg;
+  /* (on one thread with SSE2 the last update's boxes are written after, a group at a
+   * time: fill_groups) */
+  const pgrp_t *pg = whole && QK__PG_GROUPS ? NULL : sc->pg;
   uint8_t *fm = sc->fm;
   for (uint32_t i = 0; i < n; i++) {
     uint32_t k = (uint32_t)sc->rec[i];
     uint32_t b0 = sc->b01[2 * k], be = sc->b01[2 * k + 1];
     if (!whole && (be < blo || b0 > bhi)) continue;
-    const float *f = lane_of(fg, k);
     uint32_t s = ord[k], b = whole || b0 >= blo ? b0 : blo, bl = whole || be <= bhi ? be : bhi;
     const float *pf = pg ? sc->prev + 4 * (size_t)s : NULL;
     if (whole) { /* (the loop as it was on one thread: a cursor a band, the first marked) */
       uint32_t p = pos[b]++;
       fm[p >> 2] |= (uint8_t)(1u << (p & 3)); /* its first band */
       for (;;) {
-        put_entry(&d, p, f, s, pf, fx[k]);
+        if (QK__PG_GROUPS && d.cur) { /* (the boxes: fill_groups) */
+          d.g[p >> 2].slot[p & 3] = s;
+          if (d.exact) d.exact[p] = fx[k];
+        } else
+          put_entry(&d, p, lane_of(fg, k), s, pf, fx[k]);
         if (++b > be) break;
         p = pos[b]++;
       }
@@ -1171,7 +1230,7 @@ static QK__ALWAYS_INLINE void scatter_(const scat_t *sc, unsigned t, int whole) 
       uint32_t p = b == blo ? clo++ : b == bhi ? chi++ : pos[b]++;
       if (p < p0 || p >= p1) continue;
       if (b == b0) fm[p >> 2] |= (uint8_t)(1u << (p & 3)); /* its first band */
-      put_entry(&d, p, f, s, pf, fx[k]);
+      put_entry(&d, p, lane_of(fg, k), s, pf, fx[k]);
     }
   }
 }
@@ -1582,11 +1641,19 @@ static int build_bands(const qk_world_t *w, const qk__wpack_t *pk, bands_t *bd, 
     for (int l = 0; l < 4; l++)
       pg[ng - 1].x0[l] = pg[ng - 1].y0[l] = INFINITY,
               pg[ng - 1].x1[l] = pg[ng - 1].y1[l] = -INFINITY;
-  scat_t sc = {w, pk, a, b01, g, pg, fm, exact, x1, prev, start, pos, nb, start[nb], nt};
+  scat_t sc = {
+      w,     pk,  a,  b01,       g, pg, fm, exact, x1, prev, QK__PG_GROUPS && nt <= 1 ? cur : NULL,
+      start, pos, nb, start[nb], nt};
   if (nt > 1)
     qk__world_run_jobs(w, nt, nt, scatter_run, &sc);
   else
     scatter_(&sc, 0, 1);
+#if defined(__SSE2__)
+  if ((pg || cur) && nt <= 1) {
+    const bands_t eb = {.g = g, .pg = pg, .x1 = x1, .start = start, .end = end, .nb = nb};
+    fill_groups(&eb, prev, cur);
+  }
+#endif
   for (uint32_t b = 0; b < nb; b++)
     for (uint32_t p = end[b]; p < start[b + 1]; p++) {
       egrp_t *q = &g[p >> 2];
