@@ -1381,9 +1381,10 @@ static void bb_job(unsigned t, void *ud) {
     size_t ne = 0;
     uint32_t k = k0;
 #if defined(__SSE2__)
-    /* Whole groups as vectors (k0 starts a block, so a group) */
+    /* Whole groups as vectors (k0 starts a block, so a group), while a band fits the
+     * conversion to int32 (below 2^31 bands: always, short of 2^32 objects) */
     const __m128d vlo = _mm_set1_pd((double)ylo), vinv = _mm_set1_pd(inv), vtop = _mm_set1_pd(top);
-    for (; k + 4 <= k1; k += 4) {
+    for (; top < 2147483648.0 && k + 4 <= k1; k += 4) {
       const float *f = fg + 4 * (size_t)k;
       const __m128 y0 = _mm_loadu_ps(f + 4), y1 = _mm_loadu_ps(f + 12);
       const __m128i a = _mm_unpacklo_epi64(band_of2(y0, vlo, vinv, vtop),
