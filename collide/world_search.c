@@ -1076,6 +1076,14 @@ static inline uint32_t band_of(float y, double ylo, double inv, double top) {
   return (uint32_t)qk__min(((double)y - ylo) * inv, top);
 }
 
+#if defined(__SSE2__)
+/* band_of of the low two lanes of y, in the low two lanes (the same operations: minpd
+ * keeps its second operand when the first is not below it, as qk__min). */
+static inline __m128i band_of2(__m128 y, __m128d ylo, __m128d inv, __m128d top) {
+  return _mm_cvttpd_epi32(_mm_min_pd(_mm_mul_pd(_mm_sub_pd(_mm_cvtps_pd(y), ylo), inv), top));
+}
+#endif
+
 /* The entries' scatter into the bands (build_bands), on nt threads: thread t writes the
  * entries [P_t, P_t+1) (P_t = ne t / nt rounded down to a group: no group, first-band
  * byte or float is written by two threads), reading every record in order, so each band's
@@ -1092,6 +1100,7 @@ typedef struct scat {
   uint8_t *fm, *exact;
   float *x1;
   const float *prev;
+  const float *cur; /* (on one thread with SSE2, the boxes by slot: see fill_groups) */
   const uint32_t *start;
   uint32_t *pos;
   uint32_t nb;
@@ -1125,6 +1134,59 @@ static QK__ALWAYS_INLINE void put_entry(const scat_t *sc, uint32_t p, const floa
   }
 }
 
+#if defined(__SSE2__)
+#define QK__PG_GROUPS 1
+/* What scatter_ on one thread left out, a whole group at a time by a transpose of its four
+ * objects' boxes by slot, the same values as put_entry's: the entries' boxes from this
+ * update's (cur, when there is one: the maxima negated) and their last update's (prev,
+ * with pg). */
+static void fill_groups(const bands_t *bd, const float *prev, const float *cur) {
+  const __m128 neg = _mm_setr_ps(0.0f, 0.0f, -0.0f, -0.0f), all = _mm_set1_ps(-0.0f);
+  for (uint32_t b = 0; b < bd->nb; b++) {
+    uint32_t p = bd->start[b];
+    const uint32_t e = bd->end[b];
+    for (; p + 4 <= e; p += 4) {
+      egrp_t *q = &bd->g[p >> 2];
+      const uint32_t *sl = q->slot;
+      if (cur) {
+        __m128 c0 = _mm_loadu_ps(cur + 4 * (size_t)sl[0]),
+               c1 = _mm_loadu_ps(cur + 4 * (size_t)sl[1]),
+               c2 = _mm_loadu_ps(cur + 4 * (size_t)sl[2]),
+               c3 = _mm_loadu_ps(cur + 4 * (size_t)sl[3]);
+        _MM_TRANSPOSE4_PS(c0, c1, c2, c3);
+        _mm_storeu_ps(q->x0, c0), _mm_storeu_ps(q->y0, c1);
+        _mm_storeu_ps(bd->x1 + p, _mm_xor_ps(c2, all)), _mm_storeu_ps(q->y1, _mm_xor_ps(c3, all));
+      }
+      if (bd->pg) {
+        __m128 r0 = _mm_xor_ps(_mm_loadu_ps(prev + 4 * (size_t)sl[0]), neg),
+               r1 = _mm_xor_ps(_mm_loadu_ps(prev + 4 * (size_t)sl[1]), neg),
+               r2 = _mm_xor_ps(_mm_loadu_ps(prev + 4 * (size_t)sl[2]), neg),
+               r3 = _mm_xor_ps(_mm_loadu_ps(prev + 4 * (size_t)sl[3]), neg);
+        _MM_TRANSPOSE4_PS(r0, r1, r2, r3);
+        pgrp_t *r = &bd->pg[p >> 2];
+        _mm_storeu_ps(r->x0, r0), _mm_storeu_ps(r->y0, r1);
+        _mm_storeu_ps(r->x1, r2), _mm_storeu_ps(r->y1, r3);
+      }
+    }
+    for (; p < e; p++) {
+      egrp_t *q = &bd->g[p >> 2];
+      const uint32_t s = q->slot[p & 3];
+      if (cur) {
+        const float *c = cur + 4 * (size_t)s;
+        q->x0[p & 3] = c[0], q->y0[p & 3] = c[1], bd->x1[p] = -c[2], q->y1[p & 3] = -c[3];
+      }
+      if (bd->pg) {
+        const float *pf = prev + 4 * (size_t)s;
+        pgrp_t *r = &bd->pg[p >> 2];
+        r->x0[p & 3] = pf[0], r->y0[p & 3] = pf[1], r->x1[p & 3] = -pf[2], r->y1[p & 3] = -pf[3];
+      }
+    }
+  }
+}
+#else
+#define QK__PG_GROUPS 0
+#endif
+
 /* Thread t's entries (whole: all of them, on one thread, without the range's tests). */
 static QK__ALWAYS_INLINE void scatter_(const scat_t *sc, unsigned t, int whole) {
   const qk_world_t *w = sc->w;
@@ -1140,20 +1202,25 @@ static QK__ALWAYS_INLINE void scatter_(const scat_t *sc, unsigned t, int whole) 
   uint32_t clo = sc->start[blo], chi = sc->start[bhi];
   const scat_t d = *sc; /* (a copy: the byte stores cannot change it) */
   uint32_t *pos = sc->pos;
-  const pgrp_t *pg = sc->pg;
+  /* (on one thread with SSE2 the last update's boxes are written after, a group at a
+   * time: fill_groups) */
+  const pgrp_t *pg = whole && QK__PG_GROUPS ? NULL : sc->pg;
   uint8_t *fm = sc->fm;
   for (uint32_t i = 0; i < n; i++) {
     uint32_t k = (uint32_t)sc->rec[i];
     uint32_t b0 = sc->b01[2 * k], be = sc->b01[2 * k + 1];
     if (!whole && (be < blo || b0 > bhi)) continue;
-    const float *f = lane_of(fg, k);
     uint32_t s = ord[k], b = whole || b0 >= blo ? b0 : blo, bl = whole || be <= bhi ? be : bhi;
     const float *pf = pg ? sc->prev + 4 * (size_t)s : NULL;
     if (whole) { /* (the loop as it was on one thread: a cursor a band, the first marked) */
       uint32_t p = pos[b]++;
       fm[p >> 2] |= (uint8_t)(1u << (p & 3)); /* its first band */
       for (;;) {
-        put_entry(&d, p, f, s, pf, fx[k]);
+        if (QK__PG_GROUPS && d.cur) { /* (the boxes: fill_groups) */
+          d.g[p >> 2].slot[p & 3] = s;
+          if (d.exact) d.exact[p] = fx[k];
+        } else
+          put_entry(&d, p, lane_of(fg, k), s, pf, fx[k]);
         if (++b > be) break;
         p = pos[b]++;
       }
@@ -1163,7 +1230,7 @@ static QK__ALWAYS_INLINE void scatter_(const scat_t *sc, unsigned t, int whole) 
       uint32_t p = b == blo ? clo++ : b == bhi ? chi++ : pos[b]++;
       if (p < p0 || p >= p1) continue;
       if (b == b0) fm[p >> 2] |= (uint8_t)(1u << (p & 3)); /* its first band */
-      put_entry(&d, p, f, s, pf, fx[k]);
+      put_entry(&d, p, lane_of(fg, k), s, pf, fx[k]);
     }
   }
 }
@@ -1237,9 +1304,50 @@ static void bb_job(unsigned t, void *ud) {
     memset(cnt, 0, 3 * 2048 * sizeof *cnt);
     float ylo = INFINITY, yhi = -INFINITY;
     unsigned all_exact = 1;
+#if defined(__SSE2__)
+    __m128 vlo = _mm_set1_ps(INFINITY), vhi = _mm_set1_ps(-INFINITY);
+    const __m128 neg = _mm_set1_ps(-0.0f);
+    const __m128i top = _mm_set1_epi32((int32_t)0x80000000u);
+#endif
     for (uint32_t k = k0; k < k1;) {
       const uint32_t e = k + BB_BLOCK < k1 ? k + BB_BLOCK : k1;
       double hs = 0;
+#if defined(__SSE2__)
+      /* Whole groups as vectors (k starts a block, so a group): the same values as the
+       * loop below, the heights summed in the same order (the key, the float's bits with
+       * the sign flipped, or all flipped when it is set: fkey). */
+      for (; k + 4 <= e; k += 4) {
+        const float *f = fg + 4 * (size_t)k;
+        const __m128 x0 = _mm_loadu_ps(f), y0 = _mm_loadu_ps(f + 4), x1 = _mm_loadu_ps(f + 8),
+                     y1 = _mm_loadu_ps(f + 12);
+        vlo = _mm_min_ps(y0, vlo), vhi = _mm_max_ps(y1, vhi);
+        const __m128d h01 = _mm_sub_pd(_mm_cvtps_pd(y1), _mm_cvtps_pd(y0)),
+                      h23 = _mm_sub_pd(_mm_cvtps_pd(_mm_movehl_ps(y1, y1)),
+                                       _mm_cvtps_pd(_mm_movehl_ps(y0, y0)));
+        hs += _mm_cvtsd_f64(h01), hs += _mm_cvtsd_f64(_mm_unpackhi_pd(h01, h01));
+        hs += _mm_cvtsd_f64(h23), hs += _mm_cvtsd_f64(_mm_unpackhi_pd(h23, h23));
+        uint32_t ex;
+        memcpy(&ex, fx + k, sizeof ex);
+        all_exact &= (ex & 0x01010101u) == 0x01010101u;
+        if (cur) {
+          __m128 c0 = x0, c1 = y0, c2 = _mm_xor_ps(x1, neg), c3 = _mm_xor_ps(y1, neg);
+          _MM_TRANSPOSE4_PS(c0, c1, c2, c3);
+          _mm_storeu_ps(cur + 4 * (size_t)ord[k], c0);
+          _mm_storeu_ps(cur + 4 * (size_t)ord[k + 1], c1);
+          _mm_storeu_ps(cur + 4 * (size_t)ord[k + 2], c2);
+          _mm_storeu_ps(cur + 4 * (size_t)ord[k + 3], c3);
+        }
+        const __m128i u = _mm_castps_si128(x0),
+                      key = _mm_xor_si128(u, _mm_or_si128(_mm_srai_epi32(u, 31), top)),
+                      kv = _mm_add_epi32(_mm_set1_epi32((int32_t)k), _mm_setr_epi32(0, 1, 2, 3));
+        _mm_storeu_si128((__m128i *)(rec + k), _mm_unpacklo_epi32(kv, key));
+        _mm_storeu_si128((__m128i *)(rec + k + 2), _mm_unpackhi_epi32(kv, key));
+        uint32_t xs[4];
+        _mm_storeu_si128((__m128i *)xs, key);
+        for (int l = 0; l < 4; l++)
+          cnt[xs[l] & 2047]++, cnt[2048 + (xs[l] >> 11 & 2047)]++, cnt[4096 + (xs[l] >> 22)]++;
+      }
+#endif
       for (; k < e; k++) {
         const float *f = lane_of(fg, k);
         ylo = f[4] < ylo ? f[4] : ylo;
@@ -1256,6 +1364,14 @@ static void bb_job(unsigned t, void *ud) {
       }
       J->bsum[(e - 1) / BB_BLOCK] = hs;
     }
+#if defined(__SSE2__)
+    float lo[4], hi[4];
+    _mm_storeu_ps(lo, vlo), _mm_storeu_ps(hi, vhi);
+    for (int l = 0; l < 4; l++) {
+      ylo = lo[l] < ylo ? lo[l] : ylo;
+      yhi = hi[l] > yhi ? hi[l] : yhi;
+    }
+#endif
     J->ylo[t] = ylo, J->yhi[t] = yhi, J->exact[t] = all_exact;
   } else if (J->phase == 1) { /* each object's bands, counted */
     uint32_t *c = t ? J->bc + (size_t)(t - 1) * (J->nb + 1) : J->start, *b01 = J->b01;
@@ -1263,7 +1379,31 @@ static void bb_job(unsigned t, void *ud) {
     const double inv = J->inv, top = J->top;
     memset(c, 0, ((size_t)J->nb + 1) * sizeof *c);
     size_t ne = 0;
-    for (uint32_t k = k0; k < k1; k++) {
+    uint32_t k = k0;
+#if defined(__SSE2__)
+    /* Whole groups as vectors (k0 starts a block, so a group), while a band fits the
+     * conversion to int32 (below 2^31 bands: always, short of 2^32 objects) */
+    const __m128d vlo = _mm_set1_pd((double)ylo), vinv = _mm_set1_pd(inv), vtop = _mm_set1_pd(top);
+    for (; top < 2147483648.0 && k + 4 <= k1; k += 4) {
+      const float *f = fg + 4 * (size_t)k;
+      const __m128 y0 = _mm_loadu_ps(f + 4), y1 = _mm_loadu_ps(f + 12);
+      const __m128i a = _mm_unpacklo_epi64(band_of2(y0, vlo, vinv, vtop),
+                                           band_of2(_mm_movehl_ps(y0, y0), vlo, vinv, vtop)),
+                    b = _mm_unpacklo_epi64(band_of2(y1, vlo, vinv, vtop),
+                                           band_of2(_mm_movehl_ps(y1, y1), vlo, vinv, vtop));
+      _mm_storeu_si128((__m128i *)(b01 + 2 * (size_t)k), _mm_unpacklo_epi32(a, b));
+      _mm_storeu_si128((__m128i *)(b01 + 2 * (size_t)k + 4), _mm_unpackhi_epi32(a, b));
+      uint32_t as[4], bs[4];
+      _mm_storeu_si128((__m128i *)as, a), _mm_storeu_si128((__m128i *)bs, b);
+      for (int l = 0; l < 4; l++) {
+        uint32_t x = as[l];
+        ne += bs[l] - x + 1;
+        do c[++x]++;
+        while (x <= bs[l]);
+      }
+    }
+#endif
+    for (; k < k1; k++) {
       const float *f = lane_of(fg, k);
       uint32_t a = band_of(f[4], ylo, inv, top), b = band_of(f[12], ylo, inv, top);
       b01[2 * k] = a, b01[2 * k + 1] = b;
@@ -1360,17 +1500,29 @@ static const uint64_t *bb_sort(bbjob_t *J) {
     const size_t o = moved && nt > 1 ? 0 : 2048 * (size_t)d;
     int shared = 0;
     uint32_t acc = 0;
-    for (int x = 0; x < 2048; x++) {
-      uint32_t v = 0;
-      for (unsigned u = 0; u < nt; u++) {
-        uint32_t *c = bb_cnt(J, u) + o + x, cu = *c;
-        *c = acc + v, v += cu;
+    if (nt == 1) {
+      /* One thread: its cursors written where the scatter reads them in the same loop
+       * (over the first digit's counts, used by then), without the copy below. */
+      const uint32_t *c = J->cnt0 + o;
+      uint32_t *cur = J->cnt0;
+      for (int x = 0; x < 2048; x++) {
+        const uint32_t v = c[x];
+        cur[x] = acc;
+        shared |= v == n;
+        acc += v;
       }
-      shared |= v == n;
-      acc += v;
-    }
+    } else
+      for (int x = 0; x < 2048; x++) {
+        uint32_t v = 0;
+        for (unsigned u = 0; u < nt; u++) {
+          uint32_t *c = bb_cnt(J, u) + o + x, cu = *c;
+          *c = acc + v, v += cu;
+        }
+        shared |= v == n;
+        acc += v;
+      }
     if (shared) continue;
-    if (o) /* (the cursors where the scatter reads them) */
+    if (o && nt > 1) /* (the cursors where the scatter reads them) */
       for (unsigned u = 0; u < nt; u++)
         memcpy(bb_cnt(J, u), bb_cnt(J, u) + o, 2048 * sizeof(uint32_t));
     J->dst = t;
@@ -1490,11 +1642,19 @@ static int build_bands(const qk_world_t *w, const qk__wpack_t *pk, bands_t *bd, 
     for (int l = 0; l < 4; l++)
       pg[ng - 1].x0[l] = pg[ng - 1].y0[l] = INFINITY,
               pg[ng - 1].x1[l] = pg[ng - 1].y1[l] = -INFINITY;
-  scat_t sc = {w, pk, a, b01, g, pg, fm, exact, x1, prev, start, pos, nb, start[nb], nt};
+  scat_t sc = {
+      w,     pk,  a,  b01,       g, pg, fm, exact, x1, prev, QK__PG_GROUPS && nt <= 1 ? cur : NULL,
+      start, pos, nb, start[nb], nt};
   if (nt > 1)
     qk__world_run_jobs(w, nt, nt, scatter_run, &sc);
   else
     scatter_(&sc, 0, 1);
+#if defined(__SSE2__)
+  if ((pg || cur) && nt <= 1) {
+    const bands_t eb = {.g = g, .pg = pg, .x1 = x1, .start = start, .end = end, .nb = nb};
+    fill_groups(&eb, prev, cur);
+  }
+#endif
   for (uint32_t b = 0; b < nb; b++)
     for (uint32_t p = end[b]; p < start[b + 1]; p++) {
       egrp_t *q = &g[p >> 2];
