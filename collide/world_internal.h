@@ -7,7 +7,6 @@
 #define QUADKIT_WORLD_INTERNAL_H
 
 #include "collide/collide_internal.h"
-#include "index/inline.h"
 
 #include <stdatomic.h>
 
@@ -20,27 +19,6 @@
 #define QK__UNROLL4 _Pragma("clang loop unroll_count(4)")
 #else
 #define QK__UNROLL4
-#endif
-
-/* The pair search's workers (run_share, run_bands) are compiled twice, for AVX2 and for
- * the baseline, and the loader picks one by the processor (function multiversioning
- * through an ifunc: GCC and clang on x86-64 with glibc): their four-wide SSE loops then
- * take VEX's three-operand forms and comparisons with a memory operand, with no copy of
- * a register before each comparison nor a load of its own (measured: a group of four
- * tested 33 -> 27 instructions; the search of the uniform scene at 10^4 2.60 -> 2.28 M a
- * frame, same pairs). Elsewhere, and under the sanitizers (index/inline.h), one plain copy. */
-#if defined(__x86_64__) && defined(__SSE2__) && defined(__GLIBC__) && defined(__has_attribute) &&  \
-    !defined(QK__SANITIZED)
-#if __has_attribute(target_clones)
-#define QK__CLONES __attribute__((target_clones("avx2", "default")))
-/* (a function compiled twice is called through the loader's choice, never inlined; clang
- * rejects noinline beside target_clones) */
-#define QK__CLONES_NOINLINE QK__CLONES
-#endif
-#endif
-#ifndef QK__CLONES
-#define QK__CLONES
-#define QK__CLONES_NOINLINE __attribute__((noinline))
 #endif
 
 /* Levels: cells of side 2^L for L in [QK__LMIN, QK__LMIN + QK__NLEV); the filing keeps

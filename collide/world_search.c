@@ -681,7 +681,7 @@ static void keys_ordered(uint64_t *keys, size_t n) {
   }
 }
 
-QK__CLONES static void run_share(unsigned t, void *ud) {
+static void run_share(unsigned t, void *ud) {
   share_t *s = &((share_t *)ud)[t];
   if (!kv_reserve(s, 256)) { /* (the keys' place is never NULL, its slack there: kc_open) */
     s->nomem = 1;
@@ -1032,7 +1032,7 @@ static QK__ALWAYS_INLINE int sweep_run(share_t *s, uint32_t b0, uint32_t b1, con
 
 /* The sweeps' variants, each a function of its own (their code apart, as measured). */
 #define QK__SWEEP_VARIANT(name, all_exact, began, near_)                                           \
-  QK__CLONES_NOINLINE static int name(share_t *s, uint32_t b0, uint32_t b1) {                      \
+  __attribute__((noinline)) static int name(share_t *s, uint32_t b0, uint32_t b1) {                \
     return sweep_run(s, b0, b1, all_exact, began, near_);                                          \
   }
 QK__SWEEP_VARIANT(sweep_any, 0, 0, 0)
