@@ -3,8 +3,8 @@
  * The library's specialised inner loops (a function written once and expanded with a
  * constant argument per case) rely on it for their speed.
  *
- * Not under the sanitizers (ASan, UBSan's companion builds, TSan, the fuzz targets): there
- * the forced expansion made single functions of over 100 KB of instrumented code whose
+ * Not under ASan or TSan (CI's sanitizer builds and the fuzz targets all use one): there the
+ * forced expansion made single functions of over 100 KB of instrumented code whose
  * register allocation took most of the build (collide/world_search.c 17.5 s of one
  * processor under ASan + UBSan, 3.4 s without), and the sanitizer builds are for finding
  * memory errors and races, not for speed. The compiler decides there; what the code does

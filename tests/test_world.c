@@ -246,14 +246,7 @@ static QKT_SERIAL int wp_cmp(const void *x, const void *y) {
  * the test's thread only; the blocks stay reachable until the process ends. Under ASan the
  * room past the bytes asked for is poisoned, so that the library writing a list past the
  * room it was given is caught as it was in a block of that size. */
-#if defined(__SANITIZE_ADDRESS__)
-#define KEPT_ASAN 1
-#elif defined(__has_feature)
-#if __has_feature(address_sanitizer)
-#define KEPT_ASAN 1
-#endif
-#endif
-#ifdef KEPT_ASAN
+#if QKT_ASAN
 #include <sanitizer/asan_interface.h>
 #else
 #define ASAN_POISON_MEMORY_REGION(p, n) ((void)(p), (void)(n))

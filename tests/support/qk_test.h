@@ -17,7 +17,8 @@
  * QKT_SERIAL marks a test's own oracle code (brute force, sorting, comparing lists) that
  * runs on one thread while no library call is under way: TSan does not instrument it,
  * since there is no race for it to find there, and instrumented such code was most of
- * test_world's time under TSan. The library's code stays instrumented. */
+ * test_world's time under TSan; nor does ASan (QKT_ASAN: 1 in AddressSanitizer builds),
+ * for the same time (its dense scenes' sorts). The library's code stays instrumented. */
 #if defined(__SANITIZE_THREAD__)
 #define QKT_TSAN 1
 #elif defined(__has_feature)
