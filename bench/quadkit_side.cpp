@@ -143,10 +143,9 @@ static qk_tree_options_t collider_options() {
   qk_tree_options_t o;
   qk_tree_options_init(&o);
   o.capacity = 8;
-  // QKB_HUGE_PAGES=1: the collider's arrays on transparent huge pages too. Embree asks
-  // for them over its BVH by default on Linux (madvise MADV_HUGEPAGE on its 128 MB and
-  // 32 MB blocks at 1M discs, seen with strace), so this is the like-for-like A/B.
-  if (const char *h = std::getenv("QKB_HUGE_PAGES")) o.huge_pages = std::atoi(h) != 0;
+  // No huge_pages: the collider advises its large arrays for huge pages whatever the
+  // option says, as Embree does over its BVH on Linux (madvise MADV_HUGEPAGE on its
+  // 128 MB and 32 MB blocks at 1M discs, seen with strace).
   return o;
 }
 

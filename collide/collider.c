@@ -156,7 +156,6 @@ struct qk_collider {
   unsigned zdepth;  /* its depth: 4^zdepth cells */
   int ray_prefetch; /* the cast asks for the lines of its likely next reads (see below) */
   uint32_t threads; /* for the pairs and batch calls (0: every online core) */
-  int huge_pages;   /* the options' hint, applied to the collider's other arrays too */
   double mag;       /* largest coordinate magnitude of any item box, for rounding margins */
   double reach;     /* farthest any item box reaches from its centre on an axis (the ray cast) */
   /* The ray cast's start (cast_float), from the root square, computed once: its corner,
@@ -720,6 +719,7 @@ static qk_status_t build_centre_tree(qk_collider_t *c, const qk_disc_t *discs, s
   if (opt) {
     if (n) centres = qk__realloc(&c->alloc, NULL, 0, n * sizeof *centres);
     if (n && !centres) return QK_ERR_NOMEM;
+    qk__advise_huge(&c->alloc, centres, n * sizeof *centres); /* see alloc_arrays */
   } else { /* a rebuild keeps them for the next one */
     void *block = c->centres;
     size_t bytes = c->centres_cap * sizeof *c->centres;
@@ -745,20 +745,22 @@ static qk_status_t alloc_arrays(qk_collider_t *c) {
   /* Sizes of at least one, so that every array exists even for an empty set. */
   uint32_t slots = qk__tree_slot_bound(c->tree), nodes = qk__tree_node_bound(c->tree);
   const size_t n_slots = slots ? slots : 1, n_nodes = nodes ? nodes : 1;
-  /* Before the first touch, so that the pages are huge from the start. A ray jumps
-   * across the disc records and the ray entries (prepare_rays), one or two lines per
-   * 4 KiB page, so those two arrays are always advised (as Embree advises its BVH on
-   * Linux): the rays then miss the TLB far less (10^6 discs: some 14 % less CPU time a
-   * ray) and the build pays nothing measurable (fewer page faults). Advising all four
-   * arrays cost the build at 10^7 discs up to 0.7 s more kernel time in 3.4 s
-   * (docs/collide.md), which is why the other searches' two arrays are left to the hint.
-   * qk__advise_huge skips arrays below 4 MB and custom allocators. */
+  /* Every large array is advised for transparent huge pages before its first touch, so
+   * that its pages are huge from the start, whatever the options' hint (as Embree
+   * advises its BVH on Linux): the collider's arrays are made anew by every build, and
+   * glibc gives blocks of this size back to the system when they are freed, so that
+   * each fresh build faulted them in 4 KiB at a time, at 15-20 us a fault on the machine
+   * of this work (10^6 boxes: 19,100 faults and 290 ms a build, against 4,800 and 130-150
+   * ms advised; 10^7: 3.3-3.9 s against 1.1-1.5 s; docs/collide.md). A ray jumps across
+   * the disc records and the ray entries (prepare_rays), one or two lines per 4 KiB
+   * page, and misses the TLB far less on huge pages (10^6 discs: some 14 % less CPU time
+   * a ray). qk__advise_huge skips arrays below 4 MB and custom allocators. */
   void *sbox = c->sbox;
   size_t sbox_bytes = c->sbox_cap * sizeof *c->sbox;
   int made = grow_block(a, &sbox, &sbox_bytes, n_slots * sizeof *c->sbox);
   if (made < 0) return QK_ERR_NOMEM;
   c->sbox = sbox, c->sbox_cap = sbox_bytes / sizeof *c->sbox;
-  if (made && c->huge_pages) qk__advise_huge(a, c->sbox, sbox_bytes);
+  if (made) qk__advise_huge(a, c->sbox, sbox_bytes);
   if (c->n_discs) {
     made = grow_block(a, &c->sdisc_block, &c->sdisc_bytes, n_slots * sizeof(sdisc_t) + 64);
     if (made < 0) return QK_ERR_NOMEM;
@@ -768,7 +770,7 @@ static qk_status_t alloc_arrays(qk_collider_t *c) {
    * 1, 5, 9, ...) on a 128-byte boundary, with 64 bytes of slack for the alignment. */
   made = grow_block(a, &c->cn_block, &c->cn_bytes, (n_nodes + 3) * sizeof(cnode_t) + 64);
   if (made < 0) return QK_ERR_NOMEM;
-  if (made && c->huge_pages) qk__advise_huge(a, c->cn_block, c->cn_bytes);
+  if (made) qk__advise_huge(a, c->cn_block, c->cn_bytes);
   c->n_slots = n_slots, c->n_nodes = n_nodes;
   c->sdisc = c->n_discs ? (sdisc_t *)(((uintptr_t)c->sdisc_block + 63) & ~(uintptr_t)63) : NULL;
   c->cn = (cnode_t *)(((uintptr_t)c->cn_block + 63) & ~(uintptr_t)63) + 3;
@@ -906,7 +908,7 @@ qk_status_t qk_collider_build(const qk_disc_t *discs, size_t n_discs, const qk_b
   memset(c, 0, sizeof *c);
   c->alloc = a;
   c->threads = opt.threads;
-  c->huge_pages = opt.huge_pages;
+  opt.huge_pages = 1; /* the centres' tree too (see alloc_arrays) */
   atomic_init(&c->rays_state, RAYS_NONE);
   c->n_discs = n_discs;
   c->n = n_discs + n_boxes;

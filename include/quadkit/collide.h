@@ -54,6 +54,10 @@ typedef struct qk_collider qk_collider_t;
  * \param [in] options tree options for the centres (capacity, allocator, root, threads
  *             for the pairs and batch calls); NULL means qk_tree_options_init()'s defaults,
  *             as for every quadkit object (capacity 1; 8 to 16 is faster for large sets).
+ *             Its huge_pages hint is not needed: on Linux the collider asks for
+ *             transparent huge pages over each of its arrays of 4 MB and more that come
+ *             from the default allocator (as Embree does for its BVH), since every build
+ *             makes them anew.
  * \param [out] out the collider, freed with qk_collider_free(); NULL on error.
  * \return QK_OK, QK_ERR_NONFINITE, QK_ERR_GEOMETRY (negative radius or inverted box),
  *         QK_ERR_OUTSIDE (a centre outside a given root), QK_ERR_LIMIT or QK_ERR_NOMEM.
@@ -70,11 +74,11 @@ qk_status_t qk_collider_build(const qk_disc_t *discs, size_t n_discs, const qk_b
  * the next rebuild. A fresh build asks for every array anew, and a C library may give
  * large freed blocks back to the system, so that each build touches fresh pages: at 10^6
  * boxes a rebuild can take a third of the time of a build and free. The options the
- * collider was built with stay (capacity, depth cap, a given root, allocator, huge
- * pages); the build runs on the collider's threads (qk_collider_set_threads()). Ids as
- * for qk_collider_build(). Ray structures made for the old items are dropped; the next
- * cast (or qk_collider_prepare_rays()) makes them again. Must not run concurrently with
- * any other call on the collider.
+ * collider was built with stay (capacity, depth cap, a given root, allocator); the build
+ * runs on the collider's threads (qk_collider_set_threads()). Ids as for
+ * qk_collider_build(). Ray structures made for the old items are dropped; the next cast
+ * (or qk_collider_prepare_rays()) makes them again. Must not run concurrently with any
+ * other call on the collider.
  * \param [in,out] c the collider.
  * \param [in] discs,n_discs,boxes,n_boxes the items, as qk_collider_build() (copied).
  * \return as qk_collider_build(), or QK_ERR_INVALID (c NULL). The collider is unchanged
