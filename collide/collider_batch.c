@@ -303,6 +303,8 @@ static uint64_t *ray_order(const qk_collider_t *c, const qk_point_t *origins, si
     qk__free(a, s, sizeof *s);
     return NULL;
   }
+  /* 16 MB at 10^6 rays, made anew by every batch: see alloc_arrays in collider.c. */
+  qk__advise_huge(a, buf, *bytes);
   const qk_square_t sq = qk__tree_root_square(qk_collider_tree(c));
   s->origins = origins;
   s->key = buf, s->tmp = buf + n;
