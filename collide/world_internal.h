@@ -219,6 +219,11 @@ static inline double qk__pow2(int e) {
 
 static inline int qk__wlive(const qk__wobj_t *o) { return o->gen & 1; }
 
+/* The current pairs' keys in order when the last update kept them (ckeys), else NULL. */
+static inline uint64_t *qk__world_kept_keys(const qk_world_t *w) {
+  return w->cur.n && w->ckeys.n == w->cur.n ? w->ckeys.v : NULL;
+}
+
 /* The threads an update may use: one below the options' thread_min live objects. */
 static inline unsigned qk__world_update_threads(const qk_world_t *w) {
   return w->n_live < w->opt.thread_min ? 1 : w->opt.threads;

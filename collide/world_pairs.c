@@ -1637,7 +1637,7 @@ static qk_status_t update(qk_world_t *w) {
       uint64_t *nk = NULL; /* (this frame's keys in order, when the sort left them so) */
       /* The last frame's keys when kept; the merge's scratch in the sort's (free after
        * it), so that this frame's keys stay. */
-      uint64_t *ck = !dirty && w->ckeys.n == w->cur.n && w->cur.n ? w->ckeys.v : NULL;
+      uint64_t *ck = dirty ? NULL : qk__world_kept_keys(w);
       ok = make_rows_flat(al, found.v, tmp, total, cnt, (uint32_t)n_obj, &nr, &nk) &&
            diff(w, &w->cur, &nr, dirty, ck, nk, tmp, &bv, &ev, &kept);
       if (ok && kept && nk) keep = nk;
@@ -1739,9 +1739,9 @@ qk_status_t qk_world_pairs(const qk_world_t *w, qk_pairs_which_t which, qk_world
    * through w in the loop would be read again after every call. */
   const uint32_t *row = w->cur.row, *start = w->cur.start, *rb = w->cur.b, *ug = w->ugen;
   const size_t n_nz = w->cur.n_nz;
-  if (w->ckeys.n == w->cur.n && w->cur.n) {
+  const uint64_t *ck = qk__world_kept_keys(w);
+  if (ck) {
     /* The pairs also as keys in order (see ckeys): each pair from its key. */
-    const uint64_t *ck = w->ckeys.v;
     for (size_t i = 0, n = w->cur.n; i < n; i++) {
       const uint32_t a = (uint32_t)(ck[i] >> 32), b = (uint32_t)ck[i];
       if (fn((uint64_t)ug[a] << 32 | a, (uint64_t)ug[b] << 32 | b, ud)) return QK_OK;

@@ -103,10 +103,10 @@ static __attribute__((noinline)) void walk_rows1(walk_t *J, size_t lo, size_t hi
   const qk_world_pair_worker_fn fn = J->fn;
   void *const ud = J->ud;
   atomic_int *const stop = &J->stop;
-  if (w->ckeys.n == w->cur.n && w->cur.n) {
+  const uint64_t *ck = qk__world_kept_keys(w);
+  if (ck) {
     /* The pairs also as keys in order (kept for the next update's merge: short rows):
      * each pair from its key, with no row to follow. */
-    const uint64_t *ck = w->ckeys.v;
     for (size_t i = lo; i < hi; i++) {
       const uint64_t key = ck[i];
       const uint32_t a = (uint32_t)(key >> 32), b = (uint32_t)key;
