@@ -1083,7 +1083,7 @@ static void *plain_alloc(void *ud, void *ptr, size_t osize, size_t nsize) {
  * item boxes of a set of boxes before any ray is cast, the ray arrays (disc records, ray
  * entries) of a set of discs; a custom allocator is never advised. Same answers either
  * way. */
-static void test_collide_ray_arrays_huge(void **state) {
+static void test_collide_arrays_huge(void **state) {
   (void)state;
 #if defined(__linux__) && defined(MADV_HUGEPAGE)
   /* Skip where the kernel has no transparent huge pages (madvise fails) or no smaps. */
@@ -1601,7 +1601,7 @@ int main(void) {
       cmocka_unit_test(test_collide_threads_nomem),
       cmocka_unit_test(test_collide_threaded_build),
       cmocka_unit_test(test_collide_threads_worker_nomem),
-      cmocka_unit_test(test_collide_ray_arrays_huge),
+      cmocka_unit_test(test_collide_arrays_huge),
       cmocka_unit_test(test_collide_threads_skewed),
       cmocka_unit_test(test_collide_raycast_leaf_counts),
       cmocka_unit_test(test_collide_pairs_order),
