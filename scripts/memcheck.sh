@@ -6,6 +6,9 @@
 #
 #   scripts/memcheck.sh                   the default subset
 #   MEMCHECK_TESTS="test_index" scripts/memcheck.sh
+#   MEMCHECK_BUILD_DIR=build scripts/memcheck.sh
+#                                         in a build directory already configured (CI:
+#                                         make test's, built with -g), as it is
 #
 # The subset leaves out the tests that are long mostly because of their brute-force
 # oracles (test_query, test_geo, test_balance): they exercise no allocation path that the
@@ -21,7 +24,11 @@ if ! command -v valgrind >/dev/null; then
   echo "memcheck.sh: valgrind not found (make memcheck installs it)" >&2
   exit 2
 fi
-cmake -S . -B "$dir" -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
+# (a directory already configured keeps its build type and flags: CI gives make test's,
+# whose library and tests are then built already)
+if [ ! -f "$dir/CMakeCache.txt" ]; then
+  cmake -S . -B "$dir" -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
+fi
 # shellcheck disable=SC2086 # the test names are words
 nice cmake --build "$dir" -j"$jobs" --target quadkit_cli $tests
 
