@@ -8,7 +8,7 @@
 #   MEMCHECK_TESTS="test_index" scripts/memcheck.sh
 #   MEMCHECK_BUILD_DIR=build scripts/memcheck.sh
 #                                         in a build directory already configured (CI:
-#                                         make test's, built with -g), as it is
+#                                         make test's, built with -g1), as it is
 #
 # The subset leaves out the tests that are long mostly because of their brute-force
 # oracles (test_query, test_geo, test_balance): they exercise no allocation path that the
