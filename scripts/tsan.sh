@@ -7,10 +7,10 @@
 # tests/test_region.c and tests/test_collide.c, whose threaded batches must equal the
 # single calls; tests/test_build.c, whose threaded bulk build must equal one thread's;
 # tests/test_query.c, whose batches on a team of workers must equal one thread's.
-# In test_world and test_build the tests and runs that start no thread skip themselves
-# here (QKT_TSAN, tests/support/qk_test.h): TSan finds nothing without a second thread.
-# Any data race
-# TSan sees fails the run; the tests run JOBS (2) at a time. Usage: scripts/tsan.sh [build-dir]
+# In test_world, test_build and test_collide the tests and runs that start no thread skip
+# themselves here (QKT_TSAN, tests/support/qk_test.h): TSan finds nothing without a second
+# thread. Any data race TSan sees fails the run; the tests run JOBS (2) at a time.
+# Usage: scripts/tsan.sh [build-dir]
 set -euo pipefail
 cd "$(dirname "$0")/.."
 dir=${1:-build-tsan}

@@ -114,6 +114,7 @@ static void check_pairs(const qk_disc_t *d, size_t nd, const qk_box_t *b, size_t
 
 static void test_collide_pairs(void **state) {
   (void)state;
+  QKT_ONE_THREAD_TEST();
   qkt_rng_t r;
   qkt_rng_seed(&r, g_seed);
   const size_t n = 1500;
@@ -145,6 +146,7 @@ static int add_id(qk_id_t id, qk_point_t p, double dist, void *ud) {
 
 static void test_collide_query_shapes(void **state) {
   (void)state;
+  QKT_ONE_THREAD_TEST();
   qkt_rng_t r;
   qkt_rng_seed(&r, g_seed + 1);
   const size_t nd = 800, nb = 800;
@@ -204,6 +206,7 @@ static int ray_agrees(qk_hit_t h, qk_hit_t w, const qk_disc_t *d, size_t nd, con
 
 static void test_collide_raycast(void **state) {
   (void)state;
+  QKT_ONE_THREAD_TEST();
   qkt_rng_t r;
   qkt_rng_seed(&r, g_seed + 2);
   const size_t nd = 1000, nb = 1000;
@@ -416,6 +419,7 @@ static void test_collide_rebuild(void **state) {
  * overlapped) or underflowed (0 <= 0). */
 static void test_collide_exact_extremes(void **state) {
   (void)state;
+  QKT_ONE_THREAD_TEST();
   const int scales[] = {-1074, -1070, -1000, -600, -537, -300, 0, 300, 511, 600, 900, 1017};
   for (size_t si = 0; si < sizeof scales / sizeof scales[0]; si++) {
     double s = ldexp(1, scales[si]), cx = 7 * s, cy = -2 * s;
@@ -447,6 +451,7 @@ static void test_collide_exact_extremes(void **state) {
 
 static void test_collide_exact_cases(void **state) {
   (void)state;
+  QKT_ONE_THREAD_TEST();
   /* Two tangent discs and a box touching the second at one corner point. */
   qk_disc_t d[2] = {{0, 0, 1}, {2, 0, 1}};
   qk_box_t b[1] = {{3, 0, 4, 1}};
@@ -501,6 +506,7 @@ static void test_collide_exact_cases(void **state) {
 
 static void test_collide_nomem(void **state) {
   (void)state;
+  QKT_ONE_THREAD_TEST();
   qkt_rng_t r;
   qkt_rng_seed(&r, g_seed + 3);
   qk_disc_t d[300];
@@ -1085,6 +1091,7 @@ static void *plain_alloc(void *ud, void *ptr, size_t osize, size_t nsize) {
  * way. */
 static void test_collide_arrays_huge(void **state) {
   (void)state;
+  QKT_ONE_THREAD_TEST();
 #if defined(__linux__) && defined(MADV_HUGEPAGE)
   /* Skip where the kernel has no transparent huge pages (madvise fails) or no smaps. */
   const size_t probe_bytes = (size_t)8 << 20;
@@ -1181,6 +1188,7 @@ static void test_collide_arrays_huge(void **state) {
  */
 static void test_collide_raycast_leaf_counts(void **state) {
   (void)state;
+  QKT_ONE_THREAD_TEST();
   qkt_rng_t r;
   qkt_rng_seed(&r, g_seed + 41);
   const size_t cap_n = 3000;

@@ -59,14 +59,9 @@
 static uint64_t g_seed;
 
 /* Under ThreadSanitizer (QKT_TSAN: scripts/tsan.sh, which is here for the threaded tests)
- * a test that starts no thread (each run alone under strace -f makes no clone) is skipped,
- * since TSan finds nothing without a second thread (the other builds run it); tests of
- * several thread counts skip their one-thread runs there likewise, some threaded loops run
- * shorter, and the oracle's own code is not instrumented (QKT_SERIAL). */
-#define ONE_THREAD_TEST()                                                                          \
-  do {                                                                                             \
-    if (QKT_TSAN) skip();                                                                          \
-  } while (0)
+ * a test that starts no thread is skipped (QKT_ONE_THREAD_TEST); tests of several thread
+ * counts skip their one-thread runs there likewise, some threaded loops run shorter, and
+ * the oracle's own code is not instrumented (QKT_SERIAL). */
 
 /* ---- oracle --------------------------------------------------------------------------- */
 
@@ -582,27 +577,27 @@ static void run_scene(int scene, int kinds, size_t n, int frames, unsigned threa
 
 static void test_world_uniform(void **s) {
   (void)s;
-  ONE_THREAD_TEST();
+  QKT_ONE_THREAD_TEST();
   run_scene(SC_UNIFORM, 0, 400, 40, 1);
 }
 static void test_world_clustered(void **s) {
   (void)s;
-  ONE_THREAD_TEST();
+  QKT_ONE_THREAD_TEST();
   run_scene(SC_CLUSTERED, 1, 300, 40, 1);
 }
 static void test_world_mixed_sizes(void **s) {
   (void)s;
-  ONE_THREAD_TEST();
+  QKT_ONE_THREAD_TEST();
   run_scene(SC_MIXED, 1, 300, 30, 1);
 }
 static void test_world_all_kinds(void **s) {
   (void)s;
-  ONE_THREAD_TEST();
+  QKT_ONE_THREAD_TEST();
   run_scene(SC_UNIFORM, 1, 400, 40, 1);
 }
 static void test_world_huge(void **s) {
   (void)s;
-  ONE_THREAD_TEST();
+  QKT_ONE_THREAD_TEST();
   run_scene(SC_HUGE, 1, 300, 30, 1);
 }
 /* The library's list `which` equals v[0 .. n). */
@@ -889,7 +884,7 @@ static int edge_ok(double v) {
 }
 static void test_world_move_box_edges(void **s) {
   (void)s;
-  ONE_THREAD_TEST();
+  QKT_ONE_THREAD_TEST();
   const double V[] = {1.5,
                       -2,
                       0,
@@ -957,7 +952,7 @@ static void test_world_move_box_edges(void **s) {
 
 static void test_world_move_batch_errors(void **s) {
   (void)s;
-  ONE_THREAD_TEST();
+  QKT_ONE_THREAD_TEST();
   qk_world_t *w;
   assert_int_equal(qk_world_new(NULL, &w), QK_OK);
   qk_handle_t h[4];
@@ -1020,7 +1015,7 @@ static void test_world_move_batch_errors(void **s) {
  * takes), every frame against brute force. */
 static void test_world_prefilter_and_sort(void **s) {
   (void)s;
-  ONE_THREAD_TEST();
+  QKT_ONE_THREAD_TEST();
   qkt_rng_t r;
   qkt_rng_seed(&r, g_seed + 31);
   qk_world_t *w;
@@ -1222,7 +1217,7 @@ static void run_clustered_mixed(int kinds, size_t n, int frames) {
 
 static void test_world_clustered_mixed_sizes(void **s) {
   (void)s;
-  ONE_THREAD_TEST();
+  QKT_ONE_THREAD_TEST();
   run_clustered_mixed(0, 1200, 12);
   run_clustered_mixed(1, 1200, 12);
 }
@@ -1306,7 +1301,7 @@ static qk_shape_t grid_box(qkt_rng_t *r) {
 
 static void test_world_refile_in_place(void **s) {
   (void)s;
-  ONE_THREAD_TEST();
+  QKT_ONE_THREAD_TEST();
   qkt_rng_t r;
   qkt_rng_seed(&r, g_seed + 4242);
   qk_world_t *w;
@@ -1854,7 +1849,7 @@ static void *counting_alloc(void *ud, void *p, size_t osize, size_t nsize) {
 
 static void test_world_fbox_only_bands(void **s) {
   (void)s;
-  ONE_THREAD_TEST();
+  QKT_ONE_THREAD_TEST();
   enum { N = 1001 };
   for (int bands = 0; bands < 2; bands++) {
     qkt_rng_t r;
@@ -1913,7 +1908,7 @@ static qk_box_t exact_box(qk_shape_t s) {
 }
 static void test_world_move_out_of_loose(void **s) {
   (void)s;
-  ONE_THREAD_TEST();
+  QKT_ONE_THREAD_TEST();
   qkt_rng_t r;
   qkt_rng_seed(&r, g_seed + 401);
   for (int kind = 0; kind < 5; kind++)
@@ -2029,7 +2024,7 @@ static void test_world_raycast_batch(void **s) {
 /* Touching cases on integers (every formula is exact there). */
 static void test_world_touching(void **s) {
   (void)s;
-  ONE_THREAD_TEST();
+  QKT_ONE_THREAD_TEST();
   qk_shape_t sh[] = {
       {QK_SHAPE_DISC, 0, 0, 5, 0},
       {QK_SHAPE_DISC, 8, 6, 5, 0}, /* centres 10 apart */
@@ -2078,7 +2073,7 @@ static qk_shape_t swap_xy(qk_shape_t s) {
 }
 static void test_world_one_ulp_off(void **s) {
   (void)s;
-  ONE_THREAD_TEST();
+  QKT_ONE_THREAD_TEST();
   for (int k = 0; k < 4; k++)
     for (int mirror = 0; mirror < 2; mirror++) {
       double c = ldexp(1, -k), m = c / 2, u = nextafter(m, 1) - m;
@@ -2141,7 +2136,7 @@ static void grid_knn(qk_world_t *w, const qk_shape_t *obj, qk_point_t p) {
 }
 static void test_world_query_grid_touching(void **s) {
   (void)s;
-  ONE_THREAD_TEST();
+  QKT_ONE_THREAD_TEST();
   const qk_shape_t obj[] = {{QK_SHAPE_BOX, 2, 2, 4, 3},
                             {QK_SHAPE_SEGMENT, 2, 4, 4, 2},
                             {QK_SHAPE_DISC, 3, 3, 2, 0},
@@ -2177,7 +2172,7 @@ static void test_world_query_grid_touching(void **s) {
  * pairs and without). */
 static void test_world_bytes_exact(void **s) {
   (void)s;
-  ONE_THREAD_TEST();
+  QKT_ONE_THREAD_TEST();
   qkt_rng_t r;
   qkt_rng_seed(&r, g_seed + 419);
   qkt_alloc_t st;
@@ -2217,7 +2212,7 @@ static void test_world_bytes_exact(void **s) {
  * end). Began and ended every frame against brute force. */
 static void test_world_most_pairs_change(void **s) {
   (void)s;
-  ONE_THREAD_TEST();
+  QKT_ONE_THREAD_TEST();
   enum { NP = 2000, KEEP = 60 };
   qk_world_t *w;
   assert_int_equal(qk_world_new(NULL, &w), QK_OK);
@@ -2248,7 +2243,7 @@ static void test_world_most_pairs_change(void **s) {
  * moving them all, against brute force. */
 static void test_world_sort_wide_keys(void **s) {
   (void)s;
-  ONE_THREAD_TEST();
+  QKT_ONE_THREAD_TEST();
   qk_world_t *w;
   assert_int_equal(qk_world_new(NULL, &w), QK_OK);
   mirror_t m = {0};
@@ -2277,7 +2272,7 @@ static void test_world_sort_wide_keys(void **s) {
  * [0, 1]: every hit's t, by qk_world_raycast and qk_world_raycast_all. */
 static void test_world_ray_tangent_end(void **s) {
   (void)s;
-  ONE_THREAD_TEST();
+  QKT_ONE_THREAD_TEST();
   static const int tri[][3] = {{3, 4, 5}, {5, 12, 13}, {8, 15, 17}, {7, 24, 25}, {20, 21, 29}};
   qkt_rng_t r;
   qkt_rng_seed(&r, g_seed + 433);
@@ -2319,7 +2314,7 @@ static void test_world_ray_tangent_end(void **s) {
  * pair, 8 a began or ended pair), never more than qk_world_bytes. */
 static void test_world_pair_bytes(void **s) {
   (void)s;
-  ONE_THREAD_TEST();
+  QKT_ONE_THREAD_TEST();
   qk_world_t *w;
   assert_int_equal(qk_world_new(NULL, &w), QK_OK);
   assert_true(qk_world_pair_bytes(w) <= qk_world_bytes(w));
@@ -2352,7 +2347,7 @@ static void test_world_pair_bytes(void **s) {
 
 static void test_world_stale_handles(void **s) {
   (void)s;
-  ONE_THREAD_TEST();
+  QKT_ONE_THREAD_TEST();
   qk_world_t *w;
   assert_int_equal(qk_world_new(NULL, &w), QK_OK);
   qk_shape_t a = {QK_SHAPE_DISC, 0, 0, 1, 0}, b = {QK_SHAPE_BOX, 5, 5, 6, 6};
@@ -2428,7 +2423,7 @@ static void test_world_stale_handles(void **s) {
 /* 10^5 frames of a small world; memory stays within 1.2x a fresh world of the same. */
 static void test_world_churn_memory(void **s) {
   (void)s;
-  ONE_THREAD_TEST();
+  QKT_ONE_THREAD_TEST();
   qkt_rng_t r;
   qkt_rng_seed(&r, g_seed + 99);
   qk_world_t *w;
@@ -2468,7 +2463,7 @@ static void test_world_churn_memory(void **s) {
 /* Allocation failure at every N: a failed add or update changes nothing. */
 static void test_world_nomem(void **s) {
   (void)s;
-  ONE_THREAD_TEST();
+  QKT_ONE_THREAD_TEST();
   qkt_rng_t r;
   qkt_rng_seed(&r, g_seed + 5);
   for (size_t fail = 1; fail < 400; fail++) {
@@ -2518,7 +2513,7 @@ static void test_world_nomem(void **s) {
  * from that frame; an update that succeeds is checked too. */
 static void test_world_nomem_began(void **s) {
   (void)s;
-  ONE_THREAD_TEST();
+  QKT_ONE_THREAD_TEST();
   qkt_rng_t r;
   qkt_rng_seed(&r, g_seed + 171);
   double cx[8], cy[8];
@@ -3185,7 +3180,7 @@ static int vma_has_flag(const void *a, const char *flag) {
  * Fails (0 != 1) without the mark; skipped where smaps or THP are missing. */
 static void test_world_scratch_huge_pages(void **s) {
   (void)s;
-  ONE_THREAD_TEST();
+  QKT_ONE_THREAD_TEST();
   FILE *thp = fopen("/sys/kernel/mm/transparent_hugepage/enabled", "r");
   if (!thp) skip();
   fclose(thp);
@@ -3225,7 +3220,7 @@ static void test_world_scratch_huge_pages(void **s) {
  */
 static void test_world_rows_slot_bits(void **s) {
   (void)s;
-  ONE_THREAD_TEST();
+  QKT_ONE_THREAD_TEST();
   for (int big = 0; big < 2; big++) {
     qkt_rng_t r;
     qkt_rng_seed(&r, g_seed + 5150 + (uint64_t)big);
@@ -3277,7 +3272,7 @@ static void test_world_rows_slot_bits(void **s) {
 
 static void test_world_step_margin(void **s) {
   (void)s;
-  ONE_THREAD_TEST();
+  QKT_ONE_THREAD_TEST();
   qkt_rng_t r;
   qkt_rng_seed(&r, g_seed + 9191);
   qk_world_t *w;
