@@ -691,10 +691,7 @@ static void test_world_dense_kept_scratch(void **s) {
  * remove and an add reusing its slot) against brute force, in order. */
 static void test_world_dense_buckets(void **s) {
   (void)s;
-  if (QKT_TSAN) { /* one thread: nothing for ThreadSanitizer here; run by the other builds */
-    print_message("one-thread test under ThreadSanitizer: skipped\n");
-    skip();
-  }
+  QKT_ONE_THREAD_TEST();
   qkt_rng_t r;
   qkt_rng_seed(&r, g_seed + 57);
   qk_world_t *w;
