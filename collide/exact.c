@@ -210,10 +210,25 @@ int qk__within(double ax, double ay, double bx, double by, double r1, double r2)
 
 /*
  * sign of r^2 |q - p|^2 - ((q - p) x (c - p))^2: nonnegative exactly when the line
- * through p and q passes within r of c. Exact only (the segment-disc test is rare
- * enough, behind its bounding-box filter, not to need a filter of its own).
+ * through p and q passes within r of c. First in doubles: with the four differences
+ * rounded (a relative error of at most eps = 2^-53 each), the cross product is within
+ * about 4 eps C of its value (C = |dx ey| + |dy ex|), its square within 11 eps C^2, and
+ * A = r^2 |q - p|^2 (all terms positive) within 6 eps A; with the last subtraction the
+ * computed value is within 7 eps A + 12 eps C^2 of the real one, well inside the bound of
+ * 32 eps (A + C^2) taken here (no term under- or overflows for values the world
+ * accepts). Exactly when the value lies within that bound (a ray or segment grazing a
+ * disc: the world's ray queries reach this for most discs they meet, which made the
+ * exact path three quarters of a ray query's work in a world of discs).
  */
 int qk__line_within(double px, double py, double qx, double qy, double cx, double cy, double r) {
+  {
+    const double dx = qx - px, dy = qy - py, ex = cx - px, ey = cy - py;
+    const double l = dx * ey, m = dy * ex, cross = l - m, cabs = fabs(l) + fabs(m);
+    const double a = r * r * (dx * dx + dy * dy), v = a - cross * cross;
+    const double bound = 32 * EPS * (a + cabs * cabs);
+    if (v > bound) return 1;
+    if (-v > bound) return -1;
+  }
   xs_t xs, *x = &xs; /* not zeroed: every part is written before it is read */
   /* cross = (qx-px)(cy-py) - (qy-py)(cx-px) */
   x_set_diff(&x->a, qx, px);

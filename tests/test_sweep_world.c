@@ -253,8 +253,9 @@ static void run_scene(qk_shape_t *s, size_t n, const char *what, qkt_rng_t *r, u
   assert_int_equal(qk_world_new(NULL, &w), QK_OK);
   qk_handle_t *h = malloc(n * sizeof *h);
   size_t cap = n * (n - 1) / 2 + 1;
-  uint64_t *got = malloc(2 * cap * sizeof *got), *want = malloc(2 * cap * sizeof *want);
-  uint64_t *prev = malloc(2 * cap * sizeof *prev), *diff = malloc(2 * cap * sizeof *diff);
+  /* (zeroed: gcc 12 at -O3 otherwise takes the oracle's writes for reads of nothing) */
+  uint64_t *got = calloc(2 * cap, sizeof *got), *want = calloc(2 * cap, sizeof *want);
+  uint64_t *prev = calloc(2 * cap, sizeof *prev), *diff = calloc(2 * cap, sizeof *diff);
   assert_true(h && got && want && prev && diff);
   for (size_t i = 0; i < n; i++) assert_int_equal(qk_world_add(w, &s[i], i, &h[i]), QK_OK);
   assert_int_equal(qk_world_update(w), QK_OK);
@@ -377,6 +378,26 @@ static void test_sweep_world_scenes(void **state) {
     }
   }
   run_scene(s, n, "degenerate shapes on a grid", &r, seed);
+  /* Discs all but tangent to segments at any angle, far from the origin: the radius is
+   * the centre's distance to the segment's line (in long double), moved by up to two
+   * ulps either way, so that the line-to-centre test is decided in doubles only when
+   * its rounding allows and exactly otherwise. Each pair stands apart from the others. */
+  n = 0;
+  for (int i = 0; i < 150; i++) {
+    double ox = 1e6 + 20.0 * i, oy = -3e5 + qkt_rng_range(&r, 0, 1);
+    double ang = qkt_rng_range(&r, 0, 6.283185307179586), len = qkt_rng_range(&r, 1, 5);
+    qk_shape_t g = {QK_SHAPE_SEGMENT, ox, oy, ox + len * cos(ang), oy + len * sin(ang)};
+    double u = qkt_rng_range(&r, 0.3, 0.7), d = qkt_rng_range(&r, 0.2, 2);
+    double cx = g.x + u * (g.a - g.x) - d * sin(ang), cy = g.y + u * (g.b - g.y) + d * cos(ang);
+    long double vx = (long double)g.a - g.x, vy = (long double)g.b - g.y;
+    long double cr = vx * ((long double)cy - g.y) - vy * ((long double)cx - g.x);
+    double rad = (double)(fabsl(cr) / sqrtl(vx * vx + vy * vy));
+    for (int k = (int)qkt_rng_below(&r, 5) - 2; k < 0; k++) rad = nextafter(rad, 0);
+    for (int k = (int)qkt_rng_below(&r, 5) - 2; k > 0; k--) rad = nextafter(rad, INFINITY);
+    s[n++] = g;
+    s[n++] = (qk_shape_t){QK_SHAPE_DISC, cx, cy, rad, 0};
+  }
+  run_scene(s, n, "discs all but tangent to segments", &r, seed);
   free(s);
 }
 #else
