@@ -77,6 +77,17 @@ int qk__dot_sign(double ax, double ay, double bx, double by, double cx, double c
 int qk__within(double ax, double ay, double bx, double by, double r1, double r2);
 int qk__line_within(double px, double py, double qx, double qy, double cx, double cy, double r);
 
+/* qk__orient with its floating-point filter inline (the same filter, 8 ulps of the two
+ * products: the same answers), the call only for the signs the filter cannot decide. */
+static inline int qk__orient_fast(double ax, double ay, double bx, double by, double cx,
+                                  double cy) {
+  double l = (bx - ax) * (cy - ay), r = (by - ay) * (cx - ax);
+  double det = l - r, bound = 0x1p-50 * (fabs(l) + fabs(r));
+  if (det > bound) return 1;
+  if (-det > bound) return -1;
+  return qk__orient(ax, ay, bx, by, cx, cy);
+}
+
 /* Zero, or magnitude in [2^-100, 2^100]: the range in which the predicates are exact. */
 static inline int qk__value_ok(double v) {
   double a = fabs(v);

@@ -98,23 +98,25 @@ static int disc_seg(double cx, double cy, double r, const qk_shape_t *g) {
 static int box_seg(const qk_shape_t *b, const qk_shape_t *g) {
   qk_box_t gb = qk__shape_box(g);
   if (gb.xmin > b->a || b->x > gb.xmax || gb.ymin > b->b || b->y > gb.ymax) return 0;
-  int pos = 0, neg = 0;
+  /* With the boxes meeting, the segment misses the box exactly when the four corners lie
+   * strictly on one side of its line: a corner on it, or two on either side, decide. */
   const double cx[4] = {b->x, b->a, b->a, b->x}, cy[4] = {b->y, b->y, b->b, b->b};
+  int first = 0;
   for (int i = 0; i < 4; i++) {
-    int o = qk__orient(g->x, g->y, g->a, g->b, cx[i], cy[i]);
-    pos += o > 0;
-    neg += o < 0;
+    int o = qk__orient_fast(g->x, g->y, g->a, g->b, cx[i], cy[i]);
+    if (o == 0 || (i > 0 && o != first)) return 1;
+    first = o;
   }
-  return pos < 4 && neg < 4;
+  return 0;
 }
 
 static int seg_seg(const qk_shape_t *g, const qk_shape_t *h) {
   qk_box_t gb = qk__shape_box(g), hb = qk__shape_box(h);
   if (gb.xmin > hb.xmax || hb.xmin > gb.xmax || gb.ymin > hb.ymax || hb.ymin > gb.ymax) return 0;
-  int o1 = qk__orient(g->x, g->y, g->a, g->b, h->x, h->y);
-  int o2 = qk__orient(g->x, g->y, g->a, g->b, h->a, h->b);
-  int o3 = qk__orient(h->x, h->y, h->a, h->b, g->x, g->y);
-  int o4 = qk__orient(h->x, h->y, h->a, h->b, g->a, g->b);
+  int o1 = qk__orient_fast(g->x, g->y, g->a, g->b, h->x, h->y);
+  int o2 = qk__orient_fast(g->x, g->y, g->a, g->b, h->a, h->b);
+  int o3 = qk__orient_fast(h->x, h->y, h->a, h->b, g->x, g->y);
+  int o4 = qk__orient_fast(h->x, h->y, h->a, h->b, g->a, g->b);
   if (o1 * o2 < 0 && o3 * o4 < 0) return 1;
   if (o1 == 0 && in_box(h->x, h->y, gb.xmin, gb.ymin, gb.xmax, gb.ymax)) return 1;
   if (o2 == 0 && in_box(h->a, h->b, gb.xmin, gb.ymin, gb.xmax, gb.ymax)) return 1;

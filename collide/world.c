@@ -264,9 +264,10 @@ static qk__wobj_t *lookup(const qk_world_t *w, qk_handle_t h) {
   return qk__wlive(o) && o->gen == gen ? o : NULL;
 }
 
-static void set_shape(qk__wobj_t *o, const qk_shape_t *s) {
+static void set_shape(qk_world_t *w, qk__wobj_t *o, const qk_shape_t *s) {
   o->x = s->x, o->y = s->y, o->a = s->a, o->b = s->b;
   o->flags = (uint8_t)((o->flags & ~QK__WKIND) | ((unsigned)s->kind & QK__WKIND));
+  if (s->kind == QK_SHAPE_DISC || s->kind == QK_SHAPE_SEGMENT) w->had_round = 1;
 }
 
 qk_status_t qk_world_add(qk_world_t *w, const qk_shape_t *shape, uint64_t tag, qk_handle_t *h) {
@@ -311,7 +312,7 @@ qk_status_t qk_world_add(qk_world_t *w, const qk_shape_t *shape, uint64_t tag, q
   }
   qk__wobj_t *o = &w->obj[i];
   o->tag = tag;
-  set_shape(o, &s);
+  set_shape(w, o, &s);
   o->k.step = 0;
   o->flags &= (uint8_t)~QK__WFORCED;
   make_dirty(w, i); /* filed at the next update; until then queries check it directly */
@@ -374,7 +375,7 @@ static QK__NOINLINE qk_status_t move_general(qk_world_t *w, qk__wobj_t *o, uint3
   if (st != QK_OK) return st;
   qk_box_t nb = qk__shape_box(&s);
   float step = step_of(o, &nb);
-  set_shape(o, &s);
+  set_shape(w, o, &s);
   refile_check(w, o, i, &nb, step);
   return QK_OK;
 }
@@ -520,9 +521,14 @@ qk_status_t qk_world_get(const qk_world_t *w, qk_handle_t h, qk_shape_t *shape, 
   return QK_OK;
 }
 
-int qk__world_levels(const qk_world_t *w, int *levels) {
+void qk__world_note_levels(qk_world_t *w) {
   int n = 0;
   for (int l = 0; l < QK__NLEV; l++)
-    if (w->lv_n[l]) levels[n++] = l + QK__LMIN;
-  return n;
+    if (w->lv_n[l]) w->lv_occ[n++] = (int16_t)(l + QK__LMIN);
+  w->n_lv_occ = n;
+}
+
+int qk__world_levels(const qk_world_t *w, int *levels) {
+  for (int i = 0; i < w->n_lv_occ; i++) levels[i] = w->lv_occ[i];
+  return w->n_lv_occ;
 }

@@ -156,7 +156,11 @@ struct qk_world {
   qk__wcell_t *cells;
   uint32_t n_cells, cap_cells;
   uint32_t lv_first[QK__NLEV], lv_n[QK__NLEV]; /* each level's run of cells */
-  qk__prows_t cur;                             /* this frame's pairs (handles: ugen) */
+  /* The occupied levels (lv_n nonzero), ascending, noted when the order is made
+   * (qk__world_note_levels): a query reads these few, not all QK__NLEV counts. */
+  int16_t lv_occ[QK__NLEV];
+  int n_lv_occ;
+  qk__prows_t cur; /* this frame's pairs (handles: ugen) */
   /* The current pairs also as keys in order (8 bytes a pair), when the last update's
    * merge was the key merge of short rows (then ckeys.n == cur.n, else ckeys.n is 0):
    * the next merge reads the last frame's keys here instead of writing them out of the
@@ -190,6 +194,8 @@ struct qk_world {
    * every pair whose float boxes then met. */
   qk__kvec_t near;
   int ident_dirty;  /* an object was added or removed since the last update */
+  int had_round;    /* a disc or a segment was ever added or moved to (never cleared): the
+                       first-hit ray stops early only in worlds of boxes and points */
   int cells_noted;  /* each live object's `cell` is its index in the cells (the last pack) */
   int by_bands;     /* the order of the last update is searched by bands (qk__world_by_bands,
                        asked once by qk__world_reorder) */
@@ -282,9 +288,11 @@ static inline uint32_t qk__cell_lower(const qk_world_t *w, int l, int64_t y, int
 
 /* Occupied levels of the order, ascending; returns how many. */
 int qk__world_levels(const qk_world_t *w, int *levels);
+/* Note the occupied levels from lv_n (after the order's cells are made). */
+void qk__world_note_levels(qk_world_t *w);
 
 /* Visit every live object whose box meets qb: fn returns nonzero to stop. */
-typedef int (*qk__wvisit_fn)(const qk_world_t *w, uint32_t slot, void *ud);
+typedef int (*qk__wvisit_fn)(const qk_world_t *w, uint32_t slot, const qk_box_t *box, void *ud);
 void qk__world_visit(const qk_world_t *w, qk_box_t qb, qk__wvisit_fn fn, void *ud);
 /* The same for the box of a segment seg[0] -> seg[1], visiting only the cells along it
  * where the box would hold many more. */

@@ -30,7 +30,7 @@ static int visit_cell(const qk_world_t *w, uint32_t c, qk_box_t qb, qk__wvisit_f
     const qk__wobj_t *o = &w->obj[i];
     if (!qk__wlive(o) || (o->flags & QK__WDIRTY)) continue;
     qk_box_t b = qk__wbox(o);
-    if (boxes_meet(&b, &qb) && fn(w, i, ud)) return 1;
+    if (boxes_meet(&b, &qb) && fn(w, i, &b, ud)) return 1;
   }
   return 0;
 }
@@ -132,7 +132,7 @@ void qk__world_visit_seg(const qk_world_t *w, qk_box_t qb, const qk_point_t *seg
     const qk__wobj_t *o = &w->obj[i];
     if (!qk__wlive(o)) continue;
     qk_box_t b = qk__wbox(o);
-    if (boxes_meet(&b, &qb) && fn(w, i, ud)) return;
+    if (boxes_meet(&b, &qb) && fn(w, i, &b, ud)) return;
   }
 }
 
@@ -148,7 +148,8 @@ typedef struct qctx {
   size_t cap, n;
 } qctx_t;
 
-static int q_visit(const qk_world_t *w, uint32_t i, void *ud) {
+static int q_visit(const qk_world_t *w, uint32_t i, const qk_box_t *b, void *ud) {
+  (void)b;
   qctx_t *c = ud;
   qk_shape_t sh = qk__wshape(&w->obj[i]);
   if (!qk__shapes_overlap(c->q, &sh)) return 0;
@@ -190,7 +191,8 @@ static inline int hit_less(double ta, uint32_t sa, double tb, uint32_t sb) {
   return ta < tb || (ta == tb && sa < sb);
 }
 
-static int r_visit_all(const qk_world_t *w, uint32_t i, void *ud) {
+static int r_visit_all(const qk_world_t *w, uint32_t i, const qk_box_t *b, void *ud) {
+  (void)b;
   rctx_t *c = ud;
   qk_shape_t sh = qk__wshape(&w->obj[i]);
   if (!qk__shapes_overlap(&c->seg, &sh)) return 0;
@@ -199,8 +201,45 @@ static int r_visit_all(const qk_world_t *w, uint32_t i, void *ud) {
   return 0;
 }
 
-static int r_visit_first(const qk_world_t *w, uint32_t i, void *ud) {
+/* Boxes and points, whose distance and ray parameter (qk__shape_dist, qk__ray_param)
+ * are those of their boxes computed in long double, to within a few ulps of the real
+ * values: a bound from the box in doubles then bounds the computed value too. (A disc's
+ * or a segment's is computed with cancellations whose error can exceed any fixed
+ * relative margin, so they are always computed, as before: the answers stay the same.) */
+static inline int box_like(const qk__wobj_t *o) {
+  const unsigned k = o->flags & QK__WKIND;
+  return k == QK_SHAPE_BOX || k == QK_SHAPE_POINT;
+}
+
+/* A lower bound of where the segment from -> to (direction v, computed) enters box b, as
+ * a parameter in [0, 1], or more than 1 when it misses the box's slabs: the slab entry in
+ * doubles. Each quotient is within 3 ulps of its real value, so the bound is below the
+ * real entry by far less than the 2^-40 the caller leaves. */
+static double entry_bound(const rctx_t *c, const qk_box_t *b) {
+  const double ox = c->from.x, oy = c->from.y, vx = c->to.x - ox, vy = c->to.y - oy;
+  double lo = 0;
+  if (vx != 0) {
+    double t1 = (b->xmin - ox) / vx, t2 = (b->xmax - ox) / vx;
+    lo = qk__max(lo, qk__min(t1, t2));
+  } else if (ox < b->xmin || ox > b->xmax) {
+    return 2;
+  }
+  if (vy != 0) {
+    double t1 = (b->ymin - oy) / vy, t2 = (b->ymax - oy) / vy;
+    lo = qk__max(lo, qk__min(t1, t2));
+  } else if (oy < b->ymin || oy > b->ymax) {
+    return 2;
+  }
+  return lo;
+}
+
+static int r_visit_first(const qk_world_t *w, uint32_t i, const qk_box_t *b, void *ud) {
   rctx_t *c = ud;
+  /* An object the segment reaches (in its box) only after the best hit so far cannot be
+   * the first: its parameter would be larger, so no exact test is needed. */
+  if (c->best.h != QK_HANDLE_NONE && box_like(&w->obj[i]) &&
+      entry_bound(c, b) > c->best.t + 0x1p-40)
+    return 0;
   qk_shape_t sh = qk__wshape(&w->obj[i]);
   if (!qk__shapes_overlap(&c->seg, &sh)) return 0;
   double t = qk__ray_param(&sh, c->from, c->to);
@@ -241,6 +280,68 @@ qk_status_t qk_world_raycast_all(const qk_world_t *w, qk_point_t from, qk_point_
   return QK_OK;
 }
 
+/*
+ * The first hit in a world of boxes and points only (!had_round), stopping early: the
+ * segment in n pieces about a cell long at the level of the most cells, in order, each
+ * piece's cells at every level at once (visit_along's pieces and covering argument).
+ * After pieces 1 .. k every object the segment touches at a parameter up to t_k = k / n
+ * has been tested: its box meets one of those pieces' boxes, so its cell is in their
+ * ranges. An object not tested yet touches the segment only beyond t_k, and a box's or
+ * a point's parameter is computed to within a few ulps of the real one, so once the
+ * best hit lies before t_k by a margin no object left can come first, nor tie with it.
+ * (A disc's or a segment's parameter can be off by more than any such margin: worlds
+ * that had one visit every candidate.) The objects not filed yet and the levels that
+ * have few cells for the rows the pieces would search are tested first, whole. Returns
+ * 0, having tested nothing, when the pieces would be too many: the caller visits the
+ * segment's cells as any query does.
+ */
+static int visit_first(const qk_world_t *w, qk_box_t qb, const qk_point_t *seg, rctx_t *c) {
+  int levels[QK__NLEV], along[QK__NLEV];
+  crange_t prev[QK__NLEV];
+  const int nl = qk__world_levels(w, levels);
+  if (nl == 0) return 0;
+  /* pieces a cell long at the level of the most cells */
+  int lm = levels[0];
+  for (int li = 1; li < nl; li++)
+    if (w->lv_n[levels[li] - QK__LMIN] > w->lv_n[lm - QK__LMIN]) lm = levels[li];
+  const qk_point_t a = seg[0], b = seg[1];
+  const double pieces = ceil(fmax(fabs(b.x - a.x), fabs(b.y - a.y)) / qk__pow2(lm));
+  if (!(pieces <= 0x1p20)) return 0;
+  const size_t n = pieces < 1 ? 1 : (size_t)pieces;
+  for (uint32_t i = w->dirty_head; i != QK_NONE; i = w->dnext[i]) {
+    const qk__wobj_t *o = &w->obj[i];
+    if (!qk__wlive(o)) continue;
+    qk_box_t ob = qk__wbox(o);
+    if (boxes_meet(&ob, &qb)) r_visit_first(w, i, &ob, c);
+  }
+  for (int li = 0; li < nl; li++) {
+    const int l = levels[li];
+    const double ncell = w->lv_n[l - QK__LMIN], lg = log2(ncell + 1) + 2;
+    const double prow = (qb.ymax - qb.ymin) / (double)n / qk__pow2(l) + 3;
+    along[li] = (double)n * prow * lg <= 2 * ncell + 8;
+    prev[li] = (crange_t){1, 0, 1, 0}; /* empty */
+    if (!along[li]) scan_level(w, l, range_of(qb, l), qb, r_visit_first, c);
+  }
+  const double e = (fabs(a.x) + fabs(a.y) + fabs(b.x) + fabs(b.y)) * 0x1p-40;
+  qk_point_t p = a;
+  for (size_t k = 1; k <= n; k++) {
+    const double t = (double)k / (double)n;
+    const qk_point_t q = k == n ? b : (qk_point_t){a.x + t * (b.x - a.x), a.y + t * (b.y - a.y)};
+    const qk_box_t pb = {fmin(p.x, q.x) - e, fmin(p.y, q.y) - e, fmax(p.x, q.x) + e,
+                         fmax(p.y, q.y) + e};
+    for (int li = 0; li < nl; li++) {
+      if (!along[li]) continue;
+      const crange_t r = range_of(pb, levels[li]);
+      if (memcmp(&r, &prev[li], sizeof r))
+        visit_range(w, levels[li], r, &prev[li], qb, r_visit_first, c);
+      prev[li] = r;
+    }
+    if (c->best.h != QK_HANDLE_NONE && c->best.t < t - 0x1p-30) break;
+    p = q;
+  }
+  return 1;
+}
+
 qk_status_t qk_world_raycast(const qk_world_t *w, qk_point_t from, qk_point_t to,
                              qk_world_hit_t *hit) {
   if (!w || !hit) return QK_ERR_INVALID;
@@ -249,7 +350,9 @@ qk_status_t qk_world_raycast(const qk_world_t *w, qk_point_t from, qk_point_t to
   qk_status_t st = ray_setup(from, to, &c);
   if (st != QK_OK) return st;
   qk_point_t seg[2] = {from, to};
-  qk__world_visit_seg(w, qk__shape_box(&c.seg), seg, r_visit_first, &c);
+  const qk_box_t qb = qk__shape_box(&c.seg);
+  if (w->n_live && (w->had_round || !visit_first(w, qb, seg, &c)))
+    qk__world_visit_seg(w, qb, seg, r_visit_first, &c);
   *hit = c.best;
   return QK_OK;
 }
@@ -298,10 +401,19 @@ typedef struct kctx {
   size_t k, n, seen;
 } kctx_t;
 
-static int k_visit(const qk_world_t *w, uint32_t i, void *ud) {
+static int k_visit(const qk_world_t *w, uint32_t i, const qk_box_t *b, void *ud) {
   kctx_t *c = ud;
-  qk_shape_t sh = qk__wshape(&w->obj[i]);
   c->seen++;
+  if (c->n == c->k && box_like(&w->obj[i])) {
+    /* Farther than the k-th so far by its box: not among the k.
+     * The squared box distance in doubles is within a few ulps of its real value, far
+     * inside the 2^-40 left here, and its sign parts are exact. */
+    double dx = qk__max(qk__max(b->xmin - c->p.x, c->p.x - b->xmax), 0);
+    double dy = qk__max(qk__max(b->ymin - c->p.y, c->p.y - b->ymax), 0);
+    double kt = c->out[c->n - 1].t;
+    if (dx * dx + dy * dy > kt * kt * (1 + 0x1p-40)) return 0;
+  }
+  qk_shape_t sh = qk__wshape(&w->obj[i]);
   double d = qk__shape_dist(&sh, c->p);
   if (c->n == c->k && !hit_less(d, i, c->out[c->n - 1].t, (uint32_t)c->out[c->n - 1].h)) return 0;
   size_t j = c->n < c->k ? c->n++ : c->n - 1;
@@ -327,7 +439,15 @@ qk_status_t qk_world_knn(const qk_world_t *w, qk_point_t p, size_t k, qk_world_h
    * every object within distance r meets the square of half side r, so those k are the
    * nearest. Distances are rounded, so the bound is kept a little inside r.
    */
-  double r = n_levels ? ldexp(1.0, levels[0]) : 1.0;
+  double r = 1.0;
+  if (n_levels) {
+    /* The first square about holds 2k objects at the finest level's mean density: those
+     * objects in its cells over the cells' area. */
+    const int l0 = levels[0] - QK__LMIN;
+    const uint32_t c0 = w->lv_first[l0], nc = w->lv_n[l0];
+    const double objs = (double)(w->cells[c0 + nc].start - w->cells[c0].start);
+    r = ldexp(sqrt((double)k * nc / (objs > 1 ? objs : 1)), levels[0] - 1);
+  }
   for (;;) {
     kctx_t c = {p, out, k, 0, 0};
     qk_box_t qb = {p.x - r, p.y - r, p.x + r, p.y + r};

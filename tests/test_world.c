@@ -2019,6 +2019,109 @@ static void test_world_raycast_batch(void **s) {
   free(from), free(to), free(got), free(one);
 }
 
+/* Queries in worlds of boxes and points only, where the first hit stops once no object
+ * left can come first and both queries skip objects by their boxes (collide/world_query.c):
+ * every first hit is the first of all the hits (qk_world_raycast_all, which tests every
+ * candidate), no hit where brute force finds none, and the k nearest are the nearest by
+ * brute force; in each scene, with objects moved, added and removed since the update (not
+ * filed yet) and after it, for rays short and long, axis-parallel and of length zero. */
+static void test_world_boxes_points_queries(void **s) {
+  (void)s;
+  QKT_ONE_THREAD_TEST();
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 433);
+  enum { NOBJ = 400, NSMALL = 3000, NRAY = 300 };
+  qk_world_hit_t *all = malloc((NSMALL + 64) * sizeof *all);
+  /* the four scenes, then SC_HUGE + 1: 3000 small boxes and points (sides 0.05 to 0.3),
+   * where rays cross many cells before their first hit and the pieces stop early */
+  for (int scene = SC_UNIFORM; scene <= SC_HUGE + 1; scene++) {
+    qk_world_t *w = threaded_world(1);
+    mirror_t m = {0};
+    for (int phase = 0; phase < 6; phase++) {
+      if (phase == 0 && scene > SC_HUGE)
+        for (size_t i = 0; i < NSMALL; i++) {
+          double x = qkt_rng_unit(&r) * 100, y = qkt_rng_unit(&r) * 100;
+          double sw = qkt_rng_range(&r, 0.05, 0.3), sh = qkt_rng_range(&r, 0.05, 0.3);
+          m_add(w, &m,
+                qkt_rng_below(&r, 4) ? (qk_shape_t){QK_SHAPE_BOX, x, y, x + sw, y + sh}
+                                     : (qk_shape_t){QK_SHAPE_POINT, x, y, 0, 0});
+        }
+      else if (phase == 0)
+        for (size_t i = 0; i < NOBJ; i++) {
+          qk_shape_t sh;
+          do sh = rnd_shape(&r, scene, 1);
+          while (sh.kind != QK_SHAPE_BOX && sh.kind != QK_SHAPE_POINT);
+          m_add(w, &m, sh);
+        }
+      else if (phase % 2) /* moves, adds and removes, then queries before the update */
+        for (int j = 0; j < 60; j++) {
+          size_t i = qkt_rng_below(&r, (uint32_t)m.n);
+          if (j % 6 == 0) {
+            m_remove_random(w, &m, &r);
+          } else if (j % 6 == 1) {
+            qk_shape_t sh;
+            do sh = rnd_shape(&r, scene, 1);
+            while (sh.kind != QK_SHAPE_BOX && sh.kind != QK_SHAPE_POINT);
+            m_add(w, &m, sh);
+          } else {
+            m_move(w, &m, i, moved(&r, m.s[i]));
+          }
+        }
+      else
+        assert_int_equal(qk_world_update(w), QK_OK);
+      const double off = scene == SC_HUGE ? 1e9 : 0;
+      for (int q = 0; q < NRAY; q++) {
+        qk_point_t a = {off + qkt_rng_range(&r, -10, 110), -off + qkt_rng_range(&r, -10, 110)};
+        double len = q % 5 == 0   ? 150
+                     : q % 5 == 1 ? qkt_rng_range(&r, 0.01, 3)
+                                  : qkt_rng_range(&r, 3, 40);
+        double ang = qkt_rng_range(&r, 0, 6.283185307179586);
+        qk_point_t b = {a.x + len * cos(ang), a.y + len * sin(ang)};
+        if (q % 7 == 0) b.y = a.y;  /* horizontal */
+        if (q % 11 == 0) b.x = a.x; /* vertical */
+        if (q % 13 == 0) b = a;     /* a point */
+        if (q % 17 == 0 && m.n) {   /* from a corner or a point of an object */
+          const qk_shape_t *o = &m.s[qkt_rng_below(&r, (uint32_t)m.n)];
+          a = (qk_point_t){o->x, o->y};
+        }
+        qk_world_hit_t first;
+        size_t n;
+        assert_int_equal(qk_world_raycast(w, a, b, &first), QK_OK);
+        assert_int_equal(qk_world_raycast_all(w, a, b, all, NSMALL + 64, &n), QK_OK);
+        if (n ? first.h != all[0].h || !(first.t == all[0].t) : first.h != QK_HANDLE_NONE)
+          fail_msg("scene %d phase %d ray %d: first %llx at %.17g, of all %zu %llx at %.17g "
+                   "(seed %llu)",
+                   scene, phase, q, (unsigned long long)first.h, first.t, n,
+                   (unsigned long long)(n ? all[0].h : 0), n ? all[0].t : 0.0,
+                   (unsigned long long)g_seed);
+        qk_shape_t seg = {QK_SHAPE_SEGMENT, a.x, a.y, b.x, b.y};
+        size_t want = 0;
+        for (size_t j = 0; j < m.n; j++) want += o_overlap(seg, m.s[j]);
+        assert_int_equal(n, want);
+      }
+      for (int q = 0; q < 60; q++) {
+        qk_point_t p = {off + qkt_rng_range(&r, -10, 110), -off + qkt_rng_range(&r, -10, 110)};
+        size_t k = q % 3 == 0 ? 1 : q % 3 == 1 ? 3 : 9, nk;
+        qk_world_hit_t nn[9];
+        assert_int_equal(qk_world_knn(w, p, k, nn, &nk), QK_OK);
+        assert_int_equal(nk, m.n < k ? m.n : k);
+        for (size_t i = 0; i < nk; i++) {
+          size_t below = 0;
+          for (size_t j = 0; j < m.n; j++)
+            below += sqrtl(o_d2(&m.s[j], p.x, p.y)) < nn[i].t - 1e-9 * (1 + nn[i].t + fabs(p.x));
+          if (below > i)
+            fail_msg("scene %d phase %d: knn rank %zu: %zu objects nearer (seed %llu)", scene,
+                     phase, i, below, (unsigned long long)g_seed);
+          if (i) assert_true(nn[i - 1].t <= nn[i].t);
+        }
+      }
+    }
+    free(m.h), free(m.s);
+    qk_world_free(w);
+  }
+  free(all);
+}
+
 /* Touching cases on integers (every formula is exact there). */
 static void test_world_touching(void **s) {
   (void)s;
@@ -3417,6 +3520,7 @@ int main(void) {
       cmocka_unit_test(test_world_query_grid_touching),
       cmocka_unit_test(test_world_move_out_of_loose),
       cmocka_unit_test(test_world_raycast_batch),
+      cmocka_unit_test(test_world_boxes_points_queries),
       cmocka_unit_test(test_world_stale_handles),
       cmocka_unit_test(test_world_threads_frames),
       cmocka_unit_test(test_world_thread_min_sides),
