@@ -314,14 +314,17 @@ static int visit_first(const qk_world_t *w, qk_box_t qb, const qk_point_t *seg, 
     qk_box_t ob = qk__wbox(o);
     if (boxes_meet(&ob, &qb)) r_visit_first(w, i, &ob, c);
   }
+  int walk = 0;
   for (int li = 0; li < nl; li++) {
     const int l = levels[li];
     const double ncell = w->lv_n[l - QK__LMIN], lg = log2(ncell + 1) + 2;
     const double prow = (qb.ymax - qb.ymin) / (double)n / qk__pow2(l) + 3;
     along[li] = (double)n * prow * lg <= 2 * ncell + 8;
+    walk |= along[li];
     prev[li] = (crange_t){1, 0, 1, 0}; /* empty */
     if (!along[li]) scan_level(w, l, range_of(qb, l), qb, r_visit_first, c);
   }
+  if (!walk) return 1; /* (every level scanned whole) */
   const double e = (fabs(a.x) + fabs(a.y) + fabs(b.x) + fabs(b.y)) * 0x1p-40;
   qk_point_t p = a;
   for (size_t k = 1; k <= n; k++) {
