@@ -291,7 +291,7 @@ int qk__world_levels(const qk_world_t *w, int *levels);
 /* Note the occupied levels from lv_n (after the order's cells are made). */
 void qk__world_note_levels(qk_world_t *w);
 
-/* Visit every live object whose box meets qb: fn returns nonzero to stop. */
+/* Visit every live object whose box meets qb, giving fn its box: fn returns nonzero to stop. */
 typedef int (*qk__wvisit_fn)(const qk_world_t *w, uint32_t slot, const qk_box_t *box, void *ud);
 void qk__world_visit(const qk_world_t *w, qk_box_t qb, qk__wvisit_fn fn, void *ud);
 /* The same for the box of a segment seg[0] -> seg[1], visiting only the cells along it
