@@ -81,21 +81,49 @@ static int scan_level(const qk_world_t *w, int l, crange_t r, qk_box_t qb, qk__w
  * cell in two ranges is in every range between them: skipping the cells of the
  * previous range visits each cell (and so each object) once.
  */
+/* Piece k of n of the segment seg[0] -> seg[1] (k = 1 .. n, in order): the box from the
+ * end of piece k - 1 (*p, updated to piece k's end) to the point at k / n, widened by
+ * e = 2^-40 of the ends' magnitudes, far more than the points' rounding. */
+typedef struct pieces {
+  qk_point_t a, b, p;
+  double e;
+  size_t n;
+} pieces_t;
+
+static pieces_t pieces_of(const qk_point_t *seg, size_t n) {
+  const qk_point_t a = seg[0], b = seg[1];
+  return (pieces_t){a, b, a, (fabs(a.x) + fabs(a.y) + fabs(b.x) + fabs(b.y)) * 0x1p-40, n};
+}
+
+static qk_box_t next_piece(pieces_t *s, size_t k) {
+  const double t = (double)k / (double)s->n;
+  const qk_point_t a = s->a, b = s->b, p = s->p;
+  const qk_point_t q = k == s->n ? b : (qk_point_t){a.x + t * (b.x - a.x), a.y + t * (b.y - a.y)};
+  s->p = q;
+  return (qk_box_t){fmin(p.x, q.x) - s->e, fmin(p.y, q.y) - s->e, fmax(p.x, q.x) + s->e,
+                    fmax(p.y, q.y) + s->e};
+}
+
 static int visit_along(const qk_world_t *w, int l, const qk_point_t *seg, double pieces,
                        qk_box_t qb, qk__wvisit_fn fn, void *ud) {
-  qk_point_t a = seg[0], b = seg[1];
-  double e = (fabs(a.x) + fabs(a.y) + fabs(b.x) + fabs(b.y)) * 0x1p-40;
   crange_t prev = {1, 0, 1, 0}; /* empty */
-  qk_point_t p = a;
-  size_t n = (size_t)pieces;
-  for (size_t k = 1; k <= n; k++) {
-    double t = (double)k / (double)n;
-    qk_point_t q = k == n ? b : (qk_point_t){a.x + t * (b.x - a.x), a.y + t * (b.y - a.y)};
-    qk_box_t pb = {fmin(p.x, q.x) - e, fmin(p.y, q.y) - e, fmax(p.x, q.x) + e, fmax(p.y, q.y) + e};
-    crange_t r = range_of(pb, l);
+  pieces_t s = pieces_of(seg, (size_t)pieces);
+  for (size_t k = 1; k <= s.n; k++) {
+    crange_t r = range_of(next_piece(&s, k), l);
     if (visit_range(w, l, r, &prev, qb, fn, ud)) return 1;
     prev = r;
-    p = q;
+  }
+  return 0;
+}
+
+/* The objects added or re-filed since the last update (not in the order's cells), one by
+ * one. */
+static int visit_dirty(const qk_world_t *w, qk_box_t qb, qk__wvisit_fn fn, void *ud) {
+  for (uint32_t i = w->dirty_head; i != QK_NONE; i = w->dnext[i]) {
+    const qk__wobj_t *o = &w->obj[i];
+    if (!qk__wlive(o)) continue;
+    qk_box_t b = qk__wbox(o);
+    if (boxes_meet(&b, &qb) && fn(w, i, &b, ud)) return 1;
   }
   return 0;
 }
@@ -127,13 +155,7 @@ void qk__world_visit_seg(const qk_world_t *w, qk_box_t qb, const qk_point_t *seg
     }
     if (scan_level(w, l, r, qb, fn, ud)) return;
   }
-  /* The objects added or re-filed since the last update, one by one. */
-  for (uint32_t i = w->dirty_head; i != QK_NONE; i = w->dnext[i]) {
-    const qk__wobj_t *o = &w->obj[i];
-    if (!qk__wlive(o)) continue;
-    qk_box_t b = qk__wbox(o);
-    if (boxes_meet(&b, &qb) && fn(w, i, &b, ud)) return;
-  }
+  visit_dirty(w, qb, fn, ud);
 }
 
 void qk__world_visit(const qk_world_t *w, qk_box_t qb, qk__wvisit_fn fn, void *ud) {
@@ -304,16 +326,11 @@ static int visit_first(const qk_world_t *w, qk_box_t qb, const qk_point_t *seg, 
   int lm = levels[0];
   for (int li = 1; li < nl; li++)
     if (w->lv_n[levels[li] - QK__LMIN] > w->lv_n[lm - QK__LMIN]) lm = levels[li];
-  const qk_point_t a = seg[0], b = seg[1];
-  const double pieces = ceil(fmax(fabs(b.x - a.x), fabs(b.y - a.y)) / qk__pow2(lm));
+  const double pieces =
+      ceil(fmax(fabs(seg[1].x - seg[0].x), fabs(seg[1].y - seg[0].y)) / qk__pow2(lm));
   if (!(pieces <= 0x1p20)) return 0;
   const size_t n = pieces < 1 ? 1 : (size_t)pieces;
-  for (uint32_t i = w->dirty_head; i != QK_NONE; i = w->dnext[i]) {
-    const qk__wobj_t *o = &w->obj[i];
-    if (!qk__wlive(o)) continue;
-    qk_box_t ob = qk__wbox(o);
-    if (boxes_meet(&ob, &qb)) r_visit_first(w, i, &ob, c);
-  }
+  visit_dirty(w, qb, r_visit_first, c);
   int walk = 0;
   for (int li = 0; li < nl; li++) {
     const int l = levels[li];
@@ -325,13 +342,9 @@ static int visit_first(const qk_world_t *w, qk_box_t qb, const qk_point_t *seg, 
     if (!along[li]) scan_level(w, l, range_of(qb, l), qb, r_visit_first, c);
   }
   if (!walk) return 1; /* (every level scanned whole) */
-  const double e = (fabs(a.x) + fabs(a.y) + fabs(b.x) + fabs(b.y)) * 0x1p-40;
-  qk_point_t p = a;
+  pieces_t s = pieces_of(seg, n);
   for (size_t k = 1; k <= n; k++) {
-    const double t = (double)k / (double)n;
-    const qk_point_t q = k == n ? b : (qk_point_t){a.x + t * (b.x - a.x), a.y + t * (b.y - a.y)};
-    const qk_box_t pb = {fmin(p.x, q.x) - e, fmin(p.y, q.y) - e, fmax(p.x, q.x) + e,
-                         fmax(p.y, q.y) + e};
+    const qk_box_t pb = next_piece(&s, k);
     for (int li = 0; li < nl; li++) {
       if (!along[li]) continue;
       const crange_t r = range_of(pb, levels[li]);
@@ -339,8 +352,7 @@ static int visit_first(const qk_world_t *w, qk_box_t qb, const qk_point_t *seg, 
         visit_range(w, levels[li], r, &prev[li], qb, r_visit_first, c);
       prev[li] = r;
     }
-    if (c->best.h != QK_HANDLE_NONE && c->best.t < t - 0x1p-30) break;
-    p = q;
+    if (c->best.h != QK_HANDLE_NONE && c->best.t < (double)k / (double)n - 0x1p-30) break;
   }
   return 1;
 }

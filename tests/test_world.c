@@ -438,6 +438,29 @@ static void update_and_check(qk_world_t *w, const mirror_t *m, qk_world_pair_t *
   *prev = want, *np = nw;
 }
 
+/* qk_world_knn(p, k) against brute force: as many as there are up to k, in order, and
+ * no more objects nearer than the i-th (by the oracle's distances, with a tolerance) than
+ * i. `what` starts the failure message. */
+static QKT_SERIAL void check_knn(qk_world_t *w, const mirror_t *m, qk_point_t p, size_t k,
+                                 const char *what) {
+  qk_world_hit_t nn[16];
+  size_t nk;
+  assert_true(k <= 16);
+  assert_int_equal(qk_world_knn(w, p, k, nn, &nk), QK_OK);
+  assert_int_equal(nk, m->n < k ? m->n : k);
+  ld *d = malloc((m->n + 1) * sizeof *d);
+  for (size_t i = 0; i < m->n; i++) d[i] = sqrtl(o_d2(&m->s[i], p.x, p.y));
+  for (size_t i = 0; i < nk; i++) {
+    size_t below = 0;
+    for (size_t j = 0; j < m->n; j++) below += d[j] < nn[i].t - 1e-9 * (1 + nn[i].t + fabs(p.x));
+    if (below > i)
+      fail_msg("%sknn rank %zu: %zu objects nearer (seed %llu)", what, i, below,
+               (unsigned long long)g_seed);
+    if (i) assert_true(nn[i - 1].t <= nn[i].t);
+  }
+  free(d);
+}
+
 static QKT_SERIAL void check_queries(qkt_rng_t *r, qk_world_t *w, const mirror_t *m, int scene) {
   qk_handle_t *got = malloc((m->n + 1) * sizeof *got);
   for (int qi = 0; qi < 5; qi++) {
@@ -498,24 +521,10 @@ static QKT_SERIAL void check_queries(qkt_rng_t *r, qk_world_t *w, const mirror_t
       free(hits);
     }
   }
-  /* kNN */
-  qk_world_hit_t nn[8];
-  size_t k = 7, nk;
-  qk_point_t p = {qkt_rng_unit(r) * 100 + (scene == SC_HUGE ? 1e9 : 0),
-                  qkt_rng_unit(r) * 100 - (scene == SC_HUGE ? 1e9 : 0)};
-  assert_int_equal(qk_world_knn(w, p, k, nn, &nk), QK_OK);
-  assert_int_equal(nk, m->n < k ? m->n : k);
-  ld *d = malloc((m->n + 1) * sizeof *d);
-  for (size_t i = 0; i < m->n; i++) d[i] = sqrtl(o_d2(&m->s[i], p.x, p.y));
-  for (size_t i = 0; i < nk; i++) {
-    size_t below = 0;
-    for (size_t j = 0; j < m->n; j++) below += d[j] < nn[i].t - 1e-9 * (1 + nn[i].t + fabs(p.x));
-    if (below > i)
-      fail_msg("knn rank %zu: %zu objects nearer (seed %llu)", i, below,
-               (unsigned long long)g_seed);
-    if (i) assert_true(nn[i - 1].t <= nn[i].t);
-  }
-  free(d);
+  check_knn(w, m,
+            (qk_point_t){qkt_rng_unit(r) * 100 + (scene == SC_HUGE ? 1e9 : 0),
+                         qkt_rng_unit(r) * 100 - (scene == SC_HUGE ? 1e9 : 0)},
+            7, "");
   free(got);
 }
 
@@ -2019,6 +2028,14 @@ static void test_world_raycast_batch(void **s) {
   free(from), free(to), free(got), free(one);
 }
 
+/* A random shape of the scene that is a box or a point. */
+static qk_shape_t rnd_box_or_point(qkt_rng_t *r, int scene) {
+  qk_shape_t sh;
+  do sh = rnd_shape(r, scene, 1);
+  while (sh.kind != QK_SHAPE_BOX && sh.kind != QK_SHAPE_POINT);
+  return sh;
+}
+
 /* Queries in worlds of boxes and points only, where the first hit stops once no object
  * left can come first and both queries skip objects by their boxes (collide/world_query.c):
  * every first hit is the first of all the hits (qk_world_raycast_all, which tests every
@@ -2047,22 +2064,14 @@ static void test_world_boxes_points_queries(void **s) {
                                      : (qk_shape_t){QK_SHAPE_POINT, x, y, 0, 0});
         }
       else if (phase == 0)
-        for (size_t i = 0; i < NOBJ; i++) {
-          qk_shape_t sh;
-          do sh = rnd_shape(&r, scene, 1);
-          while (sh.kind != QK_SHAPE_BOX && sh.kind != QK_SHAPE_POINT);
-          m_add(w, &m, sh);
-        }
+        for (size_t i = 0; i < NOBJ; i++) m_add(w, &m, rnd_box_or_point(&r, scene));
       else if (phase % 2) /* moves, adds and removes, then queries before the update */
         for (int j = 0; j < 60; j++) {
           size_t i = qkt_rng_below(&r, (uint32_t)m.n);
           if (j % 6 == 0) {
             m_remove_random(w, &m, &r);
           } else if (j % 6 == 1) {
-            qk_shape_t sh;
-            do sh = rnd_shape(&r, scene, 1);
-            while (sh.kind != QK_SHAPE_BOX && sh.kind != QK_SHAPE_POINT);
-            m_add(w, &m, sh);
+            m_add(w, &m, rnd_box_or_point(&r, scene));
           } else {
             m_move(w, &m, i, moved(&r, m.s[i]));
           }
@@ -2099,21 +2108,11 @@ static void test_world_boxes_points_queries(void **s) {
         for (size_t j = 0; j < m.n; j++) want += o_overlap(seg, m.s[j]);
         assert_int_equal(n, want);
       }
+      char what[48];
+      snprintf(what, sizeof what, "scene %d phase %d: ", scene, phase);
       for (int q = 0; q < 60; q++) {
         qk_point_t p = {off + qkt_rng_range(&r, -10, 110), -off + qkt_rng_range(&r, -10, 110)};
-        size_t k = q % 3 == 0 ? 1 : q % 3 == 1 ? 3 : 9, nk;
-        qk_world_hit_t nn[9];
-        assert_int_equal(qk_world_knn(w, p, k, nn, &nk), QK_OK);
-        assert_int_equal(nk, m.n < k ? m.n : k);
-        for (size_t i = 0; i < nk; i++) {
-          size_t below = 0;
-          for (size_t j = 0; j < m.n; j++)
-            below += sqrtl(o_d2(&m.s[j], p.x, p.y)) < nn[i].t - 1e-9 * (1 + nn[i].t + fabs(p.x));
-          if (below > i)
-            fail_msg("scene %d phase %d: knn rank %zu: %zu objects nearer (seed %llu)", scene,
-                     phase, i, below, (unsigned long long)g_seed);
-          if (i) assert_true(nn[i - 1].t <= nn[i].t);
-        }
+        check_knn(w, &m, p, q % 3 == 0 ? 1 : q % 3 == 1 ? 3 : 9, what);
       }
     }
     free(m.h), free(m.s);
