@@ -51,6 +51,11 @@ inline void add_pair(PairSum &s, uint32_t a, uint32_t b) {
 
 double q64(double v) { return std::round(v * 64) / 64; }
 
+// The better of two hits: the smaller parameter, then the smaller index.
+inline void keep_first(Hit &best, uint32_t j, double t) {
+  if (t < best.t || (t == best.t && j < best.id)) best = Hit{j, t};
+}
+
 // ---- quadkit -------------------------------------------------------------------------
 
 class QuadkitWorld : public WorldImpl {
@@ -73,7 +78,8 @@ public:
     qk_world_options_init(&o);
     o.threads = threads;
     // QKB_WORLD_THREAD_MIN: the worlds' thread_min (an A/B of threads on small worlds).
-    if (const char *m = std::getenv("QKB_WORLD_THREAD_MIN")) o.thread_min = std::strtoul(m, nullptr, 10);
+    if (const char *m = std::getenv("QKB_WORLD_THREAD_MIN"))
+      o.thread_min = std::strtoul(m, nullptr, 10);
     qk_world_new(&o, &w);
     h.resize(boxes.size());
     for (size_t i = 0; i < boxes.size(); i++) {
@@ -105,6 +111,70 @@ public:
   size_t bytes() const override { return qk_world_bytes(w); }
   size_t pair_bytes() const override { return qk_world_pair_bytes(w); }
   double update_seconds() const override { return upd; }
+
+  bool first_hits(const std::vector<Box> &, const std::vector<Seg> &segs, bool batch,
+                  std::vector<Hit> &out) override {
+    out.resize(segs.size());
+    if (!batch) {
+      for (size_t i = 0; i < segs.size(); i++) {
+        qk_world_hit_t x;
+        qk_world_raycast(w, {segs[i].px, segs[i].py}, {segs[i].qx, segs[i].qy}, &x);
+        out[i] = hit_of(x);
+      }
+      return true;
+    }
+    // Kept from call to call, as a caller casting every frame keeps them.
+    from.resize(segs.size()), to.resize(segs.size()), hits.resize(segs.size());
+    for (size_t i = 0; i < segs.size(); i++)
+      from[i] = {segs[i].px, segs[i].py}, to[i] = {segs[i].qx, segs[i].qy};
+    qk_world_raycast_batch(w, from.data(), to.data(), segs.size(), hits.data());
+    for (size_t i = 0; i < segs.size(); i++) out[i] = hit_of(hits[i]);
+    return true;
+  }
+  bool overlaps(const std::vector<Box> &, const std::vector<Box> &qs, PairSum &out) override {
+    if (found.empty()) found.resize(64);
+    for (size_t i = 0; i < qs.size(); i++) {
+      qk_shape_t s = {QK_SHAPE_BOX, qs[i].xmin, qs[i].ymin, qs[i].xmax, qs[i].ymax};
+      size_t m = 0;
+      qk_world_query(w, &s, found.data(), found.size(), &m);
+      if (m > found.size()) {
+        found.resize(2 * m);
+        qk_world_query(w, &s, found.data(), found.size(), &m);
+      }
+      for (size_t k = 0; k < m; k++) {
+        out.pairs++;
+        out.hash += (uint64_t)i * 1000003u + QK_HANDLE_SLOT(found[k]);
+      }
+    }
+    return true;
+  }
+  bool nearest(const std::vector<Pt> &ps, bool batch, std::vector<Hit> &out) override {
+    out.resize(ps.size());
+    if (!batch) {
+      for (size_t i = 0; i < ps.size(); i++) {
+        qk_world_hit_t x;
+        size_t m = 0;
+        qk_world_knn(w, {ps[i].x, ps[i].y}, 1, &x, &m);
+        out[i] = m ? hit_of(x) : Hit{kNoHit, INFINITY};
+      }
+      return true;
+    }
+    from.resize(ps.size()), hits.resize(ps.size()), counts.resize(ps.size());
+    for (size_t i = 0; i < ps.size(); i++) from[i] = {ps[i].x, ps[i].y};
+    qk_world_knn_batch(w, from.data(), ps.size(), 1, hits.data(), counts.data());
+    for (size_t i = 0; i < ps.size(); i++)
+      out[i] = counts[i] ? hit_of(hits[i]) : Hit{kNoHit, INFINITY};
+    return true;
+  }
+
+private:
+  std::vector<qk_point_t> from, to;
+  std::vector<qk_world_hit_t> hits;
+  std::vector<size_t> counts;
+  std::vector<qk_handle_t> found;
+  static Hit hit_of(const qk_world_hit_t &x) {
+    return x.h == QK_HANDLE_NONE ? Hit{kNoHit, INFINITY} : Hit{QK_HANDLE_SLOT(x.h), x.t};
+  }
 };
 
 // ---- uniform grid ----------------------------------------------------------------------
@@ -255,6 +325,60 @@ public:
   size_t bytes() const override {
     return proxy.empty() ? 0 : sizeof(b2TreeNode) * (2 * proxy.size() - 1);
   }
+
+  // b2DynamicTree::RayCast with the callback returning the best hit's parameter (rounded
+  // up to a float), which clips the rest of the walk, as Box2D's world ray casts do.
+  struct Cast {
+    const b2DynamicTree *tree;
+    const std::vector<Box> *boxes;
+    Seg s;
+    Hit best;
+    float RayCastCallback(const b2RayCastInput &, int32 id) {
+      uint32_t j = (uint32_t)(uintptr_t)tree->GetUserData(id);
+      const Box &b = (*boxes)[j];
+      if (seg_meets_box(s, b)) keep_first(best, j, seg_box_param(s, b));
+      if (best.id == kNoHit) return -1; // go on unclipped
+      float f = std::nextafter((float)best.t, 2.0f);
+      return f > 1 ? 1 : f;
+    }
+  };
+  bool first_hits(const std::vector<Box> &boxes, const std::vector<Seg> &segs, bool batch,
+                  std::vector<Hit> &out) override {
+    if (batch) return false;
+    out.resize(segs.size());
+    Cast c{tree, &boxes, {}, {}};
+    for (size_t i = 0; i < segs.size(); i++) {
+      c.s = segs[i];
+      c.best = Hit{kNoHit, INFINITY};
+      b2RayCastInput in;
+      in.p1.Set((float)c.s.px, (float)c.s.py);
+      in.p2.Set((float)c.s.qx, (float)c.s.qy);
+      in.maxFraction = 1;
+      tree->RayCast(&c, in);
+      out[i] = c.best;
+    }
+    return true;
+  }
+  struct Over {
+    const b2DynamicTree *tree;
+    const std::vector<Box> *boxes;
+    Box q;
+    uint64_t i;
+    PairSum *out;
+    bool QueryCallback(int32 id) {
+      uint32_t j = (uint32_t)(uintptr_t)tree->GetUserData(id);
+      if (meet(q, (*boxes)[j])) out->pairs++, out->hash += i * 1000003u + j;
+      return true;
+    }
+  };
+  bool overlaps(const std::vector<Box> &boxes, const std::vector<Box> &qs, PairSum &out) override {
+    Over o{tree, &boxes, {}, 0, &out};
+    for (size_t i = 0; i < qs.size(); i++) {
+      o.q = qs[i], o.i = i;
+      tree->Query(&o, aabb(qs[i]));
+    }
+    return true;
+  }
 };
 #endif
 
@@ -300,6 +424,53 @@ public:
   }
   size_t bytes() const override {
     return leaf.empty() ? 0 : sizeof(btDbvtNode) * (2 * leaf.size() - 1);
+  }
+
+  // btDbvt::rayTest visits every leaf whose volume the whole segment crosses (it has no
+  // clipping by the best hit so far; btDbvtBroadphase::rayTest neither).
+  struct Cast : btDbvt::ICollide {
+    const std::vector<Box> *boxes;
+    Seg s;
+    Hit best;
+    void Process(const btDbvtNode *n) override {
+      uint32_t j = (uint32_t)(uintptr_t)n->data;
+      const Box &b = (*boxes)[j];
+      if (seg_meets_box(s, b)) keep_first(best, j, seg_box_param(s, b));
+    }
+  };
+  bool first_hits(const std::vector<Box> &boxes, const std::vector<Seg> &segs, bool batch,
+                  std::vector<Hit> &out) override {
+    if (batch) return false;
+    out.resize(segs.size());
+    Cast c;
+    c.boxes = &boxes;
+    for (size_t i = 0; i < segs.size(); i++) {
+      c.s = segs[i];
+      c.best = Hit{kNoHit, INFINITY};
+      btDbvt::rayTest(tree->m_root, btVector3((btScalar)c.s.px, (btScalar)c.s.py, 0),
+                      btVector3((btScalar)c.s.qx, (btScalar)c.s.qy, 0), c);
+      out[i] = c.best;
+    }
+    return true;
+  }
+  struct Over : btDbvt::ICollide {
+    const std::vector<Box> *boxes;
+    Box q;
+    uint64_t i;
+    PairSum *out;
+    void Process(const btDbvtNode *n) override {
+      uint32_t j = (uint32_t)(uintptr_t)n->data;
+      if (meet(q, (*boxes)[j])) out->pairs++, out->hash += i * 1000003u + j;
+    }
+  };
+  bool overlaps(const std::vector<Box> &boxes, const std::vector<Box> &qs, PairSum &out) override {
+    Over o;
+    o.boxes = &boxes, o.out = &out;
+    for (size_t i = 0; i < qs.size(); i++) {
+      o.q = qs[i], o.i = i;
+      tree->collideTV(tree->m_root, vol(qs[i]), o);
+    }
+    return true;
   }
 };
 #endif
@@ -354,6 +525,44 @@ public:
 };
 
 } // namespace
+
+// ---- exact answers for the baselines' candidates ------------------------------------------------
+
+// The scenes' coordinates and the query segments' endpoints are multiples of 1/64 below
+// 2^18 in magnitude: differences take 25 bits, products 50, the difference of two
+// products 51, so every orientation below is exact in double.
+bool seg_meets_box(const Seg &s, const Box &b) {
+  if (std::max(s.px, s.qx) < b.xmin || std::min(s.px, s.qx) > b.xmax ||
+      std::max(s.py, s.qy) < b.ymin || std::min(s.py, s.qy) > b.ymax)
+    return false;
+  // The boxes overlap; the segment then meets the box unless all four corners lie
+  // strictly on one side of its line (the separating axes of a segment and a box).
+  double dx = s.qx - s.px, dy = s.qy - s.py;
+  int above = 0, below = 0;
+  for (double x : {b.xmin, b.xmax})
+    for (double y : {b.ymin, b.ymax}) {
+      double o = dx * (y - s.py) - dy * (x - s.px);
+      above += o > 0, below += o < 0;
+    }
+  return above < 4 && below < 4;
+}
+
+// The parameter of the segment's first contact with a box it meets, computed as the
+// world's first hit documents it (long double slabs, clamped to [0, 1]), so the answers
+// compare bit for bit; ties are broken by index.
+double seg_box_param(const Seg &s, const Box &b) {
+  if (b.xmin <= s.px && s.px <= b.xmax && b.ymin <= s.py && s.py <= b.ymax) return 0;
+  long double v[2] = {(long double)s.qx - s.px, (long double)s.qy - s.py};
+  if (v[0] * v[0] + v[1] * v[1] == 0) return 0;
+  long double mn[2] = {b.xmin, b.ymin}, mx[2] = {b.xmax, b.ymax}, org[2] = {s.px, s.py};
+  long double lo = 0;
+  for (int k = 0; k < 2; k++) {
+    if (v[k] == 0) continue;
+    long double t1 = (mn[k] - org[k]) / v[k], t2 = (mx[k] - org[k]) / v[k];
+    lo = std::max(lo, std::min(t1, t2));
+  }
+  return (double)std::min(lo, (long double)1);
+}
 
 // ---- scenes ------------------------------------------------------------------------------------
 

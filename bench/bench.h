@@ -140,6 +140,16 @@ struct WorldScene {
 };
 WorldScene make_world_scene(const std::string &kind, size_t n, uint64_t seed);
 void world_step(WorldScene &s); // one frame of motion
+// Queries on a world (--op world-query): segments from (px, py) to (qx, qy), and hits
+// (the object's index and the segment's parameter or the distance; id kNoHit: none).
+struct Seg {
+  double px, py, qx, qy;
+};
+struct Hit {
+  uint32_t id;
+  double t;
+};
+constexpr uint32_t kNoHit = 0xffffffffu;
 class WorldImpl {
 public:
   virtual ~WorldImpl() = default;
@@ -155,7 +165,24 @@ public:
   // qk_world_update, without the caller's moves and walk of the pairs), by the bench's
   // clock; 0 when not measured.
   virtual double update_seconds() const { return 0; }
+  // Queries on the structure as its last frame() left it, answered exactly on that
+  // frame's boxes (--op world-query); false when the implementation has no such query.
+  // The first object each segment touches (least parameter, then least index), one call
+  // a segment or (batch) the library's many-segment call.
+  virtual bool first_hits(const std::vector<Box> &, const std::vector<Seg> &, bool,
+                          std::vector<Hit> &) {
+    return false;
+  }
+  // For query box i and every object j overlapping it: pairs += 1, hash += i * 1000003 + j.
+  virtual bool overlaps(const std::vector<Box> &, const std::vector<Box> &, PairSum &) {
+    return false;
+  }
+  // The nearest object to each point (least distance, then least index).
+  virtual bool nearest(const std::vector<Pt> &, bool, std::vector<Hit> &) { return false; }
 };
+// The exact answers the baselines filter their candidates with (base_world.cpp).
+bool seg_meets_box(const Seg &s, const Box &b);
+double seg_box_param(const Seg &s, const Box &b);
 std::vector<std::unique_ptr<WorldImpl>> make_world_impls();
 std::unique_ptr<WorldImpl> make_world_quadkit(unsigned threads); // qk_world on that many threads
 

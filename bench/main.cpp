@@ -31,6 +31,7 @@ extern "C" {
 #include <cstring>
 #include <functional>
 #include <map>
+#include <random>
 #include <string>
 #include <thread>
 #include <vector>
@@ -233,7 +234,8 @@ void settle_heap() {
     double t0 = wall_seconds();
     void *b[32];
     int n = 0;
-    for (size_t z = 16; z <= 65536; z *= 2) b[n++] = std::malloc(z - 8), b[n++] = std::malloc(z + z / 2);
+    for (size_t z = 16; z <= 65536; z *= 2)
+      b[n++] = std::malloc(z - 8), b[n++] = std::malloc(z + z / 2);
     for (int i = 0; i < n; i++) std::free(b[i]);
     if (wall_seconds() - t0 < 50e-6) return;
   }
@@ -880,6 +882,158 @@ void run_world(const std::string &kind, size_t n) {
                  : "seconds per frame 1..frames-1 (frame 0 untimed): move all + all pairs";
     emit(r);
   }
+}
+
+// ---- queries on a world of moving boxes (--op world-query) -------------------------------
+
+// The scene of --op world moved through a few frames (every structure through the same
+// frames, so each is in the state a game's would be in), then three kinds of query on it,
+// each timed apart: the first object each segment touches (segments an eighth of the
+// world long, in any direction), the objects overlapping a box (sides 1-3), and the
+// nearest object to a point (quadkit alone: Box2D's and Bullet's trees have no such
+// query; its rows say what two threads give). quadkit's one-a-call answers are checked
+// against brute force on a sample, every other row's against them, query by query,
+// before anything is timed. Timed: the queries only.
+void run_world_query(const std::string &kind, size_t n) {
+  progress("world-query %s n=%zu", kind.c_str(), n);
+  const int frames = 4;
+  size_t nq = opt.quick ? 10000 : 20000;
+  WorldScene sc = make_world_scene(kind, n, 77 + n);
+  std::vector<std::unique_ptr<WorldImpl>> impls;
+  for (auto &p : make_world_impls())
+    if (!strcmp(p->name(), "quadkit") || !strcmp(p->name(), "box2d") ||
+        !strcmp(p->name(), "bullet"))
+      impls.push_back(std::move(p));
+  if (impls.empty() || strcmp(impls[0]->name(), "quadkit")) return; // (QKB_WORLD_ONLY)
+  std::vector<int> nth(impls.size(), 1);
+  if (opt.threads > 1)
+    impls.push_back(make_world_quadkit((unsigned)opt.threads)), nth.push_back(opt.threads);
+  for (auto &im : impls) im->init(sc.boxes);
+  for (int f = 0; f < frames; f++) {
+    world_step(sc);
+    for (auto &im : impls) {
+      PairSum ps;
+      im->frame(sc.boxes, ps);
+    }
+  }
+  const std::vector<Box> &boxes = sc.boxes;
+
+  std::mt19937_64 rng(9 + n);
+  std::uniform_real_distribution<double> u(0, 1);
+  auto q64 = [](double v) { return std::round(v * 64) / 64; };
+  double len = std::max(1.0, q64(sc.side / 8));
+  std::vector<Seg> segs(nq);
+  std::vector<Box> qboxes(nq);
+  std::vector<Pt> pts(nq);
+  for (size_t i = 0; i < nq; i++) {
+    double a = 6.283185307179586 * u(rng), px = q64(u(rng) * sc.side), py = q64(u(rng) * sc.side);
+    double qx = q64(px + len * std::cos(a)), qy = q64(py + len * std::sin(a));
+    if (qx == px && qy == py) qx += 1.0 / 64;
+    segs[i] = Seg{px, py, qx, qy};
+    double x = q64(u(rng) * sc.side), y = q64(u(rng) * sc.side);
+    qboxes[i] = Box{x, y, x + q64(1 + 2 * u(rng)), y + q64(1 + 2 * u(rng))};
+    pts[i] = Pt{q64(u(rng) * sc.side), q64(u(rng) * sc.side)};
+  }
+
+  // quadkit's one-a-call answers, and brute force on a sample of the queries.
+  std::vector<Hit> ray_ref, knn_ref;
+  PairSum box_ref;
+  impls[0]->first_hits(boxes, segs, false, ray_ref);
+  impls[0]->overlaps(boxes, qboxes, box_ref);
+  impls[0]->nearest(pts, false, knn_ref);
+  size_t sample = std::min(nq, std::max<size_t>(16, 20000000 / n));
+  size_t wrong = 0;
+  PairSum box_bf, box_head;
+  impls[0]->overlaps(boxes, std::vector<Box>(qboxes.begin(), qboxes.begin() + sample), box_head);
+  for (size_t i = 0; i < sample; i++) {
+    Hit first{kNoHit, INFINITY}, near{kNoHit, INFINITY};
+    for (uint32_t j = 0; j < boxes.size(); j++) {
+      const Box &b = boxes[j];
+      auto keep = [j](Hit &best, double t) {
+        if (t < best.t || (t == best.t && j < best.id)) best = Hit{j, t};
+      };
+      if (seg_meets_box(segs[i], b)) keep(first, seg_box_param(segs[i], b));
+      // (the distance as the world computes it for a box, in long double)
+      const Pt &p = pts[i];
+      long double dx =
+          p.x < b.xmin ? (long double)b.xmin - p.x : (p.x > b.xmax ? (long double)p.x - b.xmax : 0);
+      long double dy =
+          p.y < b.ymin ? (long double)b.ymin - p.y : (p.y > b.ymax ? (long double)p.y - b.ymax : 0);
+      keep(near, (double)sqrtl(dx * dx + dy * dy));
+      const Box &q = qboxes[i];
+      if (q.xmin <= b.xmax && b.xmin <= q.xmax && q.ymin <= b.ymax && b.ymin <= q.ymax)
+        box_bf.pairs++, box_bf.hash += (uint64_t)i * 1000003u + j;
+    }
+    wrong += first.id != ray_ref[i].id || first.t != ray_ref[i].t || near.id != knn_ref[i].id ||
+             near.t != knn_ref[i].t;
+  }
+  if (wrong || box_bf.pairs != box_head.pairs || box_bf.hash != box_head.hash) {
+    Rec r;
+    r.op = "world-query", r.impl = "quadkit", r.dataset = kind, r.n = n, r.queries = sample;
+    r.matches = 0;
+    r.note = std::to_string(wrong) + " of " + std::to_string(sample) +
+             " first hits or nearest objects differ from brute force; overlaps " +
+             std::to_string(box_head.pairs) + " vs brute force's " + std::to_string(box_bf.pairs);
+    emit(r);
+    return;
+  }
+
+  auto differ = [](const std::vector<Hit> &a, const std::vector<Hit> &b) {
+    if (a.size() != b.size()) return std::max(a.size(), b.size());
+    size_t d = 0;
+    for (size_t i = 0; i < a.size(); i++) d += a[i].id != b[i].id || a[i].t != b[i].t;
+    return d;
+  };
+  // One kind of query: the implementations answering it, checked, then timed interleaved.
+  auto group = [&](const char *op, int k, const std::function<bool(size_t, bool, size_t &)> &run) {
+    std::vector<std::function<void()>> fns;
+    std::vector<Rec> recs;
+    for (size_t i = 0; i < impls.size(); i++)
+      for (bool batch : {false, true}) {
+        if (nth[i] > 1 && !batch) continue; // the threads serve the batch calls
+        size_t wrong = 0;
+        if (!run(i, batch, wrong)) continue;
+        Rec r;
+        r.op = op, r.impl = impls[i]->name(), r.dataset = kind, r.n = n, r.queries = nq;
+        r.k = k, r.order = "-", r.batch = batch, r.threads = nth[i];
+        r.matches = wrong == 0;
+        if (wrong) {
+          r.note = std::to_string(wrong) + " of " + std::to_string(nq) +
+                   " answers differ from quadkit's one-a-call answers";
+          emit(r);
+          continue;
+        }
+        fns.push_back([&run, i, batch] {
+          size_t d;
+          run(i, batch, d);
+        });
+        recs.push_back(r);
+      }
+    auto med = interleaved_recs(fns, recs);
+    for (size_t i = 0; i < recs.size(); i++) {
+      recs[i].seconds = med[i];
+      recs[i].per_second = nq / med[i];
+      recs[i].note = "queries only, on the world after 4 frames of motion";
+      emit(recs[i]);
+    }
+  };
+  std::vector<Hit> got;
+  group("world-ray", 0, [&](size_t i, bool batch, size_t &d) {
+    if (!impls[i]->first_hits(boxes, segs, batch, got)) return false;
+    d = differ(got, ray_ref);
+    return true;
+  });
+  group("world-box", 0, [&](size_t i, bool batch, size_t &d) {
+    PairSum ps;
+    if (batch || !impls[i]->overlaps(boxes, qboxes, ps)) return false;
+    d = ps.pairs != box_ref.pairs || ps.hash != box_ref.hash;
+    return true;
+  });
+  group("world-knn", 1, [&](size_t i, bool batch, size_t &d) {
+    if (!impls[i]->nearest(pts, batch, got)) return false;
+    d = differ(got, knn_ref);
+    return true;
+  });
 }
 
 void run_raycast(size_t n) {
@@ -1589,7 +1743,7 @@ void print_table() {
          "t2 rows end with their speedup: each run's one-thread wall time (the same call, run "
          "just before it) over its own\n",
          opt.reps);
-  printf("%-8s %-10s %8s %-14s %10s", "op", "dataset", "n", "variant", "quadkit/s");
+  printf("%-9s %-10s %8s %-14s %10s", "op", "dataset", "n", "variant", "quadkit/s");
   for (auto c : cols) printf(" %13s", c);
   printf("\n");
   for (auto &r : records) {
@@ -1599,7 +1753,7 @@ void print_table() {
       snprintf(var, sizeof var, "k=%d%s%s%s", r.k, r.order == "morton" ? " mort" : "",
                r.batch ? " batch" : "",
                r.threads > 1 ? (" t" + std::to_string(r.threads)).c_str() : "");
-    if (r.op == "region" || r.op == "raycast")
+    if (r.op == "region" || r.op == "raycast" || r.op.rfind("world-", 0) == 0)
       snprintf(var, sizeof var, "%s%s", r.batch ? "batch" : "single",
                r.threads > 1 ? (" t" + std::to_string(r.threads)).c_str() : "");
     if ((r.op == "collide" || r.op == "build" || r.op == "world") && r.threads > 1)
@@ -1607,7 +1761,7 @@ void print_table() {
     if (r.op == "collide" && r.order == "reused")
       snprintf(var, sizeof var, "reused%s",
                r.threads > 1 ? (" t" + std::to_string(r.threads)).c_str() : "");
-    printf("%-8s %-10s %8zu %-14s %10s", r.op.c_str(), r.dataset.c_str(), r.n, var,
+    printf("%-9s %-10s %8zu %-14s %10s", r.op.c_str(), r.dataset.c_str(), r.n, var,
            r.matches == 0 ? "MISMATCH" : rate(r.per_second).c_str());
     for (auto c : cols) {
       // A batched quadkit call is compared with the baseline's batched call when it has
@@ -1713,7 +1867,9 @@ void usage(FILE *f) {
           "usage: quadkit-bench [--quick] [--op OP] [--n N] [--dataset D] [--threads T] [--json]\n"
           "                     [--reps R] [--json-out FILE]\n"
           "  OP: build knn radius range collide raycast balance mesh geo-knn region world\n"
-          "  D:  uniform gauss polyline degenerate cities; for world: uniform clustered huge\n"
+          "      world-query\n"
+          "  D:  uniform gauss polyline degenerate cities; for world and world-query: uniform\n"
+          "      clustered huge\n"
           "  --quick     sizes up to 1e5, fewer queries (well under a minute)\n"
           "  --json      one JSON object per result line on stdout instead of the table\n"
           "  --json-out  also write the JSON lines to FILE (the table still goes to stdout)\n"
@@ -1776,7 +1932,7 @@ int main(int argc, char **argv) {
     }
   }
   static const char *ops[] = {"build",   "knn",  "radius",  "range",  "collide", "raycast",
-                              "balance", "mesh", "geo-knn", "region", "world"};
+                              "balance", "mesh", "geo-knn", "region", "world",   "world-query"};
   if (!opt.op.empty() && std::find_if(std::begin(ops), std::end(ops),
                                       [](const char *o) { return opt.op == o; }) == std::end(ops)) {
     fprintf(stderr, "quadkit-bench: unknown operation '%s'\n", opt.op.c_str());
@@ -1851,6 +2007,10 @@ int main(int argc, char **argv) {
     for (const char *kind : {"uniform", "clustered", "huge"})
       if (opt.dataset.empty() || opt.dataset == kind)
         for (size_t n : sizes) run_world(kind, n);
+  if (want_op("world-query"))
+    for (const char *kind : {"uniform", "clustered", "huge"})
+      if (opt.dataset.empty() || opt.dataset == kind)
+        for (size_t n : sizes) run_world_query(kind, n);
   if (want_op("balance"))
     for (const auto &ds : opt.dataset.empty() ? std::vector<std::string>{"gauss"} : datasets) {
       if (ds == "cities") continue;
