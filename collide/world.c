@@ -89,6 +89,8 @@ qk_status_t qk_world_new(const qk_world_options_t *options, qk_world_t **out) {
   qk_world_t *w = qk__realloc(&a, NULL, 0, sizeof *w);
   if (!w) return QK_ERR_NOMEM;
   memset(w, 0, sizeof *w);
+  atomic_init(&w->qstate, 0);
+  atomic_init(&w->qbytes, 0);
   qk__wscr_init(w, &a); /* w->alloc: the scratch cache in front of a */
   w->opt = o;
   w->opt.allocator = NULL;
@@ -117,6 +119,7 @@ void qk_world_free(qk_world_t *w) {
   qk__free(&a, w->spare_b, w->cap_spare_b * sizeof *w->spare_b);
   qk__free(&a, w->fbox, (size_t)w->n_fbox * 4 * sizeof *w->fbox);
   qk__free(&a, w->near.v, w->near.cap * sizeof *w->near.v);
+  qk__world_qtree_free(w);
   for (unsigned t = 0; t < QK__KEEP_THREADS; t++)
     qk__free(&a, w->scr_tkeys[t].v, w->scr_tkeys[t].cap * sizeof *w->scr_tkeys[t].v);
   qk__wscr_flush(w);
@@ -148,7 +151,8 @@ size_t qk_world_bytes(const qk_world_t *w) {
   if (!w) return 0;
   return sizeof *w + (size_t)w->cap_obj * sizeof *w->obj + (size_t)w->cap_ugen * sizeof *w->ugen +
          (size_t)w->cap_dnext * sizeof *w->dnext + (size_t)w->cap_order * sizeof *w->order +
-         (size_t)w->cap_cells * sizeof *w->cells + qk_world_pair_bytes(w);
+         (size_t)w->cap_cells * sizeof *w->cells + qk_world_pair_bytes(w) +
+         atomic_load_explicit(&w->qbytes, memory_order_relaxed);
 }
 
 /* ---- filing ---------------------------------------------------------------------- */

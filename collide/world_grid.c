@@ -1002,6 +1002,7 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
   w->order = ord, w->n_order = m, w->cap_order = (uint32_t)ocap;
   w->cells = cells, w->n_cells = nc, w->cap_cells = (uint32_t)ncap;
   qk__world_note_levels(w);
+  qk__world_qtree_stale(w);
   w->by_bands = qk__world_by_bands(w);
   /* Each object's cell noted for the next update's merge when it is likely to use them:
    * when this one's dirty objects were few for the cells (frames are alike; see ntw), or

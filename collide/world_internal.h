@@ -200,6 +200,17 @@ struct qk_world {
   int by_bands;     /* the order of the last update is searched by bands (qk__world_by_bands,
                        asked once by qk__world_reorder) */
   qk__pool_t *pool; /* the world's workers (collide/world_threads.c), or NULL */
+  /* The query tree (collide/world_query.c): each level's cells again, in Morton order of
+   * their (cx - qx0, cy - qy0) (qkey, and the cell in qcell), made by the first query
+   * after an update that wants it. qstate: 0 not made for the order of the last update,
+   * 1 being made (by one query; the others go without), 2 made. Its arrays are read only
+   * after reading 2 (acquire), written only after taking 0 -> 1. */
+  atomic_int qstate;
+  atomic_size_t qbytes; /* what its arrays hold, in bytes */
+  uint64_t *qkey;
+  uint32_t *qcell;
+  uint32_t cap_q;
+  int32_t qx0[QK__NLEV], qy0[QK__NLEV];
 };
 
 /* The scratch cache: qk__wscr_init makes it the world's allocator (w->alloc) in front
@@ -285,6 +296,13 @@ static inline uint32_t qk__cell_lower(const qk_world_t *w, int l, int64_t y, int
   }
   return lo;
 }
+
+/* The order changed (an update): the query tree is no longer for it. Frees it all
+ * (qk__world_qtree_free, before the world is freed). */
+static inline void qk__world_qtree_stale(qk_world_t *w) {
+  atomic_store_explicit(&w->qstate, 0, memory_order_relaxed);
+}
+void qk__world_qtree_free(qk_world_t *w);
 
 /* Occupied levels of the order, ascending; returns how many. */
 int qk__world_levels(const qk_world_t *w, int *levels);

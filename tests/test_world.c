@@ -2036,6 +2036,172 @@ static qk_shape_t rnd_box_or_point(qkt_rng_t *r, int scene) {
   return sh;
 }
 
+/* A shape of the query-tree scenes: 0, 1 groups of four objects scattered over
+ * [-4e5, 4e5]^2; 2 six clusters of sizes over three decades in [0, 1000]^2; 3 groups
+ * scattered over 1e5 around (1e9, -1e9). Kinds: boxes and points (even scenes) or all. */
+static qk_shape_t tree_shape(qkt_rng_t *r, int scene, double *g) {
+  double x, y, s;
+  if (scene == 2) {
+    const int c = (int)qkt_rng_below(r, 6);
+    x = 100 + 150 * c + qkt_rng_range(r, -30, 30) * qkt_rng_unit(r);
+    y = 500 + 300 * (c % 2) + qkt_rng_range(r, -30, 30) * qkt_rng_unit(r);
+    s = pow(10, qkt_rng_range(r, -2, 1));
+  } else {
+    if (qkt_rng_below(r, 4) == 0) {
+      const double span = scene == 3 ? 5e4 : 4e5;
+      g[0] = qkt_rng_range(r, -span, span), g[1] = qkt_rng_range(r, -span, span);
+    }
+    x = g[0] + qkt_rng_range(r, 0, 3), y = g[1] + qkt_rng_range(r, 0, 3);
+    if (scene == 3) x += 1e9, y -= 1e9;
+    s = qkt_rng_range(r, 0.5, 2);
+  }
+  qk_shape_t sh = {QK_SHAPE_BOX, x, y, x + s * qkt_rng_unit(r), y + s * qkt_rng_unit(r)};
+  const int k = (int)qkt_rng_below(r, 4);
+  if (k == 1) sh = (qk_shape_t){QK_SHAPE_POINT, x, y, 0, 0};
+  if (scene % 2 && k == 2) sh = (qk_shape_t){QK_SHAPE_DISC, x, y, s / 2, 0};
+  if (scene % 2 && k == 3) sh.kind = QK_SHAPE_SEGMENT;
+  return sh;
+}
+
+/* The query tree (collide/world_query.c: each level's cells in Morton order, made by the
+ * first query after an update, kept for the next) in worlds where it matters: sparse ones with long
+ * rays and points far from every object, and clustered ones over three decades of sizes, with
+ * negative cell coordinates and far from the origin; boxes and points only (first hits
+ * pruned by the tree) or all kinds. Every first hit is the first of all hits, the hits and
+ * the box queries are brute force's, the k nearest are the nearest by brute force; after
+ * an update (the tree made: the world's bytes grow) and with objects moved, added and
+ * removed since. */
+static void test_world_query_tree(void **s) {
+  (void)s;
+  QKT_ONE_THREAD_TEST();
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 977);
+  enum { NOBJ = 2000, NRAY = 250 };
+  qk_world_hit_t *all = malloc((NOBJ + 64) * sizeof *all);
+  qk_handle_t *got = malloc((NOBJ + 64) * sizeof *got);
+  for (int scene = 0; scene < 4; scene++) {
+    qk_world_t *w = threaded_world(1);
+    mirror_t m = {0};
+    double g[2] = {0, 0};
+    const double c0 = scene == 3 ? 1e9 : 0, span = scene == 2 ? 600 : scene == 3 ? 5e4 : 4e5;
+    const double cx = scene == 2 ? 500 : c0, cy = scene == 2 ? 600 : -c0;
+    for (int phase = 0; phase < 4; phase++) {
+      if (phase == 0) {
+        for (size_t i = 0; i < NOBJ; i++) m_add(w, &m, tree_shape(&r, scene, g));
+      } else if (phase == 2) {
+        for (int j = 0; j < 60; j++) {
+          const size_t i = qkt_rng_below(&r, (uint32_t)m.n);
+          if (j % 6 == 0)
+            m_remove_random(w, &m, &r);
+          else if (j % 6 == 1)
+            m_add(w, &m, tree_shape(&r, scene, g));
+          else
+            m_move(w, &m, i, moved(&r, m.s[i]));
+        }
+      }
+      if (phase != 2) assert_int_equal(qk_world_update(w), QK_OK);
+      const size_t before = qk_world_bytes(w);
+      for (int q = 0; q < NRAY; q++) {
+        /* from anywhere, or from an object; a quarter of the scene long or short */
+        qk_point_t a = {cx + qkt_rng_range(&r, -span, span), cy + qkt_rng_range(&r, -span, span)};
+        if (q % 3 == 0) a = (qk_point_t){m.s[q % m.n].x, m.s[q % m.n].y};
+        const double len = q % 2 ? span / 2 : qkt_rng_range(&r, 1, 50);
+        const double ang = qkt_rng_range(&r, 0, 6.283185307179586);
+        qk_point_t b = {a.x + len * cos(ang), a.y + len * sin(ang)};
+        if (q % 7 == 0) b.y = a.y;
+        qk_world_hit_t first;
+        size_t n;
+        assert_int_equal(qk_world_raycast(w, a, b, &first), QK_OK);
+        if (q == 0 && phase == 0) assert_true(qk_world_bytes(w) > before); /* (made) */
+        assert_int_equal(qk_world_raycast_all(w, a, b, all, NOBJ + 64, &n), QK_OK);
+        if (n ? first.h != all[0].h || !(first.t == all[0].t) : first.h != QK_HANDLE_NONE)
+          fail_msg("tree scene %d phase %d ray %d: first %llx at %.17g, of all %zu %llx at "
+                   "%.17g (seed %llu)",
+                   scene, phase, q, (unsigned long long)first.h, first.t, n,
+                   (unsigned long long)(n ? all[0].h : 0), n ? all[0].t : 0.0,
+                   (unsigned long long)g_seed);
+        const qk_shape_t seg = {QK_SHAPE_SEGMENT, a.x, a.y, b.x, b.y};
+        size_t want = 0;
+        for (size_t j = 0; j < m.n; j++) want += o_overlap(seg, m.s[j]);
+        if (n != want)
+          fail_msg("tree scene %d phase %d ray %d: %zu hits, brute force %zu (seed %llu)", scene,
+                   phase, q, n, want, (unsigned long long)g_seed);
+        /* a box about the ray's start, of a side up to a fifth of the scene */
+        const double h = q % 2 ? qkt_rng_range(&r, 0, span / 5) : qkt_rng_range(&r, 0, 5);
+        const qk_shape_t box = {QK_SHAPE_BOX, a.x - h, a.y - h, a.x + h, a.y + h};
+        assert_int_equal(qk_world_query(w, &box, got, NOBJ + 64, &n), QK_OK);
+        want = 0;
+        for (size_t j = 0; j < m.n; j++) want += o_overlap(box, m.s[j]);
+        if (n != want)
+          fail_msg("tree scene %d phase %d box %d: %zu, brute force %zu (seed %llu)", scene, phase,
+                   q, n, want, (unsigned long long)g_seed);
+      }
+      char what[48];
+      snprintf(what, sizeof what, "tree scene %d phase %d: ", scene, phase);
+      for (int q = 0; q < 60; q++) {
+        const qk_point_t p = {cx + qkt_rng_range(&r, -span, span),
+                              cy + qkt_rng_range(&r, -span, span)};
+        check_knn(w, &m, p, q % 3 == 0 ? 1 : q % 3 == 1 ? 4 : 16, what);
+      }
+    }
+    free(m.h), free(m.s);
+    qk_world_free(w);
+  }
+  free(all), free(got);
+}
+
+/* The query tree made by concurrent readers: right after each update, batches of first
+ * hits and of nearest objects on two threads (whose queries race to make the tree: one
+ * makes it, the others search by rows meanwhile), then the same queries one by one; the
+ * answers are the same (and TSan sees no race under make tsan). */
+static void test_world_query_tree_threads(void **s) {
+  (void)s;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 983);
+  enum { NOBJ = 2000, NQ = 3000, K = 3 };
+  qk_point_t *from = malloc(NQ * sizeof *from), *to = malloc(NQ * sizeof *to);
+  qk_world_hit_t *hits = malloc(NQ * sizeof *hits), *nn = malloc(NQ * K * sizeof *nn);
+  size_t *counts = malloc(NQ * sizeof *counts);
+  for (int scene = 0; scene < 2; scene++) {
+    qk_world_t *w = threaded_world(2);
+    mirror_t m = {0};
+    double g[2] = {0, 0};
+    for (size_t i = 0; i < NOBJ; i++) m_add(w, &m, tree_shape(&r, scene, g));
+    for (int round = 0; round < 4; round++) {
+      for (int j = 0; j < 200; j++) {
+        const size_t i = qkt_rng_below(&r, (uint32_t)m.n);
+        m_move(w, &m, i, moved(&r, m.s[i]));
+      }
+      assert_int_equal(qk_world_update(w), QK_OK);
+      for (size_t i = 0; i < NQ; i++) {
+        from[i] = (qk_point_t){qkt_rng_range(&r, -4e5, 4e5), qkt_rng_range(&r, -4e5, 4e5)};
+        to[i] = (qk_point_t){from[i].x + qkt_rng_range(&r, -2e5, 2e5),
+                             from[i].y + qkt_rng_range(&r, -2e5, 2e5)};
+      }
+      if (round % 2) {
+        assert_int_equal(qk_world_knn_batch(w, from, NQ, K, nn, counts), QK_OK);
+        assert_int_equal(qk_world_raycast_batch(w, from, to, NQ, hits), QK_OK);
+      } else {
+        assert_int_equal(qk_world_raycast_batch(w, from, to, NQ, hits), QK_OK);
+        assert_int_equal(qk_world_knn_batch(w, from, NQ, K, nn, counts), QK_OK);
+      }
+      for (size_t i = 0; i < NQ; i++) {
+        qk_world_hit_t one, k1[K];
+        size_t n1;
+        assert_int_equal(qk_world_raycast(w, from[i], to[i], &one), QK_OK);
+        assert_true(one.h == hits[i].h && one.t == hits[i].t);
+        assert_int_equal(qk_world_knn(w, from[i], K, k1, &n1), QK_OK);
+        assert_int_equal(n1, counts[i]);
+        for (size_t k = 0; k < n1; k++)
+          assert_true(k1[k].h == nn[i * K + k].h && k1[k].t == nn[i * K + k].t);
+      }
+    }
+    free(m.h), free(m.s);
+    qk_world_free(w);
+  }
+  free(from), free(to), free(hits), free(nn), free(counts);
+}
+
 /* Queries in worlds of boxes and points only, where the first hit stops once no object
  * left can come first and both queries skip objects by their boxes (collide/world_query.c):
  * every first hit is the first of all the hits (qk_world_raycast_all, which tests every
@@ -3520,6 +3686,8 @@ int main(void) {
       cmocka_unit_test(test_world_move_out_of_loose),
       cmocka_unit_test(test_world_raycast_batch),
       cmocka_unit_test(test_world_boxes_points_queries),
+      cmocka_unit_test(test_world_query_tree),
+      cmocka_unit_test(test_world_query_tree_threads),
       cmocka_unit_test(test_world_stale_handles),
       cmocka_unit_test(test_world_threads_frames),
       cmocka_unit_test(test_world_thread_min_sides),
