@@ -14,9 +14,11 @@ static inline int boxes_meet(const qk_box_t *a, const qk_box_t *b) {
   return a->xmin <= b->xmax && b->xmin <= a->xmax && a->ymin <= b->ymax && b->ymin <= a->ymax;
 }
 
-/* v / 2^l floored, clamped far inside the int64 range. */
+/* v / 2^l floored, clamped far inside the int64 range. (The product by 2^-l is
+ * ldexp(v, -l) bit for bit, an exact scaling rounded as ldexp rounds, without its call:
+ * it was a tenth of a query in the clustered world.) */
 static int64_t scaled(double v, int l) {
-  double s = floor(ldexp(v, -l));
+  double s = floor(v * qk__pow2(-l));
   if (s > 0x1p60) s = 0x1p60;
   if (s < -0x1p60) s = -0x1p60;
   return (int64_t)s;
