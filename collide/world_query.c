@@ -647,7 +647,8 @@ typedef struct batch {
   qk_status_t st[64];
 } batch_t;
 
-static void batch_run(unsigned k, void *ud) {
+static void batch_run(unsigned k, unsigned share, void *ud) {
+  (void)share;
   batch_t *b = ud;
   size_t lo = (size_t)k * b->chunk, hi = lo + b->chunk < b->n ? lo + b->chunk : b->n;
   for (size_t i = lo; i < hi; i++) {
@@ -669,7 +670,7 @@ qk_status_t qk_world_raycast_batch(const qk_world_t *w, const qk_point_t *from,
   if (!w || (n && (!from || !to || !hits))) return QK_ERR_INVALID;
   batch_t b = {w, from, to, n, 256, hits, {QK_OK}};
   size_t jobs = batch_jobs(n, &b.chunk);
-  qk__world_run_jobs(w, w->opt.threads, (unsigned)jobs, batch_run, &b);
+  qk__world_run_jobs_shared(w, w->opt.threads, (unsigned)jobs, batch_run, &b);
   for (int k = 0; k < 64; k++)
     if (b.st[k] != QK_OK) return b.st[k];
   return QK_OK;
@@ -853,7 +854,8 @@ typedef struct kbatch {
   qk_status_t st[64];
 } kbatch_t;
 
-static void kbatch_run(unsigned j, void *ud) {
+static void kbatch_run(unsigned j, unsigned share, void *ud) {
+  (void)share;
   kbatch_t *b = ud;
   size_t lo = (size_t)j * b->chunk, hi = lo + b->chunk < b->n ? lo + b->chunk : b->n;
   for (size_t i = lo; i < hi; i++) {
@@ -867,7 +869,7 @@ qk_status_t qk_world_knn_batch(const qk_world_t *w, const qk_point_t *ps, size_t
   if (!w || (n && (!ps || !counts || (k && !out)))) return QK_ERR_INVALID;
   kbatch_t b = {w, ps, n, k, 256, out, counts, {QK_OK}};
   size_t jobs = batch_jobs(n, &b.chunk);
-  qk__world_run_jobs(w, w->opt.threads, (unsigned)jobs, kbatch_run, &b);
+  qk__world_run_jobs_shared(w, w->opt.threads, (unsigned)jobs, kbatch_run, &b);
   for (int j = 0; j < 64; j++)
     if (b.st[j] != QK_OK) return b.st[j];
   return QK_OK;
