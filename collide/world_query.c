@@ -318,21 +318,22 @@ static qk_box_t loose_box(int64_t x, int64_t y, int64_t s, int l) {
 
 /* Whether the segment seg[0] -> seg[1] may meet box b: 0 only when it surely does not.
  * Apart from the exact test of the boxes, it misses b when b's corners all lie on one
- * side of its line; each corner's orientation is computed within 4 ulps of its two
- * terms' magnitudes, and only a side beyond 2^-48 of them counts. */
+ * side of its line: when the corner of the largest orientation (dx (y - py) - dy (x - px),
+ * linear in the corner) is below zero, or the corner of the least above it. Each is
+ * computed within 4 ulps of its two terms' magnitudes, and only a side beyond 2^-48 of
+ * them counts. */
 static int seg_may_meet(const qk_point_t *seg, const qk_box_t *b) {
   const qk_point_t p = seg[0], q = seg[1];
-  if (fmax(p.x, q.x) < b->xmin || fmin(p.x, q.x) > b->xmax || fmax(p.y, q.y) < b->ymin ||
-      fmin(p.y, q.y) > b->ymax)
+  if (qk__max(p.x, q.x) < b->xmin || qk__min(p.x, q.x) > b->xmax || qk__max(p.y, q.y) < b->ymin ||
+      qk__min(p.y, q.y) > b->ymax)
     return 0;
   const double dx = q.x - p.x, dy = q.y - p.y;
-  int above = 0, below = 0;
-  for (int k = 0; k < 4; k++) {
-    const double u = (k & 1 ? b->ymax : b->ymin) - p.y, v = (k & 2 ? b->xmax : b->xmin) - p.x;
-    const double o = dx * u - dy * v, tol = (fabs(dx * u) + fabs(dy * v)) * 0x1p-48;
-    above += o > tol, below += o < -tol;
-  }
-  return above < 4 && below < 4;
+  /* the corner of the largest orientation, then of the least */
+  const double u1 = (dx > 0 ? b->ymax : b->ymin) - p.y, v1 = (dy > 0 ? b->xmin : b->xmax) - p.x;
+  const double u0 = (dx > 0 ? b->ymin : b->ymax) - p.y, v0 = (dy > 0 ? b->xmax : b->xmin) - p.x;
+  const double o1 = dx * u1 - dy * v1, t1 = (fabs(dx * u1) + fabs(dy * v1)) * 0x1p-48;
+  const double o0 = dx * u0 - dy * v0, t0 = (fabs(dx * u0) + fabs(dy * v0)) * 0x1p-48;
+  return !(o1 < -t1) && !(o0 > t0);
 }
 
 typedef struct tquery {
