@@ -2036,6 +2036,26 @@ static qk_shape_t rnd_box_or_point(qkt_rng_t *r, int scene) {
   return sh;
 }
 
+/* The first hit from a to b is the first of all the hits (qk_world_raycast_all, which
+ * tests every candidate), and the hits are as many as brute force finds; all has room for
+ * cap hits. `what` starts the failure message. */
+static QKT_SERIAL void check_first_hit(qk_world_t *w, const mirror_t *m, qk_point_t a, qk_point_t b,
+                                       qk_world_hit_t *all, size_t cap, const char *what) {
+  qk_world_hit_t first;
+  size_t n;
+  assert_int_equal(qk_world_raycast(w, a, b, &first), QK_OK);
+  assert_int_equal(qk_world_raycast_all(w, a, b, all, cap, &n), QK_OK);
+  if (n ? first.h != all[0].h || !(first.t == all[0].t) : first.h != QK_HANDLE_NONE)
+    fail_msg("%sfirst %llx at %.17g, of all %zu %llx at %.17g (seed %llu)", what,
+             (unsigned long long)first.h, first.t, n, (unsigned long long)(n ? all[0].h : 0),
+             n ? all[0].t : 0.0, (unsigned long long)g_seed);
+  const qk_shape_t seg = {QK_SHAPE_SEGMENT, a.x, a.y, b.x, b.y};
+  size_t want = 0;
+  for (size_t j = 0; j < m->n; j++) want += o_overlap(seg, m->s[j]);
+  if (n != want)
+    fail_msg("%s%zu hits, brute force %zu (seed %llu)", what, n, want, (unsigned long long)g_seed);
+}
+
 /* A shape of the query-tree scenes: 0, 1 groups of four objects scattered over
  * [-4e5, 4e5]^2; 2 six clusters of sizes over three decades in [0, 1000]^2; 3 groups
  * scattered over 1e5 around (1e9, -1e9). Kinds: boxes and points (even scenes) or all. */
@@ -2109,28 +2129,15 @@ static void test_world_query_tree(void **s) {
         const double ang = qkt_rng_range(&r, 0, 6.283185307179586);
         qk_point_t b = {a.x + len * cos(ang), a.y + len * sin(ang)};
         if (q % 7 == 0) b.y = a.y;
-        qk_world_hit_t first;
-        size_t n;
-        assert_int_equal(qk_world_raycast(w, a, b, &first), QK_OK);
+        char what[64];
+        snprintf(what, sizeof what, "tree scene %d phase %d ray %d: ", scene, phase, q);
+        check_first_hit(w, &m, a, b, all, NOBJ + 64, what);
         if (q == 0 && phase == 0) assert_true(qk_world_bytes(w) > before); /* (made) */
-        assert_int_equal(qk_world_raycast_all(w, a, b, all, NOBJ + 64, &n), QK_OK);
-        if (n ? first.h != all[0].h || !(first.t == all[0].t) : first.h != QK_HANDLE_NONE)
-          fail_msg("tree scene %d phase %d ray %d: first %llx at %.17g, of all %zu %llx at "
-                   "%.17g (seed %llu)",
-                   scene, phase, q, (unsigned long long)first.h, first.t, n,
-                   (unsigned long long)(n ? all[0].h : 0), n ? all[0].t : 0.0,
-                   (unsigned long long)g_seed);
-        const qk_shape_t seg = {QK_SHAPE_SEGMENT, a.x, a.y, b.x, b.y};
-        size_t want = 0;
-        for (size_t j = 0; j < m.n; j++) want += o_overlap(seg, m.s[j]);
-        if (n != want)
-          fail_msg("tree scene %d phase %d ray %d: %zu hits, brute force %zu (seed %llu)", scene,
-                   phase, q, n, want, (unsigned long long)g_seed);
         /* a box about the ray's start, of a side up to a fifth of the scene */
         const double h = q % 2 ? qkt_rng_range(&r, 0, span / 5) : qkt_rng_range(&r, 0, 5);
         const qk_shape_t box = {QK_SHAPE_BOX, a.x - h, a.y - h, a.x + h, a.y + h};
+        size_t n, want = 0;
         assert_int_equal(qk_world_query(w, &box, got, NOBJ + 64, &n), QK_OK);
-        want = 0;
         for (size_t j = 0; j < m.n; j++) want += o_overlap(box, m.s[j]);
         if (n != want)
           fail_msg("tree scene %d phase %d box %d: %zu, brute force %zu (seed %llu)", scene, phase,
@@ -2259,20 +2266,9 @@ static void test_world_boxes_points_queries(void **s) {
           const qk_shape_t *o = &m.s[qkt_rng_below(&r, (uint32_t)m.n)];
           a = (qk_point_t){o->x, o->y};
         }
-        qk_world_hit_t first;
-        size_t n;
-        assert_int_equal(qk_world_raycast(w, a, b, &first), QK_OK);
-        assert_int_equal(qk_world_raycast_all(w, a, b, all, NSMALL + 64, &n), QK_OK);
-        if (n ? first.h != all[0].h || !(first.t == all[0].t) : first.h != QK_HANDLE_NONE)
-          fail_msg("scene %d phase %d ray %d: first %llx at %.17g, of all %zu %llx at %.17g "
-                   "(seed %llu)",
-                   scene, phase, q, (unsigned long long)first.h, first.t, n,
-                   (unsigned long long)(n ? all[0].h : 0), n ? all[0].t : 0.0,
-                   (unsigned long long)g_seed);
-        qk_shape_t seg = {QK_SHAPE_SEGMENT, a.x, a.y, b.x, b.y};
-        size_t want = 0;
-        for (size_t j = 0; j < m.n; j++) want += o_overlap(seg, m.s[j]);
-        assert_int_equal(n, want);
+        char what[64];
+        snprintf(what, sizeof what, "scene %d phase %d ray %d: ", scene, phase, q);
+        check_first_hit(w, &m, a, b, all, NSMALL + 64, what);
       }
       char what[48];
       snprintf(what, sizeof what, "scene %d phase %d: ", scene, phase);
