@@ -146,7 +146,6 @@ def world_targets(rows):
     sizes = sorted({r["n"] for r in rows if r["op"] == "world"})
     if not sizes:
         t.missing("world frames", "", "not in this run")
-        return t
     for n in sizes:
         for scene in ("uniform", "clustered", "huge"):
             q = pick(rows, op="world", impl="quadkit", dataset=scene, n=n, threads=1)
@@ -171,6 +170,13 @@ def world_targets(rows):
                           "one thread by design below the world's thread_min (32768 objects)")
             else:
                 two_threads(t, f"{where}, two threads / one", t2_row(rows, op="world", dataset=scene, n=n))
+    # The batch queries on the world (--op world-query): two threads over one.
+    for n in sorted({r["n"] for r in rows if r["op"] in ("world-ray", "world-knn")}):
+        for scene in ("uniform", "clustered", "huge"):
+            for op, label in (("world-ray", "first hits"), ("world-knn", "nearest objects")):
+                r = t2_row(rows, op=op, dataset=scene, n=n, batch=True)
+                if r is not None:
+                    two_threads(t, f"{scene} {sz(n)}, batch of {label}, two threads / one", r)
     return t
 
 

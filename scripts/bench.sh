@@ -10,7 +10,8 @@
 # --targets runs only what the issues' targets compare, each operation in its own run
 # (23 minutes on the 2-vCPU guest, most of it the mesh cases' gmsh and the world at 10^5;
 # the full suite takes well over an hour): 1M uniform points (build, kNN), 1M boxes and discs (all pairs, rays), the
-# balance at 1M, every mesh case, the world at 10^4 and 10^5 objects, the region layer;
+# balance at 1M, every mesh case, the world at 10^4 and 10^5 objects and queries on it at
+# 10^5, the region layer;
 # with --threads 2. It writes RESULTS/targets.jsonl (each run's lines in turn),
 # targets.txt (each run's table) and targets-targets.md; no plots.
 set -euo pipefail
@@ -55,6 +56,7 @@ if [ "$targets" = 1 ] && [ "${PLOT_ONLY:-0}" != 1 ]; then
     "--op mesh" \
     "--op world --n 10000 --threads 2" \
     "--op world --n 100000 --threads 2" \
+    "--op world-query --n 100000 --threads 2" \
     "--op region"; do
     {
       echo "# $(date -u '+%Y-%m-%d %H:%M UTC') $(uname -m), $(nproc) CPUs, load $(cut -d' ' -f1-3 /proc/loadavg)"
