@@ -259,7 +259,9 @@ typedef enum qk_pairs_which {
 
 /** World options; initialise with qk_world_options_init(). */
 typedef struct qk_world_options {
-  const qk_allocator_t *allocator; /**< NULL: libc. Must be thread-safe when threads > 1. */
+  const qk_allocator_t *allocator; /**< NULL: libc. Must be thread-safe when threads > 1,
+                                        or when queries run on other threads than the
+                                        world's changes (they may make its query tree) */
   unsigned threads;                /**< threads for update, batch queries and
                                         qk_world_pairs_parallel (1: none) */
   double margin;                   /**< fattening of each object's box, as a fraction of its
@@ -435,6 +437,15 @@ typedef int (*qk_world_pair_worker_fn)(qk_handle_t a, qk_handle_t b, unsigned wo
  */
 qk_status_t qk_world_pairs_parallel(const qk_world_t *w, qk_pairs_which_t which,
                                     qk_world_pair_worker_fn fn, void *ud);
+
+/*
+ * The queries below are read-only calls: many threads may query a world at once while
+ * it is not changed. The first of them after an update that finds 64 cells or more
+ * makes the world's query tree (for the order of that update; its memory is kept for
+ * the next one and counted by qk_world_bytes()) through the world's allocator, on the
+ * querying thread; the others go without it meanwhile, and a query whose tree cannot
+ * be allocated goes without it, with the same answers either way.
+ */
 
 /**
  * Objects overlapping a shape (a box, disc, point or segment; touching counts), exactly,
