@@ -177,7 +177,11 @@ static double entry_bound(const rctx_t *c, const qk_box_t *b) {
  * pay nothing); until it is made, or if it cannot be (no memory), the queries search by
  * rows as before, with the same answers: every path decides the same candidates exactly.
  */
-#define QK__TREE_MIN 64 /* fewer cells: rows and scans are as quick */
+/* Fewer cells: rows and scans are as quick. (scripts/fuzz.sh builds with 2, so that the
+ * fuzzer's worlds of a few dozen objects take the tree too.) */
+#ifndef QK__TREE_MIN
+#define QK__TREE_MIN 64
+#endif
 #define QK__TREE_LEAF 4 /* runs of this many cells are tested cell by cell */
 /* With the tree there, a first hit walks its segment in pieces (visit_first) for at most
  * this many pieces: a dense world's first hit is often found by then; past them (sparse
