@@ -297,8 +297,8 @@ static inline uint32_t qk__cell_lower(const qk_world_t *w, int l, int64_t y, int
   return lo;
 }
 
-/* The order changed (an update): the query tree is no longer for it. Frees it all
- * (qk__world_qtree_free, before the world is freed). */
+/* The order changed (an update): the query tree is no longer for it (its arrays are kept
+ * for the next; qk__world_qtree_free frees them, before the world is freed). */
 static inline void qk__world_qtree_stale(qk_world_t *w) {
   atomic_store_explicit(&w->qstate, 0, memory_order_relaxed);
 }

@@ -247,7 +247,8 @@ static void radix_sort(uint64_t *key, uint32_t *cell, uint64_t *tk, uint32_t *tc
 static int qtree_make(qk_world_t *w) {
   const qk_allocator_t *a = &w->alloc;
   const uint32_t nc = w->n_cells;
-  if (nc > w->cap_q) {
+  /* (made anew when the cells outgrow it, or have shrunk to under half of it) */
+  if (nc > w->cap_q || w->cap_q > 2 * (size_t)nc + 64) {
     qk__world_qtree_free(w);
     w->qkey = qk__realloc(a, NULL, 0, (size_t)nc * sizeof *w->qkey);
     w->qcell = qk__realloc(a, NULL, 0, (size_t)nc * sizeof *w->qcell);
@@ -631,14 +632,19 @@ qk_status_t qk_world_raycast(const qk_world_t *w, qk_point_t from, qk_point_t to
   if (st != QK_OK) return st;
   qk_point_t seg[2] = {from, to};
   const qk_box_t qb = qk__shape_box(&c.seg);
-  const int tree = w->n_live && !w->had_round && qtree_ready(w);
-  if (w->n_live && !w->had_round && visit_first(w, qb, seg, &c, tree)) {
-  } else if (tree) {
-    /* the objects not filed first: their hits prune the tree's squares */
-    visit_dirty(w, qb, r_visit_first, &c);
-    visit_levels(w, qb, seg, &c, r_visit_first, &c);
+  if (w->n_live && w->had_round) {
+    qk__world_visit_seg(w, qb, seg, r_visit_first, &c); /* every candidate (visit_first) */
   } else if (w->n_live) {
-    qk__world_visit_seg(w, qb, seg, r_visit_first, &c);
+    const int tree = qtree_ready(w);
+    if (!visit_first(w, qb, seg, &c, tree)) { /* (the walk handed over, or could not start) */
+      if (tree) {
+        /* the objects not filed first: their hits prune the tree's squares */
+        visit_dirty(w, qb, r_visit_first, &c);
+        visit_levels(w, qb, seg, &c, r_visit_first, &c);
+      } else {
+        qk__world_visit_seg(w, qb, seg, r_visit_first, &c);
+      }
+    }
   }
   *hit = c.best;
   return QK_OK;
@@ -833,8 +839,8 @@ qk_status_t qk_world_knn(const qk_world_t *w, qk_point_t p, size_t k, qk_world_h
   }
   for (int grown = 0;; grown++) {
     kctx_t c = {p, out, k, 0, 0};
-    /* Where the first square missed (sparse or clustered worlds), the tree goes straight
-     * to the nearest squares instead of growing it. */
+    /* Where the first two squares fell short (sparse or clustered worlds), the tree goes
+     * straight to the nearest squares instead of growing the square again. */
     if (grown == 2 && qtree_ready(w) && knn_tree(w, &c)) {
       *n_out = c.n;
       return QK_OK;

@@ -2084,13 +2084,14 @@ static qk_shape_t tree_shape(qkt_rng_t *r, int scene, double *g) {
 }
 
 /* The query tree (collide/world_query.c: each level's cells in Morton order, made by the
- * first query after an update, kept for the next) in worlds where it matters: sparse ones with long
+ * first query after an update, its memory kept for the next unless the cells shrink to
+ * under half) in worlds where it matters: sparse ones with long
  * rays and points far from every object, and clustered ones over three decades of sizes, with
  * negative cell coordinates and far from the origin; boxes and points only (first hits
  * pruned by the tree) or all kinds. Every first hit is the first of all hits, the hits and
  * the box queries are brute force's, the k nearest are the nearest by brute force; after
- * an update (the tree made: the world's bytes grow) and with objects moved, added and
- * removed since. */
+ * an update (the tree made: the world's bytes grow), with objects moved, added and removed
+ * since, and after most are removed. */
 static void test_world_query_tree(void **s) {
   (void)s;
   QKT_ONE_THREAD_TEST();
@@ -2105,9 +2106,11 @@ static void test_world_query_tree(void **s) {
     double g[2] = {0, 0};
     const double c0 = scene == 3 ? 1e9 : 0, span = scene == 2 ? 600 : scene == 3 ? 5e4 : 4e5;
     const double cx = scene == 2 ? 500 : c0, cy = scene == 2 ? 600 : -c0;
-    for (int phase = 0; phase < 4; phase++) {
+    for (int phase = 0; phase < 5; phase++) {
       if (phase == 0) {
         for (size_t i = 0; i < NOBJ; i++) m_add(w, &m, tree_shape(&r, scene, g));
+      } else if (phase == 4) { /* most removed: the tree made again, smaller */
+        while (m.n > 150) m_remove_random(w, &m, &r);
       } else if (phase == 2) {
         for (int j = 0; j < 60; j++) {
           const size_t i = qkt_rng_below(&r, (uint32_t)m.n);
