@@ -808,7 +808,10 @@ static int knn_tree(const qk_world_t *w, kctx_t *c) {
       if (run[j] == run[j + 1]) continue;
       const qk_box_t b = loose_box(x0 + squeeze(org) + (j & 1) * half,
                                    y0 + squeeze(org >> 1) + (j >> 1) * half, half, it.l);
-      if (!kheap_push(heap, &nh, (kitem_t){box_lb2(c->p, &b), run[j], run[j + 1], it.l})) return 0;
+      const double lb = box_lb2(c->p, &b);
+      if (c->n == c->k && lb * (1 - 0x1p-18) > c->out[c->k - 1].t * c->out[c->k - 1].t)
+        continue; /* (it would stop the search when popped) */
+      if (!kheap_push(heap, &nh, (kitem_t){lb, run[j], run[j + 1], it.l})) return 0;
     }
   }
   return 1;
