@@ -840,11 +840,12 @@ qk_status_t qk_world_knn(const qk_world_t *w, qk_point_t p, size_t k, qk_world_h
     const double objs = (double)(w->cells[c0 + nc].start - w->cells[c0].start);
     r = ldexp(sqrt((double)k * nc / (objs > 1 ? objs : 1)), levels[0] - 1);
   }
-  for (int grown = 0;; grown++) {
+  for (int grown = 0, tree_next = 0;; grown++) {
     kctx_t c = {p, out, k, 0, 0};
-    /* Where the first two squares fell short (sparse or clustered worlds), the tree goes
-     * straight to the nearest squares instead of growing the square again. */
-    if (grown == 2 && qtree_ready(w) && knn_tree(w, &c)) {
+    /* Where the squares fell short (sparse or clustered worlds: the first held fewer than
+     * k objects, or the second still missed), the tree goes straight to the nearest
+     * squares instead of growing the square again. */
+    if (tree_next && qtree_ready(w) && knn_tree(w, &c)) {
       *n_out = c.n;
       return QK_OK;
     }
@@ -855,6 +856,7 @@ qk_status_t qk_world_knn(const qk_world_t *w, qk_point_t p, size_t k, qk_world_h
       *n_out = c.n;
       return QK_OK;
     }
+    tree_next = c.n < k || grown >= 1;
     r *= 2;
   }
 }
