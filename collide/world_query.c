@@ -510,12 +510,25 @@ static int r_visit_all(const qk_world_t *w, uint32_t i, const qk_box_t *b, void 
   return 0;
 }
 
+/* Whether the segment surely misses box b: its slabs' entry (entry_bound) beyond their
+ * exit, the exit min(1, each axis's) computed as closely, by more than 2^-40; or an axis
+ * it does not move along, outside the box. */
+static int slab_misses(const rctx_t *c, const qk_box_t *b) {
+  const double ox = c->from.x, oy = c->from.y, vx = c->to.x - ox, vy = c->to.y - oy;
+  double hi = 1;
+  if (vx != 0) hi = qk__min(hi, qk__max((b->xmin - ox) / vx, (b->xmax - ox) / vx));
+  if (vy != 0) hi = qk__min(hi, qk__max((b->ymin - oy) / vy, (b->ymax - oy) / vy));
+  return entry_bound(c, b) > hi + 0x1p-40;
+}
+
 static int r_visit_first(const qk_world_t *w, uint32_t i, const qk_box_t *b, void *ud) {
   rctx_t *c = ud;
   /* An object the segment reaches (in its box) only after the best hit so far cannot be
-   * the first: its parameter would be larger, so no exact test is needed. */
-  if (c->best.h != QK_HANDLE_NONE && box_like(&w->obj[i]) &&
-      entry_bound(c, b) > c->best.t + 0x1p-40)
+   * the first: its parameter would be larger, so no exact test is needed; nor for one the
+   * segment surely misses. */
+  if (box_like(&w->obj[i]) &&
+      ((c->best.h != QK_HANDLE_NONE && entry_bound(c, b) > c->best.t + 0x1p-40) ||
+       slab_misses(c, b)))
     return 0;
   qk_shape_t sh = qk__wshape(&w->obj[i]);
   if (!qk__shapes_overlap(&c->seg, &sh)) return 0;
