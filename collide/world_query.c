@@ -742,7 +742,9 @@ static int k_visit(const qk_world_t *w, uint32_t i, const qk_box_t *b, void *ud)
  * beyond the k-th, neither nearer nor tied. Returns 0, having found nothing, when the
  * heap would overflow (many squares tie: the caller grows its square instead).
  */
+#ifndef QK__KHEAP /* (scripts/fuzz.sh builds with 6, so that the fuzzer overflows it) */
 #define QK__KHEAP 512
+#endif
 typedef struct kitem {
   double lb;
   uint32_t lo, hi;
@@ -786,7 +788,8 @@ static int knn_tree(const qk_world_t *w, kctx_t *c) {
   int nh = 0;
   const qk_box_t all = {-INFINITY, -INFINITY, INFINITY, INFINITY};
   for (int i = 0; i < w->n_lv_occ; i++)
-    kheap_push(heap, &nh, (kitem_t){0, 0, w->lv_n[w->lv_occ[i] - QK__LMIN], w->lv_occ[i]});
+    if (!kheap_push(heap, &nh, (kitem_t){0, 0, w->lv_n[w->lv_occ[i] - QK__LMIN], w->lv_occ[i]}))
+      return 0;
   visit_dirty(w, all, k_visit, c);
   while (nh) {
     const kitem_t it = kheap_pop(heap, &nh);
@@ -858,9 +861,12 @@ qk_status_t qk_world_knn(const qk_world_t *w, qk_point_t p, size_t k, qk_world_h
     /* Where the squares fell short (sparse or clustered worlds: the first held fewer than
      * k objects, or the second still missed), the tree goes straight to the nearest
      * squares instead of growing the square again. */
-    if (tree_next && qtree_ready(w) && knn_tree(w, &c)) {
-      *n_out = c.n;
-      return QK_OK;
+    if (tree_next > 0) {
+      tree_next = -1; /* (once: a heap that overflowed would overflow again) */
+      if (qtree_ready(w) && knn_tree(w, &c)) {
+        *n_out = c.n;
+        return QK_OK;
+      }
     }
     c = (kctx_t){p, out, k, 0, 0};
     qk_box_t qb = {p.x - r, p.y - r, p.x + r, p.y + r};
@@ -869,7 +875,7 @@ qk_status_t qk_world_knn(const qk_world_t *w, qk_point_t p, size_t k, qk_world_h
       *n_out = c.n;
       return QK_OK;
     }
-    tree_next = c.n < k || grown >= 1;
+    if (tree_next == 0) tree_next = c.n < k || grown >= 1;
     r *= 2;
   }
 }
