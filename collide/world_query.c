@@ -493,7 +493,16 @@ qk_status_t qk_world_query(const qk_world_t *w, const qk_shape_t *shape, qk_hand
   qctx_t c = {&q, out, cap, 0};
   qk_point_t seg[2] = {{q.x, q.y}, {q.a, q.b}};
   qk__world_visit_seg(w, qk__shape_box(&q), q.kind == QK_SHAPE_SEGMENT ? seg : NULL, q_visit, &c);
-  if (c.n <= cap && c.n > 1) qsort(out, c.n, sizeof *out, handle_cmp);
+  if (c.n <= cap && c.n > 32) {
+    qsort(out, c.n, sizeof *out, handle_cmp);
+  } else if (c.n <= cap) { /* a few: by insertion (qsort's calls were 6% of a box query) */
+    for (size_t i = 1; i < c.n; i++) {
+      const qk_handle_t h = out[i];
+      size_t j = i;
+      for (; j > 0 && (uint32_t)out[j - 1] > (uint32_t)h; j--) out[j] = out[j - 1];
+      out[j] = h;
+    }
+  }
   *n_out = c.n;
   return QK_OK;
 }
