@@ -148,26 +148,36 @@ static inline int box_like(const qk__wobj_t *o) {
   return k == QK_SHAPE_BOX || k == QK_SHAPE_POINT;
 }
 
-/* A lower bound of where the segment from -> to (direction v, computed) enters box b, as
- * a parameter in [0, 1], or more than 1 when it misses the box's slabs: the slab entry in
- * doubles. Each quotient is within 3 ulps of its real value, so the bound is below the
- * real entry by far less than the 2^-40 the caller leaves. */
-static double entry_bound(const rctx_t *c, const qk_box_t *b) {
+/* The segment's slabs over box b, as parameters: returns a lower bound of where the
+ * segment from -> to (direction v, computed) enters b, in [0, 1], or more than 1 when it
+ * misses the slabs (2 for an axis it does not move along, outside b): the slab entry in
+ * doubles; and sets *exit to min(1, each axis's exit) computed as closely (not all axes'
+ * when the entry is 2: any exit is below it then). Each quotient
+ * is within 3 ulps of its real value, so both are off the real ones by far less than the
+ * 2^-40 the callers leave. */
+static inline double slab_entry(const rctx_t *c, const qk_box_t *b, double *exit) {
   const double ox = c->from.x, oy = c->from.y, vx = c->to.x - ox, vy = c->to.y - oy;
   double lo = 0;
+  *exit = 1;
   if (vx != 0) {
-    double t1 = (b->xmin - ox) / vx, t2 = (b->xmax - ox) / vx;
-    lo = qk__max(lo, qk__min(t1, t2));
+    const double t1 = (b->xmin - ox) / vx, t2 = (b->xmax - ox) / vx;
+    lo = qk__max(lo, qk__min(t1, t2)), *exit = qk__min(*exit, qk__max(t1, t2));
   } else if (ox < b->xmin || ox > b->xmax) {
     return 2;
   }
   if (vy != 0) {
-    double t1 = (b->ymin - oy) / vy, t2 = (b->ymax - oy) / vy;
-    lo = qk__max(lo, qk__min(t1, t2));
+    const double t1 = (b->ymin - oy) / vy, t2 = (b->ymax - oy) / vy;
+    lo = qk__max(lo, qk__min(t1, t2)), *exit = qk__min(*exit, qk__max(t1, t2));
   } else if (oy < b->ymin || oy > b->ymax) {
     return 2;
   }
   return lo;
+}
+
+/* The entry alone (slab_entry). */
+static inline double entry_bound(const rctx_t *c, const qk_box_t *b) {
+  double exit;
+  return slab_entry(c, b, &exit);
 }
 
 /* ---- the query tree -------------------------------------------------------------- */
@@ -358,6 +368,30 @@ typedef struct tquery {
   void *ud;
 } tquery_t;
 
+/* The square of a run of two or more cells of level li (keys from `key`): its least cell
+ * (x, y) and side in cells, and its first key; its quarter k (x half k & 1, y half k >> 1)
+ * holds the run's cells tree_quarters puts in [run[k], run[k + 1]). */
+typedef struct tsquare {
+  int64_t x, y, side;
+  uint64_t org;
+} tsquare_t;
+
+static inline tsquare_t tree_square(const qk_world_t *w, int li, const uint64_t *key, uint32_t lo,
+                                    uint32_t hi) {
+  /* the least square whose key prefix the first and last keys share: side 2^s */
+  const int s = (63 - __builtin_clzll(key[lo] ^ key[hi - 1])) / 2 + 1;
+  const uint64_t org = s == 32 ? 0 : key[lo] & ~((UINT64_C(1) << 2 * s) - 1);
+  return (tsquare_t){(int64_t)w->qx0[li] + squeeze(org), (int64_t)w->qy0[li] + squeeze(org >> 1),
+                     INT64_C(1) << s, org};
+}
+
+static inline void tree_quarters(const uint64_t *key, const tsquare_t *sq, uint32_t lo, uint32_t hi,
+                                 uint32_t run[5]) {
+  const uint64_t q = (uint64_t)(sq->side / 2) * (uint64_t)(sq->side / 2); /* a quarter's keys */
+  run[0] = lo, run[4] = hi;
+  for (int k = 1; k < 4; k++) run[k] = key_lower(key, run[k - 1], hi, sq->org + (uint64_t)k * q);
+}
+
 /* Whether the cells [x, x + s) x [y, y + s) of the query's level may hold what it seeks. */
 static int tree_meets(const tquery_t *t, int64_t x, int64_t y, int64_t s) {
   if (x > t->r.x1 || x + s - 1 < t->r.x0 || y > t->r.y1 || y + s - 1 < t->r.y0) return 0;
@@ -376,7 +410,6 @@ static int tree_visit(const qk_world_t *w, const tquery_t *t) {
   const uint32_t base = w->lv_first[li];
   const uint64_t *key = w->qkey + base;
   const uint32_t *cell = w->qcell + base;
-  const int64_t x0 = w->qx0[li], y0 = w->qy0[li];
   const int near = !t->seg ? 0 : (t->seg[1].x < t->seg[0].x) | (t->seg[1].y < t->seg[0].y) << 1;
   uint32_t stack[2 * 136]; /* runs waiting: at most 3 a square of the descent, 32 deep */
   int sp = 0;
@@ -390,14 +423,11 @@ static int tree_visit(const qk_world_t *w, const tquery_t *t) {
       }
       continue;
     }
-    /* the square of the run: side 2^s cells, its keys from `org` on */
-    const int s = (63 - __builtin_clzll(key[lo] ^ key[hi - 1])) / 2 + 1;
-    const uint64_t org = s == 32 ? 0 : key[lo] & ~((UINT64_C(1) << 2 * s) - 1);
-    if (!tree_meets(t, x0 + squeeze(org), y0 + squeeze(org >> 1), INT64_C(1) << s)) continue;
-    const uint64_t q = UINT64_C(1) << (2 * s - 2); /* the keys of a quarter */
-    uint32_t run[5] = {lo, 0, 0, 0, hi};
-    for (int k = 1; k < 4; k++) run[k] = key_lower(key, run[k - 1], hi, org + (uint64_t)k * q);
-    /* quarter k: x half k & 1, y half k >> 1; pushed so that `near` comes off first */
+    const tsquare_t sq = tree_square(w, li, key, lo, hi);
+    if (!tree_meets(t, sq.x, sq.y, sq.side)) continue;
+    uint32_t run[5];
+    tree_quarters(key, &sq, lo, hi, run);
+    /* pushed so that the quarter `near` comes off first */
     for (int j = 3; j >= 0; j--) {
       const int k = near ^ j;
       if (run[k] < run[k + 1]) stack[sp++] = run[k], stack[sp++] = run[k + 1];
@@ -526,26 +556,17 @@ static int r_visit_all(const qk_world_t *w, uint32_t i, const qk_box_t *b, void 
   return 0;
 }
 
-/* Whether the segment surely misses box b: its slabs' entry (entry_bound) beyond their
- * exit, the exit min(1, each axis's) computed as closely, by more than 2^-40; or an axis
- * it does not move along, outside the box. */
-static int slab_misses(const rctx_t *c, const qk_box_t *b) {
-  const double ox = c->from.x, oy = c->from.y, vx = c->to.x - ox, vy = c->to.y - oy;
-  double hi = 1;
-  if (vx != 0) hi = qk__min(hi, qk__max((b->xmin - ox) / vx, (b->xmax - ox) / vx));
-  if (vy != 0) hi = qk__min(hi, qk__max((b->ymin - oy) / vy, (b->ymax - oy) / vy));
-  return entry_bound(c, b) > hi + 0x1p-40;
-}
-
 static int r_visit_first(const qk_world_t *w, uint32_t i, const qk_box_t *b, void *ud) {
   rctx_t *c = ud;
-  /* An object the segment reaches (in its box) only after the best hit so far cannot be
-   * the first: its parameter would be larger, so no exact test is needed; nor for one the
-   * segment surely misses. */
-  if (box_like(&w->obj[i]) &&
-      ((c->best.h != QK_HANDLE_NONE && entry_bound(c, b) > c->best.t + 0x1p-40) ||
-       slab_misses(c, b)))
-    return 0;
+  /* No exact test for a box or point that the segment surely misses (its slabs' entry
+   * beyond their exit), or reaches only after the best hit so far: its parameter would be
+   * larger, so it cannot be the first. */
+  if (box_like(&w->obj[i])) {
+    double exit;
+    const double entry = slab_entry(c, b, &exit);
+    if (entry > exit + 0x1p-40) return 0;
+    if (c->best.h != QK_HANDLE_NONE && entry > c->best.t + 0x1p-40) return 0;
+  }
   qk_shape_t sh = qk__wshape(&w->obj[i]);
   if (!qk__shapes_overlap(&c->seg, &sh)) return 0;
   double t = qk__ray_param(&sh, c->from, c->to);
@@ -799,6 +820,14 @@ static double box_lb2(qk_point_t p, const qk_box_t *b) {
   return dx * dx + dy * dy;
 }
 
+/* Whether every object at squared distance lb or more lies beyond the k-th so far by the
+ * margin knn_tree's comment gives. */
+static inline int knn_beyond(const kctx_t *c, double lb) {
+  if (c->n < c->k) return 0;
+  const double kt = c->out[c->k - 1].t;
+  return lb * (1 - 0x1p-18) > kt * kt;
+}
+
 static int knn_tree(const qk_world_t *w, kctx_t *c) {
   kitem_t heap[QK__KHEAP];
   int nh = 0;
@@ -809,40 +838,28 @@ static int knn_tree(const qk_world_t *w, kctx_t *c) {
   visit_dirty(w, all, k_visit, c);
   while (nh) {
     const kitem_t it = kheap_pop(heap, &nh);
-    if (c->n == c->k) {
-      const double kt = c->out[c->k - 1].t;
-      if (it.lb * (1 - 0x1p-18) > kt * kt) break;
-    }
+    if (knn_beyond(c, it.lb)) break;
     const int li = it.l - QK__LMIN;
     const uint32_t base = w->lv_first[li];
     const uint64_t *key = w->qkey + base;
-    const int64_t x0 = w->qx0[li], y0 = w->qy0[li];
     if (it.hi - it.lo <= QK__TREE_LEAF) {
       for (uint32_t j = it.lo; j < it.hi; j++) {
         const uint32_t cell = w->qcell[base + j];
         const qk__wcell_t *cl = &w->cells[cell];
         const qk_box_t b = loose_box(cl->cx, cl->cy, 1, it.l);
-        if (c->n == c->k) {
-          const double kt = c->out[c->k - 1].t;
-          if (box_lb2(c->p, &b) * (1 - 0x1p-18) > kt * kt) continue;
-        }
-        visit_cell(w, cell, all, k_visit, c);
+        if (!knn_beyond(c, box_lb2(c->p, &b))) visit_cell(w, cell, all, k_visit, c);
       }
       continue;
     }
-    const int s = (63 - __builtin_clzll(key[it.lo] ^ key[it.hi - 1])) / 2 + 1;
-    const uint64_t org = s == 32 ? 0 : key[it.lo] & ~((UINT64_C(1) << 2 * s) - 1);
-    const uint64_t q = UINT64_C(1) << (2 * s - 2);
-    const int64_t half = INT64_C(1) << (s - 1);
-    uint32_t run[5] = {it.lo, 0, 0, 0, it.hi};
-    for (int j = 1; j < 4; j++) run[j] = key_lower(key, run[j - 1], it.hi, org + (uint64_t)j * q);
+    const tsquare_t sq = tree_square(w, li, key, it.lo, it.hi);
+    const int64_t half = sq.side / 2;
+    uint32_t run[5];
+    tree_quarters(key, &sq, it.lo, it.hi, run);
     for (int j = 0; j < 4; j++) {
       if (run[j] == run[j + 1]) continue;
-      const qk_box_t b = loose_box(x0 + squeeze(org) + (j & 1) * half,
-                                   y0 + squeeze(org >> 1) + (j >> 1) * half, half, it.l);
+      const qk_box_t b = loose_box(sq.x + (j & 1) * half, sq.y + (j >> 1) * half, half, it.l);
       const double lb = box_lb2(c->p, &b);
-      if (c->n == c->k && lb * (1 - 0x1p-18) > c->out[c->k - 1].t * c->out[c->k - 1].t)
-        continue; /* (it would stop the search when popped) */
+      if (knn_beyond(c, lb)) continue; /* (it would stop the search when popped) */
       if (!kheap_push(heap, &nh, (kitem_t){lb, run[j], run[j + 1], it.l})) return 0;
     }
   }
