@@ -364,8 +364,10 @@ _Static_assert(sizeof(qk__wobj_t) == 64, "an object: 64 bytes");
 static inline void refile_check(qk_world_t *w, qk__wobj_t *o, uint32_t i, const qk_box_t *nb,
                                 float step) {
   if (o->flags & QK__WDIRTY) return; /* filed at the next update anyway */
-  if (in_loose(o, nb) && !(qk__max(nb->xmax - nb->xmin, nb->ymax - nb->ymin) <= o->k.shrink))
+  if (in_loose(o, nb) && !(qk__max(nb->xmax - nb->xmin, nb->ymax - nb->ymin) <= o->k.shrink)) {
+    qk__world_fine_touch(w, o);
     return;
+  }
   o->k.step = step;
   make_dirty(w, i);
 }
@@ -410,6 +412,7 @@ static inline qk_status_t move_obj(qk_world_t *w, qk__wobj_t *o, uint32_t i,
       if (!(_mm_cvtsd_f64(_mm_max_sd(ext, _mm_unpackhi_pd(ext, ext))) <= o->k.shrink)) {
         _mm_storeu_pd(&o->x, p);
         _mm_storeu_pd(&o->a, q);
+        qk__world_fine_touch(w, o);
         return QK_OK;
       }
     }
@@ -436,7 +439,10 @@ static inline qk_status_t move_obj(qk_world_t *w, qk__wobj_t *o, uint32_t i,
   const __m128d hi = _mm_add_pd(lo, _mm_add_pd(s2, s2));
   if (_mm_movemask_pd(_mm_and_pd(_mm_cmpge_pd(p, lo), _mm_cmplt_pd(q, hi))) == 3) {
     const __m128d ext = _mm_sub_pd(q, p);
-    if (!(_mm_cvtsd_f64(_mm_max_sd(ext, _mm_unpackhi_pd(ext, ext))) <= o->k.shrink)) return QK_OK;
+    if (!(_mm_cvtsd_f64(_mm_max_sd(ext, _mm_unpackhi_pd(ext, ext))) <= o->k.shrink)) {
+      qk__world_fine_touch(w, o);
+      return QK_OK;
+    }
   }
   /* (its step: the larger move of (x, y); the same value as step_of) */
   const __m128d d = _mm_andnot_pd(_mm_set1_pd(-0.0), _mm_sub_pd(p, was));

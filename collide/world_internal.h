@@ -206,12 +206,52 @@ struct qk_world {
    * 1 being made (by one query; the others go without), 2 made. Its arrays are read only
    * after reading 2 (acquire), written only after taking 0 -> 1. */
   atomic_int qstate;
-  atomic_size_t qbytes; /* what its arrays hold, in bytes */
+  atomic_size_t qbytes; /* what its arrays hold, in bytes (the groups' below too) */
   uint64_t *qkey;
   uint32_t *qcell;
   uint32_t cap_q;
   int32_t qx0[QK__NLEV], qy0[QK__NLEV];
+  /* Made with it: the groups of the crowded cells (qk__wfine_t; the cells of
+   * QK__FINE_MIN objects or more). The cells' entries in cell order, found by a hash of
+   * (level, cx, cy) in fhash (fmask + 1 entries, UINT32_MAX empty); their objects' slots
+   * (the live ones filed there) in fslot, four to a group, and the groups' float boxes
+   * in fg4, the boxes of their runs of four groups in fg16, each (xmin, ymin, -xmax,
+   * -ymax). */
+  struct qk__wfine *fine;
+  uint32_t n_fine, cap_fine;
+  uint32_t *fhash;
+  uint32_t fmask;
+  uint32_t *fslot;
+  float *fg4, *fg16;
+  size_t cap_fslot; /* fslot's room; fg4's is a quarter, fg16's a sixteenth (rounded up) */
 };
+
+/* A crowded cell's groups: its objects (in an order of their own, near ones together) at
+ * fslot[4 g4 ..], n of them in groups of four from group g4 (the last group padded with
+ * QK_NONE), and those groups four by four from g16, room for all the cell's objects set
+ * out. state (collide/world_query.c): empty, being filled by a query, filled (n and the
+ * groups may be read after reading it, acquire), or stale: an object of the cell has
+ * moved since (qk__world_fine_touch), and its group's box may no longer hold it, so the
+ * queries read the cell's objects one by one until the next update. */
+typedef struct qk__wfine {
+  uint32_t cell, g4, g16, n;
+  atomic_int state;
+} qk__wfine_t;
+
+/* Cells with this many objects get groups. (scripts/fuzz.sh builds with 2, so that the
+ * fuzzer's small worlds have them.) */
+#ifndef QK__FINE_MIN
+#define QK__FINE_MIN 16
+#endif
+
+/* A filed object o (not dirty) got a new shape in its cell: its cell's groups, if the query
+ * tree has them, are stale. (Called by every move that leaves an object filed; a load and a
+ * branch unless a query has made the tree since the last update.) */
+void qk__world_fine_stale(qk_world_t *w, const qk__wobj_t *o);
+static inline void qk__world_fine_touch(qk_world_t *w, const qk__wobj_t *o) {
+  if (atomic_load_explicit(&w->qstate, memory_order_relaxed) == 2 && w->n_fine)
+    qk__world_fine_stale(w, o);
+}
 
 /* The scratch cache: qk__wscr_init makes it the world's allocator (w->alloc) in front
  * of user; between qk__wscr_begin and qk__wscr_end (an update) it keeps freed large

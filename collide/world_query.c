@@ -31,16 +31,29 @@ static int64_t scaled(double v, int l) {
   return (int64_t)s;
 }
 
+/* Object i if it is where the order files it (live, not dirty) and its box meets qb. */
+static inline int visit_obj(const qk_world_t *w, uint32_t i, const qk_box_t *qb, qk__wvisit_fn fn,
+                            void *ud) {
+  const qk__wobj_t *o = &w->obj[i];
+  if (!qk__wlive(o) || (o->flags & QK__WDIRTY)) return 0;
+  qk_box_t b = qk__wbox(o);
+  return boxes_meet(&b, qb) && fn(w, i, &b, ud);
+}
+
+static const qk__wfine_t *fine_of(const qk_world_t *w, uint32_t c);
+static int visit_groups(const qk_world_t *w, const qk__wfine_t *f, const qk_box_t *qb,
+                        qk__wvisit_fn fn, void *ud);
+
 /* The objects of cell c that are where the order files them (live, not dirty) and whose
- * boxes meet qb. */
+ * boxes meet qb: in a crowded cell, those of its groups whose boxes meet qb. */
 static int visit_cell(const qk_world_t *w, uint32_t c, qk_box_t qb, qk__wvisit_fn fn, void *ud) {
-  for (uint32_t k = w->cells[c].start, e = w->cells[c + 1].start; k < e; k++) {
-    uint32_t i = w->order[k];
-    const qk__wobj_t *o = &w->obj[i];
-    if (!qk__wlive(o) || (o->flags & QK__WDIRTY)) continue;
-    qk_box_t b = qk__wbox(o);
-    if (boxes_meet(&b, &qb) && fn(w, i, &b, ud)) return 1;
+  const uint32_t s = w->cells[c].start, e = w->cells[c + 1].start;
+  if (e - s >= QK__FINE_MIN) {
+    const qk__wfine_t *f = fine_of(w, c);
+    if (f) return visit_groups(w, f, &qb, fn, ud);
   }
+  for (uint32_t k = s; k < e; k++)
+    if (visit_obj(w, w->order[k], &qb, fn, ud)) return 1;
   return 0;
 }
 
@@ -227,11 +240,273 @@ static uint32_t squeeze(uint64_t x) {
   return (uint32_t)(x | x >> 16);
 }
 
+/* ---- groups in crowded cells ------------------------------------------------------ */
+
+/*
+ * A cell of many objects (a cluster's: at 10^4 objects of the benchmark's clustered scene a
+ * cell of side 4 holds some 50 of sides 1-4, and a box query read 30 objects for each one
+ * it found) is given bounds finer than its square: its live objects in the Morton order of
+ * their boxes' centres within the cell's loose square (6 bits an axis), four to a group,
+ * each group with the float box around its objects' boxes, and each run of four groups
+ * with the box around theirs. A query reads the objects of the groups whose boxes meet
+ * its box (in floats: see group_meets). The tree's making only sets out room for each
+ * crowded cell; the first query that reads the cell fills it (one query, under the cell's
+ * state: the others read the cell object by object meanwhile), so that a few queries
+ * after an update pay for the cells they read. Objects removed since are skipped as
+ * before; objects added or re-filed since are dirty, visited apart. A move that leaves
+ * an object in its cell would leave its group's box behind: it marks the cell stale
+ * (qk__world_fine_stale), whose objects the queries then read one by one until the next
+ * update makes the tree anew.
+ */
+enum { FINE_EMPTY, FINE_FILLING, FINE_FILLED, FINE_STALE };
+
+static size_t fine_groups16(size_t cap_fslot, size_t cap_fine) { return cap_fslot / 16 + cap_fine; }
+
+static size_t fine_bytes(const qk_world_t *w) {
+  if (!w->cap_fine) return 0;
+  return (size_t)w->cap_fine * sizeof *w->fine + ((size_t)w->fmask + 1) * sizeof *w->fhash +
+         w->cap_fslot * (sizeof *w->fslot + sizeof *w->fg4) +
+         fine_groups16(w->cap_fslot, w->cap_fine) * 4 * sizeof *w->fg16;
+}
+
+static void fine_free(qk_world_t *w) {
+  const qk_allocator_t *a = &w->alloc;
+  if (w->cap_fine) {
+    qk__free(a, w->fine, (size_t)w->cap_fine * sizeof *w->fine);
+    qk__free(a, w->fhash, ((size_t)w->fmask + 1) * sizeof *w->fhash);
+    qk__free(a, w->fslot, w->cap_fslot * sizeof *w->fslot);
+    qk__free(a, w->fg4, w->cap_fslot * sizeof *w->fg4);
+    qk__free(a, w->fg16, fine_groups16(w->cap_fslot, w->cap_fine) * 4 * sizeof *w->fg16);
+  }
+  w->fine = NULL, w->fhash = NULL, w->fslot = NULL, w->fg4 = NULL, w->fg16 = NULL;
+  w->cap_fine = 0, w->fmask = 0, w->cap_fslot = 0, w->n_fine = 0;
+}
+
 void qk__world_qtree_free(qk_world_t *w) {
   qk__free(&w->alloc, w->qkey, (size_t)w->cap_q * sizeof *w->qkey);
   qk__free(&w->alloc, w->qcell, (size_t)w->cap_q * sizeof *w->qcell);
   w->qkey = NULL, w->qcell = NULL, w->cap_q = 0;
+  fine_free(w);
   atomic_store_explicit(&w->qbytes, 0, memory_order_relaxed);
+}
+
+static inline uint32_t fine_hash(int level, int32_t cx, int32_t cy) {
+  const uint32_t h =
+      (uint32_t)cx * 0x9E3779B1u ^ (uint32_t)cy * 0x85EBCA77u ^ (uint32_t)level * 0xC2B2AE3Du;
+  return h ^ h >> 16;
+}
+
+void qk__world_fine_stale(qk_world_t *w, const qk__wobj_t *o) {
+  for (uint32_t h = fine_hash(o->level, o->u.cx, o->cy) & w->fmask;; h = (h + 1) & w->fmask) {
+    const uint32_t i = w->fhash[h];
+    if (i == UINT32_MAX) return;
+    const qk__wcell_t *cl = &w->cells[w->fine[i].cell];
+    if (cl->cx == o->u.cx && cl->cy == o->cy && cl->level == o->level) {
+      atomic_store_explicit(&w->fine[i].state, FINE_STALE, memory_order_relaxed);
+      return;
+    }
+  }
+}
+
+/* A group's box g (xmin, ymin, -xmax, -ymax) meets the query's q (xmax, ymax, -xmin, -ymin).
+ * Both are rounded to floats to nearest, which keeps the order of any two values (a <= b
+ * gives (float)a <= (float)b) and commutes with negation: boxes that meet still meet. */
+static inline int group_meets(const float *g, const float *q) {
+  return g[0] <= q[0] && g[1] <= q[1] && g[2] <= q[2] && g[3] <= q[3];
+}
+
+static int visit_groups(const qk_world_t *w, const qk__wfine_t *f, const qk_box_t *qb,
+                        qk__wvisit_fn fn, void *ud) {
+  const float q[4] = {(float)qb->xmax, (float)qb->ymax, (float)-qb->xmin, (float)-qb->ymin};
+  const uint32_t n4 = (f->n + 3) / 4;
+  const float *g4 = w->fg4 + 4 * (size_t)f->g4, *g16 = w->fg16 + 4 * (size_t)f->g16;
+  const uint32_t *slot = w->fslot + 4 * (size_t)f->g4;
+  for (uint32_t j16 = 0; 4 * j16 < n4; j16++) {
+    if (!group_meets(g16 + 4 * j16, q)) continue;
+    const uint32_t e4 = 4 * j16 + 4 < n4 ? 4 * j16 + 4 : n4;
+    for (uint32_t j = 4 * j16; j < e4; j++) {
+      if (!group_meets(g4 + 4 * j, q)) continue;
+      for (uint32_t k = 4 * j; k < 4 * j + 4 && slot[k] != QK_NONE; k++)
+        if (visit_obj(w, slot[k], qb, fn, ud)) return 1;
+    }
+  }
+  return 0;
+}
+
+/* Where in its cell's loose square a box's centre lies: 6 bits an axis, interleaved. */
+static uint32_t fine_key(const qk_box_t *b, const qk__wcell_t *c) {
+  const double s = qk__pow2(5 - c->level); /* 64 steps over the square's side 2^(l + 1) */
+  const double fx = (b->xmin + b->xmax) * 0.5 * s - (double)c->cx * 32;
+  const double fy = (b->ymin + b->ymax) * 0.5 * s - (double)c->cy * 32;
+  const uint32_t ix = !(fx > 0) ? 0 : fx >= 63 ? 63 : (uint32_t)fx;
+  const uint32_t iy = !(fy > 0) ? 0 : fy >= 63 ? 63 : (uint32_t)fy;
+  return (uint32_t)(spread(ix) | spread(iy) << 1);
+}
+
+/* Sorts keys[0, m) by their 12-bit key (in the high half); tmp: room for m. */
+static void fine_sort(uint64_t *keys, uint64_t *tmp, uint32_t m) {
+  if (m <= 48) {
+    for (uint32_t i = 1; i < m; i++) {
+      const uint64_t v = keys[i];
+      uint32_t j = i;
+      for (; j > 0 && keys[j - 1] > v; j--) keys[j] = keys[j - 1];
+      keys[j] = v;
+    }
+    return;
+  }
+  /* two passes of six bits, through tmp and back */
+  uint64_t *src = keys, *dst = tmp;
+  for (int sh = 32; sh < 44; sh += 6) {
+    uint32_t count[65] = {0};
+    for (uint32_t i = 0; i < m; i++) count[((src[i] >> sh) & 63) + 1]++;
+    for (int d = 0; d < 64; d++) count[d + 1] += count[d];
+    for (uint32_t i = 0; i < m; i++) dst[count[(src[i] >> sh) & 63]++] = src[i];
+    uint64_t *t = src;
+    src = dst, dst = t;
+  }
+}
+
+/* The box around boxes[0, n) as floats (xmin, ymin, -xmax, -ymax). */
+static void group_box(float *g, const qk_box_t *b, uint32_t n) {
+  qk_box_t u = b[0];
+  for (uint32_t k = 1; k < n; k++) {
+    u.xmin = qk__min(u.xmin, b[k].xmin), u.ymin = qk__min(u.ymin, b[k].ymin);
+    u.xmax = qk__max(u.xmax, b[k].xmax), u.ymax = qk__max(u.ymax, b[k].ymax);
+  }
+  g[0] = (float)u.xmin, g[1] = (float)u.ymin, g[2] = (float)-u.xmax, g[3] = (float)-u.ymax;
+}
+
+/* Fills f's groups from its cell's live objects that are filed there; 0 when out of memory. */
+#define QK__FINE_STACK 128
+typedef struct fobj {
+  qk_box_t b;
+  uint32_t slot;
+} fobj_t;
+static int fine_fill(const qk_world_t *w, qk__wfine_t *f) {
+  const qk__wcell_t *cl = &w->cells[f->cell];
+  const uint32_t s = cl->start, e = cl[1].start, cap = e - s;
+  uint64_t stack_keys[2 * QK__FINE_STACK];
+  fobj_t stack_obj[QK__FINE_STACK];
+  uint64_t *keys = stack_keys;
+  fobj_t *ob = stack_obj;
+  if (cap > QK__FINE_STACK) {
+    keys = qk__realloc(&w->alloc, NULL, 0, 2 * (size_t)cap * sizeof *keys);
+    ob = qk__realloc(&w->alloc, NULL, 0, (size_t)cap * sizeof *ob);
+    if (!keys || !ob) {
+      qk__free(&w->alloc, keys, keys ? 2 * (size_t)cap * sizeof *keys : 0);
+      qk__free(&w->alloc, ob, ob ? (size_t)cap * sizeof *ob : 0);
+      return 0;
+    }
+  }
+  /* the objects (box and slot), and their keys with their places among them */
+  uint32_t m = 0;
+  for (uint32_t k = s; k < e; k++) {
+    const uint32_t i = w->order[k];
+    const qk__wobj_t *o = &w->obj[i];
+    if (!qk__wlive(o) || (o->flags & QK__WDIRTY)) continue;
+    ob[m] = (fobj_t){qk__wbox(o), i};
+    keys[m] = (uint64_t)fine_key(&ob[m].b, cl) << 32 | m;
+    m++;
+  }
+  fine_sort(keys, keys + cap, m);
+  const uint32_t n4 = (m + 3) / 4, n16 = (n4 + 3) / 4;
+  uint32_t *slot = w->fslot + 4 * (size_t)f->g4;
+  float *g4 = w->fg4 + 4 * (size_t)f->g4;
+  for (uint32_t j = 0; j < n4; j++) {
+    const uint32_t n = 4 * j + 4 <= m ? 4 : m - 4 * j;
+    qk_box_t gb[4];
+    for (uint32_t k = 0; k < n; k++) {
+      const fobj_t *x = &ob[(uint32_t)keys[4 * j + k]];
+      slot[4 * j + k] = x->slot, gb[k] = x->b;
+    }
+    for (uint32_t k = n; k < 4; k++) slot[4 * j + k] = QK_NONE;
+    group_box(g4 + 4 * j, gb, n);
+  }
+  for (uint32_t j = 0; j < n16; j++) {
+    const float *gj = g4 + 16 * (size_t)j;
+    float *u = w->fg16 + 4 * ((size_t)f->g16 + j);
+    const uint32_t n = 4 * j + 4 <= n4 ? 4 : n4 - 4 * j;
+    for (int d = 0; d < 4; d++) {
+      u[d] = gj[d];
+      for (uint32_t k = 1; k < n; k++) u[d] = gj[4 * k + d] < u[d] ? gj[4 * k + d] : u[d];
+    }
+  }
+  f->n = m;
+  if (keys != stack_keys) {
+    qk__free(&w->alloc, keys, 2 * (size_t)cap * sizeof *keys);
+    qk__free(&w->alloc, ob, (size_t)cap * sizeof *ob);
+  }
+  return 1;
+}
+
+/* The groups of cell c, filled by this query if no other has begun to, or NULL when there
+ * are none to read (no tree made for this order, another query filling them, stale, or
+ * no memory to sort the cell's objects). */
+static const qk__wfine_t *fine_of(const qk_world_t *w, uint32_t c) {
+  if (atomic_load_explicit(&((qk_world_t *)w)->qstate, memory_order_acquire) != 2 || !w->n_fine)
+    return NULL;
+  const qk__wcell_t *cl = &w->cells[c];
+  for (uint32_t h = fine_hash(cl->level, cl->cx, cl->cy) & w->fmask;; h = (h + 1) & w->fmask) {
+    const uint32_t i = w->fhash[h];
+    if (i == UINT32_MAX) return NULL;
+    qk__wfine_t *f = &w->fine[i];
+    if (f->cell != c) continue;
+    int st = atomic_load_explicit(&f->state, memory_order_acquire);
+    if (st == FINE_FILLED) return f;
+    if (st != FINE_EMPTY ||
+        !atomic_compare_exchange_strong_explicit(&f->state, &st, FINE_FILLING, memory_order_acquire,
+                                                 memory_order_relaxed))
+      return NULL;
+    const int ok = fine_fill(w, f);
+    atomic_store_explicit(&f->state, ok ? FINE_FILLED : FINE_EMPTY, memory_order_release);
+    return ok ? f : NULL;
+  }
+}
+
+/* Sets out room for the groups of the order's crowded cells, none filled; 0 (and none)
+ * when out of memory. */
+static int fine_make(qk_world_t *w) {
+  const qk_allocator_t *a = &w->alloc;
+  uint32_t nf = 0;
+  size_t ns = 0;
+  for (uint32_t c = 0; c < w->n_cells; c++) {
+    const uint32_t m = w->cells[c + 1].start - w->cells[c].start;
+    if (m >= QK__FINE_MIN) nf++, ns += (m + 3) & ~(size_t)3;
+  }
+  w->n_fine = 0;
+  if (!nf) return 1;
+  /* (made anew when outgrown, or when the crowded cells have shrunk to under half) */
+  if (nf > w->cap_fine || ns > w->cap_fslot || w->cap_fine > 2 * (size_t)nf + 64 ||
+      w->cap_fslot > 2 * ns + 1024) {
+    fine_free(w);
+    uint32_t hsize = 64;
+    while (hsize < 2 * nf) hsize *= 2;
+    w->fine = qk__realloc(a, NULL, 0, (size_t)nf * sizeof *w->fine);
+    w->fhash = qk__realloc(a, NULL, 0, (size_t)hsize * sizeof *w->fhash);
+    w->fslot = qk__realloc(a, NULL, 0, ns * sizeof *w->fslot);
+    w->fg4 = qk__realloc(a, NULL, 0, ns * sizeof *w->fg4);
+    w->fg16 = qk__realloc(a, NULL, 0, fine_groups16(ns, nf) * 4 * sizeof *w->fg16);
+    w->cap_fine = nf, w->fmask = hsize - 1, w->cap_fslot = ns;
+    if (!w->fine || !w->fhash || !w->fslot || !w->fg4 || !w->fg16) {
+      fine_free(w);
+      return 0;
+    }
+  }
+  for (uint32_t h = 0; h <= w->fmask; h++) w->fhash[h] = UINT32_MAX;
+  uint32_t g4 = 0, g16 = 0;
+  for (uint32_t c = 0; c < w->n_cells; c++) {
+    const qk__wcell_t *cl = &w->cells[c];
+    const uint32_t m = cl[1].start - cl->start, n4 = (m + 3) / 4;
+    if (m < QK__FINE_MIN) continue;
+    qk__wfine_t *f = &w->fine[w->n_fine];
+    f->cell = c, f->g4 = g4, f->g16 = g16, f->n = 0;
+    atomic_init(&f->state, FINE_EMPTY);
+    uint32_t h = fine_hash(cl->level, cl->cx, cl->cy) & w->fmask;
+    while (w->fhash[h] != UINT32_MAX) h = (h + 1) & w->fmask;
+    w->fhash[h] = w->n_fine++;
+    g4 += n4, g16 += (n4 + 3) / 4;
+  }
+  return 1;
 }
 
 /* Sorts the keys and cells of [0, m) by key, least significant byte first, over the
@@ -274,8 +549,6 @@ static int qtree_make(qk_world_t *w) {
       qk__world_qtree_free(w);
       return 0;
     }
-    atomic_store_explicit(&w->qbytes, (size_t)nc * (sizeof *w->qkey + sizeof *w->qcell),
-                          memory_order_relaxed);
   }
   uint64_t *tk = qk__realloc(a, NULL, 0, (size_t)nc * sizeof *tk);
   uint32_t *tc = qk__realloc(a, NULL, 0, (size_t)nc * sizeof *tc);
@@ -300,17 +573,23 @@ static int qtree_make(qk_world_t *w) {
   }
   qk__free(a, tk, tk ? (size_t)nc * sizeof *tk : 0);
   qk__free(a, tc, tc ? (size_t)nc * sizeof *tc : 0);
+  if (ok && !fine_make(w)) w->n_fine = 0; /* (without groups when they cannot be had) */
+  atomic_store_explicit(&w->qbytes,
+                        (size_t)w->cap_q * (sizeof *w->qkey + sizeof *w->qcell) + fine_bytes(w),
+                        memory_order_relaxed);
   return ok;
 }
 
-/* Whether the query tree of the last update's order is there to read, making it if no
- * other query is (a query of a world shared by many readers: the tree and qstate are
- * the only state it writes, under qstate's protocol). */
+/* Whether the query tree of the last update's order (and its crowded cells' groups) is
+ * there to read, making it if no other query is (a query of a world shared by many
+ * readers: the tree and qstate are the only state it writes, under qstate's protocol).
+ * Made for the groups alone in a world of a few cells; tree_ready says whether to
+ * descend the tree. */
 static int qtree_ready(const qk_world_t *cw) {
   qk_world_t *w = (qk_world_t *)cw;
   const int s = atomic_load_explicit(&w->qstate, memory_order_acquire);
   if (s == 2) return 1;
-  if (s != 0 || w->n_cells < QK__TREE_MIN) return 0;
+  if (s != 0 || (w->n_cells < QK__TREE_MIN && w->n_order < QK__FINE_MIN)) return 0;
   int expect = 0;
   if (!atomic_compare_exchange_strong_explicit(&w->qstate, &expect, 1, memory_order_acquire,
                                                memory_order_relaxed))
@@ -319,6 +598,8 @@ static int qtree_ready(const qk_world_t *cw) {
   atomic_store_explicit(&w->qstate, ok ? 2 : 0, memory_order_release);
   return ok;
 }
+
+static int tree_ready(const qk_world_t *w) { return qtree_ready(w) && w->n_cells >= QK__TREE_MIN; }
 
 /* The first of keys [lo, hi) at or above k, or hi. */
 static uint32_t key_lower(const uint64_t *keys, uint32_t lo, uint32_t hi, uint64_t k) {
@@ -455,7 +736,7 @@ static int visit_dirty(const qk_world_t *w, qk_box_t qb, qk__wvisit_fn fn, void 
  * squares that the best hit so far rules out. Returns 1 when fn stopped the visit. */
 static int visit_levels(const qk_world_t *w, qk_box_t qb, const qk_point_t *seg,
                         const rctx_t *first, qk__wvisit_fn fn, void *ud) {
-  const int tree = qtree_ready(w);
+  const int tree = tree_ready(w);
   int levels[QK__NLEV];
   int n = qk__world_levels(w, levels);
   for (int li = 0; li < n; li++) {
@@ -685,7 +966,7 @@ qk_status_t qk_world_raycast(const qk_world_t *w, qk_point_t from, qk_point_t to
   if (w->n_live && w->had_round) {
     qk__world_visit_seg(w, qb, seg, r_visit_first, &c); /* every candidate (visit_first) */
   } else if (w->n_live) {
-    const int tree = qtree_ready(w);
+    const int tree = tree_ready(w);
     if (!visit_first(w, qb, seg, &c, tree)) { /* (the walk handed over, or could not start) */
       if (tree) {
         /* the objects not filed first: their hits prune the tree's squares */
@@ -896,7 +1177,7 @@ qk_status_t qk_world_knn(const qk_world_t *w, qk_point_t p, size_t k, qk_world_h
      * squares instead of growing the square again. */
     if (tree_next > 0) {
       tree_next = -1; /* (once: a heap that overflowed would overflow again) */
-      if (qtree_ready(w) && knn_tree(w, &c)) {
+      if (tree_ready(w) && knn_tree(w, &c)) {
         *n_out = c.n;
         return QK_OK;
       }

@@ -37,9 +37,10 @@ flags=(-g -O1 -std=c11 -D_XOPEN_SOURCE=700 -Wall -Wextra -Wpedantic
   -I"$src/include" -I"$src")
 lib=("$src"/index/*.c "$src"/query/*.c "$src"/collide/*.c "$src"/mesh/*.c "$src"/region/*.c "$src"/io/*.c)
 # The world's query tree from two cells on (collide/world_query.c), not 64: the world
-# target's few dozen objects take it too; and its nearest-objects heap of 6 entries, not
-# 512, so that it overflows (the search then grows its square instead).
-flags+=(-DQK__TREE_MIN=2 -DQK__KHEAP=6)
+# target's few dozen objects take it too; its nearest-objects heap of 6 entries, not
+# 512, so that it overflows (the search then grows its square instead); and groups in
+# every cell of two objects or more, not 16 (collide/world_internal.h).
+flags+=(-DQK__TREE_MIN=2 -DQK__KHEAP=6 -DQK__FINE_MIN=2)
 # region/ reads GeoJSON through json-c (and the geojson target parses it again for its oracle).
 flags+=(-DQK_HAVE_JSONC=1 $(pkg-config --cflags json-c))
 libs=($(pkg-config --libs json-c) -lpthread)

@@ -2160,10 +2160,111 @@ static void test_world_query_tree(void **s) {
   free(all), free(got);
 }
 
+/* The objects overlapping qs are exactly brute force's, in slot order. */
+static QKT_SERIAL void check_overlaps(qk_world_t *w, const mirror_t *m, qk_shape_t qs,
+                                      qk_handle_t *got, const char *what) {
+  size_t n, want = 0;
+  assert_int_equal(qk_world_query(w, &qs, got, m->n + 1, &n), QK_OK);
+  for (size_t j = 0; j < m->n; j++) want += o_overlap(qs, m->s[j]);
+  if (n != want)
+    fail_msg("%skind %d: %zu objects, brute force %zu (seed %llu)", what, (int)qs.kind, n, want,
+             (unsigned long long)g_seed);
+  for (size_t i = 0; i < n; i++) {
+    size_t j = 0;
+    while (j < m->n && m->h[j] != got[i]) j++;
+    if (j == m->n || !o_overlap(qs, m->s[j]))
+      fail_msg("%skind %d: %llx is not brute force's (seed %llu)", what, (int)qs.kind,
+               (unsigned long long)got[i], (unsigned long long)g_seed);
+    if (i) assert_true((uint32_t)got[i - 1] < (uint32_t)got[i]);
+  }
+}
+
+/* Crowded cells (collide/world_query.c: their objects in groups of four with float boxes,
+ * made with the query tree): 1,500 objects in a square of side 6, most of sizes 0.5-2
+ * (dozens to a cell), a fifth 0.01-1, boxes and points or every kind, near the origin and far from
+ * it. Box, disc, point and segment queries, first and all hits, and the k nearest against brute
+ * force right after updates (the groups made: the world's bytes grow by more than a slot a crowded
+ * object) and after moves that keep most objects in their cells (each group's box left behind: the
+ * cell is read object by object until the next update), adds, removes, and moves out of the
+ * cluster. */
+static void test_world_crowded_cells(void **s) {
+  (void)s;
+  QKT_ONE_THREAD_TEST();
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 991);
+  enum { NOBJ = 1500, NQ = 60 };
+  qk_world_hit_t *all = malloc((NOBJ + 256) * sizeof *all);
+  qk_handle_t *got = malloc((NOBJ + 256) * sizeof *got);
+  for (int scene = 0; scene < 4; scene++) {
+    qk_world_t *w = threaded_world(1);
+    mirror_t m = {0};
+    const double ox = scene >= 2 ? 3e8 : -7.25, oy = scene >= 2 ? -5e8 : 3.5, side = 6;
+    const int kinds = scene % 2; /* every kind, or boxes and points */
+    for (int phase = 0; phase < 6; phase++) {
+      if (phase == 0) {
+        for (size_t i = 0; i < NOBJ; i++) {
+          const double x = ox + qkt_rng_unit(&r) * side, y = oy + qkt_rng_unit(&r) * side;
+          const double sz =
+              pow(10, i % 5 ? qkt_rng_range(&r, -0.3, 0.3) : qkt_rng_range(&r, -2, 0));
+          const int k = (int)qkt_rng_below(&r, kinds ? 4 : 2);
+          qk_shape_t sh = {QK_SHAPE_BOX, x, y, x + sz * qkt_rng_unit(&r),
+                           y + sz * qkt_rng_unit(&r)};
+          if (k == 1) sh = (qk_shape_t){QK_SHAPE_POINT, x, y, 0, 0};
+          if (k == 2) sh = (qk_shape_t){QK_SHAPE_DISC, x, y, sz / 2, 0};
+          if (k == 3) sh.kind = QK_SHAPE_SEGMENT;
+          m_add(w, &m, sh);
+        }
+        assert_int_equal(qk_world_update(w), QK_OK);
+      } else if (phase % 2) { /* moves before the queries, no update */
+        for (size_t j = 0; j < m.n / 3; j++) {
+          const size_t i = qkt_rng_below(&r, (uint32_t)m.n);
+          qk_shape_t sh = m.s[i];
+          const double dx = qkt_rng_range(&r, -0.3, 0.3), dy = qkt_rng_range(&r, -0.3, 0.3);
+          sh.x += dx, sh.y += dy;
+          if (sh.kind == QK_SHAPE_BOX || sh.kind == QK_SHAPE_SEGMENT) sh.a += dx, sh.b += dy;
+          if (j % 50 == 0) sh.x += 100, sh.a += sh.kind == QK_SHAPE_BOX ? 100 : 0; /* away */
+          m_move(w, &m, i, sh);
+        }
+        if (phase == 3)
+          for (int j = 0; j < 40; j++) m_remove_random(w, &m, &r);
+      } else {
+        if (phase == 4) /* objects added into the cluster, then filed */
+          for (int j = 0; j < 40; j++) {
+            const double x = ox + qkt_rng_unit(&r) * side, y = oy + qkt_rng_unit(&r) * side;
+            m_add(w, &m, (qk_shape_t){QK_SHAPE_BOX, x, y, x + 1, y + 0.5});
+          }
+        assert_int_equal(qk_world_update(w), QK_OK);
+      }
+      const size_t before = qk_world_bytes(w);
+      for (int q = 0; q < NQ; q++) {
+        char what[64];
+        snprintf(what, sizeof what, "crowded scene %d phase %d query %d: ", scene, phase, q);
+        const double x = ox - 1 + qkt_rng_unit(&r) * (side + 2);
+        const double y = oy - 1 + qkt_rng_unit(&r) * (side + 2);
+        const double h = q % 4 == 0 ? qkt_rng_range(&r, 0, 4) : qkt_rng_range(&r, 0, 0.5);
+        check_overlaps(w, &m, (qk_shape_t){QK_SHAPE_BOX, x - h, y - h, x + h, y + h}, got, what);
+        if (q == 0 && phase == 0) /* (the groups made: more than 4 bytes a crowded object) */
+          assert_true(qk_world_bytes(w) > before + 4 * NOBJ);
+        check_overlaps(w, &m, (qk_shape_t){QK_SHAPE_DISC, x, y, h, 0}, got, what);
+        check_overlaps(w, &m, (qk_shape_t){QK_SHAPE_POINT, x, y, 0, 0}, got, what);
+        const double ang = qkt_rng_range(&r, 0, 6.283185307179586), len = 4 * h + 0.1;
+        const qk_point_t a = {x, y}, b = {x + len * cos(ang), y + len * sin(ang)};
+        check_overlaps(w, &m, (qk_shape_t){QK_SHAPE_SEGMENT, a.x, a.y, b.x, b.y}, got, what);
+        check_first_hit(w, &m, a, b, all, NOBJ + 256, what);
+        if (q % 5 == 0) check_knn(w, &m, a, q % 3 == 0 ? 1 : q % 3 == 1 ? 5 : 16, what);
+      }
+    }
+    free(m.h), free(m.s);
+    qk_world_free(w);
+  }
+  free(all), free(got);
+}
+
 /* The query tree made by concurrent readers: right after each update, batches of first
- * hits and of nearest objects on two threads (whose queries race to make the tree: one
- * makes it, the others search by rows meanwhile), then the same queries one by one; the
- * answers are the same (and TSan sees no race under make tsan). */
+ * hits and of nearest objects on two threads (whose queries race to make the tree and to
+ * fill a crowded cell's groups: one makes it, the others search without meanwhile), then
+ * the same queries one by one; the answers are the same (and TSan sees no race under make
+ * tsan). */
 static void test_world_query_tree_threads(void **s) {
   (void)s;
   qkt_rng_t r;
@@ -2172,11 +2273,20 @@ static void test_world_query_tree_threads(void **s) {
   qk_point_t *from = malloc(NQ * sizeof *from), *to = malloc(NQ * sizeof *to);
   qk_world_hit_t *hits = malloc(NQ * sizeof *hits), *nn = malloc(NQ * K * sizeof *nn);
   size_t *counts = malloc(NQ * sizeof *counts);
-  for (int scene = 0; scene < 2; scene++) {
+  /* scenes 0 and 1 sparse (tree_shape), 2 crowded: every query reads cells of dozens of
+   * objects, whose groups the two threads race to fill */
+  for (int scene = 0; scene < 3; scene++) {
     qk_world_t *w = threaded_world(2);
     mirror_t m = {0};
     double g[2] = {0, 0};
-    for (size_t i = 0; i < NOBJ; i++) m_add(w, &m, tree_shape(&r, scene, g));
+    const double span = scene == 2 ? 4 : 4e5;
+    for (size_t i = 0; i < NOBJ; i++) {
+      const double x = qkt_rng_range(&r, 0, 6), y = qkt_rng_range(&r, 0, 6);
+      const double sz = qkt_rng_range(&r, 0.5, 2);
+      m_add(w, &m,
+            scene == 2 ? (qk_shape_t){QK_SHAPE_BOX, x, y, x + sz, y + sz * qkt_rng_unit(&r)}
+                       : tree_shape(&r, scene, g));
+    }
     for (int round = 0; round < 4; round++) {
       for (int j = 0; j < 200; j++) {
         const size_t i = qkt_rng_below(&r, (uint32_t)m.n);
@@ -2184,9 +2294,11 @@ static void test_world_query_tree_threads(void **s) {
       }
       assert_int_equal(qk_world_update(w), QK_OK);
       for (size_t i = 0; i < NQ; i++) {
-        from[i] = (qk_point_t){qkt_rng_range(&r, -4e5, 4e5), qkt_rng_range(&r, -4e5, 4e5)};
-        to[i] = (qk_point_t){from[i].x + qkt_rng_range(&r, -2e5, 2e5),
-                             from[i].y + qkt_rng_range(&r, -2e5, 2e5)};
+        const double c = scene == 2 ? 3 : 0;
+        from[i] =
+            (qk_point_t){c + qkt_rng_range(&r, -span, span), c + qkt_rng_range(&r, -span, span)};
+        to[i] = (qk_point_t){from[i].x + qkt_rng_range(&r, -span / 2, span / 2),
+                             from[i].y + qkt_rng_range(&r, -span / 2, span / 2)};
       }
       if (round % 2) {
         assert_int_equal(qk_world_knn_batch(w, from, NQ, K, nn, counts), QK_OK);
@@ -3687,6 +3799,7 @@ int main(void) {
       cmocka_unit_test(test_world_boxes_points_queries),
       cmocka_unit_test(test_world_query_tree),
       cmocka_unit_test(test_world_query_tree_threads),
+      cmocka_unit_test(test_world_crowded_cells),
       cmocka_unit_test(test_world_stale_handles),
       cmocka_unit_test(test_world_threads_frames),
       cmocka_unit_test(test_world_thread_min_sides),

@@ -440,11 +440,12 @@ qk_status_t qk_world_pairs_parallel(const qk_world_t *w, qk_pairs_which_t which,
 
 /*
  * The queries below are read-only calls: many threads may query a world at once while
- * it is not changed. The first of them after an update that finds 64 cells or more
- * makes the world's query tree (for the order of that update; its memory is kept for
- * the next one and counted by qk_world_bytes()) through the world's allocator, on the
- * querying thread; the others go without it meanwhile, and a query whose tree cannot
- * be allocated goes without it, with the same answers either way.
+ * it is not changed. The first of them after an update that finds 64 cells or more, or
+ * 16 objects or more, makes the world's query tree (for the order of that update; its
+ * memory is kept for the next one and counted by qk_world_bytes()) through the world's
+ * allocator, on the querying thread, and the first query to read a cell of 16 objects or
+ * more sorts them into groups there; the others go without meanwhile, and a query whose
+ * tree or groups cannot be allocated goes without them, with the same answers either way.
  */
 
 /**
