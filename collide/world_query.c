@@ -25,10 +25,11 @@ static inline double lg_cells(uint32_t n) {
  * ldexp(v, -l) bit for bit, an exact scaling rounded as ldexp rounds, without its call:
  * it was a tenth of a query in the clustered world.) */
 static int64_t scaled(double v, int l) {
-  double s = floor(v * qk__pow2(-l));
-  if (s > 0x1p60) s = 0x1p60;
-  if (s < -0x1p60) s = -0x1p60;
-  return (int64_t)s;
+  double s = v * qk__pow2(-l);
+  s = s < 0x1p60 ? s : 0x1p60;
+  s = s > -0x1p60 ? s : -0x1p60;
+  const int64_t i = (int64_t)s; /* (toward zero, exactly; then down: floor without its call) */
+  return i - ((double)i > s);
 }
 
 /* Object i if it is where the order files it (live, not dirty) and its box meets qb. */
@@ -796,9 +797,37 @@ static int q_visit(const qk_world_t *w, uint32_t i, const qk_box_t *b, void *ud)
   return 0;
 }
 
-static int handle_cmp(const void *x, const void *y) {
-  uint32_t a = (uint32_t) * (const qk_handle_t *)x, b = (uint32_t) * (const qk_handle_t *)y;
-  return (a > b) - (a < b);
+/* Sorts handles by slot (the low half; no two the same): quicksort on the median of
+ * three, the smaller part first, by insertion below 16 (qsort's calls of its comparison
+ * were a tenth of a box query in the clustered world). */
+static void sort_by_slot(qk_handle_t *a, size_t n) {
+  while (n > 16) {
+    const uint32_t x = (uint32_t)a[0], y = (uint32_t)a[n / 2], z = (uint32_t)a[n - 1];
+    const uint32_t p = x < y ? (y < z ? y : x < z ? z : x) : (x < z ? x : y < z ? z : y);
+    /* Hoare's partition: p is neither the least nor the greatest slot, so both parts
+     * [0, j] and (j, n) are non-empty */
+    size_t i = 0, j = n - 1;
+    for (;;) {
+      while ((uint32_t)a[i] < p) i++;
+      while ((uint32_t)a[j] > p) j--;
+      if (i >= j) break;
+      const qk_handle_t t = a[i];
+      a[i++] = a[j], a[j--] = t;
+    }
+    if (j + 1 < n - j - 1) {
+      sort_by_slot(a, j + 1);
+      a += j + 1, n -= j + 1;
+    } else {
+      sort_by_slot(a + j + 1, n - j - 1);
+      n = j + 1;
+    }
+  }
+  for (size_t i = 1; i < n; i++) {
+    const qk_handle_t h = a[i];
+    size_t j = i;
+    for (; j > 0 && (uint32_t)a[j - 1] > (uint32_t)h; j--) a[j] = a[j - 1];
+    a[j] = h;
+  }
 }
 
 qk_status_t qk_world_query(const qk_world_t *w, const qk_shape_t *shape, qk_handle_t *out,
@@ -811,16 +840,7 @@ qk_status_t qk_world_query(const qk_world_t *w, const qk_shape_t *shape, qk_hand
   qctx_t c = {&q, out, cap, 0};
   qk_point_t seg[2] = {{q.x, q.y}, {q.a, q.b}};
   qk__world_visit_seg(w, qk__shape_box(&q), q.kind == QK_SHAPE_SEGMENT ? seg : NULL, q_visit, &c);
-  if (c.n <= cap && c.n > 32) {
-    qsort(out, c.n, sizeof *out, handle_cmp);
-  } else if (c.n <= cap) { /* a few: by insertion (qsort's calls were 6% of a box query) */
-    for (size_t i = 1; i < c.n; i++) {
-      const qk_handle_t h = out[i];
-      size_t j = i;
-      for (; j > 0 && (uint32_t)out[j - 1] > (uint32_t)h; j--) out[j] = out[j - 1];
-      out[j] = h;
-    }
-  }
+  if (c.n <= cap) sort_by_slot(out, c.n);
   *n_out = c.n;
   return QK_OK;
 }
