@@ -217,6 +217,13 @@ struct qk_world {
    * (the live ones filed there) in fslot, four to a group, and the groups' float boxes
    * in fg4, the boxes of their runs of four groups in fg16, each (xmin, ymin, -xmax,
    * -ymax). */
+  /* Also made with it: per occupied level, a bitmap of where its cells are, their (cx -
+   * qx0, cy - qy0) shifted right by qb_s (the least shift that needs at most 8 bits a
+   * cell and 64), qb_w bits a row and qb_h rows, at qbits + qb_off (in words). */
+  uint64_t *qbits;
+  size_t cap_qbits; /* (in words) */
+  uint32_t qb_off[QK__NLEV], qb_w[QK__NLEV], qb_h[QK__NLEV];
+  uint8_t qb_s[QK__NLEV];
   struct qk__wfine *fine;
   uint32_t n_fine, cap_fine;
   uint32_t *fhash;

@@ -58,6 +58,103 @@ static int visit_cell(const qk_world_t *w, uint32_t c, qk_box_t qb, qk__wvisit_f
   return 0;
 }
 
+/* ---- where a level's cells are ------------------------------------------------------ */
+
+/* Level li's bitmap (qb_*, after the tree's qx0 and qy0 are set): the shift that keeps it
+ * within 8 bits a cell and 64, its rows' width and its rows; 0 words when it has none. */
+static size_t bits_shape(qk_world_t *w, int li) {
+  const uint32_t f = w->lv_first[li], m = w->lv_n[li];
+  const qk__wcell_t *c = w->cells + f;
+  int64_t x1 = c[0].cx;
+  for (uint32_t k = 1; k < m; k++) x1 = c[k].cx > x1 ? c[k].cx : x1;
+  const uint64_t wd = (uint64_t)(x1 - w->qx0[li]),
+                 ht = (uint64_t)((int64_t)c[m - 1].cy - w->qy0[li]);
+  const uint64_t room = 8 * (uint64_t)m + 64;
+  int sh = 0;
+  while ((wd >> sh) + 1 > room / ((ht >> sh) + 1)) sh++; /* (the product, without overflow) */
+  w->qb_s[li] = (uint8_t)sh, w->qb_w[li] = (uint32_t)(wd >> sh) + 1;
+  w->qb_h[li] = (uint32_t)(ht >> sh) + 1;
+  return ((size_t)w->qb_w[li] * w->qb_h[li] + 63) / 64;
+}
+
+/* The bitmaps of the occupied levels; none (qb_w 0) when out of memory. */
+static void bits_make(qk_world_t *w) {
+  size_t words = 0;
+  for (int i = 0; i < w->n_lv_occ; i++) {
+    const int li = w->lv_occ[i] - QK__LMIN;
+    w->qb_off[li] = (uint32_t)words;
+    words += bits_shape(w, li);
+  }
+  if (words > w->cap_qbits || w->cap_qbits > 2 * words + 64) {
+    qk__free(&w->alloc, w->qbits, w->cap_qbits * sizeof *w->qbits);
+    w->qbits = qk__realloc(&w->alloc, NULL, 0, words * sizeof *w->qbits);
+    w->cap_qbits = w->qbits ? words : 0;
+  }
+  if (!w->qbits) {
+    for (int i = 0; i < w->n_lv_occ; i++) w->qb_w[w->lv_occ[i] - QK__LMIN] = 0;
+    return;
+  }
+  memset(w->qbits, 0, words * sizeof *w->qbits);
+  for (int i = 0; i < w->n_lv_occ; i++) {
+    const int li = w->lv_occ[i] - QK__LMIN, sh = w->qb_s[li];
+    const uint32_t f = w->lv_first[li], m = w->lv_n[li];
+    uint64_t *b = w->qbits + w->qb_off[li];
+    uint64_t set = 0;
+    for (uint32_t k = 0; k < m; k++) {
+      const qk__wcell_t *c = &w->cells[f + k];
+      const uint64_t x = (uint64_t)((int64_t)c->cx - w->qx0[li]) >> sh;
+      const uint64_t y = (uint64_t)((int64_t)c->cy - w->qy0[li]) >> sh;
+      const uint64_t bit = y * w->qb_w[li] + x, word = b[bit / 64];
+      set += !(word >> (bit % 64) & 1);
+      b[bit / 64] = word | UINT64_C(1) << (bit % 64);
+    }
+    /* (a level whose bits are mostly set, as a uniform world's, is searched without: its
+     * rows have cells, and the test would only add to their search) */
+    if (2 * set > (uint64_t)w->qb_w[li] * w->qb_h[li]) w->qb_w[li] = 0;
+  }
+}
+
+/* Level li's bitmap over the columns [x0, x1] of its cells, row by row (level_rows, then
+ * row_has): none when it has no bitmap or the columns are too many to look at. */
+typedef struct lvrows {
+  const uint64_t *b; /* NULL: every row may have cells */
+  uint64_t bw, bh, bx0, bx1;
+  int64_t y0;
+  int sh;
+} lvrows_t;
+
+/* 0 when level li surely has no cell in columns [x0, x1]. */
+static int level_rows(const qk_world_t *w, int li, int64_t x0, int64_t x1, lvrows_t *v) {
+  v->b = NULL;
+  const uint64_t bw = w->qb_w[li];
+  if (!bw) return 1;
+  x0 -= w->qx0[li], x1 -= w->qx0[li];
+  const int sh = w->qb_s[li];
+  if (x1 < 0 || x0 > x1) return 0;
+  const uint64_t bx0 = x0 < 0 ? 0 : (uint64_t)x0 >> sh;
+  uint64_t bx1 = (uint64_t)x1 >> sh;
+  if (bx0 >= bw) return 0;
+  bx1 = bx1 < bw ? bx1 : bw - 1;
+  if (bx1 - bx0 >= 128) return 1; /* (too many to look at) */
+  *v = (lvrows_t){w->qbits + w->qb_off[li], bw, w->qb_h[li], bx0, bx1, w->qy0[li], sh};
+  return 1;
+}
+
+/* Whether row y may have cells in the columns of v. */
+static inline int row_has(const lvrows_t *v, int64_t y) {
+  if (!v->b) return 1;
+  y -= v->y0;
+  if (y < 0 || ((uint64_t)y >> v->sh) >= v->bh) return 0;
+  const uint64_t lo = ((uint64_t)y >> v->sh) * v->bw + v->bx0, hi = lo + (v->bx1 - v->bx0);
+  const uint64_t *b = v->b + lo / 64, mlo = ~UINT64_C(0) << (lo % 64);
+  const uint64_t mhi = ~UINT64_C(0) >> (63 - hi % 64);
+  if (lo / 64 == hi / 64) return (b[0] & mlo & mhi) != 0;
+  if (b[0] & mlo) return 1;
+  for (uint64_t k = 1; k < hi / 64 - lo / 64; k++)
+    if (b[k]) return 1;
+  return (b[hi / 64 - lo / 64] & mhi) != 0;
+}
+
 /* A box's cell range at level l: an object of cell c lies in [c 2^l, (c + 2) 2^l), so it
  * can meet the box only when c <= max / 2^l and c > min / 2^l - 2. */
 typedef struct crange {
@@ -74,16 +171,22 @@ static inline int in_range(const crange_t *r, int64_t x, int64_t y) {
 }
 
 /* The cells of level l in range r (row by row, each row found by binary search), but
- * those in *skip. */
+ * those in *skip. With bits (the query tree is made), rows where the level's bitmap has
+ * none of r's cells are not searched. */
 static int visit_range(const qk_world_t *w, int l, crange_t r, const crange_t *skip, qk_box_t qb,
-                       qk__wvisit_fn fn, void *ud) {
+                       qk__wvisit_fn fn, void *ud, int bits) {
   uint32_t end = w->lv_first[l - QK__LMIN] + w->lv_n[l - QK__LMIN];
-  for (int64_t y = r.y0; y <= r.y1; y++)
+  lvrows_t v;
+  v.b = NULL;
+  if (bits && w->qb_w[l - QK__LMIN] && !level_rows(w, l - QK__LMIN, r.x0, r.x1, &v)) return 0;
+  for (int64_t y = r.y0; y <= r.y1; y++) {
+    if (!row_has(&v, y)) continue;
     for (uint32_t k = qk__cell_lower(w, l, y, r.x0);
          k < end && w->cells[k].cy == y && w->cells[k].cx <= r.x1; k++) {
       if (skip && in_range(skip, w->cells[k].cx, y)) continue;
       if (visit_cell(w, k, qb, fn, ud)) return 1;
     }
+  }
   return 0;
 }
 
@@ -128,12 +231,12 @@ static qk_box_t next_piece(pieces_t *s, size_t k) {
 }
 
 static int visit_along(const qk_world_t *w, int l, const qk_point_t *seg, double pieces,
-                       qk_box_t qb, qk__wvisit_fn fn, void *ud) {
+                       qk_box_t qb, qk__wvisit_fn fn, void *ud, int bits) {
   crange_t prev = {1, 0, 1, 0}; /* empty */
   pieces_t s = pieces_of(seg, (size_t)pieces);
   for (size_t k = 1; k <= s.n; k++) {
     crange_t r = range_of(next_piece(&s, k), l);
-    if (visit_range(w, l, r, &prev, qb, fn, ud)) return 1;
+    if (visit_range(w, l, r, &prev, qb, fn, ud, bits)) return 1;
     prev = r;
   }
   return 0;
@@ -287,6 +390,8 @@ void qk__world_qtree_free(qk_world_t *w) {
   qk__free(&w->alloc, w->qkey, (size_t)w->cap_q * sizeof *w->qkey);
   qk__free(&w->alloc, w->qcell, (size_t)w->cap_q * sizeof *w->qcell);
   w->qkey = NULL, w->qcell = NULL, w->cap_q = 0;
+  qk__free(&w->alloc, w->qbits, w->cap_qbits * sizeof *w->qbits);
+  w->qbits = NULL, w->cap_qbits = 0;
   fine_free(w);
   atomic_store_explicit(&w->qbytes, 0, memory_order_relaxed);
 }
@@ -574,9 +679,11 @@ static int qtree_make(qk_world_t *w) {
   }
   qk__free(a, tk, tk ? (size_t)nc * sizeof *tk : 0);
   qk__free(a, tc, tc ? (size_t)nc * sizeof *tc : 0);
-  if (ok && !fine_make(w)) w->n_fine = 0; /* (without groups when they cannot be had) */
+  if (ok) bits_make(w); /* (without bitmaps or groups when they cannot be had) */
+  if (ok && !fine_make(w)) w->n_fine = 0;
   atomic_store_explicit(&w->qbytes,
-                        (size_t)w->cap_q * (sizeof *w->qkey + sizeof *w->qcell) + fine_bytes(w),
+                        (size_t)w->cap_q * (sizeof *w->qkey + sizeof *w->qcell) +
+                            w->cap_qbits * sizeof *w->qbits + fine_bytes(w),
                         memory_order_relaxed);
   return ok;
 }
@@ -737,7 +844,7 @@ static int visit_dirty(const qk_world_t *w, qk_box_t qb, qk__wvisit_fn fn, void 
  * squares that the best hit so far rules out. Returns 1 when fn stopped the visit. */
 static int visit_levels(const qk_world_t *w, qk_box_t qb, const qk_point_t *seg,
                         const rctx_t *first, qk__wvisit_fn fn, void *ud) {
-  const int tree = tree_ready(w);
+  const int made = qtree_ready(w), tree = made && w->n_cells >= QK__TREE_MIN;
   int levels[QK__NLEV];
   int n = qk__world_levels(w, levels);
   for (int li = 0; li < n; li++) {
@@ -746,7 +853,7 @@ static int visit_levels(const qk_world_t *w, qk_box_t qb, const qk_point_t *seg,
     double ncell = w->lv_n[l - QK__LMIN], lg = lg_cells(w->lv_n[l - QK__LMIN]);
     double rows = (double)r.y1 - (double)r.y0 + 1;
     if (rows * lg <= 2 * ncell + 8 && (!tree || rows <= 4)) { /* a binary search a row */
-      if (visit_range(w, l, r, NULL, qb, fn, ud)) return 1;
+      if (visit_range(w, l, r, NULL, qb, fn, ud, made)) return 1;
       continue;
     }
     if (tree) {
@@ -761,7 +868,7 @@ static int visit_levels(const qk_world_t *w, qk_box_t qb, const qk_point_t *seg,
       double pieces = ceil(major / (4 * s));
       double prow = (qb.ymax - qb.ymin) / pieces / s + 3;
       if (pieces >= 1 && pieces < 1e7 && pieces * prow * lg <= 2 * ncell + 8) {
-        if (visit_along(w, l, seg, pieces, qb, fn, ud)) return 1;
+        if (visit_along(w, l, seg, pieces, qb, fn, ud, made)) return 1;
         continue;
       }
     }
@@ -960,7 +1067,7 @@ static int visit_first(const qk_world_t *w, qk_box_t qb, const qk_point_t *seg, 
       if (!along[li]) continue;
       const crange_t r = range_of(pb, levels[li]);
       if (memcmp(&r, &prev[li], sizeof r))
-        visit_range(w, levels[li], r, &prev[li], qb, r_visit_first, c);
+        visit_range(w, levels[li], r, &prev[li], qb, r_visit_first, c, tree);
       prev[li] = r;
     }
     if (c->best.h != QK_HANDLE_NONE && c->best.t < (double)k / (double)n - 0x1p-30) break;
