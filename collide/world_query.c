@@ -891,6 +891,7 @@ void qk__world_visit(const qk_world_t *w, qk_box_t qb, qk__wvisit_fn fn, void *u
 
 typedef struct qctx {
   const qk_shape_t *q;
+  int q_box_like; /* the query is a box or a point */
   qk_handle_t *out;
   size_t cap, n;
 } qctx_t;
@@ -898,8 +899,12 @@ typedef struct qctx {
 static int q_visit(const qk_world_t *w, uint32_t i, const qk_box_t *b, void *ud) {
   (void)b;
   qctx_t *c = ud;
-  qk_shape_t sh = qk__wshape(&w->obj[i]);
-  if (!qk__shapes_overlap(c->q, &sh)) return 0;
+  /* A box or a point is its box, exactly (qk__shape_box): between two of them the box
+   * test that brought the object here decided the overlap. */
+  if (!c->q_box_like || !box_like(&w->obj[i])) {
+    qk_shape_t sh = qk__wshape(&w->obj[i]);
+    if (!qk__shapes_overlap(c->q, &sh)) return 0;
+  }
   QK__SINK_PUT(c->out, c->cap, c->n, qk__handle(w, i));
   return 0;
 }
@@ -944,7 +949,7 @@ qk_status_t qk_world_query(const qk_world_t *w, const qk_shape_t *shape, qk_hand
   qk_shape_t q;
   qk_status_t st = qk__shape_normalize(shape, &q);
   if (st != QK_OK) return st;
-  qctx_t c = {&q, out, cap, 0};
+  qctx_t c = {&q, q.kind == QK_SHAPE_BOX || q.kind == QK_SHAPE_POINT, out, cap, 0};
   qk_point_t seg[2] = {{q.x, q.y}, {q.a, q.b}};
   qk__world_visit_seg(w, qk__shape_box(&q), q.kind == QK_SHAPE_SEGMENT ? seg : NULL, q_visit, &c);
   if (c.n <= cap) sort_by_slot(out, c.n);
