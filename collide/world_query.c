@@ -58,6 +58,21 @@ static int visit_cell(const qk_world_t *w, uint32_t c, qk_box_t qb, qk__wvisit_f
   return 0;
 }
 
+/* A box's cell range at level l: an object of cell c lies in [c 2^l, (c + 2) 2^l), so it
+ * can meet the box only when c <= max / 2^l and c > min / 2^l - 2. */
+typedef struct crange {
+  int64_t x0, x1, y0, y1;
+} crange_t;
+
+static crange_t range_of(qk_box_t b, int l) {
+  return (crange_t){scaled(b.xmin, l) - 1, scaled(b.xmax, l), scaled(b.ymin, l) - 1,
+                    scaled(b.ymax, l)};
+}
+
+static inline int in_range(const crange_t *r, int64_t x, int64_t y) {
+  return x >= r->x0 && x <= r->x1 && y >= r->y0 && y <= r->y1;
+}
+
 /* ---- where a level's cells are ------------------------------------------------------ */
 
 /* Level li's bitmap (qb_*, after the tree's qx0 and qy0 are set): the shift that keeps it
@@ -140,12 +155,9 @@ static int level_rows(const qk_world_t *w, int li, int64_t x0, int64_t x1, lvrow
   return 1;
 }
 
-/* Whether row y may have cells in the columns of v. */
-static inline int row_has(const lvrows_t *v, int64_t y) {
-  if (!v->b) return 1;
-  y -= v->y0;
-  if (y < 0 || ((uint64_t)y >> v->sh) >= v->bh) return 0;
-  const uint64_t lo = ((uint64_t)y >> v->sh) * v->bw + v->bx0, hi = lo + (v->bx1 - v->bx0);
+/* Whether the bitmap's row by (below bh) has bits in the columns of v. */
+static inline int bitrow_has(const lvrows_t *v, uint64_t by) {
+  const uint64_t lo = by * v->bw + v->bx0, hi = lo + (v->bx1 - v->bx0);
   const uint64_t *b = v->b + lo / 64, mlo = ~UINT64_C(0) << (lo % 64);
   const uint64_t mhi = ~UINT64_C(0) >> (63 - hi % 64);
   if (lo / 64 == hi / 64) return (b[0] & mlo & mhi) != 0;
@@ -155,19 +167,30 @@ static inline int row_has(const lvrows_t *v, int64_t y) {
   return (b[hi / 64 - lo / 64] & mhi) != 0;
 }
 
-/* A box's cell range at level l: an object of cell c lies in [c 2^l, (c + 2) 2^l), so it
- * can meet the box only when c <= max / 2^l and c > min / 2^l - 2. */
-typedef struct crange {
-  int64_t x0, x1, y0, y1;
-} crange_t;
-
-static crange_t range_of(qk_box_t b, int l) {
-  return (crange_t){scaled(b.xmin, l) - 1, scaled(b.xmax, l), scaled(b.ymin, l) - 1,
-                    scaled(b.ymax, l)};
+/* Whether row y may have cells in the columns of v. */
+static inline int row_has(const lvrows_t *v, int64_t y) {
+  if (!v->b) return 1;
+  y -= v->y0;
+  if (y < 0 || ((uint64_t)y >> v->sh) >= v->bh) return 0;
+  return bitrow_has(v, (uint64_t)y >> v->sh);
 }
 
-static inline int in_range(const crange_t *r, int64_t x, int64_t y) {
-  return x >= r->x0 && x <= r->x1 && y >= r->y0 && y <= r->y1;
+/* Whether level li may have cells in range r: 0 only when its bitmap shows none. */
+static int level_has(const qk_world_t *w, int li, const crange_t *r) {
+  lvrows_t v;
+  if (!w->qb_w[li]) return 1;
+  if (!level_rows(w, li, r->x0, r->x1, &v)) return 0;
+  if (!v.b) return 1;
+  const int64_t y0 = r->y0 - v.y0, y1 = r->y1 - v.y0;
+  if (y1 < 0 || y0 > y1) return 0;
+  const uint64_t by0 = y0 < 0 ? 0 : (uint64_t)y0 >> v.sh;
+  uint64_t by1 = (uint64_t)y1 >> v.sh;
+  by1 = by1 < v.bh ? by1 : v.bh - 1;
+  if (by0 > by1) return 0;
+  if (by1 - by0 >= 64) return 1; /* (too many to look at) */
+  for (uint64_t by = by0; by <= by1; by++)
+    if (bitrow_has(&v, by)) return 1;
+  return 0;
 }
 
 /* The cells of level l in range r (row by row, each row found by binary search), but
@@ -856,6 +879,7 @@ static int visit_levels(const qk_world_t *w, qk_box_t qb, const qk_point_t *seg,
       if (visit_range(w, l, r, NULL, qb, fn, ud, made)) return 1;
       continue;
     }
+    if (made && !level_has(w, l - QK__LMIN, &r)) continue; /* (none there) */
     if (tree) {
       const tquery_t t = {l, r, seg, first, qb, fn, ud};
       if (tree_visit(w, &t)) return 1;
@@ -1081,6 +1105,7 @@ static int visit_first(const qk_world_t *w, qk_box_t qb, const qk_point_t *seg, 
   for (int li = 0; tree && li < nl; li++) {
     if (along[li]) continue;
     const tquery_t t = {levels[li], range_of(qb, levels[li]), seg, c, qb, r_visit_first, c};
+    if (!level_has(w, levels[li] - QK__LMIN, &t.r)) continue; /* (none there) */
     tree_visit(w, &t);
   }
   return 1;
