@@ -224,6 +224,13 @@ struct qk_world {
   size_t cap_qbits; /* (in words) */
   uint32_t qb_off[QK__NLEV], qb_w[QK__NLEV], qb_h[QK__NLEV];
   uint8_t qb_s[QK__NLEV];
+  /* And per level of 16 cells or more, where each square of its tree's top qt_d depths
+   * (qt_d in [2, 5], else 0) begins: qtab[qt_off + j] is the first of the level's keys at
+   * or above j << qt_sh, for j in [0, 4^qt_d]. */
+  uint32_t *qtab;
+  size_t cap_qtab;
+  uint32_t qt_off[QK__NLEV];
+  uint8_t qt_d[QK__NLEV], qt_sh[QK__NLEV];
   struct qk__wfine *fine;
   uint32_t n_fine, cap_fine;
   uint32_t *fhash;

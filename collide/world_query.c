@@ -413,6 +413,8 @@ void qk__world_qtree_free(qk_world_t *w) {
   qk__free(&w->alloc, w->qkey, (size_t)w->cap_q * sizeof *w->qkey);
   qk__free(&w->alloc, w->qcell, (size_t)w->cap_q * sizeof *w->qcell);
   w->qkey = NULL, w->qcell = NULL, w->cap_q = 0;
+  qk__free(&w->alloc, w->qtab, w->cap_qtab * sizeof *w->qtab);
+  w->qtab = NULL, w->cap_qtab = 0;
   qk__free(&w->alloc, w->qbits, w->cap_qbits * sizeof *w->qbits);
   w->qbits = NULL, w->cap_qbits = 0;
   fine_free(w);
@@ -664,6 +666,36 @@ static void radix_sort(uint64_t *key, uint32_t *cell, uint64_t *tk, uint32_t *tc
   }
 }
 
+/* The tables of the levels' top depths (qt_d and qt_sh set, keys sorted); none (qt_d 0)
+ * when out of memory. */
+static void tabs_make(qk_world_t *w) {
+  size_t n = 0;
+  for (int i = 0; i < w->n_lv_occ; i++) {
+    const int li = w->lv_occ[i] - QK__LMIN;
+    w->qt_off[li] = (uint32_t)n;
+    if (w->qt_d[li]) n += ((size_t)1 << 2 * w->qt_d[li]) + 1;
+  }
+  if (n > w->cap_qtab || w->cap_qtab > 2 * n + 64) {
+    qk__free(&w->alloc, w->qtab, w->cap_qtab * sizeof *w->qtab);
+    w->qtab = n ? qk__realloc(&w->alloc, NULL, 0, n * sizeof *w->qtab) : NULL;
+    w->cap_qtab = w->qtab ? n : 0;
+  }
+  for (int i = 0; i < w->n_lv_occ; i++) {
+    const int li = w->lv_occ[i] - QK__LMIN, sh = w->qt_sh[li];
+    if (!w->qt_d[li]) continue;
+    if (!w->qtab) {
+      w->qt_d[li] = 0;
+      continue;
+    }
+    const uint64_t *key = w->qkey + w->lv_first[li];
+    const uint32_t m = w->lv_n[li], last = (uint32_t)1 << 2 * w->qt_d[li];
+    uint32_t *t = w->qtab + w->qt_off[li], j = 0;
+    for (uint32_t k = 0; k < m; k++)
+      for (const uint64_t b = key[k] >> sh; j <= b;) t[j++] = k;
+    while (j <= last) t[j++] = m;
+  }
+}
+
 /* Makes the tree for the order of the last update; 0 when out of memory. */
 static int qtree_make(qk_world_t *w) {
   const qk_allocator_t *a = &w->alloc;
@@ -699,14 +731,21 @@ static int qtree_make(qk_world_t *w) {
     int bytes = 0;
     while (bytes < 8 && all >> (8 * bytes)) bytes++;
     radix_sort(w->qkey + f, w->qcell + f, tk, tc, m, bytes);
+    /* the table of its top depths: at most a entry a cell */
+    const int kb = all ? (64 - __builtin_clzll(all) + 1) & ~1 : 0;
+    int d = 0;
+    while (d < 5 && 2 * (d + 1) <= kb && (UINT64_C(4) << 2 * d) <= m) d++;
+    w->qt_d[l] = (uint8_t)(d >= 2 ? d : 0), w->qt_sh[l] = (uint8_t)(kb - 2 * d);
   }
+  if (ok) tabs_make(w);
   qk__free(a, tk, tk ? (size_t)nc * sizeof *tk : 0);
   qk__free(a, tc, tc ? (size_t)nc * sizeof *tc : 0);
   if (ok) bits_make(w); /* (without bitmaps or groups when they cannot be had) */
   if (ok && !fine_make(w)) w->n_fine = 0;
   atomic_store_explicit(&w->qbytes,
                         (size_t)w->cap_q * (sizeof *w->qkey + sizeof *w->qcell) +
-                            w->cap_qbits * sizeof *w->qbits + fine_bytes(w),
+                            (w->cap_qbits * sizeof *w->qbits + w->cap_qtab * sizeof *w->qtab) +
+                            fine_bytes(w),
                         memory_order_relaxed);
   return ok;
 }
@@ -797,10 +836,16 @@ static inline tsquare_t tree_square(const qk_world_t *w, int li, const uint64_t 
                      INT64_C(1) << s, org};
 }
 
-static inline void tree_quarters(const uint64_t *key, const tsquare_t *sq, uint32_t lo, uint32_t hi,
-                                 uint32_t run[5]) {
+static inline void tree_quarters(const qk_world_t *w, int li, const uint64_t *key,
+                                 const tsquare_t *sq, uint32_t lo, uint32_t hi, uint32_t run[5]) {
   const uint64_t q = (uint64_t)(sq->side / 2) * (uint64_t)(sq->side / 2); /* a quarter's keys */
   run[0] = lo, run[4] = hi;
+  if (w->qt_d[li] && q >= (UINT64_C(1) << w->qt_sh[li])) { /* (a square of the top depths) */
+    const uint32_t *t = w->qtab + w->qt_off[li];
+    const int sh = w->qt_sh[li];
+    for (int k = 1; k < 4; k++) run[k] = t[(sq->org + (uint64_t)k * q) >> sh];
+    return;
+  }
   for (int k = 1; k < 4; k++) run[k] = key_lower(key, run[k - 1], hi, sq->org + (uint64_t)k * q);
 }
 
@@ -838,7 +883,7 @@ static int tree_visit(const qk_world_t *w, const tquery_t *t) {
     const tsquare_t sq = tree_square(w, li, key, lo, hi);
     if (!tree_meets(t, sq.x, sq.y, sq.side)) continue;
     uint32_t run[5];
-    tree_quarters(key, &sq, lo, hi, run);
+    tree_quarters(w, li, key, &sq, lo, hi, run);
     /* pushed so that the quarter `near` comes off first */
     for (int j = 3; j >= 0; j--) {
       const int k = near ^ j;
@@ -1292,7 +1337,7 @@ static int knn_tree(const qk_world_t *w, kctx_t *c) {
     const tsquare_t sq = tree_square(w, li, key, it.lo, it.hi);
     const int64_t half = sq.side / 2;
     uint32_t run[5];
-    tree_quarters(key, &sq, it.lo, it.hi, run);
+    tree_quarters(w, li, key, &sq, it.lo, it.hi, run);
     for (int j = 0; j < 4; j++) {
       if (run[j] == run[j + 1]) continue;
       const qk_box_t b = loose_box(sq.x + (j & 1) * half, sq.y + (j >> 1) * half, half, it.l);
