@@ -1311,6 +1311,15 @@ static inline int knn_beyond(const kctx_t *c, double lb) {
   return lb * (1 - 0x1p-18) > kt * kt;
 }
 
+/* The box beyond which objects are farther than the k-th so far by the tree's margin (see
+ * knn_tree; its sides also above the rounding of p's coordinates), or the whole plane
+ * while fewer than k are found: a crowded cell's groups outside it are not read. */
+static qk_box_t knn_box(const kctx_t *c) {
+  if (c->n < c->k) return (qk_box_t){-INFINITY, -INFINITY, INFINITY, INFINITY};
+  const double h = c->out[c->k - 1].t * (1 + 0x1p-17) + (fabs(c->p.x) + fabs(c->p.y)) * 0x1p-50;
+  return (qk_box_t){c->p.x - h, c->p.y - h, c->p.x + h, c->p.y + h};
+}
+
 static int knn_tree(const qk_world_t *w, kctx_t *c) {
   kitem_t heap[QK__KHEAP];
   int nh = 0;
@@ -1330,7 +1339,7 @@ static int knn_tree(const qk_world_t *w, kctx_t *c) {
         const uint32_t cell = w->qcell[base + j];
         const qk__wcell_t *cl = &w->cells[cell];
         const qk_box_t b = loose_box(cl->cx, cl->cy, 1, it.l);
-        if (!knn_beyond(c, box_lb2(c->p, &b))) visit_cell(w, cell, all, k_visit, c);
+        if (!knn_beyond(c, box_lb2(c->p, &b))) visit_cell(w, cell, knn_box(c), k_visit, c);
       }
       continue;
     }
