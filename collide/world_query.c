@@ -43,15 +43,16 @@ static inline int visit_obj(const qk_world_t *w, uint32_t i, const qk_box_t *qb,
 
 static const qk__wfine_t *fine_of(const qk_world_t *w, uint32_t c);
 static int visit_groups(const qk_world_t *w, const qk__wfine_t *f, const qk_box_t *qb,
-                        qk__wvisit_fn fn, void *ud);
+                        const qk_point_t *seg, qk__wvisit_fn fn, void *ud);
 
 /* The objects of cell c that are where the order files them (live, not dirty) and whose
  * boxes meet qb: in a crowded cell, those of its groups whose boxes meet qb. */
-static int visit_cell(const qk_world_t *w, uint32_t c, qk_box_t qb, qk__wvisit_fn fn, void *ud) {
+static int visit_cell(const qk_world_t *w, uint32_t c, qk_box_t qb, const qk_point_t *seg,
+                      qk__wvisit_fn fn, void *ud) {
   const uint32_t s = w->cells[c].start, e = w->cells[c + 1].start;
   if (e - s >= QK__FINE_MIN) {
     const qk__wfine_t *f = fine_of(w, c);
-    if (f) return visit_groups(w, f, &qb, fn, ud);
+    if (f) return visit_groups(w, f, &qb, seg, fn, ud);
   }
   for (uint32_t k = s; k < e; k++)
     if (visit_obj(w, w->order[k], &qb, fn, ud)) return 1;
@@ -197,7 +198,7 @@ static int level_has(const qk_world_t *w, int li, const crange_t *r) {
  * those in *skip. With bits (the query tree is made), rows where the level's bitmap has
  * none of r's cells are not searched. */
 static int visit_range(const qk_world_t *w, int l, crange_t r, const crange_t *skip, qk_box_t qb,
-                       qk__wvisit_fn fn, void *ud, int bits) {
+                       const qk_point_t *seg, qk__wvisit_fn fn, void *ud, int bits) {
   uint32_t end = w->lv_first[l - QK__LMIN] + w->lv_n[l - QK__LMIN];
   lvrows_t v;
   v.b = NULL;
@@ -207,18 +208,18 @@ static int visit_range(const qk_world_t *w, int l, crange_t r, const crange_t *s
     for (uint32_t k = qk__cell_lower(w, l, y, r.x0);
          k < end && w->cells[k].cy == y && w->cells[k].cx <= r.x1; k++) {
       if (skip && in_range(skip, w->cells[k].cx, y)) continue;
-      if (visit_cell(w, k, qb, fn, ud)) return 1;
+      if (visit_cell(w, k, qb, seg, fn, ud)) return 1;
     }
   }
   return 0;
 }
 
 /* Every cell of level l in range r, by scanning the level's cells. */
-static int scan_level(const qk_world_t *w, int l, crange_t r, qk_box_t qb, qk__wvisit_fn fn,
-                      void *ud) {
+static int scan_level(const qk_world_t *w, int l, crange_t r, qk_box_t qb, const qk_point_t *seg,
+                      qk__wvisit_fn fn, void *ud) {
   uint32_t k = w->lv_first[l - QK__LMIN], end = k + w->lv_n[l - QK__LMIN];
   for (; k < end; k++)
-    if (in_range(&r, w->cells[k].cx, w->cells[k].cy) && visit_cell(w, k, qb, fn, ud)) return 1;
+    if (in_range(&r, w->cells[k].cx, w->cells[k].cy) && visit_cell(w, k, qb, seg, fn, ud)) return 1;
   return 0;
 }
 
@@ -259,7 +260,7 @@ static int visit_along(const qk_world_t *w, int l, const qk_point_t *seg, double
   pieces_t s = pieces_of(seg, (size_t)pieces);
   for (size_t k = 1; k <= s.n; k++) {
     crange_t r = range_of(next_piece(&s, k), l);
-    if (visit_range(w, l, r, &prev, qb, fn, ud, bits)) return 1;
+    if (visit_range(w, l, r, &prev, qb, seg, fn, ud, bits)) return 1;
     prev = r;
   }
   return 0;
@@ -446,17 +447,29 @@ static inline int group_meets(const float *g, const float *q) {
   return g[0] <= q[0] && g[1] <= q[1] && g[2] <= q[2] && g[3] <= q[3];
 }
 
+static inline int seg_may_meet(const qk_point_t *seg, const qk_box_t *b);
+
+/* Whether the segment may meet group box g: its box widened by more than the rounding to
+ * floats (2^-24 of a value, 2^-149 near zero), then seg_may_meet. */
+static inline int group_seg_may_meet(const float *g, const qk_point_t *seg) {
+  const double x0 = g[0], y0 = g[1], x1 = -(double)g[2], y1 = -(double)g[3];
+  const qk_box_t b = {x0 - (fabs(x0) * 0x1p-23 + 0x1p-140), y0 - (fabs(y0) * 0x1p-23 + 0x1p-140),
+                      x1 + (fabs(x1) * 0x1p-23 + 0x1p-140), y1 + (fabs(y1) * 0x1p-23 + 0x1p-140)};
+  return seg_may_meet(seg, &b);
+}
+
 static int visit_groups(const qk_world_t *w, const qk__wfine_t *f, const qk_box_t *qb,
-                        qk__wvisit_fn fn, void *ud) {
+                        const qk_point_t *seg, qk__wvisit_fn fn, void *ud) {
   const float q[4] = {(float)qb->xmax, (float)qb->ymax, (float)-qb->xmin, (float)-qb->ymin};
   const uint32_t n4 = (f->n + 3) / 4;
   const float *g4 = w->fg4 + 4 * (size_t)f->g4, *g16 = w->fg16 + 4 * (size_t)f->g16;
   const uint32_t *slot = w->fslot + 4 * (size_t)f->g4;
   for (uint32_t j16 = 0; 4 * j16 < n4; j16++) {
-    if (!group_meets(g16 + 4 * j16, q)) continue;
+    if (!group_meets(g16 + 4 * j16, q) || (seg && !group_seg_may_meet(g16 + 4 * j16, seg)))
+      continue;
     const uint32_t e4 = 4 * j16 + 4 < n4 ? 4 * j16 + 4 : n4;
     for (uint32_t j = 4 * j16; j < e4; j++) {
-      if (!group_meets(g4 + 4 * j, q)) continue;
+      if (!group_meets(g4 + 4 * j, q) || (seg && !group_seg_may_meet(g4 + 4 * j, seg))) continue;
       for (uint32_t k = 4 * j; k < 4 * j + 4 && slot[k] != QK_NONE; k++)
         if (visit_obj(w, slot[k], qb, fn, ud)) return 1;
     }
@@ -795,7 +808,7 @@ static qk_box_t loose_box(int64_t x, int64_t y, int64_t s, int l) {
  * linear in the corner) is below zero, or the corner of the least above it. Each is
  * computed within 4 ulps of its two terms' magnitudes, and only a side beyond 2^-48 of
  * them counts. */
-static int seg_may_meet(const qk_point_t *seg, const qk_box_t *b) {
+static inline int seg_may_meet(const qk_point_t *seg, const qk_box_t *b) {
   const qk_point_t p = seg[0], q = seg[1];
   if (qk__max(p.x, q.x) < b->xmin || qk__min(p.x, q.x) > b->xmax || qk__max(p.y, q.y) < b->ymin ||
       qk__min(p.y, q.y) > b->ymax)
@@ -876,7 +889,8 @@ static int tree_visit(const qk_world_t *w, const tquery_t *t) {
     if (hi - lo <= QK__TREE_LEAF) {
       for (uint32_t k = lo; k < hi; k++) {
         const qk__wcell_t *c = &w->cells[cell[k]];
-        if (tree_meets(t, c->cx, c->cy, 1) && visit_cell(w, cell[k], t->qb, t->fn, t->ud)) return 1;
+        if (tree_meets(t, c->cx, c->cy, 1) && visit_cell(w, cell[k], t->qb, t->seg, t->fn, t->ud))
+          return 1;
       }
       continue;
     }
@@ -921,7 +935,7 @@ static int visit_levels(const qk_world_t *w, qk_box_t qb, const qk_point_t *seg,
     double ncell = w->lv_n[l - QK__LMIN], lg = lg_cells(w->lv_n[l - QK__LMIN]);
     double rows = (double)r.y1 - (double)r.y0 + 1;
     if (rows * lg <= 2 * ncell + 8 && (!tree || rows <= 4)) { /* a binary search a row */
-      if (visit_range(w, l, r, NULL, qb, fn, ud, made)) return 1;
+      if (visit_range(w, l, r, NULL, qb, seg, fn, ud, made)) return 1;
       continue;
     }
     if (made && !level_has(w, l - QK__LMIN, &r)) continue; /* (none there) */
@@ -941,7 +955,7 @@ static int visit_levels(const qk_world_t *w, qk_box_t qb, const qk_point_t *seg,
         continue;
       }
     }
-    if (scan_level(w, l, r, qb, fn, ud)) return 1;
+    if (scan_level(w, l, r, qb, seg, fn, ud)) return 1;
   }
   return 0;
 }
@@ -1129,7 +1143,7 @@ static int visit_first(const qk_world_t *w, qk_box_t qb, const qk_point_t *seg, 
     along[li] = (double)n * prow * lg <= 2 * ncell + 8;
     walk |= along[li];
     prev[li] = (crange_t){1, 0, 1, 0}; /* empty */
-    if (!along[li] && !tree) scan_level(w, l, range_of(qb, l), qb, r_visit_first, c);
+    if (!along[li] && !tree) scan_level(w, l, range_of(qb, l), qb, seg, r_visit_first, c);
   }
   pieces_t s = pieces_of(seg, n);
   for (size_t k = 1; walk && k <= n; k++) {
@@ -1141,7 +1155,7 @@ static int visit_first(const qk_world_t *w, qk_box_t qb, const qk_point_t *seg, 
       if (!along[li]) continue;
       const crange_t r = range_of(pb, levels[li]);
       if (memcmp(&r, &prev[li], sizeof r))
-        visit_range(w, levels[li], r, &prev[li], qb, r_visit_first, c, tree);
+        visit_range(w, levels[li], r, &prev[li], qb, seg, r_visit_first, c, tree);
       prev[li] = r;
     }
     if (c->best.h != QK_HANDLE_NONE && c->best.t < (double)k / (double)n - 0x1p-30) break;
@@ -1339,7 +1353,7 @@ static int knn_tree(const qk_world_t *w, kctx_t *c) {
         const uint32_t cell = w->qcell[base + j];
         const qk__wcell_t *cl = &w->cells[cell];
         const qk_box_t b = loose_box(cl->cx, cl->cy, 1, it.l);
-        if (!knn_beyond(c, box_lb2(c->p, &b))) visit_cell(w, cell, knn_box(c), k_visit, c);
+        if (!knn_beyond(c, box_lb2(c->p, &b))) visit_cell(w, cell, knn_box(c), NULL, k_visit, c);
       }
       continue;
     }
