@@ -206,17 +206,12 @@ struct qk_world {
    * 1 being made (by one query; the others go without), 2 made. Its arrays are read only
    * after reading 2 (acquire), written only after taking 0 -> 1. */
   atomic_int qstate;
-  atomic_size_t qbytes; /* what its arrays hold, in bytes (the groups' below too) */
+  atomic_size_t qbytes; /* what its arrays hold, in bytes (the bitmaps', tables' and
+                           groups' below too) */
   uint64_t *qkey;
   uint32_t *qcell;
   uint32_t cap_q;
   int32_t qx0[QK__NLEV], qy0[QK__NLEV];
-  /* Made with it: the groups of the crowded cells (qk__wfine_t; the cells of
-   * QK__FINE_MIN objects or more). The cells' entries in cell order, found by a hash of
-   * (level, cx, cy) in fhash (fmask + 1 entries, UINT32_MAX empty); their objects' slots
-   * (the live ones filed there) in fslot, four to a group, and the groups' float boxes
-   * in fg4, the boxes of their runs of four groups in fg16, each (xmin, ymin, -xmax,
-   * -ymax). */
   /* Also made with it: per occupied level, a bitmap of where its cells are, their (cx -
    * qx0, cy - qy0) shifted right by qb_s (the least shift that needs at most 8 bits a
    * cell and 64), qb_w bits a row and qb_h rows, at qbits + qb_off (in words). */
@@ -231,13 +226,20 @@ struct qk_world {
   size_t cap_qtab;
   uint32_t qt_off[QK__NLEV];
   uint8_t qt_d[QK__NLEV], qt_sh[QK__NLEV];
+  /* And made with it: the groups of the crowded cells (qk__wfine_t; the cells of
+   * QK__FINE_MIN objects or more). The cells' entries in cell order, found by a hash of
+   * (level, cx, cy) in fhash (fmask + 1 entries, UINT32_MAX empty); their objects' slots
+   * (the live ones filed there) in fslot, four to a group, and the groups' float boxes
+   * in fg4, the boxes of their runs of four groups in fg16, each (xmin, ymin, -xmax,
+   * -ymax). */
   struct qk__wfine *fine;
   uint32_t n_fine, cap_fine;
   uint32_t *fhash;
   uint32_t fmask;
   uint32_t *fslot;
   float *fg4, *fg16;
-  size_t cap_fslot; /* fslot's room; fg4's is a quarter, fg16's a sixteenth (rounded up) */
+  size_t cap_fslot; /* fslot's room, and fg4's in floats (four a group of four slots); fg16
+                       holds four floats a run of four groups (cap_fslot / 16 + cap_fine) */
 };
 
 /* A crowded cell's groups: its objects (in an order of their own, near ones together) at
@@ -259,8 +261,9 @@ typedef struct qk__wfine {
 #endif
 
 /* A filed object o (not dirty) got a new shape in its cell: its cell's groups, if the query
- * tree has them, are stale. (Called by every move that leaves an object filed; a load and a
- * branch unless a query has made the tree since the last update.) */
+ * tree has them, are stale. (Called by every move that leaves an object filed: a relaxed
+ * load and a branch while no query has made the tree since the last update, else a
+ * lookup in the groups' hash.) */
 void qk__world_fine_stale(qk_world_t *w, const qk__wobj_t *o);
 static inline void qk__world_fine_touch(qk_world_t *w, const qk__wobj_t *o) {
   if (atomic_load_explicit(&w->qstate, memory_order_relaxed) == 2 && w->n_fine)

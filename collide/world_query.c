@@ -744,7 +744,7 @@ static int qtree_make(qk_world_t *w) {
     int bytes = 0;
     while (bytes < 8 && all >> (8 * bytes)) bytes++;
     radix_sort(w->qkey + f, w->qcell + f, tk, tc, m, bytes);
-    /* the table of its top depths: at most a entry a cell */
+    /* the table of its top depths: at most an entry a cell */
     const int kb = all ? (64 - __builtin_clzll(all) + 1) & ~1 : 0;
     int d = 0;
     while (d < 5 && 2 * (d + 1) <= kb && (UINT64_C(4) << 2 * d) <= m) d++;
