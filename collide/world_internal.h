@@ -234,6 +234,7 @@ struct qk_world {
    * -ymax). */
   struct qk__wfine *fine;
   uint32_t n_fine, cap_fine;
+  size_t fine_moves; /* moves that have looked up their cells since the groups were set out */
   uint32_t *fhash;
   uint32_t fmask;
   uint32_t *fslot;
@@ -263,7 +264,9 @@ typedef struct qk__wfine {
 /* A filed object o (not dirty) got a new shape in its cell: its cell's groups, if the query
  * tree has them, are stale. (Called by every move that leaves an object filed: a relaxed
  * load and a branch while no query has made the tree since the last update, else a
- * lookup in the groups' hash.) */
+ * lookup in the groups' hash, for the first n / 16 + 64 such moves; after them every
+ * group is dropped until the next update, as a frame that moves its objects after its
+ * queries would otherwise pay the lookup for every move.) */
 void qk__world_fine_stale(qk_world_t *w, const qk__wobj_t *o);
 static inline void qk__world_fine_touch(qk_world_t *w, const qk__wobj_t *o) {
   if (atomic_load_explicit(&w->qstate, memory_order_relaxed) == 2 && w->n_fine)

@@ -429,6 +429,10 @@ static inline uint32_t fine_hash(int level, int32_t cx, int32_t cy) {
 }
 
 void qk__world_fine_stale(qk_world_t *w, const qk__wobj_t *o) {
+  if (++w->fine_moves > w->n_live / 16 + 64) { /* (many moves: every group dropped) */
+    w->n_fine = 0;
+    return;
+  }
   for (uint32_t h = fine_hash(o->level, o->u.cx, o->cy) & w->fmask;; h = (h + 1) & w->fmask) {
     const uint32_t i = w->fhash[h];
     if (i == UINT32_MAX) return;
@@ -617,7 +621,7 @@ static int fine_make(qk_world_t *w) {
     const uint32_t m = w->cells[c + 1].start - w->cells[c].start;
     if (m >= QK__FINE_MIN) nf++, ns += (m + 3) & ~(size_t)3;
   }
-  w->n_fine = 0;
+  w->n_fine = 0, w->fine_moves = 0;
   if (!nf) return 1;
   /* (made anew when outgrown, or when the crowded cells have shrunk to under half) */
   if (nf > w->cap_fine || ns > w->cap_fslot || w->cap_fine > 2 * (size_t)nf + 64 ||

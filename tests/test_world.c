@@ -2185,8 +2185,8 @@ static QKT_SERIAL void check_overlaps(qk_world_t *w, const mirror_t *m, qk_shape
  * it. Box, disc, point and segment queries, first and all hits, and the k nearest against brute
  * force right after updates (the groups made: the world's bytes grow by more than a slot a crowded
  * object) and after moves that keep most objects in their cells (each group's box left behind: the
- * cell is read object by object until the next update), adds, removes, and moves out of the
- * cluster. */
+ * cell is read object by object until the next update; or, after many moves, every cell), adds,
+ * removes, and moves out of the cluster. */
 static void test_world_crowded_cells(void **s) {
   (void)s;
   QKT_ONE_THREAD_TEST();
@@ -2215,9 +2215,20 @@ static void test_world_crowded_cells(void **s) {
           m_add(w, &m, sh);
         }
         assert_int_equal(qk_world_update(w), QK_OK);
-      } else if (phase % 2) { /* moves before the queries, no update */
-        for (size_t j = 0; j < m.n / 3; j++) {
-          const size_t i = qkt_rng_below(&r, (uint32_t)m.n);
+      } else if (phase % 2) { /* moves before the queries, no update: a third of the objects,
+                                 from left to right (past the first few hundred every group is
+                                 dropped, before the right-hand cells are marked stale), or 60
+                                 at random (their cells marked stale) */
+        /* (the objects in order of their x, by insertion) */
+        size_t *byx = malloc(m.n * sizeof *byx);
+        for (size_t i = 0; i < m.n; i++) {
+          size_t k = i;
+          for (; k > 0 && m.s[byx[k - 1]].x > m.s[i].x; k--) byx[k] = byx[k - 1];
+          byx[k] = i;
+        }
+        const size_t nmove = phase == 1 ? m.n / 3 : 60;
+        for (size_t j = 0; j < nmove; j++) {
+          const size_t i = phase == 1 ? byx[3 * j] : qkt_rng_below(&r, (uint32_t)m.n);
           qk_shape_t sh = m.s[i];
           const double dx = qkt_rng_range(&r, -0.3, 0.3), dy = qkt_rng_range(&r, -0.3, 0.3);
           sh.x += dx, sh.y += dy;
@@ -2225,6 +2236,7 @@ static void test_world_crowded_cells(void **s) {
           if (j % 50 == 0) sh.x += 100, sh.a += sh.kind == QK_SHAPE_BOX ? 100 : 0; /* away */
           m_move(w, &m, i, sh);
         }
+        free(byx);
         if (phase == 3)
           for (int j = 0; j < 40; j++) m_remove_random(w, &m, &r);
       } else {
