@@ -349,7 +349,7 @@ static inline double entry_bound(const rctx_t *c, const qk_box_t *b) {
  * 14.8 k for all). */
 #define QK__FIRST_PIECES 2
 
-/* The bits of v at the even bit positions of the result, and back. */
+/* The bits of v at the even bit positions of the result. */
 static uint64_t spread(uint32_t v) {
   uint64_t x = v;
   x = (x | x << 16) & UINT64_C(0x0000ffff0000ffff);
@@ -357,15 +357,6 @@ static uint64_t spread(uint32_t v) {
   x = (x | x << 4) & UINT64_C(0x0f0f0f0f0f0f0f0f);
   x = (x | x << 2) & UINT64_C(0x3333333333333333);
   return (x | x << 1) & UINT64_C(0x5555555555555555);
-}
-
-static uint32_t squeeze(uint64_t x) {
-  x &= UINT64_C(0x5555555555555555);
-  x = (x | x >> 1) & UINT64_C(0x3333333333333333);
-  x = (x | x >> 2) & UINT64_C(0x0f0f0f0f0f0f0f0f);
-  x = (x | x >> 4) & UINT64_C(0x00ff00ff00ff00ff);
-  x = (x | x >> 8) & UINT64_C(0x0000ffff0000ffff);
-  return (uint32_t)(x | x >> 16);
 }
 
 /* ---- groups in crowded cells ------------------------------------------------------ */
@@ -849,8 +840,12 @@ static inline tsquare_t tree_square(const qk_world_t *w, int li, const uint64_t 
   /* the least square whose key prefix the first and last keys share: side 2^s */
   const int s = (63 - __builtin_clzll(key[lo] ^ key[hi - 1])) / 2 + 1;
   const uint64_t org = s == 32 ? 0 : key[lo] & ~((UINT64_C(1) << 2 * s) - 1);
-  return (tsquare_t){(int64_t)w->qx0[li] + squeeze(org), (int64_t)w->qy0[li] + squeeze(org >> 1),
-                     INT64_C(1) << s, org};
+  /* (its corner: the first cell's coordinates, relative to the level's least, rounded down
+   * to the side; the same as squeezing org's bits, for fewer instructions) */
+  const qk__wcell_t *c = &w->cells[w->qcell[w->lv_first[li] + lo]];
+  const int64_t side = INT64_C(1) << s, x0 = w->qx0[li], y0 = w->qy0[li];
+  return (tsquare_t){x0 + (((int64_t)c->cx - x0) & ~(side - 1)),
+                     y0 + (((int64_t)c->cy - y0) & ~(side - 1)), side, org};
 }
 
 static inline void tree_quarters(const qk_world_t *w, int li, const uint64_t *key,
