@@ -250,8 +250,8 @@ static qk_box_t next_piece(pieces_t *s, size_t k) {
   const qk_point_t a = s->a, b = s->b, p = s->p;
   const qk_point_t q = k == s->n ? b : (qk_point_t){a.x + t * (b.x - a.x), a.y + t * (b.y - a.y)};
   s->p = q;
-  return (qk_box_t){fmin(p.x, q.x) - s->e, fmin(p.y, q.y) - s->e, fmax(p.x, q.x) + s->e,
-                    fmax(p.y, q.y) + s->e};
+  return (qk_box_t){qk__min(p.x, q.x) - s->e, qk__min(p.y, q.y) - s->e, qk__max(p.x, q.x) + s->e,
+                    qk__max(p.y, q.y) + s->e};
 }
 
 static int visit_along(const qk_world_t *w, int l, const qk_point_t *seg, double pieces,
@@ -874,7 +874,7 @@ static int tree_meets(const tquery_t *t, int64_t x, int64_t y, int64_t s) {
 
 /* The cells of the query's level that tree_meets, by the level's query tree: the
  * quarters nearest the segment's start first. */
-static int tree_visit(const qk_world_t *w, const tquery_t *t) {
+static int tree_visit_run(const qk_world_t *w, const tquery_t *t, uint32_t lo0, uint32_t hi0) {
   const int li = t->l - QK__LMIN;
   const uint32_t base = w->lv_first[li];
   const uint64_t *key = w->qkey + base;
@@ -882,7 +882,7 @@ static int tree_visit(const qk_world_t *w, const tquery_t *t) {
   const int near = !t->seg ? 0 : (t->seg[1].x < t->seg[0].x) | (t->seg[1].y < t->seg[0].y) << 1;
   uint32_t stack[2 * 136]; /* runs waiting: at most 3 a square of the descent, 32 deep */
   int sp = 0;
-  stack[sp++] = 0, stack[sp++] = w->lv_n[li];
+  stack[sp++] = lo0, stack[sp++] = hi0;
   while (sp) {
     const uint32_t hi = stack[--sp], lo = stack[--sp];
     if (hi - lo <= QK__TREE_LEAF) {
@@ -904,6 +904,62 @@ static int tree_visit(const qk_world_t *w, const tquery_t *t) {
     }
   }
   return 0;
+}
+
+/*
+ * A segment at a level with a bitmap (collide/world_query.c, "where a level's cells are"):
+ * in pieces a bitmap square long, in order along it, the squares of the bitmap whose bits
+ * are set and that the pieces' cell ranges reach, each descended as a run of the tree
+ * (the square's keys: its Morton prefix, as the bitmap's squares and the tree's share
+ * their origin (qx0, qy0) and sides of a power of two). The cell ranges of the pieces move
+ * monotonically along the segment, and so do their squares: skipping the squares of the
+ * previous piece's range visits each once. Every object the segment meets lies in a cell
+ * of some piece's range (visit_along), so in one of those squares; a long ray across a
+ * sparse level reads a few bits a piece instead of descending from the level's top.
+ */
+static int tree_visit_along(const qk_world_t *w, const tquery_t *t) {
+  const int li = t->l - QK__LMIN, sh = w->qb_s[li];
+  const uint64_t bw = w->qb_w[li], bh = w->qb_h[li];
+  const int64_t x0 = w->qx0[li], y0 = w->qy0[li];
+  const uint64_t *bits = w->qbits + w->qb_off[li], *key = w->qkey + w->lv_first[li];
+  const uint32_t m = w->lv_n[li];
+  const double major = qk__max(fabs(t->seg[1].x - t->seg[0].x), fabs(t->seg[1].y - t->seg[0].y));
+  const double n = ceil(major / qk__pow2(t->l + sh + 1));
+  if (!(n <= 0x1p16)) return tree_visit_run(w, t, 0, m);
+  pieces_t p = pieces_of(t->seg, n < 1 ? 1 : (size_t)n);
+  int64_t pb[4] = {1, 0, 1, 0}; /* the last piece's squares (bx0, bx1, by0, by1): none */
+  for (size_t k = 1; k <= p.n; k++) {
+    /* a first hit before the pieces so far by a margin: no object left comes first (see
+     * visit_first) */
+    const rctx_t *c = t->first;
+    if (c && c->best.h != QK_HANDLE_NONE && c->best.t < (double)(k - 1) / (double)p.n - 0x1p-30)
+      break;
+    const crange_t r = range_of(next_piece(&p, k), t->l);
+    int64_t b[4] = {(r.x0 - x0) >> sh, (r.x1 - x0) >> sh, (r.y0 - y0) >> sh, (r.y1 - y0) >> sh};
+    b[0] = b[0] < 0 ? 0 : b[0], b[2] = b[2] < 0 ? 0 : b[2];
+    b[1] = b[1] < (int64_t)bw ? b[1] : (int64_t)bw - 1,
+    b[3] = b[3] < (int64_t)bh ? b[3] : (int64_t)bh - 1;
+    for (int64_t by = b[2]; by <= b[3]; by++)
+      for (int64_t bx = b[0]; bx <= b[1]; bx++) {
+        if (bx >= pb[0] && bx <= pb[1] && by >= pb[2] && by <= pb[3]) continue;
+        const uint64_t bit = (uint64_t)by * bw + (uint64_t)bx;
+        if (!(bits[bit / 64] >> (bit % 64) & 1)) continue;
+        const uint64_t k0 = (spread((uint32_t)bx) | spread((uint32_t)by) << 1) << 2 * sh;
+        const uint32_t lo = key_lower(key, 0, m, k0);
+        const uint32_t hi = key_lower(key, lo, m, k0 + (UINT64_C(1) << 2 * sh));
+        if (lo < hi && tree_visit_run(w, t, lo, hi)) return 1;
+      }
+    memcpy(pb, b, sizeof pb);
+  }
+  return 0;
+}
+
+/* The cells of the query's level that tree_meets: by the bitmap for a segment where the
+ * level has one, else from the top of the level's tree. */
+static int tree_visit(const qk_world_t *w, const tquery_t *t) {
+  const int li = t->l - QK__LMIN;
+  if (t->seg && w->qb_w[li]) return tree_visit_along(w, t);
+  return tree_visit_run(w, t, 0, w->lv_n[li]);
 }
 
 /* The objects added or re-filed since the last update (not in the order's cells), one by
@@ -946,7 +1002,7 @@ static int visit_levels(const qk_world_t *w, qk_box_t qb, const qk_point_t *seg,
     if (seg) {
       /* pieces about four cells long on the longer axis; each searches its rows */
       double s = qk__pow2(l);
-      double major = fmax(qb.xmax - qb.xmin, qb.ymax - qb.ymin);
+      double major = qk__max(qb.xmax - qb.xmin, qb.ymax - qb.ymin);
       double pieces = ceil(major / (4 * s));
       double prow = (qb.ymax - qb.ymin) / pieces / s + 3;
       if (pieces >= 1 && pieces < 1e7 && pieces * prow * lg <= 2 * ncell + 8) {
@@ -1128,7 +1184,7 @@ static int visit_first(const qk_world_t *w, qk_box_t qb, const qk_point_t *seg, 
   for (int li = 1; li < nl; li++)
     if (w->lv_n[levels[li] - QK__LMIN] > w->lv_n[lm - QK__LMIN]) lm = levels[li];
   const double pieces =
-      ceil(fmax(fabs(seg[1].x - seg[0].x), fabs(seg[1].y - seg[0].y)) / qk__pow2(lm));
+      ceil(qk__max(fabs(seg[1].x - seg[0].x), fabs(seg[1].y - seg[0].y)) / qk__pow2(lm));
   if (!(pieces <= 0x1p20)) return 0;
   const size_t n = pieces < 1 ? 1 : (size_t)pieces;
   /* with the tree, the walk hands over to it after this many pieces */
