@@ -944,9 +944,12 @@ static int tree_visit_along(const qk_world_t *w, const tquery_t *t) {
         if (bx >= pb[0] && bx <= pb[1] && by >= pb[2] && by <= pb[3]) continue;
         const uint64_t bit = (uint64_t)by * bw + (uint64_t)bx;
         if (!(bits[bit / 64] >> (bit % 64) & 1)) continue;
+        /* (its keys [k0, k1): cell indices are below 2^30 in magnitude (qk__world_cell_of),
+         * so a level spans under 2^31 of them, its keys are below 2^62 and k1 does not
+         * wrap) */
         const uint64_t k0 = (spread((uint32_t)bx) | spread((uint32_t)by) << 1) << 2 * sh;
-        const uint32_t lo = key_lower(key, 0, m, k0);
-        const uint32_t hi = key_lower(key, lo, m, k0 + (UINT64_C(1) << 2 * sh));
+        const uint64_t k1 = k0 + (UINT64_C(1) << 2 * sh);
+        const uint32_t lo = key_lower(key, 0, m, k0), hi = key_lower(key, lo, m, k1);
         if (lo < hi && tree_visit_run(w, t, lo, hi)) return 1;
       }
     memcpy(pb, b, sizeof pb);

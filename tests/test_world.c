@@ -2272,6 +2272,40 @@ static void test_world_crowded_cells(void **s) {
   free(all), free(got);
 }
 
+/* Levels whose cells span 2^30 columns and rows and more (unit boxes within 2.1e9 of the
+ * origin, the corners among them): their trees' keys take 62 bits, and their bitmaps'
+ * squares 2^25 cells a side (collide/world_query.c, tree_visit_along). First hits of long
+ * rays between the objects, and all hits, against brute force. */
+static void test_world_query_wide_span(void **s) {
+  (void)s;
+  QKT_ONE_THREAD_TEST();
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 997);
+  enum { NOBJ = 200 };
+  qk_world_hit_t *all = malloc((NOBJ + 8) * sizeof *all);
+  qk_world_t *w = threaded_world(1);
+  mirror_t m = {0};
+  const double e = 2.1e9;
+  for (size_t i = 0; i < NOBJ; i++) {
+    /* the four corners and the edges, and some anywhere */
+    double x = i % 4 < 2 ? -e : e - 1, y = i % 2 ? -e : e - 1;
+    if (i >= 16) x = qkt_rng_range(&r, -e, e - 1), y = i % 3 ? y : qkt_rng_range(&r, -e, e - 1);
+    m_add(w, &m, (qk_shape_t){QK_SHAPE_BOX, x, y, x + 1, y + 1});
+  }
+  assert_int_equal(qk_world_update(w), QK_OK);
+  for (int q = 0; q < 400; q++) {
+    const qk_shape_t *a = &m.s[qkt_rng_below(&r, (uint32_t)m.n)];
+    const qk_shape_t *b = &m.s[q < 16 ? (uint32_t)(q + 5) % 16 : qkt_rng_below(&r, (uint32_t)m.n)];
+    const qk_point_t p0 = {a->x + qkt_rng_unit(&r), a->y + qkt_rng_unit(&r)};
+    const qk_point_t p1 = {b->x + qkt_rng_unit(&r), b->y + qkt_rng_unit(&r)};
+    char what[48];
+    snprintf(what, sizeof what, "wide span ray %d: ", q);
+    check_first_hit(w, &m, q % 2 ? p0 : p1, q % 2 ? p1 : p0, all, NOBJ + 8, what);
+  }
+  free(m.h), free(m.s), free(all);
+  qk_world_free(w);
+}
+
 /* The query tree made by concurrent readers: right after each update, batches of first
  * hits and of nearest objects on two threads (whose queries race to make the tree and to
  * fill a crowded cell's groups: one makes it, the others search without meanwhile), then
@@ -3812,6 +3846,7 @@ int main(void) {
       cmocka_unit_test(test_world_query_tree),
       cmocka_unit_test(test_world_query_tree_threads),
       cmocka_unit_test(test_world_crowded_cells),
+      cmocka_unit_test(test_world_query_wide_span),
       cmocka_unit_test(test_world_stale_handles),
       cmocka_unit_test(test_world_threads_frames),
       cmocka_unit_test(test_world_thread_min_sides),
