@@ -908,7 +908,7 @@ static int tree_visit_run(const qk_world_t *w, const tquery_t *t, uint32_t lo0, 
 
 /*
  * A segment at a level with a bitmap (collide/world_query.c, "where a level's cells are"):
- * in pieces a bitmap square long, in order along it, the squares of the bitmap whose bits
+ * in pieces two bitmap squares long, in order along it, the squares of the bitmap whose bits
  * are set and that the pieces' cell ranges reach, each descended as a run of the tree
  * (the square's keys: its Morton prefix, as the bitmap's squares and the tree's share
  * their origin (qx0, qy0) and sides of a power of two). The cell ranges of the pieces move
@@ -935,9 +935,10 @@ static int tree_visit_along(const qk_world_t *w, const tquery_t *t) {
     if (c && c->best.h != QK_HANDLE_NONE && c->best.t < (double)(k - 1) / (double)p.n - 0x1p-30)
       break;
     const crange_t r = range_of(next_piece(&p, k), t->l);
-    int64_t b[4] = {(r.x0 - x0) >> sh, (r.x1 - x0) >> sh, (r.y0 - y0) >> sh, (r.y1 - y0) >> sh};
-    b[0] = b[0] < 0 ? 0 : b[0], b[2] = b[2] < 0 ? 0 : b[2];
-    b[1] = b[1] < (int64_t)bw ? b[1] : (int64_t)bw - 1,
+    /* (its squares, clipped to the bitmap: none when it lies below or left of it) */
+    int64_t b[4] = {r.x0 <= x0 ? 0 : (r.x0 - x0) >> sh, r.x1 < x0 ? -1 : (r.x1 - x0) >> sh,
+                    r.y0 <= y0 ? 0 : (r.y0 - y0) >> sh, r.y1 < y0 ? -1 : (r.y1 - y0) >> sh};
+    b[1] = b[1] < (int64_t)bw ? b[1] : (int64_t)bw - 1;
     b[3] = b[3] < (int64_t)bh ? b[3] : (int64_t)bh - 1;
     for (int64_t by = b[2]; by <= b[3]; by++)
       for (int64_t bx = b[0]; bx <= b[1]; bx++) {
