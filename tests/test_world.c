@@ -2306,6 +2306,57 @@ static void test_world_query_wide_span(void **s) {
   qk_world_free(w);
 }
 
+/* Queries when the query tree's or a crowded cell's memory cannot be had: the k-th
+ * allocation after an update fails (the tree's scratch, a large cell's sorting room), for
+ * k = 1 .. 12, and box queries, first hits and the k nearest in a crowded world are still
+ * brute force's (the queries go without the tree or the cell's groups, and a later query
+ * makes them); nothing leaks. */
+static void test_world_query_nomem(void **s) {
+  (void)s;
+  QKT_ONE_THREAD_TEST();
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 1009);
+  enum { NOBJ = 1500 };
+  qkt_alloc_t st;
+  qk_allocator_t al = qkt_alloc_make(&st);
+  qk_world_options_t o;
+  qk_world_options_init(&o);
+  o.allocator = &al;
+  qk_world_t *w;
+  assert_int_equal(qk_world_new(&o, &w), QK_OK);
+  mirror_t m = {0};
+  for (size_t i = 0; i < NOBJ; i++) { /* (cells of hundreds: sorted in allocated room) */
+    const double x = qkt_rng_range(&r, 0, 6), y = qkt_rng_range(&r, 0, 6);
+    const double sz = qkt_rng_range(&r, 0.5, 2);
+    m_add(w, &m,
+          i % 3 ? (qk_shape_t){QK_SHAPE_BOX, x, y, x + sz, y + sz * qkt_rng_unit(&r)}
+                : (qk_shape_t){QK_SHAPE_POINT, x, y, 0, 0});
+  }
+  qk_world_hit_t *all = malloc((NOBJ + 8) * sizeof *all);
+  qk_handle_t *got = malloc((NOBJ + 8) * sizeof *got);
+  size_t failed = 0;
+  for (size_t k = 1; k <= 12; k++) {
+    assert_int_equal(qk_world_update(w), QK_OK); /* (the tree made anew by the next query) */
+    qkt_alloc_arm(&st, k);
+    for (int q = 0; q < 8; q++) {
+      char what[48];
+      snprintf(what, sizeof what, "nomem %zu query %d: ", k, q);
+      const double x = qkt_rng_range(&r, -1, 7), y = qkt_rng_range(&r, -1, 7), h = 0.5 + q % 3;
+      check_overlaps(w, &m, (qk_shape_t){QK_SHAPE_BOX, x - h, y - h, x + h, y + h}, got, what);
+      check_first_hit(w, &m, (qk_point_t){x, y}, (qk_point_t){x + 5, y - 3 + q}, all, NOBJ + 8,
+                      what);
+      check_knn(w, &m, (qk_point_t){x, y}, 1 + (size_t)q, what);
+    }
+    failed += st.failed;
+    qkt_alloc_arm(&st, 0);
+  }
+  assert_true(failed >= 6); /* (the failures came where the queries allocate) */
+  free(m.h), free(m.s), free(all), free(got);
+  qk_world_free(w);
+  assert_int_equal(st.live_blocks, 0);
+  assert_int_equal(st.live_bytes, 0);
+}
+
 /* The query tree made by concurrent readers: right after each update, batches of first
  * hits and of nearest objects on two threads (whose queries race to make the tree and to
  * fill a crowded cell's groups: one makes it, the others search without meanwhile), then
@@ -3847,6 +3898,7 @@ int main(void) {
       cmocka_unit_test(test_world_query_tree_threads),
       cmocka_unit_test(test_world_crowded_cells),
       cmocka_unit_test(test_world_query_wide_span),
+      cmocka_unit_test(test_world_query_nomem),
       cmocka_unit_test(test_world_stale_handles),
       cmocka_unit_test(test_world_threads_frames),
       cmocka_unit_test(test_world_thread_min_sides),
