@@ -139,20 +139,28 @@ typedef struct lvrows {
   int sh;
 } lvrows_t;
 
+/* The bitmap's columns (or rows) [*b0, *b1] that cells [lo, hi] fall in, along an axis
+ * whose bitmap starts at cell `origin` and has n of them, shifted by sh; 0 when none. */
+static inline int bit_span(int64_t lo, int64_t hi, int64_t origin, int sh, uint64_t n, uint64_t *b0,
+                           uint64_t *b1) {
+  lo -= origin, hi -= origin;
+  if (hi < 0 || lo > hi) return 0;
+  *b0 = lo < 0 ? 0 : (uint64_t)lo >> sh;
+  *b1 = (uint64_t)hi >> sh;
+  if (*b0 >= n) return 0;
+  if (*b1 >= n) *b1 = n - 1;
+  return 1;
+}
+
 /* 0 when level li surely has no cell in columns [x0, x1]. */
 static int level_rows(const qk_world_t *w, int li, int64_t x0, int64_t x1, lvrows_t *v) {
   v->b = NULL;
   const uint64_t bw = w->qb_w[li];
   if (!bw) return 1;
-  x0 -= w->qx0[li], x1 -= w->qx0[li];
-  const int sh = w->qb_s[li];
-  if (x1 < 0 || x0 > x1) return 0;
-  const uint64_t bx0 = x0 < 0 ? 0 : (uint64_t)x0 >> sh;
-  uint64_t bx1 = (uint64_t)x1 >> sh;
-  if (bx0 >= bw) return 0;
-  bx1 = bx1 < bw ? bx1 : bw - 1;
+  uint64_t bx0, bx1;
+  if (!bit_span(x0, x1, w->qx0[li], w->qb_s[li], bw, &bx0, &bx1)) return 0;
   if (bx1 - bx0 >= 128) return 1; /* (too many to look at) */
-  *v = (lvrows_t){w->qbits + w->qb_off[li], bw, w->qb_h[li], bx0, bx1, w->qy0[li], sh};
+  *v = (lvrows_t){w->qbits + w->qb_off[li], bw, w->qb_h[li], bx0, bx1, w->qy0[li], w->qb_s[li]};
   return 1;
 }
 
@@ -182,12 +190,8 @@ static int level_has(const qk_world_t *w, int li, const crange_t *r) {
   if (!w->qb_w[li]) return 1;
   if (!level_rows(w, li, r->x0, r->x1, &v)) return 0;
   if (!v.b) return 1;
-  const int64_t y0 = r->y0 - v.y0, y1 = r->y1 - v.y0;
-  if (y1 < 0 || y0 > y1) return 0;
-  const uint64_t by0 = y0 < 0 ? 0 : (uint64_t)y0 >> v.sh;
-  uint64_t by1 = (uint64_t)y1 >> v.sh;
-  by1 = by1 < v.bh ? by1 : v.bh - 1;
-  if (by0 > by1) return 0;
+  uint64_t by0, by1;
+  if (!bit_span(r->y0, r->y1, v.y0, v.sh, v.bh, &by0, &by1)) return 0;
   if (by1 - by0 >= 64) return 1; /* (too many to look at) */
   for (uint64_t by = by0; by <= by1; by++)
     if (bitrow_has(&v, by)) return 1;
@@ -927,7 +931,7 @@ static int tree_visit_along(const qk_world_t *w, const tquery_t *t) {
   const double n = ceil(major / qk__pow2(t->l + sh + 1));
   if (!(n <= 0x1p16)) return tree_visit_run(w, t, 0, m);
   pieces_t p = pieces_of(t->seg, n < 1 ? 1 : (size_t)n);
-  int64_t pb[4] = {1, 0, 1, 0}; /* the last piece's squares (bx0, bx1, by0, by1): none */
+  uint64_t pb[4] = {1, 0, 1, 0}; /* the last piece's squares (bx0, bx1, by0, by1): none */
   for (size_t k = 1; k <= p.n; k++) {
     /* a first hit before the pieces so far by a margin: no object left comes first (see
      * visit_first) */
@@ -935,15 +939,16 @@ static int tree_visit_along(const qk_world_t *w, const tquery_t *t) {
     if (c && c->best.h != QK_HANDLE_NONE && c->best.t < (double)(k - 1) / (double)p.n - 0x1p-30)
       break;
     const crange_t r = range_of(next_piece(&p, k), t->l);
-    /* (its squares, clipped to the bitmap: none when it lies below or left of it) */
-    int64_t b[4] = {r.x0 <= x0 ? 0 : (r.x0 - x0) >> sh, r.x1 < x0 ? -1 : (r.x1 - x0) >> sh,
-                    r.y0 <= y0 ? 0 : (r.y0 - y0) >> sh, r.y1 < y0 ? -1 : (r.y1 - y0) >> sh};
-    b[1] = b[1] < (int64_t)bw ? b[1] : (int64_t)bw - 1;
-    b[3] = b[3] < (int64_t)bh ? b[3] : (int64_t)bh - 1;
-    for (int64_t by = b[2]; by <= b[3]; by++)
-      for (int64_t bx = b[0]; bx <= b[1]; bx++) {
+    uint64_t b[4]; /* (its squares, clipped to the bitmap) */
+    if (!bit_span(r.x0, r.x1, x0, sh, bw, &b[0], &b[1]) ||
+        !bit_span(r.y0, r.y1, y0, sh, bh, &b[2], &b[3])) {
+      pb[0] = 1, pb[1] = 0; /* (none) */
+      continue;
+    }
+    for (uint64_t by = b[2]; by <= b[3]; by++)
+      for (uint64_t bx = b[0]; bx <= b[1]; bx++) {
         if (bx >= pb[0] && bx <= pb[1] && by >= pb[2] && by <= pb[3]) continue;
-        const uint64_t bit = (uint64_t)by * bw + (uint64_t)bx;
+        const uint64_t bit = by * bw + bx;
         if (!(bits[bit / 64] >> (bit % 64) & 1)) continue;
         /* (its keys [k0, k1): cell indices are below 2^30 in magnitude (qk__world_cell_of),
          * so a level spans under 2^31 of them, its keys are below 2^62 and k1 does not
