@@ -2160,6 +2160,14 @@ static void test_world_query_tree(void **s) {
   free(all), free(got);
 }
 
+/* A box of the crowded scenes: in [0, 6]^2, of sides 0.5-2 by up to as much (dozens to a
+ * cell of side 4). */
+static qk_shape_t crowded_box(qkt_rng_t *r) {
+  const double x = qkt_rng_range(r, 0, 6), y = qkt_rng_range(r, 0, 6);
+  const double sz = qkt_rng_range(r, 0.5, 2);
+  return (qk_shape_t){QK_SHAPE_BOX, x, y, x + sz, y + sz * qkt_rng_unit(r)};
+}
+
 /* The objects overlapping qs are exactly brute force's, in slot order. */
 static QKT_SERIAL void check_overlaps(qk_world_t *w, const mirror_t *m, qk_shape_t qs,
                                       qk_handle_t *got, const char *what) {
@@ -2326,11 +2334,8 @@ static void test_world_query_nomem(void **s) {
   assert_int_equal(qk_world_new(&o, &w), QK_OK);
   mirror_t m = {0};
   for (size_t i = 0; i < NOBJ; i++) { /* (cells of hundreds: sorted in allocated room) */
-    const double x = qkt_rng_range(&r, 0, 6), y = qkt_rng_range(&r, 0, 6);
-    const double sz = qkt_rng_range(&r, 0.5, 2);
-    m_add(w, &m,
-          i % 3 ? (qk_shape_t){QK_SHAPE_BOX, x, y, x + sz, y + sz * qkt_rng_unit(&r)}
-                : (qk_shape_t){QK_SHAPE_POINT, x, y, 0, 0});
+    const qk_shape_t b = crowded_box(&r);
+    m_add(w, &m, i % 3 ? b : (qk_shape_t){QK_SHAPE_POINT, b.x, b.y, 0, 0});
   }
   qk_world_hit_t *all = malloc((NOBJ + 8) * sizeof *all);
   qk_handle_t *got = malloc((NOBJ + 8) * sizeof *got);
@@ -2378,11 +2383,7 @@ static void test_world_query_tree_threads(void **s) {
     double g[2] = {0, 0};
     const double span = scene == 2 ? 4 : 4e5;
     for (size_t i = 0; i < NOBJ; i++) {
-      const double x = qkt_rng_range(&r, 0, 6), y = qkt_rng_range(&r, 0, 6);
-      const double sz = qkt_rng_range(&r, 0.5, 2);
-      m_add(w, &m,
-            scene == 2 ? (qk_shape_t){QK_SHAPE_BOX, x, y, x + sz, y + sz * qkt_rng_unit(&r)}
-                       : tree_shape(&r, scene, g));
+      m_add(w, &m, scene == 2 ? crowded_box(&r) : tree_shape(&r, scene, g));
     }
     for (int round = 0; round < 4; round++) {
       for (int j = 0; j < 200; j++) {
