@@ -185,6 +185,38 @@ static uint32_t region_of(const regions_t *R, int64_t px, int64_t py, int64_t k)
   return R->id[qidx(R->U, x, y, q)];
 }
 
+/* The sign of fx + fy - 1 for doubles fx, fy in [0, 1], exactly: the rounded sum decides
+ * unless it is 1 (rounding is monotone and 1 is a double), then the sum's rounding error
+ * (Knuth's two-sum). */
+static int sum_vs_one(double fx, double fy) {
+  double s = fx + fy;
+  if (s != 1) return s < 1 ? -1 : 1;
+  double bv = s - fx, av = s - bv, err = (fx - av) + (fy - bv);
+  return (err > 0) - (err < 0);
+}
+
+/* The region of a point at any double coordinates in the domain (a hole point), exactly:
+ * its unit square, and its quarter there from its offsets in the square (exact: the
+ * floor's difference). */
+static uint32_t region_of_point(const regions_t *R, double px, double py) {
+  const double top = (double)R->U - 1;
+  double x = floor(px), y = floor(py);
+  if (x > top) x = top;
+  if (y > top) y = top;
+  const double fx = px - x, fy = py - y;
+  const int c = sum_vs_one(fx, fy);
+  int q;
+  if (fy <= fx && c <= 0)
+    q = 0; /* S */
+  else if (fy >= fx && c >= 0)
+    q = 2; /* N */
+  else if (fx > fy)
+    q = 1; /* E */
+  else
+    q = 3; /* W */
+  return R->id[qidx(R->U, (int64_t)x, (int64_t)y, q)];
+}
+
 int mc_check(const mc_input_t *in, const mc_mesh_t *m, char *msg, size_t msz) {
   int bad = 0;
   int64_t U2 = 2 * (int64_t)in->U;
@@ -293,12 +325,12 @@ int mc_check(const mc_input_t *in, const mc_mesh_t *m, char *msg, size_t msz) {
       goto out;
     }
     for (size_t h = 0; h < in->nh; h++) {
-      double hx = 2 * in->holes[2 * h], hy = 2 * in->holes[2 * h + 1];
-      if (hx != floor(hx) || hy != floor(hy)) {
-        bad = fail(msg, msz, "checker: hole %zu is not on the half-integer lattice", h);
+      double hx = in->holes[2 * h], hy = in->holes[2 * h + 1];
+      if (!(hx >= 0 && hx <= (double)in->U && hy >= 0 && hy <= (double)in->U)) {
+        bad = fail(msg, msz, "checker: hole %zu (%g, %g) is outside the domain", h, hx, hy);
         goto out;
       }
-      hole_region[region_of(&R, (int64_t)hx, (int64_t)hy, 2)] = 1;
+      hole_region[region_of_point(&R, hx, hy)] = 1;
     }
     /* Each quarter has area 1/4: 2 in units of 8 * area. */
     for (size_t q = 0; q < 4 * in->U * in->U; q++)
