@@ -14,6 +14,9 @@
  * way, so each ring is unwrapped into one closed curve of the plane (longitudes may leave
  * [-180, 180]); a query longitude is taken modulo 360 into [-180, 180) (180 is -180: the
  * point moved east) and tested at its copies 360 k apart; parity adds up over the copies.
+ * A point on edges along the antimeridian and no other is on the boundary (closed, open)
+ * only where the feature holds one side of it: the parities of the point moved east and
+ * moved west differ (Fiji's rings meet there).
  * A ring that does not close after unwrapping winds round a pole (Antarctica's): it is
  * closed along the pole's latitude (docs/region.md, rule 3), edges that are no boundary.
  * Points: the cities (cities.csv), uniform random points in each layer's box, every
@@ -195,8 +198,16 @@ static int orient(const double *a, const double *b, double px, double py) {
   return (s > 0) - (s < 0);
 }
 
-/* Parity of crossings (semi-open rule) and whether (x, y) lies on an edge. */
-static void test_one(const sw_feature_t *f, double x, double y, int *parity, int *on) {
+/* An edge along the antimeridian (lon/lat: longitude 180 + 360 k at both ends). */
+static int on_meridian(const double *e) {
+  return e[0] == e[2] && fabs(remainder(e[0], 360)) == 180;
+}
+
+/* Parity of crossings (semi-open rule: the point moved east) and of the point moved west
+ * instead (an edge through it then counts), and whether (x, y) lies on an edge: *on for
+ * an edge along the antimeridian (lon/lat), else *on. */
+static void test_one(const sw_feature_t *f, int lonlat, double x, double y, int *parity,
+                     int *parity_w, int *on, int *on_m) {
   if (x < f->box[0] || x > f->box[2] || y < f->box[1] || y > f->box[3] || !f->ne) {
     /* a point outside the box: no crossing to its right is possible only when it is right
      * of the box; left of it, crossings may still happen */
@@ -211,8 +222,10 @@ static void test_one(const sw_feature_t *f, double x, double y, int *parity, int
     if (y < lo[1] || y > hi[1]) continue;
     if (x > fmax(lo[0], hi[0])) continue;
     int s = orient(lo, hi, x, y);
-    if (s == 0 && x >= fmin(lo[0], hi[0]) && e[4] != 0) *on = 1; /* on the edge (closed segment) */
+    if (s == 0 && x >= fmin(lo[0], hi[0]) && e[4] != 0) /* on the edge (closed segment) */
+      *(lonlat && on_meridian(e) ? on_m : on) = 1;
     if (lo[1] <= y && y < hi[1] && s > 0) *parity ^= 1;
+    if (lo[1] <= y && y < hi[1] && s >= 0) *parity_w ^= 1;
   }
 }
 
@@ -234,9 +247,13 @@ static size_t oracle(const sw_layer_t *L, double x, double y, qk_boundary_t rule
       if (y >= f->box[1] && y <= f->box[3]) *skipped = 1;
       continue;
     }
-    int parity = 0, on = 0;
+    int parity = 0, parity_w = 0, on = 0, on_m = 0;
     for (int k = L->lonlat ? -2 : 0; k <= (L->lonlat ? 2 : 0); k++)
-      test_one(f, x + 360.0 * k, y, &parity, &on);
+      test_one(f, L->lonlat, x + 360.0 * k, y, &parity, &parity_w, &on, &on_m);
+    /* A point on the antimeridian that only edges along it pass through is on the sphere's
+     * boundary when the feature holds one side of it only (docs/region.md, rule 5: an island
+     * given as two rings meeting there holds it under open). */
+    if (on_m && parity != parity_w) on = 1;
     int in = rule == QK_BOUNDARY_SEMI_OPEN ? parity
              : rule == QK_BOUNDARY_CLOSED  ? (on || parity)
                                            : (!on && parity);
