@@ -637,13 +637,15 @@ std::vector<std::unique_ptr<WorldImpl>> make_world_impls() {
   v.emplace_back(new Grid);
   v.emplace_back(new Sap);
 #ifdef QKB_HAVE_BOX2D
-  v.emplace_back(new Box2dTree);
+  if (have("box2d")) v.emplace_back(new Box2dTree);
 #endif
 #ifdef QKB_HAVE_BULLET
-  v.emplace_back(new BulletDbvt);
-  v.emplace_back(new BulletBroadphase);
+  if (have("bullet")) v.emplace_back(new BulletDbvt);
+  if (have("bullet") && !skipped("bullet-bp")) v.emplace_back(new BulletBroadphase);
 #endif
   if (have("embree")) v.emplace_back(new EmbreeRebuild);
+  // (QKB_SKIP names them: box2d, bullet (both of Bullet's), bullet-bp, embree; the grid and
+  // sort and sweep always run)
   // QKB_WORLD_ONLY=NAME (for profiling, e.g. under callgrind): that implementation alone.
   if (const char *only = std::getenv("QKB_WORLD_ONLY")) {
     std::vector<std::unique_ptr<WorldImpl>> one;

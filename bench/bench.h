@@ -188,6 +188,7 @@ std::unique_ptr<WorldImpl> make_world_quadkit(unsigned threads); // qk_world on 
 
 // Which baselines this binary was built with.
 bool have(const char *what);
+bool skipped(const std::string &name); // named in QKB_SKIP
 
 double now_seconds();
 double min_angle_of(const std::vector<double> &xy, const std::vector<uint32_t> &tri);

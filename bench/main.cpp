@@ -67,7 +67,7 @@ double wall_seconds() {
 
 // QKB_SKIP=a,b,...: leave those baselines out of this run (an A/B of what the other
 // libraries' threads and memory do to quadkit's rows in the same process).
-static bool skipped(const std::string &s) {
+bool skipped(const std::string &s) {
   const char *skip = std::getenv("QKB_SKIP");
   return skip && ("," + std::string(skip) + ",").find("," + s + ",") != std::string::npos;
 }
