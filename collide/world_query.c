@@ -9,6 +9,7 @@
 #include <string.h>
 
 #include "collide/world_internal.h"
+#include "index/inline.h"
 
 static inline int boxes_meet(const qk_box_t *a, const qk_box_t *b) {
   return a->xmin <= b->xmax && b->xmin <= a->xmax && a->ymin <= b->ymax && b->ymin <= a->ymax;
@@ -176,14 +177,6 @@ static inline int bitrow_has(const lvrows_t *v, uint64_t by) {
   return (b[hi / 64 - lo / 64] & mhi) != 0;
 }
 
-/* Whether row y may have cells in the columns of v. */
-static inline int row_has(const lvrows_t *v, int64_t y) {
-  if (!v->b) return 1;
-  y -= v->y0;
-  if (y < 0 || ((uint64_t)y >> v->sh) >= v->bh) return 0;
-  return bitrow_has(v, (uint64_t)y >> v->sh);
-}
-
 /* Whether level li may have cells in range r: 0 only when its bitmap shows none. */
 static int level_has(const qk_world_t *w, int li, const crange_t *r) {
   lvrows_t v;
@@ -200,20 +193,54 @@ static int level_has(const qk_world_t *w, int li, const crange_t *r) {
 
 /* The cells of level l in range r (row by row, each row found by binary search), but
  * those in *skip. With bits (the query tree is made), rows where the level's bitmap has
- * none of r's cells are not searched. */
-static int visit_range(const qk_world_t *w, int l, crange_t r, const crange_t *skip, qk_box_t qb,
-                       const qk_point_t *seg, qk__wvisit_fn fn, void *ud, int bits) {
-  uint32_t end = w->lv_first[l - QK__LMIN] + w->lv_n[l - QK__LMIN];
+ * none of r's cells are not searched. The rows without cells are stepped over, not walked
+ * through: a row whose search finds the next cell in a later row goes on from that row,
+ * and a bitmap row without bits from the next one, so the walk takes at most a step a
+ * bitmap row and two a row with cells, however many rows r spans (a range of 2^55 rows,
+ * from a point ray at 10^30 widened by its rounding margin, hung the walk that stepped
+ * row by row: fuzz/regressions/world/ray-far-point-rows). */
+static QK__ALWAYS_INLINE int visit_range(const qk_world_t *w, int l, crange_t r,
+                                         const crange_t *skip, qk_box_t qb, const qk_point_t *seg,
+                                         qk__wvisit_fn fn, void *ud, int bits) {
+  const uint32_t end = w->lv_first[l - QK__LMIN] + w->lv_n[l - QK__LMIN];
+  const qk__wcell_t *cl = w->cells;
   lvrows_t v;
   v.b = NULL;
   if (bits && w->qb_w[l - QK__LMIN] && !level_rows(w, l - QK__LMIN, r.x0, r.x1, &v)) return 0;
-  for (int64_t y = r.y0; y <= r.y1; y++) {
-    if (!row_has(&v, y)) continue;
-    for (uint32_t k = qk__cell_lower(w, l, y, r.x0);
-         k < end && w->cells[k].cy == y && w->cells[k].cx <= r.x1; k++) {
-      if (skip && in_range(skip, w->cells[k].cx, y)) continue;
+  int64_t y = r.y0;
+  uint32_t lo = w->lv_first[l - QK__LMIN]; /* (the searches go forward: from the last cell found) */
+  while (y <= r.y1) {
+    if (v.b) { /* (the bitmap's row of y: none before its first or past its last) */
+      if (y < v.y0) {
+        y = v.y0;
+        continue;
+      }
+      const uint64_t by = (uint64_t)(y - v.y0) >> v.sh;
+      if (by >= v.bh) return 0;
+      if (!bitrow_has(&v, by)) {
+        y = v.y0 + (int64_t)((by + 1) << v.sh);
+        continue;
+      }
+    }
+    uint32_t k = lo, hi = end; /* (the first cell at or after (y, x0)) */
+    while (k < hi) {
+      const uint32_t mid = k + (hi - k) / 2;
+      if (cl[mid].cy < y || (cl[mid].cy == y && cl[mid].cx < r.x0))
+        k = mid + 1;
+      else
+        hi = mid;
+    }
+    lo = k;
+    if (k >= end || cl[k].cy > r.y1) return 0;
+    if (cl[k].cy != y) { /* (no cell in rows y .. cy - 1 at or after column x0) */
+      y = cl[k].cy;
+      continue;
+    }
+    for (; k < end && cl[k].cy == y && cl[k].cx <= r.x1; k++) {
+      if (skip && in_range(skip, cl[k].cx, y)) continue;
       if (visit_cell(w, k, qb, seg, fn, ud)) return 1;
     }
+    y++;
   }
   return 0;
 }
@@ -235,6 +262,11 @@ static int scan_level(const qk_world_t *w, int l, crange_t r, qk_box_t qb, const
  * cell in two ranges is in every range between them: skipping the cells of the
  * previous range visits each cell (and so each object) once.
  */
+/* The margin of a segment's pieces: 2^-40 of its ends' magnitudes. */
+static inline double piece_margin(const qk_point_t *seg) {
+  return (fabs(seg[0].x) + fabs(seg[0].y) + fabs(seg[1].x) + fabs(seg[1].y)) * 0x1p-40;
+}
+
 /* Piece k of n of the segment seg[0] -> seg[1] (k = 1 .. n, in order): the box from the
  * end of piece k - 1 (*p, updated to piece k's end) to the point at k / n, widened by
  * e = 2^-40 of the ends' magnitudes, far more than the points' rounding. */
@@ -242,20 +274,34 @@ typedef struct pieces {
   qk_point_t a, b, p;
   double e;
   size_t n;
+  qk_box_t box; /* the segment's box */
 } pieces_t;
 
 static pieces_t pieces_of(const qk_point_t *seg, size_t n) {
   const qk_point_t a = seg[0], b = seg[1];
-  return (pieces_t){a, b, a, (fabs(a.x) + fabs(a.y) + fabs(b.x) + fabs(b.y)) * 0x1p-40, n};
+  const qk_box_t box = {qk__min(a.x, b.x), qk__min(a.y, b.y), qk__max(a.x, b.x), qk__max(a.y, b.y)};
+  return (pieces_t){a, b, a, piece_margin(seg), n, box};
 }
 
+/* (clipped to the segment's box, which holds the whole segment: the margin, 2^-40 of
+ * the ends' magnitudes, can be far wider than the segment, as for a short one far out) */
 static qk_box_t next_piece(pieces_t *s, size_t k) {
   const double t = (double)k / (double)s->n;
   const qk_point_t a = s->a, b = s->b, p = s->p;
   const qk_point_t q = k == s->n ? b : (qk_point_t){a.x + t * (b.x - a.x), a.y + t * (b.y - a.y)};
   s->p = q;
-  return (qk_box_t){qk__min(p.x, q.x) - s->e, qk__min(p.y, q.y) - s->e, qk__max(p.x, q.x) + s->e,
-                    qk__max(p.y, q.y) + s->e};
+  return (qk_box_t){qk__max(qk__min(p.x, q.x) - s->e, s->box.xmin),
+                    qk__max(qk__min(p.y, q.y) - s->e, s->box.ymin),
+                    qk__min(qk__max(p.x, q.x) + s->e, s->box.xmax),
+                    qk__min(qk__max(p.y, q.y) + s->e, s->box.ymax)};
+}
+
+/* The rows of level l a piece of n of segment seg (box qb) spans at most: its share of
+ * the box's height and its margin on both sides, within the box's height, and a row or
+ * two of each end's cell. */
+static double piece_rows(const qk_box_t *qb, const qk_point_t *seg, double n, int l) {
+  const double h = qb->ymax - qb->ymin;
+  return qk__min(h, h / n + 2 * piece_margin(seg)) / qk__pow2(l) + 3;
 }
 
 static int visit_along(const qk_world_t *w, int l, const qk_point_t *seg, double pieces,
@@ -1010,10 +1056,9 @@ static int visit_levels(const qk_world_t *w, qk_box_t qb, const qk_point_t *seg,
     }
     if (seg) {
       /* pieces about four cells long on the longer axis; each searches its rows */
-      double s = qk__pow2(l);
       double major = qk__max(qb.xmax - qb.xmin, qb.ymax - qb.ymin);
-      double pieces = ceil(major / (4 * s));
-      double prow = (qb.ymax - qb.ymin) / pieces / s + 3;
+      double pieces = ceil(major / (4 * qk__pow2(l)));
+      double prow = piece_rows(&qb, seg, pieces, l);
       if (pieces >= 1 && pieces < 1e7 && pieces * prow * lg <= 2 * ncell + 8) {
         if (visit_along(w, l, seg, pieces, qb, fn, ud, made)) return 1;
         continue;
@@ -1203,7 +1248,7 @@ static int visit_first(const qk_world_t *w, qk_box_t qb, const qk_point_t *seg, 
   for (int li = 0; li < nl; li++) {
     const int l = levels[li];
     const double ncell = w->lv_n[l - QK__LMIN], lg = lg_cells(w->lv_n[l - QK__LMIN]);
-    const double prow = (qb.ymax - qb.ymin) / (double)n / qk__pow2(l) + 3;
+    const double prow = piece_rows(&qb, seg, (double)n, l);
     along[li] = (double)n * prow * lg <= 2 * ncell + 8;
     walk |= along[li];
     prev[li] = (crange_t){1, 0, 1, 0}; /* empty */

@@ -2399,6 +2399,62 @@ static void test_world_query_wide_span(void **s) {
   qk_world_free(w);
 }
 
+/* Rays and segment queries far from every object, as points or short segments out at
+ * 2^100 and beyond: their pieces' rounding margin (2^-40 of the ends' magnitudes, 2^61
+ * there) once spanned 2^55 rows of the level, which the row walk stepped through one by one
+ * (the fuzzer's world target hung in qk_world_raycast: fuzz/regressions/world/
+ * ray-far-point-rows). Each call returns, with brute force's answer; near and at the
+ * objects too, with a tree of several levels and with and without the query tree. */
+static void test_world_query_far_out(void **s) {
+  (void)s;
+  QKT_ONE_THREAD_TEST();
+  enum { NOBJ = 300 };
+  qk_world_hit_t *all = malloc((NOBJ + 8) * sizeof *all);
+  qk_handle_t *got = malloc((NOBJ + 8) * sizeof *got);
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 1013);
+  qk_world_t *w = threaded_world(1);
+  mirror_t m = {0};
+  m_add(w, &m, (qk_shape_t){QK_SHAPE_BOX, -20, -20, 10, 10}); /* (level 6: the fuzzer's world) */
+  assert_int_equal(qk_world_update(w), QK_OK);
+  for (int pass = 0; pass < 2; pass++) {
+    if (pass) { /* then many objects on several levels, and the query tree */
+      for (size_t i = 1; i < NOBJ; i++) {
+        double x = qkt_rng_range(&r, -100, 100), y = qkt_rng_range(&r, -100, 100);
+        double e = ldexp(1, (int)qkt_rng_below(&r, 10) - 4);
+        m_add(w, &m, (qk_shape_t){QK_SHAPE_BOX, x, y, x + e, y + e});
+      }
+      assert_int_equal(qk_world_update(w), QK_OK);
+    }
+    /* (the shapes' range ends at 2^100: a ray beyond it is refused) */
+    qk_world_hit_t h;
+    assert_int_equal(qk_world_raycast(w, (qk_point_t){0x1p101, 0}, (qk_point_t){0x1p101, 0}, &h),
+                     QK_ERR_LIMIT);
+    static const double far[] = {0x1p100, 0x1p99, 0x1p60, 1e30, 1e20};
+    for (size_t f = 0; f < sizeof far / sizeof *far; f++)
+      for (int q = 0; q < 8; q++) {
+        const double x = q & 1 ? -far[f] : far[f], y = q & 2 ? -16 : q & 4 ? 5 : -far[f];
+        /* (toward the origin: the ends stay within the range) */
+        const double len = q & 4 ? 0 : ldexp(1, (int)qkt_rng_below(&r, 40) - 10);
+        const qk_point_t p0 = {x, y}, p1 = {x - copysign(len, x), y - copysign(len / 2, y)};
+        char what[64];
+        snprintf(what, sizeof what, "far ray %g %d (pass %d): ", far[f], q, pass);
+        check_first_hit(w, &m, p0, p1, all, NOBJ + 8, what);
+        const qk_shape_t sg = {QK_SHAPE_SEGMENT, p0.x, p0.y, p1.x, p1.y};
+        size_t n = 0;
+        assert_int_equal(qk_world_query(w, &sg, got, NOBJ + 8, &n), QK_OK);
+        assert_int_equal(n, 0);
+      }
+    /* and from far out to the objects (no piece walk: too many pieces) */
+    for (int q = 0; q < 8; q++) {
+      const qk_point_t p0 = {q & 1 ? -0x1p100 : 0x1p100, -16}, p1 = {0, q & 2 ? -16 : 0.5};
+      check_first_hit(w, &m, p0, p1, all, NOBJ + 8, "far ray to the objects: ");
+    }
+  }
+  free(m.h), free(m.s), free(all), free(got);
+  qk_world_free(w);
+}
+
 /* Queries when the query tree's or a crowded cell's memory cannot be had: the k-th
  * allocation after an update fails (the tree's scratch, a large cell's sorting room), for
  * k = 1 .. 12, and box queries, first hits and the k nearest in a crowded world are still
@@ -3991,6 +4047,7 @@ int main(void) {
       cmocka_unit_test(test_world_query_tree_threads),
       cmocka_unit_test(test_world_crowded_cells),
       cmocka_unit_test(test_world_query_wide_span),
+      cmocka_unit_test(test_world_query_far_out),
       cmocka_unit_test(test_world_query_nomem),
       cmocka_unit_test(test_world_stale_handles),
       cmocka_unit_test(test_world_threads_frames),
