@@ -11,7 +11,8 @@
 //   sap       sort and sweep on x with the order kept from frame to frame (insertion
 //             sort exploits coherence), as in many game engines.
 //   box2d     b2DynamicTree (fattened AABBs, MoveProxy), then one Query per proxy.
-//   bullet    btDbvt: update(leaf, volume, margin) per box, then collideTT(root, root).
+//   bullet    btDbvt: update(leaf, volume, velocity, margin) per box (velocity: twice the
+//             box's last displacement), then collideTT(root, root).
 //   bullet-bp btDbvtBroadphase: setAabb per proxy, calculateOverlappingPairs, then the
 //             pair cache (pairs of fattened boxes) filtered by the exact box test.
 //   embree    rtcCollide on a scene rebuilt every frame (base_embree.cpp).
@@ -388,6 +389,20 @@ public:
 class BulletDbvt : public WorldImpl {
   btDbvt *tree = nullptr;
   std::vector<btDbvtNode *> leaf;
+  std::vector<Box> last; // (the boxes of the frame before: each move's displacement)
+  // The margin of update() and the multiple of each box's displacement since the last frame
+  // that it adds in the direction of motion: 0.05 (Bullet's own broadphase margin) and 2,
+  // the best single setting over the three scenes at 10^4 (docs/benchmarks.md, forty-third
+  // session: until then update(leaf, volume, 0.1), with no motion, which re-inserted
+  // nearly every leaf every frame and ran up to 2.3x slower). QKB_BULLET_MARGIN,
+  // QKB_BULLET_PREDICT (0: update(leaf, volume, margin)) and QKB_BULLET_OPT (passes of
+  // optimizeIncremental() a frame, after the updates) set them otherwise.
+  double margin = env_double("QKB_BULLET_MARGIN", 0.05), predict = env_double("QKB_BULLET_PREDICT", 2);
+  int opt_passes = (int)env_double("QKB_BULLET_OPT", 0);
+  static double env_double(const char *name, double def) {
+    const char *v = std::getenv(name);
+    return v ? std::atof(v) : def;
+  }
 
   struct Pairs : btDbvt::ICollide {
     const std::vector<Box> *boxes;
@@ -411,12 +426,25 @@ public:
     leaf.resize(boxes.size());
     for (size_t i = 0; i < boxes.size(); i++)
       leaf[i] = tree->insert(vol(boxes[i]), (void *)(uintptr_t)i);
+    last = boxes;
   }
   void frame(const std::vector<Box> &boxes, PairSum &out) override {
-    for (size_t i = 0; i < boxes.size(); i++) {
-      btDbvtVolume v = vol(boxes[i]);
-      tree->update(leaf[i], v, (btScalar)0.1); // re-inserted only when it leaves the margin
+    // (re-inserted only when it leaves its fat volume)
+    if (predict > 0) {
+      for (size_t i = 0; i < boxes.size(); i++) {
+        btDbvtVolume v = vol(boxes[i]);
+        const btVector3 d((btScalar)((boxes[i].xmin - last[i].xmin) * predict),
+                          (btScalar)((boxes[i].ymin - last[i].ymin) * predict), 0);
+        tree->update(leaf[i], v, d, (btScalar)margin);
+      }
+      last = boxes;
+    } else {
+      for (size_t i = 0; i < boxes.size(); i++) {
+        btDbvtVolume v = vol(boxes[i]);
+        tree->update(leaf[i], v, (btScalar)margin);
+      }
     }
+    if (opt_passes > 0) tree->optimizeIncremental(opt_passes);
     Pairs p;
     p.boxes = &boxes;
     p.out = &out;
