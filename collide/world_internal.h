@@ -343,20 +343,6 @@ static inline int qk__key_less(int l1, int32_t y1, int32_t x1, int l2, int32_t y
   return l1 != l2 ? l1 < l2 : y1 != y2 ? y1 < y2 : x1 < x2;
 }
 
-/* The first cell of level l's run at or after (y, x) in (cy, cx) order. */
-static inline uint32_t qk__cell_lower(const qk_world_t *w, int l, int64_t y, int64_t x) {
-  uint32_t lo = w->lv_first[l - QK__LMIN], hi = lo + w->lv_n[l - QK__LMIN];
-  while (lo < hi) {
-    uint32_t mid = lo + (hi - lo) / 2;
-    const qk__wcell_t *c = &w->cells[mid];
-    if (c->cy < y || (c->cy == y && c->cx < x))
-      lo = mid + 1;
-    else
-      hi = mid;
-  }
-  return lo;
-}
-
 /* The order changed (an update): the query tree is no longer for it (its arrays are kept
  * for the next; qk__world_qtree_free frees them, before the world is freed). */
 static inline void qk__world_qtree_stale(qk_world_t *w) {

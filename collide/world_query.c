@@ -197,7 +197,7 @@ static int level_has(const qk_world_t *w, int li, const crange_t *r) {
  * through: a row whose search finds the next cell in a later row goes on from that row,
  * and a bitmap row without bits from the next one, so the walk takes at most a step a
  * bitmap row and two a row with cells, however many rows r spans (a range of 2^55 rows,
- * from a point ray at 10^30 widened by its rounding margin, hung the walk that stepped
+ * from a point ray at 2^100 widened by its rounding margin, hung the walk that stepped
  * row by row: fuzz/regressions/world/ray-far-point-rows). */
 static QK__ALWAYS_INLINE int visit_range(const qk_world_t *w, int l, crange_t r,
                                          const crange_t *skip, qk_box_t qb, const qk_point_t *seg,

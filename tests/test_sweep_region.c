@@ -204,7 +204,7 @@ static int on_meridian(const double *e) {
 }
 
 /* Parity of crossings (semi-open rule: the point moved east) and of the point moved west
- * instead (an edge through it then counts), and whether (x, y) lies on an edge: *on for
+ * instead (an edge through it then counts), and whether (x, y) lies on an edge: *on_m for
  * an edge along the antimeridian (lon/lat), else *on. */
 static void test_one(const sw_feature_t *f, int lonlat, double x, double y, int *parity,
                      int *parity_w, int *on, int *on_m) {
