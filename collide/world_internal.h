@@ -343,6 +343,24 @@ static inline int qk__key_less(int l1, int32_t y1, int32_t x1, int l2, int32_t y
   return l1 != l2 ? l1 < l2 : y1 != y2 ? y1 < y2 : x1 < x2;
 }
 
+/* Cell c comes before (y, x) in (cy, cx) order. */
+static inline int qk__cell_before(const qk__wcell_t *c, int64_t y, int64_t x) {
+  return c->cy < y || (c->cy == y && c->cx < x);
+}
+
+/* The first cell in [lo, hi) not before (y, x), or hi (the cells before lo are before it). */
+static inline uint32_t qk__cell_bisect(const qk__wcell_t *cl, uint32_t lo, uint32_t hi, int64_t y,
+                                       int64_t x) {
+  while (lo < hi) {
+    uint32_t mid = lo + (hi - lo) / 2;
+    if (qk__cell_before(&cl[mid], y, x))
+      lo = mid + 1;
+    else
+      hi = mid;
+  }
+  return lo;
+}
+
 /* The order changed (an update): the query tree is no longer for it (its arrays are kept
  * for the next; qk__world_qtree_free frees them, before the world is freed). */
 static inline void qk__world_qtree_stale(qk_world_t *w) {

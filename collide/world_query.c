@@ -222,14 +222,7 @@ static QK__ALWAYS_INLINE int visit_range(const qk_world_t *w, int l, crange_t r,
         continue;
       }
     }
-    uint32_t k = lo, hi = end; /* (the first cell at or after (y, x0)) */
-    while (k < hi) {
-      const uint32_t mid = k + (hi - k) / 2;
-      if (cl[mid].cy < y || (cl[mid].cy == y && cl[mid].cx < r.x0))
-        k = mid + 1;
-      else
-        hi = mid;
-    }
+    uint32_t k = qk__cell_bisect(cl, lo, end, y, r.x0);
     lo = k;
     if (k >= end || cl[k].cy > r.y1) return 0;
     if (cl[k].cy != y) { /* (no cell in rows y .. cy - 1 at or after column x0) */

@@ -459,31 +459,14 @@ static QK__ALWAYS_INLINE int same_level(share_t *s, kc_t *kc, uint32_t a, uint32
 /* ---- finer levels: the coarser object's box walked over their sorted cells ---------- */
 
 /* (cy, cx) of cell c before (y, x). */
-static inline int cell_before(const qk__wcell_t *c, int64_t y, int64_t x) {
-  return c->cy < y || (c->cy == y && c->cx < x);
-}
-
-/* The first cell in [lo, hi) not before (y, x), or hi (the cells before lo are before it). */
-static inline uint32_t bisect(const qk__wcell_t *cl, uint32_t lo, uint32_t hi, int64_t y,
-                              int64_t x) {
-  while (lo < hi) {
-    uint32_t mid = lo + (hi - lo) / 2;
-    if (cell_before(&cl[mid], y, x))
-      lo = mid + 1;
-    else
-      hi = mid;
-  }
-  return lo;
-}
-
 /* The first cell of level lv at or after `from` not before (y, x), by a galloping search
  * from `from` (the cells before it are before (y, x)). */
 static uint32_t gallop(const lvinfo_t *lv, const qk__wcell_t *cl, uint32_t from, int64_t y,
                        int64_t x) {
-  if (from >= lv->end || !cell_before(&cl[from], y, x)) return from;
+  if (from >= lv->end || !qk__cell_before(&cl[from], y, x)) return from;
   uint32_t lo = from, step = 1; /* cl[lo] is before (y, x) */
-  while (lo + step < lv->end && cell_before(&cl[lo + step], y, x)) lo += step, step *= 2;
-  return bisect(cl, lo + 1, lo + step < lv->end ? lo + step : lv->end, y, x);
+  while (lo + step < lv->end && qk__cell_before(&cl[lo + step], y, x)) lo += step, step *= 2;
+  return qk__cell_bisect(cl, lo + 1, lo + step < lv->end ? lo + step : lv->end, y, x);
 }
 
 /* Cell indices from a scaled coordinate, clamped to a little beyond the 32-bit range of
@@ -610,7 +593,7 @@ static int cell_vs_level(share_t *s, uint32_t a, const lvinfo_t *lv) {
   int64_t x0 = cell_index(floor(ha->xmin * inv)) - 1, x1 = cell_index(floor(ha->xmax * inv));
   int64_t y0 = cell_index(floor(ha->ymin * inv)) - 1, y1 = cell_index(floor(ha->ymax * inv));
   for (int64_t y = y0 > lv->cy0 ? y0 : lv->cy0; y <= y1 && y <= lv->cy1; y++)
-    for (uint32_t k = bisect(cl, lv->first, lv->end, y, x0);
+    for (uint32_t k = qk__cell_bisect(cl, lv->first, lv->end, y, x0);
          k < lv->end && cl[k].cy == y && cl[k].cx <= x1; k++)
       if (boxes_meet(ha, &hb[k])) {
         kc_t kc = kc_open(s);
