@@ -104,7 +104,7 @@ void qk_world_free(qk_world_t *w) {
   if (!w) return;
   qk__world_pool_free(w);
   qk_allocator_t a = w->alloc;
-  qk__free(&a, w->obj, (size_t)w->cap_obj * sizeof *w->obj);
+  qk__free(&a, w->obj_raw, w->obj_raw ? (size_t)w->cap_obj * sizeof *w->obj + QK__WOBJ_SLACK : 0);
   qk__free(&a, w->order, (size_t)w->cap_order * sizeof *w->order);
   qk__free(&a, w->cells, (size_t)w->cap_cells * sizeof *w->cells);
   qk__free(&a, w->ugen, (size_t)w->cap_ugen * sizeof *w->ugen);
@@ -147,12 +147,29 @@ size_t qk_world_pair_bytes(const qk_world_t *w) {
          qk__wscr_bytes(w);
 }
 
+int qk__world_obj_resize(qk_world_t *w, uint32_t cap) {
+  const size_t osize = w->obj_raw ? (size_t)w->cap_obj * sizeof *w->obj + QK__WOBJ_SLACK : 0;
+  const size_t off0 = w->obj_raw ? (size_t)((char *)w->obj - (char *)w->obj_raw) : 0;
+  char *raw =
+      qk__realloc(&w->alloc, w->obj_raw, osize, (size_t)cap * sizeof *w->obj + QK__WOBJ_SLACK);
+  if (!raw) return 0;
+  /* The block may have moved to another offset from a line: the kept slots moved with it
+   * (they lie within the first osize bytes, or the first cap slots past off0 < 64). */
+  const size_t off = (size_t)(-(uintptr_t)raw & 63);
+  const uint32_t keep = cap < w->cap_obj ? cap : w->cap_obj;
+  if (off != off0 && keep) memmove(raw + off, raw + off0, (size_t)keep * sizeof *w->obj);
+  w->obj_raw = raw;
+  w->obj = (qk__wobj_t *)(void *)(raw + off);
+  w->cap_obj = cap;
+  return 1;
+}
+
 size_t qk_world_bytes(const qk_world_t *w) {
   if (!w) return 0;
-  return sizeof *w + (size_t)w->cap_obj * sizeof *w->obj + (size_t)w->cap_ugen * sizeof *w->ugen +
-         (size_t)w->cap_dnext * sizeof *w->dnext + (size_t)w->cap_order * sizeof *w->order +
-         (size_t)w->cap_cells * sizeof *w->cells + qk_world_pair_bytes(w) +
-         atomic_load_explicit(&w->qbytes, memory_order_relaxed);
+  return sizeof *w + (w->obj_raw ? (size_t)w->cap_obj * sizeof *w->obj + QK__WOBJ_SLACK : 0) +
+         (size_t)w->cap_ugen * sizeof *w->ugen + (size_t)w->cap_dnext * sizeof *w->dnext +
+         (size_t)w->cap_order * sizeof *w->order + (size_t)w->cap_cells * sizeof *w->cells +
+         qk_world_pair_bytes(w) + atomic_load_explicit(&w->qbytes, memory_order_relaxed);
 }
 
 /* ---- filing ---------------------------------------------------------------------- */
@@ -297,11 +314,7 @@ qk_status_t qk_world_add(qk_world_t *w, const qk_shape_t *shape, uint64_t tag, q
       w->dnext = nd;
       w->cap_dnext = cap;
     }
-    qk__wobj_t *no =
-        qk__realloc(&w->alloc, w->obj, (size_t)w->cap_obj * sizeof *no, (size_t)cap * sizeof *no);
-    if (!no) return QK_ERR_NOMEM;
-    w->obj = no;
-    w->cap_obj = cap;
+    if (!qk__world_obj_resize(w, cap)) return QK_ERR_NOMEM;
   }
   uint32_t i;
   if (w->free_head != QK_NONE) {

@@ -235,6 +235,9 @@ static QK__ALWAYS_INLINE void pack_cells_(const qk_world_t *w, qk__wpack_t *pk, 
 #endif
 
 #if defined(__SSE2__)
+/* How far ahead the pack fetches its objects. */
+#define QK__PACK_AHEAD 16
+
 /* The same as pack_cells_, walking the objects of cells [c0, c1) in one run instead of
  * cell by cell (most cells of a sparse world hold one or two objects, and a cell's loop
  * cost as much as its objects): four boxes filling a group are converted and stored as
@@ -256,7 +259,21 @@ static QK__ALWAYS_INLINE void pack_run_(const qk_world_t *w, qk__wpack_t *pk, co
   uint32_t m = cells[c0].start, next = cn->start, ci = c0; /* (ci: the cell, noted in obj) */
   const uint32_t me = cells[c1].start;
   qk__wobj_t *obj = w->obj;
+  /* The objects lie in slot order, walked here in cell order: each a line from anywhere
+   * in the array. Where the array outgrows the caches, each is asked for QK__PACK_AHEAD
+   * objects ahead (pf: the next one to ask for). */
+  const int far = qk__world_far(w);
+  uint32_t pf = m;
   while (m < me) {
+    if (far) {
+      const uint32_t want = me - m > QK__PACK_AHEAD ? m + QK__PACK_AHEAD : me;
+      for (; pf < want; pf++) {
+        if (cell_boxes == 2) /* (its cell is noted in it: a write) */
+          __builtin_prefetch(&obj[ord[pf]], 1);
+        else
+          __builtin_prefetch(&obj[ord[pf]], 0);
+      }
+    }
     if (!(m & 3) && m + 4 <= me) {
       qk__wobj_t *o0 = &obj[ord[m]], *o1 = &obj[ord[m + 1]], *o2 = &obj[ord[m + 2]],
                  *o3 = &obj[ord[m + 3]];
@@ -421,7 +438,7 @@ typedef struct merge {
   /* Or NULL (only with skip): a bit an old cell, set for those that lose a dirty object
    * and those before which (or in which) a dirty record goes. The cells between two set
    * bits keep every object and meet no record: copied as a run, without a key or a skip
-   * bit read (cells_touched). */
+   * bit read (cell_touched). */
   const uint64_t *touch;
 } merge_t;
 
@@ -846,38 +863,38 @@ static inline int cell_lt(const qk__wcell_t *c, uint64_t ly, uint32_t x) {
 static inline void touch_set(uint64_t *tb, uint32_t c) { tb[c >> 6] |= UINT64_C(1) << (c & 63); }
 
 /*
- * Touch (merge_t) the old cells [0, n) that the dirty records d[0 .. m_d) go before or
- * into: the first cell not before each, searched from the cell its object left (noted by
- * the last pack: a moved object's new cell is mostly a neighbour of its old one, a few
- * cells or a row away in the order) by galloping, then bisection.
+ * Touch (merge_t) the old cell [0, n) that dirty record r goes before or into: the first
+ * cell not before it, searched from h, the cell its object left (noted by the last pack:
+ * a moved object's new cell is mostly a neighbour of its old one, a few cells or a row away
+ * in the order) by galloping, then bisection. Done as each object is filed, while its
+ * line is at hand: after the sort, reading each record's object again for h missed the
+ * caches in large worlds.
  */
-static void cells_touched(const qk_world_t *w, uint64_t *tb, const drec_t *d, size_t m_d,
-                          uint32_t n) {
+static void cell_touched(const qk_world_t *w, uint64_t *tb, const drec_t *r, uint32_t h,
+                         uint32_t n) {
   const qk__wcell_t *oc = w->cells;
-  for (size_t k = 0; k < m_d; k++) {
-    const uint64_t ly = d[k].ly;
-    const uint32_t x = d[k].x, h = w->obj[d[k].slot].cell;
-    uint32_t lo, hi; /* the answer in [lo, hi] */
-    if (cell_lt(&oc[h], ly, x)) {
-      uint32_t s = 1;
-      lo = h + 1;
-      while (lo + s - 1 < n && cell_lt(&oc[lo + s - 1], ly, x)) lo += s, s *= 2;
-      hi = lo + s - 1 < n ? lo + s - 1 : n;
-    } else {
-      uint32_t s = 1;
-      hi = h;
-      while (hi >= s && !cell_lt(&oc[hi - s], ly, x)) hi -= s, s *= 2;
-      lo = hi >= s ? hi - s + 1 : 0;
-    }
-    while (lo < hi) {
-      const uint32_t mid = lo + (hi - lo) / 2;
-      if (cell_lt(&oc[mid], ly, x))
-        lo = mid + 1;
-      else
-        hi = mid;
-    }
-    if (lo < n) touch_set(tb, lo);
+  const uint64_t ly = r->ly;
+  const uint32_t x = r->x;
+  uint32_t lo, hi; /* the answer in [lo, hi] */
+  if (cell_lt(&oc[h], ly, x)) {
+    uint32_t s = 1;
+    lo = h + 1;
+    while (lo + s - 1 < n && cell_lt(&oc[lo + s - 1], ly, x)) lo += s, s *= 2;
+    hi = lo + s - 1 < n ? lo + s - 1 : n;
+  } else {
+    uint32_t s = 1;
+    hi = h;
+    while (hi >= s && !cell_lt(&oc[hi - s], ly, x)) hi -= s, s *= 2;
+    lo = hi >= s ? hi - s + 1 : 0;
   }
+  while (lo < hi) {
+    const uint32_t mid = lo + (hi - lo) / 2;
+    if (cell_lt(&oc[mid], ly, x))
+      lo = mid + 1;
+    else
+      hi = mid;
+  }
+  if (lo < n) touch_set(tb, lo);
 }
 
 void qk__world_pack_free(qk_world_t *w, qk__wpack_t *pk) {
@@ -886,6 +903,9 @@ void qk__world_pack_free(qk_world_t *w, qk__wpack_t *pk) {
   pk->fgrp = NULL, pk->hb = NULL;
   pk->cap_fgrp = pk->cap_hb = 0;
 }
+
+/* How far ahead in the dirty list the filing asks for its objects. */
+#define QK__DIRTY_AHEAD 8
 
 qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
   const qk_allocator_t *a = &w->alloc;
@@ -966,9 +986,22 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
   } else if (nsk) {
     /* Every dirty object is live (see nsk), marked in skip, and no longer dirty once filed
      * (the merge reads skip, nothing else the flag): no second walk of the list. */
+    /* (the list's objects lie anywhere in the array: where it outgrows the caches, each
+     * asked for QK__DIRTY_AHEAD entries of the list ahead, by a second cursor) */
+    uint32_t ahead = qk__world_far(w) ? w->dirty_head : QK_NONE;
+    for (int k = 0; k < QK__DIRTY_AHEAD && ahead != QK_NONE; k++) ahead = w->dnext[ahead];
     for (uint32_t i = w->dirty_head; i != QK_NONE; i = w->dnext[i]) {
-      if (touch) touch_set(touch, w->obj[i].cell); /* (its old cell, which loses it) */
-      d[m_d++] = file_dirty(w, &w->obj[i], i, true);
+      if (ahead != QK_NONE) {
+        __builtin_prefetch(&w->obj[ahead], 1);
+        ahead = w->dnext[ahead];
+      }
+      const uint32_t h = w->obj[i].cell;
+      d[m_d] = file_dirty(w, &w->obj[i], i, true);
+      if (touch) {
+        touch_set(touch, h); /* (its old cell, which loses it) */
+        cell_touched(w, touch, &d[m_d], h, n_oc);
+      }
+      m_d++;
       skip[i >> 6] |= (uint64_t)1 << (i & 63);
     }
   } else {
@@ -987,7 +1020,6 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
    * followed by the dirty entries of the same cell. The keys are compared once a cell,
    * not once an object. On threads by ranges of old cells (merge_threads), else here. */
   if (!merged && !merge_threads(w, d, m_d, NULL, skip, ord, cells, n_oc, &m, &nc)) {
-    if (touch) cells_touched(w, touch, d, m_d, n_oc);
     merge_t mg = {w, d, ord, cells, w->lv_first, w->lv_n, 0, 0, skip, touch};
     memset(w->lv_first, 0, sizeof w->lv_first);
     memset(w->lv_n, 0, sizeof w->lv_n);
@@ -1019,10 +1051,7 @@ qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
    * failed shrink is harmless). */
   /* And the object slots' slack after growth (a failed shrink is harmless). */
   if (w->cap_obj > w->n_obj + w->n_obj / 32 + 16) {
-    uint32_t cap = w->n_obj + w->n_obj / 64 + 16;
-    qk__wobj_t *no =
-        qk__realloc(a, w->obj, (size_t)w->cap_obj * sizeof *no, (size_t)cap * sizeof *no);
-    if (no) w->obj = no, w->cap_obj = cap;
+    (void)qk__world_obj_resize(w, w->n_obj + w->n_obj / 64 + 16);
   }
   /* (Not with no object slots at all: an add whose slot array could not be grown leaves
    * cap_obj 0 behind a grown ugen, and a realloc to 0 bytes frees it and returns NULL.) */
