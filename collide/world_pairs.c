@@ -136,6 +136,75 @@ static size_t rows_cnt(uint32_t n_obj, size_t n) {
   return c > n_obj + 1 + more ? c : n_obj + 1 + more;
 }
 
+/*
+ * Many keys over very many slots, where bucket_plan's 32-bit keys do not fit (10^6 slots:
+ * b takes 20 bits): the two counting sorts would scatter through two arrays of a count a
+ * slot (4 MB each) and the keys at random, several misses of the caches a key (a quarter
+ * of the frame of the benchmark's uniform scene at 10^6 objects). Instead the keys are
+ * sorted whole (sort_wide): put in buckets of 2^ab consecutive slots a (at most 1024
+ * buckets: as many cursors as stay in cache), then each bucket, in cache, by a counting
+ * sort on a mod 2^ab and its rows by b; the rows are then read off the sorted keys, as
+ * the sparse sort's are. From QK__WIDE_SLOTS slots (two counts a slot no longer fit a
+ * core's L2).
+ */
+#define QK__WIDE_SLOTS ((uint32_t)1 << 17)
+
+static int rows_wide(size_t n, uint32_t n_b) {
+  unsigned ab, bb;
+  return n * 4 >= n_b && n_b >= QK__WIDE_SLOTS && !bucket_plan(n, n_b, &ab, &bb);
+}
+
+/* Rows of more keys than this are sorted by qsort, not by insertion. */
+#define QK__WIDE_ROW 32
+
+static int key_cmp(const void *p, const void *q) {
+  const uint64_t a = *(const uint64_t *)p, b = *(const uint64_t *)q;
+  return (a > b) - (a < b);
+}
+
+/* Sort the n keys (slots a below n_b) into key order, through tmp (n keys); cnt holds at
+ * least (n_b >> 8) + 2 + 2^(bits(n_b) - 10) + 1 entries (rows_cnt's 2 (n_b + 1) do). */
+static void sort_wide(uint64_t *keys, uint64_t *tmp, size_t n, uint32_t n_b, uint32_t *cnt) {
+  unsigned ab = 8;
+  while (((uint64_t)n_b >> ab) > 1024) ab++;
+  const uint32_t nbk = (n_b >> ab) + 1, W = (uint32_t)1 << ab;
+  uint32_t *bc = cnt, *ca = cnt + nbk + 1;
+  memset(bc, 0, ((size_t)nbk + 1) * sizeof *bc);
+  QK__UNROLL4
+  for (size_t i = 0; i < n; i++) bc[(keys[i] >> (32 + ab)) + 1]++;
+  for (uint32_t k = 1; k <= nbk; k++) bc[k] += bc[k - 1];
+  QK__UNROLL4
+  for (size_t i = 0; i < n; i++) tmp[bc[keys[i] >> (32 + ab)]++] = keys[i];
+  /* bc[k] is now bucket k's end, where k + 1's starts. */
+  for (uint32_t k = 0, lo = 0; k < nbk; lo = bc[k], k++) {
+    const uint32_t hi = bc[k];
+    if (hi - lo < 2) {
+      if (hi > lo) keys[lo] = tmp[lo];
+      continue;
+    }
+    memset(ca, 0, ((size_t)W + 1) * sizeof *ca);
+    for (uint32_t i = lo; i < hi; i++) ca[((uint32_t)(tmp[i] >> 32) & (W - 1)) + 1]++;
+    for (uint32_t a = 1; a <= W; a++) ca[a] += ca[a - 1];
+    for (uint32_t i = lo; i < hi; i++) keys[lo + ca[(uint32_t)(tmp[i] >> 32) & (W - 1)]++] = tmp[i];
+    /* Each row's b in order: by insertion (rows of a pair or two in uniform scenes), by
+     * qsort when long (a large object's). */
+    for (uint32_t i = lo, e; i < hi; i = e) {
+      const uint64_t a = keys[i] >> 32;
+      for (e = i + 1; e < hi && keys[e] >> 32 == a;) e++;
+      if (e - i > QK__WIDE_ROW) {
+        qsort(keys + i, e - i, sizeof *keys, key_cmp);
+        continue;
+      }
+      for (uint32_t j = i + 1; j < e; j++) {
+        const uint64_t v = keys[j];
+        uint32_t m = j;
+        for (; m > i && keys[m - 1] > v; m--) keys[m] = keys[m - 1];
+        keys[m] = v;
+      }
+    }
+  }
+}
+
 /* The bucket plan's digits: d0 and d1 bits, the low digit's mask, b's mask. */
 typedef struct bdig {
   unsigned ab, bb, d0, d1, sh;
@@ -282,16 +351,22 @@ static QK__ALWAYS_INLINE int make_rows(const qk_allocator_t *al, uint64_t *keys,
   uint32_t *rb = r->b;
   r->n = n;
   if (flat) *flat = NULL;
-  if (n * 4 < n_b) {
-    uint64_t all_or = 0, all_and = ~(uint64_t)0;
-    for (size_t i = 0; i < n; i++) all_or |= keys[i], all_and &= keys[i];
-    for (int sh = 0; n > 1 && sh < 64; sh += 8) {
-      if (!(((all_or ^ all_and) >> sh) & 0xff)) continue;
-      memset(cnt, 0, 257 * sizeof *cnt);
-      for (size_t i = 0; i < n; i++) cnt[(keys[i] >> sh & 0xff) + 1]++;
-      for (int k = 1; k < 257; k++) cnt[k] += cnt[k - 1];
-      for (size_t i = 0; i < n; i++) tmp[cnt[keys[i] >> sh & 0xff]++] = keys[i];
-      memcpy(keys, tmp, n * sizeof *keys); /* the result stays in keys */
+  /* (the wide sort with flat only: make_rows_flat's caller sizes tmp for it) */
+  const int wide = flat && whole && bucket && rows_wide(n, n_b);
+  if (n * 4 < n_b || wide) {
+    if (wide) {
+      sort_wide(keys, tmp, n, n_b, cnt);
+    } else {
+      uint64_t all_or = 0, all_and = ~(uint64_t)0;
+      for (size_t i = 0; i < n; i++) all_or |= keys[i], all_and &= keys[i];
+      for (int sh = 0; n > 1 && sh < 64; sh += 8) {
+        if (!(((all_or ^ all_and) >> sh) & 0xff)) continue;
+        memset(cnt, 0, 257 * sizeof *cnt);
+        for (size_t i = 0; i < n; i++) cnt[(keys[i] >> sh & 0xff) + 1]++;
+        for (int k = 1; k < 257; k++) cnt[k] += cnt[k - 1];
+        for (size_t i = 0; i < n; i++) tmp[cnt[keys[i] >> sh & 0xff]++] = keys[i];
+        memcpy(keys, tmp, n * sizeof *keys); /* the result stays in keys */
+      }
     }
     size_t nz = 0;
     for (size_t i = 0; i < n; i++) nz += !i || keys[i] >> 32 != keys[i - 1] >> 32;
@@ -1610,8 +1685,10 @@ static qk_status_t update(qk_world_t *w) {
   } else if (nr.b) {
     /* one thread: the keys sorted into rows, then merged with the last frame's */
     size_t ccap = total * 4 < n_obj ? 257 : rows_cnt((uint32_t)n_obj, total);
-    /* (the dense sort's scratch holds 32-bit slots, the sparse one's keys) */
-    size_t tbytes = (total * 4 < n_obj ? sizeof(uint64_t) : sizeof(uint32_t)) * tcap;
+    /* (the dense sort's scratch holds 32-bit slots, the sparse and wide ones' keys) */
+    size_t tbytes = (total * 4 < n_obj || rows_wide(total, (uint32_t)n_obj) ? sizeof(uint64_t)
+                                                                            : sizeof(uint32_t)) *
+                    tcap;
     /* (and the key merge's scratch after the sort, half of the keys: see diff) */
     if (tbytes < (tcap / 2 + 1) * sizeof(uint64_t)) tbytes = (tcap / 2 + 1) * sizeof(uint64_t);
     /* The dense sort's scratch goes after the keys when their buffer has the room (it is

@@ -3832,21 +3832,25 @@ static void test_world_scratch_huge_pages(void **s) {
  * and in some frames objects removed and added back in their slots (the same keys, new
  * pairs: ended and began). Boxes of
  * 0.5 to 2 at 0.48 an area unit and moving up to 0.5, as in the benchmark's uniform
- * scene: about 1.5 pairs an object, a third of them changing every frame.
+ * scene: about 1.5 pairs an object, a third of them changing every frame. And 140 000
+ * slots, beyond QK__WIDE_SLOTS (2^17), where the keys are sorted whole, by buckets of
+ * slots (sort_wide), with eight boxes of side 12 among them: rows of over 32 pairs, which
+ * that sort orders by qsort.
  */
 static void test_world_rows_slot_bits(void **s) {
   (void)s;
   QKT_ONE_THREAD_TEST();
-  for (int big = 0; big < 2; big++) {
+  for (int big = 0; big < 3; big++) {
     qkt_rng_t r;
     qkt_rng_seed(&r, g_seed + 5150 + (uint64_t)big);
     qk_world_t *w;
     assert_int_equal(qk_world_new(NULL, &w), QK_OK);
     mirror_t m = {0};
-    const size_t n = big ? 65540 : 65536;
-    const double side = 370;
+    const size_t n = big == 2 ? 140000 : big ? 65540 : 65536;
+    const double side = big == 2 ? 540 : 370;
     for (size_t i = 0; i < n; i++) {
       double bw = 0.5 + 1.5 * qkt_rng_unit(&r), bh = 0.5 + 1.5 * qkt_rng_unit(&r);
+      if (big == 2 && i % 17500 == 0) bw = bh = 12;
       double x = qkt_rng_unit(&r) * (side - bw), y = qkt_rng_unit(&r) * (side - bh);
       m_add(w, &m, (qk_shape_t){QK_SHAPE_BOX, x, y, x + bw, y + bh});
     }
