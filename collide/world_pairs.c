@@ -162,8 +162,9 @@ static int key_cmp(const void *p, const void *q) {
   return (a > b) - (a < b);
 }
 
-/* Sort the n keys (slots a below n_b) into key order, through tmp (n keys); cnt holds at
- * least (n_b >> 8) + 2 + 2^(bits(n_b) - 10) + 1 entries (rows_cnt's 2 (n_b + 1) do). */
+/* Sort the n keys (slots a below n_b) into key order, through tmp (n keys); cnt holds the
+ * buckets' counts and one bucket's (at most 1026 + 2^ab + 1 entries, which rows_cnt's
+ * 2 (n_b + 1) hold). */
 static void sort_wide(uint64_t *keys, uint64_t *tmp, size_t n, uint32_t n_b, uint32_t *cnt) {
   unsigned ab = 8;
   while (((uint64_t)n_b >> ab) > 1024) ab++;
