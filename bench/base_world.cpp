@@ -430,20 +430,17 @@ public:
   }
   void frame(const std::vector<Box> &boxes, PairSum &out) override {
     // (re-inserted only when it leaves its fat volume)
-    if (predict > 0) {
-      for (size_t i = 0; i < boxes.size(); i++) {
-        btDbvtVolume v = vol(boxes[i]);
+    for (size_t i = 0; i < boxes.size(); i++) {
+      btDbvtVolume v = vol(boxes[i]);
+      if (predict > 0) {
         const btVector3 d((btScalar)((boxes[i].xmin - last[i].xmin) * predict),
                           (btScalar)((boxes[i].ymin - last[i].ymin) * predict), 0);
         tree->update(leaf[i], v, d, (btScalar)margin);
-      }
-      last = boxes;
-    } else {
-      for (size_t i = 0; i < boxes.size(); i++) {
-        btDbvtVolume v = vol(boxes[i]);
+      } else {
         tree->update(leaf[i], v, (btScalar)margin);
       }
     }
+    if (predict > 0) last = boxes;
     if (opt_passes > 0) tree->optimizeIncremental(opt_passes);
     Pairs p;
     p.boxes = &boxes;

@@ -352,8 +352,9 @@ static QK__ALWAYS_INLINE int make_rows(const qk_allocator_t *al, uint64_t *keys,
   uint32_t *rb = r->b;
   r->n = n;
   if (flat) *flat = NULL;
-  /* (the wide sort with flat only: make_rows_flat's caller sizes tmp for it) */
-  const int wide = flat && whole && bucket && rows_wide(n, n_b);
+  /* (the wide sort with flat only, whose caller, update, sizes tmp for it; its slots are
+   * every slot from 0: whole) */
+  const int wide = flat && rows_wide(n, n_b);
   if (n * 4 < n_b || wide) {
     if (wide) {
       sort_wide(keys, tmp, n, n_b, cnt);

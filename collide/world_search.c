@@ -458,7 +458,6 @@ static QK__ALWAYS_INLINE int same_level(share_t *s, kc_t *kc, uint32_t a, uint32
 
 /* ---- finer levels: the coarser object's box walked over their sorted cells ---------- */
 
-/* (cy, cx) of cell c before (y, x). */
 /* The first cell of level lv at or after `from` not before (y, x), by a galloping search
  * from `from` (the cells before it are before (y, x)). */
 static uint32_t gallop(const lvinfo_t *lv, const qk__wcell_t *cl, uint32_t from, int64_t y,
