@@ -343,18 +343,20 @@ static QK__ALWAYS_INLINE size_t b_prefix(uint32_t *cb, const uint32_t *ca, uint3
  * then by slot a, which writes only b into its row; both counts come from one read of the keys
  * (cnt: n_a + n_b + 2 entries). Few keys (a sparse world): an LSD radix sort of the keys on the
  * bytes that differ (cnt: 257 entries), so the passes cost the keys, not the slots, then the rows
- * from the sorted keys.
+ * from the sorted keys. tmp64: tmp holds n keys (else n 32-bit slots; the sparse sort's and the
+ * wide one's callers give it n keys). With flat, the keys are left in key order in keys when the
+ * sort makes them so at little cost (*flat = keys), as every sort but the buckets' does.
  */
 static QK__ALWAYS_INLINE int make_rows(const qk_allocator_t *al, uint64_t *keys, uint64_t *tmp,
                                        size_t n, uint32_t *cnt, uint32_t a0, uint32_t n_a,
                                        uint32_t n_b, int bucket, const int whole, qk__prows_t *r,
-                                       uint64_t **flat) {
+                                       uint64_t **flat, const int tmp64) {
   uint32_t *rb = r->b;
   r->n = n;
   if (flat) *flat = NULL;
   /* (the wide sort with flat only, whose caller, update, sizes tmp for it; its slots are
-   * every slot from 0: whole) */
-  const int wide = flat && rows_wide(n, n_b);
+   * every slot from 0) */
+  const int wide = whole && flat && rows_wide(n, n_b);
   if (n * 4 < n_b || wide) {
     if (wide) {
       sort_wide(keys, tmp, n, n_b, cnt);
@@ -434,6 +436,35 @@ static QK__ALWAYS_INLINE int make_rows(const qk_allocator_t *al, uint64_t *keys,
     }
     return 1;
   }
+  /* Else, with room for the keys in tmp, the keys themselves go there by slot b, and the
+   * second sort reads each key's a and b in one plain loop. (The 32-bit form, a at b's
+   * place, leaves b to be known from the place: a loop over the slots b with a short inner
+   * loop each, whose exits were mispredicted at about every slot; measured on the uniform
+   * scene at 10^5 objects, 1.5 keys a slot: the rows 1.89-2.01 -> 1.55-1.73 ms a frame.) */
+  if (tmp64) {
+    QK__UNROLL4
+    for (size_t i = 0; i < n; i++) {
+      const uint64_t k = keys[i];
+      tmp[cb[(uint32_t)k]++] = k;
+    }
+    if (flat) {
+      QK__UNROLL4
+      for (size_t i = 0; i < n; i++) {
+        const uint64_t k = tmp[i];
+        const uint32_t p = ca[(uint32_t)(k >> 32) - a0]++;
+        rb[p] = (uint32_t)k;
+        keys[p] = k;
+      }
+      *flat = keys;
+      return 1;
+    }
+    QK__UNROLL4
+    for (size_t i = 0; i < n; i++) {
+      const uint64_t k = tmp[i];
+      rb[ca[(uint32_t)(k >> 32) - a0]++] = (uint32_t)k;
+    }
+    return 1;
+  }
   QK__UNROLL4
   for (size_t i = 0; i < n; i++) t32[cb[(uint32_t)keys[i]]++] = (uint32_t)(keys[i] >> 32) - a0;
   /* cb[b] is now the end of b's run, where b + 1's starts. */
@@ -455,32 +486,43 @@ static QK__ALWAYS_INLINE int make_rows(const qk_allocator_t *al, uint64_t *keys,
   return 1;
 }
 
+/* Whether make_rows_flat's sort of n keys over n_obj slots wants 8 bytes of scratch a key
+ * (the sparse and wide sorts, and the counting sort past 2^16 slots, whose keys' a and b no
+ * longer fit 32 bits together), else 4 (the buckets', the counting sort's below). */
+static int rows_tmp64(size_t n, uint32_t n_obj) {
+  unsigned ab, bb;
+  if (n * 4 < n_obj || rows_wide(n, n_obj)) return 1;
+  return n_obj > ((uint32_t)1 << 16) && !bucket_plan(n, n_obj, &ab, &bb);
+}
+
 /* make_rows for the one-thread path: every slot, from 0, buckets allowed. With the
  * slots' offset a constant 0 the sorts' loops lose a subtraction a key (measured: 24.8
  * -> 22.2 instructions a pair on the clustered scene at 10^4). */
 __attribute__((noinline)) static int make_rows_all(const qk_allocator_t *al, uint64_t *keys,
                                                    uint64_t *tmp, size_t n, uint32_t *cnt,
                                                    uint32_t n_obj, qk__prows_t *r) {
-  return make_rows(al, keys, tmp, n, cnt, 0, n_obj, n_obj, 1, 1, r, NULL);
+  return make_rows(al, keys, tmp, n, cnt, 0, n_obj, n_obj, 1, 1, r, NULL, 0);
 }
 
 /* make_rows_all that also leaves the rows' keys in order in a flat list, *flat (keys
- * itself), when its sort makes them at little cost (the sparse radix sort and the packed
- * counting sort), else *flat NULL: the merge that follows then reads this frame's keys
- * from the list rather than through the rows (diff_merge given nk). */
+ * itself), when its sort makes them at little cost (every sort but the buckets'), else
+ * *flat NULL: the merge that follows then reads this frame's keys from the list rather
+ * than through the rows (diff_merge given nk). */
 __attribute__((noinline)) static int make_rows_flat(const qk_allocator_t *al, uint64_t *keys,
                                                     uint64_t *tmp, size_t n, uint32_t *cnt,
-                                                    uint32_t n_obj, qk__prows_t *r,
-                                                    uint64_t **flat) {
-  return make_rows(al, keys, tmp, n, cnt, 0, n_obj, n_obj, 1, 1, r, flat);
+                                                    uint32_t n_obj, qk__prows_t *r, uint64_t **flat,
+                                                    int tmp64) {
+  return make_rows(al, keys, tmp, n, cnt, 0, n_obj, n_obj, 1, 1, r, flat, tmp64);
 }
 
-/* make_rows for a thread's range of slots (no buckets: rows_frame did those). */
+/* make_rows for a thread's range of slots (no buckets: rows_frame did those), tmp with
+ * room for the n keys (the range's place in the found keys' buffer); with flat, the keys
+ * left in order in keys as make_rows_flat leaves them. */
 __attribute__((noinline)) static int make_rows_range(const qk_allocator_t *al, uint64_t *keys,
                                                      uint64_t *tmp, size_t n, uint32_t *cnt,
                                                      uint32_t a0, uint32_t n_a, uint32_t n_b,
-                                                     qk__prows_t *r) {
-  return make_rows(al, keys, tmp, n, cnt, a0, n_a, n_b, 0, 0, r, NULL);
+                                                     qk__prows_t *r, uint64_t **flat) {
+  return make_rows(al, keys, tmp, n, cnt, a0, n_a, n_b, 0, 0, r, flat, 1);
 }
 
 /* A slot's object is not the one it held at the last update (removed, or a new one). */
@@ -628,22 +670,25 @@ static int kv_more(const qk_allocator_t *a, qk__kvec_t *v, size_t more) {
   return qk__grow(a, (void **)&v->v, &v->cap, v->n + more, sizeof *v->v) == QK_OK;
 }
 
-/* The last frame's pairs o as keys in order, at k (room for o->n + 4). Each row writes
- * its first four places whatever its length (a row of one or two pairs, as in the uniform
- * scene, then takes no branch of its own; the next row overwrites the places beyond it),
- * and only longer rows loop. */
+/* The last frame's pairs o as keys in order, at k (room for o->n + 4; o may be a view of
+ * some rows, rows_view, whose pairs start at o->start[0]). Each row writes its first four
+ * places whatever its length (a row of one or two pairs, as in the uniform scene, then
+ * takes no branch of its own; the next row overwrites the places beyond it), and only
+ * longer rows loop. */
 static void rows_keys(const qk__prows_t *o, uint64_t *k) {
-  const uint32_t *b = o->b, *row = o->row, *st = o->start;
+  if (!o->n_nz) return;
+  const size_t base = o->start[0];
+  const uint32_t *b = o->b + base, *row = o->row, *st = o->start;
   size_t p = 0, nz = o->n_nz;
-  for (; p < nz && (size_t)st[p] + 4 <= o->n; p++) {
+  for (; p < nz && (size_t)st[p] - base + 4 <= o->n; p++) {
     const uint64_t ka = (uint64_t)row[p] << 32;
-    const size_t i = st[p], e = st[p + 1];
+    const size_t i = st[p] - base, e = st[p + 1] - base;
     k[i] = ka | b[i], k[i + 1] = ka | b[i + 1], k[i + 2] = ka | b[i + 2], k[i + 3] = ka | b[i + 3];
     for (size_t j = i + 4; j < e; j++) k[j] = ka | b[j];
   }
   for (; p < nz; p++) {
     const uint64_t ka = (uint64_t)row[p] << 32;
-    for (size_t j = st[p], e = st[p + 1]; j < e; j++) k[j] = ka | b[j];
+    for (size_t j = st[p] - base, e = st[p + 1] - base; j < e; j++) k[j] = ka | b[j];
   }
 }
 
@@ -1091,7 +1136,7 @@ static void sjob_run(unsigned t, void *ud) {
     uint32_t *cnt = qk__realloc(al, NULL, 0, cn * sizeof *cnt);
     J->lr[t].b = J->b + J->ks[t];
     if (!cnt || !make_rows_range(al, J->part + J->ks[t], J->keys + J->ks[t], m, cnt, s0, s1 - s0,
-                                 n_obj, &J->lr[t]))
+                                 n_obj, &J->lr[t], NULL))
       J->nomem[t] = 1;
     qk__free(al, cnt, cn * sizeof *cnt);
   }
@@ -1258,6 +1303,7 @@ typedef struct pjob {
   const qk__prows_t *o;  /* the last frame's rows */
   qk__prows_t *r;        /* the new rows */
   uint64_t *keys;        /* the found keys; scratch after the scatter */
+  uint64_t *ck;          /* the last frame's keys in order, when kept and not dirty */
   const qk__kvec_t *src; /* or NULL: chunk t's keys (the search's thread t's), else keys' */
   uint64_t *part;        /* the keys by partition (not bucketed) */
   size_t n;
@@ -1277,6 +1323,7 @@ typedef struct pjob {
   qk__kvec_t bv[QK__RMAX], ev[QK__RMAX];
   size_t bbase[QK__RMAX], ebase[QK__RMAX];
   int nomem[QK__RMAX];
+  int kept[QK__RMAX]; /* the range's keys are in order in part after its merge */
 } pjob_t;
 
 /* The rows of o whose slot is in [s0, s1), as rows (sharing o's arrays). */
@@ -1301,6 +1348,7 @@ static int range_rows(pjob_t *J, unsigned t) {
   qk__prows_t *lr = &J->lr[t];
   lr->b = J->r->b + k0;
   uint64_t *scr = J->keys + k0; /* 8 m bytes of scratch */
+  uint64_t *nk = NULL;          /* (not bucketed: the range's keys in order, in part) */
   if (J->bucketed) {
     const uint32_t W = (uint32_t)1 << J->g.ab;
     size_t cn = ((size_t)1 << J->g.d0) + ((size_t)1 << J->g.d1);
@@ -1318,7 +1366,7 @@ static int range_rows(pjob_t *J, unsigned t) {
     size_t cn = m * 4 < J->n_obj ? 257 : (size_t)(s1 - s0) + J->n_obj + 2;
     uint32_t *cnt = qk__realloc(al, NULL, 0, cn * sizeof *cnt);
     if (!cnt) return 0;
-    int ok = make_rows_range(al, J->part + k0, scr, m, cnt, s0, s1 - s0, J->n_obj, lr);
+    int ok = make_rows_range(al, J->part + k0, scr, m, cnt, s0, s1 - s0, J->n_obj, lr, &nk);
     qk__free(al, cnt, cn * sizeof *cnt);
     if (!ok) return 0;
   }
@@ -1335,8 +1383,13 @@ static int range_rows(pjob_t *J, unsigned t) {
   /* The lists grow in locals: the ranges' list heads share cache lines in J, and every
    * key added writes its count (false sharing between the threads). */
   qk__kvec_t bv = J->bv[t], ev = J->ev[t];
+  /* The merge as the one-thread path's: from the range's keys in order, and the last
+   * frame's when kept (the range's old pairs are a run of them), its scratch in the sort's
+   * (free after it), so that the range's keys stay in order for the next frame's. */
+  uint64_t *ck = J->ck && ov.n ? J->ck + ov.start[0] : NULL;
   int kept;
-  int ok = diff(J->w, &ov, lr, J->dirty, NULL, NULL, NULL, &bv, &ev, &kept);
+  int ok = diff(J->w, &ov, lr, J->dirty, ck, nk, nk ? scr : NULL, &bv, &ev, &kept);
+  J->kept[t] = kept && nk;
   J->bv[t] = bv, J->ev[t] = ev;
   return ok;
 }
@@ -1394,9 +1447,12 @@ static void pjob_phase(pjob_t *J, int ph) {
 
 /* Rows, began and ended on nt threads (keys: the found keys, n of them, in a buffer of
  * at least n; used as scratch); QK_ERR_NOMEM leaves nothing allocated in *r (but b),
- * *bvo, *evo. */
+ * *bvo, *evo. *kept: this frame's n keys in order, in a block of n keys that the caller
+ * then owns (as the one-thread path's make_rows_flat leaves them), or NULL. */
 static int rows_frame(const qk_world_t *w, uint64_t *keys, const qk__kvec_t *src, size_t n,
-                      qk__prows_t *r, int dirty, unsigned nt, qk__kvec_t *bvo, qk__kvec_t *evo) {
+                      qk__prows_t *r, int dirty, unsigned nt, qk__kvec_t *bvo, qk__kvec_t *evo,
+                      uint64_t **kept) {
+  *kept = NULL;
   const qk_allocator_t *al = &w->alloc;
   uint32_t n_obj = w->n_obj;
   if (nt > QK__RMAX) nt = QK__RMAX;
@@ -1406,6 +1462,7 @@ static int rows_frame(const qk_world_t *w, uint64_t *keys, const qk__kvec_t *src
   J->w = w, J->o = &w->cur, J->r = r, J->keys = keys, J->n = n, J->n_obj = n_obj, J->nt = nt;
   J->src = src;
   J->dirty = dirty;
+  J->ck = dirty ? NULL : qk__world_kept_keys(w);
   unsigned ab, bb;
   if (n * 4 >= n_obj && bucket_plan(n, n_obj, &ab, &bb)) {
     J->bucketed = 1, J->g = bucket_digits(ab, bb), J->pb = ab;
@@ -1470,6 +1527,10 @@ static int rows_frame(const qk_world_t *w, uint64_t *keys, const qk__kvec_t *src
   *bvo = J->bj, *evo = J->ej;
   J->bj = J->ej = (qk__kvec_t){0};
   ok = 1;
+  /* (every range's keys in order: part holds the frame's, range after range) */
+  int all = J->part != NULL;
+  for (t = 0; t < nt; t++) all = all && J->kept[t];
+  if (all) *kept = J->part, J->part = NULL;
 out:
   qk__free(al, J->bj.v, J->bj.cap * sizeof(uint64_t));
   qk__free(al, J->ej.v, J->ej.cap * sizeof(uint64_t));
@@ -1670,6 +1731,7 @@ static qk_status_t update(qk_world_t *w) {
   size_t rcap = only_new ? total + w->cur.n + 1 : tcap;
   int dirty = w->ident_dirty, ok = 0, kept = 0;
   const uint64_t *keep = NULL; /* this frame's keys in order, to be kept (see ckeys) */
+  uint64_t *tkeep = NULL;      /* the same from the threads' rows, in a block of their own */
   qk__prows_t nr = {0};
   qk__kvec_t bv = {0}, ev = {0};
   /* The new rows go in the buffer of the frame before last when it is large enough
@@ -1683,14 +1745,12 @@ static qk_status_t update(qk_world_t *w) {
   }
   if (nr.b && nt > 1 && !only_new) {
     /* on threads: the same sorts and merge, by ranges of slots */
-    ok = rows_frame(w, found.v, split ? src : NULL, total, &nr, dirty, nt, &bv, &ev);
+    ok = rows_frame(w, found.v, split ? src : NULL, total, &nr, dirty, nt, &bv, &ev, &tkeep);
   } else if (nr.b) {
     /* one thread: the keys sorted into rows, then merged with the last frame's */
     size_t ccap = total * 4 < n_obj ? 257 : rows_cnt((uint32_t)n_obj, total);
-    /* (the dense sort's scratch holds 32-bit slots, the sparse and wide ones' keys) */
-    size_t tbytes = (total * 4 < n_obj || rows_wide(total, (uint32_t)n_obj) ? sizeof(uint64_t)
-                                                                            : sizeof(uint32_t)) *
-                    tcap;
+    const int t64 = rows_tmp64(total, (uint32_t)n_obj);
+    size_t tbytes = (t64 ? sizeof(uint64_t) : sizeof(uint32_t)) * tcap;
     /* (and the key merge's scratch after the sort, half of the keys: see diff) */
     if (tbytes < (tcap / 2 + 1) * sizeof(uint64_t)) tbytes = (tcap / 2 + 1) * sizeof(uint64_t);
     /* The dense sort's scratch goes after the keys when their buffer has the room (it is
@@ -1717,7 +1777,7 @@ static qk_status_t update(qk_world_t *w) {
       /* The last frame's keys when kept; the merge's scratch in the sort's (free after
        * it), so that this frame's keys stay. */
       uint64_t *ck = dirty ? NULL : qk__world_kept_keys(w);
-      ok = make_rows_flat(al, found.v, tmp, total, cnt, (uint32_t)n_obj, &nr, &nk) &&
+      ok = make_rows_flat(al, found.v, tmp, total, cnt, (uint32_t)n_obj, &nr, &nk, t64) &&
            diff(w, &w->cur, &nr, dirty, ck, nk, tmp, &bv, &ev, &kept);
       if (ok && kept && nk) keep = nk;
     }
@@ -1736,6 +1796,7 @@ static qk_status_t update(qk_world_t *w) {
   } else {
     qk__free(al, w->ckeys.v, w->ckeys.cap * sizeof *w->ckeys.v);
     w->ckeys = (qk__kvec_t){0};
+    if (tkeep) w->ckeys = (qk__kvec_t){tkeep, total, total};
   }
   keep_tkeys(w, tk);
   keep_keys(w, &found, total);
