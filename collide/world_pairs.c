@@ -1480,14 +1480,19 @@ static int rows_frame(const qk_world_t *w, uint64_t *keys, const qk__kvec_t *src
   J->pst = J->pc + pcn, J->ca = can ? J->pst + psn : NULL;
   if (ptn && !(J->part = qk__realloc(al, NULL, 0, ptn * sizeof *J->part))) goto out;
   pjob_phase(J, 0);
-  /* The partitions' starts, the ranges (about n / nt keys each) and the chunks' cursors
-   * (a partition's keys chunk by chunk). */
+  /* The partitions' starts, the ranges and the chunks' cursors (a partition's keys chunk
+   * by chunk). The ranges take about equal work, a key counted as two slots: a range's
+   * sort and merge cost about 8 ns a key and its counts' passes over its slots about 5 ns
+   * a slot (measured on the uniform scene at 10^5 objects, whose rows are longer at the
+   * low slots: ranges of equal keys, 29,700 and 71,300 slots, took 0.78 and 1.07 ms). */
+  const uint64_t work = (uint64_t)n + n_obj / 2;
   size_t s = 0;
   unsigned t = 1;
   J->rp[0] = 0;
   for (uint32_t p = 0; p < J->np; p++) {
     J->pst[p] = (uint32_t)s;
-    for (; t < nt && s >= n * t / nt; t++) J->rp[t] = p;
+    const uint64_t done = s + (((uint64_t)p << J->pb) >> 1);
+    for (; t < nt && done >= work * t / nt; t++) J->rp[t] = p;
     for (unsigned u = 0; u < nt; u++) {
       uint32_t *c = &J->pc[(size_t)u * (J->np + 1) + p], x = *c;
       *c = (uint32_t)s, s += x;
