@@ -154,58 +154,6 @@ static int rows_wide(size_t n, uint32_t n_b) {
   return n * 4 >= n_b && n_b >= QK__WIDE_SLOTS && !bucket_plan(n, n_b, &ab, &bb);
 }
 
-/* Rows of more keys than this are sorted by qsort, not by insertion. */
-#define QK__WIDE_ROW 32
-
-static int key_cmp(const void *p, const void *q) {
-  const uint64_t a = *(const uint64_t *)p, b = *(const uint64_t *)q;
-  return (a > b) - (a < b);
-}
-
-/* Sort the n keys (slots a below n_b) into key order, through tmp (n keys); cnt holds the
- * buckets' counts and one bucket's (at most 1026 + 2^ab + 1 entries, which rows_cnt's
- * 2 (n_b + 1) hold). */
-static void sort_wide(uint64_t *keys, uint64_t *tmp, size_t n, uint32_t n_b, uint32_t *cnt) {
-  unsigned ab = 8;
-  while (((uint64_t)n_b >> ab) > 1024) ab++;
-  const uint32_t nbk = (n_b >> ab) + 1, W = (uint32_t)1 << ab;
-  uint32_t *bc = cnt, *ca = cnt + nbk + 1;
-  memset(bc, 0, ((size_t)nbk + 1) * sizeof *bc);
-  QK__UNROLL4
-  for (size_t i = 0; i < n; i++) bc[(keys[i] >> (32 + ab)) + 1]++;
-  for (uint32_t k = 1; k <= nbk; k++) bc[k] += bc[k - 1];
-  QK__UNROLL4
-  for (size_t i = 0; i < n; i++) tmp[bc[keys[i] >> (32 + ab)]++] = keys[i];
-  /* bc[k] is now bucket k's end, where k + 1's starts. */
-  for (uint32_t k = 0, lo = 0; k < nbk; lo = bc[k], k++) {
-    const uint32_t hi = bc[k];
-    if (hi - lo < 2) {
-      if (hi > lo) keys[lo] = tmp[lo];
-      continue;
-    }
-    memset(ca, 0, ((size_t)W + 1) * sizeof *ca);
-    for (uint32_t i = lo; i < hi; i++) ca[((uint32_t)(tmp[i] >> 32) & (W - 1)) + 1]++;
-    for (uint32_t a = 1; a <= W; a++) ca[a] += ca[a - 1];
-    for (uint32_t i = lo; i < hi; i++) keys[lo + ca[(uint32_t)(tmp[i] >> 32) & (W - 1)]++] = tmp[i];
-    /* Each row's b in order: by insertion (rows of a pair or two in uniform scenes), by
-     * qsort when long (a large object's). */
-    for (uint32_t i = lo, e; i < hi; i = e) {
-      const uint64_t a = keys[i] >> 32;
-      for (e = i + 1; e < hi && keys[e] >> 32 == a;) e++;
-      if (e - i > QK__WIDE_ROW) {
-        qsort(keys + i, e - i, sizeof *keys, key_cmp);
-        continue;
-      }
-      for (uint32_t j = i + 1; j < e; j++) {
-        const uint64_t v = keys[j];
-        uint32_t m = j;
-        for (; m > i && keys[m - 1] > v; m--) keys[m] = keys[m - 1];
-        keys[m] = v;
-      }
-    }
-  }
-}
-
 /* The bucket plan's digits: d0 and d1 bits, the low digit's mask, b's mask. */
 typedef struct bdig {
   unsigned ab, bb, d0, d1, sh;
@@ -251,6 +199,78 @@ static void excl_scan(uint32_t *c, size_t n) {
     c[j] = s, s += x;
   }
 #endif
+}
+
+/* One stable counting pass of the m keys at src into dst by the digit (k >> sh) & mask
+ * (k the key, sh < 64), through the counts c (mask + 1 entries, a multiple of four). */
+static void wide_pass(uint64_t *dst, const uint64_t *src, uint32_t m, unsigned sh, uint32_t mask,
+                      uint32_t *c) {
+  memset(c, 0, ((size_t)mask + 1) * sizeof *c);
+  QK__UNROLL4
+  for (uint32_t i = 0; i < m; i++) c[(src[i] >> sh) & mask]++;
+  excl_scan(c, (size_t)mask + 1);
+  QK__UNROLL4
+  for (uint32_t i = 0; i < m; i++) dst[c[(src[i] >> sh) & mask]++] = src[i];
+}
+
+/* Buckets of fewer keys than this are sorted by insertion. */
+#define QK__WIDE_SMALL 24
+
+/* Sort the n keys (slots a and b below n_b) into key order, through tmp (n keys); cnt holds
+ * the buckets' counts and one digit's (at most 1026 + max(2^11, 2^ab) entries, which
+ * rows_cnt's 2 (n_b + 1) hold, n_b being at least QK__WIDE_SLOTS). The keys go into
+ * buckets of 2^ab consecutive slots a (at most 1024 buckets: as many cursors as stay in
+ * cache), then each bucket, in cache, by an LSD radix sort: slot b in digits of at most 11
+ * bits, then a mod 2^ab. (Its rows were sorted by insertion after a counting sort on
+ * a mod 2^ab before: rows of one or two keys in the uniform scene, whose lengths and order
+ * the branches mispredicted.) Each bucket's slots b go to rb while it is in cache; returns
+ * the number of rows (slots a with keys). */
+static size_t sort_wide(uint64_t *keys, uint64_t *tmp, size_t n, uint32_t n_b, uint32_t *cnt,
+                        uint32_t *rb) {
+  unsigned ab = 8, bb = 1;
+  while (((uint64_t)n_b >> ab) > 1024) ab++;
+  while (bb < 32 && ((uint64_t)1 << bb) < n_b) bb++;
+  const unsigned np = (bb + 10) / 11, d = (bb + np - 1) / np; /* b's digits: np of d bits */
+  const uint32_t nbk = (n_b >> ab) + 1, W = (uint32_t)1 << ab;
+  uint32_t *bc = cnt, *c = cnt + nbk + 1;
+  memset(bc, 0, ((size_t)nbk + 1) * sizeof *bc);
+  QK__UNROLL4
+  for (size_t i = 0; i < n; i++) bc[(keys[i] >> (32 + ab)) + 1]++;
+  for (uint32_t k = 1; k <= nbk; k++) bc[k] += bc[k - 1];
+  QK__UNROLL4
+  for (size_t i = 0; i < n; i++) tmp[bc[keys[i] >> (32 + ab)]++] = keys[i];
+  /* bc[k] is now bucket k's end, where k + 1's starts. */
+  size_t nz = 0;
+  for (uint32_t k = 0, lo = 0; k < nbk; lo = bc[k], k++) {
+    const uint32_t m = bc[k] - lo;
+    uint64_t *kb = keys + lo, *tb = tmp + lo;
+    if (m < QK__WIDE_SMALL) {
+      for (uint32_t j = 0; j < m; j++) {
+        const uint64_t v = tb[j];
+        uint32_t i = j;
+        for (; i > 0 && kb[i - 1] > v; i--) kb[i] = kb[i - 1];
+        kb[i] = v;
+      }
+    } else {
+      /* b's digits, then a mod 2^ab: np + 1 passes between tb and kb, from tb */
+      uint64_t *src = tb, *dst = kb;
+      for (unsigned p = 0; p < np; p++) {
+        wide_pass(dst, src, m, p * d, ((uint32_t)1 << d) - 1, c);
+        uint64_t *t = src;
+        src = dst, dst = t;
+      }
+      wide_pass(dst, src, m, 32, W - 1, c);
+      if (dst != kb) memcpy(kb, dst, (size_t)m * sizeof *kb);
+    }
+    /* (a bucket's rows are its own: the first key starts one) */
+    uint64_t last = m ? ~kb[0] : 0;
+    for (uint32_t i = 0; i < m; i++) {
+      nz += kb[i] >> 32 != last >> 32;
+      rb[lo + i] = (uint32_t)kb[i];
+      last = kb[i];
+    }
+  }
+  return nz;
 }
 
 /* One bucket (m keys at src, as (a mod W) << bb | b, for na slots from a0) sorted by its
@@ -358,8 +378,9 @@ static QK__ALWAYS_INLINE int make_rows(const qk_allocator_t *al, uint64_t *keys,
    * every slot from 0) */
   const int wide = whole && flat && rows_wide(n, n_b);
   if (n * 4 < n_b || wide) {
+    size_t nz = 0;
     if (wide) {
-      sort_wide(keys, tmp, n, n_b, cnt);
+      nz = sort_wide(keys, tmp, n, n_b, cnt, rb);
     } else {
       uint64_t all_or = 0, all_and = ~(uint64_t)0;
       for (size_t i = 0; i < n; i++) all_or |= keys[i], all_and &= keys[i];
@@ -371,15 +392,30 @@ static QK__ALWAYS_INLINE int make_rows(const qk_allocator_t *al, uint64_t *keys,
         for (size_t i = 0; i < n; i++) tmp[cnt[keys[i] >> sh & 0xff]++] = keys[i];
         memcpy(keys, tmp, n * sizeof *keys); /* the result stays in keys */
       }
+      for (size_t i = 0; i < n; i++) nz += !i || keys[i] >> 32 != keys[i - 1] >> 32;
     }
-    size_t nz = 0;
-    for (size_t i = 0; i < n; i++) nz += !i || keys[i] >> 32 != keys[i - 1] >> 32;
     if (!rows_alloc(al, r, nz)) return 0;
+    /* Every key writes a row and start at the next place, which only a row's first key
+     * keeps (no branch: rows of one or two keys at random in the uniform scene; as
+     * rows_fill). The writes stay within row[0 .. nz] and start[0 .. nz]. (The wide sort
+     * wrote the slots b.) */
     nz = 0;
-    for (size_t i = 0; i < n; i++) {
-      if (!i || keys[i] >> 32 != keys[i - 1] >> 32)
-        r->row[nz] = (uint32_t)(keys[i] >> 32), r->start[nz++] = (uint32_t)i;
-      rb[i] = (uint32_t)keys[i];
+    uint64_t last = n ? ~keys[0] : 0; /* (the first key starts a row) */
+    if (wide) {
+      for (size_t i = 0; i < n; i++) {
+        const uint64_t k = keys[i];
+        r->row[nz] = (uint32_t)(k >> 32), r->start[nz] = (uint32_t)i;
+        nz += k >> 32 != last >> 32;
+        last = k;
+      }
+    } else {
+      for (size_t i = 0; i < n; i++) {
+        const uint64_t k = keys[i];
+        r->row[nz] = (uint32_t)(k >> 32), r->start[nz] = (uint32_t)i;
+        nz += k >> 32 != last >> 32;
+        rb[i] = (uint32_t)k;
+        last = k;
+      }
     }
     r->start[nz] = (uint32_t)n;
     if (flat) *flat = keys;
