@@ -407,6 +407,9 @@ int qk__world_obj_resize(qk_world_t *w, uint32_t cap);
  * longer for it (the sparse huge scene at 10^4 objects). */
 #define QK__WORLD_FAR_SLOTS 32768u
 static inline int qk__world_far(const qk_world_t *w) { return w->n_obj >= QK__WORLD_FAR_SLOTS; }
+/* How many pairs ahead a walk of the current pairs' keys asks for slot b's generation,
+ * in a far world. */
+#define QK__WALK_AHEAD 16
 
 /* Bring the order up to date (file the dirty objects, drop removed ones) and fill the
  * pack. QK_ERR_NOMEM leaves the world unchanged; the caller frees the pack with

@@ -1923,7 +1923,15 @@ qk_status_t qk_world_pairs(const qk_world_t *w, qk_pairs_which_t which, qk_world
   const uint64_t *ck = qk__world_kept_keys(w);
   if (ck) {
     /* The pairs also as keys in order (see ckeys): each pair from its key. */
-    for (size_t i = 0, n = w->cur.n; i < n; i++) {
+    const size_t n = w->cur.n;
+    size_t i = 0;
+    if (qk__world_far(w)) /* (slots b at random in a generation array beyond the caches) */
+      for (; i + QK__WALK_AHEAD < n; i++) {
+        __builtin_prefetch(&ug[(uint32_t)ck[i + QK__WALK_AHEAD]]);
+        const uint32_t a = (uint32_t)(ck[i] >> 32), b = (uint32_t)ck[i];
+        if (fn((uint64_t)ug[a] << 32 | a, (uint64_t)ug[b] << 32 | b, ud)) return QK_OK;
+      }
+    for (; i < n; i++) {
       const uint32_t a = (uint32_t)(ck[i] >> 32), b = (uint32_t)ck[i];
       if (fn((uint64_t)ug[a] << 32 | a, (uint64_t)ug[b] << 32 | b, ud)) return QK_OK;
     }

@@ -107,7 +107,15 @@ static __attribute__((noinline)) void walk_rows1(walk_t *J, size_t lo, size_t hi
   if (ck) {
     /* The pairs also as keys in order (kept for the next update's merge: short rows):
      * each pair from its key, with no row to follow. */
-    for (size_t i = lo; i < hi; i++) {
+    size_t i = lo;
+    if (qk__world_far(w)) /* (as qk_world_pairs(): slot b's generation asked for ahead) */
+      for (; i + QK__WALK_AHEAD < hi; i++) {
+        __builtin_prefetch(&ug[(uint32_t)ck[i + QK__WALK_AHEAD]]);
+        const uint64_t key = ck[i];
+        const uint32_t a = (uint32_t)(key >> 32), b = (uint32_t)key;
+        WALK_CALL((uint64_t)ug[a] << 32 | a, (uint64_t)ug[b] << 32 | b, 0);
+      }
+    for (; i < hi; i++) {
       const uint64_t key = ck[i];
       const uint32_t a = (uint32_t)(key >> 32), b = (uint32_t)key;
       WALK_CALL((uint64_t)ug[a] << 32 | a, (uint64_t)ug[b] << 32 | b, 0);

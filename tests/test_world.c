@@ -457,6 +457,12 @@ static int cb_pair(qk_handle_t a, qk_handle_t b, void *ud) {
   return 0;
 }
 
+/* cb_pair for the walk on the world's threads, with one worker (the pairs in order). */
+static int cb_pair_worker(qk_handle_t a, qk_handle_t b, unsigned worker, void *ud) {
+  if (worker != 0) ((cbctx_t *)ud)->ok = 0;
+  return cb_pair(a, b, ud);
+}
+
 static int cb_stop(qk_handle_t a, qk_handle_t b, void *ud) {
   (void)a, (void)b;
   ++*(size_t *)ud;
@@ -3830,16 +3836,17 @@ static void test_world_scratch_huge_pages(void **s) {
 
 /*
  * A sparse frame's rows when the slots are many: the one-thread counting sort packs slot
- * a and slot b into 32 bits up to 2^16 slots (and then leaves the keys in order for the
- * began / ended merge), and not beyond; the pairs, began and ended in order against the
- * sweep oracle (o_pairs, dense_check) every frame, with slots up to 65 535 and up to 65 540, moves,
- * and in some frames objects removed and added back in their slots (the same keys, new
- * pairs: ended and began). Boxes of
- * 0.5 to 2 at 0.48 an area unit and moving up to 0.5, as in the benchmark's uniform
- * scene: about 1.5 pairs an object, a third of them changing every frame. And 140 000
- * slots, beyond QK__WIDE_SLOTS (2^17), where the keys are sorted whole, by buckets of
- * slots (sort_wide), with eight boxes of side 12 among them: rows of over 32 pairs, which
- * that sort orders by qsort.
+ * a and slot b into 32 bits up to 2^16 slots, and beyond sorts the keys whole by slot b
+ * (both then leave the keys in order for the began / ended merge); the pairs, began and
+ * ended in order against the sweep oracle (o_pairs, dense_check) every frame, with slots
+ * up to 65 535 and up to 65 540, moves, and in some frames objects removed and added back
+ * in their slots (the same keys, new pairs: ended and began). Boxes of 0.5 to 2 at 0.48 an
+ * area unit and moving up to 0.5, as in the benchmark's uniform scene: about 1.5 pairs an
+ * object, a third of them changing every frame. And 140 000 slots, beyond QK__WIDE_SLOTS
+ * (2^17), where the keys are sorted by buckets of slots (sort_wide: small buckets by
+ * insertion, the others by digits of slot b and then a), with eight boxes of side 12 among
+ * them: rows of over 32 pairs. The pairs walked by qk_world_pairs and by the walk's own
+ * loop (one worker) in order too: past 32 768 slots both ask for generations ahead.
  */
 static void test_world_rows_slot_bits(void **s) {
   (void)s;
@@ -3887,6 +3894,10 @@ static void test_world_rows_slot_bits(void **s) {
       cbctx_t cb = {prev, np, 0, 1};
       assert_int_equal(qk_world_pairs(w, QK_PAIRS_ALL, cb_pair, &cb), QK_OK);
       assert_true(cb.ok && cb.i == np);
+      /* (the walk's own loop, one worker: the same pairs in the same order) */
+      cbctx_t cw = {prev, np, 0, 1};
+      assert_int_equal(qk_world_pairs_parallel(w, QK_PAIRS_ALL, cb_pair_worker, &cw), QK_OK);
+      assert_true(cw.ok && cw.i == np);
     }
     free(prev);
     free(m.h), free(m.s);
