@@ -100,11 +100,16 @@ qk_status_t qk_world_new(const qk_world_options_t *options, qk_world_t **out) {
   return QK_OK;
 }
 
+/* The object array's block in bytes (its slots and QK__WOBJ_SLACK), 0 when there is none. */
+static size_t obj_bytes(const qk_world_t *w) {
+  return w->obj_raw ? (size_t)w->cap_obj * sizeof *w->obj + QK__WOBJ_SLACK : 0;
+}
+
 void qk_world_free(qk_world_t *w) {
   if (!w) return;
   qk__world_pool_free(w);
   qk_allocator_t a = w->alloc;
-  qk__free(&a, w->obj_raw, w->obj_raw ? (size_t)w->cap_obj * sizeof *w->obj + QK__WOBJ_SLACK : 0);
+  qk__free(&a, w->obj_raw, obj_bytes(w));
   qk__free(&a, w->order, (size_t)w->cap_order * sizeof *w->order);
   qk__free(&a, w->cells, (size_t)w->cap_cells * sizeof *w->cells);
   qk__free(&a, w->ugen, (size_t)w->cap_ugen * sizeof *w->ugen);
@@ -148,7 +153,7 @@ size_t qk_world_pair_bytes(const qk_world_t *w) {
 }
 
 int qk__world_obj_resize(qk_world_t *w, uint32_t cap) {
-  const size_t osize = w->obj_raw ? (size_t)w->cap_obj * sizeof *w->obj + QK__WOBJ_SLACK : 0;
+  const size_t osize = obj_bytes(w);
   const size_t off0 = w->obj_raw ? (size_t)((char *)w->obj - (char *)w->obj_raw) : 0;
   char *raw =
       qk__realloc(&w->alloc, w->obj_raw, osize, (size_t)cap * sizeof *w->obj + QK__WOBJ_SLACK);
@@ -166,10 +171,10 @@ int qk__world_obj_resize(qk_world_t *w, uint32_t cap) {
 
 size_t qk_world_bytes(const qk_world_t *w) {
   if (!w) return 0;
-  return sizeof *w + (w->obj_raw ? (size_t)w->cap_obj * sizeof *w->obj + QK__WOBJ_SLACK : 0) +
-         (size_t)w->cap_ugen * sizeof *w->ugen + (size_t)w->cap_dnext * sizeof *w->dnext +
-         (size_t)w->cap_order * sizeof *w->order + (size_t)w->cap_cells * sizeof *w->cells +
-         qk_world_pair_bytes(w) + atomic_load_explicit(&w->qbytes, memory_order_relaxed);
+  return sizeof *w + obj_bytes(w) + (size_t)w->cap_ugen * sizeof *w->ugen +
+         (size_t)w->cap_dnext * sizeof *w->dnext + (size_t)w->cap_order * sizeof *w->order +
+         (size_t)w->cap_cells * sizeof *w->cells + qk_world_pair_bytes(w) +
+         atomic_load_explicit(&w->qbytes, memory_order_relaxed);
 }
 
 /* ---- filing ---------------------------------------------------------------------- */

@@ -142,9 +142,9 @@ static size_t rows_cnt(uint32_t n_obj, size_t n) {
  * slot (4 MB each) and the keys at random, several misses of the caches a key (a quarter
  * of the frame of the benchmark's uniform scene at 10^6 objects). Instead the keys are
  * sorted whole (sort_wide): put in buckets of 2^ab consecutive slots a (at most 1024
- * buckets: as many cursors as stay in cache), then each bucket, in cache, by a counting
- * sort on a mod 2^ab and its rows by b; the rows are then read off the sorted keys, as
- * the sparse sort's are. From QK__WIDE_SLOTS slots (two counts a slot no longer fit a
+ * buckets: as many cursors as stay in cache), then each bucket, in cache, by an LSD radix
+ * sort on b and then a mod 2^ab; the rows are then read off the sorted keys, as the
+ * sparse sort's are. From QK__WIDE_SLOTS slots (two counts a slot no longer fit a
  * core's L2).
  */
 #define QK__WIDE_SLOTS ((uint32_t)1 << 17)
@@ -202,9 +202,10 @@ static void excl_scan(uint32_t *c, size_t n) {
 }
 
 /* One stable counting pass of the m keys at src into dst by the digit (k >> sh) & mask
- * (k the key, sh < 64), through the counts c (mask + 1 entries, a multiple of four). */
-static void wide_pass(uint64_t *dst, const uint64_t *src, uint32_t m, unsigned sh, uint32_t mask,
-                      uint32_t *c) {
+ * (k the key, sh < 64), through the counts c (mask + 1 entries, a multiple of four): a
+ * pass of the sparse sort and of the wide one's buckets. */
+static void key_pass(uint64_t *dst, const uint64_t *src, uint32_t m, unsigned sh, uint32_t mask,
+                     uint32_t *c) {
   memset(c, 0, ((size_t)mask + 1) * sizeof *c);
   QK__UNROLL4
   for (uint32_t i = 0; i < m; i++) c[(src[i] >> sh) & mask]++;
@@ -223,10 +224,9 @@ static void wide_pass(uint64_t *dst, const uint64_t *src, uint32_t m, unsigned s
  * cache), then each bucket, in cache, by an LSD radix sort: slot b in digits of at most 11
  * bits, then a mod 2^ab. (Its rows were sorted by insertion after a counting sort on
  * a mod 2^ab before: rows of one or two keys in the uniform scene, whose lengths and order
- * the branches mispredicted.) Each bucket's slots b go to rb while it is in cache; returns
- * the number of rows (slots a with keys). */
-static size_t sort_wide(uint64_t *keys, uint64_t *tmp, size_t n, uint32_t n_b, uint32_t *cnt,
-                        uint32_t *rb) {
+ * the branches mispredicted.) Returns the number of rows (slots a with keys), counted
+ * while each bucket is in cache. */
+static size_t sort_wide(uint64_t *keys, uint64_t *tmp, size_t n, uint32_t n_b, uint32_t *cnt) {
   unsigned ab = 8, bb = 1;
   while (((uint64_t)n_b >> ab) > 1024) ab++;
   while (bb < 32 && ((uint64_t)1 << bb) < n_b) bb++;
@@ -255,20 +255,16 @@ static size_t sort_wide(uint64_t *keys, uint64_t *tmp, size_t n, uint32_t n_b, u
       /* b's digits, then a mod 2^ab: np + 1 passes between tb and kb, from tb */
       uint64_t *src = tb, *dst = kb;
       for (unsigned p = 0; p < np; p++) {
-        wide_pass(dst, src, m, p * d, ((uint32_t)1 << d) - 1, c);
+        key_pass(dst, src, m, p * d, ((uint32_t)1 << d) - 1, c);
         uint64_t *t = src;
         src = dst, dst = t;
       }
-      wide_pass(dst, src, m, 32, W - 1, c);
+      key_pass(dst, src, m, 32, W - 1, c);
       if (dst != kb) memcpy(kb, dst, (size_t)m * sizeof *kb);
     }
     /* (a bucket's rows are its own: the first key starts one) */
     uint64_t last = m ? ~kb[0] : 0;
-    for (uint32_t i = 0; i < m; i++) {
-      nz += kb[i] >> 32 != last >> 32;
-      rb[lo + i] = (uint32_t)kb[i];
-      last = kb[i];
-    }
+    for (uint32_t i = 0; i < m; i++) nz += kb[i] >> 32 != last >> 32, last = kb[i];
   }
   return nz;
 }
@@ -380,16 +376,13 @@ static QK__ALWAYS_INLINE int make_rows(const qk_allocator_t *al, uint64_t *keys,
   if (n * 4 < n_b || wide) {
     size_t nz = 0;
     if (wide) {
-      nz = sort_wide(keys, tmp, n, n_b, cnt, rb);
+      nz = sort_wide(keys, tmp, n, n_b, cnt);
     } else {
       uint64_t all_or = 0, all_and = ~(uint64_t)0;
       for (size_t i = 0; i < n; i++) all_or |= keys[i], all_and &= keys[i];
       for (int sh = 0; n > 1 && sh < 64; sh += 8) {
         if (!(((all_or ^ all_and) >> sh) & 0xff)) continue;
-        memset(cnt, 0, 257 * sizeof *cnt);
-        for (size_t i = 0; i < n; i++) cnt[(keys[i] >> sh & 0xff) + 1]++;
-        for (int k = 1; k < 257; k++) cnt[k] += cnt[k - 1];
-        for (size_t i = 0; i < n; i++) tmp[cnt[keys[i] >> sh & 0xff]++] = keys[i];
+        key_pass(tmp, keys, (uint32_t)n, (unsigned)sh, 0xff, cnt);
         memcpy(keys, tmp, n * sizeof *keys); /* the result stays in keys */
       }
       for (size_t i = 0; i < n; i++) nz += !i || keys[i] >> 32 != keys[i - 1] >> 32;
@@ -397,25 +390,15 @@ static QK__ALWAYS_INLINE int make_rows(const qk_allocator_t *al, uint64_t *keys,
     if (!rows_alloc(al, r, nz)) return 0;
     /* Every key writes a row and start at the next place, which only a row's first key
      * keeps (no branch: rows of one or two keys at random in the uniform scene; as
-     * rows_fill). The writes stay within row[0 .. nz] and start[0 .. nz]. (The wide sort
-     * wrote the slots b.) */
+     * rows_fill). The writes stay within row[0 .. nz] and start[0 .. nz]. */
     nz = 0;
     uint64_t last = n ? ~keys[0] : 0; /* (the first key starts a row) */
-    if (wide) {
-      for (size_t i = 0; i < n; i++) {
-        const uint64_t k = keys[i];
-        r->row[nz] = (uint32_t)(k >> 32), r->start[nz] = (uint32_t)i;
-        nz += k >> 32 != last >> 32;
-        last = k;
-      }
-    } else {
-      for (size_t i = 0; i < n; i++) {
-        const uint64_t k = keys[i];
-        r->row[nz] = (uint32_t)(k >> 32), r->start[nz] = (uint32_t)i;
-        nz += k >> 32 != last >> 32;
-        rb[i] = (uint32_t)k;
-        last = k;
-      }
+    for (size_t i = 0; i < n; i++) {
+      const uint64_t k = keys[i];
+      r->row[nz] = (uint32_t)(k >> 32), r->start[nz] = (uint32_t)i;
+      nz += k >> 32 != last >> 32;
+      rb[i] = (uint32_t)k;
+      last = k;
     }
     r->start[nz] = (uint32_t)n;
     if (flat) *flat = keys;
