@@ -99,51 +99,13 @@ qk_status_t qk__gm_output(qk__gm_t *g, qk_mesh_t *m) {
   for (size_t v = 0; v < c->nv; v++)
     if (newid[v] != QK__CDT_NONE)
       m->xy[2 * newid[v]] = c->xy[2 * v], m->xy[2 * newid[v] + 1] = c->xy[2 * v + 1];
-  /* Angles through their cosines (one square root each); the extremes back to degrees at
-   * the end. */
-  double cmax = -1, cmin = 1, cb = cos(g->bound_deg * (3.14159265358979323846 / 180));
-  /* Most corners change none of the three (cmax, cmin, the count above cb): a corner whose
-   * cosine lies strictly between cmin and min(cmax, cb) with a margin of 1e-9, far above
-   * the roundings of a few operations, is passed over on squares (no division, no square
-   * root). thr_hi (for positive cosines) and thr_lo (negative ones) are those squared
-   * limits, with the margin; 0 (never a pass) until cmax > 0 > cmin. Any doubt (zero, NaN) takes
-   * the full computation, so the results are those of computing every corner. */
-  double thr_hi = 0, thr_lo = 0, nthr_hi = -0.0;
-  size_t j = 0, exempt = 0;
-  const double *const XY = c->xy;
+  size_t j = 0;
   uint32_t *const tri = m->tri, *const comp = m->comp;
   double *const attr = m->attr;
   for (uint32_t t = 0; t < c->nt; t++) {
     if (faces[face[t]].drop) continue;
     const uint32_t *tv = &V[3 * t];
-    /* e[i] runs from corner i + 1 to corner i + 2, so the sides at corner i are e[i+2] and
-     * -e[i+1]: the same roundings as differences from the corner (a - b is exactly
-     * -(b - a)), with each squared length computed once. */
-    double e[3][2], l[3];
-    for (int i = 0; i < 3; i++) {
-      const double *a = &XY[2 * tv[(i + 1) % 3]], *b = &XY[2 * tv[(i + 2) % 3]];
-      e[i][0] = b[0] - a[0], e[i][1] = b[1] - a[1];
-      l[i] = e[i][0] * e[i][0] + e[i][1] * e[i][1];
-    }
-    for (int i = 0; i < 3; i++) {
-      tri[3 * j + i] = newid[tv[i]];
-      const double *u = e[(i + 2) % 3], *w = e[(i + 1) % 3];
-      double dot = u[0] * w[0] + u[1] * w[1], ll = l[(i + 2) % 3] * l[(i + 1) % 3];
-      /* cosine -dot / sqrt(ll): skipped when dot^2 < thr_hi ll for dot < 0 or dot^2 < thr_lo ll
-       * for dot > 0, both as comparisons of dot |dot| (the same products, signed): choosing
-       * the threshold by dot's sign took eight instructions a corner. (A zero dot may be
-       * computed where it was passed over: the full computation is what the pass stands for.) */
-      double sq = dot * fabs(dot);
-      if (sq > nthr_hi * ll && sq < thr_lo * ll) continue;
-      double cs = -dot / sqrt(ll);
-      if (cs > cmax || cs < cmin) {
-        cmax = cs > cmax ? cs : cmax, cmin = cs < cmin ? cs : cmin; /* NaN: neither, as fmax */
-        double hi = (cmax < cb ? cmax : cb) * (1 - 1e-9), lo = cmin * (1 - 1e-9);
-        thr_hi = hi > 0 && cmin < 0 ? hi * hi : 0, thr_lo = lo < 0 && cmax > 0 ? lo * lo : 0;
-        nthr_hi = -thr_hi;
-      }
-      exempt += cs > cb;
-    }
+    for (int i = 0; i < 3; i++) tri[3 * j + i] = newid[tv[i]];
     /* NONE has every bit set: the AND of the three is NONE only when no side is on a
      * segment, as in most triangles. */
     const uint32_t *ts = &S[3 * t];
@@ -165,11 +127,60 @@ qk_status_t qk__gm_output(qk__gm_t *g, qk_mesh_t *m) {
   m->stats.triangles = kt;
   m->stats.vertices = kv;
   m->stats.steiner = steiner;
-  const double deg = 180 / 3.14159265358979323846;
-  m->stats.min_angle_deg = kt ? acos(fmin(cmax, 1)) * deg : 0;
-  m->stats.max_angle_deg = kt ? acos(fmax(cmin, -1)) * deg : 0;
-  m->stats.exempt_angles = exempt;
+  m->angle_bound_deg = g->bound_deg; /* (the angles: qk_mesh_stats) */
 out:
   qk__free(g->a, newid, (c->nv + 1) * sizeof *newid);
   return st;
+}
+
+/* The general mode's angle figures, for qk_mesh_stats (the generation leaves them: a
+ * caller that writes the mesh and never asks does not pay for a pass over every corner).
+ * Angles through their cosines (one square root each); the extremes back to degrees at the
+ * end. */
+void qk__mesh_angles(const qk_mesh_t *m, double bound_deg, double *min_deg, double *max_deg,
+                     size_t *below) {
+  double cmax = -1, cmin = 1, cb = cos(bound_deg * (3.14159265358979323846 / 180));
+  /* Most corners change none of the three (cmax, cmin, the count above cb): a corner whose
+   * cosine lies strictly between cmin and min(cmax, cb) with a margin of 1e-9, far above
+   * the roundings of a few operations, is passed over on squares (no division, no square
+   * root). thr_hi (for positive cosines) and thr_lo (negative ones) are those squared
+   * limits, with the margin; 0 (never a pass) until cmax > 0 > cmin. Any doubt (zero, NaN)
+   * takes the full computation, so the results are those of computing every corner. */
+  double thr_hi = 0, thr_lo = 0, nthr_hi = -0.0;
+  size_t exempt = 0;
+  const double *const XY = m->xy;
+  for (size_t t = 0; t < m->nt; t++) {
+    const uint32_t *tv = &m->tri[3 * t];
+    /* e[i] runs from corner i + 1 to corner i + 2, so the sides at corner i are e[i+2] and
+     * -e[i+1]: the same roundings as differences from the corner (a - b is exactly
+     * -(b - a)), with each squared length computed once. */
+    double e[3][2], l[3];
+    for (int i = 0; i < 3; i++) {
+      const double *a = &XY[2 * (size_t)tv[(i + 1) % 3]], *b = &XY[2 * (size_t)tv[(i + 2) % 3]];
+      e[i][0] = b[0] - a[0], e[i][1] = b[1] - a[1];
+      l[i] = e[i][0] * e[i][0] + e[i][1] * e[i][1];
+    }
+    for (int i = 0; i < 3; i++) {
+      const double *u = e[(i + 2) % 3], *w = e[(i + 1) % 3];
+      double dot = u[0] * w[0] + u[1] * w[1], ll = l[(i + 2) % 3] * l[(i + 1) % 3];
+      /* cosine -dot / sqrt(ll): skipped when dot^2 < thr_hi ll for dot < 0 or dot^2 < thr_lo ll
+       * for dot > 0, both as comparisons of dot |dot| (the same products, signed): choosing
+       * the threshold by dot's sign took eight instructions a corner. (A zero dot may be
+       * computed where it was passed over: the full computation is what the pass stands for.) */
+      double sq = dot * fabs(dot);
+      if (sq > nthr_hi * ll && sq < thr_lo * ll) continue;
+      double cs = -dot / sqrt(ll);
+      if (cs > cmax || cs < cmin) {
+        cmax = cs > cmax ? cs : cmax, cmin = cs < cmin ? cs : cmin; /* NaN: neither, as fmax */
+        double hi = (cmax < cb ? cmax : cb) * (1 - 1e-9), lo = cmin * (1 - 1e-9);
+        thr_hi = hi > 0 && cmin < 0 ? hi * hi : 0, thr_lo = lo < 0 && cmax > 0 ? lo * lo : 0;
+        nthr_hi = -thr_hi;
+      }
+      exempt += cs > cb;
+    }
+  }
+  const double deg = 180 / 3.14159265358979323846;
+  *min_deg = m->nt ? acos(fmin(cmax, 1)) * deg : 0;
+  *max_deg = m->nt ? acos(fmax(cmin, -1)) * deg : 0;
+  *below = exempt;
 }

@@ -615,4 +615,6 @@ void qk_mesh_stats(const qk_mesh_t *m, qk_mesh_stats_t *s) {
     return;
   }
   *s = m->stats;
+  if (m->stats.mode == QK_MESH_GENERAL)
+    qk__mesh_angles(m, m->angle_bound_deg, &s->min_angle_deg, &s->max_angle_deg, &s->exempt_angles);
 }

@@ -91,7 +91,17 @@ struct qk_mesh {
   size_t noseg, noseg_cap;
   int has_marks; /* the input carried boundary markers */
   double *attr;  /* per triangle: regional attribute (nt + 1), NULL without regions */
+  /* General mode: the angle bound (degrees) its exempt angles are counted against. Its
+   * smallest and largest angles and exempt count are computed by qk_mesh_stats, from the
+   * triangles (qk__mesh_angles), not by the generation; 0 in the other modes, whose
+   * generation fills them. */
+  double angle_bound_deg;
 };
+
+/* The smallest and largest angle of mesh m (degrees; 0 without triangles) and the count
+ * of angles below bound_deg: one pass over the triangles. */
+void qk__mesh_angles(const qk_mesh_t *m, double bound_deg, double *min_deg, double *max_deg,
+                     size_t *below);
 
 /* Fill an error record (err may be NULL); returns `st` for convenience. */
 qk_status_t qk__mesh_fail(qk_mesh_error_t *err, qk_status_t st, unsigned long line, const char *fmt,

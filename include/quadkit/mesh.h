@@ -365,7 +365,12 @@ typedef struct qk_mesh_stats {
   double seconds_triangulate;      /**< step 3, components and holes included */
 } qk_mesh_stats_t;
 
-/** Fill stats for a mesh. \param [in] mesh the mesh. \param [out] stats the figures. */
+/**
+ * Fill stats for a mesh. In the general mode the smallest and largest angle and
+ * exempt_angles are computed here, one pass over the triangles a call (the generation
+ * does not spend it on a caller that never asks); the other figures are stored.
+ * \param [in] mesh the mesh. \param [out] stats the figures.
+ */
 void qk_mesh_stats(const qk_mesh_t *mesh, qk_mesh_stats_t *stats);
 
 /**
