@@ -957,17 +957,18 @@ static QK__ALWAYS_INLINE int began_range_(bjob_t *J, unsigned t, const int exact
 #if defined(__SSE2__)
     if (exact && i == ie) {
       /* A row without began pairs (most rows): its old pairs tested in a loop of their
-       * own, without the began slot's comparison. */
+       * own, without the began slot's comparison, and without a branch on the test:
+       * each pair is written as kept and as ended, and the count of the list it
+       * belongs to moves on (room for the whole row in the ended list first). */
+      if (le.cap - le.n < je - j && !(ok = kv_more(al, &le, je - j))) goto out;
+      uint64_t *ev = le.v + le.n;
       for (; j < je; j++) {
         const uint32_t x = ob[j];
-        out[d] = x; /* (kept when it meets) */
-        if (__builtin_expect(
-                _mm_movemask_ps(_mm_cmple_ps(_mm_loadu_ps(fb + 4 * (size_t)x), lim)) == 15, 1)) {
-          d++;
-          continue;
-        }
-        if (!(ok = kv_add(al, &le, ka | x))) goto out;
+        const int meet = _mm_movemask_ps(_mm_cmple_ps(_mm_loadu_ps(fb + 4 * (size_t)x), lim)) == 15;
+        out[d] = x, *ev = ka | x;
+        d += (size_t)meet, ev += !meet;
       }
+      le.n = (size_t)(ev - le.v);
       if (d > d0) zr[z] = a, zr[zc + z++] = (uint32_t)d0;
       continue;
     }
