@@ -868,7 +868,9 @@ static QK__ALWAYS_INLINE uint64_t *sweep_grp(const sw_t *w, const egrp_t *g, con
   const unsigned cxm = (unsigned)_mm_movemask_ps(cx);
   unsigned bits = (unsigned)_mm_movemask_ps(_mm_and_ps(cx, m)) & mask & (any ? 15u : *fm);
   *stop = cxm != 15u;
-  if (began && bits) {
+  if (began && (all_exact || bits)) {
+    /* (with every box exact, for every group: whether one of its lanes met k's box is a
+     * coin toss in a crowded scene, and the test costs less than the mispredictions) */
     const pgrp_t *pq = (const pgrp_t *)(const void *)((const char *)g + w->pd);
     __m128 met = _mm_and_ps(_mm_and_ps(_mm_cmple_ps(_mm_loadu_ps(pq->x0), w->px1),
                                        _mm_cmpnlt_ps(_mm_loadu_ps(pq->x1), w->px0)),
@@ -876,7 +878,7 @@ static QK__ALWAYS_INLINE uint64_t *sweep_grp(const sw_t *w, const egrp_t *g, con
                                        _mm_cmpnlt_ps(_mm_loadu_ps(pq->y1), w->py0)));
     bits &= ~(unsigned)_mm_movemask_ps(met);
   }
-  if (!bits) return v;
+  if (!(began && all_exact) && !bits) return v;
   /* the four keys at once: (min << 32 | max) of the entry's slot and each lane's */
   const __m128i bias = _mm_set1_epi32(INT32_MIN);
   __m128i sj = _mm_loadu_si128((const __m128i *)g->slot), x = _mm_xor_si128(sj, w->ks);
