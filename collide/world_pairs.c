@@ -972,6 +972,29 @@ static QK__ALWAYS_INLINE int began_range_(bjob_t *J, unsigned t, const int exact
       if (d > d0) zr[z] = a, zr[zc + z++] = (uint32_t)d0;
       continue;
     }
+    if (exact) {
+      /* A row with began pairs: the same without a branch on the test, the began slots
+       * (y, the next of them) put in before the first old slot above them. */
+      if ((le.cap - le.n < je - j && !(ok = kv_more(al, &le, je - j))) ||
+          (lb.cap - lb.n < ie - i && !(ok = kv_more(al, &lb, ie - i))))
+        goto out;
+      uint64_t *ev = le.v + le.n, *bv = lb.v + lb.n;
+      uint32_t y = bb[i]; /* (i < ie: the rows without are above) */
+      for (; j < je; j++) {
+        const uint32_t x = ob[j];
+        while (y < x) {
+          out[d++] = y, *bv++ = ka | y;
+          y = ++i < ie ? bb[i] : UINT32_MAX;
+        }
+        const int meet = _mm_movemask_ps(_mm_cmple_ps(_mm_loadu_ps(fb + 4 * (size_t)x), lim)) == 15;
+        out[d] = x, *ev = ka | x;
+        d += (size_t)meet, ev += !meet;
+      }
+      for (; i < ie; i++) out[d++] = bb[i], *bv++ = ka | bb[i];
+      le.n = (size_t)(ev - le.v), lb.n = (size_t)(bv - lb.v);
+      if (d > d0) zr[z] = a, zr[zc + z++] = (uint32_t)d0;
+      continue;
+    }
 #endif
     uint32_t y = i < ie ? bb[i] : UINT32_MAX;
     for (; j < je; j++) {
