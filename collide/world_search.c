@@ -879,13 +879,11 @@ static QK__ALWAYS_INLINE uint64_t *sweep_grp(const sw_t *w, const egrp_t *g, con
     bits &= ~(unsigned)_mm_movemask_ps(met);
   }
   if (!(began && all_exact) && !bits) return v;
-  /* the four keys at once: (min << 32 | max) of the entry's slot and each lane's */
-  const __m128i bias = _mm_set1_epi32(INT32_MIN);
-  __m128i sj = _mm_loadu_si128((const __m128i *)g->slot), x = _mm_xor_si128(sj, w->ks);
-  __m128i gt = _mm_cmpgt_epi32(_mm_xor_si128(sj, bias), w->kb); /* lane's slot > k's */
-  __m128i mn = _mm_xor_si128(sj, _mm_and_si128(x, gt)), mx = _mm_xor_si128(mn, x);
-  __m128i k01 = _mm_unpacklo_epi32(mx, mn), k23 = _mm_unpackhi_epi32(mx, mn);
+  __m128i sj = _mm_loadu_si128((const __m128i *)g->slot);
   if (all_exact) {
+    /* the four keys at once: the entry's slot above each lane's, either way round
+     * (sweep_run puts the kept ones the right way round when the sweeps are done) */
+    const __m128i k01 = _mm_unpacklo_epi32(sj, w->ks), k23 = _mm_unpackhi_epi32(sj, w->ks);
     /* all four written, the end moved past the kept ones (room for three more than
      * the candidates is reserved): each pair of keys stored whole, then its second
      * key again over the first when the first is not kept */
@@ -897,6 +895,12 @@ static QK__ALWAYS_INLINE uint64_t *sweep_grp(const sw_t *w, const egrp_t *g, con
     _mm_storeh_pd((double *)(v2 + (bits >> 2 & 1)), _mm_castsi128_pd(k23));
     return v + kept[bits];
   }
+  /* the four keys at once: (min << 32 | max) of the entry's slot and each lane's */
+  const __m128i bias = _mm_set1_epi32(INT32_MIN);
+  __m128i x = _mm_xor_si128(sj, w->ks);
+  __m128i gt = _mm_cmpgt_epi32(_mm_xor_si128(sj, bias), w->kb); /* lane's slot > k's */
+  __m128i mn = _mm_xor_si128(sj, _mm_and_si128(x, gt)), mx = _mm_xor_si128(mn, x);
+  __m128i k01 = _mm_unpacklo_epi32(mx, mn), k23 = _mm_unpackhi_epi32(mx, mn);
   uint64_t key[4];
   _mm_storeu_si128((__m128i *)key, k01);
   _mm_storeu_si128((__m128i *)(key + 2), k23);
@@ -1000,6 +1004,7 @@ static QK__ALWAYS_INLINE int sweep_run(share_t *s, uint32_t b0, uint32_t b1, con
   const bands_t *bd = s->bd;
   const uint32_t *st = bd->start, *en = bd->end;
   if (!s->out.v && !kv_reserve(s, 256)) return 0;
+  const size_t n0 = s->out.n;
   uint64_t *v = s->out.v + s->out.n, *vend = s->out.v + s->out.cap;
   for (uint32_t b = b0; b < b1; b++)
     for (uint32_t k = st[b], e = en[b]; k + 1 < e; k++) {
@@ -1011,6 +1016,11 @@ static QK__ALWAYS_INLINE int sweep_run(share_t *s, uint32_t b0, uint32_t b1, con
       v = sweep(s, bd, k, v, all_exact, began, near_);
     }
   s->out.n = (size_t)(v - s->out.v);
+#if defined(__SSE2__)
+  if (all_exact) keys_ordered(s->out.v + n0, s->out.n - n0);
+#else
+  (void)n0;
+#endif
   return 1;
 }
 
