@@ -920,6 +920,14 @@ typedef struct bjob {
   uint64_t *jb, *je;
 } bjob_t;
 
+#if defined(__SSE2__)
+/* The float box by slot of slot x (fb: (xmin, ymin, -xmax, -ymax)) meets the box whose
+ * limits are lim (its halves swapped and negated): 1 or 0, one comparison on four floats. */
+static QK__ALWAYS_INLINE int fb_meets(const float *fb, uint32_t x, __m128 lim) {
+  return _mm_movemask_ps(_mm_cmple_ps(_mm_loadu_ps(fb + 4 * (size_t)x), lim)) == 15;
+}
+#endif
+
 static QK__ALWAYS_INLINE int began_range_(bjob_t *J, unsigned t, const int exact) {
   const qk_allocator_t *al = &J->w->alloc;
   const qk__prows_t *o = J->o, *nb = J->nb;
@@ -964,7 +972,7 @@ static QK__ALWAYS_INLINE int began_range_(bjob_t *J, unsigned t, const int exact
       uint64_t *ev = le.v + le.n;
       for (; j < je; j++) {
         const uint32_t x = ob[j];
-        const int meet = _mm_movemask_ps(_mm_cmple_ps(_mm_loadu_ps(fb + 4 * (size_t)x), lim)) == 15;
+        const int meet = fb_meets(fb, x, lim);
         out[d] = x, *ev = ka | x;
         d += (size_t)meet, ev += !meet;
       }
@@ -986,7 +994,7 @@ static QK__ALWAYS_INLINE int began_range_(bjob_t *J, unsigned t, const int exact
           out[d++] = y, *bv++ = ka | y;
           y = ++i < ie ? bb[i] : UINT32_MAX;
         }
-        const int meet = _mm_movemask_ps(_mm_cmple_ps(_mm_loadu_ps(fb + 4 * (size_t)x), lim)) == 15;
+        const int meet = fb_meets(fb, x, lim);
         out[d] = x, *ev = ka | x;
         d += (size_t)meet, ev += !meet;
       }
