@@ -1130,13 +1130,14 @@ static QK__ALWAYS_INLINE void put_entry(const scat_t *sc, uint32_t p, const floa
 
 #if defined(__SSE2__)
 #define QK__PG_GROUPS 1
-/* What scatter_ on one thread left out, a whole group at a time by a transpose of its four
- * objects' boxes by slot, the same values as put_entry's: the entries' boxes from this
+/* What scatter_ left out, bands [b0, b1), a whole group at a time by a transpose of its
+ * four objects' boxes by slot, the same values as put_entry's: the entries' boxes from this
  * update's (cur, when there is one: the maxima negated) and their last update's (prev,
- * with pg). */
-static void fill_groups(const bands_t *bd, const float *prev, const float *cur) {
+ * with pg). (Each band starts a group: bands on threads write apart.) */
+static void fill_groups(const bands_t *bd, const float *prev, const float *cur, uint32_t b0,
+                        uint32_t b1) {
   const __m128 neg = _mm_setr_ps(0.0f, 0.0f, -0.0f, -0.0f), all = _mm_set1_ps(-0.0f);
-  for (uint32_t b = 0; b < bd->nb; b++) {
+  for (uint32_t b = b0; b < b1; b++) {
     uint32_t p = bd->start[b];
     const uint32_t e = bd->end[b];
     for (; p + 4 <= e; p += 4) {
@@ -1177,6 +1178,21 @@ static void fill_groups(const bands_t *bd, const float *prev, const float *cur) 
     }
   }
 }
+/* fill_groups on threads: thread t's bands hold about the t-th share of the entries. */
+typedef struct fill {
+  bands_t bd;
+  const float *prev, *cur;
+  unsigned nt;
+} fill_t;
+
+static void fill_run(unsigned t, void *ud) {
+  const fill_t *f = ud;
+  const uint32_t nb = f->bd.nb, *st = f->bd.start;
+  const size_t ne = st[nb];
+  const uint32_t b0 = t ? band_at(st, nb, ne * t / f->nt) : 0,
+                 b1 = t + 1 < f->nt ? band_at(st, nb, ne * (t + 1) / f->nt) : nb;
+  fill_groups(&f->bd, f->prev, f->cur, b0, b1);
+}
 #else
 #define QK__PG_GROUPS 0
 #endif
@@ -1196,9 +1212,9 @@ static QK__ALWAYS_INLINE void scatter_(const scat_t *sc, unsigned t, int whole) 
   uint32_t clo = sc->start[blo], chi = sc->start[bhi];
   const scat_t d = *sc; /* (a copy: the byte stores cannot change it) */
   uint32_t *pos = sc->pos;
-  /* (on one thread with SSE2 the last update's boxes are written after, a group at a
-   * time: fill_groups) */
-  const pgrp_t *pg = whole && QK__PG_GROUPS ? NULL : sc->pg;
+  /* (with SSE2 the last update's boxes are written after, a group at a time:
+   * fill_groups) */
+  const pgrp_t *pg = QK__PG_GROUPS ? NULL : sc->pg;
   uint8_t *fm = sc->fm;
   for (uint32_t i = 0; i < n; i++) {
     uint32_t k = (uint32_t)sc->rec[i];
@@ -1224,7 +1240,11 @@ static QK__ALWAYS_INLINE void scatter_(const scat_t *sc, unsigned t, int whole) 
       uint32_t p = b == blo ? clo++ : b == bhi ? chi++ : pos[b]++;
       if (p < p0 || p >= p1) continue;
       if (b == b0) fm[p >> 2] |= (uint8_t)(1u << (p & 3)); /* its first band */
-      put_entry(&d, p, lane_of(fg, k), s, pf, fx[k]);
+      if (QK__PG_GROUPS && d.cur) {                        /* (the boxes: fill_groups) */
+        d.g[p >> 2].slot[p & 3] = s;
+        if (d.exact) d.exact[p] = fx[k];
+      } else
+        put_entry(&d, p, lane_of(fg, k), s, pf, fx[k]);
     }
   }
 }
@@ -1636,17 +1656,19 @@ static int build_bands(const qk_world_t *w, const qk__wpack_t *pk, bands_t *bd, 
     for (int l = 0; l < 4; l++)
       pg[ng - 1].x0[l] = pg[ng - 1].y0[l] = INFINITY,
               pg[ng - 1].x1[l] = pg[ng - 1].y1[l] = -INFINITY;
-  scat_t sc = {
-      w,     pk,  a,  b01,       g, pg, fm, exact, x1, prev, QK__PG_GROUPS && nt <= 1 ? cur : NULL,
-      start, pos, nb, start[nb], nt};
+  scat_t sc = {w,     pk,  a,  b01,       g, pg, fm, exact, x1, prev, QK__PG_GROUPS ? cur : NULL,
+               start, pos, nb, start[nb], nt};
   if (nt > 1)
     qk__world_run_jobs(w, nt, nt, scatter_run, &sc);
   else
     scatter_(&sc, 0, 1);
 #if defined(__SSE2__)
-  if ((pg || cur) && nt <= 1) {
-    const bands_t eb = {.g = g, .pg = pg, .x1 = x1, .start = start, .end = end, .nb = nb};
-    fill_groups(&eb, prev, cur);
+  if (pg || cur) {
+    fill_t fj = {{.g = g, .pg = pg, .x1 = x1, .start = start, .end = end, .nb = nb}, prev, cur, nt};
+    if (nt > 1)
+      qk__world_run_jobs(w, nt, nt, fill_run, &fj);
+    else
+      fill_groups(&fj.bd, prev, cur, 0, nb);
   }
 #endif
   for (uint32_t b = 0; b < nb; b++)
