@@ -1094,7 +1094,7 @@ typedef struct scat {
   uint8_t *fm, *exact;
   float *x1;
   const float *prev;
-  const float *cur; /* (on one thread with SSE2, the boxes by slot: see fill_groups) */
+  const float *cur; /* (with SSE2, the boxes by slot: see fill_groups) */
   const uint32_t *start;
   uint32_t *pos;
   uint32_t nb;
@@ -1115,13 +1115,25 @@ static uint32_t band_at(const uint32_t *start, uint32_t nb, size_t p) {
   return lo;
 }
 
-/* Entry p: the object's float box f, its slot s and its last update's box pf (or NULL). */
+/* With SSE2 the entries' boxes from the boxes by slot (this update's, when there are
+ * some, and the last update's) are written after the scatter, a group at a time
+ * (fill_groups). */
+#if defined(__SSE2__)
+#define QK__PG_GROUPS 1
+#else
+#define QK__PG_GROUPS 0
+#endif
+
+/* Entry p: the object's slot s, and its float box f and last update's box pf (or NULL)
+ * unless fill_groups writes them. */
 static QK__ALWAYS_INLINE void put_entry(const scat_t *sc, uint32_t p, const float *f, uint32_t s,
                                         const float *pf, uint8_t ex) {
   egrp_t *q = &sc->g[p >> 2];
-  q->x0[p & 3] = f[0], q->y0[p & 3] = f[4], q->y1[p & 3] = f[12], q->slot[p & 3] = s;
-  sc->x1[p] = f[8];
+  q->slot[p & 3] = s;
   if (sc->exact) sc->exact[p] = ex;
+  if (QK__PG_GROUPS && sc->cur) return; /* (the boxes: fill_groups) */
+  q->x0[p & 3] = f[0], q->y0[p & 3] = f[4], q->y1[p & 3] = f[12];
+  sc->x1[p] = f[8];
   if (pf) {
     pgrp_t *r = &sc->pg[p >> 2];
     r->x0[p & 3] = pf[0], r->y0[p & 3] = pf[1], r->x1[p & 3] = -pf[2], r->y1[p & 3] = -pf[3];
@@ -1129,7 +1141,6 @@ static QK__ALWAYS_INLINE void put_entry(const scat_t *sc, uint32_t p, const floa
 }
 
 #if defined(__SSE2__)
-#define QK__PG_GROUPS 1
 /* What scatter_ left out, bands [b0, b1), a whole group at a time by a transpose of its
  * four objects' boxes by slot, the same values as put_entry's: the entries' boxes from this
  * update's (cur, when there is one: the maxima negated) and their last update's (prev,
@@ -1193,8 +1204,6 @@ static void fill_run(unsigned t, void *ud) {
                  b1 = t + 1 < f->nt ? band_at(st, nb, ne * (t + 1) / f->nt) : nb;
   fill_groups(&f->bd, f->prev, f->cur, b0, b1);
 }
-#else
-#define QK__PG_GROUPS 0
 #endif
 
 /* Thread t's entries (whole: all of them, on one thread, without the range's tests). */
@@ -1226,11 +1235,7 @@ static QK__ALWAYS_INLINE void scatter_(const scat_t *sc, unsigned t, int whole) 
       uint32_t p = pos[b]++;
       fm[p >> 2] |= (uint8_t)(1u << (p & 3)); /* its first band */
       for (;;) {
-        if (QK__PG_GROUPS && d.cur) { /* (the boxes: fill_groups) */
-          d.g[p >> 2].slot[p & 3] = s;
-          if (d.exact) d.exact[p] = fx[k];
-        } else
-          put_entry(&d, p, lane_of(fg, k), s, pf, fx[k]);
+        put_entry(&d, p, lane_of(fg, k), s, pf, fx[k]);
         if (++b > be) break;
         p = pos[b]++;
       }
@@ -1240,11 +1245,7 @@ static QK__ALWAYS_INLINE void scatter_(const scat_t *sc, unsigned t, int whole) 
       uint32_t p = b == blo ? clo++ : b == bhi ? chi++ : pos[b]++;
       if (p < p0 || p >= p1) continue;
       if (b == b0) fm[p >> 2] |= (uint8_t)(1u << (p & 3)); /* its first band */
-      if (QK__PG_GROUPS && d.cur) {                        /* (the boxes: fill_groups) */
-        d.g[p >> 2].slot[p & 3] = s;
-        if (d.exact) d.exact[p] = fx[k];
-      } else
-        put_entry(&d, p, lane_of(fg, k), s, pf, fx[k]);
+      put_entry(&d, p, lane_of(fg, k), s, pf, fx[k]);
     }
   }
 }
