@@ -98,6 +98,7 @@ typedef struct qk__kvec {
 typedef struct qk__prows {
   uint32_t *b;
   size_t n, cap;   /* pairs, and the room of b */
+  size_t off;      /* b lies off places into its block (of off + cap; see rows_began) */
   uint32_t *row;   /* n_nz + 1 entries: the rows' slots, then (start) their starts */
   uint32_t *start; /* n_nz + 1 entries, start[n_nz] = n (in row's allocation) */
   size_t n_nz;     /* rows with pairs */
