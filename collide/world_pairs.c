@@ -1168,13 +1168,16 @@ static void bjob_join(bjob_t *J, unsigned t) {
 
 static void bjob_run(unsigned t, void *ud) {
   bjob_t *J = ud;
-  if (J->phase) bjob_join(J, t);
+  if (J->phase) {
+    bjob_join(J, t);
+    return;
+  }
 #if defined(__SSE2__)
-  else if (t == 0 && J->down ? !began_range_down(J) : !began_range(J, t))
+  const int ok = t == 0 && J->down ? began_range_down(J) : began_range(J, t);
 #else
-  else if (!began_range(J, t))
+  const int ok = began_range(J, t);
 #endif
-    J->nomem[t] = 1;
+  if (!ok) J->nomem[t] = 1;
 }
 
 /* Room for n keys in v (its keys kept). 0 when memory ran short (v as it was). */
