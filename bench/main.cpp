@@ -23,6 +23,7 @@ extern "C" {
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdarg>
@@ -275,6 +276,81 @@ void settle_processors() {
 #endif
 }
 
+// How long a cache line written on this processor takes to reach another: one line passed
+// back and forth 20,000 times between this thread and a thread on another processor (both
+// pinned for the while), in nanoseconds one way; NAN where there is no other processor (or
+// it did not answer within a second). Measured before each paired repetition of a t2 row
+// and printed with the row. On this guest it read 27-39 ns one way, and 165-183 ns for
+// spells of a second or more when the host had placed its two vCPUs far apart (the same
+// memory latency on each, the same integer throughput on both at once): in those spells
+// every two-thread world row ran slower than one thread, 0.57-0.89x (docs/benchmarks.md,
+// forty-seventh session), which is what the unexplained t2 outliers of earlier runs were.
+static std::atomic<long> line_flag alignas(64);
+static void *line_echo(void *arg) {
+  const long n = *(const long *)arg;
+  for (long i = 0; i < n; i++) {
+    long want = 2 * i + 1;
+    auto t0 = std::chrono::steady_clock::now();
+    while (line_flag.load(std::memory_order_acquire) != want)
+      if (std::chrono::steady_clock::now() - t0 > std::chrono::seconds(1)) return nullptr;
+    line_flag.store(want + 1, std::memory_order_release);
+  }
+  return nullptr;
+}
+double line_transfer_ns() {
+#if defined(__linux__)
+  const int me = sched_getcpu();
+  const long ncpu = sysconf(_SC_NPROCESSORS_ONLN);
+  cpu_set_t mine, here, there;
+  if (me < 0 || pthread_getaffinity_np(pthread_self(), sizeof mine, &mine) != 0) return NAN;
+  int other = -1;
+  for (long c = 0; c < ncpu && c < CPU_SETSIZE && other < 0; c++)
+    if (c != me && CPU_ISSET((int)c, &mine)) other = (int)c;
+  if (other < 0) return NAN;
+  CPU_ZERO(&here);
+  CPU_SET(me, &here);
+  CPU_ZERO(&there);
+  CPU_SET(other, &there);
+  pthread_attr_t at;
+  if (pthread_attr_init(&at) != 0) return NAN;
+  static long n = 20000;
+  line_flag.store(0);
+  pthread_t th;
+  bool started = pthread_attr_setaffinity_np(&at, sizeof there, &there) == 0 &&
+                 pthread_setaffinity_np(pthread_self(), sizeof here, &here) == 0 &&
+                 pthread_create(&th, &at, line_echo, &n) == 0;
+  pthread_attr_destroy(&at);
+  double ns = NAN;
+  if (started) {
+    double t0 = wall_seconds();
+    long i = 0;
+    for (; i < n; i++) {
+      line_flag.store(2 * i + 1, std::memory_order_release);
+      while (line_flag.load(std::memory_order_acquire) != 2 * i + 2)
+        if (wall_seconds() - t0 > 1.0) break;
+      if (line_flag.load(std::memory_order_relaxed) != 2 * i + 2) break;
+    }
+    if (i == n) ns = (wall_seconds() - t0) / (2.0 * n) * 1e9;
+    line_flag.store(-1); /* (an echo still waiting gives up within its second) */
+    pthread_join(th, nullptr);
+  }
+  pthread_setaffinity_np(pthread_self(), sizeof mine, &mine);
+  return ns;
+#else
+  return NAN;
+#endif
+}
+
+// A t2 row's line transfer times (line_transfer_ns, one before each repetition): median
+// and largest, as the row's extras.
+static void note_line(Rec &r, std::vector<double> v) {
+  v.erase(std::remove_if(v.begin(), v.end(), [](double x) { return !std::isfinite(x); }),
+          v.end());
+  if (v.empty()) return;
+  r.extra["line_ns"] = median(v);
+  r.extra["line_ns_max"] = *std::max_element(v.begin(), v.end());
+}
+
 // What every timed call gets first, untimed: the heap, then the other processors.
 static void settle() {
   settle_heap();
@@ -290,9 +366,11 @@ static void settle() {
 std::vector<double> interleaved(const std::vector<std::function<void()>> &fns,
                                 const std::vector<bool> &wall = {},
                                 const std::vector<int> &partner = {},
-                                std::vector<double> *paired = nullptr) {
+                                std::vector<double> *paired = nullptr,
+                                std::vector<std::vector<double>> *lines = nullptr) {
   size_t m = fns.size();
   std::vector<std::vector<double>> t(m), ratio(m);
+  if (lines) lines->assign(m, {});
   for (int r = 0; r < opt.reps; r++)
     for (size_t j = 0; j < m; j++) {
       size_t i = (j + r) % m;
@@ -303,6 +381,7 @@ std::vector<double> interleaved(const std::vector<std::function<void()>> &fns,
       int p = wall_clock && i < partner.size() ? partner[i] : -1;
       double one = NAN;
       if (p >= 0) {
+        if (lines) (*lines)[i].push_back(line_transfer_ns());
         settle();
         double t0 = now_seconds();
         fns[(size_t)p]();
@@ -348,9 +427,12 @@ std::vector<double> interleaved_recs(const std::vector<std::function<void()>> &f
   std::vector<bool> wall;
   for (auto &r : recs) wall.push_back(r.threads > 1);
   std::vector<double> paired;
-  auto med = interleaved(fns, wall, one_thread_partners(recs), &paired);
-  for (size_t i = 0; i < recs.size(); i++)
+  std::vector<std::vector<double>> lines;
+  auto med = interleaved(fns, wall, one_thread_partners(recs), &paired, &lines);
+  for (size_t i = 0; i < recs.size(); i++) {
     if (std::isfinite(paired[i])) recs[i].extra["speedup_wall"] = paired[i];
+    note_line(recs[i], lines[i]);
+  }
   return med;
 }
 
@@ -480,7 +562,8 @@ void run_build(const std::string &ds, const std::vector<Pt> &pts) {
     }
   }
   std::vector<double> paired;
-  auto med = interleaved(fns, wall, partner, &paired);
+  std::vector<std::vector<double>> lines;
+  auto med = interleaved(fns, wall, partner, &paired, &lines);
   for (size_t i = 0; i < fns.size(); i++) {
     Rec r;
     r.op = "build", r.impl = names[i], r.dataset = ds, r.n = pts.size();
@@ -490,6 +573,7 @@ void run_build(const std::string &ds, const std::vector<Pt> &pts) {
     r.bytes_per_point = bytes[i];
     r.matches = names[i] == "cgal" ? cgal_match : names[i] == "proto-morton" || wall[i] ? 1 : -1;
     if (std::isfinite(paired[i])) r.extra["speedup_wall"] = paired[i];
+    note_line(r, lines[i]);
     r.order = "-";
     emit(r);
   }
@@ -801,7 +885,8 @@ void run_world(const std::string &kind, size_t n) {
       emit(r);
     }
   }
-  std::vector<std::vector<double>> t(impls.size()), ratio(impls.size()), ratio_upd(impls.size());
+  std::vector<std::vector<double>> t(impls.size()), ratio(impls.size()), ratio_upd(impls.size()),
+      lines(impls.size());
   std::vector<int> timed(impls.size(), frames - 1); // (frame 0 untimed: see run)
   size_t m = impls.size();
   double rep_budget = kWorldBudget / opt.reps;
@@ -839,6 +924,7 @@ void run_world(const std::string &kind, size_t n) {
       double upd, upd_one;
       if (nth[i] > 1) { // paired wall clock: the one-thread world just before
         std::this_thread::sleep_for(std::chrono::milliseconds(50));
+        lines[i].push_back(line_transfer_ns());
         wall_clock = true;
         double one = run(0, f, upd_one);
         t[i].push_back(run(i, f, upd));
@@ -861,6 +947,7 @@ void run_world(const std::string &kind, size_t n) {
     // whatever the world's threads (the walk of the pairs runs on them), so the frame's
     // speedup is bounded by their share; this one is the update's alone.
     if (!ratio_upd[i].empty()) r.extra["speedup_update_wall"] = median(ratio_upd[i]);
+    note_line(r, lines[i]);
     r.seconds = median(t[i]);
     r.per_second = n / r.seconds;
     size_t b = impls[i]->bytes();
@@ -1741,7 +1828,8 @@ void print_table() {
   printf("quadkit-bench: ratio = quadkit rate / baseline rate (>1: quadkit faster); medians of "
          "%d interleaved runs in one process; process CPU time (wall time for t2 rows)\n"
          "t2 rows end with their speedup: each run's one-thread wall time (the same call, run "
-         "just before it) over its own\n",
+         "just before it) over its own,\nand with the time a cache line written on one "
+         "processor took to reach another before each run (one way: median, largest)\n",
          opt.reps);
   printf("%-9s %-10s %8s %-14s %10s", "op", "dataset", "n", "variant", "quadkit/s");
   for (auto c : cols) printf(" %13s", c);
@@ -1794,6 +1882,9 @@ void print_table() {
     if (sp != r.extra.end()) printf("  %.2fx one thread (paired wall clock)", sp->second);
     auto su = r.extra.find("speedup_update_wall");
     if (su != r.extra.end()) printf(", update alone %.2fx", su->second);
+    auto ln = r.extra.find("line_ns"), lm = r.extra.find("line_ns_max");
+    if (ln != r.extra.end() && lm != r.extra.end())
+      printf("; a line between processors %.0f ns (at most %.0f)", ln->second, lm->second);
     printf("\n");
   }
   for (auto &r : records)

@@ -7,7 +7,9 @@ tree and collider targets (issues 5 and 11), the moving-objects world (issue 10)
 general mesher (issue 12). A baseline whose answers differed from quadkit's was not timed;
 where it still recorded a time (`seconds_unverified`, balance only) the ratio is shown in
 brackets. Two-thread rows are the run's paired wall-clock ratios (`speedup_wall`: the
-one-thread call timed just before, by the wall clock too). A target whose rows are
+one-thread call timed just before, by the wall clock too), with the time a cache line took
+from one processor to another before each repetition (`line_ns`, `line_ns_max`: on a
+guest whose host moves its vCPUs, two-thread rates follow it). A target whose rows are
 absent from the run (a baseline not installed, an operation not run) says so.
 """
 import json
@@ -69,7 +71,10 @@ def two_threads(t, what, r):
     if s is None:
         t.missing(what, "≥ 1.8x", "not in this run (run with --threads 2)")
     else:
-        t.value(what, "≥ 1.8x", f"{s:.2f}x", s >= 1.8, "paired wall clock")
+        note = "paired wall clock"
+        if r.get("line_ns") is not None and r.get("line_ns_max") is not None:
+            note += f"; a line between processors {r['line_ns']:.0f} ns (at most {r['line_ns_max']:.0f})"
+        t.value(what, "≥ 1.8x", f"{s:.2f}x", s >= 1.8, note)
 
 
 def t2_row(rows, **kw):
