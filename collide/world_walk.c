@@ -154,6 +154,22 @@ static __attribute__((noinline)) void walk_rows(walk_t *J, unsigned t, size_t lo
   void *const ud = J->ud;
   atomic_int *const stop = &J->stop;
   const int shared = 1;
+  const uint64_t *ck = qk__world_kept_keys(w);
+  if (ck) {
+    /* The pairs as keys in order (walk_rows1): each pair from its key, no row to follow.
+     * (Through the rows instead, two workers took 3.7-4.4 ns a pair each on the uniform
+     * scene at 10^5, 1.5 pairs an object, against 2.5 for one worker from the keys: the
+     * walk on two threads 330-335 us against 370 on one.) */
+    for (size_t i = lo; i < hi;) {
+      if (WALK_STOPPED()) return;
+      for (const size_t be = WALK_BLOCK_END(i, hi); i < be; i++) {
+        const uint64_t key = ck[i];
+        const uint32_t a = (uint32_t)(key >> 32), b = (uint32_t)key;
+        WALK_CALL((uint64_t)ug[a] << 32 | a, (uint64_t)ug[b] << 32 | b, t);
+      }
+    }
+    return;
+  }
   size_t k = row_of(&w->cur, lo);
   if (w->cur.n < 4 * w->cur.n_nz) {
     for (size_t i = lo; i < hi;) {
