@@ -930,8 +930,9 @@ void run_world(const std::string &kind, size_t n) {
         // Both over the same frames: those the one-thread world did within the budget.
         // (Until the forty-seventh session the several-thread world ran on to its own
         // budget: on the clustered scene at 10^5 it averaged frames 1-29 against its
-        // partner's 1-16, where frame 1, after a frame in which every pair began, costs
-        // several steady ones: the ratio read a few percent high.)
+        // partner's 1-16, where frames 1 and 2, after a frame in which every pair began,
+        // cost about twice and 1.3 times a steady frame: the ratio read a few percent
+        // high.)
         int f_one = 0;
         double one = run(0, f_one, upd_one, frames - 1, rep_budget);
         t[i].push_back(run(i, f, upd, f_one, INFINITY));
