@@ -114,8 +114,7 @@ void qk_world_free(qk_world_t *w) {
   qk__free(&a, w->cells, (size_t)w->cap_cells * sizeof *w->cells);
   qk__free(&a, w->ugen, (size_t)w->cap_ugen * sizeof *w->ugen);
   qk__free(&a, w->dnext, (size_t)w->cap_dnext * sizeof *w->dnext);
-  qk__free(&a, w->cur.b ? w->cur.b - w->cur.off : NULL,
-           (w->cur.off + w->cur.cap) * sizeof *w->cur.b);
+  qk__free(&a, qk__prows_block(&w->cur), qk__prows_room(&w->cur) * sizeof *w->cur.b);
   qk__free(&a, w->cur.row, w->cur.row ? 2 * (w->cur.n_nz + 1) * sizeof *w->cur.row : 0);
   qk__free(&a, w->ckeys.v, w->ckeys.cap * sizeof *w->ckeys.v);
   qk__free(&a, w->began.v, w->began.cap * sizeof *w->began.v);
@@ -144,7 +143,7 @@ static size_t kept_tkeys(const qk_world_t *w) {
 
 size_t qk_world_pair_bytes(const qk_world_t *w) {
   if (!w) return 0;
-  return (w->cur.off + w->cur.cap) * sizeof *w->cur.b +
+  return qk__prows_room(&w->cur) * sizeof *w->cur.b +
          (w->cur.row ? 2 * (w->cur.n_nz + 1) * sizeof *w->cur.row : 0) +
          (w->ckeys.cap + w->began.cap + w->ended.cap + w->n_egen + w->scr_keys.cap) *
              sizeof(uint64_t) +

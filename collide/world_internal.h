@@ -104,6 +104,12 @@ typedef struct qk__prows {
   size_t n_nz;     /* rows with pairs */
 } qk__prows_t;
 
+/* The block that holds r's pairs (or NULL), and its room in pairs. */
+static inline uint32_t *qk__prows_block(const qk__prows_t *r) {
+  return r->b ? r->b - r->off : NULL;
+}
+static inline size_t qk__prows_room(const qk__prows_t *r) { return r->off + r->cap; }
+
 /* The search threads whose key buffers an update keeps (beyond the first). */
 #define QK__KEEP_THREADS 7
 

@@ -58,7 +58,7 @@ static inline int fboxes_meet(const float *a, const float *b) {
 }
 
 static void rows_free(const qk_allocator_t *a, qk__prows_t *r) {
-  qk__free(a, r->b ? r->b - r->off : NULL, (r->off + r->cap) * sizeof *r->b);
+  qk__free(a, qk__prows_block(r), qk__prows_room(r) * sizeof *r->b);
   qk__free(a, r->row, r->row ? 2 * (r->n_nz + 1) * sizeof *r->row : 0);
   *r = (qk__prows_t){0};
 }
@@ -909,22 +909,22 @@ typedef struct bjob {
   size_t d[QK__RMAX], z[QK__RMAX];         /* its pairs and rows */
   uint32_t *zr[QK__RMAX];                  /* its rows' slots, then (at zr + zc) starts */
   size_t zc[QK__RMAX];
+  /* range t's began keys: on one thread the frame's list itself, on several its place in
+   * that list (its began keys are known: those of its began rows); its ended keys, which
+   * the tests decide, a list of its own, joined after */
   qk__kvec_t bv[QK__RMAX], ev[QK__RMAX];
   qk__kvec_t nv[QK__RMAX]; /* (not exact) the old pairs that became near candidates */
   int nomem[QK__RMAX];
-  /* The join on threads (phase 1): range t's first row, pair, began and ended key in the
-   * result, and where its pairs were written; the result. */
+  /* The join on threads (phase 1): range t's first row, pair and ended key in the result,
+   * and where its pairs were written; the result. */
   int phase;
-  size_t zo[QK__RMAX], dd[QK__RMAX], bo[QK__RMAX], eo[QK__RMAX], base[QK__RMAX];
+  size_t zo[QK__RMAX], dd[QK__RMAX], eo[QK__RMAX], base[QK__RMAX];
   qk__prows_t *r;
-  uint64_t *jb, *je;
+  uint64_t *je;
   /* Range 0 written downward (began_range_down): its pairs end at base[1], where range
    * 1's begin, and the joined pairs start off places into out. */
   int down;
   size_t off;
-  /* (on threads) bv[t] is range t's place in the joined began list, not a list of its
-   * own: its began keys are known, those of its began rows */
-  int bview;
 } bjob_t;
 
 #if defined(__SSE2__)
@@ -1115,7 +1115,7 @@ static __attribute__((noinline)) int began_range_down(bjob_t *J) {
     } else {
       /* the began slots (y, the next of them down; every slot of a row is above its
        * row's, so above 0) put in after the first old slot below them; their keys from
-       * the top of the range's place in the joined list down (J->bview) */
+       * the top of the range's place in the joined list down (bv[0]) */
       uint64_t *bv = lb.v + lb.cap - lb.n;
       size_t k = ie;
       uint32_t y = bb[k - 1];
@@ -1143,7 +1143,8 @@ out:
 #endif
 
 /* Range t's rows (row index, and, the last range, every range's pairs moved down in
- * range order: a range's place may overlap the one before's) and lists into the result. */
+ * range order: a range's place may overlap the one before's) and ended list into the
+ * result. */
 static void bjob_join(bjob_t *J, unsigned t) {
   qk__prows_t *r = J->r;
   const uint32_t *zr = J->zr[t];
@@ -1156,7 +1157,6 @@ static void bjob_join(bjob_t *J, unsigned t) {
   } else {
     for (size_t k = 0; k < z; k++)
       r->row[zo + k] = zr[k], r->start[zo + k] = (uint32_t)(d + zr[zc + k]);
-    if (J->bv[t].n && !J->bview) memcpy(J->jb + J->bo[t], J->bv[t].v, J->bv[t].n * sizeof *J->jb);
     if (J->ev[t].n) memcpy(J->je + J->eo[t], J->ev[t].v, J->ev[t].n * sizeof *J->je);
   }
   if (t + 1 < J->nt) return;
@@ -1394,10 +1394,8 @@ __attribute__((noinline)) static int rows_began(const qk_world_t *w, uint64_t *k
     J->bv[0] = J->ev[0] = J->nv[0] = (qk__kvec_t){0};
   } else {
     /* Range t's began keys (those of its began rows, in key order) straight to their
-     * place in bv (J->bview); its ended ones, which the tests decide, to a list of its own
-     * joined after. */
+     * place in bv; its ended ones to a list of its own, joined after. */
     ok = kv_room(al, bv, bv->n + nb.n);
-    J->bview = 1;
     size_t at = 0; /* (range t's first began key: nb.start[p[t]]) */
     for (unsigned t = 0; ok && t < nt; t++) {
       const size_t b1 = J->p[t + 1] < nb.n_nz ? nb.start[J->p[t + 1]] : nb.n;
@@ -1419,16 +1417,16 @@ __attribute__((noinline)) static int rows_began(const qk_world_t *w, uint64_t *k
    * a frame on the benchmark's clustered scene at 10^5), the near candidates here. */
   size_t z = 0, d = 0, bt = bv->n, et = ev->n;
   for (unsigned t = 0; ok && t < nt; t++) {
-    J->zo[t] = z, J->dd[t] = d, J->bo[t] = bt, J->eo[t] = et;
+    J->zo[t] = z, J->dd[t] = d, J->eo[t] = et;
     J->base[t] = (J->q[t] < o->n_nz ? o->start[J->q[t]] : o->n) +
                  (J->p[t] < nb.n_nz ? nb.start[J->p[t]] : nb.n);
     z += J->z[t], d += J->d[t], bt += J->bv[t].n, et += J->ev[t].n;
   }
   if (ok && J->down) J->off = J->base[1] - J->d[0];
-  if (ok && nt > 1) ok = kv_room(al, bv, bt) && kv_room(al, ev, et);
+  if (ok && nt > 1) ok = kv_room(al, ev, et); /* (bv's: before the ranges) */
   for (unsigned t = 0; ok && nt > 1 && t < nt; t++) ok = kv_append(al, nv, &J->nv[t]);
   if (ok && (ok = rows_alloc(al, r, z))) {
-    J->r = r, J->jb = bv->v, J->je = ev->v, J->phase = 1;
+    J->r = r, J->je = ev->v, J->phase = 1;
     if (nt > 1)
       qk__world_run_jobs(w, nt, nt, bjob_run, J);
     else
@@ -1440,7 +1438,6 @@ __attribute__((noinline)) static int rows_began(const qk_world_t *w, uint64_t *k
   }
   for (unsigned t = 0; t < nt; t++) {
     qk__free(al, J->zr[t], J->zr[t] ? (2 * J->zc[t] + 1) * sizeof *J->zr[t] : 0);
-    if (!J->bview) qk__free(al, J->bv[t].v, J->bv[t].cap * sizeof(uint64_t));
     qk__free(al, J->ev[t].v, J->ev[t].cap * sizeof(uint64_t));
     qk__free(al, J->nv[t].v, J->nv[t].cap * sizeof(uint64_t));
   }
@@ -1761,8 +1758,8 @@ static void keep_rows(qk_world_t *w) {
   const qk_allocator_t *al = &w->alloc;
   qk__free(al, w->spare_b, w->cap_spare_b * sizeof *w->spare_b);
   w->spare_b = NULL, w->cap_spare_b = 0;
-  if (keep_buf(w->cur.off + w->cur.cap, w->cur.n, sizeof *w->cur.b)) {
-    w->spare_b = w->cur.b - w->cur.off, w->cap_spare_b = w->cur.off + w->cur.cap;
+  if (keep_buf(qk__prows_room(&w->cur), w->cur.n, sizeof *w->cur.b)) {
+    w->spare_b = qk__prows_block(&w->cur), w->cap_spare_b = qk__prows_room(&w->cur);
     w->cur.b = NULL, w->cur.cap = w->cur.off = 0;
   }
   rows_free(al, &w->cur);
@@ -1997,10 +1994,10 @@ static qk_status_t update(qk_world_t *w) {
    * small and took a fresh one (40 MB at 10^5 clustered boxes whose pairs fall by 1% a
    * frame: 10 000 page faults every eighth update). */
   keep_rows(w);
-  if (nr.cap > nr.n + nr.n / 4 + 64 && !keep_buf(nr.off + nr.cap, nr.n, sizeof *nr.b)) {
+  if (nr.cap > nr.n + nr.n / 4 + 64 && !keep_buf(qk__prows_room(&nr), nr.n, sizeof *nr.b)) {
     size_t c = nr.n ? nr.n : 1;
-    uint32_t *p =
-        qk__realloc(al, nr.b - nr.off, (nr.off + nr.cap) * sizeof *p, (nr.off + c) * sizeof *p);
+    uint32_t *p = qk__realloc(al, qk__prows_block(&nr), qk__prows_room(&nr) * sizeof *p,
+                              (nr.off + c) * sizeof *p);
     if (p) nr.b = p + nr.off, nr.cap = c;
   }
   w->cur = nr;
