@@ -1881,6 +1881,55 @@ static void test_world_grid_levels(void **s) {
     }
 }
 
+/* The one-thread merge's touched cells (collide/world_grid.c, merge_t's touch): a sparse
+ * world on the grid (pairs of boxes of one level, most cells holding one or two objects),
+ * each object drifting at its own velocity (steps of at most 0.6, so that no margin lifts
+ * an object a level and the world stays on the grid), whose frames move every 16th to
+ * 40th object (a few of the cells touched: the merge copies the runs of untouched cells
+ * whole) or every object (once more than a sixteenth of the cells dirty: the cells are
+ * not searched then, nor noted for the next frame), one frame removing and adding an
+ * object (no search then either); every frame's pairs, began and ended against brute
+ * force. */
+static void test_world_few_movers(void **s) {
+  (void)s;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 89);
+  qk_world_t *w = threaded_world(1);
+  mirror_t m = {0};
+  enum { GROUPS = 1200 };
+  double v[2 * GROUPS][2];
+  for (int g = 0; g < GROUPS; g++) {
+    const double gx = qkt_rng_range(&r, 0, 3000), gy = qkt_rng_range(&r, 0, 3000);
+    for (int k = 0; k < 2; k++) {
+      const double x = gx + qkt_rng_range(&r, 0, 2), y = gy + qkt_rng_range(&r, 0, 2);
+      v[m.n][0] = qkt_rng_range(&r, -0.3, 0.3), v[m.n][1] = qkt_rng_range(&r, -0.3, 0.3);
+      m_add(w, &m,
+            (qk_shape_t){QK_SHAPE_BOX, x, y, x + qkt_rng_range(&r, 0.55, 0.95),
+                         y + qkt_rng_range(&r, 0.55, 0.95)});
+    }
+  }
+  qk_world_pair_t *prev = NULL;
+  size_t np = 0;
+  static const int every[] = {16, 40, 16, 1, 16, 16, 25, 7, 16, 1, 25, 16, 16, 25};
+  for (int f = 0; f <= 14; f++) {
+    for (size_t i = 0; f && i < m.n; i += (size_t)every[f - 1]) {
+      /* (two steps at a time: at most 0.6, so that no margin lifts an object a level) */
+      qk_shape_t sh = m.s[i];
+      const double dx = 2 * v[i][0], dy = 2 * v[i][1];
+      sh.x += dx, sh.a += dx, sh.y += dy, sh.b += dy;
+      m_move(w, &m, i, sh);
+    }
+    if (f == 6) {
+      m.n--; /* (the last object: its velocity stays its slot's) */
+      assert_int_equal(qk_world_remove(w, m.h[m.n]), QK_OK);
+      m_add(w, &m, (qk_shape_t){QK_SHAPE_BOX, 10, 10, 10.7, 10.7});
+    }
+    update_and_check(w, &m, &prev, &np, "few movers", f);
+  }
+  free(prev), free(m.h), free(m.s);
+  qk_world_free(w);
+}
+
 /* The re-filing's sort of the dirty objects by cell (collide/world_grid.c, drec_sort),
  * which packs each object's (level, cy, cx) relative to the frame's least ones with its
  * index into 64 bits when they fit: objects jumping every frame (all dirty, hundreds of
@@ -4052,6 +4101,7 @@ int main(void) {
       cmocka_unit_test(test_world_bands_edges),
       cmocka_unit_test(test_world_bands_stop_lanes),
       cmocka_unit_test(test_world_grid_levels),
+      cmocka_unit_test(test_world_few_movers),
       cmocka_unit_test(test_world_refile_sort),
       cmocka_unit_test(test_world_fbox_only_bands),
       cmocka_unit_test(test_world_prefilter_and_sort),
