@@ -774,7 +774,7 @@ static int merge_threads(qk_world_t *w, drec_t *d, size_t m_d, const uint32_t *s
     qk__free(a, J, sizeof *J);
     return 0;
   }
-  J->rg = (uint8_t *)(s_ord + so);
+  J->rg = sl ? (uint8_t *)(s_ord + so) : NULL;
   J->w = w, J->d = d, J->ord = ord, J->cells = cells, J->s_ord = s_ord, J->s_cell = s_cell;
   J->sl = NULL, J->nt = nt, J->skip = skip;
   /* Ranges of old cells of about equal objects; each range's dirty records from the
@@ -921,9 +921,7 @@ void qk__world_pack_free(qk_world_t *w, qk__wpack_t *pk) {
 /* The merge's touched cells (merge_t's touch) are found when the dirty objects are at
  * most this share of the old cells (1 / QK__TOUCH_SHARE), and the pack notes each
  * object's cell for them when they were so in the update before. */
-#ifndef QK__TOUCH_SHARE
 #define QK__TOUCH_SHARE 16
-#endif
 
 qk_status_t qk__world_reorder(qk_world_t *w, qk__wpack_t *pk) {
   const qk_allocator_t *a = &w->alloc;
