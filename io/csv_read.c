@@ -253,6 +253,10 @@ static qk_status_t read_row(reader_t *r, char *line, size_t len, unsigned long l
     }
     double v;
     int num = qk__csv_number(line, sp, &v);
+    if (num == -2)
+      return fail(r, QK_ERR_LIMIT, lineno, sp->start + 1, row,
+                  "field %zu%s is below the smallest double (it would read as 0): '%.*s'", f, named,
+                  (int)(sp->e - sp->b < 40 ? sp->e - sp->b : 40), line + sp->b);
     if (num <= 0)
       return fail(r, QK_ERR_PARSE, lineno, sp->start + 1, row,
                   "field %zu%s is not a %snumber: '%.*s'", f, named, num < 0 ? "decimal " : "",

@@ -210,5 +210,9 @@ int qk__csv_number(char *line, const qk__span_t *sp, double *v) {
   errno = 0;
   *v = strtod(line + b, &end);
   line[e] = saved;
-  return end == line + e;
+  if (end != line + e) return 0;
+  if (*v == 0) /* (a nonzero digit before the exponent: "1e-400" read as 0) */
+    for (size_t i = b; i < e && (line[i] | 0x20) != 'e'; i++)
+      if (line[i] >= '1' && line[i] <= '9') return -2;
+  return 1;
 }

@@ -53,7 +53,8 @@ const char *qk__csv_field(const char *line, size_t len, size_t *pos, qk__span_t 
 int qk__decimal_syntax(const char *s, size_t n);
 
 /* Is the field a number (qk__decimal_syntax, blanks around allowed)? 1 and *v set; 0 when
- * not; -1 when it is hexadecimal (0x...), which strtod would take but CSV does not. */
+ * not; -1 when it is hexadecimal (0x...), which strtod would take but CSV does not; -2 when
+ * it is a nonzero number below the smallest double, which strtod reads as 0. */
 int qk__csv_number(char *line, const qk__span_t *sp, double *v);
 
 #endif /* QUADKIT_IO_INTERNAL_H */

@@ -23,6 +23,9 @@
  * and a marker, some 25 KB, and without a limit an endless line (a pipe from `yes | tr -d
  * '\n'`, a file without line breaks) was taken into memory until it ran out. */
 #define POLY_MAX_LINE 1048576ul
+/* The tokens of a line that are kept: the most a row may hold (a vertex's number,
+ * coordinates, attributes and marker); a row with more is refused by its count. */
+#define POLY_MAX_TOKENS (4 + POLY_MAX_ATTRIBUTES)
 
 /* A line reader that strips `#` comments and splits on blanks, skipping empty lines. */
 typedef struct reader {
@@ -31,8 +34,8 @@ typedef struct reader {
   char *buf;
   size_t cap;
   unsigned long line;
-  char *tok[16]; /* the first tokens of the current line */
-  size_t ntok;   /* tokens on the line (may exceed 16; only 16 are kept) */
+  char *tok[POLY_MAX_TOKENS]; /* the first tokens of the current line */
+  size_t ntok;                /* tokens on the line (may exceed those kept) */
   int io_error;
   /* The section whose rows are being read (or were read last): its name, declared row
    * count and header line, for the hint when the rows do not match the count. */
@@ -64,7 +67,7 @@ static int next_line(reader_t *r) {
           r->line++;
           return -3;
         }
-        if (d == '\n') ungetc(d, r->f);
+        break; /* CR LF (or a CR ending the input) ends the line; the CR is not counted */
       }
       if (n == POLY_MAX_LINE) {
         r->line++;
@@ -91,13 +94,20 @@ static int next_line(reader_t *r) {
     for (;;) {
       while (*s == ' ' || *s == '\t' || *s == '\r' || *s == ',') s++;
       if (!*s) break;
-      if (r->ntok < 16) r->tok[r->ntok] = s;
+      if (r->ntok < POLY_MAX_TOKENS) r->tok[r->ntok] = s;
       r->ntok++;
       while (*s && *s != ' ' && *s != '\t' && *s != '\r' && *s != ',') s++;
       if (*s) *s++ = '\0';
     }
     if (r->ntok > 0) return 1;
   }
+}
+
+/* Whether a number's text has a nonzero digit before its exponent (it is not zero). */
+static int nonzero_digits(const char *s) {
+  for (; *s && *s != 'e' && *s != 'E'; s++)
+    if (*s >= '1' && *s <= '9') return 1;
+  return 0;
 }
 
 /* Parse a whole token as a finite decimal number (strtod's hexadecimal forms, 0x10 or
@@ -108,7 +118,7 @@ static int parse_num(const char *s, double *v) {
   if (digits[0] == '0' && (digits[1] | 0x20) == 'x') return 0;
   errno = 0;
   double d = strtod(s, &end);
-  if (end == s || *end || !isfinite(d)) return 0;
+  if (end == s || *end || !isfinite(d) || (d == 0 && nonzero_digits(s))) return 0;
   *v = d;
   return 1;
 }
@@ -121,6 +131,7 @@ static const char *num_why(const char *s) {
   double d = strtod(s, &end);
   if (end == s || *end) return "";
   if (isnan(d) || (isinf(d) && strpbrk(s, "iI"))) return " (not a finite number)";
+  if (d == 0) return " (below the smallest double: it would read as 0)";
   return " (beyond the range of a double)";
 }
 
@@ -388,7 +399,7 @@ static qk_status_t read_vertices(reader_t *r, qk_poly_t *p, qk_mesh_error_t *err
     if (r->ntok > 3 + nattr + nmark)
       return rfail(r, err, QK_ERR_PARSE, "vertex %lld: %zu fields, at most %lu expected", idx,
                    r->ntok, 3 + nattr + nmark);
-    for (size_t k = 3; k < r->ntok && k < 16; k++) {
+    for (size_t k = 3; k < r->ntok; k++) { /* (at most 3 + nattr + nmark: all kept) */
       double v;
       if (!parse_num(r->tok[k], &v))
         return rfail(r, err, QK_ERR_PARSE, "vertex %lld: bad field '%s'%s", idx, r->tok[k],

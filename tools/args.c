@@ -25,6 +25,13 @@ int cli_parse_u32(const char *cmd, const char *opt, const char *s, unsigned long
   return 0;
 }
 
+/* Whether a number's text has a nonzero digit before its exponent (it is not zero). */
+static int nonzero_digits(const char *s) {
+  for (; *s && *s != 'e' && *s != 'E'; s++)
+    if (*s >= '1' && *s <= '9') return 1;
+  return 0;
+}
+
 int cli_number(const char *s, double *v) {
   size_t i = 0, d = 0;
   if (s[i] == '+' || s[i] == '-') i++;
@@ -51,7 +58,7 @@ int cli_number(const char *s, double *v) {
     }
   }
   *v = strtod(s, NULL);
-  return 1;
+  return *v == 0 && nonzero_digits(s) ? -2 : 1;
 }
 
 int cli_parse_double(const char *cmd, const char *opt, const char *s, double *out) {
@@ -60,7 +67,12 @@ int cli_parse_double(const char *cmd, const char *opt, const char *s, double *ou
     return 1;
   }
   double v;
-  if (cli_number(s, &v) != 1 || !isfinite(v)) {
+  int got = cli_number(s, &v);
+  if (got == -2) {
+    cli_error(cmd, "%s: '%s' is below the smallest double (it would read as 0)", opt, s);
+    return 1;
+  }
+  if (got != 1 || !isfinite(v)) {
     cli_error(cmd, "%s must be a finite number, not '%s'", opt, s);
     return 1;
   }

@@ -176,7 +176,8 @@ int cli_parse_double(const char *cmd, const char *opt, const char *s, double *ou
 /* A whole string as a decimal number (optional sign, digits with an optional point, an
  * optional exponent; or strtod's inf, infinity, nan in any case, which set a non-finite
  * *v): 1 and *v set; 0 when it is not one; -1 when it is hexadecimal (0x...), which
- * strtod would take but the tool's inputs do not. No blanks around. */
+ * strtod would take but the tool's inputs do not; -2 when it is a nonzero number below the
+ * smallest double, which strtod reads as 0 (*v set to that 0). No blanks around. */
 int cli_number(const char *s, double *v);
 /* --xy X,Y: two column names or 1-based numbers, comma-separated. */
 int cli_parse_xy(const char *cmd, const char *opt, const char *s, const char **out);

@@ -139,7 +139,8 @@ static void field_error(const char *path, const char *line, int k, long lineno, 
   cli_msg("quadkit join: %s:%lu:%lu: field %d: %s\n", path, fl, fc, k, why);
 }
 
-/* A field as a number, blanks around allowed (cli_number: 1, 0, or -1 for hexadecimal). */
+/* A field as a number, blanks around allowed (cli_number: 1, 0, -1 for hexadecimal, -2 below
+ * the smallest double). */
 static int number(char *f, double *v) {
   while (*f == ' ' || *f == '\t') f++;
   size_t n = strlen(f);
@@ -484,8 +485,13 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
        * reader says it (it said "FILE:LINE: field 2", leaving the column to count). */
       unsigned long fl, fc;
       field_at(line, col, (unsigned long)lineno, bom, &fl, &fc);
-      cli_msg("quadkit join: %s:%lu:%lu: field %d%s%s%s is not a finite number: '%.40s'\n",
-              j->pts_path, fl, fc, col + 1, name[0] ? " (" : "", name, name[0] ? ")" : "", bad);
+      double u;
+      cli_msg("quadkit join: %s:%lu:%lu: field %d%s%s%s is %s: '%.40s'\n", j->pts_path, fl, fc,
+              col + 1, name[0] ? " (" : "", name, name[0] ? ")" : "",
+              number(bad == fx ? fx : fy, &u) == -2
+                  ? "below the smallest double (it would read as 0)"
+                  : "not a finite number",
+              bad);
       rc = CLI_BAD_INPUT;
       break;
     }

@@ -60,8 +60,8 @@ static const char *split(char *line, row_t *r) {
   return NULL;
 }
 
-/* A field as a number: cli_number's 1, 0, or -1 (hexadecimal, which looks like a number
- * to the header test but is refused as a value). */
+/* A field as a number: cli_number's 1, 0, -1 (hexadecimal, which looks like a number
+ * to the header test but is refused as a value) or -2 (below the smallest double). */
 static int num(const char *s, double *v) { return cli_number(s, v); }
 
 /* An id (or a frame): a whole number from 0 to 2^64 - 1. NULL, or an error message for
@@ -141,14 +141,17 @@ static int shape_values(const char *path, unsigned long ln, qk_shape_kind_t k, c
   double v[4] = {0, 0, 0, 0};
   if (nf < need) return bad(path, ln, "%s", "too few fields for this kind of shape");
   for (int i = 0; i < need; i++) {
-    if (num(f[i], &v[i]) != 1) return bad(path, ln, "not a decimal number: '%s'", f[i]);
+    const int got = num(f[i], &v[i]);
+    if (got == -2)
+      return bad(path, ln, "value below the smallest double (it would read as 0): '%s'", f[i]);
+    if (got != 1) return bad(path, ln, "not a decimal number: '%s'", f[i]);
     if (!isfinite(v[i])) return bad(path, ln, "coordinate is not finite: '%s'", f[i]);
   }
   /* Fields a kind does not use may be empty or hold a number (files that write all six
    * columns for every kind), but nothing else. */
   for (int i = need; i < nf; i++) {
     double unused;
-    if (f[i][0] && num(f[i], &unused) != 1)
+    if (f[i][0] && num(f[i], &unused) < 1 && num(f[i], &unused) != -2)
       return bad(path, ln,
                  "field '%s' is not used by this kind of shape: leave it empty or a number", f[i]);
   }
@@ -194,15 +197,14 @@ static int each_row(const char *path,
   int rc = CLI_OK, first = 1;
   long len;
   const char *rwhy;
-  while ((len = cli_read_line(&rd, &rwhy)) >= 0) {
+  /* A record is a line, or several when a quoted field holds line breaks: messages name
+   * the physical line where it starts. */
+  while ((len = cli_read_record(&rd, &rwhy)) >= 0) {
     char *line = rd.line;
-    ln = rd.phys;
+    ln = rd.first;
     size_t n = (size_t)len;
-    if (cli_cut_line_end(line, &n)) { /* (named with its column, as a NUL byte is) */
-      const char *cr = memchr(line, '\r', n);
-      cli_msg("quadkit world: %s:%lu:%lu: %s\n", path, ln, (unsigned long)(cr - line) + 1,
-              CLI_LONE_CR);
-      rc = CLI_BAD_INPUT;
+    if (rwhy) { /* the input ends inside a quoted field */
+      rc = bad(path, ln, "%s", rwhy);
       break;
     }
     char *p = line;
@@ -229,7 +231,9 @@ static int each_row(const char *path,
     }
     first = 0;
     g_row = line + (p - line >= 3 && ln == 1 && !strncmp(line, "\xEF\xBB\xBF", 3) ? 3 : 0);
-    g_row_len = n - (size_t)(g_row - line);
+    /* (columns on the record's first line only) */
+    const char *lf = memchr(g_row, '\n', n - (size_t)(g_row - line));
+    g_row_len = lf ? (size_t)(lf - g_row) : n - (size_t)(g_row - line);
     rc = fn(path, ln, &r, s);
     g_row = NULL;
     if (rc) break;
@@ -650,6 +654,15 @@ int cmd_simulate(int argc, char **argv) {
     rc = cli_status(cmd, "simulating", st);
     goto done;
   }
+  /* The picture first, and flushed: when it cannot be written, nothing goes to the JSON's
+   * output either (stdout, written in place, would keep what it was given). */
+  if (svg) {
+    qk_world_pairs(w, QK_PAIRS_ALL, mark_pair, hit);
+    if (write_svg(&so, b, n, hit, side) || !flushed(so.f)) {
+      rc = CLI_INTERNAL;
+      goto done;
+    }
+  }
   const char *names[3] = {"pairs", "began", "ended"};
   fprintf(o.f, "{\"n\": %lu, \"frames\": %lu, \"seed\": %lu, \"side\": %.6g,\n", n, frames, seed,
           side);
@@ -663,10 +676,6 @@ int cmd_simulate(int argc, char **argv) {
           " \"ms_per_frame\": {\"mean\": %.4f, \"min\": %.4f, \"max\": %.4f},\n"
           " \"bytes\": %zu}\n",
           total / (double)frames, tmin, tmax, qk_world_bytes(w));
-  if (svg) {
-    qk_world_pairs(w, QK_PAIRS_ALL, mark_pair, hit);
-    if (write_svg(&so, b, n, hit, side)) rc = CLI_INTERNAL;
-  }
 done:
   /* Both flushed before either is renamed into place: a write that fails only when its
    * buffer goes out (-o /dev/full) left the picture behind. The one that failed says

@@ -127,7 +127,10 @@ static long line_into(cli_lines_t *r, char **buf, size_t *cap, const char **why)
       *why = "binary data (NUL byte) in a text file";
       return -2;
     }
-    if (n + take > CLI_MAX_LINE) {
+    /* (a CR ending the line so far is not counted: the CR of a CR LF line end, or, when
+     * no LF follows it, counted with the bytes that do) */
+    const char last = take ? s[take - 1] : n ? (*buf)[n - 1] : '\0';
+    if (n + take - (last == '\r') > CLI_MAX_LINE) {
       /* A CR alone inside it is the likelier cause (a file with CR line ends reads as
        * one line): say that, where it is. */
       size_t lim = nl && take && s[take - 1] == '\r' ? take - 1 : take;

@@ -87,7 +87,8 @@ void qk_csv_options_init(qk_csv_options_t *opt);
  *         malformed line (a field that is not a number, a missing field, a NUL byte, an
  *         unterminated quote, a column name the header lacks); QK_ERR_NONFINITE for a
  *         NaN or infinite value; QK_ERR_INVALID for malformed options; QK_ERR_LIMIT past
- *         2^32 - 2 rows; QK_ERR_NOMEM; or the callback's status. On error nothing is
+ *         2^32 - 2 rows or for a nonzero value below the smallest double ("1e-400", which
+ *         would read as 0); QK_ERR_NOMEM; or the callback's status. On error nothing is
  *         allocated.
  */
 qk_status_t qk_points_read_csv(const char *path, const qk_csv_options_t *opt,
