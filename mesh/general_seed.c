@@ -167,6 +167,37 @@ static qk_status_t too_close(const qk__gm_t *g, uint32_t f, uint32_t h, double s
                        nm[0], nm[1], gap, ext, ext / gap, g->deep_cap, GM_DEEP);
 }
 
+/* Whether feature f is vertex v or a segment with end v. */
+static int on_hub(const qk__gm_t *g, uint32_t f, uint32_t v) {
+  const uint32_t nv = (uint32_t)g->P->nv;
+  if (f < nv) return f == v;
+  const uint32_t *e = &g->P->seg[2 * (f - nv)];
+  return e[0] == v || e[1] == v;
+}
+
+/* A hub of the k features L meeting the closed box [lo, hi]: a vertex in the box such that
+ * at most 48 of them are neither the vertex nor a segment ending at it, or UINT32_MAX. Two
+ * features on a hub in the box never need separating there (separate), so a box that many
+ * segments of one vertex meet (a fan) is split only for the others. A hub is an end of a
+ * segment among any 49 of the features (at most 48 are off it), so the first 49 are tried. */
+static uint32_t hub_of(const qk__gm_t *g, const uint32_t *L, size_t k, const double lo[2],
+                       const double hi[2]) {
+  const qk_poly_t *P = g->P;
+  const uint32_t nv = (uint32_t)P->nv;
+  for (size_t i = 0; i < k && i < 49; i++) {
+    if (L[i] < nv) continue;
+    for (int e = 0; e < 2; e++) {
+      const uint32_t v = P->seg[2 * (L[i] - nv) + (uint32_t)e];
+      const double x = P->vx[v], y = P->vy[v];
+      if (!(x >= lo[0] && x <= hi[0] && y >= lo[1] && y <= hi[1])) continue;
+      size_t off = 0;
+      for (size_t j = 0; j < k && off <= 48; j++) off += !on_hub(g, L[j], v);
+      if (off <= 48) return v;
+    }
+  }
+  return UINT32_MAX;
+}
+
 /* Step 4: split a leaf while its grown square ([lo, hi], from its parent) meets two features
  * that need separating, or while it is larger than the size bound there (inside the input's
  * bounding box). The k features at g->arena[off..] meet this node's grown square; children
@@ -177,10 +208,15 @@ static qk_status_t subdivide(qk__gm_t *g, uint32_t node, double X, double Y, dou
   int split = 0;
   if (depth < GM_DEPTH_CAP) {
     const uint32_t *L = g->arena + off;
-    if (k > 48) split = 1;
+    /* Many features: split at once, unless most of them are one hub's (a fan of segments
+     * from one vertex in the box), whose pairs need no separating: then only the pairs
+     * with a feature off the hub are tested (the same answer as testing all). */
+    const uint32_t hub = k > 48 ? hub_of(g, L, k, lo, hi) : UINT32_MAX;
+    if (k > 48 && hub == UINT32_MAX) split = 1;
     for (size_t i = 0; i < k && !split; i++)
       for (size_t j = i + 1; j < k && !split; j++)
-        if ((split = separate(g, L[i], L[j], lo, hi))) {
+        if ((hub == UINT32_MAX || !on_hub(g, L[i], hub) || !on_hub(g, L[j], hub)) &&
+            (split = separate(g, L[i], L[j], lo, hi))) {
           if (depth >= GM_DEEP && ++g->deep_splits > g->deep_cap)
             return too_close(g, L[i], L[j], s, 1);
           if (++g->sep_splits > g->sep_cap) return too_close(g, L[i], L[j], s, 0);

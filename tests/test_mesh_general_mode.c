@@ -714,6 +714,55 @@ static void test_mesh_general_mode_small_fans(void **state) {
   }
 }
 
+/* A fan of more than 48 segments from one vertex (0.1 and 0.3 degrees apart, ends on the
+ * top side of a rectangle): the grading split every square holding the apex without asking
+ * whether two of its features needed separating (more than 48 always did), so the apex was
+ * graded to the depth cap, and with ends on a 2^-40 grid the squares around it ran past
+ * the deep budget: "segment 91 and segment 92 stay within 2.2e-11 of each other along a
+ * stretch", for two segments of one apex that only spread apart (forty-ninth session's
+ * review). Now a square whose features are mostly one vertex's segments is split only
+ * for the others: on a 2^-30 grid the fans mesh, and on 2^-40 the refusal is the true one,
+ * a split point that needs a grid (--round). */
+static void test_mesh_general_mode_wide_fan(void **state) {
+  (void)state;
+  qk_mesh_options_t o = general_opts();
+  for (int bits = 30; bits <= 40; bits += 10)
+    for (int k = 0; k < 2; k++) {
+      const int n = k ? 70 : 50;
+      const double spread = k ? 0.3 : 0.1;
+      shape_t *s = calloc(1, sizeof *s);
+      double ring[2 * 80];
+      size_t nr = 0;
+      ring[nr++] = -3, ring[nr++] = -1, ring[nr++] = 3, ring[nr++] = -1, ring[nr++] = 3;
+      ring[nr++] = 2;
+      for (int i = 0; i < n; i++) { /* the ends, east to west */
+        double t = (90 - spread * (n - 1) / 2 + spread * i) * M_PI / 180;
+        ring[nr++] = grid(2 * cos(t) / sin(t), bits), ring[nr++] = 2;
+      }
+      ring[nr++] = -3, ring[nr++] = 2;
+      sh_ring(s, ring, nr / 2);
+      uint32_t c = sh_vertex(s, 0, 0);
+      for (int i = 0; i < n; i++) sh_seg(s, c, (uint32_t)(3 + i));
+      char what[80];
+      snprintf(what, sizeof what, "fan of %d segments %.1f degrees apart, 2^-%d grid", n, spread,
+               bits);
+      if (bits == 30) {
+        run(s, &o, 20, what);
+      } else {
+        qk_poly_t *p = sh_poly(s, NULL);
+        qk_mesh_t *m = NULL;
+        qk_mesh_error_t err;
+        qk_status_t st = qk_mesh_generate(p, &o, &m, &err);
+        printf("# %s: %s\n", what, err.message);
+        assert_int_equal(st, QK_ERR_GEOMETRY);
+        assert_null(m);
+        assert_non_null(strstr(err.message, "needs a split point"));
+        qk_poly_free(p);
+      }
+      free(s);
+    }
+}
+
 /* Near-coincident and near-collinear vertices: 1 ulp apart, a mesh that passes or a
  * refusal naming the place; 2^-24 apart, a mesh. */
 static void test_mesh_general_mode_near(void **state) {
@@ -1426,6 +1475,7 @@ int main(void) {
       cmocka_unit_test(test_mesh_general_mode_shells_near_60),
       cmocka_unit_test(test_mesh_general_mode_random),
       cmocka_unit_test(test_mesh_general_mode_small_fans),
+      cmocka_unit_test(test_mesh_general_mode_wide_fan),
       cmocka_unit_test(test_mesh_general_mode_near),
       cmocka_unit_test(test_mesh_general_mode_scales),
       cmocka_unit_test(test_mesh_general_mode_size),

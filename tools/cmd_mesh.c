@@ -8,7 +8,9 @@
 #include "cli.h"
 #include "mesh_geojson.h"
 
+#include <limits.h>
 #include <math.h>
+#include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
@@ -437,6 +439,7 @@ typedef struct prep {
   double lat0;
   double round;                        /* the grid rounded to (0: none) */
   int round_exp, round_mag, round_ext; /* --round auto: 2^round_exp, and why (mg_auto_grid) */
+  int own_exp; /* the coarsest grid 2^own_exp that every coordinate lies on (poly_auto_grid) */
   char name[128];
   mg_input_t gj; /* GeoJSON input (for naming segments in messages) */
 } prep_t;
@@ -572,6 +575,16 @@ static int poly_auto_grid(const qk_poly_t *p, prep_t *pp) {
   if (!xy) return 1;
   qk_poly_vertices(p, xy, nv, &nv);
   pp->round_exp = mg_auto_grid(xy, nv, &pp->round_mag, &pp->round_ext);
+  /* v = m 2^e with 2^52 <= m < 2^53 a whole number: v lies on the grid 2^(e + ctz(m)). */
+  pp->own_exp = INT_MAX;
+  for (size_t i = 0; i < 2 * nv; i++) {
+    if (xy[i] == 0) continue;
+    int e;
+    const uint64_t m = (uint64_t)ldexp(fabs(frexp(xy[i], &e)), 53);
+    int g = e - 53;
+    for (uint64_t b = m; !(b & 1); b >>= 1) g++;
+    if (g < pp->own_exp) pp->own_exp = g;
+  }
   free(xy);
   return 0;
 }
@@ -750,13 +763,29 @@ static int make_mesh(const char *cmd, const mesh_args_t *o, qk_poly_t **poly, qk
                pp->round_exp, pp->round_exp + 2);
     else if (poly_auto_grid(*poly, &a))
       snprintf(why + k, sizeof why - k, " Round the input to a grid (--round auto)");
-    else if (o->round > 0)
-      snprintf(why + k, sizeof why - k,
-               " Round the input to a coarser grid than --round %s (--round auto: 2^%d here)",
-               o->round_text, a.round_exp);
-    else
-      snprintf(why + k, sizeof why - k, " Round the input to a grid: --round auto (2^%d here)",
-               a.round_exp);
+    else {
+      /* --round auto's grid helps only where it moves coordinates: not when the input lies
+       * on it or a coarser one already (a coastline projected and rounded to 2^-4 m, whose
+       * auto grid is 2^-5); then the hint is a grid coarser than the input's own. */
+      const int moves = a.own_exp < a.round_exp;
+      const int own_coarser =
+          a.own_exp != INT_MAX && (o->round <= 0 || ldexp(1, a.own_exp) > o->round);
+      if (o->round > 0 && moves && ldexp(1, a.round_exp) > o->round)
+        snprintf(why + k, sizeof why - k,
+                 " Round the input to a coarser grid than --round %s (--round auto: 2^%d here)",
+                 o->round_text, a.round_exp);
+      else if (!moves && own_coarser)
+        snprintf(why + k, sizeof why - k,
+                 " Round the input to a coarser grid than 2^%d, which its coordinates lie on "
+                 "(e.g. --round 2^%d)",
+                 a.own_exp, a.own_exp + 2);
+      else if (o->round > 0)
+        snprintf(why + k, sizeof why - k, " Round the input to a coarser grid than --round %s",
+                 o->round_text);
+      else
+        snprintf(why + k, sizeof why - k, " Round the input to a grid: --round auto (2^%d here)",
+                 a.round_exp);
+    }
   }
   name_segment(pp, name, why, msg, sizeof msg, place, sizeof place);
   /* After --round auto, an error may come from the rounding (points that became one, a

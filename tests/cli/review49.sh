@@ -115,4 +115,50 @@ nothing_written "$tmp/oc"
 # after its own check: the same limit, the CR not counted)
 if [ -e "$tmp/mc.node" ]; then passes=$((passes + 1)); else fail "max-crlf.poly: no mesh written"; fi
 
+# ---- mesh: a split point's hint naming a grid that moves nothing --------------------------
+# An input already on a grid as coarse as --round auto's (a coastline projected and rounded
+# to 2^-4 m) that needs a split point no double holds (at --min-angle 34) was told "Round
+# the input to a grid: --round auto (2^-5 here)", which moves no coordinate. The hint now
+# names the grid its coordinates lie on and a coarser one. (Greece's largest ring from the
+# shared data, projected equirectangularly and rounded to 2^-4 by the script below.)
+shared=${QK_SHARED_DIR:-$src/../shared}
+if [ ! -f "$shared/data/countries-50m.geojson" ]; then
+  skip "the split point's hint on a coastline: $shared/data/countries-50m.geojson not found"
+elif ! command -v python3 >/dev/null; then
+  skip "the split point's hint on a coastline: python3 not found"
+else
+  python3 - "$shared/data/countries-50m.geojson" >"$tmp/gr.poly" <<'EOF2'
+import json, math, sys
+gj = json.load(open(sys.argv[1]))
+f = next(f for f in gj['features'] if f['properties'].get('name') == 'Greece')
+g = f['geometry']
+ring = max((p[0] for p in ([g['coordinates']] if g['type'] == 'Polygon' else g['coordinates'])), key=len)
+lat0 = math.radians(sum(p[1] for p in ring) / len(ring))
+pts = []
+for lon, lat in ring:
+    q = tuple(round(6371008.8 * math.radians(v) * c * 16) / 16 for v, c in ((lon, math.cos(lat0)), (lat, 1)))
+    if not pts or pts[-1] != q:
+        pts.append(q)
+while pts[0] == pts[-1]:
+    pts.pop()
+n = len(pts)
+print(f"{n} 2 0 0")
+for i, (x, y) in enumerate(pts):
+    print(f"{i} {x!r} {y!r}")
+print(f"{n} 0")
+for i in range(n):
+    print(f"{i} {i} {(i + 1) % n}")
+print("0")
+EOF2
+  expect 1 "needs a split point .* Round the input to a coarser grid than 2\\^-4, which its coordinates lie on \\(e\\.g\\. --round 2\\^-2\\)$" \
+    -- "$cli" mesh "$tmp/gr.poly" -o "$tmp/gr" --min-angle 34
+  nothing_written "$tmp/gr"
+  # ... and after a --round finer than the grid it lies on (which moved nothing) the same;
+  # after a coarser one, a grid coarser than that
+  expect 1 "needs a split point .* Round the input to a coarser grid than 2\\^-4, which its coordinates lie on \\(e\\.g\\. --round 2\\^-2\\)$" \
+    -- "$cli" mesh "$tmp/gr.poly" -o "$tmp/gr" --min-angle 34 --round 2^-7
+  expect 1 "needs a split point .* Round the input to a coarser grid than --round 2\\^-2$" \
+    -- "$cli" mesh "$tmp/gr.poly" -o "$tmp/gr" --min-angle 34 --round 2^-2
+fi
+
 report
