@@ -178,16 +178,16 @@ static int on_hub(const qk__gm_t *g, uint32_t f, uint32_t v) {
 /* A hub of the k features L meeting the closed box [lo, hi]: a vertex in the box such that
  * at most 48 of them are neither the vertex nor a segment ending at it, or UINT32_MAX. Two
  * features on a hub in the box never need separating there (separate), so a box that many
- * segments of one vertex meet (a fan) is split only for the others. A hub is an end of a
- * segment among any 49 of the features (at most 48 are off it), so the first 49 are tried. */
+ * segments of one vertex meet (a fan) is split only for the others. One of any 49 of the
+ * features is on the hub (at most 48 are off it): the hub, or a segment ending at it, so
+ * the first 49 features and their ends are tried. */
 static uint32_t hub_of(const qk__gm_t *g, const uint32_t *L, size_t k, const double lo[2],
                        const double hi[2]) {
   const qk_poly_t *P = g->P;
   const uint32_t nv = (uint32_t)P->nv;
   for (size_t i = 0; i < k && i < 49; i++) {
-    if (L[i] < nv) continue;
-    for (int e = 0; e < 2; e++) {
-      const uint32_t v = P->seg[2 * (L[i] - nv) + (uint32_t)e];
+    for (int e = 0; e < (L[i] < nv ? 1 : 2); e++) {
+      const uint32_t v = L[i] < nv ? L[i] : P->seg[2 * (L[i] - nv) + (uint32_t)e];
       const double x = P->vx[v], y = P->vy[v];
       if (!(x >= lo[0] && x <= hi[0] && y >= lo[1] && y <= hi[1])) continue;
       size_t off = 0;
