@@ -115,6 +115,18 @@ nothing_written "$tmp/oc"
 # after its own check: the same limit, the CR not counted)
 if [ -e "$tmp/mc.node" ]; then passes=$((passes + 1)); else fail "max-crlf.poly: no mesh written"; fi
 
+# ---- join: a ring whose positions are all one point has no edge (docs/region.md) ---------
+# (a guard of the documented rule, asked by the review: under `closed` it holds no point,
+# not even its own; a ring with one edge of 1 ulp holds the points of its edges)
+printf '{"type":"FeatureCollection","features":[
+{"type":"Feature","properties":{"name":"dot"},"geometry":{"type":"Polygon","coordinates":[[[5,5],[5,5],[5,5],[5,5]]]}},
+{"type":"Feature","properties":{"name":"sliver"},"geometry":{"type":"Polygon","coordinates":[[[7,7],[7.000000000000001,7],[7,7],[7,7]]]}},
+{"type":"Feature","properties":{"name":"tri"},"geometry":{"type":"Polygon","coordinates":[[[0,0],[2,0],[2,2],[0,0]]]}}]}\n' >"$tmp/dot.geojson"
+printf 'x,y\n5,5\n7,7\n1,0.5\n' >"$tmp/dot.csv"
+same_text "join --boundary closed, a ring of one point" \
+  "$("$cli" join "$tmp/dot.geojson" "$tmp/dot.csv" --boundary closed --field name | tr '\n' ' ')" \
+  "x,y,feature,name 5,5,-1, 7,7,1,sliver 1,0.5,2,tri "
+
 # ---- mesh: a split point's hint naming a grid that moves nothing --------------------------
 # An input already on a grid as coarse as --round auto's (a coastline projected and rounded
 # to 2^-4 m) that needs a split point no double holds (at --min-angle 34) was told "Round
