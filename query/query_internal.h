@@ -65,11 +65,17 @@ static inline qk__cell_t qk__root_cell(const qk_tree_t *t) {
  * tests of its ancestors, whose midpoints were rounded where they were computed; x0 +
  * side may differ from them by a few units in the last place of the coordinates. A
  * margin of 2^-40 of the root's magnitude covers hundreds of such roundings and costs
- * nothing measurable in pruning, while keeping every bound a true lower bound.
+ * nothing measurable in pruning, while keeping every bound a true lower bound. Below
+ * 2^-1000 that product underflows towards 0 while a rounding still costs up to 2^-1074
+ * (a subnormal's unit, whatever the magnitude): the margin is never less than 2^-1060,
+ * some 2^14 such units, far more than a descent of QK_MAX_DEPTH levels can round (a
+ * subnormal root's leaf held its points one unit above its square's top and the range
+ * query pruned it: forty-ninth session's review).
  */
 static inline double qk__margin(const qk_tree_t *t) {
   qk_square_t r = qk__tree_root_square(t);
-  return (fabs(r.x) + fabs(r.y) + 2.0 * r.side) * 0x1p-40;
+  const double m = (fabs(r.x) + fabs(r.y) + 2.0 * r.side) * 0x1p-40;
+  return m > 0x1p-1060 ? m : 0x1p-1060;
 }
 
 /*

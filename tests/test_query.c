@@ -1288,6 +1288,69 @@ static void test_query_knn_exact(void **state) {
 #endif
 }
 
+static int cmp_id(const void *a, const void *b) {
+  const qk_id_t x = *(const qk_id_t *)a, y = *(const qk_id_t *)b;
+  return (x > y) - (x < y);
+}
+
+/*
+ * Trees over subnormal coordinates (whole numbers of units 2^-1074 to 2^-1030): their
+ * sides do not halve exactly, so a leaf's square as computed may sit a unit off the split
+ * lines that placed its points, and the pruning margin, 2^-40 of the root's magnitude,
+ * underflowed to 0: a range query missed a leaf's points on its top edge (forty-ninth
+ * session's review: six points, capacity 1, ids 1 and 2 at y = 0x400 units). Range boxes
+ * with edges on the points' coordinates, and radius 0 at each point, against brute force.
+ */
+static void test_query_subnormal_roots(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 23);
+  static const int ux[6] = {0x30d, 0, 0, -0x24f, 0x1f8, 0x200};
+  static const int uy[6] = {-0x328, 0x400, 0x400, 0x39d, 0x2a, -0x3b};
+  enum { N = 300 };
+  qk_point_t p[N];
+  qk_id_t got[N], want[N];
+  qk_neighbor_t nb[N], nw[N];
+  size_t bad = 0, boxes = 0;
+  for (int scale = -1074; scale <= -1030; scale += 4)
+    for (int trial = 0; trial < 6; trial++) {
+      const double u = ldexp(1, scale);
+      const size_t n = trial == 0 ? 6 : 6 + qkt_rng_below(&r, N - 6);
+      for (size_t i = 0; i < n; i++)
+        p[i] = trial == 0 ? (qk_point_t){ux[i] * u, uy[i] * u}
+                          : (qk_point_t){((int)qkt_rng_below(&r, 4096) - 2048) * u,
+                                         ((int)qkt_rng_below(&r, 4096) - 2048) * u};
+      for (size_t i = 3; trial && i < n; i += 11) p[i] = p[i - 3]; /* repeats */
+      qk_tree_t *t = build(p, n, trial % 3 == 0 ? 1 : 4);
+      for (int q = 0; q < 60; q++) {
+        const qk_point_t a = p[qkt_rng_below(&r, (uint32_t)n)],
+                         b = p[qkt_rng_below(&r, (uint32_t)n)];
+        qk_box_t box = {fmin(a.x, b.x), fmin(a.y, b.y), fmax(a.x, b.x), fmax(a.y, b.y)};
+        if (q % 4 == 0) box = (qk_box_t){a.x, a.y, a.x, a.y};
+        if (q % 4 == 1) box = (qk_box_t){-1, a.y, 1, a.y};
+        size_t ng = 0, nwn = qko_range(p, n, box, want);
+        assert_int_equal(qk_query_range_list(t, box, got, N, &ng), QK_OK);
+        qsort(got, ng < N ? ng : N, sizeof *got, cmp_id);
+        boxes++;
+        if (ng != nwn || memcmp(got, want, nwn * sizeof *got)) {
+          if (!bad++)
+            fprintf(stderr, "range, scale 2^%d trial %d: %zu points, want %zu (seed %llu)\n", scale,
+                    trial, ng, nwn, (unsigned long long)g_seed);
+        }
+        size_t nr = 0, nrw = qko_radius(p, n, a, 0, nw);
+        assert_int_equal(qk_query_radius_list(t, a, 0, nb, N, &nr), QK_OK);
+        if (nr != nrw) {
+          if (!bad++)
+            fprintf(stderr, "radius 0, scale 2^%d trial %d: %zu points, want %zu\n", scale, trial,
+                    nr, nrw);
+        }
+      }
+      qk_tree_free(t);
+    }
+  printf("# %zu boxes and as many radius queries on subnormal trees\n", boxes);
+  assert_int_equal(bad, 0);
+}
+
 #if defined(__SSE2__)
 /*
  * kNN with the processor set to flush subnormal numbers (DAZ and FTZ in MXCSR, as a
@@ -1611,6 +1674,7 @@ int main(void) {
     cmocka_unit_test(test_query_knn_cell_lines),
     cmocka_unit_test(test_query_radius_exact),
     cmocka_unit_test(test_query_knn_exact),
+    cmocka_unit_test(test_query_subnormal_roots),
 #if defined(__SSE2__) /* (the flush mode is set through SSE's MXCSR) */
     cmocka_unit_test(test_query_knn_flush_subnormals),
 #endif

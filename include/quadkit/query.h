@@ -81,9 +81,10 @@ static inline qk_status_t qk_query_range_ids(const qk_tree_t *tree, qk_box_t box
  * underflow below 1e-154). The squares in double decide all but the points within a
  * relative 2^-45 of the circle, and every point when r is beyond 2^500, which an exact
  * test (big integers, microseconds) decides. The distance passed is the rounded one
- * (sqrt of the double squares, or hypot where they overflow), so a point exactly on the
- * circle may be reported at a distance an ulp above r. (Before December 2026 the double
- * formula was the definition, overflow included.)
+ * (sqrt of the double squares, or hypot of the differences where their sum reaches 2^1000,
+ * near overflow), so a point exactly on the circle may be reported at a distance an ulp
+ * above r. (Before December 2026 the double formula was the definition, overflow
+ * included.)
  * \param [in] tree the tree.
  * \param [in] c the centre; may lie outside the root square.
  * \param [in] r the radius, >= 0 (INFINITY reports every point).
@@ -168,9 +169,9 @@ static inline qk_status_t qk_query_radius_batch(const qk_tree_t *tree, const qk_
  *         distances could overflow). The ranking and the cap are exact (the exact
  *         squared distances, compared behind a floating-point filter), also below
  *         2^-537, where squares in double underflow; the distances reported are
- *         sqrt(dx*dx + dy*dy) in double, as qk_query_radius() reports them, so two
- *         neighbours whose distances differ by less than rounding may report them
- *         equal or even in reverse.
+ *         sqrt(dx*dx + dy*dy) in double (hypot(dx, dy) where that sum reaches 2^1000), as
+ *         qk_query_radius() reports them, so two neighbours whose distances differ by
+ *         less than rounding may report them equal or even in reverse.
  */
 qk_status_t qk_query_knn(const qk_tree_t *tree, qk_point_t q, size_t k, double max_dist,
                          qk_neighbor_t *out, size_t *n_out);
