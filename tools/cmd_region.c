@@ -477,20 +477,20 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
       rc = CLI_BAD_INPUT;
       break;
     }
-    if (number(fx, &x) != 1 || number(fy, &y) != 1 || !isfinite(x) || !isfinite(y)) {
-      const char *bad = (number(fx, &x) != 1 || !isfinite(x)) ? fx : fy;
+    const int gx = number(fx, &x), gy = gx == 1 ? number(fy, &y) : 1;
+    if (gx != 1 || gy != 1 || !isfinite(x) || !isfinite(y)) {
+      const int bx = gx != 1 || !isfinite(x); /* (x is named first, as before) */
+      const char *bad = bx ? fx : fy;
       int col = bad == fx ? xy->col[0] : xy->col[1];
       const char *name = bad == fx ? xname : yname;
       /* FILE:LINE:COLUMN and the header's name of the field, as the other commands'
        * reader says it (it said "FILE:LINE: field 2", leaving the column to count). */
       unsigned long fl, fc;
       field_at(line, col, (unsigned long)lineno, bom, &fl, &fc);
-      double u;
       cli_msg("quadkit join: %s:%lu:%lu: field %d%s%s%s is %s: '%.40s'\n", j->pts_path, fl, fc,
               col + 1, name[0] ? " (" : "", name, name[0] ? ")" : "",
-              number(bad == fx ? fx : fy, &u) == -2
-                  ? "below the smallest double (it would read as 0)"
-                  : "not a finite number",
+              (bx ? gx : gy) == -2 ? "below the smallest double (it would read as 0)"
+                                   : "not a finite number",
               bad);
       rc = CLI_BAD_INPUT;
       break;

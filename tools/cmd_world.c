@@ -151,7 +151,8 @@ static int shape_values(const char *path, unsigned long ln, qk_shape_kind_t k, c
    * columns for every kind), but nothing else. */
   for (int i = need; i < nf; i++) {
     double unused;
-    if (f[i][0] && num(f[i], &unused) < 1 && num(f[i], &unused) != -2)
+    const int got = f[i][0] ? num(f[i], &unused) : 1;
+    if (got != 1 && got != -2) /* (a number below the smallest double is still a number) */
       return bad(path, ln,
                  "field '%s' is not used by this kind of shape: leave it empty or a number", f[i]);
   }
