@@ -821,35 +821,76 @@ static int hole_points(mg_input_t *in, const char *path, char *msg, size_t n) {
   if (qk_region_from_arrays(&all, &ro, &l_all, &err) != QK_OK ||
       qk_region_from_arrays(&each, &ro, &l_each, &err) != QK_OK)
     rc = mg_fail(msg, n, 1, "%s: the rings do not make a polygon layer: %s", path, err.message);
+  /* A hole point must lie in the face the hole ring bounds from inside: inside the ring
+   * and the rings that hold the whole of it (its shell, and what holds that), on no ring's
+   * boundary, and inside no other ring (an island in the lake, a pond on the island; a
+   * point in the pond lay inside the hole ring and outside the area, and the lake was
+   * meshed). So the rings holding the candidate, boundaries included or not, must be
+   * exactly those holding every vertex of the ring, and the ring. */
+  uint32_t *held = malloc((in->nr + 1) * sizeof *held), *at_p = malloc((in->nr + 1) * sizeof *at_p);
+  uint32_t *at_v = malloc((in->nr + 1) * sizeof *at_v);
+  if (!rc && (!held || !at_p || !at_v)) rc = mg_fail(msg, n, 3, "out of memory");
   for (size_t q = 0; !rc && q < in->nr; q++) {
     if (in->ring_sign[q] > 0) continue;
     int found = 0;
-    size_t m = in->ring_start[q + 1] - in->ring_start[q];
-    for (size_t e = 0; e < m && !found && !rc; e++) {
-      const double *a = &xy[2 * (rs[q] + e)], *b = &xy[2 * (rs[q] + e + 1)];
-      double mx = a[0] + (b[0] - a[0]) / 2, my = a[1] + (b[1] - a[1]) / 2;
-      double nx = -(b[1] - a[1]), ny = b[0] - a[0];
-      static const double step[] = {1e-3, -1e-3, 1e-2, -1e-2, 0.1, -0.1, 0.3, -0.3};
-      for (int k = 0; k < 8 && !found; k++) {
-        qk_point_t p = {mx + step[k] * nx, my + step[k] * ny};
-        uint32_t f_all = 0;
-        size_t cnt = 0;
-        /* outside the domain, boundaries included ... */
-        if (qk_region_locate(l_all, p, QK_BOUNDARY_CLOSED, &f_all) != QK_OK || f_all != QK_NONE)
-          continue;
-        /* ... and strictly inside its own hole ring (open boundary) */
-        qk_region_locate_all(l_each, p, QK_BOUNDARY_OPEN, NULL, 0, &cnt);
-        uint32_t *list = malloc((cnt + 1) * sizeof *list);
-        if (!list) {
-          rc = mg_fail(msg, n, 3, "out of memory");
-          break;
-        }
-        qk_region_locate_all(l_each, p, QK_BOUNDARY_OPEN, list, cnt, &cnt);
-        for (size_t i = 0; i < cnt; i++) found |= list[i] == q;
-        free(list);
-        if (found) in->holes[2 * in->nh] = p.x, in->holes[2 * in->nh + 1] = p.y, in->nh++;
+    size_t m = in->ring_start[q + 1] - in->ring_start[q], nheld = 0, cnt = 0;
+    /* the rings other than q holding every vertex of q (boundaries included) */
+    for (size_t e = 0; e < m && (!e || nheld); e++) {
+      qk_point_t v = {xy[2 * (rs[q] + e)], xy[2 * (rs[q] + e) + 1]};
+      qk_region_locate_all(l_each, v, QK_BOUNDARY_CLOSED, at_v, in->nr, &cnt);
+      size_t k = 0;
+      for (size_t i = 0; i < (e ? nheld : cnt); i++) {
+        uint32_t r = e ? held[i] : at_v[i];
+        int in_v = 0;
+        for (size_t j = 0; j < cnt && !in_v; j++) in_v = at_v[j] == r;
+        if (in_v && r != q) held[k++] = r;
       }
+      nheld = k;
     }
+    /* Candidates near the middle of each edge on either side, at offsets of the edge's
+     * length from 0.3 down to 2^-41 of it (a gap between the ring and an island in it
+     * may be narrow): the coarse ones on every edge first, then the fine ones on at most
+     * about 256 edges (a refused ring is tried at some 20,000 points, not millions). */
+    static const double coarse[] = {1e-3, -1e-3, 1e-2, -1e-2, 0.1, -0.1, 0.3, -0.3};
+    int loose = 0;
+    qk_point_t loose_p = {0, 0};
+    for (int pass = 0; pass < 2 && !found; pass++)
+      for (size_t e = 0; e < m && !found; e += pass && m > 256 ? m / 256 : 1) {
+        const double *a = &xy[2 * (rs[q] + e)], *b = &xy[2 * (rs[q] + e + 1)];
+        double mx = a[0] + (b[0] - a[0]) / 2, my = a[1] + (b[1] - a[1]) / 2;
+        double nx = -(b[1] - a[1]), ny = b[0] - a[0];
+        int tries = pass ? 2 * 31 : 8;
+        for (int k = 0; k < tries && !found; k++) {
+          double step = pass ? ldexp(k % 2 ? -1.0 : 1.0, -11 - k / 2) : coarse[k];
+          qk_point_t p = {mx + step * nx, my + step * ny};
+          uint32_t f_all = 0;
+          size_t np = 0;
+          /* outside the domain, boundaries included ... */
+          if (qk_region_locate(l_all, p, QK_BOUNDARY_CLOSED, &f_all) != QK_OK || f_all != QK_NONE)
+            continue;
+          /* ... inside q and the rings holding it, strictly, and inside no other ring */
+          int ok = 1;
+          for (int rule = 0; rule < 2 && ok; rule++) {
+            qk_region_locate_all(l_each, p, rule ? QK_BOUNDARY_OPEN : QK_BOUNDARY_CLOSED, at_p,
+                                 in->nr, &np);
+            ok = np == nheld + 1;
+            for (size_t i = 0, j = 0; i < np && ok; i++) {
+              if (at_p[i] == q) continue;
+              while (j < nheld && held[j] < at_p[i]) j++;
+              ok = j < nheld && held[j] == at_p[i];
+            }
+          }
+          if (ok) found = 1, in->holes[2 * in->nh] = p.x, in->holes[2 * in->nh + 1] = p.y, in->nh++;
+          /* (the last list is the open rule's) */
+          for (size_t i = 0; i < np && !loose && !ok; i++)
+            if (at_p[i] == q) loose = 1, loose_p = p;
+        }
+      }
+    /* No such point: rings that cross (the mesher names the crossing) or a gap below 2^-41
+     * of every edge tried. A point strictly inside the ring and outside the area, as
+     * before, lets the mesher say which. */
+    if (!found && loose)
+      found = 1, in->holes[2 * in->nh] = loose_p.x, in->holes[2 * in->nh + 1] = loose_p.y, in->nh++;
     if (!found && !rc) {
       size_t v = in->ring_v[in->ring_start[q]];
       char what[128], ptr[512], place[1024], note[512];
@@ -864,7 +905,7 @@ static int hole_points(mg_input_t *in, const char *path, char *msg, size_t n) {
     }
   }
   qk_region_free(l_all), qk_region_free(l_each);
-  free(xy), free(rs), free(fs_holes);
+  free(xy), free(rs), free(fs_holes), free(held), free(at_p), free(at_v);
   return rc;
 }
 
