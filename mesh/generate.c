@@ -146,24 +146,27 @@ static int use_book(const qk_poly_t *P, const qk_mesh_options_t *o) {
 }
 
 /*
- * Whether the book's or the dyadic mode (the one use_book() picks) can mesh the input: its
- * vertices on a lattice the mode accepts, every segment at 0, 45, 90 or 135 degrees and
- * every vertex of degree two. QK_MESH_AUTO runs the general mode otherwise. The remaining
- * conditions (no crossings, hole points inside) are errors in every mode, so the
- * classic mode reports them. *ok is set; QK_ERR_NOMEM is the only failure.
+ * Whether the book's or the dyadic mode (the one use_book() picks, in *book) can mesh the
+ * input: its vertices on a lattice the mode accepts, every segment at 0, 45, 90 or 135
+ * degrees and every vertex of degree two. Integer input the book's mode cannot take (a
+ * vertex outside [0, 2^30]^2, or a mesh too large) goes to the dyadic mode, whose lattice
+ * has an origin of its own (*book is cleared): a translated input keeps its proven angles.
+ * QK_MESH_AUTO runs the general mode otherwise. The remaining conditions (no crossings,
+ * hole points inside) are errors in every mode, so the classic mode reports them. *ok is
+ * set; QK_ERR_NOMEM is the only failure.
  */
-static qk_status_t classic_ok(const qk_poly_t *P, const qk_mesh_options_t *o, int book,
+static qk_status_t classic_ok(const qk_poly_t *P, const qk_mesh_options_t *o, int *book,
                               const qk_allocator_t *a, int *ok) {
   *ok = 0;
-  if (book) {
-    for (size_t i = 0; i < P->nv; i++)
+  if (*book) {
+    for (size_t i = 0; i < P->nv && *book; i++)
       if (!(P->vx[i] >= 0 && P->vy[i] >= 0 && P->vx[i] <= (double)QK_MESH_MAX_SIZE &&
             P->vy[i] <= (double)QK_MESH_MAX_SIZE))
-        return QK_OK;
-    /* What the book's mode would refuse as too large goes to the general mode (as the
-     * dyadic mode's refusals do, through qk__mesh_lattice below). */
-    if (qk__mesh_book_limit(P, o, 0, NULL)) return QK_OK;
-  } else {
+        *book = 0;
+    if (*book && qk__mesh_book_limit(P, o, 0, NULL)) *book = 0;
+  }
+  if (!*book) {
+    /* What the dyadic mode refuses (through qk__mesh_lattice) goes to the general mode. */
     qk__lattice_t L;
     qk_mesh_error_t e;
     if (qk__mesh_lattice(P, o, 0, &L, &e)) return QK_OK;
@@ -485,7 +488,7 @@ qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *opt
   int book = use_book(poly, &opt), classic = opt.mode == QK_MESH_BOOK || opt.mode == QK_MESH_DYADIC;
   if (opt.mode == QK_MESH_AUTO && opt.size)
     classic = 1;
-  else if (opt.mode == QK_MESH_AUTO && (st = classic_ok(poly, &opt, book, &m->alloc, &classic))) {
+  else if (opt.mode == QK_MESH_AUTO && (st = classic_ok(poly, &opt, &book, &m->alloc, &classic))) {
     qk_mesh_free(m);
     return qk__mesh_fail(err, st, 0, "out of memory while choosing the mode");
   }

@@ -79,4 +79,17 @@ printf '{"type": "Polygon", "coordinates": [%s, [[1, 1], [5, 2], [3, 3], [1, 1]]
   "$(ring 0 0 4 4)" >"$tmp/cross.geojson"
 expect 1 "segments [0-9]+ and [0-9]+ cross or overlap" -- "$cli" mesh "$tmp/cross.geojson" -o "$tmp/cross"
 
+# ---- mesh: integer input beyond [0, 2^30]^2 skipped the dyadic mode ---------------------
+# The automatic choice tried the book's mode for integer input and, when a vertex lay
+# outside its domain, went to the general mode: a rectangle from x = -1 lost its proven
+# 45-90 degree angles (2 triangles, 38.66 degrees) by a translation.
+printf '4 2 0 0\n0 -1 0\n1 4 0\n2 4 4\n3 -1 4\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n0\n' >"$tmp/neg.poly"
+expect 0 '"min_angle_deg": 45, "max_angle_deg": 90,.*"mode": "dyadic"' \
+  -- "$cli" mesh "$tmp/neg.poly" -o "$tmp/neg" --stats
+printf '4 2 0 0\n0 2147483648 0\n1 2147483652 0\n2 2147483652 4\n3 2147483648 4\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n0\n' >"$tmp/big.poly"
+expect 0 '"mode": "dyadic"' -- "$cli" mesh "$tmp/big.poly" -o "$tmp/big" --stats
+# (guard: the same rectangle in [0, 2^30]^2 is the book's)
+printf '4 2 0 0\n0 0 0\n1 5 0\n2 5 4\n3 0 4\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n0\n' >"$tmp/pos.poly"
+expect 0 '"mode": "book"' -- "$cli" mesh "$tmp/pos.poly" -o "$tmp/pos" --stats
+
 report
