@@ -62,6 +62,7 @@ struct qrun {
   qk_neighbor_t *nb;
   qk_id_t *ids;
   qk_pair_t *pairs;
+  qk_hit_t *hits; /* raycast: every ray's answer, found before anything is written */
   size_t cap;
   FILE *f;
 };
@@ -245,6 +246,7 @@ static void run_free(qrun_t *q) {
   free(q->nb);
   free(q->ids);
   free(q->pairs);
+  free(q->hits);
 }
 
 /* Parse, read, prepare, answer every item of the second input (or once), write. */
@@ -602,8 +604,11 @@ static void raycast_usage(FILE *f) {
         f);
 }
 
+/* Every ray is cast here, before the header is written: a ray whose hit cannot be
+ * printed is refused with nothing on standard output (docs/reliability.md). */
 static int raycast_prepare(qrun_t *q) {
-  for (size_t i = 0; i < q->tab[1].rows; i++) {
+  size_t rays = q->tab[1].rows;
+  for (size_t i = 0; i < rays; i++) {
     double tmax = q->tab[1].v[5 * i + 4];
     if (!isnan(tmax) && tmax < 0) {
       char msg[96];
@@ -611,32 +616,39 @@ static int raycast_prepare(qrun_t *q) {
       return bad_row(q, 1, i, msg);
     }
   }
-  return build_collider(q);
+  int rc = build_collider(q);
+  if (rc) return rc;
+  q->hits = malloc((rays ? rays : 1) * sizeof *q->hits);
+  if (!q->hits) return cli_status(q->a.cmd, "ray hits", QK_ERR_NOMEM);
+  for (size_t i = 0; i < rays; i++) {
+    const double *v = q->tab[1].v + 5 * i;
+    qk_hit_t *h = &q->hits[i];
+    qk_status_t st = qk_collider_raycast(q->col, (qk_point_t){v[0], v[1]}, (qk_point_t){v[2], v[3]},
+                                         isnan(v[4]) ? INFINITY : v[4], h);
+    if (st != QK_OK) { /* the reader let only finite values and tmax >= 0 through */
+      char msg[128];
+      snprintf(msg, sizeof msg, "ray %zu: %s", i, qk_strerror(st));
+      return bad_row(q, 1, i, msg);
+    }
+    if (h->id != QK_NONE && !isfinite(h->t)) {
+      /* a hit whose t overflows (a tiny direction, a far disc) would print as the miss's inf */
+      char msg[256];
+      snprintf(msg, sizeof msg,
+               "ray %zu hits %u at a t beyond the largest double (direction %.17g,%.17g too "
+               "short for the distance); scale the direction",
+               i, (unsigned)h->id, v[2], v[3]);
+      return bad_row(q, 1, i, msg);
+    }
+  }
+  return CLI_OK;
 }
 
 static int raycast_answer(qrun_t *q, size_t i) {
-  const double *v = q->tab[1].v + 5 * i;
-  qk_hit_t h;
-  qk_status_t st = qk_collider_raycast(q->col, (qk_point_t){v[0], v[1]}, (qk_point_t){v[2], v[3]},
-                                       isnan(v[4]) ? INFINITY : v[4], &h);
-  if (st != QK_OK) { /* the reader let only finite values and tmax >= 0 through */
-    char msg[128];
-    snprintf(msg, sizeof msg, "ray %zu: %s", i, qk_strerror(st));
-    return bad_row(q, 1, i, msg);
-  }
-  if (h.id != QK_NONE && !isfinite(h.t)) {
-    /* a hit whose t overflows (a tiny direction, a far disc) would print as the miss's inf */
-    char msg[256];
-    snprintf(msg, sizeof msg,
-             "ray %zu hits %u at a t beyond the largest double (direction %.17g,%.17g too "
-             "short for the distance); scale the direction",
-             i, (unsigned)h.id, v[2], v[3]);
-    return bad_row(q, 1, i, msg);
-  }
-  if (h.id == QK_NONE)
+  const qk_hit_t *h = &q->hits[i];
+  if (h->id == QK_NONE)
     emit(q, i, SIZE_MAX, "%zu,-1,inf", i);
   else
-    emit(q, i, h.id, "%zu,%u,%.17g", i, (unsigned)h.id, h.t);
+    emit(q, i, h->id, "%zu,%u,%.17g", i, (unsigned)h->id, h->t);
   return CLI_OK;
 }
 
@@ -667,15 +679,17 @@ int cmd_raycast(int argc, char **argv) { return run_query(argc, argv, &raycast_c
 /* geo                                                                                  */
 
 static void geo_usage(FILE *f) {
-  fprintf(f, "usage: quadkit geo knn POINTS.csv QUERIES.csv -k K [--max-dist METRES] [options]\n"
-             "       quadkit geo radius POINTS.csv QUERIES.csv -r METRES [options]\n"
-             "Geodesic queries on the WGS84 ellipsoid: the x and y columns are lon,lat in\n"
-             "degrees (latitude within [-90, 90]; any longitude, normalised); distances in\n"
-             "metres along the geodesic (GeographicLib's algorithm).\n"
-             "Output: knn    query,rank,point,metres  (rank 1..K; ties by smaller id)\n"
-             "        radius query,point,metres       (by query then point)\n" XY_HELP
-             "  --query-xy X,Y  the same for QUERIES.csv only\n" KEEP_HELP("query, point or both")
-                 COMMON_HELP);
+  fprintf(f,
+          "usage: quadkit geo knn POINTS.csv QUERIES.csv -k K [--max-dist METRES] [options]\n"
+          "       quadkit geo radius POINTS.csv QUERIES.csv -r METRES [options]\n"
+          "Geodesic queries on the WGS84 ellipsoid: the x and y columns are lon,lat in\n"
+          "degrees (latitude within [-90, 90]; any longitude, normalised); distances in\n"
+          "metres along the geodesic (GeographicLib's algorithm).\n"
+          "Output: knn    query,rank,point,metres  (rank 1..K; ties by smaller id)\n"
+          "        radius query,point,metres       (by query then point)\n"
+          "  --max-dist METRES  knn: only points within METRES (fewer than K rows then)\n" XY_HELP
+          "  --query-xy X,Y  the same for QUERIES.csv only\n" KEEP_HELP("query, point or both")
+              COMMON_HELP);
 }
 
 /* Latitudes must lie in [-90, 90]: say which line does not. */

@@ -92,4 +92,20 @@ expect 0 '"mode": "dyadic"' -- "$cli" mesh "$tmp/big.poly" -o "$tmp/big" --stats
 printf '4 2 0 0\n0 0 0\n1 5 0\n2 5 4\n3 0 4\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n0\n' >"$tmp/pos.poly"
 expect 0 '"mode": "book"' -- "$cli" mesh "$tmp/pos.poly" -o "$tmp/pos" --stats
 
+# ---- raycast: rows on standard output before a refused ray ------------------------------
+# A ray whose hit lies beyond the largest double is refused, but the rays before it had
+# been printed (exit 1 after output); every ray is now cast before the header.
+printf 'x,y,r\n1e100,0,1\n' >"$tmp/far.csv"
+printf 'ox,oy,dx,dy\n0,0,1,0\n0,0,1e-300,0\n' >"$tmp/rays.csv"
+out=$("$cli" raycast "$tmp/far.csv" "$tmp/rays.csv" 2>"$tmp/rays.err")
+rc=$?
+if [ "$rc" = 1 ] && [ -z "$out" ] && grep -q "rays.csv:3: ray 1 hits 0 at a t beyond the largest double" "$tmp/rays.err"; then
+  passes=$((passes + 1))
+else
+  fail "raycast with a hit beyond the largest double: exit $rc (want 1), stdout '$out' (want none), stderr $(cat "$tmp/rays.err")"
+fi
+# (guard: the same rays without the refused one are answered)
+printf 'ox,oy,dx,dy\n0,0,1,0\n0,0,-1,0\n' >"$tmp/rays2.csv"
+expect 0 '^1,-1,inf$' -- "$cli" raycast "$tmp/far.csv" "$tmp/rays2.csv"
+
 report
