@@ -443,6 +443,12 @@ static size_t skip_blanks(const char *t, size_t n, size_t i) {
   return i;
 }
 
+/* The whole text is JSON's null, between blanks. */
+static bool is_json_null(const char *t, size_t n) {
+  size_t i = skip_blanks(t, n, 0);
+  return n - i >= 4 && !memcmp(t + i, "null", 4) && skip_blanks(t, n, i + 4) == n;
+}
+
 /* t[i] is a quote: the index after the closing quote (one not escaped by an odd run of
  * backslashes). */
 static size_t skip_string(const char *t, size_t n, size_t i) {
@@ -833,9 +839,10 @@ qk_status_t qk__geojson_read_whole(const char *text, size_t len, const qk_region
     else
       json_object_put(v);
   }
-  if (!root && jerr == json_tokener_success) {
+  if (!root && jerr == json_tokener_success && is_json_null(text, len)) {
     /* The document is JSON's null, which json-c gives as no object at all: it was
-     * reported as "unexpected end of input" or "malformed JSON: success". */
+     * reported as "unexpected end of input" or "malformed JSON: success". json-c gives
+     * the same when an allocation fails, so the text itself says which it was. */
     json_tokener_free(tok);
     where(text, skip_blanks(text, len, 0), err);
     return qk__region_fail(err, QK_ERR_PARSE, SIZE_MAX,

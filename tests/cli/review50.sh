@@ -108,4 +108,53 @@ fi
 printf 'ox,oy,dx,dy\n0,0,1,0\n0,0,-1,0\n' >"$tmp/rays2.csv"
 expect 0 '^1,-1,inf$' -- "$cli" raycast "$tmp/far.csv" "$tmp/rays2.csv"
 
+# ---- GeoJSON: out of memory reported as a document that is null ------------------------
+# json-c gives no object and no error both for the text `null` and when an allocation
+# fails: under a memory limit the reader said "expected a GeoJSON object ..., found null"
+# (exit 1, bad input) where it ran out of memory (exit 3). A sweep of address-space limits
+# over a 0.25 MB layer must give exit 0 or "out of memory", exit 3, never "found null" (it
+# did from 31 to 36 MB, in a Release build).
+if [ "${QK_SANITIZE:-0}" = 1 ]; then
+  skip "under the sanitizers: address-space limits"
+else
+  {
+    # (a MultiPolygon: a FeatureCollection is read feature by feature first, and only
+    # read whole, by the path at fault, after an error)
+    printf '{"type": "MultiPolygon", "coordinates": [\n'
+    for i in $(seq 0 399); do
+      [ "$i" = 0 ] || printf ',\n'
+      printf '[['
+      for j in $(seq 0 39); do printf '[%d.%02d, %d.5],' "$i" "$j" "$j"; done
+      printf '[%d.5, 50], [%d.00, 0.5]]]' "$i" "$i"
+    done
+    printf ']}\n'
+  } >"$tmp/big.geojson"
+  base=$(
+    ulimit -v 4000000
+    "$cli" regions "$tmp/big.geojson" --planar >/dev/null 2>&1
+    echo $?
+  )
+  seen_oom=0 bad=""
+  for kb in $(seq 20000 1000 80000); do
+    msg=$(
+      ulimit -v "$kb"
+      "$cli" regions "$tmp/big.geojson" --planar 2>&1 >/dev/null
+      echo "rc=$?"
+    )
+    case "$msg" in
+      *"found null"*) bad="$bad $kb" ;;
+      *"out of memory"*rc=3) seen_oom=1 ;;
+    esac
+  done
+  if [ "$base" = 0 ] && [ -z "$bad" ] && [ "$seen_oom" = 1 ]; then
+    passes=$((passes + 1))
+  else
+    fail "GeoJSON under memory limits: unlimited exit $base (want 0), 'found null' at$bad KB, an out-of-memory exit 3 seen: $seen_oom"
+  fi
+fi
+# (guard: the text null itself is still named)
+printf ' null \n' >"$tmp/null.geojson"
+expect 1 "^quadkit regions: $tmp/null.geojson:1:2: expected a GeoJSON object with a string \"type\", found null$" \
+  -- "$cli" regions "$tmp/null.geojson"
+
 report
