@@ -479,8 +479,9 @@ static void simulate_usage(FILE *f) {
              "Bounce N objects (discs, boxes, segments and points; sizes 0.5 to 2) around a\n"
              "square world for F frames, finding the overlapping pairs every frame.\n"
              "Prints JSON: per-frame pairs, began and ended counts and a timing summary\n"
-             "(update time per frame, milliseconds). --svg draws the last frame, objects in\n"
-             "an overlapping pair in red. Defaults: --n 2000 --frames 100 --seed 1.\n");
+             "(milliseconds per frame for moving every object plus the update). --svg draws\n"
+             "the last frame, objects in an overlapping pair in red; -o writes the JSON to\n"
+             "FILE instead of standard output. Defaults: --n 2000 --frames 100 --seed 1.\n");
 }
 
 static double now_ms(void) {

@@ -12,7 +12,7 @@ typedef struct command {
 } command_t;
 
 static const command_t commands[] = {
-    {"tree", cmd_tree, "tree POINTS.csv [--capacity C] [--svg FILE]   build a tree, print stats"},
+    {"tree", cmd_tree, "tree POINTS.csv [--capacity C] [options]     build a tree, print stats"},
     {"knn", cmd_knn, "knn POINTS.csv QUERIES.csv -k K               k nearest neighbours"},
     {"range", cmd_range, "range POINTS.csv BOXES.csv                   points in boxes"},
     {"radius", cmd_radius, "radius POINTS.csv QUERIES.csv -r R            points within R"},
@@ -25,7 +25,7 @@ static const command_t commands[] = {
      "world OBJECTS.csv MOVES.csv [--pairs all|began|ended]  replay moving objects"},
     {"simulate", cmd_simulate,
      "simulate [--n N] [--frames F] [--seed S] [--svg FILE]  bouncing objects"},
-    {"mesh", cmd_mesh, "mesh IN.poly -o PREFIX [options]              quadtree mesh generator"},
+    {"mesh", cmd_mesh, "mesh IN.poly|IN.geojson -o PREFIX [options]   quadtree mesh generator"},
     {"join", cmd_join, "join REGIONS POINTS.csv [--field NAME]...     feature holding each point"},
     {"regions", cmd_regions,
      "regions REGIONS [--stats] [--svg FILE]       polygon layer statistics"},
