@@ -1074,6 +1074,41 @@ void qk__world_visit(const qk_world_t *w, qk_box_t qb, qk__wvisit_fn fn, void *u
 
 /* ---- overlap with a shape --------------------------------------------------------- */
 
+/*
+ * The first cap of a list in an order, kept while it is found: the first cap entries go
+ * into the buffer, which becomes a max-heap when full; a later entry that comes before
+ * the heap's top replaces it. (Writing the first cap found gave a short buffer the first
+ * cap visited, not the first cap of the order the header promises.) The caller sorts the
+ * min(n, cap) entries at the end.
+ */
+#define QK__KEEP_FIRST(name, type, less)                                                           \
+  static void name##_sift(type *a, size_t n, size_t i) {                                           \
+    for (;;) {                                                                                     \
+      size_t l = 2 * i + 1, m = i;                                                                 \
+      if (l < n && less(a[m], a[l])) m = l;                                                        \
+      if (l + 1 < n && less(a[m], a[l + 1])) m = l + 1;                                            \
+      if (m == i) return;                                                                          \
+      const type t = a[i];                                                                         \
+      a[i] = a[m], a[m] = t, i = m;                                                                \
+    }                                                                                              \
+  }                                                                                                \
+  /* put v as the n-th entry found (n counts those before it) */                                   \
+  static void name(type *a, size_t cap, size_t n, type v) {                                        \
+    if (n < cap) {                                                                                 \
+      a[n] = v;                                                                                    \
+      if (n + 1 == cap)                                                                            \
+        for (size_t i = cap / 2; i-- > 0;) name##_sift(a, cap, i);                                 \
+    } else if (cap && less(v, a[0])) {                                                             \
+      a[0] = v;                                                                                    \
+      name##_sift(a, cap, 0);                                                                      \
+    }                                                                                              \
+  }
+
+#define SLOT_LESS(x, y) ((uint32_t)(x) < (uint32_t)(y))
+#define HIT_LESS(x, y) hit_less((x).t, (uint32_t)(x).h, (y).t, (uint32_t)(y).h)
+QK__KEEP_FIRST(keep_handle, qk_handle_t, SLOT_LESS)
+QK__KEEP_FIRST(keep_hit, qk_world_hit_t, HIT_LESS)
+
 typedef struct qctx {
   const qk_shape_t *q;
   int q_box_like; /* the query is a box or a point */
@@ -1090,7 +1125,7 @@ static int q_visit(const qk_world_t *w, uint32_t i, const qk_box_t *b, void *ud)
     qk_shape_t sh = qk__wshape(&w->obj[i]);
     if (!qk__shapes_overlap(c->q, &sh)) return 0;
   }
-  QK__SINK_PUT(c->out, c->cap, c->n, qk__handle(w, i));
+  keep_handle(c->out, c->cap, c->n++, qk__handle(w, i));
   return 0;
 }
 
@@ -1137,7 +1172,7 @@ qk_status_t qk_world_query(const qk_world_t *w, const qk_shape_t *shape, qk_hand
   qctx_t c = {&q, q.kind == QK_SHAPE_BOX || q.kind == QK_SHAPE_POINT, out, cap, 0};
   qk_point_t seg[2] = {{q.x, q.y}, {q.a, q.b}};
   qk__world_visit_seg(w, qk__shape_box(&q), q.kind == QK_SHAPE_SEGMENT ? seg : NULL, q_visit, &c);
-  if (c.n <= cap) sort_by_slot(out, c.n);
+  sort_by_slot(out, c.n < cap ? c.n : cap);
   *n_out = c.n;
   return QK_OK;
 }
@@ -1149,8 +1184,8 @@ static int r_visit_all(const qk_world_t *w, uint32_t i, const qk_box_t *b, void 
   rctx_t *c = ud;
   qk_shape_t sh = qk__wshape(&w->obj[i]);
   if (!qk__shapes_overlap(&c->seg, &sh)) return 0;
-  QK__SINK_PUT(c->out, c->cap, c->n,
-               ((qk_world_hit_t){qk__handle(w, i), qk__ray_param(&sh, c->from, c->to)}));
+  keep_hit(c->out, c->cap, c->n++,
+           (qk_world_hit_t){qk__handle(w, i), qk__ray_param(&sh, c->from, c->to)});
   return 0;
 }
 
@@ -1200,7 +1235,7 @@ qk_status_t qk_world_raycast_all(const qk_world_t *w, qk_point_t from, qk_point_
   c.cap = cap;
   qk_point_t seg[2] = {from, to};
   qk__world_visit_seg(w, qk__shape_box(&c.seg), seg, r_visit_all, &c);
-  if (c.n <= cap && c.n > 1) qsort(out, c.n, sizeof *out, hit_cmp);
+  if ((c.n < cap ? c.n : cap) > 1) qsort(out, c.n < cap ? c.n : cap, sizeof *out, hit_cmp);
   *n_out = c.n;
   return QK_OK;
 }

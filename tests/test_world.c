@@ -583,6 +583,17 @@ static QKT_SERIAL void check_queries(qkt_rng_t *r, qk_world_t *w, const mirror_t
       assert_true(j < m->n && o_overlap(qs, m->s[j]));
       if (i) assert_true((uint32_t)got[i - 1] < (uint32_t)got[i]);
     }
+    /* a short buffer gets the first cap of the list (it got the first cap visited) */
+    qk_handle_t *part = malloc((n + 1) * sizeof *part);
+    for (size_t cap = 1; cap < n; cap = cap < 3 ? cap + 1 : cap * 2 + 1) {
+      size_t np;
+      assert_int_equal(qk_world_query(w, &qs, part, cap, &np), QK_OK);
+      assert_int_equal(np, n);
+      if (memcmp(part, got, cap * sizeof *part))
+        fail_msg("query kind %d, %zu of %zu in the buffer: not the first by slot (seed %llu)", q,
+                 cap, n, (unsigned long long)g_seed);
+    }
+    free(part);
     /* rays: the all-hits set is the segment query's; t nondecreasing; first = all[0] */
     if (q == 2) {
       qk_world_hit_t *hits = malloc((n + 1) * sizeof *hits), first;
@@ -601,6 +612,18 @@ static QKT_SERIAL void check_queries(qkt_rng_t *r, qk_world_t *w, const mirror_t
         ld scale = 1 + fabsl(px) + fabsl(py);
         assert_true(sqrtl(o_d2(&m->s[j], px, py)) <= 1e-9 * scale);
       }
+      qk_world_hit_t *hpart = malloc((nh + 1) * sizeof *hpart);
+      for (size_t cap = 1; cap < nh; cap = cap < 3 ? cap + 1 : cap * 2 + 1) {
+        size_t np;
+        assert_int_equal(qk_world_raycast_all(w, a, b, hpart, cap, &np), QK_OK);
+        assert_int_equal(np, nh);
+        for (size_t i = 0; i < cap; i++)
+          if (hpart[i].h != hits[i].h || hpart[i].t != hits[i].t)
+            fail_msg("ray, %zu of %zu hits in the buffer: hit %zu is not the %zu-th in order "
+                     "(seed %llu)",
+                     cap, nh, i, i, (unsigned long long)g_seed);
+      }
+      free(hpart);
       assert_int_equal(qk_world_raycast(w, a, b, &first), QK_OK);
       if (nh)
         assert_true(first.h == hits[0].h && first.t == hits[0].t);

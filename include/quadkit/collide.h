@@ -451,7 +451,8 @@ qk_status_t qk_world_pairs_parallel(const qk_world_t *w, qk_pairs_which_t which,
 /**
  * Objects overlapping a shape (a box, disc, point or segment; touching counts), exactly,
  * as they are now (moves need no update first), by slot.
- * \param [out] out up to cap handles. \param [out] n_out the full count.
+ * \param [out] out up to cap handles: the first cap by slot when there are more.
+ * \param [out] n_out the full count.
  * \return QK_OK, a shape error, or QK_ERR_INVALID.
  */
 qk_status_t qk_world_query(const qk_world_t *w, const qk_shape_t *shape, qk_handle_t *out,
@@ -461,7 +462,8 @@ qk_status_t qk_world_query(const qk_world_t *w, const qk_shape_t *shape, qk_hand
  * Every object the segment from -> to touches (decided exactly), in order of the
  * parameter t in [0, 1] of the first contact (computed in long double; ties by slot).
  * For a ray, pass a far endpoint.
- * \param [out] out up to cap hits. \param [out] n_out the full count.
+ * \param [out] out up to cap hits: the first cap in that order when there are more.
+ * \param [out] n_out the full count.
  */
 qk_status_t qk_world_raycast_all(const qk_world_t *w, qk_point_t from, qk_point_t to,
                                  qk_world_hit_t *out, size_t cap, size_t *n_out);
