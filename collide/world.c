@@ -498,7 +498,14 @@ qk_status_t qk_world_move(qk_world_t *w, qk_handle_t h, const qk_shape_t *shape)
 
 qk_status_t qk_world_move_batch(qk_world_t *w, const qk_handle_t *h, const qk_shape_t *shapes,
                                 size_t n, qk_error_t *err) {
-  if (!w || (n && (!h || !shapes))) return QK_ERR_INVALID;
+  if (err) {
+    memset(err, 0, sizeof *err);
+    err->item = SIZE_MAX;
+  }
+  if (!w || (n && (!h || !shapes))) {
+    if (err) snprintf(err->message, sizeof err->message, "a NULL world, or NULL handles or shapes");
+    return QK_ERR_INVALID;
+  }
   const uint32_t n_obj = w->n_obj;
   for (size_t k = 0; k < n; k++) {
     /* The handle check: a live slot's generation is odd and a removed one's even, so an

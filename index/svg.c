@@ -46,5 +46,5 @@ qk_status_t qk_tree_write_svg(const qk_tree_t *t, FILE *f, unsigned width) {
   s.points = 1;
   qk_tree_visit(t, 0, draw, &s);
   fprintf(f, "</g>\n</svg>\n");
-  return ferror(f) ? QK_ERR_IO : QK_OK;
+  return fflush(f) != 0 || ferror(f) ? QK_ERR_IO : QK_OK; /* (flushed: see mesh/write.c) */
 }

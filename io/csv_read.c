@@ -33,7 +33,9 @@ typedef struct reader {
   size_t rows, cap;
 } reader_t;
 
-void qk_csv_options_init(qk_csv_options_t *opt) { memset(opt, 0, sizeof *opt); }
+void qk_csv_options_init(qk_csv_options_t *opt) {
+  if (opt) memset(opt, 0, sizeof *opt);
+}
 
 static qk_status_t fail(reader_t *r, qk_status_t st, unsigned long line, size_t column, size_t item,
                         const char *fmt, ...) {
@@ -364,6 +366,9 @@ qk_status_t qk_csv_read_values(FILE *f, const qk_csv_options_t *opt, size_t ncol
   if (!f || !values || !rows || ncols == 0 || ncols > MAX_COLS || nrequired == 0 ||
       nrequired > ncols)
     return fail(&r, QK_ERR_INVALID, 0, 0, SIZE_MAX, "invalid arguments");
+  if (opt && (unsigned)opt->header > (unsigned)QK_CSV_HEADER_NO)
+    return fail(&r, QK_ERR_INVALID, 0, 0, SIZE_MAX,
+                "header rule %d is none of QK_CSV_HEADER_AUTO, _YES and _NO", (int)opt->header);
   qk_status_t st = parse_columns(&r);
   if (!st) st = distinct_columns(&r, 0);
   if (st) return st;

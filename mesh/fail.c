@@ -10,10 +10,19 @@ qk_status_t qk__mesh_fail(qk_mesh_error_t *err, qk_status_t st, unsigned long li
                           ...) {
   if (err) {
     err->line = line;
+    err->column = 0;
+    err->item = SIZE_MAX;
     va_list ap;
     va_start(ap, fmt);
     vsnprintf(err->message, sizeof err->message, fmt, ap);
     va_end(ap);
   }
   return st;
+}
+
+void qk__mesh_err_clear(qk_mesh_error_t *err) {
+  if (!err) return;
+  err->line = err->column = 0;
+  err->item = SIZE_MAX;
+  err->message[0] = '\0';
 }

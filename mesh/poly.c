@@ -205,16 +205,23 @@ static qk_poly_t *poly_new(const qk_allocator_t *allocator) {
 
 unsigned qk_poly_first_index(const qk_poly_t *p) { return p ? p->first_index : 0; }
 
+/* v rounded to a multiple of step (ties to even). Where v / step reaches 2^52 (or
+ * overflows: 1e10 on 2^-1074), the multiples of step nearest v are within half an ulp of
+ * it, and v stays: the quotient alone was refused as an overflow. */
+static double round_to(double v, double step) {
+  const double q = v / step;
+  return fabs(q) < 0x1p52 ? nearbyint(q) * step : v;
+}
+
 qk_status_t qk_poly_round(qk_poly_t *p, double step, size_t *rounded) {
   if (rounded) *rounded = 0;
   if (!p || !(step > 0) || !isfinite(step)) return QK_ERR_INVALID;
   for (size_t i = 0; i < p->nv; i++) /* all or nothing */
-    if (!isfinite(nearbyint(p->vx[i] / step) * step) ||
-        !isfinite(nearbyint(p->vy[i] / step) * step))
+    if (!isfinite(round_to(p->vx[i], step)) || !isfinite(round_to(p->vy[i], step)))
       return QK_ERR_NONFINITE;
   size_t n = 0;
   for (size_t i = 0; i < p->nv; i++) {
-    double x = nearbyint(p->vx[i] / step) * step, y = nearbyint(p->vy[i] / step) * step;
+    double x = round_to(p->vx[i], step), y = round_to(p->vy[i], step);
     n += (x != p->vx[i]) + (y != p->vy[i]);
     p->vx[i] = x, p->vy[i] = y;
   }
@@ -544,10 +551,7 @@ static qk_status_t read_tail(reader_t *r, qk_poly_t *p, qk_mesh_error_t *err) {
 qk_status_t qk_poly_read(FILE *f, const qk_allocator_t *allocator, qk_poly_t **out,
                          qk_mesh_error_t *err) {
   if (out) *out = NULL;
-  if (err) {
-    err->line = 0;
-    err->message[0] = '\0';
-  }
+  qk__mesh_err_clear(err);
   if (!f || !out) return QK_ERR_INVALID;
   qk_poly_t *p = poly_new(allocator);
   if (!p) return qk__mesh_fail(err, QK_ERR_NOMEM, 0, "out of memory");
@@ -567,10 +571,16 @@ qk_status_t qk_poly_read(FILE *f, const qk_allocator_t *allocator, qk_poly_t **o
   return QK_OK;
 }
 
+/* st, with the offending array item recorded. */
+static qk_status_t item_fail(qk_mesh_error_t *err, size_t item, qk_status_t st) {
+  if (err) err->item = item;
+  return st;
+}
+
 qk_status_t qk_poly_from_arrays(const double *xy, size_t nv, const uint32_t *seg, size_t ns,
                                 const double *holes, size_t nh, const qk_allocator_t *allocator,
                                 qk_poly_t **out, qk_mesh_error_t *err) {
-  if (err) err->line = 0, err->message[0] = '\0';
+  qk__mesh_err_clear(err);
   if (!out) return qk__mesh_fail(err, QK_ERR_INVALID, 0, "no output pointer");
   *out = NULL;
   if (nv && !xy) return qk__mesh_fail(err, QK_ERR_INVALID, 0, "%zu vertices but no array", nv);
@@ -580,19 +590,25 @@ qk_status_t qk_poly_from_arrays(const double *xy, size_t nv, const uint32_t *seg
     return qk__mesh_fail(err, QK_ERR_LIMIT, 0,
                          "%zu vertices, %zu segments, %zu holes: at most %lu of each", nv, ns, nh,
                          POLY_MAX_COUNT);
+  /* (err->item: the vertex, segment or hole, as the message says) */
   for (size_t i = 0; i < nv; i++)
     if (!isfinite(xy[2 * i]) || !isfinite(xy[2 * i + 1]))
-      return qk__mesh_fail(err, QK_ERR_INVALID, 0, "vertex %zu: coordinates (%g, %g) not finite", i,
-                           xy[2 * i], xy[2 * i + 1]);
+      return item_fail(err, i,
+                       qk__mesh_fail(err, QK_ERR_INVALID, 0,
+                                     "vertex %zu: coordinates (%g, %g) not finite", i, xy[2 * i],
+                                     xy[2 * i + 1]));
   for (size_t i = 0; i < 2 * ns; i++)
     if (seg[i] >= nv)
-      return qk__mesh_fail(err, QK_ERR_INVALID, 0,
-                           "segment %zu: endpoint %lu is not a vertex number (0..%zu)", i / 2,
-                           (unsigned long)seg[i], nv ? nv - 1 : 0);
+      return item_fail(err, i / 2,
+                       qk__mesh_fail(err, QK_ERR_INVALID, 0,
+                                     "segment %zu: endpoint %lu is not a vertex number (0..%zu)",
+                                     i / 2, (unsigned long)seg[i], nv ? nv - 1 : 0));
   for (size_t i = 0; i < nh; i++)
     if (!isfinite(holes[2 * i]) || !isfinite(holes[2 * i + 1]))
-      return qk__mesh_fail(err, QK_ERR_INVALID, 0, "hole %zu: coordinates (%g, %g) not finite", i,
-                           holes[2 * i], holes[2 * i + 1]);
+      return item_fail(err, i,
+                       qk__mesh_fail(err, QK_ERR_INVALID, 0,
+                                     "hole %zu: coordinates (%g, %g) not finite", i, holes[2 * i],
+                                     holes[2 * i + 1]));
   qk_poly_t *p = poly_new(allocator);
   if (!p) return qk__mesh_fail(err, QK_ERR_NOMEM, 0, "out of memory");
   qk__poly_caps_t *c = &p->cap;
@@ -633,7 +649,7 @@ qk_status_t qk_poly_holes(const qk_poly_t *p, double *xy, size_t cap, size_t *n_
 
 qk_status_t qk_poly_set_markers(qk_poly_t *p, const int32_t *vm, const int32_t *sm,
                                 qk_mesh_error_t *err) {
-  if (err) err->line = 0, err->message[0] = '\0';
+  qk__mesh_err_clear(err);
   if (!p) return qk__mesh_fail(err, QK_ERR_INVALID, 0, "no input");
   int32_t *nv = NULL, *ns = NULL;
   size_t cv = 0, cs = 0;
@@ -651,7 +667,7 @@ nomem:
 }
 
 qk_status_t qk_poly_set_regions(qk_poly_t *p, const double *xya, size_t nr, qk_mesh_error_t *err) {
-  if (err) err->line = 0, err->message[0] = '\0';
+  qk__mesh_err_clear(err);
   if (!p || (nr && !xya)) return qk__mesh_fail(err, QK_ERR_INVALID, 0, "no input or no array");
   if (nr > POLY_MAX_COUNT)
     return qk__mesh_fail(err, QK_ERR_LIMIT, 0, "%zu regional attributes: at most %lu", nr,

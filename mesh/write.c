@@ -11,7 +11,9 @@
 #include <stdlib.h>
 #include <string.h>
 
-static qk_status_t io_status(FILE *f) { return ferror(f) ? QK_ERR_IO : QK_OK; }
+/* Flushed first: what stdio still buffered would otherwise fail only at the caller's
+ * fclose, after QK_OK (a small mesh on a full disk). */
+static qk_status_t io_status(FILE *f) { return fflush(f) != 0 || ferror(f) ? QK_ERR_IO : QK_OK; }
 
 qk_status_t qk_mesh_write_node(const qk_mesh_t *m, FILE *f, unsigned first) {
   if (!m || !f || first > 1) return QK_ERR_INVALID;

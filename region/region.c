@@ -98,6 +98,7 @@ qk_status_t qk__region_fail(qk_error_t *err, qk_status_t st, size_t item, const 
 }
 
 void qk_region_options_init(qk_region_options_t *o) {
+  if (!o) return;
   memset(o, 0, sizeof *o);
   o->leaf_edges = QK_REGION_DEFAULT_LEAF_EDGES;
   o->max_depth = QK_REGION_DEFAULT_MAX_DEPTH;
@@ -134,7 +135,9 @@ void qk_region_free(qk_region_t *r) {
   qk__free(&al, r, sizeof *r);
 }
 
-void qk_region_stats(const qk_region_t *r, qk_region_stats_t *s) { *s = r->stats; }
+void qk_region_stats(const qk_region_t *r, qk_region_stats_t *s) {
+  if (s) *s = r ? r->stats : (qk_region_stats_t){0};
+}
 
 size_t qk_region_feature_count(const qk_region_t *r) { return r ? r->n_features : 0; }
 

@@ -47,5 +47,5 @@ qk_status_t qk_region_write_svg(const qk_region_t *r, FILE *f, unsigned width) {
     }
   }
   fprintf(f, "</g>\n</svg>\n");
-  return ferror(f) ? QK_ERR_IO : QK_OK;
+  return fflush(f) != 0 || ferror(f) ? QK_ERR_IO : QK_OK; /* (flushed: see mesh/write.c) */
 }

@@ -563,8 +563,117 @@ static void test_reliability_writers_full_disk(void **state) {
   clearerr(full);
   assert_int_equal(qk_tree_write_svg(qk_mesh_tree(m), full, 0), QK_ERR_IO);
   fclose(full);
+  /* Buffered as fopen leaves it: a small mesh fits in stdio's buffer, and the writers
+   * returned QK_OK, the failure left to the caller's fclose. */
+  for (int k = 0; k < 7; k++) {
+    FILE *f = fopen("/dev/full", "w");
+    assert_non_null(f);
+    qk_status_t st = k == 0   ? qk_mesh_write_node(m, f, 1)
+                     : k == 1 ? qk_mesh_write_ele(m, f, 1)
+                     : k == 2 ? qk_mesh_write_poly(m, f, 1)
+                     : k == 3 ? qk_mesh_write_msh(m, f)
+                     : k == 4 ? qk_mesh_write_vtu(m, f)
+                     : k == 5 ? qk_mesh_write_svg(m, f, 0)
+                              : qk_tree_write_svg(qk_mesh_tree(m), f, 0);
+    if (st != QK_ERR_IO) fail_msg("writer %d on a buffered /dev/full: status %d", k, (int)st);
+    fclose(f);
+  }
   qk_mesh_free(m);
   qk_poly_free(poly);
+}
+
+/* ---- NULL where a struct is filled -------------------------------------------------- */
+
+/* The options initialisers and the statistics calls do nothing with a NULL output (and
+ * stats of a NULL object are zeros), as qk_world_options_init, qk_mesh_options_init and
+ * qk_tree_stats did: qk_tree_options_init, qk_region_options_init, qk_csv_options_init
+ * and qk_region_stats dereferenced it (a crash). */
+static void test_reliability_null_outputs(void **state) {
+  (void)state;
+  qk_tree_options_init(NULL);
+  qk_region_options_init(NULL);
+  qk_csv_options_init(NULL);
+  qk_world_options_init(NULL);
+  qk_mesh_options_init(NULL);
+  qk_tree_stats(NULL, NULL);
+  qk_region_stats_t rs;
+  memset(&rs, 0xab, sizeof rs);
+  qk_region_stats(NULL, &rs);
+  assert_int_equal(rs.features, 0);
+  assert_int_equal(rs.bytes, 0);
+  const double xy[] = {0, 0, 1, 0, 1, 1, 0, 0};
+  const size_t rings[] = {0, 4}, feats[] = {0, 1};
+  qk_region_arrays_t arr = {xy, rings, 1, feats, 1};
+  qk_region_options_t ro;
+  qk_region_options_init(&ro);
+  ro.planar = 1;
+  qk_region_t *r = NULL;
+  assert_int_equal(qk_region_from_arrays(&arr, &ro, &r, NULL), QK_OK);
+  qk_region_stats(r, NULL);
+  qk_region_stats(r, &rs);
+  assert_int_equal(rs.features, 1);
+  qk_region_free(r);
+}
+
+/* ---- error records filled whole ------------------------------------------------------ */
+
+/* common.h: a call that takes a qk_error_t fills it (item SIZE_MAX when there is none,
+ * message "" on success). The mesh module set only line and message (column and item
+ * kept the caller's bytes), and qk_world_move_batch left the record untouched on success
+ * and on a NULL argument. */
+static void expect_record(const qk_error_t *e, unsigned long line, unsigned long column,
+                          size_t item, int has_message) {
+  assert_int_equal(e->line, line);
+  assert_int_equal(e->column, column);
+  assert_int_equal(e->item, item);
+  assert_int_equal(e->message[0] != '\0', has_message);
+}
+
+static void test_reliability_error_records(void **state) {
+  (void)state;
+  qk_error_t e;
+  qk_poly_t *p = NULL;
+  const double xy[] = {0, 0, 4, 0, 4, 4, 0, NAN};
+  const uint32_t seg[] = {0, 1, 1, 2, 2, 3, 3, 9};
+  memset(&e, 0xab, sizeof e);
+  assert_int_equal(qk_poly_from_arrays(xy, 4, seg, 4, NULL, 0, NULL, &p, &e), QK_ERR_INVALID);
+  expect_record(&e, 0, 0, 3, 1); /* vertex 3 */
+  const double ok_xy[] = {0, 0, 4, 0, 4, 4, 0, 4};
+  memset(&e, 0xab, sizeof e);
+  assert_int_equal(qk_poly_from_arrays(ok_xy, 4, seg, 4, NULL, 0, NULL, &p, &e), QK_ERR_INVALID);
+  expect_record(&e, 0, 0, 3, 1); /* segment 3 */
+  const uint32_t ok_seg[] = {0, 1, 1, 2, 2, 3, 3, 0};
+  memset(&e, 0xab, sizeof e);
+  assert_int_equal(qk_poly_from_arrays(ok_xy, 4, ok_seg, 4, NULL, 0, NULL, &p, &e), QK_OK);
+  expect_record(&e, 0, 0, SIZE_MAX, 0);
+  qk_mesh_t *m = NULL;
+  memset(&e, 0xab, sizeof e);
+  assert_int_equal(qk_mesh_generate(p, NULL, &m, &e), QK_OK);
+  expect_record(&e, 0, 0, SIZE_MAX, 0);
+  qk_mesh_free(m);
+  qk_mesh_options_t mo;
+  qk_mesh_options_init(&mo);
+  mo.min_angle_deg = 80; /* refused */
+  memset(&e, 0xab, sizeof e);
+  assert_int_not_equal(qk_mesh_generate(p, &mo, &m, &e), QK_OK);
+  expect_record(&e, 0, 0, SIZE_MAX, 1);
+  qk_poly_free(p);
+  qk_world_t *w;
+  assert_int_equal(qk_world_new(NULL, &w), QK_OK);
+  qk_handle_t h;
+  qk_shape_t sh = {QK_SHAPE_DISC, 0, 0, 1, 0};
+  assert_int_equal(qk_world_add(w, &sh, 1, &h), QK_OK);
+  memset(&e, 0xab, sizeof e);
+  assert_int_equal(qk_world_move_batch(w, &h, &sh, 1, &e), QK_OK);
+  expect_record(&e, 0, 0, SIZE_MAX, 0);
+  memset(&e, 0xab, sizeof e);
+  assert_int_equal(qk_world_move_batch(w, NULL, &sh, 1, &e), QK_ERR_INVALID);
+  expect_record(&e, 0, 0, SIZE_MAX, 1);
+  qk_handle_t stale = h + 1;
+  memset(&e, 0xab, sizeof e);
+  assert_int_equal(qk_world_move_batch(w, &stale, &sh, 1, &e), QK_ERR_NOT_FOUND);
+  expect_record(&e, 0, 0, 0, 1);
+  qk_world_free(w);
 }
 
 /* ---- limits -------------------------------------------------------------------------- */
@@ -703,6 +812,8 @@ int main(void) {
       cmocka_unit_test(test_reliability_alloc_poly_arrays),
       cmocka_unit_test(test_reliability_alloc_mesh_generate),
       cmocka_unit_test(test_reliability_writers_full_disk),
+      cmocka_unit_test(test_reliability_null_outputs),
+      cmocka_unit_test(test_reliability_error_records),
       cmocka_unit_test(test_reliability_limits),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);

@@ -395,7 +395,7 @@ int qk_tree_is_balanced(const qk_tree_t *tree);
  * \param [in] tree the tree.
  * \param [in] f an open stream, owned by the caller.
  * \param [in] width picture width in pixels (0 means 800).
- * \return QK_OK or QK_ERR_IO.
+ * \return QK_OK or QK_ERR_IO (the stream is flushed, so a write it refused is seen).
  */
 qk_status_t qk_tree_write_svg(const qk_tree_t *tree, FILE *f, unsigned width);
 

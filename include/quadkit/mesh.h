@@ -378,7 +378,7 @@ void qk_mesh_stats(const qk_mesh_t *mesh, qk_mesh_stats_t *stats);
  * input carried markers.
  * \param [in] mesh the mesh. \param [in] f an open stream (caller's).
  * \param [in] first_index 0 or 1, the first vertex number.
- * \return QK_OK or QK_ERR_IO.
+ * \return QK_OK or QK_ERR_IO (the stream is flushed, so a write it refused is seen).
  */
 qk_status_t qk_mesh_write_node(const qk_mesh_t *mesh, FILE *f, unsigned first_index);
 
@@ -387,7 +387,7 @@ qk_status_t qk_mesh_write_node(const qk_mesh_t *mesh, FILE *f, unsigned first_in
  * component id as the one triangle attribute.
  * \param [in] mesh the mesh. \param [in] f an open stream (caller's).
  * \param [in] first_index 0 or 1, as for the `.node` file.
- * \return QK_OK or QK_ERR_IO.
+ * \return QK_OK or QK_ERR_IO (the stream is flushed, so a write it refused is seen).
  */
 qk_status_t qk_mesh_write_ele(const qk_mesh_t *mesh, FILE *f, unsigned first_index);
 
@@ -396,7 +396,8 @@ qk_status_t qk_mesh_write_ele(const qk_mesh_t *mesh, FILE *f, unsigned first_ind
  * they are the `.node` file's; segments with their markers; no holes).
  * \param [in] mesh the mesh. \param [in] f an open stream (caller's).
  * \param [in] first_index 0 or 1, as for the `.node` file.
- * \return QK_OK, QK_ERR_INVALID or QK_ERR_IO.
+ * \return QK_OK, QK_ERR_INVALID or QK_ERR_IO (the stream is flushed, so a write it
+ *         refused is seen).
  */
 qk_status_t qk_mesh_write_poly(const qk_mesh_t *mesh, FILE *f, unsigned first_index);
 
@@ -406,7 +407,7 @@ qk_status_t qk_mesh_write_poly(const qk_mesh_t *mesh, FILE *f, unsigned first_in
  * boundary markers, one curve entity and one physical group of line elements (the mesh
  * edges along input segments) per marker present (named "marker_M").
  * \param [in] mesh the mesh. \param [in] f an open stream (caller's).
- * \return QK_OK or QK_ERR_IO.
+ * \return QK_OK or QK_ERR_IO (the stream is flushed, so a write it refused is seen).
  */
 qk_status_t qk_mesh_write_msh(const qk_mesh_t *mesh, FILE *f);
 
@@ -415,7 +416,7 @@ qk_status_t qk_mesh_write_msh(const qk_mesh_t *mesh, FILE *f);
  * and "region"), the regional attribute when there are regions, as cell data and the
  * boundary marker ("marker") as point data.
  * \param [in] mesh the mesh. \param [in] f an open stream (caller's).
- * \return QK_OK or QK_ERR_IO.
+ * \return QK_OK or QK_ERR_IO (the stream is flushed, so a write it refused is seen).
  */
 qk_status_t qk_mesh_write_vtu(const qk_mesh_t *mesh, FILE *f);
 
@@ -424,7 +425,7 @@ qk_status_t qk_mesh_write_vtu(const qk_mesh_t *mesh, FILE *f);
  * component boundaries on top.
  * \param [in] mesh the mesh. \param [in] f an open stream (caller's).
  * \param [in] width picture width in pixels (0 means 800).
- * \return QK_OK or QK_ERR_IO.
+ * \return QK_OK or QK_ERR_IO (the stream is flushed, so a write it refused is seen).
  */
 qk_status_t qk_mesh_write_svg(const qk_mesh_t *mesh, FILE *f, unsigned width);
 

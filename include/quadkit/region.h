@@ -256,8 +256,8 @@ typedef struct qk_region_stats {
 
 /**
  * Statistics of a layer.
- * \param [in] region the layer.
- * \param [out] stats filled.
+ * \param [in] region the layer (NULL: every figure 0, as for qk_tree_stats()).
+ * \param [out] stats filled (NULL: nothing is done).
  */
 void qk_region_stats(const qk_region_t *region, qk_region_stats_t *stats);
 
@@ -291,7 +291,7 @@ const qk_tree_t *qk_region_tree(const qk_region_t *region);
  * \param [in] region the layer.
  * \param [in] f an open stream, owned by the caller.
  * \param [in] width picture width in pixels (0 means 1000).
- * \return QK_OK or QK_ERR_IO.
+ * \return QK_OK or QK_ERR_IO (the stream is flushed, so a write it refused is seen).
  */
 qk_status_t qk_region_write_svg(const qk_region_t *region, FILE *f, unsigned width);
 
