@@ -31,6 +31,7 @@
 #endif
 
 void qk_tree_options_init(qk_tree_options_t *o) {
+  if (!o) return;
   memset(o, 0, sizeof *o);
   o->capacity = 1;
   o->max_depth = QK_DEFAULT_MAX_DEPTH;
@@ -870,7 +871,12 @@ static qk_status_t rebuild(qk_tree_t *t, const qk_point_t *points, size_t n, qk_
   if (need > t->cap_slots) {
     slots_t s;
     if (need > UINT32_MAX) return say(err, QK_ERR_LIMIT, SIZE_MAX, "%zu points", n);
-    if (slots_alloc(t, need, &s)) return say(err, QK_ERR_NOMEM, SIZE_MAX, "out of memory");
+    if (slots_alloc(t, need, &s)) {
+      /* left empty, as after a later failure (the header's promise): the old points
+       * stayed and the caller could not tell which had happened */
+      (void)fill(t, points, 0, root); /* (no allocation: the tree has a node and a slot) */
+      return say(err, QK_ERR_NOMEM, SIZE_MAX, "out of memory");
+    }
     slots_install(t, s, need);
   }
   /* From now on the bulk build keeps its record block for the next one (a tree rebuilt

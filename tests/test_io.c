@@ -278,6 +278,11 @@ static void test_io_errors(void **state) {
                "columns must be 2 comma-separated names or 1-based numbers, not '1,'");
   expect_error("0,0\n", -1, "0,1", A, QK_ERR_INVALID, 0, 0, SIZE_MAX,
                "column number 0 is out of range (1 to 100000)");
+  /* A header rule outside the enum was read as QK_CSV_HEADER_AUTO (the API review). */
+  expect_error("0,0\n", -1, NULL, (qk_csv_header_t)7, QK_ERR_INVALID, 0, 0, SIZE_MAX,
+               "header rule 7 is none of QK_CSV_HEADER_AUTO, _YES and _NO");
+  expect_error("0,0\n", -1, NULL, (qk_csv_header_t)-1, QK_ERR_INVALID, 0, 0, SIZE_MAX,
+               "header rule -1 is none of QK_CSV_HEADER_AUTO, _YES and _NO");
   /* The byte order mark counts in line 1's columns. */
   expect_error("\xEF\xBB\xBF"
                "1,x\n",

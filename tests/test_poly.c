@@ -485,6 +485,21 @@ static void test_poly_round(void **state) {
   qk_poly_vertices(p, xy, 2, &n);
   assert_true(xy[0] == 1.7976931348623157e308 && xy[3] == 1);
   qk_poly_free(p);
+  /* A fine step under a large coordinate: the quotient overflows (1e10 / 1e-300) or
+   * passes 2^52, but the coordinate is a multiple to within half an ulp and stays (it was
+   * refused as QK_ERR_NONFINITE); 2^-1074 changes nothing anywhere. */
+  f = from_string("2 2 0 0\n1 1e10 0.1\n2 -3e200 4503599627370497\n0 0\n0\n");
+  assert_int_equal(qk_poly_read(f, NULL, &p, &err), QK_OK);
+  fclose(f);
+  const double steps[] = {1e-300, 0x1p-1074, 0x1p-20};
+  for (int k = 0; k < 3; k++) {
+    assert_int_equal(qk_poly_round(p, steps[k], &changed), QK_OK);
+    qk_poly_vertices(p, xy, 2, &n);
+    assert_true(xy[0] == 1e10 && xy[2] == -3e200 && xy[3] == 4503599627370497.0);
+    assert_true(xy[1] == (k < 2 ? 0.1 : nearbyint(0.1 * 0x1p20) * 0x1p-20));
+    assert_int_equal(changed, k < 2 ? 0 : 1);
+  }
+  qk_poly_free(p);
 }
 
 int main(void) {

@@ -173,7 +173,10 @@ qk_status_t qk_collider_pairs_list(const qk_collider_t *c, qk_pair_t *out, size_
 /**
  * First hit along a ray origin + t * dir, 0 <= t <= tmax: the item with the smallest t
  * at which the ray touches it (ties by smaller id); t = 0 when the origin lies inside an
- * item. For a segment from a to b pass dir = b - a and tmax = 1.
+ * item. For a segment from a to b pass dir = b - a and tmax = 1. Hits are decided in
+ * doubles (docs/collide.md), not exactly as the overlap queries are: a ray from within a
+ * few ulps of a disc's circle may hit it at t = 0 even moving away from it (the world's
+ * rays, qk_world_raycast(), are exact).
  * \param [in] c the collider.
  * \param [in] origin the ray's origin.
  * \param [in] dir its direction (any length, not normalised: one far from 1 is scaled

@@ -92,6 +92,16 @@ expect 0 '"mode": "dyadic"' -- "$cli" mesh "$tmp/big.poly" -o "$tmp/big" --stats
 printf '4 2 0 0\n0 0 0\n1 5 0\n2 5 4\n3 0 4\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n0\n' >"$tmp/pos.poly"
 expect 0 '"mode": "book"' -- "$cli" mesh "$tmp/pos.poly" -o "$tmp/pos" --stats
 
+# ---- mesh --round: a fine grid under large coordinates --------------------------------
+# x / G overflowed (1e10 / 1e-300): a .poly was refused ("a rounded coordinate is beyond
+# the largest double") and GeoJSON coordinates became NaN ("no ring with 3 distinct
+# points", exit 1). From 2^52 steps on a coordinate is a multiple of G to within half an
+# ulp, and stays.
+printf '4 2 0 0\n1 10000000000 0\n2 10000000001 0\n3 10000000001 1\n4 10000000000 1\n4 0\n1 1 2\n2 2 3\n3 3 4\n4 4 1\n0\n' >"$tmp/far.poly"
+expect 0 '"triangles": 2,' -- "$cli" mesh "$tmp/far.poly" -o "$tmp/farp" --round 2^-996 --stats
+printf '{"type": "Polygon", "coordinates": [[[1e10, 0], [10000000001, 0], [10000000001, 1], [1e10, 1], [1e10, 0]]]}\n' >"$tmp/far.geojson"
+expect 0 '"rounded_coordinates": 0' -- "$cli" mesh "$tmp/far.geojson" -o "$tmp/farg" --round 1e-300 --stats
+
 # ---- raycast: rows on standard output before a refused ray ------------------------------
 # A ray whose hit lies beyond the largest double is refused, but the rays before it had
 # been printed (exit 1 after output); every ray is now cast before the header.
