@@ -80,9 +80,11 @@ qk_status_t qk_world_new(const qk_world_options_t *options, qk_world_t **out) {
   qk_world_options_t o;
   qk_world_options_init(&o);
   if (options) o = *options;
+  /* 0 threads: every online core, as for the tree and the collider (it was refused) */
+  if (o.threads == 0) o.threads = qk__threads_resolve(0);
   /* Bounded margins keep every fat box, and so every level, inside the level table. */
   if (!(o.margin >= 0 && o.margin <= 16) || !(o.min_margin >= 0 && o.min_margin <= 0x1p100) ||
-      o.threads == 0 || o.threads > 256)
+      o.threads > 256)
     return QK_ERR_INVALID;
   qk_allocator_t a = {NULL, NULL};
   if (o.allocator) a = *o.allocator;

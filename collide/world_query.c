@@ -1570,14 +1570,19 @@ static void kbatch_run(unsigned j, unsigned share, void *ud) {
   kbatch_t *b = ud;
   size_t lo = (size_t)j * b->chunk, hi = lo + b->chunk < b->n ? lo + b->chunk : b->n;
   for (size_t i = lo; i < hi; i++) {
-    qk_status_t st = qk_world_knn(b->w, b->ps[i], b->k, b->out + i * b->k, &b->counts[i]);
-    if (st != QK_OK) b->st[j % 64] = st;
+    size_t c = 0;
+    qk_world_hit_t *o = b->out + i * b->k;
+    qk_status_t st = qk_world_knn(b->w, b->ps[i], b->k, o, &c);
+    if (st != QK_OK) b->st[j % 64] = st, c = 0;
+    /* the block's unused slots, as qk_query_knn_batch fills them */
+    for (size_t s = c; s < b->k; s++) o[s] = (qk_world_hit_t){QK_HANDLE_NONE, INFINITY};
+    if (b->counts) b->counts[i] = c;
   }
 }
 
 qk_status_t qk_world_knn_batch(const qk_world_t *w, const qk_point_t *ps, size_t n, size_t k,
                                qk_world_hit_t *out, size_t *counts) {
-  if (!w || (n && (!ps || !counts || (k && !out)))) return QK_ERR_INVALID;
+  if (!w || (n && (!ps || (k && !out)))) return QK_ERR_INVALID;
   kbatch_t b = {w, ps, n, k, 256, out, counts, {QK_OK}};
   size_t jobs = batch_jobs(n, &b.chunk);
   qk__world_run_jobs_shared(w, w->opt.threads, (unsigned)jobs, kbatch_run, &b);

@@ -3095,8 +3095,14 @@ static void test_world_stale_handles(void **s) {
   assert_int_equal(qk_world_update(w), QK_OK);
   qk_world_free(w);
   qk_world_options_init(&o);
-  o.threads = 0;
+  o.threads = 257;
   assert_int_equal(qk_world_new(&o, &w), QK_ERR_INVALID);
+  /* 0 threads: every online core, as the tree's and the collider's option (refused) */
+  o.threads = 0;
+  assert_int_equal(qk_world_new(&o, &w), QK_OK);
+  assert_int_equal(qk_world_add(w, &got, 0, &hc), QK_OK);
+  assert_int_equal(qk_world_update(w), QK_OK);
+  qk_world_free(w);
   qk_world_free(NULL);
   /* the extremes of the accepted range: tiny and huge values, and a point at 2^100 */
   assert_int_equal(qk_world_new(NULL, &w), QK_OK);
@@ -4101,11 +4107,48 @@ static void test_world_nomem_moves(void **s) {
   free(sh);
 }
 
+/* The kNN batch's layout is the tree's (query.h): counts may be NULL and the unused slots
+ * of a point's block get {QK_HANDLE_NONE, INFINITY}; they kept what the caller had there,
+ * and a NULL counts was refused. A point that fails (NaN) gets count 0 and an unused block. */
+static void test_world_knn_batch_layout(void **s) {
+  (void)s;
+  enum { K = 5 };
+  qk_world_t *w;
+  assert_int_equal(qk_world_new(NULL, &w), QK_OK);
+  qk_handle_t h[3];
+  for (int i = 0; i < 3; i++)
+    assert_int_equal(qk_world_add(w, &(qk_shape_t){QK_SHAPE_POINT, 10.0 * i, 0, 0, 0}, 0, &h[i]),
+                     QK_OK);
+  assert_int_equal(qk_world_update(w), QK_OK);
+  const qk_point_t ps[3] = {{0, 0}, {NAN, 0}, {21, 0}};
+  qk_world_hit_t out[3 * K];
+  size_t counts[3];
+  memset(out, 0x5a, sizeof out);
+  assert_int_equal(qk_world_knn_batch(w, ps, 3, K, out, counts), QK_ERR_NONFINITE);
+  assert_int_equal(counts[0], 3);
+  assert_int_equal(counts[1], 0);
+  assert_int_equal(counts[2], 3);
+  const qk_handle_t want[3][3] = {{h[0], h[1], h[2]}, {0}, {h[2], h[1], h[0]}};
+  for (int i = 0; i < 3; i++)
+    for (size_t k = 0; k < K; k++) {
+      const qk_world_hit_t *o = &out[i * K + k];
+      if (k < counts[i])
+        assert_true(o->h == want[i][k]);
+      else
+        assert_true(o->h == QK_HANDLE_NONE && o->t == INFINITY);
+    }
+  memset(out, 0x5a, sizeof out);
+  assert_int_equal(qk_world_knn_batch(w, ps + 2, 1, K, out, NULL), QK_OK);
+  assert_true(out[0].h == h[2] && out[0].t == 1 && out[3].h == QK_HANDLE_NONE);
+  qk_world_free(w);
+}
+
 int main(void) {
   g_seed = qkt_seed(20261130);
   qkt_filters_from_env();
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_world_uniform),
+      cmocka_unit_test(test_world_knn_batch_layout),
       cmocka_unit_test(test_world_clustered),
       cmocka_unit_test(test_world_dense_kept_scratch),
       cmocka_unit_test(test_world_dense_buckets),

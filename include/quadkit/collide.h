@@ -266,7 +266,8 @@ typedef struct qk_world_options {
                                         or when queries run on other threads than the
                                         world's changes (they may make its query tree) */
   unsigned threads;                /**< threads for update, batch queries and
-                                        qk_world_pairs_parallel (1: none) */
+                                        qk_world_pairs_parallel (1: none; 0: every online
+                                        core, as for the tree and the collider) */
   double margin;                   /**< fattening of each object's box, as a fraction of its
                                         size, 0..16 (default 0.5); larger: fewer re-filings */
   double min_margin;               /**< absolute fattening added, 0..2^100 (default 0) */
@@ -286,7 +287,7 @@ void qk_world_options_init(qk_world_options_t *o);
  * Make an empty world.
  * \param [in] options NULL for defaults (copied; the allocator struct is copied too).
  * \param [out] out the world, freed with qk_world_free().
- * \return QK_OK, QK_ERR_INVALID (threads 0 or above 256, a margin out of range) or
+ * \return QK_OK, QK_ERR_INVALID (threads above 256, a margin out of range) or
  *         QK_ERR_NOMEM.
  */
 qk_status_t qk_world_new(const qk_world_options_t *options, qk_world_t **out);
@@ -490,7 +491,9 @@ qk_status_t qk_world_knn(const qk_world_t *w, qk_point_t p, size_t k, qk_world_h
 
 /**
  * qk_world_knn() for n points, on the world's threads.
- * \param [out] out n * k hits, point i's in out[i k ..]. \param [out] counts n counts.
+ * \param [out] out n * k hits, point i's in out[i k ..]; the unused slots of a point's
+ *             block get {QK_HANDLE_NONE, INFINITY} (as in qk_query_knn_batch()).
+ * \param [out] counts n counts (may be NULL).
  * \return QK_OK, QK_ERR_INVALID, or the first error of a point (its count is then 0).
  */
 qk_status_t qk_world_knn_batch(const qk_world_t *w, const qk_point_t *ps, size_t n, size_t k,
