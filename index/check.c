@@ -114,7 +114,10 @@ static qk_status_t check_free_list(checker_t *c) {
 qk_status_t qk_tree_check(const qk_tree_t *t, char *msg, size_t msg_size) {
   checker_t c = {t, msg, msg_size, 0, 0, NULL, NULL, NULL};
   if (msg && msg_size) msg[0] = '\0';
-  if (!t) return fail(&c, "NULL tree");
+  if (!t) { /* a missing argument, as every call says it (not a corrupt tree) */
+    fail(&c, "NULL tree");
+    return QK_ERR_INVALID;
+  }
   if (t->n_nodes == 0 || t->n_nodes > t->cap_nodes || (t->n_nodes - 1) % 4 != 0 ||
       (t->n_nodes - 1) / 4 > t->cap_blocks)
     return fail(&c, "node count %u / capacity %u / blocks %u inconsistent", t->n_nodes,

@@ -1164,7 +1164,7 @@ int qk_tree_node_is_leaf(const qk_tree_t *t, qk_node_t v) {
 }
 
 qk_status_t qk_tree_node_info(const qk_tree_t *t, qk_node_t v, qk_node_info_t *info) {
-  if (!info) return QK_ERR_INVALID;
+  if (!t || !info) return QK_ERR_INVALID;
   if (!is_live(t, v)) return QK_ERR_NOT_FOUND;
   const qk__node_t *n = &t->nodes[v];
   qk__geom_t g = qk__node_geom(t, v);

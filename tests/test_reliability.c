@@ -613,6 +613,11 @@ static void test_reliability_null_outputs(void **state) {
   qk_region_stats(r, &rs);
   assert_int_equal(rs.features, 1);
   qk_region_free(r);
+  /* a NULL tree is a bad argument, not a corrupt tree or a missing node */
+  char msg[64];
+  qk_node_info_t info;
+  assert_int_equal(qk_tree_check(NULL, msg, sizeof msg), QK_ERR_INVALID);
+  assert_int_equal(qk_tree_node_info(NULL, 0, &info), QK_ERR_INVALID);
 }
 
 /* ---- error records filled whole ------------------------------------------------------ */

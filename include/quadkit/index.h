@@ -242,7 +242,8 @@ qk_node_t qk_tree_root(const qk_tree_t *tree);
  * \param [in] tree the tree.
  * \param [in] node a node of the tree.
  * \param [out] info the facts.
- * \return QK_OK or QK_ERR_NOT_FOUND for an id that is not a live node.
+ * \return QK_OK, QK_ERR_NOT_FOUND for an id that is not a live node, or QK_ERR_INVALID
+ *         (a NULL argument).
  */
 qk_status_t qk_tree_node_info(const qk_tree_t *tree, qk_node_t node, qk_node_info_t *info);
 
@@ -322,8 +323,9 @@ size_t qk_tree_memory(const qk_tree_t *tree);
  * \param [in] tree the tree.
  * \param [out] msg buffer for a description of the first violation (may be NULL).
  * \param [in] msg_size its size.
- * \return QK_OK, QK_ERR_CORRUPT, or QK_ERR_NOMEM when its scratch memory (a byte per
- *         slot and per id, from the tree's allocator) cannot be had.
+ * \return QK_OK, QK_ERR_CORRUPT, QK_ERR_INVALID (no tree), or QK_ERR_NOMEM when its
+ *         scratch memory (a byte per slot and per id, from the tree's allocator) cannot
+ *         be had.
  */
 qk_status_t qk_tree_check(const qk_tree_t *tree, char *msg, size_t msg_size);
 
