@@ -336,7 +336,8 @@ qk_status_t qk_tree_check(const qk_tree_t *tree, char *msg, size_t msg_size);
  * \param [in] tree the tree.
  * \param [in] node any live node.
  * \param [in] dir the side.
- * \return the neighbour or QK_NONE.
+ * \return the neighbour, or QK_NONE (on the root's boundary, and for a node that is not
+ *         live or a direction that is none of the four).
  */
 qk_node_t qk_tree_neighbor(const qk_tree_t *tree, qk_node_t node, qk_dir_t dir);
 

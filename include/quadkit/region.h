@@ -96,8 +96,9 @@ typedef struct qk_region_arrays {
  * \param [out] out the new layer, freed with qk_region_free(); NULL on error.
  * \param [out] err where and why the input was rejected (item = feature); may be NULL.
  * \return QK_OK, QK_ERR_INVALID (bad offsets or options), QK_ERR_NONFINITE,
- *         QK_ERR_GEOMETRY (short or unclosed ring, coordinate out of range), QK_ERR_LIMIT
- *         or QK_ERR_NOMEM. Nothing is built on error.
+ *         QK_ERR_GEOMETRY (short or unclosed ring, coordinate out of range, a layer whose
+ *         extent is below 1e-60: docs/region.md), QK_ERR_LIMIT or QK_ERR_NOMEM. Nothing
+ *         is built on error.
  */
 qk_status_t qk_region_from_arrays(const qk_region_arrays_t *in, const qk_region_options_t *options,
                                   qk_region_t **out, qk_error_t *err);
