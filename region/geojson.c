@@ -567,6 +567,16 @@ static size_t duplicate(const char *text, jkey_t *k, size_t n, size_t *first) {
   return dup;
 }
 
+/* The offset of the first escaped NUL ("\u0000") in the string text[b, e), or SIZE_MAX. */
+static size_t nul_escape(const char *text, size_t b, size_t e) {
+  for (size_t k = b; k < e; k++)
+    if (text[k] == '\\') {
+      if (k + 6 <= e && text[k + 1] == 'u' && !memcmp(text + k + 2, "0000", 4)) return k;
+      k++; /* (the escaped character: a backslash escaped is no escape) */
+    }
+  return SIZE_MAX;
+}
+
 /* What json-c's strict mode lets through but RFC 8259 does not, in a text it parsed: the
  * words NaN and Infinity, a decimal point without digits after it ("1."), and a name
  * twice in one object (RFC 8259 leaves the meaning to the parser; json-c, like GDAL and
@@ -579,6 +589,7 @@ static qk_status_t json_check(const qk_allocator_t *a, const char *text, size_t 
   size_t depth = 0, n = 0, cap = 0;
   jkey_t *keys = NULL;
   qk_status_t st = QK_OK;
+  int after_type = 0; /* the last string was the name "type" */
   /* the bytes that matter (the rest, mostly commas, blanks and letters, are skipped) */
   static const unsigned char special[256] = {
       ['"'] = 1, ['{'] = 1, ['['] = 1, ['}'] = 1, [']'] = 1, ['N'] = 1, ['I'] = 1,
@@ -601,7 +612,21 @@ static qk_status_t json_check(const qk_allocator_t *a, const char *text, size_t 
       size_t e = i, j = i + 1;
       while (j < len && (text[j] == ' ' || text[j] == '\n' || text[j] == '\r' || text[j] == '\t'))
         j++;
-      if (j < len && text[j] == ':' && depth && base[depth - 1] != SIZE_MAX) {
+      int name = j < len && text[j] == ':';
+      /* A NUL in a member name or in a "type" value: json-c keeps names as C strings, so
+       * "coordinates\u0000" became a second "coordinates" past the duplicate test and
+       * replaced the polygon; "Polygon\u0000z" read as "Polygon". (Property values are
+       * refused with their feature, below.) */
+      size_t z = name || after_type ? nul_escape(text, b, e) : SIZE_MAX;
+      if (z != SIZE_MAX) {
+        where(text, z, err);
+        st = qk__region_fail(err, QK_ERR_PARSE, SIZE_MAX,
+                             "%s holds a NUL character (\\u0000), which the reader cannot keep",
+                             name ? "a member name" : "a \"type\" value");
+        break;
+      }
+      after_type = name && e - b == 4 && !memcmp(text + b, "type", 4);
+      if (name && depth && base[depth - 1] != SIZE_MAX) {
         uint64_t h = 1469598103934665603u; /* (FNV-1a) */
         for (size_t k = b; k < e; k++) h = (h ^ (unsigned char)text[k]) * 1099511628211u;
         if (n == cap && (st = qk__grow(a, (void **)&keys, &cap, n + 1, sizeof *keys))) break;

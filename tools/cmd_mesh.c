@@ -8,6 +8,7 @@
 #include "cli.h"
 #include "mesh_geojson.h"
 
+#include <ctype.h>
 #include <limits.h>
 #include <math.h>
 #include <stdint.h>
@@ -74,8 +75,8 @@ static const char *usage_text =
     "                  marker\n"
     "  --stats         print figures as one JSON object on stdout (with the angle\n"
     "                  histogram in 1-degree bins)\n"
-    "  IN may be '-' for a .poly on standard input; a name ending in .geojson or .json is\n"
-    "  read as GeoJSON (rings become closed chains, holes get hole points).\n"
+    "  IN may be '-' for a .poly on standard input; a name ending in .geojson or .json\n"
+    "  (any case) is read as GeoJSON (rings become closed chains, holes get hole points).\n"
     "\n"
     "Exit status: 0 ok, 1 bad input (FILE:LINE: reason on stderr; nothing written),\n"
     "2 usage error, 3 internal error or out of memory.\n";
@@ -342,9 +343,13 @@ static int parse_args(const char *cmd, int argc, char **argv, mesh_args_t *o) {
   if (place) return place;
   if ((o->mode == QK_MESH_DYADIC || o->mode == QK_MESH_GENERAL) && o->size)
     return usage(cmd, "--size is the book's domain; the other modes use the input's extent");
-  size_t len = strlen(o->in);
-  o->geojson = (len > 8 && !strcmp(o->in + len - 8, ".geojson")) ||
-               (len > 5 && !strcmp(o->in + len - 5, ".json"));
+  /* (the suffix in any case, as the region reader takes it: "x.GeoJSON" was read as .poly) */
+  const char *dot = strrchr(o->in, '.');
+  char ext[9] = ""; /* (up to 8 characters after the last dot, lower-cased) */
+  for (size_t i = 0; dot && dot[i + 1] && i < 8; i++)
+    ext[i] = (char)tolower((unsigned char)dot[i + 1]);
+  o->geojson =
+      dot && dot > o->in && !strchr(dot, '/') && (!strcmp(ext, "geojson") || !strcmp(ext, "json"));
   if (!o->geojson && (o->project || o->feature >= 0 || o->field))
     return usage(cmd, "--project, --feature and --field apply to GeoJSON input");
   if (o->feature >= 0 && o->field) return usage(cmd, "--feature and --field exclude each other");

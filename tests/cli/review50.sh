@@ -118,6 +118,33 @@ fi
 printf 'ox,oy,dx,dy\n0,0,1,0\n0,0,-1,0\n' >"$tmp/rays2.csv"
 expect 0 '^1,-1,inf$' -- "$cli" raycast "$tmp/far.csv" "$tmp/rays2.csv"
 
+# ---- GeoJSON: an escaped NUL in a member name or a "type" value ------------------------
+# json-c keeps names as C strings: "coordinates\u0000" passed the duplicate-name test and
+# then replaced the polygon's "coordinates" (the point in the real square answered -1),
+# "type\u0000" replaced a geometry's type, and "Polygon\u0000z" read as "Polygon". (A NUL in
+# a property value was refused already.)
+printf 'x,y\n5,5\n25,5\n' >"$tmp/nul.csv"
+printf '{"type":"Feature","properties":{},"geometry":{"type":"Polygon","coordinates":[[[0,0],[10,0],[10,10],[0,10],[0,0]]],"coordinates\\u0000":[[[20,0],[30,0],[30,10],[20,10],[20,0]]]}}\n' >"$tmp/nulkey.geojson"
+nulmsg='holds a NUL character \(\\u0000\), which the reader cannot keep$'
+expect 1 "^quadkit join: $tmp/nulkey.geojson:1:128: a member name $nulmsg" \
+  -- "$cli" join "$tmp/nulkey.geojson" "$tmp/nul.csv" --planar
+printf '{"type":"Feature","properties":{},"geometry":{"type":"Polygon\\u0000z","coordinates":[[[0,0],[10,0],[10,10],[0,10],[0,0]]]}}\n' >"$tmp/nultype.geojson"
+expect 1 "^quadkit join: $tmp/nultype.geojson:1:62: a \"type\" value $nulmsg" \
+  -- "$cli" join "$tmp/nultype.geojson" "$tmp/nul.csv" --planar
+# (guard: an escaped backslash before u0000 is no NUL, and a NUL in a value of another
+# member is left to the reader's own rules)
+printf '{"type":"Feature","properties":{"a\\\\u0000":1},"geometry":{"type":"Polygon","coordinates":[[[0,0],[10,0],[10,10],[0,10],[0,0]]]}}\n' >"$tmp/bs.geojson"
+expect 0 '^5,5,0,1$' -- "$cli" join "$tmp/bs.geojson" "$tmp/nul.csv" --planar --field 'a\u0000'
+
+# ---- GeoJSON by name in any case -----------------------------------------------------
+# ".GeoJSON" went to GDAL's driver, past this reader's checks: a second "coordinates"
+# silently replaced the first (the reader refuses it), and `mesh` read the file as .poly.
+printf '{"type":"Polygon","coordinates":[[[0,0],[10,0],[10,10],[0,10],[0,0]]],\n"coordinates":[[[20,0],[30,0],[30,10],[20,10],[20,0]]]}\n' >"$tmp/dup.GeoJSON"
+expect 1 "^quadkit join: $tmp/dup.GeoJSON:2:1: duplicate name \"coordinates\"" \
+  -- "$cli" join "$tmp/dup.GeoJSON" "$tmp/nul.csv" --planar
+printf '{"type":"Polygon","coordinates":[[[0,0],[4,0],[4,4],[0,4],[0,0]]]}\n' >"$tmp/sq.JSON"
+expect 0 '"format": "geojson"' -- "$cli" mesh "$tmp/sq.JSON" -o "$tmp/sqj" --stats
+
 # ---- GeoJSON: out of memory reported as a document that is null ------------------------
 # json-c gives no object and no error both for the text `null` and when an allocation
 # fails: under a memory limit the reader said "expected a GeoJSON object ..., found null"
