@@ -440,7 +440,7 @@ static int write_outputs(const char *cmd, outputs_t *w, const qk_mesh_t *mesh, u
 /* What the input went through before meshing (for --stats and messages). */
 typedef struct prep {
   const char *format;
-  size_t rounded, merged, dropped_rings, dup_segments, split_points, features;
+  size_t rounded, merged, dropped_rings, dup_segments, split_points, filled_holes, features;
   double lat0;
   double round;                        /* the grid rounded to (0: none) */
   int round_exp, round_mag, round_ext; /* --round auto: 2^round_exp, and why (mg_auto_grid) */
@@ -488,8 +488,8 @@ static void print_stats(const qk_mesh_t *mesh, const qk_mesh_stats_t *st, const 
     printf("\", \"projection\": \"%s\", ", o->project ? "equirect" : "none");
     if (o->project) printf("\"lat0_deg\": %.10g, ", pp->lat0);
     printf("\"merged_vertices\": %zu, \"dropped_rings\": %zu, \"duplicate_segments\": %zu, "
-           "\"split_points\": %zu, ",
-           pp->merged, pp->dropped_rings, pp->dup_segments, pp->split_points);
+           "\"split_points\": %zu, \"filled_holes\": %zu, ",
+           pp->merged, pp->dropped_rings, pp->dup_segments, pp->split_points, pp->filled_holes);
   }
   printf("\"round\": %.17g, \"rounded_coordinates\": %zu}, ", pp->round, pp->rounded);
   printf("\"mode\": \"%s\", \"lattice_exponent\": %d, \"origin\": [%.17g, %.17g], "
@@ -627,7 +627,7 @@ static int read_input(const char *cmd, const mesh_args_t *o, qk_poly_t **poly, p
               o->field, pp->gj.field_matches, pp->gj.field_pick);
     pp->rounded = pp->gj.rounded, pp->merged = pp->gj.merged;
     pp->dropped_rings = pp->gj.dropped_rings, pp->dup_segments = pp->gj.dup_segments;
-    pp->split_points = pp->gj.split_points;
+    pp->split_points = pp->gj.split_points, pp->filled_holes = pp->gj.filled_holes;
     pp->features = pp->gj.features, pp->lat0 = pp->gj.lat0;
     pp->round = pp->gj.round, pp->round_exp = pp->gj.round_exp;
     pp->round_mag = pp->gj.round_mag, pp->round_ext = pp->gj.round_ext;

@@ -893,6 +893,22 @@ static int hole_points(mg_input_t *in, const char *path, char *msg, size_t n) {
      * before, lets the mesher say which. */
     if (!found && loose)
       found = 1, in->holes[2 * in->nh] = loose_p.x, in->holes[2 * in->nh + 1] = loose_p.y, in->nh++;
+    /* A hole filled by another polygon, ring on ring (Lesotho in South Africa's hole, both
+     * meshed): a ring holding every vertex of q whose every vertex q holds bounds the same
+     * region, the rings crossing nowhere (the mesher refuses crossings); inside it the
+     * area goes on (even-odd), and the hole needs no point. It was refused as a hole
+     * "covered by another polygon". */
+    for (size_t i = 0; !found && i < nheld; i++) {
+      size_t r = held[i], np = 0;
+      int all = 1;
+      for (size_t v = rs[r]; v + 1 < rs[r + 1] && all; v++) {
+        qk_region_locate_all(l_each, (qk_point_t){xy[2 * v], xy[2 * v + 1]}, QK_BOUNDARY_CLOSED,
+                             at_p, in->nr, &np);
+        all = 0;
+        for (size_t j = 0; j < np && !all; j++) all = at_p[j] == q;
+      }
+      if (all) found = 1, in->filled_holes++;
+    }
     if (!found && !rc) {
       size_t v = in->ring_v[in->ring_start[q]];
       char what[128], ptr[512], place[1024], note[512];

@@ -68,6 +68,7 @@ typedef struct mg_input {
   size_t unused_points;     /* vertices left only by dropped rings (removed) */
   size_t dup_segments;      /* segments given twice */
   size_t split_points;      /* vertices inserted into axis-parallel ring edges they lay on */
+  size_t filled_holes;      /* hole rings another ring fills exactly (no hole point) */
   double lat0;              /* the projection's latitude (degrees) */
   char name[128];           /* the feature's name (NAME / name / ADMIN), or "" */
   size_t field_matches;     /* --field: how many features match (the first is meshed) */

@@ -68,6 +68,18 @@ cat >"$tmp/thin.geojson" <<EOF
 EOF
 expect 0 '"components": 2,' -- "$cli" mesh "$tmp/thin.geojson" -o "$tmp/thin" --stats
 area_is "lake with an island 1/128 from its shore" "$tmp/thin" 899.687744140625
+# A hole another feature fills ring on ring (an enclave: Lesotho in South Africa, both
+# meshed) needs no hole point: the area goes on inside it (even-odd). It was refused as
+# "covered by another polygon".
+cat >"$tmp/enclave.geojson" <<EOF
+{"type": "FeatureCollection", "features": [
+ {"type": "Feature", "properties": {}, "geometry": {"type": "Polygon",
+  "coordinates": [$(ring 0 0 30 30), [[10, 10], [10, 20], [15, 25], [20, 20], [20, 10], [10, 10]]]}},
+ {"type": "Feature", "properties": {}, "geometry": {"type": "Polygon",
+  "coordinates": [[[10, 10], [20, 10], [20, 20], [15, 25], [10, 20], [10, 10]]]}}]}
+EOF
+expect 0 '"components": 2,.*"filled_holes": 1,' -- "$cli" mesh "$tmp/enclave.geojson" -o "$tmp/encl" --stats
+area_is "a hole filled by an enclave" "$tmp/encl" 900
 # (guards: a hole covered by another polygon, and one whose ring crosses its shell, are
 # refused as before, the latter for the crossing)
 cat >"$tmp/covered.geojson" <<EOF
