@@ -344,12 +344,13 @@ static size_t antimeridian_features(const qk_region_t *r, double y, qk_boundary_
     if (ie < ne && (TE[ie] >> 2) < f) f = TE[ie] >> 2;
     if (f == QK_NONE) return n;
     bool par = si < ns && S[si] == f, on = false, across = false;
-    unsigned sides = 0; /* given edges along the antimeridian covering [y, y + e^2] */
+    /* given edges along -180 and along +180 covering [y, y + e^2] */
+    unsigned sides_w = 0, sides_e = 0;
     if (par) si++;
     for (; iw < nw && (TW[iw] >> 2) == f; iw++) {
       const qk__seg_t *g = &r->segs[EW[iw]];
       if (!(TW[iw] & 2) && qk__on_edge(g->ax, g->ay, g->bx, g->by, -180.0, y))
-        on = true, along_meridian(g, -180.0, y, &sides, &across);
+        on = true, along_meridian(g, -180.0, y, &sides_w, &across);
       if (!same)
         par ^=
             qk__crosses(w.cx, w.cy, -180.0, y, g->ax, g->ay, g->bx, g->by, (TW[iw] & 1) ? 1 : -1);
@@ -357,16 +358,18 @@ static size_t antimeridian_features(const qk_region_t *r, double y, qk_boundary_
     for (; ie < ne && (TE[ie] >> 2) == f; ie++) {
       const qk__seg_t *g = &r->segs[EE[ie]];
       if (!(TE[ie] & 2) && qk__on_edge(g->ax, g->ay, g->bx, g->by, 180.0, y))
-        on = true, along_meridian(g, 180.0, y, &sides, &across);
+        on = true, along_meridian(g, 180.0, y, &sides_e, &across);
     }
     /* `open`: the point is inside when the feature holds the map's west edge beside it
      * (par: the point moved by (e, e^2)) and the east edge too, and no given edge off the
      * meridian passes through it. Along the meridian the parity changes, from (180 - e, y)
      * to (-180 + e, y), with the given edges there (the added closures come in pairs, one
-     * on each side over the same latitudes): an even number of them (a ring whose sides on
-     * -180 and +180 are one meridian, the whole world, a band, an island split in two) is
-     * no boundary on the sphere, an odd number is. */
-    if (b == QK_BOUNDARY_CLOSED ? (par || on) : (par && (!on || (!across && !(sides & 1))))) {
+     * on each side over the same latitudes). As many on -180 as on +180 (a ring whose sides
+     * on -180 and +180 are one meridian, the whole world, a band, an island split in two)
+     * is no boundary on the sphere: each pair is one cut of the map. Otherwise a ring runs
+     * along the meridian there (a feature on one side only; a zero-width spike up the
+     * meridian and back, whose two edges on +180 were taken for such a pair). */
+    if (b == QK_BOUNDARY_CLOSED ? (par || on) : (par && (!on || (!across && sides_w == sides_e)))) {
       if (n < cap) out[n] = f;
       n++;
       if (!all) return n;

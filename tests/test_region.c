@@ -806,6 +806,34 @@ static void test_region_antimeridian_one_side(void **state) {
     }
 }
 
+/* `open`: a zero-width spike ring up the meridian and back, (180, 0) -> (180, 8) -> (180,
+ * 0), in a feature that holds both sides there (a triangle across the antimeridian): the
+ * spike's two edges along +180 were taken for a -180/+180 pair (an even number: one
+ * meridian, no boundary), and (180, 4) was inside under `open`, where the same shape at
+ * longitude 0 puts (0, 4) on a ring, outside. Each edge along +180 must be matched by one
+ * along -180. */
+static void test_region_antimeridian_spike_open(void **state) {
+  (void)state;
+  for (int at0 = 0; at0 < 2; at0++) {
+    const double c = at0 ? 0 : 180, w = at0 ? -10 : 170, e = at0 ? 10 : -170;
+    const double xy[] = {w, 0, e, 0, c, 10, w, 0, c, 0, c, 8, c, 0, c, 0};
+    size_t rs[] = {0, 4, 8}, fs[] = {0, 2};
+    qk_region_t *r = lonlat(xy, rs, 2, fs, 1, 0);
+    for (int rule = 0; rule < 3; rule++) {
+      /* closed: on a ring, inside; open: on the spike, outside; semi-open: the point
+       * moved by (e, e^2) lies in the triangle */
+      uint32_t want = rule == QK_BOUNDARY_OPEN ? QK_NONE : 0;
+      uint32_t got = at(r, c, 4, (qk_boundary_t)rule);
+      if (got != want)
+        fail_msg("spike at longitude %g, (%g, 4), rule %d: got %u, want %u", c, c, rule,
+                 (unsigned)got, (unsigned)want);
+    }
+    /* (guard: beside the spike, inside under every rule) */
+    for (int rule = 0; rule < 3; rule++) assert_int_equal(at(r, c, 9, (qk_boundary_t)rule), 0);
+    qk_region_free(r);
+  }
+}
+
 /* `open` on the antimeridian against an oracle that reads the sphere (seventeenth
  * session). Features are lon/lat rectangles on an integer grid: the whole world (with a
  * hole touching one side of the map or not), a band [-180, 180] x [y0, y1], and sets of
@@ -1737,6 +1765,7 @@ int main(void) {
       cmocka_unit_test(test_region_antimeridian_boundary),
       cmocka_unit_test(test_region_antimeridian_one_side),
       cmocka_unit_test(test_region_antimeridian_open_oracle),
+      cmocka_unit_test(test_region_antimeridian_spike_open),
       cmocka_unit_test(test_region_across_map),
       cmocka_unit_test(test_region_batch_threads),
       cmocka_unit_test(test_region_batch_morton),
