@@ -11,6 +11,7 @@
  * tests therefore cover the rest of the reader and the builder.
  */
 #define _POSIX_C_SOURCE 200809L /* fileno, fstat */
+#include <ctype.h>
 #include <errno.h>
 #include <limits.h>
 #include <math.h>
@@ -542,8 +543,65 @@ static size_t value_end(const char *text, size_t n) {
 /* One object member's name: its text[off, off + len) inside the quotes, and a hash. */
 typedef struct jkey {
   uint64_t h;
-  size_t off, len;
+  size_t off, len; /* the name as written: text[off, off + raw); len: its decoded bytes */
+  size_t raw;
 } jkey_t;
+
+/* The next character of the JSON string text[*i, e) (well-formed: json-c parsed it),
+ * escapes decoded, as UTF-8 bytes into out; returns how many (0 at the end). */
+static size_t jdecode(const char *text, size_t *i, size_t e, unsigned char out[4]) {
+  if (*i >= e) return 0;
+  unsigned char c = (unsigned char)text[(*i)++];
+  if (c != '\\' || *i >= e) return out[0] = c, 1;
+  c = (unsigned char)text[(*i)++];
+  static const char from[] = "bfnrt", to[] = "\b\f\n\r\t";
+  const char *k = c ? strchr(from, c) : NULL;
+  if (c != 'u') return out[0] = k ? (unsigned char)to[k - from] : c, 1; /* \" \\ \/ */
+  unsigned long u = 0;
+  for (int d = 0; d < 4 && *i < e; d++, (*i)++)
+    u = u * 16 + (unsigned long)(isdigit((unsigned char)text[*i]) ? text[*i] - '0'
+                                                                  : (text[*i] | 32) - 'a' + 10);
+  if (u >= 0xD800 && u < 0xDC00 && *i + 6 <= e && text[*i] == '\\' && text[*i + 1] == 'u') {
+    size_t j = *i + 2;
+    unsigned long lo = 0;
+    for (int d = 0; d < 4; d++, j++)
+      lo = lo * 16 + (unsigned long)(isdigit((unsigned char)text[j]) ? text[j] - '0'
+                                                                     : (text[j] | 32) - 'a' + 10);
+    if (lo >= 0xDC00 && lo < 0xE000) u = 0x10000 + ((u - 0xD800) << 10) + (lo - 0xDC00), *i = j;
+  }
+  if (u < 0x80) return out[0] = (unsigned char)u, 1;
+  if (u < 0x800)
+    return out[0] = (unsigned char)(0xC0 | u >> 6), out[1] = (unsigned char)(0x80 | (u & 63)), 2;
+  if (u < 0x10000)
+    return out[0] = (unsigned char)(0xE0 | u >> 12), out[1] = (unsigned char)(0x80 | (u >> 6 & 63)),
+           out[2] = (unsigned char)(0x80 | (u & 63)), 3;
+  return out[0] = (unsigned char)(0xF0 | u >> 18), out[1] = (unsigned char)(0x80 | (u >> 12 & 63)),
+         out[2] = (unsigned char)(0x80 | (u >> 6 & 63)), out[3] = (unsigned char)(0x80 | (u & 63)),
+         4;
+}
+
+/* Whether the string text[b, e), decoded, is lit. */
+static bool jname_is(const char *text, size_t b, size_t e, const char *lit) {
+  unsigned char c[4];
+  size_t m, k = 0;
+  while ((m = jdecode(text, &b, e, c)))
+    for (size_t q = 0; q < m; q++, k++)
+      if (!lit[k] || (unsigned char)lit[k] != c[q]) return false;
+  return !lit[k];
+}
+
+/* Whether two names, as written, are the same once decoded ("a\u0062" is "ab"). */
+static bool jname_equal(const char *text, const jkey_t *a, const jkey_t *b) {
+  if (a->len != b->len) return false;
+  size_t i = a->off, j = b->off, ni = 0, nj = 0, pi = 0, pj = 0;
+  unsigned char x[4], y[4];
+  for (;;) {
+    if (pi == ni) ni = jdecode(text, &i, a->off + a->raw, x), pi = 0;
+    if (pj == nj) nj = jdecode(text, &j, b->off + b->raw, y), pj = 0;
+    if (!ni || !nj) return !ni && !nj;
+    if (x[pi++] != y[pj++]) return false;
+  }
+}
 
 static int jkey_cmp(const void *x, const void *y) {
   const jkey_t *a = x, *b = y;
@@ -553,28 +611,19 @@ static int jkey_cmp(const void *x, const void *y) {
 }
 
 /* The object whose names are k[0, n) closed: the offset of the later of the first pair of
- * equal names (as written, escapes not decoded), or SIZE_MAX; *first: the earlier one. */
+ * equal names (escapes decoded: "coordinate\u0073" is "coordinates", which json-c keeps
+ * instead of the first), or SIZE_MAX; *first: the earlier one. */
 static size_t duplicate(const char *text, jkey_t *k, size_t n, size_t *first) {
   size_t dup = SIZE_MAX;
   if (n < 2) return dup;
   qsort(k, n, sizeof *k, jkey_cmp);
   for (size_t i = 0; i < n; i++)
     for (size_t j = i + 1; j < n && k[j].h == k[i].h && k[j].len == k[i].len; j++)
-      if (!memcmp(text + k[i].off, text + k[j].off, k[i].len)) {
+      if (jname_equal(text, &k[i], &k[j])) {
         if (k[j].off < dup) dup = k[j].off, *first = k[i].off;
         break; /* (sorted by offset: later equal names come after k[j]) */
       }
   return dup;
-}
-
-/* The offset of the first escaped NUL ("\u0000") in the string text[b, e), or SIZE_MAX. */
-static size_t nul_escape(const char *text, size_t b, size_t e) {
-  for (size_t k = b; k < e; k++)
-    if (text[k] == '\\') {
-      if (k + 6 <= e && text[k + 1] == 'u' && !memcmp(text + k + 2, "0000", 4)) return k;
-      k++; /* (the escaped character: a backslash escaped is no escape) */
-    }
-  return SIZE_MAX;
 }
 
 /* What json-c's strict mode lets through but RFC 8259 does not, in a text it parsed: the
@@ -613,11 +662,21 @@ static qk_status_t json_check(const qk_allocator_t *a, const char *text, size_t 
       while (j < len && (text[j] == ' ' || text[j] == '\n' || text[j] == '\r' || text[j] == '\t'))
         j++;
       int name = j < len && text[j] == ':';
-      /* A NUL in a member name or in a "type" value: json-c keeps names as C strings, so
-       * "coordinates\u0000" became a second "coordinates" past the duplicate test and
-       * replaced the polygon; "Polygon\u0000z" read as "Polygon". (Property values are
-       * refused with their feature, below.) */
-      size_t z = name || after_type ? nul_escape(text, b, e) : SIZE_MAX;
+      /* A name and a "type" value, decoded: a NUL in one (json-c keeps names as C strings,
+       * so "coordinates\u0000" became a second "coordinates" past the duplicate test and
+       * replaced the polygon; "Polygon\u0000z" read as "Polygon"; property values are
+       * refused with their feature, below), the name "type" however written, and the
+       * decoded name's hash and length for the duplicate test. */
+      uint64_t h = 1469598103934665603u; /* (FNV-1a) */
+      size_t dlen = 0, z = SIZE_MAX;
+      if (name || after_type) {
+        unsigned char out[4];
+        for (size_t k = b, at = k, m; (m = jdecode(text, &k, e, out)); at = k)
+          for (size_t q = 0; q < m; q++, dlen++) {
+            h = (h ^ out[q]) * 1099511628211u;
+            if (!out[q] && z == SIZE_MAX) z = at;
+          }
+      }
       if (z != SIZE_MAX) {
         where(text, z, err);
         st = qk__region_fail(err, QK_ERR_PARSE, SIZE_MAX,
@@ -625,12 +684,11 @@ static qk_status_t json_check(const qk_allocator_t *a, const char *text, size_t 
                              name ? "a member name" : "a \"type\" value");
         break;
       }
-      after_type = name && e - b == 4 && !memcmp(text + b, "type", 4);
+      jkey_t key = {h, b, dlen, e - b};
+      after_type = name && dlen == 4 && jname_is(text, b, e, "type");
       if (name && depth && base[depth - 1] != SIZE_MAX) {
-        uint64_t h = 1469598103934665603u; /* (FNV-1a) */
-        for (size_t k = b; k < e; k++) h = (h ^ (unsigned char)text[k]) * 1099511628211u;
         if (n == cap && (st = qk__grow(a, (void **)&keys, &cap, n + 1, sizeof *keys))) break;
-        keys[n++] = (jkey_t){h, b, e - b};
+        keys[n++] = key;
       }
     } else if (c == '{' || c == '[') {
       if (depth == MAX_DEPTH) break; /* (deeper than json-c parses: not checked) */

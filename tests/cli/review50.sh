@@ -143,6 +143,14 @@ expect 1 "^quadkit join: $tmp/nulkey.geojson:1:128: a member name $nulmsg" \
 printf '{"type":"Feature","properties":{},"geometry":{"type":"Polygon\\u0000z","coordinates":[[[0,0],[10,0],[10,10],[0,10],[0,0]]]}}\n' >"$tmp/nultype.geojson"
 expect 1 "^quadkit join: $tmp/nultype.geojson:1:62: a \"type\" value $nulmsg" \
   -- "$cli" join "$tmp/nultype.geojson" "$tmp/nul.csv" --planar
+# Names are compared decoded: "typ\u0065" is "type" (its value's NUL was let through), and
+# "coordinate\u0073" after "coordinates" is a duplicate (it replaced the polygon).
+printf '{"typ\\u0065":"Polygon\\u0000z","coordinates":[[[0,0],[10,0],[10,10],[0,10],[0,0]]]}\n' >"$tmp/esctype.geojson"
+expect 1 "^quadkit join: $tmp/esctype.geojson:1:22: a \"type\" value $nulmsg" \
+  -- "$cli" join "$tmp/esctype.geojson" "$tmp/nul.csv" --planar
+printf '{"type":"Polygon","coordinates":[[[0,0],[10,0],[10,10],[0,10],[0,0]]],"coordinate\\u0073":[[[20,0],[30,0],[30,10],[20,10],[20,0]]]}\n' >"$tmp/escdup.geojson"
+expect 1 "^quadkit join: $tmp/escdup.geojson:1:71: duplicate name \"coordinate\\\\u0073\" in one object \\(first at line 1, column 19;" \
+  -- "$cli" join "$tmp/escdup.geojson" "$tmp/nul.csv" --planar
 # (guard: an escaped backslash before u0000 is no NUL, and a NUL in a value of another
 # member is left to the reader's own rules)
 printf '{"type":"Feature","properties":{"a\\\\u0000":1},"geometry":{"type":"Polygon","coordinates":[[[0,0],[10,0],[10,10],[0,10],[0,0]]]}}\n' >"$tmp/bs.geojson"
