@@ -205,12 +205,13 @@ static qk_poly_t *poly_new(const qk_allocator_t *allocator) {
 
 unsigned qk_poly_first_index(const qk_poly_t *p) { return p ? p->first_index : 0; }
 
-/* v rounded to a multiple of step (ties to even). Where v / step reaches 2^52 (or
- * overflows: 1e10 on 2^-1074), the multiples of step nearest v are within half an ulp of
- * it, and v stays: the quotient alone was refused as an overflow. */
+/* v rounded to a multiple of step (ties to even). Where v / step reaches 2^53 (or
+ * overflows: 1e10 on 2^-1074), step is below an ulp of v, the multiple of step nearest v
+ * is within half an ulp of it, and v stays: the quotient alone was refused as an overflow.
+ * (From 2^52 a step that is no power of two can still be up to two ulps.) */
 static double round_to(double v, double step) {
   const double q = v / step;
-  return fabs(q) < 0x1p52 ? nearbyint(q) * step : v;
+  return fabs(q) < 0x1p53 ? nearbyint(q) * step : v;
 }
 
 qk_status_t qk_poly_round(qk_poly_t *p, double step, size_t *rounded) {

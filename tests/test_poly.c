@@ -486,7 +486,7 @@ static void test_poly_round(void **state) {
   assert_true(xy[0] == 1.7976931348623157e308 && xy[3] == 1);
   qk_poly_free(p);
   /* A fine step under a large coordinate: the quotient overflows (1e10 / 1e-300) or
-   * passes 2^52, but the coordinate is a multiple to within half an ulp and stays (it was
+   * passes 2^53, but the coordinate is a multiple to within half an ulp and stays (it was
    * refused as QK_ERR_NONFINITE); 2^-1074 changes nothing anywhere. */
   f = from_string("2 2 0 0\n1 1e10 0.1\n2 -3e200 4503599627370497\n0 0\n0\n");
   assert_int_equal(qk_poly_read(f, NULL, &p, &err), QK_OK);
@@ -499,6 +499,15 @@ static void test_poly_round(void **state) {
     assert_true(xy[1] == (k < 2 ? 0.1 : nearbyint(0.1 * 0x1p20) * 0x1p-20));
     assert_int_equal(changed, k < 2 ? 0 : 1);
   }
+  qk_poly_free(p);
+  /* A step that is no power of two can be up to two ulps from 2^52 steps on: there the
+   * coordinate still moves to the multiple (it was kept, 1.5 from it, for a while) */
+  f = from_string("2 2 0 0\n1 15762598695796738 0\n2 0 1\n0 0\n0\n");
+  assert_int_equal(qk_poly_read(f, NULL, &p, &err), QK_OK);
+  fclose(f);
+  assert_int_equal(qk_poly_round(p, 3.5, &changed), QK_OK);
+  qk_poly_vertices(p, xy, 2, &n);
+  assert_true(xy[0] == nearbyint(15762598695796738.0 / 3.5) * 3.5 && xy[0] != 15762598695796738.0);
   qk_poly_free(p);
 }
 

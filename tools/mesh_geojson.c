@@ -549,9 +549,9 @@ static int transform(rings_t *r, const mg_options_t *o, mg_input_t *out, size_t 
     mv[i].ox = r->xy[2 * i], mv[i].oy = r->xy[2 * i + 1], mv[i].i = i;
   if (g > 0)
     for (size_t i = 0; i < 2 * r->np; i++) {
-      /* (from 2^52 steps on, the coordinate is a multiple of g to within half an ulp and
+      /* (from 2^53 steps on, the coordinate is a multiple of g to within half an ulp and
        * stays: the quotient may overflow, as qk_poly_round says) */
-      double q = r->xy[i] / g, v = fabs(q) < 0x1p52 ? nearbyint(q) * g : r->xy[i];
+      double q = r->xy[i] / g, v = fabs(q) < 0x1p53 ? nearbyint(q) * g : r->xy[i];
       out->rounded += v != r->xy[i];
       r->xy[i] = v;
     }

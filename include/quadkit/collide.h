@@ -458,7 +458,8 @@ qk_status_t qk_world_pairs_parallel(const qk_world_t *w, qk_pairs_which_t which,
  * \param [out] out up to cap handles: the first cap by slot when there are more.
  * \param [out] n_out the full count.
  * \return QK_OK, a shape error as qk_world_add() (QK_ERR_NONFINITE, QK_ERR_GEOMETRY,
- *         QK_ERR_LIMIT for a value beyond 2^100), or QK_ERR_INVALID.
+ *         QK_ERR_LIMIT for a nonzero magnitude below 2^-100 or beyond 2^100), or
+ *         QK_ERR_INVALID.
  */
 qk_status_t qk_world_query(const qk_world_t *w, const qk_shape_t *shape, qk_handle_t *out,
                            size_t cap, size_t *n_out);
@@ -469,8 +470,8 @@ qk_status_t qk_world_query(const qk_world_t *w, const qk_shape_t *shape, qk_hand
  * For a ray, pass a far endpoint.
  * \param [out] out up to cap hits: the first cap in that order when there are more.
  * \param [out] n_out the full count.
- * \return QK_OK, QK_ERR_NONFINITE, QK_ERR_LIMIT (an endpoint beyond 2^100: pass a far
- *         endpoint within it) or QK_ERR_INVALID.
+ * \return QK_OK, QK_ERR_NONFINITE, QK_ERR_LIMIT (an endpoint coordinate beyond 2^100, or
+ *         nonzero below 2^-100: pass a far endpoint within range) or QK_ERR_INVALID.
  */
 qk_status_t qk_world_raycast_all(const qk_world_t *w, qk_point_t from, qk_point_t to,
                                  qk_world_hit_t *out, size_t cap, size_t *n_out);
@@ -488,7 +489,8 @@ qk_status_t qk_world_raycast_batch(const qk_world_t *w, const qk_point_t *from,
 /**
  * The k objects nearest to p (distance to the shape: 0 inside), by distance then slot.
  * \param [out] out k hits (t = distance). \param [out] n_out min(k, size).
- * \return QK_OK, QK_ERR_NONFINITE, QK_ERR_LIMIT (p beyond 2^100) or QK_ERR_INVALID.
+ * \return QK_OK, QK_ERR_NONFINITE, QK_ERR_LIMIT (a coordinate of p beyond 2^100, or nonzero
+ *         below 2^-100) or QK_ERR_INVALID.
  */
 qk_status_t qk_world_knn(const qk_world_t *w, qk_point_t p, size_t k, qk_world_hit_t *out,
                          size_t *n_out);

@@ -20,8 +20,9 @@
  * All mesh vertices lie on the half-integer lattice, so their double coordinates are
  * exact.
  *
- * The dyadic-lattice mode (QK_MESH_DYADIC, chosen automatically for non-integer input or
- * a size bound) runs the same algorithm on the coarsest lattice of spacing 2^-f, with its
+ * The dyadic-lattice mode (QK_MESH_DYADIC, chosen automatically for non-integer input, a
+ * size bound, or integer input the book's mode cannot take: a vertex outside [0, 2^30])
+ * runs the same algorithm on the coarsest lattice of spacing 2^-f, with its
  * origin at the input's lower-left corner, that holds every vertex exactly: real
  * coordinates at any position and scale, edges still at multiples of 45 degrees. Input
  * vertices come back bit-identical, every mesh vertex on a segment lies on it exactly,
@@ -175,10 +176,11 @@ qk_status_t qk_poly_set_regions(qk_poly_t *poly, const double *xya, size_t nr,
 
 /** Which mesher qk_mesh_generate() runs. */
 typedef enum qk_mesh_mode {
-  /** The book's mode when the input has integer coordinates and no size bound is asked
-   *  for (or a domain size is given), the dyadic-lattice mode for other inputs on a dyadic
-   *  lattice it accepts, when the input meets that mode's conditions (segments at 0, 45,
-   *  90 or 135 degrees, every vertex on exactly two segments); the general mode otherwise. */
+  /** The book's mode when the input has integer coordinates in [0, 2^30] and no size bound
+   *  is asked for (or a domain size is given), the dyadic-lattice mode for other inputs on
+   *  a dyadic lattice it accepts (integer input elsewhere included), when the input meets that
+   * mode's conditions (segments at 0, 45, 90 or 135 degrees, every vertex on exactly two segments);
+   * the general mode otherwise. */
   QK_MESH_AUTO = 0,
   /** The book's mode (de Berg et al. ch. 14): integer vertices in [0,U]^2. */
   QK_MESH_BOOK = 1,
