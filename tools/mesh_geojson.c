@@ -823,71 +823,98 @@ static int hole_points(mg_input_t *in, const char *path, char *msg, size_t n) {
   if (qk_region_from_arrays(&all, &ro, &l_all, &err) != QK_OK ||
       qk_region_from_arrays(&each, &ro, &l_each, &err) != QK_OK)
     rc = mg_fail(msg, n, 1, "%s: the rings do not make a polygon layer: %s", path, err.message);
-  /* A hole point must lie in the face the hole ring bounds from inside: inside the ring
-   * and the rings that hold the whole of it (its shell, and what holds that), on no ring's
+  /* A hole point must lie in a face the hole ring bounds from inside: inside the ring and
+   * the rings that hold the whole of it (its shell, and what holds that), on no ring's
    * boundary, and inside no other ring (an island in the lake, a pond on the island; a
    * point in the pond lay inside the hole ring and outside the area, and the lake was
    * meshed). So the rings holding the candidate, boundaries included or not, must be
-   * exactly those holding every vertex of the ring, and the ring. */
+   * exactly those holding every vertex of the ring, and the ring. The ring bounds several
+   * faces when other rings touch it at two vertices or more (an island touching the
+   * lake's shore at two points cuts the lake in two): one point is looked for along each
+   * arc of the ring between vertices other rings share. */
   uint32_t *held = malloc((in->nr + 1) * sizeof *held), *at_p = malloc((in->nr + 1) * sizeof *at_p);
   uint32_t *at_v = malloc((in->nr + 1) * sizeof *at_v);
-  if (!rc && (!held || !at_p || !at_v)) rc = mg_fail(msg, n, 3, "out of memory");
+  unsigned char *uses = calloc(in->nv + 1, 1);
+  size_t hole_cap = 0;
+  for (size_t q = 0; q < in->nr; q++)
+    if (in->ring_sign[q] < 0) hole_cap += in->ring_start[q + 1] - in->ring_start[q];
+  double *hp = realloc(in->holes, 2 * (hole_cap + 1) * sizeof *hp);
+  if (hp) in->holes = hp;
+  if (!rc && (!held || !at_p || !at_v || !uses || !hp)) rc = mg_fail(msg, n, 3, "out of memory");
+  for (size_t i = 0; !rc && i < in->ring_start[in->nr]; i++)
+    if (uses[in->ring_v[i]] < 2) uses[in->ring_v[i]]++;
   for (size_t q = 0; !rc && q < in->nr; q++) {
     if (in->ring_sign[q] > 0) continue;
     int found = 0;
     size_t m = in->ring_start[q + 1] - in->ring_start[q], nheld = 0, cnt = 0;
-    /* the rings other than q holding every vertex of q (boundaries included) */
+    /* the rings other than q holding every vertex of q (boundaries included; both lists
+     * in increasing order) */
     for (size_t e = 0; e < m && (!e || nheld); e++) {
       qk_point_t v = {xy[2 * (rs[q] + e)], xy[2 * (rs[q] + e) + 1]};
       qk_region_locate_all(l_each, v, QK_BOUNDARY_CLOSED, at_v, in->nr, &cnt);
       size_t k = 0;
-      for (size_t i = 0; i < (e ? nheld : cnt); i++) {
+      for (size_t i = 0, j = 0; i < (e ? nheld : cnt); i++) {
         uint32_t r = e ? held[i] : at_v[i];
-        int in_v = 0;
-        for (size_t j = 0; j < cnt && !in_v; j++) in_v = at_v[j] == r;
-        if (in_v && r != q) held[k++] = r;
+        while (j < cnt && at_v[j] < r) j++;
+        if (j < cnt && at_v[j] == r && r != q) held[k++] = r;
       }
       nheld = k;
     }
-    /* Candidates near the middle of each edge on either side, at offsets of the edge's
-     * length from 0.3 down to 2^-41 of it (a gap between the ring and an island in it
-     * may be narrow): the coarse ones on every edge first, then the fine ones on at most
-     * about 256 edges (a refused ring is tried at some 20,000 points, not millions). */
-    static const double coarse[] = {1e-3, -1e-3, 1e-2, -1e-2, 0.1, -0.1, 0.3, -0.3};
+    /* The arcs: from each vertex another ring (or the ring again) shares to the next; one
+     * arc, the whole ring, when none is shared. */
+    size_t first = 0;
+    while (first < m && uses[in->ring_v[in->ring_start[q] + first]] < 2) first++;
+    if (first == m) first = 0;
     int loose = 0;
     qk_point_t loose_p = {0, 0};
-    for (int pass = 0; pass < 2 && !found; pass++)
-      for (size_t e = 0; e < m && !found; e += pass && m > 256 ? m / 256 : 1) {
-        const double *a = &xy[2 * (rs[q] + e)], *b = &xy[2 * (rs[q] + e + 1)];
-        double mx = a[0] + (b[0] - a[0]) / 2, my = a[1] + (b[1] - a[1]) / 2;
-        double nx = -(b[1] - a[1]), ny = b[0] - a[0];
-        int tries = pass ? 2 * 31 : 8;
-        for (int k = 0; k < tries && !found; k++) {
-          double step = pass ? ldexp(k % 2 ? -1.0 : 1.0, -11 - k / 2) : coarse[k];
-          qk_point_t p = {mx + step * nx, my + step * ny};
-          uint32_t f_all = 0;
-          size_t np = 0;
-          /* outside the domain, boundaries included ... */
-          if (qk_region_locate(l_all, p, QK_BOUNDARY_CLOSED, &f_all) != QK_OK || f_all != QK_NONE)
-            continue;
-          /* ... inside q and the rings holding it, strictly, and inside no other ring */
-          int ok = 1;
-          for (int rule = 0; rule < 2 && ok; rule++) {
-            qk_region_locate_all(l_each, p, rule ? QK_BOUNDARY_OPEN : QK_BOUNDARY_CLOSED, at_p,
-                                 in->nr, &np);
-            ok = np == nheld + 1;
-            for (size_t i = 0, j = 0; i < np && ok; i++) {
-              if (at_p[i] == q) continue;
-              while (j < nheld && held[j] < at_p[i]) j++;
-              ok = j < nheld && held[j] == at_p[i];
+    for (size_t a0 = first, done = 0; done < m;) {
+      size_t len = 1; /* edges in this arc: a0 .. a0 + len - 1 (mod m) */
+      while (done + len < m && uses[in->ring_v[in->ring_start[q] + (a0 + len) % m]] < 2) len++;
+      /* Candidates near the middle of each edge on either side, at offsets of the edge's
+       * length from 0.3 down to 2^-41 of it (a gap between the ring and an island in it
+       * may be narrow): the coarse ones on every edge first, then the fine ones on at most
+       * 256 edges (a refused ring is tried at some 20,000 points an arc, not millions). */
+      static const double coarse[] = {1e-3, -1e-3, 1e-2, -1e-2, 0.1, -0.1, 0.3, -0.3};
+      int arc_found = 0;
+      for (int pass = 0; pass < 2 && !arc_found; pass++)
+        for (size_t t = 0; t < len && !arc_found; t += pass && len > 256 ? (len + 255) / 256 : 1) {
+          size_t e = (a0 + t) % m;
+          const double *a = &xy[2 * (rs[q] + e)], *b = &xy[2 * (rs[q] + e + 1)];
+          double mx = a[0] + (b[0] - a[0]) / 2, my = a[1] + (b[1] - a[1]) / 2;
+          double nx = -(b[1] - a[1]), ny = b[0] - a[0];
+          int tries = pass ? 2 * 31 : 8;
+          for (int k = 0; k < tries && !arc_found; k++) {
+            double step = pass ? ldexp(k % 2 ? -1.0 : 1.0, -11 - k / 2) : coarse[k];
+            qk_point_t p = {mx + step * nx, my + step * ny};
+            uint32_t f_all = 0;
+            size_t np = 0;
+            /* outside the domain, boundaries included ... */
+            if (qk_region_locate(l_all, p, QK_BOUNDARY_CLOSED, &f_all) != QK_OK || f_all != QK_NONE)
+              continue;
+            /* ... inside q, strictly (a point to fall back on), ... */
+            qk_region_locate_all(l_each, p, QK_BOUNDARY_OPEN, at_p, in->nr, &np);
+            int in_q = 0;
+            for (size_t i = 0; i < np && !in_q; i++) in_q = at_p[i] == q;
+            if (in_q && !loose) loose = 1, loose_p = p;
+            /* ... and in the rings holding it, strictly, and inside no other ring */
+            int ok = in_q;
+            for (int rule = 0; rule < 2 && ok; rule++) {
+              if (rule) qk_region_locate_all(l_each, p, QK_BOUNDARY_CLOSED, at_p, in->nr, &np);
+              ok = np == nheld + 1;
+              for (size_t i = 0, j = 0; i < np && ok; i++) {
+                if (at_p[i] == q) continue;
+                while (j < nheld && held[j] < at_p[i]) j++;
+                ok = j < nheld && held[j] == at_p[i];
+              }
+            }
+            if (ok) {
+              arc_found = found = 1;
+              in->holes[2 * in->nh] = p.x, in->holes[2 * in->nh + 1] = p.y, in->nh++;
             }
           }
-          if (ok) found = 1, in->holes[2 * in->nh] = p.x, in->holes[2 * in->nh + 1] = p.y, in->nh++;
-          /* (the last list is the open rule's) */
-          for (size_t i = 0; i < np && !loose && !ok; i++)
-            if (at_p[i] == q) loose = 1, loose_p = p;
         }
-      }
+      done += len, a0 = (a0 + len) % m;
+    }
     /* No such point: rings that cross (the mesher names the crossing) or a gap below 2^-41
      * of every edge tried. A point strictly inside the ring and outside the area, as
      * before, lets the mesher say which. */
@@ -923,7 +950,7 @@ static int hole_points(mg_input_t *in, const char *path, char *msg, size_t n) {
     }
   }
   qk_region_free(l_all), qk_region_free(l_each);
-  free(xy), free(rs), free(fs_holes), free(held), free(at_p), free(at_v);
+  free(xy), free(rs), free(fs_holes), free(held), free(at_p), free(at_v), free(uses);
   return rc;
 }
 

@@ -55,6 +55,19 @@ expect 0 '"components": 2,' -- "$cli" mesh "$tmp/gap.geojson" -o "$tmp/gap" --st
 # 800 + (10 - 2 g)^2 - (10 - 4 g)^2
 area_is "lake and a ring-shaped island" "$tmp/gap" 800.0780792236328125
 
+# An island touching the lake's shore at two corners cuts the lake in two faces: the one
+# point found for the ring removed one of them, and the other was meshed as land (area
+# 860 for 820, exit 0). A point is now looked for along each arc between shared vertices.
+cat >"$tmp/split.geojson" <<EOF
+{"type": "FeatureCollection", "features": [
+ {"type": "Feature", "properties": {}, "geometry": {"type": "Polygon",
+  "coordinates": [$(ring 0 0 30 30), $(ring 10 10 20 20)]}},
+ {"type": "Feature", "properties": {}, "geometry": {"type": "Polygon",
+  "coordinates": [[[10, 10], [16, 14], [20, 20], [14, 16], [10, 10]]]}}]}
+EOF
+expect 0 '"components": 2,' -- "$cli" mesh "$tmp/split.geojson" -o "$tmp/split" --stats
+area_is "a lake cut in two by an island" "$tmp/split" 820
+
 # ---- mesh, GeoJSON: a hole with a narrow open gap to an island was refused --------------
 # The candidates stood at 1e-3 to 0.3 of an edge's length from its middle: an island
 # 1/128 inside a lake of side 10 left none in the gap, and the valid input was refused as
