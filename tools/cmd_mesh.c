@@ -348,8 +348,7 @@ static int parse_args(const char *cmd, int argc, char **argv, mesh_args_t *o) {
   char ext[9] = ""; /* (up to 8 characters after the last dot, lower-cased) */
   for (size_t i = 0; dot && dot[i + 1] && i < 8; i++)
     ext[i] = (char)tolower((unsigned char)dot[i + 1]);
-  o->geojson =
-      dot && dot > o->in && !strchr(dot, '/') && (!strcmp(ext, "geojson") || !strcmp(ext, "json"));
+  o->geojson = dot && !strchr(dot, '/') && (!strcmp(ext, "geojson") || !strcmp(ext, "json"));
   if (!o->geojson && (o->project || o->feature >= 0 || o->field))
     return usage(cmd, "--project, --feature and --field apply to GeoJSON input");
   if (o->feature >= 0 && o->field) return usage(cmd, "--feature and --field exclude each other");
