@@ -30,57 +30,38 @@ area_is() {
 ring() { # ring X0 Y0 X1 Y1: an axis-parallel square ring's coordinates
   echo "[[$1, $2], [$3, $2], [$3, $4], [$1, $4], [$1, $2]]"
 }
-g=0.001953125 # 2^-9
-cat >"$tmp/lake.geojson" <<EOF
+# lake NAME ISLAND AREA: a 30 x 30 square with a 10 x 10 lake (one feature) and an island
+# feature in the lake (ISLAND: its polygon's rings) meshes as two components of AREA
+lake() {
+  cat >"$tmp/$1.geojson" <<EOF
 {"type": "FeatureCollection", "features": [
  {"type": "Feature", "properties": {"name": "land"}, "geometry": {"type": "Polygon",
   "coordinates": [$(ring 0 0 30 30), $(ring 10 10 20 20)]}},
  {"type": "Feature", "properties": {"name": "island"}, "geometry": {"type": "Polygon",
-  "coordinates": [$(ring 14.75 10.001953125 15.25 10.5), $(ring 14.875 10.00390625 15.125 10.25)]}}]}
+  "coordinates": [$2]}}]}
 EOF
-expect 0 '"components": 2,' -- "$cli" mesh "$tmp/lake.geojson" -o "$tmp/lake" --stats
-# 900 - 100 + 0.5 * (0.5 - g) - 0.25 * (0.25 - 2 g)
-area_is "lake, island and pond" "$tmp/lake" 800.1875
+  expect 0 '"components": 2,' -- "$cli" mesh "$tmp/$1.geojson" -o "$tmp/$1" --stats
+  area_is "$1" "$tmp/$1" "$3"
+}
+# (900 - 100 + 0.5 * (0.5 - g) - 0.25 * (0.25 - 2 g), g = 2^-9)
+lake pond "$(ring 14.75 10.001953125 15.25 10.5), $(ring 14.875 10.00390625 15.125 10.25)" \
+  800.1875
 # The island 2^-9 from the lake on every side, its pond 2^-9 inside it: the lake's point
 # fell in the pond, and the gap between lake and island was meshed.
-cat >"$tmp/gap.geojson" <<EOF
-{"type": "FeatureCollection", "features": [
- {"type": "Feature", "properties": {}, "geometry": {"type": "Polygon",
-  "coordinates": [$(ring 0 0 30 30), $(ring 10 10 20 20)]}},
- {"type": "Feature", "properties": {}, "geometry": {"type": "Polygon",
-  "coordinates": [$(ring 10.001953125 10.001953125 19.998046875 19.998046875),
-                  $(ring 10.00390625 10.00390625 19.99609375 19.99609375)]}}]}
-EOF
-expect 0 '"components": 2,' -- "$cli" mesh "$tmp/gap.geojson" -o "$tmp/gap" --stats
-# 800 + (10 - 2 g)^2 - (10 - 4 g)^2
-area_is "lake and a ring-shaped island" "$tmp/gap" 800.0780792236328125
+# (800 + (10 - 2 g)^2 - (10 - 4 g)^2)
+lake gap "$(ring 10.001953125 10.001953125 19.998046875 19.998046875),
+          $(ring 10.00390625 10.00390625 19.99609375 19.99609375)" 800.0780792236328125
 
 # An island touching the lake's shore at two corners cuts the lake in two faces: the one
 # point found for the ring removed one of them, and the other was meshed as land (area
 # 860 for 820, exit 0). A point is now looked for along each arc between shared vertices.
-cat >"$tmp/split.geojson" <<EOF
-{"type": "FeatureCollection", "features": [
- {"type": "Feature", "properties": {}, "geometry": {"type": "Polygon",
-  "coordinates": [$(ring 0 0 30 30), $(ring 10 10 20 20)]}},
- {"type": "Feature", "properties": {}, "geometry": {"type": "Polygon",
-  "coordinates": [[[10, 10], [16, 14], [20, 20], [14, 16], [10, 10]]]}}]}
-EOF
-expect 0 '"components": 2,' -- "$cli" mesh "$tmp/split.geojson" -o "$tmp/split" --stats
-area_is "a lake cut in two by an island" "$tmp/split" 820
+lake split "[[10, 10], [16, 14], [20, 20], [14, 16], [10, 10]]" 820
 
 # ---- mesh, GeoJSON: a hole with a narrow open gap to an island was refused --------------
 # The candidates stood at 1e-3 to 0.3 of an edge's length from its middle: an island
 # 1/128 inside a lake of side 10 left none in the gap, and the valid input was refused as
 # "a hole must lie inside its shell, not outside it or covered by another polygon".
-cat >"$tmp/thin.geojson" <<EOF
-{"type": "FeatureCollection", "features": [
- {"type": "Feature", "properties": {}, "geometry": {"type": "Polygon",
-  "coordinates": [$(ring 0 0 30 30), $(ring 10 10 20 20)]}},
- {"type": "Feature", "properties": {}, "geometry": {"type": "Polygon",
-  "coordinates": [$(ring 10.0078125 10.0078125 19.9921875 19.9921875)]}}]}
-EOF
-expect 0 '"components": 2,' -- "$cli" mesh "$tmp/thin.geojson" -o "$tmp/thin" --stats
-area_is "lake with an island 1/128 from its shore" "$tmp/thin" 899.687744140625
+lake thin "$(ring 10.0078125 10.0078125 19.9921875 19.9921875)" 899.687744140625
 # A hole another feature fills ring on ring (an enclave: Lesotho in South Africa, both
 # meshed) needs no hole point: the area goes on inside it (even-odd). It was refused as
 # "covered by another polygon".
@@ -120,7 +101,7 @@ expect 0 '"mode": "book"' -- "$cli" mesh "$tmp/pos.poly" -o "$tmp/pos" --stats
 # ---- mesh --round: a fine grid under large coordinates --------------------------------
 # x / G overflowed (1e10 / 1e-300): a .poly was refused ("a rounded coordinate is beyond
 # the largest double") and GeoJSON coordinates became NaN ("no ring with 3 distinct
-# points", exit 1). From 2^52 steps on a coordinate is a multiple of G to within half an
+# points", exit 1). From 2^53 steps on a coordinate is a multiple of G to within half an
 # ulp, and stays.
 printf '4 2 0 0\n1 10000000000 0\n2 10000000001 0\n3 10000000001 1\n4 10000000000 1\n4 0\n1 1 2\n2 2 3\n3 3 4\n4 4 1\n0\n' >"$tmp/far.poly"
 expect 0 '"triangles": 2,' -- "$cli" mesh "$tmp/far.poly" -o "$tmp/farp" --round 2^-996 --stats
@@ -149,21 +130,22 @@ expect 0 '^1,-1,inf$' -- "$cli" raycast "$tmp/far.csv" "$tmp/rays2.csv"
 # "type\u0000" replaced a geometry's type, and "Polygon\u0000z" read as "Polygon". (A NUL in
 # a property value was refused already.)
 printf 'x,y\n5,5\n25,5\n' >"$tmp/nul.csv"
-printf '{"type":"Feature","properties":{},"geometry":{"type":"Polygon","coordinates":[[[0,0],[10,0],[10,10],[0,10],[0,0]]],"coordinates\\u0000":[[[20,0],[30,0],[30,10],[20,10],[20,0]]]}}\n' >"$tmp/nulkey.geojson"
+sq10='[[[0,0],[10,0],[10,10],[0,10],[0,0]]]' sq20='[[[20,0],[30,0],[30,10],[20,10],[20,0]]]'
+# joined NAME TEXT MESSAGE: join refuses the GeoJSON TEXT (in NAME.geojson) with MESSAGE
+joined() {
+  printf '%s\n' "$2" >"$tmp/$1.geojson"
+  expect 1 "^quadkit join: $tmp/$1.geojson:$3" -- "$cli" join "$tmp/$1.geojson" "$tmp/nul.csv" --planar
+}
 nulmsg='holds a NUL character \(\\u0000\), which the reader cannot keep$'
-expect 1 "^quadkit join: $tmp/nulkey.geojson:1:128: a member name $nulmsg" \
-  -- "$cli" join "$tmp/nulkey.geojson" "$tmp/nul.csv" --planar
-printf '{"type":"Feature","properties":{},"geometry":{"type":"Polygon\\u0000z","coordinates":[[[0,0],[10,0],[10,10],[0,10],[0,0]]]}}\n' >"$tmp/nultype.geojson"
-expect 1 "^quadkit join: $tmp/nultype.geojson:1:62: a \"type\" value $nulmsg" \
-  -- "$cli" join "$tmp/nultype.geojson" "$tmp/nul.csv" --planar
+joined nulkey '{"type":"Feature","properties":{},"geometry":{"type":"Polygon","coordinates":'"$sq10"',"coordinates\u0000":'"$sq20"'}}' \
+  "1:128: a member name $nulmsg"
+joined nultype '{"type":"Feature","properties":{},"geometry":{"type":"Polygon\u0000z","coordinates":'"$sq10"'}}' \
+  "1:62: a \"type\" value $nulmsg"
 # Names are compared decoded: "typ\u0065" is "type" (its value's NUL was let through), and
 # "coordinate\u0073" after "coordinates" is a duplicate (it replaced the polygon).
-printf '{"typ\\u0065":"Polygon\\u0000z","coordinates":[[[0,0],[10,0],[10,10],[0,10],[0,0]]]}\n' >"$tmp/esctype.geojson"
-expect 1 "^quadkit join: $tmp/esctype.geojson:1:22: a \"type\" value $nulmsg" \
-  -- "$cli" join "$tmp/esctype.geojson" "$tmp/nul.csv" --planar
-printf '{"type":"Polygon","coordinates":[[[0,0],[10,0],[10,10],[0,10],[0,0]]],"coordinate\\u0073":[[[20,0],[30,0],[30,10],[20,10],[20,0]]]}\n' >"$tmp/escdup.geojson"
-expect 1 "^quadkit join: $tmp/escdup.geojson:1:71: duplicate name \"coordinate\\\\u0073\" in one object \\(first at line 1, column 19;" \
-  -- "$cli" join "$tmp/escdup.geojson" "$tmp/nul.csv" --planar
+joined esctype '{"typ\u0065":"Polygon\u0000z","coordinates":'"$sq10"'}' "1:22: a \"type\" value $nulmsg"
+joined escdup '{"type":"Polygon","coordinates":'"$sq10"',"coordinate\u0073":'"$sq20"'}' \
+  "1:71: duplicate name \"coordinate\\\\u0073\" in one object \\(first at line 1, column 19;"
 # (guard: an escaped backslash before u0000 is no NUL, and a NUL in a value of another
 # member is left to the reader's own rules)
 printf '{"type":"Feature","properties":{"a\\\\u0000":1},"geometry":{"type":"Polygon","coordinates":[[[0,0],[10,0],[10,10],[0,10],[0,0]]]}}\n' >"$tmp/bs.geojson"
