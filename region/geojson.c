@@ -569,6 +569,7 @@ static size_t jdecode(const char *text, size_t *i, size_t e, unsigned char out[4
                                                                      : (text[j] | 32) - 'a' + 10);
     if (lo >= 0xDC00 && lo < 0xE000) u = 0x10000 + ((u - 0xD800) << 10) + (lo - 0xDC00), *i = j;
   }
+  if (u >= 0xD800 && u < 0xE000) u = 0xFFFD; /* a lone surrogate, as json-c reads it */
   if (u < 0x80) return out[0] = (unsigned char)u, 1;
   if (u < 0x800)
     return out[0] = (unsigned char)(0xC0 | u >> 6), out[1] = (unsigned char)(0x80 | (u & 63)), 2;
