@@ -791,8 +791,8 @@ static int build(const rings_t *r, mg_input_t *out) {
 static int hole_points(mg_input_t *in, const char *path, char *msg, size_t n) {
   size_t nh = 0;
   for (size_t q = 0; q < in->nr; q++) nh += in->ring_sign[q] < 0;
-  if (!nh) return 0;
-  in->holes = malloc(2 * nh * sizeof *in->holes);
+  if (!nh && in->ring_start[in->nr] == in->nv) return 0; /* no hole, no vertex shared */
+  in->holes = malloc(2 * (nh + 1) * sizeof *in->holes);
   size_t total = in->ring_start[in->nr] + in->nr;
   double *xy = malloc(2 * total * sizeof *xy);
   size_t *rs = malloc((in->nr + 1) * sizeof *rs), fs_all[2] = {0, in->nr};
@@ -835,18 +835,22 @@ static int hole_points(mg_input_t *in, const char *path, char *msg, size_t n) {
   uint32_t *held = malloc((in->nr + 1) * sizeof *held), *at_p = malloc((in->nr + 1) * sizeof *at_p);
   uint32_t *at_v = malloc((in->nr + 1) * sizeof *at_v);
   unsigned char *uses = calloc(in->nv + 1, 1);
-  size_t hole_cap = 0;
-  for (size_t q = 0; q < in->nr; q++)
-    if (in->ring_sign[q] < 0) hole_cap += in->ring_start[q + 1] - in->ring_start[q];
-  double *hp = realloc(in->holes, 2 * (hole_cap + 1) * sizeof *hp);
+  /* (at most a point an edge) */
+  double *hp = realloc(in->holes, 2 * (in->ring_start[in->nr] + 1) * sizeof *hp);
   if (hp) in->holes = hp;
   if (!rc && (!held || !at_p || !at_v || !uses || !hp)) rc = mg_fail(msg, n, 3, "out of memory");
   for (size_t i = 0; !rc && i < in->ring_start[in->nr]; i++)
     if (uses[in->ring_v[i]] < 2) uses[in->ring_v[i]]++;
   for (size_t q = 0; !rc && q < in->nr; q++) {
-    if (in->ring_sign[q] > 0) continue;
-    int found = 0;
+    /* A hole ring's faces inside it, and an outer ring's outside it where other rings touch
+     * it and some ring holds it (a pocket two islands in a lake enclose: a face no hole
+     * ring bounds, which was meshed as area). */
+    int hole = in->ring_sign[q] < 0, found = 0;
     size_t m = in->ring_start[q + 1] - in->ring_start[q], nheld = 0, cnt = 0;
+    size_t first = 0;
+    while (first < m && uses[in->ring_v[in->ring_start[q] + first]] < 2) first++;
+    if (!hole && first == m) continue;
+    if (first == m) first = 0;
     /* the rings other than q holding every vertex of q (boundaries included; both lists
      * in increasing order) */
     for (size_t e = 0; e < m && (!e || nheld); e++) {
@@ -860,72 +864,12 @@ static int hole_points(mg_input_t *in, const char *path, char *msg, size_t n) {
       }
       nheld = k;
     }
-    /* The arcs: from each vertex another ring (or the ring again) shares to the next; one
-     * arc, the whole ring, when none is shared. */
-    size_t first = 0;
-    while (first < m && uses[in->ring_v[in->ring_start[q] + first]] < 2) first++;
-    if (first == m) first = 0;
-    int loose = 0;
-    qk_point_t loose_p = {0, 0};
-    for (size_t a0 = first, done = 0; done < m;) {
-      size_t len = 1; /* edges in this arc: a0 .. a0 + len - 1 (mod m) */
-      while (done + len < m && uses[in->ring_v[in->ring_start[q] + (a0 + len) % m]] < 2) len++;
-      /* Candidates near the middle of each edge on either side, at offsets of the edge's
-       * length from 0.3 down to 2^-41 of it (a gap between the ring and an island in it
-       * may be narrow): the coarse ones on every edge first, then the fine ones on at most
-       * 256 edges (a refused ring is tried at some 20,000 points an arc, not millions). */
-      static const double coarse[] = {1e-3, -1e-3, 1e-2, -1e-2, 0.1, -0.1, 0.3, -0.3};
-      int arc_found = 0;
-      for (int pass = 0; pass < 2 && !arc_found; pass++)
-        for (size_t t = 0; t < len && !arc_found; t += pass && len > 256 ? (len + 255) / 256 : 1) {
-          size_t e = (a0 + t) % m;
-          const double *a = &xy[2 * (rs[q] + e)], *b = &xy[2 * (rs[q] + e + 1)];
-          double mx = a[0] + (b[0] - a[0]) / 2, my = a[1] + (b[1] - a[1]) / 2;
-          double nx = -(b[1] - a[1]), ny = b[0] - a[0];
-          int tries = pass ? 2 * 31 : 8;
-          for (int k = 0; k < tries && !arc_found; k++) {
-            double step = pass ? ldexp(k % 2 ? -1.0 : 1.0, -11 - k / 2) : coarse[k];
-            qk_point_t p = {mx + step * nx, my + step * ny};
-            uint32_t f_all = 0;
-            size_t np = 0;
-            /* outside the domain, boundaries included ... */
-            if (qk_region_locate(l_all, p, QK_BOUNDARY_CLOSED, &f_all) != QK_OK || f_all != QK_NONE)
-              continue;
-            /* ... inside q, strictly (a point to fall back on), ... */
-            qk_region_locate_all(l_each, p, QK_BOUNDARY_OPEN, at_p, in->nr, &np);
-            int in_q = 0;
-            for (size_t i = 0; i < np && !in_q; i++) in_q = at_p[i] == q;
-            if (in_q && !loose) loose = 1, loose_p = p;
-            /* ... and in the rings holding it, strictly, and inside no other ring */
-            int ok = in_q;
-            for (int rule = 0; rule < 2 && ok; rule++) {
-              if (rule) qk_region_locate_all(l_each, p, QK_BOUNDARY_CLOSED, at_p, in->nr, &np);
-              ok = np == nheld + 1;
-              for (size_t i = 0, j = 0; i < np && ok; i++) {
-                if (at_p[i] == q) continue;
-                while (j < nheld && held[j] < at_p[i]) j++;
-                ok = j < nheld && held[j] == at_p[i];
-              }
-            }
-            if (ok) {
-              arc_found = found = 1;
-              in->holes[2 * in->nh] = p.x, in->holes[2 * in->nh + 1] = p.y, in->nh++;
-            }
-          }
-        }
-      done += len, a0 = (a0 + len) % m;
-    }
-    /* No such point: rings that cross (the mesher names the crossing) or a gap below 2^-41
-     * of every edge tried. A point strictly inside the ring and outside the area, as
-     * before, lets the mesher say which. */
-    if (!found && loose)
-      found = 1, in->holes[2 * in->nh] = loose_p.x, in->holes[2 * in->nh + 1] = loose_p.y, in->nh++;
     /* A hole filled by another polygon, ring on ring (Lesotho in South Africa's hole, both
      * meshed): a ring holding every vertex of q whose every vertex q holds bounds the same
      * region, the rings crossing nowhere (the mesher refuses crossings); inside it the
      * area goes on (even-odd), and the hole needs no point. It was refused as a hole
      * "covered by another polygon". */
-    for (size_t i = 0; !found && i < nheld; i++) {
+    for (size_t i = 0; hole && i < nheld; i++) {
       size_t r = held[i], np = 0;
       int all = 1;
       for (size_t v = rs[r]; v + 1 < rs[r + 1] && all; v++) {
@@ -934,8 +878,75 @@ static int hole_points(mg_input_t *in, const char *path, char *msg, size_t n) {
         all = 0;
         for (size_t j = 0; j < np && !all; j++) all = at_p[j] == q;
       }
-      if (all) found = 1, in->filled_holes++;
+      if (all) {
+        in->filled_holes++;
+        found = 1;
+        break;
+      }
     }
+    /* (an outer ring held by no other ring has the outside of every ring beside it, or a
+     * face that the lattice modes mesh as their outside: no point goes there) */
+    if (found || (!hole && !nheld)) continue;
+    int loose = 0;
+    qk_point_t loose_p = {0, 0};
+    /* The arcs: from each vertex another ring (or the ring again) shares to the next; one
+     * arc, the whole ring, when none is shared. */
+    for (size_t a0 = first, done = 0; done < m;) {
+      size_t len = 1; /* edges in this arc: a0 .. a0 + len - 1 (mod m) */
+      while (done + len < m && uses[in->ring_v[in->ring_start[q] + (a0 + len) % m]] < 2) len++;
+      /* Probes near the middle of an edge on either side, from 2^-41 of the edge's length
+       * out to 0.3 of it: the nearest that lies in the face beside the edge (in exactly the
+       * rings holding q, and q for a hole) tells whether that face is outside the area
+       * (then it is the point) or not. Nearest first, so that a probe does not jump over
+       * a ring lying close to the edge into another face (a sand bar along a lake's shore
+       * left a sliver of lake as land). Up to 4096 edges an arc are tried. */
+      static const double coarse[] = {1e-3, 1e-2, 0.1, 0.3};
+      int arc_done = 0;
+      for (size_t t = 0; t < len && !arc_done; t += len > 4096 ? (len + 4095) / 4096 : 1) {
+        size_t e = (a0 + t) % m;
+        const double *a = &xy[2 * (rs[q] + e)], *b = &xy[2 * (rs[q] + e + 1)];
+        double mx = a[0] + (b[0] - a[0]) / 2, my = a[1] + (b[1] - a[1]) / 2;
+        double nx = -(b[1] - a[1]), ny = b[0] - a[0];
+        for (int k = 0; k < 2 * (31 + 4) && !arc_done; k++) {
+          double mag = k / 2 < 31 ? ldexp(1.0, -41 + k / 2) : coarse[k / 2 - 31];
+          double step = k % 2 ? -mag : mag;
+          qk_point_t p = {mx + step * nx, my + step * ny};
+          size_t np = 0;
+          qk_region_locate_all(l_each, p, QK_BOUNDARY_OPEN, at_p, in->nr, &np);
+          int in_q = 0;
+          for (size_t i = 0; i < np && !in_q; i++) in_q = at_p[i] == q;
+          if (in_q != hole) continue; /* the other side of the edge */
+          uint32_t f_all = 0;
+          int outside =
+              qk_region_locate(l_all, p, QK_BOUNDARY_CLOSED, &f_all) == QK_OK && f_all == QK_NONE;
+          if (hole && outside && !loose) loose = 1, loose_p = p; /* (to fall back on) */
+          /* in exactly the rings holding q (and q), strictly and boundaries included */
+          int ok = 1;
+          for (int rule = 0; rule < 2 && ok; rule++) {
+            if (rule) qk_region_locate_all(l_each, p, QK_BOUNDARY_CLOSED, at_p, in->nr, &np);
+            ok = np == nheld + (size_t)hole;
+            for (size_t i = 0, j = 0; i < np && ok; i++) {
+              if (at_p[i] == q) continue;
+              while (j < nheld && held[j] < at_p[i]) j++;
+              ok = j < nheld && held[j] == at_p[i];
+            }
+          }
+          if (!ok) continue;
+          arc_done = 1; /* the face beside the arc: a point if it is not area */
+          if (outside) {
+            found = 1;
+            in->holes[2 * in->nh] = p.x, in->holes[2 * in->nh + 1] = p.y, in->nh++;
+          }
+        }
+      }
+      done += len, a0 = (a0 + len) % m;
+    }
+    if (!hole) continue;
+    /* No such point: rings that cross (the mesher names the crossing) or a gap below 2^-41
+     * of every edge tried. A point strictly inside the ring and outside the area, as
+     * before, lets the mesher say which. */
+    if (!found && loose)
+      found = 1, in->holes[2 * in->nh] = loose_p.x, in->holes[2 * in->nh + 1] = loose_p.y, in->nh++;
     if (!found && !rc) {
       size_t v = in->ring_v[in->ring_start[q]];
       char what[128], ptr[512], place[1024], note[512];

@@ -30,38 +30,50 @@ area_is() {
 ring() { # ring X0 Y0 X1 Y1: an axis-parallel square ring's coordinates
   echo "[[$1, $2], [$3, $2], [$3, $4], [$1, $4], [$1, $2]]"
 }
-# lake NAME ISLAND AREA: a 30 x 30 square with a 10 x 10 lake (one feature) and an island
-# feature in the lake (ISLAND: its polygon's rings) meshes as two components of AREA
+# lake NAME AREA ISLAND...: a 30 x 30 square with a 10 x 10 lake (one feature) and island
+# features in the lake (each ISLAND: its polygon's rings) meshes as AREA
 lake() {
-  cat >"$tmp/$1.geojson" <<EOF
+  local name=$1 area=$2 isl=""
+  shift 2
+  for r in "$@"; do
+    isl="$isl,
+ {\"type\": \"Feature\", \"properties\": {}, \"geometry\": {\"type\": \"Polygon\", \"coordinates\": [$r]}}"
+  done
+  cat >"$tmp/$name.geojson" <<EOF
 {"type": "FeatureCollection", "features": [
  {"type": "Feature", "properties": {"name": "land"}, "geometry": {"type": "Polygon",
-  "coordinates": [$(ring 0 0 30 30), $(ring 10 10 20 20)]}},
- {"type": "Feature", "properties": {"name": "island"}, "geometry": {"type": "Polygon",
-  "coordinates": [$2]}}]}
+  "coordinates": [$(ring 0 0 30 30), $(ring 10 10 20 20)]}}$isl]}
 EOF
-  expect 0 '"components": 2,' -- "$cli" mesh "$tmp/$1.geojson" -o "$tmp/$1" --stats
-  area_is "$1" "$tmp/$1" "$3"
+  expect 0 '"triangles": [1-9]' -- "$cli" mesh "$tmp/$name.geojson" -o "$tmp/$name" --stats
+  area_is "$name" "$tmp/$name" "$area"
 }
 # (900 - 100 + 0.5 * (0.5 - g) - 0.25 * (0.25 - 2 g), g = 2^-9)
-lake pond "$(ring 14.75 10.001953125 15.25 10.5), $(ring 14.875 10.00390625 15.125 10.25)" \
-  800.1875
+lake pond 800.1875 "$(ring 14.75 10.001953125 15.25 10.5), $(ring 14.875 10.00390625 15.125 10.25)"
 # The island 2^-9 from the lake on every side, its pond 2^-9 inside it: the lake's point
 # fell in the pond, and the gap between lake and island was meshed.
 # (800 + (10 - 2 g)^2 - (10 - 4 g)^2)
-lake gap "$(ring 10.001953125 10.001953125 19.998046875 19.998046875),
-          $(ring 10.00390625 10.00390625 19.99609375 19.99609375)" 800.0780792236328125
+lake gap 800.0780792236328125 "$(ring 10.001953125 10.001953125 19.998046875 19.998046875),
+          $(ring 10.00390625 10.00390625 19.99609375 19.99609375)"
 
 # An island touching the lake's shore at two corners cuts the lake in two faces: the one
 # point found for the ring removed one of them, and the other was meshed as land (area
 # 860 for 820, exit 0). A point is now looked for along each arc between shared vertices.
-lake split "[[10, 10], [16, 14], [20, 20], [14, 16], [10, 10]]" 820
+lake split 820 "[[10, 10], [16, 14], [20, 20], [14, 16], [10, 10]]"
+
+# A sand bar along a 1000-long shore, touching its ends and 0.25 to 0.5 off it: the first
+# probe found (1e-3 of the edge away) lay beyond the bar, in the lake, and the sliver
+# between bar and shore was meshed as land. Probes go nearest first.
+lake bar 800.009765625 "[[10, 10], [15, 10.001953125], [20, 10], [15, 10.00390625], [10, 10]]"
+# Two islands touching at two points enclose a pocket of lake that no hole ring bounds:
+# it was meshed as land. An outer ring that others touch, held by a ring, looks outside.
+lake pocket 815 "[[12, 15], [15, 12], [15, 14], [14, 15], [15, 16], [15, 18], [12, 15]]" \
+  "[[15, 12], [18, 15], [15, 18], [16, 15], [15, 14], [15, 12]]"
 
 # ---- mesh, GeoJSON: a hole with a narrow open gap to an island was refused --------------
 # The candidates stood at 1e-3 to 0.3 of an edge's length from its middle: an island
 # 1/128 inside a lake of side 10 left none in the gap, and the valid input was refused as
 # "a hole must lie inside its shell, not outside it or covered by another polygon".
-lake thin "$(ring 10.0078125 10.0078125 19.9921875 19.9921875)" 899.687744140625
+lake thin 899.687744140625 "$(ring 10.0078125 10.0078125 19.9921875 19.9921875)"
 # A hole another feature fills ring on ring (an enclave: Lesotho in South Africa, both
 # meshed) needs no hole point: the area goes on inside it (even-odd). It was refused as
 # "covered by another polygon".
