@@ -439,7 +439,8 @@ static int write_outputs(const char *cmd, outputs_t *w, const qk_mesh_t *mesh, u
 /* What the input went through before meshing (for --stats and messages). */
 typedef struct prep {
   const char *format;
-  size_t rounded, merged, dropped_rings, dup_segments, split_points, filled_holes, features;
+  size_t rounded, merged, dropped_rings, dup_segments, split_points, filled_holes, gap_faces,
+      features;
   double lat0;
   double round;                        /* the grid rounded to (0: none) */
   int round_exp, round_mag, round_ext; /* --round auto: 2^round_exp, and why (mg_auto_grid) */
@@ -487,8 +488,9 @@ static void print_stats(const qk_mesh_t *mesh, const qk_mesh_stats_t *st, const 
     printf("\", \"projection\": \"%s\", ", o->project ? "equirect" : "none");
     if (o->project) printf("\"lat0_deg\": %.10g, ", pp->lat0);
     printf("\"merged_vertices\": %zu, \"dropped_rings\": %zu, \"duplicate_segments\": %zu, "
-           "\"split_points\": %zu, \"filled_holes\": %zu, ",
-           pp->merged, pp->dropped_rings, pp->dup_segments, pp->split_points, pp->filled_holes);
+           "\"split_points\": %zu, \"filled_holes\": %zu, \"gap_faces\": %zu, ",
+           pp->merged, pp->dropped_rings, pp->dup_segments, pp->split_points, pp->filled_holes,
+           pp->gap_faces);
   }
   printf("\"round\": %.17g, \"rounded_coordinates\": %zu}, ", pp->round, pp->rounded);
   printf("\"mode\": \"%s\", \"lattice_exponent\": %d, \"origin\": [%.17g, %.17g], "
@@ -707,6 +709,62 @@ static int read_input(const char *cmd, const mesh_args_t *o, qk_poly_t **poly, p
   return (st == QK_ERR_NOMEM || st == QK_ERR_IO) ? CLI_INTERNAL : CLI_BAD_INPUT;
 }
 
+/*
+ * GeoJSON: faces of the mesh inside none of the rings (a gap that features touching all
+ * round it enclose, a ring touching itself round a pocket) are outside the area, but no
+ * hole point could be found for them from the rings (mesh_geojson.c: such a face cannot
+ * be told from the outside of the map there). Each face's largest triangle's centroid is
+ * located; the faces outside every ring get it as a hole point and the input is meshed
+ * again. Only where rings share a vertex (no such face otherwise). *again: remeshed.
+ */
+static qk_status_t drop_gap_faces(prep_t *pp, const qk_mesh_options_t *opt, qk_poly_t **poly,
+                                  qk_mesh_t **mesh, qk_mesh_error_t *err, int *again) {
+  *again = 0;
+  if (pp->gj.ring_start[pp->gj.nr] == pp->gj.nv) return QK_OK;
+  size_t nt, nc, nv;
+  const uint32_t *tri = qk_mesh_triangles(*mesh, &nt),
+                 *comp = qk_mesh_triangle_components(*mesh, &nc);
+  const double *v = qk_mesh_vertices(*mesh, &nv);
+  uint32_t k = 0;
+  for (size_t t = 0; t < nt; t++) k = comp[t] > k ? comp[t] : k;
+  size_t *best = malloc((k + 1) * sizeof *best);
+  double *area = calloc(k + 1, sizeof *area), *pts = malloc(2 * (k + 1) * sizeof *pts);
+  unsigned char *out = malloc(k + 1);
+  qk_status_t st = best && area && pts && out ? QK_OK : QK_ERR_NOMEM;
+  for (size_t t = 0; !st && t < nt; t++) {
+    const double *a = &v[2 * tri[3 * t]], *b = &v[2 * tri[3 * t + 1]], *c = &v[2 * tri[3 * t + 2]];
+    double ar = fabs((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]));
+    if (ar > area[comp[t]]) area[comp[t]] = ar, best[comp[t]] = t;
+  }
+  size_t np = 0;
+  for (uint32_t f = 1; !st && f <= k; f++) {
+    if (!(area[f] > 0)) continue;
+    const uint32_t *T = &tri[3 * best[f]];
+    pts[2 * np] = (v[2 * T[0]] + v[2 * T[1]] + v[2 * T[2]]) / 3;
+    pts[2 * np + 1] = (v[2 * T[0] + 1] + v[2 * T[1] + 1] + v[2 * T[2] + 1]) / 3;
+    np++;
+  }
+  if (!st && mg_outside_rings(&pp->gj, pts, np, out)) st = QK_ERR_NOMEM;
+  size_t add = 0;
+  for (size_t i = 0; !st && i < np; i++) add += out[i];
+  double *h = !st && add ? realloc(pp->gj.holes, 2 * (pp->gj.nh + add + 1) * sizeof *h) : NULL;
+  if (!st && add && !h) st = QK_ERR_NOMEM;
+  if (!st && add) {
+    pp->gj.holes = h;
+    for (size_t i = 0; i < np; i++)
+      if (out[i]) h[2 * pp->gj.nh] = pts[2 * i], h[2 * pp->gj.nh + 1] = pts[2 * i + 1], pp->gj.nh++;
+    pp->gap_faces = add;
+    qk_poly_free(*poly), *poly = NULL;
+    qk_mesh_free(*mesh), *mesh = NULL;
+    st = qk_poly_from_arrays(pp->gj.xy, pp->gj.nv, pp->gj.seg, pp->gj.ns, pp->gj.holes, pp->gj.nh,
+                             NULL, poly, err);
+    if (!st) st = qk_mesh_generate(*poly, opt, mesh, err);
+    *again = 1;
+  }
+  free(best), free(area), free(pts), free(out);
+  return st;
+}
+
 /* Read and mesh; on failure prints FILE:LINE: reason and returns an exit code. */
 static int make_mesh(const char *cmd, const mesh_args_t *o, qk_poly_t **poly, qk_mesh_t **mesh,
                      prep_t *pp, double *t_read) {
@@ -728,6 +786,14 @@ static int make_mesh(const char *cmd, const mesh_args_t *o, qk_poly_t **poly, qk
   opt.max_size = o->max_size;
   if (o->min_angle >= 0) opt.min_angle_deg = o->min_angle;
   qk_status_t st = qk_mesh_generate(*poly, &opt, mesh, &err);
+  int again = 0;
+  if (st == QK_OK && o->geojson && opt.mode == QK_MESH_GENERAL) {
+    st = drop_gap_faces(pp, &opt, poly, mesh, &err, &again);
+    if (st == QK_ERR_NOMEM && !again) {
+      cli_error(cmd, "%s: out of memory", o->in);
+      return CLI_INTERNAL;
+    }
+  }
   const char *name = strcmp(o->in, "-") ? o->in : "<stdin>";
   if (st == QK_OK) {
     /* No triangle at all: nothing encloses an area outside the holes (an open chain, a

@@ -150,6 +150,56 @@ int mg_auto_grid(const double *xy, size_t n, int *mag, int *ext) {
   return k < -996 ? -996 : k > 1000 ? 1000 : k;
 }
 
+/* Every ring of in closed, as region layers want: *xy the points, (*rs)[q] ring q's first
+ * (nr + 1 entries). 0, or 3 (out of memory: nothing left allocated). */
+static int closed_rings(const mg_input_t *in, double **xy, size_t **rs) {
+  *xy = malloc(2 * (in->ring_start[in->nr] + in->nr + 1) * sizeof **xy);
+  *rs = malloc((in->nr + 1) * sizeof **rs);
+  if (!*xy || !*rs) {
+    free(*xy), free(*rs);
+    *xy = NULL, *rs = NULL;
+    return 3;
+  }
+  size_t at = 0;
+  for (size_t q = 0; q < in->nr; q++) {
+    (*rs)[q] = at;
+    for (size_t i = in->ring_start[q]; i <= in->ring_start[q + 1]; i++) {
+      uint32_t v = in->ring_v[i < in->ring_start[q + 1] ? i : in->ring_start[q]];
+      (*xy)[2 * at] = in->xy[2 * v], (*xy)[2 * at + 1] = in->xy[2 * v + 1], at++;
+    }
+  }
+  (*rs)[in->nr] = at;
+  return 0;
+}
+
+int mg_outside_rings(const mg_input_t *in, const double *pts, size_t n, unsigned char *out) {
+  memset(out, 0, n);
+  if (!in->nr || !n) return 0;
+  double *xy;
+  size_t *rs, *fs = malloc((in->nr + 1) * sizeof *fs);
+  if (!fs || closed_rings(in, &xy, &rs)) {
+    free(fs);
+    return 3;
+  }
+  for (size_t q = 0; q <= in->nr; q++) fs[q] = q; /* one feature per ring */
+  qk_region_arrays_t each = {xy, rs, in->nr, fs, in->nr};
+  qk_region_options_t ro;
+  qk_region_options_init(&ro);
+  ro.planar = 1;
+  qk_region_t *l = NULL;
+  qk_error_t err;
+  qk_status_t st = qk_region_from_arrays(&each, &ro, &l, &err);
+  for (size_t i = 0; st == QK_OK && i < n; i++) {
+    uint32_t f = 0;
+    out[i] = qk_region_locate(l, (qk_point_t){pts[2 * i], pts[2 * i + 1]}, QK_BOUNDARY_CLOSED,
+                              &f) == QK_OK &&
+             f == QK_NONE;
+  }
+  qk_region_free(l);
+  free(xy), free(rs), free(fs);
+  return st == QK_OK ? 0 : st == QK_ERR_NOMEM ? 3 : 1;
+}
+
 #ifndef QK_HAVE_JSONC
 int mg_read(const char *path, const mg_options_t *o, mg_input_t *out, char *msg, size_t n) {
   (void)o;
@@ -793,24 +843,13 @@ static int hole_points(mg_input_t *in, const char *path, char *msg, size_t n) {
   for (size_t q = 0; q < in->nr; q++) nh += in->ring_sign[q] < 0;
   if (!nh && in->ring_start[in->nr] == in->nv) return 0; /* no hole, no vertex shared */
   in->holes = malloc(2 * (nh + 1) * sizeof *in->holes);
-  size_t total = in->ring_start[in->nr] + in->nr;
-  double *xy = malloc(2 * total * sizeof *xy);
-  size_t *rs = malloc((in->nr + 1) * sizeof *rs), fs_all[2] = {0, in->nr};
+  double *xy = NULL;
+  size_t *rs = NULL, fs_all[2] = {0, in->nr};
   size_t *fs_holes = malloc((in->nr + 1) * sizeof *fs_holes);
-  if (!in->holes || !xy || !rs || !fs_holes) {
+  if (!in->holes || !fs_holes || closed_rings(in, &xy, &rs)) {
     free(xy), free(rs), free(fs_holes);
     return mg_fail(msg, n, 3, "out of memory");
   }
-  /* Every ring closed, as region layers want. */
-  size_t at = 0;
-  for (size_t q = 0; q < in->nr; q++) {
-    rs[q] = at;
-    for (size_t i = in->ring_start[q]; i <= in->ring_start[q + 1]; i++) {
-      uint32_t v = in->ring_v[i < in->ring_start[q + 1] ? i : in->ring_start[q]];
-      xy[2 * at] = in->xy[2 * v], xy[2 * at + 1] = in->xy[2 * v + 1], at++;
-    }
-  }
-  rs[in->nr] = at;
   qk_region_options_t ro;
   qk_region_options_init(&ro);
   ro.planar = 1;

@@ -105,6 +105,14 @@ int mg_read(const char *path, const mg_options_t *o, mg_input_t *out, char *msg,
 
 void mg_free(mg_input_t *in);
 
+/*
+ * Which of the n points pts (x, y pairs) lie inside none of in's rings, boundaries
+ * included: out[i] = 1 for those. A bounded face of the mesh there (a gap that features
+ * touching all round it enclose) is outside the area. 0, 1 (the rings make no layer) or 3
+ * (out of memory).
+ */
+int mg_outside_rings(const mg_input_t *in, const double *pts, size_t n, unsigned char *out);
+
 /* Describe input segment s as "feature F, polygon P, ring R, position I" into buf, and
  * where that position is in the file path: *line and *col (0 when unknown). */
 void mg_describe_segment(const mg_input_t *in, const char *path, size_t s, char *buf, size_t n,
