@@ -500,10 +500,7 @@ qk_status_t qk_world_move(qk_world_t *w, qk_handle_t h, const qk_shape_t *shape)
 
 qk_status_t qk_world_move_batch(qk_world_t *w, const qk_handle_t *h, const qk_shape_t *shapes,
                                 size_t n, qk_error_t *err) {
-  if (err) {
-    memset(err, 0, sizeof *err);
-    err->item = SIZE_MAX;
-  }
+  qk__error_clear(err);
   if (!w || (n && (!h || !shapes))) {
     if (err) snprintf(err->message, sizeof err->message, "a NULL world, or NULL handles or shapes");
     return QK_ERR_INVALID;

@@ -12,12 +12,16 @@
  * path (the root square halved, a corner moved per quadrant, as qk__child_square() does)
  * rather than ask for each node's: the path is in registers, a node's square may not be.
  * The first section declares the few helpers every module shares (growth, threads, the
- * short-buffer sink, Morton spreading, the SVG preamble), implemented in index/.
+ * short-buffer sink, clearing an error record, Morton spreading, the SVG preamble),
+ * implemented in index/.
  */
 #ifndef QUADKIT_INDEX_ACCESS_H
 #define QUADKIT_INDEX_ACCESS_H
 
 #include "index/index_internal.h"
+
+#include <stdint.h>
+#include <string.h>
 
 /* ---- helpers every module shares (implemented in index/) ------------------------- */
 
@@ -80,6 +84,14 @@ void qk__pool_hold(qk__pool_t *p, int on);
 /* fn(ctx) on the first worker while the caller goes on (the pool's next region and its end
  * wait for it); 0, fn not run, when there is no pool here or it is taken. */
 int qk__pool_detach(qk__pool_t *p, void (*fn)(void *), void *ctx);
+
+/* An error record for a call that may succeed (err may be NULL): no line, column or item
+ * (SIZE_MAX), message "". */
+static inline void qk__error_clear(qk_error_t *err) {
+  if (!err) return;
+  memset(err, 0, sizeof *err);
+  err->item = SIZE_MAX;
+}
 
 /* The short-buffer rule of the buffer-form calls: count every item in n, write it to out[n]
  * only while n < cap (value is evaluated only then). */

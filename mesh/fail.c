@@ -19,10 +19,3 @@ qk_status_t qk__mesh_fail(qk_mesh_error_t *err, qk_status_t st, unsigned long li
   }
   return st;
 }
-
-void qk__mesh_err_clear(qk_mesh_error_t *err) {
-  if (!err) return;
-  err->line = err->column = 0;
-  err->item = SIZE_MAX;
-  err->message[0] = '\0';
-}

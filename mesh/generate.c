@@ -469,7 +469,7 @@ out:
 
 qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *options,
                              qk_mesh_t **out, qk_mesh_error_t *err) {
-  qk__mesh_err_clear(err);
+  qk__error_clear(err);
   if (!out) return QK_ERR_INVALID;
   *out = NULL;
   if (!poly) return qk__mesh_fail(err, QK_ERR_INVALID, 0, "no input");

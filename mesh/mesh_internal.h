@@ -103,10 +103,6 @@ struct qk_mesh {
 void qk__mesh_angles(const qk_mesh_t *m, double bound_deg, double *min_deg, double *max_deg,
                      size_t *below);
 
-/* Clear an error record for a call that may succeed (err may be NULL): no line, column
- * or item (SIZE_MAX), message "". */
-void qk__mesh_err_clear(qk_mesh_error_t *err);
-
 /* Fill an error record (err may be NULL; column 0, item SIZE_MAX: the message names the
  * item); returns `st` for convenience. */
 qk_status_t qk__mesh_fail(qk_mesh_error_t *err, qk_status_t st, unsigned long line, const char *fmt,

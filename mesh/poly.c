@@ -552,7 +552,7 @@ static qk_status_t read_tail(reader_t *r, qk_poly_t *p, qk_mesh_error_t *err) {
 qk_status_t qk_poly_read(FILE *f, const qk_allocator_t *allocator, qk_poly_t **out,
                          qk_mesh_error_t *err) {
   if (out) *out = NULL;
-  qk__mesh_err_clear(err);
+  qk__error_clear(err);
   if (!f || !out) return QK_ERR_INVALID;
   qk_poly_t *p = poly_new(allocator);
   if (!p) return qk__mesh_fail(err, QK_ERR_NOMEM, 0, "out of memory");
@@ -581,7 +581,7 @@ static qk_status_t item_fail(qk_mesh_error_t *err, size_t item, qk_status_t st) 
 qk_status_t qk_poly_from_arrays(const double *xy, size_t nv, const uint32_t *seg, size_t ns,
                                 const double *holes, size_t nh, const qk_allocator_t *allocator,
                                 qk_poly_t **out, qk_mesh_error_t *err) {
-  qk__mesh_err_clear(err);
+  qk__error_clear(err);
   if (!out) return qk__mesh_fail(err, QK_ERR_INVALID, 0, "no output pointer");
   *out = NULL;
   if (nv && !xy) return qk__mesh_fail(err, QK_ERR_INVALID, 0, "%zu vertices but no array", nv);
@@ -650,7 +650,7 @@ qk_status_t qk_poly_holes(const qk_poly_t *p, double *xy, size_t cap, size_t *n_
 
 qk_status_t qk_poly_set_markers(qk_poly_t *p, const int32_t *vm, const int32_t *sm,
                                 qk_mesh_error_t *err) {
-  qk__mesh_err_clear(err);
+  qk__error_clear(err);
   if (!p) return qk__mesh_fail(err, QK_ERR_INVALID, 0, "no input");
   int32_t *nv = NULL, *ns = NULL;
   size_t cv = 0, cs = 0;
@@ -668,7 +668,7 @@ nomem:
 }
 
 qk_status_t qk_poly_set_regions(qk_poly_t *p, const double *xya, size_t nr, qk_mesh_error_t *err) {
-  qk__mesh_err_clear(err);
+  qk__error_clear(err);
   if (!p || (nr && !xya)) return qk__mesh_fail(err, QK_ERR_INVALID, 0, "no input or no array");
   if (nr > POLY_MAX_COUNT)
     return qk__mesh_fail(err, QK_ERR_LIMIT, 0, "%zu regional attributes: at most %lu", nr,

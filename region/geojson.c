@@ -547,6 +547,15 @@ typedef struct jkey {
   size_t raw;
 } jkey_t;
 
+/* The value of the four hexadecimal digits at t (json-c checked them). */
+static unsigned long hex4(const char *t) {
+  unsigned long u = 0;
+  for (int d = 0; d < 4; d++)
+    u = u * 16 +
+        (unsigned long)(isdigit((unsigned char)t[d]) ? t[d] - '0' : (t[d] | 32) - 'a' + 10);
+  return u;
+}
+
 /* The next character of the JSON string text[*i, e) (well-formed: json-c parsed it),
  * escapes decoded, as UTF-8 bytes into out; returns how many (0 at the end). */
 static size_t jdecode(const char *text, size_t *i, size_t e, unsigned char out[4]) {
@@ -557,17 +566,11 @@ static size_t jdecode(const char *text, size_t *i, size_t e, unsigned char out[4
   static const char from[] = "bfnrt", to[] = "\b\f\n\r\t";
   const char *k = c ? strchr(from, c) : NULL;
   if (c != 'u') return out[0] = k ? (unsigned char)to[k - from] : c, 1; /* \" \\ \/ */
-  unsigned long u = 0;
-  for (int d = 0; d < 4 && *i < e; d++, (*i)++)
-    u = u * 16 + (unsigned long)(isdigit((unsigned char)text[*i]) ? text[*i] - '0'
-                                                                  : (text[*i] | 32) - 'a' + 10);
+  unsigned long u = *i + 4 <= e ? hex4(text + *i) : 0;
+  *i = *i + 4 <= e ? *i + 4 : e;
   if (u >= 0xD800 && u < 0xDC00 && *i + 6 <= e && text[*i] == '\\' && text[*i + 1] == 'u') {
-    size_t j = *i + 2;
-    unsigned long lo = 0;
-    for (int d = 0; d < 4; d++, j++)
-      lo = lo * 16 + (unsigned long)(isdigit((unsigned char)text[j]) ? text[j] - '0'
-                                                                     : (text[j] | 32) - 'a' + 10);
-    if (lo >= 0xDC00 && lo < 0xE000) u = 0x10000 + ((u - 0xD800) << 10) + (lo - 0xDC00), *i = j;
+    unsigned long lo = hex4(text + *i + 2);
+    if (lo >= 0xDC00 && lo < 0xE000) u = 0x10000 + ((u - 0xD800) << 10) + (lo - 0xDC00), *i += 6;
   }
   if (u >= 0xD800 && u < 0xE000) u = 0xFFFD; /* a lone surrogate, as json-c reads it */
   if (u < 0x80) return out[0] = (unsigned char)u, 1;

@@ -449,6 +449,12 @@ typedef struct prep {
   mg_input_t gj; /* GeoJSON input (for naming segments in messages) */
 } prep_t;
 
+/* The mesher's input from the GeoJSON rings read (their vertices, segments and holes). */
+static qk_status_t gj_poly(const prep_t *pp, qk_poly_t **poly, qk_mesh_error_t *err) {
+  const mg_input_t *g = &pp->gj;
+  return qk_poly_from_arrays(g->xy, g->nv, g->seg, g->ns, g->holes, g->nh, NULL, poly, err);
+}
+
 static const char *mode_name(qk_mesh_mode_t m) {
   return m == QK_MESH_BOOK ? "book" : m == QK_MESH_DYADIC ? "dyadic" : "general";
 }
@@ -634,8 +640,7 @@ static int read_input(const char *cmd, const mesh_args_t *o, qk_poly_t **poly, p
     pp->round_mag = pp->gj.round_mag, pp->round_ext = pp->gj.round_ext;
     if (o->round == MG_ROUND_AUTO) auto_note(o->in, o->project, pp);
     snprintf(pp->name, sizeof pp->name, "%s", pp->gj.name);
-    qk_status_t st = qk_poly_from_arrays(pp->gj.xy, pp->gj.nv, pp->gj.seg, pp->gj.ns, pp->gj.holes,
-                                         pp->gj.nh, NULL, poly, &err);
+    qk_status_t st = gj_poly(pp, poly, &err);
     if (st != QK_OK) {
       cli_error(cmd, "%s: %s", o->in, err.message[0] ? err.message : qk_strerror(st));
       return st == QK_ERR_NOMEM ? CLI_INTERNAL : CLI_BAD_INPUT;
@@ -720,7 +725,7 @@ static int read_input(const char *cmd, const mesh_args_t *o, qk_poly_t **poly, p
 static qk_status_t drop_gap_faces(prep_t *pp, const qk_mesh_options_t *opt, qk_poly_t **poly,
                                   qk_mesh_t **mesh, qk_mesh_error_t *err, int *again) {
   *again = 0;
-  if (pp->gj.ring_start[pp->gj.nr] == pp->gj.nv) return QK_OK;
+  if (!mg_rings_touch(&pp->gj)) return QK_OK;
   size_t nt, nc, nv;
   const uint32_t *tri = qk_mesh_triangles(*mesh, &nt),
                  *comp = qk_mesh_triangle_components(*mesh, &nc);
@@ -744,7 +749,7 @@ static qk_status_t drop_gap_faces(prep_t *pp, const qk_mesh_options_t *opt, qk_p
     pts[2 * np + 1] = (v[2 * T[0] + 1] + v[2 * T[1] + 1] + v[2 * T[2] + 1]) / 3;
     np++;
   }
-  if (!st && mg_outside_rings(&pp->gj, pts, np, out)) st = QK_ERR_NOMEM;
+  if (!st) mg_outside_rings(&pp->gj, pts, np, out);
   size_t add = 0;
   for (size_t i = 0; !st && i < np; i++) add += out[i];
   double *h = !st && add ? realloc(pp->gj.holes, 2 * (pp->gj.nh + add + 1) * sizeof *h) : NULL;
@@ -756,8 +761,7 @@ static qk_status_t drop_gap_faces(prep_t *pp, const qk_mesh_options_t *opt, qk_p
     pp->gap_faces = add;
     qk_poly_free(*poly), *poly = NULL;
     qk_mesh_free(*mesh), *mesh = NULL;
-    st = qk_poly_from_arrays(pp->gj.xy, pp->gj.nv, pp->gj.seg, pp->gj.ns, pp->gj.holes, pp->gj.nh,
-                             NULL, poly, err);
+    st = gj_poly(pp, poly, err);
     if (!st) st = qk_mesh_generate(*poly, opt, mesh, err);
     *again = 1;
   }

@@ -42,6 +42,7 @@ static struct {
 } mg_kept;
 
 void mg_free(mg_input_t *in) {
+  qk_region_free(in->rings);
   free(in->xy), free(in->seg), free(in->holes), free(in->ring_v), free(in->ring_start);
   free(in->ring_sign), free(in->seg_feature), free(in->seg_ring), free(in->seg_point);
   free(in->ring_src), free(in->in_feature), free(in->in_poly), free(in->in_ring), free(in->in_path),
@@ -150,54 +151,18 @@ int mg_auto_grid(const double *xy, size_t n, int *mag, int *ext) {
   return k < -996 ? -996 : k > 1000 ? 1000 : k;
 }
 
-/* Every ring of in closed, as region layers want: *xy the points, (*rs)[q] ring q's first
- * (nr + 1 entries). 0, or 3 (out of memory: nothing left allocated). */
-static int closed_rings(const mg_input_t *in, double **xy, size_t **rs) {
-  *xy = malloc(2 * (in->ring_start[in->nr] + in->nr + 1) * sizeof **xy);
-  *rs = malloc((in->nr + 1) * sizeof **rs);
-  if (!*xy || !*rs) {
-    free(*xy), free(*rs);
-    *xy = NULL, *rs = NULL;
-    return 3;
-  }
-  size_t at = 0;
-  for (size_t q = 0; q < in->nr; q++) {
-    (*rs)[q] = at;
-    for (size_t i = in->ring_start[q]; i <= in->ring_start[q + 1]; i++) {
-      uint32_t v = in->ring_v[i < in->ring_start[q + 1] ? i : in->ring_start[q]];
-      (*xy)[2 * at] = in->xy[2 * v], (*xy)[2 * at + 1] = in->xy[2 * v + 1], at++;
-    }
-  }
-  (*rs)[in->nr] = at;
-  return 0;
-}
+int mg_rings_touch(const mg_input_t *in) { return in->ring_start[in->nr] != in->nv; }
 
 int mg_outside_rings(const mg_input_t *in, const double *pts, size_t n, unsigned char *out) {
   memset(out, 0, n);
-  if (!in->nr || !n) return 0;
-  double *xy;
-  size_t *rs, *fs = malloc((in->nr + 1) * sizeof *fs);
-  if (!fs || closed_rings(in, &xy, &rs)) {
-    free(fs);
-    return 3;
-  }
-  for (size_t q = 0; q <= in->nr; q++) fs[q] = q; /* one feature per ring */
-  qk_region_arrays_t each = {xy, rs, in->nr, fs, in->nr};
-  qk_region_options_t ro;
-  qk_region_options_init(&ro);
-  ro.planar = 1;
-  qk_region_t *l = NULL;
-  qk_error_t err;
-  qk_status_t st = qk_region_from_arrays(&each, &ro, &l, &err);
-  for (size_t i = 0; st == QK_OK && i < n; i++) {
+  if (!in->rings) return 0; /* (rings that neither touch nor have holes: no such face) */
+  for (size_t i = 0; i < n; i++) {
     uint32_t f = 0;
-    out[i] = qk_region_locate(l, (qk_point_t){pts[2 * i], pts[2 * i + 1]}, QK_BOUNDARY_CLOSED,
-                              &f) == QK_OK &&
+    out[i] = qk_region_locate(in->rings, (qk_point_t){pts[2 * i], pts[2 * i + 1]},
+                              QK_BOUNDARY_CLOSED, &f) == QK_OK &&
              f == QK_NONE;
   }
-  qk_region_free(l);
-  free(xy), free(rs), free(fs);
-  return st == QK_OK ? 0 : st == QK_ERR_NOMEM ? 3 : 1;
+  return 0;
 }
 
 #ifndef QK_HAVE_JSONC
@@ -835,97 +800,188 @@ static int build(const rings_t *r, mg_input_t *out) {
   return rc;
 }
 
-/* A hole point for every hole ring: near the middle of one of its edges, on the inner
- * side, strictly inside the hole ring and outside the domain (even-odd over every ring,
- * boundaries included), both decided exactly by planar region layers. */
+/* Every ring of in closed, as region layers want: *xy the points, (*rs)[q] ring q's first
+ * (nr + 1 entries). 0, or 3 (out of memory: nothing left allocated). */
+static int closed_rings(const mg_input_t *in, double **xy, size_t **rs) {
+  *xy = malloc(2 * (in->ring_start[in->nr] + in->nr + 1) * sizeof **xy);
+  *rs = malloc((in->nr + 1) * sizeof **rs);
+  if (!*xy || !*rs) {
+    free(*xy), free(*rs);
+    *xy = NULL, *rs = NULL;
+    return 3;
+  }
+  size_t at = 0;
+  for (size_t q = 0; q < in->nr; q++) {
+    (*rs)[q] = at;
+    for (size_t i = in->ring_start[q]; i <= in->ring_start[q + 1]; i++) {
+      uint32_t v = in->ring_v[i < in->ring_start[q + 1] ? i : in->ring_start[q]];
+      (*xy)[2 * at] = in->xy[2 * v], (*xy)[2 * at + 1] = in->xy[2 * v + 1], at++;
+    }
+  }
+  (*rs)[in->nr] = at;
+  return 0;
+}
+
+/* What the search for hole points works with: the rings closed (xy, rs), the layer of
+ * every ring as one even-odd feature (all) and of each ring as a feature of its own
+ * (each, kept in mg_input_t as `rings`), and lists of rings, nr + 1 entries each. */
+typedef struct hp {
+  mg_input_t *in;
+  const double *xy;
+  const size_t *rs;
+  const qk_region_t *all, *each;
+  uint32_t *held, *at_p, *at_v;
+  size_t nheld;
+} hp_t;
+
+/* The rings other than q holding every vertex of q, boundaries included, into h->held
+ * (both lists in increasing order). */
+static void rings_holding(hp_t *h, size_t q) {
+  size_t m = h->in->ring_start[q + 1] - h->in->ring_start[q], cnt = 0;
+  h->nheld = 0;
+  for (size_t e = 0; e < m && (!e || h->nheld); e++) {
+    qk_point_t v = {h->xy[2 * (h->rs[q] + e)], h->xy[2 * (h->rs[q] + e) + 1]};
+    qk_region_locate_all(h->each, v, QK_BOUNDARY_CLOSED, h->at_v, h->in->nr, &cnt);
+    size_t k = 0;
+    for (size_t i = 0, j = 0; i < (e ? h->nheld : cnt); i++) {
+      uint32_t r = e ? h->held[i] : h->at_v[i];
+      while (j < cnt && h->at_v[j] < r) j++;
+      if (j < cnt && h->at_v[j] == r && r != q) h->held[k++] = r;
+    }
+    h->nheld = k;
+  }
+}
+
+/* A hole filled by another polygon, ring on ring (Lesotho in South Africa's hole, both
+ * meshed): a ring holding every vertex of q whose every vertex q holds bounds the same
+ * region, the rings crossing nowhere (the mesher refuses crossings); inside it the area
+ * goes on (even-odd), and the hole needs no point. It was refused as a hole "covered by
+ * another polygon". */
+static int filled(hp_t *h, size_t q) {
+  for (size_t i = 0; i < h->nheld; i++) {
+    size_t r = h->held[i], np = 0;
+    int all = 1;
+    for (size_t v = h->rs[r]; v + 1 < h->rs[r + 1] && all; v++) {
+      qk_region_locate_all(h->each, (qk_point_t){h->xy[2 * v], h->xy[2 * v + 1]},
+                           QK_BOUNDARY_CLOSED, h->at_p, h->in->nr, &np);
+      all = 0;
+      for (size_t j = 0; j < np && !all; j++) all = h->at_p[j] == q;
+    }
+    if (all) return 1;
+  }
+  return 0;
+}
+
+/* Whether the rings holding p, under the boundary rule b, are exactly the rings holding
+ * q (h->held), and q when `hole` (p on its inner side). */
+static int in_face(hp_t *h, size_t q, int hole, qk_point_t p, qk_boundary_t b) {
+  size_t np = 0;
+  qk_region_locate_all(h->each, p, b, h->at_p, h->in->nr, &np);
+  if (np != h->nheld + (size_t)hole) return 0;
+  for (size_t i = 0, j = 0; i < np; i++) {
+    if (h->at_p[i] == q) continue;
+    while (j < h->nheld && h->held[j] < h->at_p[i]) j++;
+    if (j == h->nheld || h->held[j] != h->at_p[i]) return 0;
+  }
+  return 1;
+}
+
+/* The arc of ring q from edge a0, len edges: probes near the middle of an edge on either
+ * side, from 2^-41 of the edge's length out to 0.3 of it. The nearest that lies in the
+ * face beside the edge (in exactly the rings holding q, and q for a hole) tells whether
+ * that face is outside the area: then it is the hole point (returns 1). Nearest first,
+ * so that a probe does not jump over a ring lying close to the edge into another face (a
+ * sand bar along a lake's shore left a sliver of lake as land). Up to 4096 edges an arc
+ * are tried. *loose: the first probe strictly inside the hole ring and outside the area,
+ * to fall back on. */
+static int arc_point(hp_t *h, size_t q, int hole, size_t a0, size_t len, int *loose,
+                     qk_point_t *loose_p) {
+  static const double coarse[] = {1e-3, 1e-2, 0.1, 0.3};
+  mg_input_t *in = h->in;
+  size_t m = in->ring_start[q + 1] - in->ring_start[q];
+  for (size_t t = 0; t<len; t += len> 4096 ? (len + 4095) / 4096 : 1) {
+    size_t e = (a0 + t) % m;
+    const double *a = &h->xy[2 * (h->rs[q] + e)], *b = &h->xy[2 * (h->rs[q] + e + 1)];
+    double mx = a[0] + (b[0] - a[0]) / 2, my = a[1] + (b[1] - a[1]) / 2;
+    double nx = -(b[1] - a[1]), ny = b[0] - a[0];
+    for (int k = 0; k < 2 * (31 + 4); k++) {
+      double mag = k / 2 < 31 ? ldexp(1.0, -41 + k / 2) : coarse[k / 2 - 31];
+      double step = k % 2 ? -mag : mag;
+      qk_point_t p = {mx + step * nx, my + step * ny};
+      size_t np = 0;
+      qk_region_locate_all(h->each, p, QK_BOUNDARY_OPEN, h->at_p, in->nr, &np);
+      int in_q = 0;
+      for (size_t i = 0; i < np && !in_q; i++) in_q = h->at_p[i] == q;
+      if (in_q != hole) continue; /* the other side of the edge */
+      uint32_t f_all = 0;
+      int outside =
+          qk_region_locate(h->all, p, QK_BOUNDARY_CLOSED, &f_all) == QK_OK && f_all == QK_NONE;
+      if (hole && outside && !*loose) *loose = 1, *loose_p = p;
+      /* in exactly the rings holding q (and q), strictly and boundaries included */
+      if (!in_face(h, q, hole, p, QK_BOUNDARY_OPEN) || !in_face(h, q, hole, p, QK_BOUNDARY_CLOSED))
+        continue;
+      if (outside) in->holes[2 * in->nh] = p.x, in->holes[2 * in->nh + 1] = p.y, in->nh++;
+      return outside; /* the face beside the arc: a point if it is not area */
+    }
+  }
+  return 0;
+}
+
+/* A hole point for every face a hole ring bounds from inside, found exactly with planar
+ * region layers: inside the ring and the rings that hold the whole of it (its shell, and
+ * what holds that), on no ring's boundary, inside no other ring (an island in the lake, a
+ * pond on the island: a point in the pond lay inside the hole ring and outside the area,
+ * and the lake was meshed), and outside the domain (even-odd over every ring, boundaries
+ * included). The ring bounds several faces when other rings touch it at two vertices or
+ * more (an island touching the lake's shore at two points cuts the lake in two): a point
+ * is looked for along each arc of the ring between vertices other rings share. Outer
+ * rings that other rings touch and some ring holds are looked at on their outer side (a
+ * pocket two islands in a lake enclose: a face no hole ring bounds, which was meshed as
+ * area). The layer of each ring stays in in->rings for mg_outside_rings. */
 static int hole_points(mg_input_t *in, const char *path, char *msg, size_t n) {
   size_t nh = 0;
   for (size_t q = 0; q < in->nr; q++) nh += in->ring_sign[q] < 0;
-  if (!nh && in->ring_start[in->nr] == in->nv) return 0; /* no hole, no vertex shared */
-  in->holes = malloc(2 * (nh + 1) * sizeof *in->holes);
+  if (!nh && !mg_rings_touch(in)) return 0;
+  /* (at most a point an edge) */
+  in->holes = malloc(2 * (in->ring_start[in->nr] + 1) * sizeof *in->holes);
   double *xy = NULL;
   size_t *rs = NULL, fs_all[2] = {0, in->nr};
-  size_t *fs_holes = malloc((in->nr + 1) * sizeof *fs_holes);
-  if (!in->holes || !fs_holes || closed_rings(in, &xy, &rs)) {
-    free(xy), free(rs), free(fs_holes);
+  size_t *fs_each = malloc((in->nr + 1) * sizeof *fs_each);
+  uint32_t *lists = malloc(3 * (in->nr + 1) * sizeof *lists);
+  unsigned char *uses = calloc(in->nv + 1, 1);
+  if (!in->holes || !fs_each || !lists || !uses || closed_rings(in, &xy, &rs)) {
+    free(xy), free(rs), free(fs_each), free(lists), free(uses);
     return mg_fail(msg, n, 3, "out of memory");
   }
   qk_region_options_t ro;
   qk_region_options_init(&ro);
   ro.planar = 1;
   qk_region_arrays_t all = {xy, rs, in->nr, fs_all, 1};
-  for (size_t q = 0; q <= in->nr; q++) fs_holes[q] = q; /* one feature per ring */
-  qk_region_arrays_t each = {xy, rs, in->nr, fs_holes, in->nr};
-  qk_region_t *l_all = NULL, *l_each = NULL;
+  for (size_t q = 0; q <= in->nr; q++) fs_each[q] = q; /* one feature per ring */
+  qk_region_arrays_t each = {xy, rs, in->nr, fs_each, in->nr};
+  qk_region_t *l_all = NULL;
   qk_error_t err;
   int rc = 0;
   if (qk_region_from_arrays(&all, &ro, &l_all, &err) != QK_OK ||
-      qk_region_from_arrays(&each, &ro, &l_each, &err) != QK_OK)
+      qk_region_from_arrays(&each, &ro, &in->rings, &err) != QK_OK)
     rc = mg_fail(msg, n, 1, "%s: the rings do not make a polygon layer: %s", path, err.message);
-  /* A hole point must lie in a face the hole ring bounds from inside: inside the ring and
-   * the rings that hold the whole of it (its shell, and what holds that), on no ring's
-   * boundary, and inside no other ring (an island in the lake, a pond on the island; a
-   * point in the pond lay inside the hole ring and outside the area, and the lake was
-   * meshed). So the rings holding the candidate, boundaries included or not, must be
-   * exactly those holding every vertex of the ring, and the ring. The ring bounds several
-   * faces when other rings touch it at two vertices or more (an island touching the
-   * lake's shore at two points cuts the lake in two): one point is looked for along each
-   * arc of the ring between vertices other rings share. */
-  uint32_t *held = malloc((in->nr + 1) * sizeof *held), *at_p = malloc((in->nr + 1) * sizeof *at_p);
-  uint32_t *at_v = malloc((in->nr + 1) * sizeof *at_v);
-  unsigned char *uses = calloc(in->nv + 1, 1);
-  /* (at most a point an edge) */
-  double *hp = realloc(in->holes, 2 * (in->ring_start[in->nr] + 1) * sizeof *hp);
-  if (hp) in->holes = hp;
-  if (!rc && (!held || !at_p || !at_v || !uses || !hp)) rc = mg_fail(msg, n, 3, "out of memory");
-  for (size_t i = 0; !rc && i < in->ring_start[in->nr]; i++)
+  hp_t h = {in, xy, rs, l_all, in->rings, lists, lists + in->nr + 1, lists + 2 * (in->nr + 1), 0};
+  for (size_t i = 0; i < in->ring_start[in->nr]; i++)
     if (uses[in->ring_v[i]] < 2) uses[in->ring_v[i]]++;
   for (size_t q = 0; !rc && q < in->nr; q++) {
-    /* A hole ring's faces inside it, and an outer ring's outside it where other rings touch
-     * it and some ring holds it (a pocket two islands in a lake enclose: a face no hole
-     * ring bounds, which was meshed as area). */
     int hole = in->ring_sign[q] < 0, found = 0;
-    size_t m = in->ring_start[q + 1] - in->ring_start[q], nheld = 0, cnt = 0;
-    size_t first = 0;
+    size_t m = in->ring_start[q + 1] - in->ring_start[q], first = 0;
     while (first < m && uses[in->ring_v[in->ring_start[q] + first]] < 2) first++;
     if (!hole && first == m) continue;
     if (first == m) first = 0;
-    /* the rings other than q holding every vertex of q (boundaries included; both lists
-     * in increasing order) */
-    for (size_t e = 0; e < m && (!e || nheld); e++) {
-      qk_point_t v = {xy[2 * (rs[q] + e)], xy[2 * (rs[q] + e) + 1]};
-      qk_region_locate_all(l_each, v, QK_BOUNDARY_CLOSED, at_v, in->nr, &cnt);
-      size_t k = 0;
-      for (size_t i = 0, j = 0; i < (e ? nheld : cnt); i++) {
-        uint32_t r = e ? held[i] : at_v[i];
-        while (j < cnt && at_v[j] < r) j++;
-        if (j < cnt && at_v[j] == r && r != q) held[k++] = r;
-      }
-      nheld = k;
-    }
-    /* A hole filled by another polygon, ring on ring (Lesotho in South Africa's hole, both
-     * meshed): a ring holding every vertex of q whose every vertex q holds bounds the same
-     * region, the rings crossing nowhere (the mesher refuses crossings); inside it the
-     * area goes on (even-odd), and the hole needs no point. It was refused as a hole
-     * "covered by another polygon". */
-    for (size_t i = 0; hole && i < nheld; i++) {
-      size_t r = held[i], np = 0;
-      int all = 1;
-      for (size_t v = rs[r]; v + 1 < rs[r + 1] && all; v++) {
-        qk_region_locate_all(l_each, (qk_point_t){xy[2 * v], xy[2 * v + 1]}, QK_BOUNDARY_CLOSED,
-                             at_p, in->nr, &np);
-        all = 0;
-        for (size_t j = 0; j < np && !all; j++) all = at_p[j] == q;
-      }
-      if (all) {
-        in->filled_holes++;
-        found = 1;
-        break;
-      }
+    rings_holding(&h, q);
+    if (hole && filled(&h, q)) {
+      in->filled_holes++;
+      continue;
     }
     /* (an outer ring held by no other ring has the outside of every ring beside it, or a
      * face that the lattice modes mesh as their outside: no point goes there) */
-    if (found || (!hole && !nheld)) continue;
+    if (!hole && !h.nheld) continue;
     int loose = 0;
     qk_point_t loose_p = {0, 0};
     /* The arcs: from each vertex another ring (or the ring again) shares to the next; one
@@ -933,51 +989,7 @@ static int hole_points(mg_input_t *in, const char *path, char *msg, size_t n) {
     for (size_t a0 = first, done = 0; done < m;) {
       size_t len = 1; /* edges in this arc: a0 .. a0 + len - 1 (mod m) */
       while (done + len < m && uses[in->ring_v[in->ring_start[q] + (a0 + len) % m]] < 2) len++;
-      /* Probes near the middle of an edge on either side, from 2^-41 of the edge's length
-       * out to 0.3 of it: the nearest that lies in the face beside the edge (in exactly the
-       * rings holding q, and q for a hole) tells whether that face is outside the area
-       * (then it is the point) or not. Nearest first, so that a probe does not jump over
-       * a ring lying close to the edge into another face (a sand bar along a lake's shore
-       * left a sliver of lake as land). Up to 4096 edges an arc are tried. */
-      static const double coarse[] = {1e-3, 1e-2, 0.1, 0.3};
-      int arc_done = 0;
-      for (size_t t = 0; t < len && !arc_done; t += len > 4096 ? (len + 4095) / 4096 : 1) {
-        size_t e = (a0 + t) % m;
-        const double *a = &xy[2 * (rs[q] + e)], *b = &xy[2 * (rs[q] + e + 1)];
-        double mx = a[0] + (b[0] - a[0]) / 2, my = a[1] + (b[1] - a[1]) / 2;
-        double nx = -(b[1] - a[1]), ny = b[0] - a[0];
-        for (int k = 0; k < 2 * (31 + 4) && !arc_done; k++) {
-          double mag = k / 2 < 31 ? ldexp(1.0, -41 + k / 2) : coarse[k / 2 - 31];
-          double step = k % 2 ? -mag : mag;
-          qk_point_t p = {mx + step * nx, my + step * ny};
-          size_t np = 0;
-          qk_region_locate_all(l_each, p, QK_BOUNDARY_OPEN, at_p, in->nr, &np);
-          int in_q = 0;
-          for (size_t i = 0; i < np && !in_q; i++) in_q = at_p[i] == q;
-          if (in_q != hole) continue; /* the other side of the edge */
-          uint32_t f_all = 0;
-          int outside =
-              qk_region_locate(l_all, p, QK_BOUNDARY_CLOSED, &f_all) == QK_OK && f_all == QK_NONE;
-          if (hole && outside && !loose) loose = 1, loose_p = p; /* (to fall back on) */
-          /* in exactly the rings holding q (and q), strictly and boundaries included */
-          int ok = 1;
-          for (int rule = 0; rule < 2 && ok; rule++) {
-            if (rule) qk_region_locate_all(l_each, p, QK_BOUNDARY_CLOSED, at_p, in->nr, &np);
-            ok = np == nheld + (size_t)hole;
-            for (size_t i = 0, j = 0; i < np && ok; i++) {
-              if (at_p[i] == q) continue;
-              while (j < nheld && held[j] < at_p[i]) j++;
-              ok = j < nheld && held[j] == at_p[i];
-            }
-          }
-          if (!ok) continue;
-          arc_done = 1; /* the face beside the arc: a point if it is not area */
-          if (outside) {
-            found = 1;
-            in->holes[2 * in->nh] = p.x, in->holes[2 * in->nh + 1] = p.y, in->nh++;
-          }
-        }
-      }
+      found |= arc_point(&h, q, hole, a0, len, &loose, &loose_p);
       done += len, a0 = (a0 + len) % m;
     }
     if (!hole) continue;
@@ -986,7 +998,7 @@ static int hole_points(mg_input_t *in, const char *path, char *msg, size_t n) {
      * before, lets the mesher say which. */
     if (!found && loose)
       found = 1, in->holes[2 * in->nh] = loose_p.x, in->holes[2 * in->nh + 1] = loose_p.y, in->nh++;
-    if (!found && !rc) {
+    if (!found) {
       size_t v = in->ring_v[in->ring_start[q]];
       char what[128], ptr[512], place[1024], note[512];
       mg_describe_ring(in, in->ring_src[q], SIZE_MAX, what, sizeof what, ptr, sizeof ptr);
@@ -999,8 +1011,8 @@ static int hole_points(mg_input_t *in, const char *path, char *msg, size_t n) {
                    mg_pole_note(in, note, sizeof note));
     }
   }
-  qk_region_free(l_all), qk_region_free(l_each);
-  free(xy), free(rs), free(fs_holes), free(held), free(at_p), free(at_v), free(uses);
+  qk_region_free(l_all);
+  free(xy), free(rs), free(fs_each), free(lists), free(uses);
   return rc;
 }
 

@@ -15,6 +15,7 @@
 
 #include <stddef.h>
 #include <stdint.h>
+#include "quadkit/region.h"
 
 /* What to read. */
 typedef struct mg_options {
@@ -48,6 +49,7 @@ typedef struct mg_input {
    * segment starts from (or lies on, for a segment split at a T-junction). */
   uint32_t *seg_feature, *seg_ring, *seg_point;
   uint32_t *ring_src; /* per ring above: its input ring */
+  qk_region_t *rings; /* each ring a feature (planar), when a ring has a hole or two touch */
   /* Input rings (the chosen features', in file order): feature, polygon within the
    * feature and ring within the polygon as the region reader numbers them, and where the
    * ring is in the text: a JSON Pointer at paths + in_path[q]. */
@@ -105,11 +107,15 @@ int mg_read(const char *path, const mg_options_t *o, mg_input_t *out, char *msg,
 
 void mg_free(mg_input_t *in);
 
+/* Whether two rings (or a ring and itself) share a vertex. */
+int mg_rings_touch(const mg_input_t *in);
+
 /*
  * Which of the n points pts (x, y pairs) lie inside none of in's rings, boundaries
- * included: out[i] = 1 for those. A bounded face of the mesh there (a gap that features
- * touching all round it enclose) is outside the area. 0, 1 (the rings make no layer) or 3
- * (out of memory).
+ * included: out[i] = 1 for those (all 0 when no ring has a hole or touches another: then
+ * there is no such face). A bounded face of the mesh there (a gap that features touching
+ * all round it enclose) is outside the area. Located in the layer mg_read kept (rings).
+ * Returns 0.
  */
 int mg_outside_rings(const mg_input_t *in, const double *pts, size_t n, unsigned char *out);
 
