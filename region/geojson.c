@@ -630,11 +630,44 @@ static size_t duplicate(const char *text, jkey_t *k, size_t n, size_t *first) {
   return dup;
 }
 
+/* The offset of the first byte of the string text[b, e) that RFC 8259 forbids there,
+ * or SIZE_MAX: a control character (U+0000 to U+001F must be escaped), or a byte that
+ * does not belong to well-formed UTF-8 (RFC 3629: no overlong forms, no surrogates,
+ * nothing past U+10FFFF). json-c's strict mode passes both into names and values. */
+static size_t string_bytes(const char *text, size_t b, size_t e) {
+  const unsigned char *s = (const unsigned char *)text;
+  for (size_t i = b; i < e;) {
+    unsigned c = s[i];
+    if (c >= 0x20 && c < 0x80) {
+      i++;
+      continue;
+    }
+    if (c < 0x20) return i;
+    /* the sequence's length and the range of its second byte */
+    size_t n;
+    unsigned lo = 0x80, hi = 0xBF;
+    if (c >= 0xC2 && c <= 0xDF)
+      n = 2;
+    else if (c >= 0xE0 && c <= 0xEF)
+      n = 3, lo = c == 0xE0 ? 0xA0 : 0x80, hi = c == 0xED ? 0x9F : 0xBF;
+    else if (c >= 0xF0 && c <= 0xF4)
+      n = 4, lo = c == 0xF0 ? 0x90 : 0x80, hi = c == 0xF4 ? 0x8F : 0xBF;
+    else
+      return i;
+    if (i + n > e) return i;
+    if (s[i + 1] < lo || s[i + 1] > hi) return i + 1;
+    for (size_t k = 2; k < n; k++)
+      if (s[i + k] < 0x80 || s[i + k] > 0xBF) return i + k;
+    i += n;
+  }
+  return SIZE_MAX;
+}
+
 /* What json-c's strict mode lets through but RFC 8259 does not, in a text it parsed: the
- * words NaN and Infinity, a decimal point without digits after it ("1."), and a name
- * twice in one object (RFC 8259 leaves the meaning to the parser; json-c, like GDAL and
- * Python, keeps the last, so a second "coordinates" silently replaced the first).
- * QK_OK, or a parse error at the offending byte. */
+ * words NaN and Infinity, raw control characters and bytes that are not UTF-8 in strings, a decimal
+ * point without digits after it ("1."), and a name twice in one object (RFC 8259 leaves the meaning
+ * to the parser; json-c, like GDAL and Python, keeps the last, so a second "coordinates" silently
+ * replaced the first). QK_OK, or a parse error at the offending byte. */
 static qk_status_t json_check(const qk_allocator_t *a, const char *text, size_t len,
                               qk_error_t *err) {
   enum { MAX_DEPTH = 512 }; /* (json-c parses 32 levels at most by default) */
@@ -663,6 +696,20 @@ static qk_status_t json_check(const qk_allocator_t *a, const char *text, size_t 
         i++;
       }
       size_t e = i, j = i + 1;
+      size_t bad = string_bytes(text, b, e);
+      if (bad != SIZE_MAX) {
+        unsigned char x = (unsigned char)text[bad];
+        where(text, bad, err);
+        st = x < 0x20 ? qk__region_fail(err, QK_ERR_PARSE, SIZE_MAX,
+                                        "malformed JSON: control character U+%04X inside a string "
+                                        "(RFC 8259: write it as an escape, \\u%04X)",
+                                        x, x)
+                      : qk__region_fail(err, QK_ERR_PARSE, SIZE_MAX,
+                                        "malformed JSON: byte 0x%02X inside a string is not UTF-8 "
+                                        "(RFC 8259 texts are UTF-8)",
+                                        x);
+        break;
+      }
       while (j < len && (text[j] == ' ' || text[j] == '\n' || text[j] == '\r' || text[j] == '\t'))
         j++;
       int name = j < len && text[j] == ':';
@@ -704,8 +751,9 @@ static qk_status_t json_check(const qk_allocator_t *a, const char *text, size_t 
         qk_error_t at;
         where(text, first - 1, &at);
         where(text, dup - 1, err);
-        size_t nl = 0; /* (the name as written, its first 60 bytes) */
-        while (dup + nl < len && text[dup + nl] != '"' && nl < 60) nl++;
+        size_t nl = 0; /* (the name as written, its first 60 bytes; past escaped quotes) */
+        while (dup + nl < len && text[dup + nl] != '"' && nl < 60)
+          nl += text[dup + nl] == '\\' && dup + nl + 1 < len ? 2 : 1;
         st = qk__region_fail(err, QK_ERR_PARSE, SIZE_MAX,
                              "duplicate name \"%.*s\" in one object (first at line %lu, column "
                              "%lu; JSON names must be unique here)",

@@ -544,6 +544,73 @@ static void test_geojson_locate(void **state) {
 #endif
 }
 
+/* Strings hold no raw control character and only well-formed UTF-8 (RFC 8259 sections 7
+ * and 8.1): json-c's strict mode passed both into names and property values, and from
+ * there into join's CSV. Each bad byte is named at its own line and column, in a
+ * collection (the streamed reading) and in a lone feature (the whole-text one). */
+static void test_geojson_string_bytes(void **state) {
+  (void)state;
+#ifndef QK_HAVE_JSONC
+  skip();
+#else
+  static const struct {
+    const char *s; /* the name property's value, as written in the file */
+    size_t at;     /* the offending byte's position in s, or SIZE_MAX: valid */
+    const char *words;
+  } cases[] = {
+      {"a\x01z", 1, "control character U+0001 inside a string"},
+      {"tab\there", 3, "control character U+0009"},
+      {"x\n", 1, "control character U+000A"},
+      {"\x1f", 0, "control character U+001F"},
+      {"ab\xff", 2, "byte 0xFF inside a string is not UTF-8"},
+      {"\xc3", 0, "byte 0xC3"},             /* cut short by the quote */
+      {"\xc0\xaf", 0, "byte 0xC0"},         /* overlong '/' */
+      {"\xe0\x80\xaf", 1, "byte 0x80"},     /* overlong, three bytes */
+      {"\xed\xa0\x80", 1, "byte 0xA0"},     /* a surrogate, U+D800 */
+      {"\xf4\x90\x80\x80", 1, "byte 0x90"}, /* past U+10FFFF */
+      {"\xe6\x97\x41", 2, "byte 0x41"},     /* a continuation missing */
+      {"\x80", 0, "byte 0x80"},             /* a lone continuation */
+      {"Z\xc3\xbcrich \xe6\x97\xa5 \xf0\x9f\x98\x80 \x7f", SIZE_MAX, NULL},
+      {"\xf4\x8f\xbf\xbf \xef\xbf\xbf \xed\x9f\xbf \xee\x80\x80", SIZE_MAX, NULL},
+      {"a\\u0001\\\"\\n", SIZE_MAX, NULL}, /* escaped, they are fine */
+  };
+  for (size_t i = 0; i < sizeof cases / sizeof *cases; i++)
+    for (int lone = 0; lone < 2; lone++) {
+      char text[512];
+      const char *head = lone ? "{\"type\": \"Feature\",\n \"properties\": {\"name\": \""
+                              : "{\"type\": \"FeatureCollection\", \"features\": [\n"
+                                "{\"type\": \"Feature\", \"properties\": {\"name\": \"";
+      snprintf(text, sizeof text, "%s%s\"},\n \"geometry\": " SQUARE "}%s", head, cases[i].s,
+               lone ? "" : "]}");
+      qk_region_t *r = NULL;
+      qk_error_t e;
+      qk_status_t st = read_text(text, &r, &e);
+      if (cases[i].at == SIZE_MAX) {
+        if (st) fail_msg("case %zu (lone %d): %s", i, lone, e.message);
+        qk_region_free(r);
+        continue;
+      }
+      unsigned long col =
+          (unsigned long)(strchr(head, '\n') ? strlen(strrchr(head, '\n') + 1) : strlen(head)) + 1 +
+          cases[i].at;
+      if (st != QK_ERR_PARSE || e.line != 2 || e.column != col ||
+          !strstr(e.message, cases[i].words))
+        fail_msg("case %zu (lone %d): got %s at %lu:%lu '%s'; want 2:%lu '%s'", i, lone,
+                 qk_strerror(st), e.line, e.column, e.message, col, cases[i].words);
+      assert_null(r);
+    }
+  /* A duplicate name holding an escaped quote is quoted whole in the message (it was cut
+   * at the escaped quote). */
+  static const char dup[] =
+      "{\"type\": \"Feature\", \"properties\": {\"a\\\"b\": 1, \"a\\\"b\": 2},"
+      " \"geometry\": " SQUARE "}";
+  qk_region_t *r = NULL;
+  qk_error_t e;
+  assert_int_equal(read_text(dup, &r, &e), QK_ERR_PARSE);
+  if (!strstr(e.message, "duplicate name \"a\\\"b\" in one object")) fail_msg("%s", e.message);
+#endif
+}
+
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_geojson_locate),
@@ -553,6 +620,7 @@ int main(void) {
       cmocka_unit_test(test_geojson_collection_and_strict),
       cmocka_unit_test(test_geojson_semantic_position),
       cmocka_unit_test(test_geojson_streamed),
+      cmocka_unit_test(test_geojson_string_bytes),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }
