@@ -147,6 +147,7 @@ void qk__mesh_angles(const qk_mesh_t *m, double bound_deg, double *min_deg, doub
    * limits, with the margin; 0 (never a pass) until cmax > 0 > cmin. Any doubt (zero, NaN)
    * takes the full computation, so the results are those of computing every corner. */
   double thr_hi = 0, thr_lo = 0, nthr_hi = -0.0;
+  double amin = INFINITY, amax = -INFINITY; /* (radians, the corners measured by atan2) */
   size_t exempt = 0;
   const double *const XY = m->xy;
   for (size_t t = 0; t < m->nt; t++) {
@@ -170,6 +171,13 @@ void qk__mesh_angles(const qk_mesh_t *m, double bound_deg, double *min_deg, doub
       double sq = dot * fabs(dot);
       if (sq > nthr_hi * ll && sq < thr_lo * ll) continue;
       double cs = -dot / sqrt(ll);
+      if (cs > 1 - 1e-6 || cs < -1 + 1e-6) {
+        /* Within 0.08 degrees of 0 or 180 the cosine tells angles apart poorly (below
+         * 1e-6 degrees it is 1, and the smallest angle read 0): such corners are measured
+         * by atan2 as well. One passed over above is beyond another by the margin. */
+        double a = atan2(fabs(u[0] * w[1] - u[1] * w[0]), -dot);
+        amin = a < amin ? a : amin, amax = a > amax ? a : amax;
+      }
       if (cs > cmax || cs < cmin) {
         cmax = cs > cmax ? cs : cmax, cmin = cs < cmin ? cs : cmin; /* NaN: neither, as fmax */
         double hi = (cmax < cb ? cmax : cb) * (1 - 1e-9), lo = cmin * (1 - 1e-9);
@@ -180,7 +188,8 @@ void qk__mesh_angles(const qk_mesh_t *m, double bound_deg, double *min_deg, doub
     }
   }
   const double deg = 180 / 3.14159265358979323846;
-  *min_deg = m->nt ? acos(fmin(cmax, 1)) * deg : 0;
-  *max_deg = m->nt ? acos(fmax(cmin, -1)) * deg : 0;
+  /* (the extreme corner was measured by atan2 when its cosine is that close to 1 or -1) */
+  *min_deg = m->nt ? (cmax > 1 - 1e-6 ? amin : acos(cmax)) * deg : 0;
+  *max_deg = m->nt ? (cmin < -1 + 1e-6 ? amax : acos(cmin)) * deg : 0;
   *below = exempt;
 }

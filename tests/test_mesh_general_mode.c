@@ -363,13 +363,15 @@ static void square(double *pts, double cx, double cy, double r, double rot, int 
 
 /* The angle statistics (smallest and largest angle, corners below the bound) against every
  * corner's cosine computed in full, with the roundings the output pass had before it
- * learnt to pass over corners on squares: the figures must be the same to the bit. */
+ * learnt to pass over corners on squares (and corners within 0.08 degrees of 0 or 180
+ * measured by atan2 besides): the figures must be the same to the bit. */
 static void check_angle_stats(const qk_mesh_t *m, const qk_mesh_options_t *o) {
   size_t nv, nt;
   const double *xy = qk_mesh_vertices(m, &nv);
   const uint32_t *tri = qk_mesh_triangles(m, &nt);
   double bound = o->min_angle_deg > 0 ? o->min_angle_deg : 20;
   double cb = cos(bound * (3.14159265358979323846 / 180)), cmax = -1, cmin = 1;
+  double amin = INFINITY, amax = -INFINITY;
   size_t below = 0;
   for (size_t t = 0; t < nt; t++) {
     double e[3][2], l[3];
@@ -380,16 +382,21 @@ static void check_angle_stats(const qk_mesh_t *m, const qk_mesh_options_t *o) {
     }
     for (int i = 0; i < 3; i++) {
       const double *u = e[(i + 2) % 3], *w = e[(i + 1) % 3];
-      double cs = -(u[0] * w[0] + u[1] * w[1]) / sqrt(l[(i + 2) % 3] * l[(i + 1) % 3]);
+      double dot = u[0] * w[0] + u[1] * w[1];
+      double cs = -dot / sqrt(l[(i + 2) % 3] * l[(i + 1) % 3]);
       cmax = cs > cmax ? cs : cmax, cmin = cs < cmin ? cs : cmin;
       below += cs > cb;
+      if (cs > 1 - 1e-6 || cs < -1 + 1e-6) { /* near 0 or 180 degrees: by atan2 */
+        double a = atan2(fabs(u[0] * w[1] - u[1] * w[0]), -dot);
+        amin = a < amin ? a : amin, amax = a > amax ? a : amax;
+      }
     }
   }
   qk_mesh_stats_t st;
   qk_mesh_stats(m, &st);
   const double deg = 180 / 3.14159265358979323846;
-  assert_true(st.min_angle_deg == (nt ? acos(fmin(cmax, 1)) * deg : 0));
-  assert_true(st.max_angle_deg == (nt ? acos(fmax(cmin, -1)) * deg : 0));
+  assert_true(st.min_angle_deg == (nt ? (cmax > 1 - 1e-6 ? amin : acos(cmax)) * deg : 0));
+  assert_true(st.max_angle_deg == (nt ? (cmin < -1 + 1e-6 ? amax : acos(cmin)) * deg : 0));
   assert_int_equal(st.exempt_angles, below);
 }
 
@@ -485,6 +492,49 @@ static void test_mesh_general_mode_small_angle(void **state) {
   qk_mesh_free(m);
   qk_poly_free(p);
   free(s);
+}
+
+/* Angles far below a degree: the smallest angle reported is the smallest corner's, from
+ * long double atan2 of every corner (it read 0 below 1e-6 degrees, through acos of a
+ * cosine rounded to 1), and the figures agree with the output pass's own. */
+static void test_mesh_general_mode_tiny_angle_stats(void **state) {
+  (void)state;
+  for (int k = 12; k <= 50; k += 6) {
+    shape_t *s = calloc(1, sizeof *s);
+    double box[8] = {-1, -1, 2, -1, 2, 1, -1, 1};
+    sh_ring(s, box, 4);
+    uint32_t o = sh_vertex(s, 0, 0), a = sh_vertex(s, 1, 0), b = sh_vertex(s, 0.5, ldexp(1, -k));
+    sh_seg(s, o, a), sh_seg(s, o, b);
+    qk_mesh_options_t opt = general_opts();
+    qk_poly_t *p = sh_poly(s, NULL);
+    qk_mesh_t *m = mesh_of(p, &opt);
+    size_t nv, nt;
+    const double *xy = qk_mesh_vertices(m, &nv);
+    const uint32_t *tri = qk_mesh_triangles(m, &nt);
+    long double lo = 10, hi = 0;
+    for (size_t t = 0; t < nt; t++)
+      for (int i = 0; i < 3; i++) {
+        const double *c = &xy[2 * tri[3 * t + i]], *d = &xy[2 * tri[3 * t + (i + 1) % 3]],
+                     *e = &xy[2 * tri[3 * t + (i + 2) % 3]];
+        long double ux = (long double)d[0] - c[0], uy = (long double)d[1] - c[1];
+        long double wx = (long double)e[0] - c[0], wy = (long double)e[1] - c[1];
+        long double ang = atan2l(fabsl(ux * wy - uy * wx), ux * wx + uy * wy);
+        lo = ang < lo ? ang : lo, hi = ang > hi ? ang : hi;
+      }
+    qk_mesh_stats_t st;
+    qk_mesh_stats(m, &st);
+    long double deg = 180 / 3.14159265358979323846264338327950288L;
+    double want = (double)(lo * deg), input = (double)(atanl(ldexpl(1, 1 - k)) * deg);
+    if (!(st.min_angle_deg > 0 && fabs(st.min_angle_deg - want) <= 1e-6 * want) ||
+        fabs(st.max_angle_deg - (double)(hi * deg)) > 1e-9)
+      fail_msg("2^-%d: smallest angle %.17g, largest %.17g; want %.17g, %.17g", k - 1,
+               st.min_angle_deg, st.max_angle_deg, want, (double)(hi * deg));
+    assert_true(st.min_angle_deg <= input * (1 + 1e-9));
+    check_angle_stats(m, &opt);
+    qk_mesh_free(m);
+    qk_poly_free(p);
+    free(s);
+  }
 }
 
 static double size_one(double x, double y, void *user) {
@@ -1471,6 +1521,7 @@ int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_mesh_general_mode_square_holes),
       cmocka_unit_test(test_mesh_general_mode_small_angle),
+      cmocka_unit_test(test_mesh_general_mode_tiny_angle_stats),
       cmocka_unit_test(test_mesh_general_mode_size_exact),
       cmocka_unit_test(test_mesh_general_mode_shells_near_60),
       cmocka_unit_test(test_mesh_general_mode_random),
