@@ -649,6 +649,12 @@ static qk_status_t enclosing_square(qk_box_t b, size_t n, qk_square_t *s) {
   s->side = fmax(b.xmax - b.xmin, b.ymax - b.ymin);
   if (!(s->side > 0)) s->side = 1; /* one distinct location: any positive side will do */
   if (!isfinite(s->side)) return QK_ERR_LIMIT; /* the extent overflows a double */
+  /* Near DBL_MAX the square ends at the maxima instead (points at 1e308 and 1.5e308 had a
+   * finite enclosing square, and were refused), reaching down past the minima. */
+  if (!isfinite(s->x + s->side))
+    for (s->x = b.xmax - s->side; s->x > b.xmin;) s->x = nextafter(s->x, -INFINITY);
+  if (!isfinite(s->y + s->side))
+    for (s->y = b.ymax - s->side; s->y > b.ymin;) s->y = nextafter(s->y, -INFINITY);
   /* Rounding in the subtraction may leave the maxima a hair outside; widen by ulps. */
   while (s->x + s->side < b.xmax || s->y + s->side < b.ymax) s->side = nextafter(s->side, INFINITY);
   if (!isfinite(s->x + s->side) || !isfinite(s->y + s->side)) return QK_ERR_LIMIT;

@@ -580,6 +580,29 @@ static void test_index_bad_input(void **state) {
   qk_point_t huge[2] = {{-1e308, 0}, {1e308, 0}};
   assert_int_equal(qk_tree_build(huge, 2, NULL, &t), QK_ERR_LIMIT);
   assert_null(t);
+  /* Near DBL_MAX an extent that fits has a square that fits: it ends at the maxima (it
+   * was placed at the minima, overflowed, and the points were refused). Every point is
+   * found again in the fitted root; brute force over the points for a range query. */
+  qk_point_t top[4] = {{1e308, 0}, {1.5e308, 1.7e308}, {DBL_MAX, 0}, {1.2e308, DBL_MAX}};
+  for (size_t n = 2; n <= 4; n++) {
+    assert_int_equal(qk_tree_build(top, n, NULL, &t), QK_OK);
+    qk_tree_stats_t ts;
+    qk_tree_stats(t, &ts);
+    assert_true(isfinite(ts.root.x + ts.root.side) && isfinite(ts.root.y + ts.root.side));
+    for (size_t i = 0; i < n; i++) {
+      assert_true(top[i].x >= ts.root.x && top[i].x <= ts.root.x + ts.root.side);
+      assert_true(top[i].y >= ts.root.y && top[i].y <= ts.root.y + ts.root.side);
+      qk_id_t ids[4];
+      size_t m = 0;
+      qk_box_t at = {top[i].x, top[i].y, top[i].x, top[i].y};
+      assert_int_equal(qk_query_range_list(t, at, ids, 4, &m), QK_OK);
+      assert_int_equal(m, 1);
+      assert_int_equal(ids[0], i);
+    }
+    assert_int_equal(qk_tree_check(t, NULL, 0), QK_OK);
+    qk_tree_free(t);
+  }
+  t = (qk_tree_t *)1;
   qk_tree_options_t o = unit_root(1);
   bad[1] = (qk_point_t){1.5, 0.5};
   assert_int_equal(qk_tree_build(bad, 2, &o, &t), QK_ERR_OUTSIDE);

@@ -338,13 +338,24 @@ static int knn_beyond(qrun_t *q, size_t i) {
  * were listed within -r 1e300, at distance inf. Within 2^510 every squared distance is
  * finite, and an r whose square overflows is farther than any point. */
 static int beyond_check(qrun_t *q) {
+  static const char why[] = "beyond 2^510 (about 3.4e153) on an axis, where squared distances "
+                            "overflow; scale the data by a power of two";
+  char msg[240];
+  for (int f = 0; f < 2; f++) /* the points first: a point names its own row */
+    for (size_t i = 0; i < q->n[f]; i++)
+      if (fmax(fabs(q->pts[f][i].x), fabs(q->pts[f][i].y)) > 0x1p510) {
+        snprintf(msg, sizeof msg, "%s (%.17g, %.17g) is %s", f ? "query" : "point", q->pts[f][i].x,
+                 q->pts[f][i].y, why);
+        return bad_row(q, f, i, msg);
+      }
   qk_tree_stats_t s;
   qk_tree_stats(q->tree, &s);
-  double m = fmax(fmax(fabs(s.root.x), fabs(s.root.y)),
-                  fmax(fabs(s.root.x + s.root.side), fabs(s.root.y + s.root.side)));
-  for (size_t i = 0; i < q->n[1]; i++)
-    if (fmax(m, fmax(fabs(q->pts[1][i].x), fabs(q->pts[1][i].y))) > 0x1p510)
-      return knn_beyond(q, i);
+  if (fmax(fmax(fabs(s.root.x), fabs(s.root.y)),
+           fmax(fabs(s.root.x + s.root.side), fabs(s.root.y + s.root.side))) > 0x1p510) {
+    /* (the points within, their enclosing square not: a point near 2^510) */
+    cli_error(q->a.cmd, "%s: the square enclosing the points reaches %s", q->a.files[0], why);
+    return CLI_BAD_INPUT;
+  }
   return CLI_OK;
 }
 

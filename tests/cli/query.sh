@@ -181,10 +181,10 @@ expect 1 "c.csv:1: no column named 'x'" -- "$cli" knn "$tmp/c.csv" "$tmp/cq.csv"
 expect 2 "unknown option '--xy'" -- "$cli" collide "$tmp/d.csv" --xy 1,2
 expect 2 "unknown option '--query-xy'" -- "$cli" range "$tmp/c.csv" "$tmp/b2.csv" --query-xy 1,2
 
-# kNN where squared distances would overflow: refused, naming the query, not answered wrong.
+# kNN where squared distances would overflow: refused, naming the point, not answered wrong.
 printf '3e154,0\n2e154,0\n' >"$tmp/bigp.csv"
 printf '0,0\n' >"$tmp/bigq.csv"
-expect 1 "bigq.csv: query 0 \\(0, 0\\): the query or the points reach beyond 2\\^510" -- \
+expect 1 "bigp.csv:1: point \\(3.0000000000000003e\\+154, 0\\) is beyond 2\\^510" -- \
   "$cli" knn "$tmp/bigp.csv" "$tmp/bigq.csv" -k 1
 printf '3e150,0\n2e150,0\n' >"$tmp/bigp.csv"
 expect 0 '^0,1,1,2e\+150$' -- "$cli" knn "$tmp/bigp.csv" "$tmp/bigq.csv" -k 1

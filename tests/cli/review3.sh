@@ -125,7 +125,7 @@ expect 0 '0: one per core' -- "$cli" join --help
 # ---- knn beyond 2^510: the error before the header (it came after the header and rows) -
 printf 'x,y\n0,0\n1,1\n' >"$tmp/sm.csv"
 printf 'x,y\n0,0\n1e200,0\n' >"$tmp/far.csv"
-expect 1 'far.csv: query 1 \(9.9999999999999997e\+199, 0\): the query or the points reach beyond 2\^510' -- "$cli" knn "$tmp/sm.csv" "$tmp/far.csv" -k 1
+expect 1 'far.csv:3: query \(9.9999999999999997e\+199, 0\) is beyond 2\^510' -- "$cli" knn "$tmp/sm.csv" "$tmp/far.csv" -k 1
 same_text "knn beyond 2^510: nothing on stdout" "$("$cli" knn "$tmp/sm.csv" "$tmp/far.csv" -k 1 2>/dev/null)" ""
 printf 'x,y\n1e300,-1e300\n1e300,-1e300\n' >"$tmp/farp.csv"
 same_text "knn, points beyond 2^510: nothing on stdout" "$("$cli" knn "$tmp/farp.csv" "$tmp/sm.csv" -k 1 2>/dev/null)" ""
