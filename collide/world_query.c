@@ -1348,7 +1348,7 @@ static void batch_run(unsigned k, unsigned share, void *ud) {
   size_t lo = (size_t)k * b->chunk, hi = lo + b->chunk < b->n ? lo + b->chunk : b->n;
   for (size_t i = lo; i < hi; i++) {
     qk_status_t st = qk_world_raycast(b->w, b->from[i], b->to[i], &b->hits[i]);
-    if (st != QK_OK) b->st[k % 64] = st;
+    if (st != QK_OK && b->st[k % 64] == QK_OK) b->st[k % 64] = st; /* its first */
   }
 }
 
@@ -1573,7 +1573,7 @@ static void kbatch_run(unsigned j, unsigned share, void *ud) {
     size_t c = 0;
     qk_world_hit_t *o = b->out + i * b->k;
     qk_status_t st = qk_world_knn(b->w, b->ps[i], b->k, o, &c);
-    if (st != QK_OK) b->st[j % 64] = st, c = 0;
+    if (st != QK_OK) c = 0, b->st[j % 64] = b->st[j % 64] ? b->st[j % 64] : st;
     /* the block's unused slots, as qk_query_knn_batch fills them */
     for (size_t s = c; s < b->k; s++) o[s] = (qk_world_hit_t){QK_HANDLE_NONE, INFINITY};
     if (b->counts) b->counts[i] = c;

@@ -4140,6 +4140,39 @@ static void test_world_knn_batch_layout(void **s) {
   memset(out, 0x5a, sizeof out);
   assert_int_equal(qk_world_knn_batch(w, ps + 2, 1, K, out, NULL), QK_OK);
   assert_true(out[0].h == h[2] && out[0].t == 1 && out[3].h == QK_HANDLE_NONE);
+  /* Batches report their first error, in the order of the points (issue 11), on one
+   * thread and on several: a NaN then a point beyond 2^100, and the other way round, in
+   * one chunk of 256 and in chunks of different threads; they reported the last. */
+  enum { N = 2000 };
+  qk_point_t *many = malloc(N * sizeof *many), *to = malloc(N * sizeof *to);
+  qk_world_hit_t *hits = malloc(N * K * sizeof *hits);
+  assert_non_null(many), assert_non_null(to), assert_non_null(hits);
+  const size_t at[3][2] = {{1, 3}, {5, 1500}, {1700, 1999}};
+  for (unsigned threads = 1; threads <= 2; threads++) {
+    qk_world_options_t wo;
+    qk_world_options_init(&wo);
+    wo.threads = threads;
+    qk_world_t *wt;
+    assert_int_equal(qk_world_new(&wo, &wt), QK_OK);
+    for (int i = 0; i < 3; i++)
+      assert_int_equal(qk_world_add(wt, &(qk_shape_t){QK_SHAPE_POINT, 10.0 * i, 0, 0, 0}, 0, &h[i]),
+                       QK_OK);
+    assert_int_equal(qk_world_update(wt), QK_OK);
+    for (int c = 0; c < 3; c++)
+      for (int order = 0; order < 2; order++) {
+        for (size_t i = 0; i < N; i++)
+          many[i] = (qk_point_t){(double)i, 1}, to[i] = (qk_point_t){(double)i, -1};
+        size_t a = at[c][order], b = at[c][1 - order];
+        many[a].x = NAN, many[b].y = 1e200; /* NaN first when order is 0 */
+        qk_status_t want_st = a < b ? QK_ERR_NONFINITE : QK_ERR_LIMIT;
+        if (qk_world_knn_batch(wt, many, N, K, hits, NULL) != want_st ||
+            qk_world_raycast_batch(wt, many, to, N, hits) != want_st)
+          fail_msg("threads %u, errors at %zu (NaN) and %zu (1e200): not the first's status",
+                   threads, a, b);
+      }
+    qk_world_free(wt);
+  }
+  free(many), free(to), free(hits);
   qk_world_free(w);
 }
 

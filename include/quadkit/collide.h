@@ -482,6 +482,8 @@ qk_status_t qk_world_raycast(const qk_world_t *w, qk_point_t from, qk_point_t to
 
 /**
  * First hits of n segments, on the world's threads. \param [out] hits n hits.
+ * \return QK_OK, QK_ERR_INVALID (a NULL array), or the first error of a segment, in
+ *         order (its hit is then {QK_HANDLE_NONE, INFINITY}; the others are cast).
  */
 qk_status_t qk_world_raycast_batch(const qk_world_t *w, const qk_point_t *from,
                                    const qk_point_t *to, size_t n, qk_world_hit_t *hits);
