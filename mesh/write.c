@@ -83,14 +83,6 @@ qk_status_t qk_mesh_write_ele(const qk_mesh_t *m, FILE *f, unsigned first) {
 
 /* Which component ids occur, and how many triangles each has. Returns the number of
  * distinct ids; `count` has room for stats.components + 1 entries. */
-static size_t used_components(const qk_mesh_t *m, size_t *count) {
-  size_t nc = m->stats.components + 1, used = 0;
-  memset(count, 0, nc * sizeof *count);
-  for (size_t i = 0; i < m->nt; i++) count[m->comp[i]]++;
-  for (size_t c = 0; c < nc; c++) used += count[c] != 0;
-  return used;
-}
-
 static int i32_cmp(const void *a, const void *b) {
   int32_t x = *(const int32_t *)a, y = *(const int32_t *)b;
   return (x > y) - (x < y);
@@ -106,57 +98,129 @@ static size_t distinct_marks(const qk_mesh_t *m, int32_t *marks) {
   return k;
 }
 
-/* The physical names: one per marker (dimension 1), one per component (dimension 2). */
-static void msh_names(const qk_mesh_t *m, FILE *f, const size_t *count, size_t nc, size_t used,
-                      const int32_t *marks, size_t nm) {
-  fprintf(f, "$PhysicalNames\n%zu\n", used + nm);
-  for (size_t k = 0; k < nm; k++) fprintf(f, "1 %zu \"marker_%ld\"\n", k + 1, (long)marks[k]);
-  for (size_t c = 0; c < nc; c++) {
-    if (!count[c]) continue;
-    if (c == 0)
-      fprintf(f, "2 1 \"outside\"\n");
+/* A surface entity of the .msh: the triangles of one component with one regional
+ * attribute (one per component when the mesh has no attributes). */
+typedef struct msh_ent {
+  uint32_t comp;
+  double attr;
+  size_t count;
+} msh_ent_t;
+
+static int ent_cmp(const void *a, const void *b) {
+  const msh_ent_t *x = a, *y = b;
+  if (x->comp != y->comp) return x->comp < y->comp ? -1 : 1;
+  return (x->attr > y->attr) - (x->attr < y->attr);
+}
+
+static int dbl_cmp(const void *a, const void *b) {
+  double x = *(const double *)a, y = *(const double *)b;
+  return (x > y) - (x < y);
+}
+
+/* The entity of triangle i: its place in ent[0, ne) (sorted, distinct). */
+static size_t ent_of(const qk_mesh_t *m, const msh_ent_t *ent, size_t ne, size_t i) {
+  msh_ent_t key = {m->comp[i], m->attr ? m->attr[i] : 0, 0};
+  size_t lo = 0, hi = ne;
+  while (hi - lo > 1) {
+    size_t mid = lo + (hi - lo) / 2;
+    if (ent_cmp(&ent[mid], &key) <= 0)
+      lo = mid;
     else
-      fprintf(f, "2 %zu \"component_%zu\"\n", c + 1, c);
+      hi = mid;
   }
-  fprintf(f, "$EndPhysicalNames\n");
-  (void)m;
+  return lo;
+}
+
+/* The place of v in the sorted distinct values r[0, nr). */
+static size_t dbl_at(const double *r, size_t nr, double v) {
+  size_t lo = 0, hi = nr;
+  while (hi - lo > 1) {
+    size_t mid = lo + (hi - lo) / 2;
+    if (r[mid] <= v)
+      lo = mid;
+    else
+      hi = mid;
+  }
+  return lo;
 }
 
 /*
- * gmsh 4.1: every component id present becomes a surface entity (tag id + 1) carrying
- * a physical group of the same tag, and every boundary marker of the output segments a
- * curve entity (tag k + 1 for the k-th smallest marker) carrying a physical group of
- * line elements; all nodes are listed in one block on the first surface entity, which
- * gmsh accepts for a mesh without geometry.
+ * gmsh 4.1: the triangles of each component present, and with regional attributes of
+ * each (component, attribute) pair present, form a surface entity (tag k + 1 for the k-th
+ * in that order) carrying the physical group of its component (tag id + 1: `outside`
+ * for 0, `component_K`) and, with attributes, the group of its region (`region_A`, tags
+ * after the components': one group per attribute value present). Every boundary marker
+ * of the output segments is a curve entity (tag k + 1 for the k-th smallest marker)
+ * carrying a physical group of line elements (`marker_M`). All nodes are listed in one
+ * block on the first surface entity, which gmsh accepts for a mesh without geometry.
  */
 qk_status_t qk_mesh_write_msh(const qk_mesh_t *m, FILE *f) {
   if (!m || !f) return QK_ERR_INVALID;
-  size_t nc = m->stats.components + 1;
-  size_t *count = qk__realloc(&m->alloc, NULL, 0, nc * sizeof *count);
+  size_t nc = m->stats.components + 1, cap = m->nt + 1;
+  msh_ent_t *ent = qk__realloc(&m->alloc, NULL, 0, cap * sizeof *ent);
+  double *reg = qk__realloc(&m->alloc, NULL, 0, cap * sizeof *reg);
   int32_t *marks = qk__realloc(&m->alloc, NULL, 0, (m->noseg + 1) * sizeof *marks);
-  if (!count || !marks) {
-    qk__free(&m->alloc, count, nc * sizeof *count);
-    qk__free(&m->alloc, marks, (m->noseg + 1) * sizeof *marks);
-    return QK_ERR_NOMEM;
+  uint32_t *eid = qk__realloc(&m->alloc, NULL, 0, cap * sizeof *eid);
+  uint32_t *order = qk__realloc(&m->alloc, NULL, 0, cap * sizeof *order);
+  size_t *at = qk__realloc(&m->alloc, NULL, 0, (cap + 1) * sizeof *at);
+  qk_status_t st = QK_OK;
+  if (!ent || !reg || !marks || !eid || !order || !at) {
+    st = QK_ERR_NOMEM;
+    goto done;
   }
-  size_t used = used_components(m, count), nm = m->has_marks ? distinct_marks(m, marks) : 0;
+  /* The entities, sorted and distinct, with their triangle counts; the regions. */
+  for (size_t i = 0; i < m->nt; i++) ent[i] = (msh_ent_t){m->comp[i], m->attr ? m->attr[i] : 0, 0};
+  qsort(ent, m->nt, sizeof *ent, ent_cmp);
+  size_t ne = 0, nr = 0;
+  for (size_t i = 0; i < m->nt; i++)
+    if (!ne || ent_cmp(&ent[ne - 1], &ent[i])) ent[ne++] = ent[i];
+  /* The triangles in order of their entities, each entity's in triangle order (a
+   * counting sort: eid[i] is triangle i's entity, at[k] where entity k's run begins). */
+  memset(at, 0, (ne + 1) * sizeof *at);
+  for (size_t i = 0; i < m->nt; i++) eid[i] = (uint32_t)ent_of(m, ent, ne, i), at[eid[i] + 1]++;
+  for (size_t k = 0; k < ne; k++) ent[k].count = at[k + 1], at[k + 1] += at[k];
+  for (size_t i = 0; i < m->nt; i++) order[at[eid[i]]++] = (uint32_t)i;
+  if (m->attr) {
+    for (size_t k = 0; k < ne; k++) reg[k] = ent[k].attr;
+    qsort(reg, ne, sizeof *reg, dbl_cmp);
+    for (size_t k = 0; k < ne; k++)
+      if (!nr || reg[nr - 1] != reg[k]) reg[nr++] = reg[k];
+  }
+  size_t ncomp = 0; /* components present */
+  for (size_t k = 0; k < ne; k++) ncomp += !k || ent[k].comp != ent[k - 1].comp;
+  size_t nm = m->has_marks ? distinct_marks(m, marks) : 0;
   size_t nseg = m->has_marks ? m->noseg : 0;
   double ext = ldexp((double)m->size, -m->lat.f);
   double x0 = m->lat.x0 + 0.0, y0 = m->lat.y0 + 0.0, x1 = x0 + ext, y1 = y0 + ext;
   fprintf(f, "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n");
-  msh_names(m, f, count, nc, used, marks, nm);
-  fprintf(f, "$Entities\n0 %zu %zu 0\n", nm, used);
+  fprintf(f, "$PhysicalNames\n%zu\n", nm + ncomp + nr);
+  for (size_t k = 0; k < nm; k++) fprintf(f, "1 %zu \"marker_%ld\"\n", k + 1, (long)marks[k]);
+  for (size_t k = 0; k < ne; k++) {
+    if (k && ent[k].comp == ent[k - 1].comp) continue;
+    if (ent[k].comp == 0)
+      fprintf(f, "2 1 \"outside\"\n");
+    else
+      fprintf(f, "2 %lu \"component_%lu\"\n", (unsigned long)ent[k].comp + 1,
+              (unsigned long)ent[k].comp);
+  }
+  char num[QK__NUMFMT_MAX + 1];
+  for (size_t r = 0; r < nr; r++) {
+    num[qk__fmt_g17(reg[r], num)] = '\0';
+    fprintf(f, "2 %zu \"region_%s\"\n", nc + 1 + r, num);
+  }
+  fprintf(f, "$EndPhysicalNames\n");
+  fprintf(f, "$Entities\n0 %zu %zu 0\n", nm, ne);
   for (size_t k = 0; k < nm; k++)
     fprintf(f, "%zu %.17g %.17g 0 %.17g %.17g 0 1 %zu 0\n", k + 1, x0, y0, x1, y1, k + 1);
-  size_t first_tag = 0;
-  for (size_t c = 0; c < nc; c++) {
-    if (!count[c]) continue;
-    if (!first_tag) first_tag = c + 1;
-    fprintf(f, "%zu %.17g %.17g 0 %.17g %.17g 0 1 %zu 0\n", c + 1, x0, y0, x1, y1, c + 1);
+  for (size_t k = 0; k < ne; k++) {
+    fprintf(f, "%zu %.17g %.17g 0 %.17g %.17g 0 %d %lu", k + 1, x0, y0, x1, y1, m->attr ? 2 : 1,
+            (unsigned long)ent[k].comp + 1);
+    if (m->attr) fprintf(f, " %zu", nc + 1 + dbl_at(reg, nr, ent[k].attr));
+    fprintf(f, " 0\n");
   }
   fprintf(f, "$EndEntities\n$Nodes\n%d %zu %d %zu\n", m->nv ? 1 : 0, m->nv, m->nv ? 1 : 0, m->nv);
   if (m->nv) {
-    fprintf(f, "2 %zu 0 %zu\n", first_tag, m->nv);
+    fprintf(f, "2 %d 0 %zu\n", ne ? 1 : 0, m->nv);
     qk__wbuf_t w;
     w.f = f, w.n = 0;
     for (size_t i = 0; i < m->nv; i++) qk__wbuf_u(&w, i + 1), qk__wbuf_c(&w, '\n');
@@ -166,9 +230,9 @@ qk_status_t qk_mesh_write_msh(const qk_mesh_t *m, FILE *f) {
     }
     qk__wbuf_flush(&w);
   }
-  size_t ne = m->nt + nseg;
-  fprintf(f, "$EndNodes\n$Elements\n%zu %zu %d %zu\n", used + nm, ne, ne ? 1 : 0, ne);
-  /* Element tags are numbered block by block, so they run 1..ne in block order. */
+  size_t nel = m->nt + nseg;
+  fprintf(f, "$EndNodes\n$Elements\n%zu %zu %d %zu\n", ne + nm, nel, nel ? 1 : 0, nel);
+  /* Element tags are numbered block by block, so they run 1..nel in block order. */
   size_t tag = 1;
   for (size_t k = 0; k < nm; k++) {
     size_t n = 0;
@@ -179,14 +243,12 @@ qk_status_t qk_mesh_write_msh(const qk_mesh_t *m, FILE *f) {
         fprintf(f, "%zu %lu %lu\n", tag++, (unsigned long)m->oseg[i].a + 1,
                 (unsigned long)m->oseg[i].b + 1);
   }
-  for (size_t c = 0; c < nc; c++) {
-    if (!count[c]) continue;
-    fprintf(f, "2 %zu 2 %zu\n", c + 1, count[c]);
+  for (size_t k = 0, j = 0; k < ne; k++) {
+    fprintf(f, "2 %zu 2 %zu\n", k + 1, ent[k].count);
     qk__wbuf_t w;
     w.f = f, w.n = 0;
-    for (size_t i = 0; i < m->nt; i++) {
-      if (m->comp[i] != c) continue;
-      const uint32_t *t = &m->tri[3 * i];
+    for (size_t e = j + ent[k].count; j < e; j++) {
+      const uint32_t *t = &m->tri[3 * (size_t)order[j]];
       qk__wbuf_u(&w, tag++);
       for (int j = 0; j < 3; j++) qk__wbuf_c(&w, ' '), qk__wbuf_u(&w, (uint64_t)t[j] + 1);
       qk__wbuf_c(&w, '\n');
@@ -194,9 +256,15 @@ qk_status_t qk_mesh_write_msh(const qk_mesh_t *m, FILE *f) {
     qk__wbuf_flush(&w);
   }
   fprintf(f, "$EndElements\n");
-  qk__free(&m->alloc, count, nc * sizeof *count);
+  st = io_status(f);
+done:
+  qk__free(&m->alloc, ent, cap * sizeof *ent);
+  qk__free(&m->alloc, reg, cap * sizeof *reg);
   qk__free(&m->alloc, marks, (m->noseg + 1) * sizeof *marks);
-  return io_status(f);
+  qk__free(&m->alloc, eid, cap * sizeof *eid);
+  qk__free(&m->alloc, order, cap * sizeof *order);
+  qk__free(&m->alloc, at, (cap + 1) * sizeof *at);
+  return st;
 }
 
 qk_status_t qk_mesh_write_vtu(const qk_mesh_t *m, FILE *f) {

@@ -1013,6 +1013,143 @@ static void test_mesh_general_mode_markers(void **state) {
   free(s);
 }
 
+/* The .msh read back: every triangle is one element, in a surface entity whose physical
+ * groups are named for its component and, with regional attributes, for its region
+ * (issue 12: a group per region; there were only components); every output segment is a
+ * line element in the curve entity of its marker's group. */
+static void check_msh(const qk_mesh_t *m) {
+  FILE *f = tmpfile();
+  assert_non_null(f);
+  assert_int_equal(qk_mesh_write_msh(m, f), QK_OK);
+  rewind(f);
+  size_t nv, nt, na = 0, no;
+  qk_mesh_vertices(m, &nv);
+  const uint32_t *tri = qk_mesh_triangles(m, &nt);
+  const uint32_t *comp = qk_mesh_triangle_components(m, &nt);
+  const double *attr = qk_mesh_triangle_attributes(m, &na);
+  assert_int_equal(qk_mesh_segments(m, NULL, NULL, NULL, 0, &no), QK_OK);
+  uint32_t *ab = malloc((2 * no + 1) * sizeof *ab);
+  int32_t *mk = malloc((no + 1) * sizeof *mk);
+  assert_int_equal(qk_mesh_segments(m, ab, NULL, mk, no, &no), QK_OK);
+  char line[256], names[64][48];
+  int ndim[64];
+  memset(names, 0, sizeof names);
+  size_t nn = 0, ent_phys[64][3] = {{0}}, nent[4] = {0};
+  unsigned char *seen = calloc(nt + no + 1, 1);
+  while (fgets(line, sizeof line, f)) {
+    if (!strcmp(line, "$PhysicalNames\n")) {
+      assert_non_null(fgets(line, sizeof line, f));
+      nn = strtoul(line, NULL, 10);
+      assert_true(nn < 64);
+      for (size_t i = 0; i < nn; i++) {
+        int d;
+        size_t tag;
+        char nm[48];
+        assert_non_null(fgets(line, sizeof line, f));
+        assert_int_equal(sscanf(line, "%d %zu \"%47[^\"]\"", &d, &tag, nm), 3);
+        assert_true(tag < 32);
+        snprintf(names[tag + (d == 2 ? 32 : 0)], sizeof names[0], "%s", nm);
+        ndim[tag + (d == 2 ? 32 : 0)] = d;
+      }
+    } else if (!strcmp(line, "$Entities\n")) {
+      assert_non_null(fgets(line, sizeof line, f));
+      assert_int_equal(sscanf(line, "%zu %zu %zu %zu", &nent[0], &nent[1], &nent[2], &nent[3]), 4);
+      for (int d = 1; d <= 2; d++)
+        for (size_t i = 0; i < nent[d]; i++) {
+          size_t tag, np, t1 = 0, t2 = 0;
+          double b[6];
+          assert_non_null(fgets(line, sizeof line, f));
+          int got = sscanf(line, "%zu %lf %lf %lf %lf %lf %lf %zu %zu %zu", &tag, &b[0], &b[1],
+                           &b[2], &b[3], &b[4], &b[5], &np, &t1, &t2);
+          assert_true(got >= 9 && tag < 32 && np >= 1 && np <= 2);
+          ent_phys[tag + (d == 2 ? 32 : 0)][0] = np;
+          ent_phys[tag + (d == 2 ? 32 : 0)][1] = t1;
+          ent_phys[tag + (d == 2 ? 32 : 0)][2] = np == 2 ? t2 : 0;
+        }
+    } else if (!strcmp(line, "$Elements\n")) {
+      size_t nb, ne, lo, hi;
+      assert_non_null(fgets(line, sizeof line, f));
+      assert_int_equal(sscanf(line, "%zu %zu %zu %zu", &nb, &ne, &lo, &hi), 4);
+      if (!nent[1]) no = 0; /* (no markers: no curves, no line elements) */
+      assert_int_equal(ne, nt + no);
+      for (size_t b = 0; b < nb; b++) {
+        int d, type;
+        size_t etag, n;
+        assert_non_null(fgets(line, sizeof line, f));
+        assert_int_equal(sscanf(line, "%d %zu %d %zu", &d, &etag, &type, &n), 4);
+        const size_t *ph = ent_phys[etag + (d == 2 ? 32 : 0)];
+        for (size_t i = 0; i < n; i++) {
+          unsigned long id, v[3];
+          assert_non_null(fgets(line, sizeof line, f));
+          if (d == 1) {
+            assert_int_equal(sscanf(line, "%lu %lu %lu", &id, &v[0], &v[1]), 3);
+            size_t k = 0;
+            while (k < no && !(ab[2 * k] + 1 == v[0] && ab[2 * k + 1] + 1 == v[1])) k++;
+            assert_true(k < no && !seen[nt + k]);
+            seen[nt + k] = 1;
+            char want[48];
+            snprintf(want, sizeof want, "marker_%d", (int)mk[k]);
+            assert_string_equal(names[ph[1]], want);
+            assert_int_equal(ndim[ph[1]], 1);
+            continue;
+          }
+          assert_int_equal(sscanf(line, "%lu %lu %lu %lu", &id, &v[0], &v[1], &v[2]), 4);
+          size_t t = 0;
+          while (t < nt && !(tri[3 * t] + 1 == v[0] && tri[3 * t + 1] + 1 == v[1] &&
+                             tri[3 * t + 2] + 1 == v[2]))
+            t++;
+          assert_true(t < nt && !seen[t]);
+          seen[t] = 1;
+          char want[48];
+          if (comp[t])
+            snprintf(want, sizeof want, "component_%u", (unsigned)comp[t]);
+          else
+            snprintf(want, sizeof want, "outside");
+          assert_string_equal(names[32 + ph[1]], want);
+          assert_int_equal(ndim[32 + ph[1]], 2);
+          assert_int_equal(ph[0], attr ? 2 : 1);
+          if (attr) {
+            snprintf(want, sizeof want, "region_%.17g", attr[t]);
+            assert_string_equal(names[32 + ph[2]], want);
+          }
+        }
+      }
+    }
+  }
+  for (size_t i = 0; i < nt + no; i++) assert_true(seen[i]);
+  free(seen), free(ab), free(mk);
+  fclose(f);
+}
+
+/* Three faces with regional attributes 7, 9, 7 (two components share a region) and a
+ * marker on each segment: the .msh has one group per component and per region. */
+static void test_mesh_general_mode_msh_groups(void **state) {
+  (void)state;
+  shape_t *s = calloc(1, sizeof *s);
+  double pts[16] = {0, 0, 2, 0, 4, 0, 6, 0, 6, 3, 4, 3, 2, 3, 0, 3};
+  sh_ring(s, pts, 8);
+  sh_seg(s, 1, 6), sh_seg(s, 2, 5);
+  qk_poly_t *p = sh_poly(s, NULL);
+  double reg[9] = {1, 1.5, 7, 3, 1.5, 9, 5, 1.5, 7};
+  int32_t sm[10] = {1, 1, 1, 2, 3, 3, 3, 4, 5, 5};
+  qk_mesh_error_t err;
+  assert_int_equal(qk_poly_set_regions(p, reg, 3, &err), QK_OK);
+  assert_int_equal(qk_poly_set_markers(p, NULL, sm, &err), QK_OK);
+  qk_mesh_options_t o = general_opts();
+  o.max_size = 1;
+  qk_mesh_t *m = mesh_of(p, &o);
+  check_msh(m);
+  qk_mesh_free(m);
+  /* and without regions or markers, the groups of the components alone */
+  assert_int_equal(qk_poly_set_regions(p, NULL, 0, &err), QK_OK);
+  assert_int_equal(qk_poly_set_markers(p, NULL, NULL, &err), QK_OK);
+  m = mesh_of(p, &o);
+  check_msh(m);
+  qk_mesh_free(m);
+  qk_poly_free(p);
+  free(s);
+}
+
 /* Refusals: the precision budget, crossings, a vertex on a segment, duplicates. */
 static void test_mesh_general_mode_refusals(void **state) {
   (void)state;
@@ -1522,6 +1659,7 @@ int main(void) {
       cmocka_unit_test(test_mesh_general_mode_square_holes),
       cmocka_unit_test(test_mesh_general_mode_small_angle),
       cmocka_unit_test(test_mesh_general_mode_tiny_angle_stats),
+      cmocka_unit_test(test_mesh_general_mode_msh_groups),
       cmocka_unit_test(test_mesh_general_mode_size_exact),
       cmocka_unit_test(test_mesh_general_mode_shells_near_60),
       cmocka_unit_test(test_mesh_general_mode_random),
