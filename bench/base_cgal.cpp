@@ -73,8 +73,6 @@ size_t count_unbalanced(Quadtree &t) {
 } // namespace
 
 size_t cgal_orthtree_build_leaves(const std::vector<Pt> &pts, int max_depth, int bucket) {
-  // The points are converted before the clock starts (see main.cpp): this function
-  // is timed as a whole, so the conversion is kept to a plain copy of two doubles.
   std::vector<P2> v;
   v.reserve(pts.size());
   for (const Pt &p : pts) v.emplace_back(p.x, p.y);
@@ -83,6 +81,30 @@ size_t cgal_orthtree_build_leaves(const std::vector<Pt> &pts, int max_depth, int
   t.refine((size_t)max_depth, (size_t)bucket);
   return count_leaves(t);
 }
+
+struct CgalPoints {
+  std::vector<P2> v;
+};
+
+CgalPoints *cgal_points_new(const std::vector<Pt> &pts) {
+  CgalPoints *c = new CgalPoints;
+  c->v.reserve(pts.size());
+  cgal_points_reset(c, pts);
+  return c;
+}
+
+void cgal_points_reset(CgalPoints *c, const std::vector<Pt> &pts) {
+  c->v.clear();
+  for (const Pt &p : pts) c->v.emplace_back(p.x, p.y);
+}
+
+void cgal_orthtree_build(CgalPoints *c, int max_depth, int bucket) {
+  // As cgal_orthtree_build_leaves, on points converted beforehand and without the count.
+  Quadtree t(c->v, CGAL::Identity_property_map<P2>(), 1.0);
+  t.refine((size_t)max_depth, (size_t)bucket);
+}
+
+void cgal_points_free(CgalPoints *c) { delete c; }
 
 bool cgal_grade(const std::vector<Pt> &pts, int max_depth, int bucket, BalanceResult &out) {
   std::vector<P2> v;
@@ -168,6 +190,11 @@ bool cgal_mesh_pslg(const Pslg &in, double max_edge, MeshResult &out) {
 #else
 namespace qkb {
 size_t cgal_orthtree_build_leaves(const std::vector<Pt> &, int, int) { return 0; }
+struct CgalPoints {};
+CgalPoints *cgal_points_new(const std::vector<Pt> &) { return nullptr; }
+void cgal_points_reset(CgalPoints *, const std::vector<Pt> &) {}
+void cgal_orthtree_build(CgalPoints *, int, int) {}
+void cgal_points_free(CgalPoints *) {}
 bool cgal_grade(const std::vector<Pt> &, int, int, BalanceResult &) { return false; }
 bool cgal_mesh(double, const std::vector<Ring> &, double, MeshResult &) { return false; }
 bool cgal_mesh_pslg(const Pslg &, double, MeshResult &) { return false; }

@@ -411,13 +411,20 @@ struct EmbreeBoxes {
   BoxGeom geom;
 };
 
-EmbreeBoxes *embree_boxes_new(size_t n) {
+EmbreeBoxes *embree_boxes_new(size_t n, bool refit) {
   RTCDevice dev = device_for(1);
   EmbreeBoxes *s = new EmbreeBoxes;
   s->geom.boxes = nullptr;
   s->scene = rtcNewScene(dev);
-  rtcSetSceneFlags(s->scene, RTC_SCENE_FLAG_ROBUST);
+  rtcSetSceneFlags(s->scene, refit ? (RTCSceneFlags)(RTC_SCENE_FLAG_ROBUST | RTC_SCENE_FLAG_DYNAMIC)
+                                   : RTC_SCENE_FLAG_ROBUST);
+  // (Embree 3.13.5 refits only so: without the geometry's quality a dynamic scene's commit
+  // builds anew, and without the dynamic scene the geometry's quality is ignored. Seen on the
+  // order of rtcCollide's candidate pairs, which a refitted BVH keeps from the first build
+  // and a rebuilt one gives as a fresh scene over the same boxes does.)
+  if (refit) rtcSetSceneBuildQuality(s->scene, RTC_BUILD_QUALITY_LOW);
   s->g = rtcNewGeometry(dev, RTC_GEOMETRY_TYPE_USER);
+  if (refit) rtcSetGeometryBuildQuality(s->g, RTC_BUILD_QUALITY_REFIT);
   rtcSetGeometryUserPrimitiveCount(s->g, (unsigned)n);
   rtcSetGeometryUserData(s->g, &s->geom);
   rtcSetGeometryBoundsFunction(s->g, box_bounds, nullptr);
@@ -429,7 +436,8 @@ EmbreeBoxes *embree_boxes_new(size_t n) {
 
 void embree_boxes_collide(EmbreeBoxes *s, const std::vector<Box> &boxes, PairSum &out) {
   // The geometry committed again counts as modified: the scene's commit rebuilds the BVH
-  // (run_collide_reused checks that it does, with other boxes before).
+  // (run_collide_reused checks that it does, with other boxes before), or refits it when
+  // made with refit (--op world's embree-refit, checked frame by frame).
   s->geom.boxes = &boxes;
   rtcCommitGeometry(s->g);
   rtcCommitScene(s->scene);
@@ -458,7 +466,7 @@ namespace qkb {
 std::unique_ptr<PointIndex> make_embree_points() { return nullptr; }
 void embree_collide(const std::vector<Box> &, PairSum &) {}
 struct EmbreeBoxes {};
-EmbreeBoxes *embree_boxes_new(size_t) { return nullptr; }
+EmbreeBoxes *embree_boxes_new(size_t, bool) { return nullptr; }
 void embree_boxes_collide(EmbreeBoxes *, const std::vector<Box> &, PairSum &) {}
 void embree_boxes_free(EmbreeBoxes *) {}
 struct EmbreeDiscs {};

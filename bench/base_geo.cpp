@@ -35,8 +35,11 @@ void geo_knn(GeoIndex *g, const std::vector<Pt> &qs, int k, std::vector<double> 
   std::vector<int> ind;
   dist_out.assign(qs.size() * k, INFINITY);
   for (size_t i = 0; i < qs.size(); i++) {
-    g->nn.Search(*g->pts, g->dist, qs[i], ind, k);
-    for (size_t j = 0; j < ind.size() && j < (size_t)k; j++)
+    // Search returns the nearest one's distance (dist(pts[ind[0]], query), as computed
+    // during the search): only the others are measured again, as its documentation says.
+    double nearest = g->nn.Search(*g->pts, g->dist, qs[i], ind, k);
+    if (!ind.empty()) dist_out[i * k] = nearest;
+    for (size_t j = 1; j < ind.size() && j < (size_t)k; j++)
       dist_out[i * k + j] = g->dist((*g->pts)[ind[j]], qs[i]);
   }
 }

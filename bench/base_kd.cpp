@@ -20,7 +20,10 @@ namespace {
 
 // A result set for nanoflann that only accumulates: count and squared-distance sum
 // inside the radius, or count and id sum inside a box (the circumscribed circle is the
-// search radius, the box test is exact).
+// search radius, the box test is exact). nanoflann (1.4.3) offers a leaf's point only when
+// its distance is below worstDist(), strictly: worstDist() is the next double above r^2, so
+// that a point at exactly r is offered, and addPoint keeps d2 <= r^2, the closed disc the
+// other implementations report.
 struct SumResultSet {
   double r2;
   uint64_t count = 0;
@@ -35,7 +38,7 @@ struct SumResultSet {
     }
     return true;
   }
-  double worstDist() const { return r2; }
+  double worstDist() const { return std::nextafter(r2, INFINITY); }
 };
 
 struct BoxResultSet {

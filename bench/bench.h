@@ -73,8 +73,12 @@ void embree_collide(const std::vector<Box> &boxes, PairSum &out);
 // boxes (as many as the first call's) and commits it and the scene again (a full rebuild
 // of the BVH in Embree's kept memory) before rtcCollide, as an application that
 // rebuilds every frame would.
+// refit: the scene dynamic (RTC_SCENE_FLAG_DYNAMIC, RTC_BUILD_QUALITY_LOW: Embree's
+// two-level build) and the geometry RTC_BUILD_QUALITY_REFIT, so that each later commit
+// refits the first call's BVH to the new boxes instead of building a new one (the moving
+// boxes of --op world; the first call builds it).
 struct EmbreeBoxes;
-EmbreeBoxes *embree_boxes_new(size_t n);
+EmbreeBoxes *embree_boxes_new(size_t n, bool refit = false);
 void embree_boxes_collide(EmbreeBoxes *s, const std::vector<Box> &boxes, PairSum &out);
 void embree_boxes_free(EmbreeBoxes *s);
 // Embree: first hit of each ray among discs (x, y, r); the BVH is built by
@@ -96,6 +100,15 @@ using SplitFn = bool (*)(double x0, double y0, double side, int depth, void *ud)
 bool cgal_grade(const std::vector<Pt> &pts, int max_depth, int bucket, BalanceResult &out);
 bool p4est_balance_run(SplitFn split, void *ud, int max_level, BalanceResult &out);
 size_t cgal_orthtree_build_leaves(const std::vector<Pt> &pts, int max_depth, int bucket);
+// The same build for the timing alone: the points converted to CGAL's type beforehand
+// (cgal_points_new; refine() reorders them, so cgal_points_reset restores the input order
+// before each build, untimed), then cgal_orthtree_build: the tree's construction, refine()
+// and its destruction, with no count of its leaves.
+struct CgalPoints;
+CgalPoints *cgal_points_new(const std::vector<Pt> &pts);
+void cgal_points_reset(CgalPoints *c, const std::vector<Pt> &pts);
+void cgal_orthtree_build(CgalPoints *c, int max_depth, int bucket);
+void cgal_points_free(CgalPoints *c);
 
 // Meshing: a domain [0, U]^2 with polygonal components (closed rings of vertices).
 struct MeshResult {

@@ -23,6 +23,7 @@ extern "C" {
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -344,8 +345,7 @@ double line_transfer_ns() {
 // A t2 row's line transfer times (line_transfer_ns, one before each repetition): median
 // and largest, as the row's extras.
 static void note_line(Rec &r, std::vector<double> v) {
-  v.erase(std::remove_if(v.begin(), v.end(), [](double x) { return !std::isfinite(x); }),
-          v.end());
+  v.erase(std::remove_if(v.begin(), v.end(), [](double x) { return !std::isfinite(x); }), v.end());
   if (v.empty()) return;
   r.extra["line_ns"] = median(v);
   r.extra["line_ns_max"] = *std::max_element(v.begin(), v.end());
@@ -363,11 +363,17 @@ static void settle() {
 // several-thread function i: each rep then also runs it by the wall clock just before i,
 // and `paired[i]` gets the median of those one-thread / several-thread wall-time ratios
 // (the speedup, with both sides timed by the same clock a moment apart).
+// `prep[i]`, when given and not empty, runs before every call of function i, untimed (the
+// input a call consumes, restored).
 std::vector<double> interleaved(const std::vector<std::function<void()>> &fns,
                                 const std::vector<bool> &wall = {},
                                 const std::vector<int> &partner = {},
                                 std::vector<double> *paired = nullptr,
-                                std::vector<std::vector<double>> *lines = nullptr) {
+                                std::vector<std::vector<double>> *lines = nullptr,
+                                const std::vector<std::function<void()>> &prep = {}) {
+  auto prepare = [&prep](size_t i) {
+    if (i < prep.size() && prep[i]) prep[i]();
+  };
   size_t m = fns.size();
   std::vector<std::vector<double>> t(m), ratio(m);
   if (lines) lines->assign(m, {});
@@ -382,11 +388,13 @@ std::vector<double> interleaved(const std::vector<std::function<void()>> &fns,
       double one = NAN;
       if (p >= 0) {
         if (lines) (*lines)[i].push_back(line_transfer_ns());
+        prepare((size_t)p);
         settle();
         double t0 = now_seconds();
         fns[(size_t)p]();
         one = now_seconds() - t0;
       }
+      prepare(i);
       settle();
       double t0 = now_seconds();
       fns[i]();
@@ -508,15 +516,23 @@ void run_build(const std::string &ds, const std::vector<Pt> &pts) {
   }
   // CGAL Orthtree with quadkit's leaf rule (split above 32 points) and depth cap 30: the
   // same tree when both derive the same root, which the leaf counts check.
+  // Timed: the tree's construction and refine() on points converted to CGAL's type
+  // beforehand (restored to the input order before each call, untimed, as refine() reorders
+  // them); the leaves are counted by the check alone.
   const unsigned cap = kQuadkitCapacity, depth = 30;
   int cgal_match = -1;
+  std::vector<std::function<void()>> prep(fns.size());
+  std::unique_ptr<CgalPoints, void (*)(CgalPoints *)> cgal_pts(nullptr, cgal_points_free);
   if (have("cgal")) {
     size_t a = quadkit_build_leaves(pts, cap, depth, nullptr);
     size_t b = cgal_orthtree_build_leaves(pts, depth, cap);
     bool anchored = ds != "cities";
     cgal_match = anchored ? a == b : -1;
     if (cgal_match != 0) {
-      fns.push_back([&pts] { cgal_orthtree_build_leaves(pts, depth, cap); });
+      cgal_pts.reset(cgal_points_new(pts));
+      CgalPoints *c = cgal_pts.get();
+      fns.push_back([c] { cgal_orthtree_build(c, depth, cap); });
+      prep.push_back([c, &pts] { cgal_points_reset(c, pts); });
       names.push_back("cgal");
       bytes.push_back(NAN);
     } else {
@@ -563,7 +579,7 @@ void run_build(const std::string &ds, const std::vector<Pt> &pts) {
   }
   std::vector<double> paired;
   std::vector<std::vector<double>> lines;
-  auto med = interleaved(fns, wall, partner, &paired, &lines);
+  auto med = interleaved(fns, wall, partner, &paired, &lines, prep);
   for (size_t i = 0; i < fns.size(); i++) {
     Rec r;
     r.op = "build", r.impl = names[i], r.dataset = ds, r.n = pts.size();
@@ -628,6 +644,18 @@ void run_knn(const std::string &ds, const std::vector<Pt> &pts, bool variants) {
           for (int th : thread_counts) {
             if (th > 1 && !p->has_threads()) continue;
             r.threads = th;
+            // Every row's own answers are checked, the several-thread calls' too (they
+            // take other code paths: the library's threads, the harness's split).
+            if (th > 1) {
+              p->knn(qs, k, batch, th, o);
+              if (!same_d2(ref, o)) {
+                Rec bad = r;
+                bad.matches = 0;
+                bad.note = "distances differ from quadkit's (" + std::to_string(th) + " threads)";
+                emit(bad);
+                continue;
+              }
+            }
             fns.push_back([p, &qs, k, batch, th, &o] { p->knn(qs, k, batch, th, o); });
             recs.push_back(r);
           }
@@ -640,6 +668,32 @@ void run_knn(const std::string &ds, const std::vector<Pt> &pts, bool variants) {
         emit(recs[i]);
       }
     }
+}
+
+// Check quadkit's radius (closed disc of radius r) or range (closed box of half-side h)
+// answers against brute force on a few queries: the count and the checksum of each. As
+// Rec::matches: 1 all agree, 0 one differs, -1 nothing compared (no query).
+int quadkit_radius_range_oracle(PointIndex *q, const std::vector<Pt> &pts,
+                                const std::vector<Pt> &qs, bool box, double r, double h) {
+  size_t m = std::min<size_t>(qs.size(), pts.size() > 1000000 ? 8 : 40);
+  for (size_t i = 0; i < m; i++) {
+    const Pt &c = qs[i * (qs.size() / m)];
+    uint64_t count = 0, ids = 0, bf_count = 0, bf_ids = 0;
+    double sum = 0, bf_sum = 0;
+    if (box)
+      q->range({c}, h, count, ids);
+    else
+      q->radius({c}, r, count, sum);
+    for (size_t j = 0; j < pts.size(); j++) {
+      const Pt &p = pts[j];
+      double dx = p.x - c.x, dy = p.y - c.y;
+      if (box ? p.x >= c.x - h && p.x <= c.x + h && p.y >= c.y - h && p.y <= c.y + h
+              : dx * dx + dy * dy <= r * r)
+        bf_count++, bf_ids += j, bf_sum += dx * dx + dy * dy;
+    }
+    if (count != bf_count || (box ? ids != bf_ids : !close_rel(sum, bf_sum))) return 0;
+  }
+  return m > 0 ? 1 : -1;
 }
 
 void run_radius_range(const std::string &ds, const std::vector<Pt> &pts, bool box) {
@@ -658,6 +712,14 @@ void run_radius_range(const std::string &ds, const std::vector<Pt> &pts, bool bo
   // About 16 points per query on uniform data.
   double r = side * std::sqrt(16.0 / (M_PI * pts.size()));
   double h = 0.5 * side * std::sqrt(16.0 / pts.size());
+  const int checked = quadkit_radius_range_oracle(impls[0].idx.get(), pts, qs, box, r, h);
+  if (checked == 0) {
+    Rec rec;
+    rec.op = op, rec.impl = "quadkit", rec.dataset = ds, rec.n = pts.size(), rec.queries = nq;
+    rec.matches = 0, rec.note = "quadkit disagrees with brute force";
+    emit(rec);
+    return;
+  }
   uint64_t c0 = 0, i0 = 0;
   double s0 = 0;
   std::vector<std::function<void()>> fns;
@@ -681,7 +743,7 @@ void run_radius_range(const std::string &ds, const std::vector<Pt> &pts, bool bo
       emit(rec);
       continue;
     }
-    rec.matches = 1;
+    rec.matches = i == 0 ? checked : 1; // (quadkit's own: against brute force)
     fns.push_back([p, &qs, box, r, h] {
       uint64_t c = 0, ids = 0;
       double s = 0;
@@ -782,10 +844,40 @@ void run_collide_reused(const std::vector<Box> &boxes, const PairSum &q) {
   embree_boxes_free(e);
 }
 
+// Check quadkit's pairs against brute force on a sample of the boxes: for each sampled
+// box, how many boxes its closed box meets and the sum of their indices. As Rec::matches.
+int quadkit_collide_oracle(const std::vector<Box> &boxes) {
+  const size_t n = boxes.size(), m = std::min<size_t>(n, 64);
+  std::vector<char> marked(n, 0);
+  for (size_t i = 0; i < m; i++) marked[i * (n / m)] = 1;
+  std::vector<PairSum> per;
+  quadkit_collide_marked(boxes, marked, per);
+  for (size_t i = 0; i < n; i++) {
+    if (!marked[i]) continue;
+    PairSum bf;
+    const Box &p = boxes[i];
+    for (size_t j = 0; j < n; j++) {
+      const Box &q = boxes[j];
+      if (j != i && p.xmin <= q.xmax && q.xmin <= p.xmax && p.ymin <= q.ymax && q.ymin <= p.ymax)
+        bf.pairs++, bf.hash += j;
+    }
+    if (bf.pairs != per[i].pairs || bf.hash != per[i].hash) return 0;
+  }
+  return m > 0 ? 1 : -1;
+}
+
 void run_collide(size_t n) {
   progress("collide n=%zu", n);
   std::vector<Box> boxes = make_boxes(n, std::sqrt(0.5 / n), 99 + n);
   PairSum q, e;
+  const int checked = quadkit_collide_oracle(boxes);
+  if (checked == 0) {
+    Rec r;
+    r.op = "collide", r.impl = "quadkit", r.dataset = "boxes", r.n = n, r.order = "-";
+    r.matches = 0, r.note = "quadkit disagrees with brute force";
+    emit(r);
+    return;
+  }
   quadkit_collide(boxes, q);
   std::vector<std::function<void()>> fns = {[&] {
     PairSum s;
@@ -793,7 +885,7 @@ void run_collide(size_t n) {
   }};
   std::vector<Rec> recs(1);
   recs[0].impl = "quadkit";
-  recs[0].matches = 1;
+  recs[0].matches = checked;
   if (opt.threads > 1) {
     // The build and the pairs on --threads threads: the same pairs in order.
     const unsigned th = (unsigned)opt.threads;
@@ -809,6 +901,10 @@ void run_collide(size_t n) {
         quadkit_collide(boxes, s, th);
       });
       recs.push_back(r);
+    } else {
+      r.op = "collide", r.dataset = "boxes", r.n = n, r.order = "-";
+      r.note = "pairs " + std::to_string(tq.pairs) + " vs one thread's " + std::to_string(q.pairs);
+      emit(r);
     }
   }
   if (have("embree")) {
@@ -975,6 +1071,9 @@ void run_world(const std::string &kind, size_t n) {
     r.note = timed[i] < frames - 1
                  ? "seconds per frame over frames 1..frames_timed (budget; frame 0 untimed)"
                  : "seconds per frame 1..frames-1 (frame 0 untimed): move all + all pairs";
+    if (r.impl == "embree") r.note += "; a scene rebuilt every frame (new scene, geometry, BVH)";
+    if (r.impl == "embree-refit")
+      r.note += "; scene and geometry kept, the BVH refitted every frame (RTC_BUILD_QUALITY_REFIT)";
     emit(r);
   }
 }
@@ -1131,12 +1230,61 @@ void run_world_query(const std::string &kind, size_t n) {
   });
 }
 
+// Smallest t >= 0 at which the ray touches the closed disc d = (x, y, r), or -1.
+static double ray_disc_t(const Ray &ray, const double *d) {
+  double fx = ray.ox - d[0], fy = ray.oy - d[1];
+  double c = fx * fx + fy * fy - d[2] * d[2];
+  if (c <= 0) return 0;
+  double a = ray.dx * ray.dx + ray.dy * ray.dy, b = fx * ray.dx + fy * ray.dy;
+  if (b >= 0 || a == 0) return -1;
+  double disc = b * b - a * c;
+  if (disc < 0) return -1;
+  return (-b - std::sqrt(disc)) / a;
+}
+
+// Check quadkit's first hits (single calls) against brute force on a sample of the rays:
+// the disc hit and the parameter, to rounding (the collider decides hits in doubles by its
+// own formulas; a near tie may name either disc). As Rec::matches.
+int quadkit_raycast_oracle(QuadkitDiscs *qd, const std::vector<double> &discs,
+                           const std::vector<Ray> &rays) {
+  const size_t n = discs.size() / 3;
+  const size_t m =
+      std::min(rays.size(), std::min<size_t>(256, std::max<size_t>(16, 20000000 / (n + 1))));
+  auto near = [](double a, double b) { return std::fabs(a - b) <= 1e-9 * std::fabs(b) + 1e-12; };
+  for (size_t i = 0; i < m; i++) {
+    const Ray &ray = rays[i * (rays.size() / m)];
+    HitSum h;
+    quadkit_discs_raycast(qd, {ray}, h);
+    double best = INFINITY;
+    size_t id = SIZE_MAX;
+    for (size_t j = 0; j < n; j++) {
+      double t = ray_disc_t(ray, &discs[3 * j]);
+      if (t >= 0 && t < best) best = t, id = j;
+    }
+    if (h.hits != (id != SIZE_MAX ? 1u : 0u)) return 0;
+    if (!h.hits) continue;
+    if (!near(h.tsum, best)) return 0;
+    if (h.idsum != id && !(h.idsum < n && near(ray_disc_t(ray, &discs[3 * h.idsum]), best)))
+      return 0;
+  }
+  return m > 0 ? 1 : -1;
+}
+
 void run_raycast(size_t n) {
   progress("raycast n=%zu", n);
   size_t nr = opt.quick ? 100000 : 1000000;
   std::vector<double> discs = make_discs(n, 0.5 / std::sqrt((double)n), 5 + n);
   std::vector<Ray> rays = make_rays(nr, 6 + n);
   QuadkitDiscs *qd = quadkit_discs_build(discs);
+  const int checked = quadkit_raycast_oracle(qd, discs, rays);
+  if (checked == 0) {
+    Rec r;
+    r.op = "raycast", r.impl = "quadkit", r.dataset = "discs", r.n = n, r.queries = nr;
+    r.matches = 0, r.note = "quadkit disagrees with brute force";
+    emit(r);
+    quadkit_discs_free(qd);
+    return;
+  }
   HitSum q, e;
   quadkit_discs_raycast(qd, rays, q);
   std::vector<std::function<void()>> fns = {[&] {
@@ -1145,10 +1293,11 @@ void run_raycast(size_t n) {
   }};
   std::vector<Rec> recs(1);
   recs[0].impl = "quadkit";
-  recs[0].matches = 1;
+  recs[0].matches = checked;
   // qk_collider_raycast_batch on one and --threads threads: the same hits as single calls.
-  for (unsigned th : {1u, (unsigned)opt.threads}) {
-    if (th == 1 && recs.size() > 1) continue; // --threads 1: one batch row
+  std::vector<unsigned> batch_threads{1};
+  if (opt.threads > 1) batch_threads.push_back((unsigned)opt.threads);
+  for (unsigned th : batch_threads) {
     HitSum b;
     quadkit_discs_raycast_batch(qd, rays, th, b);
     Rec r;
@@ -1156,7 +1305,12 @@ void run_raycast(size_t n) {
     r.batch = true;
     r.threads = th;
     r.matches = b.hits == q.hits && b.idsum == q.idsum && b.tsum == q.tsum;
-    if (!r.matches) continue;
+    if (!r.matches) {
+      r.op = "raycast", r.dataset = "discs", r.n = n, r.queries = nr;
+      r.note = "hits " + std::to_string(b.hits) + " vs single calls' " + std::to_string(q.hits);
+      emit(r);
+      continue;
+    }
     fns.push_back([&, th] {
       HitSum s;
       quadkit_discs_raycast_batch(qd, rays, th, s);
@@ -1226,6 +1380,16 @@ void run_balance(const std::string &ds, const std::vector<Pt> &pts) {
     s.last = o;
     if (o.leaves_before != q.leaves_before || o.leaves_after != q.leaves_after) s.matches = 0;
   }
+  // quadkit's row says its answer was compared only where another library's was.
+  bool compared = false;
+  for (size_t i = 1; i < sides.size(); i++) compared = compared || sides[i].matches == 1;
+  sides[0].matches = compared ? 1 : -1;
+  // Every timed call is settled first, as interleaved()'s and the meshers' are (each times
+  // its balancing step alone, inside the call).
+  auto timed = [](Side &s, BalanceResult &o) {
+    settle();
+    s.run(o);
+  };
   // An implementation whose answer differs is not timed in the comparison, but its time
   // is still recorded (as seconds_unverified) so that the docs can say what it costs.
   for (auto &s : sides)
@@ -1233,7 +1397,7 @@ void run_balance(const std::string &ds, const std::vector<Pt> &pts) {
       BalanceResult o;
       std::vector<double> t;
       for (int r = 0; r < opt.reps; r++) {
-        s.run(o);
+        timed(s, o);
         t.push_back(o.seconds);
       }
       s.unverified = median(t);
@@ -1243,7 +1407,7 @@ void run_balance(const std::string &ds, const std::vector<Pt> &pts) {
       Side &s = sides[(j + r) % sides.size()];
       if (!s.matches) continue;
       BalanceResult o;
-      s.run(o);
+      timed(s, o);
       s.t.push_back(o.seconds);
     }
   for (auto &s : sides) {
@@ -1318,6 +1482,20 @@ static Rec mesh_rec(const MeshSide &sd, const std::string &dataset, size_t n) {
   return r;
 }
 
+// A baseline's mesh row against quadkit's mesh of the same input (both worked): the rate
+// ratio the targets are stated in, the time ratio (the baseline's time for its
+// whole mesh over quadkit's: where the meshes differ in size the rate favours the larger
+// mesh, the time the smaller), the triangle counts' ratio, and a warning where the counts
+// differ by more than 5x.
+static void mesh_ratios(Rec &r, const MeshSide &q, const MeshSide &sd) {
+  const double ratio_t = (double)q.last.triangles / sd.last.triangles, tq = median(q.t);
+  r.extra["quadkit_speedup"] = (q.last.triangles / tq) / r.per_second;
+  r.extra["quadkit_time_ratio"] = r.seconds / tq;
+  r.extra["quadkit_triangle_ratio"] = ratio_t;
+  if (ratio_t < 0.2 || ratio_t > 5)
+    r.note += "; triangle counts differ by more than 5x: check the size bounds";
+}
+
 void run_mesh(unsigned U) {
   progress("mesh U=%u", U);
   std::vector<Ring> rings = make_octagons(U, U / 64 ? U / 64 : 1, 3 + U);
@@ -1348,6 +1526,8 @@ void run_mesh(unsigned U) {
     Rec r = mesh_rec(s, "octagons", U);
     r.extra["components"] = (double)rings.size();
     r.note = s.ok ? "triangles/s; same boundary, each mesher's own quality" : "mesher failed";
+    if (s.ok && s.name != "quadkit" && sides[0].name == "quadkit" && sides[0].ok)
+      mesh_ratios(r, sides[0], s);
     emit(r);
   }
 }
@@ -1378,6 +1558,7 @@ void run_mesh_dyadic(unsigned U) {
     r.extra["max_edge"] = edge;
     if (sd.ok) {
       r.note = "triangles/s; real coordinates (2^-10 lattice), same longest-edge bound";
+      if (sd.name != "quadkit" && sides[0].ok) mesh_ratios(r, sides[0], sd);
     } else {
       r.note = sd.name == "quadkit" ? "quadkit failed: " + err : "mesher failed";
     }
@@ -1503,12 +1684,8 @@ static void mesh_general_case(const std::string &dataset, const Pslg &in, double
             r.extra["x_" + b.name] = r.per_second / (b.last.triangles / median(b.t));
       } else if (q.ok) {
         // The ratios the targets are stated in, and a sanity check of the sizes.
-        double ratio_t = (double)q.last.triangles / sd.last.triangles;
-        r.extra["quadkit_speedup"] = (q.last.triangles / median(q.t)) / r.per_second;
-        r.extra["quadkit_triangle_ratio"] = ratio_t;
+        mesh_ratios(r, q, sd);
         r.extra["quadkit_min_angle_minus_theirs"] = q.last.min_angle_deg - sd.last.min_angle_deg;
-        if (ratio_t < 0.2 || ratio_t > 5)
-          r.note += "; triangle counts differ by more than 5x: check the size bounds";
       }
     } else {
       r.note = sd.name == "quadkit" ? "quadkit failed: " + err
@@ -1548,6 +1725,42 @@ void run_mesh_general() {
   }
 }
 
+// Check quadkit's geodesic k nearest distances against brute force on a few queries.
+// Brute force measures every point on a sphere first (cheap) and measures on the
+// ellipsoid (qk_geo_distance, the index's own distance) only those that can be among the k
+// nearest: along any path the ellipsoid's length element over the sphere's (radius
+// 6371008.8 m, geodetic latitude as latitude) lies between M(0) / R = 0.9944 and
+// N(90) / R = 1.0045, so the k nearest on the ellipsoid are within 1.0102 times the k-th
+// nearest spherical distance (taken with margin as 1.02 times, plus a metre). As
+// Rec::matches.
+int quadkit_geo_oracle(const std::vector<Pt> &pts, const std::vector<Pt> &qs, int k,
+                       const std::vector<double> &got) {
+  const double R = 6371008.8, deg = M_PI / 180;
+  size_t m = std::min<size_t>(qs.size(), pts.size() > 1000000 ? 4 : 40);
+  std::vector<double> sph(pts.size()), tmp;
+  for (size_t i = 0; i < m; i++) {
+    size_t qi = i * (qs.size() / m);
+    const Pt &q = qs[qi];
+    for (size_t j = 0; j < pts.size(); j++) {
+      double s1 = std::sin((pts[j].y - q.y) * deg / 2), s2 = std::sin((pts[j].x - q.x) * deg / 2);
+      double hav = s1 * s1 + std::cos(q.y * deg) * std::cos(pts[j].y * deg) * s2 * s2;
+      sph[j] = 2 * R * std::asin(std::sqrt(std::min(1.0, hav)));
+    }
+    size_t kk = std::min<size_t>(k, pts.size());
+    tmp = sph;
+    std::nth_element(tmp.begin(), tmp.begin() + (kk - 1), tmp.end());
+    const double bound = 1.02 * tmp[kk - 1] + 1;
+    std::vector<double> d;
+    for (size_t j = 0; j < pts.size(); j++)
+      if (sph[j] <= bound) d.push_back(quadkit_geo_distance(q, pts[j]));
+    std::sort(d.begin(), d.end());
+    if (d.size() < kk) return 0;
+    for (size_t j = 0; j < kk; j++)
+      if (!(std::fabs(d[j] - got[qi * k + j]) <= 1e-6 + 1e-12 * d[j])) return 0;
+  }
+  return m > 0 ? 1 : -1;
+}
+
 void run_geo(size_t cap) {
   std::string why;
   std::vector<Pt> pts = make_dataset("cities", cap, &why);
@@ -1571,12 +1784,20 @@ void run_geo(size_t cap) {
   for (int k : {1, 8}) {
     std::vector<double> a, b;
     quadkit_geo_knn(qg, qs, k, a);
+    const int checked = quadkit_geo_oracle(pts, qs, k, a);
+    if (checked == 0) {
+      Rec r;
+      r.op = "geo-knn", r.impl = "quadkit", r.dataset = "cities", r.n = pts.size();
+      r.queries = nq, r.k = k, r.matches = 0, r.note = "quadkit disagrees with brute force";
+      emit(r);
+      continue;
+    }
     std::vector<std::function<void()>> fns = {[&] {
       std::vector<double> d;
       quadkit_geo_knn(qg, qs, k, d);
     }};
     std::vector<Rec> recs(1);
-    recs[0].impl = "quadkit", recs[0].matches = 1;
+    recs[0].impl = "quadkit", recs[0].matches = checked;
     if (gg) {
       geo_knn(gg, qs, k, b);
       bool same = a.size() == b.size();
@@ -1631,6 +1852,81 @@ size_t heap_bytes() {
 #else
   return 0;
 #endif
+}
+
+// quadkit's point location against brute force on a sample of the points: even-odd over
+// each feature's rings, edges straight in the layer's coordinates, the lowest feature that
+// holds the point. A point is left out (unsure) when a test on it is too close to call in
+// doubles (an orientation within its rounding bound, the point on a vertex or a horizontal
+// edge), so that no boundary rule decides an answer compared. In lon/lat mode a feature with
+// an edge spanning more than 180 degrees of longitude (across the antimeridian, or round a
+// pole) is not modelled: where quadkit answers such a feature, the check is that no lower
+// modelled feature holds the point; where it answers another (or none), that answer must be
+// the lowest modelled feature holding the point (a point in a lower unmodelled feature would
+// have been answered that feature).
+struct RegionCheck {
+  size_t compared = 0, wrong = 0, unsure = 0, partly = 0; // (partly: answered unmodelled)
+  int matches() const { return wrong ? 0 : compared ? 1 : -1; }
+};
+
+RegionCheck region_oracle(const RegionLayer &L, bool planar, const std::vector<Pt> &pts,
+                          const std::vector<uint32_t> &got) {
+  const size_t nf = L.feature_start.size() - 1, nr = L.ring_start.size() - 1;
+  std::vector<std::array<double, 4>> rbox(nr); // xmin, xmax, ymin, ymax of each ring
+  std::vector<char> unmodelled(nf, 0);
+  for (size_t f = 0; f < nf; f++)
+    for (size_t r = L.feature_start[f]; r < L.feature_start[f + 1]; r++) {
+      rbox[r] = {INFINITY, -INFINITY, INFINITY, -INFINITY};
+      for (size_t v = L.ring_start[r]; v < L.ring_start[r + 1]; v++) {
+        double x = L.xy[2 * v], y = L.xy[2 * v + 1];
+        rbox[r] = {std::min(rbox[r][0], x), std::max(rbox[r][1], x), std::min(rbox[r][2], y),
+                   std::max(rbox[r][3], y)};
+        if (!planar && v + 1 < L.ring_start[r + 1] && std::fabs(L.xy[2 * v + 2] - x) > 180)
+          unmodelled[f] = 1;
+      }
+    }
+  RegionCheck c;
+  const size_t m = std::min<size_t>(pts.size(), 256);
+  for (size_t i = 0; i < m; i++) {
+    const size_t pi = i * (pts.size() / m);
+    const Pt p = pts[pi];
+    bool unsure = !planar && (std::fabs(p.x) >= 180 || std::fabs(p.y) > 90);
+    uint32_t bf = QK_NONE;
+    for (size_t f = 0; f < nf && !unsure && bf == QK_NONE; f++) {
+      if (unmodelled[f]) continue;
+      bool in = false;
+      for (size_t r = L.feature_start[f]; r < L.feature_start[f + 1] && !unsure; r++) {
+        if (p.y < rbox[r][2] || p.y > rbox[r][3] || p.x > rbox[r][1]) continue;
+        for (size_t v = L.ring_start[r]; v + 1 < L.ring_start[r + 1]; v++) {
+          double ax = L.xy[2 * v], ay = L.xy[2 * v + 1], bx = L.xy[2 * v + 2], by = L.xy[2 * v + 3];
+          if ((ax == p.x && ay == p.y) ||
+              (ay == by && ay == p.y && std::min(ax, bx) <= p.x && p.x <= std::max(ax, bx))) {
+            unsure = true;
+            break;
+          }
+          if ((ay > p.y) == (by > p.y)) continue;
+          double l = (bx - ax) * (p.y - ay), rr = (by - ay) * (p.x - ax), o = l - rr;
+          if (std::fabs(o) <= 4e-16 * (std::fabs(l) + std::fabs(rr))) {
+            unsure = true;
+            break;
+          }
+          in ^= by > ay ? o > 0 : o < 0;
+        }
+      }
+      if (in) bf = (uint32_t)f;
+    }
+    if (unsure) {
+      c.unsure++;
+      continue;
+    }
+    const uint32_t q = got[pi];
+    const bool part = q != QK_NONE && q < nf && unmodelled[q];
+    const bool ok = part ? bf == QK_NONE || bf > q : q == bf;
+    c.compared++;
+    c.partly += part;
+    c.wrong += !ok;
+  }
+  return c;
 }
 
 void run_region() {
@@ -1721,8 +2017,12 @@ void run_region() {
       std::vector<uint32_t> lon(pts.size()), pla(pts.size()), gg, ss;
       qk_region_locate_batch(ql, qp_pts, pts.size(), QK_BOUNDARY_SEMI_OPEN, 1, lon.data());
       qk_region_locate_batch(qp, qp_pts, pts.size(), QK_BOUNDARY_OPEN, 1, pla.data());
+      // The two reference answers against brute force on a sample of the points.
+      const RegionCheck check_lon = region_oracle(L, false, pts, lon),
+                        check_pla = region_oracle(L, true, pts, pla);
       std::vector<std::function<void()>> fns;
       std::vector<Rec> recs;
+      // Every timed call writes into tmp, allocated here, outside the clock.
       std::vector<uint32_t> tmp(pts.size());
       auto add = [&](const char *impl, bool batch, int threads, std::function<void()> f) {
         Rec r;
@@ -1731,42 +2031,65 @@ void run_region() {
         recs.push_back(r);
         fns.push_back(f);
       };
+      // A reference row: what brute force said of its answers on the sample.
+      auto checked = [&](const RegionCheck &c) {
+        Rec &r = recs.back();
+        r.matches = c.matches();
+        r.extra["checked_points"] = (double)c.compared;
+        r.extra["unsure_points"] = (double)c.unsure;
+        r.extra["partly_checked_points"] = (double)c.partly;
+        r.note = c.wrong ? std::to_string(c.wrong) + " of " + std::to_string(c.compared) +
+                               " sample points differ from brute force"
+                 : c.compared ? "checked against brute force on a sample"
+                              : "not compared: every sample point too close to a boundary";
+      };
+      // Another quadkit row: its answers, after a first run, against the reference's.
+      auto same_as = [&](const std::vector<uint32_t> &ref, const RegionCheck &c, const char *what) {
+        fns.back()();
+        size_t d = count_diff(tmp, ref);
+        Rec &r = recs.back();
+        r.matches = d ? 0 : c.matches();
+        if (d) r.extra["mismatches"] = (double)d;
+        r.note = std::string(d ? "differs from " : "compared with ") + what +
+                 (!d && c.wrong ? ", which differs from brute force" : "");
+      };
       add("quadkit", true, 1, [&] {
         qk_region_locate_batch(ql, qp_pts, pts.size(), QK_BOUNDARY_SEMI_OPEN, 1, tmp.data());
       });
-      recs.back().matches = 1;
+      checked(check_lon);
       add("quadkit", false, 1, [&] {
         for (size_t i = 0; i < pts.size(); i++)
           qk_region_locate(ql, qp_pts[i], QK_BOUNDARY_SEMI_OPEN, &tmp[i]);
       });
-      recs.back().matches = 1;
+      same_as(lon, check_lon, "quadkit's lon/lat batch");
       add("quadkit-planar", true, 1,
           [&] { qk_region_locate_batch(qp, qp_pts, pts.size(), QK_BOUNDARY_OPEN, 1, tmp.data()); });
-      recs.back().matches = 1;
+      checked(check_pla);
+      // One call a point in planar mode: the row GEOS's (one call a point, planar, open
+      // boundary) is compared with, answers and rate alike.
+      add("quadkit-planar", false, 1, [&] {
+        for (size_t i = 0; i < pts.size(); i++)
+          qk_region_locate(qp, qp_pts[i], QK_BOUNDARY_OPEN, &tmp[i]);
+      });
+      same_as(pla, check_pla, "quadkit's planar batch");
       if (opt.threads > 1) {
         add("quadkit", true, opt.threads, [&] {
           qk_region_locate_batch(ql, qp_pts, pts.size(), QK_BOUNDARY_SEMI_OPEN,
                                  (unsigned)opt.threads, tmp.data());
         });
-        recs.back().matches = 1;
+        same_as(lon, check_lon, "quadkit's lon/lat batch on one thread");
       }
       if (g) {
         geos_regions_locate(g, pts, gg);
         size_t d = count_diff(gg, pla);
-        add("geos", false, 1, [&] {
-          std::vector<uint32_t> o;
-          geos_regions_locate(g, pts, o);
-        });
+        add("geos", false, 1, [&] { geos_regions_locate(g, pts, tmp); });
         recs.back().matches = d == 0, recs.back().extra["mismatches"] = (double)d;
         recs.back().note = "compared with quadkit --planar, open boundary";
       }
       if (s2) {
         s2_regions_locate(s2, pts, ss);
         size_t d = count_diff(ss, lon);
-        add("s2", false, 1, [&] {
-          std::vector<uint32_t> o;
-          s2_regions_locate(s2, pts, o);
-        });
+        add("s2", false, 1, [&] { s2_regions_locate(s2, pts, tmp); });
         recs.back().matches = d == 0, recs.back().extra["mismatches"] = (double)d;
         recs.back().note = "compared with quadkit lon/lat; S2 edges are geodesics";
       }
@@ -1814,10 +2137,30 @@ static std::string load_average() {
 }
 static std::string load_at_start;
 
+// The load averages as a JSON line of their own (op "load", note "start" or "end", extras
+// load1, load5 and load15; every other field as a row has it, its rate null), written at the
+// start and the end of the run, so that a reader of the JSON lines (bench/summarize.py) can
+// say what else ran on the machine. Not a row of the table.
+static void emit_load(const char *when) {
+  double a[3];
+  Rec r;
+  r.op = "load", r.impl = "-", r.dataset = "-", r.order = "-", r.note = when;
+  if (getloadavg(a, 3) == 3)
+    r.extra["load1"] = a[0], r.extra["load5"] = a[1], r.extra["load15"] = a[2];
+  if (opt.json) {
+    printf("%s\n", to_json(r).c_str());
+    fflush(stdout);
+  }
+  if (json_file) {
+    fprintf(json_file, "%s\n", to_json(r).c_str());
+    fflush(json_file);
+  }
+}
+
 void print_table() {
-  const char *bases[] = {"flann", "nanoflann",     "embree",       "cgal",   "p4est",
-                         "gmsh",  "geographiclib", "proto-morton", "geos",   "s2",
-                         "grid",  "sap",           "box2d",        "bullet", "bullet-bp"};
+  const char *bases[] = {"flann", "nanoflann",     "embree",       "embree-refit", "cgal", "p4est",
+                         "gmsh",  "geographiclib", "proto-morton", "geos",         "s2",   "grid",
+                         "sap",   "box2d",         "bullet",       "bullet-bp"};
   std::vector<const char *> cols;
   for (const char *b : bases)
     for (auto &r : records)
@@ -1839,18 +2182,41 @@ void print_table() {
          "just before it) over its own,\nand with the time a cache line written on one "
          "processor took to reach another before each run (one way: median, largest)\n",
          opt.reps);
+  bool any_mesh = false, any_region = false, any_world = false;
+  for (auto &r : records) {
+    any_mesh = any_mesh || r.op == "mesh";
+    any_region = any_region || r.op == "region";
+    any_world = any_world || (r.op == "world" && r.impl.rfind("embree", 0) == 0);
+  }
+  if (any_mesh)
+    printf("mesh cells: the triangles/s ratio, then t = the baseline's time for its whole mesh "
+           "over quadkit's; ! = triangle counts differ by more than 5x (the rate favours the "
+           "larger mesh)\n");
+  if (any_region)
+    printf("region: the geos column is read on quadkit's planar rows (planar, open boundary: "
+           "what GEOS answers), the s2 column on its lon/lat rows\n");
+  if (any_world)
+    printf("world: embree = rtcCollide on a scene rebuilt every frame (new scene, geometry and "
+           "BVH); embree-refit = scene and geometry kept, the BVH refitted each frame\n");
   printf("%-9s %-10s %8s %-14s %10s", "op", "dataset", "n", "variant", "quadkit/s");
   for (auto c : cols) printf(" %13s", c);
   printf("\n");
+  // A ratio to two significant figures or so, in at most five characters.
+  auto fx = [](double v) {
+    char t[32];
+    snprintf(t, sizeof t, v < 10 ? "%.2fx" : v < 100 ? "%.1fx" : "%.0fx", v);
+    return std::string(t);
+  };
   for (auto &r : records) {
-    if (r.impl != "quadkit") continue;
+    const bool planar = r.op == "region" && r.impl == "quadkit-planar";
+    if (r.impl != "quadkit" && !planar) continue;
     char var[64] = "";
     if (r.op == "knn" || r.op == "geo-knn")
       snprintf(var, sizeof var, "k=%d%s%s%s", r.k, r.order == "morton" ? " mort" : "",
                r.batch ? " batch" : "",
                r.threads > 1 ? (" t" + std::to_string(r.threads)).c_str() : "");
     if (r.op == "region" || r.op == "raycast" || r.op.rfind("world-", 0) == 0)
-      snprintf(var, sizeof var, "%s%s", r.batch ? "batch" : "single",
+      snprintf(var, sizeof var, "%s%s%s", planar ? "planar " : "", r.batch ? "batch" : "single",
                r.threads > 1 ? (" t" + std::to_string(r.threads)).c_str() : "");
     if ((r.op == "collide" || r.op == "build" || r.op == "world") && r.threads > 1)
       snprintf(var, sizeof var, "t%d", r.threads);
@@ -1860,6 +2226,12 @@ void print_table() {
     printf("%-9s %-10s %8zu %-14s %10s", r.op.c_str(), r.dataset.c_str(), r.n, var,
            r.matches == 0 ? "MISMATCH" : rate(r.per_second).c_str());
     for (auto c : cols) {
+      // GEOS answers the planar question, S2 the lon/lat one: each against quadkit's rows
+      // of the same question only.
+      if (r.op == "region" && ((!strcmp(c, "geos") && !planar) || (!strcmp(c, "s2") && planar))) {
+        printf(" %13s", "");
+        continue;
+      }
       // A batched quadkit call is compared with the baseline's batched call when it has
       // one, otherwise with its one-query-per-call rate.
       const Rec *b = nullptr;
@@ -1878,7 +2250,12 @@ void print_table() {
           cell = t;
         } else if (b->matches == 0)
           cell = "mismatch";
-        else if (std::isfinite(b->per_second) && std::isfinite(r.per_second)) {
+        else if (r.op == "mesh" && b->extra.count("quadkit_time_ratio")) {
+          // The rate ratio, then the time ratio for each mesher's whole mesh.
+          double tr = b->extra.at("quadkit_triangle_ratio");
+          cell = fx(b->extra.at("quadkit_speedup")) + " t" + fx(b->extra.at("quadkit_time_ratio")) +
+                 (tr < 0.2 || tr > 5 ? "!" : "");
+        } else if (std::isfinite(b->per_second) && std::isfinite(r.per_second)) {
           char t[32];
           snprintf(t, sizeof t, "%.2fx", r.per_second / b->per_second);
           cell = t;
@@ -1886,6 +2263,10 @@ void print_table() {
       }
       printf(" %13s", cell.c_str());
     }
+    // A row whose answers nothing was compared with (no brute force, no other library)
+    // says so; builds have no answers to compare (but --op build's leaf counts).
+    if (r.matches < 0 && r.op != "build" && r.op != "region-build")
+      printf("  [answers not compared]");
     auto sp = r.extra.find("speedup_wall");
     if (sp != r.extra.end()) printf("  %.2fx one thread (paired wall clock)", sp->second);
     auto su = r.extra.find("speedup_update_wall");
@@ -2054,6 +2435,7 @@ int main(int argc, char **argv) {
   }
   t_start = wall_seconds();
   load_at_start = load_average();
+  emit_load("start");
   progress_on = isatty(STDERR_FILENO);
   double wall_start = wall_seconds();
   fprintf(stderr, "quadkit-bench: baselines built in:");
@@ -2127,6 +2509,7 @@ int main(int argc, char **argv) {
   if (want_op("region")) run_region();
   if (progress_on) fprintf(stderr, "\r\033[K");
   fprintf(stderr, "quadkit-bench: done in %.1f s (wall)\n", wall_seconds() - wall_start);
+  emit_load("end");
   if (!opt.json) print_table();
   if (json_file) fclose(json_file);
   return 0;

@@ -15,6 +15,12 @@ std::unique_ptr<PointIndex> make_quadkit(unsigned capacity = kQuadkitCapacity);
 // pairs on `threads` threads; the build on one).
 bool quadkit_collide(const std::vector<Box> &boxes, PairSum &out, unsigned threads = 1);
 
+// For the check against brute force: the same collider's pairs (one thread) that involve
+// a marked box, per marked box i: per[i].pairs the boxes it overlaps, per[i].hash the sum
+// of their indices (per is resized to boxes.size(); unmarked entries stay zero).
+void quadkit_collide_marked(const std::vector<Box> &boxes, const std::vector<char> &marked,
+                            std::vector<PairSum> &per);
+
 // The same on a collider kept from call to call: built by the first call, rebuilt over
 // the boxes (qk_collider_rebuild, in its kept memory) by every later one.
 struct QuadkitBoxes;
@@ -65,6 +71,8 @@ struct QuadkitGeo;
 QuadkitGeo *quadkit_geo_build(const std::vector<Pt> &lonlat);
 void quadkit_geo_knn(QuadkitGeo *g, const std::vector<Pt> &qs, int k, std::vector<double> &dist);
 void quadkit_geo_free(QuadkitGeo *g);
+// qk_geo_distance(): metres on WGS84 (NAN when it fails), for the check against brute force.
+double quadkit_geo_distance(Pt a, Pt b);
 
 } // namespace qkb
 

@@ -6,11 +6,14 @@ Every ratio comes from the one run in the file (same process, interleaved): the 
 tree and collider targets (issues 5 and 11), the moving-objects world (issue 10) and the
 general mesher (issue 12). A baseline whose answers differed from quadkit's was not timed;
 where it still recorded a time (`seconds_unverified`, balance only) the ratio is shown in
-brackets. Two-thread rows are the run's paired wall-clock ratios (`speedup_wall`: the
-one-thread call timed just before, by the wall clock too), with the time a cache line took
-from one processor to another before each repetition (`line_ns`, `line_ns_max`: on a
-guest whose host moves its vCPUs, two-thread rates follow it). A target whose rows are
-absent from the run (a baseline not installed, an operation not run) says so.
+brackets; any other target whose row is such a mismatch (quadkit's or the baseline's) says
+"mismatch" with the row's note. Two-thread rows are the run's paired wall-clock ratios
+(`speedup_wall`: the one-thread call timed just before, by the wall clock too), with the
+time a cache line took from one processor to another before each repetition (`line_ns`,
+`line_ns_max`: on a guest whose host moves its vCPUs, two-thread rates follow it). A
+target whose rows are absent from the run (a baseline not installed, an operation not run)
+says so. The load averages recorded at the run's start and end (its "load" lines) are
+printed above the tables.
 """
 import json
 import sys
@@ -27,9 +30,19 @@ def pick(rows, **kw):
     return None
 
 
+class Mismatch:
+    """The rate of a row whose answers differed (not timed): its note says how."""
+
+    def __init__(self, r):
+        self.note = r.get("note") or "answers differ"
+
+
 def rate(r):
-    if r is None or r.get("matches") is False:
+    """A row's rate; None when there is no such row; a Mismatch when its answers differed."""
+    if r is None:
         return None
+    if r.get("matches") is False:
+        return Mismatch(r)
     return r.get("per_second")
 
 
@@ -40,6 +53,11 @@ class Table:
 
     def ratio(self, what, want, q, b, note=""):
         """A row comparing rates q and b (quadkit over the baseline) with target `want`."""
+        bad = [x for x in (q, b) if isinstance(x, Mismatch)]
+        if bad:
+            why = "; ".join(f"mismatch: {x.note}" for x in bad)
+            self.rows.append(f"| {what} | ≥ {want:g}x | – | {why} |")
+            return
         if q is None or b is None:
             self.rows.append(f"| {what} | ≥ {want:g}x | – | {note or 'not in this run'} |")
             return
@@ -81,6 +99,18 @@ def t2_row(rows, **kw):
     """quadkit's two-thread row matching kw, or None."""
     return next((r for r in rows if r.get("threads", 1) > 1 and r["impl"] == "quadkit"
                  and all(r.get(k) == v for k, v in kw.items())), None)
+
+
+def mesh_note(q, b):
+    """Triangle counts, the time ratio for each whole mesh and the size warning of a mesh row."""
+    if not q or not b or b.get("matches") is False or b.get("quadkit_time_ratio") is None:
+        return ""
+    note = (f"{q['triangles']:.0f} and {b['triangles']:.0f} triangles; its time over quadkit's "
+            f"{b['quadkit_time_ratio']:.2f}x")
+    tr = b.get("quadkit_triangle_ratio")
+    if tr is not None and (tr < 0.2 or tr > 5):
+        note += "; **counts differ by more than 5x**: the rate favours the larger mesh"
+    return note
 
 
 def tree_targets(rows):
@@ -129,9 +159,10 @@ def tree_targets(rows):
     t.ratio(f"balance ({sz(nb)}), p4est_balance (no target)", 1, rate(qbal),
             rate(pick(rows, op="balance", impl="p4est", n=nb)))
     um = max((r["n"] for r in rows if r["op"] == "mesh" and r["dataset"] == "octagons"), default=0)
+    bm = pick(rows, op="mesh", impl="cgal", dataset="octagons", n=um)
     t.ratio(f"book mesher U={um or '?'}, cgal Mesh_2 (triangles/s)", 20,
-            rate(pick(rows, op="mesh", impl="quadkit", dataset="octagons", n=um)),
-            rate(pick(rows, op="mesh", impl="cgal", dataset="octagons", n=um)))
+            rate(pick(rows, op="mesh", impl="quadkit", dataset="octagons", n=um)), rate(bm),
+            mesh_note(pick(rows, op="mesh", impl="quadkit", dataset="octagons", n=um), bm))
 
     two_threads(t, "build, two threads / one", t2_row(rows, op="build", **u))
     two_threads(t, "1-NN one query a call, two threads / one",
@@ -158,7 +189,8 @@ def world_targets(rows):
                 continue
             where = f"{scene} {sz(n)}"
             for base, want, label in (("box2d", 10, "Box2D b2DynamicTree"), ("bullet", 10, "Bullet btDbvt"),
-                                      ("embree", 2, "Embree rebuilt every frame")):
+                                      ("embree", 2, "Embree, scene rebuilt every frame"),
+                                      ("embree-refit", 1, "Embree, kept scene refitted every frame (no target)")):
                 b = pick(rows, op="world", impl=base, dataset=scene, n=n)
                 if b is not None:
                     t.ratio(f"{where}, {label}", want, rate(q), rate(b))
@@ -205,6 +237,8 @@ def mesh_targets(rows):
             if q and b.get("matches") is not False and q.get("min_angle_deg") is not None:
                 note = (f"{q['triangles']:.0f} and {b['triangles']:.0f} triangles, smallest angles "
                         f"{q['min_angle_deg']:.1f}° and {b['min_angle_deg']:.1f}°")
+                if b.get("quadkit_time_ratio") is not None:
+                    note += f"; its time over quadkit's {b['quadkit_time_ratio']:.2f}x"
             what = f"{ds[6:] if ds.startswith('coast-') else ds}, k = {k}, {label}"
             if b.get("matches") is False:  # (not timed: the run says why)
                 t.missing(what, f"≥ {want:g}x", f"not timed: {b.get('note') or 'its mesh was not checked'}")
@@ -213,8 +247,21 @@ def mesh_targets(rows):
     return t
 
 
+def loads(rows):
+    """The load averages the run recorded (its "load" lines), one line each, or a line saying none."""
+    out = []
+    for r in rows:
+        if r.get("op") == "load" and r.get("load1") is not None:
+            out.append(f"load average (1, 5, 15 min) at the run's {r.get('note', '?')}: "
+                       f"{r['load1']:.2f} {r['load5']:.2f} {r['load15']:.2f}")
+    return out or ["load average: not recorded in this run"]
+
+
 def main():
     rows = load(sys.argv[1])
+    for line in loads(rows):
+        print(line + "  ")
+    print()
     for table in (tree_targets(rows), world_targets(rows), mesh_targets(rows)):
         table.show()
 
