@@ -122,11 +122,13 @@ static inline size_t qk__prows_room(const qk__prows_t *r) { return r->off + r->c
 typedef struct qk__wscr_blk {
   void *p;
   size_t cap;
+  size_t hi;      /* its largest use, less a sixteenth an update since */
   unsigned epoch; /* the update that kept it */
 } qk__wscr_blk_t;
 typedef struct qk__wscr_lent {
   void *p;
   size_t cap, size; /* its true size, and the size its user believes */
+  size_t hi;        /* the block's hi when it was kept before (0: a new block) */
 } qk__wscr_lent_t;
 typedef struct qk__wscr {
   qk_allocator_t user; /* the allocator the world was given */
