@@ -3,7 +3,9 @@
  * region/, mesh/) read a tree's structure. Not API, and not the layout: index/ may store
  * its nodes however it likes, and only this file and the sources in index/ know how. Outside
  * index/, code includes this header, never index_internal.h; CI (scripts/check-layout.sh)
- * rejects `->nodes[`, `->side[`, `->px`, `->py`, `->pid` and `qk__node_t` outside index/.
+ * rejects `->nodes[`, `->side[`, `->px`, `->py`, `->pid` and `qk__node_t` outside index/,
+ * and, from clang's syntax tree, any use of a field of struct qk_tree, qk__node or qk__block
+ * whose name is written outside index/ (this file's accessors are index/'s).
  *
  * Nodes are named by qk_node_t (0 is the root). The four children of an internal node are
  * consecutive ids, first + QK_NE .. first + QK_SE. A leaf's points occupy the slots
