@@ -42,7 +42,8 @@
  *
  * Handles: slot in the low 32 bits, generation in the high 32. A slot's generation is
  * odd while it is live and becomes even at removal; a freed slot is reused (last freed,
- * first reused) with the next odd generation, so stale handles never match.
+ * first reused) with the next odd generation, so stale handles never match. A slot whose
+ * generation would wrap (after 2^31 objects) is retired instead of reused.
  *
  * Failure: add reserves the object slot before the world changes; move and remove never
  * allocate; update allocates the new order and its scratch before anything changes, and
@@ -539,8 +540,11 @@ qk_status_t qk_world_remove(qk_world_t *w, qk_handle_t h) {
   /* Its entry in the order (or the dirty list) stays until the next update, which drops
    * it: readers skip slots that are not live. */
   o->gen++;
-  o->u.free_next = w->free_head;
-  w->free_head = i;
+  if (o->gen != 0) {
+    o->u.free_next = w->free_head;
+    w->free_head = i;
+  } /* else its generations are spent (2^31 objects have held it): it is retired, never
+     * reused, so that a handle of its first object is not taken for a new one */
   w->n_live--;
   w->ident_dirty = 1;
   return QK_OK;
