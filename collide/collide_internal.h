@@ -76,6 +76,13 @@ int qk__orient(double ax, double ay, double bx, double by, double cx, double cy)
 int qk__dot_sign(double ax, double ay, double bx, double by, double cx, double cy);
 int qk__within(double ax, double ay, double bx, double by, double r1, double r2);
 int qk__line_within(double px, double py, double qx, double qy, double cx, double cy, double r);
+/* The values of qk__orient's, qk__within's and qk__line_within's polynomials, to within
+ * 2^-54 of themselves (exactly summed where their terms cancel): for the distances and ray
+ * parameters that order query answers. Same inputs. */
+long double qk__orient_value(double ax, double ay, double bx, double by, double cx, double cy);
+long double qk__within_value(double ax, double ay, double bx, double by, double r1, double r2);
+long double qk__line_within_value(double px, double py, double qx, double qy, double cx, double cy,
+                                  double r);
 
 /* qk__orient with its floating-point filter inline (the same filter, 8 ulps of the two
  * products: the same answers), the call only for the signs the filter cannot decide. */

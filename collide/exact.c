@@ -153,12 +153,9 @@ typedef struct xs {
 
 #define EPS 0x1p-53
 
-int qk__orient(double ax, double ay, double bx, double by, double cx, double cy) {
-  double l = (bx - ax) * (cy - ay), r = (by - ay) * (cx - ax);
-  double det = l - r, bound = 8 * EPS * (fabs(l) + fabs(r));
-  if (det > bound) return 1;
-  if (-det > bound) return -1;
-  xs_t xs, *x = &xs; /* not zeroed: every part is written before it is read */
+/* (b - a) x (c - a), exactly, into x (returned). */
+static const xp_t *orient_x(xs_t *x, double ax, double ay, double bx, double by, double cx,
+                            double cy) {
   x_set_diff(&x->a, bx, ax);
   x_set_diff(&x->b, cy, ay);
   x_mul(&x->a, &x->b, &x->c, &x->s, &x->t); /* (bx-ax)(cy-ay) */
@@ -167,7 +164,40 @@ int qk__orient(double ax, double ay, double bx, double by, double cx, double cy)
   x_mul(&x->a, &x->b, &x->d, &x->s, &x->t); /* (by-ay)(cx-ax) */
   x_neg(&x->d);
   x_add(&x->c, &x->d, &x->t);
-  return x_sign(&x->c);
+  return &x->c;
+}
+
+int qk__orient(double ax, double ay, double bx, double by, double cx, double cy) {
+  double l = (bx - ax) * (cy - ay), r = (by - ay) * (cx - ax);
+  double det = l - r, bound = 8 * EPS * (fabs(l) + fabs(r));
+  if (det > bound) return 1;
+  if (-det > bound) return -1;
+  xs_t xs; /* not zeroed: every part is written before it is read */
+  return x_sign(orient_x(&xs, ax, ay, bx, by, cx, cy));
+}
+
+/* The value of an expansion, summed from its smallest component up in long double: its
+ * components do not overlap, so the sum is within a few units of long double's last place
+ * of the value. */
+static long double x_value(const xp_t *e) {
+  long double v = 0;
+  for (int i = 0; i < e->n; i++) v += e->v[i];
+  return v;
+}
+
+/* The value functions below evaluate in long double (differences of doubles rounded by at
+ * most 2^-64 relative, products and sums by as much again: an error below 2^-60 of the
+ * terms' magnitudes) and keep that value when it is at least 2^-6 of them (so within
+ * 2^-54 of itself: below a double's rounding); otherwise, where the terms cancel, they
+ * sum the exact expansion. */
+#define VALUE_KEEP 0x1p-6L
+
+long double qk__orient_value(double ax, double ay, double bx, double by, double cx, double cy) {
+  long double l = ((long double)bx - ax) * ((long double)cy - ay);
+  long double r = ((long double)by - ay) * ((long double)cx - ax), d = l - r;
+  if (fabsl(d) >= VALUE_KEEP * (fabsl(l) + fabsl(r))) return d;
+  xs_t xs;
+  return x_value(orient_x(&xs, ax, ay, bx, by, cx, cy));
 }
 
 /* sign of u.v with u = b - a, v = c - a. */
@@ -187,14 +217,9 @@ int qk__dot_sign(double ax, double ay, double bx, double by, double cx, double c
   return x_sign(&x->c);
 }
 
-/* sign of r^2 - (ax-bx)^2 - (ay-by)^2, with r = r1 + r2 (exact sum). */
-int qk__within(double ax, double ay, double bx, double by, double r1, double r2) {
-  double dx = ax - bx, dy = ay - by, rs = r1 + r2;
-  double p = rs * rs, q = dx * dx + dy * dy;
-  double d = p - q, bound = 16 * EPS * (p + q);
-  if (d > bound) return 1;
-  if (-d > bound) return -1;
-  xs_t xs, *x = &xs; /* not zeroed: every part is written before it is read */
+/* r^2 - (ax-bx)^2 - (ay-by)^2 with r = r1 + r2, exactly, into x (returned). */
+static const xp_t *within_x(xs_t *x, double ax, double ay, double bx, double by, double r1,
+                            double r2) {
   x_set_sum(&x->a, r1, r2);
   x_mul(&x->a, &x->a, &x->c, &x->s, &x->t); /* rs^2 */
   x_set_diff(&x->a, ax, bx);
@@ -205,7 +230,26 @@ int qk__within(double ax, double ay, double bx, double by, double r1, double r2)
   x_mul(&x->a, &x->a, &x->d, &x->s, &x->t);
   x_neg(&x->d);
   x_add(&x->c, &x->d, &x->t);
-  return x_sign(&x->c);
+  return &x->c;
+}
+
+/* sign of r^2 - (ax-bx)^2 - (ay-by)^2, with r = r1 + r2 (exact sum). */
+int qk__within(double ax, double ay, double bx, double by, double r1, double r2) {
+  double dx = ax - bx, dy = ay - by, rs = r1 + r2;
+  double p = rs * rs, q = dx * dx + dy * dy;
+  double d = p - q, bound = 16 * EPS * (p + q);
+  if (d > bound) return 1;
+  if (-d > bound) return -1;
+  xs_t xs; /* not zeroed: every part is written before it is read */
+  return x_sign(within_x(&xs, ax, ay, bx, by, r1, r2));
+}
+
+long double qk__within_value(double ax, double ay, double bx, double by, double r1, double r2) {
+  long double dx = (long double)ax - bx, dy = (long double)ay - by, rs = (long double)r1 + r2;
+  long double p = rs * rs, q = dx * dx + dy * dy, d = p - q;
+  if (fabsl(d) >= VALUE_KEEP * (p + q)) return d;
+  xs_t xs;
+  return x_value(within_x(&xs, ax, ay, bx, by, r1, r2));
 }
 
 /*
@@ -220,16 +264,9 @@ int qk__within(double ax, double ay, double bx, double by, double r1, double r2)
  * disc: the world's ray queries reach this for most discs they meet, which made the
  * exact path three quarters of a ray query's work in a world of discs).
  */
-int qk__line_within(double px, double py, double qx, double qy, double cx, double cy, double r) {
-  {
-    const double dx = qx - px, dy = qy - py, ex = cx - px, ey = cy - py;
-    const double l = dx * ey, m = dy * ex, cross = l - m, cabs = fabs(l) + fabs(m);
-    const double a = r * r * (dx * dx + dy * dy), v = a - cross * cross;
-    const double bound = 32 * EPS * (a + cabs * cabs);
-    if (v > bound) return 1;
-    if (-v > bound) return -1;
-  }
-  xs_t xs, *x = &xs; /* not zeroed: every part is written before it is read */
+/* r^2 |q - p|^2 - ((q - p) x (c - p))^2, exactly, into x (returned). */
+static const xp_t *line_within_x(xs_t *x, double px, double py, double qx, double qy, double cx,
+                                 double cy, double r) {
   /* cross = (qx-px)(cy-py) - (qy-py)(cx-px) */
   x_set_diff(&x->a, qx, px);
   x_set_diff(&x->b, cy, py);
@@ -252,5 +289,29 @@ int qk__line_within(double px, double py, double qx, double qy, double cx, doubl
   x_mul(&x->c, &x->a, &x->d, &x->s, &x->t);
   x_mul(&x->d, &x->a, &x->f, &x->s, &x->t); /* f = |q-p|^2 r^2 */
   x_add(&x->f, &x->e, &x->t);
-  return x_sign(&x->f);
+  return &x->f;
+}
+
+int qk__line_within(double px, double py, double qx, double qy, double cx, double cy, double r) {
+  {
+    const double dx = qx - px, dy = qy - py, ex = cx - px, ey = cy - py;
+    const double l = dx * ey, m = dy * ex, cross = l - m, cabs = fabs(l) + fabs(m);
+    const double a = r * r * (dx * dx + dy * dy), v = a - cross * cross;
+    const double bound = 32 * EPS * (a + cabs * cabs);
+    if (v > bound) return 1;
+    if (-v > bound) return -1;
+  }
+  xs_t xs; /* not zeroed: every part is written before it is read */
+  return x_sign(line_within_x(&xs, px, py, qx, qy, cx, cy, r));
+}
+
+long double qk__line_within_value(double px, double py, double qx, double qy, double cx, double cy,
+                                  double r) {
+  long double dx = (long double)qx - px, dy = (long double)qy - py;
+  long double ex = (long double)cx - px, ey = (long double)cy - py;
+  long double l = dx * ey, m = dy * ex, cross = l - m, cabs = fabsl(l) + fabsl(m);
+  long double a = (long double)r * r * (dx * dx + dy * dy), v = a - cross * cross;
+  if (fabsl(v) >= VALUE_KEEP * (a + cabs * cabs)) return v;
+  xs_t xs;
+  return x_value(line_within_x(&xs, px, py, qx, qy, cx, cy, r));
 }

@@ -3227,6 +3227,86 @@ static void test_world_churn_memory_large(void **s) {
   qk_world_free(w), qk_world_free(fresh);
 }
 
+/* Rays and nearest objects where rounding used to decide the order (a reviewer's exact
+ * oracles): a segment lying on the ray's line was hit at t = 0; a ray grazing a disc got
+ * a t 1e-10 early, so a tangent disc and a radius-0 disc came before a point that was
+ * first, and a tie with a segment went by the wrong slot; near a disc of radius 5.8e24 a
+ * point 7407 from it was at distance 4.9e-324, and one 2.47 from a segment at 0. */
+static void test_world_ray_knn_rounding(void **s) {
+  (void)s;
+  qk_world_t *w;
+  qk_world_hit_t all[3], first, nb[2];
+  size_t n;
+  /* the ray along y = 3x from (100 2^-40, 300 2^-40) to X = 2^29 + 2^-10: the point at
+   * t = (2^27 - ox) / (X - ox) first, then the collinear segment at (2^28 - ox) / (X - ox) */
+  const double ox = 100 * 0x1p-40, X = 0x1p29 + 0x1p-10, a = 0x1p28, b = 0x1p28 + 0x1p20;
+  qk_handle_t hs, hp, hd, h0;
+  assert_int_equal(qk_world_new(NULL, &w), QK_OK);
+  assert_int_equal(qk_world_add(w, &(qk_shape_t){QK_SHAPE_SEGMENT, a, 3 * a, b, 3 * b}, 0, &hs),
+                   QK_OK);
+  assert_int_equal(qk_world_add(w, &(qk_shape_t){QK_SHAPE_POINT, 0x1p27, 3 * 0x1p27, 0, 0}, 1, &hp),
+                   QK_OK);
+  assert_int_equal(qk_world_update(w), QK_OK);
+  assert_int_equal(
+      qk_world_raycast_all(w, (qk_point_t){ox, 3 * ox}, (qk_point_t){X, 3 * X}, all, 3, &n), QK_OK);
+  assert_int_equal(n, 2);
+  assert_true(all[0].h == hp && all[1].h == hs);
+  assert_true(fabs(all[0].t - (0x1p27 - ox) / (X - ox)) < 1e-15);
+  assert_true(fabs(all[1].t - (0x1p28 - ox) / (X - ox)) < 1e-15);
+  qk_world_free(w);
+  /* the ray (-3, 4) -> (4, 4): a point at (-2^-40, 4), t = (3 - 2^-40) / 7, first; a disc
+   * tangent to it and a radius-0 disc, and a segment from the latter's centre, all at
+   * t = (3 + 2^-60) / 7 (in doubles the same as 3 / 7), in slot order */
+  assert_int_equal(qk_world_new(NULL, &w), QK_OK);
+  assert_int_equal(qk_world_add(w, &(qk_shape_t){QK_SHAPE_SEGMENT, 0x1p-60, 4, 8, 8}, 0, &hs),
+                   QK_OK);
+  assert_int_equal(qk_world_add(w, &(qk_shape_t){QK_SHAPE_DISC, 0x1p-60, 5, 1, 0}, 1, &hd), QK_OK);
+  assert_int_equal(qk_world_add(w, &(qk_shape_t){QK_SHAPE_DISC, 0x1p-60, 4, 0, 0}, 2, &h0), QK_OK);
+  assert_int_equal(qk_world_add(w, &(qk_shape_t){QK_SHAPE_POINT, -0x1p-40, 4, 0, 0}, 3, &hp),
+                   QK_OK);
+  assert_int_equal(qk_world_update(w), QK_OK);
+  qk_world_hit_t four[4];
+  assert_int_equal(qk_world_raycast_all(w, (qk_point_t){-3, 4}, (qk_point_t){4, 4}, four, 4, &n),
+                   QK_OK);
+  assert_int_equal(n, 4);
+  assert_true(four[0].h == hp && four[1].h == hs && four[2].h == hd && four[3].h == h0);
+  assert_true(four[0].t < four[1].t);
+  assert_true(four[1].t == 3.0 / 7 && four[2].t == 3.0 / 7 && four[3].t == 3.0 / 7);
+  assert_int_equal(qk_world_raycast(w, (qk_point_t){-3, 4}, (qk_point_t){4, 4}, &first), QK_OK);
+  assert_true(first.h == hp);
+  qk_world_free(w);
+  /* kNN near a huge disc: the point (12345.678, 3.6267774588438875e24) is 7407.4068 from
+   * the disc's edge (exact), after a point 1000 away */
+  const double px = 12345.678, py = 3.6267774588438875e+24;
+  assert_int_equal(qk_world_new(NULL, &w), QK_OK);
+  assert_int_equal(
+      qk_world_add(w, &(qk_shape_t){QK_SHAPE_DISC, -0x1.8p+81, -0x1p+80, 0x1.4p+82, 0}, 0, &hd),
+      QK_OK);
+  assert_int_equal(qk_world_add(w, &(qk_shape_t){QK_SHAPE_POINT, px + 1000, py, 0, 0}, 1, &hp),
+                   QK_OK);
+  assert_int_equal(qk_world_update(w), QK_OK);
+  assert_int_equal(qk_world_knn(w, (qk_point_t){px, py}, 2, nb, &n), QK_OK);
+  assert_int_equal(n, 2);
+  assert_true(nb[0].h == hp && nb[1].h == hd);
+  assert_true(fabs(nb[1].t - 7407.4068) < 1e-3);
+  qk_world_free(w);
+  /* kNN near a segment at 1e24: exact squared distance 6.125 (2.4748737341529163) */
+  assert_int_equal(qk_world_new(NULL, &w), QK_OK);
+  assert_int_equal(qk_world_add(w,
+                                &(qk_shape_t){QK_SHAPE_SEGMENT, -7.0, 3.6267774588438875e+24,
+                                              2.4178516392292583e+24, 6.044629098073146e+24},
+                                0, &hs),
+                   QK_OK);
+  assert_int_equal(qk_world_add(w, &(qk_shape_t){QK_SHAPE_POINT, 0x1p80, 0x1p82, 0, 0}, 1, &hp),
+                   QK_OK);
+  assert_int_equal(qk_world_update(w), QK_OK);
+  assert_int_equal(qk_world_knn(w, (qk_point_t){0x1p80, 0x1p82}, 2, nb, &n), QK_OK);
+  assert_int_equal(n, 2);
+  assert_true(nb[0].h == hp && nb[0].t == 0 && nb[1].h == hs);
+  assert_true(fabs(nb[1].t - sqrt(6.125)) < 1e-12);
+  qk_world_free(w);
+}
+
 /* A slot's generation does not wrap: after 2^31 objects in one slot, a handle of its
  * first object matched again and named the new one (a reviewer's 2^31 removes and adds,
  * 25 s; here the generation is set near its end). The slot is retired instead. */
@@ -4325,6 +4405,7 @@ int main(void) {
       cmocka_unit_test(test_world_churn_memory),
       cmocka_unit_test(test_world_churn_memory_large),
       cmocka_unit_test(test_world_generation_wrap),
+      cmocka_unit_test(test_world_ray_knn_rounding),
       cmocka_unit_test(test_world_nomem),
       cmocka_unit_test(test_world_nomem_threads),
       cmocka_unit_test(test_world_nomem_threads_warm),
