@@ -1004,7 +1004,7 @@ typedef struct found_ctx {
 static int found_adapter(qk_id_t id, void *ud) {
   found_ctx_t *f = ud;
   qk_point_t p;
-  qk_tree_point(f->c->tree, id, &p);
+  if (qk_tree_point(f->c->tree, id, &p) != QK_OK) return 1; /* (cannot be: the tree's own id) */
   return f->fn(id, p, 0.0, f->ud);
 }
 
@@ -1347,7 +1347,8 @@ qk_status_t qk_collider_pairs_list(const qk_collider_t *c, qk_pair_t *out, size_
                                    size_t *n_out) {
   if (!c || !n_out || (cap > 0 && !out)) return QK_ERR_INVALID;
   list_ctx_t l = {out, cap, 0};
-  qk_collider_pairs(c, list_pair, &l);
+  qk_status_t st = qk_collider_pairs(c, list_pair, &l);
+  if (st != QK_OK) return st;
   *n_out = l.n;
   /* Sorting only a prefix would mislead: sort what we wrote when it is all of them. */
   if (l.n <= cap && l.n > 1) qsort(out, l.n, sizeof *out, pair_cmp);

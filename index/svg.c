@@ -41,10 +41,11 @@ qk_status_t qk_tree_write_svg(const qk_tree_t *t, FILE *f, unsigned width) {
   qk__svg_open(f, width);
   fprintf(f, "<g fill=\"none\" stroke=\"#4a6fa5\" stroke-width=\"0.6\">\n");
   /* Cells first, then the points on top, in two passes over the leaves. */
-  qk_tree_visit(t, 0, draw, &s);
+  qk_status_t st = qk_tree_visit(t, 0, draw, &s);
   fprintf(f, "</g>\n<g fill=\"#c0392b\">\n");
   s.points = 1;
-  qk_tree_visit(t, 0, draw, &s);
+  if (st == QK_OK) st = qk_tree_visit(t, 0, draw, &s);
   fprintf(f, "</g>\n</svg>\n");
+  if (st != QK_OK) return st;
   return fflush(f) != 0 || ferror(f) ? QK_ERR_IO : QK_OK; /* (flushed: see mesh/write.c) */
 }

@@ -35,9 +35,9 @@ static qk_visit_t collect_leaf(const qk_tree_t *t, qk_node_t v, void *ud) {
 qk_status_t qk_tree_leaves(const qk_tree_t *t, qk_node_t *leaves, size_t cap, size_t *n_out) {
   if (!t || !n_out || (cap && !leaves)) return QK_ERR_INVALID;
   leaf_list_t l = {leaves, cap, 0};
-  qk_tree_visit(t, 0, collect_leaf, &l);
+  qk_status_t st = qk_tree_visit(t, 0, collect_leaf, &l);
   *n_out = l.n;
-  return QK_OK;
+  return st;
 }
 
 size_t qk_tree_memory(const qk_tree_t *t) {
@@ -66,7 +66,7 @@ void qk_tree_stats(const qk_tree_t *t, qk_tree_stats_t *s) {
   if (!s) return;
   *s = (qk_tree_stats_t){0};
   if (!t) return;
-  qk_tree_visit(t, 0, count_node, s);
+  if (qk_tree_visit(t, 0, count_node, s) != QK_OK) return; /* (cannot fail: t, its root) */
   s->points = t->n_points;
   s->memory_bytes = qk_tree_memory(t);
   s->capacity = t->capacity;

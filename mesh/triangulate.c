@@ -369,7 +369,8 @@ static size_t side_leaves(const qk_tree_t *t, const leaf_map_t *L, uint32_t li, 
   static const qk_dir_t side_dir[4] = {QK_SOUTH, QK_EAST, QK_NORTH, QK_WEST};
   qk_node_t nn[8];
   size_t n = 0;
-  qk_tree_adjacent_leaves(t, L->leaves[li], side_dir[sd], nn, 8, &n);
+  if (qk_tree_adjacent_leaves(t, L->leaves[li], side_dir[sd], nn, 8, &n) != QK_OK)
+    return 0; /* (cannot fail: a leaf of t, a direction, room) */
   if (n > 8) n = 8;
   for (size_t i = 0; i < n; i++) nb[i] = L->leaf_of[nn[i]];
   return n;

@@ -353,8 +353,10 @@ qk_status_t qk_mesh_write_svg(const qk_mesh_t *m, FILE *f, unsigned width) {
     fprintf(f, "\"/>\n");
   }
   fprintf(f, "</g>\n<g fill=\"none\" stroke=\"#2b6cb0\" stroke-width=\"1\">\n");
+  qk_status_t st = QK_OK;
   if (m->tree) /* (the general mode has one only when it graded: qk_mesh_tree) */
-    qk_tree_visit(m->tree, qk_tree_root(m->tree), draw_leaf, &c);
+    st = qk_tree_visit(m->tree, qk_tree_root(m->tree), draw_leaf, &c);
+  if (st != QK_OK) return st;
   fprintf(f, "</g>\n<g stroke=\"#c53030\" stroke-width=\"2.5\" stroke-linecap=\"round\">\n");
   for (size_t s = 0; s < m->ncs; s++) {
     uint32_t a = m->cseg[2 * s], b = m->cseg[2 * s + 1];

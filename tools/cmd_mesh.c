@@ -508,8 +508,8 @@ static void print_stats(const qk_mesh_t *mesh, const qk_mesh_stats_t *st, const 
     printf("\"exempt_angles\": %zu, \"smallest_input_angle_deg\": %.10g, ", s.exempt_angles,
            s.smallest_input_angle_deg);
   printf("\"angle_histogram\": [");
-  uint64_t bins[180];
-  qk_mesh_angle_histogram(mesh, bins);
+  uint64_t bins[180] = {0};
+  if (qk_mesh_angle_histogram(mesh, bins) != QK_OK) memset(bins, 0, sizeof bins); /* (a mesh) */
   for (int k = 0; k < 180; k++) printf("%s%llu", k ? ", " : "", (unsigned long long)bins[k]);
   printf("]}\n");
 }
@@ -586,7 +586,7 @@ static int poly_auto_grid(const qk_poly_t *p, prep_t *pp) {
   qk_poly_counts(p, &nv, NULL, NULL);
   double *xy = malloc((nv ? nv : 1) * 2 * sizeof *xy);
   if (!xy) return 1;
-  qk_poly_vertices(p, xy, nv, &nv);
+  if (qk_poly_vertices(p, xy, nv, &nv) != QK_OK) nv = 0; /* (cannot fail: p and room) */
   pp->round_exp = mg_auto_grid(xy, nv, &pp->round_mag, &pp->round_ext);
   /* v = m 2^e with 2^52 <= m < 2^53 a whole number: v lies on the grid 2^(e + ctz(m)). */
   pp->own_exp = INT_MAX;

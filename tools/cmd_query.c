@@ -403,8 +403,9 @@ static int radius_prepare(qrun_t *q) {
 }
 
 static int radius_answer(qrun_t *q, size_t i) {
-  size_t m;
-  qk_query_radius_list(q->tree, q->pts[1][i], q->a.r, q->nb, q->cap, &m);
+  size_t m = 0;
+  qk_status_t st = qk_query_radius_list(q->tree, q->pts[1][i], q->a.r, q->nb, q->cap, &m);
+  if (st != QK_OK) return cli_status(q->a.cmd, q->a.files[1], st);
   qsort(q->nb, m, sizeof *q->nb, nb_by_id);
   for (size_t j = 0; j < m; j++)
     emit(q, i, q->nb[j].id, "%zu,%u,%.17g", i, (unsigned)q->nb[j].id, q->nb[j].dist);
@@ -445,8 +446,10 @@ static int range_prepare(qrun_t *q) {
 
 static int range_answer(qrun_t *q, size_t i) {
   const double *b = q->tab[1].v + 4 * i;
-  size_t m;
-  qk_query_range_ids(q->tree, (qk_box_t){b[0], b[1], b[2], b[3]}, q->ids, q->cap, &m);
+  size_t m = 0;
+  qk_status_t st =
+      qk_query_range_ids(q->tree, (qk_box_t){b[0], b[1], b[2], b[3]}, q->ids, q->cap, &m);
+  if (st != QK_OK) return cli_status(q->a.cmd, q->a.files[1], st);
   qsort(q->ids, m, sizeof *q->ids, id_cmp);
   for (size_t j = 0; j < m; j++) emit(q, i, q->ids[j], "%zu,%u", i, (unsigned)q->ids[j]);
   return CLI_OK;
@@ -726,16 +729,18 @@ static int geo_prepare(qrun_t *q) {
 }
 
 static int geo_knn_answer(qrun_t *q, size_t i) {
-  size_t m;
-  qk_geo_knn(q->geo, q->pts[1][i], q->a.k, q->a.max_dist, q->nb, &m);
+  size_t m = 0;
+  qk_status_t st = qk_geo_knn(q->geo, q->pts[1][i], q->a.k, q->a.max_dist, q->nb, &m);
+  if (st != QK_OK) return cli_status(q->a.cmd, q->a.files[1], st);
   for (size_t j = 0; j < m; j++)
     emit(q, i, q->nb[j].id, "%zu,%zu,%u,%.17g", i, j + 1, (unsigned)q->nb[j].id, q->nb[j].dist);
   return CLI_OK;
 }
 
 static int geo_radius_answer(qrun_t *q, size_t i) {
-  size_t m;
-  qk_geo_radius_list(q->geo, q->pts[1][i], q->a.r, q->nb, q->cap, &m);
+  size_t m = 0;
+  qk_status_t st = qk_geo_radius_list(q->geo, q->pts[1][i], q->a.r, q->nb, q->cap, &m);
+  if (st != QK_OK) return cli_status(q->a.cmd, q->a.files[1], st);
   qsort(q->nb, m, sizeof *q->nb, nb_by_id);
   for (size_t j = 0; j < m; j++)
     emit(q, i, q->nb[j].id, "%zu,%u,%.17g", i, (unsigned)q->nb[j].id, q->nb[j].dist);

@@ -649,7 +649,7 @@ int cmd_simulate(int argc, char **argv) {
     tmax = fmax(tmax, dt);
     size_t np[3] = {0, 0, 0};
     for (int k = 0; k < 3 && st == QK_OK; k++)
-      qk_world_pairs_list(w, (qk_pairs_which_t)k, NULL, 0, &np[k]);
+      st = qk_world_pairs_list(w, (qk_pairs_which_t)k, NULL, 0, &np[k]);
     for (int k = 0; k < 3; k++) counts[3 * f + (unsigned long)k] = np[k];
   }
   if (st != QK_OK) {
@@ -659,7 +659,10 @@ int cmd_simulate(int argc, char **argv) {
   /* The picture first, and flushed: when it cannot be written, nothing goes to the JSON's
    * output either (stdout, written in place, would keep what it was given). */
   if (svg) {
-    qk_world_pairs(w, QK_PAIRS_ALL, mark_pair, hit);
+    if ((st = qk_world_pairs(w, QK_PAIRS_ALL, mark_pair, hit)) != QK_OK) {
+      rc = cli_status(cmd, "simulating", st);
+      goto done;
+    }
     if (write_svg(&so, b, n, hit, side) || !flushed(so.f)) {
       rc = CLI_INTERNAL;
       goto done;

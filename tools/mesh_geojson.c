@@ -841,7 +841,8 @@ static void rings_holding(hp_t *h, size_t q) {
   h->nheld = 0;
   for (size_t e = 0; e < m && (!e || h->nheld); e++) {
     qk_point_t v = {h->xy[2 * (h->rs[q] + e)], h->xy[2 * (h->rs[q] + e) + 1]};
-    qk_region_locate_all(h->each, v, QK_BOUNDARY_CLOSED, h->at_v, h->in->nr, &cnt);
+    if (qk_region_locate_all(h->each, v, QK_BOUNDARY_CLOSED, h->at_v, h->in->nr, &cnt))
+      cnt = 0; /* (cannot fail: a finite vertex, room for every ring) */
     size_t k = 0;
     for (size_t i = 0, j = 0; i < (e ? h->nheld : cnt); i++) {
       uint32_t r = e ? h->held[i] : h->at_v[i];
@@ -862,8 +863,9 @@ static int filled(hp_t *h, size_t q) {
     size_t r = h->held[i], np = 0;
     int all = 1;
     for (size_t v = h->rs[r]; v + 1 < h->rs[r + 1] && all; v++) {
-      qk_region_locate_all(h->each, (qk_point_t){h->xy[2 * v], h->xy[2 * v + 1]},
-                           QK_BOUNDARY_CLOSED, h->at_p, h->in->nr, &np);
+      if (qk_region_locate_all(h->each, (qk_point_t){h->xy[2 * v], h->xy[2 * v + 1]},
+                               QK_BOUNDARY_CLOSED, h->at_p, h->in->nr, &np))
+        np = 0; /* (cannot fail, as above) */
       all = 0;
       for (size_t j = 0; j < np && !all; j++) all = h->at_p[j] == q;
     }
@@ -876,7 +878,8 @@ static int filled(hp_t *h, size_t q) {
  * q (h->held), and q when `hole` (p on its inner side). */
 static int in_face(hp_t *h, size_t q, int hole, qk_point_t p, qk_boundary_t b) {
   size_t np = 0;
-  qk_region_locate_all(h->each, p, b, h->at_p, h->in->nr, &np);
+  if (qk_region_locate_all(h->each, p, b, h->at_p, h->in->nr, &np))
+    return 0; /* (a probe not finite) */
   if (np != h->nheld + (size_t)hole) return 0;
   for (size_t i = 0, j = 0; i < np; i++) {
     if (h->at_p[i] == q) continue;
@@ -909,7 +912,8 @@ static int arc_point(hp_t *h, size_t q, int hole, size_t a0, size_t len, int *lo
       double step = k % 2 ? -mag : mag;
       qk_point_t p = {mx + step * nx, my + step * ny};
       size_t np = 0;
-      qk_region_locate_all(h->each, p, QK_BOUNDARY_OPEN, h->at_p, in->nr, &np);
+      if (qk_region_locate_all(h->each, p, QK_BOUNDARY_OPEN, h->at_p, in->nr, &np))
+        continue; /* (a probe not finite: overflowed) */
       int in_q = 0;
       for (size_t i = 0; i < np && !in_q; i++) in_q = h->at_p[i] == q;
       if (in_q != hole) continue; /* the other side of the edge */
