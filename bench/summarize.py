@@ -248,13 +248,21 @@ def mesh_targets(rows):
 
 
 def loads(rows):
-    """The load averages the run recorded (its "load" lines), one line each, or a line saying none."""
-    out = []
-    for r in rows:
-        if r.get("op") == "load" and r.get("load1") is not None:
-            out.append(f"load average (1, 5, 15 min) at the run's {r.get('note', '?')}: "
-                       f"{r['load1']:.2f} {r['load5']:.2f} {r['load15']:.2f}")
-    return out or ["load average: not recorded in this run"]
+    """The load averages the runs recorded (their "load" lines): one line for a single run,
+    else the range over all of them (a --targets file holds one run per operation), or a
+    line saying none were recorded."""
+    got = [r for r in rows if r.get("op") == "load" and r.get("load1") is not None]
+    if not got:
+        return ["load average: not recorded in this run"]
+    if len(got) <= 2:
+        return [f"load average (1, 5, 15 min) at the run's {r.get('note', '?')}: "
+                f"{r['load1']:.2f} {r['load5']:.2f} {r['load15']:.2f}" for r in got]
+    lo = {k: min(r[k] for r in got) for k in ("load1", "load5", "load15")}
+    hi = {k: max(r[k] for r in got) for k in ("load1", "load5", "load15")}
+    runs = sum(1 for r in got if r.get("note") == "start")
+    return [f"load average over the {runs} runs' starts and ends: 1 min {lo['load1']:.2f}-"
+            f"{hi['load1']:.2f}, 5 min {lo['load5']:.2f}-{hi['load5']:.2f}, 15 min "
+            f"{lo['load15']:.2f}-{hi['load15']:.2f}"]
 
 
 def main():
