@@ -194,7 +194,8 @@ std::string to_json(const Rec &r) {
   return s + "}";
 }
 
-void emit(Rec r) {
+// A record's JSON line, on stdout under --json and in the --json-file.
+static void write_json(const Rec &r) {
   if (opt.json) {
     printf("%s\n", to_json(r).c_str());
     fflush(stdout);
@@ -203,6 +204,10 @@ void emit(Rec r) {
     fprintf(json_file, "%s\n", to_json(r).c_str());
     fflush(json_file);
   }
+}
+
+void emit(Rec r) {
+  write_json(r);
   records.push_back(std::move(r));
 }
 
@@ -2147,14 +2152,7 @@ static void emit_load(const char *when) {
   r.op = "load", r.impl = "-", r.dataset = "-", r.order = "-", r.note = when;
   if (getloadavg(a, 3) == 3)
     r.extra["load1"] = a[0], r.extra["load5"] = a[1], r.extra["load15"] = a[2];
-  if (opt.json) {
-    printf("%s\n", to_json(r).c_str());
-    fflush(stdout);
-  }
-  if (json_file) {
-    fprintf(json_file, "%s\n", to_json(r).c_str());
-    fflush(json_file);
-  }
+  write_json(r);
 }
 
 void print_table() {

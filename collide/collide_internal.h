@@ -76,10 +76,12 @@ int qk__orient(double ax, double ay, double bx, double by, double cx, double cy)
 int qk__dot_sign(double ax, double ay, double bx, double by, double cx, double cy);
 int qk__within(double ax, double ay, double bx, double by, double r1, double r2);
 int qk__line_within(double px, double py, double qx, double qy, double cx, double cy, double r);
-/* The values of qk__orient's, qk__within's and qk__line_within's polynomials, to within
+/* The values of qk__orient's, qk__dot_sign's, qk__within's and qk__line_within's
+ * polynomials, to within
  * 2^-54 of themselves (exactly summed where their terms cancel): for the distances and ray
  * parameters that order query answers. Same inputs. */
 long double qk__orient_value(double ax, double ay, double bx, double by, double cx, double cy);
+long double qk__dot_value(double ax, double ay, double bx, double by, double cx, double cy);
 long double qk__within_value(double ax, double ay, double bx, double by, double r1, double r2);
 long double qk__line_within_value(double px, double py, double qx, double qy, double cx, double cy,
                                   double r);

@@ -200,13 +200,9 @@ long double qk__orient_value(double ax, double ay, double bx, double by, double 
   return x_value(orient_x(&xs, ax, ay, bx, by, cx, cy));
 }
 
-/* sign of u.v with u = b - a, v = c - a. */
-int qk__dot_sign(double ax, double ay, double bx, double by, double cx, double cy) {
-  double l = (bx - ax) * (cx - ax), r = (by - ay) * (cy - ay);
-  double dot = l + r, bound = 8 * EPS * (fabs(l) + fabs(r));
-  if (dot > bound) return 1;
-  if (-dot > bound) return -1;
-  xs_t xs, *x = &xs; /* not zeroed: every part is written before it is read */
+/* (b - a).(c - a), exactly, into x (returned). */
+static const xp_t *dot_x(xs_t *x, double ax, double ay, double bx, double by, double cx,
+                         double cy) {
   x_set_diff(&x->a, bx, ax);
   x_set_diff(&x->b, cx, ax);
   x_mul(&x->a, &x->b, &x->c, &x->s, &x->t);
@@ -214,7 +210,25 @@ int qk__dot_sign(double ax, double ay, double bx, double by, double cx, double c
   x_set_diff(&x->b, cy, ay);
   x_mul(&x->a, &x->b, &x->d, &x->s, &x->t);
   x_add(&x->c, &x->d, &x->t);
-  return x_sign(&x->c);
+  return &x->c;
+}
+
+/* sign of u.v with u = b - a, v = c - a. */
+int qk__dot_sign(double ax, double ay, double bx, double by, double cx, double cy) {
+  double l = (bx - ax) * (cx - ax), r = (by - ay) * (cy - ay);
+  double dot = l + r, bound = 8 * EPS * (fabs(l) + fabs(r));
+  if (dot > bound) return 1;
+  if (-dot > bound) return -1;
+  xs_t xs; /* not zeroed: every part is written before it is read */
+  return x_sign(dot_x(&xs, ax, ay, bx, by, cx, cy));
+}
+
+long double qk__dot_value(double ax, double ay, double bx, double by, double cx, double cy) {
+  long double l = ((long double)bx - ax) * ((long double)cx - ax);
+  long double r = ((long double)by - ay) * ((long double)cy - ay), d = l + r;
+  if (fabsl(d) >= VALUE_KEEP * (fabsl(l) + fabsl(r))) return d;
+  xs_t xs;
+  return x_value(dot_x(&xs, ax, ay, bx, by, cx, cy));
 }
 
 /* r^2 - (ax-bx)^2 - (ay-by)^2 with r = r1 + r2, exactly, into x (returned). */

@@ -3230,7 +3230,8 @@ static void test_world_churn_memory_large(void **s) {
 /* Rays and nearest objects where rounding used to decide the order (a reviewer's exact
  * oracles): a segment lying on the ray's line was hit at t = 0; a ray grazing a disc got
  * a t 1e-10 early, so a tangent disc and a radius-0 disc came before a point that was
- * first, and a tie with a segment went by the wrong slot; near a disc of radius 5.8e24 a
+ * first, and a tie with a segment went by the wrong slot (and b = f.v, left rounded at
+ * first, still misordered grazing discs); near a disc of radius 5.8e24 a
  * point 7407 from it was at distance 4.9e-324, and one 2.47 from a segment at 0. */
 static void test_world_ray_knn_rounding(void **s) {
   (void)s;
@@ -3274,6 +3275,49 @@ static void test_world_ray_knn_rounding(void **s) {
   assert_true(four[1].t == 3.0 / 7 && four[2].t == 3.0 / 7 && four[3].t == 3.0 / 7);
   assert_int_equal(qk_world_raycast(w, (qk_point_t){-3, 4}, (qk_point_t){4, 4}, &first), QK_OK);
   assert_true(first.h == hp);
+  qk_world_free(w);
+  /* a grazing ray, f nearly across v, so that b = f.v cancels too: the large disc (slot 0,
+   * exact t 0.0608953374440831...) before the small one (slot 1, 0.0608953374442102...) */
+  assert_int_equal(qk_world_new(NULL, &w), QK_OK);
+  assert_int_equal(qk_world_add(w,
+                                &(qk_shape_t){QK_SHAPE_DISC, 0.04490772282310107,
+                                              -0.31270444442065104, 0.3499419629730869, 0},
+                                0, &hd),
+                   QK_OK);
+  assert_int_equal(qk_world_add(w,
+                                &(qk_shape_t){QK_SHAPE_DISC, -0.21129852201443586,
+                                              -0.07433972900390695, 2.6990189333332616e-09, 0},
+                                1, &h0),
+                   QK_OK);
+  assert_int_equal(qk_world_update(w), QK_OK);
+  assert_int_equal(qk_world_raycast_all(w, (qk_point_t){-0.21129851992102808, -0.07433972675380823},
+                                        (qk_point_t){-0.21129852410784364, -0.07433973125400568},
+                                        all, 3, &n),
+                   QK_OK);
+  assert_int_equal(n, 2);
+  assert_true(all[0].h == hd && all[1].h == h0);
+  assert_true(fabs(all[0].t - 0.060895337444083168) < 1e-16);
+  qk_world_free(w);
+  /* a ray tangent to a disc whose b rounds to 0: the disc at t = 2^-20, after the point at
+   * the ray's origin (it came at t = 0, the tie going to the disc's slot) */
+  assert_int_equal(qk_world_new(NULL, &w), QK_OK);
+  assert_int_equal(qk_world_add(w,
+                                &(qk_shape_t){QK_SHAPE_DISC, -3.1554436208840472e-30,
+                                              2.3665827156630354e-30, 4.6566128730773926e-09, 0},
+                                0, &hd),
+                   QK_OK);
+  assert_int_equal(qk_world_add(w,
+                                &(qk_shape_t){QK_SHAPE_POINT, 2.7939677238464355e-09,
+                                              3.725290298461914e-09, 0, 0},
+                                1, &hp),
+                   QK_OK);
+  assert_int_equal(qk_world_update(w), QK_OK);
+  assert_int_equal(qk_world_raycast_all(
+                       w, (qk_point_t){2.7939677238464355e-09, 3.725290298461914e-09},
+                       (qk_point_t){2.7939677238464322e-09, 3.7252902984619165e-09}, all, 3, &n),
+                   QK_OK);
+  assert_int_equal(n, 2);
+  assert_true(all[0].h == hp && all[0].t == 0 && all[1].h == hd && all[1].t == 0x1p-20);
   qk_world_free(w);
   /* kNN near a huge disc: the point (12345.678, 3.6267774588438875e24) is 7407.4068 from
    * the disc's edge (exact), after a point 1000 away */

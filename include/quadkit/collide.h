@@ -233,7 +233,7 @@ typedef struct qk_shape {
  * A handle to a world object: slot in the low 32 bits, generation in the high 32. A slot
  * is reused after its object is removed, with the next generation, so a stale handle is
  * rejected (QK_ERR_NOT_FOUND) rather than naming the new object; after 2^31 objects a
- * slot's generations are spent and it is retired (12 bytes of memory, never reused).
+ * slot's generations are spent and it is retired (72 bytes of memory, never reused).
  */
 typedef uint64_t qk_handle_t;
 
