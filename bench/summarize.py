@@ -52,18 +52,20 @@ class Table:
         self.rows = []
 
     def ratio(self, what, want, q, b, note=""):
-        """A row comparing rates q and b (quadkit over the baseline) with target `want`."""
+        """A row comparing rates q and b (quadkit over the baseline) with target `want`
+        (None: a row with no target, measured only)."""
+        wanted = "no target" if want is None else f"≥ {want:g}x"
         bad = [x for x in (q, b) if isinstance(x, Mismatch)]
         if bad:
             why = "; ".join(f"mismatch: {x.note}" for x in bad)
-            self.rows.append(f"| {what} | ≥ {want:g}x | – | {why} |")
+            self.rows.append(f"| {what} | {wanted} | – | {why} |")
             return
         if q is None or b is None:
-            self.rows.append(f"| {what} | ≥ {want:g}x | – | {note or 'not in this run'} |")
+            self.rows.append(f"| {what} | {wanted} | – | {note or 'not in this run'} |")
             return
         r = q / b
-        ok = "yes" if r >= want else "**no**"
-        self.rows.append(f"| {what} | ≥ {want:g}x | {r:.2f}x | {ok}{'; ' + note if note else ''} |")
+        ok = "–" if want is None else "yes" if r >= want else "**no**"
+        self.rows.append(f"| {what} | {wanted} | {r:.2f}x | {ok}{'; ' + note if note else ''} |")
 
     def value(self, what, want, got, ok, note=""):
         self.rows.append(f"| {what} | {want} | {got} | {'yes' if ok else '**no**'}{'; ' + note if note else ''} |")
@@ -156,7 +158,7 @@ def tree_targets(rows):
                       "unbalanced): not a verified comparison |")
     else:
         t.ratio(f"balance ({sz(nb)}), cgal grade()", 5, rate(qbal), rate(cb))
-    t.ratio(f"balance ({sz(nb)}), p4est_balance (no target)", 1, rate(qbal),
+    t.ratio(f"balance ({sz(nb)}), p4est_balance", None, rate(qbal),
             rate(pick(rows, op="balance", impl="p4est", n=nb)))
     um = max((r["n"] for r in rows if r["op"] == "mesh" and r["dataset"] == "octagons"), default=0)
     bm = pick(rows, op="mesh", impl="cgal", dataset="octagons", n=um)
@@ -190,7 +192,7 @@ def world_targets(rows):
             where = f"{scene} {sz(n)}"
             for base, want, label in (("box2d", 10, "Box2D b2DynamicTree"), ("bullet", 10, "Bullet btDbvt"),
                                       ("embree", 2, "Embree, scene rebuilt every frame"),
-                                      ("embree-refit", 1, "Embree, kept scene refitted every frame (no target)")):
+                                      ("embree-refit", None, "Embree, kept scene refitted every frame")):
                 b = pick(rows, op="world", impl=base, dataset=scene, n=n)
                 if b is not None:
                     t.ratio(f"{where}, {label}", want, rate(q), rate(b))

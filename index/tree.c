@@ -641,6 +641,15 @@ static qk_status_t bounding_box(const qk_point_t *p, size_t n, uint32_t threads,
 }
 
 /* The smallest enclosing square of a bounding box (lower-left at the minima). */
+/* The lower end of a side-long interval holding [lo, hi]: lo, or when lo + side overflows,
+ * hi - side stepped down to lo or below. */
+static double axis_start(double lo, double hi, double side) {
+  if (isfinite(lo + side)) return lo;
+  double x = hi - side;
+  while (x > lo) x = nextafter(x, -INFINITY);
+  return x;
+}
+
 static qk_status_t enclosing_square(qk_box_t b, size_t n, qk_square_t *s) {
   *s = (qk_square_t){0, 0, 1};
   if (n == 0) return QK_OK;
@@ -649,14 +658,18 @@ static qk_status_t enclosing_square(qk_box_t b, size_t n, qk_square_t *s) {
   s->side = fmax(b.xmax - b.xmin, b.ymax - b.ymin);
   if (!(s->side > 0)) s->side = 1; /* one distinct location: any positive side will do */
   if (!isfinite(s->side)) return QK_ERR_LIMIT; /* the extent overflows a double */
-  /* Near DBL_MAX the square ends at the maxima instead (points at 1e308 and 1.5e308 had a
-   * finite enclosing square, and were refused), reaching down past the minima. */
-  if (!isfinite(s->x + s->side))
-    for (s->x = b.xmax - s->side; s->x > b.xmin;) s->x = nextafter(s->x, -INFINITY);
-  if (!isfinite(s->y + s->side))
-    for (s->y = b.ymax - s->side; s->y > b.ymin;) s->y = nextafter(s->y, -INFINITY);
-  /* Rounding in the subtraction may leave the maxima a hair outside; widen by ulps. */
-  while (s->x + s->side < b.xmax || s->y + s->side < b.ymax) s->side = nextafter(s->side, INFINITY);
+  /* Each axis starts at its minimum or, near DBL_MAX where that overflows, ends at its
+   * maximum, reaching down past the minimum (points at 1e308 and 1.5e308 had a finite
+   * enclosing square, and were refused). Rounding may leave a maximum a hair outside:
+   * widen by an ulp and place both axes again (a widening for x's sake pushed a y placed
+   * at its maximum past DBL_MAX). */
+  for (;;) {
+    s->x = axis_start(b.xmin, b.xmax, s->side);
+    s->y = axis_start(b.ymin, b.ymax, s->side);
+    if (s->x + s->side >= b.xmax && s->y + s->side >= b.ymax) break;
+    s->side = nextafter(s->side, INFINITY);
+    if (!isfinite(s->side)) return QK_ERR_LIMIT;
+  }
   if (!isfinite(s->x + s->side) || !isfinite(s->y + s->side)) return QK_ERR_LIMIT;
   return QK_OK;
 }

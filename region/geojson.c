@@ -655,9 +655,11 @@ static size_t string_bytes(const char *text, size_t b, size_t e) {
     else
       return i;
     if (i + n > e) return i;
+    /* a byte that continues no sequence: the sequence is cut short, at its lead byte;
+     * a continuation byte out of range: an overlong form, a surrogate or past U+10FFFF */
+    for (size_t k = 1; k < n; k++)
+      if (s[i + k] < 0x80 || s[i + k] > 0xBF) return i;
     if (s[i + 1] < lo || s[i + 1] > hi) return i + 1;
-    for (size_t k = 2; k < n; k++)
-      if (s[i + k] < 0x80 || s[i + k] > 0xBF) return i + k;
     i += n;
   }
   return SIZE_MAX;

@@ -568,8 +568,11 @@ static void test_geojson_string_bytes(void **state) {
       {"\xe0\x80\xaf", 1, "byte 0x80"},     /* overlong, three bytes */
       {"\xed\xa0\x80", 1, "byte 0xA0"},     /* a surrogate, U+D800 */
       {"\xf4\x90\x80\x80", 1, "byte 0x90"}, /* past U+10FFFF */
-      {"\xe6\x97\x41", 2, "byte 0x41"},     /* a continuation missing */
-      {"\x80", 0, "byte 0x80"},             /* a lone continuation */
+      {"\xe6\x97\x41", 0, "byte 0xE6"},     /* a continuation missing: the lead byte */
+      {"\xc3"
+       "a",
+       0, "byte 0xC3"},         /* (the error blamed the a) */
+      {"\x80", 0, "byte 0x80"}, /* a lone continuation */
       {"Z\xc3\xbcrich \xe6\x97\xa5 \xf0\x9f\x98\x80 \x7f", SIZE_MAX, NULL},
       {"\xf4\x8f\xbf\xbf \xef\xbf\xbf \xed\x9f\xbf \xee\x80\x80", SIZE_MAX, NULL},
       {"a\\u0001\\\"\\n", SIZE_MAX, NULL}, /* escaped, they are fine */

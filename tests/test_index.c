@@ -584,19 +584,24 @@ static void test_index_bad_input(void **state) {
    * was placed at the minima, overflowed, and the points were refused). Every point is
    * found again in the fitted root; brute force over the points for a range query. */
   qk_point_t top[4] = {{1e308, 0}, {1.5e308, 1.7e308}, {DBL_MAX, 0}, {1.2e308, DBL_MAX}};
-  for (size_t n = 2; n <= 4; n++) {
-    assert_int_equal(qk_tree_build(top, n, NULL, &t), QK_OK);
+  /* (and mixed signs: x's extent sets the side, y ends at DBL_MAX; the widening an ulp for
+   * x's sake pushed y's end past DBL_MAX, until y was placed again) */
+  qk_point_t mixed[2] = {{-1.7e308, DBL_MAX}, {78, 1e308}};
+  for (size_t n = 1; n <= 5; n++) {
+    const qk_point_t *pts = n == 5 ? mixed : top;
+    size_t m = n == 5 ? 2 : n;
+    assert_int_equal(qk_tree_build(pts, m, NULL, &t), QK_OK);
     qk_tree_stats_t ts;
     qk_tree_stats(t, &ts);
     assert_true(isfinite(ts.root.x + ts.root.side) && isfinite(ts.root.y + ts.root.side));
-    for (size_t i = 0; i < n; i++) {
-      assert_true(top[i].x >= ts.root.x && top[i].x <= ts.root.x + ts.root.side);
-      assert_true(top[i].y >= ts.root.y && top[i].y <= ts.root.y + ts.root.side);
+    for (size_t i = 0; i < m; i++) {
+      assert_true(pts[i].x >= ts.root.x && pts[i].x <= ts.root.x + ts.root.side);
+      assert_true(pts[i].y >= ts.root.y && pts[i].y <= ts.root.y + ts.root.side);
       qk_id_t ids[4];
-      size_t m = 0;
-      qk_box_t at = {top[i].x, top[i].y, top[i].x, top[i].y};
-      assert_int_equal(qk_query_range_list(t, at, ids, 4, &m), QK_OK);
-      assert_int_equal(m, 1);
+      size_t found = 0;
+      qk_box_t at = {pts[i].x, pts[i].y, pts[i].x, pts[i].y};
+      assert_int_equal(qk_query_range_list(t, at, ids, 4, &found), QK_OK);
+      assert_int_equal(found, 1);
       assert_int_equal(ids[0], i);
     }
     assert_int_equal(qk_tree_check(t, NULL, 0), QK_OK);
