@@ -239,11 +239,10 @@ double qk__ray_param(const qk_shape_t *s, qk_point_t o, qk_point_t to) {
   case QK_SHAPE_DISC: {
     /* The first root of vv t^2 + 2 b t + c = 0 (f = o - centre, b = f.v, c = |f|^2 - r^2
      * > 0: o is outside), as c / (-b + sqrt(D)) with D = b^2 - vv c = vv r^2 - (v x f)^2
-     * (Lagrange's identity): b, c and D summed exactly where they cancel (b does for a
-     * grazing ray, f nearly across v: rounded, it put a grazing disc after one behind it,
-     * and at 0 sent a tangent ray to the other root). D as b^2 - vv c lost
-     * 1e-10 of t to rounding for a ray grazing a disc (a tangent disc came before a point
-     * that was first), and -b - sqrt(D) cancels where c / (-b + sqrt(D)) does not. */
+     * (Lagrange's identity), b, c and D summed exactly where they cancel. For a ray grazing
+     * a disc D as b^2 - vv c lost 1e-10 of t (a tangent disc came before a point that was
+     * first), b rounded (f nearly across v) put a grazing disc after one behind it, and
+     * -b - sqrt(D) cancels where c / (-b + sqrt(D)) does not. */
     long double b = -qk__dot_value(o.x, o.y, s->x, s->y, to.x, to.y); /* f.v */
     long double c = -qk__within_value(o.x, o.y, s->x, s->y, s->a, 0);
     long double disc = qk__line_within_value(o.x, o.y, to.x, to.y, s->x, s->y, s->a);

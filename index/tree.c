@@ -640,7 +640,6 @@ static qk_status_t bounding_box(const qk_point_t *p, size_t n, uint32_t threads,
   return finite ? QK_OK : QK_ERR_NONFINITE;
 }
 
-/* The smallest enclosing square of a bounding box (lower-left at the minima). */
 /* The lower end of a side-long interval holding [lo, hi]: lo, or when lo + side overflows,
  * hi - side stepped down to lo or below. */
 static double axis_start(double lo, double hi, double side) {
@@ -650,6 +649,8 @@ static double axis_start(double lo, double hi, double side) {
   return x;
 }
 
+/* The smallest enclosing square of a bounding box (lower-left at the minima, or near
+ * DBL_MAX reaching down past them). */
 static qk_status_t enclosing_square(qk_box_t b, size_t n, qk_square_t *s) {
   *s = (qk_square_t){0, 0, 1};
   if (n == 0) return QK_OK;
