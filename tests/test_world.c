@@ -3233,120 +3233,98 @@ static void test_world_churn_memory_large(void **s) {
  * first, and a tie with a segment went by the wrong slot (and b = f.v, left rounded at
  * first, still misordered grazing discs); near a disc of radius 5.8e24 a
  * point 7407 from it was at distance 4.9e-324, and one 2.47 from a segment at 0. */
+/* A world holding shapes sh[0, n) (tags 0..n-1, handles into h), updated. */
+static qk_world_t *world_of(const qk_shape_t *sh, size_t n, qk_handle_t *h) {
+  qk_world_t *w;
+  assert_int_equal(qk_world_new(NULL, &w), QK_OK);
+  for (size_t i = 0; i < n; i++) assert_int_equal(qk_world_add(w, &sh[i], i, &h[i]), QK_OK);
+  assert_int_equal(qk_world_update(w), QK_OK);
+  return w;
+}
+
 static void test_world_ray_knn_rounding(void **s) {
   (void)s;
   qk_world_t *w;
-  qk_world_hit_t all[3], first, nb[2];
+  qk_world_hit_t all[4], first, nb[2];
+  qk_handle_t h[4];
   size_t n;
   /* the ray along y = 3x from (100 2^-40, 300 2^-40) to X = 2^29 + 2^-10: the point at
    * t = (2^27 - ox) / (X - ox) first, then the collinear segment at (2^28 - ox) / (X - ox) */
   const double ox = 100 * 0x1p-40, X = 0x1p29 + 0x1p-10, a = 0x1p28, b = 0x1p28 + 0x1p20;
-  qk_handle_t hs, hp, hd, h0;
-  assert_int_equal(qk_world_new(NULL, &w), QK_OK);
-  assert_int_equal(qk_world_add(w, &(qk_shape_t){QK_SHAPE_SEGMENT, a, 3 * a, b, 3 * b}, 0, &hs),
-                   QK_OK);
-  assert_int_equal(qk_world_add(w, &(qk_shape_t){QK_SHAPE_POINT, 0x1p27, 3 * 0x1p27, 0, 0}, 1, &hp),
-                   QK_OK);
-  assert_int_equal(qk_world_update(w), QK_OK);
+  const qk_shape_t collinear[2] = {{QK_SHAPE_SEGMENT, a, 3 * a, b, 3 * b},
+                                   {QK_SHAPE_POINT, 0x1p27, 3 * 0x1p27, 0, 0}};
+  w = world_of(collinear, 2, h);
   assert_int_equal(
       qk_world_raycast_all(w, (qk_point_t){ox, 3 * ox}, (qk_point_t){X, 3 * X}, all, 3, &n), QK_OK);
   assert_int_equal(n, 2);
-  assert_true(all[0].h == hp && all[1].h == hs);
+  assert_true(all[0].h == h[1] && all[1].h == h[0]);
   assert_true(fabs(all[0].t - (0x1p27 - ox) / (X - ox)) < 1e-15);
   assert_true(fabs(all[1].t - (0x1p28 - ox) / (X - ox)) < 1e-15);
   qk_world_free(w);
   /* the ray (-3, 4) -> (4, 4): a point at (-2^-40, 4), t = (3 - 2^-40) / 7, first; a disc
    * tangent to it and a radius-0 disc, and a segment from the latter's centre, all at
    * t = (3 + 2^-60) / 7 (in doubles the same as 3 / 7), in slot order */
-  assert_int_equal(qk_world_new(NULL, &w), QK_OK);
-  assert_int_equal(qk_world_add(w, &(qk_shape_t){QK_SHAPE_SEGMENT, 0x1p-60, 4, 8, 8}, 0, &hs),
-                   QK_OK);
-  assert_int_equal(qk_world_add(w, &(qk_shape_t){QK_SHAPE_DISC, 0x1p-60, 5, 1, 0}, 1, &hd), QK_OK);
-  assert_int_equal(qk_world_add(w, &(qk_shape_t){QK_SHAPE_DISC, 0x1p-60, 4, 0, 0}, 2, &h0), QK_OK);
-  assert_int_equal(qk_world_add(w, &(qk_shape_t){QK_SHAPE_POINT, -0x1p-40, 4, 0, 0}, 3, &hp),
-                   QK_OK);
-  assert_int_equal(qk_world_update(w), QK_OK);
-  qk_world_hit_t four[4];
-  assert_int_equal(qk_world_raycast_all(w, (qk_point_t){-3, 4}, (qk_point_t){4, 4}, four, 4, &n),
+  const qk_shape_t tangent[4] = {{QK_SHAPE_SEGMENT, 0x1p-60, 4, 8, 8},
+                                 {QK_SHAPE_DISC, 0x1p-60, 5, 1, 0},
+                                 {QK_SHAPE_DISC, 0x1p-60, 4, 0, 0},
+                                 {QK_SHAPE_POINT, -0x1p-40, 4, 0, 0}};
+  w = world_of(tangent, 4, h);
+  assert_int_equal(qk_world_raycast_all(w, (qk_point_t){-3, 4}, (qk_point_t){4, 4}, all, 4, &n),
                    QK_OK);
   assert_int_equal(n, 4);
-  assert_true(four[0].h == hp && four[1].h == hs && four[2].h == hd && four[3].h == h0);
-  assert_true(four[0].t < four[1].t);
-  assert_true(four[1].t == 3.0 / 7 && four[2].t == 3.0 / 7 && four[3].t == 3.0 / 7);
+  assert_true(all[0].h == h[3] && all[1].h == h[0] && all[2].h == h[1] && all[3].h == h[2]);
+  assert_true(all[0].t < all[1].t);
+  assert_true(all[1].t == 3.0 / 7 && all[2].t == 3.0 / 7 && all[3].t == 3.0 / 7);
   assert_int_equal(qk_world_raycast(w, (qk_point_t){-3, 4}, (qk_point_t){4, 4}, &first), QK_OK);
-  assert_true(first.h == hp);
+  assert_true(first.h == h[3]);
   qk_world_free(w);
   /* a grazing ray, f nearly across v, so that b = f.v cancels too: the large disc (slot 0,
    * exact t 0.0608953374440831...) before the small one (slot 1, 0.0608953374442102...) */
-  assert_int_equal(qk_world_new(NULL, &w), QK_OK);
-  assert_int_equal(qk_world_add(w,
-                                &(qk_shape_t){QK_SHAPE_DISC, 0.04490772282310107,
-                                              -0.31270444442065104, 0.3499419629730869, 0},
-                                0, &hd),
-                   QK_OK);
-  assert_int_equal(qk_world_add(w,
-                                &(qk_shape_t){QK_SHAPE_DISC, -0.21129852201443586,
-                                              -0.07433972900390695, 2.6990189333332616e-09, 0},
-                                1, &h0),
-                   QK_OK);
-  assert_int_equal(qk_world_update(w), QK_OK);
+  const qk_shape_t grazing[2] = {
+      {QK_SHAPE_DISC, 0.04490772282310107, -0.31270444442065104, 0.3499419629730869, 0},
+      {QK_SHAPE_DISC, -0.21129852201443586, -0.07433972900390695, 2.6990189333332616e-09, 0}};
+  w = world_of(grazing, 2, h);
   assert_int_equal(qk_world_raycast_all(w, (qk_point_t){-0.21129851992102808, -0.07433972675380823},
                                         (qk_point_t){-0.21129852410784364, -0.07433973125400568},
                                         all, 3, &n),
                    QK_OK);
   assert_int_equal(n, 2);
-  assert_true(all[0].h == hd && all[1].h == h0);
+  assert_true(all[0].h == h[0] && all[1].h == h[1]);
   assert_true(fabs(all[0].t - 0.060895337444083168) < 1e-16);
   qk_world_free(w);
   /* a ray tangent to a disc whose b rounds to 0: the disc at t = 2^-20, after the point at
    * the ray's origin (it came at t = 0, the tie going to the disc's slot) */
-  assert_int_equal(qk_world_new(NULL, &w), QK_OK);
-  assert_int_equal(qk_world_add(w,
-                                &(qk_shape_t){QK_SHAPE_DISC, -3.1554436208840472e-30,
-                                              2.3665827156630354e-30, 4.6566128730773926e-09, 0},
-                                0, &hd),
-                   QK_OK);
-  assert_int_equal(qk_world_add(w,
-                                &(qk_shape_t){QK_SHAPE_POINT, 2.7939677238464355e-09,
-                                              3.725290298461914e-09, 0, 0},
-                                1, &hp),
-                   QK_OK);
-  assert_int_equal(qk_world_update(w), QK_OK);
-  assert_int_equal(qk_world_raycast_all(
-                       w, (qk_point_t){2.7939677238464355e-09, 3.725290298461914e-09},
-                       (qk_point_t){2.7939677238464322e-09, 3.7252902984619165e-09}, all, 3, &n),
-                   QK_OK);
+  const qk_point_t o = {2.7939677238464355e-09, 3.725290298461914e-09};
+  const qk_shape_t at_origin[2] = {
+      {QK_SHAPE_DISC, -3.1554436208840472e-30, 2.3665827156630354e-30, 4.6566128730773926e-09, 0},
+      {QK_SHAPE_POINT, o.x, o.y, 0, 0}};
+  w = world_of(at_origin, 2, h);
+  assert_int_equal(
+      qk_world_raycast_all(w, o, (qk_point_t){2.7939677238464322e-09, 3.7252902984619165e-09}, all,
+                           3, &n),
+      QK_OK);
   assert_int_equal(n, 2);
-  assert_true(all[0].h == hp && all[0].t == 0 && all[1].h == hd && all[1].t == 0x1p-20);
+  assert_true(all[0].h == h[1] && all[0].t == 0 && all[1].h == h[0] && all[1].t == 0x1p-20);
   qk_world_free(w);
   /* kNN near a huge disc: the point (12345.678, 3.6267774588438875e24) is 7407.4068 from
    * the disc's edge (exact), after a point 1000 away */
   const double px = 12345.678, py = 3.6267774588438875e+24;
-  assert_int_equal(qk_world_new(NULL, &w), QK_OK);
-  assert_int_equal(
-      qk_world_add(w, &(qk_shape_t){QK_SHAPE_DISC, -0x1.8p+81, -0x1p+80, 0x1.4p+82, 0}, 0, &hd),
-      QK_OK);
-  assert_int_equal(qk_world_add(w, &(qk_shape_t){QK_SHAPE_POINT, px + 1000, py, 0, 0}, 1, &hp),
-                   QK_OK);
-  assert_int_equal(qk_world_update(w), QK_OK);
+  const qk_shape_t huge_disc[2] = {{QK_SHAPE_DISC, -0x1.8p+81, -0x1p+80, 0x1.4p+82, 0},
+                                   {QK_SHAPE_POINT, px + 1000, py, 0, 0}};
+  w = world_of(huge_disc, 2, h);
   assert_int_equal(qk_world_knn(w, (qk_point_t){px, py}, 2, nb, &n), QK_OK);
   assert_int_equal(n, 2);
-  assert_true(nb[0].h == hp && nb[1].h == hd);
+  assert_true(nb[0].h == h[1] && nb[1].h == h[0]);
   assert_true(fabs(nb[1].t - 7407.4068) < 1e-3);
   qk_world_free(w);
   /* kNN near a segment at 1e24: exact squared distance 6.125 (2.4748737341529163) */
-  assert_int_equal(qk_world_new(NULL, &w), QK_OK);
-  assert_int_equal(qk_world_add(w,
-                                &(qk_shape_t){QK_SHAPE_SEGMENT, -7.0, 3.6267774588438875e+24,
-                                              2.4178516392292583e+24, 6.044629098073146e+24},
-                                0, &hs),
-                   QK_OK);
-  assert_int_equal(qk_world_add(w, &(qk_shape_t){QK_SHAPE_POINT, 0x1p80, 0x1p82, 0, 0}, 1, &hp),
-                   QK_OK);
-  assert_int_equal(qk_world_update(w), QK_OK);
+  const qk_shape_t far_segment[2] = {{QK_SHAPE_SEGMENT, -7.0, 3.6267774588438875e+24,
+                                      2.4178516392292583e+24, 6.044629098073146e+24},
+                                     {QK_SHAPE_POINT, 0x1p80, 0x1p82, 0, 0}};
+  w = world_of(far_segment, 2, h);
   assert_int_equal(qk_world_knn(w, (qk_point_t){0x1p80, 0x1p82}, 2, nb, &n), QK_OK);
   assert_int_equal(n, 2);
-  assert_true(nb[0].h == hp && nb[0].t == 0 && nb[1].h == hs);
+  assert_true(nb[0].h == h[1] && nb[0].t == 0 && nb[1].h == h[0]);
   assert_true(fabs(nb[1].t - sqrt(6.125)) < 1e-12);
   qk_world_free(w);
 }
