@@ -20,7 +20,16 @@ import sys
 
 
 def load(path):
-    return [json.loads(l) for l in open(path) if l.strip()]
+    rows = []
+    with open(path) as f:
+        for number, line in enumerate(f, 1):
+            if not line.strip():
+                continue
+            try:
+                rows.append(json.loads(line))
+            except ValueError as e:
+                raise ValueError(f"line {number}: not a JSON object ({e})") from None
+    return rows
 
 
 def pick(rows, **kw):
@@ -268,7 +277,13 @@ def loads(rows):
 
 
 def main():
-    rows = load(sys.argv[1])
+    if len(sys.argv) != 2:
+        sys.exit("usage: summarize.py RESULTS.jsonl  (the JSON lines of quadkit-bench --json, "
+                 "e.g. bench/results/targets.jsonl)")
+    try:
+        rows = load(sys.argv[1])
+    except (OSError, ValueError) as e:
+        sys.exit(f"summarize.py: {sys.argv[1]}: {e}")
     for line in loads(rows):
         print(line + "  ")
     print()

@@ -756,6 +756,8 @@ static qk_status_t json_check(const qk_allocator_t *a, const char *text, size_t 
         size_t nl = 0; /* (the name as written, its first 60 bytes; past escaped quotes) */
         while (dup + nl < len && text[dup + nl] != '"' && nl < 60)
           nl += text[dup + nl] == '\\' && dup + nl + 1 < len ? 2 : 1;
+        /* (and the rest of a character cut there: names were checked as UTF-8) */
+        while (dup + nl < len && ((unsigned char)text[dup + nl] & 0xC0) == 0x80) nl++;
         st = qk__region_fail(err, QK_ERR_PARSE, SIZE_MAX,
                              "duplicate name \"%.*s\" in one object (first at line %lu, column "
                              "%lu; JSON names must be unique here)",

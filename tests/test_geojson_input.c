@@ -611,6 +611,19 @@ static void test_geojson_string_bytes(void **state) {
   qk_error_t e;
   assert_int_equal(read_text(dup, &r, &e), QK_ERR_PARSE);
   if (!strstr(e.message, "duplicate name \"a\\\"b\" in one object")) fail_msg("%s", e.message);
+  /* A long one is cut after 60 bytes, but not inside a character: 59 ASCII bytes and then
+   * two-byte characters (U+00E9) come back with the whole first of them. */
+  char longdup[512], name[80];
+  memset(name, 'n', 59);
+  strcpy(name + 59, "\xc3\xa9\xc3\xa9\xc3\xa9");
+  snprintf(longdup, sizeof longdup,
+           "{\"type\": \"Feature\", \"properties\": {\"%s\": 1, \"%s\": 2}, \"geometry\": " SQUARE
+           "}",
+           name, name);
+  assert_int_equal(read_text(longdup, &r, &e), QK_ERR_PARSE);
+  char want[128];
+  snprintf(want, sizeof want, "duplicate name \"%.61s\" in one object", name);
+  if (!strstr(e.message, want)) fail_msg("%s", e.message);
 #endif
 }
 
