@@ -742,6 +742,57 @@ static void test_index_visit_and_svg(void **state) {
   qk_tree_free(t);
 }
 
+/* Every attribute value of an SVG that is a number: finite and inside the picture's view
+ * box (-2 to width + 2), how many there were in *count. */
+static bool svg_numbers_in_view(const char *buf, double width, size_t *count) {
+  *count = 0;
+  for (const char *s = buf; (s = strstr(s, "=\"")); s++) {
+    char *end;
+    double v = strtod(s + 2, &end);
+    if (end == s + 2 || *end != '"') continue; /* (not a number: a colour, a namespace) */
+    ++*count;
+    if (!isfinite(v) || v < -2 || v > width + 4) return false;
+  }
+  return true;
+}
+
+/*
+ * The SVG of a tree whose extent is tiny (1e-307, and subnormal 1e-320): every position is a
+ * finite number inside the picture, the two points at opposite corners of it (its width
+ * divided by the side overflowed to inf, and the picture held inf and NaN); and of a tree
+ * far from the origin with a side near DBL_MAX.
+ */
+static void test_index_svg_extremes(void **state) {
+  (void)state;
+  const double ds[] = {1e-307, 1e-320, 1};
+  for (size_t k = 0; k < 4; k++) {
+    qk_point_t p[3] = {{0, 0}, {ds[k % 3], ds[k % 3]}, {ds[k % 3] / 4, ds[k % 3] / 2}};
+    if (k == 3) /* huge: from -DBL_MAX / 2 to DBL_MAX / 2 */
+      p[0] = (qk_point_t){-DBL_MAX / 2, -DBL_MAX / 2},
+      p[1] = (qk_point_t){DBL_MAX / 2, DBL_MAX / 2}, p[2] = (qk_point_t){0, 1};
+    qk_tree_t *t = NULL;
+    assert_int_equal(qk_tree_build(p, 3, NULL, &t), QK_OK);
+    FILE *f = tmpfile();
+    assert_non_null(f);
+    assert_int_equal(qk_tree_write_svg(t, f, 400), QK_OK);
+    long size = ftell(f);
+    rewind(f);
+    char *buf = calloc((size_t)size + 1, 1);
+    assert_int_equal(fread(buf, 1, (size_t)size, f), (size_t)size);
+    size_t n = 0;
+    if (!svg_numbers_in_view(buf, 400, &n)) fail_msg("case %zu: %s", k, buf);
+    assert_true(n > 10);
+    /* the first point at the lower left (400 down), the second at the upper right */
+    if (k < 3) {
+      assert_non_null(strstr(buf, "<circle cx=\"0.000\" cy=\"400.000\""));
+      assert_non_null(strstr(buf, "<circle cx=\"400.000\" cy=\"0.000\""));
+    }
+    free(buf);
+    fclose(f);
+    qk_tree_free(t);
+  }
+}
+
 /* The id map is made on the first id lookup, possibly by several threads at once. */
 typedef struct lookup_job {
   const qk_tree_t *t;
@@ -1607,6 +1658,7 @@ static void test_index_check_detects_corruption(void **state) {
 
 int main(void) {
   const struct CMUnitTest tests[] = {
+      cmocka_unit_test(test_index_svg_extremes),
       cmocka_unit_test(test_index_build_invariants),
       cmocka_unit_test(test_index_build_equals_inserts),
       cmocka_unit_test(test_index_build_conditioning),
