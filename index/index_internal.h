@@ -318,6 +318,9 @@ extern _Atomic int qk__pool_workers_idle;
  * workers (none could be started) every region does. */
 void qk__team_begin(unsigned nw);
 void qk__team_end(void);
+/* A team's workers are kept, parked, for the next team of the same size on any thread;
+ * qk__team_release() ends them (tests; the library's unloading does it too). */
+void qk__team_release(void);
 
 /* The half-open range of [0, n) that share w of nw covers. */
 static inline void qk__share_range(size_t n, unsigned w, unsigned nw, size_t *lo, size_t *hi) {

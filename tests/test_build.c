@@ -649,6 +649,81 @@ static void test_build_team(void **state) {
   qk__pool_steal_off = 0;
 }
 
+/* A team on another thread of the process: its probe's counts (steal off). */
+static void *team_elsewhere(void *arg) {
+  team_probe_t *tp = arg;
+  qk__team_begin(3);
+  qk__run_shares(3, team_share, tp);
+  qk__team_end();
+  return NULL;
+}
+
+/*
+ * The last team's workers are kept, parked, for the next team of the same size: the next
+ * team runs on the same two workers (their thread-local counts go on), also when it is
+ * held by another thread; a team of another size ends them and starts its own; after
+ * qk__team_release() a team starts new workers; in a child forked while workers are kept,
+ * a team starts workers of its own (the parent's are not there) and runs every share once.
+ * Builds on two threads in a row give the same tree as one thread (test_build_threads).
+ */
+static void test_build_team_kept(void **state) {
+  (void)state;
+  qk__pool_steal_off = 1;
+  qk__team_release();
+  qk__team_begin(3);
+  team_probe_t first = {0};
+  qk__run_shares(3, team_share, &first);
+  qk__team_end();
+  assert_int_equal(first.runs[1], 1);
+  assert_int_equal(first.runs[2], 1);
+  qk__team_begin(3);
+  team_probe_t again = {0};
+  qk__run_shares(3, team_share, &again);
+  qk__team_end();
+  assert_int_equal(again.runs[1], 2); /* the same workers */
+  assert_int_equal(again.runs[2], 2);
+  pthread_t th;
+  team_probe_t other = {0};
+  assert_int_equal(pthread_create(&th, NULL, team_elsewhere, &other), 0);
+  assert_int_equal(pthread_join(th, NULL), 0);
+  for (unsigned w = 0; w < 3; w++) assert_int_equal(other.ran[w], 1);
+  assert_int_equal(other.runs[1], 3);
+  assert_int_equal(other.runs[2], 3);
+  qk__team_begin(2); /* another size: new workers */
+  team_probe_t two = {0};
+  qk__run_shares(2, team_share, &two);
+  qk__team_end();
+  assert_int_equal(two.runs[1], 1);
+  qk__team_begin(2);
+  team_probe_t two_again = {0};
+  qk__run_shares(2, team_share, &two_again);
+  qk__team_end();
+  assert_int_equal(two_again.runs[1], 2);
+#if !QKT_TSAN /* (TSan does not follow a multithreaded process into fork) */
+  pid_t pid = fork();
+  assert_true(pid >= 0);
+  if (pid == 0) {
+    qk__team_begin(2);
+    team_probe_t child = {0};
+    qk__run_shares(2, team_share, &child);
+    qk__team_end();
+    qk__team_release();
+    _exit(child.ran[0] == 1 && child.ran[1] == 1 && child.runs[1] == 1 ? 0 : 1);
+  }
+  int st = 0;
+  assert_int_equal(waitpid(pid, &st, 0), pid);
+  assert_true(WIFEXITED(st) && WEXITSTATUS(st) == 0);
+#endif
+  qk__team_release();
+  qk__team_begin(2);
+  team_probe_t fresh = {0};
+  qk__run_shares(2, team_share, &fresh);
+  qk__team_end();
+  assert_int_equal(fresh.runs[1], 1);
+  qk__team_release();
+  qk__pool_steal_off = 0;
+}
+
 static void pool_inner(void *ctx, unsigned w, unsigned nw) {
   (void)ctx, (void)w, (void)nw;
   fail_msg("a refused region ran");
@@ -908,6 +983,7 @@ int main(void) {
   qkt_filters_from_env();
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_build_team),
+      cmocka_unit_test(test_build_team_kept),
       cmocka_unit_test(test_build_pool),
       cmocka_unit_test(test_build_pool_steal),
       cmocka_unit_test(test_build_pool_away),

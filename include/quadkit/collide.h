@@ -152,7 +152,9 @@ qk_status_t qk_collider_pairs(const qk_collider_t *c, qk_pair_fn fn, void *ud);
  * fn is always called on the calling thread. With more than one thread, the pairs calls
  * collect the pairs in memory from the collider's allocator (which must then be
  * thread-safe) before reporting them; when that memory cannot be had they run on the
- * calling thread instead. Must not run concurrently with any other call on the collider.
+ * calling thread instead. Worker threads are kept between calls as the tree's are
+ * (qk_tree_options_t.threads). Must not run concurrently with any other call on the
+ * collider.
  * \param [in,out] c the collider (NULL does nothing).
  * \param [in] threads the count.
  */

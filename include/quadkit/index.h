@@ -75,7 +75,9 @@ typedef struct qk_tree_options {
   const qk_allocator_t *allocator;
   /** Threads for the bulk build and, kept by the tree, for its batch queries
    *  (qk_query_*_batch); 0 means every online core. Default 1. Results do not depend on
-   *  it. */
+   *  it. A call on several threads leaves its worker threads parked (waiting, using no
+   *  processor) for the next such call with as many threads, from any thread of the
+   *  process; they end when the library is unloaded or the process exits. */
   uint32_t threads;
   /** Nonzero: ask the kernel for transparent huge pages (madvise MADV_HUGEPAGE) over the
    *  point arrays when they come from the default allocator and exceed 4 MB; a hint, on
