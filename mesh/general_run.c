@@ -51,17 +51,36 @@ static void gm_free(qk__gm_t *g) {
   free_refinement(g);
 }
 
-/* A size bound asking for more triangles than memory could hold is refused up front. */
+/* A size bound asking for more triangles than memory could hold is refused up front,
+ * counted over the domain (the kept faces' area and the segments' length: a mesh of edges
+ * up to h has about two triangles an h-by-h square of area and a few an h along its
+ * boundary), not over the input's bounding box, which for a thin diagonal strip is
+ * thousands of times the domain (a 2^-10 by 1 strip at 45 degrees with h = 1e-4 was refused
+ * as 2e8 triangles; it makes about 0.4 million). Divided by h twice rather than by h^2, so
+ * that tiny extents with tiny bounds do not underflow. */
 static qk_status_t check_size(const qk__gm_t *g) {
   double h = g->opt->max_size;
   if (!(h > 0)) return QK_OK;
-  double w = g->bx1 - g->bx0, d = g->by1 - g->by0;
-  double cells = (w / h + 2) * (d / h + 2);
+  const qk__cdt_t *c = &g->cdt;
+  double area = 0, length = 0;
+  for (size_t t = 0; t < c->nt; t++) {
+    if (g->faces[g->face[t]].drop) continue;
+    const uint32_t *v = c->v + 3 * t;
+    const double *a = c->xy + 2 * (size_t)v[0], *b = c->xy + 2 * (size_t)v[1],
+                 *d = c->xy + 2 * (size_t)v[2];
+    area += fabs((b[0] - a[0]) * (d[1] - a[1]) - (b[1] - a[1]) * (d[0] - a[0])) / 2;
+  }
+  const qk_poly_t *P = g->P;
+  for (size_t k = 0; k < P->ns; k++) {
+    const uint32_t a = P->seg[2 * k], b = P->seg[2 * k + 1];
+    length += hypot(P->vx[b] - P->vx[a], P->vy[b] - P->vy[a]);
+  }
+  double cells = area / h / h + 2 * (length / h) + 4;
   if (cells > (double)(1 << 26))
     return qk__mesh_fail(g->err, QK_ERR_LIMIT, 0,
-                         "max_size %.17g asks for about %.3g triangles over the input's extent "
-                         "%.17g x %.17g (at most 2^27)",
-                         h, 2 * cells, w, d);
+                         "max_size %.17g asks for about %.3g triangles over the domain (area "
+                         "%.6g, boundary and segments %.6g long; at most 2^27)",
+                         h, 2 * cells, area, length);
   return QK_OK;
 }
 

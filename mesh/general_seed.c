@@ -376,7 +376,7 @@ static size_t size_cells(const qk__gm_t *g) {
   double s = g->S;
   while (s > h) s /= 2;
   double n = (floor((g->bx1 - g->bx0) / s) + 2) * (floor((g->by1 - g->by0) / s) + 2);
-  return n < 0x1p40 ? (size_t)n : (size_t)1 << 40; /* check_size refused more than 2^26 */
+  return n < 0x1p40 ? (size_t)n : (size_t)1 << 40; /* (a thin domain's box may hold far more) */
 }
 
 /* The trailing zero bits of k (62 for k == 0). */

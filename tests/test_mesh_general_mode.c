@@ -1151,6 +1151,42 @@ static void test_mesh_general_mode_msh_groups(void **state) {
 }
 
 /* Refusals: the precision budget, crossings, a vertex on a segment, duplicates. */
+/*
+ * The size bound's up-front refusal counts the domain, not the bounding box: a strip 2^-16
+ * wide along the unit square's diagonal with max_size 1.2e-4 is meshed (its bounding box
+ * would hold 1.4e8 triangles of that size, and it was refused as such), the unit square
+ * itself at 1e-4 is refused, naming the domain's area.
+ */
+static void test_mesh_general_mode_size_domain(void **state) {
+  (void)state;
+  const double w = 0x1p-16;
+  double xy[8] = {0, 0, w, 0, 1, 1 - w, 1, 1};
+  uint32_t seg[8] = {0, 1, 1, 2, 2, 3, 3, 0};
+  qk_poly_t *p;
+  qk_mesh_t *m = NULL;
+  qk_mesh_error_t err;
+  assert_int_equal(qk_poly_from_arrays(xy, 4, seg, 4, NULL, 0, NULL, &p, &err), QK_OK);
+  qk_mesh_options_t o = general_opts();
+  o.max_size = 1.2e-4;
+  qk_status_t st = qk_mesh_generate(p, &o, &m, &err);
+  if (st != QK_OK) fail_msg("the strip: %s", err.message);
+  qk_mesh_stats_t ms;
+  qk_mesh_stats(m, &ms);
+  printf("# the strip: %zu triangles, min angle %.2f\n", ms.triangles, ms.min_angle_deg);
+  assert_true(ms.triangles > 20000 && ms.triangles < 400000);
+  assert_true(ms.min_angle_deg >= 20);
+  qk_mesh_free(m);
+  qk_poly_free(p);
+  double sq[8] = {0, 0, 1, 0, 1, 1, 0, 1};
+  assert_int_equal(qk_poly_from_arrays(sq, 4, seg, 4, NULL, 0, NULL, &p, &err), QK_OK);
+  o.max_size = 1e-4;
+  m = NULL;
+  assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_ERR_LIMIT);
+  assert_null(m);
+  if (!strstr(err.message, "over the domain (area 1,")) fail_msg("%s", err.message);
+  qk_poly_free(p);
+}
+
 static void test_mesh_general_mode_refusals(void **state) {
   (void)state;
   qkt_rng_t r;
@@ -1669,6 +1705,7 @@ int main(void) {
       cmocka_unit_test(test_mesh_general_mode_scales),
       cmocka_unit_test(test_mesh_general_mode_size),
       cmocka_unit_test(test_mesh_general_mode_markers),
+      cmocka_unit_test(test_mesh_general_mode_size_domain),
       cmocka_unit_test(test_mesh_general_mode_refusals),
       cmocka_unit_test(test_mesh_general_mode_auto),
       cmocka_unit_test(test_mesh_general_mode_graded_late),
