@@ -407,6 +407,14 @@ static qk_status_t read_vertices(reader_t *r, qk_poly_t *p, qk_mesh_error_t *err
     if (r->ntok > 3 + nattr + nmark)
       return rfail(r, err, QK_ERR_PARSE, "vertex %lld: %zu fields, at most %lu expected", idx,
                    r->ntok, 3 + nattr + nmark);
+    /* Every attribute the header declares (the marker may be left out): a row short of
+     * one was read with what it had, the attributes after it missing without a word. */
+    if (r->ntok < 3 + nattr)
+      return rfail(r, err, QK_ERR_PARSE,
+                   "vertex %lld: %zu fields, expected %lu (number, x, y and the %lu attribute%s "
+                   "that line %lu declares%s)",
+                   idx, r->ntok, 3 + nattr, nattr, nattr == 1 ? "" : "s", r->sec_line,
+                   nmark ? ", then an optional boundary marker" : "");
     for (size_t k = 3; k < r->ntok; k++) { /* (at most 3 + nattr + nmark: all kept) */
       double v;
       if (!parse_num(r->tok[k], &v))
@@ -450,6 +458,11 @@ static qk_status_t read_segments(reader_t *r, qk_poly_t *p, qk_mesh_error_t *err
     if (r->ntok > 3 + smark)
       return rfail(r, err, QK_ERR_PARSE, "segment %lld: %zu fields, at most %lu expected", idx,
                    r->ntok, 3 + smark);
+    /* Numbered as the vertices are, from the vertices' first number on: a number out of
+     * turn was taken as its row's position, and messages named that position. */
+    if (idx != (long long)(i + p->first_index))
+      return rfail(r, err, QK_ERR_PARSE, "segment number %lu expected, found %lld",
+                   i + p->first_index, idx);
     for (int k = 0; k < 2; k++)
       if (!parse_index(r->tok[1 + k], &e[k]) || e[k] < (long long)p->first_index ||
           e[k] >= (long long)(nv + p->first_index))
@@ -486,6 +499,9 @@ static qk_status_t read_holes(reader_t *r, qk_poly_t *p, qk_mesh_error_t *err) {
     if (r->ntok != 3)
       return rfail(r, err, QK_ERR_PARSE, "hole %lld: expected x and y only, found %zu field%s%s",
                    idx, r->ntok, r->ntok == 1 ? "" : "s", r->ntok < 3 ? rows_hint(r, 1) : "");
+    if (idx != (long long)(i + p->first_index)) /* (as the segments) */
+      return rfail(r, err, QK_ERR_PARSE, "hole number %lu expected, found %lld", i + p->first_index,
+                   idx);
     if (!parse_num(r->tok[1], &x) || !parse_num(r->tok[2], &y))
       return rfail(r, err, QK_ERR_PARSE, "hole %lld: bad coordinates '%s' '%s'%s", idx, r->tok[1],
                    r->tok[2], num_why(r->tok[parse_num(r->tok[1], &x) ? 2 : 1]));

@@ -125,6 +125,93 @@ static bool nonzero_text(json_object *o) {
   return false;
 }
 
+/* Where a position is in its feature, for messages: ty "polygon" (polygon a, ring b,
+ * position c), "MultiLineString" (line a, position b), "Point", or another type (its
+ * position a). Written out only for a message: a position of every polygon's ring goes
+ * through here. */
+typedef struct gj_at {
+  const char *ty;
+  size_t a, b, c;
+} gj_at_t;
+
+static const char *at_text(const gj_at_t *w, char *buf, size_t n) {
+  if (!strcmp(w->ty, "polygon"))
+    snprintf(buf, n, "polygon %zu, ring %zu, position %zu", w->a, w->b, w->c);
+  else if (!strcmp(w->ty, "MultiLineString"))
+    snprintf(buf, n, "MultiLineString line %zu, position %zu", w->a, w->b);
+  else if (!strcmp(w->ty, "Point"))
+    snprintf(buf, n, "Point");
+  else
+    snprintf(buf, n, "%s position %zu", w->ty, w->a);
+  return buf;
+}
+
+/* One position p ([x, y, ...], numbers only) into *vx, *vy, checked as every coordinate is:
+ * `w` says where it is in feature f. The path leads to p; on an error, to p or the
+ * number. */
+static qk_status_t position(gj_t *g, json_object *p, size_t f, const gj_at_t *w, double *vx,
+                            double *vy) {
+  char at[96];
+  json_object *x = NULL, *y = NULL;
+  if (json_object_is_type(p, json_type_array) && json_object_array_length(p) >= 2) {
+    x = json_object_array_get_idx(p, 0);
+    y = json_object_array_get_idx(p, 1);
+  }
+  bool okx =
+      x && (json_object_is_type(x, json_type_double) || json_object_is_type(x, json_type_int));
+  bool oky =
+      y && (json_object_is_type(y, json_type_double) || json_object_is_type(y, json_type_int));
+  /* Elements after x and y (altitude, measure) are not used, but a position holds
+   * numbers only (RFC 7946, 3.1.1): [0, 0, "a"] is not a position. */
+  for (size_t j = 2; okx && oky && j < json_object_array_length(p); j++) {
+    json_object *z = json_object_array_get_idx(p, j);
+    oky = json_object_is_type(z, json_type_double) || json_object_is_type(z, json_type_int);
+  }
+  if (!okx || !oky)
+    return qk__region_fail(g->err, QK_ERR_PARSE, f,
+                           "feature %zu, %s: expected [x, y] numbers, found %s", f,
+                           at_text(w, at, sizeof at), shown(p));
+  for (int c = 0; c < 2; c++) {
+    size_t off, end;
+    if (!clamped(c ? y : x)) continue;
+    step_in(g, NULL, (size_t)c);
+    if (!raw(g, true, &off, &end) || beyond_64_bits(g->text, off, end)) {
+      bool shown_raw = raw(g, true, &off, &end);
+      size_t nd = shown_raw ? end - off : 0;
+      return qk__region_fail(g->err, QK_ERR_PARSE, f,
+                             "feature %zu, %s: integer %.*s%s is outside the 64-bit range "
+                             "json-c reads exactly (-2^63 to 2^64-1); write it with an exponent "
+                             "(1e20, not 100000000000000000000)",
+                             f, at_text(w, at, sizeof at), (int)(nd < 40 ? nd : 40),
+                             shown_raw ? g->text + off : "", nd < 40 ? "" : "...");
+    }
+    step_out(g);
+  }
+  *vx = json_object_get_double(x), *vy = json_object_get_double(y);
+  if (!isfinite(*vx) || !isfinite(*vy)) { /* (NaN and Infinity were refused: an overflow) */
+    step_in(g, NULL, isfinite(*vx) ? 1 : 0);
+    return qk__region_fail(g->err, QK_ERR_NONFINITE, f,
+                           "feature %zu: coordinate %.60s is beyond the largest double (not "
+                           "finite) at %s",
+                           f, shown(isfinite(*vx) ? y : x), at_text(w, at, sizeof at));
+  }
+  const bool zx = *vx == 0 && nonzero_text(x);
+  if (zx || (*vy == 0 && nonzero_text(y))) { /* (it read as 0, silently) */
+    step_in(g, NULL, zx ? 0 : 1);
+    return qk__region_fail(g->err, QK_ERR_GEOMETRY, f,
+                           "feature %zu: absurd coordinate %.60s (below the smallest double, "
+                           "it reads as 0; magnitude must be 0 or within [1e-100, 1e100]) at %s",
+                           f, shown(zx ? x : y), at_text(w, at, sizeof at));
+  }
+  qk_status_t st = qk__region_check_coord(g->planar, *vx, *vy, f, g->err);
+  if (st) {
+    size_t len = strlen(g->err->message);
+    snprintf(g->err->message + len, sizeof g->err->message - len, " at %s",
+             at_text(w, at, sizeof at));
+  }
+  return st;
+}
+
 static qk_status_t ring(gj_t *g, json_object *arr, size_t f, size_t poly, size_t k) {
   if (!json_object_is_type(arr, json_type_array))
     return qk__region_fail(g->err, QK_ERR_PARSE, f,
@@ -140,70 +227,10 @@ static qk_status_t ring(gj_t *g, json_object *arr, size_t f, size_t poly, size_t
   qk_status_t st;
   if ((st = qk__rings_reserve(g->a, &g->rg, n))) return nomem(g, st);
   for (size_t i = 0; i < n; i++) {
-    json_object *p = json_object_array_get_idx(arr, i);
-    json_object *x = NULL, *y = NULL;
+    const gj_at_t w = {"polygon", poly, k, i};
     step_in(g, NULL, i);
-    if (json_object_is_type(p, json_type_array) && json_object_array_length(p) >= 2) {
-      x = json_object_array_get_idx(p, 0);
-      y = json_object_array_get_idx(p, 1);
-    }
-    bool okx =
-        x && (json_object_is_type(x, json_type_double) || json_object_is_type(x, json_type_int));
-    bool oky =
-        y && (json_object_is_type(y, json_type_double) || json_object_is_type(y, json_type_int));
-    /* Elements after x and y (altitude, measure) are not used, but a position holds
-     * numbers only (RFC 7946, 3.1.1): [0, 0, "a"] is not a position. */
-    for (size_t j = 2; okx && oky && j < json_object_array_length(p); j++) {
-      json_object *z = json_object_array_get_idx(p, j);
-      oky = json_object_is_type(z, json_type_double) || json_object_is_type(z, json_type_int);
-    }
-    if (!okx || !oky)
-      return qk__region_fail(g->err, QK_ERR_PARSE, f,
-                             "feature %zu, polygon %zu, ring %zu, position %zu: expected [x, y] "
-                             "numbers, found %s",
-                             f, poly, k, i, shown(p));
-    for (int c = 0; c < 2; c++) {
-      size_t off, end;
-      if (!clamped(c ? y : x)) continue;
-      step_in(g, NULL, (size_t)c);
-      if (!raw(g, true, &off, &end) || beyond_64_bits(g->text, off, end)) {
-        bool shown_raw = raw(g, true, &off, &end);
-        size_t nd = shown_raw ? end - off : 0;
-        return qk__region_fail(g->err, QK_ERR_PARSE, f,
-                               "feature %zu, polygon %zu, ring %zu, position %zu: integer "
-                               "%.*s%s is outside the 64-bit range json-c reads exactly (-2^63 "
-                               "to 2^64-1); write it with an exponent (1e20, not "
-                               "100000000000000000000)",
-                               f, poly, k, i, (int)(nd < 40 ? nd : 40),
-                               shown_raw ? g->text + off : "", nd < 40 ? "" : "...");
-      }
-      step_out(g);
-    }
-    double vx = json_object_get_double(x), vy = json_object_get_double(y);
-    if (!isfinite(vx) || !isfinite(vy)) { /* (NaN and Infinity were refused: an overflow) */
-      step_in(g, NULL, isfinite(vx) ? 1 : 0);
-      return qk__region_fail(g->err, QK_ERR_NONFINITE, f,
-                             "feature %zu: coordinate %.60s is beyond the largest double (not "
-                             "finite) at polygon %zu, ring %zu, position %zu",
-                             f, shown(isfinite(vx) ? y : x), poly, k, i);
-    }
-    const bool zx = vx == 0 && nonzero_text(x);
-    if (zx || (vy == 0 && nonzero_text(y))) { /* (it read as 0, silently) */
-      step_in(g, NULL, zx ? 0 : 1);
-      return qk__region_fail(g->err, QK_ERR_GEOMETRY, f,
-                             "feature %zu: absurd coordinate %.60s (below the smallest double, "
-                             "it reads as 0; magnitude must be 0 or within [1e-100, 1e100]) at "
-                             "polygon %zu, ring %zu, position %zu",
-                             f, shown(zx ? x : y), poly, k, i);
-    }
-    if ((st = qk__region_check_coord(g->planar, vx, vy, f, g->err))) {
-      size_t len = strlen(g->err->message);
-      snprintf(g->err->message + len, sizeof g->err->message - len,
-               " at polygon %zu, ring %zu, position %zu", poly, k, i);
-      return st;
-    }
-    g->rg.xy[2 * (g->rg.nv + i)] = vx;
-    g->rg.xy[2 * (g->rg.nv + i) + 1] = vy;
+    double *v = g->rg.xy + 2 * (g->rg.nv + i);
+    if ((st = position(g, json_object_array_get_idx(arr, i), f, &w, &v[0], &v[1]))) return st;
     step_out(g);
   }
   const double *s = g->rg.xy + 2 * g->rg.nv, *e = g->rg.xy + 2 * (g->rg.nv + n - 1);
@@ -240,6 +267,53 @@ static bool other_geometry(const char *ty) {
   return false;
 }
 
+/* A geometry without area (other_geometry): nothing of it is kept, but its coordinates are
+ * read as a polygon's are, so that a malformed one is an error at its place, not a silent
+ * skip ({"type": "Point", "coordinates": "x"}, a LineString at 1e400 went through where the
+ * same in a Polygon was refused). An empty coordinates array is an empty geometry (RFC
+ * 7946, 3.1). */
+static qk_status_t no_area(gj_t *g, json_object *geom, const char *ty, size_t f) {
+  json_object *c = NULL;
+  if (!json_object_object_get_ex(geom, "coordinates", &c))
+    return qk__region_fail(g->err, QK_ERR_PARSE, f,
+                           "feature %zu: %s without a \"coordinates\" array", f, ty);
+  step_in(g, "coordinates", 0);
+  if (!json_object_is_type(c, json_type_array))
+    return qk__region_fail(g->err, QK_ERR_PARSE, f,
+                           "feature %zu: %s \"coordinates\" must be an array, found %s", f, ty,
+                           type_name(c));
+  const bool point = !strcmp(ty, "Point"), lines = !strcmp(ty, "MultiLineString");
+  double x, y;
+  qk_status_t st = QK_OK;
+  if (point) {
+    const gj_at_t w = {"Point", 0, 0, 0};
+    if (json_object_array_length(c)) st = position(g, c, f, &w, &x, &y);
+  } else {
+    for (size_t l = 0, nl = json_object_array_length(c); l < nl && !st; l++) {
+      json_object *e = json_object_array_get_idx(c, l);
+      step_in(g, NULL, l);
+      if (!lines) {
+        const gj_at_t w = {ty, l, 0, 0};
+        st = position(g, e, f, &w, &x, &y);
+      } else if (!json_object_is_type(e, json_type_array)) {
+        st = qk__region_fail(g->err, QK_ERR_PARSE, f,
+                             "feature %zu, MultiLineString line %zu: expected an array of "
+                             "positions, found %s",
+                             f, l, type_name(e));
+      }
+      for (size_t i = 0, n = lines && !st ? json_object_array_length(e) : 0; i < n && !st; i++) {
+        const gj_at_t w = {"MultiLineString", l, i, 0};
+        step_in(g, NULL, i);
+        st = position(g, json_object_array_get_idx(e, i), f, &w, &x, &y);
+        if (!st) step_out(g);
+      }
+      if (!st) step_out(g);
+    }
+  }
+  if (!st) step_out(g);
+  return st;
+}
+
 /* The rings of one geometry into g->rg; *poly numbers its polygons within the feature.
  * A GeometryCollection gives the polygons of its members, in order (members without
  * area add nothing). */
@@ -272,7 +346,7 @@ static qk_status_t geometry_rings(gj_t *g, json_object *geom, size_t f, size_t *
                              "feature %zu: unknown geometry type \"%.60s\" (RFC 7946: Polygon, "
                              "MultiPolygon, Point, ...; names are case-sensitive)",
                              f, ty);
-    return QK_OK;
+    return no_area(g, geom, ty, f);
   }
   if (!json_object_object_get_ex(geom, "coordinates", &c))
     return qk__region_fail(g->err, QK_ERR_PARSE, f,

@@ -4,7 +4,9 @@
  *    "malformed JSON" error);
  *  - a "type" that is not one of RFC 7946's (a typo: "FeatureColection", "polygon") is
  *    an error naming the feature, not a silently skipped, empty layer;
- *  - RFC 7946's other geometry types are still skipped and counted;
+ *  - RFC 7946's other geometry types are still skipped and counted, but their
+ *    coordinates are read as strictly as a polygon's: a malformed point or line is an
+ *    error at its line and column (it was skipped without a word);
  *  - malformed JSON gives its line and column in qk_error_t, not repeated in the
  *    message (the CLI printed "f.geojson:1:61: line 1, column 61: ...");
  *  - a GeometryCollection's polygons (nested ones too) are the feature's (they were
@@ -302,6 +304,73 @@ static void test_geojson_semantic_position(void **state) {
              " :\r\n {\"type\": \"Polygon\", \"coordinates\" :\t[ [[0,0],[1,0],[1,1],[0,1],[0,0]] ,"
              "\r\n [[0,0],[1,0]] ]}}",
              1, QK_ERR_GEOMETRY, 0, "[[0,0],[1,0]] ]", "2 positions");
+#endif
+}
+
+/* Points and lines are skipped, but read as strictly as a polygon's positions: a malformed
+ * one is refused at its place (they went through without a word, where the same inside a
+ * Polygon was refused). Valid ones, and empty ones, are still skipped and counted. */
+static void test_geojson_no_area_strict(void **state) {
+  (void)state;
+#ifndef QK_HAVE_JSONC
+  skip();
+#else
+  refused_at(FC_HEAD "  {\"type\": \"Feature\", \"properties\": {},\n"
+                     "   \"geometry\": {\"type\": \"Point\", \"coordinates\": \"x\"}}]}",
+             1, QK_ERR_PARSE, 1, "\"x\"}", "Point \"coordinates\" must be an array, found string");
+  refused_at(
+      FC_HEAD "  {\"type\": \"Feature\", \"properties\": {},\n"
+              "   \"geometry\": {\"type\": \"MultiPoint\", \"coordinates\": [[0, 0], [\"a\"]]}}]}",
+      1, QK_ERR_PARSE, 1, "[\"a\"]", "feature 1, MultiPoint position 1: expected [x, y] numbers");
+  refused_at(FC_HEAD
+             "  {\"type\": \"Feature\", \"properties\": {},\n"
+             "   \"geometry\": {\"type\": \"LineString\", \"coordinates\": [[1e400, 0]]}}]}",
+             1, QK_ERR_NONFINITE, 1, "1e400",
+             "coordinate 1e400 is beyond the largest double (not finite) at LineString position 0");
+  refused_at(FC_HEAD "  {\"type\": \"Feature\", \"properties\": {},\n"
+                     "   \"geometry\": {\"type\": \"MultiLineString\", \"coordinates\":\n"
+                     "    [[[0, 0], [1, 1]], [[0, 0], [0, 2e-400]]]}}]}",
+             1, QK_ERR_GEOMETRY, 1, "2e-400",
+             "below the smallest double, it reads as 0; magnitude must be 0 or within [1e-100, "
+             "1e100]) at MultiLineString line 1, position 1");
+  refused_at(FC_HEAD "  {\"type\": \"Feature\", \"properties\": {},\n"
+                     "   \"geometry\": {\"type\": \"MultiLineString\", \"coordinates\": [7]}}]}",
+             1, QK_ERR_PARSE, 1, "7]",
+             "feature 1, MultiLineString line 0: expected an array of positions, found int");
+  refused_at(
+      FC_HEAD
+      "  {\"type\": \"Feature\", \"properties\": {},\n"
+      "   \"geometry\": {\"type\": \"Point\", \"coordinates\": [100000000000000000000, 0]}}]}",
+      1, QK_ERR_PARSE, 1, "100000000000000000000",
+      "feature 1, Point: integer 100000000000000000000 is outside the 64-bit range");
+  refused_at(FC_HEAD "  {\"type\": \"Feature\", \"properties\": {},\n"
+                     "   \"geometry\": {\"type\": \"LineString\"}}]}",
+             1, QK_ERR_PARSE, 1, "{\"type\": \"LineString\"",
+             "LineString without a \"coordinates\" array");
+  /* out of longitude/latitude range, not planar; inside a GeometryCollection (feature 0) */
+  refused_at("{\"type\": \"GeometryCollection\", \"geometries\": [\n"
+             " {\"type\": \"Point\", \"coordinates\": [200, 0]}, " SQUARE "]}",
+             0, QK_ERR_GEOMETRY, 0, "[200, 0]", "is not a longitude/latitude");
+  /* Valid points and lines, an empty Point, an empty line: skipped and counted. */
+  qk_region_t *r = NULL;
+  qk_error_t err;
+  assert_int_equal(read_text(FC_HEAD
+                             "  {\"type\": \"Feature\", \"properties\": {}, \"geometry\":\n"
+                             "   {\"type\": \"Point\", \"coordinates\": [1, 2, 3]}},\n"
+                             "  {\"type\": \"Feature\", \"properties\": {}, \"geometry\":\n"
+                             "   {\"type\": \"Point\", \"coordinates\": []}},\n"
+                             "  {\"type\": \"Feature\", \"properties\": {}, \"geometry\":\n"
+                             "   {\"type\": \"MultiLineString\", \"coordinates\": [[[0, 0], [1, "
+                             "1]], []]}},\n"
+                             "  {\"type\": \"Feature\", \"properties\": {}, \"geometry\":\n"
+                             "   {\"type\": \"MultiPoint\", \"coordinates\": [[5, 5]]}}]}",
+                             &r, &err),
+                   QK_OK);
+  qk_region_stats_t s;
+  qk_region_stats(r, &s);
+  assert_int_equal(s.features, 5);
+  assert_int_equal(s.skipped, 4);
+  qk_region_free(r);
 #undef FC_HEAD
 #endif
 }
@@ -635,6 +704,7 @@ int main(void) {
       cmocka_unit_test(test_geojson_error_position),
       cmocka_unit_test(test_geojson_collection_and_strict),
       cmocka_unit_test(test_geojson_semantic_position),
+      cmocka_unit_test(test_geojson_no_area_strict),
       cmocka_unit_test(test_geojson_streamed),
       cmocka_unit_test(test_geojson_string_bytes),
   };

@@ -1,10 +1,12 @@
 /*
  * Test plan for the mesh input (Triangle's .poly reader and qk_mesh_generate's checks):
- *  - good files: comments, blank lines, first index 0 and 1, attributes and markers,
- *    optional holes and regional attributes, all read with the right counts;
+ *  - good files: comments, blank lines, first index 0 and 1, attributes and markers
+ *    (the marker may be left out), optional holes and regional attributes, all read
+ *    with the right counts;
  *  - every kind of bad input gets its status, the line it is on and a message naming
  *    the problem: malformed numbers, wrong dimension, bad first index, non-consecutive
- *    vertex numbers, segment endpoints that are not vertices, truncated files, absurd
+ *    vertex, segment or hole numbers, a vertex row short of its declared attributes,
+ *    segment endpoints that are not vertices, truncated files, absurd
  *    counts, trailing garbage; non-integer and out-of-domain coordinates, edges at
  *    other angles, open chains, vertices of degree 0 or 3, coincident vertices,
  *    duplicate segments, self-intersecting polygons, touching and crossing components,
@@ -156,6 +158,9 @@ static void test_poly_good(void **state) {
   assert_int_equal(run(DIAMOND "1\n0 2 4\n", 0, &err), QK_ERR_GEOMETRY);
   /* First index 0, no holes ("0"), no regional attributes (optional, as in Triangle). */
   assert_int_equal(run("4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS "0\n", 0, &err), QK_OK);
+  /* A declared boundary marker may be left out of a row (its attributes may not). */
+  assert_int_equal(
+      run("4 2 1 1\n0 0 0 5\n1 2 0 5 3\n2 2 2 5\n3 0 2 5 3\n" SQUARE_SEGS "0\n", 0, &err), QK_OK);
   /* Regional attributes are read from the columns after their number (numbered 7 and 8, so
    * that reading the number as x would put both outside the square): the diagonal splits
    * the square into a part below it (10) and one above (20). */
@@ -259,6 +264,22 @@ static void test_poly_bad(void **state) {
        "unexpected"},
       {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS "1\n0 nan 1\n", 0, QK_ERR_PARSE, 12,
        "hole"},
+      /* Segment and hole numbers follow the vertices' (they were never checked: a row's
+       * position stood for its number, in messages too). */
+      {"4 2 0 0\n1 0 0\n2 2 0\n3 2 2\n4 0 2\n4 0\n1 1 2\n1 2 3\n3 3 4\n4 4 1\n0\n", 0, QK_ERR_PARSE,
+       8, "segment number 2 expected, found 1"},
+      {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n4 0\n0 0 1\n1 1 2\n2 2 3\n-5 3 0\n0\n", 0,
+       QK_ERR_PARSE, 10, "segment number 3 expected, found -5"},
+      {"4 2 0 0\n1 0 0\n2 2 0\n3 2 2\n4 0 2\n4 0\n0 1 2\n1 2 3\n2 3 4\n3 4 1\n0\n", 0, QK_ERR_PARSE,
+       7, "segment number 1 expected, found 0"},
+      {"4 2 0 0\n0 0 0\n1 2 0\n2 2 2\n3 0 2\n" SQUARE_SEGS "2\n0 1 1\n0 1 1\n", 0, QK_ERR_PARSE, 13,
+       "hole number 1 expected, found 0"},
+      /* Every declared vertex attribute, the marker optional (a row short of one was read). */
+      {"4 2 2 0\n0 0 0 5 6\n1 2 0 5\n2 2 2 5 6\n3 0 2 5 6\n" SQUARE_SEGS "0\n", 0, QK_ERR_PARSE, 3,
+       "vertex 1: 4 fields, expected 5 (number, x, y and the 2 attributes that line 1 declares)"},
+      {"4 2 1 1\n0 0 0\n1 2 0 5\n2 2 2 5\n3 0 2 5\n" SQUARE_SEGS "0\n", 0, QK_ERR_PARSE, 2,
+       "vertex 0: 3 fields, expected 4 (number, x, y and the 1 attribute that line 1 declares, "
+       "then an optional boundary marker)"},
       /* Geometry. */
       {"4 2 0 0\n0 0 0\n1 2.5 0\n2 2 2\n3 0 2\n" SQUARE_SEGS "0\n", 0, QK_ERR_GEOMETRY, 3,
        "not integers"},

@@ -100,6 +100,16 @@ int cli_parse_xy(const char *cmd, const char *opt, const char *s, const char **o
       cli_error(cmd, "%s: column numbers start at 1, not '%.*s'", opt, (int)len[i], part[i]);
       return 1;
     }
+  /* Past 100000 (the readers' last column), a number is refused here, by its digits: two
+   * numbers beyond an unsigned long both read as ULONG_MAX, and were "the same column". */
+  for (int i = 0; i < 2; i++) {
+    size_t z = strspn(part[i], "0");
+    if (strspn(part[i], "0123456789") == len[i] &&
+        (len[i] - z > 6 || strtoul(part[i], NULL, 10) > 100000)) {
+      cli_error(cmd, "%s: column number %.*s must be from 1 to 100000", opt, (int)len[i], part[i]);
+      return 1;
+    }
+  }
   /* x and y from one column (--xy 2,2 or lat,lat: a slip) would read every point onto
    * the diagonal, without a word. Numbers are compared by value (2 and 02). */
   int digits = strspn(part[0], "0123456789") == len[0] && strspn(part[1], "0123456789") == len[1];

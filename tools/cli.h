@@ -185,15 +185,20 @@ int cli_parse_xy(const char *cmd, const char *opt, const char *s, const char **o
 /*
  * The atomic output writer (tools/out.c). Output files are written to "PATH.tmp.PID" and renamed on
  * success so that a failed run leaves no half-written file; a symbolic link is written through (its
- * target replaced), and a FIFO or device ("-" is stdout) is written directly. cli_out_open returns
- * an exit code (after printing why) on error.
+ * target replaced, or created when the link dangles), and a FIFO or device ("-" is stdout) is
+ * written directly. cli_out_open returns an exit code (after printing why) on error: a usage error
+ * for an output that is one of the inputs (a regular file, a FIFO or pipe, by device and inode,
+ * however it is named: /dev/stdin, /proc/self/fd/N, a link, "-" for standard output) or that
+ * another open output of the command writes (standard output included: a command that prints to
+ * it opens "-" too, so that `--svg /dev/stdout` is refused beside it).
  */
 typedef struct cli_out {
   FILE *f;
   char *path; /* final path (a link's target); the path given when writing directly */
   char *tmp;
-  int direct; /* a FIFO or device: written in place, never renamed over */
-  char *key;  /* canonical name while open (two outputs naming one file are refused) */
+  int direct;  /* a FIFO or device: written in place, never renamed over */
+  char *key;   /* canonical name while open (two outputs naming one file are refused) */
+  unsigned id; /* the entry of this output among those open (out.c) */
 } cli_out_t;
 int cli_out_open(const char *cmd, const char *path, cli_out_t *o);
 /* Close and rename (ok != 0) or close and delete (ok == 0). Returns CLI_OK or an error. */
@@ -204,8 +209,9 @@ int cli_out_close(const char *cmd, cli_out_t *o, int ok);
  * (cannot open: the system's reason; a directory: "is a directory", which fopen lets
  * through and the first read then fails on with a vague "read error"). */
 FILE *cli_open_input(const char *cmd, const char *path);
-/* Record an input that is read by other means than cli_open_input (the library's readers),
- * before any output is opened: cli_out_open refuses to write over an input (exit 2). */
+/* Record an input that is read by other means than cli_open_input (the library's readers;
+ * "-": standard input), before any output is opened: cli_out_open refuses to write over an
+ * input or into the pipe it is read from (exit 2). */
 void cli_note_input(const char *path);
 
 /* Subcommands: argv[0] is the subcommand's name. */

@@ -420,12 +420,14 @@ static int open_outputs(const char *cmd, const mesh_args_t *o, outputs_t *w) {
   return CLI_OK;
 }
 
-/* Write the mesh into every output and close them all (renamed only if all succeeded). */
+/* Write the mesh into every output and flush them (close_outputs renames them into place,
+ * once standard output, which --stats writes, is out too). */
 static int write_outputs(const char *cmd, outputs_t *w, const qk_mesh_t *mesh, unsigned first) {
   int rc = CLI_OK;
   for (int k = 0; k < w->opened && rc == CLI_OK; k++) {
     if (!w->f[k].path) continue;
     qk_status_t ws = w->f[k].fn(mesh, w->f[k].out.f, first);
+    if (ws == QK_OK && (fflush(w->f[k].out.f) != 0 || ferror(w->f[k].out.f))) ws = QK_ERR_IO;
     /* A failed write is said once, with its reason, when the output is closed (it was
      * also "FILE: input/output error" here). */
     if (ws == QK_ERR_IO && ferror(w->f[k].out.f))
@@ -433,8 +435,7 @@ static int write_outputs(const char *cmd, outputs_t *w, const qk_mesh_t *mesh, u
     else if (ws != QK_OK)
       rc = cli_status(cmd, w->f[k].path, ws);
   }
-  int c = close_outputs(cmd, w, rc == CLI_OK);
-  return rc == CLI_OK ? c : rc;
+  return rc;
 }
 
 /* What the input went through before meshing (for --stats and messages). */
@@ -896,11 +897,18 @@ int cmd_mesh(int argc, char **argv) {
   memset(&pp, 0, sizeof pp);
   double t_read = 0;
   outputs_t outs;
-  cli_note_input(o.in); /* (an output naming the input is refused) */
+  cli_note_input(o.in); /* (an output naming the input, or its pipe, is refused) */
+  /* --stats writes standard output: opened as an output too, so that another output
+   * there (`--svg -`, `--msh /dev/stdout`) is refused rather than mixed into the JSON. */
+  cli_out_t so;
+  memset(&so, 0, sizeof so);
+  if (o.stats && (rc = cli_out_open(cmd, "-", &so))) return rc;
   rc = open_outputs(cmd, &o, &outs);
-  if (rc) return rc;
+  if (rc) {
+    cli_out_close(cmd, &so, 0);
+    return rc;
+  }
   rc = make_mesh(cmd, &o, &poly, &mesh, &pp, &t_read);
-  if (rc != CLI_OK) close_outputs(cmd, &outs, 0);
   if (rc == CLI_OK) {
     double t_write = now();
     rc = write_outputs(cmd, &outs, mesh, qk_poly_first_index(poly));
@@ -911,6 +919,12 @@ int cmd_mesh(int argc, char **argv) {
     if (rc == CLI_OK && o.min_angle >= 0) report_bound(&s, o.min_angle);
     if (rc == CLI_OK && o.stats) print_stats(mesh, &s, &o, &pp, t_read, t_write);
   }
+  /* Standard output before the files are renamed into place: when it fails (--stats >
+   * /dev/full), no file is left behind. */
+  int c = cli_out_close(cmd, &so, rc == CLI_OK);
+  if (rc == CLI_OK) rc = c;
+  c = close_outputs(cmd, &outs, rc == CLI_OK);
+  if (rc == CLI_OK) rc = c;
   qk_mesh_free(mesh);
   qk_poly_free(poly);
   mg_free(&pp.gj);

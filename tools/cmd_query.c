@@ -148,23 +148,35 @@ static int parse_args(int argc, char **argv, const qcmd_t *c, qargs_t *a) {
   return -1;
 }
 
-/* --keep WHICH: the id columns named (comma-separated), or "both" where there are two. */
+/* --keep WHICH: the id columns named (comma-separated), or "both" where there are two. Each
+ * name is checked, however long the value (it was cut at 63 bytes, and what followed went
+ * unchecked), and an empty one is refused ('' and ',' did nothing, exit 0). */
 static int parse_keep(qrun_t *q) {
   const char *s = q->a.keep;
   if (!s) return CLI_OK;
-  char buf[64];
-  snprintf(buf, sizeof buf, "%s", s);
-  for (char *t = strtok(buf, ","); t; t = strtok(NULL, ",")) {
+  for (const char *t = s;; t++) {
+    const char *e = strchr(t, ',');
+    size_t n = e ? (size_t)(e - t) : strlen(t);
     int hit = 0;
-    for (int k = 0; k < 2; k++)
-      if (q->c->side[k] && (!strcmp(t, q->c->side[k]) || (!strcmp(t, "both") && q->c->side[1])))
+    for (int k = 0; k < 2 && n; k++) {
+      const char *side = q->c->side[k];
+      if (side && ((strlen(side) == n && !strncmp(t, side, n)) ||
+                   (n == 4 && !strncmp(t, "both", 4) && q->c->side[1])))
         q->keep[k] = hit = 1;
+    }
     if (!hit) {
-      cli_error(q->a.cmd, "--keep takes %s%s%s%s, not '%s'", q->c->side[0],
+      /* (the name refused, or the whole value when the name is empty; cut at 40 bytes
+       * as the readers cut a value) */
+      const char *shown = n ? t : s;
+      size_t len = n ? n : strlen(s);
+      cli_error(q->a.cmd, "--keep takes %s%s%s%s, not '%.*s'%s%s", q->c->side[0],
                 q->c->side[1] ? ", " : "", q->c->side[1] ? q->c->side[1] : "",
-                q->c->side[1] ? " or both" : "", s);
+                q->c->side[1] ? " or both" : "", (int)(len > 40 ? 40 : len), shown,
+                len > 40 ? "..." : "", n ? "" : " (an empty name)");
       return CLI_USAGE;
     }
+    if (!e) break;
+    t = e;
   }
   return CLI_OK;
 }

@@ -154,6 +154,14 @@ typedef struct xy_spec {
   int col[2]; /* 0-based, -1 until resolved */
 } xy_spec_t;
 
+/* Cut blanks (spaces, tabs) from both ends of s, in place; returns its new start. */
+static char *trim(char *s) {
+  while (*s == ' ' || *s == '\t') s++;
+  size_t n = strlen(s);
+  while (n > 0 && (s[n - 1] == ' ' || s[n - 1] == '\t')) s[--n] = '\0';
+  return s;
+}
+
 static int parse_xy(const char *cmd, const char *s, xy_spec_t *xy) {
   const char *comma = s ? strchr(s, ',') : NULL;
   if (!comma || comma == s || !comma[1] || strchr(comma + 1, ',')) {
@@ -165,9 +173,19 @@ static int parse_xy(const char *cmd, const char *s, xy_spec_t *xy) {
     cli_error(cmd, "--xy: column name too long");
     return 1;
   }
-  memcpy(xy->name[0], s, la);
-  xy->name[0][la] = '\0';
-  strcpy(xy->name[1], comma + 1);
+  char part[2][128];
+  memcpy(part[0], s, la);
+  part[0][la] = '\0';
+  strcpy(part[1], comma + 1);
+  for (int i = 0; i < 2; i++) {
+    /* blanks around a name or number dropped, as the library's reader takes --xy */
+    const char *t = trim(part[i]);
+    if (!*t) {
+      cli_error(cmd, "--xy needs two columns X,Y (names or 1-based numbers), not '%s'", s);
+      return 1;
+    }
+    memmove(xy->name[i], t, strlen(t) + 1);
+  }
   for (int i = 0; i < 2; i++) {
     char *end;
     long v = strtol(xy->name[i], &end, 10);
@@ -187,8 +205,21 @@ static int parse_xy(const char *cmd, const char *s, xy_spec_t *xy) {
   return 0;
 }
 
-/* Resolve names against a header line; returns 0 or prints why not. */
-static int resolve_xy(const char *cmd, const char *path, const char *header, xy_spec_t *xy) {
+/* The header field starting at f as a column name, in buf: its quotes undone, and blanks
+ * around an unquoted name dropped, as the library's reader compares names (io/csv_read.c:
+ * "x ,y" has a column x for every other command; join said "no column named 'x'").
+ * Returns the name, or NULL when there is no field at f. */
+static const char *header_name(const char *f, char *buf, size_t cap) {
+  if (csv_field(f, 0, buf, cap, NULL) != 1) return NULL;
+  const char *q = f;
+  while (*q == ' ' || *q == '\t') q++;
+  return *q == '"' ? buf : trim(buf);
+}
+
+/* Resolve names against the header line (its line, and the bytes of a byte order mark cut
+ * from it, for messages); returns 0 or prints why not, as the library's reader says it. */
+static int resolve_xy(const char *cmd, const char *path, const char *header, long lineno,
+                      size_t bom, xy_spec_t *xy) {
   char buf[256];
   for (int k = 0; k < 2; k++) {
     if (xy->col[k] >= 0) continue;
@@ -198,26 +229,30 @@ static int resolve_xy(const char *cmd, const char *path, const char *header, xy_
       return 1;
     }
     int i = 0;
-    for (const char *f = header; f && csv_field(f, 0, buf, sizeof buf, NULL) == 1;
+    const char *b;
+    for (const char *f = header; f && (b = header_name(f, buf, sizeof buf));
          f = field_end(f), i++) {
-      char *b = buf;
-      while (*b == ' ') b++;
       if (strcmp(b, xy->name[k])) continue;
       if (xy->col[k] >= 0) { /* as the library's reader: a name twice is ambiguous */
-        cli_error(cmd, "%s:1: column name '%s' appears twice in the header (fields %d and %d)",
-                  path, xy->name[k], xy->col[k] + 1, i + 1);
+        unsigned long fl, fc;
+        field_at(header, i, (unsigned long)lineno, bom, &fl, &fc);
+        cli_error(cmd,
+                  "%s:%lu:%lu: column name '%s' appears twice in the header (fields %d and %d)",
+                  path, fl, fc, xy->name[k], xy->col[k] + 1, i + 1);
         return 1;
       }
       xy->col[k] = i;
     }
     if (xy->col[k] < 0) {
-      cli_error(cmd, "%s:1: no column named '%s' in the header", path, xy->name[k]);
+      int nf = csv_field(header, -1, NULL, 0, NULL);
+      cli_error(cmd, "%s:%ld: no column named '%s' in the header (%d field%s: '%.100s')", path,
+                lineno, xy->name[k], nf, nf == 1 ? "" : "s", header);
       return 1;
     }
   }
   if (xy->col[0] == xy->col[1]) { /* a name and a number for one column */
-    cli_error(cmd, "%s:1: --xy %s,%s: x and y name the same column (field %d)", path, xy->name[0],
-              xy->name[1], xy->col[0] + 1);
+    cli_error(cmd, "%s:%ld: --xy %s,%s: x and y name the same column (field %d)", path, lineno,
+              xy->name[0], xy->name[1], xy->col[0] + 1);
     return 1;
   }
   return 0;
@@ -236,13 +271,11 @@ static void put_csv(FILE *f, const char *s) {
   fputc('"', f);
 }
 
-/* Whether a field of the header line is `name` (blanks before it ignored, as --xy reads). */
+/* Whether a field of the header line is `name` (as --xy reads names: header_name). */
 static int header_has(const char *header, const char *name, char *buf, size_t cap) {
-  for (const char *f = header; f && csv_field(f, 0, buf, cap, NULL) == 1; f = field_end(f)) {
-    const char *b = buf;
-    while (*b == ' ' || *b == '\t') b++;
+  const char *b;
+  for (const char *f = header; f && (b = header_name(f, buf, cap)); f = field_end(f))
     if (!strcmp(b, name)) return 1;
-  }
   return 0;
 }
 
@@ -379,9 +412,9 @@ static void join_usage(FILE *f) {
              "earlier new column has it (--field name beside a name column: feature_name);\n"
              "then every row must have as many fields as the header.\n"
              "A bad line is an error before any row is written (-o FILE is replaced\n"
-             "only on success; on standard output a POINTS file is checked whole first, while\n"
-             "points from a pipe are written as read). --threads N answers on N threads\n"
-             "(default 1; 0: one per core; at most 256).\n");
+             "only on success; on standard output, a device or a FIFO a POINTS file is\n"
+             "checked whole first, while points from a pipe are written as read).\n"
+             "--threads N answers on N threads (default 1; 0: one per core; at most 256).\n");
 }
 
 static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long total) {
@@ -444,13 +477,17 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
       }
       int header = named || ((rx != 1 || !number(fx, &v)) && (ry != 1 || !number(fy, &v)));
       if (header) {
-        if (resolve_xy("join", j->pts_path, line, xy)) {
+        if (resolve_xy("join", j->pts_path, line, lineno, bom, xy)) {
           rc = CLI_BAD_INPUT;
           break;
         }
         width = csv_field(line, -1, NULL, 0, &why), hline = lineno;
         csv_field(line, xy->col[0], xname, sizeof xname, NULL); /* (for messages) */
         csv_field(line, xy->col[1], yname, sizeof yname, NULL);
+        for (char *nm = xname; nm; nm = nm == xname ? yname : NULL) { /* (blanks cut) */
+          const char *t = trim(nm);
+          memmove(nm, t, strlen(t) + 1);
+        }
         if (width < 0) {
           field_error(j->pts_path, line, -width, lineno, bom, why);
           rc = CLI_BAD_INPUT;
@@ -612,9 +649,17 @@ int cmd_join(int argc, char **argv) {
     free(fields);
     return CLI_BAD_INPUT;
   }
+  /* The output is opened before the layer is read: one that cannot be written, or that
+   * is an input (`-o POINTS`, the points' pipe: `-o /dev/stdin`), fails before any work. */
+  cli_note_input(pos[0]);
+  cli_out_t o = {0};
+  rc = cli_out_open("join", outp, &o);
+  int said = rc != CLI_OK; /* (cli_out_open or read_layer printed why, out of memory included) */
   qk_region_t *r = NULL;
-  rc = read_layer("join", pos[0], planar, &r);
-  int said = rc != CLI_OK; /* (read_layer printed why, out of memory included) */
+  if (!rc) {
+    rc = read_layer("join", pos[0], planar, &r);
+    said = rc != CLI_OK;
+  }
   if (!rc) {
     /* A layer without a single polygon puts every point outside: no answer, and most
      * likely the wrong file (a points CSV that GDAL reads as a table, the arguments
@@ -631,9 +676,7 @@ int cmd_join(int argc, char **argv) {
   }
   if (!rc) rc = check_fields(pos[0], r, fields, nf);
   join_t j = {pos[1], r, rule, all, (unsigned)threads, fields, nf, NULL, NULL, NULL, NULL, 0, 0};
-  cli_out_t o = {0};
   int wfail = 0; /* the output failed (cli_out_close said so) */
-  if (!rc) rc = cli_out_open("join", outp, &o);
   if (!rc) {
     j.out = o.f;
     j.lines = malloc(CHUNK * sizeof *j.lines);
@@ -643,11 +686,12 @@ int cmd_join(int argc, char **argv) {
     struct stat sb;
     int regular = !fstat(fileno(in), &sb) && S_ISREG(sb.st_mode);
     long total = regular ? (long)sb.st_size : 0;
-    /* Standard output cannot be taken back: a regular file of points is read once
-     * without writing, so that a bad line stops the command before its first row. (-o
-     * FILE is written to a temporary and renamed only on success; from a pipe the rows
-     * are written as they come.) */
-    if (!rc && o.f == stdout && regular) {
+    /* Standard output, a device or a FIFO cannot be taken back: a regular file of points
+     * is read once without writing, so that a bad line stops the command before its
+     * first row (a FIFO as -o got 65,537 lines, then the error). (-o FILE is written to
+     * a temporary and renamed only on success; from a pipe the rows are written as they
+     * come.) */
+    if (!rc && (o.f == stdout || o.direct) && regular) {
       xy_spec_t xy_check = xy;
       j.dry = 1;
       rc = join_stream(&j, in, &xy_check, 0, total);
@@ -659,6 +703,8 @@ int cmd_join(int argc, char **argv) {
     }
     if (!rc) rc = join_stream(&j, in, &xy, isatty(2) && total > 0, total);
     wfail = o.f && ferror(o.f);
+  }
+  if (o.f) {
     int rc2 = cli_out_close("join", &o, rc == CLI_OK); /* (says why a write failed) */
     if (rc2) wfail = 1;
     if (!rc) rc = rc2;
@@ -704,20 +750,30 @@ int cmd_regions(int argc, char **argv) {
   }
   if (!rc && !path) cli_error("regions", "needs REGIONS"), rc = CLI_USAGE;
   if (rc) return rc;
-  qk_region_t *r;
-  if ((rc = read_layer("regions", path, planar, &r))) return rc;
-  /* The picture's file first: one that cannot be written fails before the statistics. */
-  cli_out_t o;
-  if (svg && (rc = cli_out_open("regions", svg, &o))) {
-    qk_region_free(r);
+  /* Standard output (the statistics) and the picture's file first, before the layer is
+   * read: one that cannot be written, or that is the layer itself (a pipe: `regions
+   * /dev/stdin --svg /dev/stdin`) or standard output again (`--svg /dev/stdout`), fails
+   * before any work. */
+  cli_note_input(path);
+  cli_out_t so, o;
+  if ((rc = cli_out_open("regions", "-", &so)) ||
+      (svg && (rc = cli_out_open("regions", svg, &o)))) {
+    cli_out_close("regions", &so, 0);
     return rc;
   }
-  if (svg) {
+  qk_region_t *r = NULL;
+  rc = read_layer("regions", path, planar, &r);
+  if (!rc && svg) {
     qk_status_t st = qk_region_write_svg(r, o.f, 1200);
-    rc = cli_out_close("regions", &o, st == QK_OK);
-    if (st) rc = cli_status("regions", svg, st);
+    if (st == QK_OK && (fflush(o.f) != 0 || ferror(o.f))) st = QK_ERR_IO;
+    if (st == QK_ERR_IO && ferror(o.f))
+      rc = CLI_INTERNAL; /* (said when the picture is closed) */
+    else if (st)
+      rc = cli_status("regions", svg, st);
   }
-  /* The statistics after the picture is in place (a failed write printed them too). */
+  /* The statistics once the picture is written (a failed write printed them too), and
+   * out before the picture is renamed into place: when standard output fails, the
+   * picture is not left behind. */
   if (!rc) {
     qk_region_stats_t s;
     qk_region_stats(r, &s);
@@ -729,6 +785,12 @@ int cmd_regions(int argc, char **argv) {
            s.leaves, s.leaf_edges, s.depth, s.bytes, s.build_seconds,
            s.planar ? "planar" : "lonlat", s.box.xmin + 0.0, s.box.ymin + 0.0, s.box.xmax + 0.0,
            s.box.ymax + 0.0); /* (-0 as 0) */
+  }
+  int rc2 = cli_out_close("regions", &so, rc == CLI_OK);
+  if (!rc) rc = rc2;
+  if (svg) {
+    rc2 = cli_out_close("regions", &o, rc == CLI_OK);
+    if (!rc) rc = rc2;
   }
   qk_region_free(r);
   return rc;

@@ -65,20 +65,27 @@ int cmd_tree(int argc, char **argv) {
   rc = cli_build_tree(cmd, in, pts, n, &opt, &tree);
   free(pts);
   if (rc) return rc;
-  /* The picture's file is opened first: a path that cannot be written is an error
-   * before anything is printed (the statistics came out, then the error). */
-  cli_out_t o;
-  if (svg && (rc = cli_out_open(cmd, svg, &o))) {
+  /* Standard output (the statistics) and the picture's file are opened first: a path that
+   * cannot be written is an error before anything is printed (the statistics came out,
+   * then the error), and `--svg /dev/stdout` or `--svg -` beside the statistics is
+   * refused (the JSON went after the SVG). */
+  cli_out_t so, o;
+  if ((rc = cli_out_open(cmd, "-", &so)) || (svg && (rc = cli_out_open(cmd, svg, &o)))) {
+    cli_out_close(cmd, &so, 0);
     qk_tree_free(tree);
     return rc;
   }
   if (svg) {
     qk_status_t st = qk_tree_write_svg(tree, o.f, 800);
-    rc = cli_out_close(cmd, &o, st == QK_OK);
-    if (!rc && st) rc = cli_status(cmd, svg, st);
+    if (st == QK_OK && (fflush(o.f) != 0 || ferror(o.f))) st = QK_ERR_IO;
+    if (st == QK_ERR_IO && ferror(o.f))
+      rc = CLI_INTERNAL; /* (said when the picture is closed) */
+    else if (st)
+      rc = cli_status(cmd, svg, st);
   }
-  /* The statistics after the picture is in place: a command that failed printed them
-   * (exit 3 with the JSON on stdout, as if it had worked). */
+  /* The statistics once the picture is written (a command that failed printed them: exit 3
+   * with the JSON on stdout, as if it had worked), and out before the picture is renamed
+   * into place: when standard output fails, the picture is not left behind. */
   if (!rc) {
     qk_tree_stats_t s;
     qk_tree_stats(tree, &s);
@@ -87,7 +94,13 @@ int cmd_tree(int argc, char **argv) {
            "\"root\": {\"x\": %.17g, \"y\": %.17g, \"side\": %.17g}, \"memory_bytes\": %zu}\n",
            s.points, s.nodes, s.leaves, s.height, s.max_leaf_points, s.capped_leaves, s.capacity,
            s.max_depth, s.root.x + 0.0, s.root.y + 0.0, s.root.side /* (-0 as 0) */,
-           s.memory_bytes);
+           s.memory_bytes); /* (so: standard output) */
+  }
+  int rc2 = cli_out_close(cmd, &so, rc == CLI_OK);
+  if (!rc) rc = rc2;
+  if (svg) {
+    rc2 = cli_out_close(cmd, &o, rc == CLI_OK);
+    if (!rc) rc = rc2;
   }
   qk_tree_free(tree);
   return rc;

@@ -112,14 +112,29 @@ static void scene_free(scene_t *s) {
 static const char *g_row;
 static size_t g_row_len;
 
-/* "PATH:LINE[:COLUMN]: " and fmt with val; the column when val is a field of the line. */
+/* The first 40 bytes of a field for a message, as the other readers quote a value (a
+ * quoted field of 1.2 MB, line breaks and all, made a message of 1.2 MB); a UTF-8
+ * character is not cut in two. buf holds at least 41 bytes. */
+static const char *cut40(const char *val, char *buf) {
+  size_t n = strlen(val);
+  if (n <= 40) return val;
+  n = 40;
+  while (n > 0 && ((unsigned char)val[n] & 0xC0) == 0x80) n--;
+  memcpy(buf, val, n);
+  buf[n] = '\0';
+  return buf;
+}
+
+/* "PATH:LINE[:COLUMN]: " and fmt with val; the column when val is a field of the line. A
+ * field (any val but a whole message, fmt "%s") is quoted to its first 40 bytes. */
 static int bad(const char *path, unsigned long line, const char *fmt, const char *val) {
   uintptr_t v = (uintptr_t)val, r = (uintptr_t)g_row;
+  char buf[41];
   if (g_row && v >= r && v - r < g_row_len)
     cli_msg("quadkit world: %s:%lu:%lu: ", path, line, (unsigned long)(v - r) + 1);
   else
     cli_msg("quadkit world: %s:%lu: ", path, line);
-  cli_msg(fmt, val);
+  cli_msg(fmt, strcmp(fmt, "%s") ? cut40(val, buf) : val);
   fputc('\n', stderr);
   return CLI_BAD_INPUT;
 }
@@ -289,10 +304,11 @@ static int move_row(const char *path, unsigned long ln, row_t *r, scene_t *s) {
   /* Two shapes for one object in one frame: only the last would count, the other row
    * silently lost (moves are in frame order, so the object's last move tells). */
   if (s->o[i].mline && s->o[i].mframe == frame) {
+    char buf[41];
     fprintf(stderr,
             "quadkit world: %s:%lu: id %s moves twice in frame %lu (also on line %lu): one "
             "shape per object and frame\n",
-            path, ln, r->f[1], (unsigned long)frame, s->o[i].mline);
+            path, ln, cut40(r->f[1], buf), (unsigned long)frame, s->o[i].mline);
     return CLI_BAD_INPUT;
   }
   qk_shape_t sh;

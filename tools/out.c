@@ -10,9 +10,12 @@
 
 #include "cli.h"
 
-/* The regular files this process reads (device and inode), so that an output naming one
- * of them is refused: `-o points.csv` or `--svg points.csv` replaced the input after
- * reading it, without a word. */
+/* The files this process reads (device and inode), so that an output naming one of them is
+ * refused: `-o points.csv` or `--svg points.csv` replaced the input after reading it,
+ * without a word, and an output into the pipe or FIFO being read (`-o /dev/stdin`, `mesh -
+ * --poly /dev/stdin`, a FIFO named as input and output) hung or lost the output. Regular
+ * files, FIFOs and pipes, and block devices are kept; a terminal, /dev/null and other
+ * character devices, and sockets, are read and written independently. */
 static struct {
   dev_t dev;
   ino_t ino;
@@ -20,15 +23,27 @@ static struct {
 } inputs[16];
 static size_t n_inputs;
 
+/* Whether reading and writing a file of this type at once clash (see inputs). */
+static int clashes(const struct stat *st) {
+  return S_ISREG(st->st_mode) || S_ISFIFO(st->st_mode) || S_ISBLK(st->st_mode);
+}
+
 static void note_stat(const char *path, const struct stat *st) {
-  if (!S_ISREG(st->st_mode) || n_inputs == sizeof inputs / sizeof *inputs) return;
+  if (!clashes(st) || n_inputs == sizeof inputs / sizeof *inputs) return;
+  for (size_t i = 0; i < n_inputs; i++)
+    if (inputs[i].dev == st->st_dev && inputs[i].ino == st->st_ino) return;
   inputs[n_inputs].dev = st->st_dev, inputs[n_inputs].ino = st->st_ino;
   inputs[n_inputs++].path = path;
 }
 
 void cli_note_input(const char *path) {
   struct stat st;
-  if (path && strcmp(path, "-") && stat(path, &st) == 0) note_stat(path, &st);
+  if (!path) return;
+  if (!strcmp(path, "-")) { /* standard input (mesh -) */
+    if (fstat(STDIN_FILENO, &st) == 0) note_stat("<stdin>", &st);
+  } else if (stat(path, &st) == 0) {
+    note_stat(path, &st);
+  }
 }
 
 FILE *cli_open_input(const char *cmd, const char *path) {
@@ -45,10 +60,34 @@ FILE *cli_open_input(const char *cmd, const char *path) {
   return f;
 }
 
-/* The outputs open now, by canonical name (the directory's real path and the file name):
- * two outputs of one command naming one file (`-o x --svg x`, or `./x` and `x`) would
- * leave whichever was renamed last, the other lost without a word. */
-static const char *open_keys[16];
+/* An output whose file (st: what its path or standard output leads to) is one of the
+ * inputs: a usage error. */
+static int input_clash(const char *cmd, const char *shown, const struct stat *st, int replaced) {
+  if (!clashes(st)) return CLI_OK;
+  for (size_t i = 0; i < n_inputs; i++)
+    if (st->st_dev == inputs[i].dev && st->st_ino == inputs[i].ino) {
+      cli_error(cmd, "cannot write %s: it is the input file %s, %s", shown, inputs[i].path,
+                replaced ? "which it would replace"
+                         : "which it reads (writing into it would hang or lose the output)");
+      return CLI_USAGE;
+    }
+  return CLI_OK;
+}
+
+/* The outputs open now: by canonical name (the directory's real path and the file name)
+ * for a file written through a temporary, and by device and inode for whatever exists
+ * already (standard output included): two outputs of one command naming one file (`-o x
+ * --svg x`, `./x` and `x`, a hard link, `--svg /dev/stdout` beside `-` or the command's
+ * own standard output) would leave whichever was renamed last, the other lost without a
+ * word, or write both into one stream. Character devices that are not terminals
+ * (/dev/null, /dev/full) take any number of outputs. */
+static struct {
+  unsigned id;
+  const char *key; /* (the cli_out_t's; NULL when it has none) */
+  int has_id, std;
+  dev_t dev;
+  ino_t ino;
+} open_outs[16];
 static size_t n_open;
 
 static char *out_key(const char *final) {
@@ -65,20 +104,78 @@ static char *out_key(const char *final) {
   return key;
 }
 
-static void forget_key(const char *key) {
-  for (size_t i = 0; key && i < n_open; i++)
-    if (open_keys[i] == key) {
-      open_keys[i] = open_keys[--n_open];
+/* Whether an output (std: standard output; st: its file, NULL when it does not exist yet;
+ * tty: it is a terminal; key: its canonical name or NULL) meets one already open: the
+ * usage error is said. */
+static int output_clash(const char *cmd, const char *shown, int std, const struct stat *st, int tty,
+                        const char *key) {
+  int exempt = st && S_ISCHR(st->st_mode) && !tty;
+  for (size_t i = 0; i < n_open; i++) {
+    int same = (std && open_outs[i].std) ||
+               (st && !exempt && open_outs[i].has_id && open_outs[i].dev == st->st_dev &&
+                open_outs[i].ino == st->st_ino) ||
+               (key && open_outs[i].key && !strcmp(key, open_outs[i].key));
+    if (same) {
+      cli_error(cmd, "cannot write %s: another output of this command writes that file too%s",
+                shown, std || open_outs[i].std ? " (standard output)" : "");
+      return CLI_USAGE;
+    }
+  }
+  return CLI_OK;
+}
+
+/* Record an output as open (o->id names it for forget_output). */
+static void remember_output(cli_out_t *o, int std, const struct stat *st) {
+  static unsigned ids;
+  o->id = ++ids;
+  if (n_open == sizeof open_outs / sizeof *open_outs) return;
+  open_outs[n_open].id = o->id, open_outs[n_open].key = o->key, open_outs[n_open].std = std;
+  open_outs[n_open].has_id = st != NULL;
+  if (st) open_outs[n_open].dev = st->st_dev, open_outs[n_open].ino = st->st_ino;
+  n_open++;
+}
+
+static void forget_output(const cli_out_t *o) {
+  for (size_t i = 0; o->id && i < n_open; i++)
+    if (open_outs[i].id == o->id) {
+      open_outs[i] = open_outs[--n_open];
       break;
     }
 }
 
+/* The file a chain of symbolic links ends in, existing or not (realpath fails on a
+ * dangling link, whose target is the file to create); malloc'd, or NULL with errno set
+ * (ELOOP after 40 links, as the kernel counts). */
+static char *follow_links(const char *path) {
+  char *cur = strdup(path);
+  for (int hops = 0; cur; hops++) {
+    struct stat st;
+    if (lstat(cur, &st) != 0 || !S_ISLNK(st.st_mode)) return cur;
+    if (hops == 40) {
+      free(cur);
+      errno = ELOOP;
+      return NULL;
+    }
+    char to[4096];
+    ssize_t n = readlink(cur, to, sizeof to - 1);
+    if (n < 0) return cur; /* (it was a link a moment ago: the open that follows says why) */
+    to[n] = '\0';
+    const char *slash = strrchr(cur, '/');
+    size_t dlen = to[0] == '/' || !slash ? 0 : (size_t)(slash - cur) + 1;
+    char *next = malloc(dlen + (size_t)n + 1);
+    if (next) memcpy(next, cur, dlen), memcpy(next + dlen, to, (size_t)n + 1);
+    free(cur);
+    cur = next;
+  }
+  return NULL; /* (out of memory) */
+}
+
 /* The temporaries being written, removed by a signal that ends the process (Ctrl-C, a
- * `timeout` or `kill`): outputs are opened before the work, so that an unwritable path
- * fails at once, and a mesh killed while it read or meshed left PREFIX.node.tmp.PID.0
- * and the like behind. Each entry is set once its string is whole and cleared only after
- * the file was renamed or removed (a signal between the two unlinks a name no longer
- * there, which does no harm). */
+ * `timeout` or `kill`, a reader that closed its pipe): outputs are opened before the work,
+ * so that an unwritable path fails at once, and a mesh killed while it read or meshed left
+ * PREFIX.node.tmp.PID.0 and the like behind. Each entry is set once its string is whole and
+ * cleared only after the file was renamed or removed (a signal between the two unlinks a
+ * name no longer there, which does no harm). */
 static const char *volatile live_tmp[16];
 
 static void remove_temporaries(int sig) {
@@ -92,7 +189,9 @@ static void track_tmp(const char *tmp) {
   static int installed;
   if (!installed) {
     installed = 1;
-    static const int sigs[] = {SIGINT, SIGTERM, SIGHUP};
+    /* (SIGPIPE: a reader that stopped early, `--svg /dev/stdout | head`, left the other
+     * outputs' temporaries) */
+    static const int sigs[] = {SIGINT, SIGTERM, SIGHUP, SIGPIPE};
     for (size_t i = 0; i < sizeof sigs / sizeof *sigs; i++) {
       struct sigaction sa, old;
       memset(&sa, 0, sizeof sa);
@@ -121,47 +220,67 @@ int cli_out_open(const char *cmd, const char *path, cli_out_t *o) {
     cli_error(cmd, "an output file name is empty ('')");
     return CLI_USAGE;
   }
+  struct stat st;
+  int rc;
   if (!strcmp(path, "-")) {
+    const int have = fstat(STDOUT_FILENO, &st) == 0;
+    if (have && (rc = input_clash(cmd, "standard output", &st, 0))) return rc;
+    if ((rc = output_clash(cmd, "standard output (-)", 1, have ? &st : NULL, isatty(STDOUT_FILENO),
+                           NULL)))
+      return rc;
     o->f = stdout;
+    remember_output(o, 1, have ? &st : NULL);
     return CLI_OK;
   }
+  /* Whatever the path leads to (through links, /dev/stdin, /proc/self/fd/N) must not be
+   * an input. */
+  if (stat(path, &st) == 0 && (rc = input_clash(cmd, path, &st, S_ISREG(st.st_mode)))) return rc;
   /* A symbolic link is written through: the temporary goes beside its target and is
-   * renamed over the target, so the link stays. Something that is not a regular file (a
-   * FIFO, a device such as /dev/stdout) cannot be replaced atomically and must not be
-   * replaced at all: it is written directly. */
+   * renamed over the target, so the link stays (a dangling link: its target is created).
+   * Something that is not a regular file (a FIFO, a device such as /dev/stdout) cannot
+   * be replaced atomically and must not be replaced at all: it is written directly. */
   char *target = NULL;
-  struct stat st;
-  if (lstat(path, &st) == 0 && S_ISLNK(st.st_mode)) target = realpath(path, NULL);
+  if (lstat(path, &st) == 0 && S_ISLNK(st.st_mode)) {
+    target = realpath(path, NULL);
+    /* (a link that leads somewhere realpath cannot name, /dev/stdout to a pipe, is
+     * written through as it stands) */
+    if (!target && stat(path, &st) != 0 && !(target = follow_links(path))) {
+      cli_error(cmd, "cannot write %s: %s", path, strerror(errno));
+      return errno == ENOMEM ? CLI_INTERNAL : CLI_BAD_INPUT;
+    }
+  }
   const char *final = target ? target : path;
-  if (stat(final, &st) == 0 && !S_ISREG(st.st_mode)) {
+  const int exists = stat(final, &st) == 0;
+  if (exists && !S_ISREG(st.st_mode)) {
+    /* (a FIFO is checked before it is opened, which waits for a reader; a character
+     * device after, to ask whether it is a terminal) */
+    if (!S_ISCHR(st.st_mode) && (rc = output_clash(cmd, path, 0, &st, 0, NULL))) {
+      free(target);
+      return rc;
+    }
     o->f = fopen(final, "wb");
     free(target);
     if (!o->f) {
       cli_error(cmd, "cannot write %s: %s", path, strerror(errno));
       return CLI_BAD_INPUT;
     }
+    if (S_ISCHR(st.st_mode) && (rc = output_clash(cmd, path, 0, &st, isatty(fileno(o->f)), NULL))) {
+      fclose(o->f);
+      o->f = NULL;
+      return rc;
+    }
     o->direct = 1;
     o->path = strdup(path); /* (for the message when a write fails) */
+    remember_output(o, 0, &st);
     return CLI_OK;
   }
-  if (stat(final, &st) == 0)
-    for (size_t i = 0; i < n_inputs; i++)
-      if (st.st_dev == inputs[i].dev && st.st_ino == inputs[i].ino) {
-        free(target);
-        cli_error(cmd, "cannot write %s: it is the input file %s, which it would replace", path,
-                  inputs[i].path);
-        return CLI_USAGE;
-      }
   o->key = out_key(final);
-  for (size_t i = 0; o->key && i < n_open; i++)
-    if (!strcmp(o->key, open_keys[i])) {
-      free(target);
-      free(o->key);
-      o->key = NULL;
-      cli_error(cmd, "cannot write %s: another output of this command writes that file too", path);
-      return CLI_USAGE;
-    }
-  if (o->key && n_open < sizeof open_keys / sizeof *open_keys) open_keys[n_open++] = o->key;
+  if ((rc = output_clash(cmd, path, 0, exists ? &st : NULL, 0, o->key))) {
+    free(target);
+    free(o->key);
+    o->key = NULL;
+    return rc;
+  }
   size_t n = strlen(final) + 32;
   o->path = strdup(final);
   o->tmp = malloc(n);
@@ -169,8 +288,8 @@ int cli_out_open(const char *cmd, const char *path, cli_out_t *o) {
   if (!o->path || !o->tmp) {
     free(o->path);
     free(o->tmp);
-    forget_key(o->key);
     free(o->key);
+    memset(o, 0, sizeof *o);
     cli_error(cmd, "out of memory");
     return CLI_INTERNAL;
   }
@@ -187,17 +306,18 @@ int cli_out_open(const char *cmd, const char *path, cli_out_t *o) {
               strerror(errno), o->tmp);
     free(o->path);
     free(o->tmp);
-    forget_key(o->key);
     free(o->key);
     memset(o, 0, sizeof *o);
     return CLI_BAD_INPUT;
   }
+  remember_output(o, 0, exists ? &st : NULL);
   return CLI_OK;
 }
 
 int cli_out_close(const char *cmd, cli_out_t *o, int ok) {
   int rc = CLI_OK;
   if (!o->f) return CLI_OK;
+  forget_output(o);
   if (o->f == stdout) {
     if (fflush(stdout) != 0 || ferror(stdout)) {
       cli_error(cmd, "cannot write standard output: %s", strerror(errno));
@@ -231,7 +351,6 @@ int cli_out_close(const char *cmd, cli_out_t *o, int ok) {
   untrack_tmp(o->tmp);
   free(o->path);
   free(o->tmp);
-  forget_key(o->key);
   free(o->key);
   memset(o, 0, sizeof *o);
   return rc;

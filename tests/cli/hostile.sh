@@ -54,7 +54,8 @@ same_text "join: --xy by number" "$("$cli" join "$tmp/sq.geojson" "$tmp/q.csv" -
   "feature 0 -1 "
 
 printf 'x,x,y\n5,0.5,0.5\n' >"$tmp/twice.csv"
-expect 1 "twice.csv:1: column name 'x' appears twice in the header \\(fields 1 and 2\\)" -- \
+# (with the column of the second name, as the other commands say it)
+expect 1 "twice.csv:1:3: column name 'x' appears twice in the header \\(fields 1 and 2\\)" -- \
   "$cli" join "$tmp/sq.geojson" "$tmp/twice.csv" --xy x,y -o "$tmp/keep.csv"
 unchanged "$tmp/keep.csv"
 
