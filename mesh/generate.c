@@ -475,7 +475,7 @@ qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *opt
   if (!poly) return qk__mesh_fail(err, QK_ERR_INVALID, 0, "no input");
   qk_mesh_options_t opt;
   qk_status_t st = read_options(options, &opt, err);
-  if (st) return st;
+  if (st || (st = qk__poly_check_rounded(poly, err))) return st;
   qk_allocator_t alloc = {NULL, NULL};
   if (opt.allocator) alloc = *opt.allocator;
   qk_mesh_t *m = qk__realloc(&alloc, NULL, 0, sizeof *m);

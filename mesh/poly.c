@@ -227,6 +227,45 @@ qk_status_t qk_poly_round(qk_poly_t *p, double step, size_t *rounded) {
     p->vx[i] = x, p->vy[i] = y;
   }
   if (rounded) *rounded = n;
+  if (step > p->round_step) p->round_step = step;
+  return QK_OK;
+}
+
+/* The point nearest (x, y) on segment k's line between its ends: its squared distance. */
+static double seg_dist2(const qk_poly_t *p, size_t k, double x, double y) {
+  const uint32_t a = p->seg[2 * k], b = p->seg[2 * k + 1];
+  const double ax = p->vx[a], ay = p->vy[a], dx = p->vx[b] - ax, dy = p->vy[b] - ay;
+  const double len2 = dx * dx + dy * dy;
+  double t = len2 > 0 ? ((x - ax) * dx + (y - ay) * dy) / len2 : 0;
+  t = t < 0 ? 0 : t > 1 ? 1 : t;
+  const double ex = ax + t * dx - x, ey = ay + t * dy - y;
+  return ex * ex + ey * ey;
+}
+
+qk_status_t qk__poly_check_rounded(const qk_poly_t *p, qk_mesh_error_t *err) {
+  const double g = p->round_step;
+  if (!(g > 0)) return QK_OK;
+  /* Rounding moved each vertex by at most g / sqrt(2), so each segment by at most that; a
+   * point left as read and farther than g from every rounded segment is on the side it was
+   * on. Closer, its face may have changed: a hole point 1.5e-8 inside a hole's edge, with
+   * that edge rounded past it, dropped the face around the hole and meshed the hole. */
+  for (size_t i = 0; i < p->nh + p->nr; i++) {
+    const int hole = i < p->nh;
+    const double x = hole ? p->hx[i] : p->reg[i - p->nh].x,
+                 y = hole ? p->hy[i] : p->reg[i - p->nh].y;
+    const unsigned long line = hole ? (p->hline ? p->hline[i] : 0) : p->reg[i - p->nh].line;
+    for (size_t k = 0; k < p->ns; k++) {
+      if (!(seg_dist2(p, k, x, y) < g * g)) continue;
+      const size_t num = (hole ? i : i - p->nh) + p->first_index;
+      return qk__mesh_fail(err, QK_ERR_GEOMETRY, line,
+                           "%s %zu at (%.17g, %.17g) is within the rounding grid %g of "
+                           "segment %zu (vertices %u to %u), which rounding may have moved "
+                           "across it; move it farther from the segments",
+                           hole ? "hole" : "regional attribute point", num, x, y, g,
+                           k + p->first_index, p->seg[2 * k] + p->first_index,
+                           p->seg[2 * k + 1] + p->first_index);
+    }
+  }
   return QK_OK;
 }
 
