@@ -188,10 +188,11 @@ static int parse_value(const char *cmd, const char *a, const char *v, mesh_args_
   }
   if (!strcmp(a, "--min-angle")) {
     if (cli_parse_double(cmd, "--min-angle", v, &o->min_angle)) return CLI_USAGE;
-    if (!(o->min_angle >= 0 && o->min_angle <= 45)) {
+    /* (0, the library's "the default", would be read as "no bound" and give 20) */
+    if (!(o->min_angle > 0 && o->min_angle <= 45)) {
       cli_error(cmd,
-                "--min-angle %s: must be between 0 and 45 degrees (the book's and dyadic modes "
-                "prove 45; the general mode proves 20 and tries up to 34)",
+                "--min-angle %s: must be above 0 and at most 45 degrees (the book's and dyadic "
+                "modes prove 45; the general mode proves 20, its default, and tries up to 34)",
                 v);
       return CLI_USAGE;
     }

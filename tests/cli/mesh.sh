@@ -69,7 +69,9 @@ check "--max-size 0.2: every edge at most 0.2" -- awk '
   FNR==NR { if (FNR > 1) { x[$1]=$2; y[$1]=$3 }; next }
   FNR > 1 { for (i = 2; i <= 4; i++) { a=$i; b=$(i == 4 ? 2 : i + 1); d=(x[a]-x[b])^2+(y[a]-y[b])^2; if (d > 0.04 + 1e-12) exit 1 } }' "$tmp/h.node" "$tmp/h.ele"
 expect 0 'dyadic mode: every angle in \[45, 90\] degrees \(proven' -- "$cli" mesh "$tmp/real.poly" -o "$tmp/h" --min-angle 30
-expect 2 'must be between 0 and 45 degrees' -- "$cli" mesh "$tmp/real.poly" -o "$tmp/u" --min-angle 50
+expect 2 'must be above 0 and at most 45 degrees' -- "$cli" mesh "$tmp/real.poly" -o "$tmp/u" --min-angle 50
+# 0 is refused: it read as the general mode's default (20) without a word
+expect 2 'must be above 0 and at most 45 degrees' -- "$cli" mesh "$tmp/real.poly" -o "$tmp/u" --min-angle 0
 expect 2 'exclude each other' -- "$cli" mesh "$tmp/real.poly" -o "$tmp/u" --book --dyadic
 # The issue's coastline-like polygon in the dyadic mode: refused, naming the segment and
 # the reason (without --dyadic the general mode meshes it: tests/cli/mesh_general.sh).
