@@ -890,10 +890,11 @@ static int in_face(hp_t *h, size_t q, int hole, qk_point_t p, qk_boundary_t b) {
 }
 
 /* The arc of ring q from edge a0, len edges: probes near the middle of an edge on either
- * side, from 2^-41 of the edge's length out to 0.3 of it. The nearest that lies in the
- * face beside the edge (in exactly the rings holding q, and q for a hole) tells whether
- * that face is outside the area: then it is the hole point (returns 1). Nearest first,
- * so that a probe does not jump over a ring lying close to the edge into another face (a
+ * side, from 2^-52 of the edge's length (a hole 5.8e-11 thin across edges of 256 lay
+ * below 2^-41, where the probes once began, and was refused) out to 0.3 of it. The
+ * nearest that lies in the face beside the edge (in exactly the rings holding q, and q for a hole)
+ * tells whether that face is outside the area: then it is the hole point (returns 1). Nearest
+ * first, so that a probe does not jump over a ring lying close to the edge into another face (a
  * sand bar along a lake's shore left a sliver of lake as land). Up to 4096 edges an arc
  * are tried. *loose: the first probe strictly inside the hole ring and outside the area,
  * to fall back on. */
@@ -907,8 +908,8 @@ static int arc_point(hp_t *h, size_t q, int hole, size_t a0, size_t len, int *lo
     const double *a = &h->xy[2 * (h->rs[q] + e)], *b = &h->xy[2 * (h->rs[q] + e + 1)];
     double mx = a[0] + (b[0] - a[0]) / 2, my = a[1] + (b[1] - a[1]) / 2;
     double nx = -(b[1] - a[1]), ny = b[0] - a[0];
-    for (int k = 0; k < 2 * (31 + 4); k++) {
-      double mag = k / 2 < 31 ? ldexp(1.0, -41 + k / 2) : coarse[k / 2 - 31];
+    for (int k = 0; k < 2 * (42 + 4); k++) {
+      double mag = k / 2 < 42 ? ldexp(1.0, -52 + k / 2) : coarse[k / 2 - 42];
       double step = k % 2 ? -mag : mag;
       qk_point_t p = {mx + step * nx, my + step * ny};
       size_t np = 0;
@@ -997,7 +998,7 @@ static int hole_points(mg_input_t *in, const char *path, char *msg, size_t n) {
       done += len, a0 = (a0 + len) % m;
     }
     if (!hole) continue;
-    /* No such point: rings that cross (the mesher names the crossing) or a gap below 2^-41
+    /* No such point: rings that cross (the mesher names the crossing) or a gap below 2^-52
      * of every edge tried. A point strictly inside the ring and outside the area, as
      * before, lets the mesher say which. */
     if (!found && loose)

@@ -57,6 +57,12 @@ else
   fail "projected x is not about 1113 km"
 fi
 
+# A hole 5.8e-11 thin (a triangle across 512 units): its hole point is found (the probes
+# began at 2^-41 of an edge's length, over the hole, and it was refused as "no point found
+# strictly inside this hole ring").
+printf '%s' '{"type":"Polygon","coordinates":[[[0,0],[1024,0],[1024,1024],[0,1024],[0,0]],[[256,512],[512,512.0000000000582],[768,512],[256,512]]]}' > "$tmp/thin.geojson"
+expect 0 '"triangles": 10, ' -- "$cli" mesh "$tmp/thin.geojson" -o "$tmp/thin" --stats
+
 # Option rules.
 expect 2 'apply to GeoJSON input' -- "$cli" mesh "$src/examples/mesh/notes.poly" --project equirect -o "$tmp/u"
 expect 2 'apply to GeoJSON input' -- "$cli" mesh "$src/examples/mesh/notes.poly" --feature 0 -o "$tmp/u"
