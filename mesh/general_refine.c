@@ -659,6 +659,22 @@ static qk__gm_tq_t queued(const qk__cdt_t *c, uint32_t t) {
   return (qk__gm_tq_t){t, tv[0], tv[1], tv[2]};
 }
 
+/* A bad triangle only a few ulps across, whose circumcentre does not exist in doubles or
+ * rounds onto a vertex: no double near it could improve it (two vertices 1 ulp apart in x,
+ * where y's ulp is eight times coarser, leave only points on its circumcircle). Refused,
+ * saying so and how small it is (the message once said only "precision exhausted"). */
+static qk_status_t exhausted(const qk__gm_t *g, const uint32_t *tv, const double *W,
+                             const char *what) {
+  const qk__cdt_t *c = &g->cdt;
+  double e = INFINITY;
+  for (int i = 0; i < 3; i++) e = fmin(e, sqrt(d2(&c->xy[2 * tv[i]], &c->xy[2 * tv[(i + 1) % 3]])));
+  return qk__mesh_fail(g->err, QK_ERR_LIMIT, 0,
+                       "%s the triangle at (%.17g, %.17g), %.3g across: no double near it "
+                       "improves it (features a few ulps apart, such as vertices 1 ulp "
+                       "apart); round the input to a grid (--round)",
+                       what, W[0], W[1], e);
+}
+
 /* Split a bad triangle: its circumcentre, or the subsegments hiding or encroached by it.
  * *rejected counts the triangles left because only protected pieces stood in the way. */
 static qk_status_t split_triangle(qk__gm_t *g, uint32_t t, const double lo[2], const double hi[2],
@@ -674,10 +690,7 @@ static qk_status_t split_triangle(qk__gm_t *g, uint32_t t, const double lo[2], c
    * which is as hidden. */
   if (!isfinite(p[0]) || !isfinite(p[1])) {
     const double *W = &c->xy[2 * far_corner(c, tv)];
-    return qk__mesh_fail(g->err, QK_ERR_LIMIT, 0,
-                         "no circumcentre for the triangle at (%.17g, %.17g): precision "
-                         "exhausted",
-                         W[0], W[1]);
+    return exhausted(g, tv, W, "no circumcentre for");
   }
   const int clamped = p[0] > hi[0] || p[0] < lo[0] || p[1] > hi[1] || p[1] < lo[1];
   uint32_t tri;
@@ -726,9 +739,7 @@ static qk_status_t split_triangle(qk__gm_t *g, uint32_t t, const double lo[2], c
     if (!done) ++*rejected;
     return st;
   }
-  if (clamped || where == QK__CDT_VERT)
-    return qk__mesh_fail(g->err, QK_ERR_LIMIT, 0,
-                         "precision exhausted refining the triangle at (%.17g, %.17g)", W[0], W[1]);
+  if (clamped || where == QK__CDT_VERT) return exhausted(g, tv, W, "precision exhausted refining");
   uint32_t v;
   int existed;
   if (where == QK__CDT_IN) {

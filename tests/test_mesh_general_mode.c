@@ -1187,6 +1187,38 @@ static void test_mesh_general_mode_size_domain(void **state) {
   qk_poly_free(p);
 }
 
+/* Two isolated vertices 1 ulp apart in x (1.39e-17 there, y's ulp 1.11e-16): a triangle
+ * of them and a third vertex 1 ulp above, whose circumcentre rounds onto a vertex and no
+ * double lies strictly inside its circle, is refused naming its size and the remedy (the
+ * message said only "precision exhausted refining the triangle at ..."). */
+static void test_mesh_general_mode_ulp_pair(void **state) {
+  (void)state;
+  double xy[12] = {0,
+                   0,
+                   1,
+                   0,
+                   1,
+                   1,
+                   0,
+                   1,
+                   0.11053466796875,
+                   0.7699737548828125,
+                   nextafter(0.11053466796875, 1),
+                   0.7699737548828125};
+  uint32_t seg[8] = {0, 1, 1, 2, 2, 3, 3, 0};
+  qk_poly_t *p;
+  qk_mesh_t *m = NULL;
+  qk_mesh_error_t err;
+  assert_int_equal(qk_poly_from_arrays(xy, 6, seg, 4, NULL, 0, NULL, &p, &err), QK_OK);
+  qk_mesh_options_t o = general_opts();
+  assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_ERR_LIMIT);
+  assert_null(m);
+  if (!strstr(err.message, "1.39e-17 across: no double near it improves it") ||
+      !strstr(err.message, "round the input to a grid"))
+    fail_msg("%s", err.message);
+  qk_poly_free(p);
+}
+
 static void test_mesh_general_mode_refusals(void **state) {
   (void)state;
   qkt_rng_t r;
@@ -1706,6 +1738,7 @@ int main(void) {
       cmocka_unit_test(test_mesh_general_mode_size),
       cmocka_unit_test(test_mesh_general_mode_markers),
       cmocka_unit_test(test_mesh_general_mode_size_domain),
+      cmocka_unit_test(test_mesh_general_mode_ulp_pair),
       cmocka_unit_test(test_mesh_general_mode_refusals),
       cmocka_unit_test(test_mesh_general_mode_auto),
       cmocka_unit_test(test_mesh_general_mode_graded_late),
