@@ -863,6 +863,16 @@ static int make_mesh(const char *cmd, const mesh_args_t *o, qk_poly_t **poly, qk
         snprintf(why + k, sizeof why - k, " Round the input to a grid: --round auto (2^%d here)",
                  a.round_exp);
     }
+    /* Above the proven bound the refinement may ask for ever finer splits, whatever the
+     * grid (at --min-angle 34 each coarser grid asked for a point finer by its factor);
+     * not said when the segment has no exact split point at all (rounding is the cure). */
+    if (o->min_angle > 20.7 && !strstr(why, "exact ones: none")) {
+      k = strlen(why);
+      snprintf(why + k, sizeof why - k,
+               "; above 20.7 degrees (--min-angle %g) the bound is tried, not proven, and "
+               "can need splits finer than any grid: the proven 20 may mesh it",
+               o->min_angle);
+    }
   }
   name_segment(pp, name, why, msg, sizeof msg, place, sizeof place);
   /* After --round auto, an error may come from the rounding (points that became one, a
