@@ -102,6 +102,31 @@ static qk_status_t parse_columns(reader_t *r) {
   return QK_OK;
 }
 
+/* A field's value for a message: its first 40 bytes as the value reads (a quoted field's
+ * "" as one quote: the text between the quotes of "1""" is shown as 1", not 1""), not cut
+ * inside a UTF-8 character. */
+static void field_value(const char *line, const qk__span_t *sp, char *out, size_t cap) {
+  size_t n = 0, j = sp->b;
+  for (; j < sp->e && n + 1 < cap && n < 40; j++) {
+    if (sp->quoted && line[j] == '"' && j + 1 < sp->e && line[j + 1] == '"') j++;
+    out[n++] = line[j];
+  }
+  if (j >= sp->e) { /* whole: as it stands (bytes that are no UTF-8 too) */
+    out[n] = '\0';
+    return;
+  }
+  /* Cut: a character cut at the end goes, its lead byte and the continuation bytes after
+   * it, when fewer than the lead byte announces. */
+  size_t k = n;
+  while (k > 0 && n - k < 4 && ((unsigned char)out[k - 1] & 0xC0) == 0x80) k--;
+  if (k > 0) {
+    const unsigned char lead = (unsigned char)out[k - 1];
+    const size_t want = lead >= 0xF0 ? 4 : lead >= 0xE0 ? 3 : lead >= 0xC0 ? 2 : 1;
+    if (want > 1 && n - (k - 1) < want) n = k - 1;
+  }
+  out[n] = '\0';
+}
+
 /* Does the (possibly quoted, blank-padded) field spell `name`? */
 static int field_is(const char *line, const qk__span_t *sp, const char *name, size_t len) {
   size_t b = sp->b, e = sp->e, i = 0;
@@ -255,18 +280,18 @@ static qk_status_t read_row(reader_t *r, char *line, size_t len, unsigned long l
     }
     double v;
     int num = qk__csv_number(line, sp, &v);
+    char val[48];
+    if (num <= 0 || !isfinite(v)) field_value(line, sp, val, sizeof val);
     if (num == -2)
       return fail(r, QK_ERR_LIMIT, lineno, sp->start + 1, row,
-                  "field %zu%s is below the smallest double (it would read as 0): '%.*s'", f, named,
-                  (int)(sp->e - sp->b < 40 ? sp->e - sp->b : 40), line + sp->b);
+                  "field %zu%s is below the smallest double (it would read as 0): '%s'", f, named,
+                  val);
     if (num <= 0)
       return fail(r, QK_ERR_PARSE, lineno, sp->start + 1, row,
-                  "field %zu%s is not a %snumber: '%.*s'", f, named, num < 0 ? "decimal " : "",
-                  (int)(sp->e - sp->b < 40 ? sp->e - sp->b : 40), line + sp->b);
+                  "field %zu%s is not a %snumber: '%s'", f, named, num < 0 ? "decimal " : "", val);
     if (!isfinite(v))
       return fail(r, QK_ERR_NONFINITE, lineno, sp->start + 1, row,
-                  "field %zu%s is not finite: '%.*s'", f, named,
-                  (int)(sp->e - sp->b < 40 ? sp->e - sp->b : 40), line + sp->b);
+                  "field %zu%s is not finite: '%s'", f, named, val);
     out[c] = v;
   }
   if (r->opt && r->opt->on_row) {

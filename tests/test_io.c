@@ -228,6 +228,14 @@ static void test_io_errors(void **state) {
                "field 1 is not a decimal number: '0x1'"); /* data, not a header */
   expect_error("0,0\n1.5.1,0\n", -1, NULL, A, QK_ERR_PARSE, 2, 1, 1,
                "field 1 is not a number: '1.5.1'");
+  /* A quoted field's value as it reads ("" is one quote: it showed '1""', neither the
+   * field nor its value), and a value cut at 40 bytes not inside a character (39 ASCII
+   * bytes, then U+00E9: the e-acute is left out whole). */
+  expect_error("0,0\n\"1\"\"\",0\n", -1, NULL, A, QK_ERR_PARSE, 2, 1, 1,
+               "field 1 is not a number: '1\"'");
+  expect_error("0,0\naaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaa\xc3\xa9,0\n", -1, NULL, A,
+               QK_ERR_PARSE, 2, 1, 1,
+               "field 1 is not a number: 'aaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaaa'");
   /* A nonzero number below the smallest double: strtod reads it as 0, and so did the reader
    * without a word (forty-ninth session's review). A header of such numbers is data. */
   expect_error("0,0\n1,1e-400\n", -1, NULL, A, QK_ERR_LIMIT, 2, 3, 1,

@@ -162,14 +162,14 @@ for i in range(n):
     print(f"{i} {i} {(i + 1) % n}")
 print("0")
 EOF2
-  expect 1 "needs a split point .* Round the input to a coarser grid than 2\\^-4, which its coordinates lie on \\(e\\.g\\. --round 2\\^-2\\)$" \
+  expect 1 "needs a split point .* Round the input to a coarser grid than 2\\^-4, which its coordinates lie on \\(e\\.g\\. --round 2\\^-2\\); above 20\\.7 degrees \\(--min-angle 34\\) the bound is tried, not proven, and can need splits finer than any grid: the proven 20 may mesh it$" \
     -- "$cli" mesh "$tmp/gr.poly" -o "$tmp/gr" --min-angle 34
   nothing_written "$tmp/gr"
   # ... and after a --round finer than the grid it lies on (which moved nothing) the same;
   # after a coarser one, a grid coarser than that
-  expect 1 "needs a split point .* Round the input to a coarser grid than 2\\^-4, which its coordinates lie on \\(e\\.g\\. --round 2\\^-2\\)$" \
+  expect 1 "needs a split point .* Round the input to a coarser grid than 2\\^-4, which its coordinates lie on \\(e\\.g\\. --round 2\\^-2\\); above 20\\.7 degrees \\(--min-angle 34\\) the bound is tried, not proven, and can need splits finer than any grid: the proven 20 may mesh it$" \
     -- "$cli" mesh "$tmp/gr.poly" -o "$tmp/gr" --min-angle 34 --round 2^-7
-  expect 1 "needs a split point .* Round the input to a coarser grid than --round 2\\^-2$" \
+  expect 1 "needs a split point .* Round the input to a coarser grid than --round 2\\^-2; above 20\\.7 degrees \\(--min-angle 34\\) the bound is tried, not proven, and can need splits finer than any grid: the proven 20 may mesh it$" \
     -- "$cli" mesh "$tmp/gr.poly" -o "$tmp/gr" --min-angle 34 --round 2^-2
 fi
 
