@@ -448,6 +448,8 @@ typedef struct prep {
   double round;                        /* the grid rounded to (0: none) */
   int round_exp, round_mag, round_ext; /* --round auto: 2^round_exp, and why (mg_auto_grid) */
   int own_exp; /* the coarsest grid 2^own_exp that every coordinate lies on (poly_auto_grid) */
+  int merges;  /* rounding to 2^round_exp would make vertices merge_a and merge_b one */
+  size_t merge_a, merge_b;
   char name[128];
   mg_input_t gj; /* GeoJSON input (for naming segments in messages) */
 } prep_t;
@@ -583,6 +585,38 @@ static void name_segment(const prep_t *pp, const char *file, const char *msg, ch
 
 /* --round auto's grid exponent for the vertices of p (mg_auto_grid), with M and W in pp;
  * returns 0, or 1 out of memory. */
+/* A vertex rounded to a grid, with its number, ordered by the rounded point. */
+typedef struct rv {
+  double x, y;
+  size_t i;
+} rv_t;
+
+static int rv_cmp(const void *a, const void *b) {
+  const rv_t *u = a, *v = b;
+  return u->x < v->x ? -1 : u->x > v->x ? 1 : u->y < v->y ? -1 : u->y > v->y ? 1 : 0;
+}
+
+/* Whether rounding the nv points xy to 2^e makes two distinct ones coincide (the first
+ * such pair, by rounded point, in *a < *b); -1 when out of memory. */
+static int grid_merges(const double *xy, size_t nv, int e, size_t *a, size_t *b) {
+  rv_t *r = malloc((nv ? nv : 1) * sizeof *r);
+  if (!r) return -1;
+  for (size_t i = 0; i < nv; i++)
+    r[i] = (rv_t){ldexp(nearbyint(ldexp(xy[2 * i], -e)), e),
+                  ldexp(nearbyint(ldexp(xy[2 * i + 1], -e)), e), i};
+  qsort(r, nv, sizeof *r, rv_cmp);
+  int found = 0;
+  for (size_t k = 1; k < nv && !found; k++)
+    if (r[k].x == r[k - 1].x && r[k].y == r[k - 1].y &&
+        (xy[2 * r[k].i] != xy[2 * r[k - 1].i] || xy[2 * r[k].i + 1] != xy[2 * r[k - 1].i + 1])) {
+      found = 1;
+      *a = r[k].i < r[k - 1].i ? r[k].i : r[k - 1].i;
+      *b = r[k].i < r[k - 1].i ? r[k - 1].i : r[k].i;
+    }
+  free(r);
+  return found;
+}
+
 static int poly_auto_grid(const qk_poly_t *p, prep_t *pp) {
   size_t nv = 0;
   qk_poly_counts(p, &nv, NULL, NULL);
@@ -600,6 +634,7 @@ static int poly_auto_grid(const qk_poly_t *p, prep_t *pp) {
     for (uint64_t b = m; !(b & 1); b >>= 1) g++;
     if (g < pp->own_exp) pp->own_exp = g;
   }
+  pp->merges = grid_merges(xy, nv, pp->round_exp, &pp->merge_a, &pp->merge_b) > 0;
   free(xy);
   return 0;
 }
@@ -859,6 +894,13 @@ static int make_mesh(const char *cmd, const mesh_args_t *o, qk_poly_t **poly, qk
       else if (o->round > 0)
         snprintf(why + k, sizeof why - k, " Round the input to a coarser grid than --round %s",
                  o->round_text);
+      else if (a.merges) /* (the advice would only trade this refusal for another) */
+        snprintf(why + k, sizeof why - k,
+                 " Rounding cannot help: --round auto's grid 2^%d would merge vertices %zu and "
+                 "%zu (the input has detail finer than the grid on which every split point is "
+                 "exact)",
+                 a.round_exp, a.merge_a + qk_poly_first_index(*poly),
+                 a.merge_b + qk_poly_first_index(*poly));
       else
         snprintf(why + k, sizeof why - k, " Round the input to a grid: --round auto (2^%d here)",
                  a.round_exp);
