@@ -192,6 +192,8 @@ struct qk__pool {
   int home_cpu;   /* the starting thread's processor when the workers were started */
   cpu_set_t home; /* the starting thread's processors, which each worker takes back */
   int start_cpu[QK__MAX_THREADS]; /* where each worker first ran (tests), -1 before */
+  int owner_ok;                   /* owner_set holds the starting thread's processors */
+  cpu_set_t owner_set;            /* (a kept team serves only threads allowed the same ones) */
 #endif
 };
 
@@ -336,6 +338,7 @@ qk__pool_t *qk__pool_new(const qk_allocator_t *a, unsigned nw) {
   p->proc = getpid();
   pthread_attr_t attr, *ap = NULL;
 #if QK__POOL_AWAY
+  p->owner_ok = pthread_getaffinity_np(pthread_self(), sizeof p->owner_set, &p->owner_set) == 0;
   if (pool_away(p, &attr)) ap = &attr;
 #else
   (void)attr;
@@ -393,6 +396,20 @@ int qk__pool_start_cpu(const qk__pool_t *p, unsigned i, int *home) {
 
 int qk__pool_live(const qk__pool_t *p) { return p && !pool_forked(p); }
 
+/* Whether the calling thread may run on the same processors as the thread that started
+ * p's workers (which took that thread's set): a kept team's workers must not carry one
+ * thread's pinning to another's builds. */
+static int same_cpus(const qk__pool_t *p) {
+#if QK__POOL_AWAY
+  cpu_set_t mine;
+  if (!p->owner_ok || pthread_getaffinity_np(pthread_self(), sizeof mine, &mine) != 0) return 0;
+  return CPU_EQUAL(&mine, &p->owner_set);
+#else
+  (void)p;
+  return 1;
+#endif
+}
+
 void qk__pool_hold(qk__pool_t *p, int on) {
   if (p) atomic_store_explicit(&p->hold, on, memory_order_relaxed);
 }
@@ -438,6 +455,10 @@ int qk__pool_detach(qk__pool_t *p, void (*fn)(void *), void *ctx) {
   return 1;
 }
 #else
+static int same_cpus(const qk__pool_t *p) {
+  (void)p;
+  return 1;
+}
 qk__pool_t *qk__pool_new(const qk_allocator_t *a, unsigned nw) {
   (void)a, (void)nw;
   return NULL;
@@ -487,11 +508,12 @@ static _Thread_local unsigned team_depth; /* nested qk__team_begin calls */
  * library is unloaded or the process exits (below). */
 static _Atomic(qk__pool_t *) kept_team;
 
-/* The kept pool when it has nw threads and this process started them (a forked child
- * frees the parent's memory only); NULL otherwise, the kept one ended. */
+/* The kept pool when it has nw threads, this process started them (a forked child frees
+ * the parent's memory only) and the calling thread may run where they may; NULL
+ * otherwise, the kept one ended. */
 static qk__pool_t *team_take(unsigned nw) {
   qk__pool_t *p = atomic_exchange(&kept_team, NULL);
-  if (!p || (qk__pool_live(p) && qk__pool_threads(p) == nw)) return p;
+  if (!p || (qk__pool_live(p) && qk__pool_threads(p) == nw && same_cpus(p))) return p;
   qk__pool_free(p);
   return NULL;
 }

@@ -38,12 +38,12 @@ struct qk_poly {
   int32_t *vmark, *smark; /* boundary markers, NULL when the input has none */
   qk__region_pt_t *reg;   /* regional attributes */
   size_t nr;
-  double round_step; /* the largest grid qk_poly_round() rounded the vertices to (0: none) */
+  double round_moved; /* how far qk_poly_round() calls moved a vertex at most, summed */
 };
 
 /* After qk_poly_round(): QK_ERR_GEOMETRY, naming it, when a hole or regional attribute
- * point (left as read) lies within the rounding grid of a segment, where the rounded
- * segment may have crossed it. */
+ * point (left as read) lies within round_moved of a segment, which the rounding may have
+ * moved across it. */
 qk_status_t qk__poly_check_rounded(const qk_poly_t *p, qk_mesh_error_t *err);
 
 /*

@@ -658,6 +658,25 @@ static void *team_elsewhere(void *arg) {
   return NULL;
 }
 
+#if defined(__linux__)
+/* A team of two on a thread pinned to the first processor it may run on. */
+static void *team_pinned(void *arg) {
+  cpu_set_t all, one;
+  if (sched_getaffinity(0, sizeof all, &all) != 0) return NULL;
+  CPU_ZERO(&one);
+  for (int c = 0; c < CPU_SETSIZE; c++)
+    if (CPU_ISSET(c, &all)) {
+      CPU_SET(c, &one);
+      break;
+    }
+  if (pthread_setaffinity_np(pthread_self(), sizeof one, &one) != 0) return NULL;
+  qk__team_begin(2);
+  qk__run_shares(2, team_share, arg);
+  qk__team_end();
+  return NULL;
+}
+#endif
+
 /*
  * The last team's workers are kept, parked, for the next team of the same size: the next
  * team runs on the same two workers (their thread-local counts go on), also when it is
@@ -721,6 +740,23 @@ static void test_build_team_kept(void **state) {
   qk__team_end();
   assert_int_equal(fresh.runs[1], 1);
   qk__team_release();
+#if defined(__linux__)
+  /* A team kept by a thread pinned to one processor (its workers took that set) does not
+   * serve a thread allowed others: new workers (they served it, pinned, before). */
+  cpu_set_t all;
+  if (sched_getaffinity(0, sizeof all, &all) == 0 && CPU_COUNT(&all) > 1) {
+    team_probe_t pinned = {0};
+    assert_int_equal(pthread_create(&th, NULL, team_pinned, &pinned), 0);
+    assert_int_equal(pthread_join(th, NULL), 0);
+    assert_int_equal(pinned.ran[0] + pinned.ran[1], 2);
+    qk__team_begin(2);
+    team_probe_t after = {0};
+    qk__run_shares(2, team_share, &after);
+    qk__team_end();
+    assert_int_equal(after.runs[1], 1);
+    qk__team_release();
+  }
+#endif
   qk__pool_steal_off = 0;
 }
 

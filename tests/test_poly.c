@@ -577,6 +577,25 @@ static void test_poly_round_holes(void **state) {
       qk_poly_free(p);
     }
   }
+  /* Rounding that moves nothing (integers to the grid 1) refuses no hole: a hole point 0.5
+   * from an edge (refused in the first version, which measured against the grid's step). */
+  FILE *f = from_string("8 2 0 0\n1 0 0\n2 10 0\n3 10 10\n4 0 10\n5 4 4\n6 6 4\n7 6 6\n8 4 6\n"
+                        "8 0\n1 1 2\n2 2 3\n3 3 4\n4 4 1\n5 5 6\n6 6 7\n7 7 8\n8 8 5\n"
+                        "1\n1 4.5 5\n");
+  qk_poly_t *p;
+  qk_mesh_error_t err;
+  assert_int_equal(qk_poly_read(f, NULL, &p, &err), QK_OK);
+  fclose(f);
+  size_t changed = 9;
+  assert_int_equal(qk_poly_round(p, 1, &changed), QK_OK);
+  assert_int_equal(changed, 0);
+  qk_mesh_options_t o;
+  qk_mesh_options_init(&o);
+  o.mode = QK_MESH_GENERAL;
+  qk_mesh_t *m = NULL;
+  if (qk_mesh_generate(p, &o, &m, &err) != QK_OK) fail_msg("%s", err.message);
+  qk_mesh_free(m);
+  qk_poly_free(p);
 }
 
 int main(void) {
