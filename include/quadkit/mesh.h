@@ -108,8 +108,8 @@ unsigned qk_poly_first_index(const qk_poly_t *poly);
  * Round every vertex coordinate to the nearest multiple of step (ties to even), in place:
  * vertex numbers, line numbers, boundary markers, hole points and regional attributes
  * stay as read, so errors still name the file's lines and numbers. qk_mesh_generate()
- * then refuses (QK_ERR_GEOMETRY, naming it) a hole or regional attribute point within
- * step of a segment, which the rounding may have moved across it.
+ * then refuses (QK_ERR_GEOMETRY, naming it) a hole or regional attribute point nearer a
+ * segment than the rounding moved any vertex, which may have moved the segment across it.
  * \param [in,out] poly the input.
  * \param [in] step the grid step, positive and finite.
  * \param [out] rounded how many coordinates changed (may be NULL).
