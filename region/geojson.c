@@ -267,6 +267,20 @@ static bool other_geometry(const char *ty) {
   return false;
 }
 
+/* A geometry's "coordinates" array into *c, the path stepped into it; or the error. */
+static qk_status_t coordinates_of(gj_t *g, json_object *geom, const char *ty, size_t f,
+                                  json_object **c) {
+  if (!json_object_object_get_ex(geom, "coordinates", c))
+    return qk__region_fail(g->err, QK_ERR_PARSE, f,
+                           "feature %zu: %s without a \"coordinates\" array", f, ty);
+  step_in(g, "coordinates", 0);
+  if (!json_object_is_type(*c, json_type_array))
+    return qk__region_fail(g->err, QK_ERR_PARSE, f,
+                           "feature %zu: %s \"coordinates\" must be an array, found %s", f, ty,
+                           type_name(*c));
+  return QK_OK;
+}
+
 /* A geometry without area (other_geometry): nothing of it is kept, but its coordinates are
  * read as a polygon's are, so that a malformed one is an error at its place, not a silent
  * skip ({"type": "Point", "coordinates": "x"}, a LineString at 1e400 went through where the
@@ -274,14 +288,8 @@ static bool other_geometry(const char *ty) {
  * 7946, 3.1). */
 static qk_status_t no_area(gj_t *g, json_object *geom, const char *ty, size_t f) {
   json_object *c = NULL;
-  if (!json_object_object_get_ex(geom, "coordinates", &c))
-    return qk__region_fail(g->err, QK_ERR_PARSE, f,
-                           "feature %zu: %s without a \"coordinates\" array", f, ty);
-  step_in(g, "coordinates", 0);
-  if (!json_object_is_type(c, json_type_array))
-    return qk__region_fail(g->err, QK_ERR_PARSE, f,
-                           "feature %zu: %s \"coordinates\" must be an array, found %s", f, ty,
-                           type_name(c));
+  qk_status_t cst = coordinates_of(g, geom, ty, f, &c);
+  if (cst) return cst;
   const bool point = !strcmp(ty, "Point"), lines = !strcmp(ty, "MultiLineString");
   double x, y;
   qk_status_t st = QK_OK;
@@ -348,14 +356,8 @@ static qk_status_t geometry_rings(gj_t *g, json_object *geom, size_t f, size_t *
                              f, ty);
     return no_area(g, geom, ty, f);
   }
-  if (!json_object_object_get_ex(geom, "coordinates", &c))
-    return qk__region_fail(g->err, QK_ERR_PARSE, f,
-                           "feature %zu: %s without a \"coordinates\" array", f, ty);
-  step_in(g, "coordinates", 0);
-  if (!json_object_is_type(c, json_type_array))
-    return qk__region_fail(g->err, QK_ERR_PARSE, f,
-                           "feature %zu: %s \"coordinates\" must be an array, found %s", f, ty,
-                           type_name(c));
+  qk_status_t cst = coordinates_of(g, geom, ty, f, &c);
+  if (cst) return cst;
   qk_status_t st = QK_OK;
   if (one) {
     st = polygon(g, c, f, (*poly)++);
