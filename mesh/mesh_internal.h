@@ -38,12 +38,14 @@ struct qk_poly {
   int32_t *vmark, *smark; /* boundary markers, NULL when the input has none */
   qk__region_pt_t *reg;   /* regional attributes */
   size_t nr;
-  double round_moved; /* how far qk_poly_round() calls moved a vertex at most, summed */
+  double *vmoved; /* per vertex: how far qk_poly_round() calls moved it, summed (NULL: never
+                     rounded; nv entries, allocated with vx's capacity) */
+  size_t vmoved_cap;
 };
 
 /* After qk_poly_round(): QK_ERR_GEOMETRY, naming it, when a hole or regional attribute
- * point (left as read) lies within round_moved of a segment, which the rounding may have
- * moved across it. */
+ * point (left as read) is nearer a segment than rounding moved either of its ends, which
+ * may have moved it across. */
 qk_status_t qk__poly_check_rounded(const qk_poly_t *p, qk_mesh_error_t *err);
 
 /*

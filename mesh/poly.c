@@ -188,6 +188,7 @@ void qk_poly_free(qk_poly_t *p) {
   qk__free(&a, p->hy, p->cap.hy * sizeof *p->hy);
   qk__free(&a, p->hline, p->cap.hl * sizeof *p->hline);
   qk__free(&a, p->vmark, p->cap.vm * sizeof *p->vmark);
+  qk__free(&a, p->vmoved, p->vmoved_cap * sizeof *p->vmoved);
   qk__free(&a, p->smark, p->cap.sm * sizeof *p->smark);
   qk__free(&a, p->reg, p->cap.r * sizeof *p->reg);
   qk__free(&a, p, sizeof *p);
@@ -220,16 +221,20 @@ qk_status_t qk_poly_round(qk_poly_t *p, double step, size_t *rounded) {
   for (size_t i = 0; i < p->nv; i++) /* all or nothing */
     if (!isfinite(round_to(p->vx[i], step)) || !isfinite(round_to(p->vy[i], step)))
       return QK_ERR_NONFINITE;
+  if (!p->vmoved && p->nv) { /* (before anything changes: all or nothing) */
+    p->vmoved = qk__realloc(&p->alloc, NULL, 0, p->nv * sizeof *p->vmoved);
+    if (!p->vmoved) return QK_ERR_NOMEM;
+    p->vmoved_cap = p->nv;
+    memset(p->vmoved, 0, p->nv * sizeof *p->vmoved);
+  }
   size_t n = 0;
-  double most = 0;
   for (size_t i = 0; i < p->nv; i++) {
     double x = round_to(p->vx[i], step), y = round_to(p->vy[i], step);
     n += (x != p->vx[i]) + (y != p->vy[i]);
-    if (x != p->vx[i] || y != p->vy[i]) most = fmax(most, hypot(x - p->vx[i], y - p->vy[i]));
+    if (x != p->vx[i] || y != p->vy[i]) p->vmoved[i] += hypot(x - p->vx[i], y - p->vy[i]);
     p->vx[i] = x, p->vy[i] = y;
   }
   if (rounded) *rounded = n;
-  p->round_moved += most;
   return QK_OK;
 }
 
@@ -257,15 +262,13 @@ static int rpt_cmp(const void *a, const void *b) {
 
 qk_status_t qk__poly_check_rounded(const qk_poly_t *p, qk_mesh_error_t *err) {
   const size_t np = p->nh + p->nr;
-  /* Rounding moved each vertex by at most r, so each segment by at most r (a segment's
-   * points are combinations of its ends): a point left as read and farther than r from
-   * every rounded segment is on the side it was on. Closer, its face may have changed: a
+  /* A point left as read and farther from each rounded segment than rounding moved that
+   * segment's ends is on the side it was on. Closer, its face may have changed: a
    * hole point 1.5e-8 inside a hole's edge, with that edge rounded past it, dropped the
    * face around the hole and meshed the hole. The points sorted by x, each segment
    * looks at those within r of its x range: about linear (every point against every
    * segment took 5 s for 22,500 holes). */
-  const double r = p->round_moved * (1 + 0x1p-20);
-  if (!(r > 0) || np == 0) return QK_OK;
+  if (!p->vmoved || np == 0) return QK_OK;
   rpt_t *pt = qk__realloc(&p->alloc, NULL, 0, np * sizeof *pt);
   if (!pt) return qk__mesh_fail(err, QK_ERR_NOMEM, 0, "out of memory while checking the holes");
   for (size_t i = 0; i < np; i++)
@@ -275,6 +278,10 @@ qk_status_t qk__poly_check_rounded(const qk_poly_t *p, qk_mesh_error_t *err) {
   size_t bad = SIZE_MAX, bad_seg = 0; /* the first point by number, its first segment */
   for (size_t k = 0; k < p->ns; k++) {
     const uint32_t a = p->seg[2 * k], b = p->seg[2 * k + 1];
+    /* (a segment moved at most as far as its farther-moved end: points of it are
+     * combinations of its ends) */
+    const double r = fmax(p->vmoved[a], p->vmoved[b]) * (1 + 0x1p-20);
+    if (!(r > 0)) continue;
     const double x0 = fmin(p->vx[a], p->vx[b]) - r, x1 = fmax(p->vx[a], p->vx[b]) + r;
     const double y0 = fmin(p->vy[a], p->vy[b]) - r, y1 = fmax(p->vy[a], p->vy[b]) + r;
     size_t lo = 0, hi = np; /* the first point with x >= x0 */
@@ -297,14 +304,14 @@ qk_status_t qk__poly_check_rounded(const qk_poly_t *p, qk_mesh_error_t *err) {
                y = hole ? p->hy[bad] : p->reg[bad - p->nh].y;
   const unsigned long line = hole ? (p->hline ? p->hline[bad] : 0) : p->reg[bad - p->nh].line;
   const size_t k = bad_seg;
+  const uint32_t a = p->seg[2 * k], b = p->seg[2 * k + 1];
   return qk__mesh_fail(err, QK_ERR_GEOMETRY, line,
-                       "%s %zu at (%.17g, %.17g) is within %g (as far as rounding moved a "
-                       "vertex) of segment %zu (vertices %u to %u), which may have crossed it; "
-                       "move it farther from the segments",
-                       hole ? "hole" : "regional attribute point",
-                       (hole ? bad : bad - p->nh) + p->first_index, x, y, p->round_moved,
-                       k + p->first_index, p->seg[2 * k] + p->first_index,
-                       p->seg[2 * k + 1] + p->first_index);
+                       "%s %zu at (%.17g, %.17g) is within %.3g (as far as rounding moved an "
+                       "end) of segment %zu (vertices %u to %u), which may have crossed it; "
+                       "move it off",
+                       hole ? "hole" : "region point", (hole ? bad : bad - p->nh) + p->first_index,
+                       x, y, fmax(p->vmoved[a], p->vmoved[b]), k + p->first_index,
+                       a + p->first_index, b + p->first_index);
 }
 
 void qk_poly_counts(const qk_poly_t *p, size_t *nv, size_t *ns, size_t *nh) {

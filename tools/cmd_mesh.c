@@ -617,6 +617,21 @@ static int grid_merges(const double *xy, size_t nv, int e, size_t *a, size_t *b)
   return found;
 }
 
+/* Whether rounding p's vertices to 2^e would make two distinct ones one: 1 with the two
+ * (x, y pairs, in input order) in at[0..3]; 0 when not or out of memory. By coordinates,
+ * which name them in a GeoJSON input too (whose vertex numbers the user never sees). */
+static int merged_by_grid(const qk_poly_t *p, int e, double at[4]) {
+  size_t nv = 0, a = 0, b = 0;
+  qk_poly_counts(p, &nv, NULL, NULL);
+  double *xy = malloc((nv ? nv : 1) * 2 * sizeof *xy);
+  if (!xy) return 0;
+  if (qk_poly_vertices(p, xy, nv, &nv) != QK_OK) nv = 0;
+  int found = grid_merges(xy, nv, e, &a, &b) > 0;
+  if (found) at[0] = xy[2 * a], at[1] = xy[2 * a + 1], at[2] = xy[2 * b], at[3] = xy[2 * b + 1];
+  free(xy);
+  return found;
+}
+
 static int poly_auto_grid(const qk_poly_t *p, prep_t *pp) {
   size_t nv = 0;
   qk_poly_counts(p, &nv, NULL, NULL);
@@ -634,7 +649,6 @@ static int poly_auto_grid(const qk_poly_t *p, prep_t *pp) {
     for (uint64_t b = m; !(b & 1); b >>= 1) g++;
     if (g < pp->own_exp) pp->own_exp = g;
   }
-  pp->merges = grid_merges(xy, nv, pp->round_exp, &pp->merge_a, &pp->merge_b) > 0;
   free(xy);
   return 0;
 }
@@ -882,7 +896,15 @@ static int make_mesh(const char *cmd, const mesh_args_t *o, qk_poly_t **poly, qk
       const int moves = a.own_exp < a.round_exp;
       const int own_coarser =
           a.own_exp != INT_MAX && (o->round <= 0 || ldexp(1, a.own_exp) > o->round);
-      if (o->round > 0 && moves && ldexp(1, a.round_exp) > o->round)
+      double at[4];
+      /* (where the advice is --round auto's grid or one coarser than the grid given, and
+       * that grid makes two vertices one, it would only trade this refusal for another) */
+      if (!(!moves && own_coarser) && merged_by_grid(*poly, a.round_exp, at))
+        snprintf(why + k, sizeof why - k,
+                 " Rounding cannot help: --round auto's grid 2^%d would make the vertices at "
+                 "(%.17g, %.17g) and (%.17g, %.17g) one",
+                 a.round_exp, at[0], at[1], at[2], at[3]);
+      else if (o->round > 0 && moves && ldexp(1, a.round_exp) > o->round)
         snprintf(why + k, sizeof why - k,
                  " Round the input to a coarser grid than --round %s (--round auto: 2^%d here)",
                  o->round_text, a.round_exp);
@@ -894,13 +916,6 @@ static int make_mesh(const char *cmd, const mesh_args_t *o, qk_poly_t **poly, qk
       else if (o->round > 0)
         snprintf(why + k, sizeof why - k, " Round the input to a coarser grid than --round %s",
                  o->round_text);
-      else if (a.merges) /* (the advice would only trade this refusal for another) */
-        snprintf(why + k, sizeof why - k,
-                 " Rounding cannot help: --round auto's grid 2^%d would merge vertices %zu and "
-                 "%zu (the input has detail finer than the grid on which every split point is "
-                 "exact)",
-                 a.round_exp, a.merge_a + qk_poly_first_index(*poly),
-                 a.merge_b + qk_poly_first_index(*poly));
       else
         snprintf(why + k, sizeof why - k, " Round the input to a grid: --round auto (2^%d here)",
                  a.round_exp);

@@ -109,12 +109,13 @@ unsigned qk_poly_first_index(const qk_poly_t *poly);
  * vertex numbers, line numbers, boundary markers, hole points and regional attributes
  * stay as read, so errors still name the file's lines and numbers. qk_mesh_generate()
  * then refuses (QK_ERR_GEOMETRY, naming it) a hole or regional attribute point nearer a
- * segment than the rounding moved any vertex, which may have moved the segment across it.
+ * segment than the rounding moved either end of it, which may have moved it across.
  * \param [in,out] poly the input.
  * \param [in] step the grid step, positive and finite.
  * \param [out] rounded how many coordinates changed (may be NULL).
- * \return QK_OK, QK_ERR_INVALID (no input, or step not positive and finite) or
- *         QK_ERR_NONFINITE (a rounded coordinate would overflow; nothing is changed).
+ * \return QK_OK, QK_ERR_INVALID (no input, or step not positive and finite),
+ *         QK_ERR_NONFINITE (a rounded coordinate would overflow; nothing is changed) or
+ *         QK_ERR_NOMEM (nothing is changed).
  */
 qk_status_t qk_poly_round(qk_poly_t *poly, double step, size_t *rounded);
 

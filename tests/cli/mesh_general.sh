@@ -49,7 +49,9 @@ expect 1 'cross.poly' -- "$cli" mesh "$tmp/cross.poly" --general -o "$tmp/bad"
 # --round auto's grid (2^-24) would merge them: the advice says so rather than "--round auto"
 # (which then refused "vertices 2 and 4 coincide").
 printf '7 2 0 0\n0 -1 -1\n1 -0.5 -1\n2 -0.5 -9.313225746154785e-10\n3 0.5 0\n4 -0.5 9.313225746154785e-10\n5 -0.5 1\n6 -1 1\n7 0\n0 0 1\n1 1 2\n2 2 3\n3 3 4\n4 4 5\n5 5 6\n6 6 0\n0\n' > "$tmp/spk.poly"
-expect 1 "needs a split point .* Rounding cannot help: --round auto's grid 2\\^-24 would merge vertices 2 and 4 " -- "$cli" mesh "$tmp/spk.poly" -o "$tmp/bad"
+# ... also after a --round finer than it (that advice named auto's grid again)
+expect 1 "needs a split point .* Rounding cannot help: --round auto's grid 2\\^-24 would make the vertices at \\(-0\\.5, -9\\.3132257461547852e-10\\)" -- "$cli" mesh "$tmp/spk.poly" -o "$tmp/bad" --round 2^-32
+expect 1 "needs a split point .* Rounding cannot help: --round auto's grid 2\\^-24 would make the vertices at \\(-0\\.5, -9\\.3132257461547852e-10\\) and \\(-0\\.5, 9\\.3132257461547852e-10\\) one" -- "$cli" mesh "$tmp/spk.poly" -o "$tmp/bad"
 # No exact split point at all: the advice is rounding, also at an unproven --min-angle
 # (review6_data.sh has the angle's advice).
 printf '3 2 0 0\n0 0.1 0.2\n1 1.3 0.05\n2 0.7 1.1\n3 0\n0 0 1\n1 1 2\n2 2 0\n0\n' > "$tmp/dec.poly"

@@ -49,7 +49,7 @@ expect 0 '"round": 9.5367431640625e-07, "rounded_coordinates": 0\}' \
 # Vertex 5 is 1e-7 from vertex 1, below half the grid 2^-19 (extent 100): they coincide.
 printf '5 2 0 0\n1 0 0\n2 100 0\n3 100 100\n4 0 100\n5 0.0000001 0.0000001\n5 0\n1 1 2\n2 2 3\n3 3 4\n4 4 5\n5 5 1\n0\n' >"$tmp/col.poly"
 # (the advice says so: it said "Round the input to a grid: --round auto (2^-19 here)")
-expect 1 "col.poly:11: segment 4 .* Rounding cannot help: --round auto's grid 2\\^-19 would merge vertices 1 and 5 " -- "$cli" mesh "$tmp/col.poly" -o "$tmp/col0"
+expect 1 "col.poly:11: segment 4 .* Rounding cannot help: --round auto's grid 2\\^-19 would make the vertices at \\(0, 0\\) and \\(9\\.9999999999999995e-08, 9\\.9999999999999995e-08\\) one" -- "$cli" mesh "$tmp/col.poly" -o "$tmp/col0"
 expect 1 "^quadkit mesh: $tmp/col.poly:6: vertices 1 and 5 coincide at \\(0, 0\\) \\(the coordinates were rounded to the grid 2\\^-19 by --round auto\\)$" \
   -- "$cli" mesh "$tmp/col.poly" -o "$tmp/col" --round auto
 nothing_written "$tmp/col"
