@@ -497,6 +497,20 @@ qk_status_t qk__gm_check_input(qk__gm_t *g) {
   return insert_segments(g);
 }
 
+double qk__gm_area(qk__gm_t *g) {
+  if (g->area_known) return g->area;
+  const qk__cdt_t *c = &g->cdt;
+  double area = 0;
+  for (size_t t = 0; t < c->nt; t++) {
+    if (g->faces[g->face[t]].drop) continue;
+    const uint32_t *tv = &c->v[3 * t];
+    const double *A = &c->xy[2 * tv[0]], *B = &c->xy[2 * tv[1]], *C = &c->xy[2 * tv[2]];
+    area += (B[0] - A[0]) * (C[1] - A[1]) - (B[1] - A[1]) * (C[0] - A[0]); /* (CCW: > 0) */
+  }
+  g->area = area / 2, g->area_known = 1;
+  return g->area;
+}
+
 qk_status_t qk__gm_build(qk__gm_t *g) {
   qk_status_t st = qk__gm_check_input(g);
   if (st) return st;

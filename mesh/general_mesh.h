@@ -104,6 +104,8 @@ typedef struct qk__gm {
   int size_plain;
   double h_plain, h2_hi, h2_lo;
   int reserved; /* the refinement's room was reserved before the seeding's points */
+  double area;  /* the kept faces' area once qk__gm_area() measured it (insertions keep it) */
+  int area_known;
   int refining;
   qk__gm_tq_t *bad;
   size_t nbad, bad_head, bad_cap;
@@ -142,6 +144,9 @@ static inline const double *qk__gm_vxy(const qk__gm_t *g, uint32_t v) { return &
 
 /* general_build.c: root square, the CDT of the input (validation), faces, holes, regions. */
 qk_status_t qk__gm_build(qk__gm_t *g);
+/* The kept faces' area (the sum of their triangles'), measured once: insertions only
+ * divide triangles. */
+double qk__gm_area(qk__gm_t *g);
 /* Its first part: the root square and the CDT of the input's vertices and segments, which
  * refuses duplicates, vertices on segments and crossings (expected O(n log n)). */
 qk_status_t qk__gm_check_input(qk__gm_t *g);

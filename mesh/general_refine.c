@@ -795,16 +795,10 @@ static qk_status_t split_triangle(qk__gm_t *g, uint32_t t, const double lo[2], c
  * before the refinement then has nothing to do (the estimate counted the same points). */
 static qk_status_t reserve(qk__gm_t *g, size_t more) {
   qk__cdt_t *c = &g->cdt;
-  double h = g->opt->max_size, area = 0, est = 0;
+  double h = g->opt->max_size, est = 0;
   if (!more && g->reserved) return QK_OK;
   if (h > 0 && !g->opt->size_fn) {
-    for (size_t t = 0; t < c->nt; t++) {
-      if (g->faces[g->face[t]].drop) continue;
-      const uint32_t *tv = &c->v[3 * t];
-      const double *A = &c->xy[2 * tv[0]], *B = &c->xy[2 * tv[1]], *C = &c->xy[2 * tv[2]];
-      area += (B[0] - A[0]) * (C[1] - A[1]) - (B[1] - A[1]) * (C[0] - A[0]);
-    }
-    est = 5.3 * (area / 2) / (h * h) + (double)(g->P->ns + g->npts);
+    est = 5.3 * qk__gm_area(g) / (h * h) + (double)(g->P->ns + g->npts);
     if (!(est < (double)((size_t)1 << 27))) est = 0;
   }
   if (!more && !est) return QK_OK;

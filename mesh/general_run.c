@@ -58,18 +58,10 @@ static void gm_free(qk__gm_t *g) {
  * thousands of times the domain (a 2^-10 by 1 strip at 45 degrees with h = 1e-4 was refused
  * as 2e8 triangles; it makes about 0.4 million). Divided by h twice rather than by h^2, so
  * that tiny extents with tiny bounds do not underflow. */
-static qk_status_t check_size(const qk__gm_t *g) {
+static qk_status_t check_size(qk__gm_t *g) {
   double h = g->opt->max_size;
   if (!(h > 0)) return QK_OK;
-  const qk__cdt_t *c = &g->cdt;
-  double area = 0, length = 0;
-  for (size_t t = 0; t < c->nt; t++) {
-    if (g->faces[g->face[t]].drop) continue;
-    const uint32_t *v = c->v + 3 * t;
-    const double *a = c->xy + 2 * (size_t)v[0], *b = c->xy + 2 * (size_t)v[1],
-                 *d = c->xy + 2 * (size_t)v[2];
-    area += fabs((b[0] - a[0]) * (d[1] - a[1]) - (b[1] - a[1]) * (d[0] - a[0])) / 2;
-  }
+  double area = qk__gm_area(g), length = 0;
   const qk_poly_t *P = g->P;
   for (size_t k = 0; k < P->ns; k++) {
     const uint32_t a = P->seg[2 * k], b = P->seg[2 * k + 1];

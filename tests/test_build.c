@@ -649,12 +649,18 @@ static void test_build_team(void **state) {
   qk__pool_steal_off = 0;
 }
 
+/* A region of nw shares on a team of nw held for it alone: the probe's counts. */
+static team_probe_t team_round(unsigned nw) {
+  team_probe_t tp = {0};
+  qk__team_begin(nw);
+  qk__run_shares(nw, team_share, &tp);
+  qk__team_end();
+  return tp;
+}
+
 /* A team on another thread of the process: its probe's counts (steal off). */
 static void *team_elsewhere(void *arg) {
-  team_probe_t *tp = arg;
-  qk__team_begin(3);
-  qk__run_shares(3, team_share, tp);
-  qk__team_end();
+  *(team_probe_t *)arg = team_round(3);
   return NULL;
 }
 
@@ -670,9 +676,7 @@ static void *team_pinned(void *arg) {
       break;
     }
   if (pthread_setaffinity_np(pthread_self(), sizeof one, &one) != 0) return NULL;
-  qk__team_begin(2);
-  qk__run_shares(2, team_share, arg);
-  qk__team_end();
+  *(team_probe_t *)arg = team_round(2);
   return NULL;
 }
 #endif
@@ -689,16 +693,10 @@ static void test_build_team_kept(void **state) {
   (void)state;
   qk__pool_steal_off = 1;
   qk__team_release();
-  qk__team_begin(3);
-  team_probe_t first = {0};
-  qk__run_shares(3, team_share, &first);
-  qk__team_end();
+  team_probe_t first = team_round(3);
   assert_int_equal(first.runs[1], 1);
   assert_int_equal(first.runs[2], 1);
-  qk__team_begin(3);
-  team_probe_t again = {0};
-  qk__run_shares(3, team_share, &again);
-  qk__team_end();
+  team_probe_t again = team_round(3);
   assert_int_equal(again.runs[1], 2); /* the same workers */
   assert_int_equal(again.runs[2], 2);
   pthread_t th;
@@ -708,24 +706,15 @@ static void test_build_team_kept(void **state) {
   for (unsigned w = 0; w < 3; w++) assert_int_equal(other.ran[w], 1);
   assert_int_equal(other.runs[1], 3);
   assert_int_equal(other.runs[2], 3);
-  qk__team_begin(2); /* another size: new workers */
-  team_probe_t two = {0};
-  qk__run_shares(2, team_share, &two);
-  qk__team_end();
+  team_probe_t two = team_round(2); /* another size: new workers */
   assert_int_equal(two.runs[1], 1);
-  qk__team_begin(2);
-  team_probe_t two_again = {0};
-  qk__run_shares(2, team_share, &two_again);
-  qk__team_end();
+  team_probe_t two_again = team_round(2);
   assert_int_equal(two_again.runs[1], 2);
 #if !QKT_TSAN /* (TSan does not follow a multithreaded process into fork) */
   pid_t pid = fork();
   assert_true(pid >= 0);
   if (pid == 0) {
-    qk__team_begin(2);
-    team_probe_t child = {0};
-    qk__run_shares(2, team_share, &child);
-    qk__team_end();
+    team_probe_t child = team_round(2);
     qk__team_release();
     _exit(child.ran[0] == 1 && child.ran[1] == 1 && child.runs[1] == 1 ? 0 : 1);
   }
@@ -734,10 +723,7 @@ static void test_build_team_kept(void **state) {
   assert_true(WIFEXITED(st) && WEXITSTATUS(st) == 0);
 #endif
   qk__team_release();
-  qk__team_begin(2);
-  team_probe_t fresh = {0};
-  qk__run_shares(2, team_share, &fresh);
-  qk__team_end();
+  team_probe_t fresh = team_round(2);
   assert_int_equal(fresh.runs[1], 1);
   qk__team_release();
 #if defined(__linux__)
@@ -749,10 +735,7 @@ static void test_build_team_kept(void **state) {
     assert_int_equal(pthread_create(&th, NULL, team_pinned, &pinned), 0);
     assert_int_equal(pthread_join(th, NULL), 0);
     assert_int_equal(pinned.ran[0] + pinned.ran[1], 2);
-    qk__team_begin(2);
-    team_probe_t after = {0};
-    qk__run_shares(2, team_share, &after);
-    qk__team_end();
+    team_probe_t after = team_round(2);
     assert_int_equal(after.runs[1], 1);
     qk__team_release();
   }

@@ -520,6 +520,20 @@ static void test_index_alloc_failure(void **state) {
 
 /* ---- errors, depth cap, visiting, drawing ---------------------------------------------- */
 
+/* A tree's SVG picture of the given width, as text (freed by the caller). */
+static char *svg_text(const qk_tree_t *t, unsigned width) {
+  FILE *f = tmpfile();
+  assert_non_null(f);
+  assert_int_equal(qk_tree_write_svg(t, f, width), QK_OK);
+  long size = ftell(f);
+  rewind(f);
+  char *buf = calloc((size_t)size + 1, 1);
+  assert_non_null(buf);
+  assert_int_equal(fread(buf, 1, (size_t)size, f), (size_t)size);
+  fclose(f);
+  return buf;
+}
+
 /* qk_tree_build_ex(): which point was bad, and why (issue 13). */
 static void test_index_build_ex_names_point(void **state) {
   (void)state;
@@ -720,13 +734,7 @@ static void test_index_visit_and_svg(void **state) {
   qk_tree_node_info(t, leaf, &li);
   assert_int_equal(li.quadrant, QK_NW);
 
-  FILE *f = tmpfile();
-  assert_non_null(f);
-  assert_int_equal(qk_tree_write_svg(t, f, 0), QK_OK);
-  long size = ftell(f);
-  rewind(f);
-  char *buf = calloc((size_t)size + 1, 1);
-  assert_int_equal(fread(buf, 1, (size_t)size, f), (size_t)size);
+  char *buf = svg_text(t, 0);
   assert_non_null(strstr(buf, "<svg"));
   assert_non_null(strstr(buf, "</svg>"));
   int rects = 0, circles = 0;
@@ -737,7 +745,6 @@ static void test_index_visit_and_svg(void **state) {
   assert_int_equal(rects, (int)s.leaves + 1); /* plus the background */
   assert_int_equal(circles, 5);
   free(buf);
-  fclose(f);
   assert_true(qk_tree_memory(t) > 0);
   qk_tree_free(t);
 }
@@ -772,13 +779,7 @@ static void test_index_svg_extremes(void **state) {
       p[1] = (qk_point_t){DBL_MAX / 2, DBL_MAX / 2}, p[2] = (qk_point_t){0, 1};
     qk_tree_t *t = NULL;
     assert_int_equal(qk_tree_build(p, 3, NULL, &t), QK_OK);
-    FILE *f = tmpfile();
-    assert_non_null(f);
-    assert_int_equal(qk_tree_write_svg(t, f, 400), QK_OK);
-    long size = ftell(f);
-    rewind(f);
-    char *buf = calloc((size_t)size + 1, 1);
-    assert_int_equal(fread(buf, 1, (size_t)size, f), (size_t)size);
+    char *buf = svg_text(t, 400);
     size_t n = 0;
     if (!svg_numbers_in_view(buf, 400, &n)) fail_msg("case %zu: %s", k, buf);
     assert_true(n > 10);
@@ -788,7 +789,6 @@ static void test_index_svg_extremes(void **state) {
       assert_non_null(strstr(buf, "<circle cx=\"400.000\" cy=\"0.000\""));
     }
     free(buf);
-    fclose(f);
     qk_tree_free(t);
   }
 }

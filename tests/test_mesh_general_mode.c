@@ -1151,6 +1151,19 @@ static void test_mesh_general_mode_msh_groups(void **state) {
 }
 
 /* Refusals: the precision budget, crossings, a vertex on a segment, duplicates. */
+/* The general mode's mesh of nv vertices and ns segments (no holes) with longest edge
+ * max_size (0: none): qk_mesh_generate's status, the mesh in *m. */
+static qk_status_t general_of(const double *xy, size_t nv, const uint32_t *seg, size_t ns,
+                              double max_size, qk_mesh_t **m, qk_mesh_error_t *err) {
+  qk_poly_t *p;
+  assert_int_equal(qk_poly_from_arrays(xy, nv, seg, ns, NULL, 0, NULL, &p, err), QK_OK);
+  qk_mesh_options_t o = general_opts();
+  o.max_size = max_size;
+  qk_status_t st = qk_mesh_generate(p, &o, m, err);
+  qk_poly_free(p);
+  return st;
+}
+
 /*
  * The size bound's up-front refusal counts the domain, not the bounding box: a strip 2^-16
  * wide along the unit square's diagonal with max_size 1.2e-4 is meshed (its bounding box
@@ -1162,29 +1175,20 @@ static void test_mesh_general_mode_size_domain(void **state) {
   const double w = 0x1p-16;
   double xy[8] = {0, 0, w, 0, 1, 1 - w, 1, 1};
   uint32_t seg[8] = {0, 1, 1, 2, 2, 3, 3, 0};
-  qk_poly_t *p;
   qk_mesh_t *m = NULL;
   qk_mesh_error_t err;
-  assert_int_equal(qk_poly_from_arrays(xy, 4, seg, 4, NULL, 0, NULL, &p, &err), QK_OK);
-  qk_mesh_options_t o = general_opts();
-  o.max_size = 1.2e-4;
-  qk_status_t st = qk_mesh_generate(p, &o, &m, &err);
-  if (st != QK_OK) fail_msg("the strip: %s", err.message);
+  if (general_of(xy, 4, seg, 4, 1.2e-4, &m, &err) != QK_OK) fail_msg("the strip: %s", err.message);
   qk_mesh_stats_t ms;
   qk_mesh_stats(m, &ms);
   printf("# the strip: %zu triangles, min angle %.2f\n", ms.triangles, ms.min_angle_deg);
   assert_true(ms.triangles > 20000 && ms.triangles < 400000);
   assert_true(ms.min_angle_deg >= 20);
   qk_mesh_free(m);
-  qk_poly_free(p);
   double sq[8] = {0, 0, 1, 0, 1, 1, 0, 1};
-  assert_int_equal(qk_poly_from_arrays(sq, 4, seg, 4, NULL, 0, NULL, &p, &err), QK_OK);
-  o.max_size = 1e-4;
   m = NULL;
-  assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_ERR_LIMIT);
+  assert_int_equal(general_of(sq, 4, seg, 4, 1e-4, &m, &err), QK_ERR_LIMIT);
   assert_null(m);
   if (!strstr(err.message, "over the domain (area 1,")) fail_msg("%s", err.message);
-  qk_poly_free(p);
 }
 
 /* Two isolated vertices 1 ulp apart in x (1.39e-17 there, y's ulp 1.11e-16): a triangle
@@ -1206,17 +1210,13 @@ static void test_mesh_general_mode_ulp_pair(void **state) {
                    nextafter(0.11053466796875, 1),
                    0.7699737548828125};
   uint32_t seg[8] = {0, 1, 1, 2, 2, 3, 3, 0};
-  qk_poly_t *p;
   qk_mesh_t *m = NULL;
   qk_mesh_error_t err;
-  assert_int_equal(qk_poly_from_arrays(xy, 6, seg, 4, NULL, 0, NULL, &p, &err), QK_OK);
-  qk_mesh_options_t o = general_opts();
-  assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_ERR_LIMIT);
+  assert_int_equal(general_of(xy, 6, seg, 4, 0, &m, &err), QK_ERR_LIMIT);
   assert_null(m);
   if (!strstr(err.message, "1.39e-17 across: no double near it improves it") ||
       !strstr(err.message, "round the input to a grid"))
     fail_msg("%s", err.message);
-  qk_poly_free(p);
 }
 
 static void test_mesh_general_mode_refusals(void **state) {

@@ -532,6 +532,24 @@ static void test_poly_round(void **state) {
   qk_poly_free(p);
 }
 
+/* The .poly text read, rounded to step (0: not rounded; *changed as qk_poly_round says,
+ * when not NULL) and meshed in the general mode: qk_mesh_generate's status, the mesh in
+ * *m. */
+static qk_status_t rounded_general(const char *text, double step, size_t *changed, qk_mesh_t **m,
+                                   qk_mesh_error_t *err) {
+  FILE *f = from_string(text);
+  qk_poly_t *p;
+  assert_int_equal(qk_poly_read(f, NULL, &p, err), QK_OK);
+  fclose(f);
+  if (step > 0) assert_int_equal(qk_poly_round(p, step, changed), QK_OK);
+  qk_mesh_options_t o;
+  qk_mesh_options_init(&o);
+  o.mode = QK_MESH_GENERAL;
+  qk_status_t st = qk_mesh_generate(p, &o, m, err);
+  qk_poly_free(p);
+  return st;
+}
+
 /*
  * A hole point (or a regional attribute point) left as read, close to a hole's edge that
  * qk_poly_round moved across it: the square's face was dropped and the hole meshed (16
@@ -548,17 +566,9 @@ static void test_poly_round_holes(void **state) {
     char text[512];
     snprintf(text, sizeof text, "%s%s", square, tails[k]);
     for (int rounded = 0; rounded < 2; rounded++) {
-      FILE *f = from_string(text);
-      qk_poly_t *p;
-      qk_mesh_error_t err;
-      assert_int_equal(qk_poly_read(f, NULL, &p, &err), QK_OK);
-      fclose(f);
-      if (rounded) assert_int_equal(qk_poly_round(p, 0x1p-22, NULL), QK_OK);
-      qk_mesh_options_t o;
-      qk_mesh_options_init(&o);
-      o.mode = QK_MESH_GENERAL;
       qk_mesh_t *m = NULL;
-      qk_status_t st = qk_mesh_generate(p, &o, &m, &err);
+      qk_mesh_error_t err;
+      qk_status_t st = rounded_general(text, rounded ? 0x1p-22 : 0, NULL, &m, &err);
       if (rounded && k < 2) {
         assert_int_equal(st, QK_ERR_GEOMETRY);
         assert_int_equal(err.line, k == 0 ? 20 : 21);
@@ -574,30 +584,22 @@ static void test_poly_round_holes(void **state) {
         assert_true(ms.triangles > 40);
         qk_mesh_free(m);
       }
-      qk_poly_free(p);
     }
   }
   /* Rounding that moves nothing near the hole refuses it not: a hole point 0.5 from an
    * edge of integers (refused in the first version, which measured against the grid's
    * step) and 0.3 from one, while a vertex far off, (10, 5.45), moves 0.45 (refused in the
    * second, which measured against the largest move of any vertex). */
-  FILE *f = from_string("9 2 0 0\n1 0 0\n2 10 0\n3 10 10\n4 0 10\n5 4 4\n6 6 4\n7 6 6\n8 4 6\n"
-                        "9 10 5.45\n9 0\n1 1 2\n2 2 9\n3 9 3\n4 3 4\n5 4 1\n6 5 6\n7 6 7\n"
-                        "8 7 8\n9 8 5\n2\n1 4.5 5\n2 5 4.3\n");
-  qk_poly_t *p;
-  qk_mesh_error_t err;
-  assert_int_equal(qk_poly_read(f, NULL, &p, &err), QK_OK);
-  fclose(f);
   size_t changed = 9;
-  assert_int_equal(qk_poly_round(p, 1, &changed), QK_OK);
-  assert_int_equal(changed, 1);
-  qk_mesh_options_t o;
-  qk_mesh_options_init(&o);
-  o.mode = QK_MESH_GENERAL;
   qk_mesh_t *m = NULL;
-  if (qk_mesh_generate(p, &o, &m, &err) != QK_OK) fail_msg("%s", err.message);
+  qk_mesh_error_t err;
+  if (rounded_general("9 2 0 0\n1 0 0\n2 10 0\n3 10 10\n4 0 10\n5 4 4\n6 6 4\n7 6 6\n8 4 6\n"
+                      "9 10 5.45\n9 0\n1 1 2\n2 2 9\n3 9 3\n4 3 4\n5 4 1\n6 5 6\n7 6 7\n"
+                      "8 7 8\n9 8 5\n2\n1 4.5 5\n2 5 4.3\n",
+                      1, &changed, &m, &err) != QK_OK)
+    fail_msg("%s", err.message);
+  assert_int_equal(changed, 1);
   qk_mesh_free(m);
-  qk_poly_free(p);
 }
 
 int main(void) {
