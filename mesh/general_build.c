@@ -273,8 +273,46 @@ static qk_status_t insert_vertices(qk__gm_t *g) {
   return st;
 }
 
-/* The input segments as constrained edges; a blocking vertex or constrained edge is a
- * vertex on a segment or two segments crossing (or overlapping). */
+/* Touching input: segment s changed (split or merged; see qk__gm_t's touch). */
+static qk_status_t note_change(qk__gm_t *g, size_t s) {
+  if (!g->schg) {
+    g->schg = qk__realloc(g->a, NULL, 0, g->P->ns + 1);
+    if (!g->schg) return QK_ERR_NOMEM;
+    memset(g->schg, 0, g->P->ns + 1);
+  }
+  g->schg[s] = 1;
+  return QK_OK;
+}
+
+/* Room for `need` entries in g->stack. */
+static qk_status_t stack_room(qk__gm_t *g, size_t need) {
+  void *p = g->stack;
+  if (qk__grow(g->a, &p, &g->stack_cap, need, sizeof *g->stack)) return QK_ERR_NOMEM;
+  g->stack = p;
+  return QK_OK;
+}
+
+/* Touching input: a piece a-b (input vertices) of changed segment s kept. */
+static qk_status_t add_piece(qk__gm_t *g, size_t s, uint32_t a, uint32_t b) {
+  if (3 * (g->npieces + 1) > g->pieces_cap) {
+    void *p = g->pieces;
+    if (qk__grow(g->a, &p, &g->pieces_cap, 3 * (g->npieces + 1), sizeof *g->pieces))
+      return QK_ERR_NOMEM;
+    g->pieces = p;
+  }
+  uint32_t *e = &g->pieces[3 * g->npieces++];
+  e[0] = (uint32_t)s, e[1] = a, e[2] = b;
+  return QK_OK;
+}
+
+/* The input segments as constrained edges. A segment joining the vertices of an earlier
+ * one is a repeat; a vertex blocking its way lies inside it; a constrained edge blocking
+ * its way crosses (or overlaps) it. Without g->touch each is refused, naming both. With
+ * it, a repeat is merged into the earlier segment and a vertex inside splits the segment
+ * there, its pieces then inserted in order from its first vertex (a stack of pieces in
+ * g->stack), and only crossings are refused: two segments that overlap along a stretch
+ * always have a vertex of one inside the other (the vertices are all in before any
+ * segment), so they become shared pieces, merged. */
 static qk_status_t insert_segments(qk__gm_t *g) {
   const qk_poly_t *P = g->P;
   qk__cdt_t *c = &g->cdt;
@@ -283,38 +321,65 @@ static qk_status_t insert_segments(qk__gm_t *g) {
     unsigned long ls = sline(P, s);
     if (u == w)
       return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, ls, "segment %lu joins vertex %lu to itself",
-                           qk__mesh_num(P, s), qk__mesh_num(P, u));
-    int k;
-    char n1[80], n2[80];
-    uint32_t t = qk__cdt_find_edge(c, g->cv[u], g->cv[w], &k);
-    if (t != QK__CDT_NONE && c->seg[3 * t + k] != QK__CDT_NONE) {
-      uint32_t o = c->seg[3 * t + k];
-      return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, ls, "%s and %s both join vertices %lu and %lu",
-                           qk__gm_name(P, "segments", o, sline(P, o), n1),
-                           qk__gm_name(P, "", s, ls, n2) + 1, qk__mesh_num(P, u),
-                           qk__mesh_num(P, w));
-    }
-    if (t != QK__CDT_NONE) {
-      /* Already an edge (most of a coastline's segments): marked here, rather than found a
-       * second time by qk__cdt_insert_segment. */
-      qk__cdt_mark_segment(c, t, k, (uint32_t)s);
-      continue;
-    }
-    uint32_t block = QK__CDT_NONE, bseg = QK__CDT_NONE;
-    qk_status_t st = qk__cdt_insert_segment(c, g->cv[u], g->cv[w], (uint32_t)s, &block, &bseg);
-    if (st == QK_ERR_NOMEM) return qk__mesh_fail(g->err, st, 0, "out of memory");
-    if (st && bseg != QK__CDT_NONE)
-      return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, ls, "%s and %s cross or overlap",
-                           qk__gm_name(P, "segments", bseg, sline(P, bseg), n1),
-                           qk__gm_name(P, "", s, ls, n2) + 1);
-    if (st) {
-      uint32_t vi = block < g->vcap ? g->vi[block].in : QK__CDT_NONE;
-      if (vi == QK__CDT_NONE)
-        return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, ls, "%s is blocked",
-                             qk__gm_name(P, "segment", s, ls, n2));
-      return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, ls, "%s at (%.17g, %.17g) lies on %s",
-                           qk__gm_name(P, "vertex", vi, vline(P, vi), n1), P->vx[vi] + 0.0,
-                           P->vy[vi] + 0.0, qk__gm_name(P, "segment", s, ls, n2));
+                           qk__mesh_snum(P, s), qk__mesh_num(P, u));
+    size_t sp = 0;
+    if (stack_room(g, 2)) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+    g->stack[sp++] = u, g->stack[sp++] = w;
+    while (sp) {
+      const uint32_t b = g->stack[--sp], a = g->stack[--sp];
+      const int changed = g->schg && g->schg[s];
+      int k;
+      char n1[80], n2[80];
+      uint32_t t = qk__cdt_find_edge(c, g->cv[a], g->cv[b], &k);
+      if (t != QK__CDT_NONE && c->seg[3 * t + k] != QK__CDT_NONE) {
+        if (g->touch) { /* a repeat (of a segment or a piece): merged */
+          if (note_change(g, s)) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+          g->nmerged++;
+          continue;
+        }
+        uint32_t o = c->seg[3 * t + k];
+        return qk__mesh_fail(
+            g->err, QK_ERR_GEOMETRY, ls, "%s and %s both join vertices %lu and %lu",
+            qk__gm_sname(P, "segments", o, sline(P, o), n1), qk__gm_sname(P, "", s, ls, n2) + 1,
+            qk__mesh_num(P, a), qk__mesh_num(P, b));
+      }
+      qk_status_t st = QK_OK;
+      if (t != QK__CDT_NONE) {
+        /* Already an edge (most of a coastline's segments): marked here, rather than found
+         * a second time by qk__cdt_insert_segment. */
+        qk__cdt_mark_segment(c, t, k, (uint32_t)s);
+      } else {
+        uint32_t block = QK__CDT_NONE, bseg = QK__CDT_NONE;
+        st = qk__cdt_insert_segment(c, g->cv[a], g->cv[b], (uint32_t)s, &block, &bseg);
+        if (st == QK_ERR_NOMEM) return qk__mesh_fail(g->err, st, 0, "out of memory");
+        if (st && bseg != QK__CDT_NONE)
+          return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, ls, "%s and %s cross or overlap",
+                               qk__gm_sname(P, "segments", bseg, sline(P, bseg), n1),
+                               qk__gm_sname(P, "", s, ls, n2) + 1);
+        if (st) {
+          uint32_t vi = block < g->vcap ? g->vi[block].in : QK__CDT_NONE;
+          if (vi == QK__CDT_NONE)
+            return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, ls, "%s is blocked",
+                                 qk__gm_sname(P, "segment", s, ls, n2));
+          /* A touch that rounding may have made (qk_poly_round moved the vertex or the
+           * segment's ends) changed the input's shape: refused as without touch. */
+          const int moved =
+              P->vmoved && (P->vmoved[vi] > 0 || P->vmoved[u] > 0 || P->vmoved[w] > 0);
+          if (!g->touch || moved)
+            return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, ls, "%s at (%.17g, %.17g) lies on %s",
+                                 qk__gm_name(P, "vertex", vi, vline(P, vi), n1), P->vx[vi] + 0.0,
+                                 P->vy[vi] + 0.0, qk__gm_sname(P, "segment", s, ls, n2));
+          /* Split at vertex vi: a-vi first, then vi-b. */
+          if (note_change(g, s) || stack_room(g, sp + 4))
+            return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+          g->nsplit++;
+          g->stack[sp++] = vi, g->stack[sp++] = b;
+          g->stack[sp++] = a, g->stack[sp++] = vi;
+          continue;
+        }
+      }
+      if (changed && add_piece(g, s, a, b))
+        return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
     }
   }
   return QK_OK;
@@ -373,7 +438,7 @@ static qk_status_t point_face(qk__gm_t *g, double x, double y, const char *what,
   if (w == QK__CDT_EDGE && c->seg[3 * t + k] != QK__CDT_NONE)
     return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, line,
                          "%s %lu at (%.17g, %.17g) lies on segment %lu", what, num, x, y,
-                         qk__mesh_num(g->P, c->seg[3 * t + k]));
+                         qk__mesh_snum(g->P, c->seg[3 * t + k]));
   if (w == QK__CDT_VERT) {
     uint32_t vi = g->vi[c->v[3 * t + k]].in;
     return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, line, "%s %lu at (%.17g, %.17g) is vertex %lu",

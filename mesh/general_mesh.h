@@ -59,6 +59,17 @@ typedef struct qk__gm {
   double bx0, by0, bx1, by1;
   qk__cdt_t cdt;
   int cdt_live;
+  /* Touching input (general_build.c, insert_segments): with `touch` set, a vertex inside a
+   * segment splits it and a segment (or piece) that repeats another is merged into it,
+   * instead of refusals. The pieces of the segments so changed, as (segment, from, to)
+   * vertex triples in segment order and, within one, from its first vertex on; schg marks
+   * those segments (allocated at the first change); nsplit and nmerged count the splits
+   * and the merged segments or pieces. */
+  int touch;
+  uint32_t *pieces;
+  size_t npieces, pieces_cap;
+  uint8_t *schg;
+  size_t nsplit, nmerged;
   /* Per input vertex: its CDT vertex, and whether two of its segments meet at an angle
    * below 60 degrees there (the concentric shells' apexes). */
   uint32_t *cv;
@@ -129,14 +140,27 @@ typedef struct qk__gm {
   const char *stage;            /* the step running, for messages: "grading the quadtree", ... */
 } qk__gm_t;
 
-/* "segment 3" or, when the input has line numbers, "segment 3 (line 12)", into buf. */
+/* "vertex 3" or, when the input has line numbers, "vertex 3 (line 12)", into buf; the
+ * number is num's (qk__mesh_num or qk__mesh_snum). */
+static inline const char *qk__gm_named(const char *what, unsigned long num, unsigned long line,
+                                       char buf[80]) {
+  if (line)
+    snprintf(buf, 80, "%s %lu (line %lu)", what, num, line);
+  else
+    snprintf(buf, 80, "%s %lu", what, num);
+  return buf;
+}
+
+/* Vertex i (or hole i, ...) so named. */
 static inline const char *qk__gm_name(const qk_poly_t *P, const char *what, size_t i,
                                       unsigned long line, char buf[80]) {
-  if (line)
-    snprintf(buf, 80, "%s %lu (line %lu)", what, qk__mesh_num(P, i), line);
-  else
-    snprintf(buf, 80, "%s %lu", what, qk__mesh_num(P, i));
-  return buf;
+  return qk__gm_named(what, qk__mesh_num(P, i), line, buf);
+}
+
+/* Segment s so named: the input segment's number where s is a piece of one. */
+static inline const char *qk__gm_sname(const qk_poly_t *P, const char *what, size_t s,
+                                       unsigned long line, char buf[80]) {
+  return qk__gm_named(what, qk__mesh_snum(P, s), line, buf);
 }
 
 /* CDT vertex v's coordinates. */

@@ -30,7 +30,8 @@ static qk__oseg_t out_seg(const qk__gm_t *g, uint32_t t, int k, uint32_t s, cons
     uint32_t x = a;
     a = b, b = x;
   }
-  return (qk__oseg_t){newid[a], newid[b], g->P->smark ? g->P->smark[s] : 0, s};
+  return (qk__oseg_t){newid[a], newid[b], g->P->smark ? g->P->smark[s] : 0,
+                      g->P->sorig ? g->P->sorig[s] : s};
 }
 
 /* Vertex markers: an input vertex's own nonzero marker, else the first segment (in input

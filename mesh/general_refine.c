@@ -101,7 +101,8 @@ static qk_status_t split_piece(qk__gm_t *g, uint32_t a, uint32_t b, uint32_t s, 
                          "%s from (%.17g, %.17g) to (%.17g, %.17g) needs a split point at steps "
                          "of 2^-%d of its length; exact ones: %s. Round the input to a grid "
                          "(a coarser one if it was rounded already)",
-                         qk__gm_name(P, "segment", s, line, nm), A[0], A[1], B[0], B[1], need, has);
+                         qk__gm_sname(P, "segment", s, line, nm), A[0], A[1], B[0], B[1], need,
+                         has);
   }
   int tz = 0;
   while (tz < 62 && !((k >> tz) & 1)) tz++;

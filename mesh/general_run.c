@@ -48,7 +48,64 @@ static void gm_free(qk__gm_t *g) {
   qk__free(a, g->faces, g->nface_cap * sizeof *g->faces);
   qk_tree_free(g->tree);
   qk__free(a, g->free_node, g->free_cap);
+  qk__free(a, g->pieces, g->pieces_cap * sizeof *g->pieces);
+  qk__free(a, g->schg, g->schg ? g->P->ns + 1 : 0);
   free_refinement(g);
+}
+
+/*
+ * Touching input (qk__gm_t's touch): a working copy of g->P in which every segment that
+ * the validation split or merged is replaced by its pieces (none for a repeat), in segment
+ * order, each piece keeping its segment's line and marker and naming it (sorig). Its
+ * segment arrays are blocks of its own (free_copy), everything else is g->P's. QK_ERR_NOMEM
+ * leaves a copy that free_copy still frees.
+ */
+typedef struct touched {
+  qk_poly_t p;
+  uint32_t *seg, *sorig;
+  unsigned long *sline;
+  int32_t *smark;
+} touched_t;
+
+static qk_status_t touched_copy(const qk__gm_t *g, touched_t *tc) {
+  const qk_poly_t *P = g->P;
+  size_t n = g->npieces;
+  for (size_t s = 0; s < P->ns; s++) n += !g->schg[s];
+  memset(tc, 0, sizeof *tc);
+  tc->p = *P;
+  tc->p.ns = n;
+  tc->seg = qk__realloc(g->a, NULL, 0, (2 * n + 2) * sizeof *tc->seg);
+  tc->sorig = qk__realloc(g->a, NULL, 0, (n + 1) * sizeof *tc->sorig);
+  if (P->sline) tc->sline = qk__realloc(g->a, NULL, 0, (n + 1) * sizeof *tc->sline);
+  if (P->smark) tc->smark = qk__realloc(g->a, NULL, 0, (n + 1) * sizeof *tc->smark);
+  tc->p.seg = tc->seg, tc->p.sorig = tc->sorig, tc->p.sline = tc->sline, tc->p.smark = tc->smark;
+  if (!tc->seg || !tc->sorig || (P->sline && !tc->sline) || (P->smark && !tc->smark))
+    return QK_ERR_NOMEM;
+  size_t j = 0, k = 0;
+  for (size_t s = 0; s < P->ns; s++) {
+    const uint32_t *ab = &P->seg[2 * s];
+    size_t m = 1;
+    if (g->schg[s]) { /* its pieces, in order */
+      while (k + m - 1 < g->npieces && g->pieces[3 * (k + m - 1)] == s) m++;
+      m--, ab = NULL;
+    }
+    for (size_t i = 0; i < m; i++, j++) {
+      const uint32_t *e = ab ? ab : &g->pieces[3 * k++ + 1];
+      tc->seg[2 * j] = e[0], tc->seg[2 * j + 1] = e[1];
+      tc->sorig[j] = (uint32_t)(P->sorig ? P->sorig[s] : s);
+      if (tc->sline) tc->sline[j] = P->sline[s];
+      if (tc->smark) tc->smark[j] = P->smark[s];
+    }
+  }
+  return QK_OK;
+}
+
+static void free_copy(const qk_allocator_t *a, touched_t *tc) {
+  size_t n = tc->p.ns;
+  qk__free(a, tc->seg, tc->seg ? (2 * n + 2) * sizeof *tc->seg : 0);
+  qk__free(a, tc->sorig, tc->sorig ? (n + 1) * sizeof *tc->sorig : 0);
+  qk__free(a, tc->sline, tc->sline ? (n + 1) * sizeof *tc->sline : 0);
+  qk__free(a, tc->smark, tc->smark ? (n + 1) * sizeof *tc->smark : 0);
 }
 
 /* A size bound asking for more triangles than memory could hold is refused up front,
@@ -87,6 +144,18 @@ static qk_status_t name_failure(const qk__gm_t *g, qk_status_t st) {
   return st;
 }
 
+static void gm_init(qk__gm_t *g, const qk_poly_t *P, const qk_mesh_options_t *opt, qk_mesh_t *m,
+                    qk_mesh_error_t *err) {
+  memset(g, 0, sizeof *g);
+  g->a = &m->alloc, g->P = P, g->opt = opt, g->err = err, g->stats = &m->stats;
+  g->bound_deg = opt->min_angle_deg > 0 ? opt->min_angle_deg : 20;
+  /* A triangle is good only with a margin above the bound, so that the floating-point
+   * angle test never passes an angle below it. */
+  double s = sin((g->bound_deg + 1e-7) * (3.14159265358979323846 / 180));
+  g->sin2_bound = s * s;
+  g->stage = "checking the input";
+}
+
 int qk__gm_test_grade_late = 0;
 
 qk_status_t qk__mesh_general_check(const qk_poly_t *P, const qk_mesh_options_t *opt,
@@ -107,16 +176,22 @@ qk_status_t qk__mesh_general(const qk_poly_t *P, const qk_mesh_options_t *opt, q
                          "min_angle_deg %g is not between 0 and 34 (the general mode's range)",
                          opt->min_angle_deg);
   qk__gm_t g;
-  memset(&g, 0, sizeof g);
-  g.a = &m->alloc, g.P = P, g.opt = opt, g.err = err, g.stats = &m->stats;
-  g.bound_deg = opt->min_angle_deg > 0 ? opt->min_angle_deg : 20;
-  /* A triangle is good only with a margin above the bound, so that the floating-point
-   * angle test never passes an angle below it. */
-  double s = sin((g.bound_deg + 1e-7) * (3.14159265358979323846 / 180));
-  g.sin2_bound = s * s;
+  gm_init(&g, P, opt, m, err);
   double t0 = now(), t1 = t0, t2 = t0;
-  g.stage = "checking the input";
+  /* Touching input is validated as it is, with its splits and repeats noted; the mesh is
+   * then made from the working copy that has them resolved (touched_copy). */
+  g.touch = 1;
   qk_status_t st = qk__gm_build(&g);
+  touched_t tc = {.seg = NULL};
+  const int touched = !st && (g.nsplit || g.nmerged);
+  if (touched) {
+    const size_t nsplit = g.nsplit, nmerged = g.nmerged;
+    st = touched_copy(&g, &tc);
+    gm_free(&g);
+    gm_init(&g, &tc.p, opt, m, err);
+    if (!st) st = qk__gm_build(&g); /* (nothing left to split or merge: no touch) */
+    m->stats.split_vertices = nsplit, m->stats.merged_segments = nmerged;
+  }
   if (!st) st = check_size(&g);
   if (!st) {
     t1 = now();
@@ -158,5 +233,6 @@ qk_status_t qk__mesh_general(const qk_poly_t *P, const qk_mesh_options_t *opt, q
     m->stats.seconds_triangulate = now() - t2;
   }
   gm_free(&g);
+  if (touched) free_copy(&m->alloc, &tc);
   return st;
 }

@@ -150,7 +150,8 @@ static qk_status_t too_close(const qk__gm_t *g, uint32_t f, uint32_t h, double s
     int v = id[i] < nv;
     size_t j = v ? id[i] : id[i] - nv;
     unsigned long line = v ? (P->vline ? P->vline[j] : 0) : (P->sline ? P->sline[j] : 0);
-    qk__gm_name(P, v ? "vertex" : "segment", j, line, nm[i]);
+    qk__gm_named(v ? "vertex" : "segment", v ? qk__mesh_num(P, j) : qk__mesh_snum(P, j), line,
+                 nm[i]);
   }
   double gap = 1.5 * s * g->S, ext = fmax(g->bx1 - g->bx0, g->by1 - g->by0);
   if (!deep)

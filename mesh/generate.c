@@ -467,6 +467,34 @@ out:
   return st;
 }
 
+/* An empty mesh for the options' allocator; large blocks from huge-page chunks when the
+ * caller gives none (mesh/arena.c): malloc's fresh 4 KB pages cost one fault each on
+ * every call (all three modes). NULL when memory ran short. */
+static qk_mesh_t *new_mesh(const qk_mesh_options_t *opt) {
+  qk_allocator_t alloc = {NULL, NULL};
+  if (opt->allocator) alloc = *opt->allocator;
+  qk_mesh_t *m = qk__realloc(&alloc, NULL, 0, sizeof *m);
+  if (!m) return NULL;
+  memset(m, 0, sizeof *m);
+  m->alloc = alloc;
+  if (!opt->allocator && qk__mesh_arena_available() && (m->arena = qk__mesh_arena_new()))
+    m->alloc = (qk_allocator_t){qk__mesh_arena_fn, m->arena};
+  return m;
+}
+
+/* The general mode into m (freed on failure). */
+static qk_status_t general(const qk_poly_t *poly, const qk_mesh_options_t *opt, qk_mesh_t *m,
+                           qk_mesh_t **out, qk_mesh_error_t *err) {
+  qk_status_t st = qk__mesh_general(poly, opt, m, err);
+  if (st) {
+    qk_mesh_free(m);
+    return st;
+  }
+  qk__mesh_arena_seal(m->arena);
+  *out = m;
+  return QK_OK;
+}
+
 qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *options,
                              qk_mesh_t **out, qk_mesh_error_t *err) {
   qk__error_clear(err);
@@ -476,12 +504,8 @@ qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *opt
   qk_mesh_options_t opt;
   qk_status_t st = read_options(options, &opt, err);
   if (st || (st = qk__poly_check_rounded(poly, err))) return st;
-  qk_allocator_t alloc = {NULL, NULL};
-  if (opt.allocator) alloc = *opt.allocator;
-  qk_mesh_t *m = qk__realloc(&alloc, NULL, 0, sizeof *m);
+  qk_mesh_t *m = new_mesh(&opt);
   if (!m) return qk__mesh_fail(err, QK_ERR_NOMEM, 0, "out of memory while allocating the mesh");
-  memset(m, 0, sizeof *m);
-  m->alloc = alloc;
   qk__gen_t g;
   memset(&g, 0, sizeof g);
   g.a = &m->alloc, g.poly = poly, g.src = poly, g.err = err, g.opt = &opt;
@@ -492,19 +516,7 @@ qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *opt
     qk_mesh_free(m);
     return qk__mesh_fail(err, st, 0, "out of memory while choosing the mode");
   }
-  /* Large blocks from huge-page chunks when the caller gives no allocator (mesh/arena.c):
-   * malloc's fresh 4 KB pages cost one fault each on every call (all three modes). */
-  if (!opt.allocator && qk__mesh_arena_available() && (m->arena = qk__mesh_arena_new()))
-    m->alloc = (qk_allocator_t){qk__mesh_arena_fn, m->arena};
-  if (!classic) {
-    if ((st = qk__mesh_general(poly, &opt, m, err))) {
-      qk_mesh_free(m);
-      return st;
-    }
-    qk__mesh_arena_seal(m->arena);
-    *out = m;
-    return QK_OK;
-  }
+  if (!classic) return general(poly, &opt, m, out, err);
   qk_poly_t *onlat = NULL;
 
   double t0 = now(), t1 = t0, t2 = t0, t3 = t0;
@@ -519,7 +531,9 @@ qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *opt
   if (onlat) g.poly = onlat;
   m->lat = g.lat;
   if (!st && !(st = qk__mesh_validate(&g, book ? opt.size : 0)) &&
-      !(st = qk__mesh_precheck(g.poly, g.src, &opt, book ? g.U : 0, &m->alloc, err))) {
+      (st = qk__mesh_precheck(g.poly, g.src, &opt, book ? g.U : 0, &m->alloc, err)))
+    g.meet = st == QK_ERR_GEOMETRY; /* (the general mode's check: crossings, touches) */
+  if (!st) {
     m->size = g.U;
     m->stats.components = g.ncomp;
     t1 = now();
@@ -535,6 +549,17 @@ qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *opt
   qk__mesh_lattice_poly_free(onlat);
   if (st != QK_OK) {
     qk_mesh_free(m);
+    /* Chosen automatically, the lattice mode refused segments that meet: the general mode
+     * takes touching input (a corner of one component on another's side, a shared side).
+     * Where it refuses too (crossings), the lattice mode's message stands. */
+    if (st == QK_ERR_GEOMETRY && g.meet && opt.mode == QK_MESH_AUTO && !opt.size) {
+      qk_mesh_error_t first;
+      if (err) first = *err;
+      qk_mesh_t *m2 = new_mesh(&opt);
+      if (!m2) return st;
+      if (general(poly, &opt, m2, out, err) == QK_OK) return QK_OK;
+      if (err) *err = first;
+    }
     return st;
   }
   m->stats.size = g.U;

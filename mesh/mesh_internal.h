@@ -41,6 +41,11 @@ struct qk_poly {
   double *vmoved; /* per vertex: how far qk_poly_round() calls moved it, summed (NULL: never
                      rounded; nv entries, allocated with vx's capacity) */
   size_t vmoved_cap;
+  /* Only in the general mode's working copy of an input whose vertices lie inside its
+   * segments or whose segments repeat (general_run.c): per segment of the copy, the input
+   * segment it is a piece of, for messages and outputs. NULL in every qk_poly_t a caller
+   * holds. */
+  const uint32_t *sorig;
 };
 
 /* After qk_poly_round(): QK_ERR_GEOMETRY, naming it, when a hole or regional attribute
@@ -153,6 +158,10 @@ typedef struct qk__gen {
   qk__lattice_t lat;
   const qk_mesh_options_t *opt;
   qk_mesh_error_t *err;
+  /* Set where the lattice modes refuse segments that meet (components touching or
+   * crossing, repeated or overlapping segments): QK_MESH_AUTO then tries the general mode,
+   * which takes touching input (generate.c). */
+  int meet;
   uint64_t U;
   qk__edge_t *e;
   qk__ebox_t *box; /* per edge, made by the subdivision */
@@ -240,6 +249,11 @@ typedef struct qk__leaf_tris {
 /* User-facing vertex or segment number. */
 static inline unsigned long qk__mesh_num(const qk_poly_t *p, size_t i) {
   return (unsigned long)(i + p->first_index);
+}
+
+/* User-facing number of segment s (of the input segment it is a piece of, in a copy). */
+static inline unsigned long qk__mesh_snum(const qk_poly_t *p, size_t s) {
+  return qk__mesh_num(p, p->sorig ? p->sorig[s] : s);
 }
 
 static inline int64_t qk__cross(int64_t ax, int64_t ay, int64_t bx, int64_t by) {

@@ -58,6 +58,7 @@ static int edges_legal(const qk__gen_t *g, const qk__edge_t *p, const qk__edge_t
 static qk_status_t pair_error(qk__gen_t *g, const qk__edge_t *p, const qk__edge_t *q) {
   const qk_poly_t *P = g->poly;
   unsigned long lp = P->sline[p->seg], lq = P->sline[q->seg];
+  g->meet = 1;
   if (p->comp == q->comp)
     return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, lq,
                          "component %u intersects itself: segments %lu (line %lu) and %lu (line "

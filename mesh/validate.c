@@ -117,10 +117,12 @@ static qk_status_t orient_component(qk__gen_t *g, uint32_t c, size_t first) {
   const qk__edge_t *in = &g->e[lo == first ? g->ne - 1 : lo - 1], *outg = &g->e[lo];
   int64_t turn =
       qk__cross(in->bx - in->ax, in->by - in->ay, outg->bx - outg->ax, outg->by - outg->ay);
-  if (turn == 0)
+  if (turn == 0) {
+    g->meet = 1;
     return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, P->sline[outg->seg],
                          "component %u is degenerate: segments %lu and %lu overlap", c,
                          qk__mesh_num(P, in->seg), qk__mesh_num(P, outg->seg));
+  }
   if (turn < 0)
     for (size_t i = first; i < g->ne; i++) {
       qk__edge_t *e = &g->e[i];
@@ -153,10 +155,12 @@ static qk_status_t walk_components(qk__gen_t *g, const uint32_t *adj, uint32_t *
       s = adj[2 * to] == s ? adj[2 * to + 1] : adj[2 * to];
       from = to;
     } while (s != s0);
-    if (len < 3)
+    if (len < 3) {
+      g->meet = 1;
       return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, P->sline[g->e[first + 1].seg],
                            "segments %lu and %lu coincide", qk__mesh_num(P, g->e[first].seg),
                            qk__mesh_num(P, g->e[first + 1].seg));
+    }
     qk_status_t st = orient_component(g, c, first);
     if (st) return st;
   }

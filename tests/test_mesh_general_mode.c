@@ -1013,6 +1013,165 @@ static void test_mesh_general_mode_markers(void **state) {
   free(s);
 }
 
+/* Touching input (issue 12): a vertex inside a segment splits it, and a segment that
+ * repeats another (or a piece of one) is merged into it, as Triangle and CGAL's
+ * constrained triangulations take such input; before, each was refused. Checked exactly
+ * (check_general: input vertices kept, tiling the rings' area, every boundary edge on a
+ * segment, each input segment chained by its output segments end to end). */
+static void test_mesh_general_mode_touching(void **state) {
+  (void)state;
+  qk_mesh_options_t o = general_opts();
+  o.max_size = 0.7;
+  qk_mesh_error_t err;
+  /* Two squares side by side: B's left side lies inside A's right side (two vertices of B
+   * inside it, B's side a piece of it). Markers: A's sides 1-4, B's 5-8. */
+  shape_t *s = calloc(1, sizeof *s);
+  const double a_pts[8] = {0, 0, 4, 0, 4, 4, 0, 4}, b_pts[8] = {4, 1, 8, 1, 8, 3, 4, 3};
+  sh_ring(s, a_pts, 4);
+  sh_ring(s, b_pts, 4);
+  qk_poly_t *p = sh_poly(s, NULL);
+  int32_t sm[8] = {1, 2, 3, 4, 5, 6, 7, 8};
+  assert_int_equal(qk_poly_set_markers(p, NULL, sm, &err), QK_OK);
+  qk_mesh_t *m = mesh_of(p, &o);
+  check_general(s, m, 20);
+  qk_mesh_stats_t st;
+  qk_mesh_stats(m, &st);
+  assert_int_equal(st.split_vertices, 2);
+  assert_int_equal(st.merged_segments, 1);
+  assert_int_equal(st.components, 2);
+  size_t nv, nt, no;
+  const double *xy = qk_mesh_vertices(m, &nv);
+  const uint32_t *tri = qk_mesh_triangles(m, &nt), *comp = qk_mesh_triangle_components(m, &nt);
+  /* One component each side of x = 4 (B's side is shared, not a slit). */
+  uint32_t left = 0, right = 0;
+  for (size_t t = 0; t < nt; t++) {
+    double cx = (xy[2 * tri[3 * t]] + xy[2 * tri[3 * t + 1]] + xy[2 * tri[3 * t + 2]]) / 3;
+    uint32_t *side = cx < 4 ? &left : &right;
+    if (!*side) *side = comp[t];
+    assert_int_equal(comp[t], *side);
+  }
+  assert_true(left && right && left != right);
+  assert_int_equal(qk_mesh_segments(m, NULL, NULL, NULL, 0, &no), QK_OK);
+  uint32_t *ab = malloc((2 * no + 2) * sizeof *ab), *sg = malloc((no + 1) * sizeof *sg);
+  int32_t *mk = malloc((no + 1) * sizeof *mk);
+  assert_true(ab && sg && mk);
+  assert_int_equal(qk_mesh_segments(m, ab, sg, mk, no, &no), QK_OK);
+  size_t shared = 0;
+  for (size_t i = 0; i < no; i++) {
+    assert_true(sg[i] < 8);
+    assert_int_equal(mk[i], sm[sg[i]]);
+    const double *pa = &xy[2 * ab[2 * i]], *pb = &xy[2 * ab[2 * i + 1]];
+    if (pa[0] == 4 && pb[0] == 4 && fmin(pa[1], pb[1]) >= 1 && fmax(pa[1], pb[1]) <= 3) {
+      assert_int_equal(sg[i], 1); /* the shared piece: A's side, the earlier segment */
+      shared++;
+    }
+    assert_true(sg[i] != 7); /* B's left side: merged into A's */
+  }
+  assert_true(shared >= 3); /* length 2 at edges of at most 0.7 */
+  free(ab), free(sg), free(mk);
+  qk_mesh_free(m);
+  qk_poly_free(p);
+  /* A square cut by a diagonal at an angle of no multiple of 45 degrees, with three input
+   * vertices exactly on it: a stem's end, and both ends of a segment lying along it. */
+  memset(s, 0, sizeof *s);
+  const double sq[8] = {0, 0, 8, 0, 8, 8, 0, 8};
+  sh_ring(s, sq, 4);
+  uint32_t c = sh_vertex(s, 8, 4), t1 = sh_vertex(s, 2, 1), t2 = sh_vertex(s, 2, 6);
+  uint32_t o1 = sh_vertex(s, 6, 3), o2 = sh_vertex(s, 7, 3.5);
+  sh_seg(s, c, 0); /* the diagonal, from (8, 4) to (0, 0) */
+  sh_seg(s, t1, t2);
+  sh_seg(s, o2, o1);
+  p = sh_poly(s, NULL);
+  m = mesh_of(p, &o);
+  check_general(s, m, 20);
+  qk_mesh_stats(m, &st);
+  /* Three on the diagonal, and (8, 4) on the square's right side, split there too. */
+  assert_int_equal(st.split_vertices, 4);
+  assert_int_equal(st.merged_segments, 1);
+  qk_mesh_free(m);
+  qk_poly_free(p);
+  free(s);
+  /* Crossing segments stay refused, named by their input numbers. */
+  double xc[10] = {0, 0, 4, 0, 2, 2, 1, -1, 3, 1};
+  uint32_t sc[8] = {0, 1, 1, 2, 2, 0, 3, 4};
+  assert_int_equal(qk_poly_from_arrays(xc, 5, sc, 4, NULL, 0, NULL, &p, &err), QK_OK);
+  assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_ERR_GEOMETRY);
+  assert_non_null(strstr(err.message, "segments 0 and 3 cross or overlap"));
+  qk_poly_free(p);
+}
+
+/* The vertex of s at (x, y), added when new (a linear search: small inputs). */
+static uint32_t sh_at(shape_t *s, double x, double y) {
+  for (size_t i = 0; i < s->nv; i++)
+    if (s->xy[2 * i] == x && s->xy[2 * i + 1] == y) return (uint32_t)i;
+  return sh_vertex(s, x, y);
+}
+
+/* Seeded random touching inputs: an n x n grid of cells over the square [0, n]^2, its inner
+ * corners moved by multiples of 1/16, each cell given as a ring of its own (every inner
+ * side twice, once each way), and on some of a cell's sides one or two points at parameters
+ * k/4 (exact: dyadic coordinates with few bits) that only that cell's ring passes through:
+ * vertices inside the neighbour's copy of the side, the copies overlapping along stretches.
+ * Every mesh is checked exactly against the square's area (the cells tile it). */
+static void test_mesh_general_mode_touching_random(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, qkt_seed(53));
+  shape_t *s = malloc(sizeof *s);
+  assert_non_null(s);
+  qk_mesh_options_t o = general_opts();
+  size_t splits = 0, merges = 0;
+  for (int trial = 0; trial < 40; trial++) {
+    memset(s, 0, sizeof *s);
+    const int n = 2 + (int)qkt_rng_below(&r, 3);
+    /* The outer square first (vertices 0-3), as the area's ring; its sides are the cells'. */
+    const double corner[8] = {0, 0, n, 0, n, n, 0, n};
+    for (int i = 0; i < 4; i++) sh_vertex(s, corner[2 * i], corner[2 * i + 1]);
+    s->ring[0][0] = 0, s->ring[0][1] = 4, s->nring = 1;
+    double gx[5][5], gy[5][5];
+    for (int i = 0; i <= n; i++)
+      for (int j = 0; j <= n; j++) {
+        const int inner = i > 0 && i < n && j > 0 && j < n;
+        gx[i][j] = i + (inner ? ((double)qkt_rng_below(&r, 9) - 4) / 16 : 0);
+        gy[i][j] = j + (inner ? ((double)qkt_rng_below(&r, 9) - 4) / 16 : 0);
+      }
+    for (int i = 0; i < n; i++)
+      for (int j = 0; j < n; j++) {
+        const int ci[4] = {i, i + 1, i + 1, i}, cj[4] = {j, j, j + 1, j + 1};
+        uint32_t ring[16];
+        size_t m = 0;
+        for (int k = 0; k < 4; k++) {
+          const double ax = gx[ci[k]][cj[k]], ay = gy[ci[k]][cj[k]];
+          const double bx = gx[ci[(k + 1) % 4]][cj[(k + 1) % 4]],
+                       by = gy[ci[(k + 1) % 4]][cj[(k + 1) % 4]];
+          ring[m++] = sh_at(s, ax, ay);
+          /* 0, 1 or 2 extra points on this side, at k/4 in order */
+          const uint32_t extra = qkt_rng_below(&r, 3);
+          const uint32_t first = 1 + qkt_rng_below(&r, 3 - (extra == 2));
+          for (uint32_t e = 0; e < extra; e++) {
+            const double t = (double)(first + e) / 4;
+            ring[m++] = sh_at(s, ax + (bx - ax) * t, ay + (by - ay) * t);
+          }
+        }
+        for (size_t k = 0; k < m; k++) sh_seg(s, ring[k], ring[(k + 1) % m]);
+      }
+    o.max_size = trial % 2 ? 0.3 : 0;
+    qk_poly_t *p = sh_poly(s, NULL);
+    qk_mesh_t *m = mesh_of(p, &o);
+    check_general(s, m, 20);
+    qk_mesh_stats_t st;
+    qk_mesh_stats(m, &st);
+    assert_int_equal(st.components, (size_t)(n * n));
+    assert_true(st.merged_segments > 0); /* (every inner side is given twice) */
+    splits += st.split_vertices, merges += st.merged_segments;
+    qk_mesh_free(m);
+    qk_poly_free(p);
+  }
+  printf("# 40 touching grids: %zu vertices split segments, %zu segments merged\n", splits, merges);
+  assert_true(splits > 40);
+  free(s);
+}
+
 /* The .msh read back: every triangle is one element, in a surface entity whose physical
  * groups are named for its component and, with regional attributes, for its region
  * (issue 12: a group per region; there were only components); every output segment is a
@@ -1246,13 +1405,23 @@ static void test_mesh_general_mode_refusals(void **state) {
   assert_non_null(strstr(err.message, "segments 0"));
   assert_non_null(strstr(err.message, "and 1"));
   qk_poly_free(p);
-  /* A vertex on a segment. */
+  /* A vertex on a segment: the segment is split there (it was refused, naming both; see
+   * test_mesh_general_mode_touching), unless rounding may have put it there. */
   double x3[6] = {0, 0, 3, 1, 1.5, 0.5};
   uint32_t s3[2] = {0, 1};
   assert_int_equal(qk_poly_from_arrays(x3, 3, s3, 1, NULL, 0, NULL, &p, &err), QK_OK);
+  assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_OK);
+  qk_mesh_stats_t ms;
+  qk_mesh_stats(m, &ms);
+  assert_int_equal(ms.split_vertices, 1);
+  qk_mesh_free(m);
+  qk_poly_free(p);
+  double x3r[6] = {0, 0, 3, 1, 1.5, 0.5 + 0x1p-30};
+  assert_int_equal(qk_poly_from_arrays(x3r, 3, s3, 1, NULL, 0, NULL, &p, &err), QK_OK);
+  assert_int_equal(qk_poly_round(p, 0x1p-4, NULL), QK_OK);
   assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_ERR_GEOMETRY);
-  assert_non_null(strstr(err.message, "vertex 2"));
-  assert_non_null(strstr(err.message, "segment 0"));
+  assert_non_null(strstr(err.message, "vertex 2 at (1.5, 0.5) lies on segment 0"));
+  assert_null(m);
   qk_poly_free(p);
   /* A hole point on a segment. */
   double x5[8] = {0, 0, 3, 0, 3, 3, 0, 3}, h5[2] = {1.5, 0};
@@ -1268,15 +1437,26 @@ static void test_mesh_general_mode_refusals(void **state) {
   assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_ERR_GEOMETRY);
   assert_non_null(strstr(err.message, "vertices 1 and 2"));
   qk_poly_free(p);
-  /* The same two vertices joined twice (segments 1 and 3 of a triangle with a tail), and a
-   * segment from a vertex to itself: each named. Without the first check the mesh would
-   * be made with one of the two segments lost. */
+  /* The same two vertices joined twice (segments 1 and 3 of a triangle with a tail) are
+   * merged (they were refused, naming both: the mesh must not lose one silently, and its
+   * edges are reported as segment 1's), and a segment from a vertex to itself is named. */
   double x6[8] = {0, 0, 3, 0, 1, 2, 4, 4};
   uint32_t s6[8] = {0, 1, 1, 2, 2, 0, 2, 1}, s7[8] = {0, 1, 1, 2, 2, 0, 3, 3};
   assert_int_equal(qk_poly_from_arrays(x6, 4, s6, 4, NULL, 0, NULL, &p, &err), QK_OK);
-  assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_ERR_GEOMETRY);
-  assert_non_null(strstr(err.message, "segments 1 and 3 both join vertices"));
-  assert_null(m);
+  assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_OK);
+  qk_mesh_stats(m, &ms);
+  assert_int_equal(ms.merged_segments, 1);
+  assert_int_equal(ms.split_vertices, 0);
+  size_t no6;
+  assert_int_equal(qk_mesh_segments(m, NULL, NULL, NULL, 0, &no6), QK_OK);
+  uint32_t *sg6 = malloc((no6 + 1) * sizeof *sg6), *ab6 = malloc((2 * no6 + 2) * sizeof *ab6);
+  assert_true(sg6 && ab6);
+  assert_int_equal(qk_mesh_segments(m, ab6, sg6, NULL, no6, &no6), QK_OK);
+  size_t on1 = 0;
+  for (size_t i = 0; i < no6; i++) assert_true(sg6[i] <= 2), on1 += sg6[i] == 1;
+  assert_true(on1 > 0);
+  free(sg6), free(ab6);
+  qk_mesh_free(m);
   qk_poly_free(p);
   assert_int_equal(qk_poly_from_arrays(x6, 4, s7, 4, NULL, 0, NULL, &p, &err), QK_OK);
   assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_ERR_GEOMETRY);
@@ -1740,6 +1920,8 @@ int main(void) {
       cmocka_unit_test(test_mesh_general_mode_size_domain),
       cmocka_unit_test(test_mesh_general_mode_ulp_pair),
       cmocka_unit_test(test_mesh_general_mode_refusals),
+      cmocka_unit_test(test_mesh_general_mode_touching),
+      cmocka_unit_test(test_mesh_general_mode_touching_random),
       cmocka_unit_test(test_mesh_general_mode_auto),
       cmocka_unit_test(test_mesh_general_mode_graded_late),
       cmocka_unit_test(test_mesh_general_mode_hostile),

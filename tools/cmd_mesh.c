@@ -509,8 +509,9 @@ static void print_stats(const qk_mesh_t *mesh, const qk_mesh_stats_t *st, const 
          mode_name(s.mode), s.lattice_exponent, s.origin_x, s.origin_y, s.proven_min_angle_deg,
          s.proven_max_angle_deg);
   if (s.mode == QK_MESH_GENERAL)
-    printf("\"exempt_angles\": %zu, \"smallest_input_angle_deg\": %.10g, ", s.exempt_angles,
-           s.smallest_input_angle_deg);
+    printf("\"exempt_angles\": %zu, \"smallest_input_angle_deg\": %.10g, "
+           "\"split_vertices\": %zu, \"merged_segments\": %zu, ",
+           s.exempt_angles, s.smallest_input_angle_deg, s.split_vertices, s.merged_segments);
   printf("\"angle_histogram\": [");
   uint64_t bins[180] = {0};
   if (qk_mesh_angle_histogram(mesh, bins) != QK_OK) memset(bins, 0, sizeof bins); /* (a mesh) */

@@ -36,7 +36,12 @@
  * refinement seeded from a graded quadtree: every angle at least 20 degrees (or
  * min_angle_deg) and at most 140 (180 - 2 x the bound) except inside input angles below
  * 60 degrees; input vertices bit-identical, every vertex on a segment exactly on it
- * (docs/mesh.md, "The general mode", has the algorithm and the proof).
+ * (docs/mesh.md, "The general mode", has the algorithm and the proof). It takes touching
+ * input: a vertex exactly inside a segment splits the segment there, and a segment that
+ * repeats another, wholly or along a stretch, is merged into the earlier one (its mesh
+ * edges are reported as that segment's, with its marker); stats count both.
+ * QK_MESH_AUTO runs it also where a lattice mode it chose refuses segments that meet
+ * (touching components), keeping the lattice mode's message when it refuses too.
  *
  * Thread safety: a mesh and a qk_poly never change once made, so any number of threads
  * may call the functions taking a const handle (accessors, statistics, writers) on one
@@ -245,8 +250,9 @@ typedef struct qk_mesh qk_mesh_t;
  * \return QK_OK, QK_ERR_INVALID (bad option), QK_ERR_GEOMETRY (the lattice modes:
  *         non-integer or out-of-domain coordinates, bad angles, open chains, degree != 2,
  *         intersecting or touching components, hole point on a boundary or outside; the
- *         general mode: duplicate vertices, a vertex on a segment, crossing or overlapping
- *         segments, a hole or region point on a segment, or a segment that must be split
+ *         general mode: duplicate vertices, crossing segments, a vertex on a segment that
+ *         rounding (qk_poly_round) may have put there, a hole or region point on a segment
+ *         or a vertex, or a segment that must be split
  *         where its endpoints allow no exact point), QK_ERR_LIMIT (too large; the general
  *         mode: a refinement that does not settle, or precision exhausted) or QK_ERR_NOMEM.
  */
@@ -364,6 +370,10 @@ typedef struct qk_mesh_stats {
                                         facing input angles below 60 degrees */
   double smallest_input_angle_deg; /**< general mode: the smallest angle between two input
                                         segments at a vertex (180 when none) */
+  size_t split_vertices;           /**< general mode: input vertices found inside input
+                                        segments (each splits its segment there) */
+  size_t merged_segments;          /**< general mode: input segments (or pieces of them)
+                                        that repeated an earlier one, merged into it */
   double seconds_validate;         /**< checking the input */
   double seconds_subdivide;        /**< step 1 */
   double seconds_balance;          /**< step 2 */

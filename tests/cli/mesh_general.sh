@@ -16,7 +16,7 @@ if "$cli" mesh "$tmp/coast.poly" --general -o "$tmp/probe" 2>&1 | grep -q 'unkno
   exit 77
 fi
 
-expect 0 '"mode": "general", .*"proven_min_angle_deg": 20, "proven_max_angle_deg": 140, "exempt_angles": [0-9]+, "smallest_input_angle_deg": [0-9.]+, "angle_histogram": \[' -- \
+expect 0 '"mode": "general", .*"proven_min_angle_deg": 20, "proven_max_angle_deg": 140, "exempt_angles": [0-9]+, "smallest_input_angle_deg": [0-9.]+, "split_vertices": 0, "merged_segments": 0, "angle_histogram": \[' -- \
   "$cli" mesh "$tmp/coast.poly" -o "$tmp/c" --svg "$tmp/c.svg" --msh "$tmp/c.msh" --vtk "$tmp/c.vtu" --poly "$tmp/c.out.poly" --stats
 for f in c.node c.ele c.svg c.msh c.vtu c.out.poly; do
   [ -s "$tmp/$f" ] || fail "$f not written"
@@ -61,6 +61,21 @@ ls "$tmp"/bad* >/dev/null 2>&1 && fail "output written for bad input"
 printf '3 2 0 0\n0 0 0\n1 4 1\n2 8 0\n2 0\n0 0 1\n1 1 2\n0\n' >"$tmp/open.poly"
 expect 1 'open.poly: nothing to mesh' -- "$cli" mesh "$tmp/open.poly" -o "$tmp/empty"
 ls "$tmp"/empty* >/dev/null 2>&1 && fail "output written for an input without area"
+# Touching input: two squares side by side, B's left side inside A's right side (integer,
+# axis-parallel: the book's mode refuses touching components, so the automatic choice runs
+# the general mode, which splits A's side at B's corners and merges B's side into it).
+printf '8 2 0 1\n1 0 0 0\n2 4 0 0\n3 4 4 0\n4 0 4 0\n5 4 1 0\n6 8 1 0\n7 8 3 0\n8 4 3 0\n8 1\n1 1 2 1\n2 2 3 2\n3 3 4 3\n4 4 1 4\n5 5 6 5\n6 6 7 6\n7 7 8 7\n8 8 5 8\n0\n' >"$tmp/adj.poly"
+expect 0 '"components": 2, .*"mode": "general", .*"split_vertices": 2, "merged_segments": 1, ' -- \
+  "$cli" mesh "$tmp/adj.poly" -o "$tmp/adj" --poly "$tmp/adj.out.poly" --stats
+# The shared side's mesh edges carry A's marker (2): the earlier segment's.
+awk 'NR > 1 && $4 == 8 { bad = 1 } NR > 1 && $4 == 2 { n++ } END { exit !(n >= 1 && !bad) }' "$tmp/adj.out.poly" ||
+  fail "adj.out.poly: the shared side's edges should carry marker 2, none 8"
+expect 1 'adj.poly:17: components 1 and 2 touch or cross: segments 2 \(line 12\) and 7 \(line 17\) meet' -- \
+  "$cli" mesh "$tmp/adj.poly" -o "$tmp/adjb" --book
+# A crossing stays refused in the automatic choice too, with the book's mode's message.
+printf '8 2 0 0\n1 0 0\n2 4 0\n3 4 4\n4 0 4\n5 3 1\n6 8 1\n7 8 3\n8 3 3\n8 0\n1 1 2\n2 2 3\n3 3 4\n4 4 1\n5 5 6\n6 6 7\n7 7 8\n8 8 5\n0\n' >"$tmp/adjx.poly"
+expect 1 'adjx.poly:[0-9]+: components 1 and 2 touch or cross' -- "$cli" mesh "$tmp/adjx.poly" -o "$tmp/adjx"
+ls "$tmp"/adjx* | grep -qv 'adjx.poly$' && fail "output written for crossing input"
 
 shared=${QK_SHARED_DIR:-$src/../shared}
 if [ -f "$shared/data/countries-50m.geojson" ]; then
