@@ -15,18 +15,25 @@
  */
 #include "mesh/mesh_internal.h"
 
+#include <limits.h>
 #include <math.h>
 #include <string.h>
 
 /* Fractional binary digits of a finite double (0 for integers). */
-static int frac_bits(double c) {
-  if (c == 0) return 0;
+/* The binary fraction digits of c: the least f with c 2^f an integer, negative for
+ * multiples of 2^1 and above (INT_MIN for 0, a multiple of every power of two). */
+static int lattice_bits(double c) {
+  if (c == 0) return INT_MIN;
   int e;
   double m = frexp(c, &e);                   /* c = m 2^e, 0.5 <= |m| < 1 */
   uint64_t M = (uint64_t)fabs(ldexp(m, 53)); /* c = +-M 2^(e-53), M an integer */
   int tz = 0;
   while (!(M & 1)) M >>= 1, tz++;
-  int bits = 53 - e - tz;
+  return 53 - e - tz;
+}
+
+static int frac_bits(double c) {
+  int bits = lattice_bits(c);
   return bits > 0 ? bits : 0;
 }
 
@@ -75,41 +82,49 @@ qk_status_t qk__mesh_lattice(const qk_poly_t *P, const qk_mesh_options_t *opt, i
   memset(L, 0, sizeof *L);
   if (book) return QK_OK;
   if (P->nv == 0) return QK_OK;
-  int f = 0;
+  int f = 0, coarse = INT_MIN; /* coarse: the coarsest lattice holding every vertex */
   size_t finest = 0;
   double minx = P->vx[0], miny = P->vy[0], maxx = minx, maxy = miny;
   for (size_t i = 0; i < P->nv; i++) {
     int b = frac_bits(P->vx[i]), c = frac_bits(P->vy[i]);
     if (b > f || c > f) f = b > c ? b : c, finest = i;
+    int lb = lattice_bits(P->vx[i]), lc = lattice_bits(P->vy[i]);
+    coarse = lb > coarse ? lb : coarse, coarse = lc > coarse ? lc : coarse;
     minx = fmin(minx, P->vx[i]), maxx = fmax(maxx, P->vx[i]);
     miny = fmin(miny, P->vy[i]), maxy = fmax(maxy, P->vy[i]);
   }
+  double range = fmax(maxx - minx, maxy - miny);
+  /* Integer input too wide for the unit lattice, on a coarser one (multiples of 2^k,
+   * k > 0): that lattice (f = -k), so that it is meshed with its proven angles rather
+   * than refused (or sent to the general mode). Where the unit lattice fits, f stays 0:
+   * meshes made before are unchanged. */
+  if (f == 0 && coarse < 0 && !(range <= (double)QK_MESH_MAX_SIZE))
+    f = coarse > -1000 ? coarse : -1000;
   /* A unit square's diagonal, sqrt(2) 2^-f, is its longest possible edge. */
   int fv = f;
   if (opt->max_size > 0)
     while (f < 1100 && ldexp(1.0, -f) * 1.4142135623730951 > opt->max_size) f++;
-  double range = fmax(maxx - minx, maxy - miny);
   if (f > fv && !(ldexp(range, f) <= (double)QK_MESH_MAX_SIZE))
     return qk__mesh_fail(err, QK_ERR_LIMIT, 0,
-                         "max_size %.17g needs a lattice of spacing 2^-%d, and the input's extent "
+                         "max_size %.17g needs a lattice of spacing 2^%d, and the input's extent "
                          "%.17g would span more than 2^30 such steps",
-                         opt->max_size, f, range);
+                         opt->max_size, -f, range);
   if (!(ldexp(range, f) <= (double)QK_MESH_MAX_SIZE))
     return qk__mesh_fail(err, QK_ERR_GEOMETRY, P->vline[finest],
-                         "vertex %lu: (%.17g, %.17g) needs a lattice of spacing 2^-%d, and the "
+                         "vertex %lu: (%.17g, %.17g) needs a lattice of spacing 2^%d, and the "
                          "input's extent %.17g would span more than 2^30 such steps (no exact "
                          "placement exists; see docs/mesh.md)",
-                         qk__mesh_num(P, finest), P->vx[finest], P->vy[finest], f, range);
+                         qk__mesh_num(P, finest), P->vx[finest], P->vy[finest], -f, range);
   uint64_t U = 1;
   while ((double)U < ldexp(range, f)) U *= 2;
   double ext = ldexp((double)U, -f);
   double big = fmax(fmax(fabs(minx), fabs(minx + ext)), fmax(fabs(miny), fabs(miny + ext)));
   if (!(ldexp(big, f + 1) < 0x1p52))
     return qk__mesh_fail(err, QK_ERR_GEOMETRY, P->vline[finest],
-                         "vertex %lu: (%.17g, %.17g) needs a lattice of spacing 2^-%d, too fine "
+                         "vertex %lu: (%.17g, %.17g) needs a lattice of spacing 2^%d, too fine "
                          "for a double at magnitude %.17g (no exact placement exists; see "
                          "docs/mesh.md)",
-                         qk__mesh_num(P, finest), P->vx[finest], P->vy[finest], f, big);
+                         qk__mesh_num(P, finest), P->vx[finest], P->vy[finest], -f, big);
   /* The book's step 1 splits every square along the segments down to unit size, so the
    * mesh has a few triangles per lattice step of boundary; a size bound gives about
    * 4 (extent / H)^2. Refuse what could not fit in memory rather than try. */
@@ -117,11 +132,11 @@ qk_status_t qk__mesh_lattice(const qk_poly_t *P, const qk_mesh_options_t *opt, i
   double by_size = opt->max_size > 0 ? 4 * (range / opt->max_size) * (range / opt->max_size) : 0;
   if (steps > QK__MESH_MAX_STEPS || by_size > QK__MESH_MAX_STEPS)
     return qk__mesh_fail(err, QK_ERR_LIMIT, P->vline[finest],
-                         "the dyadic mode would need %.3g lattice steps of 2^-%d along the "
+                         "the dyadic mode would need %.3g lattice steps of 2^%d along the "
                          "segments and about %.3g triangles for the size bound (at most %.3g): "
                          "vertex %lu (%.17g, %.17g) needs the finest spacing; round the input "
                          "to fewer binary digits (see docs/mesh.md)",
-                         steps, f, by_size, (double)QK__MESH_MAX_STEPS, qk__mesh_num(P, finest),
+                         steps, -f, by_size, (double)QK__MESH_MAX_STEPS, qk__mesh_num(P, finest),
                          P->vx[finest], P->vy[finest]);
   L->f = f, L->x0 = minx, L->y0 = miny;
   return QK_OK;

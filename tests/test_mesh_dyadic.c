@@ -233,6 +233,36 @@ static void test_mesh_dyadic_scales(void **state) {
   check_dyadic(&in, m, "tiny squares at 1e6");
   qk_mesh_free(m);
 
+  /* Integer input too wide for the unit lattice (2^k apart, k up to 500) is meshed on the
+   * coarsest lattice holding it, spacing 2^k (f = -k): with its proven angles, where the
+   * dyadic mode refused it ("no exact placement exists", which was not so) and
+   * QK_MESH_AUTO sent it to the general mode (20 degrees). */
+  const int ks[3] = {40, 249, 500};
+  for (int i = 0; i < 3; i++) {
+    const double u = ldexp(1, ks[i]);
+    double pent[10] = {u, u, 2 * u, u, 3 * u, 2 * u, 2 * u, 3 * u, u, 2 * u};
+    uint32_t ps[10] = {0, 1, 1, 2, 2, 3, 3, 4, 4, 0};
+    arr_t pin = {pent, NULL, ps, 5, 5, 0};
+    m = generate(&pin, &o, "a pentagon on the lattice 2^k");
+    qk_mesh_stats(m, &s);
+    assert_int_equal(s.lattice_exponent, -ks[i]);
+    assert_true(s.min_angle_deg >= 45 && s.max_angle_deg <= 90);
+    check_dyadic(&pin, m, "a pentagon on the lattice 2^k");
+    qk_mesh_free(m);
+  }
+  /* Where the unit lattice fits, it stays (meshes made before are unchanged): even
+   * coordinates with a size bound (the dyadic mode). */
+  double even[8] = {0, 0, 64, 0, 64, 64, 0, 64};
+  arr_t ein = {even, NULL, seg, 4, 4, 0};
+  o.max_size = 40;
+  m = generate(&ein, &o, "even square");
+  qk_mesh_stats(m, &s);
+  assert_int_equal(s.mode, QK_MESH_DYADIC);
+  assert_int_equal(s.lattice_exponent, 0);
+  check_dyadic(&ein, m, "even square");
+  qk_mesh_free(m);
+  o.max_size = 0;
+
   qk_poly_t *p;
   qk_mesh_error_t err;
   /* QK_MESH_AUTO hands what the dyadic mode refuses to the general mode; insisting on the
