@@ -305,82 +305,137 @@ static qk_status_t add_piece(qk__gm_t *g, size_t s, uint32_t a, uint32_t b) {
   return QK_OK;
 }
 
+/* What insert_piece did with a piece of a segment. */
+enum { PIECE_IN, PIECE_MERGED, PIECE_SPLIT, PIECE_FAILED };
+
+/* insert_piece's cases other than a piece inserted (out of line: the loop over a
+ * coastline's segments met none of them and paid for their registers and messages). t and
+ * k: the edge a-b if there is one (constrained); else st, block and bseg are what
+ * qk__cdt_insert_segment returned. */
+#if defined(__GNUC__)
+__attribute__((noinline, cold))
+#endif
+static int
+piece_trouble(qk__gm_t *g, size_t s, uint32_t a, uint32_t b, uint32_t t, int k, qk_status_t st,
+              uint32_t block, uint32_t bseg, uint32_t *vi, qk_status_t *out) {
+  const qk_poly_t *P = g->P;
+  const unsigned long ls = sline(P, s);
+  char n1[80], n2[80];
+  if (t != QK__CDT_NONE) { /* a-b is a constrained edge already: a repeat */
+    if (g->touch) {
+      if (note_change(g, s)) goto nomem;
+      g->nmerged++;
+      return PIECE_MERGED;
+    }
+    uint32_t o = g->cdt.seg[3 * t + k];
+    *out =
+        qk__mesh_fail(g->err, QK_ERR_GEOMETRY, ls, "%s and %s both join vertices %lu and %lu",
+                      qk__gm_sname(P, "segments", o, sline(P, o), n1),
+                      qk__gm_sname(P, "", s, ls, n2) + 1, qk__mesh_num(P, a), qk__mesh_num(P, b));
+    return PIECE_FAILED;
+  }
+  if (st == QK_ERR_NOMEM) goto nomem;
+  if (bseg != QK__CDT_NONE) {
+    *out = qk__mesh_fail(g->err, QK_ERR_GEOMETRY, ls, "%s and %s cross or overlap",
+                         qk__gm_sname(P, "segments", bseg, sline(P, bseg), n1),
+                         qk__gm_sname(P, "", s, ls, n2) + 1);
+    return PIECE_FAILED;
+  }
+  *vi = block < g->vcap ? g->vi[block].in : QK__CDT_NONE;
+  if (*vi == QK__CDT_NONE) {
+    *out = qk__mesh_fail(g->err, QK_ERR_GEOMETRY, ls, "%s is blocked",
+                         qk__gm_sname(P, "segment", s, ls, n2));
+    return PIECE_FAILED;
+  }
+  /* A touch that rounding may have made (qk_poly_round moved the vertex or the segment's
+   * ends) changed the input's shape: refused as without touch. */
+  const uint32_t u = P->seg[2 * s], w = P->seg[2 * s + 1];
+  const int moved = P->vmoved && (P->vmoved[*vi] > 0 || P->vmoved[u] > 0 || P->vmoved[w] > 0);
+  if (!g->touch || moved) {
+    *out = qk__mesh_fail(g->err, QK_ERR_GEOMETRY, ls, "%s at (%.17g, %.17g) lies on %s",
+                         qk__gm_name(P, "vertex", *vi, vline(P, *vi), n1), P->vx[*vi] + 0.0,
+                         P->vy[*vi] + 0.0, qk__gm_sname(P, "segment", s, ls, n2));
+    return PIECE_FAILED;
+  }
+  if (note_change(g, s)) goto nomem;
+  g->nsplit++;
+  return PIECE_SPLIT;
+nomem:
+  *out = qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  return PIECE_FAILED;
+}
+
+/* Piece a-b (input vertices) of segment s as a constrained edge: PIECE_IN; with g->touch,
+ * PIECE_MERGED when an earlier segment or piece joins a and b, PIECE_SPLIT with *vi when
+ * input vertex *vi lies inside it (nothing inserted then); PIECE_FAILED with *st and the
+ * message otherwise (a repeat or a vertex inside without touch, a crossing). */
+static inline int insert_piece(qk__gm_t *g, size_t s, uint32_t a, uint32_t b, uint32_t *vi,
+                               qk_status_t *st) {
+  qk__cdt_t *c = &g->cdt;
+  int k;
+  uint32_t t = qk__cdt_find_edge(c, g->cv[a], g->cv[b], &k);
+  if (t != QK__CDT_NONE) {
+    if (c->seg[3 * t + k] != QK__CDT_NONE)
+      return piece_trouble(g, s, a, b, t, k, QK_OK, QK__CDT_NONE, QK__CDT_NONE, vi, st);
+    /* Already an edge (most of a coastline's segments): marked here, rather than found a
+     * second time by qk__cdt_insert_segment. */
+    qk__cdt_mark_segment(c, t, k, (uint32_t)s);
+    return PIECE_IN;
+  }
+  uint32_t block = QK__CDT_NONE, bseg = QK__CDT_NONE;
+  qk_status_t r = qk__cdt_insert_segment(c, g->cv[a], g->cv[b], (uint32_t)s, &block, &bseg);
+  if (!r) return PIECE_IN;
+  return piece_trouble(g, s, a, b, QK__CDT_NONE, 0, r, block, bseg, vi, st);
+}
+
+/* Touching input: segment s, split at input vertex vi, inserted piece by piece from its
+ * first vertex u to w (a stack of pieces in g->stack), each piece kept (add_piece) or
+ * merged, or split again. */
+static qk_status_t split_segment(qk__gm_t *g, size_t s, uint32_t u, uint32_t w, uint32_t vi) {
+  size_t sp = 0;
+  if (stack_room(g, 4)) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+  g->stack[sp++] = vi, g->stack[sp++] = w, g->stack[sp++] = u, g->stack[sp++] = vi;
+  while (sp) {
+    const uint32_t b = g->stack[--sp], a = g->stack[--sp];
+    uint32_t v;
+    qk_status_t st = QK_OK;
+    switch (insert_piece(g, s, a, b, &v, &st)) {
+    case PIECE_IN:
+      if (add_piece(g, s, a, b)) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+      break;
+    case PIECE_SPLIT: /* a-v first, then v-b */
+      if (stack_room(g, sp + 4)) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
+      g->stack[sp++] = v, g->stack[sp++] = b, g->stack[sp++] = a, g->stack[sp++] = v;
+      break;
+    case PIECE_FAILED:
+      return st;
+    default: /* PIECE_MERGED */
+      break;
+    }
+  }
+  return QK_OK;
+}
+
 /* The input segments as constrained edges. A segment joining the vertices of an earlier
  * one is a repeat; a vertex blocking its way lies inside it; a constrained edge blocking
  * its way crosses (or overlaps) it. Without g->touch each is refused, naming both. With
  * it, a repeat is merged into the earlier segment and a vertex inside splits the segment
- * there, its pieces then inserted in order from its first vertex (a stack of pieces in
- * g->stack), and only crossings are refused: two segments that overlap along a stretch
- * always have a vertex of one inside the other (the vertices are all in before any
- * segment), so they become shared pieces, merged. */
+ * there, its pieces then inserted in order from its first vertex (split_segment), and
+ * only crossings are refused: two segments that overlap along a stretch always have a
+ * vertex of one inside the other (the vertices are all in before any segment), so they
+ * become shared pieces, merged. */
 static qk_status_t insert_segments(qk__gm_t *g) {
   const qk_poly_t *P = g->P;
-  qk__cdt_t *c = &g->cdt;
   for (size_t s = 0; s < P->ns; s++) {
-    uint32_t u = P->seg[2 * s], w = P->seg[2 * s + 1];
-    unsigned long ls = sline(P, s);
+    uint32_t u = P->seg[2 * s], w = P->seg[2 * s + 1], vi;
     if (u == w)
-      return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, ls, "segment %lu joins vertex %lu to itself",
-                           qk__mesh_snum(P, s), qk__mesh_num(P, u));
-    size_t sp = 0;
-    if (stack_room(g, 2)) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
-    g->stack[sp++] = u, g->stack[sp++] = w;
-    while (sp) {
-      const uint32_t b = g->stack[--sp], a = g->stack[--sp];
-      const int changed = g->schg && g->schg[s];
-      int k;
-      char n1[80], n2[80];
-      uint32_t t = qk__cdt_find_edge(c, g->cv[a], g->cv[b], &k);
-      if (t != QK__CDT_NONE && c->seg[3 * t + k] != QK__CDT_NONE) {
-        if (g->touch) { /* a repeat (of a segment or a piece): merged */
-          if (note_change(g, s)) return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
-          g->nmerged++;
-          continue;
-        }
-        uint32_t o = c->seg[3 * t + k];
-        return qk__mesh_fail(
-            g->err, QK_ERR_GEOMETRY, ls, "%s and %s both join vertices %lu and %lu",
-            qk__gm_sname(P, "segments", o, sline(P, o), n1), qk__gm_sname(P, "", s, ls, n2) + 1,
-            qk__mesh_num(P, a), qk__mesh_num(P, b));
-      }
-      qk_status_t st = QK_OK;
-      if (t != QK__CDT_NONE) {
-        /* Already an edge (most of a coastline's segments): marked here, rather than found
-         * a second time by qk__cdt_insert_segment. */
-        qk__cdt_mark_segment(c, t, k, (uint32_t)s);
-      } else {
-        uint32_t block = QK__CDT_NONE, bseg = QK__CDT_NONE;
-        st = qk__cdt_insert_segment(c, g->cv[a], g->cv[b], (uint32_t)s, &block, &bseg);
-        if (st == QK_ERR_NOMEM) return qk__mesh_fail(g->err, st, 0, "out of memory");
-        if (st && bseg != QK__CDT_NONE)
-          return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, ls, "%s and %s cross or overlap",
-                               qk__gm_sname(P, "segments", bseg, sline(P, bseg), n1),
-                               qk__gm_sname(P, "", s, ls, n2) + 1);
-        if (st) {
-          uint32_t vi = block < g->vcap ? g->vi[block].in : QK__CDT_NONE;
-          if (vi == QK__CDT_NONE)
-            return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, ls, "%s is blocked",
-                                 qk__gm_sname(P, "segment", s, ls, n2));
-          /* A touch that rounding may have made (qk_poly_round moved the vertex or the
-           * segment's ends) changed the input's shape: refused as without touch. */
-          const int moved =
-              P->vmoved && (P->vmoved[vi] > 0 || P->vmoved[u] > 0 || P->vmoved[w] > 0);
-          if (!g->touch || moved)
-            return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, ls, "%s at (%.17g, %.17g) lies on %s",
-                                 qk__gm_name(P, "vertex", vi, vline(P, vi), n1), P->vx[vi] + 0.0,
-                                 P->vy[vi] + 0.0, qk__gm_sname(P, "segment", s, ls, n2));
-          /* Split at vertex vi: a-vi first, then vi-b. */
-          if (note_change(g, s) || stack_room(g, sp + 4))
-            return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
-          g->nsplit++;
-          g->stack[sp++] = vi, g->stack[sp++] = b;
-          g->stack[sp++] = a, g->stack[sp++] = vi;
-          continue;
-        }
-      }
-      if (changed && add_piece(g, s, a, b))
-        return qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");
-    }
+      return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, sline(P, s),
+                           "segment %lu joins vertex %lu to itself", qk__mesh_snum(P, s),
+                           qk__mesh_num(P, u));
+    qk_status_t st = QK_OK;
+    const int r = insert_piece(g, s, u, w, &vi, &st);
+    if (r == PIECE_FAILED) return st;
+    if (r == PIECE_SPLIT && (st = split_segment(g, s, u, w, vi))) return st;
   }
   return QK_OK;
 }
