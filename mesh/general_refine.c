@@ -24,20 +24,30 @@
 int qk__gm_split_param(const qk__gm_t *g, uint32_t s, uint64_t lo, uint64_t hi, uint64_t *k);
 static int protected_piece(const qk__gm_t *g, uint32_t s, uint64_t lo, uint64_t hi);
 
+/* The exact budget of a segment, clamped to [-1, 62]. */
+static int exact_budget(const double A[2], const double B[2]) {
+  int bud = qk__seg_budget(A, B);
+  return bud > 62 ? 62 : bud < -1 ? -1 : bud;
+}
+
 int qk__gm_split_param(const qk__gm_t *g, uint32_t s, uint64_t lo, uint64_t hi, uint64_t *k) {
   const qk_poly_t *P = g->P;
   uint32_t u = P->seg[2 * s], w = P->seg[2 * s + 1];
   const double A[2] = {P->vx[u], P->vy[u]}, B[2] = {P->vx[w], P->vy[w]};
   int bud = g->sbud[s];
   if (bud == QK__GM_SBUD_UNSET) {
-    bud = qk__seg_budget(A, B);
-    bud = bud > 62 ? 62 : bud < -1 ? -1 : bud;
+    bud = exact_budget(A, B);
+    if (bud < 62 && (A[0] == B[0] || A[1] == B[1])) bud = QK__GM_SBUD_FREE;
     g->sbud[s] = (int8_t)bud;
   }
+  int shell = lo == 0 ? g->vsmall[u] : hi == QK__GM_ONE ? g->vsmall[w] : 0;
+  const int apex = (lo == 0) != (hi == QK__GM_ONE) && shell;
+  /* A free segment splits anywhere (to an ulp) but at the apex of a small input angle,
+   * whose shells the termination proof needs at exact radii: there its exact budget. */
+  if (bud == QK__GM_SBUD_FREE) bud = apex ? exact_budget(A, B) : 62;
   if (bud < 1 || hi - lo < 2 || protected_piece(g, s, lo, hi)) return 0;
   uint64_t q = (uint64_t)1 << (62 - bud), target = lo + (hi - lo) / 2;
-  int shell = lo == 0 ? g->vsmall[u] : hi == QK__GM_ONE ? g->vsmall[w] : 0;
-  if ((lo == 0) != (hi == QK__GM_ONE) && shell) {
+  if (apex) {
     /* Concentric shells at the apex of a small input angle: the split point's distance
      * from the apex is the power of two nearest half the piece's length, so that pieces of
      * segments meeting there split at equal radii (Shewchuk 2002). Elsewhere, the exact
@@ -57,6 +67,21 @@ int qk__gm_split_param(const qk__gm_t *g, uint32_t s, uint64_t lo, uint64_t hi, 
   if (K <= lo || K >= hi) return 0;
   *k = K;
   return 1;
+}
+
+int qk__gm_split_point(const qk__gm_t *g, uint32_t s, uint64_t k, const double e0[2],
+                       const double e1[2], double p[2]) {
+  const qk_poly_t *P = g->P;
+  uint32_t u = P->seg[2 * s], w = P->seg[2 * s + 1];
+  const double A[2] = {P->vx[u], P->vy[u]}, B[2] = {P->vx[w], P->vy[w]};
+  int tz = 0;
+  while (tz < 62 && !((k >> tz) & 1)) tz++;
+  qk__seg_point_in(A, B, k >> tz, 62 - tz, p);  /* 0 < k < 2^62 on the budget's grid */
+  if (g->sbud[s] != QK__GM_SBUD_FREE) return 1; /* exact */
+  /* Free: the constant coordinate is A's (k times a zero difference, added), the other
+   * rounded, monotone in k; strictly between the piece's ends, it keeps their order. */
+  const int i = A[0] == B[0]; /* the coordinate that varies along the segment */
+  return p[i] > fmin(e0[i], e1[i]) && p[i] < fmax(e0[i], e1[i]);
 }
 
 /* The floor next to a small input angle (docs/mesh.md, "The refinement" and "Small input
@@ -88,12 +113,23 @@ static qk_status_t split_piece(qk__gm_t *g, uint32_t a, uint32_t b, uint32_t s, 
   if (!*done) return QK_OK;
   uint32_t u = P->seg[2 * s], w = P->seg[2 * s + 1];
   const double A[2] = {P->vx[u], P->vy[u]}, B[2] = {P->vx[w], P->vy[w]};
-  if (!qk__gm_split_param(g, s, lo, hi, &k)) {
+  int kk = 0;
+  uint32_t t = QK__CDT_NONE, v;
+  double p[2];
+  int ok = qk__gm_split_param(g, s, lo, hi, &k);
+  if (ok) {
+    t = qk__cdt_find_edge(&g->cdt, a, b, &kk);
+    if (t == QK__CDT_NONE) return QK_OK; /* split already */
+    ok = qk__gm_split_point(g, s, k, qk__gm_vxy(g, a), qk__gm_vxy(g, b), p);
+  }
+  if (!ok) {
     /* The step the split needs: the piece spans (hi - lo) 2^-62 of the segment. */
     int need = 62 - (int)floor(log2((double)(hi - lo))) + 1, bud = qk__seg_budget(A, B);
     unsigned long line = P->sline ? P->sline[s] : 0;
     char nm[80], has[48];
-    if (bud < 1)
+    if (g->sbud[s] == QK__GM_SBUD_FREE && bud < 1) /* (axis-parallel: any double on it) */
+      snprintf(has, sizeof has, "none (no double strictly inside this piece)");
+    else if (bud < 1)
       snprintf(has, sizeof has, "none inside it");
     else
       snprintf(has, sizeof has, "2^-%d", bud < 62 ? bud : 62);
@@ -104,14 +140,7 @@ static qk_status_t split_piece(qk__gm_t *g, uint32_t a, uint32_t b, uint32_t s, 
                          qk__gm_sname(P, "segment", s, line, nm), A[0], A[1], B[0], B[1], need,
                          has);
   }
-  int tz = 0;
-  while (tz < 62 && !((k >> tz) & 1)) tz++;
-  double p[2];
-  qk__seg_point_in(A, B, k >> tz, 62 - tz, p); /* 0 < k < 2^62 on the budget's grid */
-  int kk;
-  uint32_t t = qk__cdt_find_edge(&g->cdt, a, b, &kk), v;
   int existed;
-  if (t == QK__CDT_NONE) return QK_OK; /* split already */
   qk_status_t st = qk__gm_insert(g, p[0], p[1], t, kk, QK__CDT_EDGE, s, k, &v, &existed);
   if (st) return qk__mesh_fail(g->err, st, 0, "out of memory");
   return QK_OK;

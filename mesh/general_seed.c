@@ -380,20 +380,12 @@ static size_t size_cells(const qk__gm_t *g) {
   return n < 0x1p40 ? (size_t)n : (size_t)1 << 40; /* (a thin domain's box may hold far more) */
 }
 
-/* The trailing zero bits of k (62 for k == 0). */
-static int ctz62(uint64_t k) {
-#if defined(__GNUC__) || defined(__clang__)
-  return k ? __builtin_ctzll(k) < 62 ? __builtin_ctzll(k) : 62 : 62;
-#else
-  int tz = 0;
-  while (tz < 62 && !((k >> tz) & 1)) tz++;
-  return tz;
-#endif
-}
-
 /* Choose an exact split parameter strictly inside (lo, hi) of segment s: concentric shells
- * next to an input vertex, the midpoint otherwise (general_refine.c). */
+ * next to an input vertex, the midpoint otherwise; and its point, given the piece's ends
+ * (general_refine.c). */
 int qk__gm_split_param(const qk__gm_t *g, uint32_t s, uint64_t lo, uint64_t hi, uint64_t *k);
+int qk__gm_split_point(const qk__gm_t *g, uint32_t s, uint64_t k, const double e0[2],
+                       const double e1[2], double p[2]);
 
 /* Step 6: split segment s's piece (lo, hi) while it is longer than the size bound at its
  * middle. Not to the graded leaves' sides: the refinement splits what is encroached, and
@@ -401,18 +393,18 @@ int qk__gm_split_param(const qk__gm_t *g, uint32_t s, uint64_t lo, uint64_t hi, 
  * bounds or none (docs/mesh.md, "Mesh size"). A piece with no exact split point is left to the
  * refinement, which refuses the input only if it must split it. */
 static qk_status_t presplit(qk__gm_t *g, uint32_t s, const double *A, const double *B, double len,
-                            uint64_t lo, uint64_t hi) {
+                            uint64_t lo, uint64_t hi, const double *e0, const double *e1) {
   double t = (double)(lo / 2 + hi / 2) * 0x1p-62;
   double mid[2] = {A[0] + t * (B[0] - A[0]), A[1] + t * (B[1] - A[1])};
   if (!(len * ((double)(hi - lo) * 0x1p-62) > size_at(g, mid, 1))) return QK_OK;
   uint64_t k;
-  if (!qk__gm_split_param(g, s, lo, hi, &k)) return QK_OK;
-  int tz = ctz62(k);
   double p[2];
-  qk__seg_point_in(A, B, k >> tz, 62 - tz, p); /* 0 < k < 2^62 on the budget's grid */
-  qk_status_t st = presplit(g, s, A, B, len, lo, k);
+  /* (e0, e1: the piece's ends, which a free segment's point must lie strictly between) */
+  if (!qk__gm_split_param(g, s, lo, hi, &k) || !qk__gm_split_point(g, s, k, e0, e1, p))
+    return QK_OK;
+  qk_status_t st = presplit(g, s, A, B, len, lo, k, e0, p);
   if (!st) st = add_pt(g, qk__gm_morton(g, p[0], p[1]), p[0], p[1], s, k);
-  if (!st) st = presplit(g, s, A, B, len, k, hi);
+  if (!st) st = presplit(g, s, A, B, len, k, hi, p, e1);
   return st;
 }
 
@@ -616,7 +608,7 @@ qk_status_t qk__gm_seed(qk__gm_t *g) {
     const double dx = B[0] - A[0], dy = B[1] - A[1];
     first[s] = (uint32_t)g->npts;
     if (dx * dx + dy * dy <= skip2) continue;
-    st = presplit(g, (uint32_t)s, A, B, hypot(dx, dy), 0, QK__GM_ONE);
+    st = presplit(g, (uint32_t)s, A, B, hypot(dx, dy), 0, QK__GM_ONE, A, B);
   }
   if (!st) first[P->ns] = (uint32_t)g->npts;
   if (!st && g->npts) st = qk__gm_sort_points(g, g->pts, g->npts);

@@ -1172,6 +1172,70 @@ static void test_mesh_general_mode_touching_random(void **state) {
   free(s);
 }
 
+/* Axis-parallel segments whose ends share no fine dyadic grid (decimal coordinates, the
+ * usual CAD and FEM input: 0.1, 1.3) have no exact split point at a dyadic parameter; they
+ * are split at the double nearest one, which lies on them exactly (the constant coordinate
+ * is theirs). Before, a plain rectangle with corners at tenths was refused as soon as a size
+ * bound asked for a split. Checked exactly: seeded random rectilinear rooms with holes, at
+ * tenths and thousandths, far from the origin too; a slanted segment at tenths is still
+ * refused, naming it. */
+static void test_mesh_general_mode_decimal_rectilinear(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, qkt_seed(54));
+  shape_t *s = malloc(sizeof *s);
+  assert_non_null(s);
+  qk_mesh_options_t o = general_opts();
+  for (int trial = 0; trial < 24; trial++) {
+    memset(s, 0, sizeof *s);
+    const double unit = trial % 3 == 0 ? 0.001 : 0.1, off = trial % 4 == 3 ? 12345.6 : 0;
+    /* A room: a rectangle with a notch cut from its top side (an L or a U), ... */
+    const int w = 8 + (int)qkt_rng_below(&r, 20), h = 6 + (int)qkt_rng_below(&r, 20);
+    const int n0 = 1 + (int)qkt_rng_below(&r, (uint32_t)(w - 3)),
+              n1 = n0 + 1 + (int)qkt_rng_below(&r, (uint32_t)(w - n0 - 1));
+    const int nd = 1 + (int)qkt_rng_below(&r, (uint32_t)(h / 2));
+    const int room[16] = {0, 0, w, 0, w, h, n1, h, n1, h - nd, n0, h - nd, n0, h, 0, h};
+    double pts[16];
+    for (int i = 0; i < 16; i++) pts[i] = off + room[i] * unit;
+    sh_ring(s, pts, 8);
+    /* ... and a rectangular pillar (a hole) below the notch, clockwise. */
+    const int px = 1 + (int)qkt_rng_below(&r, (uint32_t)(w - 3)), py = 1;
+    const int pw = 1 + (int)qkt_rng_below(&r, (uint32_t)(w - px - 1)),
+              ph = 1 + (int)qkt_rng_below(&r, (uint32_t)(h - nd - 2));
+    const int hole[8] = {px, py, px, py + ph, px + pw, py + ph, px + pw, py};
+    double hp[8];
+    for (int i = 0; i < 8; i++) hp[i] = off + hole[i] * unit;
+    sh_ring(s, hp, 4);
+    sh_hole(s, off + (px + pw / 2.0) * unit, off + (py + ph / 2.0) * unit);
+    o.max_size = unit * (0.7 + 2 * qkt_rng_unit(&r));
+    qk_poly_t *p = sh_poly(s, NULL);
+    qk_mesh_t *m = mesh_of(p, &o);
+    check_general(s, m, 20);
+    qk_mesh_free(m);
+    qk_poly_free(p);
+  }
+  free(s);
+  /* The plain rectangle at tenths, and a slanted segment at tenths (refused as before). */
+  double rect[8] = {0.1, 0.2, 1.3, 0.2, 1.3, 0.7, 0.1, 0.7},
+         tri[6] = {0.1, 0.2, 1.3, 0.2, 0.7, 1.1};
+  uint32_t rs[8] = {0, 1, 1, 2, 2, 3, 3, 0}, ts[6] = {0, 1, 1, 2, 2, 0};
+  qk_poly_t *p;
+  qk_mesh_t *m;
+  qk_mesh_error_t err;
+  o.max_size = 0.05;
+  assert_int_equal(qk_poly_from_arrays(rect, 4, rs, 4, NULL, 0, NULL, &p, &err), QK_OK);
+  assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_OK);
+  qk_mesh_free(m);
+  qk_poly_free(p);
+  assert_int_equal(qk_poly_from_arrays(tri, 3, ts, 3, NULL, 0, NULL, &p, &err), QK_OK);
+  assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_ERR_GEOMETRY);
+  assert_non_null(strstr(err.message,
+                         "segment 1 from (1.3, 0.20000000000000001) to (0.69999999999999996, "
+                         "1.1000000000000001) needs a split point"));
+  assert_non_null(strstr(err.message, "exact ones: none inside it"));
+  qk_poly_free(p);
+}
+
 /* The .msh read back: every triangle is one element, in a surface entity whose physical
  * groups are named for its component and, with regional attributes, for its region
  * (issue 12: a group per region; there were only components); every output segment is a
@@ -1922,6 +1986,7 @@ int main(void) {
       cmocka_unit_test(test_mesh_general_mode_refusals),
       cmocka_unit_test(test_mesh_general_mode_touching),
       cmocka_unit_test(test_mesh_general_mode_touching_random),
+      cmocka_unit_test(test_mesh_general_mode_decimal_rectilinear),
       cmocka_unit_test(test_mesh_general_mode_auto),
       cmocka_unit_test(test_mesh_general_mode_graded_late),
       cmocka_unit_test(test_mesh_general_mode_hostile),

@@ -47,8 +47,11 @@ printf '4 2 0 0\n0 0 0\n1 4 4\n2 4 0\n3 0 4\n2 0\n0 0 1\n1 2 3\n0\n' >"$tmp/cros
 expect 1 'cross.poly' -- "$cli" mesh "$tmp/cross.poly" --general -o "$tmp/bad"
 # A spike whose base vertices are 2^-30 apart needs a split finer than its grid allows, and
 # --round auto's grid (2^-24) would merge them: the advice says so rather than "--round auto"
-# (which then refused "vertices 2 and 4 coincide").
-printf '7 2 0 0\n0 -1 -1\n1 -0.5 -1\n2 -0.5 -9.313225746154785e-10\n3 0.5 0\n4 -0.5 9.313225746154785e-10\n5 -0.5 1\n6 -1 1\n7 0\n0 0 1\n1 1 2\n2 2 3\n3 3 4\n4 4 5\n5 5 6\n6 6 0\n0\n' > "$tmp/spk.poly"
+# (which then refused "vertices 2 and 4 coincide"). Its sides slant: axis-parallel ones take
+# any double as a split point (the same spike with vertical sides meshes, below).
+printf '7 2 0 0\n0 -1 -1\n1 -0.75 -1\n2 -0.5 -9.313225746154785e-10\n3 0.5 0\n4 -0.5 9.313225746154785e-10\n5 -0.75 1\n6 -1 1\n7 0\n0 0 1\n1 1 2\n2 2 3\n3 3 4\n4 4 5\n5 5 6\n6 6 0\n0\n' > "$tmp/spk.poly"
+printf '7 2 0 0\n0 -1 -1\n1 -0.5 -1\n2 -0.5 -9.313225746154785e-10\n3 0.5 0\n4 -0.5 9.313225746154785e-10\n5 -0.5 1\n6 -1 1\n7 0\n0 0 1\n1 1 2\n2 2 3\n3 3 4\n4 4 5\n5 5 6\n6 6 0\n0\n' > "$tmp/spkv.poly"
+expect 0 '"mode": "general"' -- "$cli" mesh "$tmp/spkv.poly" -o "$tmp/spkv" --stats
 # ... also after a --round finer than it (that advice named auto's grid again)
 expect 1 "needs a split point .* Rounding cannot help: --round auto's grid 2\\^-24 would make the vertices at \\(-0\\.5, -9\\.3132257461547852e-10\\)" -- "$cli" mesh "$tmp/spk.poly" -o "$tmp/bad" --round 2^-32
 expect 1 "needs a split point .* Rounding cannot help: --round auto's grid 2\\^-24 would make the vertices at \\(-0\\.5, -9\\.3132257461547852e-10\\) and \\(-0\\.5, 9\\.3132257461547852e-10\\) one" -- "$cli" mesh "$tmp/spk.poly" -o "$tmp/bad"
