@@ -146,11 +146,11 @@ static void shrink_all(qk_region_t *r) {
   shrink(a, (void **)&r->sets, &r->cap_sets, r->n_sets, sizeof(uint32_t));
   shrink(a, (void **)&r->kid, &r->cap_kid, r->n_kid, sizeof(uint32_t));
   shrink(a, (void **)&r->segs, &r->cap_segs, r->n_segs, sizeof(qk__seg_t));
-  shrink(a, (void **)&r->seg_feat, &r->cap_seg_feat, r->n_segs, sizeof(uint32_t));
+  shrink(a, (void **)&r->seg_tag, &r->cap_seg_tag, r->n_segs, sizeof(uint32_t));
 }
 
 static size_t layer_bytes(const qk_region_t *r) {
-  return sizeof *r + r->cap_segs * sizeof(qk__seg_t) + r->cap_seg_feat * sizeof(uint32_t) +
+  return sizeof *r + r->cap_segs * sizeof(qk__seg_t) + r->cap_seg_tag * sizeof(uint32_t) +
          r->cap_kid * sizeof(uint32_t) + r->cap_leaves * sizeof(qk__leaf_t) +
          r->cap_le * sizeof(uint32_t) + r->cap_le_tag * sizeof(uint32_t) +
          r->cap_sets * sizeof(uint32_t) + qk_tree_memory(r->tree) + r->props.pool_cap +
@@ -260,12 +260,17 @@ done:
     for (size_t i = 0; i < in->n_rings; i++) bad += b.bad[i];
     qk__free(&alloc, b.bad, in->n_rings + 1);
   }
+  /* The drawing's tags, in place of the features the build read (see seg_tag). */
+  for (size_t i = 0; i < pc.n; i++)
+    pc.feat[i] = pc.feat[i] << 2 |
+                 (i == 0 || pc.ring[i] != pc.ring[i - 1] ? QK__SEG_RING_START : 0u) |
+                 (pc.vtx[i] == UINT32_MAX ? QK__SEG_ADDED : 0u);
   qk__free(&alloc, pc.ring, pc.cap * sizeof(uint32_t));
   qk__free(&alloc, pc.vtx, pc.cap * sizeof(uint32_t));
   r->segs = pc.seg;
-  r->seg_feat = pc.feat;
+  r->seg_tag = pc.feat;
   r->n_segs = pc.n;
-  r->cap_segs = r->cap_seg_feat = pc.cap;
+  r->cap_segs = r->cap_seg_tag = pc.cap;
   if (st) {
     qk_region_free(r);
     if (err && !err->message[0])

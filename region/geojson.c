@@ -212,13 +212,44 @@ static qk_status_t position(gj_t *g, json_object *p, size_t f, const gj_at_t *w,
   return st;
 }
 
-static qk_status_t ring(gj_t *g, json_object *arr, size_t f, size_t poly, size_t k) {
+static bool is_number(json_object *o) {
+  return json_object_is_type(o, json_type_double) || json_object_is_type(o, json_type_int);
+}
+
+/* A coordinates array nested one level too shallow or too deep for its type (a Polygon's
+ * coordinates given to a MultiPolygon, or the reverse) shows as a ring or a polygon of
+ * numbers, or as a ring whose first position holds arrays; read on, it gave "ring 0: 2
+ * positions (a ring needs at least 4)". `where` names the ring or polygon, e0 is its
+ * first element, deep says which way. */
+static qk_status_t wrong_depth(gj_t *g, size_t f, const char *where, const char *ty,
+                               json_object *e0, bool deep) {
+  const char *s = shown(e0);
+  return qk__region_fail(
+      g->err, QK_ERR_PARSE, f,
+      "feature %zu, %s: the coordinates array has the wrong depth for a %s "
+      "(nested too %s): expected positions as arrays of numbers, [x, y], "
+      "found %s %.40s%s (a %s's coordinates are %s)",
+      f, where, ty, deep ? "deep" : "shallow", deep ? "an array of arrays" : "a number", s,
+      strlen(s) > 40 ? "..." : "", ty,
+      strcmp(ty, "Polygon") ? "[[[[x, y], ...], ...], ...]" : "[[[x, y], ...], ...]");
+}
+
+static qk_status_t ring(gj_t *g, json_object *arr, const char *ty, size_t f, size_t poly,
+                        size_t k) {
   if (!json_object_is_type(arr, json_type_array))
     return qk__region_fail(g->err, QK_ERR_PARSE, f,
                            "feature %zu, polygon %zu, ring %zu: expected an array of positions, "
                            "found %s",
                            f, poly, k, type_name(arr));
   size_t n = json_object_array_length(arr);
+  json_object *e0 = n ? json_object_array_get_idx(arr, 0) : NULL;
+  bool shallow = e0 && is_number(e0);
+  if (shallow || (json_object_is_type(e0, json_type_array) && json_object_array_length(e0) &&
+                  json_object_is_type(json_object_array_get_idx(e0, 0), json_type_array))) {
+    char where[64];
+    snprintf(where, sizeof where, "polygon %zu, ring %zu", poly, k);
+    return wrong_depth(g, f, where, ty, e0, !shallow);
+  }
   if (n < 4)
     return qk__region_fail(g->err, QK_ERR_GEOMETRY, f,
                            "feature %zu, polygon %zu, ring %zu: %zu positions (a ring needs at "
@@ -243,15 +274,20 @@ static qk_status_t ring(gj_t *g, json_object *arr, size_t f, size_t poly, size_t
   return QK_OK;
 }
 
-static qk_status_t polygon(gj_t *g, json_object *rings, size_t f, size_t poly) {
+static qk_status_t polygon(gj_t *g, json_object *rings, const char *ty, size_t f, size_t poly) {
   if (!json_object_is_type(rings, json_type_array))
     return qk__region_fail(g->err, QK_ERR_PARSE, f,
                            "feature %zu, polygon %zu: expected an array of rings, found %s", f,
                            poly, type_name(rings));
   size_t n = json_object_array_length(rings);
+  if (n && is_number(json_object_array_get_idx(rings, 0))) {
+    char where[32];
+    snprintf(where, sizeof where, "polygon %zu", poly);
+    return wrong_depth(g, f, where, ty, json_object_array_get_idx(rings, 0), false);
+  }
   for (size_t k = 0; k < n; k++) {
     step_in(g, NULL, k);
-    qk_status_t st = ring(g, json_object_array_get_idx(rings, k), f, poly, k);
+    qk_status_t st = ring(g, json_object_array_get_idx(rings, k), ty, f, poly, k);
     if (st) return st;
     step_out(g);
   }
@@ -360,11 +396,11 @@ static qk_status_t geometry_rings(gj_t *g, json_object *geom, size_t f, size_t *
   if (cst) return cst;
   qk_status_t st = QK_OK;
   if (one) {
-    st = polygon(g, c, f, (*poly)++);
+    st = polygon(g, c, ty, f, (*poly)++);
   } else {
     for (size_t i = 0, n = json_object_array_length(c); i < n && !st; i++) {
       step_in(g, NULL, i);
-      st = polygon(g, json_object_array_get_idx(c, i), f, (*poly)++);
+      st = polygon(g, json_object_array_get_idx(c, i), ty, f, (*poly)++);
       if (!st) step_out(g);
     }
   }
@@ -648,7 +684,7 @@ static size_t jdecode(const char *text, size_t *i, size_t e, unsigned char out[4
     unsigned long lo = hex4(text + *i + 2);
     if (lo >= 0xDC00 && lo < 0xE000) u = 0x10000 + ((u - 0xD800) << 10) + (lo - 0xDC00), *i += 6;
   }
-  if (u >= 0xD800 && u < 0xE000) u = 0xFFFD; /* a lone surrogate, as json-c reads it */
+  if (u >= 0xD800 && u < 0xE000) u = 0xFFFD; /* (lone: refused before names are decoded) */
   if (u < 0x80) return out[0] = (unsigned char)u, 1;
   if (u < 0x800)
     return out[0] = (unsigned char)(0xC0 | u >> 6), out[1] = (unsigned char)(0x80 | (u & 63)), 2;
@@ -741,6 +777,30 @@ static size_t string_bytes(const char *text, size_t b, size_t e) {
   return SIZE_MAX;
 }
 
+/* The offset of the first escape in the string text[b, e) (json-c parsed it: escapes are
+ * well-formed) that writes half of a surrogate pair alone, or SIZE_MAX: \uD800 to \uDBFF
+ * not followed by \uDC00 to \uDFFF, or one of the latter not after one of the former.
+ * json-c reads it as U+FFFD without a word; RFC 8259 leaves such strings to the parser,
+ * I-JSON (RFC 7493, 2.1) forbids them, as the raw bytes of a surrogate are refused. */
+static size_t lone_surrogate(const char *text, size_t b, size_t e) {
+  for (const char *q; b < e && (q = memchr(text + b, '\\', e - b));) {
+    size_t i = (size_t)(q - text);
+    if (i + 6 > e || text[i + 1] != 'u') { /* \" \\ \/ \b ... (two bytes) */
+      b = i + 2;
+      continue;
+    }
+    unsigned long u = hex4(text + i + 2);
+    if (u >= 0xDC00 && u < 0xE000) return i;
+    b = i + 6;
+    if (u < 0xD800 || u >= 0xDC00) continue;
+    if (i + 12 > e || text[i + 6] != '\\' || text[i + 7] != 'u') return i;
+    unsigned long lo = hex4(text + i + 8);
+    if (lo < 0xDC00 || lo >= 0xE000) return i;
+    b = i + 12;
+  }
+  return SIZE_MAX;
+}
+
 /* What json-c's strict mode lets through but RFC 8259 does not, in a text it parsed: the
  * words NaN and Infinity, raw control characters and bytes that are not UTF-8 in strings, a decimal
  * point without digits after it ("1."), and a name twice in one object (RFC 8259 leaves the meaning
@@ -786,6 +846,15 @@ static qk_status_t json_check(const qk_allocator_t *a, const char *text, size_t 
                                         "malformed JSON: byte 0x%02X inside a string is not UTF-8 "
                                         "(RFC 8259 texts are UTF-8)",
                                         x);
+        break;
+      }
+      if ((bad = lone_surrogate(text, b, e)) != SIZE_MAX) {
+        where(text, bad, err);
+        st = qk__region_fail(err, QK_ERR_PARSE, SIZE_MAX,
+                             "malformed JSON: \\u%.4s inside a string is half of a surrogate "
+                             "pair, alone (I-JSON, RFC 7493: strings hold Unicode characters; "
+                             "write the pair, or the character itself)",
+                             text + bad + 2);
         break;
       }
       while (j < len && (text[j] == ' ' || text[j] == '\n' || text[j] == '\r' || text[j] == '\t'))

@@ -9,8 +9,11 @@
  *  2. An edge whose longitudes differ by more than 180 crosses the antimeridian the
  *     short way. Its crossing latitude phi is interpolated linearly in lon/lat (rounded
  *     once; both halves use the same value, so it is simply a new vertex) and the edge
- *     becomes a -> (+-180, phi) and (-+180, phi) -> b. An edge from lon 180 to lon -180
- *     (or back) runs along the antimeridian; it is cut at its first vertex. Except an
+ *     becomes a -> (+-180, phi) and (-+180, phi) -> b. phi depends on the two ends only,
+ *     not on which comes first, so that an edge shared by two features (a -> b in one,
+ *     b -> a in the other) is cut at the same point in both. An edge from lon 180 to lon
+ *     -180 (or back) runs along the antimeridian; it is cut at its vertex on 180 (so that
+ *     it lies along -180 whichever way it runs). Except an
  *     edge from (-+180, y) to (+-180, y) that runs across the whole map along latitude y
  *     (across_map): at the poles (y = +-90, the map's top and bottom lines), and where
  *     read as a zero-length step the ring would double back on the antimeridian (its
@@ -123,13 +126,22 @@ static qk_status_t piece(ring_ctx_t *c, double ax, double ay, double bx, double 
   return QK_OK;
 }
 
-/* Latitude where a -> b (longitudes unwrapped so that b's is bu) meets longitude m. */
-static double cut_lat(double ax, double ay, double bu, double by, double m, int b_at_m) {
-  if (ax == m) return ay;
-  if (b_at_m) return by;
-  double t = (m - ax) / (bu - ax);
-  double phi = ay + t * (by - ay);
-  double lo = qk__min(ay, by), hi = qk__max(ay, by);
+/* Latitude where the edge between a and b, whose longitudes differ by more than 180, meets
+ * the antimeridian. Computed from the unordered pair: always from the end e east of
+ * longitude 0 towards the other end w moved by 360, whichever of them comes first in the
+ * ring. An edge shared by two features is listed a -> b in one and b -> a in the other,
+ * and an interpolation from each edge's own start rounds differently: the two cuts would
+ * lie a few ulps apart, and points on the antimeridian between them would fall in both
+ * features or in neither. */
+static double cut_lat(double ax, double ay, double bx, double by) {
+  bool a_east = ax > 0; /* (the ends' longitudes have opposite signs) */
+  double ex = a_east ? ax : bx, ey = a_east ? ay : by;
+  double wx = a_east ? bx : ax, wy = a_east ? by : ay;
+  if (ex == 180) return ey;
+  if (wx == -180) return wy;
+  double t = (180 - ex) / ((wx + 360) - ex);
+  double phi = ey + t * (wy - ey);
+  double lo = qk__min(ey, wy), hi = qk__max(ey, wy);
   phi = qk__min(qk__max(phi, lo), hi);
   if (fabs(phi) < QK_REGION_MIN_COORD) phi = 0.0;
   return phi;
@@ -208,13 +220,13 @@ static qk_status_t ring_lonlat(ring_ctx_t *c, const double *xy, size_t start, si
     } else if (ay == by && fabs(d) == 360 && across_map(xy + 2 * start, len, i, ay)) {
       st = piece(c, ax, ay, bx, by, v); /* along latitude ay from one side to the other */
     } else if (d < -180) {              /* eastward through 180 */
-      double phi = cut_lat(ax, ay, bx + 360, by, 180, bx == -180);
+      double phi = cut_lat(ax, ay, bx, by);
       if (!(st = piece(c, ax, ay, 180, phi, v)) && !(st = piece(c, 180, phi, 180, P, UINT32_MAX)) &&
           !(st = piece(c, -180, P, -180, phi, UINT32_MAX)))
         st = piece(c, -180, phi, bx, by, v);
       k++;
     } else { /* westward through -180 (or NaN, which validation rejects first) */
-      double phi = cut_lat(ax, ay, bx - 360, by, -180, bx == 180);
+      double phi = cut_lat(ax, ay, bx, by);
       if (!(st = piece(c, ax, ay, -180, phi, v)) &&
           !(st = piece(c, -180, phi, -180, P, UINT32_MAX)) &&
           !(st = piece(c, 180, P, 180, phi, UINT32_MAX)))

@@ -33,6 +33,42 @@ static bool segs_meet(const qk__seg_t *p, const qk__seg_t *q) {
   return true;
 }
 
+/* Does the ring turn back on itself at s, from p -> s to s -> q (p, q != s): do p and q lie
+ * on one ray from s? Then the two edges overlap beyond their shared vertex. (Same signs of
+ * p - s and q - s on both axes, compared exactly, and collinear.) */
+static bool doubles_back(double px, double py, double sx, double sy, double qx, double qy) {
+  if ((px > sx) != (qx > sx) || (px < sx) != (qx < sx) || (py > sy) != (qy > sy) ||
+      (py < sy) != (qy < sy))
+    return false;
+  return qk__orient(px, py, sx, sy, qx, qy) == 0;
+}
+
+/* Is ring edge k (from position k to k + 1 of xy) of zero length? */
+static inline bool zero_edge(const double *xy, uint32_t k) {
+  return xy[2 * k] == xy[2 * k + 2] && xy[2 * k + 1] == xy[2 * k + 3];
+}
+
+/* Do pieces g of ring edge vp and h of ring edge vq (vp < vq, edges rs .. last of one
+ * ring) meet away from a vertex they share? Edges are neighbours when only edges of zero
+ * length lie between them (the docs: "an edge of zero length is no edge"), one way round
+ * the ring (vq follows vp) or the other (vp follows vq); neighbours share a vertex and
+ * count only when they overlap beyond it, the ring doubling back. Pieces that do not
+ * share the vertex as an end (an edge cut at the antimeridian) count wherever they meet. */
+static bool pieces_meet(const double *xy, uint32_t rs, uint32_t last, uint32_t vp, uint32_t vq,
+                        const qk__seg_t *g, const qk__seg_t *h) {
+  uint32_t k = vp + 1;
+  while (k < vq && zero_edge(xy, k)) k++;
+  if (k == vq && g->bx == h->ax && g->by == h->ay)
+    return doubles_back(g->ax, g->ay, g->bx, g->by, h->bx, h->by);
+  for (k = vq + 1; k <= last && zero_edge(xy, k);) k++;
+  if (k > last) {
+    for (k = rs; k < vp && zero_edge(xy, k);) k++;
+    if (k == vp && h->bx == g->ax && h->by == g->ay)
+      return doubles_back(h->ax, h->ay, h->bx, h->by, g->bx, g->by);
+  }
+  return segs_meet(g, h);
+}
+
 /* Flag the rings of a leaf's pieces that meet themselves away from a shared vertex. A
  * leaf's pieces come in increasing order (every list keeps the order of the pieces), and
  * a ring's pieces are consecutive, so the pieces of p's ring follow p. A
@@ -46,17 +82,17 @@ static void self_meets(qk__bctx_t *b, const uint32_t *E, size_t n) {
   if (n > SELF_CHECK_MAX) return;
   const uint32_t *ring = pc->ring, *vtx = pc->vtx;
   const qk__seg_t *seg = pc->seg;
+  const double *xy = b->in->xy;
   size_t ge;
   for (size_t i = 0; i + 1 < n; i = ge) {
     uint32_t rp = ring[E[i]];
     for (ge = i + 1; ge < n && ring[E[ge]] == rp;) ge++;
     if (ge - i < 2 || b->bad[rp]) continue;
-    if (ge - i == 2) { /* two pieces (often one vertex's): the one pair, skipped as below */
+    if (ge - i == 2) { /* two pieces (often one edge's, cut in two): skipped as below */
       uint32_t v0 = vtx[E[i]], v1 = vtx[E[i + 1]];
-      if (v0 == UINT32_MAX || v1 == UINT32_MAX || v1 - v0 <= 1) continue;
+      if (v0 == UINT32_MAX || v1 == UINT32_MAX || v1 == v0) continue;
     }
-    /* One ring's pieces, in the order of its vertices (vq >= vp below); its first and
-     * last edges are neighbours too. */
+    /* One ring's pieces, in the order of its vertices (vq >= vp below). */
     uint32_t rs = (uint32_t)b->in->ring_start[rp], last = (uint32_t)b->in->ring_start[rp + 1] - 2;
     bool hit = false;
     for (size_t a = i; a + 1 < ge && !hit; a++) {
@@ -67,12 +103,12 @@ static void self_meets(qk__bctx_t *b, const uint32_t *E, size_t n) {
       double ly = qk__min(g->ay, g->by), hy = qk__max(g->ay, g->by);
       for (size_t c = a + 1; c < ge; c++) {
         uint32_t q = E[c], vq = vtx[q];
-        if (vq == UINT32_MAX || vq - vp <= 1 || (vp == rs && vq == last)) continue;
+        if (vq == UINT32_MAX || vq == vp) continue; /* (vq == vp: pieces of one edge) */
         const qk__seg_t *h = &seg[q];
         if (qk__max(h->ax, h->bx) < lx || qk__min(h->ax, h->bx) > hx ||
             qk__max(h->ay, h->by) < ly || qk__min(h->ay, h->by) > hy)
           continue; /* boxes apart: most pairs */
-        if (segs_meet(g, h)) {
+        if (pieces_meet(xy, rs, last, vp, vq, g, h)) {
           b->bad[rp] = 1;
           hit = true;
           break;

@@ -117,7 +117,7 @@ void qk_region_free(qk_region_t *r) {
   const qk_allocator_t *a = &r->alloc;
   qk__props_free(a, &r->props);
   qk__free(a, r->segs, r->cap_segs * sizeof(qk__seg_t));
-  qk__free(a, r->seg_feat, r->cap_seg_feat * sizeof(uint32_t));
+  qk__free(a, r->seg_tag, r->cap_seg_tag * sizeof(uint32_t));
   qk_tree_free(r->tree);
   qk__free(a, r->kid, r->cap_kid * sizeof(uint32_t));
   qk__free(a, r->leaves, r->cap_leaves * sizeof(qk__leaf_t));

@@ -90,6 +90,10 @@ typedef struct qk__leaf {
   float ex0, ey0, ex1, ey1;
 } qk__leaf_t;
 
+/* The flags of seg_tag (features number fewer than 2^29: two bits are free). */
+#define QK__SEG_RING_START 1u
+#define QK__SEG_ADDED 2u
+
 /* Leaf tags in the node array: kid[v] is the first child of v, or QK__LEAF | leaf, or,
  * for a leaf without edges holding at most one feature at its reference point,
  * QK__LEAF | QK__DIRECT | (feature + 1) (0: none), answered without reading leaves[]. */
@@ -132,10 +136,13 @@ struct qk_region {
    * props.key[i] and props.pool + props.val[i]. */
   qk__props_t props;
 
-  /* Every edge piece, grouped by feature (for drawings). */
+  /* Every edge piece, grouped by feature and within it by ring, in ring order (for
+   * drawings): seg_tag[i] is piece i's feature << 2 | QK__SEG_RING_START when it is its
+   * ring's first piece | QK__SEG_ADDED when lon/lat mode added it along the antimeridian
+   * or a pole (qk__pieces_t's vtx UINT32_MAX). */
   qk__seg_t *segs;
-  uint32_t *seg_feat;
-  size_t n_segs, cap_segs, cap_seg_feat;
+  uint32_t *seg_tag;
+  size_t n_segs, cap_segs, cap_seg_tag;
 
   /* The index: the tree (cells only), and flat arrays for the descent. */
   qk_tree_t *tree;

@@ -12,10 +12,15 @@
  *    shared edges and vertices belong to exactly one feature under semi-open;
  *  - closed and open rules on hand-made squares; reversed windings give the same answers;
  *  - holes and multipolygons; bow-tie rings (and the self-intersection count); the count
- *    on random layers == a brute force over each ring's pairs of edges;
+ *    on random layers, also with repeated positions and rings doubling back, == a brute
+ *    force over each ring's pairs of edges of non-zero length; the review's hand-made rings;
  *  - lon/lat mode: an antimeridian-crossing square, a ring around the south pole,
  *    longitudes 180 / -180 / 540, latitudes beyond the poles, planar mode switching it off;
  *    slanted edges across the antimeridian, both ways == even-odd on the unwrapped rings;
+ *    coverages across the antimeridian (two features sharing an edge, both ways round; a
+ *    random triangulation, and the same away from it): every point in exactly one feature;
+ *  - the SVG drawing: each ring one closed subpath, the even-odd area of each feature's
+ *    path == its area, outlines without the pieces added along +-180 and the poles;
  *  - the refinement's decisions (answers cannot see them): on separated squares of 4
  *    edges with capacity 4, every leaf holds at most 4 edges;
  *  - batch == single, threaded batch == single; batches large enough for the Morton order
@@ -24,7 +29,8 @@
  *    a build that succeeds despite a failure (a shrink) has the index of a clean build;
  *  - without keep_tree: the same index and answers as with the tree, allocation failures;
  *  - GeoJSON: Feature, bare geometry, skipped geometries, properties; errors with line
- *    and column, feature index and reason;
+ *    and column, feature index and reason (lone surrogate escapes, coordinates nested at
+ *    the wrong depth for their type);
  *  - real data (skipped when ../shared/data is absent): countries-50m with the
  *    Russia / Finland / Norway cities of issue 9 and famous cities.
  */
@@ -243,8 +249,8 @@ static uint32_t brute_pieces(const qk_region_t *r, double x, double y) {
       int s = qk__side(g->ax, g->ay, g->bx, g->by, x, y);
       if ((g->by > g->ay) ? s > 0 : s < 0) par ^= 1;
     }
-    if (i + 1 == r->n_segs || r->seg_feat[i + 1] != r->seg_feat[i]) {
-      if (par) return r->seg_feat[i];
+    if (i + 1 == r->n_segs || r->seg_tag[i + 1] >> 2 != r->seg_tag[i] >> 2) {
+      if (par) return r->seg_tag[i] >> 2;
       par = 0;
     }
   }
@@ -504,24 +510,76 @@ static int meet_i(const long *a, const long *b, const long *c, const long *d) {
   return 1;
 }
 
-/* The self-intersection count by brute force: a ring is counted when two of its edges
- * (zero-length edges dropped) meet that are not the same or neighbours by vertex number
- * (its first and last edges are neighbours), the rule of the build's leaf scan. */
+/* Do the closed segments a-b and c-d (a != b) lie on one line and overlap in more than a
+ * point? */
+static int overlap_i(const long *a, const long *b, const long *c, const long *d) {
+  if (orient_i(a[0], a[1], b[0], b[1], c[0], c[1]) || orient_i(a[0], a[1], b[0], b[1], d[0], d[1]))
+    return 0;
+  int k = a[0] != b[0] ? 0 : 1; /* an axis along which the line runs */
+  long lo1 = a[k] < b[k] ? a[k] : b[k], hi1 = a[k] < b[k] ? b[k] : a[k];
+  long lo2 = c[k] < d[k] ? c[k] : d[k], hi2 = c[k] < d[k] ? d[k] : c[k];
+  return (lo1 > lo2 ? lo1 : lo2) < (hi1 < hi2 ? hi1 : hi2);
+}
+
+/* The self-intersection count by brute force, by the docs' definition: a ring counts when
+ * two of its edges meet away from a vertex they share. An edge of zero length is no edge,
+ * so those are dropped first and the edges on either side of a repeated position are
+ * neighbours (consecutive ones, and the last and the first). Neighbours share a vertex and
+ * meet elsewhere only by overlapping: the ring doubling back (a spike, or a ring of one
+ * edge there and back). */
 static size_t oracle_self_intersecting(const tl_t *t) {
   size_t bad = 0;
   for (size_t r = 0; r < t->nr; r++) {
-    size_t rs = t->rs[r], re = t->rs[r + 1];
+    size_t rs = t->rs[r], re = t->rs[r + 1], n = 0;
+    size_t *e = malloc((re - rs) * sizeof *e); /* the ring's edges of non-zero length */
+    for (size_t v = rs; v + 1 < re; v++) {
+      const long *a = t->xy + 2 * v;
+      if (a[0] != a[2] || a[1] != a[3]) e[n++] = v;
+    }
     int hit = 0;
-    for (size_t i = rs; i + 1 < re && !hit; i++)
-      for (size_t j = i + 2; j + 1 < re && !hit; j++) {
-        const long *a = t->xy + 2 * i, *c = t->xy + 2 * j;
-        if ((a[0] == a[2] && a[1] == a[3]) || (c[0] == c[2] && c[1] == c[3])) continue;
-        if (i == rs && j == re - 2) continue;
-        hit = meet_i(a, a + 2, c, c + 2);
+    for (size_t i = 0; i < n && !hit; i++)
+      for (size_t j = i + 1; j < n && !hit; j++) {
+        const long *a = t->xy + 2 * e[i], *c = t->xy + 2 * e[j];
+        bool neighbours = j == i + 1 || (i == 0 && j == n - 1);
+        hit = neighbours ? overlap_i(a, a + 2, c, c + 2) : meet_i(a, a + 2, c, c + 2);
       }
     bad += (size_t)hit;
+    free(e);
   }
   return bad;
+}
+
+/* A random layer whose rings repeat positions (consecutively, also the first and the
+ * closing one) and double back (spikes out and back, and back along part of an edge). */
+static void degenerate_layer(qkt_rng_t *g, tl_t *t, size_t nf, long span) {
+  tl_init(t);
+  for (size_t f = 0; f < nf; f++) {
+    for (size_t k = 0, rings = 1 + qkt_rng_below(g, 2); k < rings; k++) {
+      long p[2 * 64];
+      size_t m = 0, n = 3 + qkt_rng_below(g, 6);
+      long cx = (long)qkt_rng_below(g, (uint32_t)span), cy = (long)qkt_rng_below(g, (uint32_t)span);
+      long rad = 1 + (long)qkt_rng_below(g, (uint32_t)(span / 3));
+      for (size_t i = 0; i < n; i++) {
+        long x = cx - rad + (long)qkt_rng_below(g, (uint32_t)(2 * rad + 1));
+        long y = cy - rad + (long)qkt_rng_below(g, (uint32_t)(2 * rad + 1));
+        p[2 * m] = x, p[2 * m + 1] = y, m++;
+        for (uint32_t rep = qkt_rng_below(g, 4); rep >= 2; rep--) /* repeated */
+          p[2 * m] = x, p[2 * m + 1] = y, m++;
+        uint32_t what = qkt_rng_below(g, 10);
+        long dx = (long)qkt_rng_below(g, 5) - 2, dy = (long)qkt_rng_below(g, 5) - 2;
+        if (what == 0) { /* out and back to (x, y) */
+          p[2 * m] = x + 2 * dx, p[2 * m + 1] = y + 2 * dy, m++;
+          p[2 * m] = x, p[2 * m + 1] = y, m++;
+        } else if (what == 1) { /* out, and back half way */
+          p[2 * m] = x + 2 * dx, p[2 * m + 1] = y + 2 * dy, m++;
+          p[2 * m] = x + dx, p[2 * m + 1] = y + dy, m++;
+        }
+      }
+      if (qkt_rng_below(g, 4) == 0) p[2 * m] = p[0], p[2 * m + 1] = p[1], m++; /* closing twice */
+      tl_ring(t, p, m);
+    }
+    tl_end_feature(t);
+  }
 }
 
 static void test_region_self_intersecting_oracle(void **state) {
@@ -530,10 +588,14 @@ static void test_region_self_intersecting_oracle(void **state) {
   qkt_rng_t g;
   qkt_rng_seed(&g, seed);
   const uint32_t caps[3] = {1, 3, 0};
-  for (int round = 0; round < 24; round++) {
+  for (int round = 0; round < 48; round++) {
     tl_t t;
     long span = round % 2 ? 16 : 300;
-    random_layer(&g, &t, 1 + qkt_rng_below(&g, 12), span);
+    /* (rounds 24 on: rings with repeated positions and doubling back) */
+    if (round < 24)
+      random_layer(&g, &t, 1 + qkt_rng_below(&g, 12), span);
+    else
+      degenerate_layer(&g, &t, 1 + qkt_rng_below(&g, 12), span / 2);
     qk_region_t *r = tl_build(&t, caps[round % 3], NULL, NULL);
     qk_region_stats_t s;
     qk_region_stats(r, &s);
@@ -543,6 +605,65 @@ static void test_region_self_intersecting_oracle(void **state) {
                (unsigned long long)seed, round, s.self_intersecting, want);
     qk_region_free(r);
     tl_free(&t);
+  }
+}
+
+static qk_region_t *lonlat(const double *xy, const size_t *rs, size_t nr, const size_t *fs,
+                           size_t nf, int planar);
+
+/* The count on hand-made rings (the review's cases): a repeated position is no edge, so a
+ * square with (1, 0) or its closing position repeated is simple (both were counted, the
+ * edges around the repeat taken for non-neighbours meeting at their shared vertex); a
+ * ring doubling back touches itself away from the shared vertex, a spike as a ring of one
+ * edge there and back (A, B, A, A: it was not counted). Planar, and in lon/lat mode
+ * across the antimeridian. */
+static void test_region_self_intersecting_repeats(void **state) {
+  (void)state;
+  static const struct {
+    long p[16];
+    size_t n, want;
+  } cases[] = {
+      {{0, 0, 1, 0, 1, 0, 1, 1, 0, 1}, 5, 0},
+      {{0, 0, 1, 0, 1, 1, 0, 1, 0, 0}, 5, 0},
+      {{0, 0, 0, 0, 4, 0, 4, 0, 4, 4, 4, 4, 0, 4, 0, 4}, 8, 0},
+      {{5, 0, 5, 0, 10, 0, 10, 10, 0, 0}, 5, 0},          /* straight on through the repeat */
+      {{0, 0, 10, 0, 15, 0, 10, 0, 10, 10, 0, 10}, 6, 1}, /* a spike */
+      {{0, 0, 10, 0, 0, 0}, 3, 1},                        /* A, B, A, A */
+      {{0, 0, 10, 0, 10, 0, 0, 0}, 4, 1},
+      {{0, 0, 10, 0, 5, 0, 5, 5}, 4, 1},          /* back along half the edge */
+      {{5, 0, 5, 0, 10, 0, 10, 10, 8, 0}, 5, 1},  /* back at the ring's start */
+      {{0, 0, 10, 0, 10, 10, 0, 10, 5, 0}, 5, 1}, /* a vertex on an edge */
+  };
+  for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+    tl_t t;
+    tl_init(&t);
+    tl_ring(&t, cases[i].p, cases[i].n);
+    tl_end_feature(&t);
+    assert_int_equal(oracle_self_intersecting(&t), cases[i].want); /* (the oracle agrees) */
+    qk_region_t *r = tl_build(&t, 0, NULL, NULL);
+    qk_region_stats_t s;
+    qk_region_stats(r, &s);
+    if (s.self_intersecting != cases[i].want)
+      fail_msg("case %zu: %zu self-intersecting rings, want %zu", i, s.self_intersecting,
+               cases[i].want);
+    qk_region_free(r);
+    tl_free(&t);
+  }
+  /* lon/lat: a square across the antimeridian with a repeated position (0), an edge
+   * across it there and back (1), the square with a spike back over it (1) */
+  double xy[] = {170, -10, -170, -10, -170, -10, -170, 10, 170, 10, 170,  -10, /* 0 */
+                 170, 0,   -170, 0,   170,  0,   170,  0,                      /* 1 */
+                 170, -10, -170, -10, -170, 10,  -175, 10, 175, 10, -175, 10,  170, 10, 170, -10};
+  size_t rs[] = {0, 6, 10, 18}, fs[] = {0, 1, 2, 3};
+  const size_t want[3] = {0, 1, 1};
+  for (size_t k = 0; k < 3; k++) {
+    qk_region_t *r = lonlat(xy + 2 * rs[k], (size_t[]){0, rs[k + 1] - rs[k]}, 1, fs, 1, 0);
+    qk_region_stats_t s;
+    qk_region_stats(r, &s);
+    if (s.self_intersecting != want[k])
+      fail_msg("lon/lat ring %zu: %zu self-intersecting, want %zu", k, s.self_intersecting,
+               want[k]);
+    qk_region_free(r);
   }
 }
 
@@ -1430,6 +1551,78 @@ static void test_region_geojson(void **state) {
   assert_int_equal(qk_region_read_geojson("/nonexistent/x.geojson", NULL, &r, &e), QK_ERR_IO);
 }
 
+/* A lone surrogate escape (json-c reads it as U+FFFD; I-JSON forbids it, as the reader
+ * refuses a surrogate's raw bytes) is an error at the escape, in a value, a name, a
+ * FeatureCollection (read feature by feature) or a bare Feature; a surrogate pair, an
+ * escaped backslash before "ud800" and other escapes are not. A Polygon's coordinates
+ * given to a MultiPolygon, or the reverse, are named as nested at the wrong depth (they
+ * were "ring 0: 2 positions (a ring needs at least 4)", or "1 positions"). */
+static void test_region_geojson_surrogates_and_depth(void **state) {
+  (void)state;
+  const char *poly =
+      "\"geometry\":{\"type\":\"Polygon\",\"coordinates\":[[[0,0],[1,0],[1,1],[0,0]]]}";
+  char text[512];
+  struct {
+    const char *props;    /* the properties object, on line 2 */
+    unsigned long column; /* of the escape (0: accepted) */
+  } sur[] = {
+      {"{\"name\":\"a\\ud800b\"}", 11},
+      {"{\"name\":\"a\\udc00\"}", 11},
+      {"{\"n\\ud83d\":1}", 4},
+      {"{\"name\":\"\\ud83d\\u0041\"}", 10},
+      {"{\"name\":\"\\ud83d\"}", 10},
+      {"{\"name\":\"a\\ud83d\\ude00b\"}", 0},
+      {"{\"name\":\"\\\\ud800 \\u00e9\\n\"}", 0},
+  };
+  for (size_t i = 0; i < sizeof sur / sizeof sur[0]; i++)
+    for (int fc = 0; fc < 2; fc++) {
+      snprintf(text, sizeof text, "%s{\"type\":\"Feature\",\n\"properties\":%s,%s}%s",
+               fc ? "{\"type\":\"FeatureCollection\",\"features\":[" : "", sur[i].props, poly,
+               fc ? "]}" : "");
+      qk_region_t *r = (qk_region_t *)1;
+      qk_error_t e;
+      qk_status_t st = gj(text, &r, &e);
+      if (!sur[i].column) {
+        if (st != QK_OK) fail_msg("case %zu: %s", i, e.message);
+        qk_region_free(r);
+        continue;
+      }
+      if (st != QK_ERR_PARSE || e.line != 2 || e.column != 13 + sur[i].column ||
+          !strstr(e.message, "half of a surrogate pair") || !strstr(e.message, "RFC 7493"))
+        fail_msg("case %zu%s: status %s at %lu:%lu: %s", i, fc ? " (collection)" : "",
+                 qk_strerror(st), e.line, e.column, e.message);
+      assert_null(r);
+    }
+  struct {
+    const char *geom, *msg;
+  } depth[] = {
+      {"{\"type\":\"MultiPolygon\",\"coordinates\":[[[0,0],[1,0],[1,1],[0,0]]]}",
+       "polygon 0, ring 0: the coordinates array has the wrong depth for a MultiPolygon (nested "
+       "too shallow): expected positions as arrays of numbers"},
+      {"{\"type\":\"Polygon\",\"coordinates\":[[[[0,0],[1,0],[1,1],[0,0]]]]}",
+       "polygon 0, ring 0: the coordinates array has the wrong depth for a Polygon (nested too "
+       "deep): expected positions as arrays of numbers"},
+      {"{\"type\":\"Polygon\",\"coordinates\":[[0,0],[1,0],[1,1],[0,0]]}",
+       "wrong depth for a Polygon (nested too shallow)"},
+      {"{\"type\":\"Polygon\",\"coordinates\":[0,0]}",
+       "polygon 0: the coordinates array has the wrong depth for a Polygon (nested too shallow)"},
+      {"{\"type\":\"MultiPolygon\",\"coordinates\":[[[[[0,0],[1,0],[1,1],[0,0]]]]]}",
+       "wrong depth for a MultiPolygon (nested too deep)"},
+      {"{\"type\":\"MultiPolygon\",\"coordinates\":[[[[0,0],[1,0],[1,1],[0,0]]],[[0,0],[2,0],"
+       "[2,2],[0,0]]]}",
+       "feature 0, polygon 1, ring 0: the coordinates array has the wrong depth"},
+  };
+  for (size_t i = 0; i < sizeof depth / sizeof depth[0]; i++) {
+    qk_region_t *r = (qk_region_t *)1;
+    qk_error_t e;
+    qk_status_t st = gj(depth[i].geom, &r, &e);
+    if (st != QK_ERR_PARSE || !strstr(e.message, depth[i].msg) || e.line != 1 || e.column < 30)
+      fail_msg("depth case %zu: status %s at %lu:%lu: %s", i, qk_strerror(st), e.line, e.column,
+               e.message);
+    assert_null(r);
+  }
+}
+
 /* ---- real data ----------------------------------------------------------------------------- */
 
 static void test_region_countries(void **state) {
@@ -1706,6 +1899,402 @@ static void test_region_antimeridian_slanted(void **state) {
   qk_region_free(r);
 }
 
+/* ---- coverages across the antimeridian ------------------------------------------------ */
+
+/* The latitude of segment p-q at longitude m, interpolated from p (m between them). */
+static double interp_from(double px, double py, double qx, double qy, double m) {
+  return py + (m - px) / (qx - px) * (qy - py);
+}
+
+/* The coverage promise at (x, y): in exactly one feature under semi-open, at least one
+ * under closed, at most one under open; locate gives the one of locate_all. Returns the
+ * feature. */
+static uint32_t cover_one(const qk_region_t *r, double x, double y, const char *what,
+                          uint64_t seed) {
+  size_t n[3];
+  uint32_t all[8], one;
+  for (int rule = 2; rule >= 0; rule--) /* (semi-open, 0, last: its list stays in all) */
+    assert_int_equal(
+        qk_region_locate_all(r, (qk_point_t){x, y}, (qk_boundary_t)rule, all, 8, &n[rule]), QK_OK);
+  assert_int_equal(qk_region_locate(r, (qk_point_t){x, y}, QK_BOUNDARY_SEMI_OPEN, &one), QK_OK);
+  if (n[0] != 1 || n[1] < 1 || n[2] > 1 || one != all[0])
+    fail_msg("seed %llu, %s: (%.17g, %.17g) in %zu features under semi-open (%zu closed, %zu "
+             "open), locate %d",
+             (unsigned long long)seed, what, x, y, n[0], n[1], n[2], (int)one);
+  return all[0];
+}
+
+/* Two features sharing an edge across the antimeridian, listed (175, 1.92) -> (-171, -8.68)
+ * in one and the reverse in the other, and the same with both rings reversed (the review's
+ * layers). The cut's latitude was interpolated from each edge's own start, a few ulps
+ * apart in the two features: points on the antimeridian between the two cuts were in both
+ * features (the first layer) or in neither (the second). Points within 8 ulps of either
+ * interpolation, at 180 and -180, are each in exactly one feature; points off the edge in
+ * the one on their side of it. */
+static void test_region_antimeridian_shared_edge(void **state) {
+  (void)state;
+  double north[] = {175, 1.92, -171, -8.68, -171, 10, 175, 10, 175, 1.92};
+  double south[] = {-171, -8.68, 175, 1.92, 175, -20, -171, -20, -171, -8.68};
+  const double cuts[2] = {interp_from(175, 1.92, 189, -8.68, 180),
+                          interp_from(-171, -8.68, -185, 1.92, -180)};
+  for (int reversed = 0; reversed < 2; reversed++) {
+    double xy[20];
+    for (int k = 0; k < 5; k++) {
+      int j = reversed ? 4 - k : k;
+      xy[2 * k] = north[2 * j], xy[2 * k + 1] = north[2 * j + 1];
+      xy[10 + 2 * k] = south[2 * j], xy[10 + 2 * k + 1] = south[2 * j + 1];
+    }
+    size_t rs[] = {0, 5, 10}, fs[] = {0, 1, 2};
+    qk_region_t *r = lonlat(xy, rs, 2, fs, 2, 0);
+    const char *what = reversed ? "reversed rings" : "rings as given";
+    for (int c = 0; c < 2; c++) {
+      double y = cuts[c];
+      for (int k = 0; k < 8; k++) y = nextafter(y, -INFINITY);
+      for (int k = 0; k <= 16; k++, y = nextafter(y, INFINITY)) {
+        cover_one(r, 180, y, what, 0);
+        cover_one(r, -180, y, what, 0);
+      }
+    }
+    /* off the edge: the feature on the point's side (north above the edge) */
+    const double xs[4] = {180, -180, 179.9, -179.9};
+    for (int i = 0; i < 4; i++)
+      for (double y = -19.75; y < 10; y += 0.5) {
+        double u = xs[i] < 0 ? xs[i] + 360 : xs[i];
+        double line = 1.92 + (u - 175) / 14 * (-8.68 - 1.92);
+        uint32_t f = cover_one(r, xs[i], y, what, 0);
+        if (f != (y > line ? 0u : 1u))
+          fail_msg("%s: (%g, %g) in feature %u, the edge is at %g", what, xs[i], y, (unsigned)f,
+                   line);
+      }
+    qk_region_free(r);
+  }
+}
+
+/* A seeded random coverage across the antimeridian: triangles on a jittered 8 x 8 grid
+ * over longitudes 160 to 200 (wrapped to -160) and latitudes -20 to 20, the longitudes
+ * rounded to 3, 6 or 13 decimals (so the cuts are not exact). Queried at 180 and -180
+ * within 8 ulps of both interpolations of every edge across the antimeridian, at random
+ * latitudes there, and at random points of the interior (those clearly inside a triangle
+ * in the unwrapped plane: in its feature, a brute force over the triangles). Every point
+ * is in exactly one feature. The control is the same grid moved by -180 degrees, to
+ * longitudes -20 to 20, queried along longitude 0 the same way (no cut there: it held
+ * before the fix too). */
+static void test_region_antimeridian_coverage(void **state) {
+  (void)state;
+  uint64_t seed = qkt_seed(6053);
+  qkt_rng_t g;
+  qkt_rng_seed(&g, seed);
+  enum { N = 8, T = 2 * N * N };
+  for (int rd = 0; rd < 4; rd++) {
+    double vx[N + 1][N + 1], vy[N + 1][N + 1]; /* unwrapped longitudes */
+    for (int i = 0; i <= N; i++)
+      for (int j = 0; j <= N; j++) {
+        bool inner = i > 0 && i < N && j > 0 && j < N;
+        double x = 160 + 5 * i + (inner ? qkt_rng_range(&g, -1, 1) : 0);
+        double p = pow(10, (double[]){3, 6, 13}[qkt_rng_below(&g, 3)]);
+        vx[i][j] = round(x * p) / p;
+        vy[i][j] = -20 + 5 * j + (inner ? qkt_rng_range(&g, -1, 1) : 0);
+      }
+    double tri[T][6]; /* unwrapped */
+    for (int i = 0, t = 0; i < N; i++)
+      for (int j = 0; j < N; j++) {
+        const int c[4][2] = {{i, j}, {i + 1, j}, {i + 1, j + 1}, {i, j + 1}};
+        for (int h = 0; h < 2; h++, t++)
+          for (int k = 0; k < 3; k++) {
+            int q = k == 0 ? 0 : k + h; /* (a, b, c) and (a, c, d) */
+            tri[t][2 * k] = vx[c[q][0]][c[q][1]], tri[t][2 * k + 1] = vy[c[q][0]][c[q][1]];
+          }
+      }
+    for (int control = 0; control < 2; control++) {
+      /* the layer: longitudes wrapped, or moved by -180 (both exact) */
+      double xy[T * 8];
+      size_t rs[T + 1], fs[T + 1];
+      for (int t = 0; t < T; t++) {
+        for (int k = 0; k < 4; k++) {
+          double x = tri[t][2 * (k % 3)];
+          xy[8 * t + 2 * k] = control ? x - 180 : x > 180 ? x - 360 : x;
+          xy[8 * t + 2 * k + 1] = tri[t][2 * (k % 3) + 1];
+        }
+        rs[t] = 4 * (size_t)t, fs[t] = (size_t)t;
+      }
+      rs[T] = 4 * T, fs[T] = T;
+      qk_region_t *r = lonlat(xy, rs, T, fs, T, 0);
+      const char *what = control ? "control at longitude 0" : "across the antimeridian";
+      const double m = control ? 0 : 180; /* the meridian queried, in the layer's longitudes */
+      const double mx[2] = {m, control ? 0 : -180};
+      size_t crossing = 0;
+      for (int t = 0; t < T; t++)
+        for (int k = 0; k < 3; k++) {
+          double ax = tri[t][2 * k], ay = tri[t][2 * k + 1];
+          double bx = tri[t][2 * ((k + 1) % 3)], by = tri[t][2 * ((k + 1) % 3) + 1];
+          if (!(qk__min(ax, bx) < 180 && qk__max(ax, bx) > 180)) continue;
+          crossing++;
+          if (control) ax -= 180, bx -= 180;
+          /* both ends' interpolations, in the frames the layer gives (the western end
+           * moved back by 360 across the antimeridian) */
+          double w = control ? 0 : 360;
+          double ea = ax > bx ? ax : bx, eay = ax > bx ? ay : by; /* the eastern end */
+          double wa = ax > bx ? bx : ax, way = ax > bx ? by : ay;
+          double cut[2] = {interp_from(wa, way, ea, eay, m),
+                           interp_from(ea - w, eay, wa - w, way, m - w)};
+          for (int c = 0; c < 2; c++) {
+            double y = cut[c];
+            for (int s = 0; s < 8; s++) y = nextafter(y, -INFINITY);
+            for (int s = 0; s <= 16; s++, y = nextafter(y, INFINITY))
+              for (int e = 0; e < 2 && fabs(y) < 17; e++) cover_one(r, mx[e], y, what, seed);
+          }
+        }
+      assert_true(crossing >= 2 * N); /* (each row's triangles cross the meridian) */
+      for (int k = 0; k < 500; k++) cover_one(r, mx[k % 2], qkt_rng_range(&g, -17, 17), what, seed);
+      for (int k = 0; k < 1000; k++) {
+        double u = qkt_rng_range(&g, 165, 195), y = qkt_rng_range(&g, -17, 17);
+        double x = control ? u - 180 : u > 180 ? u - 360 : u;
+        uint32_t f = cover_one(r, x, y, what, seed), want = QK_NONE;
+        for (int t = 0; t < T && want == QK_NONE; t++) {
+          int pos = 0, neg = 0;
+          for (int e = 0; e < 3; e++) {
+            double ax = tri[t][2 * e], ay = tri[t][2 * e + 1];
+            double bx = tri[t][2 * ((e + 1) % 3)], by = tri[t][2 * ((e + 1) % 3) + 1];
+            double o = (bx - ax) * (y - ay) - (by - ay) * (u - ax);
+            pos += o > 1e-9, neg += o < -1e-9;
+          }
+          if (pos == 3 || neg == 3) want = (uint32_t)t;
+        }
+        if (want != QK_NONE && f != want)
+          fail_msg("seed %llu, %s: (%.17g, %.17g) in feature %u, inside triangle %u",
+                   (unsigned long long)seed, what, x, y, (unsigned)f, (unsigned)want);
+      }
+      qk_region_free(r);
+    }
+  }
+}
+
+/* ---- the SVG drawing ----------------------------------------------------------------- */
+
+/* One <path> of a drawing: its fill and stroke attributes, and its d parsed into points
+ * (x[i], y[i]), subpaths starting at start[k] (start[nsub] = n), closed[k] when ended
+ * with Z. */
+typedef struct svg_path {
+  char fill[32], stroke[32];
+  double x[256], y[256];
+  size_t n, start[65], nsub;
+  bool closed[64];
+} svg_path_t;
+
+/* The value of attribute name="..." in the element [p, end), or "" */
+static void svg_attr(const char *p, const char *end, const char *name, char *out, size_t cap) {
+  char key[40];
+  snprintf(key, sizeof key, " %s=\"", name);
+  const char *a = strstr(p, key);
+  out[0] = '\0';
+  if (!a || a > end) return;
+  a += strlen(key);
+  size_t n = (size_t)(strchr(a, '"') - a);
+  snprintf(out, cap, "%.*s", (int)(n < cap ? n : cap - 1), a);
+}
+
+/* The paths of an SVG text, in order (at most cap). */
+static size_t svg_paths(const char *text, svg_path_t *out, size_t cap) {
+  size_t np = 0;
+  for (const char *p = text; np < cap && (p = strstr(p, "<path ")); p++) {
+    const char *end = strstr(p, "/>");
+    svg_path_t *s = &out[np++];
+    memset(s, 0, sizeof *s);
+    svg_attr(p, end, "fill", s->fill, sizeof s->fill);
+    svg_attr(p, end, "stroke", s->stroke, sizeof s->stroke);
+    const char *d = strstr(p, " d=\"");
+    assert_true(d && d < end);
+    for (d += 4; *d != '"';) {
+      char c = *d++;
+      if (c == 'Z') {
+        assert_true(s->nsub > 0);
+        s->closed[s->nsub - 1] = true;
+        continue;
+      }
+      assert_true(c == 'M' || c == 'L');
+      if (c == 'M') assert_true(s->nsub < 64), s->start[s->nsub++] = s->n;
+      char *e;
+      assert_true(s->n < 256 && s->nsub > 0);
+      s->x[s->n] = strtod(d, &e);
+      s->y[s->n] = strtod(e, &e);
+      s->n++;
+      d = e;
+    }
+    s->start[s->nsub] = s->n;
+  }
+  return np;
+}
+
+/* The segments of a path's fill, subpaths closed: segment i from (x[i], y[i]) to the next
+ * point of its subpath, or its first. */
+static size_t svg_next(const svg_path_t *s, size_t i) {
+  size_t k = 0;
+  while (s->start[k + 1] <= i) k++;
+  return i + 1 < s->start[k + 1] ? i + 1 : s->start[k];
+}
+
+/* The area the path's even-odd fill covers: the length inside at the middle of each band
+ * between consecutive heights of vertices and of crossings of two segments (within a band
+ * the length is linear in y, so the middle's is its mean). */
+static double svg_evenodd_area(const svg_path_t *s) {
+  double *ys = malloc((s->n + s->n * s->n) * sizeof *ys), area = 0;
+  size_t ny = 0;
+  for (size_t i = 0; i < s->n; i++) {
+    ys[ny++] = s->y[i];
+    size_t i1 = svg_next(s, i);
+    for (size_t j = i + 1; j < s->n; j++) { /* where segments i and j cross */
+      size_t j1 = svg_next(s, j);
+      double ux = s->x[i1] - s->x[i], uy = s->y[i1] - s->y[i];
+      double vx = s->x[j1] - s->x[j], vy = s->y[j1] - s->y[j];
+      double den = ux * vy - uy * vx;
+      if (den == 0) continue;
+      double t = ((s->x[j] - s->x[i]) * vy - (s->y[j] - s->y[i]) * vx) / den;
+      double u = ((s->x[j] - s->x[i]) * uy - (s->y[j] - s->y[i]) * ux) / den;
+      if (t > 0 && t < 1 && u > 0 && u < 1) ys[ny++] = s->y[i] + t * uy;
+    }
+  }
+  for (size_t i = 1; i < ny; i++) /* (insertion sort: few points) */
+    for (size_t j = i; j > 0 && ys[j - 1] > ys[j]; j--) {
+      double t = ys[j];
+      ys[j] = ys[j - 1], ys[j - 1] = t;
+    }
+  for (size_t b = 0; b + 1 < ny; b++) {
+    if (ys[b + 1] == ys[b]) continue;
+    double ym = 0.5 * (ys[b] + ys[b + 1]), xs[256];
+    size_t nx = 0;
+    for (size_t i = 0; i < s->n; i++) {
+      size_t j = svg_next(s, i);
+      if ((s->y[i] > ym) != (s->y[j] > ym))
+        xs[nx++] = s->x[i] + (ym - s->y[i]) / (s->y[j] - s->y[i]) * (s->x[j] - s->x[i]);
+    }
+    for (size_t i = 1; i < nx; i++)
+      for (size_t j = i; j > 0 && xs[j - 1] > xs[j]; j--) {
+        double t = xs[j];
+        xs[j] = xs[j - 1], xs[j - 1] = t;
+      }
+    for (size_t i = 0; i + 1 < nx; i += 2) area += (xs[i + 1] - xs[i]) * (ys[b + 1] - ys[b]);
+  }
+  free(ys);
+  return area;
+}
+
+/* The total length of the path's segments (subpaths open: its Z drawn by none here). */
+static double svg_length(const svg_path_t *s, bool along_x, double x, size_t *along) {
+  double len = 0;
+  for (size_t k = 0; k < s->nsub; k++)
+    for (size_t i = s->start[k]; i + 1 < s->start[k + 1]; i++) {
+      len += hypot(s->x[i + 1] - s->x[i], s->y[i + 1] - s->y[i]);
+      if (along_x && fabs(s->x[i] - x) < 0.02 && fabs(s->x[i + 1] - x) < 0.02) ++*along;
+    }
+  return len;
+}
+
+/* The drawing of a layer, parsed. */
+static size_t svg_of(const qk_region_t *r, svg_path_t *p, size_t cap) {
+  FILE *f = tmpfile();
+  assert_non_null(f);
+  assert_int_equal(qk_region_write_svg(r, f, 1000), QK_OK);
+  long n = ftell(f);
+  char *text = malloc((size_t)n + 1);
+  rewind(f);
+  assert_int_equal(fread(text, 1, (size_t)n, f), (size_t)n);
+  text[n] = '\0';
+  fclose(f);
+  size_t np = svg_paths(text, p, cap);
+  free(text);
+  return np;
+}
+
+/* The drawing fills the features: each ring is one closed subpath through its vertices
+ * (the pieces were drawn as separate two-point subpaths, M a L b M c L d, which an
+ * even-odd fill leaves empty), and the even-odd area of each feature's path is the
+ * feature's (a hole of the same winding as its shell, a repeated position, a bow-tie). In
+ * lon/lat mode the pieces added along the antimeridian and the poles close the fill but
+ * are not drawn as boundary: a square across the antimeridian and a ring around the south
+ * pole are filled with their areas, and their outlines are their own edges only. */
+static void test_region_svg_fill(void **state) {
+  (void)state;
+  svg_path_t *p = malloc(8 * sizeof *p);
+  /* planar: feature 0 a square with a hole of the same winding, feature 1 a triangle with
+   * a position repeated, feature 2 a bow-tie */
+  double xy[] = {0,  0, 10, 0, 10, 10, 0,  10, 0,  0, 3,  3, 6,  3,  6,  6, 3,  6,  3,  3,
+                 20, 0, 30, 0, 30, 0,  25, 8,  20, 0, 40, 0, 50, 10, 50, 0, 40, 10, 40, 0};
+  size_t rs[] = {0, 5, 10, 15, 20}, fs[] = {0, 2, 3, 4};
+  const double area[3] = {100 - 9, 40, 50};
+  qk_region_t *r = lonlat(xy, rs, 4, fs, 3, 1);
+  double k = 1000 / r->rside;
+  assert_int_equal(svg_of(r, p, 8), 3);
+  for (size_t f = 0; f < 3; f++) {
+    assert_string_not_equal(p[f].fill, "none");
+    assert_string_equal(p[f].stroke, "#555"); /* (no added pieces: the fill's own outline) */
+    assert_int_equal(p[f].nsub, fs[f + 1] - fs[f]);
+    for (size_t s = 0; s < p[f].nsub; s++) {
+      assert_true(p[f].closed[s]);
+      /* the ring's positions, the repeated one once, then the closing one */
+      size_t ring = fs[f] + s, m = p[f].start[s];
+      for (size_t v = rs[ring]; v < rs[ring + 1]; v++) {
+        if (v > rs[ring] && xy[2 * v] == xy[2 * v - 2] && xy[2 * v + 1] == xy[2 * v - 1]) continue;
+        assert_true(m < p[f].start[s + 1]);
+        assert_float_equal(p[f].x[m], (xy[2 * v] - r->rx) * k, 0.006);
+        assert_float_equal(p[f].y[m], (r->ry + r->rside - xy[2 * v + 1]) * k, 0.006);
+        m++;
+      }
+      assert_int_equal(m, p[f].start[s + 1]);
+    }
+    double a = svg_evenodd_area(&p[f]), want = area[f] * k * k;
+    if (fabs(a - want) > 1e-3 * want)
+      fail_msg("planar feature %zu: filled area %g, want %g", f, a, want);
+  }
+  qk_region_free(r);
+
+  /* lon/lat: feature 0 a square across the antimeridian, feature 1 a ring around the south
+   * pole along latitude -60 (crossing eastward), feature 2 a square away from both */
+  double ll[] = {170,  -10, -170, -10, -170, 10,  170, 10, 170, -10, 0,  -60, 90, -60, 179, -60,
+                 -179, -60, -90,  -60, 0,    -60, 10,  10, 20,  10,  20, 20,  10, 20,  10,  10};
+  size_t lrs[] = {0, 5, 11, 16}, lfs[] = {0, 1, 2, 3};
+  const double larea[3] = {400, 360 * 30, 100}, outline[3] = {80, 360, 40};
+  r = lonlat(ll, lrs, 3, lfs, 3, 0);
+  k = 1000 / r->rside;
+  assert_int_equal(svg_of(r, p, 8), 5); /* features 0 and 1: a fill and an outline each */
+  const size_t fill[3] = {0, 2, 4};
+  for (size_t f = 0; f < 3; f++) {
+    const svg_path_t *s = &p[fill[f]];
+    assert_string_not_equal(s->fill, "none");
+    assert_int_equal(s->nsub, 1);
+    assert_true(s->closed[0]);
+    /* the ring's positions in order among the path's, the others on the antimeridian or
+     * the pole line */
+    size_t v = lrs[f];
+    for (size_t i = 0; i < s->n; i++) {
+      double X = s->x[i] / k + r->rx, Y = r->ry + r->rside - s->y[i] / k;
+      if (v < lrs[f + 1] && fabs(X - ll[2 * v]) < 0.01 && fabs(Y - ll[2 * v + 1]) < 0.01)
+        v++;
+      else if (!(fabs(fabs(X) - 180) < 0.01 || fabs(fabs(Y) - 90) < 0.01))
+        fail_msg("lon/lat feature %zu: (%g, %g) is no vertex of the ring", f, X, Y);
+    }
+    assert_int_equal(v, lrs[f + 1]);
+    double a = svg_evenodd_area(s), want = larea[f] * k * k;
+    if (fabs(a - want) > 1e-3 * want)
+      fail_msg("lon/lat feature %zu: filled area %g, want %g", f, a, want);
+    /* the outline: the ring's edges, none along the antimeridian or the pole line */
+    const svg_path_t *o = f < 2 ? &p[fill[f] + 1] : s;
+    if (f < 2) {
+      assert_string_equal(o->fill, "none");
+      assert_string_equal(o->stroke, "#555");
+      assert_string_equal(s->stroke, "none");
+    }
+    size_t along = 0;
+    double len = svg_length(o, true, (180 - r->rx) * k, &along);
+    svg_length(o, true, (-180 - r->rx) * k, &along);
+    if (f == 2) len += hypot(o->x[0] - o->x[o->n - 1], o->y[0] - o->y[o->n - 1]);
+    if (along || fabs(len - outline[f] * k) > 0.05)
+      fail_msg("lon/lat feature %zu: outline %g long (want %g), %zu segments along +-180", f,
+               len / k, outline[f], along);
+  }
+  qk_region_free(r);
+  free(p);
+}
+
 /* The refinement splits a cell while more than C edges meet it and the split makes
  * progress (refine.c, and build_top.c's one pass over the top levels, which must make the
  * same decisions). On a lattice of separated squares of 4 edges each, with C = 4, a cell
@@ -1753,6 +2342,9 @@ int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_region_leaves_split_to_capacity),
       cmocka_unit_test(test_region_antimeridian_slanted),
+      cmocka_unit_test(test_region_antimeridian_shared_edge),
+      cmocka_unit_test(test_region_antimeridian_coverage),
+      cmocka_unit_test(test_region_svg_fill),
       cmocka_unit_test(test_region_random_vs_oracle),
       cmocka_unit_test(test_region_grid_sides),
       cmocka_unit_test(test_region_build_grid_lines),
@@ -1761,6 +2353,7 @@ int main(void) {
       cmocka_unit_test(test_region_rules_and_windings),
       cmocka_unit_test(test_region_bowtie),
       cmocka_unit_test(test_region_self_intersecting_oracle),
+      cmocka_unit_test(test_region_self_intersecting_repeats),
       cmocka_unit_test(test_region_lonlat),
       cmocka_unit_test(test_region_antimeridian_boundary),
       cmocka_unit_test(test_region_antimeridian_one_side),
@@ -1774,6 +2367,7 @@ int main(void) {
       cmocka_unit_test(test_region_without_tree),
       cmocka_unit_test(test_region_alloc_failure),
       cmocka_unit_test(test_region_geojson),
+      cmocka_unit_test(test_region_geojson_surrogates_and_depth),
       cmocka_unit_test(test_region_countries),
       cmocka_unit_test(test_region_ogr),
       cmocka_unit_test(test_region_ogr_damaged),

@@ -243,7 +243,8 @@ typedef struct qk_region_stats {
   size_t rings;             /**< rings, outer and inner */
   size_t vertices;          /**< ring vertices as given (closing vertex included) */
   size_t holes;             /**< inner rings (GeoJSON / OGR) or rings after a feature's first */
-  size_t self_intersecting; /**< rings whose edges cross or touch (other than neighbours) */
+  size_t self_intersecting; /**< rings whose edges cross or touch away from a shared vertex
+                                 (zero-length edges skipped; neighbours count by overlapping) */
   size_t skipped;           /**< input geometries skipped (points, lines, empty, null) */
   size_t edges;             /**< edge pieces indexed (after antimeridian splits and closures) */
   size_t leaves;            /**< leaves of the index */
@@ -288,7 +289,9 @@ const char *qk_region_property(const qk_region_t *region, uint32_t feature, cons
 const qk_tree_t *qk_region_tree(const qk_region_t *region);
 
 /**
- * Draw the features (even-odd filled) and the index cells as SVG.
+ * Draw the features (even-odd filled, each ring one closed subpath; in lon/lat mode the
+ * pieces added along the antimeridian and the poles are filled but not stroked) and the
+ * index cells as SVG.
  * \param [in] region the layer.
  * \param [in] f an open stream, owned by the caller.
  * \param [in] width picture width in pixels (0 means 1000).

@@ -52,6 +52,17 @@ grep -q '^"Dateline, west",-175,-15,-1$' "$tmp/pl.csv" && passes=$((passes + 1))
 expect 0 '"features": 5.*"holes": 1.*"skipped_geometries": 1' -- "$cli" regions "$layer" --stats
 expect 0 '' -- "$cli" regions "$layer" --svg "$tmp/r.svg"
 grep -q '</svg>' "$tmp/r.svg" && passes=$((passes + 1)) || fail "svg written"
+# each ring one closed subpath, so that the even-odd fill fills (it was two-point subpaths)
+printf '{"type":"Polygon","coordinates":[[[0,0],[1,0],[1,1],[0,1],[0,0]]]}' >"$tmp/sq.geojson"
+"$cli" regions "$tmp/sq.geojson" --planar --svg "$tmp/sq.svg" >/dev/null
+grep -qE '<path fill-rule="evenodd"[^>]* d="M[0-9. ]+(L[0-9. ]+){4}Z"' "$tmp/sq.svg" &&
+  passes=$((passes + 1)) || fail "svg: the square as one closed subpath"
+# a repeated position is no edge: the square stays simple (it counted as self-intersecting),
+# while a spike doubling back, and a ring of one edge there and back, touch themselves
+printf '{"type":"Polygon","coordinates":[[[0,0],[1,0],[1,0],[1,1],[0,1],[0,0],[0,0]]]}' >"$tmp/dup.geojson"
+expect 0 '"self_intersecting_rings": 0' -- "$cli" regions "$tmp/dup.geojson"
+printf '{"type":"MultiPolygon","coordinates":[[[[0,0],[10,0],[15,0],[10,0],[10,10],[0,10],[0,0]]],[[[20,0],[30,0],[20,0],[20,0]]]]}' >"$tmp/spike.geojson"
+expect 0 '"self_intersecting_rings": 2' -- "$cli" regions "$tmp/spike.geojson"
 
 # errors
 printf 'lon,lat\n1,1\n2,abc\n' >"$tmp/bad.csv"
@@ -70,6 +81,14 @@ printf '{"type":"FeatureCollection",\n "features": [}\n' >"$tmp/bad.geojson"
 expect 1 'bad.geojson:2:.*malformed JSON' -- "$cli" regions "$tmp/bad.geojson"
 printf '{"type":"Polygon","coordinates":[[[0,0],[1,0],[1,1],[0,1]]]}' >"$tmp/open.geojson"
 expect 1 'feature 0, polygon 0, ring 0: not closed' -- "$cli" regions "$tmp/open.geojson"
+# a lone surrogate escape (json-c reads it as U+FFFD; I-JSON forbids it)
+printf '{"type":"Feature","properties":{"name":"a\\ud800b"},\n "geometry":null}' >"$tmp/sur.geojson"
+expect 1 'sur.geojson:1:42: malformed JSON: \\ud800 .*half of a surrogate pair' -- "$cli" regions "$tmp/sur.geojson"
+# coordinates nested one level too shallow or too deep for the type
+printf '{"type":"MultiPolygon","coordinates":[[[0,0],[1,0],[1,1],[0,0]]]}' >"$tmp/mps.geojson"
+expect 1 'mps.geojson:1:40: feature 0, polygon 0, ring 0: the coordinates array has the wrong depth for a MultiPolygon \(nested too shallow\)' -- "$cli" regions "$tmp/mps.geojson"
+printf '{"type":"Polygon","coordinates":[[[[0,0],[1,0],[1,1],[0,0]]]]}' >"$tmp/pd.geojson"
+expect 1 'wrong depth for a Polygon \(nested too deep\): expected positions as arrays of numbers' -- "$cli" regions "$tmp/pd.geojson"
 printf '{"type":"Polygon","coordinates":[[[0,0],[500,0],[1,1],[0,0]]]}' >"$tmp/proj.geojson"
 expect 1 'planar' -- "$cli" regions "$tmp/proj.geojson"
 expect 0 '"mode": "planar"' -- "$cli" regions "$tmp/proj.geojson" --planar
