@@ -14,6 +14,10 @@ typedef struct svg {
 
 static double along(const svg_t *s, double v, double from) { return (v - from) / s->side * s->w; }
 
+/* A position as written (%.3f): one that rounds to zero is written 0.000, not -0.000 (the
+ * top row's y, w - (w - side) - side, came out a few ulps below zero). */
+static double shown(double v) { return fabs(v) < 0.0005 ? 0.0 : v; }
+
 static qk_visit_t draw(const qk_tree_t *t, qk_node_t v, void *ud) {
   svg_t *s = ud;
   const qk__node_t *n = &t->nodes[v];
@@ -22,13 +26,13 @@ static qk_visit_t draw(const qk_tree_t *t, qk_node_t v, void *ud) {
   double side = ldexp(s->w, -(int)g.depth);
   double x = along(s, g.x0, s->x0), y = s->w - along(s, g.y0, s->y0) - side;
   if (!s->points) {
-    fprintf(s->f, "<rect x=\"%.3f\" y=\"%.3f\" width=\"%.3f\" height=\"%.3f\"/>\n", x, y, side,
-            side);
+    fprintf(s->f, "<rect x=\"%.3f\" y=\"%.3f\" width=\"%.3f\" height=\"%.3f\"/>\n", shown(x),
+            shown(y), side, side);
     return QK_VISIT_CONTINUE;
   }
   for (uint32_t i = n->start; i < n->start + n->count; i++)
-    fprintf(s->f, "<circle cx=\"%.3f\" cy=\"%.3f\" r=\"1.6\"/>\n", along(s, t->px[i], s->x0),
-            s->w - along(s, t->py[i], s->y0));
+    fprintf(s->f, "<circle cx=\"%.3f\" cy=\"%.3f\" r=\"1.6\"/>\n", shown(along(s, t->px[i], s->x0)),
+            shown(s->w - along(s, t->py[i], s->y0)));
   return QK_VISIT_CONTINUE;
 }
 
