@@ -308,6 +308,12 @@ static qk_status_t add_piece(qk__gm_t *g, size_t s, uint32_t a, uint32_t b) {
 /* What insert_piece did with a piece of a segment. */
 enum { PIECE_IN, PIECE_MERGED, PIECE_SPLIT, PIECE_FAILED };
 
+/* Touching input: the most splits (times a vertex lies inside a segment or piece) the
+ * validation makes before refusing. Each costs a walk, and an input can ask for one a
+ * (vertex, segment) pair: N segments along a line through N vertices, N^2 / 2 (8.6 s at N =
+ * 16,000); real touching input (shared borders, T-junctions) needs a few an item. */
+static size_t touch_cap(const qk_poly_t *P) { return ((size_t)1 << 16) + 16 * (P->nv + P->ns); }
+
 /* insert_piece's cases other than a piece inserted (out of line: the loop over a
  * coastline's segments met none of them and paid for their registers and messages). t and
  * k: the edge a-b if there is one (constrained); else st, block and bseg are what
@@ -336,6 +342,7 @@ piece_trouble(qk__gm_t *g, size_t s, uint32_t a, uint32_t b, uint32_t t, int k, 
   }
   if (st == QK_ERR_NOMEM) goto nomem;
   if (bseg != QK__CDT_NONE) {
+    g->crossing = 1;
     *out = qk__mesh_fail(g->err, QK_ERR_GEOMETRY, ls, "%s and %s cross or overlap",
                          qk__gm_sname(P, "segments", bseg, sline(P, bseg), n1),
                          qk__gm_sname(P, "", s, ls, n2) + 1);
@@ -358,7 +365,15 @@ piece_trouble(qk__gm_t *g, size_t s, uint32_t a, uint32_t b, uint32_t t, int k, 
     return PIECE_FAILED;
   }
   if (note_change(g, s)) goto nomem;
-  g->nsplit++;
+  if (++g->nsplit > touch_cap(P)) {
+    *out = qk__mesh_fail(g->err, QK_ERR_LIMIT, ls,
+                         "%zu times a vertex lies inside a segment (%s and others): more than "
+                         "%zu (2^16 + 16 an input vertex and segment), which many segments "
+                         "overlapping along a line with many vertices on it would need; merge "
+                         "such segments before meshing",
+                         g->nsplit, qk__gm_sname(P, "segment", s, ls, n2), touch_cap(P));
+    return PIECE_FAILED;
+  }
   return PIECE_SPLIT;
 nomem:
   *out = qk__mesh_fail(g->err, QK_ERR_NOMEM, 0, "out of memory");

@@ -70,6 +70,7 @@ typedef struct qk__gm {
    * those segments (allocated at the first change); nsplit and nmerged count the splits
    * and the merged segments or pieces. */
   int touch;
+  int crossing; /* a crossing was refused (qk_mesh_t's refused_crossing) */
   uint32_t *pieces;
   size_t npieces, pieces_cap;
   uint8_t *schg;

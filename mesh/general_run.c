@@ -232,6 +232,7 @@ qk_status_t qk__mesh_general(const qk_poly_t *P, const qk_mesh_options_t *opt, q
     m->stats.seconds_balance = 0;
     m->stats.seconds_triangulate = now() - t2;
   }
+  m->refused_crossing = st && g.crossing;
   gm_free(&g);
   if (touched) free_copy(&m->alloc, &tc);
   return st;

@@ -495,6 +495,33 @@ static qk_status_t general(const qk_poly_t *poly, const qk_mesh_options_t *opt, 
   return QK_OK;
 }
 
+/* QK_MESH_AUTO, after the lattice mode it chose refused segments that meet (its message in
+ * err, QK_ERR_GEOMETRY): the general mode, which takes touching input. On success err is
+ * cleared, as for any success; where the general mode refuses two segments that cross too,
+ * the lattice mode's message stands; any other refusal (a hole point on a segment, memory
+ * running short) is the general mode's, which names what it found. */
+static qk_status_t fallback(const qk_poly_t *poly, const qk_mesh_options_t *opt, qk_mesh_t **out,
+                            qk_mesh_error_t *err) {
+  qk_mesh_error_t first;
+  if (err) first = *err;
+  qk_mesh_t *m = new_mesh(opt);
+  if (!m) return qk__mesh_fail(err, QK_ERR_NOMEM, 0, "out of memory while allocating the mesh");
+  qk__error_clear(err);
+  qk_status_t st = qk__mesh_general(poly, opt, m, err);
+  if (st == QK_OK) {
+    qk__mesh_arena_seal(m->arena);
+    *out = m;
+    return QK_OK;
+  }
+  /* (a crossing, or options the general mode does not take, say min_angle_deg 40: the
+   * lattice mode's refusal is the one that applies) */
+  const int keep = m->refused_crossing || st == QK_ERR_INVALID;
+  if (keep && err) *err = first;
+  if (keep) st = QK_ERR_GEOMETRY;
+  qk_mesh_free(m);
+  return st;
+}
+
 qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *options,
                              qk_mesh_t **out, qk_mesh_error_t *err) {
   qk__error_clear(err);
@@ -552,14 +579,8 @@ qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *opt
     /* Chosen automatically, the lattice mode refused segments that meet: the general mode
      * takes touching input (a corner of one component on another's side, a shared side).
      * Where it refuses too (crossings), the lattice mode's message stands. */
-    if (st == QK_ERR_GEOMETRY && g.meet && opt.mode == QK_MESH_AUTO && !opt.size) {
-      qk_mesh_error_t first;
-      if (err) first = *err;
-      qk_mesh_t *m2 = new_mesh(&opt);
-      if (!m2) return st;
-      if (general(poly, &opt, m2, out, err) == QK_OK) return QK_OK;
-      if (err) *err = first;
-    }
+    if (st == QK_ERR_GEOMETRY && g.meet && opt.mode == QK_MESH_AUTO && !opt.size)
+      return fallback(poly, &opt, out, err);
     return st;
   }
   m->stats.size = g.U;

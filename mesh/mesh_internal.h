@@ -109,6 +109,9 @@ struct qk_mesh {
    * triangles (qk__mesh_angles), not by the generation; 0 in the other modes, whose
    * generation fills them. */
   double angle_bound_deg;
+  /* General mode: set when it refused two segments that cross (away from any vertex), so
+   * that QK_MESH_AUTO's fallback keeps the lattice mode's message for them (generate.c). */
+  int refused_crossing;
 };
 
 /* The smallest and largest angle of mesh m (degrees; 0 without triangles) and the count

@@ -1091,6 +1091,47 @@ static void test_mesh_general_mode_touching(void **state) {
   qk_mesh_free(m);
   qk_poly_free(p);
   free(s);
+  /* Many segments along one line through many vertices: a split a (vertex, segment) pair,
+   * quadratic; refused past the cap (QK_ERR_LIMIT) at once, where N = 16,000 took 8.6 s. */
+  {
+    const uint32_t N = 6000;
+    double *fx = malloc((2 * N + 4) * sizeof *fx);
+    uint32_t *fs = malloc((4 * N + 4) * sizeof *fs);
+    assert_true(fx && fs);
+    for (uint32_t i = 0; i < N; i++) fx[2 * i] = i, fx[2 * i + 1] = 0;
+    fx[2 * N] = N / 2, fx[2 * N + 1] = -1; /* closed by a chain below */
+    uint32_t ns = 0;
+    for (uint32_t i = 1; i < N; i++) fs[2 * ns] = 0, fs[2 * ns + 1] = i, ns++;
+    fs[2 * ns] = N - 1, fs[2 * ns + 1] = N, ns++;
+    fs[2 * ns] = N, fs[2 * ns + 1] = 0, ns++;
+    assert_int_equal(qk_poly_from_arrays(fx, N + 1, fs, ns, NULL, 0, NULL, &p, &err), QK_OK);
+    assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_ERR_LIMIT);
+    assert_non_null(strstr(err.message, "times a vertex lies inside a segment"));
+    assert_null(m);
+    qk_poly_free(p);
+    free(fx), free(fs);
+  }
+  /* QK_MESH_AUTO on touching integer squares: the book's mode refuses them, the general
+   * mode meshes them, and the error record is cleared (it kept the book's message); a hole
+   * point on a side is named by the general mode (the book's "touch or cross" hid it). */
+  {
+    double sq2[16] = {0, 0, 4, 0, 4, 4, 0, 4, 4, 1, 8, 1, 8, 3, 4, 3}, hole[2] = {4, 2};
+    uint32_t ss2[16] = {0, 1, 1, 2, 2, 3, 3, 0, 4, 5, 5, 6, 6, 7, 7, 4};
+    qk_mesh_options_t oa;
+    qk_mesh_options_init(&oa);
+    assert_int_equal(qk_poly_from_arrays(sq2, 8, ss2, 8, NULL, 0, NULL, &p, &err), QK_OK);
+    strcpy(err.message, "stale");
+    assert_int_equal(qk_mesh_generate(p, &oa, &m, &err), QK_OK);
+    assert_string_equal(err.message, "");
+    qk_mesh_stats(m, &st);
+    assert_int_equal(st.mode, QK_MESH_GENERAL);
+    qk_mesh_free(m);
+    qk_poly_free(p);
+    assert_int_equal(qk_poly_from_arrays(sq2, 8, ss2, 8, hole, 1, NULL, &p, &err), QK_OK);
+    assert_int_equal(qk_mesh_generate(p, &oa, &m, &err), QK_ERR_GEOMETRY);
+    assert_non_null(strstr(err.message, "hole 0 at (4, 2) lies on segment 1"));
+    qk_poly_free(p);
+  }
   /* Crossing segments stay refused, named by their input numbers. */
   double xc[10] = {0, 0, 4, 0, 2, 2, 1, -1, 3, 1};
   uint32_t sc[8] = {0, 1, 1, 2, 2, 0, 3, 4};
@@ -1813,7 +1854,8 @@ static void test_mesh_general_mode_auto(void **state) {
 /* Fails every allocation of meshing s in turn (with markers and a region when tagged, so
  * that every output array is allocated): each refusal is QK_ERR_NOMEM with a message naming
  * the step, leaves nothing behind. Returns the number of allocations of a full run. */
-static size_t alloc_failures(const shape_t *s, int tagged, double max_size) {
+static size_t alloc_failures_in(const shape_t *s, int tagged, double max_size,
+                                qk_mesh_mode_t mode) {
   size_t fail_at;
   for (fail_at = 1;; fail_at++) {
     qkt_alloc_t as;
@@ -1827,6 +1869,7 @@ static size_t alloc_failures(const shape_t *s, int tagged, double max_size) {
     }
     as.fail_at = as.calls + fail_at;
     qk_mesh_options_t o = general_opts();
+    o.mode = mode;
     o.allocator = &a;
     o.max_size = max_size;
     qk_mesh_t *m = (qk_mesh_t *)&as;
@@ -1842,13 +1885,19 @@ static size_t alloc_failures(const shape_t *s, int tagged, double max_size) {
       continue;
     }
     if (st != QK_ERR_NOMEM) fail_msg("fail_at %zu: %s: %s", fail_at, qk_strerror(st), err.message);
-    if (strncmp(err.message, "out of memory while ", 20) != 0)
+    /* (the general mode says in which step; the book's, failing before its refusal, not) */
+    const char *want = mode == QK_MESH_GENERAL ? "out of memory while " : "out of memory";
+    if (strncmp(err.message, want, strlen(want)) != 0)
       fail_msg("fail_at %zu: message \"%s\"", fail_at, err.message);
     assert_null(m);
     qk_poly_free(p);
     assert_int_equal(as.live_bytes, 0);
   }
   return fail_at;
+}
+
+static size_t alloc_failures(const shape_t *s, int tagged, double max_size) {
+  return alloc_failures_in(s, tagged, max_size, QK_MESH_GENERAL);
 }
 
 static void test_mesh_general_mode_alloc_failure(void **state) {
@@ -1889,6 +1938,17 @@ static void test_mesh_general_mode_alloc_failure(void **state) {
   qk__gm_test_grade_late = 0;
   printf("# %zu allocations, %zu graded late (three isolated vertices)\n", fail_at, late);
   assert_true(fail_at > 20 && late > 30);
+  free(s);
+  /* Touching input chosen for the book's mode, which refuses it, then meshed by the general
+   * mode (QK_MESH_AUTO's fallback): memory running short there is QK_ERR_NOMEM (it was the
+   * book's touch refusal, QK_ERR_GEOMETRY), and nothing leaks. */
+  s = calloc(1, sizeof *s);
+  const double a_pts[8] = {0, 0, 4, 0, 4, 4, 0, 4}, b_pts[8] = {4, 1, 8, 1, 8, 3, 4, 3};
+  sh_ring(s, a_pts, 4);
+  sh_ring(s, b_pts, 4);
+  fail_at = alloc_failures_in(s, 0, 0, QK_MESH_AUTO);
+  printf("# %zu allocations (touching squares, the book's mode, then the general mode)\n", fail_at);
+  assert_true(fail_at > 20);
   free(s);
 }
 

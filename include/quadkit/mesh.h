@@ -39,9 +39,13 @@
  * (docs/mesh.md, "The general mode", has the algorithm and the proof). It takes touching
  * input: a vertex exactly inside a segment splits the segment there, and a segment that
  * repeats another, wholly or along a stretch, is merged into the earlier one (its mesh
- * edges are reported as that segment's, with its marker); stats count both.
+ * edges are reported as that segment's, with its marker; the merged segment's own marker
+ * goes to no edge and no vertex); stats count both. More than 2^16 + 16 (vertices +
+ * segments) such splits are refused (QK_ERR_LIMIT): many segments overlapping along a
+ * line through many vertices would cost a walk each.
  * QK_MESH_AUTO runs it also where a lattice mode it chose refuses segments that meet
- * (touching components), keeping the lattice mode's message when it refuses too.
+ * (touching components), keeping the lattice mode's message when it refuses a crossing too
+ * (two segments meeting away from any vertex), its own otherwise.
  *
  * Thread safety: a mesh and a qk_poly never change once made, so any number of threads
  * may call the functions taking a const handle (accessors, statistics, writers) on one
@@ -370,8 +374,9 @@ typedef struct qk_mesh_stats {
                                         facing input angles below 60 degrees */
   double smallest_input_angle_deg; /**< general mode: the smallest angle between two input
                                         segments at a vertex (180 when none) */
-  size_t split_vertices;           /**< general mode: input vertices found inside input
-                                        segments (each splits its segment there) */
+  size_t split_vertices;           /**< general mode: times an input vertex lay inside an
+                                        input segment (or a piece of one), splitting it there
+                                        (a vertex inside k segments counts k times) */
   size_t merged_segments;          /**< general mode: input segments (or pieces of them)
                                         that repeated an earlier one, merged into it */
   double seconds_validate;         /**< checking the input */
