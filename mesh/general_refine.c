@@ -74,8 +74,13 @@ int qk__gm_split_point(const qk__gm_t *g, uint32_t s, uint64_t k, const double e
   const qk_poly_t *P = g->P;
   uint32_t u = P->seg[2 * s], w = P->seg[2 * s + 1];
   const double A[2] = {P->vx[u], P->vy[u]}, B[2] = {P->vx[w], P->vy[w]};
+  /* The trailing zero bits of k (0 < k < 2^62): the pre-split's midpoints have dozens. */
+#if defined(__GNUC__) || defined(__clang__)
+  int tz = __builtin_ctzll(k);
+#else
   int tz = 0;
-  while (tz < 62 && !((k >> tz) & 1)) tz++;
+  while (!((k >> tz) & 1)) tz++;
+#endif
   qk__seg_point_in(A, B, k >> tz, 62 - tz, p);  /* 0 < k < 2^62 on the budget's grid */
   if (g->sbud[s] != QK__GM_SBUD_FREE) return 1; /* exact */
   /* Free: the constant coordinate is A's (k times a zero difference, added), the other
