@@ -19,9 +19,10 @@
 #define QK__GM_ONE ((uint64_t)1 << 62)
 /* g->sbud[s] not computed yet (budgets lie in -1 .. 62). */
 #define QK__GM_SBUD_UNSET (-128)
-/* The budget of an axis-parallel segment whose ends share no dyadic grid fine enough for its
- * splits (0.1 and 1.3, say): split at doubles near its dyadic parameters instead, exactly on
- * it (general_refine.c, qk__gm_split_point). */
+/* The budget of an axis-parallel segment whose exact budget is below 62: any parameter on
+ * the 2^-62 grid, its point the double nearest (exact within the budget), exactly on the
+ * segment (general_refine.c, qk__gm_split_point); ends sharing no fine grid (0.1 and 1.3)
+ * no longer stop its splits. */
 #define QK__GM_SBUD_FREE 63
 
 /* A point to insert before the refinement: a seed (seg == QK__CDT_NONE) or a segment's

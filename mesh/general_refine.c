@@ -83,9 +83,11 @@ int qk__gm_split_point(const qk__gm_t *g, uint32_t s, uint64_t k, const double e
 #endif
   qk__seg_point_in(A, B, k >> tz, 62 - tz, p);  /* 0 < k < 2^62 on the budget's grid */
   if (g->sbud[s] != QK__GM_SBUD_FREE) return 1; /* exact */
-  /* Free: the constant coordinate is A's (k times a zero difference, added), the other
-   * rounded, monotone in k; strictly between the piece's ends, it keeps their order. */
+  /* Free: the constant coordinate is A's (copied: A + k 0 would turn -0 into 0), the other
+   * rounded (a few roundings, each monotone in k); strictly between the piece's ends, it
+   * keeps their order. */
   const int i = A[0] == B[0]; /* the coordinate that varies along the segment */
+  p[1 - i] = A[1 - i];
   return p[i] > fmin(e0[i], e1[i]) && p[i] < fmax(e0[i], e1[i]);
 }
 
@@ -131,9 +133,15 @@ static qk_status_t split_piece(qk__gm_t *g, uint32_t a, uint32_t b, uint32_t s, 
     /* The step the split needs: the piece spans (hi - lo) 2^-62 of the segment. */
     int need = 62 - (int)floor(log2((double)(hi - lo))) + 1, bud = qk__seg_budget(A, B);
     unsigned long line = P->sline ? P->sline[s] : 0;
-    char nm[80], has[48];
-    if (g->sbud[s] == QK__GM_SBUD_FREE && bud < 1) /* (axis-parallel: any double on it) */
-      snprintf(has, sizeof has, "none (no double strictly inside this piece)");
+    char nm[80], has[112];
+    const int apex = (lo == 0 && g->vsmall[u]) || (hi == QK__GM_ONE && g->vsmall[w]);
+    if (g->sbud[s] == QK__GM_SBUD_FREE && !apex) /* (axis-parallel: any double on it) */
+      snprintf(has, sizeof has, "any double on it, but none strictly inside this piece");
+    else if (g->sbud[s] == QK__GM_SBUD_FREE && bud < 1) /* (the shells need exact points) */
+      snprintf(has, sizeof has, "none, and at the apex of a small input angle it must be exact");
+    else if (g->sbud[s] == QK__GM_SBUD_FREE)
+      snprintf(has, sizeof has, "2^-%d, and at the apex of a small input angle it must be exact",
+               bud < 62 ? bud : 62);
     else if (bud < 1)
       snprintf(has, sizeof has, "none inside it");
     else

@@ -496,12 +496,15 @@ static qk_status_t general(const qk_poly_t *poly, const qk_mesh_options_t *opt, 
 }
 
 /* QK_MESH_AUTO, after the lattice mode it chose refused segments that meet (its message in
- * err, QK_ERR_GEOMETRY): the general mode, which takes touching input. On success err is
- * cleared, as for any success; where the general mode refuses two segments that cross too,
- * the lattice mode's message stands; any other refusal (a hole point on a segment, memory
- * running short) is the general mode's, which names what it found. */
+ * err, QK_ERR_GEOMETRY; g->meet says what it found): the general mode, which takes
+ * touching input. On success err is cleared, as for any success. Where the general mode
+ * refuses a crossing and the lattice mode had named a crossing too (or what its general
+ * check found), or refuses options that are the lattice modes' only (QK_ERR_INVALID), the
+ * lattice mode's message stands; any other refusal (a crossing behind a touch the lattice
+ * mode named, a hole point on a segment, memory running short) is the general mode's,
+ * which names what it found. */
 static qk_status_t fallback(const qk_poly_t *poly, const qk_mesh_options_t *opt, qk_mesh_t **out,
-                            qk_mesh_error_t *err) {
+                            qk_mesh_error_t *err, const qk__gen_t *g) {
   qk_mesh_error_t first;
   if (err) first = *err;
   qk_mesh_t *m = new_mesh(opt);
@@ -515,7 +518,7 @@ static qk_status_t fallback(const qk_poly_t *poly, const qk_mesh_options_t *opt,
   }
   /* (a crossing, or options the general mode does not take, say min_angle_deg 40: the
    * lattice mode's refusal is the one that applies) */
-  const int keep = m->refused_crossing || st == QK_ERR_INVALID;
+  const int keep = (m->refused_crossing && g->meet != 3) || st == QK_ERR_INVALID;
   if (keep && err) *err = first;
   if (keep) st = QK_ERR_GEOMETRY;
   qk_mesh_free(m);
@@ -577,10 +580,10 @@ qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *opt
   if (st != QK_OK) {
     qk_mesh_free(m);
     /* Chosen automatically, the lattice mode refused segments that meet: the general mode
-     * takes touching input (a corner of one component on another's side, a shared side).
-     * Where it refuses too (crossings), the lattice mode's message stands. */
+     * takes touching input (a corner of one component on another's side, a shared side);
+     * see fallback for whose message a refusal there returns. */
     if (st == QK_ERR_GEOMETRY && g.meet && opt.mode == QK_MESH_AUTO && !opt.size)
-      return fallback(poly, &opt, out, err);
+      return fallback(poly, &opt, out, err, &g);
     return st;
   }
   m->stats.size = g.U;

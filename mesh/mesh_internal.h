@@ -163,7 +163,9 @@ typedef struct qk__gen {
   qk_mesh_error_t *err;
   /* Set where the lattice modes refuse segments that meet (components touching or
    * crossing, repeated or overlapping segments): QK_MESH_AUTO then tries the general mode,
-   * which takes touching input (generate.c). */
+   * which takes touching input (generate.c): 1 (the general mode's own check refused
+   * them), 2 (two segments crossing) or 3 (touching or overlapping: an end of one on the
+   * other). */
   int meet;
   uint64_t U;
   qk__edge_t *e;

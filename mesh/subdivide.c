@@ -55,10 +55,22 @@ static int edges_legal(const qk__gen_t *g, const qk__edge_t *p, const qk__edge_t
   return !edges_meet(p, q);
 }
 
+/* Does an end of edge e lie on edge f (lattice coordinates, exact)? */
+static int end_on(const qk__edge_t *e, const qk__edge_t *f) {
+  const int64_t ex[2] = {e->ax, e->bx}, ey[2] = {e->ay, e->by};
+  for (int i = 0; i < 2; i++)
+    if (qk__cross(f->bx - f->ax, f->by - f->ay, ex[i] - f->ax, ey[i] - f->ay) == 0 &&
+        ex[i] >= (f->ax < f->bx ? f->ax : f->bx) && ex[i] <= (f->ax < f->bx ? f->bx : f->ax) &&
+        ey[i] >= (f->ay < f->by ? f->ay : f->by) && ey[i] <= (f->ay < f->by ? f->by : f->ay))
+      return 1;
+  return 0;
+}
+
 static qk_status_t pair_error(qk__gen_t *g, const qk__edge_t *p, const qk__edge_t *q) {
   const qk_poly_t *P = g->poly;
   unsigned long lp = P->sline[p->seg], lq = P->sline[q->seg];
-  g->meet = 1;
+  /* (a touch, an end of one on the other, which the general mode takes: 3; a crossing: 2) */
+  g->meet = end_on(p, q) || end_on(q, p) ? 3 : 2;
   if (p->comp == q->comp)
     return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, lq,
                          "component %u intersects itself: segments %lu (line %lu) and %lu (line "

@@ -1132,6 +1132,28 @@ static void test_mesh_general_mode_touching(void **state) {
     assert_non_null(strstr(err.message, "hole 0 at (4, 2) lies on segment 1"));
     qk_poly_free(p);
   }
+  /* A touch the general mode takes and a crossing elsewhere: QK_MESH_AUTO names the
+   * crossing (the book's message named the touch, and removing it only led to the
+   * crossing); the same crossing alone keeps the book's message. */
+  {
+    double tc[32] = {0,  0, 4,  0, 4,  4, 0,  4, 4,  1, 8,  1, 8,  3, 4,  3,  /* A, B touching */
+                     20, 0, 24, 0, 24, 4, 20, 4, 22, 2, 26, 2, 26, 6, 22, 6}; /* C, D crossing */
+    uint32_t ts[32];
+    for (uint32_t r = 0; r < 4; r++)
+      for (uint32_t i = 0; i < 4; i++)
+        ts[8 * r + 2 * i] = 4 * r + i, ts[8 * r + 2 * i + 1] = 4 * r + (i + 1) % 4;
+    qk_mesh_options_t oa;
+    qk_mesh_options_init(&oa);
+    assert_int_equal(qk_poly_from_arrays(tc, 16, ts, 16, NULL, 0, NULL, &p, &err), QK_OK);
+    assert_int_equal(qk_mesh_generate(p, &oa, &m, &err), QK_ERR_GEOMETRY);
+    if (!strstr(err.message, "cross or overlap") || strstr(err.message, "touch"))
+      fail_msg("\"%s\"", err.message);
+    qk_poly_free(p);
+    assert_int_equal(qk_poly_from_arrays(tc + 16, 8, ts, 8, NULL, 0, NULL, &p, &err), QK_OK);
+    assert_int_equal(qk_mesh_generate(p, &oa, &m, &err), QK_ERR_GEOMETRY);
+    assert_non_null(strstr(err.message, "components 1 and 2 touch or cross"));
+    qk_poly_free(p);
+  }
   /* Crossing segments stay refused, named by their input numbers. */
   double xc[10] = {0, 0, 4, 0, 2, 2, 1, -1, 3, 1};
   uint32_t sc[8] = {0, 1, 1, 2, 2, 0, 3, 4};
@@ -1256,6 +1278,37 @@ static void test_mesh_general_mode_decimal_rectilinear(void **state) {
     qk_poly_free(p);
   }
   free(s);
+  /* A side at x = -0: its split points keep -0 (A + k 0 made them +0). */
+  {
+    double nz[8] = {-0.0, 0.1, 1.3, 0.1, 1.3, 0.7, -0.0, 0.7};
+    uint32_t nzs[8] = {0, 1, 1, 2, 2, 3, 3, 0};
+    qk_poly_t *p;
+    qk_mesh_t *m;
+    qk_mesh_error_t err;
+    o.max_size = 0.05;
+    assert_int_equal(qk_poly_from_arrays(nz, 4, nzs, 4, NULL, 0, NULL, &p, &err), QK_OK);
+    assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_OK);
+    size_t nv, on_side = 0;
+    const double *xy = qk_mesh_vertices(m, &nv);
+    for (size_t v = 0; v < nv; v++)
+      if (xy[2 * v] == 0) assert_true(signbit(xy[2 * v])), on_side++;
+    assert_true(on_side > 4);
+    qk_mesh_free(m);
+    qk_poly_free(p);
+  }
+  /* At the apex of a small input angle (14 degrees) a decimal axis-parallel side needs exact
+   * points for the shells: the refusal says so (it said no double lay inside the piece). */
+  {
+    double ap[6] = {0, 0, 1.3, 0, 1, 0.25};
+    uint32_t aps[6] = {0, 1, 1, 2, 2, 0};
+    qk_poly_t *p;
+    qk_mesh_t *m;
+    qk_mesh_error_t err;
+    assert_int_equal(qk_poly_from_arrays(ap, 3, aps, 3, NULL, 0, NULL, &p, &err), QK_OK);
+    assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_ERR_GEOMETRY);
+    assert_non_null(strstr(err.message, "at the apex of a small input angle it must be exact"));
+    qk_poly_free(p);
+  }
   /* The plain rectangle at tenths, and a slanted segment at tenths (refused as before). */
   double rect[8] = {0.1, 0.2, 1.3, 0.2, 1.3, 0.7, 0.1, 0.7},
          tri[6] = {0.1, 0.2, 1.3, 0.2, 0.7, 1.1};

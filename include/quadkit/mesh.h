@@ -44,8 +44,9 @@
  * segments) such splits are refused (QK_ERR_LIMIT): many segments overlapping along a
  * line through many vertices would cost a walk each.
  * QK_MESH_AUTO runs it also where a lattice mode it chose refuses segments that meet
- * (touching components), keeping the lattice mode's message when it refuses a crossing too
- * (two segments meeting away from any vertex), its own otherwise.
+ * (touching components), keeping the lattice mode's message when both refuse a crossing
+ * (two segments meeting away from any vertex) or it refuses the options (min_angle_deg
+ * above 34), its own otherwise (a crossing behind a touch the lattice mode named).
  *
  * Thread safety: a mesh and a qk_poly never change once made, so any number of threads
  * may call the functions taking a const handle (accessors, statistics, writers) on one
