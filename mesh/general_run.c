@@ -67,6 +67,14 @@ typedef struct touched {
   int32_t *smark;
 } touched_t;
 
+/* Segment j of the copy: ab, a piece of P's segment s, with its line and marker. */
+static void copy_piece(touched_t *tc, const qk_poly_t *P, size_t j, size_t s, const uint32_t *ab) {
+  tc->seg[2 * j] = ab[0], tc->seg[2 * j + 1] = ab[1];
+  tc->sorig[j] = (uint32_t)(P->sorig ? P->sorig[s] : s);
+  if (tc->sline) tc->sline[j] = P->sline[s];
+  if (tc->smark) tc->smark[j] = P->smark[s];
+}
+
 static qk_status_t touched_copy(const qk__gm_t *g, touched_t *tc) {
   const qk_poly_t *P = g->P;
   size_t n = g->npieces;
@@ -83,19 +91,11 @@ static qk_status_t touched_copy(const qk__gm_t *g, touched_t *tc) {
     return QK_ERR_NOMEM;
   size_t j = 0, k = 0;
   for (size_t s = 0; s < P->ns; s++) {
-    const uint32_t *ab = &P->seg[2 * s];
-    size_t m = 1;
-    if (g->schg[s]) { /* its pieces, in order */
-      while (k + m - 1 < g->npieces && g->pieces[3 * (k + m - 1)] == s) m++;
-      m--, ab = NULL;
-    }
-    for (size_t i = 0; i < m; i++, j++) {
-      const uint32_t *e = ab ? ab : &g->pieces[3 * k++ + 1];
-      tc->seg[2 * j] = e[0], tc->seg[2 * j + 1] = e[1];
-      tc->sorig[j] = (uint32_t)(P->sorig ? P->sorig[s] : s);
-      if (tc->sline) tc->sline[j] = P->sline[s];
-      if (tc->smark) tc->smark[j] = P->smark[s];
-    }
+    if (!g->schg[s])
+      copy_piece(tc, P, j++, s, &P->seg[2 * s]);
+    else /* its pieces, in order (none for a repeat) */
+      for (; k < g->npieces && g->pieces[3 * k] == s; k++)
+        copy_piece(tc, P, j++, s, &g->pieces[3 * k + 1]);
   }
   return QK_OK;
 }

@@ -518,7 +518,7 @@ static qk_status_t fallback(const qk_poly_t *poly, const qk_mesh_options_t *opt,
   }
   /* (a crossing, or options the general mode does not take, say min_angle_deg 40: the
    * lattice mode's refusal is the one that applies) */
-  const int keep = (m->refused_crossing && g->meet != 3) || st == QK_ERR_INVALID;
+  const int keep = (m->refused_crossing && g->meet != QK__MEET_TOUCH) || st == QK_ERR_INVALID;
   if (keep && err) *err = first;
   if (keep) st = QK_ERR_GEOMETRY;
   qk_mesh_free(m);
@@ -562,7 +562,7 @@ qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *opt
   m->lat = g.lat;
   if (!st && !(st = qk__mesh_validate(&g, book ? opt.size : 0)) &&
       (st = qk__mesh_precheck(g.poly, g.src, &opt, book ? g.U : 0, &m->alloc, err)))
-    g.meet = st == QK_ERR_GEOMETRY; /* (the general mode's check: crossings, touches) */
+    g.meet = st == QK_ERR_GEOMETRY ? QK__MEET_CHECK : 0; /* (crossings or touches) */
   if (!st) {
     m->size = g.U;
     m->stats.components = g.ncomp;

@@ -154,6 +154,11 @@ typedef struct qk__ebox {
 } qk__ebox_t;
 
 /* Generation state; freed in one place. */
+/* What a lattice mode's refusal of segments that meet found (qk__gen_t's meet): the
+ * general mode's own check refused them (the precheck), two segments crossing, or touching
+ * or overlapping (an end of one on the other). */
+enum { QK__MEET_CHECK = 1, QK__MEET_CROSS = 2, QK__MEET_TOUCH = 3 };
+
 typedef struct qk__gen {
   const qk_allocator_t *a;
   const qk_poly_t *poly; /* the input on the lattice */
@@ -163,9 +168,7 @@ typedef struct qk__gen {
   qk_mesh_error_t *err;
   /* Set where the lattice modes refuse segments that meet (components touching or
    * crossing, repeated or overlapping segments): QK_MESH_AUTO then tries the general mode,
-   * which takes touching input (generate.c): 1 (the general mode's own check refused
-   * them), 2 (two segments crossing) or 3 (touching or overlapping: an end of one on the
-   * other). */
+   * which takes touching input (generate.c): a QK__MEET_ value, 0 when none. */
   int meet;
   uint64_t U;
   qk__edge_t *e;

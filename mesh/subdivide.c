@@ -70,7 +70,7 @@ static qk_status_t pair_error(qk__gen_t *g, const qk__edge_t *p, const qk__edge_
   const qk_poly_t *P = g->poly;
   unsigned long lp = P->sline[p->seg], lq = P->sline[q->seg];
   /* (a touch, an end of one on the other, which the general mode takes: 3; a crossing: 2) */
-  g->meet = end_on(p, q) || end_on(q, p) ? 3 : 2;
+  g->meet = end_on(p, q) || end_on(q, p) ? QK__MEET_TOUCH : QK__MEET_CROSS;
   if (p->comp == q->comp)
     return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, lq,
                          "component %u intersects itself: segments %lu (line %lu) and %lu (line "

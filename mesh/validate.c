@@ -118,7 +118,7 @@ static qk_status_t orient_component(qk__gen_t *g, uint32_t c, size_t first) {
   int64_t turn =
       qk__cross(in->bx - in->ax, in->by - in->ay, outg->bx - outg->ax, outg->by - outg->ay);
   if (turn == 0) {
-    g->meet = 3;
+    g->meet = QK__MEET_TOUCH;
     return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, P->sline[outg->seg],
                          "component %u is degenerate: segments %lu and %lu overlap", c,
                          qk__mesh_num(P, in->seg), qk__mesh_num(P, outg->seg));
@@ -156,7 +156,7 @@ static qk_status_t walk_components(qk__gen_t *g, const uint32_t *adj, uint32_t *
       from = to;
     } while (s != s0);
     if (len < 3) {
-      g->meet = 3;
+      g->meet = QK__MEET_TOUCH;
       return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, P->sline[g->e[first + 1].seg],
                            "segments %lu and %lu coincide", qk__mesh_num(P, g->e[first].seg),
                            qk__mesh_num(P, g->e[first + 1].seg));
