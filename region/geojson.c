@@ -146,6 +146,10 @@ static const char *at_text(const gj_at_t *w, char *buf, size_t n) {
   return buf;
 }
 
+static bool is_number(json_object *o) {
+  return json_object_is_type(o, json_type_double) || json_object_is_type(o, json_type_int);
+}
+
 /* One position p ([x, y, ...], numbers only) into *vx, *vy, checked as every coordinate is:
  * `w` says where it is in feature f. The path leads to p; on an error, to p or the
  * number. */
@@ -157,15 +161,11 @@ static qk_status_t position(gj_t *g, json_object *p, size_t f, const gj_at_t *w,
     x = json_object_array_get_idx(p, 0);
     y = json_object_array_get_idx(p, 1);
   }
-  bool okx =
-      x && (json_object_is_type(x, json_type_double) || json_object_is_type(x, json_type_int));
-  bool oky =
-      y && (json_object_is_type(y, json_type_double) || json_object_is_type(y, json_type_int));
+  bool okx = x && is_number(x), oky = y && is_number(y);
   /* Elements after x and y (altitude, measure) are not used, but a position holds
    * numbers only (RFC 7946, 3.1.1): [0, 0, "a"] is not a position. */
   for (size_t j = 2; okx && oky && j < json_object_array_length(p); j++) {
-    json_object *z = json_object_array_get_idx(p, j);
-    oky = json_object_is_type(z, json_type_double) || json_object_is_type(z, json_type_int);
+    oky = is_number(json_object_array_get_idx(p, j));
   }
   if (!okx || !oky)
     return qk__region_fail(g->err, QK_ERR_PARSE, f,
@@ -210,10 +210,6 @@ static qk_status_t position(gj_t *g, json_object *p, size_t f, const gj_at_t *w,
              at_text(w, at, sizeof at));
   }
   return st;
-}
-
-static bool is_number(json_object *o) {
-  return json_object_is_type(o, json_type_double) || json_object_is_type(o, json_type_int);
 }
 
 /* A coordinates array nested one level too shallow or too deep for its type (a Polygon's
