@@ -10,8 +10,12 @@
  * lies on the pole line: it covers no area, and the even-odd fill is the feature's. The
  * pieces added along the antimeridian and the poles are not the feature's boundary: they
  * are filled but not stroked, the outline being a second path of the ring's own pieces. */
+/* A path command to the layer's point (x, y), in picture units (k a unit, y down). */
+static void put(const qk_region_t *r, FILE *f, char cmd, double x, double y, double k) {
+  fprintf(f, "%c%.2f %.2f", cmd, (x - r->rx) * k, (r->ry + r->rside - y) * k);
+}
+
 static void write_feature(const qk_region_t *r, FILE *f, size_t i0, size_t i1, double k) {
-  double x0 = r->rx, y0 = r->ry, s = r->rside;
   bool added = false;
   for (size_t i = i0; i < i1; i++) added |= (r->seg_tag[i] & QK__SEG_ADDED) != 0;
   unsigned hue = (unsigned)(((r->seg_tag[i0] >> 2) * 2654435761u) % 360u);
@@ -27,8 +31,8 @@ static void write_feature(const qk_region_t *r, FILE *f, size_t i0, size_t i1, d
     if ((r->seg_tag[i] & QK__SEG_RING_START) && open) fputc('Z', f), open = false;
     if ((r->seg_tag[i] & QK__SEG_ADDED) && g->ay == g->by) continue; /* along a pole */
     if (!open || g->ax != px || g->ay != py) /* (not open: a ring's first; else a gap) */
-      fprintf(f, "%c%.2f %.2f", open ? 'L' : 'M', (g->ax - x0) * k, (y0 + s - g->ay) * k);
-    fprintf(f, "L%.2f %.2f", (g->bx - x0) * k, (y0 + s - g->by) * k);
+      put(r, f, open ? 'L' : 'M', g->ax, g->ay, k);
+    put(r, f, 'L', g->bx, g->by, k);
     open = true, px = g->bx, py = g->by;
   }
   if (open) fputc('Z', f);
@@ -43,8 +47,8 @@ static void write_feature(const qk_region_t *r, FILE *f, size_t i0, size_t i1, d
       continue;
     }
     if (!drawn || (r->seg_tag[i] & QK__SEG_RING_START) || g->ax != g[-1].bx || g->ay != g[-1].by)
-      fprintf(f, "M%.2f %.2f", (g->ax - x0) * k, (y0 + s - g->ay) * k);
-    fprintf(f, "L%.2f %.2f", (g->bx - x0) * k, (y0 + s - g->by) * k);
+      put(r, f, 'M', g->ax, g->ay, k);
+    put(r, f, 'L', g->bx, g->by, k);
     drawn = true;
   }
   fprintf(f, "\"/>\n");
