@@ -226,6 +226,11 @@ qk_status_t qk__gm_sort_points(const qk__gm_t *g, qk__gm_pt_t *pts, size_t n);
 /* general_seed.c: the pre-split points (and the seeds, when compiled in), inserted; the
  * graded quadtree first only with a size function or seeds. */
 qk_status_t qk__gm_seed(qk__gm_t *g);
+/* general_lattice.c: with a plain size bound, the interior lattice (its outline's points
+ * inserted, its triangles made directly); a check that fails only stops it. Tests: 0 in
+ * qk__gm_test_lattice turns it off, 2 stops it after the outline. */
+qk_status_t qk__gm_lattice(qk__gm_t *g);
+extern int qk__gm_test_lattice;
 /* general_seed.c: the graded quadtree (g->tree, g->stats' leaves; its leaves added to
  * g->cap_leaves), or the refusal of an input whose grading would not end soon. */
 qk_status_t qk__gm_grade(qk__gm_t *g);

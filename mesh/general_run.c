@@ -197,6 +197,8 @@ qk_status_t qk__mesh_general(const qk_poly_t *P, const qk_mesh_options_t *opt, q
     t1 = now();
     g.stage = "splitting the segments to the size bound";
     st = qk__gm_seed(&g);
+    g.stage = "filling the interior with the lattice";
+    if (!st) st = qk__gm_lattice(&g);
     t2 = now();
   }
   if (!st) {
