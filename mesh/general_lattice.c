@@ -5,17 +5,17 @@
  * instead of point by point by the refinement (which would make about 2.3 times the
  * triangles there, at the cost of an insertion each):
  *
- * 1. A grid of cells of side c = s/2 over the input's bounding box marks every cell that a
+ * 1. A grid of cells of side c = s/3 over the input's bounding box marks every cell that a
  *    segment or an isolated vertex may meet; a cell is clear when no marked cell lies
- *    within two cells of it, so a point in a clear cell is at least 2c = s from every
+ *    within two cells of it, so a point in a clear cell is at least 2c = 2s/3 from every
  *    feature and every vertex of the CDT (those lie on features).
  * 2. A lattice point is taken when it lies in a kept triangle of the CDT (so in a kept
  *    face) and in a clear cell; a lattice triangle when its three corners are. The taken
  *    triangles' union is bounded by outline edges.
  * 3. The outline's points are inserted into the CDT as free points. A taken triangle's
- *    circumcircle (radius s / sqrt 3) holds no vertex of the CDT: each of its points is
- *    within s / sqrt 3 of a corner, every vertex at least s from every corner, and the
- *    lattice's own points lie outside it. So each outline edge, having an empty circle
+ *    circumcircle (radius s / sqrt 3 < 0.578 s) holds no vertex of the CDT: each of its
+ *    points is within s / sqrt 3 of a corner, every vertex at least 2s/3 from every corner,
+ *    and the lattice's own points lie outside it. So each outline edge, having an empty circle
  *    through its ends, is an edge of the CDT, and the CDT's triangles inside the outline
  *    have outline points as their only corners. They are replaced by the lattice's
  *    triangles.
@@ -30,7 +30,7 @@
  * a triangle inside the outline with another corner) only stops the step before anything
  * is replaced: the points inserted so far stay as free points, and the refinement, which
  * guarantees the mesh's bounds by itself, meshes the rest. For the proof of termination
- * the lattice points are isolated input vertices, at least s from every feature and s
+ * the lattice points are isolated input vertices, at least 2s/3 from every feature and s
  * from each other (docs/mesh.md, "The angle bound", step 1).
  */
 #include <math.h>
@@ -50,17 +50,20 @@ int qk__gm_test_lattice = 1;
 
 typedef struct lat {
   qk__gm_t *g;
-  double gx0, gy0, c, inv_c, s, dy; /* grid origin, cell side and 1 / c, lattice side, row step */
-  size_t nx, ny, nrow;              /* cells a row and rows; lattice rows */
-  size_t nh;                        /* lattice points a row in the dense index: nx/2 + 1 */
-  uint8_t *hit;                     /* per cell: 1 when a feature may meet it */
-  uint8_t *vf;                      /* per lattice point: the flags below */
-  uint32_t *vface;                  /* per taken lattice point: its face */
-  uint32_t *vid;                    /* per lattice point: its CDT vertex */
+  double gx0, gy0, c, inv_c; /* the grid's origin, its cells' side and 1 / c */
+  double s, hs, dy;          /* the lattice's side, half of it, its row step */
+  size_t nx, ny, nrow;       /* cells a row and rows; lattice rows */
+  size_t nu;                 /* lattice half steps a row (u from 0 to nu - 1) */
+  size_t nh;                 /* lattice points a row in the dense index: nu/2 + 1 */
+  uint8_t *hit;              /* per cell: 1 when a feature may meet it */
+  uint8_t *vf;               /* per lattice point: the flags below */
+  uint32_t *vface;           /* per taken lattice point: its face */
+  uint32_t *vid;             /* per lattice point: its CDT vertex */
   size_t *lo, *hi; /* per lattice row: the first and last u of its taken points (lo > hi: none) */
   uint32_t *ts;    /* per lattice triangle: 0 taken (its CDT slot once built), else NONE */
-  uint32_t *tl;    /* the taken triangles, in index order */
-  size_t ntl, tl_cap;
+  uint32_t *tl;    /* the taken triangles in index order, as 2 t + 1 for up, 2 t for down */
+  uint32_t *tc;    /* their corners' point indices, three a triangle in slot order */
+  size_t ntl, tl_cap, tc_cap;
   uint32_t *stk;
   size_t stk_cap;
 } lat_t;
@@ -109,11 +112,11 @@ static qk_status_t push(lat_t *L, size_t *sp, uint32_t x) {
 }
 
 /* Lattice point (u, j), u = j mod 2 (half steps of s along a row): its place and index. */
-static double lx(const lat_t *L, size_t u) { return L->gx0 + (double)u * L->c; }
+static double lx(const lat_t *L, size_t u) { return L->gx0 + (double)u * L->hs; }
 static double ly(const lat_t *L, size_t j) { return L->gy0 + (double)j * L->dy; }
 static size_t vindex(const lat_t *L, size_t u, size_t j) { return j * L->nh + (u >> 1); }
 
-/* Lattice triangle (m, j) of the band between rows j and j + 1 (m from 1 to nx - 2): "up"
+/* Lattice triangle (m, j) of the band between rows j and j + 1 (m from 1 to nu - 2): "up"
  * when m + j is odd, with corners (m - 1, j), (m + 1, j), (m, j + 1); "down" otherwise,
  * with (m, j), (m + 1, j + 1), (m - 1, j + 1); both counter-clockwise. Its corners' indices
  * in slot order. */
@@ -124,18 +127,17 @@ static void corners(const lat_t *L, size_t m, size_t j, size_t out[3]) {
     out[0] = vindex(L, m, j), out[1] = vindex(L, m + 1, j + 1), out[2] = vindex(L, m - 1, j + 1);
 }
 
-/* Taken triangle t = j nx + m: its corners (as corners()) and the lattice triangles
- * across its slots. Up: slot 0 (its right side) borders down (m + 1, j), slot 1 (left)
- * down (m - 1, j), slot 2 (bottom) down (m, j - 1); down: slot 0 (top) up (m, j + 1), slot
- * 1 (left) up (m - 1, j), slot 2 (right) up (m + 1, j). All on the lattice: a taken point
- * lies two cells inside the grid, so in a row from 2 to nrow - 2 and at u from 2 to nx - 3. */
-static void tri_info(const lat_t *L, uint32_t t, size_t cv[3], uint32_t nb[3]) {
-  const size_t nx = L->nx, j = t / nx, m = t - j * nx;
-  corners(L, m, j, cv);
-  if ((m + j) & 1)
-    nb[0] = t + 1, nb[1] = t - 1, nb[2] = (uint32_t)(t - nx);
+/* The lattice triangles across the slots of taken triangle tl[i]. Up: slot 0 (its right
+ * side) borders down (m + 1, j), slot 1 (left) down (m - 1, j), slot 2 (bottom) down
+ * (m, j - 1); down: slot 0 (top) up (m, j + 1), slot 1 (left) up (m - 1, j), slot 2
+ * (right) up (m + 1, j). All on the lattice: taken triangles lie in bands 1 to nrow - 2
+ * and at m from 1 to nu - 2, so their neighbours in bands 0 to nrow - 1. */
+static void across(const lat_t *L, size_t i, uint32_t nb[3]) {
+  const uint32_t t = L->tl[i] >> 1, nu = (uint32_t)L->nu;
+  if (L->tl[i] & 1)
+    nb[0] = t + 1, nb[1] = t - 1, nb[2] = t - nu;
   else
-    nb[0] = (uint32_t)(t + nx), nb[1] = t - 1, nb[2] = t + 1;
+    nb[0] = t + nu, nb[1] = t - 1, nb[2] = t + 1;
 }
 
 /* Step 1's marks: every cell a segment or an isolated vertex may meet. */
@@ -203,9 +205,9 @@ static void take_points(lat_t *L) {
         xa = MIN(xa, x), xb = MAX(xb, x);
       }
       if (!(xa <= xb)) continue;
-      double u0 = ceil((xa - eps - L->gx0) / L->c), u1 = floor((xb + eps - L->gx0) / L->c);
+      double u0 = ceil((xa - eps - L->gx0) / L->hs), u1 = floor((xb + eps - L->gx0) / L->hs);
       if (u0 < 0) u0 = 0;
-      if (u1 > (double)L->nx - 1) u1 = (double)L->nx - 1;
+      if (u1 > (double)L->nu - 1) u1 = (double)L->nu - 1;
       size_t u = (size_t)u0;
       if ((u ^ j) & 1) u++;
       for (; (double)u <= u1; u += 2) {
@@ -222,7 +224,7 @@ static void take_points(lat_t *L) {
   }
 }
 
-/* An outline edge: lattice triangle lt's slot k, the CDT triangle inside (tin, slot kin)
+/* An outline edge: taken triangle tl[lt]'s slot k, the CDT triangle inside (tin, slot kin)
  * and the one outside (tout, slot kout). */
 typedef struct oedge {
   uint32_t lt, tin, tout;
@@ -271,18 +273,17 @@ static qk_status_t build(lat_t *L) {
   size_t nout = 0, nused = 0, ne = 0;
   /* The outline: the taken triangles' sides whose other side is not taken. */
   for (size_t i = 0; i < L->ntl; i++) {
-    size_t cv[3];
     uint32_t nb[3];
-    tri_info(L, L->tl[i], cv, nb);
+    across(L, i, nb);
+    const uint32_t *cv = &L->tc[3 * i];
     for (int k = 0; k < 3; k++) {
-      L->vf[cv[k]] |= V_USED;
       if (L->ts[nb[k]] != NONE) continue;
       ne++;
       L->vf[cv[(k + 1) % 3]] |= V_OUT, L->vf[cv[(k + 2) % 3]] |= V_OUT;
     }
   }
   for (size_t j = 0; j < L->nrow; j++)
-    for (size_t u = L->lo[j]; u <= L->hi[j] && u < L->nx; u += 2) {
+    for (size_t u = L->lo[j]; u <= L->hi[j] && u < L->nu; u += 2) {
       uint8_t f = L->vf[vindex(L, u, j)];
       nused += (f & V_USED) != 0, nout += (f & V_OUT) != 0;
     }
@@ -299,7 +300,7 @@ static qk_status_t build(lat_t *L) {
   int ok = !st;
   /* The outline's points, in Z-order, inserted as free points. */
   for (size_t j = 0; j < L->nrow && ok; j++)
-    for (size_t u = L->lo[j]; u <= L->hi[j] && u < L->nx; u += 2) {
+    for (size_t u = L->lo[j]; u <= L->hi[j] && u < L->nu; u += 2) {
       size_t v = vindex(L, u, j);
       if (!(L->vf[v] & V_OUT)) continue;
       double x = lx(L, u), y = ly(L, j);
@@ -312,7 +313,7 @@ static qk_status_t build(lat_t *L) {
     uint32_t t, v;
     int k, existed;
     qk__cdt_where_t w = qk__cdt_locate(c, pts[i].x, pts[i].y, hint, &t, &k);
-    /* (Cannot happen: the point is s from every feature, in a kept face.) */
+    /* (Cannot happen: the point is 2s/3 from every feature, in a kept face.) */
     if (w == QK__CDT_VERT || (w == QK__CDT_EDGE && c->seg[3 * t + k] != NONE) ||
         g->faces[g->face[t]].drop) {
       ok = 0;
@@ -337,9 +338,9 @@ static qk_status_t build(lat_t *L) {
   /* Every outline edge an edge of the CDT, with the lattice triangle's side inside. */
   size_t e = 0;
   for (size_t i = 0; i < L->ntl && ok; i++) {
-    size_t cv[3];
-    uint32_t nb[3], t = L->tl[i];
-    tri_info(L, t, cv, nb);
+    uint32_t nb[3];
+    across(L, i, nb);
+    const uint32_t *cv = &L->tc[3 * i];
     for (int k = 0; k < 3 && ok; k++) {
       if (L->ts[nb[k]] != NONE) continue;
       int kin;
@@ -349,7 +350,7 @@ static qk_status_t build(lat_t *L) {
         break;
       }
       seen[tin] |= (uint8_t)(1 << kin);
-      oe[e++] = (oedge_t){t, tin, NONE, (uint8_t)k, (uint8_t)kin, 0};
+      oe[e++] = (oedge_t){(uint32_t)i, tin, NONE, (uint8_t)k, (uint8_t)kin, 0};
     }
   }
   if (ok) ok = flood(L, oe, ne, seen, nv0, inner, ntaken, &ninner, &st);
@@ -371,7 +372,7 @@ static qk_status_t build(lat_t *L) {
     /* The lattice's points inside the outline, then its triangles: the inside triangles'
      * slots first, then new ones. */
     for (size_t j = 0; j < L->nrow; j++)
-      for (size_t u = L->lo[j]; u <= L->hi[j] && u < L->nx; u += 2) {
+      for (size_t u = L->lo[j]; u <= L->hi[j] && u < L->nu; u += 2) {
         size_t v = vindex(L, u, j);
         if ((L->vf[v] & (V_USED | V_OUT)) != V_USED) continue;
         uint32_t id = (uint32_t)c->nv++;
@@ -381,11 +382,11 @@ static qk_status_t build(lat_t *L) {
       }
     size_t d = 0;
     for (size_t i = 0; i < L->ntl; i++)
-      L->ts[L->tl[i]] = d < ninner ? inner[d++] : (uint32_t)c->nt++;
+      L->ts[L->tl[i] >> 1] = d < ninner ? inner[d++] : (uint32_t)c->nt++;
     for (size_t i = 0; i < L->ntl; i++) {
-      size_t cv[3];
-      uint32_t nb[3], t = L->tl[i], slot = L->ts[t];
-      tri_info(L, t, cv, nb);
+      uint32_t nb[3], slot = L->ts[L->tl[i] >> 1];
+      across(L, i, nb);
+      const uint32_t *cv = &L->tc[3 * i];
       for (int k = 0; k < 3; k++) {
         uint32_t id = L->vid[cv[k]];
         c->v[3 * (size_t)slot + k] = id;
@@ -396,11 +397,11 @@ static qk_status_t build(lat_t *L) {
       g->face[slot] = L->vface[cv[0]];
     }
     for (size_t i = 0; i < ne; i++) {
-      uint32_t slot = L->ts[oe[i].lt];
+      uint32_t slot = L->ts[L->tl[oe[i].lt] >> 1];
       c->nbr[3 * (size_t)slot + oe[i].k] = oe[i].tout;
       c->nbr[3 * (size_t)oe[i].tout + oe[i].kout] = slot;
     }
-    c->hint = L->ts[oe[0].lt];
+    c->hint = L->ts[L->tl[oe[0].lt] >> 1];
   }
   qk__free(g->a, pts, (nout + 1) * sizeof *pts);
   qk__free(g->a, oe, (ne + 1) * sizeof *oe);
@@ -417,32 +418,27 @@ qk_status_t qk__gm_lattice(qk__gm_t *g) {
   memset(&L, 0, sizeof L);
   L.g = g;
   L.s = h * (1 - 0x1p-20); /* every side below h, rounding included */
-  L.c = L.s / 2, L.inv_c = 1 / L.c;
+  L.c = L.s / 3, L.inv_c = 1 / L.c, L.hs = L.s / 2;
   L.dy = L.s * 0.86602540378443864676; /* sqrt 3 / 2 */
   /* Coordinates below 2^24 s: their rounding (2^-28 s) is far below the marks' pad and
    * the 2^-20 margin of the sides. */
   double M = MAX(MAX(fabs(g->bx0), fabs(g->bx1)), MAX(fabs(g->by0), fabs(g->by1)));
   if (!(L.s > M * 0x1p-24)) return QK_OK;
-  /* Worth it when the interior beyond a band of about 3 s along the segments holds a few
-   * hundred lattice points: each outline point costs an insertion (as much as the
-   * refinement's), the interior's triangles a few dozen instructions each, and the band's
-   * triangles are the refinement's either way. (Norway at 1/256 of its extent, fjords
-   * all along: 3,868 s^2 of area, 1,597 s of coast; the lattice made 3,600 triangles and
-   * cost more than the refinement saved.) */
-  double area = qk__gm_area(g), len = 0;
-  for (size_t k = 0; k < g->P->ns; k++) {
-    const uint32_t a = g->P->seg[2 * k], b = g->P->seg[2 * k + 1];
-    len += hypot(g->P->vx[b] - g->P->vx[a], g->P->vy[b] - g->P->vy[a]);
-  }
-  if (!(area / L.s / L.s - 3 * (len / L.s) >= 256)) return QK_OK;
+  /* Not for a domain smaller than 256 s^2: its lattice would be a few triangles. (Where
+   * a long coast leaves little interior, as Norway's fjords at 1/256 of its extent, 3,868
+   * s^2 of area along 1,597 s of coast, the lattice takes what there is at about the
+   * refinement's cost: 16,526 triangles in the time the refinement makes 20,060.) */
+  if (!(qk__gm_area(g) >= 256 * L.s * L.s)) return QK_OK;
+  const double area = qk__gm_area(g);
   L.gx0 = g->bx0 - 3 * L.c, L.gy0 = g->by0 - 3 * L.c;
   double fx = floor((g->bx1 - L.gx0) / L.c) + 4, fy = floor((g->by1 - L.gy0) / L.c) + 4;
   /* A grid far larger than the domain (a thin diagonal strip's box) is not worth it. */
   if (!(fx * fy <= 16 * area / (L.c * L.c) + 65536 && fx * fy <= 0x1p28)) return QK_OK;
   L.nx = (size_t)fx, L.ny = (size_t)fy;
   L.nrow = (size_t)floor(fy * L.c / L.dy) + 1;
-  L.nh = L.nx / 2 + 1;
-  const size_t ncell = L.nx * L.ny, nvl = L.nrow * L.nh, ntri = L.nrow * L.nx;
+  L.nu = (size_t)floor(fx * L.c / L.hs) + 1;
+  L.nh = L.nu / 2 + 1;
+  const size_t ncell = L.nx * L.ny, nvl = L.nrow * L.nh, ntri = L.nrow * L.nu;
   qk_status_t st = QK_OK;
   L.hit = qk__realloc(g->a, NULL, 0, ncell);
   L.vf = qk__realloc(g->a, NULL, 0, nvl);
@@ -461,21 +457,27 @@ qk_status_t qk__gm_lattice(qk__gm_t *g) {
   }
   if (!st) take_points(&L);
   /* The taken triangles: in band j, those with a corner in row j's or row j + 1's span. */
-  for (size_t j = 0; !st && j + 1 < L.nrow; j++) {
+  for (size_t j = 1; !st && j + 1 < L.nrow; j++) { /* (row 0 is two cells from the box) */
     size_t a = L.lo[j] < L.lo[j + 1] ? L.lo[j] : L.lo[j + 1];
     size_t b = L.hi[j] > L.hi[j + 1] ? L.hi[j] : L.hi[j + 1];
     if (a > b) continue;
-    a = a > 1 ? a - 1 : 1, b = b + 2 < L.nx ? b + 1 : L.nx - 2;
+    a = a > 1 ? a - 1 : 1, b = b + 2 < L.nu ? b + 1 : L.nu - 2;
     for (size_t m = a; m <= b && !st; m++) {
       size_t cv[3];
       corners(&L, m, j, cv);
       if (!(L.vf[cv[0]] & L.vf[cv[1]] & L.vf[cv[2]] & V_TAKEN)) continue;
-      if (L.ntl + 1 > L.tl_cap) {
-        void *p = L.tl;
+      if (L.ntl + 1 > L.tl_cap || 3 * L.ntl + 3 > L.tc_cap) {
+        void *p = L.tl, *q = L.tc;
         if (qk__grow(g->a, &p, &L.tl_cap, L.ntl + 1, sizeof *L.tl)) st = QK_ERR_NOMEM;
         L.tl = p;
+        if (!st && qk__grow(g->a, &q, &L.tc_cap, 3 * L.ntl + 3, sizeof *L.tc)) st = QK_ERR_NOMEM;
+        L.tc = q;
+        if (st) break;
       }
-      if (!st) L.ts[j * L.nx + m] = 0, L.tl[L.ntl++] = (uint32_t)(j * L.nx + m);
+      const size_t t = j * L.nu + m;
+      L.ts[t] = 0, L.tl[L.ntl] = (uint32_t)(2 * t + ((m + j) & 1));
+      for (int k = 0; k < 3; k++) L.tc[3 * L.ntl + k] = (uint32_t)cv[k], L.vf[cv[k]] |= V_USED;
+      L.ntl++;
     }
   }
   if (!st && L.ntl >= 16) st = build(&L);
@@ -486,6 +488,7 @@ qk_status_t qk__gm_lattice(qk__gm_t *g) {
   qk__free(g->a, L.ts, L.ts ? ntri * sizeof *L.ts : 0);
   qk__free(g->a, L.lo, L.lo ? 2 * L.nrow * sizeof *L.lo : 0);
   qk__free(g->a, L.tl, L.tl_cap * sizeof *L.tl);
+  qk__free(g->a, L.tc, L.tc_cap * sizeof *L.tc);
   qk__free(g->a, L.stk, L.stk_cap * sizeof *L.stk);
   return st ? qk__mesh_fail(g->err, st, 0, "out of memory") : QK_OK;
 }
