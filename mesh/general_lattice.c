@@ -63,9 +63,7 @@ typedef struct lat {
   uint32_t *ts;    /* per lattice triangle: 0 taken (its CDT slot once built), else NONE */
   uint32_t *tl;    /* the taken triangles in index order, as 2 t + 1 for up, 2 t for down */
   uint32_t *tc;    /* their corners' point indices, three a triangle in slot order */
-  size_t ntl, tl_cap, tc_cap;
-  uint32_t *stk;
-  size_t stk_cap;
+  size_t ntl;
 } lat_t;
 
 /* Taken-point flags. */
@@ -99,16 +97,6 @@ static void mark_segment(lat_t *L, const double a[2], const double b[2]) {
     size_t j1 = cell_of(y1 + pad, L->gy0, L->inv_c, L->ny);
     for (size_t j = j0; j <= j1; j++) L->hit[j * L->nx + i] = 1;
   }
-}
-
-static qk_status_t push(lat_t *L, size_t *sp, uint32_t x) {
-  if (*sp + 1 > L->stk_cap) {
-    void *p = L->stk;
-    if (qk__grow(L->g->a, &p, &L->stk_cap, *sp + 1, sizeof *L->stk)) return QK_ERR_NOMEM;
-    L->stk = p;
-  }
-  L->stk[(*sp)++] = x;
-  return QK_OK;
 }
 
 /* Lattice point (u, j), u = j mod 2 (half steps of s along a row): its place and index. */
@@ -169,6 +157,25 @@ static int clear_at(const lat_t *L, double x, double y) {
   for (int r = 0; r < 5; r++, h += L->nx)
     if (h[0] | h[1] | h[2] | h[3] | h[4]) return 0;
   return 1;
+}
+
+/* The lattice rows the kept triangles of the CDT span (take_points' work), counted until
+ * past limit. */
+static size_t rows_spanned(const lat_t *L, size_t limit) {
+  const qk__gm_t *g = L->g;
+  const qk__cdt_t *c = &g->cdt;
+  size_t n = 0;
+  for (size_t t = 0; t < c->nt && n <= limit; t++) {
+    if (g->faces[g->face[t]].drop) continue;
+    const uint32_t *tv = &c->v[3 * t];
+    double y0 = c->xy[2 * (size_t)tv[0] + 1], y1 = y0;
+    for (int k = 1; k < 3; k++) {
+      double y = c->xy[2 * (size_t)tv[k] + 1];
+      y0 = MIN(y0, y), y1 = MAX(y1, y);
+    }
+    n += (size_t)((y1 - y0) / L->dy) + 2;
+  }
+  return n;
 }
 
 /* Step 2's points: those of the lattice in a kept triangle of the CDT (closed, with a
@@ -233,21 +240,20 @@ typedef struct oedge {
 
 /* The CDT's triangles inside the outline (oe[0 .. ne), the inside slots flagged in seen's
  * bits 0-2), flooded across every other edge into inner (at most cap; bit 3 of seen marks
- * them). 0 when a check fails: a triangle with a corner that is not an outline point (ids
- * from nv0 on), a constrained edge or the square's side inside, or more triangles than
- * the lattice's. */
-static int flood(lat_t *L, const oedge_t *oe, size_t ne, uint8_t *seen, uint32_t nv0,
-                 uint32_t *inner, size_t cap, size_t *ninner, qk_status_t *st) {
+ * them), which is also the flood's queue. 0 when a check fails: a triangle with a corner
+ * that is not an outline point (ids from nv0 on), a constrained edge or the square's side
+ * inside, or more triangles than the lattice's. */
+static int flood(const lat_t *L, const oedge_t *oe, size_t ne, uint8_t *seen, uint32_t nv0,
+                 uint32_t *inner, size_t cap, size_t *ninner) {
   const qk__cdt_t *c = &L->g->cdt;
-  size_t n = 0, sp = 0;
+  size_t n = 0, q = 0;
   for (size_t e = 0; e < ne; e++) {
     uint32_t t0 = oe[e].tin;
     if (seen[t0] & 8) continue;
     if (n == cap) return 0;
     seen[t0] |= 8, inner[n++] = t0;
-    if ((*st = push(L, &sp, t0))) return 0;
-    while (sp) {
-      uint32_t t = L->stk[--sp];
+    while (q < n) {
+      uint32_t t = inner[q++];
       const uint32_t *tv = &c->v[3 * (size_t)t];
       if (tv[0] < nv0 || tv[1] < nv0 || tv[2] < nv0) return 0;
       for (int k = 0; k < 3; k++) {
@@ -257,7 +263,6 @@ static int flood(lat_t *L, const oedge_t *oe, size_t ne, uint8_t *seen, uint32_t
         if (seen[u] & 8) continue;
         if (n == cap) return 0;
         seen[u] |= 8, inner[n++] = u;
-        if ((*st = push(L, &sp, u))) return 0;
       }
     }
   }
@@ -287,6 +292,12 @@ static qk_status_t build(lat_t *L) {
       uint8_t f = L->vf[vindex(L, u, j)];
       nused += (f & V_USED) != 0, nout += (f & V_OUT) != 0;
     }
+  /* Worth it only with at least four taken triangles an outline point: each outline point
+   * costs an insertion, and a lattice cut into small pieces by features a few s apart
+   * (isolated vertices or small holes at a pitch of 2.6 to 3.5 s: 0.5 to 2.9 triangles an
+   * outline point) made up to 30% more triangles than the refinement alone, more slowly.
+   * The coastlines have 4 to 150 (Norway at 1/256 of its extent 4.7, Iceland 36). */
+  if (ntaken < 4 * nout) return QK_OK;
   /* Room for everything at once: an insertion makes two triangles. */
   size_t nv_all = c->nv + nused + 4, nt_all = c->nt + 2 * nout + ntaken + 4;
   if (qk__cdt_reserve(c, nv_all, nt_all) || qk__gm_fit_to(g, nv_all, nt_all, 1))
@@ -353,7 +364,7 @@ static qk_status_t build(lat_t *L) {
       oe[e++] = (oedge_t){(uint32_t)i, tin, NONE, (uint8_t)k, (uint8_t)kin, 0};
     }
   }
-  if (ok) ok = flood(L, oe, ne, seen, nv0, inner, ntaken, &ninner, &st);
+  if (ok) ok = flood(L, oe, ne, seen, nv0, inner, ntaken, &ninner);
   /* The triangle outside each outline edge (not one inside: the edge separates them). */
   for (size_t i = 0; i < ne && ok; i++) {
     const uint32_t *tv = &c->v[3 * (size_t)oe[i].tin];
@@ -403,17 +414,24 @@ static qk_status_t build(lat_t *L) {
     }
     c->hint = L->ts[L->tl[oe[0].lt] >> 1];
   }
-  qk__free(g->a, pts, (nout + 1) * sizeof *pts);
-  qk__free(g->a, oe, (ne + 1) * sizeof *oe);
-  qk__free(g->a, inner, (ntaken + 1) * sizeof *inner);
+  /* (Freed in the reverse order of their allocation: the mesher's arena takes back a freed
+   * block only at the top of its chunk, and a hole left below keeps the triangulation's
+   * arrays from growing in place later.) */
   qk__free(g->a, seen, seen_n);
+  qk__free(g->a, inner, (ntaken + 1) * sizeof *inner);
+  qk__free(g->a, oe, (ne + 1) * sizeof *oe);
+  qk__free(g->a, pts, (nout + 1) * sizeof *pts);
   return st;
 }
 
 qk_status_t qk__gm_lattice(qk__gm_t *g) {
   const qk_mesh_options_t *opt = g->opt;
   const double h = opt->max_size;
-  if (!qk__gm_test_lattice || opt->size_fn || !(h > 0)) return QK_OK;
+  /* Not for a bound of 29 degrees or more: a point the refinement puts inside the lattice
+   * (a circumcentre from the band) makes angles of 30 degrees there, bad for such a bound,
+   * and the splits then run through the whole lattice (a unit square at 1/100, 30
+   * degrees: 67,965 triangles where the refinement alone makes 50,201). */
+  if (!qk__gm_test_lattice || opt->size_fn || !(h > 0) || g->bound_deg >= 29) return QK_OK;
   lat_t L;
   memset(&L, 0, sizeof L);
   L.g = g;
@@ -432,13 +450,25 @@ qk_status_t qk__gm_lattice(qk__gm_t *g) {
   const double area = qk__gm_area(g);
   L.gx0 = g->bx0 - 3 * L.c, L.gy0 = g->by0 - 3 * L.c;
   double fx = floor((g->bx1 - L.gx0) / L.c) + 4, fy = floor((g->by1 - L.gy0) / L.c) + 4;
-  /* A grid far larger than the domain (a thin diagonal strip's box) is not worth it. */
-  if (!(fx * fy <= 16 * area / (L.c * L.c) + 65536 && fx * fy <= 0x1p28)) return QK_OK;
+  /* The scratch arrays take about 3.2 bytes a cell of the grid over the bounding box, the
+   * mesh about 60 bytes a triangle and at least 2.3 triangles an s^2 of area: a grid of at
+   * most 64 cells an s^2 of the domain (plus 4 M) keeps the scratch under the mesh's size.
+   * A thin diagonal strip's box, far larger than the strip, is not worth it (the strip
+   * from (0, 0) to (1, 1), 0.047 wide, at h = 0.0002: 225 M cells, 720 MB). */
+  if (!(fx * fy <= 64 * (area / L.s / L.s) + 0x1p22 && fx * fy <= 0x1p28)) return QK_OK;
   L.nx = (size_t)fx, L.ny = (size_t)fy;
   L.nrow = (size_t)floor(fy * L.c / L.dy) + 1;
   L.nu = (size_t)floor(fx * L.c / L.hs) + 1;
   L.nh = L.nu / 2 + 1;
   const size_t ncell = L.nx * L.ny, nvl = L.nrow * L.nh, ntri = L.nrow * L.nu;
+  /* The rows the CDT's triangles span: at most 32 an s^2 of the domain (a row costs about
+   * 30 instructions, a lattice triangle saves the refinement about 2,000, and there are
+   * about 2.3 an s^2). A boundary of many vertices closer than s makes slivers across the
+   * domain that each span every row (a 400 by 200 rectangle at s = 1 with 2^18 vertices
+   * along each long side: 120 million rows, a second, more than the lattice saves; with
+   * 4,096 a side, 1.9 million, well spent); past that the refinement alone meshes it. */
+  const size_t budget = (size_t)(32 * (area / L.s / L.s)) + 4 * g->cdt.nt + 65536;
+  if (rows_spanned(&L, budget) > budget) return QK_OK;
   qk_status_t st = QK_OK;
   L.hit = qk__realloc(g->a, NULL, 0, ncell);
   L.vf = qk__realloc(g->a, NULL, 0, nvl);
@@ -455,40 +485,49 @@ qk_status_t qk__gm_lattice(qk__gm_t *g) {
     for (size_t j = 0; j < L.nrow; j++) L.lo[j] = SIZE_MAX, L.hi[j] = 0;
     st = mark(&L);
   }
+
   if (!st) take_points(&L);
-  /* The taken triangles: in band j, those with a corner in row j's or row j + 1's span. */
-  for (size_t j = 1; !st && j + 1 < L.nrow; j++) { /* (row 0 is two cells from the box) */
-    size_t a = L.lo[j] < L.lo[j + 1] ? L.lo[j] : L.lo[j + 1];
-    size_t b = L.hi[j] > L.hi[j + 1] ? L.hi[j] : L.hi[j + 1];
-    if (a > b) continue;
-    a = a > 1 ? a - 1 : 1, b = b + 2 < L.nu ? b + 1 : L.nu - 2;
-    for (size_t m = a; m <= b && !st; m++) {
-      size_t cv[3];
-      corners(&L, m, j, cv);
-      if (!(L.vf[cv[0]] & L.vf[cv[1]] & L.vf[cv[2]] & V_TAKEN)) continue;
-      if (L.ntl + 1 > L.tl_cap || 3 * L.ntl + 3 > L.tc_cap) {
-        void *p = L.tl, *q = L.tc;
-        if (qk__grow(g->a, &p, &L.tl_cap, L.ntl + 1, sizeof *L.tl)) st = QK_ERR_NOMEM;
-        L.tl = p;
-        if (!st && qk__grow(g->a, &q, &L.tc_cap, 3 * L.ntl + 3, sizeof *L.tc)) st = QK_ERR_NOMEM;
-        L.tc = q;
-        if (st) break;
+  /* The taken triangles: in band j, those with a corner in row j's or row j + 1's span;
+   * counted, then listed (arrays of their exact size: see the frees below). */
+  size_t ntaken = 0;
+  for (int pass = 0; pass < 2 && !st; pass++) {
+    if (pass) {
+      L.tl = qk__realloc(g->a, NULL, 0, (ntaken + 1) * sizeof *L.tl);
+      L.tc = qk__realloc(g->a, NULL, 0, 3 * (ntaken + 1) * sizeof *L.tc);
+      if (!L.tl || !L.tc) {
+        st = QK_ERR_NOMEM;
+        break;
       }
-      const size_t t = j * L.nu + m;
-      L.ts[t] = 0, L.tl[L.ntl] = (uint32_t)(2 * t + ((m + j) & 1));
-      for (int k = 0; k < 3; k++) L.tc[3 * L.ntl + k] = (uint32_t)cv[k], L.vf[cv[k]] |= V_USED;
-      L.ntl++;
+    }
+    for (size_t j = 1; j + 1 < L.nrow; j++) { /* (row 0 is two cells from the box) */
+      size_t a = L.lo[j] < L.lo[j + 1] ? L.lo[j] : L.lo[j + 1];
+      size_t b = L.hi[j] > L.hi[j + 1] ? L.hi[j] : L.hi[j + 1];
+      if (a > b) continue;
+      a = a > 1 ? a - 1 : 1, b = b + 2 < L.nu ? b + 1 : L.nu - 2;
+      for (size_t m = a; m <= b; m++) {
+        size_t cv[3];
+        corners(&L, m, j, cv);
+        if (!(L.vf[cv[0]] & L.vf[cv[1]] & L.vf[cv[2]] & V_TAKEN)) continue;
+        if (!pass) {
+          ntaken++;
+          continue;
+        }
+        const size_t t = j * L.nu + m;
+        L.ts[t] = 0, L.tl[L.ntl] = (uint32_t)(2 * t + ((m + j) & 1));
+        for (int k = 0; k < 3; k++) L.tc[3 * L.ntl + k] = (uint32_t)cv[k], L.vf[cv[k]] |= V_USED;
+        L.ntl++;
+      }
     }
   }
   if (!st && L.ntl >= 16) st = build(&L);
-  qk__free(g->a, L.hit, L.hit ? ncell : 0);
+  /* (In the reverse order of their allocation, as in build().) */
+  qk__free(g->a, L.tc, L.tc ? 3 * (ntaken + 1) * sizeof *L.tc : 0);
+  qk__free(g->a, L.tl, L.tl ? (ntaken + 1) * sizeof *L.tl : 0);
+  qk__free(g->a, L.lo, L.lo ? 2 * L.nrow * sizeof *L.lo : 0);
+  qk__free(g->a, L.ts, L.ts ? ntri * sizeof *L.ts : 0);
+  qk__free(g->a, L.vid, L.vid ? nvl * sizeof *L.vid : 0);
   qk__free(g->a, L.vface, L.vface ? nvl * sizeof *L.vface : 0);
   qk__free(g->a, L.vf, L.vf ? nvl : 0);
-  qk__free(g->a, L.vid, L.vid ? nvl * sizeof *L.vid : 0);
-  qk__free(g->a, L.ts, L.ts ? ntri * sizeof *L.ts : 0);
-  qk__free(g->a, L.lo, L.lo ? 2 * L.nrow * sizeof *L.lo : 0);
-  qk__free(g->a, L.tl, L.tl_cap * sizeof *L.tl);
-  qk__free(g->a, L.tc, L.tc_cap * sizeof *L.tc);
-  qk__free(g->a, L.stk, L.stk_cap * sizeof *L.stk);
+  qk__free(g->a, L.hit, L.hit ? ncell : 0);
   return st ? qk__mesh_fail(g->err, st, 0, "out of memory") : QK_OK;
 }

@@ -1791,6 +1791,121 @@ static void test_mesh_general_mode_lattice(void **state) {
   free(s);
 }
 
+/* Equilateral triangles of side in (0.99 h, h] in m. */
+static size_t count_equilateral(const qk_mesh_t *m, double h) {
+  size_t nv, nt, n = 0;
+  const double *xy = qk_mesh_vertices(m, &nv);
+  const uint32_t *tri = qk_mesh_triangles(m, &nt);
+  for (size_t t = 0; t < nt; t++) {
+    double l[3];
+    for (int i = 0; i < 3; i++) {
+      const double *a = &xy[2 * tri[3 * t + i]], *b = &xy[2 * tri[3 * t + (i + 1) % 3]];
+      l[i] = hypot(a[0] - b[0], a[1] - b[1]);
+    }
+    n += fabs(l[0] - l[1]) < 1e-9 * h && fabs(l[1] - l[2]) < 1e-9 * h && l[0] > 0.99 * h;
+  }
+  return n;
+}
+
+/* s meshed at bound h (and angle bound deg) with the lattice allowed: its mesh must be the
+ * refinement's own (the step declined), vertex for vertex. */
+static void lattice_declines(const shape_t *s, double h, double deg, const char *what) {
+  qk_mesh_options_t o = general_opts();
+  o.max_size = h, o.min_angle_deg = deg;
+  qk_poly_t *p = sh_poly(s, NULL);
+  qk_mesh_t *m[2];
+  size_t nt[2], nv[2];
+  for (int off = 0; off < 2; off++) {
+    qk__gm_test_lattice = !off;
+    m[off] = mesh_of(p, &o);
+    qk_mesh_triangles(m[off], &nt[off]);
+    qk_mesh_vertices(m[off], &nv[off]);
+  }
+  qk__gm_test_lattice = 1;
+  printf("# %s: %zu triangles, %zu equilateral\n", what, nt[0], count_equilateral(m[0], h));
+  assert_int_equal(count_equilateral(m[0], h), 0);
+  assert_int_equal(nt[0], nt[1]);
+  assert_int_equal(nv[0], nv[1]);
+  assert_memory_equal(qk_mesh_vertices(m[0], NULL), qk_mesh_vertices(m[1], NULL),
+                      2 * nv[0] * sizeof(double));
+  for (int i = 0; i < 2; i++) qk_mesh_free(m[i]);
+  qk_poly_free(p);
+}
+
+/* Where the lattice does not pay, the step declines and the refinement meshes the whole
+ * domain (review of the fifty-fourth session, inputs on which the lattice made larger or
+ * slower meshes):
+ *  - an angle bound of 29 degrees or more: a point the refinement puts inside the lattice
+ *    makes 30-degree angles there, and the splits ran through the whole lattice (a unit
+ *    square at 1/100 and 30 degrees: 67,965 triangles against 50,201);
+ *  - isolated vertices a few s apart: the lattice in small pieces, with under four
+ *    triangles an outline point (up to 30% more triangles, slower);
+ *  - a boundary of many vertices closer than s: slivers across the domain, each spanning
+ *    every lattice row (take_points' scan), more rows than 32 an s^2 of area;
+ *  - a thin diagonal strip, whose bounding box is far larger than its area (the scratch
+ *    arrays cover the box). */
+static void test_mesh_general_mode_lattice_declines(void **state) {
+  (void)state;
+  shape_t *s = calloc(1, sizeof *s);
+  double sq[8] = {0, 0, 1, 0, 1, 1, 0, 1};
+  sh_ring(s, sq, 4);
+  qk_mesh_options_t o = general_opts();
+  o.max_size = 0.05;
+  qk_poly_t *p = sh_poly(s, NULL);
+  qk_mesh_t *m = mesh_of(p, &o);
+  size_t equi = count_equilateral(m, 0.05); /* (the lattice where nothing stops it) */
+  printf("# unit square at 1/20, 20 degrees: %zu equilateral\n", equi);
+  assert_true(equi > 100);
+  qk_mesh_free(m);
+  qk_poly_free(p);
+  lattice_declines(s, 0.05, 30, "unit square at 1/20, 30 degrees");
+  /* Isolated vertices at a pitch of 3 s, on a 2^-30 grid. */
+  for (double x = 0.15; x < 0.95; x += 0.15)
+    for (double y = 0.15; y < 0.95; y += 0.15) sh_vertex(s, grid(x, 30), grid(y, 30));
+  lattice_declines(s, 0.05, 20, "unit square, isolated vertices 3 s apart");
+  free(s);
+  /* A 100 by 50 rectangle with 8,192 vertices along each long side, s = 1. */
+  s = calloc(1, sizeof *s);
+  enum { N = 8192 };
+  double *ring = malloc(4 * (N + 1) * sizeof *ring);
+  assert_non_null(ring);
+  size_t k = 0;
+  for (int i = 0; i <= N; i++) ring[2 * k] = grid(100.0 * i / N, 30), ring[2 * k + 1] = 0, k++;
+  for (int i = N; i >= 0; i--) ring[2 * k] = grid(100.0 * i / N, 30), ring[2 * k + 1] = 50, k++;
+  qk_poly_t *pd;
+  qk_mesh_error_t err;
+  uint32_t *seg = malloc(2 * k * sizeof *seg);
+  assert_non_null(seg);
+  for (size_t i = 0; i < k; i++) seg[2 * i] = (uint32_t)i, seg[2 * i + 1] = (uint32_t)((i + 1) % k);
+  assert_int_equal(qk_poly_from_arrays(ring, k, seg, k, NULL, 0, NULL, &pd, &err), QK_OK);
+  o.max_size = 1;
+  qk_mesh_t *md[2];
+  size_t ntd[2];
+  for (int off = 0; off < 2; off++) {
+    qk__gm_test_lattice = !off;
+    md[off] = mesh_of(pd, &o);
+    qk_mesh_triangles(md[off], &ntd[off]);
+  }
+  qk__gm_test_lattice = 1;
+  printf("# 100 by 50 with %d vertices a long side, s = 1: %zu triangles, %zu equilateral\n", N,
+         ntd[0], count_equilateral(md[0], 1));
+  assert_int_equal(count_equilateral(md[0], 1), 0);
+  assert_int_equal(ntd[0], ntd[1]);
+  for (int i = 0; i < 2; i++) qk_mesh_free(md[i]);
+  qk_poly_free(pd);
+  free(seg);
+  free(ring);
+  free(s);
+  /* A strip 2^-6.5 wide along the unit square's diagonal, at 1/1000: 9 million cells over
+   * its box, 64 an s^2 of its area would be 5.2 million (with the grid it has three rows
+   * of lattice). */
+  s = calloc(1, sizeof *s);
+  double strip[8] = {0, 0, 1, 1, 1 - 0x1p-7, 1 + 0x1p-7, -0x1p-7, 0x1p-7};
+  sh_ring(s, strip, 4);
+  lattice_declines(s, 1.0 / 1000, 20, "a strip 2^-6.5 wide across the unit square");
+  free(s);
+}
+
 /* The grading, put off until the refinement reaches the input-sized work cap, changes no
  * mesh: with qk__gm_test_grade_late = 1 the refinement grades it at its start, and
  * every vertex and triangle is the same; the mesh then has the tree (qk_mesh_tree, leaves
@@ -2260,6 +2375,7 @@ int main(void) {
       cmocka_unit_test(test_mesh_general_mode_auto),
       cmocka_unit_test(test_mesh_general_mode_graded_late),
       cmocka_unit_test(test_mesh_general_mode_lattice),
+      cmocka_unit_test(test_mesh_general_mode_lattice_declines),
       cmocka_unit_test(test_mesh_general_mode_hostile),
       cmocka_unit_test(test_mesh_general_mode_long_gap),
       cmocka_unit_test(test_mesh_general_mode_book_extent),
