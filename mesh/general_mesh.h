@@ -3,8 +3,9 @@
  * mode"). Not API. The pipeline: general_build.c validates the input while building its
  * constrained Delaunay triangulation (mesh/cdt.h) and labels the faces; general_seed.c
  * grades a quadtree on the input's features and inserts its seeds and the segments'
- * pre-split points; general_refine.c runs the quality refinement; general_out.c fills
- * struct qk_mesh; general_run.c drives them.
+ * pre-split points; general_lattice.c fills the interior with a lattice (a plain size bound);
+ * general_refine.c runs the quality refinement; general_out.c fills struct qk_mesh;
+ * general_run.c drives them.
  */
 #ifndef QK_MESH_GENERAL_MESH_H
 #define QK_MESH_GENERAL_MESH_H
