@@ -1736,6 +1736,24 @@ static size_t check_cdt(const qk_mesh_t *m) {
  * checks, keeps every edge within the bound and is constrained Delaunay; the lattice makes
  * a third of the triangles or more equilateral (the band along the boundary
  * is the refinement's) and the mesh smaller. */
+/* The triangles of m that are equilateral with sides in (0.99 h, h] (the interior
+ * lattice's), after checking that no edge of m is longer than h (the size bound). */
+static size_t count_equilateral(const qk_mesh_t *m, double h) {
+  size_t nv, nt, n = 0;
+  const double *xy = qk_mesh_vertices(m, &nv);
+  const uint32_t *tri = qk_mesh_triangles(m, &nt);
+  for (size_t t = 0; t < nt; t++) {
+    double l[3];
+    for (int i = 0; i < 3; i++) {
+      const double *a = &xy[2 * tri[3 * t + i]], *b = &xy[2 * tri[3 * t + (i + 1) % 3]];
+      l[i] = hypot(a[0] - b[0], a[1] - b[1]);
+      assert_true(l[i] <= h);
+    }
+    n += fabs(l[0] - l[1]) < 1e-9 * h && fabs(l[1] - l[2]) < 1e-9 * h && l[0] > 0.99 * h;
+  }
+  return n;
+}
+
 extern int qk__gm_test_lattice;
 static void test_mesh_general_mode_lattice(void **state) {
   (void)state;
@@ -1764,19 +1782,8 @@ static void test_mesh_general_mode_lattice(void **state) {
     qk_mesh_t *m = mesh_of(p, &o);
     qk__gm_test_lattice = 1;
     check_out_t c = check_general(s, m, 20);
-    size_t nv, equi = 0;
-    const double *xy = qk_mesh_vertices(m, &nv);
-    const uint32_t *tri = qk_mesh_triangles(m, &nt[mode]);
-    for (size_t t = 0; t < nt[mode]; t++) {
-      double l[3];
-      for (int i = 0; i < 3; i++) {
-        const double *a = &xy[2 * tri[3 * t + i]], *b = &xy[2 * tri[3 * t + (i + 1) % 3]];
-        l[i] = hypot(a[0] - b[0], a[1] - b[1]);
-        assert_true(l[i] <= o.max_size);
-      }
-      equi += fabs(l[0] - l[1]) < 1e-9 && fabs(l[1] - l[2]) < 1e-9 && l[0] > 0.124;
-    }
-    size_t tested = check_cdt(m);
+    qk_mesh_triangles(m, &nt[mode]);
+    size_t equi = count_equilateral(m, o.max_size), tested = check_cdt(m);
     printf("# lattice %s: %zu triangles (%zu equilateral), min angle %.2f, %zu edges Delaunay\n",
            mode == 0   ? "on"
            : mode == 1 ? "off"
@@ -1789,22 +1796,6 @@ static void test_mesh_general_mode_lattice(void **state) {
   }
   assert_true(nt[0] < nt[1] * 3 / 4);
   free(s);
-}
-
-/* Equilateral triangles of side in (0.99 h, h] in m. */
-static size_t count_equilateral(const qk_mesh_t *m, double h) {
-  size_t nv, nt, n = 0;
-  const double *xy = qk_mesh_vertices(m, &nv);
-  const uint32_t *tri = qk_mesh_triangles(m, &nt);
-  for (size_t t = 0; t < nt; t++) {
-    double l[3];
-    for (int i = 0; i < 3; i++) {
-      const double *a = &xy[2 * tri[3 * t + i]], *b = &xy[2 * tri[3 * t + (i + 1) % 3]];
-      l[i] = hypot(a[0] - b[0], a[1] - b[1]);
-    }
-    n += fabs(l[0] - l[1]) < 1e-9 * h && fabs(l[1] - l[2]) < 1e-9 * h && l[0] > 0.99 * h;
-  }
-  return n;
 }
 
 /* s meshed at bound h (and angle bound deg) with the lattice allowed: its mesh must be the
