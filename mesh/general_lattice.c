@@ -446,8 +446,8 @@ qk_status_t qk__gm_lattice(qk__gm_t *g) {
    * a long coast leaves little interior, as Norway's fjords at 1/256 of its extent, 3,868
    * s^2 of area along 1,597 s of coast, the lattice takes what there is at about the
    * refinement's cost: 16,526 triangles in the time the refinement makes 20,060.) */
-  if (!(qk__gm_area(g) >= 256 * L.s * L.s)) return QK_OK;
   const double area = qk__gm_area(g);
+  if (!(area >= 256 * L.s * L.s)) return QK_OK;
   L.gx0 = g->bx0 - 3 * L.c, L.gy0 = g->by0 - 3 * L.c;
   double fx = floor((g->bx1 - L.gx0) / L.c) + 4, fy = floor((g->by1 - L.gy0) / L.c) + 4;
   /* The scratch arrays take about 3.2 bytes a cell of the grid over the bounding box, the
