@@ -8,7 +8,8 @@
  * 1. A grid of cells of side c = s/3 over the input's bounding box marks every cell that a
  *    segment or an isolated vertex may meet; a cell is clear when no marked cell lies
  *    within two cells of it, so a point in a clear cell is at least 2c = 2s/3 from every
- *    feature and every vertex of the CDT (those lie on features).
+ *    feature and every vertex of the CDT (those lie on features: the step declines when
+ *    seeds, GM_SEED_LEAVES in general_seed.c, were inserted).
  * 2. A lattice point is taken when it lies in a kept triangle of the CDT (so in a kept
  *    face) and in a clear cell; a lattice triangle when its three corners are. The taken
  *    triangles' union is bounded by outline edges.
@@ -432,6 +433,9 @@ qk_status_t qk__gm_lattice(qk__gm_t *g) {
    * and the splits then run through the whole lattice (a unit square at 1/100, 30
    * degrees: 67,965 triangles where the refinement alone makes 50,201). */
   if (!qk__gm_test_lattice || opt->size_fn || !(h > 0) || g->bound_deg >= 29) return QK_OK;
+  /* (With seeds, GM_SEED_LEAVES in general_seed.c, the CDT would have vertices off the
+   * features, which the margins below do not see.) */
+  if (g->seeds) return QK_OK;
   lat_t L;
   memset(&L, 0, sizeof L);
   L.g = g;
@@ -452,9 +456,10 @@ qk_status_t qk__gm_lattice(qk__gm_t *g) {
   double fx = floor((g->bx1 - L.gx0) / L.c) + 4, fy = floor((g->by1 - L.gy0) / L.c) + 4;
   /* The scratch arrays take about 3.2 bytes a cell of the grid over the bounding box, the
    * mesh about 60 bytes a triangle and at least 2.3 triangles an s^2 of area: a grid of at
-   * most 64 cells an s^2 of the domain (plus 4 M) keeps the scratch under the mesh's size.
-   * A thin diagonal strip's box, far larger than the strip, is not worth it (the strip
-   * from (0, 0) to (1, 1), 0.047 wide, at h = 0.0002: 225 M cells, 720 MB). */
+   * most 64 cells an s^2 of the domain (plus 4 M, 13 MB) keeps the scratch within about 1.5
+   * times the mesh's size (205 bytes an s^2 against 138), and 2^28 cells (860 MB) bound it
+   * outright. A thin diagonal strip's box, far larger than the strip, is not worth it (the
+   * strip from (0, 0) to (1, 1), 0.047 wide, at h = 0.0002: 225 M cells, 720 MB). */
   if (!(fx * fy <= 64 * (area / L.s / L.s) + 0x1p22 && fx * fy <= 0x1p28)) return QK_OK;
   L.nx = (size_t)fx, L.ny = (size_t)fy;
   L.nrow = (size_t)floor(fy * L.c / L.dy) + 1;

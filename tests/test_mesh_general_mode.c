@@ -1685,8 +1685,8 @@ static size_t check_cdt(const qk_mesh_t *m) {
   const uint32_t *tri = qk_mesh_triangles(m, &nt);
   assert_int_equal(qk_mesh_segments(m, NULL, NULL, NULL, 0, &no), QK_OK);
   uint32_t *ab = malloc((2 * no + 2) * sizeof *ab);
-  dedge_t *os = malloc((2 * no + 1) * sizeof *os), *e = malloc((3 * nt + 1) * sizeof *e);
-  assert_true(ab && os && e);
+  dedge_t *os = malloc((2 * no + 1) * sizeof *os);
+  assert_true(ab && os);
   assert_int_equal(qk_mesh_segments(m, ab, NULL, NULL, no, &no), QK_OK);
   for (size_t i = 0; i < no; i++)
     os[2 * i] = (dedge_t){ab[2 * i], ab[2 * i + 1]},
@@ -1720,7 +1720,6 @@ static size_t check_cdt(const qk_mesh_t *m) {
     tested++;
   }
   free(te);
-  free(e);
   free(os);
   free(ab);
   return tested;
@@ -1779,10 +1778,29 @@ static void test_mesh_general_mode_lattice(void **state) {
   for (int mode = 0; mode < 3; mode++) {
     qk__gm_test_lattice = mode == 0 ? 1 : mode == 1 ? 0 : 2;
     qk_poly_t *p = sh_poly(s, NULL);
+    /* The loop's face gets attribute 7: every triangle inside the loop has it, the others
+     * 0 (the lattice's triangles take their face from their points). */
+    assert_int_equal(qk_poly_set_regions(p, (double[]){-1.45, 1.05, 7}, 1, NULL), QK_OK);
     qk_mesh_t *m = mesh_of(p, &o);
     qk__gm_test_lattice = 1;
     check_out_t c = check_general(s, m, 20);
-    qk_mesh_triangles(m, &nt[mode]);
+    const uint32_t *tri = qk_mesh_triangles(m, &nt[mode]);
+    const double *xy = qk_mesh_vertices(m, NULL), *attr = qk_mesh_triangle_attributes(m, NULL);
+    size_t in_loop = 0;
+    for (size_t t = 0; t < nt[mode]; t++) {
+      double cx = 0, cy = 0;
+      for (int i = 0; i < 3; i++)
+        cx += xy[2 * tri[3 * t + i]] / 3, cy += xy[2 * tri[3 * t + i] + 1] / 3;
+      int inside = 1;
+      for (int i = 0; i < 3; i++) {
+        const double *a = &loop[2 * i], *b = &loop[2 * ((i + 1) % 3)];
+        inside &= (b[0] - a[0]) * (cy - a[1]) - (b[1] - a[1]) * (cx - a[0]) > 0;
+      }
+      in_loop += inside;
+      if (attr[t] != (inside ? 7 : 0))
+        fail_msg("triangle %zu at (%.17g, %.17g): attribute %g", t, cx, cy, attr[t]);
+    }
+    assert_true(in_loop > 20);
     size_t equi = count_equilateral(m, o.max_size), tested = check_cdt(m);
     printf("# lattice %s: %zu triangles (%zu equilateral), min angle %.2f, %zu edges Delaunay\n",
            mode == 0   ? "on"
@@ -1795,6 +1813,7 @@ static void test_mesh_general_mode_lattice(void **state) {
     qk_poly_free(p);
   }
   assert_true(nt[0] < nt[1] * 3 / 4);
+  assert_true(nt[2] != nt[1]); /* (stopped after the outline: its points are in the mesh) */
   free(s);
 }
 
