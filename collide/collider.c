@@ -157,6 +157,7 @@ struct qk_collider {
   int ray_prefetch; /* the cast asks for the lines of its likely next reads (see below) */
   uint32_t threads; /* for the pairs and batch calls (0: every online core) */
   double mag;       /* largest coordinate magnitude of any item box, for rounding margins */
+  int tiny_discs;   /* some disc's box lies within NEAR_COORD of the origin (the ray cast) */
   double reach;     /* farthest any item box reaches from its centre on an axis (the ray cast) */
   /* The ray cast's start (cast_float), from the root square, computed once: its corner,
    * 2^32 / side (NaN when side <= 2^-900: no local start), and the fixed part of the
@@ -637,6 +638,12 @@ static qk_status_t check_items(const qk_disc_t *discs, size_t n_discs, const qk_
 #define RANGE_JOBS_PER_THREAD 4
 #define RANGE_PAR_MIN 4096
 
+/* The ray cast's disc test in scaled coordinates (ray_disc_scaled): for an origin or a disc
+ * beyond FAR_COORD in magnitude, whose squares could overflow, and for an origin and a disc
+ * all within NEAR_COORD of the origin, whose squares could underflow. */
+#define FAR_COORD 0x1p400
+#define NEAR_COORD 0x1p-400
+
 /* A linear pass of the build over [0, n) in n_jobs ranges; each returns a maximum. */
 typedef struct range_ctx {
   qk_collider_t *c;
@@ -645,6 +652,7 @@ typedef struct range_ctx {
   size_t n_discs;        /* discs are items [0, n_discs) */
   qk_point_t *centres;   /* build_centre_tree's output */
   const uint32_t *where; /* fill_slots' id map (ids_range) */
+  atomic_int tiny;       /* centres_range: a disc's box within NEAR_COORD of the origin */
   size_t n, n_jobs;
   double (*fn)(struct range_ctx *x, size_t lo, size_t hi);
   double max[QK__MAX_THREADS * RANGE_JOBS_PER_THREAD];
@@ -670,10 +678,12 @@ static double run_ranges(range_ctx_t *x, size_t n, double (*fn)(range_ctx_t *, s
   return m;
 }
 
-/* Items [lo, hi): their centres; the largest coordinate magnitude of their boxes. */
+/* Items [lo, hi): their centres; the largest coordinate magnitude of their boxes (and
+ * x->tiny set when a disc's box lies within NEAR_COORD of the origin). */
 static double centres_range(range_ctx_t *x, size_t lo, size_t hi) {
   const size_t n_discs = x->n_discs;
   double mag = 0;
+  int tiny = 0;
   for (size_t i = lo; i < hi; i++) {
     qk_box_t bb;
     if (i < n_discs) {
@@ -689,7 +699,9 @@ static double centres_range(range_ctx_t *x, size_t lo, size_t hi) {
     const double m =
         qk__max(qk__max(fabs(bb.xmin), fabs(bb.xmax)), qk__max(fabs(bb.ymin), fabs(bb.ymax)));
     mag = qk__max(mag, m);
+    tiny |= i < n_discs && m < NEAR_COORD;
   }
+  if (tiny) atomic_store_explicit(&x->tiny, 1, memory_order_relaxed);
   return mag;
 }
 
@@ -710,11 +722,12 @@ static int grow_block(const qk_allocator_t *a, void **block, size_t *have, size_
  * input order, discs first): built afresh, or c's tree rebuilt when opt is NULL (the
  * centres then in a block the collider keeps for the next rebuild: a block borrowed per
  * call may be given back to the system by the C library and faulted in again); the
- * largest coordinate magnitude of any item box to *mag. On an error other than
- * QK_ERR_NOMEM a rebuilt tree is as it was. */
+ * largest coordinate magnitude of any item box to *mag, and to *tiny whether some disc's
+ * box lies within NEAR_COORD of the origin. On an error other than QK_ERR_NOMEM a rebuilt
+ * tree is as it was. */
 static qk_status_t build_centre_tree(qk_collider_t *c, const qk_disc_t *discs, size_t n_discs,
                                      const qk_box_t *boxes, size_t n, const qk_tree_options_t *opt,
-                                     double *mag) {
+                                     double *mag, int *tiny) {
   qk_point_t *centres = NULL;
   if (opt) {
     if (n) centres = qk__realloc(&c->alloc, NULL, 0, n * sizeof *centres);
@@ -730,7 +743,9 @@ static qk_status_t build_centre_tree(qk_collider_t *c, const qk_disc_t *discs, s
   range_ctx_t x;
   x.c = c, x.discs = discs, x.boxes = boxes, x.n_discs = n_discs, x.centres = centres;
   x.where = NULL;
+  atomic_init(&x.tiny, 0);
   *mag = run_ranges(&x, n, centres_range);
+  *tiny = atomic_load_explicit(&x.tiny, memory_order_relaxed);
   qk_status_t st =
       opt ? qk_tree_build(centres, n, opt, &c->tree) : qk_tree_rebuild(c->tree, centres, n, NULL);
   if (opt) qk__free(&c->alloc, centres, n * sizeof *centres);
@@ -912,7 +927,8 @@ qk_status_t qk_collider_build(const qk_disc_t *discs, size_t n_discs, const qk_b
   atomic_init(&c->rays_state, RAYS_NONE);
   c->n_discs = n_discs;
   c->n = n_discs + n_boxes;
-  if ((st = build_centre_tree(c, discs, n_discs, boxes, c->n, &opt, &c->mag)) != QK_OK ||
+  if ((st = build_centre_tree(c, discs, n_discs, boxes, c->n, &opt, &c->mag, &c->tiny_discs)) !=
+          QK_OK ||
       (st = alloc_arrays(c)) != QK_OK || (st = fill_slots(c, discs, boxes)) != QK_OK) {
     qk_collider_free(c);
     return st;
@@ -935,7 +951,7 @@ static void make_empty(qk_collider_t *c) {
   qk__free(&c->alloc, c->centres, c->centres_cap * sizeof *c->centres);
   c->centres = NULL, c->centres_cap = 0;
   c->n_discs = c->n = 0;
-  c->mag = 0;
+  c->mag = 0, c->tiny_discs = 0;
   qk_status_t st = qk_tree_rebuild(c->tree, NULL, 0, NULL);
   if (st == QK_OK) st = alloc_arrays(c);
   if (st == QK_OK) st = fill_slots(c, NULL, NULL);
@@ -953,12 +969,13 @@ qk_status_t qk_collider_rebuild(qk_collider_t *c, const qk_disc_t *discs, size_t
    * is the collider, whose own arrays are not touched before. */
   qk_tree_set_threads(c->tree, c->threads);
   double mag;
-  st = build_centre_tree(c, discs, n_discs, boxes, n_discs + n_boxes, NULL, &mag);
+  int tiny;
+  st = build_centre_tree(c, discs, n_discs, boxes, n_discs + n_boxes, NULL, &mag, &tiny);
   if (st == QK_OK) {
     drop_rays(c); /* made for the old items; the next cast makes them again */
     c->n_discs = n_discs;
     c->n = n_discs + n_boxes;
-    c->mag = mag;
+    c->mag = mag, c->tiny_discs = tiny;
     if ((st = alloc_arrays(c)) == QK_OK) st = fill_slots(c, discs, boxes);
   }
   if (st == QK_ERR_NOMEM) make_empty(c);
@@ -1486,27 +1503,28 @@ static inline double ray_disc(const qk_disc_t *d, double ox, double oy, double d
   return t <= tmax ? t : -1.0;
 }
 
-/* Coordinates (of the origin, or of any item box) beyond this take ray_disc_far(). */
-#define FAR_COORD 0x1p400
-
 /*
- * ray_disc() for an origin or a disc beyond FAR_COORD, where its squares could overflow
- * (a hit at t = inf, or a miss): the same operations on the origin, the disc and tmax
- * scaled by the power of two 2^-k that brings the largest of them just below FAR_COORD,
- * and t scaled back. |f + t d| = r is |2^-k f + (2^-k t) d| = 2^-k r, and scaling by a
- * power of two commutes with every rounding, so t is ray_disc()'s own but for parts that
- * fall below 2^-1022 (coordinates 2^1000 times smaller than the largest, which then count
- * as 0). With the direction's largest component in [2^-100, 2^100] (the cast's scaling),
- * no square or product of ray_disc() overflows below FAR_COORD.
+ * ray_disc() in coordinates scaled by a power of two 2^-k, for an origin or a disc beyond
+ * FAR_COORD, where its squares could overflow (a hit at t = inf, or a miss), or all within
+ * NEAR_COORD of the origin, where they could underflow (below 2^-511 they did: a disc the ray
+ * passes at nine radii, at 1e-170, was hit at t = 0). The origin, the disc and tmax are
+ * scaled by the 2^-k that brings the largest of their magnitudes just below FAR_COORD, or
+ * to [1/2, 1), and t is scaled back. |f + t d| = r is |2^-k f + (2^-k t) d| = 2^-k r, and
+ * scaling by a power of two commutes with every rounding, so t is ray_disc()'s own but for
+ * parts that fall below 2^-1022 (coordinates 2^1000 times smaller than the largest, which
+ * then count as 0). With the direction's largest component in [2^-100, 2^100] (the cast's
+ * scaling), no square or product of ray_disc() overflows below FAR_COORD. (A tiny disc
+ * far from the origin, seen from far away, still squares its radius into the underflow:
+ * the ray then passes it within far less than the rounding of its own coordinates.)
  */
-static double ray_disc_far(const qk_disc_t *d, double ox, double oy, double dx, double dy,
-                           double tmax) {
+static double ray_disc_scaled(const qk_disc_t *d, double ox, double oy, double dx, double dy,
+                              double tmax) {
   const double m =
       qk__max(qk__max(fabs(ox), fabs(oy)), qk__max(qk__max(fabs(d->x), fabs(d->y)), d->r));
-  if (!(m > FAR_COORD)) return ray_disc(d, ox, oy, dx, dy, tmax);
+  if (!(m > FAR_COORD || (m < NEAR_COORD && m > 0))) return ray_disc(d, ox, oy, dx, dy, tmax);
   int e;
   (void)frexp(m, &e);
-  const int k = e - 400; /* m 2^-k in [2^399, 2^400) */
+  const int k = m > FAR_COORD ? e - 400 : e; /* m 2^-k in [2^399, 2^400), or [1/2, 1) */
   const qk_disc_t s = {ldexp(d->x, -k), ldexp(d->y, -k), ldexp(d->r, -k)};
   const double t = ray_disc(&s, ldexp(ox, -k), ldexp(oy, -k), dx, dy, ldexp(tmax, -k));
   return t < 0 ? t : ldexp(t, k);
@@ -1562,7 +1580,7 @@ typedef struct best {
 /* The items of slots [slot, end) against the ray, into *b. Discs carry their ids; the
  * tree's id array is read only for hits on boxes and for the kind in mixed sets. */
 static QK__ALWAYS_INLINE void scan_leaf(const qk_collider_t *c, const ray_t *ray, uint32_t slot,
-                                        uint32_t end, double tmax, int far, best_t *b) {
+                                        uint32_t end, double tmax, int scaled, best_t *b) {
   const qk_id_t *pid = qk__tree_ids(c->tree);
   const int all_discs = c->n_discs == c->n, no_discs = c->n_discs == 0;
 #if defined(__SSE2__)
@@ -1570,7 +1588,7 @@ static QK__ALWAYS_INLINE void scan_leaf(const qk_collider_t *c, const ray_t *ray
    * t to the last bit); only lanes that could be a new best go on. An odd count's last
    * pair is the last two discs: the one before the last is tested twice, which gives the
    * same t and id again and so leaves the best as it is (cheaper than a scalar test). */
-  if (all_discs && !far && end - slot >= 2) {
+  if (all_discs && !scaled && end - slot >= 2) {
     const uint32_t last = end - 2;
     for (uint32_t s2 = slot;; s2 += 2) {
       if (s2 > last) s2 = last;
@@ -1596,8 +1614,9 @@ static QK__ALWAYS_INLINE void scan_leaf(const qk_collider_t *c, const ray_t *ray
   for (; slot < end; slot++) {
     int is_disc = all_discs || (!no_discs && pid[slot] < c->n_discs);
     double th = !is_disc ? ray_box(&c->sbox[slot], ray, tmax)
-                : far    ? ray_disc_far(&c->sdisc[slot].d, ray->ox, ray->oy, ray->dx, ray->dy, tmax)
-                         : ray_disc(&c->sdisc[slot].d, ray->ox, ray->oy, ray->dx, ray->dy, tmax);
+                : scaled
+                    ? ray_disc_scaled(&c->sdisc[slot].d, ray->ox, ray->oy, ray->dx, ray->dy, tmax)
+                    : ray_disc(&c->sdisc[slot].d, ray->ox, ray->oy, ray->dx, ray->dy, tmax);
     if (th < 0 || th > b->t) continue;
     qk_id_t id = all_discs ? c->sdisc[slot].id : pid[slot];
     if (th < b->t || id < b->id) *b = (best_t){th, id};
@@ -1715,7 +1734,7 @@ static unsigned node_slab_general(const qk_collider_t *c, const cnode_t *n, cons
 }
 
 /* The cast with the general test, walking the cnode_t array (entries are node ids). */
-static void cast_general(const qk_collider_t *c, const ray_t *ray, double tmax, int far,
+static void cast_general(const qk_collider_t *c, const ray_t *ray, double tmax, int scaled,
                          qk_hit_t *hit) {
   best_t b = {INFINITY, QK_NONE};
   float tf = round_up(tmax);
@@ -1736,7 +1755,7 @@ static void cast_general(const qk_collider_t *c, const ray_t *ray, double tmax, 
       }
     } else {
       const double best0 = b.t;
-      scan_leaf(c, ray, n->start, n->start + n->count, tmax, far, &b);
+      scan_leaf(c, ray, n->start, n->start + n->count, tmax, scaled, &b);
       if (b.t != best0) tf = round_up(b.t); /* b.t <= tmax: the items test t <= tmax */
     }
     while (sp > 0 && stack[sp - 1].bound > tf) sp--;
@@ -2120,12 +2139,15 @@ raycast_rare(const qk_collider_t *c, qk_point_t o, qk_point_t d, double tmax, qk
    * stops at 2^50 so that t along it stays below 2^975 for any two doubles' distance: at
    * [1/2, 1) it overflowed beyond 2^1023 (from (0, -1e308) along (0, 1e308), a disc at the
    * origin, t = 1, came back at t = inf, and a farther item with a smaller id won the tie of
-   * two infinities). Beyond FAR_COORD (coordinates, then ray_disc_far()) every direction
+   * two infinities). Beyond FAR_COORD (coordinates, then ray_disc_scaled()) every direction
    * is scaled to [2^50, 2^51): from (-1e308, -1e308) along (1e-10, 1e-10) t overflowed in
    * the box test, which then reported a box the ray misses at t = inf. A hit whose t, scaled
-   * back, is beyond the largest double still reports inf (its id now the nearest item's). */
+   * back, is beyond the largest double still reports inf (its id now the nearest item's).
+   * An origin within NEAR_COORD of the origin, with discs as near, also takes
+   * ray_disc_scaled() (near). */
   const double m = qk__max(fabs(d.x), fabs(d.y)); /* finite: no call to fmax, no spills */
-  const int far = qk__max(qk__max(fabs(o.x), fabs(o.y)), c->mag) > FAR_COORD;
+  const double mo = qk__max(fabs(o.x), fabs(o.y));
+  const int far = qk__max(mo, c->mag) > FAR_COORD, near = c->tiny_discs && mo < NEAR_COORD;
   int e = 0;
   if (m > 0 && (far || m > 0x1p100 || m < 0x1p-100)) {
     (void)frexp(m, &e); /* m in [2^(e-1), 2^e) */
@@ -2137,11 +2159,11 @@ raycast_rare(const qk_collider_t *c, qk_point_t o, qk_point_t d, double tmax, qk
   ray_t ray;
   ray_init(&ray, c, o, d);
 #if defined(__SSE2__)
-  if (ray.simd && !far)
+  if (ray.simd && !far && !near)
     cast_float(c, &ray, tmax, hit);
   else
 #endif
-    cast_general(c, &ray, tmax, far, hit);
+    cast_general(c, &ray, tmax, far || near, hit);
   if (e != 0 && hit->id != QK_NONE) hit->t = ldexp(hit->t, -e);
   return QK_OK;
 }
@@ -2163,12 +2185,14 @@ qk_status_t qk_collider_raycast(const qk_collider_t *c, qk_point_t o, qk_point_t
 #if defined(__SSE2__)
   /* The common ray, in one branch: components and coordinates within the float test's
    * ranges (ray_init's simd), which also leave the direction unscaled and the
-   * coordinates below FAR_COORD; the same cast as below, with only what it reads set. */
+   * coordinates below FAR_COORD, and no disc test to scale up (raycast_rare's near); the
+   * same cast as below, with only what it reads set. */
   {
-    const double ax = fabs(d.x), ay = fabs(d.y);
-    const double mo = qk__max(qk__max(fabs(o.x), fabs(o.y)), c->mag);
-    if (c->quads && ((int)(mo <= 0x1p100) & (int)(qk__min(ax, ay) >= 0x1p-100) &
-                     (int)(qk__max(ax, ay) <= 0x1p100))) {
+    const double ax = fabs(d.x), ay = fabs(d.y), oo = qk__max(fabs(o.x), fabs(o.y));
+    const double mo = qk__max(oo, c->mag);
+    if (c->quads &&
+        ((int)(mo <= 0x1p100) & (int)(qk__min(ax, ay) >= 0x1p-100) &
+         (int)(qk__max(ax, ay) <= 0x1p100) & (int)(oo >= NEAR_COORD || !c->tiny_discs))) {
       ray_t ray;
       ray_init_common(&ray, c, o, d);
       ray_init_float(&ray, o, d);

@@ -514,7 +514,9 @@ static void test_collide_rays_extreme_directions(void **state) {
  * its directions scaled by 2^j has the same hits at t scaled by 2^(k - j), to the bit
  * (every operation of the cast commutes with scaling by a power of two). Beyond 2^400
  * the squares of the plain disc test overflow (hits at t = inf, or t = 0), and a large
- * direction times a large radius did so below it (a miss); hand cases besides. */
+ * direction times a large radius did so below it (a miss); below 2^-511 they underflow
+ * (fifty-fifth session: scaled by 2^-600, a disc the ray passes at nine radii was hit at
+ * t = 0, and at 2^-530 t was off in its fifth digit); hand cases besides. */
 static void test_collide_rays_far_coordinates(void **state) {
   (void)state;
   qkt_rng_t r;
@@ -527,7 +529,8 @@ static void test_collide_rays_far_coordinates(void **state) {
         (qk_disc_t){qkt_rng_range(&r, 0, 1), qkt_rng_range(&r, 0, 1), qkt_rng_range(&r, 0, 0.01)};
   qk_collider_t *c = NULL;
   assert_int_equal(qk_collider_build(d, ND, NULL, 0, NULL, &c), QK_OK);
-  const int kj[][2] = {{420, 0}, {600, 0}, {1000, 0}, {600, 300}, {300, 400}, {390, 120}};
+  const int kj[][2] = {{420, 0},  {600, 0},  {1000, 0}, {600, 300}, {300, 400},   {390, 120},
+                       {-420, 0}, {-530, 0}, {-600, 0}, {-900, 0},  {-600, -300}, {-700, 200}};
   qk_point_t o[NR], v[NR];
   qk_hit_t ref[NR];
   long hits = 0;
