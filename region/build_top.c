@@ -450,27 +450,33 @@ static qk_status_t top_cell(top_t *t, qk_node_t v, unsigned l, size_t i, size_t 
     b->ne[l] = t->cstart[c + 1] - t->cstart[c];
     if ((st = set_from_cell(t, l, c, NAN, NAN))) return st;
     double s = t->lside[l];
-    if (!(b->ne[l] > b->C && l < b->maxd && b->splits_left > 0)) /* a leaf: as build_node */
+    if (!(b->ne[l] > b->C && l < b->maxd && b->splits_left > b->splits_floor)) /* a leaf */
       return qk__emit_leaf(b, v, x0 + s * 0.5, y0 + s * 0.5, l);
     return qk__build_node(b, v, x0, y0, x1, y1, s, l, stall);
   }
   size_t ne = count(t, l, i, j);
   double h = t->lside[l] * 0.5, cx = x0 + h, cy = y0 + h;
   bool split = false;
-  if (ne > b->C && l < b->maxd && b->splits_left > 0) {
+  size_t cnt[4] = {0, 0, 0, 0};
+  if (ne > b->C && l < b->maxd && b->splits_left > b->splits_floor) {
     bool prog = true;
-    for (unsigned q = 0; q < 4; q++)
-      prog = prog && count(t, l + 1, 2 * i + qk__q_east(q), 2 * j + qk__q_north(q)) < ne;
+    for (unsigned q = 0; q < 4; q++) {
+      cnt[q] = count(t, l + 1, 2 * i + qk__q_east(q), 2 * j + qk__q_north(q));
+      prog = prog && cnt[q] < ne;
+    }
     stall = prog ? 0 : stall + 1;
     split = stall <= QK__STALL_BUDGET;
   }
   if (split) {
     uint32_t first = 0;
     if ((st = qk__split_cell(b, v, &first)) == QK_OK) {
-      for (unsigned q = 0; q < 4; q++)
-        if ((st = top_cell(t, first + q, l + 1, 2 * i + qk__q_east(q), 2 * j + qk__q_north(q),
-                           stall)))
-          return st;
+      const size_t floor = b->splits_floor; /* (each child's share: as qk__build_node's) */
+      for (unsigned q = 0; q < 4; q++) {
+        b->splits_floor = qk__child_floor(b, floor, cnt, q);
+        st = top_cell(t, first + q, l + 1, 2 * i + qk__q_east(q), 2 * j + qk__q_north(q), stall);
+        b->splits_floor = floor;
+        if (st) return st;
+      }
       return QK_OK;
     }
     if (st != QK_ERR_LIMIT) return st;

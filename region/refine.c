@@ -356,6 +356,14 @@ qk_status_t qk__child_set(qk__bctx_t *b, unsigned d, const uint32_t *odd, size_t
   return QK_OK;
 }
 
+size_t qk__child_floor(const qk__bctx_t *b, size_t floor, const size_t cnt[4], unsigned q) {
+  double rest = 0;
+  for (unsigned k = q + 1; k < 4; k++) rest += (double)cnt[k];
+  const double all = rest + (double)cnt[q];
+  if (!(b->splits_left > floor) || all == 0) return floor;
+  return floor + (size_t)((double)(b->splits_left - floor) * (rest / all));
+}
+
 qk_status_t qk__split_cell(qk__bctx_t *b, qk_node_t v, uint32_t *first) {
   qk_region_t *r = b->r;
   qk_status_t st;
@@ -385,8 +393,10 @@ qk_status_t qk__build_node(qk__bctx_t *b, qk_node_t v, double x0, double y0, dou
   /* The budget bounds the work on adversarial input (thousands of long edges fanning out
    * of one point need a number of cells far beyond the edges to separate them); when it
    * runs out the remaining cells stay leaves with more pieces. Real layers stay far
-   * below it. */
-  if (b->ne[d] > b->C && d < b->maxd && b->splits_left > 0) {
+   * below it. Each cell's children share what is left of it in proportion to their
+   * pieces (qk__child_floor): spent depth first, the first quadrant of a fan took it all,
+   * and cells far from the fan's apex kept up to 200 times the pieces a query scans. */
+  if (b->ne[d] > b->C && d < b->maxd && b->splits_left > b->splits_floor) {
     bool prog;
     if ((st = split_lists(b, d, x0, y0, x1, y1, cx, cy, h, &prog))) return st;
     stall = prog ? 0 : stall + 1;
@@ -396,6 +406,7 @@ qk_status_t qk__build_node(qk__bctx_t *b, qk_node_t v, double x0, double y0, dou
     uint32_t first = 0;
     if ((st = qk__split_cell(b, v, &first)) == QK_OK) {
       size_t n = b->ne[d];
+      const size_t floor = b->splits_floor;
       for (unsigned q = 0; q < 4; q++) {
         int east = (int)qk__q_east(q), north = (int)qk__q_north(q);
         double qx0 = east ? cx : x0, qx1 = east ? x1 : cx;
@@ -411,12 +422,14 @@ qk_status_t qk__build_node(qk__bctx_t *b, qk_node_t v, double x0, double y0, dou
         }
         /* A child that will not split is a leaf at once (qk__build_node's test and
          * reference point, without the call). */
-        if (!(cn > b->C && d + 1 < b->maxd && b->splits_left > 0)) {
+        b->splits_floor = qk__child_floor(b, floor, b->cnt[d + 1], q);
+        if (!(cn > b->C && d + 1 < b->maxd && b->splits_left > b->splits_floor)) {
           double hq = h * 0.5;
           st = qk__emit_leaf(b, first + q, qx0 + hq, qy0 + hq, d + 1);
         } else {
           st = qk__build_node(b, first + q, qx0, qy0, qx1, qy1, h, d + 1, stall);
         }
+        b->splits_floor = floor;
         if (st) return st;
       }
       return QK_OK;

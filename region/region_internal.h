@@ -276,8 +276,15 @@ typedef struct qk__bctx {
   size_t nodd[QK__MAXD + 1][4];
   uint8_t *bad; /* per ring: self-intersecting */
   unsigned depth;
-  size_t splits_left; /* a budget on splits: see qk__build_node */
+  size_t splits_left;  /* a budget on splits: see qk__build_node */
+  size_t splits_floor; /* the cell being refined stops splitting at this many left */
 } qk__bctx_t;
+
+/* The floor below which child q of a cell (counts cnt[4] of its pieces) stops splitting:
+ * the budget left above the cell's own floor is shared among the children not yet
+ * refined, q and those after it, in proportion to their pieces, so that the first ones
+ * cannot take what the others need (refine.c). */
+size_t qk__child_floor(const qk__bctx_t *b, size_t floor, const size_t cnt[4], unsigned q);
 
 /* The lower sides of the 2^G cells at depth G along one axis of the root [r0, r0 + side],
  * halved the way the descent halves them (build.c). */

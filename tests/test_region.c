@@ -2295,6 +2295,87 @@ static void test_region_svg_fill(void **state) {
   free(p);
 }
 
+/* Exact orientation of (a, b, p) in quarter units (every value a multiple of 1/4 below 2^21). */
+static int orient_q(const double *a, const double *b, const double *p) {
+  long long ax = (long long)(4 * a[0]), ay = (long long)(4 * a[1]);
+  long long bx = (long long)(4 * b[0]) - ax, by = (long long)(4 * b[1]) - ay;
+  long long px = (long long)(4 * p[0]) - ax, py = (long long)(4 * p[1]) - ay;
+  long long d = bx * py - by * px;
+  return (d > 0) - (d < 0);
+}
+
+/* The split budget (pieces + 4096) is shared among a cell's children in proportion to their
+ * pieces (refine.c, qk__child_floor; build_top.c the same): spent depth first, a fan of
+ * slices round one apex had its first quadrant (north-east) split finely and the others
+ * left as a few leaves of a quarter of the edges each (a QA helper's fan of 20,000
+ * slices: queries 50-200 times slower there). The fan here is symmetric, so each quadrant
+ * must get about as many leaves as the others; the answers (closed rule) against brute
+ * force over the triangles besides. */
+static void test_region_budget_shared_by_quadrants(void **state) {
+  (void)state;
+  const double R = 1 << 20;
+  enum { N = 1600 }; /* slices: 4,800 pieces; the fan wants far more splits than 8,896 */
+  double *xy = malloc(8 * N * sizeof *xy);
+  size_t *rs = malloc((N + 1) * sizeof *rs), *fs = malloc((N + 1) * sizeof *fs);
+  assert_non_null(xy), assert_non_null(rs), assert_non_null(fs);
+  double prev[2] = {R, 0};
+  for (int i = 0; i < N; i++) {
+    double a = 6.283185307179586 * (i + 1) / N;
+    double cur[2] = {i + 1 == N ? R : round(R * cos(a)), i + 1 == N ? 0 : round(R * sin(a))};
+    double *v = xy + 8 * i; /* apex, prev, cur, apex: counter-clockwise */
+    v[0] = v[1] = v[6] = v[7] = 0;
+    v[2] = prev[0], v[3] = prev[1], v[4] = cur[0], v[5] = cur[1];
+    rs[i] = 4 * (size_t)i, fs[i] = (size_t)i;
+    prev[0] = cur[0], prev[1] = cur[1];
+  }
+  rs[N] = 4 * (size_t)N, fs[N] = N;
+  qk_region_arrays_t in = {xy, rs, N, fs, N};
+  qk_region_options_t o;
+  qk_region_options_init(&o);
+  o.planar = 1;
+  qk_region_t *r = NULL;
+  assert_int_equal(qk_region_from_arrays(&in, &o, &r, NULL), QK_OK);
+  size_t per_q[4] = {0, 0, 0, 0}; /* leaves by the quadrant of their edges' box */
+  for (size_t i = 0; i < r->n_leaves; i++) {
+    const qk__leaf_t *l = &r->leaves[i];
+    if (l->ne == 0) continue;
+    double cx = (double)l->ex0 + (double)l->ex1, cy = (double)l->ey0 + (double)l->ey1;
+    per_q[(cx < 0) + 2 * (cy < 0)]++;
+  }
+  size_t lo = per_q[0], hi = per_q[0];
+  for (int q = 1; q < 4; q++)
+    lo = per_q[q] < lo ? per_q[q] : lo, hi = per_q[q] > hi ? per_q[q] : hi;
+  if (!(hi <= 2 * lo && lo >= 100))
+    fail_msg("leaves by quadrant (NE, NW, SE, SW): %zu %zu %zu %zu", per_q[0], per_q[1], per_q[2],
+             per_q[3]);
+  uint64_t seed = qkt_seed(977);
+  qkt_rng_t g;
+  qkt_rng_seed(&g, seed);
+  uint32_t got[8];
+  for (int k = 0; k < 2000; k++) {
+    /* quarter units, some near the apex */
+    double span = k % 4 ? 2 * R : 64;
+    double p[2] = {((double)qkt_rng_below(&g, (uint32_t)(4 * span)) - 2 * span) / 4 + 0.25,
+                   ((double)qkt_rng_below(&g, (uint32_t)(4 * span)) - 2 * span) / 4 + 0.25};
+    uint32_t want[8];
+    size_t nw = 0, n = 0;
+    for (uint32_t f = 0; f < N && nw < 8; f++) {
+      const double *v = xy + 8 * f;
+      if (orient_q(v, v + 2, p) >= 0 && orient_q(v + 2, v + 4, p) >= 0 &&
+          orient_q(v + 4, v, p) >= 0)
+        want[nw++] = f;
+    }
+    assert_int_equal(
+        qk_region_locate_all(r, (qk_point_t){p[0], p[1]}, QK_BOUNDARY_CLOSED, got, 8, &n), QK_OK);
+    if (n != nw || memcmp(got, want, nw * sizeof *got))
+      fail_msg("point (%.17g, %.17g): %zu features (first %u), brute force %zu (first %u) (seed "
+               "%llu)",
+               p[0], p[1], n, n ? got[0] : 0, nw, nw ? want[0] : 0, (unsigned long long)seed);
+  }
+  qk_region_free(r);
+  free(fs), free(rs), free(xy);
+}
+
 /* The refinement splits a cell while more than C edges meet it and the split makes
  * progress (refine.c, and build_top.c's one pass over the top levels, which must make the
  * same decisions). On a lattice of separated squares of 4 edges each, with C = 4, a cell
@@ -2341,6 +2422,7 @@ static void test_region_leaves_split_to_capacity(void **state) {
 int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_region_leaves_split_to_capacity),
+      cmocka_unit_test(test_region_budget_shared_by_quadrants),
       cmocka_unit_test(test_region_antimeridian_slanted),
       cmocka_unit_test(test_region_antimeridian_shared_edge),
       cmocka_unit_test(test_region_antimeridian_coverage),
