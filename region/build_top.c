@@ -459,11 +459,9 @@ static qk_status_t top_cell(top_t *t, qk_node_t v, unsigned l, size_t i, size_t 
   bool split = false;
   size_t cnt[4] = {0, 0, 0, 0};
   if (ne > b->C && l < b->maxd && b->splits_left > b->splits_floor) {
-    bool prog = true;
-    for (unsigned q = 0; q < 4; q++) {
+    for (unsigned q = 0; q < 4; q++)
       cnt[q] = count(t, l + 1, 2 * i + qk__q_east(q), 2 * j + qk__q_north(q));
-      prog = prog && cnt[q] < ne;
-    }
+    const bool prog = qk__split_progress(cnt, ne);
     stall = prog ? 0 : stall + 1;
     split = stall <= QK__STALL_BUDGET;
   }

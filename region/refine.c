@@ -269,9 +269,7 @@ static inline void flip(flips_t *fl, unsigned q, uint32_t p, const qk__seg_t *g,
 
 /* Sort the pieces of level d into the four children's lists (a piece may go to several;
  * qk__clip4 decides) and gather the children's flips. Returns whether the split makes
- * progress: every child meets fewer pieces than the cell. Pieces that all pass one point
- * (a vertex of high degree) or overlap (shared edges) never separate, and such cells
- * would otherwise split down to the depth cap. */
+ * progress (qk__split_progress). */
 static qk_status_t split_lists(qk__bctx_t *b, unsigned d, double x0, double y0, double x1,
                                double y1, double cx, double cy, double half, bool *progress) {
   size_t n = b->ne[d];
@@ -324,7 +322,7 @@ static qk_status_t split_lists(qk__bctx_t *b, unsigned d, double x0, double y0, 
   }
   size_t *cnt = b->cnt[d + 1];
   cnt[0] = c0, cnt[1] = c1, cnt[2] = c2, cnt[3] = c3;
-  *progress = c0 < n && c1 < n && c2 < n && c3 < n;
+  *progress = qk__split_progress(cnt, n);
   return QK_OK;
 }
 

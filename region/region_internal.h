@@ -280,6 +280,19 @@ typedef struct qk__bctx {
   size_t splits_floor; /* the cell being refined stops splitting at this many left */
 } qk__bctx_t;
 
+/* Whether a split of a cell of n pieces into children of cnt[4] makes progress: every
+ * child meets fewer pieces than the cell, or one child meets them all and the others none
+ * (a cluster of pieces far from the rest, inside one child: the splits close in on it).
+ * Pieces that all pass one point (a vertex of high degree) or overlap (shared edges) never
+ * separate, and such cells would otherwise split down to the depth cap; without the
+ * second case a compact cluster in a large cell stopped there too (a grid of 1,600 squares
+ * 1/100 wide, with another feature at 1 from it, ended as one leaf of 6,400 edges: 8.9 us
+ * a locate against 0.3). */
+static inline bool qk__split_progress(const size_t cnt[4], size_t n) {
+  return (cnt[0] < n && cnt[1] < n && cnt[2] < n && cnt[3] < n) ||
+         (cnt[0] != 0) + (cnt[1] != 0) + (cnt[2] != 0) + (cnt[3] != 0) == 1;
+}
+
 /* The floor below which child q of a cell (counts cnt[4] of its pieces) stops splitting:
  * the budget left above the cell's own floor is shared among the children not yet
  * refined, q and those after it, in proportion to their pieces, so that the first ones

@@ -2376,6 +2376,65 @@ static void test_region_budget_shared_by_quadrants(void **state) {
   free(fs), free(rs), free(xy);
 }
 
+/* A compact cluster far from the rest of the layer (qk__split_progress): the cells close
+ * in on it, one child at a time, until its pieces separate. Before, a split that left all
+ * the pieces in one child counted as no progress, as for pieces through one point, and
+ * after three such levels the cell stayed a leaf: a grid of 1,600 squares 1/100 wide with
+ * another feature at distance 1 was one leaf of 6,400 edges (8.9 us a locate against 0.09).
+ * Here 400 squares with a square 2^k away for k = -6 .. 10: every leaf holds at most 2 C
+ * edges, and the answers (closed rule) agree with brute force. */
+static void test_region_cluster_far_from_the_rest(void **state) {
+  (void)state;
+  enum { G = 20, NF = G * G + 1 };
+  const double cell = 0.01 / G, w = cell * 0.75;
+  double *xy = malloc(10 * NF * sizeof *xy);
+  size_t rs[NF + 1], fs[NF + 1];
+  assert_non_null(xy);
+  uint64_t seed = qkt_seed(31337);
+  qkt_rng_t g;
+  qkt_rng_seed(&g, seed);
+  for (int k = -6; k <= 10; k += 2) { /* (much farther, depth 26 ends above the squares) */
+    const double far = ldexp(1, k);
+    for (size_t f = 0; f < NF; f++) {
+      double x = f + 1 < NF ? (double)(f % G) * cell : far,
+             y = f + 1 < NF ? (double)(f / G) * cell : far;
+      double s = f + 1 < NF ? w : 0.01, *v = xy + 10 * f;
+      v[0] = x, v[1] = y, v[2] = x + s, v[3] = y, v[4] = x + s, v[5] = y + s;
+      v[6] = x, v[7] = y + s, v[8] = x, v[9] = y;
+      rs[f] = 5 * f, fs[f] = f;
+    }
+    rs[NF] = 5 * (size_t)NF, fs[NF] = NF;
+    qk_region_arrays_t in = {xy, rs, NF, fs, NF};
+    qk_region_options_t o;
+    qk_region_options_init(&o);
+    o.planar = 1;
+    qk_region_t *r = NULL;
+    assert_int_equal(qk_region_from_arrays(&in, &o, &r, NULL), QK_OK);
+    size_t most = 0;
+    for (size_t i = 0; i < r->n_leaves; i++) most = r->leaves[i].ne > most ? r->leaves[i].ne : most;
+    if (most > 2 * o.leaf_edges)
+      fail_msg("another square at 2^%d: a leaf holds %zu edges (C = %u)", k, most,
+               (unsigned)o.leaf_edges);
+    for (int q = 0; q < 400; q++) {
+      qk_point_t p = {qkt_rng_range(&g, -0.001, 0.011), qkt_rng_range(&g, -0.001, 0.011)};
+      if (q % 4 == 0) p.x = (double)qkt_rng_below(&g, G) * cell + (q % 8 ? w : 0); /* on a side */
+      uint32_t got[4], want = QK_NONE;
+      size_t n = 0, nw = 0;
+      for (size_t f = 0; f + 1 < NF; f++) {
+        const double *v = xy + 10 * f;
+        if (v[0] <= p.x && p.x <= v[2] && v[1] <= p.y && p.y <= v[5]) want = (uint32_t)f, nw++;
+      }
+      assert_int_equal(qk_region_locate_all(r, p, QK_BOUNDARY_CLOSED, got, 4, &n), QK_OK);
+      if (n != nw || (n && got[0] != want))
+        fail_msg("another square at 2^%d, point (%.17g, %.17g): %zu features (%u), brute force "
+                 "%zu (%u) (seed %llu)",
+                 k, p.x, p.y, n, n ? got[0] : 0, nw, want, (unsigned long long)seed);
+    }
+    qk_region_free(r);
+  }
+  free(xy);
+}
+
 /* The refinement splits a cell while more than C edges meet it and the split makes
  * progress (refine.c, and build_top.c's one pass over the top levels, which must make the
  * same decisions). On a lattice of separated squares of 4 edges each, with C = 4, a cell
@@ -2423,6 +2482,7 @@ int main(void) {
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_region_leaves_split_to_capacity),
       cmocka_unit_test(test_region_budget_shared_by_quadrants),
+      cmocka_unit_test(test_region_cluster_far_from_the_rest),
       cmocka_unit_test(test_region_antimeridian_slanted),
       cmocka_unit_test(test_region_antimeridian_shared_edge),
       cmocka_unit_test(test_region_antimeridian_coverage),
