@@ -56,8 +56,10 @@
  * does not depend on where the stages meet.
  *
  * Splits also stop when they do not separate the pieces (pieces through one point, or
- * overlapping shared edges) two levels in a row, and when a budget of (pieces +
- * 4096) splits is spent, so adversarial input cannot make the index explode.
+ * overlapping shared edges) two levels in a row (a split that leaves them all in one
+ * child, closing in on a cluster, is progress: qk__split_progress), and when a budget of
+ * (pieces + 4096) splits is spent, shared among each cell's children in proportion to
+ * their pieces (qk__child_floor), so adversarial input cannot make the index explode.
  *
  * Layout for queries (build.c). The cells form a flat array kid[] (node -> first child,
  * or a tagged leaf). A leaf without pieces whose reference point
