@@ -154,17 +154,17 @@ static qk_status_t too_close(const qk__gm_t *g, uint32_t f, uint32_t h, double s
                  nm[i]);
   }
   double gap = 1.5 * s * g->S, ext = fmax(g->bx1 - g->bx0, g->by1 - g->by0);
+  /* (Within the 255 characters of a message, names of 40 characters each included.) */
   if (!deep)
     return qk__mesh_fail(g->err, QK_ERR_LIMIT, 0,
-                         "%s and %s stay within %.3g of each other along a stretch of the "
-                         "input (extent %.17g, ratio %.3g): grading the quadtree to their gap "
-                         "along it would take more than %zu cell splits (2^18 + 256 per "
-                         "feature; the mesh would be as large)",
+                         "%s and %s stay within %.3g of each other along a stretch (extent "
+                         "%.6g, ratio %.3g): grading the quadtree to that gap would take over "
+                         "%zu cell splits (2^18 + 256 a feature)",
                          nm[0], nm[1], gap, ext, ext / gap, g->sep_cap);
   return qk__mesh_fail(g->err, QK_ERR_LIMIT, 0,
-                       "%s and %s stay within %.3g of each other along a stretch of the input "
-                       "(extent %.17g, ratio %.3g): grading the quadtree to their gap along it "
-                       "would take more than %zu cells below 2^-%d of the extent",
+                       "%s and %s stay within %.3g of each other along a stretch (extent %.6g, "
+                       "ratio %.3g): grading the quadtree to that gap would take over %zu "
+                       "cells below 2^-%d of the extent",
                        nm[0], nm[1], gap, ext, ext / gap, g->deep_cap, GM_DEEP);
 }
 

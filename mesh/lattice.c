@@ -66,14 +66,13 @@ qk_status_t qk__mesh_book_limit(const qk_poly_t *P, const qk_mesh_options_t *opt
                          "general mode (--general, QK_MESH_GENERAL)",
                          opt->max_size, by_size, (unsigned long long)U, (double)QK__MESH_MAX_STEPS);
   uint32_t a = P->seg[2 * k], b = P->seg[2 * k + 1];
+  /* (Within the 255 characters of a message: the line names the segment.) */
   return qk__mesh_fail(err, QK_ERR_LIMIT, P->sline ? P->sline[k] : 0,
                        "the book's mode would need %.3g unit steps along the segments (at most "
-                       "%.3g; segment %lu from (%.17g, %.17g) to (%.17g, %.17g) alone has "
-                       "%.17g): it splits every cell along a segment down to unit size. Use the "
-                       "general mode (--general, QK_MESH_GENERAL), which grades the cells to the "
-                       "input's features, or scale the input down",
-                       steps, (double)QK__MESH_MAX_STEPS, qk__mesh_num(P, k), P->vx[a], P->vy[a],
-                       P->vx[b], P->vy[b],
+                       "%.3g; segment %lu alone %.3g): it splits every cell along a segment to "
+                       "unit size. Use the general mode (--general, QK_MESH_GENERAL) or scale "
+                       "the input down",
+                       steps, (double)QK__MESH_MAX_STEPS, qk__mesh_num(P, k),
                        fmax(fabs(P->vx[a] - P->vx[b]), fabs(P->vy[a] - P->vy[b])));
 }
 

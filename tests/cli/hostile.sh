@@ -119,7 +119,7 @@ expect 1 'hole.poly:12: hole 0 at \(5, 5\) lies outside the domain' -- "$cli" me
 # --book refuses at once, naming the longest segment and the way out.
 printf '4 2 0 0\n0 0 0\n1 1073741824 0\n2 1073741824 1073741824\n3 0 1073741824\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n0\n' >"$tmp/huge.poly"
 expect 0 '"mode": "general"' -- "$cli" mesh "$tmp/huge.poly" -o "$tmp/h" --stats
-expect 1 "huge.poly:7: the book's mode would need 4.29e\\+09 unit steps .*segment 0 from \\(0, 0\\) to \\(1073741824, 0\\).*--general" -- \
+expect 1 "huge.poly:7: the book's mode would need 4.29e\\+09 unit steps .*segment 0 alone 1.07e\\+09.*--general.*scale the input down" -- \
   "$cli" mesh "$tmp/huge.poly" -o "$tmp/d" --book
 # A 2^31 by 1 rectangle: the general mode would need 2^31 cells along it; refused naming both
 # long sides (once 18 s and 2.5 GB).
