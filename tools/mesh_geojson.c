@@ -857,8 +857,11 @@ static void rings_holding(hp_t *h, size_t q) {
  * meshed): a ring holding every vertex of q whose every vertex q holds bounds the same
  * region, the rings crossing nowhere (the mesher refuses crossings); inside it the area
  * goes on (even-odd), and the hole needs no point. It was refused as a hole "covered by
- * another polygon". */
+ * another polygon". Only when the rings around q's inside, q and those holding it, are
+ * odd in number (even-odd, as the domain): a hole equal to its own shell (two rings, no
+ * area) counted as filled, and a polygon of no area was meshed as a square. */
 static int filled(hp_t *h, size_t q) {
+  if (h->nheld % 2) return 0; /* (q and an odd number holding it: even) */
   for (size_t i = 0; i < h->nheld; i++) {
     size_t r = h->held[i], np = 0;
     int all = 1;
