@@ -59,18 +59,91 @@ static double size_at(const qk__gm_t *g, const double *xy, int n) {
   return h;
 }
 
+/* Feature f's part in the closed box [lo, hi] into e (a vertex: itself; a segment: its
+ * clipping by the box, Liang-Barsky in doubles; the caller knows it meets the box). */
+static void part_in_box(const qk__gm_t *g, uint32_t f, const double lo[2], const double hi[2],
+                        double e[4]) {
+  const qk_poly_t *P = g->P;
+  const uint32_t nv = (uint32_t)P->nv;
+  const uint32_t u = f < nv ? f : P->seg[2 * (f - nv)], w = f < nv ? f : P->seg[2 * (f - nv) + 1];
+  const double a[2] = {P->vx[u], P->vy[u]}, d[2] = {P->vx[w] - a[0], P->vy[w] - a[1]};
+  double t0 = 0, t1 = 1;
+  for (int i = 0; i < 2; i++) {
+    if (d[i] == 0) continue;
+    double s0 = (lo[i] - a[i]) / d[i], s1 = (hi[i] - a[i]) / d[i];
+    if (s0 > s1) {
+      double x = s0;
+      s0 = s1, s1 = x;
+    }
+    t0 = s0 > t0 ? s0 : t0, t1 = s1 < t1 ? s1 : t1;
+  }
+  if (!(t0 <= t1)) t0 = t1 = 0; /* (rounding: the box only grazes it) */
+  e[0] = a[0] + t0 * d[0], e[1] = a[1] + t0 * d[1];
+  e[2] = a[0] + t1 * d[0], e[3] = a[1] + t1 * d[1];
+}
+
+/* The point of segment (or point) e nearest p, into q. */
+static void nearest_on(const double e[4], const double p[2], double q[2]) {
+  const double dx = e[2] - e[0], dy = e[3] - e[1], l2 = dx * dx + dy * dy;
+  double t = l2 > 0 ? ((p[0] - e[0]) * dx + (p[1] - e[1]) * dy) / l2 : 0;
+  t = t < 0 ? 0 : t > 1 ? 1 : t;
+  q[0] = e[0] + t * dx, q[1] = e[1] + t * dy;
+}
+
+/* Whether features f and h face each other in the box across the outside of the domain
+ * only: the midpoint of the nearest points of their parts in the box lies strictly inside
+ * a triangle of a dropped face (the outside, or a hole). The refinement never puts a point
+ * there nor tests across it (the dropped side is neither refined nor searched), so such a
+ * pair sets no size: a comb's teeth 2^-11 apart across its slots, each tooth 0.0045 wide,
+ * were refused as two segments too close along a stretch, though with a size bound that
+ * never bound they made 53,351 triangles (a QA helper's). A midpoint on an edge or in a
+ * kept face keeps the pair. */
+static int across_outside(const qk__gm_t *g, uint32_t f, uint32_t h, const double lo[2],
+                          const double hi[2]) {
+  double e[2][4];
+  part_in_box(g, f, lo, hi, e[0]);
+  part_in_box(g, h, lo, hi, e[1]);
+  double best = INFINITY, m[2] = {0, 0};
+  for (int i = 0; i < 2; i++)
+    for (int j = 0; j < 2; j++) {
+      const double *p = &e[i][2 * j];
+      double q[2];
+      nearest_on(e[1 - i], p, q);
+      const double d = (p[0] - q[0]) * (p[0] - q[0]) + (p[1] - q[1]) * (p[1] - q[1]);
+      if (d < best) best = d, m[0] = p[0] + (q[0] - p[0]) / 2, m[1] = p[1] + (q[1] - p[1]) / 2;
+    }
+  if (!(best > 0)) return 0;
+  const qk__cdt_t *c = &g->cdt;
+  if (!(m[0] > c->xy[0] && m[0] < c->xy[4] && m[1] > c->xy[1] && m[1] < c->xy[5])) return 0;
+  /* (walked from f's end nearer the midpoint: a walk from the last insertion crossed the
+   * mesh, and the comb took seconds) */
+  const qk_poly_t *P = g->P;
+  const uint32_t nv = (uint32_t)P->nv;
+  uint32_t u = f < nv ? f : P->seg[2 * (f - nv)], w = f < nv ? f : P->seg[2 * (f - nv) + 1];
+  const double du = (P->vx[u] - m[0]) * (P->vx[u] - m[0]) + (P->vy[u] - m[1]) * (P->vy[u] - m[1]);
+  const double dw = (P->vx[w] - m[0]) * (P->vx[w] - m[0]) + (P->vy[w] - m[1]) * (P->vy[w] - m[1]);
+  const uint32_t v = g->cv[dw < du ? w : u];
+  uint32_t t;
+  int k;
+  if (qk__cdt_locate(c, m[0], m[1], v == QK__CDT_NONE ? QK__CDT_NONE : c->vtri[v], &t, &k) !=
+      QK__CDT_IN)
+    return 0;
+  return g->faces[g->face[t]].drop;
+}
+
 /* Do features f and h (vertex ids below nv, then nv + segment ids) need separating in the
  * closed box [lo, hi]? Two vertices always do; a vertex and a segment unless the vertex is
  * an endpoint; two segments unless they share an endpoint that lies in the box (near their
- * shared vertex the concentric shells of the refinement grade them instead). */
+ * shared vertex the concentric shells of the refinement grade them instead); and none
+ * that face each other across the outside only (across_outside). */
 static int separate(const qk__gm_t *g, uint32_t f, uint32_t h, const double lo[2],
                     const double hi[2]) {
   const qk_poly_t *P = g->P;
   uint32_t nv = (uint32_t)P->nv;
-  if (f < nv && h < nv) return 1;
+  if (f < nv && h < nv) return !across_outside(g, f, h, lo, hi);
   if (f < nv || h < nv) {
     uint32_t v = f < nv ? f : h, s = (f < nv ? h : f) - nv;
-    return P->seg[2 * s] != v && P->seg[2 * s + 1] != v;
+    return P->seg[2 * s] != v && P->seg[2 * s + 1] != v && !across_outside(g, f, h, lo, hi);
   }
   const uint32_t *a = &P->seg[2 * (f - nv)], *b = &P->seg[2 * (h - nv)];
   for (int i = 0; i < 2; i++)
@@ -79,7 +152,7 @@ static int separate(const qk__gm_t *g, uint32_t f, uint32_t h, const double lo[2
         double x = P->vx[a[i]], y = P->vy[a[i]];
         return !(x >= lo[0] && x <= hi[0] && y >= lo[1] && y <= hi[1]);
       }
-  return 1;
+  return !across_outside(g, f, h, lo, hi);
 }
 
 /* Whether the closed segment ab meets the closed box, exactly: the bounding boxes overlap

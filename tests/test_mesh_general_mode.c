@@ -49,9 +49,9 @@
 typedef struct shape {
   double xy[4096];
   uint32_t seg[4096];
-  double holes[64];
+  double holes[256];
   size_t nv, ns, nh;
-  uint32_t ring[64][2]; /* first vertex, count: area rings (holes clockwise) */
+  uint32_t ring[160][2]; /* first vertex, count: area rings (holes clockwise) */
   size_t nring;
 } shape_t;
 
@@ -2096,6 +2096,51 @@ static void test_mesh_general_mode_long_gap(void **state) {
   refused_small(st, 404, ss, 204, QK_MESH_GENERAL, QK_ERR_LIMIT, w2, 64);
 }
 
+/* Features that face each other across the outside only set no size (general_seed.c,
+ * across_outside): a comb of 200 teeth 0.0045 wide with slots 2^-11 wide between them (a
+ * QA helper's) was refused as two segments "too close along a stretch", the grading
+ * separating the slots' sides across their gap, though a size bound that never binds made
+ * 53,351 triangles; and a plate with 120 slot holes 2^-14 wide. Both now mesh with no size
+ * bound, checked exactly; the rectangle of test_mesh_general_mode_long_gap, whose long
+ * sides face each other across its inside, is still refused. */
+static void test_mesh_general_mode_comb(void **state) {
+  (void)state;
+  const double w = 0x1p-12; /* half a slot */
+  for (int holes = 0; holes < 2; holes++) {
+    shape_t *s = calloc(1, sizeof *s);
+    assert_non_null(s);
+    if (!holes) {
+      double pts[2 * 804];
+      size_t n = 0;
+      const double head[6] = {0, 0, 1, 0, 1, 1};
+      for (int i = 0; i < 6; i++) pts[n++] = head[i];
+      for (int i = 199; i > 0; i--) {
+        const double x = i / 200.0, t[8] = {x + w, 1, x + w, 0.01, x - w, 0.01, x - w, 1};
+        for (int j = 0; j < 8; j++) pts[n++] = t[j];
+      }
+      pts[n++] = 0, pts[n++] = 1;
+      sh_ring(s, pts, n / 2);
+    } else {
+      const double outer[8] = {0, 0, 1, 0, 1, 1, 0, 1};
+      sh_ring(s, outer, 4);
+      for (int i = 1; i <= 120; i++) { /* clockwise: holes, 2^-14 wide */
+        const double x = i / 121.0, v = 0x1p-15;
+        const double h[8] = {x - v, 0.01, x - v, 0.99, x + v, 0.99, x + v, 0.01};
+        sh_ring(s, h, 4);
+        sh_hole(s, x, 0.5);
+      }
+    }
+    qk_poly_t *p = sh_poly(s, NULL);
+    qk_mesh_options_t o = general_opts();
+    qk_mesh_t *m = mesh_of(p, &o);
+    check_out_t c = check_general(s, m, 20);
+    if (c.nt < 2000) fail_msg("%s: %zu triangles", holes ? "slot holes" : "comb", c.nt);
+    qk_mesh_free(m);
+    qk_poly_free(p);
+    free(s);
+  }
+}
+
 /* Integer, axis-parallel input of a huge extent: the book's mode would split every cell
  * along the segments down to unit size (a square of side 2^30: 2^32 unit steps; it ran out
  * of time and memory). QK_MESH_AUTO hands it to the general mode, as it does with what the
@@ -2390,6 +2435,7 @@ int main(void) {
       cmocka_unit_test(test_mesh_general_mode_lattice_declines),
       cmocka_unit_test(test_mesh_general_mode_hostile),
       cmocka_unit_test(test_mesh_general_mode_long_gap),
+      cmocka_unit_test(test_mesh_general_mode_comb),
       cmocka_unit_test(test_mesh_general_mode_book_extent),
       cmocka_unit_test(test_mesh_general_mode_alloc_failure),
       cmocka_unit_test(test_mesh_general_mode_growth_copies),
