@@ -23,7 +23,7 @@ static double wanted(const qk__gen_t *g, int64_t X, int64_t Y, int64_t S) {
       double x = qk__lat_out(&g->lat, 2 * X + cx[k] * S, g->lat.x0);
       double y = qk__lat_out(&g->lat, 2 * Y + cy[k] * S, g->lat.y0);
       double v = o->size_fn(x, y, o->size_user);
-      if (v < h) h = v; /* a NaN sample asks for nothing */
+      if (v > 0 && v < h) h = v; /* (0, negative or NaN asks for nothing, as in general mode) */
     }
   }
   return h;

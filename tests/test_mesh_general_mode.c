@@ -2141,6 +2141,46 @@ static void test_mesh_general_mode_comb(void **state) {
   }
 }
 
+/* A size function's sample that is not a positive number (0, negative, NaN) bounds nothing,
+ * in every mode (include/quadkit/mesh.h): the lattice modes took 0 or a negative sample as
+ * the finest size there is (unit cells in the book's mode) while the general mode took it
+ * as no bound (a QA helper saw the general mode's; fifty-fifth session). Each mode's mesh
+ * with such a function is the mesh without one. */
+static double size_const(double x, double y, void *user) {
+  (void)x, (void)y;
+  return *(const double *)user;
+}
+static void test_mesh_general_mode_size_fn_nonpositive(void **state) {
+  (void)state;
+  const double sq[8] = {0, 0, 8, 0, 8, 8, 0, 8}, sq2[8] = {0, 0, 8.5, 0, 8.5, 8, 0, 8};
+  const uint32_t seg[8] = {0, 1, 1, 2, 2, 3, 3, 0};
+  const qk_mesh_mode_t modes[3] = {QK_MESH_BOOK, QK_MESH_DYADIC, QK_MESH_GENERAL};
+  double vals[3] = {0, -1, NAN};
+  for (int i = 0; i < 3; i++) {
+    qk_poly_t *p = NULL;
+    assert_int_equal(qk_poly_from_arrays(modes[i] == QK_MESH_DYADIC ? sq2 : sq, 4, seg, 4, NULL, 0,
+                                         NULL, &p, NULL),
+                     QK_OK);
+    qk_mesh_options_t o;
+    qk_mesh_options_init(&o);
+    o.mode = modes[i];
+    qk_mesh_t *m = mesh_of(p, &o);
+    size_t want, nt;
+    qk_mesh_triangles(m, &want);
+    qk_mesh_free(m);
+    for (int j = 0; j < 3; j++) {
+      o.size_fn = size_const, o.size_user = &vals[j];
+      m = mesh_of(p, &o);
+      qk_mesh_triangles(m, &nt);
+      if (nt != want)
+        fail_msg("mode %d, samples %g: %zu triangles, %zu without a size function", (int)modes[i],
+                 vals[j], nt, want);
+      qk_mesh_free(m);
+    }
+    qk_poly_free(p);
+  }
+}
+
 /* Integer, axis-parallel input of a huge extent: the book's mode would split every cell
  * along the segments down to unit size (a square of side 2^30: 2^32 unit steps; it ran out
  * of time and memory). QK_MESH_AUTO hands it to the general mode, as it does with what the
@@ -2436,6 +2476,7 @@ int main(void) {
       cmocka_unit_test(test_mesh_general_mode_hostile),
       cmocka_unit_test(test_mesh_general_mode_long_gap),
       cmocka_unit_test(test_mesh_general_mode_comb),
+      cmocka_unit_test(test_mesh_general_mode_size_fn_nonpositive),
       cmocka_unit_test(test_mesh_general_mode_book_extent),
       cmocka_unit_test(test_mesh_general_mode_alloc_failure),
       cmocka_unit_test(test_mesh_general_mode_growth_copies),

@@ -229,7 +229,8 @@ typedef struct qk_mesh_options {
   /** Size function (NULL: none), sampled at each leaf's corners and centre: a leaf is
    *  split while its triangles' longest possible edge exceeds the smallest sample. The
    *  general mode also samples it at every triangle's centroid and splits a triangle whose
-   *  longest edge exceeds it. */
+   *  longest edge exceeds it. A sample that is not a positive number (0, negative, NaN)
+   *  bounds nothing there; +inf neither. With max_size as well, the smaller bound holds. */
   qk_mesh_size_fn size_fn;
   /** Passed to size_fn. */
   void *size_user;
