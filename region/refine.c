@@ -189,8 +189,15 @@ qk_status_t qk__emit_leaf(qk__bctx_t *b, qk_node_t v, double cx, double cy, unsi
                                                       r->n_sets + ns, sizeof(uint32_t)))))
     return st;
   if (r->n_le + ne > UINT32_MAX || r->n_sets + ns > UINT32_MAX) return QK_ERR_LIMIT;
-  r->leaves[r->n_leaves] = (qk__leaf_t){
-      .e0 = (uint32_t)r->n_le, .ne = (uint32_t)ne, .s0 = (uint32_t)r->n_sets, .ns = (uint32_t)ns};
+  /* A list equal to the last leaf's is shared (a leaf next to the last one in Z-order
+   * with no boundary between their reference points): on overlapping layers the lists are
+   * most of the index. */
+  const int same =
+      ns && ns == b->prev_ns && !memcmp(r->sets + b->prev_s0, b->set[d], ns * sizeof(uint32_t));
+  r->leaves[r->n_leaves] = (qk__leaf_t){.e0 = (uint32_t)r->n_le,
+                                        .ne = (uint32_t)ne,
+                                        .s0 = (uint32_t)(same ? b->prev_s0 : r->n_sets),
+                                        .ns = (uint32_t)ns};
   const uint32_t *E = b->e[d], *feat = pc->feat, *vtx = pc->vtx;
   const qk__seg_t *seg = pc->seg;
   uint32_t *le = r->le + r->n_le, *tag = r->le_tag + r->n_le;
@@ -228,9 +235,12 @@ qk_status_t qk__emit_leaf(qk__bctx_t *b, qk_node_t v, double cx, double cy, unsi
     L->ex1 = outward(x1, false), L->ey1 = outward(y1, false);
 #endif
   }
-  if (ns) memcpy(r->sets + r->n_sets, b->set[d], ns * sizeof(uint32_t));
+  if (ns && !same) {
+    memcpy(r->sets + r->n_sets, b->set[d], ns * sizeof(uint32_t));
+    b->prev_s0 = r->n_sets, b->prev_ns = ns;
+    r->n_sets += ns;
+  }
   r->n_le += ne;
-  r->n_sets += ns;
   r->kid[v] = QK__LEAF | (uint32_t)r->n_leaves;
   r->n_leaves++;
   self_meets(b, b->e[d], ne);

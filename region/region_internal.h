@@ -276,8 +276,9 @@ typedef struct qk__bctx {
   size_t nodd[QK__MAXD + 1][4];
   uint8_t *bad; /* per ring: self-intersecting */
   unsigned depth;
-  size_t splits_left;  /* a budget on splits: see qk__build_node */
-  size_t splits_floor; /* the cell being refined stops splitting at this many left */
+  size_t splits_left;      /* a budget on splits: see qk__build_node */
+  size_t splits_floor;     /* the cell being refined stops splitting at this many left */
+  size_t prev_s0, prev_ns; /* the last leaf's list of features, in r->sets (qk__emit_leaf) */
 } qk__bctx_t;
 
 /* Whether a split of a cell of n pieces into children of cnt[4] makes progress: every

@@ -2435,6 +2435,54 @@ static void test_region_cluster_far_from_the_rest(void **state) {
   free(xy);
 }
 
+/* Overlapping features: a leaf's list of the features holding its reference point that
+ * equals the last leaf's is stored once (refine.c, qk__emit_leaf; on overlapping layers the
+ * lists are most of the index). 40 concentric squares, each point in up to 40: fewer
+ * entries stored than listed, and the answers (closed rule) against brute force. */
+static void test_region_shared_lists(void **state) {
+  (void)state;
+  enum { NF = 40 };
+  double xy[10 * NF];
+  size_t rs[NF + 1], fs[NF + 1];
+  for (int f = 0; f < NF; f++) {
+    const double a = f + 1, v[10] = {-a, -a, a, -a, a, a, -a, a, -a, -a};
+    memcpy(xy + 10 * f, v, sizeof v);
+    rs[f] = 5 * (size_t)f, fs[f] = (size_t)f;
+  }
+  rs[NF] = 5 * NF, fs[NF] = NF;
+  qk_region_arrays_t in = {xy, rs, NF, fs, NF};
+  qk_region_options_t o;
+  qk_region_options_init(&o);
+  o.planar = 1;
+  qk_region_t *r = NULL;
+  assert_int_equal(qk_region_from_arrays(&in, &o, &r, NULL), QK_OK);
+  size_t listed = 0;
+  for (size_t i = 0; i < r->n_leaves; i++) listed += r->leaves[i].ns;
+  if (!(5 * r->n_sets < 4 * listed)) /* (a fifth saved at least) */
+    fail_msg("%zu features listed, %zu stored", listed, r->n_sets);
+  uint64_t seed = qkt_seed(4711);
+  qkt_rng_t g;
+  qkt_rng_seed(&g, seed);
+  for (int k = 0; k < 3000; k++) {
+    qk_point_t p = {((double)qkt_rng_below(&g, 360) - 180) / 4,
+                    ((double)qkt_rng_below(&g, 360) - 180) / 4};
+    uint32_t got[NF];
+    size_t n = 0, nw = 0;
+    assert_int_equal(qk_region_locate_all(r, p, QK_BOUNDARY_CLOSED, got, NF, &n), QK_OK);
+    for (int f = 0; f < NF; f++) {
+      const double a = f + 1;
+      if (fabs(p.x) <= a && fabs(p.y) <= a) {
+        if (nw >= n || got[nw] != (uint32_t)f)
+          fail_msg("point (%g, %g): feature %d missing (seed %llu)", p.x, p.y, f,
+                   (unsigned long long)seed);
+        nw++;
+      }
+    }
+    if (n != nw) fail_msg("point (%g, %g): %zu features, %zu wanted", p.x, p.y, n, nw);
+  }
+  qk_region_free(r);
+}
+
 /* The refinement splits a cell while more than C edges meet it and the split makes
  * progress (refine.c, and build_top.c's one pass over the top levels, which must make the
  * same decisions). On a lattice of separated squares of 4 edges each, with C = 4, a cell
@@ -2483,6 +2531,7 @@ int main(void) {
       cmocka_unit_test(test_region_leaves_split_to_capacity),
       cmocka_unit_test(test_region_budget_shared_by_quadrants),
       cmocka_unit_test(test_region_cluster_far_from_the_rest),
+      cmocka_unit_test(test_region_shared_lists),
       cmocka_unit_test(test_region_antimeridian_slanted),
       cmocka_unit_test(test_region_antimeridian_shared_edge),
       cmocka_unit_test(test_region_antimeridian_coverage),
