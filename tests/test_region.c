@@ -2295,6 +2295,22 @@ static void test_region_svg_fill(void **state) {
   free(p);
 }
 
+/* A planar layer of nf features of one ring each, ring f the len positions (closed)
+ * from xy + 2 len f. */
+static qk_region_t *one_ring_features(const double *xy, size_t nf, size_t len) {
+  size_t *rs = malloc((nf + 1) * sizeof *rs), *fs = malloc((nf + 1) * sizeof *fs);
+  assert_non_null(rs), assert_non_null(fs);
+  for (size_t f = 0; f <= nf; f++) rs[f] = len * f, fs[f] = f;
+  qk_region_arrays_t in = {xy, rs, nf, fs, nf};
+  qk_region_options_t o;
+  qk_region_options_init(&o);
+  o.planar = 1;
+  qk_region_t *r = NULL;
+  assert_int_equal(qk_region_from_arrays(&in, &o, &r, NULL), QK_OK);
+  free(fs), free(rs);
+  return r;
+}
+
 /* Exact orientation of (a, b, p) in quarter units (every value a multiple of 1/4 below 2^21). */
 static int orient_q(const double *a, const double *b, const double *p) {
   long long ax = (long long)(4 * a[0]), ay = (long long)(4 * a[1]);
@@ -2316,8 +2332,7 @@ static void test_region_budget_shared_by_quadrants(void **state) {
   const double R = 1 << 20;
   enum { N = 1600 }; /* slices: 4,800 pieces; the fan wants far more splits than 8,896 */
   double *xy = malloc(8 * N * sizeof *xy);
-  size_t *rs = malloc((N + 1) * sizeof *rs), *fs = malloc((N + 1) * sizeof *fs);
-  assert_non_null(xy), assert_non_null(rs), assert_non_null(fs);
+  assert_non_null(xy);
   double prev[2] = {R, 0};
   for (int i = 0; i < N; i++) {
     double a = 6.283185307179586 * (i + 1) / N;
@@ -2325,16 +2340,9 @@ static void test_region_budget_shared_by_quadrants(void **state) {
     double *v = xy + 8 * i; /* apex, prev, cur, apex: counter-clockwise */
     v[0] = v[1] = v[6] = v[7] = 0;
     v[2] = prev[0], v[3] = prev[1], v[4] = cur[0], v[5] = cur[1];
-    rs[i] = 4 * (size_t)i, fs[i] = (size_t)i;
     prev[0] = cur[0], prev[1] = cur[1];
   }
-  rs[N] = 4 * (size_t)N, fs[N] = N;
-  qk_region_arrays_t in = {xy, rs, N, fs, N};
-  qk_region_options_t o;
-  qk_region_options_init(&o);
-  o.planar = 1;
-  qk_region_t *r = NULL;
-  assert_int_equal(qk_region_from_arrays(&in, &o, &r, NULL), QK_OK);
+  qk_region_t *r = one_ring_features(xy, N, 4);
   size_t per_q[4] = {0, 0, 0, 0}; /* leaves by the quadrant of their edges' box */
   for (size_t i = 0; i < r->n_leaves; i++) {
     const qk__leaf_t *l = &r->leaves[i];
@@ -2373,7 +2381,7 @@ static void test_region_budget_shared_by_quadrants(void **state) {
                p[0], p[1], n, n ? got[0] : 0, nw, nw ? want[0] : 0, (unsigned long long)seed);
   }
   qk_region_free(r);
-  free(fs), free(rs), free(xy);
+  free(xy);
 }
 
 /* A compact cluster far from the rest of the layer (qk__split_progress): the cells close
@@ -2388,7 +2396,6 @@ static void test_region_cluster_far_from_the_rest(void **state) {
   enum { G = 20, NF = G * G + 1 };
   const double cell = 0.01 / G, w = cell * 0.75;
   double *xy = malloc(10 * NF * sizeof *xy);
-  size_t rs[NF + 1], fs[NF + 1];
   assert_non_null(xy);
   uint64_t seed = qkt_seed(31337);
   qkt_rng_t g;
@@ -2401,20 +2408,11 @@ static void test_region_cluster_far_from_the_rest(void **state) {
       double s = f + 1 < NF ? w : 0.01, *v = xy + 10 * f;
       v[0] = x, v[1] = y, v[2] = x + s, v[3] = y, v[4] = x + s, v[5] = y + s;
       v[6] = x, v[7] = y + s, v[8] = x, v[9] = y;
-      rs[f] = 5 * f, fs[f] = f;
     }
-    rs[NF] = 5 * (size_t)NF, fs[NF] = NF;
-    qk_region_arrays_t in = {xy, rs, NF, fs, NF};
-    qk_region_options_t o;
-    qk_region_options_init(&o);
-    o.planar = 1;
-    qk_region_t *r = NULL;
-    assert_int_equal(qk_region_from_arrays(&in, &o, &r, NULL), QK_OK);
+    qk_region_t *r = one_ring_features(xy, NF, 5);
     size_t most = 0;
     for (size_t i = 0; i < r->n_leaves; i++) most = r->leaves[i].ne > most ? r->leaves[i].ne : most;
-    if (most > 2 * o.leaf_edges)
-      fail_msg("another square at 2^%d: a leaf holds %zu edges (C = %u)", k, most,
-               (unsigned)o.leaf_edges);
+    if (most > 16) fail_msg("another square at 2^%d: a leaf holds %zu edges (C = 8)", k, most);
     for (int q = 0; q < 400; q++) {
       qk_point_t p = {qkt_rng_range(&g, -0.001, 0.011), qkt_rng_range(&g, -0.001, 0.011)};
       if (q % 4 == 0) p.x = (double)qkt_rng_below(&g, G) * cell + (q % 8 ? w : 0); /* on a side */
@@ -2443,19 +2441,11 @@ static void test_region_shared_lists(void **state) {
   (void)state;
   enum { NF = 40 };
   double xy[10 * NF];
-  size_t rs[NF + 1], fs[NF + 1];
   for (int f = 0; f < NF; f++) {
     const double a = f + 1, v[10] = {-a, -a, a, -a, a, a, -a, a, -a, -a};
     memcpy(xy + 10 * f, v, sizeof v);
-    rs[f] = 5 * (size_t)f, fs[f] = (size_t)f;
   }
-  rs[NF] = 5 * NF, fs[NF] = NF;
-  qk_region_arrays_t in = {xy, rs, NF, fs, NF};
-  qk_region_options_t o;
-  qk_region_options_init(&o);
-  o.planar = 1;
-  qk_region_t *r = NULL;
-  assert_int_equal(qk_region_from_arrays(&in, &o, &r, NULL), QK_OK);
+  qk_region_t *r = one_ring_features(xy, NF, 5);
   size_t listed = 0;
   for (size_t i = 0; i < r->n_leaves; i++) listed += r->leaves[i].ns;
   if (!(5 * r->n_sets < 4 * listed)) /* (a fifth saved at least) */
