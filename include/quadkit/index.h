@@ -352,7 +352,8 @@ qk_node_t qk_tree_neighbor(const qk_tree_t *tree, qk_node_t node, qk_dir_t dir);
  * \param [out] out buffer for up to cap leaves (may be NULL when cap is 0).
  * \param [in] cap its size.
  * \param [out] n_out total number of such leaves (only min(cap, total) are written).
- * \return QK_OK or QK_ERR_NOT_FOUND.
+ * \return QK_OK, QK_ERR_NOT_FOUND (not a live node) or QK_ERR_INVALID (a NULL tree or
+ *         n_out, a NULL out with cap > 0, or dir not a side).
  */
 qk_status_t qk_tree_adjacent_leaves(const qk_tree_t *tree, qk_node_t node, qk_dir_t dir,
                                     qk_node_t *out, size_t cap, size_t *n_out);
