@@ -59,14 +59,17 @@ static double size_at(const qk__gm_t *g, const double *xy, int n) {
   return h;
 }
 
+static double dist2(const double a[2], const double b[2]) {
+  return (a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]);
+}
+
 /* Feature f's part in the closed box [lo, hi] into e (a vertex: itself; a segment: its
- * clipping by the box, Liang-Barsky in doubles; the caller knows it meets the box). */
+ * clipping by the box, Liang-Barsky in doubles; the caller knows it meets the box). Its
+ * ends are g->fbox's (the grading's). */
 static void part_in_box(const qk__gm_t *g, uint32_t f, const double lo[2], const double hi[2],
                         double e[4]) {
-  const qk_poly_t *P = g->P;
-  const uint32_t nv = (uint32_t)P->nv;
-  const uint32_t u = f < nv ? f : P->seg[2 * (f - nv)], w = f < nv ? f : P->seg[2 * (f - nv) + 1];
-  const double a[2] = {P->vx[u], P->vy[u]}, d[2] = {P->vx[w] - a[0], P->vy[w] - a[1]};
+  const double *end = &g->fbox[8 * (size_t)f + 4];
+  const double a[2] = {end[0], end[1]}, d[2] = {end[2] - a[0], end[3] - a[1]};
   double t0 = 0, t1 = 1;
   for (int i = 0; i < 2; i++) {
     if (d[i] == 0) continue;
@@ -109,7 +112,7 @@ static int across_outside(const qk__gm_t *g, uint32_t f, uint32_t h, const doubl
       const double *p = &e[i][2 * j];
       double q[2];
       nearest_on(e[1 - i], p, q);
-      const double d = (p[0] - q[0]) * (p[0] - q[0]) + (p[1] - q[1]) * (p[1] - q[1]);
+      const double d = dist2(p, q);
       if (d < best) best = d, m[0] = p[0] + (q[0] - p[0]) / 2, m[1] = p[1] + (q[1] - p[1]) / 2;
     }
   if (!(best > 0)) return 0;
@@ -119,10 +122,9 @@ static int across_outside(const qk__gm_t *g, uint32_t f, uint32_t h, const doubl
    * mesh, and the comb took seconds) */
   const qk_poly_t *P = g->P;
   const uint32_t nv = (uint32_t)P->nv;
-  uint32_t u = f < nv ? f : P->seg[2 * (f - nv)], w = f < nv ? f : P->seg[2 * (f - nv) + 1];
-  const double du = (P->vx[u] - m[0]) * (P->vx[u] - m[0]) + (P->vy[u] - m[1]) * (P->vy[u] - m[1]);
-  const double dw = (P->vx[w] - m[0]) * (P->vx[w] - m[0]) + (P->vy[w] - m[1]) * (P->vy[w] - m[1]);
-  const uint32_t v = g->cv[dw < du ? w : u];
+  const uint32_t u = f < nv ? f : P->seg[2 * (f - nv)], w = f < nv ? f : P->seg[2 * (f - nv) + 1];
+  const double *end = &g->fbox[8 * (size_t)f + 4]; /* (u's place, then w's) */
+  const uint32_t v = g->cv[dist2(end + 2, m) < dist2(end, m) ? w : u];
   uint32_t t;
   int k;
   if (qk__cdt_locate(c, m[0], m[1], v == QK__CDT_NONE ? QK__CDT_NONE : c->vtri[v], &t, &k) !=
