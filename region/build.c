@@ -144,6 +144,8 @@ static void shrink_all(qk_region_t *r) {
   shrink(a, (void **)&r->le, &r->cap_le, r->n_le, sizeof(uint32_t));
   shrink(a, (void **)&r->le_tag, &r->cap_le_tag, r->n_le, sizeof(uint32_t));
   shrink(a, (void **)&r->sets, &r->cap_sets, r->n_sets, sizeof(uint32_t));
+  shrink(a, (void **)&r->cover_at, &r->cap_cover_at, r->n_leaves, sizeof(qk__cover_t));
+  shrink(a, (void **)&r->cover, &r->cap_cover, r->n_cover, sizeof(uint32_t));
   shrink(a, (void **)&r->kid, &r->cap_kid, r->n_kid, sizeof(uint32_t));
   shrink(a, (void **)&r->segs, &r->cap_segs, r->n_segs, sizeof(qk__seg_t));
   shrink(a, (void **)&r->seg_tag, &r->cap_seg_tag, r->n_segs, sizeof(uint32_t));
@@ -153,7 +155,8 @@ static size_t layer_bytes(const qk_region_t *r) {
   return sizeof *r + r->cap_segs * sizeof(qk__seg_t) + r->cap_seg_tag * sizeof(uint32_t) +
          r->cap_kid * sizeof(uint32_t) + r->cap_leaves * sizeof(qk__leaf_t) +
          r->cap_le * sizeof(uint32_t) + r->cap_le_tag * sizeof(uint32_t) +
-         r->cap_sets * sizeof(uint32_t) + qk_tree_memory(r->tree) + r->props.pool_cap +
+         r->cap_sets * sizeof(uint32_t) + r->cap_cover_at * sizeof(qk__cover_t) +
+         r->cap_cover * sizeof(uint32_t) + qk_tree_memory(r->tree) + r->props.pool_cap +
          (r->grid_level ? ((size_t)4 << (2 * r->grid_level)) +
                               (((size_t)2 << r->grid_level) + 2) * sizeof(double)
                         : 0) +
@@ -214,6 +217,7 @@ qk_status_t qk__region_build(const qk_region_arrays_t *in, const qk_region_optio
   b.C = o.leaf_edges;
   b.maxd = o.max_depth;
   b.splits_left = pc.n + 4096;
+  b.cover_ck = UINT32_MAX;
   if ((st = root_square(&pc, r, err))) goto done;
   query_window(r);
   if (o.keep_tree) { /* the refinement is made on a quadkit tree, kept for qk_region_tree */
@@ -255,6 +259,10 @@ done:
     qk__free(&alloc, b.s[d], b.cap_s[d] * sizeof(uint32_t));
     qk__free(&alloc, b.odd[d], b.cap_odd[d] * sizeof(uint32_t));
   }
+  qk__free(&alloc, b.sh, b.cap_sh * sizeof(uint32_t));
+  qk__free(&alloc, b.cov, b.cap_cov * sizeof(uint32_t));
+  qk__free(&alloc, b.ck_cov, b.cap_ck_cov * sizeof(uint32_t));
+  qk__free(&alloc, b.chg, b.cap_chg * sizeof(uint32_t));
   size_t bad = 0;
   if (b.bad) {
     for (size_t i = 0; i < in->n_rings; i++) bad += b.bad[i];

@@ -128,16 +128,92 @@ static QK__ALWAYS_INLINE bool box_beside(const qk__leaf_t *L, double lox, double
   return hix < L->ex0 || lox > L->ex1 || hiy < L->ey0 || loy > L->ey1;
 }
 
+/*
+ * Every feature holding leaf L's reference point, in increasing order: the short set
+ * merged with the cover, which is the checkpoint's cover with the features of the leaf's
+ * change toggled (qk__cover_t). Between two features of the change or the short set the
+ * checkpoint's features are taken as a run (merged one feature at a time, a feature took
+ * four times the instructions).
+ */
+typedef struct full_set {
+  const uint32_t *s, *se; /* the short set, what is left of it */
+  const uint32_t *c, *ce; /* the checkpoint's cover, what is left of it */
+  const uint32_t *d;
+  unsigned di, dn; /* the change */
+} full_set_t;
+
+static void full_set_init(const qk_region_t *r, const qk__leaf_t *L, full_set_t *it) {
+  it->s = it->se = NULL; /* (no sets at all: r->sets may be NULL) */
+  if (L->ns) it->s = r->sets + L->s0, it->se = it->s + L->ns;
+  size_t i = (size_t)(L - r->leaves);
+  const qk__cover_t cv = r->cover_at[i];
+  const uint32_t *ck = r->cover + cv.ck;
+  it->c = ck + 1;
+  it->ce = it->c + ck[0];
+  uint32_t start = cv.ck + 1 + ck[0], prev_end = i ? r->cover_at[i - 1].end : 0;
+  if (prev_end > start) start = prev_end;
+  it->d = r->cover + start;
+  it->di = 0, it->dn = cv.end - start;
+}
+
+/* The next change or short-set feature (QK_NONE: none). */
+static QK__ALWAYS_INLINE uint32_t full_set_event(const full_set_t *it) {
+  uint32_t x = it->di < it->dn ? it->d[it->di] : QK_NONE;
+  uint32_t y = it->s < it->se ? *it->s : QK_NONE;
+  return x < y ? x : y;
+}
+
+/* Whether f, the set's next candidate or above it, is in the set; taken if so. */
+static QK__ALWAYS_INLINE bool full_set_take(full_set_t *it, uint32_t f) {
+  bool in_s = it->s < it->se && *it->s == f;
+  bool in_d = it->di < it->dn && it->d[it->di] == f;
+  bool in_c = it->c < it->ce && *it->c == f;
+  it->s += in_s, it->di += in_d, it->c += in_c;
+  return in_s || in_c != in_d;
+}
+
+/* The set's next feature, not taken (QK_NONE after the last). */
+static uint32_t full_set_peek(full_set_t *it) {
+  for (;;) {
+    uint32_t t = full_set_event(it), c = it->c < it->ce ? *it->c : QK_NONE;
+    if (c < t) return c;
+    if (t == QK_NONE) return QK_NONE;
+    bool in_s = it->s < it->se && *it->s == t, in_d = it->di < it->dn && it->d[it->di] == t;
+    if (in_s || (c == t) != in_d) return t;
+    full_set_take(it, t); /* (in the checkpoint and changed: gone) */
+  }
+}
+
+/* Take the set's features below f: written to out[n ..] while below cap; returns the
+ * new count. */
+static QK__ALWAYS_INLINE size_t full_set_take_below(full_set_t *it, uint32_t f, uint32_t *out,
+                                                    size_t cap, size_t n) {
+  for (;;) {
+    uint32_t t = full_set_event(it), lim = t < f ? t : f;
+    const uint32_t *c = it->c, *e = c;
+    while (e < it->ce && *e < lim) e++;
+    size_t k = (size_t)(e - c);
+    if (n < cap) memcpy(out + n, c, (k < cap - n ? k : cap - n) * sizeof(uint32_t));
+    n += k;
+    it->c = e;
+    if (lim == f) return n;
+    if (full_set_take(it, t)) {
+      if (n < cap) out[n] = t;
+      n++;
+    }
+  }
+}
+
 /* Decide the features of one leaf in increasing order and hand each one that holds the
- * point to the sink; with `all` false, stop at the first. Returns how many were found
- * (and written while below cap). Inlined per rule, so the semi-open rule, which needs no
- * on-edge test, gets a loop of its own. */
+ * point to out[] (while below cap). Returns how many were found. Inlined per rule, so
+ * the semi-open rule, which needs no on-edge test, gets a loop of its own. */
 static QK__ALWAYS_INLINE size_t leaf_features(const qk_region_t *r, const qk__leaf_t *L, double cx,
                                               double cy, double x, double y, qk_boundary_t b,
-                                              bool all, uint32_t *out, size_t cap) {
+                                              uint32_t *out, size_t cap) {
   /* (the arrays may be NULL when the whole layer has no sets or no edges) */
-  uint32_t ns = L->ns, si = 0, ne = L->ne, i = 0;
-  const uint32_t *S = ns ? r->sets + L->s0 : NULL;
+  uint32_t ne = L->ne, i = 0;
+  full_set_t fs;
+  full_set_init(r, L, &fs);
   const uint32_t *E = ne ? r->le + L->e0 : NULL; /* indices into r->segs */
   const uint32_t *tag = ne ? r->le_tag + L->e0 : NULL;
   const qk__seg_t *segs = r->segs;
@@ -145,19 +221,10 @@ static QK__ALWAYS_INLINE size_t leaf_features(const qk_region_t *r, const qk__le
   size_t n = 0;
   /* every edge beside the segment c-p's box: the point is on none and crosses none */
   if (box_beside(L, qk__min(cx, x), qk__max(cx, x), qk__min(cy, y), qk__max(cy, y))) ne = 0;
-    /* (the value is evaluated whatever the room: it may advance the set) */
-#define QK__TAKE(value)                                                                            \
-  do {                                                                                             \
-    uint32_t taken_ = (value);                                                                     \
-    if (n < cap) out[n] = taken_;                                                                  \
-    n++;                                                                                           \
-    if (!all) return n;                                                                            \
-  } while (0)
   while (i < ne) {
     uint32_t f = tag[i] >> 2;
-    while (si < ns && S[si] < f) QK__TAKE(S[si++]);
-    bool par = si < ns && S[si] == f;
-    if (par) si++;
+    n = full_set_take_below(&fs, f, out, cap, n);
+    bool par = full_set_take(&fs, f);
     bool on = false;
     for (; i < ne && (tag[i] >> 2) == f; i++) {
       const qk__seg_t *g = &segs[E[i]];
@@ -171,11 +238,12 @@ static QK__ALWAYS_INLINE size_t leaf_features(const qk_region_t *r, const qk__le
     bool in = b == QK_BOUNDARY_SEMI_OPEN ? par
               : b == QK_BOUNDARY_CLOSED  ? (par || on)
                                          : (par && !on);
-    if (in) QK__TAKE(f);
+    if (in) {
+      if (n < cap) out[n] = f;
+      n++;
+    }
   }
-  while (si < ns) QK__TAKE(S[si++]);
-#undef QK__TAKE
-  return n;
+  return full_set_take_below(&fs, QK_NONE, out, cap, n);
 }
 
 /* The lowest feature holding the point in leaf record L (QK_NONE for none): the same
@@ -329,24 +397,28 @@ static size_t antimeridian_features(const qk_region_t *r, double y, qk_boundary_
   if (in_root(r, 180.0, y)) descend(r, 180.0, y, &e);
   const qk__leaf_t *LW = (w.k & QK__DIRECT) ? NULL : &r->leaves[w.k & ~QK__LEAF];
   const qk__leaf_t *LE = (e.k & QK__DIRECT) ? NULL : &r->leaves[e.k & ~QK__LEAF];
-  uint32_t dw = has_w && (w.k & QK__DIRECT) ? direct(w.k) : QK_NONE;
-  const uint32_t *S = LW && LW->ns ? r->sets + LW->s0 : (dw != QK_NONE ? &dw : NULL);
-  uint32_t ns = LW ? LW->ns : (dw != QK_NONE), nw = LW ? LW->ne : 0, ne = LE ? LE->ne : 0;
+  /* the set of the west leaf's reference point: a direct leaf's answer, or the full set */
+  full_set_t fs;
+  uint32_t s = has_w && (w.k & QK__DIRECT) ? direct(w.k) : QK_NONE;
+  if (LW) {
+    full_set_init(r, LW, &fs);
+    s = full_set_peek(&fs);
+  }
+  uint32_t nw = LW ? LW->ne : 0, ne = LE ? LE->ne : 0;
   const uint32_t *EW = nw ? r->le + LW->e0 : NULL, *TW = nw ? r->le_tag + LW->e0 : NULL;
   const uint32_t *EE = ne ? r->le + LE->e0 : NULL, *TE = ne ? r->le_tag + LE->e0 : NULL;
   bool same = (-180.0 == w.cx && y == w.cy);
-  uint32_t si = 0, iw = 0, ie = 0;
+  uint32_t iw = 0, ie = 0;
   size_t n = 0;
   for (;;) {
-    uint32_t f = QK_NONE;
-    if (si < ns) f = S[si];
+    uint32_t f = s;
     if (iw < nw && (TW[iw] >> 2) < f) f = TW[iw] >> 2;
     if (ie < ne && (TE[ie] >> 2) < f) f = TE[ie] >> 2;
     if (f == QK_NONE) return n;
-    bool par = si < ns && S[si] == f, on = false, across = false;
+    bool par = s == f, on = false, across = false;
     /* given edges along -180 and along +180 covering [y, y + e^2] */
     unsigned sides_w = 0, sides_e = 0;
-    if (par) si++;
+    if (par) s = LW ? (full_set_take(&fs, f), full_set_peek(&fs)) : QK_NONE;
     for (; iw < nw && (TW[iw] >> 2) == f; iw++) {
       const qk__seg_t *g = &r->segs[EW[iw]];
       if (!(TW[iw] & 2) && qk__on_edge(g->ax, g->ay, g->bx, g->by, -180.0, y))
@@ -524,8 +596,7 @@ qk_status_t qk_region_locate_all(const qk_region_t *r, qk_point_t p, qk_boundary
       *n_out = 1;
     }
   } else {
-    *n_out =
-        leaf_features(r, &r->leaves[c.k & ~QK__LEAF], c.cx, c.cy, x, y, b, true, features, cap);
+    *n_out = leaf_features(r, &r->leaves[c.k & ~QK__LEAF], c.cx, c.cy, x, y, b, features, cap);
   }
   return QK_OK;
 }

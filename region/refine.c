@@ -164,6 +164,84 @@ static float outward(double v, bool lo) {
 }
 #endif
 
+/* Split the set of depth d (the features holding the leaf's reference point) into the
+ * leaf's short set, b->sh (*nsh), and its cover, b->cov (*nc): a feature of the set
+ * without pieces among the leaf's E[0, ne) holds the whole closed square (a piece meeting
+ * the square would be in the list: qk__clip4 keeps every such piece). The leaf's pieces
+ * come in piece order, which is feature order, so one merge does it. */
+static qk_status_t split_set(qk__bctx_t *b, unsigned d, size_t *nsh, size_t *nc) {
+  const qk_allocator_t *a = &b->r->alloc;
+  size_t ns = b->ns[d], ne = b->ne[d];
+  qk_status_t st;
+  if ((ns + 1 > b->cap_sh &&
+       (st = qk__grow(a, (void **)&b->sh, &b->cap_sh, ns + 1, sizeof(uint32_t)))) ||
+      (ns + 1 > b->cap_cov &&
+       (st = qk__grow(a, (void **)&b->cov, &b->cap_cov, ns + 1, sizeof(uint32_t)))))
+    return st;
+  const uint32_t *S = b->set[d], *E = b->e[d], *feat = b->pc->feat;
+  size_t j = 0, h = 0, c = 0;
+  for (size_t i = 0; i < ns; i++) {
+    uint32_t f = S[i];
+    while (j < ne && feat[E[j]] < f) j++;
+    if (j < ne && feat[E[j]] == f) {
+      b->sh[h++] = f;
+    } else {
+      if (c == 0) b->sh[h++] = f; /* the cover's lowest */
+      b->cov[c++] = f;
+    }
+  }
+  *nsh = h, *nc = c;
+  return QK_OK;
+}
+
+/* Store the cover of the leaf being made (b->cov, nc features) as its change from the
+ * last checkpoint's cover, or make it a checkpoint (qk__cover_t). */
+static qk_status_t store_cover(qk__bctx_t *b, size_t nc) {
+  qk_region_t *r = b->r;
+  const qk_allocator_t *a = &r->alloc;
+  qk_status_t st;
+  size_t nk = b->n_ck_cov;
+  if (nc + nk > b->cap_chg &&
+      (st = qk__grow(a, (void **)&b->chg, &b->cap_chg, nc + nk, sizeof(uint32_t))))
+    return st;
+  /* the change: the features in one of the two covers only */
+  const uint32_t *A = b->cov, *B = b->ck_cov;
+  size_t i = 0, j = 0, k = 0;
+  while (i < nc || j < nk) {
+    if (j == nk || (i < nc && A[i] < B[j]))
+      b->chg[k++] = A[i++];
+    else if (i == nc || B[j] < A[i])
+      b->chg[k++] = B[j++];
+    else
+      i++, j++;
+  }
+  bool check = b->cover_ck == UINT32_MAX || k > nc || k > QK__COVER_CHANGES_MAX;
+  size_t words = check ? nc + 1 : k;
+  if (r->n_cover + words > UINT32_MAX) return QK_ERR_LIMIT;
+  if ((r->n_leaves + 1 > r->cap_cover_at &&
+       (st = qk__grow(a, (void **)&r->cover_at, &r->cap_cover_at, r->n_leaves + 1,
+                      sizeof(qk__cover_t)))) ||
+      (r->n_cover + words > r->cap_cover &&
+       (st = qk__grow(a, (void **)&r->cover, &r->cap_cover, r->n_cover + words, sizeof(uint32_t)))))
+    return st;
+  if (check) {
+    b->cover_ck = (uint32_t)r->n_cover;
+    r->cover[r->n_cover] = (uint32_t)nc;
+    if (nc) memcpy(r->cover + r->n_cover + 1, b->cov, nc * sizeof(uint32_t));
+    /* the next leaves' changes are from this cover */
+    uint32_t *t = b->ck_cov;
+    size_t tc = b->cap_ck_cov;
+    b->ck_cov = b->cov, b->cap_ck_cov = b->cap_cov;
+    b->cov = t, b->cap_cov = tc;
+    b->n_ck_cov = nc;
+  } else if (k) {
+    memcpy(r->cover + r->n_cover, b->chg, k * sizeof(uint32_t));
+  }
+  r->n_cover += words;
+  r->cover_at[r->n_leaves] = (qk__cover_t){b->cover_ck, (uint32_t)r->n_cover};
+  return QK_OK;
+}
+
 qk_status_t qk__emit_leaf(qk__bctx_t *b, qk_node_t v, double cx, double cy, unsigned d) {
   qk_region_t *r = b->r;
   const qk__pieces_t *pc = b->pc;
@@ -176,6 +254,8 @@ qk_status_t qk__emit_leaf(qk__bctx_t *b, qk_node_t v, double cx, double cy, unsi
   }
   if (r->n_leaves >= QK__DIRECT - 1) return QK_ERR_LIMIT;
   qk_status_t st = QK_OK;
+  size_t nc;
+  if ((st = split_set(b, d, &ns, &nc)) || (st = store_cover(b, nc))) return st;
   /* (qk__grow returns at once when there is room; the tests save the calls) */
   if ((r->n_leaves + 1 > r->cap_leaves &&
        (st = qk__grow(&r->alloc, (void **)&r->leaves, &r->cap_leaves, r->n_leaves + 1,
@@ -189,11 +269,10 @@ qk_status_t qk__emit_leaf(qk__bctx_t *b, qk_node_t v, double cx, double cy, unsi
                                                       r->n_sets + ns, sizeof(uint32_t)))))
     return st;
   if (r->n_le + ne > UINT32_MAX || r->n_sets + ns > UINT32_MAX) return QK_ERR_LIMIT;
-  /* A list equal to the last leaf's is shared (a leaf next to the last one in Z-order
-   * with no boundary between their reference points): on overlapping layers the lists are
-   * most of the index. */
+  /* A short set equal to the last leaf's is shared (a leaf next to the last one in
+   * Z-order with no boundary between their reference points). */
   const int same =
-      ns && ns == b->prev_ns && !memcmp(r->sets + b->prev_s0, b->set[d], ns * sizeof(uint32_t));
+      ns && ns == b->prev_ns && !memcmp(r->sets + b->prev_s0, b->sh, ns * sizeof(uint32_t));
   r->leaves[r->n_leaves] = (qk__leaf_t){.e0 = (uint32_t)r->n_le,
                                         .ne = (uint32_t)ne,
                                         .s0 = (uint32_t)(same ? b->prev_s0 : r->n_sets),
@@ -236,7 +315,7 @@ qk_status_t qk__emit_leaf(qk__bctx_t *b, qk_node_t v, double cx, double cy, unsi
 #endif
   }
   if (ns && !same) {
-    memcpy(r->sets + r->n_sets, b->set[d], ns * sizeof(uint32_t));
+    memcpy(r->sets + r->n_sets, b->sh, ns * sizeof(uint32_t));
     b->prev_s0 = r->n_sets, b->prev_ns = ns;
     r->n_sets += ns;
   }

@@ -34,9 +34,11 @@
  * without it (the default) the same cells are numbered straight into the query array
  * kid[], which saves the tree's bookkeeping (about 8% of the build's instructions) and
  * its memory. Each cell has a reference point, the centre of its square as
- * computed by the descent. A leaf stores its reference point, the sorted set of
- * features containing it, and copies of its pieces grouped by feature, each with the
- * side of the reference point against it (one bit).
+ * computed by the descent. A leaf stores its reference point, the features containing
+ * it (those with pieces in the leaf and the lowest of the others, which hold the whole
+ * square; the rest as the change from the previous leaf's: qk__cover_t), and copies of
+ * its pieces grouped by feature, each with the side of the reference point against it
+ * (one bit).
  *
  * The build runs in two stages that make the same cells. The top k levels (4^k about the
  * number of pieces; build_top.c) are made in one pass over the pieces: each piece is
@@ -126,6 +128,8 @@ void qk_region_free(qk_region_t *r) {
   qk__free(a, r->le, r->cap_le * sizeof(uint32_t));
   qk__free(a, r->le_tag, r->cap_le_tag * sizeof(uint32_t));
   qk__free(a, r->sets, r->cap_sets * sizeof(uint32_t));
+  qk__free(a, r->cover_at, r->cap_cover_at * sizeof(qk__cover_t));
+  qk__free(a, r->cover, r->cap_cover * sizeof(uint32_t));
   qk__region_pure_free(r);
   if (r->grid_level) {
     size_t g = (size_t)1 << r->grid_level;
