@@ -1,6 +1,7 @@
 /* The atomic output writer: a temporary file renamed over the target on success. */
 #define _XOPEN_SOURCE 700
 #include <errno.h>
+#include <fcntl.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -170,6 +171,44 @@ static char *follow_links(const char *path) {
   return NULL; /* (out of memory) */
 }
 
+/* The descriptor a path names when it is one of the names of an open descriptor, or a
+ * chain of links to one: /dev/stdin, /dev/stdout, /dev/stderr, /dev/fd/N, /proc/self/fd/N
+ * and /proc/PID/fd/N of this process; -1 otherwise. Such a path is the descriptor as the
+ * shell set it up (`>> log`, a `{ ...; } > file` group), not the file it leads to: resolved
+ * to that file and replaced, `-o /dev/stdout >> a.csv` lost a.csv's earlier lines. */
+static int named_descriptor(const char *path) {
+  char cur[4096], to[4096];
+  if (strlen(path) >= sizeof cur) return -1;
+  strcpy(cur, path);
+  for (int hops = 0; hops < 40; hops++) {
+    static const char *const std[3] = {"/dev/stdin", "/dev/stdout", "/dev/stderr"};
+    for (int k = 0; k < 3; k++)
+      if (!strcmp(cur, std[k])) return k;
+    char self[64];
+    snprintf(self, sizeof self, "/proc/%ld/fd/", (long)getpid());
+    const char *const dirs[3] = {"/dev/fd/", "/proc/self/fd/", self};
+    for (int k = 0; k < 3; k++) {
+      size_t n = strlen(dirs[k]);
+      if (strncmp(cur, dirs[k], n) || !cur[n]) continue;
+      char *end;
+      errno = 0;
+      long fd = strtol(cur + n, &end, 10);
+      if (*end || errno || fd < 0 || fd > 1 << 20 || cur[n] < '0' || cur[n] > '9') return -1;
+      return (int)fd;
+    }
+    struct stat st;
+    if (lstat(cur, &st) != 0 || !S_ISLNK(st.st_mode)) return -1;
+    ssize_t n = readlink(cur, to, sizeof to - 1);
+    if (n < 0) return -1;
+    to[n] = '\0';
+    const char *slash = strrchr(cur, '/');
+    size_t dlen = to[0] == '/' || !slash ? 0 : (size_t)(slash - cur) + 1;
+    if (dlen + (size_t)n >= sizeof cur) return -1;
+    memmove(cur + dlen, to, (size_t)n + 1);
+  }
+  return -1;
+}
+
 /* The temporaries being written, removed by a signal that ends the process (Ctrl-C, a
  * `timeout` or `kill`, a reader that closed its pipe): outputs are opened before the work,
  * so that an unwritable path fails at once, and a mesh killed while it read or meshed left
@@ -235,6 +274,28 @@ int cli_out_open(const char *cmd, const char *path, cli_out_t *o) {
   /* Whatever the path leads to (through links, /dev/stdin, /proc/self/fd/N) must not be
    * an input. */
   if (stat(path, &st) == 0 && (rc = input_clash(cmd, path, &st, S_ISREG(st.st_mode)))) return rc;
+  /* A name of an open descriptor (-o /dev/stdout): written through a copy of the
+   * descriptor, where it stands and as it was opened (appending, say), never replaced. */
+  const int fd = named_descriptor(path);
+  if (fd >= 0) {
+    const int same_as_stdout = fd == STDOUT_FILENO;
+    const int dup_fd = fcntl(fd, F_DUPFD_CLOEXEC, 3);
+    if (dup_fd < 0 || fstat(dup_fd, &st) != 0 || !(o->f = fdopen(dup_fd, "wb"))) {
+      int e = errno;
+      if (dup_fd >= 0) close(dup_fd);
+      cli_error(cmd, "cannot write %s: %s", path, strerror(e));
+      return CLI_BAD_INPUT;
+    }
+    if ((rc = output_clash(cmd, path, same_as_stdout, &st, isatty(dup_fd), NULL))) {
+      fclose(o->f);
+      o->f = NULL;
+      return rc;
+    }
+    o->direct = 1;
+    o->path = strdup(path); /* (for the message when a write fails) */
+    remember_output(o, same_as_stdout, &st);
+    return CLI_OK;
+  }
   /* A symbolic link is written through: the temporary goes beside its target and is
    * renamed over the target, so the link stays (a dangling link: its target is created).
    * Something that is not a regular file (a FIFO, a device such as /dev/stdout) cannot
@@ -293,13 +354,45 @@ int cli_out_open(const char *cmd, const char *path, cli_out_t *o) {
     cli_error(cmd, "out of memory");
     return CLI_INTERNAL;
   }
-  /* One temporary per output of this process, even when two names reach one file. */
+  /* A file the user may not write is not replaced either (the directory's permission is
+   * what renaming needs: a read-only file of another user was replaced). */
+  if (exists && access(o->path, W_OK) != 0) {
+    cli_error(cmd, "cannot write %s: %s", path, strerror(errno));
+    free(o->path);
+    free(o->tmp);
+    free(o->key);
+    memset(o, 0, sizeof *o);
+    return CLI_BAD_INPUT;
+  }
+  /* One temporary per output of this process, even when two names reach one file. It is
+   * created new, never through a link or over a file already there (a link planted at
+   * that name had its target overwritten): a name taken is passed over for the next. */
   static unsigned serial;
-  snprintf(o->tmp, n, "%s.tmp.%ld.%u", o->path, (long)getpid(), serial++);
-  track_tmp(o->tmp); /* (before it exists: a signal in between unlinks nothing) */
-  o->f = fopen(o->tmp, "wb");
+  int tfd = -1;
+  for (int tries = 0; tfd < 0 && tries < 100; tries++) {
+    snprintf(o->tmp, n, "%s.tmp.%ld.%u", o->path, (long)getpid(), serial++);
+    track_tmp(o->tmp); /* (before it exists: a signal in between unlinks nothing) */
+    tfd = open(o->tmp, O_WRONLY | O_CREAT | O_EXCL | O_NOFOLLOW | O_CLOEXEC, 0666);
+    if (tfd < 0) untrack_tmp(o->tmp);
+    if (tfd < 0 && errno != EEXIST) break;
+  }
+  /* The file replaced keeps its permissions and, where this process may set them, its
+   * owner and group (a 0600 file became 0644). */
+  if (tfd >= 0 && exists) {
+    if (fchown(tfd, st.st_uid, st.st_gid) != 0 && fchown(tfd, (uid_t)-1, st.st_gid) != 0) {
+      /* (not the owner's: the new file is this user's, as any file it writes) */
+    }
+    (void)fchmod(tfd, st.st_mode & 0777);
+  }
+  o->f = tfd >= 0 ? fdopen(tfd, "wb") : NULL;
   if (!o->f) {
-    untrack_tmp(o->tmp);
+    int e = errno;
+    if (tfd >= 0) {
+      close(tfd);
+      remove(o->tmp);
+      untrack_tmp(o->tmp);
+    }
+    errno = e;
     /* The output is written beside its path first: that file may fail where the path
      * itself exists (-o /proc/version said "No such file or directory"). */
     cli_error(cmd, "cannot write %s: %s (creating the temporary file %s beside it)", path,

@@ -1,0 +1,66 @@
+#!/usr/bin/env bash
+# CLI regressions from the fifty-sixth session's review of how outputs are written (each
+# block failed before its fix): a name of an open descriptor (-o /dev/stdout) replaced the
+# file the shell had redirected it to, the temporary beside an output was opened through
+# whatever sat at its name, and a replaced output lost its permissions.
+# shellcheck source=lib/common.bash
+source "$(dirname "${BASH_SOURCE[0]}")/lib/common.bash" "$@"
+
+printf 'x,y\n0,0\n1,1\n' >"$tmp/p.csv"
+printf '0.1,0.1\n' >"$tmp/q.csv"
+row='0,1,0,0.14142135623730953'
+
+# ---- -o /dev/stdout and its aliases: the descriptor, not the file it leads to ------------
+# Resolved to the redirected file and replaced by a temporary, `-o /dev/stdout >> a.csv`
+# lost a.csv's earlier lines, and in `{ echo; quadkit ...; echo; } > f` the lines before
+# and after quadkit's went to the old, unlinked file.
+for name in /dev/stdout /dev/fd/1 /proc/self/fd/1; do
+  [ -e "$name" ] || {
+    skip "$name does not exist here"
+    continue
+  }
+  echo "earlier line" >"$tmp/a.csv"
+  "$cli" knn "$tmp/p.csv" "$tmp/q.csv" -k 1 -o "$name" >>"$tmp/a.csv"
+  same_text "-o $name >> file: appended" "$(tr '\n' '|' <"$tmp/a.csv")" \
+    "earlier line|query,rank,point,distance|$row|"
+  {
+    echo before
+    "$cli" knn "$tmp/p.csv" "$tmp/q.csv" -k 1 -o "$name"
+    echo after
+  } >"$tmp/b.csv"
+  same_text "-o $name in a group: in order" "$(tr '\n' '|' <"$tmp/b.csv")" \
+    "before|query,rank,point,distance|$row|after|"
+done
+echo "log line" >"$tmp/log.txt"
+"$cli" knn "$tmp/p.csv" "$tmp/q.csv" -k 1 -o /dev/stderr 2>>"$tmp/log.txt"
+same_text "-o /dev/stderr 2>> log: appended" "$(head -1 "$tmp/log.txt")|$(wc -l <"$tmp/log.txt" | tr -d ' ')" \
+  "log line|3"
+# (beside the command's own standard output it is still a second output into one stream,
+# which passed before; a descriptor not open is an error naming it, which said "No such
+# file or directory (creating the temporary file /dev/fd/9.tmp...)")
+expect 2 "cannot write /dev/stdout: another output of this command writes that file too" -- \
+  "$cli" tree "$tmp/p.csv" --svg /dev/stdout
+expect 1 "cannot write /dev/fd/9: Bad file descriptor" -- \
+  "$cli" knn "$tmp/p.csv" "$tmp/q.csv" -k 1 -o /dev/fd/9
+
+# ---- the temporary is created new, never through what sits at its name -------------------
+# A link planted at out.csv.tmp.PID.0 had its target overwritten, and out.csv became the
+# link (sh execs quadkit, so the process number is the shell's).
+echo "precious" >"$tmp/victim.txt"
+(cd "$tmp" && sh -c 'ln -s victim.txt out.csv.tmp.$$.0; exec "$0" knn p.csv q.csv -k 1 -o out.csv' "$cli")
+same_text "planted link: its target untouched" "$(cat "$tmp/victim.txt")" "precious"
+same_text "planted link: the output a regular file" "$([ -f "$tmp/out.csv" ] && [ ! -L "$tmp/out.csv" ] && echo regular)" "regular"
+same_text "planted link: the output written" "$(tail -1 "$tmp/out.csv")" "$row"
+rm -f "$tmp"/out.csv.tmp.*
+
+# ---- a replaced output keeps its permissions ----------------------------------------------
+echo old >"$tmp/private.csv"
+chmod 0600 "$tmp/private.csv"
+"$cli" knn "$tmp/p.csv" "$tmp/q.csv" -k 1 -o "$tmp/private.csv"
+same_text "0600 output replaced: still 0600" "$(stat -c %a "$tmp/private.csv")|$(tail -1 "$tmp/private.csv")" "600|$row"
+echo old >"$tmp/group.csv"
+chmod 0640 "$tmp/group.csv"
+"$cli" tree "$tmp/p.csv" --svg "$tmp/group.csv" >/dev/null
+same_text "0640 picture replaced: still 0640" "$(stat -c %a "$tmp/group.csv")" "640"
+
+report
