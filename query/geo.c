@@ -246,11 +246,12 @@ qk_status_t qk_geo_radius(const qk_geo_t *g, qk_point_t qp, double metres, qk_fo
       continue;
     }
     const uint32_t start = qk__node_start(t, c.node);
+    double lx = NAN, ly = NAN, d = 0; /* the last point measured (see geo_knn_one) */
     for (uint32_t i = 0; i < count; i++) {
       uint32_t s = start + i;
       qk_id_t id = ids[s];
       if (point_bound(&q, g->u + 3 * (size_t)id) > metres) continue;
-      double d = geodesic(&g->g, &q, xs[s], ys[s]);
+      if (xs[s] != lx || ys[s] != ly) d = geodesic(&g->g, &q, lx = xs[s], ly = ys[s]);
       if (d <= metres) {
         qk_point_t p = {xs[s], ys[s]};
         if (fn(id, p, d, ud)) return QK_OK;
@@ -310,11 +311,16 @@ static size_t geo_knn_one(const qk_geo_t *g, const gq_t *q, size_t k, double lim
     if (child == QK_NONE) {
       const uint32_t start = qk__node_start(t, top.c.node);
       const uint32_t count = qk__node_count(t, top.c.node);
+      /* Places at one position (a city's centre standing for its addresses) share a leaf
+       * and a distance, and ties are kept by id, so none is pruned: the geodesic, the
+       * costly part, is measured once for a run of them (100,000 places at one point made
+       * a query 130 ms). */
+      double lx = NAN, ly = NAN, d = 0;
       for (uint32_t i = 0; i < count; i++) {
         uint32_t s = start + i;
         qk_id_t id = ids[s];
         if (point_bound(q, g->u + 3 * (size_t)id) > thr) continue;
-        double d = geodesic(&g->g, q, xs[s], ys[s]);
+        if (xs[s] != lx || ys[s] != ly) d = geodesic(&g->g, q, lx = xs[s], ly = ys[s]);
         if (d <= thr) qk__heap_offer(h, &n, k, id, d, &thr);
       }
       continue;
