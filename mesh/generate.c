@@ -581,8 +581,10 @@ qk_status_t qk_mesh_generate(const qk_poly_t *poly, const qk_mesh_options_t *opt
     qk_mesh_free(m);
     /* Chosen automatically, the lattice mode refused segments that meet: the general mode
      * takes touching input (a corner of one component on another's side, a shared side);
-     * see fallback for whose message a refusal there returns. */
-    if (st == QK_ERR_GEOMETRY && g.meet && opt.mode == QK_MESH_AUTO && !opt.size)
+     * see fallback for whose message a refusal there returns. So too for a size function
+     * asking for less than a unit square of the lattice gives. */
+    if (((st == QK_ERR_GEOMETRY && g.meet) || (st == QK_ERR_LIMIT && g.size_below_unit)) &&
+        opt.mode == QK_MESH_AUTO && !opt.size)
       return fallback(poly, &opt, out, err, &g);
     return st;
   }

@@ -170,6 +170,9 @@ typedef struct qk__gen {
    * crossing, repeated or overlapping segments): QK_MESH_AUTO then tries the general mode,
    * which takes touching input (generate.c): a QK__MEET_ value, 0 when none. */
   int meet;
+  /* Set where a size function asks for less than a unit square of the lattice gives
+   * (mesh/refine.c): QK_MESH_AUTO then meshes in the general mode. */
+  int size_below_unit;
   uint64_t U;
   qk__edge_t *e;
   qk__ebox_t *box; /* per edge, made by the subdivision */

@@ -6,8 +6,9 @@
  * (those are larger than unit size), so the book's step 3 and its proof apply unchanged
  * to the refined, then balanced, tree; balancing only splits further, which keeps the
  * bound. The lattice is chosen fine enough (mesh/lattice.c) that unit leaves meet a
- * constant max_size; a size function is only sampled (corners and centre) and cannot
- * go below the unit leaf.
+ * constant max_size; a size function is only sampled (corners and centre), and one that
+ * asks for less than a unit leaf gives is refused (QK_MESH_AUTO meshes such input in the
+ * general mode instead: generate.c); it was ignored there, without a word.
  */
 #include "mesh/mesh_internal.h"
 
@@ -40,9 +41,18 @@ static qk_status_t refine(qk__gen_t *g, double sc, qk_node_t v, int64_t X, int64
       !(qk__ldexp_by((double)S, sc, -g->lat.f) * 1.4142135623730951 > g->opt->max_size))
     return QK_OK;
   if (qk__node_leaf(g->tree, v)) {
-    if (S <= 1 ||
-        !(qk__ldexp_by((double)S, sc, -g->lat.f) * 1.4142135623730951 > wanted(g, X, Y, S)))
-      return QK_OK;
+    const double diag = qk__ldexp_by((double)S, sc, -g->lat.f) * 1.4142135623730951;
+    const double want = wanted(g, X, Y, S);
+    if (!(diag > want)) return QK_OK;
+    if (S <= 1) {
+      g->size_below_unit = 1;
+      return qk__mesh_fail(g->err, QK_ERR_LIMIT, 0,
+                           "the size function asks for %g near (%.17g, %.17g), less than the "
+                           "lattice's unit square gives (diagonal %g): the general mode meshes "
+                           "to it",
+                           want, qk__lat_out(&g->lat, 2 * X + S, g->lat.x0),
+                           qk__lat_out(&g->lat, 2 * Y + S, g->lat.y0), diag);
+    }
     /* The root square is (0, 0, U), U a power of two (as in the subdivision). */
     unsigned depth = (unsigned)(__builtin_ctzll(g->U) - __builtin_ctzll((uint64_t)S));
     qk_status_t st = qk__tree_split_leaf_at(g->tree, v, (double)X, (double)Y, depth);

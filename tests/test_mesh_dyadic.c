@@ -335,15 +335,36 @@ static void test_mesh_dyadic_size(void **state) {
     qk_mesh_free(m);
   }
   assert_true(counts[0] < counts[1] && counts[1] < counts[2]);
-  /* A graded size function: between its extreme constant sizes. */
-  double h0 = 0.07;
+  /* A graded size function, 0.36 to 0.92 here: between the constant sizes 1 and 0.3, and
+   * met (every edge within the function at its triangle's centroid). It stays above the
+   * lattice's unit square (side 0.25, diagonal 0.354): one asking for less is meshed in the
+   * general mode (test_mesh_general_mode_size_fn_below_unit); with 0.07 here it was
+   * returned as the lattice allowed, 0.35 where 0.07 was asked. */
+  double h0 = 0.36;
   qk_mesh_options_t o;
   qk_mesh_options_init(&o);
   o.size_fn = graded;
   o.size_user = &h0;
   qk_mesh_t *m = generate(&in, &o, "size_fn");
+  qk_mesh_stats_t ms;
+  qk_mesh_stats(m, &ms);
+  assert_int_equal(ms.mode, QK_MESH_DYADIC);
+  assert_int_equal(ms.lattice_exponent, 2);
   size_t n = check_dyadic(&in, m, "size_fn");
-  assert_true(n < counts[2]);
+  if (!(counts[0] < n && n < counts[1]))
+    fail_msg("%zu triangles, not between %zu (size 1) and %zu (size 0.3)", n, counts[0], counts[1]);
+  {
+    size_t nv, nt;
+    const double *v = qk_mesh_vertices(m, &nv);
+    const uint32_t *t = qk_mesh_triangles(m, &nt);
+    for (size_t i = 0; i < nt; i++) {
+      const double *a = &v[2 * t[3 * i]], *b = &v[2 * t[3 * i + 1]], *c = &v[2 * t[3 * i + 2]];
+      double l = fmax(hypot(a[0] - b[0], a[1] - b[1]),
+                      fmax(hypot(b[0] - c[0], b[1] - c[1]), hypot(c[0] - a[0], c[1] - a[1])));
+      double want = graded((a[0] + b[0] + c[0]) / 3, 0, &h0);
+      if (l > want) fail_msg("triangle %zu: longest edge %g, size function %g", i, l, want);
+    }
+  }
   qk_mesh_free(m);
   /* The book's mode cannot go below its unit square's diagonal. */
   qk_poly_t *p;

@@ -2181,6 +2181,73 @@ static void test_mesh_general_mode_size_fn_nonpositive(void **state) {
   }
 }
 
+/* A size function asking for less than a lattice's unit square gives: the lattice modes
+ * sample it at each leaf and split down to unit leaves, no further, and returned their
+ * mesh without a word (a QA helper's unit square with 0.02 wanted on its left half: 2
+ * triangles, 70 times too large). QK_MESH_AUTO now meshes such input in the general mode,
+ * which honours the function (every triangle's longest edge within the sample at its
+ * centroid); asked for by name, the lattice modes refuse. A function a lattice can meet
+ * keeps QK_MESH_AUTO in the dyadic mode (the size function alone does not send input to
+ * the general mode). */
+static double size_left_fine(double x, double y, void *user) {
+  (void)y;
+  const double *h = user; /* h[0] left of h[2], h[1] right of it */
+  return x < h[2] ? h[0] : h[1];
+}
+static void size_fn_met(const qk_mesh_t *m, const double *h) {
+  size_t nv, nt;
+  const double *v = qk_mesh_vertices(m, &nv);
+  const uint32_t *t = qk_mesh_triangles(m, &nt);
+  for (size_t i = 0; i < nt; i++) {
+    const double *a = v + 2 * t[3 * i], *b = v + 2 * t[3 * i + 1], *c = v + 2 * t[3 * i + 2];
+    double l = fmax(hypot(a[0] - b[0], a[1] - b[1]),
+                    fmax(hypot(b[0] - c[0], b[1] - c[1]), hypot(c[0] - a[0], c[1] - a[1])));
+    double want = size_left_fine((a[0] + b[0] + c[0]) / 3, (a[1] + b[1] + c[1]) / 3, (void *)h);
+    if (l > want) fail_msg("triangle %zu: longest edge %.17g, size function %g", i, l, want);
+  }
+}
+static void test_mesh_general_mode_size_fn_below_unit(void **state) {
+  (void)state;
+  const double unit[8] = {0, 0, 1, 0, 1, 1, 0, 1}, big[8] = {0, 0, 64, 0, 64, 64, 0, 64};
+  const uint32_t seg[8] = {0, 1, 1, 2, 2, 3, 3, 0};
+  double fine[3] = {0.02, 0.3, 0.5}, coarse[3] = {3, 20, 32};
+  qk_poly_t *p = NULL;
+  assert_int_equal(qk_poly_from_arrays(unit, 4, seg, 4, NULL, 0, NULL, &p, NULL), QK_OK);
+  qk_mesh_options_t o;
+  qk_mesh_options_init(&o);
+  o.size_fn = size_left_fine, o.size_user = fine;
+  qk_mesh_t *m = mesh_of(p, &o);
+  qk_mesh_stats_t st;
+  qk_mesh_stats(m, &st);
+  assert_int_equal(st.mode, QK_MESH_GENERAL);
+  size_t nt;
+  qk_mesh_triangles(m, &nt);
+  if (nt < 1000) fail_msg("%zu triangles for edges of 0.02 over half the unit square", nt);
+  size_fn_met(m, fine);
+  qk_mesh_free(m);
+  const qk_mesh_mode_t lattice[2] = {QK_MESH_BOOK, QK_MESH_DYADIC};
+  for (int i = 0; i < 2; i++) {
+    qk_mesh_error_t err;
+    o.mode = lattice[i];
+    m = NULL;
+    assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_ERR_LIMIT);
+    assert_null(m);
+    if (!strstr(err.message, "size function asks for 0.02") ||
+        !strstr(err.message, "the general mode meshes to it"))
+      fail_msg("mode %d: %s", (int)lattice[i], err.message);
+  }
+  qk_poly_free(p);
+  assert_int_equal(qk_poly_from_arrays(big, 4, seg, 4, NULL, 0, NULL, &p, NULL), QK_OK);
+  qk_mesh_options_init(&o);
+  o.size_fn = size_left_fine, o.size_user = coarse;
+  m = mesh_of(p, &o);
+  qk_mesh_stats(m, &st);
+  assert_int_equal(st.mode, QK_MESH_DYADIC);
+  size_fn_met(m, coarse);
+  qk_mesh_free(m);
+  qk_poly_free(p);
+}
+
 /* Integer, axis-parallel input of a huge extent: the book's mode would split every cell
  * along the segments down to unit size (a square of side 2^30: 2^32 unit steps; it ran out
  * of time and memory). QK_MESH_AUTO hands it to the general mode, as it does with what the
@@ -2477,6 +2544,7 @@ int main(void) {
       cmocka_unit_test(test_mesh_general_mode_long_gap),
       cmocka_unit_test(test_mesh_general_mode_comb),
       cmocka_unit_test(test_mesh_general_mode_size_fn_nonpositive),
+      cmocka_unit_test(test_mesh_general_mode_size_fn_below_unit),
       cmocka_unit_test(test_mesh_general_mode_book_extent),
       cmocka_unit_test(test_mesh_general_mode_alloc_failure),
       cmocka_unit_test(test_mesh_general_mode_growth_copies),

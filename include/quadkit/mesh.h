@@ -230,7 +230,10 @@ typedef struct qk_mesh_options {
    *  split while its triangles' longest possible edge exceeds the smallest sample. The
    *  general mode also samples it at every triangle's centroid and splits a triangle whose
    *  longest edge exceeds it. A sample that is not a positive number (0, negative, NaN)
-   *  bounds nothing there; +inf neither. With max_size as well, the smaller bound holds. */
+   *  bounds nothing there; +inf neither. With max_size as well, the smaller bound holds.
+   *  The book's and the dyadic mode split no leaf below the lattice's unit square: a
+   *  sample asking for less is refused (QK_ERR_LIMIT), and QK_MESH_AUTO meshes such input
+   *  in the general mode. */
   qk_mesh_size_fn size_fn;
   /** Passed to size_fn. */
   void *size_user;
