@@ -619,8 +619,8 @@ static qk_status_t read_regions(reader_t *r, qk_poly_t *p, qk_mesh_error_t *err)
     if ((st = need_line(r, err, truncated(msg, sizeof msg, nr, i, "regional attributes"))))
       return st;
     if (r->ntok < 4 || r->ntok > 5)
-      return rfail(r, err, QK_ERR_PARSE, "region %lu: expected 4 or 5 fields, found %zu%s", i,
-                   r->ntok, r->ntok < 4 ? rows_hint(r, 1) : "");
+      return rfail(r, err, QK_ERR_PARSE, "region %lu: expected 4 or 5 fields, found %zu%s",
+                   i + p->first_index, r->ntok, r->ntok < 4 ? rows_hint(r, 1) : "");
     double v[5];
     for (size_t k = 0; k < r->ntok; k++)
       if (!parse_num(r->tok[k], &v[k]))

@@ -75,7 +75,8 @@ typedef struct qk_poly qk_poly_t;
 
 /**
  * Read Triangle's `.poly` format: vertices (`#` comments, first index 0 or 1, optional
- * attributes and boundary markers, which are ignored), segments, a holes section
+ * attributes, which are ignored, and boundary markers, which qk_mesh_vertex_markers() and
+ * the outputs carry), segments, a holes section
  * (required, "0" for none, as in Triangle) and optional regional attributes. Only syntax
  * is checked here; the geometry is checked by qk_mesh_generate(). Reading stops at the
  * first NUL byte (binary data), at a carriage return not followed by a line feed and at a
@@ -409,7 +410,8 @@ qk_status_t qk_mesh_write_node(const qk_mesh_t *mesh, FILE *f, unsigned first_in
 
 /**
  * Write the triangles in Triangle's `.ele` format, counter-clockwise, with the
- * component id as the one triangle attribute.
+ * component id as the first triangle attribute and, when the input has regional
+ * attributes, the triangle's regional attribute as the second.
  * \param [in] mesh the mesh. \param [in] f an open stream (caller's).
  * \param [in] first_index 0 or 1, as for the `.node` file.
  * \return QK_OK or QK_ERR_IO (the stream is flushed, so a write it refused is seen).
@@ -427,8 +429,10 @@ qk_status_t qk_mesh_write_ele(const qk_mesh_t *mesh, FILE *f, unsigned first_ind
 qk_status_t qk_mesh_write_poly(const qk_mesh_t *mesh, FILE *f, unsigned first_index);
 
 /**
- * Write gmsh's `.msh` 4.1 ASCII format: one surface entity and one physical group per
- * component id present (named "component_K", and "outside" for 0); when the input carries
+ * Write gmsh's `.msh` 4.1 ASCII format: one physical group per component id present
+ * (named "component_K", and "outside" for 0) and, when the input has regional attributes,
+ * one per attribute value present ("region_A"); one surface entity per component (with
+ * attributes: per component and attribute) carrying its groups; when the input carries
  * boundary markers, one curve entity and one physical group of line elements (the mesh
  * edges along input segments) per marker present (named "marker_M").
  * \param [in] mesh the mesh. \param [in] f an open stream (caller's).
