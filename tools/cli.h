@@ -126,7 +126,8 @@ int cli_lines_status(const char *cmd, const char *path, const cli_lines_t *r, lo
  * a line of any length into memory) reads it: a NUL byte or a line past CLI_MAX_LINE is
  * refused ("quadkit CMD: PATH:LINE[:COL]: why", the column when `columns`, as the
  * command's other messages; cmd NULL: "quadkit: ..."). A regular file
- * is then rewound; any other input is kept in memory as read and *f becomes a stream
+ * is then set back to where the screen began reading (not to byte 0: standard input may be
+ * a file already partly read); any other input is kept in memory as read and *f becomes a stream
  * over it (*f closed unless it is stdin; *copy, the bytes, freed by the caller after
  * fclose(*f); NULL when nothing was kept). Returns an exit code. */
 int cli_screen_input(const char *cmd, const char *path, int columns, FILE **f, char **copy);

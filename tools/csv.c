@@ -1,12 +1,13 @@
 /* CSV input of the command-line tool: the library's reader, its errors printed with
  * file, line and column, and the rows' text kept for --keep. */
-#define _POSIX_C_SOURCE 200809L /* fmemopen */
+#define _POSIX_C_SOURCE 200809L /* fmemopen, fseeko, ftello */
 #include <errno.h>
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <sys/types.h>
 
 #include "cli.h"
 
@@ -273,14 +274,22 @@ int cli_lines_status(const char *cmd, const char *path, const cli_lines_t *r, lo
  * the CSV reader takes a line of any length into memory before it checks it (a library matter,
  * include/quadkit/io.h), so /dev/zero or a file without line breaks grew the process
  * until "out of memory". A NUL byte or a line past CLI_MAX_LINE is refused here, within
- * 64 KiB of it. A regular file is read again from its start (the screen keeps nothing:
- * a pass over text in the page cache, a few per cent of the read); a pipe, FIFO or
- * device cannot be, so its bytes as read are kept and *f becomes a stream over them
- * (*copy, which the caller frees once the library is done). Returns an exit code. */
+ * 64 KiB of it. A regular file is read again from where the screen began (the screen keeps
+ * nothing: a pass over text in the page cache, a few per cent of the read): not from byte
+ * 0, since standard input may be a file already partly read (`{ read -r t; quadkit mesh -
+ * ...; } < f` was screened from the second line and parsed from the first). A pipe, FIFO or
+ * device cannot be read again, so its bytes as read are kept and *f becomes a stream over
+ * them (*copy, which the caller frees once the library is done). Returns an exit code. */
 int cli_screen_input(const char *cmd, const char *path, int columns, FILE **f, char **copy) {
   const char *sp = cmd ? " " : "", *c = cmd ? cmd : "";
   struct stat st;
   int regular = !fstat(fileno(*f), &st) && S_ISREG(st.st_mode);
+  const off_t start = regular ? ftello(*f) : 0;
+  if (start < 0) {
+    cli_msg("quadkit%s%s: %s: cannot tell where reading starts: %s\n", sp, c, path,
+            strerror(errno));
+    return CLI_BAD_INPUT;
+  }
   cli_lines_t r;
   cli_lines_init(&r, *f);
   r.tee = !regular;
@@ -289,7 +298,7 @@ int cli_screen_input(const char *cmd, const char *path, int columns, FILE **f, c
   while ((got = cli_read_line(&r, &why)) >= 0) continue;
   int rc = cli_lines_status(cmd, path, &r, got, why, columns);
   cli_lines_free(&r);
-  if (!rc && regular && fseek(*f, 0, SEEK_SET) != 0) {
+  if (!rc && regular && fseeko(*f, start, SEEK_SET) != 0) {
     cli_msg("quadkit%s%s: %s: cannot read it again: %s\n", sp, c, path, strerror(errno));
     rc = CLI_BAD_INPUT;
   }

@@ -295,4 +295,19 @@ printf '4 2 1 1\n0 0 0 5\n1 4 0 5 2\n2 4 4 5\n3 0 4 5 2\n4 0\n0 0 1\n1 1 2\n2 2 
 expect 0 '"triangles": [1-9]' -- "$cli" mesh "$tmp/ok2.poly" -o "$tmp/ok2" --stats
 expect 0 '"triangles": [1-9]' -- "$cli" mesh "$notes" -o "$tmp/ok3" --stats
 
+# ---- mesh - from a file partly read: screened from there, parsed from byte 0 ------------
+# `{ read -r title; quadkit mesh - ...; } < f`: the screen (cli_screen_input) read from the
+# shell's offset, then rewound to 0 for the .poly reader: "<stdin>:1: expected the number
+# of vertices, found 'title'". It goes back to where it began.
+mkdir "$tmp/o9"
+{
+  echo "title line, read by the shell"
+  cat "$notes"
+} >"$tmp/titled.poly"
+expect 0 '"triangles": [1-9]' -- bash -c '{ read -r _; "$1" mesh - -o "$2" --size 16 --stats; } <"$3"' \
+  - "$cli" "$tmp/o9/m" "$tmp/titled.poly"
+# (guard: the same through a pipe)
+expect 0 '"triangles": [1-9]' -- bash -c '{ read -r _; cat | "$1" mesh - -o "$2" --size 16 --stats; } <"$3"' \
+  - "$cli" "$tmp/o9/p" "$tmp/titled.poly"
+
 report
