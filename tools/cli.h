@@ -215,6 +215,23 @@ FILE *cli_open_input(const char *cmd, const char *path);
  * input or into the pipe it is read from (exit 2). */
 void cli_note_input(const char *path);
 
+/* Standard input as an input: "-" names it wherever a CSV file is read, as `mesh -` does.
+ * cli_input_open opens PATH as cli_open_input does, or, for "-", notes standard input as
+ * an input (cli_note_input) and returns stdin, from where it stood when "-" was first
+ * opened (a regular file named "-" twice is read twice from there). NULL after printing
+ * why. cli_input_close closes what it opened (never stdin). cli_input_name: the name
+ * messages give an input ("<stdin>" for "-"). */
+FILE *cli_input_open(const char *cmd, const char *path);
+void cli_input_close(FILE *f);
+const char *cli_input_name(const char *path);
+/* The inputs of a command (paths[0..n), n <= 8, NULL entries skipped; "-" is standard
+ * input) that reach one file which can be read only once (a pipe or FIFO, a socket, a
+ * terminal: `cat p.csv | quadkit knn /dev/stdin /dev/stdin` read the pipe whole for the
+ * points and found it empty for the queries): a usage error naming both, exit 2, before
+ * anything is read. A regular file, or a device read anew at each open, may be named
+ * twice. */
+int cli_inputs_once(const char *cmd, const char *const *paths, int n);
+
 /* Subcommands: argv[0] is the subcommand's name. */
 int cmd_tree(int argc, char **argv);
 int cmd_knn(int argc, char **argv);

@@ -203,7 +203,7 @@ static int read_input(qrun_t *q, int i) {
 
 /* Report bad data in row `row` of input i as "FILE:LINE: message". */
 static int bad_row(const qrun_t *q, int i, size_t row, const char *msg) {
-  cli_msg("quadkit: %s:%lu: %s\n", q->a.files[i], q->rows[i].lineno[row], msg);
+  cli_msg("quadkit: %s:%lu: %s\n", cli_input_name(q->a.files[i]), q->rows[i].lineno[row], msg);
   return CLI_BAD_INPUT;
 }
 
@@ -270,6 +270,7 @@ static int run_query(int argc, char **argv, const qcmd_t *c) {
   if (rc >= 0) return rc;
   if (q.a.boxes && c->boxes) q.c = c = c->boxes;
   if ((rc = parse_keep(&q))) return rc;
+  if ((rc = cli_inputs_once(q.a.cmd, q.a.files, c->nfiles))) return rc;
   for (int i = 0; i < c->nfiles && !rc; i++) rc = read_input(&q, i);
   if (!rc) rc = c->prepare(&q);
   cli_out_t o;
@@ -289,7 +290,8 @@ static int build_tree(qrun_t *q) {
   qk_tree_options_t opt;
   qk_tree_options_init(&opt);
   opt.capacity = (uint32_t)q->a.capacity;
-  return cli_build_tree(q->a.cmd, q->a.files[0], q->pts[0], q->n[0], &opt, &q->tree);
+  return cli_build_tree(q->a.cmd, cli_input_name(q->a.files[0]), q->pts[0], q->n[0], &opt,
+                        &q->tree);
 }
 
 /* Scratch for up to `cap` neighbours or ids. */
@@ -340,7 +342,7 @@ static int knn_beyond(qrun_t *q, size_t i) {
             "%s: query %zu (%.17g, %.17g): the query or the points reach beyond 2^510 "
             "(about 3.4e153) on an axis, where squared distances overflow; scale the data by "
             "a power of two",
-            q->a.files[1], i, q->pts[1][i].x, q->pts[1][i].y);
+            cli_input_name(q->a.files[1]), i, q->pts[1][i].x, q->pts[1][i].y);
   return CLI_BAD_INPUT;
 }
 
@@ -365,7 +367,8 @@ static int beyond_check(qrun_t *q) {
   if (fmax(fmax(fabs(s.root.x), fabs(s.root.y)),
            fmax(fabs(s.root.x + s.root.side), fabs(s.root.y + s.root.side))) > 0x1p510) {
     /* (the points within, their enclosing square not: a point near 2^510) */
-    cli_error(q->a.cmd, "%s: the square enclosing the points reaches %s", q->a.files[0], why);
+    cli_error(q->a.cmd, "%s: the square enclosing the points reaches %s",
+              cli_input_name(q->a.files[0]), why);
     return CLI_BAD_INPUT;
   }
   return CLI_OK;
@@ -381,7 +384,7 @@ static int knn_answer(qrun_t *q, size_t i) {
   size_t m;
   qk_status_t st = qk_query_knn(q->tree, q->pts[1][i], q->a.k, q->a.max_dist, q->nb, &m);
   if (st == QK_ERR_LIMIT) return knn_beyond(q, i);
-  if (st != QK_OK) return cli_status(q->a.cmd, q->a.files[1], st);
+  if (st != QK_OK) return cli_status(q->a.cmd, cli_input_name(q->a.files[1]), st);
   for (size_t j = 0; j < m; j++)
     emit(q, i, q->nb[j].id, "%zu,%zu,%u,%.17g", i, j + 1, (unsigned)q->nb[j].id, q->nb[j].dist);
   return CLI_OK;
@@ -417,7 +420,7 @@ static int radius_prepare(qrun_t *q) {
 static int radius_answer(qrun_t *q, size_t i) {
   size_t m = 0;
   qk_status_t st = qk_query_radius_list(q->tree, q->pts[1][i], q->a.r, q->nb, q->cap, &m);
-  if (st != QK_OK) return cli_status(q->a.cmd, q->a.files[1], st);
+  if (st != QK_OK) return cli_status(q->a.cmd, cli_input_name(q->a.files[1]), st);
   qsort(q->nb, m, sizeof *q->nb, nb_by_id);
   for (size_t j = 0; j < m; j++)
     emit(q, i, q->nb[j].id, "%zu,%u,%.17g", i, (unsigned)q->nb[j].id, q->nb[j].dist);
@@ -461,7 +464,7 @@ static int range_answer(qrun_t *q, size_t i) {
   size_t m = 0;
   qk_status_t st =
       qk_query_range_ids(q->tree, (qk_box_t){b[0], b[1], b[2], b[3]}, q->ids, q->cap, &m);
-  if (st != QK_OK) return cli_status(q->a.cmd, q->a.files[1], st);
+  if (st != QK_OK) return cli_status(q->a.cmd, cli_input_name(q->a.files[1]), st);
   qsort(q->ids, m, sizeof *q->ids, id_cmp);
   for (size_t j = 0; j < m; j++) emit(q, i, q->ids[j], "%zu,%u", i, (unsigned)q->ids[j]);
   return CLI_OK;
@@ -518,7 +521,7 @@ int cmd_locate(int argc, char **argv) { return run_query(argc, argv, &locate_cmd
 static int build_collider(qrun_t *q) {
   const cli_table_t *tb = &q->tab[0];
   if (tb->rows == 0) {
-    cli_msg("quadkit: %s: no data rows\n", q->a.files[0]);
+    cli_msg("quadkit: %s: no data rows\n", cli_input_name(q->a.files[0]));
     return CLI_BAD_INPUT;
   }
   for (size_t i = 0; i < tb->rows; i++) {
@@ -547,9 +550,9 @@ static int build_collider(qrun_t *q) {
   }
   int rc;
   if (!d && !b)
-    rc = cli_status(q->a.cmd, q->a.files[0], QK_ERR_NOMEM);
+    rc = cli_status(q->a.cmd, cli_input_name(q->a.files[0]), QK_ERR_NOMEM);
   else
-    rc = cli_status(q->a.cmd, q->a.files[0],
+    rc = cli_status(q->a.cmd, cli_input_name(q->a.files[0]),
                     qk_collider_build(d, d ? tb->rows : 0, b, b ? tb->rows : 0, &opt, &q->col));
   free(d);
   free(b);
@@ -736,7 +739,8 @@ static int geo_prepare(qrun_t *q) {
   qk_tree_options_t opt;
   qk_tree_options_init(&opt);
   opt.capacity = (uint32_t)q->a.capacity;
-  if ((rc = cli_status(q->a.cmd, q->a.files[0], qk_geo_build(q->pts[0], q->n[0], &opt, &q->geo))))
+  if ((rc = cli_status(q->a.cmd, cli_input_name(q->a.files[0]),
+                       qk_geo_build(q->pts[0], q->n[0], &opt, &q->geo))))
     return rc;
   return scratch(q, q->a.has_k ? q->a.k : q->n[0], 0);
 }
@@ -744,7 +748,7 @@ static int geo_prepare(qrun_t *q) {
 static int geo_knn_answer(qrun_t *q, size_t i) {
   size_t m = 0;
   qk_status_t st = qk_geo_knn(q->geo, q->pts[1][i], q->a.k, q->a.max_dist, q->nb, &m);
-  if (st != QK_OK) return cli_status(q->a.cmd, q->a.files[1], st);
+  if (st != QK_OK) return cli_status(q->a.cmd, cli_input_name(q->a.files[1]), st);
   for (size_t j = 0; j < m; j++)
     emit(q, i, q->nb[j].id, "%zu,%zu,%u,%.17g", i, j + 1, (unsigned)q->nb[j].id, q->nb[j].dist);
   return CLI_OK;
@@ -753,7 +757,7 @@ static int geo_knn_answer(qrun_t *q, size_t i) {
 static int geo_radius_answer(qrun_t *q, size_t i) {
   size_t m = 0;
   qk_status_t st = qk_geo_radius_list(q->geo, q->pts[1][i], q->a.r, q->nb, q->cap, &m);
-  if (st != QK_OK) return cli_status(q->a.cmd, q->a.files[1], st);
+  if (st != QK_OK) return cli_status(q->a.cmd, cli_input_name(q->a.files[1]), st);
   qsort(q->nb, m, sizeof *q->nb, nb_by_id);
   for (size_t j = 0; j < m; j++)
     emit(q, i, q->nb[j].id, "%zu,%u,%.17g", i, (unsigned)q->nb[j].id, q->nb[j].dist);

@@ -644,7 +644,11 @@ int cmd_join(int argc, char **argv) {
     free(fields);
     return rc;
   }
-  FILE *in = cli_open_input("join", pos[1]);
+  if ((rc = cli_inputs_once("join", pos, 2))) {
+    free(fields);
+    return rc;
+  }
+  FILE *in = cli_input_open("join", pos[1]); /* ("-": standard input) */
   if (!in) {
     free(fields);
     return CLI_BAD_INPUT;
@@ -675,7 +679,19 @@ int cmd_join(int argc, char **argv) {
     }
   }
   if (!rc) rc = check_fields(pos[0], r, fields, nf);
-  join_t j = {pos[1], r, rule, all, (unsigned)threads, fields, nf, NULL, NULL, NULL, NULL, 0, 0};
+  join_t j = {cli_input_name(pos[1]),
+              r,
+              rule,
+              all,
+              (unsigned)threads,
+              fields,
+              nf,
+              NULL,
+              NULL,
+              NULL,
+              NULL,
+              0,
+              0};
   int wfail = 0; /* the output failed (cli_out_close said so) */
   if (!rc) {
     j.out = o.f;
@@ -685,7 +701,10 @@ int cmd_join(int argc, char **argv) {
     if (!j.lines || !j.p || !j.feat) rc = CLI_INTERNAL;
     struct stat sb;
     int regular = !fstat(fileno(in), &sb) && S_ISREG(sb.st_mode);
-    long total = regular ? (long)sb.st_size : 0;
+    /* (where reading starts: standard input may be a file already partly read) */
+    off_t start = regular ? ftello(in) : 0;
+    if (start < 0) start = 0, regular = 0;
+    long total = regular ? (long)sb.st_size : 0; /* (the progress bar: offsets in the file) */
     /* Standard output, a device or a FIFO cannot be taken back: a regular file of points
      * is read once without writing, so that a bad line stops the command before its
      * first row (a FIFO as -o got 65,537 lines, then the error). (-o FILE is written to
@@ -696,8 +715,8 @@ int cmd_join(int argc, char **argv) {
       j.dry = 1;
       rc = join_stream(&j, in, &xy_check, 0, total);
       j.dry = 0;
-      if (!rc && fseek(in, 0, SEEK_SET) != 0) {
-        cli_error("join", "%s: cannot read it again: %s", pos[1], strerror(errno));
+      if (!rc && fseeko(in, start, SEEK_SET) != 0) {
+        cli_error("join", "%s: cannot read it again: %s", j.pts_path, strerror(errno));
         rc = CLI_BAD_INPUT;
       }
     }
@@ -713,7 +732,7 @@ int cmd_join(int argc, char **argv) {
   free(j.lines);
   free(j.p);
   free(j.feat);
-  fclose(in);
+  cli_input_close(in);
   qk_region_free(r);
   free(fields);
   return rc;

@@ -62,7 +62,7 @@ int cmd_tree(int argc, char **argv) {
   opt.capacity = (uint32_t)capacity;
   opt.max_depth = (uint32_t)depth;
   qk_tree_t *tree;
-  rc = cli_build_tree(cmd, in, pts, n, &opt, &tree);
+  rc = cli_build_tree(cmd, cli_input_name(in), pts, n, &opt, &tree);
   free(pts);
   if (rc) return rc;
   /* Standard output (the statistics) and the picture's file are opened first: a path that

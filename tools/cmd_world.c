@@ -201,11 +201,12 @@ static size_t find_id(const scene_t *s, uint64_t id) {
 
 /* Read lines of a CSV file, skipping blank lines and a header (a first line none of whose
  * fields is a number); fn gets each data row. */
-static int each_row(const char *path,
+static int each_row(const char *arg,
                     int (*fn)(const char *path, unsigned long ln, row_t *r, scene_t *s),
                     scene_t *s) {
-  FILE *f = cli_open_input("world", path);
+  FILE *f = cli_input_open("world", arg); /* ("-": standard input) */
   if (!f) return CLI_BAD_INPUT;
+  const char *path = cli_input_name(arg); /* (the name messages give it) */
   /* The tool's line reader: a NUL byte or a line past CLI_MAX_LINE stops it at once. */
   cli_lines_t rd;
   cli_lines_init(&rd, f);
@@ -256,7 +257,7 @@ static int each_row(const char *path,
   }
   cli_lines_free(&rd);
   if (!rc) rc = cli_lines_status("world", path, &rd, len, rwhy, 1);
-  fclose(f);
+  cli_input_close(f);
   return rc;
 }
 
@@ -391,14 +392,16 @@ int cmd_world(int argc, char **argv) {
     world_usage(stderr);
     return CLI_USAGE;
   }
+  int rc = cli_inputs_once(cmd, files, 2);
+  if (rc) return rc;
   scene_t s = {0};
   qk_world_t *w = NULL;
   qk_world_pair_t *pairs = NULL;
   idpair_t *ids = NULL;
-  int rc = each_row(files[0], object_row, &s);
+  rc = each_row(files[0], object_row, &s);
   if (rc) goto done;
   if (s.n == 0) {
-    cli_msg("quadkit world: %s: no objects\n", files[0]);
+    cli_msg("quadkit world: %s: no objects\n", cli_input_name(files[0]));
     rc = CLI_BAD_INPUT;
     goto done;
   }
@@ -413,8 +416,9 @@ int cmd_world(int argc, char **argv) {
   for (size_t i = 1; i < s.n; i++)
     if (s.o[s.by_id[i]].id == s.o[s.by_id[i - 1]].id) {
       unsigned long a = s.o[s.by_id[i - 1]].line, b = s.o[s.by_id[i]].line;
-      cli_msg("quadkit world: %s:%lu: id %llu appears twice (also on line %lu)\n", files[0],
-              a > b ? a : b, (unsigned long long)s.o[s.by_id[i]].id, a < b ? a : b);
+      cli_msg("quadkit world: %s:%lu: id %llu appears twice (also on line %lu)\n",
+              cli_input_name(files[0]), a > b ? a : b, (unsigned long long)s.o[s.by_id[i]].id,
+              a < b ? a : b);
       rc = CLI_BAD_INPUT;
       goto done;
     }

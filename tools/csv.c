@@ -2,12 +2,14 @@
  * file, line and column, and the rows' text kept for --keep. */
 #define _POSIX_C_SOURCE 200809L /* fmemopen, fseeko, ftello */
 #include <errno.h>
+#include <fcntl.h>
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
 #include <sys/types.h>
+#include <unistd.h>
 
 #include "cli.h"
 
@@ -318,6 +320,81 @@ int cli_screen_input(const char *cmd, const char *path, int columns, FILE **f, c
   return rc;
 }
 
+const char *cli_input_name(const char *path) { return strcmp(path, "-") ? path : "<stdin>"; }
+
+/* Where standard input stood when "-" was first opened (-1: not yet, or not a regular
+ * file): each later "-" reads it again from there. */
+static off_t stdin_start = -1;
+
+FILE *cli_input_open(const char *cmd, const char *path) {
+  if (strcmp(path, "-")) return cli_open_input(cmd, path);
+  const char *sp = cmd ? " " : "", *c = cmd ? cmd : "";
+  static int opened;
+  struct stat st;
+  if (fstat(STDIN_FILENO, &st) != 0) {
+    cli_msg("quadkit%s%s: <stdin>: cannot read: %s\n", sp, c, strerror(errno));
+    return NULL;
+  }
+  if (S_ISDIR(st.st_mode)) {
+    cli_msg("quadkit%s%s: <stdin>: cannot read: it is a directory\n", sp, c);
+    return NULL;
+  }
+  cli_note_input("-"); /* (an output naming it, or its pipe, is refused) */
+  if (S_ISREG(st.st_mode)) {
+    if (!opened) {
+      stdin_start = ftello(stdin);
+    } else if (stdin_start >= 0 && fseeko(stdin, stdin_start, SEEK_SET) != 0) {
+      cli_msg("quadkit%s%s: <stdin>: cannot read it again: %s\n", sp, c, strerror(errno));
+      return NULL;
+    }
+  }
+  opened = 1;
+  clearerr(stdin);
+  return stdin;
+}
+
+void cli_input_close(FILE *f) {
+  if (f && f != stdin) fclose(f);
+}
+
+/* What an input is when it can be read only once: a pipe or FIFO, a socket, a terminal
+ * (NULL otherwise: a regular file or a device read anew at each open). */
+static const char *read_once(const char *path, const struct stat *st) {
+  if (S_ISFIFO(st->st_mode)) return "pipe or FIFO";
+  if (S_ISSOCK(st->st_mode)) return "socket";
+  if (!S_ISCHR(st->st_mode)) return NULL;
+  int tty;
+  if (!strcmp(path, "-")) {
+    tty = isatty(STDIN_FILENO);
+  } else {
+    int fd = open(path, O_RDONLY | O_NOCTTY | O_NONBLOCK);
+    tty = fd >= 0 && isatty(fd);
+    if (fd >= 0) close(fd);
+  }
+  return tty ? "terminal" : NULL;
+}
+
+int cli_inputs_once(const char *cmd, const char *const *paths, int n) {
+  struct stat st[8];
+  int have[8];
+  for (int i = 0; i < n && i < 8; i++) {
+    have[i] = paths[i] &&
+              (!strcmp(paths[i], "-") ? fstat(STDIN_FILENO, &st[i]) : stat(paths[i], &st[i])) == 0;
+    for (int k = 0; k < i; k++) {
+      const char *what;
+      if (!have[i] || !have[k] || st[i].st_dev != st[k].st_dev || st[i].st_ino != st[k].st_ino ||
+          !(what = read_once(paths[i], &st[i])))
+        continue;
+      cli_error(cmd,
+                "inputs '%s' and '%s' are one %s, which can be read only once (a second "
+                "read finds the text gone): save the text to a file and name the file twice",
+                paths[k], paths[i], what);
+      return CLI_USAGE;
+    }
+  }
+  return CLI_OK;
+}
+
 /* Read through the library with `columns` selected, rows collected into *rows. */
 static int read_values(const char *path, const char *columns, int required, int cols,
                        cli_rows_t *rows, double **v, size_t *n) {
@@ -329,18 +406,19 @@ static int read_values(const char *path, const char *columns, int required, int 
   opt.on_row = on_row;
   opt.ud = rows;
   qk_error_t err;
-  FILE *f = cli_open_input(NULL, path);
+  FILE *f = cli_input_open(NULL, path);
   if (!f) return CLI_BAD_INPUT;
+  const char *name = cli_input_name(path);
   char *copy = NULL;
-  int rc = cli_screen_input(NULL, path, 1, &f, &copy);
+  int rc = cli_screen_input(NULL, name, 1, &f, &copy);
   if (rc) {
-    fclose(f);
+    cli_input_close(f);
     return rc;
   }
   qk_status_t st = qk_csv_read_values(f, &opt, (size_t)cols, (size_t)required, NULL, v, n, &err);
-  fclose(f);
+  cli_input_close(f);
   free(copy);
-  rc = st == QK_OK ? CLI_OK : read_error(path, st, &err);
+  rc = st == QK_OK ? CLI_OK : read_error(name, st, &err);
   if (rc || rows == &scratch) cli_rows_free(rows);
   return rc;
 }
@@ -364,7 +442,7 @@ static int read_points(const char *path, const char *xy, cli_rows_t *rows, qk_po
   int rc = read_values(path, xy, 2, 2, rows, &v, n);
   if (rc) return rc;
   if (*n == 0 && need_rows) {
-    cli_msg("quadkit: %s: no data rows\n", path);
+    cli_msg("quadkit: %s: no data rows\n", cli_input_name(path));
     cli_rows_free(rows);
     return CLI_BAD_INPUT;
   }

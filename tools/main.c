@@ -41,7 +41,8 @@ static void usage(FILE *f) {
              "when --xy gives\nnames. A point's id is its 0-based data row. Limits: a line of CSV "
              "or .poly\ninput may hold at most 1 MiB (1048576 bytes); a NUL byte is refused "
              "as binary data;\nan input from a pipe or device is read to at most 2^31 - 1 "
-             "bytes.\n\nexit status: 0 "
+             "bytes.\nAn input named - is standard input (a pipe or terminal may be named "
+             "as one input only).\n\nexit status: 0 "
              "success, 1 bad "
              "input, 2 usage error, 3 internal error or out of memory\n");
 }

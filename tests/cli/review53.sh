@@ -4,7 +4,8 @@
 # say so): an output into the pipe or FIFO being read, standard input as an input, join
 # streaming into a device, outputs left when standard output failed, two outputs into
 # standard output, a dangling link as output, malformed GeoJSON points and lines, join's
-# column names, --keep, --xy numbers, world's long values and .poly numbering.
+# column names, --keep, --xy numbers, world's long values and .poly numbering; one pipe
+# named as two inputs, `-` for CSV inputs, `mesh -` from a file partly read.
 # shellcheck source=lib/common.bash
 source "$(dirname "${BASH_SOURCE[0]}")/lib/common.bash" "$@"
 
@@ -294,6 +295,72 @@ expect 1 "ok1.poly:12: hole 1 at \\(9, 9\\) lies outside" -- "$cli" mesh "$tmp/o
 printf '4 2 1 1\n0 0 0 5\n1 4 0 5 2\n2 4 4 5\n3 0 4 5 2\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n0\n' >"$tmp/ok2.poly"
 expect 0 '"triangles": [1-9]' -- "$cli" mesh "$tmp/ok2.poly" -o "$tmp/ok2" --stats
 expect 0 '"triangles": [1-9]' -- "$cli" mesh "$notes" -o "$tmp/ok3" --stats
+
+# ---- one pipe named as two inputs: the second read found it empty ------------------------
+# `cat p.csv | quadkit knn /dev/stdin /dev/stdin` read the whole pipe for the points and
+# found nothing left for the queries: the header alone, exit 0 (join read the points' pipe
+# as its layer). A pipe, FIFO or terminal reached by two inputs is now a usage error
+# naming both; a regular file may be named twice.
+twice="are one pipe or FIFO, which can be read only once"
+expect 2 "^quadkit knn: inputs '/dev/stdin' and '/dev/stdin' $twice" \
+  -- in_pipe "$tmp/p.csv" knn /dev/stdin /dev/stdin -k 1
+expect 2 "^quadkit join: inputs '/dev/stdin' and '/dev/stdin' $twice" \
+  -- in_pipe "$tmp/jp.csv" join /dev/stdin /dev/stdin --planar
+expect 2 "^quadkit radius: inputs '-' and '/dev/stdin' $twice" \
+  -- in_pipe "$tmp/p.csv" radius - /dev/stdin -r 1
+if mkfifo "$tmp/twice.fifo" 2>/dev/null; then
+  fifo_twice() { # knn with the FIFO twice.fifo as both inputs, fed p.csv
+    cat "$tmp/p.csv" >"$tmp/twice.fifo" 2>/dev/null &
+    local writer=$! rc
+    "${T[@]}" "$cli" knn "$tmp/twice.fifo" "$tmp/twice.fifo" -k 1
+    rc=$?
+    kill "$writer" 2>/dev/null
+    wait "$writer" 2>/dev/null
+    return $rc
+  }
+  expect 2 "^quadkit knn: inputs '$tmp/twice.fifo' and '$tmp/twice.fifo' $twice" -- fifo_twice
+else
+  skip "a FIFO named as two inputs: mkfifo failed"
+fi
+# (guards: a regular file on standard input, named twice, answers; so does `-` twice)
+same_text "knn /dev/stdin /dev/stdin < file" \
+  "$("$cli" knn /dev/stdin /dev/stdin -k 1 <"$tmp/p.csv" | tr '\n' ' ')" \
+  "query,rank,point,distance 0,1,0,0 1,1,1,0 2,1,2,0 "
+same_text "knn - - < file" "$("$cli" knn - - -k 1 <"$tmp/p.csv" 2>&1 | tr '\n' ' ')" \
+  "query,rank,point,distance 0,1,0,0 1,1,1,0 2,1,2,0 "
+
+# ---- `-` as standard input for every CSV input -----------------------------------------
+# `mesh -` and `-o -` took it, every CSV input said "-: cannot open: No such file or
+# directory". Standard input is read from where it stands (a file partly read by the
+# shell: from its next line), and messages call it <stdin> as mesh does.
+printf 'id,kind,x,y,a\n1,disc,0,0,1\n2,disc,1,0,1\n' >"$tmp/wo.csv"
+printf 'frame,id,x,y,a\n0,1,5,5,1\n1,1,1,0,1\n' >"$tmp/wm2.csv"
+printf '0,0,1\n0,5,1\n0.5,0,1\n' >"$tmp/discs.csv"
+same_text "tree -" "$(in_pipe "$tmp/p.csv" tree - 2>&1 | cut -c1-14)" '{"points": 3, '
+same_text "knn POINTS -" "$(in_pipe "$tmp/q.csv" knn "$tmp/p.csv" - -k 1 2>&1 | tr '\n' ' ')" \
+  "query,rank,point,distance 0,1,2,0.29999999999999999 "
+same_text "join REGIONS -" "$(in_pipe "$tmp/jp.csv" join "$tmp/sq.geojson" - --planar 2>&1 | tr '\n' ' ')" \
+  "x,y,feature 5,5,0 25,5,1 50,50,-1 "
+same_text "world - MOVES" "$("$cli" world - "$tmp/wm2.csv" <"$tmp/wo.csv" 2>&1 | tr '\n' ' ')" \
+  "frame,a,b 1,1,2 "
+same_text "collide -" "$(in_pipe "$tmp/discs.csv" collide - 2>&1 | tr '\n' ' ')" "a,b 0,2 "
+same_text "raycast DISCS -" "$(printf '5,0,-1,0\n' | "$cli" raycast "$tmp/discs.csv" - 2>&1 | tr '\n' ' ')" \
+  "ray,disc,t 0,2,3.5 "
+expect 1 "^quadkit: <stdin>:2:3: field 2 \\(y\\) is not a number: 'zz'$" \
+  -- bash -c 'printf "x,y\n1,zz\n" | "$1" tree -' - "$cli"
+expect 1 "^quadkit world: <stdin>:2:3: unknown kind 'cube'" -- bash -c 'printf "id,kind,x,y\n1,cube,0,0\n" | "$1" world - "$2"' \
+  - "$cli" "$tmp/wm2.csv"
+# standard input partly read: from the line after the shell's
+same_text "{ read; read; tree -; } < file" \
+  "$({ read -r _; read -r _; "$cli" tree - | cut -c1-14; } <"$tmp/p.csv" 2>&1)" '{"points": 2, '
+same_text "{ read; join L -; } < file (checked whole, then read again from there)" \
+  "$({ read -r _; "$cli" join "$tmp/sq.geojson" - --planar | tr '\n' ' '; } <"$tmp/jp.csv" 2>&1)" \
+  "5,5,0 25,5,1 50,50,-1 "
+# an output over standard input's file is refused as over any input
+cp "$tmp/p.csv" "$tmp/p3.csv"
+expect 2 "^quadkit knn: cannot write $tmp/p3.csv: it is the input file <stdin>, which it would replace$" \
+  -- bash -c '"$1" knn - "$2" -k 1 -o "$3" <"$3"' - "$cli" "$tmp/q.csv" "$tmp/p3.csv"
+cmp -s "$tmp/p.csv" "$tmp/p3.csv" && passes=$((passes + 1)) || fail "knn - -o IN <IN: input changed"
 
 # ---- mesh - from a file partly read: screened from there, parsed from byte 0 ------------
 # `{ read -r title; quadkit mesh - ...; } < f`: the screen (cli_screen_input) read from the
