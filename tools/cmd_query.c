@@ -271,17 +271,24 @@ static int run_query(int argc, char **argv, const qcmd_t *c) {
   if (q.a.boxes && c->boxes) q.c = c = c->boxes;
   if ((rc = parse_keep(&q))) return rc;
   if ((rc = cli_inputs_once(q.a.cmd, q.a.files, c->nfiles))) return rc;
+  /* The output is opened before the inputs are read (they are noted first, so that one
+   * naming an input, or its pipe, is still refused): a path that cannot be written fails
+   * at once, not after reading, building and answering (2.9 s on 10^6 discs). It is
+   * written only once every answer is known to be printable; on an error it is closed
+   * unwritten (a file's temporary removed, an existing file unchanged). */
+  for (int i = 0; i < c->nfiles; i++) cli_note_input(q.a.files[i]);
+  cli_out_t o;
+  if ((rc = cli_out_open(q.a.cmd, q.a.out ? q.a.out : "-", &o))) return rc;
   for (int i = 0; i < c->nfiles && !rc; i++) rc = read_input(&q, i);
   if (!rc) rc = c->prepare(&q);
-  cli_out_t o;
-  if (!rc && !(rc = cli_out_open(q.a.cmd, q.a.out ? q.a.out : "-", &o))) {
+  if (!rc) {
     q.f = o.f;
     write_head(&q);
     size_t items = c->nfiles < 2 ? 1 : c->kind[1] == IN_POINTS ? q.n[1] : q.tab[1].rows;
     for (size_t i = 0; i < items && !rc; i++) rc = c->answer(&q, i);
-    int rc2 = cli_out_close(q.a.cmd, &o, rc == CLI_OK);
-    if (!rc) rc = rc2;
   }
+  int rc2 = cli_out_close(q.a.cmd, &o, rc == CLI_OK);
+  if (!rc) rc = rc2;
   run_free(&q);
   return rc;
 }

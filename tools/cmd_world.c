@@ -394,6 +394,13 @@ int cmd_world(int argc, char **argv) {
   }
   int rc = cli_inputs_once(cmd, files, 2);
   if (rc) return rc;
+  /* The output is opened before the inputs are read (they are noted first, so that an
+   * output naming one, or its pipe, is still refused): a path that cannot be written fails
+   * at once, not after reading and replaying the moves. */
+  cli_note_input(files[0]);
+  cli_note_input(files[1]);
+  cli_out_t o;
+  if ((rc = cli_out_open(cmd, out, &o))) return rc;
   scene_t s = {0};
   qk_world_t *w = NULL;
   qk_world_pair_t *pairs = NULL;
@@ -429,8 +436,6 @@ int cmd_world(int argc, char **argv) {
     rc = cli_status(cmd, "building the world", st);
     goto done;
   }
-  cli_out_t o;
-  if ((rc = cli_out_open(cmd, out, &o))) goto done;
   fprintf(o.f, "frame,a,b\n");
   unsigned long frames = s.nm ? s.m[s.nm - 1].frame + 1 : 1;
   size_t mi = 0, cap = 0, np = 0;
@@ -479,9 +484,9 @@ int cmd_world(int argc, char **argv) {
       fprintf(o.f, "%lu,%llu,%llu\n", f, (unsigned long long)ids[i].a,
               (unsigned long long)ids[i].b);
   }
-  int rc2 = cli_out_close(cmd, &o, rc == CLI_OK);
+done:;
+  int rc2 = cli_out_close(cmd, &o, rc == CLI_OK); /* (on an error: nothing written) */
   if (rc == CLI_OK) rc = rc2;
-done:
   free(pairs);
   free(ids);
   qk_world_free(w);

@@ -5,7 +5,8 @@
 # streaming into a device, outputs left when standard output failed, two outputs into
 # standard output, a dangling link as output, malformed GeoJSON points and lines, join's
 # column names, --keep, --xy numbers, world's long values and .poly numbering; one pipe
-# named as two inputs, `-` for CSV inputs, `mesh -` from a file partly read.
+# named as two inputs, `-` for CSV inputs, `mesh -` from a file partly read, outputs
+# opened before the inputs are read.
 # shellcheck source=lib/common.bash
 source "$(dirname "${BASH_SOURCE[0]}")/lib/common.bash" "$@"
 
@@ -376,5 +377,47 @@ expect 0 '"triangles": [1-9]' -- bash -c '{ read -r _; "$1" mesh - -o "$2" --siz
 # (guard: the same through a pipe)
 expect 0 '"triangles": [1-9]' -- bash -c '{ read -r _; cat | "$1" mesh - -o "$2" --size 16 --stats; } <"$3"' \
   - "$cli" "$tmp/o9/p" "$tmp/titled.poly"
+
+# ---- outputs opened after all the work ---------------------------------------------------
+# docs/reliability.md has outputs opened before the work, so that an unwritable path fails
+# at once: join, regions, mesh and simulate did, but tree, knn, radius, range, locate,
+# collide, raycast, geo and world read, built and answered everything first (1.5-2.9 s on
+# 10^6 rows). An input that never ends (a FIFO no one writes) shows the order: the
+# unwritable output is refused before it is opened (it waited there, exit 124).
+if [ "${#T[@]}" -gt 0 ] && mkfifo "$tmp/never.fifo" 2>/dev/null; then
+  printf '0,0,1,1\n' >"$tmp/box.csv"
+  printf '0,0,1,0\n' >"$tmp/ray.csv"
+  never=$tmp/never.fifo
+  nodir=$tmp/no/such
+  late() { # late CMD ARGS...: the unwritable output is said at once, exit 1
+    expect 1 "^quadkit $1: cannot write $nodir/x" -- timeout 5 "$cli" "$@"
+  }
+  late tree "$never" --svg "$nodir/x.svg"
+  late knn "$never" "$tmp/q.csv" -k 1 -o "$nodir/x.csv"
+  late radius "$tmp/p.csv" "$never" -r 1 -o "$nodir/x.csv"
+  late range "$never" "$tmp/box.csv" -o "$nodir/x.csv"
+  late locate "$never" "$tmp/q.csv" -o "$nodir/x.csv"
+  late collide "$never" -o "$nodir/x.csv"
+  late raycast "$never" "$tmp/ray.csv" -o "$nodir/x.csv"
+  expect 1 "^quadkit geo: cannot write $nodir/x" -- timeout 5 "$cli" geo knn "$never" "$tmp/q.csv" -k 1 -o "$nodir/x.csv"
+  late world "$tmp/wo.csv" "$never" -o "$nodir/x.csv"
+else
+  skip "outputs opened before the inputs are read: no timeout or mkfifo"
+fi
+# (guards, the same as before: an output naming an input is refused, and on a bad input
+# no output is left and an existing one is unchanged)
+mkdir "$tmp/o8"
+cp "$tmp/p.csv" "$tmp/o8/p.csv"
+expect 2 "^quadkit tree: cannot write $tmp/o8/p.csv: it is the input file $tmp/o8/p.csv" \
+  -- "$cli" tree "$tmp/o8/p.csv" --svg "$tmp/o8/p.csv"
+expect 2 "^quadkit world: cannot write $tmp/wm2.csv: it is the input file $tmp/wm2.csv" \
+  -- "$cli" world "$tmp/wo.csv" "$tmp/wm2.csv" -o "$tmp/wm2.csv"
+printf 'x,y\n1,zz\n' >"$tmp/o8/bad.csv"
+printf 'kept\n' >"$tmp/o8/out.csv"
+expect 1 "bad.csv:2:3: field 2" -- "$cli" knn "$tmp/o8/p.csv" "$tmp/o8/bad.csv" -k 1 -o "$tmp/o8/out.csv"
+expect 1 "bad.csv:2:3: field 2" -- "$cli" tree "$tmp/o8/bad.csv" --svg "$tmp/o8/t.svg"
+expect 1 "bad.csv:2: expected id,kind,x,y" -- "$cli" world "$tmp/o8/bad.csv" "$tmp/wm2.csv" -o "$tmp/o8/out.csv"
+same_text "bad input: existing output unchanged" "$(cat "$tmp/o8/out.csv")" "kept"
+files_are "bad input: no output or temporary left" "$tmp/o8" "bad.csv out.csv p.csv "
 
 report
