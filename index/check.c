@@ -4,6 +4,7 @@
 #include <string.h>
 
 #include "index/index_internal.h"
+#include "index/textloc.h"
 
 typedef struct checker {
   const qk_tree_t *t;
@@ -20,7 +21,7 @@ static qk_status_t fail(checker_t *c, const char *fmt, ...) {
   if (c->msg && c->msg_size) {
     va_list ap;
     va_start(ap, fmt);
-    vsnprintf(c->msg, c->msg_size, fmt, ap);
+    qk__vsnprintf(c->msg, c->msg_size, fmt, ap);
     va_end(ap);
   }
   return QK_ERR_CORRUPT;

@@ -2,6 +2,7 @@
 #include <math.h>
 
 #include "index/index_access.h"
+#include "index/textloc.h"
 
 /* Positions are the offset from the root's corner over the root's side, times the width:
  * the offset is at most the side, so neither step overflows, where width / side did for
@@ -45,7 +46,7 @@ void qk__svg_open(FILE *f, unsigned width) {
           w, w, w, w, w, w);
 }
 
-qk_status_t qk_tree_write_svg(const qk_tree_t *t, FILE *f, unsigned width) {
+static qk_status_t write_svg(const qk_tree_t *t, FILE *f, unsigned width) {
   if (!t || !f) return QK_ERR_INVALID;
   if (width == 0) width = 800;
   svg_t s = {f, t->root_x, t->root_y, t->side[0], (double)width, 0};
@@ -59,4 +60,15 @@ qk_status_t qk_tree_write_svg(const qk_tree_t *t, FILE *f, unsigned width) {
   fprintf(f, "</g>\n</svg>\n");
   if (st != QK_OK) return st;
   return fflush(f) != 0 || ferror(f) ? QK_ERR_IO : QK_OK; /* (flushed: see mesh/write.c) */
+}
+
+/* Runs in the C locale (index/textloc.h): the same bytes whatever locale the program or
+ * the calling thread set ("400.000", never "400,000"). */
+qk_status_t qk_tree_write_svg(const qk_tree_t *t, FILE *f, unsigned width) {
+  qk__c_scope_t c;
+  qk_status_t st = qk__c_locale_enter(&c);
+  if (st != QK_OK) return st;
+  st = write_svg(t, f, width);
+  qk__c_locale_leave(&c);
+  return st;
 }

@@ -17,6 +17,7 @@
 #include <string.h>
 
 #include "index/index_internal.h"
+#include "index/textloc.h"
 
 #if defined(__SSE2__)
 #include <emmintrin.h>
@@ -50,7 +51,7 @@ static qk_status_t say(qk_error_t *err, qk_status_t st, size_t item, const char 
   err->item = item;
   va_list ap;
   va_start(ap, fmt);
-  vsnprintf(err->message, sizeof err->message, fmt, ap);
+  qk__vsnprintf(err->message, sizeof err->message, fmt, ap);
   va_end(ap);
   return st;
 }

@@ -52,7 +52,7 @@ static qk_status_t fail(reader_t *r, qk_status_t st, unsigned long line, size_t 
     r->err->item = item;
     va_list ap;
     va_start(ap, fmt);
-    vsnprintf(r->err->message, sizeof r->err->message, fmt, ap);
+    qk__vsnprintf(r->err->message, sizeof r->err->message, fmt, ap);
     va_end(ap);
   }
   return st;
@@ -394,6 +394,8 @@ qk_status_t qk_csv_read_values(FILE *f, const qk_csv_options_t *opt, size_t ncol
   if (opt && (unsigned)opt->header > (unsigned)QK_CSV_HEADER_NO)
     return fail(&r, QK_ERR_INVALID, 0, 0, SIZE_MAX,
                 "header rule %d is none of QK_CSV_HEADER_AUTO, _YES and _NO", (int)opt->header);
+  if (qk__c_locale_ready() != QK_OK) /* (numbers are read in the C locale: index/textloc.h) */
+    return fail(&r, QK_ERR_NOMEM, 0, 0, SIZE_MAX, "out of memory");
   qk_status_t st = parse_columns(&r);
   if (!st) st = distinct_columns(&r, 0);
   if (st) return st;

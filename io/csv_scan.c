@@ -208,7 +208,7 @@ int qk__csv_number(char *line, const qk__span_t *sp, double *v) {
   line[e] = '\0';
   char *end;
   errno = 0;
-  *v = strtod(line + b, &end);
+  *v = qk__strtod(line + b, &end);
   line[e] = saved;
   if (end != line + e) return 0;
   if (*v == 0) /* (a nonzero digit before the exponent: "1e-400" read as 0) */

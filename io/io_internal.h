@@ -1,6 +1,7 @@
 /*
  * Private declarations of the io module: a line reader and a CSV field scanner that
- * allocate through the caller's allocator. Not API. The module depends on no other.
+ * allocate through the caller's allocator. Not API. The module depends on no other but
+ * index/textloc.h (numbers read in the C locale).
  */
 #ifndef QUADKIT_IO_INTERNAL_H
 #define QUADKIT_IO_INTERNAL_H
@@ -8,6 +9,7 @@
 #include <stdio.h>
 
 #include "quadkit/io.h"
+#include "index/textloc.h" /* numbers in the C locale */
 
 /* The allocator call (libc when a is NULL or has no function). */
 void *qk__io_realloc(const qk_allocator_t *a, void *p, size_t osize, size_t nsize);

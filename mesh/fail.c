@@ -3,6 +3,7 @@
  * qk__grow from index/index_access.h).
  */
 #include "mesh/mesh_internal.h"
+#include "index/textloc.h"
 
 #include <stdio.h>
 
@@ -14,7 +15,7 @@ qk_status_t qk__mesh_fail(qk_mesh_error_t *err, qk_status_t st, unsigned long li
     err->item = SIZE_MAX;
     va_list ap;
     va_start(ap, fmt);
-    vsnprintf(err->message, sizeof err->message, fmt, ap);
+    qk__vsnprintf(err->message, sizeof err->message, fmt, ap);
     va_end(ap);
   }
   return st;

@@ -5,6 +5,7 @@
  * numbers recorded for every vertex, segment and hole.
  */
 #include "mesh/mesh_internal.h"
+#include "index/textloc.h"
 
 #include <errno.h>
 #include <limits.h>
@@ -117,7 +118,7 @@ static int parse_num(const char *s, double *v) {
   const char *digits = s + (*s == '+' || *s == '-');
   if (digits[0] == '0' && (digits[1] | 0x20) == 'x') return 0;
   errno = 0;
-  double d = strtod(s, &end);
+  double d = qk__strtod(s, &end);
   if (end == s || *end || !isfinite(d) || (d == 0 && nonzero_digits(s))) return 0;
   *v = d;
   return 1;
@@ -128,7 +129,7 @@ static const char *num_why(const char *s) {
   const char *digits = s + (*s == '+' || *s == '-');
   if (digits[0] == '0' && (digits[1] | 0x20) == 'x') return " (hexadecimal numbers are not read)";
   char *end;
-  double d = strtod(s, &end);
+  double d = qk__strtod(s, &end);
   if (end == s || *end) return "";
   if (isnan(d) || (isinf(d) && strpbrk(s, "iI"))) return " (not a finite number)";
   if (d == 0) return " (below the smallest double: it would read as 0)";
@@ -378,7 +379,7 @@ static qk_status_t rfail(const reader_t *r, qk_mesh_error_t *err, qk_status_t st
     err->line = r->line;
     va_list ap;
     va_start(ap, fmt);
-    vsnprintf(err->message, sizeof err->message, fmt, ap);
+    qk__vsnprintf(err->message, sizeof err->message, fmt, ap);
     va_end(ap);
   }
   return st;
@@ -654,6 +655,8 @@ qk_status_t qk_poly_read(FILE *f, const qk_allocator_t *allocator, qk_poly_t **o
   if (out) *out = NULL;
   qk__error_clear(err);
   if (!f || !out) return QK_ERR_INVALID;
+  if (qk__c_locale_ready() != QK_OK) /* (numbers are read in the C locale: index/textloc.h) */
+    return qk__mesh_fail(err, QK_ERR_NOMEM, 0, "out of memory");
   qk_poly_t *p = poly_new(allocator);
   if (!p) return qk__mesh_fail(err, QK_ERR_NOMEM, 0, "out of memory");
   reader_t r;

@@ -6,6 +6,7 @@
  */
 #include "mesh/mesh_internal.h"
 #include "mesh/numfmt.h"
+#include "index/textloc.h"
 
 #include <math.h>
 #include <stdlib.h>
@@ -15,7 +16,7 @@
  * fclose, after QK_OK (a small mesh on a full disk). */
 static qk_status_t io_status(FILE *f) { return fflush(f) != 0 || ferror(f) ? QK_ERR_IO : QK_OK; }
 
-qk_status_t qk_mesh_write_node(const qk_mesh_t *m, FILE *f, unsigned first) {
+static qk_status_t write_node(const qk_mesh_t *m, FILE *f, unsigned first) {
   if (!m || !f || first > 1) return QK_ERR_INVALID;
   fprintf(f, "%zu 2 0 %d\n", m->nv, m->has_marks ? 1 : 0);
   qk__wbuf_t w;
@@ -41,7 +42,7 @@ qk_status_t qk_mesh_write_node(const qk_mesh_t *m, FILE *f, unsigned first) {
   return io_status(f);
 }
 
-qk_status_t qk_mesh_write_poly(const qk_mesh_t *m, FILE *f, unsigned first) {
+static qk_status_t write_poly(const qk_mesh_t *m, FILE *f, unsigned first) {
   if (!m || !f || first > 1) return QK_ERR_INVALID;
   fprintf(f, "# the vertices are those of the .node file\n0 2 0 %d\n%zu 1\n", m->has_marks ? 1 : 0,
           m->noseg);
@@ -58,7 +59,7 @@ qk_status_t qk_mesh_write_poly(const qk_mesh_t *m, FILE *f, unsigned first) {
   return io_status(f);
 }
 
-qk_status_t qk_mesh_write_ele(const qk_mesh_t *m, FILE *f, unsigned first) {
+static qk_status_t write_ele(const qk_mesh_t *m, FILE *f, unsigned first) {
   if (!m || !f || first > 1) return QK_ERR_INVALID;
   /* The component id, then the regional attribute when the input has regions. */
   fprintf(f, "%zu 3 %d\n", m->nt, m->attr ? 2 : 1);
@@ -154,7 +155,7 @@ static size_t dbl_at(const double *r, size_t nr, double v) {
  * carrying a physical group of line elements (`marker_M`). All nodes are listed in one
  * block on the first surface entity, which gmsh accepts for a mesh without geometry.
  */
-qk_status_t qk_mesh_write_msh(const qk_mesh_t *m, FILE *f) {
+static qk_status_t write_msh(const qk_mesh_t *m, FILE *f) {
   if (!m || !f) return QK_ERR_INVALID;
   size_t nc = m->stats.components + 1, cap = m->nt + 1;
   msh_ent_t *ent = qk__realloc(&m->alloc, NULL, 0, cap * sizeof *ent);
@@ -267,7 +268,7 @@ done:
   return st;
 }
 
-qk_status_t qk_mesh_write_vtu(const qk_mesh_t *m, FILE *f) {
+static qk_status_t write_vtu(const qk_mesh_t *m, FILE *f) {
   if (!m || !f) return QK_ERR_INVALID;
   fprintf(f,
           "<?xml version=\"1.0\"?>\n"
@@ -333,7 +334,7 @@ static qk_visit_t draw_leaf(const qk_tree_t *t, qk_node_t v, void *ud) {
   return QK_VISIT_CONTINUE;
 }
 
-qk_status_t qk_mesh_write_svg(const qk_mesh_t *m, FILE *f, unsigned width) {
+static qk_status_t write_svg(const qk_mesh_t *m, FILE *f, unsigned width) {
   if (!m || !f) return QK_ERR_INVALID;
   if (width == 0) width = 800;
   double W = width, scale = W / (double)m->size;
@@ -366,4 +367,61 @@ qk_status_t qk_mesh_write_svg(const qk_mesh_t *m, FILE *f, unsigned width) {
   }
   fprintf(f, "</g>\n</svg>\n");
   return io_status(f);
+}
+
+/* The public writers: each runs in the C locale (index/textloc.h), so that its bytes are
+ * the same whatever locale the program or the calling thread set ("1.5", never "1,5"). */
+
+qk_status_t qk_mesh_write_node(const qk_mesh_t *m, FILE *f, unsigned first) {
+  qk__c_scope_t c;
+  qk_status_t st = qk__c_locale_enter(&c);
+  if (st != QK_OK) return st;
+  st = write_node(m, f, first);
+  qk__c_locale_leave(&c);
+  return st;
+}
+
+qk_status_t qk_mesh_write_ele(const qk_mesh_t *m, FILE *f, unsigned first) {
+  qk__c_scope_t c;
+  qk_status_t st = qk__c_locale_enter(&c);
+  if (st != QK_OK) return st;
+  st = write_ele(m, f, first);
+  qk__c_locale_leave(&c);
+  return st;
+}
+
+qk_status_t qk_mesh_write_poly(const qk_mesh_t *m, FILE *f, unsigned first) {
+  qk__c_scope_t c;
+  qk_status_t st = qk__c_locale_enter(&c);
+  if (st != QK_OK) return st;
+  st = write_poly(m, f, first);
+  qk__c_locale_leave(&c);
+  return st;
+}
+
+qk_status_t qk_mesh_write_msh(const qk_mesh_t *m, FILE *f) {
+  qk__c_scope_t c;
+  qk_status_t st = qk__c_locale_enter(&c);
+  if (st != QK_OK) return st;
+  st = write_msh(m, f);
+  qk__c_locale_leave(&c);
+  return st;
+}
+
+qk_status_t qk_mesh_write_vtu(const qk_mesh_t *m, FILE *f) {
+  qk__c_scope_t c;
+  qk_status_t st = qk__c_locale_enter(&c);
+  if (st != QK_OK) return st;
+  st = write_vtu(m, f);
+  qk__c_locale_leave(&c);
+  return st;
+}
+
+qk_status_t qk_mesh_write_svg(const qk_mesh_t *m, FILE *f, unsigned width) {
+  qk__c_scope_t c;
+  qk_status_t st = qk__c_locale_enter(&c);
+  if (st != QK_OK) return st;
+  st = write_svg(m, f, width);
+  qk__c_locale_leave(&c);
+  return st;
 }

@@ -89,13 +89,14 @@
 #include <time.h>
 
 #include "region/region_internal.h"
+#include "index/textloc.h"
 
 qk_status_t qk__region_fail(qk_error_t *err, qk_status_t st, size_t item, const char *fmt, ...) {
   if (err) {
     err->item = item;
     va_list ap;
     va_start(ap, fmt);
-    vsnprintf(err->message, sizeof err->message, fmt, ap);
+    qk__vsnprintf(err->message, sizeof err->message, fmt, ap);
     va_end(ap);
   }
   return st;

@@ -1,5 +1,6 @@
 /* The SVG drawing of a layer: features filled even-odd, index cells as outlines. */
 #include "region/region_internal.h"
+#include "index/textloc.h"
 
 /* Features: one path per feature, each of its rings one closed subpath through its pieces
  * in order, filled even-odd. In lon/lat mode the pieces of a ring that crosses the
@@ -54,7 +55,7 @@ static void write_feature(const qk_region_t *r, FILE *f, size_t i0, size_t i1, d
   fprintf(f, "\"/>\n");
 }
 
-qk_status_t qk_region_write_svg(const qk_region_t *r, FILE *f, unsigned width) {
+static qk_status_t write_svg(const qk_region_t *r, FILE *f, unsigned width) {
   if (!r || !f) return QK_ERR_INVALID;
   if (width == 0) width = 1000;
   double x0 = r->rx, y0 = r->ry, s = r->rside, k = width / s;
@@ -90,4 +91,15 @@ qk_status_t qk_region_write_svg(const qk_region_t *r, FILE *f, unsigned width) {
   }
   fprintf(f, "</g>\n</svg>\n");
   return fflush(f) != 0 || ferror(f) ? QK_ERR_IO : QK_OK; /* (flushed: see mesh/write.c) */
+}
+
+/* Runs in the C locale (index/textloc.h): the same bytes whatever locale the program or
+ * the calling thread set ("400.000", never "400,000"). */
+qk_status_t qk_region_write_svg(const qk_region_t *r, FILE *f, unsigned width) {
+  qk__c_scope_t c;
+  qk_status_t st = qk__c_locale_enter(&c);
+  if (st != QK_OK) return st;
+  st = write_svg(r, f, width);
+  qk__c_locale_leave(&c);
+  return st;
 }

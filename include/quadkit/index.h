@@ -397,7 +397,8 @@ qk_status_t qk_tree_balance(qk_tree_t *tree);
 int qk_tree_is_balanced(const qk_tree_t *tree);
 
 /**
- * Draw the tree as SVG: the cells, and the points as dots.
+ * Draw the tree as SVG: the cells, and the points as dots. Numbers are written in the C
+ * locale ("400.000") whatever locale the program or the calling thread set.
  * \param [in] tree the tree.
  * \param [in] f an open stream, owned by the caller.
  * \param [in] width picture width in pixels (0 means 800).

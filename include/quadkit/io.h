@@ -20,7 +20,9 @@
  * rows are limited to 2^32 - 2 (the ids a tree holds). A NUL byte is binary data, refused
  * at its line and column: reading stops there, so a binary stream without line breaks
  * (/dev/zero) is not taken into memory first. The library never prints: a rejected input
- * fills a qk_error_t.
+ * fills a qk_error_t. Numbers are read in the C locale whatever locale the program or the
+ * calling thread set (setlocale, uselocale): "1.5" is 1.5 and "1,5" is no number under a
+ * German locale too.
  */
 #ifndef QUADKIT_IO_H
 #define QUADKIT_IO_H

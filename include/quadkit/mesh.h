@@ -78,7 +78,9 @@ typedef struct qk_poly qk_poly_t;
  * attributes, which are ignored, and boundary markers, which qk_mesh_vertex_markers() and
  * the outputs carry), segments, a holes section
  * (required, "0" for none, as in Triangle) and optional regional attributes. Only syntax
- * is checked here; the geometry is checked by qk_mesh_generate(). Reading stops at the
+ * is checked here; the geometry is checked by qk_mesh_generate(). Numbers are read in the
+ * C locale, as every writer below writes them, whatever locale the program or the calling
+ * thread set (setlocale, uselocale): "1.5", never "1,5". Reading stops at the
  * first NUL byte (binary data), at a carriage return not followed by a line feed and at a
  * line longer than 1 MiB (1048576 bytes), so an endless stream is never taken into memory.
  * \param [in] f an open stream, owned by the caller.
@@ -86,7 +88,8 @@ typedef struct qk_poly qk_poly_t;
  * \param [out] out the input, freed with qk_poly_free(); NULL on error.
  * \param [out] err where and why the input was rejected (may be NULL).
  * \return QK_OK, QK_ERR_PARSE, QK_ERR_LIMIT (absurd counts, a line past 1 MiB), QK_ERR_IO
- *         or QK_ERR_NOMEM.
+ *         or QK_ERR_NOMEM (also when the C locale cannot be made: every reader and writer
+ *         of the library returns it then).
  */
 qk_status_t qk_poly_read(FILE *f, const qk_allocator_t *allocator, qk_poly_t **out,
                          qk_mesh_error_t *err);

@@ -15,6 +15,9 @@
  *
  * Thread safety: a layer never changes once built, so any number of threads may query
  * one layer at once.
+ *
+ * Numbers as text (GeoJSON through json-c, the SVG writer, error messages) follow the C
+ * locale whatever locale the program or the calling thread set (setlocale, uselocale).
  */
 #ifndef QUADKIT_REGION_H
 #define QUADKIT_REGION_H
