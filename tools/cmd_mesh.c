@@ -656,8 +656,7 @@ static int poly_auto_grid(const qk_poly_t *p, prep_t *pp) {
 
 /* The stderr note of --round auto: the grid, why, and how much moved. */
 static void auto_note(const char *in, int projected, const prep_t *pp) {
-  fprintf(stderr,
-          "quadkit mesh: --round auto: the grid 2^%d (coordinates%s below 2^%d, extent below "
+  cli_msg("quadkit mesh: --round auto: the grid 2^%d (coordinates%s below 2^%d, extent below "
           "2^%d): %zu coordinates of %s moved to it, each by at most 2^%d\n",
           pp->round_exp, projected ? " in metres" : "", pp->round_mag, pp->round_ext, pp->rounded,
           in, pp->round_exp - 1);
@@ -744,8 +743,8 @@ static int read_input(const char *cmd, const mesh_args_t *o, qk_poly_t **poly, p
     if (st == QK_OK && o->round == MG_ROUND_AUTO)
       auto_note(nm, 0, pp);
     else if (st == QK_OK)
-      fprintf(stderr, "quadkit mesh: --round %s: %zu coordinates of %s moved to the grid\n",
-              o->round_text, pp->rounded, nm);
+      cli_msg("quadkit mesh: --round %s: %zu coordinates of %s moved to the grid\n", o->round_text,
+              pp->rounded, nm);
     else
       snprintf(err.message, sizeof err.message,
                "--round %s: a rounded coordinate is beyond the largest double", o->round_text),

@@ -306,8 +306,7 @@ static int move_row(const char *path, unsigned long ln, row_t *r, scene_t *s) {
    * silently lost (moves are in frame order, so the object's last move tells). */
   if (s->o[i].mline && s->o[i].mframe == frame) {
     char buf[41];
-    fprintf(stderr,
-            "quadkit world: %s:%lu: id %s moves twice in frame %lu (also on line %lu): one "
+    cli_msg("quadkit world: %s:%lu: id %s moves twice in frame %lu (also on line %lu): one "
             "shape per object and frame\n",
             path, ln, cut40(r->f[1], buf), (unsigned long)frame, s->o[i].mline);
     return CLI_BAD_INPUT;

@@ -2,7 +2,8 @@
 # CLI regressions from the fifty-sixth session's review of how outputs are written (each
 # block failed before its fix): a name of an open descriptor (-o /dev/stdout) replaced the
 # file the shell had redirected it to, the temporary beside an output was opened through
-# whatever sat at its name, and a replaced output lost its permissions.
+# whatever sat at its name, a replaced output lost its permissions, and two messages
+# printed file names raw.
 # shellcheck source=lib/common.bash
 source "$(dirname "${BASH_SOURCE[0]}")/lib/common.bash" "$@"
 
@@ -62,5 +63,18 @@ echo old >"$tmp/group.csv"
 chmod 0640 "$tmp/group.csv"
 "$cli" tree "$tmp/p.csv" --svg "$tmp/group.csv" >/dev/null
 same_text "0640 picture replaced: still 0640" "$(stat -c %a "$tmp/group.csv")" "640"
+
+# ---- file names in messages: control characters escaped ------------------------------------
+# Two messages printed the name with fprintf, so an escape sequence in a file name reached
+# the terminal (every other message writes it as \x1B): world's "moves twice" and mesh's
+# --round notes.
+E=$(printf '\033')
+printf '0,disc,0,0,1,0\n1,disc,5,5,1,0\n' >"$tmp/wo.csv"
+printf '0,0,1,1,1,0\n0,0,2,2,1,0\n' >"$tmp/wm${E}[31m.csv"
+msg=$("$cli" world "$tmp/wo.csv" "$tmp/wm${E}[31m.csv" 2>&1 >/dev/null)
+same_text "world, moves twice: the name escaped" "$(grep -c "$E" <<<"$msg")|$(grep -c 'wm\\x1B\[31m.csv:2: id 0 moves twice' <<<"$msg")" "0|1"
+printf '4 2 0 0\n0 0 0\n1 4.0000001 0\n2 4 4\n3 0 4\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n0\n' >"$tmp/r${E}[31m.poly"
+msg=$("$cli" mesh "$tmp/r${E}[31m.poly" -o "$tmp/rm" --round 0.5 2>&1 >/dev/null)
+same_text "mesh --round: the name escaped" "$(grep -c "$E" <<<"$msg")|$(grep -c 'r\\x1B\[31m.poly moved to the grid' <<<"$msg")" "0|1"
 
 report
