@@ -44,12 +44,14 @@ typedef struct reader {
   unsigned long sec_n, sec_line;
   size_t sec_fields; /* the fewest fields a row of that section has */
   char hint[128];
+  size_t comma_tok; /* next_line's -5 */
 } reader_t;
 
 /* Read the next line holding a token. Returns 1, 0 at end of input, -1 out of memory,
  * -2 for a NUL byte (binary data, which no text format holds), -3 for a carriage return
  * not followed by a line feed (CR-only line ends would read as one long line), -4 for a
- * line longer than POLY_MAX_LINE (reading stops there). */
+ * line longer than POLY_MAX_LINE (reading stops there), -5 for a decimal comma (tokens
+ * comma_tok - 1 and comma_tok). */
 static int next_line(reader_t *r) {
   for (;;) {
     size_t n = 0;
@@ -92,13 +94,34 @@ static int next_line(reader_t *r) {
     char *s = r->buf;
     /* A UTF-8 byte order mark opening the file (Windows editors write one) is not text. */
     if (r->line == 1 && !strncmp(s, "\xEF\xBB\xBF", 3)) s += 3;
+    /* Fields are separated by blanks, commas or both. A comma alone between two digits in
+     * a row whose other fields are separated by blanks is a decimal comma ("3 0,5 4" read
+     * as x = 0, y = 5 and a boundary marker 4, meshed without a word): refused. */
+    int blank_sep = 0;
+    size_t tight = 0; /* the token after such a comma (0: none) */
+    char cut = 0;     /* the separator overwritten by the last token's end */
     for (;;) {
-      while (*s == ' ' || *s == '\t' || *s == '\r' || *s == ',') s++;
+      int commas = cut == ',', blanks = cut && cut != ',';
+      for (; *s == ' ' || *s == '\t' || *s == '\r' || *s == ','; s++) {
+        if (*s == ',')
+          commas++;
+        else
+          blanks = 1;
+      }
       if (!*s) break;
+      if (r->ntok > 0 && !commas) blank_sep = 1;
+      if (r->ntok > 0 && commas == 1 && !blanks && !tight && s[-2] >= '0' && s[-2] <= '9' &&
+          *s >= '0' && *s <= '9')
+        tight = r->ntok;
       if (r->ntok < POLY_MAX_TOKENS) r->tok[r->ntok] = s;
       r->ntok++;
       while (*s && *s != ' ' && *s != '\t' && *s != '\r' && *s != ',') s++;
+      cut = *s;
       if (*s) *s++ = '\0';
+    }
+    if (tight && blank_sep && tight < POLY_MAX_TOKENS) {
+      r->comma_tok = tight;
+      return -5;
     }
     if (r->ntok > 0) return 1;
   }
@@ -413,6 +436,11 @@ static qk_status_t maybe_line(reader_t *r, qk_mesh_error_t *err, int *got) {
   if (g == -3)
     return rfail(r, err, QK_ERR_PARSE,
                  "a carriage return inside the line (line ends must be LF or CRLF, not CR alone)");
+  if (g == -5)
+    return rfail(r, err, QK_ERR_PARSE,
+                 "'%s,%s': a decimal comma? Numbers take a decimal point; fields are separated "
+                 "by blanks or commas",
+                 r->tok[r->comma_tok - 1], r->tok[r->comma_tok]);
   if (g < 0) return rfail(r, err, QK_ERR_NOMEM, "out of memory");
   if (g == 0 && r->io_error) return rfail(r, err, QK_ERR_IO, "read error");
   *got = g;

@@ -56,6 +56,13 @@ poly_case hfew "$V$S"'2\n0 1 1\n0\n' \
   '13: hole 0: expected x and y only, found 1 field \(fewer hole rows than the 2 that line 11 declares\?\)$'
 poly_case rfew "$V$S"'0\n2\n0 1 1 5\n1\n' \
   '14: region 1: expected 4 or 5 fields, found 1 \(fewer region rows than the 2 that line 12 declares\?\)$'
+# a decimal comma in a row of blank-separated fields: "3 0,5 4" with a marker declared was
+# read as x = 0, y = 5, marker 4 and meshed (exit 0); rows separated by commas throughout
+# still read (guard)
+poly_case dcomma '4 2 0 1\n0 0 0 1\n1 4 0 1\n2 4 4 1\n3 0,5 4\n'"$S"'0\n' \
+  "5: '0,5': a decimal comma\\? Numbers take a decimal point; fields are separated by blanks or commas$"
+printf '4 2 0 0\n0,0,0\n1, 4, 0\n2,4,4\n3 , 0 , 4\n4,0\n0,0,1\n1,1,2\n2,2,3\n3,3,0\n0\n' >"$tmp/commas.poly"
+expect 0 '"triangles": 32' -- "$cli" mesh "$tmp/commas.poly" -o "$tmp/commas" --stats
 # (numbered as the file numbers its rows: a file from 1 said "region 1" for its second row)
 poly_case rfew1 '4 2 0 0\n1 0 0\n2 4 0\n3 4 4\n4 0 4\n4 0\n1 1 2\n2 2 3\n3 3 4\n4 4 1\n0\n2\n1 1 1 5\n2\n' \
   '14: region 2: expected 4 or 5 fields, found 1 \(fewer region rows than the 2 that line 12 declares\?\)$'
