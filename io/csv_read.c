@@ -102,6 +102,19 @@ static qk_status_t parse_columns(reader_t *r) {
   return QK_OK;
 }
 
+/* The length of out[0, n) without a UTF-8 character cut at its end: the lead byte and the
+ * continuation bytes after it go when fewer than the lead byte announces. */
+static size_t utf8_whole(const char *out, size_t n) {
+  size_t k = n;
+  while (k > 0 && n - k < 4 && ((unsigned char)out[k - 1] & 0xC0) == 0x80) k--;
+  if (k > 0) {
+    const unsigned char lead = (unsigned char)out[k - 1];
+    const size_t want = lead >= 0xF0 ? 4 : lead >= 0xE0 ? 3 : lead >= 0xC0 ? 2 : 1;
+    if (want > 1 && n - (k - 1) < want) return k - 1;
+  }
+  return n;
+}
+
 /* A field's value for a message: its first 40 bytes as the value reads (a quoted field's
  * "" as one quote: the text between the quotes of "1""" is shown as 1", not 1""), not cut
  * inside a UTF-8 character. */
@@ -115,16 +128,7 @@ static void field_value(const char *line, const qk__span_t *sp, char *out, size_
     out[n] = '\0';
     return;
   }
-  /* Cut: a character cut at the end goes, its lead byte and the continuation bytes after
-   * it, when fewer than the lead byte announces. */
-  size_t k = n;
-  while (k > 0 && n - k < 4 && ((unsigned char)out[k - 1] & 0xC0) == 0x80) k--;
-  if (k > 0) {
-    const unsigned char lead = (unsigned char)out[k - 1];
-    const size_t want = lead >= 0xF0 ? 4 : lead >= 0xE0 ? 3 : lead >= 0xC0 ? 2 : 1;
-    if (want > 1 && n - (k - 1) < want) n = k - 1;
-  }
-  out[n] = '\0';
+  out[utf8_whole(out, n)] = '\0';
 }
 
 /* Does the (possibly quoted, blank-padded) field spell `name`? */
@@ -141,14 +145,20 @@ static int field_is(const char *line, const qk__span_t *sp, const char *name, si
   return i == len;
 }
 
-/* Copy a field's text (quotes undone, cut short) into a label. */
+/* Copy a field's text (quotes undone) into a label; a longer one is cut, not inside a
+ * UTF-8 character, and ends in "..." (it was cut at 47 bytes, mid-word or mid-character). */
 static void field_label(const char *line, const qk__span_t *sp, char *out) {
-  size_t i = 0, b = sp->b, e = sp->e;
+  size_t i = 0, b = sp->b, e = sp->e, j = b;
   while (b < e && is_blank(line[b])) b++;
   while (e > b && is_blank(line[e - 1])) e--;
-  for (size_t j = b; j < e && i + 1 < NAME_LEN; j++) {
+  for (j = b; j < e && i + 1 < NAME_LEN; j++) {
     if (sp->quoted && line[j] == '"') j++;
     out[i++] = line[j];
+  }
+  if (j < e) { /* cut */
+    i = utf8_whole(out, i < NAME_LEN - 4 ? i : NAME_LEN - 4);
+    memcpy(out + i, "...", 3);
+    i += 3;
   }
   out[i] = '\0';
 }
@@ -226,9 +236,12 @@ static qk_status_t read_header(reader_t *r, const char *line, size_t len, unsign
   }
   for (size_t c = 0; c < r->ncols; c++) {
     if (r->col[c] == 0)
-      return fail(r, QK_ERR_PARSE, lineno, 0, SIZE_MAX,
-                  "no column named '%.*s' in the header (%zu fields: '%.100s')",
-                  (int)r->want_len[c], r->want[c], k, line);
+      return fail(
+          r, QK_ERR_PARSE, lineno, 0, SIZE_MAX,
+          "no column named '%.*s%s' in the header (%zu fields: '%.*s%s')",
+          (int)utf8_whole(r->want[c], r->want_len[c] < NAME_LEN ? r->want_len[c] : NAME_LEN),
+          r->want[c], r->want_len[c] > NAME_LEN ? "..." : "", k,
+          (int)utf8_whole(line, len < 100 ? len : 100), line, len > 100 ? "..." : "");
     if (r->col[c] > r->maxcol) r->maxcol = r->col[c];
   }
   qk_status_t st = distinct_columns(r, lineno);

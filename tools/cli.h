@@ -142,6 +142,9 @@ int cli_read_queries(const char *path, const char *xy, cli_rows_t *rows, qk_poin
  * text is NULL). */
 void cli_write_fields(FILE *f, const char *text, size_t width, const char *prefix);
 
+/* val for a message: itself when at most max bytes long, else its first max bytes (a
+ * UTF-8 character not cut in two) and "...", in buf (max + 4 bytes). */
+const char *cli_cut(const char *val, size_t max, char *buf);
 /* Print a message to stderr (printf-style), every byte of it that a terminal would act on
  * written as \xNN: control characters but newline and tab, DEL, C1 controls and bytes
  * that are not UTF-8 (messages quote input text, which may hold escape sequences that

@@ -430,7 +430,7 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
   char *fx = NULL, *fy = NULL;
   size_t fcap = 0;
   const char *bad = NULL;
-  char xname[64] = "", yname[64] = ""; /* the header's names of the x and y fields */
+  char xname[256] = "", yname[256] = ""; /* the header's names of the x and y fields */
   /* A record is a line, or several when a quoted field holds line breaks: messages name
    * the physical line where it starts. */
   while ((len = cli_read_record(&rd, &bad)) >= 0) {
@@ -524,11 +524,12 @@ static int join_stream(join_t *j, FILE *in, xy_spec_t *xy, int progress_on, long
        * reader says it (it said "FILE:LINE: field 2", leaving the column to count). */
       unsigned long fl, fc;
       field_at(line, col, (unsigned long)lineno, bom, &fl, &fc);
-      cli_msg("quadkit join: %s:%lu:%lu: field %d%s%s%s is %s: '%.40s'\n", j->pts_path, fl, fc,
-              col + 1, name[0] ? " (" : "", name, name[0] ? ")" : "",
+      char nbuf[52], vbuf[44];
+      cli_msg("quadkit join: %s:%lu:%lu: field %d%s%s%s is %s: '%s'\n", j->pts_path, fl, fc,
+              col + 1, name[0] ? " (" : "", cli_cut(name, 47, nbuf), name[0] ? ")" : "",
               (bx ? gx : gy) == -2 ? "below the smallest double (it would read as 0)"
                                    : "not a finite number",
-              bad);
+              cli_cut(bad, 40, vbuf));
       rc = CLI_BAD_INPUT;
       break;
     }

@@ -50,6 +50,16 @@ void cli_vmsg(const char *fmt, va_list ap) {
   if (buf != small) free(buf);
 }
 
+const char *cli_cut(const char *val, size_t max, char *buf) {
+  size_t n = strlen(val);
+  if (n <= max) return val;
+  n = max;
+  while (n > 0 && ((unsigned char)val[n] & 0xC0) == 0x80) n--; /* (val[n]: the first byte cut) */
+  memcpy(buf, val, n);
+  memcpy(buf + n, "...", 4);
+  return buf;
+}
+
 void cli_msg(const char *fmt, ...) {
   va_list ap;
   va_start(ap, fmt);

@@ -3,7 +3,7 @@
 # block failed before its fix): a name of an open descriptor (-o /dev/stdout) replaced the
 # file the shell had redirected it to, the temporary beside an output was opened through
 # whatever sat at its name, a replaced output lost its permissions, and two messages
-# printed file names raw.
+# printed file names raw, and names and values in messages were cut inside a character.
 # shellcheck source=lib/common.bash
 source "$(dirname "${BASH_SOURCE[0]}")/lib/common.bash" "$@"
 
@@ -76,5 +76,24 @@ same_text "world, moves twice: the name escaped" "$(grep -c "$E" <<<"$msg")|$(gr
 printf '4 2 0 0\n0 0 0\n1 4.0000001 0\n2 4 4\n3 0 4\n4 0\n0 0 1\n1 1 2\n2 2 3\n3 3 0\n0\n' >"$tmp/r${E}[31m.poly"
 msg=$("$cli" mesh "$tmp/r${E}[31m.poly" -o "$tmp/rm" --round 0.5 2>&1 >/dev/null)
 same_text "mesh --round: the name escaped" "$(grep -c "$E" <<<"$msg")|$(grep -c 'r\\x1B\[31m.poly moved to the grid' <<<"$msg")" "0|1"
+
+# ---- names and values in messages: cut whole, marked ---------------------------------------
+# A header name was cut at 47 bytes (mid-word, or inside a UTF-8 character, printed as
+# \xC3), join cut a value at 40 bytes and a name at 63 the same way, and "no column named"
+# overflowed the library's 256-byte message, losing its closing quote and parenthesis.
+a46=$(printf 'a%.0s' $(seq 46))
+printf 'x,%s\xc3\xa9\n1,abc\n' "$a46" >"$tmp/label.csv"
+msg=$("$cli" tree "$tmp/label.csv" 2>&1 >/dev/null)
+same_text "a long header name: cut whole, marked" "$(grep -c 'xC3' <<<"$msg")|$(grep -c "field 2 (${a46:0:44}\.\.\.) is not a number" <<<"$msg")" "0|1"
+printf '{"type":"FeatureCollection","features":[{"type":"Feature","properties":{},"geometry":{"type":"Polygon","coordinates":[[[0,0],[10,0],[10,10],[0,10],[0,0]]]}}]}' >"$tmp/sq.geojson"
+printf 'x,y\n1,%s\xc3\xa9\n' "${a46:0:39}" >"$tmp/jv.csv"
+msg=$("$cli" join "$tmp/sq.geojson" "$tmp/jv.csv" --planar 2>&1 >/dev/null)
+same_text "join, a long value: cut whole, marked" "$(grep -c 'xC3' <<<"$msg")|$(grep -c "'${a46:0:39}\.\.\.'\$" <<<"$msg")" "0|1"
+printf 'x,%s\xc3\xa9bbbbbbbbbbbbbbbbbbbbbbb\n1,abc\n' "$a46" >"$tmp/jl.csv"
+msg=$("$cli" join "$tmp/sq.geojson" "$tmp/jl.csv" --planar 2>&1 >/dev/null)
+same_text "join, a long name: cut whole, marked" "$(grep -c 'xC3' <<<"$msg")|$(grep -c "field 2 (${a46}\.\.\.) is not a finite number" <<<"$msg")" "0|1"
+long=$(printf 'c%.0s' $(seq 150))
+msg=$("$cli" tree "$tmp/p.csv" --xy "$long,y" 2>&1 >/dev/null)
+same_text "no column named a long name: the message whole" "$(grep -c "no column named '${long:0:48}\.\.\.' in the header (2 fields: 'x,y')\$" <<<"$msg")" "1"
 
 report
