@@ -143,7 +143,7 @@ static qk_status_t split_piece(qk__gm_t *g, uint32_t a, uint32_t b, uint32_t s, 
       snprintf(has, sizeof has, "2^-%d, and at the apex of a small input angle it must be exact",
                bud < 62 ? bud : 62);
     else if (bud < 1)
-      snprintf(has, sizeof has, "none inside it");
+      snprintf(has, sizeof has, "none guaranteed");
     else
       snprintf(has, sizeof has, "2^-%d", bud < 62 ? bud : 62);
     return qk__mesh_fail(g->err, QK_ERR_GEOMETRY, line,

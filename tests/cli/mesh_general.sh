@@ -58,7 +58,7 @@ expect 1 "needs a split point .* Rounding cannot help: --round auto's grid 2\\^-
 # No exact split point at all: the advice is rounding, also at an unproven --min-angle
 # (review6_data.sh has the angle's advice).
 printf '3 2 0 0\n0 0.1 0.2\n1 1.3 0.05\n2 0.7 1.1\n3 0\n0 0 1\n1 1 2\n2 2 0\n0\n' > "$tmp/dec.poly"
-expect 1 'needs a split point.*exact ones: none inside it. Round the input to a grid: --round auto \(2\^-25 here\)$' -- "$cli" mesh "$tmp/dec.poly" --max-size 0.05 --min-angle 30 -o "$tmp/bad"
+expect 1 'needs a split point.*exact ones: none guaranteed. Round the input to a grid: --round auto \(2\^-25 here\)$' -- "$cli" mesh "$tmp/dec.poly" --max-size 0.05 --min-angle 30 -o "$tmp/bad"
 ls "$tmp"/bad* >/dev/null 2>&1 && fail "output written for bad input"
 # An open chain encloses nothing: an error saying so, not an empty mesh.
 printf '3 2 0 0\n0 0 0\n1 4 1\n2 8 0\n2 0\n0 0 1\n1 1 2\n0\n' >"$tmp/open.poly"

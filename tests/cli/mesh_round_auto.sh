@@ -11,7 +11,7 @@ source "$(dirname "${BASH_SOURCE[0]}")/lib/common.bash" "$@"
 
 # ---- decimal coordinates: refused without --round, meshed with --round auto ------------
 printf '4 2 0 0\n1 0.1 0.1\n2 37.7 0.2\n3 21.3 22.9\n4 3.3 19.1\n4 0\n1 1 2\n2 2 3\n3 3 4\n4 4 1\n0\n' >"$tmp/t2.poly"
-expect 1 "^quadkit mesh: $tmp/t2.poly:7: segment 1 \\(line 7\\) from \\(0.10000000000000001, 0.10000000000000001\\) to \\(37.700000000000003, 0.20000000000000001\\) needs a split point at steps of 2\\^-1 of its length; exact ones: none inside it\\. Round the input to a grid: --round auto \\(2\\^-20 here\\)$" \
+expect 1 "^quadkit mesh: $tmp/t2.poly:7: segment 1 \\(line 7\\) from \\(0.10000000000000001, 0.10000000000000001\\) to \\(37.700000000000003, 0.20000000000000001\\) needs a split point at steps of 2\\^-1 of its length; exact ones: none guaranteed\\. Round the input to a grid: --round auto \\(2\\^-20 here\\)$" \
   -- "$cli" mesh "$tmp/t2.poly" -o "$tmp/t2" --max-size 5
 nothing_written "$tmp/t2"
 # Coordinates below 2^6, extent 37.6 below 2^6: k = ceil((6 + 6 - 52) / 2) = -20.
