@@ -188,6 +188,14 @@ static int parse_marker(const char *s, int32_t *v) {
   return 1;
 }
 
+/* Why a marker was refused: an integer beyond 32 bits is one (it was "not an integer"). */
+static const char *marker_why(const char *s) {
+  double d;
+  if (parse_num(s, &d) && d == floor(d))
+    return "is out of range (boundary markers are 32-bit integers, -2147483648 to 2147483647)";
+  return "is not an integer";
+}
+
 /* Record marker v for item i (of the array *m, capacity *cap), growing it. */
 static qk_status_t put_marker(const qk_allocator_t *a, int32_t **m, size_t *cap, size_t i,
                               int32_t v) {
@@ -536,8 +544,8 @@ static qk_status_t read_vertices(reader_t *r, qk_poly_t *p, qk_mesh_error_t *err
     }
     int32_t mark = 0;
     if (nmark && r->ntok == 4 + nattr && !parse_marker(r->tok[3 + nattr], &mark))
-      return rfail(r, err, QK_ERR_PARSE, "vertex %lld: boundary marker '%s' is not an integer", idx,
-                   r->tok[3 + nattr]);
+      return rfail(r, err, QK_ERR_PARSE, "vertex %lld: boundary marker '%s' %s", idx,
+                   r->tok[3 + nattr], marker_why(r->tok[3 + nattr]));
     if (add_vertex(p, &p->cap, x, y, r->line) ||
         (nmark && put_marker(&p->alloc, &p->vmark, &p->cap.vm, p->nv - 1, mark)))
       return rfail(r, err, QK_ERR_NOMEM, "out of memory");
@@ -584,7 +592,8 @@ static qk_status_t read_segments(reader_t *r, qk_poly_t *p, qk_mesh_error_t *err
                      r->tok[1 + k], p->first_index, nv - 1 + p->first_index);
     int32_t mark = 0;
     if (r->ntok > 3 && !parse_marker(r->tok[3], &mark))
-      return rfail(r, err, QK_ERR_PARSE, "segment %lld: bad marker '%s'", idx, r->tok[3]);
+      return rfail(r, err, QK_ERR_PARSE, "segment %lld: boundary marker '%s' %s", idx, r->tok[3],
+                   marker_why(r->tok[3]));
     if (add_segment(p, &p->cap, (uint32_t)(e[0] - p->first_index),
                     (uint32_t)(e[1] - p->first_index), r->line) ||
         (smark && put_marker(&p->alloc, &p->smark, &p->cap.sm, p->ns - 1, mark)))

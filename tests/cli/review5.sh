@@ -63,6 +63,12 @@ poly_case dcomma '4 2 0 1\n0 0 0 1\n1 4 0 1\n2 4 4 1\n3 0,5 4\n'"$S"'0\n' \
   "5: '0,5': a decimal comma\\? Numbers take a decimal point; fields are separated by blanks or commas$"
 printf '4 2 0 0\n0,0,0\n1, 4, 0\n2,4,4\n3 , 0 , 4\n4,0\n0,0,1\n1,1,2\n2,2,3\n3,3,0\n0\n' >"$tmp/commas.poly"
 expect 0 '"triangles": 32' -- "$cli" mesh "$tmp/commas.poly" -o "$tmp/commas" --stats
+# a boundary marker beyond 32 bits is out of range (it was "not an integer"), for vertices
+# and segments alike (a segment's said "bad marker")
+poly_case mbig '4 2 0 1\n0 0 0 2147483648\n1 4 0 1\n2 4 4 1\n3 0 4 1\n'"$S"'0\n' \
+  "2: vertex 0: boundary marker '2147483648' is out of range \\(boundary markers are 32-bit integers, -2147483648 to 2147483647\\)$"
+poly_case sbad "$V"'4 1\n0 0 1 1\n1 1 2 1.5\n2 2 3 1\n3 3 0 1\n0\n' \
+  "8: segment 1: boundary marker '1.5' is not an integer$"
 # (numbered as the file numbers its rows: a file from 1 said "region 1" for its second row)
 poly_case rfew1 '4 2 0 0\n1 0 0\n2 4 0\n3 4 4\n4 0 4\n4 0\n1 1 2\n2 2 3\n3 3 4\n4 4 1\n0\n2\n1 1 1 5\n2\n' \
   '14: region 2: expected 4 or 5 fields, found 1 \(fewer region rows than the 2 that line 12 declares\?\)$'
