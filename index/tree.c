@@ -295,12 +295,12 @@ static void defrag_nodes(qk_tree_t *t) {
 
 /* After a removal: when the node arrays hold more than 1.2 times the nodes in use (plus 64),
  * give back the blocks merges freed (defrag_nodes: work proportional to the blocks freed);
- * when the point arrays hold more than 1.5 times the points (plus 256: a compaction leaves
- * about 1.2 times), compact them (O(n) after a third of them was given up, so O(1)
- * amortised a removal). So a tree that has shrunk holds about what a fresh build of its
- * points would (issue 10: 8.6 times that after 90% of 10^6 points were removed at capacity
- * 1, with nothing given back; and the node arrays' high-water mark took churn at capacity 1
- * to 1.19 times a fresh build). Optional: when memory is short the tree stays as it is,
+ * when the point arrays hold more than 1.5 times the points (plus 256 and a slot for every
+ * 64 nodes: a compaction leaves about 1.2 times and those slots), compact them (O(n) after a third
+ * of them was given up, so O(1) amortised a removal). So a tree that has shrunk holds about what a
+ * fresh build of its points would (issue 10: 8.6 times that after 90% of 10^6 points were removed
+ * at capacity 1, with nothing given back; and the node arrays' high-water mark took churn at
+ * capacity 1 to 1.19 times a fresh build). Optional: when memory is short the tree stays as it is,
  * valid and larger. */
 #if defined(__GNUC__)
 __attribute__((noinline))
@@ -311,9 +311,14 @@ give_back_now(qk_tree_t *t, bool nodes, bool slots) {
   if (slots) (void)compact(t, t->n_points / 16 + t->n_nodes / 64, QK_NONE);
 }
 
+/* (The trigger counts the headroom compact() leaves for the nodes, n_nodes / 64: without
+ * it, pairs of coincident points at capacity 1, chains of nodes to the depth cap of some
+ * 80 nodes a pair, left the compacted arrays above the trigger, and every removal
+ * compacted them all again: 20,000 removals took 125 s.) */
 static inline void give_back(qk_tree_t *t) {
   const size_t n = t->n_points, used = (size_t)t->n_nodes - 4 * (size_t)t->n_free_blocks;
-  const bool nodes = t->cap_nodes > used + used / 5 + 64, slots = t->cap_slots > n + n / 2 + 256;
+  const bool nodes = t->cap_nodes > used + used / 5 + 64,
+             slots = t->cap_slots > n + n / 2 + 256 + t->n_nodes / 64;
   if (nodes || slots) give_back_now(t, nodes, slots);
 }
 
