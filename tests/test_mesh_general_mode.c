@@ -2248,6 +2248,48 @@ static void test_mesh_general_mode_size_fn_below_unit(void **state) {
   qk_poly_free(p);
 }
 
+/* The up-front count of a size bound's triangles: two an h^2 of area let a QA helper's
+ * trapezoid at h = 1.5e-4 through as 7.8e7 triangles (under 2^27), which then made 1.97e8
+ * in 17.5 GB (its bounding box's grid too large for the interior lattice, the refinement
+ * alone makes about 7 an h^2). Refused at once now; the allocator here fails beyond 256 MB
+ * live, so that the count, not the memory, must refuse it. */
+static void *capped_fn(void *ud, void *ptr, size_t osize, size_t nsize) {
+  size_t *live = ud;
+  if (nsize == 0) {
+    if (ptr) *live -= osize;
+    free(ptr);
+    return NULL;
+  }
+  if (*live - (ptr ? osize : 0) + nsize > ((size_t)256 << 20)) return NULL;
+  void *q = realloc(ptr, nsize);
+  if (q) *live = *live - (ptr ? osize : 0) + nsize;
+  return q;
+}
+static void test_mesh_general_mode_size_count(void **state) {
+  (void)state;
+  const double xy[8] = {0, 0, 1, 0, 1, 1, 0.25, 1};
+  const uint32_t seg[8] = {0, 1, 1, 2, 2, 3, 3, 0};
+  qk_poly_t *p = NULL;
+  assert_int_equal(qk_poly_from_arrays(xy, 4, seg, 4, NULL, 0, NULL, &p, NULL), QK_OK);
+  size_t live = 0;
+  qk_allocator_t a = {capped_fn, &live};
+  qk_mesh_options_t o;
+  qk_mesh_options_init(&o);
+  o.mode = QK_MESH_GENERAL, o.max_size = 1.5e-4, o.allocator = &a;
+  qk_mesh_t *m = NULL;
+  qk_mesh_error_t err;
+  assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_ERR_LIMIT);
+  assert_null(m);
+  if (!strstr(err.message, "asks for about") || !strstr(err.message, "at most 2^27"))
+    fail_msg("%s", err.message);
+  /* (a bound the count lets through still meshes: a guard) */
+  o.max_size = 0.01;
+  assert_int_equal(qk_mesh_generate(p, &o, &m, &err), QK_OK);
+  qk_mesh_free(m);
+  qk_poly_free(p);
+  assert_int_equal(live, 0);
+}
+
 /* Integer, axis-parallel input of a huge extent: the book's mode would split every cell
  * along the segments down to unit size (a square of side 2^30: 2^32 unit steps; it ran out
  * of time and memory). QK_MESH_AUTO hands it to the general mode, as it does with what the
@@ -2545,6 +2587,7 @@ int main(void) {
       cmocka_unit_test(test_mesh_general_mode_comb),
       cmocka_unit_test(test_mesh_general_mode_size_fn_nonpositive),
       cmocka_unit_test(test_mesh_general_mode_size_fn_below_unit),
+      cmocka_unit_test(test_mesh_general_mode_size_count),
       cmocka_unit_test(test_mesh_general_mode_book_extent),
       cmocka_unit_test(test_mesh_general_mode_alloc_failure),
       cmocka_unit_test(test_mesh_general_mode_growth_copies),
