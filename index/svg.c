@@ -65,10 +65,5 @@ static qk_status_t write_svg(const qk_tree_t *t, FILE *f, unsigned width) {
 /* Runs in the C locale (index/textloc.h): the same bytes whatever locale the program or
  * the calling thread set ("400.000", never "400,000"). */
 qk_status_t qk_tree_write_svg(const qk_tree_t *t, FILE *f, unsigned width) {
-  qk__c_scope_t c;
-  qk_status_t st = qk__c_locale_enter(&c);
-  if (st != QK_OK) return st;
-  st = write_svg(t, f, width);
-  qk__c_locale_leave(&c);
-  return st;
+  QK__RETURN_IN_C_LOCALE(write_svg(t, f, width));
 }

@@ -38,4 +38,17 @@ typedef struct qk__c_scope {
 qk_status_t qk__c_locale_enter(qk__c_scope_t *s);
 void qk__c_locale_leave(const qk__c_scope_t *s);
 
+/* The body of a public writer: return `call` (a qk_status_t) made in the C locale, or
+ * QK_ERR_NOMEM when the C locale could not be made. */
+#define QK__RETURN_IN_C_LOCALE(call)                                                               \
+  do {                                                                                             \
+    qk__c_scope_t scope_;                                                                          \
+    qk_status_t st_ = qk__c_locale_enter(&scope_);                                                 \
+    if (st_ == QK_OK) {                                                                            \
+      st_ = (call);                                                                                \
+      qk__c_locale_leave(&scope_);                                                                 \
+    }                                                                                              \
+    return st_;                                                                                    \
+  } while (0)
+
 #endif /* QUADKIT_INDEX_TEXTLOC_H */

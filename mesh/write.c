@@ -373,55 +373,25 @@ static qk_status_t write_svg(const qk_mesh_t *m, FILE *f, unsigned width) {
  * the same whatever locale the program or the calling thread set ("1.5", never "1,5"). */
 
 qk_status_t qk_mesh_write_node(const qk_mesh_t *m, FILE *f, unsigned first) {
-  qk__c_scope_t c;
-  qk_status_t st = qk__c_locale_enter(&c);
-  if (st != QK_OK) return st;
-  st = write_node(m, f, first);
-  qk__c_locale_leave(&c);
-  return st;
+  QK__RETURN_IN_C_LOCALE(write_node(m, f, first));
 }
 
 qk_status_t qk_mesh_write_ele(const qk_mesh_t *m, FILE *f, unsigned first) {
-  qk__c_scope_t c;
-  qk_status_t st = qk__c_locale_enter(&c);
-  if (st != QK_OK) return st;
-  st = write_ele(m, f, first);
-  qk__c_locale_leave(&c);
-  return st;
+  QK__RETURN_IN_C_LOCALE(write_ele(m, f, first));
 }
 
 qk_status_t qk_mesh_write_poly(const qk_mesh_t *m, FILE *f, unsigned first) {
-  qk__c_scope_t c;
-  qk_status_t st = qk__c_locale_enter(&c);
-  if (st != QK_OK) return st;
-  st = write_poly(m, f, first);
-  qk__c_locale_leave(&c);
-  return st;
+  QK__RETURN_IN_C_LOCALE(write_poly(m, f, first));
 }
 
 qk_status_t qk_mesh_write_msh(const qk_mesh_t *m, FILE *f) {
-  qk__c_scope_t c;
-  qk_status_t st = qk__c_locale_enter(&c);
-  if (st != QK_OK) return st;
-  st = write_msh(m, f);
-  qk__c_locale_leave(&c);
-  return st;
+  QK__RETURN_IN_C_LOCALE(write_msh(m, f));
 }
 
 qk_status_t qk_mesh_write_vtu(const qk_mesh_t *m, FILE *f) {
-  qk__c_scope_t c;
-  qk_status_t st = qk__c_locale_enter(&c);
-  if (st != QK_OK) return st;
-  st = write_vtu(m, f);
-  qk__c_locale_leave(&c);
-  return st;
+  QK__RETURN_IN_C_LOCALE(write_vtu(m, f));
 }
 
 qk_status_t qk_mesh_write_svg(const qk_mesh_t *m, FILE *f, unsigned width) {
-  qk__c_scope_t c;
-  qk_status_t st = qk__c_locale_enter(&c);
-  if (st != QK_OK) return st;
-  st = write_svg(m, f, width);
-  qk__c_locale_leave(&c);
-  return st;
+  QK__RETURN_IN_C_LOCALE(write_svg(m, f, width));
 }

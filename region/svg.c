@@ -96,10 +96,5 @@ static qk_status_t write_svg(const qk_region_t *r, FILE *f, unsigned width) {
 /* Runs in the C locale (index/textloc.h): the same bytes whatever locale the program or
  * the calling thread set ("400.000", never "400,000"). */
 qk_status_t qk_region_write_svg(const qk_region_t *r, FILE *f, unsigned width) {
-  qk__c_scope_t c;
-  qk_status_t st = qk__c_locale_enter(&c);
-  if (st != QK_OK) return st;
-  st = write_svg(r, f, width);
-  qk__c_locale_leave(&c);
-  return st;
+  QK__RETURN_IN_C_LOCALE(write_svg(r, f, width));
 }
