@@ -1373,33 +1373,90 @@ qk_status_t qk_world_raycast_batch(const qk_world_t *w, const qk_point_t *from,
 
 /* ---- k nearest -------------------------------------------------------------------- */
 
+/* At most this many nearest are kept sorted by insertion (cheaper for small k); beyond,
+ * in a bounded max-heap (the worst at out[0]) sorted once at the end: the insertion sort's
+ * shifts made k = n from the middle of a world quadratic (k = n = 200 000: 6.7 s). */
+#ifndef QK__KSORT_MAX
+#define QK__KSORT_MAX 32
+#endif
+
 typedef struct kctx {
   qk_point_t p;
-  qk_world_hit_t *out; /* sorted ascending by (t, slot), n of k filled */
+  qk_world_hit_t *out; /* n of k filled: sorted ascending by (t, slot), or (k beyond
+                          QK__KSORT_MAX) a max-heap by (t, slot) until k_finish */
   size_t k, n, seen;
 } kctx_t;
+
+static inline int khit_less(const qk_world_hit_t *a, const qk_world_hit_t *b) {
+  return hit_less(a->t, (uint32_t)a->h, b->t, (uint32_t)b->h);
+}
+
+/* The worst of the k kept (n == k): the distance beyond which nothing enters. */
+static inline const qk_world_hit_t *k_worst(const kctx_t *c) {
+  return &c->out[c->k > QK__KSORT_MAX ? 0 : c->n - 1];
+}
+
+static void khp_sift_down(qk_world_hit_t *h, size_t n, size_t i) {
+  const qk_world_hit_t v = h[i];
+  for (;;) {
+    size_t l = 2 * i + 1, m = i;
+    const qk_world_hit_t *best = &v;
+    if (l < n && khit_less(best, &h[l])) m = l, best = &h[l];
+    if (l + 1 < n && khit_less(best, &h[l + 1])) m = l + 1;
+    if (m == i) break;
+    h[i] = h[m];
+    i = m;
+  }
+  h[i] = v;
+}
+
+/* The hits in order (best first), the heap's in place. */
+static void k_finish(kctx_t *c) {
+  if (c->k <= QK__KSORT_MAX) return;
+  for (size_t n = c->n; n > 1;) {
+    const qk_world_hit_t top = c->out[0];
+    c->out[0] = c->out[--n];
+    khp_sift_down(c->out, n, 0);
+    c->out[n] = top;
+  }
+}
 
 static int k_visit(const qk_world_t *w, uint32_t i, const qk_box_t *b, void *ud) {
   kctx_t *c = ud;
   c->seen++;
-  if (c->n == c->k && box_like(&w->obj[i])) {
+  const int full = c->n == c->k;
+  if (full && box_like(&w->obj[i])) {
     /* Farther than the k-th so far by its box: not among the k.
      * The squared box distance in doubles is within a few ulps of its real value, far
      * inside the 2^-40 left here, and its sign parts are exact. */
     double dx = qk__max(qk__max(b->xmin - c->p.x, c->p.x - b->xmax), 0);
     double dy = qk__max(qk__max(b->ymin - c->p.y, c->p.y - b->ymax), 0);
-    double kt = c->out[c->n - 1].t;
+    double kt = k_worst(c)->t;
     if (dx * dx + dy * dy > kt * kt * (1 + 0x1p-40)) return 0;
   }
   qk_shape_t sh = qk__wshape(&w->obj[i]);
-  double d = qk__shape_dist(&sh, c->p);
-  if (c->n == c->k && !hit_less(d, i, c->out[c->n - 1].t, (uint32_t)c->out[c->n - 1].h)) return 0;
-  size_t j = c->n < c->k ? c->n++ : c->n - 1;
-  while (j > 0 && hit_less(d, i, c->out[j - 1].t, (uint32_t)c->out[j - 1].h)) {
+  const qk_world_hit_t v = {qk__handle(w, i), qk__shape_dist(&sh, c->p)};
+  if (full && !khit_less(&v, k_worst(c))) return 0;
+  if (c->k > QK__KSORT_MAX) {
+    if (full) {
+      c->out[0] = v;
+      khp_sift_down(c->out, c->n, 0);
+      return 0;
+    }
+    size_t j = c->n++;
+    while (j > 0 && khit_less(&c->out[(j - 1) / 2], &v)) {
+      c->out[j] = c->out[(j - 1) / 2];
+      j = (j - 1) / 2;
+    }
+    c->out[j] = v;
+    return 0;
+  }
+  size_t j = full ? c->n - 1 : c->n++;
+  while (j > 0 && khit_less(&v, &c->out[j - 1])) {
     c->out[j] = c->out[j - 1];
     j--;
   }
-  c->out[j] = (qk_world_hit_t){qk__handle(w, i), d};
+  c->out[j] = v;
   return 0;
 }
 
@@ -1458,7 +1515,7 @@ static double box_lb2(qk_point_t p, const qk_box_t *b) {
  * margin knn_tree's comment gives. */
 static inline int knn_beyond(const kctx_t *c, double lb) {
   if (c->n < c->k) return 0;
-  const double kt = c->out[c->k - 1].t;
+  const double kt = k_worst(c)->t;
   return lb * (1 - 0x1p-18) > kt * kt;
 }
 
@@ -1467,7 +1524,7 @@ static inline int knn_beyond(const kctx_t *c, double lb) {
  * while fewer than k are found: a crowded cell's groups outside it are not read. */
 static qk_box_t knn_box(const kctx_t *c) {
   if (c->n < c->k) return (qk_box_t){-INFINITY, -INFINITY, INFINITY, INFINITY};
-  const double h = c->out[c->k - 1].t * (1 + 0x1p-17) + (fabs(c->p.x) + fabs(c->p.y)) * 0x1p-50;
+  const double h = k_worst(c)->t * (1 + 0x1p-17) + (fabs(c->p.x) + fabs(c->p.y)) * 0x1p-50;
   return (qk_box_t){c->p.x - h, c->p.y - h, c->p.x + h, c->p.y + h};
 }
 
@@ -1540,6 +1597,7 @@ qk_status_t qk_world_knn(const qk_world_t *w, qk_point_t p, size_t k, qk_world_h
     if (tree_next > 0) {
       tree_next = -1; /* (once: a heap that overflowed would overflow again) */
       if (tree_ready(w) && knn_tree(w, &c)) {
+        k_finish(&c);
         *n_out = c.n;
         return QK_OK;
       }
@@ -1547,7 +1605,8 @@ qk_status_t qk_world_knn(const qk_world_t *w, qk_point_t p, size_t k, qk_world_h
     c = (kctx_t){p, out, k, 0, 0};
     qk_box_t qb = {p.x - r, p.y - r, p.x + r, p.y + r};
     qk__world_visit(w, qb, k_visit, &c);
-    if (c.seen == w->n_live || (c.n == k && c.out[k - 1].t <= r * (1 - 0x1p-20))) {
+    if (c.seen == w->n_live || (c.n == k && k_worst(&c)->t <= r * (1 - 0x1p-20))) {
+      k_finish(&c);
       *n_out = c.n;
       return QK_OK;
     }

@@ -6,6 +6,8 @@
  *    (short rows and long rows take different merges; both occur), objects overlapping a
  *    random box / disc / point / segment, all hits of a segment (as a set, in order of t)
  *    and the first hit, k nearest (distances); queries also between moves and the update;
+ *  - k nearest for k from 1 to beyond the number of objects, hit by hit in order against
+ *    an exact oracle, among exact ties (integer points and boxes, slots reused);
  *  - a huge world: unit objects at coordinates near 1e9, and sizes 1e-3 .. 1e3 together;
  *  - the bench's clustered mixed-size scene, small (boxes of 0.03 .. 30 on a 1/64 grid in
  *    eight clusters, moving; also with discs, segments and points): large objects over
@@ -4373,12 +4375,130 @@ static void test_world_knn_batch_layout(void **s) {
   qk_world_free(w);
 }
 
+/* qk_world_knn for k from 1 to beyond the number of objects (the large k are kept in a
+ * heap, the small ones sorted by insertion) against brute force, object by object in
+ * order: points and boxes at small integer coordinates (their distances are then exact
+ * square roots of exact sums, the oracle's too: ties are exact), many coincident or at
+ * equal distances, boxes holding the query point (distance 0), slots reused after
+ * removals so that slot order is not insertion order; ties go by slot. From the middle
+ * (the tree's search), a corner, a point outside; after an update and with adds and
+ * removals pending; and the batch against single queries. */
+typedef struct {
+  ld d2;
+  uint32_t slot;
+  qk_handle_t h;
+} knn_ref_t;
+
+static int knn_ref_cmp(const void *a, const void *b) {
+  const knn_ref_t *x = a, *y = b;
+  if (x->d2 != y->d2) return x->d2 < y->d2 ? -1 : 1;
+  return x->slot < y->slot ? -1 : x->slot > y->slot;
+}
+
+static ld knn_axis(double v, double lo, double hi) {
+  return v < lo ? (ld)lo - v : v > hi ? (ld)v - hi : 0;
+}
+
+static void knn_check_large(qk_world_t *w, const qk_shape_t *sh, const qk_handle_t *hs, size_t n,
+                            qk_point_t p, size_t k) {
+  knn_ref_t *ref = malloc((n + 1) * sizeof *ref);
+  size_t live = 0;
+  for (size_t i = 0; i < n; i++) {
+    if (hs[i] == QK_HANDLE_NONE) continue;
+    const qk_shape_t *s = &sh[i];
+    const double x1 = s->kind == QK_SHAPE_BOX ? s->a : s->x;
+    const double y1 = s->kind == QK_SHAPE_BOX ? s->b : s->y;
+    const ld dx = knn_axis(p.x, s->x, x1), dy = knn_axis(p.y, s->y, y1);
+    ref[live++] = (knn_ref_t){dx * dx + dy * dy, (uint32_t)hs[i], hs[i]};
+  }
+  qsort(ref, live, sizeof *ref, knn_ref_cmp);
+  qk_world_hit_t *got = malloc((k + 1) * sizeof *got);
+  size_t ng = 0;
+  assert_int_equal(qk_world_knn(w, p, k, got, &ng), QK_OK);
+  assert_int_equal(ng, k < live ? k : live);
+  for (size_t i = 0; i < ng; i++)
+    if (got[i].h != ref[i].h || got[i].t != (double)sqrtl(ref[i].d2))
+      fail_msg("knn from (%g, %g), k %zu of %zu objects: hit %zu is slot %u at %.17g, not slot "
+               "%u at %.17g (seed %llu)",
+               p.x, p.y, k, live, i, (unsigned)(uint32_t)got[i].h, got[i].t, ref[i].slot,
+               (double)sqrtl(ref[i].d2), (unsigned long long)g_seed);
+  free(got);
+  free(ref);
+}
+
+static void test_world_knn_large_k(void **s) {
+  (void)s;
+  enum { N = 2400, MORE = 300 };
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 5151);
+  qk_world_t *w;
+  assert_int_equal(qk_world_new(NULL, &w), QK_OK);
+  qk_shape_t *sh = malloc((N + MORE) * sizeof *sh);
+  qk_handle_t *hs = malloc((N + MORE) * sizeof *hs);
+  size_t n = 0;
+  /* about a third boxes of integer sides 0 .. 3, the rest points, on a 40 x 40 grid */
+  for (; n < N; n++) {
+    const double x = qkt_rng_below(&r, 40), y = qkt_rng_below(&r, 40);
+    const double sx = qkt_rng_below(&r, 4), sy = qkt_rng_below(&r, 4);
+    sh[n] = qkt_rng_below(&r, 3) ? (qk_shape_t){QK_SHAPE_POINT, x, y, 0, 0}
+                                 : (qk_shape_t){QK_SHAPE_BOX, x, y, x + sx, y + sy};
+    assert_int_equal(qk_world_add(w, &sh[n], n, &hs[n]), QK_OK);
+  }
+  /* a quarter removed, as many added again (into the freed slots, in another order) */
+  for (size_t i = 0; i < N / 4; i++) {
+    const size_t j = qkt_rng_below(&r, N);
+    if (hs[j] == QK_HANDLE_NONE) continue;
+    assert_int_equal(qk_world_remove(w, hs[j]), QK_OK);
+    hs[j] = QK_HANDLE_NONE;
+  }
+  for (size_t i = 0; i < N; i++)
+    if (hs[i] == QK_HANDLE_NONE && qkt_rng_below(&r, 2))
+      assert_int_equal(qk_world_add(w, &sh[i], i, &hs[i]), QK_OK);
+  assert_int_equal(qk_world_update(w), QK_OK);
+  const qk_point_t ps[] = {{20, 20}, {0, 0}, {-50, 17}, {13.5, 27}, {39, 2.25}};
+  const size_t ks[] = {1, 2, 8, 31, 32, 33, 64, 100, 257, 1000, N - 700, N, N + 100};
+  for (int round = 0; round < 2; round++) {
+    for (size_t pi = 0; pi < sizeof ps / sizeof *ps; pi++)
+      for (size_t ki = 0; ki < sizeof ks / sizeof *ks; ki++)
+        knn_check_large(w, sh, hs, n, ps[pi], ks[ki]);
+    if (round) break;
+    /* pending: some added (past the last update) and removed */
+    for (; n < N + MORE; n++) {
+      const double x = qkt_rng_below(&r, 44), y = qkt_rng_below(&r, 44);
+      sh[n] = (qk_shape_t){QK_SHAPE_POINT, x, y, 0, 0};
+      assert_int_equal(qk_world_add(w, &sh[n], n, &hs[n]), QK_OK);
+    }
+    for (size_t i = 0; i < MORE; i++) {
+      const size_t j = qkt_rng_below(&r, N + MORE);
+      if (hs[j] == QK_HANDLE_NONE) continue;
+      assert_int_equal(qk_world_remove(w, hs[j]), QK_OK);
+      hs[j] = QK_HANDLE_NONE;
+    }
+  }
+  /* the batch, with k beyond the number of objects, as single queries */
+  enum { K = N + MORE + 7, NP = sizeof ps / sizeof *ps };
+  qk_world_hit_t *bat = malloc((size_t)NP * K * sizeof *bat), *one = malloc(K * sizeof *one);
+  size_t counts[NP];
+  assert_int_equal(qk_world_knn_batch(w, ps, NP, K, bat, counts), QK_OK);
+  for (size_t i = 0; i < NP; i++) {
+    size_t n1;
+    assert_int_equal(qk_world_knn(w, ps[i], K, one, &n1), QK_OK);
+    assert_int_equal(counts[i], n1);
+    for (size_t j = 0; j < n1; j++)
+      assert_true(bat[i * K + j].h == one[j].h && bat[i * K + j].t == one[j].t);
+  }
+  free(bat), free(one);
+  free(sh), free(hs);
+  qk_world_free(w);
+}
+
 int main(void) {
   g_seed = qkt_seed(20261130);
   qkt_filters_from_env();
   const struct CMUnitTest tests[] = {
       cmocka_unit_test(test_world_uniform),
       cmocka_unit_test(test_world_knn_batch_layout),
+      cmocka_unit_test(test_world_knn_large_k),
       cmocka_unit_test(test_world_clustered),
       cmocka_unit_test(test_world_dense_kept_scratch),
       cmocka_unit_test(test_world_dense_buckets),
