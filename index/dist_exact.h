@@ -74,4 +74,29 @@ static inline double qk__filter_hi(double r2) {
   return r2 < QK__FILTER_MAX ? r2 * (1 + QK__FILTER_REL) + QK__FILTER_ABS : INFINITY;
 }
 
+/*
+ * 2^-e for the exponent e of v > 0 (v = m 2^e, 0.5 <= m < 1), within [2^-1022, 2^1023]:
+ * v times it lies in [0.5, 1) unless v is below 2^-1022 or above 2^1022. The radius
+ * query, kNN and the collider's disc tests multiply their differences by it when the
+ * filter's squares would leave its range, below about 2^-530 (where they underflow
+ * under QK__FILTER_ABS) or from 2^500 (beyond QK__FILTER_MAX): a difference rounded once
+ * and then scaled exactly by a power of two (or, below 1, with an absolute error under
+ * 2^-1075 where it turns subnormal, as an underflowing product) keeps the bounds above,
+ * and one that overflows, scaled or not, is farther than any finite radius.
+ */
+static inline double qk__scale_of(double v) {
+  int ex;
+  (void)frexp(v, &ex);
+  ex = ex > 1022 ? 1022 : (ex < -1023 ? -1023 : ex);
+  return ldexp(1.0, -ex);
+}
+
+/* The scale for a radius (or a sum of radii) rs >= 0: 1 within [2^-400, 2^400] or
+ * infinite; 2^1023 for 0 (any nonzero difference then scales to at least 2^-51, far above
+ * the filter's absolute margin, so only coincident points pass); else qk__scale_of(rs). */
+static inline double qk__radius_scale(double rs) {
+  if ((rs >= 0x1p-400 && rs <= 0x1p400) || isinf(rs)) return 1.0;
+  return rs > 0 ? qk__scale_of(rs) : 0x1p1023;
+}
+
 #endif /* QUADKIT_INDEX_DIST_EXACT_H */

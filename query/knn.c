@@ -59,6 +59,7 @@ typedef struct best {
   /* The sorted search's first k candidates, in the order they came (fill_sort). */
   qk_neighbor_t *fill; /* (slot, squared distance) */
   double *keys;        /* their sort keys, 16-byte aligned, room for a power of two >= k */
+  double sc; /* the differences' scale, a power of two: 1 except for KIND_SCALED (knn_scale) */
 } best_t;
 
 /*
@@ -79,7 +80,7 @@ static inline void best_limits(best_t *b, double max_dist, double guess2) {
     b->lim0 = guess2;
     b->cap_lo = INFINITY;
   } else {
-    const double cap2 = max_dist * max_dist;
+    const double cs = max_dist * b->sc, cap2 = cs * cs;
     b->lim0 = kx_hi(cap2);
     b->cap_lo = kx_lo(cap2);
   }
@@ -122,10 +123,12 @@ static inline int in_cap(const qk_tree_t *t, double qx, double qy, const best_t 
 
 /* The reported distance of a squared distance d2 (that of slot s): sqrt, or beyond
  * 2^1000, where the square may have overflowed, hypot of the differences (as the radius
- * query reports it). */
+ * query reports it). d2 infinite (a scaled search's square, which is not the one
+ * reported): from the differences, the same value. */
 static inline double report_dist(const qk_tree_t *t, double qx, double qy, double d2, uint32_t s) {
   if (d2 < QK__FILTER_MAX) return sqrt(d2);
-  return hypot(qk__tree_xs(t)[s] - qx, qk__tree_ys(t)[s] - qy);
+  const double dx = qk__tree_xs(t)[s] - qx, dy = qk__tree_ys(t)[s] - qy, u2 = dx * dx + dy * dy;
+  return u2 < QK__FILTER_MAX ? sqrt(u2) : hypot(dx, dy);
 }
 
 /* The max-heap of (slot, squared distance) of the search for k > QK__KNN_SORTED, the
@@ -146,12 +149,14 @@ static void xheap_down(const qk_tree_t *t, double qx, double qy, qk_neighbor_t *
 }
 
 /* Offer a leaf's points to a heap of at most k. */
-static inline void scan_heap(const qk_tree_t *t, qk_node_t leaf, double qx, double qy, best_t *b) {
+static inline void scan_heap(const qk_tree_t *t, qk_node_t leaf, double qx, double qy, best_t *b,
+                             int scaled) {
   const uint32_t start = qk__node_start(t, leaf), count = qk__node_count(t, leaf);
   const double *px = qk__tree_xs(t) + start, *py = qk__tree_ys(t) + start;
   qk_neighbor_t *h = b->out;
+  const double sc = scaled ? b->sc : 1.0;
   for (uint32_t i = 0; i < count; i++) {
-    const double dx = px[i] - qx, dy = py[i] - qy;
+    const double dx = (px[i] - qx) * sc, dy = (py[i] - qy) * sc;
     const double d2 = dx * dx + dy * dy;
     if (!(d2 <= b->lim)) continue;
     const uint32_t s = start + i;
@@ -174,7 +179,8 @@ static inline void scan_heap(const qk_tree_t *t, qk_node_t leaf, double qx, doub
 }
 
 /* Sort the heap ascending in place, then slots to ids and squares to distances. */
-static void xheap_finish(const qk_tree_t *t, double qx, double qy, qk_neighbor_t *h, size_t n) {
+static void xheap_finish(const qk_tree_t *t, double qx, double qy, qk_neighbor_t *h, size_t n,
+                         int scaled) {
   for (size_t m = n; m > 1;) {
     const qk_neighbor_t top = h[0];
     h[0] = h[--m];
@@ -183,7 +189,8 @@ static void xheap_finish(const qk_tree_t *t, double qx, double qy, qk_neighbor_t
   }
   const qk_id_t *pid = qk__tree_ids(t);
   for (size_t i = 0; i < n; i++)
-    h[i] = (qk_neighbor_t){pid[h[i].id], report_dist(t, qx, qy, h[i].dist, h[i].id)};
+    h[i] = (qk_neighbor_t){pid[h[i].id],
+                           report_dist(t, qx, qy, scaled ? INFINITY : h[i].dist, h[i].id)};
 }
 
 /*
@@ -195,7 +202,8 @@ static void xheap_finish(const qk_tree_t *t, double qx, double qy, qk_neighbor_t
  * (Xn + Yn), the diagonal one last (Xf + Yf), and one comparison orders the other two.
  */
 static inline int expand(const qk_tree_t *t, qk__cell_entry_t *cur, uint32_t child, double qx,
-                         double qy, double e, double thr, qk__cell_entry_t *stack, int *sp) {
+                         double qy, double e, double sc, double thr, qk__cell_entry_t *stack,
+                         int *sp) {
   static const unsigned char quad[2][2] = {{QK_SW, QK_NW}, {QK_SE, QK_NE}}; /* [east][north] */
   const qk__cell_t c = cur->c;
   const double hs = qk__tree_side(t, c.depth + 1);
@@ -205,11 +213,14 @@ static inline int expand(const qk_tree_t *t, qk__cell_entry_t *cur, uint32_t chi
    * halves (gb), qk__gap's operations lane by lane, so the same values as below. */
   const __m128d vq = _mm_set_pd(qy, qx), vc = _mm_set_pd(c.y, c.x), vm = _mm_set_pd(ym, xm);
   const __m128d vh = _mm_set1_pd(hs), ve = _mm_set1_pd(e), zero = _mm_setzero_pd();
-  const __m128d ga = _mm_add_pd(_mm_max_pd(_mm_sub_pd(_mm_sub_pd(vc, ve), vq), zero),
-                                _mm_max_pd(_mm_sub_pd(vq, _mm_add_pd(vm, ve)), zero));
-  const __m128d gb =
-      _mm_add_pd(_mm_max_pd(_mm_sub_pd(_mm_sub_pd(vm, ve), vq), zero),
-                 _mm_max_pd(_mm_sub_pd(vq, _mm_add_pd(_mm_add_pd(vm, vh), ve)), zero));
+  __m128d ga = _mm_add_pd(_mm_max_pd(_mm_sub_pd(_mm_sub_pd(vc, ve), vq), zero),
+                          _mm_max_pd(_mm_sub_pd(vq, _mm_add_pd(vm, ve)), zero));
+  __m128d gb = _mm_add_pd(_mm_max_pd(_mm_sub_pd(_mm_sub_pd(vm, ve), vq), zero),
+                          _mm_max_pd(_mm_sub_pd(vq, _mm_add_pd(_mm_add_pd(vm, vh), ve)), zero));
+  if (sc != 1.0) { /* a scaled search (a constant 1 otherwise, and no code) */
+    ga = _mm_mul_pd(ga, _mm_set1_pd(sc));
+    gb = _mm_mul_pd(gb, _mm_set1_pd(sc));
+  }
   const int nearer = _mm_movemask_pd(_mm_cmplt_pd(gb, ga));
   const unsigned en = (unsigned)nearer & 1u, nn = (unsigned)nearer >> 1;
   const __m128d vn = _mm_min_pd(gb, ga), vf = _mm_max_pd(gb, ga);
@@ -221,8 +232,8 @@ static inline int expand(const qk_tree_t *t, qk__cell_entry_t *cur, uint32_t chi
   const double bff = _mm_cvtsd_f64(_mm_unpackhi_pd(s1, s1));
   const double bfn = _mm_cvtsd_f64(s2), bnf = _mm_cvtsd_f64(_mm_unpackhi_pd(s2, s2));
 #else
-  const double dxw = qk__gap(qx, c.x - e, xm + e), dxe = qk__gap(qx, xm - e, xm + hs + e);
-  const double dys = qk__gap(qy, c.y - e, ym + e), dyn = qk__gap(qy, ym - e, ym + hs + e);
+  const double dxw = qk__gap(qx, c.x - e, xm + e) * sc, dxe = qk__gap(qx, xm - e, xm + hs + e) * sc;
+  const double dys = qk__gap(qy, c.y - e, ym + e) * sc, dyn = qk__gap(qy, ym - e, ym + hs + e) * sc;
   const unsigned en = dxe < dxw, nn = dyn < dys; /* is the east / north half the nearer? */
   /* The nearer and farther per axis: the same values as choosing by en and nn. */
   const double xn = qk__min_d(dxe, dxw), xf = qk__max_d(dxe, dxw);
@@ -264,7 +275,8 @@ static inline int expand(const qk_tree_t *t, qk__cell_entry_t *cur, uint32_t chi
  */
 static QK__ALWAYS_INLINE void push_siblings(const qk_tree_t *t, qk__cell_t p, uint32_t child,
                                             unsigned skip, double qx, double qy, double e,
-                                            double thr, qk__cell_entry_t *stack, int *sp) {
+                                            double sc, double thr, qk__cell_entry_t *stack,
+                                            int *sp) {
   static const unsigned char quad[2][2] = {{QK_SW, QK_NW}, {QK_SE, QK_NE}}; /* [east][north] */
   const unsigned ex = (0x9u >> skip) & 1u,
                  no = (0x3u >> skip) & 1u; /* skip is NE or SE; NE or NW */
@@ -274,7 +286,8 @@ static QK__ALWAYS_INLINE void push_siblings(const qk_tree_t *t, qk__cell_t p, ui
   /* The gaps to the other half on each axis, whose corner is chosen by index, not by a
    * branch (the same intervals and values as expand's: x0 + hs is xm). */
   const double ox = xs[!ex], oy = ys[!no];
-  const double dx = qk__gap(qx, ox - e, ox + hs + e), dy = qk__gap(qy, oy - e, oy + hs + e);
+  const double dx = qk__gap(qx, ox - e, ox + hs + e) * sc,
+               dy = qk__gap(qy, oy - e, oy + hs + e) * sc;
   const double bx = dx * dx, by = dy * dy;
   const double bd = bx + by, bn = qk__min_d(bx, by), bf = qk__max_d(bx, by);
   const unsigned xn = bx < by; /* the sibling across the x midline is the nearer */
@@ -298,24 +311,28 @@ static QK__ALWAYS_INLINE void push_siblings(const qk_tree_t *t, qk__cell_t p, ui
  * monotone in floating point). q lies in the square.
  */
 static inline bool ball_inside(double qx, double qy, double x0, double y0, double side, double e,
-                               double thr) {
+                               double sc, double thr) {
 #if defined(__SSE2__)
   /* Both axes at once: the same differences, lane by lane. */
   const __m128d q = _mm_set_pd(qy, qx), c = _mm_set_pd(y0, x0), ve = _mm_set1_pd(e);
   const __m128d lo = _mm_sub_pd(q, _mm_add_pd(c, ve));
   const __m128d hi = _mm_sub_pd(_mm_sub_pd(_mm_add_pd(c, _mm_set1_pd(side)), ve), q);
   const __m128d m = _mm_min_pd(lo, hi);
-  const double g = _mm_cvtsd_f64(_mm_min_sd(m, _mm_unpackhi_pd(m, m)));
+  const double g = _mm_cvtsd_f64(_mm_min_sd(m, _mm_unpackhi_pd(m, m))) * sc;
 #else
   const double g = qk__min_d(qk__min_d(qx - (x0 + e), (x0 + side - e) - qx),
-                             qk__min_d(qy - (y0 + e), (y0 + side - e) - qy));
+                             qk__min_d(qy - (y0 + e), (y0 + side - e) - qy)) *
+                   sc;
 #endif
   return (g > 0) & (g * g > thr);
 }
 
 /* Which of the three leaf scans a search runs (a constant in each caller, so that the
  * compiler makes one specialised search per kind). */
-enum { KIND_ONE, KIND_SORTED, KIND_HEAP };
+enum { KIND_ONE, KIND_SORTED, KIND_HEAP, KIND_SCALED };
+
+/* The differences' scale of a search (b->sc for KIND_SCALED, a constant 1 otherwise). */
+#define QK__SC(kind, b) ((kind) == KIND_SCALED ? (b)->sc : 1.0)
 
 /* Points whose squared distances one pass of the leaf scans computes into a buffer. */
 #define QK__SCAN_CHUNK 64
@@ -864,7 +881,9 @@ static QK__ALWAYS_INLINE void scan(const qk_tree_t *t, qk_node_t leaf, double qx
   if (kind == KIND_SORTED)
     scan_sorted(t, leaf, qx, qy, b);
   else if (kind == KIND_HEAP)
-    scan_heap(t, leaf, qx, qy, b);
+    scan_heap(t, leaf, qx, qy, b, 0);
+  else if (kind == KIND_SCALED)
+    scan_heap(t, leaf, qx, qy, b, 1);
   else
     scan_one(t, leaf, qx, qy, b);
 }
@@ -917,7 +936,7 @@ static QK__ALWAYS_INLINE void drain(const qk_tree_t *t, double qx, double qy, do
         if (kind == KIND_ONE && b->slot != QK_NONE) QK__PREFETCH(qk__tree_ids(t) + b->slot);
         break;
       }
-      if (!expand(t, &cur, child, qx, qy, e, b->lim, stack, sp)) break;
+      if (!expand(t, &cur, child, qx, qy, e, QK__SC(kind, b), b->lim, stack, sp)) break;
     }
   }
 }
@@ -932,16 +951,16 @@ static QK__ALWAYS_INLINE void climb(const qk_tree_t *t, double qx, double qy, be
   qk__cell_t c = p->leaf;
   unsigned len = p->len;
   if (kind == KIND_ONE) prefetch_uncles(t, p);
-  if (kind != KIND_HEAP) prefetch_ids(t, c.node);
-  if (kind != KIND_HEAP) prefetch_sibling(t, p, qx, qy);
+  if (kind != KIND_HEAP && kind != KIND_SCALED) prefetch_ids(t, c.node);
+  if (kind != KIND_HEAP && kind != KIND_SCALED) prefetch_sibling(t, p, qx, qy);
   scan(t, c.node, qx, qy, b, kind);
   while (len > 0) {
     /* Everything inside c is done. When the threshold's ball lies inside c's square
      * (narrowed by the margin), nothing outside can come within it: stop climbing. */
-    if (ball_inside(qx, qy, c.x, c.y, qk__tree_side(t, c.depth), e, b->lim)) break;
+    if (ball_inside(qx, qy, c.x, c.y, qk__tree_side(t, c.depth), e, QK__SC(kind, b), b->lim)) break;
     len--;
     push_siblings(t, p->cell[len], qk__node_child(t, p->cell[len].node), p->q[len], qx, qy, e,
-                  b->lim, stack, &sp);
+                  QK__SC(kind, b), b->lim, stack, &sp);
     drain(t, qx, qy, e, b, stack, &sp, kind);
     c = p->cell[len];
   }
@@ -964,7 +983,8 @@ static QK__ALWAYS_INLINE void search(const qk_tree_t *t, double qx, double qy, b
     const qk_square_t r = qk__tree_root_square(t);
     qk__cell_entry_t stack[QK__STACK_MAX];
     int sp = 0;
-    stack[sp++] = (qk__cell_entry_t){qk__root_cell(t), qk__square_d2(r.x, r.y, r.side, qx, qy, e)};
+    stack[sp++] = (qk__cell_entry_t){
+        qk__root_cell(t), qk__square_d2_scaled(r.x, r.y, r.side, qx, qy, e, QK__SC(kind, b))};
     drain(t, qx, qy, e, b, stack, &sp, kind);
     return;
   }
@@ -977,7 +997,7 @@ static QK__ALWAYS_INLINE void search(const qk_tree_t *t, double qx, double qy, b
 /* k = 1: the best pair in registers. Returns 0 or 1. */
 static size_t knn1(const qk_tree_t *t, double qx, double qy, double max_dist, qk_neighbor_t *out,
                    const qk__path_t *path) {
-  best_t b = {.out = out, .k = 1, .slot = QK_NONE};
+  best_t b = {.out = out, .k = 1, .slot = QK_NONE, .sc = 1.0};
   best_limits(&b, max_dist, -1);
   search(t, qx, qy, &b, KIND_ONE, path);
   if (b.slot == QK_NONE) return 0;
@@ -1006,7 +1026,7 @@ size_t qk__knn_guess_runs, qk__knn_guess_misses;
  * 2374 and 6466 with twice the extra searches (1.4% for k = 32), which clustered points
  * would make dearer.
  */
-static double guess_limit(const qk_tree_t *t, const qk__path_t *p, size_t k) {
+static double guess_limit(const qk_tree_t *t, const qk__path_t *p, size_t k, double sc) {
   const size_t want = 4 * k;
   qk__cell_t c = p->leaf;
   size_t cnt = qk__node_count(t, c.node);
@@ -1015,7 +1035,7 @@ static double guess_limit(const qk_tree_t *t, const qk__path_t *p, size_t k) {
     cnt = qk__node_count(t, c.node);
   }
   if (cnt < want) return INFINITY;
-  const double side = qk__tree_side(t, c.depth);
+  const double side = qk__tree_side(t, c.depth) * sc;
   return ((double)k + 2.0 * sqrt((double)k) + 4.0) * side * side / (3.14159 * (double)cnt);
 }
 
@@ -1024,10 +1044,14 @@ static double guess_limit(const qk_tree_t *t, const qk__path_t *p, size_t k) {
  * are read at the end. A guessed search returns 0 unless it found k and every point it
  * did not look at lies beyond the filter's margin of the k-th (so after it, exactly). */
 static size_t knn_limited(const qk_tree_t *t, double qx, double qy, size_t k, double max_dist,
-                          double guess2, qk_neighbor_t *out, const qk__path_t *path) {
-  best_t b = {.out = out, .k = k, .slot = QK_NONE};
+                          double guess2, qk_neighbor_t *out, const qk__path_t *path, double sc) {
+  best_t b = {.out = out, .k = k, .slot = QK_NONE, .sc = sc};
   best_limits(&b, max_dist, guess2);
-  if (k <= QK__KNN_SORTED) {
+  if (sc != 1.0) { /* knn_scale */
+    search(t, qx, qy, &b, KIND_SCALED, path);
+    if (guess2 >= 0 && (b.n < k || kx_hi(b.thr) > guess2)) return 0;
+    xheap_finish(t, qx, qy, out, b.n, 1);
+  } else if (k <= QK__KNN_SORTED) {
     /* The sorted array lives here, after a sentinel that ends every insertion's shift
      * without a bound check. */
     qk_neighbor_t sorted[QK__KNN_SORTED + 1], fill[QK__KNN_SORTED];
@@ -1065,7 +1089,7 @@ static size_t knn_limited(const qk_tree_t *t, double qx, double qy, size_t k, do
   } else {
     search(t, qx, qy, &b, KIND_HEAP, path);
     if (guess2 >= 0 && (b.n < k || kx_hi(b.thr) > guess2)) return 0;
-    xheap_finish(t, qx, qy, out, b.n);
+    xheap_finish(t, qx, qy, out, b.n, 0);
   }
   return b.n;
 }
@@ -1073,8 +1097,8 @@ static size_t knn_limited(const qk_tree_t *t, double qx, double qy, size_t k, do
 /* Any k > 1: returns how many of out hold neighbours (distances), sorted. A query inside
  * the root is searched first within the guessed limit (guess_limit), from its path. */
 static size_t knn_search(const qk_tree_t *t, double qx, double qy, size_t k, double max_dist,
-                         qk_neighbor_t *out, const qk__path_t *path) {
-  if (!qk__tree_contains(t, qx, qy)) return knn_limited(t, qx, qy, k, max_dist, -1, out, NULL);
+                         qk_neighbor_t *out, const qk__path_t *path, double sc) {
+  if (!qk__tree_contains(t, qx, qy)) return knn_limited(t, qx, qy, k, max_dist, -1, out, NULL, sc);
   qk__path_t own;
   if (!path) {
     qk__path_init(t, &own);
@@ -1082,19 +1106,40 @@ static size_t knn_search(const qk_tree_t *t, double qx, double qy, size_t k, dou
     path = &own;
   }
   /* Guessed only where every square within it is surely within max_dist. */
-  const double guess2 = guess_limit(t, path, k);
+  const double guess2 = guess_limit(t, path, k, sc);
   best_t c;
+  c.sc = sc;
   best_limits(&c, max_dist, -1);
   if (guess2 < c.cap_lo) {
 #ifdef QK_KNN_STATS
     qk__knn_guess_runs++;
 #endif
-    if (knn_limited(t, qx, qy, k, max_dist, guess2, out, path) == k) return k;
+    if (knn_limited(t, qx, qy, k, max_dist, guess2, out, path, sc) == k) return k;
 #ifdef QK_KNN_STATS
     qk__knn_guess_misses++;
 #endif
   }
-  return knn_limited(t, qx, qy, k, max_dist, -1, out, path);
+  return knn_limited(t, qx, qy, k, max_dist, -1, out, path, sc);
+}
+
+/*
+ * The scale of a query's differences: 1, unless the tree's root and the query's gap to
+ * it are both below 2^-400; then 2^-e for the exponent e of the larger (qk__scale_of).
+ * There every square underflowed under the filter's absolute margin (2^-1060): every
+ * distance read 0 (or nearly), no square was pruned, and every pair of points was
+ * ranked by the exact comparison, n big-integer tests per query (35-80 ms at 10^5
+ * points at scale 1e-160 to 1e-310 where 0.7 us at 1; fifty-sixth session). Scaled,
+ * every difference is below 4 (with its gap to the root) and at least 2^-51 when not
+ * 0, so nothing overflows and the filter decides as at scale 1; the scaled search keeps
+ * its set in the heap (KIND_SCALED), and reports the unscaled distances.
+ * (Large coordinates need nothing: kNN keeps them within 2^510, qk__knn_check.)
+ */
+static inline double knn_scale(const qk_tree_t *t, qk_point_t q) {
+  const qk_square_t r = qk__tree_root_square(t);
+  if (r.side >= 0x1p-400) return 1.0;
+  const double m = qk__max_d(
+      r.side, qk__max_d(qk__gap(q.x, r.x, r.x + r.side), qk__gap(q.y, r.y, r.y + r.side)));
+  return m >= 0x1p-400 || !(m > 0) ? 1.0 : qk__scale_of(m);
 }
 
 /*
@@ -1140,7 +1185,8 @@ size_t qk__knn_one(const qk_tree_t *t, qk_point_t q, size_t k, double max_dist, 
   const size_t np = qk__tree_count(t);
   if (np == 0 || k == 0) return 0;
   if (k > np) k = np;
-  if (k > 1) return knn_search(t, q.x, q.y, k, max_dist, out, path);
+  const double sc = knn_scale(t, q);
+  if (k > 1 || sc != 1.0) return knn_search(t, q.x, q.y, k, max_dist, out, path, sc);
   return knn1(t, q.x, q.y, max_dist, out, path);
 }
 
@@ -1150,7 +1196,7 @@ qk_status_t qk_query_knn(const qk_tree_t *tree, qk_point_t q, size_t k, double m
   *n_out = 0;
   qk_status_t st = qk__knn_check(tree, q, max_dist);
   if (st != QK_OK) return st;
-  if (k == 1 && qk__tree_count(tree) > 0) {
+  if (k == 1 && qk__tree_count(tree) > 0 && knn_scale(tree, q) == 1.0) {
     /* The common case straight to its search. */
     *n_out = knn1(tree, q.x, q.y, max_dist, out, NULL);
     return QK_OK;

@@ -94,6 +94,21 @@ static inline double qk__square_d2(double x0, double y0, double side, double qx,
   return dx * dx + dy * dy;
 }
 
+/*
+ * qk__square_d2 with each gap multiplied by sc, an exact power of two, before it is
+ * squared: the bound of the searches that scale their differences so that their squares
+ * neither underflow nor overflow (docs/query.md, "Exactness"). Rounding is monotone, so a
+ * scaled gap never exceeds the scaled difference of any point beyond it.
+ */
+static inline double qk__square_d2_scaled(double x0, double y0, double side, double qx, double qy,
+                                          double e, double sc) {
+  double xlo = x0 - e, xhi = x0 + side + e;
+  double ylo = y0 - e, yhi = y0 + side + e;
+  double dx = (qx < xlo ? xlo - qx : (qx > xhi ? qx - xhi : 0.0)) * sc;
+  double dy = (qy < ylo ? ylo - qy : (qy > yhi ? qy - yhi : 0.0)) * sc;
+  return dx * dx + dy * dy;
+}
+
 /* The smaller and the larger of two values known not to be NaN: one instruction (minsd,
  * maxsd, whose rule is exactly a < b ? a : b) where fmin() is a library call and compilers
  * may keep the ternary's branch, which the searches' bounds would take at random. */

@@ -6,6 +6,7 @@
  */
 #include "index/dist_exact.h"
 #include "query/query_internal.h"
+#include "index/inline.h"
 
 /* A box test for the leaves, shared by the callback and the buffer form. */
 typedef int (*qk__emit_fn)(void *ctx, qk_id_t id, double x, double y, double dist);
@@ -61,18 +62,35 @@ static __attribute__((noinline, cold)) double near_circle(double x, double y, qk
   return d2 < 0x1p1000 ? sqrt(d2) : hypot(dx, dy);
 }
 
-static qk_status_t radius_walk(const qk_tree_t *t, qk_point_t c, double r, qk__emit_fn emit,
-                               void *ctx) {
-  if (!isfinite(c.x) || !isfinite(c.y) || isnan(r)) return QK_ERR_NONFINITE;
-  if (r < 0) return QK_ERR_INVALID;
-  if (qk__tree_count(t) == 0) return QK_OK;
+/* The reported distance of a point within r: sqrt of the square in doubles, or beyond
+ * 2^1000 hypot of the differences (as near_circle, and whatever the walk's scale). */
+static double plain_dist(double x, double y, qk_point_t c) {
+  double dx = x - c.x, dy = y - c.y, d2 = dx * dx + dy * dy;
+  return d2 < 0x1p1000 ? sqrt(d2) : hypot(dx, dy);
+}
+
+/*
+ * The walk, with the differences multiplied by sc (a power of two; 1, a constant, for
+ * the common case, whose code is then the unscaled one). Below about 2^-530 every square
+ * underflows under the filter's absolute margin, and from 2^500 on r^2 is beyond the
+ * filter's range (qk__filter_hi is infinite there): either way no square was pruned and
+ * every point went to the exact test, n big-integer tests per query (for r below 2^-400
+ * or above 2^400 alone; fifty-sixth session). Scaled by the exponent of r, r sc lies in
+ * [0.5, 1) and the filter decides again: dx sc is the difference rounded once, then
+ * scaled exactly (or, for sc < 1, with an absolute error below 2^-1075 where it
+ * underflows, which the filter's absolute margin covers, as for an underflowing
+ * product); a difference that overflows, scaled or not, is farther than any finite r.
+ */
+static QK__ALWAYS_INLINE qk_status_t radius_walk_sc(const qk_tree_t *t, qk_point_t c, double r,
+                                                    double sc, qk__emit_fn emit, void *ctx) {
   /* Exact: d2 at most lo is inside, above hi outside, and between them (a point within a
-   * relative 2^-45 of the circle, or r beyond 2^500) the exact test decides
+   * relative 2^-45 of the circle, or r beyond 2^500 unscaled) the exact test decides
    * (index/dist_exact.h). Squares are pruned against hi, which keeps every square holding
    * a point the exact test accepts. */
-  const double r2 = r * r, lo = qk__filter_lo(r2), hi = qk__filter_hi(r2), e = qk__margin(t);
+  const double rs = r * sc;
+  const double r2 = rs * rs, lo = qk__filter_lo(r2), hi = qk__filter_hi(r2), e = qk__margin(t);
   const qk_square_t root = qk__tree_root_square(t);
-  if (qk__square_d2(root.x, root.y, root.side, c.x, c.y, e) > hi) return QK_OK;
+  if (qk__square_d2_scaled(root.x, root.y, root.side, c.x, c.y, e, sc) > hi) return QK_OK;
   const double *xs = qk__tree_xs(t), *ys = qk__tree_ys(t);
   const qk_id_t *ids = qk__tree_ids(t);
   qk__cell_t stack[QK__STACK_MAX];
@@ -87,10 +105,14 @@ static qk_status_t radius_walk(const qk_tree_t *t, qk_point_t c, double r, qk__e
       const double *px = xs + start, *py = ys + start;
       const qk_id_t *pid = ids + start;
       for (uint32_t i = 0; i < count; i++) {
-        double dx = px[i] - c.x, dy = py[i] - c.y;
+        double dx = (px[i] - c.x) * sc, dy = (py[i] - c.y) * sc;
         double d2 = dx * dx + dy * dy;
         if (d2 <= hi) {
-          double dist = d2 <= lo ? sqrt(d2) : near_circle(px[i], py[i], c, r);
+          double dist;
+          if (sc == 1.0)
+            dist = d2 <= lo ? sqrt(d2) : near_circle(px[i], py[i], c, r);
+          else
+            dist = d2 <= lo ? plain_dist(px[i], py[i], c) : near_circle(px[i], py[i], c, r);
           if (dist < 0) continue;
           if (emit(ctx, pid[i], px[i], py[i], dist)) return QK_OK;
         }
@@ -103,9 +125,21 @@ static qk_status_t radius_walk(const qk_tree_t *t, qk_point_t c, double r, qk__e
     qk__cell_t kids[4];
     qk__cell_children(t, n, child, kids);
     for (int q = 3; q >= 0; q--)
-      if (qk__square_d2(kids[q].x, kids[q].y, hs, c.x, c.y, e) <= hi) stack[sp++] = kids[q];
+      if (qk__square_d2_scaled(kids[q].x, kids[q].y, hs, c.x, c.y, e, sc) <= hi)
+        stack[sp++] = kids[q];
   }
   return QK_OK;
+}
+
+static qk_status_t radius_walk(const qk_tree_t *t, qk_point_t c, double r, qk__emit_fn emit,
+                               void *ctx) {
+  if (!isfinite(c.x) || !isfinite(c.y) || isnan(r)) return QK_ERR_NONFINITE;
+  if (r < 0) return QK_ERR_INVALID;
+  if (qk__tree_count(t) == 0) return QK_OK;
+  /* The common case's walk has the constant 1 for its scale, and no multiplications. */
+  const double sc = qk__radius_scale(r);
+  if (sc == 1.0) return radius_walk_sc(t, c, r, 1.0, emit, ctx);
+  return radius_walk_sc(t, c, r, sc, emit, ctx);
 }
 
 /* Adapters from the internal emitter to the public callback and buffers. */

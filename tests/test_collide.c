@@ -32,7 +32,9 @@
  *    nothing), rays from 2 and 4 threads at once on an unprepared collider (single casts
  *    and a batch) give the oracle's answers, and allocation failure at every N during the
  *    preparation (by each entry point) returns QK_ERR_NOMEM, holds nothing more, and a
- *    retry answers as the oracle.
+ *    retry answers as the oracle;
+ *  - disc pairs at scales 1, 1e-200, 2^-1000 and 1e200 against the oracle, with the exact
+ *    (big-integer) tests counted through --wrap and bounded (no timing).
  */
 #define _DEFAULT_SOURCE /* madvise and MADV_HUGEPAGE in <sys/mman.h> */
 #include <math.h>
@@ -110,6 +112,70 @@ static void check_pairs(const qk_disc_t *d, size_t nd, const qk_box_t *b, size_t
   free(got);
   free(want);
   qk_collider_free(c);
+}
+
+/* The library's exact (big-integer) test, counted: linked with --wrap for this program
+ * (tests/CMakeLists.txt; test_collide_scale). */
+int qk__within_exact(double ax, double ay, double bx, double by, double r1, double r2);
+int __real_qk__within_exact(double ax, double ay, double bx, double by, double r1, double r2);
+int __wrap_qk__within_exact(double ax, double ay, double bx, double by, double r1, double r2);
+static size_t g_exact_calls;
+int __wrap_qk__within_exact(double ax, double ay, double bx, double by, double r1, double r2) {
+  g_exact_calls++;
+  return __real_qk__within_exact(ax, ay, bx, by, r1, r2);
+}
+
+/*
+ * Disc pairs and disc queries at every magnitude: discs of radius S/1000 (some 0) at
+ * uniform centres in [0, S]^2 for S = 1, 1e-200, 2^-1000 and 1e200, on one thread, against
+ * brute force. Below about 1e-154 the squares underflowed under the filter's absolute
+ * margin and from radii of 2^500 on they left its range: every candidate pair went to the
+ * exact test (pairs_list of 32,000 discs 3.5 s at 1e-200 and 1e200 against 2 ms at 1;
+ * fifty-sixth session). The count of exact tests (wrapped at link time) must stay below
+ * one per ten discs (0 here); before the fix it was one per candidate pair (885 here at
+ * every scale but 1).
+ */
+static void test_collide_scale(void **state) {
+  (void)state;
+  QKT_ONE_THREAD_TEST();
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 56);
+  enum { N = 1000 };
+  static const double scales[] = {1, 1e-200, 0x1p-1000, 1e200};
+  qk_disc_t *d = malloc(N * sizeof *d);
+  assert_non_null(d);
+  for (size_t si = 0; si < sizeof scales / sizeof scales[0]; si++) {
+    const double S = scales[si];
+    for (size_t i = 0; i < N; i++)
+      d[i] = (qk_disc_t){qkt_rng_unit(&r) * S, qkt_rng_unit(&r) * S,
+                         i % 37 == 5 ? 0 : qkt_rng_range(&r, 0, 0.02) * S};
+    qk_tree_options_t o = opts(8);
+    o.threads = 1;
+    qk_collider_t *c = NULL;
+    assert_int_equal(qk_collider_build(d, N, NULL, 0, &o, &c), QK_OK);
+    qk_pair_t *want;
+    const size_t nw = qko_pairs(d, N, NULL, 0, &want);
+    size_t ng = 0;
+    const size_t before = g_exact_calls;
+    assert_int_equal(qk_collider_pairs_list(c, NULL, 0, &ng), QK_OK);
+    const size_t calls = g_exact_calls - before;
+    qk_pair_t *got = malloc((ng ? ng : 1) * sizeof *got);
+    assert_non_null(got);
+    assert_int_equal(qk_collider_pairs_list(c, got, ng, &ng), QK_OK);
+    if (ng != nw) fail_msg("scale %g: %zu pairs, oracle %zu", S, ng, nw);
+    for (size_t i = 0; i < nw; i++)
+      if (got[i].a != want[i].a || got[i].b != want[i].b)
+        fail_msg("scale %g pair %zu: (%u,%u) vs oracle (%u,%u) (seed %llu)", S, i, got[i].a,
+                 got[i].b, want[i].a, want[i].b, (unsigned long long)g_seed);
+    printf("# scale %g: %zu pairs, %zu exact tests\n", S, ng, calls);
+    if (calls > N / 10)
+      fail_msg("scale %g: %zu exact tests for %d discs (seed %llu)", S, calls, N,
+               (unsigned long long)g_seed);
+    free(got);
+    free(want);
+    qk_collider_free(c);
+  }
+  free(d);
 }
 
 static void test_collide_pairs(void **state) {
@@ -1621,6 +1687,7 @@ int main(void) {
       cmocka_unit_test(test_collide_rays_lazy_threads),
       cmocka_unit_test(test_collide_rays_lazy_nomem),
       cmocka_unit_test(test_collide_exact_extremes),
+      cmocka_unit_test(test_collide_scale),
   };
   return cmocka_run_group_tests(tests, NULL, NULL);
 }

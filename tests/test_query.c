@@ -36,6 +36,9 @@
  *  - kNN and locate batches of 300,001 queries on two and three threads (chunks taken from a
  *    shared counter) equal one thread's bit for bit, and report the lower-numbered of two
  *    bad queries met by different threads;
+ *  - pruning at every magnitude: radius and kNN (k = 1, 8, 40, capped, batch) on uniform
+ *    points at scales 1, 1e-200, 1e-300 and 1e200 against brute force, with the number of
+ *    exact (big-integer) tests counted through --wrap and bounded (no timing);
  *  - the real cities set (lon/lat as planar coordinates) when present.
  */
 #include <math.h>
@@ -102,6 +105,25 @@ static void assert_nb_equal(const qk_neighbor_t *a, size_t na, const qk_neighbor
     if (a[i].id != b[i].id || a[i].dist != b[i].dist)
       fail_msg("%s query %zu rank %zu: (%u, %.17g) vs oracle (%u, %.17g) (seed %llu)", what, qi, i,
                a[i].id, a[i].dist, b[i].id, b[i].dist, (unsigned long long)g_seed);
+}
+
+/* The library's exact (big-integer) tests, counted: linked with --wrap for this program
+ * (tests/CMakeLists.txt), so that a test can bound how many a query runs (the work a
+ * query does when its filter cannot decide, which it is not allowed to time). */
+int qk__within_exact(double ax, double ay, double bx, double by, double r1, double r2);
+int qk__dist_cmp_exact(double qx, double qy, double ax, double ay, double bx, double by);
+int __real_qk__within_exact(double ax, double ay, double bx, double by, double r1, double r2);
+int __real_qk__dist_cmp_exact(double qx, double qy, double ax, double ay, double bx, double by);
+int __wrap_qk__within_exact(double ax, double ay, double bx, double by, double r1, double r2);
+int __wrap_qk__dist_cmp_exact(double qx, double qy, double ax, double ay, double bx, double by);
+static size_t g_exact_calls;
+int __wrap_qk__within_exact(double ax, double ay, double bx, double by, double r1, double r2) {
+  g_exact_calls++;
+  return __real_qk__within_exact(ax, ay, bx, by, r1, r2);
+}
+int __wrap_qk__dist_cmp_exact(double qx, double qy, double ax, double ay, double bx, double by) {
+  g_exact_calls++;
+  return __real_qk__dist_cmp_exact(qx, qy, ax, ay, bx, by);
 }
 
 static int count_cb(qk_id_t id, qk_point_t p, double dist, void *ud) {
@@ -1351,6 +1373,101 @@ static void test_query_subnormal_roots(void **state) {
   assert_int_equal(bad, 0);
 }
 
+/*
+ * Pruning at every magnitude: uniform points in [0, S]^2 for S = 1, 2^-664, 1e-200,
+ * 1e-300 and 1e200 (and 1e150 for kNN, which refuses 1e200: QK_ERR_LIMIT), radius and kNN
+ * (k = 1, 8 and 40, the heap) against brute force, from inside and outside the root.
+ * Below about 1e-154 every square underflowed under the filter's absolute margin, and
+ * from r = 2^500 on r^2 was beyond the filter's range: no square was pruned and every
+ * point went to the exact test, some n exact tests a query (fifty-sixth session; 35-80
+ * ms a kNN query at 10^5 points). The count of exact tests (wrapped at link time) must
+ * stay below one a query; before the fix it was about n a query at every scale but 1.
+ */
+static void test_query_scale_pruning(void **state) {
+  (void)state;
+  qkt_rng_t r;
+  qkt_rng_seed(&r, g_seed + 56);
+  enum { N = 3000, Q = 24, K = 40 };
+  static const double scales[] = {1, 0x1p-664, 1e-200, 1e-300, 1e150, 1e200};
+  qk_point_t *p = malloc(N * sizeof *p);
+  qk_neighbor_t *got = malloc(N * sizeof *got), *want = malloc(N * sizeof *want);
+  assert_non_null(p);
+  assert_non_null(got);
+  assert_non_null(want);
+  for (size_t si = 0; si < sizeof scales / sizeof scales[0]; si++) {
+    const double S = scales[si];
+    for (size_t i = 0; i < N; i++) p[i] = (qk_point_t){qkt_rng_unit(&r) * S, qkt_rng_unit(&r) * S};
+    qk_tree_t *t = build(p, N, 8);
+    size_t queries = 0, calls = 0;
+    for (size_t qi = 0; qi < Q; qi++) {
+      /* Inside mostly; every fourth beside the root (up to half its side away). */
+      const qk_point_t q = qi % 4 == 3 ? (qk_point_t){(1.0 + 0.5 * qkt_rng_unit(&r)) * S,
+                                                      -0.5 * qkt_rng_unit(&r) * S}
+                                       : (qk_point_t){qkt_rng_unit(&r) * S, qkt_rng_unit(&r) * S};
+      /* Radius: about 1, 10 and 40 points. */
+      static const double radii[] = {0.01, 0.03, 0.06};
+      for (int ri = 0; ri < 3; ri++) {
+        const double rad = radii[ri] * S;
+        size_t ng = 0;
+        const size_t before = g_exact_calls;
+        assert_int_equal(qk_query_radius_list(t, q, rad, got, N, &ng), QK_OK);
+        calls += g_exact_calls - before;
+        queries++;
+        const size_t nw = qko_radius(p, N, q, rad, want);
+        qko_sort_by_id(got, ng);
+        assert_nb_equal(got, ng, want, nw, "radius at scale", qi);
+      }
+      if (S > 1e153) continue; /* beyond kNN's range (qk__knn_check) */
+      static const size_t ks[] = {1, 8, K};
+      for (int ki = 0; ki < 3; ki++) {
+        size_t ng = 0;
+        const size_t before = g_exact_calls;
+        assert_int_equal(qk_query_knn(t, q, ks[ki], INFINITY, got, &ng), QK_OK);
+        calls += g_exact_calls - before;
+        queries++;
+        const size_t nw = qko_knn(p, NULL, N, q, ks[ki], INFINITY, want);
+        assert_nb_equal(got, ng, want, nw, "knn at scale", qi);
+        /* With a cap near the k-th's distance. */
+        const double cap = want[nw - 1].dist;
+        const size_t before2 = g_exact_calls;
+        assert_int_equal(qk_query_knn(t, q, ks[ki], cap, got, &ng), QK_OK);
+        calls += g_exact_calls - before2;
+        queries++;
+        const size_t nw2 = qko_knn(p, NULL, N, q, ks[ki], cap, want);
+        assert_nb_equal(got, ng, want, nw2, "capped knn at scale", qi);
+      }
+    }
+    /* A batch too (its paths walked ahead). */
+    {
+      qk_point_t qs[Q];
+      size_t counts[Q];
+      for (size_t qi = 0; qi < Q; qi++)
+        qs[qi] = (qk_point_t){qkt_rng_unit(&r) * S, qkt_rng_unit(&r) * S};
+      if (S <= 1e153) {
+        qk_neighbor_t *bo = malloc(Q * 8 * sizeof *bo);
+        assert_non_null(bo);
+        const size_t before = g_exact_calls;
+        assert_int_equal(qk_query_knn_batch(t, qs, Q, 8, INFINITY, bo, counts), QK_OK);
+        calls += g_exact_calls - before;
+        queries += Q;
+        for (size_t qi = 0; qi < Q; qi++) {
+          const size_t nw = qko_knn(p, NULL, N, qs[qi], 8, INFINITY, want);
+          assert_nb_equal(bo + qi * 8, counts[qi], want, nw, "batch knn at scale", qi);
+        }
+        free(bo);
+      }
+    }
+    printf("# scale %g: %zu exact tests in %zu queries\n", S, calls, queries);
+    if (calls > queries)
+      fail_msg("scale %g: %zu exact tests in %zu queries (seed %llu)", S, calls, queries,
+               (unsigned long long)g_seed);
+    qk_tree_free(t);
+  }
+  free(p);
+  free(got);
+  free(want);
+}
+
 #if defined(__SSE2__)
 /*
  * kNN with the processor set to flush subnormal numbers (DAZ and FTZ in MXCSR, as a
@@ -1675,6 +1792,7 @@ int main(void) {
     cmocka_unit_test(test_query_radius_exact),
     cmocka_unit_test(test_query_knn_exact),
     cmocka_unit_test(test_query_subnormal_roots),
+    cmocka_unit_test(test_query_scale_pruning),
 #if defined(__SSE2__) /* (the flush mode is set through SSE's MXCSR) */
     cmocka_unit_test(test_query_knn_flush_subnormals),
 #endif
