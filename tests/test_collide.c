@@ -119,7 +119,7 @@ static void check_pairs(const qk_disc_t *d, size_t nd, const qk_box_t *b, size_t
 int qk__within_exact(double ax, double ay, double bx, double by, double r1, double r2);
 int __real_qk__within_exact(double ax, double ay, double bx, double by, double r1, double r2);
 int __wrap_qk__within_exact(double ax, double ay, double bx, double by, double r1, double r2);
-static size_t g_exact_calls;
+static _Atomic size_t g_exact_calls; /* (atomic: threaded tests call the library too) */
 int __wrap_qk__within_exact(double ax, double ay, double bx, double by, double r1, double r2) {
   g_exact_calls++;
   return __real_qk__within_exact(ax, ay, bx, by, r1, r2);

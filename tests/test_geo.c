@@ -27,7 +27,7 @@ void __real_geod_inverse(const struct geod_geodesic *g, double lat1, double lon1
                          double lon2, double *ps12, double *pazi1, double *pazi2);
 void __wrap_geod_inverse(const struct geod_geodesic *g, double lat1, double lon1, double lat2,
                          double lon2, double *ps12, double *pazi1, double *pazi2);
-static size_t g_inverses;
+static _Atomic size_t g_inverses; /* (atomic: the batch tests run threads) */
 void __wrap_geod_inverse(const struct geod_geodesic *g, double lat1, double lon1, double lat2,
                          double lon2, double *ps12, double *pazi1, double *pazi2) {
   g_inverses++;

@@ -116,7 +116,7 @@ int __real_qk__within_exact(double ax, double ay, double bx, double by, double r
 int __real_qk__dist_cmp_exact(double qx, double qy, double ax, double ay, double bx, double by);
 int __wrap_qk__within_exact(double ax, double ay, double bx, double by, double r1, double r2);
 int __wrap_qk__dist_cmp_exact(double qx, double qy, double ax, double ay, double bx, double by);
-static size_t g_exact_calls;
+static _Atomic size_t g_exact_calls; /* (atomic: threaded tests call the library too) */
 int __wrap_qk__within_exact(double ax, double ay, double bx, double by, double r1, double r2) {
   g_exact_calls++;
   return __real_qk__within_exact(ax, ay, bx, by, r1, r2);
