@@ -143,7 +143,8 @@ typedef struct full_set {
 } full_set_t;
 
 static void full_set_init(const qk_region_t *r, const qk__leaf_t *L, full_set_t *it) {
-  it->s = it->se = NULL; /* (no sets at all: r->sets may be NULL) */
+  static const uint32_t none[1] = {0};
+  it->s = it->se = none; /* (no sets at all: r->sets may be NULL, and NULL + 0 is undefined) */
   if (L->ns) it->s = r->sets + L->s0, it->se = it->s + L->ns;
   size_t i = (size_t)(L - r->leaves);
   const qk__cover_t cv = r->cover_at[i];
